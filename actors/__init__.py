@@ -1,0 +1,1 @@
+"""Ray actor implementations, installed as ``aerodaas.actors``."""

@@ -1,0 +1,273 @@
+"""``environment.json``: the configuration of robots, sensors, compute resources and the simulated world.
+
+Everything is validated with pydantic before any actor starts. :func:`load_environment_config` turns any
+validation problem into :class:`ConfigError`, whose message names the JSON path of the field and the bad
+value, e.g. ``robots.0.limits.max_speed: Input should be greater than 0 (got -1)``.
+Relative file paths (imagery) are resolved against the environment file's folder, then
+``$AERODAAS_DATA_DIR``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from .models import GeoPoint
+
+DATA_DIR_ENV = "AERODAAS_DATA_DIR"
+
+
+class ConfigError(ValueError):
+    """A malformed environment file; the message names each bad field and its value."""
+
+
+class _Cfg(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Limits(_Cfg):
+    """Flight-envelope limits of a robot: speeds in m/s, acceleration in m/s², yaw rate in deg/s,
+    altitudes in metres above home."""
+
+    max_speed: float = Field(default=2.0, gt=0, description="horizontal speed limit, m/s")
+    max_vertical_speed: float = Field(default=1.0, gt=0, description="m/s")
+    max_acceleration: float = Field(default=2.0, gt=0, description="m/s^2")
+    max_yaw_rate: float = Field(default=90.0, gt=0, description="deg/s")
+    max_altitude: float = Field(default=120.0, gt=0, description="metres above home")
+
+
+class BatteryConfig(_Cfg):
+    """Battery model: energy drawn = (hover_power_w + speed_power_w_per_mps * |v|) * dt.
+    Voltage is linear between ``voltage_empty`` and ``voltage_full`` in state of charge (a simple LiPo model)."""
+
+    capacity_wh: float = Field(default=60.0, gt=0)
+    hover_power_w: float = Field(default=180.0, ge=0)
+    speed_power_w_per_mps: float = Field(default=10.0, ge=0)
+    voltage_full: float = Field(default=16.8, gt=0)
+    voltage_empty: float = Field(default=13.2, gt=0)
+    initial_pct: float = Field(default=100.0, ge=0, le=100)
+
+
+class NoiseConfig(_Cfg):
+    """Optional sensor noise (standard deviations): GPS position in metres, velocity in m/s."""
+
+    gps_std_m: float = Field(default=0.0, ge=0)
+    velocity_std_mps: float = Field(default=0.0, ge=0)
+    seed: int = 0
+
+
+class SensorConfig(_Cfg):
+    """A sensor. ``type``: ``camera`` (properties width, height in px, hfov_deg, fps, pitch_deg with 90 = nadir,
+    jpeg_quality), ``odometry`` (rate_hz) or ``stat_stream``. ``buffer`` is the stream buffer length (frames
+    kept for a slow consumer; older ones are dropped and counted)."""
+
+    id: str = Field(min_length=1)
+    type: Literal["camera", "odometry", "stat_stream"]
+    properties: dict[str, Any] = Field(default_factory=dict)
+    buffer: int = Field(default=1, ge=1)
+
+    @model_validator(mode="after")
+    def _check_props(self) -> "SensorConfig":
+        p = self.properties
+        if self.type == "camera":
+            defaults = {"width": 640, "height": 480, "hfov_deg": 78.0, "fps": 15.0, "pitch_deg": 90.0, "jpeg_quality": 80}
+            for k, v in defaults.items():
+                p.setdefault(k, v)
+            for k in ("width", "height", "fps"):
+                if not (isinstance(p[k], (int, float)) and p[k] > 0):
+                    raise ValueError(f"properties.{k} must be a positive number, got {p[k]!r}")
+            if not 0 < float(p["hfov_deg"]) < 180:
+                raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
+            if not 0 < float(p["pitch_deg"]) <= 90:
+                raise ValueError(f"properties.pitch_deg must be within (0, 90] (90 = nadir), got {p['pitch_deg']!r}")
+        elif self.type == "odometry":
+            p.setdefault("rate_hz", 10.0)
+            if not (isinstance(p["rate_hz"], (int, float)) and p["rate_hz"] > 0):
+                raise ValueError(f"properties.rate_hz must be a positive number, got {p['rate_hz']!r}")
+        return self
+
+
+class RobotConfig(_Cfg):
+    """A robot (drone). ``backend`` selects the driver; ``sim`` is the embedded simulator."""
+
+    id: str = Field(min_length=1)
+    backend: Literal["sim"] = "sim"
+    home: GeoPoint = Field(default_factory=lambda: GeoPoint(lat=47.3977, lon=8.5456, alt=488.0))
+    limits: Limits = Field(default_factory=Limits)
+    battery: BatteryConfig = Field(default_factory=BatteryConfig)
+    noise: NoiseConfig = Field(default_factory=NoiseConfig)
+    takeoff_altitude: float = Field(default=1.5, gt=0, description="metres above home")
+    control_rate_hz: float = Field(default=10.0, gt=0)
+    sensors: list[SensorConfig] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _unique_sensors(self) -> "RobotConfig":
+        ids = [s.id for s in self.sensors]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ValueError(f"sensors: duplicate sensor ids {dup}")
+        if not any(s.type == "stat_stream" for s in self.sensors):
+            self.sensors.append(SensorConfig(id="stat", type="stat_stream"))
+        return self
+
+
+class ComputeConfig(_Cfg):
+    """A compute resource: ``tier`` ``edge`` or ``cloud``; ``properties`` e.g. cpus, memory_gb, accelerators."""
+
+    id: str = Field(min_length=1)
+    tier: Literal["edge", "cloud"]
+    properties: dict[str, Any] = Field(default_factory=dict)
+
+
+class GroundConfig(_Cfg):
+    """The textured ground plane. With ``image`` (any PNG/JPEG) and ``metres_per_pixel``, the image is laid on
+    the ground with its top edge north; ``home_px`` is the pixel (x, y) under the home position (default:
+    image centre). Without ``image``, a procedural ground is generated from ``seed``."""
+
+    image: str | None = None
+    metres_per_pixel: float = Field(default=0.05, gt=0)
+    home_px: tuple[float, float] | None = None
+    seed: int = 0
+    size_m: float = Field(default=120.0, gt=0, description="procedural ground side length, metres")
+
+
+class TargetPathPoint(_Cfg):
+    """Target position (ENU metres from the home of the first robot) at sim time ``t`` seconds."""
+
+    t: float = Field(ge=0)
+    x: float
+    y: float
+
+    @field_validator("t", "x", "y")
+    @classmethod
+    def _finite(cls, v: float, info) -> float:
+        if not math.isfinite(v):
+            raise ValueError(f"{info.field_name} must be finite, got {v!r}")
+        return v
+
+
+class TargetConfig(_Cfg):
+    """A moving ground target drawn from a crop of a real image. ``crop`` is (x0, y0, x1, y1) in pixels of
+    ``image``; the crop's long axis is drawn ``length_m`` long, facing along its path (the crop's front is
+    its right edge, i.e. the crop image points east). The target exists between the first and last ``path``
+    times; it is linearly interpolated in between."""
+
+    id: str = Field(min_length=1)
+    class_name: str = "car"
+    image: str
+    crop: tuple[int, int, int, int]
+    length_m: float = Field(default=4.3, gt=0)
+    path: list[TargetPathPoint] = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _check(self) -> "TargetConfig":
+        x0, y0, x1, y1 = self.crop
+        if x1 <= x0 or y1 <= y0 or min(self.crop) < 0:
+            raise ValueError(f"crop must be (x0, y0, x1, y1) with x1 > x0 >= 0 and y1 > y0 >= 0, got {self.crop}")
+        ts = [p.t for p in self.path]
+        if any(b <= a for a, b in zip(ts, ts[1:])):
+            raise ValueError(f"path times must be strictly increasing, got {ts}")
+        return self
+
+
+class WorldConfig(_Cfg):
+    ground: GroundConfig = Field(default_factory=GroundConfig)
+    targets: list[TargetConfig] = Field(default_factory=list)
+
+
+class SimulationConfig(_Cfg):
+    """Simulation clock: ``speedup`` x real time; ``lockstep`` makes sim time wait for analytics to consume each
+    frame; ``physics_hz`` is the integration rate."""
+
+    speedup: float = Field(default=1.0, gt=0)
+    lockstep: bool = False
+    physics_hz: float = Field(default=50.0, gt=0)
+
+
+class EnvironmentConfig(_Cfg):
+    """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema."""
+
+    name: str = "environment"
+    robots: list[RobotConfig] = Field(min_length=1)
+    env_sensors: list[SensorConfig] = Field(default_factory=list)
+    compute: list[ComputeConfig] = Field(default_factory=lambda: [ComputeConfig(id="edge", tier="edge")])
+    world: WorldConfig = Field(default_factory=WorldConfig)
+    simulation: SimulationConfig = Field(default_factory=SimulationConfig)
+    base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
+
+    @model_validator(mode="after")
+    def _unique(self) -> "EnvironmentConfig":
+        for name, items in (("robots", self.robots), ("compute", self.compute), ("env_sensors", self.env_sensors)):
+            ids = [i.id for i in items]
+            dup = sorted({i for i in ids if ids.count(i) > 1})
+            if dup:
+                raise ValueError(f"{name}: duplicate ids {dup}")
+        return self
+
+    def resolve_path(self, rel: str, field: str) -> Path:
+        """Resolve a file named in the config: absolute, relative to the env file, or under $AERODAAS_DATA_DIR.
+
+        Raises ConfigError naming ``field`` and the search locations when it is not found."""
+        p = Path(os.path.expanduser(rel))
+        cands = [p] if p.is_absolute() else []
+        if not p.is_absolute():
+            if self.base_dir:
+                cands.append(Path(self.base_dir) / p)
+            if os.environ.get(DATA_DIR_ENV):
+                cands.append(Path(os.environ[DATA_DIR_ENV]) / p)
+            cands.append(Path.cwd() / p)
+        for c in cands:
+            if c.is_file():
+                return c.resolve()
+        raise ConfigError(f"{field}: file {rel!r} not found (looked in: {', '.join(str(c) for c in cands)}); "
+                          f"set {DATA_DIR_ENV} to the folder that holds it, or give an absolute path")
+
+
+def _format_errors(err: ValidationError, source: str) -> str:
+    lines = [f"invalid environment configuration in {source}:"]
+    for e in err.errors():
+        loc = ".".join(str(x) for x in e["loc"]) or "(root)"
+        val = e.get("input")
+        sval = json.dumps(val, default=str) if not isinstance(val, dict) else "{...}"
+        if len(sval) > 80:
+            sval = sval[:77] + "..."
+        lines.append(f"  {loc}: {e['msg']} (got {sval})")
+    return "\n".join(lines)
+
+
+def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_dir: str | None = None) -> EnvironmentConfig:
+    """Validate a parsed ``environment.json`` dict. Raises ConfigError naming each bad field and value."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"invalid environment configuration in {source}: the top level must be a JSON object")
+    try:
+        cfg = EnvironmentConfig.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError(_format_errors(e, source)) from None
+    cfg.base_dir = base_dir
+    # resolve referenced files now, so a missing image fails before any actor starts
+    if cfg.world.ground.image:
+        cfg.world.ground.image = str(cfg.resolve_path(cfg.world.ground.image, "world.ground.image"))
+    for i, t in enumerate(cfg.world.targets):
+        t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
+    return cfg
+
+
+def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
+    """Read and validate an environment file. Raises ConfigError (missing file, bad JSON, bad fields)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"environment file {str(p)!r} not found")
+    try:
+        data = json.loads(p.read_text())
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"environment file {p}: invalid JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    return parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
+
+
+def json_schema() -> dict[str, Any]:
+    """The JSON Schema of ``environment.json``."""
+    return EnvironmentConfig.model_json_schema()

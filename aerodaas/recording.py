@@ -1,0 +1,773 @@
+"""Mission recording to MCAP files (Foxglove-compatible).
+
+A :class:`McapRecorder` writes one drone mission to an `MCAP <https://mcap.dev>`_ file that opens directly in
+Foxglove Studio:
+
+* camera frames, detections, GPS fixes, poses and transforms use Foxglove's well-known **protobuf** schemas
+  (``foxglove.CompressedImage``, ``foxglove.ImageAnnotations``, ``foxglove.LocationFix``,
+  ``foxglove.PoseInFrame``, ``foxglove.FrameTransform``; message encoding ``"protobuf"``, schema encoding
+  ``"protobuf"``);
+* AeroDaaS' own messages (mission state, telemetry, results, ...) are **JSON** channels (message encoding
+  ``"json"``, schema encoding ``"jsonschema"``).
+
+Conventions:
+
+* every timestamp is an ``int`` of **nanoseconds** (``log_time_ns``; the MCAP ``publish_time`` is set to the
+  same value and the protobuf ``timestamp`` fields are derived from it);
+* angles are **degrees**; local positions are ENU metres; latitude/longitude are WGS-84 degrees, altitude metres;
+* images are ``(H, W, 3) uint8`` **BGR** arrays (OpenCV order); detection boxes are pixel ``(x0, y0, x1, y1)``
+  with the origin at the top-left corner of the image.
+
+Topic conventions used by other AeroDaaS code: ``"/mission/state"`` (JSON dict with key ``"state"``),
+``"/mission/result"`` (JSON dict with key ``"outcome"``, e.g. ``"success"``), ``"/tf"`` (transforms).
+
+Crash safety: messages are grouped into compressed chunks of about ``chunk_size`` bytes. Each chunk is handed to
+the operating system (``file.flush()``) as soon as it is complete, and :meth:`McapRecorder.flush` closes the chunk
+in progress and flushes it too. If the recording process dies without :meth:`McapRecorder.close`, the file lacks
+its summary/footer but every completed chunk is still readable with :func:`read_messages` and
+:func:`summarize_mcap` (which report ``finished=False``); at most the unfinished last chunk is lost.
+
+Reading helpers: :func:`summarize_mcap` (what ``aerodaas info FILE.mcap`` prints) and :func:`read_messages`.
+"""
+from __future__ import annotations
+
+import enum
+import io
+import json
+import math
+import os
+import struct
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from foxglove_schemas_protobuf.Color_pb2 import Color
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
+from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+from foxglove_schemas_protobuf.Point2_pb2 import Point2
+from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+from foxglove_schemas_protobuf.Pose_pb2 import Pose
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
+from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
+from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
+from google.protobuf.timestamp_pb2 import Timestamp
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType
+from mcap.writer import Writer as _McapWriter
+from mcap_protobuf.decoder import DecoderFactory as _ProtobufDecoderFactory
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from .models import Detection
+
+__all__ = [
+    "McapRecorder",
+    "summarize_mcap",
+    "read_messages",
+    "quaternion_from_euler_deg",
+    "MISSION_STATE_TOPIC",
+    "MISSION_RESULT_TOPIC",
+    "TF_TOPIC",
+    "METADATA_NAME",
+]
+
+MISSION_STATE_TOPIC = "/mission/state"
+"""JSON topic carrying ``{"state": <str>, ...}`` mission state changes."""
+MISSION_RESULT_TOPIC = "/mission/result"
+"""JSON topic carrying the final ``{"outcome": <str>, ...}`` of a mission (e.g. ``"success"``)."""
+TF_TOPIC = "/tf"
+"""Conventional topic for ``foxglove.FrameTransform`` messages."""
+METADATA_NAME = "aerodaas"
+"""Name of the MCAP metadata record holding the recorder's ``metadata`` dict."""
+
+LIBRARY = "aerodaas"
+_MAGIC = bytes((137, 77, 67, 65, 80, 48, 13, 10))
+_FOOTER_OPCODE = 0x02
+_FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
+_PERMISSIVE_SCHEMA: dict[str, Any] = {"type": "object"}
+
+# Errors a truncated (crashed) recording can raise while being read linearly.
+_TRUNCATION_ERRORS = (McapError, EOFError, struct.error, ValueError, MemoryError, UnicodeDecodeError)
+try:  # zstandard's own error type is not a ValueError subclass
+    import zstandard as _zstd
+
+    _TRUNCATION_ERRORS = _TRUNCATION_ERRORS + (_zstd.ZstdError,)
+    _COMPRESSION = CompressionType.ZSTD
+except ImportError:  # pragma: no cover - zstandard is a dependency of mcap
+    _COMPRESSION = CompressionType.NONE
+
+
+# --------------------------------------------------------------------------------------------------------------
+# small helpers
+# --------------------------------------------------------------------------------------------------------------
+def quaternion_from_euler_deg(roll_deg: float = 0.0, pitch_deg: float = 0.0,
+                              yaw_deg: float = 0.0) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)`` for roll/pitch/yaw in **degrees**, ZYX convention.
+
+    The rotation is yaw about +Z (up, so positive yaw turns counter-clockwise seen from above, i.e. from east
+    towards north in ENU), then pitch about the new +Y, then roll about the newest +X (intrinsic Z-Y'-X'', the
+    aerospace/ROS ``RPY`` convention): ``q = q_z(yaw) * q_y(pitch) * q_x(roll)``.
+    Example: ``yaw_deg=90`` gives ``(0, 0, sin 45°, cos 45°)``.
+
+    Raises ``ValueError`` if an angle is not finite.
+    """
+    for name, v in (("roll_deg", roll_deg), ("pitch_deg", pitch_deg), ("yaw_deg", yaw_deg)):
+        if not math.isfinite(float(v)):
+            raise ValueError(f"{name} must be a finite number of degrees, got {v!r}")
+    hr, hp, hy = (math.radians(float(a)) / 2.0 for a in (roll_deg, pitch_deg, yaw_deg))
+    cr, sr = math.cos(hr), math.sin(hr)
+    cp, sp = math.cos(hp), math.sin(hp)
+    cy, sy = math.cos(hy), math.sin(hy)
+    w = cr * cp * cy + sr * sp * sy
+    x = sr * cp * cy - cr * sp * sy
+    y = cr * sp * cy + sr * cp * sy
+    z = cr * cp * sy - sr * sp * cy
+    return (x, y, z, w)
+
+
+def _timestamp(ns: int) -> Timestamp:
+    return Timestamp(seconds=ns // 1_000_000_000, nanos=ns % 1_000_000_000)
+
+
+def _check_time(log_time_ns: Any) -> int:
+    if isinstance(log_time_ns, bool) or not isinstance(log_time_ns, (int, np.integer)):
+        raise TypeError(f"log_time_ns must be an int of nanoseconds, got {type(log_time_ns).__name__} {log_time_ns!r}")
+    t = int(log_time_ns)
+    if not 0 <= t < 2**64:
+        raise ValueError(f"log_time_ns must be within [0, 2**64) nanoseconds, got {t}")
+    return t
+
+
+def _finite(name: str, v: Any) -> float:
+    f = float(v)
+    if not math.isfinite(f):
+        raise ValueError(f"{name} must be finite, got {v!r}")
+    return f
+
+
+def _vec3(name: str, v: Sequence[float]) -> tuple[float, float, float]:
+    vals = tuple(v)
+    if len(vals) != 3:
+        raise ValueError(f"{name} must have 3 components (x, y, z) in metres, got {len(vals)}")
+    return tuple(_finite(f"{name}[{i}]", c) for i, c in enumerate(vals))  # type: ignore[return-value]
+
+
+def _jsonable(o: Any) -> Any:
+    """Recursively convert ``o`` to plain JSON types: numpy scalars/arrays to Python numbers/lists, NaN/inf to
+    ``None`` (JSON has no NaN), tuples/sets to lists, enums to their value, pydantic models to dicts, dict keys
+    to ``str``. Anything else unknown is left for ``json.dumps(default=str)``."""
+    if o is None or isinstance(o, (str, bool, int)):
+        return o
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, np.generic):
+        return _jsonable(o.item())
+    if isinstance(o, np.ndarray):
+        return _jsonable(o.tolist())
+    if isinstance(o, enum.Enum):
+        return _jsonable(o.value)
+    if isinstance(o, Mapping):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple, set, frozenset)):
+        return [_jsonable(v) for v in o]
+    if hasattr(o, "model_dump"):  # pydantic v2 model
+        return _jsonable(o.model_dump(mode="json"))
+    if isinstance(o, (bytes, bytearray)):
+        return o.hex()
+    return o
+
+
+def _detection_fields(det: Any) -> tuple[tuple[float, float, float, float], float, str, int | None]:
+    """(box, score, class_name, class_id) from a :class:`~aerodaas.models.Detection`-like object or dict."""
+    get = det.get if isinstance(det, Mapping) else (lambda k, d=None: getattr(det, k, d))
+    box = get("box")
+    if box is None or len(box) != 4:
+        raise ValueError(f"detection needs a 4-element pixel box (x0, y0, x1, y1), got {box!r}")
+    x0, y0, x1, y1 = (_finite("detection box", c) for c in box)
+    score = _finite("detection score", get("score", 0.0))
+    class_id = get("class_id")
+    return (min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)), score, str(get("class_name", "")), class_id
+
+
+def _class_color(name: str) -> Color:
+    """Deterministic, fairly saturated colour for a class name (same class, same colour in every file)."""
+    h = 0
+    for ch in name.encode():
+        h = (h * 131 + ch) & 0xFFFFFFFF
+    hue = (h % 360) / 60.0
+    c, x = 0.9, 0.9 * (1 - abs(hue % 2 - 1))
+    r, g, b = [(c, x, 0), (x, c, 0), (0, c, x), (0, x, c), (x, 0, c), (c, 0, x)][int(hue) % 6]
+    return Color(r=r + 0.1, g=g + 0.1, b=b + 0.1, a=1.0)
+
+
+class _ChunkFlushingStream:
+    """Minimal write-only stream handed to :class:`mcap.writer.Writer`.
+
+    mcap's writer keeps the chunk in progress in memory and writes to its output stream only when a record leaves
+    the writer: the header, a metadata record, a completed chunk (plus its message indexes), or the summary and
+    footer at the end. So "something was written since the last check" means "a chunk boundary (or another
+    complete record) was just reached"; :class:`McapRecorder` then calls :meth:`sync` to hand the bytes to the OS.
+    ``tell()`` is answered from a counter so it costs no system call.
+    """
+
+    def __init__(self, f: io.BufferedWriter) -> None:
+        self._f = f
+        self._pos = f.tell()
+        self.pending = False
+
+    def write(self, data: bytes) -> int:
+        n = self._f.write(data)
+        self._pos += len(data)
+        if data:
+            self.pending = True
+        return n
+
+    def tell(self) -> int:
+        return self._pos
+
+    def seekable(self) -> bool:
+        return False
+
+    def flush(self) -> None:
+        self._f.flush()
+        self.pending = False
+
+    def sync(self) -> None:
+        """Flush to the OS if anything was written since the last flush."""
+        if self.pending:
+            self.flush()
+
+
+# --------------------------------------------------------------------------------------------------------------
+# writer
+# --------------------------------------------------------------------------------------------------------------
+class McapRecorder:
+    """Records one mission to an MCAP file (plain Python class; AeroDaaS wraps it in a Ray actor).
+
+    Args:
+        path: output file; its parent directory is created if missing; an existing file is overwritten.
+        chunk_size: target uncompressed chunk size in bytes (a chunk is closed, compressed with zstd and flushed
+            to the OS once it grows past this). Smaller chunks lose less data on a crash; larger ones compress
+            better. Must be > 0.
+        jpeg_quality: JPEG quality 0-100 used by :meth:`write_image` when given a raw BGR array.
+        metadata: string key/values stored as an MCAP metadata record named ``"aerodaas"`` (values are ``str()``-ed).
+
+    Raises:
+        OSError (e.g. ``PermissionError``, ``IsADirectoryError``): the file cannot be created; the message names
+            the path.
+        ValueError: ``chunk_size <= 0`` or ``jpeg_quality`` outside 0-100.
+
+    Every ``write_*`` method takes ``topic`` and ``log_time_ns`` (``int`` nanoseconds, ``0 <= t < 2**64``;
+    publish time = log time). A topic's channel is created on first use and keeps its message kind: writing a
+    different kind (another protobuf type, or protobuf vs JSON, or another JSON ``schema_name``) raises
+    ``ValueError`` naming the topic. After :meth:`close`, writes raise ``RuntimeError``. All methods are
+    thread-safe (one internal lock). ``message_counts`` maps topic -> messages written.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 256 * 1024, jpeg_quality: int = 85,
+                 metadata: dict[str, str] | None = None) -> None:
+        if int(chunk_size) <= 0:
+            raise ValueError(f"chunk_size must be a positive number of bytes, got {chunk_size!r}")
+        if not 0 <= int(jpeg_quality) <= 100:
+            raise ValueError(f"jpeg_quality must be within [0, 100], got {jpeg_quality!r}")
+        self.path = Path(path)
+        self.chunk_size = int(chunk_size)
+        self.jpeg_quality = int(jpeg_quality)
+        self.message_counts: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+        self._channels: dict[str, int] = {}  # topic -> channel id
+        self._topic_kind: dict[str, str] = {}  # topic -> "protobuf:<type>" | "json:<schema_name>"
+        self._schema_ids: dict[Any, int] = {}  # schema cache key -> schema id
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        except OSError as e:
+            raise OSError(e.errno, f"cannot open MCAP recording file for writing ({e.strerror or e})",
+                          str(self.path)) from e
+        self._stream = _ChunkFlushingStream(self._file)
+        try:
+            self._writer = _McapWriter(self._stream, chunk_size=self.chunk_size, compression=_COMPRESSION)
+            self._writer.start(profile="", library=LIBRARY)
+            if metadata:
+                self._writer.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
+            self._stream.sync()
+        except BaseException:
+            self._file.close()
+            raise
+
+    # ---------------------------------------------------------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has been called."""
+        return self._closed
+
+    def __enter__(self) -> "McapRecorder":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open"
+        return f"McapRecorder({str(self.path)!r}, {state}, {sum(self.message_counts.values())} messages)"
+
+    # ---------------------------------------------------------------------------------------------------------
+    def _channel_for(self, topic: str, kind: str, make_schema: Any, schema_key: Any, message_encoding: str) -> int:
+        """Channel id for ``topic``, registering schema/channel on first use. Caller holds the lock."""
+        if not isinstance(topic, str) or not topic:
+            raise ValueError(f"topic must be a non-empty string, got {topic!r}")
+        existing = self._topic_kind.get(topic)
+        if existing is not None:
+            if existing != kind:
+                raise ValueError(f"topic {topic!r} already carries {existing}; cannot write {kind} to it "
+                                 f"(one topic keeps one schema)")
+            return self._channels[topic]
+        schema_id = self._schema_ids.get(schema_key)
+        if schema_id is None:
+            name, encoding, data = make_schema()
+            schema_id = self._writer.register_schema(name=name, encoding=encoding, data=data)
+            self._schema_ids[schema_key] = schema_id
+        channel_id = self._writer.register_channel(topic=topic, message_encoding=message_encoding,
+                                                   schema_id=schema_id)
+        self._channels[topic] = channel_id
+        self._topic_kind[topic] = kind
+        return channel_id
+
+    def _write(self, topic: str, log_time_ns: int, kind: str, make_schema: Any, schema_key: Any,
+               message_encoding: str, data: bytes) -> None:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError(f"McapRecorder for {str(self.path)!r} is closed; cannot write to {topic!r}")
+            channel_id = self._channel_for(topic, kind, make_schema, schema_key, message_encoding)
+            self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
+                                     publish_time=log_time_ns,
+                                     sequence=self.message_counts.get(topic, 0) & 0xFFFFFFFF)
+            self.message_counts[topic] = self.message_counts.get(topic, 0) + 1
+            # A completed chunk was just written to the stream: hand it to the OS so it survives a crash.
+            self._stream.sync()
+
+    def _write_proto(self, topic: str, log_time_ns: int, msg: Any) -> None:
+        cls = type(msg)
+        full_name = cls.DESCRIPTOR.full_name
+
+        def make_schema() -> tuple[str, str, bytes]:
+            return full_name, "protobuf", build_file_descriptor_set(cls).SerializeToString()
+
+        self._write(topic, log_time_ns, f"protobuf:{full_name}", make_schema, ("protobuf", full_name),
+                    "protobuf", msg.SerializeToString())
+
+    # ---------------------------------------------------------------------------------------------------------
+    def write_image(self, topic: str, log_time_ns: int, image_bgr: np.ndarray | None = None, *,
+                    jpeg: bytes | None = None, frame_id: str = "camera") -> None:
+        """Write a ``foxglove.CompressedImage`` (format ``"jpeg"``).
+
+        Give exactly one of ``image_bgr`` (``(H, W, 3) uint8`` BGR array, encoded with ``cv2.imencode('.jpg')``
+        at ``jpeg_quality``; ``(H, W)`` grayscale is accepted too) or ``jpeg`` (already-encoded JPEG bytes,
+        written as is). ``frame_id`` names the camera frame.
+
+        Raises ``ValueError`` for a missing/duplicate image argument, a wrong shape or dtype, a failed encode
+        or ``jpeg`` bytes without the JPEG start marker; ``RuntimeError`` after close; ``ValueError`` if ``topic`` carries another kind.
+        """
+        t = _check_time(log_time_ns)
+        if (image_bgr is None) == (jpeg is None):
+            raise ValueError("write_image needs exactly one of image_bgr ((H, W, 3) uint8 BGR array) or jpeg bytes")
+        if image_bgr is not None:
+            img = np.asarray(image_bgr)
+            if img.dtype != np.uint8 or not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] == 3)):
+                raise ValueError(f"image_bgr must be an (H, W, 3) uint8 BGR array, got shape {img.shape} "
+                                 f"dtype {img.dtype}")
+            if img.shape[0] == 0 or img.shape[1] == 0:
+                raise ValueError(f"image_bgr is empty (shape {img.shape})")
+            ok, buf = cv2.imencode(".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), self.jpeg_quality])
+            if not ok:
+                raise ValueError(f"cv2.imencode failed to JPEG-encode an image of shape {img.shape}")
+            data = buf.tobytes()
+        else:
+            data = bytes(jpeg)  # type: ignore[arg-type]
+            if not data.startswith(b"\xff\xd8"):
+                raise ValueError("jpeg must be JPEG-encoded bytes (starting with FF D8), "
+                                 f"got {len(data)} bytes starting {data[:4]!r}")
+        msg = CompressedImage(timestamp=_timestamp(t), frame_id=frame_id, data=data, format="jpeg")
+        self._write_proto(topic, t, msg)
+
+    def write_detections(self, topic: str, log_time_ns: int, detections: Sequence[Detection], *,
+                         image_size: tuple[int, int] | None = None) -> None:
+        """Write a ``foxglove.ImageAnnotations`` overlay for the image with the same timestamp.
+
+        ``detections``: :class:`aerodaas.models.Detection` objects (or objects/dicts with ``box``, ``score``,
+        ``class_name`` and optionally ``class_id``); ``box`` is pixel ``(x0, y0, x1, y1)``, origin top-left.
+        Each detection becomes a closed ``LINE_LOOP`` points annotation through the 4 box corners (colour per
+        class; metadata ``class_name``/``class_id``/``score``) and a ``TextAnnotation`` ``"<class_name> 0.87"``
+        anchored at the box's top-left corner. ``image_size`` = ``(width, height)`` in pixels: when given, boxes
+        are clipped to the image. An empty list writes an empty annotation message (clears the overlay).
+
+        Raises ``ValueError`` for a malformed detection (box not 4 finite numbers) or a bad ``image_size``.
+        """
+        t = _check_time(log_time_ns)
+        if image_size is not None:
+            if len(image_size) != 2 or int(image_size[0]) <= 0 or int(image_size[1]) <= 0:
+                raise ValueError(f"image_size must be (width, height) in pixels, got {image_size!r}")
+            width, height = float(image_size[0]), float(image_size[1])
+        stamp = _timestamp(t)
+        ann = ImageAnnotations(timestamp=stamp)
+        for det in detections:
+            (x0, y0, x1, y1), score, class_name, class_id = _detection_fields(det)
+            if image_size is not None:
+                x0, x1 = min(max(x0, 0.0), width), min(max(x1, 0.0), width)
+                y0, y1 = min(max(y0, 0.0), height), min(max(y1, 0.0), height)
+            color = _class_color(class_name)
+            meta = [KeyValuePair(key="class_name", value=class_name), KeyValuePair(key="score", value=f"{score:.4f}")]
+            if class_id is not None:
+                meta.append(KeyValuePair(key="class_id", value=str(class_id)))
+            ann.points.append(PointsAnnotation(
+                timestamp=stamp, type=PointsAnnotation.LINE_LOOP,
+                points=[Point2(x=x0, y=y0), Point2(x=x1, y=y0), Point2(x=x1, y=y1), Point2(x=x0, y=y1)],
+                outline_color=color, thickness=2.0, metadata=meta))
+            ann.texts.append(TextAnnotation(
+                timestamp=stamp, position=Point2(x=x0, y=y0), text=f"{class_name} {score:.2f}", font_size=14.0,
+                text_color=Color(r=1.0, g=1.0, b=1.0, a=1.0),
+                background_color=Color(r=color.r, g=color.g, b=color.b, a=0.6)))
+        self._write_proto(topic, t, ann)
+
+    def write_location(self, topic: str, log_time_ns: int, lat: float, lon: float, alt: float, *,
+                       frame_id: str = "gps") -> None:
+        """Write a ``foxglove.LocationFix``: WGS-84 ``lat``/``lon`` in degrees, ``alt`` in metres
+        (``position_covariance_type`` UNKNOWN).
+
+        Raises ``ValueError`` for non-finite values or lat outside [-90, 90] / lon outside [-180, 180].
+        """
+        t = _check_time(log_time_ns)
+        lat_f, lon_f, alt_f = _finite("lat", lat), _finite("lon", lon), _finite("alt", alt)
+        if not -90.0 <= lat_f <= 90.0:
+            raise ValueError(f"lat must be within [-90, 90] degrees, got {lat_f}")
+        if not -180.0 <= lon_f <= 180.0:
+            raise ValueError(f"lon must be within [-180, 180] degrees, got {lon_f}")
+        msg = LocationFix(timestamp=_timestamp(t), frame_id=frame_id, latitude=lat_f, longitude=lon_f,
+                          altitude=alt_f, position_covariance=[0.0] * 9,
+                          position_covariance_type=LocationFix.UNKNOWN)
+        self._write_proto(topic, t, msg)
+
+    def write_pose(self, topic: str, log_time_ns: int, position: Sequence[float], yaw_deg: float, *,
+                   frame_id: str = "enu", roll_deg: float = 0.0, pitch_deg: float = 0.0) -> None:
+        """Write a ``foxglove.PoseInFrame``: ``position`` ``(x, y, z)`` metres in ``frame_id`` (ENU by
+        convention), orientation from roll/pitch/yaw **degrees** (ZYX, see :func:`quaternion_from_euler_deg`;
+        yaw counter-clockwise from east).
+
+        Raises ``ValueError`` for a position without 3 components or non-finite values.
+        """
+        t = _check_time(log_time_ns)
+        x, y, z = _vec3("position", position)
+        qx, qy, qz, qw = quaternion_from_euler_deg(roll_deg, pitch_deg, yaw_deg)
+        msg = PoseInFrame(timestamp=_timestamp(t), frame_id=frame_id,
+                          pose=Pose(position=Vector3(x=x, y=y, z=z),
+                                    orientation=Quaternion(x=qx, y=qy, z=qz, w=qw)))
+        self._write_proto(topic, t, msg)
+
+    def write_transform(self, topic: str, log_time_ns: int, parent_frame: str, child_frame: str,
+                        translation: Sequence[float], yaw_deg: float, roll_deg: float = 0.0,
+                        pitch_deg: float = 0.0) -> None:
+        """Write a ``foxglove.FrameTransform`` placing ``child_frame`` in ``parent_frame`` (typically on
+        ``"/tf"``): ``translation`` ``(x, y, z)`` metres of the child origin in the parent frame, rotation from
+        roll/pitch/yaw **degrees** (ZYX, see :func:`quaternion_from_euler_deg`).
+
+        Raises ``ValueError`` for empty frame names, a translation without 3 components or non-finite values.
+        """
+        t = _check_time(log_time_ns)
+        if not parent_frame or not child_frame:
+            raise ValueError(f"parent_frame and child_frame must be non-empty, got {parent_frame!r}, {child_frame!r}")
+        x, y, z = _vec3("translation", translation)
+        qx, qy, qz, qw = quaternion_from_euler_deg(roll_deg, pitch_deg, yaw_deg)
+        msg = FrameTransform(timestamp=_timestamp(t), parent_frame_id=parent_frame, child_frame_id=child_frame,
+                             translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+        self._write_proto(topic, t, msg)
+
+    def write_json(self, topic: str, log_time_ns: int, obj: Mapping[str, Any], *, schema_name: str,
+                   json_schema: dict | None = None) -> None:
+        """Write ``obj`` as a JSON message (message encoding ``"json"``, schema encoding ``"jsonschema"``).
+
+        ``obj`` is a dict (a pydantic model is accepted and dumped). numpy scalars/arrays become plain numbers/
+        lists, NaN/inf become ``null``, other unknown objects ``str()``. ``schema_name`` names the schema (e.g.
+        ``"aerodaas.MissionState"``); ``json_schema`` is the JSON Schema dict, default the permissive
+        ``{"type": "object"}``. The schema is fixed by the first message on the topic.
+
+        Raises ``TypeError`` if ``obj`` is not a mapping; ``ValueError`` for an empty ``schema_name`` or if the
+        topic already carries another kind / another ``schema_name``.
+        """
+        t = _check_time(log_time_ns)
+        if not schema_name:
+            raise ValueError("write_json needs a non-empty schema_name")
+        if hasattr(obj, "model_dump") and not isinstance(obj, Mapping):
+            obj = obj.model_dump(mode="json")
+        if not isinstance(obj, Mapping):
+            raise TypeError(f"write_json expects a dict, got {type(obj).__name__}")
+        data = json.dumps(_jsonable(obj), default=str, allow_nan=False, separators=(",", ":")).encode()
+        schema_text = json.dumps(json_schema if json_schema is not None else _PERMISSIVE_SCHEMA, sort_keys=True)
+
+        def make_schema() -> tuple[str, str, bytes]:
+            return schema_name, "jsonschema", schema_text.encode()
+
+        self._write(topic, t, f"json:{schema_name}", make_schema, ("json", schema_name, schema_text), "json", data)
+
+    # ---------------------------------------------------------------------------------------------------------
+    def flush(self, *, fsync: bool = False) -> None:
+        """Close the chunk in progress (if it has messages) and flush everything to the OS, so a crash after
+        this loses nothing written so far. ``fsync=True`` also forces it to disk (survives a power loss).
+        Each call ends a chunk, so calling it very often lowers compression. A no-op after :meth:`close`.
+        """
+        with self._lock:
+            if self._closed:
+                return
+            self._writer.flush()  # finalizes the chunk and calls stream.flush()
+            self._stream.flush()
+            if fsync:
+                os.fsync(self._file.fileno())
+
+    def close(self) -> None:
+        """Finish the file (last chunk, summary section with statistics/indexes, footer) and close it.
+        Idempotent; writes afterwards raise ``RuntimeError``."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            try:
+                self._writer.finish()
+                self._stream.flush()
+            finally:
+                self._file.close()
+
+
+# --------------------------------------------------------------------------------------------------------------
+# readers
+# --------------------------------------------------------------------------------------------------------------
+def _is_finished(f: Any) -> bool:
+    """True if the file ends with a footer record followed by the MCAP magic (i.e. ``close()`` ran)."""
+    f.seek(0, io.SEEK_END)
+    size = f.tell()
+    if size < 2 * len(_MAGIC) + _FOOTER_RECORD_SIZE:
+        return False
+    f.seek(size - len(_MAGIC) - _FOOTER_RECORD_SIZE)
+    tail = f.read(len(_MAGIC) + _FOOTER_RECORD_SIZE)
+    return (tail[0] == _FOOTER_OPCODE and tail[-len(_MAGIC):] == _MAGIC
+            and struct.unpack_from("<Q", tail, 1)[0] == _FOOTER_RECORD_SIZE - 9)
+
+
+def _check_magic(f: Any, path: Any) -> None:
+    f.seek(0)
+    head = f.read(len(_MAGIC))
+    if head != _MAGIC:
+        raise ValueError(f"{str(path)!r} is not an MCAP file (bad magic bytes {head[:8]!r})")
+    f.seek(0)
+
+
+def _scan_linear(f: Any, on_metadata: Any = None, on_chunk: Any = None) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """Read records front to back, tolerating a truncated tail: yields ``(schema, channel, message)`` in file
+    order and stops quietly at the first incomplete/corrupt record (the unfinished last chunk of a crash)."""
+    f.seek(0)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    records = StreamReader(f, skip_magic=False, emit_chunks=True).records
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            return
+        except _TRUNCATION_ERRORS:
+            return
+        if isinstance(record, Chunk):
+            try:
+                inner = breakup_chunk(record, validate_crc=True)
+            except _TRUNCATION_ERRORS:
+                return
+            if on_chunk is not None:
+                on_chunk(record)
+        else:
+            inner = [record]
+        for rec in inner:
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                channels[rec.id] = rec
+            elif isinstance(rec, Message):
+                channel = channels.get(rec.channel_id)
+                if channel is None:  # corrupt file: message before its channel
+                    return
+                yield (schemas.get(channel.schema_id) if channel.schema_id else None), channel, rec
+            elif isinstance(rec, Metadata) and on_metadata is not None:
+                on_metadata(rec)
+
+
+def _iter_raw(f: Any, topics: list[str] | None, finished: bool
+              ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    if finished:
+        reader = make_reader(f)
+        yield from reader.iter_messages(topics=topics, log_time_order=True)
+        return
+    wanted = None if topics is None else set(topics)
+    for schema, channel, message in _scan_linear(f):
+        if wanted is None or channel.topic in wanted:
+            yield schema, channel, message
+
+
+class _Decoder:
+    """Decodes message bytes per channel: JSON -> dict, protobuf -> message object, anything else -> bytes."""
+
+    def __init__(self) -> None:
+        self._pb = _ProtobufDecoderFactory()
+        self._cache: dict[int, Any] = {}
+
+    def __call__(self, schema: Schema | None, channel: Channel, message: Message) -> Any:
+        dec = self._cache.get(channel.id)
+        if dec is None:
+            if channel.message_encoding == "json":
+                dec = json.loads
+            else:
+                dec = self._pb.decoder_for(channel.message_encoding, schema) or bytes
+            self._cache[channel.id] = dec
+        return dec(message.data)
+
+
+def _open_mcap(path: Any) -> Any:
+    f = open(path, "rb")  # noqa: SIM115 - caller closes
+    try:
+        _check_magic(f, path)
+        finished = _is_finished(f)
+        f.seek(0)
+    except BaseException:
+        f.close()
+        raise
+    return f, finished
+
+
+def read_messages(path: str | os.PathLike, topics: list[str] | None = None
+                  ) -> Iterator[tuple[str, str, int, Any]]:
+    """Iterate ``(topic, schema_name, log_time_ns, decoded)`` over an MCAP file.
+
+    ``decoded`` is a ``dict`` (or other JSON value) for JSON channels, a protobuf message object for protobuf
+    channels (e.g. ``foxglove.LocationFix`` with ``.latitude``), and the raw ``bytes`` for other encodings.
+    ``topics`` restricts to those topics (``None`` = all). ``schema_name`` is ``""`` for schemaless channels.
+
+    Finished files are read through their index in log-time order. Unfinished files (the recorder crashed
+    before ``close()``) are read front to back in write order, up to the last complete chunk.
+
+    Raises ``FileNotFoundError`` if ``path`` does not exist and ``ValueError`` if it is not an MCAP file.
+    """
+    f, finished = _open_mcap(path)
+    decode = _Decoder()
+    with f:
+        for schema, channel, message in _iter_raw(f, topics, finished):
+            yield (channel.topic, schema.name if schema is not None else "", message.log_time,
+                   decode(schema, channel, message))
+
+
+def summarize_mcap(path: str | os.PathLike) -> dict[str, Any]:
+    """Summarize a recording (what ``aerodaas info FILE.mcap`` shows).
+
+    Returns a dict::
+
+        {"path": str, "finished": bool,            # finished: summary/footer present (close() ran)
+         "start_ns": int | None, "end_ns": int | None,   # first/last message log time (None if no messages)
+         "duration_s": float,                      # (end_ns - start_ns) / 1e9, 0.0 without messages
+         "message_count": int,
+         "channels": [{"topic", "schema", "encoding", "count", "rate_hz"}, ...],  # sorted by topic
+         "metadata": {str: str},                   # the "aerodaas" metadata record (others merged, prefixed
+                                                   #  "<record name>." if not "aerodaas")
+         "mission": {"outcome": str | None, "final_state": str | None} | None}
+
+    ``rate_hz`` is ``count / duration_s`` over the whole recording (0.0 when the duration is 0). ``mission``
+    comes from the last JSON message on ``"/mission/result"`` (key ``"outcome"``) and on ``"/mission/state"``
+    (key ``"state"``); it is ``None`` when neither topic has messages.
+
+    Finished files are summarized from their summary section; unfinished (crashed) files are scanned front to
+    back up to the last complete chunk and reported with ``finished=False``.
+
+    Raises ``FileNotFoundError`` if ``path`` does not exist and ``ValueError`` if it is not an MCAP file.
+    """
+    f, finished = _open_mcap(path)
+    metadata: dict[str, str] = {}
+
+    def add_metadata(rec: Metadata) -> None:
+        for k, v in rec.metadata.items():
+            metadata[k if rec.name == METADATA_NAME else f"{rec.name}.{k}"] = v
+
+    last_json: dict[str, Any] = {}
+    mission_topics = (MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC)
+    channel_info: dict[int, dict[str, Any]] = {}
+    counts: dict[int, int] = {}
+    start_ns: int | None = None
+    end_ns: int | None = None
+    message_count = 0
+    with f:
+        summary = None
+        if finished:
+            try:
+                reader = make_reader(f)
+                summary = reader.get_summary()
+            except _TRUNCATION_ERRORS:
+                summary, finished = None, False
+        if summary is not None and summary.statistics is not None:
+            stats = summary.statistics
+            message_count = stats.message_count
+            if message_count:
+                start_ns, end_ns = stats.message_start_time, stats.message_end_time
+            for cid, ch in summary.channels.items():
+                schema = summary.schemas.get(ch.schema_id)
+                channel_info[cid] = {"topic": ch.topic, "schema": schema.name if schema else "",
+                                     "encoding": ch.message_encoding}
+            counts = dict(stats.channel_message_counts)
+            for rec in reader.iter_metadata():
+                add_metadata(rec)
+            present = [t for t in mission_topics if any(c["topic"] == t and counts.get(cid)
+                                                        for cid, c in channel_info.items())]
+            for topic in present:
+                for _schema, ch, msg in reader.iter_messages(topics=[topic], log_time_order=True, reverse=True):
+                    if ch.message_encoding == "json":
+                        last_json[topic] = _safe_json(msg.data)
+                    break
+        else:
+            last_time: dict[str, int] = {}
+            for schema, ch, msg in _scan_linear(f, on_metadata=add_metadata):
+                if ch.id not in channel_info:
+                    channel_info[ch.id] = {"topic": ch.topic, "schema": schema.name if schema else "",
+                                           "encoding": ch.message_encoding}
+                counts[ch.id] = counts.get(ch.id, 0) + 1
+                message_count += 1
+                t = msg.log_time
+                start_ns = t if start_ns is None else min(start_ns, t)
+                end_ns = t if end_ns is None else max(end_ns, t)
+                if ch.topic in mission_topics and ch.message_encoding == "json" and t >= last_time.get(ch.topic, -1):
+                    last_time[ch.topic] = t
+                    last_json[ch.topic] = _safe_json(msg.data)
+
+    duration_s = (end_ns - start_ns) / 1e9 if start_ns is not None and end_ns is not None else 0.0
+    channels = []
+    for cid, info in channel_info.items():
+        n = int(counts.get(cid, 0))
+        channels.append({**info, "count": n, "rate_hz": (n / duration_s) if duration_s > 0 else 0.0})
+    channels.sort(key=lambda c: (c["topic"], c["schema"]))
+
+    mission = None
+    if last_json:
+        result = last_json.get(MISSION_RESULT_TOPIC)
+        state = last_json.get(MISSION_STATE_TOPIC)
+        mission = {"outcome": result.get("outcome") if isinstance(result, dict) else None,
+                   "final_state": state.get("state") if isinstance(state, dict) else None}
+    return {"path": str(path), "duration_s": duration_s, "start_ns": start_ns, "end_ns": end_ns,
+            "message_count": int(message_count), "channels": channels, "metadata": metadata,
+            "mission": mission, "finished": bool(finished)}
+
+
+def _safe_json(data: bytes) -> Any:
+    try:
+        return json.loads(data)
+    except (ValueError, UnicodeDecodeError):
+        return None

@@ -1,0 +1,1 @@
+"""The embedded simulator backend: vehicle kinematics, battery, GPS, and the camera's world."""

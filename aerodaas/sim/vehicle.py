@@ -1,0 +1,170 @@
+"""Embedded multirotor simulator: point-mass kinematics with speed, acceleration and yaw-rate limits, a battery
+model and GPS derived from the local position.
+
+Model (per physics step ``dt`` seconds):
+
+* A setpoint gives a desired ENU velocity: for a position target, the speed towards it is
+  ``min(v_max, sqrt(2 * a_max * distance))`` (so it arrives without overshoot: the standard
+  trapezoidal-velocity profile), horizontal and vertical axes limited separately; for a velocity target
+  the commanded velocity, clipped to the limits.
+* The actual velocity moves towards the desired one by at most ``a_max * dt`` (acceleration limit).
+* Yaw moves towards the desired yaw by at most ``max_yaw_rate * dt``.
+* Battery: energy drawn while airborne is ``(P_hover + k * |v|) * dt`` joules (W·s), voltage is linear in
+  state of charge between empty and full (a deliberately simple LiPo model).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import BatteryConfig, Limits, NoiseConfig
+from ..geo import enu_to_geodetic
+from ..models import Attitude, GeoPoint, Odometry
+
+
+@dataclass
+class Setpoint:
+    """``mode``: 'idle' (on ground), 'hold' (hover at ``target``), 'position' (fly to ``target``),
+    'velocity' (hold ``velocity`` m/s), 'land' (descend at ``land_speed`` m/s)."""
+
+    mode: str = "idle"
+    target: tuple[float, float, float] | None = None
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    speed: float | None = None  # m/s cap for position mode
+    yaw_rate: float = 0.0  # deg/s for velocity mode
+    land_speed: float = 0.5
+
+
+@dataclass
+class VehicleState:
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    yaw: float = 90.0  # deg, ENU (90 = facing north)
+    armed: bool = False
+    in_air: bool = False
+    energy_j: float = 0.0
+
+
+class SimVehicle:
+    """One simulated multirotor. Positions in ENU metres from home, velocities in m/s, yaw in degrees."""
+
+    def __init__(self, robot_id: str, home: GeoPoint, limits: Limits, battery: BatteryConfig,
+                 noise: NoiseConfig | None = None) -> None:
+        self.robot_id = robot_id
+        self.home = home
+        self.limits = limits
+        self.battery = battery
+        self.noise = noise or NoiseConfig()
+        self._rng = np.random.default_rng(self.noise.seed)
+        self.state = VehicleState(energy_j=battery.capacity_wh * 3600.0 * battery.initial_pct / 100.0)
+        self.setpoint = Setpoint()
+        self.t = 0.0
+
+    # ------------------------------------------------------------------ dynamics
+    def step(self, dt: float) -> None:
+        """Advance the simulation by ``dt`` seconds."""
+        s, sp, lim = self.state, self.setpoint, self.limits
+        self.t += dt
+        if not s.in_air and sp.mode not in ("position",):
+            s.velocity[:] = 0.0
+            return
+        desired = np.zeros(3)
+        if sp.mode == "position" and sp.target is not None:
+            err = np.asarray(sp.target, float) - s.position
+            dh = float(np.hypot(err[0], err[1]))
+            vmax = min(lim.max_speed, sp.speed) if sp.speed else lim.max_speed
+            if dh > 1e-6:
+                vh = min(vmax, math.sqrt(2.0 * lim.max_acceleration * dh), dh / dt)
+                desired[:2] = err[:2] / dh * vh
+            dz = abs(err[2])
+            if dz > 1e-6:
+                vz = min(lim.max_vertical_speed, math.sqrt(2.0 * lim.max_acceleration * dz), dz / dt)
+                desired[2] = math.copysign(vz, err[2])
+        elif sp.mode == "velocity":
+            desired[:] = sp.velocity
+            h = float(np.hypot(desired[0], desired[1]))
+            if h > lim.max_speed:
+                desired[:2] *= lim.max_speed / h
+            desired[2] = float(np.clip(desired[2], -lim.max_vertical_speed, lim.max_vertical_speed))
+            yr = float(np.clip(sp.yaw_rate, -lim.max_yaw_rate, lim.max_yaw_rate))
+            s.yaw = (s.yaw + yr * dt) % 360.0
+        elif sp.mode == "land":
+            desired[2] = -min(sp.land_speed, lim.max_vertical_speed)
+        elif sp.mode == "hold" and sp.target is not None:
+            err = np.asarray(sp.target, float) - s.position
+            desired = np.clip(err * 1.5, -lim.max_speed, lim.max_speed)
+        dv = desired - s.velocity
+        n = float(np.linalg.norm(dv))
+        amax = lim.max_acceleration * dt
+        if n > amax:
+            dv *= amax / n
+        s.velocity += dv
+        s.position += s.velocity * dt
+        if s.position[2] <= 0.0:
+            s.position[2] = 0.0
+            if s.velocity[2] < 0:
+                s.velocity[:] = 0.0
+                if sp.mode == "land":
+                    s.in_air = False
+        elif s.position[2] > 0.05:
+            s.in_air = True
+        if s.in_air:
+            speed = float(np.linalg.norm(s.velocity))
+            p = self.battery.hover_power_w + self.battery.speed_power_w_per_mps * speed
+            s.energy_j = max(0.0, s.energy_j - p * dt)
+
+    # ------------------------------------------------------------------ commands
+    def arm(self) -> None:
+        self.state.armed = True
+
+    def disarm(self) -> None:
+        if self.state.in_air:
+            raise RuntimeError(f"{self.robot_id}: cannot disarm while airborne")
+        self.state.armed = False
+        self.setpoint = Setpoint("idle")
+
+    def takeoff(self, altitude: float) -> None:
+        if not self.state.armed:
+            raise RuntimeError(f"{self.robot_id}: takeoff refused, vehicle not armed")
+        x, y, _ = self.state.position
+        self.setpoint = Setpoint("position", target=(float(x), float(y), float(altitude)))
+
+    def goto(self, target: tuple[float, float, float], speed: float | None = None) -> None:
+        self.setpoint = Setpoint("position", target=tuple(float(v) for v in target), speed=speed)
+
+    def set_velocity(self, v: tuple[float, float, float], yaw_rate: float = 0.0) -> None:
+        self.setpoint = Setpoint("velocity", velocity=tuple(float(c) for c in v), yaw_rate=yaw_rate)
+
+    def hold(self) -> None:
+        self.setpoint = Setpoint("hold", target=tuple(float(c) for c in self.state.position))
+
+    def land(self) -> None:
+        self.setpoint = Setpoint("land")
+
+    # ------------------------------------------------------------------ sensing
+    @property
+    def battery_pct(self) -> float:
+        return 100.0 * self.state.energy_j / (self.battery.capacity_wh * 3600.0)
+
+    @property
+    def battery_voltage(self) -> float:
+        b = self.battery
+        return b.voltage_empty + (b.voltage_full - b.voltage_empty) * self.battery_pct / 100.0
+
+    def odometry(self) -> Odometry:
+        """Current odometry; GPS comes from the local position via pymap3d, plus optional noise."""
+        s = self.state
+        pos = s.position.copy()
+        vel = s.velocity.copy()
+        if self.noise.gps_std_m > 0:
+            pos[:2] += self._rng.normal(0.0, self.noise.gps_std_m, 2)
+        if self.noise.velocity_std_mps > 0:
+            vel += self._rng.normal(0.0, self.noise.velocity_std_mps, 3)
+        geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
+        pitch = float(np.clip(-vel[0] * 3.0, -25, 25))  # cosmetic: lean into motion
+        return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
+                        velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=0.0, pitch=pitch, yaw=s.yaw),
+                        battery_pct=max(0.0, min(100.0, self.battery_pct)), battery_voltage=self.battery_voltage,
+                        armed=s.armed, in_air=s.in_air)

@@ -1,0 +1,215 @@
+"""The trajectory-scheduler contract (the paper's INavigate) and the waypoint priority queue behind it.
+
+A scheduler holds *missions*: ``(priority, seq, name, items)`` where items are waypoints and/or velocity
+commands. Lower priority numbers win (paper: ``PriorityQueue(data, priority)``). The head of the best
+non-empty mission is what the drone executes; a higher-priority mission preempts the current one, and once
+it is exhausted or cleared the preempted mission resumes at the waypoint it was heading to.
+
+Plug-ins subclass :class:`TrajectoryScheduler` and override :meth:`order` (how an UNORDERED list is sequenced).
+"""
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Sequence
+
+from aerodaas.models import AeroNavigation, PriorityQueue, SchedulingType, VelocityCommand, Waypoint
+
+DEFAULT_PRIORITY = 2
+
+
+@dataclass
+class Mission:
+    priority: int
+    seq: int
+    name: str
+    items: list = field(default_factory=list)
+    distance_driven: bool = True
+
+
+class TrajectoryScheduler:
+    """Base trajectory scheduler (INavigate): keeps the given order (ORDERED); subclasses re-order UNORDERED.
+
+    Thread-safe. Positions are ENU metres relative to the drone's home.
+    """
+
+    name = "ordered"
+
+    def __init__(self, env: Any = None, start: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+        self.env = env
+        self.start = tuple(float(v) for v in start)
+        self._missions: list[Mission] = []
+        self._seq = 0
+        self._lock = threading.RLock()
+        self.completed: list[str] = []
+        self.cleared = 0
+        self.stream_inputs: list[tuple[Any, int]] = []  # (AeroStreamData, priority) wired at start_mission
+        self._remote = None  # SchedulerActor handle while a mission runs
+        if env is not None and hasattr(env, "_register_scheduler_instance"):
+            env._register_scheduler_instance(self)
+
+    def __getstate__(self) -> dict:
+        d = self.__dict__.copy()
+        d.pop("_lock", None)
+        d["env"] = None
+        d["_remote"] = None
+        d["stream_inputs"] = []
+        return d
+
+    def __setstate__(self, d: dict) -> None:
+        self.__dict__.update(d)
+        self._lock = threading.RLock()
+
+    # ------------------------------------------------------------------ ordering (plug-in point)
+    def order(self, waypoints: list[Waypoint], start: Sequence[float]) -> list[Waypoint]:
+        """Return the visiting order for an UNORDERED list. The base class keeps the given order."""
+        return list(waypoints)
+
+    @staticmethod
+    def tour_length(waypoints: Iterable[Waypoint], start: Sequence[float]) -> float:
+        """Length in metres of the polyline start -> waypoints (relative coordinates)."""
+        p = tuple(start)
+        total = 0.0
+        for w in waypoints:
+            q = (w.x, w.y, w.z)
+            total += math.dist(p, q)
+            p = q
+        return total
+
+    # ------------------------------------------------------------------ INavigate
+    def generate_navigation(self, nav: AeroNavigation | PriorityQueue | list, priority: int | None = None) -> AeroNavigation:
+        """Schedule ``nav`` (order it if UNORDERED) and enqueue it; returns the scheduled AeroNavigation.
+
+        Accepts an AeroNavigation, a PriorityQueue wrapping one (or a list of waypoints), or a plain list.
+        Raises TypeError for anything else."""
+        nav, prio = self._unwrap(nav, priority)
+        scheduled = self.schedule(nav)
+        self._enqueue(scheduled, prio)
+        return scheduled
+
+    def schedule(self, nav: AeroNavigation, start: Sequence[float] | None = None) -> AeroNavigation:
+        """Order ``nav`` without enqueueing it."""
+        if nav.scheduling_type == SchedulingType.UNORDERED:
+            wps = [w for w in nav.waypoints if isinstance(w, Waypoint)]
+            others = [w for w in nav.waypoints if not isinstance(w, Waypoint)]
+            ordered = self.order(wps, start if start is not None else self.start) + others
+            return nav.model_copy(update={"waypoints": ordered, "scheduling_type": SchedulingType.ORDERED})
+        return nav
+
+    def add_navigation(self, nav: AeroNavigation | PriorityQueue | list, index: int | None = None,
+                       priority: int | None = None, position: Sequence[float] | None = None) -> None:
+        """Add navigation at ``priority`` (default: the PriorityQueue's, else 2). With ``index``, insert the items at
+        that index of the existing mission of the same priority (the paper's "append at custom indices");
+        otherwise extend it (or create it). UNORDERED additions re-plan the remaining waypoints of that mission
+        from ``position`` (the drone's current position if given).
+
+        A ``PriorityQueue`` wrapping an analytics output stream (AeroStreamData) wires that stream into this
+        scheduler: every AeroNavigation it carries is added at that priority while the mission runs."""
+        data = nav.data if isinstance(nav, PriorityQueue) else nav
+        if type(data).__name__ == "AeroStreamData":
+            self.stream_inputs.append((data, nav.priority if isinstance(nav, PriorityQueue) and priority is None
+                                       else (priority if priority is not None else DEFAULT_PRIORITY)))
+            return
+        if self._remote is not None:
+            import ray
+
+            nav_, prio_ = self._unwrap(nav, priority)
+            ray.get(self._remote.add_navigation.remote(nav_, index, prio_))
+            return
+        nav, prio = self._unwrap(nav, priority)
+        with self._lock:
+            m = self._find(prio)
+            if m is None:
+                self._enqueue(self.schedule(nav, position), prio)
+                return
+            items = list(nav.waypoints)
+            if index is None:
+                m.items.extend(items)
+            else:
+                if not 0 <= index <= len(m.items):
+                    raise IndexError(f"index {index} out of range for a mission of {len(m.items)} items")
+                m.items[index:index] = items
+            if nav.scheduling_type == SchedulingType.UNORDERED:
+                wps = [w for w in m.items if isinstance(w, Waypoint)]
+                rest = [w for w in m.items if not isinstance(w, Waypoint)]
+                m.items = self.order(wps, position if position is not None else self.start) + rest
+
+    def clear_navigation(self, priority: int | None = None) -> None:
+        """Abort: drop every queued mission (or only those at ``priority``). A cleared mission never resumes."""
+        if self._remote is not None:
+            import ray
+
+            ray.get(self._remote.clear_navigation.remote(priority))
+            return
+        with self._lock:
+            if priority is None:
+                self._missions.clear()
+            else:
+                self._missions = [m for m in self._missions if m.priority != priority]
+            self.cleared += 1
+
+    # ------------------------------------------------------------------ execution side
+    def current(self, now: float) -> tuple[Mission, Any] | None:
+        """The (mission, item) the drone should execute at sim time ``now``; expired velocity commands are dropped."""
+        with self._lock:
+            for m in sorted(self._missions, key=lambda m: (m.priority, m.seq)):
+                while m.items and isinstance(m.items[0], VelocityCommand):
+                    v = m.items[0]
+                    if v.issued_at is None:
+                        v.issued_at = now
+                    if now - v.issued_at >= v.duration or (len(m.items) > 1 and isinstance(m.items[1], VelocityCommand)):
+                        m.items.pop(0)  # expired, or superseded by a newer command
+                        continue
+                    break
+                if m.items:
+                    return m, m.items[0]
+            self._missions = [m for m in self._missions if m.items]
+            return None
+
+    def complete(self, item_id: str) -> bool:
+        """Mark the head waypoint ``item_id`` of its mission as reached and pop it. Returns False if not at a head."""
+        with self._lock:
+            for m in self._missions:
+                if m.items and getattr(m.items[0], "id", None) == item_id:
+                    m.items.pop(0)
+                    self.completed.append(item_id)
+                    return True
+            return False
+
+    def pending(self, distance_driven_only: bool = False) -> int:
+        """Number of queued items (optionally only in pre-planned, distance-driven missions)."""
+        with self._lock:
+            return sum(len(m.items) for m in self._missions if m.distance_driven or not distance_driven_only)
+
+    def snapshot(self) -> list[dict]:
+        with self._lock:
+            return [{"name": m.name, "priority": m.priority, "items": [i.model_dump() for i in m.items]}
+                    for m in sorted(self._missions, key=lambda m: (m.priority, m.seq))]
+
+    # ------------------------------------------------------------------ internals
+    def _find(self, priority: int) -> Mission | None:
+        for m in self._missions:
+            if m.priority == priority:
+                return m
+        return None
+
+    def _enqueue(self, nav: AeroNavigation, priority: int) -> None:
+        with self._lock:
+            self._seq += 1
+            self._missions.append(Mission(priority, self._seq, nav.name, list(nav.waypoints),
+                                          nav.navigation_type.value == "DISTANCE_DRIVEN"))
+
+    @staticmethod
+    def _unwrap(nav: Any, priority: int | None) -> tuple[AeroNavigation, int]:
+        prio = priority
+        if isinstance(nav, PriorityQueue):
+            prio = nav.priority if priority is None else priority
+            nav = nav.data
+        if hasattr(nav, "get_data") and not isinstance(nav, AeroNavigation):
+            nav = nav.get_data()
+        if isinstance(nav, list):
+            nav = AeroNavigation(waypoints=nav)
+        if not isinstance(nav, AeroNavigation):
+            raise TypeError(f"expected AeroNavigation, PriorityQueue or a list of waypoints, got {type(nav).__name__}")
+        return nav, DEFAULT_PRIORITY if prio is None else prio
