@@ -155,7 +155,7 @@ class FollowAnalytics(NavigableAnalytics):
 
     def __init__(self, target_classes: Iterable[str] = ("car", "truck", "bus"), kp: float = 0.8, ki: float = 0.02,
                  kd: float = 0.1, max_speed: float = 4.0, command_duration: float = 0.5, gate_m: float = 4.0,
-                 confirm_hits: int = 2, lost_after: float = 1.0, name: str | None = None) -> None:
+                 confirm_hits: int = 2, lost_after: float = 2.0, name: str | None = None) -> None:
         super().__init__(name)
         self.target_classes = set(target_classes)
         self.kp, self.ki, self.kd = kp, ki, kd

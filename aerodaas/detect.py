@@ -1,0 +1,574 @@
+"""Object detection on camera frames with small COCO ONNX models (CPU, onnxruntime).
+
+Two detectors share one interface (``detect(image_bgr) -> list[Detection]`` plus ``last_timing``):
+
+* :class:`YoloxDetector` -- YOLOX-Nano, 416x416 input (Megvii YOLOX, Apache-2.0).
+* :class:`NanoDetDetector` -- NanoDet-Plus-m 1.5x, 416x416 input (RangiLyu NanoDet / OpenCV model zoo, Apache-2.0).
+
+Model files are located by :func:`resolve_model` (explicit path, ``$AERODAAS_MODEL_DIR``, the user cache, then a
+download pinned to a commit and verified by sha256). The registry :data:`MODELS` records where every file comes
+from; ``/work/shared/data/MANIFEST.md`` (the project's shared data manifest) documents the same contract.
+
+Conventions: images are ``(H, W, 3)`` ``uint8`` **BGR** arrays (what ``cv2.imread`` returns); boxes are
+``(x0, y0, x1, y1)`` in pixels of the image passed to ``detect`` (origin top-left, clipped to ``[0, W] x [0, H]``);
+times are milliseconds.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import pathlib
+import tempfile
+import threading
+import time
+import urllib.error
+import urllib.request
+from dataclasses import dataclass
+from typing import Iterable
+
+import cv2
+import numpy as np
+
+from .models import COCO_CLASSES, Detection
+
+__all__ = [
+    "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
+    "YoloxDetector", "NanoDetDetector", "make_detector", "DETECTORS",
+]
+
+log = logging.getLogger(__name__)
+
+MODEL_DIR_ENV = "AERODAAS_MODEL_DIR"
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Model registry and resolution
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Where a model file comes from.
+
+    ``file``: file name looked up in the model folders; ``url``: download URL pinned to a commit;
+    ``sha256``: hex digest of the exact bytes; ``license``: SPDX id; ``source``: human-readable provenance.
+    """
+
+    file: str
+    url: str
+    sha256: str
+    license: str
+    source: str = ""
+
+
+MODELS: dict[str, ModelSpec] = {
+    "yolox_nano": ModelSpec(
+        file="yolox_nano.onnx",
+        url="https://raw.githubusercontent.com/Kazuhito00/YOLOX-ONNX-TFLite-Sample/"
+        "3d4f1119d0694200671c08069ecb847aa0d8495a/model/yolox_nano.onnx",
+        sha256="695e750a5d5754bb5a8d5325643b59282191a7e7a564e435a415fd3c578eab14",
+        license="Apache-2.0",
+        source="Kazuhito00/YOLOX-ONNX-TFLite-Sample model/yolox_nano.onnx @ 3d4f1119 (upstream Megvii YOLOX)",
+    ),
+    "nanodet_plus_m_416": ModelSpec(
+        file="nanodet_plus_m_416.onnx",
+        url="https://raw.githubusercontent.com/hpc203/nanodet-opncv-dnn-cpp-python/"
+        "15dd99c651d53c824f51d1eb5faddbd4f3d69bbc/nanodet_m.onnx",
+        sha256="4b82da9944b88577175ee23a459dce2e26e6e4be573def65b1055dc2d9720186",
+        license="Apache-2.0",
+        source="hpc203/nanodet-opncv-dnn-cpp-python nanodet_m.onnx @ 15dd99c6; same bytes as opencv/opencv_zoo "
+        "models/object_detection_nanodet/object_detection_nanodet_2022nov.onnx (RangiLyu NanoDet-Plus)",
+    ),
+}
+
+
+class ModelNotFoundError(FileNotFoundError):
+    """No usable model file: not at the given path, not in the model folders, and the download failed."""
+
+
+class ModelChecksumError(ValueError):
+    """A model file's sha256 differs from the registry (wrong, truncated or corrupted file)."""
+
+
+_sha_cache: dict[tuple[str, int, int], str] = {}
+_sha_lock = threading.Lock()
+
+
+def _sha256_file(path: pathlib.Path) -> str:
+    """sha256 hex digest of ``path``; cached per (path, mtime_ns, size) so repeated resolutions are cheap."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    with _sha_lock:
+        hit = _sha_cache.get(key)
+    if hit is not None:
+        return hit
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    digest = h.hexdigest()
+    with _sha_lock:
+        _sha_cache[key] = digest
+    return digest
+
+
+def _verify(path: pathlib.Path, spec: ModelSpec) -> None:
+    digest = _sha256_file(path)
+    if digest != spec.sha256:
+        raise ModelChecksumError(
+            f"model file {path} has sha256 {digest}, expected {spec.sha256} for {spec.file} "
+            f"({spec.source}); the file is wrong or corrupted: replace or delete it"
+        )
+
+
+def model_cache_dir() -> pathlib.Path:
+    """The user cache folder for downloaded models: ``$XDG_CACHE_HOME/aerodaas/models``, else
+    ``~/.cache/aerodaas/models``. Not created here."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return pathlib.Path(base) / "aerodaas" / "models"
+
+
+def _download(spec: ModelSpec, dest_dir: pathlib.Path, timeout: float = 60.0) -> pathlib.Path:
+    """Download ``spec.url`` into ``dest_dir`` via a temp file, verify sha256, then move it in place atomically."""
+    dest_dir.mkdir(parents=True, exist_ok=True)
+    dest = dest_dir / spec.file
+    fd, tmp_name = tempfile.mkstemp(prefix=spec.file + ".", suffix=".part", dir=dest_dir)
+    tmp = pathlib.Path(tmp_name)
+    try:
+        h = hashlib.sha256()
+        with os.fdopen(fd, "wb") as out, urllib.request.urlopen(spec.url, timeout=timeout) as resp:
+            for chunk in iter(lambda: resp.read(1 << 16), b""):
+                h.update(chunk)
+                out.write(chunk)
+        digest = h.hexdigest()
+        if digest != spec.sha256:
+            raise ModelChecksumError(
+                f"downloaded {spec.url} has sha256 {digest}, expected {spec.sha256}; not installed as {dest}"
+            )
+        os.replace(tmp, dest)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    log.info("downloaded %s to %s", spec.url, dest)
+    return dest
+
+
+def resolve_model(
+    name: str = "yolox_nano",
+    path: str | os.PathLike | None = None,
+    *,
+    allow_download: bool = True,
+) -> pathlib.Path:
+    """Locate the ONNX file of model ``name`` (a key of :data:`MODELS`) and return its path.
+
+    Search order:
+
+    1. ``path`` if given: used as is (a user may bring their own ONNX file, so its sha256 is **not** checked);
+       raises :class:`ModelNotFoundError` naming the path if it is not a file.
+    2. ``$AERODAAS_MODEL_DIR/<file>``.
+    3. The user cache, ``$XDG_CACHE_HOME/aerodaas/models/<file>`` or ``~/.cache/aerodaas/models/<file>``.
+    4. If ``allow_download``: download from the commit-pinned URL in :data:`MODELS` with ``urllib`` into the
+       cache folder (temp file, sha256 verified, then moved in place).
+
+    Files found in 2 and 3 are verified against the registry sha256 (cached per path and mtime). A mismatch in
+    ``$AERODAAS_MODEL_DIR`` raises :class:`ModelChecksumError` naming the file; a mismatching cached file is
+    replaced by a fresh download when possible, otherwise the error is raised.
+
+    Raises ``ValueError`` for an unknown ``name``, :class:`ModelChecksumError` as above, and
+    :class:`ModelNotFoundError` (a ``FileNotFoundError``) when nothing is found and the download is disabled or
+    fails (offline); its message says to set ``AERODAAS_MODEL_DIR`` and includes the download error.
+    """
+    if name not in MODELS:
+        raise ValueError(f"unknown model {name!r}; known models: {', '.join(sorted(MODELS))}")
+    spec = MODELS[name]
+
+    if path is not None:
+        p = pathlib.Path(path).expanduser()
+        if not p.is_file():
+            raise ModelNotFoundError(f"model file {str(p)!r} for {name!r} does not exist (or is not a file)")
+        return p
+
+    searched: list[str] = []
+    env_dir = os.environ.get(MODEL_DIR_ENV)
+    if env_dir:
+        cand = pathlib.Path(env_dir).expanduser() / spec.file
+        searched.append(str(cand))
+        if cand.is_file():
+            _verify(cand, spec)
+            return cand
+    else:
+        searched.append(f"${MODEL_DIR_ENV} (not set)")
+
+    cache = model_cache_dir()
+    cand = cache / spec.file
+    searched.append(str(cand))
+    cache_error: ModelChecksumError | None = None
+    if cand.is_file():
+        try:
+            _verify(cand, spec)
+            return cand
+        except ModelChecksumError as e:  # corrupt cache entry: try to replace it by a verified download
+            if not allow_download:
+                raise
+            cache_error = e
+            log.warning("%s; downloading a fresh copy", e)
+
+    if allow_download:
+        try:
+            return _download(spec, cache)
+        except ModelChecksumError:
+            raise
+        except (urllib.error.URLError, OSError, TimeoutError, ValueError) as e:
+            if cache_error is not None:
+                raise cache_error from e
+            reason = f"download from {spec.url} failed: {type(e).__name__}: {e}"
+            cause: BaseException | None = e
+    else:
+        reason = "download disabled (allow_download=False)"
+        cause = None
+    raise ModelNotFoundError(
+        f"model {name!r} ({spec.file}) not found; searched: {', '.join(searched)}; {reason}. "
+        f"Set {MODEL_DIR_ENV} to a folder containing {spec.file} (sha256 {spec.sha256}, from {spec.source}), "
+        f"or pass an explicit model path."
+    ) from cause
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Detectors
+# ----------------------------------------------------------------------------------------------------------------
+
+_CLASS_INDEX = {n: i for i, n in enumerate(COCO_CLASSES)}
+
+
+def _check_image(image: np.ndarray) -> None:
+    if not isinstance(image, np.ndarray):
+        raise ValueError(f"image must be a numpy array of shape (H, W, 3) and dtype uint8, got {type(image).__name__}")
+    if image.dtype != np.uint8:
+        raise ValueError(f"image must have dtype uint8 (BGR 0-255), got dtype {image.dtype} with shape {image.shape}")
+    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
+        raise ValueError(
+            f"image must have shape (H, W, 3) (BGR), got shape {image.shape}; convert grey/BGRA with cv2.cvtColor"
+        )
+
+
+def _nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarray:
+    """Greedy non-maximum suppression on ``(N, 4)`` x0y0x1y1 boxes; returns kept indices, best score first."""
+    x0, y0, x1, y1 = boxes.T
+    areas = np.maximum(x1 - x0, 0) * np.maximum(y1 - y0, 0)
+    order = np.argsort(-scores, kind="stable")
+    keep = []
+    while order.size:
+        i = order[0]
+        keep.append(i)
+        rest = order[1:]
+        w = np.maximum(0.0, np.minimum(x1[i], x1[rest]) - np.maximum(x0[i], x0[rest]))
+        h = np.maximum(0.0, np.minimum(y1[i], y1[rest]) - np.maximum(y0[i], y0[rest]))
+        inter = w * h
+        iou = inter / np.maximum(areas[i] + areas[rest] - inter, 1e-9)
+        order = rest[iou <= iou_threshold]
+    return np.asarray(keep, dtype=np.int64)
+
+
+class _OnnxDetector:
+    """Shared machinery: session creation, thresholds, class filter, class-aware NMS, Detection output."""
+
+    model_name: str = ""
+    _pre_nms_top_k = 1000
+
+    def __init__(
+        self,
+        model_path: str | os.PathLike | None = None,
+        *,
+        score_threshold: float = 0.3,
+        nms_threshold: float = 0.45,
+        classes: Iterable[str] | None = None,
+        class_thresholds: dict[str, float] | None = None,
+        intra_op_threads: int = 1,
+    ) -> None:
+        import onnxruntime as ort
+
+        if not 0.0 <= score_threshold <= 1.0:
+            raise ValueError(f"score_threshold must be within [0, 1], got {score_threshold}")
+        if not 0.0 <= nms_threshold <= 1.0:
+            raise ValueError(f"nms_threshold must be within [0, 1], got {nms_threshold}")
+        if int(intra_op_threads) < 0:
+            raise ValueError(f"intra_op_threads must be >= 0 (0 = onnxruntime default), got {intra_op_threads}")
+        self.score_threshold = float(score_threshold)
+        self.nms_threshold = float(nms_threshold)
+
+        # Per-class score thresholds; excluded classes get +inf so nothing passes.
+        thr = np.full(len(COCO_CLASSES), self.score_threshold, dtype=np.float32)
+        for cname, value in (class_thresholds or {}).items():
+            if cname not in _CLASS_INDEX:
+                raise ValueError(f"class_thresholds: unknown COCO class {cname!r}")
+            if not 0.0 <= float(value) <= 1.0:
+                raise ValueError(f"class_thresholds[{cname!r}] must be within [0, 1], got {value}")
+            thr[_CLASS_INDEX[cname]] = float(value)
+        self.classes: tuple[str, ...] | None = None
+        if classes is not None:
+            if isinstance(classes, str):
+                classes = [classes]
+            self.classes = tuple(classes)
+            unknown = [c for c in self.classes if c not in _CLASS_INDEX]
+            if unknown:
+                raise ValueError(f"classes: unknown COCO class name(s) {unknown}")
+            mask = np.ones(len(COCO_CLASSES), dtype=bool)
+            mask[[_CLASS_INDEX[c] for c in self.classes]] = False
+            thr[mask] = np.inf
+        self.class_thresholds = dict(class_thresholds or {})
+        self._thr = thr
+
+        self.model_path = resolve_model(self.model_name, model_path)
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = int(intra_op_threads)
+        so.inter_op_num_threads = 1
+        so.log_severity_level = 3  # the NanoDet export triggers one harmless warning per initializer
+        self.intra_op_threads = int(intra_op_threads)
+        self.session = ort.InferenceSession(str(self.model_path), sess_options=so, providers=["CPUExecutionProvider"])
+        inp = self.session.get_inputs()[0]
+        self.input_name: str = inp.name
+        shape = inp.shape
+        if len(shape) != 4 or not all(isinstance(d, int) for d in shape[2:]):
+            raise ValueError(f"{self.model_path}: expected a fixed NCHW input, got {inp.name} {shape}")
+        self.input_hw: tuple[int, int] = (int(shape[2]), int(shape[3]))
+        self.output_names = [o.name for o in self.session.get_outputs()]
+        self.last_timing: dict[str, float] = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(model_path={str(self.model_path)!r}, score_threshold={self.score_threshold}, "
+                f"nms_threshold={self.nms_threshold}, classes={self.classes}, intra_op_threads={self.intra_op_threads})")
+
+    # subclasses: _preprocess(image) -> (blob, ctx); _decode(outputs) -> (boxes_in_input_px (N,4), scores (N,80))
+    # and _unmap(boxes, ctx) -> boxes in original pixels.
+
+    def detect(self, image_bgr: np.ndarray) -> list[Detection]:
+        """Detect COCO objects in one ``(H, W, 3)`` ``uint8`` BGR image of any size.
+
+        Returns :class:`~aerodaas.models.Detection` objects sorted by descending score, boxes
+        ``(x0, y0, x1, y1)`` in pixels of ``image_bgr`` clipped to ``[0, W] x [0, H]``. Only classes in
+        ``classes`` (if given) whose score reaches their threshold are kept, then class-aware NMS is applied.
+        Sets ``self.last_timing`` (``preprocess_ms``, ``inference_ms``, ``postprocess_ms``; ``time.perf_counter``).
+
+        Raises ``ValueError`` if ``image_bgr`` is not a 3-channel ``uint8`` array (message names shape and dtype).
+        """
+        t0 = time.perf_counter()
+        _check_image(image_bgr)
+        blob, ctx = self._preprocess(image_bgr)
+        t1 = time.perf_counter()
+        outputs = self.session.run(None, {self.input_name: blob})
+        t2 = time.perf_counter()
+        dets = self._postprocess(outputs, ctx, image_bgr.shape[:2])
+        t3 = time.perf_counter()
+        self.last_timing = {
+            "preprocess_ms": (t1 - t0) * 1e3,
+            "inference_ms": (t2 - t1) * 1e3,
+            "postprocess_ms": (t3 - t2) * 1e3,
+        }
+        return dets
+
+    __call__ = detect
+
+    def _postprocess(self, outputs, ctx, hw: tuple[int, int]) -> list[Detection]:
+        boxes, scores = self._decode(outputs)
+        # Zero every score under its class threshold (or of an excluded class); each anchor then votes for its best
+        # remaining class, so a filtered-out top class does not hide an eligible second one.
+        scores = np.where(scores >= self._thr, scores, 0.0)
+        cls = scores.argmax(axis=1)
+        conf = scores[np.arange(scores.shape[0]), cls]
+        keep = conf > 0.0
+        if not keep.any():
+            return []
+        boxes, conf, cls = boxes[keep], conf[keep], cls[keep]
+        if conf.size > self._pre_nms_top_k:
+            top = np.argpartition(-conf, self._pre_nms_top_k)[: self._pre_nms_top_k]
+            boxes, conf, cls = boxes[top], conf[top], cls[top]
+        boxes = self._unmap(boxes.astype(np.float64), ctx)
+        h, w = hw
+        np.clip(boxes[:, 0::2], 0.0, float(w), out=boxes[:, 0::2])
+        np.clip(boxes[:, 1::2], 0.0, float(h), out=boxes[:, 1::2])
+        # Class-aware NMS by offsetting each class into its own disjoint coordinate range.
+        offset = cls.astype(np.float64)[:, None] * (float(max(h, w)) + 1.0)
+        kept = _nms(boxes + offset, conf.astype(np.float64), self.nms_threshold)
+        return [
+            Detection(
+                class_id=int(cls[i]),
+                class_name=COCO_CLASSES[int(cls[i])],
+                score=float(min(max(conf[i], 0.0), 1.0)),
+                box=(float(boxes[i, 0]), float(boxes[i, 1]), float(boxes[i, 2]), float(boxes[i, 3])),
+            )
+            for i in kept
+        ]
+
+
+class YoloxDetector(_OnnxDetector):
+    """YOLOX-Nano COCO detector (ONNX, CPU via onnxruntime).
+
+    Model contract (``MANIFEST.md`` of the shared data, and the Megvii YOLOX ONNX demo
+    ``demo/ONNXRuntime/onnx_inference.py`` with ``yolox/utils/demo_utils.py``): input ``images`` float32
+    ``(1, 3, 416, 416)``, BGR 0-255 (no mean/std), letterboxed as ``preproc`` does (resize keeping the aspect
+    ratio with bilinear interpolation, top-left aligned, bottom/right padded with 114). Output ``output``
+    ``(1, 3549, 85)`` raw, decoded as ``demo_postprocess``: on grids of strides 8/16/32 (52x52 + 26x26 + 13x13),
+    ``xy = (p_xy + grid) * stride``, ``wh = exp(p_wh) * stride`` (centre/size in input pixels),
+    ``score = objectness * class_prob`` (both already sigmoid in the export).
+
+    Args:
+        model_path: ONNX file; ``None`` resolves ``"yolox_nano"`` with :func:`resolve_model`.
+        score_threshold: minimum ``obj * cls`` score in [0, 1].
+        nms_threshold: IoU above which a lower-scored box of the same class is suppressed.
+        classes: COCO class names to report (all if ``None``).
+        class_thresholds: per-class score thresholds overriding ``score_threshold``, by COCO name.
+        intra_op_threads: onnxruntime ``intra_op_num_threads`` (0 = onnxruntime default, all cores).
+
+    Raises ``ValueError`` for out-of-range thresholds or unknown class names, and the errors of
+    :func:`resolve_model` when the model cannot be found. ``detect`` is documented on the base class.
+    """
+
+    model_name = "yolox_nano"
+    strides = (8, 16, 32)
+
+    def __init__(self, model_path: str | os.PathLike | None = None, *, score_threshold: float = 0.3,
+                 nms_threshold: float = 0.45, classes: Iterable[str] | None = None,
+                 class_thresholds: dict[str, float] | None = None, intra_op_threads: int = 1) -> None:
+        super().__init__(model_path, score_threshold=score_threshold, nms_threshold=nms_threshold, classes=classes,
+                         class_thresholds=class_thresholds, intra_op_threads=intra_op_threads)
+        ih, iw = self.input_hw
+        grids, strides = [], []
+        for s in self.strides:
+            gh, gw = ih // s, iw // s
+            xv, yv = np.meshgrid(np.arange(gw), np.arange(gh))
+            grids.append(np.stack((xv, yv), axis=-1).reshape(-1, 2))
+            strides.append(np.full((gh * gw, 1), s))
+        self._grid = np.concatenate(grids).astype(np.float32)
+        self._stride = np.concatenate(strides).astype(np.float32)
+        self._pad = np.full((ih, iw, 3), 114, dtype=np.uint8)
+
+    def _preprocess(self, image: np.ndarray):
+        ih, iw = self.input_hw
+        h, w = image.shape[:2]
+        r = min(ih / h, iw / w)
+        nw, nh = max(1, int(w * r)), max(1, int(h * r))
+        padded = self._pad.copy()
+        padded[:nh, :nw] = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_LINEAR)
+        blob = np.ascontiguousarray(padded.transpose(2, 0, 1)[None], dtype=np.float32)
+        return blob, (nw / w, nh / h)
+
+    def _decode(self, outputs):
+        p = outputs[0][0]
+        if p.shape[0] != self._grid.shape[0]:
+            raise RuntimeError(f"{self.model_path}: output has {p.shape[0]} rows, expected {self._grid.shape[0]}")
+        xy = (p[:, :2] + self._grid) * self._stride
+        wh = np.exp(p[:, 2:4]) * self._stride
+        boxes = np.concatenate([xy - wh / 2, xy + wh / 2], axis=1)
+        scores = p[:, 4:5] * p[:, 5:]
+        return boxes, scores
+
+    @staticmethod
+    def _unmap(boxes: np.ndarray, ctx) -> np.ndarray:
+        sx, sy = ctx
+        boxes[:, 0::2] /= sx
+        boxes[:, 1::2] /= sy
+        return boxes
+
+
+class NanoDetDetector(_OnnxDetector):
+    """NanoDet-Plus-m 1.5x 416 COCO detector (ONNX, CPU via onnxruntime); same interface as :class:`YoloxDetector`.
+
+    Model contract (``MANIFEST.md``; OpenCV model zoo ``models/object_detection_nanodet/nanodet.py`` and
+    ``demo.py``): input ``input.1`` float32 ``(1, 3, 416, 416)``, BGR, ``(x - mean) / std`` with mean
+    ``(103.53, 116.28, 123.675)`` and std ``(57.375, 57.12, 58.395)`` (the NanoDet training normalisation, in
+    BGR order; the zoo demo feeds RGB, which we do not copy). Letterbox as the zoo ``letterbox``: resize keeping
+    the aspect ratio (``INTER_AREA``), **centred**, padded with 0 before normalisation. Outputs, matched by shape:
+    per stride 8/16/32 class scores ``(1, N, 80)`` (already sigmoid) and box distributions ``(1, N, 32)``
+    (Distribution Focal Loss, ``reg_max = 7``: for each of left/top/right/bottom, ``distance = softmax(8 bins) .
+    [0..7] * stride``), measured from the prior point ``(col * stride + (stride - 1) / 2, row * stride +
+    (stride - 1) / 2)`` as in the zoo ``nanodet.py``.
+
+    Arguments and errors as :class:`YoloxDetector` (``model_path=None`` resolves ``"nanodet_plus_m_416"``).
+    """
+
+    model_name = "nanodet_plus_m_416"
+    strides = (8, 16, 32)
+    reg_max = 7
+    mean = np.array([103.53, 116.28, 123.675], dtype=np.float32)
+    std = np.array([57.375, 57.12, 58.395], dtype=np.float32)
+
+    def __init__(self, model_path: str | os.PathLike | None = None, *, score_threshold: float = 0.3,
+                 nms_threshold: float = 0.45, classes: Iterable[str] | None = None,
+                 class_thresholds: dict[str, float] | None = None, intra_op_threads: int = 1) -> None:
+        super().__init__(model_path, score_threshold=score_threshold, nms_threshold=nms_threshold, classes=classes,
+                         class_thresholds=class_thresholds, intra_op_threads=intra_op_threads)
+        ih, iw = self.input_hw
+        levels = {}
+        for s in self.strides:
+            gh, gw = ih // s, iw // s
+            xv, yv = np.meshgrid(np.arange(gw) * s, np.arange(gh) * s)
+            centers = np.stack((xv.ravel(), yv.ravel()), axis=-1).astype(np.float32) + 0.5 * (s - 1)
+            levels[gh * gw] = (s, centers)
+        # Pair each stride's class/box outputs by their anchor count N and last dimension (80 vs 4*(reg_max+1)).
+        cls_idx, reg_idx = {}, {}
+        for k, o in enumerate(self.session.get_outputs()):
+            shp = o.shape
+            n, c = shp[-2], shp[-1]
+            if n in levels and c == len(COCO_CLASSES):
+                cls_idx[n] = k
+            elif n in levels and c == 4 * (self.reg_max + 1):
+                reg_idx[n] = k
+        if set(cls_idx) != set(levels) or set(reg_idx) != set(levels):
+            raise ValueError(
+                f"{self.model_path}: outputs {[(o.name, o.shape) for o in self.session.get_outputs()]} do not match "
+                f"the NanoDet layout (per stride (1, N, 80) scores and (1, N, 32) box distributions)"
+            )
+        order = sorted(levels, reverse=True)  # stride 8 first
+        self._levels = [(cls_idx[n], reg_idx[n], levels[n][0], levels[n][1]) for n in order]
+        self._project = np.arange(self.reg_max + 1, dtype=np.float32)
+        self._inv_std = (1.0 / self.std).astype(np.float32)
+
+    def _preprocess(self, image: np.ndarray):
+        ih, iw = self.input_hw
+        h, w = image.shape[:2]
+        r = min(ih / h, iw / w)
+        nw, nh = max(1, min(iw, int(w * r))), max(1, min(ih, int(h * r)))
+        top, left = (ih - nh) // 2, (iw - nw) // 2
+        canvas = np.zeros((ih, iw, 3), dtype=np.uint8)
+        canvas[top:top + nh, left:left + nw] = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_AREA)
+        x = (canvas.astype(np.float32) - self.mean) * self._inv_std
+        blob = np.ascontiguousarray(x.transpose(2, 0, 1)[None])
+        return blob, (left, top, nw / w, nh / h)
+
+    def _decode(self, outputs):
+        boxes, scores = [], []
+        for ci, ri, s, centers in self._levels:
+            reg = outputs[ri][0].reshape(-1, 4, self.reg_max + 1)
+            reg = np.exp(reg - reg.max(axis=-1, keepdims=True))
+            dist = (reg / reg.sum(axis=-1, keepdims=True)) @ self._project * s  # (N, 4): l, t, r, b
+            boxes.append(np.concatenate([centers - dist[:, :2], centers + dist[:, 2:]], axis=1))
+            scores.append(outputs[ci][0])
+        return np.concatenate(boxes), np.concatenate(scores)
+
+    @staticmethod
+    def _unmap(boxes: np.ndarray, ctx) -> np.ndarray:
+        left, top, sx, sy = ctx
+        boxes[:, 0::2] = (boxes[:, 0::2] - left) / sx
+        boxes[:, 1::2] = (boxes[:, 1::2] - top) / sy
+        return boxes
+
+
+DETECTORS: dict[str, type[_OnnxDetector]] = {
+    "yolox_nano": YoloxDetector,
+    "nanodet_plus_m_416": NanoDetDetector,
+}
+_ALIASES = {"yolox": "yolox_nano", "nanodet": "nanodet_plus_m_416"}
+
+
+def make_detector(name: str = "yolox_nano", **kwargs) -> YoloxDetector | NanoDetDetector:
+    """Build a detector by model name (``"yolox_nano"`` / ``"yolox"`` or ``"nanodet_plus_m_416"`` / ``"nanodet"``).
+
+    ``kwargs`` go to the detector's constructor (``model_path``, ``score_threshold``, ``nms_threshold``,
+    ``classes``, ``class_thresholds``, ``intra_op_threads``). Raises ``ValueError`` for an unknown name (listing
+    the known ones) plus whatever the constructor raises.
+    """
+    key = _ALIASES.get(name, name)
+    if key not in DETECTORS:
+        raise ValueError(f"unknown detector {name!r}; known: {', '.join(sorted([*DETECTORS, *_ALIASES]))}")
+    return DETECTORS[key](**kwargs)

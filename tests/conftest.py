@@ -1,0 +1,42 @@
+"""Shared fixtures: one local Ray session for every test that needs it, and the shared data location."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA_DIR = Path(os.environ.get("AERODAAS_DATA_DIR", REPO.parent / "shared" / "data")).resolve()
+MODEL_DIR = Path(os.environ.get("AERODAAS_MODEL_DIR", DATA_DIR / "models")).resolve()
+
+needs_data = pytest.mark.skipif(not (DATA_DIR / "imagery").is_dir() or not (MODEL_DIR / "yolox_nano.onnx").is_file(),
+                                reason=f"shared data not found at {DATA_DIR} (set AERODAAS_DATA_DIR / AERODAAS_MODEL_DIR)")
+
+
+@pytest.fixture(scope="session")
+def ray_session():
+    """A local Ray with this node labelled tier=edge (token auth on), shared by all e2e tests."""
+    from aerodaas import runtime
+
+    runtime.ensure_ray(None)
+    yield
+    runtime.shutdown_ray()
+
+
+@pytest.fixture
+def run_options(tmp_path):
+    """Reset the runtime's CLI options around a test."""
+    from aerodaas import runtime
+
+    saved = runtime.RunOptions(**vars(runtime.OPTIONS))
+    runtime.OPTIONS.progress = False
+    yield runtime.OPTIONS
+    for k, v in vars(saved).items():
+        setattr(runtime.OPTIONS, k, v)
+
+
+@pytest.fixture
+def data_env(monkeypatch):
+    monkeypatch.setenv("AERODAAS_DATA_DIR", str(DATA_DIR))
+    monkeypatch.setenv("AERODAAS_MODEL_DIR", str(MODEL_DIR))

@@ -1,0 +1,51 @@
+import json
+import subprocess
+import sys
+
+import pytest
+
+from aerodaas.config import ConfigError, load_environment_config, parse_environment_config
+
+GOOD = {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}, {"id": "odom", "type": "odometry"}]}]}
+
+
+def test_good_config_gets_defaults_and_a_stat_stream():
+    cfg = parse_environment_config(json.loads(json.dumps(GOOD)))
+    r = cfg.robots[0]
+    assert r.backend == "sim" and r.limits.max_speed > 0
+    assert {s.type for s in r.sensors} == {"camera", "odometry", "stat_stream"}
+    assert r.sensors[0].properties["fps"] == 15.0
+
+
+@pytest.mark.parametrize("mutate,expect", [
+    (lambda d: d["robots"][0].update(limits={"max_speed": -1}), "robots.0.limits.max_speed"),
+    (lambda d: d["robots"][0].update(backend="gazebo"), "robots.0.backend"),
+    (lambda d: d["robots"][0]["sensors"][0].update(properties={"hfov_deg": 200}), "hfov_deg"),
+    (lambda d: d["robots"][0].update(home={"lat": 95, "lon": 0}), "robots.0.home.lat"),
+    (lambda d: d.update(robots=[]), "robots"),
+    (lambda d: d["robots"].append({"id": "d1"}), "duplicate ids"),
+    (lambda d: d.update(compute=[{"id": "c", "tier": "fog"}]), "compute.0.tier"),
+    (lambda d: d.update(world={"ground": {"image": "nope/missing.png"}}), "world.ground.image"),
+    (lambda d: d["robots"][0].update(colour="red"), "robots.0.colour"),
+])
+def test_malformed_config_names_field_and_value(mutate, expect):
+    d = json.loads(json.dumps(GOOD))
+    mutate(d)
+    with pytest.raises(ConfigError) as e:
+        parse_environment_config(d)
+    assert expect in str(e.value)
+
+
+def test_bad_json_and_missing_file(tmp_path):
+    p = tmp_path / "env.json"
+    p.write_text("{\"robots\": [")
+    with pytest.raises(ConfigError, match="invalid JSON at line 1"):
+        load_environment_config(p)
+    with pytest.raises(ConfigError, match="not found"):
+        load_environment_config(tmp_path / "missing.json")
+
+
+def test_schema_command_prints_json_schema():
+    out = subprocess.run([sys.executable, "-m", "aerodaas.cli", "schema"], capture_output=True, text=True, check=True)
+    schema = json.loads(out.stdout)
+    assert "robots" in schema["properties"] and "RobotConfig" in schema["$defs"]
