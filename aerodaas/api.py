@@ -66,10 +66,6 @@ class Sensor:
         """The sensor's stream (push: analytics subscribe to it; pull: ``get_data()`` while a mission runs)."""
         return self._stream
 
-    def subscribe(self, callback: Callable[[Any], None]) -> None:
-        """IPushSensor: ``callback(item)`` is called in the driver for each item (odometry and stat-stream)."""
-        self._stream.subscribers.append(callback)
-
     def __repr__(self) -> str:
         return f"Sensor({self.id!r}, type={self.type!r})"
 

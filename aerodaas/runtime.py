@@ -92,8 +92,6 @@ def _collect_graph(robot) -> tuple[list, list]:
 
     def visit(stream):
         for sub in stream.subscribers:
-            if callable(sub) and not hasattr(sub, "process"):
-                continue
             if id(sub) not in seen:
                 seen.add(id(sub))
                 order.append(sub)
