@@ -7,7 +7,7 @@ Two detectors share one interface (``detect(image_bgr) -> list[Detection]`` plus
 
 Model files are located by :func:`resolve_model` (explicit path, ``$AERODAAS_MODEL_DIR``, the user cache, then a
 download pinned to a commit and verified by sha256). The registry :data:`MODELS` records where every file comes
-from; ``/work/shared/data/MANIFEST.md`` (the project's shared data manifest) documents the same contract.
+from; the shared data manifest (``MANIFEST.md`` next to the models) documents the same contract.
 
 Conventions: images are ``(H, W, 3)`` ``uint8`` **BGR** arrays (what ``cv2.imread`` returns); boxes are
 ``(x0, y0, x1, y1)`` in pixels of the image passed to ``detect`` (origin top-left, clipped to ``[0, W] x [0, H]``);
@@ -81,6 +81,10 @@ MODELS: dict[str, ModelSpec] = {
         "models/object_detection_nanodet/object_detection_nanodet_2022nov.onnx (RangiLyu NanoDet-Plus)",
     ),
 }
+
+
+#: Short names accepted by :func:`resolve_model` and :func:`make_detector`.
+_ALIASES = {"yolox": "yolox_nano", "nanodet": "nanodet_plus_m_416"}
 
 
 class ModelNotFoundError(FileNotFoundError):
@@ -160,7 +164,7 @@ def resolve_model(
     *,
     allow_download: bool = True,
 ) -> pathlib.Path:
-    """Locate the ONNX file of model ``name`` (a key of :data:`MODELS`) and return its path.
+    """Locate the ONNX file of model ``name`` (a key of :data:`MODELS`, or ``"yolox"``/``"nanodet"``); return its path.
 
     Search order:
 
@@ -179,6 +183,7 @@ def resolve_model(
     :class:`ModelNotFoundError` (a ``FileNotFoundError``) when nothing is found and the download is disabled or
     fails (offline); its message says to set ``AERODAAS_MODEL_DIR`` and includes the download error.
     """
+    name = _ALIASES.get(name, name)
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; known models: {', '.join(sorted(MODELS))}")
     spec = MODELS[name]
@@ -310,6 +315,8 @@ class _OnnxDetector:
             if isinstance(classes, str):
                 classes = [classes]
             self.classes = tuple(classes)
+            if not self.classes:
+                raise ValueError("classes must name at least one COCO class (or be None for all classes)")
             unknown = [c for c in self.classes if c not in _CLASS_INDEX]
             if unknown:
                 raise ValueError(f"classes: unknown COCO class name(s) {unknown}")
@@ -337,10 +344,12 @@ class _OnnxDetector:
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(model_path={str(self.model_path)!r}, score_threshold={self.score_threshold}, "
-                f"nms_threshold={self.nms_threshold}, classes={self.classes}, intra_op_threads={self.intra_op_threads})")
+                f"nms_threshold={self.nms_threshold}, classes={self.classes}, "
+                f"intra_op_threads={self.intra_op_threads})")
 
-    # subclasses: _preprocess(image) -> (blob, ctx); _decode(outputs) -> (boxes_in_input_px (N,4), scores (N,80))
-    # and _unmap(boxes, ctx) -> boxes in original pixels.
+    # Subclasses implement: _preprocess(image) -> (blob, ctx); _candidates(outputs, min_score) -> (anchor indices,
+    # (K, 80) class scores) for anchors that may reach min_score; _boxes(outputs, idx) -> (K, 4) x0y0x1y1 boxes in
+    # model-input pixels; _unmap(boxes, ctx) -> boxes in pixels of the original image.
 
     def detect(self, image_bgr: np.ndarray) -> list[Detection]:
         """Detect COCO objects in one ``(H, W, 3)`` ``uint8`` BGR image of any size.
@@ -370,7 +379,9 @@ class _OnnxDetector:
     __call__ = detect
 
     def _postprocess(self, outputs, ctx, hw: tuple[int, int]) -> list[Detection]:
-        boxes, scores = self._decode(outputs)
+        idx, scores = self._candidates(outputs, float(self._thr.min()))
+        if idx.size == 0:
+            return []
         # Zero every score under its class threshold (or of an excluded class); each anchor then votes for its best
         # remaining class, so a filtered-out top class does not hide an eligible second one.
         scores = np.where(scores >= self._thr, scores, 0.0)
@@ -379,10 +390,11 @@ class _OnnxDetector:
         keep = conf > 0.0
         if not keep.any():
             return []
-        boxes, conf, cls = boxes[keep], conf[keep], cls[keep]
+        idx, conf, cls = idx[keep], conf[keep], cls[keep]
         if conf.size > self._pre_nms_top_k:
             top = np.argpartition(-conf, self._pre_nms_top_k)[: self._pre_nms_top_k]
-            boxes, conf, cls = boxes[top], conf[top], cls[top]
+            idx, conf, cls = idx[top], conf[top], cls[top]
+        boxes = self._boxes(outputs, idx)
         boxes = self._unmap(boxes.astype(np.float64), ctx)
         h, w = hw
         np.clip(boxes[:, 0::2], 0.0, float(w), out=boxes[:, 0::2])
@@ -453,15 +465,19 @@ class YoloxDetector(_OnnxDetector):
         blob = np.ascontiguousarray(padded.transpose(2, 0, 1)[None], dtype=np.float32)
         return blob, (nw / w, nh / h)
 
-    def _decode(self, outputs):
+    def _candidates(self, outputs, min_score: float):
         p = outputs[0][0]
-        if p.shape[0] != self._grid.shape[0]:
-            raise RuntimeError(f"{self.model_path}: output has {p.shape[0]} rows, expected {self._grid.shape[0]}")
-        xy = (p[:, :2] + self._grid) * self._stride
-        wh = np.exp(p[:, 2:4]) * self._stride
-        boxes = np.concatenate([xy - wh / 2, xy + wh / 2], axis=1)
-        scores = p[:, 4:5] * p[:, 5:]
-        return boxes, scores
+        if p.shape != (self._grid.shape[0], 5 + len(COCO_CLASSES)):
+            raise RuntimeError(f"{self.model_path}: output shape {p.shape}, expected ({self._grid.shape[0]}, 85)")
+        idx = np.flatnonzero(p[:, 4] >= min_score)  # score = obj * cls <= obj
+        return idx, p[idx, 4:5] * p[idx, 5:]
+
+    def _boxes(self, outputs, idx: np.ndarray) -> np.ndarray:
+        p = outputs[0][0][idx]
+        stride = self._stride[idx]
+        xy = (p[:, :2] + self._grid[idx]) * stride
+        wh = np.exp(p[:, 2:4]) * stride
+        return np.concatenate([xy - wh / 2, xy + wh / 2], axis=1)
 
     @staticmethod
     def _unmap(boxes: np.ndarray, ctx) -> np.ndarray:
@@ -482,7 +498,10 @@ class NanoDetDetector(_OnnxDetector):
     per stride 8/16/32 class scores ``(1, N, 80)`` (already sigmoid) and box distributions ``(1, N, 32)``
     (Distribution Focal Loss, ``reg_max = 7``: for each of left/top/right/bottom, ``distance = softmax(8 bins) .
     [0..7] * stride``), measured from the prior point ``(col * stride + (stride - 1) / 2, row * stride +
-    (stride - 1) / 2)`` as in the zoo ``nanodet.py``.
+    (stride - 1) / 2)`` as in the zoo ``nanodet.py``. (Upstream NanoDet-Plus training code puts the priors at
+    ``col * stride`` without the half-cell offset; for *this* export the zoo offset is the right one: with it,
+    detections on a horizontally/vertically flipped frame flip back to within ~1-2 px, without it they are off by
+    ~15 px, measured on the shared aerial crops.)
 
     Arguments and errors as :class:`YoloxDetector` (``model_path=None`` resolves ``"nanodet_plus_m_416"``).
     """
@@ -520,9 +539,14 @@ class NanoDetDetector(_OnnxDetector):
                 f"the NanoDet layout (per stride (1, N, 80) scores and (1, N, 32) box distributions)"
             )
         order = sorted(levels, reverse=True)  # stride 8 first
-        self._levels = [(cls_idx[n], reg_idx[n], levels[n][0], levels[n][1]) for n in order]
+        self._cls_out = [cls_idx[n] for n in order]
+        self._reg_out = [reg_idx[n] for n in order]
+        self._centers = np.concatenate([levels[n][1] for n in order])
+        self._anchor_stride = np.concatenate([np.full((n, 1), levels[n][0], np.float32) for n in order])
         self._project = np.arange(self.reg_max + 1, dtype=np.float32)
-        self._inv_std = (1.0 / self.std).astype(np.float32)
+        # uint8 -> normalised float32 lookup table per BGR channel, shape (3, 256)
+        self._lut = ((np.arange(256, dtype=np.float32)[None, :] - self.mean[:, None]) / self.std[:, None]).astype(
+            np.float32)
 
     def _preprocess(self, image: np.ndarray):
         ih, iw = self.input_hw
@@ -532,19 +556,22 @@ class NanoDetDetector(_OnnxDetector):
         top, left = (ih - nh) // 2, (iw - nw) // 2
         canvas = np.zeros((ih, iw, 3), dtype=np.uint8)
         canvas[top:top + nh, left:left + nw] = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_AREA)
-        x = (canvas.astype(np.float32) - self.mean) * self._inv_std
-        blob = np.ascontiguousarray(x.transpose(2, 0, 1)[None])
+        blob = np.empty((1, 3, ih, iw), dtype=np.float32)
+        for c in range(3):  # (x - mean) / std through a lookup table: same values, ~5x faster than float maths
+            blob[0, c] = self._lut[c][canvas[:, :, c]]
         return blob, (left, top, nw / w, nh / h)
 
-    def _decode(self, outputs):
-        boxes, scores = [], []
-        for ci, ri, s, centers in self._levels:
-            reg = outputs[ri][0].reshape(-1, 4, self.reg_max + 1)
-            reg = np.exp(reg - reg.max(axis=-1, keepdims=True))
-            dist = (reg / reg.sum(axis=-1, keepdims=True)) @ self._project * s  # (N, 4): l, t, r, b
-            boxes.append(np.concatenate([centers - dist[:, :2], centers + dist[:, 2:]], axis=1))
-            scores.append(outputs[ci][0])
-        return np.concatenate(boxes), np.concatenate(scores)
+    def _candidates(self, outputs, min_score: float):
+        scores = np.concatenate([outputs[k][0] for k in self._cls_out])
+        idx = np.flatnonzero(scores.max(axis=1) >= min_score)
+        return idx, scores[idx]
+
+    def _boxes(self, outputs, idx: np.ndarray) -> np.ndarray:
+        reg = np.concatenate([outputs[k][0] for k in self._reg_out])[idx].reshape(-1, 4, self.reg_max + 1)
+        reg = np.exp(reg - reg.max(axis=-1, keepdims=True))
+        dist = (reg / reg.sum(axis=-1, keepdims=True)) @ self._project * self._anchor_stride[idx]  # (K, 4): l t r b
+        centers = self._centers[idx]
+        return np.concatenate([centers - dist[:, :2], centers + dist[:, 2:]], axis=1)
 
     @staticmethod
     def _unmap(boxes: np.ndarray, ctx) -> np.ndarray:
@@ -558,7 +585,6 @@ DETECTORS: dict[str, type[_OnnxDetector]] = {
     "yolox_nano": YoloxDetector,
     "nanodet_plus_m_416": NanoDetDetector,
 }
-_ALIASES = {"yolox": "yolox_nano", "nanodet": "nanodet_plus_m_416"}
 
 
 def make_detector(name: str = "yolox_nano", **kwargs) -> YoloxDetector | NanoDetDetector:
