@@ -14,7 +14,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 
 from .config import SimulationConfig
 
@@ -304,7 +303,8 @@ def _progress_lines(handles: dict, pending: dict, t0: float) -> list[str]:
             st = ray.get(h["drone"].status.remote(), timeout=2)
         except Exception:
             continue
-        fps = st["frames"] / max(time.monotonic() - t0, 1e-6)
+        rendered = st["frames"] - st["frames_dropped_at_camera"]  # frames actually captured, not skipped ticks
+        fps = rendered / max(time.monotonic() - t0, 1e-6)
         dets = ""
         for a in h["analytics"].values():
             try:
@@ -370,7 +370,3 @@ def format_summary(result: MissionResult) -> str:
         lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} channels)")
     return "\n".join(lines)
 
-
-def percentile_summary(values: list[float]) -> dict[str, float]:
-    v = np.asarray(values, float)
-    return {"median": float(np.median(v)), "p99": float(np.percentile(v, 99))} if v.size else {}
