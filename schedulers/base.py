@@ -6,6 +6,13 @@ non-empty mission is what the drone executes; a higher-priority mission preempts
 it is exhausted or cleared the preempted mission resumes at the waypoint it was heading to.
 
 Plug-ins subclass :class:`TrajectoryScheduler` and override :meth:`order` (how an UNORDERED list is sequenced).
+
+Fixed ORDERED runs: every waypoint in a mission has a segment id (``Mission.segment_ids``): 0 for waypoints that
+came from UNORDERED navigation (free to re-order), n > 0 for waypoints of the ORDERED navigation n. When an
+UNORDERED addition re-plans a mission, each run n is one node (entered at its first waypoint, left at its last)
+that stays contiguous and in its order; only the free waypoints move between runs
+(:meth:`TrajectoryScheduler.order_segments`). An ORDERED addition inserted (``index=``) strictly inside a run joins
+that run; any other ORDERED addition is a run of its own.
 """
 from __future__ import annotations
 
@@ -21,11 +28,37 @@ DEFAULT_PRIORITY = 2
 
 @dataclass
 class Mission:
+    """One queued mission (one priority): ``items`` in flying order. ``segment_of`` maps ``id(item)`` to the item's
+    segment id (absent = 0 = free, UNORDERED origin; n > 0 = part of the fixed ORDERED run n), so code that pops or
+    inserts ``items`` directly cannot misalign it; pickling (Ray) carries it over by position."""
+
     priority: int
     seq: int
     name: str
     items: list = field(default_factory=list)
     distance_driven: bool = True
+    segment_of: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def segment_ids(self) -> list[int]:
+        """Segment id of each item (0 = free), parallel to ``items``."""
+        return [self.segment_of.get(id(i), 0) for i in self.items]
+
+    def set_segment_ids(self, ids: Sequence[int]) -> None:
+        """Tag ``items`` (parallel ``ids``); forgets every other entry."""
+        self.segment_of = {id(i): t for i, t in zip(self.items, ids) if t}
+
+    def __getstate__(self) -> dict:
+        d = self.__dict__.copy()
+        d["segment_of"] = self.segment_ids  # object ids do not survive pickling; positions do
+        return d
+
+    def __setstate__(self, d: dict) -> None:
+        ids = d.pop("segment_of", [])
+        self.__dict__.update(d)
+        self.segment_of = {}
+        if isinstance(ids, list):
+            self.set_segment_ids(ids)
 
 
 class TrajectoryScheduler:
@@ -44,7 +77,7 @@ class TrajectoryScheduler:
         self._lock = threading.RLock()
         self.completed: list[str] = []
         self.cleared = 0
-        self.stream_inputs: list[tuple[Any, int]] = []  # (AeroStreamData, priority) wired at start_mission
+        self.stream_inputs: list[tuple[Any, int, bool]] = []  # (AeroStreamData, priority, replace) wired at start
         self._remote = None  # SchedulerActor handle while a mission runs
         if env is not None and hasattr(env, "_register_scheduler_instance"):
             env._register_scheduler_instance(self)
@@ -66,6 +99,25 @@ class TrajectoryScheduler:
         """Return the visiting order for an UNORDERED list. The base class keeps the given order."""
         return list(waypoints)
 
+    def order_segments(self, segments: list[list[Waypoint]], start: Sequence[float]) -> list[list[Waypoint]]:
+        """Order *nodes* for an open path from ``start``: each inner list is flown as given (a fixed ORDERED run,
+        entered at its first waypoint and left at its last, or a single free waypoint). Return the same inner
+        lists, re-ordered. With only single waypoints this is :meth:`order`; otherwise, by default, :meth:`order`
+        sequences the runs by their first waypoint. Override it to plan with the runs' exits too."""
+        if all(len(seg) == 1 for seg in segments):
+            return [[w] for w in self.order([seg[0] for seg in segments], start)]
+        by_head: dict[int, list[list[Waypoint]]] = {}
+        for seg in segments:
+            by_head.setdefault(id(seg[0]), []).append(seg)
+        out = []
+        for w in self.order([seg[0] for seg in segments], start):
+            if not by_head.get(id(w)):
+                break
+            out.append(by_head[id(w)].pop(0))
+        if len(out) != len(segments):
+            raise ValueError(f"{type(self).__name__}.order() must return the waypoints it was given, each once")
+        return out
+
     @staticmethod
     def tour_length(waypoints: Iterable[Waypoint], start: Sequence[float]) -> float:
         """Length in metres of the polyline start -> waypoints (relative coordinates)."""
@@ -85,7 +137,7 @@ class TrajectoryScheduler:
         Raises TypeError for anything else."""
         nav, prio = self._unwrap(nav, priority)
         scheduled = self.schedule(nav)
-        self._enqueue(scheduled, prio)
+        self._enqueue(scheduled, prio, fixed=nav.scheduling_type == SchedulingType.ORDERED)
         return scheduled
 
     def schedule(self, nav: AeroNavigation, start: Sequence[float] | None = None) -> AeroNavigation:
@@ -109,7 +161,8 @@ class TrajectoryScheduler:
         data = nav.data if isinstance(nav, PriorityQueue) else nav
         if type(data).__name__ == "AeroStreamData":
             self.stream_inputs.append((data, nav.priority if isinstance(nav, PriorityQueue) and priority is None
-                                       else (priority if priority is not None else DEFAULT_PRIORITY)))
+                                       else (priority if priority is not None else DEFAULT_PRIORITY),
+                                       bool(getattr(nav, "replace", False))))
             return
         if self._remote is not None:
             import ray
@@ -120,20 +173,27 @@ class TrajectoryScheduler:
         nav, prio = self._unwrap(nav, priority)
         with self._lock:
             m = self._find(prio)
+            fixed = nav.scheduling_type == SchedulingType.ORDERED
             if m is None:
-                self._enqueue(self.schedule(nav, position), prio)
+                self._enqueue(self.schedule(nav, position), prio, fixed=fixed)
                 return
             items = list(nav.waypoints)
+            tags = m.segment_ids
             if index is None:
-                m.items.extend(items)
+                index = len(m.items)
+            elif not 0 <= index <= len(m.items):
+                raise IndexError(f"index {index} out of range for a mission of {len(m.items)} items")
+            if not fixed:
+                tag = 0
+            elif 0 < index < len(tags) and tags[index - 1] == tags[index] != 0:
+                tag = tags[index]  # inserted strictly inside a fixed run: it joins the run
             else:
-                if not 0 <= index <= len(m.items):
-                    raise IndexError(f"index {index} out of range for a mission of {len(m.items)} items")
-                m.items[index:index] = items
-            if nav.scheduling_type == SchedulingType.UNORDERED:
-                wps = [w for w in m.items if isinstance(w, Waypoint)]
-                rest = [w for w in m.items if not isinstance(w, Waypoint)]
-                m.items = self.order(wps, position if position is not None else self.start) + rest
+                tag = self._new_segment_id()
+            m.items[index:index] = items
+            tags[index:index] = [tag] * len(items)
+            m.set_segment_ids(tags)
+            if not fixed:
+                self._replan(m, position if position is not None else self.start)
 
     def clear_navigation(self, priority: int | None = None) -> None:
         """Abort: drop every queued mission (or only those at ``priority``). A cleared mission never resumes."""
@@ -194,11 +254,43 @@ class TrajectoryScheduler:
                 return m
         return None
 
-    def _enqueue(self, nav: AeroNavigation, priority: int) -> None:
+    def _enqueue(self, nav: AeroNavigation, priority: int, fixed: bool = False) -> None:
         with self._lock:
             self._seq += 1
-            self._missions.append(Mission(priority, self._seq, nav.name, list(nav.waypoints),
-                                          nav.navigation_type.value == "DISTANCE_DRIVEN"))
+            m = Mission(priority, self._seq, nav.name, list(nav.waypoints),
+                        nav.navigation_type.value == "DISTANCE_DRIVEN")
+            if fixed:
+                m.set_segment_ids([self._new_segment_id()] * len(m.items))
+            self._missions.append(m)
+
+    def _new_segment_id(self) -> int:
+        self._segments_issued = getattr(self, "_segments_issued", 0) + 1
+        return self._segments_issued
+
+    def _replan(self, m: Mission, start: Sequence[float]) -> None:
+        """Re-order ``m``'s waypoints from ``start``: fixed runs as single nodes, free waypoints individually;
+        velocity commands keep their relative order after the waypoints."""
+        segs: list[list[Waypoint]] = []
+        seg_tag: dict[int, int] = {}  # id(first waypoint of a node) -> segment id
+        run_index: dict[int, int] = {}  # segment id -> index in segs
+        rest, rest_tags = [], []
+        for item, tag in zip(m.items, m.segment_ids):
+            if not isinstance(item, Waypoint):
+                rest.append(item)
+                rest_tags.append(tag)
+            elif tag and tag in run_index:
+                segs[run_index[tag]].append(item)
+            else:
+                if tag:
+                    run_index[tag] = len(segs)
+                seg_tag[id(item)] = tag
+                segs.append([item])
+        items, tags = [], []
+        for seg in self.order_segments(segs, start):
+            items.extend(seg)
+            tags.extend([seg_tag[id(seg[0])]] * len(seg))
+        m.items = items + rest
+        m.set_segment_ids(tags + rest_tags)
 
     @staticmethod
     def _unwrap(nav: Any, priority: int | None) -> tuple[AeroNavigation, int]:

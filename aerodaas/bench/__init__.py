@@ -1,0 +1,31 @@
+"""Benchmarks behind ``aerodaas bench <name>``.
+
+Each benchmark is a module here exposing ``add_parser(bench_subparsers)``, which registers its sub-command (its
+options and a ``func(args) -> exit code`` default). :func:`add_parsers` registers them all; the CLI calls it
+once. Modules keep their heavy imports inside functions so ``aerodaas`` starts fast.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+
+
+def machine_info() -> dict:
+    """Where a benchmark ran: CPU count, Python version and implementation, platform string, processor."""
+    return {
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "implementation": platform.python_implementation(),
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "executable": sys.executable,
+    }
+
+
+def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
+    """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
+    from . import tours
+
+    tours.add_parser(bench_subparsers)
