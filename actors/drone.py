@@ -16,7 +16,8 @@ import ray
 
 from aerodaas.config import RobotConfig, SimulationConfig
 from aerodaas.fsm import MissionFSM, MissionState as S
-from aerodaas.models import VelocityCommand, Waypoint
+from aerodaas.models import ActionCommand, VelocityCommand, Waypoint
+from aerodaas.safety import SafetyGate, SafetyViolation
 from aerodaas.sim.vehicle import SimVehicle
 
 from .streams import Outlet, wait_tree
@@ -28,6 +29,11 @@ class DroneActor:
         self.cfg = RobotConfig.model_validate(robot_cfg)
         self.sim = SimulationConfig.model_validate(sim_cfg)
         self.vehicle = SimVehicle(self.cfg.id, self.cfg.home, self.cfg.limits, self.cfg.battery, self.cfg.noise)
+        self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home)
+        self.rejected: list[dict] = []
+        self.preplanned_left = 0
+        self.idle_since: float | None = None
+        self.flew_something = False
         self.scheduler = scheduler
         self.recorder = recorder
         self.epoch_ns = epoch_ns
@@ -103,6 +109,7 @@ class DroneActor:
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
+                "rejected": self.rejected, "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
     # ------------------------------------------------------------------ main loop
@@ -195,18 +202,29 @@ class DroneActor:
                 v.disarm()
                 self._event("landed")
                 if self.outcome is None:
-                    done_all = len(self.visited) >= self.preplanned_total
-                    self.outcome = "success" if done_all else "incomplete"
+                    self.outcome = "success" if self.preplanned_left == 0 else "incomplete"
                 return True
             return False
         if st == S.EMERGENCY:
             v.land()
             fsm.transition(S.LANDING, t)
             return False
-        if v.battery_pct < 5.0 and v.state.in_air:
+        safety = self.cfg.safety
+        if v.battery_pct < safety.critical_battery_pct and v.state.in_air:
             self._event("battery_critical", battery_pct=v.battery_pct)
             self.outcome = "failed"
             fsm.transition(S.EMERGENCY, t)
+            return False
+        if st == S.RETURNING:
+            if math.hypot(pos[0], pos[1]) <= 0.5:
+                v.land()
+                fsm.transition(S.LANDING, t)
+                self._event("landing", reason="return to launch")
+            return False
+        if v.battery_pct < safety.low_battery_rtl_pct and v.state.in_air:
+            self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
+            self.outcome = "failsafe_rtl"
+            self._return_to_launch(t, pos)
             return False
         if self._pause_req.is_set():
             self._pause_req.clear()
@@ -235,6 +253,29 @@ class DroneActor:
             return False
         res = ray.get(self.scheduler.tick.remote(t, pos))
         item = res["item"]
+        self.preplanned_left = res["preplanned_left"]
+        if item is not None:
+            self.idle_since = None
+            self.flew_something = True
+        if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and self.active_wp == item.id):
+            try:  # the choke point: nothing outside the safety limits reaches the backend
+                item = self.gate.check_item(item, pos)
+            except SafetyViolation as e:
+                self._reject(t, item, e)
+                return False
+        if isinstance(item, ActionCommand):
+            self._event("action", action=item.action, reason=item.reason, priority=res["priority"])
+            if st == S.TRACKING:
+                self._event("tracking_ended")
+            ray.get(self.scheduler.discard.remote(item.id, "executed"))
+            self.preplanned_left = ray.get(self.scheduler.pending.remote())
+            if item.action == "land":
+                v.land()
+                fsm.transition(S.LANDING, t)
+                self._event("landing", reason=item.reason or "land command")
+            else:
+                self._return_to_launch(t, pos)
+            return False
         if isinstance(item, VelocityCommand):
             if st != S.TRACKING:
                 fsm.transition(S.TRACKING, t)
@@ -275,12 +316,40 @@ class DroneActor:
         # nothing queued
         if st == S.TRACKING:
             self._event("tracking_ended")
-        if self.preplanned_total > 0 and res["preplanned_left"] == 0 and len(self.visited) > 0:
+        if self.idle_since is None:
+            self.idle_since = t
+        done_plan = self.preplanned_total > 0 and res["preplanned_left"] == 0 and len(self.visited) > 0
+        had_mission = self.flew_something or self.preplanned_total > 0
+        idle_too_long = had_mission and t - self.idle_since >= self.cfg.idle_land_s
+        if done_plan or idle_too_long:
             v.land()
             fsm.transition(S.LANDING, t)
-            self._event("landing")
+            self._event("landing", reason="mission complete" if done_plan else
+                        f"nothing to do for {self.cfg.idle_land_s:g} s")
             return False
         if st != S.HOVERING:
             fsm.transition(S.HOVERING, t)
             v.hold()
         return False
+
+    def _return_to_launch(self, t: float, pos: tuple) -> None:
+        """RTL: fly home at the current altitude (at least the take-off altitude), then land (see _control)."""
+        self.vehicle.goto((0.0, 0.0, max(pos[2], self.cfg.takeoff_altitude)))
+        self.active_wp, self.hold_until = None, None
+        if self.fsm.state == S.TRACKING:
+            self._event("tracking_ended")
+        self.fsm.transition(S.RETURNING, t)
+        self._event("returning", home=[0.0, 0.0])
+
+    def _reject(self, t: float, item: Any, err: SafetyViolation) -> None:
+        """A command outside the safety limits: never sent to the backend; dropped from the queue and recorded."""
+        rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason}
+        self.rejected.append(rec)
+        self._event("command_rejected", **rec)
+        ray.get(self.scheduler.discard.remote(rec["id"], f"rejected: {err.reason}"))
+        if self.fsm.state == S.TRACKING:
+            self._event("tracking_ended")
+        if self.fsm.state in (S.TRACKING, S.NAVIGATING, S.WAYPOINT_HOLD):
+            self.fsm.transition(S.HOVERING, t)
+        self.vehicle.hold()
+        self.active_wp, self.hold_until = None, None

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import ray
 
-from aerodaas.models import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.models import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose, Waypoint
 
 from .streams import Outlet
 
@@ -175,9 +175,16 @@ class SchedulerActor:
     """Hosts one robot's trajectory scheduler (INavigate plug-in) and its waypoint priority queue.
 
     The drone polls :meth:`tick` at its control rate; analytics streams deliver navigation via :meth:`push`
-    on port ``priority:<n>``. Per-frame latency (capture -> command queued) is measured here."""
+    on port ``priority:<n>``; users add navigation via :meth:`add_navigation` (the HITL API). Everything added
+    is checked by the robot's :class:`~aerodaas.safety.SafetyGate` first (all items or none). Per-frame latency
+    (capture -> command queued) is measured here. The waypoint plan is recorded on ``/<robot>/mission/plan``
+    at start and whenever the queued waypoints change."""
 
-    def __init__(self, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int) -> None:
+    def __init__(self, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
+                 robot_cfg: dict | None = None) -> None:
+        from aerodaas.config import RobotConfig
+        from aerodaas.safety import SafetyGate
+
         self.robot_id = robot_id
         self.s = scheduler
         self.recorder = recorder
@@ -185,9 +192,18 @@ class SchedulerActor:
         self.position = tuple(scheduler.start)
         self.now = 0.0
         self.latency: list[dict] = []
+        cfg = RobotConfig.model_validate(robot_cfg) if robot_cfg else RobotConfig(id=robot_id)
+        self.home = cfg.home
+        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home)
+        self.refused: list[dict] = []
+        self.discarded: list[dict] = []
+        self._plan_sig: Any = None
+        self._replaced: set[str] = set()
 
     def tick(self, now: float, position: tuple) -> dict | None:
         self.now, self.position = now, tuple(position)
+        if self._plan_sig is None:
+            self._record_plan()
         cur = self.s.current(now)
         left = self.s.pending(distance_driven_only=True)
         if cur is None:
@@ -195,15 +211,57 @@ class SchedulerActor:
         m, item = cur
         return {"item": item, "priority": m.priority, "mission": m.name, "preplanned_left": left}
 
+    def pending(self) -> int:
+        """Queued items of pre-planned (distance-driven) missions."""
+        return self.s.pending(distance_driven_only=True)
+
     def complete(self, item_id: str) -> bool:
-        return self.s.complete(item_id)
+        ok = self.s.complete(item_id)
+        self._record_plan()
+        return ok
+
+    def discard(self, item_id: str, reason: str) -> bool:
+        """Drop the head item ``item_id`` without counting it as visited (rejected by safety, or an executed
+        action). Returns False if no mission has it at its head."""
+        with self.s._lock:
+            for m in self.s._missions:
+                if m.items and getattr(m.items[0], "id", None) == item_id:
+                    m.items.pop(0)
+                    self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
+                    break
+            else:
+                return False
+        self._record_plan()
+        return True
 
     def push(self, port: str, env: dict) -> list:
-        prio = int(port.split(":", 1)[1]) if port.startswith("priority:") else None
+        from aerodaas.safety import SafetyViolation
+
+        parts = port.split(":")
+        prio = int(parts[1]) if parts[0] == "priority" else None
         nav = env["data"]
         if not isinstance(nav, AeroNavigation):
             return []
+        try:
+            nav = self.gate.check_navigation(nav, self.position)
+        except SafetyViolation as e:  # an analytics asked for something unsafe: refuse it, keep running
+            self.refused.append({"t": env.get("sim_t", 0.0), "source": "analytics", "error": str(e)})
+            if self.recorder is not None:
+                self.recorder.json.remote(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
+                                          {"robot": self.robot_id, "t": self.now, "event": "navigation_refused",
+                                           "source": "analytics", "error": str(e)}, "aerodaas.MissionEvent")
+            return []
+        if "replace" in parts[2:] and port not in self._replaced:
+            self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
+            self.s.clear_navigation()
+            self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
+            if self.recorder is not None:
+                self.recorder.json.remote(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
+                                          {"robot": self.robot_id, "t": self.now, "event": "mission_aborted",
+                                           "by": port}, "aerodaas.MissionEvent")
         self.s.add_navigation(nav, priority=prio, position=self.position)
+        if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
+            self._record_plan()
         tr = env.get("trace") or {}
         if "capture_wall" in tr:
             e2e = (time.time() - tr["capture_wall"]) * 1e3
@@ -216,17 +274,44 @@ class SchedulerActor:
                                           "aerodaas.FrameLatency")
         return []
 
-    def add_navigation(self, nav: Any, index: int | None = None, priority: int | None = None) -> None:
-        self.s.add_navigation(nav, index=index, priority=priority, position=self.position)
+    def add_navigation(self, nav: Any, index: int | None = None, priority: int | None = None) -> dict:
+        """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
+        changes nothing; returns the queue snapshot on success."""
+        nav_, prio = self.s._unwrap(nav, priority)
+        nav_ = self.gate.check_navigation(nav_, self.position)
+        self.s.add_navigation(nav_, index=index, priority=prio, position=self.position)
+        self._record_plan()
+        return {"queued": self.s.snapshot(), "position": list(self.position), "t": self.now}
 
     def clear_navigation(self, priority: int | None = None) -> None:
         self.s.clear_navigation(priority)
+        self._record_plan()
 
     def snapshot(self) -> list[dict]:
         return self.s.snapshot()
 
+    def _record_plan(self) -> None:
+        """Record the queued waypoints (with local ENU targets) when they changed since the last record."""
+        missions = []
+        with self.s._lock:
+            for m in sorted(self.s._missions, key=lambda m: (m.priority, m.seq)):
+                items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                          "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+                if items:
+                    missions.append({"name": m.name, "priority": m.priority, "items": items})
+        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
+        if sig == self._plan_sig:
+            return
+        self._plan_sig = sig
+        if self.recorder is not None:
+            self.recorder.json.remote(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(self.now * 1e9),
+                                      {"robot": self.robot_id, "t": self.now, "missions": missions},
+                                      "aerodaas.MissionPlan")
+
     def stats(self) -> dict:
-        out: dict[str, Any] = {"completed": list(self.s.completed), "frames_with_latency": len(self.latency)}
+        out: dict[str, Any] = {"completed": list(self.s.completed), "frames_with_latency": len(self.latency),
+                               "refused": self.refused[-20:], "refused_count": len(self.refused),
+                               "discarded": self.discarded}
         if self.latency:
             for key in ("e2e_ms", "overhead_ms", "inference_ms"):
                 v = np.array([r[key] for r in self.latency])

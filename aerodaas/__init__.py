@@ -12,9 +12,9 @@ from .api import ComputeResource, Environment, Robot, Sensor
 from .config import ConfigError
 from .data import AeroData, AeroListData, AeroStreamData, IAeroData
 from .fsm import IllegalTransition, MissionState
-from .models import (AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue, SchedulingType,
-                     VelocityCommand, Waypoint)
-from .schedulers import NearestNeighborScheduler, TrajectoryScheduler
+from .models import (ActionCommand, AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue,
+                     SchedulingType, VelocityCommand, Waypoint)
+from .schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
 
 IEnvironment, IRobot, ISensor, ICompute = Environment, Robot, Sensor, ComputeResource
 AeroNav = AeroNavigation
@@ -26,5 +26,5 @@ __all__ = [
     "MonitoringAnalytics", "AeroData", "IAeroData", "AeroListData", "AeroStreamData", "AeroNavigation", "AeroNav",
     "NavigationType", "SchedulingType", "PriorityQueue", "Waypoint", "VelocityCommand", "Odometry", "Detection",
     "MissionState", "IllegalTransition", "ConfigError", "TrajectoryScheduler", "NearestNeighborScheduler",
-    "INavigate",
+    "INavigate", "TwoOptScheduler", "ActionCommand",
 ]

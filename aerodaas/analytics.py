@@ -117,7 +117,7 @@ class ObjectDetector(Analytics):
         """Resolve the model now (driver side), so a missing model fails before any actor starts."""
         from .detect import resolve_model
 
-        resolve_model(self.model, self.model_path)
+        self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly this file
 
     def setup(self) -> None:
         from .detect import make_detector
@@ -149,14 +149,19 @@ class FollowAnalytics(NavigableAnalytics):
     target's estimated velocity (feed-forward), clipped to ``max_speed`` m/s. Each command lasts
     ``command_duration`` s. The track must be confirmed by ``confirm_hits`` detections; after ``lost_after``
     seconds without a detection it is dropped and no more commands are issued (the preempted mission resumes).
+    ``standoff_m`` > 0 keeps the drone that many metres (horizontally) behind the target along its heading
+    (e.g. 2 m for following a person), instead of directly above it.
     """
 
     name = "follow"
 
     def __init__(self, target_classes: Iterable[str] = ("car", "truck", "bus"), kp: float = 0.8, ki: float = 0.02,
                  kd: float = 0.1, max_speed: float = 4.0, command_duration: float = 0.5, gate_m: float = 4.0,
-                 confirm_hits: int = 2, lost_after: float = 2.0, name: str | None = None) -> None:
+                 confirm_hits: int = 2, lost_after: float = 2.0, standoff_m: float = 0.0,
+                 name: str | None = None) -> None:
         super().__init__(name)
+        self.standoff_m = float(standoff_m)
+        self._away = np.array([0.0, -1.0])  # unit vector from the target to the standoff point
         self.target_classes = set(target_classes)
         self.kp, self.ki, self.kd = kp, ki, kd
         self.max_speed, self.command_duration = max_speed, command_duration
@@ -210,6 +215,13 @@ class FollowAnalytics(NavigableAnalytics):
         if self.hits < self.confirm_hits:
             return None
         target = self.track + self.track_v * (t - self.track_t)
+        if self.standoff_m > 0:  # stay standoff_m behind the target (along its heading), or where we are if it stops
+            sp = float(np.hypot(*self.track_v))
+            if sp > 0.2:
+                self._away = -self.track_v / sp
+            elif np.hypot(*(drone - target)) > 0.3:
+                self._away = (drone - target) / np.hypot(*(drone - target))
+            target = target + self._away * self.standoff_m
         err = target - drone
         dt = (t - self.prev_t) if self.prev_t is not None else 0.0
         if dt > 0:

@@ -179,6 +179,7 @@ class Environment:
         self.compute = {c.id: ComputeResource(c) for c in cfg.compute}
         self._trajectory_scheduler = None
         self.analytics_scheduler = "default"
+        self.hitl = None  # the running HitlServer (url, token) while a mission with the HITL API runs
 
     # -- sensors
     def has_env_sensors(self) -> bool:

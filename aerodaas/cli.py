@@ -22,6 +22,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.env_path = str(Path(args.env).resolve()) if args.env else None
     o.lockstep = True if args.lockstep else None
     o.progress = not args.quiet
+    o.hitl = True if args.hitl else None
+    o.hitl_port = args.hitl_port
     results = []
 
     from . import api
@@ -79,6 +81,44 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_waypoint(text: str) -> dict:
+    """``x,y,z[,hover]`` (ENU metres from home, hover seconds) -> a waypoint request dict."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (3, 4):
+        raise argparse.ArgumentTypeError(f"--waypoint expects x,y,z[,hover] (metres, seconds), got {text!r}")
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--waypoint expects numbers x,y,z[,hover], got {text!r}") from None
+    wp = {"x": vals[0], "y": vals[1], "z": vals[2]}
+    if len(vals) == 4:
+        wp["hover_duration"] = vals[3]
+    return wp
+
+
+def _cmd_inject(args: argparse.Namespace) -> int:
+    from .hitl import request
+
+    body: dict = {"waypoints": args.waypoint, "scheduling_type": "ORDERED" if args.ordered else "UNORDERED"}
+    if args.index is not None:
+        body["index"] = args.index
+    if args.priority is not None:
+        body["priority"] = args.priority
+    try:
+        status, out = request("POST", f"/drones/{args.drone}/waypoints", body, url=args.url, token=args.token)
+    except RuntimeError as e:
+        print(f"aerodaas inject: {e}", file=sys.stderr)
+        return 2
+    if status != 200:
+        detail = out.get("detail") if isinstance(out, dict) else out
+        if isinstance(detail, list):
+            detail = "; ".join(f"{'.'.join(str(x) for x in d.get('loc', []))}: {d.get('msg')}" for d in detail)
+        print(f"aerodaas inject: HTTP {status}: {detail}", file=sys.stderr)
+        return 1
+    print(json.dumps(out, indent=2) if args.json else f"queued {', '.join(out['added'])} for {args.drone}")
+    return 0
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from .config import json_schema
 
@@ -98,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--timeout", type=float, help="wall-clock limit in seconds")
     r.add_argument("--address", help="attach to an existing Ray cluster (e.g. 'auto') instead of starting one")
     r.add_argument("--quiet", action="store_true", help="no live progress")
+    r.add_argument("--hitl", action="store_true", help="serve the human-in-the-loop API (token printed once)")
+    r.add_argument("--hitl-port", type=int, help="port of the human-in-the-loop API (0: any free port)")
     r.set_defaults(func=_cmd_run)
     i = sub.add_parser("info", help="summarise an MCAP recording")
     i.add_argument("file")
@@ -105,6 +147,31 @@ def main(argv: list[str] | None = None) -> int:
     i.set_defaults(func=_cmd_info)
     s = sub.add_parser("schema", help="print the JSON Schema of environment.json")
     s.set_defaults(func=_cmd_schema)
+    j = sub.add_parser("inject", help="add waypoints to a running mission through the human-in-the-loop API")
+    j.add_argument("--drone", required=True, help="robot id")
+    j.add_argument("--waypoint", required=True, action="append", type=_parse_waypoint,
+                   help="x,y,z[,hover]: ENU metres from home and hover seconds (repeatable)")
+    j.add_argument("--index", type=int, help="insert at this index of the mission (default: append and re-plan)")
+    j.add_argument("--priority", type=int, help="mission priority (lower wins; default 2)")
+    j.add_argument("--ordered", action="store_true", help="keep the given order (default: let the scheduler order)")
+    j.add_argument("--url", help="API url (default: $AERODAAS_HITL_URL or the running server's state file)")
+    j.add_argument("--token", help="bearer token (default: $AERODAAS_HITL_TOKEN or the state file)")
+    j.add_argument("--json", action="store_true", help="print the API's JSON reply")
+    j.set_defaults(func=_cmd_inject)
+    pl = sub.add_parser("plot", help="draw a recording's figures (trajectory, battery/altitude, latency) as PNGs")
+    pl.add_argument("file", help="MCAP recording (an unfinished, crashed one plots what is readable)")
+    pl.add_argument("--out", metavar="DIR", help="output folder (default: <stem>_plots/ next to the recording)")
+
+    def _cmd_plot(a: argparse.Namespace) -> int:
+        from .plot import cmd_plot  # matplotlib is imported only for this command
+
+        return cmd_plot(a)
+
+    pl.set_defaults(func=_cmd_plot)
+    bench = sub.add_parser("bench", help="benchmarks (tours: trajectory schedulers); --json for JSON output")
+    from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
+
+    _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))
     args = p.parse_args(argv)
     return args.func(args)
 

@@ -16,6 +16,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from .geofence import GeofenceConfig
 from .models import GeoPoint
 
 DATA_DIR_ENV = "AERODAAS_DATA_DIR"
@@ -60,6 +61,36 @@ class NoiseConfig(_Cfg):
     seed: int = 0
 
 
+class SafetyConfig(_Cfg):
+    """Safety limits, enforced by :class:`aerodaas.safety.SafetyGate` before any command reaches the drone.
+
+    Altitudes are metres above home; ``max_altitude``/``max_speed`` default to the robot's ``limits``.
+    ``min_altitude`` applies to everything except take-off and landing. ``geofence`` holds inclusion/exclusion
+    polygons and circles (lat/lon degrees, radius metres); ``geofence_plan`` names a QGroundControl ``.plan``
+    whose ``geoFence`` is added to it. ``on_violation``: ``reject`` (default) refuses a violating command;
+    ``clamp`` clamps altitude and speed into the limits (geofence breaches are always rejected).
+    ``low_battery_rtl_pct``: below this battery percentage the drone returns to launch and lands, whatever the
+    queue holds (the stat-stream shows RETURNING). ``critical_battery_pct``: below this it lands in place."""
+
+    geofence: GeofenceConfig = Field(default_factory=GeofenceConfig)
+    geofence_plan: str | None = None
+    max_altitude: float | None = Field(default=None, gt=0, description="metres above home")
+    min_altitude: float = Field(default=0.5, ge=0, description="metres above home, except take-off/landing")
+    max_speed: float | None = Field(default=None, gt=0, description="m/s, horizontal")
+    on_violation: Literal["reject", "clamp"] = "reject"
+    low_battery_rtl_pct: float = Field(default=20.0, ge=0, le=100)
+    critical_battery_pct: float = Field(default=5.0, ge=0, le=100)
+
+    @model_validator(mode="after")
+    def _check(self) -> "SafetyConfig":
+        if self.max_altitude is not None and self.min_altitude >= self.max_altitude:
+            raise ValueError(f"min_altitude ({self.min_altitude}) must be below max_altitude ({self.max_altitude})")
+        if self.critical_battery_pct > self.low_battery_rtl_pct:
+            raise ValueError(f"critical_battery_pct ({self.critical_battery_pct}) must not exceed "
+                             f"low_battery_rtl_pct ({self.low_battery_rtl_pct})")
+        return self
+
+
 class SensorConfig(_Cfg):
     """A sensor. ``type``: ``camera`` (properties width, height in px, hfov_deg, fps, pitch_deg with 90 = nadir,
     jpeg_quality), ``odometry`` (rate_hz) or ``stat_stream``. ``buffer`` is the stream buffer length (frames
@@ -100,8 +131,11 @@ class RobotConfig(_Cfg):
     limits: Limits = Field(default_factory=Limits)
     battery: BatteryConfig = Field(default_factory=BatteryConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
+    safety: SafetyConfig = Field(default_factory=SafetyConfig)
     takeoff_altitude: float = Field(default=1.5, gt=0, description="metres above home")
     control_rate_hz: float = Field(default=10.0, gt=0)
+    idle_land_s: float = Field(default=10.0, gt=0, description="land after this many seconds (sim time) with "
+                               "nothing queued, once some navigation has been flown")
     sensors: list[SensorConfig] = Field(default_factory=list)
 
     @model_validator(mode="after")
@@ -188,6 +222,16 @@ class SimulationConfig(_Cfg):
     physics_hz: float = Field(default=50.0, gt=0)
 
 
+class HitlConfig(_Cfg):
+    """Human-in-the-loop HTTP API (see :mod:`aerodaas.hitl`). Loopback-only by default; ``token`` is the
+    bearer token (generated at start and printed once when not given). ``port`` 0 picks a free port."""
+
+    enabled: bool = False
+    host: str = "127.0.0.1"
+    port: int = Field(default=8470, ge=0, le=65535)
+    token: str | None = Field(default=None, min_length=16)
+
+
 class EnvironmentConfig(_Cfg):
     """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema."""
 
@@ -197,6 +241,7 @@ class EnvironmentConfig(_Cfg):
     compute: list[ComputeConfig] = Field(default_factory=lambda: [ComputeConfig(id="edge", tier="edge")])
     world: WorldConfig = Field(default_factory=WorldConfig)
     simulation: SimulationConfig = Field(default_factory=SimulationConfig)
+    hitl: HitlConfig = Field(default_factory=HitlConfig)
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
 
     @model_validator(mode="after")
@@ -253,6 +298,19 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         cfg.world.ground.image = str(cfg.resolve_path(cfg.world.ground.image, "world.ground.image"))
     for i, t in enumerate(cfg.world.targets):
         t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
+    for i, r in enumerate(cfg.robots):
+        if r.safety.geofence_plan:
+            field = f"robots.{i}.safety.geofence_plan"
+            path = cfg.resolve_path(r.safety.geofence_plan, field)
+            from .missionfile import MissionFileError, load_mission
+
+            try:
+                fence = load_mission(path).geofence
+            except (MissionFileError, OSError) as e:
+                raise ConfigError(f"{field}: {e}") from None
+            r.safety.geofence = GeofenceConfig(polygons=[*r.safety.geofence.polygons, *fence.polygons],
+                                               circles=[*r.safety.geofence.circles, *fence.circles])
+            r.safety.geofence_plan = str(path)
     return cfg
 
 

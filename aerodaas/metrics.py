@@ -33,6 +33,8 @@ def load_run(path: str) -> dict[str, Any]:
                 out["odometry"].append(msg)
             elif topic == "/world/targets":
                 out["targets"].append((t_ns, msg))
+            elif topic.endswith("/mission/plan"):
+                out["plans"].append(msg)
             elif topic.endswith("/events"):
                 out["events"].append(msg)
             elif topic == "/mission/state":

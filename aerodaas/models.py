@@ -19,7 +19,7 @@ from typing import Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 __all__ = [
-    "Waypoint", "VelocityCommand", "NavigationType", "SchedulingType", "AeroNavigation", "PriorityQueue",
+    "Waypoint", "VelocityCommand", "ActionCommand", "NavigationType", "SchedulingType", "AeroNavigation", "PriorityQueue",
     "GeoPoint", "Attitude", "Odometry", "CameraIntrinsics", "FramePose", "FrameMeta", "Detection",
     "NavCommand", "COCO_CLASSES",
 ]
@@ -98,7 +98,18 @@ class VelocityCommand(_Model):
     _chk = field_validator("vx", "vy", "vz", "yaw_rate", "duration")(_finite)
 
 
-NavCommand = Union[Waypoint, VelocityCommand]
+class ActionCommand(_Model):
+    """A terminal flight action issued by an analytics or a user: ``land`` (descend and land where the drone is)
+    or ``rtl`` (return to launch: fly to home at the current altitude, then land). ``reason`` is recorded.
+
+    Executed in priority order like any other navigation item; it ends the mission once the drone has landed."""
+
+    id: str = "action"
+    action: Literal["land", "rtl"]
+    reason: str = ""
+
+
+NavCommand = Union[Waypoint, VelocityCommand, ActionCommand]
 
 
 class NavigationType(str, Enum):
@@ -123,7 +134,7 @@ class AeroNavigation(_Model):
     """
 
     navigation_type: NavigationType = NavigationType.DISTANCE_DRIVEN
-    waypoints: list[Union[Waypoint, VelocityCommand]] = Field(default_factory=list)
+    waypoints: list[Union[Waypoint, VelocityCommand, ActionCommand]] = Field(default_factory=list)
     scheduling_type: SchedulingType = SchedulingType.ORDERED
     name: str = "mission"
 
@@ -145,10 +156,15 @@ class AeroNavigation(_Model):
 
 
 class PriorityQueue(_Model):
-    """Navigation data with a priority (paper: ``PriorityQueue(data, priority)``); lower number = higher priority."""
+    """Navigation data with a priority (paper: ``PriorityQueue(data, priority)``); lower number = higher priority.
+
+    ``replace=True`` (for an analytics output stream): the first navigation it delivers aborts every queued
+    mission (``clear_navigation``) before it is added, so the old mission never resumes (pattern 5, mission
+    abort); without it a higher priority only preempts (pattern 4, the old mission resumes)."""
 
     data: Any
     priority: int = Field(default=2, ge=0)
+    replace: bool = False
 
     def __init__(self, data: Any = None, priority: int = 2, **kwargs: Any) -> None:
         super().__init__(data=data, priority=priority, **kwargs)

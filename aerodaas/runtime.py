@@ -29,6 +29,8 @@ class RunOptions:
     address: str | None = None
     env_path: str | None = None
     progress: bool = True
+    hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
+    hitl_port: int | None = None
 
 
 OPTIONS = RunOptions()
@@ -128,6 +130,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             if callable(check):
                 check()
         graphs[r.id] = analytics
+        _check_preplanned(r, r.scheduler or env.trajectory_scheduler())
 
     t_start = time.monotonic()
     has_cloud = ensure_ray(opts.address)
@@ -140,12 +143,14 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         recorder = RecorderActor.options(label_selector={"tier": "edge"}).remote(os.path.abspath(opts.record), meta)
         actors.append(recorder)
     handles: dict[str, dict] = {}
+    hitl = None
     try:
         for r in robots:
             sched = r.scheduler or env.trajectory_scheduler()
             preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
                              for m in sched._missions if m.distance_driven)
-            s_actor = SchedulerActor.options(label_selector={"tier": "edge"}).remote(r.id, sched, recorder, epoch_ns)
+            s_actor = SchedulerActor.options(label_selector={"tier": "edge"}).remote(
+                r.id, sched, recorder, epoch_ns, r.cfg.model_dump(mode="json"))
             d_actor = DroneActor.options(label_selector={"tier": "edge"}).remote(
                 r.cfg.model_dump(mode="json"), sim.model_dump(), s_actor, recorder, epoch_ns)
             actors += [s_actor, d_actor]
@@ -170,9 +175,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 for sub in stream.subscribers:
                     if id(sub) in a_actors:
                         out.append((a_actors[id(sub)], "push", "in", stream.buffer))
-                for st, prio in sched.stream_inputs:
+                for st, prio, replace in sched.stream_inputs:
                     if st is stream:
-                        out.append((s_actor, "push", f"priority:{prio}", 4))
+                        out.append((s_actor, "push", f"priority:{prio}" + (":replace" if replace else ""), 4))
                 return out
 
             wiring = []
@@ -195,6 +200,16 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             for a in graphs[r.id]:
                 a.output._runtime_getter = (lambda h=a_actors[id(a)]: ray.get(h.get_latest.remote()))
 
+        hcfg = env.cfg.hitl
+        if opts.hitl if opts.hitl is not None else hcfg.enabled:
+            from .hitl import HitlServer
+
+            hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in handles.items()},
+                              host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
+                              token=hcfg.token).start()
+            env.hitl = hitl
+            shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
+            print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
         for h in handles.values():
             for hook in h["robot"]._start_hooks:
                 hook(h["robot"])
@@ -202,6 +217,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         reports = _wait_with_progress(runs, handles, opts.progress)
         stats, latency = _collect_stats(handles)
     finally:
+        if hitl is not None:
+            hitl.stop()
+            env.hitl = None
         counts = {}
         if recorder is not None:
             try:
@@ -224,6 +242,20 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
     return result
+
+
+def _check_preplanned(robot, sched) -> None:
+    """Check every queued mission of ``robot`` against its safety limits before any actor starts (legs chained
+    from the take-off point). Raises :class:`aerodaas.safety.SafetyViolation`; clamped items replace the
+    originals."""
+    from .models import AeroNavigation, SchedulingType
+    from .safety import SafetyGate
+
+    gate = SafetyGate(robot.cfg.safety, robot.cfg.limits, robot.cfg.home)
+    start = (0.0, 0.0, robot.cfg.takeoff_altitude)
+    for m in sched._missions:
+        nav = AeroNavigation(waypoints=list(m.items), scheduling_type=SchedulingType.ORDERED, name=m.name)
+        m.items = list(gate.check_navigation(nav, start).waypoints)
 
 
 def _pull_getter(sensor, drone, cams):

@@ -109,6 +109,11 @@ class _Target:
     xy: np.ndarray
 
 
+#: Height of the camera above the ground when the drone is landed (metres); a camera in the ground plane
+#: would make the ground homography singular.
+CAMERA_MIN_HEIGHT_M = 0.05
+
+
 class World:
     """Ground texture + moving targets; renders camera frames and reports target ground truth."""
 
@@ -173,6 +178,8 @@ class World:
 
         Returns ((k.height, k.width, 3) uint8 BGR frame, ground truth per target with ``in_view`` (any corner
         visible), ``fully_in_view`` (all four corners inside the image) and ``bbox_px`` (x0, y0, x1, y1))."""
+        if pose.position[2] < CAMERA_MIN_HEIGHT_M:  # on the ground: the lens sits above it, never in the plane
+            pose = pose.model_copy(update={"position": (pose.position[0], pose.position[1], CAMERA_MIN_HEIGHT_M)})
         Hg = ground_to_image_homography(pose, k)
         # pick the pyramid level whose texel is closest to (but finer than) the ground sample distance
         alt = max(pose.position[2], 0.1)
