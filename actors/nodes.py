@@ -223,14 +223,9 @@ class SchedulerActor:
     def discard(self, item_id: str, reason: str) -> bool:
         """Drop the head item ``item_id`` without counting it as visited (rejected by safety, or an executed
         action). Returns False if no mission has it at its head."""
-        with self.s._lock:
-            for m in self.s._missions:
-                if m.items and getattr(m.items[0], "id", None) == item_id:
-                    m.items.pop(0)
-                    self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
-                    break
-            else:
-                return False
+        if not self.s.discard(item_id):
+            return False
+        self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
         self._record_plan()
         return True
 

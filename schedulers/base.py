@@ -230,10 +230,18 @@ class TrajectoryScheduler:
     def complete(self, item_id: str) -> bool:
         """Mark the head waypoint ``item_id`` of its mission as reached and pop it. Returns False if not at a head."""
         with self._lock:
+            if not self.discard(item_id):
+                return False
+            self.completed.append(item_id)
+            return True
+
+    def discard(self, item_id: str) -> bool:
+        """Pop the head item ``item_id`` of its mission without counting it as reached (an item refused by the
+        safety limits, or an executed action). Returns False if no mission has it at its head."""
+        with self._lock:
             for m in self._missions:
                 if m.items and getattr(m.items[0], "id", None) == item_id:
                     m.items.pop(0)
-                    self.completed.append(item_id)
                     return True
             return False
 
