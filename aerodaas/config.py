@@ -122,11 +122,68 @@ class SensorConfig(_Cfg):
         return self
 
 
+class MavlinkConfig(_Cfg):
+    """A MAVLink autopilot (ArduPilot or PX4) reached through pymavlink.
+
+    ``connection`` is a pymavlink connection string (``udpin:0.0.0.0:14550``, ``udpout:HOST:PORT``,
+    ``tcp:HOST:PORT``, ``/dev/ttyACM0`` with ``baud``). ``autopilot``: ``auto`` identifies it from its HEARTBEAT
+    (MAV_AUTOPILOT_ARDUPILOTMEGA / MAV_AUTOPILOT_PX4). We speak as ``source_system``/``source_component`` (a GCS).
+    The link is lost after ``heartbeat_timeout_s`` seconds without a HEARTBEAT. Every COMMAND_LONG waits
+    ``command_timeout_s`` seconds for its COMMAND_ACK and is re-sent up to ``command_retries`` times.
+    ``stream_rate_hz`` is the rate requested for telemetry (MAV_CMD_SET_MESSAGE_INTERVAL).
+    ``use_autopilot_mission``: fly pre-planned ORDERED waypoint missions as an autopilot mission (uploaded with the
+    MISSION_ITEM_INT protocol, AUTO/MISSION mode) instead of streaming position targets."""
+
+    connection: str = Field(default="tcp:127.0.0.1:5760", min_length=1)
+    baud: int = Field(default=57600, gt=0)
+    autopilot: Literal["auto", "ardupilot", "px4"] = "auto"
+    source_system: int = Field(default=255, ge=1, le=255)
+    source_component: int = Field(default=190, ge=0, le=255)
+    target_system: int | None = Field(default=None, ge=1, le=255)
+    connect_timeout_s: float = Field(default=30.0, gt=0)
+    heartbeat_timeout_s: float = Field(default=3.0, gt=0)
+    command_timeout_s: float = Field(default=1.5, gt=0)
+    command_retries: int = Field(default=3, ge=0)
+    stream_rate_hz: float = Field(default=10.0, gt=0)
+    use_autopilot_mission: bool = False
+
+
+class TelloConfig(_Cfg):
+    """A DJI Tello (SDK 2.0 over UDP): commands to ``host:command_port`` (replies on the same socket), state
+    packets on local ``state_port``, H.264 video on local ``video_port``. A command without reply within
+    ``command_timeout_s`` seconds is retried ``command_retries`` times; a keep-alive is sent every
+    ``keepalive_s`` seconds (the Tello lands after 15 s without a command)."""
+
+    host: str = "192.168.10.1"
+    command_port: int = Field(default=8889, ge=1, le=65535)
+    local_command_port: int = Field(default=0, ge=0, le=65535, description="0: any free port")
+    state_port: int = Field(default=8890, ge=0, le=65535)
+    video_port: int = Field(default=11111, ge=0, le=65535)
+    video: bool = True
+    command_timeout_s: float = Field(default=7.0, gt=0)
+    command_retries: int = Field(default=2, ge=0)
+    keepalive_s: float = Field(default=5.0, gt=0, lt=15)
+    state_timeout_s: float = Field(default=3.0, gt=0, description="link lost after this long without a state packet")
+
+
+class ReplayConfig(_Cfg):
+    """Replay a recorded flight as odometry, battery and mode/state streams: ``log`` is a MAVLink telemetry log
+    (``.tlog``) or a PX4 ``.ulg``; ``rate`` is the replay speed (1 = real time)."""
+
+    log: str = Field(min_length=1)
+    rate: float = Field(default=1.0, gt=0)
+
+
 class RobotConfig(_Cfg):
-    """A robot (drone). ``backend`` selects the driver; ``sim`` is the embedded simulator."""
+    """A robot (drone). ``backend`` selects the driver: ``sim`` (the embedded simulator), ``mavlink`` (ArduPilot or
+    PX4, settings in ``mavlink``), ``tello`` (DJI Tello, settings in ``tello``) or ``replay`` (a recorded flight,
+    settings in ``replay``; not navigable)."""
 
     id: str = Field(min_length=1)
-    backend: Literal["sim"] = "sim"
+    backend: Literal["sim", "mavlink", "tello", "replay"] = "sim"
+    mavlink: MavlinkConfig | None = None
+    tello: TelloConfig | None = None
+    replay: ReplayConfig | None = None
     home: GeoPoint = Field(default_factory=lambda: GeoPoint(lat=47.3977, lon=8.5456, alt=488.0))
     limits: Limits = Field(default_factory=Limits)
     battery: BatteryConfig = Field(default_factory=BatteryConfig)
@@ -146,6 +203,12 @@ class RobotConfig(_Cfg):
             raise ValueError(f"sensors: duplicate sensor ids {dup}")
         if not any(s.type == "stat_stream" for s in self.sensors):
             self.sensors.append(SensorConfig(id="stat", type="stat_stream"))
+        if self.backend == "mavlink" and self.mavlink is None:
+            self.mavlink = MavlinkConfig()
+        if self.backend == "tello" and self.tello is None:
+            self.tello = TelloConfig()
+        if self.backend == "replay" and self.replay is None:
+            raise ValueError("replay: backend 'replay' needs a 'replay' section naming the log to play")
         return self
 
 
@@ -299,6 +362,8 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     for i, t in enumerate(cfg.world.targets):
         t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
     for i, r in enumerate(cfg.robots):
+        if r.replay is not None:
+            r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))
         if r.safety.geofence_plan:
             field = f"robots.{i}.safety.geofence_plan"
             path = cfg.resolve_path(r.safety.geofence_plan, field)

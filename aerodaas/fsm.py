@@ -2,7 +2,8 @@
 
 The paper draws its 13 states in a figure without naming them in text; these are ours, covering the same
 mission cycle (pre-flight, take-off, waypoint and analytics-driven flight, pause/resume, return, landing,
-failure). Every change goes through :meth:`MissionFSM.transition`, which checks :data:`TRANSITIONS`; an
+failure), plus a 14th, LINK_LOST, for real vehicles whose telemetry link drops (no navigation is issued while
+in it; the previous activity resumes when the link returns). Every change goes through :meth:`MissionFSM.transition`, which checks :data:`TRANSITIONS`; an
 illegal transition raises :class:`IllegalTransition` instead of silently changing state.
 """
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Callable
 
 
 class MissionState(str, Enum):
-    """The 13 stat-stream states."""
+    """The stat-stream states: the paper's 13 plus LINK_LOST."""
 
     IDLE = "IDLE"                    # on the ground, disarmed, no mission
     PREFLIGHT = "PREFLIGHT"          # mission accepted; sensors and analytics starting, checks running
@@ -28,6 +29,7 @@ class MissionState(str, Enum):
     LANDING = "LANDING"              # descending to land
     LANDED = "LANDED"                # on the ground after a flight; the mission is over
     EMERGENCY = "EMERGENCY"          # a failure (battery, backend error); the drone will land
+    LINK_LOST = "LINK_LOST"          # real vehicles: no heartbeat/state within the timeout; no commands are sent
 
 
 S = MissionState
@@ -47,9 +49,16 @@ TRANSITIONS: dict[MissionState, frozenset[MissionState]] = {
     S.RETURNING: frozenset({S.LANDING, S.PAUSED, S.EMERGENCY}),
     S.LANDING: frozenset({S.LANDED, S.EMERGENCY}),
     S.LANDED: frozenset({S.IDLE}),
-    S.EMERGENCY: frozenset({S.LANDING, S.LANDED}),
+    S.EMERGENCY: frozenset({S.LANDING, S.LANDED, S.LINK_LOST}),
+    # the link returns: resume what was going on (the runtime re-enters the right state), or it landed meanwhile
+    S.LINK_LOST: frozenset(_AIRBORNE_ACTIVE | {S.TAKING_OFF, S.PAUSED, S.RETURNING, S.LANDING, S.LANDED,
+                                               S.EMERGENCY}),
 }
-assert len(MissionState) == 13 and set(TRANSITIONS) == set(MissionState)
+# every state the link can drop in (anything after PREFLIGHT but LANDED/LINK_LOST itself) may go to LINK_LOST
+for _s in (S.ARMED, S.TAKING_OFF, S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING, S.PAUSED, S.RETURNING,
+           S.LANDING):
+    TRANSITIONS[_s] = TRANSITIONS[_s] | {S.LINK_LOST}
+assert len(MissionState) == 14 and set(TRANSITIONS) == set(MissionState)
 
 
 class IllegalTransition(RuntimeError):

@@ -7,8 +7,8 @@ from aerodaas.fsm import TRANSITIONS, IllegalTransition, MissionFSM, MissionStat
 from aerodaas.models import AeroNavigation, CameraIntrinsics, GeoPoint, NavigationType, SchedulingType, Waypoint
 
 
-def test_fsm_has_13_states_and_rejects_illegal_transitions():
-    assert len(MissionState) == 13
+def test_fsm_has_the_papers_13_states_plus_link_lost_and_rejects_illegal_transitions():
+    assert len(MissionState) == 14 and MissionState.LINK_LOST in MissionState
     seen = []
     fsm = MissionFSM(lambda old, new, t: seen.append((old, new)))
     for s in ("PREFLIGHT", "ARMED", "TAKING_OFF", "HOVERING", "NAVIGATING", "WAYPOINT_HOLD", "LANDING", "LANDED"):
@@ -25,6 +25,16 @@ def test_fsm_has_13_states_and_rejects_illegal_transitions():
                 reach.add(n)
                 frontier.append(n)
     assert reach == set(MissionState)
+
+
+def test_link_lost_resumes_the_previous_activity_and_never_skips_the_ground():
+    fsm = MissionFSM()
+    for s in ("PREFLIGHT", "ARMED", "TAKING_OFF", "HOVERING", "NAVIGATING", "LINK_LOST", "NAVIGATING"):
+        fsm.transition(s)
+    fsm.transition("LINK_LOST")
+    fsm.transition("LANDED")  # it landed by itself (autopilot failsafe) while the link was down
+    with pytest.raises(IllegalTransition):
+        MissionFSM().transition("LINK_LOST")  # IDLE: nothing is flying, the link cannot be "lost" yet
 
 
 @pytest.mark.parametrize("kwargs,field", [

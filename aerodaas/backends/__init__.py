@@ -1,0 +1,30 @@
+"""Vehicle backends: the embedded simulator, MAVLink autopilots (ArduPilot, PX4), the DJI Tello, and replay of
+recorded flights. :func:`make_backend` builds the one a robot's ``backend`` names in ``environment.json``."""
+from __future__ import annotations
+
+from .base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
+
+__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend"]
+
+
+def make_backend(cfg) -> VehicleBackend:
+    """The backend for ``cfg`` (an :class:`aerodaas.config.RobotConfig`). Imports the driver lazily, so a robot on
+    the simulator never imports pymavlink. Raises ValueError for an unknown ``backend``."""
+    if cfg.backend == "sim":
+        from .sim import SimBackend
+
+        return SimBackend(cfg)
+    if cfg.backend == "mavlink":
+        from .mavlink import MavlinkBackend
+
+        return MavlinkBackend(cfg)
+    if cfg.backend == "tello":
+        from .tello import TelloBackend
+
+        return TelloBackend(cfg)
+    if cfg.backend == "replay":
+        from .replay import ReplayBackend
+
+        return ReplayBackend(cfg)
+    raise ValueError(f"robots[{cfg.id!r}].backend: unknown backend {cfg.backend!r}; "
+                     f"choose from ['sim', 'mavlink', 'tello', 'replay']")

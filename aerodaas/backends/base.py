@@ -1,0 +1,207 @@
+"""The vehicle-backend contract: what the runtime's drone component needs from a robot's driver.
+
+One backend instance drives one robot. The runtime owns the flight logic (mission state machine, waypoint
+acceptance, hover timers, safety gate, failsafes); a backend only *executes* commands and *reports* the
+vehicle's state, so the same application flies the embedded simulator, an ArduPilot/PX4 autopilot over MAVLink,
+a DJI Tello, or replays a recorded flight.
+
+Conventions (as everywhere in AeroDaaS): positions are ENU metres relative to the robot's home (x east, y
+north, z up), velocities ENU m/s, yaw in degrees counter-clockwise from east (ENU; MAVLink headings are
+clockwise from north: ``yaw_enu = 90 - heading_ned``), times in seconds.
+
+Clocks. ``clock == "sim"``: the vehicle only moves when :meth:`VehicleBackend.step` is called, by ``dt``
+simulated seconds (the runtime's simulated clock: speedup and lock-step apply). ``clock == "vehicle"``: the
+vehicle lives on its own clock (a real autopilot, an emulator, a log being replayed); :meth:`step` only
+processes what has arrived since the last call and never blocks for long, and :attr:`t` is the vehicle's time
+(e.g. from MAVLink ``time_boot_ms``, else wall time) in seconds since :meth:`connect` returned.
+
+Errors. Every failure is a :class:`BackendError` subclass whose message names the robot and the command;
+a refused command raises :class:`CommandRefused` carrying the autopilot's result code and its last status text.
+"""
+from __future__ import annotations
+
+import abc
+import math
+from typing import Any, ClassVar, Sequence
+
+import numpy as np
+
+from ..models import GeoPoint, Odometry
+
+__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
+
+
+class BackendError(RuntimeError):
+    """A vehicle backend failed (connection, protocol, timeout). The message names the robot and the step."""
+
+
+class CommandRefused(BackendError):
+    """The vehicle refused a command. ``result`` is the autopilot's code (e.g. the MAVLink ``MAV_RESULT`` name,
+    or the Tello's ``error`` reply), ``status_text`` the last STATUSTEXT/log line that explains it."""
+
+    def __init__(self, robot_id: str, command: str, result: str, status_text: str = "") -> None:
+        self.robot_id, self.command, self.result, self.status_text = robot_id, command, result, status_text
+        why = f" ({status_text})" if status_text else ""
+        super().__init__(f"robot {robot_id!r}: {command} refused: {result}{why}")
+
+    def __reduce__(self):  # picklable across Ray workers
+        return (CommandRefused, (self.robot_id, self.command, self.result, self.status_text))
+
+
+class LinkLost(BackendError):
+    """A command could not be sent or confirmed because the link to the vehicle is lost."""
+
+
+class NotNavigable(BackendError):
+    """Navigation was asked of a backend that cannot navigate (e.g. the replay of a recorded flight)."""
+
+
+class VehicleBackend(abc.ABC):
+    """Driver of one robot. Subclasses set :attr:`kind`, :attr:`clock` and implement the abstract methods.
+
+    Thread-safety: the runtime calls every method from one thread (the drone's control thread), except
+    :attr:`link_ok`, :meth:`odometry` and the state properties, which may also be read from a status thread and
+    must not block.
+    """
+
+    #: the ``backend`` name in ``environment.json``
+    kind: ClassVar[str] = ""
+    #: "sim" (moves only in :meth:`step`) or "vehicle" (lives on its own clock)
+    clock: ClassVar[str] = "vehicle"
+    #: False for backends that only report (replay): navigation raises :class:`NotNavigable`
+    navigable: ClassVar[bool] = True
+
+    def __init__(self, robot_id: str, home: GeoPoint) -> None:
+        self.robot_id = robot_id
+        #: ENU origin; a real vehicle may replace it with its HOME_POSITION when it connects
+        self.home = home
+
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self, timeout_s: float = 30.0) -> None:
+        """Open the link and wait until the vehicle reports its state. Raises :class:`BackendError` after
+        ``timeout_s`` seconds. The simulator is always connected."""
+
+    def close(self) -> None:
+        """Release the link (idempotent). Never raises."""
+
+    # ------------------------------------------------------------------ time and state
+    @property
+    @abc.abstractmethod
+    def t(self) -> float:
+        """Seconds on the vehicle's clock since :meth:`connect` (simulated seconds for the simulator)."""
+
+    @abc.abstractmethod
+    def step(self, dt: float) -> None:
+        """Simulator: advance ``dt`` seconds. Other backends: process incoming messages (non-blocking)."""
+
+    @property
+    @abc.abstractmethod
+    def position(self) -> np.ndarray:
+        """(3,) float ENU metres from home."""
+
+    @property
+    @abc.abstractmethod
+    def velocity(self) -> np.ndarray:
+        """(3,) float ENU m/s."""
+
+    @property
+    @abc.abstractmethod
+    def yaw(self) -> float:
+        """Heading in degrees, ENU convention (counter-clockwise from east)."""
+
+    @property
+    @abc.abstractmethod
+    def armed(self) -> bool: ...
+
+    @property
+    @abc.abstractmethod
+    def in_air(self) -> bool: ...
+
+    @property
+    @abc.abstractmethod
+    def battery_pct(self) -> float:
+        """State of charge in percent, 0-100."""
+
+    @property
+    def link_ok(self) -> bool:
+        """False while the link is lost (no heartbeat/state for the configured time). Always True in simulation."""
+        return True
+
+    @abc.abstractmethod
+    def odometry(self) -> Odometry:
+        """The current :class:`~aerodaas.models.Odometry` (t = :attr:`t`)."""
+
+    def drain_events(self) -> list[dict[str, Any]]:
+        """Events since the last call, oldest first, each ``{"event": name, ...}``: e.g. ``status_text``
+        (severity, text), ``mission_item_reached`` (seq), ``mode`` (name), ``link_lost``, ``link_regained``.
+        The runtime records them on ``/<robot>/events``."""
+        return []
+
+    # ------------------------------------------------------------------ control
+    @abc.abstractmethod
+    def arm(self) -> None:
+        """Arm the motors (waiting until the vehicle is armable). Raises CommandRefused / BackendError."""
+
+    @abc.abstractmethod
+    def disarm(self) -> None: ...
+
+    @abc.abstractmethod
+    def takeoff(self, altitude_m: float) -> None:
+        """Climb to ``altitude_m`` metres above home; returns once the command is accepted (not reached)."""
+
+    @abc.abstractmethod
+    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
+        """Fly to ``target_enu`` (ENU metres from home) at up to ``speed`` m/s (None: the vehicle's limit)."""
+
+    @abc.abstractmethod
+    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
+        """Hold the ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s, counter-clockwise positive)."""
+
+    @abc.abstractmethod
+    def hold(self) -> None:
+        """Hover where the vehicle is."""
+
+    @abc.abstractmethod
+    def land(self) -> None:
+        """Descend and land where the vehicle is."""
+
+    def return_to_launch(self) -> bool:
+        """Ask the vehicle to return home and land by itself. Returns False when the backend has no such mode
+        (the runtime then flies home with :meth:`goto` and lands with :meth:`land`)."""
+        return False
+
+    def camera_frame(self) -> tuple[np.ndarray, float] | None:
+        """For vehicles with their own camera stream (the Tello): the newest decoded frame, (H, W, 3) uint8 BGR,
+        and its time on :attr:`t`'s clock; None when no frame arrived yet or the backend has no camera."""
+        return None
+
+    # ------------------------------------------------------------------ helpers for subclasses
+    def _require_navigable(self, command: str) -> None:
+        if not self.navigable:
+            raise NotNavigable(f"robot {self.robot_id!r}: backend {self.kind!r} is not navigable; {command} is "
+                               f"not possible (is_navigable() is False)")
+
+    @staticmethod
+    def enu_yaw_from_heading(heading_deg: float) -> float:
+        """ENU yaw (deg, CCW from east) from a compass heading (deg, CW from north), in [0, 360)."""
+        return (90.0 - heading_deg) % 360.0
+
+    @staticmethod
+    def heading_from_enu_yaw(yaw_deg: float) -> float:
+        """Compass heading (deg, CW from north) from an ENU yaw, in [0, 360)."""
+        return (90.0 - yaw_deg) % 360.0
+
+    @staticmethod
+    def ned_to_enu(v: Sequence[float]) -> np.ndarray:
+        """(3,) NED vector -> ENU (swap north/east, negate down)."""
+        return np.array([float(v[1]), float(v[0]), -float(v[2])])
+
+    @staticmethod
+    def enu_to_ned(v: Sequence[float]) -> np.ndarray:
+        """(3,) ENU vector -> NED."""
+        return np.array([float(v[1]), float(v[0]), -float(v[2])])
+
+    def horizontal_distance(self, target_enu: Sequence[float]) -> float:
+        """Metres from the vehicle to ``target_enu`` in the horizontal plane."""
+        p = self.position
+        return math.hypot(float(target_enu[0]) - p[0], float(target_enu[1]) - p[1])
