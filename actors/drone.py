@@ -1,91 +1,126 @@
-"""DroneActor: one robot — its backend (the embedded simulator), flight control, navigation executor, and its
-odometry and stat-stream sensors (co-located in this actor because their data is the vehicle state itself).
+"""DroneComponent: one robot — its vehicle backend, flight logic (mission state machine, waypoint acceptance,
+hover timers, failsafes), navigation executor, and its odometry and stat-stream sensors (their data is the
+vehicle state itself).
 
-The simulation loop runs in a thread of this (threaded) actor so that pause/resume/end and status calls are
-served while it flies. Simulated time advances ``speedup`` x wall time, or, in lock-step mode, frame by
-frame after the analytics have consumed each frame.
+It lives in the edge host (:mod:`aerodaas.actors.host`): the host's clock thread calls :meth:`step` and
+:meth:`control_tick`; the trajectory scheduler calls :meth:`nudge` when new navigation arrives so that it is
+applied at once. Every command passes the robot's :class:`~aerodaas.safety.SafetyGate` right before it reaches
+the backend (the one choke point). The backend is whatever ``robots[].backend`` names: the embedded simulator,
+a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
 """
 from __future__ import annotations
 
 import math
 import threading
-import time
 from typing import Any
 
-import ray
-
-from aerodaas.config import RobotConfig, SimulationConfig
+from aerodaas.backends import BackendError, make_backend
+from aerodaas.config import RobotConfig
 from aerodaas.fsm import MissionFSM, MissionState as S
 from aerodaas.models import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.safety import SafetyGate, SafetyViolation
-from aerodaas.sim.vehicle import SimVehicle
 
-from .streams import Outlet, wait_tree
+_ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-@ray.remote(num_cpus=0, max_concurrency=8)
-class DroneActor:
-    def __init__(self, robot_cfg: dict, sim_cfg: dict, scheduler: Any, recorder: Any, epoch_ns: int) -> None:
+class DroneComponent:
+    """See the module docstring. ``scheduler`` is the robot's SchedulerComponent (same host); ``publish(src, envs)``
+    hands sensor messages to subscribers; ``recorder`` is the run's RecorderService or None."""
+
+    kind = "drone"
+
+    def __init__(self, cid: str, robot_cfg: dict, host: Any, scheduler: Any, recorder: Any, epoch_ns: int,
+                 preplanned_total: int, odom_cids: list[str], stat_cids: list[str], backend: Any = None) -> None:
+        self.cid = cid
         self.cfg = RobotConfig.model_validate(robot_cfg)
-        self.sim = SimulationConfig.model_validate(sim_cfg)
-        self.vehicle = SimVehicle(self.cfg.id, self.cfg.home, self.cfg.limits, self.cfg.battery, self.cfg.noise)
+        self.host = host
+        self.backend = backend if backend is not None else make_backend(self.cfg)
         self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home)
-        self.rejected: list[dict] = []
-        self.preplanned_left = 0
-        self.idle_since: float | None = None
-        self.flew_something = False
         self.scheduler = scheduler
         self.recorder = recorder
         self.epoch_ns = epoch_ns
+        self.odom_cids, self.stat_cids = odom_cids, stat_cids
+        self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
-        self.cameras: list[dict] = []  # {"actor", "fps", "outlet", "next_t", "seq"}
-        self.odom_outlets: list[Outlet] = []
-        self.state_outlets: list[Outlet] = []
+        self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the host runtime
+        self.rejected: list[dict] = []
         self.visited: list[dict] = []
         self.events: list[dict] = []
+        self.preplanned_total = preplanned_total
+        self.preplanned_left = preplanned_total
+        self.idle_since: float | None = None
+        self.flew_something = False
         self.active_wp: str | None = None
         self.hold_until: float | None = None
-        self.last_cmd_kind: str | None = None
         self._paused_from: S | None = None
+        self._link_lost_from: S | None = None
         self._pause_req = threading.Event()
         self._resume_req = threading.Event()
         self._end_req: str | None = None
+        self._backend_rtl = False
         self.outcome: str | None = None
         self.error: str | None = None
-        self.missed_ticks = 0
+        self.done = False
         self.ticks = 0
-        self.preplanned_total = 0
+        self.missed_ticks = 0
+        self.nudges = 0
+        self.last_odom: dict | None = None
+        odom_rate = 10.0
+        for s in self.cfg.sensors:
+            if s.type == "odometry":
+                odom_rate = float(s.properties.get("rate_hz", 10.0))
+        self.odom_period = 1.0 / odom_rate
+        self.next_odom = 0.0
+        self.tick_period = 1.0 / self.cfg.control_rate_hz
+        self.next_tick = 0.0
 
-    # ------------------------------------------------------------------ wiring
-    def connect(self, cameras: list[tuple[Any, float]], odom_subs: list[tuple], state_subs: list[tuple],
-                preplanned_total: int) -> bool:
-        ls = self.sim.lockstep
-        self.cameras = [{"actor": a, "fps": fps, "outlet": Outlet(a, "capture", "capture", 1, ls), "next_t": 0.0,
-                         "seq": 0} for a, fps in cameras]
-        self.odom_outlets = [Outlet(a, m, p, b, ls) for a, m, p, b in odom_subs]
-        self.state_outlets = [Outlet(a, m, p, b, False) for a, m, p, b in state_subs]
-        self.preplanned_total = preplanned_total
-        return True
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self, timeout_s: float = 30.0) -> None:
+        """Open the backend's link (a no-op for the simulator). Raises BackendError naming the robot."""
+        try:
+            self.backend.connect(timeout_s)
+        except BackendError:
+            raise
+        except Exception as e:
+            raise BackendError(f"robot {self.cfg.id!r}: backend {self.cfg.backend!r} could not connect: "
+                               f"{type(e).__name__}: {e}") from e
+
+    def start(self) -> None:
+        """PREFLIGHT -> ARMED -> TAKING_OFF (navigable backends), or PREFLIGHT only (a replayed log)."""
+        b, t = self.backend, self.backend.t
+        self.fsm.transition(S.PREFLIGHT, t)
+        if not b.navigable:
+            self._event("observing", backend=self.cfg.backend)
+            return
+        b.arm()
+        self.fsm.transition(S.ARMED, b.t)
+        b.takeoff(self.cfg.takeoff_altitude)
+        self.fsm.transition(S.TAKING_OFF, b.t)
+        self._event("takeoff", altitude=self.cfg.takeoff_altitude)
+
+    def close(self) -> None:
+        self.backend.close()
 
     # ------------------------------------------------------------------ recording helpers
     def _t_ns(self, t: float) -> int:
         return self.epoch_ns + int(t * 1e9)
 
     def _event(self, kind: str, **kw: Any) -> None:
-        ev = {"robot": self.cfg.id, "t": self.vehicle.t, "event": kind, **kw}
+        ev = {"robot": self.cfg.id, "t": self.backend.t, "event": kind, **kw}
         self.events.append(ev)
         if self.recorder is not None:
-            self.recorder.json.remote(f"/{self.cfg.id}/events", self._t_ns(self.vehicle.t), ev, "aerodaas.MissionEvent")
+            self.recorder.json(f"/{self.cfg.id}/events", self._t_ns(self.backend.t), ev, "aerodaas.MissionEvent")
 
     def _on_transition(self, old: S, new: S, t: float) -> None:
         msg = {"robot": self.cfg.id, "state": new.value, "previous": old.value, "t": t}
         if self.recorder is not None:
-            self.recorder.json.remote("/mission/state", self._t_ns(t), msg, "aerodaas.MissionState")
-        env = {"kind": "value", "data": msg, "meta": None, "sim_t": t, "trace": {}}
-        for o in self.state_outlets:
-            o.send(env)
+            self.recorder.json("/mission/state", self._t_ns(t), msg, "aerodaas.MissionState")
+        if self.stat_cids:
+            env = {"kind": "value", "data": msg, "meta": None, "sim_t": t, "trace": {}, "robot": self.cfg.id}
+            for cid in self.stat_cids:
+                self.host.publish(cid, [dict(env)], None, inline=False)
 
-    # ------------------------------------------------------------------ control API (served concurrently)
+    # ------------------------------------------------------------------ control API (any thread)
     def pause_mission(self) -> bool:
         self._pause_req.set()
         return True
@@ -99,107 +134,112 @@ class DroneActor:
         return True
 
     def status(self) -> dict:
-        s = self.vehicle.state
-        cam_drop = sum(c["outlet"].dropped for c in self.cameras)
-        return {"robot": self.cfg.id, "t": self.vehicle.t, "state": self.fsm.state.value,
-                "position": [float(v) for v in s.position], "battery_pct": self.vehicle.battery_pct,
+        b = self.backend
+        cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
+        return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
+                "position": [float(v) for v in b.position], "battery_pct": float(b.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.preplanned_total,
-                "frames": sum(c["seq"] for c in self.cameras), "frames_dropped_at_camera": cam_drop,
-                "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks}
+                "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
+                "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
+                "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
                 "rejected": self.rejected, "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
-    # ------------------------------------------------------------------ main loop
-    def run(self, timeout_s: float | None = None) -> dict:
-        """Fly the mission to its end; returns :meth:`report`. ``timeout_s`` is wall-clock seconds."""
-        try:
-            self._run(timeout_s)
-        except Exception as e:  # never lose the report: record the failure and land the sim vehicle
-            import traceback
+    # ------------------------------------------------------------------ the clock thread
+    def step(self, dt: float) -> None:
+        """Advance the backend (simulator: ``dt`` seconds; others: process what arrived) and publish odometry
+        when due. Backend events are recorded."""
+        with self.lock:
+            self.backend.step(dt)
+            for ev in self.backend.drain_events():
+                self._event(ev.pop("event", "backend_event"), **ev)
+        if self.backend.t + 1e-9 >= self.next_odom:
+            self.next_odom += self.odom_period
+            if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
+                self.next_odom = self.backend.t + self.odom_period
+            self.publish_odometry()
 
-            self.error = f"{type(e).__name__}: {e}"
-            self.outcome = "failed"
-            self._event("error", message=self.error, traceback=traceback.format_exc())
-        if self.recorder is not None:
-            self.recorder.json.remote("/mission/result", self._t_ns(self.vehicle.t),
-                                      {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
-                                       "preplanned_total": self.preplanned_total, "t": self.vehicle.t,
-                                       "error": self.error}, "aerodaas.MissionResult")
-        return self.report()
-
-    def _run(self, timeout_s: float | None) -> None:
-        v, fsm = self.vehicle, self.fsm
-        dt = 1.0 / self.sim.physics_hz
-        ctrl_every = max(1, round(self.sim.physics_hz / self.cfg.control_rate_hz))
-        odom_rate = 10.0
-        for s in self.cfg.sensors:
-            if s.type == "odometry":
-                odom_rate = float(s.properties.get("rate_hz", 10.0))
-        odom_every = max(1, round(self.sim.physics_hz / odom_rate))
-        fsm.transition(S.PREFLIGHT, v.t)
-        fsm.transition(S.ARMED, v.t)
-        v.arm()
-        fsm.transition(S.TAKING_OFF, v.t)
-        v.takeoff(self.cfg.takeoff_altitude)
-        self._event("takeoff", altitude=self.cfg.takeoff_altitude)
-        wall0 = time.monotonic()
-        step = 0
-        while True:
-            step += 1
-            v.step(dt)
-            if step % odom_every == 0:
-                self._publish_odometry()
-            for cam in self.cameras:
-                if v.t + 1e-9 >= cam["next_t"]:
-                    cam["next_t"] += 1.0 / cam["fps"]
-                    cam["seq"] += 1
-                    ref = cam["outlet"].send(tuple(float(c) for c in v.state.position), v.state.yaw, v.t, cam["seq"])
-                    if self.sim.lockstep and ref is not None:
-                        wait_tree([ref])
-            if step % ctrl_every == 0:
-                self.ticks += 1
-                if self._control():
-                    break
-            if self._end_req is not None:
-                self.outcome = self._end_req
-                self._event("end_requested", reason=self._end_req)
-                break
-            if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
-                self.outcome = "timeout"
-                self._event("timeout", wall_s=timeout_s)
-                break
-            if not self.sim.lockstep:
-                lag = wall0 + v.t / self.sim.speedup - time.monotonic()
-                if lag > 0:
-                    time.sleep(lag)
-                elif step % ctrl_every == 0 and lag < -0.25:
-                    self.missed_ticks += 1
-        self._publish_odometry()
-
-    def _publish_odometry(self) -> None:
-        odom = self.vehicle.odometry().model_dump(mode="json")
-        t_ns = self._t_ns(self.vehicle.t)
-        if self.recorder is not None:
-            self.recorder.odometry.remote(self.cfg.id, t_ns, odom)
-        env = {"kind": "odometry", "data": odom, "meta": None, "sim_t": self.vehicle.t, "trace": {}}
-        for o in self.odom_outlets:
-            ref = o.send(env)
-            if self.sim.lockstep and ref is not None:
-                wait_tree([ref])
+    def publish_odometry(self, tok: Any = None) -> None:
+        odom = self.backend.odometry().model_dump(mode="json")
         self.last_odom = odom
+        if self.recorder is not None:
+            self.recorder.odometry(self.cfg.id, self._t_ns(odom["t"]), odom)
+        if self.odom_cids:
+            env = {"kind": "odometry", "data": odom, "meta": None, "sim_t": odom["t"], "trace": {},
+                   "robot": self.cfg.id}
+            for cid in self.odom_cids:
+                self.host.publish(cid, [dict(env)], tok, inline=False)
 
+    def control_tick(self) -> bool:
+        """One control tick (at ``control_rate_hz``); returns True when this drone's mission is over."""
+        self.ticks += 1
+        with self.lock:
+            try:
+                if self._end_req is not None:
+                    self.outcome = self._end_req
+                    self._event("end_requested", reason=self._end_req)
+                    self.done = True
+                elif self._control():
+                    self.done = True
+            except BackendError as e:  # the vehicle refused or the link failed: record it, keep the run alive
+                self._event("backend_error", error=str(e))
+                self.error = str(e)
+            except Exception as e:
+                import traceback
+
+                self.error = f"{type(e).__name__}: {e}"
+                self.outcome = "failed"
+                self._event("error", message=self.error, traceback=traceback.format_exc())
+                self.done = True
+        return self.done
+
+    def finish(self) -> None:
+        """The run is over for this drone: last odometry and the mission result."""
+        self.publish_odometry()
+        if self.recorder is not None:
+            self.recorder.json("/mission/result", self._t_ns(self.backend.t),
+                               {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
+                                "preplanned_total": self.preplanned_total, "t": self.backend.t,
+                                "error": self.error}, "aerodaas.MissionResult")
+
+    def nudge(self) -> None:
+        """New navigation was queued: apply it now (a control step outside the tick; idempotent)."""
+        if self.done:
+            return
+        with self.lock:
+            if self.fsm.state in _ACTIVE or self.fsm.state == S.PAUSED:
+                self.nudges += 1
+                try:
+                    self._control()
+                except BackendError as e:
+                    self._event("backend_error", error=str(e))
+
+    # ------------------------------------------------------------------ flight logic
     def _control(self) -> bool:
-        """One control tick; returns True when the mission is over."""
-        v, fsm = self.vehicle, self.fsm
+        """One control step; returns True when the mission is over. Caller holds ``self.lock``."""
+        v, fsm = self.backend, self.fsm
         t, st = v.t, fsm.state
-        pos = tuple(float(c) for c in v.state.position)
+        pos = tuple(float(c) for c in v.position)
+        if not v.navigable:
+            return self._observe(t, st)
+        if not v.link_ok:
+            if st not in (S.LINK_LOST, S.LANDED):
+                self._link_lost_from = st
+                fsm.transition(S.LINK_LOST, t)
+                self._event("link_lost", previous=st.value)
+            return False
+        if st == S.LINK_LOST:
+            return self._link_regained(t)
         if st == S.LANDING:
-            if not v.state.in_air:
+            if not v.in_air:
                 fsm.transition(S.LANDED, t)
-                v.disarm()
+                try:
+                    v.disarm()
+                except BackendError as e:
+                    self._event("backend_error", error=str(e))
                 self._event("landed")
                 if self.outcome is None:
                     self.outcome = "success" if self.preplanned_left == 0 else "incomplete"
@@ -210,18 +250,22 @@ class DroneActor:
             fsm.transition(S.LANDING, t)
             return False
         safety = self.cfg.safety
-        if v.battery_pct < safety.critical_battery_pct and v.state.in_air:
+        if v.battery_pct < safety.critical_battery_pct and v.in_air:
             self._event("battery_critical", battery_pct=v.battery_pct)
             self.outcome = "failed"
             fsm.transition(S.EMERGENCY, t)
             return False
         if st == S.RETURNING:
+            if self._backend_rtl:
+                if not v.in_air:
+                    fsm.transition(S.LANDING, t)
+                return False
             if math.hypot(pos[0], pos[1]) <= 0.5:
                 v.land()
                 fsm.transition(S.LANDING, t)
                 self._event("landing", reason="return to launch")
             return False
-        if v.battery_pct < safety.low_battery_rtl_pct and v.state.in_air:
+        if v.battery_pct < safety.low_battery_rtl_pct and v.in_air:
             self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
             self.outcome = "failsafe_rtl"
             self._return_to_launch(t, pos)
@@ -247,11 +291,11 @@ class DroneActor:
             self.hold_until = None
             return False
         if st == S.TAKING_OFF:
-            if abs(v.state.position[2] - self.cfg.takeoff_altitude) < 0.1:
+            if abs(v.position[2] - self.cfg.takeoff_altitude) < 0.1:
                 fsm.transition(S.HOVERING, t)
                 v.hold()
             return False
-        res = ray.get(self.scheduler.tick.remote(t, pos))
+        res = self.scheduler.tick(t, pos)
         item = res["item"]
         self.preplanned_left = res["preplanned_left"]
         if item is not None:
@@ -267,8 +311,8 @@ class DroneActor:
             self._event("action", action=item.action, reason=item.reason, priority=res["priority"])
             if st == S.TRACKING:
                 self._event("tracking_ended")
-            ray.get(self.scheduler.discard.remote(item.id, "executed"))
-            self.preplanned_left = ray.get(self.scheduler.pending.remote())
+            self.scheduler.discard(item.id, "executed")
+            self.preplanned_left = self.scheduler.pending()
             if item.action == "land":
                 v.land()
                 fsm.transition(S.LANDING, t)
@@ -283,7 +327,6 @@ class DroneActor:
                             preempted=self.active_wp)
             v.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
             self.active_wp, self.hold_until = None, None
-            self.last_cmd_kind = "velocity"
             return False
         if isinstance(item, Waypoint):
             target = item.to_local(self.cfg.home)
@@ -296,9 +339,9 @@ class DroneActor:
                 self._event("navigate", waypoint=item.id, target=list(target), priority=res["priority"],
                             mission=res["mission"])
                 if self.recorder is not None:
-                    self.recorder.json.remote(f"/{self.cfg.id}/nav/command", self._t_ns(t),
-                                              {"kind": "waypoint", "waypoint": item.model_dump(), "local": list(target),
-                                               "priority": res["priority"]}, "aerodaas.NavCommand")
+                    self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t),
+                                       {"kind": "waypoint", "waypoint": item.model_dump(), "local": list(target),
+                                        "priority": res["priority"]}, "aerodaas.NavCommand")
                 return False
             dist = math.dist(pos, target)
             if st == S.NAVIGATING and dist <= item.acceptance_radius:
@@ -307,7 +350,7 @@ class DroneActor:
                 self.hold_until = t + item.hover_duration
                 self._event("waypoint_reached", waypoint=item.id, error_m=dist)
             if st == S.WAYPOINT_HOLD and self.hold_until is not None and t + 1e-9 >= self.hold_until:
-                ray.get(self.scheduler.complete.remote(item.id))
+                self.scheduler.complete(item.id)
                 self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
                                      "error_m": dist})
                 self._event("waypoint_done", waypoint=item.id)
@@ -332,24 +375,71 @@ class DroneActor:
             v.hold()
         return False
 
+    def _link_regained(self, t: float) -> bool:
+        """The link is back: resume what was going on (re-issuing the active waypoint), or note the landing."""
+        v, prev = self.backend, self._link_lost_from or S.HOVERING
+        self._event("link_regained", resuming=prev.value)
+        if not v.in_air:
+            self.fsm.transition(S.LANDED, t)
+            self._event("landed", reason="landed while the link was lost")
+            if self.outcome is None:
+                self.outcome = "incomplete" if self.preplanned_left else "success"
+            return True
+        resume = {S.WAYPOINT_HOLD: S.NAVIGATING}.get(prev, prev)
+        if resume in (S.ARMED, S.PREFLIGHT):
+            resume = S.TAKING_OFF
+        self.fsm.transition(resume, t)
+        self.active_wp, self.hold_until = None, None  # re-issue the current waypoint on the next step
+        return False
+
+    def _observe(self, t: float, st: S) -> bool:
+        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state; ends with the log."""
+        v, fsm = self.backend, self.fsm
+        finished = bool(getattr(v, "finished", False))
+        speed = math.hypot(float(v.velocity[0]), float(v.velocity[1]))
+        if st == S.PREFLIGHT and v.armed:
+            fsm.transition(S.ARMED, t)
+        elif st == S.ARMED and v.in_air:
+            fsm.transition(S.TAKING_OFF, t)
+        elif st == S.TAKING_OFF and v.in_air and v.velocity[2] < 0.3:
+            fsm.transition(S.NAVIGATING if speed > 0.5 else S.HOVERING, t)
+        elif st in (S.HOVERING, S.NAVIGATING):
+            if not v.in_air or v.velocity[2] < -0.5 and v.position[2] < 5.0:
+                fsm.transition(S.LANDING, t)
+            elif st == S.HOVERING and speed > 0.5:
+                fsm.transition(S.NAVIGATING, t)
+            elif st == S.NAVIGATING and speed < 0.2:
+                fsm.transition(S.HOVERING, t)
+        elif st == S.LANDING and not v.in_air:
+            fsm.transition(S.LANDED, t)
+        if finished:
+            if self.outcome is None:
+                self.outcome = "success"
+            self._event("replay_finished")
+            return True
+        return False
+
     def _return_to_launch(self, t: float, pos: tuple) -> None:
-        """RTL: fly home at the current altitude (at least the take-off altitude), then land (see _control)."""
-        self.vehicle.goto((0.0, 0.0, max(pos[2], self.cfg.takeoff_altitude)))
+        """RTL: the autopilot's own mode when it has one; else fly home at the current altitude (at least the
+        take-off altitude), then land (see _control)."""
         self.active_wp, self.hold_until = None, None
         if self.fsm.state == S.TRACKING:
             self._event("tracking_ended")
+        self._backend_rtl = bool(self.backend.return_to_launch())
+        if not self._backend_rtl:
+            self.backend.goto((0.0, 0.0, max(pos[2], self.cfg.takeoff_altitude)))
         self.fsm.transition(S.RETURNING, t)
-        self._event("returning", home=[0.0, 0.0])
+        self._event("returning", home=[0.0, 0.0], by="autopilot" if self._backend_rtl else "aerodaas")
 
     def _reject(self, t: float, item: Any, err: SafetyViolation) -> None:
         """A command outside the safety limits: never sent to the backend; dropped from the queue and recorded."""
         rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason}
         self.rejected.append(rec)
         self._event("command_rejected", **rec)
-        ray.get(self.scheduler.discard.remote(rec["id"], f"rejected: {err.reason}"))
+        self.scheduler.discard(rec["id"], f"rejected: {err.reason}")
         if self.fsm.state == S.TRACKING:
             self._event("tracking_ended")
         if self.fsm.state in (S.TRACKING, S.NAVIGATING, S.WAYPOINT_HOLD):
             self.fsm.transition(S.HOVERING, t)
-        self.vehicle.hold()
+        self.backend.hold()
         self.active_wp, self.hold_until = None, None

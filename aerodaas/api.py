@@ -82,7 +82,7 @@ class Robot:
         self.scheduler = None
         self._start_hooks: list[Callable] = []
         self._end_hooks: list[Callable] = []
-        self._handle = None  # DroneActor while running
+        self._handle = None  # the drone component's handle while running
 
     # -- sensors
     def has_sensors(self) -> bool:

@@ -70,8 +70,8 @@ class ClearRequest(BaseModel):
 
 
 class HitlServer:
-    """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": DroneActor handle,
-    "scheduler": SchedulerActor handle}. ``start()`` returns once the server accepts connections."""
+    """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": handle of the drone component,
+    "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns once the server accepts connections."""
 
     def __init__(self, drones: dict[str, dict], host: str = "127.0.0.1", port: int = 8470,
                  token: str | None = None) -> None:

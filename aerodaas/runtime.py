@@ -103,13 +103,111 @@ def _collect_graph(robot) -> tuple[list, list]:
     return order, [s for s in robot.sensors.values()]
 
 
+class ComponentHandle:
+    """A component inside a host actor, used like an actor handle: ``h.status.remote()`` calls
+    ``component.status()`` in its host process and returns an ObjectRef."""
+
+    def __init__(self, host: Any, cid: str) -> None:
+        self.host, self.cid = host, cid
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        host, cid = self.host, self.cid
+
+        class _Method:
+            def remote(self, *args: Any, **kwargs: Any) -> Any:
+                return host.call.remote(cid, name, *args, **kwargs)
+
+        return _Method()
+
+    def __repr__(self) -> str:
+        return f"ComponentHandle({self.cid!r})"
+
+
+@dataclass
+class _Plan:
+    """Where every component goes: host specs by tier, the routes between components, and per-robot ids."""
+
+    specs: dict[str, dict]
+    routes: dict[str, list]
+    location: dict[str, str]
+    robots: dict[str, dict]
+    analytics_cids: dict[int, str]
+
+
+def _plan(env, robots: list, graphs: dict, sim: SimulationConfig, record: str | None, epoch_ns: int) -> _Plan:
+    """Place components on hosts (one per tier in use: "edge" has the drones, cameras, schedulers, the recorder and
+    the analytics deployed on edge compute; "cloud" the analytics deployed on cloud compute) and compute the
+    routes from every stream producer to its subscribers."""
+    specs: dict[str, dict] = {"edge": {"sim": sim.model_dump(), "world": env.cfg.world.model_dump(mode="json"),
+                                       "robots": [], "analytics": []}}
+    if record:
+        specs["edge"]["record"] = {"path": os.path.abspath(record), "meta": {
+            "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
+            "lockstep": str(sim.lockstep), "aerodaas": "0.1.0"}}
+    location: dict[str, str] = {}
+    acid: dict[int, str] = {}
+    for r in robots:
+        for a in graphs[r.id]:
+            if id(a) in acid:
+                continue  # shared by several robots: one instance
+            cid = f"{a.name}#{len(acid) + 1}"
+            acid[id(a)] = cid
+            tier = a.compute.tier
+            specs.setdefault(tier, {"sim": sim.model_dump(), "robots": [], "analytics": []})
+            buffer = max((s.buffer for s in a.inputs), default=1)
+            specs[tier]["analytics"].append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer})
+            location[cid] = tier
+    routes: dict[str, list] = {}
+    robot_ids: dict[str, dict] = {}
+
+    def subs_of(stream, sched, sched_cid) -> list[tuple]:
+        out = [(acid[id(sub)], "in", stream.buffer) for sub in stream.subscribers if id(sub) in acid]
+        for st, prio, replace in sched.stream_inputs:
+            if st is stream:
+                out.append((sched_cid, f"priority:{prio}" + (":replace" if replace else ""), 4))
+        return out
+
+    for r in robots:
+        sched = r.scheduler or env.trajectory_scheduler()
+        preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
+                         for m in sched._missions if m.distance_driven)
+        ids = {"drone": f"{r.id}/drone", "scheduler": f"{r.id}/scheduler", "cameras": {}, "odom": [], "stat": []}
+        cams = []
+        for s in r.sensors.values():
+            cid = f"{r.id}/{s.id}"
+            if s.type == "camera" and (s.get_data_stream().subscribers or record):
+                cams.append({"cid": cid, "sensor": s.id, "props": dict(s.cfg.properties)})
+                ids["cameras"][s.id] = cid
+            elif s.type == "odometry":
+                ids["odom"].append(cid)
+            elif s.type == "stat_stream":
+                ids["stat"].append(cid)
+            else:
+                continue
+            routes[cid] = subs_of(s.get_data_stream(), sched, ids["scheduler"])
+        for a in graphs[r.id]:
+            routes.setdefault(acid[id(a)], [])
+            for sub in subs_of(a.output, sched, ids["scheduler"]):
+                if sub not in routes[acid[id(a)]]:
+                    routes[acid[id(a)]].append(sub)
+        specs["edge"]["robots"].append({"robot": r.cfg.model_dump(mode="json"), "drone_cid": ids["drone"],
+                                        "scheduler_cid": ids["scheduler"], "scheduler": sched,
+                                        "preplanned": preplanned, "cameras": cams,
+                                        "odom_cids": [c for c in ids["odom"] if routes.get(c)],
+                                        "stat_cids": [c for c in ids["stat"] if routes.get(c)]})
+        for cid in [ids["drone"], ids["scheduler"], *ids["cameras"].values(), *ids["odom"], *ids["stat"]]:
+            location[cid] = "edge"
+        robot_ids[r.id] = ids
+    return _Plan(specs, routes, location, robot_ids, acid)
+
+
 def run_mission(env, robots: list, timeout: float | None = None) -> MissionResult:
-    """Start all actors for ``robots`` of ``env``, fly, and tear down. See module docstring."""
+    """Start the hosts for ``robots`` of ``env``, fly, and tear down. See the module docstring."""
     import ray
 
-    from aerodaas.actors.drone import DroneActor
-    from aerodaas.actors.nodes import AnalyticsActor, CameraActor, SchedulerActor
-    from aerodaas.actors.recorder import RecorderActor
+    from aerodaas.actors.host import HostActor
 
     opts = OPTIONS
     timeout = opts.timeout if opts.timeout is not None else timeout
@@ -118,6 +216,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         sim.speedup = opts.speedup
     if opts.lockstep is not None:
         sim.lockstep = opts.lockstep
+    _check_clocks(robots, sim)
 
     # ---- validate everything before any actor starts
     graphs = {}
@@ -135,70 +234,37 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     t_start = time.monotonic()
     has_cloud = ensure_ray(opts.address)
     epoch_ns = time.time_ns()
-    actors: list = []
-    recorder = None
-    if opts.record:
-        meta = {"environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
-                "lockstep": str(sim.lockstep), "aerodaas": "0.1.0"}
-        recorder = RecorderActor.options(label_selector={"tier": "edge"}).remote(os.path.abspath(opts.record), meta)
-        actors.append(recorder)
+    plan = _plan(env, robots, graphs, sim, opts.record, epoch_ns)
+    hosts: dict[str, Any] = {}
     handles: dict[str, dict] = {}
     hitl = None
+    reports: dict[str, dict] = {}
+    stats: dict[str, Any] = {}
+    latency: dict[str, Any] = {}
+    counts: dict[str, int] = {}
     try:
+        for tier, spec in plan.specs.items():
+            hosts[tier] = HostActor.options(label_selector=_selector(tier, has_cloud), name=None).remote(
+                tier, tier, epoch_ns, sim.lockstep)
+        ray.get([hosts[t].setup.remote(spec) for t, spec in plan.specs.items()])
+        tiers = {t: t for t in hosts}
+        ray.get([h.connect.remote(plan.routes, plan.location, tiers, hosts) for h in hosts.values()])
+        edge = hosts["edge"]
         for r in robots:
-            sched = r.scheduler or env.trajectory_scheduler()
-            preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
-                             for m in sched._missions if m.distance_driven)
-            s_actor = SchedulerActor.options(label_selector={"tier": "edge"}).remote(
-                r.id, sched, recorder, epoch_ns, r.cfg.model_dump(mode="json"))
-            d_actor = DroneActor.options(label_selector={"tier": "edge"}).remote(
-                r.cfg.model_dump(mode="json"), sim.model_dump(), s_actor, recorder, epoch_ns)
-            actors += [s_actor, d_actor]
-            a_actors = {}
-            for a in graphs[r.id]:
-                sel = _selector(a.compute.tier, has_cloud)
-                h = AnalyticsActor.options(label_selector=sel).remote(a.name, r.id, a, recorder, epoch_ns, sim.lockstep)
-                a_actors[id(a)] = h
-                actors.append(h)
-            cams, cam_handles = [], {}
+            ids = plan.robots[r.id]
+            a_handles = {cid: ComponentHandle(hosts[plan.location[cid]], cid)
+                         for cid in (plan.analytics_cids[id(a)] for a in graphs[r.id])}
+            handles[r.id] = {"robot": r, "drone": ComponentHandle(edge, ids["drone"]),
+                             "scheduler": ComponentHandle(edge, ids["scheduler"]), "analytics": a_handles,
+                             "cameras": {sid: ComponentHandle(edge, cid) for sid, cid in ids["cameras"].items()},
+                             "sched_obj": r.scheduler or env.trajectory_scheduler()}
+            r._handle = handles[r.id]["drone"]
+            handles[r.id]["sched_obj"]._remote = handles[r.id]["scheduler"]
             for s in r.sensors.values():
-                if s.type == "camera" and (s.get_data_stream().subscribers or recorder is not None):
-                    h = CameraActor.options(label_selector={"tier": "edge"}).remote(
-                        r.id, s.id, s.cfg.properties, env.cfg.world.model_dump(mode="json"), recorder, epoch_ns,
-                        sim.lockstep)
-                    cams.append((h, float(s.cfg.properties["fps"])))
-                    cam_handles[s.id] = h
-                    actors.append(h)
-
-            def subs_of(stream) -> list[tuple]:
-                out = []
-                for sub in stream.subscribers:
-                    if id(sub) in a_actors:
-                        out.append((a_actors[id(sub)], "push", "in", stream.buffer))
-                for st, prio, replace in sched.stream_inputs:
-                    if st is stream:
-                        out.append((s_actor, "push", f"priority:{prio}" + (":replace" if replace else ""), 4))
-                return out
-
-            wiring = []
-            for sid, h in cam_handles.items():
-                wiring.append(h.connect.remote(subs_of(r.sensors[sid].get_data_stream())))
+                s.get_data_stream()._runtime_getter = _pull_getter(s, handles[r.id])
             for a in graphs[r.id]:
-                wiring.append(a_actors[id(a)].connect.remote(subs_of(a.output)))
-            odom = [s for s in r.sensors.values() if s.type == "odometry"]
-            stat = [s for s in r.sensors.values() if s.type == "stat_stream"]
-            odom_subs = [x for s in odom for x in subs_of(s.get_data_stream())]
-            state_subs = [x for s in stat for x in subs_of(s.get_data_stream())]
-            wiring.append(d_actor.connect.remote(cams, odom_subs, state_subs, preplanned))
-            ray.get(wiring + [h.ready.remote() for h in a_actors.values()])
-            handles[r.id] = {"robot": r, "drone": d_actor, "scheduler": s_actor, "analytics": a_actors,
-                             "cameras": cam_handles, "sched_obj": sched}
-            r._handle = d_actor
-            sched._remote = s_actor
-            for s in r.sensors.values():
-                s.get_data_stream()._runtime_getter = _pull_getter(s, d_actor, cam_handles)
-            for a in graphs[r.id]:
-                a.output._runtime_getter = (lambda h=a_actors[id(a)]: ray.get(h.get_latest.remote()))
+                h = a_handles[plan.analytics_cids[id(a)]]
+                a.output._runtime_getter = (lambda h=h: ray.get(h.get_latest.remote()))
 
         hcfg = env.cfg.hitl
         if opts.hitl if opts.hitl is not None else hcfg.enabled:
@@ -213,26 +279,30 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         for h in handles.values():
             for hook in h["robot"]._start_hooks:
                 hook(h["robot"])
-        runs = {rid: h["drone"].run.remote(timeout) for rid, h in handles.items()}
-        reports = _wait_with_progress(runs, handles, opts.progress)
-        stats, latency = _collect_stats(handles)
+        run_ref = edge.run.remote(timeout)
+        reports = _wait_with_progress(run_ref, handles, opts.progress)
+        stats, latency = _collect_stats(handles, hosts)
     finally:
         if hitl is not None:
             hitl.stop()
             env.hitl = None
-        counts = {}
-        if recorder is not None:
+        for tier, h in hosts.items():
             try:
-                counts = ray.get(recorder.close.remote(), timeout=30)
+                got = ray.get(h.close.remote(), timeout=60)
+                if tier == "edge":
+                    counts = got
             except Exception as e:  # pragma: no cover - reported, never silently lost
-                print(f"aerodaas: warning: recording could not be finished cleanly: {e}", file=sys.stderr)
+                print(f"aerodaas: warning: host {tier!r} could not be closed cleanly (recording: {opts.record}): {e}",
+                      file=sys.stderr)
         for h in handles.values():
             h["robot"]._handle = None
             h["sched_obj"]._remote = None
             for s in h["robot"].sensors.values():
                 s.get_data_stream()._runtime_getter = None
-        for a in actors:
-            ray.kill(a, no_restart=True)
+        for h in hosts.values():
+            ray.kill(h, no_restart=True)
+    for r in robots:
+        reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": "no report (the run did not start)"})
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
@@ -242,6 +312,16 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
     return result
+
+
+def _check_clocks(robots: list, sim: SimulationConfig) -> None:
+    """Real vehicles live in real time: lock-step needs every robot on the simulator. Raises ConfigError."""
+    from .config import ConfigError
+
+    real = [r.id for r in robots if r.cfg.backend != "sim"]
+    if real and sim.lockstep:
+        raise ConfigError(f"simulation.lockstep: true needs every robot on backend 'sim'; {real} fly real or "
+                          f"emulated vehicles, which cannot wait for the analytics (set lockstep to false)")
 
 
 def _check_preplanned(robot, sched) -> None:
@@ -258,23 +338,22 @@ def _check_preplanned(robot, sched) -> None:
         m.items = list(gate.check_navigation(nav, start).waypoints)
 
 
-def _pull_getter(sensor, drone, cams):
+def _pull_getter(sensor, h: dict):
     import ray
 
     def get():
-        if sensor.type == "camera" and sensor.id in cams:
-            got = ray.get(cams[sensor.id].get_latest.remote())
-            return None if got is None else (ray.get(got[0][0]), got[1])
-        st = ray.get(drone.status.remote())
-        return st if sensor.type == "stat_stream" else ray.get(drone.report.remote()).get("position")
+        if sensor.type == "camera" and sensor.id in h["cameras"]:
+            return ray.get(h["cameras"][sensor.id].get_latest.remote())
+        st = ray.get(h["drone"].status.remote())
+        return st if sensor.type == "stat_stream" else ray.get(h["drone"].report.remote()).get("position")
 
     return get
 
 
-def _wait_with_progress(runs: dict, handles: dict, progress: bool) -> dict:
+def _wait_with_progress(run_ref: Any, handles: dict, progress: bool) -> dict:
+    """Wait for the edge host's run to end, showing live progress; Ctrl-C ends every mission cleanly."""
     import ray
 
-    pending = dict(runs)
     reports: dict[str, dict] = {}
     interrupted = False
     live = None
@@ -286,17 +365,13 @@ def _wait_with_progress(runs: dict, handles: dict, progress: bool) -> dict:
     last_print = 0.0
     t0 = time.monotonic()
     try:
-        while pending:
-            try:
-                ready, _ = ray.wait(list(pending.values()), num_returns=1, timeout=0.5)
-            except KeyboardInterrupt:
-                raise
-            for rid, ref in list(pending.items()):
-                if ref in ready:
-                    reports[rid] = ray.get(ref)
-                    del pending[rid]
-            if progress and pending:
-                lines = _progress_lines(handles, pending, t0)
+        while True:
+            ready, _ = ray.wait([run_ref], num_returns=1, timeout=0.5)
+            if ready:
+                reports = ray.get(run_ref)
+                break
+            if progress:
+                lines = _progress_lines(handles, t0)
                 if live is not None:
                     from rich.text import Text
 
@@ -306,16 +381,15 @@ def _wait_with_progress(runs: dict, handles: dict, progress: bool) -> dict:
                     last_print = time.monotonic()
     except KeyboardInterrupt:
         interrupted = True
-        for rid in pending:
+        for h in handles.values():
             try:
-                ray.get(handles[rid]["drone"].end_mission.remote("interrupted"), timeout=5)
+                ray.get(h["drone"].end_mission.remote("interrupted"), timeout=5)
             except Exception:
                 pass
-        for rid, ref in pending.items():
-            try:
-                reports[rid] = ray.get(ref, timeout=20)
-            except Exception as e:
-                reports[rid] = {"robot": rid, "outcome": "interrupted", "error": str(e)}
+        try:
+            reports = ray.get(run_ref, timeout=20)
+        except Exception as e:
+            reports = {rid: {"robot": rid, "outcome": "interrupted", "error": str(e)} for rid in handles}
     finally:
         if live is not None:
             live.stop()
@@ -325,15 +399,16 @@ def _wait_with_progress(runs: dict, handles: dict, progress: bool) -> dict:
     return reports
 
 
-def _progress_lines(handles: dict, pending: dict, t0: float) -> list[str]:
+def _progress_lines(handles: dict, t0: float) -> list[str]:
     import ray
 
     lines = []
-    for rid in pending:
-        h = handles[rid]
+    for rid, h in handles.items():
         try:
             st = ray.get(h["drone"].status.remote(), timeout=2)
         except Exception:
+            continue
+        if st.get("outcome"):
             continue
         rendered = st["frames"] - st["frames_dropped_at_camera"]  # frames actually captured, not skipped ticks
         fps = rendered / max(time.monotonic() - t0, 1e-6)
@@ -346,21 +421,24 @@ def _progress_lines(handles: dict, pending: dict, t0: float) -> list[str]:
             if "frames_with_detections" in s:
                 dets = f" detections {s['frames_with_detections']}/{s['frames']}"
         x, y, z = st["position"]
+        link = "" if st.get("link_ok", True) else " LINK LOST"
         lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "
                      f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {st['battery_pct']:5.1f}% "
-                     f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}")
+                     f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
     return lines
 
 
-def _collect_stats(handles: dict) -> tuple[dict, dict]:
+def _collect_stats(handles: dict, hosts: dict) -> tuple[dict, dict]:
     import ray
 
-    stats: dict[str, Any] = {}
+    host_stats = {tier: ray.get(h.stats.remote()) for tier, h in hosts.items()}
+    every = {cid: s for hs in host_stats.values() for cid, s in hs.items()}
+    stats: dict[str, Any] = {"_hosts": {t: hs.get("_host", {}) for t, hs in host_stats.items()}}
     latency: dict[str, Any] = {}
     for rid, h in handles.items():
-        s: dict[str, Any] = {"scheduler": ray.get(h["scheduler"].stats.remote())}
-        s["cameras"] = {sid: ray.get(c.stats.remote()) for sid, c in h["cameras"].items()}
-        s["analytics"] = [ray.get(a.stats.remote()) for a in h["analytics"].values()]
+        s: dict[str, Any] = {"scheduler": every.get(h["scheduler"].cid, {})}
+        s["cameras"] = {sid: every.get(c.cid, {}) for sid, c in h["cameras"].items()}
+        s["analytics"] = [every.get(cid, {}) for cid in h["analytics"]]
         stats[rid] = s
         sch = s["scheduler"]
         if "e2e_ms" in sch:
@@ -380,11 +458,15 @@ def format_summary(result: MissionResult) -> str:
             lines.append(f"    error: {rep['error']}")
         st = result.stats.get(rid, {})
         for sid, c in st.get("cameras", {}).items():
-            dropped = sum(o["dropped"] for o in c["outlets"])
+            if not c:
+                continue
+            dropped = sum(a.get("dropped", 0) for a in st.get("analytics", []) if a)
             lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
                          f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by busy "
                          f"consumers")
         for a in st.get("analytics", []):
+            if not a:
+                continue
             extra = ""
             if "frames_with_detections" in a:
                 extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"

@@ -78,7 +78,7 @@ class TrajectoryScheduler:
         self.completed: list[str] = []
         self.cleared = 0
         self.stream_inputs: list[tuple[Any, int, bool]] = []  # (AeroStreamData, priority, replace) wired at start
-        self._remote = None  # SchedulerActor handle while a mission runs
+        self._remote = None  # the scheduler component's handle while a mission runs
         if env is not None and hasattr(env, "_register_scheduler_instance"):
             env._register_scheduler_instance(self)
 

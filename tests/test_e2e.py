@@ -75,7 +75,7 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
     from aerodaas import Environment, ObjectDetector
-    from aerodaas.actors import drone as drone_mod, nodes, recorder
+    from aerodaas.actors import host
     from aerodaas.detect import ModelNotFoundError
 
     started = []
@@ -88,9 +88,7 @@ def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_opti
             started.append(self.name)
             raise AssertionError(f"{self.name} started although the model is missing")
 
-    for mod, name in ((drone_mod, "DroneActor"), (nodes, "CameraActor"), (nodes, "AnalyticsActor"),
-                      (nodes, "SchedulerActor"), (recorder, "RecorderActor")):
-        monkeypatch.setattr(mod, name, NoActor(name))
+    monkeypatch.setattr(host, "HostActor", NoActor("HostActor"))  # every component of a run lives in a host
 
     monkeypatch.setenv("AERODAAS_MODEL_DIR", str(tmp_path))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))

@@ -1,0 +1,513 @@
+"""The components a host runs — cameras, analytics, trajectory schedulers, drones — and :class:`HostRuntime`,
+which builds them from the driver's spec, runs the clock and answers the driver's calls.
+
+Envelopes between components are dicts ``{"kind", "data", "meta", "sim_t", "trace", "robot"}``: ``kind`` is
+``frame`` (data: a read-only (H, W, 3) uint8 BGR ``ndarray``, shared by every reader, never copied),
+``detections`` (list of Detection), ``nav`` (AeroNavigation), ``odometry`` (Odometry dict) or ``value``;
+``meta`` is the FrameMeta of the frame the item derives from; ``robot`` the robot it belongs to; ``trace``
+accumulates the per-frame timings used for latency accounting (``capture_wall``: ``time.time()`` when the frame
+was ready, ``inference_ms``, ``post_ms``). A lock-step envelope also carries its :class:`~.host.Cascade`
+(``tok``).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
+from aerodaas.models import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose, Waypoint
+
+from .host import Cascade, Component, Host
+
+
+def _kind_of(out: Any) -> str:
+    if isinstance(out, AeroNavigation):
+        return "nav"
+    if isinstance(out, list) and (not out or isinstance(out[0], Detection)):
+        return "detections"
+    return "value"
+
+
+def _percentiles(values: list[float]) -> dict[str, float]:
+    a = np.asarray(values if values else [0.0], float)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(values)}
+
+
+# --------------------------------------------------------------------------------------------------- camera
+class CameraComponent:
+    """A camera sensor. :meth:`capture` (run on the host's pool when the clock says a frame is due) produces one
+    frame — rendered by the simulator at the drone's pose, or the backend's own newest frame (``source:
+    backend``, e.g. a Tello) — makes it read-only, and publishes it. While the previous capture is still being
+    rendered a new one is skipped and counted (``dropped_at_camera``). Frames go to the recorder by reference."""
+
+    kind = "camera"
+
+    def __init__(self, host: Host, cid: str, robot_id: str, sensor_id: str, props: dict, world: Any,
+                 backend: Any, recorder: Any, epoch_ns: int) -> None:
+        self.host, self.cid = host, cid
+        self.robot_id, self.sensor_id = robot_id, sensor_id
+        self.k = CameraIntrinsics.from_hfov(int(props["width"]), int(props["height"]), float(props["hfov_deg"]))
+        self.pitch = float(props["pitch_deg"])
+        self.source = props.get("source", "sim")
+        self.fps = float(props["fps"])
+        self.world, self.backend = world, backend
+        self.recorder = recorder
+        self.topic = f"/{robot_id}/camera/{sensor_id}"
+        self.epoch_ns = epoch_ns
+        self.ticks = 0
+        self.frames = 0
+        self.dropped_at_camera = 0
+        self.render_ms: list[float] = []
+        self.latest: tuple | None = None
+        self._busy = threading.Lock()
+        self._last_backend_t: float | None = None
+
+    def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
+        """Clock thread: a frame is due. Submits the capture unless the previous one is still running."""
+        self.ticks += 1
+        if not self._busy.acquire(blocking=False):
+            self.dropped_at_camera += 1
+            return False
+        if tok is not None:
+            tok.add()
+        self.host.submit(self._capture, position, yaw, t, self.ticks, tok)
+        return True
+
+    def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None) -> None:
+        try:
+            self.capture(position, yaw, t, seq, tok)
+        finally:
+            self._busy.release()
+            if tok is not None:
+                tok.done()
+
+    def capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None = None) -> np.ndarray | None:
+        """Produce and publish one frame; returns it (None if the backend had no new frame)."""
+        t0 = time.perf_counter()
+        pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
+        truth: list = []
+        if self.source == "backend":
+            got = self.backend.camera_frame()
+            if got is None or got[1] == self._last_backend_t:
+                self.dropped_at_camera += 1
+                return None
+            frame, t = got
+            self._last_backend_t = t
+        else:
+            frame, truth = self.world.render(pose, self.k, t)
+        frame.flags.writeable = False  # shared by every reader from here on: nobody may change it
+        wall = time.time()
+        self.render_ms.append((time.perf_counter() - t0) * 1e3)
+        self.frames += 1
+        meta = FrameMeta(robot_id=self.robot_id, sensor_id=self.sensor_id, seq=seq, capture_time=t, wall_time=wall,
+                         pose=pose, intrinsics=self.k)
+        self.latest = (frame, meta)
+        env = {"kind": "frame", "data": frame, "meta": meta, "sim_t": t, "robot": self.robot_id,
+               "trace": {"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0}}
+        self.host.publish(self.cid, [env], tok, inline=True)
+        if self.recorder is not None:
+            t_ns = self.epoch_ns + int(t * 1e9)
+            self.recorder.image(self.topic, t_ns, frame, f"{self.robot_id}/{self.sensor_id}")
+            if truth:
+                self.recorder.json("/world/targets", t_ns, {"robot": self.robot_id, "seq": seq, "t": t,
+                                                            "targets": truth}, "aerodaas.GroundTruth")
+        return frame
+
+    def get_latest(self) -> tuple | None:
+        """(frame, FrameMeta) of the newest frame, for pull-style access."""
+        return self.latest
+
+    def stats(self) -> dict:
+        r = np.array(self.render_ms or [0.0])
+        return {"frames": self.frames, "ticks": self.ticks, "dropped_at_camera": self.dropped_at_camera,
+                "render_ms_median": float(np.median(r)),
+                "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,
+                "outlets": self.host.outlet_stats(self.cid), "subscribers": len(self.host.routes.get(self.cid, []))}
+
+
+# --------------------------------------------------------------------------------------------------- analytics
+class AnalyticsComponent(Component):
+    """Hosts one analytics (IAnalyse / INavigableAnalyse) object: ``setup()`` once, then ``process()`` on every
+    delivered item; non-None outputs are recorded and published. An item older than the newest one already
+    processed from the same source (possible when two pool threads race) is skipped as stale."""
+
+    kind = "analytics"
+
+    def __init__(self, host: Host, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+                 buffer: int = 1) -> None:
+        super().__init__(host, cid, buffer)
+        self.name = name
+        self.obj = analytics
+        self.obj.setup()
+        self.recorder = recorder
+        self.epoch_ns = epoch_ns
+        self.processed = 0
+        self.outputs = 0
+        self.stale = 0
+        self.latest: Any = None
+        self.proc_ms: list[float] = []
+        self._newest: dict[tuple, float] = {}
+
+    def handle(self, port: str, env: dict) -> list[dict] | None:
+        meta = env.get("meta")
+        if meta is not None:
+            key = (meta.robot_id, meta.sensor_id)
+            if meta.capture_time < self._newest.get(key, -1.0):
+                self.stale += 1
+                return None
+            self._newest[key] = meta.capture_time
+        t0 = time.perf_counter()
+        out = self.obj.process(env["data"], meta)
+        dt_ms = (time.perf_counter() - t0) * 1e3
+        self.proc_ms.append(dt_ms)
+        self.processed += 1
+        self.host.mark_processed()
+        if out is None:
+            return None
+        self.outputs += 1
+        self.latest = out
+        trace = dict(env.get("trace") or {})
+        timing = getattr(self.obj, "last_timing", None)
+        if timing and "inference_ms" in timing:
+            trace["inference_ms"] = trace.get("inference_ms", 0.0) + timing["inference_ms"]
+            trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms - timing["inference_ms"]
+        else:
+            trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms
+        kind = _kind_of(out)
+        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        if self.recorder is not None:
+            t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
+            if kind == "detections":
+                size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None
+                self.recorder.detections(f"/{robot}/{self.name}/detections", t_ns, out, size)
+            elif kind == "nav":
+                self.recorder.json(f"/{robot}/{self.name}/navigation", t_ns, out.model_dump(mode="json"),
+                                   "aerodaas.AeroNavigation")
+            elif isinstance(out, dict):
+                self.recorder.json(f"/{robot}/{self.name}", t_ns, out, "aerodaas.AnalyticsOutput")
+        return [{"kind": kind, "data": out, "meta": meta, "sim_t": env.get("sim_t", 0.0), "trace": trace,
+                 "robot": robot}]
+
+    def get_latest(self) -> Any:
+        return self.latest
+
+    def stats(self) -> dict:
+        p = np.array(self.proc_ms or [0.0])
+        out = {"name": self.name, "processed": self.processed, "outputs": self.outputs, "stale": self.stale,
+               "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
+               "outlets": self.host.outlet_stats(self.cid)}
+        extra = getattr(self.obj, "stats", None)
+        if callable(extra):
+            out.update(extra())
+        return out
+
+
+# --------------------------------------------------------------------------------------------------- scheduler
+class SchedulerComponent(Component):
+    """Hosts one robot's trajectory scheduler (the paper's INavigate plug-in) and its waypoint priority queue.
+
+    The drone calls :meth:`tick` / :meth:`complete` / :meth:`discard` directly (same host, no actor hop);
+    analytics streams deliver navigation as envelopes on port ``priority:<n>[:replace]``; users add navigation
+    through :meth:`add_navigation` (the HITL API). Everything added is checked by the robot's
+    :class:`~aerodaas.safety.SafetyGate` first (all items or none). New navigation nudges the drone, which applies
+    it at once; the per-frame latency (frame ready -> command applied to the vehicle) is measured here. The
+    waypoint plan is recorded on ``/<robot>/mission/plan`` at start and whenever the queued waypoints change."""
+
+    kind = "scheduler"
+
+    def __init__(self, host: Host, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
+                 robot_cfg: dict | None = None) -> None:
+        from aerodaas.safety import SafetyGate
+
+        super().__init__(host, cid, buffer=4)
+        self.robot_id = robot_id
+        self.s = scheduler
+        self.recorder = recorder
+        self.epoch_ns = epoch_ns
+        self.position = tuple(scheduler.start)
+        self.now = 0.0
+        self.latency: list[dict] = []
+        cfg = RobotConfig.model_validate(robot_cfg) if robot_cfg else RobotConfig(id=robot_id)
+        self.home = cfg.home
+        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home)
+        self.refused: list[dict] = []
+        self.discarded: list[dict] = []
+        self._plan_sig: Any = None
+        self._replaced: set[str] = set()
+        self.drone: Any = None  # the DroneComponent, set by the host runtime
+
+    def tick(self, now: float, position: tuple) -> dict:
+        self.now, self.position = now, tuple(position)
+        if self._plan_sig is None:
+            self._record_plan()
+        cur = self.s.current(now)
+        left = self.s.pending(distance_driven_only=True)
+        if cur is None:
+            return {"item": None, "preplanned_left": left}
+        m, item = cur
+        return {"item": item, "priority": m.priority, "mission": m.name, "preplanned_left": left}
+
+    def pending(self) -> int:
+        """Queued items of pre-planned (distance-driven) missions."""
+        return self.s.pending(distance_driven_only=True)
+
+    def complete(self, item_id: str) -> bool:
+        ok = self.s.complete(item_id)
+        self._record_plan()
+        return ok
+
+    def discard(self, item_id: str, reason: str) -> bool:
+        """Drop the head item ``item_id`` without counting it as visited (rejected by safety, or an executed
+        action). Returns False if no mission has it at its head."""
+        if not self.s.discard(item_id):
+            return False
+        self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
+        self._record_plan()
+        return True
+
+    def _event(self, event: str, **kw: Any) -> None:
+        if self.recorder is not None:
+            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
+                               {"robot": self.robot_id, "t": self.now, "event": event, **kw}, "aerodaas.MissionEvent")
+
+    def handle(self, port: str, env: dict) -> None:
+        from aerodaas.safety import SafetyViolation
+
+        parts = port.split(":")
+        prio = int(parts[1]) if parts[0] == "priority" else None
+        nav = env["data"]
+        if not isinstance(nav, AeroNavigation) or env.get("robot", self.robot_id) != self.robot_id:
+            return None  # a shared analytics navigates each robot through that robot's own scheduler
+        try:
+            nav = self.gate.check_navigation(nav, self.position)
+        except SafetyViolation as e:  # an analytics asked for something unsafe: refuse it, keep running
+            self.refused.append({"t": env.get("sim_t", 0.0), "source": "analytics", "error": str(e)})
+            self._event("navigation_refused", source="analytics", error=str(e))
+            return None
+        if "replace" in parts[2:] and port not in self._replaced:
+            self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
+            self.s.clear_navigation()
+            self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
+            self._event("mission_aborted", by=port)
+        self.s.add_navigation(nav, priority=prio, position=self.position)
+        if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
+            self._record_plan()
+        if self.drone is not None:
+            self.drone.nudge()  # applied now, not at the next control tick
+        tr = env.get("trace") or {}
+        if "capture_wall" in tr:
+            e2e = (time.time() - tr["capture_wall"]) * 1e3
+            rec = {"robot": self.robot_id, "t": env.get("sim_t", 0.0), "e2e_ms": e2e,
+                   "inference_ms": tr.get("inference_ms", 0.0), "post_ms": tr.get("post_ms", 0.0),
+                   "overhead_ms": max(0.0, e2e - tr.get("inference_ms", 0.0) - tr.get("post_ms", 0.0))}
+            self.latency.append(rec)
+            if self.recorder is not None:
+                self.recorder.json(f"/{self.robot_id}/latency", self.epoch_ns + int(rec["t"] * 1e9), rec,
+                                   "aerodaas.FrameLatency")
+        return None
+
+    def add_navigation(self, nav: Any, index: int | None = None, priority: int | None = None) -> dict:
+        """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
+        changes nothing; returns the queue snapshot on success."""
+        nav_, prio = self.s._unwrap(nav, priority)
+        nav_ = self.gate.check_navigation(nav_, self.position)
+        self.s.add_navigation(nav_, index=index, priority=prio, position=self.position)
+        self._record_plan()
+        if self.drone is not None:
+            self.drone.nudge()
+        return {"queued": self.s.snapshot(), "position": list(self.position), "t": self.now}
+
+    def clear_navigation(self, priority: int | None = None) -> None:
+        self.s.clear_navigation(priority)
+        self._record_plan()
+
+    def snapshot(self) -> list[dict]:
+        return self.s.snapshot()
+
+    def _record_plan(self) -> None:
+        """Record the queued waypoints (with local ENU targets) when they changed since the last record."""
+        missions = []
+        with self.s._lock:
+            for m in sorted(self.s._missions, key=lambda m: (m.priority, m.seq)):
+                items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                          "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+                if items:
+                    missions.append({"name": m.name, "priority": m.priority, "items": items})
+        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
+        if sig == self._plan_sig:
+            return
+        self._plan_sig = sig
+        if self.recorder is not None:
+            self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(self.now * 1e9),
+                               {"robot": self.robot_id, "t": self.now, "missions": missions}, "aerodaas.MissionPlan")
+
+    def stats(self) -> dict:
+        out: dict[str, Any] = {"completed": list(self.s.completed), "frames_with_latency": len(self.latency),
+                               "refused": self.refused[-20:], "refused_count": len(self.refused),
+                               "discarded": self.discarded, **self.mailbox_stats()}
+        if self.latency:
+            for key in ("e2e_ms", "overhead_ms", "inference_ms"):
+                out[key] = _percentiles([r[key] for r in self.latency])
+        return out
+
+    def latency_records(self) -> list[dict]:
+        return list(self.latency)
+
+
+# --------------------------------------------------------------------------------------------------- runtime
+class HostRuntime:
+    """Builds a host's components from the driver's ``spec`` and runs them.
+
+    ``spec`` keys: ``sim`` (SimulationConfig dict), ``world`` (WorldConfig dict, for simulated cameras),
+    ``record`` ({"path", "meta"} or None: the recorder lives on the host that has the drones), ``analytics``
+    ([{"cid", "name", "obj", "buffer"}]), ``robots`` ([{"robot": RobotConfig dict, "drone_cid",
+    "scheduler_cid", "scheduler": TrajectoryScheduler, "preplanned": n, "cameras": [{"cid", "sensor", "props"}],
+    "odom_cids": [...], "stat_cids": [...]}]). Drones connect to their vehicles here, so an unreachable vehicle
+    fails the run before take-off."""
+
+    def __init__(self, host: Host, spec: dict) -> None:
+        from .drone import DroneComponent
+        from .recorder import RecorderService
+
+        self.host = host
+        self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
+        rec = spec.get("record")
+        self.recorder = RecorderService(rec["path"], rec.get("meta")) if rec else None
+        host.recorder = self.recorder
+        self.comps: dict[str, Any] = {}
+        for a in spec.get("analytics", []):
+            self.comps[a["cid"]] = host.add(AnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder,
+                                                               host.epoch_ns, a.get("buffer", 1)))
+        self.drones: list[DroneComponent] = []
+        world = None
+        for r in spec.get("robots", []):
+            cfg = RobotConfig.model_validate(r["robot"])
+            sched = host.add(SchedulerComponent(host, r["scheduler_cid"], cfg.id, r["scheduler"], self.recorder,
+                                                host.epoch_ns, r["robot"]))
+            drone = DroneComponent(r["drone_cid"], r["robot"], host, sched, self.recorder, host.epoch_ns,
+                                   r["preplanned"], r["odom_cids"], r["stat_cids"])
+            sched.drone = drone
+            for c in r["cameras"]:
+                if c["props"].get("source", "sim") == "sim" and world is None:
+                    from aerodaas.sim.world import World
+
+                    w = WorldConfig.model_validate(spec["world"])
+                    world = World(w.ground, w.targets)  # one texture for every camera of this host
+                cam = CameraComponent(host, c["cid"], cfg.id, c["sensor"], c["props"], world, drone.backend,
+                                      self.recorder, host.epoch_ns)
+                drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
+                self.comps[c["cid"]] = cam
+            self.comps[r["drone_cid"]] = drone
+            self.comps[r["scheduler_cid"]] = sched
+            self.drones.append(drone)
+        for d in self.drones:
+            d.connect()
+
+    def describe(self) -> dict:
+        return {"host": self.host.host_id, "tier": self.host.tier, "components": sorted(self.comps),
+                "pid": __import__("os").getpid(), "threads": self.host.pool._max_workers}
+
+    def lookup(self, cid: str) -> Any:
+        try:
+            return self.comps[cid]
+        except KeyError:
+            raise KeyError(f"host {self.host.host_id!r} has no component {cid!r}; it has {sorted(self.comps)}") from None
+
+    # ------------------------------------------------------------------ the clock
+    def run(self, timeout_s: float | None = None) -> dict[str, dict]:
+        """Fly every drone of this host to the end of its mission; returns robot id -> report.
+
+        One clock for the fleet: every ``1/physics_hz`` simulated seconds each backend steps (simulator) or is
+        polled (real vehicles), odometry is published at its rate, due cameras capture, and each drone's control
+        tick runs at ``control_rate_hz``. Time runs at ``speedup`` x wall time (lock-step: as fast as the
+        analytics allow). A control tick later than one control period (wall time) is counted as missed."""
+        sim, drones = self.sim, self.drones
+        dt = 1.0 / sim.physics_hz
+        lock = sim.lockstep
+        for d in drones:
+            d.start()
+        wall0 = time.monotonic()
+        step = 0
+        active = list(drones)
+        self.tick_lateness: list[float] = []
+        try:
+            while active:
+                step += 1
+                nominal = step * dt
+                tok = Cascade() if lock else None
+                for d in active:
+                    d.step(dt) if tok is None else self._step_lockstep(d, dt, tok)
+                for d in active:
+                    b = d.backend
+                    for cam in d.cameras:
+                        if b.t + 1e-9 >= cam["next_t"]:
+                            cam["next_t"] += 1.0 / cam["fps"]
+                            if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
+                                cam["next_t"] = b.t + 1.0 / cam["fps"]
+                            cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
+                if tok is not None:
+                    tok.wait()
+                now = time.monotonic()
+                finished = []
+                for d in active:
+                    if d.backend.t + 1e-9 >= d.next_tick:
+                        due = d.next_tick
+                        d.next_tick += d.tick_period
+                        if not lock:
+                            late = now - (wall0 + due / sim.speedup) if d.backend.clock == "sim" else 0.0
+                            self.tick_lateness.append(late)
+                            if late > d.tick_period / sim.speedup:
+                                d.missed_ticks += 1
+                        if d.control_tick():
+                            finished.append(d)
+                    elif d._end_req is not None and d.control_tick():
+                        finished.append(d)
+                for d in finished:
+                    d.finish()
+                    active.remove(d)
+                if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
+                    for d in active:
+                        d.outcome = "timeout"
+                        d._event("timeout", wall_s=timeout_s)
+                        d.finish()
+                    active = []
+                if not lock and active:
+                    lag = wall0 + nominal / sim.speedup - time.monotonic()
+                    if lag > 0:
+                        time.sleep(lag)
+        finally:
+            for d in drones:
+                d.close()
+        return {d.cfg.id: d.report() for d in drones}
+
+    @staticmethod
+    def _step_lockstep(d: Any, dt: float, tok: Cascade) -> None:
+        with d.lock:
+            d.backend.step(dt)
+            for ev in d.backend.drain_events():
+                d._event(ev.pop("event", "backend_event"), **ev)
+        if d.backend.t + 1e-9 >= d.next_odom:
+            d.next_odom += d.odom_period
+            d.publish_odometry(tok)
+
+    # ------------------------------------------------------------------ end
+    def stats(self) -> dict:
+        out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
+        out["_host"] = {"errors": self.host.errors[-10:], "error_count": len(self.host.errors),
+                        "first_processed_wall": self.host.first_processed_wall,
+                        "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])])}
+        return out
+
+    def close(self) -> dict:
+        self.host.close()
+        for c in self.comps.values():
+            close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None
+            if callable(close):
+                try:
+                    close()
+                except Exception:
+                    pass
+        return self.recorder.close() if self.recorder is not None else {}

@@ -1,0 +1,413 @@
+"""The data plane: one host process per tier, in which co-located components hand items to each other in memory.
+
+Every component of an application — a drone (its vehicle backend, flight logic, odometry and stat-stream
+sensors), a camera, an analytics, a trajectory scheduler — is an actor *in the API and in placement*: it has a
+tier, it is placed with a Ray ``label_selector`` on ``tier``, and it is reached through a handle. What changed
+(issue 6) is the data plane: all components placed on the same tier of a run share one Ray actor process, a
+:class:`Host`, instead of one worker process each. Inside a host:
+
+* a component is a *mailbox actor* (:class:`Component`): it processes one item at a time, in order; an item
+  for an idle component runs **in the delivering thread** (no thread hop, no serialisation, no copy: a frame
+  is the same ``ndarray`` object from the camera to the last analytics); an item for a busy component is queued
+  up to its stream ``buffer`` (then dropped and counted, so a slow consumer never stalls the camera or the
+  control loop);
+* the clock thread (:meth:`Host.run`) steps every vehicle, publishes odometry and the stat-stream, triggers
+  camera captures and runs each drone's control ticks; it never runs components itself: it submits work to a
+  small thread pool (OpenCV and onnxruntime release the GIL, so renders and inference overlap on 2 cores);
+* when an analytics hands navigation to the trajectory scheduler, the drone applies it at once (not at its next
+  control tick), so the end-to-end latency ends at the command reaching the vehicle backend.
+
+Items that cross processes (a component on another host, e.g. cloud analytics) go through Ray actor calls
+(:class:`RemoteOutlet`, bounded in flight); frames cross tiers as JPEG bytes.
+
+Lock-step: with ``lockstep`` the clock waits after every frame (and odometry message) for its whole cascade —
+every item derived from it, on this host and on others — before simulated time moves on (:class:`Cascade`);
+queues are then unbounded, so nothing is dropped.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+import ray
+
+__all__ = ["Cascade", "Component", "RemoteOutlet", "Host", "HostActor", "encode_frame", "decode_frame"]
+
+
+class Cascade:
+    """Counts the outstanding work derived from one lock-step item (a frame or an odometry message).
+
+    :meth:`add` when an item derived from it is accepted by a component (or sent to another host), :meth:`done`
+    when that item was processed and its outputs were handed on; :meth:`wait` blocks until nothing is left.
+    Remote work is tracked by the ObjectRefs of the calls, whose results list further refs (their own remote
+    sends)."""
+
+    __slots__ = ("_n", "_cv", "_refs")
+
+    def __init__(self) -> None:
+        self._n = 0
+        self._cv = threading.Condition(threading.Lock())
+        self._refs: list = []
+
+    def add(self) -> None:
+        with self._cv:
+            self._n += 1
+
+    def done(self) -> None:
+        with self._cv:
+            self._n -= 1
+            if self._n <= 0:
+                self._cv.notify_all()
+
+    def add_ref(self, ref: Any) -> None:
+        with self._cv:
+            self._refs.append(ref)
+
+    def wait(self, timeout_s: float = 120.0) -> None:
+        """Block until every derived item is done. Raises TimeoutError after ``timeout_s`` seconds."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            with self._cv:
+                while self._n > 0:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        raise TimeoutError(f"lock-step: {self._n} items still in flight after {timeout_s:.0f} s")
+                    self._cv.wait(left)
+                refs, self._refs = self._refs, []
+            if not refs:
+                return
+            for res in ray.get(refs, timeout=max(0.1, deadline - time.monotonic())):
+                for r in res or ():
+                    if isinstance(r, ray.ObjectRef):
+                        self.add_ref(r)
+
+
+def encode_frame(frame: np.ndarray, quality: int = 85) -> bytes:
+    """(H, W, 3) uint8 BGR -> JPEG bytes (for frames crossing tiers). Raises ValueError if encoding fails."""
+    ok, buf = cv2.imencode(".jpg", frame, [int(cv2.IMWRITE_JPEG_QUALITY), int(quality)])
+    if not ok:
+        raise ValueError(f"cannot JPEG-encode a frame of shape {getattr(frame, 'shape', None)}")
+    return buf.tobytes()
+
+
+def decode_frame(data: bytes) -> np.ndarray:
+    """JPEG bytes -> read-only (H, W, 3) uint8 BGR. Raises ValueError for undecodable bytes."""
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if img is None:
+        raise ValueError(f"cannot decode a {len(data)}-byte JPEG frame")
+    img.flags.writeable = False
+    return img
+
+
+class Component:
+    """A mailbox actor inside a :class:`Host`: :meth:`offer` runs :meth:`handle` at once in the caller's thread
+    when the component is idle, queues the item when it is busy (up to ``buffer - 1`` waiting items; unbounded in
+    lock-step), and drops it otherwise (counted in ``dropped``). :meth:`handle` returns the envelopes to publish
+    downstream (or None); they are published after the component is released, so a slow subscriber never keeps
+    its producer busy. Subclasses override :meth:`handle`. Thread-safe."""
+
+    kind = "component"
+
+    def __init__(self, host: "Host", cid: str, buffer: int = 1) -> None:
+        self.host, self.cid = host, cid
+        self.capacity = max(0, int(buffer) - 1)
+        self._m = threading.Lock()
+        self._busy = False
+        self._q: deque = deque()
+        self.received = 0
+        self.dropped = 0
+        self.errors = 0
+
+    def offer(self, port: str, env: dict) -> bool:
+        """Deliver one envelope; returns False when it was dropped (the component is busy and its queue full)."""
+        tok = env.get("tok")
+        with self._m:
+            self.received += 1
+            if self._busy:
+                if tok is not None or len(self._q) < self.capacity:
+                    self._q.append((port, env))
+                    if tok is not None:
+                        tok.add()
+                    return True
+                self.dropped += 1
+                return False
+            self._busy = True
+            if tok is not None:
+                tok.add()
+        self._run(port, env)
+        return True
+
+    def _run(self, port: str, env: dict) -> None:
+        try:
+            out = self.handle(port, env)
+        except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
+            self.errors += 1
+            out = None
+            self.host.report_error(self.cid, e)
+        with self._m:
+            nxt = self._q.popleft() if self._q else None
+            if nxt is None:
+                self._busy = False
+        if nxt is not None:  # keep draining on another thread, in order, while this one carries the output on
+            self.host.submit(self._run, *nxt)
+        try:
+            if out:
+                self.host.publish(self.cid, out, env.get("tok"))
+        finally:
+            tok = env.get("tok")
+            if tok is not None:
+                tok.done()
+
+    def handle(self, port: str, env: dict) -> list[dict] | None:
+        """Process one envelope; return the envelopes to publish (or None)."""
+        return None
+
+    def mailbox_stats(self) -> dict:
+        return {"received": self.received, "dropped": self.dropped, "errors": self.errors}
+
+
+class RemoteOutlet:
+    """The producer's end of an edge to a component on another host (a Ray actor call to ``Host.deliver``).
+
+    Allows ``buffer`` calls in flight; when the consumer is still busy with them a new item is dropped and
+    counted. Frames are JPEG-encoded when the edge crosses tiers (``jpeg``), else sent as an ObjectRef."""
+
+    def __init__(self, handle: Any, cid: str, port: str, buffer: int, jpeg: bool) -> None:
+        self.handle, self.cid, self.port = handle, cid, port
+        self.buffer = max(1, int(buffer))
+        self.jpeg = jpeg
+        self.in_flight: list = []
+        self.sent = 0
+        self.dropped = 0
+        self._lock = threading.Lock()
+
+    def send(self, env: dict) -> Any:
+        """Send one envelope (without its lock-step token); returns the call's ObjectRef or None if dropped."""
+        tok = env.get("tok")
+        with self._lock:
+            if tok is None and self.in_flight:
+                _, self.in_flight = ray.wait(self.in_flight, num_returns=len(self.in_flight), timeout=0)
+                if len(self.in_flight) >= self.buffer:
+                    self.dropped += 1
+                    return None
+            wire = {k: v for k, v in env.items() if k != "tok"}
+            wire["lockstep"] = tok is not None
+            if env.get("kind") == "frame":
+                frame = env["data"]
+                wire["data"] = encode_frame(frame) if self.jpeg else ray.put(frame)
+                wire["kind"] = "frame_jpeg" if self.jpeg else "frame_ref"
+            ref = self.handle.deliver.remote(self.cid, self.port, wire)
+            self.sent += 1
+            if tok is None:
+                self.in_flight.append(ref)
+            else:
+                tok.add_ref(ref)
+            return ref
+
+    def stats(self) -> dict:
+        return {"port": self.port, "to": self.cid, "sent": self.sent, "dropped": self.dropped}
+
+
+class Host:
+    """One process's share of a run: its components, the routes between them, the worker pool and (on the host
+    that has drones) the clock. Plain Python: :class:`HostActor` is the Ray actor around it.
+
+    ``routes`` maps a producing component id to its subscribers ``[(component id, port, buffer)]``; components
+    of other hosts are reached through ``peers`` (host id -> actor handle) and ``location`` (component id ->
+    host id). ``tier`` decides whether a frame sent to a peer of another tier is JPEG-encoded."""
+
+    def __init__(self, host_id: str, tier: str, epoch_ns: int, lockstep: bool = False, workers: int | None = None,
+                 recorder: Any = None) -> None:
+        self.host_id, self.tier, self.epoch_ns, self.lockstep = host_id, tier, epoch_ns, lockstep
+        n = workers or max(2, min(4, (os.cpu_count() or 2)))
+        self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
+        self.components: dict[str, Component] = {}
+        self.routes: dict[str, list[tuple[str, str, int]]] = {}
+        self.location: dict[str, str] = {}
+        self.tiers: dict[str, str] = {host_id: tier}
+        self.peers: dict[str, Any] = {}
+        self._outlets: dict[tuple[str, str, str], RemoteOutlet] = {}
+        self.recorder = recorder
+        self.errors: list[dict] = []
+        self.first_processed_wall: float | None = None
+        self._closed = False
+
+    # ------------------------------------------------------------------ wiring
+    def add(self, comp: Component) -> Component:
+        self.components[comp.cid] = comp
+        self.location[comp.cid] = self.host_id
+        return comp
+
+    def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> None:
+        self.routes = {k: [tuple(s) for s in v] for k, v in routes.items()}
+        self.location.update(location)
+        self.tiers.update(tiers)
+        self.peers = dict(peers)
+
+    # ------------------------------------------------------------------ delivery
+    def submit(self, fn: Callable, *args: Any) -> None:
+        if not self._closed:
+            self.pool.submit(self._guard, fn, *args)
+
+    def _guard(self, fn: Callable, *args: Any) -> None:
+        try:
+            fn(*args)
+        except Exception as e:  # pool jobs must never die silently
+            self.report_error(getattr(fn, "__qualname__", str(fn)), e)
+
+    def publish(self, src: str, envs: list[dict], tok: Cascade | None = None, inline: bool = True) -> None:
+        """Hand ``envs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
+        in this thread when ``inline`` (zero hops for a chain), the others on the pool; remote ones through their
+        :class:`RemoteOutlet` on the pool (JPEG encoding stays off the hot path)."""
+        subs = self.routes.get(src)
+        if not subs:
+            return
+        for env in envs:
+            if tok is not None:
+                env["tok"] = tok
+            local = []
+            for cid, port, buf in subs:
+                comp = self.components.get(cid)
+                if comp is not None:
+                    local.append((comp, port))
+                else:
+                    out = self._outlet(src, cid, port, buf)
+                    if tok is not None:
+                        out.send(env)  # lock-step: sent now, its ref joins the cascade
+                    else:
+                        self.submit(out.send, env)
+            last = len(local) - 1
+            for i, (comp, port) in enumerate(local):
+                if inline and i == last:
+                    comp.offer(port, env)
+                else:
+                    if tok is not None:
+                        tok.add()  # keep the cascade open until the pool picks it up
+                        self.submit(self._offer_then_done, comp, port, env, tok)
+                    else:
+                        self.submit(comp.offer, port, env)
+
+    @staticmethod
+    def _offer_then_done(comp: Component, port: str, env: dict, tok: Cascade) -> None:
+        try:
+            comp.offer(port, env)
+        finally:
+            tok.done()
+
+    def _outlet(self, src: str, cid: str, port: str, buffer: int) -> RemoteOutlet:
+        key = (src, cid, port)
+        o = self._outlets.get(key)
+        if o is None:
+            hid = self.location.get(cid)
+            if hid is None or hid not in self.peers:
+                raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
+            o = self._outlets[key] = RemoteOutlet(self.peers[hid], cid, port, buffer,
+                                                  jpeg=self.tiers.get(hid, self.tier) != self.tier)
+        return o
+
+    def deliver(self, cid: str, port: str, wire: dict) -> list:
+        """An envelope from another host. Frames arrive as JPEG bytes or ObjectRefs and are decoded once here.
+        In lock-step the whole local cascade runs before this returns; the result lists the refs of the remote
+        sends it caused (for the sender's :class:`Cascade`)."""
+        env = dict(wire)
+        lock = env.pop("lockstep", False)
+        kind = env.get("kind")
+        if kind == "frame_jpeg":
+            env["data"], env["kind"] = decode_frame(env["data"]), "frame"
+        elif kind == "frame_ref":
+            env["data"], env["kind"] = ray.get(env["data"]), "frame"
+        comp = self.components[cid]
+        if not lock:
+            comp.offer(port, env)
+            return []
+        tok = Cascade()
+        env["tok"] = tok
+        comp.offer(port, env)
+        with tok._cv:
+            while tok._n > 0:
+                tok._cv.wait(1.0)
+            refs, tok._refs = tok._refs, []
+        return refs
+
+    # ------------------------------------------------------------------ bookkeeping
+    def report_error(self, where: str, e: BaseException) -> None:
+        rec = {"where": where, "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(),
+               "t_wall": time.time()}
+        self.errors.append(rec)
+        if len(self.errors) <= 5:
+            print(f"aerodaas: error in {where}: {rec['error']}", file=sys.stderr, flush=True)
+
+    def mark_processed(self) -> None:
+        """Called by analytics when they finish an item: remembers the wall time of the first one (startup bench)."""
+        if self.first_processed_wall is None:
+            self.first_processed_wall = time.time()
+            probe = os.environ.get("AERODAAS_STARTUP_PROBE")
+            if probe:
+                try:
+                    with open(probe, "w") as f:
+                        f.write(repr(self.first_processed_wall))
+                except OSError:
+                    pass
+
+    def outlet_stats(self, src: str) -> list[dict]:
+        return [o.stats() for (s, _, _), o in self._outlets.items() if s == src]
+
+    def close(self) -> None:
+        self._closed = True
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+@ray.remote(num_cpus=0, max_concurrency=32)
+class HostActor:
+    """The Ray actor around a :class:`Host` (see the module docstring). Built empty, then
+    :meth:`setup` creates its components from their specs (see :func:`aerodaas.actors.components.build`)."""
+
+    def __init__(self, host_id: str, tier: str, epoch_ns: int, lockstep: bool = False, workers: int | None = None,
+                 switch_interval_s: float | None = 0.0005) -> None:
+        if switch_interval_s:
+            # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
+            # to move on by up to 5 ms; the host is latency-bound, not throughput-bound
+            sys.setswitchinterval(switch_interval_s)
+        self.host = Host(host_id, tier, epoch_ns, lockstep, workers)
+        self.runtime = None
+
+    def setup(self, spec: dict) -> dict:
+        """Create this host's components (drones connect to their vehicles here). Returns a description."""
+        from .components import HostRuntime
+
+        self.runtime = HostRuntime(self.host, spec)
+        return self.runtime.describe()
+
+    def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> bool:
+        self.host.connect(routes, location, tiers, peers)
+        return True
+
+    def deliver(self, cid: str, port: str, wire: dict) -> list:
+        return self.host.deliver(cid, port, wire)
+
+    def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
+        if method.startswith("_"):
+            raise AttributeError(f"component {cid!r}: {method!r} is not public")
+        comp = self.runtime.lookup(cid)
+        return getattr(comp, method)(*args, **kwargs)
+
+    def run(self, timeout_s: float | None = None) -> dict:
+        return self.runtime.run(timeout_s)
+
+    def stats(self) -> dict:
+        return self.runtime.stats() if self.runtime else {}
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def close(self) -> dict:
+        return self.runtime.close() if self.runtime else {}
