@@ -295,12 +295,11 @@ class SchedulerComponent(Component):
         self.s.add_navigation(nav, priority=prio, position=self.position)
         if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
             self._record_plan()
-        if self.drone is not None:
-            self.drone.nudge()  # applied now, not at the next control tick
+        applied = self.drone.nudge() if self.drone is not None else False  # applied now, not at the next tick
         tr = env.get("trace") or {}
         if "capture_wall" in tr:
             e2e = (time.time() - tr["capture_wall"]) * 1e3
-            rec = {"robot": self.robot_id, "t": env.get("sim_t", 0.0), "e2e_ms": e2e,
+            rec = {"robot": self.robot_id, "t": env.get("sim_t", 0.0), "e2e_ms": e2e, "applied": applied,
                    "inference_ms": tr.get("inference_ms", 0.0), "post_ms": tr.get("post_ms", 0.0),
                    "overhead_ms": max(0.0, e2e - tr.get("inference_ms", 0.0) - tr.get("post_ms", 0.0))}
             self.latency.append(rec)
@@ -351,10 +350,8 @@ class SchedulerComponent(Component):
         if self.latency:
             for key in ("e2e_ms", "overhead_ms", "inference_ms"):
                 out[key] = _percentiles([r[key] for r in self.latency])
+            out["latency_records"] = list(self.latency)
         return out
-
-    def latency_records(self) -> list[dict]:
-        return list(self.latency)
 
 
 # --------------------------------------------------------------------------------------------------- runtime
@@ -403,6 +400,10 @@ class HostRuntime:
             self.comps[r["drone_cid"]] = drone
             self.comps[r["scheduler_cid"]] = sched
             self.drones.append(drone)
+        # real cameras are not synchronised: spread the fleet's capture phases over one frame period
+        cams = [c for d in self.drones for c in d.cameras]
+        for i, c in enumerate(cams):
+            c["next_t"] = i / (len(cams) * c["fps"])
         for d in self.drones:
             d.connect()
 
@@ -496,7 +497,9 @@ class HostRuntime:
     # ------------------------------------------------------------------ end
     def stats(self) -> dict:
         out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
+        gcp = self.host.gc_pauses_ms
         out["_host"] = {"errors": self.host.errors[-10:], "error_count": len(self.host.errors),
+                        "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
                         "first_processed_wall": self.host.first_processed_wall,
                         "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])])}
         return out

@@ -205,17 +205,20 @@ class DroneComponent:
                                 "preplanned_total": self.preplanned_total, "t": self.backend.t,
                                 "error": self.error}, "aerodaas.MissionResult")
 
-    def nudge(self) -> None:
-        """New navigation was queued: apply it now (a control step outside the tick; idempotent)."""
+    def nudge(self) -> bool:
+        """New navigation was queued: apply it now (a control step outside the tick; idempotent). Returns True when
+        the drone was in a state that flies navigation (so the command reached the backend, or was refused)."""
         if self.done:
-            return
+            return False
         with self.lock:
-            if self.fsm.state in _ACTIVE or self.fsm.state == S.PAUSED:
-                self.nudges += 1
-                try:
-                    self._control()
-                except BackendError as e:
-                    self._event("backend_error", error=str(e))
+            if self.fsm.state not in _ACTIVE:
+                return False
+            self.nudges += 1
+            try:
+                self._control()
+            except BackendError as e:
+                self._event("backend_error", error=str(e))
+            return True
 
     # ------------------------------------------------------------------ flight logic
     def _control(self) -> bool:

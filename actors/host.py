@@ -26,6 +26,7 @@ queues are then unbounded, so nothing is dropped.
 """
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import threading
@@ -239,6 +240,22 @@ class Host:
         self.errors: list[dict] = []
         self.first_processed_wall: float | None = None
         self._closed = False
+        self.gc_pauses_ms: list[float] = []
+        self._gc_t0 = 0.0
+
+    def watch_gc(self) -> None:
+        """Freeze what setup allocated (long-lived: models, textures, configs) out of the collector's sight and
+        time every collection from now on (``gc_pauses_ms``): a full collection stalls every thread."""
+        gc.collect()
+        gc.freeze()
+
+        def cb(phase: str, info: dict) -> None:
+            if phase == "start":
+                self._gc_t0 = time.perf_counter()
+            elif info.get("generation", 0) >= 1:
+                self.gc_pauses_ms.append((time.perf_counter() - self._gc_t0) * 1e3)
+
+        gc.callbacks.append(cb)
 
     # ------------------------------------------------------------------ wiring
     def add(self, comp: Component) -> Component:
@@ -384,6 +401,7 @@ class HostActor:
         from .components import HostRuntime
 
         self.runtime = HostRuntime(self.host, spec)
+        self.host.watch_gc()
         return self.runtime.describe()
 
     def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> bool:

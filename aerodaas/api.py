@@ -220,6 +220,15 @@ class Environment:
             raise KeyError(f"unknown compute resource {compute_id!r}; the environment has {sorted(self.compute)}")
         return self.compute[compute_id]
 
+    # -- the fleet
+    def start_mission(self, robots: list["Robot"] | None = None, timeout: float | None = None):
+        """Fly several robots together (default: every robot of the environment) on one clock; blocks and returns
+        one MissionResult with a report per robot. Robots sharing the environment's trajectory scheduler each get
+        their own waypoint queue holding the missions they were told to ``navigate``."""
+        from .runtime import run_mission
+
+        return run_mission(self, list(robots) if robots is not None else self.get_env_robots(), timeout=timeout)
+
     # -- schedulers
     def set_trajectory_scheduler(self, scheduler: Any) -> None:
         """Plug in the trajectory scheduler (an INavigate, e.g. NearestNeighborScheduler)."""

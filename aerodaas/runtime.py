@@ -66,8 +66,11 @@ def ensure_ray(address: str | None = None) -> bool:
         if address:
             ray.init(address=address, log_to_driver=True, include_dashboard=False)
         else:
-            ray.init(labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
-                     num_cpus=max(os.cpu_count() or 2, 4), configure_logging=True, logging_level="warning")
+            # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
+            # num_cpus=1: hosts reserve no CPU (they are num_cpus=0 actors), so the CPU resource only sizes Ray's
+            # pool of prestarted workers: one, which the edge host takes (no idle 80 MB worker left around)
+            ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
+                     num_cpus=1, configure_logging=True, logging_level="warning")
             _STARTED_RAY = True
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
 
@@ -136,7 +139,8 @@ class _Plan:
     analytics_cids: dict[int, str]
 
 
-def _plan(env, robots: list, graphs: dict, sim: SimulationConfig, record: str | None, epoch_ns: int) -> _Plan:
+def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, record: str | None,
+          epoch_ns: int) -> _Plan:
     """Place components on hosts (one per tier in use: "edge" has the drones, cameras, schedulers, the recorder and
     the analytics deployed on edge compute; "cloud" the analytics deployed on cloud compute) and compute the
     routes from every stream producer to its subscribers."""
@@ -156,7 +160,7 @@ def _plan(env, robots: list, graphs: dict, sim: SimulationConfig, record: str | 
             acid[id(a)] = cid
             tier = a.compute.tier
             specs.setdefault(tier, {"sim": sim.model_dump(), "robots": [], "analytics": []})
-            buffer = max((s.buffer for s in a.inputs), default=1)
+            buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
             specs[tier]["analytics"].append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer})
             location[cid] = tier
     routes: dict[str, list] = {}
@@ -170,7 +174,7 @@ def _plan(env, robots: list, graphs: dict, sim: SimulationConfig, record: str | 
         return out
 
     for r in robots:
-        sched = r.scheduler or env.trajectory_scheduler()
+        sched = scheds[r.id]
         preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
                          for m in sched._missions if m.distance_driven)
         ids = {"drone": f"{r.id}/drone", "scheduler": f"{r.id}/scheduler", "cameras": {}, "odom": [], "stat": []}
@@ -203,6 +207,32 @@ def _plan(env, robots: list, graphs: dict, sim: SimulationConfig, record: str | 
     return _Plan(specs, routes, location, robot_ids, acid)
 
 
+def _robot_schedulers(env, robots: list) -> dict[str, Any]:
+    """Each robot's trajectory scheduler. Robots that share one scheduler object (the application plugged one into
+    the environment) get a fork each, holding the missions that robot navigates. Raises ValueError for a queued
+    mission that no robot navigates when several robots share the scheduler (its drone would be a guess)."""
+    by_sched: dict[int, list] = {}
+    for r in robots:
+        by_sched.setdefault(id(r.scheduler or env.trajectory_scheduler()), []).append(r)
+    out: dict[str, Any] = {}
+    for group in by_sched.values():
+        sched = group[0].scheduler or env.trajectory_scheduler()
+        if len(group) == 1:
+            out[group[0].id] = sched
+            continue
+        owned: dict[str, list] = {r.id: [] for r in group}
+        for m in sched._missions:
+            owners = [r for r in group if any(w is i for nav in r.navigations for w in nav.waypoints for i in m.items)]
+            if not owners:
+                raise ValueError(f"mission {m.name!r} (priority {m.priority}) is queued in the shared trajectory scheduler "
+                                 f"but no robot navigates it; call robot.navigate(...) for one of "
+                                 f"{[r.id for r in group]}")
+            owned[owners[0].id].append(m)
+        for r in group:
+            out[r.id] = sched.fork(owned[r.id])
+    return out
+
+
 def run_mission(env, robots: list, timeout: float | None = None) -> MissionResult:
     """Start the hosts for ``robots`` of ``env``, fly, and tear down. See the module docstring."""
     import ray
@@ -220,6 +250,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
     # ---- validate everything before any actor starts
     graphs = {}
+    scheds = _robot_schedulers(env, robots)
     for r in robots:
         analytics, _ = _collect_graph(r)
         for a in analytics:
@@ -229,12 +260,12 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             if callable(check):
                 check()
         graphs[r.id] = analytics
-        _check_preplanned(r, r.scheduler or env.trajectory_scheduler())
+        _check_preplanned(r, scheds[r.id])
 
     t_start = time.monotonic()
     has_cloud = ensure_ray(opts.address)
     epoch_ns = time.time_ns()
-    plan = _plan(env, robots, graphs, sim, opts.record, epoch_ns)
+    plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns)
     hosts: dict[str, Any] = {}
     handles: dict[str, dict] = {}
     hitl = None
@@ -259,7 +290,8 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                              "cameras": {sid: ComponentHandle(edge, cid) for sid, cid in ids["cameras"].items()},
                              "sched_obj": r.scheduler or env.trajectory_scheduler()}
             r._handle = handles[r.id]["drone"]
-            handles[r.id]["sched_obj"]._remote = handles[r.id]["scheduler"]
+            if scheds[r.id] is handles[r.id]["sched_obj"]:  # not shared: live add/clear go to this robot's queue
+                handles[r.id]["sched_obj"]._remote = handles[r.id]["scheduler"]
             for s in r.sensors.values():
                 s.get_data_stream()._runtime_getter = _pull_getter(s, handles[r.id])
             for a in graphs[r.id]:

@@ -94,6 +94,21 @@ class TrajectoryScheduler:
         self.__dict__.update(d)
         self._lock = threading.RLock()
 
+    def fork(self, missions: list[Mission]) -> "TrajectoryScheduler":
+        """A scheduler of the same class and settings holding only ``missions`` (each robot of a fleet gets its
+        own waypoint queue when an application plugs one scheduler into the environment). Analytics stream
+        inputs are kept: their navigation carries the robot it is meant for."""
+        import copy
+
+        with self._lock:
+            twin = copy.copy(self)
+            twin._lock = threading.RLock()
+            twin._missions = list(missions)
+            twin.completed = []
+            twin.stream_inputs = list(self.stream_inputs)
+            twin._remote = None
+        return twin
+
     # ------------------------------------------------------------------ ordering (plug-in point)
     def order(self, waypoints: list[Waypoint], start: Sequence[float]) -> list[Waypoint]:
         """Return the visiting order for an UNORDERED list. The base class keeps the given order."""

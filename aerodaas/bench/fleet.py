@@ -1,0 +1,210 @@
+"""``aerodaas bench fleet``: how many simulated drones one 2-core node carries.
+
+For each fleet size N (default 1, 5, 10, 20, 40) on a fresh local Ray: N simulated drones, each with a camera
+(640x480 at 15 FPS), odometry (10 Hz), the stat-stream and a navigation (control) loop at 10 Hz flying its own
+survey, plus one lightweight analytics shared by every camera, in real time (speedup 1) for ``--duration``
+seconds. Reported per N: missed control ticks (%: a tick that runs more than one control period late), frames
+dropped (%: camera ticks whose frame never reached the shared analytics), CPU (% of one core, all Ray processes
+and the driver), and the summed RSS (and PSS) of every Ray process and the driver at its peak.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from aerodaas.analytics import Analytics
+
+DEFAULT_SIZES = (1, 5, 10, 20, 40)
+
+
+class FrameExposure(Analytics):
+    """A lightweight analytics: mean brightness and the fraction of saturated pixels of every 8th pixel of a frame
+    ((H, W, 3) uint8 BGR in; a dict out). Shared by every camera of the fleet benchmark."""
+
+    name = "exposure"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.frames = 0
+        self.per_robot: dict[str, int] = {}
+
+    def process(self, frame: np.ndarray, meta: Any) -> dict:
+        small = frame[::8, ::8]
+        self.frames += 1
+        rid = meta.robot_id if meta is not None else "?"
+        self.per_robot[rid] = self.per_robot.get(rid, 0) + 1
+        return {"robot": rid, "mean": float(small.mean()), "saturated": float((small >= 250).mean())}
+
+    def stats(self) -> dict:
+        return {"frames": self.frames, "per_robot": dict(self.per_robot)}
+
+
+def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480) -> dict:
+    """environment.json dict for ``n`` drones 6 m apart on a grid, each flying a 4 m square over and over."""
+    robots = []
+    side = max(1, math.ceil(math.sqrt(n)))
+    for i in range(n):
+        robots.append({
+            "id": f"d{i:02d}", "backend": "sim", "takeoff_altitude": 3.0, "control_rate_hz": 10,
+            "limits": {"max_speed": 2.0, "max_vertical_speed": 1.0, "max_acceleration": 2.0},
+            "sensors": [
+                {"id": "cam", "type": "camera",
+                 "properties": {"width": width, "height": height, "hfov_deg": 78, "fps": fps, "pitch_deg": 90}},
+                {"id": "odom", "type": "odometry", "properties": {"rate_hz": 10}},
+                {"id": "stat", "type": "stat_stream"}]})
+    return {"name": f"fleet-{n}", "robots": robots,
+            "world": {"ground": {"seed": 3, "metres_per_pixel": 0.05, "size_m": 12.0 * side + 40}},
+            "simulation": {"speedup": 1.0, "lockstep": False, "physics_hz": 50}}
+
+
+def _grid_offset(i: int, n: int) -> tuple[float, float]:
+    side = max(1, math.ceil(math.sqrt(n)))
+    return (6.0 * (i % side), 6.0 * (i // side))
+
+
+def build_fleet(n: int):
+    """The fleet application: environment, one shared analytics on every camera, a looping survey per drone."""
+    from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
+    from aerodaas.config import parse_environment_config
+    from aerodaas.schedulers import TrajectoryScheduler
+
+    env = Environment(parse_environment_config(fleet_config(n)))
+    edge = env.get_compute_resource_by_id("edge")
+    shared = FrameExposure()
+    shared.deploy(edge)
+    sched = TrajectoryScheduler(env)
+    env.set_trajectory_scheduler(sched)  # one scheduler plugged in; each drone gets its own queue at start
+    for i, drone in enumerate(env.get_env_robots()):
+        shared.analyse(drone.get_sensor_by_id("cam").get_data_stream())
+        ox, oy = _grid_offset(i, n)
+        square = [(0, 0), (4, 0), (4, 4), (0, 4)]
+        wps = [Waypoint(id=f"w{k}", x=ox + square[k % 4][0], y=oy + square[k % 4][1], z=3.0, hover_duration=0.5)
+               for k in range(400)]
+        drone.navigate(sched.generate_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps,
+                                                                SchedulingType.ORDERED)))
+    return env, shared
+
+
+def run_size(n: int, duration_s: float) -> dict:
+    """One fleet size on a fresh local Ray; returns the measured row."""
+    from aerodaas import runtime
+
+    from .procs import MemorySampler, cpu_seconds, ray_processes
+
+    runtime.shutdown_ray()
+    runtime.OPTIONS.progress = False
+    env, _ = build_fleet(n)
+    runtime.ensure_ray(None)
+    time.sleep(2.0)  # let Ray's own processes settle before measuring
+    procs = ray_processes()
+    cpu0, wall0 = cpu_seconds(procs), time.monotonic()
+    with MemorySampler(1.0) as mem:
+        res = env.start_mission(timeout=duration_s)
+    wall = time.monotonic() - wall0
+    cpu = cpu_seconds(ray_processes()) - cpu0
+    runtime.shutdown_ray()
+    ticks = sum(r.get("ticks", 0) for r in res.robots.values())
+    missed = sum(r.get("missed_ticks", 0) for r in res.robots.values())
+    cam_ticks = sum(c.get("ticks", 0) for s in res.stats.values() if isinstance(s, dict)
+                    for c in s.get("cameras", {}).values())
+    analysed = 0
+    for rid in res.robots:
+        a = (res.stats.get(rid, {}).get("analytics") or [{}])[0]
+        analysed = a.get("frames", analysed)
+    host = res.stats.get("_hosts", {}).get("edge", {})
+    return {"drones": n, "duration_s": round(wall, 1), "ticks": ticks, "missed_ticks": missed,
+            "missed_ticks_pct": 100.0 * missed / max(ticks, 1), "camera_ticks": cam_ticks, "frames_analysed": analysed,
+            "dropped_frames_pct": 100.0 * (cam_ticks - analysed) / max(cam_ticks, 1),
+            "cpu_pct": 100.0 * cpu / max(wall, 1e-9), "rss_mb": round(mem.peak["rss_mb"], 1),
+            "pss_mb": round(mem.peak["pss_mb"], 1), "processes": mem.peak["processes"],
+            "process_rows": mem.peak["rows"], "tick_lateness_ms": host.get("tick_lateness_ms"),
+            "host_errors": host.get("error_count", 0), "outcomes": sorted({r.get("outcome") for r in res.robots.values()})}
+
+
+def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0) -> dict:
+    from . import machine_info
+
+    rows = []
+    for n in sizes:
+        row = run_size(n, duration_s)
+        print(f"fleet N={n:3d}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
+              f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
+              f"(PSS {row['pss_mb']:.0f} MB, {row['processes']} processes)", file=sys.stderr, flush=True)
+        rows.append(row)
+    one = next((r for r in rows if r["drones"] == 1), None)
+    for r in rows:
+        r["rss_mb_per_extra_drone"] = ((r["rss_mb"] - one["rss_mb"]) / (r["drones"] - 1)
+                                       if one and r["drones"] > 1 else None)
+    return {"benchmark": "fleet", "machine": machine_info(), "duration_s": duration_s, "results": rows,
+            "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "rss_mb_one_drone_max": 1024,
+                        "rss_mb_per_extra_drone_max": 150}}
+
+
+def plot_fleet(report: dict, path: str) -> None:
+    """Four panels against N: missed ticks %, frames dropped %, CPU %, RSS/PSS MB."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = report["results"]
+    n = [r["drones"] for r in rows]
+    fig, ax = plt.subplots(1, 4, figsize=(16, 3.6))
+    ax[0].plot(n, [r["missed_ticks_pct"] for r in rows], "o-")
+    ax[0].axhline(1.0, color="r", ls="--", lw=1, label="target < 1 %")
+    ax[0].set_title("missed control ticks (%)")
+    ax[1].plot(n, [r["dropped_frames_pct"] for r in rows], "o-", color="tab:orange")
+    ax[1].set_title("frames dropped (%)")
+    ax[2].plot(n, [r["cpu_pct"] for r in rows], "o-", color="tab:green")
+    ax[2].axhline(200, color="grey", ls=":", lw=1, label="2 cores")
+    ax[2].set_title("CPU (% of one core)")
+    ax[3].plot(n, [r["rss_mb"] for r in rows], "o-", label="RSS sum")
+    ax[3].plot(n, [r["pss_mb"] for r in rows], "s-", label="PSS sum")
+    ax[3].plot(n, [1024 + 150 * (k - 1) for k in n], "r--", lw=1, label="target 1 GB + 150 MB/drone")
+    ax[3].set_title("memory of all Ray processes (MB)")
+    for a in ax:
+        a.set_xlabel("drones")
+        a.grid(alpha=0.3)
+        if a.get_legend_handles_labels()[0]:
+            a.legend(fontsize=8)
+    fig.suptitle(f"aerodaas bench fleet — {report['machine']['cpu_count']} cores, {report['duration_s']:.0f} s per size")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("fleet", help="N simulated drones on one node: missed control ticks, dropped frames, CPU, RSS")
+    p.add_argument("--drones", type=int, action="append", help="fleet size (repeatable; default 1 5 10 20 40)")
+    p.add_argument("--duration", type=float, default=30.0, help="seconds of flight per size (real time)")
+    p.add_argument("--json", action="store_true", help="print the JSON report")
+    p.add_argument("--out", help="also write the JSON report to this file")
+    p.add_argument("--plot", help="write the curve as a PNG (default: fleet.png next to --out, if given)")
+
+    def run(a: argparse.Namespace) -> int:
+        if a.duration <= 0:
+            print(f"aerodaas bench fleet: --duration must be > 0, got {a.duration}", file=sys.stderr)
+            return 2
+        sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
+        if any(s < 1 for s in sizes):
+            print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
+            return 2
+        report = run_fleet(sizes, a.duration)
+        text = json.dumps(report, indent=2)
+        if a.out:
+            with open(a.out, "w") as f:
+                f.write(text)
+        plot = a.plot or (a.out.rsplit(".", 1)[0] + ".png" if a.out else None)
+        if plot:
+            plot_fleet(report, plot)
+        if a.json:
+            print(text)
+        return 0
+
+    p.set_defaults(func=run)
