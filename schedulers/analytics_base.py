@@ -251,8 +251,10 @@ class AnalyticsScheduler(abc.ABC):
     # -- the cloud
     def cloud_admit(self, task: AnalyticsTask, now_ms: float) -> bool:
         """The cloud executor's re-check right before it runs ``task``: by default, can it still finish in time
-        with the profile's cloud time?"""
-        return now_ms + self.cloud_estimate_ms(task.model) <= task.deadline_ms
+        with the task's cloud estimate — ``task.notes["cloud_ms"]`` if the policy fixed one when it held the task
+        for the cloud (as the reference does), else :meth:`cloud_estimate_ms`? On False the dispatcher drops the
+        task (DROPPED_TIME)."""
+        return now_ms + task.notes.get("cloud_ms", self.cloud_estimate_ms(task.model)) <= task.deadline_ms
 
     def cloud_estimate_ms(self, model: str) -> float:
         """Expected cloud round trip for ``model`` in ms (the profile; adaptive policies override)."""
@@ -325,7 +327,8 @@ def _load_builtins() -> None:
 
 
 #: modules that register the built-in analytics schedulers when imported
-_BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines"]
+_BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
+                                "aerodaas.schedulers.analytics_gainplan"]
 
 
 def iter_schedulers(names: Iterable[str] | None = None) -> list[type[AnalyticsScheduler]]:
