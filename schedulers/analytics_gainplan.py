@@ -31,10 +31,12 @@ edge time.
 """
 from __future__ import annotations
 
-from .analytics_base import AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload, register_analytics_scheduler
-from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS, CloudLatencyEstimator
+from collections import deque
 
-__all__ = ["GainPlan", "max_gain_edge_plan"]
+from .analytics_base import AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload, register_analytics_scheduler
+from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
+
+__all__ = ["GainPlan", "max_gain_edge_plan", "PessimisticLatencyEstimator"]
 
 OPEN, COMMITTED, EDGE_ONLY = "open", "committed", "edge_only"
 
@@ -64,6 +66,27 @@ def max_gain_edge_plan(items: list[tuple[float, float, float]], start_ms: float)
     return list(max(states, key=lambda s: (s[1], -s[0]))[2])
 
 
+class PessimisticLatencyEstimator:
+    """Per-model cloud-latency estimate for just-in-time release: the *largest* of the last ``window`` observed
+    round trips (ms), the profile's ``cloud_ms`` before any. A JIT release leaves only ~60 ms of margin, so a
+    mean (DEMS-A) sends about half the tasks late under symmetric jitter — each paying the cloud cost for no
+    benefit; the recent maximum reacts to a latency step after one late sample and costs only an earlier
+    release when latency is steady."""
+
+    def __init__(self, workload: Workload, window: int = 5) -> None:
+        if window < 1:
+            raise ValueError(f"window must be >= 1, got {window}")
+        self.profile = {m: p.cloud_ms for m, p in workload.models.items()}
+        self.samples = {m: deque(maxlen=window) for m in workload.models}
+
+    def observe(self, model: str, latency_ms: float) -> None:
+        self.samples[model].append(float(latency_ms))
+
+    def estimate(self, model: str) -> float:
+        s = self.samples[model]
+        return max(s) if s else self.profile[model]
+
+
 @register_analytics_scheduler
 class GainPlan(AnalyticsScheduler):
     """GAINPLAN — rolling max-gain edge plan with just-in-time cloud commitment (see the module docstring).
@@ -77,14 +100,20 @@ class GainPlan(AnalyticsScheduler):
 
     name = "GAINPLAN"
 
-    def __init__(self, workload: Workload) -> None:
+    def __init__(self, workload: Workload, *, commit_horizon_ms: float | None = None, latency_window: int = 5) -> None:
         super().__init__(workload)
-        self.latency = CloudLatencyEstimator(workload)
+        #: commit a task to the edge at its cloud trigger only if the plan starts it within this many ms of the
+        #: edge becoming free (default: the shortest model edge time)
+        self.commit_horizon_ms = workload.min_edge_ms if commit_horizon_ms is None else float(commit_horizon_ms)
+        self.latency = PessimisticLatencyEstimator(workload, window=latency_window)
         self.pool: list[AnalyticsTask] = []
+        #: (arrival ms, edge ms) of recent arrivals, for the offered edge load
+        self._recent: deque[tuple[float, float]] = deque()
+        self.load_window_ms = 5_000.0
 
     # -- estimates
     def cloud_estimate_ms(self, model: str) -> float:
-        return self.latency.estimate[self.w[model].name]
+        return self.latency.estimate(self.w[model].name)
 
     def gain(self, task: AnalyticsTask) -> float:
         """Utility gained by running ``task`` on the edge rather than its fallback."""
@@ -117,34 +146,61 @@ class GainPlan(AnalyticsScheduler):
                 if t.notes.get("mode") != OPEN and start + self.w[t.model].edge_ms > t.deadline_ms]
 
     # -- the contract
+    def trigger_ms(self, task: AnalyticsTask) -> float:
+        """Cloud trigger of a held task from the *current* latency estimate: deadline - estimate - 10 ms."""
+        return task.deadline_ms - self.cloud_estimate_ms(task.model) - CLOUD_TRIGGER_BUFFER_MS
+
+    def offered_load(self, now_ms: float) -> float:
+        """Edge time requested per ms by the tasks that arrived in the last ``load_window_ms`` (1.0 = the edge
+        would be busy all the time running every one of them)."""
+        while self._recent and self._recent[0][0] < now_ms - self.load_window_ms:
+            self._recent.popleft()
+        if not self._recent:
+            return 0.0
+        span = max(now_ms - self._recent[0][0], self.load_window_ms / 5)
+        return sum(e for _, e in self._recent) / span
+
     def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
         p = self.w[task.model]
-        est = self.cloud_estimate_ms(task.model)
         self.pool.append(task)
-        if p.cloud_utility > 0 and self.cloud_available and now_ms + est <= task.deadline_ms:
-            task.notes.update(mode=OPEN, cloud_ms=est, trigger_ms=task.deadline_ms - est - CLOUD_TRIGGER_BUFFER_MS)
-            return self.poll(now_ms) if task.notes["trigger_ms"] - now_ms <= JIT_EARLY_MS else []
+        self._recent.append((now_ms, p.edge_ms))
+        if p.cloud_utility > 0 and self.cloud_available and now_ms + self.cloud_estimate_ms(task.model) <= task.deadline_ms:
+            task.notes["mode"] = OPEN
+            return self.poll(now_ms) if self.trigger_ms(task) - now_ms <= JIT_EARLY_MS else []
         task.notes["mode"] = EDGE_ONLY
         if p.edge_utility <= 0 or now_ms + p.edge_ms > task.deadline_ms:
             return [self._lose(task, now_ms, "no usable cloud option and no gain from (or time for) the edge")]
         return []
 
+    def _planned_start(self, task: AnalyticsTask, now_ms: float) -> float | None:
+        """When the current max-gain plan would start ``task`` on the edge (None if it is not in the plan)."""
+        start = self._edge_free_at(now_ms)
+        for q in self._plan(start):
+            if q is task:
+                return start
+            start += self.w[q.model].edge_ms
+        return None
+
     def poll(self, now_ms: float) -> list[Decision]:
         out = self._sweep(now_ms)
-        due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN
-                      and t.notes["trigger_ms"] - now_ms <= JIT_EARLY_MS), key=lambda t: t.notes["trigger_ms"])
+        due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= JIT_EARLY_MS),
+                     key=self.trigger_ms)
         for t in due:
-            if t.notes["trigger_ms"] - now_ms < -JIT_LATE_MS or not self.cloud_available:
+            if self.trigger_ms(t) - now_ms < -JIT_LATE_MS or not self.cloud_available:
                 t.notes["mode"] = EDGE_ONLY  # the cloud option is gone; an edge candidate until it no longer fits
-            elif t in self._plan(self._edge_free_at(now_ms)):
+                continue
+            start = self._planned_start(t, now_ms)
+            horizon = self.commit_horizon_ms if self.offered_load(now_ms) > 1.0 else float("inf")
+            if start is not None and start - self._edge_free_at(now_ms) <= horizon:
                 t.notes["mode"] = COMMITTED
             else:
                 self.pool.remove(t)
-                out.append(Decision.cloud(t, "not in the max-gain edge plan at its cloud trigger"))
+                t.notes["cloud_ms"] = self.cloud_estimate_ms(t.model)
+                out.append(Decision.cloud(t, "at its cloud trigger: not about to run on the edge"))
         return out
 
     def next_poll_ms(self) -> float | None:
-        triggers = [t.notes["trigger_ms"] for t in self.pool if t.notes.get("mode") == OPEN]
+        triggers = [self.trigger_ms(t) for t in self.pool if t.notes.get("mode") == OPEN]
         return min(triggers) - JIT_EARLY_MS if triggers else None
 
     def _pop_edge(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
