@@ -143,44 +143,28 @@ class EdgeEdf(_EdgeOnly):
     """EDGE_EDF (algorithm 3): priority = the model's relative deadline (ms), ties FIFO — as in the reference,
     the *relative* deadline, so a later task of a tighter model overtakes earlier tasks of looser models."""
 
-    name = "EDGE_EDF"
-
-    @staticmethod
-    def priority(p: ModelProfile) -> float:
-        return p.deadline_ms
+    name, priority = "EDGE_EDF", staticmethod(lambda p: p.deadline_ms)
 
 
 @register_analytics_scheduler
 class EdgeSjf(_EdgeOnly):
     """EDGE_SJF (algorithm 5): shortest expected edge time first, ties FIFO."""
 
-    name = "EDGE_SJF"
-
-    @staticmethod
-    def priority(p: ModelProfile) -> float:
-        return p.edge_ms
+    name, priority = "EDGE_SJF", staticmethod(lambda p: p.edge_ms)
 
 
 @register_analytics_scheduler
 class EdgeHbf(_EdgeOnly):
     """EDGE_HBF (algorithm 7): highest benefit first, ties FIFO."""
 
-    name = "EDGE_HBF"
-
-    @staticmethod
-    def priority(p: ModelProfile) -> float:
-        return -p.benefit
+    name, priority = "EDGE_HBF", staticmethod(lambda p: -p.benefit)
 
 
 @register_analytics_scheduler
 class EdgeHuf(_EdgeOnly):
     """EDGE_HUF (algorithm 9): highest edge utility (benefit - edge cost) first, ties FIFO."""
 
-    name = "EDGE_HUF"
-
-    @staticmethod
-    def priority(p: ModelProfile) -> float:
-        return -p.edge_utility
+    name, priority = "EDGE_HUF", staticmethod(lambda p: -p.edge_utility)
 
 
 # --------------------------------------------------------------------------------------------- cloud-only

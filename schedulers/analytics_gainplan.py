@@ -19,8 +19,10 @@ models with the highest gain per edge-ms that still fit.
 
 Cloud use follows DEMS's just-in-time idea (Raj et al., FGCS 2025): a task with a cloud option stays a
 candidate for the edge until its cloud trigger (deadline - cloud estimate - 10 ms, acted on 50 ms early).
-Then it is *committed* to the edge if the current max-gain plan includes it (its weight becomes its full edge
-utility, since leaving the plan would now lose it), else released to the cloud. Tasks without a cloud option
+Then it is *committed* to the edge if the current max-gain plan starts it soon — within the shortest model edge
+time of the edge becoming free while the offered edge load (last 5 s of arrivals) exceeds the edge's capacity, at
+any point of the plan otherwise — and its weight becomes its full edge utility (leaving the plan would now lose
+it); else it is released to the cloud (a task planned further out would likely be displaced by better arrivals). Tasks without a cloud option
 (non-positive cloud utility, or too late for the cloud) stay candidates until they no longer fit on the edge,
 and are then dropped (for cost or time). The cloud-latency estimate adapts as in DEMS-A (sliding window of
 10, 10 ms drift). Nothing here is specific to a model name: gains, times and deadlines come from the workload.
@@ -92,7 +94,9 @@ class GainPlan(AnalyticsScheduler):
     """GAINPLAN — rolling max-gain edge plan with just-in-time cloud commitment (see the module docstring).
 
     Every held task is in :attr:`pool` with ``task.notes["mode"]``: ``"open"`` (cloud option alive, trigger
-    ``notes["trigger_ms"]``), ``"committed"`` (to the edge) or ``"edge_only"`` (no cloud option). Terminal
+    :meth:`trigger_ms` from the current estimate), ``"committed"`` (to the edge) or ``"edge_only"`` (no cloud
+    option). ``commit_horizon_ms`` (default: the shortest model edge time) and ``latency_window`` (default 5) tune
+    the commitment rule and the latency estimate; ValueError if negative / < 1. Terminal
     states: done on the edge or the cloud; DROPPED_COST / DROPPED_TIME when a task without a cloud option no
     longer fits on the edge (cost if its cloud utility is <= 0); EXPIRED_EDGE for a committed task that no
     longer fits.
@@ -105,6 +109,8 @@ class GainPlan(AnalyticsScheduler):
         #: commit a task to the edge at its cloud trigger only if the plan starts it within this many ms of the
         #: edge becoming free (default: the shortest model edge time)
         self.commit_horizon_ms = workload.min_edge_ms if commit_horizon_ms is None else float(commit_horizon_ms)
+        if self.commit_horizon_ms < 0:
+            raise ValueError(f"commit_horizon_ms must be >= 0, got {commit_horizon_ms!r}")
         self.latency = PessimisticLatencyEstimator(workload, window=latency_window)
         self.pool: list[AnalyticsTask] = []
         #: (arrival ms, edge ms) of recent arrivals, for the offered edge load

@@ -190,22 +190,30 @@ if __name__ == "__main__":  # the utility table of docs/analytics-schedulers.md
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--drones", type=int, default=2)
-    ap.add_argument("--extra", type=float, default=0.0, help="extra cloud latency, ms")
+    ap.add_argument("--extra", type=float, default=0.0, help="constant extra cloud latency, ms")
+    ap.add_argument("--step", type=float, default=0.0, help="extra cloud latency (ms) during the last 20 s of every minute")
+    ap.add_argument("--jitter", type=float, default=0.0, help="extra cloud latency drawn uniformly from [0, JITTER] ms")
     a = ap.parse_args()
     path = os.path.join(os.environ.get("AERODAAS_DATA_DIR", "../shared/data"), "workloads", "ocularone_lambda.json")
     names = analytics_scheduler_names()
-    print(f"drones/edge={a.drones} fps=1 duration={a.duration:.0f}s seeds={a.seeds} extra cloud latency={a.extra:.0f} ms")
-    print(f"{'scheduler':10}" + "".join(f"{load:>24}" for load in ("LIGHT", "MEDIUM", "HEAVY")))
+    print(f"drones/edge={a.drones} fps=1 duration={a.duration:.0f}s seeds={a.seeds} extra={a.extra:.0f} ms "
+          f"step={a.step:.0f} ms jitter={a.jitter:.0f} ms; mean utility per run (on-time completion)")
+    print(f"{'scheduler':10}" + "".join(f"{load:>20}" for load in ("LIGHT", "MEDIUM", "HEAVY")))
     rows = {}
     for load in ("LIGHT", "MEDIUM", "HEAVY"):
         w = Workload.from_file(path, load)
         for name in names:
             us, cs = [], []
             for seed in range(a.seeds):
+                rng = random.Random(seed)
+
+                def extra(task, t, rng=rng):
+                    return a.extra + (a.step if t % 60_000 >= 40_000 else 0.0) + rng.uniform(0.0, a.jitter)
+
                 r = run_policy(name, w, make_trace(w, drones=a.drones, duration_s=a.duration, seed=seed),
-                               cloud_extra_ms=a.extra)
+                               cloud_extra_ms=extra)
                 us.append(r.utility)
                 cs.append(r.completion())
             rows.setdefault(name, []).append((sum(us) / len(us), sum(cs) / len(cs)))
     for name, cells in rows.items():
-        print(f"{name:10}" + "".join(f"{u:>14.0f} ({100 * c:3.0f}%)  " for u, c in cells))
+        print(f"{name:10}" + "".join(f"{u:>12.0f} ({100 * c:3.0f}%)" for u, c in cells))

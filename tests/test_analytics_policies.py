@@ -62,6 +62,18 @@ def kinds(decisions):
     return [(d.kind, d.task, d.state) for d in decisions]
 
 
+def c1_then_a1(name: str):
+    """Edge running B until 300; C1 (deadline 500) queued at 0 (0 + 300 + 150 = 450 <= 500); then A1 (deadline
+    410) submitted at 10 at the EDF head slot (400 < 500): 10 + 290 + 100 = 400 <= 410 fits, but it would push C1 to
+    550 > 500. Returns (policy, C1, A1, the decisions of A1's submit)."""
+    pol = make_analytics_scheduler(name, TW)
+    busy(pol, 0.0, "B")
+    c1 = task("C", 0.0)
+    assert pol.submit(c1, 0.0) == []
+    a1 = task("A", 10.0)
+    return pol, c1, a1, pol.submit(a1, 10.0)
+
+
 # --------------------------------------------------------------------------------------------- registry
 def test_every_scheduler_is_registered_under_its_name():
     assert set(ALL) <= set(analytics_scheduler_names())
@@ -120,13 +132,8 @@ def test_edge_only_never_uses_the_cloud_and_cloud_never_uses_the_edge(name):
 
 # --------------------------------------------------------------------------------------------- E+C and DEM
 def test_e_plus_c_inserts_at_the_edf_slot_never_evicts_and_sends_rejects_to_the_cloud_at_once():
-    pol = make_analytics_scheduler("E+C", TW)
-    busy(pol, 0.0, "B")                               # running until 300
-    c1 = task("C", 0.0)                               # 0 + 300 + 150 = 450 <= 500: queued
-    assert pol.submit(c1, 0.0) == []
-    a1 = task("A", 10.0)                              # slot 0 (400 < 500): 10 + 290 + 100 = 400 <= 410: inserted
-    assert pol.submit(a1, 10.0) == []                 # ... and C1 (now 550 > 500) is NOT evicted
-    assert list(pol.queue) == [a1, c1]
+    pol, c1, a1, decisions = c1_then_a1("E+C")
+    assert decisions == [] and list(pol.queue) == [a1, c1]  # A1 inserted ahead; C1 is NOT evicted
     b2 = task("B", 20.0)                              # behind both: 20 + 280 + 250 + 300 > 620: rejected
     assert kinds(pol.submit(b2, 20.0)) == [("cloud", b2, None)]  # to the cloud at once: 20 + 350 <= 620
     assert pol.next_poll_ms() is None
@@ -138,14 +145,9 @@ def test_e_plus_c_inserts_at_the_edf_slot_never_evicts_and_sends_rejects_to_the_
 
 
 def test_dem_evicts_only_when_the_victims_score_less_and_migrates_at_once():
-    pol = make_analytics_scheduler("DEM", TW)
-    busy(pol, 0.0, "B")
-    c1 = task("C", 0.0)
-    pol.submit(c1, 0.0)
-    a1 = task("A", 10.0)
-    # A1 would push C1 to 550 > 500; C1's score 20 (cloud utility < 0: |60 - 40|) >= A1's 9: A1 is rejected and
-    # migrated at once (10 + 200 <= 410)
-    assert kinds(pol.submit(a1, 10.0)) == [("cloud", a1, None)]
+    pol, c1, a1, decisions = c1_then_a1("DEM")
+    # C1's score 20 (cloud utility < 0: |60 - 40|) >= A1's 9: A1 is rejected and migrated at once (10 + 200 <= 410)
+    assert kinds(decisions) == [("cloud", a1, None)]
     assert list(pol.queue) == [c1]
     d1 = task("D", 40.0)
     # D1 (prio 450 < 500) at slot 0: 40 + 260 + 100 = 400 <= 490; C1 then ends at 550 > 500; 20 < D1's 199:
@@ -157,11 +159,8 @@ def test_dem_evicts_only_when_the_victims_score_less_and_migrates_at_once():
 
 # --------------------------------------------------------------------------------------------- DEMS
 def test_dems_rejected_task_is_held_until_its_trigger_and_released_in_the_jit_window():
-    pol = make_analytics_scheduler("DEMS", TW)
-    busy(pol, 0.0, "B")
-    pol.submit(task("C", 0.0), 0.0)
-    a1 = task("A", 10.0)                              # rejected as in the DEM test, but held: no decision now
-    assert pol.submit(a1, 10.0) == []
+    pol, c1, a1, decisions = c1_then_a1("DEMS")       # rejected as in the DEM test, but held: no decision now
+    assert decisions == []
     assert a1.notes["trigger_ms"] == 410 - 200 - 10   # cloud trigger = deadline - cloud - 10 = 200
     assert pol.next_poll_ms() == 150.0                # acted on 50 ms early
     assert pol.poll(149.0) == []
@@ -171,11 +170,7 @@ def test_dems_rejected_task_is_held_until_its_trigger_and_released_in_the_jit_wi
 
 @pytest.mark.parametrize("poll_at,expected", [(210.0, "cloud"), (211.0, "drop")])
 def test_dems_drops_a_held_task_polled_more_than_10_ms_past_its_trigger(poll_at, expected):
-    pol = make_analytics_scheduler("DEMS", TW)
-    busy(pol, 0.0, "B")
-    pol.submit(task("C", 0.0), 0.0)
-    a1 = task("A", 10.0)
-    pol.submit(a1, 10.0)                              # held, trigger 200
+    pol, c1, a1, _ = c1_then_a1("DEMS")               # A1 held, trigger 200
     # trigger - now = -10: still released; -11: dropped for time
     want = ("cloud", a1, None) if expected == "cloud" else ("drop", a1, TaskState.DROPPED_TIME)
     assert kinds(pol.poll(poll_at)) == [want]
