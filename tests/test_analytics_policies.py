@@ -29,7 +29,8 @@ EDGE_ONLY = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF"]
 #   B       300  350   200     5    150     600      |   195        50      |  600
 #   C       150  250    60    40     70     500      |    20       -10      |  500   (cloud never worth it)
 #   D       100  150   300     1    200     450      |   299       100      |  450
-# Eviction score (cloud feasible): A 9, B 145, D 199; C (cloud utility < 0): |60 - 40| = 20.
+#   E       250  150   400     1    300     420      |   399       100      |  420
+# Eviction score (cloud feasible): A 9, B 145, D 199, E 299; C (cloud utility < 0): |60 - 40| = 20.
 # Steal rank (c_cost - e_cost) * 1000 / edge (+1000 if cloud utility < 0): A 90, B 483, C 1200, D 1990.
 TW = Workload.from_dict({
     "models": {
@@ -37,8 +38,9 @@ TW = Workload.from_dict({
         "B": {"edge_ms": 300, "cloud_ms": 350, "benefit": 200, "edge_cost": 5, "cloud_cost": 150},
         "C": {"edge_ms": 150, "cloud_ms": 250, "benefit": 60, "edge_cost": 40, "cloud_cost": 70},
         "D": {"edge_ms": 100, "cloud_ms": 150, "benefit": 300, "edge_cost": 1, "cloud_cost": 200},
+        "E": {"edge_ms": 250, "cloud_ms": 150, "benefit": 400, "edge_cost": 1, "cloud_cost": 300},
     },
-    "loads": {"T": {"A": 400, "B": 600, "C": 500, "D": 450}},
+    "loads": {"T": {"A": 400, "B": 600, "C": 500, "D": 450, "E": 420}},
 }, "T")
 
 _ids = itertools.count(1000)
@@ -155,6 +157,25 @@ def test_dem_evicts_only_when_the_victims_score_less_and_migrates_at_once():
     assert kinds(pol.submit(d1, 40.0)) == [("drop", c1, TaskState.DROPPED_COST)]
     assert list(pol.queue) == [d1]
     assert pol.next_poll_ms() is None and pol.held_tasks() == [d1]
+
+
+@pytest.mark.parametrize("b1_deadline,evicted", [(520.0, False), (700.0, True)])
+def test_eviction_compares_the_summed_score_of_all_victims(b1_deadline, evicted):
+    pol = make_analytics_scheduler("DEMS", TW)
+    busy(pol, 0.0, "A")                               # running until 100
+    d1, b1 = task("D", 0.0, 300.0), task("B", 0.0, b1_deadline)
+    pol.submit(d1, 0.0)                               # 100 + 100 = 200 <= 300
+    pol.submit(b1, 0.0)                               # 200 + 300 = 500 <= 520
+    e1 = task("E", 0.0, 400.0)                        # slot 0 (420 < 450): 100 + 250 = 350 <= 400
+    decisions = pol.submit(e1, 0.0)
+    # behind E1: D1 ends at 450 > 300 (victim, score 199); B1 at 650: a victim too if its deadline is 520
+    # (score 145). 199 + 145 = 344 >= E1's 299: E1 is rejected although each victim alone scores less; with B1's
+    # deadline at 700 only D1 is a victim (199 < 299): E1 goes in and D1 is evicted.
+    assert decisions == []                            # everything off the edge is held (triggers > now + 50)
+    if evicted:
+        assert list(pol.queue) == [e1, b1] and d1 in pol.tentative.tasks()
+    else:
+        assert list(pol.queue) == [d1, b1] and e1 in pol.tentative.tasks()
 
 
 # --------------------------------------------------------------------------------------------- DEMS
