@@ -221,7 +221,9 @@ class AnalyticsScheduler(abc.ABC):
     # -- the edge executor is free
     def next_edge_task(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
         """The edge is free: return the task to run now (or None to stay idle) and any decisions taken on the
-        way (e.g. queued tasks that expired). Marks the returned task as running."""
+        way (e.g. queued tasks that expired). Marks the returned task as running. A policy may return None while
+        it still holds tasks (none fits now, e.g. DEMS's work-stealing candidates): the dispatcher calls this again
+        after every later event (submit, poll, completion) while the edge stays free."""
         task, decisions = self._pop_edge(now_ms)
         if task is not None:
             self.edge_running = task
@@ -233,7 +235,9 @@ class AnalyticsScheduler(abc.ABC):
         """Choose the next edge task (policy-specific). Tasks it gives up on go into the returned decisions."""
 
     def on_edge_done(self, task: AnalyticsTask, now_ms: float, exec_ms: float) -> list[Decision]:
-        """The edge finished ``task`` after ``exec_ms`` of execution."""
+        """The edge finished ``task`` after ``exec_ms`` of execution. Policies that count outcomes (GEMS) read
+        ``task.state`` if the dispatcher already set it (DONE_ON_TIME / DONE_LATE / FAILED), else ``now_ms <=
+        deadline``."""
         if self.edge_running is task:
             self.edge_running = None
             self.edge_busy_until_ms = now_ms
@@ -251,8 +255,10 @@ class AnalyticsScheduler(abc.ABC):
     # -- the cloud
     def cloud_admit(self, task: AnalyticsTask, now_ms: float) -> bool:
         """The cloud executor's re-check right before it runs ``task``: by default, can it still finish in time
-        with the profile's cloud time?"""
-        return now_ms + self.cloud_estimate_ms(task.model) <= task.deadline_ms
+        with the task's cloud estimate — ``task.notes["cloud_ms"]`` if the policy fixed one when it held the task
+        for the cloud (as the reference does), else :meth:`cloud_estimate_ms`? On False the dispatcher drops the
+        task (DROPPED_TIME)."""
+        return now_ms + task.notes.get("cloud_ms", self.cloud_estimate_ms(task.model)) <= task.deadline_ms
 
     def cloud_estimate_ms(self, model: str) -> float:
         """Expected cloud round trip for ``model`` in ms (the profile; adaptive policies override)."""
@@ -325,7 +331,8 @@ def _load_builtins() -> None:
 
 
 #: modules that register the built-in analytics schedulers when imported
-_BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines"]
+_BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
+                                "aerodaas.schedulers.analytics_gainplan"]
 
 
 def iter_schedulers(names: Iterable[str] | None = None) -> list[type[AnalyticsScheduler]]:

@@ -1,0 +1,515 @@
+"""Behavioural tests of the analytics-scheduler policies (Ocularone baselines, E+C, DEM, DEMS, DEMS-A, GEMS and
+GAINPLAN), with hand-built scenarios whose right answer is derived in the comments, plus invariants and
+utility orderings on seeded traces driven by the exact-timing harness in ``tests/analytics_harness.py``."""
+from __future__ import annotations
+
+import itertools
+import random
+
+import pytest
+
+from aerodaas.schedulers.analytics_base import (AnalyticsTask, TaskState, Workload, analytics_scheduler_names,
+                                                make_analytics_scheduler, task_utility)
+from aerodaas.schedulers.analytics_dems import CloudLatencyEstimator
+from aerodaas.schedulers.analytics_gainplan import max_gain_edge_plan
+
+from .analytics_harness import Harness, Result, make_trace, run_policy
+from .conftest import DATA_DIR
+
+WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
+needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
+
+ALL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
+       "GAINPLAN"]
+EDGE_ONLY = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF"]
+
+# A small workload where every number below is derivable by hand (times in ms).
+#   model  edge cloud benefit e_cost c_cost deadline | edge util cloud util | EDF prio
+#   A       100  200    50     1     10     400      |    49        40      |  400
+#   B       300  350   200     5    150     600      |   195        50      |  600
+#   C       150  250    60    40     70     500      |    20       -10      |  500   (cloud never worth it)
+#   D       100  150   300     1    200     450      |   299       100      |  450
+#   E       250  150   400     1    300     420      |   399       100      |  420
+# Eviction score (cloud feasible): A 9, B 145, D 199, E 299; C (cloud utility < 0): |60 - 40| = 20.
+# Steal rank (c_cost - e_cost) * 1000 / edge (+1000 if cloud utility < 0): A 90, B 483, C 1200, D 1990.
+TW = Workload.from_dict({
+    "models": {
+        "A": {"edge_ms": 100, "cloud_ms": 200, "benefit": 50, "edge_cost": 1, "cloud_cost": 10},
+        "B": {"edge_ms": 300, "cloud_ms": 350, "benefit": 200, "edge_cost": 5, "cloud_cost": 150},
+        "C": {"edge_ms": 150, "cloud_ms": 250, "benefit": 60, "edge_cost": 40, "cloud_cost": 70},
+        "D": {"edge_ms": 100, "cloud_ms": 150, "benefit": 300, "edge_cost": 1, "cloud_cost": 200},
+        "E": {"edge_ms": 250, "cloud_ms": 150, "benefit": 400, "edge_cost": 1, "cloud_cost": 300},
+    },
+    "loads": {"T": {"A": 400, "B": 600, "C": 500, "D": 450, "E": 420}},
+}, "T")
+
+_ids = itertools.count(1000)
+
+
+def task(model: str, arrival: float, deadline: float | None = None, w: Workload = TW) -> AnalyticsTask:
+    """A task of ``model`` arriving at ``arrival`` (absolute deadline defaults to arrival + the model's)."""
+    return AnalyticsTask(next(_ids), "d0", model, arrival, arrival + w[model].deadline_ms if deadline is None else deadline)
+
+
+def busy(pol, now: float = 0.0, model: str = "B") -> AnalyticsTask:
+    """Make the edge busy with one ``model`` task started at ``now`` (submitted to an empty queue, then popped)."""
+    t = task(model, now)
+    assert pol.submit(t, now) == []
+    got, decisions = pol.next_edge_task(now)
+    assert got is t and decisions == []
+    return t
+
+
+def kinds(decisions):
+    return [(d.kind, d.task, d.state) for d in decisions]
+
+
+def c1_then_a1(name: str):
+    """Edge running B until 300; C1 (deadline 500) queued at 0 (0 + 300 + 150 = 450 <= 500); then A1 (deadline
+    410) submitted at 10 at the EDF head slot (400 < 500): 10 + 290 + 100 = 400 <= 410 fits, but it would push C1 to
+    550 > 500. Returns (policy, C1, A1, the decisions of A1's submit)."""
+    pol = make_analytics_scheduler(name, TW)
+    busy(pol, 0.0, "B")
+    c1 = task("C", 0.0)
+    assert pol.submit(c1, 0.0) == []
+    a1 = task("A", 10.0)
+    return pol, c1, a1, pol.submit(a1, 10.0)
+
+
+# --------------------------------------------------------------------------------------------- registry
+def test_every_scheduler_is_registered_under_its_name():
+    assert set(ALL) <= set(analytics_scheduler_names())
+    for name in ALL:
+        assert make_analytics_scheduler(name, TW).name == name
+
+
+# --------------------------------------------------------------------------------------------- edge-only baselines
+@pytest.mark.parametrize("name,order", [
+    ("EDGE_FIFO", "CBDA"),  # arrival order
+    ("EDGE_EDF", "ADCB"),   # relative deadline 400 < 450 < 500 < 600
+    ("EDGE_SJF", "DACB"),   # edge 100 (D before A: FIFO tie) < 150 < 300
+    ("EDGE_HBF", "DBCA"),   # benefit 300 > 200 > 60 > 50
+    ("EDGE_HUF", "DBAC"),   # benefit - edge cost 299 > 195 > 49 > 20
+])
+def test_edge_only_queue_order(name, order):
+    pol = make_analytics_scheduler(name, TW)
+    busy(pol, 0.0, "A")
+    queued = [task(m, 1.0, 10_000) for m in "CBDA"]
+    for t in queued:
+        assert pol.submit(t, 1.0) == []
+    pol.on_edge_done(pol.edge_running, 100.0, 100.0)
+    ran = []
+    for now in (100, 400, 700, 1000):
+        t, decisions = pol.next_edge_task(float(now))
+        assert decisions == []
+        ran.append(t.model)
+        pol.on_edge_done(t, now + TW[t.model].edge_ms, TW[t.model].edge_ms)
+    assert "".join(ran) == order
+
+
+def test_edge_only_expires_tasks_that_can_no_longer_finish_instead_of_running_them_late():
+    # Reference TaskExecutorEdge: run only if edge_ms < deadline - now, else EXPIRED_EDGE.
+    pol = make_analytics_scheduler("EDGE_FIFO", TW)
+    busy(pol, 0.0, "B")                      # edge busy until 300
+    late, ok = task("A", 10.0, 350.0), task("A", 20.0, 500.0)
+    pol.submit(late, 10.0)
+    pol.submit(ok, 20.0)
+    got, decisions = pol.next_edge_task(300.0)  # 300 + 100 > 350: expired; 300 + 100 <= 500: runs
+    assert got is ok
+    assert kinds(decisions) == [("drop", late, TaskState.EXPIRED_EDGE)]
+
+
+@needs_workload
+@pytest.mark.parametrize("name", EDGE_ONLY)
+def test_edge_only_never_uses_the_cloud_and_cloud_never_uses_the_edge(name):
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+    r = run_policy(name, w, make_trace(w, duration_s=20, seed=3))
+    assert not r.cloud_sends and r.edge_starts
+    assert r.states[TaskState.EXPIRED_EDGE] > 0 and r.states[TaskState.DONE_LATE] == 0
+    c = run_policy("CLOUD", w, make_trace(w, duration_s=20, seed=3))
+    assert not c.edge_starts and c.cloud_sends
+    # BP has benefit 40 < cloud cost 43: every BP task is dropped for cost, every other one runs on the cloud
+    assert {t.model for t in c.tasks if t.state is TaskState.DROPPED_COST} == {"BP"}
+
+
+# --------------------------------------------------------------------------------------------- E+C and DEM
+def test_e_plus_c_inserts_at_the_edf_slot_never_evicts_and_sends_rejects_to_the_cloud_at_once():
+    pol, c1, a1, decisions = c1_then_a1("E+C")
+    assert decisions == [] and list(pol.queue) == [a1, c1]  # A1 inserted ahead; C1 is NOT evicted
+    b2 = task("B", 20.0)                              # behind both: 20 + 280 + 250 + 300 > 620: rejected
+    assert kinds(pol.submit(b2, 20.0)) == [("cloud", b2, None)]  # to the cloud at once: 20 + 350 <= 620
+    assert pol.next_poll_ms() is None
+    pol.on_edge_done(pol.edge_running, 300.0, 300.0)
+    assert pol.next_edge_task(300.0) == (a1, [])
+    pol.on_edge_done(a1, 400.0, 100.0)
+    got, decisions = pol.next_edge_task(400.0)        # C1 would end at 550 > 500: expires at the head
+    assert got is None and kinds(decisions) == [("drop", c1, TaskState.EXPIRED_EDGE)]
+
+
+def test_dem_evicts_only_when_the_victims_score_less_and_migrates_at_once():
+    pol, c1, a1, decisions = c1_then_a1("DEM")
+    # C1's score 20 (cloud utility < 0: |60 - 40|) >= A1's 9: A1 is rejected and migrated at once (10 + 200 <= 410)
+    assert kinds(decisions) == [("cloud", a1, None)]
+    assert list(pol.queue) == [c1]
+    d1 = task("D", 40.0)
+    # D1 (prio 450 < 500) at slot 0: 40 + 260 + 100 = 400 <= 490; C1 then ends at 550 > 500; 20 < D1's 199:
+    # C1 is evicted; DEM keeps no candidates, so C1 (cloud utility -10) is dropped for cost
+    assert kinds(pol.submit(d1, 40.0)) == [("drop", c1, TaskState.DROPPED_COST)]
+    assert list(pol.queue) == [d1]
+    assert pol.next_poll_ms() is None and pol.held_tasks() == [d1]
+
+
+@pytest.mark.parametrize("b1_deadline,evicted", [(520.0, False), (700.0, True)])
+def test_eviction_compares_the_summed_score_of_all_victims(b1_deadline, evicted):
+    pol = make_analytics_scheduler("DEMS", TW)
+    busy(pol, 0.0, "A")                               # running until 100
+    d1, b1 = task("D", 0.0, 300.0), task("B", 0.0, b1_deadline)
+    pol.submit(d1, 0.0)                               # 100 + 100 = 200 <= 300
+    pol.submit(b1, 0.0)                               # 200 + 300 = 500 <= 520
+    e1 = task("E", 0.0, 400.0)                        # slot 0 (420 < 450): 100 + 250 = 350 <= 400
+    decisions = pol.submit(e1, 0.0)
+    # behind E1: D1 ends at 450 > 300 (victim, score 199); B1 at 650: a victim too if its deadline is 520
+    # (score 145). 199 + 145 = 344 >= E1's 299: E1 is rejected although each victim alone scores less; with B1's
+    # deadline at 700 only D1 is a victim (199 < 299): E1 goes in and D1 is evicted.
+    assert decisions == []                            # everything off the edge is held (triggers > now + 50)
+    if evicted:
+        assert list(pol.queue) == [e1, b1] and d1 in pol.tentative.tasks()
+    else:
+        assert list(pol.queue) == [d1, b1] and e1 in pol.tentative.tasks()
+
+
+# --------------------------------------------------------------------------------------------- DEMS
+def test_dems_rejected_task_is_held_until_its_trigger_and_released_in_the_jit_window():
+    pol, c1, a1, decisions = c1_then_a1("DEMS")       # rejected as in the DEM test, but held: no decision now
+    assert decisions == []
+    assert a1.notes["trigger_ms"] == 410 - 200 - 10   # cloud trigger = deadline - cloud - 10 = 200
+    assert pol.next_poll_ms() == 150.0                # acted on 50 ms early
+    assert pol.poll(149.0) == []
+    assert kinds(pol.poll(150.0)) == [("cloud", a1, None)]
+    assert pol.cloud_admit(a1, 150.0)                 # 150 + 200 <= 410
+
+
+@pytest.mark.parametrize("poll_at,expected", [(210.0, "cloud"), (211.0, "drop")])
+def test_dems_drops_a_held_task_polled_more_than_10_ms_past_its_trigger(poll_at, expected):
+    pol, c1, a1, _ = c1_then_a1("DEMS")               # A1 held, trigger 200
+    # trigger - now = -10: still released; -11: dropped for time
+    want = ("cloud", a1, None) if expected == "cloud" else ("drop", a1, TaskState.DROPPED_TIME)
+    assert kinds(pol.poll(poll_at)) == [want]
+
+
+def test_dems_eviction_holds_cost_victims_for_stealing_and_drops_them_for_cost_when_unstolen():
+    pol = make_analytics_scheduler("DEMS", TW)
+    busy(pol, 0.0, "B")
+    c1 = task("C", 0.0)
+    pol.submit(c1, 0.0)
+    d1 = task("D", 40.0)
+    assert pol.submit(d1, 40.0) == []                 # C1 evicted (20 < 199) but only held, not terminal
+    assert list(pol.queue) == [d1] and c1 in pol.held_tasks() and c1.state is TaskState.PENDING
+    assert c1.notes["trigger_ms"] == 500 - 150 - 10   # keyed by its edge trigger
+    assert pol.next_poll_ms() == 340 - 50
+    assert pol.poll(289.0) == []
+    assert kinds(pol.poll(290.0)) == [("drop", c1, TaskState.DROPPED_COST)]
+    assert c1 not in pol.held_tasks()
+
+
+def test_dems_insertion_position_and_eviction_of_every_task_behind_that_would_miss():
+    pol = make_analytics_scheduler("DEMS", TW)
+    busy(pol, 0.0, "A")                               # running until 100
+    b1, b2 = task("B", 0.0, 700.0), task("B", 0.0, 1000.0)
+    pol.submit(b1, 0.0)                               # 0 + 100 + 300 = 400 <= 700
+    pol.submit(b2, 0.0)                               # 700 <= 1000
+    a1 = task("A", 0.0, 10_000.0)                     # prio 400: ahead of both B (600)
+    assert pol.submit(a1, 0.0) == [] and list(pol.queue) == [a1, b1, b2]
+    d1 = task("D", 5.0, 560.0)                        # prio 450: after A1, before B1: 5 + 95 + 100 + 100 = 300
+    # B1 would end at 600 <= 700 (kept); B2 at 900 <= 1000 (kept): no victim
+    assert pol.submit(d1, 5.0) == [] and list(pol.queue) == [a1, d1, b1, b2]
+    d2 = task("D", 6.0, 500.0)                        # after D1 (FIFO tie): 6 + 94 + 200 + 100 = 400 <= 500
+    # B1 would end at 700 (<= 700, kept), B2 at 1000 (kept)
+    assert pol.submit(d2, 6.0) == [] and list(pol.queue) == [a1, d1, d2, b1, b2]
+    d3 = task("D", 7.0, 520.0)                        # after D2: 7 + 93 + 300 + 100 = 500 <= 520
+    # behind it B1 would end at 800 > 700: a victim (score 145 < D3's 199), evicted; B2 then ends at
+    # 500 + 300 = 800 <= 1000 (the evicted B1 no longer occupies the edge): kept
+    assert pol.submit(d3, 7.0) == []
+    assert list(pol.queue) == [a1, d1, d2, d3, b2]
+    assert b1 in pol.tentative.tasks() and b1.notes["trigger_ms"] == 700 - 350 - 10  # held for the cloud
+
+
+def test_dems_work_stealing_when_idle_takes_the_best_ranked_task_that_fits():
+    pol = make_analytics_scheduler("DEMS", TW)
+    d_late, c, b = task("D", 0.0, 90.0), task("C", 0.0, 500.0), task("B", 0.0, 600.0)
+    pol.tentative.add(d_late, 1000.0, "cloud")        # rank 1990 but 0 + 100 > 90: cannot fit
+    pol.tentative.add(b, 240.0, "cloud")              # rank 483
+    pol.tentative.add(c, 340.0, "cost")               # rank 1200
+    assert pol.next_edge_task(0.0) == (c, [])
+    pol.on_edge_done(c, 150.0, 150.0)
+    assert pol.next_edge_task(150.0) == (b, [])       # D still cannot fit; B: 150 + 300 <= 600
+    pol.on_edge_done(b, 450.0, 300.0)
+    assert pol.next_edge_task(450.0) == (None, []) and pol.held_tasks() == [d_late]
+
+
+def test_dems_work_stealing_in_slack_without_making_queued_tasks_miss():
+    pol = make_analytics_scheduler("DEMS", TW)
+    q1 = task("A", 0.0, 240.0)                        # head slack = 240 - 100 - 10 - 0 = 130 > min edge 100
+    pol.queue.insert(q1)
+    b, c, a = task("B", 0.0, 600.0), task("C", 0.0, 500.0), task("A", 0.0, 400.0)
+    for t, key, kind in ((b, 240.0, "cloud"), (c, 340.0, "cost"), (a, 190.0, "cloud")):
+        pol.tentative.add(t, key, kind)
+    # C (rank 1200) and B (483) need 150 / 300 >= 130; A (100 < 130): A then Q1 ends at 200 <= 240: stolen
+    assert pol.next_edge_task(0.0) == (a, [])
+    pol.on_edge_done(a, 100.0, 100.0)
+
+    pol2 = make_analytics_scheduler("DEMS", TW)
+    q1, q2 = task("A", 0.0, 240.0), task("A", 0.0, 290.0)
+    pol2.queue.insert(q1)
+    pol2.queue.insert(q2)
+    a2 = task("A", 0.0, 400.0)
+    pol2.tentative.add(a2, 190.0, "cloud")
+    # stealing A2 would end Q2 at 300 > 290: no steal, the head runs
+    assert pol2.next_edge_task(0.0) == (q1, [])
+
+
+def test_dems_cloud_rechecks_the_deadline_before_executing():
+    pol = make_analytics_scheduler("DEMS", TW)
+    a = task("A", 0.0)                                # deadline 400, cloud 200
+    assert pol.cloud_admit(a, 200.0) and not pol.cloud_admit(a, 201.0)
+
+
+# --------------------------------------------------------------------------------------------- DEMS-A
+def test_latency_window_replaces_the_estimate_only_on_a_drift_over_10_ms():
+    est = CloudLatencyEstimator(TW)
+    for _ in range(9):
+        est.observe("A", 215.0)
+    assert est.estimate["A"] == 200.0                 # window not full yet
+    est.observe("A", 215.0)
+    assert est.estimate["A"] == 215.0                 # mean 215 drifts 15 > 10 from 200
+    for _ in range(5):                                # sliding: the mean moves 2.5 ms per 240 ms sample
+        est.observe("A", 240.0)
+    assert est.estimate["A"] == 227.5                 # 215 + 12.5: replaced as soon as it drifts > 10
+    for _ in range(5):
+        est.observe("A", 240.0)
+    assert est.estimate["A"] == 240.0
+    for _ in range(10):
+        est.observe("A", 248.0)                       # drift 8: kept
+    assert est.estimate["A"] == 240.0
+
+
+def _cloud_done(pol, model: str, now: float, latency: float):
+    t = task(model, now - latency, now + 1_000)
+    t.tier, t.start_ms, t.state = "cloud", now - latency, TaskState.DONE_ON_TIME
+    return pol.on_cloud_done(t, now, latency)
+
+
+def test_dems_a_cools_down_for_10_s_then_probes_with_the_profile_and_snaps_to_the_probe_latency():
+    pol = make_analytics_scheduler("DEMS-A", TW)
+    for i in range(10):
+        _cloud_done(pol, "A", 100.0 + i, 500.0)
+    assert pol.cloud_estimate_ms("A") == 500.0
+    a1 = task("A", 1000.0)                            # 400 ms left < 500: fails the check, cool-down starts
+    assert kinds(pol._off_edge(a1, 1000.0, "test")) == [("drop", a1, TaskState.DROPPED_TIME)]
+    assert pol.cooling_since["A"] == 1000.0
+    a2 = task("A", 6000.0)
+    assert kinds(pol._off_edge(a2, 6000.0, "test")) == [("drop", a2, TaskState.DROPPED_TIME)]
+    a3 = task("A", 11_001.0)                          # > 10 s later: probe with the profile's 200 ms
+    assert pol._off_edge(a3, 11_001.0, "test") == []
+    assert a3.notes["probe"] and a3.notes["cloud_ms"] == 200.0 and pol.cooling_since["A"] is None
+    assert a3.notes["trigger_ms"] == 11_401 - 200 - 10
+    assert kinds(pol.poll(11_141.0)) == [("cloud", a3, None)]
+    assert pol.cloud_admit(a3, 11_141.0)              # re-checked with the probe's own 200 ms, not 500
+    a3.state = TaskState.DONE_ON_TIME
+    pol.on_cloud_done(a3, 11_371.0, 230.0)
+    assert pol.cloud_estimate_ms("A") == 230.0        # window refilled with the probe's latency
+
+
+def test_dems_a_on_time_cloud_completion_ends_a_cool_down():
+    pol = make_analytics_scheduler("DEMS-A", TW)
+    for i in range(10):
+        _cloud_done(pol, "A", 100.0 + i, 500.0)
+    pol._off_edge(task("A", 1000.0), 1000.0, "test")
+    assert pol.cooling_since["A"] == 1000.0
+    _cloud_done(pol, "A", 1500.0, 480.0)
+    assert pol.cooling_since["A"] is None
+
+
+def test_dems_a_adapts_and_beats_dems_when_cloud_latency_rises():
+    # +300 ms on every cloud call: DEMS keeps releasing just in time with the profile and everything it sends
+    # is late (cost, no benefit); DEMS-A learns the latency after 10 samples.
+    rng = random.Random(1)
+    trace = []
+    for k in range(300):                              # 500 ms of edge work every 250 ms: half must go to the cloud
+        t = k * 250.0 + rng.uniform(0, 20)
+        trace += [task(m, t) for m in "ADB"]
+    res = {n: Harness(make_analytics_scheduler(n, TW), cloud_extra_ms=300.0).run(
+        [AnalyticsTask(t.task_id, t.drone, t.model, t.arrival_ms, t.deadline_ms) for t in trace]) for n in ("DEMS", "DEMS-A")}
+    assert res["DEMS-A"].utility > res["DEMS"].utility
+    assert res["DEMS-A"].states[TaskState.DONE_LATE] < res["DEMS"].states[TaskState.DONE_LATE]
+
+
+# --------------------------------------------------------------------------------------------- GEMS
+def _finish(pol, model: str, now: float, on_time: bool):
+    t = task(model, now - 100, now + (1 if on_time else -1))
+    t.tier, t.start_ms = "cloud", now - 100
+    t.state = TaskState.DONE_ON_TIME if on_time else TaskState.DONE_LATE
+    return pol.on_cloud_done(t, now, 100.0)
+
+
+def test_gems_gatekeeper_sends_a_models_queued_tasks_to_the_cloud_below_90_percent_on_time():
+    pol = make_analytics_scheduler("GEMS", TW)
+    busy(pol, 0.0, "B")
+    a1, c1 = task("A", 0.0, 1000.0), task("C", 0.0, 1000.0)
+    pol.submit(a1, 0.0)
+    pol.submit(c1, 0.0)
+    for i in range(9):
+        assert _finish(pol, "A", 10.0 + i, True) == []
+    assert _finish(pol, "A", 20.0, False) == []       # 9/10 = 0.9: not below
+    assert pol.on_time_fraction("A") == pytest.approx(0.9)
+    got = _finish(pol, "A", 30.0, False)              # 9/11 < 0.9: A's queued task goes to the cloud
+    assert kinds(got) == [("cloud", a1, None)] and list(pol.queue) == [c1]
+    for i in range(5):
+        _finish(pol, "C", 40.0 + i, False)            # C is below 0.9 but its cloud utility is negative: stays
+    assert list(pol.queue) == [c1]
+
+
+def test_gems_window_tumbles_every_20_s():
+    pol = make_analytics_scheduler("GEMS", TW)
+    _finish(pol, "A", 1000.0, False)
+    assert pol.on_time_fraction("A") == 0.0
+    _finish(pol, "A", 20_999.0, True)                 # still the first window [1000, 21000)
+    assert pol.on_time_fraction("A") == 0.5
+    _finish(pol, "A", 21_000.0, True)                 # a new window: counts restart
+    assert pol.on_time_fraction("A") == 1.0
+    busy(pol, 21_001.0, "B")
+    a1 = task("A", 21_001.0, 30_000.0)
+    pol.submit(a1, 21_001.0)
+    assert list(pol.queue) == [a1]                    # 100% on time: nothing migrated
+
+
+# --------------------------------------------------------------------------------------------- GAINPLAN
+def _brute_force(items, start):
+    best = 0.0
+    for r in range(len(items) + 1):
+        for sub in itertools.combinations(range(len(items)), r):
+            t, ok = start, True
+            for i in sorted(sub, key=lambda i: items[i][0]):
+                t += items[i][1]
+                ok &= t <= items[i][0]
+            if ok:
+                best = max(best, sum(items[i][2] for i in sub))
+    return best
+
+
+def test_max_gain_edge_plan_is_exact_and_feasible():
+    rng = random.Random(7)
+    for _ in range(200):
+        n = rng.randint(0, 8)
+        items = [(rng.uniform(50, 900), rng.choice([100, 142, 174, 244, 563, 739]), rng.uniform(-5, 200)) for _ in range(n)]
+        chosen = max_gain_edge_plan(items, 0.0)
+        t = 0.0
+        for i in chosen:                              # returned in EDF order, each on time
+            t += items[i][1]
+            assert t <= items[i][0]
+        assert [items[i][0] for i in chosen] == sorted(items[i][0] for i in chosen)
+        assert sum(items[i][2] for i in chosen) == pytest.approx(_brute_force(items, 0.0))
+
+
+def test_gainplan_gives_the_edge_to_the_higher_gain_task_where_dems_follows_edf():
+    # Edge free at 0. A (deadline 150, gain 49 - 40 = 9) and B (deadline 320, gain 195 - 50 = 145) cannot both
+    # finish (100 + 300 = 400 > 320). DEMS runs A (EDF head); GAINPLAN runs B.
+    a, b = task("A", 0.0, 150.0), task("B", 0.0, 320.0)
+    gp = make_analytics_scheduler("GAINPLAN", TW)
+    gp.submit(a, 0.0)
+    gp.submit(b, 0.0)
+    assert gp.next_edge_task(0.0)[0] is b
+    dems = make_analytics_scheduler("DEMS", TW)
+    dems.submit(AnalyticsTask(1, "d0", "A", 0.0, 150.0), 0.0)
+    assert dems.next_edge_task(0.0)[0].model == "A"
+
+
+def test_gainplan_releases_to_the_cloud_at_the_trigger_unless_about_to_run_and_drops_cost_tasks_that_no_longer_fit():
+    gp = make_analytics_scheduler("GAINPLAN", TW)
+    running = busy(gp, 0.0, "B")                      # edge busy until 300
+    a1 = task("A", 0.0)                               # deadline 400, trigger 400 - 200 - 10 = 190
+    c1 = task("C", 0.0, 420.0)                        # no cloud option; fits until 420 - 150 = 270
+    assert gp.submit(a1, 0.0) == [] and gp.submit(c1, 0.0) == []
+    assert gp.next_poll_ms() == 140.0
+    # at 140 the edge frees at 300: C1 would end at 450 > 420 (dropped for cost: it can no longer fit anywhere);
+    # the plan from 300 is {A1}, starting as soon as the edge frees: committed to the edge, not released
+    assert kinds(gp.poll(140.0)) == [("drop", c1, TaskState.DROPPED_COST)]
+    assert a1.notes["mode"] == "committed" and gp.next_poll_ms() is None
+    gp.on_edge_done(running, 300.0, 300.0)
+    assert gp.next_edge_task(300.0) == (a1, [])
+
+
+def test_gainplan_releases_a_task_the_plan_does_not_start_soon_at_its_cloud_trigger():
+    gp = make_analytics_scheduler("GAINPLAN", TW)
+    running = busy(gp, 0.0, "B")                      # edge busy until 300
+    for i in range(12):                               # offered edge load > 1: commit only imminent tasks
+        gp._recent.append((0.0, 300.0))
+    d1 = task("D", 0.0, 560.0)                        # gain 199, runs 300-400
+    d2 = task("D", 0.0, 580.0)                        # gain 199, runs 400-500
+    a1 = task("A", 0.0, 520.0)                        # gain 9, trigger 310: in the plan at 500-600? 600 > 520: no
+    for t in (d1, d2, a1):
+        assert gp.submit(t, 0.0) == []
+    decisions = gp.poll(a1.deadline_ms - 200 - 10 - 50)
+    assert kinds(decisions) == [("cloud", a1, None)]
+    assert running.state is TaskState.PENDING
+
+
+def test_gainplan_latency_estimate_reacts_to_one_late_sample():
+    gp = make_analytics_scheduler("GAINPLAN", TW)
+    assert gp.cloud_estimate_ms("A") == 200.0
+    _cloud_done(gp, "A", 1000.0, 320.0)
+    assert gp.cloud_estimate_ms("A") == 320.0
+    for i in range(5):
+        _cloud_done(gp, "A", 2000.0 + i, 205.0)
+    assert gp.cloud_estimate_ms("A") == 205.0
+
+
+# --------------------------------------------------------------------------------------------- invariants
+def _independent_utility(res: Result, w: Workload) -> float:
+    total = 0.0
+    for t, start in res.edge_starts:
+        p = w[t.model]
+        total += (p.benefit if t.end_ms is not None and t.end_ms <= t.deadline_ms else 0.0) - p.edge_cost
+    for t, start in res.cloud_sends:
+        p = w[t.model]
+        total += (p.benefit if t.end_ms is not None and t.end_ms <= t.deadline_ms else 0.0) - p.cloud_cost
+    return total
+
+
+@needs_workload
+@pytest.mark.parametrize("load", ["LIGHT", "MEDIUM", "HEAVY"])
+@pytest.mark.parametrize("name", ALL)
+def test_invariants_on_random_traces(name, load):
+    w = Workload.from_file(WORKLOAD_JSON, load)
+    rng = random.Random(f"{name}/{load}")
+    for seed, extra, down in ((11, 0.0, []), (12, lambda t, now: rng.uniform(0, 200), [(8_000.0, 12_000.0)])):
+        trace = make_trace(w, drones=2, duration_s=20, seed=seed)
+        res = Harness(make_analytics_scheduler(name, w), cloud_extra_ms=extra, cloud_down=down).run(trace)
+        assert not res.double_terminal and not res.bad_dispatch
+        assert all(t.state is not TaskState.PENDING for t in res.tasks)          # exactly one terminal state each
+        assert res.utility == pytest.approx(sum(task_utility(t, w[t.model]) for t in res.tasks))
+        assert res.utility == pytest.approx(_independent_utility(res, w))
+        assert all(not (t0 <= s < t1) for _, s in res.cloud_sends for t0, t1 in down)  # no cloud while down
+        if extra == 0.0:  # exact timing: no policy starts an edge task that will miss its deadline
+            assert all(s + w[t.model].edge_ms <= t.deadline_ms for t, s in res.edge_starts)
+            assert res.states[TaskState.DONE_LATE] == 0
+
+
+# --------------------------------------------------------------------------------------------- orderings
+@needs_workload
+def test_heavy_load_utility_orderings():
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+
+    def total(name, **kw):
+        return sum(run_policy(name, w, make_trace(w, drones=2, duration_s=60, seed=s), **kw).utility for s in range(3))
+
+    u = {n: total(n) for n in ("EDGE_FIFO", "EDGE_EDF", "CLOUD", "E+C", "DEMS", "DEMS-A", "GAINPLAN")}
+    assert u["DEMS"] > u["E+C"] > u["CLOUD"] > u["EDGE_EDF"] > u["EDGE_FIFO"]
+    assert u["DEMS-A"] == pytest.approx(u["DEMS"])     # exact timing: nothing to adapt to
+    assert u["GAINPLAN"] >= 1.05 * u["DEMS-A"]
+
+    # the paper's latency-variability setting: +200 ms on every cloud call for 20 s of each minute
+    step = dict(cloud_extra_ms=lambda t, now: 200.0 if now % 60_000 >= 40_000 else 0.0)
+    v = {n: total(n, **step) for n in ("DEMS", "DEMS-A", "GAINPLAN")}
+    assert v["DEMS-A"] > 1.2 * v["DEMS"]
+    assert v["GAINPLAN"] >= 1.10 * v["DEMS-A"]
