@@ -365,14 +365,10 @@ class Host:
     def mark_processed(self) -> None:
         """Called by analytics when they finish an item: remembers the wall time of the first one (startup bench)."""
         if self.first_processed_wall is None:
+            from aerodaas.bench.startup import probe
+
             self.first_processed_wall = time.time()
-            probe = os.environ.get("AERODAAS_STARTUP_PROBE")
-            if probe:
-                try:
-                    with open(probe, "w") as f:
-                        f.write(repr(self.first_processed_wall))
-                except OSError:
-                    pass
+            probe("first_processed")
 
     def outlet_stats(self, src: str) -> list[dict]:
         return [o.stats() for (s, _, _), o in self._outlets.items() if s == src]

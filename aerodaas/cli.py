@@ -10,6 +10,9 @@ from pathlib import Path
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from .bench.startup import probe
+
+    probe("cli")
     from . import runtime
     from .config import ConfigError
 

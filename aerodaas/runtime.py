@@ -262,8 +262,12 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         graphs[r.id] = analytics
         _check_preplanned(r, scheds[r.id])
 
+    from .bench.startup import probe
+
+    probe("app_built")
     t_start = time.monotonic()
     has_cloud = ensure_ray(opts.address)
+    probe("ray_ready")
     epoch_ns = time.time_ns()
     plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns)
     hosts: dict[str, Any] = {}
@@ -280,6 +284,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         ray.get([hosts[t].setup.remote(spec) for t, spec in plan.specs.items()])
         tiers = {t: t for t in hosts}
         ray.get([h.connect.remote(plan.routes, plan.location, tiers, hosts) for h in hosts.values()])
+        probe("hosts_ready")
         edge = hosts["edge"]
         for r in robots:
             ids = plan.robots[r.id]
