@@ -150,9 +150,17 @@ class MavlinkConfig(_Cfg):
 
 class TelloConfig(_Cfg):
     """A DJI Tello (SDK 2.0 over UDP): commands to ``host:command_port`` (replies on the same socket), state
-    packets on local ``state_port``, H.264 video on local ``video_port``. A command without reply within
-    ``command_timeout_s`` seconds is retried ``command_retries`` times; a keep-alive is sent every
-    ``keepalive_s`` seconds (the Tello lands after 15 s without a command)."""
+    packets on local ``state_port``, H.264 video on local ``video_port`` (both bound on ``bind_host``). A command
+    without reply within ``command_timeout_s`` seconds is retried ``command_retries`` times; a keep-alive is sent
+    every ``keepalive_s`` seconds (the Tello lands after 15 s without a command).
+
+    The Tello has no compass: its yaw is relative to where it pointed at power-on. ``initial_heading_deg`` is the
+    compass heading (degrees clockwise from north) the Tello faces when :meth:`connect` runs (mission start); the
+    yaw reported then is taken as that heading. ``velocity_frame`` says how to read the state packet's
+    ``vgx``/``vgy`` (the SDK guide does not say): ``yaw_zero`` (default: x along the heading of yaw 0, y 90 deg
+    clockwise of it, z down) or ``body`` (x forward, y right, z down). Motion commands (takeoff, go, land) are
+    answered only when the Tello has finished them; a motion call returns once the command has not been refused
+    within ``accept_window_s`` seconds."""
 
     host: str = "192.168.10.1"
     command_port: int = Field(default=8889, ge=1, le=65535)
@@ -164,6 +172,10 @@ class TelloConfig(_Cfg):
     command_retries: int = Field(default=2, ge=0)
     keepalive_s: float = Field(default=5.0, gt=0, lt=15)
     state_timeout_s: float = Field(default=3.0, gt=0, description="link lost after this long without a state packet")
+    bind_host: str = Field(default="0.0.0.0", description="local address the state and video sockets bind to")
+    initial_heading_deg: float = Field(default=0.0, ge=-360, le=360, description="compass heading at connect(), deg")
+    velocity_frame: Literal["yaw_zero", "body"] = "yaw_zero"
+    accept_window_s: float = Field(default=0.3, ge=0, description="wait this long for a motion command's refusal")
 
 
 class ReplayConfig(_Cfg):

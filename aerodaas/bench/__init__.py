@@ -26,6 +26,7 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from . import tours
+    from . import tello_video, tours
 
     tours.add_parser(bench_subparsers)
+    tello_video.add_parser(bench_subparsers)
