@@ -91,7 +91,8 @@ def test_go_command_body_frame_ranges_and_chunking():
 
 
 # ---------------------------------------------------------------------------------------------- flight
-def test_takeoff_go_rc_land_reach_expected_positions(tello):
+@pytest.mark.tello(cfg={"keepalive_s": 0.3})
+def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
     emu, b = tello
     assert b.link_ok and b.yaw == pytest.approx(90.0 - HEADING, abs=1.0)  # mission-start reference
     b.arm()
@@ -101,26 +102,35 @@ def test_takeoff_go_rc_land_reach_expected_positions(tello):
     assert b.in_air and b.odometry().in_air
     assert _sent(emu, "takeoff") == ["takeoff"] and len(_sent(emu, "up")) == 1  # takeoff climbs to 0.8 m
 
-    target = np.array([2.0, -1.0, 1.2])  # east-south-up, i.e. not along the Tello's body axes
-    b.goto(target, speed=1.0)
+    p0, yaw0 = emu.position, emu.yaw_enu
+    b.set_velocity((0.0, 0.5, 0.0), yaw_rate_dps=20.0)  # north at 0.5 m/s, turning counter-clockwise
+    time.sleep(1.0)
+    moved = emu.position - p0
+    assert moved[1] > 0.3 and abs(moved[0]) < 0.2 and abs(moved[2]) < 0.05, moved
+    assert emu.yaw_enu - yaw0 > 10.0  # counter-clockwise in ENU
+    assert b.yaw == pytest.approx(emu.yaw_enu, abs=3.0)
+    assert np.linalg.norm(b.position - emu.position) < 0.15, (b.position, emu.position)  # dead reckoning
+
+    target = np.array([2.0, -1.0, 1.2])  # east-south-down from a yawed vehicle: no axis is a body axis
+    b.goto(target, speed=1.0)  # replaces the velocity command
     _settle(b)
     for go in _sent(emu, "go"):
         x, y, z, s = (int(v) for v in go.split()[1:])
         assert all(abs(c) <= 500 for c in (x, y, z)) and 10 <= s <= 100 and max(abs(x), abs(y), abs(z)) > 20
     assert np.linalg.norm(emu.position - target) < 0.2, emu.position  # the vehicle flew there
     assert np.linalg.norm(b.position - emu.position) < 0.1, (b.position, emu.position)  # and we know it
+    time.sleep(0.8)  # keep-alives while hovering must not resume the old velocity
+    assert np.linalg.norm(emu.position - target) < 0.2 and b.velocity == pytest.approx(np.zeros(3), abs=0.1)
 
-    p0, yaw0 = emu.position, emu.yaw_enu
-    b.set_velocity((0.0, 0.5, 0.0), yaw_rate_dps=20.0)  # north at 0.5 m/s, turning counter-clockwise
+    b.goto((5.0, -1.0, 1.2), speed=0.5)
     time.sleep(1.0)
-    b.hold()
+    b.hold()  # stops the running go
+    assert not b.busy and _sent(emu, "stop") == ["stop"]
     time.sleep(0.6)
-    moved = emu.position - p0
-    assert moved[1] > 0.3 and abs(moved[0]) < 0.2 and abs(moved[2]) < 0.05, moved
-    assert emu.yaw_enu - yaw0 > 10.0  # counter-clockwise in ENU
-    assert b.yaw == pytest.approx(emu.yaw_enu, abs=1.5)
-    assert np.linalg.norm(b.position - emu.position) < 0.15, (b.position, emu.position)  # dead reckoning
-    assert b.velocity == pytest.approx(np.zeros(3), abs=0.1)
+    stopped = emu.position
+    assert 2.2 < stopped[0] < 4.5, stopped
+    time.sleep(0.4)
+    assert np.linalg.norm(emu.position - stopped) < 0.05
 
     b.land()
     _settle(b)

@@ -41,7 +41,7 @@ import socket
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -319,31 +319,26 @@ class TelloBackend(VehicleBackend):
         self._threads.append(th)
 
     # ------------------------------------------------------------------ receivers
-    def _reply_loop(self) -> None:
+    def _datagrams(self, sock: socket.socket, size: int) -> Iterator[bytes]:
+        """Datagrams from ``sock`` until :meth:`close` (socket errors such as an ICMP port-unreachable surfacing as
+        ConnectionRefusedError are skipped)."""
         while not self._stop.is_set():
             try:
-                data = self._cmd_sock.recv(2048)
-            except socket.timeout:
-                continue
-            except OSError:
-                if self._stop.is_set():
-                    return
-                time.sleep(0.05)  # e.g. ICMP port unreachable surfaced as ConnectionRefusedError
-                continue
-            self._replies.put(data.decode("utf-8", "replace").strip())
-
-    def _state_loop(self) -> None:
-        prev_v: np.ndarray | None = None
-        while not self._stop.is_set():
-            try:
-                data = self._state_sock.recv(2048)
+                yield sock.recv(size)
             except socket.timeout:
                 continue
             except OSError:
                 if self._stop.is_set():
                     return
                 time.sleep(0.05)
-                continue
+
+    def _reply_loop(self) -> None:
+        for data in self._datagrams(self._cmd_sock, 2048):
+            self._replies.put(data.decode("utf-8", "replace").strip())
+
+    def _state_loop(self) -> None:
+        prev_v: np.ndarray | None = None
+        for data in self._datagrams(self._state_sock, 2048):
             now = time.monotonic()
             try:
                 st = parse_state(data)
@@ -386,16 +381,7 @@ class TelloBackend(VehicleBackend):
         except ImportError as e:
             self._push_event("video_error", reason=f"PyAV is not installed: {e}")
             return
-        while not self._stop.is_set():
-            try:
-                data = self._video_sock.recv(65536)
-            except socket.timeout:
-                continue
-            except OSError:
-                if self._stop.is_set():
-                    return
-                time.sleep(0.05)
-                continue
+        for data in self._datagrams(self._video_sock, 65536):
             self.stats["video_datagrams"] += 1
             frames = dec.feed(data)
             self.stats["video_errors"] = dec.errors
@@ -473,8 +459,9 @@ class TelloBackend(VehicleBackend):
             raise CommandRefused(self.robot_id, cmd, reply)
 
     def command(self, cmd: str) -> str:
-        """Send any SDK command and return its reply (e.g. ``battery?`` -> ``"87"``), with retries. Raises
-        :class:`CommandRefused` for ``error...``/``out of range``/``unknown command`` replies."""
+        """Send any SDK command and return its reply (e.g. ``battery?`` -> ``"87"``), with retries; waits while a
+        manoeuvre is being executed (one command at a time). Raises :class:`CommandRefused` for
+        ``error...``/``out of range``/``unknown command`` replies, BackendError / LinkLost without reply."""
         reply = self._transact(cmd, self.cfg.command_timeout_s, self.cfg.command_retries)
         low = reply.lower()
         if low.startswith(("error", "out of range", "unknown command")):
@@ -489,6 +476,9 @@ class TelloBackend(VehicleBackend):
     def _start_motion(self, name: str, plan: Callable[[_Motion], None]) -> None:
         self._require_link(name)
         self._preempt()
+        if any(self._sticks):  # else the keep-alive would resume the old velocity after the manoeuvre
+            self._sticks = (0, 0, 0, 0)
+            self._send_rc(self._sticks)
         m = _Motion(name)
 
         def run() -> None:
