@@ -234,7 +234,8 @@ class TelloBackend(VehicleBackend):
         self.stats = {"commands": 0, "retries": 0, "timeouts": 0, "stale_replies": 0, "state_packets": 0,
                       "malformed_state": 0, "keepalives": 0, "video_datagrams": 0, "video_frames": 0,
                       "video_errors": 0, "video_decode_ms": 0.0}
-        self.last_status = ""  # last non-ok reply, for CommandRefused.status_text
+        #: the Tello's last reply other than ``ok`` (diagnostics)
+        self.last_status = ""
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
@@ -300,8 +301,7 @@ class TelloBackend(VehicleBackend):
         self._connected = False
 
     def _udp(self, addr: tuple[str, int], field_name: str, rcvbuf: int = 0) -> socket.socket:
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # no SO_REUSEADDR: a port in use is an error
         if rcvbuf:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         s.settimeout(0.1)

@@ -133,6 +133,8 @@ class TelloEmulator:
         self.received: list[tuple[float, str]] = []
         self.auto_landings = 0
         self.dropped_replies = 0
+        self._world: World | None = None  # built on first use (a second or so for the procedural ground)
+        self._world_lock = threading.Lock()
         self.sent_frames: deque[tuple[float, int, np.ndarray]] = deque(maxlen=64)
         #: frame index -> monotonic time its first datagram was sent (the last 100 000 frames)
         self.send_times: dict[int, float] = {}
@@ -415,14 +417,15 @@ class TelloEmulator:
         x, y = float(position[0]) + self.start_enu[0], float(position[1]) + self.start_enu[1]
         pose = FramePose(position=(x, y, z), yaw=float(yaw_enu),
                          camera_pitch=self.camera_pitch_deg)
-        return self._world.render(pose, self._intrinsics, 0.0)[0]
+        with self._world_lock:
+            if self._world is None:
+                self._world = World(self.ground, [])
+        w, h = self.video_size
+        return self._world.render(pose, CameraIntrinsics.from_hfov(w, h, self.hfov_deg), 0.0)[0]
 
     def _video_loop(self) -> None:
         import av  # lazy: only a streaming emulator needs PyAV
 
-        self._world = World(self.ground, [])
-        w, h = self.video_size
-        self._intrinsics = CameraIntrinsics.from_hfov(w, h, self.hfov_deg)
         enc = None
         period = 1.0 / self.video_fps
         next_t = time.monotonic()
