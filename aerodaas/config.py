@@ -91,10 +91,22 @@ class SafetyConfig(_Cfg):
         return self
 
 
+#: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
+#: Tello's), or a recorded MCAP camera channel
+CAMERA_SOURCES = ("sim", "backend", "mcap")
+#: backends whose :meth:`~aerodaas.backends.base.VehicleBackend.camera_frame` gives frames
+BACKENDS_WITH_CAMERA = ("tello",)
+
+
 class SensorConfig(_Cfg):
     """A sensor. ``type``: ``camera`` (properties width, height in px, hfov_deg, fps, pitch_deg with 90 = nadir,
-    jpeg_quality), ``odometry`` (rate_hz) or ``stat_stream``. ``buffer`` is the stream buffer length (frames
-    kept for a slow consumer; older ones are dropped and counted)."""
+    jpeg_quality, source), ``odometry`` (rate_hz) or ``stat_stream``. ``buffer`` is the stream buffer length
+    (frames kept for a slow consumer; older ones are dropped and counted).
+
+    A camera's ``source`` is ``sim`` (default: rendered from the simulated world), ``backend`` (the robot's own
+    video, e.g. a Tello's; needs such a backend) or ``mcap`` (replay a recording: ``mcap`` names the file,
+    resolved like other files at load time, and ``topic`` its ``foxglove.CompressedImage`` channel, by default
+    ``/<robot>/camera/<sensor id>`` as AeroDaaS records it)."""
 
     id: str = Field(min_length=1)
     type: Literal["camera", "odometry", "stat_stream"]
@@ -115,6 +127,20 @@ class SensorConfig(_Cfg):
                 raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
             if not 0 < float(p["pitch_deg"]) <= 90:
                 raise ValueError(f"properties.pitch_deg must be within (0, 90] (90 = nadir), got {p['pitch_deg']!r}")
+            src = p.setdefault("source", "sim")
+            if src not in CAMERA_SOURCES:
+                raise ValueError(f"properties.source must be one of {list(CAMERA_SOURCES)}, got {src!r}")
+            if src == "mcap":
+                if not (isinstance(p.get("mcap"), str) and p["mcap"]):
+                    raise ValueError(f"properties.mcap must name the MCAP recording to replay when properties.source "
+                                     f"is 'mcap', got {p.get('mcap')!r}")
+                if "topic" in p and not (isinstance(p["topic"], str) and p["topic"].startswith("/")):
+                    raise ValueError(f"properties.topic must be an MCAP topic starting with '/', got {p['topic']!r}")
+            else:
+                for k in ("mcap", "topic"):
+                    if k in p:
+                        raise ValueError(f"properties.{k} is only used with properties.source 'mcap', "
+                                         f"but source is {src!r}")
         elif self.type == "odometry":
             p.setdefault("rate_hz", 10.0)
             if not (isinstance(p["rate_hz"], (int, float)) and p["rate_hz"] > 0):
@@ -150,9 +176,17 @@ class MavlinkConfig(_Cfg):
 
 class TelloConfig(_Cfg):
     """A DJI Tello (SDK 2.0 over UDP): commands to ``host:command_port`` (replies on the same socket), state
-    packets on local ``state_port``, H.264 video on local ``video_port``. A command without reply within
-    ``command_timeout_s`` seconds is retried ``command_retries`` times; a keep-alive is sent every
-    ``keepalive_s`` seconds (the Tello lands after 15 s without a command)."""
+    packets on local ``state_port``, H.264 video on local ``video_port`` (both bound on ``bind_host``). A command
+    without reply within ``command_timeout_s`` seconds is retried ``command_retries`` times; a keep-alive is sent
+    every ``keepalive_s`` seconds (the Tello lands after 15 s without a command).
+
+    The Tello has no compass: its yaw is relative to where it pointed at power-on. ``initial_heading_deg`` is the
+    compass heading (degrees clockwise from north) the Tello faces when :meth:`connect` runs (mission start); the
+    yaw reported then is taken as that heading. ``velocity_frame`` says how to read the state packet's
+    ``vgx``/``vgy`` (the SDK guide does not say): ``yaw_zero`` (default: x along the heading of yaw 0, y 90 deg
+    clockwise of it, z down) or ``body`` (x forward, y right, z down). Motion commands (takeoff, go, land) are
+    answered only when the Tello has finished them; a motion call returns once the command has not been refused
+    within ``accept_window_s`` seconds."""
 
     host: str = "192.168.10.1"
     command_port: int = Field(default=8889, ge=1, le=65535)
@@ -164,6 +198,10 @@ class TelloConfig(_Cfg):
     command_retries: int = Field(default=2, ge=0)
     keepalive_s: float = Field(default=5.0, gt=0, lt=15)
     state_timeout_s: float = Field(default=3.0, gt=0, description="link lost after this long without a state packet")
+    bind_host: str = Field(default="0.0.0.0", description="local address the state and video sockets bind to")
+    initial_heading_deg: float = Field(default=0.0, ge=-360, le=360, description="compass heading at connect(), deg")
+    velocity_frame: Literal["yaw_zero", "body"] = "yaw_zero"
+    accept_window_s: float = Field(default=0.3, ge=0, description="wait this long for a motion command's refusal")
 
 
 class ReplayConfig(_Cfg):
@@ -209,6 +247,10 @@ class RobotConfig(_Cfg):
             self.tello = TelloConfig()
         if self.backend == "replay" and self.replay is None:
             raise ValueError("replay: backend 'replay' needs a 'replay' section naming the log to play")
+        for j, s in enumerate(self.sensors):
+            if s.type == "camera" and s.properties.get("source") == "backend" and self.backend not in BACKENDS_WITH_CAMERA:
+                raise ValueError(f"sensors.{j}.properties.source: 'backend' needs a backend with its own camera "
+                                 f"stream ({list(BACKENDS_WITH_CAMERA)}), but backend is {self.backend!r}")
         return self
 
 
@@ -314,6 +356,14 @@ class EnvironmentConfig(_Cfg):
             dup = sorted({i for i in ids if ids.count(i) > 1})
             if dup:
                 raise ValueError(f"{name}: duplicate ids {dup}")
+        for j, s in enumerate(self.env_sensors):
+            src = s.properties.get("source") if s.type == "camera" else None
+            if src == "backend":
+                raise ValueError(f"env_sensors.{j}.properties.source: 'backend' is for a robot's camera; an "
+                                 f"environment camera has no backend (use 'sim' or 'mcap')")
+            if src == "mcap" and "topic" not in s.properties:
+                raise ValueError(f"env_sensors.{j}.properties.topic: an environment camera replayed from an MCAP "
+                                 f"recording needs the topic to read")
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:
@@ -361,6 +411,12 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         cfg.world.ground.image = str(cfg.resolve_path(cfg.world.ground.image, "world.ground.image"))
     for i, t in enumerate(cfg.world.targets):
         t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
+    cameras = [(f"robots.{i}.sensors.{j}", r.id, s) for i, r in enumerate(cfg.robots) for j, s in enumerate(r.sensors)]
+    cameras += [(f"env_sensors.{j}", None, s) for j, s in enumerate(cfg.env_sensors)]
+    for where, robot_id, s in cameras:
+        if s.type == "camera" and s.properties.get("source") == "mcap":
+            s.properties["mcap"] = str(cfg.resolve_path(s.properties["mcap"], f"{where}.properties.mcap"))
+            s.properties.setdefault("topic", f"/{robot_id}/camera/{s.id}")
     for i, r in enumerate(cfg.robots):
         if r.replay is not None:
             r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))

@@ -1,0 +1,395 @@
+"""Replay of recorded flights: a MAVLink telemetry log as a (non-navigable) vehicle, and an MCAP recording's camera
+channel as a frame source, so that analytics and their schedulers can be re-run on a real or recorded flight.
+
+:class:`ReplayBackend` plays a ``.tlog`` (pymavlink's reader; the format is each MAVLink packet prefixed by its
+capture time, a big-endian uint64 of microseconds) at ``rate`` x real time:
+
+* odometry from ``GLOBAL_POSITION_INT`` (lat/lon -> ENU about home with pymap3d, ``relative_alt`` as height above
+  home, NED velocity -> ENU) and ``ATTITUDE`` (roll, pitch, yaw -> ENU yaw);
+* battery from ``BATTERY_STATUS.battery_remaining`` (``SYS_STATUS`` when the log has no BATTERY_STATUS), voltage
+  from ``SYS_STATUS.voltage_battery``;
+* armed and flight mode from the vehicle's ``HEARTBEAT`` (``base_mode`` bit ``MAV_MODE_FLAG_SAFETY_ARMED``;
+  PX4/ArduPilot custom modes decoded by ``pymavlink.mavutil.mode_string_v10``), in-air from
+  ``EXTENDED_SYS_STATE.landed_state``;
+* home from the first ``HOME_POSITION`` (else the first ``GLOBAL_POSITION_INT`` with a fix), updated when a later
+  HOME_POSITION moves it.
+
+Only the vehicle's own messages count (the autopilot: the first HEARTBEAT whose autopilot is not
+``MAV_AUTOPILOT_INVALID``); a GCS's messages, unknown message ids and bad data are skipped. A log captured on two
+links holds each packet twice: a packet byte-identical (same sequence number and payload) to one seen less than
+``DUPLICATE_WINDOW_S`` before is dropped.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+import os
+import struct
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from ..geo import geodetic_to_enu
+from ..models import Attitude, GeoPoint, Odometry
+from .base import BackendError, VehicleBackend
+
+__all__ = ["ReplayBackend", "McapCameraReplay", "load_tlog", "LogMessage", "DUPLICATE_WINDOW_S"]
+
+#: a byte-identical packet within this many seconds of the same one is a duplicate from a second link
+DUPLICATE_WINDOW_S = 0.5
+#: the link counts as lost after this many seconds of log time without a vehicle HEARTBEAT (as a GCS would)
+HEARTBEAT_TIMEOUT_S = 3.0
+#: MAVLink messages the replay uses
+TLOG_TYPES = ("HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "BATTERY_STATUS", "SYS_STATUS", "HOME_POSITION",
+              "EXTENDED_SYS_STATE", "STATUSTEXT", "MISSION_ITEM_REACHED")
+_MAV_AUTOPILOT_INVALID = 8
+_MAV_TYPE_GCS = 6
+_MAV_MODE_FLAG_SAFETY_ARMED = 128
+_MAV_LANDED_STATE_IN_AIR = (2, 3, 4)  # IN_AIR, TAKEOFF, LANDING
+
+
+@dataclass(frozen=True)
+class LogMessage:
+    """One vehicle message of a log: ``t`` seconds since the log's first record, MAVLink ``type`` name, and the
+    decoded pymavlink message."""
+
+    t: float
+    type: str
+    msg: Any
+
+
+def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]]:
+    """Read the vehicle's :data:`TLOG_TYPES` messages from a MAVLink telemetry log, de-duplicated, in log order.
+
+    Returns (messages, info) with info ``{"t0": unix seconds of the first record, "sysid", "compid",
+    "duplicates": n dropped, "foreign": n from other systems}``. Raises BackendError when the file cannot be
+    read or holds no vehicle HEARTBEAT."""
+    from pymavlink import mavutil
+
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(8)
+        if len(head) < 8:
+            raise BackendError(f"replay.log: {str(p)!r} is empty or truncated (no tlog timestamp)")
+        t0 = struct.unpack(">Q", head)[0] / 1e6
+        conn = mavutil.mavlink_connection(str(p))
+    except OSError as e:
+        raise BackendError(f"replay.log: cannot read {str(p)!r}: {e}") from e
+    raw: list[tuple[float, str, Any]] = []
+    seen: dict[bytes, float] = {}
+    dups = 0
+    vehicle: tuple[int, int] | None = None
+    try:
+        while True:
+            m = conn.recv_match(type=list(TLOG_TYPES))
+            if m is None:
+                break
+            ts = float(getattr(m, "_timestamp", t0))
+            key = bytes(m.get_msgbuf())
+            last = seen.get(key)
+            seen[key] = ts
+            if last is not None and ts - last < DUPLICATE_WINDOW_S:
+                dups += 1
+                continue
+            if len(seen) > 50_000:  # forget keys older than the window
+                seen = {k: v for k, v in seen.items() if ts - v < DUPLICATE_WINDOW_S}
+            mtype = m.get_type()
+            if (vehicle is None and mtype == "HEARTBEAT" and m.autopilot != _MAV_AUTOPILOT_INVALID
+                    and m.type != _MAV_TYPE_GCS):
+                vehicle = (m.get_srcSystem(), m.get_srcComponent())
+            raw.append((ts - t0, mtype, m))
+    finally:
+        conn.close()
+    if vehicle is None:
+        raise BackendError(f"replay.log: {str(p)!r} holds no autopilot HEARTBEAT; is it a MAVLink telemetry log?")
+    msgs = [LogMessage(t, ty, m) for t, ty, m in raw if (m.get_srcSystem(), m.get_srcComponent()) == vehicle]
+    return msgs, {"t0": t0, "sysid": vehicle[0], "compid": vehicle[1], "duplicates": dups,
+                  "foreign": len(raw) - len(msgs)}
+
+
+def _home_of(m: Any) -> GeoPoint | None:
+    """Home from a HOME_POSITION (or a GLOBAL_POSITION_INT with a fix); None without one."""
+    if m.get_type() == "HOME_POSITION":
+        return GeoPoint(lat=m.latitude / 1e7, lon=m.longitude / 1e7, alt=m.altitude / 1000.0)
+    if m.lat == 0 and m.lon == 0:
+        return None
+    return GeoPoint(lat=m.lat / 1e7, lon=m.lon / 1e7, alt=(m.alt - m.relative_alt) / 1000.0)
+
+
+class ReplayBackend(VehicleBackend):
+    """A recorded flight played back as a vehicle that reports but cannot be commanded (see the module docstring).
+
+    Clock ``"vehicle"``: :attr:`t` is log time (seconds since the log's first record) = ``rate`` x wall seconds
+    since :meth:`connect`; :meth:`step` applies every message up to :attr:`t` and never blocks. Odometry's ``t``
+    is the log time up to which messages have been applied. Events (:meth:`drain_events`, each with its log time
+    ``t``): ``mode`` (name), ``armed``, ``disarmed``, ``status_text`` (severity, text),
+    ``mission_item_reached`` (seq; PX4 repeats the message for about a second, reported once per item),
+    ``home`` (lat, lon, alt), ``link_lost``/``link_regained`` (gaps of HEARTBEAT_TIMEOUT_S in the log's
+    heartbeats), and ``replay_finished`` after the last message (then :attr:`finished` is True).
+
+    Every navigation method raises :class:`~aerodaas.backends.base.NotNavigable`.
+    """
+
+    kind = "replay"
+    clock = "vehicle"
+    navigable = False
+
+    def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig with a ``replay`` section
+        super().__init__(cfg.id, cfg.home)
+        if cfg.replay is None:
+            raise BackendError(f"robot {cfg.id!r}: backend 'replay' needs a 'replay' section naming the log")
+        self.log_path = str(cfg.replay.log)
+        self.rate = float(cfg.replay.rate)
+        self.info: dict[str, Any] = {}
+        self._msgs: list[LogMessage] = []
+        self._i = 0
+        self._t_wall0: float | None = None
+        self._t_applied = 0.0
+        self._pos = np.zeros(3)
+        self._vel = np.zeros(3)
+        self._att = Attitude()
+        self._geo: GeoPoint | None = None
+        self._bat = 100.0
+        self._volt = 0.0
+        self._have_battery_status = False
+        self._armed = False
+        self._landed_state: int | None = None
+        self.mode = ""
+        self._last_reached: int | None = None
+        self._last_hb: float | None = None
+        self._link_ok = True
+        self.finished = False
+        self._events: list[dict[str, Any]] = []
+
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self, timeout_s: float = 30.0) -> None:
+        """Read the log (``.tlog``) and start the replay clock. Raises BackendError for a missing, unreadable or
+        unsupported log (the message names ``replay.log`` and the path)."""
+        suffix = Path(self.log_path).suffix.lower()
+        if suffix == ".ulg":
+            raise BackendError(f"robot {self.robot_id!r}: replay.log {self.log_path!r}: PX4 .ulg logs are not "
+                               f"supported yet; convert it to a .tlog or record a .tlog with the GCS")
+        if not Path(self.log_path).is_file():
+            raise BackendError(f"robot {self.robot_id!r}: replay.log {self.log_path!r}: file not found")
+        self._msgs, self.info = load_tlog(self.log_path)
+        self.info["duration_s"] = self._msgs[-1].t if self._msgs else 0.0
+        home = next((h for lm in self._msgs if lm.type == "HOME_POSITION" for h in [_home_of(lm.msg)] if h), None)
+        home = home or next((h for lm in self._msgs if lm.type == "GLOBAL_POSITION_INT"
+                             for h in [_home_of(lm.msg)] if h), None)
+        if home is not None:
+            self.home = home
+        self._t_wall0 = time.monotonic()
+
+    def close(self) -> None:
+        self._t_wall0 = None
+
+    @property
+    def duration_s(self) -> float:
+        """Log time of the last vehicle message, seconds."""
+        return float(self.info.get("duration_s", 0.0))
+
+    # ------------------------------------------------------------------ time and state
+    @property
+    def t(self) -> float:
+        if self._t_wall0 is None:
+            return self._t_applied
+        return (time.monotonic() - self._t_wall0) * self.rate
+
+    def step(self, dt: float) -> None:
+        """Apply every log message with log time <= :attr:`t` (``dt`` is ignored: the log has its own clock)."""
+        now = self.t
+        msgs = self._msgs
+        while self._i < len(msgs) and msgs[self._i].t <= now:
+            lm = msgs[self._i]
+            self._i += 1
+            self._apply(lm)
+        self._t_applied = now
+        if not self.finished and self._last_hb is not None:
+            ok = now - self._last_hb < HEARTBEAT_TIMEOUT_S
+            if ok != self._link_ok and self._i < len(msgs):
+                self._link_ok = ok
+                self._event("link_regained" if ok else "link_lost", now)
+        if self._i >= len(msgs) and not self.finished:
+            self.finished = True
+            self._event("replay_finished", now, messages=len(msgs))
+
+    def _apply(self, lm: LogMessage) -> None:
+        m, t = lm.msg, lm.t
+        ty = lm.type
+        if ty == "GLOBAL_POSITION_INT":
+            if m.lat == 0 and m.lon == 0:
+                return
+            e, n, _ = geodetic_to_enu(m.lat / 1e7, m.lon / 1e7, m.alt / 1000.0, self.home)
+            self._pos = np.array([e, n, m.relative_alt / 1000.0])
+            self._vel = self.ned_to_enu((m.vx / 100.0, m.vy / 100.0, m.vz / 100.0))
+            self._geo = GeoPoint(lat=m.lat / 1e7, lon=m.lon / 1e7, alt=m.alt / 1000.0)
+        elif ty == "ATTITUDE":
+            self._att = Attitude(roll=math.degrees(m.roll), pitch=math.degrees(m.pitch),
+                                 yaw=self.enu_yaw_from_heading(math.degrees(m.yaw)))
+        elif ty == "BATTERY_STATUS":
+            if m.battery_remaining >= 0:
+                self._bat, self._have_battery_status = float(m.battery_remaining), True
+        elif ty == "SYS_STATUS":
+            if m.voltage_battery not in (0, 65535):
+                self._volt = m.voltage_battery / 1000.0
+            if not self._have_battery_status and m.battery_remaining >= 0:
+                self._bat = float(m.battery_remaining)
+        elif ty == "HEARTBEAT":
+            self._heartbeat(m, t)
+        elif ty == "EXTENDED_SYS_STATE":
+            self._landed_state = int(m.landed_state)
+        elif ty == "HOME_POSITION":
+            home = _home_of(m)
+            if home is not None and (home.lat, home.lon, home.alt) != (self.home.lat, self.home.lon, self.home.alt):
+                self.home = home
+                self._event("home", t, lat=home.lat, lon=home.lon, alt=home.alt)
+        elif ty == "STATUSTEXT":
+            text = m.text if isinstance(m.text, str) else bytes(m.text).decode("utf-8", "replace")
+            self._event("status_text", t, severity=int(m.severity), text=text.rstrip("\x00").strip())
+        elif ty == "MISSION_ITEM_REACHED":
+            if m.seq != self._last_reached:
+                self._last_reached = int(m.seq)
+                self._event("mission_item_reached", t, seq=int(m.seq))
+
+    def _heartbeat(self, m: Any, t: float) -> None:
+        from pymavlink import mavutil
+
+        self._last_hb = t
+        armed = bool(m.base_mode & _MAV_MODE_FLAG_SAFETY_ARMED)
+        if armed != self._armed:
+            self._armed = armed
+            self._event("armed" if armed else "disarmed", t)
+        mode = mavutil.mode_string_v10(m)
+        if mode != self.mode:
+            self.mode = mode
+            self._event("mode", t, name=mode)
+
+    def _event(self, kind: str, t: float, **kw: Any) -> None:
+        self._events.append({"event": kind, "t": t, **kw})
+
+    def drain_events(self) -> list[dict[str, Any]]:
+        out, self._events = self._events, []
+        return out
+
+    @property
+    def link_ok(self) -> bool:
+        return self._link_ok
+
+    @property
+    def position(self) -> np.ndarray:
+        return self._pos.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return self._vel.copy()
+
+    @property
+    def yaw(self) -> float:
+        return float(self._att.yaw)
+
+    @property
+    def armed(self) -> bool:
+        return self._armed
+
+    @property
+    def in_air(self) -> bool:
+        if self._landed_state is not None:
+            return self._landed_state in _MAV_LANDED_STATE_IN_AIR
+        return self._armed and self._pos[2] > 0.5
+
+    @property
+    def battery_pct(self) -> float:
+        return self._bat
+
+    def odometry(self) -> Odometry:
+        geo = self._geo or self.home
+        return Odometry(robot_id=self.robot_id, t=self._t_applied, position=tuple(float(v) for v in self._pos),
+                        geodetic=geo, velocity=tuple(float(v) for v in self._vel), attitude=self._att,
+                        battery_pct=min(max(self._bat, 0.0), 100.0), battery_voltage=self._volt,
+                        armed=self._armed, in_air=self.in_air)
+
+    # ------------------------------------------------------------------ control: a recording cannot be flown
+    def arm(self) -> None:
+        self._require_navigable("arm")
+
+    def disarm(self) -> None:
+        self._require_navigable("disarm")
+
+    def takeoff(self, altitude_m: float) -> None:
+        self._require_navigable("takeoff")
+
+    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
+        self._require_navigable("goto")
+
+    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
+        self._require_navigable("set_velocity")
+
+    def hold(self) -> None:
+        self._require_navigable("hold")
+
+    def land(self) -> None:
+        self._require_navigable("land")
+
+    def return_to_launch(self) -> bool:
+        self._require_navigable("return_to_launch")
+        return False
+
+
+class McapCameraReplay:
+    """A camera channel of an MCAP recording (``foxglove.CompressedImage``, JPEG or PNG) as a frame source.
+
+    ``path``: the recording; ``topic``: e.g. ``/drone1/camera/cam0`` (AeroDaaS records cameras on
+    ``/<robot>/camera/<sensor>``). Frame times ``t`` are seconds since ``start_ns`` (default: the recording's
+    first message on any topic, which for AeroDaaS recordings is mission time 0). Frames are decoded lazily with
+    ``cv2.imdecode`` to ``(H, W, 3) uint8 BGR``; only the compressed bytes are kept in memory.
+
+    Raises FileNotFoundError / ValueError (not an MCAP file, ``topic`` absent or not a CompressedImage channel,
+    naming the topics that are there)."""
+
+    def __init__(self, path: str | os.PathLike, topic: str, start_ns: int | None = None) -> None:
+        from ..recording import read_messages, summarize_mcap
+
+        self.path, self.topic = str(path), topic
+        summary = summarize_mcap(self.path)
+        self.start_ns = int(summary["start_ns"] or 0) if start_ns is None else int(start_ns)
+        times: list[int] = []
+        self._data: list[bytes] = []
+        for _, schema, t_ns, msg in read_messages(self.path, topics=[topic]):
+            if schema != "foxglove.CompressedImage":
+                raise ValueError(f"topic {topic!r} in {self.path!r} carries {schema!r}, not foxglove.CompressedImage")
+            times.append(t_ns)
+            self._data.append(bytes(msg.data))
+        if not times:
+            topics = [c["topic"] for c in summary["channels"]]
+            raise ValueError(f"topic {topic!r} not found (or empty) in {self.path!r}; topics there: {topics}")
+        order = np.argsort(np.asarray(times, np.int64), kind="stable")
+        self._data = [self._data[i] for i in order]
+        self.times_ns = [times[i] for i in order]
+        #: frame times, seconds since ``start_ns``
+        self.times = [(t - self.start_ns) / 1e9 for t in self.times_ns]
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def frame(self, i: int) -> np.ndarray:
+        """Frame ``i`` decoded, ``(H, W, 3) uint8 BGR``. Raises IndexError / ValueError (undecodable bytes)."""
+        import cv2
+
+        img = cv2.imdecode(np.frombuffer(self._data[i], np.uint8), cv2.IMREAD_COLOR)
+        if img is None:
+            raise ValueError(f"{self.path!r} {self.topic!r}: frame {i} is not a decodable image")
+        return img
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, float] | None:
+        """The newest frame at or before ``t`` seconds and its time; None before the first frame."""
+        i = bisect.bisect_right(self.times, t) - 1
+        return None if i < 0 else (self.frame(i), self.times[i])
+
+    def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+        """``(t, frame)`` in time order."""
+        for i, t in enumerate(self.times):
+            yield t, self.frame(i)
