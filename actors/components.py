@@ -39,8 +39,9 @@ def _percentiles(values: list[float]) -> dict[str, float]:
 # --------------------------------------------------------------------------------------------------- camera
 class CameraComponent:
     """A camera sensor. :meth:`capture` (run on the host's pool when the clock says a frame is due) produces one
-    frame — rendered by the simulator at the drone's pose, or the backend's own newest frame (``source:
-    backend``, e.g. a Tello) — makes it read-only, and publishes it. While the previous capture is still being
+    frame — rendered by the simulator at the drone's pose (``source: sim``), the backend's own newest frame
+    (``source: backend``, e.g. a Tello), or the recorded frame at this time of an MCAP recording's camera channel
+    (``source: mcap``, to re-run analytics on a recorded flight) — makes it read-only, and publishes it. While the previous capture is still being
     rendered a new one is skipped and counted (``dropped_at_camera``). Frames go to the recorder by reference."""
 
     kind = "camera"
@@ -63,7 +64,12 @@ class CameraComponent:
         self.render_ms: list[float] = []
         self.latest: tuple | None = None
         self._busy = threading.Lock()
-        self._last_backend_t: float | None = None
+        self._last_source_t: float | None = None
+        self.replay = None
+        if self.source == "mcap":
+            from aerodaas.backends.replay import McapCameraReplay
+
+            self.replay = McapCameraReplay(props["mcap"], props.get("topic") or f"/{robot_id}/camera/{sensor_id}")
 
     def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
         """Clock thread: a frame is due. Submits the capture unless the previous one is still running."""
@@ -89,13 +95,13 @@ class CameraComponent:
         t0 = time.perf_counter()
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         truth: list = []
-        if self.source == "backend":
-            got = self.backend.camera_frame()
-            if got is None or got[1] == self._last_backend_t:
+        if self.source in ("backend", "mcap"):
+            got = self.backend.camera_frame() if self.replay is None else self.replay.frame_at(t)
+            if got is None or got[1] == self._last_source_t:  # no new frame since the last capture
                 self.dropped_at_camera += 1
                 return None
             frame, t = got
-            self._last_backend_t = t
+            self._last_source_t = t
         else:
             frame, truth = self.world.render(pose, self.k, t)
         frame.flags.writeable = False  # shared by every reader from here on: nobody may change it

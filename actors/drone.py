@@ -405,7 +405,7 @@ class DroneComponent:
         elif st == S.ARMED and v.in_air:
             fsm.transition(S.TAKING_OFF, t)
         elif st == S.TAKING_OFF and v.in_air and v.velocity[2] < 0.3:
-            fsm.transition(S.NAVIGATING if speed > 0.5 else S.HOVERING, t)
+            fsm.transition(S.HOVERING, t)
         elif st in (S.HOVERING, S.NAVIGATING):
             if not v.in_air or v.velocity[2] < -0.5 and v.position[2] < 5.0:
                 fsm.transition(S.LANDING, t)
@@ -415,10 +415,9 @@ class DroneComponent:
                 fsm.transition(S.HOVERING, t)
         elif st == S.LANDING and not v.in_air:
             fsm.transition(S.LANDED, t)
-        if finished:
+        if finished:  # the backend recorded its own replay_finished event
             if self.outcome is None:
                 self.outcome = "success"
-            self._event("replay_finished")
             return True
         return False
 

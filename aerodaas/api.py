@@ -100,11 +100,20 @@ class Robot:
 
     # -- navigation
     def is_navigable(self) -> bool:
-        return True
+        """False for a robot whose backend only reports (``replay`` of a recorded flight)."""
+        from .backends import NAVIGABLE
+
+        return NAVIGABLE.get(self.cfg.backend, True)
 
     def navigate(self, nav: AeroNavigation | PriorityQueue | Any) -> None:
         """Fly ``nav`` (usually the result of ``scheduler.generate_navigation``) with the environment's
-        trajectory scheduler; navigation that the scheduler has not queued yet is queued now."""
+        trajectory scheduler; navigation that the scheduler has not queued yet is queued now. Raises
+        :class:`aerodaas.backends.NotNavigable` for a robot that cannot fly (``is_navigable()`` is False)."""
+        if not self.is_navigable():
+            from .backends import NotNavigable
+
+            raise NotNavigable(f"robot {self.id!r}: backend {self.cfg.backend!r} is not navigable "
+                               f"(is_navigable() is False); it replays a recorded flight")
         sched = self.env.trajectory_scheduler()
         self.scheduler = sched
         data = nav.data if isinstance(nav, PriorityQueue) else nav

@@ -28,6 +28,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.hitl = True if args.hitl else None
     o.hitl_port = args.hitl_port
     results = []
+    runtime.start_ray_early(args.address)  # Ray's start (seconds) overlaps importing and building the app
 
     from . import api
 

@@ -55,23 +55,58 @@ class MissionResult:
 
 
 _STARTED_RAY = False
+_EARLY: dict[str, Any] = {}  # the background start of Ray (start_ray_early)
+
+
+def _init_ray(address: str | None) -> None:
+    global _STARTED_RAY
+    import ray
+
+    if address:
+        ray.init(address=address, log_to_driver=True, include_dashboard=False)
+    else:
+        # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
+        # num_cpus=1: hosts reserve no CPU (they are num_cpus=0 actors), so the CPU resource only sizes Ray's
+        # pool of prestarted workers: one, which the edge host takes (no idle 80 MB worker left around)
+        ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
+                 num_cpus=1, configure_logging=True, logging_level="warning")
+        _STARTED_RAY = True
+
+
+def start_ray_early(address: str | None = None) -> None:
+    """Start (or connect to) Ray in a background thread while the application is imported and built; the next
+    :func:`ensure_ray` waits for it. Ray's processes are tied to the thread that started them
+    (``PR_SET_PDEATHSIG``), so that thread stays alive, idle, for the life of the driver."""
+    import threading
+
+    if _EARLY:
+        return
+    ready = threading.Event()
+    _EARLY.update(ready=ready, error=None, address=address)
+
+    def keeper() -> None:
+        try:
+            _init_ray(address)
+        except BaseException as e:  # surfaced by ensure_ray in the main thread
+            _EARLY["error"] = e
+        ready.set()
+        threading.Event().wait()
+
+    threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
 
 
 def ensure_ray(address: str | None = None) -> bool:
     """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes."""
-    global _STARTED_RAY
     import ray
 
+    if _EARLY and _EARLY["address"] == address:
+        _EARLY["ready"].wait()
+        if _EARLY["error"] is not None:
+            err, _EARLY["error"] = _EARLY["error"], None
+            _EARLY.clear()
+            raise err
     if not ray.is_initialized():
-        if address:
-            ray.init(address=address, log_to_driver=True, include_dashboard=False)
-        else:
-            # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
-            # num_cpus=1: hosts reserve no CPU (they are num_cpus=0 actors), so the CPU resource only sizes Ray's
-            # pool of prestarted workers: one, which the edge host takes (no idle 80 MB worker left around)
-            ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
-                     num_cpus=1, configure_logging=True, logging_level="warning")
-            _STARTED_RAY = True
+        _init_ray(address)
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
 
 
@@ -79,9 +114,12 @@ def shutdown_ray() -> None:
     global _STARTED_RAY
     import ray
 
+    if _EARLY:
+        _EARLY["ready"].wait()
     if _STARTED_RAY and ray.is_initialized():
         ray.shutdown()
     _STARTED_RAY = False
+    _EARLY.clear()
 
 
 def _selector(tier: str, has_cloud: bool) -> dict[str, str]:
@@ -352,8 +390,12 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
 
 def _check_clocks(robots: list, sim: SimulationConfig) -> None:
-    """Real vehicles live in real time: lock-step needs every robot on the simulator. Raises ConfigError."""
+    """Real vehicles live in real time: lock-step needs every robot on the simulator. Raises ConfigError. A run
+    that only replays logs runs its clock at the replay rate (so odometry keeps its rate in log time)."""
     from .config import ConfigError
+
+    if robots and all(r.cfg.backend == "replay" for r in robots):
+        sim.speedup = max(r.cfg.replay.rate for r in robots)
 
     real = [r.id for r in robots if r.cfg.backend != "sim"]
     if real and sim.lockstep:

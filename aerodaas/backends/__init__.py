@@ -4,7 +4,11 @@ from __future__ import annotations
 
 from .base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
 
-__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend"]
+__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
+           "NAVIGABLE"]
+
+#: whether each backend can fly navigation (the replay of a log only reports); known without importing drivers
+NAVIGABLE = {"sim": True, "mavlink": True, "tello": True, "replay": False}
 
 
 def make_backend(cfg) -> VehicleBackend:

@@ -1,0 +1,139 @@
+"""Real-vehicle backends through the whole runtime: the same application code, only ``backend`` changes.
+
+* replay: a real PX4 flight log drives the stat-stream, odometry and events; the robot is not navigable;
+* tello: a short survey against the Tello SDK emulator, with the Tello's own video as the camera.
+"""
+from __future__ import annotations
+
+import json
+import socket
+
+import pytest
+
+from aerodaas import Analytics, AeroNavigation, Environment, MonitoringAnalytics, NavigationType, SchedulingType, Waypoint
+from aerodaas.backends import NotNavigable
+from aerodaas.config import parse_environment_config
+from aerodaas.metrics import load_run
+
+from .conftest import DATA_DIR
+
+TLOG = DATA_DIR / "tlogs" / "thayer_rural.tlog"
+
+
+class FrameCounter(Analytics):
+    name = "frames"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.shapes: list = []
+
+    def process(self, frame, meta):
+        self.shapes.append(frame.shape)
+        return None
+
+    def stats(self) -> dict:
+        return {"frames": len(self.shapes), "shapes": sorted({tuple(s) for s in self.shapes})}
+
+
+@pytest.mark.skipif(not TLOG.is_file(), reason=f"{TLOG} not found (set AERODAAS_DATA_DIR)")
+def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_session, run_options, tmp_path):
+    cfg = {"name": "replay", "robots": [{"id": "px4", "backend": "replay",
+                                         "replay": {"log": str(TLOG), "rate": 60},
+                                         "sensors": [{"id": "odom", "type": "odometry", "properties": {"rate_hz": 5}}]}]}
+    env = Environment(parse_environment_config(cfg))
+    drone = env.get_robot_by_id("px4")
+    assert not drone.is_navigable()
+    with pytest.raises(NotNavigable, match="not navigable"):
+        drone.navigate(AeroNavigation(waypoints=[Waypoint(id="w", x=1, y=1, z=5)]))
+    monitor = MonitoringAnalytics(["battery", "height", "speed"])
+    monitor.analyse(drone.get_sensor_by_id("odom").get_data_stream())
+    run_options.record = str(tmp_path / "replay.mcap")
+    res = drone.start_mission()
+    assert res.outcome == "success", res.robots["px4"].get("error")
+    run = load_run(run_options.record)
+    states = [s["state"] for s in run["states"]]
+    order = ["PREFLIGHT", "ARMED", "TAKING_OFF", "NAVIGATING", "LANDING", "LANDED"]
+    idx = [states.index(s) for s in order]
+    assert idx == sorted(idx), states  # the flight's phases, in order
+    reached = [e["seq"] for e in run["events"] if e["event"] == "mission_item_reached"]
+    assert reached == list(range(8))  # the uploaded mission's 8 items, each once
+    heights = [o["position"][2] for o in run["odometry"]]
+    assert 25 < max(heights) < 40 and len(run["odometry"]) > 1000  # ~30 m above ground, 5 Hz over ~300 s of log
+    summary = res.stats["px4"]["analytics"][0]["summary"]
+    assert summary["battery"]["min"] < summary["battery"]["max"] <= 100
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_tello_flies_the_survey_and_feeds_its_own_video_to_analytics(ray_session, run_options, tmp_path):
+    pytest.importorskip("av")
+    from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator
+
+    sp, vp = _free_udp_port(), _free_udp_port()
+    with TelloEmulator(state_port=sp, video_port=vp, video_size=(320, 240), video_fps=15) as emu:
+        cfg = {"name": "tello", "robots": [{
+            "id": "tello", "backend": "tello", "takeoff_altitude": 1.2,
+            "limits": json.loads(TELLO_LIMITS.model_dump_json()),
+            "tello": {"host": "127.0.0.1", "command_port": emu.command_port, "state_port": sp, "video_port": vp,
+                      "bind_host": "127.0.0.1", "command_timeout_s": 3.0},
+            "sensors": [{"id": "cam", "type": "camera", "properties": {"source": "backend", "width": 320,
+                                                                        "height": 240, "fps": 10}},
+                        {"id": "odom", "type": "odometry"}]}]}
+        env = Environment(parse_environment_config(cfg))
+        drone = env.get_robot_by_id("tello")
+        frames = FrameCounter()
+        frames.analyse(drone.get_sensor_by_id("cam").get_data_stream())
+        wps = [Waypoint(id="a", x=1.0, y=0.0, z=1.2, hover_duration=0.5, acceptance_radius=0.3),
+               Waypoint(id="b", x=1.0, y=1.0, z=1.2, hover_duration=0.5, acceptance_radius=0.3)]
+        drone.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, SchedulingType.ORDERED))
+        run_options.record = str(tmp_path / "tello.mcap")
+        res = drone.start_mission(timeout=90)
+        rep = res.robots["tello"]
+        assert res.outcome == "success", (rep.get("error"), rep["state_history"])
+        assert [v["id"] for v in rep["visited_waypoints"]] == ["a", "b"]
+        # the Tello was flown with SDK commands (take-off, `go` legs, land) and the emulated vehicle itself, not just
+        # our dead reckoning, ended at the last waypoint
+        sent = [t.split(" ", 1)[0] for _, t in emu.received]
+        assert sent.count("takeoff") == 1 and "go" in sent and "land" in sent
+        x, y, _ = emu.vehicle.state.position
+        assert abs(x - 1.0) < 0.35 and abs(y - 1.0) < 0.35
+        st = res.stats["tello"]["analytics"][0]
+        assert st["frames"] >= 5 and st["shapes"] == [(240, 320, 3)]
+        assert rep["state"] == "LANDED" and not emu.vehicle.state.in_air
+
+
+def test_a_recorded_camera_channel_replays_into_analytics(tmp_path):
+    """Analytics re-run on a recorded flight: a camera with ``source: mcap`` serves the recorded frame at each time."""
+    import numpy as np
+
+    from aerodaas.recording import McapRecorder
+
+    from .test_dataplane import FrameProbe, _host_for
+
+    path = tmp_path / "flight.mcap"
+    recorded = []
+    with McapRecorder(path, jpeg_quality=95) as rec:
+        rec.write_json("/start", 0, {"t": 0}, schema_name="aerodaas.Start")  # the recording's time origin
+        for i in range(5):
+            img = np.full((60, 80, 3), 40 * i, np.uint8)
+            recorded.append(img)
+            rec.write_image("/uav/camera/cam", int((0.5 + i) * 1e9), img)
+    cfg = {"name": "rerun", "robots": [{"id": "uav", "sensors": [{"id": "cam", "type": "camera", "properties": {
+        "source": "mcap", "mcap": str(path), "width": 80, "height": 60, "fps": 2}}]}]}
+    env = Environment(parse_environment_config(cfg))
+    probe = FrameProbe()
+    probe.analyse(env.get_robot_by_id("uav").get_sensor_by_id("cam").get_data_stream())
+    host, rt, _ = _host_for(env)
+    try:
+        cam = rt.drones[0].cameras[0]["comp"]
+        got = [cam.capture((0.0, 0.0, 3.0), 90.0, t, k) for k, t in enumerate((0.2, 0.6, 0.9, 2.7, 4.6), 1)]
+        assert got[0] is None and got[2] is None  # before the first frame; no new frame since 0.6 s
+        assert cam.dropped_at_camera == 2
+        seen = rt.comps["probe#1"].obj.seen
+        assert [int(f.mean()) for f in seen] == [0, 80, 160]  # recorded frames 0, 2 and 4 (at 0.5, 2.5, 4.5 s)
+    finally:
+        rt.close()
