@@ -446,7 +446,7 @@ class HostRuntime:
                 nominal = step * dt
                 tok = Cascade() if lock else None
                 for d in active:
-                    d.step(dt) if tok is None else self._step_lockstep(d, dt, tok)
+                    d.step(dt, tok)
                 for d in active:
                     b = d.backend
                     for cam in d.cameras:
@@ -489,16 +489,6 @@ class HostRuntime:
             for d in drones:
                 d.close()
         return {d.cfg.id: d.report() for d in drones}
-
-    @staticmethod
-    def _step_lockstep(d: Any, dt: float, tok: Cascade) -> None:
-        with d.lock:
-            d.backend.step(dt)
-            for ev in d.backend.drain_events():
-                d._event(ev.pop("event", "backend_event"), **ev)
-        if d.backend.t + 1e-9 >= d.next_odom:
-            d.next_odom += d.odom_period
-            d.publish_odometry(tok)
 
     # ------------------------------------------------------------------ end
     def stats(self) -> dict:

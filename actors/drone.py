@@ -149,9 +149,9 @@ class DroneComponent:
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
     # ------------------------------------------------------------------ the clock thread
-    def step(self, dt: float) -> None:
+    def step(self, dt: float, tok: Any = None) -> None:
         """Advance the backend (simulator: ``dt`` seconds; others: process what arrived) and publish odometry
-        when due. Backend events are recorded."""
+        when due (in lock-step, as part of the cascade ``tok``). Backend events are recorded."""
         with self.lock:
             self.backend.step(dt)
             for ev in self.backend.drain_events():
@@ -160,7 +160,7 @@ class DroneComponent:
             self.next_odom += self.odom_period
             if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
                 self.next_odom = self.backend.t + self.odom_period
-            self.publish_odometry()
+            self.publish_odometry(tok)
 
     def publish_odometry(self, tok: Any = None) -> None:
         odom = self.backend.odometry().model_dump(mode="json")

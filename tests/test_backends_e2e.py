@@ -6,7 +6,6 @@
 from __future__ import annotations
 
 import json
-import socket
 
 import pytest
 
@@ -16,6 +15,7 @@ from aerodaas.config import parse_environment_config
 from aerodaas.metrics import load_run
 
 from .conftest import DATA_DIR
+from aerodaas.emulators import free_udp_port
 
 TLOG = DATA_DIR / "tlogs" / "thayer_rural.tlog"
 
@@ -63,17 +63,12 @@ def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_sessi
     assert summary["battery"]["min"] < summary["battery"]["max"] <= 100
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def test_a_tello_flies_the_survey_and_feeds_its_own_video_to_analytics(ray_session, run_options, tmp_path):
     pytest.importorskip("av")
     from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator
 
-    sp, vp = _free_udp_port(), _free_udp_port()
+    sp, vp = free_udp_port(), free_udp_port()
     with TelloEmulator(state_port=sp, video_port=vp, video_size=(320, 240), video_fps=15) as emu:
         cfg = {"name": "tello", "robots": [{
             "id": "tello", "backend": "tello", "takeoff_altitude": 1.2,

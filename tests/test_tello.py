@@ -1,7 +1,6 @@
 """The DJI Tello backend against the Tello SDK 2.0 emulator on loopback UDP."""
 from __future__ import annotations
 
-import socket
 import time
 
 import numpy as np
@@ -12,18 +11,12 @@ from aerodaas.backends.base import CommandRefused, LinkLost
 from aerodaas.backends.tello import go_command, parse_state
 from aerodaas.config import RobotConfig, TelloConfig
 from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator, format_state
+from aerodaas.emulators import free_udp_port
 
 pytest.importorskip("av")
 
 HEADING = 30.0  # the emulated Tello's power-on heading, compass degrees: makes every frame conversion matter
 
-
-def _free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def _wait(pred, timeout: float, what: str) -> None:
@@ -39,7 +32,7 @@ def tello(request):
     """(emulator, backend) connected on loopback; per-test options via ``@pytest.mark.tello(emu={}, cfg={})``."""
     mark = request.node.get_closest_marker("tello")
     opts = mark.kwargs if mark else {}
-    sp, vp = _free_udp_port(), _free_udp_port()
+    sp, vp = free_udp_port(), free_udp_port()
     emu = TelloEmulator(state_port=sp, video_port=vp, initial_heading_deg=HEADING, **opts.get("emu", {})).start()
     tcfg = dict(host="127.0.0.1", command_port=emu.command_port, state_port=sp, video_port=vp,
                 bind_host="127.0.0.1", initial_heading_deg=HEADING, command_timeout_s=1.0, video=False,

@@ -15,6 +15,8 @@ and ``decode_ms`` — the CPU time to decode one frame to BGR, measured offline 
 """
 from __future__ import annotations
 
+from aerodaas.emulators import free_udp_port
+
 import argparse
 import json
 import os
@@ -34,19 +36,11 @@ def _percentiles(xs: list[float]) -> dict:
             "mean": round(statistics.fmean(xs), 2)}
 
 
-def _free_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
-
-
 def _stream(width: int, height: int, fps: float, video_port: int):
     """A started emulator streaming to ``video_port`` on loopback, and the client socket that asked for it."""
     from ..emulators.tello import TelloEmulator
 
-    emu = TelloEmulator(video_port=video_port, state_port=_free_port(), video_size=(width, height), video_fps=fps,
+    emu = TelloEmulator(video_port=video_port, state_port=free_udp_port(), video_size=(width, height), video_fps=fps,
                         stamp_frame_index=True, camera_pitch_deg=30.0).start()
     cli = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     cli.settimeout(2.0)
@@ -61,7 +55,7 @@ def run_pyav(width: int, height: int, fps: float, seconds: float, record: str | 
     from ..backends.tello import H264Reassembler
     from ..emulators.tello import read_index
 
-    port = _free_port()
+    port = free_udp_port()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
     sock.bind(("127.0.0.1", port))
@@ -112,7 +106,7 @@ def run_opencv(width: int, height: int, fps: float, seconds: float, low_delay: b
 
     from ..emulators.tello import read_index
 
-    port = _free_port()
+    port = free_udp_port()
     res: dict = {"opened": False}
     lat: list[float] = []
     emu_box: list = []

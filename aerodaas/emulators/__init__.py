@@ -1,3 +1,12 @@
 """Protocol emulators for testing the real-vehicle backends on loopback, written from the protocols' public
 specifications (MAVLink common message set and the autopilots' documented behaviour; the Tello SDK 2.0),
 not from our backends' assumptions."""
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port on ``host`` that was free a moment ago (bind to port 0, read it back, release it)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
