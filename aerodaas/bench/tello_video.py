@@ -15,8 +15,6 @@ and ``decode_ms`` — the CPU time to decode one frame to BGR, measured offline 
 """
 from __future__ import annotations
 
-from aerodaas.emulators import free_udp_port
-
 import argparse
 import json
 import os
@@ -26,6 +24,7 @@ import tempfile
 import threading
 import time
 
+from aerodaas.emulators import free_udp_port
 
 def _percentiles(xs: list[float]) -> dict:
     if not xs:
