@@ -103,6 +103,8 @@ class MavlinkBackend(VehicleBackend):
         self.autopilot: Literal["ardupilot", "px4"] | None = None
         self.vehicle_type: str = ""
         self.command_rtt_ms: list[float] = []
+        #: every message the receive path saw, unknown and malformed ones included
+        self.messages_received = 0
         self._conn: Any = None
         self._sysid = self._compid = 0
         self._lock = threading.RLock()
@@ -295,6 +297,7 @@ class MavlinkBackend(VehicleBackend):
 
     def _dispatch(self, msg: Any, now: float) -> None:
         mtype = msg.get_type()
+        self.messages_received += 1
         if mtype == "BAD_DATA" or mtype.startswith("UNKNOWN_"):
             return
         key = (msg.get_srcSystem(), msg.get_srcComponent(), msg.get_seq(), msg.get_msgId(), getattr(msg, "_crc", 0))
@@ -448,14 +451,19 @@ class MavlinkBackend(VehicleBackend):
     def _on_mission_current(self, msg: Any) -> None:
         if msg.seq != self._mission_seq:
             self._mission_seq = msg.seq
-            self._event("mission_current", seq=msg.seq)
+            self._event("mission_current", seq=msg.seq, item=self._item_number(msg.seq))
+
+    def _item_number(self, wire_seq: int) -> int:
+        """The :class:`MissionItem` ``seq`` (from 1, as :meth:`upload_mission` returns) of a wire sequence number:
+        ArduPilot's wire numbering already starts at 1 (home is 0), PX4's at 0."""
+        return wire_seq if self.autopilot == "ardupilot" else wire_seq + 1
 
     def _on_mission_item_reached(self, msg: Any) -> None:
         now = time.monotonic()
         if self._last_reached[0] == msg.seq and now - self._last_reached[1] < 1.0:
             return
         self._last_reached = (msg.seq, now)
-        self._event("mission_item_reached", seq=msg.seq)
+        self._event("mission_item_reached", seq=msg.seq, item=self._item_number(msg.seq))
 
     def _periodic(self, now: float) -> None:
         if now >= self._hb_next:

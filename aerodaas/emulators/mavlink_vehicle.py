@@ -739,6 +739,10 @@ class MavlinkVehicleEmulator:
             return M.MAV_RESULT_ACCEPTED
         if not force:
             if self.px4:
+                why = self._prearm()  # health checks first (PX4 reports every failing check; we send the first)
+                if why:
+                    self._text(M.MAV_SEVERITY_CRITICAL, f"Preflight Fail: {why}")
+                    return M.MAV_RESULT_TEMPORARILY_REJECTED
                 if self.mode in _PX4_MANUAL:
                     self._text(M.MAV_SEVERITY_CRITICAL, "Preflight Fail: No manual control input")
                     return M.MAV_RESULT_TEMPORARILY_REJECTED
@@ -747,10 +751,6 @@ class MavlinkVehicleEmulator:
                     return M.MAV_RESULT_TEMPORARILY_REJECTED
                 if self.mode == "OFFBOARD" and not self._offboard_stream_ok():
                     self._text(M.MAV_SEVERITY_CRITICAL, "Preflight Fail: offboard control signal lost")
-                    return M.MAV_RESULT_TEMPORARILY_REJECTED
-                why = self._prearm()
-                if why:
-                    self._text(M.MAV_SEVERITY_CRITICAL, f"Preflight Fail: {why}")
                     return M.MAV_RESULT_TEMPORARILY_REJECTED
             else:
                 if self.mode not in _AP_ARMABLE:
