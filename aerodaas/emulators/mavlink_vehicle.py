@@ -94,6 +94,12 @@ _PX4_DEFAULT_STREAMS: dict[int, float] = {
     M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0, M.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0, M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
 }
 
+#: messages the vehicle can stream (SET_MESSAGE_INTERVAL); others are DENIED
+_STREAMABLE = {M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_SYSTEM_TIME,
+               M.MAVLINK_MSG_ID_GPS_RAW_INT, M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+               M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_VFR_HUD,
+               M.MAVLINK_MSG_ID_BATTERY_STATUS, M.MAVLINK_MSG_ID_HOME_POSITION, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE}
+
 _NAV_COMMANDS = {M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH,
                  M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_LOITER_UNLIM}
 _MISSION_COMMANDS = _NAV_COMMANDS | {M.MAV_CMD_DO_CHANGE_SPEED}
@@ -262,7 +268,8 @@ class MavlinkVehicleEmulator:
         self.item_started = False
         self.reached_log: list[int] = []
         self._transfer: _Transfer | None = None
-        self._intervals: dict[int, float] = dict(_PX4_DEFAULT_STREAMS) if self.px4 else {}
+        # message id -> interval in vehicle seconds
+        self._intervals: dict[int, float] = {m: 1.0 / hz for m, hz in _PX4_DEFAULT_STREAMS.items()} if self.px4 else {}
         self._next_due: dict[int, float] = {}
         self._next_hb = 0.0
         self.statustexts: list[str] = []
@@ -842,14 +849,14 @@ class MavlinkVehicleEmulator:
             if not self.message_interval_supported:
                 return M.MAV_RESULT_UNSUPPORTED
             msg_id, interval = int(p[0]), p[1]
-            if self._build(msg_id) is None:
+            if msg_id not in _STREAMABLE:
                 return M.MAV_RESULT_DENIED
             if interval == -1:
                 self._intervals.pop(msg_id, None)
             elif interval == 0:
                 default = _PX4_DEFAULT_STREAMS.get(msg_id) if self.px4 else None
                 if default:
-                    self._intervals[msg_id] = default
+                    self._intervals[msg_id] = 1.0 / default
                 else:
                     self._intervals.pop(msg_id, None)
             elif interval > 0:
