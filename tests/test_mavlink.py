@@ -132,6 +132,27 @@ def test_connect_arm_takeoff_square_velocity_land_rtl(fly, autopilot):
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_goto_speed_cap(fly, autopilot):
+    """goto(speed=0.5): ArduPilot through DO_CHANGE_SPEED, PX4 (which flies OFFBOARD position setpoints at its own
+    limit) through a setpoint moving at 0.5 m/s; without a speed the vehicle's limit (2 m/s) applies again."""
+    emu, b = fly(autopilot)
+    b.arm()
+    b.takeoff(3.0)
+    assert run_until(b, lambda: b.position[2] > 2.8, 15)
+    speeds: list = []
+    sample = lambda: speeds.append(float(np.hypot(*emu.veh.state.velocity[:2])))  # noqa: E731 - ground truth
+    t0 = b.t
+    b.goto((6.0, 0.0, 3.0), speed=0.5)
+    assert run_until(b, lambda: dist(b.position, (6, 0, 3)) < 0.3, 20, every=sample), b.position
+    assert 10.0 < b.t - t0 < 16.0  # 6 m at 0.5 m/s, in vehicle seconds
+    assert max(speeds) < 0.75  # peaks while the position loop catches up with the moving PX4 setpoint
+    speeds.clear()
+    b.goto((0.0, 0.0, 3.0))
+    assert run_until(b, lambda: dist(b.position, (0, 0, 3)) < 0.3, 20, every=sample), b.position
+    assert max(speeds) > 1.5
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_refused_commands_carry_result_and_status_text(fly, autopilot):
     emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.3})
     emu.set_prearm_failure("Compass not calibrated")

@@ -56,6 +56,7 @@ _IGNORE_YAW = 1024
 _IGNORE_YAW_RATE = 2048
 POSITION_ONLY_MASK = _IGNORE_VEL | _IGNORE_ACC | _IGNORE_YAW | _IGNORE_YAW_RATE
 VELOCITY_ONLY_MASK = _IGNORE_POS | _IGNORE_ACC | _IGNORE_YAW  # yaw rate is used
+POSITION_VELOCITY_MASK = _IGNORE_ACC | _IGNORE_YAW | _IGNORE_YAW_RATE  # velocity as feed-forward
 _GLOBAL_FRAMES = {0, 3, 5, 6, 10, 11}
 _TELEMETRY = ((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, None), (M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, None),
               (M.MAVLINK_MSG_ID_ATTITUDE, None), (M.MAVLINK_MSG_ID_SYS_STATUS, 2.0), (M.MAVLINK_MSG_ID_GPS_RAW_INT, 2.0),
@@ -291,10 +292,6 @@ class MavlinkBackend(VehicleBackend):
                 except Exception:  # noqa: BLE001
                     time.sleep(0.005)
 
-    def feed(self, msg: Any) -> None:
-        """Process one received pymavlink message as the I/O thread does (for replaying logs and tests)."""
-        self._dispatch(msg, time.monotonic())
-
     def _dispatch(self, msg: Any, now: float) -> None:
         mtype = msg.get_type()
         self.messages_received += 1
@@ -504,13 +501,32 @@ class MavlinkBackend(VehicleBackend):
     def _boot_ms_out(self) -> int:
         return int((time.monotonic() - self._wall0) * 1000) & 0xFFFFFFFF
 
+    def _carrot(self, sp: tuple) -> tuple:
+        """A speed-capped goto as the position setpoint to send now: ``("carrot", start_enu, target_enu, speed m/s,
+        vehicle t0)`` moves from start towards target at ``speed`` metres per vehicle second."""
+        _, start, target, speed, t0 = sp
+        delta = target - start
+        length = float(np.linalg.norm(delta))
+        frac = 1.0 if length < 1e-6 else min(1.0, speed * max(0.0, self.t - t0) / length)
+        p = start + delta * frac
+        v = delta / length * speed if frac < 1.0 else np.zeros(3)  # velocity feed-forward, ENU
+        g = enu_to_geodetic(float(p[0]), float(p[1]), 0.0, self.home)
+        return ("posvel", int(round(g.lat * 1e7)), int(round(g.lon * 1e7)), float(p[2]), *self.enu_to_ned(v))
+
     def _send_setpoint(self, sp: tuple) -> None:
         try:
+            if sp[0] == "carrot":
+                sp = self._carrot(sp)
             if sp[0] == "pos":
                 _, lat_i, lon_i, alt = sp
                 self._send(lambda mav: mav.set_position_target_global_int_send(
                     self._boot_ms_out(), self._sysid, self._compid, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                     POSITION_ONLY_MASK, lat_i, lon_i, alt, 0, 0, 0, 0, 0, 0, 0, 0))
+            elif sp[0] == "posvel":
+                _, lat_i, lon_i, alt, vn, ve, vd = sp
+                self._send(lambda mav: mav.set_position_target_global_int_send(
+                    self._boot_ms_out(), self._sysid, self._compid, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                    POSITION_VELOCITY_MASK, lat_i, lon_i, alt, vn, ve, vd, 0, 0, 0, 0, 0))
             else:
                 _, vn, ve, vd, yaw_rate = sp
                 self._send(lambda mav: mav.set_position_target_local_ned_send(
@@ -853,8 +869,12 @@ class MavlinkBackend(VehicleBackend):
 
     def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
         """Fly to ``target_enu`` (ENU metres from home) with SET_POSITION_TARGET_GLOBAL_INT
-        (MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, position-only type mask), re-sent by the I/O thread; a ``speed``
-        (m/s) cap goes out as MAV_CMD_DO_CHANGE_SPEED (ground speed). Raises ValueError for a non-finite target."""
+        (MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, position-only type mask), re-sent by the I/O thread. A ``speed`` cap
+        (m/s): ArduPilot gets MAV_CMD_DO_CHANGE_SPEED (ground speed; GUIDED honours it); PX4 OFFBOARD flies
+        position setpoints at its own velocity limit (DO_CHANGE_SPEED is a navigator/mission command), so the
+        streamed setpoint itself moves from here towards the target at ``speed`` per vehicle second, with that
+        velocity as feed-forward (position + velocity type mask).
+        Raises ValueError for a non-finite target or a non-positive speed."""
         self._require_navigable("goto")
         x, y, z = (float(v) for v in target_enu)
         if not all(math.isfinite(v) for v in (x, y, z)):
@@ -862,9 +882,13 @@ class MavlinkBackend(VehicleBackend):
         if speed is not None and not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"goto speed must be a positive number of m/s or None, got {speed!r}")
         self._check_link("goto")
+        if self.autopilot == "px4" and speed is not None:
+            self._enter_guided(("carrot", self.position, np.array([x, y, z]), float(speed), self.t))
+            return
         g = enu_to_geodetic(x, y, 0.0, self.home)
         sp = ("pos", int(round(g.lat * 1e7)), int(round(g.lon * 1e7)), z)
-        self._change_speed(speed)
+        if self.autopilot == "ardupilot":
+            self._change_speed(speed)
         self._enter_guided(sp)
 
     def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:

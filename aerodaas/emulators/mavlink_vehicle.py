@@ -260,6 +260,7 @@ class MavlinkVehicleEmulator:
         self.setpoint_times: list[float] = []
         self.velocity_deadline: float | None = None  # ArduPilot GUIDED velocity timeout
         self._last_target: tuple | None = None  # last position/velocity target (PX4 acts on it in OFFBOARD)
+        self.posvel: tuple | None = None  # active position + velocity feed-forward target (ENU m, m/s)
         self.takeoff_alt: float | None = None
         self.mission: list[Any] = []  # MISSION_ITEM_INT-like messages, wire sequence
         self.mission_seq = 0
@@ -543,6 +544,11 @@ class MavlinkVehicleEmulator:
                 after = self.params["COM_DISARM_LAND"] if self.px4 else 1.0
                 if self.t - self.landed_at > after:
                     self._disarm("landed")
+        if self.posvel is not None:
+            if mode in ("GUIDED", "OFFBOARD") and s.armed and s.in_air:
+                self._track_posvel()
+            else:
+                self.posvel = None
         # ArduPilot GUIDED velocity targets time out after 3 s
         if self.velocity_deadline is not None and self.t > self.velocity_deadline:
             self.velocity_deadline = None
@@ -605,9 +611,11 @@ class MavlinkVehicleEmulator:
     def _goto_enu(self, target: np.ndarray) -> None:
         sp = self.veh.setpoint
         t = tuple(float(v) for v in target)
-        if sp.mode == "position" and sp.target == t and sp.speed == self.speed:
+        # PX4 flies OFFBOARD position setpoints at its velocity limit: DO_CHANGE_SPEED is for navigator modes
+        speed = None if self.px4 and self.mode == "OFFBOARD" else self.speed
+        if sp.mode == "position" and sp.target == t and sp.speed == speed:
             return
-        self.veh.goto(t, self.speed)
+        self.veh.goto(t, speed)
 
     # ------------------------------------------------------------------ modes
     def _mode_number(self) -> tuple[int, int]:
@@ -683,6 +691,7 @@ class MavlinkVehicleEmulator:
         prev = self.mode
         self.mode = name
         self.phase = ""
+        self.posvel = None
         self.velocity_deadline = None
         if name in ("AUTO", "AUTO.MISSION") and prev not in ("AUTO", "AUTO.MISSION"):
             if not self.px4 and s.armed and not s.in_air:
@@ -842,8 +851,8 @@ class MavlinkVehicleEmulator:
             elif p[1] != -1:
                 return M.MAV_RESULT_DENIED
             sp = self.veh.setpoint
-            if sp.mode == "position" and sp.target is not None:
-                self.veh.goto(sp.target, self.speed)
+            if sp.mode == "position":  # the leg being flown changes speed too
+                sp.speed = None if self.px4 and self.mode == "OFFBOARD" else self.speed
             return M.MAV_RESULT_ACCEPTED
         if cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
             if not self.message_interval_supported:
@@ -948,7 +957,13 @@ class MavlinkVehicleEmulator:
             return
         if not self.px4 and not s.in_air and self.takeoff_alt is None:
             return  # ArduPilot ignores guided targets until it has taken off
-        if pos_enu is not None:
+        self.posvel = None
+        if pos_enu is not None and vel_enu is not None:  # position with velocity feed-forward
+            self.velocity_deadline = None
+            self.takeoff_alt = None
+            self.posvel = (np.asarray(pos_enu, float), np.asarray(vel_enu, float))
+            self._track_posvel()
+        elif pos_enu is not None:
             self.velocity_deadline = None
             self.takeoff_alt = None
             self._goto_enu(pos_enu)
@@ -958,13 +973,22 @@ class MavlinkVehicleEmulator:
             if not self.px4:
                 self.velocity_deadline = self.t + 3.0
 
+    def _track_posvel(self) -> None:
+        """Position + velocity target: the autopilots' position loop, v = v_ff + Kp (p_sp - p) (PX4 MPC_XY_P
+        0.95, ArduPilot PSC_POSXY_P 1.0), re-evaluated every physics step."""
+        pos, vel = self.posvel
+        kp = 0.95 if self.px4 else 1.0
+        v = vel + kp * (pos - self.veh.state.position)
+        self.veh.set_velocity(tuple(float(c) for c in v), 0.0)
+
     def _decode_target(self, msg: Any, pos_fn: Callable[[], np.ndarray]) -> None:
         tm = msg.type_mask
         pos_ign = (tm & 0b111) == 0b111
         vel_ign = (tm & 0b111000) == 0b111000
         yaw_rate = None if tm & M.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE else -math.degrees(msg.yaw_rate)
         if not pos_ign:
-            self._apply_target(pos_fn(), None, yaw_rate)
+            vel = None if vel_ign else np.array([msg.vy, msg.vx, -msg.vz])
+            self._apply_target(pos_fn(), vel, yaw_rate)
         elif not vel_ign:
             self._apply_target(None, np.array([msg.vy, msg.vx, -msg.vz]), yaw_rate)
         else:
