@@ -1,4 +1,4 @@
-"""The ``aerodaas`` command line: ``run``, ``info``, ``schema``."""
+"""The ``aerodaas`` command line: ``run``, ``info``, ``schema``, ``sim`` and more."""
 from __future__ import annotations
 
 import argparse
@@ -123,6 +123,39 @@ def _cmd_inject(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sim(args: argparse.Namespace) -> int:
+    """``aerodaas sim --mavlink ADDR``: the flight model as an ArduPilot/PX4 vehicle until Ctrl-C."""
+    import time
+
+    from .emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from .models import GeoPoint
+
+    home = None
+    if args.home:
+        try:
+            lat, lon, alt = (float(v) for v in args.home.split(","))
+            home = GeoPoint(lat=lat, lon=lon, alt=alt)
+        except ValueError as e:
+            print(f"aerodaas sim: --home expects LAT,LON,ALT (degrees, degrees, metres AMSL), got {args.home!r} "
+                  f"({e})", file=sys.stderr)
+            return 2
+    try:
+        emu = MavlinkVehicleEmulator(args.autopilot, home=home, speedup=args.speedup, system_id=args.sysid)
+        address = emu.start(args.mavlink, allow_remote=args.allow_remote)
+    except (ValueError, OSError) as e:
+        print(f"aerodaas sim: {e}", file=sys.stderr)
+        return 2
+    print(f"aerodaas sim: {args.autopilot} vehicle (system {args.sysid}) on {address}, {args.speedup:g}x real time; "
+          "Ctrl-C to stop", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        emu.stop()
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from .config import json_schema
 
@@ -172,6 +205,15 @@ def main(argv: list[str] | None = None) -> int:
         return cmd_plot(a)
 
     pl.set_defaults(func=_cmd_plot)
+    sm = sub.add_parser("sim", help="serve the simulator as a MAVLink vehicle (ArduPilot or PX4 behaviour)")
+    sm.add_argument("--mavlink", required=True, metavar="ADDR",
+                    help="tcp:HOST:PORT (server), udpin:HOST:PORT or udpout:HOST:PORT, e.g. tcp:127.0.0.1:5760")
+    sm.add_argument("--autopilot", choices=["ardupilot", "px4"], default="ardupilot")
+    sm.add_argument("--speedup", type=float, default=1.0, help="vehicle time runs K times faster than real time")
+    sm.add_argument("--home", metavar="LAT,LON,ALT", help="home position (degrees, degrees, metres AMSL)")
+    sm.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
+    sm.add_argument("--allow-remote", action="store_true", help="allow a non-loopback address")
+    sm.set_defaults(func=_cmd_sim)
     bench = sub.add_parser("bench", help="benchmarks (tours: trajectory schedulers); --json for JSON output")
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 

@@ -158,7 +158,11 @@ class MavlinkConfig(_Cfg):
     ``command_timeout_s`` seconds for its COMMAND_ACK and is re-sent up to ``command_retries`` times.
     ``stream_rate_hz`` is the rate requested for telemetry (MAV_CMD_SET_MESSAGE_INTERVAL).
     ``use_autopilot_mission``: fly pre-planned ORDERED waypoint missions as an autopilot mission (uploaded with the
-    MISSION_ITEM_INT protocol, AUTO/MISSION mode) instead of streaming position targets."""
+    MISSION_ITEM_INT protocol, AUTO/MISSION mode) instead of streaming position targets.
+    ``arm_timeout_s``: how long (wall seconds) ``arm()`` waits for the vehicle to report itself armable (3-D GPS
+    fix, pre-arm and AHRS health bits of SYS_STATUS) before it asks anyway, so that a refusal carries the
+    autopilot's reason. ``setpoint_rate_hz``: rate, in the vehicle's own time, at which the active position or
+    velocity target is re-sent (PX4 OFFBOARD needs more than 2 Hz; ArduPilot stops a velocity target after 3 s)."""
 
     connection: str = Field(default="tcp:127.0.0.1:5760", min_length=1)
     baud: int = Field(default=57600, gt=0)
@@ -172,6 +176,8 @@ class MavlinkConfig(_Cfg):
     command_retries: int = Field(default=3, ge=0)
     stream_rate_hz: float = Field(default=10.0, gt=0)
     use_autopilot_mission: bool = False
+    arm_timeout_s: float = Field(default=30.0, gt=0)
+    setpoint_rate_hz: float = Field(default=10.0, gt=2.0)
 
 
 class TelloConfig(_Cfg):

@@ -1,0 +1,440 @@
+"""The MAVLink backend against the emulated ArduPilot / PX4 vehicle (in-process, loopback TCP, faster than real
+time), the real PX4 telemetry log, and MAVProxy as a third-party ground station."""
+from __future__ import annotations
+
+import math
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aerodaas.backends import CommandRefused, LinkLost, make_backend
+from aerodaas.backends.mavlink import MavlinkBackend
+from aerodaas.config import MavlinkConfig, RobotConfig
+from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.geo import geodetic_to_enu
+from aerodaas.missionfile import load_mission
+from aerodaas.models import GeoPoint, Waypoint
+
+from .conftest import DATA_DIR
+
+AUTOPILOTS = ["ardupilot", "px4"]
+CONFIG_HOME = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
+VEHICLE_HOME = GeoPoint(lat=47.39797, lon=8.5456, alt=500.0)  # 30 m north of, 12 m above the configured home
+RTL_PARAMS = {"ardupilot": {"RTL_ALT": 800.0}, "px4": {"RTL_RETURN_ALT": 8.0}}
+REFUSED = {"ardupilot": "MAV_RESULT_FAILED", "px4": "MAV_RESULT_TEMPORARILY_REJECTED"}
+PREARM_PREFIX = {"ardupilot": "PreArm: ", "px4": "Preflight Fail: "}
+
+
+@pytest.fixture
+def fly():
+    """fly(autopilot, speedup=10, emulator kwargs..., mavlink=dict of MavlinkConfig fields) -> (emulator, backend),
+    connected; everything is stopped after the test."""
+    made: list = []
+
+    def make(autopilot: str, speedup: float = 10.0, mavlink: dict | None = None, connect: bool = True, **emu_kw):
+        emu_kw.setdefault("home", VEHICLE_HOME)
+        emu_kw.setdefault("gps_lock_s", 1.0)
+        if autopilot == "px4":
+            # PX4 leaves OFFBOARD after COM_OF_LOSS_T (1 s) of vehicle time without a setpoint: 100 ms of wall time
+            # at 10x. Emulator and backend share this process, and on a loaded 2-core machine a thread can starve
+            # for that long (measured: 118 ms at load average 8), so the tests give the stream 3 s.
+            emu_kw["params"] = {"COM_OF_LOSS_T": 3.0, **emu_kw.get("params", {})}
+        emu = MavlinkVehicleEmulator(autopilot, speedup=speedup, **emu_kw)
+        made.append(emu)
+        address = emu.start("tcp:127.0.0.1:0")
+        mc = MavlinkConfig(connection=address, **{"stream_rate_hz": 5.0, **(mavlink or {})})
+        backend = make_backend(RobotConfig(id="quad", backend="mavlink", home=CONFIG_HOME, mavlink=mc))
+        made.append(backend)
+        if connect:
+            backend.connect(timeout_s=10)
+        return emu, backend
+
+    yield make
+    for obj in reversed(made):
+        obj.close() if isinstance(obj, MavlinkBackend) else obj.stop()
+
+
+def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:
+    """Drive the backend like the runtime does (step() at 20 Hz wall) until ``cond()``; ``every()`` each tick."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        backend.step(0.05)
+        if every is not None:
+            every()
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def dist(a, b) -> float:
+    return float(np.linalg.norm(np.asarray(a, float) - np.asarray(b, float)))
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_connect_arm_takeoff_square_velocity_land_rtl(fly, autopilot):
+    emu, b = fly(autopilot, params=RTL_PARAMS[autopilot])
+    assert b.autopilot == autopilot and b.vehicle_type == "MAV_TYPE_QUADROTOR"
+    # HOME_POSITION replaces the configured home as ENU origin
+    assert run_until(b, lambda: b.home_received, 5)
+    assert abs(b.home.lat - VEHICLE_HOME.lat) < 1e-6 and abs(b.home.alt - VEHICLE_HOME.alt) < 0.01
+    assert dist(b.position, (0, 0, 0)) < 0.2
+    b.arm()
+    assert b.armed and emu.snapshot()["armed"]
+    b.takeoff(5.0)
+    assert run_until(b, lambda: abs(b.position[2] - 5.0) < 0.3 and b.in_air, 15), b.position
+    # a 4-waypoint square flown with goto(), positions relative to the vehicle's real home
+    for corner in [(8, 0, 5), (8, 8, 5), (0, 8, 5), (0, 0, 5)]:
+        b.goto(corner)
+        assert run_until(b, lambda: dist(b.position, corner) < 0.5, 20), (corner, b.position, b.drain_events(),
+                                                                          emu.snapshot()["statustexts"])
+        assert dist(emu.snapshot()["position"], corner) < 1.0  # the vehicle agrees with the backend
+    assert b.mode == ("OFFBOARD" if autopilot == "px4" else "GUIDED")
+    # velocity commands are ENU: east, then north; re-sent each tick like the runtime does (from a hover)
+    b.hold()
+    assert run_until(b, lambda: np.linalg.norm(b.velocity) < 0.05, 10)
+    start = b.position
+    assert run_until(b, lambda: b.position[0] - start[0] > 2.5, 10, every=lambda: b.set_velocity((1.0, 0.0, 0.0)))
+    assert abs(b.position[1] - start[1]) < 0.3 and abs(b.position[2] - start[2]) < 0.3
+    assert b.velocity[0] > 0.8 and abs(b.velocity[1]) < 0.2 and abs(b.velocity[2]) < 0.2
+    start = b.position
+    assert run_until(b, lambda: b.position[1] - start[1] > 2.5, 10, every=lambda: b.set_velocity((0.0, 1.0, 0.0)))
+    assert b.velocity[1] > 0.8 and abs(b.velocity[0]) < 0.2  # the east motion has been braked away
+    b.hold()
+    # land: in_air goes False, the autopilot disarms by itself
+    b.land()
+    assert run_until(b, lambda: not b.in_air and not b.armed, 25), (b.position, b.in_air, b.armed)
+    assert b.position[2] < 0.2
+    # again, then RTL from a displaced position: the autopilot flies home and lands
+    b.arm()
+    b.takeoff(4.0)
+    assert run_until(b, lambda: b.position[2] > 3.7, 15)
+    b.goto((8.0, -6.0, 4.0))
+    assert run_until(b, lambda: dist(b.position, (8, -6, 4)) < 0.5, 20)
+    assert b.return_to_launch() is True
+    assert run_until(b, lambda: b.position[2] > 7.5, 15)  # climbs to its return altitude first
+    assert run_until(b, lambda: not b.armed and not b.in_air, 40), b.position
+    assert math.hypot(b.position[0], b.position[1]) < 1.0 and b.position[2] < 0.2, (
+        b.position, emu.snapshot(), b.drain_events()[-12:])
+    odo = b.odometry()
+    assert odo.robot_id == "quad" and odo.t > 10 and 0 < odo.battery_pct < 100
+    names = [e["event"] for e in b.drain_events()]
+    assert {"home", "armed", "disarmed", "mode"} <= set(names)
+    # vehicle time runs ~10x faster than the wall clock and t follows it
+    assert 6 < b.clock_ratio < 14
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_goto_speed_cap(fly, autopilot):
+    """goto(speed=0.5): ArduPilot through DO_CHANGE_SPEED, PX4 (which flies OFFBOARD position setpoints at its own
+    limit) through a setpoint moving at 0.5 m/s; without a speed the vehicle's limit (2 m/s) applies again."""
+    emu, b = fly(autopilot)
+    b.arm()
+    b.takeoff(3.0)
+    assert run_until(b, lambda: b.position[2] > 2.8, 15)
+    speeds: list = []
+    sample = lambda: speeds.append(float(np.hypot(*emu.veh.state.velocity[:2])))  # noqa: E731 - ground truth
+    t0 = b.t
+    b.goto((6.0, 0.0, 3.0), speed=0.5)
+    assert run_until(b, lambda: dist(b.position, (6, 0, 3)) < 0.3, 20, every=sample), b.position
+    assert 10.0 < b.t - t0 < 16.0  # 6 m at 0.5 m/s, in vehicle seconds
+    assert max(speeds) < 0.75  # peaks while the position loop catches up with the moving PX4 setpoint
+    speeds.clear()
+    b.goto((0.0, 0.0, 3.0))
+    assert run_until(b, lambda: dist(b.position, (0, 0, 3)) < 0.3, 20, every=sample), b.position
+    assert max(speeds) > 1.5
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_refused_commands_carry_result_and_status_text(fly, autopilot):
+    emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.3})
+    emu.set_prearm_failure("Compass not calibrated")
+    with pytest.raises(CommandRefused) as e:
+        b.arm()
+    assert e.value.result == REFUSED[autopilot]
+    assert e.value.status_text == PREARM_PREFIX[autopilot] + "Compass not calibrated"
+    assert REFUSED[autopilot] in str(e.value) and "Compass not calibrated" in str(e.value)
+    assert not b.armed and not emu.snapshot()["armed"]
+    # an unknown command is UNSUPPORTED
+    with pytest.raises(CommandRefused) as e:
+        b.command_long("bogus", 31999)
+    assert e.value.result == "MAV_RESULT_UNSUPPORTED"
+    emu.set_prearm_failure(None)
+    b.arm()
+    assert b.armed
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_arm_before_gps_fix_is_refused(fly, autopilot):
+    emu, b = fly(autopilot, gps_lock_s=1e6, mavlink={"arm_timeout_s": 0.2})
+    assert not b.home_received and b.gps_fix_type < 3
+    with pytest.raises(CommandRefused) as e:
+        b.arm()
+    assert e.value.result == REFUSED[autopilot]
+    assert e.value.status_text.startswith(PREARM_PREFIX[autopilot])
+    assert "Fix" in e.value.status_text or "fix" in e.value.status_text
+
+
+def test_ardupilot_takeoff_refused_when_disarmed(fly):
+    emu, b = fly("ardupilot")
+    with pytest.raises(CommandRefused) as e:
+        b.takeoff(3.0)
+    assert e.value.result == "MAV_RESULT_FAILED" and "not armed" in e.value.status_text
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_mission_round_trip_and_auto_flight(fly, autopilot):
+    emu, b = fly(autopilot)
+    assert run_until(b, lambda: b.home_received, 5)
+    square = [Waypoint(id=f"wp{i}", x=x, y=y, z=6.0, hover_duration=2.0)
+              for i, (x, y) in enumerate([(10, 0), (10, 10), (0, 10)])]
+    sent = b.upload_mission(square, takeoff_altitude=6.0, final_action="land")
+    assert [it.command for it in sent] == [22, 16, 16, 16, 21]
+    got = b.download_mission()
+    assert got.items == sent
+    assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)  # ArduPilot: home
+    b.drain_events()
+    b.arm()
+    b.start_mission()
+    track: list = []
+    truth: list = []  # the emulator's own position
+
+    def sample():
+        track.append(b.position)
+        truth.append(emu.snapshot()["position"])
+
+    assert run_until(b, lambda: not b.armed and not b.in_air and len(track) > 50, 60, every=sample), b.position
+    reached = [e["item"] for e in b.drain_events() if e["event"] == "mission_item_reached"]
+    assert reached == [1, 2, 3, 4, 5]  # take-off, three waypoints, land: in order, each once
+    for wp in square:  # the vehicle went to every waypoint and held there; the backend saw it
+        assert min(dist(p, (wp.x, wp.y, wp.z)) for p in truth) < 1.0, wp.id
+        assert min(dist(p, (wp.x, wp.y, wp.z)) for p in track) < 2.0, wp.id
+    assert max(p[2] for p in track) > 5.5 and dist(b.position[:2], (0, 10)) < 1.0  # landed at the last waypoint
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_imported_plan_round_trip(fly, autopilot):
+    plan = load_mission(DATA_DIR / "missions" / "qgc_test_simple_square.plan")
+    emu, b = fly(autopilot)
+    sent = b.upload_mission(plan)
+    assert len(sent) == len(plan.expanded_items())
+    assert b.download_mission().items == sent
+    for s, p in zip(sent, plan.expanded_items()):
+        assert s.command == p.command and s.frame == p.frame
+        if p.params[4] is not None:
+            assert abs(s.params[4] - p.params[4]) < 1e-7 and abs(s.params[5] - p.params[5]) < 1e-7
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_link_loss_and_recovery(fly, autopilot):
+    emu, b = fly(autopilot, speedup=5, mavlink={"heartbeat_timeout_s": 0.6})
+    assert b.link_ok
+    b.drain_events()
+    emu.set_blackhole(True)
+    assert run_until(b, lambda: not b.link_ok, 5)
+    t0 = time.monotonic()
+    with pytest.raises(LinkLost):
+        b.arm()
+    with pytest.raises(LinkLost):
+        b.goto((1.0, 0.0, 2.0))
+    assert time.monotonic() - t0 < 0.5  # refused at once, not after timeouts
+    emu.set_blackhole(False)
+    assert run_until(b, lambda: b.link_ok, 5)
+    events = [e["event"] for e in b.drain_events()]
+    assert events.index("link_lost") < events.index("link_regained")
+    b.arm()  # commands work again
+    assert b.armed
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+@pytest.mark.parametrize("firmware", ["unsupported", "no_ack"])
+def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopilot, firmware):
+    emu_kw = {"message_interval": False} if firmware == "unsupported" else {"ignore_commands": {511}}
+    emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.2, "command_retries": 1}, **emu_kw)
+    assert any(e["event"] == "stream_fallback" for e in b.drain_events())
+    # ArduPilot streams only what REQUEST_DATA_STREAM asked for; PX4 ignores it and streams its defaults
+    b.arm()
+    b.takeoff(3.0)
+    assert run_until(b, lambda: b.position[2] > 2.7, 15), b.position
+    assert b.home_received and b.gps_fix_type == 3 and b.in_air
+
+
+def test_udp_link_backend_listens_emulator_sends():
+    """The usual SITL arrangement: the vehicle sends to udp 14550-style, the ground station listens (udpin)."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    emu = MavlinkVehicleEmulator("px4", speedup=10, gps_lock_s=0.5)
+    emu.start(f"udpout:127.0.0.1:{port}")
+    b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink",
+                                   mavlink=MavlinkConfig(connection=f"udpin:127.0.0.1:{port}")))
+    try:
+        b.connect(timeout_s=10)
+        b.arm()
+        b.takeoff(2.0)
+        assert run_until(b, lambda: b.position[2] > 1.7, 10)
+        assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+    finally:
+        b.close()
+        emu.stop()
+
+
+def test_sim_cli_refuses_remote_bind_and_bad_address():
+    from aerodaas.cli import main
+
+    assert main(["sim", "--mavlink", "tcp:0.0.0.0:5760"]) == 2
+    assert main(["sim", "--mavlink", "serial:/dev/null"]) == 2
+    assert main(["sim", "--mavlink", "tcp:127.0.0.1:0", "--home", "47.3,8.5"]) == 2
+    with pytest.raises(ValueError, match="allow-remote"):
+        MavlinkVehicleEmulator("px4").start("udpin:10.1.2.3:14550")
+
+
+def _tlog_packets(path: Path) -> list[bytes]:
+    """Split a .tlog (8-byte big-endian µs timestamp + one MAVLink v1/v2 packet, repeated) into raw packets."""
+    data = path.read_bytes()
+    out, i = [], 0
+    while i + 10 <= len(data):
+        magic, n = data[i + 8], data[i + 9]
+        if magic == 0xFD:
+            size = 12 + n + (13 if data[i + 10] & 1 else 0)
+        elif magic == 0xFE:
+            size = 8 + n
+        else:
+            raise AssertionError(f"tlog desynchronised at byte {i}")
+        out.append(data[i + 8:i + 8 + size])
+        i += 8 + size
+    return out
+
+
+def test_real_px4_tlog_through_the_receive_path():
+    """The real PX4 log (unknown message ids, messages captured twice) streamed over a loopback socket into
+    connect() and the I/O thread: nothing raises, positions, home, status texts and mission progress parse."""
+    tlog = DATA_DIR / "tlogs" / "thayer_rural.tlog"
+    if not tlog.is_file():
+        pytest.skip(f"{tlog} not found (set AERODAAS_DATA_DIR)")
+    packets = _tlog_packets(tlog)
+    from pymavlink import mavutil
+
+    ids = {mavutil.mavlink.MAVLink(None).parse_buffer(p)[0].get_msgId() for p in packets[:4000]}
+    assert len(packets) > 30000 and ids
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    port = server.getsockname()[1]
+    done = threading.Event()
+
+    def serve():
+        conn, _ = server.accept()
+        for k in range(0, len(packets), 200):
+            conn.sendall(b"".join(packets[k:k + 200]))
+            time.sleep(0.002)
+        done.set()
+        time.sleep(30)
+        conn.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    cfg = RobotConfig(id="thayer", backend="mavlink", home=CONFIG_HOME,
+                      mavlink=MavlinkConfig(connection=f"tcp:127.0.0.1:{port}", command_timeout_s=0.1,
+                                            command_retries=0, heartbeat_timeout_s=60))
+    b = MavlinkBackend(cfg)
+    try:
+        b.connect(timeout_s=20)
+        assert b.autopilot == "px4" and b.vehicle_type == "MAV_TYPE_QUADROTOR"
+        assert done.wait(30)
+        seen = -1
+        while seen != b.messages_received:  # until the receive path has drained the socket
+            seen = b.messages_received
+            time.sleep(0.5)
+        assert b.messages_received > 30000
+        b.step(0.1)  # raises if the I/O thread failed
+        events = b.drain_events()
+        assert not [e for e in events if e["event"] == "receive_error"]
+        assert b.home_received and abs(b.home.lat - 43.7) < 0.3 and abs(b.home.lon + 72.2) < 0.5
+        odo = b.odometry()
+        e, n, _ = geodetic_to_enu(odo.geodetic.lat, odo.geodetic.lon, b.home.alt, b.home)
+        assert abs(odo.position[0] - e) < 0.01 and abs(odo.position[1] - n) < 0.01
+        assert 0 < math.hypot(e, n) < 2000
+        assert any(e["event"] == "status_text" and e["text"] for e in events)
+        reached = [e for e in events if e["event"] == "mission_item_reached"]
+        assert 0 < len(reached) < 176  # duplicated packets (two captured links) counted once
+        assert {"MISSION", "RTL"} <= {e["name"] for e in events if e["event"] == "mode"}
+    finally:
+        b.close()
+        server.close()
+
+
+@pytest.mark.skipif(shutil.which("mavproxy.py") is None and not (Path(sys.executable).parent / "mavproxy.py").exists(),
+                    reason="MAVProxy not installed (pip install '.[test]')")
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_mavproxy_ground_station(autopilot, tmp_path):
+    """MAVProxy, driven headless through its stdin, sees the emulated vehicle's heartbeat and position, switches
+    its mode and arms it. (MAVProxy's ``mode NAME`` passes PX4's (base, main, sub) tuple to pymavlink's set_mode,
+    which fails packing it, so for PX4 the mode goes out with the generic ``long DO_SET_MODE``.)"""
+    exe = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
+    emu = MavlinkVehicleEmulator(autopilot, home=VEHICLE_HOME, gps_lock_s=0.5)
+    address = emu.start("tcp:127.0.0.1:0")
+    proc = subprocess.Popen([sys.executable, exe, "--master", address, "--no-state",
+                             "--default-modules", "link,mode,arm,cmdlong,misc"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            bufsize=1, cwd=tmp_path)
+    lines: list[str] = []
+    threading.Thread(target=lambda: [lines.append(x.rstrip()) for x in proc.stdout], daemon=True).start()
+
+    def wait_for(pred, timeout_s=20.0) -> bool:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if pred():
+                return True
+            time.sleep(0.05)
+        return False
+
+    def say(cmd: str) -> None:
+        proc.stdin.write(cmd + "\n")
+        proc.stdin.flush()
+
+    try:
+        assert wait_for(lambda: any("online system 1" in x for x in lines)), lines
+        assert wait_for(lambda: emu.snapshot()["home"] is not None, 10)
+        assert wait_for(lambda: emu.snapshot()["links"] == 1, 5)
+        # MAVProxy requests streams (REQUEST_DATA_STREAM) every 15 s, or at once when its stream rate changes; the
+        # emulated ArduPilot streams nothing until asked
+        say("set streamrate 5")
+        lat = f"lat : {int(round(VEHICLE_HOME.lat * 1e7))}"
+
+        def position_seen() -> bool:  # ask MAVProxy for the last GLOBAL_POSITION_INT it received
+            say("status GLOBAL_POSITION_INT")
+            time.sleep(0.3)
+            return any("GLOBAL_POSITION_INT" in x and lat in x for x in lines)
+
+        assert wait_for(position_seen, 10), lines[-10:]
+        if autopilot == "ardupilot":
+            say("mode guided")
+            assert wait_for(lambda: emu.snapshot()["mode"] == "GUIDED", 10), lines[-10:]
+            assert wait_for(lambda: any("Mode GUIDED" in x for x in lines), 5)
+        else:
+            say("long DO_SET_MODE 1 4 3")  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, AUTO, LOITER
+            assert wait_for(lambda: emu.snapshot()["mode"] == "AUTO.LOITER", 10), lines[-10:]
+        say("arm throttle")
+        assert wait_for(lambda: emu.snapshot()["armed"], 10), lines[-10:]
+        assert wait_for(lambda: any("ARMED" in x for x in lines), 5)
+        assert 400 in emu.snapshot()["commands_seen"]
+        # a second ground station on the same TCP server (our backend) sees what MAVProxy did
+        b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink", mavlink=MavlinkConfig(connection=address)))
+        try:
+            b.connect(timeout_s=10)
+            assert b.armed and b.mode == ("GUIDED" if autopilot == "ardupilot" else "LOITER")
+            assert emu.snapshot()["links"] == 2
+        finally:
+            b.close()
+    finally:
+        proc.kill()  # --no-state: nothing to save
+        proc.wait(5)
+        emu.stop()
