@@ -84,14 +84,27 @@ class CameraComponent:
 
     def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None) -> None:
         try:
-            self.capture(position, yaw, t, seq, tok)
+            try:
+                env = self._produce(position, yaw, t, seq)
+            finally:
+                self._busy.release()  # the next frame may be rendered while this one travels downstream
+            if env is not None:
+                self.host.publish(self.cid, [env], tok, inline=True)
         finally:
-            self._busy.release()
             if tok is not None:
                 tok.done()
 
     def capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None = None) -> np.ndarray | None:
-        """Produce and publish one frame; returns it (None if the backend had no new frame)."""
+        """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
+        new frame)."""
+        env = self._produce(position, yaw, t, seq)
+        if env is None:
+            return None
+        self.host.publish(self.cid, [env], tok, inline=True)
+        return env["data"]
+
+    def _produce(self, position: tuple, yaw: float, t: float, seq: int) -> dict | None:
+        """Render (or fetch) the frame, make it read-only, record it; returns its envelope."""
         t0 = time.perf_counter()
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         truth: list = []
@@ -111,16 +124,14 @@ class CameraComponent:
         meta = FrameMeta(robot_id=self.robot_id, sensor_id=self.sensor_id, seq=seq, capture_time=t, wall_time=wall,
                          pose=pose, intrinsics=self.k)
         self.latest = (frame, meta)
-        env = {"kind": "frame", "data": frame, "meta": meta, "sim_t": t, "robot": self.robot_id,
-               "trace": {"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0}}
-        self.host.publish(self.cid, [env], tok, inline=True)
-        if self.recorder is not None:
+        if self.recorder is not None:  # by reference; encoded by the recorder's thread
             t_ns = self.epoch_ns + int(t * 1e9)
             self.recorder.image(self.topic, t_ns, frame, f"{self.robot_id}/{self.sensor_id}")
             if truth:
                 self.recorder.json("/world/targets", t_ns, {"robot": self.robot_id, "seq": seq, "t": t,
                                                             "targets": truth}, "aerodaas.GroundTruth")
-        return frame
+        return {"kind": "frame", "data": frame, "meta": meta, "sim_t": t, "robot": self.robot_id,
+                "trace": {"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0}}
 
     def get_latest(self) -> tuple | None:
         """(frame, FrameMeta) of the newest frame, for pull-style access."""

@@ -14,7 +14,7 @@ from aerodaas.backends import NotNavigable
 from aerodaas.config import parse_environment_config
 from aerodaas.metrics import load_run
 
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_data
 from aerodaas.emulators import free_udp_port
 
 TLOG = DATA_DIR / "tlogs" / "thayer_rural.tlog"
@@ -132,3 +132,84 @@ def test_a_recorded_camera_channel_replays_into_analytics(tmp_path):
         assert [int(f.mean()) for f in seen] == [0, 80, 160]  # recorded frames 0, 2 and 4 (at 0.5, 2.5, 4.5 s)
     finally:
         rt.close()
+
+
+# ------------------------------------------------------------------------------------------------- MAVLink
+def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path):
+    """The app's own environment file with only the robot's backend changed to ``mavlink``, pointed at an emulated
+    ``flavour`` autopilot running ``speedup`` x real time (and the clock not in lock-step: real vehicles don't
+    wait). Returns (emulator, path of the variant environment file)."""
+    from aerodaas.config import load_environment_config
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
+    from .conftest import REPO
+
+    cfg = load_environment_config(REPO / "apps" / f"{app}.json")  # resolves imagery paths
+    robot = cfg.robots[0]
+    emu = MavlinkVehicleEmulator(flavour, robot=robot, speedup=speedup)
+    addr = emu.start("tcp:127.0.0.1:0")
+    data = cfg.model_dump(mode="json", exclude={"base_dir"})
+    data["robots"][0].update(backend="mavlink", mavlink={"connection": addr, "autopilot": flavour})
+    data["simulation"].update(speedup=speedup, lockstep=False)
+    path = tmp_path / f"{app}_{flavour}.json"
+    path.write_text(json.dumps(data))
+    return emu, path
+
+
+def _run_app(app: str, env_path, opts, record) -> "MissionResult":  # noqa: F821
+    import runpy
+
+    from .conftest import REPO
+
+    opts.env_path, opts.record = str(env_path), str(record)
+    return runpy.run_path(str(REPO / "apps" / f"{app}.py"), run_name="__main__")["result"]
+
+
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+def test_farm_survey_app_unchanged_on_a_mavlink_autopilot(ray_session, run_options, tmp_path, flavour):
+    from aerodaas.metrics import waypoint_visits
+
+    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path)
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
+        vehicle = emu.snapshot()  # the emulated autopilot's own view, not our telemetry
+    finally:
+        emu.stop()
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", (rep.get("error"), rep["events"][-5:])
+    assert rep["backend"] == "mavlink" and [v["id"] for v in rep["visited_waypoints"]] == ["wp1", "wp2", "wp3", "wp4"]
+    run = load_run(str(tmp_path / "farm.mcap"))
+    visits = waypoint_visits(run["odometry"], [(0, 0, 1.5), (0, 10, 1.5), (10, 10, 1.5), (10, 0, 1.5)], 0.5)
+    assert all(v["closest_m"] <= 0.5 and v["time_within_s"] >= 4.0 for v in visits), visits
+    firsts = [v["first_within_t"] for v in visits]
+    assert firsts == sorted(firsts)
+    # the autopilot's own events reached the recording (mode changes, arming); it ended on the ground, disarmed,
+    # at the last corner (wp4 at (10, 0)) in its own frame
+    kinds = {e["event"] for e in run["events"]}
+    assert {"mode", "armed"} <= kinds, kinds
+    assert not vehicle["in_air"] and not vehicle["armed"]
+    assert abs(vehicle["position"][0] - 10.0) < 0.6 and abs(vehicle["position"][1]) < 0.6, vehicle["position"]
+
+
+@needs_data
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+def test_vehicle_tracking_app_unchanged_on_a_mavlink_autopilot(ray_session, run_options, data_env, tmp_path, flavour):
+    """The same app: survey at priority 2, the follow at priority 1 preempts it through the autopilot's guided /
+    offboard velocity targets, then the survey resumes. Real time x4 without lock-step (a real vehicle does not
+    wait for the detector), so fewer frames are analysed than in the simulator's lock-step test."""
+    from aerodaas.metrics import tracking_metrics
+
+    emu, env_path = _mavlink_variant("vehicle_tracking", flavour, 4.0, tmp_path)
+    try:
+        res = _run_app("vehicle_tracking", env_path, run_options, tmp_path / "vt.mcap")
+    finally:
+        emu.stop()
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", (rep.get("error"), rep["events"][-5:])
+    assert [v["id"] for v in rep["visited_waypoints"]] == ["wp1", "wp2", "wp3"]
+    run = load_run(str(tmp_path / "vt.mcap"))
+    m = tracking_metrics(run, "car1")
+    assert m["switch_delay_s"] is not None and m["switch_delay_s"] <= 2.0, m
+    assert m["time_within_5m_s"] >= 15.0, m
+    done = [e["t"] for e in run["events"] if e["event"] == "waypoint_done"]
+    assert m["tracking_ended_t"] is not None and max(done) > m["tracking_ended_t"]
