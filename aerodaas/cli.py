@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         return cmd_plot(a)
 
     pl.set_defaults(func=_cmd_plot)
-    bench = sub.add_parser("bench", help="benchmarks (tours: trajectory schedulers); --json for JSON output")
+    bench = sub.add_parser("bench", help="benchmarks (tours: trajectory schedulers; schedulers: analytics schedulers); --json for JSON output")
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
     _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))

@@ -26,6 +26,7 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from . import tours
+    from . import schedulers, tours
 
     tours.add_parser(bench_subparsers)
+    schedulers.add_parser(bench_subparsers)
