@@ -86,6 +86,7 @@ import math
 import os
 import random
 import re
+import sys
 import threading
 import time
 from collections import Counter, defaultdict
@@ -462,10 +463,9 @@ class OnnxEdgeExecutor(EdgeExecutor):
 def _where() -> dict:
     """``pid`` and, inside a Ray worker, the ``node_id`` and node ``labels`` of this process."""
     out: dict[str, Any] = {"pid": os.getpid(), "node_id": None, "labels": {}}
+    ray = sys.modules.get("ray")  # not imported here: outside Ray there is nothing to ask (and it takes seconds)
     try:
-        import ray
-
-        if ray.is_initialized():
+        if ray is not None and ray.is_initialized():
             ctx = ray.get_runtime_context()
             out["node_id"] = ctx.get_node_id()
             out["labels"] = dict(ctx.get_node_labels())
