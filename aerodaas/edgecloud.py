@@ -67,7 +67,10 @@ node id, when, the error, tasks affected). Each task in flight on it is **retrie
 if there is one and the policy's ``cloud_admit`` still holds at that moment; otherwise it ends FAILED (the cloud
 cost is charged, as for any task that ran there) with a reason naming the executor. When no executor is left, every
 dispatcher calls ``policy.on_cloud_availability(False, now)`` and carries out what it returns; from then on a
-"cloud" decision is dropped (DROPPED_TIME, "cloud unavailable") by the dispatcher as a safety net. A task with no
+"cloud" decision is dropped (DROPPED_TIME, "cloud unavailable") by the dispatcher as a safety net;
+:meth:`CloudPool.add_executor` brings the cloud back (``on_cloud_availability(True)``). Ray reports an actor
+on a killed node about 2 s later (measured with Ray 2.60 on a local cluster); tasks sent to it meanwhile are
+handled the same way when the loss is seen. A task with no
 reply at all ``lost_after_ms`` after its deadline ends FAILED ("no reply"), so no task is ever lost.
 
 Reference for the policies, the workload and the utility model: S. Raj, R. Mittal, H. Gupta, Y. Simmhan,
@@ -326,6 +329,9 @@ class Samples:
 
     def summary(self) -> dict:
         return self.summarize(self.values, self.n, self.max if self.n else None)
+
+
+_FAILED = object()  # sentinel: a policy call raised
 
 
 def _reason_key(reason: str) -> str:
@@ -794,6 +800,26 @@ class CloudPool:
     def attach(self, dispatcher: "AnalyticsDispatcher") -> None:
         self.dispatchers.append(dispatcher)
 
+    async def add_executor(self, executor: Any) -> dict:
+        """Add a cloud executor (e.g. on a replacement cloud node) to a started pool; if no executor was alive,
+        every dispatcher's policy hears ``on_cloud_availability(True)``. Returns the executor's info; raises
+        whatever asking it for its info raises (then nothing is added)."""
+        i = len(self.executors)
+        self.executors.append(executor)
+        try:
+            info = await self._call(i, "info")
+        except BaseException:
+            self.executors.pop()
+            raise
+        was_available = self.available
+        self.alive.append(True)
+        self.infos.append(info)
+        self._tasks.append(self._loop.create_task(self._collector(i)))
+        if not was_available:
+            for d in list(self.dispatchers):
+                d._on_cloud_availability(True)
+        return info
+
     @property
     def available(self) -> bool:
         return any(self.alive)
@@ -1165,16 +1191,23 @@ class AnalyticsDispatcher:
         self.decision_by_call[name].add(us)
         return out
 
+    def _safe(self, name: str, default: Any, *args, about: str = ""):
+        """``self.policy.<name>(*args)`` through :meth:`_policy`; an exception is recorded as a policy error and
+        ``default`` returned (a buggy policy must not stop the dispatcher)."""
+        try:
+            return self._policy(name, getattr(self.policy, name), *args)
+        except Exception as e:
+            self._policy_error(f"{name}({about}) raised {type(e).__name__}: {e}")
+            return default
+
     def _on_arrival(self, task: AnalyticsTask) -> None:
         now = self.clock.now_ms()
         self.arrival_lateness.add(now - task.arrival_ms)
         if task.state is not TaskState.PENDING:
             return
-        try:
-            decisions = self._policy("submit", self.policy.submit, task, now)
-        except Exception as e:
-            self._policy_error(f"submit(#{task.task_id}) raised {type(e).__name__}: {e}")
-            self._finish(task, TaskState.FAILED, None, f"scheduler error in submit: {type(e).__name__}: {e}")
+        decisions = self._safe("submit", _FAILED, task, now, about=f"#{task.task_id}")
+        if decisions is _FAILED:
+            self._finish(task, TaskState.FAILED, None, f"scheduler error in submit: {self.policy_errors[-1]}")
             return
         self._after_policy(decisions)
 
@@ -1201,11 +1234,7 @@ class AnalyticsDispatcher:
                 self._send_cloud(t, d.reason)
 
     def _admits(self, task: AnalyticsTask, now_ms: float) -> bool:
-        try:
-            return bool(self._policy("cloud_admit", self.policy.cloud_admit, task, now_ms))
-        except Exception as e:
-            self._policy_error(f"cloud_admit(#{task.task_id}) raised {type(e).__name__}: {e}")
-            return False
+        return bool(self._safe("cloud_admit", False, task, now_ms, about=f"#{task.task_id}"))
 
     def _admit_by(self, task: AnalyticsTask, now_ms: float) -> float | None:
         """The latest time (ms, 1 ms resolution) at which ``cloud_admit`` still holds; None if it fails now,
@@ -1257,22 +1286,14 @@ class AnalyticsDispatcher:
             self._finish(task, TaskState.FAILED, "cloud", reply.get("error") or "cloud failure", notify=False)
         else:
             self._finish(task, TaskState.DROPPED_TIME, "cloud", reply["error"], notify=False)
-        try:
-            decisions = self._policy("on_cloud_done", self.policy.on_cloud_done, task, now, latency_ms)
-        except Exception as e:
-            self._policy_error(f"on_cloud_done(#{task.task_id}) raised {type(e).__name__}: {e}")
-            decisions = []
+        decisions = self._safe("on_cloud_done", [], task, now, latency_ms, about=f"#{task.task_id}")
         self._notify(task)
         self._after_policy(decisions)
 
     def _on_cloud_availability(self, available: bool) -> None:
         now = self.clock.now_ms()
         self.cloud_availability_changes.append({"at_s": now / 1000.0, "available": available})
-        try:
-            decisions = self._policy("on_cloud_availability", self.policy.on_cloud_availability, available, now)
-        except Exception as e:
-            self._policy_error(f"on_cloud_availability raised {type(e).__name__}: {e}")
-            decisions = []
+        decisions = self._safe("on_cloud_availability", [], available, now)
         if self._wake is not None:
             self._after_policy(decisions)
         else:
@@ -1281,11 +1302,7 @@ class AnalyticsDispatcher:
     def _rearm_poll(self) -> None:
         if self._closed:
             return
-        try:
-            t = self._policy("next_poll_ms", self.policy.next_poll_ms)
-        except Exception as e:
-            self._policy_error(f"next_poll_ms raised {type(e).__name__}: {e}")
-            t = None
+        t = self._safe("next_poll_ms", None)
         if t == self._poll_at and self._poll_handle is not None:
             return
         if self._poll_handle is not None:
@@ -1300,11 +1317,7 @@ class AnalyticsDispatcher:
         self._poll_at = None
         now = self.clock.now_ms()
         self.poll_lateness.add(now - due_ms)
-        try:
-            decisions = self._policy("poll", self.policy.poll, now)
-        except Exception as e:
-            self._policy_error(f"poll raised {type(e).__name__}: {e}")
-            decisions = []
+        decisions = self._safe("poll", [], now)
         self._after_policy(decisions)
 
     def _policy_error(self, msg: str) -> None:
@@ -1316,11 +1329,7 @@ class AnalyticsDispatcher:
         while not self._closing:
             self._wake.clear()
             now = self.clock.now_ms()
-            try:
-                task, decisions = self._policy("next_edge_task", self.policy.next_edge_task, now)
-            except Exception as e:
-                self._policy_error(f"next_edge_task raised {type(e).__name__}: {e}")
-                task, decisions = None, []
+            task, decisions = self._safe("next_edge_task", (None, []), now)
             self._apply(decisions)
             self._rearm_poll()
             if task is None:
@@ -1350,11 +1359,7 @@ class AnalyticsDispatcher:
             else:
                 self._finish(task, TaskState.DONE_ON_TIME if now <= task.deadline_ms else TaskState.DONE_LATE,
                              "edge", task.reason or "edge", notify=False)
-            try:
-                decisions = self._policy("on_edge_done", self.policy.on_edge_done, task, now, exec_ms)
-            except Exception as e:
-                self._policy_error(f"on_edge_done raised {type(e).__name__}: {e}")
-                decisions = []
+            decisions = self._safe("on_edge_done", [], task, now, exec_ms, about=f"#{task.task_id}")
             self._notify(task)
             self._apply(decisions)
             self._rearm_poll()
@@ -1418,11 +1423,7 @@ class AnalyticsDispatcher:
             except asyncio.TimeoutError:
                 pass
         self._closing = True  # the edge loop takes no new task from here on
-        try:
-            held = self._policy("held_tasks", self.policy.held_tasks)
-        except Exception as e:
-            self._policy_error(f"held_tasks raised {type(e).__name__}: {e}")
-            held = []
+        held = self._safe("held_tasks", [])
         for t in held:
             if t.state is TaskState.PENDING and t.tier is None:
                 self._finish(t, TaskState.DROPPED_TIME, None, "run ended while held by the scheduler")

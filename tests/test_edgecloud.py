@@ -227,7 +227,8 @@ def test_submit_from_many_threads_loses_nothing():
 
 def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     """An executor that dies (its calls raise) takes its in-flight tasks with it (no second executor: FAILED), and
-    the policy hears that the cloud is gone: CLOUD then drops new tasks with a reason."""
+    the policy hears that the cloud is gone: CLOUD then drops new tasks with a reason, until a replacement
+    executor is added."""
     w = workload("LIGHT")
 
     class Dying(CloudExecutor):
@@ -249,6 +250,9 @@ def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
         ex.dead = True
         await asyncio.sleep(0.1)
         d.submit("d1", "HV")
+        await asyncio.sleep(0.05)
+        await pool.add_executor(CloudExecutor("c1"))  # a replacement: the cloud is back
+        d.submit("d2", "HV")
         r = await d.finish(2.0)
         rep = pool.report()
         await pool.close()
@@ -256,12 +260,14 @@ def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
 
     d, r, rep = asyncio.run(run())
     check_accounting(d, r)
-    first, late = d.tasks()[:2], d.tasks()[2]
+    first, late, back = d.tasks()[:2], d.tasks()[2], d.tasks()[3]
     assert all(t.state is TaskState.FAILED and t.tier == "cloud" and "died" in t.reason for t in first)
     assert late.state is TaskState.DROPPED_TIME and "cloud unavailable" in late.reason
-    assert r["cloud_cost"] == sum(w[t.model].cloud_cost for t in first)  # charged: they ran there
-    (change,) = r["cloud_availability_changes"]
-    assert change["available"] is False and ev_time(rep) == pytest.approx(change["at_s"], abs=0.05)
+    assert back.state is TaskState.DONE_ON_TIME and back.tier == "cloud"
+    assert r["cloud_cost"] == sum(w[t.model].cloud_cost for t in (*first, back))  # charged: they ran there
+    lost, regained = r["cloud_availability_changes"]
+    assert lost["available"] is False and ev_time(rep) == pytest.approx(lost["at_s"], abs=0.05)
+    assert regained["available"] is True and regained["at_s"] > lost["at_s"]
     (ev,) = rep["losses"]
     assert late.arrival_ms / 1000.0 > ev["at_s"]
     assert ev["in_flight"] == 2 and ev["failed"] == 2 and ev["retried"] == 0 and "node lost" in ev["error"]
@@ -384,3 +390,30 @@ def test_edge_host_and_cloud_executor_actors_on_the_session_ray(ray_session):
         ray.kill(host)
         for c in cloud:
             ray.kill(c)
+
+
+# ------------------------------------------------------------------------------------------------ benchmark trace
+def test_benchmark_trace_is_seeded_and_follows_the_arrival_process():
+    from aerodaas.bench.schedulers import edge_layout, make_trace
+
+    w = workload("HEAVY")
+    a = make_trace(w, drones=10, duration_s=3.0, seed=4, drones_per_edge=3, fps=1.0)
+    assert a == make_trace(w, drones=10, duration_s=3.0, seed=4, drones_per_edge=3, fps=1.0)
+    assert a != make_trace(w, drones=10, duration_s=3.0, seed=5, drones_per_edge=3, fps=1.0)
+    assert [len(g) for g in edge_layout(10, 3)] == [3, 3, 3, 1]
+    assert len(a) == 10 * 3 * len(w.models)  # 3 frames per drone, one task per model per frame
+    assert [r[0] for r in a] == sorted(r[0] for r in a) and all(0 <= r[0] < 3000 for r in a)
+    frames_of = {}
+    for t, edge, drone, model in a:
+        frames_of.setdefault((drone, t), []).append(model)
+        assert edge == f"edge{int(drone[1:]) // 3:02d}"
+    assert all(sorted(ms) == sorted(w.models) for ms in frames_of.values())
+    assert len({tuple(ms) for ms in frames_of.values()}) > 1  # the model order is shuffled per frame
+    per_drone = {}
+    for drone, t in frames_of:
+        per_drone.setdefault(drone, []).append(t)
+    for ts in per_drone.values():
+        ts.sort()
+        assert [round(b - a_, 3) for a_, b in zip(ts, ts[1:])] == [1000.0, 1000.0]
+    with pytest.raises(ValueError, match="drones_per_edge"):
+        edge_layout(10, 0)

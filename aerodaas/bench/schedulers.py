@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from aerodaas.bench import machine_info
+from aerodaas.bench.tours import _positive as _positive_int  # argparse type: an integer >= 1
 
 LOADS = ("LIGHT", "MEDIUM", "HEAVY")
 DEFAULT_DRONES_PER_EDGE = 3
@@ -406,13 +407,6 @@ def write_plot(res: dict, path: str | os.PathLike) -> None:
 
 
 # ---------------------------------------------------------------------------------------------- CLI
-def _positive_int(s: str) -> int:
-    v = int(s)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {s}")
-    return v
-
-
 def _positive_float(s: str) -> float:
     v = float(s)
     if not (v > 0 and math.isfinite(v)):
