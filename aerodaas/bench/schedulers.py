@@ -35,7 +35,7 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 from aerodaas.bench import machine_info
 from aerodaas.bench.tours import _positive as _positive_int  # argparse type: an integer >= 1
@@ -159,7 +159,7 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
     total = c["submitted"]
     return {
         "scheduler": name, "load": load, "drones": drones, "edges": n_edges, "drones_per_edge": per_edge,
-        "tasks": total, "on_time_rate": states[ "done_on_time"] / total if total else 0.0,
+        "tasks": total, "on_time_rate": states["done_on_time"] / total if total else 0.0,
         "utility": utility, "utility_by_model": dict(ubm), "tasks_by_model": dict(tbm),
         "on_time_by_model": dict(obm), "cloud_cost": cloud_cost, "edge_cost": edge_cost,
         "drops": dict(drops), "drop_reasons": dict(reasons.most_common()), "states": dict(states), "tiers": dict(tiers),
@@ -243,6 +243,9 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
 
     try:
         nodes = cluster.nodes()
+        if not any(n["labels"].get("tier") == "edge" for n in nodes):
+            raise ValueError(f"the cluster at {address!r} has no node labelled tier=edge (start the edge node with "
+                             "`ray start --labels tier=edge`, see docs/clusters.md)")
         n_cloud_nodes = sum(1 for n in nodes if n["labels"].get("tier") == "cloud")
         cloud = start_cloud_executors(cloud_executors or max(1, n_cloud_nodes)) if (n_cloud_nodes or address) else []
         hosts = [EdgeHostActor.options(label_selector={"tier": "edge"}).remote(f"edge-host{i}")
