@@ -214,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     sm.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
     sm.add_argument("--allow-remote", action="store_true", help="allow a non-loopback address")
     sm.set_defaults(func=_cmd_sim)
-    bench = sub.add_parser("bench", help="benchmarks (tours: trajectory schedulers); --json for JSON output")
+    bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video; "
+                                         "--json for JSON output")
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
     _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))

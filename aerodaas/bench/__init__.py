@@ -26,9 +26,10 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from . import fleet, overhead, startup, tello_video, tours
+    from . import fleet, overhead, schedulers, startup, tello_video, tours
 
     tours.add_parser(bench_subparsers)
+    schedulers.add_parser(bench_subparsers)
     overhead.add_parser(bench_subparsers)
     fleet.add_parser(bench_subparsers)
     startup.add_parser(bench_subparsers)

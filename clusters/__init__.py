@@ -1,0 +1,1 @@
+"""Cluster configurations and helpers, installed as ``aerodaas.clusters`` (local multi-node clusters for tests and benchmarks)."""

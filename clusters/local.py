@@ -1,0 +1,131 @@
+"""A local multi-node Ray cluster on one machine: one edge node and N cloud nodes (``ray.cluster_utils.Cluster``).
+
+For tests and the scheduler benchmark: the head node is labelled ``tier=edge``, every other node ``tier=cloud``,
+so actors placed with ``label_selector={"tier": "edge"}`` / ``{"tier": "cloud"}`` land on different raylets, and a
+cloud node can be removed mid-run (its processes are killed, as when a machine is lost). Ray's token
+authentication stays on: ``RAY_AUTH_MODE=token`` is set for this process (and inherited by the node processes)
+unless the environment already sets a mode, and a token is generated at ``~/.ray/auth_token`` if none exists
+(what ``ray.init()`` does for a new local cluster since Ray 2.59).
+
+``ray.cluster_utils.Cluster.add_node(**node_args)`` passes its keyword arguments to ``ray._private.parameter.RayParams``,
+which accepts ``labels: dict[str, str]`` (checked on Ray 2.60).
+
+Usage::
+
+    from aerodaas.clusters.local import LocalCluster
+    with LocalCluster(cloud_nodes=2) as lc:       # connects this driver to it
+        ...                                        # ray.* calls
+        lc.remove_cloud_node(0)                    # lose a cloud node
+"""
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any
+
+__all__ = ["LocalCluster", "enable_token_auth"]
+
+log = logging.getLogger(__name__)
+
+
+def enable_token_auth() -> None:
+    """Turn Ray token authentication on for this process and the node processes it starts (``RAY_AUTH_MODE=token``
+    unless the environment says otherwise) and make sure a token exists (generated at ``~/.ray/auth_token`` if
+    missing), as ``ray.init()`` does for a new local cluster. Raises RuntimeError if Ray's auth setup fails."""
+    try:
+        from ray._private.authentication.authentication_token_setup import (
+            enable_token_auth_by_default, ensure_token_if_auth_enabled,
+        )
+    except ImportError:  # an older or newer Ray without these helpers: set the mode, let Ray find the token
+        os.environ.setdefault("RAY_AUTH_MODE", "token")
+        return
+    enable_token_auth_by_default()
+    ensure_token_if_auth_enabled(None, create_token_if_missing=True)
+
+
+class LocalCluster:
+    """One ``tier=edge`` head node and ``cloud_nodes`` ``tier=cloud`` nodes, all on this machine.
+
+    ``edge_cpus``/``cloud_cpus``: logical CPUs each node advertises (Ray's scheduling resource, not a limit on real
+    CPU use). ``object_store_mb``: object store per node (MiB). ``connect``: call ``ray.init(address=...)`` for this
+    driver (which then runs on the edge node). ``worker_niceness``: the niceness Ray gives worker processes
+    (Ray's default is 15, below its control plane; the scheduler benchmark uses 0 so that its timers compete on
+    equal terms with other processes on a shared machine). Raises RuntimeError if Ray is already initialised in this process
+    and ``connect`` is True (shut it down first).
+
+    Attributes: ``address`` (the GCS address, ``host:port``), ``edge_node``, ``cloud_nodes`` (``ray._private.node.Node``
+    handles, in the order they were added; removed ones are dropped from the list).
+    """
+
+    def __init__(self, cloud_nodes: int = 1, *, edge_cpus: int = 2, cloud_cpus: int = 2,
+                 object_store_mb: int = 150, connect: bool = True, extra_edge_labels: dict[str, str] | None = None,
+                 worker_niceness: int | None = None) -> None:
+        import ray
+        from ray.cluster_utils import Cluster
+
+        if cloud_nodes < 0:
+            raise ValueError(f"cloud_nodes must be >= 0, got {cloud_nodes}")
+        if connect and ray.is_initialized():
+            raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
+                               "LocalCluster with connect=True")
+        enable_token_auth()
+        self._cloud_cpus = int(cloud_cpus)
+        self._store = int(object_store_mb) * 1024 * 1024
+        head_args: dict[str, Any] = {"num_cpus": int(edge_cpus), "labels": {"tier": "edge", **(extra_edge_labels or {})},
+                                     "include_dashboard": False, "object_store_memory": self._store}
+        if worker_niceness is not None:  # Ray starts workers at niceness 15 (below the control plane) by default
+            head_args["_system_config"] = {"worker_niceness": int(worker_niceness)}
+        self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
+        self.edge_node = self.cluster.head_node
+        self.cloud_nodes: list[Any] = []
+        self.removed: list[dict] = []
+        try:
+            for _ in range(cloud_nodes):
+                self.add_cloud_node()
+            self.cluster.wait_for_nodes()
+        except BaseException:
+            self.cluster.shutdown()
+            raise
+        self.address: str = self.cluster.address
+        self.connected = False
+        if connect:
+            ray.init(address=self.address, include_dashboard=False, log_to_driver=True, logging_level="warning")
+            self.connected = True
+
+    def add_cloud_node(self, labels: dict[str, str] | None = None):
+        """Add a ``tier=cloud`` node (extra ``labels`` allowed) and return its handle."""
+        node = self.cluster.add_node(num_cpus=self._cloud_cpus, labels={"tier": "cloud", **(labels or {})},
+                                     object_store_memory=self._store)
+        self.cloud_nodes.append(node)
+        return node
+
+    def node_id(self, node) -> str:
+        """The Ray node id (hex) of a node handle."""
+        return node.node_id
+
+    def remove_cloud_node(self, index: int = 0, graceful: bool = False) -> str:
+        """Kill cloud node ``index`` (of :attr:`cloud_nodes`), as if the machine were lost (``graceful=False``:
+        SIGKILL). Returns its node id. Raises IndexError naming the nodes left."""
+        if not 0 <= index < len(self.cloud_nodes):
+            raise IndexError(f"cloud node index {index} out of range; {len(self.cloud_nodes)} cloud node(s) left")
+        node = self.cloud_nodes.pop(index)
+        nid = node.node_id
+        self.cluster.remove_node(node, allow_graceful=graceful)
+        self.removed.append({"node_id": nid, "graceful": graceful})
+        log.info("removed cloud node %s", nid)
+        return nid
+
+    def shutdown(self) -> None:
+        """Disconnect this driver (if it connected) and stop every node."""
+        import ray
+
+        if self.connected and ray.is_initialized():
+            ray.shutdown()
+        self.connected = False
+        self.cluster.shutdown()
+
+    def __enter__(self) -> "LocalCluster":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.shutdown()
