@@ -85,7 +85,7 @@ def test_edge_fifo_overloaded_expires_tasks_and_accounts_for_all():
     assert r["states"]["done_on_time"] > 0
     assert r["tiers"].get("cloud", 0) == 0 and r["cloud_cost"] == 0
     expired = [t for t in d.tasks() if t.state is TaskState.EXPIRED_EDGE]
-    assert all("deadline passed" in t.reason and t.tier is None for t in expired)
+    assert all("left when it reached the head of the edge queue" in t.reason and t.tier is None for t in expired)
     assert r["edge_utilisation"] > 0.5
     # the edge executor emulates the profile: jitter none, so each hold is the profile's edge_ms within a few ms
     assert r["timing_ms"]["edge_hold_error"]["n"] > 0
