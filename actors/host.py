@@ -111,9 +111,11 @@ def decode_frame(data: bytes) -> np.ndarray:
 class Component:
     """A mailbox actor inside a :class:`Host`: :meth:`offer` runs :meth:`handle` at once in the caller's thread
     when the component is idle, queues the item when it is busy (up to ``buffer - 1`` waiting items; unbounded in
-    lock-step), and drops it otherwise (counted in ``dropped``). :meth:`handle` returns the envelopes to publish
-    downstream (or None); they are published after the component is released, so a slow subscriber never keeps
-    its producer busy. Subclasses override :meth:`handle`. Thread-safe."""
+    lock-step), and drops it otherwise (counted in ``dropped``); the thread that is processing drains the queue,
+    in order. :meth:`handle` returns the envelopes to publish downstream (or None); when nothing waits the
+    component is released before they are published, so a slow subscriber never keeps its producer busy. An
+    exception in :meth:`handle` or while publishing is recorded and counted in ``errors``; the mailbox keeps
+    draining. Subclasses override :meth:`handle`. Thread-safe."""
 
     kind = "component"
 
@@ -147,25 +149,32 @@ class Component:
         return True
 
     def _run(self, port: str, env: dict) -> None:
-        try:
-            out = self.handle(port, env)
-        except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
-            self.errors += 1
-            out = None
-            self.host.report_error(self.cid, e)
-        with self._m:
-            nxt = self._q.popleft() if self._q else None
+        """Process ``env``, hand its outputs on, then keep draining the mailbox in this thread until it is empty
+        (resubmitting each waiting item to the pool would queue it behind every pending capture: starvation)."""
+        while True:
+            try:
+                out = self.handle(port, env)
+            except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
+                self.errors += 1
+                out = None
+                self.host.report_error(self.cid, e)
+            with self._m:
+                nxt = self._q.popleft() if self._q else None
+                if nxt is None:
+                    self._busy = False
+            try:
+                if out:
+                    self.host.publish(self.cid, out, env.get("tok"))
+            except Exception as e:  # a failing subscriber must not leave this mailbox busy with items queued
+                self.errors += 1
+                self.host.report_error(self.cid, e)
+            finally:
+                tok = env.get("tok")
+                if tok is not None:
+                    tok.done()
             if nxt is None:
-                self._busy = False
-        if nxt is not None:  # keep draining on another thread, in order, while this one carries the output on
-            self.host.submit(self._run, *nxt)
-        try:
-            if out:
-                self.host.publish(self.cid, out, env.get("tok"))
-        finally:
-            tok = env.get("tok")
-            if tok is not None:
-                tok.done()
+                return
+            port, env = nxt
 
     def handle(self, port: str, env: dict) -> list[dict] | None:
         """Process one envelope; return the envelopes to publish (or None)."""
