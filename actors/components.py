@@ -179,6 +179,13 @@ class AnalyticsComponent(Component):
         t0 = time.perf_counter()
         out = self.obj.process(env["data"], meta)
         dt_ms = (time.perf_counter() - t0) * 1e3
+        return self._emit(out, env, dt_ms, getattr(self.obj, "last_timing", None))
+
+    def _emit(self, out: Any, env: dict, dt_ms: float, timing: dict | None) -> list[dict] | None:
+        """Count one processed item that took ``dt_ms`` (ms) and, for a non-None output, record it and return the
+        envelope to publish; ``timing["inference_ms"]`` (if given) splits ``dt_ms`` into inference and
+        post-processing in the latency trace."""
+        meta = env.get("meta")
         self.proc_ms.append(dt_ms)
         self.processed += 1
         self.host.mark_processed()
@@ -187,7 +194,6 @@ class AnalyticsComponent(Component):
         self.outputs += 1
         self.latest = out
         trace = dict(env.get("trace") or {})
-        timing = getattr(self.obj, "last_timing", None)
         if timing and "inference_ms" in timing:
             trace["inference_ms"] = trace.get("inference_ms", 0.0) + timing["inference_ms"]
             trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms - timing["inference_ms"]
@@ -220,6 +226,138 @@ class AnalyticsComponent(Component):
         if callable(extra):
             out.update(extra())
         return out
+
+
+class ScheduledAnalyticsComponent(AnalyticsComponent):
+    """An analytics whose frames the *analytics scheduler* places (the paper's setAnalyticsScheduler): every frame
+    delivered to it becomes a task — (drone, this analytics as the model, the frame, arrival now, deadline from its
+    QoS) — that :class:`AnalyticsSchedulingService`'s policy runs on the edge (here, on the frame object itself), sends
+    to the cloud (as JPEG, with the FrameMeta) or drops with a reason. A result that is done by its deadline is
+    recorded and published downstream exactly as an unscheduled analytics' output; a late one earns nothing and is
+    only counted. Every task's outcome is recorded on ``/<robot>/<name>/tasks``. The mailbox only hands frames to the
+    scheduler (microseconds), so it never drops: dropping is the scheduler's decision, with its reason."""
+
+    def __init__(self, host: Host, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+                 service: "AnalyticsSchedulingService") -> None:
+        super().__init__(host, cid, name, analytics, recorder, epoch_ns, buffer=256)
+        self.service = service
+        self.outcomes: dict[str, int] = {}
+
+    def handle(self, port: str, env: dict) -> None:
+        frame = env.get("data")
+        if not (isinstance(frame, np.ndarray) and frame.ndim == 3):
+            raise TypeError(f"scheduled analytics {self.name!r} takes camera frames ((H, W, 3) uint8 BGR), got "
+                            f"{type(frame).__name__}")
+        tok = env.get("tok")
+        if tok is not None:
+            tok.add()  # held until the task's terminal state (on_task_done)
+        try:
+            self.service.submit(self, env)
+        except Exception:
+            if tok is not None:
+                tok.done()
+            raise
+        return None
+
+    def on_task_done(self, task: Any) -> None:
+        """Called by the dispatcher (its loop thread) once per task, in its terminal state: publish an on-time
+        result, record the outcome, release the lock-step hold."""
+        env = task.payload.context
+        tok = env.get("tok")
+        try:
+            state = task.state.value
+            self.outcomes[state] = self.outcomes.get(state, 0) + 1
+            robot = env.get("robot") or task.drone
+            if self.recorder is not None:
+                t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
+                rec = {"task_id": task.task_id, "model": task.model, "state": state, "tier": task.tier,
+                       "reason": task.reason, "arrival_ms": task.arrival_ms, "deadline_ms": task.deadline_ms,
+                       "start_ms": task.start_ms, "end_ms": task.end_ms}
+                self.recorder.json(f"/{robot}/{self.name}/tasks", t_ns, rec, "aerodaas.AnalyticsTask")
+            if state == "done_on_time":
+                dt_ms = (task.end_ms - task.start_ms) if task.start_ms is not None and task.end_ms is not None else 0.0
+                timing = task.notes.get("timing") if task.tier == "edge" else {"inference_ms": dt_ms}
+                envs = self._emit(task.result, env, dt_ms, timing)
+                if envs:
+                    self.host.publish(self.cid, envs, tok)
+        except Exception as e:  # never lose the hold or the dispatcher's loop over one bad result
+            self.errors += 1
+            self.host.report_error(self.cid, e)
+        finally:
+            if tok is not None:
+                tok.done()
+
+    def stats(self) -> dict:
+        out = super().stats()
+        out["scheduled"] = {"scheduler": self.service.name, "outcomes": dict(self.outcomes)}
+        return out
+
+
+class AnalyticsSchedulingService:
+    """The edge device's analytics scheduler, inside the edge host: one :class:`aerodaas.edgecloud.AnalyticsDispatcher`
+    (one policy instance, one edge executor thread, the scheduler's timers) for every scheduled analytics of the
+    host, each analytics being one *model* of the workload. Edge tasks run the host's own analytics objects on the
+    camera's frame (no copy); cloud tasks go to ``CloudExecutor`` actors (tier=cloud) that run copies of the same
+    analytics on the JPEG. A cloud executor that dies (its node lost) is handled by the pool: in-flight tasks are
+    retried or FAILED, the policy is told when no cloud is left, and the mission goes on.
+
+    ``spec``: ``{"name", "workload" (Workload), "executors" ([CloudExecutorActor handles], may be empty),
+    "network" ([NetworkModel specs]), "jpeg_quality", "seed"}``."""
+
+    def __init__(self, host: Host, spec: dict) -> None:
+        self.host = host
+        self.spec = spec
+        self.name = spec["name"]
+        self.comps: dict[str, ScheduledAnalyticsComponent] = {}
+        self.dispatcher = None
+        self.final: dict | None = None
+
+    def add(self, comp: ScheduledAnalyticsComponent) -> None:
+        if comp.name in self.comps:
+            raise ValueError(f"two scheduled analytics are named {comp.name!r}; give them distinct names")
+        self.comps[comp.name] = comp
+
+    def start(self) -> None:
+        from aerodaas.edgecloud import (AnalyticsBank, AnalyticsDispatcher, AnalyticsEdgeExecutor, CloudPool,
+                                        NetworkModel)
+        from aerodaas.schedulers.analytics_base import make_analytics_scheduler
+
+        w = self.spec["workload"]
+        policy = make_analytics_scheduler(self.name, w)
+        bank = AnalyticsBank({n: c.obj for n, c in self.comps.items()}, shared=True)
+        ex = list(self.spec.get("executors") or [])
+        pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.get("network") or ["none"],
+                                                                     seed=int(self.spec.get("seed", 0))),
+                         jpeg_quality=int(self.spec.get("jpeg_quality", 90))) if ex else None
+        self.dispatcher = AnalyticsDispatcher(policy, AnalyticsEdgeExecutor(bank), pool, edge_id=self.host.host_id,
+                                              on_result=self._on_result, keep_tasks=False)
+        self.dispatcher.start_background()
+
+    def submit(self, comp: ScheduledAnalyticsComponent, env: dict) -> None:
+        from aerodaas.edgecloud import FramePayload
+
+        meta = env.get("meta")
+        drone = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        self.dispatcher.submit(drone, comp.name, FramePayload(env["data"], meta, env))
+
+    def _on_result(self, task: Any) -> None:
+        self.comps[task.model].on_task_done(task)
+
+    def report(self) -> dict:
+        """The dispatcher's report (utility, states, drops by reason, decision latency, cloud losses): final after
+        :meth:`finish`, else the run so far."""
+        if self.final is not None:
+            return self.final
+        rep = self.dispatcher.report() if self.dispatcher is not None else {}
+        if self.dispatcher is not None and self.dispatcher.cloud is not None:
+            rep["cloud"] = self.dispatcher.cloud.report()
+        return rep
+
+    def finish(self) -> dict:
+        """End the run: tasks still held end with a reason (every task reaches one terminal state); idempotent."""
+        if self.final is None and self.dispatcher is not None:
+            self.final = self.dispatcher.finish_background()
+        return self.final or {}
 
 
 # --------------------------------------------------------------------------------------------------- scheduler
@@ -392,9 +530,19 @@ class HostRuntime:
         self.recorder = RecorderService(rec["path"], rec.get("meta")) if rec else None
         host.recorder = self.recorder
         self.comps: dict[str, Any] = {}
+        self.scheduling = AnalyticsSchedulingService(host, spec["analytics_scheduler"]) \
+            if spec.get("analytics_scheduler") else None
         for a in spec.get("analytics", []):
-            self.comps[a["cid"]] = host.add(AnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder,
-                                                               host.epoch_ns, a.get("buffer", 1)))
+            if a.get("scheduled"):
+                comp = ScheduledAnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder, host.epoch_ns,
+                                                   self.scheduling)
+                self.scheduling.add(comp)
+            else:
+                comp = AnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder, host.epoch_ns,
+                                          a.get("buffer", 1))
+            self.comps[a["cid"]] = host.add(comp)
+        if self.scheduling is not None:
+            self.scheduling.start()
         self.drones: list[DroneComponent] = []
         world = None
         for r in spec.get("robots", []):
@@ -499,6 +647,8 @@ class HostRuntime:
         finally:
             for d in drones:
                 d.close()
+            if self.scheduling is not None:
+                self.scheduling.finish()
         return {d.cfg.id: d.report() for d in drones}
 
     # ------------------------------------------------------------------ end
@@ -509,9 +659,16 @@ class HostRuntime:
                         "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
                         "first_processed_wall": self.host.first_processed_wall,
                         "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])])}
+        if self.scheduling is not None:
+            out["_analytics_scheduler"] = self.scheduling.report()
         return out
 
     def close(self) -> dict:
+        if self.scheduling is not None:
+            try:
+                self.scheduling.finish()
+            except Exception as e:  # reported, never blocks closing the recording
+                self.host.report_error("analytics_scheduler", e)
         self.host.close()
         for c in self.comps.values():
             close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None

@@ -187,7 +187,6 @@ class Environment:
         self.env_sensors = {s.id: Sensor(s) for s in cfg.env_sensors}
         self.compute = {c.id: ComputeResource(c) for c in cfg.compute}
         self._trajectory_scheduler = None
-        self.analytics_scheduler = "default"
         self.hitl = None  # the running HitlServer (url, token) while a mission with the HITL API runs
 
     # -- sensors
@@ -254,13 +253,45 @@ class Environment:
             self._trajectory_scheduler = TrajectoryScheduler(self)
         return self._trajectory_scheduler
 
-    def set_analytics_scheduler(self, name: str) -> None:
-        """Plug in the analytics scheduler by name (``default`` runs every analytics where it is deployed)."""
-        if name != "default":
-            raise ValueError(f"unknown analytics scheduler {name!r}; available: ['default']")
-        self.analytics_scheduler = name
+    def set_analytics_scheduler(self, name: str, models: dict | None = None, *, workload: str | None = None,
+                                load: str | None = None, cloud_executors: int | None = None,
+                                network: str | list[str] | None = None) -> None:
+        """Plug in the analytics scheduler by name (the paper's setAnalyticsScheduler), as ``analytics_scheduler``
+        in ``environment.json`` does; arguments given here replace the file's.
+
+        ``name``: ``default`` (every analytics runs where it is deployed) or a registered scheduler (``DEMS``,
+        ``DEMS-A``, ``GEMS``, ``E+C``, ``DEM``, ``CLOUD``, ``EDGE_EDF``, ..., ``GAINPLAN``). ``models``: analytics name
+        -> QoS dict (``deadline_ms``, ``edge_ms``, ``cloud_ms``, ``benefit``, ``edge_cost``, ``cloud_cost``; ms and
+        utility units) or a model name of ``workload`` under ``load``. Each frame reaching a named analytics then
+        becomes a task the scheduler runs on the edge, sends to the cloud, or drops. See
+        :class:`aerodaas.config.AnalyticsSchedulerConfig`. Raises ConfigError naming the bad field and value."""
+        from pydantic import ValidationError
+
+        from .config import AnalyticsSchedulerConfig, ConfigError, _format_errors
+
+        cur = self.cfg.analytics_scheduler.model_dump()
+        cur["name"] = name
+        for k, v in (("models", models), ("workload", workload), ("load", load),
+                     ("cloud_executors", cloud_executors), ("network", network)):
+            if v is not None:
+                cur[k] = v
+        if cur.get("workload") and workload is not None:
+            cur["workload"] = str(self.cfg.resolve_path(workload, "analytics_scheduler.workload"))
+        try:
+            cfg = AnalyticsSchedulerConfig.model_validate(cur)
+        except ValidationError as e:
+            raise ConfigError(_format_errors(e, "set_analytics_scheduler").replace("\n  ", "\n  analytics_scheduler.")) from None
+        if cfg.name != "default":
+            cfg.resolved_workload(self.cfg)
+        self.cfg.analytics_scheduler = cfg
+
+    @property
+    def analytics_scheduler(self) -> str:
+        """Name of the analytics scheduler in use (``default``: none)."""
+        return self.cfg.analytics_scheduler.name
 
     # camelCase aliases for readers of the paper
     getRobotById = get_robot_by_id
     getComputeResourceById = get_compute_resource_by_id
     setTrajectoryScheduler = set_trajectory_scheduler
+    setAnalyticsScheduler = set_analytics_scheduler

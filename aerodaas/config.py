@@ -343,6 +343,94 @@ class HitlConfig(_Cfg):
     token: str | None = Field(default=None, min_length=16)
 
 
+class AnalyticsQosConfig(_Cfg):
+    """Quality of service of one scheduled analytics, in the terms of the Ocularone workload (Raj et al., FGCS 2025):
+    a result within ``deadline_ms`` of the frame's capture earns ``benefit``; running it costs ``edge_cost`` on the
+    edge or ``cloud_cost`` on the cloud, charged whether or not it met the deadline. ``edge_ms`` / ``cloud_ms`` are
+    the expected execution times (ms; the cloud's includes the network round trip) the scheduler plans with."""
+
+    deadline_ms: float = Field(gt=0, description="relative deadline from capture, ms")
+    edge_ms: float = Field(gt=0, description="expected execution time on the edge, ms")
+    cloud_ms: float = Field(gt=0, description="expected round trip on the cloud, ms")
+    benefit: float = Field(ge=0)
+    edge_cost: float = Field(default=0.0, ge=0)
+    cloud_cost: float = Field(default=0.0, ge=0)
+
+
+class AnalyticsSchedulerConfig(_Cfg):
+    """The analytics scheduler (the paper's ``setAnalyticsScheduler``): per frame, it places each *scheduled*
+    analytics on the edge, on the cloud, or drops it with a reason.
+
+    ``name``: a registered scheduler (``EDGE_FIFO`` ... ``DEMS``, ``DEMS-A``, ``GEMS``, ``GAINPLAN``, or a plug-in
+    registered with :func:`aerodaas.schedulers.analytics_base.register_analytics_scheduler`); ``default`` runs
+    every analytics where it is deployed. ``models``: analytics name -> its QoS, inline, or the name of a model
+    of ``workload`` under ``load`` (e.g. ``"HV"`` of ``workloads/ocularone_lambda.json``). Analytics not named
+    here run where they are deployed. ``cloud_executors``: cloud executor actors (tier=cloud nodes, else this
+    node). ``network``: emulated extra cloud latency (:class:`aerodaas.edgecloud.NetworkModel` specs, e.g.
+    ``"const:40"`` or ``"normal:60,15"``; ``"none"`` for a real network)."""
+
+    name: str = "default"
+    models: dict[str, AnalyticsQosConfig | str] = Field(default_factory=dict)
+    workload: str | None = Field(default=None, description="workload JSON (Ocularone format) for named models")
+    load: str | None = Field(default=None, description="load of the workload: LIGHT, MEDIUM, HEAVY")
+    cloud_executors: int = Field(default=1, ge=1, le=64)
+    network: list[str] = Field(default_factory=lambda: ["none"])
+    jpeg_quality: int = Field(default=90, ge=10, le=100, description="JPEG quality of frames sent to the cloud")
+
+    @field_validator("network", mode="before")
+    @classmethod
+    def _one_or_many(cls, v: Any) -> Any:
+        return [v] if isinstance(v, str) else v
+
+    @model_validator(mode="after")
+    def _check(self) -> "AnalyticsSchedulerConfig":
+        if self.name == "default":
+            return self
+        from aerodaas.schedulers.analytics_base import analytics_scheduler_names
+
+        names = analytics_scheduler_names()
+        if self.name not in names:
+            raise ValueError(f"name: unknown analytics scheduler {self.name!r}; available: ['default', {', '.join(map(repr, names))}]")
+        if not self.models:
+            raise ValueError(f"models: the {self.name} scheduler needs the QoS of at least one analytics "
+                             f"(analytics name -> {{deadline_ms, edge_ms, cloud_ms, benefit, edge_cost, cloud_cost}})")
+        named = sorted(k for k, v in self.models.items() if isinstance(v, str))
+        if named and (self.workload is None or self.load is None):
+            raise ValueError(f"models: {named} name workload models, which needs 'workload' and 'load'")
+        from aerodaas.edgecloud import NetworkModel
+
+        NetworkModel.parse(self.network)  # ValueError naming the bad spec
+        return self
+
+    def resolved_workload(self, base: "EnvironmentConfig | None" = None):
+        """The QoS of every scheduled analytics as a :class:`aerodaas.schedulers.analytics_base.Workload` keyed by
+        analytics name (named models read from ``workload``, resolved like every file of the environment).
+        Raises ConfigError naming the field for a missing file, load or model."""
+        from aerodaas.schedulers.analytics_base import ModelProfile, Workload
+
+        data = None
+        if any(isinstance(v, str) for v in self.models.values()):
+            path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
+                else Path(self.workload)
+            try:
+                data = json.loads(Path(path).read_text())
+            except (OSError, json.JSONDecodeError) as e:
+                raise ConfigError(f"analytics_scheduler.workload: cannot read {str(path)!r}: {e}") from None
+        models = {}
+        for name, v in self.models.items():
+            if isinstance(v, str):
+                try:
+                    p = Workload.from_dict(data, self.load)[v]
+                except (ValueError, KeyError) as e:
+                    raise ConfigError(f"analytics_scheduler.models.{name}: {str(e).strip(chr(34))}") from None
+                models[name] = ModelProfile(name, p.edge_ms, p.cloud_ms, p.benefit, p.edge_cost, p.cloud_cost,
+                                            p.deadline_ms)
+            else:
+                models[name] = ModelProfile(name, v.edge_ms, v.cloud_ms, v.benefit, v.edge_cost, v.cloud_cost,
+                                            v.deadline_ms)
+        return Workload(self.load or "custom", models)
+
+
 class EnvironmentConfig(_Cfg):
     """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema."""
 
@@ -353,6 +441,7 @@ class EnvironmentConfig(_Cfg):
     world: WorldConfig = Field(default_factory=WorldConfig)
     simulation: SimulationConfig = Field(default_factory=SimulationConfig)
     hitl: HitlConfig = Field(default_factory=HitlConfig)
+    analytics_scheduler: AnalyticsSchedulerConfig = Field(default_factory=AnalyticsSchedulerConfig)
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
 
     @model_validator(mode="after")
@@ -438,6 +527,11 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
             r.safety.geofence = GeofenceConfig(polygons=[*r.safety.geofence.polygons, *fence.polygons],
                                                circles=[*r.safety.geofence.circles, *fence.circles])
             r.safety.geofence_plan = str(path)
+    sched = cfg.analytics_scheduler
+    if sched.name != "default":
+        if sched.workload is not None and any(isinstance(v, str) for v in sched.models.values()):
+            sched.workload = str(cfg.resolve_path(sched.workload, "analytics_scheduler.workload"))
+        sched.resolved_workload(cfg)  # a missing load or model fails here, before any actor starts
     return cfg
 
 

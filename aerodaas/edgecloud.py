@@ -101,7 +101,8 @@ from aerodaas.schedulers.analytics_base import (
 )
 
 __all__ = [
-    "Clock", "Jitter", "NetworkModel", "EdgeExecutor", "EmulatedEdgeExecutor", "OnnxEdgeExecutor",
+    "Clock", "Jitter", "NetworkModel", "EdgeExecutor", "EmulatedEdgeExecutor", "OnnxEdgeExecutor", "AnalyticsEdgeExecutor",
+    "AnalyticsBank", "FramePayload",
     "CloudExecutor", "CloudExecutorActor", "CloudPool", "AnalyticsDispatcher", "EdgeHost", "EdgeHostActor",
     "Samples", "cloud_selector", "start_cloud_executors", "DROP_STATES",
 ]
@@ -385,11 +386,24 @@ def _set_result_if_pending(fut: asyncio.Future, value: Any) -> None:
         fut.set_result(value)
 
 
+class FramePayload:
+    """A task payload of an application's frame path: ``frame`` ((H, W, 3) uint8 BGR ndarray, the camera's own
+    object: never copied on the edge), ``meta`` (:class:`~aerodaas.models.FrameMeta`, sent to the cloud with the
+    JPEG) and ``context`` (edge-side only: what the caller needs to hand the result on; never sent)."""
+
+    __slots__ = ("frame", "meta", "context")
+
+    def __init__(self, frame: Any, meta: Any = None, context: Any = None) -> None:
+        self.frame, self.meta, self.context = frame, meta, context
+
+
 def _frame_from_payload(payload: Any):
-    """The frame of a task payload: an ``(H, W, 3)`` uint8 BGR array, from an ndarray, an ObjectRef to one, or JPEG
-    bytes. Raises TypeError for anything else and ValueError for undecodable bytes."""
+    """The frame of a task payload: an ``(H, W, 3)`` uint8 BGR array, from an ndarray, a :class:`FramePayload`, an
+    ObjectRef to one, or JPEG bytes. Raises TypeError for anything else and ValueError for undecodable bytes."""
     import numpy as np
 
+    if isinstance(payload, FramePayload):
+        payload = payload.frame
     if payload is None:
         raise TypeError("the task has no frame (payload None); real executors need an image")
     if type(payload).__name__ == "ObjectRef":
@@ -439,6 +453,55 @@ class _DetectorBank:
             det = cache[name] = make_detector(name, **self.kwargs)
         return det.detect(frame)
 
+    def run(self, model: str, frame, meta: Any = None) -> list:
+        """The detections of ``model``'s detector on ``frame`` (``meta`` unused)."""
+        return self.detect(model, frame)
+
+
+class AnalyticsBank:
+    """Runs an application's analytics objects (:class:`aerodaas.analytics.Analytics`) by model name, for the
+    executors of scheduled analytics. Each thread gets its own copy of an analytics (``setup()`` once per copy), so
+    an onnxruntime session is never shared by concurrent calls; with ``shared=True`` the given objects themselves
+    are used, already set up by the caller (one executor thread: the edge host's own analytics). :meth:`run` returns ``process(frame, meta)`` and keeps the analytics'
+    ``last_timing`` in ``self.last_timing`` of the thread (inference ms, when the analytics reports it)."""
+
+    def __init__(self, analytics: Mapping[str, Any], shared: bool = False) -> None:
+        if not analytics:
+            raise ValueError("an AnalyticsBank needs at least one analytics (model name -> Analytics)")
+        self.analytics = dict(analytics)
+        self.shared = shared  # the caller has set the objects up (they live in its host)
+        self._local = threading.local()
+
+    def _get(self, model: str):
+        try:
+            proto = self.analytics[model]
+        except KeyError:
+            raise KeyError(f"no analytics for model {model!r} (have {sorted(self.analytics)})") from None
+        if self.shared:
+            return proto
+        cache = getattr(self._local, "cache", None)
+        if cache is None:
+            cache = self._local.cache = {}
+        obj = cache.get(model)
+        if obj is None:
+            import copy
+
+            obj = cache[model] = copy.deepcopy(proto)
+            obj.setup()
+        return obj
+
+    def run(self, model: str, frame, meta: Any = None) -> Any:
+        """``process(frame, meta)`` of ``model``'s analytics on this thread; raises what it raises."""
+        obj = self._get(model)
+        out = obj.process(frame, meta)
+        self._local.timing = dict(getattr(obj, "last_timing", None) or {})
+        return out
+
+    @property
+    def last_timing(self) -> dict:
+        """The ``last_timing`` of the analytics that last ran on this thread (empty if it reports none)."""
+        return getattr(self._local, "timing", {})
+
 
 class OnnxEdgeExecutor(EdgeExecutor):
     """Runs a real ONNX detector on the task's frame on one worker thread (the edge's one accelerator).
@@ -463,6 +526,31 @@ class OnnxEdgeExecutor(EdgeExecutor):
 
     def describe(self) -> dict:
         return {"kind": "onnx", "detectors": self.bank.detector_for}
+
+
+class AnalyticsEdgeExecutor(EdgeExecutor):
+    """Runs an application's analytics on the edge, one task at a time on one worker thread (the edge's one
+    accelerator): ``bank.run(task.model, frame, meta)`` for a :class:`FramePayload`. The result is the analytics'
+    output (e.g. a list of :class:`~aerodaas.models.Detection`); ``last_timing`` of the analytics goes to
+    ``task.notes["timing"]``."""
+
+    def __init__(self, bank: AnalyticsBank) -> None:
+        self.bank = bank
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="edge-analytics")
+
+    async def run(self, task: AnalyticsTask, workload: Workload, edge_id: str) -> tuple[Any, float | None]:
+        payload = task.payload
+        meta = getattr(payload, "meta", None)
+
+        def work():
+            out = self.bank.run(task.model, _frame_from_payload(payload), meta)
+            task.notes["timing"] = self.bank.last_timing
+            return out
+
+        return await asyncio.get_running_loop().run_in_executor(self._pool, work), None
+
+    def describe(self) -> dict:
+        return {"kind": "analytics", "models": sorted(self.bank.analytics)}
 
 
 # ================================================================================================ cloud executor
@@ -499,14 +587,18 @@ class CloudExecutor:
 
     def __init__(self, name: str = "cloud", mode: str = "emulated", threads: int = 2,
                  detector_for: Mapping[str, str] | str = "yolox_nano",
-                 detector_kwargs: Mapping[str, Any] | None = None) -> None:
+                 detector_kwargs: Mapping[str, Any] | None = None,
+                 analytics: Mapping[str, Any] | None = None) -> None:
         if mode not in ("emulated", "real"):
             raise ValueError(f"mode must be 'emulated' or 'real', got {mode!r}")
         if int(threads) < 1:
             raise ValueError(f"threads must be >= 1, got {threads!r}")
+        if analytics and mode != "real":
+            raise ValueError("analytics run in mode 'real' only")
         self.name = name
         self.mode = mode
-        self._bank = _DetectorBank(detector_for, detector_kwargs) if mode == "real" else None
+        self._bank = (AnalyticsBank(analytics) if analytics else _DetectorBank(detector_for, detector_kwargs)) \
+            if mode == "real" else None
         self._pool = concurrent.futures.ThreadPoolExecutor(int(threads), thread_name_prefix="cloud-onnx") \
             if mode == "real" else None
         self._ready: dict[str, list[dict]] = defaultdict(list)
@@ -611,8 +703,8 @@ class CloudExecutor:
         if admit_by is not None and start > admit_by:  # queued for a detector thread too long
             return "refused", start, None, None
         self.executed += 1
-        dets = self._bank.detect(req["model"], _frame_from_payload(req["jpeg"]))
-        return "ok", start, time.time(), dets
+        out = self._bank.run(req["model"], _frame_from_payload(req["jpeg"]), req.get("meta"))
+        return "ok", start, time.time(), out
 
     def _real_done(self, client: str, req: dict, fut) -> None:
         try:
@@ -666,7 +758,8 @@ def cloud_selector(has_cloud_nodes: bool) -> dict[str, str]:
 def start_cloud_executors(n: int, mode: str = "emulated", *, selector: Mapping[str, str] | None = None,
                           name_prefix: str = "cloud", threads: int = 2, spread: bool = True,
                           detector_for: Mapping[str, str] | str = "yolox_nano",
-                          detector_kwargs: Mapping[str, Any] | None = None) -> list:
+                          detector_kwargs: Mapping[str, Any] | None = None,
+                          analytics: Mapping[str, Any] | None = None) -> list:
     """Start ``n`` :data:`CloudExecutorActor` s on tier=cloud nodes (``selector`` defaults to
     :func:`cloud_selector` for the current cluster), spread over the nodes that match. Returns the handles once
     each has answered :meth:`CloudExecutor.info`. Raises ValueError for ``n < 1``."""
@@ -681,7 +774,7 @@ def start_cloud_executors(n: int, mode: str = "emulated", *, selector: Mapping[s
     if spread:
         opts["scheduling_strategy"] = "SPREAD"
     handles = [CloudExecutorActor.options(**opts).remote(f"{name_prefix}{i}", mode, threads, detector_for,
-                                                          detector_kwargs) for i in range(n)]
+                                                          detector_kwargs, analytics) for i in range(n)]
     ray.get([h.info.remote() for h in handles])
     return handles
 
@@ -849,7 +942,8 @@ class CloudPool:
         exec_ms = profile.cloud_ms * self.jitter.factor(rng) if self.mode == "emulated" else None
         req = {"k": key, "model": task.model, "sent": time.time(), "up_ms": net / 2.0, "down_ms": net / 2.0,
                "exec_ms": exec_ms, "lead_ms": self.reply_lead_ms,
-               "admit_by": None if math.isinf(admit_by_ms) else self.clock.epoch(admit_by_ms), "jpeg": None}
+               "admit_by": None if math.isinf(admit_by_ms) else self.clock.epoch(admit_by_ms), "jpeg": None,
+               "meta": getattr(task.payload, "meta", None)}
         f = _InFlight(dispatcher, task, i, now_ms, None if exec_ms is None else exec_ms + net, admit_by_ms, req=req)
         self._inflight[key] = f
         self.sent += 1
@@ -1041,7 +1135,7 @@ class AnalyticsDispatcher:
     ``edge``: the :class:`EdgeExecutor` (emulated or ONNX). ``cloud``: a :class:`CloudPool` (may be shared with
     other dispatchers of the same loop) or None for an edge-only device. ``clock``: the :class:`Clock` (share one to
     give several dispatchers one time origin). ``on_result(task)`` is called (on the loop) for every task that
-    reaches its terminal state. ``keep_tasks``: keep every task object for :meth:`tasks` (set False for long-running
+    reaches its terminal state, with its ``payload`` still attached (released right after). ``keep_tasks``: keep every task object for :meth:`tasks` (set False for long-running
     use; the counters stay exact).
 
     Lifecycle: ``await start()`` on the loop that will run it (or :meth:`start_background` from synchronous code),
@@ -1391,7 +1485,6 @@ class AnalyticsDispatcher:
         self.tiers[task.tier or "none"] += 1
         if state not in _DONE_STATES:
             self.reasons[f"{state.value}: {_reason_key(reason)}"] += 1
-        task.payload = None  # release the frame (ObjectRef / bytes)
         with self._lock:
             self._pending.discard(task.task_id)
             if not self.keep_tasks:
@@ -1402,11 +1495,13 @@ class AnalyticsDispatcher:
             self._idle_event.set()
 
     def _notify(self, task: AnalyticsTask) -> None:
+        """``on_result(task)`` (once per task, in its terminal state), then release the frame (payload)."""
         if self.on_result is not None:
             try:
                 self.on_result(task)
             except Exception:  # a consumer's bug must not stop the dispatcher
                 log.exception("on_result callback failed for task #%s", task.task_id)
+        task.payload = None
 
     # ------------------------------------------------------------------ end of run
     async def finish(self, drain_timeout_s: float = 10.0) -> dict:

@@ -178,10 +178,12 @@ class _Plan:
 
 
 def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, record: str | None,
-          epoch_ns: int) -> _Plan:
+          epoch_ns: int, scheduled: dict[int, Any] | None = None) -> _Plan:
     """Place components on hosts (one per tier in use: "edge" has the drones, cameras, schedulers, the recorder and
     the analytics deployed on edge compute; "cloud" the analytics deployed on cloud compute) and compute the
-    routes from every stream producer to its subscribers."""
+    routes from every stream producer to its subscribers. Analytics placed per frame by the analytics scheduler
+    (``scheduled``: id(analytics) -> analytics) live on the edge host, whose dispatcher decides edge or cloud."""
+    scheduled = scheduled or {}
     specs: dict[str, dict] = {"edge": {"sim": sim.model_dump(), "world": env.cfg.world.model_dump(mode="json"),
                                        "robots": [], "analytics": []}}
     if record:
@@ -196,10 +198,11 @@ def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, 
                 continue  # shared by several robots: one instance
             cid = f"{a.name}#{len(acid) + 1}"
             acid[id(a)] = cid
-            tier = a.compute.tier
+            tier = "edge" if id(a) in scheduled else a.compute.tier
             specs.setdefault(tier, {"sim": sim.model_dump(), "robots": [], "analytics": []})
             buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
-            specs[tier]["analytics"].append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer})
+            specs[tier]["analytics"].append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer,
+                                             "scheduled": id(a) in scheduled})
             location[cid] = tier
     routes: dict[str, list] = {}
     robot_ids: dict[str, dict] = {}
@@ -243,6 +246,50 @@ def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, 
             location[cid] = "edge"
         robot_ids[r.id] = ids
     return _Plan(specs, routes, location, robot_ids, acid)
+
+
+def _scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
+    """The analytics the environment's analytics scheduler places per frame (id -> analytics): those named in
+    ``analytics_scheduler.models``. Raises ConfigError for a named analytics the application does not have, two
+    scheduled analytics sharing a name, or one that is not fed by camera frames."""
+    from .config import ConfigError
+
+    cfg = env.cfg.analytics_scheduler
+    if cfg.name == "default":
+        return {}
+    every = {id(a): a for g in graphs.values() for a in g}
+    out = {i: a for i, a in every.items() if a.name in cfg.models}
+    names = [a.name for a in out.values()]
+    for name in cfg.models:
+        if name not in names:
+            raise ConfigError(f"analytics_scheduler.models.{name}: the application has no analytics named {name!r} "
+                              f"(it has {sorted({a.name for a in every.values()})})")
+        if names.count(name) > 1:
+            raise ConfigError(f"analytics_scheduler.models.{name}: {names.count(name)} analytics share the name "
+                              f"{name!r}; give each scheduled analytics its own name")
+    for a in out.values():
+        bad = [getattr(st.source, "id", repr(st.source)) for st in a.inputs
+               if getattr(st.source, "type", None) != "camera"]
+        if bad or not a.inputs:
+            raise ConfigError(f"analytics_scheduler.models.{a.name}: a scheduled analytics takes camera frames, but "
+                              f"{a.name!r} is fed by {bad or 'nothing'}")
+    return out
+
+
+def _start_scheduling(env, plan: _Plan, scheduled: dict, has_cloud: bool) -> list:
+    """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
+    copies of the scheduled analytics, and put the scheduler's spec into the edge host's spec. Returns the
+    executors' handles (to kill at the end)."""
+    from .edgecloud import cloud_selector, start_cloud_executors
+
+    cfg = env.cfg.analytics_scheduler
+    analytics = {a.name: a for a in scheduled.values()}
+    executors = start_cloud_executors(cfg.cloud_executors, mode="real", selector=cloud_selector(has_cloud),
+                                      name_prefix="cloud-analytics", analytics=analytics)
+    plan.specs["edge"]["analytics_scheduler"] = {
+        "name": cfg.name, "workload": cfg.resolved_workload(env.cfg), "executors": executors,
+        "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
+    return executors
 
 
 def _robot_schedulers(env, robots: list) -> dict[str, Any]:
@@ -299,6 +346,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 check()
         graphs[r.id] = analytics
         _check_preplanned(r, scheds[r.id])
+    scheduled = _scheduled_analytics(env, graphs)
 
     from .bench.startup import probe
 
@@ -307,8 +355,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
-    plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns)
+    plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns, scheduled)
     hosts: dict[str, Any] = {}
+    cloud_executors: list = []
     handles: dict[str, dict] = {}
     hitl = None
     reports: dict[str, dict] = {}
@@ -316,6 +365,8 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     latency: dict[str, Any] = {}
     counts: dict[str, int] = {}
     try:
+        if scheduled:
+            cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
         for tier, spec in plan.specs.items():
             hosts[tier] = HostActor.options(label_selector=_selector(tier, has_cloud), name=None).remote(
                 tier, tier, epoch_ns, sim.lockstep)
@@ -374,8 +425,11 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             h["sched_obj"]._remote = None
             for s in h["robot"].sensors.values():
                 s.get_data_stream()._runtime_getter = None
-        for h in hosts.values():
-            ray.kill(h, no_restart=True)
+        for h in [*hosts.values(), *cloud_executors]:
+            try:
+                ray.kill(h, no_restart=True)
+            except Exception:  # an executor on a lost node is already gone
+                pass
     for r in robots:
         reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": "no report (the run did not start)"})
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
@@ -513,6 +567,9 @@ def _collect_stats(handles: dict, hosts: dict) -> tuple[dict, dict]:
     host_stats = {tier: ray.get(h.stats.remote()) for tier, h in hosts.items()}
     every = {cid: s for hs in host_stats.values() for cid, s in hs.items()}
     stats: dict[str, Any] = {"_hosts": {t: hs.get("_host", {}) for t, hs in host_stats.items()}}
+    sched_rep = host_stats.get("edge", {}).get("_analytics_scheduler")
+    if sched_rep:
+        stats["analytics_scheduler"] = sched_rep
     latency: dict[str, Any] = {}
     for rid, h in handles.items():
         s: dict[str, Any] = {"scheduler": every.get(h["scheduler"].cid, {})}
@@ -558,6 +615,17 @@ def format_summary(result: MissionResult) -> str:
                          f"{lat['e2e_ms']['median']:.1f} ms (p99 {lat['e2e_ms']['p99']:.1f}), inference median "
                          f"{lat['inference_ms']['median']:.1f} ms, framework overhead median "
                          f"{lat['overhead_ms']['median']:.1f} ms (p99 {lat['overhead_ms']['p99']:.1f})")
+    sr = result.stats.get("analytics_scheduler")
+    if sr:
+        st = sr.get("states", {})
+        lines.append(f"  analytics scheduler {sr.get('scheduler')}: {sr.get('submitted', 0)} tasks, on time "
+                     f"{100 * sr.get('on_time_rate', 0):.1f}% (edge {sr.get('tiers', {}).get('edge', 0)}, cloud "
+                     f"{sr.get('tiers', {}).get('cloud', 0)}), utility {sr.get('utility', 0):.0f}, cloud cost "
+                     f"{sr.get('cloud_cost', 0):.0f}; " + ", ".join(f"{k} {v}" for k, v in st.items() if v))
+        for ev in (sr.get("cloud") or {}).get("losses", []):
+            lines.append(f"    cloud executor {ev.get('name')} lost at {ev.get('at_s', 0):.1f} s ({ev.get('error')}): "
+                         f"{ev.get('in_flight', 0)} tasks in flight, {ev.get('retried', 0)} retried, "
+                         f"{ev.get('failed', 0)} failed")
     if result.recording:
         total = sum(result.recording_counts.values())
         lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} channels)")
