@@ -209,6 +209,47 @@ def test_losing_cloud_nodes_mid_run_fails_or_retries_in_flight_tasks_and_moves_n
     assert all(t.reason for t in after if t.state is not TaskState.DONE_ON_TIME)
 
 
+def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, run_options, tmp_path):
+    """An application whose detector is placed per frame by DEMS (edge overloaded, so the cloud takes a share) loses
+    the cloud node mid-mission: the mission still succeeds, the report names the lost executor and its node, tasks in
+    flight there are retried or failed, and every later frame runs on the edge or is dropped with a reason."""
+    import threading
+
+    from aerodaas.bench.overhead import FixedCostDetector
+    from aerodaas.runtime import format_summary
+    from tests.test_analytics_scheduling import QOS, build, hover_config, topic_messages
+
+    node = cluster.add_cloud_node({"cloud-node": "c-mission"})
+    cluster.cluster.wait_for_nodes()
+    env, drone = build(hover_config(fps=15), FixedCostDetector(80), hover_s=12.0)
+    env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
+    run_options.record = str(tmp_path / "loss.mcap")
+    removed: list[str] = []
+
+    def lose_cloud() -> None:  # 8 s into the flight (the cloud has taken a share by then): SIGKILL its node
+        removed.append(cluster.remove_cloud_node(cluster.cloud_nodes.index(node)))
+
+    drone.on_mission_start(lambda r: threading.Timer(8.0, lose_cloud).start())
+    res = drone.start_mission()
+    assert removed, "the cloud node was never removed"
+    assert res.outcome == "success", res.robots["uav"].get("error")
+    rep = res.stats["analytics_scheduler"]
+    assert rep["terminal"] == rep["submitted"] and rep["pending"] == 0
+    losses = rep["cloud"]["losses"]
+    assert len(losses) == 1 and losses[0]["node_id"] == removed[0]
+    assert losses[0]["retried"] + losses[0]["failed"] == losses[0]["in_flight"]
+    assert rep["cloud_availability_changes"][-1]["available"] is False
+    assert "lost at" in format_summary(res)  # the run's report says what happened
+    tasks = topic_messages(run_options.record, "/uav/detector/tasks")
+    lost_ms = losses[0]["at_s"] * 1000.0
+    before = [t for t in tasks if t["arrival_ms"] < lost_ms - 3000]
+    after = [t for t in tasks if t["arrival_ms"] > lost_ms + 50]
+    assert any(t["tier"] == "cloud" and t["state"] == "done_on_time" for t in before)  # the cloud was in use
+    assert after and all(t["tier"] != "cloud" for t in after)
+    assert any(t["tier"] == "edge" and t["state"] == "done_on_time" for t in after)
+    assert all(t["reason"] for t in after if t["state"] != "done_on_time")
+
+
 # ------------------------------------------------------------------------------------------------ ray up files
 @pytest.mark.parametrize("name", ["edge-cloud-aws.yaml", "edge-cloud-onprem.yaml"])
 def test_cluster_yaml_passes_rays_validation(name):
