@@ -455,7 +455,8 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--address", help="run on this Ray cluster (e.g. 'auto') instead of starting a local one")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON result to FILE")
-    p.add_argument("--plot", metavar="PNG", help="write a comparison figure to PNG")
+    p.add_argument("--plot", metavar="PNG", help="write the comparison figure to PNG (default: next to --out with a "
+                                                 ".png suffix, else bench_schedulers.png in the working folder)")
     p.set_defaults(func=_cmd)
     return p
 
@@ -473,8 +474,9 @@ def _cmd(args: argparse.Namespace) -> int:
     try:
         if args.out:
             Path(args.out).write_text(text + "\n", encoding="utf-8")
-        if args.plot:
-            write_plot(res, args.plot)
+        plot = args.plot or (str(Path(args.out).with_suffix(".png")) if args.out else "bench_schedulers.png")
+        write_plot(res, plot)
+        print(f"aerodaas bench schedulers: comparison figure written to {plot}", file=sys.stderr)
     except OSError as e:
         print(f"aerodaas bench schedulers: cannot write output: {e}", file=sys.stderr)
         return 2
