@@ -573,7 +573,7 @@ class CloudExecutor:
 
     Requests (dicts) carry: ``k`` (the client's key), ``model``, ``sent`` (epoch s), ``up_ms``/``down_ms`` (emulated
     network latency before/after execution), ``exec_ms`` (emulated hold; None in real mode), ``admit_by`` (epoch s or
-    None: the re-check), ``jpeg`` (real mode: the frame). The executor waits until ``sent + up_ms``, re-checks
+    None: the re-check), ``jpeg`` (real mode: the frame), ``meta`` (its FrameMeta or None). The executor waits until ``sent + up_ms``, re-checks
     ``now <= admit_by`` right before it starts the model, runs it (emulated: holds ``exec_ms``; real: decodes the
     JPEG and runs the ONNX detector on one of ``threads`` threads, re-checking when a thread picks the task up),
     waits ``down_ms`` and queues the reply for the client's :meth:`collect`.
@@ -581,7 +581,10 @@ class CloudExecutor:
     Replies (dicts): ``k``, ``ok`` (False: refused by the re-check, or failed: see ``error``), ``start``/``end`` (epoch
     s of the model's execution), ``result`` (real mode: list of detections), ``ready`` (epoch s), ``error``.
 
-    ``detector_for``/``detector_kwargs`` as in :class:`OnnxEdgeExecutor` (real mode only). Wrapped as the Ray actor
+    ``detector_for``/``detector_kwargs`` as in :class:`OnnxEdgeExecutor` (real mode only). ``analytics`` (real mode):
+    model name -> an application's :class:`~aerodaas.analytics.Analytics`, run instead of the ONNX detectors (a copy
+    per thread, ``process(frame, meta)`` with the request's ``meta``: the scheduled analytics of a running app).
+    Wrapped as the Ray actor
     :data:`CloudExecutorActor`; also usable in-process (tests, single-process experiments).
     """
 
