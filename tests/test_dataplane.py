@@ -119,9 +119,9 @@ def test_frames_reach_every_reader_as_the_same_read_only_array():
         rt.close()
 
 
-def _host_processes() -> list:
-    """psutil processes of this driver's Ray node running a HostActor (Ray titles an actor's worker process
-    ``ray::HostActor`` / ``ray::HostActor.<method>``)."""
+def _ray_processes_titled(keep) -> list:
+    """psutil processes of this driver's Ray node whose title (Ray titles a worker ``ray::<Class>`` or
+    ``ray::<Class>.<method>``, an idle one ``ray::IDLE``) satisfies ``keep(title)``."""
     import psutil
 
     from aerodaas.bench.procs import ray_processes
@@ -132,28 +132,20 @@ def _host_processes() -> list:
             title = " ".join(p.cmdline())
         except (psutil.NoSuchProcess, psutil.AccessDenied):
             continue
-        if title.startswith("ray::HostActor"):
+        if keep(title):
             out.append(p)
     return out
+
+
+def _host_processes() -> list:
+    """Processes running a HostActor."""
+    return _ray_processes_titled(lambda t: t.startswith("ray::HostActor"))
 
 
 def _worker_processes() -> list:
-    """psutil processes of this driver's Ray node that run an actor or task (``ray::...``), other than Ray's own
-    agents and idle pooled workers."""
-    import psutil
-
-    from aerodaas.bench.procs import ray_processes
-
-    out = []
-    for p in ray_processes():
-        try:
-            title = " ".join(p.cmdline())
-        except (psutil.NoSuchProcess, psutil.AccessDenied):
-            continue
-        if title.startswith("ray::") and not title.startswith(("ray::IDLE", "ray::DashboardAgent",
-                                                                 "ray::RuntimeEnvAgent")):
-            out.append(p)
-    return out
+    """Processes running an actor or task, other than Ray's own agents and idle pooled workers."""
+    return _ray_processes_titled(lambda t: t.startswith("ray::") and not t.startswith(
+        ("ray::IDLE", "ray::DashboardAgent", "ray::RuntimeEnvAgent")))
 
 
 def test_one_host_process_per_tier_whatever_the_fleet(ray_session, run_options):
