@@ -118,6 +118,7 @@ class CameraComponent:
         else:
             frame, truth = self.world.render(pose, self.k, t)
         frame.flags.writeable = False  # shared by every reader from here on: nobody may change it
+        self.host.copies.count("materialised")
         wall = time.time()
         self.render_ms.append((time.perf_counter() - t0) * 1e3)
         self.frames += 1
@@ -527,7 +528,7 @@ class HostRuntime:
         self.host = host
         self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
         rec = spec.get("record")
-        self.recorder = RecorderService(rec["path"], rec.get("meta")) if rec else None
+        self.recorder = RecorderService(rec["path"], rec.get("meta"), copies=host.copies) if rec else None
         host.recorder = self.recorder
         self.comps: dict[str, Any] = {}
         self.scheduling = AnalyticsSchedulingService(host, spec["analytics_scheduler"]) \
@@ -658,6 +659,7 @@ class HostRuntime:
         out["_host"] = {"errors": self.host.errors[-10:], "error_count": len(self.host.errors),
                         "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
                         "first_processed_wall": self.host.first_processed_wall,
+                        "frame_copies": self.host.copies.snapshot(),
                         "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])])}
         if self.scheduling is not None:
             out["_analytics_scheduler"] = self.scheduling.report()

@@ -20,6 +20,15 @@ tier, it is placed with a Ray ``label_selector`` on ``tier``, and it is reached 
 Items that cross processes (a component on another host, e.g. cloud analytics) go through Ray actor calls
 (:class:`RemoteOutlet`, bounded in flight); frames cross tiers as JPEG bytes.
 
+Frame copies per frame (counted in :class:`FrameCopies`, ``Host.copies``, reported in the host stats as
+``frame_copies``): the camera materialises the pixels once (render, or the vehicle's decoded video, or a
+recording's decoded JPEG); from there **0 copies** to every reader on the same host (the same read-only
+``ndarray`` object reaches the detector and any other edge analytics; follow analytics, scheduler and drone get
+detections and navigation, not pixels); **+1 JPEG encode** in the recorder's writer thread when the run is
+recorded (``foxglove.CompressedImage``); **+1 JPEG encode on the sending host and +1 decode on the receiving host**
+per edge that crosses tiers (e.g. edge camera -> cloud analytics); +1 ``ray.put`` per edge to another host of the
+same tier (the receiver's ``ray.get`` maps the object store's shared memory on the same node).
+
 Lock-step: with ``lockstep`` the clock waits after every frame (and odometry message) for its whole cascade —
 every item derived from it, on this host and on others — before simulated time moves on (:class:`Cascade`);
 queues are then unbounded, so nothing is dropped.
@@ -40,7 +49,39 @@ import cv2
 import numpy as np
 import ray
 
-__all__ = ["Cascade", "Component", "RemoteOutlet", "Host", "HostActor", "encode_frame", "decode_frame"]
+__all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "Host", "HostActor", "encode_frame", "decode_frame"]
+
+
+class FrameCopies:
+    """Counts, in one host process, every place where a frame's pixels are materialised or copied (see the module
+    docstring for the per-frame totals). Counters, in frames:
+
+    * ``materialised``: frames produced by a camera (the one allocation of the pixels);
+    * ``tier_jpeg_encoded`` / ``tier_jpeg_decoded``: frames JPEG-encoded here to cross to a host of another tier /
+      decoded here on arrival from one;
+    * ``object_store_put`` / ``object_store_get``: frames sent to / received from a host of the same tier as an
+      ObjectRef;
+    * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
+
+    Handing a frame to a component of the same host copies nothing and is not counted. Thread-safe; a count costs
+    one uncontended lock (well under a microsecond)."""
+
+    FIELDS = ("materialised", "tier_jpeg_encoded", "tier_jpeg_decoded", "object_store_put", "object_store_get",
+              "recorder_jpeg_encoded")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._n = dict.fromkeys(self.FIELDS, 0)
+
+    def count(self, what: str, n: int = 1) -> None:
+        """Add ``n`` frames to counter ``what`` (one of :attr:`FIELDS`; KeyError otherwise)."""
+        with self._lock:
+            self._n[what] += n
+
+    def snapshot(self) -> dict[str, int]:
+        """The counters now, ``{name: frames}``."""
+        with self._lock:
+            return dict(self._n)
 
 
 class Cascade:
@@ -190,8 +231,10 @@ class RemoteOutlet:
     Allows ``buffer`` calls in flight; when the consumer is still busy with them a new item is dropped and
     counted. Frames are JPEG-encoded when the edge crosses tiers (``jpeg``), else sent as an ObjectRef."""
 
-    def __init__(self, handle: Any, cid: str, port: str, buffer: int, jpeg: bool) -> None:
+    def __init__(self, handle: Any, cid: str, port: str, buffer: int, jpeg: bool,
+                 copies: FrameCopies | None = None) -> None:
         self.handle, self.cid, self.port = handle, cid, port
+        self.copies = copies if copies is not None else FrameCopies()
         self.buffer = max(1, int(buffer))
         self.jpeg = jpeg
         self.in_flight: list = []
@@ -214,6 +257,7 @@ class RemoteOutlet:
                 frame = env["data"]
                 wire["data"] = encode_frame(frame) if self.jpeg else ray.put(frame)
                 wire["kind"] = "frame_jpeg" if self.jpeg else "frame_ref"
+                self.copies.count("tier_jpeg_encoded" if self.jpeg else "object_store_put")
             ref = self.handle.deliver.remote(self.cid, self.port, wire)
             self.sent += 1
             if tok is None:
@@ -246,6 +290,7 @@ class Host:
         self.peers: dict[str, Any] = {}
         self._outlets: dict[tuple[str, str, str], RemoteOutlet] = {}
         self.recorder = recorder
+        self.copies = FrameCopies()
         self.errors: list[dict] = []
         self.first_processed_wall: float | None = None
         self._closed = False
@@ -336,7 +381,7 @@ class Host:
             if hid is None or hid not in self.peers:
                 raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
             o = self._outlets[key] = RemoteOutlet(self.peers[hid], cid, port, buffer,
-                                                  jpeg=self.tiers.get(hid, self.tier) != self.tier)
+                                                  jpeg=self.tiers.get(hid, self.tier) != self.tier, copies=self.copies)
         return o
 
     def deliver(self, cid: str, port: str, wire: dict) -> list:
@@ -348,8 +393,10 @@ class Host:
         kind = env.get("kind")
         if kind == "frame_jpeg":
             env["data"], env["kind"] = decode_frame(env["data"]), "frame"
+            self.copies.count("tier_jpeg_decoded")
         elif kind == "frame_ref":
             env["data"], env["kind"] = ray.get(env["data"]), "frame"
+            self.copies.count("object_store_get")
         comp = self.components[cid]
         if not lock:
             comp.offer(port, env)

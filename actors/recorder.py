@@ -19,10 +19,12 @@ from aerodaas.recording import McapRecorder
 class RecorderService:
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
-    telemetry messages are never dropped. All methods are thread-safe and return at once."""
+    telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
+    ``recorder_jpeg_encoded`` in ``copies`` (the host's :class:`~.host.FrameCopies`) when given. All methods are
+    thread-safe and return at once."""
 
     def __init__(self, path: str, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
-                 max_pending_frames: int = 8, flush_every_s: float = 2.0) -> None:
+                 max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None) -> None:
         self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality)
         self.path = path
         self._q: queue.SimpleQueue = queue.SimpleQueue()
@@ -30,6 +32,7 @@ class RecorderService:
         self._lock = threading.Lock()
         self.max_pending_frames = max_pending_frames
         self.flush_every_s = flush_every_s
+        self.copies = copies
         self.frames_dropped = 0
         self.write_errors: list[str] = []
         self.closed = False
@@ -88,7 +91,9 @@ class RecorderService:
         r = self.rec
         if kind == "image":
             _, topic, t_ns, frame, frame_id = item
-            r.write_image(topic, t_ns, frame, frame_id=frame_id)
+            r.write_image(topic, t_ns, frame, frame_id=frame_id)  # the one JPEG encode of this frame
+            if self.copies is not None:
+                self.copies.count("recorder_jpeg_encoded")
         elif kind == "detections":
             _, topic, t_ns, dets, size = item
             r.write_detections(topic, t_ns, dets, image_size=size)

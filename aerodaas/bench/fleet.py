@@ -5,13 +5,16 @@ For each fleet size N (default 1, 5, 10, 20, 40) on a fresh local Ray: N simulat
 survey, plus one lightweight analytics shared by every camera, in real time (speedup 1) for ``--duration``
 seconds. Reported per N: missed control ticks (%: a tick that runs more than one control period late), frames
 dropped (%: camera ticks whose frame never reached the shared analytics), CPU (% of one core, all Ray processes
-and the driver), and the summed RSS (and PSS) of every Ray process and the driver at its peak.
+and the driver), and the summed RSS (and PSS) of every Ray process and the driver at its peak. The curve against
+N is always drawn as a PNG (``--plot``; default: the ``--out`` file with ``.png``, else ``fleet.png`` in the current
+directory); its absolute path is printed on stderr and given as ``"plot"`` in the JSON report.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from typing import Any
@@ -185,7 +188,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=30.0, help="seconds of flight per size (real time)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
-    p.add_argument("--plot", help="write the curve as a PNG (default: fleet.png next to --out, if given)")
+    p.add_argument("--plot", help="write the curve as a PNG to this file (default: the --out file with .png, "
+                                  "else fleet.png in the current directory)")
 
     def run(a: argparse.Namespace) -> int:
         if a.duration <= 0:
@@ -196,13 +200,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
             return 2
         report = run_fleet(sizes, a.duration)
+        plot = a.plot or (os.path.splitext(a.out)[0] + ".png" if a.out else "fleet.png")
+        report["plot"] = os.path.abspath(plot)
         text = json.dumps(report, indent=2)
         if a.out:
             with open(a.out, "w") as f:
                 f.write(text)
-        plot = a.plot or (a.out.rsplit(".", 1)[0] + ".png" if a.out else None)
-        if plot:
-            plot_fleet(report, plot)
+        plot_fleet(report, plot)
+        print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
         if a.json:
             print(text)
         return 0
