@@ -649,7 +649,10 @@ class HostRuntime:
             for d in drones:
                 d.close()
             if self.scheduling is not None:
-                self.scheduling.finish()
+                try:
+                    self.scheduling.finish()
+                except Exception as e:  # reported; the drones' reports must still come back
+                    self.host.report_error("analytics_scheduler", e)
         return {d.cfg.id: d.report() for d in drones}
 
     # ------------------------------------------------------------------ end
