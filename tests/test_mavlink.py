@@ -2,6 +2,7 @@
 time), the real PX4 telemetry log, and MAVProxy as a third-party ground station."""
 from __future__ import annotations
 
+import logging
 import math
 import shutil
 import socket
@@ -153,11 +154,14 @@ def test_goto_speed_cap(fly, autopilot):
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
-def test_refused_commands_carry_result_and_status_text(fly, autopilot):
+def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
     emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.3})
     emu.set_prearm_failure("Compass not calibrated")
-    with pytest.raises(CommandRefused) as e:
+    with caplog.at_level(logging.INFO, logger="aerodaas.mavlink"), pytest.raises(CommandRefused) as e:
         b.arm()
+    # the STATUSTEXT is also a log line, at the level of its MAV_SEVERITY (CRITICAL for both autopilots' pre-arm)
+    logged = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "aerodaas.mavlink"]
+    assert (logging.CRITICAL, "quad: " + PREARM_PREFIX[autopilot] + "Compass not calibrated") in logged, logged
     assert e.value.result == REFUSED[autopilot]
     assert e.value.status_text == PREARM_PREFIX[autopilot] + "Compass not calibrated"
     assert REFUSED[autopilot] in str(e.value) and "Compass not calibrated" in str(e.value)

@@ -19,6 +19,7 @@ level on PX4; ArduPilot missions carry home at sequence 0.
 """
 from __future__ import annotations
 
+import logging
 import math
 import queue
 import struct
@@ -36,6 +37,9 @@ from ..models import ActionCommand, AeroNavigation, Attitude, GeoPoint, Navigati
 from .base import BackendError, CommandRefused, LinkLost, VehicleBackend
 
 __all__ = ["MavlinkBackend"]
+
+#: STATUSTEXT lines are logged here (``robot: text``), at the level of their MAV_SEVERITY
+log = logging.getLogger("aerodaas.mavlink")
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M  # constants and enum names
@@ -67,6 +71,14 @@ _LEGACY_STREAMS = ((M.MAV_DATA_STREAM_EXTENDED_STATUS, 2.0), (M.MAV_DATA_STREAM_
                    (M.MAV_DATA_STREAM_EXTRA1, None), (M.MAV_DATA_STREAM_EXTRA3, 1.0))
 
 
+def _log_level(severity: int) -> int:
+    """The :mod:`logging` level of a MAV_SEVERITY (0 EMERGENCY .. 7 DEBUG)."""
+    if severity <= M.MAV_SEVERITY_CRITICAL:
+        return logging.CRITICAL
+    return {M.MAV_SEVERITY_ERROR: logging.ERROR, M.MAV_SEVERITY_WARNING: logging.WARNING,
+            M.MAV_SEVERITY_DEBUG: logging.DEBUG}.get(severity, logging.INFO)
+
+
 def _enum_name(enum: str, value: int) -> str:
     e = M.enums.get(enum, {}).get(value)
     return e.name if e is not None else f"{enum} {value}"
@@ -88,6 +100,9 @@ class MavlinkBackend(VehicleBackend):
     :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
     :meth:`set_mode` and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
     :attr:`gps_fix_type`, :attr:`command_rtt_ms` (acknowledged command round trips, wall milliseconds).
+    Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
+    (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
+    DEBUG).
 
     Raises :class:`BackendError` (connection, protocol timeouts), :class:`CommandRefused` (MAV_RESULT /
     MAV_MISSION_RESULT name and the autopilot's latest STATUSTEXT) and :class:`LinkLost` (no HEARTBEAT for
@@ -313,6 +328,7 @@ class MavlinkBackend(VehicleBackend):
             text = text.rstrip("\x00").strip()
             self._texts.append((now, msg.severity, text))
             self._event("status_text", severity=_enum_name("MAV_SEVERITY", msg.severity), text=text)
+            log.log(_log_level(msg.severity), "%s: %s", self.robot_id, text)
             return
         if self._compid and src_comp != self._compid:
             return
