@@ -63,6 +63,7 @@ class DroneComponent:
         self._resume_req = threading.Event()
         self._end_req: str | None = None
         self._backend_rtl = False
+        self._reissue = False  # the backend's link dropped and came back: send the active target again
         self.outcome: str | None = None
         self.error: str | None = None
         self.done = False
@@ -194,6 +195,8 @@ class DroneComponent:
             for ev in self.backend.drain_events():
                 if self.autopilot_mission and ev.get("event") in ("mission_current", "mission_item_reached"):
                     self._ap_events.append(dict(ev))
+                elif ev.get("event") == "link_regained":
+                    self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
                 self._event(ev.pop("event", "backend_event"), **ev)
         if self.backend.t + 1e-9 >= self.next_odom:
             self.next_odom += self.odom_period
@@ -274,7 +277,15 @@ class DroneComponent:
                 self._event("link_lost", previous=st.value)
             return False
         if st == S.LINK_LOST:
+            self._reissue = False
             return self._link_regained(t)
+        if self._reissue:  # a drop shorter than a control tick: the state machine never saw it, the vehicle may have
+            self._reissue = False
+            if st in (S.NAVIGATING, S.WAYPOINT_HOLD) and not self.autopilot_mission:
+                self._event("link_blip", resuming=st.value)
+                if st == S.WAYPOINT_HOLD:
+                    fsm.transition(S.NAVIGATING, t)
+                self.active_wp, self.hold_until = None, None
         if st == S.LANDING:
             if not v.in_air:
                 fsm.transition(S.LANDED, t)

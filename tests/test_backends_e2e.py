@@ -305,3 +305,71 @@ def test_autopilot_mission_refuses_what_it_cannot_fly_before_any_actor_starts(ru
     with pytest.raises(ConfigError, match=r"use_autopilot_mission: true needs backend 'mavlink'.*'sim'"):
         parse_environment_config({"name": "ap", "robots": [{"id": "s", "backend": "sim",
                                                             "mavlink": {"use_autopilot_mission": True}}]})
+
+
+_NAV_MESSAGES = {"SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED", "COMMAND_LONG", "COMMAND_INT",
+                 "SET_MODE", "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_SET_CURRENT"}
+
+
+@pytest.mark.parametrize("flavour,mission", [("ardupilot", False), ("px4", False), ("ardupilot", True)],
+                         ids=["ardupilot-guided", "px4-offboard", "ardupilot-autopilot-mission"])
+def test_link_cut_mid_mission_then_recovers(ray_session, run_options, tmp_path, flavour, mission):
+    """The radio drops on the leg wp2 -> wp3 for 1.2 s wall (12 s of vehicle time): the stat-stream shows
+    LINK_LOST, nothing but heartbeats reaches for the vehicle once the loss is detected, and when the link returns
+    the mission resumes and completes with every waypoint, in order."""
+    import threading
+
+    from aerodaas.metrics import waypoint_visits
+
+    hb_timeout, outage = 0.5, 1.2
+    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path,
+                                     mavlink={"heartbeat_timeout_s": hb_timeout, "use_autopilot_mission": mission},
+                                     params=AP_WP_RADIUS[flavour])
+    cut: dict = {}
+    stop = threading.Event()
+
+    def radio() -> None:  # cut once the vehicle is 2 m along the leg from (0, 10) to (10, 10)
+        while not stop.is_set():
+            snap = emu.snapshot()
+            x, y, _ = snap["position"]
+            if snap["in_air"] and y > 9.0 and 2.0 < x < 8.0:
+                cut["start"] = time.monotonic()
+                emu.set_blackhole(True)
+                time.sleep(outage)
+                emu.set_blackhole(False)
+                cut["end"] = time.monotonic()
+                return
+            time.sleep(0.01)
+
+    th = threading.Thread(target=radio, daemon=True)
+    th.start()
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "cut.mcap")
+    finally:
+        stop.set()
+        th.join(timeout=5)
+        emu.stop()
+    assert "end" in cut, "the vehicle never reached the leg where the link is cut"
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", (rep.get("error"), rep["events"][-8:])
+    assert [v["id"] for v in rep["visited_waypoints"]] == ["wp1", "wp2", "wp3", "wp4"]
+    run = load_run(str(tmp_path / "cut.mcap"))
+    states = [s["state"] for s in run["states"]]
+    lost = states.index("LINK_LOST")
+    assert states.count("LINK_LOST") == 1 and states[lost - 1] in ("NAVIGATING", "WAYPOINT_HOLD"), states
+    assert states[lost + 1] in ("NAVIGATING", "WAYPOINT_HOLD") and states[-1] == "LANDED", states
+    # shown while the link was down (the vehicle's clock runs on without telemetry), not only once it returned:
+    # of the 12 s outage, 5 s pass before the heartbeat timeout
+    lost_for = run["states"][lost + 1]["t"] - run["states"][lost]["t"]
+    assert 4.0 < lost_for < 10.0, lost_for
+    kinds = [e["event"] for e in run["events"]]
+    assert kinds.index("link_lost") < kinds.index("link_regained")
+    # what the ground station still sent while the vehicle could not hear it: once the loss was detected
+    # (heartbeat timeout, plus a margin for the control tick in flight), only our GCS heartbeats
+    after = [m for t, m in emu.blackholed_inbound if t > cut["start"] + hb_timeout + 0.3]
+    assert after and set(after) <= {"HEARTBEAT"}, sorted(set(after))
+    assert not [m for t, m in emu.blackholed_inbound if m in _NAV_MESSAGES and t > cut["start"] + hb_timeout + 0.3]
+    visits = waypoint_visits(run["odometry"], FARM_CORNERS, 0.5)
+    assert all(v["closest_m"] <= 0.5 for v in visits), visits
+    firsts = [v["first_within_t"] for v in visits]
+    assert firsts == sorted(firsts)

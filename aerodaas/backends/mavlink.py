@@ -95,7 +95,8 @@ class MavlinkBackend(VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
-    until a timestamped message arrives. Positions are ENU metres from the vehicle's HOME_POSITION (the configured
+    until a timestamped message arrives; while the link is lost it runs on from the last sample at the measured
+    vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
     home until the vehicle reports one). Besides the :class:`VehicleBackend` contract it offers
     :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
     :meth:`set_mode` and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
@@ -161,6 +162,7 @@ class MavlinkBackend(VehicleBackend):
         self._wall0 = time.monotonic()
         self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
         self._boot_last = 0
+        self._boot_wall = 0.0  # wall (monotonic) time of the latest time_boot_ms sample
         self._t_connect = 0.0
         self._ratio = 1.0
         self._clock_samples: deque[tuple[float, int]] = deque()
@@ -373,6 +375,7 @@ class MavlinkBackend(VehicleBackend):
             self._boot_ref = (ms, self._raw_t())
             self._clock_samples.clear()
         self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
+        self._boot_wall = now
         # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
         samples = self._clock_samples
         samples.append((now, ms))
@@ -678,7 +681,11 @@ class MavlinkBackend(VehicleBackend):
     @property
     def t(self) -> float:
         with self._lock:
-            t = max(self._raw_t() - self._t_connect, self._t_max)
+            t = self._raw_t() - self._t_connect
+            if not self._link_ok and self._boot_ref is not None:
+                # nothing timestamped arrives while the link is down: the vehicle's clock goes on at its last rate
+                t += (time.monotonic() - self._boot_wall) * self._ratio
+            t = max(t, self._t_max)
             self._t_max = t
             return t
 
@@ -764,7 +771,7 @@ class MavlinkBackend(VehicleBackend):
         return out
 
     def _event(self, event: str, **fields: Any) -> None:
-        self._events.append({"event": event, "t": round(self._raw_t() - self._t_connect, 3), **fields})
+        self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
 
     # ------------------------------------------------------------------ modes
     def set_mode(self, name: str, confirm_s: float | None = None) -> None:

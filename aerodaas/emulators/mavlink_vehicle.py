@@ -244,6 +244,8 @@ class MavlinkVehicleEmulator:
         self.address: str | None = None
         self._blackhole = False
         self._blackhole_inbound = False
+        #: (wall monotonic s, message type) of every message that arrived while the inbound link was cut
+        self.blackholed_inbound: list[tuple[float, str]] = []
         self.prearm_failure: str | None = None
         # vehicle state
         self.t = 0.0
@@ -348,8 +350,9 @@ class MavlinkVehicleEmulator:
 
     # ------------------------------------------------------------------ test hooks and state
     def set_blackhole(self, on: bool, inbound: bool = True) -> None:
-        """Drop everything the vehicle sends (and, with ``inbound``, everything it receives), like a radio out
-        of range; the vehicle keeps flying on its own. ``False`` restores the link."""
+        """Drop everything the vehicle sends (and, with ``inbound``, everything it receives, logging its type and
+        wall time in :attr:`blackholed_inbound`), like a radio out of range; the vehicle keeps flying on its own.
+        ``False`` restores the link."""
         with self._lock:
             self._blackhole = bool(on)
             self._blackhole_inbound = bool(on and inbound)
@@ -460,12 +463,14 @@ class MavlinkVehicleEmulator:
                 pass
 
     def _feed(self, link: _Link, data: bytes) -> None:
-        if self._blackhole_inbound:
-            return
         try:
             msgs = link.mav.parse_buffer(data) or []
         except Exception:  # a malformed stream must never stop the vehicle
             self.bad_packets += 1
+            return
+        if self._blackhole_inbound:  # out of range: parsed only to log what the ground station still sent
+            now = time.monotonic()
+            self.blackholed_inbound.extend((now, m.get_type()) for m in msgs)
             return
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
