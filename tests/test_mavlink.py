@@ -237,6 +237,24 @@ def test_imported_plan_round_trip(fly, autopilot):
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
+    """Single lost packets: the backend's bounded retries recover each, and nothing else is lost."""
+    emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
+    assert run_until(b, lambda: b.home_received, 5)
+    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    emu.drop_next("COMMAND_ACK")  # the arm command's acknowledgement is lost: re-sent once, then acknowledged
+    b.arm()
+    assert b.armed and emu.snapshot()["commands_seen"].count(400) == 2
+    wps = [Waypoint(id=f"w{i}", x=x, y=5.0, z=4.0) for i, x in enumerate((0, 5, 10))]
+    emu.drop_next("MISSION_COUNT", "in")  # the vehicle never hears the upload start: the backend re-sends it
+    sent = b.upload_mission(wps, final_action="land")
+    assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)
+    emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
+    assert b.download_mission().items == sent
+    assert emu.dropped == [("out", "COMMAND_ACK"), ("in", "MISSION_COUNT"), ("out", "MISSION_ITEM_INT")]
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_link_loss_and_recovery(fly, autopilot):
     emu, b = fly(autopilot, speedup=5, mavlink={"heartbeat_timeout_s": 0.6})
     assert b.link_ok
