@@ -406,6 +406,10 @@ class SchedulerComponent(Component):
         m, item = cur
         return {"item": item, "priority": m.priority, "mission": m.name, "preplanned_left": left}
 
+    def queued(self) -> list:
+        """Every queued item in flying order (see :meth:`TrajectoryScheduler.queued`)."""
+        return self.s.queued()
+
     def pending(self) -> int:
         """Queued items of pre-planned (distance-driven) missions."""
         return self.s.pending(distance_driven_only=True)

@@ -7,6 +7,11 @@ It lives in the edge host (:mod:`aerodaas.actors.host`): the host's clock thread
 applied at once. Every command passes the robot's :class:`~aerodaas.safety.SafetyGate` right before it reaches
 the backend (the one choke point). The backend is whatever ``robots[].backend`` names: the embedded simulator,
 a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
+
+With ``mavlink.use_autopilot_mission`` the pre-planned waypoints are uploaded to the autopilot before arming and
+flown as its own mission (ArduPilot AUTO, PX4 AUTO.MISSION); the state machine then follows the autopilot's
+MISSION_CURRENT / MISSION_ITEM_REACHED reports instead of sending targets (the runtime refused, before any actor
+started, every navigation that such a mission cannot express).
 """
 from __future__ import annotations
 
@@ -17,7 +22,7 @@ from typing import Any
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.fsm import MissionFSM, MissionState as S
-from aerodaas.models import ActionCommand, VelocityCommand, Waypoint
+from aerodaas.models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, VelocityCommand, Waypoint
 from aerodaas.safety import SafetyGate, SafetyViolation
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
@@ -58,6 +63,7 @@ class DroneComponent:
         self._resume_req = threading.Event()
         self._end_req: str | None = None
         self._backend_rtl = False
+        self._reissue = False  # the backend's link dropped and came back: send the active target again
         self.outcome: str | None = None
         self.error: str | None = None
         self.done = False
@@ -73,6 +79,14 @@ class DroneComponent:
         self.next_odom = 0.0
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
+        mc = self.cfg.mavlink
+        #: fly the pre-planned waypoints as an uploaded autopilot mission (mavlink.use_autopilot_mission)
+        self.autopilot_mission = bool(self.cfg.backend == "mavlink" and mc is not None and mc.use_autopilot_mission)
+        self._ap_items: dict[int, tuple[str, Waypoint | None]] = {}  # MissionItem seq (from 1) -> (kind, waypoint)
+        self._ap_events: list[dict] = []  # mission_current / mission_item_reached from the backend, not yet applied
+        self._ap_current = 0
+        self._ap_reached: dict[int, tuple] = {}  # item -> where the vehicle was when the autopilot reported it
+        self._ap_done: set[int] = set()
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
@@ -92,11 +106,35 @@ class DroneComponent:
         if not b.navigable:
             self._event("observing", backend=self.cfg.backend)
             return
+        if self.autopilot_mission:
+            self._start_autopilot_mission()
+            return
         b.arm()
         self.fsm.transition(S.ARMED, b.t)
         b.takeoff(self.cfg.takeoff_altitude)
         self.fsm.transition(S.TAKING_OFF, b.t)
         self._event("takeoff", altitude=self.cfg.takeoff_altitude)
+
+    def _start_autopilot_mission(self) -> None:
+        """Upload the queued waypoints in flying order (NAV_TAKEOFF to ``takeoff_altitude``, NAV_WAYPOINT each with
+        its hover time, NAV_LAND at the last one or NAV_RETURN_TO_LAUNCH for a final rtl action), arm, and start
+        the mission (MAV_CMD_MISSION_START). Raises the backend's CommandRefused / BackendError."""
+        b = self.backend
+        items = self.scheduler.queued()
+        nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, items, SchedulingType.ORDERED, name="autopilot mission")
+        sent = b.upload_mission(nav, takeoff_altitude=self.cfg.takeoff_altitude, final_action="land")
+        wps = iter([w for w in items if isinstance(w, Waypoint)])
+        kinds = {16: "waypoint", 22: "takeoff", 21: "land", 20: "rtl"}
+        for it in sent:
+            kind = kinds.get(it.command, "other")
+            self._ap_items[it.seq] = (kind, next(wps) if kind == "waypoint" else None)
+        self._event("autopilot_mission_uploaded", items=len(sent),
+                    waypoints=[w.id for _, w in self._ap_items.values() if w is not None])
+        b.arm()
+        self.fsm.transition(S.ARMED, b.t)
+        b.start_mission()
+        self.fsm.transition(S.TAKING_OFF, b.t)
+        self._event("takeoff", altitude=self.cfg.takeoff_altitude, by="autopilot mission")
 
     def close(self) -> None:
         self.backend.close()
@@ -155,6 +193,10 @@ class DroneComponent:
         with self.lock:
             self.backend.step(dt)
             for ev in self.backend.drain_events():
+                if self.autopilot_mission and ev.get("event") in ("mission_current", "mission_item_reached"):
+                    self._ap_events.append(dict(ev))
+                elif ev.get("event") == "link_regained":
+                    self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
                 self._event(ev.pop("event", "backend_event"), **ev)
         if self.backend.t + 1e-9 >= self.next_odom:
             self.next_odom += self.odom_period
@@ -235,7 +277,15 @@ class DroneComponent:
                 self._event("link_lost", previous=st.value)
             return False
         if st == S.LINK_LOST:
+            self._reissue = False
             return self._link_regained(t)
+        if self._reissue:  # a drop shorter than a control tick: the state machine never saw it, the vehicle may have
+            self._reissue = False
+            if st in (S.NAVIGATING, S.WAYPOINT_HOLD) and not self.autopilot_mission:
+                self._event("link_blip", resuming=st.value)
+                if st == S.WAYPOINT_HOLD:
+                    fsm.transition(S.NAVIGATING, t)
+                self.active_wp, self.hold_until = None, None
         if st == S.LANDING:
             if not v.in_air:
                 fsm.transition(S.LANDED, t)
@@ -288,11 +338,15 @@ class DroneComponent:
             back = self._paused_from or S.HOVERING
             fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
             self._event("resumed")
-            if back == S.TAKING_OFF:
+            if self.autopilot_mission:
+                v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
+            elif back == S.TAKING_OFF:
                 v.takeoff(self.cfg.takeoff_altitude)
             self.active_wp = None
             self.hold_until = None
             return False
+        if self.autopilot_mission:
+            return self._follow_autopilot_mission(t, pos)
         if st == S.TAKING_OFF:
             if abs(v.position[2] - self.cfg.takeoff_altitude) < 0.1:
                 fsm.transition(S.HOVERING, t)
@@ -377,6 +431,85 @@ class DroneComponent:
             fsm.transition(S.HOVERING, t)
             v.hold()
         return False
+
+    # ------------------------------------------------------------------ autopilot mission
+    def _to(self, state: S, t: float) -> None:
+        """Transition to ``state``, through HOVERING when the state machine needs it (TAKING_OFF -> NAVIGATING)."""
+        if self.fsm.state != state and not self.fsm.can(state) and self.fsm.can(S.HOVERING):
+            self.fsm.transition(S.HOVERING, t)
+        self.fsm.transition(state, t)
+
+    def _follow_autopilot_mission(self, t: float, pos: tuple) -> bool:
+        """Map the autopilot's mission reports onto the stat-stream and the waypoint bookkeeping: MISSION_CURRENT
+        on a waypoint -> NAVIGATING (``navigate``), MISSION_ITEM_REACHED -> WAYPOINT_HOLD (``waypoint_reached``;
+        the autopilot holds for the item's hover time), MISSION_CURRENT moving past a waypoint -> visited
+        (``waypoint_done``; also for items whose reports were lost with the link), on NAV_LAND -> LANDING, on
+        NAV_RETURN_TO_LAUNCH -> RETURNING (the autopilot's RTL). Sends nothing to the vehicle."""
+        res = self.scheduler.tick(t, pos)  # records the plan; the queue itself is only popped as items complete
+        self.preplanned_left = res["preplanned_left"]
+        events, self._ap_events = self._ap_events, []
+        for ev in events:
+            n = ev.get("item")
+            if n not in self._ap_items:
+                continue  # ArduPilot's home (sequence 0)
+            kind, wp = self._ap_items[n]
+            if ev["event"] == "mission_item_reached":
+                if kind == "takeoff" and self.fsm.state == S.TAKING_OFF:
+                    self.fsm.transition(S.HOVERING, t)
+                elif kind == "waypoint":
+                    self._ap_waypoint_reached(n, t, pos)
+                continue
+            if n <= self._ap_current:
+                continue
+            for k in range(max(self._ap_current, 1), n):
+                self._ap_item_done(k, t, pos)
+            self._ap_current = n
+            if kind == "waypoint":
+                target = wp.to_local(self.cfg.home)
+                self.active_wp = wp.id
+                self._to(S.NAVIGATING, t)
+                self._event("navigate", waypoint=wp.id, target=list(target), by="autopilot mission", item=n)
+                if self.recorder is not None:
+                    self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t),
+                                       {"kind": "waypoint", "waypoint": wp.model_dump(), "local": list(target),
+                                        "priority": None, "autopilot_item": n}, "aerodaas.NavCommand")
+            elif kind == "land":
+                self.active_wp = None
+                self._to(S.LANDING, t)
+                self._event("landing", reason="mission complete", by="autopilot mission")
+            elif kind == "rtl":
+                self.active_wp = None
+                self._backend_rtl = True
+                self._to(S.RETURNING, t)
+                self._event("returning", home=[0.0, 0.0], by="autopilot mission")
+        self.preplanned_left = self.scheduler.pending()
+        return False
+
+    def _ap_waypoint_reached(self, n: int, t: float, pos: tuple) -> None:
+        if n in self._ap_reached:
+            return
+        self._ap_reached[n] = pos
+        wp = self._ap_items[n][1]
+        if self.fsm.state in (S.NAVIGATING, S.HOVERING, S.TAKING_OFF):
+            self._to(S.WAYPOINT_HOLD, t)
+        self._event("waypoint_reached", waypoint=wp.id, error_m=math.dist(pos, wp.to_local(self.cfg.home)),
+                    by="autopilot mission", item=n)
+
+    def _ap_item_done(self, n: int, t: float, pos: tuple) -> None:
+        kind, wp = self._ap_items.get(n, ("other", None))
+        if kind == "takeoff" and self.fsm.state == S.TAKING_OFF:
+            self.fsm.transition(S.HOVERING, t)
+        if kind != "waypoint" or n in self._ap_done:
+            return
+        self._ap_waypoint_reached(n, t, pos)  # its MISSION_ITEM_REACHED may have been lost (link loss)
+        self._ap_done.add(n)
+        target = wp.to_local(self.cfg.home)
+        at = self._ap_reached[n]
+        self.scheduler.complete(wp.id)
+        self.visited.append({"id": wp.id, "t": t, "position": list(at), "target": list(target),
+                             "error_m": math.dist(at, target)})
+        self._event("waypoint_done", waypoint=wp.id)
+        self.active_wp = None
 
     def _link_regained(self, t: float) -> bool:
         """The link is back: resume what was going on (re-issuing the active waypoint), or note the landing."""

@@ -157,8 +157,15 @@ class MavlinkConfig(_Cfg):
     The link is lost after ``heartbeat_timeout_s`` seconds without a HEARTBEAT. Every COMMAND_LONG waits
     ``command_timeout_s`` seconds for its COMMAND_ACK and is re-sent up to ``command_retries`` times.
     ``stream_rate_hz`` is the rate requested for telemetry (MAV_CMD_SET_MESSAGE_INTERVAL).
-    ``use_autopilot_mission``: fly pre-planned ORDERED waypoint missions as an autopilot mission (uploaded with the
-    MISSION_ITEM_INT protocol, AUTO/MISSION mode) instead of streaming position targets.
+    ``use_autopilot_mission``: fly the robot's pre-planned waypoints (in the order its trajectory scheduler gave
+    them) as an autopilot mission instead of streaming position targets: NAV_TAKEOFF to ``takeoff_altitude``, one
+    NAV_WAYPOINT per waypoint (hold = ``hover_duration``), then NAV_LAND at the last waypoint (or
+    NAV_RETURN_TO_LAUNCH when the navigation ends with an ``rtl`` action), uploaded with the MISSION_ITEM_INT
+    protocol and flown in ArduPilot AUTO / PX4 AUTO.MISSION; MISSION_CURRENT / MISSION_ITEM_REACHED drive the
+    stat-stream. The autopilot's own acceptance radius (ArduPilot WPNAV_RADIUS, PX4 NAV_ACC_RAD or the item's)
+    decides "reached", not ``acceptance_radius``. Missions it cannot express are refused before any actor
+    starts (ConfigError naming this field): navigation from analytics or the HITL API, velocity commands,
+    time-driven navigation, no waypoints.
     ``arm_timeout_s``: how long (wall seconds) ``arm()`` waits for the vehicle to report itself armable (3-D GPS
     fix, pre-arm and AHRS health bits of SYS_STATUS) before it asks anyway, so that a refusal carries the
     autopilot's reason. ``setpoint_rate_hz``: rate, in the vehicle's own time, at which the active position or
@@ -212,10 +219,20 @@ class TelloConfig(_Cfg):
 
 class ReplayConfig(_Cfg):
     """Replay a recorded flight as odometry, battery and mode/state streams: ``log`` is a MAVLink telemetry log
-    (``.tlog``) or a PX4 ``.ulg``; ``rate`` is the replay speed (1 = real time)."""
+    (``.tlog``, as QGroundControl, MAVProxy or Mission Planner record it); ``rate`` is the replay speed (1 = real
+    time). PX4 ``.ulg`` flight logs are not supported (no ULog parser is bundled): a ``.ulg`` path is refused
+    here with a ValueError, before anything starts; record a ``.tlog`` with the ground station instead."""
 
     log: str = Field(min_length=1)
     rate: float = Field(default=1.0, gt=0)
+
+    @field_validator("log")
+    @classmethod
+    def _not_ulog(cls, v: str) -> str:
+        if v.lower().endswith(".ulg"):
+            raise ValueError(f"PX4 .ulg logs are not supported (only MAVLink .tlog telemetry logs), got {v!r}; "
+                             "record a .tlog with QGroundControl/MAVProxy or convert the flight")
+        return v
 
 
 class RobotConfig(_Cfg):
@@ -251,6 +268,9 @@ class RobotConfig(_Cfg):
             self.mavlink = MavlinkConfig()
         if self.backend == "tello" and self.tello is None:
             self.tello = TelloConfig()
+        if self.mavlink is not None and self.mavlink.use_autopilot_mission and self.backend != "mavlink":
+            raise ValueError(f"mavlink.use_autopilot_mission: true needs backend 'mavlink' (an autopilot that flies "
+                             f"uploaded missions), but backend is {self.backend!r}")
         if self.backend == "replay" and self.replay is None:
             raise ValueError("replay: backend 'replay' needs a 'replay' section naming the log to play")
         for j, s in enumerate(self.sensors):

@@ -346,6 +346,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 check()
         graphs[r.id] = analytics
         _check_preplanned(r, scheds[r.id])
+        _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
     scheduled = _scheduled_analytics(env, graphs)
 
     from .bench.startup import probe
@@ -469,6 +470,41 @@ def _check_preplanned(robot, sched) -> None:
     for m in sched._missions:
         nav = AeroNavigation(waypoints=list(m.items), scheduling_type=SchedulingType.ORDERED, name=m.name)
         m.items = list(gate.check_navigation(nav, start).waypoints)
+
+
+def _check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
+    """``mavlink.use_autopilot_mission``: the robot's navigation must be a static, pre-planned waypoint list that
+    an uploaded mission can express. Raises ConfigError naming the field and the reason: analytics navigating
+    through the scheduler, the HITL API on (both add waypoints mid-flight), time-driven navigation, velocity
+    commands or a land/rtl action before the end (MissionFileError), or no waypoints at all."""
+    from .config import ConfigError
+    from .missionfile import MissionFileError, navigation_to_plan
+    from .models import AeroNavigation, SchedulingType, Waypoint
+
+    mc = robot.cfg.mavlink
+    if robot.cfg.backend != "mavlink" or mc is None or not mc.use_autopilot_mission:
+        return
+    field = f"robots[{robot.id!r}].mavlink.use_autopilot_mission: true"
+    if sched.stream_inputs:
+        raise ConfigError(f"{field} flies a mission uploaded before take-off, but {len(sched.stream_inputs)} analytics "
+                          "stream(s) navigate this robot through its trajectory scheduler (analytics-driven "
+                          "navigation); set it to false to fly with position/velocity targets")
+    if hitl_on:
+        raise ConfigError(f"{field} flies a mission uploaded before take-off, but the human-in-the-loop API is on "
+                          "(hitl.enabled / --hitl) and could add waypoints mid-flight; turn one of them off")
+    timed = [m.name for m in sched._missions if not m.distance_driven]
+    if timed:
+        raise ConfigError(f"{field}: navigation {timed} is time-driven; an autopilot mission holds only "
+                          "distance-driven waypoints")
+    items = sched.queued()
+    if not any(isinstance(i, Waypoint) for i in items):
+        raise ConfigError(f"{field}: robot {robot.id!r} has no pre-planned waypoints to upload "
+                          "(call drone.navigate(...) before start_mission())")
+    try:
+        navigation_to_plan(AeroNavigation(waypoints=items, scheduling_type=SchedulingType.ORDERED), robot.cfg.home,
+                           "land", takeoff_altitude=robot.cfg.takeoff_altitude)
+    except MissionFileError as e:
+        raise ConfigError(f"{field}: the navigation cannot be an autopilot mission: {e}") from None
 
 
 def _pull_getter(sensor, h: dict):

@@ -265,6 +265,12 @@ class TrajectoryScheduler:
         with self._lock:
             return sum(len(m.items) for m in self._missions if m.distance_driven or not distance_driven_only)
 
+    def queued(self) -> list:
+        """Every queued item in the order the drone would fly them (missions by priority, then age), e.g. to upload
+        a pre-planned mission to an autopilot in one go."""
+        with self._lock:
+            return [i for m in sorted(self._missions, key=lambda m: (m.priority, m.seq)) for i in m.items]
+
     def snapshot(self) -> list[dict]:
         with self._lock:
             return [{"name": m.name, "priority": m.priority, "items": [i.model_dump() for i in m.items]}

@@ -140,10 +140,12 @@ def test_a_recorded_camera_channel_replays_into_analytics(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------- MAVLink
-def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path):
+def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path, mavlink: dict | None = None,
+                     params: dict | None = None):
     """The app's own environment file with only the robot's backend changed to ``mavlink``, pointed at an emulated
     ``flavour`` autopilot running ``speedup`` x real time (and the clock not in lock-step: real vehicles don't
-    wait). Returns (emulator, path of the variant environment file)."""
+    wait). ``mavlink``: more MavlinkConfig fields; ``params``: emulated autopilot parameters. Returns (emulator,
+    path of the variant environment file)."""
     from aerodaas.config import load_environment_config
     from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 
@@ -151,10 +153,10 @@ def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path):
 
     cfg = load_environment_config(REPO / "apps" / f"{app}.json")  # resolves imagery paths
     robot = cfg.robots[0]
-    emu = MavlinkVehicleEmulator(flavour, robot=robot, speedup=speedup)
+    emu = MavlinkVehicleEmulator(flavour, robot=robot, speedup=speedup, params=params)
     addr = emu.start("tcp:127.0.0.1:0")
     data = cfg.model_dump(mode="json", exclude={"base_dir"})
-    data["robots"][0].update(backend="mavlink", mavlink={"connection": addr, "autopilot": flavour})
+    data["robots"][0].update(backend="mavlink", mavlink={"connection": addr, "autopilot": flavour, **(mavlink or {})})
     data["simulation"].update(speedup=speedup, lockstep=False)
     path = tmp_path / f"{app}_{flavour}.json"
     path.write_text(json.dumps(data))
@@ -218,3 +220,156 @@ def test_vehicle_tracking_app_unchanged_on_a_mavlink_autopilot(ray_session, run_
     assert m["time_within_5m_s"] >= 15.0, m
     done = [e["t"] for e in run["events"] if e["event"] == "waypoint_done"]
     assert m["tracking_ended_t"] is not None and max(done) > m["tracking_ended_t"]
+
+
+FARM_CORNERS = [(0, 0, 1.5), (0, 10, 1.5), (10, 10, 1.5), (10, 0, 1.5)]
+#: ArduPilot ignores a waypoint's acceptance radius (param2) and uses WPNAV_RADIUS (default 2 m, in cm); PX4 takes
+#: the item's (0.3 m here). 30 cm so the 5 s hold happens at the corner, as the simulator's runtime does it.
+AP_WP_RADIUS = {"ardupilot": {"WPNAV_RADIUS": 30.0}, "px4": {}}
+
+
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+def test_farm_survey_flown_as_an_autopilot_mission(ray_session, run_options, tmp_path, flavour):
+    """``use_autopilot_mission``: the app's waypoints (in the scheduler's order) are uploaded with MISSION_ITEM_INT
+    and flown by the autopilot in AUTO / AUTO.MISSION; its MISSION_CURRENT / MISSION_ITEM_REACHED reports drive
+    the stat-stream and the visited waypoints; it lands by itself at the end."""
+    from aerodaas.metrics import waypoint_visits
+
+    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, mavlink={"use_autopilot_mission": True},
+                                     params=AP_WP_RADIUS[flavour])
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
+        vehicle = emu.snapshot()
+        setpoints_seen = emu.last_setpoint_t > 0
+    finally:
+        emu.stop()
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", (rep.get("error"), rep["events"][-5:])
+    assert [v["id"] for v in rep["visited_waypoints"]] == ["wp1", "wp2", "wp3", "wp4"]
+    # flown by the autopilot: MISSION_START, never a position/velocity target; 6 mission items (take-off, 4
+    # waypoints, land), each reported reached once and in order (ArduPilot numbers them from 1, PX4 from 0)
+    assert 300 in vehicle["commands_seen"] and not setpoints_seen
+    first = 1 if flavour == "ardupilot" else 0
+    assert vehicle["reached"] == list(range(first, first + 6)), vehicle["reached"]
+    assert not vehicle["in_air"] and not vehicle["armed"]
+    run = load_run(str(tmp_path / "farm.mcap"))
+    ev = run["events"]
+    assert [e["item"] for e in ev if e["event"] == "mission_item_reached"] == [1, 2, 3, 4, 5, 6]
+    for kind in ("navigate", "waypoint_reached", "waypoint_done"):
+        assert [e["waypoint"] for e in ev if e["event"] == kind] == ["wp1", "wp2", "wp3", "wp4"], kind
+    states = [s["state"] for s in run["states"]]
+    for a, b in (("TAKING_OFF", "NAVIGATING"), ("NAVIGATING", "WAYPOINT_HOLD"), ("WAYPOINT_HOLD", "LANDING"),
+                 ("LANDING", "LANDED")):
+        assert a in states and b in states and states.index(a) < states.index(b), states
+    # the recorded odometry: every corner visited, held (the items' 5 s hold time), in the planned order
+    visits = waypoint_visits(run["odometry"], FARM_CORNERS, 0.5)
+    assert all(v["closest_m"] <= 0.5 and v["time_within_s"] >= 4.0 for v in visits), visits
+    firsts = [v["first_within_t"] for v in visits]
+    assert firsts == sorted(firsts)
+
+
+def test_autopilot_mission_refuses_what_it_cannot_fly_before_any_actor_starts(run_options, tmp_path):
+    """Navigation an uploaded mission cannot express is refused at start_mission(), before Ray or any actor starts,
+    naming the field; so is the setting on a backend without an autopilot."""
+    import ray
+
+    from aerodaas import PriorityQueue, VelocityCommand
+    from aerodaas.config import ConfigError
+
+    def robot(**kw):
+        return {"id": "uav", "backend": "mavlink",
+                "mavlink": {"connection": "tcp:127.0.0.1:9", "use_autopilot_mission": True, "connect_timeout_s": 0.1},
+                "sensors": [{"id": "odom", "type": "odometry"}], **kw}
+
+    wps = [Waypoint(id="a", x=5, y=0, z=3), Waypoint(id="b", x=5, y=5, z=3)]
+    cases = {
+        "hitl": ({"hitl": {"enabled": True}}, lambda env, d: d.navigate(AeroNavigation(waypoints=wps))),
+        "analytics": ({}, lambda env, d: (d.navigate(AeroNavigation(waypoints=wps)), env.trajectory_scheduler()
+                                          .add_navigation(PriorityQueue(d.get_sensor_by_id("odom").get_data_stream(),
+                                                                        priority=1)))),
+        "velocity": ({}, lambda env, d: d.navigate(AeroNavigation(
+            waypoints=[*wps, VelocityCommand(id="v", vx=1.0, duration=2.0)], scheduling_type=SchedulingType.ORDERED))),
+        "no waypoints": ({}, lambda env, d: None),
+    }
+    expect = {"hitl": "human-in-the-loop", "analytics": "analytics", "velocity": "velocity command",
+              "no waypoints": "no pre-planned waypoints"}
+    was_up = ray.is_initialized()
+    for name, (extra, build) in cases.items():
+        env = Environment(parse_environment_config({"name": "ap", "robots": [robot()], **extra}))
+        d = env.get_robot_by_id("uav")
+        build(env, d)
+        with pytest.raises(ConfigError, match=r"robots\['uav'\]\.mavlink\.use_autopilot_mission: true") as e:
+            d.start_mission(timeout=5)
+        assert expect[name] in str(e.value), (name, str(e.value))
+    assert ray.is_initialized() == was_up  # nothing was started
+    with pytest.raises(ConfigError, match=r"use_autopilot_mission: true needs backend 'mavlink'.*'sim'"):
+        parse_environment_config({"name": "ap", "robots": [{"id": "s", "backend": "sim",
+                                                            "mavlink": {"use_autopilot_mission": True}}]})
+
+
+_NAV_MESSAGES = {"SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED", "COMMAND_LONG", "COMMAND_INT",
+                 "SET_MODE", "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_SET_CURRENT"}
+
+
+@pytest.mark.parametrize("flavour,mission", [("ardupilot", False), ("px4", False), ("ardupilot", True)],
+                         ids=["ardupilot-guided", "px4-offboard", "ardupilot-autopilot-mission"])
+def test_link_cut_mid_mission_then_recovers(ray_session, run_options, tmp_path, flavour, mission):
+    """The radio drops on the leg wp2 -> wp3 for 1.2 s wall (12 s of vehicle time): the stat-stream shows
+    LINK_LOST, nothing but heartbeats reaches for the vehicle once the loss is detected, and when the link returns
+    the mission resumes and completes with every waypoint, in order."""
+    import threading
+
+    from aerodaas.metrics import waypoint_visits
+
+    hb_timeout, outage = 0.5, 1.2
+    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path,
+                                     mavlink={"heartbeat_timeout_s": hb_timeout, "use_autopilot_mission": mission},
+                                     params=AP_WP_RADIUS[flavour])
+    cut: dict = {}
+    stop = threading.Event()
+
+    def radio() -> None:  # cut once the vehicle is 2 m along the leg from (0, 10) to (10, 10)
+        while not stop.is_set():
+            snap = emu.snapshot()
+            x, y, _ = snap["position"]
+            if snap["in_air"] and y > 9.0 and 2.0 < x < 8.0:
+                cut["start"] = time.monotonic()
+                emu.set_blackhole(True)
+                time.sleep(outage)
+                emu.set_blackhole(False)
+                cut["end"] = time.monotonic()
+                return
+            time.sleep(0.01)
+
+    th = threading.Thread(target=radio, daemon=True)
+    th.start()
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "cut.mcap")
+    finally:
+        stop.set()
+        th.join(timeout=5)
+        emu.stop()
+    assert "end" in cut, "the vehicle never reached the leg where the link is cut"
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", (rep.get("error"), rep["events"][-8:])
+    assert [v["id"] for v in rep["visited_waypoints"]] == ["wp1", "wp2", "wp3", "wp4"]
+    run = load_run(str(tmp_path / "cut.mcap"))
+    states = [s["state"] for s in run["states"]]
+    lost = states.index("LINK_LOST")
+    assert states.count("LINK_LOST") == 1 and states[lost - 1] in ("NAVIGATING", "WAYPOINT_HOLD"), states
+    assert states[lost + 1] in ("NAVIGATING", "WAYPOINT_HOLD") and states[-1] == "LANDED", states
+    # shown while the link was down (the vehicle's clock runs on without telemetry), not only once it returned:
+    # of the 12 s outage, 5 s pass before the heartbeat timeout
+    lost_for = run["states"][lost + 1]["t"] - run["states"][lost]["t"]
+    assert 4.0 < lost_for < 10.0, lost_for
+    kinds = [e["event"] for e in run["events"]]
+    assert kinds.index("link_lost") < kinds.index("link_regained")
+    # what the ground station still sent while the vehicle could not hear it: once the loss was detected
+    # (heartbeat timeout, plus a margin for the control tick in flight), only our GCS heartbeats
+    after = [m for t, m in emu.blackholed_inbound if t > cut["start"] + hb_timeout + 0.3]
+    assert after and set(after) <= {"HEARTBEAT"}, sorted(set(after))
+    assert not [m for t, m in emu.blackholed_inbound if m in _NAV_MESSAGES and t > cut["start"] + hb_timeout + 0.3]
+    visits = waypoint_visits(run["odometry"], FARM_CORNERS, 0.5)
+    assert all(v["closest_m"] <= 0.5 for v in visits), visits
+    firsts = [v["first_within_t"] for v in visits]
+    assert firsts == sorted(firsts)

@@ -2,6 +2,7 @@
 time), the real PX4 telemetry log, and MAVProxy as a third-party ground station."""
 from __future__ import annotations
 
+import logging
 import math
 import shutil
 import socket
@@ -153,11 +154,14 @@ def test_goto_speed_cap(fly, autopilot):
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
-def test_refused_commands_carry_result_and_status_text(fly, autopilot):
+def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
     emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.3})
     emu.set_prearm_failure("Compass not calibrated")
-    with pytest.raises(CommandRefused) as e:
+    with caplog.at_level(logging.INFO, logger="aerodaas.mavlink"), pytest.raises(CommandRefused) as e:
         b.arm()
+    # the STATUSTEXT is also a log line, at the level of its MAV_SEVERITY (CRITICAL for both autopilots' pre-arm)
+    logged = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "aerodaas.mavlink"]
+    assert (logging.CRITICAL, "quad: " + PREARM_PREFIX[autopilot] + "Compass not calibrated") in logged, logged
     assert e.value.result == REFUSED[autopilot]
     assert e.value.status_text == PREARM_PREFIX[autopilot] + "Compass not calibrated"
     assert REFUSED[autopilot] in str(e.value) and "Compass not calibrated" in str(e.value)
@@ -230,6 +234,24 @@ def test_imported_plan_round_trip(fly, autopilot):
         assert s.command == p.command and s.frame == p.frame
         if p.params[4] is not None:
             assert abs(s.params[4] - p.params[4]) < 1e-7 and abs(s.params[5] - p.params[5]) < 1e-7
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
+    """Single lost packets: the backend's bounded retries recover each, and nothing else is lost."""
+    emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
+    assert run_until(b, lambda: b.home_received, 5)
+    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    emu.drop_next("COMMAND_ACK")  # the arm command's acknowledgement is lost: re-sent once, then acknowledged
+    b.arm()
+    assert b.armed and emu.snapshot()["commands_seen"].count(400) == 2
+    wps = [Waypoint(id=f"w{i}", x=x, y=5.0, z=4.0) for i, x in enumerate((0, 5, 10))]
+    emu.drop_next("MISSION_COUNT", "in")  # the vehicle never hears the upload start: the backend re-sends it
+    sent = b.upload_mission(wps, final_action="land")
+    assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)
+    emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
+    assert b.download_mission().items == sent
+    assert emu.dropped == [("out", "COMMAND_ACK"), ("in", "MISSION_COUNT"), ("out", "MISSION_ITEM_INT")]
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)

@@ -132,12 +132,21 @@ def test_replay_is_not_navigable():
 def test_replay_rejects_bad_logs(tmp_path):
     from aerodaas.backends.base import BackendError
 
-    for name, data in (("empty.tlog", b""), ("noise.tlog", bytes(range(256)) * 8), ("flight.ulg", b"ULog")):
+    for name, data in (("empty.tlog", b""), ("noise.tlog", bytes(range(256)) * 8)):
         p = tmp_path / name
         p.write_bytes(data)
         b = make_backend(RobotConfig(id="r", backend="replay", replay=ReplayConfig(log=str(p))))
         with pytest.raises(BackendError, match="replay.log"):
             b.connect()
+
+
+def test_replay_refuses_px4_ulog_in_the_config():
+    """ULog is not supported: the environment file is refused (field and value named) before any actor starts."""
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    with pytest.raises(ConfigError, match=r"replay\.log.*\.ulg logs are not supported.*flight\.ulg"):
+        parse_environment_config({"name": "r", "robots": [{"id": "r", "backend": "replay",
+                                                            "replay": {"log": "flight.ulg"}}]})
 
 
 # ---------------------------------------------------------------------------------------------- MCAP camera

@@ -19,6 +19,7 @@ level on PX4; ArduPilot missions carry home at sequence 0.
 """
 from __future__ import annotations
 
+import logging
 import math
 import queue
 import struct
@@ -36,6 +37,9 @@ from ..models import ActionCommand, AeroNavigation, Attitude, GeoPoint, Navigati
 from .base import BackendError, CommandRefused, LinkLost, VehicleBackend
 
 __all__ = ["MavlinkBackend"]
+
+#: STATUSTEXT lines are logged here (``robot: text``), at the level of their MAV_SEVERITY
+log = logging.getLogger("aerodaas.mavlink")
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M  # constants and enum names
@@ -67,6 +71,14 @@ _LEGACY_STREAMS = ((M.MAV_DATA_STREAM_EXTENDED_STATUS, 2.0), (M.MAV_DATA_STREAM_
                    (M.MAV_DATA_STREAM_EXTRA1, None), (M.MAV_DATA_STREAM_EXTRA3, 1.0))
 
 
+def _log_level(severity: int) -> int:
+    """The :mod:`logging` level of a MAV_SEVERITY (0 EMERGENCY .. 7 DEBUG)."""
+    if severity <= M.MAV_SEVERITY_CRITICAL:
+        return logging.CRITICAL
+    return {M.MAV_SEVERITY_ERROR: logging.ERROR, M.MAV_SEVERITY_WARNING: logging.WARNING,
+            M.MAV_SEVERITY_DEBUG: logging.DEBUG}.get(severity, logging.INFO)
+
+
 def _enum_name(enum: str, value: int) -> str:
     e = M.enums.get(enum, {}).get(value)
     return e.name if e is not None else f"{enum} {value}"
@@ -83,11 +95,15 @@ class MavlinkBackend(VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
-    until a timestamped message arrives. Positions are ENU metres from the vehicle's HOME_POSITION (the configured
+    until a timestamped message arrives; while the link is lost it runs on from the last sample at the measured
+    vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
     home until the vehicle reports one). Besides the :class:`VehicleBackend` contract it offers
     :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
     :meth:`set_mode` and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
     :attr:`gps_fix_type`, :attr:`command_rtt_ms` (acknowledged command round trips, wall milliseconds).
+    Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
+    (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
+    DEBUG).
 
     Raises :class:`BackendError` (connection, protocol timeouts), :class:`CommandRefused` (MAV_RESULT /
     MAV_MISSION_RESULT name and the autopilot's latest STATUSTEXT) and :class:`LinkLost` (no HEARTBEAT for
@@ -146,6 +162,7 @@ class MavlinkBackend(VehicleBackend):
         self._wall0 = time.monotonic()
         self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
         self._boot_last = 0
+        self._boot_wall = 0.0  # wall (monotonic) time of the latest time_boot_ms sample
         self._t_connect = 0.0
         self._ratio = 1.0
         self._clock_samples: deque[tuple[float, int]] = deque()
@@ -313,6 +330,7 @@ class MavlinkBackend(VehicleBackend):
             text = text.rstrip("\x00").strip()
             self._texts.append((now, msg.severity, text))
             self._event("status_text", severity=_enum_name("MAV_SEVERITY", msg.severity), text=text)
+            log.log(_log_level(msg.severity), "%s: %s", self.robot_id, text)
             return
         if self._compid and src_comp != self._compid:
             return
@@ -357,6 +375,7 @@ class MavlinkBackend(VehicleBackend):
             self._boot_ref = (ms, self._raw_t())
             self._clock_samples.clear()
         self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
+        self._boot_wall = now
         # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
         samples = self._clock_samples
         samples.append((now, ms))
@@ -662,7 +681,11 @@ class MavlinkBackend(VehicleBackend):
     @property
     def t(self) -> float:
         with self._lock:
-            t = max(self._raw_t() - self._t_connect, self._t_max)
+            t = self._raw_t() - self._t_connect
+            if not self._link_ok and self._boot_ref is not None:
+                # nothing timestamped arrives while the link is down: the vehicle's clock goes on at its last rate
+                t += (time.monotonic() - self._boot_wall) * self._ratio
+            t = max(t, self._t_max)
             self._t_max = t
             return t
 
@@ -748,7 +771,7 @@ class MavlinkBackend(VehicleBackend):
         return out
 
     def _event(self, event: str, **fields: Any) -> None:
-        self._events.append({"event": event, "t": round(self._raw_t() - self._t_connect, 3), **fields})
+        self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
 
     # ------------------------------------------------------------------ modes
     def set_mode(self, name: str, confirm_s: float | None = None) -> None:

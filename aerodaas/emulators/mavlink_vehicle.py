@@ -26,7 +26,7 @@ What differs between the two flavours (all emulated):
   take-off, and after landing.
 
 Time: the emulator has its own clock (``time_boot_ms`` starts at a non-zero boot time); ``speedup`` K runs physics,
-streams, timeouts and the clock K times faster than real time. Test hooks: :meth:`set_blackhole` (link loss),
+streams, timeouts and the clock K times faster than real time. Test hooks: :meth:`set_blackhole` (link loss), :meth:`drop_next` (single lost packets),
 :meth:`set_prearm_failure`, ``message_interval=False`` (old firmware that answers SET_MESSAGE_INTERVAL with
 UNSUPPORTED), ``ignore_commands`` (commands never acknowledged).
 """
@@ -244,6 +244,11 @@ class MavlinkVehicleEmulator:
         self.address: str | None = None
         self._blackhole = False
         self._blackhole_inbound = False
+        self._drop_counts: dict[tuple[str, str], int] = {}  # (direction, message type) -> how many more to drop
+        #: (direction "in"/"out", message type) of every message dropped by :meth:`drop_next`
+        self.dropped: list[tuple[str, str]] = []
+        #: (wall monotonic s, message type) of every message that arrived while the inbound link was cut
+        self.blackholed_inbound: list[tuple[float, str]] = []
         self.prearm_failure: str | None = None
         # vehicle state
         self.t = 0.0
@@ -348,11 +353,30 @@ class MavlinkVehicleEmulator:
 
     # ------------------------------------------------------------------ test hooks and state
     def set_blackhole(self, on: bool, inbound: bool = True) -> None:
-        """Drop everything the vehicle sends (and, with ``inbound``, everything it receives), like a radio out
-        of range; the vehicle keeps flying on its own. ``False`` restores the link."""
+        """Drop everything the vehicle sends (and, with ``inbound``, everything it receives, logging its type and
+        wall time in :attr:`blackholed_inbound`), like a radio out of range; the vehicle keeps flying on its own.
+        ``False`` restores the link."""
         with self._lock:
             self._blackhole = bool(on)
             self._blackhole_inbound = bool(on and inbound)
+
+    def drop_next(self, msg_type: str, direction: Literal["in", "out"] = "out", count: int = 1) -> None:
+        """Lose exactly the next ``count`` messages of type ``msg_type`` (e.g. ``"COMMAND_ACK"``,
+        ``"MISSION_COUNT"``) that the vehicle sends (``"out"``) or receives (``"in"``), like single lost radio
+        packets; each loss is logged in :attr:`dropped`. Raises ValueError for another direction or count < 1."""
+        if direction not in ("in", "out") or count < 1:
+            raise ValueError(f"drop_next: direction must be 'in' or 'out' and count >= 1, got {direction!r}, {count!r}")
+        with self._lock:
+            key = (direction, msg_type.upper())
+            self._drop_counts[key] = self._drop_counts.get(key, 0) + int(count)
+
+    def _dropping(self, direction: str, msg_type: str) -> bool:
+        key = (direction, msg_type)
+        if self._drop_counts.get(key, 0) <= 0:
+            return False
+        self._drop_counts[key] -= 1
+        self.dropped.append(key)
+        return True
 
     def set_prearm_failure(self, text: str | None) -> None:
         """Make pre-arm checks fail with ``text`` (e.g. ``"Compass not calibrated"``); None clears it."""
@@ -460,16 +484,20 @@ class MavlinkVehicleEmulator:
                 pass
 
     def _feed(self, link: _Link, data: bytes) -> None:
-        if self._blackhole_inbound:
-            return
         try:
             msgs = link.mav.parse_buffer(data) or []
         except Exception:  # a malformed stream must never stop the vehicle
             self.bad_packets += 1
             return
+        if self._blackhole_inbound:  # out of range: parsed only to log what the ground station still sent
+            now = time.monotonic()
+            self.blackholed_inbound.extend((now, m.get_type()) for m in msgs)
+            return
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
                 self.bad_packets += 1
+                continue
+            if self._drop_counts and self._dropping("in", msg.get_type()):
                 continue
             try:
                 self._handle(link, msg)
@@ -477,6 +505,8 @@ class MavlinkVehicleEmulator:
                 self._text(M.MAV_SEVERITY_ERROR, f"emulator: {msg.get_type()} handling failed: {e}")
 
     def _send(self, msg: Any, link: _Link | None = None) -> None:
+        if self._drop_counts and self._dropping("out", msg.get_type()):
+            return
         for lk in ([link] if link is not None else list(self._links)):
             try:
                 lk.mav.send(msg)
