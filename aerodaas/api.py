@@ -275,7 +275,7 @@ class Environment:
                      ("cloud_executors", cloud_executors), ("network", network)):
             if v is not None:
                 cur[k] = v
-        if cur.get("workload") and workload is not None:
+        if workload is not None:
             cur["workload"] = str(self.cfg.resolve_path(workload, "analytics_scheduler.workload"))
         try:
             cfg = AnalyticsSchedulerConfig.model_validate(cur)
