@@ -1,4 +1,4 @@
-"""The ``aerodaas`` command line: ``run``, ``info``, ``schema``, ``sim`` and more."""
+"""The ``aerodaas`` command line: ``run``, ``info``, ``schema``, ``sim``, ``mission`` and more."""
 from __future__ import annotations
 
 import argparse
@@ -6,6 +6,7 @@ import json
 import os
 import runpy
 import sys
+import time
 from pathlib import Path
 
 
@@ -156,6 +157,76 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         emu.stop()
 
 
+_MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
+
+
+def _mission_backend(args: argparse.Namespace, home=None):
+    """A connected MAVLink backend for ``--connection`` (BackendError / ValueError name the connection)."""
+    from .backends import make_backend
+    from .config import MavlinkConfig, RobotConfig
+
+    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout)
+    cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
+    backend = make_backend(cfg)
+    backend.connect()
+    deadline = time.monotonic() + min(args.timeout, 5.0)
+    while not backend.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
+        time.sleep(0.05)
+    return backend
+
+
+def _cmd_mission(args: argparse.Namespace) -> int:
+    """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
+    through the MAVLink backend's mission protocol. The file is read and every item checked (with
+    :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
+    sent; a download is written only once complete."""
+    from .backends import BackendError
+    from .missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
+
+    name = f"aerodaas mission {args.mission_cmd}"
+    backend = None
+    try:
+        if args.mission_cmd == "upload":
+            path = Path(args.file)
+            if not path.is_file():
+                raise MissionFileError(f"{str(path)!r}: mission file not found")
+            plan = load_mission(path)
+            if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
+                plan_to_flight(plan)
+            backend = _mission_backend(args, plan.home)
+            if plan.home is None:  # AMSL altitudes need a home: the vehicle's (still before anything is sent)
+                plan_to_flight(plan, backend.home)
+            sent = backend.upload_mission(plan)
+            print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
+                  f"{args.connection}", flush=True)
+            if args.start:
+                backend.arm()
+                backend.start_mission()
+                print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
+        else:
+            out = Path(args.out)
+            if out.suffix.lower() not in _MISSION_SUFFIXES:
+                raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
+                                       "(QGroundControl .plan or QGC WPL 110 waypoints)")
+            backend = _mission_backend(args)
+            plan = backend.download_mission().model_copy(update={
+                "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
+            tmp = out.with_name(out.name + ".part")
+            (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
+            os.replace(tmp, out)  # never a half-written mission file
+            print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
+                  f"written to {str(out)!r}", flush=True)
+    except (MissionFileError, BackendError, ValueError, OSError) as e:
+        where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
+            else ""
+        print(f"{name}: {e}{where}", file=sys.stderr)
+        return 2
+    finally:
+        if backend is not None:
+            backend.close()
+    return 0
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from .config import json_schema
 
@@ -214,6 +285,19 @@ def main(argv: list[str] | None = None) -> int:
     sm.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
     sm.add_argument("--allow-remote", action="store_true", help="allow a non-loopback address")
     sm.set_defaults(func=_cmd_sim)
+    ms = sub.add_parser("mission", help="upload a .plan / QGC WPL mission to a MAVLink vehicle, or download one")
+    msub = ms.add_subparsers(dest="mission_cmd", required=True)
+    mu = msub.add_parser("upload", help="check FILE (.plan, .waypoints, .txt) and upload it (MISSION_ITEM_INT)")
+    mu.add_argument("file")
+    mu.add_argument("--start", action="store_true", help="then arm and start it (ArduPilot AUTO / PX4 AUTO.MISSION)")
+    md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
+    md.add_argument("--out", required=True, metavar="FILE")
+    for m in (mu, md):
+        m.add_argument("--connection", required=True, metavar="CONN",
+                       help="pymavlink connection string, e.g. tcp:127.0.0.1:5760, udpin:0.0.0.0:14550, /dev/ttyACM0")
+        m.add_argument("--autopilot", choices=["auto", "ardupilot", "px4"], default="auto")
+        m.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the vehicle (default 10)")
+        m.set_defaults(func=_cmd_mission)
     bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video; "
                                          "--json for JSON output")
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
