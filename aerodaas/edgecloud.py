@@ -40,9 +40,12 @@ dispatcher turns ``policy.cloud_admit(task, t)`` into an *admit-by* time: the la
 bisection between now and the deadline) at which the policy still admits the task, on the policy's current
 estimate (``cloud_estimate_ms``). That assumes ``cloud_admit`` is monotone in ``t`` (true for every "enough time
 left" test); a policy that admits at any time (the CLOUD baseline) gets no limit. The admit-by epoch travels with
-the task; the cloud executor compares it with its clock right before it starts the model (after the uplink part
-of the network latency and, in real mode, after queueing for a detector thread). A refused task ends as
-DROPPED_TIME with reason ``cloud re-check``.
+the task; the cloud executor compares it with its clock when the request reaches it and, in real mode, again when a
+detector thread picks the task up (queueing beyond the admit-by time). Emulated network latency (``NetworkModel``)
+comes *after* the check: the reference makes its check right before the HTTP call to its Lambda function
+(``TaskExecutorLambda``), so the network's delay is part of the round trip the check has already admitted, and the
+task comes back late rather than being refused. A refused task ends as DROPPED_TIME with reason ``cloud re-check``;
+it never ran, so adaptive policies do not take its reply time as a latency sample.
 
 Cloud transport
 ---------------
@@ -56,7 +59,7 @@ surfaces on that outstanding call at once (``RayActorError`` / ``ActorDiedError`
 Each Ray hop can be delayed by CPU contention (tens of ms on a busy 2-core machine), while the edge's holds are
 timers in one process and stay within a few ms. So in emulated mode the executor holds the task on the intended
 schedule (``sent + uplink + cloud time``, absorbing a late request hop), makes the re-check when the request
-arrives, and sends the reply ``reply_lead_ms`` (default 100) before it is due; the pool releases it at the due
+arrives (before the emulated uplink), and sends the reply ``reply_lead_ms`` (default 100) before it is due; the pool releases it at the due
 time, unless the executor died meanwhile (then the task is retried or FAILED as below). The benchmark reports how
 early replies arrived (``reply_margin``) and the round trip's error against the intended one.
 
@@ -204,7 +207,8 @@ class NetworkModel:
       [0, MAX]; the walk is seeded, so it is the same in every process.
 
     A task's draw is seeded by ``(seed, task key)``, so runs are reproducible whatever the order of events. Half of
-    the latency is applied before the cloud's re-check and execution (uplink), half after (downlink).
+    the latency is applied before execution (uplink, after the cloud's re-check: see the module docstring), half
+    after (downlink).
     """
 
     _EPISODE = re.compile(r"^\+(?P<ms>\d+(\.\d*)?)@(?P<t1>\d+(\.\d*)?)-(?P<t2>\d+(\.\d*)?)$")
@@ -573,10 +577,11 @@ class CloudExecutor:
 
     Requests (dicts) carry: ``k`` (the client's key), ``model``, ``sent`` (epoch s), ``up_ms``/``down_ms`` (emulated
     network latency before/after execution), ``exec_ms`` (emulated hold; None in real mode), ``admit_by`` (epoch s or
-    None: the re-check), ``jpeg`` (real mode: the frame), ``meta`` (its FrameMeta or None). The executor waits until ``sent + up_ms``, re-checks
-    ``now <= admit_by`` right before it starts the model, runs it (emulated: holds ``exec_ms``; real: decodes the
-    JPEG and runs the ONNX detector on one of ``threads`` threads, re-checking when a thread picks the task up),
-    waits ``down_ms`` and queues the reply for the client's :meth:`collect`.
+    None: the re-check), ``jpeg`` (real mode: the frame), ``meta`` (its FrameMeta or None). The executor re-checks
+    ``now <= admit_by`` when the request arrives, waits until ``sent + up_ms``, runs the model (emulated: holds
+    ``exec_ms``; real: decodes the JPEG and runs the ONNX detector on one of ``threads`` threads, re-checking when a
+    thread picks the task up, not counting ``up_ms``), waits ``down_ms`` and queues the reply for the client's
+    :meth:`collect`.
 
     Replies (dicts): ``k``, ``ok`` (False: refused by the re-check, or failed: see ``error``), ``start``/``end`` (epoch
     s of the model's execution), ``result`` (real mode: list of detections), ``ready`` (epoch s), ``error``.
@@ -620,8 +625,8 @@ class CloudExecutor:
         """Accept a batch of requests from ``client``; returns how many were accepted (all)."""
         loop = self._loop = asyncio.get_running_loop()
         wall, lt = time.time(), loop.time()
-        for req in reqs:
-            self._later(client, loop, lt + (req["sent"] + req["up_ms"] / 1000.0 - wall), self._arrive, client, req)
+        for req in reqs:  # arrival: the re-check comes before the emulated uplink (see the module docstring)
+            self._arrive(client, req, loop, wall, lt)
         return len(reqs)
 
     async def collect(self, client: str, max_wait_s: float = 5.0) -> list[dict]:
@@ -681,29 +686,30 @@ class CloudExecutor:
             return True
         return False
 
-    def _arrive(self, client: str, req: dict) -> None:
-        now = time.time()
+    def _arrive(self, client: str, req: dict, loop, now: float, lt: float) -> None:
         if self._refused(client, req, now):
             return
-        loop = asyncio.get_running_loop()
-        if self.mode == "emulated":
-            self.executed += 1
-            # the hold ends on the intended schedule (sent + uplink + exec), so a late arrival of the request (a Ray
-            # hop delayed by CPU contention) is absorbed; the reply is due after the downlink and is sent
-            # ``lead_ms`` early (the client releases it at ``due``)
-            end = max(now, req["sent"] + (req["up_ms"] + req["exec_ms"]) / 1000.0)
-            due = end + req["down_ms"] / 1000.0
-            send_at = max(now, due - req.get("lead_ms", 0.0) / 1000.0)
-            self._later(client, loop, loop.time() + (send_at - now), self._reply, client, req, True, now, end,
-                        None, None, due)
+        if self.mode == "real":  # the model starts after the emulated uplink (at once when there is none)
+            self._later(client, loop, lt + (req["sent"] + req["up_ms"] / 1000.0 - now), self._start_real, client, req)
             return
-        fut = loop.run_in_executor(self._pool, self._run_real, req)
+        self.executed += 1
+        # emulated: the hold ends on the intended schedule (sent + uplink + exec), so a late arrival of the request
+        # (a Ray hop delayed by CPU contention) is absorbed; the reply is due after the downlink and is sent
+        # ``lead_ms`` early (the client releases it at ``due``)
+        start = max(now, req["sent"] + req["up_ms"] / 1000.0)
+        end = max(now, req["sent"] + (req["up_ms"] + req["exec_ms"]) / 1000.0)
+        due = end + req["down_ms"] / 1000.0
+        send_at = max(now, due - req.get("lead_ms", 0.0) / 1000.0)
+        self._later(client, loop, lt + (send_at - now), self._reply, client, req, True, start, end, None, None, due)
+
+    def _start_real(self, client: str, req: dict) -> None:
+        fut = asyncio.get_running_loop().run_in_executor(self._pool, self._run_real, req)
         fut.add_done_callback(lambda f: self._real_done(client, req, f))
 
     def _run_real(self, req: dict) -> tuple[str, float | None, float | None, Any]:
         start = time.time()
         admit_by = req.get("admit_by")
-        if admit_by is not None and start > admit_by:  # queued for a detector thread too long
+        if admit_by is not None and start - req["up_ms"] / 1000.0 > admit_by:  # queued for a detector thread too long
             return "refused", start, None, None
         self.executed += 1
         out = self._bank.run(req["model"], _frame_from_payload(req["jpeg"]), req.get("meta"))
@@ -718,7 +724,8 @@ class CloudExecutor:
         if status == "refused":
             self.refused += 1
             self._reply(client, req, False, None, None,
-                        error=f"cloud re-check: queued {1000 * (start - req['admit_by']):.0f} ms past the admit-by time")
+                        error=f"cloud re-check: queued {1000 * (start - req['up_ms'] / 1000.0 - req['admit_by']):.0f} ms "
+                              "past the admit-by time")
             return
         loop = self._loop
         self._later(client, loop, loop.time() + req["down_ms"] / 1000.0,

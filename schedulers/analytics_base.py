@@ -123,6 +123,8 @@ class TaskState(str, Enum):
 
 
 TERMINAL_STATES = tuple(s for s in TaskState if s is not TaskState.PENDING)
+#: terminal states of a task whose model ran (only these carry a latency that says something about the tier)
+EXECUTED_STATES = (TaskState.DONE_ON_TIME, TaskState.DONE_LATE)
 
 
 @dataclass(eq=False)
@@ -265,7 +267,9 @@ class AnalyticsScheduler(abc.ABC):
         return self.w[model].cloud_ms
 
     def on_cloud_done(self, task: AnalyticsTask, now_ms: float, latency_ms: float) -> list[Decision]:
-        """A cloud task came back after ``latency_ms`` (send to result, network included)."""
+        """A cloud task came back after ``latency_ms`` (send to reply, network included). ``task.state`` is already
+        terminal: only in :data:`EXECUTED_STATES` is ``latency_ms`` a cloud round trip; a task refused by the cloud
+        re-check (DROPPED_TIME) or FAILED never ran, and its reply time says nothing about the cloud's latency."""
         return []
 
     def on_cloud_availability(self, available: bool, now_ms: float) -> list[Decision]:

@@ -24,8 +24,8 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from .analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState, Workload,
-                             register_analytics_scheduler)
+from .analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState,
+                             Workload, register_analytics_scheduler)
 from .analytics_baselines import PriorityEdgeQueue
 
 __all__ = ["EdgeCloud", "Dem", "Dems", "DemsA", "Gems", "TentativeCloudQueue", "CloudLatencyEstimator",
@@ -430,7 +430,8 @@ class DemsA(Dems):
                 self.cooling_since[m] = None
             elif task.notes.get("probe"):
                 self.latency.refill(m, latency_ms)
-        self.latency.observe(m, latency_ms)
+        if task.state in EXECUTED_STATES:  # as the reference: only completions reach its latency window
+            self.latency.observe(m, latency_ms)
         return super().on_cloud_done(task, now_ms, latency_ms)
 
 

@@ -35,7 +35,8 @@ from __future__ import annotations
 
 from collections import deque
 
-from .analytics_base import AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload, register_analytics_scheduler
+from .analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
+                             register_analytics_scheduler)
 from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
 
 __all__ = ["GainPlan", "max_gain_edge_plan", "PessimisticLatencyEstimator"]
@@ -218,7 +219,8 @@ class GainPlan(AnalyticsScheduler):
         return plan[0], drops
 
     def on_cloud_done(self, task: AnalyticsTask, now_ms: float, latency_ms: float) -> list[Decision]:
-        self.latency.observe(task.model, latency_ms)
+        if task.state in EXECUTED_STATES:  # a refused or failed task's reply time is no cloud round trip
+            self.latency.observe(task.model, latency_ms)
         return []
 
     def on_cloud_availability(self, available: bool, now_ms: float) -> list[Decision]:

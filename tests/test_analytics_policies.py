@@ -293,10 +293,24 @@ def test_latency_window_replaces_the_estimate_only_on_a_drift_over_10_ms():
     assert est.estimate["A"] == 240.0
 
 
-def _cloud_done(pol, model: str, now: float, latency: float):
+def _cloud_done(pol, model: str, now: float, latency: float, state: TaskState = TaskState.DONE_ON_TIME):
     t = task(model, now - latency, now + 1_000)
-    t.tier, t.start_ms, t.state = "cloud", now - latency, TaskState.DONE_ON_TIME
+    t.tier, t.start_ms, t.state = "cloud", now - latency, state
     return pol.on_cloud_done(t, now, latency)
+
+
+@pytest.mark.parametrize("name", ["DEMS-A", "GAINPLAN"])
+def test_adaptive_latency_estimates_learn_from_completions_only(name):
+    """A task refused by the cloud re-check or FAILED never ran: its reply time (here 30 ms) is no cloud round trip
+    and must not pull the estimate down; completions, late ones included, do move it."""
+    pol = make_analytics_scheduler(name, TW)
+    for i in range(10):
+        _cloud_done(pol, "A", 100.0 + i, 30.0, TaskState.DROPPED_TIME)
+        _cloud_done(pol, "A", 200.0 + i, 30.0, TaskState.FAILED)
+    assert pol.cloud_estimate_ms("A") == 200.0        # still the profile
+    for i in range(10):
+        _cloud_done(pol, "A", 300.0 + i, 420.0, TaskState.DONE_LATE)
+    assert pol.cloud_estimate_ms("A") == 420.0
 
 
 def test_dems_a_cools_down_for_10_s_then_probes_with_the_profile_and_snaps_to_the_probe_latency():
