@@ -24,8 +24,8 @@ time of the edge becoming free while the offered edge load (last 5 s of arrivals
 any point of the plan otherwise — and its weight becomes its full edge utility (leaving the plan would now lose
 it); else it is released to the cloud (a task planned further out would likely be displaced by better arrivals). Tasks without a cloud option
 (non-positive cloud utility, or too late for the cloud) stay candidates until they no longer fit on the edge,
-and are then dropped (for cost or time). The cloud-latency estimate adapts as in DEMS-A (sliding window of
-10, 10 ms drift). Nothing here is specific to a model name: gains, times and deadlines come from the workload.
+and are then dropped (for cost or time). The cloud-latency estimate is the largest of the last 5 completed
+cloud round trips (:class:`PessimisticLatencyEstimator`), not DEMS-A's window mean. Nothing here is specific to a model name: gains, times and deadlines come from the workload.
 
 Decision points: :meth:`submit` (drops hopeless tasks), :meth:`poll` (triggers), :meth:`next_edge_task` (the
 plan's first task). A task is never started on the edge unless it can finish by its deadline at the profile's

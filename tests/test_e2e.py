@@ -112,13 +112,17 @@ def test_unknown_robot_id_names_the_id():
 
 def test_sigint_leaves_a_finished_recording(tmp_path):
     rec = tmp_path / "int.mcap"
+    # real time (86 s of mission): a slow machine must not finish the mission before the interrupt
     proc = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "run", str(APPS / "farm_survey.py"), "--record",
-                             str(rec), "--speedup", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             str(rec), "--speedup", "1", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, start_new_session=True)
     # wait until the recording has started receiving data
-    deadline = time.monotonic() + 90
-    while time.monotonic() < deadline and (not rec.exists() or rec.stat().st_size < 20000):
+    t0 = time.monotonic()
+    sizes = []
+    while time.monotonic() < t0 + 90 and (not rec.exists() or rec.stat().st_size < 20000):
+        sizes.append((round(time.monotonic() - t0, 1), rec.stat().st_size if rec.exists() else None))
         time.sleep(0.5)
+    assert proc.poll() is None, f"the run ended before the interrupt; recording sizes (s, bytes): {sizes[-6:]}"
     os.killpg(proc.pid, signal.SIGINT)
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 130, out
