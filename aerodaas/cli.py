@@ -5,6 +5,7 @@ import argparse
 import json
 import os
 import runpy
+import signal
 import sys
 import time
 from pathlib import Path
@@ -29,6 +30,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.hitl = True if args.hitl else None
     o.hitl_port = args.hitl_port
     results = []
+    stop_signal: list[int] = []
+
+    def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd: the same clean stop as Ctrl-C
+        stop_signal.append(signum)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second SIGTERM must not cut it short
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    # installed before Ray starts: the driver's own fatal-signal handler then chains to this one
+    previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
     runtime.start_ray_early(args.address)  # Ray's start (seconds) overlaps importing and building the app
 
     from . import api
@@ -50,18 +60,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     except KeyboardInterrupt:
         print("aerodaas run: interrupted", file=sys.stderr)
-        return 130
+        return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)
     except (FileNotFoundError, ValueError, KeyError) as e:
         print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
     finally:
         api.Robot.start_mission = original
         runtime.shutdown_ray()
+        signal.signal(signal.SIGTERM, previous_sigterm)
     if not results:
         print("aerodaas run: the application never called start_mission()", file=sys.stderr)
         return 1
     if any(r.outcome == "interrupted" for r in results):
-        return 130
+        return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
     return 0 if all(r.ok for r in results) else 1
 
 

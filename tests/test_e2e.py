@@ -110,12 +110,22 @@ def test_unknown_robot_id_names_the_id():
         env.get_robot_by_id("drone9")
 
 
-def test_sigint_leaves_a_finished_recording(tmp_path):
+def _default_sigint() -> None:
+    # a suite started in the background (`cmd &` in a non-interactive shell) inherits SIGINT ignored, and Python
+    # keeps it ignored: give the child the default disposition, as a terminal's Ctrl-C would find it
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.mark.parametrize("sig, code, group", [(signal.SIGINT, 130, True), (signal.SIGTERM, 143, False)],
+                         ids=["ctrl-c", "sigterm"])
+def test_interrupt_leaves_a_finished_recording(tmp_path, sig, code, group):
+    """Ctrl-C (SIGINT to the terminal's process group) and `kill` / `docker stop` (SIGTERM to the driver only) both
+    end the mission cleanly: outcome ``interrupted``, exit code 128 + signal, the MCAP finished."""
     rec = tmp_path / "int.mcap"
     # real time (86 s of mission): a slow machine must not finish the mission before the interrupt
     proc = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "run", str(APPS / "farm_survey.py"), "--record",
                              str(rec), "--speedup", "1", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True, preexec_fn=_default_sigint)
     # wait until the recording has started receiving data
     t0 = time.monotonic()
     sizes = []
@@ -123,9 +133,12 @@ def test_sigint_leaves_a_finished_recording(tmp_path):
         sizes.append((round(time.monotonic() - t0, 1), rec.stat().st_size if rec.exists() else None))
         time.sleep(0.5)
     assert proc.poll() is None, f"the run ended before the interrupt; recording sizes (s, bytes): {sizes[-6:]}"
-    os.killpg(proc.pid, signal.SIGINT)
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        os.kill(proc.pid, sig)
     out, _ = proc.communicate(timeout=120)
-    assert proc.returncode == 130, out
+    assert proc.returncode == code, out
     s = summarize_mcap(rec)
     assert s["finished"], out
     assert s["mission"]["outcome"] == "interrupted"
