@@ -1414,13 +1414,16 @@ class AnalyticsDispatcher:
             self._poll_handle = None
         self._poll_at = t
         if t is not None:
-            self._poll_handle = self._loop.call_at(self.clock.loop_time(self._loop, t), self._on_poll, t)
+            self._poll_handle = self._loop.call_at(self.clock.loop_time(self._loop, t), self._on_poll, t,
+                                                   self.clock.now_ms())
 
-    def _on_poll(self, due_ms: float) -> None:
+    def _on_poll(self, due_ms: float, armed_ms: float) -> None:
         self._poll_handle = None
         self._poll_at = None
         now = self.clock.now_ms()
-        self.poll_lateness.add(now - due_ms)
+        # the timer's own lateness: a poll armed for a time already past (a policy whose triggers moved earlier,
+        # e.g. after its latency estimate grew) is due when armed, not at that past time
+        self.poll_lateness.add(now - max(due_ms, armed_ms))
         decisions = self._safe("poll", [], now)
         self._after_policy(decisions)
 

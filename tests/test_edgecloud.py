@@ -231,6 +231,25 @@ def test_poll_timer_fires_at_next_poll_ms():
     assert r["timing_ms"]["poll_lateness"]["p50"] < 20
 
 
+class OverdueCloud(JustInTimeCloud):
+    """Test policy: each task is due 200 ms before it arrived, as when a policy's latency estimate jumps and its
+    triggers move into the past."""
+
+    name = "TEST_OVERDUE"
+
+    def _due(self, t):
+        return t.arrival_ms - 200.0
+
+
+def test_poll_lateness_times_the_timer_not_a_due_time_already_past_when_armed():
+    policy = OverdueCloud(workload("LIGHT"))
+    d, r, _ = asyncio.run(drive(policy, [(0.0, "d0", "HV"), (50.0, "d1", "HV"), (100.0, "d2", "MD")]))
+    check_accounting(d, r)
+    assert len(policy.polls) >= 3 and r["states"]["done_on_time"] == 3
+    # each poll ran right after it was armed, 200 ms after its due time: that is no loop lag
+    assert r["timing_ms"]["poll_lateness"]["n"] >= 3 and r["timing_ms"]["poll_lateness"]["max"] < 50, r["timing_ms"]
+
+
 def test_held_tasks_are_dropped_when_the_run_ends():
     w = workload("LIGHT")
     policy = JustInTimeCloud(w)
