@@ -309,6 +309,26 @@ def test_udp_link_backend_listens_emulator_sends():
         emu.stop()
 
 
+def test_udpout_backend_sends_first_to_a_listening_vehicle():
+    """The other UDP arrangement (a companion computer pointed at an autopilot's UDP port): the vehicle listens
+    (udpin) and knows no peer until the ground station speaks first, so the backend must not wait for the
+    vehicle's HEARTBEAT before sending its own."""
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=10, gps_lock_s=0.5)
+    addr = emu.start("udpin:127.0.0.1:0")
+    b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink",
+                                   mavlink=MavlinkConfig(connection=addr.replace("udpin", "udpout"))))
+    try:
+        b.connect(timeout_s=10)
+        assert b.autopilot == "ardupilot"
+        b.arm()
+        b.takeoff(2.0)
+        assert run_until(b, lambda: b.position[2] > 1.7, 10)
+        assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+    finally:
+        b.close()
+        emu.stop()
+
+
 def test_sim_cli_refuses_remote_bind_and_bad_address():
     from aerodaas.cli import main
 
