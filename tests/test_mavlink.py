@@ -329,6 +329,63 @@ def test_udpout_backend_sends_first_to_a_listening_vehicle():
         emu.stop()
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pseudo-terminals as serial ports: Linux")
+def test_serial_link_through_a_pseudo_terminal():
+    """A telemetry radio or USB link: the backend opens a serial device (a pty here, with ``baud``) through
+    pyserial; a relay carries the bytes between the pty and the emulated vehicle's UDP port, as a radio would."""
+    import os
+    import selectors
+    import tty
+
+    emu = MavlinkVehicleEmulator("px4", speedup=10, gps_lock_s=0.5)
+    _, host, port = emu.start("udpin:127.0.0.1:0").split(":")
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    radio = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    radio.connect((host, int(port)))
+    stop = threading.Event()
+    carried = {"to_vehicle": 0, "to_gcs": 0}
+
+    def relay() -> None:
+        sel = selectors.DefaultSelector()
+        sel.register(master, selectors.EVENT_READ, "pty")
+        sel.register(radio, selectors.EVENT_READ, "udp")
+        while not stop.is_set():
+            for key, _ in sel.select(0.1):
+                try:
+                    if key.data == "pty":
+                        data = os.read(master, 4096)
+                        radio.send(data)
+                        carried["to_vehicle"] += len(data)
+                    else:
+                        data = radio.recv(65535)
+                        os.write(master, data)
+                        carried["to_gcs"] += len(data)
+                except OSError:
+                    pass
+
+    t = threading.Thread(target=relay, daemon=True)
+    t.start()
+    b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink",
+                                   mavlink=MavlinkConfig(connection=os.ttyname(slave), baud=57600)))
+    try:
+        b.connect(timeout_s=10)
+        assert b.autopilot == "px4"
+        b.arm()
+        b.takeoff(2.0)
+        assert run_until(b, lambda: b.position[2] > 1.7, 10)
+        assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+        assert carried["to_vehicle"] > 0 and carried["to_gcs"] > 0
+    finally:
+        b.close()
+        stop.set()
+        t.join(timeout=2)
+        emu.stop()
+        radio.close()
+        os.close(master)
+        os.close(slave)
+
+
 def test_sim_cli_refuses_remote_bind_and_bad_address():
     from aerodaas.cli import main
 
