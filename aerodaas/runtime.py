@@ -85,6 +85,13 @@ def start_ray_early(address: str | None = None) -> None:
     _EARLY.update(ready=ready, error=None, address=address)
 
     def keeper() -> None:
+        import logging
+
+        class _NoSigtermNotice(logging.Filter):  # the CLI installs its own SIGTERM handler in the main thread
+            def filter(self, record: logging.LogRecord) -> bool:
+                return not str(record.msg).startswith("SIGTERM handler is not set")
+
+        logging.getLogger("ray._private.worker").addFilter(_NoSigtermNotice())
         try:
             _init_ray(address)
         except BaseException as e:  # surfaced by ensure_ray in the main thread
