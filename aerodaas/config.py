@@ -219,20 +219,11 @@ class TelloConfig(_Cfg):
 
 class ReplayConfig(_Cfg):
     """Replay a recorded flight as odometry, battery and mode/state streams: ``log`` is a MAVLink telemetry log
-    (``.tlog``, as QGroundControl, MAVProxy or Mission Planner record it); ``rate`` is the replay speed (1 = real
-    time). PX4 ``.ulg`` flight logs are not supported (no ULog parser is bundled): a ``.ulg`` path is refused
-    here with a ValueError, before anything starts; record a ``.tlog`` with the ground station instead."""
+    (``.tlog``, as QGroundControl, MAVProxy or Mission Planner record it) or a PX4 flight log (``.ulg``, as the
+    autopilot writes it to its SD card); ``rate`` is the replay speed (1 = real time)."""
 
     log: str = Field(min_length=1)
     rate: float = Field(default=1.0, gt=0)
-
-    @field_validator("log")
-    @classmethod
-    def _not_ulog(cls, v: str) -> str:
-        if v.lower().endswith(".ulg"):
-            raise ValueError(f"PX4 .ulg logs are not supported (only MAVLink .tlog telemetry logs), got {v!r}; "
-                             "record a .tlog with QGroundControl/MAVProxy or convert the flight")
-        return v
 
 
 class RobotConfig(_Cfg):

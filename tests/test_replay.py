@@ -140,13 +140,140 @@ def test_replay_rejects_bad_logs(tmp_path):
             b.connect()
 
 
-def test_replay_refuses_px4_ulog_in_the_config():
-    """ULog is not supported: the environment file is refused (field and value named) before any actor starts."""
-    from aerodaas.config import ConfigError, parse_environment_config
+# ---------------------------------------------------------------------------------------------- PX4 ULog
+def write_ulog(path, topics: dict, logs: list, start_us: int = 1_000_000) -> None:
+    """A minimal ULog v1 file written from the format spec (docs.px4.io, "ULog File Format"), not by the code under
+    test: header (magic, version, start µs), flag bits, one format per topic, then subscriptions ('A'), data ('D')
+    and text ('L') in time order. ``topics``: name -> ([(c type, field name)], [row dicts with ``timestamp``]);
+    ``logs``: (timestamp µs, level 0-7, text)."""
+    import struct
 
-    with pytest.raises(ConfigError, match=r"replay\.log.*\.ulg logs are not supported.*flight\.ulg"):
-        parse_environment_config({"name": "r", "robots": [{"id": "r", "backend": "replay",
-                                                            "replay": {"log": "flight.ulg"}}]})
+    out = bytearray(b"ULog\x01\x12\x35" + bytes([1]) + struct.pack("<Q", start_us))
+
+    def put(kind: str, payload: bytes) -> None:
+        out.extend(struct.pack("<HB", len(payload), ord(kind)) + payload)
+
+    put("B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
+    codes = {"uint64_t": "Q", "int32_t": "i", "uint8_t": "B", "float": "f", "double": "d", "bool": "?"}
+    for name, (fields, _) in topics.items():
+        put("F", (name + ":" + "".join(f"{t} {n};" for t, n in fields)).encode())
+    put("I", bytes([len("char[5] ver_sw")]) + b"char[5] ver_sw" + b"test1")
+    records = []
+    for msg_id, (name, (fields, rows)) in enumerate(topics.items()):
+        put("A", struct.pack("<BH", 0, msg_id) + name.encode())
+        fmt = "<" + "".join(f"{t.split('[')[1][:-1]}{codes[t.split('[')[0]]}" if "[" in t else codes[t] for t, _ in fields)
+        for row in rows:
+            values = [v for _, n in fields for v in (row[n] if isinstance(row[n], (list, tuple)) else [row[n]])]
+            records.append((row["timestamp"], "D", struct.pack("<H", msg_id) + struct.pack(fmt, *values)))
+    for ts, level, text in logs:
+        records.append((ts, "L", struct.pack("<BQ", ord(str(level)), ts) + text.encode()))
+    for _, kind, payload in sorted(records, key=lambda r: r[0]):
+        put(kind, payload)
+    path.write_bytes(bytes(out))
+
+
+HOME = (47.397742, 8.545594, 488.0)  # lat, lon deg, alt m AMSL
+
+
+def _flight(t: float) -> tuple[float, float]:
+    """The synthetic flight: (north m, height m) at log time t s — climb to 10 m, 50 m north at 2.5 m/s, descend."""
+    h = min(10.0, max(0.0, (t - 2.0) * 2.0)) if t < 40.0 else max(0.0, 10.0 - (t - 40.0) * 1.0)
+    return min(50.0, max(0.0, (t - 8.0) * 2.5)), h
+
+
+@pytest.fixture(scope="module")
+def ulog_file(tmp_path_factory):
+    """60 s of a PX4 flight at 10 Hz: POSCTL disarmed, armed TAKEOFF at 2 s, MISSION at 8 s, LAND at 40 s, landed
+    and disarmed at 52 s; mission items 0-2 reached at 8, 28 and 40 s; battery 100 % -> 76 %; heading east."""
+    path = tmp_path_factory.mktemp("ulog") / "flight.ulg"
+    start = 1_000_000
+    gpos, lpos, att, bat, status, land, mres = [], [], [], [], [], [], []
+    for i in range(600):
+        t = i / 10.0
+        ts = start + int(t * 1e6)
+        north, h = _flight(t)
+        lat, lon, alt = pymap3d.enu2geodetic(0.0, north, h, *HOME)
+        gpos.append({"timestamp": ts, "lat": lat, "lon": lon, "alt": alt})
+        vn = 2.5 if 8.0 < t < 28.0 else 0.0
+        lpos.append({"timestamp": ts, "x": north, "y": 0.0, "z": -h, "vx": vn, "vy": 0.0, "vz": 0.0})
+        att.append({"timestamp": ts, "q": [np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)]})  # yaw 90 deg (east)
+        bat.append({"timestamp": ts, "voltage_v": 16.8 - 0.02 * t, "remaining": 1.0 - 0.004 * t})
+        armed = 2.0 <= t < 52.0
+        nav = 2 if t < 2.0 else 17 if t < 8.0 else 3 if t < 40.0 else 18 if t < 52.0 else 2
+        status.append({"timestamp": ts, "arming_state": 2 if armed else 1, "nav_state": nav})
+        land.append({"timestamp": ts, "landed": not (2.5 <= t < 50.0)})
+        mres.append({"timestamp": ts, "seq_reached": -1 if t < 8.0 else 0 if t < 28.0 else 1 if t < 40.0 else 2})
+    topics = {
+        "vehicle_global_position": ([("uint64_t", "timestamp"), ("double", "lat"), ("double", "lon"),
+                                     ("float", "alt")], gpos),
+        "vehicle_local_position": ([("uint64_t", "timestamp"), ("float", "x"), ("float", "y"), ("float", "z"),
+                                    ("float", "vx"), ("float", "vy"), ("float", "vz")], lpos),
+        "vehicle_attitude": ([("uint64_t", "timestamp"), ("float[4]", "q")], att),
+        "battery_status": ([("uint64_t", "timestamp"), ("float", "voltage_v"), ("float", "remaining")], bat),
+        "vehicle_status": ([("uint64_t", "timestamp"), ("uint8_t", "arming_state"), ("uint8_t", "nav_state")],
+                           status),
+        "vehicle_land_detected": ([("uint64_t", "timestamp"), ("bool", "landed")], land),
+        "home_position": ([("uint64_t", "timestamp"), ("double", "lat"), ("double", "lon"), ("float", "alt")],
+                          [{"timestamp": start + 500_000, "lat": HOME[0], "lon": HOME[1], "alt": HOME[2]}]),
+        "mission_result": ([("uint64_t", "timestamp"), ("int32_t", "seq_reached")], mres),
+    }
+    write_ulog(path, topics, [(start + 2_600_000, 6, "Takeoff detected"), (start + 51_000_000, 6, "Landing detected")],
+               start_us=start)
+    return path
+
+
+def test_replay_plays_a_px4_ulog(ulog_file):
+    """Positions, height above home, battery, heading, modes, arming, landed state, mission items and the log's
+    text messages come out of a .ulg as they do from a .tlog (the expectations come from the flight's own
+    definition, not from the reader)."""
+    b = make_backend(RobotConfig(id="px4", backend="replay", replay=ReplayConfig(log=str(ulog_file), rate=RATE)))
+    assert b.navigable is False
+    b.connect()
+    assert (b.home.lat, b.home.lon) == pytest.approx(HOME[:2], abs=1e-7) and b.home.alt == pytest.approx(HOME[2])
+    assert b.info["format"] == "ulog" and "vehicle_status" in b.info["topics"]
+    samples, events = [], []
+    deadline = time.monotonic() + 60.0 / RATE + 5
+    while not b.finished and time.monotonic() < deadline:
+        b.step(0.0)
+        samples.append((b.odometry().t, b.position.copy(), b.battery_pct, b.in_air, b.yaw))
+        events += b.drain_events()
+        time.sleep(0.002)
+    assert b.finished
+    checked = 0
+    for t, pos, bat, in_air, yaw in samples:
+        if 1.0 < t < 59.0 and abs(t * 10 - round(t * 10)) > 0.2:  # away from sample edges
+            north, h = _flight(np.floor(t * 10) / 10)
+            assert pos[0] == pytest.approx(0.0, abs=0.05) and pos[1] == pytest.approx(north, abs=0.05), (t, pos)
+            assert pos[2] == pytest.approx(h, abs=0.05), (t, pos)
+            assert bat == pytest.approx(100 * (1.0 - 0.004 * np.floor(t * 10) / 10), abs=1.0)
+            assert in_air == (2.5 <= np.floor(t * 10) / 10 < 50.0), t
+            assert yaw == pytest.approx(0.0, abs=0.5)  # heading east = ENU yaw 0
+            checked += 1
+    assert checked > 50
+    kinds = [e["event"] for e in events]
+    assert [e["name"] for e in events if e["event"] == "mode"] == ["POSCTL", "TAKEOFF", "MISSION", "LAND", "POSCTL"]
+    assert kinds.count("armed") == 1 and kinds.count("disarmed") == 1
+    assert [e["seq"] for e in events if e["event"] == "mission_item_reached"] == [0, 1, 2]
+    assert [e["text"] for e in events if e["event"] == "status_text"] == ["Takeoff detected", "Landing detected"]
+    assert "link_lost" not in kinds  # an onboard log has no link to lose
+    with pytest.raises(NotNavigable):
+        b.goto((0.0, 0.0, 5.0))
+
+
+def test_replay_rejects_a_bad_ulog(tmp_path):
+    from aerodaas.backends.base import BackendError
+
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(b"not a ulog at all" * 10)
+    b = make_backend(RobotConfig(id="r", backend="replay", replay=ReplayConfig(log=str(bad))))
+    with pytest.raises(BackendError, match=r"replay\.log.*bad\.ulg.*not a readable ULog"):
+        b.connect()
+    nopos = tmp_path / "nopos.ulg"
+    write_ulog(nopos, {"battery_status": ([("uint64_t", "timestamp"), ("float", "remaining")],
+                                          [{"timestamp": 2_000_000, "remaining": 0.5}])}, [])
+    b = make_backend(RobotConfig(id="r", backend="replay", replay=ReplayConfig(log=str(nopos))))
+    with pytest.raises(BackendError, match="no vehicle_global_position"):
+        b.connect()
 
 
 # ---------------------------------------------------------------------------------------------- MCAP camera

@@ -14,6 +14,10 @@ capture time, a big-endian uint64 of microseconds) at ``rate`` x real time:
 * home from the first ``HOME_POSITION`` (else the first ``GLOBAL_POSITION_INT`` with a fix), updated when a later
   HOME_POSITION moves it.
 
+A PX4 flight log (``.ulg``, read with pyulog) plays the same way: its uORB topics are turned into the MAVLink
+messages above, in MAVLink units, by :func:`load_ulog` (see there). A ULog has no radio link, so link loss is never
+reported for it.
+
 Only the vehicle's own messages count (the autopilot: the first HEARTBEAT whose autopilot is not
 ``MAV_AUTOPILOT_INVALID``); a GCS's messages, unknown message ids and bad data are skipped. A log captured on two
 links holds each packet twice: a packet byte-identical (same sequence number and payload) to one seen less than
@@ -36,7 +40,7 @@ from ..geo import geodetic_to_enu
 from ..models import Attitude, GeoPoint, Odometry
 from .base import BackendError, VehicleBackend
 
-__all__ = ["ReplayBackend", "McapCameraReplay", "load_tlog", "LogMessage", "DUPLICATE_WINDOW_S"]
+__all__ = ["ReplayBackend", "McapCameraReplay", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
 
 #: a byte-identical packet within this many seconds of the same one is a duplicate from a second link
 DUPLICATE_WINDOW_S = 0.5
@@ -111,6 +115,135 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
                   "foreign": len(raw) - len(msgs)}
 
 
+class _UlogMsg:
+    """A MAVLink-shaped message made from a ULog sample (the fields :class:`ReplayBackend` reads, in MAVLink units)."""
+
+    def __init__(self, mtype: str, **fields: Any) -> None:
+        self._type = mtype
+        self.__dict__.update(fields)
+
+    def get_type(self) -> str:
+        return self._type
+
+
+#: PX4 ``vehicle_status.nav_state`` -> the flight-mode name pymavlink gives the same mode in a .tlog
+PX4_NAV_STATE_MODES = {0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "MISSION", 4: "LOITER", 5: "RTL", 6: "POSCTL",
+                       10: "ACRO", 12: "DESCEND", 13: "TERMINATION", 14: "OFFBOARD", 15: "STABILIZED",
+                       17: "TAKEOFF", 18: "LAND", 19: "FOLLOWME", 20: "PRECLAND", 21: "ORBIT", 22: "TAKEOFF"}
+_PX4_ARMING_STATE_ARMED = 2
+#: uORB topics :func:`load_ulog` reads (instance 0 of each)
+ULOG_TOPICS = ("vehicle_global_position", "vehicle_local_position", "vehicle_attitude", "battery_status",
+               "vehicle_status", "vehicle_land_detected", "home_position", "mission_result")
+
+
+def _euler_from_quaternion(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) in radians, ZYX order, from PX4's attitude quaternion (body FRD to NED, Hamilton, w first)."""
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def load_ulog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]]:
+    """Read a PX4 ULog (``.ulg``; format: docs.px4.io "ULog File Format") with pyulog into the messages a ``.tlog``
+    replay uses, in log order, ``t`` in seconds since the log's start:
+
+    * ``vehicle_global_position`` (lat/lon deg, alt m AMSL) -> GLOBAL_POSITION_INT (1e7 deg, mm), with
+      ``relative_alt`` = alt - home altitude and the velocity of the latest ``vehicle_local_position`` (NED m/s ->
+      cm/s);
+    * ``vehicle_attitude.q`` -> ATTITUDE (roll, pitch, yaw rad); ``battery_status`` (``remaining`` 0-1,
+      ``voltage_v``) -> BATTERY_STATUS and SYS_STATUS;
+    * ``vehicle_status`` -> HEARTBEAT (armed when ``arming_state`` is ARMED = 2; the mode named from ``nav_state`` as
+      pymavlink names PX4 modes, :data:`PX4_NAV_STATE_MODES`), on change only;
+    * ``vehicle_land_detected.landed`` -> EXTENDED_SYS_STATE (ON_GROUND / IN_AIR); ``home_position`` ->
+      HOME_POSITION; ``mission_result.seq_reached`` -> MISSION_ITEM_REACHED; the log's text messages -> STATUSTEXT
+      (severity = the ULog log level).
+
+    Returns (messages, info) with info ``{"t0": None (a ULog's clock is the autopilot's boot time), "format":
+    "ulog", "topics": [topics found], "dropouts": n}``. Raises BackendError when pyulog is missing, the file cannot
+    be parsed, or it has no ``vehicle_global_position`` samples."""
+    try:
+        from pyulog import ULog
+    except ImportError as e:  # pragma: no cover - a dependency; only a broken install lacks it
+        raise BackendError("replay.log: reading a PX4 .ulg needs pyulog (pip install pyulog)") from e
+    p = Path(path)
+    try:
+        ulog = ULog(str(p), list(ULOG_TOPICS))
+    except Exception as e:  # noqa: BLE001 - pyulog raises bare Exceptions / struct errors on bad files
+        raise BackendError(f"replay.log: {str(p)!r} is not a readable ULog: {type(e).__name__}: {e}") from e
+    start_us = ulog.start_timestamp
+    rows: list[tuple[int, int, str, dict[str, Any]]] = []  # (timestamp us, topic order, topic, sample)
+    found = []
+    for d in ulog.data_list:
+        if d.multi_id != 0 or d.name not in ULOG_TOPICS:
+            continue
+        found.append(d.name)
+        cols = {k: v for k, v in d.data.items()}
+        order = ULOG_TOPICS.index(d.name)
+        for i in range(len(cols["timestamp"])):
+            rows.append((int(cols["timestamp"][i]), order, d.name, {k: v[i].item() for k, v in cols.items()}))
+    if "vehicle_global_position" not in found:
+        raise BackendError(f"replay.log: {str(p)!r} has no vehicle_global_position samples (no position to replay)")
+    for m in ulog.logged_messages:
+        rows.append((int(m.timestamp), len(ULOG_TOPICS), "log", {"level": int(m.log_level), "text": m.message}))
+    rows.sort(key=lambda r: (r[0], r[1]))
+
+    out: list[LogMessage] = []
+    vel_ned = (0.0, 0.0, 0.0)
+    home_alt: float | None = None
+    status: tuple[bool, str] | None = None
+    landed: bool | None = None
+    reached = -1
+    for ts, _, topic, f in rows:
+        t = (ts - start_us) / 1e6
+        if topic == "vehicle_local_position":
+            vel_ned = (f.get("vx", 0.0), f.get("vy", 0.0), f.get("vz", 0.0))
+        elif topic == "vehicle_global_position":
+            if not (math.isfinite(f["lat"]) and math.isfinite(f["lon"]) and math.isfinite(f["alt"])):
+                continue
+            if home_alt is None:
+                home_alt = f["alt"]
+            out.append(LogMessage(t, "GLOBAL_POSITION_INT", _UlogMsg(
+                "GLOBAL_POSITION_INT", lat=round(f["lat"] * 1e7), lon=round(f["lon"] * 1e7), alt=round(f["alt"] * 1000),
+                relative_alt=round((f["alt"] - home_alt) * 1000), vx=round(vel_ned[0] * 100),
+                vy=round(vel_ned[1] * 100), vz=round(vel_ned[2] * 100))))
+        elif topic == "home_position":
+            if math.isfinite(f["lat"]) and math.isfinite(f["lon"]):
+                home_alt = f["alt"]
+                out.append(LogMessage(t, "HOME_POSITION", _UlogMsg(
+                    "HOME_POSITION", latitude=round(f["lat"] * 1e7), longitude=round(f["lon"] * 1e7),
+                    altitude=round(f["alt"] * 1000))))
+        elif topic == "vehicle_attitude":
+            roll, pitch, yaw = _euler_from_quaternion(f["q[0]"], f["q[1]"], f["q[2]"], f["q[3]"])
+            out.append(LogMessage(t, "ATTITUDE", _UlogMsg("ATTITUDE", roll=roll, pitch=pitch, yaw=yaw)))
+        elif topic == "battery_status":
+            rem = f.get("remaining", -1.0)
+            pct = round(rem * 100) if 0.0 <= rem <= 1.0 else -1
+            out.append(LogMessage(t, "BATTERY_STATUS", _UlogMsg("BATTERY_STATUS", battery_remaining=pct)))
+            out.append(LogMessage(t, "SYS_STATUS", _UlogMsg(
+                "SYS_STATUS", voltage_battery=round(f.get("voltage_v", 0.0) * 1000), battery_remaining=pct)))
+        elif topic == "vehicle_status":
+            now = (int(f["arming_state"]) == _PX4_ARMING_STATE_ARMED,
+                   PX4_NAV_STATE_MODES.get(int(f["nav_state"]), f"NAV_STATE_{int(f['nav_state'])}"))
+            if now != status:
+                status = now
+                out.append(LogMessage(t, "HEARTBEAT", _UlogMsg(
+                    "HEARTBEAT", base_mode=_MAV_MODE_FLAG_SAFETY_ARMED if now[0] else 0, mode_name=now[1])))
+        elif topic == "vehicle_land_detected":
+            if bool(f["landed"]) != landed:
+                landed = bool(f["landed"])
+                out.append(LogMessage(t, "EXTENDED_SYS_STATE", _UlogMsg(
+                    "EXTENDED_SYS_STATE", landed_state=1 if landed else 2)))
+        elif topic == "mission_result":
+            seq = int(f.get("seq_reached", -1))
+            if seq >= 0 and seq != reached:
+                reached = seq
+                out.append(LogMessage(t, "MISSION_ITEM_REACHED", _UlogMsg("MISSION_ITEM_REACHED", seq=seq)))
+        elif topic == "log":
+            out.append(LogMessage(t, "STATUSTEXT", _UlogMsg("STATUSTEXT", severity=f["level"], text=f["text"])))
+    return out, {"t0": None, "format": "ulog", "topics": sorted(set(found)), "dropouts": len(ulog.dropouts)}
+
+
 def _home_of(m: Any) -> GeoPoint | None:
     """Home from a HOME_POSITION (or a GLOBAL_POSITION_INT with a fix); None without one."""
     if m.get_type() == "HOME_POSITION":
@@ -163,19 +296,21 @@ class ReplayBackend(VehicleBackend):
         self._last_hb: float | None = None
         self._link_ok = True
         self.finished = False
+        self._link_monitor = True
         self._events: list[dict[str, Any]] = []
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
-        """Read the log (``.tlog``) and start the replay clock. Raises BackendError for a missing, unreadable or
+        """Read the log (``.tlog`` or PX4 ``.ulg``) and start the replay clock. Raises BackendError for a missing, unreadable or
         unsupported log (the message names ``replay.log`` and the path)."""
         suffix = Path(self.log_path).suffix.lower()
-        if suffix == ".ulg":
-            raise BackendError(f"robot {self.robot_id!r}: replay.log {self.log_path!r}: PX4 .ulg logs are not "
-                               f"supported yet; convert it to a .tlog or record a .tlog with the GCS")
         if not Path(self.log_path).is_file():
             raise BackendError(f"robot {self.robot_id!r}: replay.log {self.log_path!r}: file not found")
-        self._msgs, self.info = load_tlog(self.log_path)
+        if suffix == ".ulg":
+            self._msgs, self.info = load_ulog(self.log_path)
+            self._link_monitor = False  # an onboard log has no radio link to lose
+        else:
+            self._msgs, self.info = load_tlog(self.log_path)
         self.info["duration_s"] = self._msgs[-1].t if self._msgs else 0.0
         home = next((h for lm in self._msgs if lm.type == "HOME_POSITION" for h in [_home_of(lm.msg)] if h), None)
         home = home or next((h for lm in self._msgs if lm.type == "GLOBAL_POSITION_INT"
@@ -208,7 +343,7 @@ class ReplayBackend(VehicleBackend):
             self._i += 1
             self._apply(lm)
         self._t_applied = now
-        if not self.finished and self._last_hb is not None:
+        if self._link_monitor and not self.finished and self._last_hb is not None:
             ok = now - self._last_hb < HEARTBEAT_TIMEOUT_S
             if ok != self._link_ok and self._i < len(msgs):
                 self._link_ok = ok
@@ -263,7 +398,7 @@ class ReplayBackend(VehicleBackend):
         if armed != self._armed:
             self._armed = armed
             self._event("armed" if armed else "disarmed", t)
-        mode = mavutil.mode_string_v10(m)
+        mode = getattr(m, "mode_name", None) or mavutil.mode_string_v10(m)
         if mode != self.mode:
             self.mode = mode
             self._event("mode", t, name=mode)
