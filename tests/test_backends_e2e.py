@@ -65,6 +65,30 @@ def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_sessi
 
 
 
+def test_a_replayed_px4_ulog_drives_the_same_stat_stream(ray_session, run_options, tmp_path):
+    """The .ulg replay through the runtime: the synthetic PX4 flight of tests/test_replay.py (written from the ULog
+    spec) goes through the same phases, in order, and its three mission items are events."""
+    from .test_replay import write_ulog_flight
+
+    log = write_ulog_flight(tmp_path / "flight.ulg")
+    cfg = {"name": "replay-ulog", "robots": [{"id": "px4", "backend": "replay", "replay": {"log": str(log), "rate": 20},
+                                              "sensors": [{"id": "odom", "type": "odometry",
+                                                           "properties": {"rate_hz": 5}}]}]}
+    env = Environment(parse_environment_config(cfg))
+    drone = env.get_robot_by_id("px4")
+    run_options.record = str(tmp_path / "replay-ulog.mcap")
+    res = drone.start_mission()
+    assert res.outcome == "success", res.robots["px4"].get("error")
+    run = load_run(run_options.record)
+    states = [s["state"] for s in run["states"]]
+    order = ["PREFLIGHT", "ARMED", "TAKING_OFF", "NAVIGATING", "LANDING", "LANDED"]
+    idx = [states.index(s) for s in order]
+    assert idx == sorted(idx), states
+    assert [e["seq"] for e in run["events"] if e["event"] == "mission_item_reached"] == [0, 1, 2]
+    heights = [o["position"][2] for o in run["odometry"]]
+    assert max(heights) == pytest.approx(10.0, abs=0.3) and max(o["position"][1] for o in run["odometry"]) > 45
+
+
 def test_a_tello_flies_the_survey_and_feeds_its_own_video_to_analytics(ray_session, run_options, tmp_path):
     pytest.importorskip("av")
     from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator

@@ -183,9 +183,13 @@ def _flight(t: float) -> tuple[float, float]:
 
 @pytest.fixture(scope="module")
 def ulog_file(tmp_path_factory):
+    return write_ulog_flight(tmp_path_factory.mktemp("ulog") / "flight.ulg")
+
+
+def write_ulog_flight(path):
     """60 s of a PX4 flight at 10 Hz: POSCTL disarmed, armed TAKEOFF at 2 s, MISSION at 8 s, LAND at 40 s, landed
-    and disarmed at 52 s; mission items 0-2 reached at 8, 28 and 40 s; battery 100 % -> 76 %; heading east."""
-    path = tmp_path_factory.mktemp("ulog") / "flight.ulg"
+    and disarmed at 52 s; mission items 0-2 reached at 8, 28 and 40 s; battery 100 % -> 76 %; heading east.
+    Returns ``path``."""
     start = 1_000_000
     gpos, lpos, att, bat, status, land, mres = [], [], [], [], [], [], []
     for i in range(600):
