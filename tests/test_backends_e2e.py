@@ -36,6 +36,13 @@ class FrameCounter(Analytics):
         return {"frames": len(self.shapes), "shapes": sorted({tuple(s) for s in self.shapes})}
 
 
+def _assert_flight_phases(run: dict) -> None:
+    """The recorded stat-stream went through a whole flight's phases, in order."""
+    states = [s["state"] for s in run["states"]]
+    idx = [states.index(s) for s in ("PREFLIGHT", "ARMED", "TAKING_OFF", "NAVIGATING", "LANDING", "LANDED")]
+    assert idx == sorted(idx), states
+
+
 @pytest.mark.skipif(not TLOG.is_file(), reason=f"{TLOG} not found (set AERODAAS_DATA_DIR)")
 def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_session, run_options, tmp_path):
     cfg = {"name": "replay", "robots": [{"id": "px4", "backend": "replay",
@@ -52,10 +59,7 @@ def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_sessi
     res = drone.start_mission()
     assert res.outcome == "success", res.robots["px4"].get("error")
     run = load_run(run_options.record)
-    states = [s["state"] for s in run["states"]]
-    order = ["PREFLIGHT", "ARMED", "TAKING_OFF", "NAVIGATING", "LANDING", "LANDED"]
-    idx = [states.index(s) for s in order]
-    assert idx == sorted(idx), states  # the flight's phases, in order
+    _assert_flight_phases(run)
     reached = [e["seq"] for e in run["events"] if e["event"] == "mission_item_reached"]
     assert reached == list(range(8))  # the uploaded mission's 8 items, each once
     heights = [o["position"][2] for o in run["odometry"]]
@@ -80,10 +84,7 @@ def test_a_replayed_px4_ulog_drives_the_same_stat_stream(ray_session, run_option
     res = drone.start_mission()
     assert res.outcome == "success", res.robots["px4"].get("error")
     run = load_run(run_options.record)
-    states = [s["state"] for s in run["states"]]
-    order = ["PREFLIGHT", "ARMED", "TAKING_OFF", "NAVIGATING", "LANDING", "LANDED"]
-    idx = [states.index(s) for s in order]
-    assert idx == sorted(idx), states
+    _assert_flight_phases(run)
     assert [e["seq"] for e in run["events"] if e["event"] == "mission_item_reached"] == [0, 1, 2]
     heights = [o["position"][2] for o in run["odometry"]]
     assert max(heights) == pytest.approx(10.0, abs=0.3) and max(o["position"][1] for o in run["odometry"]) > 45

@@ -288,6 +288,17 @@ def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopil
     assert b.home_received and b.gps_fix_type == 3 and b.in_air
 
 
+def _connect_and_take_off(b: MavlinkBackend, emu: MavlinkVehicleEmulator, autopilot: str | None = None) -> None:
+    """Over whatever link ``b`` uses: connect, identify the autopilot, arm, take off to 2 m — as the vehicle sees it."""
+    b.connect(timeout_s=10)
+    if autopilot is not None:
+        assert b.autopilot == autopilot
+    b.arm()
+    b.takeoff(2.0)
+    assert run_until(b, lambda: b.position[2] > 1.7, 10)
+    assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+
+
 def test_udp_link_backend_listens_emulator_sends():
     """The usual SITL arrangement: the vehicle sends to udp 14550-style, the ground station listens (udpin)."""
     probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -299,11 +310,7 @@ def test_udp_link_backend_listens_emulator_sends():
     b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink",
                                    mavlink=MavlinkConfig(connection=f"udpin:127.0.0.1:{port}")))
     try:
-        b.connect(timeout_s=10)
-        b.arm()
-        b.takeoff(2.0)
-        assert run_until(b, lambda: b.position[2] > 1.7, 10)
-        assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+        _connect_and_take_off(b, emu)
     finally:
         b.close()
         emu.stop()
@@ -318,12 +325,7 @@ def test_udpout_backend_sends_first_to_a_listening_vehicle():
     b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink",
                                    mavlink=MavlinkConfig(connection=addr.replace("udpin", "udpout"))))
     try:
-        b.connect(timeout_s=10)
-        assert b.autopilot == "ardupilot"
-        b.arm()
-        b.takeoff(2.0)
-        assert run_until(b, lambda: b.position[2] > 1.7, 10)
-        assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+        _connect_and_take_off(b, emu, "ardupilot")
     finally:
         b.close()
         emu.stop()
@@ -369,12 +371,7 @@ def test_serial_link_through_a_pseudo_terminal():
     b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink",
                                    mavlink=MavlinkConfig(connection=os.ttyname(slave), baud=57600)))
     try:
-        b.connect(timeout_s=10)
-        assert b.autopilot == "px4"
-        b.arm()
-        b.takeoff(2.0)
-        assert run_until(b, lambda: b.position[2] > 1.7, 10)
-        assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
+        _connect_and_take_off(b, emu, "px4")
         assert carried["to_vehicle"] > 0 and carried["to_gcs"] > 0
     finally:
         b.close()
