@@ -221,7 +221,7 @@ def write_ulog_flight(path):
                           [{"timestamp": start + 500_000, "lat": HOME[0], "lon": HOME[1], "alt": HOME[2]}]),
         "mission_result": ([("uint64_t", "timestamp"), ("int32_t", "seq_reached")], mres),
     }
-    write_ulog(path, topics, [(start + 2_600_000, 6, "Takeoff detected"), (start + 51_000_000, 6, "Landing detected")],
+    write_ulog(path, topics, [(start + 2_600_000, 6, "Takeoff detected"), (start + 51_000_000, 4, "Landing detected")],
                start_us=start)
     return path
 
@@ -258,7 +258,8 @@ def test_replay_plays_a_px4_ulog(ulog_file):
     assert [e["name"] for e in events if e["event"] == "mode"] == ["POSCTL", "TAKEOFF", "MISSION", "LAND", "POSCTL"]
     assert kinds.count("armed") == 1 and kinds.count("disarmed") == 1
     assert [e["seq"] for e in events if e["event"] == "mission_item_reached"] == [0, 1, 2]
-    assert [e["text"] for e in events if e["event"] == "status_text"] == ["Takeoff detected", "Landing detected"]
+    assert [(e["severity"], e["text"]) for e in events if e["event"] == "status_text"] == [
+        (6, "Takeoff detected"), (4, "Landing detected")]  # MAV_SEVERITY_INFO, _WARNING
     assert "link_lost" not in kinds  # an onboard log has no link to lose
     with pytest.raises(NotNavigable):
         b.goto((0.0, 0.0, 5.0))

@@ -184,8 +184,10 @@ def load_ulog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
             rows.append((int(cols["timestamp"][i]), order, d.name, {k: v[i].item() for k, v in cols.items()}))
     if "vehicle_global_position" not in found:
         raise BackendError(f"replay.log: {str(p)!r} has no vehicle_global_position samples (no position to replay)")
-    for m in ulog.logged_messages:
-        rows.append((int(m.timestamp), len(ULOG_TOPICS), "log", {"level": int(m.log_level), "text": m.message}))
+    for m in ulog.logged_messages:  # the level is an ASCII digit, '0' (emergency) to '7' (debug): MAV_SEVERITY's scale
+        level = int(m.log_level) - ord("0")
+        rows.append((int(m.timestamp), len(ULOG_TOPICS), "log",
+                     {"level": level if 0 <= level <= 7 else 6, "text": m.message}))
     rows.sort(key=lambda r: (r[0], r[1]))
 
     out: list[LogMessage] = []
