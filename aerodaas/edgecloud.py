@@ -107,7 +107,7 @@ __all__ = [
     "Clock", "Jitter", "NetworkModel", "EdgeExecutor", "EmulatedEdgeExecutor", "OnnxEdgeExecutor", "AnalyticsEdgeExecutor",
     "AnalyticsBank", "FramePayload",
     "CloudExecutor", "CloudExecutorActor", "CloudPool", "AnalyticsDispatcher", "EdgeHost", "EdgeHostActor",
-    "Samples", "cloud_selector", "start_cloud_executors", "DROP_STATES",
+    "Samples", "cloud_selector", "start_cloud_executors", "DROP_STATES", "admit_by_time",
 ]
 
 log = logging.getLogger(__name__)
@@ -1138,6 +1138,30 @@ class _LoopThread:
         self.thread.join(5)
 
 
+def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: float) -> float | None:
+    """The latest time (ms, 1 ms resolution) at which the cloud re-check ``admits(t)`` still holds, by bisection
+    between ``now_ms`` and ``deadline_ms``: None if it fails at ``now_ms``, +inf if it holds even an hour past the
+    deadline (a policy that admits at any time). Assumes ``admits`` is monotone (see the module docstring); it is
+    called about a dozen times, so it must have no side effects."""
+    if not admits(now_ms):
+        return None
+    hi = deadline_ms
+    if admits(hi):
+        far = deadline_ms + 3_600_000.0
+        if admits(far):
+            return math.inf
+        lo, hi = hi, far
+    else:
+        lo = now_ms
+    while hi - lo > 1.0:
+        mid = (lo + hi) / 2.0
+        if admits(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
 class AnalyticsDispatcher:
     """Carries out one analytics scheduler's decisions for one edge device, on the wall clock.
 
@@ -1341,41 +1365,31 @@ class AnalyticsDispatcher:
         return bool(self._safe("cloud_admit", False, task, now_ms, about=f"#{task.task_id}"))
 
     def _admit_by(self, task: AnalyticsTask, now_ms: float) -> float | None:
-        """The latest time (ms, 1 ms resolution) at which ``cloud_admit`` still holds; None if it fails now,
-        +inf if it holds even an hour past the deadline (see the module docstring)."""
-        if not self._admits(task, now_ms):
-            return None
-        hi = task.deadline_ms
-        if self._admits(task, hi):
-            far = task.deadline_ms + 3_600_000.0
-            if self._admits(task, far):
-                return math.inf
-            lo, hi = hi, far
-        else:
-            lo = now_ms
-        while hi - lo > 1.0:
-            mid = (lo + hi) / 2.0
-            if self._admits(task, mid):
-                lo = mid
-            else:
-                hi = mid
-        return lo
+        return admit_by_time(lambda t: self._admits(task, t), now_ms, task.deadline_ms)
 
     def _send_cloud(self, task: AnalyticsTask, reason: str) -> None:
         now = self.clock.now_ms()
         if self.cloud is None or not self.cloud.available:
-            self._finish(task, TaskState.DROPPED_TIME, None, f"{reason}; cloud unavailable")
+            self._not_sent(task, f"{reason}; cloud unavailable")
             return
         admit_by = self._admit_by(task, now)
         if admit_by is None:
-            self._finish(task, TaskState.DROPPED_TIME, None, f"{reason}; cloud re-check failed before sending")
+            self._not_sent(task, f"{reason}; cloud re-check failed before sending")
             return
         task.tier = "cloud"
         task.start_ms = now
         task.reason = reason
         if not self.cloud.send(self, task, admit_by, now):
             task.tier = None
-            self._finish(task, TaskState.DROPPED_TIME, None, f"{reason}; cloud unavailable")
+            self._not_sent(task, f"{reason}; cloud unavailable")
+
+    def _not_sent(self, task: AnalyticsTask, reason: str) -> None:
+        """A task the policy sent to the cloud is dropped (DROPPED_TIME) before it left the edge; the policy hears
+        of it through ``on_cloud_done`` (latency 0), like a refusal at the executor."""
+        self._finish(task, TaskState.DROPPED_TIME, None, reason, notify=False)
+        decisions = self._safe("on_cloud_done", [], task, self.clock.now_ms(), 0.0, about=f"#{task.task_id}")
+        self._notify(task)
+        self._apply(decisions)
 
     def _on_cloud_reply(self, task: AnalyticsTask, reply: dict, latency_ms: float, executor: str | None) -> None:
         """A cloud reply (or a failure) for ``task``: set its terminal state, then tell the policy."""

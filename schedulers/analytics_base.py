@@ -259,7 +259,10 @@ class AnalyticsScheduler(abc.ABC):
         """The cloud executor's re-check right before it runs ``task``: by default, can it still finish in time
         with the task's cloud estimate — ``task.notes["cloud_ms"]`` if the policy fixed one when it held the task
         for the cloud (as the reference does), else :meth:`cloud_estimate_ms`? On False the dispatcher drops the
-        task (DROPPED_TIME)."""
+        task (DROPPED_TIME) and reports it through :meth:`on_cloud_done`.
+
+        Must be a pure, monotone query (no side effects, False stays False for later ``now_ms``): the dispatcher
+        bisects over ``now_ms`` with about a dozen calls per task to turn it into an admit-by time."""
         return now_ms + task.notes.get("cloud_ms", self.cloud_estimate_ms(task.model)) <= task.deadline_ms
 
     def cloud_estimate_ms(self, model: str) -> float:
@@ -267,9 +270,11 @@ class AnalyticsScheduler(abc.ABC):
         return self.w[model].cloud_ms
 
     def on_cloud_done(self, task: AnalyticsTask, now_ms: float, latency_ms: float) -> list[Decision]:
-        """A cloud task came back after ``latency_ms`` (send to reply, network included). ``task.state`` is already
-        terminal: only in :data:`EXECUTED_STATES` is ``latency_ms`` a cloud round trip; a task refused by the cloud
-        re-check (DROPPED_TIME) or FAILED never ran, and its reply time says nothing about the cloud's latency."""
+        """A task this policy decided to send to the cloud has ended, once per task: it came back after
+        ``latency_ms`` (send to reply, network included), or was refused by the cloud re-check (before sending,
+        ``latency_ms`` = 0, or at the executor), or failed, or the cloud was unavailable. ``task.state`` is already
+        terminal: only in :data:`EXECUTED_STATES` is ``latency_ms`` a cloud round trip; a task refused (DROPPED_TIME)
+        or FAILED never ran, and its reply time says nothing about the cloud's latency."""
         return []
 
     def on_cloud_availability(self, available: bool, now_ms: float) -> list[Decision]:

@@ -47,12 +47,11 @@ def edf_priority(p: ModelProfile) -> float:
 
 
 def task_on_time(task: AnalyticsTask, now_ms: float) -> bool:
-    """Whether a task reported done at ``now_ms`` counts as on time: the dispatcher's state if it set one, else
-    ``now_ms <= deadline``."""
-    if task.state is TaskState.DONE_ON_TIME:
-        return True
-    if task.state in (TaskState.DONE_LATE, TaskState.FAILED):
-        return False
+    """Whether a task reported at ``now_ms`` counts as on time: once the dispatcher has set a terminal state, only
+    DONE_ON_TIME does (a task refused by the cloud re-check, failed or dropped never met its deadline); a task
+    still PENDING (a harness that reports before setting the state) counts if ``now_ms <= deadline``."""
+    if task.state is not TaskState.PENDING:
+        return task.state is TaskState.DONE_ON_TIME
     return now_ms <= task.deadline_ms
 
 
@@ -220,16 +219,12 @@ class EdgeCloud(AnalyticsScheduler):
         return self._settle([], now_ms)
 
     def on_cloud_done(self, task: AnalyticsTask, now_ms: float, latency_ms: float) -> list[Decision]:
+        """Every task this policy sent to the cloud ends here once (done, late, refused by the re-check — before
+        sending or at the executor — or failed): counted as a terminal event (GEMS), on time only if DONE_ON_TIME.
+        The re-check itself (:meth:`cloud_admit`, the base class's) is a pure query: the dispatcher calls it many
+        times per task to find the admit-by time."""
         self._observe_terminal(task, now_ms, task_on_time(task, now_ms))
         return self._settle([], now_ms)
-
-    def cloud_admit(self, task: AnalyticsTask, now_ms: float) -> bool:
-        """Cloud executor re-check (TaskExecutorLambda): the task's own cloud estimate (fixed when it was held
-        for the cloud) must still fit; a refused task is dropped by the dispatcher and counted here."""
-        ok = super().cloud_admit(task, now_ms)
-        if not ok:
-            self._observe_terminal(task, now_ms, False)
-        return ok
 
     def held_tasks(self) -> list[AnalyticsTask]:
         return list(self.queue)

@@ -2,7 +2,8 @@
 experiments run the policies in the Ray dispatcher on wall-clock time).
 
 It drives a policy the way the dispatcher does: ``submit`` on arrival, ``next_edge_task`` whenever the edge is
-free (after every event), ``poll`` at ``next_poll_ms``, ``cloud_admit`` before a cloud execution,
+free (after every event), ``poll`` at ``next_poll_ms``, ``cloud_admit`` before a cloud execution (bisected into
+an admit-by time with the dispatcher's own :func:`~aerodaas.edgecloud.admit_by_time`, a dozen calls per task),
 ``on_edge_done`` / ``on_cloud_done(task, now, latency_ms)`` on completion, and drops ``held_tasks()`` at the end.
 The emulated edge runs one task at a time for exactly the profile's ``edge_ms``; the cloud runs any number at
 once for exactly ``cloud_ms`` + a configurable extra latency.
@@ -21,6 +22,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Callable
 
+from aerodaas.edgecloud import admit_by_time
 from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
                                                 task_utility)
 
@@ -70,11 +72,14 @@ class Result:
 class Harness:
     """Run ``policy`` over a trace with exact timing. ``cloud_extra_ms`` is a constant or a function
     ``(task, send_ms) -> extra ms`` added to the profile's cloud time; ``cloud_down`` is a list of
-    (start_ms, end_ms) intervals during which the cloud is reported unavailable."""
+    (start_ms, end_ms) intervals during which the cloud is reported unavailable. ``admit_probes`` False calls
+    ``cloud_admit`` once per cloud task instead of bisecting as the dispatcher does (a pure policy gives the same
+    result either way)."""
 
     def __init__(self, policy: AnalyticsScheduler, *, cloud_extra_ms: float | Callable = 0.0,
-                 cloud_down: list[tuple[float, float]] = ()) -> None:
+                 cloud_down: list[tuple[float, float]] = (), admit_probes: bool = True) -> None:
         self.p = policy
+        self.admit_probes = admit_probes
         self.w = policy.w
         self.extra = cloud_extra_ms if callable(cloud_extra_ms) else (lambda task, t, c=float(cloud_extra_ms): c)
         self.cloud_down = list(cloud_down)
@@ -104,12 +109,18 @@ class Harness:
                 continue
             if d.kind == "drop":
                 self._terminate(t, d.state, d.reason)
-            elif not self.p.cloud_admit(t, self.now):
+            elif not self._admits(t):
                 self._terminate(t, TaskState.DROPPED_TIME, "cloud re-check failed")
+                self._apply(self.p.on_cloud_done(t, self.now, 0.0))  # the dispatcher's contract
             else:
                 t.tier, t.start_ms = "cloud", self.now
                 self.res.cloud_sends.append((t, self.now))
                 self._push(self.now + self.w[t.model].cloud_ms + self.extra(t, self.now), "cloud_done", t)
+
+    def _admits(self, t: AnalyticsTask) -> bool:
+        if self.admit_probes:
+            return admit_by_time(lambda at: self.p.cloud_admit(t, at), self.now, t.deadline_ms) is not None
+        return self.p.cloud_admit(t, self.now)
 
     def _kick(self) -> None:
         if self._edge_task is None:

@@ -527,3 +527,33 @@ def test_heavy_load_utility_orderings():
     v = {n: total(n, **step) for n in ("DEMS", "DEMS-A", "GAINPLAN")}
     assert v["DEMS-A"] > 1.2 * v["DEMS"]
     assert v["GAINPLAN"] >= 1.10 * v["DEMS-A"]
+
+
+@needs_workload
+@pytest.mark.parametrize("name", ALL)
+def test_cloud_recheck_is_a_pure_query(name):
+    """The dispatcher bisects ``cloud_admit`` into an admit-by time (a dozen calls per cloud task): a policy must
+    decide the same whether it is asked once or a dozen times. GEMS used to count every refused probe as a missed
+    task, which filled its gatekeeper window with phantom misses and sent its whole edge queue to the cloud."""
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+    trace = make_trace(w, drones=2, duration_s=30, seed=5)
+    step = lambda t, now: 150.0 if 10_000 <= now < 20_000 else 0.0  # noqa: E731 — some re-checks must fail
+    once = run_policy(name, w, trace, cloud_extra_ms=step, admit_probes=False)
+    probed = run_policy(name, w, trace, cloud_extra_ms=step, admit_probes=True)
+    assert [(t.task_id, t.state, t.tier) for t in probed.tasks] == [(t.task_id, t.state, t.tier) for t in once.tasks]
+    assert probed.utility == pytest.approx(once.utility)
+
+
+def test_gems_counts_each_cloud_task_once_however_often_it_is_rechecked():
+    pol = make_analytics_scheduler("GEMS", TW)
+    a = task("A", 0.0)                                  # deadline 400, cloud 200
+    for at in (0.0, 150.0, 200.0, 201.0, 300.0, 400.0):  # the dispatcher's probes: admitted up to 200 ms
+        pol.cloud_admit(a, at)
+    assert pol.on_time_fraction("A") is None            # probing is not an outcome
+    a.state = TaskState.DROPPED_TIME                    # refused by the executor's re-check
+    pol.on_cloud_done(a, 250.0, 0.0)
+    assert (pol.terminal["A"], pol.done_on_time["A"]) == (1, 0)
+    b = task("A", 1000.0)
+    b.state = TaskState.DONE_ON_TIME
+    pol.on_cloud_done(b, 1200.0, 200.0)
+    assert pol.on_time_fraction("A") == pytest.approx(0.5)
