@@ -171,21 +171,31 @@ class EdgeHuf(_EdgeOnly):
 @register_analytics_scheduler
 class CloudOnly(AnalyticsScheduler):
     """CLOUD (algorithm 4, "CLD"): every task goes to the cloud at once if its cloud utility is positive, else it
-    is dropped for cost. The cloud executor's re-check (base :meth:`cloud_admit`) applies, as in the reference."""
+    is dropped for cost. The cloud executor's re-check (base :meth:`cloud_admit`) applies, as in the reference.
+
+    Failover (ours; the reference has no cloud loss): while no cloud executor is reachable
+    (:meth:`on_cloud_availability`), new tasks join an edge FIFO queue instead — run if they can still finish by
+    their deadline when they reach the head, else expired — so a mission keeps its analytics when the cloud node
+    is lost. Queued tasks drain on the edge after the cloud returns; new ones go to the cloud again."""
 
     name = "CLOUD"
     uses_cloud: ClassVar[bool] = True
+
+    def __init__(self, workload: Workload) -> None:
+        super().__init__(workload)
+        self.fallback = PriorityEdgeQueue(workload, lambda p: 0.0)
 
     def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
         p = self.w[task.model]
         if p.cloud_utility <= 0:
             return [Decision.drop(task, TaskState.DROPPED_COST, f"cloud utility {p.cloud_utility:g} <= 0")]
         if not self.cloud_available:
-            return [Decision.drop(task, TaskState.DROPPED_TIME, "cloud unavailable")]
+            self.fallback.insert(task)
+            return []
         return [Decision.cloud(task, "cloud only")]
 
     def _pop_edge(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
-        return None, []
+        return self.fallback.pop_runnable(now_ms)
 
     def held_tasks(self) -> list[AnalyticsTask]:
-        return []
+        return list(self.fallback)

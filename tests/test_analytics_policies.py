@@ -132,6 +132,21 @@ def test_edge_only_never_uses_the_cloud_and_cloud_never_uses_the_edge(name):
     assert {t.model for t in c.tasks if t.state is TaskState.DROPPED_COST} == {"BP"}
 
 
+@needs_workload
+def test_cloud_only_falls_back_to_the_edge_while_the_cloud_is_lost():
+    """A lost cloud node must not stop a mission's analytics: CLOUD runs new tasks on the edge (FIFO, never late)
+    while no cloud is reachable, and sends to the cloud again when it returns."""
+    w = Workload.from_file(WORKLOAD_JSON, "LIGHT")
+    down = (5_000.0, 12_000.0)
+    r = run_policy("CLOUD", w, make_trace(w, duration_s=20, seed=3), cloud_down=[down])
+    assert r.edge_starts and all(down[0] <= t.arrival_ms < down[1] for t, _ in r.edge_starts)
+    assert all(not (down[0] <= s < down[1]) for _, s in r.cloud_sends)
+    assert any(s >= down[1] for _, s in r.cloud_sends)              # back on the cloud afterwards
+    during = [t for t in r.tasks if down[0] <= t.arrival_ms < down[1] - 1_000]
+    assert sum(t.state is TaskState.DONE_ON_TIME for t in during) > 0.9 * len(during)   # LIGHT fits on the edge
+    assert r.states[TaskState.DONE_LATE] == 0
+
+
 # --------------------------------------------------------------------------------------------- E+C and DEM
 def test_e_plus_c_inserts_at_the_edf_slot_never_evicts_and_sends_rejects_to_the_cloud_at_once():
     pol, c1, a1, decisions = c1_then_a1("E+C")
