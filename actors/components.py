@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -61,7 +62,9 @@ class CameraComponent:
         self.ticks = 0
         self.frames = 0
         self.dropped_at_camera = 0
-        self.render_ms: list[float] = []
+        #: the last frames' render time and capture dispatch delay (clock tick -> render start on the pool), ms
+        self.render_ms: deque[float] = deque(maxlen=4096)
+        self.dispatch_ms: deque[float] = deque(maxlen=4096)
         self.latest: tuple | None = None
         self._busy = threading.Lock()
         self._last_source_t: float | None = None
@@ -79,10 +82,11 @@ class CameraComponent:
             return False
         if tok is not None:
             tok.add()
-        self.host.submit(self._capture, position, yaw, t, self.ticks, tok)
+        self.host.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter())
         return True
 
-    def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None) -> None:
+    def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None, ticked: float) -> None:
+        self.dispatch_ms.append((time.perf_counter() - ticked) * 1e3)
         try:
             try:
                 env = self._produce(position, yaw, t, seq)
@@ -140,8 +144,10 @@ class CameraComponent:
 
     def stats(self) -> dict:
         r = np.array(self.render_ms or [0.0])
+        q = np.array(self.dispatch_ms or [0.0])
         return {"frames": self.frames, "ticks": self.ticks, "dropped_at_camera": self.dropped_at_camera,
                 "render_ms_median": float(np.median(r)),
+                "dispatch_ms_median": float(np.median(q)), "dispatch_ms_p99": float(np.percentile(q, 99)),
                 "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,
                 "outlets": self.host.outlet_stats(self.cid), "subscribers": len(self.host.routes.get(self.cid, []))}
 
