@@ -614,6 +614,10 @@ class HostRuntime:
             while active:
                 step += 1
                 nominal = step * dt
+                if not lock:  # simulated time ``nominal`` is computed when wall time reaches it, not one step early
+                    lag = wall0 + nominal / sim.speedup - time.monotonic()
+                    if lag > 0:
+                        time.sleep(lag)
                 tok = Cascade() if lock else None
                 for d in active:
                     d.step(dt, tok)
@@ -651,10 +655,6 @@ class HostRuntime:
                         d._event("timeout", wall_s=timeout_s)
                         d.finish()
                     active = []
-                if not lock and active:
-                    lag = wall0 + nominal / sim.speedup - time.monotonic()
-                    if lag > 0:
-                        time.sleep(lag)
         finally:
             for d in drones:
                 d.close()
