@@ -11,7 +11,7 @@ import pytest
 from aerodaas.schedulers.analytics_base import (
     TERMINAL_STATES, AnalyticsScheduler, Decision, TaskState, Workload, task_utility,
 )
-from tests.conftest import DATA_DIR, REPO
+from tests.conftest import DATA_DIR, REPO, needs_data
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"
 needs_workload = pytest.mark.skipif(not WORKLOAD.is_file(), reason=f"workload not found at {WORKLOAD}")
@@ -248,6 +248,34 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
     assert after and all(t["tier"] != "cloud" for t in after)
     assert any(t["tier"] == "edge" and t["state"] == "done_on_time" for t in after)
     assert all(t["reason"] for t in after if t["state"] != "done_on_time")
+
+
+@needs_data
+def test_real_detector_runs_on_a_cloud_node_of_the_cluster(cluster, run_options, data_env, tmp_path):
+    """Real mode across nodes: CLOUD sends every frame, JPEG-encoded, to an executor on a tier=cloud node of the
+    cluster, which runs its own NanoDet-Plus (onnxruntime) on it; the detections come back to the edge and on down
+    the app. Lock-step, so every rendered frame is one task."""
+    import ray
+
+    from aerodaas import ObjectDetector
+    from tests.test_analytics_scheduling import QOS, _stats, build, hover_config
+
+    cloud_nodes = {n.node_id for n in cluster.cloud_nodes}
+    env, drone = build(hover_config(fps=4, real=True, lockstep=True), ObjectDetector(
+        "nanodet", classes=["car", "truck", "bus"], score_threshold=0.2), hover_s=3.0)
+    env.set_analytics_scheduler("CLOUD", {"detector": {**QOS, "deadline_ms": 5000, "cloud_ms": 400}})
+    run_options.record = str(tmp_path / "cloud-node.mcap")
+    res = drone.start_mission()
+    assert res.outcome == "success", res.robots["uav"].get("error")
+    rep = res.stats["analytics_scheduler"]
+    frames = res.stats["uav"]["cameras"]["cam"]["frames"]
+    assert rep["submitted"] == frames > 0 and rep["tiers"] == {"cloud": frames}
+    assert rep["states"]["done_on_time"] == frames
+    executors = rep["cloud"]["executors"]
+    assert executors and all(e["node_id"] in cloud_nodes for e in executors), executors
+    assert all(e["node_id"] != ray.get_runtime_context().get_node_id() for e in executors)
+    sink = _stats(res, "sink")
+    assert sink["lists"] == frames and sum(sink["classes"].values()) > 0, sink
 
 
 # ------------------------------------------------------------------------------------------------ ray up files
