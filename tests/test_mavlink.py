@@ -6,6 +6,7 @@ import logging
 import math
 import shutil
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -15,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aerodaas.backends import CommandRefused, LinkLost, make_backend
-from aerodaas.backends.mavlink import MavlinkBackend
+from aerodaas.backends import BackendError, CommandRefused, LinkLost, make_backend
+from aerodaas.backends.mavlink import CommandNotConfirmed, MavlinkBackend
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 from aerodaas.geo import geodetic_to_enu
@@ -288,6 +289,208 @@ def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopil
     assert b.home_received and b.gps_fix_type == 3 and b.in_air
 
 
+def test_px4_offboard_setpoints_stream_above_2hz_before_and_during_offboard(fly):
+    """PX4 enters OFFBOARD only with a setpoint stream of more than 2 Hz already running and needs it to go on
+    (docs.px4.io, Offboard mode): every gap between the setpoints the vehicle received, from the last one before
+    each switch into OFFBOARD until it leaves OFFBOARD, is at most 0.5 s of vehicle time. Run at 2x with PX4's
+    default COM_OF_LOSS_T of 1 s, so a loaded machine does not stretch wall gaps into vehicle-time ones."""
+    emu, b = fly("px4", speedup=2.0, params={"COM_OF_LOSS_T": 1.0})
+    b.arm()
+    b.takeoff(2.0)
+    assert run_until(b, lambda: b.position[2] > 1.8, 15)
+    b.goto((3.0, 0.0, 2.0))
+    assert run_until(b, lambda: dist(b.position, (3, 0, 2)) < 0.5, 15)
+    b.goto((3.0, 2.0, 2.0), speed=1.5)  # the moving (carrot) setpoint
+    assert run_until(b, lambda: dist(b.position, (3, 2, 2)) < 0.5, 15)
+    end = b.t + 1.0
+    assert run_until(b, lambda: b.t > end, 5, every=lambda: b.set_velocity((-1.0, 0.0, 0.0)))
+    b.hold()
+    run_until(b, lambda: False, 0.3)
+    b.land()
+    assert run_until(b, lambda: not b.in_air, 20)
+    sp, modes = list(emu.setpoint_log), list(emu.mode_log)
+    spans = []  # (entered, left) OFFBOARD, vehicle seconds
+    for i, (t, mode) in enumerate(modes):
+        if mode == "OFFBOARD":
+            spans.append((t, next(t2 for t2, m2 in modes[i + 1:] if m2 != "OFFBOARD")))
+    assert spans and all(left - entered > 1.0 for entered, left in spans), modes
+    for entered, left in spans:
+        before = [t for t in sp if t <= entered]
+        assert len([t for t in before if entered - t <= 1.0]) >= 3, "stream not running before the switch"
+        times = [before[-1]] + [t for t in sp if entered < t <= left] + [left]
+        gaps = np.diff(times)
+        assert gaps.max() <= 0.5, (entered, left, float(gaps.max()), times[int(gaps.argmax())])
+    assert not [x for x in emu.snapshot()["statustexts"] if "offboard control lost" in x]
+
+
+def _frame_v2(msgid: int, payload: bytes, seq: int = 0, sysid: int = 1, compid: int = 1,
+              crc_extra: int = 0) -> bytes:
+    """A MAVLink 2 frame (no signature) with a CRC computed over ``crc_extra``."""
+    from pymavlink.generator.mavcrc import x25crc
+
+    header = struct.pack("<BBBBBBBHB", 0xFD, len(payload), 0, 0, seq, sysid, compid, msgid & 0xFFFF, msgid >> 16)
+    crc = x25crc(header[1:] + payload)
+    crc.accumulate(bytes([crc_extra]))
+    return header + payload + struct.pack("<H", crc.crc)
+
+
+def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
+    """Garbage bytes, a frame with a bad CRC, a truncated known message and an unknown message id, mixed into
+    the vehicle's stream: the receive path skips them (no event from their contents, no receive error), telemetry
+    goes on and later commands work."""
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
+    emu, b = fly("ardupilot", mavlink={"heartbeat_timeout_s": 1.0})
+    assert run_until(b, lambda: b.home_received, 5)
+    b.drain_events()
+    enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # the vehicle's own ids
+    rtl_armed = enc.heartbeat_encode(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                     M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED, 6,
+                                     M.MAV_STATE_ACTIVE, 3).pack(enc)
+    bad_crc = rtl_armed[:-2] + bytes([rtl_armed[-2] ^ 0x5A, rtl_armed[-1]])
+    far = enc.global_position_int_encode(1, 10 * 10**7, 20 * 10**7, 0, 900_000, 0, 0, 0, 0).pack(enc)
+    truncated = far[:len(far) // 2]
+    unknown = _frame_v2(0xBEEF1, b"\x01\x02\x03\x04\x05", seq=7)
+    rng = np.random.default_rng(5)
+    garbage = bytes(rng.integers(0, 256, 300, dtype=np.uint8)) + b"\xfd\xff\x00" + b"\xfe\x09"
+    n0, t0 = b.messages_received, b.t
+    for _ in range(5):
+        for data in (garbage, bad_crc, truncated, unknown):
+            emu.inject(data)
+            time.sleep(0.02)
+    assert run_until(b, lambda: b.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
+    assert emu.snapshot()["links"] == 1 and b.link_ok and b._io is not None and b._io.is_alive()
+    b.step(0.05)  # raises if the I/O thread failed
+    events = b.drain_events()
+    assert not [e for e in events if e["event"] in ("receive_error", "armed", "mode", "link_lost")], events
+    assert not b.armed and b.mode == "STABILIZE" and dist(b.position, (0, 0, 0)) < 0.3  # nothing taken from them
+    assert b.odometry().t > t0 + 3.0
+    b.arm()
+    b.takeoff(2.0)
+    assert run_until(b, lambda: b.position[2] > 1.7, 10) and emu.snapshot()["in_air"]
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_accepted_but_never_shown_mode_or_arming_raises(fly, autopilot):
+    """A vehicle that acknowledges MAV_CMD_DO_SET_MODE / MAV_CMD_COMPONENT_ARM_DISARM with MAV_RESULT_ACCEPTED but
+    whose HEARTBEAT never shows the change: set_mode() and arm() raise CommandNotConfirmed after the bounded wait,
+    naming what was asked and what the HEARTBEAT shows."""
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
+    emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.5, "heartbeat_timeout_s": 1.0},
+                 ack_only_commands={M.MAV_CMD_DO_SET_MODE})
+    assert run_until(b, lambda: b.home_received, 5)
+    first, target = ("STABILIZE", "GUIDED") if autopilot == "ardupilot" else ("MANUAL", "LOITER")
+    t0 = time.monotonic()
+    with pytest.raises(CommandNotConfirmed) as e:
+        b.set_mode(target)
+    assert 0.9 < time.monotonic() - t0 < 3.0  # max(command_timeout_s, heartbeat_timeout_s), not forever
+    assert e.value.expected == f"mode {target}" and e.value.observed == f"mode {first}, disarmed"
+    assert f"mode {target}" in str(e.value) and f"shows mode {first}" in str(e.value)
+    assert "MAV_RESULT_ACCEPTED" in str(e.value) and emu.snapshot()["mode"] != target
+    emu.ack_only_commands = {M.MAV_CMD_COMPONENT_ARM_DISARM}
+    with pytest.raises(CommandNotConfirmed) as e:
+        b.arm()
+    assert e.value.command == "arm" and e.value.expected == "armed" and e.value.observed.endswith("disarmed")
+    assert not emu.snapshot()["armed"]
+    emu.ack_only_commands = set()
+    b.arm()
+    assert b.armed
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopilot):
+    """MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work") is re-sent within the bounded tries;
+    an endless MAV_RESULT_IN_PROGRESS ends in BackendError at (retries + 1) x timeout, without re-sending."""
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
+    emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
+    assert run_until(b, lambda: b.home_received, 5)
+    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    arm = M.MAV_CMD_COMPONENT_ARM_DISARM
+    emu.reject_next(arm, 2)
+    b.arm()  # rejected twice, accepted on the third try
+    assert b.armed and emu.snapshot()["commands_seen"].count(arm) == 3
+    speed = M.MAV_CMD_DO_CHANGE_SPEED
+    emu.reject_next(speed, 5)
+    t0 = time.monotonic()
+    with pytest.raises(CommandRefused) as e:
+        b.command_long("change speed", speed, 1, 1.5, -1)
+    assert e.value.result == "MAV_RESULT_TEMPORARILY_REJECTED"
+    assert e.value.status_text == "Command temporarily rejected: busy"
+    assert emu.snapshot()["commands_seen"].count(speed) == 3 and time.monotonic() - t0 < 1.5
+    emu.in_progress_commands = {speed}
+    seen = emu.snapshot()["commands_seen"].count(speed)
+    box: dict = {}
+
+    def call() -> None:
+        t = time.monotonic()
+        try:
+            b.command_long("change speed", speed, 1, 1.5, -1)
+        except BaseException as exc:  # noqa: BLE001 - examined below
+            box["error"] = exc
+        box["s"] = time.monotonic() - t
+
+    th = threading.Thread(target=call, daemon=True)
+    th.start()
+    th.join(5.0)
+    assert not th.is_alive(), "an endless MAV_RESULT_IN_PROGRESS kept command_long() waiting"
+    assert type(box.get("error")) is BackendError and "MAV_RESULT_IN_PROGRESS" in str(box["error"]), box
+    assert 0.85 < box["s"] < 1.6  # (2 + 1) x 0.3 s
+    assert emu.snapshot()["commands_seen"].count(speed) == seen + 1  # progress came: nothing re-sent
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_mission_round_trip_with_older_firmware_using_mission_item(fly, autopilot):
+    """A vehicle that speaks only the float forms (MISSION_REQUEST, MISSION_ITEM with latitude/longitude as float32
+    degrees): upload answers its MISSION_REQUESTs and download accepts its MISSION_ITEM replies, on the same
+    1e-7 degree grid, equal to what was sent within float32 precision."""
+    emu, b = fly(autopilot, mission_int=False)
+    assert run_until(b, lambda: b.home_received, 5)
+    wps = [Waypoint(id=f"w{i}", x=x, y=y, z=5.0, hover_duration=1.0) for i, (x, y) in enumerate([(12, 3), (-7, 25)])]
+    sent = b.upload_mission(wps, takeoff_altitude=5.0, final_action="land")
+    got = b.download_mission().items
+    assert len(got) == len(sent) == 4
+    for s_, g in zip(sent, got):
+        assert (g.seq, g.command, g.frame, g.autocontinue) == (s_.seq, s_.command, s_.frame, s_.autocontinue)
+        assert g.params[:4] == s_.params[:4] and g.params[6] == pytest.approx(s_.params[6], abs=1e-4)
+        for k in (4, 5):  # float32 degrees: ~2e-6 at 47 degrees; rounded to the 1e-7 grid like MISSION_ITEM_INT
+            assert abs(g.params[k] - s_.params[k]) < 3e-6
+            assert abs(g.params[k] * 1e7 - round(g.params[k] * 1e7)) < 1e-3
+    assert min(abs(g.params[4] - VEHICLE_HOME.lat) for g in got if g.command == 16) < 1e-3
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_long_statustext_chunks_are_joined(fly, autopilot, caplog):
+    """MAVLink 2 sends a STATUSTEXT longer than 50 characters in chunks (same non-zero id, chunk_seq 0, 1, ...;
+    the last one shorter than 50): CommandRefused and the log line carry the whole text; a chunked text whose last
+    chunk is lost is emitted after a short timeout; id 0 texts are emitted at once."""
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
+    emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.2, "command_retries": 1})
+    reason = ("Compass not calibrated: run the onboard calibration and keep the vehicle away from steel, then "
+              "reboot")  # 106 characters: three chunks with the prefix
+    emu.set_prearm_failure(reason)
+    with caplog.at_level(logging.INFO, logger="aerodaas.mavlink"), pytest.raises(CommandRefused) as e:
+        b.arm()
+    whole = PREARM_PREFIX[autopilot] + reason
+    assert e.value.status_text == whole and whole in str(e.value)
+    assert ("quad: " + whole) in [r.getMessage() for r in caplog.records if r.name == "aerodaas.mavlink"]
+    emu.set_prearm_failure(None)
+    b.drain_events()
+    exact = "".join(chr(65 + i % 26) for i in range(100))  # fills two chunks: an empty third one ends it
+    emu.send_status_text(exact, M.MAV_SEVERITY_WARNING)
+    assert run_until(b, lambda: any(x["event"] == "status_text" for x in b._events), 3)
+    texts = [x for x in b.drain_events() if x["event"] == "status_text"]
+    assert [(x["text"], x["severity"]) for x in texts] == [(exact, "MAV_SEVERITY_WARNING")]
+    emu.inject(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"x" * 50, 4242, 0))  # its last chunk never comes
+    emu.inject(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"short one", 0, 0))
+    texts: list = []
+    assert run_until(b, lambda: len(texts) >= 2, 3,
+                     every=lambda: texts.extend(x["text"] for x in b.drain_events() if x["event"] == "status_text"))
+    assert texts == ["short one", "x" * 50]
+
+
 def _connect_and_take_off(b: MavlinkBackend, emu: MavlinkVehicleEmulator, autopilot: str | None = None) -> None:
     """Over whatever link ``b`` uses: connect, identify the autopilot, arm, take off to 2 m — as the vehicle sees it."""
     b.connect(timeout_s=10)
@@ -472,8 +675,9 @@ def test_real_px4_tlog_through_the_receive_path():
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_mavproxy_ground_station(autopilot, tmp_path):
     """MAVProxy, driven headless through its stdin, sees the emulated vehicle's heartbeat and position, switches
-    its mode and arms it. (MAVProxy's ``mode NAME`` passes PX4's (base, main, sub) tuple to pymavlink's set_mode,
-    which fails packing it, so for PX4 the mode goes out with the generic ``long DO_SET_MODE``.)"""
+    its mode, arms it and takes off with the commands the README gives. (MAVProxy's ``mode NAME`` passes PX4's
+    (base, main, sub) tuple to pymavlink's set_mode, which fails packing it, so for PX4 the mode goes out with the
+    generic ``long DO_SET_MODE``.)"""
     exe = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
     emu = MavlinkVehicleEmulator(autopilot, home=VEHICLE_HOME, gps_lock_s=0.5)
     address = emu.start("tcp:127.0.0.1:0")
@@ -530,6 +734,15 @@ def test_mavproxy_ground_station(autopilot, tmp_path):
             assert emu.snapshot()["links"] == 2
         finally:
             b.close()
+        # take-off as the README says: MAV_CMD_NAV_TAKEOFF param7 is metres above home on ArduPilot (MAVProxy's
+        # `takeoff 5`), metres above mean sea level on PX4 (`takeoff 5` would mean 5 m AMSL)
+        if autopilot == "ardupilot":
+            say("takeoff 5")
+        else:
+            say(f"long NAV_TAKEOFF 0 0 0 nan nan nan {VEHICLE_HOME.alt + 5:g}")
+        assert wait_for(lambda: emu.snapshot()["position"][2] > 0.3, 10), lines[-10:]
+        assert emu.takeoff_alt == pytest.approx(5.0, abs=0.01)  # climbing to 5 m above home
+        assert emu.snapshot()["mode"] == ("GUIDED" if autopilot == "ardupilot" else "AUTO.TAKEOFF")
     finally:
         proc.kill()  # --no-state: nothing to save
         proc.wait(5)

@@ -36,7 +36,7 @@ from ..missionfile import MissionItem, MissionPlan, expand_items, navigation_to_
 from ..models import ActionCommand, AeroNavigation, Attitude, GeoPoint, NavigationType, Odometry, SchedulingType, Waypoint
 from .base import BackendError, CommandRefused, LinkLost, VehicleBackend
 
-__all__ = ["MavlinkBackend"]
+__all__ = ["MavlinkBackend", "CommandNotConfirmed"]
 
 #: STATUSTEXT lines are logged here (``robot: text``), at the level of their MAV_SEVERITY
 log = logging.getLogger("aerodaas.mavlink")
@@ -69,6 +69,31 @@ _TELEMETRY = ((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, None), (M.MAVLINK_MSG_ID_LO
               (M.MAVLINK_MSG_ID_SYSTEM_TIME, 1.0))
 _LEGACY_STREAMS = ((M.MAV_DATA_STREAM_EXTENDED_STATUS, 2.0), (M.MAV_DATA_STREAM_POSITION, None),
                    (M.MAV_DATA_STREAM_EXTRA1, None), (M.MAV_DATA_STREAM_EXTRA3, 1.0))
+#: STATUSTEXT.text is char[50]; a MAVLink 2 chunk shorter than that (NUL-terminated) ends a long text
+_STATUSTEXT_LEN = 50
+#: wall seconds after its first chunk that a long STATUSTEXT whose last chunk never came is emitted as it is
+_STATUSTEXT_FLUSH_S = 0.5
+#: wall seconds to wait before re-sending a command answered MAV_RESULT_TEMPORARILY_REJECTED (at most the timeout)
+_REJECTED_BACKOFF_S = 0.5
+
+
+class CommandNotConfirmed(BackendError):
+    """The autopilot acknowledged a command (COMMAND_ACK MAV_RESULT_ACCEPTED) but no HEARTBEAT showed its effect
+    (the requested mode, or the armed flag) within the bounded wait. ``expected`` is what was asked (e.g.
+    ``"mode GUIDED"``, ``"armed"``), ``observed`` what the latest HEARTBEAT shows, ``waited_s`` the wait in wall
+    seconds, ``status_text`` the autopilot's latest STATUSTEXT since the command (may be empty)."""
+
+    def __init__(self, robot_id: str, command: str, expected: str, observed: str, waited_s: float,
+                 status_text: str = "") -> None:
+        self.robot_id, self.command, self.expected, self.observed = robot_id, command, expected, observed
+        self.waited_s, self.status_text = waited_s, status_text
+        why = f" ({status_text})" if status_text else ""
+        super().__init__(f"robot {robot_id!r}: {command}: acknowledged (MAV_RESULT_ACCEPTED) but no HEARTBEAT showed "
+                         f"{expected} within {waited_s:g} s; the HEARTBEAT shows {observed}{why}")
+
+    def __reduce__(self):  # picklable across Ray workers
+        return (CommandNotConfirmed, (self.robot_id, self.command, self.expected, self.observed, self.waited_s,
+                                      self.status_text))
 
 
 def _log_level(severity: int) -> int:
@@ -106,7 +131,8 @@ class MavlinkBackend(VehicleBackend):
     DEBUG).
 
     Raises :class:`BackendError` (connection, protocol timeouts), :class:`CommandRefused` (MAV_RESULT /
-    MAV_MISSION_RESULT name and the autopilot's latest STATUSTEXT) and :class:`LinkLost` (no HEARTBEAT for
+    MAV_MISSION_RESULT name and the autopilot's latest STATUSTEXT), :class:`CommandNotConfirmed` (a mode change or
+    arming acknowledged but never shown by the HEARTBEAT) and :class:`LinkLost` (no HEARTBEAT for
     ``heartbeat_timeout_s``: commands fail at once instead of blocking).
     """
 
@@ -135,6 +161,8 @@ class MavlinkBackend(VehicleBackend):
         self._mission_active = False
         self._recent: deque[tuple] = deque(maxlen=32)  # (sys, comp, seq, msgid, crc) for duplicate packets
         self._texts: deque[tuple[float, int, str]] = deque(maxlen=50)
+        #: long STATUSTEXTs being reassembled: (component, id) -> {"t": first chunk, "severity", "parts": {seq: text}}
+        self._chunks: dict[tuple[int, int], dict[str, Any]] = {}
         self._ap_modes: dict[str, int] = {}
         # state (guarded by _lock)
         self._pos = np.zeros(3)
@@ -326,11 +354,7 @@ class MavlinkBackend(VehicleBackend):
                 self._on_heartbeat(msg, now)
             return
         if mtype == "STATUSTEXT":
-            text = msg.text.decode(errors="replace") if isinstance(msg.text, bytes) else str(msg.text)
-            text = text.rstrip("\x00").strip()
-            self._texts.append((now, msg.severity, text))
-            self._event("status_text", severity=_enum_name("MAV_SEVERITY", msg.severity), text=text)
-            log.log(_log_level(msg.severity), "%s: %s", self.robot_id, text)
+            self._on_statustext(msg, now)
             return
         if self._compid and src_comp != self._compid:
             return
@@ -347,6 +371,40 @@ class MavlinkBackend(VehicleBackend):
         if handler is not None:
             with self._lock:
                 handler(msg)
+
+    def _on_statustext(self, msg: Any, now: float) -> None:
+        """STATUSTEXT (common.xml): ``id`` 0 is a complete text; a non-zero ``id`` marks chunks of one long text
+        (MAVLink 2 extensions ``id``, ``chunk_seq`` from 0), ended by a chunk shorter than 50 characters (pymavlink
+        cuts the text at its NUL) or, if that one is lost, by :data:`_STATUSTEXT_FLUSH_S`."""
+        text = msg.text.decode(errors="replace") if isinstance(msg.text, bytes) else str(msg.text)
+        text = text.split("\x00", 1)[0]
+        sid = getattr(msg, "id", 0) or 0
+        if not sid:
+            self._emit_text(now, msg.severity, text)
+            return
+        key = (msg.get_srcComponent(), sid)
+        buf = self._chunks.get(key)
+        seq = getattr(msg, "chunk_seq", 0) or 0
+        if buf is not None and seq in buf["parts"]:  # the id came round again: the old text lost its last chunk
+            self._flush_text(key)
+            buf = None
+        if buf is None:
+            buf = self._chunks[key] = {"t": now, "severity": msg.severity, "parts": {}}
+        buf["parts"][seq] = text
+        if len(text) < _STATUSTEXT_LEN:
+            self._flush_text(key)
+
+    def _flush_text(self, key: tuple[int, int]) -> None:
+        buf = self._chunks.pop(key, None)
+        if buf is not None:
+            self._emit_text(buf["t"], buf["severity"], "".join(buf["parts"][k] for k in sorted(buf["parts"])))
+
+    def _emit_text(self, t: float, severity: int, text: str) -> None:
+        """One whole status text: kept for :class:`CommandRefused`, a ``status_text`` event and a log line."""
+        text = text.strip()
+        self._texts.append((t, severity, text))
+        self._event("status_text", severity=_enum_name("MAV_SEVERITY", severity), text=text)
+        log.log(_log_level(severity), "%s: %s", self.robot_id, text)
 
     def _on_heartbeat(self, msg: Any, now: float) -> None:
         with self._lock:
@@ -482,6 +540,9 @@ class MavlinkBackend(VehicleBackend):
         self._event("mission_item_reached", seq=msg.seq, item=self._item_number(msg.seq))
 
     def _periodic(self, now: float) -> None:
+        for key, buf in list(self._chunks.items()):
+            if now - buf["t"] > _STATUSTEXT_FLUSH_S:
+                self._flush_text(key)
         if now >= self._hb_next:
             self._hb_next = now + 1.0 / max(1.0, min(self._ratio, 20.0))
             self._send_gcs_heartbeat()
@@ -565,12 +626,14 @@ class MavlinkBackend(VehicleBackend):
                            f"{self.cfg.heartbeat_timeout_s:g} s)")
 
     def _status_text_since(self, since: float, wait_s: float = 0.3) -> str:
-        """The autopilot's latest STATUSTEXT sent since ``since`` (waiting up to ``wait_s`` for one), else the
-        latest of the 2 s before."""
+        """The autopilot's latest STATUSTEXT sent since ``since`` (waiting up to ``wait_s`` for one, and up to
+        :data:`_STATUSTEXT_FLUSH_S` longer while a chunked one begun since then is incomplete), else the latest of
+        the 2 s before."""
         end = time.monotonic() + wait_s
         while True:
             texts = [t for t in list(self._texts) if t[0] >= since]
-            if texts or time.monotonic() >= end:
+            pending = any(b["t"] >= since for b in list(self._chunks.values()))
+            if (texts and not pending) or time.monotonic() >= end + (_STATUSTEXT_FLUSH_S if pending else 0.0):
                 break
             time.sleep(0.01)
         if not texts:
@@ -580,11 +643,19 @@ class MavlinkBackend(VehicleBackend):
     def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
                      timeout_s: float | None = None) -> None:
         """Send COMMAND_LONG ``command`` (MAV_CMD number) with up to seven ``params`` and wait for its COMMAND_ACK
-        (``timeout_s``, default ``command_timeout_s``, per try; ``retries`` re-sends with the ``confirmation``
-        counter raised; MAV_RESULT_IN_PROGRESS extends the wait). ``name`` is used in errors.
+        (MAVLink command protocol). ``name`` is used in errors.
 
-        Raises :class:`CommandRefused` (MAV_RESULT name, STATUSTEXT) for any result but ACCEPTED,
-        :class:`LinkLost` when the link is or goes down, :class:`BackendError` when no ACK comes."""
+        Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds for the ACK; without one the
+        command is re-sent, up to ``retries`` (default ``command_retries``) times, with the ``confirmation``
+        counter raised. MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try
+        too: re-sent after min(``timeout_s``, 0.5) s. MAV_RESULT_IN_PROGRESS (the command runs; progress ACKs
+        follow) keeps the current try open for another ``timeout_s`` after each progress ACK, but never beyond
+        the overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send.
+
+        Raises :class:`CommandRefused` (MAV_RESULT name, the autopilot's STATUSTEXT) for any final result but
+        ACCEPTED, and for TEMPORARILY_REJECTED when the tries are used up; :class:`LinkLost` when the link is or
+        goes down; :class:`BackendError` when no ACK comes, or the command is still IN_PROGRESS at the overall
+        deadline."""
         self._check_link(name)
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         retries = self.cfg.command_retries if retries is None else retries
@@ -595,6 +666,8 @@ class MavlinkBackend(VehicleBackend):
             except queue.Empty:
                 break
         started = time.monotonic()
+        overall = started + (retries + 1) * timeout
+        last: Any = None  # the latest non-final answer: IN_PROGRESS or TEMPORARILY_REJECTED
         for attempt in range(retries + 1):
             sent = time.monotonic()
             self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
@@ -611,16 +684,33 @@ class MavlinkBackend(VehicleBackend):
                     continue
                 if ack.command != command:
                     continue
-                if ack.result == M.MAV_RESULT_IN_PROGRESS:
-                    deadline = time.monotonic() + timeout
-                    continue
                 if ack.result == M.MAV_RESULT_ACCEPTED:
                     self.command_rtt_ms.append((time.monotonic() - sent) * 1000.0)
                     return
+                if ack.result == M.MAV_RESULT_IN_PROGRESS:
+                    last = ack
+                    deadline = max(deadline, min(time.monotonic() + timeout, overall))
+                    continue
+                if ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
+                    last = ack
+                    if attempt == retries:
+                        break  # no try left to wait for
+                    deadline = min(deadline, time.monotonic() + min(timeout, _REJECTED_BACKOFF_S))
+                    continue
                 raise CommandRefused(self.robot_id, name, _enum_name("MAV_RESULT", ack.result),
                                      self._status_text_since(started))
+            if last is not None and last.result == M.MAV_RESULT_IN_PROGRESS and time.monotonic() >= overall:
+                break
         if not self._link_ok:
             raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
+        if last is not None and last.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
+            raise CommandRefused(self.robot_id, name, "MAV_RESULT_TEMPORARILY_REJECTED",
+                                 self._status_text_since(started))
+        if last is not None:
+            progress = "" if last.progress in (0, 255) else f", progress {last.progress} %"
+            raise BackendError(f"robot {self.robot_id!r}: {name}: {_enum_name('MAV_CMD', command)} still "
+                               f"MAV_RESULT_IN_PROGRESS{progress} after {time.monotonic() - started:.1f} s (limit "
+                               f"{retries + 1} x {timeout:g} s)")
         raise BackendError(f"robot {self.robot_id!r}: {name}: no COMMAND_ACK for {_enum_name('MAV_CMD', command)} "
                            f"after {retries + 1} tries of {timeout:g} s")
 
@@ -778,9 +868,12 @@ class MavlinkBackend(VehicleBackend):
         """Switch to flight mode ``name`` (ArduPilot copter names ``GUIDED``, ``LAND``, ``RTL``, ``AUTO``,
         ``LOITER``...; PX4 names as pymavlink's ``px4_map``: ``OFFBOARD``, ``TAKEOFF``, ``LOITER``, ``MISSION``,
         ``RTL``, ``LAND``...) with MAV_CMD_DO_SET_MODE (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom main mode,
-        PX4 sub mode), then wait up to ``confirm_s`` (default ``command_timeout_s``) for a HEARTBEAT showing it.
-        Raises ValueError for an unknown name, CommandRefused / LinkLost / BackendError as :meth:`command_long`."""
+        PX4 sub mode), then wait up to ``confirm_s`` wall seconds (default the larger of ``command_timeout_s`` and
+        ``heartbeat_timeout_s``) for a HEARTBEAT showing it. Raises ValueError for an unknown name,
+        CommandRefused / LinkLost / BackendError as :meth:`command_long`, :class:`CommandNotConfirmed` (naming the
+        mode asked for and the one the HEARTBEAT shows) when the vehicle acknowledged but never switched."""
         name = name.upper()
+        sent = time.monotonic()
         if self.autopilot == "px4":
             if name not in mavutil.px4_map:
                 raise ValueError(f"mode {name!r} is not a PX4 mode; choose from {sorted(mavutil.px4_map)}")
@@ -792,8 +885,23 @@ class MavlinkBackend(VehicleBackend):
                                  f"{sorted(self._ap_modes)}")
             self.command_long(f"set mode {name}", M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                               self._ap_modes[name])
-        end = time.monotonic() + (self.cfg.command_timeout_s if confirm_s is None else confirm_s)
-        while self._mode != name and time.monotonic() < end and self._link_ok:
+        self._await_heartbeat(f"set mode {name}", lambda: self._mode == name, f"mode {name}", confirm_s, sent)
+
+    def _await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,
+                         sent: float) -> None:
+        """After ``command`` (sent at monotonic ``sent``) was accepted: wait until ``done()`` (the HEARTBEAT shows
+        ``expected``) for ``wait_s`` wall seconds (None: the larger of ``command_timeout_s`` and
+        ``heartbeat_timeout_s``: the autopilot's HEARTBEAT comes at least that often while the link is up).
+        Raises LinkLost or CommandNotConfirmed."""
+        wait = max(self.cfg.command_timeout_s, self.cfg.heartbeat_timeout_s) if wait_s is None else wait_s
+        started = time.monotonic()
+        while not done():
+            if not self._link_ok:
+                raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost before a HEARTBEAT showed {expected}")
+            if time.monotonic() - started >= wait:
+                observed = f"mode {self._mode or '(none)'}, {'armed' if self._armed else 'disarmed'}"
+                raise CommandNotConfirmed(self.robot_id, command, expected, observed, wait,
+                                          self._status_text_since(sent, wait_s=0.0))
             time.sleep(0.005)
 
     def _guided_mode(self) -> str:
@@ -844,7 +952,10 @@ class MavlinkBackend(VehicleBackend):
         SYS_STATUS pre-arm and AHRS health bits when present), switch to a mode that can arm and take off
         (ArduPilot GUIDED, PX4 LOITER/Hold), then MAV_CMD_COMPONENT_ARM_DISARM. If it never becomes armable the
         arm command is sent anyway in the current mode, so the :class:`CommandRefused` carries the autopilot's
-        reason (e.g. ``PreArm: ...``)."""
+        reason (e.g. ``PreArm: ...``). Once acknowledged, waits (like :meth:`set_mode`) for a HEARTBEAT with the
+        armed flag (MAV_MODE_FLAG_SAFETY_ARMED). Raises CommandRefused / LinkLost / BackendError as
+        :meth:`command_long`, :class:`CommandNotConfirmed` when the vehicle acknowledged but never reported
+        itself armed."""
         self._check_link("arm")
         end = time.monotonic() + self.cfg.arm_timeout_s
         while not self._armable() and time.monotonic() < end:
@@ -855,10 +966,9 @@ class MavlinkBackend(VehicleBackend):
                 self.set_mode("GUIDED")
             elif self.autopilot == "px4" and self._mode in _PX4_NO_ARM_MODES:
                 self.set_mode("LOITER")
+        sent = time.monotonic()
         self.command_long("arm", M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-        end = time.monotonic() + self.cfg.command_timeout_s
-        while not self._armed and time.monotonic() < end:
-            time.sleep(0.005)
+        self._await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
 
     def disarm(self) -> None:
         """MAV_CMD_COMPONENT_ARM_DISARM(0); autopilots refuse it in flight (CommandRefused)."""
@@ -1057,8 +1167,9 @@ class MavlinkBackend(VehicleBackend):
     def _transaction(self, name: str, begin: Callable[[], None], resend: Callable[[Any], None],
                      on_msg: Callable[[Any, dict], bool]) -> dict:
         """Run one mission-protocol exchange: ``begin()``, then feed every mission message to ``on_msg`` until it
-        returns True; after ``command_timeout_s`` of silence ``resend(state["last"])`` up to ``command_retries``
-        times."""
+        returns True; after ``command_timeout_s`` without progress ``resend(state["last"])`` up to
+        ``command_retries`` times (only a message that advances the exchange, i.e. changes ``state``, resets the
+        count, so a vehicle answering with something we do not use cannot keep it going for ever)."""
         while True:
             try:
                 self._mission_q.get_nowait()
@@ -1069,28 +1180,41 @@ class MavlinkBackend(VehicleBackend):
         try:
             begin()
             retries = 0
+            deadline = time.monotonic() + self.cfg.command_timeout_s
             while True:
-                try:
-                    msg = self._mission_q.get(timeout=self.cfg.command_timeout_s)
-                except queue.Empty:
+                remaining = deadline - time.monotonic()
+                msg = None
+                if remaining > 0:
+                    try:
+                        msg = self._mission_q.get(timeout=remaining)
+                    except queue.Empty:
+                        pass
+                if msg is None:
                     self._check_link(name)
                     retries += 1
                     if retries > self.cfg.command_retries:
-                        raise BackendError(f"robot {self.robot_id!r}: {name}: no answer after {retries} tries of "
-                                           f"{self.cfg.command_timeout_s:g} s") from None
+                        raise BackendError(f"robot {self.robot_id!r}: {name}: no usable answer after {retries} "
+                                           f"tries of {self.cfg.command_timeout_s:g} s")
                     resend(state["last"])
+                    deadline = time.monotonic() + self.cfg.command_timeout_s
                     continue
-                retries = 0
+                before = (state["last"], state["max"], state.get("count"))
                 if on_msg(msg, state):
                     return state
+                if (state["last"], state["max"], state.get("count")) != before:
+                    retries = 0
+                    deadline = time.monotonic() + self.cfg.command_timeout_s
         finally:
             self._mission_active = False
 
     def download_mission(self) -> MissionPlan:
         """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
-        item, MISSION_ACK). Returns a :class:`~aerodaas.missionfile.MissionPlan` with ``home`` = the vehicle's
-        home and ``items`` numbered from 1 (ArduPilot's home item at sequence 0 is left out); turn it into
-        waypoints with :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost."""
+        item, answered with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM, whose float latitude/longitude
+        degrees are rounded to the same 1e-7 degree grid; MISSION_ACK). Returns a
+        :class:`~aerodaas.missionfile.MissionPlan` with ``home`` = the vehicle's home and ``items`` numbered from 1
+        (ArduPilot's home item at sequence 0 is left out); turn it into waypoints with
+        :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
+        with an error)."""
         self._check_link("mission download")
         got: dict[int, Any] = {}
 
@@ -1111,7 +1235,7 @@ class MavlinkBackend(VehicleBackend):
                     return True
                 state["last"] = 0
                 request(0)
-            elif t == "MISSION_ITEM_INT" and "count" in state and msg.seq == state["last"]:
+            elif t in ("MISSION_ITEM_INT", "MISSION_ITEM") and "count" in state and msg.seq == state["last"]:
                 got[msg.seq] = msg
                 if msg.seq + 1 >= state["count"]:
                     return True
@@ -1130,7 +1254,9 @@ class MavlinkBackend(VehicleBackend):
             if seq < first:
                 continue
             m = got[seq]
-            if m.frame in _GLOBAL_FRAMES:
+            if m.frame in _GLOBAL_FRAMES and m.get_type() == "MISSION_ITEM":  # float degrees (float32 on the wire)
+                x, y = round(m.x * 1e7) / 1e7, round(m.y * 1e7) / 1e7
+            elif m.frame in _GLOBAL_FRAMES:
                 x, y = m.x / 1e7, m.y / 1e7
             else:
                 x, y = float(m.x), float(m.y)

@@ -28,7 +28,13 @@ What differs between the two flavours (all emulated):
 Time: the emulator has its own clock (``time_boot_ms`` starts at a non-zero boot time); ``speedup`` K runs physics,
 streams, timeouts and the clock K times faster than real time. Test hooks: :meth:`set_blackhole` (link loss), :meth:`drop_next` (single lost packets),
 :meth:`set_prearm_failure`, ``message_interval=False`` (old firmware that answers SET_MESSAGE_INTERVAL with
-UNSUPPORTED), ``ignore_commands`` (commands never acknowledged).
+UNSUPPORTED), ``ignore_commands`` (commands never acknowledged), ``ack_only_commands`` (acknowledged ACCEPTED but
+not carried out), ``in_progress_commands`` (answered MAV_RESULT_IN_PROGRESS forever), :meth:`reject_next`
+(one-off refusals such as MAV_RESULT_TEMPORARILY_REJECTED), ``mission_int=False`` (firmware that speaks only the
+float MISSION_REQUEST / MISSION_ITEM forms of the mission protocol), :meth:`send_status_text` (STATUSTEXT,
+chunked as MAVLink 2 does when longer than 50 characters) and :meth:`inject` (raw bytes or a message on the
+link, e.g. corrupt packets). :attr:`setpoint_log` and :attr:`mode_log` record every position/velocity target
+and mode change in vehicle time.
 """
 from __future__ import annotations
 
@@ -38,6 +44,7 @@ import selectors
 import socket
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Literal
 
@@ -108,6 +115,8 @@ _GLOBAL_FRAMES = {M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRA
 _MISSION_FRAMES = _GLOBAL_FRAMES | {M.MAV_FRAME_MISSION}
 _PROTOCOL_TIMEOUT_S = 1.5  # vehicle-time seconds before a mission transfer request is re-sent
 _PROTOCOL_RETRIES = 5
+_IN_PROGRESS_PERIOD_S = 0.5  # vehicle-time seconds between repeated MAV_RESULT_IN_PROGRESS acknowledgements
+_STATUSTEXT_LEN = 50  # STATUSTEXT.text is char[50]
 
 
 def parse_endpoint(address: str) -> tuple[str, str, int]:
@@ -195,6 +204,11 @@ class MavlinkVehicleEmulator:
     ``MPC_XY_CRUISE`` m/s), also settable with PARAM_SET. ``gps_lock_s``: vehicle seconds until the 3-D fix.
     ``message_interval``: False emulates firmware without MAV_CMD_SET_MESSAGE_INTERVAL (UNSUPPORTED).
     ``ignore_commands``: MAV_CMD numbers that are silently dropped (never acknowledged).
+    ``ack_only_commands``: MAV_CMD numbers acknowledged MAV_RESULT_ACCEPTED but not carried out (a vehicle that
+    says yes and does nothing: the HEARTBEAT never shows the new mode / armed state).
+    ``in_progress_commands``: MAV_CMD numbers answered MAV_RESULT_IN_PROGRESS, repeated every 0.5 vehicle seconds,
+    and never finished. ``mission_int``: False emulates older firmware that asks for mission items with
+    MISSION_REQUEST and answers MISSION_REQUEST_INT with MISSION_ITEM (latitude/longitude as float degrees).
 
     Use :meth:`start` (returns the bound address), :meth:`stop`, :meth:`snapshot` for the state.
     """
@@ -202,7 +216,9 @@ class MavlinkVehicleEmulator:
     def __init__(self, autopilot: Literal["ardupilot", "px4"] = "ardupilot", *, robot: RobotConfig | None = None,
                  home: GeoPoint | None = None, speedup: float = 1.0, system_id: int = 1, component_id: int = 1,
                  params: dict[str, float] | None = None, gps_lock_s: float = 2.0, physics_hz: float = 50.0,
-                 message_interval: bool = True, ignore_commands: set[int] | None = None) -> None:
+                 message_interval: bool = True, ignore_commands: set[int] | None = None,
+                 ack_only_commands: set[int] | None = None, in_progress_commands: set[int] | None = None,
+                 mission_int: bool = True) -> None:
         if autopilot not in ("ardupilot", "px4"):
             raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
         if not (speedup > 0 and math.isfinite(speedup)):
@@ -219,6 +235,12 @@ class MavlinkVehicleEmulator:
         self.gps_lock_s = gps_lock_s
         self.message_interval_supported = message_interval
         self.ignore_commands = set(ignore_commands or ())
+        self.ack_only_commands = set(ack_only_commands or ())
+        self.in_progress_commands = set(in_progress_commands or ())
+        self.mission_int = bool(mission_int)
+        self._rejections: dict[int, list[int]] = {}  # MAV_CMD -> results still to answer (reject_next)
+        self._in_progress: dict[int, tuple[_Link, int, int, float, int]] = {}  # cmd -> (link, sys, comp, next t, %)
+        self._statustext_id = 0
         sp = robot.limits.max_speed
         if self.px4:
             self.params: dict[str, float] = {"RTL_RETURN_ALT": 60.0, "MPC_LAND_SPEED": 0.7, "MIS_TAKEOFF_ALT": 2.5,
@@ -263,6 +285,10 @@ class MavlinkVehicleEmulator:
         self.phase = ""  # RTL phase: climb / return / land
         self.last_setpoint_t = -1e9
         self.setpoint_times: list[float] = []
+        #: vehicle time (s) of every position/velocity target received (the most recent 100 000)
+        self.setpoint_log: deque[float] = deque(maxlen=100_000)
+        #: (vehicle time s, mode name) of every mode change (the most recent 10 000)
+        self.mode_log: deque[tuple[float, str]] = deque(maxlen=10_000)
         self.velocity_deadline: float | None = None  # ArduPilot GUIDED velocity timeout
         self._last_target: tuple | None = None  # last position/velocity target (PX4 acts on it in OFFBOARD)
         self.posvel: tuple | None = None  # active position + velocity feed-forward target (ENU m, m/s)
@@ -382,6 +408,35 @@ class MavlinkVehicleEmulator:
         """Make pre-arm checks fail with ``text`` (e.g. ``"Compass not calibrated"``); None clears it."""
         with self._lock:
             self.prearm_failure = text
+
+    def reject_next(self, command: int, count: int = 1,
+                    result: int = M.MAV_RESULT_TEMPORARILY_REJECTED) -> None:
+        """Answer the next ``count`` COMMAND_LONG/COMMAND_INT ``command`` (MAV_CMD number) with ``result``
+        (MAV_RESULT, default TEMPORARILY_REJECTED: "try again later") without carrying it out. Raises ValueError
+        for count < 1 or MAV_RESULT_ACCEPTED / IN_PROGRESS (see ``ack_only_commands`` / ``in_progress_commands``)."""
+        if count < 1 or result in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS, M.MAV_RESULT_ENUM_END) \
+                or result not in M.enums["MAV_RESULT"]:
+            raise ValueError(f"reject_next: count must be >= 1 and result a refusing MAV_RESULT, got {count!r}, "
+                             f"{result!r}")
+        with self._lock:
+            self._rejections.setdefault(int(command), []).extend([int(result)] * int(count))
+
+    def send_status_text(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
+        """Send STATUSTEXT ``text`` (ASCII) to every peer; longer than 50 characters it goes out in chunks as
+        MAVLink 2 specifies (same non-zero ``id``, ``chunk_seq`` from 0, the last chunk NUL-terminated)."""
+        with self._lock:
+            self._text(severity, text)
+
+    def inject(self, data: bytes | Any) -> None:
+        """Put ``data`` on the link to every peer as if the vehicle had sent it: raw bytes (garbage, a corrupt
+        frame) are written unchanged between two packets; a pymavlink message is packed with each link's
+        sequence number."""
+        with self._lock:
+            for link in list(self._links):
+                if isinstance(data, (bytes, bytearray)):
+                    link.write(bytes(data))
+                else:
+                    self._send(data, link)
 
     def set_param(self, name: str, value: float) -> None:
         """Set an emulated parameter (see the class docstring). Raises KeyError for an unknown name."""
@@ -514,8 +569,20 @@ class MavlinkVehicleEmulator:
                 lk.closed = True
 
     def _text(self, severity: int, text: str) -> None:
+        """STATUSTEXT: one message up to 50 characters (``id`` 0); longer ones in chunks of 50 with a shared
+        non-zero ``id`` and ``chunk_seq`` 0, 1, ...; the last chunk is shorter than 50 (NUL-padded on the wire),
+        an empty one when the text fills the previous chunks exactly. Texts are cut at 200 characters."""
         self.statustexts.append(text)
-        self._send(self._enc.statustext_encode(severity, text[:50].encode()))
+        data = text.encode("ascii", "replace")[:200]
+        if len(data) <= _STATUSTEXT_LEN:
+            self._send(self._enc.statustext_encode(severity, data, 0, 0))
+            return
+        self._statustext_id = self._statustext_id % 0xFFFF + 1
+        chunks = [data[i:i + _STATUSTEXT_LEN] for i in range(0, len(data), _STATUSTEXT_LEN)]
+        if len(chunks[-1]) == _STATUSTEXT_LEN:
+            chunks.append(b"")
+        for seq, chunk in enumerate(chunks):
+            self._send(self._enc.statustext_encode(severity, chunk, self._statustext_id, seq))
 
     # ------------------------------------------------------------------ geometry helpers
     def _fix_type(self) -> int:
@@ -720,6 +787,7 @@ class MavlinkVehicleEmulator:
         s = self.veh.state
         prev = self.mode
         self.mode = name
+        self.mode_log.append((self.t, name))
         self.phase = ""
         self.posvel = None
         self.velocity_deadline = None
@@ -842,10 +910,22 @@ class MavlinkVehicleEmulator:
         self.commands_seen.append(cmd)
         if cmd in self.ignore_commands:
             return
-        result = self._execute(link, cmd, p, frame)
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if cmd in self.in_progress_commands:  # repeated by _stream until the end of time
+            prev = self._in_progress.get(cmd)
+            self._in_progress[cmd] = (link, *src, self.t + _IN_PROGRESS_PERIOD_S, prev[4] if prev else 0)
+            result = M.MAV_RESULT_IN_PROGRESS
+        elif self._rejections.get(cmd):
+            result = self._rejections[cmd].pop(0)
+            if result == M.MAV_RESULT_TEMPORARILY_REJECTED:
+                self._text(M.MAV_SEVERITY_WARNING, "Command temporarily rejected: busy")
+        elif cmd in self.ack_only_commands:
+            result = M.MAV_RESULT_ACCEPTED
+        else:
+            result = self._execute(link, cmd, p, frame)
         if result is None:
             return
-        self._send(self._enc.command_ack_encode(cmd, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), link)
+        self._send(self._enc.command_ack_encode(cmd, result, 0, 0, *src), link)
 
     def _execute(self, link: _Link, cmd: int, p: list[float], frame: int | None) -> int | None:
         s = self.veh.state
@@ -930,7 +1010,9 @@ class MavlinkVehicleEmulator:
                 return self._reject_mode("AUTO.TAKEOFF", "requires position")
             alt_amsl = p[6]
             rel = self.params["MIS_TAKEOFF_ALT"] if alt_amsl != alt_amsl else alt_amsl - self.home.alt
-            self.mode = "AUTO.TAKEOFF"
+            if self.mode != "AUTO.TAKEOFF":
+                self.mode = "AUTO.TAKEOFF"
+                self.mode_log.append((self.t, self.mode))
             self.phase = ""
             if s.armed and not s.in_air:
                 self._start_takeoff(rel)
@@ -972,6 +1054,7 @@ class MavlinkVehicleEmulator:
     def _note_setpoint(self) -> None:
         self.last_setpoint_t = self.t
         self.setpoint_times = [t for t in self.setpoint_times if self.t - t <= 1.0] + [self.t]
+        self.setpoint_log.append(self.t)
 
     def _apply_target(self, pos_enu: np.ndarray | None, vel_enu: np.ndarray | None, yaw_rate_dps: float | None,
                       note: bool = True) -> None:
@@ -1102,7 +1185,8 @@ class MavlinkVehicleEmulator:
         tr = self._transfer
         seq = len(tr.items)
         tr.deadline = self.t + _PROTOCOL_TIMEOUT_S
-        self._send(self._enc.mission_request_int_encode(tr.sysid, tr.compid, seq, 0), tr.link)
+        request = self._enc.mission_request_int_encode if self.mission_int else self._enc.mission_request_encode
+        self._send(request(tr.sysid, tr.compid, seq, 0), tr.link)
 
     def _check_item(self, msg: Any) -> int:
         if msg.command not in _MISSION_COMMANDS:
@@ -1192,7 +1276,7 @@ class MavlinkVehicleEmulator:
 
     def _on_mission_request_int(self, link: _Link, msg: Any) -> None:
         if getattr(msg, "mission_type", 0) == M.MAV_MISSION_TYPE_MISSION:
-            self._send_item(link, msg, True)
+            self._send_item(link, msg, self.mission_int)  # older firmware answers with MISSION_ITEM
 
     def _on_mission_request(self, link: _Link, msg: Any) -> None:
         if getattr(msg, "mission_type", 0) == M.MAV_MISSION_TYPE_MISSION:
@@ -1336,6 +1420,13 @@ class MavlinkVehicleEmulator:
         if self.t >= self._next_hb:
             self._next_hb = self.t + 1.0
             self._emit(M.MAVLINK_MSG_ID_HEARTBEAT)
+        for cmd, (link, sysid, compid, due, pct) in list(self._in_progress.items()):
+            if link not in self._links:
+                del self._in_progress[cmd]
+            elif self.t >= due:  # COMMAND_ACK.progress creeps towards 99 %, never done
+                pct = min(99, pct + 1)
+                self._in_progress[cmd] = (link, sysid, compid, self.t + _IN_PROGRESS_PERIOD_S, pct)
+                self._send(self._enc.command_ack_encode(cmd, M.MAV_RESULT_IN_PROGRESS, pct, 0, sysid, compid), link)
         if self._transfer is not None and self.t > self._transfer.deadline:
             tr = self._transfer
             tr.retries += 1
