@@ -136,7 +136,9 @@ def _cmd_inject(args: argparse.Namespace) -> int:
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
-    """``aerodaas sim --mavlink ADDR``: the flight model as an ArduPilot/PX4 vehicle until Ctrl-C."""
+    """``aerodaas sim --mavlink ADDR``: the flight model as an ArduPilot/PX4 vehicle until Ctrl-C or SIGTERM
+    (``kill``, ``docker stop``, systemd), either of which stops it cleanly: sockets closed, exit code 0 (stopping
+    is how a server ends, unlike ``run``'s interrupted mission); 2 for a bad argument or address."""
     import time
 
     from .emulators.mavlink_vehicle import MavlinkVehicleEmulator
@@ -157,15 +159,28 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:
         print(f"aerodaas sim: {e}", file=sys.stderr)
         return 2
-    print(f"aerodaas sim: {args.autopilot} vehicle (system {args.sysid}) on {address}, {args.speedup:g}x real time; "
-          "Ctrl-C to stop", flush=True)
+
+    def on_sigterm(signum, frame):  # the same clean stop as Ctrl-C
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second SIGTERM must not cut it short
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous_sigterm = None
     try:
+        try:
+            previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
+        except ValueError:  # not the main thread (main() called from a worker thread): Ctrl-C only
+            pass
+        print(f"aerodaas sim: {args.autopilot} vehicle (system {args.sysid}) on {address}, {args.speedup:g}x real "
+              "time; Ctrl-C or SIGTERM to stop", flush=True)
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
+        print("aerodaas sim: stopped", file=sys.stderr, flush=True)
         return 0
     finally:
         emu.stop()
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, previous_sigterm)
 
 
 _MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
