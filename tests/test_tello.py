@@ -9,7 +9,7 @@ import pytest
 from aerodaas.backends import make_backend
 from aerodaas.backends.base import CommandRefused, LinkLost
 from aerodaas.backends.tello import go_command, parse_state
-from aerodaas.config import RobotConfig, TelloConfig
+from aerodaas.config import RobotConfig, SensorConfig, TelloConfig
 from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator, format_state
 from aerodaas.emulators import free_udp_port
 
@@ -217,3 +217,41 @@ def test_video_frames_decode_to_the_rendered_view(tello):
     mad_other = float(np.abs(frame.astype(np.int16) - other.astype(np.int16)).mean())
     assert mad < 6.0 and mad_other > 3 * mad, (mad, mad_other)
     assert b.stats["video_errors"] == 0
+
+
+@pytest.mark.tello(emu={"refuse": {"streamon": "error"}}, cfg={"video": True})
+def test_refused_streamon_without_a_backend_camera_is_a_video_error_event(tello):
+    """No camera takes its frames from this Tello: a refused ``streamon`` does not fail the connection, it is a
+    ``video_error`` event carrying the reply, and no frames come."""
+    emu, b = tello
+    assert _sent(emu, "streamon") == ["streamon"] and b.link_ok
+    events = b.drain_events()
+    assert [e["event"] for e in events] == ["video_error"]
+    assert events[0]["command"] == "streamon" and events[0]["reply"] == "error"
+    assert "streamon refused: error" in events[0]["reason"] and b.last_status == "error"
+    time.sleep(0.5)
+    assert b.camera_frame() is None and emu.frames_sent == 0 and b.stats["video_datagrams"] == 0
+    assert b.command("battery?") == str(int(emu.vehicle.battery_pct))  # otherwise a working Tello
+
+
+def test_refused_streamon_fails_connect_when_a_camera_needs_the_video():
+    """A camera sensor with ``source: backend`` needs the Tello's video: a refused ``streamon`` fails connect()
+    with CommandRefused naming the command, the Tello's reply and the sensor, and the backend is closed."""
+    sp, vp = free_udp_port(), free_udp_port()
+    emu = TelloEmulator(state_port=sp, video_port=vp, refuse={"streamon": "error"}).start()
+    cam = SensorConfig(id="cam", type="camera", properties={"source": "backend", "width": 960, "height": 720})
+    tcfg = TelloConfig(host="127.0.0.1", command_port=emu.command_port, state_port=sp, video_port=vp,
+                       bind_host="127.0.0.1", command_timeout_s=1.0, video=True)
+    b = make_backend(RobotConfig(id="tello1", backend="tello", limits=TELLO_LIMITS, tello=tcfg, sensors=[cam]))
+    try:
+        with pytest.raises(CommandRefused) as ei:
+            b.connect(timeout_s=5.0)
+        e = ei.value
+        assert e.command == "streamon" and e.result == "error"
+        assert "'cam'" in e.status_text and "properties.source 'backend'" in e.status_text
+        assert str(e).startswith("robot 'tello1': streamon refused: error")
+        assert _sent(emu, "streamon") == ["streamon"]  # a refusal is an answer: not re-sent
+        assert b._stop.is_set() and not b._threads  # closed: sockets and threads released
+    finally:
+        b.close()
+        emu.stop()

@@ -60,6 +60,9 @@ DATAGRAM_SIZE = 1460
 GO_MIN_CM, GO_MAX_CM = 20, 500
 #: ``go`` speed range, cm/s
 GO_SPEED_CM = (10, 100)
+#: wall seconds a manoeuvre waits, after the sticks were released, for a state packet showing the Tello at rest
+#: (velocity fields 0 dm/s, yaw unchanged); the body-frame ``go`` offset is computed from that pose
+SETTLE_S = 1.5
 #: the state fields a packet must carry for us to use it
 REQUIRED_STATE_FIELDS = ("pitch", "roll", "yaw", "vgx", "vgy", "vgz", "h", "bat")
 
@@ -223,6 +226,8 @@ class TelloBackend(VehicleBackend):
         self._h_cm = 0.0
         self._yaw_ref: float | None = None  # Tello yaw at connect
         self._last_state: float | None = None  # monotonic arrival of the last good packet
+        #: monotonic arrival of the last packet that showed the Tello at rest (0 dm/s, yaw as in the one before)
+        self._rest_at: float | None = None
         self._armed = False
         self._frame: tuple[np.ndarray, float] | None = None
         self._link_was_ok = True
@@ -233,15 +238,19 @@ class TelloBackend(VehicleBackend):
         self._last_send = 0.0
         self.stats = {"commands": 0, "retries": 0, "timeouts": 0, "stale_replies": 0, "state_packets": 0,
                       "malformed_state": 0, "keepalives": 0, "video_datagrams": 0, "video_frames": 0,
-                      "video_errors": 0, "video_decode_ms": 0.0}
+                      "video_errors": 0, "video_decode_ms": 0.0, "settle_timeouts": 0}
         #: the Tello's last reply other than ``ok`` (diagnostics)
         self.last_status = ""
+        #: ids of the robot's camera sensors with ``properties.source: backend``: they need the video stream
+        self._video_sensors = [s.id for s in cfg.sensors
+                               if s.type == "camera" and s.properties.get("source") == "backend"]
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
         """Open the sockets, enter SDK mode (``command``), wait for the first state packet and, with
-        ``video``, send ``streamon``. Raises :class:`BackendError` (naming the robot and the step) after
-        ``timeout_s`` seconds or when a socket cannot be bound."""
+        ``video``, send ``streamon`` (see :meth:`_start_video` for a refusal). Raises :class:`BackendError`
+        (naming the robot and the step) after ``timeout_s`` seconds or when a socket cannot be bound, and
+        :class:`CommandRefused` when the Tello refuses ``streamon`` while a camera sensor needs its video."""
         c = self.cfg
         deadline = time.monotonic() + timeout_s
         try:
@@ -278,9 +287,36 @@ class TelloBackend(VehicleBackend):
             time.sleep(0.02)
         if c.video:
             self._spawn(self._video_loop, "video")
-            self._transact("streamon", c.command_timeout_s, retries=c.command_retries)
+            self._start_video()
         self._spawn(self._keepalive_loop, "keepalive")
         self._connected = True
+
+    def _start_video(self) -> None:
+        """``streamon``, checking its reply. A refusal (``error``, ``out of range``...) or no reply after the
+        retries fails the connection (the backend is closed; CommandRefused with the Tello's reply, or
+        BackendError) when a camera sensor of this robot has ``properties.source: backend``; otherwise the robot
+        flies without video: a ``video_error`` event (``command``, ``reply``, ``reason``), a warning in the log,
+        and :meth:`camera_frame` stays None."""
+        c = self.cfg
+        reply: str | None = None
+        try:
+            reply = self._transact("streamon", c.command_timeout_s, retries=c.command_retries)
+        except BackendError as e:
+            failure = str(e)
+        else:
+            if reply.lower() == "ok":
+                return
+            self.last_status = reply
+            failure = f"robot {self.robot_id!r}: streamon refused: {reply}"
+        if self._video_sensors:
+            needs = (f"sensors {', '.join(repr(i) for i in self._video_sensors)}: a camera with "
+                     "properties.source 'backend' needs the Tello's video")
+            self.close()
+            if reply is not None:
+                raise CommandRefused(self.robot_id, "streamon", reply, needs)
+            raise BackendError(f"{failure}; {needs}")
+        self._push_event("video_error", command="streamon", reply=reply, reason=failure)
+        log.warning("%s; flying without video (set tello.video to false if none is wanted)", failure)
 
     def close(self) -> None:
         """Stop the threads and close the sockets (idempotent, never raises). Does not land the Tello."""
@@ -338,6 +374,7 @@ class TelloBackend(VehicleBackend):
 
     def _state_loop(self) -> None:
         prev_v: np.ndarray | None = None
+        prev_yaw: float | None = None
         for data in self._datagrams(self._state_sock, 2048):
             now = time.monotonic()
             try:
@@ -357,6 +394,9 @@ class TelloBackend(VehicleBackend):
                     self._pos[:2] += 0.5 * (prev_v[:2] + v[:2]) * dt
                 prev_v = v
                 self._last_state = now
+                if st["vgx"] == st["vgy"] == st["vgz"] == 0 and st["yaw"] == prev_yaw:
+                    self._rest_at = now
+                prev_yaw = st["yaw"]
                 self._pos[2] = st["h"] / 100.0
                 self._h_cm = st["h"]
                 self._vel = v
@@ -476,13 +516,17 @@ class TelloBackend(VehicleBackend):
     def _start_motion(self, name: str, plan: Callable[[_Motion], None]) -> None:
         self._require_link(name)
         self._preempt()
+        released = None
         if any(self._sticks):  # else the keep-alive would resume the old velocity after the manoeuvre
             self._sticks = (0, 0, 0, 0)
             self._send_rc(self._sticks)
+            released = time.monotonic()
         m = _Motion(name)
 
         def run() -> None:
             try:
+                if released is not None:
+                    self._await_rest(m, released)
                 plan(m)
             except _Cancelled:
                 pass
@@ -503,6 +547,21 @@ class TelloBackend(VehicleBackend):
             m.returned = True
             if m.error is not None:
                 raise m.error
+
+    def _await_rest(self, m: _Motion, since: float) -> None:
+        """After ``rc 0 0 0 0`` (sent at monotonic ``since``): wait up to :data:`SETTLE_S` for a state packet
+        received after it that shows the Tello at rest, so that a ``go`` offset (body frame, from the current
+        yaw and dead-reckoned position) is computed from where it stopped, not from a pose it is braking out of.
+        Goes on after the bound (the ``go`` then starts from the latest estimate); raises _Cancelled if pre-empted."""
+        end = since + SETTLE_S
+        while time.monotonic() < end:
+            if m.cancel.is_set():
+                raise _Cancelled()
+            rest = self._rest_at
+            if rest is not None and rest > since:
+                return
+            time.sleep(0.01)
+        self.stats["settle_timeouts"] += 1
 
     def _motion_step(self, m: _Motion, cmd: str, timeout_s: float) -> str | None:
         """One manoeuvre command: the reply, or None when it went unanswered (the plan re-checks the state)."""
@@ -613,7 +672,8 @@ class TelloBackend(VehicleBackend):
 
     def camera_frame(self) -> tuple[np.ndarray, float] | None:
         """The newest decoded video frame, ``(720, 960, 3) uint8 BGR`` on a real Tello, and its arrival time
-        on :attr:`t`'s clock; None before the first frame or with ``video`` off."""
+        on :attr:`t`'s clock; None before the first frame, with ``video`` off, or after a refused ``streamon``
+        (a ``video_error`` event)."""
         with self._state_lock:
             return self._frame
 

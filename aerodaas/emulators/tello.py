@@ -19,7 +19,8 @@ Emulated behaviour:
   :class:`aerodaas.config.TelloConfig`).
 * safety: it lands by itself ``auto_land_s`` seconds (15 on a real Tello) after the last datagram received or the
   last manoeuvre finished, whichever is later.
-* faults for tests: :meth:`drop_next_reply`, :meth:`send_raw_state`, :attr:`state_paused`.
+* faults for tests: :meth:`drop_next_reply`, :meth:`send_raw_state`, :attr:`state_paused`, ``refuse`` (a reply
+  such as ``error`` to a command word instead of carrying it out, e.g. ``{"streamon": "error"}``).
 
 Not emulated: flips, curves, mission pads, Wi-Fi settings, the Tello's own velocity/position estimation errors,
 wind, video bit-rate adaptation, packet loss (except injected faults), low-battery auto-landing.
@@ -80,7 +81,8 @@ class TelloEmulator:
     ``hfov_deg``; ``stamp_frame_index`` writes each frame's index as a 16-bit barcode in the top 8 rows (for
     latency measurements). Everything it rendered and sent recently is in :attr:`sent_frames`
     (``(monotonic send time, index, (H, W, 3) uint8 BGR frame)``). The take-off point (the vehicle's ENU origin,
-    :attr:`position`) lies at ``start_enu`` metres in the rendered world (off the procedural ground's tracks)."""
+    :attr:`position`) lies at ``start_enu`` metres in the rendered world (off the procedural ground's tracks).
+    ``refuse``: command word -> the reply sent instead of carrying the command out (see :attr:`refusals`)."""
 
     def __init__(self, *, host: str = "127.0.0.1", command_port: int = 0, state_port: int = 8890,
                  video_port: int = 11111, state_hz: float = 10.0, auto_land_s: float = 15.0,
@@ -89,7 +91,8 @@ class TelloEmulator:
                  mission_pad_fields: bool = False, video_fps: float = 30.0, video_size: tuple[int, int] = (960, 720),
                  hfov_deg: float = 82.6, camera_pitch_deg: float = 10.0, ground: GroundConfig | None = None,
                  bitrate: int | None = None, stamp_frame_index: bool = False,
-                 home: GeoPoint | None = None, start_enu: tuple[float, float] = (5.0, 5.0)) -> None:
+                 home: GeoPoint | None = None, start_enu: tuple[float, float] = (5.0, 5.0),
+                 refuse: dict[str, str] | None = None) -> None:
         if velocity_frame not in ("yaw_zero", "body"):
             raise ValueError(f"velocity_frame must be 'yaw_zero' or 'body', got {velocity_frame!r}")
         self.host = host
@@ -129,6 +132,8 @@ class TelloEmulator:
         self._drop: dict[str, int] = {}
         self._prev_v_body = np.zeros(3)
         self.state_paused = False
+        #: command word -> reply sent instead of carrying the command out (e.g. ``{"streamon": "error"}``)
+        self.refusals: dict[str, str] = dict(refuse or {})
         #: every datagram received: (monotonic time, text)
         self.received: list[tuple[float, str]] = []
         self.auto_landings = 0
@@ -240,6 +245,8 @@ class TelloEmulator:
         flying = v.state.in_air
         if word == "command":
             return "ok"
+        if word in self.refusals:
+            return self.refusals[word]
         if word == "rc":
             self._rc(args)
             return None
