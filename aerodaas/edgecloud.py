@@ -100,14 +100,14 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from aerodaas.schedulers.analytics_base import (
-    AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload, task_utility,
+    AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload, admit_by_time, task_utility,
 )
 
 __all__ = [
     "Clock", "Jitter", "NetworkModel", "EdgeExecutor", "EmulatedEdgeExecutor", "OnnxEdgeExecutor", "AnalyticsEdgeExecutor",
     "AnalyticsBank", "FramePayload",
     "CloudExecutor", "CloudExecutorActor", "CloudPool", "AnalyticsDispatcher", "EdgeHost", "EdgeHostActor",
-    "Samples", "cloud_selector", "start_cloud_executors", "DROP_STATES", "admit_by_time",
+    "Samples", "cloud_selector", "start_cloud_executors", "DROP_STATES",
 ]
 
 log = logging.getLogger(__name__)
@@ -1004,7 +1004,7 @@ class CloudPool:
                 continue
             if not self.alive[i]:
                 for r in reqs:
-                    self._reroute_or_fail(r["k"], f"cloud executor {self.name_of(i)} is gone")
+                    self._reroute_or_fail(r["k"], f"cloud executor {self.name_of(i)} died before the task was sent")
                 continue
             ex = self.executors[i]
             if self._is_actor(ex):
@@ -1091,6 +1091,9 @@ class CloudPool:
               "error": f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}",
               "in_flight": len(keys), "retried": 0, "failed": 0}
         node = (info.get("node_id") or "?")[:12]
+        if not self.available:  # first: a policy reacting to the failures below must already know there is no cloud
+            for d in list(self.dispatchers):
+                d._on_cloud_availability(False)
         for k in keys:
             outcome = self._reroute_or_fail(k, f"cloud executor {ev['name']} (node {node}) died at "
                                                f"{now_ms / 1000:.1f} s while the task was in flight")
@@ -1099,9 +1102,6 @@ class CloudPool:
         self.events.append(ev)
         log.warning("cloud executor %s on node %s died at %.1f s: %d in flight (%d retried, %d failed)",
                     ev["name"], node, ev["at_s"], ev["in_flight"], ev["retried"], ev["failed"])
-        if not self.available:
-            for d in list(self.dispatchers):
-                d._on_cloud_availability(False)
 
     async def _watchdog(self) -> None:
         while True:
@@ -1136,30 +1136,6 @@ class _LoopThread:
     def stop(self) -> None:
         self.loop.call_soon_threadsafe(self.loop.stop)
         self.thread.join(5)
-
-
-def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: float) -> float | None:
-    """The latest time (ms, 1 ms resolution) at which the cloud re-check ``admits(t)`` still holds, by bisection
-    between ``now_ms`` and ``deadline_ms``: None if it fails at ``now_ms``, +inf if it holds even an hour past the
-    deadline (a policy that admits at any time). Assumes ``admits`` is monotone (see the module docstring); it is
-    called about a dozen times, so it must have no side effects."""
-    if not admits(now_ms):
-        return None
-    hi = deadline_ms
-    if admits(hi):
-        far = deadline_ms + 3_600_000.0
-        if admits(far):
-            return math.inf
-        lo, hi = hi, far
-    else:
-        lo = now_ms
-    while hi - lo > 1.0:
-        mid = (lo + hi) / 2.0
-        if admits(mid):
-            lo = mid
-        else:
-            hi = mid
-    return lo
 
 
 class AnalyticsDispatcher:
@@ -1351,7 +1327,8 @@ class AnalyticsDispatcher:
                 self._policy_error(f"decision {d.kind} about an unknown task #{t.task_id}")
                 continue
             if t.state is not TaskState.PENDING:
-                self._policy_error(f"decision {d.kind} about task #{t.task_id}, already {t.state.value}")
+                if not self._closing:  # at the end of the run finish() has ended what the policy still held
+                    self._policy_error(f"decision {d.kind} about task #{t.task_id}, already {t.state.value}")
                 continue
             if t.tier is not None:
                 self._policy_error(f"decision {d.kind} about task #{t.task_id}, already running on the {t.tier}")
@@ -1369,6 +1346,9 @@ class AnalyticsDispatcher:
 
     def _send_cloud(self, task: AnalyticsTask, reason: str) -> None:
         now = self.clock.now_ms()
+        if self._closing:  # after the in-flight sweep of finish(): it would never come back
+            self._not_sent(task, f"{reason}; run ended")
+            return
         if self.cloud is None or not self.cloud.available:
             self._not_sent(task, f"{reason}; cloud unavailable")
             return
@@ -1418,7 +1398,7 @@ class AnalyticsDispatcher:
             self._apply(decisions)
 
     def _rearm_poll(self) -> None:
-        if self._closed:
+        if self._closing:
             return
         t = self._safe("next_poll_ms", None)
         if t == self._poll_at and self._poll_handle is not None:
@@ -1544,7 +1524,10 @@ class AnalyticsDispatcher:
                 await asyncio.wait_for(self._idle_event.wait(), drain_timeout_s)
             except asyncio.TimeoutError:
                 pass
-        self._closing = True  # the edge loop takes no new task from here on
+        self._closing = True  # the edge loop takes no new task, no timer is armed, no task leaves for the cloud
+        if self._poll_handle is not None:
+            self._poll_handle.cancel()
+            self._poll_handle = None
         held = self._safe("held_tasks", [])
         for t in held:
             if t.state is TaskState.PENDING and t.tier is None:

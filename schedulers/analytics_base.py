@@ -25,14 +25,15 @@ from __future__ import annotations
 
 import abc
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, ClassVar, Iterable, Mapping
+from typing import Any, Callable, ClassVar, Iterable, Mapping
 
 __all__ = ["ModelProfile", "Workload", "TaskState", "AnalyticsTask", "Decision", "AnalyticsScheduler",
            "task_utility", "register_analytics_scheduler", "analytics_scheduler_names", "make_analytics_scheduler",
-           "TERMINAL_STATES"]
+           "TERMINAL_STATES", "admit_by_time"]
 
 
 # --------------------------------------------------------------------------------------------- workload
@@ -306,6 +307,31 @@ class AnalyticsScheduler(abc.ABC):
 
 # --------------------------------------------------------------------------------------------- registry
 _REGISTRY: dict[str, type[AnalyticsScheduler]] = {}
+
+
+def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: float) -> float | None:
+    """The latest time (ms, 1 ms resolution) at which the cloud re-check ``admits(t)`` still holds, by bisection
+    between ``now_ms`` and ``deadline_ms``: None if it fails at ``now_ms``, +inf if it holds even an hour past the
+    deadline (a policy that admits at any time). ``admits`` must be monotone and free of side effects: it is
+    called about a dozen times (see :meth:`AnalyticsScheduler.cloud_admit`). The dispatcher in
+    ``aerodaas.edgecloud`` sends the result with the task; the cloud executor compares it with its clock."""
+    if not admits(now_ms):
+        return None
+    hi = deadline_ms
+    if admits(hi):
+        far = deadline_ms + 3_600_000.0
+        if admits(far):
+            return math.inf
+        lo, hi = hi, far
+    else:
+        lo = now_ms
+    while hi - lo > 1.0:
+        mid = (lo + hi) / 2.0
+        if admits(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 def register_analytics_scheduler(cls: type[AnalyticsScheduler]) -> type[AnalyticsScheduler]:

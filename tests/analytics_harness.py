@@ -3,7 +3,7 @@ experiments run the policies in the Ray dispatcher on wall-clock time).
 
 It drives a policy the way the dispatcher does: ``submit`` on arrival, ``next_edge_task`` whenever the edge is
 free (after every event), ``poll`` at ``next_poll_ms``, ``cloud_admit`` before a cloud execution (bisected into
-an admit-by time with the dispatcher's own :func:`~aerodaas.edgecloud.admit_by_time`, a dozen calls per task),
+an admit-by time with the dispatcher's own ``analytics_base.admit_by_time``, a dozen calls per task),
 ``on_edge_done`` / ``on_cloud_done(task, now, latency_ms)`` on completion, and drops ``held_tasks()`` at the end.
 The emulated edge runs one task at a time for exactly the profile's ``edge_ms``; the cloud runs any number at
 once for exactly ``cloud_ms`` + a configurable extra latency.
@@ -22,9 +22,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Callable
 
-from aerodaas.edgecloud import admit_by_time
 from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
-                                                task_utility)
+                                                admit_by_time, task_utility)
 
 
 def make_trace(workload: Workload, *, drones: int = 2, fps: float = 1.0, duration_s: float = 60.0, seed: int = 0,

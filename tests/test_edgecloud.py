@@ -292,8 +292,8 @@ def test_submit_from_many_threads_loses_nothing():
 
 def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     """An executor that dies (its calls raise) takes its in-flight tasks with it (no second executor: FAILED), and
-    the policy hears that the cloud is gone: CLOUD then drops new tasks with a reason, until a replacement
-    executor is added."""
+    the policy hears that the cloud is gone: CLOUD then runs new tasks on the edge (its fallback), until a
+    replacement executor is added and they go to the cloud again."""
     w = workload("LIGHT")
 
     class Dying(CloudExecutor):
@@ -327,15 +327,59 @@ def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     check_accounting(d, r)
     first, late, back = d.tasks()[:2], d.tasks()[2], d.tasks()[3]
     assert all(t.state is TaskState.FAILED and t.tier == "cloud" and "died" in t.reason for t in first)
-    assert late.state is TaskState.DROPPED_TIME and "cloud unavailable" in late.reason
+    assert late.state is TaskState.DONE_ON_TIME and late.tier == "edge"
     assert back.state is TaskState.DONE_ON_TIME and back.tier == "cloud"
     assert r["cloud_cost"] == sum(w[t.model].cloud_cost for t in (*first, back))  # charged: they ran there
+    assert r["edge_cost"] == w[late.model].edge_cost
     lost, regained = r["cloud_availability_changes"]
     assert lost["available"] is False and ev_time(rep) == pytest.approx(lost["at_s"], abs=0.05)
     assert regained["available"] is True and regained["at_s"] > lost["at_s"]
     (ev,) = rep["losses"]
     assert late.arrival_ms / 1000.0 > ev["at_s"]
     assert ev["in_flight"] == 2 and ev["failed"] == 2 and ev["retried"] == 0 and "node lost" in ev["error"]
+
+
+def test_losing_the_last_executor_tells_the_policy_before_failing_its_tasks():
+    """When the last cloud executor dies, the policy must already know the cloud is gone when it hears that the
+    tasks in flight there failed: otherwise GEMS's gatekeeper counts the failures as misses and sends its queued
+    edge tasks to a cloud that no longer exists (each then dropped as "cloud unavailable")."""
+    # one model, 100 ms on the edge, 1500 ms on the cloud, 2500 ms deadline: one task every 25 ms overloads the
+    # edge 4x, so its queue is full of tasks the cloud could still finish, and rejected tasks are released to the
+    # cloud just in time (990 ms after arrival) and in flight for 1.5 s
+    w = Workload.from_dict({"models": {"A": {"edge_ms": 100, "cloud_ms": 1500, "benefit": 100, "edge_cost": 1,
+                                             "cloud_cost": 10}},
+                            "loads": {"T": {"A": 2500}}}, "T")
+
+    class Dying(CloudExecutor):
+        dead = False
+
+        async def collect(self, client, max_wait_s=5.0):
+            while not self.dead:
+                await asyncio.sleep(0.01)
+            raise RuntimeError("node lost")
+
+    async def run():
+        ex = Dying("c0")
+        pool = CloudPool([ex], jitter=Jitter("none"))
+        policy = make_analytics_scheduler("GEMS", w)
+        d = AnalyticsDispatcher(policy, EmulatedEdgeExecutor(), pool)
+        await d.start()
+        for _ in range(100):  # 2.5 s
+            d.submit("d0", "A")
+            await asyncio.sleep(0.025)
+        state = len(pool._inflight), policy.on_time_fraction("A")
+        ex.dead = True
+        await asyncio.sleep(0.2)
+        r = await d.finish(3.0)
+        await pool.close()
+        return d, r, state
+
+    d, r, (in_flight, fraction_before) = asyncio.run(run())
+    check_accounting(d, r)
+    assert in_flight > 5 and fraction_before >= 0.9 and r["states"]["failed"] >= in_flight  # the loss hit hard
+    moved_to_nowhere = [t for t in d.tasks() if "gatekeeper" in (t.reason or "") and "cloud unavailable" in t.reason]
+    assert moved_to_nowhere == []
+    assert r["cloud_availability_changes"][0]["available"] is False
 
 
 def ev_time(pool_report: dict) -> float:

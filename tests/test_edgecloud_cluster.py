@@ -260,12 +260,17 @@ def test_real_detector_runs_on_a_cloud_node_of_the_cluster(cluster, run_options,
     from aerodaas import ObjectDetector
     from tests.test_analytics_scheduling import QOS, _stats, build, hover_config
 
-    cloud_nodes = {n.node_id for n in cluster.cloud_nodes}
-    env, drone = build(hover_config(fps=4, real=True, lockstep=True), ObjectDetector(
-        "nanodet", classes=["car", "truck", "bus"], score_threshold=0.2), hover_s=3.0)
-    env.set_analytics_scheduler("CLOUD", {"detector": {**QOS, "deadline_ms": 5000, "cloud_ms": 400}})
-    run_options.record = str(tmp_path / "cloud-node.mcap")
-    res = drone.start_mission()
+    node = cluster.add_cloud_node({"cloud-node": "c-real"})  # earlier tests of the module remove theirs
+    cluster.cluster.wait_for_nodes()
+    try:
+        cloud_nodes = {n.node_id for n in cluster.cloud_nodes}
+        env, drone = build(hover_config(fps=4, real=True, lockstep=True), ObjectDetector(
+            "nanodet", classes=["car", "truck", "bus"], score_threshold=0.2), hover_s=3.0)
+        env.set_analytics_scheduler("CLOUD", {"detector": {**QOS, "deadline_ms": 5000, "cloud_ms": 400}})
+        run_options.record = str(tmp_path / "cloud-node.mcap")
+        res = drone.start_mission()
+    finally:
+        cluster.remove_cloud_node(cluster.cloud_nodes.index(node), graceful=True)
     assert res.outcome == "success", res.robots["uav"].get("error")
     rep = res.stats["analytics_scheduler"]
     frames = res.stats["uav"]["cameras"]["cam"]["frames"]
