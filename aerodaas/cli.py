@@ -178,6 +178,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print("aerodaas sim: stopped", file=sys.stderr, flush=True)
         return 0
     finally:
+        if previous_sigterm is not None:  # no signal may cut the clean stop short
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
         emu.stop()
         if previous_sigterm is not None:
             signal.signal(signal.SIGTERM, previous_sigterm)

@@ -12,16 +12,11 @@ import time
 
 import pytest
 
+from aerodaas.emulators import free_tcp_port
+
 pytestmark = pytest.mark.skipif(sys.platform.startswith("win"), reason="POSIX signals")
 
 HOME = (47.3977, 8.5456, 488.0)
-
-
-def free_tcp_port(host: str = "127.0.0.1") -> int:
-    """A TCP port on ``host`` that was free a moment ago (bind to port 0, read it back, release it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
 
 
 def test_sim_serves_an_ardupilot_vehicle_and_stops_on_sigterm():
@@ -33,13 +28,16 @@ def test_sim_serves_an_ardupilot_vehicle_and_stops_on_sigterm():
          "ardupilot", "--speedup", "4", "--home", ",".join(f"{v:g}" for v in HOME)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     out: list[str] = []
-    reader = threading.Thread(target=lambda: out.extend(proc.stdout), daemon=True)
-    reader.start()
+    err_lines: list[str] = []  # both pipes drained in threads: a full pipe must not block the server
+    readers = [threading.Thread(target=lambda: out.extend(proc.stdout), daemon=True),
+               threading.Thread(target=lambda: err_lines.extend(proc.stderr), daemon=True)]
+    for r in readers:
+        r.start()
     conn = None
     try:
         deadline = time.monotonic() + 30
         while not any("aerodaas sim:" in x for x in out):  # listening
-            assert proc.poll() is None and time.monotonic() < deadline, (proc.poll(), out, proc.stderr.read())
+            assert proc.poll() is None and time.monotonic() < deadline, (proc.poll(), out, err_lines)
             time.sleep(0.05)
         assert f"tcp:127.0.0.1:{port}" in out[0] and "SIGTERM" in out[0]
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=250, source_component=190)
@@ -64,7 +62,9 @@ def test_sim_serves_an_ardupilot_vehicle_and_stops_on_sigterm():
         proc.send_signal(signal.SIGTERM)
         rc = proc.wait(timeout=10)
         assert time.monotonic() - t0 < 5.0, "did not stop promptly on SIGTERM"
-        err = proc.stderr.read()
+        for r in readers:
+            r.join(5)
+        err = "".join(err_lines)
         assert rc == 0, (rc, err)  # a stopped server ends normally, as on Ctrl-C
         assert "Traceback" not in err and "aerodaas sim: stopped" in err
         # the listening socket is closed: nobody answers on the port any more

@@ -374,13 +374,14 @@ class MavlinkBackend(VehicleBackend):
 
     def _on_statustext(self, msg: Any, now: float) -> None:
         """STATUSTEXT (common.xml): ``id`` 0 is a complete text; a non-zero ``id`` marks chunks of one long text
-        (MAVLink 2 extensions ``id``, ``chunk_seq`` from 0), ended by a chunk shorter than 50 characters (pymavlink
-        cuts the text at its NUL) or, if that one is lost, by :data:`_STATUSTEXT_FLUSH_S`."""
-        text = msg.text.decode(errors="replace") if isinstance(msg.text, bytes) else str(msg.text)
-        text = text.split("\x00", 1)[0]
+        (MAVLink 2 extensions ``id``, ``chunk_seq`` from 0), ended by a chunk shorter than the 50-byte field
+        (pymavlink cuts the text at its NUL) or, if that one is lost, by :data:`_STATUSTEXT_FLUSH_S`. Chunks are
+        joined as bytes and decoded (UTF-8) once whole, so a character split across two chunks survives."""
+        raw = msg.text if isinstance(msg.text, bytes) else str(msg.text).encode("utf-8", errors="replace")
+        raw = raw.split(b"\x00", 1)[0]
         sid = getattr(msg, "id", 0) or 0
         if not sid:
-            self._emit_text(now, msg.severity, text)
+            self._emit_text(now, msg.severity, raw.decode("utf-8", errors="replace"))
             return
         key = (msg.get_srcComponent(), sid)
         buf = self._chunks.get(key)
@@ -390,14 +391,15 @@ class MavlinkBackend(VehicleBackend):
             buf = None
         if buf is None:
             buf = self._chunks[key] = {"t": now, "severity": msg.severity, "parts": {}}
-        buf["parts"][seq] = text
-        if len(text) < _STATUSTEXT_LEN:
+        buf["parts"][seq] = raw
+        if len(raw) < _STATUSTEXT_LEN:
             self._flush_text(key)
 
     def _flush_text(self, key: tuple[int, int]) -> None:
         buf = self._chunks.pop(key, None)
         if buf is not None:
-            self._emit_text(buf["t"], buf["severity"], "".join(buf["parts"][k] for k in sorted(buf["parts"])))
+            whole = b"".join(buf["parts"][k] for k in sorted(buf["parts"]))
+            self._emit_text(buf["t"], buf["severity"], whole.decode("utf-8", errors="replace"))
 
     def _emit_text(self, t: float, severity: int, text: str) -> None:
         """One whole status text: kept for :class:`CommandRefused`, a ``status_text`` event and a log line."""
@@ -648,9 +650,9 @@ class MavlinkBackend(VehicleBackend):
         Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds for the ACK; without one the
         command is re-sent, up to ``retries`` (default ``command_retries``) times, with the ``confirmation``
         counter raised. MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try
-        too: re-sent after min(``timeout_s``, 0.5) s. MAV_RESULT_IN_PROGRESS (the command runs; progress ACKs
-        follow) keeps the current try open for another ``timeout_s`` after each progress ACK, but never beyond
-        the overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send.
+        too: re-sent after min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs; progress
+        ACKs follow) the command is not sent again (MAVLink command protocol): its final ACK is awaited until the
+        overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send, which bounds every case.
 
         Raises :class:`CommandRefused` (MAV_RESULT name, the autopilot's STATUSTEXT) for any final result but
         ACCEPTED, and for TEMPORARILY_REJECTED when the tries are used up; :class:`LinkLost` when the link is or
@@ -669,9 +671,11 @@ class MavlinkBackend(VehicleBackend):
         overall = started + (retries + 1) * timeout
         last: Any = None  # the latest non-final answer: IN_PROGRESS or TEMPORARILY_REJECTED
         for attempt in range(retries + 1):
+            if time.monotonic() >= overall:
+                break
             sent = time.monotonic()
             self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
-            deadline = sent + timeout
+            deadline = min(sent + timeout, overall)
             while True:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
@@ -687,9 +691,9 @@ class MavlinkBackend(VehicleBackend):
                 if ack.result == M.MAV_RESULT_ACCEPTED:
                     self.command_rtt_ms.append((time.monotonic() - sent) * 1000.0)
                     return
-                if ack.result == M.MAV_RESULT_IN_PROGRESS:
+                if ack.result == M.MAV_RESULT_IN_PROGRESS:  # it runs: wait for the final ACK, never re-send
                     last = ack
-                    deadline = max(deadline, min(time.monotonic() + timeout, overall))
+                    deadline = overall
                     continue
                 if ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
                     last = ack
@@ -699,7 +703,7 @@ class MavlinkBackend(VehicleBackend):
                     continue
                 raise CommandRefused(self.robot_id, name, _enum_name("MAV_RESULT", ack.result),
                                      self._status_text_since(started))
-            if last is not None and last.result == M.MAV_RESULT_IN_PROGRESS and time.monotonic() >= overall:
+            if last is not None and last.result == M.MAV_RESULT_IN_PROGRESS:
                 break
         if not self._link_ok:
             raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
@@ -1047,22 +1051,32 @@ class MavlinkBackend(VehicleBackend):
             p = self.position
             self.goto((p[0], p[1], p[2]))
         else:
-            self.set_mode("LOITER")
-            self._stop_setpoints()
+            self._autopilot_mode("LOITER")
 
     def land(self) -> None:
-        """LAND mode (ArduPilot LAND, PX4 AUTO.LAND): descend and land here; both disarm once landed."""
+        """LAND mode (ArduPilot LAND, PX4 AUTO.LAND): descend and land here; both disarm once landed. Raises as
+        :meth:`set_mode`."""
         self._require_navigable("land")
-        self.set_mode("LAND")
-        self._stop_setpoints()
+        self._autopilot_mode("LAND")
 
     def return_to_launch(self) -> bool:
         """RTL mode (ArduPilot RTL, PX4 AUTO.RTL): the autopilot climbs to its return altitude, flies home, lands
-        and disarms. Returns True."""
+        and disarms. Returns True. Raises as :meth:`set_mode`."""
         self._require_navigable("return_to_launch")
-        self.set_mode("RTL")
-        self._stop_setpoints()
+        self._autopilot_mode("RTL")
         return True
+
+    def _autopilot_mode(self, name: str) -> None:
+        """Hand the vehicle to one of the autopilot's own modes and stop streaming our targets. A refused mode
+        change keeps the stream (the vehicle stays where our last target holds it); one the autopilot accepted but
+        whose HEARTBEAT has not shown it yet (CommandNotConfirmed) stops it too, so a late switch is not pulled
+        back by our setpoints."""
+        try:
+            self.set_mode(name)
+        except CommandNotConfirmed:
+            self._stop_setpoints()
+            raise
+        self._stop_setpoints()
 
     # ------------------------------------------------------------------ missions
     def _mission_items(self, mission: Any, takeoff_altitude: float | None, final_action: str) -> list[MissionItem]:

@@ -515,8 +515,8 @@ class TelloBackend(VehicleBackend):
 
     def _start_motion(self, name: str, plan: Callable[[_Motion], None]) -> None:
         self._require_link(name)
-        self._preempt()
-        released = None
+        # a manoeuvre that was stopped, or sticks released, leave the Tello braking: the plan waits for rest first
+        released = time.monotonic() if self._preempt() else None
         if any(self._sticks):  # else the keep-alive would resume the old velocity after the manoeuvre
             self._sticks = (0, 0, 0, 0)
             self._send_rc(self._sticks)
@@ -542,14 +542,15 @@ class TelloBackend(VehicleBackend):
         m.thread = threading.Thread(target=run, name=f"tello-{self.robot_id}-{name}", daemon=True)
         self._motion = m
         m.thread.start()
-        m.settled.wait(self.cfg.accept_window_s)
+        # the caller hears a refusal of the first command, also when it comes after the wait for rest
+        m.settled.wait(self.cfg.accept_window_s + (SETTLE_S if released is not None else 0.0))
         with m.lock:
             m.returned = True
             if m.error is not None:
                 raise m.error
 
     def _await_rest(self, m: _Motion, since: float) -> None:
-        """After ``rc 0 0 0 0`` (sent at monotonic ``since``): wait up to :data:`SETTLE_S` for a state packet
+        """After the sticks were released or a manoeuvre stopped (at monotonic ``since``): wait up to :data:`SETTLE_S` for a state packet
         received after it that shows the Tello at rest, so that a ``go`` offset (body frame, from the current
         yaw and dead-reckoned position) is computed from where it stopped, not from a pose it is braking out of.
         Goes on after the bound (the ``go`` then starts from the latest estimate); raises _Cancelled if pre-empted."""
@@ -586,13 +587,15 @@ class TelloBackend(VehicleBackend):
         raise BackendError(f"robot {self.robot_id!r}: {cmd}: no reply after {self.cfg.command_retries + 1} tries "
                            f"and the state shows it did not happen")
 
-    def _preempt(self) -> None:
+    def _preempt(self) -> bool:
+        """Stop the running manoeuvre (cancel its worker, ``stop``); True if one was running."""
         m = self._motion
         if m is None or m.thread is None or not m.thread.is_alive():
-            return
+            return False
         m.cancel.set()
         m.thread.join(timeout=2.0)
         self._expect_ok("stop", self._transact("stop", self.cfg.command_timeout_s, self.cfg.command_retries))
+        return True
 
     def _require_link(self, command: str) -> None:
         if not self._connected:
