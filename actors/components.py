@@ -600,7 +600,8 @@ class HostRuntime:
         One clock for the fleet: every ``1/physics_hz`` simulated seconds each backend steps (simulator) or is
         polled (real vehicles), odometry is published at its rate, due cameras capture, and each drone's control
         tick runs at ``control_rate_hz``. Time runs at ``speedup`` x wall time (lock-step: as fast as the
-        analytics allow). A control tick later than one control period (wall time) is counted as missed."""
+        analytics allow). A control tick that runs later than one control period after its due wall time (the
+        period divided by ``speedup``) is counted as missed."""
         sim, drones = self.sim, self.drones
         dt = 1.0 / sim.physics_hz
         lock = sim.lockstep
