@@ -290,22 +290,26 @@ def test_submit_from_many_threads_loses_nothing():
     assert r["states"]["expired_edge"] + r["states"]["dropped_time"] > 0  # 200 tasks cannot all run in 0.5 s
 
 
+class DyingExecutor(CloudExecutor):
+    """An in-process cloud executor whose node is lost when ``dead`` is set: its outstanding ``collect`` raises,
+    as a Ray call to an actor on a removed node does."""
+
+    dead = False
+
+    async def collect(self, client, max_wait_s=5.0):
+        while not self.dead:
+            await asyncio.sleep(0.01)
+        raise RuntimeError("node lost")
+
+
 def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     """An executor that dies (its calls raise) takes its in-flight tasks with it (no second executor: FAILED), and
     the policy hears that the cloud is gone: CLOUD then runs new tasks on the edge (its fallback), until a
     replacement executor is added and they go to the cloud again."""
     w = workload("LIGHT")
 
-    class Dying(CloudExecutor):
-        dead = False
-
-        async def collect(self, client, max_wait_s=5.0):
-            while not self.dead:
-                await asyncio.sleep(0.01)
-            raise RuntimeError("node lost")
-
     async def run():
-        ex = Dying("c0")
+        ex = DyingExecutor("c0")
         pool = CloudPool([ex], jitter=Jitter("none"))
         d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
         await d.start()
@@ -350,16 +354,8 @@ def test_losing_the_last_executor_tells_the_policy_before_failing_its_tasks():
                                              "cloud_cost": 10}},
                             "loads": {"T": {"A": 2500}}}, "T")
 
-    class Dying(CloudExecutor):
-        dead = False
-
-        async def collect(self, client, max_wait_s=5.0):
-            while not self.dead:
-                await asyncio.sleep(0.01)
-            raise RuntimeError("node lost")
-
     async def run():
-        ex = Dying("c0")
+        ex = DyingExecutor("c0")
         pool = CloudPool([ex], jitter=Jitter("none"))
         policy = make_analytics_scheduler("GEMS", w)
         d = AnalyticsDispatcher(policy, EmulatedEdgeExecutor(), pool)
