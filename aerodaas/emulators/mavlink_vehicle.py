@@ -284,7 +284,6 @@ class MavlinkVehicleEmulator:
         self.speed: float | None = None  # DO_CHANGE_SPEED, m/s
         self.phase = ""  # RTL phase: climb / return / land
         self.last_setpoint_t = -1e9
-        self.setpoint_times: list[float] = []
         #: vehicle time (s) of every position/velocity target received (the most recent 100 000)
         self.setpoint_log: deque[float] = deque(maxlen=100_000)
         #: (vehicle time s, mode name) of every mode change (the most recent 10 000)
@@ -778,8 +777,11 @@ class MavlinkVehicleEmulator:
         return M.MAV_RESULT_ACCEPTED
 
     def _offboard_stream_ok(self) -> bool:
-        recent = [t for t in self.setpoint_times if self.t - t <= 1.0]
-        return self.t - self.last_setpoint_t <= self.params["COM_OF_LOSS_T"] and len(recent) >= 2
+        """PX4 enters OFFBOARD only with a live setpoint stream: the last one within COM_OF_LOSS_T and at least
+        two in the last vehicle second."""
+        log = self.setpoint_log
+        recent = len(log) >= 2 and self.t - log[-2] <= 1.0
+        return self.t - self.last_setpoint_t <= self.params["COM_OF_LOSS_T"] and recent
 
     def _enter(self, name: str) -> None:
         if name == self.mode and name not in ("AUTO", "AUTO.MISSION"):
@@ -1053,7 +1055,6 @@ class MavlinkVehicleEmulator:
 
     def _note_setpoint(self) -> None:
         self.last_setpoint_t = self.t
-        self.setpoint_times = [t for t in self.setpoint_times if self.t - t <= 1.0] + [self.t]
         self.setpoint_log.append(self.t)
 
     def _apply_target(self, pos_enu: np.ndarray | None, vel_enu: np.ndarray | None, yaw_rate_dps: float | None,
