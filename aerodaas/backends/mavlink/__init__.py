@@ -16,6 +16,13 @@ ArduPilot, ``mavutil.px4_map`` for PX4 main/sub modes).
 Flavour differences handled here: ArduPilot flies targets in GUIDED, PX4 in OFFBOARD (entered only after the
 setpoint stream runs); MAV_CMD_NAV_TAKEOFF ``param7`` is metres above home on ArduPilot and metres above mean sea
 level on PX4; ArduPilot missions carry home at sequence 0.
+
+One module per MAVLink concern, the way MAVSDK splits its plugins (each a mixin of :class:`MavlinkBackend`, which
+holds the shared state): :mod:`.link` (connection, autopilot HEARTBEAT, I/O thread, vehicle clock, streams,
+close), :mod:`.command` (command protocol, mode changes), :mod:`.telemetry` (state from the streams, mission
+progress), :mod:`.params` (parameter protocol, the vehicle's own speed limits), :mod:`.action` (readiness,
+arming, take-off), :mod:`.offboard` (GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.mission` (the
+mission protocol). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from .backend import MavlinkBackend
 from ._common import CommandNotConfirmed

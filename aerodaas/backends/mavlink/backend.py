@@ -102,6 +102,7 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._ratio = 1.0
         self._clock_samples: deque[tuple[float, int]] = deque()
         self._t_max = 0.0
+        self._reanchor = False  # the link was lost: the next time_boot_ms may re-anchor the clock (link.py)
         # outgoing
         self._setpoint: tuple | None = None
         self._sp_sent = 0

@@ -271,13 +271,15 @@ class LinkMixin:
             self._boot_ref = (ms, self._raw_t())
             self._clock_samples.clear()
         self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
-        if self._raw_t() - self._t_connect < self._t_max - 1.0:
-            # the vehicle's clock stood still while ours ran on (the autopilot was stopped or the link silent):
-            # go on from where :attr:`t` got to, so the recording has no gap and no step back
+        if self._reanchor and self._raw_t() - self._t_connect < self._t_max - 1.0:
+            # after a link loss, the vehicle's clock stood still while ours ran on (the autopilot was stopped):
+            # go on from where :attr:`t` got to, so the recording has no step back (a short stall of our own
+            # process needs nothing: the vehicle's clock ran on meanwhile)
             self._boot_ref = (ms, self._t_max + self._t_connect)
             self._boot_last = ms
             self._clock_samples.clear()
             self._event("vehicle_clock_resumed")
+        self._reanchor = False
         self._boot_wall = now
         # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
         samples = self._clock_samples
@@ -306,6 +308,7 @@ class LinkMixin:
             if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s:
                 self._link_ok = False
                 self._event("link_lost", silent_s=round(now - self._last_hb, 3))
+                self._reanchor = True
             resume = self._resume_streams
             self._resume_streams = False
             sp = self._setpoint if self._link_ok else None

@@ -1,0 +1,352 @@
+"""Helpers for the real-firmware tests (``tests/test_sitl_*.py``, marker ``sitl``): ArduCopter and PX4 SITL from
+``../shared/sitl`` (or ``$AERODAAS_SITL_DIR``), each run in a private network namespace that has only loopback
+(``unshare -n``), together with the ``aerodaas`` commands that talk to it; recordings are read back in the parent
+with the ``mcap`` package's own reader (not ours).
+
+Firmware links: ArduCopter instance ``i`` sends MAVLink to ``udpin:127.0.0.1:14550+10*i`` (``--serial0
+udpclient:...``; ``-I i`` shifts its other ports by 10*i); PX4 instance ``i`` (``-i i``) sends its offboard/API
+link from 14580+i to ``udpin:127.0.0.1:14540+i`` (PX4 ``ROMFS/px4fmu_common/init.d-posix/px4-rc.mavlink``).
+PX4's clock factor is ``PX4_SIM_SPEED_FACTOR`` (read by SIH's ``Sih::lockstep_loop`` in
+``src/modules/simulation/simulator_sih/sih.cpp``; ``rcS`` scales COM_DL_LOSS_T/COM_OF_LOSS_T/... by it).
+"""
+from __future__ import annotations
+
+import copy
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+SITL_DIR = Path(os.environ.get("AERODAAS_SITL_DIR", REPO.parent / "shared" / "sitl"))
+if not SITL_DIR.is_dir():  # a worktree beside /work/main: the shared folder is /work/shared
+    SITL_DIR = Path("/work/shared/sitl")
+ARDUCOPTER = SITL_DIR / "arducopter" / "arducopter"
+PX4 = SITL_DIR / "px4" / "bin" / "px4"
+AERODAAS = [sys.executable, "-m", "aerodaas.cli"]
+
+#: firmware clock factors (vehicle seconds per wall second); 2-core machines keep up with these
+SPEEDUP = {"ardupilot": 5.0, "px4": 5.0}
+FARM_HOME = {"lat": 13.0213, "lon": 77.5671, "alt": 920.0}
+
+
+def namespace_skip_reason() -> str | None:
+    """Why the SITL tests cannot run here (None: they can): no private network namespace (``unshare -n`` needs
+    root or user namespaces), or no firmware."""
+    for exe in (ARDUCOPTER, PX4):
+        if not exe.is_file():
+            return f"SITL firmware {exe} not found (set AERODAAS_SITL_DIR)"
+    if shutil.which("unshare") is None or shutil.which("ip") is None:
+        return "unshare/ip not installed: cannot create a private network namespace"
+    try:
+        r = subprocess.run(["unshare", "-n", "bash", "-c", "ip link set lo up"], capture_output=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"cannot create a private network namespace: {e}"
+    if r.returncode != 0:
+        return f"cannot create a private network namespace (unshare -n): {r.stderr.decode(errors='replace').strip()}"
+    return None
+
+
+def connection(autopilot: str, instance: int = 0) -> str:
+    """The pymavlink connection string of firmware instance ``instance`` inside the namespace."""
+    return f"udpin:127.0.0.1:{14550 + 10 * instance}" if autopilot == "ardupilot" else \
+        f"udpin:127.0.0.1:{14540 + instance}"
+
+
+def monitor_connection(autopilot: str, instance: int = 0) -> str:
+    """A second link to firmware instance ``instance`` (ArduCopter ``--serial1``; PX4's ground-station link,
+    18570+i -> 14550+i), for watchers beside the backend."""
+    return f"udpin:127.0.0.1:{14551 + 10 * instance}" if autopilot == "ardupilot" else \
+        f"udpin:127.0.0.1:{14550 + instance}"
+
+
+def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, speedup: float) -> str:
+    """A shell command starting firmware instance ``instance`` (fresh parameters: ArduCopter ``-w``, PX4 a new
+    working directory) in the background, its output in ``workdir/fw<i>.log``, its pid in ``$FW<i>``."""
+    log = workdir / f"fw{instance}.log"
+    if autopilot == "ardupilot":
+        d = ARDUCOPTER.parent
+        cmd = (f"cd {shlex.quote(str(workdir))} && {shlex.quote(str(ARDUCOPTER))} --model + --speedup {speedup:g} "
+               f"-I{instance} -w --defaults {shlex.quote(str(d / 'copter.parm'))} "
+               f"--home {home['lat']},{home['lon']},{home['alt']},0 "
+               f"--serial0 udpclient:127.0.0.1:{14550 + 10 * instance} "
+               f"--serial1 udpclient:127.0.0.1:{14551 + 10 * instance}")
+    else:
+        w = workdir / f"px4_{instance}"
+        farm = w / "bin"  # the px4-* command aliases must be symlinks to px4 (the shared copy has plain files)
+        farm.mkdir(parents=True, exist_ok=True)
+        for f in PX4.parent.iterdir():
+            link = farm / f.name
+            if not link.exists():
+                link.symlink_to(f if f.name in ("px4", "px4-alias.sh") else PX4)
+        env = (f"PATH={shlex.quote(str(farm))}:$PATH PX4_SIM_MODEL=sihsim_quadx PX4_SIMULATOR=sihsim HEADLESS=1 "
+               f"PX4_SIM_SPEED_FACTOR={speedup:g} PX4_HOME_LAT={home['lat']} PX4_HOME_LON={home['lon']} "
+               f"PX4_HOME_ALT={home['alt']}")
+        cmd = (f"cd {shlex.quote(str(w))} && {env} {shlex.quote(str(farm / 'px4'))} -i {instance} "
+               f"-d {shlex.quote(str(PX4.parents[1] / 'etc'))} -w {shlex.quote(str(w))}")
+    return f"( {cmd} ) > {shlex.quote(str(log))} 2>&1 &\nFW{instance}=$!"
+
+
+def mavlink_env(autopilot: str, app_env: Path, n: int = 1, **mavlink: Any) -> dict:
+    """``app_env`` (an app's environment.json) with its first robot turned into ``n`` MAVLink robots
+    (``<id>``, ``<id>_1``...) on firmware instances 0..n-1; ``mavlink`` sets further MavlinkConfig fields."""
+    cfg = json.loads(app_env.read_text())
+    base = cfg["robots"][0]
+    robots = []
+    for i in range(n):
+        r = copy.deepcopy(base)
+        r["id"] = base["id"] if i == 0 else f"{base['id']}_{i}"
+        r["backend"] = "mavlink"
+        r["mavlink"] = {"connection": connection(autopilot, i), "autopilot": autopilot,
+                        "connect_timeout_s": 60, "arm_timeout_s": 120, **mavlink}
+        robots.append(r)
+    cfg["robots"] = robots + cfg["robots"][1:]
+    return cfg
+
+
+def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1, home: dict | None = None,
+                     speedup: float | None = None, timeout_s: float = 900,
+                     with_firmware: bool = True) -> subprocess.CompletedProcess:
+    """Start ``n`` fresh firmware instances and run the shell ``steps`` one after another inside one private
+    loopback-only network namespace (each step's exit code in ``workdir/rc<k>``, output in ``workdir/out<k>``);
+    the firmware is killed at the end. Steps may use ``$FW0``..: the firmware pids."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    speedup = SPEEDUP[autopilot] if speedup is None else speedup
+    ray_tmp = tempfile.mkdtemp(prefix="rs", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
+    lines = ["set -u", "ip link set lo up", f"export RAY_TMPDIR={shlex.quote(ray_tmp)}",
+             "mkdir -p $RAY_TMPDIR", f"export PYTHONPATH={shlex.quote(str(REPO))}${{PYTHONPATH:+:$PYTHONPATH}}"]
+    for i in range(n if with_firmware else 0):
+        lines.append(firmware_command(autopilot, i, home or FARM_HOME, workdir, speedup))
+    lines.append("cleanup() { for p in $(jobs -p); do kill -9 $p 2>/dev/null; done; }")
+    lines.append("trap cleanup EXIT")
+    for k, step in enumerate(steps):
+        lines.append(f"( cd {shlex.quote(str(REPO))} && {step} ) > {shlex.quote(str(workdir / f'out{k}'))} 2>&1; "
+                     f"echo $? > {shlex.quote(str(workdir / f'rc{k}'))}")
+    script = "\n".join(lines) + "\n"
+    (workdir / "script.sh").write_text(script)
+    try:
+        return subprocess.run(["unshare", "-n", "bash", str(workdir / "script.sh")], capture_output=True, text=True,
+                              timeout=timeout_s)
+    finally:
+        shutil.rmtree(ray_tmp, ignore_errors=True)
+
+
+def step_result(workdir: Path, k: int) -> tuple[int | None, str]:
+    """(exit code, output) of step ``k`` of :func:`run_in_namespace` (None: it never finished)."""
+    rc = workdir / f"rc{k}"
+    out = workdir / f"out{k}"
+    return (int(rc.read_text()) if rc.exists() else None), (out.read_text(errors="replace") if out.exists() else "")
+
+
+def aerodaas_run(app: Path, env: Path, record: Path, timeout_s: float = 600) -> str:
+    """The shell step ``aerodaas run APP --env ENV --record REC --timeout T --quiet``."""
+    args = [*AERODAAS, "run", str(app), "--env", str(env), "--record", str(record), "--timeout", f"{timeout_s:g}",
+            "--quiet"]
+    return " ".join(shlex.quote(a) for a in args)
+
+
+def read_recording(path: Path) -> dict[str, list]:
+    """The JSON channels of an MCAP recording, read with the ``mcap`` package's reader: ``{topic: [(log_time_ns,
+    message dict)]}``."""
+    from mcap.reader import make_reader
+
+    out: dict[str, list] = {}
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.message_encoding != "json":
+                continue
+            out.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
+    return out
+
+
+def max_horizontal_speed(odometry: list[dict], from_positions: bool = True, window_s: float = 2.0) -> float:
+    """Largest horizontal speed (m/s) in recorded odometry: the vehicle's reported velocity, and
+    (``from_positions``) the distance flown between samples at least ``window_s`` vehicle seconds apart (shorter
+    windows mostly measure the jitter between a position's arrival and its odometry time stamp)."""
+    best = max((float((o["velocity"][0] ** 2 + o["velocity"][1] ** 2) ** 0.5) for o in odometry), default=0.0)
+    if from_positions:
+        j = 0
+        for i, o in enumerate(odometry):
+            while j + 1 < i and o["t"] - odometry[j + 1]["t"] >= window_s:
+                j += 1
+            dt = o["t"] - odometry[j]["t"]
+            if dt >= window_s:
+                p, q = o["position"], odometry[j]["position"]
+                best = max(best, ((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2) ** 0.5 / dt)
+    return best
+
+
+def wait_until(cond, timeout_s: float, every_s: float = 0.2) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(every_s)
+    return False
+
+
+def observe(conn: str, out: str, timeout_s: float) -> int:
+    """Follow a vehicle with the MAVLink backend (never commanding it) until it has been armed and is disarmed
+    again, or ``timeout_s`` wall seconds; write ``{"armed": bool, "samples": [[t, x, y, z, vx, vy], ...]`` (x, y
+    ENU metres from :data:`FARM_HOME`, z above the vehicle's home),
+    "events": [...]}`` to ``out``. Used after ``aerodaas mission upload --start`` (the CLI hands the vehicle over)."""
+    from aerodaas.backends import make_backend
+    from aerodaas.config import MavlinkConfig, RobotConfig
+    from aerodaas.geo import geodetic_to_enu
+    from aerodaas.models import GeoPoint
+
+    b = make_backend(RobotConfig(id="observer", backend="mavlink", home=FARM_HOME,
+                                 mavlink=MavlinkConfig(connection=conn, set_speed_limits=False)))
+    b.connect(timeout_s=60)
+    samples, was_armed = [], False
+    end = time.monotonic() + timeout_s
+    try:
+        while time.monotonic() < end:
+            was_armed = was_armed or b.armed
+            g, v = b.odometry().geodetic, b.velocity
+            e, n, _ = geodetic_to_enu(g.lat, g.lon, FARM_HOME["alt"], GeoPoint(**FARM_HOME))
+            samples.append([b.t, float(e), float(n), float(b.position[2]), float(v[0]), float(v[1])])
+            if was_armed and not b.armed and not b.in_air:
+                break
+            time.sleep(0.05)
+    finally:
+        events = b.drain_events()
+        b.close()
+    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not b.armed,
+                                     "samples": samples, "events": events}, default=str))
+    return 0
+
+
+def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout_s: float = 300) -> int:
+    """On a second MAVLink link (``conn``: the firmware's other output), wait for a HEARTBEAT showing the vehicle
+    armed in a guided mode (GUIDED / OFFBOARD), ``delay_s`` wall seconds more, then SIGSTOP firmware ``pid`` for
+    ``stop_s`` seconds and SIGCONT it (a link loss the runtime must ride out)."""
+    import signal
+
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(conn, source_system=254, source_component=191)
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        hb = m.recv_match(type="HEARTBEAT", blocking=True, timeout=1.0)
+        if hb is None or hb.autopilot == 8:
+            continue
+        if hb.base_mode & 128 and mavutil.mode_string_v10(hb) in ("GUIDED", "OFFBOARD"):
+            time.sleep(delay_s)
+            os.kill(pid, signal.SIGSTOP)
+            time.sleep(stop_s)
+            os.kill(pid, signal.SIGCONT)
+            print(f"stopped {pid} for {stop_s} s", flush=True)
+            return 0
+    print("never saw the vehicle flying", flush=True)
+    return 1
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "observe":
+        sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+    if sys.argv[1] == "stop-when-flying":
+        sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
+    raise SystemExit(f"unknown command {sys.argv[1]!r}")
+
+
+# ---------------------------------------------------------------------------------------------- scenarios
+FARM_APP = REPO / "apps" / "farm_survey.py"
+FARM_ENV = REPO / "apps" / "farm_survey.json"
+FARM_CORNERS = [(0.0, 0.0, 1.5), (0.0, 10.0, 1.5), (10.0, 10.0, 1.5), (10.0, 0.0, 1.5)]
+FLEET_APP = Path(__file__).with_name("sitl_fleet_app.py")
+#: the geofence run: an exclusion circle of this radius (m) around the (10, 10) corner
+FENCE_RADIUS_M = 2.0
+
+
+def _write_env(path: Path, cfg: dict) -> Path:
+    path.write_text(json.dumps(cfg, indent=1))
+    return path
+
+
+def _mission_file(path: Path, home: dict) -> Path:
+    """A QGC WPL 110 mission: take off to 2 m, two waypoints 6 m apart (hold 3 s), land."""
+    from aerodaas.geo import enu_to_geodetic
+    from aerodaas.models import GeoPoint
+
+    h = GeoPoint(**home)
+    a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
+    rows = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t{h.alt:.2f}\t1",
+            "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t2.0\t1",
+            f"2\t0\t3\t16\t3\t0\t0\t0\t{a.lat:.7f}\t{a.lon:.7f}\t2.0\t1",
+            f"3\t0\t3\t16\t3\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t2.0\t1",
+            f"4\t0\t3\t21\t0\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t0\t1"]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def single_vehicle_session(autopilot: str, workdir: Path) -> dict[str, Any]:
+    """The single-vehicle scenarios, each in its own namespace with a freshly booted firmware instance (cold,
+    fresh parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas
+    mission upload --start`` (then observed until it lands), the farm survey with a geofence exclusion around one
+    corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
+    (SIGSTOP/SIGCONT) in flight. Returns ``{name: {"rc", "out", "rec" or "observed"}}``."""
+    from aerodaas.geo import enu_to_geodetic
+    from aerodaas.models import GeoPoint
+
+    workdir.mkdir(parents=True, exist_ok=True)
+    env_guided = _write_env(workdir / "guided.json", mavlink_env(autopilot, FARM_ENV))
+    env_auto = _write_env(workdir / "auto.json", mavlink_env(autopilot, FARM_ENV, use_autopilot_mission=True))
+    fenced = mavlink_env(autopilot, FARM_ENV)
+    c = enu_to_geodetic(10.0, 10.0, 0.0, GeoPoint(**FARM_HOME))
+    fenced["robots"][0]["safety"] = {"geofence": {"circles": [
+        {"center": [c.lat, c.lon], "radius": FENCE_RADIUS_M, "inclusion": False}]}}
+    env_fence = _write_env(workdir / "fence.json", fenced)
+    plan = _mission_file(workdir / "mission.waypoints", FARM_HOME)
+    py = shlex.quote(sys.executable)
+    conn = connection(autopilot)
+    upload = " ".join(shlex.quote(a) for a in [*AERODAAS, "mission", "upload", str(plan), "--start", "--connection",
+                                                conn, "--timeout", "60"])
+    observe = f"{py} -m tests.sitl observe {conn} {shlex.quote(str(workdir / 'observed.json'))} 300"
+    stopper = (f"( {py} -m tests.sitl stop-when-flying {monitor_connection(autopilot)} $FW0 3 6 "
+               f"> {shlex.quote(str(workdir / 'stopper.log'))} 2>&1 & ) ; ")
+    # every scenario on a vehicle booted for it (the farm survey is relative to where the vehicle takes off)
+    scenarios = {
+        "guided": [aerodaas_run(FARM_APP, env_guided, workdir / "guided.mcap")],
+        "auto": [aerodaas_run(FARM_APP, env_auto, workdir / "auto.mcap")],
+        "upload": [upload, observe],
+        "fence": [aerodaas_run(FARM_APP, env_fence, workdir / "fence.mcap")],
+        "linkloss": [stopper + aerodaas_run(FARM_APP, env_guided, workdir / "linkloss.mcap")],
+    }
+    out: dict[str, Any] = {}
+    for name, steps in scenarios.items():
+        d = workdir / name
+        run_in_namespace(autopilot, d, steps, with_firmware=name != "fence")
+        for k, step in enumerate(steps):
+            rc, text = step_result(d, k)
+            out[name if k == 0 else "observe"] = {"rc": rc, "out": text}
+    for name in ("guided", "auto", "linkloss"):
+        rec = workdir / f"{name}.mcap"
+        out[name]["rec"] = read_recording(rec) if rec.exists() else {}
+    obs = workdir / "observed.json"
+    out["observe"]["observed"] = json.loads(obs.read_text()) if obs.exists() else {}
+    return out
+
+
+def fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str, Any]:
+    """``n`` fresh firmware instances flying :data:`FLEET_APP` together (one app, one clock)."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    env = _write_env(workdir / "fleet.json", mavlink_env(autopilot, FARM_ENV, n=n))
+    run_in_namespace(autopilot, workdir, [aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap")], n=n)
+    rc, text = step_result(workdir, 0)
+    rec = workdir / "fleet.mcap"
+    return {"rc": rc, "out": text, "rec": read_recording(rec) if rec.exists() else {}}
+
+
+def odometry(rec: dict, robot: str = "quadrotor_base") -> list[dict]:
+    return [m for _, m in rec.get(f"/{robot}/odometry", [])]
+
+
+def events(rec: dict, robot: str = "quadrotor_base") -> list[dict]:
+    return [m for _, m in rec.get(f"/{robot}/events", [])]
