@@ -271,14 +271,14 @@ def _write_env(path: Path, cfg: dict) -> Path:
 
 
 def _mission_file(path: Path, home: dict) -> Path:
-    """A QGC WPL 110 mission: take off to 2 m, two waypoints 6 m apart (hold 3 s), land."""
+    """A QGC WPL 110 mission: take off (at home) to 2 m, two waypoints 6 m apart (hold 3 s), land."""
     from aerodaas.geo import enu_to_geodetic
     from aerodaas.models import GeoPoint
 
     h = GeoPoint(**home)
     a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
     rows = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t{h.alt:.2f}\t1",
-            "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t2.0\t1",
+            f"1\t0\t3\t22\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t2.0\t1",  # PX4 takes 0, 0 literally
             f"2\t0\t3\t16\t3\t0\t0\t0\t{a.lat:.7f}\t{a.lon:.7f}\t2.0\t1",
             f"3\t0\t3\t16\t3\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t2.0\t1",
             f"4\t0\t3\t21\t0\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t0\t1"]

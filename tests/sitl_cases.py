@@ -22,6 +22,14 @@ def autopilot(request) -> str:
     return request.module.AUTOPILOT
 
 
+@pytest.fixture(autouse=True)
+def _known_gap(request):
+    """A case the importing module lists in ``KNOWN_GAPS`` is expected to fail (non-strict xfail, reason there)."""
+    if request.node.originalname in getattr(request.module, "KNOWN_GAPS", ()):
+        request.applymarker(pytest.mark.xfail(strict=False, reason=f"known gap on {request.module.AUTOPILOT}: "
+                                                                   "see the module's comment and the README"))
+
+
 @pytest.fixture(scope="module")
 def session(autopilot, tmp_path_factory):
     """The single-vehicle scenarios (:func:`tests.sitl.single_vehicle_session`), flown once per module."""

@@ -10,6 +10,7 @@ import numpy as np
 
 from ...geo import enu_to_geodetic
 from ..base import LinkLost
+from .params import _PX4_SPEED_MARGIN
 from ._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
@@ -135,7 +136,8 @@ class OffboardMixin:
         if self.autopilot == "px4":
             # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
             # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
-            speed = float(self.limits.max_speed) if speed is None else min(float(speed), float(self.limits.max_speed))
+            limit = float(self.limits.max_speed) * _PX4_SPEED_MARGIN
+            speed = limit if speed is None else min(float(speed), limit)
             self._enter_guided(("carrot", self.position, np.array([x, y, z]), speed, self.t))
             return
         sp = ("pos", *self._global_target(x, y, z))
