@@ -2,9 +2,9 @@
 time), the real PX4 telemetry log, and MAVProxy as a third-party ground station."""
 from __future__ import annotations
 
+import importlib.util
 import logging
 import math
-import shutil
 import socket
 import struct
 import subprocess
@@ -670,18 +670,16 @@ def test_real_px4_tlog_through_the_receive_path():
         server.close()
 
 
-@pytest.mark.skipif(shutil.which("mavproxy.py") is None and not (Path(sys.executable).parent / "mavproxy.py").exists(),
-                    reason="MAVProxy not installed (pip install '.[test]')")
+@pytest.mark.skipif(importlib.util.find_spec("MAVProxy") is None, reason="MAVProxy not installed (pip install '.[test]')")
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_mavproxy_ground_station(autopilot, tmp_path):
     """MAVProxy, driven headless through its stdin, sees the emulated vehicle's heartbeat and position, switches
     its mode, arms it and takes off with the commands the README gives. (MAVProxy's ``mode NAME`` passes PX4's
     (base, main, sub) tuple to pymavlink's set_mode, which fails packing it, so for PX4 the mode goes out with the
     generic ``long DO_SET_MODE``.)"""
-    exe = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
     emu = MavlinkVehicleEmulator(autopilot, home=VEHICLE_HOME, gps_lock_s=0.5)
     address = emu.start("tcp:127.0.0.1:0")
-    proc = subprocess.Popen([sys.executable, exe, "--master", address, "--no-state",
+    proc = subprocess.Popen([sys.executable, "-m", "MAVProxy.mavproxy", "--master", address, "--no-state",
                              "--default-modules", "link,mode,arm,cmdlong,misc"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             bufsize=1, cwd=tmp_path)

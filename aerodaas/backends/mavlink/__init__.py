@@ -1,0 +1,23 @@
+"""MAVLink autopilots (ArduPilot Copter, PX4 multicopter) as a vehicle backend, through pymavlink.
+
+One background I/O thread reads every message (pymavlink parses; unknown ids, bad CRCs and duplicates from
+several captured links are skipped, never raised), keeps the state, sends our GCS HEARTBEAT at 1 Hz, re-sends the
+active position/velocity target at ``setpoint_rate_hz`` in the *vehicle's* time (so an emulator running K times
+faster than real time still sees PX4's required > 2 Hz offboard stream) and watches the autopilot's HEARTBEAT for
+link loss. The control thread sends commands and waits for their acknowledgements.
+
+Protocols (mavlink.io): heartbeat/connection, command protocol (COMMAND_LONG -> COMMAND_ACK with retries and the
+``confirmation`` counter), message intervals (MAV_CMD_SET_MESSAGE_INTERVAL, else the deprecated
+REQUEST_DATA_STREAM), offboard control (SET_POSITION_TARGET_GLOBAL_INT / _LOCAL_NED with
+POSITION_TARGET_TYPEMASK), the mission protocol (MISSION_COUNT / MISSION_REQUEST_INT / MISSION_ITEM_INT /
+MISSION_ACK, both directions). Mode numbers are pymavlink's tables (``mavutil.mode_mapping_byname`` for
+ArduPilot, ``mavutil.px4_map`` for PX4 main/sub modes).
+
+Flavour differences handled here: ArduPilot flies targets in GUIDED, PX4 in OFFBOARD (entered only after the
+setpoint stream runs); MAV_CMD_NAV_TAKEOFF ``param7`` is metres above home on ArduPilot and metres above mean sea
+level on PX4; ArduPilot missions carry home at sequence 0.
+"""
+from .backend import MavlinkBackend
+from ._common import CommandNotConfirmed
+
+__all__ = ["MavlinkBackend", "CommandNotConfirmed"]

@@ -1,0 +1,114 @@
+"""The MAVLink vehicle backend: one class composed of one mixin per MAVLink concern (see the package docstring)."""
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections import deque
+from typing import Any, Literal
+
+import numpy as np
+
+from ...config import MavlinkConfig
+from ...models import GeoPoint
+from ..base import VehicleBackend
+from .action import ActionMixin
+from .command import CommandMixin
+from .link import LinkMixin
+from .mission import MissionMixin
+from .offboard import OffboardMixin
+from .telemetry import TelemetryMixin
+from ._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
+
+
+class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ActionMixin, OffboardMixin, MissionMixin,
+                     VehicleBackend):
+    """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
+
+    ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
+    until a timestamped message arrives; while the link is lost it runs on from the last sample at the measured
+    vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
+    home until the vehicle reports one). Besides the :class:`VehicleBackend` contract it offers
+    :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
+    :meth:`set_mode` and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
+    :attr:`gps_fix_type`, :attr:`command_rtt_ms` (acknowledged command round trips, wall milliseconds).
+    Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
+    (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
+    DEBUG).
+
+    Raises :class:`BackendError` (connection, protocol timeouts), :class:`CommandRefused` (MAV_RESULT /
+    MAV_MISSION_RESULT name and the autopilot's latest STATUSTEXT), :class:`CommandNotConfirmed` (a mode change or
+    arming acknowledged but never shown by the HEARTBEAT) and :class:`LinkLost` (no HEARTBEAT for
+    ``heartbeat_timeout_s``: commands fail at once instead of blocking).
+    """
+
+    kind = "mavlink"
+    clock = "vehicle"
+
+    def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
+        super().__init__(cfg.id, cfg.home)
+        self.cfg: MavlinkConfig = cfg.mavlink or MavlinkConfig()
+        self.config_home: GeoPoint = cfg.home
+        self.autopilot: Literal["ardupilot", "px4"] | None = None
+        self.vehicle_type: str = ""
+        self.command_rtt_ms: list[float] = []
+        #: every message the receive path saw, unknown and malformed ones included
+        self.messages_received = 0
+        self._conn: Any = None
+        self._sysid = self._compid = 0
+        self._lock = threading.RLock()
+        self._send_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._io: threading.Thread | None = None
+        self._io_error: BaseException | None = None
+        self._events: deque[dict[str, Any]] = deque(maxlen=2000)
+        self._acks: queue.Queue = queue.Queue()
+        self._mission_q: queue.Queue = queue.Queue()
+        self._mission_active = False
+        self._recent: deque[tuple] = deque(maxlen=32)  # (sys, comp, seq, msgid, crc) for duplicate packets
+        self._texts: deque[tuple[float, int, str]] = deque(maxlen=50)
+        #: long STATUSTEXTs being reassembled: (component, id) -> {"t": first chunk, "severity", "parts": {seq: text}}
+        self._chunks: dict[tuple[int, int], dict[str, Any]] = {}
+        self._ap_modes: dict[str, int] = {}
+        # state (guarded by _lock)
+        self._pos = np.zeros(3)
+        self._vel = np.zeros(3)
+        self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
+        self._geo: GeoPoint | None = None
+        self._rel_alt = 0.0
+        self._has_global = False
+        self._local_ned: tuple[float, ...] | None = None
+        self._local_wall = 0.0
+        self._armed = False
+        self._mode = ""
+        self._system_status = 0
+        self._landed_state = 0
+        self._landed_wall = 0.0
+        self._battery: float | None = None
+        self._battery_v = 0.0
+        self._gps_fix = -1
+        self._sensors: tuple[int, int, int] | None = None
+        self._home_received = False
+        self._mission_seq = -1
+        self._last_reached: tuple[int, float] = (-1, 0.0)
+        self._link_ok = False
+        self._last_hb = 0.0
+        self._wall0 = time.monotonic()
+        self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
+        self._boot_last = 0
+        self._boot_wall = 0.0  # wall (monotonic) time of the latest time_boot_ms sample
+        self._t_connect = 0.0
+        self._ratio = 1.0
+        self._clock_samples: deque[tuple[float, int]] = deque()
+        self._t_max = 0.0
+        # outgoing
+        self._setpoint: tuple | None = None
+        self._sp_sent = 0
+        self._sp_next = 0.0
+        self._hb_next = 0.0
+        self._speed_cmd: float | None = None
+        self._stream_legacy = False
+        self._ever_linked = False
+        self._resume_streams = False
+        self._att_wall = 0.0
+

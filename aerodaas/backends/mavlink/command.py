@@ -1,0 +1,149 @@
+"""The MAVLink command protocol (COMMAND_LONG -> COMMAND_ACK, retries, IN_PROGRESS, TEMPORARILY_REJECTED) and flight
+mode changes confirmed by the HEARTBEAT."""
+from __future__ import annotations
+
+import queue
+import time
+from typing import Any, Callable
+
+from pymavlink import mavutil
+
+from ..base import BackendError, CommandRefused, LinkLost
+from ._common import M, _enum_name, CommandNotConfirmed, _REJECTED_BACKOFF_S, _STATUSTEXT_FLUSH_S
+
+
+class CommandMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+
+    def _status_text_since(self, since: float, wait_s: float = 0.3) -> str:
+        """The autopilot's latest STATUSTEXT sent since ``since`` (waiting up to ``wait_s`` for one, and up to
+        :data:`_STATUSTEXT_FLUSH_S` longer while a chunked one begun since then is incomplete), else the latest of
+        the 2 s before."""
+        end = time.monotonic() + wait_s
+        while True:
+            texts = [t for t in list(self._texts) if t[0] >= since]
+            pending = any(b["t"] >= since for b in list(self._chunks.values()))
+            if (texts and not pending) or time.monotonic() >= end + (_STATUSTEXT_FLUSH_S if pending else 0.0):
+                break
+            time.sleep(0.01)
+        if not texts:
+            texts = [t for t in list(self._texts) if t[0] >= since - 2.0]
+        return texts[-1][2] if texts else ""
+
+    def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
+                     timeout_s: float | None = None) -> None:
+        """Send COMMAND_LONG ``command`` (MAV_CMD number) with up to seven ``params`` and wait for its COMMAND_ACK
+        (MAVLink command protocol). ``name`` is used in errors.
+
+        Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds for the ACK; without one the
+        command is re-sent, up to ``retries`` (default ``command_retries``) times, with the ``confirmation``
+        counter raised. MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try
+        too: re-sent after min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs; progress
+        ACKs follow) the command is not sent again (MAVLink command protocol): its final ACK is awaited until the
+        overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send, which bounds every case.
+
+        Raises :class:`CommandRefused` (MAV_RESULT name, the autopilot's STATUSTEXT) for any final result but
+        ACCEPTED, and for TEMPORARILY_REJECTED when the tries are used up; :class:`LinkLost` when the link is or
+        goes down; :class:`BackendError` when no ACK comes, or the command is still IN_PROGRESS at the overall
+        deadline."""
+        self._check_link(name)
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        retries = self.cfg.command_retries if retries is None else retries
+        timeout = self.cfg.command_timeout_s if timeout_s is None else timeout_s
+        while True:  # drop acknowledgements nobody waited for
+            try:
+                self._acks.get_nowait()
+            except queue.Empty:
+                break
+        started = time.monotonic()
+        overall = started + (retries + 1) * timeout
+        last: Any = None  # the latest non-final answer: IN_PROGRESS or TEMPORARILY_REJECTED
+        for attempt in range(retries + 1):
+            if time.monotonic() >= overall:
+                break
+            sent = time.monotonic()
+            self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
+            deadline = min(sent + timeout, overall)
+            while True:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                try:
+                    _, ack = self._acks.get(timeout=min(remaining, 0.05))
+                except queue.Empty:
+                    if not self._link_ok:
+                        raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
+                    continue
+                if ack.command != command:
+                    continue
+                if ack.result == M.MAV_RESULT_ACCEPTED:
+                    self.command_rtt_ms.append((time.monotonic() - sent) * 1000.0)
+                    return
+                if ack.result == M.MAV_RESULT_IN_PROGRESS:  # it runs: wait for the final ACK, never re-send
+                    last = ack
+                    deadline = overall
+                    continue
+                if ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
+                    last = ack
+                    if attempt == retries:
+                        break  # no try left to wait for
+                    deadline = min(deadline, time.monotonic() + min(timeout, _REJECTED_BACKOFF_S))
+                    continue
+                raise CommandRefused(self.robot_id, name, _enum_name("MAV_RESULT", ack.result),
+                                     self._status_text_since(started))
+            if last is not None and last.result == M.MAV_RESULT_IN_PROGRESS:
+                break
+        if not self._link_ok:
+            raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
+        if last is not None and last.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
+            raise CommandRefused(self.robot_id, name, "MAV_RESULT_TEMPORARILY_REJECTED",
+                                 self._status_text_since(started))
+        if last is not None:
+            progress = "" if last.progress in (0, 255) else f", progress {last.progress} %"
+            raise BackendError(f"robot {self.robot_id!r}: {name}: {_enum_name('MAV_CMD', command)} still "
+                               f"MAV_RESULT_IN_PROGRESS{progress} after {time.monotonic() - started:.1f} s (limit "
+                               f"{retries + 1} x {timeout:g} s)")
+        raise BackendError(f"robot {self.robot_id!r}: {name}: no COMMAND_ACK for {_enum_name('MAV_CMD', command)} "
+                           f"after {retries + 1} tries of {timeout:g} s")
+
+    # ------------------------------------------------------------------ modes
+    def set_mode(self, name: str, confirm_s: float | None = None) -> None:
+        """Switch to flight mode ``name`` (ArduPilot copter names ``GUIDED``, ``LAND``, ``RTL``, ``AUTO``,
+        ``LOITER``...; PX4 names as pymavlink's ``px4_map``: ``OFFBOARD``, ``TAKEOFF``, ``LOITER``, ``MISSION``,
+        ``RTL``, ``LAND``...) with MAV_CMD_DO_SET_MODE (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom main mode,
+        PX4 sub mode), then wait up to ``confirm_s`` wall seconds (default the larger of ``command_timeout_s`` and
+        ``heartbeat_timeout_s``) for a HEARTBEAT showing it. Raises ValueError for an unknown name,
+        CommandRefused / LinkLost / BackendError as :meth:`command_long`, :class:`CommandNotConfirmed` (naming the
+        mode asked for and the one the HEARTBEAT shows) when the vehicle acknowledged but never switched."""
+        name = name.upper()
+        sent = time.monotonic()
+        if self.autopilot == "px4":
+            if name not in mavutil.px4_map:
+                raise ValueError(f"mode {name!r} is not a PX4 mode; choose from {sorted(mavutil.px4_map)}")
+            _, main, sub = mavutil.px4_map[name]
+            self.command_long(f"set mode {name}", M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
+        else:
+            if name not in self._ap_modes:
+                raise ValueError(f"mode {name!r} is not an ArduPilot {self.vehicle_type} mode; choose from "
+                                 f"{sorted(self._ap_modes)}")
+            self.command_long(f"set mode {name}", M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                              self._ap_modes[name])
+        self._await_heartbeat(f"set mode {name}", lambda: self._mode == name, f"mode {name}", confirm_s, sent)
+
+    def _await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,
+                         sent: float) -> None:
+        """After ``command`` (sent at monotonic ``sent``) was accepted: wait until ``done()`` (the HEARTBEAT shows
+        ``expected``) for ``wait_s`` wall seconds (None: the larger of ``command_timeout_s`` and
+        ``heartbeat_timeout_s``: the autopilot's HEARTBEAT comes at least that often while the link is up).
+        Raises LinkLost or CommandNotConfirmed."""
+        wait = max(self.cfg.command_timeout_s, self.cfg.heartbeat_timeout_s) if wait_s is None else wait_s
+        started = time.monotonic()
+        while not done():
+            if not self._link_ok:
+                raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost before a HEARTBEAT showed {expected}")
+            if time.monotonic() - started >= wait:
+                observed = f"mode {self._mode or '(none)'}, {'armed' if self._armed else 'disarmed'}"
+                raise CommandNotConfirmed(self.robot_id, command, expected, observed, wait,
+                                          self._status_text_since(sent, wait_s=0.0))
+            time.sleep(0.005)
+

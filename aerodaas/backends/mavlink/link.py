@@ -1,0 +1,385 @@
+"""Link and heartbeat (MAVLink heartbeat/connection protocol): opening the pymavlink connection, finding and identifying the
+autopilot, the I/O thread (receive, de-duplicate, dispatch; our GCS HEARTBEAT at 1 Hz; link-loss watch), the vehicle clock
+from ``time_boot_ms`` and the telemetry stream requests (MAV_CMD_SET_MESSAGE_INTERVAL, else REQUEST_DATA_STREAM)."""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+from pymavlink import mavutil
+
+from ..base import BackendError, CommandRefused, LinkLost
+from ._common import M, _enum_name, _log_level, log, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+
+
+class LinkMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self, timeout_s: float | None = None) -> None:
+        """Open ``mavlink.connection``, wait for the autopilot's HEARTBEAT (GCS and peripheral heartbeats are
+        ignored), identify it, start the I/O thread, request the telemetry streams and HOME_POSITION, and wait
+        for the first SYS_STATUS. Raises :class:`BackendError` after ``timeout_s`` (default
+        ``connect_timeout_s``) seconds, naming the connection string; ValueError for a vehicle that is not a
+        multirotor or an autopilot that cannot be identified."""
+        timeout = self.cfg.connect_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout
+        where = f"robot {self.robot_id!r}: mavlink connection {self.cfg.connection!r}"
+        last_err: Exception | None = None
+        while self._conn is None:
+            try:
+                self._conn = mavutil.mavlink_connection(
+                    self.cfg.connection, baud=self.cfg.baud, source_system=self.cfg.source_system,
+                    source_component=self.cfg.source_component, dialect="ardupilotmega", autoreconnect=True,
+                    retries=0 if self.cfg.connection.startswith("tcp:") else 3)
+            except Exception as e:  # noqa: BLE001 - refused, no such device: retry until the deadline
+                last_err = e
+                if time.monotonic() > deadline:
+                    raise BackendError(f"{where}: cannot open it within {timeout:g} s: {e}") from None
+                time.sleep(0.2)
+        hb = None
+        next_hb = 0.0
+        while hb is None:
+            now = time.monotonic()
+            if now > deadline:
+                self.close()
+                raise BackendError(f"{where}: no autopilot HEARTBEAT within {timeout:g} s"
+                                   + (f" (last error: {last_err})" if last_err else ""))
+            if now >= next_hb:  # udpout: the vehicle learns our address from what we send
+                self._send_gcs_heartbeat()
+                next_hb = now + 1.0
+            try:
+                msg = self._conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+            except Exception as e:  # noqa: BLE001
+                last_err = e
+                time.sleep(0.05)
+                continue
+            if msg is not None and self._is_autopilot_heartbeat(msg):
+                hb = msg
+        self._identify(hb)
+        self._conn.target_system, self._conn.target_component = self._sysid, self._compid
+        self._on_heartbeat(hb, time.monotonic())
+        self._stop.clear()
+        self._io = threading.Thread(target=self._io_loop, name=f"mavlink-{self.robot_id}", daemon=True)
+        self._io.start()
+        self._request_streams()
+        self._request_home()
+        while True:
+            with self._lock:
+                ready = self._sensors is not None
+            if ready:
+                break
+            if time.monotonic() > deadline:
+                self.close()
+                raise BackendError(f"{where}: the autopilot sent HEARTBEAT but no SYS_STATUS within {timeout:g} s "
+                                   "(telemetry streams not configured?)")
+            time.sleep(0.01)
+        with self._lock:
+            self._t_connect = self._raw_t()
+            self._t_max = 0.0
+
+    def close(self) -> None:
+        """Stop the I/O thread and close the link (idempotent, never raises)."""
+        self._stop.set()
+        if self._io is not None and self._io is not threading.current_thread():
+            self._io.join(timeout=2)
+        self._io = None
+        if self._conn is not None:
+            try:
+                self._conn.close()
+            except Exception:  # noqa: BLE001
+                pass
+            self._conn = None
+
+    def _is_autopilot_heartbeat(self, msg: Any) -> bool:
+        if msg.get_srcSystem() == self.cfg.source_system and msg.get_srcComponent() == self.cfg.source_component:
+            return False
+        if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.type in _NOT_VEHICLES:
+            return False
+        return self.cfg.target_system is None or msg.get_srcSystem() == self.cfg.target_system
+
+    def _identify(self, hb: Any) -> None:
+        found = {M.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot", M.MAV_AUTOPILOT_PX4: "px4"}.get(hb.autopilot)
+        flavour = found if self.cfg.autopilot == "auto" else self.cfg.autopilot
+        self.vehicle_type = _enum_name("MAV_TYPE", hb.type)
+        if flavour is None:
+            self.close()
+            raise ValueError(f"robot {self.robot_id!r}: mavlink.autopilot is 'auto' but the HEARTBEAT says "
+                             f"{_enum_name('MAV_AUTOPILOT', hb.autopilot)}; set mavlink.autopilot to 'ardupilot' "
+                             "or 'px4'")
+        if hb.type not in _MULTIROTORS:
+            self.close()
+            raise ValueError(f"robot {self.robot_id!r}: the vehicle is a {self.vehicle_type}; the MAVLink backend "
+                             "flies multirotors only (mode numbers and guidance differ for planes and rovers)")
+        if found is not None and found != flavour:
+            self._event("autopilot_mismatch", configured=flavour, heartbeat=found)
+        self.autopilot = flavour
+        self._sysid, self._compid = hb.get_srcSystem(), hb.get_srcComponent()
+        if flavour == "ardupilot":
+            self._ap_modes = mavutil.mode_mapping_byname(hb.type) or dict(
+                (v, k) for k, v in mavutil.mode_mapping_acm.items())
+        self._event("connected", autopilot=flavour, vehicle_type=self.vehicle_type, system=self._sysid,
+                    component=self._compid)
+
+    # ------------------------------------------------------------------ I/O thread
+    def _io_loop(self) -> None:
+        conn = self._conn
+        while not self._stop.is_set():
+            try:
+                msg = conn.recv_msg()
+            except Exception:  # noqa: BLE001 - a broken packet or a socket hiccup: keep going
+                msg = None
+                time.sleep(0.01)
+            now = time.monotonic()
+            if msg is not None:
+                try:
+                    self._dispatch(msg, now)
+                except Exception as e:  # noqa: BLE001 - a malformed message must never stop telemetry
+                    self._event("receive_error", message=msg.get_type(), error=str(e))
+            try:
+                self._periodic(now)
+            except Exception as e:  # noqa: BLE001
+                self._io_error = e
+            if msg is None:
+                try:
+                    conn.select(0.005)
+                except Exception:  # noqa: BLE001
+                    time.sleep(0.005)
+
+    def _dispatch(self, msg: Any, now: float) -> None:
+        mtype = msg.get_type()
+        self.messages_received += 1
+        if mtype == "BAD_DATA" or mtype.startswith("UNKNOWN_"):
+            return
+        key = (msg.get_srcSystem(), msg.get_srcComponent(), msg.get_seq(), msg.get_msgId(), getattr(msg, "_crc", 0))
+        if key in self._recent:
+            return  # the same packet again (captured on two links)
+        self._recent.append(key)
+        src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
+        if self._sysid and src_sys != self._sysid:
+            return
+        if mtype == "HEARTBEAT":
+            if src_comp == self._compid and self._is_autopilot_heartbeat(msg):
+                self._on_heartbeat(msg, now)
+            return
+        if mtype == "STATUSTEXT":
+            self._on_statustext(msg, now)
+            return
+        if self._compid and src_comp != self._compid:
+            return
+        if mtype == "COMMAND_ACK":
+            if getattr(msg, "target_system", 0) in (0, self.cfg.source_system):
+                self._acks.put((now, msg))
+            return
+        if mtype in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT", "MISSION_ITEM_INT",
+                     "MISSION_ITEM"):
+            if self._mission_active and getattr(msg, "target_system", 0) in (0, self.cfg.source_system):
+                self._mission_q.put(msg)
+            return
+        handler = getattr(self, f"_on_{mtype.lower()}", None)
+        if handler is not None:
+            with self._lock:
+                handler(msg)
+
+    def _on_statustext(self, msg: Any, now: float) -> None:
+        """STATUSTEXT (common.xml): ``id`` 0 is a complete text; a non-zero ``id`` marks chunks of one long text
+        (MAVLink 2 extensions ``id``, ``chunk_seq`` from 0), ended by a chunk shorter than the 50-byte field
+        (pymavlink cuts the text at its NUL) or, if that one is lost, by :data:`_STATUSTEXT_FLUSH_S`. Chunks are
+        joined as bytes and decoded (UTF-8) once whole, so a character split across two chunks survives."""
+        raw = msg.text if isinstance(msg.text, bytes) else str(msg.text).encode("utf-8", errors="replace")
+        raw = raw.split(b"\x00", 1)[0]
+        sid = getattr(msg, "id", 0) or 0
+        if not sid:
+            self._emit_text(now, msg.severity, raw.decode("utf-8", errors="replace"))
+            return
+        key = (msg.get_srcComponent(), sid)
+        buf = self._chunks.get(key)
+        seq = getattr(msg, "chunk_seq", 0) or 0
+        if buf is not None and seq in buf["parts"]:  # the id came round again: the old text lost its last chunk
+            self._flush_text(key)
+            buf = None
+        if buf is None:
+            buf = self._chunks[key] = {"t": now, "severity": msg.severity, "parts": {}}
+        buf["parts"][seq] = raw
+        if len(raw) < _STATUSTEXT_LEN:
+            self._flush_text(key)
+
+    def _flush_text(self, key: tuple[int, int]) -> None:
+        buf = self._chunks.pop(key, None)
+        if buf is not None:
+            whole = b"".join(buf["parts"][k] for k in sorted(buf["parts"]))
+            self._emit_text(buf["t"], buf["severity"], whole.decode("utf-8", errors="replace"))
+
+    def _emit_text(self, t: float, severity: int, text: str) -> None:
+        """One whole status text: kept for :class:`CommandRefused`, a ``status_text`` event and a log line."""
+        text = text.strip()
+        self._texts.append((t, severity, text))
+        self._event("status_text", severity=_enum_name("MAV_SEVERITY", severity), text=text)
+        log.log(_log_level(severity), "%s: %s", self.robot_id, text)
+
+    def _on_heartbeat(self, msg: Any, now: float) -> None:
+        with self._lock:
+            self._last_hb = now
+            if not self._link_ok:
+                self._link_ok = True
+                if self._ever_linked:
+                    self._event("link_regained")
+                    self._resume_streams = True
+                self._ever_linked = True
+            armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+            if armed != self._armed:
+                self._armed = armed
+                self._event("armed" if armed else "disarmed")
+            mode = mavutil.mode_string_v10(msg)
+            if mode != self._mode:
+                self._mode = mode
+                self._event("mode", name=mode)
+            self._system_status = msg.system_status
+
+    def _on_boot_ms(self, ms: int) -> None:
+        now = time.monotonic()
+        if self._boot_ref is None or ms + 5000 < self._boot_last:  # first sample, or the autopilot rebooted
+            if self._boot_ref is not None:
+                self._event("vehicle_rebooted")
+            self._boot_ref = (ms, self._raw_t())
+            self._clock_samples.clear()
+        self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
+        self._boot_wall = now
+        # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
+        samples = self._clock_samples
+        samples.append((now, ms))
+        while len(samples) > 2 and now - samples[0][0] > 5.0:
+            samples.popleft()
+        span = now - samples[0][0]
+        if span >= 0.2:
+            r = (ms - samples[0][1]) / 1000.0 / span
+            if 0.05 < r < 200:
+                self._ratio = r
+
+    def _raw_t(self) -> float:
+        if self._boot_ref is None:
+            return time.monotonic() - self._wall0
+        return self._boot_ref[1] + (self._boot_last - self._boot_ref[0]) / 1000.0
+
+    def _periodic(self, now: float) -> None:
+        for key, buf in list(self._chunks.items()):
+            if now - buf["t"] > _STATUSTEXT_FLUSH_S:
+                self._flush_text(key)
+        if now >= self._hb_next:
+            self._hb_next = now + 1.0 / max(1.0, min(self._ratio, 20.0))
+            self._send_gcs_heartbeat()
+        with self._lock:
+            if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s:
+                self._link_ok = False
+                self._event("link_lost", silent_s=round(now - self._last_hb, 3))
+            resume = self._resume_streams
+            self._resume_streams = False
+            sp = self._setpoint if self._link_ok else None
+        if resume:
+            self._request_streams(wait=False)
+        if sp is not None and now >= self._sp_next:
+            rate = self.cfg.setpoint_rate_hz if sp[0] == "vel" or self.autopilot == "px4" else 1.0
+            self._sp_next = now + max(0.004, 1.0 / (rate * self._ratio))
+            self._send_setpoint(sp)
+
+    # ------------------------------------------------------------------ sending
+    def _send(self, fn: Callable[[Any], None]) -> None:
+        conn = self._conn
+        if conn is None:
+            raise LinkLost(f"robot {self.robot_id!r}: not connected")
+        with self._send_lock:
+            try:
+                fn(conn.mav)
+            except OSError as e:
+                raise LinkLost(f"robot {self.robot_id!r}: send failed: {e}") from None
+
+    def _send_gcs_heartbeat(self) -> None:
+        try:
+            self._send(lambda mav: mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                      M.MAV_STATE_ACTIVE))
+        except (LinkLost, Exception):  # noqa: BLE001 - the link may be down; the heartbeat watch reports it
+            pass
+
+    def _boot_ms_out(self) -> int:
+        return int((time.monotonic() - self._wall0) * 1000) & 0xFFFFFFFF
+
+    def _check_link(self, command: str) -> None:
+        if self._conn is None:
+            raise BackendError(f"robot {self.robot_id!r}: {command}: not connected (call connect() first)")
+        if self._io_error is not None:
+            raise BackendError(f"robot {self.robot_id!r}: {command}: the MAVLink I/O thread failed: {self._io_error}")
+        if not self._link_ok:
+            raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost (no HEARTBEAT for more than "
+                           f"{self.cfg.heartbeat_timeout_s:g} s)")
+
+    # ------------------------------------------------------------------ streams and home
+    def _request_streams(self, wait: bool = True) -> None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL for each telemetry message (rates in the vehicle's time); on UNSUPPORTED or
+        no acknowledgement fall back to REQUEST_DATA_STREAM. ``wait=False`` (from the I/O thread, after the link
+        returns) re-sends the method chosen at connect without waiting for acknowledgements."""
+        rate = self.cfg.stream_rate_hz
+        if not wait:
+            for msg_id, hz in _TELEMETRY if not self._stream_legacy else ():
+                self._send(lambda mav, m=msg_id, h=hz: mav.command_long_send(
+                    self._sysid, self._compid, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m, 1e6 / (h or rate), 0, 0, 0, 0, 0))
+            if self._stream_legacy:
+                self._legacy_streams(rate)
+            return
+        for msg_id, hz in _TELEMETRY:
+            name = f"SET_MESSAGE_INTERVAL for message {msg_id}"
+            try:
+                self.command_long(name, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (hz or rate), retries=1)
+            except CommandRefused as e:
+                if e.result == "MAV_RESULT_UNSUPPORTED":
+                    self._stream_legacy = True
+                    break
+                self._event("stream_refused", message_id=msg_id, result=e.result)
+            except LinkLost:
+                raise
+            except BackendError:
+                self._stream_legacy = True
+                break
+        if self._stream_legacy:
+            self._event("stream_fallback", method="REQUEST_DATA_STREAM")
+            self._legacy_streams(rate)
+
+    def _legacy_streams(self, rate: float) -> None:
+        for _ in range(3):  # no acknowledgement exists for REQUEST_DATA_STREAM
+            for stream, hz in _LEGACY_STREAMS:
+                self._send(lambda mav, s=stream, h=hz: mav.request_data_stream_send(
+                    self._sysid, self._compid, s, max(1, int(round(h or rate))), 1))
+
+    def _request_home(self) -> None:
+        try:
+            self.command_long("request HOME_POSITION", M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION,
+                              retries=1)
+        except CommandRefused as e:
+            if e.result == "MAV_RESULT_UNSUPPORTED":
+                try:
+                    self.command_long("request HOME_POSITION", M.MAV_CMD_GET_HOME_POSITION, retries=1)
+                except BackendError:
+                    pass
+            # FAILED / DENIED: no home yet; it is sent when it is set
+        except LinkLost:
+            raise
+        except BackendError:
+            pass
+
+    # ------------------------------------------------------------------ VehicleBackend: state
+    @property
+    def t(self) -> float:
+        with self._lock:
+            t = self._raw_t() - self._t_connect
+            if not self._link_ok and self._boot_ref is not None:
+                # nothing timestamped arrives while the link is down: the vehicle's clock goes on at its last rate
+                t += (time.monotonic() - self._boot_wall) * self._ratio
+            t = max(t, self._t_max)
+            self._t_max = t
+            return t
+
+    def step(self, dt: float) -> None:
+        """Telemetry arrives on the I/O thread; this only reports that thread's failure (BackendError)."""
+        if self._io_error is not None:
+            raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self._io_error}")
+

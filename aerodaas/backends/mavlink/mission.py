@@ -1,0 +1,242 @@
+"""The mission protocol (mavlink.io mission microservice): upload, download, clear and start, in the INT form."""
+from __future__ import annotations
+
+import queue
+import time
+from typing import Any, Callable, Literal
+
+
+from ...missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
+from ...models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
+from ..base import BackendError, CommandRefused
+from ._common import M, _enum_name, _f32, _GLOBAL_FRAMES
+
+
+class MissionMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+
+    # ------------------------------------------------------------------ missions
+    def _mission_items(self, mission: Any, takeoff_altitude: float | None, final_action: str) -> list[MissionItem]:
+        if isinstance(mission, MissionPlan):
+            items = expand_items(mission)
+        else:
+            if isinstance(mission, AeroNavigation):
+                nav = mission
+            else:
+                seq = list(mission)
+                if seq and all(isinstance(i, MissionItem) for i in seq):
+                    items = seq
+                    nav = None
+                elif all(isinstance(i, (Waypoint, ActionCommand)) for i in seq):
+                    nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, seq, SchedulingType.ORDERED)
+                else:
+                    bad = next(i for i in seq if not isinstance(i, (Waypoint, ActionCommand, MissionItem)))
+                    raise TypeError(f"upload_mission: items must all be Waypoint/ActionCommand or all MissionItem, "
+                                    f"got {type(bad).__name__}")
+            if nav is not None:
+                items = navigation_to_plan(nav, self.home, final_action, takeoff_altitude=takeoff_altitude).items
+        for it in items:
+            if it.is_complex:
+                raise ValueError(f"upload_mission: {it.describe()} must be expanded first (pass the MissionPlan)")
+        return items
+
+    def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
+                       final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
+        """Upload a mission with the MISSION_ITEM_INT protocol (MISSION_COUNT, answering each MISSION_REQUEST_INT
+        / MISSION_REQUEST, until MISSION_ACK).
+
+        ``mission``: a list of :class:`~aerodaas.models.Waypoint` (ENU relative to :attr:`home`, or absolute) and
+        optionally a final land/rtl :class:`~aerodaas.models.ActionCommand`, an :class:`AeroNavigation`, a
+        :class:`~aerodaas.missionfile.MissionPlan` (e.g. an imported ``.plan``; ComplexItems expanded) or a list
+        of :class:`~aerodaas.missionfile.MissionItem`. Waypoints become MAV_CMD_NAV_WAYPOINT items
+        (``navigation_to_plan``: ``takeoff_altitude`` m prepends a NAV_TAKEOFF, ``final_action`` appends
+        NAV_LAND / NAV_RETURN_TO_LAUNCH). ArduPilot gets its home placeholder at sequence 0.
+
+        Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
+        which :meth:`download_mission` returns unchanged. Raises CommandRefused (MAV_MISSION_RESULT name) when the
+        autopilot rejects an item, BackendError after ``command_retries`` timeouts, LinkLost, TypeError/ValueError
+        for bad input (nothing is sent then)."""
+        items = self._mission_items(mission, takeoff_altitude, final_action)
+        wire: list[tuple] = []
+        sent_items: list[MissionItem] = []
+        for k, it in enumerate(items):
+            p = [_f32(v) for v in it.params[:4]]
+            x, y = it.params[4], it.params[5]
+            if it.frame in _GLOBAL_FRAMES:
+                xi, yi = int(round((x or 0.0) * 1e7)), int(round((y or 0.0) * 1e7))
+                xs, ys = xi / 1e7, yi / 1e7
+            else:
+                xi, yi = int(round(x or 0.0)), int(round(y or 0.0))
+                xs, ys = float(xi), float(yi)
+            z = _f32(it.params[6] if it.params[6] is not None else 0.0)
+            wire.append((it.frame, it.command, 1 if it.autocontinue else 0,
+                         *[float("nan") if v is None else v for v in p], xi, yi, z))
+            sent_items.append(MissionItem(seq=k + 1, command=it.command, frame=it.frame, params=[*p, xs, ys, z],
+                                          autocontinue=it.autocontinue))
+        if self.autopilot == "ardupilot":
+            h = self.home
+            wire.insert(0, (0, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, 0.0, int(round(h.lat * 1e7)),
+                            int(round(h.lon * 1e7)), float(h.alt)))
+        self._check_link("mission upload")
+        n = len(wire)
+
+        def send_item(seq: int, as_int: bool) -> None:
+            frame, cmd, auto, p1, p2, p3, p4, xi, yi, z = wire[seq]
+            if as_int:
+                self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, auto,
+                                                                 p1, p2, p3, p4, xi, yi, z, 0))
+            else:
+                k = 1e-7 if frame in _GLOBAL_FRAMES else 1.0
+                self._send(lambda mav: mav.mission_item_send(self._sysid, self._compid, seq, frame, cmd, 0, auto,
+                                                             p1, p2, p3, p4, xi * k, yi * k, z, 0))
+
+        def resend(last: Any) -> None:
+            if last is None:
+                self._send(lambda mav: mav.mission_count_send(self._sysid, self._compid, n, 0))
+            else:
+                send_item(*last)
+
+        def on_msg(msg: Any, state: dict) -> bool:
+            t = msg.get_type()
+            if t in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and getattr(msg, "mission_type", 0) == 0:
+                if 0 <= msg.seq < n:
+                    state["last"] = (msg.seq, t == "MISSION_REQUEST_INT")
+                    state["max"] = max(state["max"], msg.seq)
+                    send_item(*state["last"])
+                return False
+            if t == "MISSION_ACK" and getattr(msg, "mission_type", 0) == 0:
+                if msg.type != M.MAV_MISSION_ACCEPTED:
+                    raise CommandRefused(self.robot_id, "mission upload", _enum_name("MAV_MISSION_RESULT", msg.type),
+                                         self._status_text_since(state["start"]))
+                return state["max"] == n - 1 or n == 0
+            return False
+
+        self._transaction("mission upload", lambda: resend(None), resend, on_msg)
+        self._event("mission_uploaded", count=len(sent_items))
+        return sent_items
+
+    def _transaction(self, name: str, begin: Callable[[], None], resend: Callable[[Any], None],
+                     on_msg: Callable[[Any, dict], bool]) -> dict:
+        """Run one mission-protocol exchange: ``begin()``, then feed every mission message to ``on_msg`` until it
+        returns True; after ``command_timeout_s`` without progress ``resend(state["last"])`` up to
+        ``command_retries`` times (only a message that advances the exchange, i.e. changes ``state``, resets the
+        count, so a vehicle answering with something we do not use cannot keep it going for ever)."""
+        while True:
+            try:
+                self._mission_q.get_nowait()
+            except queue.Empty:
+                break
+        state: dict[str, Any] = {"last": None, "max": -1, "start": time.monotonic()}
+        self._mission_active = True
+        try:
+            begin()
+            retries = 0
+            deadline = time.monotonic() + self.cfg.command_timeout_s
+            while True:
+                remaining = deadline - time.monotonic()
+                msg = None
+                if remaining > 0:
+                    try:
+                        msg = self._mission_q.get(timeout=remaining)
+                    except queue.Empty:
+                        pass
+                if msg is None:
+                    self._check_link(name)
+                    retries += 1
+                    if retries > self.cfg.command_retries:
+                        raise BackendError(f"robot {self.robot_id!r}: {name}: no usable answer after {retries} "
+                                           f"tries of {self.cfg.command_timeout_s:g} s")
+                    resend(state["last"])
+                    deadline = time.monotonic() + self.cfg.command_timeout_s
+                    continue
+                before = (state["last"], state["max"], state.get("count"))
+                if on_msg(msg, state):
+                    return state
+                if (state["last"], state["max"], state.get("count")) != before:
+                    retries = 0
+                    deadline = time.monotonic() + self.cfg.command_timeout_s
+        finally:
+            self._mission_active = False
+
+    def download_mission(self) -> MissionPlan:
+        """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
+        item, answered with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM, whose float latitude/longitude
+        degrees are rounded to the same 1e-7 degree grid; MISSION_ACK). Returns a
+        :class:`~aerodaas.missionfile.MissionPlan` with ``home`` = the vehicle's home and ``items`` numbered from 1
+        (ArduPilot's home item at sequence 0 is left out); turn it into waypoints with
+        :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
+        with an error)."""
+        self._check_link("mission download")
+        got: dict[int, Any] = {}
+
+        def begin() -> None:
+            self._send(lambda mav: mav.mission_request_list_send(self._sysid, self._compid, 0))
+
+        def request(seq: int) -> None:
+            self._send(lambda mav: mav.mission_request_int_send(self._sysid, self._compid, seq, 0))
+
+        def resend(last: Any) -> None:
+            begin() if last is None else request(last)
+
+        def on_msg(msg: Any, state: dict) -> bool:
+            t = msg.get_type()
+            if t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0 and "count" not in state:
+                state["count"] = msg.count
+                if msg.count == 0:
+                    return True
+                state["last"] = 0
+                request(0)
+            elif t in ("MISSION_ITEM_INT", "MISSION_ITEM") and "count" in state and msg.seq == state["last"]:
+                got[msg.seq] = msg
+                if msg.seq + 1 >= state["count"]:
+                    return True
+                state["last"] = msg.seq + 1
+                request(msg.seq + 1)
+            elif t == "MISSION_ACK" and msg.type != M.MAV_MISSION_ACCEPTED:
+                raise CommandRefused(self.robot_id, "mission download", _enum_name("MAV_MISSION_RESULT", msg.type),
+                                     self._status_text_since(state["start"]))
+            return False
+
+        self._transaction("mission download", begin, resend, on_msg)
+        self._send(lambda mav: mav.mission_ack_send(self._sysid, self._compid, M.MAV_MISSION_ACCEPTED, 0))
+        items = []
+        first = 1 if self.autopilot == "ardupilot" else 0
+        for seq in sorted(got):
+            if seq < first:
+                continue
+            m = got[seq]
+            if m.frame in _GLOBAL_FRAMES and m.get_type() == "MISSION_ITEM":  # float degrees (float32 on the wire)
+                x, y = round(m.x * 1e7) / 1e7, round(m.y * 1e7) / 1e7
+            elif m.frame in _GLOBAL_FRAMES:
+                x, y = m.x / 1e7, m.y / 1e7
+            else:
+                x, y = float(m.x), float(m.y)
+            items.append(MissionItem(seq=seq + 1 - first, command=m.command, frame=m.frame,
+                                     params=[_f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4), x, y,
+                                             _f32(m.z)], autocontinue=bool(m.autocontinue)))
+        return MissionPlan(home=self.home, items=items)
+
+    def clear_mission(self) -> None:
+        """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
+        self._check_link("mission clear")
+
+        def on_msg(msg: Any, state: dict) -> bool:
+            if msg.get_type() == "MISSION_ACK":
+                if msg.type != M.MAV_MISSION_ACCEPTED:
+                    raise CommandRefused(self.robot_id, "mission clear", _enum_name("MAV_MISSION_RESULT", msg.type))
+                return True
+            return False
+
+        clear = lambda *_: self._send(lambda mav: mav.mission_clear_all_send(self._sysid, self._compid, 0))  # noqa: E731
+        self._transaction("mission clear", clear, clear, on_msg)
+
+    def start_mission(self) -> None:
+        """Fly the uploaded mission: in the air switch to AUTO (ArduPilot) / MISSION (PX4); on the ground (armed)
+        MAV_CMD_MISSION_START, which starts it from the first item (ArduPilot needs a NAV_TAKEOFF first; PX4
+        takes off by itself). Progress arrives as ``mission_current`` / ``mission_item_reached`` events."""
+        self._require_navigable("start_mission")
+        self._stop_setpoints()
+        if self.in_air:
+            self.set_mode("MISSION" if self.autopilot == "px4" else "AUTO")
+        else:
+            self.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
