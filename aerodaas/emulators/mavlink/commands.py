@@ -87,15 +87,20 @@ class CommandMixin:
         if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             return self._request_mode("AUTO.RTL" if self.px4 else "RTL")
         if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
-            if p[1] == -2:
+            if self.deny_default_speed:
+                # ArduCopter/GCS_MAVLink_Copter.cpp handle_MAV_CMD_DO_CHANGE_SPEED: a speed that is not positive
+                # (-1 "no change", -2 "default") is DENIED; climb/descent speeds (param1 2/3) change those rates
+                if not p[1] > 0 or int(p[0]) not in (0, 1, 2, 3):
+                    return M.MAV_RESULT_DENIED
+                if int(p[0]) in (0, 1):
+                    self.speed = float(p[1])
+            elif p[1] == -2:  # PX4 Navigator: -2 restores the default cruise speed
                 self.speed = None
             elif p[1] > 0:
                 self.speed = float(p[1])
             elif p[1] != -1:
                 return M.MAV_RESULT_DENIED
-            sp = self.veh.setpoint
-            if sp.mode == "position":  # the leg being flown changes speed too
-                sp.speed = None if self.px4 and self.mode == "OFFBOARD" else self.speed
+            self._apply_speed_params()  # the leg being flown changes speed too
             return M.MAV_RESULT_ACCEPTED
         if cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
             if not self.message_interval_supported:

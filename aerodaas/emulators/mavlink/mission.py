@@ -69,7 +69,10 @@ class MissionMixin:
         tr = self._transfer
         seq = len(tr.items)
         tr.deadline = self.t + _PROTOCOL_TIMEOUT_S
-        request = self._enc.mission_request_int_encode if self.mission_int else self._enc.mission_request_encode
+        # ArduPilot asks with the float MISSION_REQUEST and takes either item form back (libraries/GCS_MAVLink/
+        # MissionItemProtocol.cpp, as the trace shows); PX4 asks with MISSION_REQUEST_INT
+        as_int = self.mission_int if self.mission_int is not None else self.px4
+        request = self._enc.mission_request_int_encode if as_int else self._enc.mission_request_encode
         self._send(request(tr.sysid, tr.compid, seq, 0), tr.link)
 
     def _check_item(self, msg: Any) -> int:
@@ -93,6 +96,9 @@ class MissionMixin:
             if msg.seq > expected:  # out of order: ask again for the one we need
                 self._request_next()
             return
+        if not is_int and not self.px4 and self.mission_int is not False and not self._mission_item_warned:
+            self._mission_item_warned = True  # MissionItemProtocol::send_mission_item_warning, once per boot
+            self._text(M.MAV_SEVERITY_WARNING, "got MISSION_ITEM; GCS should send MISSION_ITEM_INT")
         if not is_int:  # MISSION_ITEM (float): store as the INT form
             x, y = msg.x, msg.y
             if msg.frame in _GLOBAL_FRAMES:
@@ -160,7 +166,7 @@ class MissionMixin:
 
     def _on_mission_request_int(self, link: _Link, msg: Any) -> None:
         if getattr(msg, "mission_type", 0) == M.MAV_MISSION_TYPE_MISSION:
-            self._send_item(link, msg, self.mission_int)  # older firmware answers with MISSION_ITEM
+            self._send_item(link, msg, self.mission_int is not False)  # older firmware answers with MISSION_ITEM
 
     def _on_mission_request(self, link: _Link, msg: Any) -> None:
         if getattr(msg, "mission_type", 0) == M.MAV_MISSION_TYPE_MISSION:

@@ -7,6 +7,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 
 
+from .flavour import PX4_REACHED_REPEATS
+
 M = mavlink
 
 
@@ -50,8 +52,9 @@ class MissionRunMixin:
             if it.command == M.MAV_CMD_DO_CHANGE_SPEED:
                 if it.param2 > 0:
                     self.speed = float(it.param2)
-                elif it.param2 == -2:
+                elif it.param2 == -2 and self.px4:  # ArduCopter's do_change_speed ignores speeds <= 0
                     self.speed = None
+                self._apply_speed_params()
                 self._advance()
                 continue
             break
@@ -66,21 +69,28 @@ class MissionRunMixin:
                 lat, lon = g.lat, g.lon
             else:
                 lat, lon = it.x / 1e7, it.y / 1e7
-            target = self._global_to_enu(lat, lon, it.z, it.frame)
-            if not self.item_started:
+            if not self.item_started:  # the target is fixed when the item starts (relative to home then)
                 self.item_started = True
-                self._goto_enu(target)
-            radius = self.params["NAV_ACC_RAD"] if self.px4 else self.params["WPNAV_RADIUS"] / 100.0
-            if self.px4 and cmd == M.MAV_CMD_NAV_WAYPOINT and it.param2 > 0:
-                radius = it.param2
+                self._item_target = self._global_to_enu(lat, lon, it.z, it.frame)
+                self._goto_enu(self._item_target)
+                if not self.px4:  # AP_Mission start_command: "Mission: <index> <type>"
+                    self._text(M.MAV_SEVERITY_INFO, f"Mission: {self.mission_seq} WP")
+            target = self._item_target
+            if self.px4:  # navigator: within the acceptance radius (NAV_ACC_RAD or the item's param2)
+                radius = it.param2 if cmd == M.MAV_CMD_NAV_WAYPOINT and it.param2 > 0 else self.params["NAV_ACC_RAD"]
+            else:  # AC_WPNav::reached_wp_destination: the S-curve has ended at the point (and within WPNAV_RADIUS)
+                radius = min(0.3, self.params["WPNAV_RADIUS"] / 100.0)
             d_h = math.hypot(*(target[:2] - s.position[:2]))
             d_v = abs(target[2] - s.position[2])
             if self.item_reached_at is None and d_h <= radius and d_v <= 1.0:
-                self.item_reached_at = self.t
-                self._reached(self.mission_seq)
+                self.item_reached_at = self.t  # arrival: the hold (param1, s) starts
             if self.item_reached_at is not None:
+                # both firmware send MISSION_ITEM_REACHED when the hold is over, then go on (ArduCopter/
+                # mode_auto.cpp ModeAuto::verify_nav_wp / verify_loiter_time; PX4 src/modules/navigator/
+                # mission_block.cpp is_mission_item_reached); LOITER_UNLIM is never reached
                 hold = it.param1 if cmd in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME) else math.inf
-                if self.t - self.item_reached_at >= hold:
+                if self.t - self.item_reached_at >= max(0.0, hold):
+                    self._reached(self.mission_seq)
                     self._advance()
         elif cmd == M.MAV_CMD_NAV_TAKEOFF:
             alt = self._global_to_enu(self.origin.lat, self.origin.lon, it.z, it.frame)[2] - self.home_enu[2]
@@ -114,8 +124,22 @@ class MissionRunMixin:
             self._enter("AUTO.RTL" if self.px4 else "RTL")
 
     def _reached(self, seq: int) -> None:
+        """MISSION_ITEM_REACHED ``seq``: ArduPilot says "Reached command #N" with it; PX4 repeats it 10 times, once
+        a vehicle second, until another item is reached (src/modules/mavlink/mavlink_mission.cpp)."""
         self.reached_log.append(seq)
         self._send(self._enc.mission_item_reached_encode(seq))
+        if self.px4:
+            self._reached_repeat = (seq, PX4_REACHED_REPEATS, self.t + 1.0)
+        else:
+            self._text(M.MAV_SEVERITY_INFO, f"Reached command #{seq}")
+
+    def _repeat_reached(self) -> None:
+        if self._reached_repeat is None:
+            return
+        seq, left, due = self._reached_repeat
+        if self.t >= due:
+            self._send(self._enc.mission_item_reached_encode(seq))
+            self._reached_repeat = (seq, left - 1, self.t + 1.0) if left > 1 else None
 
     def _advance(self) -> None:
         self._set_current(self.mission_seq + 1)

@@ -6,6 +6,7 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from .flavour import AIRFRAME_MAX_SPEED
 from .constants import ARDUCOPTER_MODES, PX4_MODES, _AP_NEEDS_POSITION, _PX4_MANUAL, _PX4_NEEDS_POSITION
 
 
@@ -60,8 +61,11 @@ class ModeMixin:
                 self._text(M.MAV_SEVERITY_WARNING, "Flight mode change failed")
             return M.MAV_RESULT_FAILED if not self.px4 else M.MAV_RESULT_TEMPORARILY_REJECTED
         s = self.veh.state
-        needs_pos = _PX4_NEEDS_POSITION if self.px4 else _AP_NEEDS_POSITION
-        if name in needs_pos and self._fix_type() < 3:
+        # PX4 checks a mode's requirements always (commander ModeManagement / mode requirements); ArduCopter only
+        # when armed (ArduCopter/mode.cpp Copter::set_mode: ignore_checks = !motors->armed())
+        if self.px4 and name in _PX4_NEEDS_POSITION and not self._position_ok():
+            return self._reject_mode(name, "requires position")
+        if not self.px4 and name in _AP_NEEDS_POSITION and s.armed and not self._position_ok():
             return self._reject_mode(name, "requires position")
         if self.px4 and name == "OFFBOARD" and not self._offboard_stream_ok():
             return self._reject_mode(name, "no setpoint stream")
@@ -151,6 +155,8 @@ class ModeMixin:
                 after = self.params["COM_DISARM_LAND"] if self.px4 else 1.0
                 if self.t - self.landed_at > after:
                     self._disarm("landed")
+                    if self.px4 and mode in ("AUTO.RTL", "AUTO.LAND"):
+                        self._enter("AUTO.LOITER")  # PX4 SIH shows Hold once disarmed after an RTL/LAND (trace)
         if self.posvel is not None:
             if mode in ("GUIDED", "OFFBOARD") and s.armed and s.in_air:
                 self._track_posvel()
@@ -215,11 +221,37 @@ class ModeMixin:
                 self.phase = "land"
                 self._start_land()
 
+    def _cruise_speed(self) -> float:
+        """Horizontal speed (m/s) of a position target: ArduCopter flies GUIDED/AUTO/RTL legs at WPNAV_SPEED (cm/s)
+        unless MAV_CMD_DO_CHANGE_SPEED set another (AC_WPNav::set_speed_NE_cms); PX4 at MPC_XY_CRUISE, or a
+        mission's DO_CHANGE_SPEED, never above MPC_XY_VEL_MAX (OFFBOARD position setpoints without a velocity
+        fly at MPC_XY_CRUISE too, as observed; DO_CHANGE_SPEED is a navigator command)."""
+        if self.px4:
+            base = self.params["MPC_XY_CRUISE"] if self.speed is None or self.mode == "OFFBOARD" else self.speed
+            return max(0.1, min(base, self.params["MPC_XY_VEL_MAX"]))
+        return max(0.1, self.speed if self.speed else self.params["WPNAV_SPEED"] / 100.0)
+
+    def _apply_speed_params(self) -> None:
+        """The vehicle envelope from the speed parameters (read every control cycle by the firmware, so a
+        PARAM_SET changes the leg being flown): horizontal limit, climb rate, acceleration."""
+        lim, p = self.veh.limits, self.params
+        if self.px4:
+            lim.max_speed = max(0.1, p["MPC_XY_VEL_MAX"])
+            lim.max_vertical_speed = max(0.1, p["MPC_Z_VEL_MAX_UP"])
+            lim.max_acceleration = max(0.1, p["MPC_ACC_HOR"])
+        else:  # GUIDED velocity targets too are bounded by the WPNAV speeds (ModeGuided sets the position
+            # controller's limits from AC_WPNav's defaults); DO_CHANGE_SPEED may raise them
+            lim.max_speed = min(AIRFRAME_MAX_SPEED, max(p["WPNAV_SPEED"] / 100.0, self.speed or 0.0, 0.1))
+            lim.max_vertical_speed = max(0.1, p["WPNAV_SPEED_UP"] / 100.0)
+            lim.max_acceleration = max(0.1, p["WPNAV_ACCEL"] / 100.0)
+        sp = self.veh.setpoint
+        if sp.mode == "position":
+            sp.speed = self._cruise_speed()
+
     def _goto_enu(self, target: np.ndarray) -> None:
         sp = self.veh.setpoint
         t = tuple(float(v) for v in target)
-        # PX4 flies OFFBOARD position setpoints at its velocity limit: DO_CHANGE_SPEED is for navigator modes
-        speed = None if self.px4 and self.mode == "OFFBOARD" else self.speed
+        speed = self._cruise_speed()
         if sp.mode == "position" and sp.target == t and sp.speed == speed:
             return
         self.veh.goto(t, speed)

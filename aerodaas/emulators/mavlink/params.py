@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from .link import _Link
 
+from .flavour import SPEED_PARAMS
+
 M = mavlink
 
 
@@ -24,7 +26,12 @@ class ParamMixin:
         with self._lock:
             if name not in self.params:
                 raise KeyError(f"unknown {self.autopilot} parameter {name!r}")
-            self.params[name] = float(value)
+            self._store_param(name, float(value))
+
+    def _store_param(self, name: str, value: float) -> None:
+        self.params[name] = value
+        if name in SPEED_PARAMS:
+            self._apply_speed_params()
 
     def _param_msg(self, name: str) -> Any:
         names = list(self.params)
@@ -47,6 +54,8 @@ class ParamMixin:
     def _on_param_set(self, link: _Link, msg: Any) -> None:
         name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else msg.param_id
         name = name.rstrip("\x00")
+        # the parameter protocol: an unknown name gets no answer; a known one is stored and its new value
+        # broadcast as PARAM_VALUE (REAL32, the firmware's units) - both firmware do so (trace)
         if name in self.params and math.isfinite(msg.param_value):
-            self.params[name] = float(msg.param_value)
+            self._store_param(name, float(msg.param_value))
             self._send(self._param_msg(name))

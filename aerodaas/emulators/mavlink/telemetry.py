@@ -9,7 +9,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from ...geo import enu_to_geodetic, geodetic_to_enu
 from ...models import GeoPoint
-from .constants import _IN_PROGRESS_PERIOD_S, _PROTOCOL_RETRIES, _SENSORS
+from .constants import _IN_PROGRESS_PERIOD_S, _PROTOCOL_RETRIES
+from .flavour import EKF_STATUS_REPORT_ID
 
 
 M = mavlink
@@ -29,6 +30,7 @@ class TelemetryMixin:
                 pct = min(99, pct + 1)
                 self._in_progress[cmd] = (link, sysid, compid, self.t + _IN_PROGRESS_PERIOD_S, pct)
                 self._send(self._enc.command_ack_encode(cmd, M.MAV_RESULT_IN_PROGRESS, pct, 0, sysid, compid), link)
+        self._repeat_reached()
         if self._transfer is not None and self.t > self._transfer.deadline:
             tr = self._transfer
             tr.retries += 1
@@ -62,13 +64,14 @@ class TelemetryMixin:
             ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
             return e.heartbeat_encode(M.MAV_TYPE_QUADROTOR, ap, base, custom, status, 3)
         if msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
-            health = _SENSORS
-            if fix < 3:
-                health &= ~(M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_AHRS)
-            if self._prearm() is not None:
-                health &= ~M.MAV_SYS_STATUS_PREARM_CHECK
-            return e.sys_status_encode(_SENSORS, _SENSORS, health, 250, int(self.veh.battery_voltage * 1000), -1,
+            present, enabled, health = self._sensors()
+            return e.sys_status_encode(present, enabled, health, 250, int(self.veh.battery_voltage * 1000), -1,
                                        int(round(self.veh.battery_pct)), 0, 0, 0, 0, 0, 0)
+        if msg_id == EKF_STATUS_REPORT_ID:
+            if self.px4:
+                return None
+            ok = self._position_ok()
+            return e.ekf_status_report_encode(self._ekf_flags(), 0.1, 0.1 if ok else 1.0, 0.1, 0.1, 0.0)
         if msg_id == M.MAVLINK_MSG_ID_SYSTEM_TIME:
             return e.system_time_encode(int((1.7e9 + self.t) * 1e6), boot_ms)
         if msg_id == M.MAVLINK_MSG_ID_GPS_RAW_INT:

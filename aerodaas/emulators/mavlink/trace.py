@@ -38,14 +38,14 @@ from typing import Any, Callable
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-__all__ = ["run_trace", "main"]
+__all__ = ["run_trace", "trace_emulator", "summarise", "main"]
 
 _AP_SPEED = "WPNAV_SPEED"
 _PX4_SPEED = ("MPC_XY_CRUISE", "MPC_XY_VEL_MAX")
 _PARAMS = {"ardupilot": ("WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN"),
            "px4": ("MPC_XY_CRUISE", "MPC_XY_VEL_MAX", "MPC_Z_VEL_MAX_UP", "MPC_Z_VEL_MAX_DN")}
 _REFUSAL_WORDS = ("arm", "prearm", "preflight", "denied", "fail", "need", "not ")
-_STREAMS_HZ = {M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0, M.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
+_STREAMS_HZ = {M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0, M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
                M.MAVLINK_MSG_ID_HOME_POSITION: 1.0, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 2.0,
                M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0, M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
                M.MAVLINK_MSG_ID_SYSTEM_TIME: 2.0}
@@ -86,6 +86,8 @@ class _Tracer:
         self.sysid = 1
         self.compid = 1
         self.mission: list[tuple] = []  # (MAV_CMD, lat deg, lon deg, alt m, param1) per wire sequence
+        self.wps: list[tuple[float, float]] = []  # the mission's waypoints (deg), for arrival times
+        self.arrivals: dict[int, float] = {}  # waypoint index -> vehicle s of the first arrival within 1 m
 
     # -------------------------------------------------------------- receive
     def pump(self, wall_s: float = 0.02) -> None:
@@ -130,6 +132,9 @@ class _Tracer:
             self.pos = msg
             if msg.lat or msg.lon:
                 self.speed_log.append((self.vt, math.hypot(msg.vx, msg.vy) / 100.0))
+                for k, (lat, lon) in enumerate(self.wps):  # first arrival within 1 m, in order
+                    if k not in self.arrivals and (k == 0 or k - 1 in self.arrivals) and _dist(msg, lat, lon) < 1.0:
+                        self.arrivals[k] = self.vt
         elif t == "HOME_POSITION":
             self.home_alts.append((self.vt, msg.altitude / 1000.0))
         elif t == "MISSION_ITEM_REACHED":
@@ -172,10 +177,11 @@ class _Tracer:
         self.wait(lambda: False, vehicle_s)
 
     # -------------------------------------------------------------- send
-    def command(self, cmd: int, *p: float, vehicle_s: float = 2.0) -> int | None:
-        """COMMAND_LONG, re-sent up to 3 times without an answer; returns the final MAV_RESULT or None."""
+    def command(self, cmd: int, *p: float, vehicle_s: float = 3.0) -> int | None:
+        """COMMAND_LONG, re-sent up to 4 times without an answer (a loaded machine loses UDP datagrams and PX4
+        drops messages over its link's data rate); returns the final MAV_RESULT or None."""
         p = list(p) + [0.0] * (7 - len(p))
-        for confirmation in range(3):
+        for confirmation in range(4):
             n = len(self.acks)
             self.m.mav.command_long_send(self.sysid, self.compid, cmd, confirmation, *p)
             got = self.wait(lambda: any(a[1] == cmd and a[2] != M.MAV_RESULT_IN_PROGRESS for a in self.acks[n:]),
@@ -207,7 +213,7 @@ class _Tracer:
     def param(self, name: str, value: float | None = None) -> dict | None:
         """PARAM_REQUEST_READ (value None) or PARAM_SET; the PARAM_VALUE answer (dict) or None."""
         self.params.pop(name, None)
-        for _ in range(3):
+        for _ in range(5):
             if value is None:
                 self.m.mav.param_request_read_send(self.sysid, self.compid, name.encode(), -1)
             else:
@@ -270,7 +276,6 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
         tr["stage"] = "no heartbeat"
         return
     tr["stage"] = "streams"
-    T.pump(0.3)
     for mid, hz in _STREAMS_HZ.items():
         res = T.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, mid, 1e6 / hz)
         tr.setdefault("interval_acks", {})[M.mavlink_map[mid].msgname] = [_res(res), round(T.vt, 2)]
@@ -278,6 +283,14 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
         T.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, _AP_EKF_STATUS_REPORT, 1e6 / 2)
         for sid in (M.MAV_DATA_STREAM_EXTENDED_STATUS, M.MAV_DATA_STREAM_POSITION, M.MAV_DATA_STREAM_EXTRA3):
             T.m.mav.request_data_stream_send(T.sysid, T.compid, sid, 2, 1)
+    tr["stage"] = "cold arm"
+    n = len(T.texts)
+    res = T.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    T.sleep(0.3)
+    tr["cold_arm"] = {"t": round(T.vt, 2), "result": _res(res), "mode": T.mode,
+                      "texts": [x for _, x in T.texts[n:] if any(w in x.lower() for w in _REFUSAL_WORDS)]}
+    if res == M.MAV_RESULT_ACCEPTED:
+        T.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
     tr["stage"] = "params"
     tr["params"] = {n: T.param(n) for n in _PARAMS[T.ap]}
     tr["param_unknown"] = T.param("NO_SUCH_PARAM")
@@ -336,19 +349,22 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     if res != M.MAV_RESULT_ACCEPTED:
         return
     legs: list[dict] = []
-    for k, (lat, lon) in enumerate((wp1, wp2)):
+    T.wps = [wp1, wp2]
+    for k in range(2):
         seq = first + k
-        t_leg = T.vt
-        if not T.wait(lambda: T.pos is not None and _dist(T.pos, lat, lon) < 1.0, 120.0):
+        # leg 2's speed counts from the parameter's echo (+1.5 s to slow down) if that came after the departure
+        t_leg = t_start if k == 0 else max(T.arrivals[k - 1], legs[0].get("param_set_t", 0.0) + 1.5)
+        if not T.wait(lambda: k in T.arrivals, 120.0):
             tr["stage"] = f"wp{k + 1} timeout"
             return
-        arrived = T.vt
+        arrived = T.arrivals[k]
         vmax = max((v for t, v in T.speed_log if t_leg <= t <= arrived), default=0.0)
         leg = {"seq": seq, "arrival_t": round(arrived, 2), "max_speed": round(vmax, 2)}
         if k == 0:
             leg["change_speed_minus2"] = _res(T.command(M.MAV_CMD_DO_CHANGE_SPEED, 1, -2, -1))
             value = slow * 100.0 if not T.px4 else slow
             leg["param_set"] = {n: T.param(n, value) for n in ((_AP_SPEED,) if not T.px4 else _PX4_SPEED)}
+            leg["param_set_t"] = round(T.vt, 2)
         if not T.wait(lambda: any(s == seq for _, s in T.reached), hold + 20.0):
             leg["reached"] = None
         legs.append(leg)
@@ -378,16 +394,79 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
         tr["home_alt_drift_m"] = round(max((abs(a - home_alt) for a in after), default=0.0), 3)
 
 
+def summarise(tr: dict) -> dict:
+    """The comparable part of a trace: acknowledgement results, refusal texts, mode sequence, reached events
+    (count, first one relative to arrival, s), max horizontal speed per leg (m/s), parameter values, home drift."""
+    legs = tr.get("legs") or []
+    modes: list[str] = []
+    for x in tr.get("transitions", []):
+        label = f"{x['mode']}{'+armed' if x['armed'] else ''}"
+        if not modes or modes[-1] != label:
+            modes.append(label)
+    return {
+        "ok": tr.get("ok"), "stage": tr.get("stage"),
+        "cold_arm": (tr.get("cold_arm") or {}).get("result"),
+        "refusal_results": sorted({a["result"] for a in tr.get("arm_acks", []) if a["result"] != "ACCEPTED"}),
+        "refusal_texts": sorted({x for a in tr.get("arm_acks", []) + [tr.get("cold_arm") or {"texts": []}]
+                                 for x in a["texts"] if "Arming motors" not in x and "Armed by" not in x}),
+        "arm_final": (tr.get("arm_acks") or [{}])[-1].get("result"),
+        "armable_after_s": tr.get("armable_after_s"),
+        "mode_results": sorted({(m["mode"], m["result"]) for m in tr.get("mode_acks", [])}),
+        "modes": modes,
+        "takeoff": tr.get("takeoff_ack"), "rtl": tr.get("rtl_ack"), "mission_ack": tr.get("mission_ack"),
+        "mission_requests": tr.get("mission_request_types"),
+        "change_speed_minus2": legs[0].get("change_speed_minus2") if legs else None,
+        "param_set_echo": {k: (v or {}).get("last") for k, v in (legs[0].get("param_set") or {}).items()} if legs else {},
+        "params": {k: (v or {}).get("value") for k, v in (tr.get("params") or {}).items()},
+        "param_types": sorted({(v or {}).get("type") for v in (tr.get("params") or {}).values()}, key=str),
+        "param_unknown": tr.get("param_unknown"),
+        "reached_count": [leg.get("reached_count") for leg in legs],
+        "reached_first_after_arrival_s": [(leg.get("reached_after_arrival_s") or [None])[0] for leg in legs],
+        "leg_max_speed": [leg.get("max_speed") for leg in legs],
+        "after_mission_mode": tr.get("after_mission_mode"),
+        "home_alt_drift_m": tr.get("home_alt_drift_m"),
+    }
+
+
+def trace_emulator(autopilot: str, speedup: float = 10.0, wall_limit_s: float = 300.0,
+                   emulator: dict | None = None) -> dict:
+    """:func:`run_trace` against our emulator (``autopilot`` flavour, ``speedup`` x real time, ``emulator``:
+    keyword arguments of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator`, JSON-able) in a child
+    process on a free loopback UDP port; the vehicle sends to the tracer as the SITL firmware does (``udpout`` ->
+    ``udpin``)."""
+    import subprocess
+
+    from .. import free_udp_port
+
+    port = free_udp_port()
+    spec = json.dumps({"autopilot": autopilot, "speedup": speedup, **(emulator or {})})
+    code = ("import json, sys, time; from aerodaas.emulators.mavlink import MavlinkVehicleEmulator as E; "
+            f"e = E(**json.loads(sys.argv[1])); e.start('udpout:127.0.0.1:{port}'); time.sleep(1e6)")
+    proc = subprocess.Popen([sys.executable, "-c", code, spec], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        tr = run_trace(f"udpin:127.0.0.1:{port}", autopilot, wall_limit_s=wall_limit_s)
+    finally:
+        proc.kill()
+        _, err = proc.communicate(timeout=10)
+    if not tr.get("ok") and err:
+        tr["emulator_stderr"] = err.decode(errors="replace")[-2000:]
+    return tr
+
+
 def main(argv: list[str] | None = None) -> int:
     """CLI: ``CONNECTION --autopilot ardupilot|px4 [--out FILE] [--wall-limit S]``; exit 0 when the vehicle flew
     the whole sequence and landed, 1 otherwise, 2 for bad arguments."""
     ap = argparse.ArgumentParser(prog="python -m aerodaas.emulators.mavlink.trace", description=__doc__.split("\n")[0])
-    ap.add_argument("connection")
+    ap.add_argument("connection", help="pymavlink connection string, or 'emulator' for our emulated vehicle")
     ap.add_argument("--autopilot", choices=["ardupilot", "px4"], required=True)
     ap.add_argument("--out", default="-")
     ap.add_argument("--wall-limit", type=float, default=600.0)
+    ap.add_argument("--emulator", default="{}", help="emulator keyword arguments as JSON (connection 'emulator')")
     a = ap.parse_args(argv)
-    tr = run_trace(a.connection, a.autopilot, wall_limit_s=a.wall_limit)
+    if a.connection == "emulator":
+        tr = trace_emulator(a.autopilot, wall_limit_s=a.wall_limit, emulator=json.loads(a.emulator))
+    else:
+        tr = run_trace(a.connection, a.autopilot, wall_limit_s=a.wall_limit)
     text = json.dumps(tr, indent=1)
     if a.out == "-":
         print(text)

@@ -43,24 +43,25 @@ import selectors
 import socket
 import threading
 from collections import deque
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from ...config import Limits, RobotConfig
 from ...models import GeoPoint
-from .constants import _PX4_DEFAULT_STREAMS
-from .link import LinkMixin
-from .commands import CommandMixin
-from .modes import ModeMixin
+from ...sim.vehicle import SimVehicle
 from .arming import ArmingMixin
+from .commands import CommandMixin
+from .constants import _PX4_DEFAULT_STREAMS
+from .flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
 from .guided import GuidedMixin
-from .params import ParamMixin
+from .link import LinkMixin
 from .mission import MissionMixin
 from .mission_run import MissionRunMixin
+from .modes import ModeMixin
+from .params import ParamMixin
 from .telemetry import TelemetryMixin
-
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from .link import _Link
@@ -68,29 +69,34 @@ if TYPE_CHECKING:
 
 M = mavlink
 
-from ...config import RobotConfig
-from ...sim.vehicle import SimVehicle
-
 __all__ = ["MavlinkVehicleEmulator"]
 
 
-class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, ParamMixin, MissionMixin, MissionRunMixin, TelemetryMixin):
+class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, ParamMixin, MissionMixin,
+                             MissionRunMixin, TelemetryMixin):
     """A simulated ArduPilot Copter or PX4 multicopter speaking MAVLink 2 over TCP (server) or UDP.
 
-    ``autopilot``: ``"ardupilot"`` or ``"px4"``. ``robot``: limits, battery and home from a
-    :class:`~aerodaas.config.RobotConfig` (defaults when None); ``home`` overrides its home (WGS-84 degrees,
-    metres AMSL). ``speedup``: vehicle time runs this many times faster than real time. ``params``: overrides
-    of the emulated parameters (ArduPilot ``RTL_ALT`` cm, ``LAND_SPEED`` cm/s, ``WPNAV_SPEED`` cm/s,
-    ``WPNAV_RADIUS`` cm, ``DISARM_DELAY`` s; PX4 ``RTL_RETURN_ALT`` m, ``MPC_LAND_SPEED`` m/s,
-    ``MIS_TAKEOFF_ALT`` m, ``COM_OF_LOSS_T`` s, ``COM_DISARM_PRFLT`` s, ``COM_DISARM_LAND`` s, ``NAV_ACC_RAD`` m,
-    ``MPC_XY_CRUISE`` m/s), also settable with PARAM_SET. ``gps_lock_s``: vehicle seconds until the 3-D fix.
+    ``autopilot``: ``"ardupilot"`` or ``"px4"``. ``robot``: battery, yaw rate, altitude and home from a
+    :class:`~aerodaas.config.RobotConfig` (defaults when None) - *not* its speed limits: like the firmware, the
+    vehicle flies at its own speed parameters until the ground station changes them; ``home`` overrides the home
+    (WGS-84 degrees, metres AMSL). ``speedup``: vehicle time runs this many times faster than real time.
+    ``params``: overrides of the emulated parameters, defaults and units as the firmware's
+    (:data:`.flavour.ARDUPILOT_PARAMS`: ``WPNAV_SPEED`` cm/s ...; :data:`.flavour.PX4_PARAMS`: ``MPC_XY_CRUISE``
+    m/s ...), also readable and settable with the parameter protocol. ``gps_lock_s``: vehicle seconds until the
+    3-D fix (ArduPilot: "EKF3 IMU0 origin set", home); ``ekf_gps_s``: vehicle seconds after that until the EKF
+    has a position estimate ("EKF3 IMU0 is using GPS"; PX4: XY_POSITION_CONTROL healthy) - arming in a mode that
+    needs a position is refused until then. ``home_alt_drift_m``: bound of PX4's in-flight home-altitude
+    correction (default 2 m for PX4, 0 for ArduPilot; ``seed`` makes it repeatable). ``deny_default_speed``:
+    MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 is DENIED (default: ArduCopter yes, PX4 no, as the firmware).
     ``message_interval``: False emulates firmware without MAV_CMD_SET_MESSAGE_INTERVAL (UNSUPPORTED).
     ``ignore_commands``: MAV_CMD numbers that are silently dropped (never acknowledged).
     ``ack_only_commands``: MAV_CMD numbers acknowledged MAV_RESULT_ACCEPTED but not carried out (a vehicle that
     says yes and does nothing: the HEARTBEAT never shows the new mode / armed state).
     ``in_progress_commands``: MAV_CMD numbers answered MAV_RESULT_IN_PROGRESS, repeated every 0.5 vehicle seconds,
-    and never finished. ``mission_int``: False emulates older firmware that asks for mission items with
-    MISSION_REQUEST and answers MISSION_REQUEST_INT with MISSION_ITEM (latitude/longitude as float degrees).
+    and never finished. ``mission_int``: None (default) asks for mission items as the firmware does (ArduPilot
+    MISSION_REQUEST, PX4 MISSION_REQUEST_INT) and accepts either item form; True asks with MISSION_REQUEST_INT;
+    False emulates older firmware that asks with MISSION_REQUEST and answers MISSION_REQUEST_INT with MISSION_ITEM
+    (latitude/longitude as float degrees).
 
     Use :meth:`start` (returns the bound address), :meth:`stop`, :meth:`snapshot` for the state.
     """
@@ -100,7 +106,8 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
                  params: dict[str, float] | None = None, gps_lock_s: float = 2.0, physics_hz: float = 50.0,
                  message_interval: bool = True, ignore_commands: set[int] | None = None,
                  ack_only_commands: set[int] | None = None, in_progress_commands: set[int] | None = None,
-                 mission_int: bool = True) -> None:
+                 mission_int: bool | None = None, ekf_gps_s: float = 1.0, home_alt_drift_m: float | None = None,
+                 deny_default_speed: bool | None = None, seed: int = 0) -> None:
         if autopilot not in ("ardupilot", "px4"):
             raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
         if not (speedup > 0 and math.isfinite(speedup)):
@@ -111,26 +118,39 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.speedup = float(speedup)
         self.system_id, self.component_id = system_id, component_id
         self.origin = home or robot.home  # EKF origin: the simulator's ENU frame
-        self.limits = robot.limits
-        self.veh = SimVehicle(robot.id, self.origin, robot.limits, robot.battery, robot.noise)
+        # the airframe's envelope; the robot's own limits are the ground station's business (it must set the
+        # vehicle's speed parameters, as with the real firmware)
+        self.limits = Limits(max_speed=AIRFRAME_MAX_SPEED, max_vertical_speed=3.0, max_acceleration=3.0,
+                             max_yaw_rate=robot.limits.max_yaw_rate, max_altitude=robot.limits.max_altitude)
+        self.veh = SimVehicle(robot.id, self.origin, self.limits, robot.battery, robot.noise)
         self.physics_dt = 1.0 / physics_hz
         self.gps_lock_s = gps_lock_s
         self.message_interval_supported = message_interval
         self.ignore_commands = set(ignore_commands or ())
         self.ack_only_commands = set(ack_only_commands or ())
         self.in_progress_commands = set(in_progress_commands or ())
-        self.mission_int = bool(mission_int)
+        if not (ekf_gps_s >= 0 and math.isfinite(ekf_gps_s)):
+            raise ValueError(f"ekf_gps_s must be a finite number >= 0, got {ekf_gps_s!r}")
+        #: vehicle seconds from the GPS fix until the EKF fuses GPS (a position estimate); the firmware takes
+        #: ~20 s (ArduCopter SITL) - shorter here so that tests stay fast
+        self.ekf_gps_s = float(ekf_gps_s)
+        #: None: the flavour's mission request form (ArduPilot MISSION_REQUEST, PX4 MISSION_REQUEST_INT, as the
+        #: firmware sends them); False: older firmware that speaks only the float forms
+        self.mission_int = mission_int
+        drift = (2.0 if autopilot == "px4" else 0.0) if home_alt_drift_m is None else float(home_alt_drift_m)
+        if not (drift >= 0 and math.isfinite(drift)):
+            raise ValueError(f"home_alt_drift_m must be a finite number >= 0, got {home_alt_drift_m!r}")
+        #: bound (m) of PX4's in-flight home-altitude correction (COM_HOME_EN); 0 disables it
+        self.home_alt_drift_m = drift
+        self._rng = np.random.default_rng(seed)
+        #: MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 (-2 "default") is DENIED (None: as the flavour's firmware,
+        #: ArduCopter denies, PX4 accepts)
+        self.deny_default_speed = (not self.px4) if deny_default_speed is None else bool(deny_default_speed)
         self._rejections: dict[int, list[int]] = {}  # MAV_CMD -> results still to answer (reject_next)
         self._in_progress: dict[int, tuple[_Link, int, int, float, int]] = {}  # cmd -> (link, sys, comp, next t, %)
         self._statustext_id = 0
-        sp = robot.limits.max_speed
-        if self.px4:
-            self.params: dict[str, float] = {"RTL_RETURN_ALT": 60.0, "MPC_LAND_SPEED": 0.7, "MIS_TAKEOFF_ALT": 2.5,
-                                             "COM_OF_LOSS_T": 1.0, "COM_DISARM_PRFLT": 10.0, "COM_DISARM_LAND": 2.0,
-                                             "NAV_ACC_RAD": 2.0, "MPC_XY_CRUISE": sp, "MAV_SYS_ID": system_id}
-        else:
-            self.params = {"RTL_ALT": 1500.0, "LAND_SPEED": 50.0, "WPNAV_SPEED": sp * 100.0, "WPNAV_RADIUS": 200.0,
-                           "DISARM_DELAY": 10.0, "SYSID_THISMAV": system_id}
+        self.params: dict[str, float] = dict(PX4_PARAMS if self.px4 else ARDUPILOT_PARAMS)
+        self.params["MAV_SYS_ID" if self.px4 else "SYSID_THISMAV"] = float(system_id)
         for k, v in (params or {}).items():
             if k not in self.params:
                 raise ValueError(f"params: unknown {autopilot} parameter {k!r}; known: {sorted(self.params)}")
@@ -179,7 +199,14 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.mission_state = "idle"  # idle / wait_start / running / holding / done
         self.item_reached_at: float | None = None
         self.item_started = False
+        self._item_target = np.zeros(3)  # ENU target of the mission item being flown
         self.reached_log: list[int] = []
+        self._reached_repeat: tuple[int, int, float] | None = None  # PX4: (seq, repeats left, next vehicle s)
+        self._mission_item_warned = False
+        self._position_ok_sent = False
+        self._next_prearm_report = AP_PREARM_DISPLAY_PERIOD_S
+        self._home_corr = (0.0, 0.0, 0.0)  # PX4 home-altitude correction: (error m, applied m, next update s)
+        self.took_off_at: float | None = None
         self._transfer: _Transfer | None = None
         # message id -> interval in vehicle seconds
         self._intervals: dict[int, float] = {m: 1.0 / hz for m, hz in _PX4_DEFAULT_STREAMS.items()} if self.px4 else {}
@@ -188,6 +215,7 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.statustexts: list[str] = []
         self.commands_seen: list[int] = []
         self.bad_packets = 0
+        self._apply_speed_params()
 
     def snapshot(self) -> dict[str, Any]:
         """The vehicle's state: ``t`` (vehicle seconds), ``mode``, ``armed``, ``in_air``, ``position`` (ENU metres
@@ -210,10 +238,13 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         if self.home is None and self._fix_type() >= 3:
             self._set_home_here()
             self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 origin set" if not self.px4 else "home set")
+        self._readiness_tick()
         was_in_air = s.in_air
         if s.armed:
             veh.step(dt)
         if s.in_air:
+            if not self.took_off:
+                self.took_off_at = self.t
             self.took_off = True
         if was_in_air and not s.in_air:
             self.landed_at = self.t
