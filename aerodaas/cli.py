@@ -52,6 +52,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return res
 
     api.Robot.start_mission = start_mission
+    original_fleet = api.Environment.start_mission
+
+    def start_fleet(self, robots=None, timeout=None):  # a fleet app: env.start_mission() counts as well
+        res = original_fleet(self, robots, timeout)
+        results.append(res)
+        print(runtime.format_summary(res), flush=True)
+        return res
+
+    api.Environment.start_mission = start_fleet
     sys.path.insert(0, str(app.resolve().parent))
     try:
         runpy.run_path(str(app), run_name="__main__")
@@ -66,6 +75,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     finally:
         api.Robot.start_mission = original
+        api.Environment.start_mission = original_fleet
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
     if not results:
@@ -251,7 +261,7 @@ def _cmd_mission(args: argparse.Namespace) -> int:
         return 2
     finally:
         if backend is not None:
-            backend.close()
+            backend.close(safe_end=False)  # hand the vehicle over as it is: a started mission flies on
     return 0
 
 

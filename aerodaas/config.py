@@ -185,6 +185,15 @@ class MavlinkConfig(_Cfg):
     use_autopilot_mission: bool = False
     arm_timeout_s: float = Field(default=30.0, gt=0)
     setpoint_rate_hz: float = Field(default=10.0, gt=2.0)
+    #: set the vehicle's own speed limits from the robot's ``limits`` on connect (ArduCopter WPNAV_SPEED*, PX4
+    #: MPC_XY_VEL_MAX/MPC_XY_CRUISE/MPC_Z_VEL_MAX_*), read back to verify; ``restore_params``: put the user's
+    #: values back when the backend closes
+    set_speed_limits: bool = True
+    restore_params: bool = True
+    #: what closing the backend does with a vehicle still in the air (run timeout, error, Ctrl-C): ``land`` here
+    #: or ``rtl``, waiting up to ``safe_end_timeout_s`` vehicle seconds for it to land and disarm
+    on_close: Literal["land", "rtl"] = "land"
+    safe_end_timeout_s: float = Field(default=120.0, gt=0)
 
 
 class TelloConfig(_Cfg):

@@ -37,6 +37,11 @@ _TELEMETRY = ((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, None), (M.MAVLINK_MSG_ID_LO
               (M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 2.0), (M.MAVLINK_MSG_ID_BATTERY_STATUS, 1.0),
               (M.MAVLINK_MSG_ID_HOME_POSITION, 0.5), (M.MAVLINK_MSG_ID_MISSION_CURRENT, 1.0),
               (M.MAVLINK_MSG_ID_SYSTEM_TIME, 1.0))
+#: per autopilot, the estimator report that says when it has a position (action.py readiness), 2 Hz
+_ESTIMATOR_STREAM = {"ardupilot": (M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 2.0),
+                     "px4": (M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, 2.0)}
+#: wall seconds without a timestamped message after which the vehicle clock is extrapolated (link.py)
+_CLOCK_STALE_S = 0.5
 _LEGACY_STREAMS = ((M.MAV_DATA_STREAM_EXTENDED_STATUS, 2.0), (M.MAV_DATA_STREAM_POSITION, None),
                    (M.MAV_DATA_STREAM_EXTRA1, None), (M.MAV_DATA_STREAM_EXTRA3, 1.0))
 #: STATUSTEXT.text is char[50]; a MAVLink 2 chunk shorter than that (NUL-terminated) ends a long text

@@ -1,50 +1,128 @@
-"""Actions: readiness, arming, disarming and take-off."""
+"""Actions: readiness as the autopilot itself reports it, arming (with "not yet" refusals retried inside
+``arm_timeout_s``), disarming and take-off.
+
+Readiness (both autopilots): a 3-D GPS fix (GPS_RAW_INT ``fix_type`` >= 3) when a GPS reports, HOME_POSITION
+received, and the autopilot's own estimator and pre-arm reports:
+
+* ArduPilot: EKF_STATUS_REPORT ``flags`` with attitude, horizontal velocity and an absolute horizontal position
+  (``EKF_POS_HORIZ_ABS`` or, disarmed, ``EKF_PRED_POS_HORIZ_ABS``) and not ``EKF_CONST_POS_MODE`` -- the test
+  ArduCopter's ``Copter::ekf_has_absolute_position()`` (ArduCopter/system.cpp) applies before arming in a mode
+  that needs a position ("Arm: Need Position Estimate"); before any EKF_STATUS_REPORT arrives, the STATUSTEXT
+  "EKF3 IMU0 is using GPS" (AP_NavEKF3_Control.cpp) counts as the same. The SYS_STATUS pre-arm bit alone is not
+  enough: it reflects the checks of the *current* mode (STABILIZE at boot).
+* PX4: SYS_STATUS ``MAV_SYS_STATUS_PREARM_CHECK`` in ``onboard_control_sensors_health`` (PX4 reports it only
+  there: ``src/modules/mavlink/streams/SYS_STATUS.hpp`` from the commander's health report), the
+  XY_POSITION_CONTROL health bit once the vehicle reports it, HEARTBEAT ``system_status`` MAV_STATE_STANDBY, and
+  ESTIMATOR_STATUS (when streamed) with attitude, horizontal velocity and absolute horizontal position.
+
+Even when all of these read ready, an arm can still be refused for a moment (PX4 "Arming denied: Resolve system
+health failures first", ArduPilot "PreArm: ..."): MAV_RESULT_FAILED / TEMPORARILY_REJECTED are "not yet" and
+retried with back-off (0.5 s doubling to 4 s, wall) until ``arm_timeout_s`` expires; then the last refusal is
+raised with the autopilot's text.
+"""
 from __future__ import annotations
 
 import math
 import time
 
-
+from ..base import CommandRefused
 from ._common import M, _PX4_NO_ARM_MODES
+
+#: EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (EKF_STATUS_FLAGS, ESTIMATOR_STATUS_FLAGS share these low bits)
+_EKF_ATTITUDE, _EKF_VEL_HORIZ, _EKF_POS_HORIZ_ABS = 1, 2, 16
+_EKF_CONST_POS_MODE, _EKF_PRED_POS_HORIZ_ABS = 128, 512
+#: arm results that mean "not yet" while the vehicle is still getting ready (MAV_RESULT)
+_NOT_YET = ("MAV_RESULT_FAILED", "MAV_RESULT_TEMPORARILY_REJECTED")
+_ARM_BACKOFF_S = (0.5, 4.0)
 
 
 class ActionMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: readiness, arm, disarm, take-off."""
 
-    # ------------------------------------------------------------------ VehicleBackend: control
-    def _armable(self) -> bool:
+    def not_ready_reasons(self) -> list[str]:
+        """What the autopilot's own reports say is still missing before it can arm in a guided mode (see the module
+        docstring); empty when ready. Never blocks."""
+        out: list[str] = []
         with self._lock:
-            if self._gps_fix >= 0 and self._gps_fix < M.GPS_FIX_TYPE_3D_FIX:
-                return False
-            if self._sensors is not None:
-                present, _, health = self._sensors
-                for bit in (M.MAV_SYS_STATUS_PREARM_CHECK, M.MAV_SYS_STATUS_AHRS):
+            if 0 <= self._gps_fix < M.GPS_FIX_TYPE_3D_FIX:
+                out.append(f"GPS fix type {self._gps_fix} < 3")
+            if not self._home_received and self._gps_fix >= 0:
+                out.append("no HOME_POSITION yet")
+            present, health = (self._sensors[0], self._sensors[2]) if self._sensors is not None else (0, 0)
+            ekf = self._ekf_flags
+            if self.autopilot == "px4":
+                if not health & M.MAV_SYS_STATUS_PREARM_CHECK:
+                    out.append("SYS_STATUS pre-arm check not healthy")
+                xy = M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+                if (present | self._health_seen) & xy and not health & xy:
+                    out.append("SYS_STATUS XY position control not healthy")
+                if not self._armed and self._system_status != M.MAV_STATE_STANDBY:
+                    out.append(f"HEARTBEAT system_status {self._system_status} (not STANDBY)")
+                if ekf is not None and (ekf & (_EKF_ATTITUDE | _EKF_VEL_HORIZ | _EKF_POS_HORIZ_ABS)
+                                        != (_EKF_ATTITUDE | _EKF_VEL_HORIZ | _EKF_POS_HORIZ_ABS)):
+                    out.append(f"ESTIMATOR_STATUS flags {ekf:#x}: no absolute position")
+            else:
+                for bit, name in ((M.MAV_SYS_STATUS_PREARM_CHECK, "pre-arm"), (M.MAV_SYS_STATUS_AHRS, "AHRS")):
                     if present & bit and not health & bit:
-                        return False
-            return True
+                        out.append(f"SYS_STATUS {name} not healthy")
+                if ekf is not None:
+                    pos = ekf & (_EKF_POS_HORIZ_ABS | _EKF_PRED_POS_HORIZ_ABS)
+                    if not (ekf & _EKF_ATTITUDE and ekf & _EKF_VEL_HORIZ and pos) or ekf & _EKF_CONST_POS_MODE:
+                        out.append(f"EKF_STATUS_REPORT flags {ekf:#x}: no absolute position estimate")
+                elif not self._ekf_using_gps and self._gps_fix >= 0 and \
+                        M.MAVLINK_MSG_ID_EKF_STATUS_REPORT not in self._streams_refused and not self._stream_legacy:
+                    out.append("EKF not yet using GPS (no EKF_STATUS_REPORT yet)")
+        return out
+
+    def _armable(self) -> bool:
+        return not self.not_ready_reasons()
 
     def arm(self) -> None:
-        """Wait up to ``arm_timeout_s`` until the autopilot reports itself armable (3-D fix in GPS_RAW_INT,
-        SYS_STATUS pre-arm and AHRS health bits when present), switch to a mode that can arm and take off
-        (ArduPilot GUIDED, PX4 LOITER/Hold), then MAV_CMD_COMPONENT_ARM_DISARM. If it never becomes armable the
-        arm command is sent anyway in the current mode, so the :class:`CommandRefused` carries the autopilot's
-        reason (e.g. ``PreArm: ...``). Once acknowledged, waits (like :meth:`set_mode`) for a HEARTBEAT with the
-        armed flag (MAV_MODE_FLAG_SAFETY_ARMED). Raises CommandRefused / LinkLost / BackendError as
-        :meth:`command_long`, :class:`CommandNotConfirmed` when the vehicle acknowledged but never reported
-        itself armed."""
+        """Arm for a guided flight, bounded by ``arm_timeout_s`` wall seconds: wait until the autopilot reports
+        itself ready (:meth:`not_ready_reasons`), switch to a mode that can arm and take off (ArduPilot GUIDED,
+        PX4 LOITER/Hold), send MAV_CMD_COMPONENT_ARM_DISARM, and wait for a HEARTBEAT with the armed flag
+        (MAV_MODE_FLAG_SAFETY_ARMED). A refusal with MAV_RESULT_FAILED / TEMPORARILY_REJECTED (a pre-arm check
+        still failing) is retried with back-off inside the window; a ``arm_refused`` event records each. An
+        ``armed_after`` event gives the wait (wall and vehicle seconds).
+
+        Raises :class:`CommandRefused` (the last refusal: MAV_RESULT name and the autopilot's STATUSTEXT, e.g.
+        ``Arm: Need Position Estimate``) when the window expires or for a final result (DENIED, UNSUPPORTED);
+        LinkLost / BackendError as :meth:`command_long`; :class:`CommandNotConfirmed` when the vehicle
+        acknowledged but never reported itself armed."""
         self._check_link("arm")
-        end = time.monotonic() + self.cfg.arm_timeout_s
-        while not self._armable() and time.monotonic() < end:
+        start, t0 = time.monotonic(), self.t
+        end = start + self.cfg.arm_timeout_s
+        while self.not_ready_reasons() and time.monotonic() < end:
             self._check_link("arm")
             time.sleep(0.02)
-        if self._armable():
-            if self.autopilot == "ardupilot" and self._mode != "GUIDED":
-                self.set_mode("GUIDED")
-            elif self.autopilot == "px4" and self._mode in _PX4_NO_ARM_MODES:
-                self.set_mode("LOITER")
-        sent = time.monotonic()
-        self.command_long("arm", M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-        self._await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
+        backoff, tries = _ARM_BACKOFF_S[0], 0
+        while True:
+            tries += 1
+            try:
+                # not ready when the window closed: ask in the current mode, so the refusal carries the
+                # autopilot's pre-arm reason (a guided mode would be refused first, without it)
+                if self.autopilot == "ardupilot" and self._mode != "GUIDED" and self._armable():
+                    self.set_mode("GUIDED")
+                elif self.autopilot == "px4" and self._mode in _PX4_NO_ARM_MODES and self._armable():
+                    self.set_mode("LOITER")
+                sent = time.monotonic()
+                self.command_long("arm", M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+                self._await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
+                break
+            except CommandRefused as e:
+                if e.result not in _NOT_YET or time.monotonic() + backoff > end:
+                    raise
+                self._event("arm_refused", result=e.result, text=e.status_text, command=e.command,
+                            not_ready=self.not_ready_reasons())
+                stop = time.monotonic() + backoff
+                while time.monotonic() < stop:
+                    self._check_link("arm")
+                    time.sleep(0.02)
+                backoff = min(backoff * 2.0, _ARM_BACKOFF_S[1])
+        self._fix_altitude_reference()
+        self._in_control = True
+        self._event("armed_after", wall_s=round(time.monotonic() - start, 3), vehicle_s=round(self.t - t0, 3),
+                    tries=tries)
 
     def disarm(self) -> None:
         """MAV_CMD_COMPONENT_ARM_DISARM(0); autopilots refuse it in flight (CommandRefused)."""
@@ -52,21 +130,22 @@ class ActionMixin:
         self.command_long("disarm", M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
 
     def takeoff(self, altitude_m: float) -> None:
-        """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above home. ArduPilot: in GUIDED, ``param7`` relative;
-        PX4: ``param7`` AMSL (home altitude from GLOBAL_POSITION_INT alt - relative_alt), position NaN = here;
-        PX4 holds (LOITER) when it gets there. Raises ValueError for a non-positive or non-finite altitude."""
+        """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above the take-off point. The altitude reference (the
+        take-off point's AMSL altitude from GLOBAL_POSITION_INT, fixed when arming) is used on both autopilots
+        (ArduPilot: in GUIDED, ``param7`` relative to home, which ArduPilot sets at arming = the take-off point;
+        PX4: ``param7`` AMSL = reference + ``altitude_m``, position NaN = here; PX4 holds (LOITER) when there).
+        Raises ValueError for a non-positive or non-finite altitude; CommandRefused / LinkLost / BackendError."""
         self._require_navigable("takeoff")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude_m must be a positive number of metres, got {altitude_m!r}")
         self._check_link("takeoff")
         self._stop_setpoints()
+        if self._alt_ref is None:
+            self._fix_altitude_reference()
         if self.autopilot == "px4":
-            with self._lock:
-                home_amsl = (self._geo.alt - self._rel_alt) if self._geo is not None else self.home.alt
             nan = float("nan")
-            self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, home_amsl + altitude_m)
+            self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, self._alt_ref + altitude_m)
         else:
             if self._mode != "GUIDED":
                 self.set_mode("GUIDED")
             self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_m)
-

@@ -17,11 +17,12 @@ from .command import CommandMixin
 from .link import LinkMixin
 from .mission import MissionMixin
 from .offboard import OffboardMixin
+from .params import ParamMixin
 from .telemetry import TelemetryMixin
 from ._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ActionMixin, OffboardMixin, MissionMixin,
+class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,
                      VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
@@ -106,9 +107,23 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ActionMixin, Offbo
         self._sp_sent = 0
         self._sp_next = 0.0
         self._hb_next = 0.0
-        self._speed_cmd: float | None = None
+        self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
+        self._mode_changes = 0
         self._stream_legacy = False
         self._ever_linked = False
         self._resume_streams = False
         self._att_wall = 0.0
+        #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
+        self.limits = cfg.limits
+        self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
+        self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
+        self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
+        self._health_seen = 0  # every SYS_STATUS health bit ever reported
+        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
+        self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
+        self._home_moved_alt = 0.0
+        self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
+        self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
+        self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
+        self._init_params()
 

@@ -10,7 +10,7 @@ from typing import Any, Callable
 from pymavlink import mavutil
 
 from ..base import BackendError, CommandRefused, LinkLost
-from ._common import M, _enum_name, _log_level, log, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+from ._common import M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
 
 
 class LinkMixin:
@@ -78,9 +78,31 @@ class LinkMixin:
         with self._lock:
             self._t_connect = self._raw_t()
             self._t_max = 0.0
+        if self.cfg.set_speed_limits:
+            try:
+                self.apply_speed_limits()
+            except BaseException:
+                self.close(safe_end=False)
+                raise
 
-    def close(self) -> None:
-        """Stop the I/O thread and close the link (idempotent, never raises)."""
+    def close(self, safe_end: bool = True) -> None:
+        """Close the link (idempotent, never raises). With ``safe_end`` (default) a vehicle still armed is first
+        brought down (:meth:`safe_end`), and parameters changed by :meth:`apply_speed_limits` are restored when
+        ``restore_params`` says so and the vehicle is disarmed (never in flight: it would speed up). ``safe_end=False``
+        hands the vehicle over as it is (``aerodaas mission upload --start``: the autopilot flies on)."""
+        if self._conn is not None and self._io is not None and not self._stop.is_set():
+            if safe_end:
+                try:
+                    self.safe_end()
+                except Exception as e:  # noqa: BLE001 - closing must go on
+                    self._event("safe_end_failed", error=str(e))
+                    log.warning("%s: safe end failed: %s", self.robot_id, e)
+            if self.cfg.restore_params and self._saved_params:
+                if self._link_ok and not self._armed:
+                    self.restore_parameters()
+                else:
+                    self._event("params_not_restored", reason="link lost" if not self._link_ok else "still armed",
+                                names=sorted(self._saved_params))
         self._stop.set()
         if self._io is not None and self._io is not threading.current_thread():
             self._io.join(timeout=2)
@@ -212,8 +234,11 @@ class LinkMixin:
             self._emit_text(buf["t"], buf["severity"], whole.decode("utf-8", errors="replace"))
 
     def _emit_text(self, t: float, severity: int, text: str) -> None:
-        """One whole status text: kept for :class:`CommandRefused`, a ``status_text`` event and a log line."""
+        """One whole status text: kept for :class:`CommandRefused`, a ``status_text`` event and a log line.
+        ArduPilot's "EKFn IMUm is using GPS" also marks the EKF's position estimate as ready (action.py)."""
         text = text.strip()
+        if "is using GPS" in text and text.startswith("EKF"):
+            self._ekf_using_gps = True
         self._texts.append((t, severity, text))
         self._event("status_text", severity=_enum_name("MAV_SEVERITY", severity), text=text)
         log.log(_log_level(severity), "%s: %s", self.robot_id, text)
@@ -234,6 +259,7 @@ class LinkMixin:
             mode = mavutil.mode_string_v10(msg)
             if mode != self._mode:
                 self._mode = mode
+                self._mode_changes += 1
                 self._event("mode", name=mode)
             self._system_status = msg.system_status
 
@@ -245,6 +271,13 @@ class LinkMixin:
             self._boot_ref = (ms, self._raw_t())
             self._clock_samples.clear()
         self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
+        if self._raw_t() - self._t_connect < self._t_max - 1.0:
+            # the vehicle's clock stood still while ours ran on (the autopilot was stopped or the link silent):
+            # go on from where :attr:`t` got to, so the recording has no gap and no step back
+            self._boot_ref = (ms, self._t_max + self._t_connect)
+            self._boot_last = ms
+            self._clock_samples.clear()
+            self._event("vehicle_clock_resumed")
         self._boot_wall = now
         # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
         samples = self._clock_samples
@@ -320,13 +353,13 @@ class LinkMixin:
         returns) re-sends the method chosen at connect without waiting for acknowledgements."""
         rate = self.cfg.stream_rate_hz
         if not wait:
-            for msg_id, hz in _TELEMETRY if not self._stream_legacy else ():
+            for msg_id, hz in self._streams() if not self._stream_legacy else ():
                 self._send(lambda mav, m=msg_id, h=hz: mav.command_long_send(
                     self._sysid, self._compid, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m, 1e6 / (h or rate), 0, 0, 0, 0, 0))
             if self._stream_legacy:
                 self._legacy_streams(rate)
             return
-        for msg_id, hz in _TELEMETRY:
+        for msg_id, hz in self._streams():
             name = f"SET_MESSAGE_INTERVAL for message {msg_id}"
             try:
                 self.command_long(name, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (hz or rate), retries=1)
@@ -334,6 +367,7 @@ class LinkMixin:
                 if e.result == "MAV_RESULT_UNSUPPORTED":
                     self._stream_legacy = True
                     break
+                self._streams_refused.add(msg_id)
                 self._event("stream_refused", message_id=msg_id, result=e.result)
             except LinkLost:
                 raise
@@ -343,6 +377,11 @@ class LinkMixin:
         if self._stream_legacy:
             self._event("stream_fallback", method="REQUEST_DATA_STREAM")
             self._legacy_streams(rate)
+
+    def _streams(self) -> tuple:
+        """(message id, Hz or None for ``stream_rate_hz``) of every telemetry message requested."""
+        extra = _ESTIMATOR_STREAM.get(self.autopilot or "")
+        return _TELEMETRY + ((extra,) if extra else ())
 
     def _legacy_streams(self, rate: float) -> None:
         for _ in range(3):  # no acknowledgement exists for REQUEST_DATA_STREAM
@@ -371,9 +410,11 @@ class LinkMixin:
     def t(self) -> float:
         with self._lock:
             t = self._raw_t() - self._t_connect
-            if not self._link_ok and self._boot_ref is not None:
-                # nothing timestamped arrives while the link is down: the vehicle's clock goes on at its last rate
-                t += (time.monotonic() - self._boot_wall) * self._ratio
+            silent = time.monotonic() - self._boot_wall
+            if self._boot_ref is not None and (not self._link_ok or silent > _CLOCK_STALE_S):
+                # nothing timestamped arrives (the link is down, or not yet declared down): the vehicle's clock
+                # goes on at its last rate, so odometry and control ticks go on before link loss is declared
+                t += silent * self._ratio
             t = max(t, self._t_max)
             self._t_max = t
             return t

@@ -6,10 +6,15 @@ import time
 from typing import Any, Callable, Literal
 
 
+from ...geo import geodetic_to_enu
 from ...missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
 from ...models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
 from ..base import BackendError, CommandRefused
 from ._common import M, _enum_name, _f32, _GLOBAL_FRAMES
+
+
+#: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins), at most
+_ARRIVAL_RADIUS_M = 0.5
 
 
 class MissionMixin:
@@ -69,6 +74,10 @@ class MissionMixin:
                 xi, yi = int(round(x or 0.0)), int(round(y or 0.0))
                 xs, ys = float(xi), float(yi)
             z = _f32(it.params[6] if it.params[6] is not None else 0.0)
+            if it.command == M.MAV_CMD_DO_CHANGE_SPEED:
+                # never above the robot's limit, never -2 ("default": DENIED by ArduCopter): the limit instead
+                limit = float(self.limits.max_speed)
+                p[1] = _f32(limit if p[1] is None or (p[1] <= 0 and p[1] != -1) else min(p[1], limit))
             wire.append((it.frame, it.command, 1 if it.autocontinue else 0,
                          *[float("nan") if v is None else v for v in p], xi, yi, z))
             sent_items.append(MissionItem(seq=k + 1, command=it.command, frame=it.frame, params=[*p, xs, ys, z],
@@ -81,14 +90,11 @@ class MissionMixin:
         n = len(wire)
 
         def send_item(seq: int, as_int: bool) -> None:
+            # always MISSION_ITEM_INT, also to a MISSION_REQUEST (ArduPilot: "GCS should send MISSION_ITEM_INT";
+            # the float MISSION_ITEM loses ~0.4 m of latitude/longitude in float32)
             frame, cmd, auto, p1, p2, p3, p4, xi, yi, z = wire[seq]
-            if as_int:
-                self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, auto,
-                                                                 p1, p2, p3, p4, xi, yi, z, 0))
-            else:
-                k = 1e-7 if frame in _GLOBAL_FRAMES else 1.0
-                self._send(lambda mav: mav.mission_item_send(self._sysid, self._compid, seq, frame, cmd, 0, auto,
-                                                             p1, p2, p3, p4, xi * k, yi * k, z, 0))
+            self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, auto,
+                                                             p1, p2, p3, p4, xi, yi, z, 0))
 
         def resend(last: Any) -> None:
             if last is None:
@@ -105,6 +111,12 @@ class MissionMixin:
                     send_item(*state["last"])
                 return False
             if t == "MISSION_ACK" and getattr(msg, "mission_type", 0) == 0:
+                if msg.type == M.MAV_MISSION_INVALID_SEQUENCE and state["max"] < n - 1:
+                    # ArduPilot answers an item that is not the one it asks for now (our answer to a request it
+                    # had already repeated) with this ACK and goes on with the transfer (MissionItemProtocol::
+                    # handle_mission_item); the next MISSION_REQUEST follows
+                    self._event("mission_item_out_of_sequence", last_requested=state["max"])
+                    return False
                 if msg.type != M.MAV_MISSION_ACCEPTED:
                     raise CommandRefused(self.robot_id, "mission upload", _enum_name("MAV_MISSION_RESULT", msg.type),
                                          self._status_text_since(state["start"]))
@@ -112,6 +124,7 @@ class MissionMixin:
             return False
 
         self._transaction("mission upload", lambda: resend(None), resend, on_msg)
+        self._remember_waypoints(wire)
         self._event("mission_uploaded", count=len(sent_items))
         return sent_items
 
@@ -157,6 +170,21 @@ class MissionMixin:
                     deadline = time.monotonic() + self.cfg.command_timeout_s
         finally:
             self._mission_active = False
+
+    def _remember_waypoints(self, wire: list[tuple]) -> None:
+        """Keep each uploaded NAV_WAYPOINT's horizontal position (ENU metres from :attr:`home`) and acceptance
+        radius by wire sequence number, for the arrival report (telemetry.py ``_check_arrival``)."""
+        wps = {}
+        first = 1 if self.autopilot == "ardupilot" else 0
+        for seq, (frame, cmd, _auto, _p1, p2, _p3, _p4, xi, yi, _z) in enumerate(wire):
+            if seq >= first and cmd == M.MAV_CMD_NAV_WAYPOINT and frame in _GLOBAL_FRAMES:
+                e, n, _ = geodetic_to_enu(xi / 1e7, yi / 1e7, self.home.alt, self.home)
+                radius = p2 if p2 is not None and p2 == p2 and p2 > 0 else _ARRIVAL_RADIUS_M
+                wps[seq] = (float(e), float(n), min(float(radius), _ARRIVAL_RADIUS_M))
+        with self._lock:
+            self._mission_wire = wps
+            self._arrived.clear()
+            self._reached_fw.clear()
 
     def download_mission(self) -> MissionPlan:
         """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
@@ -236,6 +264,7 @@ class MissionMixin:
         takes off by itself). Progress arrives as ``mission_current`` / ``mission_item_reached`` events."""
         self._require_navigable("start_mission")
         self._stop_setpoints()
+        self._in_control = True
         if self.in_air:
             self.set_mode("MISSION" if self.autopilot == "px4" else "AUTO")
         else:

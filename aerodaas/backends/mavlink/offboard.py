@@ -13,6 +13,10 @@ from ..base import LinkLost
 from ._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
+#: lowest target height (metres above the take-off point) goto sends to an armed vehicle
+_MIN_TARGET_HEIGHT_M = 0.5
+
+
 class OffboardMixin:
     """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
 
@@ -25,22 +29,32 @@ class OffboardMixin:
         frac = 1.0 if length < 1e-6 else min(1.0, speed * max(0.0, self.t - t0) / length)
         p = start + delta * frac
         v = delta / length * speed if frac < 1.0 else np.zeros(3)  # velocity feed-forward, ENU
-        g = enu_to_geodetic(float(p[0]), float(p[1]), 0.0, self.home)
-        return ("posvel", int(round(g.lat * 1e7)), int(round(g.lon * 1e7)), float(p[2]), *self.enu_to_ned(v))
+        lat_i, lon_i, alt, frame = self._global_target(float(p[0]), float(p[1]), float(p[2]))
+        return ("posvel", lat_i, lon_i, alt, frame, *self.enu_to_ned(v))
+
+    def _global_target(self, x: float, y: float, z: float) -> tuple[int, int, float, int]:
+        """ENU metres -> (lat 1e-7 deg, lon 1e-7 deg, altitude m, MAV_FRAME) for SET_POSITION_TARGET_GLOBAL_INT:
+        once the altitude reference is fixed (arming), MAV_FRAME_GLOBAL_INT with the AMSL altitude reference +
+        ``z`` (a frame that does not move with PX4's re-estimated home); before, relative to home."""
+        g = enu_to_geodetic(x, y, 0.0, self.home)
+        lat_i, lon_i = int(round(g.lat * 1e7)), int(round(g.lon * 1e7))
+        if self._alt_ref is not None:
+            return lat_i, lon_i, self._alt_ref + z, M.MAV_FRAME_GLOBAL_INT
+        return lat_i, lon_i, z, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
     def _send_setpoint(self, sp: tuple) -> None:
         try:
             if sp[0] == "carrot":
                 sp = self._carrot(sp)
             if sp[0] == "pos":
-                _, lat_i, lon_i, alt = sp
+                _, lat_i, lon_i, alt, frame = sp
                 self._send(lambda mav: mav.set_position_target_global_int_send(
-                    self._boot_ms_out(), self._sysid, self._compid, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                    self._boot_ms_out(), self._sysid, self._compid, frame,
                     POSITION_ONLY_MASK, lat_i, lon_i, alt, 0, 0, 0, 0, 0, 0, 0, 0))
             elif sp[0] == "posvel":
-                _, lat_i, lon_i, alt, vn, ve, vd = sp
+                _, lat_i, lon_i, alt, frame, vn, ve, vd = sp
                 self._send(lambda mav: mav.set_position_target_global_int_send(
-                    self._boot_ms_out(), self._sysid, self._compid, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                    self._boot_ms_out(), self._sysid, self._compid, frame,
                     POSITION_VELOCITY_MASK, lat_i, lon_i, alt, vn, ve, vd, 0, 0, 0, 0, 0))
             else:
                 _, vn, ve, vd, yaw_rate = sp
@@ -58,6 +72,7 @@ class OffboardMixin:
         """Make ``sp`` the active target and fly it: ArduPilot GUIDED (mode first, then the target), PX4 OFFBOARD
         (stream first, then the mode switch, which PX4 refuses without a stream)."""
         guided = self._guided_mode()
+        self._in_control = True
         if self.autopilot == "px4":
             with self._lock:
                 self._setpoint = sp
@@ -83,15 +98,25 @@ class OffboardMixin:
             self._setpoint = None
 
     def _change_speed(self, speed: float | None) -> None:
-        if speed == self._speed_cmd:
+        """ArduPilot: MAV_CMD_DO_CHANGE_SPEED (param1 1 = ground speed, param2 m/s, param3 -1 = throttle
+        unchanged) to ``speed`` capped at ``limits.max_speed``; no speed = the limit itself. Never -2 ("back to
+        default"): ArduCopter answers it MAV_RESULT_DENIED (``Copter::do_change_speed`` accepts > 0 only). Sent
+        again after every mode change (ArduCopter re-initialises its navigation speed from WPNAV_SPEED on mode
+        entry). Raises as :meth:`command_long`."""
+        limit = float(self.limits.max_speed)
+        value = limit if speed is None else min(float(speed), limit)
+        key = (round(value, 3), self._mode_changes)
+        if key == self._speed_cmd:
             return
-        self.command_long("change speed", M.MAV_CMD_DO_CHANGE_SPEED, 1, -2 if speed is None else speed, -1)
-        self._speed_cmd = speed
+        self.command_long("change speed", M.MAV_CMD_DO_CHANGE_SPEED, 1, value, -1)
+        self._speed_cmd = key
 
     def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        """Fly to ``target_enu`` (ENU metres from home) with SET_POSITION_TARGET_GLOBAL_INT
-        (MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, position-only type mask), re-sent by the I/O thread. A ``speed`` cap
-        (m/s): ArduPilot gets MAV_CMD_DO_CHANGE_SPEED (ground speed; GUIDED honours it); PX4 OFFBOARD flies
+        """Fly to ``target_enu`` (ENU metres from home; height above the take-off point, at least 0.5 m once armed)
+        with SET_POSITION_TARGET_GLOBAL_INT (MAV_FRAME_GLOBAL_INT at the altitude reference + height, see
+        :meth:`_global_target`; position-only type mask), re-sent by the I/O thread. Speeds never exceed
+        ``limits.max_speed`` (also the vehicle's own limit, params.py). A ``speed`` cap (m/s): ArduPilot gets
+        MAV_CMD_DO_CHANGE_SPEED (ground speed; GUIDED honours it); PX4 OFFBOARD flies
         position setpoints at its own velocity limit (DO_CHANGE_SPEED is a navigator/mission command), so the
         streamed setpoint itself moves from here towards the target at ``speed`` per vehicle second, with that
         velocity as feed-forward (position + velocity type mask).
@@ -103,12 +128,20 @@ class OffboardMixin:
         if speed is not None and not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"goto speed must be a positive number of m/s or None, got {speed!r}")
         self._check_link("goto")
-        if self.autopilot == "px4" and speed is not None:
-            self._enter_guided(("carrot", self.position, np.array([x, y, z]), float(speed), self.t))
+        if z < _MIN_TARGET_HEIGHT_M and self._armed:
+            self._event("target_raised", asked_m=z, sent_m=_MIN_TARGET_HEIGHT_M,
+                        reason="below the take-off point (only LAND goes lower)")
+            z = _MIN_TARGET_HEIGHT_M
+        if self.autopilot == "px4":
+            # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
+            # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
+            speed = float(self.limits.max_speed) if speed is None else min(float(speed), float(self.limits.max_speed))
+            self._enter_guided(("carrot", self.position, np.array([x, y, z]), speed, self.t))
             return
-        g = enu_to_geodetic(x, y, 0.0, self.home)
-        sp = ("pos", int(round(g.lat * 1e7)), int(round(g.lon * 1e7)), z)
+        sp = ("pos", *self._global_target(x, y, z))
         if self.autopilot == "ardupilot":
+            if self._mode != "GUIDED":
+                self.set_mode("GUIDED")
             self._change_speed(speed)
         self._enter_guided(sp)
 
@@ -162,3 +195,33 @@ class OffboardMixin:
             raise
         self._stop_setpoints()
 
+
+    def safe_end(self) -> str:
+        """Leave the vehicle safe before the link closes (a run's timeout, an error, Ctrl-C): in the air, hand it to
+        the autopilot's LAND (or RTL: ``mavlink.on_close``) and wait, at most ``safe_end_timeout_s`` vehicle seconds,
+        until it has landed and disarmed (both autopilots disarm by themselves after landing); armed on the ground in
+        GUIDED/OFFBOARD, disarm. Never leaves it armed in GUIDED/OFFBOARD with nobody streaming targets: our stream
+        stops only once the autopilot's own mode holds it. Returns what was done (``"nothing"``, ``"landed"``,
+        ``"disarmed"``, ``"timeout"``, ``"link lost"``), also as a ``safe_end`` event. Raises BackendError /
+        CommandRefused when LAND/RTL is refused."""
+        if not self._armed or not self._in_control:
+            return "nothing"  # disarmed, or armed by someone else and never commanded by us: not ours to end
+        if not self._link_ok:
+            self._stop_setpoints()
+            self._event("safe_end", result="link lost", mode=self._mode)
+            return "link lost"
+        if not self.in_air:
+            if self._mode in ("GUIDED", "OFFBOARD"):
+                self.disarm()
+                self._event("safe_end", result="disarmed")
+                return "disarmed"
+            return "nothing"
+        mode = "RTL" if self.cfg.on_close == "rtl" else "LAND"
+        if self._mode not in (mode, "LAND", "RTL"):
+            self._autopilot_mode(mode)
+        t0 = self.t
+        while self._armed and self.t - t0 < self.cfg.safe_end_timeout_s and self._link_ok:
+            time.sleep(0.05)
+        result = "landed" if not self._armed else ("link lost" if not self._link_ok else "timeout")
+        self._event("safe_end", result=result, mode=mode, vehicle_s=round(self.t - t0, 2))
+        return result

@@ -24,12 +24,52 @@ class TelemetryMixin:
         self._geo = GeoPoint(lat=lat, lon=lon, alt=msg.alt / 1000.0)
         self._rel_alt = msg.relative_alt / 1000.0
         e, n, _ = geodetic_to_enu(lat, lon, self.home.alt, self.home)
-        self._pos = np.array([e, n, self._rel_alt])
+        self._pos = np.array([e, n, self._height()])
         self._has_global = True
+        if self._mission_wire:
+            self._check_arrival()
         if time.monotonic() - self._local_wall > 1.0:  # no fresher LOCAL_POSITION_NED velocity
             self._vel = self.ned_to_enu((msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0))
         if msg.hdg != 65535 and time.monotonic() - self._att_wall > 1.0:  # no ATTITUDE lately
             self._att = (self._att[0], self._att[1], self.enu_yaw_from_heading(msg.hdg / 100.0))
+
+    def _height(self) -> float:
+        """Metres above the altitude reference (the take-off point's AMSL altitude, fixed at arming: a frame that
+        does not move), else above home (``relative_alt``) before the first arming. Caller holds ``_lock``."""
+        if self._alt_ref is not None and self._geo is not None:
+            return self._geo.alt - self._alt_ref
+        return self._rel_alt
+
+    def _fix_altitude_reference(self) -> None:
+        """Fix the altitude reference (AMSL metres) for this flight: the vehicle's own AMSL altitude
+        (GLOBAL_POSITION_INT ``alt``) where it stands, or, if already in the air, its home altitude (``alt -
+        relative_alt``); the configured/received home altitude without a global position. Every height read and
+        commanded is against it, not against a HOME_POSITION that PX4 keeps re-estimating after take-off
+        (``COM_HOME_EN``, commander ``HomePosition::update``)."""
+        with self._lock:
+            if self._geo is None:
+                ref = self.home.alt
+            elif self.in_air:
+                ref = self._geo.alt - self._rel_alt
+            else:
+                ref = self._geo.alt
+            self._alt_ref = ref
+            if self._geo is not None:
+                self._pos = np.array([self._pos[0], self._pos[1], self._height()])
+        self._event("altitude_reference", amsl_m=round(ref, 3), home_amsl_m=round(self.home.alt, 3))
+
+    @property
+    def altitude_reference(self) -> float | None:
+        """The AMSL altitude (metres) heights are measured from since arming, None before the first arming."""
+        return self._alt_ref
+
+    def _on_ekf_status_report(self, msg: Any) -> None:
+        """ArduPilot EKF_STATUS_REPORT: ``flags`` (EKF_STATUS_FLAGS) for readiness."""
+        self._ekf_flags = int(msg.flags)
+
+    def _on_estimator_status(self, msg: Any) -> None:
+        """PX4 ESTIMATOR_STATUS: ``flags`` (ESTIMATOR_STATUS_FLAGS) for readiness."""
+        self._ekf_flags = int(msg.flags)
 
     def _on_local_position_ned(self, msg: Any) -> None:
         self._on_boot_ms(msg.time_boot_ms)
@@ -50,6 +90,7 @@ class TelemetryMixin:
     def _on_sys_status(self, msg: Any) -> None:
         self._sensors = (msg.onboard_control_sensors_present, msg.onboard_control_sensors_enabled,
                          msg.onboard_control_sensors_health)
+        self._health_seen |= msg.onboard_control_sensors_health
         if msg.battery_remaining >= 0 and self._battery_from != "BATTERY_STATUS":
             self._battery = float(msg.battery_remaining)
             self._battery_from = "SYS_STATUS"
@@ -80,18 +121,43 @@ class TelemetryMixin:
         old = self.home
         moved = (not self._home_received or abs(home.lat - old.lat) > 1e-7 or abs(home.lon - old.lon) > 1e-7
                  or abs(home.alt - old.alt) > 0.01)
+        if moved and self._home_received and self._armed:
+            # in flight the ENU origin stays put (PX4 re-estimates home for minutes after take-off): report only
+            if abs(home.alt - old.alt) > abs(self._home_moved_alt - old.alt) + 0.5:  # a new largest move only
+                self._home_moved_alt = home.alt
+                self._event("home_moved_in_flight", lat=home.lat, lon=home.lon, alt=home.alt)
+            return
         if moved:
+            self._home_moved_alt = home.alt
             self.home = home
             self._home_received = True
             if self._geo is not None:  # re-express the last fix in the new frame
                 e, n, _ = geodetic_to_enu(self._geo.lat, self._geo.lon, home.alt, home)
-                self._pos = np.array([e, n, self._rel_alt])
+                self._pos = np.array([e, n, self._height()])
             self._event("home", lat=home.lat, lon=home.lon, alt=home.alt)
 
     def _on_mission_current(self, msg: Any) -> None:
         if msg.seq != self._mission_seq:
+            if msg.seq < self._mission_seq:  # the mission restarted (or jumped back): its items may be reached again
+                self._arrived = {s for s in self._arrived if s < msg.seq}
+                self._reached_fw = {s for s in self._reached_fw if s < msg.seq}
             self._mission_seq = msg.seq
             self._event("mission_current", seq=msg.seq, item=self._item_number(msg.seq))
+        self._check_arrival()
+
+    def _check_arrival(self) -> None:
+        """In AUTO / AUTO.MISSION, the current item is an uploaded NAV_WAYPOINT and the vehicle is within its
+        arrival radius (horizontal metres): report ``mission_item_reached`` now, when its hold begins. Both
+        autopilots send MISSION_ITEM_REACHED only *after* the hold time (ArduCopter ``ModeAuto::verify_nav_wp``
+        after ``loiter_time``; PX4 navigator after the item's hold, repeated ~10 times at 1 Hz), so without this the
+        stat-stream's WAYPOINT_HOLD would begin when the hover ends. Caller holds ``_lock``."""
+        seq = self._mission_seq
+        wp = self._mission_wire.get(seq)
+        if wp is None or seq in self._arrived or seq in self._reached_fw or self._mode not in ("AUTO", "MISSION"):
+            return
+        if math.hypot(self._pos[0] - wp[0], self._pos[1] - wp[1]) <= wp[2]:
+            self._arrived.add(seq)
+            self._event("mission_item_reached", seq=seq, item=self._item_number(seq), by="arrival")
 
     def _item_number(self, wire_seq: int) -> int:
         """The :class:`MissionItem` ``seq`` (from 1, as :meth:`upload_mission` returns) of a wire sequence number:
@@ -99,11 +165,14 @@ class TelemetryMixin:
         return wire_seq if self.autopilot == "ardupilot" else wire_seq + 1
 
     def _on_mission_item_reached(self, msg: Any) -> None:
-        now = time.monotonic()
-        if self._last_reached[0] == msg.seq and now - self._last_reached[1] < 1.0:
+        """The autopilot's MISSION_ITEM_REACHED (after the item's hold): reported once per item and mission run
+        (PX4 repeats it). For an item whose arrival :meth:`_check_arrival` already reported it becomes
+        ``mission_item_hold_done``, else ``mission_item_reached`` (take-off, or an item we do not track)."""
+        if msg.seq in self._reached_fw:
             return
-        self._last_reached = (msg.seq, now)
-        self._event("mission_item_reached", seq=msg.seq, item=self._item_number(msg.seq))
+        self._reached_fw.add(msg.seq)
+        name = "mission_item_hold_done" if msg.seq in self._arrived else "mission_item_reached"
+        self._event(name, seq=msg.seq, item=self._item_number(msg.seq), by="autopilot")
 
     @property
     def position(self) -> np.ndarray:
@@ -130,7 +199,7 @@ class TelemetryMixin:
             if self._landed_state and time.monotonic() - self._landed_wall < 5.0:
                 return self._landed_state in (M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF,
                                               M.MAV_LANDED_STATE_LANDING)
-            return self._armed and self._rel_alt > 0.3
+            return self._armed and self._height() > 0.3
 
     @property
     def battery_pct(self) -> float:

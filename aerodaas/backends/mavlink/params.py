@@ -1,0 +1,155 @@
+"""Parameters (mavlink.io parameter protocol: PARAM_REQUEST_READ / PARAM_SET, answered by PARAM_VALUE) and the
+vehicle's own speed limits set from the robot's ``limits``.
+
+Why the vehicle's parameters: both autopilots fly their own speed unless told otherwise. ArduCopter flies GUIDED
+and AUTO at ``WPNAV_SPEED`` (cm/s, range 20-2000; climb/descent ``WPNAV_SPEED_UP``/``WPNAV_SPEED_DN`` cm/s;
+ArduCopter ``AC_WPNav`` parameter table) and re-initialises its navigation speed from ``WPNAV_SPEED`` on every
+entry to AUTO, so MAV_CMD_DO_CHANGE_SPEED alone does not last. PX4 limits every position-controlled mode with
+``MPC_XY_VEL_MAX`` (m/s) and flies missions at ``MPC_XY_CRUISE`` (m/s); vertically ``MPC_Z_VEL_MAX_UP`` /
+``MPC_Z_VEL_MAX_DN`` (m/s), which PX4 itself applies to its automatic climb/descent speeds ("Ascent speed has
+been constrained by max speed"; ``src/modules/mc_pos_control/multicopter_*_params.c``). PX4's take-off and
+landing speeds (``MPC_TKO_SPEED``, ``MPC_LAND_SPEED``) are left alone: lowered to 0.5 m/s the SIH quadrotor
+never left the ground (auto preflight disarm after 10 s). A parameter the firmware does not have gets no
+PARAM_VALUE: it is reported (``param_unavailable`` event) and left out, never guessed.
+"""
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from typing import Any
+
+from ..base import BackendError
+from ._common import M, _f32
+
+#: how long (wall seconds, at most ``command_timeout_s``) one round of PARAM_REQUEST_READ waits for its answers
+_PARAM_READ_WAIT_S = 0.6
+
+
+class ParamMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: parameter reads/writes and speed limits.
+
+    State: ``_params`` (name -> float value from the latest PARAM_VALUE), ``_param_cv`` (notified on each),
+    ``_saved_params`` (the user's values before we changed them, restored by :meth:`restore_parameters`)."""
+
+    def _on_param_value(self, msg: Any) -> None:
+        name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
+        name = name.rstrip("\x00")
+        value = float(msg.param_value)
+        if msg.param_type in (M.MAV_PARAM_TYPE_INT32, M.MAV_PARAM_TYPE_UINT32, M.MAV_PARAM_TYPE_INT16,
+                              M.MAV_PARAM_TYPE_UINT16, M.MAV_PARAM_TYPE_INT8, M.MAV_PARAM_TYPE_UINT8) \
+                and self.autopilot == "px4":
+            # PX4 sends integers bytewise in the float field (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
+            value = float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+        with self._param_cv:
+            self._params[name] = value
+            self._param_cv.notify_all()
+
+    def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
+        """Read ``names`` with PARAM_REQUEST_READ (all at once, re-asked once for those still missing), waiting up
+        to ``wait_s`` wall seconds per round (default min(``command_timeout_s``, 0.6)). Returns the values that
+        came (floats, in the parameter's own unit); a name without answer is absent (the firmware lacks it).
+        Raises LinkLost."""
+        self._check_link("read parameters")
+        wait = min(self.cfg.command_timeout_s, _PARAM_READ_WAIT_S) if wait_s is None else wait_s
+        with self._param_cv:
+            for n in names:
+                self._params.pop(n, None)
+        for _ in range(2):
+            missing = [n for n in names if n not in self._params]
+            if not missing:
+                break
+            for n in missing:
+                self._send(lambda mav, n=n: mav.param_request_read_send(self._sysid, self._compid, n.encode(), -1))
+            end = time.monotonic() + wait
+            with self._param_cv:
+                while any(n not in self._params for n in missing) and time.monotonic() < end:
+                    self._param_cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
+        return {n: self._params[n] for n in names if n in self._params}
+
+    def set_parameter(self, name: str, value: float, wait_s: float | None = None) -> float:
+        """PARAM_SET ``name`` = ``value`` (REAL32) and wait for the PARAM_VALUE echo (re-sent up to
+        ``command_retries`` times, each try ``command_timeout_s``). Returns the value the vehicle reports, which
+        may differ (the firmware clamps to its range). Raises BackendError when no echo comes, LinkLost."""
+        self._check_link(f"set parameter {name}")
+        wait = self.cfg.command_timeout_s if wait_s is None else wait_s
+        v32 = _f32(value)
+        for _ in range(self.cfg.command_retries + 1):
+            with self._param_cv:
+                self._params.pop(name, None)
+            self._send(lambda mav: mav.param_set_send(self._sysid, self._compid, name.encode(), v32,
+                                                      M.MAV_PARAM_TYPE_REAL32))
+            end = time.monotonic() + wait
+            with self._param_cv:
+                while name not in self._params and time.monotonic() < end:
+                    self._param_cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
+                if name in self._params:
+                    return self._params[name]
+            self._check_link(f"set parameter {name}")
+        raise BackendError(f"robot {self.robot_id!r}: set parameter {name}: no PARAM_VALUE after "
+                           f"{self.cfg.command_retries + 1} tries of {wait:g} s")
+
+    # ------------------------------------------------------------------ speed limits
+    def _limit_parameters(self) -> dict[str, float]:
+        """The parameters that carry the robot's ``limits`` on this autopilot, in the firmware's units (see the
+        module docstring): ArduCopter cm/s, PX4 m/s."""
+        lim = self.limits
+        xy, z = float(lim.max_speed), float(lim.max_vertical_speed)
+        if self.autopilot == "ardupilot":
+            return {"WPNAV_SPEED": max(20.0, xy * 100.0), "WPNAV_SPEED_UP": max(10.0, z * 100.0),
+                    "WPNAV_SPEED_DN": max(10.0, z * 100.0)}
+        return {"MPC_XY_VEL_MAX": xy, "MPC_XY_CRUISE": xy}
+
+    def apply_speed_limits(self) -> dict[str, float]:
+        """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
+        read each parameter (keeping the user's value for :meth:`restore_parameters`), set the ones that allow
+        more than the limit, and read every one back (PARAM_VALUE). Returns the verified values (firmware units). Raises BackendError when a value
+        read back differs from what was set (beyond float32 rounding) or the firmware never echoes a
+        PARAM_SET; LinkLost."""
+        want = self._limit_parameters()
+        have = self.read_parameters(list(want))
+        for name in want:
+            if name not in have:
+                self._event("param_unavailable", name=name)
+        changed = {}
+        for name, value in have.items():
+            target = want[name]
+            if abs(value - target) <= 1e-3 * max(1.0, abs(target)):
+                continue
+            self._saved_params.setdefault(name, value)
+            changed[name] = target
+        for name, target in changed.items():
+            got = self.set_parameter(name, target)
+            if not math.isclose(got, target, rel_tol=1e-4, abs_tol=1e-4):
+                raise BackendError(f"robot {self.robot_id!r}: speed limit {name}: set {target:g}, the vehicle "
+                                   f"reports {got:g}")
+        verified = self.read_parameters(list(have)) if changed else have
+        for name, target in changed.items():
+            if name in verified and not math.isclose(verified[name], target, rel_tol=1e-4, abs_tol=1e-4):
+                raise BackendError(f"robot {self.robot_id!r}: speed limit {name}: set {target:g}, read back "
+                                   f"{verified[name]:g}")
+        self._limits_applied = True
+        self._event("speed_limits", **{k: round(v, 3) for k, v in verified.items()}, changed=sorted(changed))
+        return verified
+
+    def restore_parameters(self) -> dict[str, float]:
+        """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them (best effort: a
+        parameter whose echo does not come is reported in a ``param_restore_failed`` event). Returns what was
+        restored. Never raises."""
+        done = {}
+        for name, value in list(self._saved_params.items()):
+            try:
+                done[name] = self.set_parameter(name, value)
+                self._saved_params.pop(name, None)
+            except Exception as e:  # noqa: BLE001 - closing: report and go on
+                self._event("param_restore_failed", name=name, error=str(e))
+        if done:
+            self._event("params_restored", **{k: round(v, 3) for k, v in done.items()})
+        return done
+
+    def _init_params(self) -> None:
+        self._params: dict[str, float] = {}
+        self._param_cv = threading.Condition()
+        self._saved_params: dict[str, float] = {}
+        self._limits_applied = False
