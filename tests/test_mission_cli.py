@@ -20,8 +20,7 @@ def vehicle():
     made: list = []
 
     def make(autopilot: str) -> tuple[MavlinkVehicleEmulator, str]:
-        # mission_int: until the backend answers ArduCopter's MISSION_REQUEST with MISSION_ITEM_INT (branch i19)
-        emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, gps_lock_s=1.0, mission_int=True,
+        emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, gps_lock_s=1.0,
                                      home=GeoPoint(lat=47.397742, lon=8.545594, alt=488.0))
         made.append(emu)
         return emu, emu.start("tcp:127.0.0.1:0")

@@ -142,6 +142,10 @@ class MissionRunMixin:
             self._reached_repeat = (seq, left - 1, self.t + 1.0) if left > 1 else None
 
     def _advance(self) -> None:
+        if self.mission_seq + 1 >= len(self.mission):  # past the last item: the mission ends (next step), and
+            self.mission_seq = len(self.mission)  # MISSION_CURRENT stays at the last item, as both firmware do
+            self.item_started, self.item_reached_at = False, None
+            return
         self._set_current(self.mission_seq + 1)
 
     def _mission_done(self) -> None:

@@ -124,7 +124,8 @@ class TelemetryMixin:
             return e.battery_status_encode(0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 32767, cells, -1, -1,
                                            -1, int(round(self.veh.battery_pct)))
         if msg_id == M.MAVLINK_MSG_ID_MISSION_CURRENT:
-            return e.mission_current_encode(self.mission_seq, len(self.mission), 0, 0)
+            return e.mission_current_encode(min(self.mission_seq, max(0, len(self.mission) - 1)), len(self.mission),
+                                            0, 0)
         if msg_id == M.MAVLINK_MSG_ID_VFR_HUD:
             v = float(np.hypot(s.velocity[0], s.velocity[1]))
             return e.vfr_hud_encode(v, v, int(self._heading()), 50 if s.in_air else 0, float(self._geo().alt),
