@@ -178,14 +178,9 @@ def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path, mavlink: 
 
     cfg = load_environment_config(REPO / "apps" / f"{app}.json")  # resolves imagery paths
     robot = cfg.robots[0]
-    # until the backend handles them (branch i19): the position estimate with the fix, no PX4 home drift,
-    # ArduCopter asking for MISSION_ITEM_INT, DO_CHANGE_SPEED -2 accepted, and the vehicle's speed parameters
-    # already at the robot's limit (the backend is to set them on the vehicle, as on the real firmware)
-    v = robot.limits.max_speed
-    speed = {"WPNAV_SPEED": v * 100.0} if flavour == "ardupilot" else {"MPC_XY_CRUISE": v, "MPC_XY_VEL_MAX": v}
-    params = {**speed, **(params or {})}
-    emu = MavlinkVehicleEmulator(flavour, robot=robot, speedup=speedup, params=params, ekf_gps_s=0.0,
-                                 home_alt_drift_m=0.0, mission_int=True, deny_default_speed=False)
+    # PX4's in-flight home-altitude correction off: missions go up with heights relative to home, which PX4
+    # re-resolves with its moved home (1.5 m survey heights would touch the ground); on once they go up absolute
+    emu = MavlinkVehicleEmulator(flavour, robot=robot, speedup=speedup, params=params, home_alt_drift_m=0.0)
     addr = emu.start("tcp:127.0.0.1:0")
     data = cfg.model_dump(mode="json", exclude={"base_dir"})
     data["robots"][0].update(backend="mavlink", mavlink={"connection": addr, "autopilot": flavour, **(mavlink or {})})
