@@ -283,6 +283,8 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
         T.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, _AP_EKF_STATUS_REPORT, 1e6 / 2)
         for sid in (M.MAV_DATA_STREAM_EXTENDED_STATUS, M.MAV_DATA_STREAM_POSITION, M.MAV_DATA_STREAM_EXTRA3):
             T.m.mav.request_data_stream_send(T.sysid, T.compid, sid, 2, 1)
+    tr["stage"] = "mode"
+    T.set_mode("LOITER" if T.px4 else "GUIDED", tries=120, why="pre-arm")
     tr["stage"] = "cold arm"
     n = len(T.texts)
     res = T.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
@@ -294,8 +296,6 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     tr["stage"] = "params"
     tr["params"] = {n: T.param(n) for n in _PARAMS[T.ap]}
     tr["param_unknown"] = T.param("NO_SUCH_PARAM")
-    tr["stage"] = "mode"
-    T.set_mode("LOITER" if T.px4 else "GUIDED", tries=120, why="pre-arm")
     tr["stage"] = "arm"
     armed_at = None
     for _ in range(180):
@@ -352,14 +352,18 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     T.wps = [wp1, wp2]
     for k in range(2):
         seq = first + k
-        # leg 2's speed counts from the parameter's echo (+1.5 s to slow down) if that came after the departure
-        t_leg = t_start if k == 0 else max(T.arrivals[k - 1], legs[0].get("param_set_t", 0.0) + 1.5)
+        # leg 2 from the departure: the end of waypoint 1's hold (its first MISSION_ITEM_REACHED, both firmware)
+        t_leg = t_start if k == 0 else min([t for t, s in T.reached if s == seq - 1] or [T.arrivals[0] + hold])
+        # leg 2 tells the parameter's effect only if its echo came before the departure (PX4 reads the cruise
+        # speed when an item starts); on a loaded machine it may come later: then None
+        late = k == 1 and legs[0].get("param_set_t", 0.0) > T.arrivals[0] + hold - 0.5
         if not T.wait(lambda: k in T.arrivals, 120.0):
             tr["stage"] = f"wp{k + 1} timeout"
             return
         arrived = T.arrivals[k]
-        vmax = max((v for t, v in T.speed_log if t_leg <= t <= arrived), default=0.0)
-        leg = {"seq": seq, "arrival_t": round(arrived, 2), "max_speed": round(vmax, 2)}
+        # None: the parameter's echo came after the leg (a loaded machine), so the leg says nothing about it
+        vmax = None if late else max((v for t, v in T.speed_log if t_leg <= t <= arrived), default=None)
+        leg = {"seq": seq, "arrival_t": round(arrived, 2), "max_speed": None if vmax is None else round(vmax, 2)}
         if k == 0:
             leg["change_speed_minus2"] = _res(T.command(M.MAV_CMD_DO_CHANGE_SPEED, 1, -2, -1))
             value = slow * 100.0 if not T.px4 else slow
