@@ -1,0 +1,252 @@
+"""The embedded flight model exposed as a MAVLink vehicle that behaves like ArduPilot Copter or PX4 multicopter.
+
+Written from the MAVLink common message set (mavlink.io: heartbeat, command, mission and offboard protocols)
+and the autopilots' documented behaviour, *not* from :mod:`aerodaas.backends.mavlink`, so it tests the backend's
+assumptions. Mode numbers come from ArduPilot's ``ArduCopter/mode.h`` (``Mode::Number``) and PX4's
+``src/modules/commander/px4_custom_mode.h``; result codes from PX4 ``Commander::handle_command`` (refusals are
+``MAV_RESULT_TEMPORARILY_REJECTED``) and ArduPilot ``GCS_MAVLINK`` (refusals are ``MAV_RESULT_FAILED``).
+
+What differs between the two flavours (all emulated):
+
+* HEARTBEAT ``autopilot`` (ARDUPILOTMEGA 3 / PX4 12) and ``custom_mode`` (ArduCopter mode number / PX4
+  ``main_mode << 16 | sub_mode << 24``).
+* Take-off: ArduPilot needs GUIDED and armed, ``param7`` is metres above home; PX4 switches to AUTO.TAKEOFF and
+  ``param7`` is metres above mean sea level (NaN: ``MIS_TAKEOFF_ALT`` above home), then holds (AUTO.LOITER).
+* Position/velocity targets: ArduPilot honours them in GUIDED (velocity targets stop after 3 s without a new
+  one); PX4 only in OFFBOARD, which it refuses to enter without a setpoint stream and leaves (to AUTO.LOITER)
+  when the stream stops for ``COM_OF_LOSS_T`` seconds.
+* Missions: ArduPilot keeps home at sequence 0 (uploads carry a placeholder there, downloads return home);
+  PX4 numbers the first item 0. ArduPilot's AUTO on the ground needs a NAV_TAKEOFF first and starts on
+  MAV_CMD_MISSION_START; PX4 takes off by itself and holds (AUTO.LOITER) when the mission ends.
+* Streams: ArduPilot sends nothing but HEARTBEAT until asked (SET_MESSAGE_INTERVAL or the legacy
+  REQUEST_DATA_STREAM); PX4 streams its default set and ignores REQUEST_DATA_STREAM.
+* Before its GPS fix ArduPilot sends GLOBAL_POSITION_INT with latitude/longitude 0; PX4 sends none.
+* RTL: climb to ``RTL_ALT`` (cm, ArduPilot) / ``RTL_RETURN_ALT`` (m, PX4) when lower, fly home, land, disarm.
+* Both auto-disarm on the ground ``DISARM_DELAY`` / ``COM_DISARM_PRFLT`` seconds after arming without a
+  take-off, and after landing.
+
+Time: the emulator has its own clock (``time_boot_ms`` starts at a non-zero boot time); ``speedup`` K runs physics,
+streams, timeouts and the clock K times faster than real time. Test hooks: :meth:`set_blackhole` (link loss), :meth:`drop_next` (single lost packets),
+:meth:`set_prearm_failure`, ``message_interval=False`` (old firmware that answers SET_MESSAGE_INTERVAL with
+UNSUPPORTED), ``ignore_commands`` (commands never acknowledged), ``ack_only_commands`` (acknowledged ACCEPTED but
+not carried out), ``in_progress_commands`` (answered MAV_RESULT_IN_PROGRESS forever), :meth:`reject_next`
+(one-off refusals such as MAV_RESULT_TEMPORARILY_REJECTED), ``mission_int=False`` (firmware that speaks only the
+float MISSION_REQUEST / MISSION_ITEM forms of the mission protocol), :meth:`send_status_text` (STATUSTEXT,
+chunked as MAVLink 2 does when longer than 50 characters) and :meth:`inject` (raw bytes or a message on the
+link, e.g. corrupt packets). :attr:`setpoint_log` and :attr:`mode_log` record every position/velocity target
+and mode change in vehicle time.
+"""
+from __future__ import annotations
+
+import math
+import selectors
+import socket
+import threading
+from collections import deque
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from ...config import Limits, RobotConfig
+from ...models import GeoPoint
+from ...sim.vehicle import SimVehicle
+from .arming import ArmingMixin
+from .commands import CommandMixin
+from .constants import _PX4_DEFAULT_STREAMS
+from .flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
+from .guided import GuidedMixin
+from .link import LinkMixin
+from .mission import MissionMixin
+from .mission_run import MissionRunMixin
+from .modes import ModeMixin
+from .params import ParamMixin
+from .telemetry import TelemetryMixin
+
+if TYPE_CHECKING:
+    from .link import _Link
+    from .mission import _Transfer
+
+M = mavlink
+
+__all__ = ["MavlinkVehicleEmulator"]
+
+
+class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, ParamMixin, MissionMixin,
+                             MissionRunMixin, TelemetryMixin):
+    """A simulated ArduPilot Copter or PX4 multicopter speaking MAVLink 2 over TCP (server) or UDP.
+
+    ``autopilot``: ``"ardupilot"`` or ``"px4"``. ``robot``: battery, yaw rate, altitude and home from a
+    :class:`~aerodaas.config.RobotConfig` (defaults when None) - *not* its speed limits: like the firmware, the
+    vehicle flies at its own speed parameters until the ground station changes them; ``home`` overrides the home
+    (WGS-84 degrees, metres AMSL). ``speedup``: vehicle time runs this many times faster than real time.
+    ``params``: overrides of the emulated parameters, defaults and units as the firmware's
+    (:data:`.flavour.ARDUPILOT_PARAMS`: ``WPNAV_SPEED`` cm/s ...; :data:`.flavour.PX4_PARAMS`: ``MPC_XY_CRUISE``
+    m/s ...), also readable and settable with the parameter protocol. ``gps_lock_s``: vehicle seconds until the
+    3-D fix (ArduPilot: "EKF3 IMU0 origin set", home); ``ekf_gps_s``: vehicle seconds after that until the EKF
+    has a position estimate ("EKF3 IMU0 is using GPS"; PX4: XY_POSITION_CONTROL healthy) - arming in a mode that
+    needs a position is refused until then. ``home_alt_drift_m``: bound of PX4's in-flight home-altitude
+    correction (default 2 m for PX4, 0 for ArduPilot; ``seed`` makes it repeatable). ``deny_default_speed``:
+    MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 is DENIED (default: ArduCopter yes, PX4 no, as the firmware).
+    ``message_interval``: False emulates firmware without MAV_CMD_SET_MESSAGE_INTERVAL (UNSUPPORTED).
+    ``ignore_commands``: MAV_CMD numbers that are silently dropped (never acknowledged).
+    ``ack_only_commands``: MAV_CMD numbers acknowledged MAV_RESULT_ACCEPTED but not carried out (a vehicle that
+    says yes and does nothing: the HEARTBEAT never shows the new mode / armed state).
+    ``in_progress_commands``: MAV_CMD numbers answered MAV_RESULT_IN_PROGRESS, repeated every 0.5 vehicle seconds,
+    and never finished. ``mission_int``: None (default) asks for mission items as the firmware does (ArduPilot
+    MISSION_REQUEST, PX4 MISSION_REQUEST_INT) and accepts either item form; True asks with MISSION_REQUEST_INT;
+    False emulates older firmware that asks with MISSION_REQUEST and answers MISSION_REQUEST_INT with MISSION_ITEM
+    (latitude/longitude as float degrees).
+
+    Use :meth:`start` (returns the bound address), :meth:`stop`, :meth:`snapshot` for the state.
+    """
+
+    def __init__(self, autopilot: Literal["ardupilot", "px4"] = "ardupilot", *, robot: RobotConfig | None = None,
+                 home: GeoPoint | None = None, speedup: float = 1.0, system_id: int = 1, component_id: int = 1,
+                 params: dict[str, float] | None = None, gps_lock_s: float = 2.0, physics_hz: float = 50.0,
+                 message_interval: bool = True, ignore_commands: set[int] | None = None,
+                 ack_only_commands: set[int] | None = None, in_progress_commands: set[int] | None = None,
+                 mission_int: bool | None = None, ekf_gps_s: float = 1.0, home_alt_drift_m: float | None = None,
+                 deny_default_speed: bool | None = None, seed: int = 0) -> None:
+        if autopilot not in ("ardupilot", "px4"):
+            raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
+        if not (speedup > 0 and math.isfinite(speedup)):
+            raise ValueError(f"speedup must be a positive number, got {speedup!r}")
+        robot = robot or RobotConfig(id="mavlink_sim")
+        self.autopilot = autopilot
+        self.px4 = autopilot == "px4"
+        self.speedup = float(speedup)
+        self.system_id, self.component_id = system_id, component_id
+        self.origin = home or robot.home  # EKF origin: the simulator's ENU frame
+        # the airframe's envelope; the robot's own limits are the ground station's business (it must set the
+        # vehicle's speed parameters, as with the real firmware)
+        self.limits = Limits(max_speed=AIRFRAME_MAX_SPEED, max_vertical_speed=3.0, max_acceleration=3.0,
+                             max_yaw_rate=robot.limits.max_yaw_rate, max_altitude=robot.limits.max_altitude)
+        self.veh = SimVehicle(robot.id, self.origin, self.limits, robot.battery, robot.noise)
+        self.physics_dt = 1.0 / physics_hz
+        self.gps_lock_s = gps_lock_s
+        self.message_interval_supported = message_interval
+        self.ignore_commands = set(ignore_commands or ())
+        self.ack_only_commands = set(ack_only_commands or ())
+        self.in_progress_commands = set(in_progress_commands or ())
+        if not (ekf_gps_s >= 0 and math.isfinite(ekf_gps_s)):
+            raise ValueError(f"ekf_gps_s must be a finite number >= 0, got {ekf_gps_s!r}")
+        #: vehicle seconds from the GPS fix until the EKF fuses GPS (a position estimate); the firmware takes
+        #: ~20 s (ArduCopter SITL) - shorter here so that tests stay fast
+        self.ekf_gps_s = float(ekf_gps_s)
+        #: None: the flavour's mission request form (ArduPilot MISSION_REQUEST, PX4 MISSION_REQUEST_INT, as the
+        #: firmware sends them); False: older firmware that speaks only the float forms
+        self.mission_int = mission_int
+        drift = (2.0 if autopilot == "px4" else 0.0) if home_alt_drift_m is None else float(home_alt_drift_m)
+        if not (drift >= 0 and math.isfinite(drift)):
+            raise ValueError(f"home_alt_drift_m must be a finite number >= 0, got {home_alt_drift_m!r}")
+        #: bound (m) of PX4's in-flight home-altitude correction (COM_HOME_EN); 0 disables it
+        self.home_alt_drift_m = drift
+        self._rng = np.random.default_rng(seed)
+        #: MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 (-2 "default") is DENIED (None: as the flavour's firmware,
+        #: ArduCopter denies, PX4 accepts)
+        self.deny_default_speed = (not self.px4) if deny_default_speed is None else bool(deny_default_speed)
+        self._rejections: dict[int, list[int]] = {}  # MAV_CMD -> results still to answer (reject_next)
+        self._in_progress: dict[int, tuple[_Link, int, int, float, int]] = {}  # cmd -> (link, sys, comp, next t, %)
+        self._statustext_id = 0
+        self.params: dict[str, float] = dict(PX4_PARAMS if self.px4 else ARDUPILOT_PARAMS)
+        self.params["MAV_SYS_ID" if self.px4 else "SYSID_THISMAV"] = float(system_id)
+        for k, v in (params or {}).items():
+            if k not in self.params:
+                raise ValueError(f"params: unknown {autopilot} parameter {k!r}; known: {sorted(self.params)}")
+            self.params[k] = float(v)
+        self._enc = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._sel: selectors.BaseSelector | None = None
+        self._links: list[_Link] = []
+        self._udp_links: dict[Any, _Link] = {}
+        self._listen: socket.socket | None = None
+        self._udp: socket.socket | None = None
+        self._udpout_addr: tuple[str, int] | None = None
+        self.address: str | None = None
+        self._blackhole = False
+        self._blackhole_inbound = False
+        self._drop_counts: dict[tuple[str, str], int] = {}  # (direction, message type) -> how many more to drop
+        #: (direction "in"/"out", message type) of every message dropped by :meth:`drop_next`
+        self.dropped: list[tuple[str, str]] = []
+        #: (wall monotonic s, message type) of every message that arrived while the inbound link was cut
+        self.blackholed_inbound: list[tuple[float, str]] = []
+        self.prearm_failure: str | None = None
+        # vehicle state
+        self.t = 0.0
+        self.boot_ms0 = 73_421  # the autopilot booted a while before we count
+        self.mode = "MANUAL" if self.px4 else "STABILIZE"
+        self.home: GeoPoint | None = None
+        self.home_enu = np.zeros(3)
+        self.armed_at = 0.0
+        self.landed_at: float | None = None
+        self.took_off = False
+        self.speed: float | None = None  # DO_CHANGE_SPEED, m/s
+        self.phase = ""  # RTL phase: climb / return / land
+        self.last_setpoint_t = -1e9
+        #: vehicle time (s) of every position/velocity target received (the most recent 100 000)
+        self.setpoint_log: deque[float] = deque(maxlen=100_000)
+        #: (vehicle time s, mode name) of every mode change (the most recent 10 000)
+        self.mode_log: deque[tuple[float, str]] = deque(maxlen=10_000)
+        self.velocity_deadline: float | None = None  # ArduPilot GUIDED velocity timeout
+        self._last_target: tuple | None = None  # last position/velocity target (PX4 acts on it in OFFBOARD)
+        self.posvel: tuple | None = None  # active position + velocity feed-forward target (ENU m, m/s)
+        self.takeoff_alt: float | None = None
+        self.mission: list[Any] = []  # MISSION_ITEM_INT-like messages, wire sequence
+        self.mission_seq = 0
+        self.mission_state = "idle"  # idle / wait_start / running / holding / done
+        self.item_reached_at: float | None = None
+        self.item_started = False
+        self._item_target = np.zeros(3)  # ENU target of the mission item being flown
+        self.reached_log: list[int] = []
+        self._reached_repeat: tuple[int, int, float] | None = None  # PX4: (seq, repeats left, next vehicle s)
+        self._mission_item_warned = False
+        self._position_ok_sent = False
+        self._next_prearm_report = AP_PREARM_DISPLAY_PERIOD_S
+        self._home_corr = (0.0, 0.0, 0.0)  # PX4 home-altitude correction: (error m, applied m, next update s)
+        self.took_off_at: float | None = None
+        self._transfer: _Transfer | None = None
+        # message id -> interval in vehicle seconds
+        self._intervals: dict[int, float] = {m: 1.0 / hz for m, hz in _PX4_DEFAULT_STREAMS.items()} if self.px4 else {}
+        self._next_due: dict[int, float] = {}
+        self._next_hb = 0.0
+        self.statustexts: list[str] = []
+        self.commands_seen: list[int] = []
+        self.bad_packets = 0
+        self._apply_speed_params()
+
+    def snapshot(self) -> dict[str, Any]:
+        """The vehicle's state: ``t`` (vehicle seconds), ``mode``, ``armed``, ``in_air``, ``position`` (ENU metres
+        from the *current* home), ``position_origin`` (ENU from the EKF origin), ``home`` (GeoPoint or None),
+        ``gps_fix``, ``mission_seq``, ``mission_len`` (wire items), ``reached`` (MISSION_ITEM_REACHED seqs),
+        ``links`` (connected peers), ``statustexts``, ``commands_seen``."""
+        with self._lock:
+            s = self.veh.state
+            return {"t": self.t, "mode": self.mode, "armed": s.armed, "in_air": s.in_air,
+                    "position": tuple(float(v) for v in s.position - self.home_enu),
+                    "position_origin": tuple(float(v) for v in s.position), "home": self.home,
+                    "gps_fix": self._fix_type(), "mission_seq": self.mission_seq, "mission_len": len(self.mission),
+                    "reached": list(self.reached_log), "links": len(self._links),
+                    "statustexts": list(self.statustexts), "commands_seen": list(self.commands_seen),
+                    "battery_pct": self.veh.battery_pct}
+
+    def _tick(self, dt: float) -> None:
+        self.t += dt
+        veh, s = self.veh, self.veh.state
+        if self.home is None and self._fix_type() >= 3:
+            self._set_home_here()
+            self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 origin set" if not self.px4 else "home set")
+        self._readiness_tick()
+        was_in_air = s.in_air
+        if s.armed:
+            veh.step(dt)
+        if s.in_air:
+            if not self.took_off:
+                self.took_off_at = self.t
+            self.took_off = True
+        if was_in_air and not s.in_air:
+            self.landed_at = self.t
+        self._autopilot_logic()
+        self._stream()
