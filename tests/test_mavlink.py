@@ -726,8 +726,12 @@ def test_mavproxy_ground_station(autopilot, tmp_path):
             assert wait_for(lambda: emu.snapshot()["mode"] == "GUIDED", 10), lines[-10:]
             assert wait_for(lambda: any("Mode GUIDED" in x for x in lines), 5)
         else:
-            say("long DO_SET_MODE 1 4 3")  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, AUTO, LOITER
-            assert wait_for(lambda: emu.snapshot()["mode"] == "AUTO.LOITER", 10), lines[-10:]
+            def hold_mode() -> bool:  # like PX4, the emulator refuses Hold until it has a position estimate: retry
+                say("long DO_SET_MODE 1 4 3")  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, AUTO, LOITER
+                time.sleep(0.5)
+                return emu.snapshot()["mode"] == "AUTO.LOITER"
+
+            assert wait_for(hold_mode, 20), lines[-10:]
         say("arm throttle")
         assert wait_for(lambda: emu.snapshot()["armed"], 10), lines[-10:]
         assert wait_for(lambda: any("ARMED" in x for x in lines), 5)
