@@ -63,7 +63,10 @@ def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_sessi
     reached = [e["seq"] for e in run["events"] if e["event"] == "mission_item_reached"]
     assert reached == list(range(8))  # the uploaded mission's 8 items, each once
     heights = [o["position"][2] for o in run["odometry"]]
-    assert 25 < max(heights) < 40 and len(run["odometry"]) > 1000  # ~30 m above ground, 5 Hz over ~300 s of log
+    # ~30 m above ground; odometry over the whole ~300 s of log (how many samples a 60x replay gets depends on how
+    # often a loaded machine runs the clock, so the span is checked, not a count)
+    t = [o["t"] for o in run["odometry"]]
+    assert 25 < max(heights) < 40 and len(t) > 100 and max(t) - min(t) > 250, (len(t), min(t), max(t))
     summary = res.stats["px4"]["analytics"][0]["summary"]
     assert summary["battery"]["min"] < summary["battery"]["max"] <= 100
 
