@@ -27,13 +27,14 @@ import abc
 import json
 import math
 import os
+from collections import Counter
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, ClassVar, Iterable, Mapping
 
 __all__ = ["ModelProfile", "Workload", "TaskState", "AnalyticsTask", "Decision", "AnalyticsScheduler",
            "task_utility", "register_analytics_scheduler", "analytics_scheduler_names", "make_analytics_scheduler",
-           "TERMINAL_STATES", "admit_by_time"]
+           "TERMINAL_STATES", "admit_by_time", "filter_options"]
 
 
 # --------------------------------------------------------------------------------------------- workload
@@ -209,12 +210,17 @@ class AnalyticsScheduler(abc.ABC):
     name: ClassVar[str] = ""
     #: whether this policy ever uses the cloud (False for the edge-only baselines)
     uses_cloud: ClassVar[bool] = True
+    #: keyword options the constructor accepts (e.g. ``estimator``, ``eviction_scan``); see :func:`filter_options`
+    options: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, workload: Workload) -> None:
         self.w = workload
         self.edge_running: AnalyticsTask | None = None
         self.edge_busy_until_ms: float = 0.0
         self.cloud_available = True
+        #: behaviour counters a policy keeps for the benchmark (steals tried/passed/rejected by reason, JIT
+        #: releases, evictions, ...): names are policy-specific, values are event counts
+        self.counters: Counter = Counter()
 
     # -- arrivals
     @abc.abstractmethod
@@ -356,6 +362,14 @@ def make_analytics_scheduler(name: str, workload: Workload, **kwargs: Any) -> An
     if name not in _REGISTRY:
         raise ValueError(f"unknown analytics scheduler {name!r}; available: {list(_REGISTRY)}")
     return _REGISTRY[name](workload, **kwargs)
+
+
+def filter_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
+    """The entries of ``options`` that the scheduler registered as ``name`` accepts (its ``options``), None values
+    left out: how a benchmark applies one setting (e.g. ``estimator="max:5"``) to every policy that has it."""
+    _load_builtins()
+    accepted = _REGISTRY[name].options if name in _REGISTRY else ()
+    return {k: v for k, v in options.items() if k in accepted and v is not None}
 
 
 def _load_builtins() -> None:

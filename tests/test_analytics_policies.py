@@ -64,11 +64,14 @@ def kinds(decisions):
     return [(d.kind, d.task, d.state) for d in decisions]
 
 
-def c1_then_a1(name: str):
+def c1_then_a1(name: str, **options):
     """Edge running B until 300; C1 (deadline 500) queued at 0 (0 + 300 + 150 = 450 <= 500); then A1 (deadline
     410) submitted at 10 at the EDF head slot (400 < 500): 10 + 290 + 100 = 400 <= 410 fits, but it would push C1 to
-    550 > 500. Returns (policy, C1, A1, the decisions of A1's submit)."""
-    pol = make_analytics_scheduler(name, TW)
+    550 > 500. Returns (policy, C1, A1, the decisions of A1's submit). Evicting policies scan every task behind
+    the insertion point (``eviction_scan="full"``) unless ``options`` say otherwise."""
+    if name != "E+C":
+        options.setdefault("eviction_scan", "full")
+    pol = make_analytics_scheduler(name, TW, **options)
     busy(pol, 0.0, "B")
     c1 = task("C", 0.0)
     assert pol.submit(c1, 0.0) == []
@@ -176,7 +179,7 @@ def test_dem_evicts_only_when_the_victims_score_less_and_migrates_at_once():
 
 @pytest.mark.parametrize("b1_deadline,evicted", [(520.0, False), (700.0, True)])
 def test_eviction_compares_the_summed_score_of_all_victims(b1_deadline, evicted):
-    pol = make_analytics_scheduler("DEMS", TW)
+    pol = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
     busy(pol, 0.0, "A")                               # running until 100
     d1, b1 = task("D", 0.0, 300.0), task("B", 0.0, b1_deadline)
     pol.submit(d1, 0.0)                               # 100 + 100 = 200 <= 300
@@ -191,6 +194,31 @@ def test_eviction_compares_the_summed_score_of_all_victims(b1_deadline, evicted)
         assert list(pol.queue) == [e1, b1] and d1 in pol.tentative.tasks()
     else:
         assert list(pol.queue) == [d1, b1] and e1 in pol.tentative.tasks()
+
+
+def test_reference_eviction_scan_neither_checks_nor_counts_the_first_task_behind_the_insertion_point():
+    """PriorityQueue.add: the outer iterator has consumed the first task behind the insertion point when the victim
+    scan starts, so that task is never checked and its edge time is not in the running finish time."""
+    pol, c1, a1, decisions = c1_then_a1("DEM", eviction_scan="reference")
+    assert decisions == [] and list(pol.queue) == [a1, c1]  # C1 (would end at 550 > 500) is not checked
+    pol = make_analytics_scheduler("DEMS", TW)              # the default scan is the reference's
+    assert pol.eviction_scan == "reference"
+    busy(pol, 0.0, "A")                                     # running until 100
+    b1, b2 = task("B", 0.0, 700.0), task("B", 0.0, 720.0)
+    pol.submit(b1, 0.0)                                     # 100 + 300 = 400 <= 700
+    pol.submit(b2, 0.0)                                     # 700 <= 720
+    d1 = task("D", 0.0, 250.0)                              # slot 0: 100 + 100 = 200 <= 250
+    # reference: B1 skipped (not counted either), B2 checked from D1's end: 200 + 300 = 500 <= 720, kept.
+    # full scan: B1 ends at 500 <= 700, B2 at 800 > 720: a victim (145 < D1's 199) -- see the next assertion
+    assert pol.submit(d1, 0.0) == [] and list(pol.queue) == [d1, b1, b2]
+    full = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
+    busy(full, 0.0, "A")
+    for t in (task("B", 0.0, 700.0), task("B", 0.0, 720.0)):
+        full.submit(t, 0.0)
+    full.submit(task("D", 0.0, 250.0), 0.0)
+    assert len(full.queue) == 2 and len(full.tentative) == 1 and full.counters["evicted"] == 1
+    with pytest.raises(ValueError, match="eviction_scan"):
+        make_analytics_scheduler("DEM", TW, eviction_scan="partial")
 
 
 # --------------------------------------------------------------------------------------------- DEMS
@@ -213,7 +241,7 @@ def test_dems_drops_a_held_task_polled_more_than_10_ms_past_its_trigger(poll_at,
 
 
 def test_dems_eviction_holds_cost_victims_for_stealing_and_drops_them_for_cost_when_unstolen():
-    pol = make_analytics_scheduler("DEMS", TW)
+    pol = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
     busy(pol, 0.0, "B")
     c1 = task("C", 0.0)
     pol.submit(c1, 0.0)
@@ -228,7 +256,7 @@ def test_dems_eviction_holds_cost_victims_for_stealing_and_drops_them_for_cost_w
 
 
 def test_dems_insertion_position_and_eviction_of_every_task_behind_that_would_miss():
-    pol = make_analytics_scheduler("DEMS", TW)
+    pol = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
     busy(pol, 0.0, "A")                               # running until 100
     b1, b2 = task("B", 0.0, 700.0), task("B", 0.0, 1000.0)
     pol.submit(b1, 0.0)                               # 0 + 100 + 300 = 400 <= 700
