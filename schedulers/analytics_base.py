@@ -34,7 +34,7 @@ from typing import Any, Callable, ClassVar, Iterable, Mapping
 
 __all__ = ["ModelProfile", "Workload", "TaskState", "AnalyticsTask", "Decision", "AnalyticsScheduler",
            "task_utility", "register_analytics_scheduler", "analytics_scheduler_names", "make_analytics_scheduler",
-           "TERMINAL_STATES", "admit_by_time", "filter_options"]
+           "TERMINAL_STATES", "admit_by_time", "filter_options", "CloudCounters"]
 
 
 # --------------------------------------------------------------------------------------------- workload
@@ -309,6 +309,47 @@ class AnalyticsScheduler(abc.ABC):
             return Decision.drop(task, TaskState.DROPPED_TIME, f"{reason}; cloud time {self.cloud_estimate_ms(task.model):.0f} ms "
                                  f"exceeds the {task.deadline_ms - now_ms:.0f} ms left")
         return Decision.cloud(task, reason)
+
+
+# --------------------------------------------------------------------------------------------- run counters
+class CloudCounters:
+    """What a driver (the dispatcher, the policy harness) counts about a policy's cloud use: tasks sent, the
+    in-flight count over time (peak and time-weighted mean between the first send and the last reply), and cloud
+    tasks that came back late — all of them, and those the policy had *held* before sending (sent at least 1 ms
+    after arrival: a just-in-time release, a late eviction), which paid the cloud cost for no benefit."""
+
+    def __init__(self) -> None:
+        self.sent = self.in_flight = self.peak = self.late = self.late_held = 0
+        self._area = 0.0
+        self._first: float | None = None
+        self._last: float | None = None
+
+    def _advance(self, now_ms: float) -> None:
+        if self._last is not None:
+            self._area += self.in_flight * max(0.0, now_ms - self._last)
+        if self._first is None:
+            self._first = now_ms
+        self._last = now_ms
+
+    def on_send(self, now_ms: float) -> None:
+        self._advance(now_ms)
+        self.sent += 1
+        self.in_flight += 1
+        self.peak = max(self.peak, self.in_flight)
+
+    def on_end(self, task: AnalyticsTask, now_ms: float) -> None:
+        """``task`` (sent earlier, terminal now) came back or failed."""
+        self._advance(now_ms)
+        self.in_flight = max(0, self.in_flight - 1)
+        if task.state is TaskState.DONE_LATE:
+            self.late += 1
+            self.late_held += int(task.start_ms is not None and task.start_ms - task.arrival_ms >= 1.0)
+
+    def summary(self) -> dict:
+        span = (self._last - self._first) if self._first is not None and self._last is not None else 0.0
+        return {"cloud_sent": self.sent, "cloud_peak_concurrency": self.peak,
+                "cloud_mean_concurrency": self._area / span if span > 0 else 0.0,
+                "cloud_done_late": self.late, "cloud_done_late_after_hold": self.late_held}
 
 
 # --------------------------------------------------------------------------------------------- registry
