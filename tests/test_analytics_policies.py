@@ -20,7 +20,7 @@ WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
 needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 ALL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
-       "GAINPLAN"]
+       "GAINPLAN", "EVPLAN"]
 EDGE_ONLY = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF"]
 
 # A small workload where every number below is derivable by hand (times in ms).
