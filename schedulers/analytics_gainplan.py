@@ -188,8 +188,10 @@ class GainPlan(AnalyticsScheduler):
             horizon = self.commit_horizon_ms if self.offered_load(now_ms) > 1.0 else float("inf")
             if start is not None and start - self._edge_free_at(now_ms) <= horizon:
                 t.notes["mode"] = COMMITTED
+                self.counters["committed_to_edge"] += 1
             else:
                 self.pool.remove(t)
+                self.counters["released_to_cloud"] += 1
                 t.notes["cloud_ms"] = self.cloud_estimate_ms(t.model)
                 out.append(Decision.cloud(t, "at its cloud trigger: not about to run on the edge"))
         return out
