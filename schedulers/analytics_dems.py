@@ -283,6 +283,9 @@ class Dems(Dem):
     def __init__(self, workload: Workload, **options) -> None:
         super().__init__(workload, **options)
         self.tentative = TentativeCloudQueue()
+        #: steal into a busy queue only if the head's slack exceeds this (ms): the workload's shortest edge time
+        #: (the reference hard-codes 132 ms; deviation 5)
+        self.steal_slack_ms = workload.min_edge_ms
 
     # -- placing rejected/evicted tasks
     def _off_edge(self, task: AnalyticsTask, now_ms: float, why: str) -> list[Decision]:
@@ -379,9 +382,9 @@ class Dems(Dem):
                 return stolen, self._settle(drops, now_ms)
             head = self.queue.tasks[0]
             slack = head.deadline_ms - self.queue.edge_ms(head) - EDGE_TRIGGER_BUFFER_MS - now_ms
-            if self.tentative and slack <= self.w.min_edge_ms:
+            if self.tentative and slack <= self.steal_slack_ms:
                 self.counters["steal_skipped_slack_below_min_edge"] += 1
-            if self.tentative and slack > self.w.min_edge_ms:
+            if self.tentative and slack > self.steal_slack_ms:
                 stolen = self._steal(now_ms, slack)
                 if stolen is not None:
                     return stolen, self._settle(drops, now_ms)

@@ -233,10 +233,11 @@ def _fresh(trace: Sequence[AnalyticsTask]) -> list[AnalyticsTask]:
 
 
 def run_policy(name: str, workload: Workload, trace: Sequence[AnalyticsTask], *, options: dict | None = None,
-               **harness_kw) -> Result:
+               factory: Callable[[Workload], AnalyticsScheduler] | None = None, **harness_kw) -> Result:
     """Fresh copies of the trace's tasks through a fresh ``name`` scheduler (``options``: constructor options,
-    those the policy does not accept are ignored, see :func:`filter_options`)."""
-    pol = make_analytics_scheduler(name, workload, **filter_options(name, options or {}))
+    those the policy does not accept are ignored, see :func:`filter_options`; ``factory(workload)``: build the
+    policy instead, e.g. a variant that is not registered)."""
+    pol = factory(workload) if factory else make_analytics_scheduler(name, workload, **filter_options(name, options or {}))
     return Harness(pol, **harness_kw).run(_fresh(trace))
 
 
@@ -252,7 +253,7 @@ def fleet_tasks(rows: Sequence[tuple[float, str, str, str]], workload: Workload)
 
 def run_fleet(name: str, workload: Workload, per_edge: dict[str, list[AnalyticsTask]], *, seed: int,
               edge_jitter: Jitter | None, cloud_jitter: Jitter | None, network_specs: Sequence[str] = (),
-              options: dict | None = None) -> dict:
+              options: dict | None = None, factory: Callable[[Workload], AnalyticsScheduler] | None = None) -> dict:
     """Every edge of a fleet through its own fresh ``name`` policy (as the runtime: one policy per edge, one
     unbounded cloud). Returns the summed figures: ``tasks``, ``utility``, ``on_time``, ``cloud_cost``,
     ``edge_cost``, ``states`` and ``counters`` (sums; ``cloud_peak_concurrency`` is the largest edge's)."""
@@ -260,7 +261,8 @@ def run_fleet(name: str, workload: Workload, per_edge: dict[str, list[AnalyticsT
     states, counters = Counter(), Counter()
     peak = 0
     for edge, trace in per_edge.items():
-        res = run_policy(name, workload, trace, options=options, edge_jitter=edge_jitter, cloud_jitter=cloud_jitter,
+        res = run_policy(name, workload, trace, options=options, factory=factory, edge_jitter=edge_jitter,
+                         cloud_jitter=cloud_jitter,
                          network=NetworkModel.parse(list(network_specs), seed), seed=seed, edge_id=edge)
         tot["tasks"] += len(res.tasks)
         tot["utility"] += res.utility
