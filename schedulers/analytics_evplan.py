@@ -37,9 +37,9 @@ import math
 from collections import deque
 
 from .analytics_base import EXECUTED_STATES, AnalyticsTask, Decision, Workload, register_analytics_scheduler
-from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
+from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS
 from .analytics_estimators import make_estimator
-from .analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN, GainPlan, max_gain_edge_plan
+from .analytics_gainplan import EDGE_ONLY, OPEN, GainPlan, max_gain_edge_plan
 
 __all__ = ["EvPlan"]
 
@@ -72,7 +72,6 @@ class EvPlan(GainPlan):
         self.edge_ratios: deque[float] = deque(maxlen=100)
         self._edge_scale = 1.0
         self._sorted: dict[str, list[float]] = {}
-        self._now = 0.0
 
     # -- the latency model
     def _ratios(self, model: str) -> list[float]:
@@ -161,31 +160,13 @@ class EvPlan(GainPlan):
                 for t in list(self.pool)
                 if t.notes.get("mode") != OPEN and start + k * self.w[t.model].edge_ms > t.deadline_ms]
 
-    def poll(self, now_ms: float) -> list[Decision]:
-        self._now = now_ms
-        out = self._sweep(now_ms)
-        due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= JIT_EARLY_MS),
-                     key=self.trigger_ms)
-        for t in due:
-            if not self.cloud_available or self.cloud_value(t, now_ms) <= 0:
-                t.notes["mode"] = EDGE_ONLY  # the cloud option is gone; an edge candidate until it no longer fits
-                self.counters["cloud_option_lost"] += 1
-                continue
-            start = self._planned_start(t, now_ms)
-            horizon = self.commit_horizon_ms if self.offered_load(now_ms) > 1.0 else float("inf")
-            if start is not None and start - self._edge_free_at(now_ms) <= horizon:
-                t.notes["mode"] = COMMITTED
-                self.counters["committed_to_edge"] += 1
-            else:
-                self.pool.remove(t)
-                p = self.w[t.model]
-                # admitted while the expected value stays positive: slack >= c * Q(cloud cost / benefit)
-                need = p.cloud_ms * self.ratio_quantile(t.model, p.cloud_cost / p.benefit)
-                t.notes["cloud_ms"] = min(need, t.deadline_ms - now_ms)
-                self.counters["released_to_cloud"] += 1
-                self.counters["released_after_trigger"] += int(now_ms > self.trigger_ms(t) + JIT_LATE_MS)
-                out.append(Decision.cloud(t, "at its cloud trigger: not about to run on the edge"))
-        return out
+    def _cloud_option_gone(self, task: AnalyticsTask, now_ms: float) -> bool:
+        return not self.cloud_available or self.cloud_value(task, now_ms) <= 0
+
+    def _admit_cloud_ms(self, task: AnalyticsTask, now_ms: float) -> float:
+        # admitted while the expected value stays positive: slack >= c * Q(cloud cost / benefit)
+        p = self.w[task.model]
+        return min(p.cloud_ms * self.ratio_quantile(task.model, p.cloud_cost / p.benefit), task.deadline_ms - now_ms)
 
     def _pop_edge(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
         self._now = now_ms

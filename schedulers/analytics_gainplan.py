@@ -105,6 +105,7 @@ class GainPlan(AnalyticsScheduler):
         #: (arrival ms, edge ms) of recent arrivals, for the offered edge load
         self._recent: deque[tuple[float, float]] = deque()
         self.load_window_ms = 5_000.0
+        self._now = 0.0  # time of the current decision point (ms)
 
     # -- estimates
     def cloud_estimate_ms(self, model: str) -> float:
@@ -176,13 +177,23 @@ class GainPlan(AnalyticsScheduler):
             start += self.w[q.model].edge_ms
         return None
 
+    def _cloud_option_gone(self, task: AnalyticsTask, now_ms: float) -> bool:
+        """At its trigger: has ``task`` lost its cloud option (trigger more than 10 ms past, or no cloud)?"""
+        return self.trigger_ms(task) - now_ms < -JIT_LATE_MS or not self.cloud_available
+
+    def _admit_cloud_ms(self, task: AnalyticsTask, now_ms: float) -> float:
+        """The cloud time the re-check (:meth:`cloud_admit`) holds a released task to (ms)."""
+        return self.cloud_estimate_ms(task.model)
+
     def poll(self, now_ms: float) -> list[Decision]:
+        self._now = now_ms
         out = self._sweep(now_ms)
         due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= JIT_EARLY_MS),
                      key=self.trigger_ms)
         for t in due:
-            if self.trigger_ms(t) - now_ms < -JIT_LATE_MS or not self.cloud_available:
+            if self._cloud_option_gone(t, now_ms):
                 t.notes["mode"] = EDGE_ONLY  # the cloud option is gone; an edge candidate until it no longer fits
+                self.counters["cloud_option_lost"] += 1
                 continue
             start = self._planned_start(t, now_ms)
             horizon = self.commit_horizon_ms if self.offered_load(now_ms) > 1.0 else float("inf")
@@ -192,7 +203,7 @@ class GainPlan(AnalyticsScheduler):
             else:
                 self.pool.remove(t)
                 self.counters["released_to_cloud"] += 1
-                t.notes["cloud_ms"] = self.cloud_estimate_ms(t.model)
+                t.notes["cloud_ms"] = self._admit_cloud_ms(t, now_ms)
                 out.append(Decision.cloud(t, "at its cloud trigger: not about to run on the edge"))
         return out
 
