@@ -1,6 +1,6 @@
 """Behavioural tests of the analytics-scheduler policies (Ocularone baselines, E+C, DEM, DEMS, DEMS-A, GEMS and
 GAINPLAN), with hand-built scenarios whose right answer is derived in the comments, plus invariants and
-utility orderings on seeded traces driven by the exact-timing harness in ``tests/analytics_harness.py``."""
+utility orderings on seeded traces driven by the policy harness (``aerodaas/bench/harness.py``)."""
 from __future__ import annotations
 
 import itertools
@@ -600,3 +600,23 @@ def test_gems_counts_each_cloud_task_once_however_often_it_is_rechecked():
     b.state = TaskState.DONE_ON_TIME
     pol.on_cloud_done(b, 1200.0, 200.0)
     assert pol.on_time_fraction("A") == pytest.approx(0.5)
+
+
+# --------------------------------------------------------------------------------------------- EVPLAN
+def test_evplan_values_the_cloud_by_its_expected_utility_under_the_observed_latencies():
+    pol = make_analytics_scheduler("EVPLAN", TW)
+    a = task("A", 0.0)                                  # deadline 400, cloud 200: profile only, P = 1
+    assert pol.submit(a, 0.0) == [] and a.notes["mode"] == "open"
+    assert pol.trigger_ms(a) == 400 - 200 - 10          # exact timing: DEMS's cloud trigger
+    for i in range(10):                                 # A's round trips: 200, 220, ..., 380 ms (ratios 1.0..1.9)
+        _cloud_done(pol, "A", 1000.0 + i, 200.0 + 20 * i)
+    assert pol.on_time_chance("A", 300.0) == pytest.approx(0.6)   # 200..300: 6 of 10 fit
+    # V = P * 50 - 10 > 0 needs P > 0.2: with 230 ms left P = 0.2 -> V = 0: no cloud option, an edge-only candidate
+    b = task("A", 2000.0, 2230.0)
+    pol.submit(b, 2000.0)
+    assert b.notes["mode"] == "edge_only"
+    c = task("A", 3000.0)                               # 400 ms left: P = 1 at arrival; holding costs chance at once
+    pol.submit(c, 3000.0)
+    # hold while it costs < 2 % of the on-time chance: until the 98th-percentile ratio (1.9, the slowest) fits
+    assert pol.trigger_ms(c) == 3400 - 1.9 * 200 - 10
+    assert pol.cloud_admit(c, 3000.0)

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Sequence
 
 __all__ = ["Cell", "mean_ci", "t95", "scenario_specs", "SCENARIOS", "run_sweep", "aggregate", "format_sweep",
-           "DEFAULT_SCHEDULERS", "BASELINES", "OURS"]
+           "DEFAULT_SCHEDULERS", "BASELINES", "OURS", "markdown_tables", "claims"]
 
 #: network-variability scenarios: name -> what it adds to every cloud round trip (NetworkModel specs)
 SCENARIOS = {
@@ -318,3 +318,34 @@ def format_sweep(res: dict) -> str:
                          + (f"  bound fractions {c['best_fraction_of_bound']:.3f} -> {c['ours_fraction_of_bound']:.3f}"
                             if c["best_fraction_of_bound"] is not None else ""))
     return "\n".join(lines)
+
+
+def markdown_tables(res: dict, schedulers: Sequence[str] = ("E+C", "DEM", "DEMS", "DEMS-A", "GEMS", "GAINPLAN",
+                                                           OURS)) -> str:
+    """The sweep as Markdown (the tables of docs/analytics-schedulers.md): per load and scenario, one row per
+    (sigma, drones per edge), one cell per scheduler: utility mean ± CI in thousands, on-time %, fraction of the
+    upper bound."""
+    rows = [r for r in res["results"] if r["scheduler"] in schedulers]
+    out = []
+    for load, sc in dict.fromkeys((r["load"], r["scenario"]) for r in rows):
+        out += ["", f"**{load}, network {sc}** — utility (k) ± 95 % CI / on-time % / fraction of the upper bound", "",
+                "| σ | drones/edge | upper bound (k) | " + " | ".join(schedulers) + " |",
+                "|---|---|---|" + "---|" * len(schedulers)]
+        cells = dict.fromkeys((r["cloud_sigma"], r["drones_per_edge"]) for r in rows
+                              if (r["load"], r["scenario"]) == (load, sc))
+        for sigma, dpe in cells:
+            got = {r["scheduler"]: r for r in rows if (r["load"], r["scenario"], r["cloud_sigma"],
+                                                      r["drones_per_edge"]) == (load, sc, sigma, dpe)}
+            b = next(iter(got.values())).get("upper_bound")
+            cols = []
+            for name in schedulers:
+                r = got.get(name)
+                if r is None:
+                    cols.append("")
+                    continue
+                f = r.get("fraction_of_bound", {}).get("mean")
+                cols.append(f"{r['utility']['mean'] / 1e3:.1f} ± {r['utility']['ci95'] / 1e3:.1f} / "
+                            f"{100 * r['on_time_rate']['mean']:.0f}" + (f" / {f:.3f}" if f is not None else ""))
+            out.append(f"| {sigma:g} | {dpe} | " + (f"{b['mean'] / 1e3:.1f}" if b else "-") + " | "
+                       + " | ".join(cols) + " |")
+    return "\n".join(out)
