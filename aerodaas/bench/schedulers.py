@@ -487,7 +487,7 @@ def write_plot(res: dict, path: str | os.PathLike) -> None:
                                for r in res["results"]))
     ncol = min(4, len(cells))
     nrow = math.ceil(len(cells) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.4 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(max(6.5, 4.2 * ncol), 3.4 * nrow + 0.5), squeeze=False)
     for ax, cell in zip(axes.flat, cells):
         rs = [r for r in res["results"] if (r["load"], r["cloud_sigma"], r["drones_per_edge"], r["scenario"]) == cell]
         x = range(len(rs))
@@ -512,7 +512,7 @@ def write_plot(res: dict, path: str | os.PathLike) -> None:
     seeds = res.get("seeds") or res["config"].get("seeds")
     fig.suptitle(f"Analytics schedulers ({res.get('mode', 'runtime')}): total utility, mean ± 95 % CI over seeds "
                  f"{seeds}", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / (3.4 * nrow + 0.5)))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
