@@ -160,9 +160,30 @@ JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
 _CACHE: dict[str, dict[str, Any]] = {}
 
 
-def json_schema_for(schema_name: str) -> dict[str, Any] | None:
+#: free-form schemas: their fields are taken from an example message (json_schema_for's ``example``)
+FREE_FORM = ("aerodaas.AnalyticsOutput",)
+_JSON_TYPES = ((bool, "boolean"), ((int, float), "number"), (str, "string"), (list, "array"), (dict, "object"))
+
+
+def _field_schema(value: Any) -> dict[str, Any]:
+    for types, name in _JSON_TYPES:
+        if isinstance(value, types):
+            if name == "array" and value and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                  for v in value):
+                return {"type": "array", "items": {"type": "number"}}
+            return {"type": name}
+    return {}  # null or unknown: any value
+
+
+def json_schema_for(schema_name: str, example: dict[str, Any] | None = None) -> dict[str, Any] | None:
     """The JSON Schema (a dict, ``"type": "object"``, ``"title"`` = ``schema_name``) of a registered schema name,
-    or None for a name this module does not know. Generated once per name (cached)."""
+    or None for a name this module does not know. For a free-form schema (:data:`FREE_FORM`) with an ``example``
+    message (plain JSON types), each top-level field of the example is declared with its JSON type (numbers as
+    ``number``; a ``null`` accepts anything); other fields stay allowed. Generated once per name (cached)."""
+    if schema_name in FREE_FORM and example:
+        base = dict(json_schema_for(schema_name) or {})
+        base["properties"] = {str(k): _field_schema(v) for k, v in example.items()}
+        return base
     got = _CACHE.get(schema_name)
     if got is None:
         model = JSON_SCHEMA_MODELS.get(schema_name)

@@ -331,6 +331,7 @@ class McapRecorder:
         self._schema_ids: dict[Any, int] = {}  # schema cache key -> schema id
         self._schema_records: dict[str, tuple[str, str, bytes]] = {}  # topic -> (name, encoding, data)
         self._sinks: list[Callable[[RecordedMessage], None]] = []
+        self._default_schema_text: dict[str, str] = {}  # topic -> its generated JSON Schema (write_json)
         self.sink_errors: list[str] = []
         try:
             if path is not None:
@@ -598,8 +599,9 @@ class McapRecorder:
         ``obj`` is a dict (a pydantic model is accepted and dumped). numpy scalars/arrays become plain numbers/
         lists, NaN/inf become ``null``, other unknown objects ``str()``. ``schema_name`` names the schema (e.g.
         ``"aerodaas.MissionState"``); ``json_schema`` is the JSON Schema dict, default the one generated from the
-        pydantic model registered for ``schema_name`` in :mod:`aerodaas.record_schemas`, else the permissive
-        ``{"type": "object"}``. The schema is fixed by the first message on the topic.
+        pydantic model registered for ``schema_name`` in :mod:`aerodaas.record_schemas` (for a free-form schema
+        such as ``aerodaas.AnalyticsOutput``, with the top-level fields of the topic's first message), else the
+        permissive ``{"type": "object"}``. The schema is fixed by the first message on the topic.
 
         Raises ``TypeError`` if ``obj`` is not a mapping; ``ValueError`` for an empty ``schema_name`` or if the
         topic already carries another kind / another ``schema_name``.
@@ -611,10 +613,15 @@ class McapRecorder:
             obj = obj.model_dump(mode="json")
         if not isinstance(obj, Mapping):
             raise TypeError(f"write_json expects a dict, got {type(obj).__name__}")
-        data = json.dumps(_jsonable(obj), default=str, allow_nan=False, separators=(",", ":")).encode()
-        if json_schema is None:
-            json_schema = json_schema_for(schema_name) or _PERMISSIVE_SCHEMA
-        schema_text = json.dumps(json_schema, sort_keys=True)
+        plain = _jsonable(obj)
+        data = json.dumps(plain, default=str, allow_nan=False, separators=(",", ":")).encode()
+        if json_schema is None:  # generated once per topic (free-form outputs: from the topic's first message)
+            schema_text = self._default_schema_text.get(topic)
+            if schema_text is None:
+                schema_text = json.dumps(json_schema_for(schema_name, plain) or _PERMISSIVE_SCHEMA, sort_keys=True)
+                self._default_schema_text[topic] = schema_text
+        else:
+            schema_text = json.dumps(json_schema, sort_keys=True)
 
         def make_schema() -> tuple[str, str, bytes]:
             return schema_name, "jsonschema", schema_text.encode()
