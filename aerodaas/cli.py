@@ -127,6 +127,24 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_layout(args: argparse.Namespace) -> int:
+    """``aerodaas layout RUN.mcap [--out FILE]``: a Foxglove layout for the recording's robot, camera and detections
+    (:func:`aerodaas.foxglove_layout.layout_for_recording`); exit 2 for a missing or foreign file."""
+    from .foxglove_layout import layout_for_recording
+
+    try:
+        text = json.dumps(layout_for_recording(args.file), indent=2) + "\n"
+        if args.out:
+            Path(args.out).write_text(text)
+            print(f"aerodaas layout: wrote {args.out} (Foxglove: Layouts -> Import from file)")
+        else:
+            sys.stdout.write(text)
+    except (OSError, ValueError) as e:
+        print(f"aerodaas layout: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from .recording import summarize_mcap
 
@@ -337,6 +355,11 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--speed", type=float, default=1.0, help="playback speed over the recorded time (default 1)")
     rp.add_argument("--no-wait", action="store_true", help="start at once instead of when a client subscribes")
     rp.set_defaults(func=_cmd_replay)
+    ly = sub.add_parser("layout", help="write a Foxglove layout (camera + detections, 3D, map, state, battery/altitude) "
+                                       "for a recording")
+    ly.add_argument("file")
+    ly.add_argument("--out", metavar="FILE", help="output file (default: standard output)")
+    ly.set_defaults(func=_cmd_layout)
     i = sub.add_parser("info", help="summarise an MCAP recording")
     i.add_argument("file")
     i.add_argument("--json", action="store_true")

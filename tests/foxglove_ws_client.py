@@ -26,7 +26,8 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
     import aiohttp
 
     out: dict[str, Any] = {"server_info": None, "channels": {}, "messages": {t: [] for t in want}, "protocol": None,
-                           "closed_by_server": False}
+                           "closed_by_server": False, "timeline": []}
+    t0 = time.monotonic()
     deadline = time.monotonic() + timeout_s
     async with aiohttp.ClientSession() as session:
         t_conn = time.monotonic() + connect_timeout_s
@@ -57,6 +58,7 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
                         new = []
                         for ch in body["channels"]:
                             out["channels"][ch["topic"]] = ch
+                            out["timeline"].append((round(time.monotonic() - t0, 3), "advertise", ch["topic"]))
                             if ch["topic"] in want and ch["topic"] not in subs.values():
                                 subs[next_sub] = ch["topic"]
                                 new.append({"id": next_sub, "channelId": ch["id"]})
@@ -73,6 +75,7 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
                 elif msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING,
                                   aiohttp.WSMsgType.ERROR):
                     out["closed_by_server"] = True
+                    out["timeline"].append((round(time.monotonic() - t0, 3), "closed", str(msg.type)))
                     break
     return out
 
@@ -81,7 +84,7 @@ def collect(url: str, want: dict[str, int], timeout_s: float = 60.0, connect_tim
     """Connect to ``url``, subscribe to every topic of ``want`` as soon as it is advertised, and gather messages
     until each topic has ``want[topic]`` of them, the server closes, or ``timeout_s`` passes. Returns
     ``{"server_info", "channels": {topic: advertised channel}, "messages": {topic: [(log_time_ns, bytes)]},
-    "protocol", "closed_by_server"}``."""
+    "protocol", "closed_by_server", "timeline": [(seconds since connect, "advertise" | "closed", topic)]}``."""
     return asyncio.run(_collect(url, want, timeout_s, connect_timeout_s))
 
 
