@@ -81,7 +81,8 @@ class LiveServer:
     :meth:`advertise`) in a context of their own (nothing leaks into foxglove's global context). :meth:`publish`
     is thread-safe and does not block: the SDK queues per client (``backlog`` messages; the oldest data message is
     dropped for a slow client) and sends from its own threads. ``playback_range`` (ns) announces a replay's time
-    range; ``listener`` is a ``foxglove.websocket.ServerListener``.
+    range; ``listener`` is told of subscriptions (``on_subscribe``/``on_unsubscribe``, a
+    ``foxglove.websocket.ServerListener`` subset).
 
     Raises ``ValueError`` for a bad address and ``RuntimeError`` naming the address when the server cannot bind.
     """
@@ -99,9 +100,11 @@ class LiveServer:
         self._lock = threading.Lock()
         self.published = 0
         self.stopped = False
+        self.subscriptions = 0  # subscriptions open now, over all clients
+        self._user_listener = listener
         try:
             self._server = foxglove.start_server(name=name, host=self.host, port=port, context=self._ctx,
-                                                 message_backlog_size=backlog, server_listener=listener,
+                                                 message_backlog_size=backlog, server_listener=self,
                                                  capabilities=[Capability.Time] if time_capability else None)
         except Exception as e:  # the SDK raises its own error type for bind failures
             raise RuntimeError(f"live view: cannot serve on {self.host}:{port} ({e})") from e
@@ -134,15 +137,30 @@ class LiveServer:
         ch.log(msg.data, log_time=msg.log_time_ns)
         self.published += 1
 
+    # foxglove.websocket.ServerListener (called from the SDK's threads)
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self.subscriptions += 1
+        if self._user_listener is not None:
+            self._user_listener.on_subscribe(client, channel)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        self.subscriptions -= 1
+        if self._user_listener is not None:
+            self._user_listener.on_unsubscribe(client, channel)
+
     def broadcast_time(self, t_ns: int) -> None:
         """Tell clients the server's current time (ns), when built with ``time_capability``."""
         self._server.broadcast_time(int(t_ns))
 
-    def stop(self) -> None:
-        """Close the channels and stop the server (clients are disconnected). Idempotent."""
+    def stop(self, linger_s: float = 1.0) -> None:
+        """Stop publishing, give subscribed clients ``linger_s`` seconds to receive what the server still queues
+        for them (stopping drops it), then close the channels and stop the server (clients are disconnected).
+        Idempotent."""
         if self.stopped:
             return
         self.stopped = True
+        if linger_s > 0 and self.subscriptions > 0:
+            time.sleep(linger_s)
         with self._lock:
             channels, self._channels = list(self._channels.values()), {}
         for ch in channels:

@@ -6,12 +6,19 @@ Spec: https://github.com/foxglove/foxglove-sdk/blob/main/docs/spec/websocket/REA
 ``{"op": "subscribe", "subscriptions": [{"id", "channelId"}]}``; each message then arrives as a binary frame
 ``0x01 | subscription id (uint32 LE) | log time (uint64 LE, ns) | payload``. Uses aiohttp's WebSocket client
 (aiohttp comes with ray[default]).
+
+foxglove-sdk (0.30.3 and its main branch, rust/foxglove/src/websocket/connected_client.rs ``advertise_channels``)
+sends the ``advertise`` of a channel created while a client is connected *before* it enters the channel in that
+client's map, so a client that subscribes at once can be answered ``status`` "Unknown channel ID: N" and the
+subscription is dropped. This client then subscribes again (once per such status); the test records the status in
+``timeline`` so the race stays visible.
 """
 from __future__ import annotations
 
 import asyncio
 import base64
 import json
+import re
 import struct
 import time
 from typing import Any
@@ -20,6 +27,7 @@ from typing import Any
 #: `foxglove.websocket.v1` under the SDK's name; its spec now lives in the foxglove-sdk repository), older servers
 #: `foxglove.websocket.v1`
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
+_UNKNOWN_CHANNEL = re.compile(r"Unknown channel ID: (\d+)")
 
 
 async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_timeout_s: float) -> dict[str, Any]:
@@ -65,6 +73,14 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
                                 next_sub += 1
                         if new:
                             await ws.send_str(json.dumps({"op": "subscribe", "subscriptions": new}))
+                    else:  # status, unadvertise, time, ...: kept for diagnosis
+                        out["timeline"].append((round(time.monotonic() - t0, 3), body.get("op"), body))
+                        bad = _UNKNOWN_CHANNEL.match(str(body.get("message", ""))) if body.get("op") == "status" else None
+                        retry = [{"id": i, "channelId": int(bad.group(1))} for i, t in subs.items()
+                                 if bad and out["channels"].get(t, {}).get("id") == int(bad.group(1))]
+                        if retry:  # foxglove-sdk race (see module docstring): subscribe again
+                            await asyncio.sleep(0.05)
+                            await ws.send_str(json.dumps({"op": "subscribe", "subscriptions": retry}))
                 elif msg.type == aiohttp.WSMsgType.BINARY:
                     data = msg.data
                     if data[0] == 0x01:
