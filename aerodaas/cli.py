@@ -31,10 +31,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.hitl_port = args.hitl_port
     o.live = None
     if args.live is not None:
-        from .live import parse_address
+        from .live import check_bindable, parse_address
 
         try:
             host, port = parse_address(args.live)
+            if not args.address:  # local run: the edge host (which serves) is on this machine
+                check_bindable(host, port)
         except ValueError as e:
             print(f"aerodaas run: {e}", file=sys.stderr)
             return 2
@@ -90,10 +92,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     """``aerodaas replay FILE.mcap --live [HOST:PORT] [--speed K]``: serve a recording to Foxglove over WebSocket
     (:func:`aerodaas.live.replay`). Exit 0 when played to the end or stopped (Ctrl-C, SIGTERM), 2 for a bad file,
     address or speed."""
-    from .live import parse_address, replay
+    from .live import check_bindable, parse_address, replay
 
     try:
-        parse_address(args.live)
+        check_bindable(*parse_address(args.live))
         if not args.speed > 0:
             raise ValueError(f"--speed must be a positive number (1 = as recorded), got {args.speed!r}")
         if not Path(args.file).is_file():

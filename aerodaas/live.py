@@ -16,7 +16,6 @@ The server binds loopback (``127.0.0.1:8765``) unless an address is given: the p
 """
 from __future__ import annotations
 
-import ipaddress
 import threading
 import time
 from collections.abc import Callable
@@ -24,7 +23,7 @@ from typing import Any
 
 from .recording import RecordedMessage
 
-__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer", "parse_address", "replay"]
+__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer", "check_bindable", "parse_address", "replay"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765  # Foxglove's default for its WebSocket connection
@@ -65,13 +64,22 @@ def parse_address(text: str | None, option: str = "--live") -> tuple[str, int]:
     return host, port
 
 
-def _is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
+def check_bindable(host: str, port: int, option: str = "--live") -> None:
+    """Raise ``ValueError`` naming ``option`` when ``host:port`` cannot be listened on here (port taken, address not
+    of this machine), so that ``aerodaas run --live`` fails before anything starts. Port 0 always works."""
+    import socket
+
     try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except OSError as e:
+        raise ValueError(f"{option}: cannot resolve {host!r} ({e})") from None
+    family, _, _, _, addr = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(addr)
+        except OSError as e:
+            raise ValueError(f"{option}: cannot listen on {host}:{port} ({e.strerror or e})") from None
 
 
 class LiveServer:
@@ -93,7 +101,6 @@ class LiveServer:
         from foxglove.websocket import Capability
 
         self.host, port = parse_address(address)
-        self.loopback = _is_loopback(self.host)
         self._foxglove = foxglove
         self._ctx = foxglove.Context()
         self._channels: dict[str, Any] = {}

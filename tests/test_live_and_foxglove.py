@@ -92,12 +92,22 @@ def test_live_address_parsing_names_the_bad_value():
         parse_address("::1:80")
 
 
-def test_a_bad_live_address_fails_before_ray(tmp_path):
+def test_a_bad_or_busy_live_address_fails_before_ray(tmp_path):
+    import socket
+
     app = tmp_path / "app.py"
     app.write_text("raise SystemExit('must not run')\n")
     p = subprocess.run([*AERODAAS, "run", str(app), "--live", "127.0.0.1:99999"], capture_output=True, text=True,
                        timeout=60)
     assert p.returncode == 2 and "--live: port 99999" in p.stderr and "must not run" not in p.stderr
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        for cmd in (["run", str(app)], ["replay", str(tmp_path / "none.mcap")]):
+            p = subprocess.run([*AERODAAS, *cmd, "--live", f"127.0.0.1:{port}"], capture_output=True, text=True,
+                               timeout=60)
+            assert p.returncode == 2 and f"cannot listen on 127.0.0.1:{port}" in p.stderr, p.stderr
 
 
 def test_live_server_sends_the_recorders_bytes_to_a_protocol_client():
