@@ -392,8 +392,10 @@ def test_the_recording_reads_with_the_npm_mcap_reader(live_run, tmp_path):
     if not npm or not node:
         pytest.skip("node/npm not installed")
     try:
-        inst = subprocess.run([npm, "install", "--silent", "--no-audit", "--no-fund", "@mcap/core@2", "fzstd@0.1"],
-                              cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        # no retries and a short fetch timeout: offline, npm fails (or uses its cache) in seconds, not minutes
+        inst = subprocess.run([npm, "install", "--silent", "--no-audit", "--no-fund", "--prefer-offline",
+                               "--fetch-retries=0", "--fetch-timeout=15000", "@mcap/core@2", "fzstd@0.1"],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=120)
     except subprocess.TimeoutExpired:
         pytest.skip("npm install @mcap/core timed out (offline?)")
     if inst.returncode != 0:
