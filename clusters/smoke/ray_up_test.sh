@@ -302,9 +302,18 @@ T[node_loss]=$(elapsed "$t_loss")
 T[run_dems]=$(elapsed "$t0")
 grep -q "mission outcome: success" "$WORK/dems_run.log" || { cat "$WORK/dems_run.log" >&2; fail "DEMS run: no success"; }
 grep -q "lost at" "$WORK/dems_run.log" || { cat "$WORK/dems_run.log" >&2; fail "DEMS run: the summary does not report the loss"; }
-grep -Eq "analytics scheduler DEMS: [0-9]+ tasks.*cloud [1-9]" "$WORK/dems_run.log" ||
-    { cat "$WORK/dems_run.log" >&2; fail "DEMS run: the cloud served no task before the loss"; }
-check "DEMS run survived losing the cloud machine: outcome success, loss in the summary (run ${T[run_dems]} s, ${T[node_loss]} s from the loss to the end)"
+# every task reached exactly one terminal state (how many the cloud served before the loss depends on the machine's
+# load: DEMS releases cloud tasks just in time and drops those it cannot release within 10 ms; reported, not checked)
+DEMS_LINE=$(tr -d '\r' < "$WORK/dems_run.log" | grep -E "^ *analytics scheduler DEMS: " | tail -n 1)
+"$LAUNCH_PY" - "$DEMS_LINE" <<'EOF' || { cat "$WORK/dems_run.log" >&2; fail "DEMS run: tasks unaccounted for"; }
+import re, sys
+line = sys.argv[1]
+total = int(re.search(r"DEMS: (\d+) tasks", line).group(1))
+states = {k: int(v) for k, v in re.findall(r"(done_on_time|done_late|dropped_\w+|failed|expired\w*) (\d+)", line)}
+assert total > 0 and sum(states.values()) == total, (total, states, line)
+EOF
+DEMS_CLOUD=$(echo "$DEMS_LINE" | sed -n 's/.*(edge [0-9]*, cloud \([0-9]*\)).*/\1/p')
+check "DEMS run survived losing the cloud machine: outcome success, every task in one terminal state, loss in the summary; ${DEMS_CLOUD:-?} tasks served by the cloud (run ${T[run_dems]} s, ${T[node_loss]} s from the loss to the end)"
 
 # ------------------------------------------------------------------------------------------------ 6. ray down
 t0=$(now)
