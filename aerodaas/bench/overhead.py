@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, FixedCostDetector,  # noqa: F401
-                       FollowStage, mp, overheads, parsed_config, summary)
+                       FollowStage, Pacer, mp, overheads, parsed_config, summary)
 
 RESOLUTIONS = ((1280, 720), (640, 480))
 LAYOUTS = ("colocated", "actors")
@@ -131,17 +131,12 @@ class BareLoop:
         self.t0 = time.monotonic()
 
     def window(self, seconds: float) -> list[dict]:
-        period, rows = 1.0 / FPS, []
-        start = next_t = time.monotonic()
+        rows, pacer = [], Pacer()
+        start = time.monotonic()
         while time.monotonic() - start < seconds:
-            now = time.monotonic()
-            if now < next_t:
-                time.sleep(next_t - now)
-            tick, next_t = next_t, next_t + period
-            if time.monotonic() > next_t:  # already late for the next frame: skip ahead like a camera
-                next_t = time.monotonic() + period
+            tick = pacer.wait()
             t_start = time.monotonic()
-            self.drone.step(period)
+            self.drone.step(pacer.period)
             frame, meta = self.cam.capture(self.drone.position, float(self.drone.backend.yaw), t_start - self.t0)
             ready = time.monotonic()
             dets, inf, post = self.det(frame, meta)
@@ -327,13 +322,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       file=sys.stderr)
                 return 2
         layouts = LAYOUTS if a.layout == "both" else (a.layout,)
-        report = run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record)
-        text = json.dumps(report, indent=2)
-        if a.out:
-            with open(a.out, "w") as f:
-                f.write(text)
-        if a.json:
-            print(text)
+        emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
         return 0
 
     p.set_defaults(func=run)
+
+
+def emit_report(report: dict, out: str | None, to_stdout: bool) -> None:
+    """Write a benchmark's JSON report to ``out`` (if given) and print it (if ``to_stdout``)."""
+    text = json.dumps(report, indent=2)
+    if out:
+        with open(out, "w") as f:
+            f.write(text)
+    if to_stdout:
+        print(text)

@@ -140,11 +140,11 @@ def _unpack(value) -> object:
 def _camera(node, p: dict, workdir: str) -> None:
     import pyarrow as pa
 
-    from .pipeline import FPS, HOVER_M, CameraStage
+    from .pipeline import FPS, HOVER_M, CameraStage, Pacer
 
     cam = CameraStage(p["width"], p["height"], p["kind"])
     Path(workdir, "ready_camera").touch()
-    period, t0, next_t, until = 1.0 / FPS, time.monotonic(), 0.0, 0.0
+    pacer, t0, until = Pacer(FPS), time.monotonic(), 0.0
     win = Path(workdir, "window")
     while True:
         if time.monotonic() >= until:  # idle between windows: wait for STOP or a new window
@@ -155,14 +155,9 @@ def _camera(node, p: dict, workdir: str) -> None:
             if time.monotonic() - t_poll < 0.01:  # a timeout comes back as an ERROR event: never spin
                 time.sleep(0.01)
             until = float(win.read_text() or 0.0)
-            next_t = time.monotonic()
+            pacer.restart()
             continue
-        now = time.monotonic()
-        if now < next_t:
-            time.sleep(next_t - now)
-        tick, next_t = next_t, next_t + period
-        if time.monotonic() > next_t:  # already late for the next frame: skip ahead like a camera
-            next_t = time.monotonic() + period
+        tick = pacer.wait()
         start = time.monotonic()
         frame, meta = cam.capture((0.0, 0.0, HOVER_M), 0.0, start - t0)
         ready = time.monotonic()

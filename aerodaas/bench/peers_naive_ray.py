@@ -16,7 +16,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from .pipeline import FPS, HOVER_M, CameraStage, CommandStage, DetectStage, DroneStage, FollowStage, parsed_config
+from .pipeline import (FPS, HOVER_M, CameraStage, CommandStage, DetectStage, DroneStage, FollowStage, Pacer,
+                       parsed_config)
 
 
 class CameraActor:
@@ -31,15 +32,9 @@ class CameraActor:
         """Produce frames at ``fps`` for ``window_s`` seconds; returns how many were sent."""
         import ray
 
-        period, start, n = 1.0 / fps, time.monotonic(), 0
-        next_t = start
+        pacer, start, n = Pacer(fps), time.monotonic(), 0
         while time.monotonic() - start < window_s:
-            now = time.monotonic()
-            if now < next_t:
-                time.sleep(next_t - now)
-            tick, next_t = next_t, next_t + period
-            if time.monotonic() > next_t:  # already late for the next frame: skip ahead like a camera
-                next_t = time.monotonic() + period
+            tick = pacer.wait()
             t_start = time.monotonic()
             frame, meta = self.cam.capture((0.0, 0.0, HOVER_M), 0.0, t_start - self.t0)
             ready = time.monotonic()

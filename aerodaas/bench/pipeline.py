@@ -82,6 +82,27 @@ def make_detector(kind: str, stub_ms: float) -> Analytics:
     return ObjectDetector("yolox_nano", classes=["car", "truck", "bus"], score_threshold=0.15)
 
 
+class Pacer:
+    """A camera's clock at ``fps``: :meth:`wait` sleeps until the next frame is due and returns when it was due
+    (``time.monotonic()`` seconds); a frame that would start late is skipped, as a camera would."""
+
+    def __init__(self, fps: float = FPS) -> None:
+        self.period = 1.0 / fps
+        self.next_t = time.monotonic()
+
+    def restart(self) -> None:
+        self.next_t = time.monotonic()
+
+    def wait(self) -> float:
+        now = time.monotonic()
+        if now < self.next_t:
+            time.sleep(self.next_t - now)
+        tick, self.next_t = self.next_t, self.next_t + self.period
+        if time.monotonic() > self.next_t:  # already late for the next frame: skip ahead
+            self.next_t = time.monotonic() + self.period
+        return tick
+
+
 class CameraStage:
     """Renders one (H, W, 3) uint8 read-only frame at a pose (metres ENU, yaw degrees) and builds its FrameMeta."""
 

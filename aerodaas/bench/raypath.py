@@ -20,7 +20,6 @@ on, loopback only). Each step is timed ``--repeat`` times (after 20 unmeasured w
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from typing import Any
@@ -130,12 +129,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         report = run_raypath(a.repeat)
         for k, v in report["results_us"].items():
             print(f"raypath {k:32s} median {v['median']:9.1f} µs  p99 {v['p99']:9.1f} µs", file=sys.stderr)
-        text = json.dumps(report, indent=2)
-        if a.out:
-            with open(a.out, "w") as f:
-                f.write(text)
-        if a.json:
-            print(text)
+        from .overhead import emit_report
+
+        emit_report(report, a.out, a.json)
         return 0
 
     p.set_defaults(func=run)
