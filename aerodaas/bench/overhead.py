@@ -255,7 +255,9 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
             shutil.rmtree(record_dir, ignore_errors=True)
     return {"benchmark": "overhead", "machine": machine, "duration_s": duration_s, "window_s": window_s,
             "stub_ms": stub_ms, "recorded": record, "layouts": list(layouts),
-            "load": {"load_avg_1min_at_windows": summary(loads), "load_avg_1min_end": round(os.getloadavg()[0], 2)},
+            "load": {"load_avg_1min_at_windows": {**summary(loads), "min": min(loads, default=None),
+                                                  "max": max(loads, default=None)},
+                     "load_avg_1min_end": round(os.getloadavg()[0], 2)},
             "definition": "framework overhead = end-to-end (frame ready -> command applied to the vehicle backend) "
                           "- inference - post-processing, per frame whose command reached the drone; honest "
                           "overhead (stub) = end-to-end + capture dispatch - the stub's nominal time",
