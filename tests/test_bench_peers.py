@@ -25,7 +25,7 @@ def test_dora_dataflow_wires_one_node_per_component_in_pipeline_order(tmp_path):
     assert ids == ["camera", "detector", "follow", "scheduler", "drone"]
     sources = [line.split("source: ")[1] for line in text.splitlines() if "source: " in line]
     assert sources == ["camera/frame", "detector/dets", "follow/nav", "scheduler/item"]
-    assert text.count(f"-m aerodaas.bench.peers_dora") == 5 and str(tmp_path) in text
+    assert text.count("-m aerodaas.bench.peers_dora") == 5 and str(tmp_path) in text
 
 
 def test_overheads_use_the_nominal_stub_time_for_the_honest_tail():
