@@ -46,6 +46,10 @@ def test_bench_overhead_json_has_every_column_both_layouts_and_the_honest_tail(t
     fw = colo["framework"]
     assert fw["commands_applied"] > 0 and fw["host_errors"] == 0           # the follow really commanded the drone
     assert fw["recorded"] and fw["recording_bytes"] > 0                    # --record recorded the runtime's runs
+    un = colo["framework_unrecorded"]                                      # ... beside unrecorded ones, same rotation
+    assert not un["recorded"] and un["recording_bytes"] == 0 and un["commands_applied"] > 0
+    assert set(colo["framework_unrecorded_overhead_ms"]) == {"median", "p99"}
+    assert "framework_unrecorded_overhead_ms" not in actors
     # end-to-end = inference + post-processing + overhead, frame by frame, so the medians are ordered
     assert fw["e2e_ms"]["median"] >= fw["inference_ms"]["median"] >= 2.0 * 0.9
     assert fw["capture_dispatch_ms"]["median"] is not None

@@ -12,7 +12,8 @@ frames, in one invocation, **interleaved**: round-robin windows of ``--window`` 
 round) until each has had ``--duration`` seconds, so a drift in the machine's load hits all of them alike:
 
 * ``framework`` — the AeroDaaS runtime, today's host layout (``colocated``: every component of the tier in one
-  host process); one short mission per window (its take-off is not measured), optionally recorded (``--record``);
+  host process); one short mission per window (its take-off is not measured), optionally recorded (``--record``:
+  then an unrecorded copy joins the rotation, ``framework_unrecorded_overhead_ms``, so the recording's cost shows);
 * ``bare_loop`` — one process, plain function calls: the floor;
 * ``naive_ray`` — one Ray actor per component, ``ray.put`` + actor call per hop (:mod:`.peers_naive_ray`);
 * ``dora_rs`` — one dora-rs 1.1 node process per component, shared memory (:mod:`.peers_dora`; the optional
@@ -176,9 +177,13 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
                 record_dir: str | None, loads: list[float], with_framework: bool = True) -> dict:
     """Every pipeline for ``duration_s`` seconds in round-robin windows of ``window_s`` (order rotated each round,
     one unmeasured warm-up window first for the peers). Returns ``{name: report}``; an unavailable pipeline's report
-    is ``{"available": False, "reason": ...}``; without ``with_framework`` the AeroDaaS runtime is not flown."""
+    is ``{"available": False, "reason": ...}``; without ``with_framework`` the AeroDaaS runtime is not flown. When
+    recording (``record_dir``), an unrecorded AeroDaaS runner joins the rotation (``framework_unrecorded``), so the
+    recording's cost shows side by side."""
     fw = FrameworkWindows(width, height, kind, stub_ms, record_dir)
     runners: dict[str, Any] = {"framework": fw} if with_framework else {}
+    if with_framework and record_dir:
+        runners["framework_unrecorded"] = FrameworkWindows(width, height, kind, stub_ms, None)
     missing: dict[str, str] = {}
     for name in PEERS:
         p, why = _peer(name, width, height, kind, stub_ms)
@@ -200,6 +205,9 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
             if name in runners:
                 runners[name].close()
     out: dict[str, Any] = {"framework": fw.report(rows["framework"], kind, stub_ms) if with_framework else None}
+    if "framework_unrecorded" in runners:
+        out["framework_unrecorded"] = runners["framework_unrecorded"].report(rows["framework_unrecorded"], kind,
+                                                                             stub_ms)
     for name in PEERS:
         out[name] = ({"available": True, **overheads(rows[name], kind, stub_ms)} if name in runners
                      else {"available": False, "reason": missing[name]})
@@ -223,6 +231,11 @@ def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
                            if fw and bo and bo["median"] and row["framework_overhead_ms"]["median"] is not None
                            else None)
     row["framework"] = fw if fw else {"status": NOT_IMPLEMENTED}
+    if fw and rep.get("framework_unrecorded"):  # --record: the same runtime unrecorded, in the same rotation
+        un = rep["framework_unrecorded"]
+        row["framework_unrecorded_overhead_ms"] = mp(un["framework_overhead_ms"])
+        row["honest_overhead_ms"]["framework_unrecorded"] = mp(un["honest_overhead_ms"])
+        row["framework_unrecorded"] = un
     for name in cols:
         row[name] = rep[name]
     return row
