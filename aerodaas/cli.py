@@ -411,7 +411,7 @@ def main(argv: list[str] | None = None) -> int:
         m.add_argument("--autopilot", choices=["auto", "ardupilot", "px4"], default="auto")
         m.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the vehicle (default 10)")
         m.set_defaults(func=_cmd_mission)
-    bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video; "
+    bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video, raypath; "
                                          "--json for JSON output")
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
