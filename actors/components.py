@@ -59,6 +59,8 @@ class CameraComponent:
         self.recorder = recorder
         self.topic = f"/{robot_id}/camera/{sensor_id}"
         self.epoch_ns = epoch_ns
+        if recorder is not None:  # its frame in the transform tree, its calibration beside each image
+            recorder.camera(robot_id, sensor_id, self.k.model_dump(), self.pitch)
         self.ticks = 0
         self.frames = 0
         self.dropped_at_camera = 0
@@ -249,6 +251,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
         super().__init__(host, cid, name, analytics, recorder, epoch_ns, buffer=256)
         self.service = service
         self.outcomes: dict[str, int] = {}
+        #: executed tasks (done on time or late) per tier, and those whose result was non-empty (e.g. detections)
+        self.executed: dict[str, int] = {}
+        self.with_output: dict[str, int] = {}
 
     def handle(self, port: str, env: dict) -> None:
         frame = env.get("data")
@@ -274,6 +279,10 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
         try:
             state = task.state.value
             self.outcomes[state] = self.outcomes.get(state, 0) + 1
+            if state in ("done_on_time", "done_late"):  # the model ran, on the edge or in the cloud
+                tier = task.tier or "edge"
+                self.executed[tier] = self.executed.get(tier, 0) + 1
+                self.with_output[tier] = self.with_output.get(tier, 0) + bool(task.result)
             robot = env.get("robot") or task.drone
             if self.recorder is not None:
                 t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
@@ -296,7 +305,12 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
 
     def stats(self) -> dict:
         out = super().stats()
-        out["scheduled"] = {"scheduler": self.service.name, "outcomes": dict(self.outcomes)}
+        out["scheduled"] = {"scheduler": self.service.name, "outcomes": dict(self.outcomes),
+                            "executed": dict(self.executed), "with_output": dict(self.with_output)}
+        if "frames_with_detections" in out:  # the edge copy's own counts miss the frames the cloud served
+            out["frames"] = sum(self.executed.values())
+            out["frames_with_detections"] = sum(self.with_output.values())
+            out["frames_by_tier"] = dict(self.executed)
         return out
 
 
@@ -538,7 +552,14 @@ class HostRuntime:
         self.host = host
         self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
         rec = spec.get("record")
-        self.recorder = RecorderService(rec["path"], rec.get("meta"), copies=host.copies) if rec else None
+        if rec:  # the edge host: the file and/or the live view
+            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"))
+        elif spec.get("record_remote"):  # another host of a recorded run: its messages go to the edge recorder
+            from .recorder import RemoteRecorder
+
+            self.recorder = RemoteRecorder(host, spec["record_remote"])
+        else:
+            self.recorder = None
         host.recorder = self.recorder
         self.comps: dict[str, Any] = {}
         self.scheduling = AnalyticsSchedulingService(host, spec["analytics_scheduler"]) \
@@ -584,8 +605,10 @@ class HostRuntime:
             d.connect()
 
     def describe(self) -> dict:
+        live = getattr(self.recorder, "live", None)
         return {"host": self.host.host_id, "tier": self.host.tier, "components": sorted(self.comps),
-                "pid": __import__("os").getpid(), "threads": self.host.pool._max_workers}
+                "pid": __import__("os").getpid(), "threads": self.host.pool._max_workers,
+                "live_url": live.url if live is not None else None}
 
     def lookup(self, cid: str) -> Any:
         try:
@@ -674,7 +697,9 @@ class HostRuntime:
                         "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
                         "first_processed_wall": self.host.first_processed_wall,
                         "frame_copies": self.host.copies.snapshot(),
-                        "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])])}
+                        "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])]),
+                        # a host without the recorder (cloud): messages it could not hand to the edge recorder
+                        "record_send_errors": list(getattr(self.recorder, "send_errors", []))[-5:]}
         if self.scheduling is not None:
             out["_analytics_scheduler"] = self.scheduling.report()
         return out

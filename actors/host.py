@@ -473,6 +473,14 @@ class HostActor:
     def run(self, timeout_s: float | None = None) -> dict:
         return self.runtime.run(timeout_s)
 
+    def record(self, batch: list) -> int:
+        """Messages recorded by components of another host (:class:`~.recorder.RemoteRecorder`), handed to this
+        host's recorder; returns how many (0 when this host records nothing)."""
+        from .recorder import deliver
+
+        rec = self.runtime.recorder if self.runtime else None
+        return deliver(rec, batch) if rec is not None and hasattr(rec, "rec") else 0
+
     def stats(self) -> dict:
         return self.runtime.stats() if self.runtime else {}
 

@@ -2,7 +2,19 @@
 
 Every component hands it messages with non-blocking calls; a writer thread JPEG-encodes frames and writes
 everything through :class:`aerodaas.recording.McapRecorder` (zstd chunks, flushed as chunks complete and at
-least every ``flush_every_s`` seconds, so a crash loses at most the last couple of seconds).
+least every ``flush_every_s`` seconds, so a crash loses at most the last couple of seconds). With a live view
+(``aerodaas run --live``) the same writer also feeds a :class:`aerodaas.live.LiveServer`: every message is
+serialized once and goes to the file and to the Foxglove WebSocket clients.
+
+Components on other hosts (analytics deployed on cloud compute) record through a :class:`RemoteRecorder`, which
+batches their messages to the edge host's recorder.
+
+Frames of reference written for Foxglove's transform tree (on ``/tf``, with every odometry message, so a client
+that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the vehicle's pose),
+``<robot>/base_link`` -> ``<robot>/gps`` (the GPS antenna, at the body origin) and ``<robot>/base_link`` ->
+``<robot>/<camera>`` (each camera's optical frame, pitched by its mount, see
+:func:`aerodaas.recording.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
+on ``<image topic>/calibration`` with the camera's intrinsics.
 """
 from __future__ import annotations
 
@@ -13,7 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.recording import McapRecorder
+from aerodaas.recording import McapRecorder, camera_mount_quaternion
+
+TF_TOPIC = "/tf"
 
 
 class RecorderService:
@@ -23,10 +37,23 @@ class RecorderService:
     ``recorder_jpeg_encoded`` in ``copies`` (the host's :class:`~.host.FrameCopies`) when given. All methods are
     thread-safe and return at once."""
 
-    def __init__(self, path: str, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
-                 max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None) -> None:
+    def __init__(self, path: str | None, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
+                 max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
+                 live: str | None = None) -> None:
         self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality)
         self.path = path
+        #: the live Foxglove WebSocket server (``live`` = its HOST:PORT), fed by the same writer
+        self.live = None
+        if live is not None:
+            from aerodaas.live import LiveServer
+
+            try:
+                self.live = LiveServer(live, name="aerodaas run")
+            except BaseException:
+                self.rec.close()
+                raise
+            self.rec.add_sink(self.live.publish)
+        self._cameras: dict[str, list[tuple[str, tuple]]] = {}  # robot -> [(camera frame, mount quaternion)]
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._pending_frames = 0
         self._lock = threading.Lock()
@@ -36,6 +63,7 @@ class RecorderService:
         self.frames_dropped = 0
         self.write_errors: list[str] = []
         self.closed = False
+        self._intrinsics: dict[str, dict] = {}  # camera frame -> intrinsics (writer thread only)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
         self._thread.start()
 
@@ -49,6 +77,13 @@ class RecorderService:
             self._pending_frames += 1
         self._q.put(("image", topic, t_ns, frame, frame_id))
         return True
+
+    def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
+        """Register a camera: its frame ``<robot>/<sensor>`` joins the transform tree under ``<robot>/base_link``
+        (optical frame, pitched ``pitch_deg`` below the horizon, 90 = nadir) and each of its images on
+        ``/<robot>/camera/<sensor>`` is followed by a ``foxglove.CameraCalibration`` built from ``intrinsics``
+        (``width``, ``height`` in pixels, ``fx``, ``fy``, ``cx``, ``cy`` in pixels)."""
+        self._put(("camera", robot, sensor, dict(intrinsics), float(pitch_deg)))
 
     def detections(self, topic: str, t_ns: int, dets: list, image_size: tuple[int, int] | None = None) -> None:
         self._put(("detections", topic, t_ns, dets, image_size))
@@ -94,6 +129,14 @@ class RecorderService:
             r.write_image(topic, t_ns, frame, frame_id=frame_id)  # the one JPEG encode of this frame
             if self.copies is not None:
                 self.copies.count("recorder_jpeg_encoded")
+            k = self._intrinsics.get(frame_id)
+            if k is not None:
+                r.write_camera_calibration(f"{topic}/calibration", t_ns, frame_id=frame_id, **k)
+        elif kind == "camera":
+            _, robot, sensor, k, pitch = item
+            frame = f"{robot}/{sensor}"
+            self._intrinsics[frame] = {n: k[n] for n in ("width", "height", "fx", "fy", "cx", "cy")}
+            self._cameras.setdefault(robot, []).append((frame, camera_mount_quaternion(pitch)))
         elif kind == "detections":
             _, topic, t_ns, dets, size = item
             r.write_detections(topic, t_ns, dets, image_size=size)
@@ -107,8 +150,12 @@ class RecorderService:
             att = odom["attitude"]
             r.write_pose(f"/{robot}/pose", t_ns, odom["position"], att["yaw"], frame_id="enu",
                          roll_deg=att["roll"], pitch_deg=att["pitch"])
-            r.write_transform("/tf", t_ns, "enu", f"{robot}/base_link", odom["position"], att["yaw"],
+            base = f"{robot}/base_link"
+            r.write_transform(TF_TOPIC, t_ns, "enu", base, odom["position"], att["yaw"],
                               roll_deg=att["roll"], pitch_deg=att["pitch"])
+            r.write_transform(TF_TOPIC, t_ns, base, f"{robot}/gps", (0.0, 0.0, 0.0))
+            for frame, q in self._cameras.get(robot, ()):
+                r.write_transform(TF_TOPIC, t_ns, base, frame, (0.0, 0.0, 0.0), quaternion=q)
             r.write_json(f"/{robot}/odometry", t_ns, odom, schema_name="aerodaas.Odometry")
 
     # ------------------------------------------------------------------ end
@@ -118,8 +165,106 @@ class RecorderService:
             self.closed = True
             self._q.put(("stop",))
             self._thread.join(timeout_s)
-            self.rec.close()
+            try:
+                self.rec.close()
+            finally:
+                if self.live is not None:  # after the last message: a client sees the whole run
+                    self.live.stop()
         return dict(self.rec.message_counts)
 
     def counts(self) -> dict[str, int]:
         return dict(self.rec.message_counts)
+
+
+class RemoteRecorder:
+    """The recorder of a host without one (e.g. the cloud host of analytics deployed on cloud compute): the same
+    non-blocking producer calls as :class:`RecorderService` (``detections``, ``json``, ``odometry``, ``camera``;
+    frames are not sent), batched and delivered to the recorder of host ``target`` (the edge host) through its
+    ``record`` actor method, at most every ``period_s`` seconds from a background thread. :meth:`close` delivers
+    what is left and waits for it. ``host`` is this process's :class:`~.host.Host` (its ``peers`` are known once
+    the hosts are connected).
+    Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages)."""
+
+    def __init__(self, host: Any, target: str = "edge", period_s: float = 0.2) -> None:
+        self.host, self.target, self.period_s = host, target, period_s
+        self._buf: list[tuple] = []
+        self._lock = threading.Lock()
+        self._refs: list = []
+        self.sent = 0
+        self.send_errors: list[str] = []
+        self.frames_dropped = 0
+        self.closed = False
+        self._wake = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="aerodaas-remote-recorder", daemon=True)
+        self._thread.start()
+
+    def image(self, topic: str, t_ns: int, frame: np.ndarray, frame_id: str) -> bool:
+        self.frames_dropped += 1  # frames are recorded where the camera is
+        return False
+
+    def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
+        self._put(("camera", robot, sensor, dict(intrinsics), float(pitch_deg)))
+
+    def detections(self, topic: str, t_ns: int, dets: list, image_size: tuple[int, int] | None = None) -> None:
+        self._put(("detections", topic, t_ns, list(dets), image_size))
+
+    def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
+        self._put(("odometry", robot, t_ns, odom))
+
+    def json(self, topic: str, t_ns: int, obj: dict, schema_name: str) -> None:
+        self._put(("json", topic, t_ns, obj, schema_name))
+
+    def _put(self, item: tuple) -> None:
+        with self._lock:
+            if not self.closed:
+                self._buf.append(item)
+
+    def _send(self) -> None:
+        import ray
+
+        with self._lock:
+            batch, self._buf = self._buf, []
+        if not batch:
+            return
+        try:
+            self._refs.append(self.host.peers[self.target].record.remote(batch))
+            self.sent += len(batch)
+        except Exception as e:  # noqa: BLE001 - reported in stats, never fatal
+            self.send_errors.append(f"{type(e).__name__}: {e}")
+        done, self._refs = ray.wait(self._refs, num_returns=len(self._refs), timeout=0)
+        for ref in done:
+            try:
+                ray.get(ref)
+            except Exception as e:  # noqa: BLE001
+                self.send_errors.append(f"{type(e).__name__}: {e}")
+
+    def _loop(self) -> None:
+        while not self._wake.wait(self.period_s):
+            self._send()
+
+    def close(self, timeout_s: float = 30.0) -> dict[str, Any]:
+        """Deliver the rest and wait (at most ``timeout_s``) until the edge recorder has queued it all."""
+        import ray
+
+        if not self.closed:
+            self._wake.set()
+            self._thread.join(timeout_s)
+            self._send()
+            self.closed = True
+            try:
+                ray.get(self._refs, timeout=timeout_s)
+            except Exception as e:  # noqa: BLE001
+                self.send_errors.append(f"{type(e).__name__}: {e}")
+            self._refs = []
+        return {}
+
+
+def deliver(recorder: Any, batch: list[tuple]) -> int:
+    """Hand a :class:`RemoteRecorder` batch to ``recorder`` (the edge host's :class:`RecorderService`); returns the
+    number of items. Raises ValueError for an unknown item kind."""
+    for item in batch:
+        kind = item[0]
+        if kind not in ("camera", "detections", "odometry", "json"):
+            raise ValueError(f"remote recorder: unknown item kind {kind!r}")
+        getattr(recorder, kind)(*item[1:])
+    return len(batch)

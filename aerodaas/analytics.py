@@ -95,7 +95,9 @@ class ObjectDetector(Analytics):
     """ONNX object detector on onnxruntime (YOLOX-Nano by default). Input frames (H, W, 3) uint8 BGR; output a
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
     without it the model is resolved by :func:`aerodaas.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
-    download). ``classes`` restricts to COCO names; thresholds are scores in [0, 1]."""
+    download) where the driver runs, once, and its bytes travel with the analytics to the node that runs it
+    (:class:`aerodaas.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to COCO
+    names; thresholds are scores in [0, 1]."""
 
     name = "detector"
 
@@ -109,20 +111,23 @@ class ObjectDetector(Analytics):
         self.class_thresholds = class_thresholds
         self.threads = threads
         self.detector = None
+        self.shipped = None  # the model's bytes, read by check() on the driver
         self.last_timing: dict[str, float] = {}
         self.n_frames = 0
         self.n_with_dets = 0
 
     def check(self) -> None:
         """Resolve the model now (driver side), so a missing model fails before any actor starts."""
-        from .detect import resolve_model
+        from .detect import ShippedModel, resolve_model
 
-        self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly this file
+        self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
+        self.shipped = ShippedModel.read(self.model_path)
 
     def setup(self) -> None:
         from .detect import make_detector
 
-        self.detector = make_detector(self.model, model_path=self.model_path, score_threshold=self.score_threshold,
+        path = self.shipped.path_on_this_node(self.model_path) if self.shipped is not None else self.model_path
+        self.detector = make_detector(self.model, model_path=path, score_threshold=self.score_threshold,
                                       classes=self.classes, class_thresholds=self.class_thresholds,
                                       intra_op_threads=self.threads)
 

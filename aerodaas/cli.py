@@ -29,6 +29,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.progress = not args.quiet
     o.hitl = True if args.hitl else None
     o.hitl_port = args.hitl_port
+    o.live = None
+    if args.live is not None:
+        from .live import check_bindable, parse_address
+
+        try:
+            host, port = parse_address(args.live)
+            if not args.address:  # local run: the edge host (which serves) is on this machine
+                check_bindable(host, port)
+        except ValueError as e:
+            print(f"aerodaas run: {e}", file=sys.stderr)
+            return 2
+        o.live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
     results = []
     stop_signal: list[int] = []
 
@@ -84,6 +96,65 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if any(r.outcome == "interrupted" for r in results):
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
     return 0 if all(r.ok for r in results) else 1
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    """``aerodaas replay FILE.mcap --live [HOST:PORT] [--speed K]``: serve a recording to Foxglove over WebSocket
+    (:func:`aerodaas.live.replay`). Exit 0 when played to the end or stopped (Ctrl-C, SIGTERM), 2 for a bad file,
+    address or speed."""
+    from .live import check_bindable, parse_address, replay
+
+    try:
+        check_bindable(*parse_address(args.live))
+        if not args.speed > 0:
+            raise ValueError(f"--speed must be a positive number (1 = as recorded), got {args.speed!r}")
+        if not Path(args.file).is_file():
+            raise FileNotFoundError(f"recording {args.file!r} not found")
+    except (ValueError, FileNotFoundError) as e:
+        print(f"aerodaas replay: {e}", file=sys.stderr)
+        return 2
+
+    def on_sigterm(signum, frame):  # the same clean stop as Ctrl-C
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    def ready(server) -> None:
+        wait = "" if args.no_wait else "; playback starts when a client subscribes"
+        print(f"aerodaas replay: serving {args.file} at {server.url} ({args.speed:g}x){wait}", flush=True)
+
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        out = replay(args.file, args.live, speed=args.speed, on_ready=ready,
+                     wait_for_client_s=None if args.no_wait else float("inf"))
+    except KeyboardInterrupt:
+        print("aerodaas replay: stopped", file=sys.stderr, flush=True)
+        return 0
+    except (OSError, ValueError, RuntimeError) as e:
+        print(f"aerodaas replay: {e}", file=sys.stderr)
+        return 2
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    print(f"aerodaas replay: {out['messages']} messages, {out['duration_s']:.1f} s of recording in {out['wall_s']:.1f} s",
+          flush=True)
+    return 0
+
+
+def _cmd_layout(args: argparse.Namespace) -> int:
+    """``aerodaas layout RUN.mcap [--out FILE]``: a Foxglove layout for the recording's robot, camera and detections
+    (:func:`aerodaas.foxglove_layout.layout_for_recording`); exit 2 for a missing or foreign file."""
+    from .foxglove_layout import layout_for_recording
+
+    try:
+        text = json.dumps(layout_for_recording(args.file), indent=2) + "\n"
+        if args.out:
+            Path(args.out).write_text(text)
+            print(f"aerodaas layout: wrote {args.out} (Foxglove: Layouts -> Import from file)")
+        else:
+            sys.stdout.write(text)
+    except (OSError, ValueError) as e:
+        print(f"aerodaas layout: {e}", file=sys.stderr)
+        return 2
+    return 0
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
@@ -286,7 +357,21 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--quiet", action="store_true", help="no live progress")
     r.add_argument("--hitl", action="store_true", help="serve the human-in-the-loop API (token printed once)")
     r.add_argument("--hitl-port", type=int, help="port of the human-in-the-loop API (0: any free port)")
+    r.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
+                   help="serve the run to Foxglove over WebSocket (default 127.0.0.1:8765; port 0: any free port)")
     r.set_defaults(func=_cmd_run)
+    rp = sub.add_parser("replay", help="serve an MCAP recording to Foxglove over WebSocket, at 1x or faster")
+    rp.add_argument("file")
+    rp.add_argument("--live", nargs="?", const="", required=True, metavar="HOST:PORT",
+                    help="address to serve on (default 127.0.0.1:8765; port 0: any free port)")
+    rp.add_argument("--speed", type=float, default=1.0, help="playback speed over the recorded time (default 1)")
+    rp.add_argument("--no-wait", action="store_true", help="start at once instead of when a client subscribes")
+    rp.set_defaults(func=_cmd_replay)
+    ly = sub.add_parser("layout", help="write a Foxglove layout (camera + detections, 3D, map, state, battery/altitude) "
+                                       "for a recording")
+    ly.add_argument("file")
+    ly.add_argument("--out", metavar="FILE", help="output file (default: standard output)")
+    ly.set_defaults(func=_cmd_layout)
     i = sub.add_parser("info", help="summarise an MCAP recording")
     i.add_argument("file")
     i.add_argument("--json", action="store_true")
@@ -336,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
         m.add_argument("--autopilot", choices=["auto", "ardupilot", "px4"], default="auto")
         m.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the vehicle (default 10)")
         m.set_defaults(func=_cmd_mission)
-    bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video; "
+    bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video, raypath; "
                                          "--json for JSON output")
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 

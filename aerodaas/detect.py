@@ -34,6 +34,7 @@ from .models import COCO_CLASSES, Detection
 
 __all__ = [
     "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
+    "ShippedModel",
     "YoloxDetector", "NanoDetDetector", "make_detector", "DETECTORS",
 ]
 
@@ -237,6 +238,58 @@ def resolve_model(
         f"Set {MODEL_DIR_ENV} to a folder containing {spec.file} (sha256 {spec.sha256}, from {spec.source}), "
         f"or pass an explicit model path."
     ) from cause
+
+
+@dataclass(frozen=True)
+class ShippedModel:
+    """A model file's bytes, resolved once where the driver runs and shipped with an actor (pickled into its
+    arguments, so through Ray's object store) to the nodes that run the detector: cloud nodes need no model folder,
+    no cache and no internet. ``file``: the file name; ``sha256``: hex digest of ``data``.
+
+    :meth:`path_on_this_node` returns ``path`` if that file exists here with the same sha256 (the driver's node, or
+    a cluster sharing the folder), else the bytes written once to
+    ``<model cache>/shipped/<sha256[:16]>-<file>`` (temp file, then an atomic rename, so concurrent actors on one
+    node never see a half-written file)."""
+
+    file: str
+    sha256: str
+    data: bytes
+
+    @classmethod
+    def read(cls, path: str | os.PathLike) -> "ShippedModel":
+        """The bytes of the model file at ``path``. Raises ModelNotFoundError if it is not a readable file."""
+        p = pathlib.Path(path)
+        try:
+            data = p.read_bytes()
+        except OSError as e:
+            raise ModelNotFoundError(f"model file {str(p)!r} cannot be read to ship it to the cluster: {e}") from e
+        return cls(file=p.name, sha256=hashlib.sha256(data).hexdigest(), data=data)
+
+    def __repr__(self) -> str:  # never the bytes
+        return f"ShippedModel(file={self.file!r}, sha256={self.sha256[:16]}..., {len(self.data)} bytes)"
+
+    def path_on_this_node(self, path: str | os.PathLike | None = None) -> pathlib.Path:
+        """A local file holding exactly these bytes (see the class docstring). Raises OSError if the cache folder
+        cannot be written."""
+        if path is not None:
+            p = pathlib.Path(path)
+            if p.is_file() and _sha256_file(p) == self.sha256:
+                return p
+        dest_dir = model_cache_dir() / "shipped"
+        dest = dest_dir / f"{self.sha256[:16]}-{self.file}"
+        if dest.is_file() and _sha256_file(dest) == self.sha256:
+            return dest
+        dest_dir.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=dest.name + ".", suffix=".part", dir=dest_dir)
+        try:
+            with os.fdopen(fd, "wb") as out:
+                out.write(self.data)
+            os.replace(tmp, dest)
+        except BaseException:
+            pathlib.Path(tmp).unlink(missing_ok=True)
+            raise
+        log.info("model %s written from the driver's copy to %s", self.file, dest)
+        return dest
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -100,7 +100,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from aerodaas.schedulers.analytics_base import (
-    AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload, admit_by_time, task_utility,
+    AnalyticsScheduler, AnalyticsTask, CloudCounters, Decision, TaskState, Workload, admit_by_time, task_utility,
 )
 
 __all__ = [
@@ -1206,6 +1206,7 @@ class AnalyticsDispatcher:
         self.arrival_lateness = Samples(seed=sample_seed)
         self.poll_lateness = Samples(seed=sample_seed)
         self.cloud_availability_changes: list[dict] = []
+        self.cloud_counters = CloudCounters()  # in flight, peak, late (benchmark counters)
         if cloud is not None:
             cloud.attach(self)
 
@@ -1362,6 +1363,8 @@ class AnalyticsDispatcher:
         if not self.cloud.send(self, task, admit_by, now):
             task.tier = None
             self._not_sent(task, f"{reason}; cloud unavailable")
+        else:
+            self.cloud_counters.on_send(now)
 
     def _not_sent(self, task: AnalyticsTask, reason: str) -> None:
         """A task the policy sent to the cloud is dropped (DROPPED_TIME) before it left the edge; the policy hears
@@ -1384,6 +1387,7 @@ class AnalyticsDispatcher:
             self._finish(task, TaskState.FAILED, "cloud", reply.get("error") or "cloud failure", notify=False)
         else:
             self._finish(task, TaskState.DROPPED_TIME, "cloud", reply["error"], notify=False)
+        self.cloud_counters.on_end(task, now)
         decisions = self._safe("on_cloud_done", [], task, now, latency_ms, about=f"#{task.task_id}")
         self._notify(task)
         self._after_policy(decisions)
@@ -1596,6 +1600,7 @@ class AnalyticsDispatcher:
                           "arrival_lateness": self.arrival_lateness.summary(),
                           "poll_lateness": self.poll_lateness.summary()},
             "cloud_availability_changes": list(self.cloud_availability_changes),
+            "counters": {**dict(self.policy.counters), **self.cloud_counters.summary()},
             "accounting": {"submitted": total, "terminal": sum(self.states.values()), "pending": pending,
                            "policy_errors": len(self.policy_errors), "errors": self.policy_errors[:20]},
             "edge_executor": self.edge.describe(),

@@ -40,10 +40,11 @@ import struct
 import threading
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, NamedTuple
 
 import cv2
 import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.Color_pb2 import Color
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
@@ -68,12 +69,15 @@ from mcap_protobuf.decoder import DecoderFactory as _ProtobufDecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from .models import Detection
+from .record_schemas import json_schema_for
 
 __all__ = [
     "McapRecorder",
+    "RecordedMessage",
     "summarize_mcap",
     "read_messages",
     "quaternion_from_euler_deg",
+    "camera_mount_quaternion",
     "MISSION_STATE_TOPIC",
     "MISSION_RESULT_TOPIC",
     "TF_TOPIC",
@@ -132,6 +136,27 @@ def quaternion_from_euler_deg(roll_deg: float = 0.0, pitch_deg: float = 0.0,
     y = cr * sp * cy + sr * cp * sy
     z = cr * cp * sy - sr * sp * cy
     return (x, y, z, w)
+
+
+def _quat_mul(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float, float]:
+    """Hamilton product ``a * b`` of ``(x, y, z, w)`` quaternions (rotation ``b`` first, then ``a``)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
+def camera_mount_quaternion(pitch_deg: float) -> tuple[float, float, float, float]:
+    """Rotation ``(x, y, z, w)`` of a camera's **optical** frame (z along the optical axis, x right, y down: the
+    frame of Foxglove's ``CameraCalibration`` and OpenCV) in the body frame ``base_link`` (x forward, y left,
+    z up; ENU-aligned at yaw 0), for a camera looking forward and pitched ``pitch_deg`` below the horizon
+    (90 = nadir, the top of the image then points forward).
+
+    It is the ROS optical-frame rotation ``rpy = (-90°, 0, -90°)`` (REP 103) followed by a pitch of ``pitch_deg``
+    about the body's +y axis (positive pitch tilts the nose down in a z-up frame). Matches the simulator's
+    camera (:func:`aerodaas.sim.world.camera_rotation`). Raises ``ValueError`` for a non-finite angle."""
+    optical = quaternion_from_euler_deg(-90.0, 0.0, -90.0)
+    return _quat_mul(quaternion_from_euler_deg(0.0, pitch_deg, 0.0), optical)
 
 
 def _timestamp(ns: int) -> Timestamp:
@@ -247,6 +272,21 @@ class _ChunkFlushingStream:
             self.flush()
 
 
+class RecordedMessage(NamedTuple):
+    """One message exactly as written to the MCAP file, handed to every sink of a :class:`McapRecorder`
+    (:meth:`McapRecorder.add_sink`; e.g. the live Foxglove WebSocket server of :mod:`aerodaas.live`): the topic,
+    its schema record (name, encoding ``"protobuf"``/``"jsonschema"``, bytes: a FileDescriptorSet or a JSON
+    Schema), the message encoding (``"protobuf"``/``"json"``), log time (ns) and the serialized bytes."""
+
+    topic: str
+    schema_name: str
+    schema_encoding: str
+    schema_data: bytes
+    message_encoding: str
+    log_time_ns: int
+    data: bytes
+
+
 # --------------------------------------------------------------------------------------------------------------
 # writer
 # --------------------------------------------------------------------------------------------------------------
@@ -255,6 +295,7 @@ class McapRecorder:
 
     Args:
         path: output file; its parent directory is created if missing; an existing file is overwritten.
+            ``None``: no file (messages are serialized for the sinks only, e.g. a live view without a recording).
         chunk_size: target uncompressed chunk size in bytes (a chunk is closed, compressed with zstd and flushed
             to the OS once it grows past this). Smaller chunks lose less data on a crash; larger ones compress
             better. Must be > 0.
@@ -273,13 +314,13 @@ class McapRecorder:
     thread-safe (one internal lock). ``message_counts`` maps topic -> messages written.
     """
 
-    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 256 * 1024, jpeg_quality: int = 85,
+    def __init__(self, path: str | os.PathLike | None, *, chunk_size: int = 256 * 1024, jpeg_quality: int = 85,
                  metadata: dict[str, str] | None = None) -> None:
         if int(chunk_size) <= 0:
             raise ValueError(f"chunk_size must be a positive number of bytes, got {chunk_size!r}")
         if not 0 <= int(jpeg_quality) <= 100:
             raise ValueError(f"jpeg_quality must be within [0, 100], got {jpeg_quality!r}")
-        self.path = Path(path)
+        self.path = Path(path if path is not None else os.devnull)
         self.chunk_size = int(chunk_size)
         self.jpeg_quality = int(jpeg_quality)
         self.message_counts: dict[str, int] = {}
@@ -288,15 +329,21 @@ class McapRecorder:
         self._channels: dict[str, int] = {}  # topic -> channel id
         self._topic_kind: dict[str, str] = {}  # topic -> "protobuf:<type>" | "json:<schema_name>"
         self._schema_ids: dict[Any, int] = {}  # schema cache key -> schema id
+        self._schema_records: dict[str, tuple[str, str, bytes]] = {}  # topic -> (name, encoding, data)
+        self._sinks: list[Callable[[RecordedMessage], None]] = []
+        self._default_schema_text: dict[str, str] = {}  # topic -> its generated JSON Schema (write_json)
+        self.sink_errors: list[str] = []
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+            if path is not None:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
         except OSError as e:
             raise OSError(e.errno, f"cannot open MCAP recording file for writing ({e.strerror or e})",
                           str(self.path)) from e
         self._stream = _ChunkFlushingStream(self._file)
         try:
-            self._writer = _McapWriter(self._stream, chunk_size=self.chunk_size, compression=_COMPRESSION)
+            self._writer = _McapWriter(self._stream, chunk_size=self.chunk_size,
+                                       compression=_COMPRESSION if path is not None else CompressionType.NONE)
             self._writer.start(profile="", library=LIBRARY)
             if metadata:
                 self._writer.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
@@ -333,10 +380,12 @@ class McapRecorder:
                                  f"(one topic keeps one schema)")
             return self._channels[topic]
         schema_id = self._schema_ids.get(schema_key)
+        record = make_schema()
         if schema_id is None:
-            name, encoding, data = make_schema()
+            name, encoding, data = record
             schema_id = self._writer.register_schema(name=name, encoding=encoding, data=data)
             self._schema_ids[schema_key] = schema_id
+        self._schema_records[topic] = record
         channel_id = self._writer.register_channel(topic=topic, message_encoding=message_encoding,
                                                    schema_id=schema_id)
         self._channels[topic] = channel_id
@@ -355,6 +404,25 @@ class McapRecorder:
             self.message_counts[topic] = self.message_counts.get(topic, 0) + 1
             # A completed chunk was just written to the stream: hand it to the OS so it survives a crash.
             self._stream.sync()
+            if self._sinks:
+                self._to_sinks(RecordedMessage(topic, *self._schema_records[topic], message_encoding, log_time_ns,
+                                               data))
+
+    def add_sink(self, sink: Callable[[RecordedMessage], None]) -> None:
+        """Also hand every message written from now on to ``sink`` (called in the writing thread, under the
+        recorder's lock, right after the message went to the file: it must return quickly). The bytes are the
+        ones written to the file, so a sink shows exactly the recording's channels, schemas and messages. A sink
+        that raises is removed and its error kept in ``sink_errors``: it never stops the recording."""
+        with self._lock:
+            self._sinks.append(sink)
+
+    def _to_sinks(self, msg: RecordedMessage) -> None:
+        for sink in list(self._sinks):
+            try:
+                sink(msg)
+            except Exception as e:  # a failing live view must never cost the recording
+                self._sinks.remove(sink)
+                self.sink_errors.append(f"{type(e).__name__}: {e}")
 
     def _write_proto(self, topic: str, log_time_ns: int, msg: Any) -> None:
         cls = type(msg)
@@ -474,21 +542,54 @@ class McapRecorder:
         self._write_proto(topic, t, msg)
 
     def write_transform(self, topic: str, log_time_ns: int, parent_frame: str, child_frame: str,
-                        translation: Sequence[float], yaw_deg: float, roll_deg: float = 0.0,
-                        pitch_deg: float = 0.0) -> None:
+                        translation: Sequence[float], yaw_deg: float = 0.0, roll_deg: float = 0.0,
+                        pitch_deg: float = 0.0, *, quaternion: Sequence[float] | None = None) -> None:
         """Write a ``foxglove.FrameTransform`` placing ``child_frame`` in ``parent_frame`` (typically on
         ``"/tf"``): ``translation`` ``(x, y, z)`` metres of the child origin in the parent frame, rotation from
-        roll/pitch/yaw **degrees** (ZYX, see :func:`quaternion_from_euler_deg`).
+        roll/pitch/yaw **degrees** (ZYX, see :func:`quaternion_from_euler_deg`), or ``quaternion`` ``(x, y, z, w)``
+        (normalised here) instead of the angles.
 
-        Raises ``ValueError`` for empty frame names, a translation without 3 components or non-finite values.
+        Raises ``ValueError`` for empty frame names, a translation without 3 components, a quaternion without 4
+        components or of zero length, or non-finite values.
         """
         t = _check_time(log_time_ns)
         if not parent_frame or not child_frame:
             raise ValueError(f"parent_frame and child_frame must be non-empty, got {parent_frame!r}, {child_frame!r}")
         x, y, z = _vec3("translation", translation)
-        qx, qy, qz, qw = quaternion_from_euler_deg(roll_deg, pitch_deg, yaw_deg)
+        if quaternion is None:
+            qx, qy, qz, qw = quaternion_from_euler_deg(roll_deg, pitch_deg, yaw_deg)
+        else:
+            q = [_finite(f"quaternion[{i}]", c) for i, c in enumerate(quaternion)]
+            n = math.sqrt(sum(c * c for c in q))
+            if len(q) != 4 or n < 1e-12:
+                raise ValueError(f"quaternion must be 4 finite components (x, y, z, w) of non-zero length, got {q}")
+            qx, qy, qz, qw = (c / n for c in q)
         msg = FrameTransform(timestamp=_timestamp(t), parent_frame_id=parent_frame, child_frame_id=child_frame,
                              translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+        self._write_proto(topic, t, msg)
+
+    def write_camera_calibration(self, topic: str, log_time_ns: int, *, width: int, height: int, fx: float,
+                                 fy: float, cx: float, cy: float, frame_id: str) -> None:
+        """Write a ``foxglove.CameraCalibration`` for an undistorted pinhole camera (Foxglove's convention, the
+        ROS ``sensor_msgs/CameraInfo`` one): ``K = [fx 0 cx; 0 fy cy; 0 0 1]`` (pixels, row-major), ``R`` identity,
+        ``P = [fx 0 cx 0; 0 fy cy 0; 0 0 1 0]``, ``D`` empty with ``distortion_model`` ``"plumb_bob"``; ``frame_id``
+        names the camera's optical frame (z forward, x right, y down), the frame of its images.
+
+        Raises ``ValueError`` for a non-positive width/height/focal length, non-finite values or an empty frame_id.
+        """
+        t = _check_time(log_time_ns)
+        if int(width) <= 0 or int(height) <= 0:
+            raise ValueError(f"width and height must be positive pixels, got {width!r} x {height!r}")
+        fx_, fy_, cx_, cy_ = (_finite(n, v) for n, v in (("fx", fx), ("fy", fy), ("cx", cx), ("cy", cy)))
+        if fx_ <= 0 or fy_ <= 0:
+            raise ValueError(f"focal lengths fx, fy must be positive pixels, got {fx_}, {fy_}")
+        if not frame_id:
+            raise ValueError("write_camera_calibration needs the camera's frame_id")
+        msg = CameraCalibration(timestamp=_timestamp(t), frame_id=frame_id, width=int(width), height=int(height),
+                                distortion_model="plumb_bob", D=[],
+                                K=[fx_, 0.0, cx_, 0.0, fy_, cy_, 0.0, 0.0, 1.0],
+                                R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                                P=[fx_, 0.0, cx_, 0.0, 0.0, fy_, cy_, 0.0, 0.0, 0.0, 1.0, 0.0])
         self._write_proto(topic, t, msg)
 
     def write_json(self, topic: str, log_time_ns: int, obj: Mapping[str, Any], *, schema_name: str,
@@ -497,8 +598,10 @@ class McapRecorder:
 
         ``obj`` is a dict (a pydantic model is accepted and dumped). numpy scalars/arrays become plain numbers/
         lists, NaN/inf become ``null``, other unknown objects ``str()``. ``schema_name`` names the schema (e.g.
-        ``"aerodaas.MissionState"``); ``json_schema`` is the JSON Schema dict, default the permissive
-        ``{"type": "object"}``. The schema is fixed by the first message on the topic.
+        ``"aerodaas.MissionState"``); ``json_schema`` is the JSON Schema dict, default the one generated from the
+        pydantic model registered for ``schema_name`` in :mod:`aerodaas.record_schemas` (for a free-form schema
+        such as ``aerodaas.AnalyticsOutput``, with the top-level fields of the topic's first message), else the
+        permissive ``{"type": "object"}``. The schema is fixed by the first message on the topic.
 
         Raises ``TypeError`` if ``obj`` is not a mapping; ``ValueError`` for an empty ``schema_name`` or if the
         topic already carries another kind / another ``schema_name``.
@@ -510,8 +613,15 @@ class McapRecorder:
             obj = obj.model_dump(mode="json")
         if not isinstance(obj, Mapping):
             raise TypeError(f"write_json expects a dict, got {type(obj).__name__}")
-        data = json.dumps(_jsonable(obj), default=str, allow_nan=False, separators=(",", ":")).encode()
-        schema_text = json.dumps(json_schema if json_schema is not None else _PERMISSIVE_SCHEMA, sort_keys=True)
+        plain = _jsonable(obj)
+        data = json.dumps(plain, default=str, allow_nan=False, separators=(",", ":")).encode()
+        if json_schema is None:  # generated once per topic (free-form outputs: from the topic's first message)
+            schema_text = self._default_schema_text.get(topic)
+            if schema_text is None:
+                schema_text = json.dumps(json_schema_for(schema_name, plain) or _PERMISSIVE_SCHEMA, sort_keys=True)
+                self._default_schema_text[topic] = schema_text
+        else:
+            schema_text = json.dumps(json_schema, sort_keys=True)
 
         def make_schema() -> tuple[str, str, bytes]:
             return schema_name, "jsonschema", schema_text.encode()

@@ -31,6 +31,7 @@ class RunOptions:
     progress: bool = True
     hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
     hitl_port: int | None = None
+    live: str | None = None  # serve the run to Foxglove over WebSocket on this HOST:PORT (aerodaas.live)
 
 
 OPTIONS = RunOptions()
@@ -185,7 +186,7 @@ class _Plan:
 
 
 def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, record: str | None,
-          epoch_ns: int, scheduled: dict[int, Any] | None = None) -> _Plan:
+          epoch_ns: int, scheduled: dict[int, Any] | None = None, live: str | None = None) -> _Plan:
     """Place components on hosts (one per tier in use: "edge" has the drones, cameras, schedulers, the recorder and
     the analytics deployed on edge compute; "cloud" the analytics deployed on cloud compute) and compute the
     routes from every stream producer to its subscribers. Analytics placed per frame by the analytics scheduler
@@ -193,8 +194,8 @@ def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, 
     scheduled = scheduled or {}
     specs: dict[str, dict] = {"edge": {"sim": sim.model_dump(), "world": env.cfg.world.model_dump(mode="json"),
                                        "robots": [], "analytics": []}}
-    if record:
-        specs["edge"]["record"] = {"path": os.path.abspath(record), "meta": {
+    if record or live:  # the recorder also feeds the live view; without --record it writes no file
+        specs["edge"]["record"] = {"path": os.path.abspath(record) if record else None, "live": live, "meta": {
             "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
             "lockstep": str(sim.lockstep), "aerodaas": "0.1.0"}}
     location: dict[str, str] = {}
@@ -207,6 +208,8 @@ def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, 
             acid[id(a)] = cid
             tier = "edge" if id(a) in scheduled else a.compute.tier
             specs.setdefault(tier, {"sim": sim.model_dump(), "robots": [], "analytics": []})
+            if tier != "edge" and (record or live):  # e.g. cloud analytics: recorded by the edge recorder
+                specs[tier]["record_remote"] = "edge"
             buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
             specs[tier]["analytics"].append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer,
                                              "scheduled": id(a) in scheduled})
@@ -229,7 +232,7 @@ def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, 
         cams = []
         for s in r.sensors.values():
             cid = f"{r.id}/{s.id}"
-            if s.type == "camera" and (s.get_data_stream().subscribers or record):
+            if s.type == "camera" and (s.get_data_stream().subscribers or record or live):
                 cams.append({"cid": cid, "sensor": s.id, "props": dict(s.cfg.properties)})
                 ids["cameras"][s.id] = cid
             elif s.type == "odometry":
@@ -363,7 +366,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
-    plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns, scheduled)
+    plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns, scheduled, opts.live)
     hosts: dict[str, Any] = {}
     cloud_executors: list = []
     handles: dict[str, dict] = {}
@@ -378,7 +381,11 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         for tier, spec in plan.specs.items():
             hosts[tier] = HostActor.options(label_selector=_selector(tier, has_cloud), name=None).remote(
                 tier, tier, epoch_ns, sim.lockstep)
-        ray.get([hosts[t].setup.remote(spec) for t, spec in plan.specs.items()])
+        described = ray.get([hosts[t].setup.remote(spec) for t, spec in plan.specs.items()])
+        for d in described:
+            if d.get("live_url"):
+                print(f"aerodaas: live view at {d['live_url']} (Foxglove: Open connection -> Foxglove WebSocket)",
+                      flush=True)
         tiers = {t: t for t in hosts}
         ray.get([h.connect.remote(plan.routes, plan.location, tiers, hosts) for h in hosts.values()])
         probe("hosts_ready")
@@ -420,7 +427,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         if hitl is not None:
             hitl.stop()
             env.hitl = None
-        for tier, h in hosts.items():
+        for tier, h in sorted(hosts.items(), key=lambda th: th[0] == "edge"):  # the edge recorder closes last
             try:
                 got = ray.get(h.close.remote(), timeout=60)
                 if tier == "edge":
@@ -596,6 +603,9 @@ def _progress_lines(handles: dict, t0: float) -> list[str]:
                 continue
             if "frames_with_detections" in s:
                 dets = f" detections {s['frames_with_detections']}/{s['frames']}"
+                cloud = (s.get("frames_by_tier") or {}).get("cloud")
+                if cloud:  # frames the analytics scheduler sent to the cloud (counted above too)
+                    dets += f" (cloud {cloud})"
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
         lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "

@@ -27,13 +27,14 @@ import abc
 import json
 import math
 import os
+from collections import Counter
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, ClassVar, Iterable, Mapping
 
 __all__ = ["ModelProfile", "Workload", "TaskState", "AnalyticsTask", "Decision", "AnalyticsScheduler",
            "task_utility", "register_analytics_scheduler", "analytics_scheduler_names", "make_analytics_scheduler",
-           "TERMINAL_STATES", "admit_by_time"]
+           "TERMINAL_STATES", "admit_by_time", "filter_options", "CloudCounters"]
 
 
 # --------------------------------------------------------------------------------------------- workload
@@ -209,12 +210,17 @@ class AnalyticsScheduler(abc.ABC):
     name: ClassVar[str] = ""
     #: whether this policy ever uses the cloud (False for the edge-only baselines)
     uses_cloud: ClassVar[bool] = True
+    #: keyword options the constructor accepts (e.g. ``estimator``, ``eviction_scan``); see :func:`filter_options`
+    options: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, workload: Workload) -> None:
         self.w = workload
         self.edge_running: AnalyticsTask | None = None
         self.edge_busy_until_ms: float = 0.0
         self.cloud_available = True
+        #: behaviour counters a policy keeps for the benchmark (steals tried/passed/rejected by reason, JIT
+        #: releases, evictions, ...): names are policy-specific, values are event counts
+        self.counters: Counter = Counter()
 
     # -- arrivals
     @abc.abstractmethod
@@ -305,6 +311,47 @@ class AnalyticsScheduler(abc.ABC):
         return Decision.cloud(task, reason)
 
 
+# --------------------------------------------------------------------------------------------- run counters
+class CloudCounters:
+    """What a driver (the dispatcher, the policy harness) counts about a policy's cloud use: tasks sent, the
+    in-flight count over time (peak and time-weighted mean between the first send and the last reply), and cloud
+    tasks that came back late — all of them, and those the policy had *held* before sending (sent at least 1 ms
+    after arrival: a just-in-time release, a late eviction), which paid the cloud cost for no benefit."""
+
+    def __init__(self) -> None:
+        self.sent = self.in_flight = self.peak = self.late = self.late_held = 0
+        self._area = 0.0
+        self._first: float | None = None
+        self._last: float | None = None
+
+    def _advance(self, now_ms: float) -> None:
+        if self._last is not None:
+            self._area += self.in_flight * max(0.0, now_ms - self._last)
+        if self._first is None:
+            self._first = now_ms
+        self._last = now_ms
+
+    def on_send(self, now_ms: float) -> None:
+        self._advance(now_ms)
+        self.sent += 1
+        self.in_flight += 1
+        self.peak = max(self.peak, self.in_flight)
+
+    def on_end(self, task: AnalyticsTask, now_ms: float) -> None:
+        """``task`` (sent earlier, terminal now) came back or failed."""
+        self._advance(now_ms)
+        self.in_flight = max(0, self.in_flight - 1)
+        if task.state is TaskState.DONE_LATE:
+            self.late += 1
+            self.late_held += int(task.start_ms is not None and task.start_ms - task.arrival_ms >= 1.0)
+
+    def summary(self) -> dict:
+        span = (self._last - self._first) if self._first is not None and self._last is not None else 0.0
+        return {"cloud_sent": self.sent, "cloud_peak_concurrency": self.peak,
+                "cloud_mean_concurrency": self._area / span if span > 0 else 0.0,
+                "cloud_done_late": self.late, "cloud_done_late_after_hold": self.late_held}
+
+
 # --------------------------------------------------------------------------------------------- registry
 _REGISTRY: dict[str, type[AnalyticsScheduler]] = {}
 
@@ -358,6 +405,14 @@ def make_analytics_scheduler(name: str, workload: Workload, **kwargs: Any) -> An
     return _REGISTRY[name](workload, **kwargs)
 
 
+def filter_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
+    """The entries of ``options`` that the scheduler registered as ``name`` accepts (its ``options``), None values
+    left out: how a benchmark applies one setting (e.g. ``estimator="max:5"``) to every policy that has it."""
+    _load_builtins()
+    accepted = _REGISTRY[name].options if name in _REGISTRY else ()
+    return {k: v for k, v in options.items() if k in accepted and v is not None}
+
+
 def _load_builtins() -> None:
     import importlib
 
@@ -367,7 +422,7 @@ def _load_builtins() -> None:
 
 #: modules that register the built-in analytics schedulers when imported
 _BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
-                                "aerodaas.schedulers.analytics_gainplan"]
+                                "aerodaas.schedulers.analytics_gainplan", "aerodaas.schedulers.analytics_evplan"]
 
 
 def iter_schedulers(names: Iterable[str] | None = None) -> list[type[AnalyticsScheduler]]:

@@ -27,9 +27,10 @@ from typing import ClassVar
 from .analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState,
                              Workload, register_analytics_scheduler)
 from .analytics_baselines import PriorityEdgeQueue
+from .analytics_estimators import LatencyEstimator, WindowMeanEstimator, make_estimator
 
 __all__ = ["EdgeCloud", "Dem", "Dems", "DemsA", "Gems", "TentativeCloudQueue", "CloudLatencyEstimator",
-           "EDGE_TRIGGER_BUFFER_MS", "CLOUD_TRIGGER_BUFFER_MS", "JIT_EARLY_MS", "JIT_LATE_MS"]
+           "EVICTION_SCANS", "EDGE_TRIGGER_BUFFER_MS", "CLOUD_TRIGGER_BUFFER_MS", "JIT_EARLY_MS", "JIT_LATE_MS"]
 
 #: edge trigger = deadline - edge_ms - this (TaskCreation.edgeBuffer)
 EDGE_TRIGGER_BUFFER_MS = 10.0
@@ -102,30 +103,11 @@ class TentativeCloudQueue:
 
 
 # --------------------------------------------------------------------------------------------- latency estimate
-class CloudLatencyEstimator:
-    """DEMS-A's per-model cloud-latency estimate (PostProcessing.java + TriggerUpdate.java): a sliding window of
-    the last ``window`` observed cloud round trips (ms); once the window is full, its mean replaces the estimate
-    whenever the two differ by more than ``drift_ms``. Starts at the profile's ``cloud_ms``."""
+#: DEMS-A's per-model estimate (window of 10, 10 ms drift); see :mod:`.analytics_estimators`
+CloudLatencyEstimator = WindowMeanEstimator
 
-    def __init__(self, workload: Workload, window: int = 10, drift_ms: float = 10.0) -> None:
-        if window < 1:
-            raise ValueError(f"window must be >= 1, got {window}")
-        self.window, self.drift_ms = window, drift_ms
-        self.estimate = {m: p.cloud_ms for m, p in workload.models.items()}
-        self.samples = {m: deque(maxlen=window) for m in workload.models}
-
-    def observe(self, model: str, latency_ms: float) -> None:
-        buf = self.samples[model]
-        buf.append(float(latency_ms))
-        if len(buf) == self.window:
-            mean = sum(buf) / len(buf)
-            if abs(mean - self.estimate[model]) > self.drift_ms:
-                self.estimate[model] = mean
-
-    def refill(self, model: str, latency_ms: float) -> None:
-        """Fill the whole window with one observation (the reference's reset after a cool-down probe)."""
-        self.samples[model].clear()
-        self.samples[model].extend([float(latency_ms)] * self.window)
+#: how the eviction scan treats the queued tasks behind the insertion point (see :class:`EdgeCloud`)
+EVICTION_SCANS = ("reference", "full")
 
 
 # --------------------------------------------------------------------------------------------- E+C
@@ -140,10 +122,29 @@ class EdgeCloud(AnalyticsScheduler):
     name = "E+C"
     #: evict tasks behind the insertion point that would miss (DEM and later)
     evict: ClassVar[bool] = False
+    options = ("eviction_scan", "estimator")
 
-    def __init__(self, workload: Workload) -> None:
+    def __init__(self, workload: Workload, *, eviction_scan: str = "reference", estimator: str | None = None) -> None:
+        """``eviction_scan``: ``"reference"`` (default) checks the queued tasks behind the insertion point exactly as
+        ``PriorityQueue.add`` does — the first of them was already consumed by the outer iterator, so it is neither
+        checked nor counted in the running finish time; ``"full"`` checks every one (our earlier variant,
+        deviation 2 in docs/analytics-schedulers.md). ``estimator``: a cloud-latency estimator spec
+        (:func:`~.analytics_estimators.make_estimator`) replacing the policy's own (the fair-margin option).
+        Raises ValueError for an unknown scan or a bad spec."""
         super().__init__(workload)
+        if eviction_scan not in EVICTION_SCANS:
+            raise ValueError(f"eviction_scan must be one of {EVICTION_SCANS}, got {eviction_scan!r}")
+        self.eviction_scan = eviction_scan
+        self.latency: LatencyEstimator | None = (make_estimator(estimator, workload) if estimator
+                                                 else self._default_estimator(workload))
         self.queue = PriorityEdgeQueue(workload, edf_priority)
+
+    def _default_estimator(self, workload: Workload) -> LatencyEstimator | None:
+        """The policy's own cloud-latency estimator (None: the profile's ``cloud_ms``)."""
+        return None
+
+    def cloud_estimate_ms(self, model: str) -> float:
+        return self.latency.value(model) if self.latency is not None else self.w[model].cloud_ms
 
     # -- hooks for subclasses
     def _observe_terminal(self, task: AnalyticsTask, now_ms: float, on_time: bool) -> None:
@@ -185,7 +186,10 @@ class EdgeCloud(AnalyticsScheduler):
         victims: list[AnalyticsTask] = []
         if self.evict:
             lost = 0.0
-            for q in self.queue.tasks[idx:]:
+            behind = self.queue.tasks[idx:]
+            if self.eviction_scan == "reference":  # PriorityQueue.add: the outer iterator consumed the first one
+                behind = behind[1:]
+            for q in behind:
                 q_end = finish + self.queue.edge_ms(q)
                 if q_end > q.deadline_ms:
                     victims.append(q)
@@ -194,6 +198,7 @@ class EdgeCloud(AnalyticsScheduler):
                     finish = q_end
             gain = self.score(task, now_ms)
             if victims and not lost < gain:
+                self.counters["eviction_refused"] += 1
                 return False, [], (f"inserting it would make {len(victims)} queued task(s) miss, whose score {lost:g} "
                                    f">= its score {gain:g}")
             for v in victims:
@@ -204,6 +209,8 @@ class EdgeCloud(AnalyticsScheduler):
     # -- the contract
     def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
         inserted, victims, why = self._admit(task, now_ms)
+        self.counters["admitted" if inserted else "rejected"] += 1
+        self.counters["evicted"] += len(victims)
         out = [] if inserted else self._off_edge(task, now_ms, f"rejected by the edge queue: {why}")
         for v in victims:
             out += self._off_edge(v, now_ms, f"evicted from the edge queue by task #{task.task_id} ({task.model})")
@@ -223,6 +230,8 @@ class EdgeCloud(AnalyticsScheduler):
         sending or at the executor — or failed): counted as a terminal event (GEMS), on time only if DONE_ON_TIME.
         The re-check itself (:meth:`cloud_admit`, the base class's) is a pure query: the dispatcher calls it many
         times per task to find the admit-by time."""
+        if self.latency is not None and task.state in EXECUTED_STATES:  # only completions feed the estimate
+            self.latency.observe(task.model, latency_ms)
         self._observe_terminal(task, now_ms, task_on_time(task, now_ms))
         return self._settle([], now_ms)
 
@@ -271,9 +280,12 @@ class Dems(Dem):
     #: steal when the edge queue is empty (the reference does this for DEMS and DEMS-A)
     steal_when_idle: ClassVar[bool] = True
 
-    def __init__(self, workload: Workload) -> None:
-        super().__init__(workload)
+    def __init__(self, workload: Workload, **options) -> None:
+        super().__init__(workload, **options)
         self.tentative = TentativeCloudQueue()
+        #: steal into a busy queue only if the head's slack exceeds this (ms): the workload's shortest edge time
+        #: (the reference hard-codes 132 ms; deviation 5)
+        self.steal_slack_ms = workload.min_edge_ms
 
     # -- placing rejected/evicted tasks
     def _off_edge(self, task: AnalyticsTask, now_ms: float, why: str) -> list[Decision]:
@@ -319,9 +331,12 @@ class Dems(Dem):
                                          f"cloud utility {self.w[h.task.model].cloud_utility:g} <= 0 and not stolen by "
                                          "the edge before its edge trigger"))
             elif h.key - now_ms < -JIT_LATE_MS:
+                self.counters["jit_dropped_past_trigger"] += 1
                 out.append(Decision.drop(h.task, TaskState.DROPPED_TIME,
                                          f"missed its cloud trigger by {now_ms - h.key:.0f} ms"))
             else:
+                self.counters["jit_released"] += 1
+                self.counters["jit_released_after_trigger"] += int(now_ms > h.key)
                 out.append(self._release(h.task, now_ms, "just-in-time release from the tentative cloud queue"))
         return self._settle(out, now_ms)
 
@@ -340,14 +355,22 @@ class Dems(Dem):
     def _steal(self, now_ms: float, slack_ms: float | None) -> AnalyticsTask | None:
         """The best-ranked held task the edge can run now: it fits its own deadline and, when ``slack_ms`` is
         given (queue busy), its edge time is below the slack and no queued task would miss behind it."""
+        c = self.counters
+        c["steal_attempts_idle" if slack_ms is None else "steal_attempts_busy"] += 1
         for h in sorted(self.tentative.entries(), key=lambda h: (-self.steal_rank(h.task), h.key, h.seq)):
             e = self.queue.edge_ms(h.task)
             if now_ms + e > h.task.deadline_ms:
+                c["steal_rejected_own_deadline"] += 1
                 continue
-            if slack_ms is not None and (e >= slack_ms or self.queue.first_violation(now_ms + e) is not None):
+            if slack_ms is not None and e >= slack_ms:
+                c["steal_rejected_over_slack"] += 1
+                continue
+            if slack_ms is not None and self.queue.first_violation(now_ms + e) is not None:
+                c["steal_rejected_queue_would_miss"] += 1
                 continue
             self.tentative.remove(h)
             h.task.notes["stolen"] = True
+            c["steals"] += 1
             return h.task
         return None
 
@@ -359,7 +382,9 @@ class Dems(Dem):
                 return stolen, self._settle(drops, now_ms)
             head = self.queue.tasks[0]
             slack = head.deadline_ms - self.queue.edge_ms(head) - EDGE_TRIGGER_BUFFER_MS - now_ms
-            if self.tentative and slack > self.w.min_edge_ms:
+            if self.tentative and slack <= self.steal_slack_ms:
+                self.counters["steal_skipped_slack_below_min_edge"] += 1
+            if self.tentative and slack > self.steal_slack_ms:
                 stolen = self._steal(now_ms, slack)
                 if stolen is not None:
                     return stolen, self._settle(drops, now_ms)
@@ -392,13 +417,12 @@ class DemsA(Dems):
     name = "DEMS-A"
     cooldown_ms: ClassVar[float] = 10_000.0
 
-    def __init__(self, workload: Workload) -> None:
-        super().__init__(workload)
-        self.latency = CloudLatencyEstimator(workload)
+    def __init__(self, workload: Workload, **options) -> None:
+        super().__init__(workload, **options)
         self.cooling_since: dict[str, float | None] = {m: None for m in workload.models}
 
-    def cloud_estimate_ms(self, model: str) -> float:
-        return self.latency.estimate[self.w[model].name]
+    def _default_estimator(self, workload: Workload) -> LatencyEstimator | None:
+        return WindowMeanEstimator(workload)
 
     def _cloud_too_slow(self, task: AnalyticsTask, now_ms: float, est_ms: float, why: str) -> list[Decision]:
         m, left = task.model, task.deadline_ms - now_ms
@@ -425,9 +449,7 @@ class DemsA(Dems):
                 self.cooling_since[m] = None
             elif task.notes.get("probe"):
                 self.latency.refill(m, latency_ms)
-        if task.state in EXECUTED_STATES:  # as the reference: only completions reach its latency window
-            self.latency.observe(m, latency_ms)
-        return super().on_cloud_done(task, now_ms, latency_ms)
+        return super().on_cloud_done(task, now_ms, latency_ms)  # observes completions only, as the reference
 
 
 # --------------------------------------------------------------------------------------------- GEMS
@@ -446,8 +468,8 @@ class Gems(Dems):
     window_ms: ClassVar[float] = 20_000.0
     required_fraction: ClassVar[float] = 0.9
 
-    def __init__(self, workload: Workload) -> None:
-        super().__init__(workload)
+    def __init__(self, workload: Workload, **options) -> None:
+        super().__init__(workload, **options)
         self.window_start_ms: float | None = None
         self.done_on_time: Counter[str] = Counter()
         self.terminal: Counter[str] = Counter()
@@ -482,6 +504,7 @@ class Gems(Dems):
             p = self.w[t.model]
             if t.model in low and p.cloud_utility > 0 and now_ms + self.cloud_estimate_ms(t.model) <= t.deadline_ms:
                 self.queue.remove(t)
+                self.counters["gatekeeper_migrations"] += 1
                 decisions.append(Decision.cloud(t, f"gatekeeper: {t.model} on-time fraction {low[t.model]:.2f} < "
                                                    f"{self.required_fraction} in this window"))
         return decisions

@@ -38,6 +38,7 @@ from collections import deque
 from .analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
                              register_analytics_scheduler)
 from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
+from .analytics_estimators import RecentMaxEstimator, make_estimator
 
 __all__ = ["GainPlan", "max_gain_edge_plan", "PessimisticLatencyEstimator"]
 
@@ -69,25 +70,8 @@ def max_gain_edge_plan(items: list[tuple[float, float, float]], start_ms: float)
     return list(max(states, key=lambda s: (s[1], -s[0]))[2])
 
 
-class PessimisticLatencyEstimator:
-    """Per-model cloud-latency estimate for just-in-time release: the *largest* of the last ``window`` observed
-    round trips (ms), the profile's ``cloud_ms`` before any. A JIT release leaves only ~60 ms of margin, so a
-    mean (DEMS-A) sends about half the tasks late under symmetric jitter — each paying the cloud cost for no
-    benefit; the recent maximum reacts to a latency step after one late sample and costs only an earlier
-    release when latency is steady."""
-
-    def __init__(self, workload: Workload, window: int = 5) -> None:
-        if window < 1:
-            raise ValueError(f"window must be >= 1, got {window}")
-        self.profile = {m: p.cloud_ms for m, p in workload.models.items()}
-        self.samples = {m: deque(maxlen=window) for m in workload.models}
-
-    def observe(self, model: str, latency_ms: float) -> None:
-        self.samples[model].append(float(latency_ms))
-
-    def estimate(self, model: str) -> float:
-        s = self.samples[model]
-        return max(s) if s else self.profile[model]
+#: GAINPLAN's default estimate: the largest of the last 5 observed round trips (see :mod:`.analytics_estimators`)
+PessimisticLatencyEstimator = RecentMaxEstimator
 
 
 @register_analytics_scheduler
@@ -97,30 +81,35 @@ class GainPlan(AnalyticsScheduler):
     Every held task is in :attr:`pool` with ``task.notes["mode"]``: ``"open"`` (cloud option alive, trigger
     :meth:`trigger_ms` from the current estimate), ``"committed"`` (to the edge) or ``"edge_only"`` (no cloud
     option). ``commit_horizon_ms`` (default: the shortest model edge time) and ``latency_window`` (default 5) tune
-    the commitment rule and the latency estimate; ValueError if negative / < 1. Terminal
+    the commitment rule and the latency estimate; ``estimator`` (a spec of :func:`~.analytics_estimators.make_estimator`)
+    replaces the estimate (the fair-margin option); ValueError if negative / < 1 / a bad spec. Terminal
     states: done on the edge or the cloud; DROPPED_COST / DROPPED_TIME when a task without a cloud option no
     longer fits on the edge (cost if its cloud utility is <= 0); EXPIRED_EDGE for a committed task that no
     longer fits.
     """
 
     name = "GAINPLAN"
+    options = ("estimator", "commit_horizon_ms", "latency_window")
 
-    def __init__(self, workload: Workload, *, commit_horizon_ms: float | None = None, latency_window: int = 5) -> None:
+    def __init__(self, workload: Workload, *, commit_horizon_ms: float | None = None, latency_window: int = 5,
+                 estimator: str | None = None) -> None:
         super().__init__(workload)
         #: commit a task to the edge at its cloud trigger only if the plan starts it within this many ms of the
         #: edge becoming free (default: the shortest model edge time)
         self.commit_horizon_ms = workload.min_edge_ms if commit_horizon_ms is None else float(commit_horizon_ms)
         if self.commit_horizon_ms < 0:
             raise ValueError(f"commit_horizon_ms must be >= 0, got {commit_horizon_ms!r}")
-        self.latency = PessimisticLatencyEstimator(workload, window=latency_window)
+        self.latency = (make_estimator(estimator, workload) if estimator
+                        else RecentMaxEstimator(workload, window=latency_window))
         self.pool: list[AnalyticsTask] = []
         #: (arrival ms, edge ms) of recent arrivals, for the offered edge load
         self._recent: deque[tuple[float, float]] = deque()
         self.load_window_ms = 5_000.0
+        self._now = 0.0  # time of the current decision point (ms)
 
     # -- estimates
     def cloud_estimate_ms(self, model: str) -> float:
-        return self.latency.estimate(self.w[model].name)
+        return self.latency.value(self.w[model].name)
 
     def gain(self, task: AnalyticsTask) -> float:
         """Utility gained by running ``task`` on the edge rather than its fallback."""
@@ -188,21 +177,33 @@ class GainPlan(AnalyticsScheduler):
             start += self.w[q.model].edge_ms
         return None
 
+    def _cloud_option_gone(self, task: AnalyticsTask, now_ms: float) -> bool:
+        """At its trigger: has ``task`` lost its cloud option (trigger more than 10 ms past, or no cloud)?"""
+        return self.trigger_ms(task) - now_ms < -JIT_LATE_MS or not self.cloud_available
+
+    def _admit_cloud_ms(self, task: AnalyticsTask, now_ms: float) -> float:
+        """The cloud time the re-check (:meth:`cloud_admit`) holds a released task to (ms)."""
+        return self.cloud_estimate_ms(task.model)
+
     def poll(self, now_ms: float) -> list[Decision]:
+        self._now = now_ms
         out = self._sweep(now_ms)
         due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= JIT_EARLY_MS),
                      key=self.trigger_ms)
         for t in due:
-            if self.trigger_ms(t) - now_ms < -JIT_LATE_MS or not self.cloud_available:
+            if self._cloud_option_gone(t, now_ms):
                 t.notes["mode"] = EDGE_ONLY  # the cloud option is gone; an edge candidate until it no longer fits
+                self.counters["cloud_option_lost"] += 1
                 continue
             start = self._planned_start(t, now_ms)
             horizon = self.commit_horizon_ms if self.offered_load(now_ms) > 1.0 else float("inf")
             if start is not None and start - self._edge_free_at(now_ms) <= horizon:
                 t.notes["mode"] = COMMITTED
+                self.counters["committed_to_edge"] += 1
             else:
                 self.pool.remove(t)
-                t.notes["cloud_ms"] = self.cloud_estimate_ms(t.model)
+                self.counters["released_to_cloud"] += 1
+                t.notes["cloud_ms"] = self._admit_cloud_ms(t, now_ms)
                 out.append(Decision.cloud(t, "at its cloud trigger: not about to run on the edge"))
         return out
 

@@ -1,6 +1,6 @@
 """Behavioural tests of the analytics-scheduler policies (Ocularone baselines, E+C, DEM, DEMS, DEMS-A, GEMS and
 GAINPLAN), with hand-built scenarios whose right answer is derived in the comments, plus invariants and
-utility orderings on seeded traces driven by the exact-timing harness in ``tests/analytics_harness.py``."""
+utility orderings on seeded traces driven by the policy harness (``aerodaas/bench/harness.py``)."""
 from __future__ import annotations
 
 import itertools
@@ -20,7 +20,7 @@ WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
 needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 ALL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
-       "GAINPLAN"]
+       "GAINPLAN", "EVPLAN"]
 EDGE_ONLY = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF"]
 
 # A small workload where every number below is derivable by hand (times in ms).
@@ -64,11 +64,14 @@ def kinds(decisions):
     return [(d.kind, d.task, d.state) for d in decisions]
 
 
-def c1_then_a1(name: str):
+def c1_then_a1(name: str, **options):
     """Edge running B until 300; C1 (deadline 500) queued at 0 (0 + 300 + 150 = 450 <= 500); then A1 (deadline
     410) submitted at 10 at the EDF head slot (400 < 500): 10 + 290 + 100 = 400 <= 410 fits, but it would push C1 to
-    550 > 500. Returns (policy, C1, A1, the decisions of A1's submit)."""
-    pol = make_analytics_scheduler(name, TW)
+    550 > 500. Returns (policy, C1, A1, the decisions of A1's submit). Evicting policies scan every task behind
+    the insertion point (``eviction_scan="full"``) unless ``options`` say otherwise."""
+    if name != "E+C":
+        options.setdefault("eviction_scan", "full")
+    pol = make_analytics_scheduler(name, TW, **options)
     busy(pol, 0.0, "B")
     c1 = task("C", 0.0)
     assert pol.submit(c1, 0.0) == []
@@ -176,7 +179,7 @@ def test_dem_evicts_only_when_the_victims_score_less_and_migrates_at_once():
 
 @pytest.mark.parametrize("b1_deadline,evicted", [(520.0, False), (700.0, True)])
 def test_eviction_compares_the_summed_score_of_all_victims(b1_deadline, evicted):
-    pol = make_analytics_scheduler("DEMS", TW)
+    pol = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
     busy(pol, 0.0, "A")                               # running until 100
     d1, b1 = task("D", 0.0, 300.0), task("B", 0.0, b1_deadline)
     pol.submit(d1, 0.0)                               # 100 + 100 = 200 <= 300
@@ -191,6 +194,31 @@ def test_eviction_compares_the_summed_score_of_all_victims(b1_deadline, evicted)
         assert list(pol.queue) == [e1, b1] and d1 in pol.tentative.tasks()
     else:
         assert list(pol.queue) == [d1, b1] and e1 in pol.tentative.tasks()
+
+
+def test_reference_eviction_scan_neither_checks_nor_counts_the_first_task_behind_the_insertion_point():
+    """PriorityQueue.add: the outer iterator has consumed the first task behind the insertion point when the victim
+    scan starts, so that task is never checked and its edge time is not in the running finish time."""
+    pol, c1, a1, decisions = c1_then_a1("DEM", eviction_scan="reference")
+    assert decisions == [] and list(pol.queue) == [a1, c1]  # C1 (would end at 550 > 500) is not checked
+    pol = make_analytics_scheduler("DEMS", TW)              # the default scan is the reference's
+    assert pol.eviction_scan == "reference"
+    busy(pol, 0.0, "A")                                     # running until 100
+    b1, b2 = task("B", 0.0, 700.0), task("B", 0.0, 720.0)
+    pol.submit(b1, 0.0)                                     # 100 + 300 = 400 <= 700
+    pol.submit(b2, 0.0)                                     # 700 <= 720
+    d1 = task("D", 0.0, 250.0)                              # slot 0: 100 + 100 = 200 <= 250
+    # reference: B1 skipped (not counted either), B2 checked from D1's end: 200 + 300 = 500 <= 720, kept.
+    # full scan: B1 ends at 500 <= 700, B2 at 800 > 720: a victim (145 < D1's 199) -- see the next assertion
+    assert pol.submit(d1, 0.0) == [] and list(pol.queue) == [d1, b1, b2]
+    full = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
+    busy(full, 0.0, "A")
+    for t in (task("B", 0.0, 700.0), task("B", 0.0, 720.0)):
+        full.submit(t, 0.0)
+    full.submit(task("D", 0.0, 250.0), 0.0)
+    assert len(full.queue) == 2 and len(full.tentative) == 1 and full.counters["evicted"] == 1
+    with pytest.raises(ValueError, match="eviction_scan"):
+        make_analytics_scheduler("DEM", TW, eviction_scan="partial")
 
 
 # --------------------------------------------------------------------------------------------- DEMS
@@ -213,7 +241,7 @@ def test_dems_drops_a_held_task_polled_more_than_10_ms_past_its_trigger(poll_at,
 
 
 def test_dems_eviction_holds_cost_victims_for_stealing_and_drops_them_for_cost_when_unstolen():
-    pol = make_analytics_scheduler("DEMS", TW)
+    pol = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
     busy(pol, 0.0, "B")
     c1 = task("C", 0.0)
     pol.submit(c1, 0.0)
@@ -228,7 +256,7 @@ def test_dems_eviction_holds_cost_victims_for_stealing_and_drops_them_for_cost_w
 
 
 def test_dems_insertion_position_and_eviction_of_every_task_behind_that_would_miss():
-    pol = make_analytics_scheduler("DEMS", TW)
+    pol = make_analytics_scheduler("DEMS", TW, eviction_scan="full")
     busy(pol, 0.0, "A")                               # running until 100
     b1, b2 = task("B", 0.0, 700.0), task("B", 0.0, 1000.0)
     pol.submit(b1, 0.0)                               # 0 + 100 + 300 = 400 <= 700
@@ -572,3 +600,23 @@ def test_gems_counts_each_cloud_task_once_however_often_it_is_rechecked():
     b.state = TaskState.DONE_ON_TIME
     pol.on_cloud_done(b, 1200.0, 200.0)
     assert pol.on_time_fraction("A") == pytest.approx(0.5)
+
+
+# --------------------------------------------------------------------------------------------- EVPLAN
+def test_evplan_values_the_cloud_by_its_expected_utility_under_the_observed_latencies():
+    pol = make_analytics_scheduler("EVPLAN", TW)
+    a = task("A", 0.0)                                  # deadline 400, cloud 200: profile only, P = 1
+    assert pol.submit(a, 0.0) == [] and a.notes["mode"] == "open"
+    assert pol.trigger_ms(a) == 400 - 200 - 10          # exact timing: DEMS's cloud trigger
+    for i in range(10):                                 # A's round trips: 200, 220, ..., 380 ms (ratios 1.0..1.9)
+        _cloud_done(pol, "A", 1000.0 + i, 200.0 + 20 * i)
+    assert pol.on_time_chance("A", 300.0) == pytest.approx(0.6)   # 200..300: 6 of 10 fit
+    # V = P * 50 - 10 > 0 needs P > 0.2: with 230 ms left P = 0.2 -> V = 0: no cloud option, an edge-only candidate
+    b = task("A", 2000.0, 2230.0)
+    pol.submit(b, 2000.0)
+    assert b.notes["mode"] == "edge_only"
+    c = task("A", 3000.0)                               # 400 ms left: P = 1 at arrival; holding costs chance at once
+    pol.submit(c, 3000.0)
+    # hold while it costs < 2 % of the on-time chance: until the 98th-percentile ratio (1.9, the slowest) fits
+    assert pol.trigger_ms(c) == 3400 - 1.9 * 200 - 10
+    assert pol.cloud_admit(c, 3000.0)

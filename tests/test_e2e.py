@@ -1,6 +1,7 @@
 """End-to-end missions on Ray actors in the embedded simulator (one shared Ray session)."""
 from __future__ import annotations
 
+import json
 import os
 import runpy
 import signal
@@ -15,6 +16,7 @@ from aerodaas.metrics import load_run, tracking_metrics, waypoint_visits
 from aerodaas.recording import read_messages, summarize_mcap
 
 from .conftest import REPO, needs_data
+from .mcap_validation import validate_recording
 
 APPS = REPO / "apps"
 pytestmark = pytest.mark.e2e
@@ -71,6 +73,13 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
     done = [e["t"] for e in run["events"] if e["event"] == "waypoint_done"]
     assert m["tracking_ended_t"] is not None and max(done) > m["tracking_ended_t"]
     assert res.latency["quadrotor_base"]["frames"] > 50
+    # the recording opens fully populated in Foxglove: validated with the mcap reader, every message decoded, JSON
+    # checked against its channel's JSON Schema, transform tree and camera calibration (tests/mcap_validation.py)
+    cfg = json.loads((APPS / "vehicle_tracking.json").read_text())["robots"][0]
+    cams = {s["id"]: s["properties"] for s in cfg["sensors"] if s["type"] == "camera"}
+    c = validate_recording(rec, "quadrotor_base", cams)["counts"]
+    assert c["/quadrotor_base/detector/detections"] > 50 and c["/quadrotor_base/follow/navigation"] > 0
+    assert c["/quadrotor_base/camera/cam1/calibration"] == c["/quadrotor_base/camera/cam1"]
 
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):

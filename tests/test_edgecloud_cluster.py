@@ -93,12 +93,16 @@ def test_benchmark_smoke_run_gives_json_and_a_plot(cluster, tmp_path, monkeypatc
     # runs on this module's cluster (address given); before the node-loss test, which leaves no cloud node
     out, png = tmp_path / "bench.json", tmp_path / "bench.png"
     rc = main(["bench", "schedulers", "--address", cluster.address, "--drones", "6", "--load", "LIGHT", "--duration",
-               "2", "--schedulers", "EDGE_FIFO", "CLOUD", "--seed", "5", "--json", "--out", str(out), "--plot",
-               str(png)])
+               "2", "--schedulers", "EDGE_FIFO", "CLOUD", "--seed", "5", "--seeds", "1", "--json", "--out", str(out),
+               "--plot", str(png)])
     assert rc == 0
     res = json.loads(out.read_text())
     assert res["seed"] == 5 and res["machine"]["cpu_count"] and res["config"]["drones"] == 6
-    rows = {r["scheduler"]: r for r in res["results"]}
+    summary = {r["scheduler"]: r for r in res["results"]}  # mean ± CI over the seeds (one here)
+    assert set(summary) == {"EDGE_FIFO", "CLOUD"} and all(r["seeds"] == [5] for r in summary.values())
+    assert all(r["utility"]["per_seed"] == [run["utility"]] for r in summary.values() for run in res["runs"]
+               if run["scheduler"] == r["scheduler"])
+    rows = {r["scheduler"]: r for r in res["runs"]}
     assert set(rows) == {"EDGE_FIFO", "CLOUD"}
     for r in rows.values():
         assert r["load"] == "LIGHT" and r["drones"] == 6 and r["tasks"] == 2 * 6 * 2  # 2 models, 6 drones, 2 frames

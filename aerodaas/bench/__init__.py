@@ -40,7 +40,7 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from . import fleet, overhead, schedulers, startup, tello_video, tours
+    from . import fleet, overhead, raypath, schedulers, startup, tello_video, tours
 
     tours.add_parser(bench_subparsers)
     schedulers.add_parser(bench_subparsers)
@@ -48,3 +48,4 @@ def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     fleet.add_parser(bench_subparsers)
     startup.add_parser(bench_subparsers)
     tello_video.add_parser(bench_subparsers)
+    raypath.add_parser(bench_subparsers)

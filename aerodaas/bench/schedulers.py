@@ -1,4 +1,6 @@
-"""``aerodaas bench schedulers``: analytics schedulers on one seeded drone-fleet trace, on real Ray actors.
+"""``aerodaas bench schedulers``: analytics schedulers on seeded drone-fleet traces, on real Ray actors (or, with
+``--harness``, on the deterministic policy harness: :mod:`aerodaas.bench.sweep`). Every figure is reported as mean ±
+95 % CI over ``--seeds`` (:mod:`aerodaas.bench.schedulers_report`); the per-seed runs are kept in ``runs``.
 
 Every scheduler (all registered ones by default) runs the SAME arrival trace, in emulated mode, with wall-clock
 time, on a local multi-node Ray cluster (one ``tier=edge`` node, ``--cloud-nodes`` ``tier=cloud`` nodes; see
@@ -27,6 +29,7 @@ actual vs intended edge hold, actual vs intended cloud round trip, how late poli
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -38,9 +41,13 @@ from pathlib import Path
 from typing import Sequence
 
 from aerodaas.bench import machine_info
+from aerodaas.bench.schedulers_report import (_emulation_p99, compare_with_harness, format_table,  # noqa: F401
+                                              summarize_runs, write_plot)
 from aerodaas.bench.tours import _positive as _positive_int  # argparse type: an integer >= 1
 
 LOADS = ("LIGHT", "MEDIUM", "HEAVY")
+#: a runtime run is valid only if its worst emulation timing error p99 stays within this (ms; see run_schedulers)
+EMULATION_BOUND_MS = 10.0
 DEFAULT_DRONES_PER_EDGE = 3
 DEFAULT_FPS = 1.0
 
@@ -130,7 +137,7 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
     edges = [r for out in host_outs for r in out["edges"]]
     c = Counter()
     states, tiers, drops, reasons = Counter(), Counter(), Counter(), Counter()
-    ubm, tbm, obm = Counter(), Counter(), Counter()
+    ubm, tbm, obm, counters = Counter(), Counter(), Counter(), Counter()
     utility = cloud_cost = edge_cost = 0.0
     dec, hold, late, poll = [], [], [], []
     for r in edges:
@@ -147,6 +154,11 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
         utility += r["utility"]
         cloud_cost += r["cloud_cost"]
         edge_cost += r["edge_cost"]
+        for k, v in r.get("counters", {}).items():
+            if k == "cloud_peak_concurrency":
+                c["peak"] = max(c["peak"], v)
+            else:
+                counters[k] += v
         s = r.get("samples", {})
         dec += s.get("decision_us", [])
         hold += s.get("edge_hold_error_ms", [])
@@ -171,20 +183,22 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
                       "cloud_reply_margin": _pooled(margin)},
         "accounting": {"submitted": total, "terminal": sum(states.values()), "pending": c["pending"],
                        "policy_errors": c["policy_errors"]},
+        "counters": {**counters, "cloud_peak_concurrency_per_edge": c["peak"]},
         "cloud_losses": losses, "wall_s": wall_s,
     }
 
 
 def _run_one(hosts, host_edges: list[list[str]], cloud, name: str, workload, trace_by_host, *, seed: int,
              edge_jitter: str, cloud_jitter: str, network: Sequence[str] | None, drain_s: float,
-             reply_lead_ms: float) -> list[dict]:
+             reply_lead_ms: float, options: dict | None = None) -> list[dict]:
     import ray
 
     t = time.time()
     start_epoch = time.time() + 0.5 + 0.02 * sum(len(e) for e in host_edges) / max(1, len(hosts))
     ray.get([h.configure.remote(scheduler=name, workload=workload, edge_ids=edges, cloud_executors=cloud,
                                 start_epoch=start_epoch, edge_jitter=edge_jitter, cloud_jitter=cloud_jitter,
-                                network=network, seed=seed, reply_lead_ms=reply_lead_ms)
+                                network=network, seed=seed, reply_lead_ms=reply_lead_ms,
+                                scheduler_kwargs=options or None)
             for h, edges in zip(hosts, host_edges)])
     if time.time() > start_epoch:
         raise RuntimeError("configuring the edge hosts took longer than the run's lead time")
@@ -199,9 +213,19 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                    edge_jitter: str = "lognormal:0.05", cloud_jitter: str = "lognormal:0.1", cloud_nodes: int = 1,
                    cloud_executors: int | None = None, edge_hosts: int | None = None, address: str | None = None,
                    repeat: int = 1, drain_s: float = 10.0, workload_path: str | os.PathLike | None = None,
-                   progress: bool = True, reply_lead_ms: float = 100.0) -> dict:
-    """Run the benchmark; returns the JSON-able result (see the module docstring). Raises ValueError for an
-    unknown scheduler or load, or bad numbers, before starting Ray."""
+                   progress: bool = True, reply_lead_ms: float = 100.0, seeds: int = 1,
+                   cloud_sigmas: Sequence[float] | None = None, scenarios: Sequence[str] | None = None,
+                   options: dict | None = None, emulation_bound_ms: float = EMULATION_BOUND_MS) -> dict:
+    """Run the benchmark; returns the JSON-able result (see the module docstring): ``runs`` (one row per
+    scheduler, load, cloud sigma, scenario and seed ``seed .. seed + seeds - 1``) and ``results`` (per scheduler,
+    load, sigma and scenario: every figure as mean ± 95 % CI over the seeds, :func:`summarize_runs`).
+    ``cloud_sigmas``: lognormal cloud jitter sigmas to sweep (overrides ``cloud_jitter``); ``scenarios``: network
+    scenarios of :mod:`aerodaas.bench.sweep` added to ``network``; ``options``: scheduler options (``estimator``,
+    ``eviction_scan``) for every policy that accepts them. A run whose worst emulation timing error p99 exceeds
+    ``emulation_bound_ms`` is marked invalid. Raises ValueError for an unknown scheduler or load, or bad numbers,
+    before starting Ray."""
+    from aerodaas.bench.sweep import scenario_specs
+    from aerodaas.schedulers.analytics_base import filter_options
     from aerodaas.edgecloud import EdgeHostActor, Jitter, NetworkModel, start_cloud_executors
     from aerodaas.schedulers.analytics_base import Workload, analytics_scheduler_names
 
@@ -219,11 +243,22 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
         raise ValueError(f"cloud_nodes must be >= 0, got {cloud_nodes}")
     if not (reply_lead_ms >= 0 and math.isfinite(reply_lead_ms)):
         raise ValueError(f"cloud reply lead must be a finite number of ms >= 0, got {reply_lead_ms}")
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}")
     Jitter.parse(edge_jitter), Jitter.parse(cloud_jitter), NetworkModel.parse(network)  # validate early
+    jitters = [(None, cloud_jitter)] if not cloud_sigmas else [(float(x), str(Jitter("lognormal", float(x))))
+                                                               for x in cloud_sigmas]
+    scen = list(scenarios or ["none"])
+    nets = {sc: list(network or []) + scenario_specs(sc, duration_s) for sc in scen}
     wpath = Path(workload_path) if workload_path else default_workload_path()
     if not wpath.is_file():
         raise ValueError(f"workload file not found: {wpath} (set AERODAAS_DATA_DIR or pass workload_path)")
     workloads = {ld: Workload.from_file(wpath, ld) for ld in loads}
+    from aerodaas.schedulers.analytics_base import make_analytics_scheduler
+
+    opts = {n: filter_options(n, options or {}) for n in names}
+    for n in names:  # a bad option value fails here, before Ray
+        make_analytics_scheduler(n, workloads[loads[0]], **opts[n])
     layout = edge_layout(drones, drones_per_edge)
     n_edges = len(layout)
     ncpu = os.cpu_count() or 2
@@ -266,25 +301,30 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                  [[r for r in warm if host_of[r[1]] == i] for i in range(n_hosts)], seed=seed,
                  edge_jitter=edge_jitter, cloud_jitter=cloud_jitter, network=network, drain_s=drain_s,
                  reply_lead_ms=reply_lead_ms)
-        for load in loads:
+        for load, (sigma, cj), sc, sd in itertools.product(loads, jitters, scen, range(seed, seed + seeds)):
             w = workloads[load]
-            trace = make_trace(w, drones, duration_s, seed, drones_per_edge, fps)
+            trace = make_trace(w, drones, duration_s, sd, drones_per_edge, fps)
             by_host = [[r for r in trace if host_of[r[1]] == i] for i in range(n_hosts)]
-            say(f"{load}: {len(trace)} tasks from {drones} drones over {duration_s:g} s")
+            say(f"{load} cloud jitter {cj} network {sc} seed {sd}: {len(trace)} tasks from {drones} drones over "
+                f"{duration_s:g} s (load average {os.getloadavg()[0]:.2f})")
             for name in names:
                 reps = []
                 for k in range(repeat):
-                    outs = _run_one(hosts, host_edges, cloud, name, w, by_host, seed=seed, edge_jitter=edge_jitter,
-                                    cloud_jitter=cloud_jitter, network=network, drain_s=drain_s,
-                                    reply_lead_ms=reply_lead_ms)
+                    outs = _run_one(hosts, host_edges, cloud, name, w, by_host, seed=sd, edge_jitter=edge_jitter,
+                                    cloud_jitter=cj, network=nets[sc], drain_s=drain_s,
+                                    reply_lead_ms=reply_lead_ms, options=opts[name])
                     wall = outs.pop()["wall_s"]
                     reps.append(_merge(name, load, drones, n_edges, drones_per_edge, outs, wall))
                     r = reps[-1]
                     say(f"{load} {name} #{k + 1}: on-time {100 * r['on_time_rate']:.1f}% utility {r['utility']:.0f} "
                         f"cloud cost {r['cloud_cost']:.0f} decision p50/p99 {r['decision_us']['p50']:.1f}/"
-                        f"{r['decision_us']['p99']:.1f} us; arrival lateness p99 "
-                        f"{r['timing_ms']['arrival_lateness']['p99']:.1f} ms ({wall:.0f} s)")
-                results.append(_with_repeats(reps))
+                        f"{r['decision_us']['p99']:.1f} us; emulation error p99 {_emulation_p99(r):.1f} ms "
+                        f"({wall:.0f} s)")
+                row = _with_repeats(reps)
+                row.update(seed=sd, cloud_sigma=sigma, cloud_jitter=cj, scenario=sc,
+                           load_avg_1min=round(os.getloadavg()[0], 2), emulation_p99_ms=_emulation_p99(row),
+                           emulation_valid=_emulation_p99(row) <= emulation_bound_ms)
+                results.append(row)
     finally:
         for actor in (*hosts, *cloud):  # on a shared cluster (--address) leave nothing behind
             try:
@@ -293,14 +333,20 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                 pass
         cluster.close()
     return {
-        "benchmark": "schedulers", "machine": machine_info(), "seed": seed,
+        "benchmark": "schedulers", "mode": "runtime", "machine": machine_info(), "seed": seed,
+        "seeds": list(range(seed, seed + seeds)),
         "config": {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
                    "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
                    "edge_jitter": edge_jitter, "cloud_jitter": cloud_jitter,
                    "network_variability": list(network or []), "network": NetworkModel.parse(network, seed).describe(),
                    "cloud_nodes": cloud_nodes if not address else None, "address": address,
                    "edge_hosts": n_hosts, "cloud_executors": len(cloud), "workload": str(wpath), "mode": "emulated",
-                   "cloud_reply_lead_ms": reply_lead_ms, "worker_niceness": 0 if not address else None},
+                   "cloud_reply_lead_ms": reply_lead_ms, "worker_niceness": 0 if not address else None,
+                   "cloud_sigma": [j[0] for j in jitters], "scenarios": scen, "options": dict(options or {}),
+                   "emulation_bound_ms": emulation_bound_ms,
+                   "emulation_bound_why": "a run is valid only if its worst timing error p99 (arrival, edge hold, "
+                                          "cloud round trip, poll) stays within this bound, a sixth of the smallest "
+                                          "just-in-time margin (60 ms)"},
         "cluster": {"nodes": nodes, "edge_hosts": host_info, "cloud_executors": cloud_info},
         "arrival_process": {
             "per_drone": f"one frame every {1000.0 / fps:g} ms from a seeded random phase",
@@ -309,7 +355,8 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
             "source": "dream-lab/ocularone-scheduler: TaskCreation.java (one task per model per batch, shuffled), "
                       "DNNPerfModel keyed by frame count 1, conf/config.yaml batch_length 1 s; paper: >80 drones, "
                       ">25 VIPs, several drones per Jetson Nano edge (arXiv 2412.20860)"},
-        "results": results, "emulation": _emulation_summary(results), "wall_s": time.time() - t_all,
+        "runs": results, "results": summarize_runs(results), "emulation": _emulation_summary(results),
+        "wall_s": time.time() - t_all,
     }
 
 
@@ -346,69 +393,6 @@ def _emulation_summary(results: list[dict]) -> dict:
     return out
 
 
-# ---------------------------------------------------------------------------------------------- output
-def format_table(res: dict) -> str:
-    """Human-readable summary of a :func:`run_schedulers` result."""
-    cfg, m = res["config"], res["machine"]
-    lines = [f"aerodaas bench schedulers: {cfg['drones']} drones ({cfg['drones_per_edge']} per edge, {cfg['edges']} "
-             f"edges), {cfg['duration_s']:g} s at {cfg['fps']:g} fps, seed {res['seed']}, {m['cpu_count']} CPUs", ""]
-    head = ("load", "scheduler", "tasks", "on-time %", "utility", "cloud cost", "drops t/c/e/f", "edge util",
-            "dec p50 us", "dec p99 us")
-    rows = []
-    for r in res["results"]:
-        d = r["drops"]
-        rows.append((r["load"], r["scheduler"], str(r["tasks"]), f"{100 * r['on_time_rate']:.1f}", f"{r['utility']:.0f}",
-                     f"{r['cloud_cost']:.0f}", f"{d.get('dropped_time', 0)}/{d.get('dropped_cost', 0)}/"
-                     f"{d.get('expired_edge', 0)}/{d.get('failed', 0)}", f"{100 * r['edge_utilisation']:.0f}%",
-                     f"{r['decision_us']['p50']:.1f}", f"{r['decision_us']['p99']:.1f}"))
-    widths = [max(len(x) for x in col) for col in zip(head, *rows)]
-    for row in (head, *rows):
-        lines.append("  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))))
-    e = res["emulation"]
-    lines += ["", "emulation timing error (worst over runs, ms): " + ", ".join(
-        f"{k} p99 {v['worst_p99']:.1f} max {v['worst_max']:.1f}" for k, v in e.items() if "worst_p99" in v)]
-    return "\n".join(lines)
-
-
-def write_plot(res: dict, path: str | os.PathLike) -> None:
-    """A comparison figure (PNG): per load, on-time rate, utility and terminal states by scheduler."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    loads = list(dict.fromkeys(r["load"] for r in res["results"]))
-    fig, axes = plt.subplots(len(loads), 3, figsize=(15, 3.6 * len(loads)), squeeze=False)
-    states = ["done_on_time", "done_late", "dropped_time", "dropped_cost", "expired_edge", "failed"]
-    colors = ["#2a9d8f", "#8ab17d", "#e9c46a", "#f4a261", "#e76f51", "#6d597a"]
-    for row, load in zip(axes, loads):
-        rs = [r for r in res["results"] if r["load"] == load]
-        names = [r["scheduler"] for r in rs]
-        x = range(len(rs))
-        row[0].bar(x, [100 * r["on_time_rate"] for r in rs], color="#2a9d8f")
-        row[0].set_ylabel(f"{load}\non-time completion (%)")
-        row[0].set_ylim(0, 100)
-        row[1].bar(x, [r["utility"] for r in rs], color="#264653")
-        row[1].set_ylabel("total utility")
-        bottom = [0.0] * len(rs)
-        for s, col in zip(states, colors):
-            vals = [100 * r["states"].get(s, 0) / max(1, r["tasks"]) for r in rs]
-            row[2].bar(x, vals, bottom=bottom, color=col, label=s)
-            bottom = [b + v for b, v in zip(bottom, vals)]
-        row[2].set_ylabel("terminal states (% of tasks)")
-        for ax in row:
-            ax.set_xticks(list(x))
-            ax.set_xticklabels(names, rotation=30, ha="right")
-            ax.grid(axis="y", alpha=0.3)
-    axes[0][2].legend(fontsize=7, loc="upper right")
-    cfg = res["config"]
-    fig.suptitle(f"Analytics schedulers: {cfg['drones']} drones, {cfg['drones_per_edge']} per edge, "
-                 f"{cfg['duration_s']:g} s, seed {res['seed']}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 # ---------------------------------------------------------------------------------------------- CLI
 def _positive_float(s: str) -> float:
     v = float(s)
@@ -425,23 +409,75 @@ def _loads(s: str) -> list[str]:
     return out
 
 
+def _floats(s: str) -> list[float]:
+    try:
+        out = [float(x) for x in s.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}") from None
+    if not out or any(not (v >= 0 and math.isfinite(v)) for v in out):
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers >= 0, got {s!r}")
+    return out
+
+
+def _ints(s: str) -> list[int]:
+    try:
+        out = [int(x) for x in s.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {s!r}") from None
+    if not out or any(v < 1 for v in out):
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 1, got {s!r}")
+    return out
+
+
+def _scenarios(s: str) -> list[str]:
+    from aerodaas.bench.sweep import SCENARIOS
+
+    out = [x.strip() for x in s.split(",") if x.strip()]
+    bad = [x for x in out if x not in SCENARIOS]
+    if bad or not out:
+        raise argparse.ArgumentTypeError(f"scenarios must be among {', '.join(SCENARIOS)}, got {s!r}")
+    return out
+
+
 def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``aerodaas bench schedulers`` on the ``bench`` sub-command's subparsers."""
     p = bench_subparsers.add_parser(
-        "schedulers", help="analytics schedulers (edge/cloud placement) on one seeded drone-fleet trace",
-        description="Every analytics scheduler on the same seeded arrival trace, emulated with wall-clock time on "
-                    "Ray actors (edge node + cloud nodes): on-time rate, utility, cloud cost, drops, decision "
-                    "latency, and the emulation's own timing error.")
-    p.add_argument("--drones", type=_positive_int, default=80, help="drones in the fleet (default 80)")
-    p.add_argument("--load", type=_loads, default=["MEDIUM"],
-                   help="LIGHT, MEDIUM or HEAVY, or a comma-separated list (default MEDIUM)")
-    p.add_argument("--duration", type=_positive_float, default=60.0, help="seconds of arrivals per run (default 60)")
-    p.add_argument("--schedulers", nargs="+", metavar="NAME", help="schedulers to run (default: all registered)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the trace, jitter and network draws (default 0)")
-    p.add_argument("--drones-per-edge", type=_positive_int, default=DEFAULT_DRONES_PER_EDGE,
-                   help=f"drones linked to each edge device (default {DEFAULT_DRONES_PER_EDGE})")
+        "schedulers", help="analytics schedulers (edge/cloud placement): seeded drone-fleet traces, mean ± 95 %% CI "
+                           "over seeds, on Ray actors or (--harness) on the deterministic policy harness",
+        description="Every analytics scheduler on the same seeded arrival traces: on-time rate, utility, cloud cost, "
+                    "drops and behaviour counters as mean ± 95%% CI over --seeds. Default: emulated with wall-clock "
+                    "time on Ray actors (edge node + cloud nodes), with the emulation's own timing error (a run over "
+                    "--emulation-bound-ms is marked invalid). --harness: the same policies and draws on simulated "
+                    "time, no Ray, swept over --cloud-sigma x --drones-per-edge x --scenarios, with an LP upper bound.")
+    p.add_argument("--harness", action="store_true",
+                   help="run the deterministic policy harness (no Ray) over the sweep instead of the Ray runtime")
+    p.add_argument("--drones", type=_positive_int,
+                   help="drones in the fleet (default 80 on the runtime; 4 edges' worth in --harness)")
+    p.add_argument("--load", type=_loads,
+                   help="LIGHT, MEDIUM or HEAVY, or a comma-separated list (default MEDIUM; --harness: all three)")
+    p.add_argument("--duration", type=_positive_float, help="seconds of arrivals per run (default 60; --harness 120)")
+    p.add_argument("--schedulers", nargs="+", metavar="NAME", help="schedulers to run (default: all registered; "
+                                                                   "--harness: EDGE_EDF, CLOUD, E+C, the DEMS family, "
+                                                                   "GAINPLAN, EVPLAN)")
+    p.add_argument("--seed", type=int, default=0, help="first seed of the traces and draws (default 0)")
+    p.add_argument("--seeds", type=_positive_int, default=5, help="seeds per configuration (default 5)")
+    p.add_argument("--drones-per-edge", type=_ints,
+                   help=f"drones linked to each edge device, comma-separated to sweep (default "
+                        f"{DEFAULT_DRONES_PER_EDGE}; --harness 2,3)")
+    p.add_argument("--cloud-sigma", type=_floats,
+                   help="lognormal cloud-time jitter sigmas to sweep, comma-separated (default: --cloud-jitter on the "
+                        "runtime; --harness 0,0.05,0.1,0.2)")
+    p.add_argument("--scenarios", type=_scenarios,
+                   help="network-variability scenarios to sweep: none, step, walk (default none; --harness none,step, "
+                        "run at HEAVY)")
+    p.add_argument("--estimator", help="fair-margin option: one cloud-latency estimator for every just-in-time "
+                                       "policy: profile, mean[:K], max[:K] or pQ[:K]")
+    p.add_argument("--eviction-scan", choices=("reference", "full"),
+                   help="DEM/DEMS eviction scan: reference (PriorityQueue.add, the default) or full")
     p.add_argument("--fps", type=_positive_float, default=DEFAULT_FPS,
                    help=f"frames (1-frame batches) per second per drone (default {DEFAULT_FPS:g})")
+    p.add_argument("--processes", type=_positive_int, help="--harness worker processes (default: min(2, CPUs))")
+    p.add_argument("--no-bound", action="store_true", help="--harness: skip the LP upper bound")
     p.add_argument("--network-variability", action="append", metavar="SPEC",
                    help="extra cloud latency: const:MS, normal:MEAN,SD, lognormal:MEDIAN,SIGMA, +MS@T1-T2 (episode, "
                         "seconds), walk:STEP,MAX[,EVERY]; repeatable")
@@ -451,7 +487,13 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--edge-hosts", type=_positive_int, help="edge host actors (default: 1 on <= 2 CPUs)")
     p.add_argument("--cloud-reply-lead-ms", type=float, default=100.0,
                    help="emulated cloud replies are sent this early and released when due (default 100; 0: off)")
-    p.add_argument("--repeat", type=_positive_int, default=1, help="runs per scheduler and load (default 1)")
+    p.add_argument("--emulation-bound-ms", type=_positive_float, default=EMULATION_BOUND_MS,
+                   help=f"a runtime run whose worst timing error p99 exceeds this is marked invalid (default "
+                        f"{EMULATION_BOUND_MS:g})")
+    p.add_argument("--compare-harness", action="store_true",
+                   help="runtime: also run the harness on the same traces and draws and say whether each result lies "
+                        "within the harness's CI")
+    p.add_argument("--repeat", type=_positive_int, default=1, help="runs per scheduler, load and seed (default 1)")
     p.add_argument("--address", help="run on this Ray cluster (e.g. 'auto') instead of starting a local one")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON result to FILE")
@@ -461,12 +503,45 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     return p
 
 
+def _run_harness(args: argparse.Namespace, options: dict) -> dict:
+    from aerodaas.bench.sweep import run_sweep
+
+    def progress(done: int, total: int) -> None:
+        if done == total or done % max(1, total // 20) == 0:
+            print(f"[bench schedulers --harness] {done}/{total} jobs", file=sys.stderr, flush=True)
+
+    return run_sweep(loads=args.load or list(LOADS), sigmas=args.cloud_sigma or [0.0, 0.05, 0.1, 0.2],
+                     drones_per_edge=args.drones_per_edge or [2, 3], scenarios=args.scenarios or ["none", "step"],
+                     seeds=list(range(args.seed, args.seed + args.seeds)), drones=args.drones,
+                     duration_s=args.duration or 120.0, fps=args.fps, schedulers=args.schedulers, options=options,
+                     edge_jitter=args.edge_jitter, processes=args.processes, bound=not args.no_bound,
+                     progress=progress)
+
+
+def _run_runtime(args: argparse.Namespace, options: dict) -> dict:
+    out = None
+    for dpe in args.drones_per_edge or [DEFAULT_DRONES_PER_EDGE]:
+        res = run_schedulers(args.schedulers, args.load or ["MEDIUM"], args.drones or 80, args.duration or 60.0,
+                             args.seed, dpe, args.fps, args.network_variability, args.edge_jitter, args.cloud_jitter,
+                             args.cloud_nodes, None, args.edge_hosts, args.address, args.repeat,
+                             reply_lead_ms=args.cloud_reply_lead_ms, seeds=args.seeds, cloud_sigmas=args.cloud_sigma,
+                             scenarios=args.scenarios, options=options, emulation_bound_ms=args.emulation_bound_ms)
+        if args.compare_harness:
+            res["harness_comparison"] = compare_with_harness(res)
+        if out is None:
+            out = res
+        else:  # several drones-per-edge settings: one result, runs and rows of every setting
+            out["runs"] += res["runs"]
+            out["results"] += res["results"]
+            out.setdefault("harness_comparison", []).extend(res.get("harness_comparison", []))
+            out.setdefault("per_drones_per_edge_config", []).append(res["config"])
+    return out
+
+
 def _cmd(args: argparse.Namespace) -> int:
+    options = {k: v for k, v in (("estimator", args.estimator), ("eviction_scan", args.eviction_scan)) if v}
     try:
-        res = run_schedulers(args.schedulers, args.load, args.drones, args.duration, args.seed,
-                             args.drones_per_edge, args.fps, args.network_variability, args.edge_jitter,
-                             args.cloud_jitter, args.cloud_nodes, None, args.edge_hosts, args.address, args.repeat,
-                             reply_lead_ms=args.cloud_reply_lead_ms)
+        res = _run_harness(args, options) if args.harness else _run_runtime(args, options)
     except ValueError as e:
         print(f"aerodaas bench schedulers: {e}", file=sys.stderr)
         return 2
@@ -480,6 +555,11 @@ def _cmd(args: argparse.Namespace) -> int:
     except OSError as e:
         print(f"aerodaas bench schedulers: cannot write output: {e}", file=sys.stderr)
         return 2
+    if args.harness:
+        from aerodaas.bench.sweep import format_sweep
+
+        print(text if args.json else format_sweep(res))
+        return 0
     print(text if args.json else format_table(res))
-    bad = [r for r in res["results"] if r["accounting"]["pending"] or r["accounting"]["terminal"] != r["tasks"]]
+    bad = [r for r in res["runs"] if r["accounting"]["pending"] or r["accounting"]["terminal"] != r["tasks"]]
     return 1 if bad else 0

@@ -1,0 +1,245 @@
+"""The dora-rs peer of ``aerodaas bench overhead``: the same pipeline (see :mod:`aerodaas.bench.pipeline`) on dora-rs
+1.1 (``pip install 'aerodaas[bench]'``), one Python node process per component, wired by a ``dataflow.yml``
+generated into a temporary directory and run with ``dora run`` (local mode, no coordinator). On one machine dora
+moves every message of at least 4096 bytes (``ZERO_COPY_THRESHOLD`` in dora's node API) through shared memory, so
+a frame is written once into a shared-memory sample and read zero-copy by the detector; small messages (pickled
+detections, navigation, setpoint) are inline.
+
+    camera --frame (uint8 Arrow array + JSON metadata)--> detector --dets--> follow --nav--> scheduler --item--> drone
+
+Control from the benchmark process goes through files in that directory (so the nodes need no extra ports): each
+node writes ``ready_<node>`` once set up; the camera produces frames while the monotonic deadline in ``window``
+is in the future; the drone appends one JSON row per applied command to ``rows.jsonl``. ``dora run`` is stopped
+with SIGINT (its Ctrl-C: a STOP event to every node). Node processes run ``python -m aerodaas.bench.peers_dora
+NODE DIR`` with this interpreter.
+"""
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+NODES = ("camera", "detector", "follow", "scheduler", "drone")
+_EDGES = {"detector": ("frame", "camera/frame"), "follow": ("dets", "detector/dets"),
+          "scheduler": ("nav", "follow/nav"), "drone": ("item", "scheduler/item")}
+_OUTPUT = {"camera": "frame", "detector": "dets", "follow": "nav", "scheduler": "item"}
+
+
+def dora_cli() -> str | None:
+    """Path of the ``dora`` CLI (next to this interpreter first, then ``$PATH``), or None."""
+    local = Path(sys.executable).parent / "dora"
+    return str(local) if local.exists() else shutil.which("dora")
+
+
+def unavailable_reason() -> str | None:
+    """Why the dora-rs column cannot be measured here (None when it can)."""
+    try:
+        import dora  # noqa: F401
+    except ImportError:
+        return "dora-rs is not installed (pip install 'aerodaas[bench]': dora-rs and dora-rs-cli >= 1.1)"
+    if dora_cli() is None:
+        return "the dora CLI is not installed (pip install 'dora-rs-cli>=1.1')"
+    return None
+
+
+def dataflow_yaml(workdir: str) -> str:
+    """The dataflow descriptor: one custom Python node per component (dora's YAML spec: ``nodes[].path``,
+    ``args``, ``inputs`` ``<node>/<output>``, ``outputs``)."""
+    lines = ["nodes:"]
+    for node in NODES:
+        lines += [f"  - id: {node}", f"    path: {sys.executable}",
+                  f"    args: -u -m aerodaas.bench.peers_dora {node} {workdir}"]
+        if node in _EDGES:
+            port, src = _EDGES[node]
+            lines += ["    inputs:", f"      {port}:", f"        source: {src}", "        queue_size: 10"]
+        if node in _OUTPUT:
+            lines += ["    outputs:", f"      - {_OUTPUT[node]}"]
+    return "\n".join(lines) + "\n"
+
+
+class DoraPipeline:
+    """Starts ``dora run`` on the generated dataflow and waits for every node to be set up (``timeout_s``);
+    :meth:`window` runs the camera for a while and returns the rows of applied commands. Raises RuntimeError when
+    dora exits or a node is not ready in time (the log tail is in the message)."""
+
+    name = "dora_rs"
+
+    def __init__(self, width: int, height: int, kind: str, stub_ms: float, timeout_s: float = 180.0) -> None:
+        reason = unavailable_reason()
+        if reason:
+            raise RuntimeError(reason)
+        self.dir = tempfile.mkdtemp(prefix="aerodaas-dora-")
+        Path(self.dir, "params.json").write_text(json.dumps({"width": width, "height": height, "kind": kind,
+                                                             "stub_ms": stub_ms}))
+        self._set_window(0.0)
+        Path(self.dir, "dataflow.yml").write_text(dataflow_yaml(self.dir))
+        self.log = open(Path(self.dir, "dora.log"), "w")
+        self.proc = subprocess.Popen([dora_cli(), "run", "dataflow.yml", "--log-level", "warn"], cwd=self.dir,
+                                     stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self._offset = 0
+        deadline = time.monotonic() + timeout_s
+        while not all(Path(self.dir, f"ready_{n}").exists() for n in NODES):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                tail = self._log_tail()
+                self.close()
+                raise RuntimeError(f"dora run did not get every node ready (exit {self.proc.returncode}): {tail}")
+            time.sleep(0.1)
+
+    def _set_window(self, until: float) -> None:
+        tmp = Path(self.dir, "window.tmp")
+        tmp.write_text(repr(until))
+        os.replace(tmp, Path(self.dir, "window"))
+
+    def _log_tail(self) -> str:
+        self.log.flush()
+        return Path(self.dir, "dora.log").read_text(errors="replace")[-1500:]
+
+    def window(self, seconds: float, settle_s: float = 0.5) -> list[dict]:
+        self._set_window(time.monotonic() + seconds)
+        time.sleep(seconds + settle_s)
+        if self.proc.poll() is not None:
+            raise RuntimeError(f"dora run exited ({self.proc.returncode}): {self._log_tail()}")
+        with open(Path(self.dir, "rows.jsonl")) as f:
+            f.seek(self._offset)
+            text = f.read()
+        complete = text[:text.rfind("\n") + 1]
+        self._offset += len(complete)
+        return [json.loads(line) for line in complete.splitlines() if line]
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(20)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(10)
+        self.log.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+# ---------------------------------------------------------------------------------------------- the node processes
+def _pack(obj: object):
+    import numpy as np
+    import pyarrow as pa
+
+    return pa.array(np.frombuffer(pickle.dumps(obj), np.uint8))
+
+
+def _unpack(value) -> object:
+    return pickle.loads(value.to_numpy(zero_copy_only=False).tobytes())
+
+
+def _camera(node, p: dict, workdir: str) -> None:
+    import pyarrow as pa
+
+    from .pipeline import FPS, HOVER_M, CameraStage, Pacer
+
+    cam = CameraStage(p["width"], p["height"], p["kind"])
+    Path(workdir, "ready_camera").touch()
+    pacer, t0, until = Pacer(FPS), time.monotonic(), 0.0
+    win = Path(workdir, "window")
+    while True:
+        if time.monotonic() >= until:  # idle between windows: wait for STOP or a new window
+            t_poll = time.monotonic()
+            ev = node.next(timeout=0.02)
+            if ev is not None and ev["type"] == "STOP":
+                return
+            if time.monotonic() - t_poll < 0.01:  # a timeout comes back as an ERROR event: never spin
+                time.sleep(0.01)
+            until = float(win.read_text() or 0.0)
+            pacer.restart()
+            continue
+        tick = pacer.wait()
+        start = time.monotonic()
+        frame, meta = cam.capture((0.0, 0.0, HOVER_M), 0.0, start - t0)
+        ready = time.monotonic()
+        tr = {"tick": tick, "start": start, "ready": ready, "seq": meta.seq, "t": meta.capture_time, "out": ready}
+        node.send_output("frame", pa.array(frame.reshape(-1)), {"trace": json.dumps(tr)})
+
+
+def _rebuild_meta(p: dict, tr: dict):
+    from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
+
+    from .pipeline import HOVER_M
+
+    return FrameMeta(robot_id="uav", sensor_id="cam", seq=tr["seq"], capture_time=tr["t"], wall_time=time.time(),
+                     pose=FramePose(position=(0.0, 0.0, HOVER_M), yaw=0.0, camera_pitch=90),
+                     intrinsics=CameraIntrinsics.from_hfov(p["width"], p["height"], 78))
+
+
+def _worker(node, p: dict, workdir: str, role: str) -> None:
+    from . import pipeline as pl
+
+    rc = pl.parsed_config(p["width"], p["height"], p["kind"]).robots[0]
+    stage = {"detector": lambda: pl.DetectStage(p["kind"], p["stub_ms"]), "follow": pl.FollowStage,
+             "scheduler": lambda: pl.CommandStage(rc), "drone": lambda: pl.DroneStage(rc)}[role]()
+    rows = open(Path(workdir, "rows.jsonl"), "a", buffering=1) if role == "drone" else None
+    Path(workdir, f"ready_{role}").touch()
+    last = time.monotonic()
+    for ev in node:
+        if ev["type"] == "STOP":
+            break
+        if ev["type"] != "INPUT":
+            continue
+        t_in = time.monotonic()
+        if role == "detector":
+            tr = json.loads(ev["metadata"]["trace"])
+            tr["hop_camera_detector"] = t_in - tr["out"]
+            frame = ev["value"].to_numpy(zero_copy_only=True).reshape(p["height"], p["width"], 3)
+            meta = _rebuild_meta(p, tr)
+            dets, tr["inference_ms"], tr["post_ms"] = stage(frame, meta)
+            del frame
+            tr["out"] = time.monotonic()
+            node.send_output("dets", _pack((dets, meta, tr)))
+        elif role == "follow":
+            dets, meta, tr = _unpack(ev["value"])
+            tr["hop_detector_follow"] = t_in - tr["out"]
+            nav, ms = stage(dets, meta)
+            if nav is not None:
+                tr["post_ms"] += ms
+                tr["out"] = time.monotonic()
+                node.send_output("nav", _pack((nav, meta, tr)))
+        elif role == "scheduler":
+            nav, meta, tr = _unpack(ev["value"])
+            tr["hop_follow_scheduler"] = t_in - tr["out"]
+            item = stage(nav, tuple(meta.pose.position), meta.capture_time)
+            if item is not None:
+                tr["out"] = time.monotonic()
+                node.send_output("item", _pack((item, tr)))
+        else:
+            item, tr = _unpack(ev["value"])
+            tr["hop_scheduler_drone"] = t_in - tr["out"]
+            stage.step(min(0.1, t_in - last))
+            last = t_in
+            stage.apply(item)
+            tr["applied"] = time.monotonic()
+            del tr["out"], tr["seq"], tr["t"]
+            rows.write(json.dumps(tr) + "\n")
+    if rows is not None:
+        rows.close()
+
+
+def node_main(argv: list[str]) -> int:
+    """Entry point of a node process: ``NODE WORKDIR``."""
+    from dora import Node
+
+    role, workdir = argv
+    p = json.loads(Path(workdir, "params.json").read_text())
+    node = Node()
+    if role == "camera":
+        _camera(node, p, workdir)
+    else:
+        _worker(node, p, workdir, role)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(node_main(sys.argv[1:]))

@@ -1,0 +1,75 @@
+"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.detect.ShippedModel):
+a node without the file (a cloud node: other disk, no model folder, no internet) writes the bytes to its own cache
+and loads them; the driver's own node keeps loading the file it resolved."""
+from __future__ import annotations
+
+import hashlib
+import pickle
+import shutil
+
+import numpy as np
+import pytest
+
+pytest.importorskip("onnxruntime")
+
+from aerodaas.analytics import ObjectDetector  # noqa: E402
+from aerodaas.detect import MODELS, ModelNotFoundError, ShippedModel  # noqa: E402
+from tests.conftest import MODEL_DIR  # noqa: E402
+
+needs_model = pytest.mark.skipif(not (MODEL_DIR / "yolox_nano.onnx").is_file(),
+                                 reason=f"yolox_nano.onnx not found in {MODEL_DIR} (set AERODAAS_MODEL_DIR)")
+
+
+@pytest.fixture
+def other_node(tmp_path, monkeypatch):
+    """This process as a node that has neither the model folder nor a cached model: its own cache folder, no
+    AERODAAS_MODEL_DIR, and no download possible."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "node-cache"))
+    monkeypatch.delenv("AERODAAS_MODEL_DIR", raising=False)
+
+    def no_download(*a, **k):
+        raise AssertionError("the node tried to download the model")
+
+    monkeypatch.setattr("aerodaas.detect._download", no_download)
+    return tmp_path / "node-cache" / "aerodaas" / "models" / "shipped"
+
+
+def test_shipped_bytes_land_once_in_the_node_cache(tmp_path, other_node):
+    src = tmp_path / "m.onnx"
+    src.write_bytes(b"model-bytes" * 1000)
+    shipped = pickle.loads(pickle.dumps(ShippedModel.read(src)))
+    assert shipped.sha256 == hashlib.sha256(src.read_bytes()).hexdigest() and "bytes" in repr(shipped)
+    assert shipped.path_on_this_node(src) == src  # the file is here with the same bytes: used as is
+    src.unlink()  # another node: the driver's path does not exist there
+    p = shipped.path_on_this_node(src)
+    assert p.parent == other_node and p.read_bytes() == b"model-bytes" * 1000
+    mtime = p.stat().st_mtime_ns
+    assert shipped.path_on_this_node(src) == p and p.stat().st_mtime_ns == mtime  # written once
+    src.write_bytes(b"another model at the same path")  # same path, other bytes: never loaded
+    assert shipped.path_on_this_node(src) == p
+    assert [f.name for f in other_node.iterdir()] == [p.name]  # no temp file left behind
+
+
+def test_reading_a_missing_model_names_it(tmp_path):
+    with pytest.raises(ModelNotFoundError, match="nope.onnx"):
+        ShippedModel.read(tmp_path / "nope.onnx")
+
+
+@needs_model
+def test_object_detector_runs_where_the_model_file_is_absent(tmp_path, monkeypatch, other_node):
+    """check() on the driver, pickled as Ray ships an actor's arguments, set up on a node without the file."""
+    driver_copy = tmp_path / "driver" / "yolox_nano.onnx"
+    driver_copy.parent.mkdir()
+    shutil.copy(MODEL_DIR / "yolox_nano.onnx", driver_copy)
+    det = ObjectDetector("yolox_nano", model_path=str(driver_copy))
+    det.check()
+    assert det.shipped.sha256 == MODELS["yolox_nano"].sha256
+    local = pickle.loads(pickle.dumps(det))
+    local.setup()  # the driver's node: its own file, no copy written
+    assert str(local.detector.model_path) == str(driver_copy) and not other_node.exists()
+    wire = pickle.dumps(det)
+    driver_copy.unlink()
+    remote = pickle.loads(wire)
+    remote.setup()
+    assert remote.detector.model_path.parent == other_node
+    assert remote.process(np.zeros((480, 640, 3), np.uint8), None) == []
