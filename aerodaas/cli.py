@@ -22,6 +22,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if not app.is_file():
         print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
         return 2
+    # everything the command line names is checked before Ray starts (exit 2, naming the bad input)
+    try:
+        if args.record:
+            from .recording import check_record_path
+
+            check_record_path(args.record)
+        for flag, v, hi in (("--speedup", args.speedup, 1000.0), ("--timeout", args.timeout, 1e7)):
+            if v is not None and not (v > 0 and v <= hi):  # NaN fails both comparisons
+                raise ValueError(f"{flag} must be a number within (0, {hi:g}], got {v!r}")
+        if args.env:
+            from .config import load_environment_config
+
+            load_environment_config(args.env)
+    except (ConfigError, ValueError) as e:
+        print(f"aerodaas run: {e}", file=sys.stderr)
+        return 2
     o = runtime.OPTIONS
     o.record, o.speedup, o.timeout, o.address = args.record, args.speedup, args.timeout, args.address
     o.env_path = str(Path(args.env).resolve()) if args.env else None
@@ -39,7 +55,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     # installed before Ray starts: the driver's own fatal-signal handler then chains to this one
     previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
-    runtime.start_ray_early(args.address)  # Ray's start (seconds) overlaps importing and building the app
+    # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
+    # the rest of the app's build; never before, so a bad environment fails at once with no Ray process
+    o.early_ray = True
 
     from . import api
 
@@ -66,6 +84,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     finally:
         api.Robot.start_mission = original
+        o.early_ray = False
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
     if not results:
@@ -219,6 +238,9 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             if not path.is_file():
                 raise MissionFileError(f"{str(path)!r}: mission file not found")
             plan = load_mission(path)
+            if not plan.items:
+                raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
+                                       f"would clear the vehicle's mission)")
             if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
                 plan_to_flight(plan)
             backend = _mission_backend(args, plan.home)

@@ -31,6 +31,10 @@ class RunOptions:
     progress: bool = True
     hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
     hitl_port: int | None = None
+    #: start Ray in the background as soon as the application's Environment is validated (``aerodaas run``): an
+    #: invalid environment then fails before any Ray process exists, and a valid one overlaps Ray's start with
+    #: building the rest of the application
+    early_ray: bool = False
 
 
 OPTIONS = RunOptions()
@@ -341,6 +345,10 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     _check_clocks(robots, sim)
 
     # ---- validate everything before any actor starts
+    if opts.record:
+        from .recording import check_record_path
+
+        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
     graphs = {}
     scheds = _robot_schedulers(env, robots)
     for r in robots:

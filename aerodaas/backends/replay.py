@@ -40,7 +40,7 @@ from ..geo import geodetic_to_enu
 from ..models import Attitude, GeoPoint, Odometry
 from .base import BackendError, VehicleBackend
 
-__all__ = ["ReplayBackend", "McapCameraReplay", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
+__all__ = ["ReplayBackend", "McapCameraReplay", "check_log", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
 
 #: a byte-identical packet within this many seconds of the same one is a duplicate from a second link
 DUPLICATE_WINDOW_S = 0.5
@@ -113,6 +113,19 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
     msgs = [LogMessage(t, ty, m) for t, ty, m in raw if (m.get_srcSystem(), m.get_srcComponent()) == vehicle]
     return msgs, {"t0": t0, "sysid": vehicle[0], "compid": vehicle[1], "duplicates": dups,
                   "foreign": len(raw) - len(msgs)}
+
+
+def check_log(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a replay log (``.tlog`` or ``.ulg``) as :class:`ReplayBackend` will and check that it can be replayed: a
+    vehicle HEARTBEAT (tlog) and at least one position fix (``GLOBAL_POSITION_INT`` with a non-zero lat/lon, or a
+    ULog's ``vehicle_global_position``). Called while the environment is validated, before Ray starts. Returns the
+    loader's info; raises BackendError naming the file and what is missing."""
+    p = Path(path)
+    msgs, info = load_ulog(p) if p.suffix.lower() == ".ulg" else load_tlog(p)
+    if not any(lm.type == "GLOBAL_POSITION_INT" and (lm.msg.lat, lm.msg.lon) != (0, 0) for lm in msgs):
+        raise BackendError(f"{str(p)!r} holds no position fix (GLOBAL_POSITION_INT / vehicle_global_position): "
+                           f"nothing to replay")
+    return info
 
 
 class _UlogMsg:
