@@ -40,7 +40,8 @@ class DroneComponent:
         self.cfg = RobotConfig.model_validate(robot_cfg)
         self.host = host
         self.backend = backend if backend is not None else make_backend(self.cfg)
-        self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home)
+        self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home,
+                               control_period_s=1.0 / self.cfg.control_rate_hz)
         self.scheduler = scheduler
         self.recorder = recorder
         self.epoch_ns = epoch_ns
@@ -53,6 +54,7 @@ class DroneComponent:
         self.events: list[dict] = []
         self.preplanned_total = preplanned_total
         self.preplanned_left = preplanned_total
+        self.takeoff_altitude = self.cfg.takeoff_altitude  # as the safety gate passed it (start())
         self.idle_since: float | None = None
         self.flew_something = False
         self.active_wp: str | None = None
@@ -109,11 +111,13 @@ class DroneComponent:
         if self.autopilot_mission:
             self._start_autopilot_mission()
             return
+        alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
+        self.takeoff_altitude = alt
         b.arm()
         self.fsm.transition(S.ARMED, b.t)
-        b.takeoff(self.cfg.takeoff_altitude)
+        b.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
-        self._event("takeoff", altitude=self.cfg.takeoff_altitude)
+        self._event("takeoff", altitude=alt)
 
     def _start_autopilot_mission(self) -> None:
         """Upload the queued waypoints in flying order (NAV_TAKEOFF to ``takeoff_altitude``, NAV_WAYPOINT each with
@@ -122,7 +126,8 @@ class DroneComponent:
         b = self.backend
         items = self.scheduler.queued()
         nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, items, SchedulingType.ORDERED, name="autopilot mission")
-        sent = b.upload_mission(nav, takeoff_altitude=self.cfg.takeoff_altitude, final_action="land")
+        sent = b.upload_mission(nav, takeoff_altitude=self.gate.check_takeoff(self.cfg.takeoff_altitude),
+                                final_action="land")
         wps = iter([w for w in items if isinstance(w, Waypoint)])
         kinds = {16: "waypoint", 22: "takeoff", 21: "land", 20: "rtl"}
         for it in sent:
@@ -341,14 +346,14 @@ class DroneComponent:
             if self.autopilot_mission:
                 v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
             elif back == S.TAKING_OFF:
-                v.takeoff(self.cfg.takeoff_altitude)
+                v.takeoff(self.takeoff_altitude)
             self.active_wp = None
             self.hold_until = None
             return False
         if self.autopilot_mission:
             return self._follow_autopilot_mission(t, pos)
         if st == S.TAKING_OFF:
-            if abs(v.position[2] - self.cfg.takeoff_altitude) < 0.1:
+            if abs(v.position[2] - self.takeoff_altitude) < 0.1:
                 fsm.transition(S.HOVERING, t)
                 v.hold()
             return False
@@ -360,7 +365,7 @@ class DroneComponent:
             self.flew_something = True
         if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and self.active_wp == item.id):
             try:  # the choke point: nothing outside the safety limits reaches the backend
-                item = self.gate.check_item(item, pos)
+                item = self.gate.check_item(item, pos, tuple(float(c) for c in v.velocity))
             except SafetyViolation as e:
                 self._reject(t, item, e)
                 return False
