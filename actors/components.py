@@ -20,6 +20,7 @@ import numpy as np
 
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
 from aerodaas.models import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose, Waypoint
+from aerodaas.safety import SafetyViolation
 
 from .host import Cascade, Component, Host
 
@@ -394,7 +395,10 @@ class SchedulerComponent(Component):
         self.latency: list[dict] = []
         cfg = RobotConfig.model_validate(robot_cfg) if robot_cfg else RobotConfig(id=robot_id)
         self.home = cfg.home
-        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home)
+        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home, control_period_s=1.0 / cfg.control_rate_hz)
+        self.max_per_request = cfg.max_waypoints_per_request
+        self.max_queued = cfg.max_queued_items
+        self._plan_lock = threading.Lock()  # one planner at a time; never the lock the control tick takes
         self.refused: list[dict] = []
         self.discarded: list[dict] = []
         self._plan_sig: Any = None
@@ -447,18 +451,20 @@ class SchedulerComponent(Component):
         nav = env["data"]
         if not isinstance(nav, AeroNavigation) or env.get("robot", self.robot_id) != self.robot_id:
             return None  # a shared analytics navigates each robot through that robot's own scheduler
+        replace = "replace" in parts[2:] and port not in self._replaced
         try:
+            self._check_bounds(nav, ignore_queue=replace)
             nav = self.gate.check_navigation(nav, self.position)
-        except SafetyViolation as e:  # an analytics asked for something unsafe: refuse it, keep running
+            if replace:
+                self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
+                self.s.clear_navigation()
+                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
+                self._event("mission_aborted", by=port)
+            self._plan_and_add(nav, None, prio)
+        except (SafetyViolation, ValueError) as e:  # an analytics asked for something unsafe: refuse it, keep running
             self.refused.append({"t": env.get("sim_t", 0.0), "source": "analytics", "error": str(e)})
             self._event("navigation_refused", source="analytics", error=str(e))
             return None
-        if "replace" in parts[2:] and port not in self._replaced:
-            self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
-            self.s.clear_navigation()
-            self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
-            self._event("mission_aborted", by=port)
-        self.s.add_navigation(nav, priority=prio, position=self.position)
         if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
             self._record_plan()
         applied = self.drone.nudge() if self.drone is not None else False  # applied now, not at the next tick
@@ -478,12 +484,82 @@ class SchedulerComponent(Component):
         """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
         changes nothing; returns the queue snapshot on success."""
         nav_, prio = self.s._unwrap(nav, priority)
+        self._check_bounds(nav_)
         nav_ = self.gate.check_navigation(nav_, self.position)
-        self.s.add_navigation(nav_, index=index, priority=prio, position=self.position)
+        self._plan_and_add(nav_, index, prio)
         self._record_plan()
         if self.drone is not None:
             self.drone.nudge()
         return {"queued": self.s.snapshot(), "position": list(self.position), "t": self.now}
+
+    def _check_bounds(self, nav: AeroNavigation, ignore_queue: bool = False) -> None:
+        """Bounded work: at most ``max_waypoints_per_request`` items per request and ``max_queued_items`` queued in
+        all (robot config). Raises ValueError naming the limit; nothing is planned or queued."""
+        n = len(nav.waypoints)
+        if n > self.max_per_request:
+            raise ValueError(f"waypoints: {n} items in one request, more than max_waypoints_per_request "
+                             f"({self.max_per_request}) of robot {self.robot_id!r}")
+        queued = 0 if ignore_queue else self.s.pending()
+        if queued + n > self.max_queued:
+            raise ValueError(f"waypoints: {queued} items queued + {n} new exceed max_queued_items "
+                             f"({self.max_queued}) of robot {self.robot_id!r}")
+
+    def _plan_and_add(self, nav: AeroNavigation, index: int | None, prio: int) -> None:
+        """Add ``nav`` (already through the gate) at ``prio``: planned on a copy of the queue, outside the lock the
+        drone's control tick takes (a long re-plan never holds the tick), then every leg of the resulting tour of
+        that mission, from the drone's position, is checked against the geofence (SafetyViolation naming the leg:
+        nothing is queued, never a silent drop in flight), and the plan is committed under the lock, keeping what
+        happened meanwhile (waypoints reached or discarded, navigation added by others)."""
+        from aerodaas.schedulers.base import Mission
+
+        with self._plan_lock:
+            position = self.position
+            with self.s._lock:
+                snap = [Mission(m.priority, m.seq, m.name, list(m.items), m.distance_driven, dict(m.segment_of))
+                        for m in self.s._missions]
+                cur = self.s._find(prio)
+                if index is not None and index > (len(cur.items) if cur is not None else 0):
+                    raise IndexError(f"index: {index} is out of range for the priority-{prio} mission of "
+                                     f"{len(cur.items) if cur is not None else 0} items")
+            twin = self.s.fork(snap)
+            twin.add_navigation(nav, index=index, priority=prio, position=position)  # the planning
+            planned = twin._find(prio)
+            self._check_tour(planned.items if planned is not None else [], position)
+            added = {id(i) for i in nav.waypoints}
+            with self.s._lock:
+                real = self.s._find(prio)
+                alive = {id(i) for i in real.items} if real is not None else set()
+                in_plan = {id(i) for i in planned.items}
+                items = [i for i in planned.items if id(i) in alive or id(i) in added]
+                items += [i for i in (real.items if real is not None else []) if id(i) not in in_plan]
+                tags = [planned.segment_of.get(id(i), real.segment_of.get(id(i), 0) if real is not None else 0)
+                        for i in items]
+                issued = getattr(twin, "_segments_issued", 0)
+                if issued > getattr(self.s, "_segments_issued", 0):
+                    self.s._segments_issued = issued
+                if real is None:
+                    self.s._seq += 1
+                    real = Mission(prio, self.s._seq, planned.name, [], planned.distance_driven)
+                    self.s._missions.append(real)
+                real.items = items
+                real.set_segment_ids(tags)
+
+    def _check_tour(self, items: list, position: tuple) -> None:
+        """Every leg of a planned tour (from ``position`` through its waypoints, ENU metres) against the geofence."""
+        fence = self.gate.fence
+        if fence.is_empty:
+            return
+        prev, prev_id = (float(position[0]), float(position[1])), "the drone's position"
+        for w in items:
+            if not isinstance(w, Waypoint):
+                continue
+            x, y, _ = w.to_local(self.home)
+            why = fence.check_segment(prev, (x, y))
+            if why is not None:
+                self.gate.rejected += 1
+                raise SafetyViolation(w.id, "leg", [prev_id, w.id], f"the planned tour's leg from {prev_id} to "
+                                      f"{w.id!r} is refused by the geofence: {why}")
+            prev, prev_id = (x, y), repr(w.id)
 
     def clear_navigation(self, priority: int | None = None) -> None:
         self.s.clear_navigation(priority)

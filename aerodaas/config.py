@@ -300,6 +300,10 @@ class RobotConfig(_Cfg):
     idle_land_s: float = Field(default=10.0, gt=0, le=MAX_DURATION_S, description="land after this many seconds (sim time) with "
                                "nothing queued, once some navigation has been flown")
     sensors: list[SensorConfig] = Field(default_factory=list)
+    max_waypoints_per_request: int = Field(default=1000, ge=1, le=100_000, description="bounded work: items in one "
+                                           "navigation added while flying (HITL request, analytics output)")
+    max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
+                                  "all missions of this robot; more are refused (HTTP 422 / navigation_refused)")
 
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
@@ -416,7 +420,8 @@ class HitlConfig(_Cfg):
     enabled: bool = False
     host: str = "127.0.0.1"
     port: int = Field(default=8470, ge=0, le=65535)
-    token: str | None = Field(default=None, min_length=16)
+    token: str | None = Field(default=None, min_length=16, max_length=256)
+    docs: bool = Field(default=False, description="serve /docs and /openapi.json (behind the bearer token)")
 
 
 class AnalyticsQosConfig(_Cfg):

@@ -414,7 +414,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
             hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in handles.items()},
                               host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
-                              token=hcfg.token).start()
+                              token=hcfg.token, docs=hcfg.docs).start()
             env.hitl = hitl
             shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
             print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)

@@ -197,7 +197,8 @@ def test_safety_limits_reject_clamp_and_low_battery_rtl(ray_session, run_options
     drone.navigate(AeroNavigation(waypoints=[Waypoint(id="high", x=1, y=1, z=50, hover_duration=1)]))
     res = drone.start_mission()
     assert res.outcome == "success"
-    assert max(v["target"][2] for v in res.robots["quadrotor_base"]["visited_waypoints"]) == pytest.approx(10.0)
+    # clamped to the ceiling, lowered by what the approach would overshoot (the gate's dynamics model)
+    assert 9.9 <= max(v["target"][2] for v in res.robots["quadrotor_base"]["visited_waypoints"]) <= 10.0
 
     d = json.loads(json.dumps(base))
     d["robots"][0]["safety"] = {"low_battery_rtl_pct": 50}
