@@ -48,13 +48,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
     results = []
     stop_signal: list[int] = []
 
-    def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd: the same clean stop as Ctrl-C
+    def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd, Ctrl-C: one clean stop
+        # Ray's C++ failure-signal handler (absl, chained before this one) answers SIGTERM with alarm(3) and a SIGALRM
+        # handler that aborts: the clean stop takes longer than 3 s, so the run died with SIGABRT (exit 134). We take
+        # the signal over: cancel that alarm and its handler.
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, signal.SIG_DFL)
         stop_signal.append(signum)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second SIGTERM must not cut it short
-        raise KeyboardInterrupt(f"signal {signum}")
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        runtime.request_stop(signum)  # raises KeyboardInterrupt where that is safe, else stops at the next safe point
 
     # installed before Ray starts: the driver's own fatal-signal handler then chains to this one
     previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
+    previous_sigint = signal.signal(signal.SIGINT, on_sigterm)
+    runtime.STOP_SIGNALS.clear()
     # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
     # the rest of the app's build; never before, so a bad environment fails at once with no Ray process
     o.early_ray = True
@@ -87,10 +95,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         o.early_ray = False
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
+        signal.signal(signal.SIGINT, previous_sigint)
     if not results:
         print("aerodaas run: the application never called start_mission()", file=sys.stderr)
         return 1
-    if any(r.outcome == "interrupted" for r in results):
+    if stop_signal or any(r.outcome == "interrupted" for r in results):
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
     return 0 if all(r.ok for r in results) else 1
 

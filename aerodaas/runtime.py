@@ -59,6 +59,21 @@ class MissionResult:
 
 
 _STARTED_RAY = False
+#: stop signals received (SIGINT/SIGTERM through :func:`request_stop`), and whether raising KeyboardInterrupt in the
+#: main thread is safe right now: while the application is built and while a mission runs, yes; while actors are
+#: being set up or torn down, no (an exception inside a Ray call there can leave the core worker half shut down and
+#: abort the process: exit 134 instead of 143, the recording unfinished) — the stop is then taken at the next
+#: safe point, which ends the mission as ``interrupted`` with the recording finished
+STOP_SIGNALS: list[int] = []
+_RAISE_OK = [True]
+
+
+def request_stop(signum: int) -> None:
+    """Called by the CLI's SIGINT/SIGTERM handler (main thread): record the stop and raise KeyboardInterrupt when
+    that is safe now; otherwise the run stops at its next safe point."""
+    STOP_SIGNALS.append(signum)
+    if _RAISE_OK[0]:
+        raise KeyboardInterrupt(f"signal {signum}")
 _EARLY: dict[str, Any] = {}  # the background start of Ray (start_ray_early)
 
 
@@ -368,6 +383,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
     probe("app_built")
     t_start = time.monotonic()
+    if STOP_SIGNALS:  # stopped while the app was built: nothing started, nothing to record
+        raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
+    _RAISE_OK[0] = False  # from here on a stop signal is taken at the safe points (see request_stop)
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
@@ -423,8 +441,10 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 hook(h["robot"])
         run_ref = edge.run.remote(timeout)
         reports = _wait_with_progress(run_ref, handles, opts.progress)
+        _RAISE_OK[0] = False
         stats, latency = _collect_stats(handles, hosts)
     finally:
+        _RAISE_OK[0] = False
         if hitl is not None:
             hitl.stop()
             env.hitl = None
@@ -446,6 +466,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 ray.kill(h, no_restart=True)
             except Exception:  # an executor on a lost node is already gone
                 pass
+    _RAISE_OK[0] = True  # back in the application
     for r in robots:
         reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": "no report (the run did not start)"})
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
@@ -549,6 +570,9 @@ def _wait_with_progress(run_ref: Any, handles: dict, progress: bool) -> dict:
     last_print = 0.0
     t0 = time.monotonic()
     try:
+        if STOP_SIGNALS:  # a stop arrived while the actors were set up: end at once, cleanly
+            raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
+        _RAISE_OK[0] = True
         while True:
             ready, _ = ray.wait([run_ref], num_returns=1, timeout=0.5)
             if ready:
@@ -564,6 +588,7 @@ def _wait_with_progress(run_ref: Any, handles: dict, progress: bool) -> dict:
                     print("\n".join(lines), flush=True)
                     last_print = time.monotonic()
     except KeyboardInterrupt:
+        _RAISE_OK[0] = False
         interrupted = True
         for h in handles.values():
             try:
