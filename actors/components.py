@@ -175,6 +175,10 @@ class AnalyticsComponent(Component):
         self.latest: Any = None
         self.proc_ms: list[float] = []
         self._newest: dict[tuple, float] = {}
+        self.failures = 0  # items whose process() raised
+        self.last_failure: str | None = None
+        self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
+        self.aborted = False
 
     def handle(self, port: str, env: dict) -> list[dict] | None:
         meta = env.get("meta")
@@ -185,9 +189,39 @@ class AnalyticsComponent(Component):
                 return None
             self._newest[key] = meta.capture_time
         t0 = time.perf_counter()
-        out = self.obj.process(env["data"], meta)
+        try:
+            out = self.obj.process(env["data"], meta)
+        except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
+            self._failed(e, env)
+            return None
         dt_ms = (time.perf_counter() - t0) * 1e3
         return self._emit(out, env, dt_ms, getattr(self.obj, "last_timing", None))
+
+    def _failed(self, e: Exception, env: dict) -> None:
+        """An exception in ``process``: logged with its traceback (the first 5, then every 100th), recorded as an
+        ``analytics_error`` event of the robot, counted in the run's summary; ``on_error == "abort"`` ends every
+        mission of the run as failed (once)."""
+        import logging
+        import traceback
+
+        self.failures += 1
+        tb = traceback.format_exc()
+        self.last_failure = f"{type(e).__name__}: {e}"
+        if self.failures <= 5 or self.failures % 100 == 0:
+            logging.getLogger("aerodaas.analytics").error("analytics %r failed on item %d (%d failures so far):\n%s",
+                                                          self.name, self.processed + self.failures, self.failures, tb)
+        meta = env.get("meta")
+        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        if self.recorder is not None:
+            self.recorder.json(f"/{robot}/events", self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9),
+                               {"robot": robot, "t": env.get("sim_t", 0.0), "event": "analytics_error",
+                                "analytics": self.name, "error": self.last_failure, "traceback": tb,
+                                "count": self.failures, "on_error": self.on_error}, "aerodaas.MissionEvent")
+        if self.on_error == "abort" and not self.aborted:
+            self.aborted = True
+            abort = getattr(self, "abort", None)
+            if callable(abort):
+                abort(f"analytics {self.name!r} raised {self.last_failure} (on_error=abort)")
 
     def _emit(self, out: Any, env: dict, dt_ms: float, timing: dict | None) -> list[dict] | None:
         """Count one processed item that took ``dt_ms`` (ms) and, for a non-None output, record it and return the
@@ -229,6 +263,7 @@ class AnalyticsComponent(Component):
         p = np.array(self.proc_ms or [0.0])
         out = {"name": self.name, "processed": self.processed, "outputs": self.outputs, "stale": self.stale,
                "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
+               "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
                "outlets": self.host.outlet_stats(self.cid)}
         extra = getattr(self.obj, "stats", None)
         if callable(extra):
@@ -653,6 +688,12 @@ class HostRuntime:
             self.comps[r["scheduler_cid"]] = sched
             self.drones.append(drone)
         # real cameras are not synchronised: spread the fleet's capture phases over one frame period
+        for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
+            if isinstance(c, AnalyticsComponent):
+                c.abort = self._abort_all
+        if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
+            self.recorder.on_failure.append(
+                lambda info, drones=tuple(self.drones): [d._event("recording_failed", **info) for d in drones])
         cams = [c for d in self.drones for c in d.cameras]
         for i, c in enumerate(cams):
             c["next_t"] = i / (len(cams) * c["fps"])
@@ -742,6 +783,17 @@ class HostRuntime:
                     self.host.report_error("analytics_scheduler", e)
         return {d.cfg.id: d.report() for d in drones}
 
+    def _abort_all(self, reason: str) -> None:
+        """End every drone's mission as failed with ``reason``: this host's drones directly, the others through
+        their host (an analytics on the cloud tier aborting drones on the edge)."""
+        for d in self.drones:
+            d.error = reason
+            d.end_mission("failed")
+        peers = getattr(self.host, "peers", {}) or {}
+        for cid, tier in getattr(self.host, "location", {}).items():
+            if cid.endswith("/drone") and tier in peers and not any(d.cid == cid for d in self.drones):
+                peers[tier].call.remote(cid, "end_mission", "failed")
+
     # ------------------------------------------------------------------ end
     def stats(self) -> dict:
         out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
@@ -769,4 +821,7 @@ class HostRuntime:
                     close()
                 except Exception:
                     pass
-        return self.recorder.close() if self.recorder is not None else {}
+        if self.recorder is None:
+            return {"counts": {}, "recording": None}
+        counts = self.recorder.close()
+        return {"counts": counts, "recording": self.recorder.report()}

@@ -21,9 +21,15 @@ __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "
 
 
 class Analytics:
-    """Base class (IAnalyse). Subclasses override :meth:`process` and optionally :meth:`setup`."""
+    """Base class (IAnalyse). Subclasses override :meth:`process` and optionally :meth:`setup`.
+
+    ``on_error`` says what an exception raised by :meth:`process` does: ``"continue"`` (default: the item is
+    skipped; the error is logged with its traceback, recorded as an ``analytics_error`` event and counted in the
+    run's summary) or ``"abort"`` (the same, then every mission of the run ends as ``failed``). Set it on the
+    instance (``detector.on_error = "abort"``) or the class; anything else is refused before Ray starts."""
 
     name: str = "analytics"
+    on_error: str = "continue"
 
     def __init__(self, name: str | None = None) -> None:
         if name:

@@ -90,6 +90,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except (FileNotFoundError, ValueError, KeyError) as e:
         print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
+    except runtime.RayStartError as e:
+        print(f"aerodaas run: {e}", file=sys.stderr)
+        return 1
     finally:
         api.Robot.start_mission = original
         o.early_ray = False
@@ -286,6 +289,23 @@ def _cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_recover(args: argparse.Namespace) -> int:
+    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recover`. Exit 0 (also for a file that was already
+    finished), 2 for a missing or non-MCAP file or an output that cannot be written."""
+    from .recover import recover_mcap
+
+    try:
+        r = recover_mcap(args.file, args.out)
+    except (OSError, ValueError) as e:
+        print(f"aerodaas recover: {e}", file=sys.stderr)
+        return 2
+    if r["was_finished"] and r["messages"] is None:
+        print(f"{r['path']}: already finished; nothing to do")
+    else:
+        print(f"{r['out']}: finished and indexed, {r['messages']} messages on {r['channels']} channels recovered")
+    return 0
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from .config import json_schema
 
@@ -362,8 +382,21 @@ def main(argv: list[str] | None = None) -> int:
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
     _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))
+    rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "
+                                        "indexed one")
+    rc.add_argument("file")
+    rc.add_argument("--out", help="write here instead of replacing FILE")
+    rc.set_defaults(func=_cmd_recover)
     args = p.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # `aerodaas info FILE | head`: the reader left; end quietly like any Unix filter
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())  # Python's final flush of stdout must not fail again
+        except OSError:
+            pass
+        return 128 + signal.SIGPIPE
 
 
 if __name__ == "__main__":

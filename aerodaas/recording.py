@@ -223,6 +223,7 @@ class _ChunkFlushingStream:
         self._f = f
         self._pos = f.tell()
         self.pending = False
+        self.durable = self._pos  # bytes handed to the OS by the last successful flush (a record boundary)
 
     def write(self, data: bytes) -> int:
         n = self._f.write(data)
@@ -240,6 +241,7 @@ class _ChunkFlushingStream:
     def flush(self) -> None:
         self._f.flush()
         self.pending = False
+        self.durable = self._pos
 
     def sync(self) -> None:
         """Flush to the OS if anything was written since the last flush."""

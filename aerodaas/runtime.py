@@ -52,10 +52,15 @@ class MissionResult:
     recording: str | None
     wall_s: float
     recording_counts: dict[str, int] = field(default_factory=dict)
+    #: the recorder's failure (disk full, I/O error) or None: ``{error, last_recorded_ns, finished, ...}``; a run
+    #: whose recording failed is not ``ok`` (exit code 1)
+    recording_failure: dict[str, Any] | None = None
+    recording_lost: int = 0
+    recording_start_ns: int | None = None  # log time of sim time 0 (ns)
 
     @property
     def ok(self) -> bool:
-        return self.outcome == "success"
+        return self.outcome == "success" and self.recording_failure is None
 
 
 _STARTED_RAY = False
@@ -121,18 +126,29 @@ def start_ray_early(address: str | None = None) -> None:
     threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
 
 
+class RayStartError(RuntimeError):
+    """Ray could not be started or reached (the message says which and why); ``aerodaas run`` exits 1 with it."""
+
+
 def ensure_ray(address: str | None = None) -> bool:
-    """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes."""
+    """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes.
+    Raises :class:`RayStartError`."""
     import ray
 
+    where = f"the Ray cluster at {address!r}" if address else "a local Ray"
     if _EARLY and _EARLY["address"] == address:
         _EARLY["ready"].wait()
         if _EARLY["error"] is not None:
             err, _EARLY["error"] = _EARLY["error"], None
             _EARLY.clear()
-            raise err
+            if isinstance(err, KeyboardInterrupt):
+                raise err
+            raise RayStartError(f"could not start {where}: {type(err).__name__}: {err}") from err
     if not ray.is_initialized():
-        _init_ray(address)
+        try:
+            _init_ray(address)
+        except Exception as e:  # noqa: BLE001 - Ray raises bare Exceptions (node start time-outs, ...)
+            raise RayStartError(f"could not start {where}: {type(e).__name__}: {e}") from e
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
 
 
@@ -374,6 +390,11 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             check = getattr(a, "check", None)
             if callable(check):
                 check()
+            if getattr(a, "on_error", "continue") not in ("continue", "abort"):
+                from .config import ConfigError
+
+                raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
+                                  f"{getattr(a, 'on_error')!r}")
         graphs[r.id] = analytics
         _check_preplanned(r, scheds[r.id])
         _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
@@ -398,6 +419,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     stats: dict[str, Any] = {}
     latency: dict[str, Any] = {}
     counts: dict[str, int] = {}
+    rec_report: dict[str, Any] = {}
     try:
         if scheduled:
             cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
@@ -452,7 +474,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             try:
                 got = ray.get(h.close.remote(), timeout=60)
                 if tier == "edge":
-                    counts = got
+                    counts, rec_report = got.get("counts", {}), got.get("recording") or {}
             except Exception as e:  # pragma: no cover - reported, never silently lost
                 print(f"aerodaas: warning: host {tier!r} could not be closed cleanly (recording: {opts.record}): {e}",
                       file=sys.stderr)
@@ -473,7 +495,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
     result = MissionResult(outcome=outcome, robots=reports, stats=stats, latency=latency, recording=opts.record,
-                           wall_s=time.monotonic() - t_start, recording_counts=counts)
+                           wall_s=time.monotonic() - t_start, recording_counts=counts,
+                           recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
+                           recording_start_ns=epoch_ns)
     for h in handles.values():
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
@@ -684,6 +708,9 @@ def format_summary(result: MissionResult) -> str:
                 extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"
             if "commands" in a:
                 extra = f", {a['commands']} navigation commands"
+            if a.get("failures"):
+                extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
+                          f"{a.get('last_failure')})")
             lines.append(f"    analytics {a['name']}: {a['processed']} items, {a['process_ms_median']:.1f} ms median{extra}")
         lat = result.latency.get(rid)
         if lat:
@@ -704,6 +731,18 @@ def format_summary(result: MissionResult) -> str:
                          f"{ev.get('failed', 0)} failed")
     if result.recording:
         total = sum(result.recording_counts.values())
-        lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} channels)")
+        fail = result.recording_failure
+        if fail is None:
+            lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
+                         f"channels)")
+        else:
+            at = fail.get("last_recorded_ns")
+            held = f"up to {(at - result.recording_start_ns) / 1e9:.1f} s" if at and result.recording_start_ns else \
+                "nothing"
+            state = "finished" if fail.get("finished") else ("UNFINISHED (" + str(fail.get("finish_error")) +
+                                                              "; run `aerodaas recover FILE` when there is room)")
+            lines.append(f"  recording: FAILED: {fail.get('error')}; {result.recording} holds {held} "
+                         f"({fail.get('messages_in_file', '?')} messages, {state}); "
+                         f"{result.recording_lost} later messages were not recorded")
     return "\n".join(lines)
 

@@ -71,7 +71,11 @@ def test_disaster_survey_hitl_injection_is_replanned(ray_session, run_options, t
     st, body = request("POST", f"/drones/{drone}/waypoints", {"waypoints": [{"x": 1, "y": 1, "z": 99}]})
     assert st == 422 and "max_altitude" in json.dumps(body), body
     assert request("GET", "/drones/nope")[0] == 404
-    assert [m["items"] for m in queue()] == [m["items"] for m in before]  # nothing half-done
+    # nothing half-done: the queue is what it was, less what the drone flew meanwhile (a loaded machine may let it
+    # finish a waypoint while the requests are answered): a suffix of it, nothing added
+    after = [i for m in queue() for i in m["items"]]
+    was = [i for m in before for i in m["items"]]
+    assert after == was[len(was) - len(after):], (was, after)
 
     # wait until the first waypoint has been flown, then inject three over 10 m x 20 m in a poor order
     while request("GET", f"/drones/{drone}")[1]["visited"] < 1:
