@@ -180,7 +180,7 @@ class DroneComponent:
         b = self.backend
         cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
         return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
-                "position": [float(v) for v in b.position], "battery_pct": float(b.battery_pct),
+                "position": [float(v) for v in b.position], "battery_pct": None if b.battery_pct is None else float(b.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.preplanned_total,
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
@@ -540,8 +540,18 @@ class DroneComponent:
         v, fsm = self.backend, self.fsm
         finished = bool(getattr(v, "finished", False))
         speed = math.hypot(float(v.velocity[0]), float(v.velocity[1]))
-        if st == S.PREFLIGHT and v.armed:
+        if st in (S.IDLE, S.LANDED) and v.armed:  # armed again for another flight
+            if st == S.LANDED:
+                fsm.transition(S.IDLE, t)
+            fsm.transition(S.PREFLIGHT, t)
             fsm.transition(S.ARMED, t)
+        elif st == S.PREFLIGHT and v.armed:
+            fsm.transition(S.ARMED, t)
+        elif st == S.ARMED and not v.armed:  # disarmed without flying
+            fsm.transition(S.IDLE, t)
+        elif st in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) and not v.armed:  # disarm ends the flight
+            fsm.transition(S.LANDING, t)
+            fsm.transition(S.LANDED, t)
         elif st == S.ARMED and v.in_air:
             fsm.transition(S.TAKING_OFF, t)
         elif st == S.TAKING_OFF and v.in_air and v.velocity[2] < 0.3:
@@ -553,7 +563,7 @@ class DroneComponent:
                 fsm.transition(S.NAVIGATING, t)
             elif st == S.NAVIGATING and speed < 0.2:
                 fsm.transition(S.HOVERING, t)
-        elif st == S.LANDING and not v.in_air:
+        elif st == S.LANDING and (not v.in_air or not v.armed):
             fsm.transition(S.LANDED, t)
         if finished:  # the backend recorded its own replay_finished event
             if self.outcome is None:

@@ -280,7 +280,8 @@ class MonitoringAnalytics(Analytics):
             if isinstance(v, (int, float)):
                 s = self.summary.setdefault(k, {"min": v, "max": v})
                 s["min"], s["max"] = min(s["min"], v), max(s["max"], v)
-        if "battery" in self.limits and vals.get("battery", 100) < self.limits["battery"]:
+        if "battery" in self.limits and (vals.get("battery") if vals.get("battery") is not None else 100) \
+                < self.limits["battery"]:
             self.warnings.append(f"battery {vals['battery']:.1f}% below {self.limits['battery']}% at t={odom['t']:.1f}s")
         if "height" in self.limits and vals.get("height", 0) > self.limits["height"]:
             self.warnings.append(f"height {vals['height']:.1f} m above {self.limits['height']} m at t={odom['t']:.1f}s")

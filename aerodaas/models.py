@@ -217,7 +217,8 @@ class Odometry(_Model):
     geodetic: GeoPoint
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     attitude: Attitude = Field(default_factory=Attitude)
-    battery_pct: float = Field(default=100.0, ge=0.0, le=100.0)
+    battery_pct: float | None = Field(default=100.0, ge=0.0, le=100.0, description="None: unknown (a log without "
+                                      "battery data)")
     battery_voltage: float = 0.0
     armed: bool = False
     in_air: bool = False

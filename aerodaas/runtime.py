@@ -656,7 +656,7 @@ def _progress_lines(handles: dict, t0: float) -> list[str]:
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
         lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "
-                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {st['battery_pct']:5.1f}% "
+                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {_pct(st['battery_pct'])} "
                      f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
     return lines
 
@@ -689,7 +689,7 @@ def format_summary(result: MissionResult) -> str:
     for rid, rep in result.robots.items():
         lines.append(f"  robot {rid}: sim time {rep.get('t', 0):.1f} s, waypoints {rep.get('visited', 0)}/"
                      f"{rep.get('preplanned_total', 0)}, final state {rep.get('state')}, "
-                     f"battery {rep.get('battery_pct', 0):.1f}%")
+                     f"battery {_pct(rep.get('battery_pct', 0))}")
         if rep.get("error"):
             lines.append(f"    error: {rep['error']}")
         st = result.stats.get(rid, {})
@@ -746,3 +746,8 @@ def format_summary(result: MissionResult) -> str:
                          f"{result.recording_lost} later messages were not recorded")
     return "\n".join(lines)
 
+
+
+def _pct(v: float | None) -> str:
+    """A battery percentage for humans; None (a log without battery data) is "unknown"."""
+    return "unknown" if v is None else f"{v:5.1f}%"
