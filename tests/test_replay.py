@@ -247,22 +247,25 @@ def write_ulog_flight(path):
     return path
 
 
-def test_replay_plays_a_px4_ulog(ulog_file):
+def test_replay_plays_a_px4_ulog(ulog_file, monkeypatch):
     """Positions, height above home, battery, heading, modes, arming, landed state, mission items and the log's
     text messages come out of a .ulg as they do from a .tlog (the expectations come from the flight's own
     definition, not from the reader)."""
+    import aerodaas.backends.replay as replay_mod
+
+    clock = _FakeClock()  # hand-driven: the number of samples does not depend on the machine's load
+    monkeypatch.setattr(replay_mod.time, "monotonic", clock)
     b = make_backend(RobotConfig(id="px4", backend="replay", replay=ReplayConfig(log=str(ulog_file), rate=RATE)))
     assert b.navigable is False
     b.connect()
     assert (b.home.lat, b.home.lon) == pytest.approx(HOME[:2], abs=1e-7) and b.home.alt == pytest.approx(HOME[2])
     assert b.info["format"] == "ulog" and "vehicle_status" in b.info["topics"]
     samples, events = [], []
-    deadline = time.monotonic() + 60.0 / RATE + 5
-    while not b.finished and time.monotonic() < deadline:
+    while not b.finished and clock.now < 1000.0 + 60.0 / RATE + 5:
         b.step(0.0)
         samples.append((b.odometry().t, b.position.copy(), b.battery_pct, b.in_air, b.yaw))
         events += b.drain_events()
-        time.sleep(0.002)
+        clock.now += 0.00037  # 0.037 s of log per step, off the 0.1 s sample grid
     assert b.finished
     checked = 0
     for t, pos, bat, in_air, yaw in samples:
