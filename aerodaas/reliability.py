@@ -196,6 +196,26 @@ def run_inputs() -> dict[str, Any]:
             "accepted_wrongly": [r["name"] for r in rows if not r["refused"]]}
 
 
+def run_flights(n: int = 40, seed: int = 0) -> dict[str, Any]:
+    """``n`` seeded random command sequences (half ``reject``, half ``clamp``) plus the issue's attacks, flown on the
+    simulator's vehicle behind the safety gate (:mod:`aerodaas.reliability_flight`); the worst excursions."""
+    import random
+
+    from .reliability_flight import Excursion, fly_commands, random_commands
+
+    total, outside = Excursion(), 0
+    seqs = [random_commands(random.Random(seed + i)) for i in range(n)]
+    seqs += [[("vel", 3.0, 0.0, 0.0, 0.5, 5)] * 80, [("vel", 2.0, 1.2, 0.0, 0.5, 5)] * 80,
+             [("vel", 0.0, 0.0, 1.5, 0.5, 5)] * 60]
+    for i, seq in enumerate(seqs):
+        ex = fly_commands(seq, on_violation="clamp" if i % 2 else "reject")
+        outside += int(ex.outside_inclusion_m > 0 or ex.inside_exclusion_m > 0 or ex.above_max_altitude_m > 0.05)
+        total.merge(ex)
+    return {"sequences": len(seqs), "samples": total.samples, "accepted": total.accepted, "refused": total.rejected,
+            "outside_inclusion_m": total.outside_inclusion_m, "inside_exclusion_m": total.inside_exclusion_m,
+            "above_max_altitude_m": total.above_max_altitude_m, "flown_outside_limits": outside}
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
@@ -204,6 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-faults", action="store_true", help="only the input cases (no runs)")
     args = p.parse_args(argv)
     inputs = run_inputs()
+    flights = run_flights()
     faults = None
     if not args.no_faults:
         from .reliability_faults import run_faults
@@ -211,13 +232,14 @@ def main(argv: list[str] | None = None) -> int:
         faults = run_faults()
     from .reliability_faults import render
 
-    text = render(inputs, faults)
+    text = render(inputs, faults, flights)
     if args.out:
         Path(args.out).write_text(text)
         print(f"wrote {args.out}")
     else:
         print(text)
-    bad = inputs["accepted_wrongly"] or (faults and any(not f["clean"] for f in faults["rows"]))
+    bad = inputs["accepted_wrongly"] or flights["flown_outside_limits"] or (
+        faults and any(not f["clean"] for f in faults["rows"]))
     return 1 if bad else 0
 
 

@@ -233,9 +233,13 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
         lines += ["| faults injected | ended clean |", "|---|---|",
                   f"| {len(rows)} | {sum(1 for r in rows if r['clean'])} |", ""]
     if extra:
-        for k, v in extra.items():
-            lines.append(f"- {k}: {v}")
-        lines.append("")
+        e = extra
+        lines += ["| randomized command sequences (simulator) | odometry samples checked | commands accepted / "
+                  "refused | flown outside limits | max outside inclusion fence | max inside exclusion zone | max "
+                  "above max_altitude |", "|---|---|---|---|---|---|---|",
+                  f"| {e['sequences']} | {e['samples']} | {e['accepted']} / {e['refused']} | "
+                  f"{e['flown_outside_limits']} | {e['outside_inclusion_m']:.3f} m | {e['inside_exclusion_m']:.3f} m | "
+                  f"{e['above_max_altitude_m']:.3f} m (tolerance 0.05 m) |", ""]
     lines += ["## Inputs", "", "| kind | input | refused | error (first line) |", "|---|---|---|---|"]
     for r in inputs["rows"]:
         msg = r["message"].splitlines()
