@@ -196,7 +196,7 @@ def run_inputs() -> dict[str, Any]:
             "accepted_wrongly": [r["name"] for r in rows if not r["refused"]]}
 
 
-def run_flights(n: int = 40, seed: int = 0) -> dict[str, Any]:
+def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
     """``n`` seeded random command sequences (half ``reject``, half ``clamp``) plus the issue's attacks, flown on the
     simulator's vehicle behind the safety gate (:mod:`aerodaas.reliability_flight`); the worst excursions."""
     import random

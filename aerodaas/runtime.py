@@ -92,8 +92,17 @@ def _init_ray(address: str | None) -> None:
         # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
         # num_cpus=1: hosts reserve no CPU (they are num_cpus=0 actors), so the CPU resource only sizes Ray's
         # pool of prestarted workers: one, which the edge host takes (no idle 80 MB worker left around)
-        ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
-                 num_cpus=1, configure_logging=True, logging_level="warning")
+        for attempt in range(3):
+            try:
+                ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
+                         num_cpus=1, configure_logging=True, logging_level="warning")
+                break
+            except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
+                # Ray gives its raylet a fixed 30 s to register with the GCS (ray/_private/node.py); a heavily
+                # loaded machine can miss that: start again (at most 3 times) rather than fail the run
+                if "timed out during startup" not in str(e) or attempt == 2:
+                    raise
+                ray.shutdown()
         _STARTED_RAY = True
 
 
