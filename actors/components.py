@@ -821,7 +821,8 @@ class HostRuntime:
                     close()
                 except Exception:
                     pass
-        if self.recorder is None:
-            return {"counts": {}, "recording": None}
-        counts = self.recorder.close()
-        return {"counts": counts, "recording": self.recorder.report()}
+        return self.recorder.close() if self.recorder is not None else {}
+
+    def recording_report(self) -> dict:
+        """The recorder's :meth:`~.recorder.RecorderService.report` (failure, lost messages), {} without one."""
+        return self.recorder.report() if self.recorder is not None else {}

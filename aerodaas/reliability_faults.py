@@ -160,6 +160,13 @@ def _sigkill_recover(tmp: Path) -> dict:
     reached = _wait_size(rec, 30000, p)
     os.killpg(p.pid, signal.SIGKILL)
     p.communicate(timeout=60)
+    last, t0 = -1, time.monotonic()  # Ray's worker holding the recorder dies with its parent: wait for the file
+    while rec.exists() and time.monotonic() - t0 < 120:  # to stop growing
+        size = rec.stat().st_size
+        if size == last:
+            break
+        last = size
+        time.sleep(3.0)
     before_ok, _, before_why = mcap_reader_ok(rec)
     from .recording import summarize_mcap
 

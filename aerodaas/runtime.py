@@ -483,7 +483,8 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             try:
                 got = ray.get(h.close.remote(), timeout=60)
                 if tier == "edge":
-                    counts, rec_report = got.get("counts", {}), got.get("recording") or {}
+                    counts = got
+                    rec_report = ray.get(h.recording_report.remote(), timeout=60)
             except Exception as e:  # pragma: no cover - reported, never silently lost
                 print(f"aerodaas: warning: host {tier!r} could not be closed cleanly (recording: {opts.record}): {e}",
                       file=sys.stderr)
