@@ -67,7 +67,7 @@ def _run(args: list[str], env: dict | None = None, **kw: Any) -> subprocess.Pope
                             stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})}, **kw)
 
 
-def _wait_size(path: Path, size: int, proc: subprocess.Popen, limit_s: float = 240.0) -> bool:
+def _wait_size(path: Path, size: int, proc: subprocess.Popen, limit_s: float = 480.0) -> bool:
     t0 = time.monotonic()
     while time.monotonic() - t0 < limit_s:
         if proc.poll() is not None:
@@ -102,8 +102,9 @@ def _signal_case(sig: int, min_size: int, group: bool = False) -> Callable[[Path
             outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
         want = 128 + sig
         clean = reached and p.returncode == want and ok and _no_crash(out)
+        late = "" if reached else " (the run had not reached the phase to interrupt: machine too loaded)"
         return {"observed": f"exit {p.returncode}, recording {'finished' if ok else why} ({n} msgs), "
-                            f"outcome {outcome}", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
+                            f"outcome {outcome}{late}", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
     return run
 
 
