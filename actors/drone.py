@@ -300,7 +300,7 @@ class DroneComponent:
                     self._event("backend_error", error=str(e))
                 self._event("landed")
                 if self.outcome is None:
-                    dropped = [r["id"] for r in self.rejected if r.get("kind") == "waypoint"]
+                    dropped = [r["id"] for r in self.rejected if r.get("item") == "waypoint"]
                     # a waypoint refused in flight was not flown: never a success
                     self.outcome = "success" if self.preplanned_left == 0 and not dropped else "incomplete"
                 return True
@@ -586,7 +586,7 @@ class DroneComponent:
     def _reject(self, t: float, item: Any, err: SafetyViolation) -> None:
         """A command outside the safety limits: never sent to the backend; dropped from the queue and recorded."""
         rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason,
-               "kind": "waypoint" if isinstance(item, Waypoint) else type(item).__name__}
+               "item": "waypoint" if isinstance(item, Waypoint) else type(item).__name__}
         self.rejected.append(rec)
         self._event("command_rejected", **rec)
         self.scheduler.discard(rec["id"], f"rejected: {err.reason}")
