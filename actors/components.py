@@ -20,6 +20,7 @@ import numpy as np
 
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
 from aerodaas.models import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose, Waypoint
+from aerodaas.safety import SafetyViolation
 
 from .host import Cascade, Component, Host
 
@@ -176,6 +177,10 @@ class AnalyticsComponent(Component):
         self.latest: Any = None
         self.proc_ms: list[float] = []
         self._newest: dict[tuple, float] = {}
+        self.failures = 0  # items whose process() raised
+        self.last_failure: str | None = None
+        self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
+        self.aborted = False
 
     def handle(self, port: str, env: dict) -> list[dict] | None:
         meta = env.get("meta")
@@ -186,9 +191,39 @@ class AnalyticsComponent(Component):
                 return None
             self._newest[key] = meta.capture_time
         t0 = time.perf_counter()
-        out = self.obj.process(env["data"], meta)
+        try:
+            out = self.obj.process(env["data"], meta)
+        except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
+            self._failed(e, env)
+            return None
         dt_ms = (time.perf_counter() - t0) * 1e3
         return self._emit(out, env, dt_ms, getattr(self.obj, "last_timing", None))
+
+    def _failed(self, e: Exception, env: dict) -> None:
+        """An exception in ``process``: logged with its traceback (the first 5, then every 100th), recorded as an
+        ``analytics_error`` event of the robot, counted in the run's summary; ``on_error == "abort"`` ends every
+        mission of the run as failed (once)."""
+        import logging
+        import traceback
+
+        self.failures += 1
+        tb = traceback.format_exc()
+        self.last_failure = f"{type(e).__name__}: {e}"
+        if self.failures <= 5 or self.failures % 100 == 0:
+            logging.getLogger("aerodaas.analytics").error("analytics %r failed on item %d (%d failures so far):\n%s",
+                                                          self.name, self.processed + self.failures, self.failures, tb)
+        meta = env.get("meta")
+        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        if self.recorder is not None:
+            self.recorder.json(f"/{robot}/events", self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9),
+                               {"robot": robot, "t": env.get("sim_t", 0.0), "event": "analytics_error",
+                                "analytics": self.name, "error": self.last_failure, "traceback": tb,
+                                "count": self.failures, "on_error": self.on_error}, "aerodaas.MissionEvent")
+        if self.on_error == "abort" and not self.aborted:
+            self.aborted = True
+            abort = getattr(self, "abort", None)
+            if callable(abort):
+                abort(f"analytics {self.name!r} raised {self.last_failure} (on_error=abort)")
 
     def _emit(self, out: Any, env: dict, dt_ms: float, timing: dict | None) -> list[dict] | None:
         """Count one processed item that took ``dt_ms`` (ms) and, for a non-None output, record it and return the
@@ -230,6 +265,7 @@ class AnalyticsComponent(Component):
         p = np.array(self.proc_ms or [0.0])
         out = {"name": self.name, "processed": self.processed, "outputs": self.outputs, "stale": self.stale,
                "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
+               "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
                "outlets": self.host.outlet_stats(self.cid)}
         extra = getattr(self.obj, "stats", None)
         if callable(extra):
@@ -408,7 +444,10 @@ class SchedulerComponent(Component):
         self.latency: list[dict] = []
         cfg = RobotConfig.model_validate(robot_cfg) if robot_cfg else RobotConfig(id=robot_id)
         self.home = cfg.home
-        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home)
+        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home, control_period_s=1.0 / cfg.control_rate_hz)
+        self.max_per_request = cfg.max_waypoints_per_request
+        self.max_queued = cfg.max_queued_items
+        self._plan_lock = threading.Lock()  # one planner at a time; never the lock the control tick takes
         self.refused: list[dict] = []
         self.discarded: list[dict] = []
         self._plan_sig: Any = None
@@ -461,18 +500,20 @@ class SchedulerComponent(Component):
         nav = env["data"]
         if not isinstance(nav, AeroNavigation) or env.get("robot", self.robot_id) != self.robot_id:
             return None  # a shared analytics navigates each robot through that robot's own scheduler
+        replace = "replace" in parts[2:] and port not in self._replaced
         try:
+            self._check_bounds(nav, ignore_queue=replace)
             nav = self.gate.check_navigation(nav, self.position)
-        except SafetyViolation as e:  # an analytics asked for something unsafe: refuse it, keep running
+            if replace:
+                self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
+                self.s.clear_navigation()
+                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
+                self._event("mission_aborted", by=port)
+            self._plan_and_add(nav, None, prio)
+        except (SafetyViolation, ValueError) as e:  # an analytics asked for something unsafe: refuse it, keep running
             self.refused.append({"t": env.get("sim_t", 0.0), "source": "analytics", "error": str(e)})
             self._event("navigation_refused", source="analytics", error=str(e))
             return None
-        if "replace" in parts[2:] and port not in self._replaced:
-            self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
-            self.s.clear_navigation()
-            self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
-            self._event("mission_aborted", by=port)
-        self.s.add_navigation(nav, priority=prio, position=self.position)
         if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
             self._record_plan()
         applied = self.drone.nudge() if self.drone is not None else False  # applied now, not at the next tick
@@ -492,12 +533,82 @@ class SchedulerComponent(Component):
         """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
         changes nothing; returns the queue snapshot on success."""
         nav_, prio = self.s._unwrap(nav, priority)
+        self._check_bounds(nav_)
         nav_ = self.gate.check_navigation(nav_, self.position)
-        self.s.add_navigation(nav_, index=index, priority=prio, position=self.position)
+        self._plan_and_add(nav_, index, prio)
         self._record_plan()
         if self.drone is not None:
             self.drone.nudge()
         return {"queued": self.s.snapshot(), "position": list(self.position), "t": self.now}
+
+    def _check_bounds(self, nav: AeroNavigation, ignore_queue: bool = False) -> None:
+        """Bounded work: at most ``max_waypoints_per_request`` items per request and ``max_queued_items`` queued in
+        all (robot config). Raises ValueError naming the limit; nothing is planned or queued."""
+        n = len(nav.waypoints)
+        if n > self.max_per_request:
+            raise ValueError(f"waypoints: {n} items in one request, more than max_waypoints_per_request "
+                             f"({self.max_per_request}) of robot {self.robot_id!r}")
+        queued = 0 if ignore_queue else self.s.pending()
+        if queued + n > self.max_queued:
+            raise ValueError(f"waypoints: {queued} items queued + {n} new exceed max_queued_items "
+                             f"({self.max_queued}) of robot {self.robot_id!r}")
+
+    def _plan_and_add(self, nav: AeroNavigation, index: int | None, prio: int) -> None:
+        """Add ``nav`` (already through the gate) at ``prio``: planned on a copy of the queue, outside the lock the
+        drone's control tick takes (a long re-plan never holds the tick), then every leg of the resulting tour of
+        that mission, from the drone's position, is checked against the geofence (SafetyViolation naming the leg:
+        nothing is queued, never a silent drop in flight), and the plan is committed under the lock, keeping what
+        happened meanwhile (waypoints reached or discarded, navigation added by others)."""
+        from aerodaas.schedulers.base import Mission
+
+        with self._plan_lock:
+            position = self.position
+            with self.s._lock:
+                snap = [Mission(m.priority, m.seq, m.name, list(m.items), m.distance_driven, dict(m.segment_of))
+                        for m in self.s._missions]
+                cur = self.s._find(prio)
+                if index is not None and index > (len(cur.items) if cur is not None else 0):
+                    raise IndexError(f"index: {index} is out of range for the priority-{prio} mission of "
+                                     f"{len(cur.items) if cur is not None else 0} items")
+            twin = self.s.fork(snap)
+            twin.add_navigation(nav, index=index, priority=prio, position=position)  # the planning
+            planned = twin._find(prio)
+            self._check_tour(planned.items if planned is not None else [], position)
+            added = {id(i) for i in nav.waypoints}
+            with self.s._lock:
+                real = self.s._find(prio)
+                alive = {id(i) for i in real.items} if real is not None else set()
+                in_plan = {id(i) for i in planned.items}
+                items = [i for i in planned.items if id(i) in alive or id(i) in added]
+                items += [i for i in (real.items if real is not None else []) if id(i) not in in_plan]
+                tags = [planned.segment_of.get(id(i), real.segment_of.get(id(i), 0) if real is not None else 0)
+                        for i in items]
+                issued = getattr(twin, "_segments_issued", 0)
+                if issued > getattr(self.s, "_segments_issued", 0):
+                    self.s._segments_issued = issued
+                if real is None:
+                    self.s._seq += 1
+                    real = Mission(prio, self.s._seq, planned.name, [], planned.distance_driven)
+                    self.s._missions.append(real)
+                real.items = items
+                real.set_segment_ids(tags)
+
+    def _check_tour(self, items: list, position: tuple) -> None:
+        """Every leg of a planned tour (from ``position`` through its waypoints, ENU metres) against the geofence."""
+        fence = self.gate.fence
+        if fence.is_empty:
+            return
+        prev, prev_id = (float(position[0]), float(position[1])), "the drone's position"
+        for w in items:
+            if not isinstance(w, Waypoint):
+                continue
+            x, y, _ = w.to_local(self.home)
+            why = fence.check_segment(prev, (x, y))
+            if why is not None:
+                self.gate.rejected += 1
+                raise SafetyViolation(w.id, "leg", [prev_id, w.id], f"the planned tour's leg from {prev_id} to "
+                                      f"{w.id!r} is refused by the geofence: {why}")
+            prev, prev_id = (x, y), repr(w.id)
 
     def clear_navigation(self, priority: int | None = None) -> None:
         self.s.clear_navigation(priority)
@@ -598,6 +709,12 @@ class HostRuntime:
             self.comps[r["scheduler_cid"]] = sched
             self.drones.append(drone)
         # real cameras are not synchronised: spread the fleet's capture phases over one frame period
+        for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
+            if isinstance(c, AnalyticsComponent):
+                c.abort = self._abort_all
+        if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
+            self.recorder.on_failure.append(
+                lambda info, drones=tuple(self.drones): [d._event("recording_failed", **info) for d in drones])
         cams = [c for d in self.drones for c in d.cameras]
         for i, c in enumerate(cams):
             c["next_t"] = i / (len(cams) * c["fps"])
@@ -689,6 +806,17 @@ class HostRuntime:
                     self.host.report_error("analytics_scheduler", e)
         return {d.cfg.id: d.report() for d in drones}
 
+    def _abort_all(self, reason: str) -> None:
+        """End every drone's mission as failed with ``reason``: this host's drones directly, the others through
+        their host (an analytics on the cloud tier aborting drones on the edge)."""
+        for d in self.drones:
+            d.error = reason
+            d.end_mission("failed")
+        peers = getattr(self.host, "peers", {}) or {}
+        for cid, tier in getattr(self.host, "location", {}).items():
+            if cid.endswith("/drone") and tier in peers and not any(d.cid == cid for d in self.drones):
+                peers[tier].call.remote(cid, "end_mission", "failed")
+
     # ------------------------------------------------------------------ end
     def stats(self) -> dict:
         out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
@@ -719,3 +847,7 @@ class HostRuntime:
                 except Exception:
                     pass
         return self.recorder.close() if self.recorder is not None else {}
+
+    def recording_report(self) -> dict:
+        """The recorder's :meth:`~.recorder.RecorderService.report` (failure, lost messages), {} without one."""
+        return self.recorder.report() if self.recorder is not None else {}

@@ -40,7 +40,8 @@ class DroneComponent:
         self.cfg = RobotConfig.model_validate(robot_cfg)
         self.host = host
         self.backend = backend if backend is not None else make_backend(self.cfg)
-        self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home)
+        self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home,
+                               control_period_s=1.0 / self.cfg.control_rate_hz)
         self.scheduler = scheduler
         self.recorder = recorder
         self.epoch_ns = epoch_ns
@@ -53,6 +54,7 @@ class DroneComponent:
         self.events: list[dict] = []
         self.preplanned_total = preplanned_total
         self.preplanned_left = preplanned_total
+        self.takeoff_altitude = self.cfg.takeoff_altitude  # as the safety gate passed it (start())
         self.idle_since: float | None = None
         self.flew_something = False
         self.active_wp: str | None = None
@@ -109,11 +111,13 @@ class DroneComponent:
         if self.autopilot_mission:
             self._start_autopilot_mission()
             return
+        alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
+        self.takeoff_altitude = alt
         b.arm()
         self.fsm.transition(S.ARMED, b.t)
-        b.takeoff(self.cfg.takeoff_altitude)
+        b.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
-        self._event("takeoff", altitude=self.cfg.takeoff_altitude)
+        self._event("takeoff", altitude=alt)
 
     def _start_autopilot_mission(self) -> None:
         """Upload the queued waypoints in flying order (NAV_TAKEOFF to ``takeoff_altitude``, NAV_WAYPOINT each with
@@ -122,7 +126,8 @@ class DroneComponent:
         b = self.backend
         items = self.scheduler.queued()
         nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, items, SchedulingType.ORDERED, name="autopilot mission")
-        sent = b.upload_mission(nav, takeoff_altitude=self.cfg.takeoff_altitude, final_action="land")
+        sent = b.upload_mission(nav, takeoff_altitude=self.gate.check_takeoff(self.cfg.takeoff_altitude),
+                                final_action="land")
         wps = iter([w for w in items if isinstance(w, Waypoint)])
         kinds = {16: "waypoint", 22: "takeoff", 21: "land", 20: "rtl"}
         for it in sent:
@@ -175,7 +180,7 @@ class DroneComponent:
         b = self.backend
         cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
         return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
-                "position": [float(v) for v in b.position], "battery_pct": float(b.battery_pct),
+                "position": [float(v) for v in b.position], "battery_pct": None if b.battery_pct is None else float(b.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.preplanned_total,
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
@@ -295,7 +300,9 @@ class DroneComponent:
                     self._event("backend_error", error=str(e))
                 self._event("landed")
                 if self.outcome is None:
-                    self.outcome = "success" if self.preplanned_left == 0 else "incomplete"
+                    dropped = [r["id"] for r in self.rejected if r.get("item") == "waypoint"]
+                    # a waypoint refused in flight was not flown: never a success
+                    self.outcome = "success" if self.preplanned_left == 0 and not dropped else "incomplete"
                 return True
             return False
         if st == S.EMERGENCY:
@@ -341,14 +348,14 @@ class DroneComponent:
             if self.autopilot_mission:
                 v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
             elif back == S.TAKING_OFF:
-                v.takeoff(self.cfg.takeoff_altitude)
+                v.takeoff(self.takeoff_altitude)
             self.active_wp = None
             self.hold_until = None
             return False
         if self.autopilot_mission:
             return self._follow_autopilot_mission(t, pos)
         if st == S.TAKING_OFF:
-            if abs(v.position[2] - self.cfg.takeoff_altitude) < 0.1:
+            if abs(v.position[2] - self.takeoff_altitude) < 0.1:
                 fsm.transition(S.HOVERING, t)
                 v.hold()
             return False
@@ -360,7 +367,7 @@ class DroneComponent:
             self.flew_something = True
         if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and self.active_wp == item.id):
             try:  # the choke point: nothing outside the safety limits reaches the backend
-                item = self.gate.check_item(item, pos)
+                item = self.gate.check_item(item, pos, tuple(float(c) for c in v.velocity))
             except SafetyViolation as e:
                 self._reject(t, item, e)
                 return False
@@ -533,8 +540,18 @@ class DroneComponent:
         v, fsm = self.backend, self.fsm
         finished = bool(getattr(v, "finished", False))
         speed = math.hypot(float(v.velocity[0]), float(v.velocity[1]))
-        if st == S.PREFLIGHT and v.armed:
+        if st in (S.IDLE, S.LANDED) and v.armed:  # armed again for another flight
+            if st == S.LANDED:
+                fsm.transition(S.IDLE, t)
+            fsm.transition(S.PREFLIGHT, t)
             fsm.transition(S.ARMED, t)
+        elif st == S.PREFLIGHT and v.armed:
+            fsm.transition(S.ARMED, t)
+        elif st == S.ARMED and not v.armed:  # disarmed without flying
+            fsm.transition(S.IDLE, t)
+        elif st in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) and not v.armed:  # disarm ends the flight
+            fsm.transition(S.LANDING, t)
+            fsm.transition(S.LANDED, t)
         elif st == S.ARMED and v.in_air:
             fsm.transition(S.TAKING_OFF, t)
         elif st == S.TAKING_OFF and v.in_air and v.velocity[2] < 0.3:
@@ -546,7 +563,7 @@ class DroneComponent:
                 fsm.transition(S.NAVIGATING, t)
             elif st == S.NAVIGATING and speed < 0.2:
                 fsm.transition(S.HOVERING, t)
-        elif st == S.LANDING and not v.in_air:
+        elif st == S.LANDING and (not v.in_air or not v.armed):
             fsm.transition(S.LANDED, t)
         if finished:  # the backend recorded its own replay_finished event
             if self.outcome is None:
@@ -568,7 +585,8 @@ class DroneComponent:
 
     def _reject(self, t: float, item: Any, err: SafetyViolation) -> None:
         """A command outside the safety limits: never sent to the backend; dropped from the queue and recorded."""
-        rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason}
+        rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason,
+               "item": "waypoint" if isinstance(item, Waypoint) else type(item).__name__}
         self.rejected.append(rec)
         self._event("command_rejected", **rec)
         self.scheduler.discard(rec["id"], f"rejected: {err.reason}")

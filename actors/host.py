@@ -489,3 +489,6 @@ class HostActor:
 
     def close(self) -> dict:
         return self.runtime.close() if self.runtime else {}
+
+    def recording_report(self) -> dict:
+        return self.runtime.recording_report() if self.runtime else {}

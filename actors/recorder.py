@@ -15,13 +15,22 @@ that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the v
 ``<robot>/<camera>`` (each camera's optical frame, pitched by its mount, see
 :func:`aerodaas.recording.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
 on ``<image topic>/calibration`` with the camera's intrinsics.
+
+A failing disk (full, I/O error, gone) stops the recording cleanly instead of killing the writer thread: the file
+is cut back to the last record boundary the OS accepted and finished if the disk still takes the summary (else it
+stays unfinished, readable by ``aerodaas info`` and made whole by ``aerodaas recover``); the failure is reported
+to ``on_failure`` callbacks (the drones record it as a ``recording_failed`` event) and in :meth:`report`, and every
+message offered afterwards is counted as lost. ``AERODAAS_FAULT_RECORDER=enospc:N`` (or ``eio:N``) injects that
+failure once N bytes have been written (the fault suite of :mod:`aerodaas.reliability`).
 """
 from __future__ import annotations
 
+import errno
+import os
 import queue
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -64,6 +73,11 @@ class RecorderService:
         self.write_errors: list[str] = []
         self.closed = False
         self._intrinsics: dict[str, dict] = {}  # camera frame -> intrinsics (writer thread only)
+        self.failure: dict[str, Any] | None = None
+        self.lost = 0  # messages offered after a failure (not recorded)
+        self.last_t_ns: int | None = None  # log time of the last message written
+        self.on_failure: list[Callable[[dict], None]] = []
+        _inject_fault(self.rec)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
         self._thread.start()
 
@@ -71,6 +85,9 @@ class RecorderService:
     def image(self, topic: str, t_ns: int, frame: np.ndarray, frame_id: str) -> bool:
         """Queue a (H, W, 3) uint8 BGR frame (shared, not copied: frames are read-only). False if dropped."""
         with self._lock:
+            if self.failure is not None:
+                self.lost += 1
+                return False
             if self.closed or self._pending_frames >= self.max_pending_frames:
                 self.frames_dropped += 1
                 return False
@@ -95,7 +112,9 @@ class RecorderService:
         self._put(("json", topic, t_ns, obj, schema_name))
 
     def _put(self, item: tuple) -> None:
-        if not self.closed:
+        if self.failure is not None:
+            self.lost += 1
+        elif not self.closed:
             self._q.put(item)
 
     # ------------------------------------------------------------------ writer thread
@@ -108,18 +127,25 @@ class RecorderService:
                 item = None
             if item is not None and item[0] == "stop":
                 return
-            if item is not None:
-                try:
-                    self._write(item)
-                except Exception as e:  # a bad message must not stop the recording
-                    self.write_errors.append(f"{item[0]} {item[1]}: {type(e).__name__}: {e}")
-                finally:
-                    if item[0] == "image":
-                        with self._lock:
-                            self._pending_frames -= 1
-            if time.monotonic() - last_flush > self.flush_every_s:
-                self.rec.flush()
-                last_flush = time.monotonic()
+            try:
+                if item is not None:
+                    try:
+                        self._write(item)
+                        self.last_t_ns = item[2]
+                    except OSError:
+                        raise
+                    except Exception as e:  # a bad message must not stop the recording
+                        self.write_errors.append(f"{item[0]} {item[1]}: {type(e).__name__}: {e}")
+                    finally:
+                        if item[0] == "image":
+                            with self._lock:
+                                self._pending_frames -= 1
+                if time.monotonic() - last_flush > self.flush_every_s:
+                    self.rec.flush()
+                    last_flush = time.monotonic()
+            except OSError as e:  # the disk: full, I/O error, gone. Stop cleanly, say what was lost.
+                self._fail(e)
+                return
 
     def _write(self, item: tuple) -> None:
         kind = item[0]
@@ -158,6 +184,45 @@ class RecorderService:
                 r.write_transform(TF_TOPIC, t_ns, base, frame, (0.0, 0.0, 0.0), quaternion=q)
             r.write_json(f"/{robot}/odometry", t_ns, odom, schema_name="aerodaas.Odometry")
 
+    def _fail(self, e: OSError) -> None:
+        """The writer hit ``e``: cut the file back to the last record boundary the OS took, try to finish it, count
+        what is lost, tell the callbacks. Runs in the writer thread, which then ends."""
+        rec = self.rec
+        info: dict[str, Any] = {"error": f"{type(e).__name__}: {e}", "errno": e.errno,
+                                "last_recorded_ns": self.last_t_ns, "path": self.path}
+        with self._lock:
+            self.failure = info
+        lost = 0
+        while True:  # what was queued is lost too
+            try:
+                item = self._q.get_nowait()
+            except queue.Empty:
+                break
+            if item[0] != "stop":
+                lost += 1
+        self.lost += lost
+        durable = rec._stream.durable
+        try:
+            rec._file.close()  # its pending buffer cannot be written: close the descriptor anyway
+        except OSError:
+            pass
+        rec._closed = True
+        finished = False
+        try:
+            os.truncate(rec.path, durable)  # the file ends at a complete record: an unfinished but valid MCAP
+            from aerodaas.recover import recover_mcap
+
+            info["messages_in_file"] = recover_mcap(rec.path)["messages"]  # finished and indexed, if the disk
+            finished = True  # still takes it
+        except OSError as e2:
+            info["finish_error"] = f"{type(e2).__name__}: {e2}"
+        info["finished"] = finished
+        for cb in list(self.on_failure):
+            try:
+                cb(dict(info))
+            except Exception:  # noqa: BLE001 - a reporting callback must not hide the failure
+                pass
+
     # ------------------------------------------------------------------ end
     def close(self, timeout_s: float = 30.0) -> dict[str, Any]:
         """Write what is queued, finish the file (summary and footer) and return the per-topic message counts."""
@@ -166,11 +231,21 @@ class RecorderService:
             self._q.put(("stop",))
             self._thread.join(timeout_s)
             try:
-                self.rec.close()
+                if self.failure is None:
+                    try:
+                        self.rec.close()
+                    except OSError as e:  # the summary itself does not fit: the same clean failure
+                        self._fail(e)
             finally:
                 if self.live is not None:  # after the last message: a client sees the whole run
                     self.live.stop()
         return dict(self.rec.message_counts)
+
+    def report(self) -> dict[str, Any]:
+        """``{"failure": None | {error, errno, last_recorded_ns, path, finished, finish_error?}, "lost": n,
+        "frames_dropped": n, "write_errors": [...]}``."""
+        return {"failure": self.failure, "lost": self.lost, "frames_dropped": self.frames_dropped,
+                "write_errors": self.write_errors[-10:]}
 
     def counts(self) -> dict[str, int]:
         return dict(self.rec.message_counts)
@@ -268,3 +343,24 @@ def deliver(recorder: Any, batch: list[tuple]) -> int:
             raise ValueError(f"remote recorder: unknown item kind {kind!r}")
         getattr(recorder, kind)(*item[1:])
     return len(batch)
+
+
+def _inject_fault(rec: McapRecorder) -> None:
+    """``AERODAAS_FAULT_RECORDER=enospc:N`` / ``eio:N``: the recording's file fails with ENOSPC / EIO once N bytes
+    were written (fault injection; unset in normal runs)."""
+    spec = os.environ.get("AERODAAS_FAULT_RECORDER")
+    if not spec:
+        return
+    kind, _, n = spec.partition(":")
+    code = {"enospc": errno.ENOSPC, "eio": errno.EIO}[kind.strip().lower()]
+    limit = int(n)
+    f = rec._file
+    real_write = f.write
+
+    def write(data: bytes) -> int:
+        if f.tell() + len(data) > limit:
+            raise OSError(code, os.strerror(code))
+        return real_write(data)
+
+    rec._stream._f = type("_Faulty", (), {"write": staticmethod(write), "flush": f.flush, "tell": f.tell,
+                                          "fileno": f.fileno, "close": f.close})()

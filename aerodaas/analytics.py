@@ -21,9 +21,15 @@ __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "
 
 
 class Analytics:
-    """Base class (IAnalyse). Subclasses override :meth:`process` and optionally :meth:`setup`."""
+    """Base class (IAnalyse). Subclasses override :meth:`process` and optionally :meth:`setup`.
+
+    ``on_error`` says what an exception raised by :meth:`process` does: ``"continue"`` (default: the item is
+    skipped; the error is logged with its traceback, recorded as an ``analytics_error`` event and counted in the
+    run's summary) or ``"abort"`` (the same, then every mission of the run ends as ``failed``). Set it on the
+    instance (``detector.on_error = "abort"``) or the class; anything else is refused before Ray starts."""
 
     name: str = "analytics"
+    on_error: str = "continue"
 
     def __init__(self, name: str | None = None) -> None:
         if name:
@@ -279,7 +285,8 @@ class MonitoringAnalytics(Analytics):
             if isinstance(v, (int, float)):
                 s = self.summary.setdefault(k, {"min": v, "max": v})
                 s["min"], s["max"] = min(s["min"], v), max(s["max"], v)
-        if "battery" in self.limits and vals.get("battery", 100) < self.limits["battery"]:
+        if "battery" in self.limits and (vals.get("battery") if vals.get("battery") is not None else 100) \
+                < self.limits["battery"]:
             self.warnings.append(f"battery {vals['battery']:.1f}% below {self.limits['battery']}% at t={odom['t']:.1f}s")
         if "height" in self.limits and vals.get("height", 0) > self.limits["height"]:
             self.warnings.append(f"height {vals['height']:.1f} m above {self.limits['height']} m at t={odom['t']:.1f}s")

@@ -182,6 +182,10 @@ class Environment:
                 if (caller / p).exists():
                     p = caller / p
             cfg = load_environment_config(p)
+        if OPTIONS.early_ray:  # `aerodaas run`: Ray starts only once the environment is known to be valid
+            from .runtime import start_ray_early
+
+            start_ray_early(OPTIONS.address)
         self.cfg = cfg
         self.robots = {r.id: Robot(r, self) for r in cfg.robots}
         self.env_sensors = {s.id: Sensor(s) for s in cfg.env_sensors}

@@ -22,6 +22,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if not app.is_file():
         print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
         return 2
+    # everything the command line names is checked before Ray starts (exit 2, naming the bad input)
+    try:
+        if args.record:
+            from .recording import check_record_path
+
+            check_record_path(args.record)
+        for flag, v, hi in (("--speedup", args.speedup, 1000.0), ("--timeout", args.timeout, 1e7)):
+            if v is not None and not (v > 0 and v <= hi):  # NaN fails both comparisons
+                raise ValueError(f"{flag} must be a number within (0, {hi:g}], got {v!r}")
+        if args.env:
+            from .config import load_environment_config
+
+            load_environment_config(args.env)
+    except (ConfigError, ValueError) as e:
+        print(f"aerodaas run: {e}", file=sys.stderr)
+        return 2
     o = runtime.OPTIONS
     o.record, o.speedup, o.timeout, o.address = args.record, args.speedup, args.timeout, args.address
     o.env_path = str(Path(args.env).resolve()) if args.env else None
@@ -44,14 +60,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
     results = []
     stop_signal: list[int] = []
 
-    def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd: the same clean stop as Ctrl-C
+    def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd, Ctrl-C: one clean stop
+        # Ray's C++ failure-signal handler (absl, chained before this one) answers SIGTERM with alarm(3) and a SIGALRM
+        # handler that aborts: the clean stop takes longer than 3 s, so the run died with SIGABRT (exit 134). We take
+        # the signal over: cancel that alarm and its handler.
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, signal.SIG_DFL)
         stop_signal.append(signum)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second SIGTERM must not cut it short
-        raise KeyboardInterrupt(f"signal {signum}")
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        runtime.request_stop(signum)  # raises KeyboardInterrupt where that is safe, else stops at the next safe point
 
     # installed before Ray starts: the driver's own fatal-signal handler then chains to this one
     previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
-    runtime.start_ray_early(args.address)  # Ray's start (seconds) overlaps importing and building the app
+    previous_sigint = signal.signal(signal.SIGINT, on_sigterm)
+    runtime.STOP_SIGNALS.clear()
+    runtime._RAISE_OK[0] = True  # building the app: a stop may interrupt it at once
+    # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
+    # the rest of the app's build; never before, so a bad environment fails at once with no Ray process
+    o.early_ray = True
 
     from . import api
 
@@ -85,15 +112,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except (FileNotFoundError, ValueError, KeyError) as e:
         print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
+    except runtime.RayStartError as e:
+        print(f"aerodaas run: {e}", file=sys.stderr)
+        return 1
     finally:
         api.Robot.start_mission = original
         api.Environment.start_mission = original_fleet
+        o.early_ray = False
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
+        signal.signal(signal.SIGINT, previous_sigint)
     if not results:
         print("aerodaas run: the application never called start_mission()", file=sys.stderr)
         return 1
-    if any(r.outcome == "interrupted" for r in results):
+    if stop_signal or any(r.outcome == "interrupted" for r in results):
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
     return 0 if all(r.ok for r in results) else 1
 
@@ -300,6 +332,9 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             if not path.is_file():
                 raise MissionFileError(f"{str(path)!r}: mission file not found")
             plan = load_mission(path)
+            if not plan.items:
+                raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
+                                       f"would clear the vehicle's mission)")
             if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
                 plan_to_flight(plan)
             backend = _mission_backend(args, plan.home)
@@ -333,6 +368,23 @@ def _cmd_mission(args: argparse.Namespace) -> int:
     finally:
         if backend is not None:
             backend.close(safe_end=False)  # hand the vehicle over as it is: a started mission flies on
+    return 0
+
+
+def _cmd_recover(args: argparse.Namespace) -> int:
+    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recover`. Exit 0 (also for a file that was already
+    finished), 2 for a missing or non-MCAP file or an output that cannot be written."""
+    from .recover import recover_mcap
+
+    try:
+        r = recover_mcap(args.file, args.out)
+    except (OSError, ValueError) as e:
+        print(f"aerodaas recover: {e}", file=sys.stderr)
+        return 2
+    if r["was_finished"] and r["messages"] is None:
+        print(f"{r['path']}: already finished; nothing to do")
+    else:
+        print(f"{r['out']}: finished and indexed, {r['messages']} messages on {r['channels']} channels recovered")
     return 0
 
 
@@ -426,8 +478,21 @@ def main(argv: list[str] | None = None) -> int:
     from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
     _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))
+    rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "
+                                        "indexed one")
+    rc.add_argument("file")
+    rc.add_argument("--out", help="write here instead of replacing FILE")
+    rc.set_defaults(func=_cmd_recover)
     args = p.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # `aerodaas info FILE | head`: the reader left; end quietly like any Unix filter
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())  # Python's final flush of stdout must not fail again
+        except OSError:
+            pass
+        return 128 + signal.SIGPIPE
 
 
 if __name__ == "__main__":

@@ -12,9 +12,9 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from .geofence import GeofenceConfig
 from .models import GeoPoint
@@ -27,37 +27,57 @@ class ConfigError(ValueError):
 
 
 class _Cfg(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Every configuration section: unknown keys are refused (with a "did you mean" suggestion, see
+    :func:`_format_errors`), numbers must be finite (no NaN/Infinity), and types are strict: ``"yes"`` or ``1``
+    is not a boolean, ``"3"`` is not a number (JSON has real booleans and numbers)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+#: Documented physical bounds of the configuration (README "Configuration bounds"). Numbers outside them are
+#: refused: they are typos or attacks, not vehicles (a 1e308 m/s speed limit disables the check it configures).
+MAX_SPEED_MPS = 100.0  # fastest multirotors are ~ 60 m/s
+MAX_ACCEL_MPS2 = 100.0
+MAX_YAW_RATE_DPS = 3600.0
+MAX_ALTITUDE_M = 10_000.0  # above home
+HOME_ALT_RANGE_M = (-500.0, 9_000.0)  # AMSL: below the Dead Sea shore .. above Everest
+MAX_CAMERA_PX = 8192  # per side
+MAX_CAMERA_FPS = 240.0
+MAX_RATE_HZ = 1000.0  # control, physics, odometry, stream rates
+MAX_SPEEDUP = 1000.0
+MAX_DURATION_S = 86_400.0  # timeouts and intervals: one day
+MAX_BATTERY_WH = 100_000.0
+MAX_POWER_W = 1_000_000.0
 
 
 class Limits(_Cfg):
     """Flight-envelope limits of a robot: speeds in m/s, acceleration in m/s², yaw rate in deg/s,
     altitudes in metres above home."""
 
-    max_speed: float = Field(default=2.0, gt=0, description="horizontal speed limit, m/s")
-    max_vertical_speed: float = Field(default=1.0, gt=0, description="m/s")
-    max_acceleration: float = Field(default=2.0, gt=0, description="m/s^2")
-    max_yaw_rate: float = Field(default=90.0, gt=0, description="deg/s")
-    max_altitude: float = Field(default=120.0, gt=0, description="metres above home")
+    max_speed: float = Field(default=2.0, gt=0, le=MAX_SPEED_MPS, description="horizontal speed limit, m/s")
+    max_vertical_speed: float = Field(default=1.0, gt=0, le=MAX_SPEED_MPS, description="m/s")
+    max_acceleration: float = Field(default=2.0, gt=0, le=MAX_ACCEL_MPS2, description="m/s^2")
+    max_yaw_rate: float = Field(default=90.0, gt=0, le=MAX_YAW_RATE_DPS, description="deg/s")
+    max_altitude: float = Field(default=120.0, gt=0, le=MAX_ALTITUDE_M, description="metres above home")
 
 
 class BatteryConfig(_Cfg):
     """Battery model: energy drawn = (hover_power_w + speed_power_w_per_mps * |v|) * dt.
     Voltage is linear between ``voltage_empty`` and ``voltage_full`` in state of charge (a simple LiPo model)."""
 
-    capacity_wh: float = Field(default=60.0, gt=0)
-    hover_power_w: float = Field(default=180.0, ge=0)
-    speed_power_w_per_mps: float = Field(default=10.0, ge=0)
-    voltage_full: float = Field(default=16.8, gt=0)
-    voltage_empty: float = Field(default=13.2, gt=0)
+    capacity_wh: float = Field(default=60.0, gt=0, le=MAX_BATTERY_WH)
+    hover_power_w: float = Field(default=180.0, ge=0, le=MAX_POWER_W)
+    speed_power_w_per_mps: float = Field(default=10.0, ge=0, le=MAX_POWER_W)
+    voltage_full: float = Field(default=16.8, gt=0, le=1000)
+    voltage_empty: float = Field(default=13.2, gt=0, le=1000)
     initial_pct: float = Field(default=100.0, ge=0, le=100)
 
 
 class NoiseConfig(_Cfg):
     """Optional sensor noise (standard deviations): GPS position in metres, velocity in m/s."""
 
-    gps_std_m: float = Field(default=0.0, ge=0)
-    velocity_std_mps: float = Field(default=0.0, ge=0)
+    gps_std_m: float = Field(default=0.0, ge=0, le=1000)
+    velocity_std_mps: float = Field(default=0.0, ge=0, le=MAX_SPEED_MPS)
     seed: int = 0
 
 
@@ -74,9 +94,13 @@ class SafetyConfig(_Cfg):
 
     geofence: GeofenceConfig = Field(default_factory=GeofenceConfig)
     geofence_plan: str | None = None
-    max_altitude: float | None = Field(default=None, gt=0, description="metres above home")
-    min_altitude: float = Field(default=0.5, ge=0, description="metres above home, except take-off/landing")
-    max_speed: float | None = Field(default=None, gt=0, description="m/s, horizontal")
+    max_altitude: float | None = Field(default=None, gt=0, le=MAX_ALTITUDE_M, description="metres above home")
+    min_altitude: float = Field(default=0.5, ge=0, le=MAX_ALTITUDE_M,
+                                description="metres above home, except take-off/landing")
+    max_speed: float | None = Field(default=None, gt=0, le=MAX_SPEED_MPS, description="m/s, horizontal")
+    command_latency_s: float = Field(default=0.2, ge=0, le=10.0, description="worst-case delay (s) between the gate's "
+                                     "check and the vehicle acting on a command (link + autopilot); the stopping "
+                                     "envelope of every command includes it")
     on_violation: Literal["reject", "clamp"] = "reject"
     low_battery_rtl_pct: float = Field(default=20.0, ge=0, le=100)
     critical_battery_pct: float = Field(default=5.0, ge=0, le=100)
@@ -116,36 +140,65 @@ class SensorConfig(_Cfg):
     @model_validator(mode="after")
     def _check_props(self) -> "SensorConfig":
         p = self.properties
+        spec = SENSOR_PROPERTIES.get(self.type, {})
+        for k in p:
+            if k not in spec:
+                raise ValueError(f"properties.{k}: unknown {self.type} property{did_you_mean(k, spec)}; "
+                                 f"known: {sorted(spec)}")
+        for k, (kind, default, lo, hi, lo_open) in spec.items():
+            if k not in p:
+                if default is not None:
+                    p[k] = default
+                continue
+            v = p[k]
+            if kind == "str":
+                if not isinstance(v, str) or not v:
+                    raise ValueError(f"properties.{k} must be a non-empty string, got {v!r}")
+                continue
+            ok_type = isinstance(v, int) if kind == "int" else isinstance(v, (int, float))
+            if isinstance(v, bool) or not ok_type or not math.isfinite(v) or v > hi or (v <= lo if lo_open else v < lo):
+                what = "an integer" if kind == "int" else "a finite number"
+                rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+                raise ValueError(f"properties.{k} must be {what} within {rng}, got {v!r}")
         if self.type == "camera":
-            defaults = {"width": 640, "height": 480, "hfov_deg": 78.0, "fps": 15.0, "pitch_deg": 90.0, "jpeg_quality": 80}
-            for k, v in defaults.items():
-                p.setdefault(k, v)
-            for k in ("width", "height", "fps"):
-                if not (isinstance(p[k], (int, float)) and p[k] > 0):
-                    raise ValueError(f"properties.{k} must be a positive number, got {p[k]!r}")
-            if not 0 < float(p["hfov_deg"]) < 180:
-                raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
-            if not 0 < float(p["pitch_deg"]) <= 90:
-                raise ValueError(f"properties.pitch_deg must be within (0, 90] (90 = nadir), got {p['pitch_deg']!r}")
-            src = p.setdefault("source", "sim")
+            src = p["source"]
             if src not in CAMERA_SOURCES:
                 raise ValueError(f"properties.source must be one of {list(CAMERA_SOURCES)}, got {src!r}")
+            if p["hfov_deg"] >= 180:
+                raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
             if src == "mcap":
-                if not (isinstance(p.get("mcap"), str) and p["mcap"]):
+                if not p.get("mcap"):
                     raise ValueError(f"properties.mcap must name the MCAP recording to replay when properties.source "
                                      f"is 'mcap', got {p.get('mcap')!r}")
-                if "topic" in p and not (isinstance(p["topic"], str) and p["topic"].startswith("/")):
+                if "topic" in p and not p["topic"].startswith("/"):
                     raise ValueError(f"properties.topic must be an MCAP topic starting with '/', got {p['topic']!r}")
             else:
                 for k in ("mcap", "topic"):
                     if k in p:
                         raise ValueError(f"properties.{k} is only used with properties.source 'mcap', "
                                          f"but source is {src!r}")
-        elif self.type == "odometry":
-            p.setdefault("rate_hz", 10.0)
-            if not (isinstance(p["rate_hz"], (int, float)) and p["rate_hz"] > 0):
-                raise ValueError(f"properties.rate_hz must be a positive number, got {p['rate_hz']!r}")
         return self
+
+
+#: the properties of each sensor type: name -> (kind, default, low, high, low bound exclusive). Camera sizes are
+#: pixels, fps frames/s, angles degrees (pitch 90 = nadir), rates Hz. Unknown properties are refused.
+SENSOR_PROPERTIES: dict[str, dict[str, tuple]] = {
+    "camera": {"width": ("int", 640, 1, MAX_CAMERA_PX, False), "height": ("int", 480, 1, MAX_CAMERA_PX, False),
+               "hfov_deg": ("float", 78.0, 0.0, 180.0, True), "fps": ("float", 15.0, 0.0, MAX_CAMERA_FPS, True),
+               "pitch_deg": ("float", 90.0, 0.0, 90.0, True), "jpeg_quality": ("int", 80, 1, 100, False),
+               "source": ("str", "sim", 0, 0, False), "mcap": ("str", None, 0, 0, False),
+               "topic": ("str", None, 0, 0, False)},
+    "odometry": {"rate_hz": ("float", 10.0, 0.0, MAX_RATE_HZ, True)},
+    "stat_stream": {},
+}
+
+
+def did_you_mean(word: str, choices) -> str:
+    """``" (did you mean 'width'?)"`` for the closest of ``choices`` to a misspelt ``word`` (difflib), else ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 class MavlinkConfig(_Cfg):
@@ -172,19 +225,19 @@ class MavlinkConfig(_Cfg):
     velocity target is re-sent (PX4 OFFBOARD needs more than 2 Hz; ArduPilot stops a velocity target after 3 s)."""
 
     connection: str = Field(default="tcp:127.0.0.1:5760", min_length=1)
-    baud: int = Field(default=57600, gt=0)
+    baud: int = Field(default=57600, gt=0, le=10_000_000)
     autopilot: Literal["auto", "ardupilot", "px4"] = "auto"
     source_system: int = Field(default=255, ge=1, le=255)
     source_component: int = Field(default=190, ge=0, le=255)
     target_system: int | None = Field(default=None, ge=1, le=255)
-    connect_timeout_s: float = Field(default=30.0, gt=0)
-    heartbeat_timeout_s: float = Field(default=3.0, gt=0)
-    command_timeout_s: float = Field(default=1.5, gt=0)
-    command_retries: int = Field(default=3, ge=0)
-    stream_rate_hz: float = Field(default=10.0, gt=0)
+    connect_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
+    heartbeat_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S)
+    command_timeout_s: float = Field(default=1.5, gt=0, le=MAX_DURATION_S)
+    command_retries: int = Field(default=3, ge=0, le=100)
+    stream_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
     use_autopilot_mission: bool = False
-    arm_timeout_s: float = Field(default=30.0, gt=0)
-    setpoint_rate_hz: float = Field(default=10.0, gt=2.0)
+    arm_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
+    setpoint_rate_hz: float = Field(default=10.0, gt=2.0, le=MAX_RATE_HZ)
     #: set the vehicle's own speed limits from the robot's ``limits`` on connect (ArduCopter WPNAV_SPEED*, PX4
     #: MPC_XY_VEL_MAX/MPC_XY_CRUISE/MPC_Z_VEL_MAX_*), read back to verify; ``restore_params``: put the user's
     #: values back when the backend closes
@@ -193,7 +246,7 @@ class MavlinkConfig(_Cfg):
     #: what closing the backend does with a vehicle still in the air (run timeout, error, Ctrl-C): ``land`` here
     #: or ``rtl``, waiting up to ``safe_end_timeout_s`` vehicle seconds for it to land and disarm
     on_close: Literal["land", "rtl"] = "land"
-    safe_end_timeout_s: float = Field(default=120.0, gt=0)
+    safe_end_timeout_s: float = Field(default=120.0, gt=0, le=MAX_DURATION_S)
 
 
 class TelloConfig(_Cfg):
@@ -216,14 +269,14 @@ class TelloConfig(_Cfg):
     state_port: int = Field(default=8890, ge=0, le=65535)
     video_port: int = Field(default=11111, ge=0, le=65535)
     video: bool = True
-    command_timeout_s: float = Field(default=7.0, gt=0)
-    command_retries: int = Field(default=2, ge=0)
-    keepalive_s: float = Field(default=5.0, gt=0, lt=15)
-    state_timeout_s: float = Field(default=3.0, gt=0, description="link lost after this long without a state packet")
+    command_timeout_s: float = Field(default=7.0, gt=0, le=MAX_DURATION_S)
+    command_retries: int = Field(default=2, ge=0, le=100)
+    keepalive_s: float = Field(default=5.0, gt=0, le=MAX_DURATION_S, lt=15)
+    state_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S, description="link lost after this long without a state packet")
     bind_host: str = Field(default="0.0.0.0", description="local address the state and video sockets bind to")
     initial_heading_deg: float = Field(default=0.0, ge=-360, le=360, description="compass heading at connect(), deg")
     velocity_frame: Literal["yaw_zero", "body"] = "yaw_zero"
-    accept_window_s: float = Field(default=0.3, ge=0, description="wait this long for a motion command's refusal")
+    accept_window_s: float = Field(default=0.3, ge=0, le=MAX_DURATION_S, description="wait this long for a motion command's refusal")
 
 
 class ReplayConfig(_Cfg):
@@ -232,7 +285,7 @@ class ReplayConfig(_Cfg):
     autopilot writes it to its SD card); ``rate`` is the replay speed (1 = real time)."""
 
     log: str = Field(min_length=1)
-    rate: float = Field(default=1.0, gt=0)
+    rate: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
 
 
 class RobotConfig(_Cfg):
@@ -250,11 +303,16 @@ class RobotConfig(_Cfg):
     battery: BatteryConfig = Field(default_factory=BatteryConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
     safety: SafetyConfig = Field(default_factory=SafetyConfig)
-    takeoff_altitude: float = Field(default=1.5, gt=0, description="metres above home")
-    control_rate_hz: float = Field(default=10.0, gt=0)
-    idle_land_s: float = Field(default=10.0, gt=0, description="land after this many seconds (sim time) with "
+    takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
+                                    "[safety.min_altitude, max_altitude]")
+    control_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
+    idle_land_s: float = Field(default=10.0, gt=0, le=MAX_DURATION_S, description="land after this many seconds (sim time) with "
                                "nothing queued, once some navigation has been flown")
     sensors: list[SensorConfig] = Field(default_factory=list)
+    max_waypoints_per_request: int = Field(default=1000, ge=1, le=100_000, description="bounded work: items in one "
+                                           "navigation added while flying (HITL request, analytics output)")
+    max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
+                                  "all missions of this robot; more are refused (HTTP 422 / navigation_refused)")
 
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
@@ -273,6 +331,17 @@ class RobotConfig(_Cfg):
                              f"uploaded missions), but backend is {self.backend!r}")
         if self.backend == "replay" and self.replay is None:
             raise ValueError("replay: backend 'replay' needs a 'replay' section naming the log to play")
+        lo, hi = HOME_ALT_RANGE_M
+        if not lo <= self.home.alt <= hi:
+            raise ValueError(f"home.alt: {self.home.alt!r} m AMSL is outside [{lo:g}, {hi:g}] m")
+        max_alt = self.safety.max_altitude if self.safety.max_altitude is not None else self.limits.max_altitude
+        if self.takeoff_altitude > max_alt:
+            which = "safety.max_altitude" if self.safety.max_altitude is not None else "limits.max_altitude"
+            raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is above {which} ({max_alt:g} m); the "
+                             f"take-off target passes the same safety gate as every command")
+        if self.takeoff_altitude < self.safety.min_altitude:
+            raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is below safety.min_altitude "
+                             f"({self.safety.min_altitude:g} m); the drone would hover below the floor it must keep")
         for j, s in enumerate(self.sensors):
             if s.type == "camera" and s.properties.get("source") == "backend" and self.backend not in BACKENDS_WITH_CAMERA:
                 raise ValueError(f"sensors.{j}.properties.source: 'backend' needs a backend with its own camera "
@@ -294,18 +363,18 @@ class GroundConfig(_Cfg):
     image centre). Without ``image``, a procedural ground is generated from ``seed``."""
 
     image: str | None = None
-    metres_per_pixel: float = Field(default=0.05, gt=0)
-    home_px: tuple[float, float] | None = None
+    metres_per_pixel: float = Field(default=0.05, gt=0, le=100_000)
+    home_px: Annotated[tuple[float, float], Strict(False)] | None = None
     seed: int = 0
-    size_m: float = Field(default=120.0, gt=0, description="procedural ground side length, metres")
+    size_m: float = Field(default=120.0, gt=0, le=100_000, description="procedural ground side length, metres")
 
 
 class TargetPathPoint(_Cfg):
     """Target position (ENU metres from the home of the first robot) at sim time ``t`` seconds."""
 
-    t: float = Field(ge=0)
-    x: float
-    y: float
+    t: float = Field(ge=0, le=MAX_DURATION_S * 365)
+    x: float = Field(ge=-100_000, le=100_000)
+    y: float = Field(ge=-100_000, le=100_000)
 
     @field_validator("t", "x", "y")
     @classmethod
@@ -324,8 +393,8 @@ class TargetConfig(_Cfg):
     id: str = Field(min_length=1)
     class_name: str = "car"
     image: str
-    crop: tuple[int, int, int, int]
-    length_m: float = Field(default=4.3, gt=0)
+    crop: Annotated[tuple[int, int, int, int], Strict(False)]
+    length_m: float = Field(default=4.3, gt=0, le=100_000)
     path: list[TargetPathPoint] = Field(min_length=2)
 
     @model_validator(mode="after")
@@ -348,9 +417,9 @@ class SimulationConfig(_Cfg):
     """Simulation clock: ``speedup`` x real time; ``lockstep`` makes sim time wait for analytics to consume each
     frame; ``physics_hz`` is the integration rate."""
 
-    speedup: float = Field(default=1.0, gt=0)
+    speedup: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
     lockstep: bool = False
-    physics_hz: float = Field(default=50.0, gt=0)
+    physics_hz: float = Field(default=50.0, gt=0, le=MAX_RATE_HZ)
 
 
 class HitlConfig(_Cfg):
@@ -360,7 +429,8 @@ class HitlConfig(_Cfg):
     enabled: bool = False
     host: str = "127.0.0.1"
     port: int = Field(default=8470, ge=0, le=65535)
-    token: str | None = Field(default=None, min_length=16)
+    token: str | None = Field(default=None, min_length=16, max_length=256)
+    docs: bool = Field(default=False, description="serve /docs and /openapi.json (behind the bearer token)")
 
 
 class AnalyticsQosConfig(_Cfg):
@@ -369,12 +439,12 @@ class AnalyticsQosConfig(_Cfg):
     edge or ``cloud_cost`` on the cloud, charged whether or not it met the deadline. ``edge_ms`` / ``cloud_ms`` are
     the expected execution times (ms; the cloud's includes the network round trip) the scheduler plans with."""
 
-    deadline_ms: float = Field(gt=0, description="relative deadline from capture, ms")
-    edge_ms: float = Field(gt=0, description="expected execution time on the edge, ms")
-    cloud_ms: float = Field(gt=0, description="expected round trip on the cloud, ms")
-    benefit: float = Field(ge=0)
-    edge_cost: float = Field(default=0.0, ge=0)
-    cloud_cost: float = Field(default=0.0, ge=0)
+    deadline_ms: float = Field(gt=0, le=1e7, description="relative deadline from capture, ms")
+    edge_ms: float = Field(gt=0, le=1e7, description="expected execution time on the edge, ms")
+    cloud_ms: float = Field(gt=0, le=1e7, description="expected round trip on the cloud, ms")
+    benefit: float = Field(ge=0, le=1e9)
+    edge_cost: float = Field(default=0.0, ge=0, le=1e9)
+    cloud_cost: float = Field(default=0.0, ge=0, le=1e9)
 
 
 class AnalyticsSchedulerConfig(_Cfg):
@@ -466,7 +536,8 @@ class EnvironmentConfig(_Cfg):
 
     @model_validator(mode="after")
     def _unique(self) -> "EnvironmentConfig":
-        for name, items in (("robots", self.robots), ("compute", self.compute), ("env_sensors", self.env_sensors)):
+        for name, items in (("robots", self.robots), ("compute", self.compute), ("env_sensors", self.env_sensors),
+                            ("world.targets", self.world.targets)):
             ids = [i.id for i in items]
             dup = sorted({i for i in ids if ids.count(i) > 1})
             if dup:
@@ -504,12 +575,40 @@ def _format_errors(err: ValidationError, source: str) -> str:
     lines = [f"invalid environment configuration in {source}:"]
     for e in err.errors():
         loc = ".".join(str(x) for x in e["loc"]) or "(root)"
+        if e["type"] == "extra_forbidden" and e["loc"]:
+            known = _fields_at(EnvironmentConfig, e["loc"][:-1])
+            e["msg"] = f"unknown key{did_you_mean(e['loc'][-1], known)}" + (f"; known: {sorted(known)}" if known else "")
         val = e.get("input")
         sval = json.dumps(val, default=str) if not isinstance(val, dict) else "{...}"
         if len(sval) > 80:
             sval = sval[:77] + "..."
         lines.append(f"  {loc}: {e['msg']} (got {sval})")
     return "\n".join(lines)
+
+
+def _fields_at(model: type, loc: tuple) -> list[str]:
+    """The field names of the pydantic model reached from ``model`` along an error location (list indices and dict
+    keys skipped); [] when the path does not end at a model."""
+    import typing
+
+    def models_in(tp) -> list[type]:
+        if isinstance(tp, type) and issubclass(tp, BaseModel):
+            return [tp]
+        return [m for a in typing.get_args(tp) for m in models_in(a)]
+
+    cur: list[type] = [model]
+    for part in loc:
+        if isinstance(part, int) or not cur:
+            continue
+        nxt = []
+        for m in cur:
+            f = m.model_fields.get(str(part))
+            if f is not None:
+                nxt += models_in(f.annotation)
+        if not nxt and any(str(part) not in m.model_fields for m in cur):
+            continue  # a dict key (e.g. analytics_scheduler.models.<name>)
+        cur = nxt
+    return sorted({k for m in cur for k in m.model_fields if k != "base_dir"})
 
 
 def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_dir: str | None = None) -> EnvironmentConfig:
@@ -524,8 +623,13 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     # resolve referenced files now, so a missing image fails before any actor starts
     if cfg.world.ground.image:
         cfg.world.ground.image = str(cfg.resolve_path(cfg.world.ground.image, "world.ground.image"))
+        _image_size(cfg.world.ground.image, "world.ground.image")
     for i, t in enumerate(cfg.world.targets):
         t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
+        w, h = _image_size(t.image, f"world.targets.{i}.image")
+        if t.crop[2] > w or t.crop[3] > h:
+            raise ConfigError(f"world.targets.{i}.crop: {list(t.crop)} reaches outside its image {t.image!r} "
+                              f"({w} x {h} px); x1 must be <= {w} and y1 <= {h}")
     cameras = [(f"robots.{i}.sensors.{j}", r.id, s) for i, r in enumerate(cfg.robots) for j, s in enumerate(r.sensors)]
     cameras += [(f"env_sensors.{j}", None, s) for j, s in enumerate(cfg.env_sensors)]
     for where, robot_id, s in cameras:
@@ -535,6 +639,13 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     for i, r in enumerate(cfg.robots):
         if r.replay is not None:
             r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))
+            from .backends.base import BackendError
+            from .backends.replay import check_log
+
+            try:
+                check_log(r.replay.log)
+            except BackendError as e:
+                raise ConfigError(f"robots.{i}.replay.log: {e}") from None
         if r.safety.geofence_plan:
             field = f"robots.{i}.safety.geofence_plan"
             path = cfg.resolve_path(r.safety.geofence_plan, field)
@@ -547,12 +658,32 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
             r.safety.geofence = GeofenceConfig(polygons=[*r.safety.geofence.polygons, *fence.polygons],
                                                circles=[*r.safety.geofence.circles, *fence.circles])
             r.safety.geofence_plan = str(path)
+    for i, r in enumerate(cfg.robots):
+        from .geofence import Geofence
+
+        try:
+            why = Geofence(r.safety.geofence, r.home).check_point(0.0, 0.0)
+        except ValueError as e:
+            raise ConfigError(f"robots.{i}.safety.geofence: {e}") from None
+        if why is not None:
+            raise ConfigError(f"robots.{i}.safety.geofence: the home position ({r.home.lat}, {r.home.lon}) is {why}; "
+                              f"the drone takes off there, so the fence must allow it")
     sched = cfg.analytics_scheduler
     if sched.name != "default":
         if sched.workload is not None and any(isinstance(v, str) for v in sched.models.values()):
             sched.workload = str(cfg.resolve_path(sched.workload, "analytics_scheduler.workload"))
         sched.resolved_workload(cfg)  # a missing load or model fails here, before any actor starts
     return cfg
+
+
+def _image_size(path: str, field: str) -> tuple[int, int]:
+    """(width, height) in pixels of an image file, read with OpenCV; ConfigError naming ``field`` if unreadable."""
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ConfigError(f"{field}: {str(path)!r} is not an image OpenCV can read (PNG, JPEG, ...)")
+    return int(img.shape[1]), int(img.shape[0])
 
 
 def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:

@@ -23,9 +23,9 @@ Sources: QGroundControl plan file format (docs ``qgc-dev-guide/file_formats/plan
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Annotated, Sequence
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator
 from shapely.geometry import LineString, Point, Polygon
 from shapely.validation import explain_validity
 
@@ -39,7 +39,7 @@ _COVER_TOL_M = 1e-6
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, strict=True, allow_inf_nan=False)
 
 
 def _check_lat_lon(lat: float, lon: float, where: str) -> None:
@@ -55,7 +55,7 @@ class GeofencePolygon(_Model):
     vehicle must stay inside, ``False`` that it must stay out. Must be a simple (non self-intersecting) polygon
     once projected; that is checked when a :class:`Geofence` is built."""
 
-    points: list[tuple[float, float]] = Field(min_length=3)
+    points: list[Annotated[tuple[float, float], Strict(False)]] = Field(min_length=3)
     inclusion: bool = True
 
     @field_validator("points")
@@ -72,8 +72,8 @@ class GeofenceCircle(_Model):
     """A circular fence zone: ``center`` is ``(latitude, longitude)`` in WGS-84 degrees, ``radius`` in metres
     (> 0); ``inclusion=True`` means the vehicle must stay inside, ``False`` that it must stay out."""
 
-    center: tuple[float, float]
-    radius: float = Field(gt=0.0)
+    center: Annotated[tuple[float, float], Strict(False)]
+    radius: float = Field(gt=0.0, le=1e6)
     inclusion: bool = True
 
     @field_validator("center")

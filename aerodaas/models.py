@@ -37,6 +37,13 @@ def _finite(v: float, info) -> float:
     return v
 
 
+#: relative waypoints, altitudes and velocity commands farther than this from home (metres) are refused: beyond any
+#: multirotor's range, and large enough to lose precision in the ENU/geodetic conversions
+MAX_LOCAL_M = 100_000.0
+#: velocity commands faster than this (m/s, any axis) are refused before any safety limit is consulted
+MAX_COMMAND_SPEED_MPS = 100.0
+
+
 class Waypoint(_Model):
     """A navigation target (paper Table 2: ``Waypoint(id, x, y, z, hover_duration, waypoint_type)``).
 
@@ -54,15 +61,20 @@ class Waypoint(_Model):
     x: float
     y: float
     z: float
-    hover_duration: float = Field(default=0.0, ge=0.0)
+    hover_duration: float = Field(default=0.0, ge=0.0, le=86_400.0)
     waypoint_type: Literal["relative", "absolute"] = "relative"
-    speed: float | None = Field(default=None, gt=0.0)
-    acceptance_radius: float = Field(default=0.3, gt=0.0)
+    speed: float | None = Field(default=None, gt=0.0, le=MAX_COMMAND_SPEED_MPS)
+    acceptance_radius: float = Field(default=0.3, gt=0.0, le=1000.0)
 
     _chk = field_validator("x", "y", "z", "hover_duration", "speed")(_finite)
 
     @model_validator(mode="after")
     def _check_geodetic(self) -> "Waypoint":
+        if self.waypoint_type == "relative" and max(abs(self.x), abs(self.y)) > MAX_LOCAL_M:
+            raise ValueError(f"x, y must be within +-{MAX_LOCAL_M:g} m of home for a relative waypoint, got "
+                             f"({self.x!r}, {self.y!r})")
+        if abs(self.z) > MAX_LOCAL_M:
+            raise ValueError(f"z must be within +-{MAX_LOCAL_M:g} m of home, got {self.z!r}")
         if self.waypoint_type == "absolute":
             if not -90.0 <= self.x <= 90.0:
                 raise ValueError(f"x (latitude) must be within [-90, 90] degrees for an absolute waypoint, got {self.x}")
@@ -92,10 +104,17 @@ class VelocityCommand(_Model):
     vy: float = 0.0
     vz: float = 0.0
     yaw_rate: float = 0.0
-    duration: float = Field(default=0.5, gt=0.0)
+    duration: float = Field(default=0.5, gt=0.0, le=3600.0)
     issued_at: float | None = None  # sim time (s) the command was issued; set by the scheduler if None
 
     _chk = field_validator("vx", "vy", "vz", "yaw_rate", "duration")(_finite)
+
+    @field_validator("vx", "vy", "vz")
+    @classmethod
+    def _bounded(cls, v: float, info) -> float:
+        if abs(v) > MAX_COMMAND_SPEED_MPS:
+            raise ValueError(f"{info.field_name} must be within +-{MAX_COMMAND_SPEED_MPS:g} m/s, got {v!r}")
+        return v
 
 
 class ActionCommand(_Model):
@@ -198,7 +217,8 @@ class Odometry(_Model):
     geodetic: GeoPoint
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     attitude: Attitude = Field(default_factory=Attitude)
-    battery_pct: float = Field(default=100.0, ge=0.0, le=100.0)
+    battery_pct: float | None = Field(default=100.0, ge=0.0, le=100.0, description="None: unknown (a log without "
+                                      "battery data)")
     battery_voltage: float = 0.0
     armed: bool = False
     in_air: bool = False

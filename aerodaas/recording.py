@@ -248,6 +248,7 @@ class _ChunkFlushingStream:
         self._f = f
         self._pos = f.tell()
         self.pending = False
+        self.durable = self._pos  # bytes handed to the OS by the last successful flush (a record boundary)
 
     def write(self, data: bytes) -> int:
         n = self._f.write(data)
@@ -265,6 +266,7 @@ class _ChunkFlushingStream:
     def flush(self) -> None:
         self._f.flush()
         self.pending = False
+        self.durable = self._pos
 
     def sync(self) -> None:
         """Flush to the OS if anything was written since the last flush."""
@@ -881,3 +883,35 @@ def _safe_json(data: bytes) -> Any:
         return json.loads(data)
     except (ValueError, UnicodeDecodeError):
         return None
+
+
+def check_record_path(path: str | os.PathLike) -> Path:
+    """Check, before anything starts, that a recording can be written at ``path``; returns the absolute path.
+
+    The folder must already exist (nothing is created: a typo must not leave directories behind), the path must be
+    a regular file or not exist yet (``/dev/full``, ``/dev/null``, FIFOs and directories are refused), and the file
+    must be creatable there (``/proc/x.mcap`` is not). An existing file is left as it is until the run starts.
+    Raises ValueError naming the path and the reason."""
+    import stat
+
+    p = Path(os.path.abspath(os.path.expanduser(str(path))))
+    if not p.parent.is_dir():
+        raise ValueError(f"--record {str(path)!r}: folder {str(p.parent)!r} does not exist (create it first)")
+    if p.exists() or p.is_symlink():
+        try:
+            mode = p.stat().st_mode
+        except OSError as e:
+            raise ValueError(f"--record {str(path)!r}: {e.strerror}") from None
+        if not stat.S_ISREG(mode):
+            raise ValueError(f"--record {str(path)!r}: not a regular file (a device, directory or pipe cannot hold "
+                             f"a recording)")
+        if not os.access(p, os.W_OK):
+            raise ValueError(f"--record {str(path)!r}: the file is not writable")
+        return p
+    try:
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    except OSError as e:
+        raise ValueError(f"--record {str(path)!r}: cannot create the file: {e.strerror}") from None
+    os.close(fd)
+    os.unlink(p)
+    return p

@@ -32,6 +32,10 @@ class RunOptions:
     hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
     hitl_port: int | None = None
     live: str | None = None  # serve the run to Foxglove over WebSocket on this HOST:PORT (aerodaas.live)
+    #: start Ray in the background as soon as the application's Environment is validated (``aerodaas run``): an
+    #: invalid environment then fails before any Ray process exists, and a valid one overlaps Ray's start with
+    #: building the rest of the application
+    early_ray: bool = False
 
 
 OPTIONS = RunOptions()
@@ -49,13 +53,33 @@ class MissionResult:
     recording: str | None
     wall_s: float
     recording_counts: dict[str, int] = field(default_factory=dict)
+    #: the recorder's failure (disk full, I/O error) or None: ``{error, last_recorded_ns, finished, ...}``; a run
+    #: whose recording failed is not ``ok`` (exit code 1)
+    recording_failure: dict[str, Any] | None = None
+    recording_lost: int = 0
+    recording_start_ns: int | None = None  # log time of sim time 0 (ns)
 
     @property
     def ok(self) -> bool:
-        return self.outcome == "success"
+        return self.outcome == "success" and self.recording_failure is None
 
 
 _STARTED_RAY = False
+#: stop signals received (SIGINT/SIGTERM through :func:`request_stop`), and whether raising KeyboardInterrupt in the
+#: main thread is safe right now: while the application is built and while a mission runs, yes; while actors are
+#: being set up or torn down, no (an exception inside a Ray call there can leave the core worker half shut down and
+#: abort the process: exit 134 instead of 143, the recording unfinished) — the stop is then taken at the next
+#: safe point, which ends the mission as ``interrupted`` with the recording finished
+STOP_SIGNALS: list[int] = []
+_RAISE_OK = [True]
+
+
+def request_stop(signum: int) -> None:
+    """Called by the CLI's SIGINT/SIGTERM handler (main thread): record the stop and raise KeyboardInterrupt when
+    that is safe now; otherwise the run stops at its next safe point."""
+    STOP_SIGNALS.append(signum)
+    if _RAISE_OK[0]:
+        raise KeyboardInterrupt(f"signal {signum}")
 _EARLY: dict[str, Any] = {}  # the background start of Ray (start_ray_early)
 
 
@@ -69,8 +93,17 @@ def _init_ray(address: str | None) -> None:
         # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
         # num_cpus=1: hosts reserve no CPU (they are num_cpus=0 actors), so the CPU resource only sizes Ray's
         # pool of prestarted workers: one, which the edge host takes (no idle 80 MB worker left around)
-        ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
-                 num_cpus=1, configure_logging=True, logging_level="warning")
+        for attempt in range(3):
+            try:
+                ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
+                         num_cpus=1, configure_logging=True, logging_level="warning")
+                break
+            except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
+                # Ray gives its raylet a fixed 30 s to register with the GCS (ray/_private/node.py); a heavily
+                # loaded machine can miss that: start again (at most 3 times) rather than fail the run
+                if "timed out during startup" not in str(e) or attempt == 2:
+                    raise
+                ray.shutdown()
         _STARTED_RAY = True
 
 
@@ -103,18 +136,29 @@ def start_ray_early(address: str | None = None) -> None:
     threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
 
 
+class RayStartError(RuntimeError):
+    """Ray could not be started or reached (the message says which and why); ``aerodaas run`` exits 1 with it."""
+
+
 def ensure_ray(address: str | None = None) -> bool:
-    """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes."""
+    """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes.
+    Raises :class:`RayStartError`."""
     import ray
 
+    where = f"the Ray cluster at {address!r}" if address else "a local Ray"
     if _EARLY and _EARLY["address"] == address:
         _EARLY["ready"].wait()
         if _EARLY["error"] is not None:
             err, _EARLY["error"] = _EARLY["error"], None
             _EARLY.clear()
-            raise err
+            if isinstance(err, KeyboardInterrupt):
+                raise err
+            raise RayStartError(f"could not start {where}: {type(err).__name__}: {err}") from err
     if not ray.is_initialized():
-        _init_ray(address)
+        try:
+            _init_ray(address)
+        except Exception as e:  # noqa: BLE001 - Ray raises bare Exceptions (node start time-outs, ...)
+            raise RayStartError(f"could not start {where}: {type(e).__name__}: {e}") from e
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
 
 
@@ -344,6 +388,10 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     _check_clocks(robots, sim)
 
     # ---- validate everything before any actor starts
+    if opts.record:
+        from .recording import check_record_path
+
+        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
     graphs = {}
     scheds = _robot_schedulers(env, robots)
     for r in robots:
@@ -354,6 +402,11 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             check = getattr(a, "check", None)
             if callable(check):
                 check()
+            if getattr(a, "on_error", "continue") not in ("continue", "abort"):
+                from .config import ConfigError
+
+                raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
+                                  f"{getattr(a, 'on_error')!r}")
         graphs[r.id] = analytics
         _check_preplanned(r, scheds[r.id])
         _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
@@ -363,6 +416,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
     probe("app_built")
     t_start = time.monotonic()
+    if STOP_SIGNALS:  # stopped while the app was built: nothing started, nothing to record
+        raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
+    _RAISE_OK[0] = False  # from here on a stop signal is taken at the safe points (see request_stop)
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
@@ -375,6 +431,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     stats: dict[str, Any] = {}
     latency: dict[str, Any] = {}
     counts: dict[str, int] = {}
+    rec_report: dict[str, Any] = {}
     try:
         if scheduled:
             cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
@@ -413,7 +470,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
             hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in handles.items()},
                               host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
-                              token=hcfg.token).start()
+                              token=hcfg.token, docs=hcfg.docs).start()
             env.hitl = hitl
             shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
             print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
@@ -422,8 +479,10 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 hook(h["robot"])
         run_ref = edge.run.remote(timeout)
         reports = _wait_with_progress(run_ref, handles, opts.progress)
+        _RAISE_OK[0] = False
         stats, latency = _collect_stats(handles, hosts)
     finally:
+        _RAISE_OK[0] = False
         if hitl is not None:
             hitl.stop()
             env.hitl = None
@@ -432,6 +491,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 got = ray.get(h.close.remote(), timeout=60)
                 if tier == "edge":
                     counts = got
+                    rec_report = ray.get(h.recording_report.remote(), timeout=60)
             except Exception as e:  # pragma: no cover - reported, never silently lost
                 print(f"aerodaas: warning: host {tier!r} could not be closed cleanly (recording: {opts.record}): {e}",
                       file=sys.stderr)
@@ -445,13 +505,16 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 ray.kill(h, no_restart=True)
             except Exception:  # an executor on a lost node is already gone
                 pass
+    _RAISE_OK[0] = True  # back in the application
     for r in robots:
         reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": "no report (the run did not start)"})
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
     result = MissionResult(outcome=outcome, robots=reports, stats=stats, latency=latency, recording=opts.record,
-                           wall_s=time.monotonic() - t_start, recording_counts=counts)
+                           wall_s=time.monotonic() - t_start, recording_counts=counts,
+                           recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
+                           recording_start_ns=epoch_ns)
     for h in handles.values():
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
@@ -548,6 +611,9 @@ def _wait_with_progress(run_ref: Any, handles: dict, progress: bool) -> dict:
     last_print = 0.0
     t0 = time.monotonic()
     try:
+        if STOP_SIGNALS:  # a stop arrived while the actors were set up: end at once, cleanly
+            raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
+        _RAISE_OK[0] = True
         while True:
             ready, _ = ray.wait([run_ref], num_returns=1, timeout=0.5)
             if ready:
@@ -563,6 +629,7 @@ def _wait_with_progress(run_ref: Any, handles: dict, progress: bool) -> dict:
                     print("\n".join(lines), flush=True)
                     last_print = time.monotonic()
     except KeyboardInterrupt:
+        _RAISE_OK[0] = False
         interrupted = True
         for h in handles.values():
             try:
@@ -609,7 +676,7 @@ def _progress_lines(handles: dict, t0: float) -> list[str]:
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
         lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "
-                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {st['battery_pct']:5.1f}% "
+                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {_pct(st['battery_pct'])} "
                      f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
     return lines
 
@@ -642,7 +709,7 @@ def format_summary(result: MissionResult) -> str:
     for rid, rep in result.robots.items():
         lines.append(f"  robot {rid}: sim time {rep.get('t', 0):.1f} s, waypoints {rep.get('visited', 0)}/"
                      f"{rep.get('preplanned_total', 0)}, final state {rep.get('state')}, "
-                     f"battery {rep.get('battery_pct', 0):.1f}%")
+                     f"battery {_pct(rep.get('battery_pct', 0))}")
         if rep.get("error"):
             lines.append(f"    error: {rep['error']}")
         st = result.stats.get(rid, {})
@@ -661,6 +728,9 @@ def format_summary(result: MissionResult) -> str:
                 extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"
             if "commands" in a:
                 extra = f", {a['commands']} navigation commands"
+            if a.get("failures"):
+                extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
+                          f"{a.get('last_failure')})")
             lines.append(f"    analytics {a['name']}: {a['processed']} items, {a['process_ms_median']:.1f} ms median{extra}")
         lat = result.latency.get(rid)
         if lat:
@@ -681,6 +751,23 @@ def format_summary(result: MissionResult) -> str:
                          f"{ev.get('failed', 0)} failed")
     if result.recording:
         total = sum(result.recording_counts.values())
-        lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} channels)")
+        fail = result.recording_failure
+        if fail is None:
+            lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
+                         f"channels)")
+        else:
+            at = fail.get("last_recorded_ns")
+            held = f"up to {(at - result.recording_start_ns) / 1e9:.1f} s" if at and result.recording_start_ns else \
+                "nothing"
+            state = "finished" if fail.get("finished") else ("UNFINISHED (" + str(fail.get("finish_error")) +
+                                                              "; run `aerodaas recover FILE` when there is room)")
+            lines.append(f"  recording: FAILED: {fail.get('error')}; {result.recording} holds {held} "
+                         f"({fail.get('messages_in_file', '?')} messages, {state}); "
+                         f"{result.recording_lost} later messages were not recorded")
     return "\n".join(lines)
 
+
+
+def _pct(v: float | None) -> str:
+    """A battery percentage for humans; None (a log without battery data) is "unknown"."""
+    return "unknown" if v is None else f"{v:5.1f}%"

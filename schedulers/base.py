@@ -155,10 +155,17 @@ class TrajectoryScheduler:
         self._enqueue(scheduled, prio, fixed=nav.scheduling_type == SchedulingType.ORDERED)
         return scheduled
 
+    #: bounded work: an UNORDERED navigation of more waypoints is refused (ValueError) before any planning
+    #: (nearest neighbour is O(n^2): 2000 waypoints ~ 2 s on a loaded 2-core machine). Set per instance or subclass.
+    max_waypoints = 2000
+
     def schedule(self, nav: AeroNavigation, start: Sequence[float] | None = None) -> AeroNavigation:
-        """Order ``nav`` without enqueueing it."""
+        """Order ``nav`` without enqueueing it. Raises ValueError for more than :attr:`max_waypoints` waypoints."""
         if nav.scheduling_type == SchedulingType.UNORDERED:
             wps = [w for w in nav.waypoints if isinstance(w, Waypoint)]
+            if len(wps) > self.max_waypoints:
+                raise ValueError(f"navigation {nav.name!r}: {len(wps)} UNORDERED waypoints, more than the scheduler's "
+                                 f"max_waypoints ({self.max_waypoints}); split it or raise the limit")
             others = [w for w in nav.waypoints if not isinstance(w, Waypoint)]
             ordered = self.order(wps, start if start is not None else self.start) + others
             return nav.model_copy(update={"waypoints": ordered, "scheduling_type": SchedulingType.ORDERED})

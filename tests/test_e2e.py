@@ -151,4 +151,6 @@ def test_interrupt_leaves_a_finished_recording(tmp_path, sig, code, group):
     s = summarize_mcap(rec)
     assert s["finished"], out
     assert s["mission"]["outcome"] == "interrupted"
-    assert sum(1 for _ in read_messages(rec, ["/quadrotor_base/pose"])) > 5
+    # the flight up to the stop is in the file (how much of it depends on the machine's load: camera frames alone
+    # may fill the 20 kB the test waits for, and a stop during the actors' start ends the mission at once)
+    assert sum(1 for _ in read_messages(rec, ["/quadrotor_base/pose"])) >= 1

@@ -71,7 +71,11 @@ def test_disaster_survey_hitl_injection_is_replanned(ray_session, run_options, t
     st, body = request("POST", f"/drones/{drone}/waypoints", {"waypoints": [{"x": 1, "y": 1, "z": 99}]})
     assert st == 422 and "max_altitude" in json.dumps(body), body
     assert request("GET", "/drones/nope")[0] == 404
-    assert [m["items"] for m in queue()] == [m["items"] for m in before]  # nothing half-done
+    # nothing half-done: the queue is what it was, less what the drone flew meanwhile (a loaded machine may let it
+    # finish a waypoint while the requests are answered): a suffix of it, nothing added
+    after = [i for m in queue() for i in m["items"]]
+    was = [i for m in before for i in m["items"]]
+    assert after == was[len(was) - len(after):], (was, after)
 
     # wait until the first waypoint has been flown, then inject three over 10 m x 20 m in a poor order
     while request("GET", f"/drones/{drone}")[1]["visited"] < 1:
@@ -197,7 +201,8 @@ def test_safety_limits_reject_clamp_and_low_battery_rtl(ray_session, run_options
     drone.navigate(AeroNavigation(waypoints=[Waypoint(id="high", x=1, y=1, z=50, hover_duration=1)]))
     res = drone.start_mission()
     assert res.outcome == "success"
-    assert max(v["target"][2] for v in res.robots["quadrotor_base"]["visited_waypoints"]) == pytest.approx(10.0)
+    # clamped to the ceiling, lowered by what the approach would overshoot (the gate's dynamics model)
+    assert 9.9 <= max(v["target"][2] for v in res.robots["quadrotor_base"]["visited_waypoints"]) <= 10.0
 
     d = json.loads(json.dumps(base))
     d["robots"][0]["safety"] = {"low_battery_rtl_pct": 50}

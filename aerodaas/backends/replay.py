@@ -19,9 +19,15 @@ messages above, in MAVLink units, by :func:`load_ulog` (see there). A ULog has n
 reported for it.
 
 Only the vehicle's own messages count (the autopilot: the first HEARTBEAT whose autopilot is not
-``MAV_AUTOPILOT_INVALID``); a GCS's messages, unknown message ids and bad data are skipped. A log captured on two
-links holds each packet twice: a packet byte-identical (same sequence number and payload) to one seen less than
-``DUPLICATE_WINDOW_S`` before is dropped.
+``MAV_AUTOPILOT_INVALID``); a GCS's messages, unknown message ids and bad data are skipped. A log captured through
+a router that forwards each packet on two links holds it twice: a packet is a duplicate when the same sender
+(system, component) sent a packet with the same sequence number and message id within the last
+:data:`DUPLICATE_WINDOW_PACKETS` packets of that sender and :data:`DUPLICATE_WINDOW_S` seconds (MAVLink's 8-bit
+``seq`` counts per sender and link, so a window far shorter than its 256-packet wrap never mistakes a later packet,
+and a genuinely repeated message — a STATUSTEXT sent twice — has its own sequence number and is kept).
+
+A battery reported as unknown (``battery_remaining`` -1, MAVLink's "not available") stays unknown: ``battery_pct``
+is None and the odometry records ``null``, never 100 %.
 """
 from __future__ import annotations
 
@@ -40,10 +46,12 @@ from ..geo import geodetic_to_enu
 from ..models import Attitude, GeoPoint, Odometry
 from .base import BackendError, VehicleBackend
 
-__all__ = ["ReplayBackend", "McapCameraReplay", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
+__all__ = ["ReplayBackend", "McapCameraReplay", "check_log", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
 
-#: a byte-identical packet within this many seconds of the same one is a duplicate from a second link
+#: a packet repeating the (sequence number, message id) of one of its sender's last DUPLICATE_WINDOW_PACKETS packets,
+#: seen less than DUPLICATE_WINDOW_S seconds before, is a duplicate from a second link
 DUPLICATE_WINDOW_S = 0.5
+DUPLICATE_WINDOW_PACKETS = 32
 #: the link counts as lost after this many seconds of log time without a vehicle HEARTBEAT (as a GCS would)
 HEARTBEAT_TIMEOUT_S = 3.0
 #: MAVLink messages the replay uses
@@ -83,8 +91,10 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
         conn = mavutil.mavlink_connection(str(p))
     except OSError as e:
         raise BackendError(f"replay.log: cannot read {str(p)!r}: {e}") from e
+    from collections import deque
+
     raw: list[tuple[float, str, Any]] = []
-    seen: dict[bytes, float] = {}
+    recent: dict[tuple[int, int], deque] = {}  # sender -> its last packets' (seq, msgid, time)
     dups = 0
     vehicle: tuple[int, int] | None = None
     try:
@@ -93,14 +103,13 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
             if m is None:
                 break
             ts = float(getattr(m, "_timestamp", t0))
-            key = bytes(m.get_msgbuf())
-            last = seen.get(key)
-            seen[key] = ts
-            if last is not None and ts - last < DUPLICATE_WINDOW_S:
+            window = recent.setdefault((m.get_srcSystem(), m.get_srcComponent()),
+                                       deque(maxlen=DUPLICATE_WINDOW_PACKETS))
+            key = (m.get_seq(), m.get_msgId())
+            if any((sq, mid) == key and ts - t < DUPLICATE_WINDOW_S for sq, mid, t in window):
                 dups += 1
                 continue
-            if len(seen) > 50_000:  # forget keys older than the window
-                seen = {k: v for k, v in seen.items() if ts - v < DUPLICATE_WINDOW_S}
+            window.append((key[0], key[1], ts))
             mtype = m.get_type()
             if (vehicle is None and mtype == "HEARTBEAT" and m.autopilot != _MAV_AUTOPILOT_INVALID
                     and m.type != _MAV_TYPE_GCS):
@@ -113,6 +122,19 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
     msgs = [LogMessage(t, ty, m) for t, ty, m in raw if (m.get_srcSystem(), m.get_srcComponent()) == vehicle]
     return msgs, {"t0": t0, "sysid": vehicle[0], "compid": vehicle[1], "duplicates": dups,
                   "foreign": len(raw) - len(msgs)}
+
+
+def check_log(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a replay log (``.tlog`` or ``.ulg``) as :class:`ReplayBackend` will and check that it can be replayed: a
+    vehicle HEARTBEAT (tlog) and at least one position fix (``GLOBAL_POSITION_INT`` with a non-zero lat/lon, or a
+    ULog's ``vehicle_global_position``). Called while the environment is validated, before Ray starts. Returns the
+    loader's info; raises BackendError naming the file and what is missing."""
+    p = Path(path)
+    msgs, info = load_ulog(p) if p.suffix.lower() == ".ulg" else load_tlog(p)
+    if not any(lm.type == "GLOBAL_POSITION_INT" and (lm.msg.lat, lm.msg.lon) != (0, 0) for lm in msgs):
+        raise BackendError(f"{str(p)!r} holds no position fix (GLOBAL_POSITION_INT / vehicle_global_position): "
+                           f"nothing to replay")
+    return info
 
 
 class _UlogMsg:
@@ -288,7 +310,7 @@ class ReplayBackend(VehicleBackend):
         self._vel = np.zeros(3)
         self._att = Attitude()
         self._geo: GeoPoint | None = None
-        self._bat = 100.0
+        self._bat: float | None = None  # unknown until the log reports it (battery_remaining -1 = unknown)
         self._volt = 0.0
         self._have_battery_status = False
         self._armed = False
@@ -439,14 +461,16 @@ class ReplayBackend(VehicleBackend):
         return self._armed and self._pos[2] > 0.5
 
     @property
-    def battery_pct(self) -> float:
+    def battery_pct(self) -> float | None:
+        """Percent from the log, or None while the log has not reported it (or reports it unknown)."""
         return self._bat
 
     def odometry(self) -> Odometry:
         geo = self._geo or self.home
         return Odometry(robot_id=self.robot_id, t=self._t_applied, position=tuple(float(v) for v in self._pos),
                         geodetic=geo, velocity=tuple(float(v) for v in self._vel), attitude=self._att,
-                        battery_pct=min(max(self._bat, 0.0), 100.0), battery_voltage=self._volt,
+                        battery_pct=None if self._bat is None else min(max(self._bat, 0.0), 100.0),
+                        battery_voltage=self._volt,
                         armed=self._armed, in_air=self.in_air)
 
     # ------------------------------------------------------------------ control: a recording cannot be flown

@@ -1,0 +1,141 @@
+"""Bad input is refused before anything starts: every case of the reliability catalogue (environment files,
+``--record`` paths), the CLI's own flags, empty missions, and — structurally — no Ray process is ever started for
+an invalid environment."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from aerodaas import cli, runtime
+from aerodaas.reliability import ENV_CASES, PATH_CASES, check_env_case, check_path_case
+
+pytestmark = pytest.mark.faults
+
+
+@pytest.mark.parametrize("case", ENV_CASES, ids=[c.name for c in ENV_CASES])
+def test_bad_environment_is_refused_naming_the_field(case, tmp_path):
+    ok, msg = check_env_case(case, tmp_path)
+    assert ok, f"{case.name}: {msg}"
+
+
+@pytest.mark.parametrize("name,make,expect", PATH_CASES, ids=[c[0] for c in PATH_CASES])
+def test_bad_record_path_is_refused_and_nothing_is_created(name, make, expect, tmp_path):
+    ok, msg = check_path_case(make, expect, tmp_path)
+    assert ok, f"{name}: {msg}"
+    assert not (tmp_path / "no").exists()
+
+
+def test_ulog_without_position_is_refused_before_ray(tmp_path):
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    from .test_replay import write_ulog
+
+    nopos = tmp_path / "nopos.ulg"
+    write_ulog(nopos, {"battery_status": ([("uint64_t", "timestamp"), ("float", "remaining")],
+                                          [{"timestamp": 2_000_000, "remaining": 0.5}])}, [])
+    env = {"robots": [{"id": "px4", "backend": "replay", "replay": {"log": str(nopos)}}]}
+    with pytest.raises(ConfigError, match=r"robots\.0\.replay\.log: .*no vehicle_global_position"):
+        parse_environment_config(env)
+
+
+def test_far_waypoints_are_refused_without_a_geofence():
+    from pydantic import ValidationError
+
+    from aerodaas.models import VelocityCommand, Waypoint
+
+    with pytest.raises(ValidationError, match="within"):
+        Waypoint(id="w", x=1e308, y=0, z=5)
+    with pytest.raises(ValidationError, match="within"):
+        Waypoint(id="w", x=0, y=0, z=1e6)
+    with pytest.raises(ValidationError, match="vx"):
+        VelocityCommand(vx=1e308)
+
+
+APP = """from aerodaas import *
+env = Environment({env!r})
+drone = env.get_robot_by_id("d1")
+drone.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=1, y=0, z=2)]))
+drone.start_mission()
+"""
+
+
+@pytest.fixture
+def no_ray(monkeypatch):
+    """Fails the test if anything tries to start or connect to Ray."""
+    calls = []
+    monkeypatch.setattr(runtime, "_init_ray", lambda address: calls.append(address))
+    monkeypatch.setattr(runtime, "start_ray_early", lambda address=None: calls.append(("early", address)))
+    yield calls
+    runtime.OPTIONS.early_ray = False
+
+
+@pytest.mark.parametrize("via_flag", [True, False], ids=["--env", "named-by-the-app"])
+def test_invalid_environment_never_starts_ray(tmp_path, no_ray, capsys, via_flag):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"robots": [{"id": "d1", "limits": {"max_speed": 1e308}}]}))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(bad)))
+    argv = ["run", str(app), "--quiet"] + (["--env", str(bad)] if via_flag else [])
+    assert cli.main(argv) == 2
+    assert no_ray == []  # neither the early background start nor a direct start was begun
+    assert "robots.0.limits.max_speed" in capsys.readouterr().err
+
+
+def test_valid_environment_starts_ray_early_only_after_validation(tmp_path, no_ray, monkeypatch):
+    """The early start is begun by Environment() once the file validated (and a later bad waypoint still fails)."""
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"robots": [{"id": "d1"}]}))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(good)).replace("x=1, y=0, z=2", "x=1, y=0, z=500"))
+    assert cli.main(["run", str(app), "--quiet"]) == 2  # z 500 m above max_altitude 120: SafetyViolation
+    assert no_ray == [("early", None)]
+
+
+def test_invalid_environment_subprocess_creates_no_ray_session(tmp_path):
+    """The real command, in a fresh RAY_TMPDIR: exit 2, the field named, and Ray never created a session there."""
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"robots": [{"id": "d1", "sensors": [{"id": "c", "type": "camera",
+                                                                      "properties": {"widht": 640}}]}]}))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(bad)))
+    ray_tmp = tmp_path / "ray"
+    ray_tmp.mkdir()
+    env = {**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)}
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
+                       text=True, env=env, timeout=120)
+    assert p.returncode == 2, p.stderr
+    assert "did you mean 'width'" in p.stderr and "Traceback" not in p.stderr
+    assert list(ray_tmp.iterdir()) == []  # no session_* folder: no gcs_server/raylet was ever spawned
+
+
+@pytest.mark.parametrize("flag,value", [("--speedup", "inf"), ("--speedup", "nan"), ("--speedup", "1e308"),
+                                        ("--timeout", "-1")])
+def test_bad_run_flags_exit_2_before_anything(tmp_path, no_ray, capsys, flag, value):
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(tmp_path / "unused.json")))
+    assert cli.main(["run", str(app), flag, value]) == 2
+    assert no_ray == [] and flag in capsys.readouterr().err
+
+
+def test_bad_record_path_exits_2_before_ray(tmp_path, no_ray, capsys):
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(tmp_path / "unused.json")))
+    assert cli.main(["run", str(app), "--record", str(tmp_path / "missing" / "x.mcap")]) == 2
+    assert no_ray == [] and not (tmp_path / "missing").exists()
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_mission_upload_refuses_an_empty_mission(tmp_path, capsys):
+    plan = {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
+            "mission": {"version": 2, "items": [], "plannedHomePosition": [47.3977, 8.5456, 488.0],
+                        "firmwareType": 12, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5},
+            "geoFence": {"version": 2, "polygons": [], "circles": []}, "rallyPoints": {"version": 2, "points": []}}
+    f = tmp_path / "empty.plan"
+    f.write_text(json.dumps(plan))
+    # a connection nobody serves: the refusal must come before any connection attempt
+    assert cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1"]) == 2
+    assert "no items" in capsys.readouterr().err
