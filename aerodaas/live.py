@@ -215,7 +215,7 @@ def replay(path: str, address: str | None = None, *, speed: float = 1.0, wait_fo
 
     from mcap.reader import make_reader
 
-    from .recording import _iter_raw, _open_mcap
+    from .mcap_read import _iter_raw, _open_mcap
 
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and speed > 0):
         raise ValueError(f"--speed must be a positive number (1 = as recorded), got {speed!r}")

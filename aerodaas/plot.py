@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from .recording import (_TRUNCATION_ERRORS, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC, read_messages,
+from .mcap_read import (_TRUNCATION_ERRORS, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC, read_messages,
                         summarize_mcap)
 
 __all__ = ["plot_run", "load_plot_data", "planned_and_flown", "tracking_segments", "RunData", "RobotRun",

@@ -24,7 +24,7 @@ def recover_mcap(path: str | os.PathLike, out: str | os.PathLike | None = None) 
     file) or OSError (cannot write the output)."""
     from mcap.writer import CompressionType, Writer
 
-    from .recording import _open_mcap, _scan_linear
+    from .mcap_read import _open_mcap, _scan_linear
 
     src = Path(path)
     dst = Path(out) if out is not None else src

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import re
+from abc import ABC, abstractmethod
 from collections import deque
 
 from .analytics_base import Workload
@@ -28,7 +29,7 @@ __all__ = ["LatencyEstimator", "ProfileEstimator", "WindowMeanEstimator", "Recen
 ESTIMATOR_HELP = "profile, mean[:K] (DEMS-A), max[:K] (GAINPLAN) or pQ[:K] (percentile Q of the last K)"
 
 
-class LatencyEstimator:
+class LatencyEstimator(ABC):
     """Per-model cloud round-trip estimate (ms). Subclasses implement :meth:`_from_window`."""
 
     #: the spec this estimator was built from (reported in the benchmark JSON)
@@ -55,8 +56,9 @@ class LatencyEstimator:
         s = self.samples[model]
         return self._from_window(model, s) if s else self.profile[model]
 
+    @abstractmethod
     def _from_window(self, model: str, s: deque) -> float:
-        raise NotImplementedError
+        """The estimate (ms) from a non-empty window ``s`` of observed round trips of ``model``."""
 
 
 class ProfileEstimator(LatencyEstimator):
@@ -102,8 +104,8 @@ class WindowMeanEstimator(LatencyEstimator):
             if abs(mean - self.estimate[model]) > self.drift_ms:
                 self.estimate[model] = mean
 
-    def value(self, model: str) -> float:
-        return self.estimate[model]
+    def _from_window(self, model: str, s: deque) -> float:
+        return self.estimate[model]  # moved only by _update (the profile until a full window drifts)
 
 
 class RecentMaxEstimator(LatencyEstimator):
