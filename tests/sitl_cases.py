@@ -23,7 +23,7 @@ def autopilot(request) -> str:
 
 
 @pytest.fixture(autouse=True)
-def _known_gap(request):
+def known_gap_xfail(request):
     """A case the importing module lists in ``KNOWN_GAPS`` is expected to fail (non-strict xfail, reason there)."""
     if request.node.originalname in getattr(request.module, "KNOWN_GAPS", ()):
         request.applymarker(pytest.mark.xfail(strict=False, reason=f"known gap on {request.module.AUTOPILOT}: "
