@@ -269,6 +269,9 @@ class RemoteRecorder:
         self.send_errors: list[str] = []
         self.frames_dropped = 0
         self.closed = False
+        #: the same interface as :class:`RecorderService`: a disk failure is the edge recorder's (the file is there),
+        #: so these callbacks are never called here
+        self.on_failure: list[Callable[[dict], None]] = []
         self._wake = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="aerodaas-remote-recorder", daemon=True)
         self._thread.start()
@@ -316,6 +319,12 @@ class RemoteRecorder:
     def _loop(self) -> None:
         while not self._wake.wait(self.period_s):
             self._send()
+
+    def report(self) -> dict[str, Any]:
+        """``{"failure": None, "lost": 0, "frames_dropped": n, "write_errors": [...]}`` like
+        :meth:`RecorderService.report`; batches that could not be delivered are in ``write_errors``."""
+        return {"failure": None, "lost": 0, "frames_dropped": self.frames_dropped,
+                "write_errors": self.send_errors[-10:]}
 
     def close(self, timeout_s: float = 30.0) -> dict[str, Any]:
         """Deliver the rest and wait (at most ``timeout_s``) until the edge recorder has queued it all."""
