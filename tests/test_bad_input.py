@@ -69,6 +69,9 @@ def no_ray(monkeypatch):
     calls = []
     monkeypatch.setattr(runtime, "_init_ray", lambda address: calls.append(address))
     monkeypatch.setattr(runtime, "start_ray_early", lambda address=None: calls.append(("early", address)))
+    # `aerodaas run` shuts Ray down at its end: here that would be the test session's shared Ray (tests after this
+    # one found it gone); nothing was started, so there is nothing to stop
+    monkeypatch.setattr(runtime, "shutdown_ray", lambda: None)
     yield calls
     runtime.OPTIONS.early_ray = False
 
