@@ -646,6 +646,36 @@ class SchedulerComponent(Component):
 
 
 # --------------------------------------------------------------------------------------------------- runtime
+class _Checkpointer:
+    """Sends each drone's checkpoint (:mod:`.checkpoint`) to the run's recorder actor about every ``period_s``
+    wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
+    checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
+
+    def __init__(self, host: Host, drones: list, period_s: float = 1.0) -> None:
+        self.host, self.period_s = host, period_s
+        self.on = "recorder" in (getattr(host, "peers", None) or {}) and bool(drones)
+        self.last = time.monotonic()
+        self.visited = {id(d): len(d.visited) for d in drones}
+
+    def maybe(self, active: list) -> None:
+        if not self.on:
+            return
+        now = time.monotonic()
+        due = now - self.last >= self.period_s
+        for d in active:
+            if due or len(d.visited) != self.visited.get(id(d)):
+                from .checkpoint import drone_checkpoint
+
+                self.visited[id(d)] = len(d.visited)
+                try:
+                    self.host.peer("recorder").checkpoint.remote(d.cfg.id, drone_checkpoint(d))
+                except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
+                    self.host.report_error("checkpoint", e)
+                    self.on = False
+        if due:
+            self.last = now
+
+
 class HostRuntime:
     """Builds a host's components from the driver's ``spec`` and runs them.
 
@@ -665,7 +695,7 @@ class HostRuntime:
         rec = spec.get("record")
         if rec:  # the edge host: the file and/or the live view
             self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"))
-        elif spec.get("record_remote"):  # another host of a recorded run: its messages go to the edge recorder
+        elif spec.get("record_remote"):  # an actor of a recorded run: its messages go to the run's recorder actor
             from .recorder import RemoteRecorder
 
             self.recorder = RemoteRecorder(host, spec["record_remote"])
@@ -734,8 +764,9 @@ class HostRuntime:
             raise KeyError(f"host {self.host.host_id!r} has no component {cid!r}; it has {sorted(self.comps)}") from None
 
     # ------------------------------------------------------------------ the clock
-    def run(self, timeout_s: float | None = None) -> dict[str, dict]:
-        """Fly every drone of this host to the end of its mission; returns robot id -> report.
+    def run(self, timeout_s: float | None = None, resume: bool = False) -> dict[str, dict]:
+        """Fly every drone of this host to the end of its mission; returns robot id -> report. ``resume``: the
+        drones were restored from checkpoints (a restarted actor): no arming, no take-off, the mission goes on.
 
         One clock for the fleet: every ``1/physics_hz`` simulated seconds each backend steps (simulator) or is
         polled (real vehicles), odometry is published at its rate, due cameras capture, and each drone's control
@@ -746,10 +777,13 @@ class HostRuntime:
         dt = 1.0 / sim.physics_hz
         lock = sim.lockstep
         for d in drones:
+            if resume and getattr(d, "restored_from", None) is not None:
+                continue
             d.start()
         wall0 = time.monotonic()
         step = 0
-        active = list(drones)
+        active = [d for d in drones if not d.done]
+        checkpoints = _Checkpointer(self.host, drones)
         self.tick_lateness: list[float] = []
         try:
             while active:
@@ -790,6 +824,7 @@ class HostRuntime:
                 for d in finished:
                     d.finish()
                     active.remove(d)
+                checkpoints.maybe(active)
                 if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
                     for d in active:
                         d.outcome = "timeout"
@@ -813,9 +848,9 @@ class HostRuntime:
             d.error = reason
             d.end_mission("failed")
         peers = getattr(self.host, "peers", {}) or {}
-        for cid, tier in getattr(self.host, "location", {}).items():
-            if cid.endswith("/drone") and tier in peers and not any(d.cid == cid for d in self.drones):
-                peers[tier].call.remote(cid, "end_mission", "failed")
+        for cid, hid in getattr(self.host, "location", {}).items():
+            if cid.endswith("/drone") and hid in peers and not any(d.cid == cid for d in self.drones):
+                self.host.peer(hid).call.remote(cid, "end_mission", "failed")
 
     # ------------------------------------------------------------------ end
     def stats(self) -> dict:

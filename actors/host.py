@@ -49,7 +49,7 @@ import cv2
 import numpy as np
 import ray
 
-__all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "Host", "HostActor", "encode_frame", "decode_frame"]
+__all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "Host", "encode_frame", "decode_frame"]
 
 
 class FrameCopies:
@@ -240,24 +240,40 @@ class RemoteOutlet:
         self.in_flight: list = []
         self.sent = 0
         self.dropped = 0
+        self.failed = 0  # calls that ended in an error (the consumer's actor died or restarted meanwhile)
         self._lock = threading.Lock()
 
+    def _reap(self) -> None:
+        """Forget finished calls; count those that failed (frames in flight when the consumer died)."""
+        done, self.in_flight = ray.wait(self.in_flight, num_returns=len(self.in_flight), timeout=0)
+        for ref in done:
+            try:
+                ray.get(ref, timeout=0)
+            except Exception:  # noqa: BLE001 - ActorDiedError, ActorUnavailableError, the consumer's own error
+                self.failed += 1
+
     def send(self, env: dict) -> Any:
-        """Send one envelope (without its lock-step token); returns the call's ObjectRef or None if dropped."""
+        """Send one envelope (without its lock-step token); returns the call's ObjectRef or None if dropped. A frame
+        is put into the object store (or JPEG-encoded, across tiers) once per envelope, however many consumers of
+        other actors it has (the envelope keeps the ref)."""
         tok = env.get("tok")
         with self._lock:
             if tok is None and self.in_flight:
-                _, self.in_flight = ray.wait(self.in_flight, num_returns=len(self.in_flight), timeout=0)
+                self._reap()
                 if len(self.in_flight) >= self.buffer:
                     self.dropped += 1
                     return None
-            wire = {k: v for k, v in env.items() if k != "tok"}
+            wire = {k: v for k, v in env.items() if k not in ("tok", "_ref", "_jpeg")}
             wire["lockstep"] = tok is not None
             if env.get("kind") == "frame":
-                frame = env["data"]
-                wire["data"] = encode_frame(frame) if self.jpeg else ray.put(frame)
+                key = "_jpeg" if self.jpeg else "_ref"
+                data = env.get(key)
+                if data is None:
+                    frame = env["data"]
+                    data = env[key] = encode_frame(frame) if self.jpeg else ray.put(frame)
+                    self.copies.count("tier_jpeg_encoded" if self.jpeg else "object_store_put")
+                wire["data"] = data
                 wire["kind"] = "frame_jpeg" if self.jpeg else "frame_ref"
-                self.copies.count("tier_jpeg_encoded" if self.jpeg else "object_store_put")
             ref = self.handle.deliver.remote(self.cid, self.port, wire)
             self.sent += 1
             if tok is None:
@@ -267,7 +283,10 @@ class RemoteOutlet:
             return ref
 
     def stats(self) -> dict:
-        return {"port": self.port, "to": self.cid, "sent": self.sent, "dropped": self.dropped}
+        with self._lock:
+            if self.in_flight:
+                self._reap()
+        return {"port": self.port, "to": self.cid, "sent": self.sent, "dropped": self.dropped, "failed": self.failed}
 
 
 class Host:
@@ -318,10 +337,20 @@ class Host:
         return comp
 
     def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> None:
-        self.routes = {k: [tuple(s) for s in v] for k, v in routes.items()}
+        """``routes``: producer id -> ``[(consumer id, port, buffer, robots or None)]``; ``location``: component id
+        -> host id; ``tiers``: host id -> tier; ``peers``: host id -> Ray actor name (resolved on first use, so a
+        restarted actor is reached under the same name) or actor handle."""
+        self.routes = {k: [tuple(s) if len(s) == 4 else (*s, None) for s in v] for k, v in routes.items()}
         self.location.update(location)
         self.tiers.update(tiers)
         self.peers = dict(peers)
+
+    def peer(self, host_id: str) -> Any:
+        """The actor handle of host ``host_id`` (looked up by name once, then cached). Raises KeyError."""
+        p = self.peers[host_id]
+        if isinstance(p, str):
+            p = self.peers[host_id] = ray.get_actor(p)
+        return p
 
     # ------------------------------------------------------------------ delivery
     def submit(self, fn: Callable, *args: Any) -> None:
@@ -345,7 +374,10 @@ class Host:
             if tok is not None:
                 env["tok"] = tok
             local = []
-            for cid, port, buf in subs:
+            robot = env.get("robot")
+            for cid, port, buf, only in subs:
+                if only is not None and robot not in only:
+                    continue  # an edge to a replica or a drone's own copy carries only its drones' items
                 comp = self.components.get(cid)
                 if comp is not None:
                     local.append((comp, port))
@@ -380,7 +412,7 @@ class Host:
             hid = self.location.get(cid)
             if hid is None or hid not in self.peers:
                 raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
-            o = self._outlets[key] = RemoteOutlet(self.peers[hid], cid, port, buffer,
+            o = self._outlets[key] = RemoteOutlet(self.peer(hid), cid, port, buffer,
                                                   jpeg=self.tiers.get(hid, self.tier) != self.tier, copies=self.copies)
         return o
 
@@ -432,63 +464,3 @@ class Host:
     def close(self) -> None:
         self._closed = True
         self.pool.shutdown(wait=True, cancel_futures=True)
-
-
-@ray.remote(num_cpus=0, max_concurrency=32)
-class HostActor:
-    """The Ray actor around a :class:`Host` (see the module docstring). Built empty, then
-    :meth:`setup` creates its components from their specs (see :func:`aerodaas.actors.components.build`)."""
-
-    def __init__(self, host_id: str, tier: str, epoch_ns: int, lockstep: bool = False, workers: int | None = None,
-                 switch_interval_s: float | None = 0.0005) -> None:
-        if switch_interval_s:
-            # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
-            # to move on by up to 5 ms; the host is latency-bound, not throughput-bound
-            sys.setswitchinterval(switch_interval_s)
-        self.host = Host(host_id, tier, epoch_ns, lockstep, workers)
-        self.runtime = None
-
-    def setup(self, spec: dict) -> dict:
-        """Create this host's components (drones connect to their vehicles here). Returns a description."""
-        from .components import HostRuntime
-
-        self.runtime = HostRuntime(self.host, spec)
-        self.host.watch_gc()
-        return self.runtime.describe()
-
-    def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> bool:
-        self.host.connect(routes, location, tiers, peers)
-        return True
-
-    def deliver(self, cid: str, port: str, wire: dict) -> list:
-        return self.host.deliver(cid, port, wire)
-
-    def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:
-        """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
-        if method.startswith("_"):
-            raise AttributeError(f"component {cid!r}: {method!r} is not public")
-        comp = self.runtime.lookup(cid)
-        return getattr(comp, method)(*args, **kwargs)
-
-    def run(self, timeout_s: float | None = None) -> dict:
-        return self.runtime.run(timeout_s)
-
-    def record(self, batch: list) -> int:
-        """Messages recorded by components of another host (:class:`~.recorder.RemoteRecorder`), handed to this
-        host's recorder; returns how many (0 when this host records nothing)."""
-        from .recorder import deliver
-
-        rec = self.runtime.recorder if self.runtime else None
-        return deliver(rec, batch) if rec is not None and hasattr(rec, "rec") else 0
-
-    def stats(self) -> dict:
-        return self.runtime.stats() if self.runtime else {}
-
-    def pid(self) -> int:
-        return os.getpid()
-
-    def close(self) -> dict:
-        return self.runtime.close() if self.runtime else {}
-
-    def recording_report(self) -> dict:
-        return self.runtime.recording_report() if self.runtime else {}

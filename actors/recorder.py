@@ -82,8 +82,9 @@ class RecorderService:
         self._thread.start()
 
     # ------------------------------------------------------------------ producers
-    def image(self, topic: str, t_ns: int, frame: np.ndarray, frame_id: str) -> bool:
-        """Queue a (H, W, 3) uint8 BGR frame (shared, not copied: frames are read-only). False if dropped."""
+    def image(self, topic: str, t_ns: int, frame: np.ndarray | bytes, frame_id: str) -> bool:
+        """Queue a (H, W, 3) uint8 BGR frame (shared, not copied: frames are read-only), or its JPEG bytes already
+        encoded by the sending actor. False if dropped."""
         with self._lock:
             if self.failure is not None:
                 self.lost += 1
@@ -152,9 +153,12 @@ class RecorderService:
         r = self.rec
         if kind == "image":
             _, topic, t_ns, frame, frame_id = item
-            r.write_image(topic, t_ns, frame, frame_id=frame_id)  # the one JPEG encode of this frame
-            if self.copies is not None:
-                self.copies.count("recorder_jpeg_encoded")
+            if isinstance(frame, (bytes, bytearray)):  # encoded by the sending actor (RemoteRecorder)
+                r.write_image(topic, t_ns, jpeg=bytes(frame), frame_id=frame_id)
+            else:
+                r.write_image(topic, t_ns, frame, frame_id=frame_id)  # the one JPEG encode of this frame
+                if self.copies is not None:
+                    self.copies.count("recorder_jpeg_encoded")
             k = self._intrinsics.get(frame_id)
             if k is not None:
                 r.write_camera_calibration(f"{topic}/calibration", t_ns, frame_id=frame_id, **k)
@@ -260,8 +264,11 @@ class RemoteRecorder:
     the hosts are connected).
     Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages)."""
 
-    def __init__(self, host: Any, target: str = "edge", period_s: float = 0.2) -> None:
+    def __init__(self, host: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
+                 max_pending_frames: int = 8) -> None:
         self.host, self.target, self.period_s = host, target, period_s
+        self.jpeg_quality, self.max_pending_frames = jpeg_quality, max_pending_frames
+        self._pending_frames = 0
         self._buf: list[tuple] = []
         self._lock = threading.Lock()
         self._refs: list = []
@@ -277,8 +284,16 @@ class RemoteRecorder:
         self._thread.start()
 
     def image(self, topic: str, t_ns: int, frame: np.ndarray, frame_id: str) -> bool:
-        self.frames_dropped += 1  # frames are recorded where the camera is
-        return False
+        """Queue a (H, W, 3) uint8 BGR frame (shared, not copied); it is JPEG-encoded here, on the sending thread,
+        and crosses to the recorder as JPEG bytes. At most ``max_pending_frames`` wait; beyond that a frame is
+        dropped and counted (False)."""
+        with self._lock:
+            if self.closed or self._pending_frames >= self.max_pending_frames:
+                self.frames_dropped += 1
+                return False
+            self._pending_frames += 1
+            self._buf.append(("image", topic, t_ns, frame, frame_id))
+        return True
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
         self._put(("camera", robot, sensor, dict(intrinsics), float(pitch_deg)))
@@ -300,12 +315,21 @@ class RemoteRecorder:
     def _send(self) -> None:
         import ray
 
+        from .host import encode_frame
+
         with self._lock:
             batch, self._buf = self._buf, []
+            frames, self._pending_frames = self._pending_frames, 0
         if not batch:
             return
+        if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
+            batch = [("image", it[1], it[2], encode_frame(it[3], self.jpeg_quality), it[4]) if it[0] == "image"
+                     and isinstance(it[3], np.ndarray) else it for it in batch]
+            copies = getattr(self.host, "copies", None)
+            if copies is not None:
+                copies.count("recorder_jpeg_encoded", frames)
         try:
-            self._refs.append(self.host.peers[self.target].record.remote(batch))
+            self._refs.append(self.host.peer(self.target).record.remote(batch))
             self.sent += len(batch)
         except Exception as e:  # noqa: BLE001 - reported in stats, never fatal
             self.send_errors.append(f"{type(e).__name__}: {e}")
@@ -348,7 +372,7 @@ def deliver(recorder: Any, batch: list[tuple]) -> int:
     number of items. Raises ValueError for an unknown item kind."""
     for item in batch:
         kind = item[0]
-        if kind not in ("camera", "detections", "odometry", "json"):
+        if kind not in ("camera", "detections", "odometry", "json", "image"):
             raise ValueError(f"remote recorder: unknown item kind {kind!r}")
         getattr(recorder, kind)(*item[1:])
     return len(batch)

@@ -35,6 +35,8 @@ class Analytics:
         if name:
             self.name = name
         self.compute = None
+        self.colocate = False
+        self.replicas = 1
         self.inputs: list[AeroStreamData] = []
         self.output = AeroStreamData(source=self)
         self.triggers: list[Analytics] = []
@@ -48,9 +50,24 @@ class Analytics:
         return d
 
     # -- IAnalyse
-    def deploy(self, compute: Any) -> "Analytics":
-        """Assign the compute resource (ICompute) this analytics runs on; its tier decides placement."""
+    def deploy(self, compute: Any, *, colocate: bool = False, replicas: int = 1) -> "Analytics":
+        """Assign the compute resource (ICompute) this analytics runs on: its actor is placed on a Ray node of the
+        resource's tier carrying its labels.
+
+        ``replicas``: run ``n`` actors of this analytics; each drone's items always go to the same replica
+        (``index of the drone % n``), so per-drone state (tracks, integrators) stays in one place.
+        ``colocate=True``: no actor of its own; a copy runs inside the actor of each drone that feeds it (zero
+        actor hops, the drone's own process and GIL: for cheap per-drone analytics such as a follow controller);
+        ``compute`` then only names where the drones fly from. Raises ValueError for ``replicas`` < 1 or
+        ``replicas`` > 1 with ``colocate``."""
+        if not isinstance(replicas, int) or isinstance(replicas, bool) or replicas < 1:
+            raise ValueError(f"analytics {self.name!r}: replicas must be an integer >= 1, got {replicas!r}")
+        if colocate and replicas != 1:
+            raise ValueError(f"analytics {self.name!r}: replicas={replicas} with colocate=True (a colocated "
+                             f"analytics runs once inside each drone's actor)")
         self.compute = compute
+        self.colocate = bool(colocate)
+        self.replicas = replicas
         return self
 
     def analyse(self, stream: AeroStreamData) -> AeroStreamData:

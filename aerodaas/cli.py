@@ -42,6 +42,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.record, o.speedup, o.timeout, o.address = args.record, args.speedup, args.timeout, args.address
     o.env_path = str(Path(args.env).resolve()) if args.env else None
     o.lockstep = True if args.lockstep else None
+    o.dashboard = bool(getattr(args, "dashboard", False))
     o.progress = not args.quiet
     o.hitl = True if args.hitl else None
     o.hitl_port = args.hitl_port
@@ -407,6 +408,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--timeout", type=float, help="wall-clock limit in seconds")
     r.add_argument("--address", help="attach to an existing Ray cluster (e.g. 'auto') instead of starting one")
     r.add_argument("--quiet", action="store_true", help="no live progress")
+    r.add_argument("--dashboard", action="store_true",
+                   help="start Ray's dashboard with the local Ray (127.0.0.1:8265): `ray list actors`, the actors view")
     r.add_argument("--hitl", action="store_true", help="serve the human-in-the-loop API (token printed once)")
     r.add_argument("--hitl-port", type=int, help="port of the human-in-the-loop API (0: any free port)")
     r.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -309,6 +310,8 @@ class RobotConfig(_Cfg):
     idle_land_s: float = Field(default=10.0, gt=0, le=MAX_DURATION_S, description="land after this many seconds (sim time) with "
                                "nothing queued, once some navigation has been flown")
     sensors: list[SensorConfig] = Field(default_factory=list)
+    compute: str | None = Field(default=None, description="id of the edge compute resource this robot flies from "
+                                "(its drone actor runs there); default: the environment's first edge compute")
     max_waypoints_per_request: int = Field(default=1000, ge=1, le=100_000, description="bounded work: items in one "
                                            "navigation added while flying (HITL request, analytics output)")
     max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
@@ -349,12 +352,35 @@ class RobotConfig(_Cfg):
         return self
 
 
+_LABEL_KEY = re.compile(r"^([a-z0-9]([-a-z0-9.]*[a-z0-9])?/)?[A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?$")
+_LABEL_VALUE = re.compile(r"^([A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?)?$")
+
+
 class ComputeConfig(_Cfg):
-    """A compute resource: ``tier`` ``edge`` or ``cloud``; ``properties`` e.g. cpus, memory_gb, accelerators."""
+    """A compute resource, and the place its actors run: ``tier`` ``edge`` or ``cloud``; ``labels`` are Ray node
+    labels beyond ``tier`` that a node must carry to run this resource's actors (e.g.
+    ``{"aerodaas/site": "field-2"}``; ``ray start --labels``), matched with Ray's ``label_selector``;
+    ``properties`` e.g. cpus, memory_gb, accelerators (informative). Label keys and values follow Ray's (Kubernetes')
+    label syntax: ``[prefix/]name`` of at most 63 characters, alphanumerics, ``-``, ``_``, ``.``."""
 
     id: str = Field(min_length=1)
     tier: Literal["edge", "cloud"]
+    labels: dict[str, str] = Field(default_factory=dict)
     properties: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _labels(self) -> "ComputeConfig":
+        for k, v in self.labels.items():
+            if k == "tier":
+                raise ValueError(f"labels.tier: the tier is the compute resource's 'tier' field ({self.tier!r}); "
+                                 f"do not repeat it as a label")
+            if not _LABEL_KEY.match(k):
+                raise ValueError(f"labels: {k!r} is not a Ray node label key ([prefix/]name, alphanumerics, '-', '_', "
+                                 f"'.', at most 63 characters)")
+            if not isinstance(v, str) or not _LABEL_VALUE.match(v):
+                raise ValueError(f"labels.{k}: {v!r} is not a Ray node label value (alphanumerics, '-', '_', '.', "
+                                 f"at most 63 characters)")
+        return self
 
 
 class GroundConfig(_Cfg):
@@ -532,6 +558,10 @@ class EnvironmentConfig(_Cfg):
     simulation: SimulationConfig = Field(default_factory=SimulationConfig)
     hitl: HitlConfig = Field(default_factory=HitlConfig)
     analytics_scheduler: AnalyticsSchedulerConfig = Field(default_factory=AnalyticsSchedulerConfig)
+    drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
+                                  "1: an actor per drone; more for memory-bound fleets")
+    actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
+                                    "and dispatcher actor of a run (the recorder is never restarted)")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
 
     @model_validator(mode="after")
@@ -542,6 +572,11 @@ class EnvironmentConfig(_Cfg):
             dup = sorted({i for i in ids if ids.count(i) > 1})
             if dup:
                 raise ValueError(f"{name}: duplicate ids {dup}")
+        edges = [c.id for c in self.compute if c.tier == "edge"]
+        for j, r in enumerate(self.robots):
+            if r.compute is not None and r.compute not in edges:
+                raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
+                                 f"environment (edge: {edges})")
         for j, s in enumerate(self.env_sensors):
             src = s.properties.get("source") if s.type == "camera" else None
             if src == "backend":

@@ -1,10 +1,13 @@
-"""Runtime glue: turns an application's dataflow into Ray actors placed on tiers, runs the mission, shows
-progress, finishes the recording and returns a :class:`MissionResult`.
+"""Runtime glue: checks an application, starts (or joins) Ray, turns the application's dataflow into the run's
+Ray actors (:mod:`aerodaas.dataflow`: a drone actor per drone, an actor per deployed analytics replica, a
+dispatcher per edge compute with scheduled analytics, a recorder per run), flies the mission
+(:mod:`aerodaas.supervise`), finishes the recording and returns a :class:`MissionResult`.
 
-Placement uses Ray node labels: actors for compute on tier ``edge`` get ``label_selector={"tier": "edge"}``,
-tier ``cloud`` ``{"tier": "cloud"}``. In local single-node mode (the default) Ray is started here with the
-node labelled ``tier=edge`` and cloud compute is allowed on it (``in(edge,cloud)``). Ray's token
-authentication stays on (Ray >= 2.59 enables it for local clusters).
+Placement uses Ray node labels: an actor for compute on tier ``edge`` gets ``label_selector={"tier": "edge",
+**compute labels}``, tier ``cloud`` ``{"tier": "cloud", ...}``. In local single-node mode (the default) Ray is
+started here with the node labelled ``tier=edge``, cloud compute may use it (``in(edge,cloud)``) and compute labels
+are not required. Ray's token authentication stays on (Ray >= 2.59 enables it for local clusters); the local
+cluster listens on loopback only.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ from typing import Any
 
 
 from .config import SimulationConfig
+from .run_report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 
 
 @dataclass
@@ -32,6 +36,10 @@ class RunOptions:
     hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
     hitl_port: int | None = None
     live: str | None = None  # serve the run to Foxglove over WebSocket on this HOST:PORT (aerodaas.live)
+    #: a local Ray also starts its dashboard on 127.0.0.1 (``aerodaas run --dashboard``: it serves
+    #: ``ray list actors`` and the actors view; off by default: it adds seconds to the start and on a loaded machine
+    #: can fail to start, which then costs a retry without it)
+    dashboard: bool = False
     #: start Ray in the background as soon as the application's Environment is validated (``aerodaas run``): an
     #: invalid environment then fails before any Ray process exists, and a valid one overlaps Ray's start with
     #: building the rest of the application
@@ -93,17 +101,26 @@ def _init_ray(address: str | None) -> None:
         # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
         # num_cpus=1: hosts reserve no CPU (they are num_cpus=0 actors), so the CPU resource only sizes Ray's
         # pool of prestarted workers: one, which the edge host takes (no idle 80 MB worker left around)
+        dashboard = OPTIONS.dashboard
         for attempt in range(3):
             try:
-                ray.init(address="local", labels={"tier": "edge"}, include_dashboard=False, log_to_driver=True,
+                # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
+                ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
+                         dashboard_host="127.0.0.1", log_to_driver=True,
                          num_cpus=1, configure_logging=True, logging_level="warning")
                 break
             except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
                 # Ray gives its raylet a fixed 30 s to register with the GCS (ray/_private/node.py); a heavily
-                # loaded machine can miss that: start again (at most 3 times) rather than fail the run
+                # loaded machine can miss that: start again (at most 3 times) rather than fail the run. A dashboard
+                # that fails to start is not worth failing the run for: start again without it
+                ray.shutdown()
+                if dashboard and "dashboard" in str(e).lower() and attempt < 2:
+                    print(f"aerodaas: warning: Ray's dashboard did not start ({str(e).splitlines()[0][:120]}); "
+                          f"running without it", file=sys.stderr, flush=True)
+                    dashboard = False
+                    continue
                 if "timed out during startup" not in str(e) or attempt == 2:
                     raise
-                ray.shutdown()
         _STARTED_RAY = True
 
 
@@ -174,31 +191,9 @@ def shutdown_ray() -> None:
     _EARLY.clear()
 
 
-def _selector(tier: str, has_cloud: bool) -> dict[str, str]:
-    if tier == "cloud" and not has_cloud:
-        return {"tier": "in(edge,cloud)"}
-    return {"tier": tier}
-
-
-def _collect_graph(robot) -> tuple[list, list]:
-    """Analytics reachable from the robot's sensors (topological order) and the sensors in use."""
-    order, seen = [], set()
-
-    def visit(stream):
-        for sub in stream.subscribers:
-            if id(sub) not in seen:
-                seen.add(id(sub))
-                order.append(sub)
-                visit(sub.output)
-
-    for s in robot.sensors.values():
-        visit(s.get_data_stream())
-    return order, [s for s in robot.sensors.values()]
-
-
 class ComponentHandle:
-    """A component inside a host actor, used like an actor handle: ``h.status.remote()`` calls
-    ``component.status()`` in its host process and returns an ObjectRef."""
+    """A component inside one of the run's actors, used like an actor handle: ``h.status.remote()`` calls
+    ``component.status()`` in its actor's process and returns an ObjectRef."""
 
     def __init__(self, host: Any, cid: str) -> None:
         self.host, self.cid = host, cid
@@ -216,90 +211,6 @@ class ComponentHandle:
 
     def __repr__(self) -> str:
         return f"ComponentHandle({self.cid!r})"
-
-
-@dataclass
-class _Plan:
-    """Where every component goes: host specs by tier, the routes between components, and per-robot ids."""
-
-    specs: dict[str, dict]
-    routes: dict[str, list]
-    location: dict[str, str]
-    robots: dict[str, dict]
-    analytics_cids: dict[int, str]
-
-
-def _plan(env, robots: list, graphs: dict, scheds: dict, sim: SimulationConfig, record: str | None,
-          epoch_ns: int, scheduled: dict[int, Any] | None = None, live: str | None = None) -> _Plan:
-    """Place components on hosts (one per tier in use: "edge" has the drones, cameras, schedulers, the recorder and
-    the analytics deployed on edge compute; "cloud" the analytics deployed on cloud compute) and compute the
-    routes from every stream producer to its subscribers. Analytics placed per frame by the analytics scheduler
-    (``scheduled``: id(analytics) -> analytics) live on the edge host, whose dispatcher decides edge or cloud."""
-    scheduled = scheduled or {}
-    specs: dict[str, dict] = {"edge": {"sim": sim.model_dump(), "world": env.cfg.world.model_dump(mode="json"),
-                                       "robots": [], "analytics": []}}
-    if record or live:  # the recorder also feeds the live view; without --record it writes no file
-        specs["edge"]["record"] = {"path": os.path.abspath(record) if record else None, "live": live, "meta": {
-            "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
-            "lockstep": str(sim.lockstep), "aerodaas": "0.1.0"}}
-    location: dict[str, str] = {}
-    acid: dict[int, str] = {}
-    for r in robots:
-        for a in graphs[r.id]:
-            if id(a) in acid:
-                continue  # shared by several robots: one instance
-            cid = f"{a.name}#{len(acid) + 1}"
-            acid[id(a)] = cid
-            tier = "edge" if id(a) in scheduled else a.compute.tier
-            specs.setdefault(tier, {"sim": sim.model_dump(), "robots": [], "analytics": []})
-            if tier != "edge" and (record or live):  # e.g. cloud analytics: recorded by the edge recorder
-                specs[tier]["record_remote"] = "edge"
-            buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
-            specs[tier]["analytics"].append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer,
-                                             "scheduled": id(a) in scheduled})
-            location[cid] = tier
-    routes: dict[str, list] = {}
-    robot_ids: dict[str, dict] = {}
-
-    def subs_of(stream, sched, sched_cid) -> list[tuple]:
-        out = [(acid[id(sub)], "in", stream.buffer) for sub in stream.subscribers if id(sub) in acid]
-        for st, prio, replace in sched.stream_inputs:
-            if st is stream:
-                out.append((sched_cid, f"priority:{prio}" + (":replace" if replace else ""), 4))
-        return out
-
-    for r in robots:
-        sched = scheds[r.id]
-        preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
-                         for m in sched._missions if m.distance_driven)
-        ids = {"drone": f"{r.id}/drone", "scheduler": f"{r.id}/scheduler", "cameras": {}, "odom": [], "stat": []}
-        cams = []
-        for s in r.sensors.values():
-            cid = f"{r.id}/{s.id}"
-            if s.type == "camera" and (s.get_data_stream().subscribers or record or live):
-                cams.append({"cid": cid, "sensor": s.id, "props": dict(s.cfg.properties)})
-                ids["cameras"][s.id] = cid
-            elif s.type == "odometry":
-                ids["odom"].append(cid)
-            elif s.type == "stat_stream":
-                ids["stat"].append(cid)
-            else:
-                continue
-            routes[cid] = subs_of(s.get_data_stream(), sched, ids["scheduler"])
-        for a in graphs[r.id]:
-            routes.setdefault(acid[id(a)], [])
-            for sub in subs_of(a.output, sched, ids["scheduler"]):
-                if sub not in routes[acid[id(a)]]:
-                    routes[acid[id(a)]].append(sub)
-        specs["edge"]["robots"].append({"robot": r.cfg.model_dump(mode="json"), "drone_cid": ids["drone"],
-                                        "scheduler_cid": ids["scheduler"], "scheduler": sched,
-                                        "preplanned": preplanned, "cameras": cams,
-                                        "odom_cids": [c for c in ids["odom"] if routes.get(c)],
-                                        "stat_cids": [c for c in ids["stat"] if routes.get(c)]})
-        for cid in [ids["drone"], ids["scheduler"], *ids["cameras"].values(), *ids["odom"], *ids["stat"]]:
-            location[cid] = "edge"
-        robot_ids[r.id] = ids
-    return _Plan(specs, routes, location, robot_ids, acid)
 
 
 def _scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
@@ -330,19 +241,21 @@ def _scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
     return out
 
 
-def _start_scheduling(env, plan: _Plan, scheduled: dict, has_cloud: bool) -> list:
+def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
-    copies of the scheduled analytics, and put the scheduler's spec into the edge host's spec. Returns the
-    executors' handles (to kill at the end)."""
+    copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
+    scheduler's spec. Returns the executors' handles (to kill at the end)."""
     from .edgecloud import cloud_selector, start_cloud_executors
 
     cfg = env.cfg.analytics_scheduler
     analytics = {a.name: a for a in scheduled.values()}
     executors = start_cloud_executors(cfg.cloud_executors, mode="real", selector=cloud_selector(has_cloud),
-                                      name_prefix="cloud-analytics", analytics=analytics)
-    plan.specs["edge"]["analytics_scheduler"] = {
-        "name": cfg.name, "workload": cfg.resolved_workload(env.cfg), "executors": executors,
-        "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
+                                      name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics", analytics=analytics)
+    for a in plan.actors.values():
+        if a.role == "dispatcher":
+            a.spec["analytics_scheduler"] = {
+                "name": cfg.name, "workload": cfg.resolved_workload(env.cfg), "executors": executors,
+                "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
     return executors
 
 
@@ -372,11 +285,69 @@ def _robot_schedulers(env, robots: list) -> dict[str, Any]:
     return out
 
 
-def run_mission(env, robots: list, timeout: float | None = None) -> MissionResult:
-    """Start the hosts for ``robots`` of ``env``, fly, and tear down. See the module docstring."""
+def _validate(env, robots: list, opts: RunOptions) -> tuple[dict, dict, dict]:
+    """Everything checked before any actor starts: returns (graphs, schedulers, scheduled analytics). Raises
+    ConfigError / ValueError naming the field."""
+    from .config import ConfigError
+    from .dataflow import collect_graph
+
+    if opts.record:
+        from .recording import check_record_path
+
+        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
+    graphs = {}
+    scheds = _robot_schedulers(env, robots)
+    for r in robots:
+        analytics = collect_graph(r)
+        for a in analytics:
+            if a.compute is None:
+                a.deploy(env.get_compute_resources()[0])
+            check = getattr(a, "check", None)
+            if callable(check):
+                check()
+            if getattr(a, "on_error", "continue") not in ("continue", "abort"):
+                raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
+                                  f"{getattr(a, 'on_error')!r}")
+        graphs[r.id] = analytics
+        _check_preplanned(r, scheds[r.id])
+        _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
+    return graphs, scheds, _scheduled_analytics(env, graphs)
+
+
+def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
+    """The driver's handles per robot (drone, scheduler, cameras, analytics: :class:`ComponentHandle` into their
+    actors), bound to the application's objects (``robot._handle``, live scheduler, pull getters)."""
     import ray
 
-    from aerodaas.actors.host import HostActor
+    loc = plan.location()
+    handles: dict[str, dict] = {}
+    for r in robots:
+        ids = plan.robots[r.id]
+        a_handles = {cid: ComponentHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
+        home = actors[ids["actor"]]
+        handles[r.id] = {"robot": r, "drone": ComponentHandle(home, ids["drone"]),
+                         "scheduler": ComponentHandle(home, ids["scheduler"]), "analytics": a_handles,
+                         "cameras": {sid: ComponentHandle(home, cid) for sid, cid in ids["cameras"].items()},
+                         "sched_obj": r.scheduler or env.trajectory_scheduler()}
+        r._handle = handles[r.id]["drone"]
+        for s in r.sensors.values():
+            s.get_data_stream()._runtime_getter = _pull_getter(s, handles[r.id])
+        for a in graphs[r.id]:
+            mine = [c for c in plan.analytics_instances[id(a)] if c in a_handles]
+            if mine:
+                h = a_handles[mine[0]]
+                a.output._runtime_getter = (lambda h=h: ray.get(h.get_latest.remote()))
+    return handles
+
+
+def run_mission(env, robots: list, timeout: float | None = None) -> MissionResult:
+    """Plan the run's actors (:mod:`aerodaas.dataflow`), start them, fly (:func:`aerodaas.supervise.supervise`),
+    finish the recording and tear down. Bad input raises before Ray starts; once actors exist, every failure ends
+    in a :class:`MissionResult` (never a raw traceback) with the recording finished."""
+    import ray
+
+    from .dataflow import Placement, build_plan
+    from .supervise import collect_stats, start_actors, supervise
 
     opts = OPTIONS
     timeout = opts.timeout if opts.timeout is not None else timeout
@@ -386,31 +357,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     if opts.lockstep is not None:
         sim.lockstep = opts.lockstep
     _check_clocks(robots, sim)
-
-    # ---- validate everything before any actor starts
-    if opts.record:
-        from .recording import check_record_path
-
-        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
-    graphs = {}
-    scheds = _robot_schedulers(env, robots)
-    for r in robots:
-        analytics, _ = _collect_graph(r)
-        for a in analytics:
-            if a.compute is None:
-                a.deploy(env.get_compute_resources()[0])
-            check = getattr(a, "check", None)
-            if callable(check):
-                check()
-            if getattr(a, "on_error", "continue") not in ("continue", "abort"):
-                from .config import ConfigError
-
-                raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
-                                  f"{getattr(a, 'on_error')!r}")
-        graphs[r.id] = analytics
-        _check_preplanned(r, scheds[r.id])
-        _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
-    scheduled = _scheduled_analytics(env, graphs)
+    graphs, scheds, scheduled = _validate(env, robots, opts)
 
     from .bench.startup import probe
 
@@ -422,8 +369,18 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
-    plan = _plan(env, robots, graphs, scheds, sim, opts.record, epoch_ns, scheduled, opts.live)
-    hosts: dict[str, Any] = {}
+    plan = build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live, scheduled=scheduled,
+                      epoch_ns=epoch_ns)
+    placement = Placement(has_cloud=has_cloud, local=_STARTED_RAY and not opts.address)
+    if opts.progress:
+        kinds = {}
+        for a in plan.actors.values():
+            kinds[a.role] = kinds.get(a.role, 0) + 1
+        print(f"aerodaas: run {plan.run_id}: " + ", ".join(f"{n} {k}" for k, n in kinds.items()) + " actor(s) on Ray "
+              f"{ray.get_runtime_context().gcs_address}" + (f" (see them: RAY_AUTH_MODE=token ray list actors --address "
+              f"{ray.get_runtime_context().gcs_address})" if OPTIONS.dashboard or opts.address else
+              " (run with --dashboard to see them with `ray list actors`)"), flush=True)
+    actors: dict[str, Any] = {}
     cloud_executors: list = []
     handles: dict[str, dict] = {}
     hitl = None
@@ -432,82 +389,71 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     latency: dict[str, Any] = {}
     counts: dict[str, int] = {}
     rec_report: dict[str, Any] = {}
+    failure: str | None = None
     try:
-        if scheduled:
-            cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
-        for tier, spec in plan.specs.items():
-            hosts[tier] = HostActor.options(label_selector=_selector(tier, has_cloud), name=None).remote(
-                tier, tier, epoch_ns, sim.lockstep)
-        described = ray.get([hosts[t].setup.remote(spec) for t, spec in plan.specs.items()])
-        for d in described:
+        try:
+            if scheduled:
+                cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
+            actors = start_actors(plan, placement, sim.lockstep, env.cfg.actor_max_restarts)
+            ray.get(actors["recorder"].setup.remote())  # the file and the live view first: a bad one stops here
+            described = ray.get([h.setup.remote() for hid, h in actors.items() if hid != "recorder"])
+        except KeyboardInterrupt:
+            raise
+        except Exception as e:  # noqa: BLE001 - e.g. a vehicle that does not answer: a failed run, not a traceback
+            failure = _cause(e)
+            print(f"aerodaas: the run could not start: {failure}", file=sys.stderr, flush=True)
+            described = []
+        for d in [ray.get(actors["recorder"].setup.remote())] if "recorder" in actors and failure is None else []:
             if d.get("live_url"):
                 print(f"aerodaas: live view at {d['live_url']} (Foxglove: Open connection -> Foxglove WebSocket)",
                       flush=True)
-        tiers = {t: t for t in hosts}
-        ray.get([h.connect.remote(plan.routes, plan.location, tiers, hosts) for h in hosts.values()])
         probe("hosts_ready")
-        edge = hosts["edge"]
-        for r in robots:
-            ids = plan.robots[r.id]
-            a_handles = {cid: ComponentHandle(hosts[plan.location[cid]], cid)
-                         for cid in (plan.analytics_cids[id(a)] for a in graphs[r.id])}
-            handles[r.id] = {"robot": r, "drone": ComponentHandle(edge, ids["drone"]),
-                             "scheduler": ComponentHandle(edge, ids["scheduler"]), "analytics": a_handles,
-                             "cameras": {sid: ComponentHandle(edge, cid) for sid, cid in ids["cameras"].items()},
-                             "sched_obj": r.scheduler or env.trajectory_scheduler()}
-            r._handle = handles[r.id]["drone"]
-            if scheds[r.id] is handles[r.id]["sched_obj"]:  # not shared: live add/clear go to this robot's queue
-                handles[r.id]["sched_obj"]._remote = handles[r.id]["scheduler"]
-            for s in r.sensors.values():
-                s.get_data_stream()._runtime_getter = _pull_getter(s, handles[r.id])
-            for a in graphs[r.id]:
-                h = a_handles[plan.analytics_cids[id(a)]]
-                a.output._runtime_getter = (lambda h=h: ray.get(h.get_latest.remote()))
+        if failure is None:
+            handles = _bind_handles(plan, actors, robots, graphs, env)
+            for r in robots:
+                h = handles[r.id]
+                if scheds[r.id] is h["sched_obj"]:  # not shared: live add/clear go to this robot's queue
+                    h["sched_obj"]._remote = h["scheduler"]
+            hcfg = env.cfg.hitl
+            if opts.hitl if opts.hitl is not None else hcfg.enabled:
+                from .hitl import HitlServer
 
-        hcfg = env.cfg.hitl
-        if opts.hitl if opts.hitl is not None else hcfg.enabled:
-            from .hitl import HitlServer
-
-            hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in handles.items()},
-                              host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
-                              token=hcfg.token, docs=hcfg.docs).start()
-            env.hitl = hitl
-            shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
-            print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
-        for h in handles.values():
-            for hook in h["robot"]._start_hooks:
-                hook(h["robot"])
-        run_ref = edge.run.remote(timeout)
-        reports = _wait_with_progress(run_ref, handles, opts.progress)
-        _RAISE_OK[0] = False
-        stats, latency = _collect_stats(handles, hosts)
+                hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]}
+                                   for rid, h in handles.items()}, host=hcfg.host,
+                                  port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
+                                  token=hcfg.token, docs=hcfg.docs).start()
+                env.hitl = hitl
+                shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
+                print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
+            for h in handles.values():
+                for hook in h["robot"]._start_hooks:
+                    hook(h["robot"])
+            _RAISE_OK[0] = True
+            reports = supervise(plan, actors, handles, timeout, opts.progress, lambda: bool(STOP_SIGNALS))
+            _RAISE_OK[0] = False
+            stats, latency = collect_stats(handles, actors, plan)
+            stats["_plan"] = {"run": plan.run_id, "actors": {hid: a.name for hid, a in plan.actors.items()},
+                              "placed": {d.get("host"): d.get("node_id") for d in described}}
     finally:
         _RAISE_OK[0] = False
         if hitl is not None:
             hitl.stop()
             env.hitl = None
-        for tier, h in sorted(hosts.items(), key=lambda th: th[0] == "edge"):  # the edge recorder closes last
-            try:
-                got = ray.get(h.close.remote(), timeout=60)
-                if tier == "edge":
-                    counts = got
-                    rec_report = ray.get(h.recording_report.remote(), timeout=60)
-            except Exception as e:  # pragma: no cover - reported, never silently lost
-                print(f"aerodaas: warning: host {tier!r} could not be closed cleanly (recording: {opts.record}): {e}",
-                      file=sys.stderr)
+        counts, rec_report = _close_actors(actors, opts.record)
         for h in handles.values():
             h["robot"]._handle = None
             h["sched_obj"]._remote = None
             for s in h["robot"].sensors.values():
                 s.get_data_stream()._runtime_getter = None
-        for h in [*hosts.values(), *cloud_executors]:
+        for h in [*actors.values(), *cloud_executors]:
             try:
                 ray.kill(h, no_restart=True)
-            except Exception:  # an executor on a lost node is already gone
+            except Exception:  # noqa: BLE001 - an actor on a lost node is already gone
                 pass
     _RAISE_OK[0] = True  # back in the application
     for r in robots:
-        reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": "no report (the run did not start)"})
+        reports.setdefault(r.id, {"robot": r.id, "outcome": "failed",
+                                  "error": failure or "no report (the run did not start)"})
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
@@ -519,6 +465,45 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
     return result
+
+
+def _cause(e: BaseException) -> str:
+    """The message of the exception an actor call failed with, without Ray's wrapping."""
+    cause = getattr(e, "cause", None)
+    if isinstance(cause, BaseException):
+        e = cause
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[-1] if lines else ''}".rstrip(": ")
+
+
+def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
+    """Close every actor (analytics and dispatchers first, drones, the recorder last: everything they recorded
+    reaches the file); returns (message counts, recording report). Never raises."""
+    import ray
+
+    order = sorted((h for h in actors if h != "recorder"), key=lambda h: h.startswith("drone"))
+    refs = {}
+    for hid in order:
+        try:
+            refs[hid] = actors[hid].close.remote()
+        except Exception:  # noqa: BLE001
+            pass
+    for hid, ref in refs.items():
+        try:
+            ray.get(ref, timeout=60)
+        except Exception as e:  # noqa: BLE001 - a dead actor has nothing left to close
+            if not isinstance(e, ray.exceptions.RayActorError):
+                print(f"aerodaas: warning: actor {hid!r} could not be closed cleanly: {_cause(e)}", file=sys.stderr)
+    counts: dict = {}
+    rep: dict = {}
+    if "recorder" in actors:
+        try:
+            counts = ray.get(actors["recorder"].close.remote(), timeout=120)
+            rep = ray.get(actors["recorder"].recording_report.remote(), timeout=60)
+        except Exception as e:  # noqa: BLE001 - pragma: no cover - reported, never silently lost
+            print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
+                  file=sys.stderr)
+    return counts, rep
 
 
 def _check_clocks(robots: list, sim: SimulationConfig) -> None:
@@ -594,180 +579,3 @@ def _pull_getter(sensor, h: dict):
         return st if sensor.type == "stat_stream" else ray.get(h["drone"].report.remote()).get("position")
 
     return get
-
-
-def _wait_with_progress(run_ref: Any, handles: dict, progress: bool) -> dict:
-    """Wait for the edge host's run to end, showing live progress; Ctrl-C ends every mission cleanly."""
-    import ray
-
-    reports: dict[str, dict] = {}
-    interrupted = False
-    live = None
-    if progress and sys.stdout.isatty():
-        from rich.live import Live
-
-        live = Live(refresh_per_second=4, transient=False)
-        live.start()
-    last_print = 0.0
-    t0 = time.monotonic()
-    try:
-        if STOP_SIGNALS:  # a stop arrived while the actors were set up: end at once, cleanly
-            raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
-        _RAISE_OK[0] = True
-        while True:
-            ready, _ = ray.wait([run_ref], num_returns=1, timeout=0.5)
-            if ready:
-                reports = ray.get(run_ref)
-                break
-            if progress:
-                lines = _progress_lines(handles, t0)
-                if live is not None:
-                    from rich.text import Text
-
-                    live.update(Text("\n".join(lines)))
-                elif time.monotonic() - last_print > 5.0:
-                    print("\n".join(lines), flush=True)
-                    last_print = time.monotonic()
-    except KeyboardInterrupt:
-        _RAISE_OK[0] = False
-        interrupted = True
-        for h in handles.values():
-            try:
-                ray.get(h["drone"].end_mission.remote("interrupted"), timeout=5)
-            except Exception:
-                pass
-        try:
-            reports = ray.get(run_ref, timeout=20)
-        except Exception as e:
-            reports = {rid: {"robot": rid, "outcome": "interrupted", "error": str(e)} for rid in handles}
-    finally:
-        if live is not None:
-            live.stop()
-    if interrupted:
-        for rep in reports.values():
-            rep["outcome"] = "interrupted"
-    return reports
-
-
-def _progress_lines(handles: dict, t0: float) -> list[str]:
-    import ray
-
-    lines = []
-    for rid, h in handles.items():
-        try:
-            st = ray.get(h["drone"].status.remote(), timeout=2)
-        except Exception:
-            continue
-        if st.get("outcome"):
-            continue
-        rendered = st["frames"] - st["frames_dropped_at_camera"]  # frames actually captured, not skipped ticks
-        fps = rendered / max(time.monotonic() - t0, 1e-6)
-        dets = ""
-        for a in h["analytics"].values():
-            try:
-                s = ray.get(a.stats.remote(), timeout=2)
-            except Exception:
-                continue
-            if "frames_with_detections" in s:
-                dets = f" detections {s['frames_with_detections']}/{s['frames']}"
-                cloud = (s.get("frames_by_tier") or {}).get("cloud")
-                if cloud:  # frames the analytics scheduler sent to the cloud (counted above too)
-                    dets += f" (cloud {cloud})"
-        x, y, z = st["position"]
-        link = "" if st.get("link_ok", True) else " LINK LOST"
-        lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "
-                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {_pct(st['battery_pct'])} "
-                     f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
-    return lines
-
-
-def _collect_stats(handles: dict, hosts: dict) -> tuple[dict, dict]:
-    import ray
-
-    host_stats = {tier: ray.get(h.stats.remote()) for tier, h in hosts.items()}
-    every = {cid: s for hs in host_stats.values() for cid, s in hs.items()}
-    stats: dict[str, Any] = {"_hosts": {t: hs.get("_host", {}) for t, hs in host_stats.items()}}
-    sched_rep = host_stats.get("edge", {}).get("_analytics_scheduler")
-    if sched_rep:
-        stats["analytics_scheduler"] = sched_rep
-    latency: dict[str, Any] = {}
-    for rid, h in handles.items():
-        s: dict[str, Any] = {"scheduler": every.get(h["scheduler"].cid, {})}
-        s["cameras"] = {sid: every.get(c.cid, {}) for sid, c in h["cameras"].items()}
-        s["analytics"] = [every.get(cid, {}) for cid in h["analytics"]]
-        stats[rid] = s
-        sch = s["scheduler"]
-        if "e2e_ms" in sch:
-            latency[rid] = {k: sch[k] for k in ("e2e_ms", "overhead_ms", "inference_ms")}
-            latency[rid]["frames"] = sch["frames_with_latency"]
-    return stats, latency
-
-
-def format_summary(result: MissionResult) -> str:
-    """Human-readable end-of-run summary (what ``aerodaas run`` prints)."""
-    lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
-    for rid, rep in result.robots.items():
-        lines.append(f"  robot {rid}: sim time {rep.get('t', 0):.1f} s, waypoints {rep.get('visited', 0)}/"
-                     f"{rep.get('preplanned_total', 0)}, final state {rep.get('state')}, "
-                     f"battery {_pct(rep.get('battery_pct', 0))}")
-        if rep.get("error"):
-            lines.append(f"    error: {rep['error']}")
-        st = result.stats.get(rid, {})
-        for sid, c in st.get("cameras", {}).items():
-            if not c:
-                continue
-            dropped = sum(a.get("dropped", 0) for a in st.get("analytics", []) if a)
-            lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
-                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by busy "
-                         f"consumers")
-        for a in st.get("analytics", []):
-            if not a:
-                continue
-            extra = ""
-            if "frames_with_detections" in a:
-                extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"
-            if "commands" in a:
-                extra = f", {a['commands']} navigation commands"
-            if a.get("failures"):
-                extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
-                          f"{a.get('last_failure')})")
-            lines.append(f"    analytics {a['name']}: {a['processed']} items, {a['process_ms_median']:.1f} ms median{extra}")
-        lat = result.latency.get(rid)
-        if lat:
-            lines.append(f"    per-frame latency over {lat['frames']} frames: end-to-end median "
-                         f"{lat['e2e_ms']['median']:.1f} ms (p99 {lat['e2e_ms']['p99']:.1f}), inference median "
-                         f"{lat['inference_ms']['median']:.1f} ms, framework overhead median "
-                         f"{lat['overhead_ms']['median']:.1f} ms (p99 {lat['overhead_ms']['p99']:.1f})")
-    sr = result.stats.get("analytics_scheduler")
-    if sr:
-        st = sr.get("states", {})
-        lines.append(f"  analytics scheduler {sr.get('scheduler')}: {sr.get('submitted', 0)} tasks, on time "
-                     f"{100 * sr.get('on_time_rate', 0):.1f}% (edge {sr.get('tiers', {}).get('edge', 0)}, cloud "
-                     f"{sr.get('tiers', {}).get('cloud', 0)}), utility {sr.get('utility', 0):.0f}, cloud cost "
-                     f"{sr.get('cloud_cost', 0):.0f}; " + ", ".join(f"{k} {v}" for k, v in st.items() if v))
-        for ev in (sr.get("cloud") or {}).get("losses", []):
-            lines.append(f"    cloud executor {ev.get('name')} lost at {ev.get('at_s', 0):.1f} s ({ev.get('error')}): "
-                         f"{ev.get('in_flight', 0)} tasks in flight, {ev.get('retried', 0)} retried, "
-                         f"{ev.get('failed', 0)} failed")
-    if result.recording:
-        total = sum(result.recording_counts.values())
-        fail = result.recording_failure
-        if fail is None:
-            lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
-                         f"channels)")
-        else:
-            at = fail.get("last_recorded_ns")
-            held = f"up to {(at - result.recording_start_ns) / 1e9:.1f} s" if at and result.recording_start_ns else \
-                "nothing"
-            state = "finished" if fail.get("finished") else ("UNFINISHED (" + str(fail.get("finish_error")) +
-                                                              "; run `aerodaas recover FILE` when there is room)")
-            lines.append(f"  recording: FAILED: {fail.get('error')}; {result.recording} holds {held} "
-                         f"({fail.get('messages_in_file', '?')} messages, {state}); "
-                         f"{result.recording_lost} later messages were not recorded")
-    return "\n".join(lines)
-
-
-
-def _pct(v: float | None) -> str:
-    """A battery percentage for humans; None (a log without battery data) is "unknown"."""
-    return "unknown" if v is None else f"{v:5.1f}%"

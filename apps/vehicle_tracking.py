@@ -17,7 +17,7 @@ vehicles = ["car", "truck", "bus"]
 detector = ObjectDetector("yolox_nano", classes=vehicles, score_threshold=0.15)
 detector.deploy(edge)
 follow = FollowAnalytics(target_classes=vehicles)
-follow.deploy(edge)
+follow.deploy(edge, colocate=True)  # cheap and per drone: runs inside the drone actor, no hop
 car_nav = follow.analyse(detector.analyse(frames))
 scheduler.add_navigation(PriorityQueue(car_nav, priority=1))
 

@@ -84,6 +84,14 @@ class VehicleBackend(abc.ABC):
     def close(self) -> None:
         """Release the link (idempotent). Never raises."""
 
+    def checkpoint(self) -> Any:
+        """The vehicle state a restarted drone actor needs to go on (picklable), or None when the vehicle keeps its
+        own state (a real vehicle flies on under its own control while the actor restarts): the default."""
+        return None
+
+    def restore(self, state: Any) -> None:
+        """Take back a :meth:`checkpoint` (called after :meth:`connect` of a restarted drone actor)."""
+
     # ------------------------------------------------------------------ time and state
     @property
     @abc.abstractmethod

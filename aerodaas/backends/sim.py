@@ -24,6 +24,20 @@ class SimBackend(VehicleBackend):
     def t(self) -> float:
         return self.vehicle.t
 
+    def checkpoint(self) -> dict:
+        """The simulated vehicle's state, setpoint, clock and noise generator (deep copies)."""
+        import copy
+
+        v = self.vehicle
+        return copy.deepcopy({"state": v.state, "setpoint": v.setpoint, "t": v.t, "rng": v._rng.bit_generator.state})
+
+    def restore(self, state: dict) -> None:
+        import copy
+
+        v, s = self.vehicle, copy.deepcopy(state)
+        v.state, v.setpoint, v.t = s["state"], s["setpoint"], s["t"]
+        v._rng.bit_generator.state = s["rng"]
+
     def step(self, dt: float) -> None:
         self.vehicle.step(dt)
 

@@ -1,0 +1,108 @@
+"""What every actor of a run shares: a :class:`~.host.Host` (its components and the routes between actors), built
+from the plan's spec by :class:`~.components.HostRuntime`, and the calls the driver makes on it.
+
+An actor gets its whole spec and wiring (routes, locations, peers by Ray actor name) in its constructor, so when
+Ray restarts it (``max_restarts``) it rebuilds itself: the constructor sees
+``ray.get_runtime_context().was_current_actor_reconstructed`` and sets up again at once, and its peers reach it
+again under the same name. The first start is set up by the driver (:meth:`ActorBase.setup`) so that a failure
+there (an unreachable vehicle) reaches the driver as that call's error.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any
+
+import ray
+
+from .host import Host
+
+
+def restarted_actor() -> bool:
+    """True in the constructor of an actor that Ray restarted (``max_restarts``)."""
+    import warnings
+
+    with warnings.catch_warnings():  # Ray's own property reads its deprecated ``actor_id`` inside
+        warnings.simplefilter("ignore")
+        return bool(ray.get_runtime_context().was_current_actor_reconstructed)
+
+
+def self_name() -> str:
+    """This actor's Ray name."""
+    return ray.get_runtime_context().get_actor_name() or ""
+
+
+def _recorder_name(name: str) -> str:
+    """``aerodaas/<run>/drone/d1`` -> ``aerodaas/<run>/recorder``."""
+    parts = name.split("/")
+    return "/".join(parts[:2] + ["recorder"])
+
+
+class ActorBase:
+    """Plain base of the run's Ray actors (see the module docstring). ``spec``: the actor's part of the plan
+    (:class:`aerodaas.dataflow.ActorPlan.spec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
+    None: read them from the run's recorder actor (how the runtime starts them)."""
+
+    def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None, lockstep: bool = False,
+                 workers: int | None = None, switch_interval_s: float | None = 0.0005) -> None:
+        if switch_interval_s:
+            # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
+            # to move on by up to 5 ms; the actors are latency-bound, not throughput-bound
+            sys.setswitchinterval(switch_interval_s)
+        if spec is None:  # the run's recorder actor keeps every actor's spec (see aerodaas.supervise.start_actors)
+            from ray import cloudpickle
+
+            spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
+            spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
+        self.spec, self.wiring = spec, wiring
+        self.host = Host(host_id, tier, int(spec.get("epoch_ns", 0)), lockstep, workers)
+        self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
+                          wiring.get("peers", {}))
+        self.runtime: Any = None
+        self.restarts = 0
+        if restarted_actor():
+            self.restarts = 1
+            self.on_restart()
+
+    def on_restart(self) -> None:
+        """Called in the constructor of a restarted actor: set up again from the stored spec."""
+        self.setup()
+
+    def setup(self) -> dict:
+        """Create this actor's components (drones connect to their vehicles here). Returns :meth:`describe`."""
+        from .components import HostRuntime
+
+        if self.runtime is None:
+            self.runtime = HostRuntime(self.host, self.spec)
+            self.host.watch_gc()
+        return self.describe()
+
+    def describe(self) -> dict:
+        out = self.runtime.describe() if self.runtime is not None else {"host": self.host.host_id}
+        return {**out, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id(),
+                "restarts": self.restarts}
+
+    def ping(self) -> int:
+        """The actor's process id (a cheap liveness probe)."""
+        return os.getpid()
+
+    pid = ping
+
+    def deliver(self, cid: str, port: str, wire: dict) -> list:
+        return self.host.deliver(cid, port, wire)
+
+    def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
+        if method.startswith("_"):
+            raise AttributeError(f"component {cid!r}: {method!r} is not public")
+        comp = self.runtime.lookup(cid)
+        return getattr(comp, method)(*args, **kwargs)
+
+    def stats(self) -> dict:
+        return self.runtime.stats() if self.runtime else {}
+
+    def close(self) -> dict:
+        return self.runtime.close() if self.runtime else {}
+
+    def recording_report(self) -> dict:
+        return self.runtime.recording_report() if self.runtime else {}

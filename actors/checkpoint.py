@@ -1,0 +1,72 @@
+"""Checkpoints of a drone, so that a restarted drone actor goes on with the mission instead of starting it again.
+
+A checkpoint (a picklable dict) holds the vehicle's state when the backend keeps one for us (the simulator:
+:meth:`~aerodaas.backends.base.VehicleBackend.checkpoint`; a real vehicle keeps flying on its own), the mission
+state machine's state, the waypoints visited, the trajectory scheduler's queued missions and completed items, the
+clocks of the control loop and the drone's counters. :func:`restore_drone` puts them back into a freshly built
+:class:`~.drone.DroneComponent`: the waypoint that was being flown to (or held) is flown to again, from where the
+vehicle is, and the events say ``resumed_after_restart``.
+"""
+from __future__ import annotations
+
+import copy
+import itertools
+from typing import Any
+
+from aerodaas.fsm import MissionState as S
+
+_SEQ = itertools.count(1)
+
+
+def drone_checkpoint(d: Any) -> dict:
+    """A checkpoint of DroneComponent ``d`` (taken under its lock, so it is consistent with one control step)."""
+    with d.lock:
+        s = d.scheduler.s
+        with s._lock:
+            missions = copy.deepcopy(s._missions)
+            completed = list(s.completed)
+        return {"seq": next(_SEQ), "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
+                "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(d.visited),
+                "events": list(d.events), "preplanned_left": d.preplanned_left, "preplanned_total": d.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
+                "flew_something": d.flew_something, "idle_since": d.idle_since, "outcome": d.outcome,
+                "error": d.error, "ticks": d.ticks, "missed_ticks": d.missed_ticks, "next_tick": d.next_tick,
+                "next_odom": d.next_odom, "rejected": list(d.rejected), "missions": missions,
+                "completed": completed, "segments_issued": getattr(s, "_segments_issued", 0), "seq_missions": s._seq,
+                "cameras": [c["next_t"] for c in d.cameras]}
+
+
+def restore_drone(d: Any, cp: dict) -> None:
+    """Put checkpoint ``cp`` back into DroneComponent ``d`` (built and connected, not started). A drone that was
+    holding at a waypoint flies to it again (acceptance and hold are redone); one that was tracking hovers until
+    its analytics send the next command."""
+    with d.lock:
+        if cp.get("vehicle") is not None:
+            d.backend.restore(cp["vehicle"])
+        s = d.scheduler.s
+        with s._lock:
+            s._missions = cp["missions"]
+            s.completed = list(cp["completed"])
+            s._seq = cp.get("seq_missions", s._seq)
+            if cp.get("segments_issued"):
+                s._segments_issued = cp["segments_issued"]
+        state = S(cp["state"])
+        if state == S.WAYPOINT_HOLD:
+            state = S.NAVIGATING
+        d.fsm._state = state
+        d.fsm.history = list(cp.get("history") or []) + [(cp["t"], state)]
+        for k in ("events", "visited", "preplanned_left", "takeoff_altitude", "flew_something", "idle_since", "outcome",
+                  "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected"):
+            if k in cp:
+                setattr(d, k, cp[k])
+        d.active_wp, d.hold_until = None, None
+        for c, t in zip(d.cameras, cp.get("cameras", [])):
+            c["next_t"] = t
+        d.restored_from = cp
+        d._event("resumed_after_restart", state=state.value, checkpoint_t=cp["t"],
+                 visited=len(d.visited), heading_to=_head(d))
+
+
+def _head(d: Any) -> str | None:
+    """The id of the item the drone flies to next (None: nothing queued)."""
+    items = d.scheduler.s.queued()
+    return getattr(items[0], "id", None) if items else None

@@ -1,0 +1,74 @@
+"""The end-of-run summary ``aerodaas run`` prints (:func:`format_summary`)."""
+from __future__ import annotations
+
+from typing import Any
+
+
+def format_summary(result: Any) -> str:
+    """Human-readable end-of-run summary (what ``aerodaas run`` prints)."""
+    lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
+    for rid, rep in result.robots.items():
+        lines.append(f"  robot {rid}: sim time {rep.get('t', 0):.1f} s, waypoints {rep.get('visited', 0)}/"
+                     f"{rep.get('preplanned_total', 0)}, final state {rep.get('state')}, "
+                     f"battery {pct(rep.get('battery_pct', 0))}")
+        if rep.get("error"):
+            lines.append(f"    error: {rep['error']}")
+        st = result.stats.get(rid, {})
+        for sid, c in st.get("cameras", {}).items():
+            if not c:
+                continue
+            dropped = sum(a.get("dropped", 0) for a in st.get("analytics", []) if a)
+            lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
+                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by busy "
+                         f"consumers")
+        for a in st.get("analytics", []):
+            if not a:
+                continue
+            extra = ""
+            if "frames_with_detections" in a:
+                extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"
+            if "commands" in a:
+                extra = f", {a['commands']} navigation commands"
+            if a.get("failures"):
+                extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
+                          f"{a.get('last_failure')})")
+            lines.append(f"    analytics {a['name']}: {a['processed']} items, {a['process_ms_median']:.1f} ms median{extra}")
+        lat = result.latency.get(rid)
+        if lat:
+            lines.append(f"    per-frame latency over {lat['frames']} frames: end-to-end median "
+                         f"{lat['e2e_ms']['median']:.1f} ms (p99 {lat['e2e_ms']['p99']:.1f}), inference median "
+                         f"{lat['inference_ms']['median']:.1f} ms, framework overhead median "
+                         f"{lat['overhead_ms']['median']:.1f} ms (p99 {lat['overhead_ms']['p99']:.1f})")
+    sr = result.stats.get("analytics_scheduler")
+    if sr:
+        st = sr.get("states", {})
+        lines.append(f"  analytics scheduler {sr.get('scheduler')}: {sr.get('submitted', 0)} tasks, on time "
+                     f"{100 * sr.get('on_time_rate', 0):.1f}% (edge {sr.get('tiers', {}).get('edge', 0)}, cloud "
+                     f"{sr.get('tiers', {}).get('cloud', 0)}), utility {sr.get('utility', 0):.0f}, cloud cost "
+                     f"{sr.get('cloud_cost', 0):.0f}; " + ", ".join(f"{k} {v}" for k, v in st.items() if v))
+        for ev in (sr.get("cloud") or {}).get("losses", []):
+            lines.append(f"    cloud executor {ev.get('name')} lost at {ev.get('at_s', 0):.1f} s ({ev.get('error')}): "
+                         f"{ev.get('in_flight', 0)} tasks in flight, {ev.get('retried', 0)} retried, "
+                         f"{ev.get('failed', 0)} failed")
+    if result.recording:
+        total = sum(result.recording_counts.values())
+        fail = result.recording_failure
+        if fail is None:
+            lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
+                         f"channels)")
+        else:
+            at = fail.get("last_recorded_ns")
+            held = f"up to {(at - result.recording_start_ns) / 1e9:.1f} s" if at and result.recording_start_ns else \
+                "nothing"
+            state = "finished" if fail.get("finished") else ("UNFINISHED (" + str(fail.get("finish_error")) +
+                                                              "; run `aerodaas recover FILE` when there is room)")
+            lines.append(f"  recording: FAILED: {fail.get('error')}; {result.recording} holds {held} "
+                         f"({fail.get('messages_in_file', '?')} messages, {state}); "
+                         f"{result.recording_lost} later messages were not recorded")
+    return "\n".join(lines)
+
+
+
+def pct(v: float | None) -> str:
+    """A battery percentage for humans; None (a log without battery data) is "unknown"."""
+    return "unknown" if v is None else f"{v:5.1f}%"
