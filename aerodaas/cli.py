@@ -128,7 +128,41 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 1
     if stop_signal or any(r.outcome == "interrupted" for r in results):
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
+    if any(r.outcome == "lost" for r in results):
+        return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
     return 0 if all(r.ok for r in results) else 1
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    """``aerodaas plan APP.py [--env FILE] [--json] [--address ADDR]``: build the application's dataflow graph and
+    print the actors it would start, where each goes (its ``label_selector``) and the edges between them, without
+    starting Ray or flying. Exit 0, or 2 for bad input (named) like ``aerodaas run``."""
+    from . import runtime
+    from .config import ConfigError
+    from .dataflow import Placement
+
+    app = Path(args.app)
+    if not app.is_file():
+        print(f"aerodaas plan: application file {str(app)!r} not found", file=sys.stderr)
+        return 2
+    o = runtime.OPTIONS
+    o.env_path = str(Path(args.env).resolve()) if args.env else None
+    o.plan_only, o.early_ray = True, False
+    sys.path.insert(0, str(app.resolve().parent))
+    try:
+        runpy.run_path(str(app), run_name="__main__")
+    except runtime.PlanReady as p:
+        placement = Placement(has_cloud=True, local=False)
+        print(json.dumps(p.plan.describe(placement), indent=2) if args.json else p.plan.text(placement))
+        return 0
+    except (ConfigError, FileNotFoundError, ValueError, KeyError) as e:
+        print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
+    finally:
+        o.plan_only = False
+        o.env_path = None
+    print("aerodaas plan: the application never called start_mission()", file=sys.stderr)
+    return 2
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
@@ -415,6 +449,11 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
                    help="serve the run to Foxglove over WebSocket (default 127.0.0.1:8765; port 0: any free port)")
     r.set_defaults(func=_cmd_run)
+    pl = sub.add_parser("plan", help="print the actors an application would start and where, without flying")
+    pl.add_argument("app")
+    pl.add_argument("--env", help="environment.json to use instead of the one the app names")
+    pl.add_argument("--json", action="store_true", help="the plan as JSON (actors, nodes, edges)")
+    pl.set_defaults(func=_cmd_plan)
     rp = sub.add_parser("replay", help="serve an MCAP recording to Foxglove over WebSocket, at 1x or faster")
     rp.add_argument("file")
     rp.add_argument("--live", nargs="?", const="", required=True, metavar="HOST:PORT",

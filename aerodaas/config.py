@@ -562,6 +562,8 @@ class EnvironmentConfig(_Cfg):
                                   "1: an actor per drone; more for memory-bound fleets")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
                                     "and dispatcher actor of a run (the recorder is never restarted)")
+    actor_restart_timeout_s: float = Field(default=60.0, gt=0, le=3600, description="how long the driver waits for "
+                                           "a dead drone actor to come back before its drones end as 'lost', s")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
 
     @model_validator(mode="after")

@@ -40,6 +40,10 @@ class RunOptions:
     #: ``ray list actors`` and the actors view; off by default: it adds seconds to the start and on a loaded machine
     #: can fail to start, which then costs a retry without it)
     dashboard: bool = False
+    #: the run's id in its actors' names (``aerodaas/<run id>/...``); None: a random one per run
+    run_id: str | None = None
+    #: ``aerodaas plan``: build and check everything, then raise :class:`PlanReady` instead of starting Ray
+    plan_only: bool = False
     #: start Ray in the background as soon as the application's Environment is validated (``aerodaas run``): an
     #: invalid environment then fails before any Ray process exists, and a valid one overlaps Ray's start with
     #: building the rest of the application
@@ -151,6 +155,15 @@ def start_ray_early(address: str | None = None) -> None:
         threading.Event().wait()
 
     threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
+
+
+class PlanReady(Exception):
+    """Raised by :func:`run_mission` under ``OPTIONS.plan_only`` (``aerodaas plan``): ``plan`` is the
+    :class:`aerodaas.dataflow.RunPlan` the run would start; nothing was started."""
+
+    def __init__(self, plan: Any) -> None:
+        super().__init__(f"plan of run {plan.run_id}")
+        self.plan = plan
 
 
 class RayStartError(RuntimeError):
@@ -363,6 +376,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
 
     probe("app_built")
     t_start = time.monotonic()
+    if opts.plan_only:
+        raise PlanReady(build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live,
+                                   scheduled=scheduled))
     if STOP_SIGNALS:  # stopped while the app was built: nothing started, nothing to record
         raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
     _RAISE_OK[0] = False  # from here on a stop signal is taken at the safe points (see request_stop)
@@ -370,7 +386,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     probe("ray_ready")
     epoch_ns = time.time_ns()
     plan = build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live, scheduled=scheduled,
-                      epoch_ns=epoch_ns)
+                      epoch_ns=epoch_ns, run_id=opts.run_id)
     placement = Placement(has_cloud=has_cloud, local=_STARTED_RAY and not opts.address)
     if opts.progress:
         kinds = {}
@@ -429,7 +445,8 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 for hook in h["robot"]._start_hooks:
                     hook(h["robot"])
             _RAISE_OK[0] = True
-            reports = supervise(plan, actors, handles, timeout, opts.progress, lambda: bool(STOP_SIGNALS))
+            reports = supervise(plan, actors, handles, timeout, opts.progress, lambda: bool(STOP_SIGNALS),
+                                restart_wait_s=env.cfg.actor_restart_timeout_s)
             _RAISE_OK[0] = False
             stats, latency = collect_stats(handles, actors, plan)
             stats["_plan"] = {"run": plan.run_id, "actors": {hid: a.name for hid, a in plan.actors.items()},

@@ -1,4 +1,4 @@
-"""A local multi-node Ray cluster on one machine: one edge node and N cloud nodes (``ray.cluster_utils.Cluster``).
+"""A local multi-node Ray cluster on one machine: edge nodes and cloud nodes (``ray.cluster_utils.Cluster``).
 
 For tests and the scheduler benchmark: the head node is labelled ``tier=edge``, every other node ``tier=cloud``,
 so actors placed with ``label_selector={"tier": "edge"}`` / ``{"tier": "cloud"}`` land on different raylets, and a
@@ -44,7 +44,8 @@ def enable_token_auth() -> None:
 
 
 class LocalCluster:
-    """One ``tier=edge`` head node and ``cloud_nodes`` ``tier=cloud`` nodes, all on this machine.
+    """``edge_nodes`` ``tier=edge`` nodes (the first is the head; ``edge_labels[i]``: extra labels of edge node i)
+    and ``cloud_nodes`` ``tier=cloud`` nodes, all on this machine.
 
     ``edge_cpus``/``cloud_cpus``: logical CPUs each node advertises (Ray's scheduling resource, not a limit on real
     CPU use). ``object_store_mb``: object store per node (MiB). ``connect``: call ``ray.init(address=...)`` for this
@@ -59,7 +60,8 @@ class LocalCluster:
 
     def __init__(self, cloud_nodes: int = 1, *, edge_cpus: int = 2, cloud_cpus: int = 2,
                  object_store_mb: int = 150, connect: bool = True, extra_edge_labels: dict[str, str] | None = None,
-                 worker_niceness: int | None = None) -> None:
+                 worker_niceness: int | None = None, edge_nodes: int = 1,
+                 edge_labels: list[dict[str, str]] | None = None) -> None:
         import ray
         from ray.cluster_utils import Cluster
 
@@ -71,15 +73,21 @@ class LocalCluster:
         enable_token_auth()
         self._cloud_cpus = int(cloud_cpus)
         self._store = int(object_store_mb) * 1024 * 1024
-        head_args: dict[str, Any] = {"num_cpus": int(edge_cpus), "labels": {"tier": "edge", **(extra_edge_labels or {})},
+        first = (edge_labels or [{}])[0] if edge_labels else {}
+        head_args: dict[str, Any] = {"num_cpus": int(edge_cpus),
+                                     "labels": {"tier": "edge", **(extra_edge_labels or {}), **first},
                                      "include_dashboard": False, "object_store_memory": self._store}
         if worker_niceness is not None:  # Ray starts workers at niceness 15 (below the control plane) by default
             head_args["_system_config"] = {"worker_niceness": int(worker_niceness)}
         self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
         self.edge_node = self.cluster.head_node
         self.cloud_nodes: list[Any] = []
+        self.edge_nodes: list[Any] = [self.edge_node]
         self.removed: list[dict] = []
+        self._edge_cpus = int(edge_cpus)
         try:
+            for i in range(1, max(1, int(edge_nodes))):
+                self.add_edge_node((edge_labels or [{}] * edge_nodes)[i] if edge_labels else None)
             for _ in range(cloud_nodes):
                 self.add_cloud_node()
             self.cluster.wait_for_nodes()
@@ -98,6 +106,26 @@ class LocalCluster:
                                      object_store_memory=self._store)
         self.cloud_nodes.append(node)
         return node
+
+    def add_edge_node(self, labels: dict[str, str] | None = None):
+        """Add another ``tier=edge`` node (extra ``labels`` allowed, e.g. ``{"aerodaas/site": "field-2"}``) and
+        return its handle. The driver stays on the head node (the first edge node)."""
+        node = self.cluster.add_node(num_cpus=self._edge_cpus, labels={"tier": "edge", **(labels or {})},
+                                     object_store_memory=self._store)
+        self.edge_nodes.append(node)
+        return node
+
+    def remove_edge_node(self, index: int = 1, graceful: bool = False) -> str:
+        """Kill edge node ``index`` of :attr:`edge_nodes` (not 0: the head, where the driver runs), as if the
+        machine were lost. Returns its node id. Raises IndexError."""
+        if not 1 <= index < len(self.edge_nodes):
+            raise IndexError(f"edge node index {index} out of range (1..{len(self.edge_nodes) - 1}; 0 is the head)")
+        node = self.edge_nodes.pop(index)
+        nid = node.node_id
+        self.cluster.remove_node(node, allow_graceful=graceful)
+        self.removed.append({"node_id": nid, "graceful": graceful})
+        log.info("removed edge node %s", nid)
+        return nid
 
     def node_id(self, node) -> str:
         """The Ray node id (hex) of a node handle."""

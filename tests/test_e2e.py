@@ -83,21 +83,16 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
 
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
-    from aerodaas import Environment, ObjectDetector
-    from aerodaas.actors import host
+    from aerodaas import Environment, ObjectDetector, supervise
     from aerodaas.detect import ModelNotFoundError
 
     started = []
 
-    class NoActor:
-        def __init__(self, name):
-            self.name = name
+    def no_actors(*a, **kw):
+        started.append("actors")
+        raise AssertionError("the run's actors started although the model is missing")
 
-        def options(self, **kw):
-            started.append(self.name)
-            raise AssertionError(f"{self.name} started although the model is missing")
-
-    monkeypatch.setattr(host, "HostActor", NoActor("HostActor"))  # every component of a run lives in a host
+    monkeypatch.setattr(supervise, "start_actors", no_actors)  # every actor of a run is started there
 
     monkeypatch.setenv("AERODAAS_MODEL_DIR", str(tmp_path))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))

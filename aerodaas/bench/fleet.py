@@ -1,11 +1,15 @@
-"""``aerodaas bench fleet``: how many simulated drones one 2-core node carries.
+"""``aerodaas bench fleet``: how many simulated drones one 2-core node carries, as drone actors.
 
-For each fleet size N (default 1, 5, 10, 20, 40) on a fresh local Ray: N simulated drones, each with a camera
-(640x480 at 15 FPS), odometry (10 Hz), the stat-stream and a navigation (control) loop at 10 Hz flying its own
-survey, plus one lightweight analytics shared by every camera, in real time (speedup 1) for ``--duration``
-seconds. Reported per N: missed control ticks (%: a tick that runs more than one control period late), frames
-dropped (%: camera ticks whose frame never reached the shared analytics), CPU (% of one core, all Ray processes
-and the driver), and the summed RSS (and PSS) of every Ray process and the driver at its peak. The curve against
+For each fleet size N (default 1, 5, 10, 20, 40) and each grouping k (``--drones-per-actor``, default 1: one drone
+actor per drone) on a fresh local Ray: N simulated drones, each with a camera (640x480 at 15 FPS), odometry
+(10 Hz), the stat-stream and a navigation (control) loop at 10 Hz flying its own survey, and a lightweight
+analytics colocated with each drone (in its drone actor), in real time (speedup 1) for ``--duration`` seconds.
+``--edge-nodes M`` (M > 1) runs the fleet on a :class:`~aerodaas.clusters.local.LocalCluster` with M ``tier=edge``
+nodes, one edge compute resource per node (its own ``aerodaas/site`` label), the drones spread over them
+round-robin, and reports the drones each node carried. Reported per run: missed control ticks (%: a tick that runs
+more than one control period late), frames dropped (%: camera ticks whose frame never reached the analytics), CPU
+(% of one core, all Ray processes and the driver), the summed RSS (and PSS) of every Ray process and the driver at
+its peak, and the Ray worker processes (one per drone actor, plus the recorder's). The curve against
 N is always drawn as a PNG (``--plot``; default: the ``--out`` file with ``.png``, else ``fleet.png`` in the current
 directory); its absolute path is printed on stderr and given as ``"plot"`` in the JSON report.
 """
@@ -28,7 +32,7 @@ DEFAULT_SIZES = (1, 5, 10, 20, 40)
 
 class FrameExposure(Analytics):
     """A lightweight analytics: mean brightness and the fraction of saturated pixels of every 8th pixel of a frame
-    ((H, W, 3) uint8 BGR in; a dict out). Shared by every camera of the fleet benchmark."""
+    ((H, W, 3) uint8 BGR in; a dict out). Colocated with every drone of the fleet benchmark."""
 
     name = "exposure"
 
@@ -48,20 +52,26 @@ class FrameExposure(Analytics):
         return {"frames": self.frames, "per_robot": dict(self.per_robot)}
 
 
-def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480) -> dict:
-    """environment.json dict for ``n`` drones 6 m apart on a grid, each flying a 4 m square over and over."""
+def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480, drones_per_actor: int = 1,
+                 edge_nodes: int = 1) -> dict:
+    """environment.json dict for ``n`` drones 6 m apart on a grid, each flying a 4 m square over and over;
+    ``drones_per_actor`` drones share a drone actor; ``edge_nodes`` > 1: one edge compute per node (label
+    ``aerodaas/site: site<j>``), drone i flying from compute ``edge<i % edge_nodes>``."""
     robots = []
     side = max(1, math.ceil(math.sqrt(n)))
     for i in range(n):
         robots.append({
             "id": f"d{i:02d}", "backend": "sim", "takeoff_altitude": 3.0, "control_rate_hz": 10,
+            **({"compute": f"edge{i % edge_nodes}"} if edge_nodes > 1 else {}),
             "limits": {"max_speed": 2.0, "max_vertical_speed": 1.0, "max_acceleration": 2.0},
             "sensors": [
                 {"id": "cam", "type": "camera",
                  "properties": {"width": width, "height": height, "hfov_deg": 78, "fps": fps, "pitch_deg": 90}},
                 {"id": "odom", "type": "odometry", "properties": {"rate_hz": 10}},
                 {"id": "stat", "type": "stat_stream"}]})
-    return {"name": f"fleet-{n}", "robots": robots,
+    compute = ([{"id": f"edge{j}", "tier": "edge", "labels": {"aerodaas/site": f"site{j}"}} for j in range(edge_nodes)]
+               if edge_nodes > 1 else [{"id": "edge", "tier": "edge"}])
+    return {"name": f"fleet-{n}", "robots": robots, "compute": compute, "drones_per_actor": drones_per_actor,
             "world": {"ground": {"seed": 3, "metres_per_pixel": 0.05, "size_m": 12.0 * side + 40}},
             "simulation": {"speedup": 1.0, "lockstep": False, "physics_hz": 50}}
 
@@ -71,16 +81,17 @@ def _grid_offset(i: int, n: int) -> tuple[float, float]:
     return (6.0 * (i % side), 6.0 * (i // side))
 
 
-def build_fleet(n: int):
-    """The fleet application: environment, one shared analytics on every camera, a looping survey per drone."""
+def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
+    """The fleet application: environment, an analytics colocated with each drone's camera, a looping survey per
+    drone."""
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
     from aerodaas.config import parse_environment_config
     from aerodaas.schedulers import TrajectoryScheduler
 
-    env = Environment(parse_environment_config(fleet_config(n)))
-    edge = env.get_compute_resource_by_id("edge")
+    env = Environment(parse_environment_config(fleet_config(n, drones_per_actor=drones_per_actor,
+                                                            edge_nodes=edge_nodes)))
     shared = FrameExposure()
-    shared.deploy(edge)
+    shared.deploy(env.get_compute_resources()[0], colocate=True)  # a copy inside each drone's actor
     sched = TrajectoryScheduler(env)
     env.set_trajectory_scheduler(sched)  # one scheduler plugged in; each drone gets its own queue at start
     for i, drone in enumerate(env.get_env_robots()):
@@ -94,58 +105,90 @@ def build_fleet(n: int):
     return env, shared
 
 
-def run_size(n: int, duration_s: float) -> dict:
-    """One fleet size on a fresh local Ray; returns the measured row."""
+def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int = 1) -> dict:
+    """One fleet size on a fresh local Ray (or a fresh LocalCluster of ``edge_nodes`` edge nodes); returns the
+    measured row."""
     from aerodaas import runtime
 
     from .procs import MemorySampler, cpu_seconds, ray_processes
 
     runtime.shutdown_ray()
     runtime.OPTIONS.progress = False
-    env, _ = build_fleet(n)
-    runtime.ensure_ray(None)
-    time.sleep(2.0)  # let Ray's own processes settle before measuring
-    procs = ray_processes()
-    cpu0, wall0 = cpu_seconds(procs), time.monotonic()
-    with MemorySampler(1.0) as mem:
-        res = env.start_mission(timeout=duration_s)
-    wall = time.monotonic() - wall0
-    cpu = cpu_seconds(ray_processes()) - cpu0
-    runtime.shutdown_ray()
+    env, _ = build_fleet(n, drones_per_actor, edge_nodes)
+    lc, nodes = None, None
+    if edge_nodes > 1:
+        from aerodaas.clusters.local import LocalCluster
+
+        lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes,
+                          edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
+        nodes = lc.cluster.list_all_nodes()
+        runtime.OPTIONS.address = lc.address
+    try:
+        runtime.ensure_ray(runtime.OPTIONS.address)
+        time.sleep(2.0)  # let Ray's own processes settle before measuring
+        procs = ray_processes(nodes)
+        cpu0, wall0 = cpu_seconds(procs), time.monotonic()
+        with MemorySampler(1.0, nodes) as mem:
+            res = env.start_mission(timeout=duration_s)
+        wall = time.monotonic() - wall0
+        cpu = cpu_seconds(ray_processes(nodes)) - cpu0
+        names = {nd.node_id: f"edge node {j}" for j, nd in enumerate(lc.edge_nodes)} if lc else {}
+    finally:
+        runtime.OPTIONS.address = None
+        runtime.shutdown_ray()
+        if lc is not None:
+            lc.shutdown()
     ticks = sum(r.get("ticks", 0) for r in res.robots.values())
     missed = sum(r.get("missed_ticks", 0) for r in res.robots.values())
     cam_ticks = sum(c.get("ticks", 0) for s in res.stats.values() if isinstance(s, dict)
                     for c in s.get("cameras", {}).values())
-    analysed = 0
-    for rid in res.robots:
-        a = (res.stats.get(rid, {}).get("analytics") or [{}])[0]
-        analysed = a.get("frames", analysed)
-    host = res.stats.get("_hosts", {}).get("edge", {})
-    return {"drones": n, "duration_s": round(wall, 1), "ticks": ticks, "missed_ticks": missed,
+    analysed = sum((a or {}).get("processed", 0) for rid in res.robots
+                   for a in res.stats.get(rid, {}).get("analytics", []))
+    hosts = res.stats.get("_hosts", {})
+    lateness = [h["tick_lateness_ms"] for h in hosts.values() if (h.get("tick_lateness_ms") or {}).get("n")]
+    plan = res.stats.get("_plan", {})
+    per_node: dict[str, int] = {}
+    for hid, node in (plan.get("placed") or {}).items():
+        if hid and hid.startswith("drone"):
+            per_node[names.get(node, node)] = per_node.get(names.get(node, node), 0) + (
+                1 if hid.startswith("drone/") else int(hid.rsplit("+", 1)[1]) + 1)
+    return {"drones": n, "drones_per_actor": drones_per_actor, "edge_nodes": edge_nodes,
+            "duration_s": round(wall, 1), "ticks": ticks, "missed_ticks": missed,
             "missed_ticks_pct": 100.0 * missed / max(ticks, 1), "camera_ticks": cam_ticks, "frames_analysed": analysed,
             "dropped_frames_pct": 100.0 * (cam_ticks - analysed) / max(cam_ticks, 1),
             "cpu_pct": 100.0 * cpu / max(wall, 1e-9), "rss_mb": round(mem.peak["rss_mb"], 1),
             "pss_mb": round(mem.peak["pss_mb"], 1), "processes": mem.peak["processes"],
-            "process_rows": mem.peak["rows"], "tick_lateness_ms": host.get("tick_lateness_ms"),
-            "host_errors": host.get("error_count", 0), "outcomes": sorted({r.get("outcome") for r in res.robots.values()})}
+            "worker_processes": mem.peak.get("worker_processes", 0), "drones_per_node": per_node,
+            "process_rows": mem.peak["rows"],
+            "tick_lateness_ms": {"median": float(np.median([x["median"] for x in lateness])) if lateness else None,
+                                 "p99": max((x["p99"] for x in lateness), default=None)},
+            "host_errors": sum(h.get("error_count", 0) for h in hosts.values()),
+            "outcomes": sorted({str(r.get("outcome")) for r in res.robots.values()})}
 
 
-def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0) -> dict:
+def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
+              edge_nodes: int = 1) -> dict:
     from . import machine_info
 
     rows = []
-    for n in sizes:
-        row = run_size(n, duration_s)
-        print(f"fleet N={n:3d}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
-              f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
-              f"(PSS {row['pss_mb']:.0f} MB, {row['processes']} processes)", file=sys.stderr, flush=True)
-        rows.append(row)
-    one = next((r for r in rows if r["drones"] == 1), None)
+    for k in groupings:
+        for n in sizes:
+            row = run_size(n, duration_s, k, edge_nodes)
+            row["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
+            print(f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
+                  f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
+                  f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
+                  + (f"  per node {row['drones_per_node']}" if edge_nodes > 1 else ""), file=sys.stderr, flush=True)
+            rows.append(row)
     for r in rows:
+        one = next((o for o in rows if o["drones"] == 1 and o["drones_per_actor"] == r["drones_per_actor"]), None)
         r["rss_mb_per_extra_drone"] = ((r["rss_mb"] - one["rss_mb"]) / (r["drones"] - 1)
                                        if one and r["drones"] > 1 else None)
-    return {"benchmark": "fleet", "machine": machine_info(), "duration_s": duration_s, "results": rows,
-            "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "rss_mb_one_drone_max": 1024,
+        r["pss_mb_per_extra_drone"] = ((r["pss_mb"] - one["pss_mb"]) / (r["drones"] - 1)
+                                       if one and r["drones"] > 1 else None)
+    return {"benchmark": "fleet", "machine": machine_info(), "duration_s": duration_s, "edge_nodes": edge_nodes,
+            "load_avg_1min_start": round(os.getloadavg()[0], 2), "results": rows,
+            "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "drones_at_least_grouped": 40,
                         "rss_mb_per_extra_drone_max": 150}}
 
 
@@ -186,6 +229,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fleet", help="N simulated drones on one node: missed control ticks, dropped frames, CPU, RSS")
     p.add_argument("--drones", type=int, action="append", help="fleet size (repeatable; default 1 5 10 20 40)")
     p.add_argument("--duration", type=float, default=30.0, help="seconds of flight per size (real time)")
+    p.add_argument("--drones-per-actor", type=int, action="append", dest="per_actor",
+                   help="drones sharing one drone actor (repeatable; default 1)")
+    p.add_argument("--edge-nodes", type=int, default=1, help="tier=edge nodes of a local cluster (default 1: "
+                                                            "the local Ray)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
     p.add_argument("--plot", help="write the curve as a PNG to this file (default: the --out file with .png, "
@@ -199,7 +246,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         if any(s < 1 for s in sizes):
             print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
             return 2
-        report = run_fleet(sizes, a.duration)
+        per_actor = tuple(a.per_actor) if a.per_actor else (1,)
+        if any(k < 1 for k in per_actor) or a.edge_nodes < 1:
+            print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
+                  f"{a.edge_nodes}", file=sys.stderr)
+            return 2
+        report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes)
         plot = a.plot or (os.path.splitext(a.out)[0] + ".png" if a.out else "fleet.png")
         report["plot"] = os.path.abspath(plot)
         text = json.dumps(report, indent=2)

@@ -11,9 +11,12 @@ moment the command was applied. Four pipelines do the same work (:mod:`aerodaas.
 frames, in one invocation, **interleaved**: round-robin windows of ``--window`` seconds (the order rotated each
 round) until each has had ``--duration`` seconds, so a drift in the machine's load hits all of them alike:
 
-* ``framework`` — the AeroDaaS runtime, today's host layout (``colocated``: every component of the tier in one
-  host process); one short mission per window (its take-off is not measured), optionally recorded (``--record``:
-  then an unrecorded copy joins the rotation, ``framework_unrecorded_overhead_ms``, so the recording's cost shows);
+* ``framework`` — the AeroDaaS runtime in each ``--layout``: ``colocated`` (detector and follow deployed with
+  ``colocate=True``: everything runs in the drone actor, zero actor hops) and ``actors`` (the detector in its own
+  analytics actor: the frame crosses one process boundary as an ObjectRef, detections come back as a small
+  message to the follow controller colocated in the drone actor); one short mission per window (its take-off is
+  not measured), optionally recorded (``--record``: then an unrecorded copy joins the rotation,
+  ``framework_unrecorded_overhead_ms``, so the recording's cost shows);
 * ``bare_loop`` — one process, plain function calls: the floor;
 * ``naive_ray`` — one Ray actor per component, ``ray.put`` + actor call per hop (:mod:`.peers_naive_ray`);
 * ``dora_rs`` — one dora-rs 1.1 node process per component, shared memory (:mod:`.peers_dora`; the optional
@@ -21,8 +24,7 @@ round) until each has had ``--duration`` seconds, so a drift in the machine's lo
 
 The *honest tail* (stub only): end-to-end plus capture dispatch (camera tick -> render start) minus the stub's
 *nominal* time, so the stub's sleep overshoot and every stall count (the paper's definition subtracts the measured
-inference window, which hides them). ``--layout actors`` is accepted for the Ray-native runtime to come and reported
-as not implemented rather than measured.
+inference window, which hides them).
 """
 from __future__ import annotations
 
@@ -43,19 +45,21 @@ from .pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, 
 
 RESOLUTIONS = ((1280, 720), (640, 480))
 LAYOUTS = ("colocated", "actors")
-NOT_IMPLEMENTED = "not implemented in this runtime yet"
+NOT_MEASURED = "not flown in this invocation"
 PEERS = ("bare_loop", "naive_ray", "dora_rs")
 
 
 class FrameworkWindows:
-    """Today's AeroDaaS runtime: each :meth:`window` flies one mission of ``seconds`` after take-off in the current
-    Ray (the edge host process is started per mission), recorded to a temporary MCAP when ``record_dir`` is set.
-    Returns the scheduler's latency records of applied commands plus the camera's dispatch figures."""
+    """The AeroDaaS runtime in ``layout`` (see the module docstring): each :meth:`window` flies one mission of
+    ``seconds`` after take-off in the current Ray (the run's actors are started per mission), recorded to a
+    temporary MCAP when ``record_dir`` is set. Returns the scheduler's latency records of applied commands plus the
+    camera's dispatch figures."""
 
     name = "framework"
 
-    def __init__(self, width: int, height: int, kind: str, stub_ms: float, record_dir: str | None) -> None:
-        self.args, self.record_dir = (width, height, kind, stub_ms), record_dir
+    def __init__(self, width: int, height: int, kind: str, stub_ms: float, record_dir: str | None,
+                 layout: str = "colocated") -> None:
+        self.args, self.record_dir, self.layout = (width, height, kind, stub_ms), record_dir, layout
         self.n, self.info = 0, {"frames_captured": 0, "frames_dropped_busy_detector": 0, "host_errors": 0,
                                 "dispatch": [], "recording_bytes": 0}
 
@@ -71,9 +75,9 @@ class FrameworkWindows:
         edge = env.get_compute_resource_by_id("edge")
         sched = TrajectoryScheduler(env)
         det = make_detector(kind, stub_ms)
-        det.deploy(edge)
+        det.deploy(edge, colocate=self.layout == "colocated")
         follow = FollowAnalytics(target_classes=["car", "truck", "bus"], confirm_hits=1, lost_after=1e9)
-        follow.deploy(edge)
+        follow.deploy(edge, colocate=True)
         sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
                                            priority=1))
         self.n += 1
@@ -87,7 +91,7 @@ class FrameworkWindows:
         i = self.info
         i["frames_captured"] += cam.get("frames", 0)
         i["frames_dropped_busy_detector"] += res.stats["uav"]["analytics"][0].get("dropped", 0)
-        i["host_errors"] += res.stats["_hosts"]["edge"].get("error_count", 0)
+        i["host_errors"] += sum(h.get("error_count", 0) for h in res.stats.get("_hosts", {}).values())
         i["dispatch"].append((cam.get("dispatch_ms_median"), cam.get("dispatch_ms_p99")))
         if rec and os.path.exists(rec):
             i["recording_bytes"] += os.path.getsize(rec)
@@ -109,7 +113,8 @@ class FrameworkWindows:
                # from the camera's clock tick to its render starting on the host's thread pool (per window median
                # and p99 from the camera's stats: the runtime does not pair it with each frame's latency record)
                "capture_dispatch_ms": {"median": d_med, "p99": d_p99},
-               "recorded": self.record_dir is not None, "recording_bytes": i["recording_bytes"],
+               "layout": self.layout, "recorded": self.record_dir is not None,
+               "recording_bytes": i["recording_bytes"],
                "honest_overhead_ms": None}
         if kind == "stub" and recs:
             h = summary([r["e2e_ms"] - stub_ms for r in recs])
@@ -174,16 +179,17 @@ def _peer(name: str, width: int, height: int, kind: str, stub_ms: float) -> tupl
 
 
 def interleaved(width: int, height: int, kind: str, duration_s: float, window_s: float, stub_ms: float,
-                record_dir: str | None, loads: list[float], with_framework: bool = True) -> dict:
+                record_dir: str | None, loads: list[float], layouts: tuple[str, ...] = ("colocated",)) -> dict:
     """Every pipeline for ``duration_s`` seconds in round-robin windows of ``window_s`` (order rotated each round,
     one unmeasured warm-up window first for the peers). Returns ``{name: report}``; an unavailable pipeline's report
-    is ``{"available": False, "reason": ...}``; without ``with_framework`` the AeroDaaS runtime is not flown. When
+    is ``{"available": False, "reason": ...}``. When
     recording (``record_dir``), an unrecorded AeroDaaS runner joins the rotation (``framework_unrecorded``), so the
-    recording's cost shows side by side."""
-    fw = FrameworkWindows(width, height, kind, stub_ms, record_dir)
-    runners: dict[str, Any] = {"framework": fw} if with_framework else {}
-    if with_framework and record_dir:
-        runners["framework_unrecorded"] = FrameworkWindows(width, height, kind, stub_ms, None)
+    recording's cost shows side by side. The runtime is flown in each of ``layouts`` (``framework:<layout>``)."""
+    runners: dict[str, Any] = {}
+    for layout in layouts:
+        runners[f"framework:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, record_dir, layout)
+        if record_dir:
+            runners[f"framework_unrecorded:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, None, layout)
     missing: dict[str, str] = {}
     for name in PEERS:
         p, why = _peer(name, width, height, kind, stub_ms)
@@ -204,10 +210,10 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
         for name in PEERS:
             if name in runners:
                 runners[name].close()
-    out: dict[str, Any] = {"framework": fw.report(rows["framework"], kind, stub_ms) if with_framework else None}
-    if "framework_unrecorded" in runners:
-        out["framework_unrecorded"] = runners["framework_unrecorded"].report(rows["framework_unrecorded"], kind,
-                                                                             stub_ms)
+    out: dict[str, Any] = {}
+    for name, r in runners.items():
+        if name.startswith("framework"):
+            out[name] = r.report(rows[name], kind, stub_ms)
     for name in PEERS:
         out[name] = ({"available": True, **overheads(rows[name], kind, stub_ms)} if name in runners
                      else {"available": False, "reason": missing[name]})
@@ -217,9 +223,9 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
 def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
     cols = {"bare_loop": "bare_loop_overhead_ms", "naive_ray": "naive_ray_overhead_ms",
             "dora_rs": "dora_rs_overhead_ms"}
-    fw = rep["framework"] if layout == "colocated" else None
+    fw = rep.get(f"framework:{layout}")
     row: dict[str, Any] = {"resolution": f"{width}x{height}", "detector": kind, "fps": int(FPS), "layout": layout,
-                           "status": "measured" if fw else NOT_IMPLEMENTED,
+                           "status": "measured" if fw else NOT_MEASURED,
                            "framework_overhead_ms": mp(fw["framework_overhead_ms"]) if fw else None}
     for name, key in cols.items():
         row[key] = mp(rep[name]["framework_overhead_ms"]) if rep[name]["available"] else None
@@ -230,9 +236,9 @@ def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
     row["ratio_median"] = (row["framework_overhead_ms"]["median"] / bo["median"]
                            if fw and bo and bo["median"] and row["framework_overhead_ms"]["median"] is not None
                            else None)
-    row["framework"] = fw if fw else {"status": NOT_IMPLEMENTED}
-    if fw and rep.get("framework_unrecorded"):  # --record: the same runtime unrecorded, in the same rotation
-        un = rep["framework_unrecorded"]
+    row["framework"] = fw if fw else {"status": NOT_MEASURED}
+    if fw and rep.get(f"framework_unrecorded:{layout}"):  # --record: the same runtime unrecorded, same rotation
+        un = rep[f"framework_unrecorded:{layout}"]
         row["framework_unrecorded_overhead_ms"] = mp(un["framework_overhead_ms"])
         row["honest_overhead_ms"]["framework_unrecorded"] = mp(un["honest_overhead_ms"])
         row["framework_unrecorded"] = un
@@ -256,8 +262,7 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
     try:
         for kind in kinds:
             for wdt, hgt in resolutions:
-                rep = interleaved(wdt, hgt, kind, duration_s, window_s, stub_ms, record_dir, loads,
-                                  with_framework="colocated" in layouts)
+                rep = interleaved(wdt, hgt, kind, duration_s, window_s, stub_ms, record_dir, loads, layouts)
                 for layout in layouts:
                     row = _row(wdt, hgt, kind, layout, rep)
                     results.append(row)
@@ -305,7 +310,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detector", choices=["stub", "yolox", "both"], default="both")
     p.add_argument("--resolution", action="append", help="WxH (repeatable; default 1280x720 and 640x480)")
     p.add_argument("--layout", choices=["colocated", "actors", "both"], default="both",
-                   help="AeroDaaS layout(s) to report (actors: not implemented in this runtime yet)")
+                   help="AeroDaaS layout(s) to fly: colocated (zero hops), actors (the detector in its own actor), both")
     p.add_argument("--record", action="store_true", help="record the AeroDaaS runs to MCAP (recording cost shows)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")

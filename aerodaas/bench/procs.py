@@ -9,25 +9,28 @@ import time
 from typing import Any
 
 
-def ray_processes() -> list:
-    """psutil.Process objects of this driver's local Ray node (its system processes and all their descendants)
-    and of the driver itself. Raises RuntimeError when Ray was not started by this driver."""
+def ray_processes(nodes: list | None = None) -> list:
+    """psutil.Process objects of this driver's local Ray node — or of ``nodes`` (``ray._private.node.Node``
+    handles, e.g. a :class:`~aerodaas.clusters.local.LocalCluster`'s) — (their system processes and all their
+    descendants) and of the driver itself. Raises RuntimeError when Ray was not started by this driver and no
+    ``nodes`` are given."""
     import psutil
     import ray
 
-    node = getattr(ray._private.worker, "_global_node", None)
-    if node is None:
-        raise RuntimeError("ray_processes(): Ray is not running in this process (call ray.init first)")
+    if nodes is None:
+        node = getattr(ray._private.worker, "_global_node", None)
+        if node is None:
+            raise RuntimeError("ray_processes(): Ray is not running in this process (call ray.init first)")
+        nodes = [node]
     procs: dict[int, Any] = {os.getpid(): psutil.Process()}
-    for infos in node.all_processes.values():
-        for info in infos:
-            try:
-                p = psutil.Process(info.process.pid)
-            except psutil.NoSuchProcess:
-                continue
-            procs[p.pid] = p
-            for c in p.children(recursive=True):
-                procs[c.pid] = c
+    for info in (i for n in nodes for infos in n.all_processes.values() for i in infos):
+        try:
+            p = psutil.Process(info.process.pid)
+        except psutil.NoSuchProcess:
+            continue
+        procs[p.pid] = p
+        for c in p.children(recursive=True):
+            procs[c.pid] = c
     return list(procs.values())
 
 
@@ -47,7 +50,9 @@ def memory_mb(procs: list | None = None) -> dict[str, Any]:
         pss += getattr(mi, "pss", mi.rss) / 2**20
         rows.append({"pid": p.pid, "name": title if title.startswith("ray::") else os.path.basename(name) or title,
                      "rss_mb": round(mi.rss / 2**20, 1), "pss_mb": round(getattr(mi, "pss", mi.rss) / 2**20, 1)})
-    return {"rss_mb": rss, "pss_mb": pss, "processes": len(rows), "rows": rows}
+    workers = sum(1 for r in rows if r["name"].startswith("ray::") and not r["name"].startswith("ray::IDLE")
+                  and "Agent" not in r["name"])
+    return {"rss_mb": rss, "pss_mb": pss, "processes": len(rows), "worker_processes": workers, "rows": rows}
 
 
 def cpu_seconds(procs: list) -> float:
@@ -67,16 +72,16 @@ def cpu_seconds(procs: list) -> float:
 class MemorySampler:
     """Samples :func:`memory_mb` every ``period_s`` seconds in a background thread; keeps the peak sum."""
 
-    def __init__(self, period_s: float = 1.0) -> None:
-        self.period_s = period_s
-        self.peak: dict[str, Any] = {"rss_mb": 0.0, "pss_mb": 0.0, "processes": 0, "rows": []}
+    def __init__(self, period_s: float = 1.0, nodes: list | None = None) -> None:
+        self.period_s, self.nodes = period_s, nodes
+        self.peak: dict[str, Any] = {"rss_mb": 0.0, "pss_mb": 0.0, "processes": 0, "worker_processes": 0, "rows": []}
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._loop, daemon=True)
 
     def _loop(self) -> None:
         while not self._stop.is_set():
             try:
-                m = memory_mb()
+                m = memory_mb(ray_processes(self.nodes))
             except Exception:
                 m = None
             if m and m["rss_mb"] > self.peak["rss_mb"]:
