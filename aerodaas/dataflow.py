@@ -20,6 +20,7 @@ the actors it lists.
 """
 from __future__ import annotations
 
+import copy
 import os
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -258,10 +259,10 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         inst[aid] = []
 
         def place(cid: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
-                  scheduled_: bool = False) -> None:
+                  scheduled_: bool = False, obj: Any = None) -> None:
             pa = actor(hid, role, tier, compute, labels)
-            pa.spec.setdefault("analytics", []).append({"cid": cid, "name": a.name, "obj": a, "buffer": buffer,
-                                                       "scheduled": scheduled_})
+            pa.spec.setdefault("analytics", []).append({"cid": cid, "name": a.name, "obj": a if obj is None else obj,
+                                                       "buffer": buffer, "scheduled": scheduled_})
             add(Node(cid, "analytics", robots_[0] if len(robots_) == 1 and hid.startswith("drone") else None, hid,
                      a.name))
             inst[aid].append((cid, hid, robots_))
@@ -274,9 +275,10 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 labels = actors[drone_host[rids[0]]].labels
                 cid = base if len(per) == 1 else f"{base}@{comp}"
                 place(cid, f"dispatcher/{comp}", tuple(rids), "dispatcher", "edge", comp, labels, True)
-        elif getattr(a, "colocate", False):  # a copy inside each drone's actor
-            for rid in served:
-                place(f"{base}@{rid}", drone_host[rid], (rid,), "drone", "edge", None, {})
+        elif getattr(a, "colocate", False):  # a copy inside each drone's actor: per-drone state by construction
+            for j, rid in enumerate(served):
+                place(f"{base}@{rid}", drone_host[rid], (rid,), "drone", "edge", None, {},
+                      obj=a if j == 0 else copy.deepcopy(a))
         else:
             n_rep = max(1, int(getattr(a, "replicas", 1)))
             comp = a.compute

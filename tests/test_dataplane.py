@@ -1,9 +1,11 @@
-"""The data plane (issue 6): structural facts, not wall-clock numbers.
+"""The data plane (issues 6 and 15): structural facts, not wall-clock numbers.
 
-* one host process per tier, whatever the number of drones (components are actors in placement, not processes),
-  counted on the Ray node during a real run;
-* a frame is never copied between the camera and its readers (same ndarray object, read-only); the recorder
-  JPEG-encodes each recorded frame once; a frame crossing to the cloud tier is encoded once and decoded once;
+* one drone actor per drone (or per ``drones_per_actor`` drones), one actor per deployed analytics and one recorder
+  per run, counted on the Ray node during a real run and found by their names;
+* a frame is never copied between the camera and its readers in the drone actor (same ndarray object, read-only);
+  the recorder's JPEG encode happens once per recorded frame; a frame crossing to an analytics actor of the same
+  tier is put into the object store once and read once; one crossing to the cloud tier is encoded once and
+  decoded once;
 * new navigation from an analytics reaches the vehicle backend at once, not at the next control tick;
 * a busy component drops (and counts) instead of queueing without bound; lock-step never drops.
 """
@@ -64,25 +66,31 @@ class RightBox(Analytics):
 
 
 def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str | None = None):
-    """Plan the run as the driver does and build the edge host in this process (no Ray actors); ``record``: an
-    MCAP path for the host's recorder."""
+    """Plan the run as the driver does, with every analytics colocated and every drone in one drone actor, and
+    build that actor's host in this process (no Ray actors); ``record``: an MCAP path for an in-process recorder."""
     from aerodaas.actors.components import HostRuntime
     from aerodaas.actors.host import Host
     from aerodaas.config import SimulationConfig
-    from aerodaas.runtime import _collect_graph, _plan, _robot_schedulers
+    from aerodaas.dataflow import build_plan, collect_graph
+    from aerodaas.runtime import _robot_schedulers
 
     robots = robots or env.get_env_robots()
+    env.cfg.drones_per_actor = len(robots)
     graphs = {}
     for r in robots:
-        graphs[r.id] = _collect_graph(r)[0]
+        graphs[r.id] = collect_graph(r)
         for a in graphs[r.id]:
-            if a.compute is None:
-                a.deploy(env.get_compute_resource_by_id("edge"))
+            a.deploy(env.get_compute_resource_by_id("edge"), colocate=True)
     sim = SimulationConfig(lockstep=lockstep)
-    plan = _plan(env, robots, graphs, _robot_schedulers(env, robots), sim, record, 0)
-    host = Host("edge", "edge", 0, lockstep=lockstep, workers=2)
-    rt = HostRuntime(host, plan.specs["edge"])
-    host.connect(plan.routes, plan.location, {"edge": "edge"}, {})
+    plan = build_plan(env, robots, graphs, _robot_schedulers(env, robots), sim)
+    (hid,) = [h for h, a in plan.actors.items() if a.role == "drone"]
+    spec = dict(plan.actors[hid].spec)
+    spec.pop("record_remote", None)
+    if record:
+        spec["record"] = {"path": record, "meta": {}}
+    host = Host(hid, "edge", 0, lockstep=lockstep, workers=2)
+    rt = HostRuntime(host, spec)
+    host.connect(plan.routes(), plan.location(), {h: a.tier for h, a in plan.actors.items()}, {})
     return host, rt, plan
 
 
@@ -110,7 +118,7 @@ def test_frames_reach_every_reader_as_the_same_read_only_array():
         deadline = time.time() + 5
         while (len(a.seen) < 3 or len(b.seen) < 3) and time.time() < deadline:
             time.sleep(0.01)
-        pa, pb = rt.comps["probe#1"].obj, rt.comps["probe#2"].obj
+        pa, pb = rt.comps["probe#1@d00"].obj, rt.comps["probe#2@d00"].obj
         assert [id(f) for f in pa.seen] == [id(f) for f in produced] == [id(f) for f in pb.seen]  # zero copies
         assert all(not f.flags.writeable for f in produced)
         with pytest.raises(ValueError):
@@ -137,55 +145,66 @@ def _ray_processes_titled(keep) -> list:
     return out
 
 
-def _host_processes() -> list:
-    """Processes running a HostActor."""
-    return _ray_processes_titled(lambda t: t.startswith("ray::HostActor"))
-
-
 def _worker_processes() -> list:
     """Processes running an actor or task, other than Ray's own agents and idle pooled workers."""
     return _ray_processes_titled(lambda t: t.startswith("ray::") and not t.startswith(
         ("ray::IDLE", "ray::DashboardAgent", "ray::RuntimeEnvAgent")))
 
 
-def test_one_host_process_per_tier_whatever_the_fleet(ray_session, run_options):
+def _titles(pids: list[int]) -> list[str]:
+    import psutil
+
+    out = []
+    for pid in pids:
+        try:
+            out.append(" ".join(psutil.Process(pid).cmdline()).split(".")[0].split()[0])
+        except psutil.NoSuchProcess:
+            out.append("gone")
+    return sorted(out)
+
+
+@pytest.mark.parametrize("n,per_actor", [(1, 1), (4, 1), (4, 2)])
+def test_a_drone_actor_per_drone_an_actor_per_analytics_and_a_recorder(ray_session, run_options, n, per_actor):
     """A real run (Environment.start_mission on the session's Ray): the worker processes it creates are one
-    HostActor per tier in use, for 1 drone as for 4 (counted on the node while the hosts are up)."""
+    DroneActor per drone (per ``drones_per_actor`` drones), one AnalyticsActor for the analytics the fleet shares
+    and one RecorderActor, each found under its name ``aerodaas/<run>/...`` while the run is up."""
     import psutil
     import ray
 
-    for p in _host_processes():  # hosts of earlier tests, killed, may take a moment to exit
-        try:
-            p.wait(30)
-        except psutil.NoSuchProcess:
-            pass
     before = {p.pid for p in _worker_processes()}  # actors earlier tests of the session left running are not ours
-    seen: dict[int, dict] = {}
-    for n in (1, 4):
-        env = _env(n)
-        probe = FrameProbe()
-        probe.deploy(env.get_compute_resource_by_id("edge"))
-        for r in env.get_env_robots():
-            probe.analyse(r.get_sensor_by_id("cam").get_data_stream())  # one analytics shared by the fleet
+    env = _env(n)
+    env.cfg.drones_per_actor = per_actor
+    probe = FrameProbe()
+    probe.deploy(env.get_compute_resource_by_id("edge"))
+    for r in env.get_env_robots():
+        probe.analyse(r.get_sensor_by_id("cam").get_data_stream())  # one analytics shared by the fleet
+    run_options.run_id = f"dp{n}x{per_actor}"
+    seen: dict = {}
 
-        def count(robot, n=n):
-            host_pid = ray.get(robot._handle.host.pid.remote())
-            seen[n] = {"hosts": sorted(p.pid for p in _host_processes()),
-                       "workers": sorted(p.pid for p in _worker_processes() if p.pid not in before),
-                       "edge_pid": host_pid}
+    def count(robot):
+        groups = [f"drone/d{i:02d}" for i in range(n)] if per_actor == 1 else \
+            [f"drones/d{i:02d}+{per_actor - 1}" for i in range(0, n, per_actor)]
+        names = [f"aerodaas/{run_options.run_id}/{g}" for g in groups] + [
+            f"aerodaas/{run_options.run_id}/analytics/edge/probe#1", f"aerodaas/{run_options.run_id}/recorder"]
+        seen["pids"] = {nm: ray.get(ray.get_actor(nm).ping.remote()) for nm in names}
+        seen["workers"] = sorted(p.pid for p in _worker_processes() if p.pid not in before)
 
-        env.get_robot_by_id("d00").on_mission_start(count)
-        res = env.start_mission(timeout=1.5)
-        assert set(res.robots) == {f"d{i:02d}" for i in range(n)}
-        assert res.stats["_hosts"].keys() == {"edge"}  # nothing deployed on cloud: one host
-        try:  # the killed host's process is gone before the next fleet starts
-            psutil.Process(seen[n]["edge_pid"]).wait(30)
+    env.get_robot_by_id("d00").on_mission_start(count)
+    res = env.start_mission(timeout=2.0)
+    assert set(res.robots) == {f"d{i:02d}" for i in range(n)}
+    n_actors = -(-n // per_actor)
+    assert sorted(seen["pids"].values()) == seen["workers"], seen  # every worker process of the run is named
+    assert _titles(seen["workers"]) == sorted(["ray::DroneActor"] * n_actors + ["ray::AnalyticsActor",
+                                                                                  "ray::RecorderActor"]) or \
+        len(seen["workers"]) == n_actors + 2, seen
+    assert len(set(seen["pids"].values())) == n_actors + 2
+    assert set(res.stats["_hosts"]) == {*(h.split("aerodaas/" + run_options.run_id + "/")[1]
+                                          for h in seen["pids"])}
+    for pid in seen["workers"]:  # killed at the end of the run
+        try:
+            psutil.Process(pid).wait(30)
         except psutil.NoSuchProcess:
             pass
-    for n in (1, 4):
-        assert seen[n]["hosts"] == [seen[n]["edge_pid"]], seen  # one HostActor process: the edge host
-        assert seen[n]["workers"] == seen[n]["hosts"], seen  # and no other worker process of the run
-    assert len(seen[4]["workers"]) == len(seen[1]["workers"]) == 1
 
 
 def test_frame_copies_on_the_edge_hot_path_and_the_recorder(tmp_path):
@@ -226,26 +245,33 @@ def test_frame_copies_on_the_edge_hot_path_and_the_recorder(tmp_path):
                       "object_store_put": 0, "object_store_get": 0}
 
 
-def test_frame_crossing_to_the_cloud_is_encoded_once_and_decoded_once(ray_session, run_options):
-    """A real lock-step run with a frame analytics deployed on the cloud tier: every frame the edge camera
-    materialises is JPEG-encoded once on the edge host and decoded once on the cloud host (and nothing else)."""
+@pytest.mark.parametrize("where", ["edge", "cloud"])
+def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_session, run_options, where):
+    """A real lock-step run with a frame analytics in its own actor: on the same tier every frame the drone actor
+    materialises is put into the object store once and read once by the analytics actor; across tiers (cloud) it
+    is JPEG-encoded once by the drone actor and decoded once by the analytics actor — nothing else."""
     env = _env(1, lockstep=True)
     probe = FrameProbe()
-    probe.deploy(env.get_compute_resource_by_id("cloud"))
+    probe.deploy(env.get_compute_resource_by_id(where))
     probe.analyse(env.get_robot_by_id("d00").get_sensor_by_id("cam").get_data_stream())
     res = env.start_mission(timeout=3.0)
     hosts = res.stats["_hosts"]
-    assert set(hosts) == {"edge", "cloud"} and hosts["edge"]["error_count"] == hosts["cloud"]["error_count"] == 0
-    edge, cloud = hosts["edge"]["frame_copies"], hosts["cloud"]["frame_copies"]
+    a_host = f"analytics/{where}/probe#1"
+    assert set(hosts) == {"recorder", "drone/d00", a_host}
+    assert hosts["drone/d00"]["error_count"] == hosts[a_host]["error_count"] == 0
+    drone, ana = hosts["drone/d00"]["frame_copies"], hosts[a_host]["frame_copies"]
     cam = res.stats["d00"]["cameras"]["cam"]
     analysed = res.stats["d00"]["analytics"][0]
     n = cam["frames"]
     assert n > 0 and analysed["processed"] == analysed["received"] == n  # lock-step: every frame crossed
     assert [o["sent"] for o in cam["outlets"]] == [n] and cam["outlets"][0]["dropped"] == 0
-    assert edge == {"materialised": n, "tier_jpeg_encoded": n, "tier_jpeg_decoded": 0, "object_store_put": 0,
-                    "object_store_get": 0, "recorder_jpeg_encoded": 0}
-    assert cloud == {"materialised": 0, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": n, "object_store_put": 0,
-                     "object_store_get": 0, "recorder_jpeg_encoded": 0}
+    cross = where != "edge"
+    assert drone == {"materialised": n, "tier_jpeg_encoded": n if cross else 0, "tier_jpeg_decoded": 0,
+                     "object_store_put": 0 if cross else n, "object_store_get": 0, "recorder_jpeg_encoded": 0}
+    assert ana == {"materialised": 0, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": n if cross else 0,
+                   "object_store_put": 0, "object_store_get": 0 if cross else n, "recorder_jpeg_encoded": 0}
+
+
 def test_navigation_reaches_the_backend_before_the_next_tick():
     env = _env(1)
     drone = env.get_robot_by_id("d00")
@@ -286,7 +312,7 @@ def test_busy_consumer_drops_and_counts_lockstep_never_drops():
             from aerodaas.actors.host import Cascade
 
             cam = rt.drones[0].cameras[0]["comp"]
-            comp = rt.comps["probe#1"]
+            comp = rt.comps["probe#1@d00"]
             tok = Cascade() if lockstep else None
             threads = [threading.Thread(target=cam.capture, args=((0.0, 0.0, 3.0), 90.0, 0.01 * i, i, tok))
                        for i in range(1, 6)]
