@@ -375,8 +375,11 @@ class AnalyticsSchedulingService:
         self.comps[comp.name] = comp
 
     def start(self) -> None:
-        from aerodaas.edgecloud import (AnalyticsBank, AnalyticsDispatcher, AnalyticsEdgeExecutor, CloudPool,
-                                        NetworkModel)
+        from aerodaas.schedulers.dispatch.banks import AnalyticsBank
+        from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+        from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
+        from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
+        from aerodaas.schedulers.dispatch.emulation import NetworkModel
         from aerodaas.schedulers.analytics_base import make_analytics_scheduler
 
         w = self.spec["workload"]
@@ -391,7 +394,7 @@ class AnalyticsSchedulingService:
         self.dispatcher.start_background()
 
     def submit(self, comp: ScheduledAnalyticsComponent, env: dict) -> None:
-        from aerodaas.edgecloud import FramePayload
+        from aerodaas.schedulers.dispatch.payload import FramePayload
 
         meta = env.get("meta")
         drone = env.get("robot") or (meta.robot_id if meta is not None else "?")

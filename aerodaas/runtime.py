@@ -334,7 +334,7 @@ def _start_scheduling(env, plan: _Plan, scheduled: dict, has_cloud: bool) -> lis
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and put the scheduler's spec into the edge host's spec. Returns the
     executors' handles (to kill at the end)."""
-    from .edgecloud import cloud_selector, start_cloud_executors
+    from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
 
     cfg = env.cfg.analytics_scheduler
     analytics = {a.name: a for a in scheduled.values()}
