@@ -412,7 +412,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
     scheduled = _scheduled_analytics(env, graphs)
 
-    from .bench.startup import probe
+    from .startup_probe import probe
 
     probe("app_built")
     t_start = time.monotonic()
