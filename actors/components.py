@@ -351,7 +351,7 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
 
 
 class AnalyticsSchedulingService:
-    """The edge device's analytics scheduler, inside the edge host: one :class:`aerodaas.edgecloud.AnalyticsDispatcher`
+    """The edge device's analytics scheduler, inside the edge host: one :class:`aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher`
     (one policy instance, one edge executor thread, the scheduler's timers) for every scheduled analytics of the
     host, each analytics being one *model* of the workload. Edge tasks run the host's own analytics objects on the
     camera's frame (no copy); cloud tasks go to ``CloudExecutor`` actors (tier=cloud) that run copies of the same
@@ -375,8 +375,11 @@ class AnalyticsSchedulingService:
         self.comps[comp.name] = comp
 
     def start(self) -> None:
-        from aerodaas.edgecloud import (AnalyticsBank, AnalyticsDispatcher, AnalyticsEdgeExecutor, CloudPool,
-                                        NetworkModel)
+        from aerodaas.schedulers.dispatch.banks import AnalyticsBank
+        from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+        from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
+        from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
+        from aerodaas.schedulers.dispatch.emulation import NetworkModel
         from aerodaas.schedulers.analytics_base import make_analytics_scheduler
 
         w = self.spec["workload"]
@@ -391,7 +394,7 @@ class AnalyticsSchedulingService:
         self.dispatcher.start_background()
 
     def submit(self, comp: ScheduledAnalyticsComponent, env: dict) -> None:
-        from aerodaas.edgecloud import FramePayload
+        from aerodaas.schedulers.dispatch.payload import FramePayload
 
         meta = env.get("meta")
         drone = env.get("robot") or (meta.robot_id if meta is not None else "?")

@@ -453,7 +453,7 @@ class Host:
     def mark_processed(self) -> None:
         """Called by analytics when they finish an item: remembers the wall time of the first one (startup bench)."""
         if self.first_processed_wall is None:
-            from aerodaas.bench.startup import probe
+            from aerodaas.startup_probe import probe
 
             self.first_processed_wall = time.time()
             probe("first_processed")

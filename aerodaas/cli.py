@@ -12,7 +12,7 @@ from pathlib import Path
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .bench.startup import probe
+    from .startup_probe import probe
 
     probe("cli")
     from . import runtime

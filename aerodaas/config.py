@@ -482,7 +482,7 @@ class AnalyticsSchedulerConfig(_Cfg):
     every analytics where it is deployed. ``models``: analytics name -> its QoS, inline, or the name of a model
     of ``workload`` under ``load`` (e.g. ``"HV"`` of ``workloads/ocularone_lambda.json``). Analytics not named
     here run where they are deployed. ``cloud_executors``: cloud executor actors (tier=cloud nodes, else this
-    node). ``network``: emulated extra cloud latency (:class:`aerodaas.edgecloud.NetworkModel` specs, e.g.
+    node). ``network``: emulated extra cloud latency (:class:`aerodaas.schedulers.dispatch.emulation.NetworkModel` specs, e.g.
     ``"const:40"`` or ``"normal:60,15"``; ``"none"`` for a real network)."""
 
     name: str = "default"
@@ -513,7 +513,7 @@ class AnalyticsSchedulerConfig(_Cfg):
         named = sorted(k for k, v in self.models.items() if isinstance(v, str))
         if named and (self.workload is None or self.load is None):
             raise ValueError(f"models: {named} name workload models, which needs 'workload' and 'load'")
-        from aerodaas.edgecloud import NetworkModel
+        from aerodaas.schedulers.dispatch.emulation import NetworkModel
 
         NetworkModel.parse(self.network)  # ValueError naming the bad spec
         return self

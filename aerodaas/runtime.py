@@ -258,7 +258,7 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
-    from .edgecloud import cloud_selector, start_cloud_executors
+    from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
 
     cfg = env.cfg.analytics_scheduler
     analytics = {a.name: a for a in scheduled.values()}
@@ -372,7 +372,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     _check_clocks(robots, sim)
     graphs, scheds, scheduled = _validate(env, robots, opts)
 
-    from .bench.startup import probe
+    from .startup_probe import probe
 
     probe("app_built")
     t_start = time.monotonic()

@@ -1,15 +1,14 @@
 """The analytics-scheduler contract: per-frame placement of DNN tasks on the edge or the cloud.
 
-An analytics scheduler (the paper's ``setAnalyticsScheduler`` plug-in) receives *tasks* — one per (frame,
-model): the drone, the model, the frame (opaque ``payload``: an ObjectRef or JPEG bytes), the arrival time and
-an absolute deadline — and decides for each: run it on the edge queue, send it to the cloud, or drop it with a
-reason. It is a pure policy object: it owns its queues but never executes, sleeps or talks to Ray. A
-*dispatcher* drives it (see :mod:`aerodaas.edgecloud`): it calls :meth:`AnalyticsScheduler.submit` when a task
-arrives, :meth:`AnalyticsScheduler.next_edge_task` whenever the edge executor is free,
-:meth:`AnalyticsScheduler.poll` at :meth:`AnalyticsScheduler.next_poll_ms` (just-in-time cloud releases,
-windows, cool-downs), and reports completions; it carries out the returned :class:`Decision` s. All methods are
-called under one lock, from one thread at a time. All times are **milliseconds** on the dispatcher's monotonic
-clock (``now_ms``), as in the workload's profile.
+An analytics scheduler (the paper's ``setAnalyticsScheduler`` plug-in) receives *tasks* — one per (frame, model): the
+drone, the model, the frame (opaque ``payload``: an ObjectRef or JPEG bytes), the arrival time and an absolute deadline
+— and decides for each: run it on the edge queue, send it to the cloud, or drop it with a reason. It is a pure policy
+object: it owns its queues but never executes, sleeps or talks to Ray. A *dispatcher* drives it (see
+:mod:`aerodaas.schedulers.dispatch.dispatcher`): it calls :meth:`AnalyticsScheduler.submit` when a task arrives,
+:meth:`AnalyticsScheduler.next_edge_task` whenever the edge executor is free, :meth:`AnalyticsScheduler.poll` at
+:meth:`AnalyticsScheduler.next_poll_ms` (just-in-time cloud releases, windows, cool-downs), and reports completions; it
+carries out the returned :class:`Decision` s. All methods are called under one lock, from one thread at a time. All
+times are **milliseconds** on the dispatcher's monotonic clock (``now_ms``), as in the workload's profile.
 
 Terminal states (:class:`TaskState`): every task ends in exactly one of done on time, done late, dropped for
 time, dropped for cost, expired at the edge, failed — counted, never lost. Utility (:func:`task_utility`),
@@ -361,7 +360,8 @@ def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: f
     between ``now_ms`` and ``deadline_ms``: None if it fails at ``now_ms``, +inf if it holds even an hour past the
     deadline (a policy that admits at any time). ``admits`` must be monotone and free of side effects: it is
     called about a dozen times (see :meth:`AnalyticsScheduler.cloud_admit`). The dispatcher in
-    ``aerodaas.edgecloud`` sends the result with the task; the cloud executor compares it with its clock."""
+    ``aerodaas.schedulers.dispatch.dispatcher`` sends the result with the task; the cloud executor compares it
+    with its clock."""
     if not admits(now_ms):
         return None
     hi = deadline_ms

@@ -12,7 +12,7 @@ from aerodaas.bench.harness import Harness, fleet_tasks, make_trace, run_fleet, 
 from aerodaas.bench.schedulers import make_trace as fleet_trace
 from aerodaas.bench.schedulers_report import summarize_runs
 from aerodaas.bench.sweep import mean_ci, run_sweep, scenario_specs, t95
-from aerodaas.edgecloud import Jitter
+from aerodaas.schedulers.dispatch.emulation import Jitter
 from aerodaas.schedulers.analytics_base import (AnalyticsTask, TaskState, Workload, filter_options,
                                                 make_analytics_scheduler)
 from aerodaas.schedulers.analytics_estimators import make_estimator

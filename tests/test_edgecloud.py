@@ -1,4 +1,4 @@
-"""The edge/cloud dispatcher (aerodaas.edgecloud) with emulated executors: accounting, utility, the baselines'
+"""The edge/cloud dispatcher (aerodaas.schedulers.dispatch) with emulated executors: accounting, utility, the baselines'
 behaviour, the cloud re-check, timers, thread-safe submission, the ONNX executors, and the Ray actor wrappers on
 the session's single-node Ray."""
 from __future__ import annotations
@@ -9,9 +9,11 @@ import time
 
 import pytest
 
-from aerodaas.edgecloud import (
-    AnalyticsDispatcher, CloudExecutor, CloudPool, EmulatedEdgeExecutor, Jitter, NetworkModel, OnnxEdgeExecutor,
-)
+from aerodaas.actors.cloud_executor import CloudExecutor
+from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
+from aerodaas.schedulers.dispatch.edge_executors import EmulatedEdgeExecutor, OnnxEdgeExecutor
+from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
 from aerodaas.schedulers.analytics_base import (
     TERMINAL_STATES, AnalyticsScheduler, Decision, TaskState, Workload, make_analytics_scheduler, task_utility,
 )
@@ -403,7 +405,7 @@ def test_bad_inputs_raise_clear_errors():
 
 
 def test_network_model_is_seeded_and_has_episodes_and_a_walk():
-    from aerodaas.edgecloud import seeded_rng
+    from aerodaas.schedulers.dispatch.emulation import seeded_rng
 
     m = NetworkModel.parse(["normal:50,10", "+300@2-4", "walk:20,100,0.5"], seed=3)
     a = [m.sample(t, seeded_rng(3, i)) for i, t in enumerate(range(0, 6000, 100))]
@@ -471,7 +473,8 @@ def test_onnx_executors_run_the_detector_on_the_edge_and_on_a_jpeg_in_the_cloud(
 def test_edge_host_and_cloud_executor_actors_on_the_session_ray(ray_session):
     import ray
 
-    from aerodaas.edgecloud import EdgeHostActor, start_cloud_executors
+    from aerodaas.actors.cloud_executor import start_cloud_executors
+    from aerodaas.bench.edge_host import EdgeHostActor
 
     w = workload("LIGHT")
     cloud = start_cloud_executors(1)  # single node: tier in(edge,cloud)

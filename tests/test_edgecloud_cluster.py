@@ -47,7 +47,7 @@ def cluster():
 
 
 def _executor(label: str):
-    from aerodaas.edgecloud import CloudExecutorActor
+    from aerodaas.actors.cloud_executor import CloudExecutorActor
 
     return CloudExecutorActor.options(label_selector={"tier": "cloud", "cloud-node": label}).remote(f"cloud-{label}")
 
@@ -62,7 +62,8 @@ def test_token_auth_is_on(cluster):
 def test_edge_host_runs_on_the_edge_node_and_cloud_executors_on_cloud_nodes(cluster):
     import ray
 
-    from aerodaas.edgecloud import EdgeHostActor, start_cloud_executors
+    from aerodaas.actors.cloud_executor import start_cloud_executors
+    from aerodaas.bench.edge_host import EdgeHostActor
 
     nodes = {n["NodeID"]: n["Labels"] for n in ray.nodes() if n["Alive"]}
     host = EdgeHostActor.options(label_selector={"tier": "edge"}).remote("host-placement")
@@ -151,7 +152,10 @@ def test_losing_cloud_nodes_mid_run_fails_or_retries_in_flight_tasks_and_moves_n
     which is on the tier=edge head node."""
     import ray
 
-    from aerodaas.edgecloud import AnalyticsDispatcher, CloudPool, EmulatedEdgeExecutor, Jitter
+    from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+    from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
+    from aerodaas.schedulers.dispatch.edge_executors import EmulatedEdgeExecutor
+    from aerodaas.schedulers.dispatch.emulation import Jitter
 
     w = Workload.from_file(WORKLOAD, "LIGHT")
     execs = [_executor("c0"), _executor("c1")]

@@ -8,7 +8,7 @@ import pytest
 
 from aerodaas.backends import make_backend
 from aerodaas.backends.base import CommandRefused, LinkLost
-from aerodaas.backends.tello import go_command, parse_state
+from aerodaas.backends.tello.protocol import go_command, parse_state
 from aerodaas.config import RobotConfig, SensorConfig, TelloConfig
 from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator, format_state
 from aerodaas.emulators import free_udp_port

@@ -64,7 +64,7 @@ def measure(*, seeds: int = 5, duration_s: float = 60.0, edges: int = 4, sigmas=
     from aerodaas.bench.harness import fleet_tasks, run_fleet
     from aerodaas.bench.schedulers import default_workload_path, make_trace
     from aerodaas.bench.sweep import mean_ci, scenario_specs
-    from aerodaas.edgecloud import Jitter
+    from aerodaas.schedulers.dispatch.emulation import Jitter
 
     w = Workload.from_file(workload_path or default_workload_path(), load)
     ej = Jitter("lognormal", 0.05)

@@ -1,18 +1,18 @@
 """The deterministic policy harness: analytics-scheduler policies driven on simulated time, without Ray.
 
-It drives a policy exactly the way :class:`aerodaas.edgecloud.AnalyticsDispatcher` does: ``submit`` on arrival,
-``next_edge_task`` whenever the edge is free (after every event), ``poll`` at ``next_poll_ms``, ``cloud_admit``
-before a cloud execution (bisected into an admit-by time with :func:`admit_by_time`, a dozen calls per task, as the
-dispatcher does), ``on_edge_done`` / ``on_cloud_done(task, now, latency_ms)`` on completion, and drops
+It drives a policy exactly the way :class:`aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher` does: ``submit``
+on arrival, ``next_edge_task`` whenever the edge is free (after every event), ``poll`` at ``next_poll_ms``,
+``cloud_admit`` before a cloud execution (bisected into an admit-by time with :func:`admit_by_time`, a dozen calls per
+task, as the dispatcher does), ``on_edge_done`` / ``on_cloud_done(task, now, latency_ms)`` on completion, and drops
 ``held_tasks()`` at the end. The emulated edge runs one task at a time; the cloud runs any number at once.
 
-Timing is the runtime benchmark's, drawn from the same seeded streams (``seeded_rng(seed, "edge"|"cloud",
-edge_id, task_id)``, task ids counted from 1 per edge in arrival order, as the dispatcher numbers them): an edge
-execution takes ``edge_ms`` x the edge jitter factor, a cloud round trip ``cloud_ms`` x the cloud jitter factor +
-the :class:`~aerodaas.edgecloud.NetworkModel`'s extra latency at the send time (+ ``cloud_extra_ms``, a constant or
-``(task, send_ms) -> ms``, for hand-built scenarios). With no jitter and no network model the timing is exact.
-So the harness reproduces what the Ray benchmark measures minus its wall-clock emulation error
-(``aerodaas bench schedulers --harness``, :mod:`aerodaas.bench.sweep`).
+Timing is the runtime benchmark's, drawn from the same seeded streams (``seeded_rng(seed, "edge"|"cloud", edge_id,
+task_id)``, task ids counted from 1 per edge in arrival order, as the dispatcher numbers them): an edge execution takes
+``edge_ms`` x the edge jitter factor, a cloud round trip ``cloud_ms`` x the cloud jitter factor + the
+:class:`~aerodaas.schedulers.dispatch.emulation.NetworkModel`'s extra latency at the send time (+ ``cloud_extra_ms``, a
+constant or ``(task, send_ms) -> ms``, for hand-built scenarios). With no jitter and no network model the timing is
+exact. So the harness reproduces what the Ray benchmark measures minus its wall-clock emulation error (``aerodaas bench
+schedulers --harness``, :mod:`aerodaas.bench.sweep`).
 
 :func:`make_trace` is the single-edge arrival process of the policy tests; fleets use
 :func:`aerodaas.bench.schedulers.make_trace` (the runtime benchmark's) through :func:`run_fleet`.
@@ -26,7 +26,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
-from aerodaas.edgecloud import Jitter, NetworkModel, seeded_rng
+from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel, seeded_rng
 from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, CloudCounters, Decision, TaskState,
                                                 Workload, admit_by_time, filter_options, make_analytics_scheduler,
                                                 task_utility)
@@ -120,8 +120,9 @@ class Harness:
         return e * self.edge_jitter.factor(seeded_rng(self.seed, "edge", self.edge_id, task.task_id))
 
     def cloud_round_trip_ms(self, task: AnalyticsTask, send_ms: float) -> float:
-        """Cloud round trip (ms) of ``task`` sent at ``send_ms``: drawn as :meth:`aerodaas.edgecloud.CloudPool.send`
-        does (network first, then the jitter factor, from one seeded stream), plus ``cloud_extra_ms``."""
+        """Cloud round trip (ms) of ``task`` sent at ``send_ms``: drawn as
+        :meth:`aerodaas.schedulers.dispatch.cloud_pool.CloudPool.send` does (network first, then the jitter factor, from
+        one seeded stream), plus ``cloud_extra_ms``."""
         c = self.w[task.model].cloud_ms
         if self.cloud_jitter is not None or self.network is not None:
             rng = seeded_rng(self.seed, "cloud", self.edge_id, task.task_id)

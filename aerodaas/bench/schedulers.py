@@ -7,9 +7,9 @@ time, on a local multi-node Ray cluster (one ``tier=edge`` node, ``--cloud-nodes
 :mod:`aerodaas.clusters.local`) or on the cluster at ``--address``:
 
 * edge devices: ``ceil(drones / drones_per_edge)`` emulated edge accelerators, each an
-  :class:`~aerodaas.edgecloud.AnalyticsDispatcher` with its own policy instance, hosted by a few
-  :class:`~aerodaas.edgecloud.EdgeHost` actors on the edge node (many devices per process: the tasks are timers);
-* cloud: :class:`~aerodaas.edgecloud.CloudExecutor` actors on the cloud nodes (Lambda-like, unbounded
+  :class:`~aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher` with its own policy instance, hosted by a few
+  :class:`~aerodaas.bench.edge_host.EdgeHost` actors on the edge node (many devices per process: the tasks are timers);
+* cloud: :class:`~aerodaas.actors.cloud_executor.CloudExecutor` actors on the cloud nodes (Lambda-like, unbounded
   concurrency), holding ``cloud_ms`` x jitter plus the ``--network-variability`` latency.
 
 Arrival process (see ``arrival_process`` in the JSON): the Ocularone scheduler creates, for every batch a drone
@@ -126,7 +126,7 @@ class _Cluster:
 
 
 def _pooled(values: list[float]) -> dict:
-    from aerodaas.edgecloud import Samples
+    from aerodaas.schedulers.dispatch.stats import Samples
 
     return Samples.summarize(values)
 
@@ -226,7 +226,9 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
     before starting Ray."""
     from aerodaas.bench.sweep import scenario_specs
     from aerodaas.schedulers.analytics_base import filter_options
-    from aerodaas.edgecloud import EdgeHostActor, Jitter, NetworkModel, start_cloud_executors
+    from aerodaas.actors.cloud_executor import start_cloud_executors
+    from aerodaas.bench.edge_host import EdgeHostActor
+    from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
     from aerodaas.schedulers.analytics_base import Workload, analytics_scheduler_names
 
     known = analytics_scheduler_names()

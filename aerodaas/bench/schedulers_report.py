@@ -145,7 +145,7 @@ def compare_with_harness(res: dict, workload_path: str | os.PathLike | None = No
     from aerodaas.bench.harness import fleet_tasks, run_fleet
     from aerodaas.bench.schedulers import make_trace
     from aerodaas.bench.sweep import mean_ci, scenario_specs
-    from aerodaas.edgecloud import Jitter
+    from aerodaas.schedulers.dispatch.emulation import Jitter
     from aerodaas.schedulers.analytics_base import Workload
 
     cfg = res["config"]

@@ -1,9 +1,10 @@
 """``aerodaas bench startup``: seconds from ``aerodaas run APP`` to the first frame an analytics has processed.
 
 Each repetition starts ``aerodaas run APP --quiet`` as a fresh process (a cold Ray start included) with
-``AERODAAS_STARTUP_PROBE`` naming a file; the runtime appends ``<phase> <unix time>`` lines to it (``cli``: the
-command started, ``app_built``: the application's dataflow is built, ``ray_ready``, ``hosts_ready``: every host
-set up and wired, ``first_processed``: the first item an analytics finished). The run is then interrupted.
+``AERODAAS_STARTUP_PROBE`` naming a file; the runtime appends ``<phase> <unix time>`` lines to it
+(:func:`aerodaas.startup_probe.probe`; ``cli``: the command started, ``app_built``: the application's dataflow is built,
+``ray_ready``, ``hosts_ready``: every host set up and wired, ``first_processed``: the first item an analytics finished).
+The run is then interrupted.
 """
 from __future__ import annotations
 
@@ -19,18 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-PROBE_ENV = "AERODAAS_STARTUP_PROBE"
-
-
-def probe(phase: str) -> None:
-    """Append ``phase`` with the current unix time to the startup probe file, if one is set (never raises)."""
-    path = os.environ.get(PROBE_ENV)
-    if path:
-        try:
-            with open(path, "a") as f:
-                f.write(f"{phase} {time.time():.6f}\n")
-        except OSError:
-            pass
+from aerodaas.startup_probe import PROBE_ENV
 
 
 def _read(path: Path) -> dict[str, float]:

@@ -104,7 +104,7 @@ def _job(args: tuple) -> dict:
     from aerodaas.bench.bound import utility_upper_bound
     from aerodaas.bench.harness import Harness, fleet_tasks, run_fleet
     from aerodaas.bench.schedulers import make_trace
-    from aerodaas.edgecloud import Jitter, NetworkModel
+    from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
     from aerodaas.schedulers.analytics_base import Workload, make_analytics_scheduler
 
     cell, seed, drones, duration_s, fps, names, options, edge_jitter, wpath, bound = args
@@ -144,7 +144,7 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     work starts."""
     from aerodaas.bench import machine_info
     from aerodaas.bench.schedulers import LOADS, default_workload_path
-    from aerodaas.edgecloud import Jitter
+    from aerodaas.schedulers.dispatch.emulation import Jitter
     from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options,
                                                     make_analytics_scheduler)
 

@@ -51,7 +51,7 @@ def _stream(width: int, height: int, fps: float, video_port: int):
 
 def run_pyav(width: int, height: int, fps: float, seconds: float, record: str | None = None) -> dict:
     """Live PyAV decode of the emulated stream; optionally writes the received bytes to ``record``."""
-    from ..backends.tello import H264Reassembler
+    from ..backends.tello.video import H264Reassembler
     from ..emulators.tello import read_index
 
     port = free_udp_port()

@@ -1,0 +1,292 @@
+"""The Tello link: UDP sockets, the receiver threads (command replies, state packets with dead reckoning, video),
+the keep-alive, and the command channel (one transaction at a time, retries, stale replies drained)."""
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import socket
+import threading
+import time
+from typing import Callable, Iterator
+
+import numpy as np
+
+from ..base import BackendError, CommandRefused, LinkLost
+from .protocol import parse_state
+from .video import H264Reassembler
+
+#: the package's logger (named ``aerodaas.backends.tello``, as before the package was split)
+log = logging.getLogger(__package__)
+
+
+class _Cancelled(Exception):
+    pass
+
+
+class LinkMixin:
+    """Part of :class:`~aerodaas.backends.tello.backend.TelloBackend` (see its ``__init__`` for the shared state)."""
+
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self, timeout_s: float = 30.0) -> None:
+        """Open the sockets, enter SDK mode (``command``), wait for the first state packet and, with
+        ``video``, send ``streamon`` (see :meth:`_start_video` for a refusal). Raises :class:`BackendError`
+        (naming the robot and the step) after ``timeout_s`` seconds or when a socket cannot be bound, and
+        :class:`CommandRefused` when the Tello refuses ``streamon`` while a camera sensor needs its video."""
+        c = self.cfg
+        deadline = time.monotonic() + timeout_s
+        try:
+            self._cmd_sock = self._udp(("0.0.0.0", c.local_command_port), "local_command_port")
+            self._cmd_sock.connect((c.host, c.command_port))
+            self._state_sock = self._udp((c.bind_host, c.state_port), "state_port")
+            if c.video:
+                self._video_sock = self._udp((c.bind_host, c.video_port), "video_port", rcvbuf=4 << 20)
+        except BackendError:
+            self.close()
+            raise
+        except OSError as e:
+            self.close()
+            raise BackendError(f"robot {self.robot_id!r}: connect: cannot reach {c.host}:{c.command_port}: {e}") from e
+        self._t0 = time.monotonic()
+        self._spawn(self._reply_loop, "replies")
+        self._spawn(self._state_loop, "state")
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.close()
+                raise BackendError(f"robot {self.robot_id!r}: connect: no 'ok' to 'command' from "
+                                   f"{c.host}:{c.command_port} within {timeout_s} s")
+            try:
+                if self._transact("command", min(c.command_timeout_s, left), retries=0) == "ok":
+                    break
+            except BackendError:
+                continue
+        while self._last_state is None:
+            if time.monotonic() > deadline:
+                self.close()
+                raise BackendError(f"robot {self.robot_id!r}: connect: no state packet on port {c.state_port} "
+                                   f"within {timeout_s} s")
+            time.sleep(0.02)
+        if c.video:
+            self._spawn(self._video_loop, "video")
+            self._start_video()
+        self._spawn(self._keepalive_loop, "keepalive")
+        self._connected = True
+
+    def _start_video(self) -> None:
+        """``streamon``, checking its reply. A refusal (``error``, ``out of range``...) or no reply after the
+        retries fails the connection (the backend is closed; CommandRefused with the Tello's reply, or
+        BackendError) when a camera sensor of this robot has ``properties.source: backend``; otherwise the robot
+        flies without video: a ``video_error`` event (``command``, ``reply``, ``reason``), a warning in the log,
+        and :meth:`camera_frame` stays None."""
+        c = self.cfg
+        reply: str | None = None
+        try:
+            reply = self._transact("streamon", c.command_timeout_s, retries=c.command_retries)
+        except BackendError as e:
+            failure = str(e)
+        else:
+            if reply.lower() == "ok":
+                return
+            self.last_status = reply
+            failure = f"robot {self.robot_id!r}: streamon refused: {reply}"
+        if self._video_sensors:
+            needs = (f"sensors {', '.join(repr(i) for i in self._video_sensors)}: a camera with "
+                     "properties.source 'backend' needs the Tello's video")
+            self.close()
+            if reply is not None:
+                raise CommandRefused(self.robot_id, "streamon", reply, needs)
+            raise BackendError(f"{failure}; {needs}")
+        self._push_event("video_error", command="streamon", reply=reply, reason=failure)
+        log.warning("%s; flying without video (set tello.video to false if none is wanted)", failure)
+
+    def close(self) -> None:
+        """Stop the threads and close the sockets (idempotent, never raises). Does not land the Tello."""
+        m = self._motion
+        if m is not None:
+            m.cancel.set()
+        self._stop.set()
+        for s in (self._cmd_sock, self._state_sock, self._video_sock):
+            if s is not None:
+                try:
+                    s.close()
+                except OSError:
+                    pass
+        for th in self._threads:
+            if th is not threading.current_thread():
+                th.join(timeout=2.0)
+        self._threads.clear()
+        self._connected = False
+
+    def _udp(self, addr: tuple[str, int], field_name: str, rcvbuf: int = 0) -> socket.socket:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # no SO_REUSEADDR: a port in use is an error
+        if rcvbuf:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        s.settimeout(0.1)
+        try:
+            s.bind(addr)
+        except OSError as e:
+            s.close()
+            raise BackendError(f"robot {self.robot_id!r}: connect: cannot bind tello.{field_name} "
+                               f"{addr[0]}:{addr[1]}: {e}") from e
+        return s
+
+    def _spawn(self, fn: Callable[[], None], name: str) -> None:
+        th = threading.Thread(target=fn, name=f"tello-{self.robot_id}-{name}", daemon=True)
+        th.start()
+        self._threads.append(th)
+
+    # ------------------------------------------------------------------ receivers
+    def _datagrams(self, sock: socket.socket, size: int) -> Iterator[bytes]:
+        """Datagrams from ``sock`` until :meth:`close` (socket errors such as an ICMP port-unreachable surfacing as
+        ConnectionRefusedError are skipped)."""
+        while not self._stop.is_set():
+            try:
+                yield sock.recv(size)
+            except socket.timeout:
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    return
+                time.sleep(0.05)
+
+    def _reply_loop(self) -> None:
+        for data in self._datagrams(self._cmd_sock, 2048):
+            self._replies.put(data.decode("utf-8", "replace").strip())
+
+    def _state_loop(self) -> None:
+        prev_v: np.ndarray | None = None
+        prev_yaw: float | None = None
+        for data in self._datagrams(self._state_sock, 2048):
+            now = time.monotonic()
+            try:
+                st = parse_state(data)
+            except ValueError as e:
+                self.stats["malformed_state"] += 1
+                log.debug("robot %s: skipped malformed Tello state packet: %s", self.robot_id, e)
+                continue
+            self.stats["state_packets"] += 1
+            with self._state_lock:
+                if self._yaw_ref is None:
+                    self._yaw_ref = st["yaw"]
+                heading = self.cfg.initial_heading_deg + (st["yaw"] - self._yaw_ref)
+                v = self._enu_velocity(st, heading)
+                if self._last_state is not None and prev_v is not None:
+                    dt = min(now - self._last_state, 0.5)  # a gap is a lost link, not a long flight
+                    self._pos[:2] += 0.5 * (prev_v[:2] + v[:2]) * dt
+                prev_v = v
+                self._last_state = now
+                if st["vgx"] == st["vgy"] == st["vgz"] == 0 and st["yaw"] == prev_yaw:
+                    self._rest_at = now
+                prev_yaw = st["yaw"]
+                self._pos[2] = st["h"] / 100.0
+                self._h_cm = st["h"]
+                self._vel = v
+                self._yaw_enu = self.enu_yaw_from_heading(heading)
+                self._roll, self._pitch = st["roll"], st["pitch"]
+                self._bat = st["bat"]
+
+    def _enu_velocity(self, st: dict[str, float], heading_deg: float) -> np.ndarray:
+        """ENU m/s from vgx/vgy/vgz (dm/s, NED-like; x along yaw 0 or the body's forward axis, see module doc)."""
+        if self.cfg.velocity_frame == "body":
+            h = math.radians(heading_deg)
+        else:
+            h = math.radians(self.cfg.initial_heading_deg - self._yaw_ref)
+        vx, vy, vz = st["vgx"] / 10.0, st["vgy"] / 10.0, st["vgz"] / 10.0
+        north = vx * math.cos(h) - vy * math.sin(h)
+        east = vx * math.sin(h) + vy * math.cos(h)
+        return np.array([east, north, -vz])
+
+    def _video_loop(self) -> None:
+        try:
+            dec = H264Reassembler()
+        except ImportError as e:
+            self._push_event("video_error", reason=f"PyAV is not installed: {e}")
+            return
+        for data in self._datagrams(self._video_sock, 65536):
+            self.stats["video_datagrams"] += 1
+            frames = dec.feed(data)
+            self.stats["video_errors"] = dec.errors
+            if frames:
+                t = time.monotonic() - self._t0
+                with self._state_lock:
+                    self._frame = (frames[-1], t)
+                self.stats["video_frames"] = dec.frames
+                self.stats["video_decode_ms"] = 1000.0 * dec.decode_s / max(dec.frames, 1)
+
+    def _keepalive_loop(self) -> None:
+        period = self.cfg.keepalive_s
+        while not self._stop.wait(min(0.1, period / 4)):
+            m = self._motion
+            if m is not None and m.thread is not None and m.thread.is_alive():
+                continue  # the Tello is busy with a manoeuvre; its 15 s count starts when it finishes
+            if time.monotonic() - self._last_send >= period:
+                self._send_rc(self._sticks)
+                self.stats["keepalives"] += 1
+
+    # ------------------------------------------------------------------ command channel
+    def _send(self, cmd: str) -> None:
+        if self._cmd_sock is None:
+            raise LinkLost(f"robot {self.robot_id!r}: {cmd}: not connected (call connect() first)")
+        try:
+            self._cmd_sock.send(cmd.encode("utf-8"))
+        except OSError as e:
+            raise LinkLost(f"robot {self.robot_id!r}: {cmd}: cannot send to the Tello: {e}") from e
+        self._last_send = time.monotonic()
+        self.stats["commands"] += 1
+
+    def _send_rc(self, sticks: tuple[int, int, int, int]) -> None:
+        try:
+            self._send("rc {} {} {} {}".format(*sticks))
+        except LinkLost as e:
+            log.debug("%s", e)
+
+    def _transact(self, cmd: str, timeout_s: float, retries: int, cancel: threading.Event | None = None) -> str:
+        """Send ``cmd`` and return the Tello's reply (stripped). A missing reply is retried ``retries`` times;
+        then :class:`LinkLost` (no state either) or :class:`BackendError`. ``cancel`` aborts the wait
+        (raises :class:`_Cancelled`). One transaction at a time: the protocol has no sequence numbers, so stale
+        replies are drained before each send."""
+        with self._cmd_lock:
+            for attempt in range(retries + 1):
+                while True:
+                    try:
+                        self._replies.get_nowait()
+                        self.stats["stale_replies"] += 1
+                    except queue.Empty:
+                        break
+                if attempt:
+                    self.stats["retries"] += 1
+                self._send(cmd)
+                deadline = time.monotonic() + timeout_s
+                while True:
+                    left = deadline - time.monotonic()
+                    if cancel is not None and cancel.is_set():
+                        raise _Cancelled(cmd)
+                    if left <= 0:
+                        break
+                    try:
+                        return self._replies.get(timeout=min(left, 0.05))
+                    except queue.Empty:
+                        continue
+                self.stats["timeouts"] += 1
+        if not self.link_ok:
+            raise LinkLost(f"robot {self.robot_id!r}: {cmd}: no reply after {retries + 1} tries and no state "
+                           f"packet for {self.cfg.state_timeout_s} s")
+        raise BackendError(f"robot {self.robot_id!r}: {cmd}: no reply from the Tello after {retries + 1} tries "
+                           f"of {timeout_s:.1f} s")
+
+    def _expect_ok(self, cmd: str, reply: str) -> None:
+        if reply.lower() != "ok":
+            self.last_status = reply
+            raise CommandRefused(self.robot_id, cmd, reply)
+
+    def command(self, cmd: str) -> str:
+        """Send any SDK command and return its reply (e.g. ``battery?`` -> ``"87"``), with retries; waits while a
+        manoeuvre is being executed (one command at a time). Raises :class:`CommandRefused` for
+        ``error...``/``out of range``/``unknown command`` replies, BackendError / LinkLost without reply."""
+        reply = self._transact(cmd, self.cfg.command_timeout_s, self.cfg.command_retries)
+        low = reply.lower()
+        if low.startswith(("error", "out of range", "unknown command")):
+            self.last_status = reply
+            raise CommandRefused(self.robot_id, cmd, reply)
+        return reply

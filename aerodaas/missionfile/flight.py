@@ -1,0 +1,266 @@
+"""Mission plans and AeroDaaS navigation: :func:`plan_to_flight` (a plan -> the ordered absolute waypoints, terminal
+action and geofence a drone flies; :func:`plan_to_navigation` for the waypoints alone) and
+:func:`navigation_to_plan` (the other way, for export)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Iterable, Literal
+
+from pydantic import ValidationError
+
+from ..geo import enu_to_geodetic
+from ..geofence import Geofence, GeofenceConfig
+from ..models import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
+from ._common import MissionFileError, _fail, _first_error
+from .commands import (_AMSL_FRAMES, _FLIGHT_COMMANDS, _RELATIVE_FRAMES, _TERRAIN_FRAMES, MAV_CMD_DO_CHANGE_SPEED,
+                       MAV_CMD_NAV_LAND, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM,
+                       MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT,
+                       MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_MISSION, PAYLOAD_COMMANDS, command_name, frame_name)
+from .expand import expand_items
+from .items import MissionItem
+from .plans import FlightPlan, MissionPlan
+
+
+def _latlon_missing(lat: float | None, lon: float | None) -> bool:
+    return lat is None or lon is None or (lat == 0.0 and lon == 0.0)
+
+
+def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_commands: Iterable[int] = (),
+                   check_geofence: bool = True, min_altitude: float | None = 0.0) -> FlightPlan:
+    """Convert a mission plan into the navigation an AeroDaaS drone flies.
+
+    ``home`` (WGS-84, AMSL altitude) overrides ``plan.home``; it is needed for AMSL altitudes
+    (``MAV_FRAME_GLOBAL`` 0 / ``_INT`` 5: above-home = z - home altitude) and for takeoff / loiter items without
+    a position. Relative altitudes (frames 3 / 6) are used as they are. Items, after ComplexItem expansion:
+
+    * ``MAV_CMD_NAV_WAYPOINT`` (16) -> waypoint; param1 hold time (s) -> ``hover_duration``, param2 acceptance
+      radius (m) -> ``acceptance_radius`` when > 0. param3 (pass radius) and param4 (yaw) are not modelled.
+    * ``MAV_CMD_NAV_TAKEOFF`` (22) -> waypoint at the takeoff position and altitude (home position if latitude
+      and longitude are 0 or unset).
+    * ``MAV_CMD_NAV_LOITER_TIME`` (19) -> waypoint with ``hover_duration`` = param1 (s) (current position if
+      latitude/longitude are 0 or unset).
+    * ``MAV_CMD_NAV_LOITER_UNLIM`` (17) as the last item -> waypoint, then ``final_action="hover"``.
+    * ``MAV_CMD_NAV_LAND`` (21) -> ``final_action="land"`` (a transit waypoint at the previous altitude first if
+      it names a different location); ``MAV_CMD_NAV_RETURN_TO_LAUNCH`` (20) -> ``final_action="rtl"``.
+    * ``MAV_CMD_DO_CHANGE_SPEED`` (178), speed type 0/1 -> ``speed`` (m/s) of the following waypoints (-1 keeps,
+      -2 restores the default).
+    * commands in ``skip_commands`` (e.g. :data:`PAYLOAD_COMMANDS`) are skipped and listed in ``skipped``.
+
+    Anything else — other NAV commands, DO_JUMP, conditions, terrain frames, items after LAND/RTL — raises
+    :class:`MissionFileError` naming the file, the item, the command number and name. A waypoint lower than
+    ``min_altitude`` metres above home (default 0: below the take-off point, typically an AMSL altitude that
+    was meant relative) raises too; ``None`` disables that check. With ``check_geofence`` every waypoint and
+    leg (from home, and back to home for RTL) must satisfy the plan's geofence."""
+    src = plan.source or "<plan>"
+    skip = frozenset(int(c) for c in skip_commands)
+    clash = skip & _FLIGHT_COMMANDS
+    if clash:
+        raise ValueError(f"skip_commands may not contain commands plan_to_flight flies: "
+                         f"{', '.join(command_name(c) for c in sorted(clash))}")
+    home = home if home is not None else plan.home
+    items = expand_items(plan)
+
+    waypoints: list[Waypoint] = []
+    skipped: list[str] = []
+    final: str | None = None
+    terminal: MissionItem | None = None
+    speed: float | None = None
+    last: tuple[float, float, float] | None = None  # lat, lon, altitude above home of the previous waypoint
+
+    def altitude(item: MissionItem, tag: str) -> float:
+        z = item.params[6]
+        if item.frame in _TERRAIN_FRAMES:
+            raise _fail(src, tag, f"{frame_name(item.frame)} altitudes are above terrain; AeroDaaS has no "
+                                  "terrain model")
+        if item.frame not in _AMSL_FRAMES and item.frame not in _RELATIVE_FRAMES:
+            raise _fail(src, tag, f"{frame_name(item.frame)} carries no global position")
+        if z is None:
+            raise _fail(src, tag, "altitude (z) is not set")
+        if item.frame in _RELATIVE_FRAMES:
+            return z
+        if home is None:
+            raise _fail(src, tag, f"{frame_name(item.frame)} altitude {z:g} m is above mean sea level; converting "
+                                  "it to altitude above home needs the home position (plan has none; pass home=)")
+        return z - home.alt
+
+    def add_waypoint(item: MissionItem, tag: str, lat: float, lon: float, z: float, hover: float = 0.0,
+                     radius: float | None = None, wp_id: str | None = None) -> None:
+        nonlocal last
+        if min_altitude is not None and z < min_altitude:
+            raise _fail(src, tag, f"altitude {z:g} m above home is below min_altitude {min_altitude:g} m "
+                                  f"({frame_name(item.frame)}, z={item.params[6]!r}"
+                                  f"{f', home altitude {home.alt:g} m AMSL' if home is not None else ''})")
+        kwargs: dict[str, Any] = {}
+        if radius is not None and radius > 0:
+            kwargs["acceptance_radius"] = radius
+        try:
+            waypoints.append(Waypoint(id=wp_id or f"item{item.seq}", x=lat, y=lon, z=z, hover_duration=hover,
+                                      waypoint_type="absolute", speed=speed, **kwargs))
+        except ValidationError as e:
+            raise _fail(src, tag, _first_error(e)) from None
+        last = (lat, lon, z)
+
+    for k, item in enumerate(items):
+        tag = item.describe()
+        cmd = item.command
+        if cmd in skip:
+            skipped.append(f"{tag} skipped")
+            continue
+        if terminal is not None:
+            raise _fail(src, tag, f"comes after the terminal {terminal.describe()} and would never run")
+        p = item.params
+        if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM):
+            lat, lon = p[4], p[5]
+            if _latlon_missing(lat, lon):
+                if cmd == MAV_CMD_NAV_WAYPOINT:
+                    raise _fail(src, tag, f"latitude/longitude not set (x={lat!r}, y={lon!r})")
+                if cmd != MAV_CMD_NAV_TAKEOFF and last is not None:
+                    lat, lon = last[0], last[1]  # loiter at the current position
+                elif home is not None:
+                    lat, lon = home.lat, home.lon
+                else:
+                    raise _fail(src, tag, "has no latitude/longitude, so it acts at the vehicle's current (home) "
+                                          "position, which is unknown (plan has no home; pass home=)")
+            z = altitude(item, tag)
+            hover, radius = 0.0, None
+            if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
+                hover = p[0] or 0.0
+                if hover < 0:
+                    raise _fail(src, tag, f"param1 (hold/loiter time) must be >= 0 s, got {hover!r}")
+            if cmd == MAV_CMD_NAV_WAYPOINT:
+                radius = p[1]
+            if cmd == MAV_CMD_NAV_LOITER_UNLIM:
+                rest = [it for it in items[k + 1:] if it.command not in skip]
+                if rest:
+                    raise _fail(src, tag, f"loiters forever, so the following {rest[0].describe()} would never run")
+                final = "hover"
+            add_waypoint(item, tag, lat, lon, z, hover, radius)
+        elif cmd == MAV_CMD_NAV_LAND:
+            lat, lon = p[4], p[5]
+            if item.frame != MAV_FRAME_MISSION and not _latlon_missing(lat, lon):
+                here = last[:2] if last is not None else (home.lat, home.lon) if home is not None else None
+                if here is None or abs(lat - here[0]) > 1e-7 or abs(lon - here[1]) > 1e-7:
+                    if last is None:
+                        raise _fail(src, tag, f"lands at ({lat}, {lon}) before any waypoint gave an altitude to fly "
+                                              "there at; add a takeoff or waypoint first")
+                    add_waypoint(item, tag, lat, lon, last[2], wp_id=f"item{item.seq}_approach")
+            final, terminal = "land", item
+        elif cmd == MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            final, terminal = "rtl", item
+        elif cmd == MAV_CMD_DO_CHANGE_SPEED:
+            kind, value = p[0], p[1]
+            if kind not in (0.0, 1.0, None):
+                raise _fail(src, tag, f"param1 speed type {kind!r} (climb/descent speed) is not supported; only "
+                                      "0 (airspeed) and 1 (ground speed)")
+            if value is None or value == -1:
+                pass
+            elif value == -2:
+                speed = None
+            elif value > 0:
+                speed = value
+            else:
+                raise _fail(src, tag, f"param2 speed must be > 0 m/s, -1 (no change) or -2 (default), got {value!r}")
+        else:
+            hint = " (pass skip_commands=PAYLOAD_COMMANDS to skip camera/gimbal commands)" \
+                if cmd in PAYLOAD_COMMANDS else ""
+            raise _fail(src, tag, f"{command_name(cmd)} is not supported by AeroDaaS navigation{hint}")
+
+    ids = [w.id for w in waypoints]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise _fail(src, "items", f"duplicate sequence numbers give duplicate waypoint ids {dup}")
+    if check_geofence and not plan.geofence.is_empty and waypoints:
+        _check_flight_geofence(src, plan.geofence, home, waypoints, final)
+    name = Path(plan.source).stem if plan.source else "mission"
+    nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, waypoints, SchedulingType.ORDERED, name=name)
+    return FlightPlan(navigation=nav, final_action=final or "hover", geofence=plan.geofence, home=home,
+                      skipped=skipped)
+
+
+def _check_flight_geofence(src: str, config: GeofenceConfig, home: GeoPoint | None, waypoints: list[Waypoint],
+                           final: str | None) -> None:
+    origin = home if home is not None else GeoPoint(lat=waypoints[0].x, lon=waypoints[0].y, alt=0.0)
+    try:
+        fence = Geofence(config, origin)
+    except ValueError as e:
+        raise _fail(src, "geoFence", str(e)) from None
+    pts: list[tuple[str, tuple[float, float]]] = []
+    if home is not None:
+        pts.append(("home", (0.0, 0.0)))
+    pts += [(w.id, w.to_local(origin)[:2]) for w in waypoints]
+    if final == "rtl" and home is not None:
+        pts.append(("home (return to launch)", (0.0, 0.0)))
+    for label, (x, y) in pts:
+        reason = fence.check_point(x, y)
+        if reason:
+            raise _fail(src, f"geofence: {label}", reason)
+    for (la, a), (lb, b) in zip(pts, pts[1:]):
+        reason = fence.check_segment(a, b)
+        if reason:
+            raise _fail(src, f"geofence: leg {la} -> {lb}", reason)
+
+
+def plan_to_navigation(plan: MissionPlan, home: GeoPoint | None = None, **kwargs: Any) -> AeroNavigation:
+    """``plan_to_flight(plan, home, **kwargs).navigation``: the waypoints only (the terminal land/RTL action and
+    the geofence are in :func:`plan_to_flight`'s result)."""
+    return plan_to_flight(plan, home, **kwargs).navigation
+
+
+def navigation_to_plan(nav: AeroNavigation, home: GeoPoint, final_action: Literal["land", "rtl", "hover"] = "land",
+                       geofence: GeofenceConfig | None = None, *, takeoff_altitude: float | None = None) -> MissionPlan:
+    """Turn an AeroDaaS navigation into a mission plan (for :func:`save_plan` / :func:`save_wpl`).
+
+    Waypoints become ``MAV_CMD_NAV_WAYPOINT`` (16) items in ``MAV_FRAME_GLOBAL_RELATIVE_ALT`` (3): relative
+    waypoints (ENU metres from ``home``) are converted to latitude/longitude with pymap3d, absolute ones are
+    used as they are; ``z`` is the altitude above home (m), ``hover_duration`` the hold time (param1),
+    ``acceptance_radius`` param2. A change of ``speed`` emits ``MAV_CMD_DO_CHANGE_SPEED`` (178, ground speed,
+    -2 back to the default). ``takeoff_altitude`` (m above home) prepends a ``MAV_CMD_NAV_TAKEOFF`` (22) at
+    home. ``final_action`` appends ``MAV_CMD_NAV_LAND`` (21) at the last waypoint, ``MAV_CMD_NAV_RETURN_TO_LAUNCH``
+    (20) or nothing (``"hover"``); a land / rtl action command ending the navigation takes its place. The
+    order is the navigation's order (an UNORDERED navigation is exported as given). Velocity commands have no
+    mission equivalent and raise :class:`MissionFileError`."""
+    if final_action not in ("land", "rtl", "hover"):
+        raise ValueError(f"final_action must be 'land', 'rtl' or 'hover', got {final_action!r}")
+    items: list[MissionItem] = []
+
+    def add(command: int, frame: int, params: list[float | None]) -> None:
+        items.append(MissionItem(seq=len(items) + 1, command=command, frame=frame, params=params))
+
+    speed: float | None = None
+    last: tuple[float | None, float | None] = (None, None)  # NAV_LAND with NaN position lands where it is
+    if takeoff_altitude is not None:
+        add(MAV_CMD_NAV_TAKEOFF, MAV_FRAME_GLOBAL_RELATIVE_ALT, [0, 0, 0, None, home.lat, home.lon, takeoff_altitude])
+        last = (home.lat, home.lon)
+    terminal: str | None = None
+    for n, cmd in enumerate(nav.waypoints):
+        if isinstance(cmd, VelocityCommand):
+            raise MissionFileError(f"navigation {nav.name!r}: velocity command {cmd.id!r} has no mission-file "
+                                   "equivalent (only waypoints can be exported)")
+        if not isinstance(cmd, Waypoint):
+            action = getattr(cmd, "action", None)  # a terminal land / rtl action command
+            if action not in ("land", "rtl"):
+                raise MissionFileError(f"navigation {nav.name!r}: item {getattr(cmd, 'id', n)!r} "
+                                       f"({type(cmd).__name__}) has no mission-file equivalent")
+            if n != len(nav.waypoints) - 1:
+                raise MissionFileError(f"navigation {nav.name!r}: {action} action {cmd.id!r} ends the flight, so "
+                                       f"the following item {getattr(nav.waypoints[n + 1], 'id', n + 1)!r} would "
+                                       "never run")
+            terminal = action
+            break
+        if cmd.speed != speed:
+            add(MAV_CMD_DO_CHANGE_SPEED, MAV_FRAME_MISSION, [1, -2 if cmd.speed is None else cmd.speed, -1, 0, 0, 0, 0])
+            speed = cmd.speed
+        if cmd.waypoint_type == "absolute":
+            lat, lon = cmd.x, cmd.y
+        else:
+            g = enu_to_geodetic(cmd.x, cmd.y, 0.0, home)
+            lat, lon = g.lat, g.lon
+        add(MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            [cmd.hover_duration, cmd.acceptance_radius, 0, None, lat, lon, cmd.z])
+        last = (lat, lon)
+    final_action = terminal or final_action
+    if final_action == "land":
+        add(MAV_CMD_NAV_LAND, MAV_FRAME_GLOBAL_RELATIVE_ALT, [0, 0, 0, None, last[0], last[1], 0])
+    elif final_action == "rtl":
+        add(MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_FRAME_MISSION, [0, 0, 0, 0, 0, 0, 0])
+    return MissionPlan(home=home, items=items, geofence=geofence or GeofenceConfig())
