@@ -95,8 +95,14 @@ class ActorBase:
         """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
         if method.startswith("_"):
             raise AttributeError(f"component {cid!r}: {method!r} is not public")
+        if self.runtime is None:
+            raise RuntimeError(f"actor {self.host.host_id!r} is not set up yet (component {cid!r})")
         comp = self.runtime.lookup(cid)
         return getattr(comp, method)(*args, **kwargs)
+
+    def drain(self) -> bool:
+        """Finish the work in flight once the drones are done (the analytics scheduler's tasks)."""
+        return self.runtime.drain() if self.runtime else False
 
     def stats(self) -> dict:
         return self.runtime.stats() if self.runtime else {}

@@ -201,10 +201,11 @@ def start_cloud_executors(n: int, mode: str = "emulated", *, selector: Mapping[s
                           name_prefix: str = "cloud", threads: int = 2, spread: bool = True,
                           detector_for: Mapping[str, str] | str = "yolox_nano",
                           detector_kwargs: Mapping[str, Any] | None = None,
-                          analytics: Mapping[str, Any] | None = None) -> list:
+                          analytics: Mapping[str, Any] | None = None, ray_name_prefix: str | None = None) -> list:
     """Start ``n`` :data:`CloudExecutorActor` s on tier=cloud nodes (``selector`` defaults to
-    :func:`cloud_selector` for the current cluster), spread over the nodes that match. Returns the handles once
-    each has answered :meth:`CloudExecutor.info`. Raises ValueError for ``n < 1``."""
+    :func:`cloud_selector` for the current cluster), spread over the nodes that match; ``ray_name_prefix``: name
+    them ``<prefix><i>`` in Ray (``ray list actors``). Returns the handles once each has answered
+    :meth:`CloudExecutor.info`. Raises ValueError for ``n < 1``."""
     import ray
 
     if n < 1:
@@ -215,7 +216,8 @@ def start_cloud_executors(n: int, mode: str = "emulated", *, selector: Mapping[s
     opts: dict[str, Any] = {"label_selector": dict(selector)}
     if spread:
         opts["scheduling_strategy"] = "SPREAD"
-    handles = [CloudExecutorActor.options(**opts).remote(f"{name_prefix}{i}", mode, threads, detector_for,
-                                                          detector_kwargs, analytics) for i in range(n)]
+    handles = [CloudExecutorActor.options(**opts, **({"name": f"{ray_name_prefix}{i}"} if ray_name_prefix else {}))
+               .remote(f"{name_prefix}{i}", mode, threads, detector_for, detector_kwargs, analytics)
+               for i in range(n)]
     ray.get([h.info.remote() for h in handles])
     return handles

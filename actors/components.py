@@ -856,6 +856,17 @@ class HostRuntime:
                 self.host.peer(hid).call.remote(cid, "end_mission", "failed")
 
     # ------------------------------------------------------------------ end
+    def drain(self) -> bool:
+        """The drones are done: let the analytics scheduler (a dispatcher actor) finish its tasks in flight, so that
+        its report counts every task in a terminal state. Returns True when there was one."""
+        if self.scheduling is None:
+            return False
+        try:
+            self.scheduling.finish()
+        except Exception as e:  # reported; the report must still come back
+            self.host.report_error("analytics_scheduler", e)
+        return True
+
     def stats(self) -> dict:
         out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
         gcp = self.host.gc_pauses_ms

@@ -13,6 +13,11 @@ def format_summary(result: Any) -> str:
                      f"battery {pct(rep.get('battery_pct', 0))}")
         if rep.get("error"):
             lines.append(f"    error: {rep['error']}")
+        if rep.get("actor_restarts"):
+            resumed = [e for e in rep.get("events", []) if e.get("event") == "resumed_after_restart"]
+            at = "; ".join(f"resumed at t={e.get('checkpoint_t', 0):.1f} s heading to {e.get('heading_to')}"
+                           for e in resumed)
+            lines.append(f"    drone actor restarted {rep['actor_restarts']} time(s)" + (f": {at}" if at else ""))
         st = result.stats.get(rid, {})
         for sid, c in st.get("cameras", {}).items():
             if not c:

@@ -263,7 +263,8 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     cfg = env.cfg.analytics_scheduler
     analytics = {a.name: a for a in scheduled.values()}
     executors = start_cloud_executors(cfg.cloud_executors, mode="real", selector=cloud_selector(has_cloud),
-                                      name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics", analytics=analytics)
+                                      name_prefix="cloud-analytics", analytics=analytics,
+                                      ray_name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics/")
     for a in plan.actors.values():
         if a.role == "dispatcher":
             a.spec["analytics_scheduler"] = {
@@ -386,7 +387,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     probe("ray_ready")
     epoch_ns = time.time_ns()
     plan = build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live, scheduled=scheduled,
-                      epoch_ns=epoch_ns, run_id=opts.run_id)
+                      epoch_ns=epoch_ns, run_id=opts.run_id or os.environ.get("AERODAAS_RUN_ID") or None)
     placement = Placement(has_cloud=has_cloud, local=_STARTED_RAY and not opts.address)
     if opts.progress:
         kinds = {}
@@ -499,6 +500,16 @@ def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
     import ray
 
     order = sorted((h for h in actors if h != "recorder"), key=lambda h: h.startswith("drone"))
+    pings = {hid: actors[hid].ping.remote() for hid in order}
+    alive = set()
+    for hid, ref in pings.items():  # an actor whose node is gone (pending a restart that cannot happen) is skipped
+        try:
+            ray.get(ref, timeout=10)
+            alive.add(hid)
+        except Exception:  # noqa: BLE001
+            print(f"aerodaas: warning: actor {hid!r} is gone (not closed; the recording has what it sent)",
+                  file=sys.stderr)
+    order = [h for h in order if h in alive]
     refs = {}
     for hid in order:
         try:

@@ -257,6 +257,12 @@ def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
     actor that is gone contributes ``{"error": ...}`` under ``_hosts``. Never raises."""
     import ray
 
+    drains = [h.drain.remote() for hid, h in actors.items() if plan.actors[hid].role == "dispatcher"]
+    for ref in drains:  # the analytics schedulers finish their tasks in flight before they report
+        try:
+            ray.get(ref, timeout=60)
+        except Exception:  # noqa: BLE001 - a dispatcher that is gone reports what it can below
+            pass
     refs = {hid: h.stats.remote() for hid, h in actors.items()}
     host_stats: dict[str, dict] = {}
     for hid, ref in refs.items():

@@ -161,7 +161,7 @@ def test_a_recorded_camera_channel_replays_into_analytics(tmp_path):
         got = [cam.capture((0.0, 0.0, 3.0), 90.0, t, k) for k, t in enumerate((0.2, 0.6, 0.9, 2.7, 4.6), 1)]
         assert got[0] is None and got[2] is None  # before the first frame; no new frame since 0.6 s
         assert cam.dropped_at_camera == 2
-        seen = rt.comps["probe#1"].obj.seen
+        seen = rt.comps["probe#1@uav"].obj.seen
         assert [int(f.mean()) for f in seen] == [0, 80, 160]  # recorded frames 0, 2 and 4 (at 0.5, 2.5, 4.5 s)
     finally:
         rt.close()
