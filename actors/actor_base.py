@@ -70,7 +70,7 @@ class ActorBase:
 
     def setup(self) -> dict:
         """Create this actor's components (drones connect to their vehicles here). Returns :meth:`describe`."""
-        from .components import HostRuntime
+        from .host_runtime import HostRuntime
 
         if self.runtime is None:
             self.runtime = HostRuntime(self.host, self.spec)

@@ -12,7 +12,6 @@ with ``resume=True``: the mission goes on from the waypoint it was heading to.
 """
 from __future__ import annotations
 
-from typing import Any
 
 import ray
 

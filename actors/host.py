@@ -52,6 +52,12 @@ import ray
 __all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "Host", "encode_frame", "decode_frame"]
 
 
+def percentiles(values: list[float]) -> dict[str, float]:
+    """``{"median", "p99", "n"}`` of ``values`` (0.0 for an empty list)."""
+    a = np.asarray(values if values else [0.0], float)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(values)}
+
+
 class FrameCopies:
     """Counts, in one host process, every place where a frame's pixels are materialised or copied (see the module
     docstring for the per-frame totals). Counters, in frames:

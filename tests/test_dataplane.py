@@ -14,7 +14,6 @@ from __future__ import annotations
 import threading
 import time
 
-import numpy as np
 import pytest
 
 from aerodaas import Analytics, Environment, FollowAnalytics, PriorityQueue
@@ -68,7 +67,7 @@ class RightBox(Analytics):
 def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str | None = None):
     """Plan the run as the driver does, with every analytics colocated and every drone in one drone actor, and
     build that actor's host in this process (no Ray actors); ``record``: an MCAP path for an in-process recorder."""
-    from aerodaas.actors.components import HostRuntime
+    from aerodaas.actors.host_runtime import HostRuntime
     from aerodaas.actors.host import Host
     from aerodaas.config import SimulationConfig
     from aerodaas.dataflow import build_plan, collect_graph

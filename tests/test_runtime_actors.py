@@ -264,8 +264,6 @@ def kill(robot):
 drone.on_mission_start(kill)
 drone.start_mission()
 ''')
-    from aerodaas import runtime as _rt  # noqa: F401 - the CLI below runs in its own process
-
     p = _run(["-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet"], timeout=300,
              env={"AERODAAS_RUN_ID": "lost"})
     assert p.returncode == 3, (p.returncode, p.stdout[-2000:], p.stderr[-2000:])

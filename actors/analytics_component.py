@@ -1,0 +1,285 @@
+"""Analytics inside an actor: :class:`AnalyticsComponent` (one analytics object, ``process`` per item),
+:class:`ScheduledAnalyticsComponent` and :class:`AnalyticsSchedulingService` (frames placed on the edge or the cloud
+by the analytics scheduler of a dispatcher actor)."""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from aerodaas.models import AeroNavigation, Detection
+
+from .host import Component, Host
+
+
+def _kind_of(out: Any) -> str:
+    if isinstance(out, AeroNavigation):
+        return "nav"
+    if isinstance(out, list) and (not out or isinstance(out[0], Detection)):
+        return "detections"
+    return "value"
+
+
+class AnalyticsComponent(Component):
+    """Hosts one analytics (IAnalyse / INavigableAnalyse) object: ``setup()`` once, then ``process()`` on every
+    delivered item; non-None outputs are recorded and published. An item older than the newest one already
+    processed from the same source (possible when two pool threads race) is skipped as stale."""
+
+    kind = "analytics"
+
+    def __init__(self, host: Host, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+                 buffer: int = 1) -> None:
+        super().__init__(host, cid, buffer)
+        self.name = name
+        self.obj = analytics
+        self.obj.setup()
+        self.recorder = recorder
+        self.epoch_ns = epoch_ns
+        self.processed = 0
+        self.outputs = 0
+        self.stale = 0
+        self.latest: Any = None
+        self.proc_ms: list[float] = []
+        self._newest: dict[tuple, float] = {}
+        self.failures = 0  # items whose process() raised
+        self.last_failure: str | None = None
+        self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
+        self.aborted = False
+
+    def handle(self, port: str, env: dict) -> list[dict] | None:
+        meta = env.get("meta")
+        if meta is not None:
+            key = (meta.robot_id, meta.sensor_id)
+            if meta.capture_time < self._newest.get(key, -1.0):
+                self.stale += 1
+                return None
+            self._newest[key] = meta.capture_time
+        t0 = time.perf_counter()
+        try:
+            out = self.obj.process(env["data"], meta)
+        except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
+            self._failed(e, env)
+            return None
+        dt_ms = (time.perf_counter() - t0) * 1e3
+        return self._emit(out, env, dt_ms, getattr(self.obj, "last_timing", None))
+
+    def _failed(self, e: Exception, env: dict) -> None:
+        """An exception in ``process``: logged with its traceback (the first 5, then every 100th), recorded as an
+        ``analytics_error`` event of the robot, counted in the run's summary; ``on_error == "abort"`` ends every
+        mission of the run as failed (once)."""
+        import logging
+        import traceback
+
+        self.failures += 1
+        tb = traceback.format_exc()
+        self.last_failure = f"{type(e).__name__}: {e}"
+        if self.failures <= 5 or self.failures % 100 == 0:
+            logging.getLogger("aerodaas.analytics").error("analytics %r failed on item %d (%d failures so far):\n%s",
+                                                          self.name, self.processed + self.failures, self.failures, tb)
+        meta = env.get("meta")
+        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        if self.recorder is not None:
+            self.recorder.json(f"/{robot}/events", self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9),
+                               {"robot": robot, "t": env.get("sim_t", 0.0), "event": "analytics_error",
+                                "analytics": self.name, "error": self.last_failure, "traceback": tb,
+                                "count": self.failures, "on_error": self.on_error}, "aerodaas.MissionEvent")
+        if self.on_error == "abort" and not self.aborted:
+            self.aborted = True
+            abort = getattr(self, "abort", None)
+            if callable(abort):
+                abort(f"analytics {self.name!r} raised {self.last_failure} (on_error=abort)")
+
+    def _emit(self, out: Any, env: dict, dt_ms: float, timing: dict | None) -> list[dict] | None:
+        """Count one processed item that took ``dt_ms`` (ms) and, for a non-None output, record it and return the
+        envelope to publish; ``timing["inference_ms"]`` (if given) splits ``dt_ms`` into inference and
+        post-processing in the latency trace."""
+        meta = env.get("meta")
+        self.proc_ms.append(dt_ms)
+        self.processed += 1
+        self.host.mark_processed()
+        if out is None:
+            return None
+        self.outputs += 1
+        self.latest = out
+        trace = dict(env.get("trace") or {})
+        if timing and "inference_ms" in timing:
+            trace["inference_ms"] = trace.get("inference_ms", 0.0) + timing["inference_ms"]
+            trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms - timing["inference_ms"]
+        else:
+            trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms
+        kind = _kind_of(out)
+        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        if self.recorder is not None:
+            t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
+            if kind == "detections":
+                size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None
+                self.recorder.detections(f"/{robot}/{self.name}/detections", t_ns, out, size)
+            elif kind == "nav":
+                self.recorder.json(f"/{robot}/{self.name}/navigation", t_ns, out.model_dump(mode="json"),
+                                   "aerodaas.AeroNavigation")
+            elif isinstance(out, dict):
+                self.recorder.json(f"/{robot}/{self.name}", t_ns, out, "aerodaas.AnalyticsOutput")
+        return [{"kind": kind, "data": out, "meta": meta, "sim_t": env.get("sim_t", 0.0), "trace": trace,
+                 "robot": robot}]
+
+    def get_latest(self) -> Any:
+        return self.latest
+
+    def stats(self) -> dict:
+        p = np.array(self.proc_ms or [0.0])
+        out = {"name": self.name, "processed": self.processed, "outputs": self.outputs, "stale": self.stale,
+               "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
+               "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
+               "outlets": self.host.outlet_stats(self.cid)}
+        extra = getattr(self.obj, "stats", None)
+        if callable(extra):
+            out.update(extra())
+        return out
+
+
+class ScheduledAnalyticsComponent(AnalyticsComponent):
+    """An analytics whose frames the *analytics scheduler* places (the paper's setAnalyticsScheduler): every frame
+    delivered to it becomes a task — (drone, this analytics as the model, the frame, arrival now, deadline from its
+    QoS) — that :class:`AnalyticsSchedulingService`'s policy runs on the edge (here, on the frame object itself), sends
+    to the cloud (as JPEG, with the FrameMeta) or drops with a reason. A result that is done by its deadline is
+    recorded and published downstream exactly as an unscheduled analytics' output; a late one earns nothing and is
+    only counted. Every task's outcome is recorded on ``/<robot>/<name>/tasks``. The mailbox only hands frames to the
+    scheduler (microseconds), so it never drops: dropping is the scheduler's decision, with its reason."""
+
+    def __init__(self, host: Host, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+                 service: "AnalyticsSchedulingService") -> None:
+        super().__init__(host, cid, name, analytics, recorder, epoch_ns, buffer=256)
+        self.service = service
+        self.outcomes: dict[str, int] = {}
+        #: executed tasks (done on time or late) per tier, and those whose result was non-empty (e.g. detections)
+        self.executed: dict[str, int] = {}
+        self.with_output: dict[str, int] = {}
+
+    def handle(self, port: str, env: dict) -> None:
+        frame = env.get("data")
+        if not (isinstance(frame, np.ndarray) and frame.ndim == 3):
+            raise TypeError(f"scheduled analytics {self.name!r} takes camera frames ((H, W, 3) uint8 BGR), got "
+                            f"{type(frame).__name__}")
+        tok = env.get("tok")
+        if tok is not None:
+            tok.add()  # held until the task's terminal state (on_task_done)
+        try:
+            self.service.submit(self, env)
+        except Exception:
+            if tok is not None:
+                tok.done()
+            raise
+        return None
+
+    def on_task_done(self, task: Any) -> None:
+        """Called by the dispatcher (its loop thread) once per task, in its terminal state: publish an on-time
+        result, record the outcome, release the lock-step hold."""
+        env = task.payload.context
+        tok = env.get("tok")
+        try:
+            state = task.state.value
+            self.outcomes[state] = self.outcomes.get(state, 0) + 1
+            if state in ("done_on_time", "done_late"):  # the model ran, on the edge or in the cloud
+                tier = task.tier or "edge"
+                self.executed[tier] = self.executed.get(tier, 0) + 1
+                self.with_output[tier] = self.with_output.get(tier, 0) + bool(task.result)
+            robot = env.get("robot") or task.drone
+            if self.recorder is not None:
+                t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
+                rec = {"task_id": task.task_id, "model": task.model, "state": state, "tier": task.tier,
+                       "reason": task.reason, "arrival_ms": task.arrival_ms, "deadline_ms": task.deadline_ms,
+                       "start_ms": task.start_ms, "end_ms": task.end_ms}
+                self.recorder.json(f"/{robot}/{self.name}/tasks", t_ns, rec, "aerodaas.AnalyticsTask")
+            if state == "done_on_time":
+                dt_ms = (task.end_ms - task.start_ms) if task.start_ms is not None and task.end_ms is not None else 0.0
+                timing = task.notes.get("timing") if task.tier == "edge" else {"inference_ms": dt_ms}
+                envs = self._emit(task.result, env, dt_ms, timing)
+                if envs:
+                    self.host.publish(self.cid, envs, tok)
+        except Exception as e:  # never lose the hold or the dispatcher's loop over one bad result
+            self.errors += 1
+            self.host.report_error(self.cid, e)
+        finally:
+            if tok is not None:
+                tok.done()
+
+    def stats(self) -> dict:
+        out = super().stats()
+        out["scheduled"] = {"scheduler": self.service.name, "outcomes": dict(self.outcomes),
+                            "executed": dict(self.executed), "with_output": dict(self.with_output)}
+        if "frames_with_detections" in out:  # the edge copy's own counts miss the frames the cloud served
+            out["frames"] = sum(self.executed.values())
+            out["frames_with_detections"] = sum(self.with_output.values())
+            out["frames_by_tier"] = dict(self.executed)
+        return out
+
+
+class AnalyticsSchedulingService:
+    """The edge device's analytics scheduler, inside the edge host: one :class:`aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher`
+    (one policy instance, one edge executor thread, the scheduler's timers) for every scheduled analytics of the
+    host, each analytics being one *model* of the workload. Edge tasks run the host's own analytics objects on the
+    camera's frame (no copy); cloud tasks go to ``CloudExecutor`` actors (tier=cloud) that run copies of the same
+    analytics on the JPEG. A cloud executor that dies (its node lost) is handled by the pool: in-flight tasks are
+    retried or FAILED, the policy is told when no cloud is left, and the mission goes on.
+
+    ``spec``: ``{"name", "workload" (Workload), "executors" ([CloudExecutorActor handles], may be empty),
+    "network" ([NetworkModel specs]), "jpeg_quality", "seed"}``."""
+
+    def __init__(self, host: Host, spec: dict) -> None:
+        self.host = host
+        self.spec = spec
+        self.name = spec["name"]
+        self.comps: dict[str, ScheduledAnalyticsComponent] = {}
+        self.dispatcher = None
+        self.final: dict | None = None
+
+    def add(self, comp: ScheduledAnalyticsComponent) -> None:
+        if comp.name in self.comps:
+            raise ValueError(f"two scheduled analytics are named {comp.name!r}; give them distinct names")
+        self.comps[comp.name] = comp
+
+    def start(self) -> None:
+        from aerodaas.schedulers.dispatch.banks import AnalyticsBank
+        from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+        from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
+        from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
+        from aerodaas.schedulers.dispatch.emulation import NetworkModel
+        from aerodaas.schedulers.analytics_base import make_analytics_scheduler
+
+        w = self.spec["workload"]
+        policy = make_analytics_scheduler(self.name, w)
+        bank = AnalyticsBank({n: c.obj for n, c in self.comps.items()}, shared=True)
+        ex = list(self.spec.get("executors") or [])
+        pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.get("network") or ["none"],
+                                                                     seed=int(self.spec.get("seed", 0))),
+                         jpeg_quality=int(self.spec.get("jpeg_quality", 90))) if ex else None
+        self.dispatcher = AnalyticsDispatcher(policy, AnalyticsEdgeExecutor(bank), pool, edge_id=self.host.host_id,
+                                              on_result=self._on_result, keep_tasks=False)
+        self.dispatcher.start_background()
+
+    def submit(self, comp: ScheduledAnalyticsComponent, env: dict) -> None:
+        from aerodaas.schedulers.dispatch.payload import FramePayload
+
+        meta = env.get("meta")
+        drone = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        self.dispatcher.submit(drone, comp.name, FramePayload(env["data"], meta, env))
+
+    def _on_result(self, task: Any) -> None:
+        self.comps[task.model].on_task_done(task)
+
+    def report(self) -> dict:
+        """The dispatcher's report (utility, states, drops by reason, decision latency, cloud losses): final after
+        :meth:`finish`, else the run so far."""
+        if self.final is not None:
+            return self.final
+        rep = self.dispatcher.report() if self.dispatcher is not None else {}
+        if self.dispatcher is not None and self.dispatcher.cloud is not None:
+            rep["cloud"] = self.dispatcher.cloud.report()
+        return rep
+
+    def finish(self) -> dict:
+        """End the run: tasks still held end with a reason (every task reaches one terminal state); idempotent."""
+        if self.final is None and self.dispatcher is not None:
+            self.final = self.dispatcher.finish_background()
+        return self.final or {}

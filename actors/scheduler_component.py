@@ -1,0 +1,241 @@
+"""SchedulerComponent: one robot's trajectory scheduler plug-in (INavigate) and its waypoint queue, inside the
+robot's drone actor; navigation from analytics and from users passes its safety gate first."""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+
+from aerodaas.config import RobotConfig
+from aerodaas.models import AeroNavigation, Waypoint
+from aerodaas.safety import SafetyViolation
+
+from .host import Component, Host, percentiles as _percentiles
+
+
+class SchedulerComponent(Component):
+    """Hosts one robot's trajectory scheduler (the paper's INavigate plug-in) and its waypoint priority queue.
+
+    The drone calls :meth:`tick` / :meth:`complete` / :meth:`discard` directly (same host, no actor hop);
+    analytics streams deliver navigation as envelopes on port ``priority:<n>[:replace]``; users add navigation
+    through :meth:`add_navigation` (the HITL API). Everything added is checked by the robot's
+    :class:`~aerodaas.safety.SafetyGate` first (all items or none). New navigation nudges the drone, which applies
+    it at once; the per-frame latency (frame ready -> command applied to the vehicle) is measured here. The
+    waypoint plan is recorded on ``/<robot>/mission/plan`` at start and whenever the queued waypoints change."""
+
+    kind = "scheduler"
+
+    def __init__(self, host: Host, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
+                 robot_cfg: dict | None = None) -> None:
+        from aerodaas.safety import SafetyGate
+
+        super().__init__(host, cid, buffer=4)
+        self.robot_id = robot_id
+        self.s = scheduler
+        self.recorder = recorder
+        self.epoch_ns = epoch_ns
+        self.position = tuple(scheduler.start)
+        self.now = 0.0
+        self.latency: list[dict] = []
+        cfg = RobotConfig.model_validate(robot_cfg) if robot_cfg else RobotConfig(id=robot_id)
+        self.home = cfg.home
+        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home, control_period_s=1.0 / cfg.control_rate_hz)
+        self.max_per_request = cfg.max_waypoints_per_request
+        self.max_queued = cfg.max_queued_items
+        self._plan_lock = threading.Lock()  # one planner at a time; never the lock the control tick takes
+        self.refused: list[dict] = []
+        self.discarded: list[dict] = []
+        self._plan_sig: Any = None
+        self._replaced: set[str] = set()
+        self.drone: Any = None  # the DroneComponent, set by the host runtime
+
+    def tick(self, now: float, position: tuple) -> dict:
+        self.now, self.position = now, tuple(position)
+        if self._plan_sig is None:
+            self._record_plan()
+        cur = self.s.current(now)
+        left = self.s.pending(distance_driven_only=True)
+        if cur is None:
+            return {"item": None, "preplanned_left": left}
+        m, item = cur
+        return {"item": item, "priority": m.priority, "mission": m.name, "preplanned_left": left}
+
+    def queued(self) -> list:
+        """Every queued item in flying order (see :meth:`TrajectoryScheduler.queued`)."""
+        return self.s.queued()
+
+    def pending(self) -> int:
+        """Queued items of pre-planned (distance-driven) missions."""
+        return self.s.pending(distance_driven_only=True)
+
+    def complete(self, item_id: str) -> bool:
+        ok = self.s.complete(item_id)
+        self._record_plan()
+        return ok
+
+    def discard(self, item_id: str, reason: str) -> bool:
+        """Drop the head item ``item_id`` without counting it as visited (rejected by safety, or an executed
+        action). Returns False if no mission has it at its head."""
+        if not self.s.discard(item_id):
+            return False
+        self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
+        self._record_plan()
+        return True
+
+    def _event(self, event: str, **kw: Any) -> None:
+        if self.recorder is not None:
+            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
+                               {"robot": self.robot_id, "t": self.now, "event": event, **kw}, "aerodaas.MissionEvent")
+
+    def handle(self, port: str, env: dict) -> None:
+        from aerodaas.safety import SafetyViolation
+
+        parts = port.split(":")
+        prio = int(parts[1]) if parts[0] == "priority" else None
+        nav = env["data"]
+        if not isinstance(nav, AeroNavigation) or env.get("robot", self.robot_id) != self.robot_id:
+            return None  # a shared analytics navigates each robot through that robot's own scheduler
+        replace = "replace" in parts[2:] and port not in self._replaced
+        try:
+            self._check_bounds(nav, ignore_queue=replace)
+            nav = self.gate.check_navigation(nav, self.position)
+            if replace:
+                self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
+                self.s.clear_navigation()
+                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
+                self._event("mission_aborted", by=port)
+            self._plan_and_add(nav, None, prio)
+        except (SafetyViolation, ValueError) as e:  # an analytics asked for something unsafe: refuse it, keep running
+            self.refused.append({"t": env.get("sim_t", 0.0), "source": "analytics", "error": str(e)})
+            self._event("navigation_refused", source="analytics", error=str(e))
+            return None
+        if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
+            self._record_plan()
+        applied = self.drone.nudge() if self.drone is not None else False  # applied now, not at the next tick
+        tr = env.get("trace") or {}
+        if "capture_wall" in tr:
+            e2e = (time.time() - tr["capture_wall"]) * 1e3
+            rec = {"robot": self.robot_id, "t": env.get("sim_t", 0.0), "e2e_ms": e2e, "applied": applied,
+                   "inference_ms": tr.get("inference_ms", 0.0), "post_ms": tr.get("post_ms", 0.0),
+                   "overhead_ms": max(0.0, e2e - tr.get("inference_ms", 0.0) - tr.get("post_ms", 0.0))}
+            self.latency.append(rec)
+            if self.recorder is not None:
+                self.recorder.json(f"/{self.robot_id}/latency", self.epoch_ns + int(rec["t"] * 1e9), rec,
+                                   "aerodaas.FrameLatency")
+        return None
+
+    def add_navigation(self, nav: Any, index: int | None = None, priority: int | None = None) -> dict:
+        """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
+        changes nothing; returns the queue snapshot on success."""
+        nav_, prio = self.s._unwrap(nav, priority)
+        self._check_bounds(nav_)
+        nav_ = self.gate.check_navigation(nav_, self.position)
+        self._plan_and_add(nav_, index, prio)
+        self._record_plan()
+        if self.drone is not None:
+            self.drone.nudge()
+        return {"queued": self.s.snapshot(), "position": list(self.position), "t": self.now}
+
+    def _check_bounds(self, nav: AeroNavigation, ignore_queue: bool = False) -> None:
+        """Bounded work: at most ``max_waypoints_per_request`` items per request and ``max_queued_items`` queued in
+        all (robot config). Raises ValueError naming the limit; nothing is planned or queued."""
+        n = len(nav.waypoints)
+        if n > self.max_per_request:
+            raise ValueError(f"waypoints: {n} items in one request, more than max_waypoints_per_request "
+                             f"({self.max_per_request}) of robot {self.robot_id!r}")
+        queued = 0 if ignore_queue else self.s.pending()
+        if queued + n > self.max_queued:
+            raise ValueError(f"waypoints: {queued} items queued + {n} new exceed max_queued_items "
+                             f"({self.max_queued}) of robot {self.robot_id!r}")
+
+    def _plan_and_add(self, nav: AeroNavigation, index: int | None, prio: int) -> None:
+        """Add ``nav`` (already through the gate) at ``prio``: planned on a copy of the queue, outside the lock the
+        drone's control tick takes (a long re-plan never holds the tick), then every leg of the resulting tour of
+        that mission, from the drone's position, is checked against the geofence (SafetyViolation naming the leg:
+        nothing is queued, never a silent drop in flight), and the plan is committed under the lock, keeping what
+        happened meanwhile (waypoints reached or discarded, navigation added by others)."""
+        from aerodaas.schedulers.base import Mission
+
+        with self._plan_lock:
+            position = self.position
+            with self.s._lock:
+                snap = [Mission(m.priority, m.seq, m.name, list(m.items), m.distance_driven, dict(m.segment_of))
+                        for m in self.s._missions]
+                cur = self.s._find(prio)
+                if index is not None and index > (len(cur.items) if cur is not None else 0):
+                    raise IndexError(f"index: {index} is out of range for the priority-{prio} mission of "
+                                     f"{len(cur.items) if cur is not None else 0} items")
+            twin = self.s.fork(snap)
+            twin.add_navigation(nav, index=index, priority=prio, position=position)  # the planning
+            planned = twin._find(prio)
+            self._check_tour(planned.items if planned is not None else [], position)
+            added = {id(i) for i in nav.waypoints}
+            with self.s._lock:
+                real = self.s._find(prio)
+                alive = {id(i) for i in real.items} if real is not None else set()
+                in_plan = {id(i) for i in planned.items}
+                items = [i for i in planned.items if id(i) in alive or id(i) in added]
+                items += [i for i in (real.items if real is not None else []) if id(i) not in in_plan]
+                tags = [planned.segment_of.get(id(i), real.segment_of.get(id(i), 0) if real is not None else 0)
+                        for i in items]
+                issued = getattr(twin, "_segments_issued", 0)
+                if issued > getattr(self.s, "_segments_issued", 0):
+                    self.s._segments_issued = issued
+                if real is None:
+                    self.s._seq += 1
+                    real = Mission(prio, self.s._seq, planned.name, [], planned.distance_driven)
+                    self.s._missions.append(real)
+                real.items = items
+                real.set_segment_ids(tags)
+
+    def _check_tour(self, items: list, position: tuple) -> None:
+        """Every leg of a planned tour (from ``position`` through its waypoints, ENU metres) against the geofence."""
+        fence = self.gate.fence
+        if fence.is_empty:
+            return
+        prev, prev_id = (float(position[0]), float(position[1])), "the drone's position"
+        for w in items:
+            if not isinstance(w, Waypoint):
+                continue
+            x, y, _ = w.to_local(self.home)
+            why = fence.check_segment(prev, (x, y))
+            if why is not None:
+                self.gate.rejected += 1
+                raise SafetyViolation(w.id, "leg", [prev_id, w.id], f"the planned tour's leg from {prev_id} to "
+                                      f"{w.id!r} is refused by the geofence: {why}")
+            prev, prev_id = (x, y), repr(w.id)
+
+    def clear_navigation(self, priority: int | None = None) -> None:
+        self.s.clear_navigation(priority)
+        self._record_plan()
+
+    def snapshot(self) -> list[dict]:
+        return self.s.snapshot()
+
+    def _record_plan(self) -> None:
+        """Record the queued waypoints (with local ENU targets) when they changed since the last record."""
+        missions = []
+        with self.s._lock:
+            for m in sorted(self.s._missions, key=lambda m: (m.priority, m.seq)):
+                items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                          "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+                if items:
+                    missions.append({"name": m.name, "priority": m.priority, "items": items})
+        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
+        if sig == self._plan_sig:
+            return
+        self._plan_sig = sig
+        if self.recorder is not None:
+            self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(self.now * 1e9),
+                               {"robot": self.robot_id, "t": self.now, "missions": missions}, "aerodaas.MissionPlan")
+
+    def stats(self) -> dict:
+        out: dict[str, Any] = {"completed": list(self.s.completed), "frames_with_latency": len(self.latency),
+                               "refused": self.refused[-20:], "refused_count": len(self.refused),
+                               "discarded": self.discarded, **self.mailbox_stats()}
+        if self.latency:
+            for key in ("e2e_ms", "overhead_ms", "inference_ms"):
+                out[key] = _percentiles([r[key] for r in self.latency])
+            out["latency_records"] = list(self.latency)
+        return out
