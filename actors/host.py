@@ -238,8 +238,12 @@ class RemoteOutlet:
     counted. Frames are JPEG-encoded when the edge crosses tiers (``jpeg``), else sent as an ObjectRef."""
 
     def __init__(self, handle: Any, cid: str, port: str, buffer: int, jpeg: bool,
-                 copies: FrameCopies | None = None) -> None:
+                 copies: FrameCopies | None = None, reply_to: str | None = None,
+                 on_reply: Callable[[list], None] | None = None) -> None:
         self.handle, self.cid, self.port = handle, cid, port
+        #: this host's id: the consumer returns the outputs bound for this host in the call's reply (one actor call
+        #: per round trip instead of two); ``on_reply`` hands them to the local components
+        self.reply_to, self.on_reply = reply_to, on_reply
         self.copies = copies if copies is not None else FrameCopies()
         self.buffer = max(1, int(buffer))
         self.jpeg = jpeg
@@ -280,13 +284,26 @@ class RemoteOutlet:
                     self.copies.count("tier_jpeg_encoded" if self.jpeg else "object_store_put")
                 wire["data"] = data
                 wire["kind"] = "frame_jpeg" if self.jpeg else "frame_ref"
+            if tok is None and self.reply_to is not None:
+                wire["reply"] = self.reply_to
             ref = self.handle.deliver.remote(self.cid, self.port, wire)
             self.sent += 1
             if tok is None:
                 self.in_flight.append(ref)
+                if self.on_reply is not None:
+                    ref.future().add_done_callback(self._replied)
             else:
                 tok.add_ref(ref)
             return ref
+
+    def _replied(self, fut: Any) -> None:
+        """The consumer's reply (Ray's callback thread: hand over, never block it)."""
+        try:
+            out = fut.result()
+        except Exception:  # noqa: BLE001 - counted as failed when reaped
+            return
+        if out:
+            self.on_reply(out)
 
     def stats(self) -> dict:
         with self._lock:
@@ -314,6 +331,7 @@ class Host:
         self.tiers: dict[str, str] = {host_id: tier}
         self.peers: dict[str, Any] = {}
         self._outlets: dict[tuple[str, str, str], RemoteOutlet] = {}
+        self._tl = threading.local()  # .reply: (host id of the caller, [(cid, port, env)]) while a deliver runs
         self.recorder = recorder
         self.copies = FrameCopies()
         self.errors: list[dict] = []
@@ -387,6 +405,8 @@ class Host:
                 comp = self.components.get(cid)
                 if comp is not None:
                     local.append((comp, port))
+                elif tok is None and self._reply_to(cid, port, env):
+                    continue  # returned to the calling actor in the reply of its deliver call
                 else:
                     out = self._outlet(src, cid, port, buf)
                     if tok is not None:
@@ -404,6 +424,22 @@ class Host:
                     else:
                         self.submit(comp.offer, port, env)
 
+    def _reply_to(self, cid: str, port: str, env: dict) -> bool:
+        """While a deliver call from host H runs in this thread, an item for a component of H goes back in that
+        call's reply instead of a call of its own (not frames: they go through the object store)."""
+        rep = getattr(self._tl, "reply", None)
+        if rep is None or env.get("kind") == "frame" or self.location.get(cid) != rep[0]:
+            return False
+        rep[1].append((cid, port, {k: v for k, v in env.items() if k not in ("tok", "_ref", "_jpeg")}))
+        return True
+
+    def on_reply(self, items: list) -> None:
+        """Items another actor returned in a deliver call's reply: offered to their components on the pool."""
+        for cid, port, env in items:
+            comp = self.components.get(cid)
+            if comp is not None:
+                self.submit(comp.offer, port, env)
+
     @staticmethod
     def _offer_then_done(comp: Component, port: str, env: dict, tok: Cascade) -> None:
         try:
@@ -419,7 +455,8 @@ class Host:
             if hid is None or hid not in self.peers:
                 raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
             o = self._outlets[key] = RemoteOutlet(self.peer(hid), cid, port, buffer,
-                                                  jpeg=self.tiers.get(hid, self.tier) != self.tier, copies=self.copies)
+                                                  jpeg=self.tiers.get(hid, self.tier) != self.tier, copies=self.copies,
+                                                  reply_to=self.host_id, on_reply=self.on_reply)
         return o
 
     def deliver(self, cid: str, port: str, wire: dict) -> list:
@@ -436,9 +473,17 @@ class Host:
             env["data"], env["kind"] = ray.get(env["data"]), "frame"
             self.copies.count("object_store_get")
         comp = self.components[cid]
+        reply = env.pop("reply", None)
         if not lock:
-            comp.offer(port, env)
-            return []
+            if reply is None:
+                comp.offer(port, env)
+                return []
+            self._tl.reply = (reply, [])
+            try:
+                comp.offer(port, env)
+                return list(self._tl.reply[1])
+            finally:
+                self._tl.reply = None
         tok = Cascade()
         env["tok"] = tok
         comp.offer(port, env)
