@@ -77,6 +77,31 @@ def _contract_model(path, contract: str, seed: int = 0) -> None:
     onnx.save(model, str(path))
 
 
+def _dynamic_yolox_copy(path) -> None:
+    """The shipped YOLOX-Nano with a dynamic batch: input dim 0 named ``N`` and every Reshape target starting with 1
+    made to start with 0 (ONNX Reshape: 0 copies that dimension of the input, here the batch)."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import numpy_helper
+
+    m = onnx.load(str(MODEL_DIR / "yolox_nano.onnx"))
+    inits = {i.name: i for i in m.graph.initializer}
+    consts = {n.output[0]: n.attribute[0].t for n in m.graph.node if n.op_type == "Constant"}
+    patched = 0
+    for node in m.graph.node:
+        if node.op_type == "Reshape":
+            t = inits.get(node.input[1]) or consts[node.input[1]]
+            shape = numpy_helper.to_array(t).copy()
+            if shape[0] == 1:
+                shape[0] = 0
+                t.CopyFrom(numpy_helper.from_array(shape, t.name))
+                patched += 1
+    assert patched == 3  # the three detection heads' flattening
+    m.graph.input[0].type.tensor_type.shape.dim[0].dim_param = "N"
+    m.graph.output[0].type.tensor_type.shape.dim[0].dim_param = "N"
+    del m.graph.value_info[:]
+    onnx.save(m, str(path))
+
+
 class _RunSpy:
     """Stands in for the onnxruntime session: records the batch size of every ``run`` call."""
 
@@ -91,9 +116,12 @@ class _RunSpy:
         return getattr(self.session, k)
 
 
-def _detector(model: str, path, batch: int = 8) -> tuple[ObjectDetector, _RunSpy]:
-    det = ObjectDetector(model, model_path=str(path), classes=VEHICLES, score_threshold=0.15 if path.name.startswith(
-        model) else 0.5, batch=batch)
+REAL, CONTRACT = 0.15, 0.5  # score thresholds: real weights (as apps/vehicle_tracking.py); random-weight models
+
+
+def _detector(model: str, path, threshold: float, batch: int = 8) -> tuple[ObjectDetector, _RunSpy]:
+    """An ObjectDetector for vehicles on ``path``, set up, its onnxruntime session behind a :class:`_RunSpy`."""
+    det = ObjectDetector(model, model_path=str(path), classes=VEHICLES, score_threshold=threshold, batch=batch)
     det.setup()
     spy = _RunSpy(det.detector.session)
     det.detector.session = spy
@@ -111,7 +139,7 @@ def _same(a: list, b: list) -> None:
 
 @pytest.mark.parametrize("model", ["yolox_nano", "nanodet_plus_m_416"])
 def test_shipped_models_take_a_fixed_batch_so_process_batch_loops(model, frames):
-    det, spy = _detector(model, MODEL_DIR / f"{model}.onnx")
+    det, spy = _detector(model, MODEL_DIR / f"{model}.onnx", REAL)
     assert det.detector.batch_dynamic is False and det.max_batch == 1
     want = [det.process(f, None) for f in frames]
     assert sum(len(d) for d in want) >= 1  # real cars: the comparison below is not between empty lists
@@ -127,7 +155,7 @@ def test_shipped_models_take_a_fixed_batch_so_process_batch_loops(model, frames)
 def test_a_dynamic_batch_model_runs_the_drones_frames_in_one_call(contract, frames, tmp_path):
     path = tmp_path / f"dynamic_{contract}.onnx"
     _contract_model(path, contract)
-    det, spy = _detector(contract, path, batch=4)
+    det, spy = _detector(contract, path, CONTRACT, batch=4)
     assert det.detector.batch_dynamic is True and det.max_batch == 4
     want = [det.process(f, None) for f in frames]
     assert all(want)  # every frame has detections to compare
@@ -141,10 +169,24 @@ def test_a_dynamic_batch_model_runs_the_drones_frames_in_one_call(contract, fram
     assert det.last_timing["batch"] == 3.0 and det.last_timing["inference_ms"] > 0
 
 
+def test_yolox_nano_with_a_dynamic_batch_finds_the_same_cars_in_one_call(frames, tmp_path):
+    path = tmp_path / "yolox_nano_dynamic.onnx"
+    _dynamic_yolox_copy(path)
+    det, spy = _detector("yolox_nano", path, REAL)
+    assert det.max_batch == 8
+    shipped, _ = _detector("yolox_nano", MODEL_DIR / "yolox_nano.onnx", REAL)
+    want = [shipped.process(f, None) for f in frames]
+    assert sum(len(d) for d in want) >= 1 and all(d.class_name in VEHICLES for w in want for d in w)
+    got = det.process_batch([(f, None) for f in frames])
+    assert spy.batches == [3]
+    for a, b in zip(got, want):
+        _same(a, b)
+
+
 def test_batches_are_chunked_to_the_detectors_batch_size(frames, tmp_path):
     path = tmp_path / "dynamic_yolox_nano.onnx"
     _contract_model(path, "yolox_nano")
-    det, spy = _detector("yolox_nano", path, batch=2)
+    det, spy = _detector("yolox_nano", path, CONTRACT, batch=2)
     items = [(f, None) for f in frames + frames[:1]]
     want = [det.process(f, None) for f, _ in items]
     spy.batches.clear()
@@ -157,7 +199,7 @@ def test_batches_are_chunked_to_the_detectors_batch_size(frames, tmp_path):
 def test_a_bad_frame_in_a_batch_is_named_before_any_inference(frames, tmp_path):
     path = tmp_path / "dynamic_yolox_nano.onnx"
     _contract_model(path, "yolox_nano")
-    det, spy = _detector("yolox_nano", path)
+    det, spy = _detector("yolox_nano", path, CONTRACT)
     spy.batches.clear()
     with pytest.raises(ValueError, match=r"images\[1\]: image must have shape \(H, W, 3\)"):
         det.process_batch([(frames[0], None), (frames[1][:, :, 0], None)])
