@@ -4,12 +4,19 @@
 An analytics is a plain Python object built in the application; ``deploy(compute)`` picks its tier and
 ``analyse(stream)`` wires it into the dataflow. At ``start_mission()`` the runtime ships it to a Ray
 actor on that tier, calls :meth:`Analytics.setup` there once (load models), then :meth:`Analytics.process`
-for every delivered item. Subclass and override ``setup``/``process`` to write your own.
+for every delivered item (or :meth:`Analytics.process_batch` for several at once). Subclass and override
+``setup``/``process`` to write your own.
+
+One analytics object may be fed by several drones (one shared detector or follow controller for a fleet). Whatever
+it remembers between items must then be kept per drone: :func:`source_robot` names the drone an item comes from
+and :meth:`Analytics.drone_state` holds one state object per drone. The built-in analytics keep all their memory
+(tracks, PID integrators, confirmation streaks, running minima/maxima) that way.
 """
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
 
@@ -17,7 +24,28 @@ from .data import AeroStreamData
 from .models import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
 
 __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "ObjectDetector",
-           "FollowAnalytics", "MonitoringAnalytics"]
+           "FollowAnalytics", "FollowTrack", "MonitoringAnalytics", "source_robot"]
+
+_S = TypeVar("_S")
+
+
+def source_robot(data: Any, meta: Any) -> str:
+    """The id of the drone (robot) an analytics input item comes from.
+
+    * A camera frame, and everything an analytics derives from one (detections, navigation), travels with the
+      frame's :class:`~aerodaas.models.FrameMeta`: its ``robot_id``.
+    * Odometry (``meta`` None) is an :class:`~aerodaas.models.Odometry` dict or model: its ``robot_id``.
+    * A stat-stream message (``meta`` None) is a dict with a ``robot`` field.
+
+    Returns ``""`` when the item names no drone (an environment sensor's value): such items share one state."""
+    rid = getattr(meta, "robot_id", None)
+    if rid:
+        return str(rid)
+    if isinstance(data, dict):
+        rid = data.get("robot_id") or data.get("robot")
+    else:
+        rid = getattr(data, "robot_id", None)
+    return str(rid) if rid else ""
 
 
 class Analytics:
@@ -30,6 +58,13 @@ class Analytics:
 
     name: str = "analytics"
     on_error: str = "continue"
+    #: Most items the runtime should hand to one :meth:`process_batch` call (1: no batching pays off). Read on the
+    #: actor after :meth:`setup`; the ONNX detectors raise it when their model takes a dynamic batch.
+    max_batch: int = 1
+    #: True when the analytics remembers anything between items of one drone (a track, an integrator, a streak):
+    #: a runtime that spreads items over ``replicas`` must then send every item of a drone to the same replica
+    #: (route by :func:`source_robot`). False (e.g. :class:`ObjectDetector`): any replica may take any item.
+    stateful: bool = True
 
     def __init__(self, name: str | None = None) -> None:
         if name:
@@ -97,6 +132,39 @@ class Analytics:
         """Process one item; return an output (published downstream) or None."""
         return None
 
+    def process_batch(self, items: Sequence[tuple[Any, FrameMeta | None]]) -> list[Any]:
+        """Process several delivered items at once, possibly from different drones (e.g. the latest frame of each
+        drone feeding one detector): ``items`` is a sequence of ``(data, meta)`` pairs exactly as :meth:`process`
+        takes them; returns one output per item, in the same order (None: no output for that item).
+
+        Default: ``[self.process(data, meta) for data, meta in items]``, so every analytics supports it; an
+        analytics whose work vectorises (one DNN inference call for several frames) overrides it and raises
+        :attr:`max_batch`. Errors: whatever :meth:`process` raises; when it raises, no output of the batch is
+        valid (a runtime re-runs the items one by one with :meth:`process` to attribute the failure, which is safe
+        for the analytics that batch: they are not :attr:`stateful`)."""
+        return [self.process(data, meta) for data, meta in items]
+
+    # -- per-drone state (one analytics object may serve a fleet)
+    def drone_state(self, data: Any, meta: Any, factory: Callable[[], _S]) -> _S:
+        """This analytics' state object for the drone the item ``(data, meta)`` comes from
+        (:func:`source_robot`), made by ``factory()`` on that drone's first item. Keep in it everything remembered
+        between items, so that drones sharing this analytics never mix (issue 15)."""
+        states = self.__dict__.setdefault("_drone_states", {})
+        key = source_robot(data, meta)
+        st = states.get(key)
+        if st is None:
+            st = states.setdefault(key, factory())
+        return st
+
+    def drone_states(self) -> dict[str, Any]:
+        """The per-drone state objects made so far, by robot id (``""``: items naming no drone)."""
+        return dict(self.__dict__.get("_drone_states", {}))
+
+    def reset_drone(self, robot_id: str) -> None:
+        """Forget what this analytics remembers about drone ``robot_id`` (e.g. after that drone's actor restarted
+        from a checkpoint); a no-op for a drone it has not seen."""
+        self.__dict__.get("_drone_states", {}).pop(robot_id, None)
+
 
 IAnalyse = Analytics
 
@@ -120,14 +188,24 @@ class ObjectDetector(Analytics):
     without it the model is resolved by :func:`aerodaas.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
     download) where the driver runs, once, and its bytes travel with the analytics to the node that runs it
     (:class:`aerodaas.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to COCO
-    names; thresholds are scores in [0, 1]."""
+    names; thresholds are scores in [0, 1].
+
+    Several drones may share one detector: it remembers nothing between frames (not :attr:`stateful`), and
+    :meth:`process_batch` runs the frames of several drones in one onnxruntime call, up to ``batch`` frames, when
+    the model's input has a dynamic batch dimension (:attr:`max_batch` is then ``batch``). The shipped YOLOX-Nano
+    and NanoDet-Plus exports have a fixed batch of 1: with them :attr:`max_batch` is 1 and :meth:`process_batch`
+    is a loop over :meth:`process`. Raises ValueError for ``batch`` < 1."""
 
     name = "detector"
+    stateful = False
 
     def __init__(self, model: str = "yolox_nano", model_path: str | None = None, classes: Iterable[str] | None = None,
                  score_threshold: float = 0.3, class_thresholds: dict[str, float] | None = None,
-                 name: str | None = None, threads: int = 1) -> None:
+                 name: str | None = None, threads: int = 1, batch: int = 8) -> None:
         super().__init__(name)
+        if not (isinstance(batch, int) and batch >= 1):
+            raise ValueError(f"ObjectDetector batch must be an integer >= 1 (frames per inference call), got {batch!r}")
+        self.batch = batch
         self.model, self.model_path = model, model_path
         self.classes = list(classes) if classes else None
         self.score_threshold = score_threshold
@@ -138,6 +216,7 @@ class ObjectDetector(Analytics):
         self.last_timing: dict[str, float] = {}
         self.n_frames = 0
         self.n_with_dets = 0
+        self.n_batched = 0
 
     def check(self) -> None:
         """Resolve the model now (driver side), so a missing model fails before any actor starts."""
@@ -154,6 +233,13 @@ class ObjectDetector(Analytics):
                                       classes=self.classes, class_thresholds=self.class_thresholds,
                                       intra_op_threads=self.threads)
 
+    @property
+    def max_batch(self) -> int:  # type: ignore[override]
+        """Frames per :meth:`process_batch` inference call: ``batch`` when the loaded model (after :meth:`setup`)
+        takes a dynamic batch, else 1."""
+        d = self.detector
+        return self.batch if d is not None and getattr(d, "batch_dynamic", False) else 1
+
     def process(self, frame: np.ndarray, meta: FrameMeta | None) -> list[Detection]:
         dets = self.detector.detect(frame)
         t = self.detector.last_timing
@@ -162,8 +248,50 @@ class ObjectDetector(Analytics):
         self.n_with_dets += bool(dets)
         return dets
 
+    def process_batch(self, items: Sequence[tuple[np.ndarray, FrameMeta | None]]) -> list[list[Detection]]:
+        """Detections for each ``(frame, meta)`` of ``items`` (frames of any drones), in order, equal to what
+        :meth:`process` returns for each; one onnxruntime call per ``max_batch`` frames when the model allows (see
+        the class docstring). ``last_timing`` is then per frame (the call's times divided by its frames) with
+        ``batch`` = the most frames in one call. Raises ValueError naming the index of a frame that is not (H, W, 3) uint8."""
+        if not items:
+            return []
+        frames = [f for f, _ in items]
+        out = self.detector.detect_batch(frames, max_batch=max(self.max_batch, 1))
+        t, n = self.detector.last_timing, len(frames)
+        self.last_timing = {"inference_ms": t["inference_ms"] / n, "pre_ms": t["preprocess_ms"] / n,
+                            "post_ms": t["postprocess_ms"] / n, "batch": float(self.detector.last_batch)}
+        self.n_frames += n
+        self.n_with_dets += sum(bool(d) for d in out)
+        self.n_batched += self.detector.last_batched
+        return out
+
     def stats(self) -> dict:
-        return {"frames": self.n_frames, "frames_with_detections": self.n_with_dets}
+        """``frames``, ``frames_with_detections`` and ``frames_batched`` (inferred in a call with other frames)."""
+        return {"frames": self.n_frames, "frames_with_detections": self.n_with_dets,
+                "frames_batched": getattr(self, "n_batched", 0)}
+
+
+@dataclass
+class FollowTrack:
+    """One drone's follow state (:class:`FollowAnalytics` keeps one per drone): the target's ground position
+    ``track`` (ENU metres, None: no track) and velocity ``track_v`` (m/s) at sim time ``track_t`` (s), the
+    detections ``hits`` that fed it, the PID integral (metre-seconds) and previous error (metres) at ``prev_t``,
+    the standoff direction ``away`` (unit ENU vector) and the ``commands`` issued to this drone."""
+
+    track: np.ndarray | None = None
+    track_v: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    track_t: float = 0.0
+    hits: int = 0
+    integral: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    prev_err: np.ndarray | None = None
+    prev_t: float | None = None
+    away: np.ndarray = field(default_factory=lambda: np.array([0.0, -1.0]))
+    commands: int = 0
+
+    def drop(self) -> None:
+        """Lose the target: clear the track and the controller memory (``away`` and ``commands`` stay)."""
+        self.track, self.track_v, self.track_t, self.hits = None, np.zeros(2), 0.0, 0
+        self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
 
 class FollowAnalytics(NavigableAnalytics):
@@ -179,6 +307,9 @@ class FollowAnalytics(NavigableAnalytics):
     seconds without a detection it is dropped and no more commands are issued (the preempted mission resumes).
     ``standoff_m`` > 0 keeps the drone that many metres (horizontally) behind the target along its heading
     (e.g. 2 m for following a person), instead of directly above it.
+
+    Shared by several drones, it keeps one :class:`FollowTrack` per drone (keyed by the frame's
+    ``FrameMeta.robot_id``): each drone follows what its own camera sees, with its own PID memory.
     """
 
     name = "follow"
@@ -189,28 +320,26 @@ class FollowAnalytics(NavigableAnalytics):
                  name: str | None = None) -> None:
         super().__init__(name)
         self.standoff_m = float(standoff_m)
-        self._away = np.array([0.0, -1.0])  # unit vector from the target to the standoff point
         self.target_classes = set(target_classes)
         self.kp, self.ki, self.kd = kp, ki, kd
         self.max_speed, self.command_duration = max_speed, command_duration
         self.gate_m, self.confirm_hits, self.lost_after = gate_m, confirm_hits, lost_after
-        self._reset()
-        self.commands = 0
 
-    def _reset(self) -> None:
-        self.track: np.ndarray | None = None
-        self.track_v = np.zeros(2)
-        self.track_t = 0.0
-        self.hits = 0
-        self.integral = np.zeros(2)
-        self.prev_err: np.ndarray | None = None
-        self.prev_t: float | None = None
+    def track_of(self, robot_id: str) -> FollowTrack | None:
+        """The follow state of drone ``robot_id`` (None before its first frame)."""
+        return self.drone_states().get(robot_id)
+
+    @property
+    def commands(self) -> int:
+        """Velocity commands issued, all drones together."""
+        return sum(st.commands for st in self.drone_states().values())
 
     def generate_navigation(self, dets: list[Detection], meta: FrameMeta | None) -> AeroNavigation | None:
         from .sim.world import pixel_to_ground
 
         if meta is None:
             return None
+        st = self.drone_state(dets, meta, FollowTrack)
         t = meta.capture_time
         drone = np.array(meta.pose.position[:2])
         cands = []
@@ -220,7 +349,7 @@ class FollowAnalytics(NavigableAnalytics):
             g = pixel_to_ground(*d.center, meta.pose, meta.intrinsics)
             if g is not None:
                 cands.append((d, np.array(g)))
-        pred = None if self.track is None else self.track + self.track_v * (t - self.track_t)
+        pred = None if st.track is None else st.track + st.track_v * (t - st.track_t)
         best = None
         if cands:
             if pred is None:
@@ -231,48 +360,52 @@ class FollowAnalytics(NavigableAnalytics):
                     best = c
         if best is not None:
             p = best[1]
-            if self.track is not None and t > self.track_t:
-                v_new = (p - self.track) / (t - self.track_t)
-                self.track_v = 0.7 * self.track_v + 0.3 * v_new if self.hits > 1 else v_new * 0.0
-            self.track, self.track_t = p, t
-            self.hits += 1
-        elif self.track is None or t - self.track_t > self.lost_after:
-            if self.track is not None:
-                self._reset()
+            if st.track is not None and t > st.track_t:
+                v_new = (p - st.track) / (t - st.track_t)
+                st.track_v = 0.7 * st.track_v + 0.3 * v_new if st.hits > 1 else v_new * 0.0
+            st.track, st.track_t = p, t
+            st.hits += 1
+        elif st.track is None or t - st.track_t > self.lost_after:
+            if st.track is not None:
+                st.drop()
             return None
-        if self.hits < self.confirm_hits:
+        if st.hits < self.confirm_hits:
             return None
-        target = self.track + self.track_v * (t - self.track_t)
+        target = st.track + st.track_v * (t - st.track_t)
         if self.standoff_m > 0:  # stay standoff_m behind the target (along its heading), or where we are if it stops
-            sp = float(np.hypot(*self.track_v))
+            sp = float(np.hypot(*st.track_v))
             if sp > 0.2:
-                self._away = -self.track_v / sp
+                st.away = -st.track_v / sp
             elif np.hypot(*(drone - target)) > 0.3:
-                self._away = (drone - target) / np.hypot(*(drone - target))
-            target = target + self._away * self.standoff_m
+                st.away = (drone - target) / np.hypot(*(drone - target))
+            target = target + st.away * self.standoff_m
         err = target - drone
-        dt = (t - self.prev_t) if self.prev_t is not None else 0.0
+        dt = (t - st.prev_t) if st.prev_t is not None else 0.0
         if dt > 0:
-            self.integral = np.clip(self.integral + err * dt, -5.0, 5.0)
-        deriv = (err - self.prev_err) / dt if (self.prev_err is not None and dt > 0) else np.zeros(2)
-        self.prev_err, self.prev_t = err, t
-        v = self.kp * err + self.ki * self.integral + self.kd * deriv + self.track_v
+            st.integral = np.clip(st.integral + err * dt, -5.0, 5.0)
+        deriv = (err - st.prev_err) / dt if (st.prev_err is not None and dt > 0) else np.zeros(2)
+        st.prev_err, st.prev_t = err, t
+        v = self.kp * err + self.ki * st.integral + self.kd * deriv + st.track_v
         n = float(np.hypot(*v))
         if n > self.max_speed:
             v *= self.max_speed / n
-        self.commands += 1
+        st.commands += 1
         cmd = VelocityCommand(id=f"follow-{meta.seq}", vx=float(v[0]), vy=float(v[1]), vz=0.0,
                               duration=self.command_duration, issued_at=t)
         return AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [cmd], SchedulingType.ORDERED, name="follow")
 
     def stats(self) -> dict:
-        return {"commands": self.commands}
+        """``commands`` (all drones) and ``commands_by_drone`` (robot id -> velocity commands issued)."""
+        by = {rid: st.commands for rid, st in self.drone_states().items()}
+        return {"commands": sum(by.values()), "commands_by_drone": by}
 
 
 class MonitoringAnalytics(Analytics):
     """Watches odometry fields (any of ``battery``, ``height``, ``gps``, ``speed``) and reports them with running
     minima/maxima; raises warnings when a ``limits`` bound (e.g. ``{"battery": 20}`` percent minimum,
-    ``{"height": 30}`` metres maximum) is crossed. Output: a dict per odometry message."""
+    ``{"height": 30}`` metres maximum) is crossed. Output: a dict per odometry message (``t`` s, ``robot``, the
+    watched values). Shared by several drones, it keeps the minima/maxima per drone (``by_drone`` in
+    :meth:`stats`; ``summary`` is over all drones) and names the drone in each warning."""
 
     name = "monitor"
     FIELDS = ("battery", "height", "gps", "speed")
@@ -285,10 +418,21 @@ class MonitoringAnalytics(Analytics):
         if bad:
             raise ValueError(f"watch: unknown fields {bad}; choose from {list(self.FIELDS)}")
         self.limits = limits or {}
-        self.summary: dict[str, dict[str, float]] = {}
         self.warnings: list[str] = []
 
+    @property
+    def summary(self) -> dict[str, dict[str, float]]:
+        """Minimum and maximum of each numeric watched field over every drone: ``{field: {"min", "max"}}``."""
+        out: dict[str, dict[str, float]] = {}
+        for per in self.drone_states().values():
+            for k, s in per.items():
+                o = out.setdefault(k, dict(s))
+                o["min"], o["max"] = min(o["min"], s["min"]), max(o["max"], s["max"])
+        return out
+
     def process(self, odom: dict, meta: Any) -> dict:
+        robot = source_robot(odom, meta)
+        per: dict[str, dict[str, float]] = self.drone_state(odom, meta, dict)
         vals: dict[str, Any] = {}
         if "battery" in self.watch:
             vals["battery"] = odom["battery_pct"]
@@ -300,14 +444,19 @@ class MonitoringAnalytics(Analytics):
             vals["gps"] = [odom["geodetic"]["lat"], odom["geodetic"]["lon"], odom["geodetic"]["alt"]]
         for k, v in vals.items():
             if isinstance(v, (int, float)):
-                s = self.summary.setdefault(k, {"min": v, "max": v})
+                s = per.setdefault(k, {"min": v, "max": v})
                 s["min"], s["max"] = min(s["min"], v), max(s["max"], v)
+        who = f"{robot}: " if robot else ""
         if "battery" in self.limits and (vals.get("battery") if vals.get("battery") is not None else 100) \
                 < self.limits["battery"]:
-            self.warnings.append(f"battery {vals['battery']:.1f}% below {self.limits['battery']}% at t={odom['t']:.1f}s")
+            self.warnings.append(f"{who}battery {vals['battery']:.1f}% below {self.limits['battery']}% at "
+                                 f"t={odom['t']:.1f}s")
         if "height" in self.limits and vals.get("height", 0) > self.limits["height"]:
-            self.warnings.append(f"height {vals['height']:.1f} m above {self.limits['height']} m at t={odom['t']:.1f}s")
-        return {"t": odom["t"], **vals}
+            self.warnings.append(f"{who}height {vals['height']:.1f} m above {self.limits['height']} m at "
+                                 f"t={odom['t']:.1f}s")
+        return {"t": odom["t"], "robot": robot, **vals}
 
     def stats(self) -> dict:
-        return {"summary": self.summary, "warnings": self.warnings[-5:]}
+        return {"summary": self.summary, "by_drone": {r: {k: dict(v) for k, v in per.items()}
+                                                      for r, per in self.drone_states().items()},
+                "warnings": self.warnings[-5:]}

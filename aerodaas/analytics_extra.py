@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,25 @@ from .analytics import Analytics, NavigableAnalytics
 from .models import ActionCommand, AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, Waypoint
 
 __all__ = ["FallDetector", "FallModelNotFound", "decode_yolov8", "StructureLocator", "InspectionPlanner"]
+
+
+@dataclass
+class _FallWatch:
+    """One drone's emergency-pose state: frames seen, frames inferred, consecutive fall frames, landing sent."""
+
+    frames: int = 0
+    processed: int = 0
+    streak: int = 0
+    fired: bool = False
+    max_fall_score: float = 0.0
+
+
+@dataclass
+class _InspectionState:
+    """One drone's inspection state: consecutive frames with a structure, and the planned centre (ENU metres)."""
+
+    hits: int = 0
+    planned: tuple[float, float] | None = None
 
 FALL_MODEL_ENV = "AERODAAS_FALL_MODEL"
 FALL_CLASSES = ("Normal", "Fall")
@@ -69,7 +89,9 @@ class FallDetector(NavigableAnalytics):
     installed package's file (found without importing the package, which would import ultralytics/torch).
     ``every_n`` processes one frame in n (the model is slow); after ``confirm_frames`` consecutive processed
     frames with a ``Fall`` score >= ``score_threshold`` it emits, once, an AeroNavigation holding
-    ``ActionCommand("land")``. Raises :class:`FallModelNotFound` from :meth:`check` when no model is found."""
+    ``ActionCommand("land")``. Raises :class:`FallModelNotFound` from :meth:`check` when no model is found.
+    Shared by several drones, it counts frames and streaks per drone (FrameMeta ``robot_id``) and commands the
+    landing of the drone whose camera saw the fall, once per drone."""
 
     name = "emergency"
 
@@ -80,10 +102,29 @@ class FallDetector(NavigableAnalytics):
         self.score_threshold, self.confirm_frames, self.every_n = score_threshold, confirm_frames, max(1, every_n)
         self.threads = threads
         self.session = None
-        self.frames = self.processed = self.streak = 0
-        self.fired = False
-        self.max_fall_score = 0.0
         self.last_timing: dict[str, float] = {}
+
+    def _total(self, attr: str) -> int:
+        return sum(getattr(w, attr) for w in self.drone_states().values())
+
+    @property
+    def frames(self) -> int:
+        """Frames seen, all drones together."""
+        return self._total("frames")
+
+    @property
+    def processed(self) -> int:
+        """Frames inferred (one in ``every_n`` per drone), all drones together."""
+        return self._total("processed")
+
+    @property
+    def fired(self) -> bool:
+        """True once a landing was commanded to any drone."""
+        return any(w.fired for w in self.drone_states().values())
+
+    @property
+    def max_fall_score(self) -> float:
+        return max((w.max_fall_score for w in self.drone_states().values()), default=0.0)
 
     @staticmethod
     def resolve_model(model_path: str | None = None) -> Path:
@@ -138,26 +179,29 @@ class FallDetector(NavigableAnalytics):
         return dets
 
     def generate_navigation(self, frame: np.ndarray, meta: FrameMeta | None) -> AeroNavigation | None:
-        self.frames += 1
-        if self.fired or (self.frames - 1) % self.every_n:
+        w = self.drone_state(frame, meta, _FallWatch)
+        w.frames += 1
+        if w.fired or (w.frames - 1) % self.every_n:
             self.last_timing = {"inference_ms": 0.0}
             return None
-        self.processed += 1
+        w.processed += 1
         falls = [d.score for d in self.infer(frame) if d.class_name == "Fall"]
         score = max(falls, default=0.0)
-        self.max_fall_score = max(self.max_fall_score, score)
-        self.streak = self.streak + 1 if score >= self.score_threshold else 0
-        if self.streak < self.confirm_frames:
+        w.max_fall_score = max(w.max_fall_score, score)
+        w.streak = w.streak + 1 if score >= self.score_threshold else 0
+        if w.streak < self.confirm_frames:
             return None
-        self.fired = True
+        w.fired = True
         t = meta.capture_time if meta else 0.0
-        cmd = ActionCommand(id=f"emergency-land-{self.frames}", action="land",
-                            reason=f"fall detected (score {score:.2f}) in {self.streak} consecutive frames at t={t:.1f} s")
+        cmd = ActionCommand(id=f"emergency-land-{w.frames}", action="land",
+                            reason=f"fall detected (score {score:.2f}) in {w.streak} consecutive frames at t={t:.1f} s")
         return AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [cmd], SchedulingType.ORDERED, name="emergency")
 
     def stats(self) -> dict:
+        """Totals over all drones, and ``landing_commanded_to``: the drones told to land."""
         return {"frames": self.frames, "processed": self.processed, "max_fall_score": self.max_fall_score,
-                "landing_commanded": self.fired}
+                "landing_commanded": self.fired,
+                "landing_commanded_to": sorted(r for r, w in self.drone_states().items() if w.fired)}
 
 
 class StructureLocator(Analytics):
@@ -168,9 +212,11 @@ class StructureLocator(Analytics):
     pixels selects it within a larger photo), ``size_m`` the template's width in metres. For each frame the template is scaled to the frame's ground sample distance (metres per pixel from
     the camera pose and intrinsics: altitude / focal length, nadir) so the match is scale-correct; a match with
     correlation >= ``threshold`` is output as a Detection of class ``structure`` (score = correlation).
-    Raises FileNotFoundError from :meth:`check` if the template cannot be read."""
+    Raises FileNotFoundError from :meth:`check` if the template cannot be read. Each frame is matched on its own
+    (only counters are kept), so drones may share it and replicas may take any frame (not :attr:`stateful`)."""
 
     name = "structure_locator"
+    stateful = False
 
     def __init__(self, template: Any, size_m: float, crop: tuple[int, int, int, int] | None = None,
                  threshold: float = 0.6, name: str | None = None) -> None:
@@ -250,7 +296,8 @@ class InspectionPlanner(NavigableAnalytics):
     structure's ground position (back-projected through the frame's pose): ``faces`` viewpoints on a circle of
     ``radius_m`` metres, at every ``step_m`` metres from ``base_altitude`` up to ``top_altitude`` (metres above
     home), flown bottom-up layer by layer with ``hover_s`` seconds at each viewpoint (frames are captured
-    throughout), then a landing. Emitted once, as an ORDERED AeroNavigation."""
+    throughout), then a landing. Emitted once per drone, as an ORDERED AeroNavigation; shared by several drones,
+    it counts confirmations and plans per drone (FrameMeta ``robot_id``)."""
 
     name = "inspection_planner"
 
@@ -262,23 +309,29 @@ class InspectionPlanner(NavigableAnalytics):
             raise ValueError(f"need 0 < base_altitude <= top_altitude, got {base_altitude}, {top_altitude}")
         self.base, self.top, self.step, self.radius = base_altitude, top_altitude, step_m, radius_m
         self.faces, self.hover_s, self.confirm_hits = faces, hover_s, confirm_hits
-        self.hits = 0
-        self.planned: tuple[float, float] | None = None
+
+    def planned_for(self, robot_id: str) -> tuple[float, float] | None:
+        """The structure centre (ENU metres) planned around for drone ``robot_id``, or None (not yet)."""
+        st = self.drone_states().get(robot_id)
+        return st.planned if st is not None else None
 
     def generate_navigation(self, dets: list[Detection], meta: FrameMeta | None) -> AeroNavigation | None:
         from .sim.world import pixel_to_ground
 
-        if self.planned is not None or meta is None:
+        if meta is None:
+            return None
+        st = self.drone_state(dets, meta, _InspectionState)
+        if st.planned is not None:
             return None
         found = [d for d in dets if d.class_name == "structure"]
-        self.hits = self.hits + 1 if found else 0
-        if self.hits < self.confirm_hits:
+        st.hits = st.hits + 1 if found else 0
+        if st.hits < self.confirm_hits:
             return None
         g = pixel_to_ground(*max(found, key=lambda d: d.score).center, meta.pose, meta.intrinsics)
         if g is None:
             return None
-        self.planned = (float(g[0]), float(g[1]))
-        cx, cy = self.planned
+        st.planned = (float(g[0]), float(g[1]))
+        cx, cy = st.planned
         levels = list(np.arange(self.base, self.top + 1e-6, self.step))
         if levels[-1] < self.top - 1e-6:
             levels.append(self.top)

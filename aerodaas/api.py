@@ -16,7 +16,22 @@ from .config import ComputeConfig, EnvironmentConfig, RobotConfig, SensorConfig,
 from .data import AeroStreamData
 from .models import AeroNavigation, PriorityQueue
 
-__all__ = ["Environment", "Robot", "Sensor", "ComputeResource"]
+__all__ = ["Environment", "Robot", "Sensor", "ComputeResource", "MISSION_LISTENERS"]
+
+#: Callables ``fn(result)`` told of every :class:`aerodaas.runtime.MissionResult` that a mission start returns —
+#: :meth:`Robot.start_mission` and :meth:`Environment.start_mission` (a fleet) alike. ``aerodaas run`` listens here
+#: for its summary and exit code, so an application may start its mission either way.
+MISSION_LISTENERS: list[Callable[[Any], None]] = []
+
+
+def _fly(env: "Environment", robots: list["Robot"], timeout: float | None):
+    """Run the mission of ``robots`` (blocks), tell :data:`MISSION_LISTENERS`, return the MissionResult."""
+    from .runtime import run_mission
+
+    result = run_mission(env, robots, timeout=timeout)
+    for listener in list(MISSION_LISTENERS):
+        listener(result)
+    return result
 
 
 class ComputeResource:
@@ -134,9 +149,7 @@ class Robot:
 
     def start_mission(self, timeout: float | None = None):
         """Start the actors, fly the mission to its end, and return the MissionResult (blocks)."""
-        from .runtime import run_mission
-
-        return run_mission(self.env, [self], timeout=timeout)
+        return _fly(self.env, [self], timeout)
 
     def end_mission(self, reason: str = "ended") -> None:
         """End the running mission now (the run stops; the result's outcome is ``reason``)."""
@@ -236,10 +249,23 @@ class Environment:
     def start_mission(self, robots: list["Robot"] | None = None, timeout: float | None = None):
         """Fly several robots together (default: every robot of the environment) on one clock; blocks and returns
         one MissionResult with a report per robot. Robots sharing the environment's trajectory scheduler each get
-        their own waypoint queue holding the missions they were told to ``navigate``."""
-        from .runtime import run_mission
-
-        return run_mission(self, list(robots) if robots is not None else self.get_env_robots(), timeout=timeout)
+        their own waypoint queue holding the missions they were told to ``navigate``. ``robots`` holds Robots of
+        this environment or their ids. Raises KeyError for an unknown id and ValueError naming the item for anything
+        else, or a robot given twice, before anything starts."""
+        if isinstance(robots, (Robot, str)):
+            robots = [robots]
+        given = list(robots) if robots is not None else self.get_env_robots()
+        robots = []
+        for i, r in enumerate(given):
+            if isinstance(r, str):
+                r = self.get_robot_by_id(r)
+            if not isinstance(r, Robot) or self.robots.get(r.id) is not r:
+                raise ValueError(f"start_mission: robots[{i}] must be a Robot of this environment or its id "
+                                 f"(one of {sorted(self.robots)}), got {r!r}")
+            if r in robots:
+                raise ValueError(f"start_mission: robots[{i}] ({r.id!r}) is given twice")
+            robots.append(r)
+        return _fly(self, robots, timeout)
 
     # -- schedulers
     def set_trajectory_scheduler(self, scheduler: Any) -> None:

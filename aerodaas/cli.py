@@ -83,24 +83,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     from . import api
 
-    original = api.Robot.start_mission
-
-    def start_mission(self, timeout=None):  # capture results for the summary and exit code
-        res = original(self, timeout)
+    def on_result(res) -> None:  # every mission start counts (robot.start_mission() or a fleet's env.start_mission())
         results.append(res)
         print(runtime.format_summary(res), flush=True)
-        return res
 
-    api.Robot.start_mission = start_mission
-    original_fleet = api.Environment.start_mission
-
-    def start_fleet(self, robots=None, timeout=None):  # a fleet app: env.start_mission() counts as well
-        res = original_fleet(self, robots, timeout)
-        results.append(res)
-        print(runtime.format_summary(res), flush=True)
-        return res
-
-    api.Environment.start_mission = start_fleet
+    api.MISSION_LISTENERS.append(on_result)
     sys.path.insert(0, str(app.resolve().parent))
     try:
         runpy.run_path(str(app), run_name="__main__")
@@ -117,8 +104,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 1
     finally:
-        api.Robot.start_mission = original
-        api.Environment.start_mission = original_fleet
+        api.MISSION_LISTENERS.remove(on_result)
         o.early_ray = False
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)

@@ -1,6 +1,7 @@
 """Object detection on camera frames with small COCO ONNX models (CPU, onnxruntime).
 
-Two detectors share one interface (``detect(image_bgr) -> list[Detection]`` plus ``last_timing``):
+Two detectors share one interface (``detect(image_bgr) -> list[Detection]``, ``detect_batch(images)`` plus
+``last_timing``):
 
 * :class:`YoloxDetector` -- YOLOX-Nano, 416x416 input (Megvii YOLOX, Apache-2.0).
 * :class:`NanoDetDetector` -- NanoDet-Plus-m 1.5x, 416x416 input (RangiLyu NanoDet / OpenCV model zoo, Apache-2.0).
@@ -8,6 +9,11 @@ Two detectors share one interface (``detect(image_bgr) -> list[Detection]`` plus
 Model files are located by :func:`resolve_model` (explicit path, ``$AERODAAS_MODEL_DIR``, the user cache, then a
 download pinned to a commit and verified by sha256). The registry :data:`MODELS` records where every file comes
 from; the shared data manifest (``MANIFEST.md`` next to the models) documents the same contract.
+
+Batching: ``detect_batch`` runs several images (e.g. the latest frames of several drones) in one onnxruntime call
+when the model's input has a dynamic batch dimension (``batch_dynamic``); the shipped YOLOX-Nano and NanoDet-Plus
+exports have a fixed batch of 1 (input ``(1, 3, 416, 416)``, and batch-1 ``Reshape`` constants inside the graph),
+so with them ``detect_batch`` is a loop over ``detect`` (same results, no speed-up).
 
 Conventions: images are ``(H, W, 3)`` ``uint8`` **BGR** arrays (what ``cv2.imread`` returns); boxes are
 ``(x0, y0, x1, y1)`` in pixels of the image passed to ``detect`` (origin top-left, clipped to ``[0, W] x [0, H]``);
@@ -392,8 +398,13 @@ class _OnnxDetector:
         if len(shape) != 4 or not all(isinstance(d, int) for d in shape[2:]):
             raise ValueError(f"{self.model_path}: expected a fixed NCHW input, got {inp.name} {shape}")
         self.input_hw: tuple[int, int] = (int(shape[2]), int(shape[3]))
+        # onnxruntime reports a symbolic dimension as its name (str) and an unknown one as None; only then may the
+        # batch differ from the exported one
+        self.batch_dynamic: bool = not isinstance(shape[0], int)
         self.output_names = [o.name for o in self.session.get_outputs()]
         self.last_timing: dict[str, float] = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
+        self.last_batch = 1  # most images in one onnxruntime call of the last detect / detect_batch
+        self.last_batched = 0  # images of the last detect_batch that shared an onnxruntime call with others
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(model_path={str(self.model_path)!r}, score_threshold={self.score_threshold}, "
@@ -422,6 +433,7 @@ class _OnnxDetector:
         t2 = time.perf_counter()
         dets = self._postprocess(outputs, ctx, image_bgr.shape[:2])
         t3 = time.perf_counter()
+        self.last_batch = 1
         self.last_timing = {
             "preprocess_ms": (t1 - t0) * 1e3,
             "inference_ms": (t2 - t1) * 1e3,
@@ -430,6 +442,52 @@ class _OnnxDetector:
         return dets
 
     __call__ = detect
+
+    def detect_batch(self, images: list[np.ndarray], max_batch: int = 8) -> list[list[Detection]]:
+        """Detect in several images (each ``(H, W, 3)`` ``uint8`` BGR, sizes may differ); returns one detection list
+        per image, in order, each exactly as :meth:`detect` returns it for that image alone.
+
+        With a model whose input batch dimension is dynamic (``batch_dynamic``), the images go through
+        onnxruntime together, up to ``max_batch`` per call (an ``(n, 3, h, w)`` input, outputs split along axis 0);
+        with a fixed-batch model (both shipped ones: ``(1, 3, 416, 416)``) this is a loop over :meth:`detect`.
+        ``last_timing`` then holds the whole call's times (ms), ``last_batch`` the most images in one onnxruntime
+        call and ``last_batched`` how many images shared a call with others. Raises ``ValueError`` (naming the image's index, shape and dtype) before any inference if an image is
+        not a 3-channel ``uint8`` array, and ``ValueError`` if ``max_batch`` < 1."""
+        if int(max_batch) < 1:
+            raise ValueError(f"max_batch must be >= 1, got {max_batch}")
+        for i, im in enumerate(images):
+            try:
+                _check_image(im)
+            except ValueError as e:
+                raise ValueError(f"images[{i}]: {e}") from None
+        if not self.batch_dynamic or len(images) <= 1:
+            out, total = [], {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
+            for im in images:
+                out.append(self.detect(im))
+                for k in total:
+                    total[k] += self.last_timing[k]
+            self.last_timing, self.last_batch, self.last_batched = total, 1, 0
+            return out
+        out, self.last_batch, self.last_batched = [], 1, 0
+        total = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
+        for lo in range(0, len(images), int(max_batch)):
+            chunk = images[lo:lo + int(max_batch)]
+            t0 = time.perf_counter()
+            pre = [self._preprocess(im) for im in chunk]
+            blob = np.concatenate([b for b, _ in pre], axis=0)
+            t1 = time.perf_counter()
+            outputs = self.session.run(None, {self.input_name: blob})
+            t2 = time.perf_counter()
+            for i, (im, (_, ctx)) in enumerate(zip(chunk, pre)):
+                out.append(self._postprocess([o[i:i + 1] for o in outputs], ctx, im.shape[:2]))
+            t3 = time.perf_counter()
+            total["preprocess_ms"] += (t1 - t0) * 1e3
+            total["inference_ms"] += (t2 - t1) * 1e3
+            total["postprocess_ms"] += (t3 - t2) * 1e3
+            self.last_batch = max(self.last_batch, len(chunk))
+            self.last_batched += len(chunk) if len(chunk) > 1 else 0
+        self.last_timing = total
+        return out
 
     def _postprocess(self, outputs, ctx, hw: tuple[int, int]) -> list[Detection]:
         idx, scores = self._candidates(outputs, float(self._thr.min()))
