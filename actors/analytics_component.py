@@ -43,21 +43,60 @@ class AnalyticsComponent(Component):
         self.proc_ms: list[float] = []
         self._newest: dict[tuple, float] = {}
         self.failures = 0  # items whose process() raised
+        self.batched = 0  # items processed in a process_batch call of more than one item
         self.last_failure: str | None = None
         self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
         self.aborted = False
 
     def handle(self, port: str, env: dict) -> list[dict] | None:
+        if self._stale(env):
+            return None
+        return self._process_one(env)
+
+    def batch_limit(self) -> int:
+        """The analytics' ``max_batch`` (> 1 only for a model that takes several frames per inference call)."""
+        try:
+            return max(1, int(getattr(self.obj, "max_batch", 1) or 1))
+        except (TypeError, ValueError):
+            return 1
+
+    def handle_batch(self, items: list[tuple[str, dict]]) -> list[list[dict] | None]:
+        """Several waiting items (e.g. frames of several drones for one detector) in one ``process_batch`` call;
+        stale items are skipped as in :meth:`handle`. If the batch raises, each item is processed alone, so the
+        failing one is found and counted like any other failure."""
+        fresh = [(p, e) for p, e in items if not self._stale(e)]
+        out: list = [None] * len(items)
+        if not fresh:
+            return out
+        t0 = time.perf_counter()
+        try:
+            res = self.obj.process_batch([(e["data"], e.get("meta")) for _, e in fresh])
+        except Exception:  # noqa: BLE001 - find the culprit item by item
+            res = None
+        dt_ms = (time.perf_counter() - t0) * 1e3 / len(fresh)
+        index = {id(e): i for i, (_, e) in enumerate(items)}
+        for j, (p, e) in enumerate(fresh):
+            if res is None:
+                out[index[id(e)]] = self._process_one(e)
+            else:
+                self.batched += 1
+                out[index[id(e)]] = self._emit(res[j], e, dt_ms, getattr(self.obj, "last_timing", None))
+        return out
+
+    def _stale(self, env: dict) -> bool:
         meta = env.get("meta")
         if meta is not None:
             key = (meta.robot_id, meta.sensor_id)
             if meta.capture_time < self._newest.get(key, -1.0):
                 self.stale += 1
-                return None
+                return True
             self._newest[key] = meta.capture_time
+        return False
+
+    def _process_one(self, env: dict) -> list[dict] | None:
         t0 = time.perf_counter()
         try:
-            out = self.obj.process(env["data"], meta)
+            out = self.obj.process(env["data"], env.get("meta"))
         except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
             self._failed(e, env)
             return None
@@ -129,6 +168,7 @@ class AnalyticsComponent(Component):
     def stats(self) -> dict:
         p = np.array(self.proc_ms or [0.0])
         out = {"name": self.name, "processed": self.processed, "outputs": self.outputs, "stale": self.stale,
+               "batched": self.batched,
                "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
                "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
                "outlets": self.host.outlet_stats(self.cid)}
@@ -155,6 +195,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
         #: executed tasks (done on time or late) per tier, and those whose result was non-empty (e.g. detections)
         self.executed: dict[str, int] = {}
         self.with_output: dict[str, int] = {}
+
+    def batch_limit(self) -> int:
+        return 1  # each frame is a task of the analytics scheduler
 
     def handle(self, port: str, env: dict) -> None:
         frame = env.get("data")

@@ -199,26 +199,33 @@ class Component:
         """Process ``env``, hand its outputs on, then keep draining the mailbox in this thread until it is empty
         (resubmitting each waiting item to the pool would queue it behind every pending capture: starvation)."""
         while True:
+            batch = [(port, env)]
+            limit = self.batch_limit()
+            if limit > 1:  # items waiting (e.g. frames of several drones for one detector): one call for them
+                with self._m:
+                    while self._q and len(batch) < limit:
+                        batch.append(self._q.popleft())
             try:
-                out = self.handle(port, env)
+                outs = self.handle_batch(batch) if len(batch) > 1 else [self.handle(port, env)]
             except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
                 self.errors += 1
-                out = None
+                outs = [None] * len(batch)
                 self.host.report_error(self.cid, e)
             with self._m:
                 nxt = self._q.popleft() if self._q else None
                 if nxt is None:
                     self._busy = False
-            try:
-                if out:
-                    self.host.publish(self.cid, out, env.get("tok"))
-            except Exception as e:  # a failing subscriber must not leave this mailbox busy with items queued
-                self.errors += 1
-                self.host.report_error(self.cid, e)
-            finally:
-                tok = env.get("tok")
-                if tok is not None:
-                    tok.done()
+            for (_, e_in), out in zip(batch, outs):
+                try:
+                    if out:
+                        self.host.publish(self.cid, out, e_in.get("tok"))
+                except Exception as e:  # a failing subscriber must not leave this mailbox busy with items queued
+                    self.errors += 1
+                    self.host.report_error(self.cid, e)
+                finally:
+                    tok = e_in.get("tok")
+                    if tok is not None:
+                        tok.done()
             if nxt is None:
                 return
             port, env = nxt
@@ -226,6 +233,15 @@ class Component:
     def handle(self, port: str, env: dict) -> list[dict] | None:
         """Process one envelope; return the envelopes to publish (or None)."""
         return None
+
+    def batch_limit(self) -> int:
+        """How many waiting items :meth:`handle_batch` may take at once (1: no batching, the default)."""
+        return 1
+
+    def handle_batch(self, items: list[tuple[str, dict]]) -> list[list[dict] | None]:
+        """Process several ``(port, envelope)`` items in one go; one result per item, in order (default: one
+        :meth:`handle` call each)."""
+        return [self.handle(p, e) for p, e in items]
 
     def mailbox_stats(self) -> dict:
         return {"received": self.received, "dropped": self.dropped, "errors": self.errors}

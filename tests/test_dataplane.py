@@ -14,6 +14,7 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from aerodaas import Analytics, Environment, FollowAnalytics, PriorityQueue
@@ -329,3 +330,59 @@ def test_busy_consumer_drops_and_counts_lockstep_never_drops():
                 assert comp.dropped >= 1 and len(slow.seen) + comp.dropped + comp.stale == 5
         finally:
             rt.close()
+
+
+class BatchProbe(Analytics):
+    """Takes up to 4 frames per call (``max_batch``) and remembers each call's size; slow, so frames queue."""
+
+    name = "batchprobe"
+    max_batch = 4
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[int] = []
+
+    def process(self, frame, meta):
+        self.calls.append(1)
+        time.sleep(0.1)
+        return {"n": 1}
+
+    def process_batch(self, items):
+        self.calls.append(len(items))
+        time.sleep(0.1)
+        return [{"n": len(items)} for _ in items]
+
+
+def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
+    """Frames of three drones arriving while the detector is busy wait in its mailbox and reach it in one
+    process_batch call (its max_batch allows 4); every frame still gets its own output, in order."""
+    from aerodaas.actors.analytics_component import AnalyticsComponent
+    from aerodaas.actors.host import Host
+    from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
+
+    host = Host("analytics/edge/batchprobe#1", "edge", 0, workers=2)
+    obj = BatchProbe()
+    comp = host.add(AnalyticsComponent(host, "batchprobe#1", "batchprobe", obj, None, 0, buffer=4))
+    published: list = []
+    host.publish = lambda src, envs, tok=None, inline=True: published.extend(envs)  # what it hands on
+    k = CameraIntrinsics.from_hfov(16, 12, 78.0)
+
+    def env(robot: str, t: float) -> dict:
+        meta = FrameMeta(robot_id=robot, sensor_id="cam", seq=1, capture_time=t, wall_time=time.time(), intrinsics=k,
+                         pose=FramePose(position=(0.0, 0.0, 3.0), yaw=90.0))
+        return {"kind": "frame", "data": np.zeros((12, 16, 3), np.uint8), "meta": meta, "sim_t": t, "trace": {},
+                "robot": robot}
+
+    first = threading.Thread(target=comp.offer, args=("in", env("d00", 0.1)))
+    first.start()
+    time.sleep(0.03)  # d00's frame is being processed: the next three wait
+    for r in ("d01", "d02", "d03"):
+        assert comp.offer("in", env(r, 0.1))
+    first.join(5)
+    deadline = time.time() + 5
+    while len(published) < 4 and time.time() < deadline:
+        time.sleep(0.01)
+    host.close()
+    assert obj.calls == [1, 3], obj.calls  # one alone, then the three that waited in one call
+    assert [e["robot"] for e in published] == ["d00", "d01", "d02", "d03"] and comp.batched == 3
+    assert comp.processed == 4 and comp.dropped == 0
