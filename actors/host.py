@@ -294,12 +294,16 @@ class RemoteOutlet:
             if env.get("kind") == "frame":
                 key = "_jpeg" if self.jpeg else "_ref"
                 data = env.get(key)
+                t0 = time.time()
                 if data is None:
                     frame = env["data"]
                     data = env[key] = encode_frame(frame) if self.jpeg else ray.put(frame)
                     self.copies.count("tier_jpeg_encoded" if self.jpeg else "object_store_put")
                 wire["data"] = data
                 wire["kind"] = "frame_jpeg" if self.jpeg else "frame_ref"
+                # where the time of a hop goes (see SchedulerComponent's latency records): put/encode, then the call
+                wire["trace"] = {**(env.get("trace") or {}), "put_ms": (time.time() - t0) * 1e3,
+                                 "sent_wall": time.time()}
             if tok is None and self.reply_to is not None:
                 wire["reply"] = self.reply_to
             ref = self.handle.deliver.remote(self.cid, self.port, wire)
@@ -446,12 +450,18 @@ class Host:
         rep = getattr(self._tl, "reply", None)
         if rep is None or env.get("kind") == "frame" or self.location.get(cid) != rep[0]:
             return False
-        rep[1].append((cid, port, {k: v for k, v in env.items() if k not in ("tok", "_ref", "_jpeg")}))
+        item = {k: v for k, v in env.items() if k not in ("tok", "_ref", "_jpeg")}
+        item["trace"] = {**(env.get("trace") or {}), "replied_wall": time.time()}
+        rep[1].append((cid, port, item))
         return True
 
     def on_reply(self, items: list) -> None:
         """Items another actor returned in a deliver call's reply: offered to their components on the pool."""
+        now = time.time()
         for cid, port, env in items:
+            tr = env.get("trace")
+            if tr and "replied_wall" in tr:
+                tr["reply_ms"] = (now - tr.pop("replied_wall")) * 1e3
             comp = self.components.get(cid)
             if comp is not None:
                 self.submit(comp.offer, port, env)
@@ -480,6 +490,7 @@ class Host:
         In lock-step the whole local cascade runs before this returns; the result lists the refs of the remote
         sends it caused (for the sender's :class:`Cascade`)."""
         env = dict(wire)
+        t_arrived = time.time()
         lock = env.pop("lockstep", False)
         kind = env.get("kind")
         if kind == "frame_jpeg":
@@ -488,6 +499,9 @@ class Host:
         elif kind == "frame_ref":
             env["data"], env["kind"] = ray.get(env["data"]), "frame"
             self.copies.count("object_store_get")
+        if kind in ("frame_jpeg", "frame_ref") and "sent_wall" in (env.get("trace") or {}):
+            env["trace"] = {**env["trace"], "call_ms": (t_arrived - env["trace"]["sent_wall"]) * 1e3,
+                            "get_ms": (time.time() - t_arrived) * 1e3}
         comp = self.components[cid]
         reply = env.pop("reply", None)
         if not lock:

@@ -119,6 +119,9 @@ class SchedulerComponent(Component):
             rec = {"robot": self.robot_id, "t": env.get("sim_t", 0.0), "e2e_ms": e2e, "applied": applied,
                    "inference_ms": tr.get("inference_ms", 0.0), "post_ms": tr.get("post_ms", 0.0),
                    "overhead_ms": max(0.0, e2e - tr.get("inference_ms", 0.0) - tr.get("post_ms", 0.0))}
+            for k in ("put_ms", "call_ms", "get_ms", "reply_ms"):  # the actor hop, when the frame made one
+                if k in tr:
+                    rec[k] = tr[k]
             self.latency.append(rec)
             if self.recorder is not None:
                 self.recorder.json(f"/{self.robot_id}/latency", self.epoch_ns + int(rec["t"] * 1e9), rec,

@@ -110,6 +110,11 @@ class FrameworkWindows:
                "e2e_ms": summary([r["e2e_ms"] for r in recs]), "inference_ms": summary([r["inference_ms"] for r in recs]),
                "post_ms": summary([r["post_ms"] for r in recs]),
                "framework_overhead_ms": summary([r["overhead_ms"] for r in recs]),
+               # the actors layout's hop, where its time goes: ray.put of the frame, the actor call (submit ->
+               # the analytics actor's deliver starting), the zero-copy get, the reply back to the drone actor
+               "hop_ms": {k: summary([r[k] for r in recs if k in r]) for k in ("put_ms", "call_ms", "get_ms",
+                                                                                 "reply_ms")
+                          if any(k in r for r in recs)},
                # from the camera's clock tick to its render starting on the host's thread pool (per window median
                # and p99 from the camera's stats: the runtime does not pair it with each frame's latency record)
                "capture_dispatch_ms": {"median": d_med, "p99": d_p99},
@@ -289,7 +294,8 @@ def _fmt(mp_: dict | None) -> str:
 def _line(row: dict) -> str:
     return (f"overhead {row['detector']:5s} {row['resolution']} {row['layout']:9s} median/p99 ms: "
             f"framework {_fmt(row['framework_overhead_ms'])} | bare {_fmt(row['bare_loop_overhead_ms'])} | "
-            f"naive Ray {_fmt(row['naive_ray_overhead_ms'])} | dora-rs {_fmt(row['dora_rs_overhead_ms'])}")
+            f"naive Ray {_fmt(row['naive_ray_overhead_ms'])} | dora-rs {_fmt(row['dora_rs_overhead_ms'])}"
+            + "".join(f" | {k[:-3]} {_fmt(v)}" for k, v in ((row.get("framework") or {}).get("hop_ms") or {}).items()))
 
 
 def _parse_resolutions(values: list[str] | None) -> tuple[tuple[int, int], ...]:
