@@ -262,7 +262,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                   scheduled_: bool = False, obj: Any = None) -> None:
             pa = actor(hid, role, tier, compute, labels)
             pa.spec.setdefault("analytics", []).append({"cid": cid, "name": a.name, "obj": a if obj is None else obj,
-                                                       "buffer": buffer, "scheduled": scheduled_})
+                                                       "buffer": max(buffer, 8) if scheduled_ else buffer,
+                                                       "scheduled": scheduled_})
             add(Node(cid, "analytics", robots_[0] if len(robots_) == 1 and hid.startswith("drone") else None, hid,
                      a.name))
             inst[aid].append((cid, hid, robots_))
@@ -300,10 +301,12 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         """Edges from ``stream`` (of ``robot``'s items when known) to every consumer instance."""
         out = []
         for sub in stream.subscribers:
+            # frames for the analytics scheduler: its dispatcher decides what to drop, not the edge's in-flight limit
+            buffer = max(stream.buffer, 8) if id(sub) in scheduled else stream.buffer
             for cid, _, served in inst.get(id(sub), []):
                 if robot is not None and robot not in served:
                     continue
-                out.append(Edge("", cid, Port("in"), stream.buffer, served if robot is None else None))
+                out.append(Edge("", cid, Port("in"), buffer, served if robot is None else None))
         for rr in robots:
             if robot is not None and rr.id != robot:
                 continue
