@@ -109,8 +109,10 @@ def _init_ray(address: str | None) -> None:
         for attempt in range(3):
             try:
                 # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
+                # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
+                # process on the machine (a SITL autopilot, a compiler) starve their control loops
                 ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
-                         dashboard_host="127.0.0.1", log_to_driver=True,
+                         dashboard_host="127.0.0.1", log_to_driver=True, _system_config={"worker_niceness": 0},
                          num_cpus=1, configure_logging=True, logging_level="warning")
                 break
             except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one

@@ -67,7 +67,7 @@ def placement(out_dir: str) -> dict:
 
     qos = {"deadline_ms": 400, "edge_ms": 20, "cloud_ms": 60, "benefit": 100, "edge_cost": 1, "cloud_cost": 5}
     cfg = _cfg(6, ["a", "b"], 1.0, {"name": "DEMS", "models": {"det-a": qos, "det-b": qos}})
-    with LocalCluster(cloud_nodes=1, edge_nodes=2, edge_labels=[{"aerodaas/site": "a"}, {"aerodaas/site": "b"}],
+    with LocalCluster(cloud_nodes=1, edge_nodes=2, edge_labels=[{"aerodaas/site": "a"}, {"aerodaas/site": "b"}], worker_niceness=0,
                       edge_cpus=2, cloud_cpus=2) as lc:
         env = Environment(parse_environment_config(cfg))
         sched = NearestNeighborScheduler(env)
@@ -97,7 +97,8 @@ def node_loss(out_dir: str) -> dict:
 
     cfg = _cfg(2, ["a", "b"], 4.0)
     rec = os.path.join(out_dir, "node_loss.mcap")
-    with LocalCluster(cloud_nodes=0, edge_nodes=2, edge_labels=[{"aerodaas/site": "a"}, {"aerodaas/site": "b"}]) as lc:
+    with LocalCluster(cloud_nodes=0, edge_nodes=2, edge_labels=[{"aerodaas/site": "a"}, {"aerodaas/site": "b"}],
+                      worker_niceness=0) as lc:
         env = Environment(parse_environment_config(cfg))
         sched = NearestNeighborScheduler(env)
         env.set_trajectory_scheduler(sched)

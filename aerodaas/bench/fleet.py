@@ -119,7 +119,7 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     if edge_nodes > 1:
         from aerodaas.clusters.local import LocalCluster
 
-        lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes,
+        lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes, worker_niceness=0,
                           edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
         nodes = lc.cluster.list_all_nodes()
         runtime.OPTIONS.address = lc.address
