@@ -2,14 +2,14 @@
 
 A checkpoint (a picklable dict) holds the vehicle's state when the backend keeps one for us (the simulator:
 :meth:`~aerodaas.backends.base.VehicleBackend.checkpoint`; a real vehicle keeps flying on its own), the mission
-state machine's state, the waypoints visited, the trajectory scheduler's queued missions and completed items, the
+state machine's state, the waypoints visited, the last 50 events (the recording has them all), the trajectory scheduler's queued missions
+and completed items, the
 clocks of the control loop and the drone's counters. :func:`restore_drone` puts them back into a freshly built
 :class:`~.drone.DroneComponent`: the waypoint that was being flown to (or held) is flown to again, from where the
 vehicle is, and the events say ``resumed_after_restart``.
 """
 from __future__ import annotations
 
-import copy
 import itertools
 from typing import Any
 
@@ -20,14 +20,17 @@ _SEQ = itertools.count(1)
 
 def drone_checkpoint(d: Any) -> dict:
     """A checkpoint of DroneComponent ``d`` (taken under its lock, so it is consistent with one control step)."""
+    from aerodaas.schedulers.base import Mission
+
     with d.lock:
         s = d.scheduler.s
-        with s._lock:
-            missions = copy.deepcopy(s._missions)
+        with s._lock:  # the items themselves are never changed in place: copying the lists is enough
+            missions = [Mission(m.priority, m.seq, m.name, list(m.items), m.distance_driven, dict(m.segment_of))
+                        for m in s._missions]
             completed = list(s.completed)
         return {"seq": next(_SEQ), "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
                 "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(d.visited),
-                "events": list(d.events), "preplanned_left": d.preplanned_left, "preplanned_total": d.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
+                "events": list(d.events[-50:]), "preplanned_left": d.preplanned_left, "preplanned_total": d.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
                 "flew_something": d.flew_something, "idle_since": d.idle_since, "outcome": d.outcome,
                 "error": d.error, "ticks": d.ticks, "missed_ticks": d.missed_ticks, "next_tick": d.next_tick,
                 "next_odom": d.next_odom, "rejected": list(d.rejected), "missions": missions,

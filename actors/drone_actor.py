@@ -5,7 +5,7 @@ needs no hop to be captured, recorded or analysed by a colocated analytics.
 
 Named ``aerodaas/<run>/drone/<robot id>`` (``aerodaas/<run>/drones/<first id>+<n - 1>`` for a group) and placed
 on a ``tier=edge`` node carrying the robot's edge compute labels. Restartable: while flying it checkpoints each
-drone (vehicle state for the simulator, mission state and waypoint queue) to the run's recorder actor about once
+drone (vehicle state for the simulator, mission state and waypoint queue) to the run's recorder actor every two seconds
 a second and at every waypoint; a restarted DroneActor restores the last checkpoint (the simulator's vehicle where
 it was; a real vehicle flew on under its own control and is reconnected) and the driver calls :meth:`run` again
 with ``resume=True``: the mission goes on from the waypoint it was heading to.

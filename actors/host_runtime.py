@@ -28,7 +28,7 @@ class _Checkpointer:
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
     checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
 
-    def __init__(self, host: Host, drones: list, period_s: float = 1.0) -> None:
+    def __init__(self, host: Host, drones: list, period_s: float = 2.0) -> None:
         self.host, self.period_s = host, period_s
         self.on = "recorder" in (getattr(host, "peers", None) or {}) and bool(drones)
         self.last = time.monotonic()
@@ -44,13 +44,18 @@ class _Checkpointer:
                 from .checkpoint import drone_checkpoint
 
                 self.visited[id(d)] = len(d.visited)
-                try:
-                    self.host.peer("recorder").checkpoint.remote(d.cfg.id, drone_checkpoint(d))
-                except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
-                    self.host.report_error("checkpoint", e)
-                    self.on = False
+                # taken here (consistent with the control step), serialised and sent on the pool: the clock
+                # thread never pays for pickling the queue
+                self.host.submit(self._send, d.cfg.id, drone_checkpoint(d))
         if due:
             self.last = now
+
+    def _send(self, robot_id: str, cp: dict) -> None:
+        try:
+            self.host.peer("recorder").checkpoint.remote(robot_id, cp)
+        except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
+            self.host.report_error("checkpoint", e)
+            self.on = False
 
 
 class HostRuntime:
