@@ -119,7 +119,9 @@ class ActionMixin:
                     self._check_link("arm")
                     time.sleep(0.02)
                 backoff = min(backoff * 2.0, _ARM_BACKOFF_S[1])
-        self._fix_altitude_reference()
+        if not self._alt_ref_pinned:  # an uploaded mission's altitudes refer to the one fixed at upload
+            self._fix_altitude_reference()
+        self._alt_ref_pinned = False
         self._in_control = True
         self._event("armed_after", wall_s=round(time.monotonic() - start, 3), vehicle_s=round(self.t - t0, 3),
                     tries=tries)
