@@ -287,6 +287,36 @@ def test_link_loss_and_recovery(fly, autopilot):
     assert b.armed
 
 
+def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(monkeypatch):
+    """A firmware process stopped for 6 s (SIGSTOP, as tests/sitl.py does to PX4 SITL at 5x): while silent the
+    vehicle clock is extrapolated at its last rate; when time_boot_ms resumes from where it stopped, :attr:`t` goes
+    on from where it got to. (It once jumped by the whole silence x the clock ratio, 28 s, leaving a gap in the
+    recorded odometry: the resume event read t before the new sample's wall time was noted.)"""
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
+    wall = [1000.0]
+    monkeypatch.setattr(time, "monotonic", lambda: wall[0])
+    b._wall0, b._link_ok = wall[0], True
+    ms = 10_000
+    for _ in range(50):  # 5 vehicle seconds per wall second
+        wall[0] += 0.1
+        ms += 500
+        b._on_boot_ms(ms)
+    assert 4.5 < b.clock_ratio < 5.5
+    wall[0] += 3.0  # silent: the heartbeat watch declares the link lost (link.py _periodic)
+    b._link_ok, b._reanchor = False, True
+    wall[0] += 3.0
+    t_silent = b.t
+    assert t_silent > 24.0 + 25.0  # 24.5 s of samples, then 6 s of silence extrapolated at 5x
+    b._link_ok = True
+    wall[0] += 0.1
+    b._on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
+    assert t_silent <= b.t < t_silent + 1.0
+    wall[0] += 0.1
+    b._on_boot_ms(ms + 1000)
+    assert t_silent + 0.3 < b.t < t_silent + 1.5
+    assert "vehicle_clock_resumed" in [e["event"] for e in b.drain_events()]
+
+
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 @pytest.mark.parametrize("firmware", ["unsupported", "no_ack"])
 def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopilot, firmware):
