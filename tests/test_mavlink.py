@@ -287,6 +287,26 @@ def test_link_loss_and_recovery(fly, autopilot):
     assert b.armed
 
 
+def test_px4_home_moves_to_where_it_landed_and_positions_keep_their_origin(fly):
+    """PX4 moves its home to where it landed once disarmed (commander HomePosition::update; seen on SIH: the
+    survey's positions then jumped 9.5 m back to (0, 0) at the end of the recording): the backend reports it
+    (``home_moved``) and keeps the ENU origin of the flight."""
+    emu, b = fly("px4")
+    events: list = []
+    b.arm()
+    b.takeoff(3.0)
+    assert run_until(b, lambda: b.position[2] > 2.8, 15)
+    b.goto((6.0, 0.0, 3.0))
+    assert run_until(b, lambda: dist(b.position[:2], (6, 0)) < 0.3, 25), b.position
+    b.land()
+    assert run_until(b, lambda: not b.armed and not b.in_air, 40)
+    assert run_until(b, lambda: events.extend(b.drain_events()) or "home_moved" in [e["event"] for e in events], 10)
+    moved = next(e for e in events if e["event"] == "home_moved")
+    assert geodetic_to_enu(moved["lat"], moved["lon"], b.home.alt, b.home)[0] > 5.0  # the emulated PX4's new home
+    time.sleep(0.5)
+    assert dist(b.position[:2], (6, 0)) < 0.5, b.position  # still where it landed, in the flight's frame
+
+
 def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(monkeypatch):
     """A firmware process stopped for 6 s (SIGSTOP, as tests/sitl.py does to PX4 SITL at 5x): while silent the
     vehicle clock is extrapolated at its last rate; when time_boot_ms resumes from where it stopped, :attr:`t` goes

@@ -255,6 +255,7 @@ class LinkMixin:
             armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
             if armed != self._armed:
                 self._armed = armed
+                self._was_armed = self._was_armed or armed
                 self._event("armed" if armed else "disarmed")
             mode = mavutil.mode_string_v10(msg)
             if mode != self._mode:

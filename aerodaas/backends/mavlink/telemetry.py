@@ -118,6 +118,9 @@ class TelemetryMixin:
 
     def _on_home_position(self, msg: Any) -> None:
         home = GeoPoint(lat=msg.latitude / 1e7, lon=msg.longitude / 1e7, alt=msg.altitude / 1000.0)
+        if self._home_after is not None and abs(home.lat - self._home_after.lat) <= 1e-7 \
+                and abs(home.lon - self._home_after.lon) <= 1e-7 and abs(home.alt - self._home_after.alt) <= 0.01:
+            return  # the moved home reported again (HOME_POSITION streams at 0.5 Hz)
         old = self.home
         moved = (not self._home_received or abs(home.lat - old.lat) > 1e-7 or abs(home.lon - old.lon) > 1e-7
                  or abs(home.alt - old.alt) > 0.01)
@@ -126,6 +129,13 @@ class TelemetryMixin:
             if abs(home.alt - old.alt) > abs(self._home_moved_alt - old.alt) + 0.5:  # a new largest move only
                 self._home_moved_alt = home.alt
                 self._event("home_moved_in_flight", lat=home.lat, lon=home.lon, alt=home.alt)
+            return
+        if moved and self._home_received and self._was_armed:
+            # after a flight too: PX4 moves home to where it landed once disarmed (commander HomePosition::update,
+            # hasMovedFromCurrentHomeLocation); the run's positions keep their origin, so report only
+            self._event("home_moved", lat=home.lat, lon=home.lon, alt=home.alt, reason="after landing")
+            self._home_moved_alt = home.alt
+            self._home_after = home
             return
         if moved:
             self._home_moved_alt = home.alt
