@@ -90,6 +90,16 @@ class ActionMixin:
         LinkLost / BackendError as :meth:`command_long`; :class:`CommandNotConfirmed` when the vehicle
         acknowledged but never reported itself armed."""
         self._check_link("arm")
+        with self._lock:  # a new flight: its home (where it arms) becomes the ENU origin (telemetry.py)
+            self._arming = True
+            if self._home_after is not None and not self._armed:
+                self._rebase_home(self._home_after)
+        try:
+            self._arm()
+        finally:
+            self._arming = False
+
+    def _arm(self) -> None:
         start, t0 = time.monotonic(), self.t
         end = start + self.cfg.arm_timeout_s
         while self.not_ready_reasons() and time.monotonic() < end:

@@ -90,7 +90,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._gps_fix = -1
         self._sensors: tuple[int, int, int] | None = None
         self._home_received = False
-        self._was_armed = False  # armed once: the ENU origin (home) stays put from then on (telemetry.py)
+        self._was_armed = False  # armed once: the ENU origin (home) stays put until the next arm() (telemetry.py)
+        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
         self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
         self._mission_seq = -1
         self._last_reached: tuple[int, float] = (-1, 0.0)
