@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from aerodaas.backends import BackendError, CommandRefused, LinkLost, make_backend
-from aerodaas.backends.mavlink import CommandNotConfirmed, MavlinkBackend
+from aerodaas.backends.mavlink import CommandNotAcknowledged, CommandNotConfirmed, MavlinkBackend
 from aerodaas.backends.mavlink.params import _PX4_SPEED_MARGIN
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
@@ -264,6 +264,28 @@ def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
     assert b.download_mission().items == sent
     assert emu.dropped == [("out", "COMMAND_ACK"), ("in", "MISSION_COUNT"), ("out", "MISSION_ITEM_INT")]
+
+
+@pytest.mark.parametrize("autopilot", AUTOPILOTS)
+def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
+    """All acknowledgements of a mode change and of the arm command lost (seen with three PX4 SITL instances on a
+    loaded machine: PX4 armed, no ACK arrived, the run died): the HEARTBEAT shows the mode / the armed flag, so
+    the command is done (``command_ack_lost``); a command whose effect never shows still raises."""
+    emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 1})
+    assert run_until(b, lambda: b.home_received, 5)
+    mode = "GUIDED" if autopilot == "ardupilot" else "LOITER"
+    emu.drop_next("COMMAND_ACK", count=2)
+    b.set_mode(mode)
+    assert b.mode == mode
+    emu.drop_next("COMMAND_ACK", count=2)
+    b.arm()
+    assert b.armed and emu.snapshot()["armed"]
+    lost = [e["command"] for e in b.drain_events() if e["event"] == "command_ack_lost"]
+    assert lost == [f"set mode {mode}", "arm"], lost
+    emu.drop_next("COMMAND_LONG", "in", count=2)  # the vehicle never hears it: no answer, no effect
+    with pytest.raises(CommandNotAcknowledged, match="no COMMAND_ACK"):
+        b.set_mode("LAND")
+    assert b.mode == mode
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
