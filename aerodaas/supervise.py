@@ -55,9 +55,13 @@ def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int, n
     from ray import cloudpickle
 
     handles: dict[str, Any] = {}
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
     rec_plan = plan.actors["recorder"]
-    handles["recorder"] = RecorderActor.options(name=rec_plan.name, label_selector=rec_plan.selector(placement)
-                                                ).remote(rec_plan.spec)
+    # the recorder writes the driver's file: it runs on the driver's node, whatever other edge nodes exist (and
+    # lives as long as the driver does, so losing another node never loses the recording)
+    here = NodeAffinitySchedulingStrategy(node_id=ray.get_runtime_context().get_node_id(), soft=False)
+    handles["recorder"] = RecorderActor.options(name=rec_plan.name, scheduling_strategy=here).remote(rec_plan.spec)
     # every other actor reads its spec (analytics, schedulers: possibly large) and the wiring from the recorder
     # actor, which lives as long as the run: a restarted actor reads the same again, and no constructor argument
     # sits in the object store (Ray cannot promise those across restarts, ray-project/ray#53727)
