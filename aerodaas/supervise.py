@@ -44,9 +44,10 @@ def actor_class(role: str):
     raise ValueError(f"no actor class for role {role!r}")
 
 
-def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int, namespace_note: str = "") -> dict:
-    """Create every actor of ``plan`` (named, placed with its ``label_selector``; the recorder first, never
-    restarted; the others with ``max_restarts``). Returns host id -> actor handle. Nothing is set up yet."""
+def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -> dict:
+    """Create every actor of ``plan``: the recorder first, on the driver's node, never restarted; the others named,
+    placed with their ``label_selector`` and restartable ``max_restarts`` times. Returns host id -> actor handle.
+    Nothing is set up yet. Raises what Ray raises for an impossible placement option."""
     from aerodaas.actors.recorder_actor import RecorderActor
 
     wiring = {"routes": plan.routes(), "location": plan.location(),

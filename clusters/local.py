@@ -120,12 +120,7 @@ class LocalCluster:
         machine were lost. Returns its node id. Raises IndexError."""
         if not 1 <= index < len(self.edge_nodes):
             raise IndexError(f"edge node index {index} out of range (1..{len(self.edge_nodes) - 1}; 0 is the head)")
-        node = self.edge_nodes.pop(index)
-        nid = node.node_id
-        self.cluster.remove_node(node, allow_graceful=graceful)
-        self.removed.append({"node_id": nid, "graceful": graceful})
-        log.info("removed edge node %s", nid)
-        return nid
+        return self._remove(self.edge_nodes.pop(index), graceful, "edge")
 
     def node_id(self, node) -> str:
         """The Ray node id (hex) of a node handle."""
@@ -136,11 +131,14 @@ class LocalCluster:
         SIGKILL). Returns its node id. Raises IndexError naming the nodes left."""
         if not 0 <= index < len(self.cloud_nodes):
             raise IndexError(f"cloud node index {index} out of range; {len(self.cloud_nodes)} cloud node(s) left")
-        node = self.cloud_nodes.pop(index)
+        return self._remove(self.cloud_nodes.pop(index), graceful, "cloud")
+
+    def _remove(self, node, graceful: bool, kind: str) -> str:
+        """Stop ``node`` (SIGKILL unless ``graceful``), remember it in :attr:`removed`; returns its node id."""
         nid = node.node_id
         self.cluster.remove_node(node, allow_graceful=graceful)
         self.removed.append({"node_id": nid, "graceful": graceful})
-        log.info("removed cloud node %s", nid)
+        log.info("removed %s node %s", kind, nid)
         return nid
 
     def shutdown(self) -> None:
