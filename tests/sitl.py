@@ -45,11 +45,12 @@ def namespace_skip_reason() -> str | None:
     if shutil.which("unshare") is None or shutil.which("ip") is None:
         return "unshare/ip not installed: cannot create a private network namespace"
     try:
-        r = subprocess.run(["unshare", "-n", "bash", "-c", "ip link set lo up"], capture_output=True, timeout=20)
+        r = subprocess.run(["unshare", "-n", "bash", "-c", "ip link set lo up && unshare -m --propagation private true"],
+                           capture_output=True, timeout=20)
     except (OSError, subprocess.TimeoutExpired) as e:
         return f"cannot create a private network namespace: {e}"
     if r.returncode != 0:
-        return f"cannot create a private network namespace (unshare -n): {r.stderr.decode(errors='replace').strip()}"
+        return f"cannot create a private network and mount namespace (unshare -n, -m): {r.stderr.decode(errors='replace').strip()}"
     return None
 
 
@@ -85,11 +86,19 @@ def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, s
             link = farm / f.name
             if not link.exists():
                 link.symlink_to(f if f.name in ("px4", "px4-alias.sh") else PX4)
-        env = (f"PATH={shlex.quote(str(farm))}:$PATH PX4_SIM_MODEL=sihsim_quadx PX4_SIMULATOR=sihsim HEADLESS=1 "
+        env = (f"PATH={shlex.quote(str(farm))}:\"$PATH\" PX4_SIM_MODEL=sihsim_quadx PX4_SIMULATOR=sihsim HEADLESS=1 "
                f"PX4_SIM_SPEED_FACTOR={speedup:g} PX4_HOME_LAT={home['lat']} PX4_HOME_LON={home['lon']} "
                f"PX4_HOME_ALT={home['alt']}")
-        cmd = (f"cd {shlex.quote(str(w))} && {env} {shlex.quote(str(farm / 'px4'))} -i {instance} "
+        px4 = (f"exec env {env} {shlex.quote(str(farm / 'px4'))} -i {instance} "
                f"-d {shlex.quote(str(PX4.parents[1] / 'etc'))} -w {shlex.quote(str(w))}")
+        # PX4's server socket and lock are fixed paths (/tmp/px4-sock-N, /tmp/px4_lock-N: px4_daemon
+        # get_socket_path): in a private mount namespace with its own /tmp, so runs beside each other never meet;
+        # the working directory is bound back in from the descriptor held open across the tmpfs mount (-c: mount
+        # must not resolve /proc/self/fd/3 to a path the tmpfs now hides). The pid stays px4's (exec all along).
+        inner = (f"exec 3<{shlex.quote(str(w))}; mount -t tmpfs tmpfs /tmp && mkdir -p {shlex.quote(str(w))} && "
+                 f"mount -c --bind /proc/self/fd/3 {shlex.quote(str(w))} && exec 3<&- && cd {shlex.quote(str(w))} "
+                 f"&& {px4}")
+        cmd = f"cd {shlex.quote(str(w))} && exec unshare -m --propagation private bash -c {shlex.quote(inner)}"
     return f"( {cmd} ) > {shlex.quote(str(log))} 2>&1 &\nFW{instance}=$!"
 
 
@@ -300,12 +309,13 @@ def _mission_file(path: Path, home: dict) -> Path:
     return path
 
 
-def single_vehicle_session(autopilot: str, workdir: Path) -> dict[str, Any]:
+def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] | None = None) -> dict[str, Any]:
     """The single-vehicle scenarios, each in its own namespace with a freshly booted firmware instance (cold,
     fresh parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas
     mission upload --start`` (then observed until it lands), the farm survey with a geofence exclusion around one
     corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
-    (SIGSTOP/SIGCONT) in flight. Returns ``{name: {"rc", "out", "rec" or "observed"}}``."""
+    (SIGSTOP/SIGCONT) in flight; ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
+    "observed"}}``."""
     from aerodaas.geo import enu_to_geodetic
     from aerodaas.models import GeoPoint
 
@@ -335,16 +345,19 @@ def single_vehicle_session(autopilot: str, workdir: Path) -> dict[str, Any]:
     }
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
+        if only is not None and name not in only:
+            continue
         d = workdir / name
         run_in_namespace(autopilot, d, steps, with_firmware=name != "fence")
         for k, step in enumerate(steps):
             rc, text = step_result(d, k)
             out[name if k == 0 else "observe"] = {"rc": rc, "out": text}
     for name in ("guided", "auto", "linkloss"):
-        rec = workdir / f"{name}.mcap"
-        out[name]["rec"] = _read_or_note(rec)
+        if name in out:
+            out[name]["rec"] = _read_or_note(workdir / f"{name}.mcap")
     obs = workdir / "observed.json"
-    out["observe"]["observed"] = json.loads(obs.read_text()) if obs.exists() else {}
+    if "observe" in out:
+        out["observe"]["observed"] = json.loads(obs.read_text()) if obs.exists() else {}
     return out
 
 

@@ -25,6 +25,6 @@ arming, take-off), :mod:`.offboard` (GUIDED/OFFBOARD targets, hold/land/RTL, saf
 mission protocol). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from .backend import MavlinkBackend
-from ._common import CommandNotConfirmed
+from ._common import CommandNotAcknowledged, CommandNotConfirmed
 
-__all__ = ["MavlinkBackend", "CommandNotConfirmed"]
+__all__ = ["MavlinkBackend", "CommandNotAcknowledged", "CommandNotConfirmed"]

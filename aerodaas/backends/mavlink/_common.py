@@ -71,6 +71,11 @@ class CommandNotConfirmed(BackendError):
                                       self.status_text))
 
 
+class CommandNotAcknowledged(BackendError):
+    """No COMMAND_ACK came for a command within its tries (MAVLink command protocol), e.g. every answer lost on
+    a loaded link. A mode change or an arm whose effect the HEARTBEAT shows anyway is taken as done."""
+
+
 def _log_level(severity: int) -> int:
     """The :mod:`logging` level of a MAV_SEVERITY (0 EMERGENCY .. 7 DEBUG)."""
     if severity <= M.MAV_SEVERITY_CRITICAL:

@@ -90,6 +90,16 @@ class ActionMixin:
         LinkLost / BackendError as :meth:`command_long`; :class:`CommandNotConfirmed` when the vehicle
         acknowledged but never reported itself armed."""
         self._check_link("arm")
+        with self._lock:  # a new flight: its home (where it arms) becomes the ENU origin (telemetry.py)
+            self._arming = True
+            if self._home_after is not None and not self._armed:
+                self._rebase_home(self._home_after)
+        try:
+            self._arm()
+        finally:
+            self._arming = False
+
+    def _arm(self) -> None:
         start, t0 = time.monotonic(), self.t
         end = start + self.cfg.arm_timeout_s
         while self.not_ready_reasons() and time.monotonic() < end:
@@ -106,7 +116,7 @@ class ActionMixin:
                 elif self.autopilot == "px4" and self._mode in _PX4_NO_ARM_MODES and self._armable():
                     self.set_mode("LOITER")
                 sent = time.monotonic()
-                self.command_long("arm", M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+                self._command_with_effect("arm", lambda: self._armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
                 self._await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
                 break
             except CommandRefused as e:
@@ -119,7 +129,9 @@ class ActionMixin:
                     self._check_link("arm")
                     time.sleep(0.02)
                 backoff = min(backoff * 2.0, _ARM_BACKOFF_S[1])
-        self._fix_altitude_reference()
+        if not self._alt_ref_pinned:  # an uploaded mission's altitudes refer to the one fixed at upload
+            self._fix_altitude_reference()
+        self._alt_ref_pinned = False
         self._in_control = True
         self._event("armed_after", wall_s=round(time.monotonic() - start, 3), vehicle_s=round(self.t - t0, 3),
                     tries=tries)

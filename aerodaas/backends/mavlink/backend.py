@@ -90,6 +90,9 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._gps_fix = -1
         self._sensors: tuple[int, int, int] | None = None
         self._home_received = False
+        self._was_armed = False  # armed once: the ENU origin (home) stays put until the next arm() (telemetry.py)
+        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
+        self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
         self._mission_seq = -1
         self._last_reached: tuple[int, float] = (-1, 0.0)
         self._link_ok = False
@@ -105,6 +108,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._reanchor = False  # the link was lost: the next time_boot_ms may re-anchor the clock (link.py)
         # outgoing
         self._setpoint: tuple | None = None
+        self._carrot_sp: tuple | None = None  # the speed-capped goto being flown, its progress (m) and time (s)
+        self._carrot_s = self._carrot_t = 0.0
         self._sp_sent = 0
         self._sp_next = 0.0
         self._hb_next = 0.0
@@ -122,6 +127,7 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._health_seen = 0  # every SYS_STATUS health bit ever reported
         self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
         self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
+        self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it
         self._home_moved_alt = 0.0
         self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
         self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported

@@ -9,7 +9,8 @@ from typing import Any, Callable
 from pymavlink import mavutil
 
 from ..base import BackendError, CommandRefused, LinkLost
-from ._common import M, _enum_name, CommandNotConfirmed, _REJECTED_BACKOFF_S, _STATUSTEXT_FLUSH_S
+from ._common import M, _enum_name, CommandNotAcknowledged, CommandNotConfirmed, _REJECTED_BACKOFF_S, \
+    _STATUSTEXT_FLUSH_S
 
 
 class CommandMixin:
@@ -103,8 +104,24 @@ class CommandMixin:
             raise BackendError(f"robot {self.robot_id!r}: {name}: {_enum_name('MAV_CMD', command)} still "
                                f"MAV_RESULT_IN_PROGRESS{progress} after {time.monotonic() - started:.1f} s (limit "
                                f"{retries + 1} x {timeout:g} s)")
-        raise BackendError(f"robot {self.robot_id!r}: {name}: no COMMAND_ACK for {_enum_name('MAV_CMD', command)} "
-                           f"after {retries + 1} tries of {timeout:g} s")
+        raise CommandNotAcknowledged(f"robot {self.robot_id!r}: {name}: no COMMAND_ACK for "
+                                     f"{_enum_name('MAV_CMD', command)} after {retries + 1} tries of {timeout:g} s")
+
+    def _command_with_effect(self, name: str, effect, *args, **kw) -> None:
+        """:meth:`command_long` whose effect the HEARTBEAT shows (``effect()``, e.g. the mode or the armed flag):
+        when no COMMAND_ACK came at all (:class:`CommandNotAcknowledged`: answers lost, as seen on a loaded
+        machine with three PX4 SITL instances, where PX4 armed but none of its acknowledgements arrived) but the
+        HEARTBEAT shows the effect within ``heartbeat_timeout_s``, the command is done (``command_ack_lost``
+        event); otherwise the error stands."""
+        try:
+            self.command_long(name, *args, **kw)
+        except CommandNotAcknowledged:
+            end = time.monotonic() + self.cfg.heartbeat_timeout_s
+            while not effect() and time.monotonic() < end and self._link_ok:
+                time.sleep(0.01)
+            if not effect():
+                raise
+            self._event("command_ack_lost", command=name)
 
     # ------------------------------------------------------------------ modes
     def set_mode(self, name: str, confirm_s: float | None = None) -> None:
@@ -121,13 +138,14 @@ class CommandMixin:
             if name not in mavutil.px4_map:
                 raise ValueError(f"mode {name!r} is not a PX4 mode; choose from {sorted(mavutil.px4_map)}")
             _, main, sub = mavutil.px4_map[name]
-            self.command_long(f"set mode {name}", M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
+            self._command_with_effect(f"set mode {name}", lambda: self._mode == name, M.MAV_CMD_DO_SET_MODE,
+                                      M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
         else:
             if name not in self._ap_modes:
                 raise ValueError(f"mode {name!r} is not an ArduPilot {self.vehicle_type} mode; choose from "
                                  f"{sorted(self._ap_modes)}")
-            self.command_long(f"set mode {name}", M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                              self._ap_modes[name])
+            self._command_with_effect(f"set mode {name}", lambda: self._mode == name, M.MAV_CMD_DO_SET_MODE,
+                                      M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, self._ap_modes[name])
         self._await_heartbeat(f"set mode {name}", lambda: self._mode == name, f"mode {name}", confirm_s, sent)
 
     def _await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,

@@ -255,6 +255,7 @@ class LinkMixin:
             armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
             if armed != self._armed:
                 self._armed = armed
+                self._was_armed = self._was_armed or armed
                 self._event("armed" if armed else "disarmed")
             mode = mavutil.mode_string_v10(msg)
             if mode != self._mode:
@@ -271,6 +272,7 @@ class LinkMixin:
             self._boot_ref = (ms, self._raw_t())
             self._clock_samples.clear()
         self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
+        resumed = False
         if self._reanchor and self._raw_t() - self._t_connect < self._t_max - 1.0:
             # after a link loss, the vehicle's clock stood still while ours ran on (the autopilot was stopped):
             # go on from where :attr:`t` got to, so the recording has no step back (a short stall of our own
@@ -278,9 +280,12 @@ class LinkMixin:
             self._boot_ref = (ms, self._t_max + self._t_connect)
             self._boot_last = ms
             self._clock_samples.clear()
-            self._event("vehicle_clock_resumed")
+            resumed = True
         self._reanchor = False
         self._boot_wall = now
+        if resumed:  # only now: the event reads :attr:`t`, which before this sample still counted the silence
+            # on top of the re-anchored clock (t jumped by the whole stop x the clock ratio: 28 s at 5x for 6 s)
+            self._event("vehicle_clock_resumed")
         # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
         samples = self._clock_samples
         samples.append((now, ms))

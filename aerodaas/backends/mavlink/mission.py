@@ -13,6 +13,8 @@ from ..base import BackendError, CommandRefused
 from ._common import M, _enum_name, _f32, _GLOBAL_FRAMES
 
 
+#: MAV_FRAME_GLOBAL_RELATIVE_ALT and its _INT twin: altitudes above home
+_RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 #: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins), at most
 _ARRIVAL_RADIUS_M = 0.5
 
@@ -21,7 +23,10 @@ class MissionMixin:
     """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
 
     # ------------------------------------------------------------------ missions
-    def _mission_items(self, mission: Any, takeoff_altitude: float | None, final_action: str) -> list[MissionItem]:
+    def _mission_items(self, mission: Any, takeoff_altitude: float | None,
+                       final_action: str) -> tuple[list[MissionItem], bool]:
+        """The items to upload, and whether we built them from waypoints (True) rather than being given items."""
+        nav = None
         if isinstance(mission, MissionPlan):
             items = expand_items(mission)
         else:
@@ -43,7 +48,7 @@ class MissionMixin:
         for it in items:
             if it.is_complex:
                 raise ValueError(f"upload_mission: {it.describe()} must be expanded first (pass the MissionPlan)")
-        return items
+        return items, nav is not None
 
     def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
                        final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
@@ -55,13 +60,21 @@ class MissionMixin:
         :class:`~aerodaas.missionfile.MissionPlan` (e.g. an imported ``.plan``; ComplexItems expanded) or a list
         of :class:`~aerodaas.missionfile.MissionItem`. Waypoints become MAV_CMD_NAV_WAYPOINT items
         (``navigation_to_plan``: ``takeoff_altitude`` m prepends a NAV_TAKEOFF, ``final_action`` appends
-        NAV_LAND / NAV_RETURN_TO_LAUNCH). ArduPilot gets its home placeholder at sequence 0.
+        NAV_LAND / NAV_RETURN_TO_LAUNCH). ArduPilot gets its home placeholder at sequence 0. On PX4 the items built
+        from waypoints carry absolute altitudes (MAV_FRAME_GLOBAL: the take-off point's AMSL altitude, fixed here
+        while the vehicle stands on it, + the height), since PX4 keeps re-estimating the home altitude that
+        MAV_FRAME_GLOBAL_RELATIVE_ALT refers to for minutes after take-off (``COM_HOME_EN``; commander
+        ``HomePosition``); given mission items (a file) keep their frames.
 
         Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
         which :meth:`download_mission` returns unchanged. Raises CommandRefused (MAV_MISSION_RESULT name) when the
         autopilot rejects an item, BackendError after ``command_retries`` timeouts, LinkLost, TypeError/ValueError
         for bad input (nothing is sent then)."""
-        items = self._mission_items(mission, takeoff_altitude, final_action)
+        items, built = self._mission_items(mission, takeoff_altitude, final_action)
+        absolute = built and self.autopilot == "px4"
+        if absolute and (self._alt_ref is None or not self._armed):
+            self._fix_altitude_reference()  # the take-off point, where the vehicle stands now
+            self._alt_ref_pinned = True  # arm() keeps it: the mission's altitudes are relative to it
         wire: list[tuple] = []
         sent_items: list[MissionItem] = []
         for k, it in enumerate(items):
@@ -74,13 +87,18 @@ class MissionMixin:
                 xi, yi = int(round(x or 0.0)), int(round(y or 0.0))
                 xs, ys = float(xi), float(yi)
             z = _f32(it.params[6] if it.params[6] is not None else 0.0)
+            frame = it.frame
+            if absolute and frame in _RELATIVE_FRAMES:
+                # PX4 resolves home-relative altitudes with a home it keeps re-estimating for minutes after
+                # take-off (COM_HOME_EN): our own waypoints go up as AMSL altitudes above the take-off point
+                frame, z = M.MAV_FRAME_GLOBAL, _f32(self._alt_ref + z)
             if it.command == M.MAV_CMD_DO_CHANGE_SPEED:
                 # never above the robot's limit, never -2 ("default": DENIED by ArduCopter): the limit instead
                 limit = float(self.limits.max_speed)
                 p[1] = _f32(limit if p[1] is None or (p[1] <= 0 and p[1] != -1) else min(p[1], limit))
-            wire.append((it.frame, it.command, 1 if it.autocontinue else 0,
+            wire.append((frame, it.command, 1 if it.autocontinue else 0,
                          *[float("nan") if v is None else v for v in p], xi, yi, z))
-            sent_items.append(MissionItem(seq=k + 1, command=it.command, frame=it.frame, params=[*p, xs, ys, z],
+            sent_items.append(MissionItem(seq=k + 1, command=it.command, frame=frame, params=[*p, xs, ys, z],
                                           autocontinue=it.autocontinue))
         if self.autopilot == "ardupilot":
             h = self.home

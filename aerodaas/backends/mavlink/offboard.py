@@ -16,6 +16,8 @@ from ._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCI
 
 #: lowest target height (metres above the take-off point) goto sends to an armed vehicle
 _MIN_TARGET_HEIGHT_M = 0.5
+#: how far (metres along the leg) a speed-capped PX4 setpoint may run ahead of the vehicle (see _carrot)
+_CARROT_LEAD_M = 0.5
 
 
 class OffboardMixin:
@@ -23,11 +25,26 @@ class OffboardMixin:
 
     def _carrot(self, sp: tuple) -> tuple:
         """A speed-capped goto as the position setpoint to send now: ``("carrot", start_enu, target_enu, speed m/s,
-        vehicle t0)`` moves from start towards target at ``speed`` metres per vehicle second."""
+        vehicle t0)`` moves from start towards target at ``speed`` metres per vehicle second, with that velocity as
+        feed-forward, but never more than :data:`_CARROT_LEAD_M` ahead of the vehicle's own progress along the
+        leg: a vehicle that fell behind (PX4 SIH's velocity estimate lags its true speed by up to 0.6 m/s) is not
+        pulled into a sprint to catch up, and one that ran ahead is pulled back by PX4's position loop."""
         _, start, target, speed, t0 = sp
         delta = target - start
         length = float(np.linalg.norm(delta))
-        frac = 1.0 if length < 1e-6 else min(1.0, speed * max(0.0, self.t - t0) / length)
+        with self._lock:
+            now = self.t
+            if self._carrot_sp is not sp:  # a new leg
+                self._carrot_sp, self._carrot_s, self._carrot_t = sp, 0.0, max(now, t0)
+            if length < 1e-6:
+                s_now = length
+            else:
+                unit = delta / length
+                along = float(np.dot(self._pos - start, unit))  # the vehicle's progress, metres
+                step = speed * max(0.0, now - self._carrot_t)
+                s_now = min(length, max(self._carrot_s, min(self._carrot_s + step, along + _CARROT_LEAD_M)))
+            self._carrot_s, self._carrot_t = s_now, now
+        frac = 1.0 if length < 1e-6 else s_now / length
         p = start + delta * frac
         v = delta / length * speed if frac < 1.0 else np.zeros(3)  # velocity feed-forward, ENU
         lat_i, lon_i, alt, frame = self._global_target(float(p[0]), float(p[1]), float(p[2]))

@@ -117,24 +117,40 @@ class TelemetryMixin:
         self._landed_wall = time.monotonic()
 
     def _on_home_position(self, msg: Any) -> None:
+        """HOME_POSITION: the ENU origin until the first arming, and again while :meth:`arm` runs (the autopilot
+        sets home where it arms). In flight a moved home (PX4 re-estimates it for minutes after take-off) and,
+        after a flight, PX4's home moved to where it landed once disarmed (commander ``HomePosition::update``,
+        ``hasMovedFromCurrentHomeLocation``) are only reported (``home_moved_in_flight``, ``home_moved``): the
+        flight's positions keep their origin until the next arming. Caller holds ``_lock``."""
         home = GeoPoint(lat=msg.latitude / 1e7, lon=msg.longitude / 1e7, alt=msg.altitude / 1000.0)
+        if self._home_after is not None and abs(home.lat - self._home_after.lat) <= 1e-7 \
+                and abs(home.lon - self._home_after.lon) <= 1e-7 and abs(home.alt - self._home_after.alt) <= 0.01:
+            return  # the moved home reported again (HOME_POSITION streams at 0.5 Hz)
         old = self.home
         moved = (not self._home_received or abs(home.lat - old.lat) > 1e-7 or abs(home.lon - old.lon) > 1e-7
                  or abs(home.alt - old.alt) > 0.01)
         if moved and self._home_received and self._armed:
-            # in flight the ENU origin stays put (PX4 re-estimates home for minutes after take-off): report only
             if abs(home.alt - old.alt) > abs(self._home_moved_alt - old.alt) + 0.5:  # a new largest move only
                 self._home_moved_alt = home.alt
                 self._event("home_moved_in_flight", lat=home.lat, lon=home.lon, alt=home.alt)
             return
+        if moved and self._home_received and self._was_armed and not self._arming:
+            self._event("home_moved", lat=home.lat, lon=home.lon, alt=home.alt, reason="after landing")
+            self._home_after = home
+            return
         if moved:
-            self._home_moved_alt = home.alt
-            self.home = home
-            self._home_received = True
-            if self._geo is not None:  # re-express the last fix in the new frame
-                e, n, _ = geodetic_to_enu(self._geo.lat, self._geo.lon, home.alt, home)
-                self._pos = np.array([e, n, self._height()])
-            self._event("home", lat=home.lat, lon=home.lon, alt=home.alt)
+            self._rebase_home(home)
+
+    def _rebase_home(self, home: GeoPoint) -> None:
+        """Make ``home`` the ENU origin (re-expressing the last fix in it). Caller holds ``_lock``."""
+        self._home_moved_alt = home.alt
+        self._home_after = None
+        self.home = home
+        self._home_received = True
+        if self._geo is not None:
+            e, n, _ = geodetic_to_enu(self._geo.lat, self._geo.lon, home.alt, home)
+            self._pos = np.array([e, n, self._height()])
+        self._event("home", lat=home.lat, lon=home.lon, alt=home.alt)
 
     def _on_mission_current(self, msg: Any) -> None:
         if msg.seq != self._mission_seq:

@@ -63,3 +63,6 @@ PX4_REACHED_REPEATS = 10
 #: HomePosition.hpp kHomePositionCorrectionTimeWindow, kAltitudeDifferenceThreshold)
 PX4_HOME_CORRECTION_WINDOW_S = 120.0
 PX4_HOME_CORRECTION_STEP_M = 1.0
+#: PX4 commander: disarmed and landed, home follows the vehicle once it is farther from it than twice the GPS eph
+#: (HomePosition::hasMovedFromCurrentHomeLocation; SIH's simulated GPS reports eph 0.9 m)
+PX4_HOME_MOVED_M = 1.8

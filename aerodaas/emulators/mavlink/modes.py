@@ -6,7 +6,7 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .flavour import AIRFRAME_MAX_SPEED
+from .flavour import AIRFRAME_MAX_SPEED, PX4_HOME_MOVED_M
 from .constants import ARDUCOPTER_MODES, PX4_MODES, _AP_NEEDS_POSITION, _PX4_MANUAL, _PX4_NEEDS_POSITION
 
 
@@ -194,6 +194,11 @@ class ModeMixin:
         self.phase = ""
         self.landed_at = None
         self._text(M.MAV_SEVERITY_INFO, f"Disarming motors ({why})" if not self.px4 else f"Disarmed by {why}")
+        if self.px4 and self.home_enu is not None and self.params.get("COM_HOME_EN", 1.0) >= 0.5 \
+                and math.hypot(*(s.position[:2] - self.home_enu[:2])) > PX4_HOME_MOVED_M:
+            # PX4 commander, disarmed and landed: home follows the vehicle once it moved from it by more than
+            # twice the GPS eph (HomePosition::update, hasMovedFromCurrentHomeLocation; SIH GPS eph 0.9 m)
+            self._set_home_here()
 
     def _land_speed(self) -> float:
         return self.params["MPC_LAND_SPEED"] if self.px4 else self.params["LAND_SPEED"] / 100.0
