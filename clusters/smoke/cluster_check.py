@@ -2,7 +2,7 @@
 labels and IPs, and where actors ran, from Ray's state API (``ray.util.state``, served by the head's dashboard).
 
     python cluster_check.py wait-nodes --count 2 [--timeout S]      # JSON list of alive nodes (node_id, ip, labels)
-    python cluster_check.py placement --class HostActor --tier cloud [--alive] [--timeout S]
+    python cluster_check.py placement --class AnalyticsActor --tier cloud [--alive] [--timeout S]
 
 ``placement`` exits 0 when some actor of that class ran (or, with ``--alive``, is running) on a node labelled
 ``tier=<tier>`` and prints those actors; exit 1 otherwise, after ``--timeout`` seconds (default 0: one look).

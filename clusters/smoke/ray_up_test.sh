@@ -279,8 +279,8 @@ T[run]=$(elapsed "$t0")
 grep -q "mission outcome: success" "$WORK/cloud_run.log" || { cat "$WORK/cloud_run.log" >&2; fail "cloud run: no success"; }
 grep -Eq "analytics detector: [1-9][0-9]* items" "$WORK/cloud_run.log" ||
     { cat "$WORK/cloud_run.log" >&2; fail "the cloud detector processed no frame"; }
-head_sh "$CHECK placement --class HostActor --tier cloud" > "$WORK/placement.json" ||
-    fail "no HostActor ran on the tier=cloud node (state API)"
+head_sh "$CHECK placement --class AnalyticsActor --tier cloud --timeout 60" > "$WORK/placement.json" ||
+    fail "no AnalyticsActor (the cloud-deployed detector) ran on the tier=cloud node (state API)"
 check "cloud-compute run: success, detector frames processed on the tier=cloud node (state API) (${T[run]} s)"
 
 log "aerodaas run $APP with analytics_scheduler DEMS; the cloud machine is lost mid-run"
