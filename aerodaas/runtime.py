@@ -15,7 +15,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 
 from .config import SimulationConfig
@@ -109,14 +109,17 @@ def _init_ray(address: str | None) -> None:
         dashboard = OPTIONS.dashboard
         for attempt in range(3):
             try:
+                restore = _loopback_only()
                 # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
                 # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
                 # process on the machine (a SITL autopilot, a compiler) starve their control loops
                 ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
                          dashboard_host="127.0.0.1", log_to_driver=True, _system_config={"worker_niceness": 0},
                          num_cpus=3, configure_logging=True, logging_level="warning")
+                restore()
                 break
             except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
+                restore()
                 # Ray gives its raylet a fixed 30 s to register with the GCS (ray/_private/node.py); a heavily
                 # loaded machine can miss that: start again (at most 3 times) rather than fail the run. A dashboard
                 # that fails to start is not worth failing the run for: start again without it
@@ -129,6 +132,36 @@ def _init_ray(address: str | None) -> None:
                 if "timed out during startup" not in str(e) or attempt == 2:
                     raise
         _STARTED_RAY = True
+
+
+#: the environment variable with which Ray takes loopback as the node's address (ray/_private/ray_constants.py
+#: ``ENABLE_RAY_CLUSTER``, read by ``services.get_node_ip_address``; Ray's own default on macOS and Windows)
+_RAY_LOCAL_ONLY_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+def _loopback_only() -> Callable[[], None]:
+    """Make the local Ray about to start a loopback-only one: node address 127.0.0.1, so the GCS, raylet, object
+    manager and every worker's gRPC server listen on 127.0.0.1 only (since Ray binds its servers to the node IP,
+    ray-project/ray#55484, #59852), not on the machine's network address. ``ray.init(_node_ip_address=
+    "127.0.0.1")`` does not do it (``resolve_ip_for_localhost`` turns loopback back into the network address).
+    The variable reaches Ray's processes through their environment; the driver's copy of the constant is set too
+    (Ray may already be imported). Returns the function that undoes both once Ray has started (its processes keep
+    the variable; a later ``ray.init(address=...)`` of this process must see the machine's address again). A
+    cluster joined with ``--address`` is never touched."""
+    from ray._private import ray_constants
+
+    before_env, before_const = os.environ.get(_RAY_LOCAL_ONLY_ENV), ray_constants.ENABLE_RAY_CLUSTER
+    os.environ[_RAY_LOCAL_ONLY_ENV] = "0"
+    ray_constants.ENABLE_RAY_CLUSTER = False
+
+    def restore() -> None:
+        ray_constants.ENABLE_RAY_CLUSTER = before_const
+        if before_env is None:
+            os.environ.pop(_RAY_LOCAL_ONLY_ENV, None)
+        else:
+            os.environ[_RAY_LOCAL_ONLY_ENV] = before_env
+
+    return restore
 
 
 def start_ray_early(address: str | None = None) -> None:
