@@ -15,6 +15,8 @@ from typing import Any
 
 import ray
 
+from aerodaas.messages import Delivery
+
 from .host import Host
 
 
@@ -58,11 +60,28 @@ class ActorBase:
         self.host = Host(host_id, tier, int(spec.get("epoch_ns", 0)), lockstep, workers)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
+        self.channel = None
+        key = wiring.get("channel_key")
+        if key and not lockstep:  # same-node channels (aerodaas.actors.channel): serve ours, use the peers'
+            self.host.channel_key = key
+            self.channel = self._serve_channel(host_id, key)
         self.runtime: Any = None
         self.restarts = 0
         if restarted_actor():
             self.restarts = 1
             self.on_restart()
+
+    def _serve_channel(self, host_id: str, key: bytes) -> Any:
+        """This actor's :class:`~.channel.ChannelServer`, or None when its address cannot be served (peers then
+        reach this actor through Ray calls)."""
+        from .channel import ChannelServer, channel_address
+
+        try:
+            return ChannelServer(channel_address(key, host_id), key, self.host.deliver,
+                                 on_error=self.host.report_error)
+        except OSError as e:
+            print(f"aerodaas: actor {host_id!r}: no same-node channel ({e}); peers use Ray calls", file=sys.stderr)
+            return None
 
     def on_restart(self) -> None:
         """Called in the constructor of a restarted actor: set up again from the stored spec."""
@@ -88,8 +107,9 @@ class ActorBase:
 
     pid = ping
 
-    def deliver(self, cid: str, port: str, wire: dict) -> list:
-        return self.host.deliver(cid, port, wire)
+    def deliver(self, d: Delivery) -> list:
+        """A message from another actor for one of this actor's components (see :meth:`.host.Host.deliver`)."""
+        return self.host.deliver(d)
 
     def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:
         """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
@@ -108,6 +128,8 @@ class ActorBase:
         return self.runtime.stats() if self.runtime else {}
 
     def close(self) -> dict:
+        if self.channel is not None:
+            self.channel.close()
         return self.runtime.close() if self.runtime else {}
 
     def recording_report(self) -> dict:

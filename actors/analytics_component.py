@@ -8,17 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.models import AeroNavigation, Detection
+from aerodaas.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
 
 from .host import Component, Host
-
-
-def _kind_of(out: Any) -> str:
-    if isinstance(out, AeroNavigation):
-        return "nav"
-    if isinstance(out, list) and (not out or isinstance(out[0], Detection)):
-        return "detections"
-    return "value"
 
 
 class AnalyticsComponent(Component):
@@ -48,10 +40,10 @@ class AnalyticsComponent(Component):
         self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
         self.aborted = False
 
-    def handle(self, port: str, env: dict) -> list[dict] | None:
-        if self._stale(env):
+    def handle(self, port: Port, msg: Message) -> list[Message] | None:
+        if self._stale(msg):
             return None
-        return self._process_one(env)
+        return self._process_one(msg)
 
     def batch_limit(self) -> int:
         """The analytics' ``max_batch`` (> 1 only for a model that takes several frames per inference call)."""
@@ -60,17 +52,17 @@ class AnalyticsComponent(Component):
         except (TypeError, ValueError):
             return 1
 
-    def handle_batch(self, items: list[tuple[str, dict]]) -> list[list[dict] | None]:
+    def handle_batch(self, items: list[tuple[Port, Message]]) -> list[list[Message] | None]:
         """Several waiting items (e.g. frames of several drones for one detector) in one ``process_batch`` call;
         stale items are skipped as in :meth:`handle`. If the batch raises, each item is processed alone, so the
         failing one is found and counted like any other failure."""
-        fresh = [(p, e) for p, e in items if not self._stale(e)]
+        fresh = [(p, m) for p, m in items if not self._stale(m)]
         out: list = [None] * len(items)
         if not fresh:
             return out
         t0 = time.perf_counter()
         try:
-            res = self.obj.process_batch([(e["data"], e.get("meta")) for _, e in fresh])
+            res = self.obj.process_batch([(m.data, m.meta) for _, m in fresh])
         except Exception:  # noqa: BLE001 - find the culprit item by item
             res = None
         dt_ms = (time.perf_counter() - t0) * 1e3 / len(fresh)
@@ -83,8 +75,8 @@ class AnalyticsComponent(Component):
                 out[index[id(e)]] = self._emit(res[j], e, dt_ms, getattr(self.obj, "last_timing", None))
         return out
 
-    def _stale(self, env: dict) -> bool:
-        meta = env.get("meta")
+    def _stale(self, msg: Message) -> bool:
+        meta = msg.meta
         if meta is not None:
             key = (meta.robot_id, meta.sensor_id)
             if meta.capture_time < self._newest.get(key, -1.0):
@@ -93,17 +85,17 @@ class AnalyticsComponent(Component):
             self._newest[key] = meta.capture_time
         return False
 
-    def _process_one(self, env: dict) -> list[dict] | None:
+    def _process_one(self, msg: Message) -> list[Message] | None:
         t0 = time.perf_counter()
         try:
-            out = self.obj.process(env["data"], env.get("meta"))
+            out = self.obj.process(msg.data, msg.meta)
         except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
-            self._failed(e, env)
+            self._failed(e, msg)
             return None
         dt_ms = (time.perf_counter() - t0) * 1e3
-        return self._emit(out, env, dt_ms, getattr(self.obj, "last_timing", None))
+        return self._emit(out, msg, dt_ms, getattr(self.obj, "last_timing", None))
 
-    def _failed(self, e: Exception, env: dict) -> None:
+    def _failed(self, e: Exception, msg: Message) -> None:
         """An exception in ``process``: logged with its traceback (the first 5, then every 100th), recorded as an
         ``analytics_error`` event of the robot, counted in the run's summary; ``on_error == "abort"`` ends every
         mission of the run as failed (once)."""
@@ -116,11 +108,10 @@ class AnalyticsComponent(Component):
         if self.failures <= 5 or self.failures % 100 == 0:
             logging.getLogger("aerodaas.analytics").error("analytics %r failed on item %d (%d failures so far):\n%s",
                                                           self.name, self.processed + self.failures, self.failures, tb)
-        meta = env.get("meta")
-        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        robot = msg.robot
         if self.recorder is not None:
-            self.recorder.json(f"/{robot}/events", self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9),
-                               {"robot": robot, "t": env.get("sim_t", 0.0), "event": "analytics_error",
+            self.recorder.json(f"/{robot}/events", self.epoch_ns + int(msg.sim_t * 1e9),
+                               {"robot": robot, "t": msg.sim_t, "event": "analytics_error",
                                 "analytics": self.name, "error": self.last_failure, "traceback": tb,
                                 "count": self.failures, "on_error": self.on_error}, "aerodaas.MissionEvent")
         if self.on_error == "abort" and not self.aborted:
@@ -129,11 +120,11 @@ class AnalyticsComponent(Component):
             if callable(abort):
                 abort(f"analytics {self.name!r} raised {self.last_failure} (on_error=abort)")
 
-    def _emit(self, out: Any, env: dict, dt_ms: float, timing: dict | None) -> list[dict] | None:
+    def _emit(self, out: Any, msg: Message, dt_ms: float, timing: dict | None) -> list[Message] | None:
         """Count one processed item that took ``dt_ms`` (ms) and, for a non-None output, record it and return the
-        envelope to publish; ``timing["inference_ms"]`` (if given) splits ``dt_ms`` into inference and
+        message to publish; ``timing["inference_ms"]`` (if given) splits ``dt_ms`` into inference and
         post-processing in the latency trace."""
-        meta = env.get("meta")
+        meta = msg.meta
         self.proc_ms.append(dt_ms)
         self.processed += 1
         self.host.mark_processed()
@@ -141,26 +132,25 @@ class AnalyticsComponent(Component):
             return None
         self.outputs += 1
         self.latest = out
-        trace = dict(env.get("trace") or {})
+        trace = dict(msg.trace)
         if timing and "inference_ms" in timing:
             trace["inference_ms"] = trace.get("inference_ms", 0.0) + timing["inference_ms"]
             trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms - timing["inference_ms"]
         else:
             trace["post_ms"] = trace.get("post_ms", 0.0) + dt_ms
-        kind = _kind_of(out)
-        robot = env.get("robot") or (meta.robot_id if meta is not None else "?")
+        res = output_message(out, msg, trace)
+        robot = msg.robot
         if self.recorder is not None:
-            t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
-            if kind == "detections":
+            t_ns = self.epoch_ns + int(msg.sim_t * 1e9)
+            if isinstance(res, DetectionsMsg):
                 size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None
                 self.recorder.detections(f"/{robot}/{self.name}/detections", t_ns, out, size)
-            elif kind == "nav":
+            elif isinstance(res, NavigationMsg):
                 self.recorder.json(f"/{robot}/{self.name}/navigation", t_ns, out.model_dump(mode="json"),
                                    "aerodaas.AeroNavigation")
             elif isinstance(out, dict):
                 self.recorder.json(f"/{robot}/{self.name}", t_ns, out, "aerodaas.AnalyticsOutput")
-        return [{"kind": kind, "data": out, "meta": meta, "sim_t": env.get("sim_t", 0.0), "trace": trace,
-                 "robot": robot}]
+        return [res]
 
     def get_latest(self) -> Any:
         return self.latest
@@ -199,16 +189,16 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
     def batch_limit(self) -> int:
         return 1  # each frame is a task of the analytics scheduler
 
-    def handle(self, port: str, env: dict) -> None:
-        frame = env.get("data")
-        if not (isinstance(frame, np.ndarray) and frame.ndim == 3):
+    def handle(self, port: Port, msg: Message) -> None:
+        frame = msg.data
+        if not (isinstance(msg, FrameMsg) and isinstance(frame, np.ndarray) and frame.ndim == 3):
             raise TypeError(f"scheduled analytics {self.name!r} takes camera frames ((H, W, 3) uint8 BGR), got "
                             f"{type(frame).__name__}")
-        tok = env.get("tok")
+        tok = msg.tok
         if tok is not None:
             tok.add()  # held until the task's terminal state (on_task_done)
         try:
-            self.service.submit(self, env)
+            self.service.submit(self, msg)
         except Exception:
             if tok is not None:
                 tok.done()
@@ -218,8 +208,8 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
     def on_task_done(self, task: Any) -> None:
         """Called by the dispatcher (its loop thread) once per task, in its terminal state: publish an on-time
         result, record the outcome, release the lock-step hold."""
-        env = task.payload.context
-        tok = env.get("tok")
+        msg: Message = task.payload.context
+        tok = msg.tok
         try:
             state = task.state.value
             self.outcomes[state] = self.outcomes.get(state, 0) + 1
@@ -227,9 +217,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
                 tier = task.tier or "edge"
                 self.executed[tier] = self.executed.get(tier, 0) + 1
                 self.with_output[tier] = self.with_output.get(tier, 0) + bool(task.result)
-            robot = env.get("robot") or task.drone
+            robot = msg.robot or task.drone
             if self.recorder is not None:
-                t_ns = self.epoch_ns + int(env.get("sim_t", 0.0) * 1e9)
+                t_ns = self.epoch_ns + int(msg.sim_t * 1e9)
                 rec = {"task_id": task.task_id, "model": task.model, "state": state, "tier": task.tier,
                        "reason": task.reason, "arrival_ms": task.arrival_ms, "deadline_ms": task.deadline_ms,
                        "start_ms": task.start_ms, "end_ms": task.end_ms}
@@ -237,9 +227,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
             if state == "done_on_time":
                 dt_ms = (task.end_ms - task.start_ms) if task.start_ms is not None and task.end_ms is not None else 0.0
                 timing = task.notes.get("timing") if task.tier == "edge" else {"inference_ms": dt_ms}
-                envs = self._emit(task.result, env, dt_ms, timing)
-                if envs:
-                    self.host.publish(self.cid, envs, tok)
+                outs = self._emit(task.result, msg, dt_ms, timing)
+                if outs:
+                    self.host.publish(self.cid, outs, tok)
         except Exception as e:  # never lose the hold or the dispatcher's loop over one bad result
             self.errors += 1
             self.host.report_error(self.cid, e)
@@ -301,12 +291,10 @@ class AnalyticsSchedulingService:
                                               on_result=self._on_result, keep_tasks=False)
         self.dispatcher.start_background()
 
-    def submit(self, comp: ScheduledAnalyticsComponent, env: dict) -> None:
+    def submit(self, comp: ScheduledAnalyticsComponent, msg: Message) -> None:
         from aerodaas.schedulers.dispatch.payload import FramePayload
 
-        meta = env.get("meta")
-        drone = env.get("robot") or (meta.robot_id if meta is not None else "?")
-        self.dispatcher.submit(drone, comp.name, FramePayload(env["data"], meta, env))
+        self.dispatcher.submit(msg.robot, comp.name, FramePayload(msg.data, msg.meta, msg))
 
     def _on_result(self, task: Any) -> None:
         self.comps[task.model].on_task_done(task)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from aerodaas.messages import FrameMsg
 from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
 
 from .host import Cascade, Host
@@ -67,11 +68,11 @@ class CameraComponent:
         self.dispatch_ms.append((time.perf_counter() - ticked) * 1e3)
         try:
             try:
-                env = self._produce(position, yaw, t, seq)
+                msg = self._produce(position, yaw, t, seq)
             finally:
                 self._busy.release()  # the next frame may be rendered while this one travels downstream
-            if env is not None:
-                self.host.publish(self.cid, [env], tok, inline=True)
+            if msg is not None:
+                self.host.publish(self.cid, [msg], tok, inline=True)
         finally:
             if tok is not None:
                 tok.done()
@@ -79,14 +80,14 @@ class CameraComponent:
     def capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None = None) -> np.ndarray | None:
         """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
         new frame)."""
-        env = self._produce(position, yaw, t, seq)
-        if env is None:
+        msg = self._produce(position, yaw, t, seq)
+        if msg is None:
             return None
-        self.host.publish(self.cid, [env], tok, inline=True)
-        return env["data"]
+        self.host.publish(self.cid, [msg], tok, inline=True)
+        return msg.data
 
-    def _produce(self, position: tuple, yaw: float, t: float, seq: int) -> dict | None:
-        """Render (or fetch) the frame, make it read-only, record it; returns its envelope."""
+    def _produce(self, position: tuple, yaw: float, t: float, seq: int) -> FrameMsg | None:
+        """Render (or fetch) the frame, make it read-only, record it; returns its message."""
         t0 = time.perf_counter()
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         truth: list = []
@@ -113,8 +114,8 @@ class CameraComponent:
             if truth:
                 self.recorder.json("/world/targets", t_ns, {"robot": self.robot_id, "seq": seq, "t": t,
                                                             "targets": truth}, "aerodaas.GroundTruth")
-        return {"kind": "frame", "data": frame, "meta": meta, "sim_t": t, "robot": self.robot_id,
-                "trace": {"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0}}
+        return FrameMsg(robot=self.robot_id, sim_t=t, data=frame, meta=meta,
+                        trace={"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0})
 
     def get_latest(self) -> tuple | None:
         """(frame, FrameMeta) of the newest frame, for pull-style access."""

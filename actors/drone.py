@@ -22,6 +22,7 @@ from typing import Any
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.fsm import MissionFSM, MissionState as S
+from aerodaas.messages import OdometryMsg, StatMsg
 from aerodaas.models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, VelocityCommand, Waypoint
 from aerodaas.safety import SafetyGate, SafetyViolation
 
@@ -158,10 +159,8 @@ class DroneComponent:
         msg = {"robot": self.cfg.id, "state": new.value, "previous": old.value, "t": t}
         if self.recorder is not None:
             self.recorder.json("/mission/state", self._t_ns(t), msg, "aerodaas.MissionState")
-        if self.stat_cids:
-            env = {"kind": "value", "data": msg, "meta": None, "sim_t": t, "trace": {}, "robot": self.cfg.id}
-            for cid in self.stat_cids:
-                self.host.publish(cid, [dict(env)], None, inline=False)
+        for cid in self.stat_cids:
+            self.host.publish(cid, [StatMsg(robot=self.cfg.id, sim_t=t, data=msg)], None, inline=False)
 
     # ------------------------------------------------------------------ control API (any thread)
     def pause_mission(self) -> bool:
@@ -214,11 +213,8 @@ class DroneComponent:
         self.last_odom = odom
         if self.recorder is not None:
             self.recorder.odometry(self.cfg.id, self._t_ns(odom["t"]), odom)
-        if self.odom_cids:
-            env = {"kind": "odometry", "data": odom, "meta": None, "sim_t": odom["t"], "trace": {},
-                   "robot": self.cfg.id}
-            for cid in self.odom_cids:
-                self.host.publish(cid, [dict(env)], tok, inline=False)
+        for cid in self.odom_cids:
+            self.host.publish(cid, [OdometryMsg(robot=self.cfg.id, sim_t=odom["t"], data=odom)], tok, inline=False)
 
     def control_tick(self) -> bool:
         """One control tick (at ``control_rate_hz``); returns True when this drone's mission is over."""

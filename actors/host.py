@@ -49,6 +49,8 @@ import cv2
 import numpy as np
 import ray
 
+from aerodaas.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
+
 __all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "Host", "encode_frame", "decode_frame"]
 
 
@@ -67,13 +69,15 @@ class FrameCopies:
       decoded here on arrival from one;
     * ``object_store_put`` / ``object_store_get``: frames sent to / received from a host of the same tier as an
       ObjectRef;
+    * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`.channel`; the
+      receiver reads the slot in place);
     * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
 
     Handing a frame to a component of the same host copies nothing and is not counted. Thread-safe; a count costs
     one uncontended lock (well under a microsecond)."""
 
     FIELDS = ("materialised", "tier_jpeg_encoded", "tier_jpeg_decoded", "object_store_put", "object_store_get",
-              "recorder_jpeg_encoded")
+              "channel_copy", "recorder_jpeg_encoded")
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -176,14 +180,14 @@ class Component:
         self.dropped = 0
         self.errors = 0
 
-    def offer(self, port: str, env: dict) -> bool:
-        """Deliver one envelope; returns False when it was dropped (the component is busy and its queue full)."""
-        tok = env.get("tok")
+    def offer(self, port: Port, msg: Message) -> bool:
+        """Deliver one message; returns False when it was dropped (the component is busy and its queue full)."""
+        tok = msg.tok
         with self._m:
             self.received += 1
             if self._busy:
                 if tok is not None or len(self._q) < self.capacity:
-                    self._q.append((port, env))
+                    self._q.append((port, msg))
                     if tok is not None:
                         tok.add()
                     return True
@@ -192,21 +196,21 @@ class Component:
             self._busy = True
             if tok is not None:
                 tok.add()
-        self._run(port, env)
+        self._run(port, msg)
         return True
 
-    def _run(self, port: str, env: dict) -> None:
-        """Process ``env``, hand its outputs on, then keep draining the mailbox in this thread until it is empty
+    def _run(self, port: Port, msg: Message) -> None:
+        """Process ``msg``, hand its outputs on, then keep draining the mailbox in this thread until it is empty
         (resubmitting each waiting item to the pool would queue it behind every pending capture: starvation)."""
         while True:
-            batch = [(port, env)]
+            batch = [(port, msg)]
             limit = self.batch_limit()
             if limit > 1:  # items waiting (e.g. frames of several drones for one detector): one call for them
                 with self._m:
                     while self._q and len(batch) < limit:
                         batch.append(self._q.popleft())
             try:
-                outs = self.handle_batch(batch) if len(batch) > 1 else [self.handle(port, env)]
+                outs = self.handle_batch(batch) if len(batch) > 1 else [self.handle(port, msg)]
             except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
                 self.errors += 1
                 outs = [None] * len(batch)
@@ -215,33 +219,32 @@ class Component:
                 nxt = self._q.popleft() if self._q else None
                 if nxt is None:
                     self._busy = False
-            for (_, e_in), out in zip(batch, outs):
+            for (_, m_in), out in zip(batch, outs):
                 try:
                     if out:
-                        self.host.publish(self.cid, out, e_in.get("tok"))
+                        self.host.publish(self.cid, out, m_in.tok)
                 except Exception as e:  # a failing subscriber must not leave this mailbox busy with items queued
                     self.errors += 1
                     self.host.report_error(self.cid, e)
                 finally:
-                    tok = e_in.get("tok")
-                    if tok is not None:
-                        tok.done()
+                    if m_in.tok is not None:
+                        m_in.tok.done()
             if nxt is None:
                 return
-            port, env = nxt
+            port, msg = nxt
 
-    def handle(self, port: str, env: dict) -> list[dict] | None:
-        """Process one envelope; return the envelopes to publish (or None)."""
+    def handle(self, port: Port, msg: Message) -> list[Message] | None:
+        """Process one message; return the messages to publish (or None)."""
         return None
 
     def batch_limit(self) -> int:
         """How many waiting items :meth:`handle_batch` may take at once (1: no batching, the default)."""
         return 1
 
-    def handle_batch(self, items: list[tuple[str, dict]]) -> list[list[dict] | None]:
-        """Process several ``(port, envelope)`` items in one go; one result per item, in order (default: one
+    def handle_batch(self, items: list[tuple[Port, Message]]) -> list[list[Message] | None]:
+        """Process several ``(port, message)`` items in one go; one result per item, in order (default: one
         :meth:`handle` call each)."""
-        return [self.handle(p, e) for p, e in items]
+        return [self.handle(p, m) for p, m in items]
 
     def mailbox_stats(self) -> dict:
         return {"received": self.received, "dropped": self.dropped, "errors": self.errors}
@@ -253,7 +256,9 @@ class RemoteOutlet:
     Allows ``buffer`` calls in flight; when the consumer is still busy with them a new item is dropped and
     counted. Frames are JPEG-encoded when the edge crosses tiers (``jpeg``), else sent as an ObjectRef."""
 
-    def __init__(self, handle: Any, cid: str, port: str, buffer: int, jpeg: bool,
+    transport = "ray"
+
+    def __init__(self, handle: Any, cid: str, port: Port, buffer: int, jpeg: bool,
                  copies: FrameCopies | None = None, reply_to: str | None = None,
                  on_reply: Callable[[list], None] | None = None) -> None:
         self.handle, self.cid, self.port = handle, cid, port
@@ -278,35 +283,36 @@ class RemoteOutlet:
             except Exception:  # noqa: BLE001 - ActorDiedError, ActorUnavailableError, the consumer's own error
                 self.failed += 1
 
-    def send(self, env: dict) -> Any:
-        """Send one envelope (without its lock-step token); returns the call's ObjectRef or None if dropped. A frame
-        is put into the object store (or JPEG-encoded, across tiers) once per envelope, however many consumers of
-        other actors it has (the envelope keeps the ref)."""
-        tok = env.get("tok")
+    def send(self, msg: Message) -> Any:
+        """Send one message (without its lock-step token); returns the call's ObjectRef or None if dropped. A frame
+        is put into the object store (or JPEG-encoded, across tiers) once per message, however many consumers of
+        other actors it has (the message keeps the ref)."""
+        tok = msg.tok
         with self._lock:
             if tok is None and self.in_flight:
                 self._reap()
                 if len(self.in_flight) >= self.buffer:
                     self.dropped += 1
                     return None
-            wire = {k: v for k, v in env.items() if k not in ("tok", "_ref", "_jpeg")}
-            wire["lockstep"] = tok is not None
-            if env.get("kind") == "frame":
-                key = "_jpeg" if self.jpeg else "_ref"
-                data = env.get(key)
+            if isinstance(msg, FrameMsg):
                 t0 = time.time()
-                if data is None:
-                    frame = env["data"]
-                    data = env[key] = encode_frame(frame) if self.jpeg else ray.put(frame)
-                    self.copies.count("tier_jpeg_encoded" if self.jpeg else "object_store_put")
-                wire["data"] = data
-                wire["kind"] = "frame_jpeg" if self.jpeg else "frame_ref"
+                if self.jpeg:
+                    if msg.jpeg is None:
+                        msg.jpeg = EncodedFrame(encode_frame(msg.data))
+                        self.copies.count("tier_jpeg_encoded")
+                    wire = msg.to_wire(msg.jpeg)
+                else:
+                    if msg.ref is None:
+                        msg.ref = ray.put(msg.data)
+                        self.copies.count("object_store_put")
+                    wire = msg.to_wire(msg.ref)
                 # where the time of a hop goes (see SchedulerComponent's latency records): put/encode, then the call
-                wire["trace"] = {**(env.get("trace") or {}), "put_ms": (time.time() - t0) * 1e3,
-                                 "sent_wall": time.time()}
-            if tok is None and self.reply_to is not None:
-                wire["reply"] = self.reply_to
-            ref = self.handle.deliver.remote(self.cid, self.port, wire)
+                wire.trace.update(put_ms=(time.time() - t0) * 1e3, sent_wall=time.time())
+            else:
+                wire = msg.to_wire()
+            d = Delivery(self.cid, self.port, wire, lockstep=tok is not None,
+                         reply_to=self.reply_to if tok is None else None)
+            ref = self.handle.deliver.remote(d)
             self.sent += 1
             if tok is None:
                 self.in_flight.append(ref)
@@ -329,7 +335,8 @@ class RemoteOutlet:
         with self._lock:
             if self.in_flight:
                 self._reap()
-        return {"port": self.port, "to": self.cid, "sent": self.sent, "dropped": self.dropped, "failed": self.failed}
+        return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
+                "dropped": self.dropped, "failed": self.failed}
 
 
 class Host:
@@ -346,12 +353,15 @@ class Host:
         n = workers or max(2, min(4, (os.cpu_count() or 2)))
         self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
         self.components: dict[str, Component] = {}
-        self.routes: dict[str, list[tuple[str, str, int]]] = {}
+        self.routes: dict[str, list[tuple[str, Port, int, tuple | None]]] = {}
         self.location: dict[str, str] = {}
         self.tiers: dict[str, str] = {host_id: tier}
         self.peers: dict[str, Any] = {}
-        self._outlets: dict[tuple[str, str, str], RemoteOutlet] = {}
-        self._tl = threading.local()  # .reply: (host id of the caller, [(cid, port, env)]) while a deliver runs
+        self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel.ChannelOutlet
+        #: the run's channel key (bytes) when actors on this machine talk through same-node channels
+        #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``, or lock-step)
+        self.channel_key: bytes | None = None
+        self._tl = threading.local()  # .reply: (host id of the caller, [Delivery]) while a deliver runs
         self.recorder = recorder
         self.copies = FrameCopies()
         self.errors: list[dict] = []
@@ -407,116 +417,140 @@ class Host:
         except Exception as e:  # pool jobs must never die silently
             self.report_error(getattr(fn, "__qualname__", str(fn)), e)
 
-    def publish(self, src: str, envs: list[dict], tok: Cascade | None = None, inline: bool = True) -> None:
-        """Hand ``envs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
+    def publish(self, src: str, msgs: list[Message], tok: Cascade | None = None, inline: bool = True) -> None:
+        """Hand ``msgs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
         in this thread when ``inline`` (zero hops for a chain), the others on the pool; remote ones through their
         :class:`RemoteOutlet` on the pool (JPEG encoding stays off the hot path)."""
         subs = self.routes.get(src)
         if not subs:
             return
-        for env in envs:
+        for msg in msgs:
             if tok is not None:
-                env["tok"] = tok
+                msg.tok = tok
             local = []
-            robot = env.get("robot")
+            robot = msg.robot
             for cid, port, buf, only in subs:
                 if only is not None and robot not in only:
                     continue  # an edge to a replica or a drone's own copy carries only its drones' items
                 comp = self.components.get(cid)
                 if comp is not None:
                     local.append((comp, port))
-                elif tok is None and self._reply_to(cid, port, env):
+                elif tok is None and self._reply_to(cid, port, msg):
                     continue  # returned to the calling actor in the reply of its deliver call
                 else:
                     out = self._outlet(src, cid, port, buf)
                     if tok is not None:
-                        out.send(env)  # lock-step: sent now, its ref joins the cascade
+                        out.send(msg)  # lock-step: sent now, its ref joins the cascade
                     else:
-                        self.submit(out.send, env)
+                        self.submit(out.send, msg)
             last = len(local) - 1
             for i, (comp, port) in enumerate(local):
                 if inline and i == last:
-                    comp.offer(port, env)
+                    comp.offer(port, msg)
                 else:
                     if tok is not None:
                         tok.add()  # keep the cascade open until the pool picks it up
-                        self.submit(self._offer_then_done, comp, port, env, tok)
+                        self.submit(self._offer_then_done, comp, port, msg, tok)
                     else:
-                        self.submit(comp.offer, port, env)
+                        self.submit(comp.offer, port, msg)
 
-    def _reply_to(self, cid: str, port: str, env: dict) -> bool:
+    def _reply_to(self, cid: str, port: Port, msg: Message) -> bool:
         """While a deliver call from host H runs in this thread, an item for a component of H goes back in that
-        call's reply instead of a call of its own (not frames: they go through the object store)."""
+        call's reply instead of a call of its own (not frames: their pixels never travel in a reply)."""
         rep = getattr(self._tl, "reply", None)
-        if rep is None or env.get("kind") == "frame" or self.location.get(cid) != rep[0]:
+        if rep is None or isinstance(msg, FrameMsg) or self.location.get(cid) != rep[0]:
             return False
-        item = {k: v for k, v in env.items() if k not in ("tok", "_ref", "_jpeg")}
-        item["trace"] = {**(env.get("trace") or {}), "replied_wall": time.time()}
-        rep[1].append((cid, port, item))
+        item = msg.to_wire()
+        item.trace["replied_wall"] = time.time()
+        rep[1].append(Delivery(cid, port, item))
         return True
 
-    def on_reply(self, items: list) -> None:
-        """Items another actor returned in a deliver call's reply: offered to their components on the pool."""
+    def on_reply(self, items: list[Delivery], inline: bool = False) -> None:
+        """Items another actor returned in a deliver call's reply: offered to their components on the pool, or in
+        this thread when ``inline`` (a channel's reader thread; never Ray's callback thread, which must not
+        block)."""
         now = time.time()
-        for cid, port, env in items:
-            tr = env.get("trace")
-            if tr and "replied_wall" in tr:
+        for d in items:
+            tr = d.msg.trace
+            if "replied_wall" in tr:
                 tr["reply_ms"] = (now - tr.pop("replied_wall")) * 1e3
-            comp = self.components.get(cid)
-            if comp is not None:
-                self.submit(comp.offer, port, env)
+            comp = self.components.get(d.cid)
+            if comp is None:
+                continue
+            if inline:
+                comp.offer(d.port, d.msg)
+            else:
+                self.submit(comp.offer, d.port, d.msg)
 
     @staticmethod
-    def _offer_then_done(comp: Component, port: str, env: dict, tok: Cascade) -> None:
+    def _offer_then_done(comp: Component, port: Port, msg: Message, tok: Cascade) -> None:
         try:
-            comp.offer(port, env)
+            comp.offer(port, msg)
         finally:
             tok.done()
 
-    def _outlet(self, src: str, cid: str, port: str, buffer: int) -> RemoteOutlet:
+    def _outlet(self, src: str, cid: str, port: Port, buffer: int) -> Any:
+        """The outlet of edge ``src`` -> ``cid`` (another actor's component), made on first use: a same-node
+        channel when the peer serves one on this machine (:mod:`.channel`), else Ray calls
+        (:class:`RemoteOutlet`). Raises KeyError for a component no actor of the run has."""
         key = (src, cid, port)
         o = self._outlets.get(key)
         if o is None:
             hid = self.location.get(cid)
             if hid is None or hid not in self.peers:
                 raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
-            o = self._outlets[key] = RemoteOutlet(self.peer(hid), cid, port, buffer,
-                                                  jpeg=self.tiers.get(hid, self.tier) != self.tier, copies=self.copies,
-                                                  reply_to=self.host_id, on_reply=self.on_reply)
+            o = self._channel_outlet(hid, cid, port, buffer)
+            if o is None:
+                o = RemoteOutlet(self.peer(hid), cid, port, buffer, jpeg=self.tiers.get(hid, self.tier) != self.tier,
+                                 copies=self.copies, reply_to=self.host_id, on_reply=self.on_reply)
+            self._outlets[key] = o
         return o
 
-    def deliver(self, cid: str, port: str, wire: dict) -> list:
-        """An envelope from another host. Frames arrive as JPEG bytes or ObjectRefs and are decoded once here.
-        In lock-step the whole local cascade runs before this returns; the result lists the refs of the remote
-        sends it caused (for the sender's :class:`Cascade`)."""
-        env = dict(wire)
+    def _channel_outlet(self, hid: str, cid: str, port: Port, buffer: int) -> Any:
+        """A :class:`~.channel.ChannelOutlet` to host ``hid`` when channels are on and ``hid`` serves one on this
+        machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
+        if self.channel_key is None or self.lockstep or self.tiers.get(hid, self.tier) != self.tier:
+            return None
+        from .channel import ChannelOutlet, channel_address
+
+        try:
+            return ChannelOutlet(channel_address(self.channel_key, hid), self.channel_key, cid, port, buffer,
+                                 reply_to=self.host_id, on_reply=lambda items: self.on_reply(items, inline=True),
+                                 copies=self.copies)
+        except Exception:  # noqa: BLE001 - not on this machine (or not serving): Ray calls
+            return None
+
+    def deliver(self, d: Delivery) -> list:
+        """A message from another host. A frame's pixels arrive as JPEG bytes or an ObjectRef and are decoded (or
+        mapped) once here. Returns the replies (Delivery items for the sender's components, see
+        :class:`~aerodaas.messages.Delivery`); in lock-step the whole local cascade runs before this returns and the
+        result lists the refs of the remote sends it caused (for the sender's :class:`Cascade`)."""
+        msg = d.msg
         t_arrived = time.time()
-        lock = env.pop("lockstep", False)
-        kind = env.get("kind")
-        if kind == "frame_jpeg":
-            env["data"], env["kind"] = decode_frame(env["data"]), "frame"
-            self.copies.count("tier_jpeg_decoded")
-        elif kind == "frame_ref":
-            env["data"], env["kind"] = ray.get(env["data"]), "frame"
-            self.copies.count("object_store_get")
-        if kind in ("frame_jpeg", "frame_ref") and "sent_wall" in (env.get("trace") or {}):
-            env["trace"] = {**env["trace"], "call_ms": (t_arrived - env["trace"]["sent_wall"]) * 1e3,
-                            "get_ms": (time.time() - t_arrived) * 1e3}
-        comp = self.components[cid]
-        reply = env.pop("reply", None)
-        if not lock:
-            if reply is None:
-                comp.offer(port, env)
+        if isinstance(msg, FrameMsg):
+            if isinstance(msg.data, EncodedFrame):
+                msg.data = decode_frame(msg.data.jpeg)
+                self.copies.count("tier_jpeg_decoded")
+            elif isinstance(msg.data, ray.ObjectRef):
+                msg.data = ray.get(msg.data)
+                self.copies.count("object_store_get")
+            if "sent_wall" in msg.trace:
+                msg.trace.update(call_ms=(t_arrived - msg.trace["sent_wall"]) * 1e3,
+                                 get_ms=(time.time() - t_arrived) * 1e3)
+        comp = self.components[d.cid]
+        if not d.lockstep:
+            if d.reply_to is None:
+                comp.offer(d.port, msg)
                 return []
-            self._tl.reply = (reply, [])
+            self._tl.reply = (d.reply_to, [])
             try:
-                comp.offer(port, env)
+                comp.offer(d.port, msg)
                 return list(self._tl.reply[1])
             finally:
                 self._tl.reply = None
         tok = Cascade()
-        env["tok"] = tok
-        comp.offer(port, env)
+        msg.tok = tok
+        comp.offer(d.port, msg)
         with tok._cv:
             while tok._n > 0:
                 tok._cv.wait(1.0)
@@ -545,3 +579,7 @@ class Host:
     def close(self) -> None:
         self._closed = True
         self.pool.shutdown(wait=True, cancel_futures=True)
+        for o in list(self._outlets.values()):
+            close = getattr(o, "close", None)
+            if callable(close):
+                close()

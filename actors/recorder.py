@@ -25,6 +25,7 @@ failure once N bytes have been written (the fault suite of :mod:`aerodaas.reliab
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import os
 import queue
@@ -34,6 +35,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from aerodaas.messages import RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson, RecordOdometry
 from aerodaas.recording import McapRecorder, camera_mount_quaternion
 
 TF_TOPIC = "/tf"
@@ -269,7 +271,7 @@ class RemoteRecorder:
         self.host, self.target, self.period_s = host, target, period_s
         self.jpeg_quality, self.max_pending_frames = jpeg_quality, max_pending_frames
         self._pending_frames = 0
-        self._buf: list[tuple] = []
+        self._buf: list[RecordItem] = []
         self._lock = threading.Lock()
         self._refs: list = []
         self.sent = 0
@@ -292,22 +294,22 @@ class RemoteRecorder:
                 self.frames_dropped += 1
                 return False
             self._pending_frames += 1
-            self._buf.append(("image", topic, t_ns, frame, frame_id))
+            self._buf.append(RecordImage(topic, t_ns, frame, frame_id))
         return True
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
-        self._put(("camera", robot, sensor, dict(intrinsics), float(pitch_deg)))
+        self._put(RecordCamera(robot, sensor, dict(intrinsics), float(pitch_deg)))
 
     def detections(self, topic: str, t_ns: int, dets: list, image_size: tuple[int, int] | None = None) -> None:
-        self._put(("detections", topic, t_ns, list(dets), image_size))
+        self._put(RecordDetections(topic, t_ns, list(dets), image_size))
 
     def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
-        self._put(("odometry", robot, t_ns, odom))
+        self._put(RecordOdometry(robot, t_ns, odom))
 
     def json(self, topic: str, t_ns: int, obj: dict, schema_name: str) -> None:
-        self._put(("json", topic, t_ns, obj, schema_name))
+        self._put(RecordJson(topic, t_ns, obj, schema_name))
 
-    def _put(self, item: tuple) -> None:
+    def _put(self, item: RecordItem) -> None:
         with self._lock:
             if not self.closed:
                 self._buf.append(item)
@@ -323,8 +325,8 @@ class RemoteRecorder:
         if not batch:
             return
         if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
-            batch = [("image", it[1], it[2], encode_frame(it[3], self.jpeg_quality), it[4]) if it[0] == "image"
-                     and isinstance(it[3], np.ndarray) else it for it in batch]
+            batch = [dataclasses.replace(it, frame=encode_frame(it.frame, self.jpeg_quality))
+                     if isinstance(it, RecordImage) and isinstance(it.frame, np.ndarray) else it for it in batch]
             copies = getattr(self.host, "copies", None)
             if copies is not None:
                 copies.count("recorder_jpeg_encoded", frames)
@@ -367,14 +369,13 @@ class RemoteRecorder:
         return {}
 
 
-def deliver(recorder: Any, batch: list[tuple]) -> int:
-    """Hand a :class:`RemoteRecorder` batch to ``recorder`` (the edge host's :class:`RecorderService`); returns the
-    number of items. Raises ValueError for an unknown item kind."""
+def deliver(recorder: Any, batch: list[RecordItem]) -> int:
+    """Hand a :class:`RemoteRecorder` batch to ``recorder`` (the run's :class:`RecorderService`); returns the
+    number of items. Raises TypeError for anything that is not a :class:`~aerodaas.messages.RecordItem`."""
     for item in batch:
-        kind = item[0]
-        if kind not in ("camera", "detections", "odometry", "json", "image"):
-            raise ValueError(f"remote recorder: unknown item kind {kind!r}")
-        getattr(recorder, kind)(*item[1:])
+        if not isinstance(item, RecordItem):
+            raise TypeError(f"remote recorder: {type(item).__name__} is not a RecordItem")
+        item.apply(recorder)
     return len(batch)
 
 

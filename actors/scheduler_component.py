@@ -8,6 +8,7 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig
+from aerodaas.messages import Message, Port
 from aerodaas.models import AeroNavigation, Waypoint
 from aerodaas.safety import SafetyViolation
 
@@ -18,7 +19,8 @@ class SchedulerComponent(Component):
     """Hosts one robot's trajectory scheduler (the paper's INavigate plug-in) and its waypoint priority queue.
 
     The drone calls :meth:`tick` / :meth:`complete` / :meth:`discard` directly (same host, no actor hop);
-    analytics streams deliver navigation as envelopes on port ``priority:<n>[:replace]``; users add navigation
+    analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.messages.Port` (optionally
+    ``replace``); users add navigation
     through :meth:`add_navigation` (the HITL API). Everything added is checked by the robot's
     :class:`~aerodaas.safety.SafetyGate` first (all items or none). New navigation nudges the drone, which applies
     it at once; the per-frame latency (frame ready -> command applied to the vehicle) is measured here. The
@@ -47,7 +49,7 @@ class SchedulerComponent(Component):
         self.refused: list[dict] = []
         self.discarded: list[dict] = []
         self._plan_sig: Any = None
-        self._replaced: set[str] = set()
+        self._replaced: set[Port] = set()
         self.drone: Any = None  # the DroneComponent, set by the host runtime
 
     def tick(self, now: float, position: tuple) -> dict:
@@ -88,35 +90,32 @@ class SchedulerComponent(Component):
             self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
                                {"robot": self.robot_id, "t": self.now, "event": event, **kw}, "aerodaas.MissionEvent")
 
-    def handle(self, port: str, env: dict) -> None:
-        from aerodaas.safety import SafetyViolation
-
-        parts = port.split(":")
-        prio = int(parts[1]) if parts[0] == "priority" else None
-        nav = env["data"]
-        if not isinstance(nav, AeroNavigation) or env.get("robot", self.robot_id) != self.robot_id:
+    def handle(self, port: Port, msg: Message) -> None:
+        prio = port.priority if port.name == "priority" else None
+        nav = msg.data
+        if not isinstance(nav, AeroNavigation) or msg.robot != self.robot_id:
             return None  # a shared analytics navigates each robot through that robot's own scheduler
-        replace = "replace" in parts[2:] and port not in self._replaced
+        replace = port.replace and port not in self._replaced
         try:
             self._check_bounds(nav, ignore_queue=replace)
             nav = self.gate.check_navigation(nav, self.position)
             if replace:
                 self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
                 self.s.clear_navigation()
-                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port}"})
-                self._event("mission_aborted", by=port)
+                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port.wire()}"})
+                self._event("mission_aborted", by=port.wire())
             self._plan_and_add(nav, None, prio)
         except (SafetyViolation, ValueError) as e:  # an analytics asked for something unsafe: refuse it, keep running
-            self.refused.append({"t": env.get("sim_t", 0.0), "source": "analytics", "error": str(e)})
+            self.refused.append({"t": msg.sim_t, "source": "analytics", "error": str(e)})
             self._event("navigation_refused", source="analytics", error=str(e))
             return None
-        if any(isinstance(w, Waypoint) for w in nav.waypoints) or "replace" in parts[2:]:
+        if any(isinstance(w, Waypoint) for w in nav.waypoints) or port.replace:
             self._record_plan()
         applied = self.drone.nudge() if self.drone is not None else False  # applied now, not at the next tick
-        tr = env.get("trace") or {}
+        tr = msg.trace
         if "capture_wall" in tr:
             e2e = (time.time() - tr["capture_wall"]) * 1e3
-            rec = {"robot": self.robot_id, "t": env.get("sim_t", 0.0), "e2e_ms": e2e, "applied": applied,
+            rec = {"robot": self.robot_id, "t": msg.sim_t, "e2e_ms": e2e, "applied": applied,
                    "inference_ms": tr.get("inference_ms", 0.0), "post_ms": tr.get("post_ms", 0.0),
                    "overhead_ms": max(0.0, e2e - tr.get("inference_ms", 0.0) - tr.get("post_ms", 0.0))}
             for k in ("put_ms", "call_ms", "get_ms", "reply_ms"):  # the actor hop, when the frame made one

@@ -564,6 +564,12 @@ class EnvironmentConfig(_Cfg):
                                     "and dispatcher actor of a run (the recorder is never restarted)")
     actor_restart_timeout_s: float = Field(default=60.0, gt=0, le=3600, description="how long the driver waits for "
                                            "a dead drone actor to come back before its drones end as 'lost', s")
+    same_node_transport: Literal["channel", "ray"] = Field(
+        default="channel", description="how messages (frames above all) travel between two actors of a run on the "
+        "same machine: 'channel' (the frame copied once into a shared-memory slot the receiver reads in place, the "
+        "message and its reply on a persistent authenticated Unix socket: no Ray call per frame) or 'ray' (ray.put "
+        "of the frame and an actor call per message). Actors on different machines always use Ray (an ObjectRef on "
+        "one tier, JPEG across tiers); lock-step runs always use Ray calls")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
 
     @model_validator(mode="after")

@@ -25,25 +25,11 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from .messages import Port
+
 __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_plan", "collect_graph"]
 
 Role = Literal["drone", "analytics", "dispatcher", "recorder"]
-
-
-@dataclass(frozen=True)
-class Port:
-    """Where an edge enters its consumer: ``in`` (an analytics input) or ``priority`` (a trajectory scheduler's
-    input at ``priority``; ``replace``: the first navigation from it aborts the queued missions, pattern 5)."""
-
-    name: Literal["in", "priority"] = "in"
-    priority: int | None = None
-    replace: bool = False
-
-    def wire(self) -> str:
-        """The port's name on the wire: ``in`` or ``priority:<n>[:replace]``."""
-        if self.name == "in":
-            return "in"
-        return f"priority:{self.priority}" + (":replace" if self.replace else "")
 
 
 @dataclass(frozen=True)
@@ -70,8 +56,8 @@ class Edge:
     robots: tuple[str, ...] | None = None
 
     def route(self) -> tuple:
-        """The wire form the actors route with: ``(dst, port, buffer, robots)``."""
-        return (self.dst, self.port.wire(), self.buffer, self.robots)
+        """The form the actors route with: ``(dst, port, buffer, robots)``."""
+        return (self.dst, self.port, self.buffer, self.robots)
 
 
 @dataclass
@@ -121,6 +107,8 @@ class RunPlan:
     actors: dict[str, ActorPlan]
     robots: dict[str, dict]
     analytics_instances: dict[int, list[str]]
+    #: the run's secret for same-node channels (``same_node_transport: channel``; None: Ray calls only)
+    channel_key: bytes | None = field(default=None, repr=False)
 
     def routes(self) -> dict[str, list[tuple]]:
         """Producer id -> its edges in wire form (see :meth:`Edge.route`)."""
@@ -364,4 +352,6 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                                         if r.id in served]
     for a in actors.values():
         a.spec["epoch_ns"] = epoch_ns
-    return RunPlan(run_id, nodes, edges, actors, robot_ids, {aid: [c for c, _, _ in v] for aid, v in inst.items()})
+    key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
+    return RunPlan(run_id, nodes, edges, actors, robot_ids, {aid: [c for c, _, _ in v] for aid, v in inst.items()},
+                   channel_key=key)

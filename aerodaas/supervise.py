@@ -51,7 +51,8 @@ def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -
     from aerodaas.actors.recorder_actor import RecorderActor
 
     wiring = {"routes": plan.routes(), "location": plan.location(),
-              "tiers": {h: a.tier for h, a in plan.actors.items()}, "peers": plan.peer_names()}
+              "tiers": {h: a.tier for h, a in plan.actors.items()}, "peers": plan.peer_names(),
+              "channel_key": plan.channel_key}
     import ray
     from ray import cloudpickle
 

@@ -156,8 +156,10 @@ def test_dems_splits_an_overloaded_detector_between_edge_and_cloud(ray_session, 
     assert det["scheduled"]["outcomes"]["done_on_time"] == on_time
     assert det["outputs"] == on_time  # every on-time result is published, nothing else
     # downstream, each was processed, or skipped as older than one already seen (edge and cloud results interleave),
-    # or dropped by the sink's busy mailbox
-    assert sink["lists"] + sink["stale"] + sink["dropped"] == on_time and sink["lists"] > on_time // 2, sink
+    # or dropped by the sink's busy mailbox, or by the edge to the sink's actor while its calls were in flight
+    on_the_way = sum(o["dropped"] + o["failed"] for o in det["outlets"])
+    assert sink["lists"] + sink["stale"] + sink["dropped"] + on_the_way == on_time, (sink, det["outlets"])
+    assert sink["lists"] > on_time // 2, sink
     assert rep["utility"] == pytest.approx(on_time * 100 - rep["edge_cost"] - rep["cloud_cost"])
 
 

@@ -20,22 +20,26 @@ def _aerodaas(*args: str, timeout: float) -> subprocess.CompletedProcess:
                           timeout=timeout, env=dict(os.environ))
 
 
-def test_bench_overhead_json_has_every_column_both_layouts_and_the_honest_tail(tmp_path):
+def test_bench_overhead_json_has_every_column_every_layout_and_the_honest_tail(tmp_path):
     out = tmp_path / "o.json"
     p = _aerodaas("bench", "overhead", "--detector", "stub", "--stub-ms", "2", "--resolution", "320x240",
-                  "--duration", "2", "--window", "2", "--layout", "both", "--record", "--out", str(out), timeout=600)
+                  "--duration", "2", "--window", "2", "--layout", "all", "--record", "--out", str(out), timeout=600)
     assert p.returncode == 0, p.stderr[-2000:]
     rep = json.loads(out.read_text())
     assert rep["benchmark"] == "overhead" and rep["machine"]["cpu_count"] >= 1 and rep["machine"]["ray"]
-    assert rep["layouts"] == ["colocated", "actors"] and rep["recorded"] is True
+    assert rep["layouts"] == ["colocated", "actors", "actors-ray"] and rep["recorded"] is True
     assert rep["load"]["load_avg_1min_at_windows"]["n"] >= 3              # one load sample per window
-    colo, actors = rep["results"]
-    for row in (colo, actors):
+    colo, actors, actors_ray = rep["results"]
+    for row in (colo, actors, actors_ray):
         assert row["resolution"] == "320x240" and row["detector"] == "stub" and row["fps"] == 30
         for key in ("framework_overhead_ms", "bare_loop_overhead_ms", "naive_ray_overhead_ms", "dora_rs_overhead_ms"):
             assert key in row
-    assert colo["layout"] == "colocated" and actors["layout"] == "actors"
-    for row in (colo, actors):                                             # both layouts really flown
+    assert colo["layout"] == "colocated" and actors["layout"] == "actors" and actors_ray["layout"] == "actors-ray"
+    # frames left the drone actor: not at all / through the same-node channel / through Ray
+    assert [r["framework"]["frame_transport"] for r in (colo, actors, actors_ray)] == [[], ["channel"], ["ray"]]
+    for row in (actors, actors_ray):                                       # the hop's parts were measured
+        assert {"put_ms", "call_ms", "get_ms"} <= set(row["framework"]["hop_ms"])
+    for row in (colo, actors, actors_ray):                                 # every layout really flown
         assert row["status"] == "measured" and row["framework"]["layout"] == row["layout"]
         for side in ("framework_overhead_ms", "bare_loop_overhead_ms", "naive_ray_overhead_ms"):
             assert set(row[side]) == {"median", "p99"} and 0 <= row[side]["median"] <= row[side]["p99"]

@@ -65,6 +65,17 @@ class RightBox(Analytics):
         return [Detection(class_id=2, class_name="car", score=0.9, box=(u - 5, h / 2 - 5, u + 5, h / 2 + 5))]
 
 
+class Spotter(RightBox):
+    """RightBox that keeps no frame (an analytics in its own actor: a kept frame would keep its channel slot)."""
+
+    name = "spotter"
+
+    def process(self, frame, meta):
+        out = super().process(frame, meta)
+        self.seen.clear()
+        return out
+
+
 def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str | None = None):
     """Plan the run as the driver does, with every analytics colocated and every drone in one drone actor, and
     build that actor's host in this process (no Ray actors); ``record``: an MCAP path for an in-process recorder."""
@@ -242,7 +253,7 @@ def test_frame_copies_on_the_edge_hot_path_and_the_recorder(tmp_path):
     assert rt.stats()["_host"]["frame_copies"] == copies
     assert counts["/d00/camera/cam"] == 3
     assert copies == {"materialised": 3, "recorder_jpeg_encoded": 3, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": 0,
-                      "object_store_put": 0, "object_store_get": 0}
+                      "object_store_put": 0, "object_store_get": 0, "channel_copy": 0}
 
 
 @pytest.mark.parametrize("where", ["edge", "cloud"])
@@ -267,9 +278,49 @@ def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_se
     assert [o["sent"] for o in cam["outlets"]] == [n] and cam["outlets"][0]["dropped"] == 0
     cross = where != "edge"
     assert drone == {"materialised": n, "tier_jpeg_encoded": n if cross else 0, "tier_jpeg_decoded": 0,
-                     "object_store_put": 0 if cross else n, "object_store_get": 0, "recorder_jpeg_encoded": 0}
+                     "object_store_put": 0 if cross else n, "object_store_get": 0, "recorder_jpeg_encoded": 0,
+                     "channel_copy": 0}  # lock-step cascades are tracked by Ray calls: no channel
     assert ana == {"materialised": 0, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": n if cross else 0,
-                   "object_store_put": 0, "object_store_get": 0 if cross else n, "recorder_jpeg_encoded": 0}
+                   "object_store_put": 0, "object_store_get": 0 if cross else n, "recorder_jpeg_encoded": 0,
+                   "channel_copy": 0}
+
+
+@pytest.mark.parametrize("transport", ["channel", "ray"])
+def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, transport):
+    """A real run (not lock-step) with a frame analytics in its own actor on this node and navigation coming back:
+    with ``same_node_transport: channel`` every frame that left the drone actor was copied once into a shared-memory
+    slot and nothing went through the object store; with ``ray`` each was put once and read once. Either way the
+    analytics saw every frame that was sent, and its results reached the drone's trajectory scheduler."""
+    env = _env(1)
+    env.cfg.same_node_transport = transport
+    drone = env.get_robot_by_id("d00")
+    from aerodaas.schedulers import TrajectoryScheduler
+
+    sched = TrajectoryScheduler(env)
+    env.set_trajectory_scheduler(sched)
+    det = Spotter()
+    det.deploy(env.get_compute_resource_by_id("edge"))  # its own actor
+    follow = FollowAnalytics(target_classes=["car"], confirm_hits=1)
+    follow.deploy(env.get_compute_resource_by_id("edge"), colocate=True)  # in the drone actor: results come back
+    sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
+                                       priority=1))
+    res = env.start_mission(timeout=4.0)
+    hosts = res.stats["_hosts"]
+    d_copies, a_copies = hosts["drone/d00"]["frame_copies"], hosts["analytics/edge/spotter#1"]["frame_copies"]
+    cam = res.stats["d00"]["cameras"]["cam"]
+    (outlet,) = cam["outlets"]
+    sent = outlet["sent"]
+    analysed = next(a for a in res.stats["d00"]["analytics"] if a["name"] == "spotter")
+    assert sent > 10 and outlet["transport"] == transport and outlet["failed"] == 0
+    assert analysed["received"] == sent and analysed["errors"] == 0
+    if transport == "channel":
+        assert d_copies["channel_copy"] == sent and d_copies["object_store_put"] == 0
+        assert a_copies["object_store_get"] == 0
+    else:
+        assert d_copies["object_store_put"] == sent == a_copies["object_store_get"] and d_copies["channel_copy"] == 0
+    lat = res.stats["d00"]["scheduler"]
+    assert lat["frames_with_latency"] > 0  # navigation from the other actor's detections reached this drone
+    assert all(k in r for r in lat["latency_records"] for k in ("put_ms", "call_ms", "get_ms"))
 
 
 def test_navigation_reaches_the_backend_before_the_next_tick():
@@ -358,6 +409,7 @@ def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
     process_batch call (its max_batch allows 4); every frame still gets its own output, in order."""
     from aerodaas.actors.analytics_component import AnalyticsComponent
     from aerodaas.actors.host import Host
+    from aerodaas.messages import FrameMsg, Port
     from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
 
     host = Host("analytics/edge/batchprobe#1", "edge", 0, workers=2)
@@ -367,22 +419,21 @@ def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
     host.publish = lambda src, envs, tok=None, inline=True: published.extend(envs)  # what it hands on
     k = CameraIntrinsics.from_hfov(16, 12, 78.0)
 
-    def env(robot: str, t: float) -> dict:
+    def env(robot: str, t: float) -> FrameMsg:
         meta = FrameMeta(robot_id=robot, sensor_id="cam", seq=1, capture_time=t, wall_time=time.time(), intrinsics=k,
                          pose=FramePose(position=(0.0, 0.0, 3.0), yaw=90.0))
-        return {"kind": "frame", "data": np.zeros((12, 16, 3), np.uint8), "meta": meta, "sim_t": t, "trace": {},
-                "robot": robot}
+        return FrameMsg(robot=robot, sim_t=t, data=np.zeros((12, 16, 3), np.uint8), meta=meta)
 
-    first = threading.Thread(target=comp.offer, args=("in", env("d00", 0.1)))
+    first = threading.Thread(target=comp.offer, args=(Port("in"), env("d00", 0.1)))
     first.start()
     time.sleep(0.03)  # d00's frame is being processed: the next three wait
     for r in ("d01", "d02", "d03"):
-        assert comp.offer("in", env(r, 0.1))
+        assert comp.offer(Port("in"), env(r, 0.1))
     first.join(5)
     deadline = time.time() + 5
     while len(published) < 4 and time.time() < deadline:
         time.sleep(0.01)
     host.close()
     assert obj.calls == [1, 3], obj.calls  # one alone, then the three that waited in one call
-    assert [e["robot"] for e in published] == ["d00", "d01", "d02", "d03"] and comp.batched == 3
+    assert [m.robot for m in published] == ["d00", "d01", "d02", "d03"] and comp.batched == 3
     assert comp.processed == 4 and comp.dropped == 0

@@ -12,10 +12,12 @@ frames, in one invocation, **interleaved**: round-robin windows of ``--window`` 
 round) until each has had ``--duration`` seconds, so a drift in the machine's load hits all of them alike:
 
 * ``framework`` — the AeroDaaS runtime in each ``--layout``: ``colocated`` (detector and follow deployed with
-  ``colocate=True``: everything runs in the drone actor, zero actor hops) and ``actors`` (the detector in its own
-  analytics actor: the frame crosses one process boundary as an ObjectRef, detections come back as a small
-  message to the follow controller colocated in the drone actor); one short mission per window (its take-off is
-  not measured), optionally recorded (``--record``: then an unrecorded copy joins the rotation,
+  ``colocate=True``: everything runs in the drone actor, zero actor hops), ``actors`` (the detector in its own
+  analytics actor on the same node, reached through the run's same-node channel — the frame copied once into a
+  shared-memory slot, the message and the detections coming back on a Unix socket, :mod:`aerodaas.actors.channel`
+  — to the follow controller colocated in the drone actor) and ``actors-ray`` (the same actors with
+  ``same_node_transport: ray``: the frame ``ray.put`` once and an actor call per frame, the detections in the
+  call's reply); one short mission per window (its take-off is not measured), optionally recorded (``--record``: then an unrecorded copy joins the rotation,
   ``framework_unrecorded_overhead_ms``, so the recording's cost shows);
 * ``bare_loop`` — one process, plain function calls: the floor;
 * ``naive_ray`` — one Ray actor per component, ``ray.put`` + actor call per hop (:mod:`.peers_naive_ray`);
@@ -44,7 +46,7 @@ from .pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, 
                        FollowStage, Pacer, mp, overheads, parsed_config, summary)
 
 RESOLUTIONS = ((1280, 720), (640, 480))
-LAYOUTS = ("colocated", "actors")
+LAYOUTS = ("colocated", "actors", "actors-ray")
 NOT_MEASURED = "not flown in this invocation"
 PEERS = ("bare_loop", "naive_ray", "dora_rs")
 
@@ -61,7 +63,7 @@ class FrameworkWindows:
                  layout: str = "colocated") -> None:
         self.args, self.record_dir, self.layout = (width, height, kind, stub_ms), record_dir, layout
         self.n, self.info = 0, {"frames_captured": 0, "frames_dropped_busy_detector": 0, "host_errors": 0,
-                                "dispatch": [], "recording_bytes": 0}
+                                "dispatch": [], "recording_bytes": 0, "transports": set()}
 
     def window(self, seconds: float) -> list[dict]:
         from aerodaas import Environment, FollowAnalytics, PriorityQueue, runtime
@@ -71,6 +73,7 @@ class FrameworkWindows:
 
         width, height, kind, stub_ms = self.args
         env = Environment(parsed_config(width, height, kind))
+        env.cfg.same_node_transport = "ray" if self.layout == "actors-ray" else "channel"
         drone = env.get_robot_by_id("uav")
         edge = env.get_compute_resource_by_id("edge")
         sched = TrajectoryScheduler(env)
@@ -93,6 +96,7 @@ class FrameworkWindows:
         i["frames_dropped_busy_detector"] += res.stats["uav"]["analytics"][0].get("dropped", 0)
         i["host_errors"] += sum(h.get("error_count", 0) for h in res.stats.get("_hosts", {}).values())
         i["dispatch"].append((cam.get("dispatch_ms_median"), cam.get("dispatch_ms_p99")))
+        i["transports"].update(o.get("transport") for o in cam.get("outlets", []))  # how frames left the drone
         if rec and os.path.exists(rec):
             i["recording_bytes"] += os.path.getsize(rec)
             os.remove(rec)
@@ -119,6 +123,8 @@ class FrameworkWindows:
                # and p99 from the camera's stats: the runtime does not pair it with each frame's latency record)
                "capture_dispatch_ms": {"median": d_med, "p99": d_p99},
                "layout": self.layout, "recorded": self.record_dir is not None,
+               # how the frames left the drone actor: [] (colocated), ["channel"] or ["ray"]
+               "frame_transport": sorted(t for t in i["transports"] if t),
                "recording_bytes": i["recording_bytes"],
                "honest_overhead_ms": None}
         if kind == "stub" and recs:
@@ -292,7 +298,7 @@ def _fmt(mp_: dict | None) -> str:
 
 
 def _line(row: dict) -> str:
-    return (f"overhead {row['detector']:5s} {row['resolution']} {row['layout']:9s} median/p99 ms: "
+    return (f"overhead {row['detector']:5s} {row['resolution']} {row['layout']:10s} median/p99 ms: "
             f"framework {_fmt(row['framework_overhead_ms'])} | bare {_fmt(row['bare_loop_overhead_ms'])} | "
             f"naive Ray {_fmt(row['naive_ray_overhead_ms'])} | dora-rs {_fmt(row['dora_rs_overhead_ms'])}"
             + "".join(f" | {k[:-3]} {_fmt(v)}" for k, v in ((row.get("framework") or {}).get("hop_ms") or {}).items()))
@@ -315,8 +321,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--stub-ms", type=float, default=10.0, help="inference time of the fixed-cost stub detector, ms")
     p.add_argument("--detector", choices=["stub", "yolox", "both"], default="both")
     p.add_argument("--resolution", action="append", help="WxH (repeatable; default 1280x720 and 640x480)")
-    p.add_argument("--layout", choices=["colocated", "actors", "both"], default="both",
-                   help="AeroDaaS layout(s) to fly: colocated (zero hops), actors (the detector in its own actor), both")
+    p.add_argument("--layout", choices=[*LAYOUTS, "both", "all"], default="all",
+                   help="AeroDaaS layout(s) to fly: colocated (zero hops), actors (the detector in its own actor, "
+                        "same-node channel), actors-ray (its own actor, Ray calls), both (colocated + actors), "
+                        "all (default)")
     p.add_argument("--record", action="store_true", help="record the AeroDaaS runs to MCAP (recording cost shows)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
@@ -347,7 +355,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                 print(f"aerodaas bench overhead: the YOLOX-Nano configuration needs the model and imagery: {e}",
                       file=sys.stderr)
                 return 2
-        layouts = LAYOUTS if a.layout == "both" else (a.layout,)
+        layouts = {"both": ("colocated", "actors"), "all": LAYOUTS}.get(a.layout, (a.layout,))
         emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
         return 0
 

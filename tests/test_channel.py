@@ -1,0 +1,161 @@
+"""Same-node channels (aerodaas.actors.channel) on their own: a server and an outlet in this process, talking over a
+real abstract Unix socket and real POSIX shared memory."""
+from __future__ import annotations
+
+import gc
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from aerodaas.actors.channel import ChannelOutlet, ChannelServer, channel_address
+from aerodaas.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
+from aerodaas.models import AeroNavigation
+
+KEY = os.urandom(32)
+
+
+def _wait(cond, timeout_s: float = 10.0) -> bool:
+    """True as soon as ``cond()`` is (called until then, never once more), False after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+class Receiver:
+    """A stand-in for an actor's ``Host.deliver``: remembers what arrived, answers with a reply for the sender,
+    optionally keeps the frames or blocks until released."""
+
+    def __init__(self, keep: bool = False) -> None:
+        self.got: list = []
+        self.kept: list = []
+        self.keep = keep
+        self.gate = threading.Event()
+        self.gate.set()
+
+    def __call__(self, d: Delivery) -> list:
+        self.gate.wait(10)
+        m = d.msg
+        arr = m.data if isinstance(m, FrameMsg) else None
+        self.got.append((d.cid, d.port, type(m).__name__, None if arr is None else (arr.shape, bool(arr.flags.writeable),
+                                                                                     int(arr[0, 0, 0]), int(arr.sum() % 997))))
+        if self.keep and arr is not None:
+            self.kept.append(arr)
+        nav = NavigationMsg(robot=m.robot, sim_t=m.sim_t, data=AeroNavigation(waypoints=[]), trace=dict(m.trace))
+        return [Delivery("d1/scheduler", Port("priority", 1), nav)]
+
+
+def _frame(value: int, shape=(720, 1280, 3)) -> FrameMsg:
+    a = np.full(shape, value, np.uint8)
+    a[0, 1, 2] = (value + 1) % 256
+    a.flags.writeable = False
+    return FrameMsg(robot="d1", sim_t=0.1 * value, data=a, trace={"capture_wall": time.time()})
+
+
+@pytest.fixture
+def address(request):
+    return channel_address(KEY, f"test/{request.node.name}/{os.getpid()}")
+
+
+def test_frames_arrive_read_only_and_equal_and_replies_come_back(address):
+    rx = Receiver()
+    srv = ChannelServer(address, KEY, rx)
+    replies: list = []
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
+    try:
+        for v in (3, 7, 11):
+            assert out.send(_frame(v)) is not None
+            assert _wait(lambda: len(replies) == (3, 7, 11).index(v) + 1)
+        out.send(ValueMsg(robot="d1", sim_t=1.0, data={"battery": 90}))
+        assert _wait(lambda: len(rx.got) == 4)
+        want = [(v, int(_frame(v).data.sum() % 997)) for v in (3, 7, 11)]
+        assert [(g[3][2], g[3][3]) for g in rx.got[:3]] == want
+        assert all(g[:3] == ("detector#1", Port("in"), "FrameMsg") and g[3][0] == (720, 1280, 3) and not g[3][1]
+                   for g in rx.got[:3])
+        assert rx.got[3][2] == "ValueMsg" and rx.got[3][3] is None
+        assert all(d.cid == "d1/scheduler" and isinstance(d.msg, NavigationMsg) for d in replies)
+        assert all("put_ms" in d.msg.trace and "get_ms" in d.msg.trace for d in replies[:3])
+        st = out.stats()
+        # one slot reused for every frame: the receiver let go of each before the next was sent
+        assert st["sent"] == 4 and st["dropped"] == 0 and st["failed"] == 0 and st["slots"] == 1
+    finally:
+        out.close()
+        srv.close()
+
+
+def test_in_flight_limit_drops_and_counts(address):
+    rx = Receiver()
+    rx.gate.clear()  # the receiver is busy with the first delivery
+    srv = ChannelServer(address, KEY, rx)
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None)
+    try:
+        assert out.send(_frame(1, (48, 64, 3))) is not None
+        assert out.send(_frame(2, (48, 64, 3))) is None and out.dropped == 1
+        rx.gate.set()
+        assert _wait(lambda: len(rx.got) == 1 and not out._in_flight)
+        assert out.send(_frame(3, (48, 64, 3))) is not None
+        assert _wait(lambda: len(rx.got) == 2)
+    finally:
+        out.close()
+        srv.close()
+
+
+def test_a_kept_frame_keeps_its_slot_until_it_is_collected(address):
+    """An analytics that keeps frames keeps their slots (as an ObjectRef keeps its object): the sender never
+    overwrites them; with every slot held it drops and counts; once the frames are collected the slots come back."""
+    rx = Receiver(keep=True)
+    srv = ChannelServer(address, KEY, rx)
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None,
+                        max_slots=3)
+    try:
+        for v in (1, 2, 3):
+            assert out.send(_frame(v, (48, 64, 3))) is not None
+            assert _wait(lambda: not out._in_flight)
+        assert out.send(_frame(4, (48, 64, 3))) is None and out.slots_exhausted == 1
+        assert [int(a[0, 0, 0]) for a in rx.kept] == [1, 2, 3]  # nothing was overwritten
+        rx.kept.clear()
+        gc.collect()
+        assert _wait(lambda: all(s.free for s in out._slots.values()))
+        assert out.send(_frame(5, (48, 64, 3))) is not None
+        assert _wait(lambda: len(rx.got) == 4) and rx.got[-1][3][2] == 5
+    finally:
+        out.close()
+        srv.close()
+
+
+def test_a_restarted_receiver_is_reconnected_and_in_flight_items_count_as_failed(address):
+    rx = Receiver()
+    rx.gate.clear()
+    srv = ChannelServer(address, KEY, rx)
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=2, reply_to=None, on_reply=lambda r: None,
+                        retry_s=0.05)
+    try:
+        assert out.send(_frame(1, (48, 64, 3))) is not None
+        srv.close()  # the receiving actor dies with a delivery in flight
+        rx.gate.set()
+        assert _wait(lambda: out.failed >= 1 and out._conn is None)
+        rx2 = Receiver()
+        srv = ChannelServer(address, KEY, rx2)  # restarted: the same address again
+        assert _wait(lambda: out.send(_frame(2, (48, 64, 3))) is not None)
+        assert _wait(lambda: len(rx2.got) == 1) and rx2.got[0][3][2] == 2 and out.reconnects >= 1
+    finally:
+        out.close()
+        srv.close()
+
+
+def test_nobody_serving_or_a_wrong_key_is_refused(address):
+    with pytest.raises(OSError):
+        ChannelOutlet(address, KEY, "x", Port("in"), 1, None, lambda r: None)
+    srv = ChannelServer(address, KEY, Receiver())
+    try:
+        from multiprocessing import AuthenticationError
+
+        with pytest.raises((AuthenticationError, OSError, EOFError)):
+            ChannelOutlet(address, os.urandom(32), "x", Port("in"), 1, None, lambda r: None)
+    finally:
+        srv.close()
