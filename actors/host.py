@@ -1,37 +1,42 @@
-"""The data plane: one host process per tier, in which co-located components hand items to each other in memory.
+"""The data plane inside one actor of a run: its components hand items to each other in memory, and items for
+components of other actors leave through outlets.
 
 Every component of an application — a drone (its vehicle backend, flight logic, odometry and stat-stream
-sensors), a camera, an analytics, a trajectory scheduler — is an actor *in the API and in placement*: it has a
-tier, it is placed with a Ray ``label_selector`` on ``tier``, and it is reached through a handle. What changed
-(issue 6) is the data plane: all components placed on the same tier of a run share one Ray actor process, a
-:class:`Host`, instead of one worker process each. Inside a host:
+sensors), a camera, an analytics, a trajectory scheduler — lives in one of the run's Ray actors (a drone actor, an
+analytics actor, a dispatcher actor; :mod:`aerodaas.dataflow` decides which). Each actor holds one :class:`Host`:
 
 * a component is a *mailbox actor* (:class:`Component`): it processes one item at a time, in order; an item
   for an idle component runs **in the delivering thread** (no thread hop, no serialisation, no copy: a frame
-  is the same ``ndarray`` object from the camera to the last analytics); an item for a busy component is queued
-  up to its stream ``buffer`` (then dropped and counted, so a slow consumer never stalls the camera or the
-  control loop);
-* the clock thread (:meth:`Host.run`) steps every vehicle, publishes odometry and the stat-stream, triggers
-  camera captures and runs each drone's control ticks; it never runs components itself: it submits work to a
-  small thread pool (OpenCV and onnxruntime release the GIL, so renders and inference overlap on 2 cores);
+  is the same ``ndarray`` object from the camera to the last colocated analytics); an item for a busy component
+  is queued up to its stream ``buffer`` (then dropped and counted, so a slow consumer never stalls the camera or
+  the control loop); items waiting for an analytics that takes batches go to it in one call;
+* in a drone actor the clock thread (:class:`~.host_runtime.HostRuntime`) steps every vehicle, publishes
+  odometry and the stat-stream, triggers camera captures and runs each drone's control ticks; it never runs
+  components itself: it submits work to a small thread pool (OpenCV and onnxruntime release the GIL, so renders
+  and inference overlap on 2 cores);
 * when an analytics hands navigation to the trajectory scheduler, the drone applies it at once (not at its next
   control tick), so the end-to-end latency ends at the command reaching the vehicle backend.
 
-Items that cross processes (a component on another host, e.g. cloud analytics) go through Ray actor calls
-(:class:`RemoteOutlet`, bounded in flight); frames cross tiers as JPEG bytes.
+Items for a component of another actor (:class:`~aerodaas.messages.Message` kinds, typed) leave through that
+edge's outlet, bounded in flight: a same-node channel when the other actor serves one on this machine
+(:mod:`.channel`: the frame copied once into shared memory, the message and its reply on a Unix socket), else a
+Ray actor call (:class:`RemoteOutlet`: the frame put once into the object store on one tier, JPEG-encoded across
+tiers). Outputs bound for the sender come back in the reply of the same delivery.
 
-Frame copies per frame (counted in :class:`FrameCopies`, ``Host.copies``, reported in the host stats as
+Frame copies per frame (counted in :class:`FrameCopies`, ``Host.copies``, reported in the actor's stats as
 ``frame_copies``): the camera materialises the pixels once (render, or the vehicle's decoded video, or a
-recording's decoded JPEG); from there **0 copies** to every reader on the same host (the same read-only
-``ndarray`` object reaches the detector and any other edge analytics; follow analytics, scheduler and drone get
-detections and navigation, not pixels); **+1 JPEG encode** in the recorder's writer thread when the run is
-recorded (``foxglove.CompressedImage``); **+1 JPEG encode on the sending host and +1 decode on the receiving host**
-per edge that crosses tiers (e.g. edge camera -> cloud analytics); +1 ``ray.put`` per edge to another host of the
-same tier (the receiver's ``ray.get`` maps the object store's shared memory on the same node).
+recording's decoded JPEG); from there **0 copies** to every reader in the same actor (follow analytics, scheduler
+and drone get detections and navigation, not pixels); **+1 JPEG encode** when the run is recorded (in the
+recorder's writer thread, or the sending actor's for the run's recorder actor); **+1 copy** into a channel slot
+per delivery to another actor on the same machine (read in place there); **+1 JPEG encode on the sending actor
+and +1 decode on the receiving one** per edge that crosses tiers; +1 ``ray.put`` per delivery to an actor of the
+same tier on another machine (or with ``same_node_transport: ray``; the receiver's ``ray.get`` maps the object
+store's shared memory on its node).
 
 Lock-step: with ``lockstep`` the clock waits after every frame (and odometry message) for its whole cascade —
-every item derived from it, on this host and on others — before simulated time moves on (:class:`Cascade`);
-queues are then unbounded, so nothing is dropped.
+every item derived from it, in this actor and in others — before simulated time moves on (:class:`Cascade`);
+queues are then unbounded, so nothing is dropped, and deliveries to other actors are Ray calls (the cascade
+follows their ObjectRefs).
 """
 from __future__ import annotations
 
@@ -340,8 +345,8 @@ class RemoteOutlet:
 
 
 class Host:
-    """One process's share of a run: its components, the routes between them, the worker pool and (on the host
-    that has drones) the clock. Plain Python: :class:`HostActor` is the Ray actor around it.
+    """One actor's share of a run: its components, the routes between them, the outlets to other actors and the
+    worker pool. Plain Python: :class:`~.actor_base.ActorBase` is the Ray actor around it.
 
     ``routes`` maps a producing component id to its subscribers ``[(component id, port, buffer)]``; components
     of other hosts are reached through ``peers`` (host id -> actor handle) and ``location`` (component id ->

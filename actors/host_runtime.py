@@ -1,13 +1,12 @@
 """HostRuntime: builds an actor's components (cameras, analytics, trajectory schedulers, drones) from its spec,
 runs the drones' clock and checkpoints, and answers the driver's calls.
 
-Envelopes between components are dicts ``{"kind", "data", "meta", "sim_t", "trace", "robot"}``: ``kind`` is
-``frame`` (data: a read-only (H, W, 3) uint8 BGR ``ndarray``, shared by every reader, never copied),
-``detections`` (list of Detection), ``nav`` (AeroNavigation), ``odometry`` (Odometry dict) or ``value``;
-``meta`` is the FrameMeta of the frame the item derives from; ``robot`` the robot it belongs to; ``trace``
-accumulates the per-frame timings used for latency accounting (``capture_wall``: ``time.time()`` when the frame
-was ready, ``inference_ms``, ``post_ms``). A lock-step envelope also carries its :class:`~.host.Cascade`
-(``tok``).
+Components hand each other typed messages (:mod:`aerodaas.messages`): a camera publishes :class:`FrameMsg` (a
+read-only (H, W, 3) uint8 BGR ``ndarray``, shared by every reader of the actor, never copied there), a drone
+:class:`OdometryMsg` and :class:`StatMsg`, an analytics :class:`DetectionsMsg`, :class:`NavigationMsg` or
+:class:`ValueMsg`; each carries its robot, simulated time, the FrameMeta of its frame and the frame's latency
+trace (``capture_wall``: ``time.time()`` when the frame was ready, ``inference_ms``, ``post_ms``), and in
+lock-step its :class:`~.host.Cascade`.
 """
 from __future__ import annotations
 
