@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 
 from .config import SimulationConfig
+from .preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from .run_report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 
 
@@ -262,34 +263,6 @@ class ComponentHandle:
         return f"ComponentHandle({self.cid!r})"
 
 
-def _scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
-    """The analytics the environment's analytics scheduler places per frame (id -> analytics): those named in
-    ``analytics_scheduler.models``. Raises ConfigError for a named analytics the application does not have, two
-    scheduled analytics sharing a name, or one that is not fed by camera frames."""
-    from .config import ConfigError
-
-    cfg = env.cfg.analytics_scheduler
-    if cfg.name == "default":
-        return {}
-    every = {id(a): a for g in graphs.values() for a in g}
-    out = {i: a for i, a in every.items() if a.name in cfg.models}
-    names = [a.name for a in out.values()]
-    for name in cfg.models:
-        if name not in names:
-            raise ConfigError(f"analytics_scheduler.models.{name}: the application has no analytics named {name!r} "
-                              f"(it has {sorted({a.name for a in every.values()})})")
-        if names.count(name) > 1:
-            raise ConfigError(f"analytics_scheduler.models.{name}: {names.count(name)} analytics share the name "
-                              f"{name!r}; give each scheduled analytics its own name")
-    for a in out.values():
-        bad = [getattr(st.source, "id", repr(st.source)) for st in a.inputs
-               if getattr(st.source, "type", None) != "camera"]
-        if bad or not a.inputs:
-            raise ConfigError(f"analytics_scheduler.models.{a.name}: a scheduled analytics takes camera frames, but "
-                              f"{a.name!r} is fed by {bad or 'nothing'}")
-    return out
-
-
 def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
@@ -307,61 +280,6 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
                 "name": cfg.name, "workload": cfg.resolved_workload(env.cfg), "executors": executors,
                 "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
     return executors
-
-
-def _robot_schedulers(env, robots: list) -> dict[str, Any]:
-    """Each robot's trajectory scheduler. Robots that share one scheduler object (the application plugged one into
-    the environment) get a fork each, holding the missions that robot navigates. Raises ValueError for a queued
-    mission that no robot navigates when several robots share the scheduler (its drone would be a guess)."""
-    by_sched: dict[int, list] = {}
-    for r in robots:
-        by_sched.setdefault(id(r.scheduler or env.trajectory_scheduler()), []).append(r)
-    out: dict[str, Any] = {}
-    for group in by_sched.values():
-        sched = group[0].scheduler or env.trajectory_scheduler()
-        if len(group) == 1:
-            out[group[0].id] = sched
-            continue
-        owned: dict[str, list] = {r.id: [] for r in group}
-        for m in sched._missions:
-            owners = [r for r in group if any(w is i for nav in r.navigations for w in nav.waypoints for i in m.items)]
-            if not owners:
-                raise ValueError(f"mission {m.name!r} (priority {m.priority}) is queued in the shared trajectory scheduler "
-                                 f"but no robot navigates it; call robot.navigate(...) for one of "
-                                 f"{[r.id for r in group]}")
-            owned[owners[0].id].append(m)
-        for r in group:
-            out[r.id] = sched.fork(owned[r.id])
-    return out
-
-
-def _validate(env, robots: list, opts: RunOptions) -> tuple[dict, dict, dict]:
-    """Everything checked before any actor starts: returns (graphs, schedulers, scheduled analytics). Raises
-    ConfigError / ValueError naming the field."""
-    from .config import ConfigError
-    from .dataflow import collect_graph
-
-    if opts.record:
-        from .recording import check_record_path
-
-        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
-    graphs = {}
-    scheds = _robot_schedulers(env, robots)
-    for r in robots:
-        analytics = collect_graph(r)
-        for a in analytics:
-            if a.compute is None:
-                a.deploy(env.get_compute_resources()[0])
-            check = getattr(a, "check", None)
-            if callable(check):
-                check()
-            if getattr(a, "on_error", "continue") not in ("continue", "abort"):
-                raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
-                                  f"{getattr(a, 'on_error')!r}")
-        graphs[r.id] = analytics
-        _check_preplanned(r, scheds[r.id])
-        _check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
-    return graphs, scheds, _scheduled_analytics(env, graphs)
 
 
 def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
@@ -406,8 +324,8 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         sim.speedup = opts.speedup
     if opts.lockstep is not None:
         sim.lockstep = opts.lockstep
-    _check_clocks(robots, sim)
-    graphs, scheds, scheduled = _validate(env, robots, opts)
+    check_clocks(robots, sim)
+    graphs, scheds, scheduled = validate(env, robots, opts)
 
     from .startup_probe import probe
 
@@ -568,69 +486,6 @@ def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
             print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
                   file=sys.stderr)
     return counts, rep
-
-
-def _check_clocks(robots: list, sim: SimulationConfig) -> None:
-    """Real vehicles live in real time: lock-step needs every robot on the simulator. Raises ConfigError. A run
-    that only replays logs runs its clock at the replay rate (so odometry keeps its rate in log time)."""
-    from .config import ConfigError
-
-    if robots and all(r.cfg.backend == "replay" for r in robots):
-        sim.speedup = max(r.cfg.replay.rate for r in robots)
-
-    real = [r.id for r in robots if r.cfg.backend != "sim"]
-    if real and sim.lockstep:
-        raise ConfigError(f"simulation.lockstep: true needs every robot on backend 'sim'; {real} fly real or "
-                          f"emulated vehicles, which cannot wait for the analytics (set lockstep to false)")
-
-
-def _check_preplanned(robot, sched) -> None:
-    """Check every queued mission of ``robot`` against its safety limits before any actor starts (legs chained
-    from the take-off point). Raises :class:`aerodaas.safety.SafetyViolation`; clamped items replace the
-    originals."""
-    from .models import AeroNavigation, SchedulingType
-    from .safety import SafetyGate
-
-    gate = SafetyGate(robot.cfg.safety, robot.cfg.limits, robot.cfg.home)
-    start = (0.0, 0.0, robot.cfg.takeoff_altitude)
-    for m in sched._missions:
-        nav = AeroNavigation(waypoints=list(m.items), scheduling_type=SchedulingType.ORDERED, name=m.name)
-        m.items = list(gate.check_navigation(nav, start).waypoints)
-
-
-def _check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
-    """``mavlink.use_autopilot_mission``: the robot's navigation must be a static, pre-planned waypoint list that
-    an uploaded mission can express. Raises ConfigError naming the field and the reason: analytics navigating
-    through the scheduler, the HITL API on (both add waypoints mid-flight), time-driven navigation, velocity
-    commands or a land/rtl action before the end (MissionFileError), or no waypoints at all."""
-    from .config import ConfigError
-    from .missionfile import MissionFileError, navigation_to_plan
-    from .models import AeroNavigation, SchedulingType, Waypoint
-
-    mc = robot.cfg.mavlink
-    if robot.cfg.backend != "mavlink" or mc is None or not mc.use_autopilot_mission:
-        return
-    field = f"robots[{robot.id!r}].mavlink.use_autopilot_mission: true"
-    if sched.stream_inputs:
-        raise ConfigError(f"{field} flies a mission uploaded before take-off, but {len(sched.stream_inputs)} analytics "
-                          "stream(s) navigate this robot through its trajectory scheduler (analytics-driven "
-                          "navigation); set it to false to fly with position/velocity targets")
-    if hitl_on:
-        raise ConfigError(f"{field} flies a mission uploaded before take-off, but the human-in-the-loop API is on "
-                          "(hitl.enabled / --hitl) and could add waypoints mid-flight; turn one of them off")
-    timed = [m.name for m in sched._missions if not m.distance_driven]
-    if timed:
-        raise ConfigError(f"{field}: navigation {timed} is time-driven; an autopilot mission holds only "
-                          "distance-driven waypoints")
-    items = sched.queued()
-    if not any(isinstance(i, Waypoint) for i in items):
-        raise ConfigError(f"{field}: robot {robot.id!r} has no pre-planned waypoints to upload "
-                          "(call drone.navigate(...) before start_mission())")
-    try:
-        navigation_to_plan(AeroNavigation(waypoints=items, scheduling_type=SchedulingType.ORDERED), robot.cfg.home,
-                           "land", takeoff_altitude=robot.cfg.takeoff_altitude)
-    except MissionFileError as e:
-        raise ConfigError(f"{field}: the navigation cannot be an autopilot mission: {e}") from None
 
 
 def _pull_getter(sensor, h: dict):
