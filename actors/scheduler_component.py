@@ -118,7 +118,8 @@ class SchedulerComponent(Component):
             rec = {"robot": self.robot_id, "t": msg.sim_t, "e2e_ms": e2e, "applied": applied,
                    "inference_ms": tr.get("inference_ms", 0.0), "post_ms": tr.get("post_ms", 0.0),
                    "overhead_ms": max(0.0, e2e - tr.get("inference_ms", 0.0) - tr.get("post_ms", 0.0))}
-            for k in ("put_ms", "call_ms", "get_ms", "reply_ms"):  # the actor hop, when the frame made one
+            for k in ("put_ms", "call_ms", "get_ms", "reply_ms", "dispatch_ms"):  # the actor hop, when the frame
+                # made one; the capture's wait for a pool thread after the clock's tick
                 if k in tr:
                     rec[k] = tr[k]
             self.latency.append(rec)
