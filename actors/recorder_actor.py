@@ -27,6 +27,9 @@ class RecorderActor:
         self._cp: dict[str, dict] = {}
         self._specs: dict[str, bytes] = {}
         self._wiring = b""
+        self._specs_kept = threading.Event()
+        self._set_up = threading.Event()  # setup() done (or failed): record() may hand messages on
+        self._setup_lock = threading.Lock()
         self._lock = threading.Lock()
         self.received = 0
 
@@ -36,9 +39,13 @@ class RecorderActor:
         from .recorder import RecorderService
 
         rec = self.spec.get("record")
-        if rec and self.recorder is None:
-            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), live=rec.get("live"),
-                                            max_pending_frames=64)
+        with self._setup_lock:
+            try:
+                if rec and self.recorder is None:
+                    self.recorder = RecorderService(rec.get("path"), rec.get("meta"), live=rec.get("live"),
+                                                    max_pending_frames=64)
+            finally:
+                self._set_up.set()
         live = getattr(self.recorder, "live", None)
         return {"host": "recorder", "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id(),
                 "live_url": live.url if live is not None else None, "components": []}
@@ -47,19 +54,26 @@ class RecorderActor:
         return os.getpid()
 
     def record(self, batch: list) -> int:
-        """Messages of another actor (:class:`~.recorder.RemoteRecorder`); returns how many were taken."""
+        """Messages of another actor (:class:`~.recorder.RemoteRecorder`); returns how many were taken. The other
+        actors set up while this one does: their first messages wait (at most 60 s) for the file to be open."""
         from .recorder import deliver
 
+        self._set_up.wait(60.0)
         self.received += len(batch)
         return deliver(self.recorder, batch) if self.recorder is not None else 0
 
     def keep_specs(self, specs: dict[str, bytes], wiring: bytes) -> bool:
         """Keep every other actor's pickled spec and the run's pickled wiring (read by :meth:`spec_of`)."""
         self._specs, self._wiring = dict(specs), wiring
+        self._specs_kept.set()
         return True
 
-    def spec_of(self, host_id: str) -> tuple[bytes, bytes]:
-        """(pickled spec, pickled wiring) of actor ``host_id``. Raises KeyError."""
+    def spec_of(self, host_id: str, wait_s: float = 60.0) -> tuple[bytes, bytes]:
+        """(pickled spec, pickled wiring) of actor ``host_id``, waiting up to ``wait_s`` seconds for
+        :meth:`keep_specs` (the driver starts every actor right after this one, without waiting). Raises KeyError
+        for an unknown actor, TimeoutError when the specs never came."""
+        if not self._specs_kept.wait(wait_s):
+            raise TimeoutError(f"recorder: no specs after {wait_s:g} s (actor {host_id!r} asked)")
         return self._specs[host_id], self._wiring
 
     def checkpoint(self, robot_id: str, state: dict) -> bool:

@@ -366,8 +366,12 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             if scheduled:
                 cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
             actors = start_actors(plan, placement, sim.lockstep, env.cfg.actor_max_restarts)
-            ray.get(actors["recorder"].setup.remote())  # the file and the live view first: a bad one stops here
-            described = ray.get([h.setup.remote() for hid, h in actors.items() if hid != "recorder"])
+            # every actor sets up at once (drones connect to their vehicles); the recorder's answer is read first:
+            # a bad file or live view is the error reported
+            rec_setup = actors["recorder"].setup.remote()
+            others = [h.setup.remote() for hid, h in actors.items() if hid != "recorder"]
+            ray.get(rec_setup)
+            described = ray.get(others)
         except KeyboardInterrupt:
             raise
         except Exception as e:  # noqa: BLE001 - e.g. a vehicle that does not answer: a failed run, not a traceback

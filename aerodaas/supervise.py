@@ -66,10 +66,11 @@ def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -
     handles["recorder"] = RecorderActor.options(name=rec_plan.name, scheduling_strategy=here).remote(rec_plan.spec)
     # every other actor reads its spec (analytics, schedulers: possibly large) and the wiring from the recorder
     # actor, which lives as long as the run: a restarted actor reads the same again, and no constructor argument
-    # sits in the object store (Ray cannot promise those across restarts, ray-project/ray#53727)
-    ray.get(handles["recorder"].keep_specs.remote(
+    # sits in the object store (Ray cannot promise those across restarts, ray-project/ray#53727). Not waited for:
+    # the other actors start while the recorder's process does (their spec_of waits for it), not after
+    handles["recorder"].keep_specs.remote(
         {hid: cloudpickle.dumps(a.spec) for hid, a in plan.actors.items() if hid != "recorder"},
-        cloudpickle.dumps(wiring)))
+        cloudpickle.dumps(wiring))
     for hid, a in plan.actors.items():
         if hid == "recorder":
             continue
