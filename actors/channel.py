@@ -16,7 +16,9 @@ and restarts:
   task submission per frame in either direction;
 * a slot is reused only once the receiver released the frame: the receiver sends :class:`SlotFree` when its last
   reference to the array is gone (``weakref.finalize``), so an analytics that keeps a frame keeps its slot, exactly
-  as an ObjectRef would keep its object. A sender whose slots are all held drops the frame and counts it.
+  as an ObjectRef would keep its object. A sender whose slots are all held (a receiver that keeps frames, or an
+  analytics scheduler holding many queued tasks) sends the frame's bytes in the message itself instead (one more
+  copy, counted as ``inline_frames``): never overwritten, never dropped for want of a slot.
 
 Addresses are Linux abstract Unix sockets named from the run and the receiving actor (:func:`channel_address`):
 an actor of another machine (or another network namespace) is simply not found there, and the sender falls back
@@ -225,6 +227,9 @@ class ChannelServer:
                         t0 = time.time()
                         d.msg.data = self._map(d.msg.data, maps, freed, wake)
                         d.msg.trace["get_ms"] = (time.time() - t0) * 1e3
+                    elif isinstance(d.msg, FrameMsg) and isinstance(d.msg.data, np.ndarray):
+                        d.msg.data.flags.writeable = False  # sent inline: shared by every reader here too
+                        d.msg.trace["get_ms"] = 0.0
                     replies = self._deliver(d)
                 except Exception as e:  # noqa: BLE001 - answered as failed; the actor goes on
                     self.failed += 1
@@ -311,7 +316,7 @@ class ChannelOutlet:
         self._conn: Any = None
         self._next_try = 0.0
         self.sent = self.dropped = self.failed = 0
-        self.slots_exhausted = 0  # frames dropped because the receiver still held every slot
+        self.inline_frames = 0  # frames sent in the message itself: the receiver still held every slot
         self.reconnects = 0
         self.closed = False
         self.connect()
@@ -399,7 +404,7 @@ class ChannelOutlet:
 
     def send(self, msg: Message) -> int | None:
         """Send one message (never a lock-step one); returns its delivery number, or None when dropped (too many in
-        flight, every slot held, or the peer is down: counted in ``dropped`` / ``failed``)."""
+        flight, or the peer is down: counted in ``dropped`` / ``failed``)."""
         with self._lock:
             if not self._ensure():
                 self.failed += 1
@@ -412,15 +417,15 @@ class ChannelOutlet:
             if isinstance(msg, FrameMsg):
                 frame = msg.data
                 slot = self._slot(frame.nbytes)
-                if slot is None:
-                    self.dropped += 1
-                    self.slots_exhausted += 1
-                    return None
-                np.copyto(np.ndarray(frame.shape, frame.dtype, buffer=slot.shm.buf), frame)
+                if slot is None:  # every slot held by the receiver: the pixels travel in the message
+                    self.inline_frames += 1
+                    wire = msg.to_wire()
+                else:
+                    np.copyto(np.ndarray(frame.shape, frame.dtype, buffer=slot.shm.buf), frame)
+                    slot_name = slot.shm.name
+                    wire = msg.to_wire(SlotFrame(slot_name, tuple(frame.shape), frame.dtype.str))
                 if self.copies is not None:
                     self.copies.count("channel_copy")
-                slot_name = slot.shm.name
-                wire = msg.to_wire(SlotFrame(slot_name, tuple(frame.shape), frame.dtype.str))
                 wire.trace.update(put_ms=(time.time() - t0) * 1e3)
             else:
                 wire = msg.to_wire()
@@ -442,7 +447,7 @@ class ChannelOutlet:
         with self._lock:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
                     "dropped": self.dropped, "failed": self.failed, "slots": len(self._slots),
-                    "slots_exhausted": self.slots_exhausted, "reconnects": self.reconnects}
+                    "inline_frames": self.inline_frames, "reconnects": self.reconnects}
 
     def close(self) -> None:
         """Close the channel and unlink this outlet's slots (a receiver still holding a frame keeps its mapping)."""

@@ -107,22 +107,24 @@ def test_in_flight_limit_drops_and_counts(address):
 
 def test_a_kept_frame_keeps_its_slot_until_it_is_collected(address):
     """An analytics that keeps frames keeps their slots (as an ObjectRef keeps its object): the sender never
-    overwrites them; with every slot held it drops and counts; once the frames are collected the slots come back."""
+    overwrites them; with every slot held the next frame travels in the message itself (never dropped); once the
+    kept frames are collected their slots are written again."""
     rx = Receiver(keep=True)
     srv = ChannelServer(address, KEY, rx)
     out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None,
                         max_slots=3)
     try:
-        for v in (1, 2, 3):
+        for v in (1, 2, 3, 4):
             assert out.send(_frame(v, (48, 64, 3))) is not None
             assert _wait(lambda: not out._in_flight)
-        assert out.send(_frame(4, (48, 64, 3))) is None and out.slots_exhausted == 1
-        assert [int(a[0, 0, 0]) for a in rx.kept] == [1, 2, 3]  # nothing was overwritten
+        assert out.inline_frames == 1 and out.stats()["slots"] == 3 and out.dropped == 0
+        assert [int(a[0, 0, 0]) for a in rx.kept] == [1, 2, 3, 4]  # nothing was overwritten
+        assert rx.got[3][3][3] == int(_frame(4, (48, 64, 3)).data.sum() % 997)
         rx.kept.clear()
         gc.collect()
         assert _wait(lambda: all(s.free for s in out._slots.values()))
         assert out.send(_frame(5, (48, 64, 3))) is not None
-        assert _wait(lambda: len(rx.got) == 4) and rx.got[-1][3][2] == 5
+        assert _wait(lambda: len(rx.got) == 5) and rx.got[-1][3][2] == 5 and out.inline_frames == 1
     finally:
         out.close()
         srv.close()
