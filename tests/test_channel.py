@@ -119,7 +119,7 @@ def test_a_kept_frame_keeps_its_slot_until_it_is_collected(address):
             assert _wait(lambda: not out._in_flight)
         assert out.inline_frames == 1 and out.stats()["slots"] == 3 and out.dropped == 0
         assert [int(a[0, 0, 0]) for a in rx.kept] == [1, 2, 3, 4]  # nothing was overwritten
-        assert rx.got[3][3][3] == int(_frame(4, (48, 64, 3)).data.sum() % 997)
+        assert rx.got[3][3][3] == int(_frame(4, (48, 64, 3)).data.sum() % 997) and not rx.got[3][3][1]  # read-only
         rx.kept.clear()
         gc.collect()
         assert _wait(lambda: all(s.free for s in out._slots.values()))
