@@ -30,7 +30,7 @@ def other_node(tmp_path, monkeypatch):
     def no_download(*a, **k):
         raise AssertionError("the node tried to download the model")
 
-    monkeypatch.setattr("aerodaas.detect._download", no_download)
+    monkeypatch.setattr("aerodaas.model_files._download", no_download)
     return tmp_path / "node-cache" / "aerodaas" / "models" / "shipped"
 
 
