@@ -329,7 +329,9 @@ def test_resolve_model_unknown_name():
 def test_sha_cache_is_per_mtime(tmp_path):
     f = tmp_path / "x.bin"
     f.write_bytes(b"a")
-    h1 = D._sha256_file(f)
+    from aerodaas.model_files import _sha256_file
+
+    h1 = _sha256_file(f)
     f.write_bytes(b"bb")
     os.utime(f, ns=(1, 1))
-    assert D._sha256_file(f) != h1
+    assert _sha256_file(f) != h1
