@@ -1,0 +1,45 @@
+"""The configuration's foundations: :class:`ConfigError`, the strict base of every section (unknown keys refused,
+finite numbers, strict types), the documented physical bounds and the "did you mean" helper."""
+from __future__ import annotations
+
+
+from pydantic import BaseModel, ConfigDict
+
+
+DATA_DIR_ENV = "AERODAAS_DATA_DIR"
+
+
+class ConfigError(ValueError):
+    """A malformed environment file; the message names each bad field and its value."""
+
+
+class _Cfg(BaseModel):
+    """Every configuration section: unknown keys are refused (with a "did you mean" suggestion, see
+    :func:`_format_errors`), numbers must be finite (no NaN/Infinity), and types are strict: ``"yes"`` or ``1``
+    is not a boolean, ``"3"`` is not a number (JSON has real booleans and numbers)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+#: Documented physical bounds of the configuration (README "Configuration bounds"). Numbers outside them are
+#: refused: they are typos or attacks, not vehicles (a 1e308 m/s speed limit disables the check it configures).
+MAX_SPEED_MPS = 100.0  # fastest multirotors are ~ 60 m/s
+MAX_ACCEL_MPS2 = 100.0
+MAX_YAW_RATE_DPS = 3600.0
+MAX_ALTITUDE_M = 10_000.0  # above home
+HOME_ALT_RANGE_M = (-500.0, 9_000.0)  # AMSL: below the Dead Sea shore .. above Everest
+MAX_CAMERA_PX = 8192  # per side
+MAX_CAMERA_FPS = 240.0
+MAX_RATE_HZ = 1000.0  # control, physics, odometry, stream rates
+MAX_SPEEDUP = 1000.0
+MAX_DURATION_S = 86_400.0  # timeouts and intervals: one day
+MAX_BATTERY_WH = 100_000.0
+MAX_POWER_W = 1_000_000.0
+
+
+def did_you_mean(word: str, choices) -> str:
+    """``" (did you mean 'width'?)"`` for the closest of ``choices`` to a misspelt ``word`` (difflib), else ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""

@@ -1,0 +1,412 @@
+"""The environment's configuration (``environment.json`` as a whole): compute resources (places: tier and Ray node
+labels), the simulated world (ground, moving targets), the simulation clock, the HITL API, the analytics scheduler
+and its QoS, the runtime's actor settings; parsing and loading with errors that name the field and the value."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, Field, Strict, ValidationError, field_validator, model_validator
+
+from ..geofence import GeofenceConfig
+
+from .base import ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, did_you_mean
+from .robot import RobotConfig, SensorConfig
+
+
+_LABEL_KEY = re.compile(r"^([a-z0-9]([-a-z0-9.]*[a-z0-9])?/)?[A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?$")
+_LABEL_VALUE = re.compile(r"^([A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?)?$")
+
+
+class ComputeConfig(_Cfg):
+    """A compute resource, and the place its actors run: ``tier`` ``edge`` or ``cloud``; ``labels`` are Ray node
+    labels beyond ``tier`` that a node must carry to run this resource's actors (e.g.
+    ``{"aerodaas/site": "field-2"}``; ``ray start --labels``), matched with Ray's ``label_selector``;
+    ``properties`` e.g. cpus, memory_gb, accelerators (informative). Label keys and values follow Ray's (Kubernetes')
+    label syntax: ``[prefix/]name`` of at most 63 characters, alphanumerics, ``-``, ``_``, ``.``."""
+
+    id: str = Field(min_length=1)
+    tier: Literal["edge", "cloud"]
+    labels: dict[str, str] = Field(default_factory=dict)
+    properties: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _labels(self) -> "ComputeConfig":
+        for k, v in self.labels.items():
+            if k == "tier":
+                raise ValueError(f"labels.tier: the tier is the compute resource's 'tier' field ({self.tier!r}); "
+                                 f"do not repeat it as a label")
+            if not _LABEL_KEY.match(k):
+                raise ValueError(f"labels: {k!r} is not a Ray node label key ([prefix/]name, alphanumerics, '-', '_', "
+                                 f"'.', at most 63 characters)")
+            if not isinstance(v, str) or not _LABEL_VALUE.match(v):
+                raise ValueError(f"labels.{k}: {v!r} is not a Ray node label value (alphanumerics, '-', '_', '.', "
+                                 f"at most 63 characters)")
+        return self
+
+
+class GroundConfig(_Cfg):
+    """The textured ground plane. With ``image`` (any PNG/JPEG) and ``metres_per_pixel``, the image is laid on
+    the ground with its top edge north; ``home_px`` is the pixel (x, y) under the home position (default:
+    image centre). Without ``image``, a procedural ground is generated from ``seed``."""
+
+    image: str | None = None
+    metres_per_pixel: float = Field(default=0.05, gt=0, le=100_000)
+    home_px: Annotated[tuple[float, float], Strict(False)] | None = None
+    seed: int = 0
+    size_m: float = Field(default=120.0, gt=0, le=100_000, description="procedural ground side length, metres")
+
+
+class TargetPathPoint(_Cfg):
+    """Target position (ENU metres from the home of the first robot) at sim time ``t`` seconds."""
+
+    t: float = Field(ge=0, le=MAX_DURATION_S * 365)
+    x: float = Field(ge=-100_000, le=100_000)
+    y: float = Field(ge=-100_000, le=100_000)
+
+    @field_validator("t", "x", "y")
+    @classmethod
+    def _finite(cls, v: float, info) -> float:
+        if not math.isfinite(v):
+            raise ValueError(f"{info.field_name} must be finite, got {v!r}")
+        return v
+
+
+class TargetConfig(_Cfg):
+    """A moving ground target drawn from a crop of a real image. ``crop`` is (x0, y0, x1, y1) in pixels of
+    ``image``; the crop's long axis is drawn ``length_m`` long, facing along its path (the crop's front is
+    its right edge, i.e. the crop image points east). The target exists between the first and last ``path``
+    times; it is linearly interpolated in between."""
+
+    id: str = Field(min_length=1)
+    class_name: str = "car"
+    image: str
+    crop: Annotated[tuple[int, int, int, int], Strict(False)]
+    length_m: float = Field(default=4.3, gt=0, le=100_000)
+    path: list[TargetPathPoint] = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _check(self) -> "TargetConfig":
+        x0, y0, x1, y1 = self.crop
+        if x1 <= x0 or y1 <= y0 or min(self.crop) < 0:
+            raise ValueError(f"crop must be (x0, y0, x1, y1) with x1 > x0 >= 0 and y1 > y0 >= 0, got {self.crop}")
+        ts = [p.t for p in self.path]
+        if any(b <= a for a, b in zip(ts, ts[1:])):
+            raise ValueError(f"path times must be strictly increasing, got {ts}")
+        return self
+
+
+class WorldConfig(_Cfg):
+    ground: GroundConfig = Field(default_factory=GroundConfig)
+    targets: list[TargetConfig] = Field(default_factory=list)
+
+
+class SimulationConfig(_Cfg):
+    """Simulation clock: ``speedup`` x real time; ``lockstep`` makes sim time wait for analytics to consume each
+    frame; ``physics_hz`` is the integration rate."""
+
+    speedup: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
+    lockstep: bool = False
+    physics_hz: float = Field(default=50.0, gt=0, le=MAX_RATE_HZ)
+
+
+class HitlConfig(_Cfg):
+    """Human-in-the-loop HTTP API (see :mod:`aerodaas.hitl`). Loopback-only by default; ``token`` is the
+    bearer token (generated at start and printed once when not given). ``port`` 0 picks a free port."""
+
+    enabled: bool = False
+    host: str = "127.0.0.1"
+    port: int = Field(default=8470, ge=0, le=65535)
+    token: str | None = Field(default=None, min_length=16, max_length=256)
+    docs: bool = Field(default=False, description="serve /docs and /openapi.json (behind the bearer token)")
+
+
+class AnalyticsQosConfig(_Cfg):
+    """Quality of service of one scheduled analytics, in the terms of the Ocularone workload (Raj et al., FGCS 2025):
+    a result within ``deadline_ms`` of the frame's capture earns ``benefit``; running it costs ``edge_cost`` on the
+    edge or ``cloud_cost`` on the cloud, charged whether or not it met the deadline. ``edge_ms`` / ``cloud_ms`` are
+    the expected execution times (ms; the cloud's includes the network round trip) the scheduler plans with."""
+
+    deadline_ms: float = Field(gt=0, le=1e7, description="relative deadline from capture, ms")
+    edge_ms: float = Field(gt=0, le=1e7, description="expected execution time on the edge, ms")
+    cloud_ms: float = Field(gt=0, le=1e7, description="expected round trip on the cloud, ms")
+    benefit: float = Field(ge=0, le=1e9)
+    edge_cost: float = Field(default=0.0, ge=0, le=1e9)
+    cloud_cost: float = Field(default=0.0, ge=0, le=1e9)
+
+
+class AnalyticsSchedulerConfig(_Cfg):
+    """The analytics scheduler (the paper's ``setAnalyticsScheduler``): per frame, it places each *scheduled*
+    analytics on the edge, on the cloud, or drops it with a reason.
+
+    ``name``: a registered scheduler (``EDGE_FIFO`` ... ``DEMS``, ``DEMS-A``, ``GEMS``, ``GAINPLAN``, or a plug-in
+    registered with :func:`aerodaas.schedulers.analytics_base.register_analytics_scheduler`); ``default`` runs
+    every analytics where it is deployed. ``models``: analytics name -> its QoS, inline, or the name of a model
+    of ``workload`` under ``load`` (e.g. ``"HV"`` of ``workloads/ocularone_lambda.json``). Analytics not named
+    here run where they are deployed. ``cloud_executors``: cloud executor actors (tier=cloud nodes, else this
+    node). ``network``: emulated extra cloud latency (:class:`aerodaas.schedulers.dispatch.emulation.NetworkModel` specs, e.g.
+    ``"const:40"`` or ``"normal:60,15"``; ``"none"`` for a real network)."""
+
+    name: str = "default"
+    models: dict[str, AnalyticsQosConfig | str] = Field(default_factory=dict)
+    workload: str | None = Field(default=None, description="workload JSON (Ocularone format) for named models")
+    load: str | None = Field(default=None, description="load of the workload: LIGHT, MEDIUM, HEAVY")
+    cloud_executors: int = Field(default=1, ge=1, le=64)
+    network: list[str] = Field(default_factory=lambda: ["none"])
+    jpeg_quality: int = Field(default=90, ge=10, le=100, description="JPEG quality of frames sent to the cloud")
+
+    @field_validator("network", mode="before")
+    @classmethod
+    def _one_or_many(cls, v: Any) -> Any:
+        return [v] if isinstance(v, str) else v
+
+    @model_validator(mode="after")
+    def _check(self) -> "AnalyticsSchedulerConfig":
+        if self.name == "default":
+            return self
+        from aerodaas.schedulers.analytics_base import analytics_scheduler_names
+
+        names = analytics_scheduler_names()
+        if self.name not in names:
+            raise ValueError(f"name: unknown analytics scheduler {self.name!r}; available: ['default', {', '.join(map(repr, names))}]")
+        if not self.models:
+            raise ValueError(f"models: the {self.name} scheduler needs the QoS of at least one analytics "
+                             f"(analytics name -> {{deadline_ms, edge_ms, cloud_ms, benefit, edge_cost, cloud_cost}})")
+        named = sorted(k for k, v in self.models.items() if isinstance(v, str))
+        if named and (self.workload is None or self.load is None):
+            raise ValueError(f"models: {named} name workload models, which needs 'workload' and 'load'")
+        from aerodaas.schedulers.dispatch.emulation import NetworkModel
+
+        NetworkModel.parse(self.network)  # ValueError naming the bad spec
+        return self
+
+    def resolved_workload(self, base: "EnvironmentConfig | None" = None):
+        """The QoS of every scheduled analytics as a :class:`aerodaas.schedulers.analytics_base.Workload` keyed by
+        analytics name (named models read from ``workload``, resolved like every file of the environment).
+        Raises ConfigError naming the field for a missing file, load or model."""
+        from aerodaas.schedulers.analytics_base import ModelProfile, Workload
+
+        data = None
+        if any(isinstance(v, str) for v in self.models.values()):
+            path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
+                else Path(self.workload)
+            try:
+                data = json.loads(Path(path).read_text())
+            except (OSError, json.JSONDecodeError) as e:
+                raise ConfigError(f"analytics_scheduler.workload: cannot read {str(path)!r}: {e}") from None
+        models = {}
+        for name, v in self.models.items():
+            if isinstance(v, str):
+                try:
+                    p = Workload.from_dict(data, self.load)[v]
+                except (ValueError, KeyError) as e:
+                    raise ConfigError(f"analytics_scheduler.models.{name}: {str(e).strip(chr(34))}") from None
+                models[name] = ModelProfile(name, p.edge_ms, p.cloud_ms, p.benefit, p.edge_cost, p.cloud_cost,
+                                            p.deadline_ms)
+            else:
+                models[name] = ModelProfile(name, v.edge_ms, v.cloud_ms, v.benefit, v.edge_cost, v.cloud_cost,
+                                            v.deadline_ms)
+        return Workload(self.load or "custom", models)
+
+
+class EnvironmentConfig(_Cfg):
+    """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema."""
+
+    name: str = "environment"
+    robots: list[RobotConfig] = Field(min_length=1)
+    env_sensors: list[SensorConfig] = Field(default_factory=list)
+    compute: list[ComputeConfig] = Field(default_factory=lambda: [ComputeConfig(id="edge", tier="edge")])
+    world: WorldConfig = Field(default_factory=WorldConfig)
+    simulation: SimulationConfig = Field(default_factory=SimulationConfig)
+    hitl: HitlConfig = Field(default_factory=HitlConfig)
+    analytics_scheduler: AnalyticsSchedulerConfig = Field(default_factory=AnalyticsSchedulerConfig)
+    drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
+                                  "1: an actor per drone; more for memory-bound fleets")
+    actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
+                                    "and dispatcher actor of a run (the recorder is never restarted)")
+    actor_restart_timeout_s: float = Field(default=60.0, gt=0, le=3600, description="how long the driver waits for "
+                                           "a dead drone actor to come back before its drones end as 'lost', s")
+    same_node_transport: Literal["channel", "ray"] = Field(
+        default="channel", description="how messages (frames above all) travel between two actors of a run on the "
+        "same machine: 'channel' (the frame copied once into a shared-memory slot the receiver reads in place, the "
+        "message and its reply on a persistent authenticated Unix socket: no Ray call per frame) or 'ray' (ray.put "
+        "of the frame and an actor call per message). Actors on different machines always use Ray (an ObjectRef on "
+        "one tier, JPEG across tiers); lock-step runs always use Ray calls")
+    base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
+
+    @model_validator(mode="after")
+    def _unique(self) -> "EnvironmentConfig":
+        for name, items in (("robots", self.robots), ("compute", self.compute), ("env_sensors", self.env_sensors),
+                            ("world.targets", self.world.targets)):
+            ids = [i.id for i in items]
+            dup = sorted({i for i in ids if ids.count(i) > 1})
+            if dup:
+                raise ValueError(f"{name}: duplicate ids {dup}")
+        edges = [c.id for c in self.compute if c.tier == "edge"]
+        for j, r in enumerate(self.robots):
+            if r.compute is not None and r.compute not in edges:
+                raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
+                                 f"environment (edge: {edges})")
+        for j, s in enumerate(self.env_sensors):
+            src = s.properties.get("source") if s.type == "camera" else None
+            if src == "backend":
+                raise ValueError(f"env_sensors.{j}.properties.source: 'backend' is for a robot's camera; an "
+                                 f"environment camera has no backend (use 'sim' or 'mcap')")
+            if src == "mcap" and "topic" not in s.properties:
+                raise ValueError(f"env_sensors.{j}.properties.topic: an environment camera replayed from an MCAP "
+                                 f"recording needs the topic to read")
+        return self
+
+    def resolve_path(self, rel: str, field: str) -> Path:
+        """Resolve a file named in the config: absolute, relative to the env file, or under $AERODAAS_DATA_DIR.
+
+        Raises ConfigError naming ``field`` and the search locations when it is not found."""
+        p = Path(os.path.expanduser(rel))
+        cands = [p] if p.is_absolute() else []
+        if not p.is_absolute():
+            if self.base_dir:
+                cands.append(Path(self.base_dir) / p)
+            if os.environ.get(DATA_DIR_ENV):
+                cands.append(Path(os.environ[DATA_DIR_ENV]) / p)
+            cands.append(Path.cwd() / p)
+        for c in cands:
+            if c.is_file():
+                return c.resolve()
+        raise ConfigError(f"{field}: file {rel!r} not found (looked in: {', '.join(str(c) for c in cands)}); "
+                          f"set {DATA_DIR_ENV} to the folder that holds it, or give an absolute path")
+
+
+def _format_errors(err: ValidationError, source: str) -> str:
+    lines = [f"invalid environment configuration in {source}:"]
+    for e in err.errors():
+        loc = ".".join(str(x) for x in e["loc"]) or "(root)"
+        if e["type"] == "extra_forbidden" and e["loc"]:
+            known = _fields_at(EnvironmentConfig, e["loc"][:-1])
+            e["msg"] = f"unknown key{did_you_mean(e['loc'][-1], known)}" + (f"; known: {sorted(known)}" if known else "")
+        val = e.get("input")
+        sval = json.dumps(val, default=str) if not isinstance(val, dict) else "{...}"
+        if len(sval) > 80:
+            sval = sval[:77] + "..."
+        lines.append(f"  {loc}: {e['msg']} (got {sval})")
+    return "\n".join(lines)
+
+
+def _fields_at(model: type, loc: tuple) -> list[str]:
+    """The field names of the pydantic model reached from ``model`` along an error location (list indices and dict
+    keys skipped); [] when the path does not end at a model."""
+    import typing
+
+    def models_in(tp) -> list[type]:
+        if isinstance(tp, type) and issubclass(tp, BaseModel):
+            return [tp]
+        return [m for a in typing.get_args(tp) for m in models_in(a)]
+
+    cur: list[type] = [model]
+    for part in loc:
+        if isinstance(part, int) or not cur:
+            continue
+        nxt = []
+        for m in cur:
+            f = m.model_fields.get(str(part))
+            if f is not None:
+                nxt += models_in(f.annotation)
+        if not nxt and any(str(part) not in m.model_fields for m in cur):
+            continue  # a dict key (e.g. analytics_scheduler.models.<name>)
+        cur = nxt
+    return sorted({k for m in cur for k in m.model_fields if k != "base_dir"})
+
+
+def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_dir: str | None = None) -> EnvironmentConfig:
+    """Validate a parsed ``environment.json`` dict. Raises ConfigError naming each bad field and value."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"invalid environment configuration in {source}: the top level must be a JSON object")
+    try:
+        cfg = EnvironmentConfig.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError(_format_errors(e, source)) from None
+    cfg.base_dir = base_dir
+    # resolve referenced files now, so a missing image fails before any actor starts
+    if cfg.world.ground.image:
+        cfg.world.ground.image = str(cfg.resolve_path(cfg.world.ground.image, "world.ground.image"))
+        _image_size(cfg.world.ground.image, "world.ground.image")
+    for i, t in enumerate(cfg.world.targets):
+        t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
+        w, h = _image_size(t.image, f"world.targets.{i}.image")
+        if t.crop[2] > w or t.crop[3] > h:
+            raise ConfigError(f"world.targets.{i}.crop: {list(t.crop)} reaches outside its image {t.image!r} "
+                              f"({w} x {h} px); x1 must be <= {w} and y1 <= {h}")
+    cameras = [(f"robots.{i}.sensors.{j}", r.id, s) for i, r in enumerate(cfg.robots) for j, s in enumerate(r.sensors)]
+    cameras += [(f"env_sensors.{j}", None, s) for j, s in enumerate(cfg.env_sensors)]
+    for where, robot_id, s in cameras:
+        if s.type == "camera" and s.properties.get("source") == "mcap":
+            s.properties["mcap"] = str(cfg.resolve_path(s.properties["mcap"], f"{where}.properties.mcap"))
+            s.properties.setdefault("topic", f"/{robot_id}/camera/{s.id}")
+    for i, r in enumerate(cfg.robots):
+        if r.replay is not None:
+            r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))
+            from ..backends.base import BackendError
+            from ..backends.replay import check_log
+
+            try:
+                check_log(r.replay.log)
+            except BackendError as e:
+                raise ConfigError(f"robots.{i}.replay.log: {e}") from None
+        if r.safety.geofence_plan:
+            field = f"robots.{i}.safety.geofence_plan"
+            path = cfg.resolve_path(r.safety.geofence_plan, field)
+            from ..missionfile import MissionFileError, load_mission
+
+            try:
+                fence = load_mission(path).geofence
+            except (MissionFileError, OSError) as e:
+                raise ConfigError(f"{field}: {e}") from None
+            r.safety.geofence = GeofenceConfig(polygons=[*r.safety.geofence.polygons, *fence.polygons],
+                                               circles=[*r.safety.geofence.circles, *fence.circles])
+            r.safety.geofence_plan = str(path)
+    for i, r in enumerate(cfg.robots):
+        from ..geofence import Geofence
+
+        try:
+            why = Geofence(r.safety.geofence, r.home).check_point(0.0, 0.0)
+        except ValueError as e:
+            raise ConfigError(f"robots.{i}.safety.geofence: {e}") from None
+        if why is not None:
+            raise ConfigError(f"robots.{i}.safety.geofence: the home position ({r.home.lat}, {r.home.lon}) is {why}; "
+                              f"the drone takes off there, so the fence must allow it")
+    sched = cfg.analytics_scheduler
+    if sched.name != "default":
+        if sched.workload is not None and any(isinstance(v, str) for v in sched.models.values()):
+            sched.workload = str(cfg.resolve_path(sched.workload, "analytics_scheduler.workload"))
+        sched.resolved_workload(cfg)  # a missing load or model fails here, before any actor starts
+    return cfg
+
+
+def _image_size(path: str, field: str) -> tuple[int, int]:
+    """(width, height) in pixels of an image file, read with OpenCV; ConfigError naming ``field`` if unreadable."""
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ConfigError(f"{field}: {str(path)!r} is not an image OpenCV can read (PNG, JPEG, ...)")
+    return int(img.shape[1]), int(img.shape[0])
+
+
+def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
+    """Read and validate an environment file. Raises ConfigError (missing file, bad JSON, bad fields)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"environment file {str(p)!r} not found")
+    try:
+        data = json.loads(p.read_text())
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"environment file {p}: invalid JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    return parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
+
+
+def json_schema() -> dict[str, Any]:
+    """The JSON Schema of ``environment.json``."""
+    return EnvironmentConfig.model_json_schema()

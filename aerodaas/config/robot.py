@@ -1,0 +1,308 @@
+"""A robot's configuration (``robots[]`` of ``environment.json``): its limits (m/s, metres, degrees/s), battery,
+sensor noise, safety rules, sensors, backend (the simulator, a MAVLink autopilot, a Tello, a replayed log) and the
+backend's own settings."""
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+from pydantic import Field, model_validator
+
+from ..geofence import GeofenceConfig
+from ..models import GeoPoint
+from .base import (HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
+                   MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
+                   did_you_mean)
+
+
+class Limits(_Cfg):
+    """Flight-envelope limits of a robot: speeds in m/s, acceleration in m/s², yaw rate in deg/s,
+    altitudes in metres above home."""
+
+    max_speed: float = Field(default=2.0, gt=0, le=MAX_SPEED_MPS, description="horizontal speed limit, m/s")
+    max_vertical_speed: float = Field(default=1.0, gt=0, le=MAX_SPEED_MPS, description="m/s")
+    max_acceleration: float = Field(default=2.0, gt=0, le=MAX_ACCEL_MPS2, description="m/s^2")
+    max_yaw_rate: float = Field(default=90.0, gt=0, le=MAX_YAW_RATE_DPS, description="deg/s")
+    max_altitude: float = Field(default=120.0, gt=0, le=MAX_ALTITUDE_M, description="metres above home")
+
+
+class BatteryConfig(_Cfg):
+    """Battery model: energy drawn = (hover_power_w + speed_power_w_per_mps * |v|) * dt.
+    Voltage is linear between ``voltage_empty`` and ``voltage_full`` in state of charge (a simple LiPo model)."""
+
+    capacity_wh: float = Field(default=60.0, gt=0, le=MAX_BATTERY_WH)
+    hover_power_w: float = Field(default=180.0, ge=0, le=MAX_POWER_W)
+    speed_power_w_per_mps: float = Field(default=10.0, ge=0, le=MAX_POWER_W)
+    voltage_full: float = Field(default=16.8, gt=0, le=1000)
+    voltage_empty: float = Field(default=13.2, gt=0, le=1000)
+    initial_pct: float = Field(default=100.0, ge=0, le=100)
+
+
+class NoiseConfig(_Cfg):
+    """Optional sensor noise (standard deviations): GPS position in metres, velocity in m/s."""
+
+    gps_std_m: float = Field(default=0.0, ge=0, le=1000)
+    velocity_std_mps: float = Field(default=0.0, ge=0, le=MAX_SPEED_MPS)
+    seed: int = 0
+
+
+class SafetyConfig(_Cfg):
+    """Safety limits, enforced by :class:`aerodaas.safety.SafetyGate` before any command reaches the drone.
+
+    Altitudes are metres above home; ``max_altitude``/``max_speed`` default to the robot's ``limits``.
+    ``min_altitude`` applies to everything except take-off and landing. ``geofence`` holds inclusion/exclusion
+    polygons and circles (lat/lon degrees, radius metres); ``geofence_plan`` names a QGroundControl ``.plan``
+    whose ``geoFence`` is added to it. ``on_violation``: ``reject`` (default) refuses a violating command;
+    ``clamp`` clamps altitude and speed into the limits (geofence breaches are always rejected).
+    ``low_battery_rtl_pct``: below this battery percentage the drone returns to launch and lands, whatever the
+    queue holds (the stat-stream shows RETURNING). ``critical_battery_pct``: below this it lands in place."""
+
+    geofence: GeofenceConfig = Field(default_factory=GeofenceConfig)
+    geofence_plan: str | None = None
+    max_altitude: float | None = Field(default=None, gt=0, le=MAX_ALTITUDE_M, description="metres above home")
+    min_altitude: float = Field(default=0.5, ge=0, le=MAX_ALTITUDE_M,
+                                description="metres above home, except take-off/landing")
+    max_speed: float | None = Field(default=None, gt=0, le=MAX_SPEED_MPS, description="m/s, horizontal")
+    command_latency_s: float = Field(default=0.2, ge=0, le=10.0, description="worst-case delay (s) between the gate's "
+                                     "check and the vehicle acting on a command (link + autopilot); the stopping "
+                                     "envelope of every command includes it")
+    on_violation: Literal["reject", "clamp"] = "reject"
+    low_battery_rtl_pct: float = Field(default=20.0, ge=0, le=100)
+    critical_battery_pct: float = Field(default=5.0, ge=0, le=100)
+
+    @model_validator(mode="after")
+    def _check(self) -> "SafetyConfig":
+        if self.max_altitude is not None and self.min_altitude >= self.max_altitude:
+            raise ValueError(f"min_altitude ({self.min_altitude}) must be below max_altitude ({self.max_altitude})")
+        if self.critical_battery_pct > self.low_battery_rtl_pct:
+            raise ValueError(f"critical_battery_pct ({self.critical_battery_pct}) must not exceed "
+                             f"low_battery_rtl_pct ({self.low_battery_rtl_pct})")
+        return self
+
+
+#: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
+#: Tello's), or a recorded MCAP camera channel
+CAMERA_SOURCES = ("sim", "backend", "mcap")
+#: backends whose :meth:`~aerodaas.backends.base.VehicleBackend.camera_frame` gives frames
+BACKENDS_WITH_CAMERA = ("tello",)
+
+
+class SensorConfig(_Cfg):
+    """A sensor. ``type``: ``camera`` (properties width, height in px, hfov_deg, fps, pitch_deg with 90 = nadir,
+    jpeg_quality, source), ``odometry`` (rate_hz) or ``stat_stream``. ``buffer`` is the stream buffer length
+    (frames kept for a slow consumer; older ones are dropped and counted).
+
+    A camera's ``source`` is ``sim`` (default: rendered from the simulated world), ``backend`` (the robot's own
+    video, e.g. a Tello's; needs such a backend) or ``mcap`` (replay a recording: ``mcap`` names the file,
+    resolved like other files at load time, and ``topic`` its ``foxglove.CompressedImage`` channel, by default
+    ``/<robot>/camera/<sensor id>`` as AeroDaaS records it)."""
+
+    id: str = Field(min_length=1)
+    type: Literal["camera", "odometry", "stat_stream"]
+    properties: dict[str, Any] = Field(default_factory=dict)
+    buffer: int = Field(default=1, ge=1)
+
+    @model_validator(mode="after")
+    def _check_props(self) -> "SensorConfig":
+        p = self.properties
+        spec = SENSOR_PROPERTIES.get(self.type, {})
+        for k in p:
+            if k not in spec:
+                raise ValueError(f"properties.{k}: unknown {self.type} property{did_you_mean(k, spec)}; "
+                                 f"known: {sorted(spec)}")
+        for k, (kind, default, lo, hi, lo_open) in spec.items():
+            if k not in p:
+                if default is not None:
+                    p[k] = default
+                continue
+            v = p[k]
+            if kind == "str":
+                if not isinstance(v, str) or not v:
+                    raise ValueError(f"properties.{k} must be a non-empty string, got {v!r}")
+                continue
+            ok_type = isinstance(v, int) if kind == "int" else isinstance(v, (int, float))
+            if isinstance(v, bool) or not ok_type or not math.isfinite(v) or v > hi or (v <= lo if lo_open else v < lo):
+                what = "an integer" if kind == "int" else "a finite number"
+                rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+                raise ValueError(f"properties.{k} must be {what} within {rng}, got {v!r}")
+        if self.type == "camera":
+            src = p["source"]
+            if src not in CAMERA_SOURCES:
+                raise ValueError(f"properties.source must be one of {list(CAMERA_SOURCES)}, got {src!r}")
+            if p["hfov_deg"] >= 180:
+                raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
+            if src == "mcap":
+                if not p.get("mcap"):
+                    raise ValueError(f"properties.mcap must name the MCAP recording to replay when properties.source "
+                                     f"is 'mcap', got {p.get('mcap')!r}")
+                if "topic" in p and not p["topic"].startswith("/"):
+                    raise ValueError(f"properties.topic must be an MCAP topic starting with '/', got {p['topic']!r}")
+            else:
+                for k in ("mcap", "topic"):
+                    if k in p:
+                        raise ValueError(f"properties.{k} is only used with properties.source 'mcap', "
+                                         f"but source is {src!r}")
+        return self
+
+
+#: the properties of each sensor type: name -> (kind, default, low, high, low bound exclusive). Camera sizes are
+#: pixels, fps frames/s, angles degrees (pitch 90 = nadir), rates Hz. Unknown properties are refused.
+SENSOR_PROPERTIES: dict[str, dict[str, tuple]] = {
+    "camera": {"width": ("int", 640, 1, MAX_CAMERA_PX, False), "height": ("int", 480, 1, MAX_CAMERA_PX, False),
+               "hfov_deg": ("float", 78.0, 0.0, 180.0, True), "fps": ("float", 15.0, 0.0, MAX_CAMERA_FPS, True),
+               "pitch_deg": ("float", 90.0, 0.0, 90.0, True), "jpeg_quality": ("int", 80, 1, 100, False),
+               "source": ("str", "sim", 0, 0, False), "mcap": ("str", None, 0, 0, False),
+               "topic": ("str", None, 0, 0, False)},
+    "odometry": {"rate_hz": ("float", 10.0, 0.0, MAX_RATE_HZ, True)},
+    "stat_stream": {},
+}
+
+
+class MavlinkConfig(_Cfg):
+    """A MAVLink autopilot (ArduPilot or PX4) reached through pymavlink.
+
+    ``connection`` is a pymavlink connection string (``udpin:0.0.0.0:14550``, ``udpout:HOST:PORT``,
+    ``tcp:HOST:PORT``, ``/dev/ttyACM0`` with ``baud``). ``autopilot``: ``auto`` identifies it from its HEARTBEAT
+    (MAV_AUTOPILOT_ARDUPILOTMEGA / MAV_AUTOPILOT_PX4). We speak as ``source_system``/``source_component`` (a GCS).
+    The link is lost after ``heartbeat_timeout_s`` seconds without a HEARTBEAT. Every COMMAND_LONG waits
+    ``command_timeout_s`` seconds for its COMMAND_ACK and is re-sent up to ``command_retries`` times.
+    ``stream_rate_hz`` is the rate requested for telemetry (MAV_CMD_SET_MESSAGE_INTERVAL).
+    ``use_autopilot_mission``: fly the robot's pre-planned waypoints (in the order its trajectory scheduler gave
+    them) as an autopilot mission instead of streaming position targets: NAV_TAKEOFF to ``takeoff_altitude``, one
+    NAV_WAYPOINT per waypoint (hold = ``hover_duration``), then NAV_LAND at the last waypoint (or
+    NAV_RETURN_TO_LAUNCH when the navigation ends with an ``rtl`` action), uploaded with the MISSION_ITEM_INT
+    protocol and flown in ArduPilot AUTO / PX4 AUTO.MISSION; MISSION_CURRENT / MISSION_ITEM_REACHED drive the
+    stat-stream. The autopilot's own acceptance radius (ArduPilot WPNAV_RADIUS, PX4 NAV_ACC_RAD or the item's)
+    decides "reached", not ``acceptance_radius``. Missions it cannot express are refused before any actor
+    starts (ConfigError naming this field): navigation from analytics or the HITL API, velocity commands,
+    time-driven navigation, no waypoints.
+    ``arm_timeout_s``: how long (wall seconds) ``arm()`` waits for the vehicle to report itself armable (3-D GPS
+    fix, pre-arm and AHRS health bits of SYS_STATUS) before it asks anyway, so that a refusal carries the
+    autopilot's reason. ``setpoint_rate_hz``: rate, in the vehicle's own time, at which the active position or
+    velocity target is re-sent (PX4 OFFBOARD needs more than 2 Hz; ArduPilot stops a velocity target after 3 s)."""
+
+    connection: str = Field(default="tcp:127.0.0.1:5760", min_length=1)
+    baud: int = Field(default=57600, gt=0, le=10_000_000)
+    autopilot: Literal["auto", "ardupilot", "px4"] = "auto"
+    source_system: int = Field(default=255, ge=1, le=255)
+    source_component: int = Field(default=190, ge=0, le=255)
+    target_system: int | None = Field(default=None, ge=1, le=255)
+    connect_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
+    heartbeat_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S)
+    command_timeout_s: float = Field(default=1.5, gt=0, le=MAX_DURATION_S)
+    command_retries: int = Field(default=3, ge=0, le=100)
+    stream_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
+    use_autopilot_mission: bool = False
+    arm_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
+    setpoint_rate_hz: float = Field(default=10.0, gt=2.0, le=MAX_RATE_HZ)
+    #: set the vehicle's own speed limits from the robot's ``limits`` on connect (ArduCopter WPNAV_SPEED*, PX4
+    #: MPC_XY_VEL_MAX/MPC_XY_CRUISE/MPC_Z_VEL_MAX_*), read back to verify; ``restore_params``: put the user's
+    #: values back when the backend closes
+    set_speed_limits: bool = True
+    restore_params: bool = True
+    #: what closing the backend does with a vehicle still in the air (run timeout, error, Ctrl-C): ``land`` here
+    #: or ``rtl``, waiting up to ``safe_end_timeout_s`` vehicle seconds for it to land and disarm
+    on_close: Literal["land", "rtl"] = "land"
+    safe_end_timeout_s: float = Field(default=120.0, gt=0, le=MAX_DURATION_S)
+
+
+class TelloConfig(_Cfg):
+    """A DJI Tello (SDK 2.0 over UDP): commands to ``host:command_port`` (replies on the same socket), state
+    packets on local ``state_port``, H.264 video on local ``video_port`` (both bound on ``bind_host``). A command
+    without reply within ``command_timeout_s`` seconds is retried ``command_retries`` times; a keep-alive is sent
+    every ``keepalive_s`` seconds (the Tello lands after 15 s without a command).
+
+    The Tello has no compass: its yaw is relative to where it pointed at power-on. ``initial_heading_deg`` is the
+    compass heading (degrees clockwise from north) the Tello faces when :meth:`connect` runs (mission start); the
+    yaw reported then is taken as that heading. ``velocity_frame`` says how to read the state packet's
+    ``vgx``/``vgy`` (the SDK guide does not say): ``yaw_zero`` (default: x along the heading of yaw 0, y 90 deg
+    clockwise of it, z down) or ``body`` (x forward, y right, z down). Motion commands (takeoff, go, land) are
+    answered only when the Tello has finished them; a motion call returns once the command has not been refused
+    within ``accept_window_s`` seconds."""
+
+    host: str = "192.168.10.1"
+    command_port: int = Field(default=8889, ge=1, le=65535)
+    local_command_port: int = Field(default=0, ge=0, le=65535, description="0: any free port")
+    state_port: int = Field(default=8890, ge=0, le=65535)
+    video_port: int = Field(default=11111, ge=0, le=65535)
+    video: bool = True
+    command_timeout_s: float = Field(default=7.0, gt=0, le=MAX_DURATION_S)
+    command_retries: int = Field(default=2, ge=0, le=100)
+    keepalive_s: float = Field(default=5.0, gt=0, le=MAX_DURATION_S, lt=15)
+    state_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S, description="link lost after this long without a state packet")
+    bind_host: str = Field(default="0.0.0.0", description="local address the state and video sockets bind to")
+    initial_heading_deg: float = Field(default=0.0, ge=-360, le=360, description="compass heading at connect(), deg")
+    velocity_frame: Literal["yaw_zero", "body"] = "yaw_zero"
+    accept_window_s: float = Field(default=0.3, ge=0, le=MAX_DURATION_S, description="wait this long for a motion command's refusal")
+
+
+class ReplayConfig(_Cfg):
+    """Replay a recorded flight as odometry, battery and mode/state streams: ``log`` is a MAVLink telemetry log
+    (``.tlog``, as QGroundControl, MAVProxy or Mission Planner record it) or a PX4 flight log (``.ulg``, as the
+    autopilot writes it to its SD card); ``rate`` is the replay speed (1 = real time)."""
+
+    log: str = Field(min_length=1)
+    rate: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
+
+
+class RobotConfig(_Cfg):
+    """A robot (drone). ``backend`` selects the driver: ``sim`` (the embedded simulator), ``mavlink`` (ArduPilot or
+    PX4, settings in ``mavlink``), ``tello`` (DJI Tello, settings in ``tello``) or ``replay`` (a recorded flight,
+    settings in ``replay``; not navigable)."""
+
+    id: str = Field(min_length=1)
+    backend: Literal["sim", "mavlink", "tello", "replay"] = "sim"
+    mavlink: MavlinkConfig | None = None
+    tello: TelloConfig | None = None
+    replay: ReplayConfig | None = None
+    home: GeoPoint = Field(default_factory=lambda: GeoPoint(lat=47.3977, lon=8.5456, alt=488.0))
+    limits: Limits = Field(default_factory=Limits)
+    battery: BatteryConfig = Field(default_factory=BatteryConfig)
+    noise: NoiseConfig = Field(default_factory=NoiseConfig)
+    safety: SafetyConfig = Field(default_factory=SafetyConfig)
+    takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
+                                    "[safety.min_altitude, max_altitude]")
+    control_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
+    idle_land_s: float = Field(default=10.0, gt=0, le=MAX_DURATION_S, description="land after this many seconds (sim time) with "
+                               "nothing queued, once some navigation has been flown")
+    sensors: list[SensorConfig] = Field(default_factory=list)
+    compute: str | None = Field(default=None, description="id of the edge compute resource this robot flies from "
+                                "(its drone actor runs there); default: the environment's first edge compute")
+    max_waypoints_per_request: int = Field(default=1000, ge=1, le=100_000, description="bounded work: items in one "
+                                           "navigation added while flying (HITL request, analytics output)")
+    max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
+                                  "all missions of this robot; more are refused (HTTP 422 / navigation_refused)")
+
+    @model_validator(mode="after")
+    def _unique_sensors(self) -> "RobotConfig":
+        ids = [s.id for s in self.sensors]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ValueError(f"sensors: duplicate sensor ids {dup}")
+        if not any(s.type == "stat_stream" for s in self.sensors):
+            self.sensors.append(SensorConfig(id="stat", type="stat_stream"))
+        if self.backend == "mavlink" and self.mavlink is None:
+            self.mavlink = MavlinkConfig()
+        if self.backend == "tello" and self.tello is None:
+            self.tello = TelloConfig()
+        if self.mavlink is not None and self.mavlink.use_autopilot_mission and self.backend != "mavlink":
+            raise ValueError(f"mavlink.use_autopilot_mission: true needs backend 'mavlink' (an autopilot that flies "
+                             f"uploaded missions), but backend is {self.backend!r}")
+        if self.backend == "replay" and self.replay is None:
+            raise ValueError("replay: backend 'replay' needs a 'replay' section naming the log to play")
+        lo, hi = HOME_ALT_RANGE_M
+        if not lo <= self.home.alt <= hi:
+            raise ValueError(f"home.alt: {self.home.alt!r} m AMSL is outside [{lo:g}, {hi:g}] m")
+        max_alt = self.safety.max_altitude if self.safety.max_altitude is not None else self.limits.max_altitude
+        if self.takeoff_altitude > max_alt:
+            which = "safety.max_altitude" if self.safety.max_altitude is not None else "limits.max_altitude"
+            raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is above {which} ({max_alt:g} m); the "
+                             f"take-off target passes the same safety gate as every command")
+        if self.takeoff_altitude < self.safety.min_altitude:
+            raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is below safety.min_altitude "
+                             f"({self.safety.min_altitude:g} m); the drone would hover below the floor it must keep")
+        for j, s in enumerate(self.sensors):
+            if s.type == "camera" and s.properties.get("source") == "backend" and self.backend not in BACKENDS_WITH_CAMERA:
+                raise ValueError(f"sensors.{j}.properties.source: 'backend' needs a backend with its own camera "
+                                 f"stream ({list(BACKENDS_WITH_CAMERA)}), but backend is {self.backend!r}")
+        return self
