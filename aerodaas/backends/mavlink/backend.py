@@ -132,5 +132,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
         self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
         self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
+        #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
+        self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
+        self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)
         self._init_params()
 
