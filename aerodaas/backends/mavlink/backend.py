@@ -97,6 +97,7 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._last_reached: tuple[int, float] = (-1, 0.0)
         self._link_ok = False
         self._last_hb = 0.0
+        self._hb_boot_ms = 0  # the vehicle's time_boot_ms when its latest HEARTBEAT came (link.py _periodic)
         self._wall0 = time.monotonic()
         self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
         self._boot_last = 0
