@@ -202,9 +202,9 @@ def _run_app(app: str, env_path, opts, record) -> "MissionResult":  # noqa: F821
     return runpy.run_path(str(REPO / "apps" / f"{app}.py"), run_name="__main__")["result"]
 
 
-#: PX4's COM_OF_LOSS_T (1 s by default) counts vehicle time: at 10x it is 100 ms of wall time, less than a busy
-#: 2-core CI box can stall the setpoint stream for. 5 s vehicle time (500 ms wall; PX4 allows up to 60 s) keeps the
-#: failsafe but not the flakiness. The link-loss tests below keep the default.
+#: PX4's COM_OF_LOSS_T counts vehicle time; the emulator scales it by its speed-up as PX4 SITL's rcS does (10 s at
+#: 10x: 1 s of wall time), these tests ask for 5 s (500 ms wall at 10x, 1.25 s at 4x). The link-loss tests below
+#: keep the emulator's.
 PX4_AT_SPEED = {"ardupilot": {}, "px4": {"COM_OF_LOSS_T": 5.0}}
 
 
