@@ -154,7 +154,7 @@ def test_goto_speed_cap(fly, autopilot):
     speeds.clear()
     b.goto((0.0, 0.0, 3.0))
     assert run_until(b, lambda: dist(b.position, (0, 0, 3)) < 0.3, 20, every=sample), b.position
-    # the vehicle's own limit: ArduPilot WPNAV_SPEED 2 m/s, PX4 MPC_XY_VEL_MAX 0.6 x 2 m/s (params.py margin)
+    # the vehicle's own limit: ArduPilot WPNAV_SPEED 2 m/s, PX4 MPC_XY_VEL_MAX _PX4_SPEED_MARGIN x 2 m/s (params.py)
     assert max(speeds) > (1.5 if autopilot == "ardupilot" else 0.9 * 2.0 * _PX4_SPEED_MARGIN)
 
 
@@ -357,6 +357,69 @@ def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(mo
     b._on_boot_ms(ms + 1000)
     assert t_silent + 0.3 < b.t < t_silent + 1.5
     assert "vehicle_clock_resumed" in [e["event"] for e in b.drain_events()]
+
+
+def test_a_slow_vehicle_clock_is_no_lost_link(monkeypatch):
+    """An autopilot sends HEARTBEAT at 1 Hz of its own clock: a simulator running at 0.3x real time (three PX4 SIH
+    on a loaded 2-core machine) sends one every 3.3 wall seconds while its position reports go on. Not a lost link
+    until its clock has run heartbeat_timeout_s past the last HEARTBEAT, or nothing timestamped arrives any more."""
+    from types import SimpleNamespace as NS
+
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
+    wall = [1000.0]
+    monkeypatch.setattr(time, "monotonic", lambda: wall[0])
+    b._wall0, b._conn = wall[0], None
+    b._send_gcs_heartbeat = lambda: None
+    b._request_streams = lambda wait=True: None  # asked again when the link returns
+    hb = NS(base_mode=0, custom_mode=0, type=2, autopilot=12, system_status=3, get_type=lambda: "HEARTBEAT")
+    ms = 10_000
+    b._on_boot_ms(ms)
+    b._on_heartbeat(hb, wall[0])
+    for _ in range(33):  # 3.3 wall s at 0.3x: 0.99 vehicle s, position reports every 0.1 wall s
+        wall[0] += 0.1
+        ms += 30
+        b._on_boot_ms(ms)
+        b._periodic(wall[0])
+    assert b.link_ok
+    for _ in range(80):  # 8 more wall s: 2.4 more vehicle s, 3.4 s past the last HEARTBEAT: missed
+        wall[0] += 0.1
+        ms += 30
+        b._on_boot_ms(ms)
+        b._periodic(wall[0])
+    assert not b.link_ok
+    b._on_heartbeat(hb, wall[0])
+    assert b.link_ok
+    wall[0] += 3.1  # nothing at all arrives: lost after the wall timeout, as before
+    b._periodic(wall[0])
+    assert not b.link_ok
+
+
+def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost():
+    """PX4 sends MISSION_ITEM_REACHED(k) and MISSION_CURRENT(k+1) from one mission result, each once (then at 1 Hz):
+    with the MISSION_CURRENT lost, the next waypoint's hold starts on arrival all the same, the stale
+    MISSION_CURRENT(k) that may still follow is no restart, and every item is reported reached once."""
+    from types import SimpleNamespace as NS
+
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
+    b.autopilot, b._mode = "px4", "MISSION"
+    # wire 0 take-off, 1 and 2 waypoints (ENU x, y, radius), 3 land; all autocontinue
+    b._mission_wire = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
+    b._mission_next = (frozenset({0, 1, 2, 3}), 4)
+    b._pos = np.array([0.0, 0.1, 1.5])
+    with b._lock:
+        b._on_mission_current(NS(seq=0))
+        b._on_mission_item_reached(NS(seq=0))  # take-off done: waypoint 1 (here) is current, its hold begins
+        b._on_mission_current(NS(seq=0))  # stale, sent before the reached one
+        b._on_mission_item_reached(NS(seq=0))  # PX4's repeats
+        b._pos = np.array([0.0, 9.8, 1.5])
+        b._on_mission_item_reached(NS(seq=1))  # hold over: waypoint 2 current, and we are there
+        b._on_mission_current(NS(seq=2))
+        b._on_mission_item_reached(NS(seq=2))
+        b._on_mission_current(NS(seq=3))
+    ev = [(e["event"], e.get("seq")) for e in b.drain_events()]
+    assert ev == [("mission_current", 0), ("mission_item_reached", 0), ("mission_current", 1),
+                  ("mission_item_reached", 1), ("mission_item_hold_done", 1), ("mission_current", 2),
+                  ("mission_item_reached", 2), ("mission_item_hold_done", 2), ("mission_current", 3)], ev
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)

@@ -164,7 +164,9 @@ class MavlinkConfig(_Cfg):
     ``connection`` is a pymavlink connection string (``udpin:0.0.0.0:14550``, ``udpout:HOST:PORT``,
     ``tcp:HOST:PORT``, ``/dev/ttyACM0`` with ``baud``). ``autopilot``: ``auto`` identifies it from its HEARTBEAT
     (MAV_AUTOPILOT_ARDUPILOTMEGA / MAV_AUTOPILOT_PX4). We speak as ``source_system``/``source_component`` (a GCS).
-    The link is lost after ``heartbeat_timeout_s`` seconds without a HEARTBEAT. Every COMMAND_LONG waits
+    The link is lost after ``heartbeat_timeout_s`` seconds without a HEARTBEAT (wall seconds, and as many of the
+    vehicle's own clock while its timestamped telemetry still arrives: a simulator may run slower than real time,
+    and its heartbeats with it). Every COMMAND_LONG waits
     ``command_timeout_s`` seconds for its COMMAND_ACK and is re-sent up to ``command_retries`` times.
     ``stream_rate_hz`` is the rate requested for telemetry (MAV_CMD_SET_MESSAGE_INTERVAL).
     ``use_autopilot_mission``: fly the robot's pre-planned waypoints (in the order its trajectory scheduler gave

@@ -97,6 +97,7 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._last_reached: tuple[int, float] = (-1, 0.0)
         self._link_ok = False
         self._last_hb = 0.0
+        self._hb_boot_ms = 0  # the vehicle's time_boot_ms when its latest HEARTBEAT came (link.py _periodic)
         self._wall0 = time.monotonic()
         self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
         self._boot_last = 0
@@ -132,5 +133,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
         self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
         self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
+        #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
+        self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
+        self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)
         self._init_params()
 

@@ -116,8 +116,9 @@ class CommandMixin:
         try:
             self.command_long(name, *args, **kw)
         except CommandNotAcknowledged:
-            end = time.monotonic() + self.cfg.heartbeat_timeout_s
-            while not effect() and time.monotonic() < end and self._link_ok:
+            started, boot0 = time.monotonic(), self._boot_last
+            while not effect() and not self._heartbeat_due(started, boot0, self.cfg.heartbeat_timeout_s) \
+                    and self._link_ok:
                 time.sleep(0.01)
             if not effect():
                 raise
@@ -148,6 +149,18 @@ class CommandMixin:
                                       M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, self._ap_modes[name])
         self._await_heartbeat(f"set mode {name}", lambda: self._mode == name, f"mode {name}", confirm_s, sent)
 
+    def _heartbeat_due(self, started: float, boot0: int, wait_s: float) -> bool:
+        """Has a HEARTBEAT been due since ``started`` (monotonic), when the vehicle's time_boot_ms was ``boot0``:
+        ``wait_s`` wall seconds passed, and the vehicle's own clock ran min(``wait_s``, ``heartbeat_timeout_s``)
+        too (an autopilot sends HEARTBEAT at 1 Hz of its clock, which a simulator may run slower than real time;
+        see link.py ``_heartbeats_missed``; a clock that stopped ends the wait through link loss)."""
+        now = time.monotonic()
+        if now - started < wait_s:
+            return False
+        if self._boot_ref is None or now - self._boot_wall > self.cfg.heartbeat_timeout_s:
+            return True  # no clock of the vehicle's to go by: wall time alone
+        return (self._boot_last - boot0) / 1000.0 >= min(wait_s, self.cfg.heartbeat_timeout_s)
+
     def _await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,
                          sent: float) -> None:
         """After ``command`` (sent at monotonic ``sent``) was accepted: wait until ``done()`` (the HEARTBEAT shows
@@ -155,11 +168,11 @@ class CommandMixin:
         ``heartbeat_timeout_s``: the autopilot's HEARTBEAT comes at least that often while the link is up).
         Raises LinkLost or CommandNotConfirmed."""
         wait = max(self.cfg.command_timeout_s, self.cfg.heartbeat_timeout_s) if wait_s is None else wait_s
-        started = time.monotonic()
+        started, boot0 = time.monotonic(), self._boot_last
         while not done():
             if not self._link_ok:
                 raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost before a HEARTBEAT showed {expected}")
-            if time.monotonic() - started >= wait:
+            if self._heartbeat_due(started, boot0, wait):
                 observed = f"mode {self._mode or '(none)'}, {'armed' if self._armed else 'disarmed'}"
                 raise CommandNotConfirmed(self.robot_id, command, expected, observed, wait,
                                           self._status_text_since(sent, wait_s=0.0))

@@ -246,6 +246,7 @@ class LinkMixin:
     def _on_heartbeat(self, msg: Any, now: float) -> None:
         with self._lock:
             self._last_hb = now
+            self._hb_boot_ms = self._boot_last
             if not self._link_ok:
                 self._link_ok = True
                 if self._ever_linked:
@@ -310,7 +311,7 @@ class LinkMixin:
             self._hb_next = now + 1.0 / max(1.0, min(self._ratio, 20.0))
             self._send_gcs_heartbeat()
         with self._lock:
-            if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s:
+            if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s and self._heartbeats_missed(now):
                 self._link_ok = False
                 self._event("link_lost", silent_s=round(now - self._last_hb, 3))
                 self._reanchor = True
@@ -323,6 +324,21 @@ class LinkMixin:
             rate = self.cfg.setpoint_rate_hz if sp[0] == "vel" or self.autopilot == "px4" else 1.0
             self._sp_next = now + max(0.004, 1.0 / (rate * self._ratio))
             self._send_setpoint(sp)
+
+    def _heartbeats_missed(self, now: float) -> bool:
+        """No HEARTBEAT for ``heartbeat_timeout_s`` wall seconds (checked by the caller): is that a lost link? The
+        heartbeat protocol counts *expected* heartbeats that did not come (mavlink.io/en/services/heartbeat.html),
+        and an autopilot sends one per second of its own clock (PX4: the constant-rate 1 Hz HEARTBEAT stream,
+        src/modules/mavlink/mavlink_main.cpp; ArduPilot: its 1 Hz scheduler task). A simulated autopilot that runs
+        slower than real time (PX4 SIH lock-step, three of them on a loaded 2-core machine: heartbeats 3.0-3.7 s
+        of wall time apart while position reports went on) has missed none until its clock, as its timestamped
+        messages show it, has run ``heartbeat_timeout_s`` past its last HEARTBEAT. Lost when those messages stopped
+        too (a stopped process, a cut link) or the vehicle's clock ran on that long without a heartbeat. Caller
+        holds ``_lock``."""
+        timeout = self.cfg.heartbeat_timeout_s
+        if self._boot_ref is None or now - self._boot_wall > timeout:
+            return True
+        return (self._boot_last - self._hb_boot_ms) / 1000.0 > timeout
 
     # ------------------------------------------------------------------ sending
     def _send(self, fn: Callable[[Any], None]) -> None:

@@ -201,6 +201,8 @@ class MissionMixin:
                 wps[seq] = (float(e), float(n), min(float(radius), _ARRIVAL_RADIUS_M))
         with self._lock:
             self._mission_wire = wps
+            self._mission_next = (frozenset(k for k, w in enumerate(wire) if w[2]), len(wire))
+            self._current_inferred_from = -1
             self._arrived.clear()
             self._reached_fw.clear()
 

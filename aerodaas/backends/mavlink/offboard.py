@@ -16,8 +16,12 @@ from ._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCI
 
 #: lowest target height (metres above the take-off point) goto sends to an armed vehicle
 _MIN_TARGET_HEIGHT_M = 0.5
-#: how far (metres along the leg) a speed-capped PX4 setpoint may run ahead of the vehicle (see _carrot)
-_CARROT_LEAD_M = 0.5
+#: how far (metres along the leg) a speed-capped PX4 setpoint may run ahead of the vehicle (see _carrot). It bounds
+#: how far a vehicle can fall behind the setpoint's schedule and then catch up: PX4's velocity loop flies its
+#: *estimate* at MPC_XY_VEL_MAX, and SIH's estimate ran 0.1-0.2 m/s below the truth for seconds at a time, so a
+#: vehicle 0.5 m behind caught up at 0.42 m/s over 4 s (MPC_XY_VEL_MAX 0.25: 0.25 + (0.5 + 0.2) / 4 s); 0.25 m
+#: bounds the 4 s average near MPC_XY_VEL_MAX + 0.1 m/s
+_CARROT_LEAD_M = 0.25
 
 
 class OffboardMixin:

@@ -153,12 +153,20 @@ class TelemetryMixin:
         self._event("home", lat=home.lat, lon=home.lon, alt=home.alt)
 
     def _on_mission_current(self, msg: Any) -> None:
-        if msg.seq != self._mission_seq:
-            if msg.seq < self._mission_seq:  # the mission restarted (or jumped back): its items may be reached again
-                self._arrived = {s for s in self._arrived if s < msg.seq}
-                self._reached_fw = {s for s in self._reached_fw if s < msg.seq}
-            self._mission_seq = msg.seq
-            self._event("mission_current", seq=msg.seq, item=self._item_number(msg.seq))
+        if msg.seq == self._current_inferred_from:
+            return  # sent before the MISSION_ITEM_REACHED we already advanced on (see _on_mission_item_reached)
+        self._current_inferred_from = -1
+        self._set_mission_current(msg.seq)
+
+    def _set_mission_current(self, seq: int, **why: Any) -> None:
+        """Make wire item ``seq`` the current one (a ``mission_current`` event when it changes). Caller holds
+        ``_lock``."""
+        if seq != self._mission_seq:
+            if seq < self._mission_seq:  # the mission restarted (or jumped back): its items may be reached again
+                self._arrived = {s for s in self._arrived if s < seq}
+                self._reached_fw = {s for s in self._reached_fw if s < seq}
+            self._mission_seq = seq
+            self._event("mission_current", seq=seq, item=self._item_number(seq), **why)
         self._check_arrival()
 
     def _check_arrival(self) -> None:
@@ -189,6 +197,17 @@ class TelemetryMixin:
         self._reached_fw.add(msg.seq)
         name = "mission_item_hold_done" if msg.seq in self._arrived else "mission_item_reached"
         self._event(name, seq=msg.seq, item=self._item_number(msg.seq), by="autopilot")
+        # The current item of our own mission moves on with it: both autopilots advance to the next item in the
+        # step that reports the reached one (PX4: navigator Mission advances on the same mission_result that the
+        # MAVLink mission manager sends as MISSION_ITEM_REACHED, then MISSION_CURRENT, in one
+        # MavlinkMissionManager::send(), src/modules/mavlink/mavlink_mission.cpp; ArduPilot: AP_Mission::update
+        # advances once verify_command reports the NAV item complete). A MISSION_CURRENT lost on the link is
+        # repeated only at 1 Hz (PX4's slow-rate resend; our stream request), which delayed the next hold's start
+        # and this hold's end by up to 1 s of vehicle time.
+        auto, count = self._mission_next
+        if msg.seq == self._mission_seq and msg.seq in auto and msg.seq + 1 < count:
+            self._current_inferred_from = msg.seq
+            self._set_mission_current(msg.seq + 1, by="reached")
 
     @property
     def position(self) -> np.ndarray:

@@ -90,8 +90,7 @@ class MissionRunMixin:
                 # mission_block.cpp is_mission_item_reached); LOITER_UNLIM is never reached
                 hold = it.param1 if cmd in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME) else math.inf
                 if self.t - self.item_reached_at >= max(0.0, hold):
-                    self._reached(self.mission_seq)
-                    self._advance()
+                    self._item_done()
         elif cmd == M.MAV_CMD_NAV_TAKEOFF:
             alt = self._global_to_enu(self.origin.lat, self.origin.lon, it.z, it.frame)[2] - self.home_enu[2]
             if not self.item_started:
@@ -100,8 +99,7 @@ class MissionRunMixin:
                     self._start_takeoff(alt)
             if self.takeoff_alt is None or abs(self._rel()[2] - alt) < 0.1:
                 self.takeoff_alt = None
-                self._reached(self.mission_seq)
-                self._advance()
+                self._item_done()
         elif cmd == M.MAV_CMD_NAV_LAND:
             if not self.item_started:
                 self.item_started = True
@@ -116,12 +114,23 @@ class MissionRunMixin:
                                                                     self.veh.setpoint.target[1] - s.position[1])) < 0.3:
                 self._start_land()
             if not s.in_air and self.took_off:
-                self._reached(self.mission_seq)
-                self._advance()
+                self._item_done()
         elif cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            self._reached(self.mission_seq)
-            self._advance()
+            self._item_done()
             self._enter("AUTO.RTL" if self.px4 else "RTL")
+
+    def _item_done(self) -> None:
+        """The current item is complete: MISSION_ITEM_REACHED for it and the next item current. PX4 publishes both
+        in one mission result and its MAVLink mission manager sends MISSION_CURRENT (the next item) before
+        MISSION_ITEM_REACHED (MavlinkMissionManager::send, src/modules/mavlink/mavlink_mission.cpp); ArduPilot
+        sends the reached report as the item completes, its MISSION_CURRENT at the stream rate."""
+        seq = self.mission_seq
+        if self.px4:
+            self._advance()
+            self._reached(seq)
+        else:
+            self._reached(seq)
+            self._advance()
 
     def _reached(self, seq: int) -> None:
         """MISSION_ITEM_REACHED ``seq``: ArduPilot says "Reached command #N" with it; PX4 repeats it 10 times, once

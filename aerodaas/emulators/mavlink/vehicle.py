@@ -151,6 +151,12 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self._statustext_id = 0
         self.params: dict[str, float] = dict(PX4_PARAMS if self.px4 else ARDUPILOT_PARAMS)
         self.params["MAV_SYS_ID" if self.px4 else "SYSID_THISMAV"] = float(system_id)
+        if self.px4:
+            # PX4 SITL stretches its loss timeouts by the simulation's speed factor, so that they stay the same in
+            # wall time (ROMFS init.d-posix/rcS, "Adapt timeout parameters if simulation runs faster or slower than
+            # realtime": COM_OF_LOSS_T = PX4_SIM_SPEED_FACTOR x 1.0 s); at 10x the unscaled 1 s was 0.1 s of wall
+            # time, less than a loaded machine stalls a setpoint stream for
+            self.params["COM_OF_LOSS_T"] = self.speedup * PX4_PARAMS["COM_OF_LOSS_T"]
         for k, v in (params or {}).items():
             if k not in self.params:
                 raise ValueError(f"params: unknown {autopilot} parameter {k!r}; known: {sorted(self.params)}")
