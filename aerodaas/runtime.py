@@ -347,9 +347,11 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         kinds = {}
         for a in plan.actors.values():
             kinds[a.role] = kinds.get(a.role, 0) + 1
+        # `ray list actors` talks to the dashboard's state API, so the hint names the dashboard, not the GCS
+        dashboard_url = ray._private.worker.get_dashboard_url() if (OPTIONS.dashboard or opts.address) else ""
         print(f"aerodaas: run {plan.run_id}: " + ", ".join(f"{n} {k}" for k, n in kinds.items()) + " actor(s) on Ray "
               f"{ray.get_runtime_context().gcs_address}" + (f" (see them: RAY_AUTH_MODE=token ray list actors --address "
-              f"{ray.get_runtime_context().gcs_address})" if OPTIONS.dashboard or opts.address else
+              f"http://{dashboard_url})" if dashboard_url else
               " (run with --dashboard to see them with `ray list actors`)"), flush=True)
     actors: dict[str, Any] = {}
     cloud_executors: list = []
