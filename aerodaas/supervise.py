@@ -152,7 +152,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
                         refs[actors[hid].run.remote(remaining(), resume=True)] = hid
                         continue
                     why = (f"drone actor {plan.actors[hid].name} lost: {type(e).__name__}: {_first_line(e)}"
-                           if _is_actor_death(e) else f"{type(e).__name__}: {_first_line(e)}")
+                           if _is_actor_death(e) else _raised(e))
                     print(f"aerodaas: {why}", file=sys.stderr, flush=True)
                     for rid in robots_of[hid]:
                         cp = _last_checkpoint(actors.get("recorder"), rid)
@@ -192,6 +192,15 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
         for rep in reports.values():
             rep["outcome"] = "interrupted"
     return reports
+
+
+def _raised(e: BaseException) -> str:
+    """``Type: message`` of the exception a drone actor's run raised, without Ray's RayTaskError wrapping (whose
+    first line names only the actor method and pid)."""
+    cause = getattr(e, "cause", None)
+    if isinstance(cause, BaseException):
+        e = cause
+    return f"{type(e).__name__}: {_first_line(e)}"
 
 
 def _first_line(e: BaseException) -> str:
