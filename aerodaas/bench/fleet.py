@@ -170,6 +170,7 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
               edge_nodes: int = 1) -> dict:
     from . import machine_info
 
+    machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
     for k in groupings:
         for n in sizes:
@@ -186,8 +187,8 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                                        if one and r["drones"] > 1 else None)
         r["pss_mb_per_extra_drone"] = ((r["pss_mb"] - one["pss_mb"]) / (r["drones"] - 1)
                                        if one and r["drones"] > 1 else None)
-    return {"benchmark": "fleet", "machine": machine_info(), "duration_s": duration_s, "edge_nodes": edge_nodes,
-            "load_avg_1min_start": round(os.getloadavg()[0], 2), "results": rows,
+    return {"benchmark": "fleet", "machine": machine, "duration_s": duration_s, "edge_nodes": edge_nodes,
+            "load_avg_1min_start": load_start, "results": rows,
             "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "drones_at_least_grouped": 40,
                         "rss_mb_per_extra_drone_max": 150}}
 
