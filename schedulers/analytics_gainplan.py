@@ -90,6 +90,8 @@ class GainPlan(AnalyticsScheduler):
 
     name = "GAINPLAN"
     options = ("estimator", "commit_horizon_ms", "latency_window")
+    #: a held task is decided this many ms before its cloud trigger (DEMS's JIT queue: 50)
+    jit_early_ms: float = JIT_EARLY_MS
 
     def __init__(self, workload: Workload, *, commit_horizon_ms: float | None = None, latency_window: int = 5,
                  estimator: str | None = None) -> None:
@@ -162,7 +164,7 @@ class GainPlan(AnalyticsScheduler):
         self._recent.append((now_ms, p.edge_ms))
         if p.cloud_utility > 0 and self.cloud_available and now_ms + self.cloud_estimate_ms(task.model) <= task.deadline_ms:
             task.notes["mode"] = OPEN
-            return self.poll(now_ms) if self.trigger_ms(task) - now_ms <= JIT_EARLY_MS else []
+            return self.poll(now_ms) if self.trigger_ms(task) - now_ms <= self.jit_early_ms else []
         task.notes["mode"] = EDGE_ONLY
         if p.edge_utility <= 0 or now_ms + p.edge_ms > task.deadline_ms:
             return [self._lose(task, now_ms, "no usable cloud option and no gain from (or time for) the edge")]
@@ -188,7 +190,7 @@ class GainPlan(AnalyticsScheduler):
     def poll(self, now_ms: float) -> list[Decision]:
         self._now = now_ms
         out = self._sweep(now_ms)
-        due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= JIT_EARLY_MS),
+        due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= self.jit_early_ms),
                      key=self.trigger_ms)
         for t in due:
             if self._cloud_option_gone(t, now_ms):
@@ -209,7 +211,7 @@ class GainPlan(AnalyticsScheduler):
 
     def next_poll_ms(self) -> float | None:
         triggers = [self.trigger_ms(t) for t in self.pool if t.notes.get("mode") == OPEN]
-        return min(triggers) - JIT_EARLY_MS if triggers else None
+        return min(triggers) - self.jit_early_ms if triggers else None
 
     def _pop_edge(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
         drops = self._sweep(now_ms)
