@@ -72,16 +72,17 @@ class ArrivalPredictor:
             st[1] = task.arrival_ms - st[0]
             st[0], st[2], st[3] = task.arrival_ms, [task.model], st[2]
 
-    def predict(self, now_ms: float, horizon_ms: float) -> list[tuple[float, str, str, float]]:
-        """``(arrival_ms, drone, model, wake_ms)`` of the tasks still expected: the rest of a frame being submitted
+    def predict(self, now_ms: float, horizon_ms: float) -> list[tuple[float, str, str, float, float]]:
+        """``(arrival_ms, drone, model, wake_ms, frame_ms)`` of the tasks still expected: the rest of a frame being submitted
         (the previous frame's models not seen yet, within ``frame_grace_ms``) and each drone's next frames within
         ``horizon_ms`` of its next frame (so the set changes only when a task arrives or a frame goes missing). An
         overdue frame within its grace is predicted at ``now_ms`` and ``wake_ms`` (when to re-plan if it has not
-        come) is the end of its grace; otherwise ``wake_ms`` is its predicted arrival."""
+        come) is the end of its grace; otherwise ``wake_ms`` is its predicted arrival. ``frame_ms``: the frame's own
+        (predicted) time, which identifies it."""
         out = []
         for drone, (last, period, seen, before) in self.drones.items():
             if now_ms < last + self.frame_grace_ms:
-                out += [(now_ms, drone, m, last + self.frame_grace_ms) for m in before if m not in seen]
+                out += [(now_ms, drone, m, last + self.frame_grace_ms, last) for m in before if m not in seen]
             if not period or period <= 0:
                 continue
             t = last + period
@@ -91,7 +92,7 @@ class ArrivalPredictor:
             until = t + horizon_ms
             while t <= until:
                 wake = t if t > now_ms else t + self.overdue * period
-                out += [(max(t, now_ms), drone, m, wake) for m in models]
+                out += [(max(t, now_ms), drone, m, wake, t) for m in models]
                 t += period
         return out
 
@@ -151,36 +152,44 @@ class LaPlan(EvPlan):
             return 0.0
         return max(0.0, self.on_time_chance(model, p.deadline_ms) * p.benefit - p.cloud_cost)
 
-    def schedule(self, now_ms: float) -> list[tuple[AnalyticsTask | None, float]]:
-        """The current plan: ``[(task or None for a predicted one, planned start ms)]`` from when the edge is
-        free. Sets :attr:`_first_wake`: when to re-plan if the plan starts with a predicted task that has not come."""
+    @staticmethod
+    def _key(task: AnalyticsTask) -> tuple:
+        """A task's identity in a plan: (drone, model, frame time) — the predicted frame's time once it came."""
+        return task.notes.get("plan_key") or (task.drone, task.model, task.arrival_ms)
+
+    def schedule(self, now_ms: float) -> list[tuple[tuple, float]]:
+        """The current plan: ``[(key, planned start ms)]`` from when the edge is free, keys as :meth:`_key` (a
+        predicted task's is its drone, model and predicted frame time). Sets :attr:`_first_wake`: when to re-plan
+        if the plan starts with a predicted task that has not come. Cached while nothing changed."""
         key = (self._version, self.edge_running is None)
         if self._cache is not None and self._cache[0] == key and now_ms <= self._cache[3]:
             self._first_wake = self._cache[2]
             return self._cache[1]
         self._now = now_ms
         free = self._edge_free_at(now_ms)
-        jobs, who, group = [], [], []
+        jobs, who, wakes = [], [], {}
         for t in self.pool:
             fb = max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0
             for end, proc, g in self._variants(t.model, t.deadline_ms, fb):
                 jobs.append((free, end, proc, g))
-                who.append(t)
-                group.append(id(t))
+                who.append(self._key(t))
+        self._predicted: dict[tuple, float] = {}  # (drone, model) -> predicted frame times, for matching arrivals
         if self.horizon_ms > 0:
             fbs: dict[str, float] = {}
-            for k, (at, _, m, wake) in enumerate(self.arrivals.predict(now_ms, self.horizon_ms)):
+            for at, drone, m, wake, frame in self.arrivals.predict(now_ms, self.horizon_ms):
                 if m not in fbs:
                     fbs[m] = self._predicted_fallback(m)
-                for end, proc, g in self._variants(m, at + self.w[m].deadline_ms, fbs[m]):
+                k = (drone, m, frame)
+                wakes[k] = wake
+                self._predicted.setdefault((drone, m), []).append(frame)
+                for end, proc, g in self._variants(m, frame + self.w[m].deadline_ms, fbs[m]):
                     jobs.append((max(at, free), end, proc, g))
-                    who.append(wake)
-                    group.append(-1 - k)
-        _, sched = max_gain_schedule(jobs, free_at=free, groups=group)
-        plan = [(who[j] if isinstance(who[j], AnalyticsTask) else None, s) for j, s in sched]
+                    who.append(k)
+        _, sched = max_gain_schedule(jobs, free_at=free, groups=who)
+        plan = [(who[j], s) for j, s in sched]
         self._first_wake = None
-        if sched and not isinstance(who[sched[0][0]], AnalyticsTask):
-            self._first_wake = max(sched[0][1], who[sched[0][0]])
+        if plan and plan[0][0] in wakes:
+            self._first_wake = max(plan[0][1], wakes[plan[0][0]])
         # valid while nothing changes and the edge state it assumed holds: the running task not overdue, or (idle)
         # until its first start
         valid = free if self.edge_running is not None else (plan[0][1] if plan else math.inf)
@@ -188,19 +197,34 @@ class LaPlan(EvPlan):
         return plan
 
     def _plan(self, start_ms: float) -> list[AnalyticsTask]:
-        return [t for t, _ in self.schedule(self._now) if t is not None]
+        keys = {k for k, _ in self.schedule(self._now)}
+        return [t for t in self.pool if self._key(t) in keys]
 
     def _planned_start(self, task: AnalyticsTask, now_ms: float) -> float | None:
-        for t, s in self.schedule(now_ms):
-            if t is task:
+        k = self._key(task)
+        for q, s in self.schedule(now_ms):
+            if q == k:
                 return s
         return None
 
     # -- the contract
     def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
+        """A task that arrives as predicted (same drone and model, frame within ``same_frame_ms`` of the predicted
+        time) takes the predicted task's place in the cached plan, which stays optimal: same release, deadline and
+        gain. Any other arrival makes the policy re-plan."""
         self.arrivals.observe(task)
-        self._version += 1
+        times = getattr(self, "_predicted", {}).get((task.drone, task.model), ())
+        match = [f for f in times if abs(f - task.arrival_ms) < self.arrivals.same_frame_ms]
+        if match:
+            task.notes["plan_key"] = (task.drone, task.model, match[0])
+            self.counters["arrived_as_predicted"] += 1
+        else:
+            self._version += 1
         return super().submit(task, now_ms)
+
+    def _lose(self, task: AnalyticsTask, now_ms: float, why: str) -> Decision:
+        self._version += 1
+        return super()._lose(task, now_ms, why)
 
     def _sweep(self, now_ms: float) -> list[Decision]:
         start = self._edge_free_at(now_ms)
@@ -210,8 +234,6 @@ class LaPlan(EvPlan):
             if t.notes.get("mode") != OPEN and start + proc > end:
                 out.append(self._lose(t, now_ms, f"edge time {proc:.0f} ms no longer fits (at the "
                                                  f"{100 * self._tails[0][1]:.0f} % level)"))
-        if out:
-            self._version += 1
         return out
 
     def poll(self, now_ms: float) -> list[Decision]:
@@ -249,7 +271,7 @@ class LaPlan(EvPlan):
         self._wake = None
         if not plan:
             return None, drops
-        first, start = plan[0]
+        first = next((t for t in self.pool if self._key(t) == plan[0][0]), None)
         if first is None:
             # wait for a predicted arrival; re-plan then (at least 1 ms on: a poll never repeats at the same time)
             self._wake = max(self._first_wake, now_ms + 1.0) if self._first_wake is not None else now_ms + 1.0
@@ -257,6 +279,9 @@ class LaPlan(EvPlan):
             return None, drops
         self.pool.remove(first)
         self._version += 1
+        # the rest of an optimal plan is optimal for the rest (principle of optimality): keep it while the edge
+        # runs the first task, until that task is due to end
+        self._cache = ((self._version, False), plan[1:], None, now_ms + self.w[first.model].edge_ms)
         if first.notes.get("mode") == OPEN:
             self.counters["open_started_on_edge"] += 1
         return first, drops

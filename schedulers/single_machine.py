@@ -89,7 +89,7 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
     store: dict[int, tuple[float, object]] = {}         # used mask (still startable at now) -> (gain, path)
     active: list[_Group] = []                           # released, a variant still startable
     best_gain, best_path = 0.0, None
-    gi, now = 0, None
+    gi = 0
     alive_mask = 0
 
     def dominated(mask: int, g: float) -> bool:
@@ -112,11 +112,12 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             if not mask & grp.bit:
                 heapq.heappush(heap, (t + grp.proc, next(seq), mask | grp.bit, g + gains[j], (j, t, path)))
 
+    expiry = float("inf")  # the earliest time an active group's last variant stops being startable
     while heap or gi < len(gs):
         t = min(heap[0][0] if heap else float("inf"), gs[gi].release if gi < len(gs) else float("inf"))
-        if t != now:  # time advances: forget used jobs that can no longer start
-            now = t
-            active = [grp for grp in active if grp.at(t) is not None]
+        if t > expiry + _EPS:  # time advanced past an expiry: forget used jobs that can no longer start
+            active = [grp for grp in active if grp.latest[-1] + _EPS >= t]
+            expiry = min((grp.latest[-1] for grp in active), default=float("inf"))
             alive_mask = 0
             for grp in active:
                 alive_mask |= grp.bit
@@ -126,13 +127,14 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
                 if k2 not in pruned or pruned[k2][0] < v[0]:
                     pruned[k2] = v
             store = pruned
-        old = list(store.items())
         newly: list[_Group] = []
         while gi < len(gs) and gs[gi].release == t:
             if gs[gi].at(t) is not None:
                 newly.append(gs[gi])
                 alive_mask |= gs[gi].bit
+                expiry = min(expiry, gs[gi].latest[-1])
             gi += 1
+        old = list(store.items()) if newly else ()
         active += newly
         fresh = []
         while heap and heap[0][0] == t:
@@ -145,7 +147,7 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             if g > best_gain + _EPS:
                 best_gain, best_path = g, path
         if fresh:
-            cands = [(grp, grp.at(t)) for grp in active]
+            cands = [(grp, j) for grp in active if (j := grp.at(t)) is not None]
             for mask in fresh:
                 if mask in store:
                     g, path = store[mask]
