@@ -144,6 +144,8 @@ class EvPlan(GainPlan):
         p = self.w[task.model]
         self.pool.append(task)
         self._recent.append((now_ms, p.edge_ms))
+        if self._first_arrival is None:
+            self._first_arrival = now_ms
         if p.cloud_utility > 0 and self.cloud_available and self.cloud_value(task, now_ms) > 0:
             task.notes["mode"] = OPEN
             task.notes["p0"] = self.on_time_chance(task.model, task.deadline_ms - now_ms)

@@ -106,6 +106,7 @@ class GainPlan(AnalyticsScheduler):
         self.pool: list[AnalyticsTask] = []
         #: (arrival ms, edge ms) of recent arrivals, for the offered edge load
         self._recent: deque[tuple[float, float]] = deque()
+        self._first_arrival: float | None = None
         self.load_window_ms = 5_000.0
         self._now = 0.0  # time of the current decision point (ms)
 
@@ -150,18 +151,24 @@ class GainPlan(AnalyticsScheduler):
 
     def offered_load(self, now_ms: float) -> float:
         """Edge time requested per ms by the tasks that arrived in the last ``load_window_ms`` (1.0 = the edge
-        would be busy all the time running every one of them)."""
+        would be busy all the time running every one of them): their edge ms over the window's length (over the
+        time since the first arrival while the run is younger; at least a fifth of the window). Until 2026-11-22
+        the divisor was the time since the oldest arrival *in* the window, up to a frame period short of it: 3
+        drones at LIGHT (948 ms/s) read as > 1, so GAINPLAN/EVPLAN committed only imminent tasks and sent ~590
+        more per run to the cloud (EVPLAN 1 % below GEMS)."""
+        if self._first_arrival is None:
+            return 0.0
         while self._recent and self._recent[0][0] < now_ms - self.load_window_ms:
             self._recent.popleft()
-        if not self._recent:
-            return 0.0
-        span = max(now_ms - self._recent[0][0], self.load_window_ms / 5)
+        span = max(min(self.load_window_ms, now_ms - self._first_arrival), self.load_window_ms / 5)
         return sum(e for _, e in self._recent) / span
 
     def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
         p = self.w[task.model]
         self.pool.append(task)
         self._recent.append((now_ms, p.edge_ms))
+        if self._first_arrival is None:
+            self._first_arrival = now_ms
         if p.cloud_utility > 0 and self.cloud_available and now_ms + self.cloud_estimate_ms(task.model) <= task.deadline_ms:
             task.notes["mode"] = OPEN
             return self.poll(now_ms) if self.trigger_ms(task) - now_ms <= self.jit_early_ms else []
