@@ -158,7 +158,7 @@ class GainPlan(AnalyticsScheduler):
         more per run to the cloud (EVPLAN 1 % below GEMS)."""
         if self._first_arrival is None:
             return 0.0
-        while self._recent and self._recent[0][0] < now_ms - self.load_window_ms:
+        while self._recent and self._recent[0][0] <= now_ms - self.load_window_ms:  # window (now - W, now]
             self._recent.popleft()
         span = max(min(self.load_window_ms, now_ms - self._first_arrival), self.load_window_ms / 5)
         return sum(e for _, e in self._recent) / span

@@ -554,6 +554,25 @@ def test_invariants_on_random_traces(name, load):
             assert res.states[TaskState.DONE_LATE] == 0
 
 
+@needs_workload
+@pytest.mark.parametrize("name", ALL)
+def test_decisions_before_t_do_not_depend_on_arrivals_after_t(name):
+    """Non-anticipation: two traces equal up to T and different after it must get the same decisions before T
+    (a policy may predict arrivals from what it saw, as LAPLAN does, but never read the trace ahead)."""
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+    cut = 10_000.0
+    a = make_trace(w, drones=3, duration_s=20, seed=21)
+    other = [t for t in make_trace(w, drones=2, duration_s=20, seed=99) if t.arrival_ms >= cut]
+    prefix = [t for t in a if t.arrival_ms < cut]
+    b = prefix + [AnalyticsTask(len(prefix) + i, t.drone, t.model, t.arrival_ms, t.deadline_ms)
+                  for i, t in enumerate(other)]
+    assert [(t.drone, t.model, t.arrival_ms) for t in a if t.arrival_ms >= cut] != \
+        [(t.drone, t.model, t.arrival_ms) for t in other]                    # the futures really differ
+    logs = [run_policy(name, w, trace, cloud_extra_ms=40.0).log for trace in (a, b)]
+    before = [[e for e in log if e[0] < cut] for log in logs]
+    assert before[0] and before[0] == before[1]
+
+
 # --------------------------------------------------------------------------------------------- orderings
 @needs_workload
 def test_heavy_load_utility_orderings():
@@ -754,3 +773,5 @@ def test_laplan_refuses_bad_options():
         make_analytics_scheduler("LAPLAN", LW, edge_levels=(0.5, 1.5))
     with pytest.raises(ValueError, match="release_early_ms"):
         make_analytics_scheduler("LAPLAN", LW, release_early_ms=-5)
+    with pytest.raises(ValueError, match="commit_horizon_ms"):
+        make_analytics_scheduler("LAPLAN", LW, commit_horizon_ms=100.0)

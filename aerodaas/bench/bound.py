@@ -114,11 +114,16 @@ def utility_upper_bound(tasks: Sequence[AnalyticsTask], workload: Workload, edge
     it is on time if sent then (the expected-cloud bound); ``send_times(task)``: the send times worth trying
     (default: its arrival; give the times where the network's extra latency changes within the window too).
     ``method``: ``"lp"`` or ``"exact"``. Returns ``{"bound", "cloud_part", "edge_gain", "edge_tasks", "method",
-    "edge_schedule"}`` (utility units; ``edge_tasks``: candidates with a positive gain; ``edge_schedule``: the
+    "edge_schedule"}`` (utility units; ``edge_tasks``: edge candidates with a positive gain, one per task and
+    edge-time level when ``edge_slack`` is given; ``edge_schedule``: the
     exact method's ``[(task_id, start_ms)]``, else None). Raises ValueError for an unknown method, RuntimeError if
-    the LP solver fails."""
+    the LP solver fails; ValueError for ``edge_slack`` with ``"lp"`` or ``levels`` not descending in (0, 1]."""
     if method not in ("lp", "exact"):
         raise ValueError(f"method must be 'lp' or 'exact', got {method!r}")
+    if method == "lp" and edge_slack is not None:
+        raise ValueError("method 'lp' has no one-variant-per-task constraint: use edge_slack with method 'exact'")
+    if list(levels) != sorted(levels, reverse=True) or not all(0 < q <= 1 for q in levels):
+        raise ValueError(f"levels must be descending probabilities in (0, 1], got {tuple(levels)!r}")
     base = 0.0
     cands: list[tuple[float, float, float, float]] = []  # (release, deadline, p, gain)
     ids: list[int] = []
