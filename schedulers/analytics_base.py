@@ -422,7 +422,8 @@ def _load_builtins() -> None:
 
 #: modules that register the built-in analytics schedulers when imported
 _BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
-                                "aerodaas.schedulers.analytics_gainplan", "aerodaas.schedulers.analytics_evplan"]
+                                "aerodaas.schedulers.analytics_gainplan", "aerodaas.schedulers.analytics_evplan",
+                                "aerodaas.schedulers.analytics_laplan"]
 
 
 def iter_schedulers(names: Iterable[str] | None = None) -> list[type[AnalyticsScheduler]]:

@@ -37,7 +37,7 @@ import math
 from collections import deque
 
 from .analytics_base import EXECUTED_STATES, AnalyticsTask, Decision, Workload, register_analytics_scheduler
-from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS
+from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS
 from .analytics_estimators import make_estimator
 from .analytics_gainplan import EDGE_ONLY, OPEN, GainPlan, max_gain_edge_plan
 
@@ -144,10 +144,12 @@ class EvPlan(GainPlan):
         p = self.w[task.model]
         self.pool.append(task)
         self._recent.append((now_ms, p.edge_ms))
+        if self._first_arrival is None:
+            self._first_arrival = now_ms
         if p.cloud_utility > 0 and self.cloud_available and self.cloud_value(task, now_ms) > 0:
             task.notes["mode"] = OPEN
             task.notes["p0"] = self.on_time_chance(task.model, task.deadline_ms - now_ms)
-            return self.poll(now_ms) if self.trigger_ms(task) - now_ms <= JIT_EARLY_MS else []
+            return self.poll(now_ms) if self.trigger_ms(task) - now_ms <= self.jit_early_ms else []
         task.notes["mode"] = EDGE_ONLY
         if p.edge_utility <= 0 or now_ms + self._edge_scale * p.edge_ms > task.deadline_ms:
             return [self._lose(task, now_ms, "no usable cloud option and no gain from (or time for) the edge")]

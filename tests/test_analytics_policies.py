@@ -1,5 +1,5 @@
-"""Behavioural tests of the analytics-scheduler policies (Ocularone baselines, E+C, DEM, DEMS, DEMS-A, GEMS and
-GAINPLAN), with hand-built scenarios whose right answer is derived in the comments, plus invariants and
+"""Behavioural tests of the analytics-scheduler policies (Ocularone baselines, E+C, DEM, DEMS, DEMS-A, GEMS,
+GAINPLAN, EVPLAN and LAPLAN) and of the exact single-machine planner, with hand-built scenarios whose right answer is derived in the comments, plus invariants and
 utility orderings on seeded traces driven by the policy harness (``aerodaas/bench/harness.py``)."""
 from __future__ import annotations
 
@@ -12,6 +12,8 @@ from aerodaas.schedulers.analytics_base import (AnalyticsTask, TaskState, Worklo
                                                 make_analytics_scheduler, task_utility)
 from aerodaas.schedulers.analytics_dems import CloudLatencyEstimator
 from aerodaas.schedulers.analytics_gainplan import max_gain_edge_plan
+from aerodaas.schedulers.analytics_laplan import ArrivalPredictor
+from aerodaas.schedulers.single_machine import max_gain_schedule
 
 from .analytics_harness import Harness, Result, make_trace, run_policy
 from .conftest import DATA_DIR
@@ -20,7 +22,7 @@ WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
 needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 ALL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
-       "GAINPLAN", "EVPLAN"]
+       "GAINPLAN", "EVPLAN", "LAPLAN"]
 EDGE_ONLY = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF"]
 
 # A small workload where every number below is derivable by hand (times in ms).
@@ -552,6 +554,25 @@ def test_invariants_on_random_traces(name, load):
             assert res.states[TaskState.DONE_LATE] == 0
 
 
+@needs_workload
+@pytest.mark.parametrize("name", ALL)
+def test_decisions_before_t_do_not_depend_on_arrivals_after_t(name):
+    """Non-anticipation: two traces equal up to T and different after it must get the same decisions before T
+    (a policy may predict arrivals from what it saw, as LAPLAN does, but never read the trace ahead)."""
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+    cut = 10_000.0
+    a = make_trace(w, drones=3, duration_s=20, seed=21)
+    other = [t for t in make_trace(w, drones=2, duration_s=20, seed=99) if t.arrival_ms >= cut]
+    prefix = [t for t in a if t.arrival_ms < cut]
+    b = prefix + [AnalyticsTask(len(prefix) + i, t.drone, t.model, t.arrival_ms, t.deadline_ms)
+                  for i, t in enumerate(other)]
+    assert [(t.drone, t.model, t.arrival_ms) for t in a if t.arrival_ms >= cut] != \
+        [(t.drone, t.model, t.arrival_ms) for t in other]                    # the futures really differ
+    logs = [run_policy(name, w, trace, cloud_extra_ms=40.0).log for trace in (a, b)]
+    before = [[e for e in log if e[0] < cut] for log in logs]
+    assert before[0] and before[0] == before[1]
+
+
 # --------------------------------------------------------------------------------------------- orderings
 @needs_workload
 def test_heavy_load_utility_orderings():
@@ -620,3 +641,137 @@ def test_evplan_values_the_cloud_by_its_expected_utility_under_the_observed_late
     # hold while it costs < 2 % of the on-time chance: until the 98th-percentile ratio (1.9, the slowest) fits
     assert pol.trigger_ms(c) == 3400 - 1.9 * 200 - 10
     assert pol.cloud_admit(c, 3000.0)
+
+
+# --------------------------------------------------------------------------------------------- exact single-machine plans
+def _brute_force_release_dates(jobs, free_at, groups):
+    """Max gain over every subset (at most one job per group) and every order, each job left-shifted."""
+    best = 0.0
+    for r in range(1, len(jobs) + 1):
+        for sub in itertools.combinations(range(len(jobs)), r):
+            if len({groups[j] for j in sub}) < r or any(jobs[j][3] <= 0 for j in sub):
+                continue
+            for perm in itertools.permutations(sub):
+                f, ok = free_at, True
+                for j in perm:
+                    rel, dl, p, _ = jobs[j]
+                    f = max(f, rel) + p
+                    ok = ok and f <= dl + 1e-9
+                if ok:
+                    best = max(best, sum(jobs[j][3] for j in sub))
+                    break
+    return best
+
+
+def test_max_gain_schedule_with_release_dates_equals_brute_force_and_is_feasible():
+    rng = random.Random(3)
+    for _ in range(300):
+        jobs, groups = [], []
+        for g in range(rng.randint(0, 5)):            # a job and 1-2 variants (same release and length)
+            rel = rng.choice([0.0, 10.0, 20.0, 35.0, rng.uniform(0, 60)])
+            p = rng.choice([10.0, 15.0, 30.0, rng.uniform(5, 40)])
+            for _ in range(rng.choice([1, 1, 2])):
+                jobs.append((rel, rel + p + rng.choice([-3.0, 0.0, 10.0, rng.uniform(0, 50)]), p,
+                             rng.choice([-1.0, 1.0, 3.0, rng.uniform(0.5, 5)])))
+                groups.append(g)
+        free_at = rng.choice([float("-inf"), 0.0, 15.0, rng.uniform(0, 40)])
+        gain, sched = max_gain_schedule(jobs, free_at=free_at, groups=groups)
+        f, total = free_at, 0.0
+        for j, start in sched:                        # in start order, none before its release or the previous end
+            rel, dl, p, w = jobs[j]
+            assert start >= max(f, rel) - 1e-9 and start + p <= dl + 1e-9
+            f, total = start + p, total + w
+        assert len({groups[j] for j, _ in sched}) == len(sched)
+        assert total == pytest.approx(gain)
+        assert gain == pytest.approx(_brute_force_release_dates(jobs, free_at, groups))
+
+
+def test_max_gain_schedule_waits_for_a_later_release_when_it_pays():
+    # Y (gain 1) is available now and would block X (gain 10, released at 50, latest start 60) if started at 0
+    gain, sched = max_gain_schedule([(0.0, 1000.0, 100.0, 1.0), (50.0, 160.0, 100.0, 10.0)])
+    assert gain == 11.0 and sched == [(1, 50.0), (0, 150.0)]
+    with pytest.raises(ValueError, match="share"):
+        max_gain_schedule([(0.0, 100.0, 10.0, 1.0), (5.0, 100.0, 10.0, 1.0)], groups=[0, 0])
+
+
+# --------------------------------------------------------------------------------------------- LAPLAN
+#   model  edge  cloud  benefit e_cost c_cost deadline: X long, valuable and tight (latest start + 20 ms after it
+#   arrives); Y a short filler with a loose deadline. Neither has a cloud option in time.
+LW = Workload.from_dict({"models": {
+    "X": {"edge_ms": 300, "cloud_ms": 5000, "benefit": 200, "edge_cost": 0, "cloud_cost": 0},
+    "Y": {"edge_ms": 150, "cloud_ms": 5000, "benefit": 30, "edge_cost": 0, "cloud_cost": 0}},
+    "loads": {"T": {"X": 320, "Y": 1000}}}, "T")
+
+
+def _frame(pol, drone, t, models):
+    out = []
+    for m in models:
+        tk = AnalyticsTask(next(_ids), drone, m, t, t + LW[m].deadline_ms)
+        assert pol.submit(tk, t) == []
+        out.append(tk)
+    return out
+
+
+def _run_edge(pol, t, now, exec_ms):
+    got, drops = pol.next_edge_task(now)
+    assert got is t and drops == []
+    pol.on_edge_done(t, now + exec_ms, exec_ms)
+
+
+def test_arrival_predictor_learns_each_drones_period_and_stops_waiting_for_a_missing_frame():
+    ap = ArrivalPredictor()
+    for t in (0.0, 1000.0):
+        for m in ("X", "Y"):
+            ap.observe(AnalyticsTask(next(_ids), "d0", m, t, t + 500))
+    assert ap.predict(1500.0, 1000.0) == [(2000.0, "d0", m, 2000.0, 2000.0) for m in ("X", "Y")] + \
+        [(3000.0, "d0", m, 3000.0, 3000.0) for m in ("X", "Y")]
+    # overdue within a tenth of the period: expected now, re-plan at the end of the grace
+    assert ap.predict(2050.0, 0.0) == [(2050.0, "d0", m, 2100.0, 2000.0) for m in ("X", "Y")]
+    assert ap.predict(2100.0, 5000.0) == []            # missing: not waited for
+    # the first task of a frame has come: the rest of it is expected now
+    ap.observe(AnalyticsTask(next(_ids), "d0", "Y", 2100.0, 3100.0))
+    assert ap.predict(2100.0, 0.0)[0] == (2100.0, "d0", "X", 2120.0, 2100.0)
+
+
+def test_laplan_keeps_the_edge_free_for_a_predicted_high_gain_task():
+    # drone d0 sends X every 1000 ms. At 1950 a filler Y arrives from d1 with the edge idle: EVPLAN starts it (it
+    # ends at 2100, and X of 2000 can no longer start by 2020: lost); LAPLAN waits for X, runs it 2000-2300, then Y.
+    for name, first in (("EVPLAN", "Y"), ("LAPLAN", "X")):
+        pol = make_analytics_scheduler(name, LW)
+        for t0 in (0.0, 1000.0):
+            x, = _frame(pol, "d0", t0, ["X"])
+            _run_edge(pol, x, t0, 300.0)
+        y, = _frame(pol, "d1", 1950.0, ["Y"])
+        got, _ = pol.next_edge_task(1950.0)
+        if first == "Y":
+            assert got is y
+            continue
+        assert got is None and pol.next_poll_ms() == 2000.0
+        assert pol.poll(2000.0) == []
+        x, = _frame(pol, "d0", 2000.0, ["X"])
+        _run_edge(pol, x, 2000.0, 300.0)
+        _run_edge(pol, y, 2300.0, 150.0)
+        assert pol.held_tasks() == [] and pol.counters["edge_waits_for_prediction"] == 1
+
+
+def test_laplan_expects_the_rest_of_a_frame_while_its_tasks_are_submitted_one_by_one():
+    pol = make_analytics_scheduler("LAPLAN", LW)
+    for t0 in (0.0, 1000.0):
+        x, y = _frame(pol, "d0", t0, ["X", "Y"])
+        _run_edge(pol, x, t0, 300.0)
+        _run_edge(pol, y, t0 + 300.0, 150.0)
+    y, = _frame(pol, "d0", 2000.0, ["Y"])             # Y of the frame first: X of the same frame is on its way
+    assert pol.next_edge_task(2000.0)[0] is None
+    x, = _frame(pol, "d0", 2000.0, ["X"])
+    assert pol.next_edge_task(2000.0)[0] is x
+
+
+def test_laplan_refuses_bad_options():
+    with pytest.raises(ValueError, match="horizon_ms"):
+        make_analytics_scheduler("LAPLAN", LW, horizon_ms=-1)
+    with pytest.raises(ValueError, match="edge_levels"):
+        make_analytics_scheduler("LAPLAN", LW, edge_levels=(0.5, 1.5))
+    with pytest.raises(ValueError, match="release_early_ms"):
+        make_analytics_scheduler("LAPLAN", LW, release_early_ms=-5)
+    with pytest.raises(ValueError, match="commit_horizon_ms"):
+        make_analytics_scheduler("LAPLAN", LW, commit_horizon_ms=100.0)

@@ -1,13 +1,16 @@
 """The scheduler benchmark's deterministic side: the harness sweep's CI/sweep output shape and determinism, the
-fair-margin estimator option, the behaviour counters, the LP upper bound, the runtime's emulation-validity marking,
-and the CLI's ``--harness`` mode. No timing is asserted; every run here is a few simulated seconds."""
+fair-margin estimator option, the behaviour counters, the upper bounds (LP, exact, non-anticipative), the runtime's
+emulation-validity marking, and the CLI's ``--harness`` mode. No timing is asserted; every run here is a few
+simulated seconds."""
 from __future__ import annotations
 
+import itertools
 import json
+import random
 
 import pytest
 
-from aerodaas.bench.bound import utility_upper_bound
+from aerodaas.bench.bound import lognormal_on_time_chance, lognormal_slack, utility_upper_bound
 from aerodaas.bench.harness import Harness, fleet_tasks, make_trace, run_fleet, run_policy
 from aerodaas.bench.schedulers import make_trace as fleet_trace
 from aerodaas.bench.schedulers_report import summarize_runs
@@ -21,7 +24,7 @@ from .conftest import DATA_DIR
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
 needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
-JIT = ["DEMS", "DEMS-A", "GEMS", "GAINPLAN", "EVPLAN"]
+JIT = ["DEMS", "DEMS-A", "GEMS", "GAINPLAN", "EVPLAN", "LAPLAN"]
 
 
 # --------------------------------------------------------------------------------------------- statistics
@@ -45,7 +48,7 @@ def test_scenarios_are_network_specs():
 # --------------------------------------------------------------------------------------------- the sweep
 def _small_sweep(processes: int, **kw) -> dict:
     args = dict(loads=["HEAVY"], sigmas=[0.0, 0.1], drones_per_edge=[2], scenarios=["none"], seeds=[0, 1],
-                edges=1, duration_s=8.0, schedulers=["DEM", "DEMS", "DEMS-A", "GEMS", "EVPLAN"],
+                edges=1, duration_s=8.0, schedulers=["DEM", "DEMS", "DEMS-A", "GEMS", "EVPLAN", "LAPLAN"],
                 workload_path=WORKLOAD_JSON, processes=processes)
     args.update(kw)
     return run_sweep(**args)
@@ -55,14 +58,16 @@ def _small_sweep(processes: int, **kw) -> dict:
 def test_harness_sweep_reports_every_figure_as_mean_ci_with_per_seed_values_and_is_deterministic():
     a = _small_sweep(1)
     assert a["mode"] == "harness" and a["config"]["seeds"] == [0, 1]
-    assert len(a["results"]) == 2 * 5                  # 2 sigmas x 5 schedulers
+    assert len(a["results"]) == 2 * 6                  # 2 sigmas x 6 schedulers
     for r in a["results"]:
         for k in ("scheduler", "load", "cloud_sigma", "drones_per_edge", "seeds", "cloud_cost", "drops"):
             assert k in r
-        for k in ("utility", "on_time_rate", "fraction_of_bound"):
+        for k in ("utility", "on_time_rate", "fraction_of_bound", "fraction_of_lp_bound", "fraction_of_na_bound"):
             assert set(r[k]) >= {"mean", "ci95", "per_seed"} and len(r[k]["per_seed"]) == 2
             assert r[k]["mean"] == pytest.approx(sum(r[k]["per_seed"]) / 2)
-        assert all(f <= 1.0 + 1e-9 for f in r["fraction_of_bound"]["per_seed"])  # nobody beats the upper bound
+        assert r["upper_bound_kind"] == "exact"        # HEAVY: the exact optimum, below the LP on every seed
+        assert all(e <= lp + 1e-6 for e, lp in zip(r["upper_bound"]["per_seed"], r["bound_lp"]["per_seed"]))
+        assert all(f <= 1.0 + 1e-9 for f in r["fraction_of_bound"]["per_seed"])  # nobody beats the exact optimum
         assert r["seeds"] == [0, 1] and r["drones_per_edge"] == 2
     assert {(c["cloud_sigma"], c["best_baseline"] in ("DEM", "DEMS", "DEMS-A", "GEMS")) for c in a["claims"]} == \
         {(0.0, True), (0.1, True)}
@@ -97,7 +102,7 @@ def test_every_just_in_time_policy_takes_the_same_estimator(spec, after, expecte
             t = AnalyticsTask(i, "d", "A", 0.0, 10_000.0)
             t.tier, t.start_ms, t.state = "cloud", 0.0, TaskState.DONE_ON_TIME
             pol.on_cloud_done(t, lat, lat)
-        got = pol.cloud_estimate_ms("A") if name != "EVPLAN" else pol.point.value("A")
+        got = pol.cloud_estimate_ms("A") if name not in ("EVPLAN", "LAPLAN") else pol.point.value("A")
         assert got == pytest.approx(expected), name
     assert filter_options("EDGE_EDF", {"estimator": "max:2"}) == {}  # edge-only policies have no estimator
     with pytest.raises(ValueError, match="estimator 'p0x'"):
@@ -149,15 +154,103 @@ def test_upper_bound_on_a_hand_built_case():
 
 
 @needs_workload
-def test_upper_bound_is_above_every_policy_on_the_same_draws():
+@pytest.mark.parametrize("sigma", [0.0, 0.1])
+def test_upper_bounds_are_above_every_policy_on_the_same_draws(sigma):
+    """The LP and the exact (clairvoyant) bound hold on every seed: no policy's utility exceeds them, and the exact
+    optimum never exceeds the LP relaxation."""
     w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
     per_edge = fleet_tasks(fleet_trace(w, 3, 15.0, 2, 3), w)
     (edge, tasks), = per_edge.items()
-    ej, cj = Jitter("lognormal", 0.05), Jitter("lognormal", 0.1)
+    ej, cj = Jitter("lognormal", 0.05), Jitter("lognormal", sigma)
     h = Harness(make_analytics_scheduler("CLOUD", w), edge_jitter=ej, cloud_jitter=cj, seed=2, edge_id=edge)
-    bound = utility_upper_bound(tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms)["bound"]
-    for name in ("DEM", "DEMS", "GAINPLAN", "EVPLAN", "CLOUD"):
-        assert run_fleet(name, w, per_edge, seed=2, edge_jitter=ej, cloud_jitter=cj)["utility"] <= bound + 1e-6
+    lp = utility_upper_bound(tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms)["bound"]
+    exact = utility_upper_bound(tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms, method="exact")
+    assert exact["bound"] <= lp + 1e-6
+    for name in ("DEM", "DEMS", "GAINPLAN", "EVPLAN", "LAPLAN", "CLOUD"):
+        assert run_fleet(name, w, per_edge, seed=2, edge_jitter=ej, cloud_jitter=cj)["utility"] <= exact["bound"] + 1e-6
+    # its schedule is feasible: one task at a time, each within its window at its realised time
+    by_id, free = {t.task_id: t for t in tasks}, float("-inf")
+    for tid, start in exact["edge_schedule"]:
+        t = by_id[tid]
+        assert start >= max(free, t.arrival_ms) - 1e-9 and start + h.edge_hold_ms(t) <= t.deadline_ms + 1e-9
+        free = start + h.edge_hold_ms(t)
+
+
+def _brute_force_bound(tasks, w, edge_ms, cloud_ok):
+    """max over every edge subset and order (left-shifted, on time) of its edge utility + the others' cloud value"""
+    best = 0.0
+    fallback = {t.task_id: (w[t.model].cloud_utility if cloud_ok(t) else 0.0) for t in tasks}
+    for r in range(len(tasks) + 1):
+        for sub in itertools.combinations(tasks, r):
+            for perm in itertools.permutations(sub):
+                f, ok = float("-inf"), True
+                for t in perm:
+                    f = max(f, t.arrival_ms) + edge_ms(t)
+                    ok = ok and f <= t.deadline_ms
+                if ok:
+                    best = max(best, sum(max(0.0, fallback[t.task_id]) for t in tasks if t not in sub)
+                               + sum(w[t.model].edge_utility for t in sub))
+                    break
+    return best
+
+
+def test_exact_bound_equals_brute_force_on_tiny_traces():
+    w = Workload.from_dict({"models": {
+        "X": {"edge_ms": 300, "cloud_ms": 250, "benefit": 200, "edge_cost": 5, "cloud_cost": 150},
+        "Y": {"edge_ms": 150, "cloud_ms": 5000, "benefit": 60, "edge_cost": 1, "cloud_cost": 0},
+        "Z": {"edge_ms": 100, "cloud_ms": 300, "benefit": 50, "edge_cost": 1, "cloud_cost": 10}},
+        "loads": {"T": {"X": 400, "Y": 500, "Z": 350}}}, "T")
+    rng = random.Random(5)
+    for k in range(40):
+        tasks = []
+        for i in range(rng.randint(1, 6)):
+            m, at = rng.choice("XYZ"), rng.choice([0.0, 50.0, 120.0, rng.uniform(0, 400)])
+            tasks.append(AnalyticsTask(i, "d", m, at, at + w[m].deadline_ms))
+        jit = {t.task_id: rng.uniform(0.8, 1.2) for t in tasks}
+        edge_ms = lambda t: w[t.model].edge_ms * jit[t.task_id]  # noqa: E731
+        cloud_ms = lambda t, s: w[t.model].cloud_ms * (2 - jit[t.task_id])  # noqa: E731
+        b = utility_upper_bound(tasks, w, edge_ms, cloud_ms, method="exact")["bound"]
+        assert b == pytest.approx(_brute_force_bound(tasks, w, edge_ms,
+                                                     lambda t: t.arrival_ms + cloud_ms(t, 0) <= t.deadline_ms))
+
+
+def test_non_anticipative_bound_values_each_task_by_its_expected_reward():
+    """One edge-only task, profile 100 ms, window exactly 100 ms, lognormal edge jitter 0.05: started at its
+    arrival it is on time with P(X <= 1) = Phi(sigma / 2) ~ 0.510. The bound credits the next level above (0.55 x
+    benefit - edge cost): >= the true expectation, within one level. A cloud-only task is worth P * benefit -
+    cost with P its on-time chance at arrival; with no jitter both bounds are the clairvoyant one."""
+    w = Workload.from_dict({"models": {
+        "E": {"edge_ms": 100, "cloud_ms": 9000, "benefit": 100, "edge_cost": 1, "cloud_cost": 0},
+        "C": {"edge_ms": 900, "cloud_ms": 500, "benefit": 100, "edge_cost": 1, "cloud_cost": 50}},
+        "loads": {"T": {"E": 100, "C": 550}}}, "T")
+    e, c = AnalyticsTask(1, "d", "E", 0.0, 100.0), AnalyticsTask(2, "d", "C", 0.0, 550.0)
+    p_edge = lognormal_on_time_chance(100.0, 0.05, 100.0)
+    p_cloud = lognormal_on_time_chance(500.0, 0.1, 550.0)
+    assert p_edge == pytest.approx(0.510, abs=1e-3) and 0.8 < p_cloud < 0.9
+    b = utility_upper_bound([e, c], w, lambda t: 100.0, lambda t, s: 0.0, method="exact",
+                            cloud_chance=lambda t, s: lognormal_on_time_chance(w[t.model].cloud_ms, 0.1,
+                                                                               t.deadline_ms - s),
+                            edge_slack=lambda t, p: lognormal_slack(w[t.model].edge_ms, 0.05, p))
+    assert b["cloud_part"] == pytest.approx(p_cloud * 100 - 50)
+    assert p_edge * 100 - 1 <= b["edge_gain"] <= (p_edge + 0.05) * 100 - 1
+    exact = utility_upper_bound([e, c], w, lambda t: w[t.model].edge_ms, lambda t, s: w[t.model].cloud_ms,
+                                method="exact")
+    flat = utility_upper_bound([e, c], w, lambda t: w[t.model].edge_ms, lambda t, s: w[t.model].cloud_ms,
+                               method="exact", cloud_chance=lambda t, s: lognormal_on_time_chance(w[t.model].cloud_ms, 0,
+                                                                                         t.deadline_ms - s),
+                               edge_slack=lambda t, p: lognormal_slack(w[t.model].edge_ms, 0.0, p))
+    assert exact["bound"] == pytest.approx(flat["bound"]) == pytest.approx(99 + 50)
+
+
+def test_lognormal_on_time_chance_matches_the_harness_draws():
+    from aerodaas.schedulers.dispatch.emulation import seeded_rng
+
+    j = Jitter("lognormal", 0.1)
+    draws = [600.0 * j.factor(seeded_rng(1, "cloud", "e", i)) for i in range(4000)]
+    for slack in (560.0, 600.0, 680.0):
+        assert lognormal_on_time_chance(600.0, 0.1, slack) == pytest.approx(
+            sum(d <= slack for d in draws) / len(draws), abs=0.02)
+    assert lognormal_slack(600.0, 0.1, lognormal_on_time_chance(600.0, 0.1, 640.0)) == pytest.approx(640.0)
 
 
 # --------------------------------------------------------------------------------------------- runtime summary

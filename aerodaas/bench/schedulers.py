@@ -450,7 +450,8 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
                     "drops and behaviour counters as mean ± 95%% CI over --seeds. Default: emulated with wall-clock "
                     "time on Ray actors (edge node + cloud nodes), with the emulation's own timing error (a run over "
                     "--emulation-bound-ms is marked invalid). --harness: the same policies and draws on simulated "
-                    "time, no Ray, swept over --cloud-sigma x --drones-per-edge x --scenarios, with an LP upper bound.")
+                    "time, no Ray, swept over --cloud-sigma x --drones-per-edge x --scenarios, with upper bounds (LP; at "
+                    "HEAVY also the exact offline optimum and the non-anticipative bound).")
     p.add_argument("--harness", action="store_true",
                    help="run the deterministic policy harness (no Ray) over the sweep instead of the Ray runtime")
     p.add_argument("--drones", type=_positive_int,
@@ -460,7 +461,7 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--duration", type=_positive_float, help="seconds of arrivals per run (default 60; --harness 120)")
     p.add_argument("--schedulers", nargs="+", metavar="NAME", help="schedulers to run (default: all registered; "
                                                                    "--harness: EDGE_EDF, CLOUD, E+C, the DEMS family, "
-                                                                   "GAINPLAN, EVPLAN)")
+                                                                   "GAINPLAN, EVPLAN, LAPLAN)")
     p.add_argument("--seed", type=int, default=0, help="first seed of the traces and draws (default 0)")
     p.add_argument("--seeds", type=_positive_int, default=5, help="seeds per configuration (default 5)")
     p.add_argument("--drones-per-edge", type=_ints,
@@ -479,7 +480,9 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--fps", type=_positive_float, default=DEFAULT_FPS,
                    help=f"frames (1-frame batches) per second per drone (default {DEFAULT_FPS:g})")
     p.add_argument("--processes", type=_positive_int, help="--harness worker processes (default: min(2, CPUs))")
-    p.add_argument("--no-bound", action="store_true", help="--harness: skip the LP upper bound")
+    p.add_argument("--no-bound", action="store_true", help="--harness: skip the upper bounds")
+    p.add_argument("--exact-bound", type=_loads, default=None, metavar="LOADS",
+                   help="--harness: loads whose cells also get the exact and non-anticipative bounds (default HEAVY)")
     p.add_argument("--network-variability", action="append", metavar="SPEC",
                    help="extra cloud latency: const:MS, normal:MEAN,SD, lognormal:MEDIAN,SIGMA, +MS@T1-T2 (episode, "
                         "seconds), walk:STEP,MAX[,EVERY]; repeatable")
@@ -517,7 +520,7 @@ def _run_harness(args: argparse.Namespace, options: dict) -> dict:
                      seeds=list(range(args.seed, args.seed + args.seeds)), drones=args.drones,
                      duration_s=args.duration or 120.0, fps=args.fps, schedulers=args.schedulers, options=options,
                      edge_jitter=args.edge_jitter, processes=args.processes, bound=not args.no_bound,
-                     progress=progress)
+                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress)
 
 
 def _run_runtime(args: argparse.Namespace, options: dict) -> dict:

@@ -121,7 +121,10 @@ def write_plot(res: dict, path: str | os.PathLike) -> None:
                 ax.text(b.get_x() + b.get_width() / 2, b.get_height(), "INVALID", rotation=90, ha="center",
                         va="bottom", fontsize=7, color="#e76f51")
         if "upper_bound" in rs[0]:
-            ax.axhline(rs[0]["upper_bound"]["mean"], color="#e76f51", ls="--", lw=1, label="upper bound (LP)")
+            ax.axhline(rs[0]["upper_bound"]["mean"], color="#e76f51", ls="--", lw=1,
+                       label=f"upper bound ({rs[0].get('upper_bound_kind', 'lp')})")
+            if "bound_na" in rs[0]:
+                ax.axhline(rs[0]["bound_na"]["mean"], color="#2a9d8f", ls=":", lw=1, label="non-anticipative bound")
             ax.legend(fontsize=6, loc="lower right")
         ax.set_xticks(list(x))
         ax.set_xticklabels([r["scheduler"] for r in rs], rotation=40, ha="right", fontsize=7)

@@ -1,0 +1,320 @@
+"""LAPLAN: EVPLAN's expected-value cloud option with an edge plan that looks ahead over the predicted arrivals.
+
+Why. The exact offline optimum of the HEAVY workload at 3 drones per edge (:mod:`aerodaas.bench.bound`, method
+``exact``: the non-preemptive max-gain edge schedule on the same trace and draws) runs almost only the two long,
+high-gain models on the edge — DEO (739 ms, gain over its cloud fallback 204) and CD (563 ms, gain 148): on seed 0,
+420 DEO and 324 CD of 744 edge runs, the edge busy 100 % of the time. EVPLAN ran 231 DEO and 209 CD, filling the
+rest with short low-gain models (DEV, BP, HV: gain 25-38 for 172-244 ms). The reason is its plan's horizon: it
+plans over the tasks that have arrived. When the edge frees and no DEO/CD is waiting, it starts a BP (244 ms); a
+DEO arriving 50 ms later can then no longer start by its latest start (deadline 950 - 739 = arrival + 211 ms), and
+its cloud trigger (arrival + 108 ms) sends it to the cloud. The drones' frames are periodic (one 1-frame batch per
+drone per second, :func:`aerodaas.bench.schedulers.make_trace`, the reference's mock client), so the next
+arrivals can be predicted from the ones seen.
+
+Rules (times ms; EVPLAN's expected cloud value ``V`` and triggers, see :mod:`.analytics_evplan`, with two
+changes: the observed round-trip / profile ratios are pooled over all models (``pool_models``, default on: one
+model's few samples no longer decide its ``V``), and a task is acted on ``release_early_ms`` before its trigger,
+default DEMS's 50 ms):
+
+* Arrival prediction, learned online: per drone, the period is the gap between its last two frames (tasks of one
+  frame share an arrival time) and the frame's models are the last frame's. The frames of the next
+  ``horizon_ms`` (default 2,000) are predicted at ``last + k * period``; a frame overdue by more than a tenth of
+  the period stops the drone's predictions until it sends again (a stopped or irregular drone is not waited for).
+* Edge plan: the exact max-gain schedule with release times (:func:`.single_machine.max_gain_schedule`) over the
+  pool (release: when the edge is free) and the predicted tasks (release: their predicted arrival), each with
+  EVPLAN's gain (edge utility - max(0, V); a predicted task's V at its arrival). Processing times are the profile's
+  x the mean observed edge ratio (chains add means). Each task enters the plan as one variant per on-time level
+  of ``edge_levels`` (default 0.7 ... 0.995): its deadline tightened by the tail ``p * (q - mean)``, ``q`` the
+  observed ratio at that level, and its gain weighted by that chance; the DP picks at most one variant per task.
+* The edge starts the plan's first task if it is a real one; if the plan waits for a predicted task, the edge
+  stays idle and the policy re-plans at that time (:meth:`next_poll_ms`) or at the next event.
+* At a task's cloud trigger (EVPLAN's): committed to the edge if the plan runs it (any start), else sent to the
+  cloud if ``V > 0``, else kept as an edge-only candidate, dropped when it no longer fits.
+
+The plan is cached while nothing unpredicted happens (see :meth:`LaPlan.submit`): an arrival that matches a
+predicted task (same drone and model, within ``same_frame_ms`` = 50 ms of the predicted frame time) takes its
+twin's place; any other arrival, a lost task, a mode change or the edge's state re-plans. This is an
+approximation: a task that arrives up to 50 ms early has an earlier deadline than its twin had, and the cloud
+fallbacks ``V`` of the open tasks change with time and with each cloud completion without a re-plan; measured on
+the HEAVY sweep cells it moved utility by < 0.1 % and cut the plans computed per second from 10.7 to 3.8 per edge.
+
+There is no ``commit_horizon_ms`` (GAINPLAN/EVPLAN's): at its trigger a task is committed to the edge exactly
+when the plan runs it, wherever it stands.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from .analytics_base import AnalyticsTask, Decision, Workload, register_analytics_scheduler
+from .analytics_dems import JIT_EARLY_MS
+from .analytics_evplan import EvPlan
+from .analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
+from .single_machine import max_gain_schedule
+
+__all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
+
+#: on-time chances at which a planned edge task's expected gain is evaluated (its start-time variants)
+EDGE_LEVELS = (0.7, 0.8, 0.9, 0.95, 0.98, 0.995)
+
+
+class ArrivalPredictor:
+    """Per-drone periodic arrival model learned from the tasks seen (see the module docstring).
+
+    ``overdue``: fraction of the period after which a missing frame stops the drone's predictions; ``same_frame_ms``:
+    tasks of one drone this close in arrival time belong to one frame; ``frame_grace_ms``: how long the rest of a
+    frame whose first tasks have arrived is still expected (its tasks are submitted one by one)."""
+
+    def __init__(self, overdue: float = 0.1, same_frame_ms: float = 50.0, frame_grace_ms: float = 20.0) -> None:
+        self.overdue, self.same_frame_ms, self.frame_grace_ms = overdue, same_frame_ms, frame_grace_ms
+        #: drone -> [current frame arrival ms, period ms or None, models seen in it, models of the frame before]
+        self.drones: dict[str, list] = {}
+
+    def observe(self, task: AnalyticsTask) -> None:
+        """Learn from an arrived task: a task within ``same_frame_ms`` of its drone's current frame joins it; a
+        later one starts the next frame and sets the drone's period to the gap between the two frames."""
+        st = self.drones.get(task.drone)
+        if st is None:
+            self.drones[task.drone] = [task.arrival_ms, None, [task.model], []]
+        elif abs(task.arrival_ms - st[0]) < self.same_frame_ms:  # same frame
+            if task.model not in st[2]:
+                st[2].append(task.model)
+        elif task.arrival_ms > st[0]:
+            st[1] = task.arrival_ms - st[0]
+            st[0], st[2], st[3] = task.arrival_ms, [task.model], st[2]
+
+    def predict(self, now_ms: float, horizon_ms: float) -> list[tuple[float, str, str, float, float]]:
+        """``(arrival_ms, drone, model, wake_ms, frame_ms)`` of the tasks still expected: the rest of a frame being submitted
+        (the previous frame's models not seen yet, within ``frame_grace_ms``) and each drone's next frames within
+        ``horizon_ms`` of its next frame (so the set changes only when a task arrives or a frame goes missing). An
+        overdue frame within its grace is predicted at ``now_ms`` and ``wake_ms`` (when to re-plan if it has not
+        come) is the end of its grace; otherwise ``wake_ms`` is its predicted arrival. ``frame_ms``: the frame's own
+        (predicted) time, which identifies it."""
+        out = []
+        for drone, (last, period, seen, before) in self.drones.items():
+            if now_ms < last + self.frame_grace_ms:
+                out += [(now_ms, drone, m, last + self.frame_grace_ms, last) for m in before if m not in seen]
+            if not period or period <= 0:
+                continue
+            t = last + period
+            if t + self.overdue * period <= now_ms:
+                continue  # a frame is missing: do not wait for this drone
+            models = seen if len(seen) >= len(before) else before
+            until = t + horizon_ms
+            while t <= until:
+                wake = t if t > now_ms else t + self.overdue * period
+                out += [(max(t, now_ms), drone, m, wake, t) for m in models]
+                t += period
+        return out
+
+
+@register_analytics_scheduler
+class LaPlan(EvPlan):
+    """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
+    prediction), ``edge_levels`` (on-time chances of the edge-time variants, each in (0, 1]), ``pool_models``
+    (default True), ``release_early_ms`` (default 50), and EVPLAN's ``window``, ``tolerance``, ``estimator`` and
+    ``edge_quantile`` (admission only). Terminal states as GAINPLAN's. Raises ValueError for out-of-range options
+    and for ``commit_horizon_ms``, which LAPLAN does not have."""
+
+    name = "LAPLAN"
+    options = tuple(o for o in EvPlan.options if o != "commit_horizon_ms") + (
+        "horizon_ms", "edge_levels", "pool_models", "release_early_ms")
+
+    def __init__(self, workload: Workload, *, horizon_ms: float = 2000.0,
+                 edge_levels: tuple[float, ...] = EDGE_LEVELS, pool_models: bool = True,
+                 release_early_ms: float = JIT_EARLY_MS, **kw) -> None:
+        if "commit_horizon_ms" in kw:
+            raise ValueError(f"LAPLAN has no commit_horizon_ms (got {kw['commit_horizon_ms']!r}): its plan decides "
+                             "which tasks are committed to the edge")
+        super().__init__(workload, commit_horizon_ms=math.inf, **kw)
+        if not horizon_ms >= 0:
+            raise ValueError(f"horizon_ms must be >= 0, got {horizon_ms!r}")
+        levels = tuple(sorted(float(q) for q in edge_levels))
+        if not levels or not all(0 < q <= 1 for q in levels):
+            raise ValueError(f"edge_levels must be probabilities in (0, 1], got {edge_levels!r}")
+        self.horizon_ms, self.edge_levels = float(horizon_ms), levels
+        self.arrivals = ArrivalPredictor()
+        self.pool_models = bool(pool_models)
+        if not 0 <= release_early_ms:
+            raise ValueError(f"release_early_ms must be >= 0, got {release_early_ms!r}")
+        self.jit_early_ms = float(release_early_ms)
+        self._edge_obs: deque[float] = deque(maxlen=100)
+        self._edge_mean = 1.0                                  # mean observed edge run / profile ratio
+        self._tails: list[tuple[float, float]] = [(0.0, 1.0)]  # (ratio above the mean, on-time chance) per level
+        self._version = 0      # bumped whenever the pool, a mode or the edge changes
+        self._cache: tuple | None = None
+        self._wake: float | None = None
+        self._first_wake: float | None = None
+        self._predicted: dict[tuple, list[float]] = {}  # (drone, model) -> predicted frame times of the plan
+
+    def _ratios(self, model: str) -> list[float]:
+        if not self.pool_models:
+            return super()._ratios(model)
+        if model not in self._sorted:
+            self._sorted[model] = sorted(self.pooled) if self.pooled else [1.0]
+        return self._sorted[model]
+
+    # -- the plan
+    def _variants(self, model: str, deadline_ms: float, fallback: float) -> list[tuple[float, float, float]]:
+        """``(latest end ms, planned processing ms, expected gain)`` per edge-time level of a task of ``model``:
+        ending by ``deadline - p * tail`` at the planned (mean) time, it is on time with the level's chance."""
+        p = self.w[model]
+        proc = p.edge_ms * self._edge_mean
+        return [(deadline_ms - p.edge_ms * tail, proc, chance * p.benefit - p.edge_cost - fallback)
+                for tail, chance in self._tails]
+
+    def _predicted_fallback(self, model: str) -> float:
+        p = self.w[model]
+        if not self.cloud_available or p.cloud_utility <= 0:
+            return 0.0
+        return max(0.0, self.on_time_chance(model, p.deadline_ms) * p.benefit - p.cloud_cost)
+
+    @staticmethod
+    def _key(task: AnalyticsTask) -> tuple:
+        """A task's identity in a plan: (drone, model, frame time) — the predicted frame's time once it came."""
+        return task.notes.get("plan_key") or (task.drone, task.model, task.arrival_ms)
+
+    def schedule(self, now_ms: float) -> list[tuple[tuple, float]]:
+        """The current plan: ``[(key, planned start ms)]`` from when the edge is free, keys as :meth:`_key` (a
+        predicted task's is its drone, model and predicted frame time). Sets :attr:`_first_wake`: when to re-plan
+        if the plan starts with a predicted task that has not come. Cached while nothing changed."""
+        key = (self._version, self.edge_running is None)
+        if self._cache is not None and self._cache[0] == key and now_ms <= self._cache[3]:
+            self._first_wake = self._cache[2]
+            return self._cache[1]
+        self._now = now_ms
+        free = self._edge_free_at(now_ms)
+        jobs, who, wakes = [], [], {}
+        for t in self.pool:
+            fb = max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0
+            for end, proc, g in self._variants(t.model, t.deadline_ms, fb):
+                jobs.append((free, end, proc, g))
+                who.append(self._key(t))
+        self._predicted = {}
+        if self.horizon_ms > 0:
+            fbs: dict[str, float] = {}
+            for at, drone, m, wake, frame in self.arrivals.predict(now_ms, self.horizon_ms):
+                if m not in fbs:
+                    fbs[m] = self._predicted_fallback(m)
+                k = (drone, m, frame)
+                wakes[k] = wake
+                self._predicted.setdefault((drone, m), []).append(frame)
+                for end, proc, g in self._variants(m, frame + self.w[m].deadline_ms, fbs[m]):
+                    jobs.append((max(at, free), end, proc, g))
+                    who.append(k)
+        _, sched = max_gain_schedule(jobs, free_at=free, groups=who)
+        plan = [(who[j], s) for j, s in sched]
+        self._first_wake = None
+        if plan and plan[0][0] in wakes:
+            self._first_wake = max(plan[0][1], wakes[plan[0][0]])
+        # valid while nothing changes and the edge state it assumed holds: the running task not overdue, or (idle)
+        # until its first start
+        valid = free if self.edge_running is not None else (plan[0][1] if plan else math.inf)
+        self._cache = (key, plan, self._first_wake, valid)
+        return plan
+
+    def _plan(self, start_ms: float) -> list[AnalyticsTask]:
+        keys = {k for k, _ in self.schedule(self._now)}
+        return [t for t in self.pool if self._key(t) in keys]
+
+    def _planned_start(self, task: AnalyticsTask, now_ms: float) -> float | None:
+        k = self._key(task)
+        for q, s in self.schedule(now_ms):
+            if q == k:
+                return s
+        return None
+
+    # -- the contract
+    def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
+        """A task that arrives as predicted (same drone and model, frame within ``same_frame_ms`` of the predicted
+        time) takes the predicted task's place in the cached plan, which stays optimal: same release, deadline and
+        gain. Any other arrival makes the policy re-plan."""
+        self.arrivals.observe(task)
+        times = self._predicted.get((task.drone, task.model), ())
+        match = [f for f in times if abs(f - task.arrival_ms) < self.arrivals.same_frame_ms]
+        if match:
+            task.notes["plan_key"] = (task.drone, task.model, match[0])
+            self.counters["arrived_as_predicted"] += 1
+        else:
+            self._version += 1
+        return super().submit(task, now_ms)
+
+    def _lose(self, task: AnalyticsTask, now_ms: float, why: str) -> Decision:
+        self._version += 1
+        return super()._lose(task, now_ms, why)
+
+    def _sweep(self, now_ms: float) -> list[Decision]:
+        start = self._edge_free_at(now_ms)
+        out = []
+        for t in list(self.pool):
+            end, proc, _ = self._variants(t.model, t.deadline_ms, 0.0)[0]
+            if t.notes.get("mode") != OPEN and start + proc > end:
+                out.append(self._lose(t, now_ms, f"edge time {proc:.0f} ms no longer fits (at the "
+                                                 f"{100 * self._tails[0][1]:.0f} % level)"))
+        return out
+
+    def poll(self, now_ms: float) -> list[Decision]:
+        self._now = now_ms
+        if self._wake is not None and self._wake <= now_ms:
+            self._wake = None
+        out = self._sweep(now_ms)
+        due = sorted((t for t in self.pool if t.notes.get("mode") == OPEN and self.trigger_ms(t) - now_ms <= self.jit_early_ms),
+                     key=self.trigger_ms)
+        for t in due:  # committing a planned task or releasing an unplanned one keeps the plan optimal
+            if self._cloud_option_gone(t, now_ms):
+                t.notes["mode"] = EDGE_ONLY  # an edge candidate until it no longer fits
+                self.counters["cloud_option_lost"] += 1
+                self._version += 1
+            elif self._planned_start(t, now_ms) is not None:
+                t.notes["mode"] = COMMITTED
+                self.counters["committed_to_edge"] += 1
+            else:
+                self.pool.remove(t)
+                self.counters["released_to_cloud"] += 1
+                t.notes["cloud_ms"] = self._admit_cloud_ms(t, now_ms)
+                out.append(Decision.cloud(t, "at its cloud trigger: not in the edge plan"))
+        return out
+
+    def next_poll_ms(self) -> float | None:
+        nxt = super().next_poll_ms()
+        if self._wake is not None:
+            nxt = self._wake if nxt is None else min(nxt, self._wake)
+        return nxt
+
+    def _pop_edge(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
+        self._now = now_ms
+        drops = self._sweep(now_ms)
+        plan = self.schedule(now_ms)
+        self._wake = None
+        if not plan:
+            return None, drops
+        first = next((t for t in self.pool if self._key(t) == plan[0][0]), None)
+        if first is None:
+            # wait for a predicted arrival; re-plan then (at least 1 ms on: a poll never repeats at the same time)
+            self._wake = max(self._first_wake, now_ms + 1.0) if self._first_wake is not None else now_ms + 1.0
+            self.counters["edge_waits_for_prediction"] += 1
+            return None, drops
+        self.pool.remove(first)
+        self._version += 1
+        # the rest of an optimal plan is optimal for the rest (principle of optimality): keep it while the edge
+        # runs the first task, until that task is due to end
+        self._cache = ((self._version, False), plan[1:], None, now_ms + self.w[first.model].edge_ms)
+        if first.notes.get("mode") == OPEN:
+            self.counters["open_started_on_edge"] += 1
+        return first, drops
+
+    def on_edge_done(self, task: AnalyticsTask, now_ms: float, exec_ms: float) -> list[Decision]:
+        out = super().on_edge_done(task, now_ms, exec_ms)
+        if exec_ms > 0:
+            self._edge_obs.append(exec_ms / self.w[task.model].edge_ms)
+            xs = sorted(self._edge_obs)
+            self._edge_mean = max(1e-3, sum(xs) / len(xs))
+            if len(xs) >= 10:
+                self._tails = [(max(0.0, xs[min(len(xs) - 1, max(0, math.ceil(q * len(xs)) - 1))] - self._edge_mean), q)
+                               for q in self.edge_levels]
+        self._version += 1
+        return out
+
+    def on_cloud_availability(self, available: bool, now_ms: float) -> list[Decision]:
+        self._version += 1
+        return super().on_cloud_availability(available, now_ms)
