@@ -210,11 +210,15 @@ class GainPlan(AnalyticsScheduler):
                 t.notes["mode"] = COMMITTED
                 self.counters["committed_to_edge"] += 1
             else:
-                self.pool.remove(t)
-                self.counters["released_to_cloud"] += 1
-                t.notes["cloud_ms"] = self._admit_cloud_ms(t, now_ms)
-                out.append(Decision.cloud(t, "at its cloud trigger: not about to run on the edge"))
+                out.append(self._release_to_cloud(t, now_ms, "at its cloud trigger: not about to run on the edge"))
         return out
+
+    def _release_to_cloud(self, t: AnalyticsTask, now_ms: float, why: str) -> Decision:
+        """Take ``t`` out of the pool and send it to the cloud (its admit-by time computed now)."""
+        self.pool.remove(t)
+        self.counters["released_to_cloud"] += 1
+        t.notes["cloud_ms"] = self._admit_cloud_ms(t, now_ms)
+        return Decision.cloud(t, why)
 
     def next_poll_ms(self) -> float | None:
         triggers = [self.trigger_ms(t) for t in self.pool if t.notes.get("mode") == OPEN]

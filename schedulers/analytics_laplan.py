@@ -269,10 +269,7 @@ class LaPlan(EvPlan):
                 t.notes["mode"] = COMMITTED
                 self.counters["committed_to_edge"] += 1
             else:
-                self.pool.remove(t)
-                self.counters["released_to_cloud"] += 1
-                t.notes["cloud_ms"] = self._admit_cloud_ms(t, now_ms)
-                out.append(Decision.cloud(t, "at its cloud trigger: not in the edge plan"))
+                out.append(self._release_to_cloud(t, now_ms, "at its cloud trigger: not in the edge plan"))
         return out
 
     def next_poll_ms(self) -> float | None:
