@@ -64,7 +64,8 @@ ALLOWED = {
         "modes": "before arming the HEARTBEAT may or may not catch the short STABILIZE/GUIDED phases",
         "leg_max_speed": "the emulator accelerates at WPNAV_ACCEL without ArduPilot's S-curve jerk limit (within "
                          "25 %)",
-        "reached_first_after_arrival_s": "ArduCopter's S-curve settles ~1-1.5 s before the hold starts",
+        "reached_first_after_arrival_s": "ArduCopter's S-curve settles ~1-2 s before the hold starts (2.01 s seen "
+                                         "in a full-suite run)",
         "refusal_texts": "'Arm: Gyros/Accels inconsistent' (SITL boot artefact) not emulated",
     },
     "px4": {
@@ -134,7 +135,9 @@ def _compare(autopilot: str, fw: dict, emu: dict) -> None:
     assert emu["leg_max_speed"][0] > 3.0  # its own default, not a robot's limit
     assert emu["leg_max_speed"][1] is None or emu["leg_max_speed"][1] <= 2.0 * 1.1  # the PARAM_SET speed
     for f, e in zip(fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"]):
-        assert abs(f - e) <= 2.0, (fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"])
+        # the emulator starts the hold on arrival; the firmware after settling (above): 1-2 s later. An emulator
+        # that reported the item reached on arrival (the old behaviour) would be off by the whole hold
+        assert abs(f - e) <= 2.5, (fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"])
     assert min(emu["reached_count"]) >= (1 if autopilot == "ardupilot" else 2)
     # the armed flight's modes and the mode after landing (ArduCopter: GUIDED, AUTO, RTL, stays RTL; PX4:
     # TAKEOFF, LOITER, MISSION, LOITER, RTL, then LOITER disarmed); before that only the cold arm differs
