@@ -21,6 +21,7 @@ from typing import Any, Callable
 from .config import SimulationConfig
 from .preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from .run_report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
+from .supervise import error_cause as _cause
 
 
 @dataclass
@@ -443,15 +444,6 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
     return result
-
-
-def _cause(e: BaseException) -> str:
-    """The message of the exception an actor call failed with, without Ray's wrapping."""
-    cause = getattr(e, "cause", None)
-    if isinstance(cause, BaseException):
-        e = cause
-    lines = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {lines[-1] if lines else ''}".rstrip(": ")
 
 
 def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:

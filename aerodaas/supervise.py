@@ -152,7 +152,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
                         refs[actors[hid].run.remote(remaining(), resume=True)] = hid
                         continue
                     why = (f"drone actor {plan.actors[hid].name} lost: {type(e).__name__}: {_first_line(e)}"
-                           if _is_actor_death(e) else _raised(e))
+                           if _is_actor_death(e) else error_cause(e))
                     print(f"aerodaas: {why}", file=sys.stderr, flush=True)
                     for rid in robots_of[hid]:
                         cp = _last_checkpoint(actors.get("recorder"), rid)
@@ -194,13 +194,14 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     return reports
 
 
-def _raised(e: BaseException) -> str:
-    """``Type: message`` of the exception a drone actor's run raised, without Ray's RayTaskError wrapping (whose
-    first line names only the actor method and pid)."""
+def error_cause(e: BaseException) -> str:
+    """``Type: message`` of the exception an actor call failed with, without Ray's RayTaskError wrapping (whose
+    first line names only the actor method and pid): the cause's type and the last line of its message."""
     cause = getattr(e, "cause", None)
     if isinstance(cause, BaseException):
         e = cause
-    return f"{type(e).__name__}: {_first_line(e)}"
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[-1] if lines else ''}".rstrip(": ")
 
 
 def _first_line(e: BaseException) -> str:
