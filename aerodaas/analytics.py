@@ -276,7 +276,8 @@ class FollowTrack:
     """One drone's follow state (:class:`FollowAnalytics` keeps one per drone): the target's ground position
     ``track`` (ENU metres, None: no track) and velocity ``track_v`` (m/s) at sim time ``track_t`` (s), the
     detections ``hits`` that fed it, the PID integral (metre-seconds) and previous error (metres) at ``prev_t``,
-    the standoff direction ``away`` (unit ENU vector) and the ``commands`` issued to this drone."""
+    the standoff direction ``away`` (unit ENU vector), the ``commands`` issued to this drone, and the smoothed
+    interval ``frame_interval_s`` (s, capture time) between the frames that reached the follow at ``last_frame_t``."""
 
     track: np.ndarray | None = None
     track_v: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -287,9 +288,20 @@ class FollowTrack:
     prev_t: float | None = None
     away: np.ndarray = field(default_factory=lambda: np.array([0.0, -1.0]))
     commands: int = 0
+    frame_interval_s: float | None = None
+    last_frame_t: float | None = None
+
+    def saw_frame(self, t: float) -> None:
+        """Note a frame captured at sim time ``t`` (s): ``frame_interval_s`` follows the gaps between frames with
+        an exponential average (weight 0.3 on the newest gap)."""
+        if self.last_frame_t is not None and t > self.last_frame_t:
+            gap = t - self.last_frame_t
+            self.frame_interval_s = gap if self.frame_interval_s is None else 0.7 * self.frame_interval_s + 0.3 * gap
+        self.last_frame_t = t
 
     def drop(self) -> None:
-        """Lose the target: clear the track and the controller memory (``away`` and ``commands`` stay)."""
+        """Lose the target: clear the track and the controller memory (``away``, ``commands`` and the frame
+        interval stay)."""
         self.track, self.track_v, self.track_t, self.hits = None, np.zeros(2), 0.0, 0
         self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
@@ -303,7 +315,11 @@ class FollowAnalytics(NavigableAnalytics):
     ``v = kp·e + ki·∫e dt + kd·de/dt + v_target`` where ``e`` is the horizontal ground error in metres
     (target minus drone), ``kp`` in 1/s, ``ki`` in 1/s², ``kd`` dimensionless, and ``v_target`` the
     target's estimated velocity (feed-forward), clipped to ``max_speed`` m/s. Each command lasts
-    ``command_duration`` s. The track must be confirmed by ``confirm_hits`` detections; after ``lost_after``
+    ``command_duration`` s from its frame's capture time, stretched to twice the interval between the frames that
+    reach the follow for this drone (capped at ``lost_after``): with a detector slower than the camera the frames
+    that get analysed arrive late and far apart (80 ms of inference on a 2-core machine is 0.32 s of vehicle time
+    at 4x real time), and a command that expired before the next one arrived handed the drone back to the
+    preempted mission between every two detections (TRACKING and NAVIGATING alternated every 0.1-0.4 s). The track must be confirmed by ``confirm_hits`` detections; after ``lost_after``
     seconds without a detection it is dropped and no more commands are issued (the preempted mission resumes).
     ``standoff_m`` > 0 keeps the drone that many metres (horizontally) behind the target along its heading
     (e.g. 2 m for following a person), instead of directly above it.
@@ -341,6 +357,7 @@ class FollowAnalytics(NavigableAnalytics):
             return None
         st = self.drone_state(dets, meta, FollowTrack)
         t = meta.capture_time
+        st.saw_frame(t)
         drone = np.array(meta.pose.position[:2])
         cands = []
         for d in dets:
@@ -391,8 +408,16 @@ class FollowAnalytics(NavigableAnalytics):
             v *= self.max_speed / n
         st.commands += 1
         cmd = VelocityCommand(id=f"follow-{meta.seq}", vx=float(v[0]), vy=float(v[1]), vz=0.0,
-                              duration=self.command_duration, issued_at=t)
+                              duration=self.duration_for(st), issued_at=t)
         return AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [cmd], SchedulingType.ORDERED, name="follow")
+
+    def duration_for(self, st: FollowTrack) -> float:
+        """A command's lifetime (s) for the drone whose state is ``st``: ``command_duration``, or twice its frame
+        interval when that is longer, never beyond ``lost_after`` (nor the command limit of 3600 s)."""
+        d = self.command_duration
+        if st.frame_interval_s is not None:
+            d = max(d, min(2.0 * st.frame_interval_s, self.lost_after))
+        return float(min(d, 3600.0))
 
     def stats(self) -> dict:
         """``commands`` (all drones) and ``commands_by_drone`` (robot id -> velocity commands issued)."""

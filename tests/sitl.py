@@ -216,18 +216,38 @@ def _read_or_note(path: Path) -> dict[str, list]:
 
 def max_horizontal_speed(odometry: list[dict], from_positions: bool = True, window_s: float = 2.0) -> float:
     """Largest horizontal speed (m/s) in recorded odometry: the vehicle's reported velocity, and
-    (``from_positions``) the distance flown between samples at least ``window_s`` vehicle seconds apart (shorter
-    windows mostly measure the jitter between a position's arrival and its odometry time stamp)."""
+    (``from_positions``) :func:`flown_speed` over ``window_s``."""
     best = max((float((o["velocity"][0] ** 2 + o["velocity"][1] ** 2) ** 0.5) for o in odometry), default=0.0)
-    if from_positions:
-        j = 0
-        for i, o in enumerate(odometry):
-            while j + 1 < i and o["t"] - odometry[j + 1]["t"] >= window_s:
-                j += 1
-            dt = o["t"] - odometry[j]["t"]
-            if dt >= window_s:
-                p, q = o["position"], odometry[j]["position"]
-                best = max(best, ((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2) ** 0.5 / dt)
+    return max(best, flown_speed(odometry, window_s)) if from_positions else best
+
+
+def flown_speed(odometry: list[dict], window_s: float) -> float:
+    """Largest horizontal distance flown between samples at least ``window_s`` vehicle seconds apart, divided by
+    their time apart (m/s). Shorter windows mostly measure the jitter between a position's arrival and its
+    odometry time stamp."""
+    best, j = 0.0, 0
+    for i, o in enumerate(odometry):
+        while j + 1 < i and o["t"] - odometry[j + 1]["t"] >= window_s:
+            j += 1
+        dt = o["t"] - odometry[j]["t"]
+        if dt >= window_s:
+            p, q = o["position"], odometry[j]["position"]
+            best = max(best, ((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2) ** 0.5 / dt)
+    return best
+
+
+def sustained_speed(odometry: list[dict], window_s: float) -> float:
+    """Largest median of the reported horizontal speed (m/s) over any ``window_s`` vehicle seconds of odometry:
+    what the vehicle held, without the single samples that an estimator's correction jolts upward."""
+    import statistics
+
+    speeds = [float((o["velocity"][0] ** 2 + o["velocity"][1] ** 2) ** 0.5) for o in odometry]
+    best, j = 0.0, 0
+    for i, o in enumerate(odometry):
+        while odometry[i]["t"] - odometry[j]["t"] > window_s:
+            j += 1
+        if o["t"] - odometry[j]["t"] >= 0.5 * window_s:
+            best = max(best, statistics.median(speeds[j:i + 1]))
     return best
 
 

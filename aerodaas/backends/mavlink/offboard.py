@@ -10,7 +10,7 @@ import numpy as np
 
 from ...geo import enu_to_geodetic
 from ..base import LinkLost
-from .params import _PX4_SPEED_MARGIN
+from .params import px4_speed_limit
 from ._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
@@ -157,7 +157,7 @@ class OffboardMixin:
         if self.autopilot == "px4":
             # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
             # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
-            limit = float(self.limits.max_speed) * _PX4_SPEED_MARGIN
+            limit = px4_speed_limit(self.limits.max_speed)
             speed = limit if speed is None else min(float(speed), limit)
             self._enter_guided(("carrot", self.position, np.array([x, y, z]), speed, self.t))
             return

@@ -23,12 +23,24 @@ from typing import Any
 from ..base import BackendError
 from ._common import M, _f32
 
-#: PX4 horizontal limits are set to this fraction of ``limits.max_speed``. PX4's velocity loop holds its *estimate*
-#: at MPC_XY_VEL_MAX, and each GPS fusion step of EKF2 moves that estimate (and the position) by a jolt that the
-#: loop then flies off: on SIH (EKF2 tuned to its IMU, tests/sitl.py) the reported speed peaked 0.15-0.24 m/s above
-#: MPC_XY_VEL_MAX 0.3 in five runs (0.45-0.54 m/s at max_speed 0.5, for 0.2-0.5 s); at 0.5 x the peaks stay below
-#: max_speed. The distance flown over 4 s stays within MPC_XY_VEL_MAX + 0.13 m/s.
-_PX4_SPEED_MARGIN = 0.5
+#: PX4's horizontal limits are ``limits.max_speed`` less this margin (m/s), and never below half of it (see
+#: :func:`px4_speed_limit`). PX4's velocity loop holds its *estimate* at MPC_XY_VEL_MAX, and each GPS fusion step
+#: of EKF2 moves that estimate (and the position) by a jolt that the loop then flies off: an overshoot in m/s, not
+#: a fraction of the speed. On SIH (EKF2 tuned to its IMU, tests/sitl.py) the reported speed peaked 0.15-0.24 m/s
+#: above MPC_XY_VEL_MAX 0.3 in five runs (0.45-0.54 m/s at max_speed 0.5, for 0.2-0.5 s), and the distance flown
+#: over 4 s stayed within MPC_XY_VEL_MAX + 0.13 m/s. On 30 m legs (2026-11-23): at MPC_XY_VEL_MAX 1.5 the
+#: reported peak was +0.04 m/s and the distance flown over 1 s +0.19 m/s; with this rule, max_speed 3.0 (2.75)
+#: peaked at 2.64 reported and 2.92 m/s over 1 s, max_speed 1.0 (0.75) at 0.92 and 1.01 m/s.
+_PX4_SPEED_MARGIN_MPS = 0.25
+
+
+def px4_speed_limit(max_speed: float) -> float:
+    """PX4's ``MPC_XY_VEL_MAX`` / ``MPC_XY_CRUISE`` (m/s) for a robot whose ``limits.max_speed`` is ``max_speed``
+    m/s: ``max(max_speed - 0.25, max_speed / 2)`` (0.25 m/s at 0.5, 2.75 m/s at 3). The margin is measured
+    overshoot (:data:`_PX4_SPEED_MARGIN_MPS`); ArduCopter needs none (it flies WPNAV_SPEED within the limit)."""
+    return max(float(max_speed) - _PX4_SPEED_MARGIN_MPS, 0.5 * float(max_speed))
+
+
 #: how long (wall seconds, at most ``command_timeout_s``) one round of PARAM_REQUEST_READ waits for its answers
 _PARAM_READ_WAIT_S = 0.6
 
@@ -106,7 +118,7 @@ class ParamMixin:
             return {"WPNAV_SPEED": max(20.0, xy * 100.0), "WPNAV_SPEED_UP": max(10.0, z * 100.0),
                     "WPNAV_SPEED_DN": max(10.0, z * 100.0)}
         # PX4's velocity estimate jolts above its setpoint on every GPS fusion correction: a margin (see above)
-        return {"MPC_XY_VEL_MAX": xy * _PX4_SPEED_MARGIN, "MPC_XY_CRUISE": xy * _PX4_SPEED_MARGIN}
+        return {"MPC_XY_VEL_MAX": px4_speed_limit(xy), "MPC_XY_CRUISE": px4_speed_limit(xy)}
 
     def apply_speed_limits(self) -> dict[str, float]:
         """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
