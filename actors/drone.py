@@ -363,7 +363,9 @@ class DroneComponent:
             self.flew_something = True
         if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and self.active_wp == item.id):
             try:  # the choke point: nothing outside the safety limits reaches the backend
-                item = self.gate.check_item(item, pos, tuple(float(c) for c in v.velocity))
+                # a velocity command is checked for the time it has left (its fence horizon shrinks as it runs)
+                left = item.left_at(t) if isinstance(item, VelocityCommand) else item
+                item = self.gate.check_item(left, pos, tuple(float(c) for c in v.velocity))
             except SafetyViolation as e:
                 self._reject(t, item, e)
                 return False

@@ -291,13 +291,15 @@ class FollowTrack:
     frame_interval_s: float | None = None
     last_frame_t: float | None = None
 
-    def saw_frame(self, t: float) -> None:
+    def saw_frame(self, t: float, longest_gap_s: float) -> None:
         """Note a frame captured at sim time ``t`` (s): ``frame_interval_s`` follows the gaps between frames with
-        an exponential average (weight 0.3 on the newest gap)."""
+        an exponential average (weight 0.3 on the newest gap), each gap cut to ``longest_gap_s`` (a pause, such as
+        a detector restarting, is not the detector's pace); a frame older than the newest seen is not a gap."""
         if self.last_frame_t is not None and t > self.last_frame_t:
-            gap = t - self.last_frame_t
+            gap = min(t - self.last_frame_t, longest_gap_s)
             self.frame_interval_s = gap if self.frame_interval_s is None else 0.7 * self.frame_interval_s + 0.3 * gap
-        self.last_frame_t = t
+        if self.last_frame_t is None or t > self.last_frame_t:
+            self.last_frame_t = t
 
     def drop(self) -> None:
         """Lose the target: clear the track and the controller memory (``away``, ``commands`` and the frame
@@ -315,12 +317,14 @@ class FollowAnalytics(NavigableAnalytics):
     ``v = kp·e + ki·∫e dt + kd·de/dt + v_target`` where ``e`` is the horizontal ground error in metres
     (target minus drone), ``kp`` in 1/s, ``ki`` in 1/s², ``kd`` dimensionless, and ``v_target`` the
     target's estimated velocity (feed-forward), clipped to ``max_speed`` m/s. Each command lasts
-    ``command_duration`` s from its frame's capture time, stretched to twice the interval between the frames that
-    reach the follow for this drone (capped at ``lost_after``): with a detector slower than the camera the frames
-    that get analysed arrive late and far apart (80 ms of inference on a 2-core machine is 0.32 s of vehicle time
-    at 4x real time), and a command that expired before the next one arrived handed the drone back to the
-    preempted mission between every two detections (TRACKING and NAVIGATING alternated every 0.1-0.4 s). The track must be confirmed by ``confirm_hits`` detections; after ``lost_after``
-    seconds without a detection it is dropped and no more commands are issued (the preempted mission resumes).
+    ``command_duration`` s from its frame's capture time, stretched by twice the interval between the frames
+    that reach the follow for this drone (to at most ``lost_after`` and 4 x ``command_duration``): with a
+    detector slower than the camera the frames that get analysed arrive late and far apart (80 ms of inference
+    on a 2-core machine is 0.32 s of vehicle time at 4x real time), and a command that expired before the next
+    one arrived handed the drone back to the preempted mission between every two detections (TRACKING and
+    NAVIGATING alternated every 0.1-0.4 s). The track must be confirmed by ``confirm_hits`` detections; after
+    ``lost_after`` seconds without a detection it is dropped and no more commands are issued (the preempted
+    mission resumes once the last command runs out).
     ``standoff_m`` > 0 keeps the drone that many metres (horizontally) behind the target along its heading
     (e.g. 2 m for following a person), instead of directly above it.
 
@@ -357,7 +361,7 @@ class FollowAnalytics(NavigableAnalytics):
             return None
         st = self.drone_state(dets, meta, FollowTrack)
         t = meta.capture_time
-        st.saw_frame(t)
+        st.saw_frame(t, self._longest_command_s())
         drone = np.array(meta.pose.position[:2])
         cands = []
         for d in dets:
@@ -411,12 +415,18 @@ class FollowAnalytics(NavigableAnalytics):
                               duration=self.duration_for(st), issued_at=t)
         return AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [cmd], SchedulingType.ORDERED, name="follow")
 
+    def _longest_command_s(self) -> float:
+        """The most a command is stretched to (s): ``lost_after``, and at most 4 x ``command_duration``."""
+        return max(self.command_duration, min(self.lost_after, 4.0 * self.command_duration))
+
     def duration_for(self, st: FollowTrack) -> float:
-        """A command's lifetime (s) for the drone whose state is ``st``: ``command_duration``, or twice its frame
-        interval when that is longer, never beyond ``lost_after`` (nor the command limit of 3600 s)."""
+        """A command's lifetime (s) for the drone whose state is ``st``: ``command_duration`` + twice its frame
+        interval (it must outlive the wait for the next analysed frame plus that frame's latency, which is about
+        one interval when the detector is the bottleneck), within [``command_duration``, ``lost_after``] and at
+        most 4 x ``command_duration``."""
         d = self.command_duration
         if st.frame_interval_s is not None:
-            d = max(d, min(2.0 * st.frame_interval_s, self.lost_after))
+            d = min(d + 2.0 * st.frame_interval_s, self._longest_command_s())
         return float(min(d, 3600.0))
 
     def stats(self) -> dict:

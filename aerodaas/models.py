@@ -109,6 +109,15 @@ class VelocityCommand(_Model):
 
     _chk = field_validator("vx", "vy", "vz", "yaw_rate", "duration")(_finite)
 
+    def left_at(self, now: float) -> "VelocityCommand":
+        """This command as it stands at sim time ``now`` (s): ``duration`` cut to the seconds left of it since
+        ``issued_at`` (at least 1 ms; unchanged when ``issued_at`` is None). The safety gate checks that much
+        flight, not the whole command again on every tick."""
+        if self.issued_at is None:
+            return self
+        left = max(1e-3, min(self.duration, self.issued_at + self.duration - now))
+        return self if left >= self.duration else self.model_copy(update={"duration": left})
+
     @field_validator("vx", "vy", "vz")
     @classmethod
     def _bounded(cls, v: float, info) -> float:

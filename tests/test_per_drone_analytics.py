@@ -206,3 +206,58 @@ def test_follow_through_process_batch_equals_item_by_item():
 @pytest.mark.parametrize("cls", [FollowAnalytics, MonitoringAnalytics, InspectionPlanner])
 def test_stateful_analytics_say_so_for_replica_routing(cls):
     assert cls().stateful is True
+
+
+@pytest.mark.parametrize("interval_s,latency_s", [(0.1, 0.05), (0.4, 0.35), (0.6, 0.55)])
+def test_a_slow_detectors_follow_commands_leave_no_gap_for_the_preempted_survey(interval_s, latency_s):
+    """A detector that analyses one frame every ``interval_s`` (vehicle s) and answers ``latency_s`` after its
+    capture (at 4x real time an 80-140 ms inference is 0.32-0.56 s): from the second command on, the drone's
+    scheduler always has a live follow command at priority 1, so the survey at priority 2 never takes over between
+    two detections (it did with 0.5 s commands: TRACKING and NAVIGATING alternated every 0.1-0.4 s)."""
+    from schedulers.base import TrajectoryScheduler
+
+    from aerodaas.models import AeroNavigation, NavigationType, PriorityQueue, Waypoint
+
+    follow = FollowAnalytics(target_classes=["car"], confirm_hits=1)
+    sched = TrajectoryScheduler()
+    survey = AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="s", x=50, y=0, z=10)])
+    sched.add_navigation(PriorityQueue(survey, priority=2))
+    arrivals = []
+    for k in range(8):
+        m = _meta("d1", k, k * interval_s, DRONES["d1"])
+        nav = follow.process(_seen(m, "car", _car("d1", m.capture_time)), m)
+        assert nav is not None
+        arrivals.append((m.capture_time + latency_s, nav))
+    heads = []
+    t, dt = arrivals[1][0], 0.01  # the drone's ticks from the second command's arrival
+    while t < arrivals[-1][0]:
+        while arrivals and arrivals[0][0] <= t:
+            sched.add_navigation(arrivals.pop(0)[1], priority=1)
+        mission, item = sched.current(t)
+        heads.append((round(t, 2), mission.priority))
+        t += dt
+    assert all(p == 1 for _, p in heads), [h for h in heads if h[1] != 1][:5]
+    d = follow.duration_for(follow.track_of("d1"))
+    assert follow.command_duration < d <= 4 * follow.command_duration
+
+
+def test_a_pause_in_the_frames_does_not_stretch_follow_commands_beyond_four_command_durations():
+    """A detector restart (60 s without frames) with ``lost_after`` effectively infinite (as the benchmarks set it):
+    the next command still lasts at most 4 x ``command_duration``."""
+    follow = FollowAnalytics(target_classes=["car"], confirm_hits=1, lost_after=1e9)
+    for k, t in enumerate([0.0, 0.1, 0.2, 60.2, 60.3]):
+        m = _meta("d1", k, t, DRONES["d1"])
+        nav = follow.process(_seen(m, "car", _car("d1", 0.0)), m)
+    (cmd,) = nav.waypoints
+    assert cmd.duration <= 4 * follow.command_duration
+    assert cmd.issued_at == 60.3
+
+
+def test_a_velocity_command_is_checked_for_the_time_it_has_left():
+    """The drone re-checks its current velocity command every tick: for the seconds still left of it, so a long
+    command near a fence is not refused for flight it will never make."""
+    c = VelocityCommand(vx=1.0, duration=2.0, issued_at=10.0)
+    assert c.left_at(10.0) is c and c.left_at(9.0) is c
+    assert c.left_at(11.5).duration == pytest.approx(0.5)
+    assert c.left_at(13.0).duration == pytest.approx(1e-3)  # ran out: the least the model allows
+    assert VelocityCommand(vx=1.0).left_at(99.0).duration == 0.5  # never issued: the whole command

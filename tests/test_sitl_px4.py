@@ -14,6 +14,6 @@ pytestmark = [pytest.mark.sitl, pytest.mark.skipif(_SKIP is not None, reason=_SK
 # No known gaps on PX4 SIH any more (measured 2026-11-22, see the README): the farm survey, the autopilot mission,
 # the link loss and the three-vehicle fleet, which failed here on SIH's velocity estimate (0.5 m hold offsets,
 # 0.51-0.72 m/s flown against 0.55), pass since tests/sitl.py tells SIH's EKF2 its IMU noise (PX4_SIH_PARAMS) and
-# the backend keeps PX4 at max_speed - 0.25 m/s (0.5 x here) with a 0.25 m setpoint lead (params.py, offboard.py). A case listed
-# here would run as a non-strict xfail.
+# the backend keeps PX4 at max_speed - 0.25 m/s (0.5 x here) with a 0.25 m setpoint lead (params.py, offboard.py).
+# A case listed here would run as a non-strict xfail.
 KNOWN_GAPS: set[str] = set()
