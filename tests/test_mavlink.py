@@ -158,6 +158,17 @@ def test_goto_speed_cap(fly, autopilot):
     assert max(speeds) > (1.5 if autopilot == "ardupilot" else 0.9 * px4_speed_limit(2.0))
 
 
+def test_px4_speed_limit_keeps_the_measured_overshoot_below_max_speed(fly):
+    """PX4 gets MPC_XY_VEL_MAX / MPC_XY_CRUISE = max_speed - 0.25 m/s (EKF2's jolts overshoot by up to 0.24 m/s
+    on SIH at any speed), never below half of max_speed; the emulated PX4 holds what was set (PARAM_VALUE)."""
+    for max_speed, want in ((0.5, 0.25), (1.0, 0.75), (3.0, 2.75), (0.2, 0.1), (15.0, 14.75)):
+        assert px4_speed_limit(max_speed) == pytest.approx(want), max_speed
+    emu, b = fly("px4")
+    limit = px4_speed_limit(b.limits.max_speed)
+    assert emu.params["MPC_XY_VEL_MAX"] == pytest.approx(limit, abs=1e-4)
+    assert emu.params["MPC_XY_CRUISE"] == pytest.approx(limit, abs=1e-4)
+
+
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
     emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.3})
