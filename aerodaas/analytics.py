@@ -295,11 +295,12 @@ class FollowTrack:
         """Note a frame captured at sim time ``t`` (s): ``frame_interval_s`` follows the gaps between frames with
         an exponential average (weight 0.3 on the newest gap), each gap cut to ``longest_gap_s`` (a pause, such as
         a detector restarting, is not the detector's pace); a frame older than the newest seen is not a gap."""
-        if self.last_frame_t is not None and t > self.last_frame_t:
+        if self.last_frame_t is not None:
+            if t <= self.last_frame_t:
+                return
             gap = min(t - self.last_frame_t, longest_gap_s)
             self.frame_interval_s = gap if self.frame_interval_s is None else 0.7 * self.frame_interval_s + 0.3 * gap
-        if self.last_frame_t is None or t > self.last_frame_t:
-            self.last_frame_t = t
+        self.last_frame_t = t
 
     def drop(self) -> None:
         """Lose the target: clear the track and the controller memory (``away``, ``commands`` and the frame

@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import os
 import shlex
 import shutil
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -214,10 +216,15 @@ def _read_or_note(path: Path) -> dict[str, list]:
         return {}
 
 
+def horizontal_speed(sample: dict) -> float:
+    """The reported horizontal speed (m/s) of one odometry sample."""
+    return float(math.hypot(sample["velocity"][0], sample["velocity"][1]))
+
+
 def max_horizontal_speed(odometry: list[dict], from_positions: bool = True, window_s: float = 2.0) -> float:
     """Largest horizontal speed (m/s) in recorded odometry: the vehicle's reported velocity, and
     (``from_positions``) :func:`flown_speed` over ``window_s``."""
-    best = max((float((o["velocity"][0] ** 2 + o["velocity"][1] ** 2) ** 0.5) for o in odometry), default=0.0)
+    best = max((horizontal_speed(o) for o in odometry), default=0.0)
     return max(best, flown_speed(odometry, window_s)) if from_positions else best
 
 
@@ -232,19 +239,18 @@ def flown_speed(odometry: list[dict], window_s: float) -> float:
         dt = o["t"] - odometry[j]["t"]
         if dt >= window_s:
             p, q = o["position"], odometry[j]["position"]
-            best = max(best, ((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2) ** 0.5 / dt)
+            best = max(best, math.hypot(p[0] - q[0], p[1] - q[1]) / dt)
     return best
 
 
 def sustained_speed(odometry: list[dict], window_s: float) -> float:
-    """Largest median of the reported horizontal speed (m/s) over any ``window_s`` vehicle seconds of odometry:
-    what the vehicle held, without the single samples that an estimator's correction jolts upward."""
-    import statistics
-
-    speeds = [float((o["velocity"][0] ** 2 + o["velocity"][1] ** 2) ** 0.5) for o in odometry]
+    """Largest median of the reported horizontal speed (m/s) over any ``window_s`` vehicle seconds of odometry
+    (windows of at least half that): what the vehicle held, without the single samples that an estimator's
+    correction jolts upward."""
+    speeds = [horizontal_speed(o) for o in odometry]
     best, j = 0.0, 0
     for i, o in enumerate(odometry):
-        while odometry[i]["t"] - odometry[j]["t"] > window_s:
+        while o["t"] - odometry[j]["t"] > window_s:
             j += 1
         if o["t"] - odometry[j]["t"] >= 0.5 * window_s:
             best = max(best, statistics.median(speeds[j:i + 1]))

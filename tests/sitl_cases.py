@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from aerodaas.metrics import waypoint_visits
 
 from . import sitl
-from .sitl import FARM_CORNERS, events, flown_speed, max_horizontal_speed, odometry, sustained_speed
+from .sitl import (FARM_CORNERS, events, flown_speed, horizontal_speed, max_horizontal_speed, odometry,
+                   sustained_speed)
 
 #: each module's scenarios run in its first tests' fixtures (minutes of flight): beyond the suite's 600 s default
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(1800)]
@@ -183,6 +183,5 @@ def test_three_vehicle_fleet(fleet, autopilot):
         # last 0.2-0.5 s, see aerodaas/backends/mavlink/params.py); the peaks are in the message
         flown = flown_speed(odo, 4.0)
         smooth = sustained_speed(odo, 1.0)
-        peaks = sorted(((round(float(np.hypot(*o["velocity"][:2])), 3), round(o["t"], 1)) for o in odo),
-                       reverse=True)[:5]
+        peaks = sorted(((round(horizontal_speed(o), 3), round(o["t"], 1)) for o in odo), reverse=True)[:5]
         assert flown <= MAX_SPEED * 1.1 and smooth <= MAX_SPEED * 1.1, (rid, flown, smooth, peaks)

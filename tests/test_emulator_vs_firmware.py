@@ -9,6 +9,7 @@ The emulator runs with the firmware's boot timing (GPS fix and EKF position esti
 the cold-arm refusals show; its defaults are shorter so that the other tests stay fast."""
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import shutil
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from aerodaas.emulators.mavlink.trace import summarise, trace_emulator
+from aerodaas.emulators.mavlink.trace import run_trace, summarise, trace_emulator
 
 pytestmark = pytest.mark.sitl
 
@@ -134,7 +135,7 @@ def _compare(autopilot: str, fw: dict, emu: dict) -> None:
                                                                             emu["leg_max_speed"])
     assert emu["leg_max_speed"][0] > 3.0  # its own default, not a robot's limit
     assert emu["leg_max_speed"][1] is None or emu["leg_max_speed"][1] <= 2.0 * 1.1  # the PARAM_SET speed
-    hold = 3.0  # trace.run_trace's hold at each waypoint, s
+    hold = inspect.signature(run_trace).parameters["hold"].default  # s at each waypoint (both traces use it)
     for f, e in zip(fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"]):
         # both report an item reached after (most of) its hold, never on arrival (the emulator's old behaviour,
         # e ~ 0), and the emulator not noticeably after the firmware. Measured: PX4 SIH 2.06-2.62 s (its acceptance

@@ -118,7 +118,8 @@ class ParamMixin:
             return {"WPNAV_SPEED": max(20.0, xy * 100.0), "WPNAV_SPEED_UP": max(10.0, z * 100.0),
                     "WPNAV_SPEED_DN": max(10.0, z * 100.0)}
         # PX4's velocity estimate jolts above its setpoint on every GPS fusion correction: a margin (see above)
-        return {"MPC_XY_VEL_MAX": px4_speed_limit(xy), "MPC_XY_CRUISE": px4_speed_limit(xy)}
+        limit = px4_speed_limit(xy)
+        return {"MPC_XY_VEL_MAX": limit, "MPC_XY_CRUISE": limit}
 
     def apply_speed_limits(self) -> dict[str, float]:
         """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
