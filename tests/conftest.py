@@ -14,6 +14,18 @@ needs_data = pytest.mark.skipif(not (DATA_DIR / "imagery").is_dir() or not (MODE
                                 reason=f"shared data not found at {DATA_DIR} (set AERODAAS_DATA_DIR / AERODAAS_MODEL_DIR)")
 
 
+#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters and fault runs
+SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test of a slow group ``slow`` too, so that ``pytest -m "not slow"`` is the development tier
+    (everything but SITL, ``ray up``, cluster and fault runs); CI runs everything."""
+    for item in items:
+        if any(item.get_closest_marker(g) for g in SLOW_GROUPS):
+            item.add_marker(pytest.mark.slow)
+
+
 @pytest.fixture(scope="session")
 def ray_session():
     """A local Ray with this node labelled tier=edge (token auth on), shared by all e2e tests."""
