@@ -187,8 +187,17 @@ class ObjectDetector(Analytics):
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
     without it the model is resolved by :func:`aerodaas.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
     download) where the driver runs, once, and its bytes travel with the analytics to the node that runs it
-    (:class:`aerodaas.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to COCO
-    names; thresholds are scores in [0, 1].
+    (:class:`aerodaas.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to the
+    model's class names (a plain string is one class; ``[]`` is refused); thresholds are scores in [0, 1].
+
+    Bring your own model (issue 28): ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
+    ``"yolox"``, ``"nanodet"`` or ``"ultralytics"`` (YOLOv5 / YOLOv8 / YOLO11 ONNX exports,
+    :mod:`aerodaas.perception.decoders`); ``class_names`` (else the model's metadata ``names``, else COCO for the
+    YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes. ``nms_threshold`` (IoU),
+    ``agnostic_nms`` (one NMS over all classes) and ``class_groups`` (``{"vehicle": ["car", "truck", "bus"]}``:
+    class-agnostic NMS within a group); ``class_thresholds`` per class. ``tiling``: a
+    :class:`aerodaas.perception.tiling.Tiling` for small objects in large frames. All options are checked by
+    :meth:`check` in the pre-flight, before Ray starts; :meth:`process` before :meth:`setup` raises RuntimeError.
 
     Several drones may share one detector: it remembers nothing between frames (not :attr:`stateful`), and
     :meth:`process_batch` runs the frames of several drones in one onnxruntime call, up to ``batch`` frames, when
@@ -199,18 +208,30 @@ class ObjectDetector(Analytics):
     name = "detector"
     stateful = False
 
-    def __init__(self, model: str = "yolox_nano", model_path: str | None = None, classes: Iterable[str] | None = None,
+    def __init__(self, model: str = "yolox_nano", model_path: str | None = None, classes: Iterable[str] | str | None = None,
                  score_threshold: float = 0.3, class_thresholds: dict[str, float] | None = None,
-                 name: str | None = None, threads: int = 1, batch: int = 8) -> None:
+                 name: str | None = None, threads: int = 1, batch: int = 8, *, format: str = "auto",
+                 nms_threshold: float = 0.45, agnostic_nms: bool = False,
+                 class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
+                 class_names: Sequence[str] | None = None, tiling: Any = None) -> None:
+        from .perception.options import normalise_classes
+
         super().__init__(name)
         if not (isinstance(batch, int) and batch >= 1):
             raise ValueError(f"ObjectDetector batch must be an integer >= 1 (frames per inference call), got {batch!r}")
         self.batch = batch
         self.model, self.model_path = model, model_path
-        self.classes = list(classes) if classes else None
+        self.classes = normalise_classes(classes)  # "car" is one class; [] is refused
         self.score_threshold = score_threshold
         self.class_thresholds = class_thresholds
         self.threads = threads
+        self.format = format
+        self.nms_threshold = nms_threshold
+        self.agnostic_nms = agnostic_nms
+        self.class_groups = {g: normalise_classes(m, f"class_groups[{g!r}]") for g, m in (class_groups or {}).items()}
+        self.input_size = tuple(input_size) if input_size is not None else None
+        self.class_names = list(class_names) if class_names is not None else None
+        self.tiling = tiling
         self.detector = None
         self.shipped = None  # the model's bytes, read by check() on the driver
         self.last_timing: dict[str, float] = {}
@@ -219,19 +240,43 @@ class ObjectDetector(Analytics):
         self.n_batched = 0
 
     def check(self) -> None:
-        """Resolve the model now (driver side), so a missing model fails before any actor starts."""
+        """Driver side, before any actor starts (called by the pre-flight): check every option
+        (:func:`aerodaas.perception.options.check_detector_options`: thresholds, class names against the model's,
+        class groups, input size, the model's format) and resolve the model, so a typo or a missing model fails
+        with a ValueError naming the field and the value (``aerodaas run`` exits 2)."""
         from .detect import ShippedModel, resolve_model
+        from .perception.options import check_detector_options
 
+        if self.tiling is not None:
+            self.tiling.check()
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
+        check_detector_options(name=self.name, model=self.model, model_path=self.model_path, format=self.format,
+                               classes=self.classes, score_threshold=self.score_threshold,
+                               nms_threshold=self.nms_threshold, class_thresholds=self.class_thresholds,
+                               class_groups=self.class_groups, input_size=self.input_size,
+                               class_names=self.class_names)
         self.shipped = ShippedModel.read(self.model_path)
 
     def setup(self) -> None:
-        from .detect import make_detector
+        from .perception.options import build_detector
 
         path = self.shipped.path_on_this_node(self.model_path) if self.shipped is not None else self.model_path
-        self.detector = make_detector(self.model, model_path=path, score_threshold=self.score_threshold,
-                                      classes=self.classes, class_thresholds=self.class_thresholds,
-                                      intra_op_threads=self.threads)
+        self.detector = build_detector(self.model, model_path=path, format=self.format,
+                                       score_threshold=self.score_threshold, nms_threshold=self.nms_threshold,
+                                       classes=self.classes, class_thresholds=self.class_thresholds,
+                                       intra_op_threads=self.threads, agnostic_nms=self.agnostic_nms,
+                                       class_groups=self.class_groups or None, input_size=self.input_size,
+                                       class_names=self.class_names)
+        if self.tiling is not None:
+            from .perception.tiling import TiledDetector
+
+            self.detector = TiledDetector(self.detector, self.tiling)
+
+    def _ready(self):
+        if self.detector is None:
+            raise RuntimeError(f"analytics {self.name!r}: process() called before setup(); the runtime calls "
+                               f"setup() on the actor first (call it yourself when using the detector directly)")
+        return self.detector
 
     @property
     def max_batch(self) -> int:  # type: ignore[override]
@@ -241,7 +286,7 @@ class ObjectDetector(Analytics):
         return self.batch if d is not None and getattr(d, "batch_dynamic", False) else 1
 
     def process(self, frame: np.ndarray, meta: FrameMeta | None) -> list[Detection]:
-        dets = self.detector.detect(frame)
+        dets = self._ready().detect(frame)
         t = self.detector.last_timing
         self.last_timing = {"inference_ms": t["inference_ms"], "pre_ms": t["preprocess_ms"], "post_ms": t["postprocess_ms"]}
         self.n_frames += 1
@@ -256,7 +301,7 @@ class ObjectDetector(Analytics):
         if not items:
             return []
         frames = [f for f, _ in items]
-        out = self.detector.detect_batch(frames, max_batch=max(self.max_batch, 1))
+        out = self._ready().detect_batch(frames, max_batch=max(self.max_batch, 1))
         t, n = self.detector.last_timing, len(frames)
         self.last_timing = {"inference_ms": t["inference_ms"] / n, "pre_ms": t["preprocess_ms"] / n,
                             "post_ms": t["postprocess_ms"] / n, "batch": float(self.detector.last_batch)}
