@@ -335,6 +335,8 @@ class FollowTrack:
     commands: int = 0
     frame_interval_s: float | None = None
     last_frame_t: float | None = None
+    tracker: Any = None  # this drone's ByteTracker (FollowAnalytics(tracker=...)), None: gated nearest detection
+    target_id: int | None = None  # the track id followed (with a tracker)
 
     def saw_frame(self, t: float, longest_gap_s: float) -> None:
         """Note a frame captured at sim time ``t`` (s): ``frame_interval_s`` follows the gaps between frames with
@@ -351,6 +353,7 @@ class FollowTrack:
         """Lose the target: clear the track and the controller memory (``away``, ``commands`` and the frame
         interval stay)."""
         self.track, self.track_v, self.track_t, self.hits = None, np.zeros(2), 0.0, 0
+        self.target_id = None
         self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
 
@@ -376,6 +379,12 @@ class FollowAnalytics(NavigableAnalytics):
 
     Shared by several drones, it keeps one :class:`FollowTrack` per drone (keyed by the frame's
     ``FrameMeta.robot_id``): each drone follows what its own camera sees, with its own PID memory.
+
+    ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` makes it follow a **track id** (issue 28):
+    each drone runs its own ByteTracker on the target-class detections; the followed id is kept while that track
+    is seen, whatever other boxes come near, and ByteTrack re-acquires it under the same id after a short occlusion
+    (``track_buffer`` frames); when the id is gone for good, the track nearest the predicted ground position within
+    ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before.
     """
 
     name = "follow"
@@ -383,8 +392,11 @@ class FollowAnalytics(NavigableAnalytics):
     def __init__(self, target_classes: Iterable[str] = ("car", "truck", "bus"), kp: float = 0.8, ki: float = 0.02,
                  kd: float = 0.1, max_speed: float = 4.0, command_duration: float = 0.5, gate_m: float = 4.0,
                  confirm_hits: int = 2, lost_after: float = 2.0, standoff_m: float = 0.0,
-                 name: str | None = None) -> None:
+                 name: str | None = None, tracker: Any = None) -> None:
         super().__init__(name)
+        if tracker is not None:
+            tracker.check()
+        self.tracker = tracker
         self.standoff_m = float(standoff_m)
         self.target_classes = set(target_classes)
         self.kp, self.ki, self.kd = kp, ki, kd
@@ -410,15 +422,30 @@ class FollowAnalytics(NavigableAnalytics):
         st.saw_frame(t, self._longest_command_s())
         drone = np.array(meta.pose.position[:2])
         cands = []
-        for d in dets:
-            if d.class_name not in self.target_classes:
-                continue
+        ids: list[int | None] = []
+        if self.tracker is not None:
+            from .perception.tracking import ByteTracker
+
+            if st.tracker is None:
+                st.tracker = ByteTracker(self.tracker)
+            seen = [(tr.detection, tr.track_id) for tr in
+                    st.tracker.update([d for d in dets if d.class_name in self.target_classes])]
+        else:
+            seen = [(d, None) for d in dets if d.class_name in self.target_classes]
+        for d, tid in seen:
             g = pixel_to_ground(*d.center, meta.pose, meta.intrinsics)
             if g is not None:
                 cands.append((d, np.array(g)))
+                ids.append(tid)
         pred = None if st.track is None else st.track + st.track_v * (t - st.track_t)
         best = None
-        if cands:
+        coasting = (st.target_id is not None and st.target_id not in ids
+                    and any(tr.track_id == st.target_id for tr in st.tracker.tracks))
+        if st.target_id is not None and st.target_id in ids:  # the followed track is seen: keep it
+            best = cands[ids.index(st.target_id)]
+        elif coasting:  # hidden but still alive in ByteTrack (lost, within its buffer): adopt no other object
+            best = None
+        elif cands:
             if pred is None:
                 best = max(cands, key=lambda c: c[0].score)
             else:
@@ -426,6 +453,8 @@ class FollowAnalytics(NavigableAnalytics):
                 if np.linalg.norm(c[1] - pred) <= self.gate_m:
                     best = c
         if best is not None:
+            if self.tracker is not None:
+                st.target_id = ids[next(i for i, c in enumerate(cands) if c is best)]
             p = best[1]
             if st.track is not None and t > st.track_t:
                 v_new = (p - st.track) / (t - st.track_t)
