@@ -168,3 +168,21 @@ def test_object_detector_runs_a_brought_model_end_to_end(tmp_path):
     det.setup()
     (d,) = det.process(IMG, None)
     assert d.class_name == "car" and d.box == pytest.approx(_img_box(320, 320, 64, 32))
+
+
+def test_object_detector_with_tiling_checks_and_runs(tmp_path):
+    from aerodaas.perception.tiling import Tiling
+
+    path = _const_model(tmp_path / "v8.onnx", _v8_head(), meta={"names": str(NAMES)})
+    with pytest.raises(ValueError, match=r"tiling.overlap must be .* got 0.95"):
+        ObjectDetector(model_path=path, tiling=Tiling(overlap=0.95)).check()
+    det = ObjectDetector(model_path=path, classes="car", score_threshold=0.5,
+                         tiling=Tiling(tile=640, overlap=0.0, full_frame=False, merge="nms"))
+    det.check()
+    det.setup()
+    # 1280x720 -> two rows of two 640x640 slices (the second row shifted back to y=80); each slice of 640x640
+    # is its own input (r = 1, no padding): the constant car lands at (288..352, 304..336) of every slice
+    dets = det.process(IMG, None)
+    assert det.detector.last_slices == 4
+    assert sorted(d.box for d in dets) == sorted([(288.0, 304.0, 352.0, 336.0), (928.0, 304.0, 992.0, 336.0),
+                                                  (288.0, 384.0, 352.0, 416.0), (928.0, 384.0, 992.0, 416.0)])
