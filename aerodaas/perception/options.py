@@ -12,7 +12,6 @@ import math
 import os
 from typing import Any, Iterable
 
-from aerodaas.detect import _check_input_size
 from aerodaas.models import COCO_CLASSES
 
 __all__ = ["normalise_classes", "check_detector_options", "build_detector"]
@@ -60,6 +59,7 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
     format, input size and class names (:func:`aerodaas.perception.decoders.inspect_model`). Returns
     ``{"format", "class_names", "input_hw"}`` as they will be used. Every error is a ValueError whose message
     starts with ``analytics {name!r}:`` and names the field and the value."""
+    from aerodaas.detect import _check_input_size  # cv2 and onnxruntime load here, not when an app is built
     from aerodaas.perception.decoders import FORMATS, inspect_model
 
     pre = f"analytics {name!r}: "
