@@ -208,8 +208,9 @@ class ObjectDetector(Analytics):
     name = "detector"
     stateful = False
 
-    def __init__(self, model: str = "yolox_nano", model_path: str | None = None, classes: Iterable[str] | str | None = None,
-                 score_threshold: float = 0.3, class_thresholds: dict[str, float] | None = None,
+    def __init__(self, model: str = "yolox_nano", model_path: str | None = None,
+                 classes: Iterable[str] | str | None = None, score_threshold: float = 0.3,
+                 class_thresholds: dict[str, float] | None = None,
                  name: str | None = None, threads: int = 1, batch: int = 8, *, format: str = "auto",
                  nms_threshold: float = 0.45, agnostic_nms: bool = False,
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,

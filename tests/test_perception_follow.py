@@ -21,7 +21,8 @@ def _meta(seq: int, t: float) -> FrameMeta:
 def _det(meta: FrameMeta, xy, score=0.9, half_px=10.0) -> Detection:
     uv, _ = project_points(np.array([[xy[0], xy[1], 0.0]]), meta.pose, meta.intrinsics)
     u, v = uv[0]
-    return Detection(class_id=2, class_name="car", score=score, box=(u - half_px, v - half_px, u + half_px, v + half_px))
+    return Detection(class_id=2, class_name="car", score=score,
+                     box=(u - half_px, v - half_px, u + half_px, v + half_px))
 
 
 def _run(follow: FollowAnalytics) -> list[np.ndarray | None]:

@@ -51,7 +51,8 @@ def test_fixes_recorded_as_location_fix_and_scene_update(tmp_path):
     with McapRecorder(path) as rec:
         record_track_fixes(rec, 1_000_000_000, "d1", fixes)
     with open(path, "rb") as f:
-        msgs = {c.topic: m for _, c, _, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()}
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msgs = {c.topic: m for _, c, _, m in reader.iter_decoded_messages()}
     loc = msgs["/d1/tracks/7/fix"]
     assert (loc.latitude, loc.longitude) == pytest.approx((fixes[7].lat, fixes[7].lon))
     assert loc.position_covariance[0] == pytest.approx(fixes[7].cov[0, 0]) and loc.position_covariance[0] > 0

@@ -31,7 +31,8 @@ def _const_model(path, head: np.ndarray, *, in_shape=(1, 3, 640, 640), out_shape
     inits = [numpy_helper.from_array(head.astype(np.float32), "head"),
              numpy_helper.from_array(np.zeros((1, 1, 1), np.float32), "zero"),
              numpy_helper.from_array(np.array([-1, 1, 1], np.int64), "shape3")]
-    g = helper.make_graph(nodes, "const_head", [helper.make_tensor_value_info("images", TensorProto.FLOAT, list(in_shape))],
+    g = helper.make_graph(nodes, "const_head",
+                          [helper.make_tensor_value_info("images", TensorProto.FLOAT, list(in_shape))],
                           [helper.make_tensor_value_info("output0", TensorProto.FLOAT,
                                                          list(out_shape or head.shape))], inits)
     m = helper.make_model(g, opset_imports=[helper.make_opsetid("", 13)])

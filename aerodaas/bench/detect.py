@@ -97,7 +97,8 @@ def run_detect(a: argparse.Namespace) -> dict:
     return {"benchmark": "detect", "machine": machine_info(), "load_avg_1min_start": round(load_start, 2),
             "load_avg_1min_end": round(os.getloadavg()[0], 2), "images": str(a.images),
             "annotations": str(a.annotations), "n_images": len(gts), "model": a.model_path or a.model,
-            "threads": a.threads, "repeat": a.repeat, "frame_width": a.frame_width or None, "overlap": a.overlap, "merge": a.merge, "full_frame": not a.no_full_frame,
+            "threads": a.threads, "repeat": a.repeat, "frame_width": a.frame_width or None, "overlap": a.overlap,
+            "merge": a.merge, "full_frame": not a.no_full_frame,
             "results": results}
 
 
@@ -150,7 +151,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-full-frame", action="store_true", help="tiles only, without the whole frame")
     p.add_argument("--agnostic-nms", action="store_true")
     p.add_argument("--sweep", action="store_true", help="every combination of sizes, tiles and thresholds")
-    p.add_argument("--threads", type=int, default=1, help="onnxruntime intra-op threads (1: on a shared, loaded machine 2 threads spin and run slower)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="onnxruntime intra-op threads (1: on a shared, loaded machine 2 threads spin and run slower)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame (the median is kept)")
     p.add_argument("--frame-width", type=int, default=0,
                    help="resize each image to this width first (e.g. 1920), boxes scaled alike (0: as stored)")
