@@ -187,8 +187,17 @@ class ObjectDetector(Analytics):
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
     without it the model is resolved by :func:`aerodaas.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
     download) where the driver runs, once, and its bytes travel with the analytics to the node that runs it
-    (:class:`aerodaas.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to COCO
-    names; thresholds are scores in [0, 1].
+    (:class:`aerodaas.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to the
+    model's class names (a plain string is one class; ``[]`` is refused); thresholds are scores in [0, 1].
+
+    Bring your own model (issue 28): ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
+    ``"yolox"``, ``"nanodet"`` or ``"ultralytics"`` (YOLOv5 / YOLOv8 / YOLO11 ONNX exports,
+    :mod:`aerodaas.perception.decoders`); ``class_names`` (else the model's metadata ``names``, else COCO for the
+    YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes. ``nms_threshold`` (IoU),
+    ``agnostic_nms`` (one NMS over all classes) and ``class_groups`` (``{"vehicle": ["car", "truck", "bus"]}``:
+    class-agnostic NMS within a group); ``class_thresholds`` per class. ``tiling``: a
+    :class:`aerodaas.perception.tiling.Tiling` for small objects in large frames. All options are checked by
+    :meth:`check` in the pre-flight, before Ray starts; :meth:`process` before :meth:`setup` raises RuntimeError.
 
     Several drones may share one detector: it remembers nothing between frames (not :attr:`stateful`), and
     :meth:`process_batch` runs the frames of several drones in one onnxruntime call, up to ``batch`` frames, when
@@ -199,18 +208,31 @@ class ObjectDetector(Analytics):
     name = "detector"
     stateful = False
 
-    def __init__(self, model: str = "yolox_nano", model_path: str | None = None, classes: Iterable[str] | None = None,
-                 score_threshold: float = 0.3, class_thresholds: dict[str, float] | None = None,
-                 name: str | None = None, threads: int = 1, batch: int = 8) -> None:
+    def __init__(self, model: str = "yolox_nano", model_path: str | None = None,
+                 classes: Iterable[str] | str | None = None, score_threshold: float = 0.3,
+                 class_thresholds: dict[str, float] | None = None,
+                 name: str | None = None, threads: int = 1, batch: int = 8, *, format: str = "auto",
+                 nms_threshold: float = 0.45, agnostic_nms: bool = False,
+                 class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
+                 class_names: Sequence[str] | None = None, tiling: Any = None) -> None:
+        from .perception.options import normalise_classes
+
         super().__init__(name)
         if not (isinstance(batch, int) and batch >= 1):
             raise ValueError(f"ObjectDetector batch must be an integer >= 1 (frames per inference call), got {batch!r}")
         self.batch = batch
         self.model, self.model_path = model, model_path
-        self.classes = list(classes) if classes else None
+        self.classes = normalise_classes(classes)  # "car" is one class; [] is refused
         self.score_threshold = score_threshold
         self.class_thresholds = class_thresholds
         self.threads = threads
+        self.format = format
+        self.nms_threshold = nms_threshold
+        self.agnostic_nms = agnostic_nms
+        self.class_groups = {g: normalise_classes(m, f"class_groups[{g!r}]") for g, m in (class_groups or {}).items()}
+        self.input_size = tuple(input_size) if input_size is not None else None
+        self.class_names = list(class_names) if class_names is not None else None
+        self.tiling = tiling
         self.detector = None
         self.shipped = None  # the model's bytes, read by check() on the driver
         self.last_timing: dict[str, float] = {}
@@ -219,19 +241,43 @@ class ObjectDetector(Analytics):
         self.n_batched = 0
 
     def check(self) -> None:
-        """Resolve the model now (driver side), so a missing model fails before any actor starts."""
+        """Driver side, before any actor starts (called by the pre-flight): check every option
+        (:func:`aerodaas.perception.options.check_detector_options`: thresholds, class names against the model's,
+        class groups, input size, the model's format) and resolve the model, so a typo or a missing model fails
+        with a ValueError naming the field and the value (``aerodaas run`` exits 2)."""
         from .detect import ShippedModel, resolve_model
+        from .perception.options import check_detector_options
 
+        if self.tiling is not None:
+            self.tiling.check()
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
+        check_detector_options(name=self.name, model=self.model, model_path=self.model_path, format=self.format,
+                               classes=self.classes, score_threshold=self.score_threshold,
+                               nms_threshold=self.nms_threshold, class_thresholds=self.class_thresholds,
+                               class_groups=self.class_groups, input_size=self.input_size,
+                               class_names=self.class_names)
         self.shipped = ShippedModel.read(self.model_path)
 
     def setup(self) -> None:
-        from .detect import make_detector
+        from .perception.options import build_detector
 
         path = self.shipped.path_on_this_node(self.model_path) if self.shipped is not None else self.model_path
-        self.detector = make_detector(self.model, model_path=path, score_threshold=self.score_threshold,
-                                      classes=self.classes, class_thresholds=self.class_thresholds,
-                                      intra_op_threads=self.threads)
+        self.detector = build_detector(self.model, model_path=path, format=self.format,
+                                       score_threshold=self.score_threshold, nms_threshold=self.nms_threshold,
+                                       classes=self.classes, class_thresholds=self.class_thresholds,
+                                       intra_op_threads=self.threads, agnostic_nms=self.agnostic_nms,
+                                       class_groups=self.class_groups or None, input_size=self.input_size,
+                                       class_names=self.class_names)
+        if self.tiling is not None:
+            from .perception.tiling import TiledDetector
+
+            self.detector = TiledDetector(self.detector, self.tiling)
+
+    def _ready(self):
+        if self.detector is None:
+            raise RuntimeError(f"analytics {self.name!r}: process() called before setup(); the runtime calls "
+                               f"setup() on the actor first (call it yourself when using the detector directly)")
+        return self.detector
 
     @property
     def max_batch(self) -> int:  # type: ignore[override]
@@ -241,7 +287,7 @@ class ObjectDetector(Analytics):
         return self.batch if d is not None and getattr(d, "batch_dynamic", False) else 1
 
     def process(self, frame: np.ndarray, meta: FrameMeta | None) -> list[Detection]:
-        dets = self.detector.detect(frame)
+        dets = self._ready().detect(frame)
         t = self.detector.last_timing
         self.last_timing = {"inference_ms": t["inference_ms"], "pre_ms": t["preprocess_ms"], "post_ms": t["postprocess_ms"]}
         self.n_frames += 1
@@ -256,7 +302,7 @@ class ObjectDetector(Analytics):
         if not items:
             return []
         frames = [f for f, _ in items]
-        out = self.detector.detect_batch(frames, max_batch=max(self.max_batch, 1))
+        out = self._ready().detect_batch(frames, max_batch=max(self.max_batch, 1))
         t, n = self.detector.last_timing, len(frames)
         self.last_timing = {"inference_ms": t["inference_ms"] / n, "pre_ms": t["preprocess_ms"] / n,
                             "post_ms": t["postprocess_ms"] / n, "batch": float(self.detector.last_batch)}
@@ -290,6 +336,8 @@ class FollowTrack:
     commands: int = 0
     frame_interval_s: float | None = None
     last_frame_t: float | None = None
+    tracker: Any = None  # this drone's ByteTracker (FollowAnalytics(tracker=...)), None: gated nearest detection
+    target_id: int | None = None  # the track id followed (with a tracker)
 
     def saw_frame(self, t: float, longest_gap_s: float) -> None:
         """Note a frame captured at sim time ``t`` (s): ``frame_interval_s`` follows the gaps between frames with
@@ -306,6 +354,7 @@ class FollowTrack:
         """Lose the target: clear the track and the controller memory (``away``, ``commands`` and the frame
         interval stay)."""
         self.track, self.track_v, self.track_t, self.hits = None, np.zeros(2), 0.0, 0
+        self.target_id = None
         self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
 
@@ -331,6 +380,12 @@ class FollowAnalytics(NavigableAnalytics):
 
     Shared by several drones, it keeps one :class:`FollowTrack` per drone (keyed by the frame's
     ``FrameMeta.robot_id``): each drone follows what its own camera sees, with its own PID memory.
+
+    ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` makes it follow a **track id** (issue 28):
+    each drone runs its own ByteTracker on the target-class detections; the followed id is kept while that track
+    is seen, whatever other boxes come near, and ByteTrack re-acquires it under the same id after a short occlusion
+    (``track_buffer`` frames); when the id is gone for good, the track nearest the predicted ground position within
+    ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before.
     """
 
     name = "follow"
@@ -338,8 +393,11 @@ class FollowAnalytics(NavigableAnalytics):
     def __init__(self, target_classes: Iterable[str] = ("car", "truck", "bus"), kp: float = 0.8, ki: float = 0.02,
                  kd: float = 0.1, max_speed: float = 4.0, command_duration: float = 0.5, gate_m: float = 4.0,
                  confirm_hits: int = 2, lost_after: float = 2.0, standoff_m: float = 0.0,
-                 name: str | None = None) -> None:
+                 name: str | None = None, tracker: Any = None) -> None:
         super().__init__(name)
+        if tracker is not None:
+            tracker.check()
+        self.tracker = tracker
         self.standoff_m = float(standoff_m)
         self.target_classes = set(target_classes)
         self.kp, self.ki, self.kd = kp, ki, kd
@@ -365,15 +423,30 @@ class FollowAnalytics(NavigableAnalytics):
         st.saw_frame(t, self._longest_command_s())
         drone = np.array(meta.pose.position[:2])
         cands = []
-        for d in dets:
-            if d.class_name not in self.target_classes:
-                continue
+        ids: list[int | None] = []
+        if self.tracker is not None:
+            from .perception.tracking import ByteTracker
+
+            if st.tracker is None:
+                st.tracker = ByteTracker(self.tracker)
+            seen = [(tr.detection, tr.track_id) for tr in
+                    st.tracker.update([d for d in dets if d.class_name in self.target_classes])]
+        else:
+            seen = [(d, None) for d in dets if d.class_name in self.target_classes]
+        for d, tid in seen:
             g = pixel_to_ground(*d.center, meta.pose, meta.intrinsics)
             if g is not None:
                 cands.append((d, np.array(g)))
+                ids.append(tid)
         pred = None if st.track is None else st.track + st.track_v * (t - st.track_t)
         best = None
-        if cands:
+        coasting = (st.target_id is not None and st.target_id not in ids
+                    and any(tr.track_id == st.target_id for tr in st.tracker.tracks))
+        if st.target_id is not None and st.target_id in ids:  # the followed track is seen: keep it
+            best = cands[ids.index(st.target_id)]
+        elif coasting:  # hidden but still alive in ByteTrack (lost, within its buffer): adopt no other object
+            best = None
+        elif cands:
             if pred is None:
                 best = max(cands, key=lambda c: c[0].score)
             else:
@@ -381,6 +454,8 @@ class FollowAnalytics(NavigableAnalytics):
                 if np.linalg.norm(c[1] - pred) <= self.gate_m:
                     best = c
         if best is not None:
+            if self.tracker is not None:
+                st.target_id = ids[next(i for i, c in enumerate(cands) if c is best)]
             p = best[1]
             if st.track is not None and t > st.track_t:
                 v_new = (p - st.track) / (t - st.track_t)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -61,6 +61,23 @@ def _check_image(image: np.ndarray) -> None:
         )
 
 
+def _some(names: Sequence[str], n: int = 12) -> str:
+    return ", ".join(names[:n]) + (f", ... ({len(names)} in all)" if len(names) > n else "")
+
+
+def _check_input_size(input_size) -> tuple[int, int]:
+    """``(H, W)`` in pixels, both positive multiples of 32 (the largest stride of the supported heads), at most
+    4096. Raises ValueError naming the value."""
+    try:
+        ih, iw = (int(v) for v in input_size)
+        ok = all(float(v) == int(v) for v in input_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"input_size must be (H, W) in pixels, got {input_size!r}") from None
+    if not ok or not (32 <= ih <= 4096 and 32 <= iw <= 4096) or ih % 32 or iw % 32:
+        raise ValueError(f"input_size must be (H, W) with each a multiple of 32 within [32, 4096], got {input_size!r}")
+    return ih, iw
+
+
 def _nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarray:
     """Greedy non-maximum suppression on ``(N, 4)`` x0y0x1y1 boxes; returns kept indices, best score first."""
     x0, y0, x1, y1 = boxes.T
@@ -91,9 +108,13 @@ class _OnnxDetector:
         *,
         score_threshold: float = 0.3,
         nms_threshold: float = 0.45,
-        classes: Iterable[str] | None = None,
+        classes: Iterable[str] | str | None = None,
         class_thresholds: dict[str, float] | None = None,
         intra_op_threads: int = 1,
+        agnostic_nms: bool = False,
+        class_groups: dict[str, Iterable[str]] | None = None,
+        input_size: tuple[int, int] | None = None,
+        class_names: Sequence[str] | None = None,
     ) -> None:
         import onnxruntime as ort
 
@@ -105,30 +126,7 @@ class _OnnxDetector:
             raise ValueError(f"intra_op_threads must be >= 0 (0 = onnxruntime default), got {intra_op_threads}")
         self.score_threshold = float(score_threshold)
         self.nms_threshold = float(nms_threshold)
-
-        # Per-class score thresholds; excluded classes get +inf so nothing passes.
-        thr = np.full(len(COCO_CLASSES), self.score_threshold, dtype=np.float32)
-        for cname, value in (class_thresholds or {}).items():
-            if cname not in _CLASS_INDEX:
-                raise ValueError(f"class_thresholds: unknown COCO class {cname!r}")
-            if not 0.0 <= float(value) <= 1.0:
-                raise ValueError(f"class_thresholds[{cname!r}] must be within [0, 1], got {value}")
-            thr[_CLASS_INDEX[cname]] = float(value)
-        self.classes: tuple[str, ...] | None = None
-        if classes is not None:
-            if isinstance(classes, str):
-                classes = [classes]
-            self.classes = tuple(classes)
-            if not self.classes:
-                raise ValueError("classes must name at least one COCO class (or be None for all classes)")
-            unknown = [c for c in self.classes if c not in _CLASS_INDEX]
-            if unknown:
-                raise ValueError(f"classes: unknown COCO class name(s) {unknown}")
-            mask = np.ones(len(COCO_CLASSES), dtype=bool)
-            mask[[_CLASS_INDEX[c] for c in self.classes]] = False
-            thr[mask] = np.inf
-        self.class_thresholds = dict(class_thresholds or {})
-        self._thr = thr
+        self.agnostic_nms = bool(agnostic_nms)
 
         self.model_path = resolve_model(self.model_name, model_path)
         so = ort.SessionOptions()
@@ -140,20 +138,83 @@ class _OnnxDetector:
         inp = self.session.get_inputs()[0]
         self.input_name: str = inp.name
         shape = inp.shape
-        if len(shape) != 4 or not all(isinstance(d, int) for d in shape[2:]):
-            raise ValueError(f"{self.model_path}: expected a fixed NCHW input, got {inp.name} {shape}")
-        self.input_hw: tuple[int, int] = (int(shape[2]), int(shape[3]))
+        if len(shape) != 4:
+            raise ValueError(f"{self.model_path}: expected an NCHW input, got {inp.name} {shape}")
+        fixed_hw = all(isinstance(d, int) for d in shape[2:])
+        if input_size is not None:
+            ih, iw = _check_input_size(input_size)
+            if fixed_hw and (ih, iw) != (int(shape[2]), int(shape[3])):
+                raise ValueError(f"input_size={tuple(input_size)!r} but {self.model_path} has a fixed input "
+                                 f"{tuple(shape[2:])} (H, W); omit input_size or export with dynamic axes")
+            self.input_hw: tuple[int, int] = (ih, iw)
+        elif fixed_hw:
+            self.input_hw = (int(shape[2]), int(shape[3]))
+        else:
+            self.input_hw = self._default_input_hw(shape)
         # onnxruntime reports a symbolic dimension as its name (str) and an unknown one as None; only then may the
         # batch differ from the exported one
         self.batch_dynamic: bool = not isinstance(shape[0], int)
         self.output_names = [o.name for o in self.session.get_outputs()]
+
+        names = tuple(class_names) if class_names is not None else self._model_class_names()
+        self.class_names: tuple[str, ...] = tuple(str(n) for n in names)
+        index = {n: i for i, n in enumerate(self.class_names)}
+        kind = "COCO class" if self.class_names == tuple(COCO_CLASSES) else "class"
+        self._class_index = index
+        # Per-class score thresholds; excluded classes get +inf so nothing passes.
+        thr = np.full(len(self.class_names), self.score_threshold, dtype=np.float32)
+        for cname, value in (class_thresholds or {}).items():
+            if cname not in index:
+                raise ValueError(f"class_thresholds: unknown {kind} {cname!r} (the model's classes: "
+                                 f"{_some(self.class_names)})")
+            if not 0.0 <= float(value) <= 1.0:
+                raise ValueError(f"class_thresholds[{cname!r}] must be within [0, 1], got {value}")
+            thr[index[cname]] = float(value)
+        self.classes: tuple[str, ...] | None = None
+        if classes is not None:
+            if isinstance(classes, str):
+                classes = [classes]
+            self.classes = tuple(classes)
+            if not self.classes:
+                raise ValueError("classes must name at least one class (or be None for all classes)")
+            unknown = [c for c in self.classes if c not in index]
+            if unknown:
+                raise ValueError(f"classes: unknown {kind} name(s) {unknown} (the model's classes: "
+                                 f"{_some(self.class_names)})")
+            mask = np.ones(len(self.class_names), dtype=bool)
+            mask[[index[c] for c in self.classes]] = False
+            thr[mask] = np.inf
+        self.class_thresholds = dict(class_thresholds or {})
+        self._thr = thr
+        # NMS group of each class: its own index, or the group's (class_groups), or one group for all (agnostic)
+        group = np.arange(len(self.class_names), dtype=np.int64)
+        self.class_groups = {g: tuple(m) for g, m in (class_groups or {}).items()}
+        for gi, (gname, members) in enumerate(self.class_groups.items()):
+            bad = [m for m in members if m not in index]
+            if bad or not members:
+                raise ValueError(f"class_groups[{gname!r}]: unknown class name(s) {bad or members} (the model's "
+                                 f"classes: {_some(self.class_names)})")
+            for m in members:
+                group[index[m]] = len(self.class_names) + gi
+        if self.agnostic_nms:
+            group[:] = 0
+        self._nms_group = group
         self.last_timing: dict[str, float] = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
         self.last_batch = 1  # most images in one onnxruntime call of the last detect / detect_batch
         self.last_batched = 0  # images of the last detect_batch that shared an onnxruntime call with others
 
+    def _model_class_names(self) -> Sequence[str]:
+        """The class names the model itself carries (subclasses read metadata); default COCO's 80."""
+        return COCO_CLASSES
+
+    def _default_input_hw(self, shape) -> tuple[int, int]:
+        raise ValueError(f"{self.model_path}: the input {self.input_name} {shape} has dynamic height/width; give "
+                         f"input_size=(H, W)")
+
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(model_path={str(self.model_path)!r}, score_threshold={self.score_threshold}, "
-                f"nms_threshold={self.nms_threshold}, classes={self.classes}, "
+                f"nms_threshold={self.nms_threshold}, classes={self.classes}, agnostic_nms={self.agnostic_nms}, "
+                f"input_hw={self.input_hw}, "
                 f"intra_op_threads={self.intra_op_threads})")
 
     # Subclasses implement: _preprocess(image) -> (blob, ctx); _candidates(outputs, min_score) -> (anchor indices,
@@ -255,13 +316,14 @@ class _OnnxDetector:
         h, w = hw
         np.clip(boxes[:, 0::2], 0.0, float(w), out=boxes[:, 0::2])
         np.clip(boxes[:, 1::2], 0.0, float(h), out=boxes[:, 1::2])
-        # Class-aware NMS by offsetting each class into its own disjoint coordinate range.
-        offset = cls.astype(np.float64)[:, None] * (float(max(h, w)) + 1.0)
+        # NMS per group (class-aware: one group per class; class_groups; agnostic: one group) by offsetting each
+        # group into its own disjoint coordinate range.
+        offset = self._nms_group[cls].astype(np.float64)[:, None] * (float(max(h, w)) + 1.0)
         kept = _nms(boxes + offset, conf.astype(np.float64), self.nms_threshold)
         return [
             Detection(
                 class_id=int(cls[i]),
-                class_name=COCO_CLASSES[int(cls[i])],
+                class_name=self.class_names[int(cls[i])],
                 score=float(min(max(conf[i], 0.0), 1.0)),
                 box=(float(boxes[i, 0]), float(boxes[i, 1]), float(boxes[i, 2]), float(boxes[i, 3])),
             )
@@ -287,19 +349,22 @@ class YoloxDetector(_OnnxDetector):
         classes: COCO class names to report (all if ``None``).
         class_thresholds: per-class score thresholds overriding ``score_threshold``, by COCO name.
         intra_op_threads: onnxruntime ``intra_op_num_threads`` (0 = onnxruntime default, all cores).
+        agnostic_nms: one NMS over all classes (a vehicle is not reported both as "car" and "truck").
+        class_groups: ``{"vehicle": ["car", "truck", "bus"]}``: NMS is class-agnostic within each group (the
+            detections keep their own class names); other classes stay class-aware.
+        input_size: ``(H, W)`` pixels, multiples of 32, for a model exported with dynamic height/width (must equal
+            the model's own for a fixed-size one).
+        class_names: the model's class names in output order (default: COCO's 80, or the model's metadata).
 
-    Raises ``ValueError`` for out-of-range thresholds or unknown class names, and the errors of
+    Raises ``ValueError`` for out-of-range thresholds, unknown class names or a bad ``input_size``, and the errors of
     :func:`resolve_model` when the model cannot be found. ``detect`` is documented on the base class.
     """
 
     model_name = "yolox_nano"
     strides = (8, 16, 32)
 
-    def __init__(self, model_path: str | os.PathLike | None = None, *, score_threshold: float = 0.3,
-                 nms_threshold: float = 0.45, classes: Iterable[str] | None = None,
-                 class_thresholds: dict[str, float] | None = None, intra_op_threads: int = 1) -> None:
-        super().__init__(model_path, score_threshold=score_threshold, nms_threshold=nms_threshold, classes=classes,
-                         class_thresholds=class_thresholds, intra_op_threads=intra_op_threads)
+    def __init__(self, model_path: str | os.PathLike | None = None, **kwargs) -> None:
+        super().__init__(model_path, **kwargs)
         ih, iw = self.input_hw
         grids, strides = [], []
         for s in self.strides:
@@ -323,8 +388,10 @@ class YoloxDetector(_OnnxDetector):
 
     def _candidates(self, outputs, min_score: float):
         p = outputs[0][0]
-        if p.shape != (self._grid.shape[0], 5 + len(COCO_CLASSES)):
-            raise RuntimeError(f"{self.model_path}: output shape {p.shape}, expected ({self._grid.shape[0]}, 85)")
+        nc = len(self.class_names)
+        if p.shape != (self._grid.shape[0], 5 + nc):
+            raise RuntimeError(f"{self.model_path}: output shape {p.shape}, expected ({self._grid.shape[0]}, {5 + nc}) "
+                               f"for {nc} classes")
         idx = np.flatnonzero(p[:, 4] >= min_score)  # score = obj * cls <= obj
         return idx, p[idx, 4:5] * p[idx, 5:]
 
@@ -368,11 +435,8 @@ class NanoDetDetector(_OnnxDetector):
     mean = np.array([103.53, 116.28, 123.675], dtype=np.float32)
     std = np.array([57.375, 57.12, 58.395], dtype=np.float32)
 
-    def __init__(self, model_path: str | os.PathLike | None = None, *, score_threshold: float = 0.3,
-                 nms_threshold: float = 0.45, classes: Iterable[str] | None = None,
-                 class_thresholds: dict[str, float] | None = None, intra_op_threads: int = 1) -> None:
-        super().__init__(model_path, score_threshold=score_threshold, nms_threshold=nms_threshold, classes=classes,
-                         class_thresholds=class_thresholds, intra_op_threads=intra_op_threads)
+    def __init__(self, model_path: str | os.PathLike | None = None, **kwargs) -> None:
+        super().__init__(model_path, **kwargs)
         ih, iw = self.input_hw
         levels = {}
         for s in self.strides:
@@ -385,7 +449,7 @@ class NanoDetDetector(_OnnxDetector):
         for k, o in enumerate(self.session.get_outputs()):
             shp = o.shape
             n, c = shp[-2], shp[-1]
-            if n in levels and c == len(COCO_CLASSES):
+            if n in levels and c == len(self.class_names):
                 cls_idx[n] = k
             elif n in levels and c == 4 * (self.reg_max + 1):
                 reg_idx[n] = k
