@@ -287,7 +287,9 @@ class McapRecorder:
                 self._sinks.remove(sink)
                 self.sink_errors.append(f"{type(e).__name__}: {e}")
 
-    def _write_proto(self, topic: str, log_time_ns: int, msg: Any) -> None:
+    def write_proto(self, topic: str, log_time_ns: int, msg: Any) -> None:
+        """Write one protobuf message (any Foxglove schema) on ``topic`` at ``log_time_ns`` (ns since the epoch);
+        the channel and its schema are registered on first use."""
         cls = type(msg)
         full_name = cls.DESCRIPTOR.full_name
 
@@ -329,7 +331,7 @@ class McapRecorder:
                 raise ValueError("jpeg must be JPEG-encoded bytes (starting with FF D8), "
                                  f"got {len(data)} bytes starting {data[:4]!r}")
         msg = CompressedImage(timestamp=_timestamp(t), frame_id=frame_id, data=data, format="jpeg")
-        self._write_proto(topic, t, msg)
+        self.write_proto(topic, t, msg)
 
     def write_detections(self, topic: str, log_time_ns: int, detections: Sequence[Detection], *,
                          image_size: tuple[int, int] | None = None) -> None:
@@ -368,7 +370,7 @@ class McapRecorder:
                 timestamp=stamp, position=Point2(x=x0, y=y0), text=f"{class_name} {score:.2f}", font_size=14.0,
                 text_color=Color(r=1.0, g=1.0, b=1.0, a=1.0),
                 background_color=Color(r=color.r, g=color.g, b=color.b, a=0.6)))
-        self._write_proto(topic, t, ann)
+        self.write_proto(topic, t, ann)
 
     def write_location(self, topic: str, log_time_ns: int, lat: float, lon: float, alt: float, *,
                        frame_id: str = "gps") -> None:
@@ -386,7 +388,7 @@ class McapRecorder:
         msg = LocationFix(timestamp=_timestamp(t), frame_id=frame_id, latitude=lat_f, longitude=lon_f,
                           altitude=alt_f, position_covariance=[0.0] * 9,
                           position_covariance_type=LocationFix.UNKNOWN)
-        self._write_proto(topic, t, msg)
+        self.write_proto(topic, t, msg)
 
     def write_pose(self, topic: str, log_time_ns: int, position: Sequence[float], yaw_deg: float, *,
                    frame_id: str = "enu", roll_deg: float = 0.0, pitch_deg: float = 0.0) -> None:
@@ -402,7 +404,7 @@ class McapRecorder:
         msg = PoseInFrame(timestamp=_timestamp(t), frame_id=frame_id,
                           pose=Pose(position=Vector3(x=x, y=y, z=z),
                                     orientation=Quaternion(x=qx, y=qy, z=qz, w=qw)))
-        self._write_proto(topic, t, msg)
+        self.write_proto(topic, t, msg)
 
     def write_transform(self, topic: str, log_time_ns: int, parent_frame: str, child_frame: str,
                         translation: Sequence[float], yaw_deg: float = 0.0, roll_deg: float = 0.0,
@@ -429,7 +431,7 @@ class McapRecorder:
             qx, qy, qz, qw = (c / n for c in q)
         msg = FrameTransform(timestamp=_timestamp(t), parent_frame_id=parent_frame, child_frame_id=child_frame,
                              translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))
-        self._write_proto(topic, t, msg)
+        self.write_proto(topic, t, msg)
 
     def write_camera_calibration(self, topic: str, log_time_ns: int, *, width: int, height: int, fx: float,
                                  fy: float, cx: float, cy: float, frame_id: str) -> None:
@@ -453,7 +455,7 @@ class McapRecorder:
                                 K=[fx_, 0.0, cx_, 0.0, fy_, cy_, 0.0, 0.0, 1.0],
                                 R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
                                 P=[fx_, 0.0, cx_, 0.0, 0.0, fy_, cy_, 0.0, 0.0, 0.0, 1.0, 0.0])
-        self._write_proto(topic, t, msg)
+        self.write_proto(topic, t, msg)
 
     def write_json(self, topic: str, log_time_ns: int, obj: Mapping[str, Any], *, schema_name: str,
                    json_schema: dict | None = None) -> None:

@@ -103,7 +103,7 @@ def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[in
         c = f.cov
         cov9 = [c[0, 0], c[0, 1], 0.0, c[1, 0], c[1, 1], 0.0, 0.0, 0.0, 0.0]
         kind = LocationFix.DIAGONAL_KNOWN if abs(c[0, 1]) < 1e-12 else LocationFix.KNOWN
-        recorder._write_proto(f"/{robot_id}/tracks/{tid}/fix", log_time_ns, LocationFix(
+        recorder.write_proto(f"/{robot_id}/tracks/{tid}/fix", log_time_ns, LocationFix(
             timestamp=stamp, frame_id="wgs84", latitude=f.lat, longitude=f.lon, altitude=f.alt,
             position_covariance=[float(x) for x in cov9], position_covariance_type=kind))
         pose = Pose(position=Vector3(x=f.enu[0], y=f.enu[1], z=f.enu[2]), orientation=Quaternion(w=1.0))
@@ -113,4 +113,4 @@ def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[in
         ent.texts.append(TextPrimitive(pose=pose, billboard=True, font_size=14.0, scale_invariant=True,
                                        color=Color(r=1.0, g=1.0, b=1.0, a=1.0), text=f"{robot_id} #{tid}"))
         scene.entities.append(ent)
-    recorder._write_proto(f"/{robot_id}/tracks/scene", log_time_ns, scene)
+    recorder.write_proto(f"/{robot_id}/tracks/scene", log_time_ns, scene)
