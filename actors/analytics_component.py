@@ -256,7 +256,8 @@ class AnalyticsSchedulingService:
     analytics on the JPEG. A cloud executor that dies (its node lost) is handled by the pool: in-flight tasks are
     retried or FAILED, the policy is told when no cloud is left, and the mission goes on.
 
-    ``spec``: ``{"name", "workload" (Workload), "executors" ([CloudExecutorActor handles], may be empty),
+    ``spec``: ``{"name", "policy_class" (the :class:`AnalyticsScheduler` subclass, resolved in the driver, where an
+    application's own scheduler is registered), "workload" (Workload), "executors" ([CloudExecutorActor handles], may be empty),
     "network" ([NetworkModel specs]), "jpeg_quality", "seed"}``."""
 
     def __init__(self, host: Host, spec: dict) -> None:
@@ -278,10 +279,8 @@ class AnalyticsSchedulingService:
         from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
         from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
         from aerodaas.schedulers.dispatch.emulation import NetworkModel
-        from aerodaas.schedulers.analytics_base import make_analytics_scheduler
-
         w = self.spec["workload"]
-        policy = make_analytics_scheduler(self.name, w)
+        policy = self.spec["policy_class"](w)
         bank = AnalyticsBank({n: c.obj for n, c in self.comps.items()}, shared=True)
         ex = list(self.spec.get("executors") or [])
         pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.get("network") or ["none"],

@@ -269,8 +269,10 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
     from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
+    from aerodaas.schedulers.analytics_base import analytics_scheduler_class
 
     cfg = env.cfg.analytics_scheduler
+    policy_class = analytics_scheduler_class(cfg.name)  # the class travels, not its name
     analytics = {a.name: a for a in scheduled.values()}
     executors = start_cloud_executors(cfg.cloud_executors, mode="real", selector=cloud_selector(has_cloud),
                                       name_prefix="cloud-analytics", analytics=analytics,
@@ -278,7 +280,8 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     for a in plan.actors.values():
         if a.role == "dispatcher":
             a.spec["analytics_scheduler"] = {
-                "name": cfg.name, "workload": cfg.resolved_workload(env.cfg), "executors": executors,
+                "name": cfg.name, "policy_class": policy_class, "workload": cfg.resolved_workload(env.cfg),
+                "executors": executors,
                 "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
     return executors
 

@@ -32,7 +32,8 @@ from enum import Enum
 from typing import Any, Callable, ClassVar, Iterable, Mapping
 
 __all__ = ["ModelProfile", "Workload", "TaskState", "AnalyticsTask", "Decision", "AnalyticsScheduler",
-           "task_utility", "register_analytics_scheduler", "analytics_scheduler_names", "make_analytics_scheduler",
+           "task_utility", "register_analytics_scheduler", "analytics_scheduler_names",
+           "analytics_scheduler_class", "make_analytics_scheduler",
            "TERMINAL_STATES", "admit_by_time", "filter_options", "CloudCounters"]
 
 
@@ -395,6 +396,17 @@ def analytics_scheduler_names() -> list[str]:
     """Registered names, in registration order."""
     _load_builtins()
     return list(_REGISTRY)
+
+
+def analytics_scheduler_class(name: str) -> type[AnalyticsScheduler]:
+    """The class registered as ``name`` in this process (built-ins, and whatever the application registered with
+    :func:`register_analytics_scheduler`). The runtime carries this class, not its name, to the dispatcher actors:
+    the registry is per process, and an application's class exists only where the application ran (Ray pickles a
+    class defined in the application by value). Raises ValueError naming the known schedulers."""
+    _load_builtins()
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown analytics scheduler {name!r}; available: {list(_REGISTRY)}")
+    return _REGISTRY[name]
 
 
 def make_analytics_scheduler(name: str, workload: Workload, **kwargs: Any) -> AnalyticsScheduler:
