@@ -92,10 +92,14 @@ class DroneComponent:
         self._ap_done: set[int] = set()
 
     # ------------------------------------------------------------------ lifecycle
-    def connect(self, timeout_s: float = 30.0) -> None:
-        """Open the backend's link (a no-op for the simulator). Raises BackendError naming the robot."""
+    def connect(self, timeout_s: float | None = None) -> None:
+        """Open the backend's link (a no-op for the simulator), waiting up to ``timeout_s`` seconds (default: the
+        backend's own setting, e.g. ``mavlink.connect_timeout_s``). Raises BackendError naming the robot."""
         try:
-            self.backend.connect(timeout_s)
+            if timeout_s is None:
+                self.backend.connect()
+            else:
+                self.backend.connect(timeout_s)
         except BackendError:
             raise
         except Exception as e:

@@ -129,7 +129,9 @@ class HostRuntime:
         cams = [c for d in self.drones for c in d.cameras]
         for i, c in enumerate(cams):
             c["next_t"] = i / (len(cams) * c["fps"])
-        for d in self.drones:
+        # robots that name their MAVLink system id claim it before 'auto' ones take the lowest unclaimed id on a
+        # shared link (aerodaas.backends.mavlink.shared_link)
+        for d in sorted(self.drones, key=lambda d: not isinstance(getattr(d.cfg.mavlink, "target_system", None), int)):
             d.connect()
 
     def describe(self) -> dict:

@@ -188,7 +188,9 @@ class MavlinkConfig(_Cfg):
     autopilot: Literal["auto", "ardupilot", "px4"] = "auto"
     source_system: int = Field(default=255, ge=1, le=255)
     source_component: int = Field(default=190, ge=0, le=255)
-    target_system: int | None = Field(default=None, ge=1, le=255)
+    target_system: int | Literal["auto"] | None = Field(
+        default=None, description="the vehicle's MAVLink system id (1-255) on this connection; 'auto' (or unset): the "
+        "lowest id seen on the link that no other robot of the run claimed")
     connect_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
     heartbeat_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S)
     command_timeout_s: float = Field(default=1.5, gt=0, le=MAX_DURATION_S)
@@ -206,6 +208,26 @@ class MavlinkConfig(_Cfg):
     #: or ``rtl``, waiting up to ``safe_end_timeout_s`` vehicle seconds for it to land and disarm
     on_close: Literal["land", "rtl"] = "land"
     safe_end_timeout_s: float = Field(default=120.0, gt=0, le=MAX_DURATION_S)
+
+    @model_validator(mode="after")
+    def _check_target(self) -> "MavlinkConfig":
+        t = self.target_system
+        if isinstance(t, int) and (isinstance(t, bool) or not 1 <= t <= 255):
+            raise ValueError(f"target_system: a MAVLink system id is 1-255 (or 'auto'), got {t!r}")
+        return self
+
+    def link_key(self) -> str:
+        """The endpoint this connection string names, so that two spellings of one socket are one link:
+        ``udp:``/``udpin:`` -> ``udpin:PORT`` (one port whatever the bound address), ``udpout:``/``tcp:`` ->
+        ``KIND:HOST:PORT`` (``localhost`` as 127.0.0.1), anything else (a serial device) as written."""
+        parts = self.connection.strip().split(":")
+        kind = parts[0].lower()
+        if len(parts) == 3 and kind in ("udp", "udpin", "udpout", "udpbcast", "tcp", "tcpin"):
+            host = "127.0.0.1" if parts[1].lower() == "localhost" else parts[1]
+            if kind in ("udp", "udpin"):
+                return f"udpin:{parts[2]}"
+            return f"{kind}:{host}:{parts[2]}"
+        return self.connection.strip()
 
 
 class TelloConfig(_Cfg):
