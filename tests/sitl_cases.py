@@ -42,6 +42,12 @@ def fleet(autopilot, tmp_path_factory):
     """Three firmware instances flying one app (:func:`tests.sitl.fleet_session`)."""
     return sitl.fleet_session(autopilot, tmp_path_factory.mktemp(f"sitl_{autopilot}_fleet"))
 
+@pytest.fixture(scope="module")
+def router_fleet(autopilot, tmp_path_factory):
+    """Three firmware instances (system ids 1-3) behind one MAVProxy output port (:func:`tests.sitl.router_fleet_session`)."""
+    return sitl.router_fleet_session(autopilot, tmp_path_factory.mktemp(f"sitl_{autopilot}_router"))
+
+
 MAX_SPEED = 0.5  # apps/farm_survey.json limits.max_speed, m/s
 HOVER_S = 5.0  # the farm survey's hover_duration
 
@@ -185,3 +191,26 @@ def test_three_vehicle_fleet(fleet, autopilot):
         smooth = sustained_speed(odo, 1.0)
         peaks = sorted(((round(horizontal_speed(o), 3), round(o["t"], 1)) for o in odo), reverse=True)[:5]
         assert flown <= MAX_SPEED * 1.1 and smooth <= MAX_SPEED * 1.1, (rid, flown, smooth, peaks)
+
+
+def test_three_vehicles_behind_one_router_port(router_fleet, autopilot):
+    """Three vehicles, system ids 1-3, one MAVProxy output port shared by the three robots (one socket in one drone
+    actor): each flies its own survey (x = 0, 3, 6 m), lands and disarms, as each firmware's own telemetry (its
+    serial1, followed by an independent observer) shows."""
+    r = router_fleet
+    assert r["rc"] == 0, r["out"][-3000:] + "\nMAVProxy:\n" + r["mavproxy"]
+    for k, obs in enumerate(r["observed"]):
+        assert obs.get("armed") and obs.get("landed"), (k, {key: obs.get(key) for key in ("armed", "landed")})
+        flying = [s for s in obs["samples"] if s[3] > 1.0]
+        assert flying, k
+        # the firmware flew the survey of the robot with its system id, nobody else's: x near 3k, y up to 8 m
+        xs = [s[1] for s in flying]
+        ys = [s[2] for s in flying]
+        assert abs(sorted(xs)[len(xs) // 2] - 3.0 * k) < 1.0 and max(ys) > 7.5, (k, min(xs), max(xs), max(ys))
+        assert obs["samples"][-1][3] < 0.3, (k, obs["samples"][-1])
+    rec = r["rec"]
+    for k, rid in enumerate(["quadrotor_base", "quadrotor_base_1", "quadrotor_base_2"]):
+        connected = [e for e in events(rec, rid) if e.get("event") == "connected"]
+        assert connected and connected[0]["system"] == k + 1, (rid, connected)
+        visits = waypoint_visits(odometry(rec, rid), [(3.0 * k, 3.0, 1.5), (3.0 * k, 8.0, 1.5)], 0.5)
+        assert all(v["closest_m"] <= 0.5 for v in visits), (rid, visits)

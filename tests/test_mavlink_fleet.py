@@ -192,3 +192,31 @@ def test_plan_puts_robots_of_one_link_in_one_drone_actor(tmp_path):
     assert "x/drone" in alone["components"] and "a/drone" not in alone["components"]
     p = _cli("plan", str(app))
     assert "mavlink link udpin:14600 shared by a, b, c" in p.stdout, p.stdout
+
+
+@pytest.mark.e2e
+def test_each_robot_gets_its_own_connect_error_and_its_own_connect_timeout(ray_session, run_options):
+    """Two robots whose vehicles never answer, with connect_timeout_s 1.5 and 2.5: each error names its own robot,
+    connection and timeout (mavlink.connect_timeout_s reaches the drone actor; it used to wait its own 30 s), and
+    the summary prints each under its robot."""
+    from aerodaas import AeroNavigation, Environment, NavigationType, Waypoint
+    from aerodaas.config import parse_environment_config
+    from aerodaas.emulators import free_udp_port
+    from aerodaas.run_report import format_summary
+
+    robots = []
+    for rid, t in (("a", 1.5), ("b", 2.5)):
+        robots.append({"id": rid, "backend": "mavlink", "mavlink": {
+            "connection": f"udpin:127.0.0.1:{free_udp_port()}", "connect_timeout_s": t, "set_speed_limits": False}})
+    env = Environment(parse_environment_config({"name": "silent", "robots": robots,
+                                                "compute": [{"id": "edge", "tier": "edge"}]}))
+    for r in env.get_env_robots():
+        r.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id=r.id + "_a", x=1, y=0, z=2)]))
+    res = env.start_mission(env.get_env_robots())
+    assert res.outcome == "failed"
+    ea, eb = res.robots["a"]["error"], res.robots["b"]["error"]
+    assert "robot 'a'" in ea and "within 1.5 s" in ea and "robot 'b'" not in ea, ea
+    assert "robot 'b'" in eb and "within 2.5 s" in eb and "robot 'a'" not in eb, eb
+    text = format_summary(res)
+    block_a = text.split("robot a:")[1].split("robot b:")[0]
+    assert "within 1.5 s" in block_a and "within 2.5 s" not in block_a, text

@@ -35,6 +35,18 @@ class BackendError(RuntimeError):
     """A vehicle backend failed (connection, protocol, timeout). The message names the robot and the step."""
 
 
+class RobotsNotConnected(BackendError):
+    """Some robots of one drone actor could not connect to their vehicles: ``errors`` maps each such robot id to
+    its own error (so the summary prints each robot's error under it, not the first one under all)."""
+
+    def __init__(self, errors: dict[str, str]) -> None:
+        self.errors = dict(errors)
+        super().__init__("; ".join(self.errors.values()))
+
+    def __reduce__(self):  # picklable across Ray workers
+        return (RobotsNotConnected, (self.errors,))
+
+
 class CommandRefused(BackendError):
     """The vehicle refused a command. ``result`` is the autopilot's code (e.g. the MAVLink ``MAV_RESULT`` name,
     or the Tello's ``error`` reply), ``status_text`` the last STATUSTEXT/log line that explains it."""

@@ -189,8 +189,9 @@ class MavlinkConfig(_Cfg):
     source_system: int = Field(default=255, ge=1, le=255)
     source_component: int = Field(default=190, ge=0, le=255)
     target_system: int | Literal["auto"] | None = Field(
-        default=None, description="the vehicle's MAVLink system id (1-255) on this connection; 'auto' (or unset): the "
-        "lowest id seen on the link that no other robot of the run claimed")
+        default=None, description="the vehicle's MAVLink system id (1-255) on this connection; 'auto': the lowest id "
+        "seen on the link that no other robot of the run claimed (after 1.5 s of discovery); unset: the first "
+        "autopilot heard that no other robot claimed")
     connect_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
     heartbeat_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S)
     command_timeout_s: float = Field(default=1.5, gt=0, le=MAX_DURATION_S)

@@ -14,9 +14,9 @@ This module does the same for :class:`~aerodaas.backends.mavlink.MavlinkBackend`
 - Each robot gets a :class:`LinkPort` (the connection-like object its backend reads from and sends through):
   messages from the system id the robot claimed arrive in its own queue; GCS messages and other systems' traffic
   never reach it. Sends from every robot are serialised on the link's lock (one MAVLink sequence counter).
-- :meth:`LinkPort.claim` waits for the autopilot HEARTBEAT of the robot's ``target_system``, or, for ``None`` /
-  ``"auto"``, takes the lowest system id seen on the link that no other robot has claimed (after one heartbeat
-  period of discovery, so that the id order does not depend on which vehicle spoke first). An id claimed twice in
+- :meth:`LinkPort.claim` waits for the autopilot HEARTBEAT of the robot's ``target_system``; ``"auto"`` takes the
+  lowest system id seen on the link that no other robot has claimed (after one heartbeat period of discovery, so
+  that the id order does not depend on which vehicle spoke first); ``None`` (unset) the first one heard. An id claimed twice in
   one process is refused (:class:`~aerodaas.backends.base.BackendError`); the configuration check refuses it before
   Ray starts (:meth:`aerodaas.config.EnvironmentConfig`).
 - The link closes when its last port closes.
@@ -36,8 +36,12 @@ from ._common import M, _NOT_VEHICLES
 #: wall seconds of discovery before ``target_system: auto`` picks the lowest unclaimed id (autopilots send their
 #: HEARTBEAT at 1 Hz, mavlink.io/en/services/heartbeat.html)
 DISCOVERY_S = 1.5
-#: messages kept per robot while its backend does not read (a stalled I/O thread): the oldest are dropped
+#: messages queued per robot; when full the link's reader waits up to :data:`FULL_WAIT_S` for the robot's I/O
+#: thread (TCP flow control then holds the sender back, as a socket of its own would), then drops the oldest
 PORT_QUEUE = 5000
+FULL_WAIT_S = 1.0
+#: messages kept per unclaimed system id (the latest), handed to the robot that claims it
+PENDING = 200
 
 _LINKS: dict[str, "SharedLink"] = {}
 _LINKS_LOCK = threading.Lock()
@@ -67,6 +71,8 @@ class SharedLink:
         self.send_lock = threading.Lock()
         self.cond = threading.Condition()
         self.first_seen: float | None = None
+        #: system id -> its latest messages while no robot has claimed it (handed to the robot that claims it)
+        self.pending: dict[int, deque] = {}
         self.messages = 0
         self.unrouted = 0  # messages of a system id no robot claimed
         self._stop = threading.Event()
@@ -101,11 +107,13 @@ class SharedLink:
                         self.cond.notify_all()
                     else:
                         self.seen[sysid] = (self.seen[sysid][0], msg, self.seen[sysid][2])
-            owner = self.claimed.get(sysid)
-            port = self.ports.get(owner) if owner is not None else None
-            if port is None:
-                self.unrouted += 1
-                continue
+            with self.cond:
+                owner = self.claimed.get(sysid)
+                port = self.ports.get(owner) if owner is not None else None
+                if port is None:  # kept (the latest few) for a robot that claims this id soon
+                    self.unrouted += 1
+                    self.pending.setdefault(sysid, deque(maxlen=PENDING)).append(msg)
+                    continue
             port._put(msg)
 
     def close(self) -> None:
@@ -135,16 +143,23 @@ class LinkPort:
 
     def _put(self, msg: Any) -> None:
         with self._cv:
+            if len(self._q) >= PORT_QUEUE and not self._closed:
+                self._cv.wait_for(lambda: len(self._q) < PORT_QUEUE or self._closed, FULL_WAIT_S)
             if len(self._q) >= PORT_QUEUE:
                 self._q.popleft()
                 self.dropped += 1
             self._q.append(msg)
-            self._cv.notify()
+            self._cv.notify_all()
 
     def recv_msg(self) -> Any:
         """The next message of this robot's vehicle, or None (never blocks)."""
         with self._cv:
-            return self._q.popleft() if self._q else None
+            if not self._q:
+                return None
+            msg = self._q.popleft()
+            if len(self._q) == PORT_QUEUE - 1:
+                self._cv.notify_all()  # the link's reader may be waiting for room
+            return msg
 
     def select(self, timeout: float) -> bool:
         """Wait up to ``timeout`` wall seconds for a message; True when one is waiting."""
@@ -155,8 +170,8 @@ class LinkPort:
 
     def claim(self, target: int | str | None, deadline: float, tick: Callable[[], None] | None = None) -> Any:
         """Wait until the wanted vehicle's autopilot HEARTBEAT is seen on the link and make its system id this
-        robot's; returns that HEARTBEAT. ``target``: a system id (1-255), or ``None`` / ``"auto"`` for the lowest
-        unclaimed id seen after :data:`DISCOVERY_S` of discovery. ``tick`` is called about every 0.2 s while waiting
+        robot's; returns that HEARTBEAT. ``target``: a system id (1-255); ``"auto"``: the lowest unclaimed id seen
+        after :data:`DISCOVERY_S` of discovery; ``None``: the first autopilot heard that no robot claimed (at once). ``tick`` is called about every 0.2 s while waiting
         (our GCS HEARTBEAT: a ``udpout`` vehicle learns our address from it). Raises BackendError when the id is
         claimed by another robot of this process, and TimeoutError at ``deadline`` (time.monotonic())."""
         link = self.link
@@ -170,17 +185,21 @@ class LinkPort:
                                        f"robot {link.claimed[want]!r}; give each robot on one link its own "
                                        "mavlink.target_system")
                 pick = None
+                free = sorted((s for s in link.seen if s not in link.claimed), key=lambda s: link.seen[s][2])
                 if want is not None and want in link.seen:
                     pick = want
-                elif want is None and link.first_seen is not None:
-                    free = sorted(s for s in link.seen if s not in link.claimed)
+                elif target is None and free:  # the first autopilot heard that nobody flies
+                    pick = free[0]
+                elif target == "auto" and free:  # the lowest id after a heartbeat period of discovery
                     settled = time.monotonic() - link.first_seen >= DISCOVERY_S
-                    if free and (settled or time.monotonic() >= deadline - 0.2):
-                        pick = free[0]
+                    if settled or time.monotonic() >= deadline - 0.2:
+                        pick = min(free)
                 if pick is not None:
                     compid, hb, _ = link.seen[pick]
                     link.claimed[pick] = self.robot_id
                     self.target_system, self.target_component = pick, compid
+                    for m in link.pending.pop(pick, ()):
+                        self._put(m)
                     return hb
                 if time.monotonic() >= deadline:
                     seen = sorted(link.seen)
@@ -190,9 +209,11 @@ class LinkPort:
 
     def close(self) -> None:
         """Leave the link (idempotent); the last port to leave closes the socket."""
-        if self._closed:
-            return
-        self._closed = True
+        with self._cv:
+            if self._closed:
+                return
+            self._closed = True
+            self._cv.notify_all()
         with _LINKS_LOCK:
             link = self.link
             with link.cond:
