@@ -80,6 +80,7 @@ class DroneComponent:
                 odom_rate = float(s.properties.get("rate_hz", 10.0))
         self.odom_period = 1.0 / odom_rate
         self.next_odom = 0.0
+        self._odom_key: Any = None  # the backend's sample_key of the last published odometry
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
         mc = self.cfg.mavlink
@@ -206,13 +207,24 @@ class DroneComponent:
                 elif ev.get("event") == "link_regained":
                     self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
                 self._event(ev.pop("event", "backend_event"), **ev)
-        if self.backend.t + 1e-9 >= self.next_odom:
+        if self.backend.t + 1e-9 >= self.next_odom and self._new_sample():
             self.next_odom += self.odom_period
             if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
                 self.next_odom = self.backend.t + self.odom_period
             self.publish_odometry(tok)
 
+    def _new_sample(self) -> bool:
+        """Whether the backend has a position sample not yet published (always, for a backend without
+        ``sample_key``: the simulator's state is new at every step)."""
+        key = self.backend.sample_key
+        return key is None or key != self._odom_key
+
     def publish_odometry(self, tok: Any = None) -> None:
+        """Record and publish the backend's odometry, once per vehicle sample (a real vehicle's odometry is stamped
+        with its own time of the sample; the same sample is never sent again under a new timestamp)."""
+        if not self._new_sample():
+            return
+        self._odom_key = self.backend.sample_key
         odom = self.backend.odometry().model_dump(mode="json")
         self.last_odom = odom
         if self.recorder is not None:

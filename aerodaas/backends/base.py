@@ -149,7 +149,15 @@ class VehicleBackend(abc.ABC):
 
     @abc.abstractmethod
     def odometry(self) -> Odometry:
-        """The current :class:`~aerodaas.models.Odometry` (t = :attr:`t`)."""
+        """The current :class:`~aerodaas.models.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
+        for backends with a :attr:`sample_key`)."""
+
+    @property
+    def sample_key(self) -> Any:
+        """None when every :meth:`odometry` is a fresh state (the simulator); otherwise a value that changes with
+        each new position sample from the vehicle, so that the runtime records a sample once, never the same
+        position again under a new timestamp."""
+        return None
 
     def drain_events(self) -> list[dict[str, Any]]:
         """Events since the last call, oldest first, each ``{"event": name, ...}``: e.g. ``status_text``

@@ -73,6 +73,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._ap_modes: dict[str, int] = {}
         # state (guarded by _lock)
         self._pos = np.zeros(3)
+        self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
+        self._pos_seq = 0  # position samples received
         self._vel = np.zeros(3)
         self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
         self._geo: GeoPoint | None = None
