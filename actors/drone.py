@@ -60,6 +60,8 @@ class DroneComponent:
         self.flew_something = False
         self.active_wp: str | None = None
         self.hold_until: float | None = None
+        self._hold: dict | None = None  # the hold under way: start, last tick, time within the radius, its figures
+        self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
         self._paused_from: S | None = None
         self._link_lost_from: S | None = None
         self._pause_req = threading.Event()
@@ -192,7 +194,7 @@ class DroneComponent:
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
-                "rejected": self.rejected, "safety": self.gate.stats(),
+                "rejected": self.rejected, "hold_failed": self.hold_failed, "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
     # ------------------------------------------------------------------ the clock thread
@@ -313,8 +315,9 @@ class DroneComponent:
                 self._event("landed")
                 if self.outcome is None:
                     dropped = [r["id"] for r in self.rejected if r.get("item") == "waypoint"]
-                    # a waypoint refused in flight was not flown: never a success
-                    self.outcome = "success" if self.preplanned_left == 0 and not dropped else "incomplete"
+                    # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
+                    ok = self.preplanned_left == 0 and not dropped and not self.hold_failed
+                    self.outcome = "success" if ok else "incomplete"
                 return True
             return False
         if st == S.EMERGENCY:
@@ -411,7 +414,7 @@ class DroneComponent:
             if self.active_wp != item.id:
                 if st == S.TRACKING:
                     self._event("tracking_ended")
-                self.active_wp, self.hold_until = item.id, None
+                self.active_wp, self.hold_until, self._hold = item.id, None, None
                 v.goto(target, item.speed)
                 fsm.transition(S.NAVIGATING, t)
                 self._event("navigate", waypoint=item.id, target=list(target), priority=res["priority"],
@@ -422,17 +425,40 @@ class DroneComponent:
                                         "priority": res["priority"]}, "aerodaas.NavCommand")
                 return False
             dist = math.dist(pos, target)
-            if st == S.NAVIGATING and dist <= item.acceptance_radius:
+            speed = math.hypot(*tuple(float(c) for c in v.velocity)[:2])
+            within = dist <= item.acceptance_radius
+            hc = self.cfg.hold
+            if st == S.NAVIGATING and within and (item.hover_duration <= 0 or speed <= hc.settle_speed):
                 fsm.transition(S.WAYPOINT_HOLD, t)
+                st = S.WAYPOINT_HOLD
                 v.goto(target)  # keep station on the exact waypoint
                 self.hold_until = t + item.hover_duration
-                self._event("waypoint_reached", waypoint=item.id, error_m=dist)
-            if st == S.WAYPOINT_HOLD and self.hold_until is not None and t + 1e-9 >= self.hold_until:
-                self.scheduler.complete(item.id)
-                self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
-                                     "error_m": dist})
-                self._event("waypoint_done", waypoint=item.id)
-                self.active_wp, self.hold_until = None, None
+                self._hold = {"start": t, "last": t, "within_s": 0.0, "max_error_m": dist, "max_speed": speed}
+                self._event("waypoint_reached", waypoint=item.id, error_m=dist, speed=round(speed, 3))
+            elif st == S.WAYPOINT_HOLD and self._hold is not None:
+                h = self._hold
+                if within:  # only time within the radius counts (the previous tick's interval, ended in it)
+                    h["within_s"] += t - h["last"]
+                h["last"] = t
+                h["max_error_m"] = max(h["max_error_m"], dist)
+                h["max_speed"] = max(h["max_speed"], speed)
+            if st == S.WAYPOINT_HOLD and self._hold is not None:
+                h = self._hold
+                if h["within_s"] + 1e-9 >= item.hover_duration:
+                    self.scheduler.complete(item.id)
+                    self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
+                                         "error_m": dist})
+                    self._event("waypoint_done", waypoint=item.id, held_s=round(h["within_s"], 3),
+                                max_error_m=round(h["max_error_m"], 3))
+                    self.active_wp, self.hold_until, self._hold = None, None, None
+                elif t - h["start"] > hc.max_time_factor * item.hover_duration + hc.grace_s:
+                    rec = {"waypoint": item.id, "held_s": round(h["within_s"], 3), "needed_s": item.hover_duration,
+                           "elapsed_s": round(t - h["start"], 3), "max_error_m": round(h["max_error_m"], 3),
+                           "max_speed": round(h["max_speed"], 3), "acceptance_radius": item.acceptance_radius}
+                    self.hold_failed.append(rec)
+                    self._event("hold_failed", **rec)
+                    self.scheduler.discard(item.id, "hold_failed")
+                    self.active_wp, self.hold_until, self._hold = None, None, None
             return False
         # nothing queued
         if st == S.TRACKING:

@@ -270,6 +270,19 @@ class ReplayConfig(_Cfg):
     rate: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
 
 
+class HoldConfig(_Cfg):
+    """How a waypoint's hover (``hover_duration`` > 0) is held. The hold starts once the vehicle is within the
+    waypoint's acceptance radius AND its horizontal speed is at most ``settle_speed`` (m/s): passing through at
+    speed is not holding. Only time within the radius counts towards the hover time. A hold that has not gathered
+    ``hover_duration`` within the radius after ``max_time_factor`` x ``hover_duration`` + ``grace_s`` seconds
+    (vehicle time) since it started ends the waypoint as ``hold_failed`` (an event with its figures), never as
+    reached: the mission is then ``incomplete``."""
+
+    settle_speed: float = Field(default=0.3, gt=0, le=MAX_SPEED_MPS, description="m/s, horizontal")
+    max_time_factor: float = Field(default=2.0, ge=1.0, le=100.0)
+    grace_s: float = Field(default=5.0, ge=0, le=MAX_DURATION_S, description="seconds")
+
+
 class RobotConfig(_Cfg):
     """A robot (drone). ``backend`` selects the driver: ``sim`` (the embedded simulator), ``mavlink`` (ArduPilot or
     PX4, settings in ``mavlink``), ``tello`` (DJI Tello, settings in ``tello``) or ``replay`` (a recorded flight,
@@ -285,6 +298,7 @@ class RobotConfig(_Cfg):
     battery: BatteryConfig = Field(default_factory=BatteryConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
     safety: SafetyConfig = Field(default_factory=SafetyConfig)
+    hold: HoldConfig = Field(default_factory=HoldConfig)
     takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
                                     "[safety.min_altitude, max_altitude]")
     control_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
