@@ -60,6 +60,8 @@ class DroneComponent:
         self.flew_something = False
         self.active_wp: str | None = None
         self.hold_until: float | None = None
+        #: how the run ended for this robot (set when it closes): e.g. "landed and disarmed", "safe end: landed ..."
+        self.ended: str | None = None
         self._hold: dict | None = None  # the hold under way: start, last tick, time within the radius, its figures
         self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
         self._paused_from: S | None = None
@@ -150,7 +152,59 @@ class DroneComponent:
         self._event("takeoff", altitude=self.cfg.takeoff_altitude, by="autopilot mission")
 
     def close(self) -> None:
-        self.backend.close()
+        """Close the backend. A real vehicle still armed (run timeout, error, Ctrl-C) is brought down first by the
+        backend's safe end (LAND/RTL, wait for the disarm: ``mavlink.on_close``), and meanwhile its events (the mode
+        change, ``safe_end``), state (LANDING, LANDED) and odometry are recorded until the disarm; :attr:`ended`
+        says how the run ended for this robot."""
+        b = self.backend
+        safe_end = getattr(b, "safe_end", None)
+        if callable(safe_end) and b.navigable and b.armed and b.link_ok:
+            import threading
+
+            result: dict[str, Any] = {}
+
+            def run() -> None:
+                try:
+                    result["how"] = safe_end()
+                except Exception as e:  # noqa: BLE001 - recorded; closing goes on
+                    result["error"] = f"{type(e).__name__}: {e}"
+
+            self._event("safe_end_started", state=self.fsm.state.value, mode=getattr(b, "mode", None),
+                        on_close=getattr(getattr(b, "cfg", None), "on_close", None))
+            th = threading.Thread(target=run, name=f"safe-end-{self.cfg.id}", daemon=True)
+            th.start()
+            while th.is_alive():
+                th.join(0.05)
+                self._record_safe_end()
+            self._record_safe_end()
+            how = result.get("how") or "failed: " + result.get("error", "?")
+            self.ended = {"landed": "safe end: landed and disarmed", "disarmed": "safe end: disarmed on the ground",
+                          "timeout": "safe end: TIMEOUT, vehicle still armed",
+                          "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
+                how, f"safe end {how}")
+            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+        elif self.ended is None:
+            st = self.fsm.state
+            self.ended = ("landed and disarmed" if st == S.LANDED and not b.armed else
+                          f"state {st.value}, {'armed' if b.armed else 'disarmed'}" if b.navigable else
+                          f"observed to the end ({st.value})")
+            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+        b.close()
+
+    def _record_safe_end(self) -> None:
+        """While the backend's safe end runs: its events, the stat-stream (LANDING, then LANDED at the disarm) and
+        each new odometry sample, recorded as in flight."""
+        b = self.backend
+        for ev in b.drain_events():
+            self._event(ev.pop("event", "backend_event"), **ev)
+        st = self.fsm.state
+        if st not in (S.LANDING, S.LANDED) and getattr(b, "mode", "") in ("LAND", "RTL"):
+            if self.fsm.can(S.LANDING):
+                self.fsm.transition(S.LANDING, b.t)
+        if self.fsm.state == S.LANDING and not b.armed and not b.in_air:
+            self.fsm.transition(S.LANDED, b.t)
+            self._event("landed", reason="safe end")
+        self.publish_odometry()
 
     # ------------------------------------------------------------------ recording helpers
     def _t_ns(self, t: float) -> int:
@@ -194,7 +248,8 @@ class DroneComponent:
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
-                "rejected": self.rejected, "hold_failed": self.hold_failed, "safety": self.gate.stats(),
+                "rejected": self.rejected, "hold_failed": self.hold_failed, "ended": self.ended,
+                "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
     # ------------------------------------------------------------------ the clock thread
