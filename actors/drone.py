@@ -62,7 +62,9 @@ class DroneComponent:
         self.hold_until: float | None = None
         #: how the run ended for this robot (set when it closes): e.g. "landed and disarmed", "safe end: landed ..."
         self.ended: str | None = None
-        self._hold: dict | None = None  # the hold under way: start, last tick, time within the radius, its figures
+        self._hold: dict | None = None
+        self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
+        self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it  # the hold under way: start, last tick, time within the radius, its figures
         self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
         self._paused_from: S | None = None
         self._link_lost_from: S | None = None
@@ -249,6 +251,7 @@ class DroneComponent:
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
                 "rejected": self.rejected, "hold_failed": self.hold_failed, "ended": self.ended,
+                "failsafe": self.failsafe,
                 "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
@@ -263,6 +266,8 @@ class DroneComponent:
                     self._ap_events.append(dict(ev))
                 elif ev.get("event") == "link_regained":
                     self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
+                elif ev.get("event") == "autopilot_failsafe":
+                    self._failsafe_pending = dict(ev)
                 self._event(ev.pop("event", "backend_event"), **ev)
         if self.backend.t + 1e-9 >= self.next_odom and self._new_sample():
             self.next_odom += self.odom_period
@@ -350,6 +355,8 @@ class DroneComponent:
                 fsm.transition(S.LINK_LOST, t)
                 self._event("link_lost", previous=st.value)
             return False
+        if self._failsafe_pending is not None:
+            return self._on_autopilot_failsafe(t, st)
         if st == S.LINK_LOST:
             self._reissue = False
             return self._link_regained(t)
@@ -612,6 +619,50 @@ class DroneComponent:
                              "error_m": math.dist(at, target)})
         self._event("waypoint_done", waypoint=wp.id)
         self.active_wp = None
+
+    def _on_autopilot_failsafe(self, t: float, st: S) -> bool:
+        """The autopilot entered a failsafe mode by itself (backend event ``autopilot_failsafe``): the mission
+        pauses and the outcome records it; then ``mavlink.on_failsafe`` says what follows: ``end`` (the autopilot's
+        RTL/LAND flies on to the ground; after BRAKE, land here), ``hold`` (PAUSED until an operator resumes) or
+        ``resume`` (the current waypoint is re-issued, which switches back to GUIDED/OFFBOARD)."""
+        fs, self._failsafe_pending = self._failsafe_pending, None
+        v, fsm = self.backend, self.fsm
+        action = getattr(self.cfg.mavlink, "on_failsafe", "end") if self.cfg.mavlink else "end"
+        mode = fs.get("mode", "")
+        if self.autopilot_mission and self.preplanned_left == 0 and mode in ("RTL", "LAND"):
+            return False  # the uploaded mission's own last item (NAV_RETURN_TO_LAUNCH / NAV_LAND)
+        self.failsafe = {"mode": mode, "previous": fs.get("previous"), "t": t, "text": fs.get("text", ""),
+                         "action": action, "state": st.value}
+        self._event("failsafe", mode=mode, action=action, state=st.value, text=fs.get("text", ""))
+        if st in (S.LANDING, S.LANDED, S.RETURNING):
+            return False  # already on the way down: nothing of ours to pause
+
+        self._reissue = False
+        self.active_wp, self.hold_until, self._hold = None, None, None
+        if action == "resume":
+            if st == S.LINK_LOST:
+                return self._link_regained(t)
+            if st == S.WAYPOINT_HOLD:
+                fsm.transition(S.NAVIGATING, t)
+            return False
+        getattr(v, "release", lambda: None)()
+        if action == "hold":
+            if st != S.PAUSED and fsm.can(S.PAUSED):
+                self._paused_from = {S.LINK_LOST: self._link_lost_from}.get(st, st)
+                fsm.transition(S.PAUSED, t)
+                self._event("paused", reason=f"autopilot failsafe {mode}")
+            return False
+        self.outcome = "failsafe"
+        if mode in ("RTL", "SMART_RTL", "AUTO_RTL"):
+            self._backend_rtl = True
+            fsm.transition(S.RETURNING, t)
+            self._event("returning", by="autopilot failsafe", mode=mode)
+        else:
+            if mode not in ("LAND",):
+                v.land()  # BRAKE (a fence action) holds in the air: end the flight here
+            fsm.transition(S.LANDING, t)
+            self._event("landing", reason=f"autopilot failsafe {mode}")
+        return False
 
     def _link_regained(self, t: float) -> bool:
         """The link is back: resume what was going on (re-issuing the active waypoint), or note the landing."""

@@ -209,6 +209,14 @@ class MavlinkConfig(_Cfg):
     #: or ``rtl``, waiting up to ``safe_end_timeout_s`` vehicle seconds for it to land and disarm
     on_close: Literal["land", "rtl"] = "land"
     safe_end_timeout_s: float = Field(default=120.0, gt=0, le=MAX_DURATION_S)
+    #: what the mission does when the autopilot enters a failsafe mode by itself (ArduCopter RTL/SMART_RTL/LAND/
+    #: BRAKE, PX4 AUTO.RTL/AUTO.LAND, not asked by us: lost datalink or RC, battery, geofence action, EKF, or a
+    #: pilot's switch). ``end`` (default): the mission ends, the autopilot's failsafe flies on (RTL/LAND to the
+    #: ground; after BRAKE the vehicle lands where it is), the outcome is ``failsafe``. ``hold``: the mission pauses
+    #: with the vehicle left in the failsafe mode until an operator resumes it (HITL ``resume``). ``resume``: once
+    #: the link is up, the mission goes on in GUIDED/OFFBOARD (overriding the failsafe: only when the operator
+    #: knows why it triggered). docs/operations.md links the autopilots' failsafe documentation.
+    on_failsafe: Literal["end", "hold", "resume"] = "end"
 
     @model_validator(mode="after")
     def _check_target(self) -> "MavlinkConfig":

@@ -11,7 +11,7 @@ from pymavlink import mavutil
 
 from ..base import BackendError, CommandRefused, LinkLost
 from .shared_link import open_link
-from ._common import M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+from ._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
 
 
 class LinkMixin:
@@ -250,10 +250,27 @@ class LinkMixin:
                 self._event("armed" if armed else "disarmed")
             mode = mavutil.mode_string_v10(msg)
             if mode != self._mode:
+                previous = self._mode
                 self._mode = mode
                 self._mode_changes += 1
                 self._event("mode", name=mode)
+                self._check_failsafe(mode, previous, now)
             self._system_status = msg.system_status
+
+    def _check_failsafe(self, mode: str, previous: str, now: float) -> None:
+        """A failsafe mode (:data:`FAILSAFE_MODES`) entered while the vehicle is armed, and not the one we last
+        asked for (set_mode): the autopilot's own failsafe (datalink, battery, geofence action, EKF) or a pilot's
+        switch. Recorded as :attr:`failsafe` and an ``autopilot_failsafe`` event with the status texts of the last
+        2 s (the autopilot says why). Caller holds ``_lock``."""
+        asked = self._mode_asked
+        if not self._armed or mode not in FAILSAFE_MODES.get(self.autopilot or "", ()):
+            return
+        if asked is not None and asked[0] == mode:
+            return
+        texts = [t for (ts, _sev, t) in self._texts if now - ts <= 2.0]
+        self.failsafe = {"mode": mode, "previous": previous, "t": round(self.t, 3), "text": "; ".join(texts[-3:])}
+        self._stop_setpoints_quiet()
+        self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
     def _on_boot_ms(self, ms: int) -> None:
         now = time.monotonic()
