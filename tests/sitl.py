@@ -302,6 +302,48 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     return 0
 
 
+def observe_raw(conn: str, out: str, timeout_s: float) -> int:
+    """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
+    flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
+    and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
+    z, vx, vy], ...]}`` to ``out``: t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
+    :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s."""
+    from pymavlink import mavutil
+
+    from aerodaas.geo import geodetic_to_enu
+    from aerodaas.models import GeoPoint
+
+    home = GeoPoint(**FARM_HOME)
+    m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
+    end = time.monotonic() + timeout_s
+    samples, armed, was_armed, sysid, next_hb, disarmed_at = [], False, False, None, 0.0, None
+    while time.monotonic() < end:
+        if time.monotonic() >= next_hb:
+            m.mav.heartbeat_send(6, 8, 0, 0, 4)
+            if sysid is not None:
+                m.mav.command_long_send(sysid, 1, 511, 0, 33, 100000, 0, 0, 0, 0, 0)
+            next_hb = time.monotonic() + 1.0
+        msg = m.recv_match(type=["HEARTBEAT", "GLOBAL_POSITION_INT"], blocking=True, timeout=0.5)
+        if msg is None:
+            continue
+        if msg.get_type() == "HEARTBEAT":
+            if msg.autopilot == 8 or msg.type == 6:
+                continue
+            sysid = msg.get_srcSystem()
+            armed = bool(msg.base_mode & 128)
+            was_armed = was_armed or armed
+            if was_armed and not armed and disarmed_at is None:
+                disarmed_at = time.monotonic()
+        elif msg.lat or msg.lon:
+            e, n, _ = geodetic_to_enu(msg.lat / 1e7, msg.lon / 1e7, home.alt, home)
+            samples.append([msg.time_boot_ms / 1000.0, float(e), float(n), msg.relative_alt / 1000.0,
+                            msg.vy / 100.0, msg.vx / 100.0])
+        if disarmed_at is not None and time.monotonic() - disarmed_at > 1.0:
+            break
+    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not armed, "samples": samples}))
+    return 0
+
+
 def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout_s: float = 300) -> int:
     """On a second MAVLink link (``conn``: the firmware's other output), wait for a HEARTBEAT showing the vehicle
     armed in a guided mode (GUIDED / OFFBOARD), ``delay_s`` wall seconds more, then SIGSTOP firmware ``pid`` for
@@ -330,6 +372,8 @@ def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout
 if __name__ == "__main__":
     if sys.argv[1] == "observe":
         sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+    if sys.argv[1] == "observe-raw":
+        sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4])))
     if sys.argv[1] == "stop-when-flying":
         sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
     raise SystemExit(f"unknown command {sys.argv[1]!r}")
@@ -447,8 +491,8 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     """``n`` fresh ArduCopters with system ids 1..n behind ONE MAVProxy output port (as a ground station meets a
     fleet through one telemetry radio or router port): MAVProxy takes each firmware's serial0 as a master and
     forwards everything to ``udp:127.0.0.1:ROUTER_PORT``; the robots all name ``udpin:127.0.0.1:ROUTER_PORT`` with
-    ``target_system`` 1..n. Each vehicle's own serial1 is followed by an observer (:func:`observe`, its own link) for
-    the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log}``."""
+    ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`observe_raw`,
+    its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log}``."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = mavlink_env(autopilot, FARM_ENV, n=n)
     for i, r in enumerate(cfg["robots"]):
@@ -463,7 +507,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     router = (f"( cd {shlex.quote(str(workdir))} && exec {py} -m MAVProxy.mavproxy {masters} "
               f"--out=udp:127.0.0.1:{ROUTER_PORT} --daemon --non-interactive --streamrate=-1 "
               f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & ) ; ")
-    watchers = "".join(f"( {py} -m tests.sitl observe {monitor_connection(autopilot, i)} "
+    watchers = "".join(f"( {py} -m tests.sitl observe-raw {monitor_connection(autopilot, i)} "
                        f"{shlex.quote(str(workdir / f'observed{i}.json'))} 900 > "
                        f"{shlex.quote(str(workdir / f'observer{i}.log'))} 2>&1 & ) ; " for i in range(n))
     wait_obs = " ".join(f"{shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))

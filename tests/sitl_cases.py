@@ -223,11 +223,10 @@ def test_three_vehicles_behind_one_router_port(router_fleet, autopilot):
 
 def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
     """Odometry once per vehicle sample, stamped with the firmware's time_boot_ms: the speed computed from the
-    recorded positions and times matches the firmware's own reported speed within 5 % over every steady 1 s window
-    (the issue's recordings repeated positions under new time stamps: 0.56-0.58 m/s where the firmware flew
-    0.51-0.52), and consecutive records are one sample period (0.1 s at stream_rate_hz 10) apart."""
-    from .test_mavlink_telemetry import window_speeds
-
+    recorded positions and times matches what the firmware flew (its own positions and time_boot_ms) within 5 %
+    over 1 s and 2 s windows (the issue's recordings repeated positions under new time stamps: 0.56-0.58 m/s where
+    the firmware flew 0.51-0.52), and consecutive records are one sample period (0.1 s at stream_rate_hz 10)
+    apart."""
     rec = router_fleet["rec"]
     for rid in ["quadrotor_base", "quadrotor_base_1", "quadrotor_base_2"]:
         odo = odometry(rec, rid)
@@ -235,7 +234,10 @@ def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
         assert all(b > a for a, b in zip(ts, ts[1:])), rid
         gaps = sorted(b - a for a, b in zip(ts, ts[1:]))
         assert abs(gaps[len(gaps) // 2] - 0.1) < 0.02, (rid, gaps[len(gaps) // 2])
-        w = window_speeds(odo)
-        assert len(w) > 20, (rid, len(w))
-        bad = [(round(t, 1), round(f, 3), round(v, 3)) for t, f, v in w if abs(f / v - 1.0) > 0.05]
-        assert not bad, (rid, len(bad), len(w), bad[:8])
+        # the fastest 1 s (and 2 s) flown, from the recording and from the firmware's own GLOBAL_POSITION_INT
+        # and time_boot_ms (a raw pymavlink observer on the vehicle's serial1): within 5 %
+        k = ["quadrotor_base", "quadrotor_base_1", "quadrotor_base_2"].index(rid)
+        fw = [{"t": s[0], "position": s[1:4]} for s in router_fleet["observed"][k]["samples"]]
+        for window in (1.0, 2.0):
+            ours, theirs = flown_speed(odo, window), flown_speed(fw, window)
+            assert theirs > 0.3 and abs(ours / theirs - 1.0) <= 0.05, (rid, window, ours, theirs)

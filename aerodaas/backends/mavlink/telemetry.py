@@ -25,7 +25,7 @@ class TelemetryMixin:
         self._rel_alt = msg.relative_alt / 1000.0
         e, n, _ = geodetic_to_enu(lat, lon, self.home.alt, self.home)
         self._pos = np.array([e, n, self._height()])
-        self._new_sample()
+        self._new_sample(msg.time_boot_ms)
         self._has_global = True
         if self._mission_wire:
             self._check_arrival()
@@ -79,12 +79,16 @@ class TelemetryMixin:
         self._vel = self.ned_to_enu((msg.vx, msg.vy, msg.vz))
         if not self._has_global:  # no global position (indoors): ENU from the EKF origin
             self._pos = self.ned_to_enu((msg.x, msg.y, msg.z))
-            self._new_sample()
+            self._new_sample(msg.time_boot_ms)
 
-    def _new_sample(self) -> None:
-        """A new position sample: its vehicle time (the ``time_boot_ms`` just read, on the run's clock) stamps the
-        odometry made from it, and :attr:`sample_key` changes. Caller holds ``_lock``."""
-        self._pos_t = self._raw_t()
+    def _new_sample(self, ms: int) -> None:
+        """A new position sample: its own ``time_boot_ms`` (not the latest of all messages: ATTITUDE or SYSTEM_TIME
+        stamped a few ms later may have come first), on the run's clock, stamps the odometry made from it, and
+        :attr:`sample_key` changes. Caller holds ``_lock``."""
+        raw = self._raw_t()
+        if self._boot_ref is not None and self._boot_ref[0] <= ms:
+            raw = self._boot_ref[1] + (ms - self._boot_ref[0]) / 1000.0
+        self._pos_t = max(raw, self._pos_t)
         self._pos_seq += 1
 
     @property
