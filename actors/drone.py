@@ -160,7 +160,7 @@ class DroneComponent:
         says how the run ended for this robot."""
         b = self.backend
         safe_end = getattr(b, "safe_end", None)
-        if callable(safe_end) and b.navigable and b.armed and b.link_ok:
+        if callable(safe_end) and b.navigable and b.armed and b.link_ok and (b.in_air or self.fsm.state != S.LANDED):
             import threading
 
             result: dict[str, Any] = {}
@@ -180,6 +180,8 @@ class DroneComponent:
                 self._record_safe_end()
             self._record_safe_end()
             how = result.get("how") or "failed: " + result.get("error", "?")
+            if how == "nothing":  # not ours to end (armed by someone else), or already down
+                how = "landed" if not b.armed else "left armed (not commanded by us)"
             self.ended = {"landed": "safe end: landed and disarmed", "disarmed": "safe end: disarmed on the ground",
                           "timeout": "safe end: TIMEOUT, vehicle still armed",
                           "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
