@@ -418,6 +418,12 @@ class DroneComponent:
                 self._event("paused")
             return False
         if st == S.PAUSED:
+            if not v.in_air and not v.armed and self.flew_something_or_took_off():
+                # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
+                fsm.transition(S.LANDING, t)
+                self.outcome = self.outcome or ("failsafe" if self.failsafe else "incomplete")
+                self._event("landing", reason="landed while paused")
+                return False
             if not self._resume_req.is_set():
                 return False
             self._resume_req.clear()
@@ -621,6 +627,10 @@ class DroneComponent:
                              "error_m": math.dist(at, target)})
         self._event("waypoint_done", waypoint=wp.id)
         self.active_wp = None
+
+    def flew_something_or_took_off(self) -> bool:
+        """The vehicle has been in the air in this run (a landed, disarmed vehicle then means the flight ended)."""
+        return any(s in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) for _, s in self.fsm.history)
 
     def _on_autopilot_failsafe(self, t: float, st: S) -> bool:
         """The autopilot entered a failsafe mode by itself (backend event ``autopilot_failsafe``): the mission

@@ -38,7 +38,8 @@ def _rtl_when_navigating(address: str, flavour: str, stop: threading.Event, done
 
 
 @pytest.mark.e2e
-@pytest.mark.parametrize("flavour,action", [("ardupilot", "end"), ("px4", "end"), ("ardupilot", "resume")])
+@pytest.mark.parametrize("flavour,action", [("ardupilot", "end"), ("px4", "end"), ("ardupilot", "resume"),
+                                            ("px4", "hold")])
 def test_an_autopilot_failsafe_pauses_the_mission_and_on_failsafe_decides(ray_session, run_options, tmp_path,
                                                                             flavour, action):
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, params=PX4_AT_SPEED[flavour],
@@ -69,6 +70,11 @@ def test_an_autopilot_failsafe_pauses_the_mission_and_on_failsafe_decides(ray_se
         states = [m["state"] for _, m in rec["/mission/state"]]
         assert "RETURNING" in states and states[-1] == "LANDED", states[-6:]
         assert len(rep["visited_waypoints"]) < 4
+    elif action == "hold":  # paused, left to the autopilot's RTL; it landed: the flight is over, as a failsafe
+        assert res.outcome == "failsafe", (res.outcome, rep.get("error"))
+        assert "OFFBOARD" not in modes_after, modes_after
+        states = [m["state"] for _, m in rec["/mission/state"]]
+        assert "PAUSED" in states and states[-1] == "LANDED", states[-6:]
     else:
         assert res.outcome == "success", (res.outcome, rep.get("error"))
         assert "GUIDED" in modes_after and len(rep["visited_waypoints"]) == 4
