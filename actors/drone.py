@@ -60,6 +60,12 @@ class DroneComponent:
         self.flew_something = False
         self.active_wp: str | None = None
         self.hold_until: float | None = None
+        #: how the run ended for this robot (set when it closes): e.g. "landed and disarmed", "safe end: landed ..."
+        self.ended: str | None = None
+        self._hold: dict | None = None
+        self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
+        self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it  # the hold under way: start, last tick, time within the radius, its figures
+        self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
         self._paused_from: S | None = None
         self._link_lost_from: S | None = None
         self._pause_req = threading.Event()
@@ -80,6 +86,7 @@ class DroneComponent:
                 odom_rate = float(s.properties.get("rate_hz", 10.0))
         self.odom_period = 1.0 / odom_rate
         self.next_odom = 0.0
+        self._odom_key: Any = None  # the backend's sample_key of the last published odometry
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
         mc = self.cfg.mavlink
@@ -92,10 +99,14 @@ class DroneComponent:
         self._ap_done: set[int] = set()
 
     # ------------------------------------------------------------------ lifecycle
-    def connect(self, timeout_s: float = 30.0) -> None:
-        """Open the backend's link (a no-op for the simulator). Raises BackendError naming the robot."""
+    def connect(self, timeout_s: float | None = None) -> None:
+        """Open the backend's link (a no-op for the simulator), waiting up to ``timeout_s`` seconds (default: the
+        backend's own setting, e.g. ``mavlink.connect_timeout_s``). Raises BackendError naming the robot."""
         try:
-            self.backend.connect(timeout_s)
+            if timeout_s is None:
+                self.backend.connect()
+            else:
+                self.backend.connect(timeout_s)
         except BackendError:
             raise
         except Exception as e:
@@ -143,7 +154,61 @@ class DroneComponent:
         self._event("takeoff", altitude=self.cfg.takeoff_altitude, by="autopilot mission")
 
     def close(self) -> None:
-        self.backend.close()
+        """Close the backend. A real vehicle still armed (run timeout, error, Ctrl-C) is brought down first by the
+        backend's safe end (LAND/RTL, wait for the disarm: ``mavlink.on_close``), and meanwhile its events (the mode
+        change, ``safe_end``), state (LANDING, LANDED) and odometry are recorded until the disarm; :attr:`ended`
+        says how the run ended for this robot."""
+        b = self.backend
+        safe_end = getattr(b, "safe_end", None)
+        if callable(safe_end) and b.navigable and b.armed and b.link_ok and (b.in_air or self.fsm.state != S.LANDED):
+            import threading
+
+            result: dict[str, Any] = {}
+
+            def run() -> None:
+                try:
+                    result["how"] = safe_end()
+                except Exception as e:  # noqa: BLE001 - recorded; closing goes on
+                    result["error"] = f"{type(e).__name__}: {e}"
+
+            self._event("safe_end_started", state=self.fsm.state.value, mode=getattr(b, "mode", None),
+                        on_close=getattr(getattr(b, "cfg", None), "on_close", None))
+            th = threading.Thread(target=run, name=f"safe-end-{self.cfg.id}", daemon=True)
+            th.start()
+            while th.is_alive():
+                th.join(0.05)
+                self._record_safe_end()
+            self._record_safe_end()
+            how = result.get("how") or "failed: " + result.get("error", "?")
+            if how == "nothing":  # not ours to end (armed by someone else), or already down
+                how = "landed" if not b.armed else "left armed (not commanded by us)"
+            self.ended = {"landed": "safe end: landed and disarmed", "disarmed": "safe end: disarmed on the ground",
+                          "timeout": "safe end: TIMEOUT, vehicle still armed",
+                          "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
+                how, f"safe end {how}")
+            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+        elif self.ended is None:
+            st = self.fsm.state
+            self.ended = ("landed and disarmed" if st == S.LANDED and not b.armed else
+                          f"state {st.value}, {'armed' if b.armed else 'disarmed'}" if b.navigable else
+                          f"observed to the end ({st.value})")
+            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+        b.close()
+
+    def _record_safe_end(self) -> None:
+        """While the backend's safe end runs: its events, the stat-stream (LANDING, then LANDED at the disarm) and
+        each new odometry sample, recorded as in flight."""
+        b = self.backend
+        for ev in b.drain_events():
+            self._event(ev.pop("event", "backend_event"), **ev)
+        st = self.fsm.state
+        if st not in (S.LANDING, S.LANDED) and getattr(b, "mode", "") in ("LAND", "RTL"):
+            if self.fsm.can(S.LANDING):
+                self.fsm.transition(S.LANDING, b.t)
+        if self.fsm.state == S.LANDING and not b.armed and not b.in_air:
+            self.fsm.transition(S.LANDED, b.t)
+            self._event("landed", reason="safe end")
+        self.publish_odometry()
 
     # ------------------------------------------------------------------ recording helpers
     def _t_ns(self, t: float) -> int:
@@ -187,7 +252,9 @@ class DroneComponent:
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
-                "rejected": self.rejected, "safety": self.gate.stats(),
+                "rejected": self.rejected, "hold_failed": self.hold_failed, "ended": self.ended,
+                "failsafe": self.failsafe,
+                "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
     # ------------------------------------------------------------------ the clock thread
@@ -201,14 +268,27 @@ class DroneComponent:
                     self._ap_events.append(dict(ev))
                 elif ev.get("event") == "link_regained":
                     self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
+                elif ev.get("event") == "autopilot_failsafe":
+                    self._failsafe_pending = dict(ev)
                 self._event(ev.pop("event", "backend_event"), **ev)
-        if self.backend.t + 1e-9 >= self.next_odom:
+        if self.backend.t + 1e-9 >= self.next_odom and self._new_sample():
             self.next_odom += self.odom_period
             if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
                 self.next_odom = self.backend.t + self.odom_period
             self.publish_odometry(tok)
 
+    def _new_sample(self) -> bool:
+        """Whether the backend has a position sample not yet published (always, for a backend without
+        ``sample_key``: the simulator's state is new at every step)."""
+        key = self.backend.sample_key
+        return key is None or key != self._odom_key
+
     def publish_odometry(self, tok: Any = None) -> None:
+        """Record and publish the backend's odometry, once per vehicle sample (a real vehicle's odometry is stamped
+        with its own time of the sample; the same sample is never sent again under a new timestamp)."""
+        if not self._new_sample():
+            return
+        self._odom_key = self.backend.sample_key
         odom = self.backend.odometry().model_dump(mode="json")
         self.last_odom = odom
         if self.recorder is not None:
@@ -277,6 +357,8 @@ class DroneComponent:
                 fsm.transition(S.LINK_LOST, t)
                 self._event("link_lost", previous=st.value)
             return False
+        if self._failsafe_pending is not None:
+            return self._on_autopilot_failsafe(t, st)
         if st == S.LINK_LOST:
             self._reissue = False
             return self._link_regained(t)
@@ -297,8 +379,9 @@ class DroneComponent:
                 self._event("landed")
                 if self.outcome is None:
                     dropped = [r["id"] for r in self.rejected if r.get("item") == "waypoint"]
-                    # a waypoint refused in flight was not flown: never a success
-                    self.outcome = "success" if self.preplanned_left == 0 and not dropped else "incomplete"
+                    # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
+                    ok = self.preplanned_left == 0 and not dropped and not self.hold_failed
+                    self.outcome = "success" if ok else "incomplete"
                 return True
             return False
         if st == S.EMERGENCY:
@@ -335,6 +418,12 @@ class DroneComponent:
                 self._event("paused")
             return False
         if st == S.PAUSED:
+            if not v.in_air and not v.armed and self.flew_something_or_took_off():
+                # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
+                fsm.transition(S.LANDING, t)
+                self.outcome = self.outcome or ("failsafe" if self.failsafe else "incomplete")
+                self._event("landing", reason="landed while paused")
+                return False
             if not self._resume_req.is_set():
                 return False
             self._resume_req.clear()
@@ -395,7 +484,7 @@ class DroneComponent:
             if self.active_wp != item.id:
                 if st == S.TRACKING:
                     self._event("tracking_ended")
-                self.active_wp, self.hold_until = item.id, None
+                self.active_wp, self.hold_until, self._hold = item.id, None, None
                 v.goto(target, item.speed)
                 fsm.transition(S.NAVIGATING, t)
                 self._event("navigate", waypoint=item.id, target=list(target), priority=res["priority"],
@@ -406,17 +495,40 @@ class DroneComponent:
                                         "priority": res["priority"]}, "aerodaas.NavCommand")
                 return False
             dist = math.dist(pos, target)
-            if st == S.NAVIGATING and dist <= item.acceptance_radius:
+            speed = math.hypot(*tuple(float(c) for c in v.velocity)[:2])
+            within = dist <= item.acceptance_radius
+            hc = self.cfg.hold
+            if st == S.NAVIGATING and within and (item.hover_duration <= 0 or speed <= hc.settle_speed):
                 fsm.transition(S.WAYPOINT_HOLD, t)
+                st = S.WAYPOINT_HOLD
                 v.goto(target)  # keep station on the exact waypoint
                 self.hold_until = t + item.hover_duration
-                self._event("waypoint_reached", waypoint=item.id, error_m=dist)
-            if st == S.WAYPOINT_HOLD and self.hold_until is not None and t + 1e-9 >= self.hold_until:
-                self.scheduler.complete(item.id)
-                self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
-                                     "error_m": dist})
-                self._event("waypoint_done", waypoint=item.id)
-                self.active_wp, self.hold_until = None, None
+                self._hold = {"start": t, "last": t, "within_s": 0.0, "max_error_m": dist, "max_speed": speed}
+                self._event("waypoint_reached", waypoint=item.id, error_m=dist, speed=round(speed, 3))
+            elif st == S.WAYPOINT_HOLD and self._hold is not None:
+                h = self._hold
+                if within:  # only time within the radius counts (the previous tick's interval, ended in it)
+                    h["within_s"] += t - h["last"]
+                h["last"] = t
+                h["max_error_m"] = max(h["max_error_m"], dist)
+                h["max_speed"] = max(h["max_speed"], speed)
+            if st == S.WAYPOINT_HOLD and self._hold is not None:
+                h = self._hold
+                if h["within_s"] + 1e-9 >= item.hover_duration:
+                    self.scheduler.complete(item.id)
+                    self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
+                                         "error_m": dist})
+                    self._event("waypoint_done", waypoint=item.id, held_s=round(h["within_s"], 3),
+                                max_error_m=round(h["max_error_m"], 3))
+                    self.active_wp, self.hold_until, self._hold = None, None, None
+                elif t - h["start"] > hc.max_time_factor * item.hover_duration + hc.grace_s:
+                    rec = {"waypoint": item.id, "held_s": round(h["within_s"], 3), "needed_s": item.hover_duration,
+                           "elapsed_s": round(t - h["start"], 3), "max_error_m": round(h["max_error_m"], 3),
+                           "max_speed": round(h["max_speed"], 3), "acceptance_radius": item.acceptance_radius}
+                    self.hold_failed.append(rec)
+                    self._event("hold_failed", **rec)
+                    self.scheduler.discard(item.id, "hold_failed")
+                    self.active_wp, self.hold_until, self._hold = None, None, None
             return False
         # nothing queued
         if st == S.TRACKING:
@@ -515,6 +627,54 @@ class DroneComponent:
                              "error_m": math.dist(at, target)})
         self._event("waypoint_done", waypoint=wp.id)
         self.active_wp = None
+
+    def flew_something_or_took_off(self) -> bool:
+        """The vehicle has been in the air in this run (a landed, disarmed vehicle then means the flight ended)."""
+        return any(s in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) for _, s in self.fsm.history)
+
+    def _on_autopilot_failsafe(self, t: float, st: S) -> bool:
+        """The autopilot entered a failsafe mode by itself (backend event ``autopilot_failsafe``): the mission
+        pauses and the outcome records it; then ``mavlink.on_failsafe`` says what follows: ``end`` (the autopilot's
+        RTL/LAND flies on to the ground; after BRAKE, land here), ``hold`` (PAUSED until an operator resumes) or
+        ``resume`` (the current waypoint is re-issued, which switches back to GUIDED/OFFBOARD)."""
+        fs, self._failsafe_pending = self._failsafe_pending, None
+        v, fsm = self.backend, self.fsm
+        action = getattr(self.cfg.mavlink, "on_failsafe", "end") if self.cfg.mavlink else "end"
+        mode = fs.get("mode", "")
+        if self.autopilot_mission and self.preplanned_left == 0 and mode in ("RTL", "LAND"):
+            return False  # the uploaded mission's own last item (NAV_RETURN_TO_LAUNCH / NAV_LAND)
+        self.failsafe = {"mode": mode, "previous": fs.get("previous"), "t": t, "text": fs.get("text", ""),
+                         "action": action, "state": st.value}
+        self._event("failsafe", mode=mode, action=action, state=st.value, text=fs.get("text", ""))
+        if st in (S.LANDING, S.LANDED, S.RETURNING):
+            return False  # already on the way down: nothing of ours to pause
+
+        self._reissue = False
+        self.active_wp, self.hold_until, self._hold = None, None, None
+        if action == "resume":
+            if st == S.LINK_LOST:
+                return self._link_regained(t)
+            if st == S.WAYPOINT_HOLD:
+                fsm.transition(S.NAVIGATING, t)
+            return False
+        getattr(v, "release", lambda: None)()
+        if action == "hold":
+            if st != S.PAUSED and fsm.can(S.PAUSED):
+                self._paused_from = {S.LINK_LOST: self._link_lost_from}.get(st, st)
+                fsm.transition(S.PAUSED, t)
+                self._event("paused", reason=f"autopilot failsafe {mode}")
+            return False
+        self.outcome = "failsafe"
+        if mode in ("RTL", "SMART_RTL", "AUTO_RTL"):
+            self._backend_rtl = True
+            fsm.transition(S.RETURNING, t)
+            self._event("returning", by="autopilot failsafe", mode=mode)
+        else:
+            if mode not in ("LAND",):
+                v.land()  # BRAKE (a fence action) holds in the air: end the flight here
+            fsm.transition(S.LANDING, t)
+            self._event("landing", reason=f"autopilot failsafe {mode}")
+        return False
 
     def _link_regained(self, t: float) -> bool:
         """The link is back: resume what was going on (re-issuing the active waypoint), or note the landing."""

@@ -129,8 +129,24 @@ class HostRuntime:
         cams = [c for d in self.drones for c in d.cameras]
         for i, c in enumerate(cams):
             c["next_t"] = i / (len(cams) * c["fps"])
-        for d in self.drones:
-            d.connect()
+        # robots that name their MAVLink system id claim it before 'auto' ones take the lowest unclaimed id on a
+        # shared link (aerodaas.backends.mavlink.shared_link)
+        errors: dict[str, str] = {}
+        for d in sorted(self.drones, key=lambda d: not isinstance(getattr(d.cfg.mavlink, "target_system", None), int)):
+            try:
+                d.connect()
+            except Exception as e:  # noqa: BLE001 - every robot gets its own error (RobotsNotConnected)
+                errors[d.cfg.id] = f"{type(e).__name__}: {e}"
+        if errors:
+            from aerodaas.backends.base import RobotsNotConnected
+
+            for d in self.drones:  # the run will not start: hand the connected vehicles back untouched
+                if d.cfg.id not in errors:
+                    try:
+                        d.backend.close()
+                    except Exception:  # noqa: BLE001
+                        pass
+            raise RobotsNotConnected(errors)
 
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)

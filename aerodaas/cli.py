@@ -364,6 +364,12 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             sent = backend.upload_mission(plan)
             print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
                   f"{args.connection}", flush=True)
+            fence = plan.geofence
+            if not fence.is_empty:  # never silently: the vehicle has no fence from this file (issue 26 item 2)
+                print(f"{name}: WARNING: the geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), "
+                      f"{len(fence.circles)} circle(s)) was checked against the mission but NOT uploaded: the "
+                      f"vehicle keeps its own fence (ArduPilot FENCE_*, PX4 GF_*); set it with your ground station "
+                      f"(docs/operations.md)", file=sys.stderr, flush=True)
             if args.start:
                 backend.arm()
                 backend.start_mission()

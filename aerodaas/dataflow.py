@@ -130,7 +130,8 @@ class RunPlan:
         placement = placement or Placement(has_cloud=True)
         return {"run": self.run_id,
                 "actors": [{"host": a.host_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
-                            "label_selector": a.selector(placement), "components": list(a.components)}
+                            "label_selector": a.selector(placement), "components": list(a.components),
+                            **({"mavlink_links": a.spec["mavlink_links"]} if a.spec.get("mavlink_links") else {})}
                            for a in self.actors.values()],
                 "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
                            **({"analytics": n.analytics} if n.analytics else {})} for n in self.nodes.values()],
@@ -144,6 +145,8 @@ class RunPlan:
         for a in self.actors.values():
             sel = ",".join(f"{k}={v}" for k, v in a.selector(placement).items())
             lines.append(f"  {a.role:<10} {a.name}  [{sel}]" + (f"  compute {a.compute}" if a.compute else ""))
+            for key, ids in (a.spec.get("mavlink_links") or {}).items():
+                lines.append(f"      mavlink link {key} shared by {', '.join(ids)} (one socket, routed by system id)")
             for c in a.components:
                 lines.append(f"      {self.nodes[c].kind:<11} {c}")
         cross = [e for e in self.edges if self.nodes[e.src].actor != self.nodes[e.dst].actor]
@@ -153,6 +156,46 @@ class RunPlan:
                 only = f" (items of {', '.join(e.robots)})" if e.robots else ""
                 lines.append(f"      {e.src} -> {e.dst} [{e.port.wire()}]{only}")
         return "\n".join(lines)
+
+
+def _link_of(robot) -> str | None:
+    mc = robot.cfg.mavlink if robot.cfg.backend == "mavlink" else None
+    return mc.link_key() if mc is not None else None
+
+
+def _drone_chunks(group: list, k: int) -> list[list]:
+    """``group`` (robots of one edge compute, in order) cut into drone actors of at most ``k`` robots, except that
+    robots whose ``mavlink.connection`` names one endpoint always share one actor (one process holds the socket;
+    :mod:`aerodaas.backends.mavlink.shared_link`): such a set is never split, and is an actor of its own when it
+    has more than ``k`` robots."""
+    units: list[list] = []
+    by_link: dict[str, list] = {}
+    for r in group:
+        key = _link_of(r)
+        if key is None:
+            units.append([r])
+        elif key in by_link:
+            by_link[key].append(r)
+        else:
+            by_link[key] = [r]
+            units.append(by_link[key])
+    chunks: list[list] = []
+    for u in units:
+        if chunks and len(chunks[-1]) + len(u) <= k and len(chunks[-1]) < k:
+            chunks[-1].extend(u)
+        else:
+            chunks.append(list(u))
+    return chunks
+
+
+def _shared_links(chunk: list) -> dict[str, list[str]]:
+    """Endpoint -> robot ids, for each MAVLink link that more than one robot of ``chunk`` names."""
+    out: dict[str, list[str]] = {}
+    for r in chunk:
+        key = _link_of(r)
+        if key is not None:
+            out.setdefault(key, []).append(r.id)
+    return {key: ids for key, ids in out.items() if len(ids) > 1}
 
 
 def collect_graph(robot) -> list:
@@ -223,12 +266,14 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     for r in robots:
         by_compute.setdefault(_edge_compute(env, r)[0], []).append(r)
     for comp, group in by_compute.items():
-        for i in range(0, len(group), k):
-            chunk = group[i:i + k]
+        for chunk in _drone_chunks(group, k):
             hid = f"drone/{chunk[0].id}" if len(chunk) == 1 else f"drones/{chunk[0].id}+{len(chunk) - 1}"
             _, labels = _edge_compute(env, chunk[0])
             a = actor(hid, "drone", "edge", comp, labels)
             a.spec.update(world=env.cfg.world.model_dump(mode="json"), robots=[], analytics=[])
+            shared = _shared_links(chunk)
+            if shared:
+                a.spec["mavlink_links"] = shared
             for r in chunk:
                 drone_host[r.id] = hid
 

@@ -11,6 +11,15 @@ def format_summary(result: Any) -> str:
         lines.append(f"  robot {rid}: sim time {rep.get('t', 0):.1f} s, waypoints {rep.get('visited', 0)}/"
                      f"{rep.get('preplanned_total', 0)}, final state {rep.get('state')}, "
                      f"battery {pct(rep.get('battery_pct', 0))}")
+        if rep.get("ended"):
+            lines.append(f"    ended: {rep['ended']}")
+        for h in rep.get("hold_failed") or []:
+            lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
+                         f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
+        if rep.get("failsafe"):
+            f = rep["failsafe"]
+            lines.append(f"    autopilot failsafe: {f.get('mode')} at t={f.get('t', 0):.1f} s"
+                         + (f" ({f['text']})" if f.get("text") else "") + f"; on_failsafe {f.get('action')}")
         if rep.get("error"):
             lines.append(f"    error: {rep['error']}")
         if rep.get("actor_restarts"):

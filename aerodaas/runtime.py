@@ -367,6 +367,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     counts: dict[str, int] = {}
     rec_report: dict[str, Any] = {}
     failure: str | None = None
+    robot_errors: dict[str, str] = {}  # robot id -> its own error when the run could not start
     try:
         try:
             if scheduled:
@@ -377,11 +378,23 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
             rec_setup = actors["recorder"].setup.remote()
             others = [h.setup.remote() for hid, h in actors.items() if hid != "recorder"]
             ray.get(rec_setup)
-            described = ray.get(others)
+            described, first = [], None
+            for ref in others:  # every actor's answer: each robot that could not connect gets its own error
+                try:
+                    described.append(ray.get(ref))
+                except Exception as e:  # noqa: BLE001
+                    per = getattr(getattr(e, "cause", None), "errors", None) or getattr(e, "errors", None)
+                    if isinstance(per, dict):
+                        robot_errors.update(per)
+                    first = first or e
+            if first is not None:
+                raise first
         except KeyboardInterrupt:
             raise
         except Exception as e:  # noqa: BLE001 - e.g. a vehicle that does not answer: a failed run, not a traceback
             failure = _cause(e)
+            for rid, err in robot_errors.items():
+                print(f"aerodaas: robot {rid!r} could not start: {err}", file=sys.stderr, flush=True)
             print(f"aerodaas: the run could not start: {failure}", file=sys.stderr, flush=True)
             described = []
         for d in [ray.get(actors["recorder"].setup.remote())] if "recorder" in actors and failure is None else []:
@@ -434,8 +447,9 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
                 pass
     _RAISE_OK[0] = True  # back in the application
     for r in robots:
-        reports.setdefault(r.id, {"robot": r.id, "outcome": "failed",
-                                  "error": failure or "no report (the run did not start)"})
+        err = robot_errors.get(r.id) or (f"not started: another robot could not connect ({failure})"
+                                         if robot_errors else failure) or "no report (the run did not start)"
+        reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": err})
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")

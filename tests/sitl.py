@@ -82,7 +82,8 @@ def monitor_connection(autopilot: str, instance: int = 0) -> str:
         f"udpin:127.0.0.1:{14550 + instance}"
 
 
-def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, speedup: float) -> str:
+def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, speedup: float,
+                     sysid: int | None = None) -> str:
     """A shell command starting firmware instance ``instance`` (fresh parameters: ArduCopter ``-w``, PX4 a new
     working directory) in the background, its output in ``workdir/fw<i>.log``, its pid in ``$FW<i>``."""
     log = workdir / f"fw{instance}.log"
@@ -92,7 +93,8 @@ def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, s
                f"-I{instance} -w --defaults {shlex.quote(str(d / 'copter.parm'))} "
                f"--home {home['lat']},{home['lon']},{home['alt']},0 "
                f"--serial0 udpclient:127.0.0.1:{14550 + 10 * instance} "
-               f"--serial1 udpclient:127.0.0.1:{14551 + 10 * instance}")
+               f"--serial1 udpclient:127.0.0.1:{14551 + 10 * instance}"
+               + (f" --sysid {sysid}" if sysid is not None else ""))
     else:
         w = workdir / f"px4_{instance}"
         farm = w / "bin"  # the px4-* command aliases must be symlinks to px4 (the shared copy has plain files)
@@ -136,17 +138,19 @@ def mavlink_env(autopilot: str, app_env: Path, n: int = 1, **mavlink: Any) -> di
 
 def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1, home: dict | None = None,
                      speedup: float | None = None, timeout_s: float = 900,
-                     with_firmware: bool = True) -> subprocess.CompletedProcess:
+                     with_firmware: bool = True, sysids: bool = False) -> subprocess.CompletedProcess:
     """Start ``n`` fresh firmware instances and run the shell ``steps`` one after another inside one private
     loopback-only network namespace (each step's exit code in ``workdir/rc<k>``, output in ``workdir/out<k>``);
-    the firmware is killed at the end. Steps may use ``$FW0``..: the firmware pids."""
+    the firmware is killed at the end. Steps may use ``$FW0``..: the firmware pids. ``sysids``: instance i has
+    MAVLink system id i + 1 (ArduCopter ``--sysid``)."""
     workdir.mkdir(parents=True, exist_ok=True)
     speedup = SPEEDUP[autopilot] if speedup is None else speedup
     ray_tmp = tempfile.mkdtemp(prefix="rs", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
     lines = ["set -u", "ip link set lo up", f"export RAY_TMPDIR={shlex.quote(ray_tmp)}",
              "mkdir -p $RAY_TMPDIR", f"export PYTHONPATH={shlex.quote(str(REPO))}${{PYTHONPATH:+:$PYTHONPATH}}"]
     for i in range(n if with_firmware else 0):
-        lines.append(firmware_command(autopilot, i, home or FARM_HOME, workdir, speedup))
+        lines.append(firmware_command(autopilot, i, home or FARM_HOME, workdir, speedup,
+                                      sysid=i + 1 if sysids else None))
     lines.append("cleanup() { for p in $(jobs -p); do kill -9 $p 2>/dev/null; done; }")
     lines.append("trap cleanup EXIT")
     for k, step in enumerate(steps):
@@ -298,6 +302,48 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     return 0
 
 
+def observe_raw(conn: str, out: str, timeout_s: float) -> int:
+    """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
+    flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
+    and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
+    z, vx, vy], ...]}`` to ``out``: t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
+    :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s."""
+    from pymavlink import mavutil
+
+    from aerodaas.geo import geodetic_to_enu
+    from aerodaas.models import GeoPoint
+
+    home = GeoPoint(**FARM_HOME)
+    m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
+    end = time.monotonic() + timeout_s
+    samples, armed, was_armed, sysid, next_hb, disarmed_at = [], False, False, None, 0.0, None
+    while time.monotonic() < end:
+        if time.monotonic() >= next_hb:
+            m.mav.heartbeat_send(6, 8, 0, 0, 4)
+            if sysid is not None:
+                m.mav.command_long_send(sysid, 1, 511, 0, 33, 100000, 0, 0, 0, 0, 0)
+            next_hb = time.monotonic() + 1.0
+        msg = m.recv_match(type=["HEARTBEAT", "GLOBAL_POSITION_INT"], blocking=True, timeout=0.5)
+        if msg is None:
+            continue
+        if msg.get_type() == "HEARTBEAT":
+            if msg.autopilot == 8 or msg.type == 6:
+                continue
+            sysid = msg.get_srcSystem()
+            armed = bool(msg.base_mode & 128)
+            was_armed = was_armed or armed
+            if was_armed and not armed and disarmed_at is None:
+                disarmed_at = time.monotonic()
+        elif msg.lat or msg.lon:
+            e, n, _ = geodetic_to_enu(msg.lat / 1e7, msg.lon / 1e7, home.alt, home)
+            samples.append([msg.time_boot_ms / 1000.0, float(e), float(n), msg.relative_alt / 1000.0,
+                            msg.vy / 100.0, msg.vx / 100.0])
+        if disarmed_at is not None and time.monotonic() - disarmed_at > 1.0:
+            break
+    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not armed, "samples": samples}))
+    return 0
+
+
 def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout_s: float = 300) -> int:
     """On a second MAVLink link (``conn``: the firmware's other output), wait for a HEARTBEAT showing the vehicle
     armed in a guided mode (GUIDED / OFFBOARD), ``delay_s`` wall seconds more, then SIGSTOP firmware ``pid`` for
@@ -326,6 +372,8 @@ def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout
 if __name__ == "__main__":
     if sys.argv[1] == "observe":
         sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+    if sys.argv[1] == "observe-raw":
+        sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4])))
     if sys.argv[1] == "stop-when-flying":
         sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
     raise SystemExit(f"unknown command {sys.argv[1]!r}")
@@ -433,6 +481,48 @@ def fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str, Any]:
     rc, text = step_result(workdir, 0)
     rec = workdir / "fleet.mcap"
     return {"rc": rc, "out": text, "rec": _read_or_note(rec)}
+
+
+#: the ground-station port of the router (MAVProxy ``--out``) every vehicle of :func:`router_fleet_session` is behind
+ROUTER_PORT = 14600
+
+
+def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str, Any]:
+    """``n`` fresh ArduCopters with system ids 1..n behind ONE MAVProxy output port (as a ground station meets a
+    fleet through one telemetry radio or router port): MAVProxy takes each firmware's serial0 as a master and
+    forwards everything to ``udp:127.0.0.1:ROUTER_PORT``; the robots all name ``udpin:127.0.0.1:ROUTER_PORT`` with
+    ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`observe_raw`,
+    its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log}``."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    cfg = mavlink_env(autopilot, FARM_ENV, n=n)
+    for i, r in enumerate(cfg["robots"]):
+        r["mavlink"]["connection"] = f"udpin:127.0.0.1:{ROUTER_PORT}"
+        r["mavlink"]["target_system"] = i + 1
+        for sensor in r.get("sensors", []):
+            if sensor.get("type") == "camera":
+                sensor.setdefault("properties", {}).update(width=320, height=240, fps=2)
+    env = _write_env(workdir / "fleet.json", cfg)
+    py = shlex.quote(sys.executable)
+    masters = " ".join(f"--master={connection(autopilot, i)}" for i in range(n))
+    router = (f"( cd {shlex.quote(str(workdir))} && exec {py} -m MAVProxy.mavproxy {masters} "
+              f"--out=udp:127.0.0.1:{ROUTER_PORT} --daemon --non-interactive --streamrate=-1 "
+              f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & ) ; ")
+    watchers = "".join(f"( {py} -m tests.sitl observe-raw {monitor_connection(autopilot, i)} "
+                       f"{shlex.quote(str(workdir / f'observed{i}.json'))} 900 > "
+                       f"{shlex.quote(str(workdir / f'observer{i}.log'))} 2>&1 & ) ; " for i in range(n))
+    wait_obs = " ".join(f"{shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))
+    step = (router + watchers + aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap")
+            + f"; rc=$?; for k in $(seq 1 600); do ok=1; for f in {wait_obs}; do [ -e $f ] || ok=0; done; "
+              "[ $ok = 1 ] && break; sleep 0.5; done; exit $rc")
+    run_in_namespace(autopilot, workdir, [step], n=n, sysids=True, timeout_s=1500, speedup=FLEET_SPEEDUP.get(autopilot))
+    rc, text = step_result(workdir, 0)
+    observed = []
+    for i in range(n):
+        f = workdir / f"observed{i}.json"
+        observed.append(json.loads(f.read_text()) if f.exists() else {})
+    log = workdir / "mavproxy.log"
+    return {"rc": rc, "out": text, "rec": _read_or_note(workdir / "fleet.mcap"), "observed": observed,
+            "mavproxy": log.read_text(errors="replace")[-2000:] if log.exists() else ""}
 
 
 def odometry(rec: dict, robot: str = "quadrotor_base") -> list[dict]:

@@ -75,3 +75,20 @@ def test_errors_name_the_file_item_or_connection_and_send_nothing(vehicle, tmp_p
     assert main(["mission", "download", "--connection", dead, "--out", str(tmp_path / "x.plan"),
                  "--timeout", "1"]) == 2
     assert dead in capsys.readouterr().err and not (tmp_path / "x.plan").exists()
+
+
+def test_upload_of_a_plan_with_a_geofence_says_the_fence_was_not_sent(vehicle, tmp_path, capsys):
+    """issue 26: a .plan's geofence left the vehicle without a fence, silently. Until the fence is uploaded
+    (MISSION_TYPE_FENCE), the command says so on stderr, naming the file and the zones."""
+    import json
+
+    doc = json.loads(SQUARE.read_text())
+    home = doc["mission"]["plannedHomePosition"]
+    doc["geoFence"] = {"version": 2, "polygons": [], "circles": [
+        {"version": 1, "inclusion": True, "circle": {"center": home[:2], "radius": 200.0}}]}
+    plan = tmp_path / "fenced.plan"
+    plan.write_text(json.dumps(doc))
+    emu, address = vehicle("ardupilot")
+    assert main(["mission", "upload", str(plan), "--connection", address]) == 0
+    err = capsys.readouterr().err
+    assert "fenced.plan" in err and "1 circle(s)" in err and "NOT uploaded" in err, err

@@ -35,6 +35,18 @@ class BackendError(RuntimeError):
     """A vehicle backend failed (connection, protocol, timeout). The message names the robot and the step."""
 
 
+class RobotsNotConnected(BackendError):
+    """Some robots of one drone actor could not connect to their vehicles: ``errors`` maps each such robot id to
+    its own error (so the summary prints each robot's error under it, not the first one under all)."""
+
+    def __init__(self, errors: dict[str, str]) -> None:
+        self.errors = dict(errors)
+        super().__init__("; ".join(self.errors.values()))
+
+    def __reduce__(self):  # picklable across Ray workers
+        return (RobotsNotConnected, (self.errors,))
+
+
 class CommandRefused(BackendError):
     """The vehicle refused a command. ``result`` is the autopilot's code (e.g. the MAVLink ``MAV_RESULT`` name,
     or the Tello's ``error`` reply), ``status_text`` the last STATUSTEXT/log line that explains it."""
@@ -137,7 +149,15 @@ class VehicleBackend(abc.ABC):
 
     @abc.abstractmethod
     def odometry(self) -> Odometry:
-        """The current :class:`~aerodaas.models.Odometry` (t = :attr:`t`)."""
+        """The current :class:`~aerodaas.models.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
+        for backends with a :attr:`sample_key`)."""
+
+    @property
+    def sample_key(self) -> Any:
+        """None when every :meth:`odometry` is a fresh state (the simulator); otherwise a value that changes with
+        each new position sample from the vehicle, so that the runtime records a sample once, never the same
+        position again under a new timestamp."""
+        return None
 
     def drain_events(self) -> list[dict[str, Any]]:
         """Events since the last call, oldest first, each ``{"event": name, ...}``: e.g. ``status_text``

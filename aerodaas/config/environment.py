@@ -251,6 +251,7 @@ class EnvironmentConfig(_Cfg):
             if r.compute is not None and r.compute not in edges:
                 raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
                                  f"environment (edge: {edges})")
+        _check_shared_links(self.robots)
         for j, s in enumerate(self.env_sensors):
             src = s.properties.get("source") if s.type == "camera" else None
             if src == "backend":
@@ -278,6 +279,40 @@ class EnvironmentConfig(_Cfg):
                 return c.resolve()
         raise ConfigError(f"{field}: file {rel!r} not found (looked in: {', '.join(str(c) for c in cands)}); "
                           f"set {DATA_DIR_ENV} to the folder that holds it, or give an absolute path")
+
+
+def _check_shared_links(robots: list) -> None:
+    """Robots whose ``mavlink.connection`` names one endpoint share one link (one socket, routed by system id;
+    :mod:`aerodaas.backends.mavlink.shared_link`): each needs its own ``target_system``, one drone actor flies them
+    all (so one edge compute), and they speak as one ground station (``source_system``, ``source_component``,
+    ``baud`` alike). Raises ValueError naming both robots."""
+    first: dict[str, int] = {}
+    ids: dict[tuple[str, int], int] = {}
+    for j, r in enumerate(robots):
+        mc = r.mavlink if r.backend == "mavlink" else None
+        if mc is None:
+            continue
+        key = mc.link_key()
+        if key not in first:
+            first[key] = j
+        else:
+            i = first[key]
+            a = robots[i]
+            for field in ("source_system", "source_component", "baud"):
+                if getattr(a.mavlink, field) != getattr(mc, field):
+                    raise ValueError(f"robots.{j}.mavlink.{field}: robots {a.id!r} and {r.id!r} share the link "
+                                     f"{key} (one socket) but give {field} {getattr(a.mavlink, field)!r} and "
+                                     f"{getattr(mc, field)!r}; a link speaks as one ground station")
+            if a.compute != r.compute:
+                raise ValueError(f"robots.{j}.compute: robots {a.id!r} and {r.id!r} share the link {key} (one socket, "
+                                 f"so one drone actor) but name edge computes {a.compute!r} and {r.compute!r}")
+        if isinstance(mc.target_system, int):
+            if (key, mc.target_system) in ids:
+                i = ids[(key, mc.target_system)]
+                raise ValueError(f"robots.{j}.mavlink.target_system: robots {robots[i].id!r} and {r.id!r} both fly "
+                                 f"system id {mc.target_system} on the link {key}; each robot on one link needs its "
+                                 f"own target_system (or 'auto')")
+            ids[(key, mc.target_system)] = j
 
 
 def _format_errors(err: ValidationError, source: str) -> str:

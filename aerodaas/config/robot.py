@@ -188,7 +188,10 @@ class MavlinkConfig(_Cfg):
     autopilot: Literal["auto", "ardupilot", "px4"] = "auto"
     source_system: int = Field(default=255, ge=1, le=255)
     source_component: int = Field(default=190, ge=0, le=255)
-    target_system: int | None = Field(default=None, ge=1, le=255)
+    target_system: int | Literal["auto"] | None = Field(
+        default=None, description="the vehicle's MAVLink system id (1-255) on this connection; 'auto': the lowest id "
+        "seen on the link that no other robot of the run claimed (after 1.5 s of discovery); unset: the first "
+        "autopilot heard that no other robot claimed")
     connect_timeout_s: float = Field(default=30.0, gt=0, le=MAX_DURATION_S)
     heartbeat_timeout_s: float = Field(default=3.0, gt=0, le=MAX_DURATION_S)
     command_timeout_s: float = Field(default=1.5, gt=0, le=MAX_DURATION_S)
@@ -206,6 +209,34 @@ class MavlinkConfig(_Cfg):
     #: or ``rtl``, waiting up to ``safe_end_timeout_s`` vehicle seconds for it to land and disarm
     on_close: Literal["land", "rtl"] = "land"
     safe_end_timeout_s: float = Field(default=120.0, gt=0, le=MAX_DURATION_S)
+    #: what the mission does when the autopilot enters a failsafe mode by itself (ArduCopter RTL/SMART_RTL/LAND/
+    #: BRAKE, PX4 AUTO.RTL/AUTO.LAND, not asked by us: lost datalink or RC, battery, geofence action, EKF, or a
+    #: pilot's switch). ``end`` (default): the mission ends, the autopilot's failsafe flies on (RTL/LAND to the
+    #: ground; after BRAKE the vehicle lands where it is), the outcome is ``failsafe``. ``hold``: the mission pauses
+    #: with the vehicle left in the failsafe mode until an operator resumes it (HITL ``resume``). ``resume``: once
+    #: the link is up, the mission goes on in GUIDED/OFFBOARD (overriding the failsafe: only when the operator
+    #: knows why it triggered). docs/operations.md links the autopilots' failsafe documentation.
+    on_failsafe: Literal["end", "hold", "resume"] = "end"
+
+    @model_validator(mode="after")
+    def _check_target(self) -> "MavlinkConfig":
+        t = self.target_system
+        if isinstance(t, int) and (isinstance(t, bool) or not 1 <= t <= 255):
+            raise ValueError(f"target_system: a MAVLink system id is 1-255 (or 'auto'), got {t!r}")
+        return self
+
+    def link_key(self) -> str:
+        """The endpoint this connection string names, so that two spellings of one socket are one link:
+        ``udp:``/``udpin:`` -> ``udpin:PORT`` (one port whatever the bound address), ``udpout:``/``tcp:`` ->
+        ``KIND:HOST:PORT`` (``localhost`` as 127.0.0.1), anything else (a serial device) as written."""
+        parts = self.connection.strip().split(":")
+        kind = parts[0].lower()
+        if len(parts) == 3 and kind in ("udp", "udpin", "udpout", "udpbcast", "tcp", "tcpin"):
+            host = "127.0.0.1" if parts[1].lower() == "localhost" else parts[1]
+            if kind in ("udp", "udpin"):
+                return f"udpin:{parts[2]}"
+            return f"{kind}:{host}:{parts[2]}"
+        return self.connection.strip()
 
 
 class TelloConfig(_Cfg):
@@ -247,6 +278,19 @@ class ReplayConfig(_Cfg):
     rate: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
 
 
+class HoldConfig(_Cfg):
+    """How a waypoint's hover (``hover_duration`` > 0) is held. The hold starts once the vehicle is within the
+    waypoint's acceptance radius AND its horizontal speed is at most ``settle_speed`` (m/s): passing through at
+    speed is not holding. Only time within the radius counts towards the hover time. A hold that has not gathered
+    ``hover_duration`` within the radius after ``max_time_factor`` x ``hover_duration`` + ``grace_s`` seconds
+    (vehicle time) since it started ends the waypoint as ``hold_failed`` (an event with its figures), never as
+    reached: the mission is then ``incomplete``."""
+
+    settle_speed: float = Field(default=0.3, gt=0, le=MAX_SPEED_MPS, description="m/s, horizontal")
+    max_time_factor: float = Field(default=2.0, ge=1.0, le=100.0)
+    grace_s: float = Field(default=5.0, ge=0, le=MAX_DURATION_S, description="seconds")
+
+
 class RobotConfig(_Cfg):
     """A robot (drone). ``backend`` selects the driver: ``sim`` (the embedded simulator), ``mavlink`` (ArduPilot or
     PX4, settings in ``mavlink``), ``tello`` (DJI Tello, settings in ``tello``) or ``replay`` (a recorded flight,
@@ -262,6 +306,7 @@ class RobotConfig(_Cfg):
     battery: BatteryConfig = Field(default_factory=BatteryConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
     safety: SafetyConfig = Field(default_factory=SafetyConfig)
+    hold: HoldConfig = Field(default_factory=HoldConfig)
     takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
                                     "[safety.min_altitude, max_altitude]")
     control_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)

@@ -73,6 +73,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._ap_modes: dict[str, int] = {}
         # state (guarded by _lock)
         self._pos = np.zeros(3)
+        self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
+        self._pos_seq = 0  # position samples received
         self._vel = np.zeros(3)
         self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
         self._geo: GeoPoint | None = None
@@ -116,6 +118,9 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._hb_next = 0.0
         self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
         self._mode_changes = 0
+        self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode
+        #: the autopilot's failsafe, when it entered one by itself: {"mode", "previous", "t", "text"} (link.py)
+        self.failsafe: dict[str, Any] | None = None
         self._stream_legacy = False
         self._ever_linked = False
         self._resume_streams = False

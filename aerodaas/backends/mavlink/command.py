@@ -135,6 +135,7 @@ class CommandMixin:
         mode asked for and the one the HEARTBEAT shows) when the vehicle acknowledged but never switched."""
         name = name.upper()
         sent = time.monotonic()
+        self._mode_asked = (name, sent)  # a mode we asked for is never taken for the autopilot's failsafe
         if self.autopilot == "px4":
             if name not in mavutil.px4_map:
                 raise ValueError(f"mode {name!r} is not a PX4 mode; choose from {sorted(mavutil.px4_map)}")

@@ -10,7 +10,8 @@ from typing import Any, Callable
 from pymavlink import mavutil
 
 from ..base import BackendError, CommandRefused, LinkLost
-from ._common import M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+from .shared_link import open_link
+from ._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
 
 
 class LinkMixin:
@@ -26,39 +27,28 @@ class LinkMixin:
         timeout = self.cfg.connect_timeout_s if timeout_s is None else timeout_s
         deadline = time.monotonic() + timeout
         where = f"robot {self.robot_id!r}: mavlink connection {self.cfg.connection!r}"
-        last_err: Exception | None = None
-        while self._conn is None:
-            try:
-                self._conn = mavutil.mavlink_connection(
-                    self.cfg.connection, baud=self.cfg.baud, source_system=self.cfg.source_system,
-                    source_component=self.cfg.source_component, dialect="ardupilotmega", autoreconnect=True,
-                    retries=0 if self.cfg.connection.startswith("tcp:") else 3)
-            except Exception as e:  # noqa: BLE001 - refused, no such device: retry until the deadline
-                last_err = e
-                if time.monotonic() > deadline:
-                    raise BackendError(f"{where}: cannot open it within {timeout:g} s: {e}") from None
-                time.sleep(0.2)
-        hb = None
-        next_hb = 0.0
-        while hb is None:
-            now = time.monotonic()
-            if now > deadline:
-                self.close()
-                raise BackendError(f"{where}: no autopilot HEARTBEAT within {timeout:g} s"
-                                   + (f" (last error: {last_err})" if last_err else ""))
-            if now >= next_hb:  # udpout: the vehicle learns our address from what we send
+        # one socket per endpoint in this process, shared by every robot that names it (shared_link.py)
+        port = open_link(self.cfg, self.robot_id, deadline)
+        self._conn = port
+        self._send_lock = port.send_lock
+        next_hb = [0.0]
+
+        def tick() -> None:  # udpout: the vehicle learns our address from what we send
+            if time.monotonic() >= next_hb[0]:
                 self._send_gcs_heartbeat()
-                next_hb = now + 1.0
-            try:
-                msg = self._conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
-            except Exception as e:  # noqa: BLE001
-                last_err = e
-                time.sleep(0.05)
-                continue
-            if msg is not None and self._is_autopilot_heartbeat(msg):
-                hb = msg
+                next_hb[0] = time.monotonic() + 1.0
+
+        try:
+            hb = port.claim(self.cfg.target_system, deadline, tick)
+        except TimeoutError as e:
+            self.close()
+            which = ("" if self.cfg.target_system in (None, "auto")
+                     else f" from system id {self.cfg.target_system}")
+            raise BackendError(f"{where}: no autopilot HEARTBEAT{which} within {timeout:g} s ({e})") from None
+        except BaseException:
+            self.close()
+            raise
         self._identify(hb)
-        self._conn.target_system, self._conn.target_component = self._sysid, self._compid
         self._on_heartbeat(hb, time.monotonic())
         self._stop.clear()
         self._io = threading.Thread(target=self._io_loop, name=f"mavlink-{self.robot_id}", daemon=True)
@@ -119,7 +109,7 @@ class LinkMixin:
             return False
         if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.type in _NOT_VEHICLES:
             return False
-        return self.cfg.target_system is None or msg.get_srcSystem() == self.cfg.target_system
+        return not self._sysid or msg.get_srcSystem() == self._sysid
 
     def _identify(self, hb: Any) -> None:
         found = {M.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot", M.MAV_AUTOPILOT_PX4: "px4"}.get(hb.autopilot)
@@ -260,10 +250,27 @@ class LinkMixin:
                 self._event("armed" if armed else "disarmed")
             mode = mavutil.mode_string_v10(msg)
             if mode != self._mode:
+                previous = self._mode
                 self._mode = mode
                 self._mode_changes += 1
                 self._event("mode", name=mode)
+                self._check_failsafe(mode, previous, now)
             self._system_status = msg.system_status
+
+    def _check_failsafe(self, mode: str, previous: str, now: float) -> None:
+        """A failsafe mode (:data:`FAILSAFE_MODES`) entered while the vehicle is armed, and not the one we last
+        asked for (set_mode): the autopilot's own failsafe (datalink, battery, geofence action, EKF) or a pilot's
+        switch. Recorded as :attr:`failsafe` and an ``autopilot_failsafe`` event with the status texts of the last
+        2 s (the autopilot says why). Caller holds ``_lock``."""
+        asked = self._mode_asked
+        if not self._armed or mode not in FAILSAFE_MODES.get(self.autopilot or "", ()):
+            return
+        if asked is not None and asked[0] == mode:
+            return
+        texts = [t for (ts, _sev, t) in self._texts if now - ts <= 2.0]
+        self.failsafe = {"mode": mode, "previous": previous, "t": round(self.t, 3), "text": "; ".join(texts[-3:])}
+        self._stop_setpoints_quiet()
+        self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
     def _on_boot_ms(self, ms: int) -> None:
         now = time.monotonic()

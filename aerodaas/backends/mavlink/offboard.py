@@ -115,6 +115,15 @@ class OffboardMixin:
                 self._sp_next = time.monotonic() + 1.0 / (self.cfg.setpoint_rate_hz * self._ratio)
             self._send_setpoint(sp)
 
+    def _stop_setpoints_quiet(self) -> None:
+        """Stop streaming our targets, from the I/O thread (the autopilot took over: a failsafe)."""
+        self._setpoint = None
+
+    def release(self) -> None:
+        """Stop streaming targets and leave the vehicle to the mode it is in (the autopilot's failsafe): nothing is
+        sent that could switch it back to GUIDED/OFFBOARD."""
+        self._stop_setpoints()
+
     def _stop_setpoints(self) -> None:
         with self._lock:
             self._setpoint = None

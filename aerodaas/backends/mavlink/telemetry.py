@@ -25,6 +25,7 @@ class TelemetryMixin:
         self._rel_alt = msg.relative_alt / 1000.0
         e, n, _ = geodetic_to_enu(lat, lon, self.home.alt, self.home)
         self._pos = np.array([e, n, self._height()])
+        self._new_sample(msg.time_boot_ms)
         self._has_global = True
         if self._mission_wire:
             self._check_arrival()
@@ -78,6 +79,24 @@ class TelemetryMixin:
         self._vel = self.ned_to_enu((msg.vx, msg.vy, msg.vz))
         if not self._has_global:  # no global position (indoors): ENU from the EKF origin
             self._pos = self.ned_to_enu((msg.x, msg.y, msg.z))
+            self._new_sample(msg.time_boot_ms)
+
+    def _new_sample(self, ms: int) -> None:
+        """A new position sample: its own ``time_boot_ms`` (not the latest of all messages: ATTITUDE or SYSTEM_TIME
+        stamped a few ms later may have come first), on the run's clock, stamps the odometry made from it, and
+        :attr:`sample_key` changes. Caller holds ``_lock``."""
+        raw = self._raw_t()
+        if self._boot_ref is not None and self._boot_ref[0] <= ms:
+            raw = self._boot_ref[1] + (ms - self._boot_ref[0]) / 1000.0
+        self._pos_t = max(raw, self._pos_t)
+        self._pos_seq += 1
+
+    @property
+    def sample_key(self) -> int:
+        """Changes with every new position sample from the vehicle (GLOBAL_POSITION_INT, or LOCAL_POSITION_NED
+        without a global position): the drone records odometry once per sample, never the same one again under a
+        new timestamp (:meth:`odometry` is stamped with the sample's own vehicle time)."""
+        return self._pos_seq
 
     def _on_attitude(self, msg: Any) -> None:
         self._on_boot_ms(msg.time_boot_ms)
@@ -270,7 +289,10 @@ class TelemetryMixin:
         with self._lock:
             pos = tuple(float(v) for v in self._pos)
             geo = self._geo or enu_to_geodetic(pos[0], pos[1], pos[2], self.home)
-            return Odometry(robot_id=self.robot_id, t=self.t, position=pos, geodetic=geo,
+            t = self.t
+            if self._pos_seq:  # the sample's own time (time_boot_ms mapped to the run's clock), never after now
+                t = min(t, max(0.0, self._pos_t - self._t_connect))
+            return Odometry(robot_id=self.robot_id, t=t, position=pos, geodetic=geo,
                             velocity=tuple(float(v) for v in self._vel),
                             attitude=Attitude(roll=self._att[0], pitch=self._att[1], yaw=self._att[2]),
                             battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._armed,

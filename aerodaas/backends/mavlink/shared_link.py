@@ -1,0 +1,262 @@
+"""One MAVLink link, many vehicles: a connection is a shared object per endpoint inside a process.
+
+Ground stations meet a fleet through one telemetry radio or one router port (MAVProxy ``--out``, mavlink-router):
+every vehicle's messages arrive on one socket, told apart by the MAVLink header's system id and component id.
+MAVLink routers forward by those ids (mavlink.io/en/guide/routing.html: a system learns which link each
+``sysid/compid`` is reached on, and a message with a target goes only where that target was seen); MAVSDK's
+``Mavsdk::add_any_connection`` opens a port once and discovers one ``System`` per system id seen on it
+(``mavsdk_impl.cpp``: ``receive_message`` looks up the system by ``msg.sysid``, a new id makes a new ``System``).
+This module does the same for :class:`~aerodaas.backends.mavlink.MavlinkBackend`:
+
+- :func:`open_link` returns the :class:`SharedLink` of a connection string (one per :meth:`MavlinkConfig.link_key
+  <aerodaas.config.MavlinkConfig.link_key>`; ``udpin:0.0.0.0:14600`` and ``udp:127.0.0.1:14600`` are one port),
+  creating it on first use. It owns the pymavlink connection and one reader thread.
+- Each robot gets a :class:`LinkPort` (the connection-like object its backend reads from and sends through):
+  messages from the system id the robot claimed arrive in its own queue; GCS messages and other systems' traffic
+  never reach it. Sends from every robot are serialised on the link's lock (one MAVLink sequence counter).
+- :meth:`LinkPort.claim` waits for the autopilot HEARTBEAT of the robot's ``target_system``; ``"auto"`` takes the
+  lowest system id seen on the link that no other robot has claimed (after one heartbeat period of discovery, so
+  that the id order does not depend on which vehicle spoke first); ``None`` (unset) the first one heard. An id claimed twice in
+  one process is refused (:class:`~aerodaas.backends.base.BackendError`); the configuration check refuses it before
+  Ray starts (:meth:`aerodaas.config.EnvironmentConfig`).
+- The link closes when its last port closes.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from typing import Any, Callable
+
+from pymavlink import mavutil
+
+from ..base import BackendError
+from ._common import M, _NOT_VEHICLES
+
+#: wall seconds of discovery before ``target_system: auto`` picks the lowest unclaimed id (autopilots send their
+#: HEARTBEAT at 1 Hz, mavlink.io/en/services/heartbeat.html)
+DISCOVERY_S = 1.5
+#: messages queued per robot; when full the link's reader waits up to :data:`FULL_WAIT_S` for the robot's I/O
+#: thread (TCP flow control then holds the sender back, as a socket of its own would), then drops the oldest
+PORT_QUEUE = 5000
+FULL_WAIT_S = 1.0
+#: messages kept per unclaimed system id (the latest), handed to the robot that claims it
+PENDING = 200
+
+_LINKS: dict[str, "SharedLink"] = {}
+_LINKS_LOCK = threading.Lock()
+
+
+def is_autopilot_heartbeat(msg: Any, source_system: int, source_component: int) -> bool:
+    """A HEARTBEAT from a vehicle's autopilot: not ours, not a GCS/companion/peripheral (MAV_TYPE), not
+    MAV_AUTOPILOT_INVALID."""
+    if msg.get_srcSystem() == source_system and msg.get_srcComponent() == source_component:
+        return False
+    return msg.autopilot != M.MAV_AUTOPILOT_INVALID and msg.type not in _NOT_VEHICLES
+
+
+class SharedLink:
+    """One pymavlink connection shared by every robot of this process that names it (see the module docstring).
+
+    ``key``: the endpoint (:meth:`MavlinkConfig.link_key`); ``conn``: the pymavlink connection; ``ports``: robot id
+    -> :class:`LinkPort`; ``claimed``: system id -> robot id; ``seen``: system id -> (component id, HEARTBEAT,
+    wall time first seen) of every autopilot heard on the link."""
+
+    def __init__(self, key: str, conn: Any, source_system: int, source_component: int) -> None:
+        self.key, self.conn = key, conn
+        self.source = (source_system, source_component)
+        self.ports: dict[str, LinkPort] = {}
+        self.claimed: dict[int, str] = {}
+        self.seen: dict[int, tuple[int, Any, float]] = {}
+        self.send_lock = threading.Lock()
+        self.cond = threading.Condition()
+        self.first_seen: float | None = None
+        #: system id -> its latest messages while no robot has claimed it (handed to the robot that claims it)
+        self.pending: dict[int, deque] = {}
+        self.messages = 0
+        self.unrouted = 0  # messages of a system id no robot claimed
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, name=f"mavlink-link-{key}", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        conn = self.conn
+        while not self._stop.is_set():
+            try:
+                msg = conn.recv_msg()
+            except Exception:  # noqa: BLE001 - a broken packet or a socket hiccup: keep reading
+                msg = None
+                time.sleep(0.01)
+            if msg is None:
+                try:
+                    conn.select(0.01)
+                except Exception:  # noqa: BLE001
+                    time.sleep(0.01)
+                continue
+            self.messages += 1
+            try:
+                sysid = msg.get_srcSystem()
+            except Exception:  # noqa: BLE001 - BAD_DATA has no header
+                continue
+            if msg.get_type() == "HEARTBEAT" and is_autopilot_heartbeat(msg, *self.source):
+                with self.cond:
+                    if sysid not in self.seen:
+                        self.seen[sysid] = (msg.get_srcComponent(), msg, time.monotonic())
+                        if self.first_seen is None:
+                            self.first_seen = time.monotonic()
+                        self.cond.notify_all()
+                    else:
+                        self.seen[sysid] = (self.seen[sysid][0], msg, self.seen[sysid][2])
+            with self.cond:
+                owner = self.claimed.get(sysid)
+                port = self.ports.get(owner) if owner is not None else None
+                if port is None:  # kept (the latest few) for a robot that claims this id soon
+                    self.unrouted += 1
+                    self.pending.setdefault(sysid, deque(maxlen=PENDING)).append(msg)
+                    continue
+            port._put(msg)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=2)
+        try:
+            self.conn.close()
+        except Exception:  # noqa: BLE001
+            pass
+
+
+class LinkPort:
+    """One robot's view of a :class:`SharedLink`: what the backend's I/O thread reads (:meth:`recv_msg`,
+    :meth:`select`) and sends through (:attr:`mav`, under :attr:`send_lock`). ``target_system`` /
+    ``target_component``: the vehicle claimed (0 until :meth:`claim`)."""
+
+    def __init__(self, link: SharedLink, robot_id: str) -> None:
+        self.link, self.robot_id = link, robot_id
+        self.mav = link.conn.mav
+        self.send_lock = link.send_lock
+        self.target_system = self.target_component = 0
+        self.dropped = 0
+        self._q: deque = deque()
+        self._cv = threading.Condition()
+        self._closed = False
+
+    def _put(self, msg: Any) -> None:
+        with self._cv:
+            if len(self._q) >= PORT_QUEUE and not self._closed:
+                self._cv.wait_for(lambda: len(self._q) < PORT_QUEUE or self._closed, FULL_WAIT_S)
+            if len(self._q) >= PORT_QUEUE:
+                self._q.popleft()
+                self.dropped += 1
+            self._q.append(msg)
+            self._cv.notify_all()
+
+    def recv_msg(self) -> Any:
+        """The next message of this robot's vehicle, or None (never blocks)."""
+        with self._cv:
+            if not self._q:
+                return None
+            msg = self._q.popleft()
+            if len(self._q) == PORT_QUEUE - 1:
+                self._cv.notify_all()  # the link's reader may be waiting for room
+            return msg
+
+    def select(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` wall seconds for a message; True when one is waiting."""
+        with self._cv:
+            if not self._q:
+                self._cv.wait(timeout)
+            return bool(self._q)
+
+    def claim(self, target: int | str | None, deadline: float, tick: Callable[[], None] | None = None) -> Any:
+        """Wait until the wanted vehicle's autopilot HEARTBEAT is seen on the link and make its system id this
+        robot's; returns that HEARTBEAT. ``target``: a system id (1-255); ``"auto"``: the lowest unclaimed id seen
+        after :data:`DISCOVERY_S` of discovery; ``None``: the first autopilot heard that no robot claimed (at once). ``tick`` is called about every 0.2 s while waiting
+        (our GCS HEARTBEAT: a ``udpout`` vehicle learns our address from it). Raises BackendError when the id is
+        claimed by another robot of this process, and TimeoutError at ``deadline`` (time.monotonic())."""
+        link = self.link
+        want = target if isinstance(target, int) else None
+        while True:
+            if tick is not None:
+                tick()
+            with link.cond:
+                if want is not None and link.claimed.get(want, self.robot_id) != self.robot_id:
+                    raise BackendError(f"robot {self.robot_id!r}: system id {want} on {link.key} is already flown by "
+                                       f"robot {link.claimed[want]!r}; give each robot on one link its own "
+                                       "mavlink.target_system")
+                pick = None
+                free = sorted((s for s in link.seen if s not in link.claimed), key=lambda s: link.seen[s][2])
+                if want is not None and want in link.seen:
+                    pick = want
+                elif target is None and free:  # the first autopilot heard that nobody flies
+                    pick = free[0]
+                elif target == "auto" and free:  # the lowest id after a heartbeat period of discovery
+                    settled = time.monotonic() - link.first_seen >= DISCOVERY_S
+                    if settled or time.monotonic() >= deadline - 0.2:
+                        pick = min(free)
+                if pick is not None:
+                    compid, hb, _ = link.seen[pick]
+                    link.claimed[pick] = self.robot_id
+                    self.target_system, self.target_component = pick, compid
+                    for m in link.pending.pop(pick, ()):
+                        self._put(m)
+                    return hb
+                if time.monotonic() >= deadline:
+                    seen = sorted(link.seen)
+                    raise TimeoutError(f"system ids seen on the link: {seen or 'none'}, claimed: "
+                                       f"{ {s: r for s, r in sorted(link.claimed.items())} or 'none'}")
+                link.cond.wait(0.2)
+
+    def close(self) -> None:
+        """Leave the link (idempotent); the last port to leave closes the socket."""
+        with self._cv:
+            if self._closed:
+                return
+            self._closed = True
+            self._cv.notify_all()
+        with _LINKS_LOCK:
+            link = self.link
+            with link.cond:
+                link.ports.pop(self.robot_id, None)
+                for s in [s for s, r in link.claimed.items() if r == self.robot_id]:
+                    del link.claimed[s]
+            if not link.ports:
+                _LINKS.pop(link.key, None)
+                link.close()
+
+
+def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
+    """The :class:`LinkPort` of robot ``robot_id`` on the link ``cfg.connection`` names (a
+    :class:`~aerodaas.config.MavlinkConfig`), opening the connection when this process has none yet (retried until
+    ``deadline``, time.monotonic(): a refused TCP connection, a serial device not there yet). Raises BackendError
+    naming the connection when it cannot be opened, or when the robot already has a port on it."""
+    key = cfg.link_key()
+    last: Exception | None = None
+    while True:
+        with _LINKS_LOCK:
+            link = _LINKS.get(key)
+            if link is None:
+                try:
+                    conn = mavutil.mavlink_connection(
+                        cfg.connection, baud=cfg.baud, source_system=cfg.source_system,
+                        source_component=cfg.source_component, dialect="ardupilotmega", autoreconnect=True,
+                        retries=0 if cfg.connection.startswith("tcp:") else 3)
+                except Exception as e:  # noqa: BLE001 - refused, no such device: retry until the deadline
+                    last = e
+                    conn = None
+                if conn is not None:
+                    link = _LINKS[key] = SharedLink(key, conn, cfg.source_system, cfg.source_component)
+            if link is not None:
+                if robot_id in link.ports:
+                    raise BackendError(f"robot {robot_id!r}: already connected on {key}")
+                port = link.ports[robot_id] = LinkPort(link, robot_id)
+                return port
+        if time.monotonic() > deadline:
+            raise BackendError(f"robot {robot_id!r}: mavlink connection {cfg.connection!r}: cannot open it: {last}")
+        time.sleep(0.2)
+
+
+def links() -> dict[str, SharedLink]:
+    """The links open in this process (endpoint -> link), for reports and tests."""
+    with _LINKS_LOCK:
+        return dict(_LINKS)
