@@ -131,3 +131,29 @@ def test_bad_trace_options_name_the_field(tmp_path):
     (tmp_path / "empty.mcap").write_bytes(b"")
     with pytest.raises(ValueError):
         recording_frame_gaps(tmp_path / "empty.mcap")
+
+
+def test_sweep_runs_and_records_the_realistic_trace():
+    from aerodaas.bench.sweep import run_sweep
+    from .conftest import DATA_DIR
+
+    wpath = DATA_DIR / "workloads" / "ocularone_lambda.json"
+    if not wpath.is_file():
+        pytest.skip(f"no workload at {wpath}")
+    kw = dict(loads=["HEAVY"], sigmas=[0.0], drones_per_edge=[2], scenarios=["none"], seeds=[0], duration_s=10,
+              edges=1, schedulers=["DEM"], processes=1, bound=False, workload_path=wpath)
+    per = run_sweep(**kw)
+    real = run_sweep(**kw, trace=TraceSpec.parse("realistic", drop=0.3))
+    assert real["config"]["trace"]["kind"] == "realistic" and per["config"]["trace"] is None
+    # 30 % of the frames lost and one of the two drones joining late: fewer tasks than the periodic trace
+    assert real["results"][0]["tasks"]["mean"] < 0.8 * per["results"][0]["tasks"]["mean"]
+
+
+def test_cli_rejects_a_bad_trace_before_running(tmp_path):
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-c", "import sys; from aerodaas.cli import main; sys.exit(main())", "bench", "schedulers", "--harness", "--trace", "bursty",
+                        "--out", str(tmp_path / "x.json")], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "trace kind" in p.stderr and "bursty" in p.stderr
+    assert not (tmp_path / "x.json").exists()
