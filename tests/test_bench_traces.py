@@ -153,7 +153,8 @@ def test_cli_rejects_a_bad_trace_before_running(tmp_path):
     import subprocess
     import sys
 
-    p = subprocess.run([sys.executable, "-c", "import sys; from aerodaas.cli import main; sys.exit(main())", "bench", "schedulers", "--harness", "--trace", "bursty",
+    cli = "import sys; from aerodaas.cli import main; sys.exit(main())"
+    p = subprocess.run([sys.executable, "-c", cli, "bench", "schedulers", "--harness", "--trace", "bursty",
                         "--out", str(tmp_path / "x.json")], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "trace kind" in p.stderr and "bursty" in p.stderr
     assert not (tmp_path / "x.json").exists()

@@ -3,8 +3,9 @@
 The policy is driven by the deterministic harness (:mod:`aerodaas.bench.harness`) over one edge of the runtime
 benchmark's trace (HEAVY, 3 drones per edge by default, periodic or realistic arrivals); every call the dispatcher
 makes on an event (``submit`` on arrival, ``poll``, ``on_edge_done`` / ``on_cloud_done`` on completion, then
-``next_edge_task``) is timed with :func:`time.perf_counter` (wall, ``decision_ms``) and :func:`time.thread_time` (CPU of this thread,
-``decision_cpu_ms``: what the policy costs, less sensitive to other processes on a loaded machine) and the calls of one event are summed into one decision.
+``next_edge_task``) is timed with :func:`time.perf_counter` (wall, ``decision_ms``) and :func:`time.thread_time`
+(CPU of this thread, ``decision_cpu_ms``: what the policy costs, less sensitive to other processes on a loaded
+machine), and the calls of one event are summed into one decision.
 The ``cloud_admit`` probes (a dozen per cloud task, bisected into an admit-by time) are timed separately.
 
 Run: ``python -m aerodaas.bench.decision_time --scheduler LAPLAN --trace realistic --out decision.json``. The
