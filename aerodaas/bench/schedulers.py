@@ -29,6 +29,7 @@ actual vs intended edge hold, actual vs intended cloud round trip, how late poli
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict
 import itertools
 import json
 import math
@@ -71,10 +72,13 @@ def edge_layout(drones: int, drones_per_edge: int) -> list[list[str]]:
 
 
 def make_trace(workload, drones: int, duration_s: float, seed: int, drones_per_edge: int = DEFAULT_DRONES_PER_EDGE,
-               fps: float = DEFAULT_FPS) -> list[tuple[float, str, str, str]]:
+               fps: float = DEFAULT_FPS, trace=None) -> list[tuple[float, str, str, str]]:
     """The arrival trace: rows ``(arrival_ms, edge_id, drone, model)`` sorted by time, for frames sent in
-    ``[0, duration_s)``. Each drone sends a frame every ``1/fps`` s from a seeded phase in ``[0, 1/fps)``; each frame
-    yields one task per model of ``workload`` in a seeded shuffled order. Raises ValueError for bad parameters."""
+    ``[0, duration_s)``. Each frame yields one task per model of ``workload`` in a seeded shuffled order.
+    ``trace`` (a :class:`aerodaas.bench.traces.TraceSpec`, default periodic): periodic — each drone sends a frame
+    every ``1/fps`` s from a seeded phase in ``[0, 1/fps)`` (the published sweep's traces, unchanged); realistic or
+    recording — the frame times of :func:`aerodaas.bench.traces.frame_times`. Raises ValueError for bad
+    parameters."""
     if not duration_s > 0:
         raise ValueError(f"duration must be > 0 s, got {duration_s}")
     if not fps > 0:
@@ -83,14 +87,24 @@ def make_trace(workload, drones: int, duration_s: float, seed: int, drones_per_e
     period_ms = 1000.0 / fps
     models = list(workload.models)
     rows = []
+    periodic = trace is None or trace.kind == "periodic"
+    n = 0
     for e, group in enumerate(edge_layout(drones, drones_per_edge)):
-        for drone in group:
-            t = round(rng.uniform(0.0, period_ms), 3)
-            while t < duration_s * 1000.0:
+        for i, drone in enumerate(group):
+            if periodic:
+                t = round(rng.uniform(0.0, period_ms), 3)
+                times = []
+                while t < duration_s * 1000.0:
+                    times.append(t)
+                    t = round(t + period_ms, 3)
+            else:
+                from aerodaas.bench.traces import frame_times
+                times = frame_times(trace, drone, i, len(group), n, period_ms, duration_s * 1000.0, seed)
+            n += 1
+            for t in times:
                 order = models[:]
                 rng.shuffle(order)
                 rows.extend((t, f"edge{e:02d}", drone, m) for m in order)
-                t = round(t + period_ms, 3)
     rows.sort(key=lambda r: r[0])  # stable: keeps each frame's shuffled model order
     return rows
 
@@ -215,13 +229,14 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                    repeat: int = 1, drain_s: float = 10.0, workload_path: str | os.PathLike | None = None,
                    progress: bool = True, reply_lead_ms: float = 100.0, seeds: int = 1,
                    cloud_sigmas: Sequence[float] | None = None, scenarios: Sequence[str] | None = None,
-                   options: dict | None = None, emulation_bound_ms: float = EMULATION_BOUND_MS) -> dict:
+                   options: dict | None = None, emulation_bound_ms: float = EMULATION_BOUND_MS, trace=None) -> dict:
     """Run the benchmark; returns the JSON-able result (see the module docstring): ``runs`` (one row per
     scheduler, load, cloud sigma, scenario and seed ``seed .. seed + seeds - 1``) and ``results`` (per scheduler,
     load, sigma and scenario: every figure as mean ± 95 % CI over the seeds, :func:`summarize_runs`).
     ``cloud_sigmas``: lognormal cloud jitter sigmas to sweep (overrides ``cloud_jitter``); ``scenarios``: network
     scenarios of :mod:`aerodaas.bench.sweep` added to ``network``; ``options``: scheduler options (``estimator``,
-    ``eviction_scan``) for every policy that accepts them. A run whose worst emulation timing error p99 exceeds
+    ``eviction_scan``) for every policy that accepts them; ``trace``: the arrival process
+    (:class:`aerodaas.bench.traces.TraceSpec`, default periodic). A run whose worst emulation timing error p99 exceeds
     ``emulation_bound_ms`` is marked invalid. Raises ValueError for an unknown scheduler or load, or bad numbers,
     before starting Ray."""
     from aerodaas.bench.sweep import scenario_specs
@@ -232,6 +247,7 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
     from aerodaas.schedulers.analytics_base import Workload, analytics_scheduler_names
 
     known = analytics_scheduler_names()
+    trace_spec = trace
     names = list(schedulers) if schedulers else known
     unknown = [n for n in names if n not in known]
     if unknown:
@@ -305,7 +321,7 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                  reply_lead_ms=reply_lead_ms)
         for load, (sigma, cj), sc, sd in itertools.product(loads, jitters, scen, range(seed, seed + seeds)):
             w = workloads[load]
-            trace = make_trace(w, drones, duration_s, sd, drones_per_edge, fps)
+            trace = make_trace(w, drones, duration_s, sd, drones_per_edge, fps, trace_spec)
             by_host = [[r for r in trace if host_of[r[1]] == i] for i in range(n_hosts)]
             say(f"{load} cloud jitter {cj} network {sc} seed {sd}: {len(trace)} tasks from {drones} drones over "
                 f"{duration_s:g} s (load average {os.getloadavg()[0]:.2f})")
@@ -339,6 +355,7 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
         "seeds": list(range(seed, seed + seeds)),
         "config": {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
                    "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
+                   "trace": asdict(trace_spec) if trace_spec is not None else None,
                    "edge_jitter": edge_jitter, "cloud_jitter": cloud_jitter,
                    "network_variability": list(network or []), "network": NetworkModel.parse(network, seed).describe(),
                    "cloud_nodes": cloud_nodes if not address else None, "address": address,
@@ -477,6 +494,15 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
                                        "policy: profile, mean[:K], max[:K] or pQ[:K]")
     p.add_argument("--eviction-scan", choices=("reference", "full"),
                    help="DEM/DEMS eviction scan: reference (PriorityQueue.add, the default) or full")
+    p.add_argument("--trace", default="periodic", metavar="KIND",
+                   help="arrival process: periodic (default), realistic (jittered gaps, dropped frames, drones joining "
+                        "mid-run) or recording:FILE.mcap (the camera-frame gaps of a recording, scaled to --fps)")
+    p.add_argument("--trace-jitter", type=float, metavar="FRACTION",
+                   help="realistic: each frame gap x (1 + U(-f, f)) (default 0.2)")
+    p.add_argument("--trace-drop", type=float, metavar="P", help="realistic/recording: frame loss probability "
+                                                                 "(default 0.1 realistic, 0 recording)")
+    p.add_argument("--trace-joins", type=int, metavar="N", help="drones per edge joining mid-run (default 1 realistic)")
+    p.add_argument("--trace-leaves", type=int, metavar="N", help="drones per edge leaving mid-run (default 0)")
     p.add_argument("--fps", type=_positive_float, default=DEFAULT_FPS,
                    help=f"frames (1-frame batches) per second per drone (default {DEFAULT_FPS:g})")
     p.add_argument("--processes", type=_positive_int, help="--harness worker processes (default: min(2, CPUs))")
@@ -508,6 +534,14 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     return p
 
 
+def _trace_spec(args: argparse.Namespace):
+    """The :class:`aerodaas.bench.traces.TraceSpec` of the ``--trace*`` options (ValueError naming the field)."""
+    from aerodaas.bench.traces import TraceSpec
+
+    return TraceSpec.parse(args.trace, jitter=args.trace_jitter, drop=args.trace_drop, joins=args.trace_joins,
+                           leaves=args.trace_leaves)
+
+
 def _run_harness(args: argparse.Namespace, options: dict) -> dict:
     from aerodaas.bench.sweep import run_sweep
 
@@ -520,7 +554,7 @@ def _run_harness(args: argparse.Namespace, options: dict) -> dict:
                      seeds=list(range(args.seed, args.seed + args.seeds)), drones=args.drones,
                      duration_s=args.duration or 120.0, fps=args.fps, schedulers=args.schedulers, options=options,
                      edge_jitter=args.edge_jitter, processes=args.processes, bound=not args.no_bound,
-                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress)
+                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress, trace=_trace_spec(args))
 
 
 def _run_runtime(args: argparse.Namespace, options: dict) -> dict:
@@ -530,7 +564,8 @@ def _run_runtime(args: argparse.Namespace, options: dict) -> dict:
                              args.seed, dpe, args.fps, args.network_variability, args.edge_jitter, args.cloud_jitter,
                              args.cloud_nodes, None, args.edge_hosts, args.address, args.repeat,
                              reply_lead_ms=args.cloud_reply_lead_ms, seeds=args.seeds, cloud_sigmas=args.cloud_sigma,
-                             scenarios=args.scenarios, options=options, emulation_bound_ms=args.emulation_bound_ms)
+                             scenarios=args.scenarios, options=options, emulation_bound_ms=args.emulation_bound_ms,
+                             trace=_trace_spec(args))
         if args.compare_harness:
             res["harness_comparison"] = compare_with_harness(res)
         if out is None:

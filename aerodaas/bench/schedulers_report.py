@@ -147,6 +147,7 @@ def compare_with_harness(res: dict, workload_path: str | os.PathLike | None = No
     on a valid emulation the two agree seed by seed)."""
     from aerodaas.bench.harness import fleet_tasks, run_fleet
     from aerodaas.bench.schedulers import make_trace
+    from aerodaas.bench.traces import TraceSpec
     from aerodaas.bench.sweep import mean_ci, scenario_specs
     from aerodaas.schedulers.dispatch.emulation import Jitter
     from aerodaas.schedulers.analytics_base import Workload
@@ -158,8 +159,9 @@ def compare_with_harness(res: dict, workload_path: str | os.PathLike | None = No
         w = Workload.from_file(wpath, r["load"])
         cj = Jitter.parse(cfg["cloud_jitter"]) if r["cloud_sigma"] is None else Jitter("lognormal", r["cloud_sigma"])
         specs = list(cfg["network_variability"]) + scenario_specs(r["scenario"], cfg["duration_s"])
+        spec = TraceSpec(**cfg["trace"]) if cfg.get("trace") else None
         us = [run_fleet(r["scheduler"], w, fleet_tasks(make_trace(w, cfg["drones"], cfg["duration_s"], sd,
-                                                                  cfg["drones_per_edge"], cfg["fps"]), w),
+                                                                  cfg["drones_per_edge"], cfg["fps"], spec), w),
                         seed=sd, edge_jitter=Jitter.parse(cfg["edge_jitter"]), cloud_jitter=cj, network_specs=specs,
                         options=cfg["options"])["utility"] for sd in r["seeds"]]
         h = mean_ci(us)

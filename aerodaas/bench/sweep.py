@@ -151,12 +151,12 @@ def _job(args: tuple) -> dict:
     from aerodaas.schedulers.analytics_base import Workload
     from aerodaas.schedulers.dispatch.emulation import Jitter
 
-    cell, seed, drones, duration_s, fps, names, options, edge_jitter, wpath, bound, exact = args
+    cell, seed, drones, duration_s, fps, names, options, edge_jitter, wpath, bound, exact, trace = args
     t0 = time.process_time()
     w = Workload.from_file(wpath, cell.load)
     specs = scenario_specs(cell.scenario, duration_s)
     ej, cj = Jitter.parse(edge_jitter), Jitter("lognormal", cell.cloud_sigma)
-    per_edge = fleet_tasks(make_trace(w, drones, duration_s, seed, cell.drones_per_edge, fps), w)
+    per_edge = fleet_tasks(make_trace(w, drones, duration_s, seed, cell.drones_per_edge, fps, trace), w)
     out = {"cell": asdict(cell), "seed": seed, "edges": len(per_edge), "results": {}}
     for name in names:
         out["results"][name] = run_fleet(name, w, per_edge, seed=seed, edge_jitter=ej, cloud_jitter=cj,
@@ -173,7 +173,7 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
               schedulers: Sequence[str] | None = None, options: dict | None = None,
               edge_jitter: str = "lognormal:0.05", workload_path: str | os.PathLike | None = None,
               processes: int | None = None, bound: bool = True, exact_bound_loads: Sequence[str] = ("HEAVY",),
-              progress=None) -> dict:
+              progress=None, trace=None) -> dict:
     """Run the sweep; returns the JSON-able result (``config``, ``cells``, ``results``, ``jobs``).
 
     ``drones``: fleet size per run (default ``edges`` x drones per edge). Scenarios other than ``"none"`` are run
@@ -181,7 +181,8 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     policy that accepts them (``estimator``, ``eviction_scan``). ``bound``: compute the LP bound of every cell, and
     for the loads in ``exact_bound_loads`` the exact and the non-anticipative bounds too (seconds per edge at
     HEAVY; at MEDIUM the long deadlines make the exact one slow, and the LP is already within 1 % of the best
-    policy there). Raises ValueError for bad parameters, before any work starts."""
+    policy there). ``trace``: the arrival process (:class:`aerodaas.bench.traces.TraceSpec`; default periodic).
+    Raises ValueError for bad parameters, before any work starts."""
     from aerodaas.bench import machine_info
     from aerodaas.bench.schedulers import LOADS, default_workload_path
     from aerodaas.schedulers.dispatch.emulation import Jitter
@@ -215,7 +216,7 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     cells = [Cell(ld, float(s), int(d), sc) for sc in scenarios for ld in loads for d in drones_per_edge
              for s in sigmas if sc == "none" or ld in scenario_loads]
     jobs = [(c, seed, drones or edges * c.drones_per_edge, duration_s, fps, names, dict(options or {}), edge_jitter,
-             wpath, bound, bound and c.load in exact_bound_loads) for c in cells for seed in seeds]
+             wpath, bound, bound and c.load in exact_bound_loads, trace) for c in cells for seed in seeds]
     procs = processes or min(2, os.cpu_count() or 1)
     t0 = time.time()
     done = []
@@ -241,6 +242,8 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
                    "scenario_loads": scenario_loads, "scenario_specs": {s: SCENARIOS[s] for s in scenarios},
                    "seeds": list(seeds), "drones": drones, "edges_per_run": None if drones else edges,
                    "duration_s": duration_s, "fps": fps, "edge_jitter": edge_jitter,
+                   "trace": asdict(trace) if trace is not None else None,
+                   "trace_label": trace.label() if trace is not None else "periodic",
                    "cloud_jitter": "lognormal:<cloud_sigma>", "options": dict(options or {}), "workload": wpath,
                    "processes": procs, "bounds": BOUND_NAMES if bound else None,
                    "exact_bound_loads": list(exact_bound_loads) if bound else [], "ours": OURS,
@@ -332,7 +335,7 @@ def format_sweep(res: dict) -> str:
     """The sweep as text: per cell, each scheduler's utility ± CI, on-time rate, fraction of the bound, cloud
     cost, drops and the counters that explain behaviour; then the claim per cell."""
     cfg = res["config"]
-    lines = [f"aerodaas bench schedulers --harness: seeds {cfg['seeds']}, {cfg['duration_s']:g} s, "
+    lines = [f"aerodaas bench schedulers --harness: trace {cfg.get('trace_label', 'periodic')}, seeds {cfg['seeds']}, {cfg['duration_s']:g} s, "
              f"{cfg['drones'] or str(cfg['edges_per_run']) + ' edges x drones/edge'} drones; mean ± 95 % CI "
              f"(Student t); {res['wall_s']:.0f} s wall, {res['cpu_s']:.0f} s CPU, {cfg['processes']} process(es)"]
     head = ("scheduler", "utility", "on-time %", "of bound", "of n-a", "cloud cost", "late", "drops t/c/e",
