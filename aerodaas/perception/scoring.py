@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from aerodaas.perception.boxes import iou_matrix
+
 __all__ = ["GroundTruth", "load_annotations", "match", "ClassScore", "score"]
 
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
@@ -101,16 +103,7 @@ def load_annotations(path: str | Path, images_dir: str | Path, names: list[str] 
     return out
 
 
-def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU matrix of ``(N, 4)`` and ``(M, 4)`` x0y0x1y1 boxes."""
-    x0 = np.maximum(a[:, None, 0], b[None, :, 0])
-    y0 = np.maximum(a[:, None, 1], b[None, :, 1])
-    x1 = np.minimum(a[:, None, 2], b[None, :, 2])
-    y1 = np.minimum(a[:, None, 3], b[None, :, 3])
-    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
-    aa = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
-    bb = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    return inter / np.maximum(aa[:, None] + bb[None, :] - inter, 1e-9)
+_iou = iou_matrix
 
 
 def match(det_boxes: np.ndarray, det_scores: np.ndarray, gt_boxes: np.ndarray, iou_thr: float) -> np.ndarray:

@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aerodaas.perception.boxes import iou_matrix
+
 from aerodaas.models import Detection
 
 __all__ = ["ByteTrackConfig", "Track", "ByteTracker"]
@@ -118,16 +120,7 @@ class Track:
 def _iou_cost(tracks: list[Track], dets: list[Detection]) -> np.ndarray:
     if not tracks or not dets:
         return np.zeros((len(tracks), len(dets)))
-    a = np.array([t.box for t in tracks])
-    b = np.array([d.box for d in dets])
-    x0 = np.maximum(a[:, None, 0], b[None, :, 0])
-    y0 = np.maximum(a[:, None, 1], b[None, :, 1])
-    x1 = np.minimum(a[:, None, 2], b[None, :, 2])
-    y1 = np.minimum(a[:, None, 3], b[None, :, 3])
-    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
-    aa = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
-    bb = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    return 1.0 - inter / np.maximum(aa[:, None] + bb[None, :] - inter, 1e-9)
+    return 1.0 - iou_matrix(np.array([t.box for t in tracks]), np.array([d.box for d in dets]))
 
 
 def _assign(cost: np.ndarray, thresh: float) -> tuple[list[tuple[int, int]], list[int], list[int]]:
