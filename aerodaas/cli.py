@@ -138,7 +138,12 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     try:
         runpy.run_path(str(app), run_name="__main__")
     except runtime.PlanReady as p:
+        from aerodaas.clusters.placement import placement_warning
+
         placement = Placement(has_cloud=True, local=False)
+        warning = placement_warning(p.plan)
+        if warning:
+            print(f"aerodaas plan: warning: {warning}", file=sys.stderr)
         print(json.dumps(p.plan.describe(placement), indent=2) if args.json else p.plan.text(placement))
         return 0
     except (ConfigError, FileNotFoundError, ValueError, KeyError) as e:

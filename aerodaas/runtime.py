@@ -344,6 +344,12 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     plan = build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live, scheduled=scheduled,
                       epoch_ns=epoch_ns, run_id=opts.run_id or os.environ.get("AERODAAS_RUN_ID") or None)
     placement = Placement(has_cloud=has_cloud, local=_STARTED_RAY and not opts.address)
+    if not placement.local:
+        from aerodaas.clusters.placement import placement_warning
+
+        warning = placement_warning(plan)
+        if warning:
+            print(f"aerodaas: warning: {warning}", file=sys.stderr, flush=True)
     if opts.progress:
         kinds = {}
         for a in plan.actors.values():
