@@ -119,6 +119,9 @@ def _init_ray(address: str | None) -> None:
         ray.init(address=address, log_to_driver=True, include_dashboard=False)
     elif up_address:
         # the persistent local cluster of `aerodaas up` (aerodaas.clusters.persistent): loopback, like our own
+        from aerodaas.clusters.local import enable_token_auth
+
+        enable_token_auth()  # the cluster was started with token auth: the driver must present the token
         restore = _loopback_only()
         try:
             ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning")
