@@ -155,10 +155,12 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     return {"drones": n, "drones_per_actor": drones_per_actor, "edge_nodes": edge_nodes,
             # duration_s: the measured (flying) part; wall_s also holds the actors' start and close
             "duration_s": round(float(res.stats.get("_timing", {}).get("mission_s", wall)), 1),
-            "wall_s": round(wall, 1), "startup_s": res.stats.get("_timing", {}).get("startup_s"), "ticks": ticks, "missed_ticks": missed,
+            "wall_s": round(wall, 1), "startup_s": res.stats.get("_timing", {}).get("startup_s"),
+            "ticks": ticks, "missed_ticks": missed,
             "missed_ticks_pct": 100.0 * missed / max(ticks, 1), "camera_ticks": cam_ticks, "frames_analysed": analysed,
             "dropped_frames_pct": 100.0 * (cam_ticks - analysed) / max(cam_ticks, 1),
-            "cpu_pct": 100.0 * cpu / max(wall, 1e-9),  # over the whole wall time (CPU was sampled over it) "rss_mb": round(mem.peak["rss_mb"], 1),
+            "cpu_pct": 100.0 * cpu / max(wall, 1e-9),  # over wall_s, the span the CPU time was sampled over
+            "rss_mb": round(mem.peak["rss_mb"], 1),
             "pss_mb": round(mem.peak["pss_mb"], 1), "processes": mem.peak["processes"],
             "worker_processes": mem.peak.get("worker_processes", 0), "drones_per_node": per_node,
             "process_rows": mem.peak["rows"],
