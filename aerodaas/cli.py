@@ -119,6 +119,41 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0 if all(r.ok for r in results) else 1
 
 
+def _cmd_up(args: argparse.Namespace) -> int:
+    """``aerodaas up [--cpus N]``: start the persistent local cluster (:mod:`aerodaas.clusters.persistent`). Exit 0
+    (also when it already runs), 1 when it cannot start, 2 for a bad ``--cpus``."""
+    from aerodaas.clusters.persistent import up
+
+    if not 1 <= args.cpus <= 256:
+        print(f"aerodaas up: --cpus must be in [1, 256], got {args.cpus}", file=sys.stderr)
+        return 2
+    try:
+        st = up(cpus=args.cpus)
+    except RuntimeError as e:
+        print(e, file=sys.stderr)
+        return 1
+    what = "already running" if st["already"] else "started"
+    print(f"aerodaas up: local cluster {what} at {st['address']} (pid {st['pid']}, loopback only, tier=edge"
+          + (f", dashboard http://{st['dashboard']}" if st.get("dashboard") else "") + "); `aerodaas run` attaches "
+          "to it, `aerodaas down` stops it", flush=True)
+    return 0
+
+
+def _cmd_down(args: argparse.Namespace) -> int:
+    """``aerodaas down``: stop the cluster ``aerodaas up`` started (its processes only). Exit 0, 1 if it would
+    not stop."""
+    from aerodaas.clusters.persistent import down
+
+    try:
+        st = down()
+    except RuntimeError as e:
+        print(e, file=sys.stderr)
+        return 1
+    print("aerodaas down: " + (f"stopped the local cluster at {st['address']} (pid {st['pid']})" if st else
+                               "no local cluster of `aerodaas up` is running"), flush=True)
+    return 0
+
+
 def _cmd_plan(args: argparse.Namespace) -> int:
     """``aerodaas plan APP.py [--env FILE] [--json] [--address ADDR]``: build the application's dataflow graph and
     print the actors it would start, where each goes (its ``label_selector``) and the edges between them, without
@@ -138,7 +173,12 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     try:
         runpy.run_path(str(app), run_name="__main__")
     except runtime.PlanReady as p:
+        from aerodaas.clusters.placement import placement_warning
+
         placement = Placement(has_cloud=True, local=False)
+        warning = placement_warning(p.plan)
+        if warning:
+            print(f"aerodaas plan: warning: {warning}", file=sys.stderr)
         print(json.dumps(p.plan.describe(placement), indent=2) if args.json else p.plan.text(placement))
         return 0
     except (ConfigError, FileNotFoundError, ValueError, KeyError) as e:
@@ -441,6 +481,11 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
                    help="serve the run to Foxglove over WebSocket (default 127.0.0.1:8765; port 0: any free port)")
     r.set_defaults(func=_cmd_run)
+    upp = sub.add_parser("up", help="start a persistent local Ray cluster (loopback, token auth, tier=edge, "
+                                     "dashboard) that `aerodaas run` attaches to")
+    upp.add_argument("--cpus", type=int, default=3, help="logical CPUs of the node (sizes the prestarted workers)")
+    upp.set_defaults(func=_cmd_up)
+    sub.add_parser("down", help="stop the cluster `aerodaas up` started (only that one)").set_defaults(func=_cmd_down)
     pl = sub.add_parser("plan", help="print the actors an application would start and where, without flying")
     pl.add_argument("app")
     pl.add_argument("--env", help="environment.json to use instead of the one the app names")

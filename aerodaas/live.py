@@ -13,6 +13,16 @@ recorded bytes and log time. One serializer, two outputs: what Foxglove shows li
   real time (log-time spacing kept), by default once a client has subscribed.
 
 The server binds loopback (``127.0.0.1:8765``) unless an address is given: the protocol has no authentication.
+Clients may offer either subprotocol name, ``foxglove.sdk.v1`` (the SDK's) or ``foxglove.websocket.v1`` (Foxglove's
+``@foxglove/ws-protocol`` client): :mod:`aerodaas.liveview.subprotocol` fronts the SDK server, which accepts only the
+first.
+
+Nothing is lost for a client that subscribes to a channel soon after it is advertised (within ``catchup_s``): the
+messages the channel carried before the subscription are sent to that client alone (the SDK's per-sink ``log``), so a
+client connected from the start receives every message of every channel; a later subscriber to a latched topic
+(:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result) receives its latest message. At
+:meth:`LiveServer.stop` the server waits (bounded) until every client is subscribed to every channel, so the last
+channel of a run (``/mission/result``) reaches it before the server closes.
 """
 from __future__ import annotations
 
@@ -23,7 +33,11 @@ from typing import Any
 
 from .recording import RecordedMessage
 
-__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer", "check_bindable", "parse_address", "replay"]
+__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LATCHED_SUFFIXES", "LiveServer", "check_bindable", "parse_address",
+           "replay"]
+
+#: topics ending so keep their latest message for late subscribers (ROS's "latched" topics)
+LATCHED_SUFFIXES = ("mission/plan", "camera_info", "calibration", "mission/result")
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765  # Foxglove's default for its WebSocket connection
@@ -96,26 +110,41 @@ class LiveServer:
     """
 
     def __init__(self, address: str | None = None, *, name: str = "aerodaas", backlog: int = 1024,
-                 listener: Any = None, time_capability: bool = False) -> None:
+                 listener: Any = None, time_capability: bool = False, catchup_s: float = 5.0,
+                 catchup_messages: int = 256, catchup_bytes: int = 32 << 20) -> None:
         import foxglove
         from foxglove.websocket import Capability
+
+        from aerodaas.liveview.subprotocol import SubprotocolFront
 
         self.host, port = parse_address(address)
         self._foxglove = foxglove
         self._ctx = foxglove.Context()
         self._channels: dict[str, Any] = {}
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
         self.published = 0
         self.stopped = False
         self.subscriptions = 0  # subscriptions open now, over all clients
         self._user_listener = listener
-        try:
-            self._server = foxglove.start_server(name=name, host=self.host, port=port, context=self._ctx,
+        self.catchup_s, self._catchup_n, self._catchup_bytes = float(catchup_s), int(catchup_messages), catchup_bytes
+        self._born: dict[str, float] = {}  # topic -> monotonic time of its advertisement
+        self._early: dict[str, list[tuple[bytes, int]]] = {}  # topic -> messages of its first catchup_s
+        self._early_bytes: dict[str, int] = {}
+        self._latest: dict[str, tuple[bytes, int]] = {}  # latched topic -> its latest message
+        self._client_subs: dict[int, set[str]] = {}  # client id -> topics subscribed
+        self.catchup_sent = 0
+        try:  # the SDK on a loopback port of its own, fronted for both subprotocol names (module docstring)
+            self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._ctx,
                                                  message_backlog_size=backlog, server_listener=self,
                                                  capabilities=[Capability.Time] if time_capability else None)
         except Exception as e:  # the SDK raises its own error type for bind failures
-            raise RuntimeError(f"live view: cannot serve on {self.host}:{port} ({e})") from e
-        self.port = int(self._server.port)
+            raise RuntimeError(f"live view: cannot start the foxglove-sdk server ({e})") from e
+        try:
+            self._front = SubprotocolFront(self.host, port, int(self._server.port))
+        except OSError as e:
+            self._server.stop()
+            raise RuntimeError(f"live view: cannot serve on {self.host}:{port} ({e.strerror or e})") from e
+        self.port = self._front.port
 
     @property
     def url(self) -> str:
@@ -133,6 +162,8 @@ class LiveServer:
                 ch = self._foxglove.Channel(topic, schema=schema, message_encoding=message_encoding,
                                             context=self._ctx)
                 self._channels[topic] = ch
+                self._born[topic] = time.monotonic()
+                self._early[topic], self._early_bytes[topic] = [], 0
             return ch
 
     def publish(self, msg: RecordedMessage) -> None:
@@ -141,17 +172,46 @@ class LiveServer:
             return
         ch = self._channels.get(msg.topic) or self.advertise(msg.topic, msg.schema_name, msg.schema_encoding,
                                                              msg.schema_data, msg.message_encoding)
-        ch.log(msg.data, log_time=msg.log_time_ns)
+        data = bytes(msg.data)
+        with self._lock:  # ordered against on_subscribe's catch-up, so no message is sent twice or missed
+            ch.log(data, log_time=msg.log_time_ns)
+            t = msg.topic
+            early = self._early.get(t)
+            if early is not None:
+                if (time.monotonic() - self._born[t] <= self.catchup_s and len(early) < self._catchup_n
+                        and self._early_bytes[t] + len(data) <= self._catchup_bytes):
+                    early.append((data, msg.log_time_ns))
+                    self._early_bytes[t] += len(data)
+                elif time.monotonic() - self._born[t] > self.catchup_s:
+                    self._early[t] = None  # type: ignore[assignment]  # the window is over: free it
+            if t.endswith(LATCHED_SUFFIXES):
+                self._latest[t] = (data, msg.log_time_ns)
         self.published += 1
 
     # foxglove.websocket.ServerListener (called from the SDK's threads)
     def on_subscribe(self, client: Any, channel: Any) -> None:
-        self.subscriptions += 1
+        """Count the subscription and send the new subscriber what it missed (module docstring)."""
+        topic = channel.topic
+        with self._lock:
+            self.subscriptions += 1
+            self._client_subs.setdefault(client.id, set()).add(topic)
+            ch = self._channels.get(topic)
+            backlog: list[tuple[bytes, int]] = []
+            if ch is not None and time.monotonic() - self._born.get(topic, 0.0) <= self.catchup_s:
+                backlog = list(self._early.get(topic) or [])
+            latest = self._latest.get(topic)
+            if latest is not None and (not backlog or backlog[-1] != latest):
+                backlog.append(latest)
+            for data, t in backlog:
+                ch.log(data, log_time=t, sink_id=client.id)
+                self.catchup_sent += 1
         if self._user_listener is not None:
             self._user_listener.on_subscribe(client, channel)
 
     def on_unsubscribe(self, client: Any, channel: Any) -> None:
-        self.subscriptions -= 1
+        with self._lock:
+            self.subscriptions -= 1
+            self._client_subs.get(client.id, set()).discard(channel.topic)
         if self._user_listener is not None:
             self._user_listener.on_unsubscribe(client, channel)
 
@@ -167,12 +227,22 @@ class LiveServer:
             return
         self.stopped = True
         if linger_s > 0 and self.subscriptions > 0:
+            # clients that subscribe to everything get the channels advertised last (the mission result) first
+            deadline = time.monotonic() + max(3.0, linger_s)
+            while time.monotonic() < deadline:
+                with self._lock:
+                    topics = set(self._channels)
+                    missing = [c for c, subs in self._client_subs.items() if subs and not topics <= subs]
+                if not missing:
+                    break
+                time.sleep(0.05)
             time.sleep(linger_s)
         with self._lock:
             channels, self._channels = list(self._channels.values()), {}
         for ch in channels:
             ch.close()
         self._server.stop()
+        self._front.close()
 
     def __enter__(self) -> "LiveServer":
         return self

@@ -7,6 +7,10 @@ authentication stays on: ``RAY_AUTH_MODE=token`` is set for this process (and in
 unless the environment already sets a mode, and a token is generated at ``~/.ray/auth_token`` if none exists
 (what ``ray.init()`` does for a new local cluster since Ray 2.59).
 
+Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.runtime._loopback_only`): node address
+127.0.0.1, so the GCS, raylets, object managers, agents and workers listen on 127.0.0.1 only, never on the machine's
+network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
+
 ``ray.cluster_utils.Cluster.add_node(**node_args)`` passes its keyword arguments to ``ray._private.parameter.RayParams``,
 which accepts ``labels: dict[str, str]`` (checked on Ray 2.60).
 
@@ -71,6 +75,10 @@ class LocalCluster:
             raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
                                "LocalCluster with connect=True")
         enable_token_auth()
+        from aerodaas.runtime import _loopback_only
+
+        # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
+        self._restore_network = _loopback_only()
         self._cloud_cpus = int(cloud_cpus)
         self._store = int(object_store_mb) * 1024 * 1024
         first = (edge_labels or [{}])[0] if edge_labels else {}
@@ -79,7 +87,11 @@ class LocalCluster:
                                      "include_dashboard": False, "object_store_memory": self._store}
         if worker_niceness is not None:  # Ray starts workers at niceness 15 (below the control plane) by default
             head_args["_system_config"] = {"worker_niceness": int(worker_niceness)}
-        self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
+        try:
+            self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
+        except BaseException:
+            self._restore_network()
+            raise
         self.edge_node = self.cluster.head_node
         self.cloud_nodes: list[Any] = []
         self.edge_nodes: list[Any] = [self.edge_node]
@@ -93,6 +105,7 @@ class LocalCluster:
             self.cluster.wait_for_nodes()
         except BaseException:
             self.cluster.shutdown()
+            self._restore_network()
             raise
         self.address: str = self.cluster.address
         self.connected = False
@@ -149,6 +162,7 @@ class LocalCluster:
             ray.shutdown()
         self.connected = False
         self.cluster.shutdown()
+        self._restore_network()
 
     def __enter__(self) -> "LocalCluster":
         return self

@@ -85,6 +85,10 @@ def test_bench_startup_json_reports_phases_in_order(tmp_path):
     order = ["cli", "app_built", "ray_ready", "hosts_ready", "first_processed"]
     assert list(phases) == order                                             # each phase seen, in this order
     assert phases["first_processed"] == run["seconds_to_first_frame"]
+    # attached to an `aerodaas up` cluster of the benchmark's own (issue 27 item 2), stopped afterwards
+    (att,) = rep["attached"]["runs"]
+    assert list(att["phases_s"]) == order and rep["cold"]["runs"] == [run]
+    assert len(rep["load_avg_before"]) == 3 == len(rep["load_avg_after"])
 
 
 def test_bench_overhead_refuses_a_bad_resolution():

@@ -77,3 +77,28 @@ def test_plan_refuses_a_robot_flying_from_an_unknown_compute(tmp_path):
     app.write_text(f"from aerodaas import *\nenv = Environment({str(env)!r})\nenv.start_mission()\n")
     p = _plan(str(app))
     assert p.returncode == 2 and "robots.0.compute" in p.stderr and "nowhere" in p.stderr, p.stderr[-1000:]
+
+
+def _two_edge_env(tmp_path, labels: list[dict]) -> Path:
+    env = tmp_path / "env.json"
+    env.write_text(json.dumps({
+        "name": "two-edges",
+        "compute": [{"id": f"e{i}", "tier": "edge", "labels": labels[i]} for i in range(2)],
+        "robots": [{"id": f"d{i}", "compute": f"e{i % 2}",
+                    "sensors": [{"id": "cam", "type": "camera", "properties": {"width": 64, "height": 48}}]}
+                   for i in range(4)]}))
+    app = tmp_path / "app.py"
+    app.write_text(f"from aerodaas import *\nenv = Environment({str(env)!r})\nenv.start_mission()\n")
+    return app
+
+
+def test_plan_warns_when_two_edge_computes_place_alike_and_not_when_labelled(tmp_path):
+    """Issue 27 item 4: two unlabelled edge computes get one selector, so Ray picks the node: said before flying."""
+    p = _plan(str(_two_edge_env(tmp_path, [{}, {}])), "--json")
+    assert p.returncode == 0, p.stderr[-2000:]
+    sels = {json.dumps(a["label_selector"]) for a in json.loads(p.stdout)["actors"] if a["role"] == "drone"}
+    assert sels == {'{"tier": "edge"}'}  # the ambiguity the warning is about
+    assert "placement between them is Ray's choice" in p.stderr and "'e0', 'e1'" in p.stderr, p.stderr
+    assert "aerodaas/compute" in p.stderr
+    p = _plan(str(_two_edge_env(tmp_path, [{"aerodaas/compute": "e0"}, {"aerodaas/compute": "e1"}])), "--json")
+    assert p.returncode == 0 and "Ray's choice" not in p.stderr, p.stderr

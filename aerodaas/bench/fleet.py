@@ -153,10 +153,14 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
             per_node[names.get(node, node)] = per_node.get(names.get(node, node), 0) + (
                 1 if hid.startswith("drone/") else int(hid.rsplit("+", 1)[1]) + 1)
     return {"drones": n, "drones_per_actor": drones_per_actor, "edge_nodes": edge_nodes,
-            "duration_s": round(wall, 1), "ticks": ticks, "missed_ticks": missed,
+            # duration_s: the measured (flying) part; wall_s also holds the actors' start and close
+            "duration_s": round(float(res.stats.get("_timing", {}).get("mission_s", wall)), 1),
+            "wall_s": round(wall, 1), "startup_s": res.stats.get("_timing", {}).get("startup_s"),
+            "ticks": ticks, "missed_ticks": missed,
             "missed_ticks_pct": 100.0 * missed / max(ticks, 1), "camera_ticks": cam_ticks, "frames_analysed": analysed,
             "dropped_frames_pct": 100.0 * (cam_ticks - analysed) / max(cam_ticks, 1),
-            "cpu_pct": 100.0 * cpu / max(wall, 1e-9), "rss_mb": round(mem.peak["rss_mb"], 1),
+            "cpu_pct": 100.0 * cpu / max(wall, 1e-9),  # over wall_s, the span the CPU time was sampled over
+            "rss_mb": round(mem.peak["rss_mb"], 1),
             "pss_mb": round(mem.peak["pss_mb"], 1), "processes": mem.peak["processes"],
             "worker_processes": mem.peak.get("worker_processes", 0), "drones_per_node": per_node,
             "process_rows": mem.peak["rows"],
@@ -170,16 +174,21 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
               edge_nodes: int = 1) -> dict:
     from . import machine_info
 
+    from .progress import bench_progress
+
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
-    for k in groupings:
-        for n in sizes:
+    with bench_progress("bench fleet", total=len(groupings) * len(sizes)) as (progress, task):
+        for k, n in [(k, n) for k in groupings for n in sizes]:
+            progress.update(task, description=f"bench fleet N={n} k={k}")
             row = run_size(n, duration_s, k, edge_nodes)
             row["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
-            print(f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
-                  f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
-                  f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
-                  + (f"  per node {row['drones_per_node']}" if edge_nodes > 1 else ""), file=sys.stderr, flush=True)
+            progress.advance(task)
+            progress.console.print(
+                f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
+                f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
+                f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
+                + (f"  per node {row['drones_per_node']}" if edge_nodes > 1 else ""))
             rows.append(row)
     for r in rows:
         one = next((o for o in rows if o["drones"] == 1 and o["drones_per_actor"] == r["drones_per_actor"]), None)

@@ -190,8 +190,10 @@ def _peer(name: str, width: int, height: int, kind: str, stub_ms: float) -> tupl
 
 
 def interleaved(width: int, height: int, kind: str, duration_s: float, window_s: float, stub_ms: float,
-                record_dir: str | None, loads: list[float], layouts: tuple[str, ...] = ("colocated",)) -> dict:
+                record_dir: str | None, loads: list[float], layouts: tuple[str, ...] = ("colocated",),
+                on_round: Any = None) -> dict:
     """Every pipeline for ``duration_s`` seconds in round-robin windows of ``window_s`` (order rotated each round,
+    ``on_round()`` called after each round: the progress bar;
     one unmeasured warm-up window first for the peers). Returns ``{name: report}``; an unavailable pipeline's report
     is ``{"available": False, "reason": ...}``. When
     recording (``record_dir``), an unrecorded AeroDaaS runner joins the rotation (``framework_unrecorded``), so the
@@ -217,6 +219,8 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
             for name in order[k % len(order):] + order[:k % len(order)]:
                 loads.append(os.getloadavg()[0])
                 rows[name] += runners[name].window(min(window_s, duration_s - k * window_s))
+            if on_round is not None:
+                on_round()
     finally:
         for name in PEERS:
             if name in runners:
@@ -268,16 +272,22 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
     machine = machine_info()
     runtime.OPTIONS.progress = False
     runtime.ensure_ray()
+    from .progress import bench_progress
+
     results, loads = [], []
     record_dir = tempfile.mkdtemp(prefix="aerodaas-overhead-rec-") if record else None
+    rounds = max(1, math.ceil(duration_s / window_s))
     try:
-        for kind in kinds:
-            for wdt, hgt in resolutions:
-                rep = interleaved(wdt, hgt, kind, duration_s, window_s, stub_ms, record_dir, loads, layouts)
-                for layout in layouts:
-                    row = _row(wdt, hgt, kind, layout, rep)
-                    results.append(row)
-                    print(_line(row), file=sys.stderr, flush=True)
+        with bench_progress("bench overhead", total=len(kinds) * len(resolutions) * rounds) as (progress, task):
+            for kind in kinds:
+                for wdt, hgt in resolutions:
+                    progress.update(task, description=f"bench overhead {kind} {wdt}x{hgt}")
+                    rep = interleaved(wdt, hgt, kind, duration_s, window_s, stub_ms, record_dir, loads, layouts,
+                                      on_round=lambda: progress.advance(task))
+                    for layout in layouts:
+                        row = _row(wdt, hgt, kind, layout, rep)
+                        results.append(row)
+                        progress.console.print(_line(row))
     finally:
         runtime.shutdown_ray()
         if record_dir:

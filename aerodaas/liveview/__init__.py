@@ -1,0 +1,1 @@
+"""Live-view helpers around the foxglove-sdk WebSocket server (:mod:`aerodaas.live`)."""

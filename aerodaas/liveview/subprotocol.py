@@ -1,0 +1,156 @@
+"""Accept both Foxglove WebSocket subprotocol names in front of the foxglove-sdk server.
+
+The Foxglove WebSocket protocol was published as ``foxglove.websocket.v1`` (``@foxglove/ws-protocol``'s
+``FoxgloveClient.SUPPORTED_SUBPROTOCOL``, Foxglove's desktop/web app before the SDK) and is now served by
+foxglove-sdk under ``foxglove.sdk.v1`` (spec: https://github.com/foxglove/foxglove-sdk/blob/main/docs/spec/websocket/
+README.md). foxglove-sdk 0.30.3's server accepts only ``foxglove.sdk.v1``/``foxglove.sdk.v1.1`` and has no option to
+add a name (``foxglove.start_server`` takes none; the names are constants in its Rust core), so a client offering
+only ``foxglove.websocket.v1`` is answered HTTP 400 "Missing expected sec-websocket-protocol header".
+
+:class:`SubprotocolFront` listens on the user's address and forwards every TCP connection to the SDK server on a
+loopback port. Only the HTTP upgrade is touched (RFC 6455 section 4.1/4.2.2): when the client's
+``Sec-WebSocket-Protocol`` offers ``foxglove.websocket.v1`` and no ``foxglove.sdk.*`` name, ``foxglove.sdk.v1`` is
+offered to the SDK instead and the SDK's answer is renamed back to ``foxglove.websocket.v1``; every byte after the
+handshake passes through unchanged (the two names denote the same frames).
+"""
+from __future__ import annotations
+
+import re
+import socket
+import threading
+
+__all__ = ["LEGACY", "SDK", "SubprotocolFront"]
+
+LEGACY = "foxglove.websocket.v1"
+SDK = "foxglove.sdk.v1"
+_MAX_HEADER = 64 * 1024  # an HTTP upgrade request is a few hundred bytes; bound what we buffer
+_PROTO_LINE = re.compile(rb"(?im)^sec-websocket-protocol:[ \t]*([^\r\n]*)\r\n")
+
+
+def _read_header(sock: socket.socket) -> tuple[bytes, bytes]:
+    """Read up to the end of an HTTP header (``\\r\\n\\r\\n``) -> ``(header, rest)``; ``(b"", b"")`` on EOF/overflow."""
+    buf = b""
+    while b"\r\n\r\n" not in buf:
+        chunk = sock.recv(4096)
+        if not chunk or len(buf) > _MAX_HEADER:
+            return b"", b""
+        buf += chunk
+    i = buf.index(b"\r\n\r\n") + 4
+    return buf[:i], buf[i:]
+
+
+def rewrite_request(header: bytes) -> tuple[bytes, bool]:
+    """Offer ``foxglove.sdk.v1`` for a request that offers only ``foxglove.websocket.v1`` -> ``(header, renamed)``."""
+    m = _PROTO_LINE.search(header)
+    if m is None:
+        return header, False
+    offered = [p.strip() for p in m.group(1).decode("latin-1").split(",")]
+    if LEGACY not in offered or any(p.startswith("foxglove.sdk.") for p in offered):
+        return header, False
+    line = f"Sec-WebSocket-Protocol: {SDK}\r\n".encode()
+    return header[:m.start()] + line + header[m.end():], True
+
+
+def rewrite_response(header: bytes) -> bytes:
+    """Rename the SDK's chosen ``foxglove.sdk.v1`` back to ``foxglove.websocket.v1`` in its 101 answer."""
+    m = _PROTO_LINE.search(header)
+    if m is None or m.group(1).strip() != SDK.encode():
+        return header
+    return header[:m.start()] + f"Sec-WebSocket-Protocol: {LEGACY}\r\n".encode() + header[m.end():]
+
+
+def _pipe(src: socket.socket, dst: socket.socket) -> None:
+    try:
+        while True:
+            data = src.recv(65536)
+            if not data:
+                break
+            dst.sendall(data)
+    except OSError:
+        pass
+    finally:
+        for s in (dst, src):
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+
+class SubprotocolFront:
+    """Listen on ``host:port`` (0 = any free port) and forward to ``127.0.0.1:backend_port``, renaming the
+    subprotocol as the module docstring describes. ``port`` is the port bound. Raises ``OSError`` when the address
+    cannot be bound. :meth:`close` stops accepting and closes the connections it forwards."""
+
+    def __init__(self, host: str, port: int, backend_port: int) -> None:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._listen = socket.socket(family, socket.SOCK_STREAM)
+        self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self._listen.bind((host, port))
+        self._listen.listen(64)
+        self.port = int(self._listen.getsockname()[1])
+        self._backend = ("127.0.0.1", int(backend_port))
+        self._conns: list[socket.socket] = []
+        self._lock = threading.Lock()
+        self._closed = False
+        threading.Thread(target=self._accept, name="foxglove-front", daemon=True).start()
+
+    def _accept(self) -> None:
+        while not self._closed:
+            try:
+                client, _ = self._listen.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(client,), daemon=True).start()
+
+    def _serve(self, client: socket.socket) -> None:
+        try:
+            backend = socket.create_connection(self._backend, timeout=10)
+            backend.settimeout(None)
+        except OSError:
+            client.close()
+            return
+        with self._lock:
+            if self._closed:
+                client.close()
+                backend.close()
+                return
+            self._conns += [client, backend]
+        try:
+            client.settimeout(10)
+            header, rest = _read_header(client)
+            client.settimeout(None)
+            if not header:
+                raise OSError("no HTTP header")
+            header, renamed = rewrite_request(header)
+            backend.sendall(header + rest)
+            if renamed:
+                answer, rest = _read_header(backend)
+                if not answer:
+                    raise OSError("no HTTP answer")
+                client.sendall(rewrite_response(answer) + rest)
+        except OSError:
+            client.close()
+            backend.close()
+            return
+        threading.Thread(target=_pipe, args=(backend, client), daemon=True).start()
+        _pipe(client, backend)
+
+    def close(self) -> None:
+        """Stop listening and close every forwarded connection. Idempotent."""
+        self._closed = True
+        try:
+            self._listen.shutdown(socket.SHUT_RDWR)  # wakes the accept() of the other thread (Linux)
+        except OSError:
+            pass
+        try:
+            self._listen.close()
+        except OSError:
+            pass
+        with self._lock:
+            conns, self._conns = self._conns, []
+        for s in conns:
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            s.close()

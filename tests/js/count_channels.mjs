@@ -1,0 +1,49 @@
+// Foxglove's own client (@foxglove/ws-protocol) for tests/test_liveview_npm_client.py.
+// usage: node count_channels.mjs ws://HOST:PORT TIMEOUT_S [SUBSCRIBE_AFTER_MS]
+// Connects (retrying until the server listens), subscribes to every channel as it is advertised (after
+// SUBSCRIBE_AFTER_MS, default 0), counts messages per topic until the server closes the connection, then prints
+// {"protocol", "channels": {topic: {schemaName, encoding}}, "counts": {topic: n}, "statuses": [...]} as JSON.
+import wsProtocol from "@foxglove/ws-protocol";
+const { FoxgloveClient } = wsProtocol;
+import WebSocket from "ws";
+
+const [url, timeoutS, afterMs] = [process.argv[2], Number(process.argv[3] ?? 60), Number(process.argv[4] ?? 0)];
+const deadline = Date.now() + timeoutS * 1000;
+const out = { protocol: null, channels: {}, counts: {}, statuses: [], closed_by_server: false };
+
+function finish(code) {
+  process.stdout.write(JSON.stringify(out) + "\n");
+  process.exit(code);
+}
+setTimeout(() => finish(3), timeoutS * 1000).unref();
+
+function connect() {
+  const ws = new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+  let opened = false;
+  const client = new FoxgloveClient({ ws });
+  const subTopic = new Map();
+  client.on("open", () => { opened = true; out.protocol = ws.protocol; });
+  client.on("error", (e) => {
+    if (!opened && Date.now() < deadline) { setTimeout(connect, 200); return; }
+    out.statuses.push(`error: ${e?.message ?? e}`);
+  });
+  client.on("status", (s) => out.statuses.push(s.message));
+  client.on("advertise", (channels) => {
+    for (const ch of channels) {
+      out.channels[ch.topic] = { schemaName: ch.schemaName, encoding: ch.encoding };
+      out.counts[ch.topic] ??= 0;
+      const sub = () => subTopic.set(client.subscribe(ch.id), ch.topic);
+      if (afterMs > 0) setTimeout(sub, afterMs); else sub();
+    }
+  });
+  client.on("message", ({ subscriptionId }) => {
+    const t = subTopic.get(subscriptionId);
+    out.counts[t] = (out.counts[t] ?? 0) + 1;
+  });
+  client.on("close", () => {
+    if (!opened) return; // a refused connection: retried from "error"
+    out.closed_by_server = true;
+    finish(0);
+  });
+}
+connect();

@@ -1,0 +1,120 @@
+"""The live view as Foxglove's own client sees it (issue 27, item 1).
+
+The client is ``@foxglove/ws-protocol`` from npm (tests/js/count_channels.mjs; it offers only the subprotocol
+``foxglove.websocket.v1``). It connects before the run's first message, subscribes to every channel as it is
+advertised and counts messages per topic until the server closes; the counts must equal the recording's, channel for
+channel (``/mission/result`` included), for ``aerodaas run --live`` and ``aerodaas replay --live``. Skipped only when
+node/npm are missing or npm cannot install the client.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from aerodaas.live import LiveServer
+from aerodaas.recording import RecordedMessage
+
+from .test_live_and_foxglove import AERODAAS, APP, ENV, _start, _wait_for_url
+
+JS = Path(__file__).parent / "js"
+
+
+@pytest.fixture(scope="module")
+def node_client():
+    npm, node = shutil.which("npm"), shutil.which("node")
+    if not npm or not node:
+        pytest.skip("node/npm not installed")
+    if not (JS / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
+        try:
+            inst = subprocess.run([npm, "install", "--silent", "--no-audit", "--no-fund", "--prefer-offline",
+                                   "--fetch-retries=0", "--fetch-timeout=15000"], cwd=JS, capture_output=True,
+                                  text=True, timeout=180)
+        except subprocess.TimeoutExpired:
+            pytest.skip("npm install @foxglove/ws-protocol timed out (offline?)")
+        if inst.returncode != 0:
+            pytest.skip(f"npm install @foxglove/ws-protocol failed (offline?): {inst.stderr[-300:]}")
+
+    def start(url: str, timeout_s: float = 240, subscribe_after_ms: int = 0) -> subprocess.Popen:
+        return subprocess.Popen([node, str(JS / "count_channels.mjs"), url, str(timeout_s), str(subscribe_after_ms)],
+                                cwd=JS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return start
+
+
+def _finish(client: subprocess.Popen, timeout_s: float = 120) -> dict:
+    out, err = client.communicate(timeout=timeout_s)
+    assert client.returncode == 0, (client.returncode, out, err)
+    return json.loads(out)
+
+
+def _recorded_counts(path: Path) -> dict[str, int]:
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    counts = Counter({ch.topic: 0 for ch in summary.channels.values()})
+    for cid, n in summary.statistics.channel_message_counts.items():
+        counts[summary.channels[cid].topic] += n
+    return dict(counts)
+
+
+def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_every_message(node_client):
+    """In-process server: plan (latched) and frames published, then a client subscribes; it gets the plan's latest
+    message and, the channel being young, the frames it missed - offered as ``foxglove.websocket.v1``."""
+    srv = LiveServer("127.0.0.1:0", catchup_s=3600)
+    try:
+        for i in range(3):
+            srv.publish(RecordedMessage("/mission/plan", "aerodaas.MissionPlan", "jsonschema", b"{}", "json",
+                                        10 + i, json.dumps({"rev": i}).encode()))
+        for i in range(5):
+            srv.publish(RecordedMessage("/uav/state", "aerodaas.State", "jsonschema", b"{}", "json", 100 + i,
+                                        json.dumps({"i": i}).encode()))
+        client = node_client(srv.url, 60)
+        import time
+        t_end = time.monotonic() + 60
+        while srv.subscriptions < 2 and time.monotonic() < t_end:
+            time.sleep(0.05)
+    finally:
+        srv.stop(linger_s=1.0)
+    got = _finish(client)
+    assert got["protocol"] == "foxglove.websocket.v1", got
+    assert got["counts"] == {"/mission/plan": 3, "/uav/state": 5}, got
+
+
+@pytest.mark.e2e
+def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_client(node_client, tmp_path):
+    (tmp_path / "live.json").write_text(json.dumps(ENV))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(tmp_path / "live.json")))
+    rec = tmp_path / "run.mcap"
+    p, lines = _start([*AERODAAS, "run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"])
+    try:
+        url, _ = _wait_for_url(p, lines, "live view at")
+        client = node_client(url, 300)
+        got = _finish(client, 320)
+        assert p.wait(timeout=240) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+    recorded = _recorded_counts(rec)
+    print("run --live per-channel counts (npm client / recording):",
+          {t: (got["counts"].get(t), n) for t, n in sorted(recorded.items())})
+    assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"], got
+    assert "/mission/result" in recorded
+    assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
+    assert not [s for s in got["statuses"] if "Unknown channel" in s], got["statuses"]
+
+    p, lines = _start([*AERODAAS, "replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"])
+    try:
+        url, _ = _wait_for_url(p, lines, "serving", timeout_s=60)
+        got = _finish(node_client(url, 300), 320)
+        assert p.wait(timeout=60) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+    print("replay --live per-channel counts:", got["counts"])
+    assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"]
+    assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
