@@ -206,8 +206,10 @@ class AnalyticsSchedulerConfig(_Cfg):
             path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
                 else Path(self.workload)
             try:
-                data = json.loads(Path(path).read_text())
-            except (OSError, json.JSONDecodeError) as e:
+                from .jsonfile import read_json
+
+                data = read_json(path)
+            except (OSError, ValueError) as e:
                 raise ConfigError(f"analytics_scheduler.workload: cannot read {str(path)!r}: {e}") from None
         models = {}
         for name, v in self.models.items():
@@ -411,10 +413,14 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"environment file {str(p)!r} not found")
+    from .jsonfile import JsonFileError, read_json
+
     try:
-        data = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"environment file {p}: invalid JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+        data = read_json(p)
+    except JsonFileError as e:
+        raise ConfigError(f"environment file {e}") from None
+    except OSError as e:
+        raise ConfigError(f"environment file {str(p)!r}: cannot read ({e.strerror or e})") from None
     return parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
 
 
