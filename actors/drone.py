@@ -399,7 +399,12 @@ class DroneComponent:
                 if not v.in_air:
                     fsm.transition(S.LANDING, t)
                 return False
-            if math.hypot(pos[0], pos[1]) <= 0.5:
+            path = getattr(self, "_rtl_path", None)
+            if path and len(path) > 1 and math.hypot(pos[0] - path[0][0], pos[1] - path[0][1]) <= 0.5:
+                path.pop(0)  # the next leg of the path around the exclusion zones
+                v.goto(path[0], self.gate.max_speed)
+                self._event("rtl_leg", target=list(path[0]), legs_left=len(path))
+            elif math.hypot(pos[0], pos[1]) <= 0.5:
                 v.land()
                 fsm.transition(S.LANDING, t)
                 self._event("landing", reason="return to launch")
@@ -735,11 +740,29 @@ class DroneComponent:
         self.active_wp, self.hold_until = None, None
         if self.fsm.state == S.TRACKING:
             self._event("tracking_ended")
-        self._backend_rtl = bool(self.backend.return_to_launch())
+        from aerodaas.navigation.rtl import plan_return
+
+        alt = min(max(pos[2], self.cfg.takeoff_altitude), self.gate.max_alt)
+        try:
+            vel = tuple(float(c) for c in self.backend.velocity)
+        except Exception:  # noqa: BLE001 - a backend without a velocity estimate: planned from rest
+            vel = (0.0, 0.0, 0.0)
+        path, why = plan_return(self.gate, pos, vel, alt)
+        if path is None:  # no safe path home: land in place (a failsafe never crosses an exclusion zone)
+            self._rtl_path = None
+            self.backend.land()
+            self.fsm.transition(S.LANDING, t)
+            self._event("landing", reason=f"return to launch impossible: {why}; landing in place")
+            return
+        # the autopilot's own RTL flies straight home: only when the straight leg is the planned path
+        straight = len(path) == 2
+        self._backend_rtl = bool(straight and self.backend.return_to_launch())
+        self._rtl_path = [(x, y, alt) for x, y in path[1:]]
         if not self._backend_rtl:
-            self.backend.goto((0.0, 0.0, max(pos[2], self.cfg.takeoff_altitude)))
+            self.backend.goto(self._rtl_path[0], self.gate.max_speed)
         self.fsm.transition(S.RETURNING, t)
-        self._event("returning", home=[0.0, 0.0], by="autopilot" if self._backend_rtl else "aerodaas")
+        self._event("returning", home=[0.0, 0.0], by="autopilot" if self._backend_rtl else "aerodaas",
+                    path=[list(p) for p in self._rtl_path])
 
     def _reject(self, t: float, item: Any, err: SafetyViolation) -> None:
         """A command outside the safety limits: never sent to the backend; dropped from the queue and recorded."""

@@ -24,13 +24,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     # everything the command line names is checked before Ray starts (exit 2, naming the bad input)
     try:
+        for flag, v in (("--record", args.record), ("--env", args.env)):
+            if v is not None and not v.strip():
+                raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
         if args.record:
             from .recording import check_record_path
 
             check_record_path(args.record)
-        for flag, v, hi in (("--speedup", args.speedup, 1000.0), ("--timeout", args.timeout, 1e7)):
-            if v is not None and not (v > 0 and v <= hi):  # NaN fails both comparisons
-                raise ValueError(f"{flag} must be a number within (0, {hi:g}], got {v!r}")
+        from .config import MAX_SPEEDUP, MIN_SPEEDUP
+
+        for flag, v, lo, hi in (("--speedup", args.speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", args.timeout, 0.0, 1e7)):
+            if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
+                raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
         if args.env:
             from .config import load_environment_config
 

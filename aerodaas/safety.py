@@ -67,9 +67,13 @@ class SafetyGate:
 
         self.cfg = safety
         self.home = home
-        self.max_alt = float(safety.max_altitude if safety.max_altitude is not None else limits.max_altitude)
+        # one limit set: the effective limit is the minimum of every configured one (limits.*, safety.*); the
+        # waypoint's own speed can only lower it further (check_waypoint)
+        self.max_alt = min(float(limits.max_altitude), float(safety.max_altitude if safety.max_altitude is not None
+                                                              else math.inf))
         self.min_alt = float(safety.min_altitude)
-        self.max_speed = float(safety.max_speed if safety.max_speed is not None else limits.max_speed)
+        self.max_speed = min(float(limits.max_speed), float(safety.max_speed if safety.max_speed is not None
+                                                            else math.inf))
         self.max_vspeed = float(limits.max_vertical_speed)
         self.clamp = safety.on_violation == "clamp"
         self.accel = float(limits.max_acceleration)
@@ -86,9 +90,13 @@ class SafetyGate:
 
         With ``from_position`` (local ENU metres), the leg from there to the waypoint is also checked against
         the geofence; with ``velocity`` too (ENU m/s, the vehicle's now), the predicted turn towards the waypoint
-        and the stopping distance from every point of it (see the module docstring)."""
+        and the stopping distance from every point of it (see the module docstring). A waypoint without its own
+        ``speed`` gets the effective ``max_speed`` (the minimum of ``limits.max_speed`` and ``safety.max_speed``):
+        otherwise a backend would fly it at its own default, the robot's ``limits.max_speed``."""
         x, y, z = wp.to_local(self.home)
         upd: dict[str, Any] = {}
+        if wp.speed is None:
+            wp = wp.model_copy(update={"speed": self.max_speed})
         if z > self.max_alt or z < self.min_alt:
             if not self.clamp:
                 self.rejected += 1
@@ -196,7 +204,8 @@ class SafetyGate:
         return cmd
 
     def check_takeoff(self, altitude: float) -> float:
-        """The take-off target altitude (m above home) through the same limits: above ``max_altitude`` it is
+        """The take-off target altitude (m above home) through the same limits: above the effective ``max_altitude``
+        (the minimum of ``limits.max_altitude`` and ``safety.max_altitude``) it is
         rejected (or clamped to it when clamping); it must be > 0. Returns the altitude to fly."""
         if not (math.isfinite(altitude) and altitude > 0):
             self.rejected += 1

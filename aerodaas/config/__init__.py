@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from .base import (ConfigError, DATA_DIR_ENV, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH,
                    MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP,
-                   MAX_SPEED_MPS, MAX_YAW_RATE_DPS, did_you_mean, _Cfg)  # noqa: F401
+                   MAX_SPEED_MPS, MAX_YAW_RATE_DPS, MIN_PHYSICS_HZ, MIN_SPEEDUP, MAX_GROUND_PX, MAX_SEED,
+                   did_you_mean, _Cfg)  # noqa: F401
 from .robot import (BACKENDS_WITH_CAMERA, BatteryConfig, CAMERA_SOURCES, Limits, MavlinkConfig, NoiseConfig,
                     ReplayConfig, RobotConfig, SENSOR_PROPERTIES, SafetyConfig, SensorConfig, TelloConfig)  # noqa: F401
 from .environment import (AnalyticsQosConfig, AnalyticsSchedulerConfig, ComputeConfig, EnvironmentConfig,

@@ -14,7 +14,8 @@ from pydantic import BaseModel, Field, Strict, ValidationError, field_validator,
 
 from ..geofence import GeofenceConfig
 
-from .base import ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, did_you_mean
+from .base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
+                   MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
 from .robot import RobotConfig, SensorConfig
 
 
@@ -57,8 +58,16 @@ class GroundConfig(_Cfg):
     image: str | None = None
     metres_per_pixel: float = Field(default=0.05, gt=0, le=100_000)
     home_px: Annotated[tuple[float, float], Strict(False)] | None = None
-    seed: int = 0
+    seed: int = Field(default=0, ge=0, le=MAX_SEED)
     size_m: float = Field(default=120.0, gt=0, le=100_000, description="procedural ground side length, metres")
+
+    @model_validator(mode="after")
+    def _bounded_texture(self) -> "GroundConfig":
+        if self.image is None and self.size_m / self.metres_per_pixel > MAX_GROUND_PX:
+            raise ValueError(f"size_m / metres_per_pixel = {self.size_m:g} / {self.metres_per_pixel:g} = "
+                             f"{self.size_m / self.metres_per_pixel:.4g} px per side, above {MAX_GROUND_PX} (the ground "
+                             f"texture would not fit in memory): use a larger metres_per_pixel")
+        return self
 
 
 class TargetPathPoint(_Cfg):
@@ -107,11 +116,13 @@ class WorldConfig(_Cfg):
 
 class SimulationConfig(_Cfg):
     """Simulation clock: ``speedup`` x real time; ``lockstep`` makes sim time wait for analytics to consume each
-    frame; ``physics_hz`` is the integration rate."""
+    frame; ``physics_hz`` is the integration rate. Bounds: ``speedup`` in [MIN_SPEEDUP, MAX_SPEEDUP] = [0.01, 1000];
+    ``physics_hz`` in [MIN_PHYSICS_HZ, MAX_RATE_HZ] = [10, 1000] Hz (a coarser step than the 0.1 s control period is
+    not covered by the safety gate's envelope model)."""
 
-    speedup: float = Field(default=1.0, gt=0, le=MAX_SPEEDUP)
+    speedup: float = Field(default=1.0, ge=MIN_SPEEDUP, le=MAX_SPEEDUP)
     lockstep: bool = False
-    physics_hz: float = Field(default=50.0, gt=0, le=MAX_RATE_HZ)
+    physics_hz: float = Field(default=50.0, ge=MIN_PHYSICS_HZ, le=MAX_RATE_HZ)
 
 
 class HitlConfig(_Cfg):
@@ -195,8 +206,10 @@ class AnalyticsSchedulerConfig(_Cfg):
             path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
                 else Path(self.workload)
             try:
-                data = json.loads(Path(path).read_text())
-            except (OSError, json.JSONDecodeError) as e:
+                from .jsonfile import read_json
+
+                data = read_json(path)
+            except (OSError, ValueError) as e:
                 raise ConfigError(f"analytics_scheduler.workload: cannot read {str(path)!r}: {e}") from None
         models = {}
         for name, v in self.models.items():
@@ -435,10 +448,14 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"environment file {str(p)!r} not found")
+    from .jsonfile import JsonFileError, read_json
+
     try:
-        data = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"environment file {p}: invalid JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+        data = read_json(p)
+    except JsonFileError as e:
+        raise ConfigError(f"environment file {e}") from None
+    except OSError as e:
+        raise ConfigError(f"environment file {str(p)!r}: cannot read ({e.strerror or e})") from None
     return parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
 
 

@@ -43,7 +43,7 @@ class NoiseConfig(_Cfg):
 
     gps_std_m: float = Field(default=0.0, ge=0, le=1000)
     velocity_std_mps: float = Field(default=0.0, ge=0, le=MAX_SPEED_MPS)
-    seed: int = 0
+    seed: int = Field(default=0, ge=0, le=2**32 - 1)
 
 
 class SafetyConfig(_Cfg):

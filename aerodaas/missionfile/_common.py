@@ -22,11 +22,12 @@ def _read_text(path: Path) -> str:
         data = path.read_bytes()
     except OSError as e:
         raise MissionFileError(f"{path}: cannot read mission file ({e.strerror or e})") from e
+    from aerodaas.config.jsonfile import JsonFileError, decode_text
+
     try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise MissionFileError(f"{path}: not UTF-8 text (byte {e.start}: {data[e.start:e.start + 1]!r})") from e
-    return text
+        return decode_text(data, str(path))
+    except JsonFileError as e:
+        raise MissionFileError(str(e)) from None
 
 
 def _is_number(v: Any) -> bool:

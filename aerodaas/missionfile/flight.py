@@ -165,8 +165,9 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
                 if cmd in PAYLOAD_COMMANDS else ""
             raise _fail(src, tag, f"{command_name(cmd)} is not supported by AeroDaaS navigation{hint}")
 
-    ids = [w.id for w in waypoints]
-    dup = sorted({i for i in ids if ids.count(i) > 1})
+    from collections import Counter
+
+    dup = sorted(i for i, n in Counter(w.id for w in waypoints).items() if n > 1)  # linear (ids.count was quadratic)
     if dup:
         raise _fail(src, "items", f"duplicate sequence numbers give duplicate waypoint ids {dup}")
     if check_geofence and not plan.geofence.is_empty and waypoints:

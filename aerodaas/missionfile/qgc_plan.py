@@ -46,10 +46,12 @@ def _complex_item_count(raw: dict[str, Any]) -> int:
 
 
 def _parse_plan(text: str, src: str) -> MissionPlan:
+    from aerodaas.config.jsonfile import JsonFileError, parse_json
+
     try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise MissionFileError(f"{src}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
+        doc = parse_json(text, src)
+    except JsonFileError as e:
+        raise MissionFileError(str(e)) from None
     if not isinstance(doc, dict):
         raise _fail(src, "top level", f"expected a JSON object, got {type(doc).__name__}")
     if doc.get("fileType") != "Plan":
