@@ -1,5 +1,5 @@
-"""What every actor of a run shares: a :class:`~.host.Host` (its components and the routes between actors), built
-from the plan's spec by :class:`~.components.HostRuntime`, and the calls the driver makes on it.
+"""What every actor of a run shares: a :class:`~.dataplane.DataPlane` (its components and the routes between actors), built
+from the plan's spec by :class:`~.assembly.ActorAssembly`, and the calls the driver makes on it.
 
 An actor gets its whole spec and wiring (routes, locations, peers by Ray actor name) in its constructor, so when
 Ray restarts it (``max_restarts``) it rebuilds itself: the constructor sees
@@ -15,9 +15,9 @@ from typing import Any
 
 import ray
 
-from aerodaas.messages import Delivery
+from aerodaas.runtime.messages import Delivery
 
-from .host import Host
+from aerodaas.actors.dataplane import DataPlane
 
 
 def restarted_actor() -> bool:
@@ -42,7 +42,7 @@ def _recorder_name(name: str) -> str:
 
 class ActorBase:
     """Plain base of the run's Ray actors (see the module docstring). ``spec``: the actor's part of the plan
-    (:class:`aerodaas.dataflow.ActorPlan.spec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
+    (:class:`aerodaas.runtime.dataflow.ActorPlan.spec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
     None: read them from the run's recorder actor (how the runtime starts them)."""
 
     def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None, lockstep: bool = False,
@@ -51,13 +51,13 @@ class ActorBase:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
             # to move on by up to 5 ms; the actors are latency-bound, not throughput-bound
             sys.setswitchinterval(switch_interval_s)
-        if spec is None:  # the run's recorder actor keeps every actor's spec (see aerodaas.supervise.start_actors)
+        if spec is None:  # the run's recorder actor keeps every actor's spec (see aerodaas.runtime.supervise.start_actors)
             from ray import cloudpickle
 
             spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
             spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
-        self.host = Host(host_id, tier, int(spec.get("epoch_ns", 0)), lockstep, workers)
+        self.host = DataPlane(host_id, tier, int(spec.get("epoch_ns", 0)), lockstep, workers)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None
@@ -79,7 +79,7 @@ class ActorBase:
     def _serve_channel(self, host_id: str, key: bytes) -> Any:
         """This actor's :class:`~.channel.ChannelServer`, or None when its address cannot be served (peers then
         reach this actor through Ray calls)."""
-        from .channel import ChannelServer, channel_address
+        from aerodaas.actors.channel import ChannelServer, channel_address
 
         try:
             return ChannelServer(channel_address(key, host_id), key, self.host.deliver,
@@ -94,10 +94,10 @@ class ActorBase:
 
     def setup(self) -> dict:
         """Create this actor's components (drones connect to their vehicles here). Returns :meth:`describe`."""
-        from .host_runtime import HostRuntime
+        from aerodaas.actors.assembly import ActorAssembly
 
         if self.runtime is None:
-            self.runtime = HostRuntime(self.host, self.spec)
+            self.runtime = ActorAssembly(self.host, self.spec)
             self.host.watch_gc()
         return self.describe()
 
@@ -113,7 +113,7 @@ class ActorBase:
     pid = ping
 
     def deliver(self, d: Delivery) -> list:
-        """A message from another actor for one of this actor's components (see :meth:`.host.Host.deliver`)."""
+        """A message from another actor for one of this actor's components (see :meth:`.host.DataPlane.deliver`)."""
         return self.host.deliver(d)
 
     def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
+from aerodaas.runtime.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
 
-from .host import Component, Host
+from aerodaas.actors.dataplane import Component, DataPlane
 
 
 class AnalyticsComponent(Component):
@@ -20,7 +20,7 @@ class AnalyticsComponent(Component):
 
     kind = "analytics"
 
-    def __init__(self, host: Host, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, host: DataPlane, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
                  buffer: int = 1) -> None:
         super().__init__(host, cid, buffer)
         self.name = name
@@ -106,7 +106,7 @@ class AnalyticsComponent(Component):
         tb = traceback.format_exc()
         self.last_failure = f"{type(e).__name__}: {e}"
         if self.failures <= 5 or self.failures % 100 == 0:
-            logging.getLogger("aerodaas.analytics").error("analytics %r failed on item %d (%d failures so far):\n%s",
+            logging.getLogger("aerodaas.analytics.core").error("analytics %r failed on item %d (%d failures so far):\n%s",
                                                           self.name, self.processed + self.failures, self.failures, tb)
         robot = msg.robot
         if self.recorder is not None:
@@ -177,7 +177,7 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
     only counted. Every task's outcome is recorded on ``/<robot>/<name>/tasks``. The mailbox only hands frames to the
     scheduler (microseconds), so it never drops: dropping is the scheduler's decision, with its reason."""
 
-    def __init__(self, host: Host, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, host: DataPlane, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
                  service: "AnalyticsSchedulingService") -> None:
         super().__init__(host, cid, name, analytics, recorder, epoch_ns, buffer=256)
         self.service = service
@@ -260,7 +260,7 @@ class AnalyticsSchedulingService:
     application's own scheduler is registered), "workload" (Workload), "executors" ([CloudExecutorActor handles], may be empty),
     "network" ([NetworkModel specs]), "jpeg_quality", "seed"}``."""
 
-    def __init__(self, host: Host, spec: dict) -> None:
+    def __init__(self, host: DataPlane, spec: dict) -> None:
         self.host = host
         self.spec = spec
         self.name = spec["name"]

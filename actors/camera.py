@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.messages import FrameMsg
-from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
+from aerodaas.runtime.messages import FrameMsg
+from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
 
-from .host import Cascade, Host
+from aerodaas.actors.dataplane import Cascade, DataPlane
 
 
 class CameraComponent:
@@ -24,7 +24,7 @@ class CameraComponent:
 
     kind = "camera"
 
-    def __init__(self, host: Host, cid: str, robot_id: str, sensor_id: str, props: dict, world: Any,
+    def __init__(self, host: DataPlane, cid: str, robot_id: str, sensor_id: str, props: dict, world: Any,
                  backend: Any, recorder: Any, epoch_ns: int) -> None:
         self.host, self.cid = host, cid
         self.robot_id, self.sensor_id = robot_id, sensor_id

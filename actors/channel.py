@@ -10,7 +10,7 @@ and restarts:
 * the frame's pixels are copied once into a **shared-memory slot** (POSIX shared memory,
   :class:`multiprocessing.shared_memory.SharedMemory`) owned by the sending actor, which the receiver maps and reads
   in place (a read-only (H, W, 3) uint8 BGR ``ndarray`` over the slot; no copy on the receiving side);
-* the message itself (a :class:`~aerodaas.messages.Delivery`, small) travels on a **persistent, authenticated Unix
+* the message itself (a :class:`~aerodaas.runtime.messages.Delivery`, small) travels on a **persistent, authenticated Unix
   socket** (:mod:`multiprocessing.connection`: HMAC challenge with the run's key both ways), and the outputs bound
   for the sender (detections, navigation) come back on the same socket as soon as the receiver is done — no Ray
   task submission per frame in either direction;
@@ -46,7 +46,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.messages import Delivery, FrameMsg, Message, Port
+from aerodaas.runtime.messages import Delivery, FrameMsg, Message, Port
 
 __all__ = ["channel_address", "SlotFrame", "ChannelSend", "ChannelDone", "SlotFree", "ChannelServer",
            "ChannelOutlet"]
@@ -134,7 +134,7 @@ def _attach(name: str) -> SharedMemory:
 class ChannelServer:
     """The receiving end of every channel into one actor: listens on :func:`channel_address`, authenticates each
     sender with the run's key and serves it on a thread of its own. ``deliver(d) -> replies`` is the actor's
-    :meth:`~.host.Host.deliver`; it runs in the connection's thread (as a Ray actor call runs in one of the actor's
+    :meth:`~.dataplane.DataPlane.deliver`; it runs in the connection's thread (as a Ray actor call runs in one of the actor's
     threads). Raises OSError if the address is taken (another live process serves it)."""
 
     def __init__(self, address: str, key: bytes, deliver: Callable[[Delivery], list],
@@ -290,7 +290,7 @@ class _Slot:
 
 class ChannelOutlet:
     """The sending end of an edge to component ``cid`` of a peer actor on the same machine, over that peer's
-    channel (the same interface as :class:`~.host.RemoteOutlet`: :meth:`send`, :meth:`stats`).
+    channel (the same interface as :class:`~.dataplane.RemoteOutlet`: :meth:`send`, :meth:`stats`).
 
     At most ``buffer`` deliveries are in flight (sent, not yet answered); a new one beyond that is dropped and
     counted, as a busy consumer's mailbox would. Frames go through at most ``max_slots`` shared-memory slots of

@@ -13,7 +13,7 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
-from aerodaas.fsm import MissionState as S
+from aerodaas.navigation.fsm import MissionState as S
 
 _SEQ = itertools.count(1)
 

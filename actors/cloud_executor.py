@@ -23,7 +23,7 @@ from typing import Any, Mapping
 from aerodaas.schedulers.dispatch.banks import AnalyticsBank, DetectorBank
 from aerodaas.schedulers.dispatch.payload import frame_from_payload
 
-from .remote import LazyActorClass, where
+from aerodaas.actors.remote import LazyActorClass, where
 
 __all__ = ["CloudExecutor", "CloudExecutorActor", "cloud_selector", "start_cloud_executors"]
 
@@ -43,7 +43,7 @@ class CloudExecutor:
     s of the model's execution), ``result`` (real mode: list of detections), ``ready`` (epoch s), ``error``.
 
     ``detector_for``/``detector_kwargs`` as in :class:`OnnxEdgeExecutor` (real mode only). ``analytics`` (real mode):
-    model name -> an application's :class:`~aerodaas.analytics.Analytics`, run instead of the ONNX detectors (a copy
+    model name -> an application's :class:`~aerodaas.analytics.core.Analytics`, run instead of the ONNX detectors (a copy
     per thread, ``process(frame, meta)`` with the request's ``meta``: the scheduled analytics of a running app).
     Wrapped as the Ray actor
     :data:`CloudExecutorActor`; also usable in-process (tests, single-process experiments).

@@ -2,9 +2,9 @@
 hover timers, failsafes), navigation executor, and its odometry and stat-stream sensors (their data is the
 vehicle state itself).
 
-It lives in the edge host (:mod:`aerodaas.actors.host`): the host's clock thread calls :meth:`step` and
+It lives in the edge host (:mod:`aerodaas.actors.dataplane`): the host's clock thread calls :meth:`step` and
 :meth:`control_tick`; the trajectory scheduler calls :meth:`nudge` when new navigation arrives so that it is
-applied at once. Every command passes the robot's :class:`~aerodaas.safety.SafetyGate` right before it reaches
+applied at once. Every command passes the robot's :class:`~aerodaas.navigation.safety.SafetyGate` right before it reaches
 the backend (the one choke point). The backend is whatever ``robots[].backend`` names: the embedded simulator,
 a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
 
@@ -21,10 +21,10 @@ from typing import Any
 
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
-from aerodaas.fsm import MissionFSM, MissionState as S
-from aerodaas.messages import OdometryMsg, StatMsg
-from aerodaas.models import ActionCommand, VelocityCommand, Waypoint
-from aerodaas.safety import SafetyGate, SafetyViolation
+from aerodaas.navigation.fsm import MissionFSM, MissionState as S
+from aerodaas.runtime.messages import OdometryMsg, StatMsg
+from aerodaas.app.models import ActionCommand, VelocityCommand, Waypoint
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 from aerodaas.actors.drone_autopilot import AutopilotFlight
 

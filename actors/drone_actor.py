@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import ray
 
-from .actor_base import ActorBase
+from aerodaas.actors.actor_base import ActorBase
 
 
 @ray.remote(num_cpus=0, max_concurrency=32)
@@ -23,7 +23,7 @@ class DroneActor(ActorBase):
     """See the module docstring. Methods beyond :class:`~.actor_base.ActorBase`: :meth:`run`, :meth:`checkpoint`."""
 
     def on_restart(self) -> None:
-        from .checkpoint import restore_drone
+        from aerodaas.actors.checkpoint import restore_drone
 
         self.setup()
         rec = self.host.peer("recorder")
@@ -39,6 +39,6 @@ class DroneActor(ActorBase):
 
     def checkpoint(self) -> dict:
         """Robot id -> its current checkpoint (see :mod:`.checkpoint`)."""
-        from .checkpoint import drone_checkpoint
+        from aerodaas.actors.checkpoint import drone_checkpoint
 
         return {d.cfg.id: drone_checkpoint(d) for d in self.runtime.drones}

@@ -1,9 +1,9 @@
 """The run's MCAP writer, living in the edge host process (no extra Ray worker, no copy of the frames).
 
 Every component hands it messages with non-blocking calls; a writer thread JPEG-encodes frames and writes
-everything through :class:`aerodaas.recording.McapRecorder` (zstd chunks, flushed as chunks complete and at
+everything through :class:`aerodaas.recording.writer.McapRecorder` (zstd chunks, flushed as chunks complete and at
 least every ``flush_every_s`` seconds, so a crash loses at most the last couple of seconds). With a live view
-(``aerodaas run --live``) the same writer also feeds a :class:`aerodaas.live.LiveServer`: every message is
+(``aerodaas run --live``) the same writer also feeds a :class:`aerodaas.liveview.server.LiveServer`: every message is
 serialized once and goes to the file and to the Foxglove WebSocket clients.
 
 Components on other hosts (analytics deployed on cloud compute) record through a :class:`RemoteRecorder`, which
@@ -13,7 +13,7 @@ Frames of reference written for Foxglove's transform tree (on ``/tf``, with ever
 that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the vehicle's pose),
 ``<robot>/base_link`` -> ``<robot>/gps`` (the GPS antenna, at the body origin) and ``<robot>/base_link`` ->
 ``<robot>/<camera>`` (each camera's optical frame, pitched by its mount, see
-:func:`aerodaas.recording.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
+:func:`aerodaas.recording.writer.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
 on ``<image topic>/calibration`` with the camera's intrinsics.
 
 A failing disk (full, I/O error, gone) stops the recording cleanly instead of killing the writer thread: the file
@@ -21,7 +21,7 @@ is cut back to the last record boundary the OS accepted and finished if the disk
 stays unfinished, readable by ``aerodaas info`` and made whole by ``aerodaas recover``); the failure is reported
 to ``on_failure`` callbacks (the drones record it as a ``recording_failed`` event) and in :meth:`report`, and every
 message offered afterwards is counted as lost. ``AERODAAS_FAULT_RECORDER=enospc:N`` (or ``eio:N``) injects that
-failure once N bytes have been written (the fault suite of :mod:`aerodaas.reliability`).
+failure once N bytes have been written (the fault suite of :mod:`aerodaas.reliability.catalogue`).
 """
 from __future__ import annotations
 
@@ -35,8 +35,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.messages import RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson, RecordOdometry
-from aerodaas.recording import McapRecorder, camera_mount_quaternion
+from aerodaas.runtime.messages import RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson, RecordOdometry
+from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 
 TF_TOPIC = "/tf"
 
@@ -45,7 +45,7 @@ class RecorderService:
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
     telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
-    ``recorder_jpeg_encoded`` in ``copies`` (the host's :class:`~.host.FrameCopies`) when given. All methods are
+    ``recorder_jpeg_encoded`` in ``copies`` (the host's :class:`~.dataplane.FrameCopies`) when given. All methods are
     thread-safe and return at once."""
 
     def __init__(self, path: str | None, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
@@ -56,7 +56,7 @@ class RecorderService:
         #: the live Foxglove WebSocket server (``live`` = its HOST:PORT), fed by the same writer
         self.live = None
         if live is not None:
-            from aerodaas.live import LiveServer
+            from aerodaas.liveview.server import LiveServer
 
             try:
                 self.live = LiveServer(live, name="aerodaas run")
@@ -216,7 +216,7 @@ class RecorderService:
         finished = False
         try:
             os.truncate(rec.path, durable)  # the file ends at a complete record: an unfinished but valid MCAP
-            from aerodaas.recover import recover_mcap
+            from aerodaas.recording.recover import recover_mcap
 
             info["messages_in_file"] = recover_mcap(rec.path)["messages"]  # finished and indexed, if the disk
             finished = True  # still takes it
@@ -262,7 +262,7 @@ class RemoteRecorder:
     non-blocking producer calls as :class:`RecorderService` (``detections``, ``json``, ``odometry``, ``camera``;
     frames are not sent), batched and delivered to the recorder of host ``target`` (the edge host) through its
     ``record`` actor method, at most every ``period_s`` seconds from a background thread. :meth:`close` delivers
-    what is left and waits for it. ``host`` is this process's :class:`~.host.Host` (its ``peers`` are known once
+    what is left and waits for it. ``host`` is this process's :class:`~.dataplane.DataPlane` (its ``peers`` are known once
     the hosts are connected).
     Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages)."""
 
@@ -317,7 +317,7 @@ class RemoteRecorder:
     def _send(self) -> None:
         import ray
 
-        from .host import encode_frame
+        from aerodaas.actors.dataplane import encode_frame
 
         with self._lock:
             batch, self._buf = self._buf, []
@@ -371,7 +371,7 @@ class RemoteRecorder:
 
 def deliver(recorder: Any, batch: list[RecordItem]) -> int:
     """Hand a :class:`RemoteRecorder` batch to ``recorder`` (the run's :class:`RecorderService`); returns the
-    number of items. Raises TypeError for anything that is not a :class:`~aerodaas.messages.RecordItem`."""
+    number of items. Raises TypeError for anything that is not a :class:`~aerodaas.runtime.messages.RecordItem`."""
     for item in batch:
         if not isinstance(item, RecordItem):
             raise TypeError(f"remote recorder: {type(item).__name__} is not a RecordItem")

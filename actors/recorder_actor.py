@@ -36,7 +36,7 @@ class RecorderActor:
     def setup(self) -> dict:
         """Open the file and the live view. Raises what :class:`~.recorder.RecorderService` raises (a bad path,
         a busy live port)."""
-        from .recorder import RecorderService
+        from aerodaas.actors.recorder import RecorderService
 
         rec = self.spec.get("record")
         with self._setup_lock:
@@ -56,7 +56,7 @@ class RecorderActor:
     def record(self, batch: list) -> int:
         """Messages of another actor (:class:`~.recorder.RemoteRecorder`); returns how many were taken. The other
         actors set up while this one does: their first messages wait (at most 60 s) for the file to be open."""
-        from .recorder import deliver
+        from aerodaas.actors.recorder import deliver
 
         self._set_up.wait(60.0)
         self.received += len(batch)

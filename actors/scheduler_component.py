@@ -8,29 +8,29 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig
-from aerodaas.messages import Message, Port
-from aerodaas.models import AeroNavigation, Waypoint
-from aerodaas.safety import SafetyViolation
+from aerodaas.runtime.messages import Message, Port
+from aerodaas.app.models import AeroNavigation, Waypoint
+from aerodaas.navigation.safety import SafetyViolation
 
-from .host import Component, Host, percentiles as _percentiles
+from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
 
 
 class SchedulerComponent(Component):
     """Hosts one robot's trajectory scheduler (the paper's INavigate plug-in) and its waypoint priority queue.
 
     The drone calls :meth:`tick` / :meth:`complete` / :meth:`discard` directly (same host, no actor hop);
-    analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.messages.Port` (optionally
+    analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.runtime.messages.Port` (optionally
     ``replace``); users add navigation
     through :meth:`add_navigation` (the HITL API). Everything added is checked by the robot's
-    :class:`~aerodaas.safety.SafetyGate` first (all items or none). New navigation nudges the drone, which applies
+    :class:`~aerodaas.navigation.safety.SafetyGate` first (all items or none). New navigation nudges the drone, which applies
     it at once; the per-frame latency (frame ready -> command applied to the vehicle) is measured here. The
     waypoint plan is recorded on ``/<robot>/mission/plan`` at start and whenever the queued waypoints change."""
 
     kind = "scheduler"
 
-    def __init__(self, host: Host, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, host: DataPlane, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
                  robot_cfg: dict | None = None) -> None:
-        from aerodaas.safety import SafetyGate
+        from aerodaas.navigation.safety import SafetyGate
 
         super().__init__(host, cid, buffer=4)
         self.robot_id = robot_id

@@ -6,15 +6,15 @@ The public API (paper Table 2, Python style) is importable from here::
 """
 __version__ = "0.1.0"
 
-from .analytics import (Analytics, FollowAnalytics, IAnalyse, INavigableAnalyse, MonitoringAnalytics,
+from aerodaas.analytics.core import (Analytics, FollowAnalytics, IAnalyse, INavigableAnalyse, MonitoringAnalytics,
                         NavigableAnalytics, ObjectDetector)
-from .api import ComputeResource, Environment, Robot, Sensor
-from .config import ConfigError
-from .data import AeroData, AeroListData, AeroStreamData, IAeroData
-from .fsm import IllegalTransition, MissionState
-from .models import (ActionCommand, AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue,
+from aerodaas.app.api import ComputeResource, Environment, Robot, Sensor
+from aerodaas.config import ConfigError
+from aerodaas.app.data import AeroData, AeroListData, AeroStreamData, IAeroData
+from aerodaas.navigation.fsm import IllegalTransition, MissionState
+from aerodaas.app.models import (ActionCommand, AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue,
                      SchedulingType, VelocityCommand, Waypoint)
-from .schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
+from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
 
 IEnvironment, IRobot, ISensor, ICompute = Environment, Robot, Sensor, ComputeResource
 AeroNav = AeroNavigation

@@ -12,11 +12,11 @@ from pathlib import Path
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .startup_probe import probe
+    from aerodaas.runtime.startup_probe import probe
 
     probe("cli")
-    from . import runtime
-    from .config import ConfigError
+    from aerodaas.runtime import driver as runtime
+    from aerodaas.config import ConfigError
 
     app = Path(args.app)
     if not app.is_file():
@@ -28,16 +28,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
             if v is not None and not v.strip():
                 raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
         if args.record:
-            from .recording import check_record_path
+            from aerodaas.recording.writer import check_record_path
 
             check_record_path(args.record)
-        from .config import MAX_SPEEDUP, MIN_SPEEDUP
+        from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
 
         for flag, v, lo, hi in (("--speedup", args.speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", args.timeout, 0.0, 1e7)):
             if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
                 raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
         if args.env:
-            from .config import load_environment_config
+            from aerodaas.config import load_environment_config
 
             load_environment_config(args.env)
     except (ConfigError, ValueError) as e:
@@ -53,7 +53,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     o.hitl_port = args.hitl_port
     o.live = None
     if args.live is not None:
-        from .live import check_bindable, parse_address
+        from aerodaas.liveview.server import check_bindable, parse_address
 
         try:
             host, port = parse_address(args.live)
@@ -86,7 +86,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     # the rest of the app's build; never before, so a bad environment fails at once with no Ray process
     o.early_ray = True
 
-    from . import api
+    from aerodaas.app import api
 
     def on_result(res) -> None:  # every mission start counts (robot.start_mission() or a fleet's env.start_mission())
         results.append(res)
@@ -163,9 +163,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     """``aerodaas plan APP.py [--env FILE] [--json] [--address ADDR]``: build the application's dataflow graph and
     print the actors it would start, where each goes (its ``label_selector``) and the edges between them, without
     starting Ray or flying. Exit 0, or 2 for bad input (named) like ``aerodaas run``."""
-    from . import runtime
-    from .config import ConfigError
-    from .dataflow import Placement
+    from aerodaas.runtime import driver as runtime
+    from aerodaas.config import ConfigError
+    from aerodaas.runtime.dataflow import Placement
 
     app = Path(args.app)
     if not app.is_file():
@@ -198,9 +198,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     """``aerodaas replay FILE.mcap --live [HOST:PORT] [--speed K]``: serve a recording to Foxglove over WebSocket
-    (:func:`aerodaas.live.replay`). Exit 0 when played to the end or stopped (Ctrl-C, SIGTERM), 2 for a bad file,
+    (:func:`aerodaas.liveview.server.replay`). Exit 0 when played to the end or stopped (Ctrl-C, SIGTERM), 2 for a bad file,
     address or speed."""
-    from .live import check_bindable, parse_address, replay
+    from aerodaas.liveview.server import check_bindable, parse_address, replay
 
     try:
         check_bindable(*parse_address(args.live))
@@ -239,8 +239,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 def _cmd_layout(args: argparse.Namespace) -> int:
     """``aerodaas layout RUN.mcap [--out FILE]``: a Foxglove layout for the recording's robot, camera and detections
-    (:func:`aerodaas.foxglove_layout.layout_for_recording`); exit 2 for a missing or foreign file."""
-    from .foxglove_layout import layout_for_recording
+    (:func:`aerodaas.liveview.layout.layout_for_recording`); exit 2 for a missing or foreign file."""
+    from aerodaas.liveview.layout import layout_for_recording
 
     try:
         text = json.dumps(layout_for_recording(args.file), indent=2) + "\n"
@@ -256,7 +256,7 @@ def _cmd_layout(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from .recording import summarize_mcap
+    from aerodaas.recording.writer import summarize_mcap
 
     try:
         s = summarize_mcap(args.file)
@@ -292,7 +292,7 @@ def _parse_waypoint(text: str) -> dict:
 
 
 def _cmd_inject(args: argparse.Namespace) -> int:
-    from .hitl import request
+    from aerodaas.tools.hitl import request
 
     body: dict = {"waypoints": args.waypoint, "scheduling_type": "ORDERED" if args.ordered else "UNORDERED"}
     if args.index is not None:
@@ -320,8 +320,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     is how a server ends, unlike ``run``'s interrupted mission); 2 for a bad argument or address."""
     import time
 
-    from .emulators.mavlink_vehicle import MavlinkVehicleEmulator
-    from .models import GeoPoint
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.app.models import GeoPoint
 
     home = None
     if args.home:
@@ -369,8 +369,8 @@ _MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
 
 def _mission_backend(args: argparse.Namespace, home=None):
     """A connected MAVLink backend for ``--connection`` (BackendError / ValueError name the connection)."""
-    from .backends import make_backend
-    from .config import MavlinkConfig, RobotConfig
+    from aerodaas.backends import make_backend
+    from aerodaas.config import MavlinkConfig, RobotConfig
 
     mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout)
     cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
@@ -387,8 +387,8 @@ def _cmd_mission(args: argparse.Namespace) -> int:
     through the MAVLink backend's mission protocol. The file is read and every item checked (with
     :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
     sent; a download is written only once complete."""
-    from .backends import BackendError
-    from .missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
+    from aerodaas.backends import BackendError
+    from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
 
     name = f"aerodaas mission {args.mission_cmd}"
     backend = None
@@ -444,9 +444,9 @@ def _cmd_mission(args: argparse.Namespace) -> int:
 
 
 def _cmd_recover(args: argparse.Namespace) -> int:
-    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recover`. Exit 0 (also for a file that was already
+    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recording.recover`. Exit 0 (also for a file that was already
     finished), 2 for a missing or non-MCAP file or an output that cannot be written."""
-    from .recover import recover_mcap
+    from aerodaas.recording.recover import recover_mcap
 
     try:
         r = recover_mcap(args.file, args.out)
@@ -461,7 +461,7 @@ def _cmd_recover(args: argparse.Namespace) -> int:
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
-    from .config import json_schema
+    from aerodaas.config import json_schema
 
     print(json.dumps(json_schema(), indent=2))
     return 0
@@ -530,7 +530,7 @@ def main(argv: list[str] | None = None) -> int:
     pl.add_argument("--out", metavar="DIR", help="output folder (default: <stem>_plots/ next to the recording)")
 
     def _cmd_plot(a: argparse.Namespace) -> int:
-        from .plot import cmd_plot  # matplotlib is imported only for this command
+        from aerodaas.tools.plot import cmd_plot  # matplotlib is imported only for this command
 
         return cmd_plot(a)
 
@@ -559,7 +559,7 @@ def main(argv: list[str] | None = None) -> int:
         m.set_defaults(func=_cmd_mission)
     bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video, raypath; "
                                          "--json for JSON output")
-    from .bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
+    from aerodaas.bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
     _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))
     rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "

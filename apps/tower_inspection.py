@@ -3,7 +3,7 @@ mission is aborted and replaced by a vertical inspection pattern around it (5 m 
 frames all the way, then the drone lands. The structure is recognised from a reference photo of it.
 Needs real imagery (AERODAAS_DATA_DIR)."""
 from aerodaas import *
-from aerodaas.analytics_extra import InspectionPlanner, StructureLocator
+from aerodaas.analytics.extra import InspectionPlanner, StructureLocator
 
 env = Environment("tower_inspection.json")
 edge = env.get_compute_resource_by_id("edge")

@@ -7,7 +7,7 @@ authentication stays on: ``RAY_AUTH_MODE=token`` is set for this process (and in
 unless the environment already sets a mode, and a token is generated at ``~/.ray/auth_token`` if none exists
 (what ``ray.init()`` does for a new local cluster since Ray 2.59).
 
-Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.runtime._loopback_only`): node address
+Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.runtime.driver._loopback_only`): node address
 127.0.0.1, so the GCS, raylets, object managers, agents and workers listen on 127.0.0.1 only, never on the machine's
 network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
 
@@ -75,7 +75,7 @@ class LocalCluster:
             raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
                                "LocalCluster with connect=True")
         enable_token_auth()
-        from aerodaas.runtime import _loopback_only
+        from aerodaas.runtime.driver import _loopback_only
 
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
         self._restore_network = _loopback_only()

@@ -1,7 +1,7 @@
 """Placement you can see before flying: computes that Ray cannot tell apart (issue 27, item 4).
 
 An actor of compute resource ``c`` is placed with ``label_selector={"tier": c.tier, **c.labels}``
-(:meth:`aerodaas.dataflow.ActorPlan.selector`). Two computes of the same tier with the same labels (typically none)
+(:meth:`aerodaas.runtime.dataflow.ActorPlan.selector`). Two computes of the same tier with the same labels (typically none)
 get the same selector, so which of their nodes each actor lands on is Ray's choice (six drones over two unlabelled
 edge computes landed 5 + 1). :func:`indistinct_computes` finds them in a plan; ``aerodaas plan`` and ``aerodaas run``
 (on a cluster) print :func:`placement_warning`. :func:`compute_label` is the label that tells them apart, which
@@ -29,7 +29,7 @@ def compute_label(compute_id: str) -> dict[str, str]:
 
 def indistinct_computes(plan: Any) -> list[tuple[str, dict[str, str], list[str]]]:
     """Groups of two or more computes the plan's actors use whose selectors are equal: ``[(tier, labels,
-    [compute ids])]`` (sorted). ``plan``: a :class:`aerodaas.dataflow.RunPlan`."""
+    [compute ids])]`` (sorted). ``plan``: a :class:`aerodaas.runtime.dataflow.RunPlan`."""
     by_selector: dict[tuple, set[str]] = {}
     for a in plan.actors.values():
         if a.compute is None:

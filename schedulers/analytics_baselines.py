@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Callable, ClassVar, Iterator
 
-from .analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState, Workload,
+from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState, Workload,
                              register_analytics_scheduler)
 
 __all__ = ["PriorityEdgeQueue", "EdgeFifo", "EdgeEdf", "EdgeSjf", "EdgeHbf", "EdgeHuf", "CloudOnly"]

@@ -24,10 +24,10 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from .analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState,
+from aerodaas.schedulers.analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState,
                              Workload, register_analytics_scheduler)
-from .analytics_baselines import PriorityEdgeQueue
-from .analytics_estimators import LatencyEstimator, WindowMeanEstimator, make_estimator
+from aerodaas.schedulers.analytics_baselines import PriorityEdgeQueue
+from aerodaas.schedulers.analytics_estimators import LatencyEstimator, WindowMeanEstimator, make_estimator
 
 __all__ = ["EdgeCloud", "Dem", "Dems", "DemsA", "Gems", "TentativeCloudQueue", "CloudLatencyEstimator",
            "EVICTION_SCANS", "EDGE_TRIGGER_BUFFER_MS", "CLOUD_TRIGGER_BUFFER_MS", "JIT_EARLY_MS", "JIT_LATE_MS"]

@@ -21,7 +21,7 @@ import re
 from abc import ABC, abstractmethod
 from collections import deque
 
-from .analytics_base import Workload
+from aerodaas.schedulers.analytics_base import Workload
 
 __all__ = ["LatencyEstimator", "ProfileEstimator", "WindowMeanEstimator", "RecentMaxEstimator",
            "PercentileEstimator", "make_estimator", "ESTIMATOR_HELP"]

@@ -36,10 +36,10 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from .analytics_base import EXECUTED_STATES, AnalyticsTask, Decision, Workload, register_analytics_scheduler
-from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS
-from .analytics_estimators import make_estimator
-from .analytics_gainplan import EDGE_ONLY, OPEN, GainPlan, max_gain_edge_plan
+from aerodaas.schedulers.analytics_base import EXECUTED_STATES, AnalyticsTask, Decision, Workload, register_analytics_scheduler
+from aerodaas.schedulers.analytics_dems import CLOUD_TRIGGER_BUFFER_MS
+from aerodaas.schedulers.analytics_estimators import make_estimator
+from aerodaas.schedulers.analytics_gainplan import EDGE_ONLY, OPEN, GainPlan, max_gain_edge_plan
 
 __all__ = ["EvPlan"]
 

@@ -35,10 +35,10 @@ from __future__ import annotations
 
 from collections import deque
 
-from .analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
+from aerodaas.schedulers.analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
                              register_analytics_scheduler)
-from .analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
-from .analytics_estimators import RecentMaxEstimator, make_estimator
+from aerodaas.schedulers.analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
+from aerodaas.schedulers.analytics_estimators import RecentMaxEstimator, make_estimator
 
 __all__ = ["GainPlan", "max_gain_edge_plan", "PessimisticLatencyEstimator"]
 

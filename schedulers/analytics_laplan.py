@@ -46,11 +46,11 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from .analytics_base import AnalyticsTask, Decision, Workload, register_analytics_scheduler
-from .analytics_dems import JIT_EARLY_MS
-from .analytics_evplan import EvPlan
-from .analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
-from .single_machine import max_gain_schedule
+from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload, register_analytics_scheduler
+from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
+from aerodaas.schedulers.analytics_evplan import EvPlan
+from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
+from aerodaas.schedulers.single_machine import max_gain_schedule
 
 __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
 

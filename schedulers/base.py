@@ -21,7 +21,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Sequence
 
-from aerodaas.models import AeroNavigation, PriorityQueue, SchedulingType, VelocityCommand, Waypoint
+from aerodaas.app.models import AeroNavigation, PriorityQueue, SchedulingType, VelocityCommand, Waypoint
 
 DEFAULT_PRIORITY = 2
 

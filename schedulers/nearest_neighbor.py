@@ -4,9 +4,9 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from aerodaas.models import Waypoint
+from aerodaas.app.models import Waypoint
 
-from .base import TrajectoryScheduler
+from aerodaas.schedulers.base import TrajectoryScheduler
 
 
 class NearestNeighborScheduler(TrajectoryScheduler):

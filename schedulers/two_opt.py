@@ -57,9 +57,9 @@ from typing import Sequence
 
 import numpy as np
 
-from aerodaas.models import Waypoint
+from aerodaas.app.models import Waypoint
 
-from .base import TrajectoryScheduler
+from aerodaas.schedulers.base import TrajectoryScheduler
 
 _EPS = 1e-9  # metres: a move must shorten the path by more than this to be applied
 _KICK_SEGMENT = 50  # longest segment a local double-bridge kick moves (nodes)

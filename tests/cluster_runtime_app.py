@@ -60,7 +60,8 @@ def _actors_by_node() -> list[dict]:
 
 
 def placement(out_dir: str) -> dict:
-    from aerodaas import Environment, NearestNeighborScheduler, runtime
+    from aerodaas import Environment, NearestNeighborScheduler
+    from aerodaas.runtime import driver as runtime
     from aerodaas.bench.overhead import FixedCostDetector
     from aerodaas.clusters.local import LocalCluster
     from aerodaas.config import parse_environment_config
@@ -91,7 +92,8 @@ def placement(out_dir: str) -> dict:
 
 
 def node_loss(out_dir: str) -> dict:
-    from aerodaas import Environment, NearestNeighborScheduler, runtime
+    from aerodaas import Environment, NearestNeighborScheduler
+    from aerodaas.runtime import driver as runtime
     from aerodaas.clusters.local import LocalCluster
     from aerodaas.config import parse_environment_config
 

@@ -29,7 +29,7 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture(scope="session")
 def ray_session():
     """A local Ray with this node labelled tier=edge (token auth on), shared by all e2e tests."""
-    from aerodaas import runtime
+    from aerodaas.runtime import driver as runtime
 
     runtime.ensure_ray(None)
     yield
@@ -39,7 +39,7 @@ def ray_session():
 @pytest.fixture
 def run_options(tmp_path):
     """Reset the runtime's CLI options around a test."""
-    from aerodaas import runtime
+    from aerodaas.runtime import driver as runtime
 
     saved = runtime.RunOptions(**vars(runtime.OPTIONS))
     runtime.OPTIONS.progress = False

@@ -277,8 +277,8 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     "events": [...]}`` to ``out``. Used after ``aerodaas mission upload --start`` (the CLI hands the vehicle over)."""
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
-    from aerodaas.geo import geodetic_to_enu
-    from aerodaas.models import GeoPoint
+    from aerodaas.navigation.geo import geodetic_to_enu
+    from aerodaas.app.models import GeoPoint
 
     b = make_backend(RobotConfig(id="observer", backend="mavlink", home=FARM_HOME,
                                  mavlink=MavlinkConfig(connection=conn, set_speed_limits=False)))
@@ -310,8 +310,8 @@ def observe_raw(conn: str, out: str, timeout_s: float) -> int:
     :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s."""
     from pymavlink import mavutil
 
-    from aerodaas.geo import geodetic_to_enu
-    from aerodaas.models import GeoPoint
+    from aerodaas.navigation.geo import geodetic_to_enu
+    from aerodaas.app.models import GeoPoint
 
     home = GeoPoint(**FARM_HOME)
     m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
@@ -395,8 +395,8 @@ def _write_env(path: Path, cfg: dict) -> Path:
 
 def _mission_file(path: Path, home: dict) -> Path:
     """A QGC WPL 110 mission: take off (at home) to 2 m, two waypoints 6 m apart (hold 3 s), land."""
-    from aerodaas.geo import enu_to_geodetic
-    from aerodaas.models import GeoPoint
+    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.app.models import GeoPoint
 
     h = GeoPoint(**home)
     a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
@@ -416,8 +416,8 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
     (SIGSTOP/SIGCONT) in flight; ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
     "observed"}}``."""
-    from aerodaas.geo import enu_to_geodetic
-    from aerodaas.models import GeoPoint
+    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.app.models import GeoPoint
 
     workdir.mkdir(parents=True, exist_ok=True)
     env_guided = _write_env(workdir / "guided.json", mavlink_env(autopilot, FARM_ENV))

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from aerodaas.metrics import waypoint_visits
+from aerodaas.recording.metrics import waypoint_visits
 
 from . import sitl
 from .sitl import (FARM_CORNERS, events, flown_speed, horizontal_speed, max_horizontal_speed, odometry,

@@ -9,7 +9,7 @@ from aerodaas import (AeroListData, Analytics, Environment, NearestNeighborSched
                       Waypoint)
 from aerodaas.bench.overhead import FixedCostDetector
 from aerodaas.config import ConfigError, parse_environment_config
-from aerodaas.recording import read_messages
+from aerodaas.recording.writer import read_messages
 from tests.conftest import DATA_DIR, needs_data
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"

@@ -13,7 +13,7 @@ import pytest
 from aerodaas import Analytics, AeroNavigation, Environment, MonitoringAnalytics, NavigationType, SchedulingType, Waypoint
 from aerodaas.backends import NotNavigable
 from aerodaas.config import parse_environment_config
-from aerodaas.metrics import load_run
+from aerodaas.recording.metrics import load_run
 
 from .conftest import DATA_DIR, needs_data
 from aerodaas.emulators import free_udp_port
@@ -138,7 +138,7 @@ def test_a_recorded_camera_channel_replays_into_analytics(tmp_path):
     """Analytics re-run on a recorded flight: a camera with ``source: mcap`` serves the recorded frame at each time."""
     import numpy as np
 
-    from aerodaas.recording import McapRecorder
+    from aerodaas.recording.writer import McapRecorder
 
     from .test_dataplane import FrameProbe, _host_for
 
@@ -210,7 +210,7 @@ PX4_AT_SPEED = {"ardupilot": {}, "px4": {"COM_OF_LOSS_T": 5.0}}
 
 @pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
 def test_farm_survey_app_unchanged_on_a_mavlink_autopilot(ray_session, run_options, tmp_path, flavour):
-    from aerodaas.metrics import waypoint_visits
+    from aerodaas.recording.metrics import waypoint_visits
 
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, params=PX4_AT_SPEED[flavour])
     try:
@@ -242,7 +242,7 @@ def test_vehicle_tracking_app_unchanged_on_a_mavlink_autopilot(ray_session, run_
     """The same app: survey at priority 2, the follow at priority 1 preempts it through the autopilot's guided /
     offboard velocity targets, then the survey resumes. Real time x4 without lock-step (a real vehicle does not
     wait for the detector), so fewer frames are analysed than in the simulator's lock-step test."""
-    from aerodaas.metrics import tracking_metrics
+    from aerodaas.recording.metrics import tracking_metrics
 
     emu, env_path = _mavlink_variant("vehicle_tracking", flavour, 4.0, tmp_path, params=PX4_AT_SPEED[flavour])
     try:
@@ -272,7 +272,7 @@ def test_farm_survey_flown_as_an_autopilot_mission(ray_session, run_options, tmp
     """``use_autopilot_mission``: the app's waypoints (in the scheduler's order) are uploaded with MISSION_ITEM_INT
     and flown by the autopilot in AUTO / AUTO.MISSION; its MISSION_CURRENT / MISSION_ITEM_REACHED reports drive
     the stat-stream and the visited waypoints; it lands by itself at the end."""
-    from aerodaas.metrics import waypoint_visits
+    from aerodaas.recording.metrics import waypoint_visits
 
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, mavlink={"use_autopilot_mission": True},
                                      params=AP_WP_RADIUS[flavour])
@@ -361,7 +361,7 @@ def test_link_cut_mid_mission_then_recovers(ray_session, run_options, tmp_path, 
     the mission resumes and completes with every waypoint, in order."""
     import threading
 
-    from aerodaas.metrics import waypoint_visits
+    from aerodaas.recording.metrics import waypoint_visits
 
     hb_timeout, outage = 0.5, 1.2
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path,

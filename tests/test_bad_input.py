@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from aerodaas import cli, runtime
-from aerodaas.reliability import ENV_CASES, PATH_CASES, check_env_case, check_path_case
+from aerodaas import cli
+from aerodaas.runtime import driver as runtime
+from aerodaas.reliability.catalogue import ENV_CASES, PATH_CASES, check_env_case, check_path_case
 
 pytestmark = pytest.mark.faults
 
@@ -45,7 +46,7 @@ def test_ulog_without_position_is_refused_before_ray(tmp_path):
 def test_far_waypoints_are_refused_without_a_geofence():
     from pydantic import ValidationError
 
-    from aerodaas.models import VelocityCommand, Waypoint
+    from aerodaas.app.models import VelocityCommand, Waypoint
 
     with pytest.raises(ValidationError, match="within"):
         Waypoint(id="w", x=1e308, y=0, z=5)

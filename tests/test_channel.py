@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from aerodaas.actors.channel import ChannelOutlet, ChannelServer, channel_address
-from aerodaas.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
-from aerodaas.models import AeroNavigation
+from aerodaas.runtime.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
+from aerodaas.app.models import AeroNavigation
 
 KEY = os.urandom(32)
 
@@ -28,7 +28,7 @@ def _wait(cond, timeout_s: float = 10.0) -> bool:
 
 
 class Receiver:
-    """A stand-in for an actor's ``Host.deliver``: remembers what arrived, answers with a reply for the sender,
+    """A stand-in for an actor's ``DataPlane.deliver``: remembers what arrived, answers with a reply for the sender,
     optionally keeps the frames or blocks until released."""
 
     def __init__(self, keep: bool = False) -> None:

@@ -19,7 +19,7 @@ import pytest
 
 from aerodaas import Analytics, Environment, FollowAnalytics, PriorityQueue
 from aerodaas.config import parse_environment_config
-from aerodaas.models import Detection
+from aerodaas.app.models import Detection
 
 
 def _env(n_drones: int = 1, fps: float = 10.0, lockstep: bool = False) -> Environment:
@@ -79,11 +79,11 @@ class Spotter(RightBox):
 def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str | None = None):
     """Plan the run as the driver does, with every analytics colocated and every drone in one drone actor, and
     build that actor's host in this process (no Ray actors); ``record``: an MCAP path for an in-process recorder."""
-    from aerodaas.actors.host_runtime import HostRuntime
-    from aerodaas.actors.host import Host
+    from aerodaas.actors.assembly import ActorAssembly
+    from aerodaas.actors.dataplane import DataPlane
     from aerodaas.config import SimulationConfig
-    from aerodaas.dataflow import build_plan, collect_graph
-    from aerodaas.runtime import _robot_schedulers
+    from aerodaas.runtime.dataflow import build_plan, collect_graph
+    from aerodaas.runtime.driver import _robot_schedulers
 
     robots = robots or env.get_env_robots()
     env.cfg.drones_per_actor = len(robots)
@@ -99,15 +99,15 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     spec.pop("record_remote", None)
     if record:
         spec["record"] = {"path": record, "meta": {}}
-    host = Host(hid, "edge", 0, lockstep=lockstep, workers=2)
-    rt = HostRuntime(host, spec)
+    host = DataPlane(hid, "edge", 0, lockstep=lockstep, workers=2)
+    rt = ActorAssembly(host, spec)
     host.connect(plan.routes(), plan.location(), {h: a.tier for h, a in plan.actors.items()}, {})
     return host, rt, plan
 
 
 def _fly(drone) -> None:
     """Put a drone component in the air, hovering (as after take-off)."""
-    from aerodaas.fsm import MissionState as S
+    from aerodaas.navigation.fsm import MissionState as S
 
     v = drone.backend.vehicle
     v.state.position[:] = (0.0, 0.0, 3.0)
@@ -360,7 +360,7 @@ def test_busy_consumer_drops_and_counts_lockstep_never_drops():
         slow.analyse(env.get_robot_by_id("d00").get_sensor_by_id("cam").get_data_stream())
         host, rt, _ = _host_for(env, lockstep=lockstep)
         try:
-            from aerodaas.actors.host import Cascade
+            from aerodaas.actors.dataplane import Cascade
 
             cam = rt.drones[0].cameras[0]["comp"]
             comp = rt.comps["probe#1@d00"]
@@ -408,11 +408,11 @@ def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
     """Frames of three drones arriving while the detector is busy wait in its mailbox and reach it in one
     process_batch call (its max_batch allows 4); every frame still gets its own output, in order."""
     from aerodaas.actors.analytics_component import AnalyticsComponent
-    from aerodaas.actors.host import Host
-    from aerodaas.messages import FrameMsg, Port
-    from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
+    from aerodaas.actors.dataplane import DataPlane
+    from aerodaas.runtime.messages import FrameMsg, Port
+    from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
 
-    host = Host("analytics/edge/batchprobe#1", "edge", 0, workers=2)
+    host = DataPlane("analytics/edge/batchprobe#1", "edge", 0, workers=2)
     obj = BatchProbe()
     comp = host.add(AnalyticsComponent(host, "batchprobe#1", "batchprobe", obj, None, 0, buffer=4))
     published: list = []

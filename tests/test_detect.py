@@ -1,4 +1,4 @@
-"""Tests for aerodaas.detect: model resolution and the YOLOX / NanoDet detectors on real aerial photos.
+"""Tests for aerodaas.perception.detect: model resolution and the YOLOX / NanoDet detectors on real aerial photos.
 
 Data: ``$AERODAAS_DATA_DIR`` (default ``<repo>/../shared/data``), see its MANIFEST.md. Tests needing the data are
 skipped with a reason when it is absent.
@@ -17,8 +17,8 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 pytest.importorskip("onnxruntime")
 
-from aerodaas import detect as D  # noqa: E402
-from aerodaas.detect import (  # noqa: E402
+from aerodaas.perception import detect as D  # noqa: E402
+from aerodaas.perception.detect import (  # noqa: E402
     MODELS,
     ModelChecksumError,
     ModelNotFoundError,
@@ -329,7 +329,7 @@ def test_resolve_model_unknown_name():
 def test_sha_cache_is_per_mtime(tmp_path):
     f = tmp_path / "x.bin"
     f.write_bytes(b"a")
-    from aerodaas.model_files import _sha256_file
+    from aerodaas.perception.model_files import _sha256_file
 
     h1 = _sha256_file(f)
     f.write_bytes(b"bb")

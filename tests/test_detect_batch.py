@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aerodaas.analytics import ObjectDetector
+from aerodaas.analytics.core import ObjectDetector
 
 from .conftest import DATA_DIR, MODEL_DIR, needs_data
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from aerodaas.metrics import load_run, tracking_metrics, waypoint_visits
-from aerodaas.recording import read_messages, summarize_mcap
+from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
+from aerodaas.recording.writer import read_messages, summarize_mcap
 
 from .conftest import REPO, needs_data
 from .mcap_validation import validate_recording
@@ -83,8 +83,9 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
 
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
-    from aerodaas import Environment, ObjectDetector, supervise
-    from aerodaas.detect import ModelNotFoundError
+    from aerodaas import Environment, ObjectDetector
+    from aerodaas.runtime import supervise
+    from aerodaas.perception.detect import ModelNotFoundError
 
     started = []
 

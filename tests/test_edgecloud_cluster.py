@@ -24,7 +24,7 @@ def cluster():
     restarted afterwards."""
     import ray
 
-    from aerodaas import runtime
+    from aerodaas.runtime import driver as runtime
     from aerodaas.clusters.local import LocalCluster
 
     had_session = ray.is_initialized()
@@ -224,7 +224,7 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
     import threading
 
     from aerodaas.bench.overhead import FixedCostDetector
-    from aerodaas.runtime import format_summary
+    from aerodaas.runtime.driver import format_summary
     from tests.test_analytics_scheduling import QOS, build, hover_config, topic_messages
 
     node = cluster.add_cloud_node({"cloud-node": "c-mission"})

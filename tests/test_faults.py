@@ -1,6 +1,6 @@
 """Injected faults end cleanly: signals at any phase, a disk that fills up or fails, analytics that raise, a killed
 run's recording recovered, a closed output pipe. The scenarios are the reliability catalogue's
-(:mod:`aerodaas.reliability_faults`, which also writes ``docs/reliability.md``); the recorder and recovery are also
+(:mod:`aerodaas.reliability.faults`, which also writes ``docs/reliability.md``); the recorder and recovery are also
 tested in-process."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from aerodaas.reliability_faults import mcap_reader_ok, run_fault
+from aerodaas.reliability.faults import mcap_reader_ok, run_fault
 
 pytestmark = pytest.mark.faults
 
@@ -37,7 +37,7 @@ def test_info_into_a_closed_pipe_ends_quietly():
 
 def test_info_broken_pipe_in_process(tmp_path, monkeypatch):
     from aerodaas import cli
-    from aerodaas.recording import McapRecorder
+    from aerodaas.recording.writer import McapRecorder
 
     rec = tmp_path / "a.mcap"
     with McapRecorder(rec) as r:
@@ -88,7 +88,7 @@ def test_recorder_failure_is_reported_and_the_file_is_finished(tmp_path, monkeyp
 def test_recorder_failure_when_the_disk_stays_full_leaves_a_recoverable_file(tmp_path, monkeypatch):
     """The summary cannot be written either: the file is cut at the last record boundary (valid, unfinished), the
     failure says so, and `aerodaas recover` finishes it once there is room."""
-    import aerodaas.recover as recover
+    import aerodaas.recording.recover as recover
     from aerodaas import cli
     from aerodaas.actors.recorder import RecorderService
 
@@ -106,7 +106,7 @@ def test_recorder_failure_when_the_disk_stays_full_leaves_a_recoverable_file(tmp
     fail = svc.report()["failure"]
     assert fail["finished"] is False and "No space" in fail["finish_error"]
     assert not mcap_reader_ok(path)[0]
-    from aerodaas.recording import summarize_mcap
+    from aerodaas.recording.writer import summarize_mcap
 
     readable = summarize_mcap(path)["message_count"]
     assert readable > 0
@@ -122,7 +122,7 @@ def test_recover_a_sigkilled_writer(tmp_path):
     path = tmp_path / "killed.mcap"
     code = f"""
 import os, sys, time
-from aerodaas.recording import McapRecorder
+from aerodaas.recording.writer import McapRecorder
 r = McapRecorder({str(path)!r}, chunk_size=4096, metadata={{"run": "killed"}})
 for i in range(400):
     r.write_json(f"/t/{{i % 3}}", 1_000_000 + i, {{"i": i, "pad": os.urandom(100).hex()}}, schema_name="t.T")
@@ -136,7 +136,7 @@ time.sleep(600)
     p.wait()
     assert not mcap_reader_ok(path)[0]
     from aerodaas import cli
-    from aerodaas.recording import summarize_mcap
+    from aerodaas.recording.writer import summarize_mcap
 
     assert summarize_mcap(path)["message_count"] == 400
     assert cli.main(["recover", str(path)]) == 0

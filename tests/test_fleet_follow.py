@@ -9,7 +9,7 @@ import runpy
 import numpy as np
 import pytest
 
-from aerodaas.recording import read_messages
+from aerodaas.recording.writer import read_messages
 
 from .conftest import REPO
 

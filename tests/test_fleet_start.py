@@ -9,8 +9,8 @@ import sys
 import pytest
 
 from aerodaas import Environment
-from aerodaas.metrics import waypoint_visits
-from aerodaas.recording import read_messages
+from aerodaas.recording.metrics import waypoint_visits
+from aerodaas.recording.writer import read_messages
 
 from .conftest import REPO
 

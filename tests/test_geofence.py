@@ -1,12 +1,12 @@
-"""Geofence models and geometry (aerodaas.geofence): QGroundControl/PX4 semantics in local ENU metres."""
+"""Geofence models and geometry (aerodaas.navigation.geofence): QGroundControl/PX4 semantics in local ENU metres."""
 from __future__ import annotations
 
 import pytest
 from pydantic import ValidationError
 
-from aerodaas.geo import enu_to_geodetic
-from aerodaas.geofence import Geofence, GeofenceCircle, GeofenceConfig, GeofencePolygon
-from aerodaas.models import GeoPoint
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.navigation.geofence import Geofence, GeofenceCircle, GeofenceConfig, GeofencePolygon
+from aerodaas.app.models import GeoPoint
 
 HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)
 

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from aerodaas.actors.scheduler_component import SchedulerComponent
-from aerodaas.hitl import HitlServer
+from aerodaas.tools.hitl import HitlServer
 from aerodaas.schedulers import NearestNeighborScheduler
 
 pytestmark = pytest.mark.faults
@@ -242,7 +242,7 @@ def test_planning_runs_outside_the_lock_the_control_tick_needs(api):
     the lock the drone's control tick takes: tick() completes while the planning is provably still running."""
     comp = SchedulerComponent(None, "d2/scheduler", "d2", NearestNeighborScheduler(start=(0, 0, 2)), None, 0,
                               robot_cfg={**ROBOT, "id": "d2"})
-    from aerodaas.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+    from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
 
     comp.add_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=-5, y=-5, z=2)],
                                        SchedulingType.ORDERED))

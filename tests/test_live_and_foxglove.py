@@ -24,9 +24,9 @@ from mcap.reader import make_reader
 from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
-from aerodaas.live import LiveServer, parse_address
-from aerodaas.recording import McapRecorder, camera_mount_quaternion, quaternion_from_euler_deg
-from aerodaas.record_schemas import JSON_SCHEMA_MODELS, json_schema_for
+from aerodaas.liveview.server import LiveServer, parse_address
+from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion, quaternion_from_euler_deg
+from aerodaas.recording.schemas import JSON_SCHEMA_MODELS, json_schema_for
 
 from .conftest import REPO
 from .foxglove_ws_client import collect, schema_bytes
@@ -150,7 +150,7 @@ def test_live_server_sends_the_recorders_bytes_to_a_protocol_client():
 
 
 def test_docs_layout_is_the_generated_vehicle_tracking_layout_with_the_panels_asked_for():
-    from aerodaas.foxglove_layout import build_layout
+    from aerodaas.liveview.layout import build_layout
 
     doc = json.loads((REPO / "docs" / "foxglove-layout.json").read_text())
     assert doc == build_layout("quadrotor_base", "cam1", ["/quadrotor_base/detector/detections"])
@@ -363,7 +363,7 @@ class CountingDetector(FixedCostDetector):
 def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run_options, tmp_path):
     """DEMS sends part of an overloaded detector's frames to a cloud executor: the detections shown live and in the
     summary are those of every executed task, edge and cloud (the edge copy alone saw only its own)."""
-    from aerodaas.runtime import format_summary
+    from aerodaas.runtime.driver import format_summary
     from tests.test_analytics_scheduling import QOS, build, hover_config
 
     env, drone = build(hover_config(fps=15, hover_s=4.0), CountingDetector(80))

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from aerodaas.live import LiveServer
-from aerodaas.recording import RecordedMessage
+from aerodaas.liveview.server import LiveServer
+from aerodaas.recording.writer import RecordedMessage
 
 from .test_live_and_foxglove import AERODAAS, APP, ENV, _start, _wait_for_url
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from aerodaas.run_report import format_summary
+from aerodaas.runtime.report import format_summary
 
 from .sitl import read_recording
 from .test_backends_e2e import PX4_AT_SPEED, _mavlink_variant, _run_app

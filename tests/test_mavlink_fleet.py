@@ -16,7 +16,7 @@ from aerodaas.backends import BackendError, make_backend
 from aerodaas.backends.mavlink import shared_link
 from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, load_environment_config
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-from aerodaas.models import GeoPoint
+from aerodaas.app.models import GeoPoint
 
 from .test_mavlink import run_until
 from .udp_fanout import UdpFanout
@@ -202,7 +202,7 @@ def test_each_robot_gets_its_own_connect_error_and_its_own_connect_timeout(ray_s
     from aerodaas import AeroNavigation, Environment, NavigationType, Waypoint
     from aerodaas.config import parse_environment_config
     from aerodaas.emulators import free_udp_port
-    from aerodaas.run_report import format_summary
+    from aerodaas.runtime.report import format_summary
 
     robots = []
     for rid, t in (("a", 1.5), ("b", 2.5)):

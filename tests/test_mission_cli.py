@@ -8,7 +8,7 @@ import pytest
 from aerodaas.cli import main
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission
-from aerodaas.models import GeoPoint
+from aerodaas.app.models import GeoPoint
 
 from .conftest import DATA_DIR
 

@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-from aerodaas.hitl import request, state_file
-from aerodaas.metrics import load_run, tracking_metrics, waypoint_visits
+from aerodaas.tools.hitl import request, state_file
+from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
 
 from .conftest import needs_data
 from .test_e2e import APPS, run_app
@@ -179,7 +179,7 @@ def test_safety_limits_reject_clamp_and_low_battery_rtl(ray_session, run_options
     point); clamping where configured; below the battery threshold the drone returns to launch and lands."""
     from aerodaas import AeroNavigation, Environment, Waypoint
     from aerodaas.config import parse_environment_config
-    from aerodaas.safety import SafetyViolation
+    from aerodaas.navigation.safety import SafetyViolation
 
     base = json.loads((APPS / "farm_survey.json").read_text())
     base["robots"][0]["sensors"] = [{"id": "odom", "type": "odometry"}]

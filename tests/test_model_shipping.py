@@ -1,4 +1,4 @@
-"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.detect.ShippedModel):
+"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.perception.detect.ShippedModel):
 a node without the file (a cloud node: other disk, no model folder, no internet) writes the bytes to its own cache
 and loads them; the driver's own node keeps loading the file it resolved."""
 from __future__ import annotations
@@ -12,8 +12,8 @@ import pytest
 
 pytest.importorskip("onnxruntime")
 
-from aerodaas.analytics import ObjectDetector  # noqa: E402
-from aerodaas.detect import MODELS, ModelNotFoundError, ShippedModel  # noqa: E402
+from aerodaas.analytics.core import ObjectDetector  # noqa: E402
+from aerodaas.perception.detect import MODELS, ModelNotFoundError, ShippedModel  # noqa: E402
 from tests.conftest import MODEL_DIR  # noqa: E402
 
 needs_model = pytest.mark.skipif(not (MODEL_DIR / "yolox_nano.onnx").is_file(),
@@ -30,7 +30,7 @@ def other_node(tmp_path, monkeypatch):
     def no_download(*a, **k):
         raise AssertionError("the node tried to download the model")
 
-    monkeypatch.setattr("aerodaas.model_files._download", no_download)
+    monkeypatch.setattr("aerodaas.perception.model_files._download", no_download)
     return tmp_path / "node-cache" / "aerodaas" / "models" / "shipped"
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aerodaas.geo import geodetic_to_enu
-from aerodaas.models import CameraIntrinsics, FramePose, GeoPoint
+from aerodaas.navigation.geo import geodetic_to_enu
+from aerodaas.app.models import CameraIntrinsics, FramePose, GeoPoint
 from aerodaas.perception.geolocate import geolocate_box, record_track_fixes
 from aerodaas.sim.world import project_points
 
@@ -43,7 +43,7 @@ def test_fixes_recorded_as_location_fix_and_scene_update(tmp_path):
     from mcap_protobuf.decoder import DecoderFactory
     from mcap.reader import make_reader
 
-    from aerodaas.recording import McapRecorder
+    from aerodaas.recording.writer import McapRecorder
 
     pose = FramePose(position=(0.0, 0.0, 20.0), yaw=0.0, camera_pitch=90.0)
     fixes = {7: geolocate_box(_box(pose, (2.0, 3.0)), pose, K, HOME)}

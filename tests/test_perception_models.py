@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aerodaas.analytics import ObjectDetector
+from aerodaas.analytics.core import ObjectDetector
 from aerodaas.perception.decoders import UltralyticsDetector, inspect_model, metadata_names
 from aerodaas.perception.options import build_detector, check_detector_options
 
@@ -148,7 +148,7 @@ def test_metadata_names_forms():
     (dict(format="nanodet"), r"format='nanodet' but .* yolox head"),
 ])
 def test_object_detector_check_names_field_and_value(kwargs, field):
-    """ObjectDetector.check runs in the pre-flight (aerodaas.preflight.validate) on the driver, before Ray."""
+    """ObjectDetector.check runs in the pre-flight (aerodaas.runtime.preflight.validate) on the driver, before Ray."""
     with pytest.raises(ValueError, match=r"analytics 'detector': " + field):
         ObjectDetector(**kwargs).check()
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aerodaas.models import CameraIntrinsics, Detection, FrameMeta, FramePose, GeoPoint
+from aerodaas.app.models import CameraIntrinsics, Detection, FrameMeta, FramePose, GeoPoint
 from aerodaas.perception.track_analytics import TrackAnalytics
 from aerodaas.sim.world import project_points
 

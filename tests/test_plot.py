@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from aerodaas.cli import main
-from aerodaas.plot import load_plot_data, plot_run, planned_and_flown, tracking_segments
-from aerodaas.recording import McapRecorder
+from aerodaas.tools.plot import load_plot_data, plot_run, planned_and_flown, tracking_segments
+from aerodaas.recording.writer import McapRecorder
 
 T0 = 1_700_000_000_000_000_000  # ns
 R = "r1"

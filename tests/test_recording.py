@@ -1,4 +1,4 @@
-"""Tests for aerodaas.recording: MCAP mission recording with Foxglove protobuf schemas and JSON channels."""
+"""Tests for aerodaas.recording.writer: MCAP mission recording with Foxglove protobuf schemas and JSON channels."""
 from __future__ import annotations
 
 import json
@@ -16,8 +16,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from aerodaas.models import Detection
-from aerodaas.recording import McapRecorder, quaternion_from_euler_deg, read_messages, summarize_mcap
+from aerodaas.app.models import Detection
+from aerodaas.recording.writer import McapRecorder, quaternion_from_euler_deg, read_messages, summarize_mcap
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 T0 = 1_700_000_000_000_000_000  # ns
@@ -264,7 +264,7 @@ def test_threaded_writes(tmp_path: Path) -> None:
 _CRASH_SCRIPT = textwrap.dedent("""
     import os, sys
     import numpy as np
-    from aerodaas.recording import McapRecorder
+    from aerodaas.recording.writer import McapRecorder
     rec = McapRecorder(sys.argv[1], chunk_size=4096, metadata={{"run": "crash"}})
     for i in range({n}):
         t = {t0} + i * 10_000_000
@@ -337,7 +337,7 @@ def test_flush_makes_everything_durable(tmp_path: Path) -> None:
     path = tmp_path / "flushed.mcap"
     script = textwrap.dedent(f"""
         import os, sys
-        from aerodaas.recording import McapRecorder
+        from aerodaas.recording.writer import McapRecorder
         rec = McapRecorder(sys.argv[1], chunk_size=1 << 20)
         for i in range(7):
             rec.write_json("/mission/state", {T0} + i, {{"state": "S%d" % i}}, schema_name="s")

@@ -13,7 +13,7 @@ from aerodaas.backends import make_backend
 from aerodaas.backends.base import NotNavigable
 from aerodaas.backends.replay import McapCameraReplay
 from aerodaas.config import ConfigError, RobotConfig, ReplayConfig, SensorConfig, parse_environment_config
-from aerodaas.recording import McapRecorder
+from aerodaas.recording.writer import McapRecorder
 
 from .conftest import DATA_DIR
 

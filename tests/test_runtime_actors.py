@@ -132,7 +132,7 @@ class AlwaysCar(Analytics):
     name = "always_car"
 
     def process(self, frame, meta):
-        from aerodaas.models import Detection
+        from aerodaas.app.models import Detection
 
         h, w = frame.shape[:2]
         time.sleep(0.1)

@@ -11,12 +11,12 @@ import runpy
 import pytest
 
 from aerodaas.config import ConfigError, RobotConfig, load_environment_config
-from aerodaas.geofence import Geofence
-from aerodaas.models import GeoPoint, VelocityCommand, Waypoint
+from aerodaas.navigation.geofence import Geofence
+from aerodaas.app.models import GeoPoint, VelocityCommand, Waypoint
 from aerodaas.navigation.route import plan_path
 from aerodaas.navigation.rtl import plan_return
-from aerodaas.reliability_flight import PROBE_ENV
-from aerodaas.safety import SafetyGate, SafetyViolation
+from aerodaas.reliability.flight import PROBE_ENV
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 HOME = {"lat": 47.3977, "lon": 8.5456, "alt": 488.0}
 
@@ -66,7 +66,7 @@ def test_clamp_uses_the_minimum_too():
 
 # ------------------------------------------------------------------------------------------------- the path home
 def _circle_fence(radius: float = 4.0, centre=(12.0, 0.0), square: float | None = None) -> Geofence:
-    from aerodaas.geofence import GeofenceConfig
+    from aerodaas.navigation.geofence import GeofenceConfig
 
     cfg = {"circles": [{"center": _ll(*centre), "radius": radius, "inclusion": False}]}
     if square:
@@ -89,7 +89,7 @@ def test_the_path_home_goes_around_an_exclusion_circle():
 
 
 def test_no_path_home_means_none():
-    from aerodaas.geofence import GeofenceConfig
+    from aerodaas.navigation.geofence import GeofenceConfig
 
     # home boxed in: a ring of exclusion polygons around it, the drone outside
     ring = [{"points": [_ll(-10, -10), _ll(10, -10), _ll(10, -8), _ll(-10, -8)], "inclusion": False},
@@ -152,8 +152,8 @@ def test_speedup_below_the_bound_is_refused_before_ray(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------------- end to end
 APP = '''
 from aerodaas import *
-from aerodaas.analytics import NavigableAnalytics
-from aerodaas.models import ActionCommand, AeroNavigation, NavigationType
+from aerodaas.analytics.core import NavigableAnalytics
+from aerodaas.app.models import ActionCommand, AeroNavigation, NavigationType
 
 class GoHome(NavigableAnalytics):
     """Once the drone is behind the exclusion circle, on the line from home through its centre: an app's RTL."""
@@ -179,7 +179,7 @@ result = drone.start_mission()
 
 
 def _e2e(tmp_path, run_options, robot: dict, waypoints: str, rtl: bool):
-    from aerodaas.recording import read_messages
+    from aerodaas.recording.writer import read_messages
 
     robot.setdefault("sensors", [{"id": "odom", "type": "odometry", "properties": {"rate_hz": 10.0}}])
     robot["idle_land_s"] = 2.0

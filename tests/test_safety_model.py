@@ -13,9 +13,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from aerodaas.config import RobotConfig
-from aerodaas.models import VelocityCommand, Waypoint
-from aerodaas.reliability_flight import fly_commands
-from aerodaas.safety import SafetyGate, SafetyViolation
+from aerodaas.app.models import VelocityCommand, Waypoint
+from aerodaas.reliability.flight import fly_commands
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 pytestmark = pytest.mark.faults
 
@@ -102,8 +102,8 @@ def test_takeoff_passes_the_gate():
 APP = '''
 import math
 from aerodaas import *
-from aerodaas.analytics import NavigableAnalytics
-from aerodaas.models import AeroNavigation, NavigationType, VelocityCommand
+from aerodaas.analytics.core import NavigableAnalytics
+from aerodaas.app.models import AeroNavigation, NavigationType, VelocityCommand
 
 class Push(NavigableAnalytics):
     """Every odometry sample: 0.5 s at 3 m/s along a heading that turns slowly (east, then north-east, ...),
@@ -132,9 +132,9 @@ result = drone.start_mission()
 
 @pytest.mark.e2e
 def test_end_to_end_velocity_attack_stays_inside_on_the_recorded_odometry(ray_session, run_options, tmp_path):
-    from aerodaas.geofence import Geofence
-    from aerodaas.recording import read_messages
-    from aerodaas.reliability_flight import PROBE_ENV
+    from aerodaas.navigation.geofence import Geofence
+    from aerodaas.recording.writer import read_messages
+    from aerodaas.reliability.flight import PROBE_ENV
 
     robot = PROBE_ENV().model_dump(mode="json")
     robot["idle_land_s"] = 2.0

@@ -2,7 +2,7 @@
 recorded flights. :func:`make_backend` builds the one a robot's ``backend`` names in ``environment.json``."""
 from __future__ import annotations
 
-from .base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
            "NAVIGABLE"]
@@ -15,19 +15,19 @@ def make_backend(cfg) -> VehicleBackend:
     """The backend for ``cfg`` (an :class:`aerodaas.config.RobotConfig`). Imports the driver lazily, so a robot on
     the simulator never imports pymavlink. Raises ValueError for an unknown ``backend``."""
     if cfg.backend == "sim":
-        from .sim import SimBackend
+        from aerodaas.backends.sim import SimBackend
 
         return SimBackend(cfg)
     if cfg.backend == "mavlink":
-        from .mavlink import MavlinkBackend
+        from aerodaas.backends.mavlink import MavlinkBackend
 
         return MavlinkBackend(cfg)
     if cfg.backend == "tello":
-        from .tello import TelloBackend
+        from aerodaas.backends.tello import TelloBackend
 
         return TelloBackend(cfg)
     if cfg.backend == "replay":
-        from .replay import ReplayBackend
+        from aerodaas.backends.replay import ReplayBackend
 
         return ReplayBackend(cfg)
     raise ValueError(f"robots[{cfg.id!r}].backend: unknown backend {cfg.backend!r}; "

@@ -26,7 +26,7 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from ..models import GeoPoint, Odometry
+from aerodaas.app.models import GeoPoint, Odometry
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
 
@@ -149,7 +149,7 @@ class VehicleBackend(abc.ABC):
 
     @abc.abstractmethod
     def odometry(self) -> Odometry:
-        """The current :class:`~aerodaas.models.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
+        """The current :class:`~aerodaas.app.models.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
         for backends with a :attr:`sample_key`)."""
 
     @property

@@ -42,9 +42,9 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from ..geo import geodetic_to_enu
-from ..models import Attitude, GeoPoint, Odometry
-from .base import BackendError, VehicleBackend
+from aerodaas.navigation.geo import geodetic_to_enu
+from aerodaas.app.models import Attitude, GeoPoint, Odometry
+from aerodaas.backends.base import BackendError, VehicleBackend
 
 __all__ = ["ReplayBackend", "McapCameraReplay", "check_log", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
 
@@ -512,7 +512,7 @@ class McapCameraReplay:
     naming the topics that are there)."""
 
     def __init__(self, path: str | os.PathLike, topic: str, start_ns: int | None = None) -> None:
-        from ..recording import read_messages, summarize_mcap
+        from aerodaas.recording.writer import read_messages, summarize_mcap
 
         self.path, self.topic = str(path), topic
         summary = summarize_mcap(self.path)

@@ -5,9 +5,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..models import Odometry
-from ..sim.vehicle import SimVehicle
-from .base import VehicleBackend
+from aerodaas.app.models import Odometry
+from aerodaas.sim.vehicle import SimVehicle
+from aerodaas.backends.base import VehicleBackend
 
 
 class SimBackend(VehicleBackend):

@@ -40,7 +40,7 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from . import detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours
+    from aerodaas.bench import detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours
 
     tours.add_parser(bench_subparsers)
     schedulers.add_parser(bench_subparsers)

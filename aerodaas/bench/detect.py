@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import machine_info
+from aerodaas.bench import machine_info
 
 
 def _configs(a: argparse.Namespace) -> list[dict]:

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.analytics import Analytics
+from aerodaas.analytics.core import Analytics
 
 DEFAULT_SIZES = (1, 5, 10, 20, 40)
 
@@ -108,9 +108,9 @@ def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
 def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int = 1) -> dict:
     """One fleet size on a fresh local Ray (or a fresh LocalCluster of ``edge_nodes`` edge nodes); returns the
     measured row."""
-    from aerodaas import runtime
+    from aerodaas.runtime import driver as runtime
 
-    from .procs import MemorySampler, cpu_seconds, ray_processes
+    from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
 
     runtime.shutdown_ray()
     runtime.OPTIONS.progress = False
@@ -172,9 +172,9 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
 
 def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
               edge_nodes: int = 1) -> dict:
-    from . import machine_info
+    from aerodaas.bench import machine_info
 
-    from .progress import bench_progress
+    from aerodaas.bench.progress import bench_progress
 
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []

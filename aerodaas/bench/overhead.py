@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, FixedCostDetector,  # noqa: F401
+from aerodaas.bench.pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, FixedCostDetector,  # noqa: F401
                        FollowStage, Pacer, mp, overheads, parsed_config, summary)
 
 RESOLUTIONS = ((1280, 720), (640, 480))
@@ -66,10 +66,11 @@ class FrameworkWindows:
                                 "dispatch": [], "recording_bytes": 0, "transports": set()}
 
     def window(self, seconds: float) -> list[dict]:
-        from aerodaas import Environment, FollowAnalytics, PriorityQueue, runtime
+        from aerodaas import Environment, FollowAnalytics, PriorityQueue
+        from aerodaas.runtime import driver as runtime
         from aerodaas.schedulers import TrajectoryScheduler
 
-        from .pipeline import HOVER_M, make_detector
+        from aerodaas.bench.pipeline import HOVER_M, make_detector
 
         width, height, kind, stub_ms = self.args
         env = Environment(parsed_config(width, height, kind))
@@ -178,10 +179,10 @@ def _peer(name: str, width: int, height: int, kind: str, stub_ms: float) -> tupl
         if name == "bare_loop":
             return BareLoop(width, height, kind, stub_ms), None
         if name == "naive_ray":
-            from .peers_naive_ray import NaiveRayPipeline
+            from aerodaas.bench.peers_naive_ray import NaiveRayPipeline
 
             return NaiveRayPipeline(width, height, kind, stub_ms), None
-        from .peers_dora import DoraPipeline, unavailable_reason
+        from aerodaas.bench.peers_dora import DoraPipeline, unavailable_reason
 
         reason = unavailable_reason()
         return (None, reason) if reason else (DoraPipeline(width, height, kind, stub_ms), None)
@@ -265,14 +266,14 @@ def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
 def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[str, ...] = ("stub", "yolox"),
                  resolutions: tuple[tuple[int, int], ...] = RESOLUTIONS, layouts: tuple[str, ...] = ("colocated",),
                  window_s: float = 5.0, record: bool = False) -> dict:
-    from aerodaas import runtime
+    from aerodaas.runtime import driver as runtime
 
-    from . import machine_info
+    from aerodaas.bench import machine_info
 
     machine = machine_info()
     runtime.OPTIONS.progress = False
     runtime.ensure_ray()
-    from .progress import bench_progress
+    from aerodaas.bench.progress import bench_progress
 
     results, loads = [], []
     record_dir = tempfile.mkdtemp(prefix="aerodaas-overhead-rec-") if record else None
@@ -355,7 +356,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             return 2
         kinds = ("stub", "yolox") if a.detector == "both" else (a.detector,)
         if "yolox" in kinds:
-            from aerodaas.detect import ModelNotFoundError, resolve_model
+            from aerodaas.perception.detect import ModelNotFoundError, resolve_model
 
             try:
                 resolve_model("yolox_nano")

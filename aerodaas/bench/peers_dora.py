@@ -140,7 +140,7 @@ def _unpack(value) -> object:
 def _camera(node, p: dict, workdir: str) -> None:
     import pyarrow as pa
 
-    from .pipeline import FPS, HOVER_M, CameraStage, Pacer
+    from aerodaas.bench.pipeline import FPS, HOVER_M, CameraStage, Pacer
 
     cam = CameraStage(p["width"], p["height"], p["kind"])
     Path(workdir, "ready_camera").touch()
@@ -166,9 +166,9 @@ def _camera(node, p: dict, workdir: str) -> None:
 
 
 def _rebuild_meta(p: dict, tr: dict):
-    from aerodaas.models import CameraIntrinsics, FrameMeta, FramePose
+    from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
 
-    from .pipeline import HOVER_M
+    from aerodaas.bench.pipeline import HOVER_M
 
     return FrameMeta(robot_id="uav", sensor_id="cam", seq=tr["seq"], capture_time=tr["t"], wall_time=time.time(),
                      pose=FramePose(position=(0.0, 0.0, HOVER_M), yaw=0.0, camera_pitch=90),
@@ -176,7 +176,7 @@ def _rebuild_meta(p: dict, tr: dict):
 
 
 def _worker(node, p: dict, workdir: str, role: str) -> None:
-    from . import pipeline as pl
+    from aerodaas.bench import pipeline as pl
 
     rc = pl.parsed_config(p["width"], p["height"], p["kind"]).robots[0]
     stage = {"detector": lambda: pl.DetectStage(p["kind"], p["stub_ms"]), "follow": pl.FollowStage,

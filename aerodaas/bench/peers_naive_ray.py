@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from .pipeline import (FPS, HOVER_M, CameraStage, CommandStage, DetectStage, DroneStage, FollowStage, Pacer,
+from aerodaas.bench.pipeline import (FPS, HOVER_M, CameraStage, CommandStage, DetectStage, DroneStage, FollowStage, Pacer,
                        parsed_config)
 
 

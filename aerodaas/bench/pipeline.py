@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.analytics import Analytics
-from aerodaas.models import Detection
+from aerodaas.analytics.core import Analytics
+from aerodaas.app.models import Detection
 
 FPS = 30.0
 HOVER_M = 14.0  # metres above the target
@@ -75,7 +75,7 @@ def parsed_config(width: int, height: int, kind: str):
 
 def make_detector(kind: str, stub_ms: float) -> Analytics:
     """``stub``: :class:`FixedCostDetector` (``stub_ms``); ``yolox``: YOLOX-Nano on cars, trucks and buses."""
-    from aerodaas.analytics import ObjectDetector
+    from aerodaas.analytics.core import ObjectDetector
 
     if kind == "stub":
         return FixedCostDetector(stub_ms)
@@ -107,7 +107,7 @@ class CameraStage:
     """Renders one (H, W, 3) uint8 read-only frame at a pose (metres ENU, yaw degrees) and builds its FrameMeta."""
 
     def __init__(self, width: int, height: int, kind: str) -> None:
-        from aerodaas.models import CameraIntrinsics
+        from aerodaas.app.models import CameraIntrinsics
         from aerodaas.sim.world import World
 
         cfg = parsed_config(width, height, kind)
@@ -116,7 +116,7 @@ class CameraStage:
         self.seq = 0
 
     def capture(self, position: tuple, yaw: float, t: float) -> tuple[np.ndarray, Any]:
-        from aerodaas.models import FrameMeta, FramePose
+        from aerodaas.app.models import FrameMeta, FramePose
 
         self.seq += 1
         pose = FramePose(position=tuple(float(c) for c in position), yaw=float(yaw), camera_pitch=90)
@@ -152,7 +152,7 @@ class FollowStage:
         self.follow.setup()
 
     def __call__(self, dets: list, meta: Any) -> tuple[Any, float]:
-        from aerodaas.models import AeroNavigation
+        from aerodaas.app.models import AeroNavigation
 
         t0 = time.perf_counter()
         nav = self.follow.process(dets, meta)
@@ -164,7 +164,7 @@ class CommandStage:
     safety-checked item to fly now (or None)."""
 
     def __init__(self, rc: Any) -> None:
-        from aerodaas.safety import SafetyGate
+        from aerodaas.navigation.safety import SafetyGate
         from aerodaas.schedulers import TrajectoryScheduler
 
         self.gate = SafetyGate(rc.safety, rc.limits, rc.home)

@@ -98,9 +98,9 @@ def measure(repeat: int = 300, width: int = 1280, height: int = 720, warmup: int
 
 
 def run_raypath(repeat: int = 300) -> dict:
-    from aerodaas import runtime
+    from aerodaas.runtime import driver as runtime
 
-    from . import machine_info
+    from aerodaas.bench import machine_info
 
     machine = machine_info()
     runtime.OPTIONS.progress = False
@@ -129,7 +129,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         report = run_raypath(a.repeat)
         for k, v in report["results_us"].items():
             print(f"raypath {k:32s} median {v['median']:9.1f} µs  p99 {v['p99']:9.1f} µs", file=sys.stderr)
-        from .overhead import emit_report
+        from aerodaas.bench.overhead import emit_report
 
         emit_report(report, a.out, a.json)
         return 0

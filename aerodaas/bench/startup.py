@@ -2,7 +2,7 @@
 
 Each repetition starts ``aerodaas run APP --quiet`` as a fresh process (a cold Ray start included) with
 ``AERODAAS_STARTUP_PROBE`` naming a file; the runtime appends ``<phase> <unix time>`` lines to it
-(:func:`aerodaas.startup_probe.probe`; ``cli``: the command started, ``app_built``: the application's dataflow is built,
+(:func:`aerodaas.runtime.startup_probe.probe`; ``cli``: the command started, ``app_built``: the application's dataflow is built,
 ``ray_ready``, ``hosts_ready``: every host set up and wired, ``first_processed``: the first item an analytics finished).
 The run is then interrupted.
 
@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from aerodaas.startup_probe import PROBE_ENV
+from aerodaas.runtime.startup_probe import PROBE_ENV
 
 
 def _read(path: Path) -> dict[str, float]:
@@ -93,7 +93,7 @@ def run_startup(app: str, repeat: int = 3, mode: str = "both") -> dict:
 
     from aerodaas.clusters import persistent
 
-    from . import machine_info
+    from aerodaas.bench import machine_info
 
     load_before = os.getloadavg()
     out: dict = {"benchmark": "startup", "machine": machine_info(), "app": app}

@@ -37,7 +37,7 @@ def _percentiles(xs: list[float]) -> dict:
 
 def _stream(width: int, height: int, fps: float, video_port: int):
     """A started emulator streaming to ``video_port`` on loopback, and the client socket that asked for it."""
-    from ..emulators.tello import TelloEmulator
+    from aerodaas.emulators.tello import TelloEmulator
 
     emu = TelloEmulator(video_port=video_port, state_port=free_udp_port(), video_size=(width, height), video_fps=fps,
                         stamp_frame_index=True, camera_pitch_deg=30.0).start()
@@ -51,8 +51,8 @@ def _stream(width: int, height: int, fps: float, video_port: int):
 
 def run_pyav(width: int, height: int, fps: float, seconds: float, record: str | None = None) -> dict:
     """Live PyAV decode of the emulated stream; optionally writes the received bytes to ``record``."""
-    from ..backends.tello.video import H264Reassembler
-    from ..emulators.tello import read_index
+    from aerodaas.backends.tello.video import H264Reassembler
+    from aerodaas.emulators.tello import read_index
 
     port = free_udp_port()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -103,7 +103,7 @@ def run_opencv(width: int, height: int, fps: float, seconds: float, low_delay: b
     else:
         os.environ.pop("OPENCV_FFMPEG_CAPTURE_OPTIONS", None)
 
-    from ..emulators.tello import read_index
+    from aerodaas.emulators.tello import read_index
 
     port = free_udp_port()
     res: dict = {"opened": False}
@@ -169,7 +169,7 @@ def offline_decode_ms(path: str) -> dict:
 
 
 def run(width: int = 960, height: int = 720, fps: float = 30.0, seconds: float = 8.0) -> dict:
-    from . import machine_info
+    from aerodaas.bench import machine_info
 
     with tempfile.TemporaryDirectory() as d:
         rec = os.path.join(d, "tello.h264")

@@ -96,7 +96,7 @@ def recording_frame_gaps(path: str | Path) -> list[list[float]]:
     """Per camera topic of the MCAP recording ``path`` (messages of :data:`IMAGE_SCHEMAS`, in log-time order): the
     gaps between consecutive frames' log times, in ms. Topics with fewer than 3 frames are skipped. Raises
     FileNotFoundError, ValueError (not an MCAP file, or no camera topic with 3 frames)."""
-    from aerodaas.mcap_read import _iter_raw, _open_mcap
+    from aerodaas.recording.reader import _iter_raw, _open_mcap
 
     key = str(Path(path).resolve())
     if key in _GAP_CACHE:

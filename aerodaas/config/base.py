@@ -35,8 +35,8 @@ MAX_SPEEDUP = 1000.0
 #: slowest simulation clock: 100x slower than real time (below, one simulated second takes minutes of wall time and a
 #: run looks hung; 1e-300 overflowed the clock's arithmetic)
 MIN_SPEEDUP = 0.01
-#: coarsest physics step: 1/10 s, the control period the safety gate's envelope model assumes (aerodaas.safety);
-#: measured with aerodaas.reliability_flight: no fence/altitude excursion at 10, 20, 50 Hz, 0.77 m outside the fence
+#: coarsest physics step: 1/10 s, the control period the safety gate's envelope model assumes (aerodaas.navigation.safety);
+#: measured with aerodaas.reliability.flight: no fence/altitude excursion at 10, 20, 50 Hz, 0.77 m outside the fence
 #: at 1 Hz
 MIN_PHYSICS_HZ = 10.0
 #: largest procedural ground, pixels per side (size_m / metres_per_pixel): 16384² RGB is 805 MB

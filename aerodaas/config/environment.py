@@ -12,11 +12,11 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field, Strict, ValidationError, field_validator, model_validator
 
-from ..geofence import GeofenceConfig
+from aerodaas.navigation.geofence import GeofenceConfig
 
-from .base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
+from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
                    MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
-from .robot import RobotConfig, SensorConfig
+from aerodaas.config.robot import RobotConfig, SensorConfig
 
 
 _LABEL_KEY = re.compile(r"^([a-z0-9]([-a-z0-9.]*[a-z0-9])?/)?[A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?$")
@@ -126,7 +126,7 @@ class SimulationConfig(_Cfg):
 
 
 class HitlConfig(_Cfg):
-    """Human-in-the-loop HTTP API (see :mod:`aerodaas.hitl`). Loopback-only by default; ``token`` is the
+    """Human-in-the-loop HTTP API (see :mod:`aerodaas.tools.hitl`). Loopback-only by default; ``token`` is the
     bearer token (generated at start and printed once when not given). ``port`` 0 picks a free port."""
 
     enabled: bool = False
@@ -206,7 +206,7 @@ class AnalyticsSchedulerConfig(_Cfg):
             path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
                 else Path(self.workload)
             try:
-                from .jsonfile import read_json
+                from aerodaas.config.jsonfile import read_json
 
                 data = read_json(path)
             except (OSError, ValueError) as e:
@@ -396,8 +396,8 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     for i, r in enumerate(cfg.robots):
         if r.replay is not None:
             r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))
-            from ..backends.base import BackendError
-            from ..backends.replay import check_log
+            from aerodaas.backends.base import BackendError
+            from aerodaas.backends.replay import check_log
 
             try:
                 check_log(r.replay.log)
@@ -406,7 +406,7 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         if r.safety.geofence_plan:
             field = f"robots.{i}.safety.geofence_plan"
             path = cfg.resolve_path(r.safety.geofence_plan, field)
-            from ..missionfile import MissionFileError, load_mission
+            from aerodaas.missionfile import MissionFileError, load_mission
 
             try:
                 fence = load_mission(path).geofence
@@ -416,7 +416,7 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
                                                circles=[*r.safety.geofence.circles, *fence.circles])
             r.safety.geofence_plan = str(path)
     for i, r in enumerate(cfg.robots):
-        from ..geofence import Geofence
+        from aerodaas.navigation.geofence import Geofence
 
         try:
             why = Geofence(r.safety.geofence, r.home).check_point(0.0, 0.0)
@@ -448,7 +448,7 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"environment file {str(p)!r} not found")
-    from .jsonfile import JsonFileError, read_json
+    from aerodaas.config.jsonfile import JsonFileError, read_json
 
     try:
         data = read_json(p)

@@ -8,9 +8,9 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from ..geofence import GeofenceConfig
-from ..models import GeoPoint
-from .base import (HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
+from aerodaas.navigation.geofence import GeofenceConfig
+from aerodaas.app.models import GeoPoint
+from aerodaas.config.base import (HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
                    did_you_mean)
 
@@ -47,7 +47,7 @@ class NoiseConfig(_Cfg):
 
 
 class SafetyConfig(_Cfg):
-    """Safety limits, enforced by :class:`aerodaas.safety.SafetyGate` before any command reaches the drone.
+    """Safety limits, enforced by :class:`aerodaas.navigation.safety.SafetyGate` before any command reaches the drone.
 
     Altitudes are metres above home; ``max_altitude``/``max_speed`` default to the robot's ``limits``.
     ``min_altitude`` applies to everything except take-off and landing. ``geofence`` holds inclusion/exclusion

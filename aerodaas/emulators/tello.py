@@ -37,10 +37,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..config import BatteryConfig, GroundConfig, Limits
-from ..models import CameraIntrinsics, FramePose, GeoPoint
-from ..sim.vehicle import Setpoint, SimVehicle
-from ..sim.world import CAMERA_MIN_HEIGHT_M, World
+from aerodaas.config import BatteryConfig, GroundConfig, Limits
+from aerodaas.app.models import CameraIntrinsics, FramePose, GeoPoint
+from aerodaas.sim.vehicle import Setpoint, SimVehicle
+from aerodaas.sim.world import CAMERA_MIN_HEIGHT_M, World
 
 __all__ = ["TelloEmulator", "format_state", "stamp_index", "read_index"]
 

@@ -1,1 +1,1 @@
-"""Live-view helpers around the foxglove-sdk WebSocket server (:mod:`aerodaas.live`)."""
+"""Live-view helpers around the foxglove-sdk WebSocket server (:mod:`aerodaas.liveview.server`)."""

@@ -10,7 +10,7 @@ above mean sea level in ``MAV_FRAME_GLOBAL`` 0 / ``MAV_FRAME_GLOBAL_INT`` 5, abo
   lossless for every item: ``.plan`` ComplexItems (survey, corridor scan, structure scan, landing patterns)
   are kept verbatim in :attr:`MissionItem.raw` and written back unchanged.
 * :func:`plan_to_flight` turns a plan into what an AeroDaaS drone flies: an ordered
-  :class:`~aerodaas.models.AeroNavigation` of absolute waypoints (latitude, longitude, metres above home), a
+  :class:`~aerodaas.app.models.AeroNavigation` of absolute waypoints (latitude, longitude, metres above home), a
   terminal action (land, return to launch, or hover) and the plan's geofence. :func:`plan_to_navigation` is
   the shortcut to the navigation alone; :func:`navigation_to_plan` goes the other way.
 * Nothing is dropped silently. Commands the drone cannot honour raise :class:`MissionFileError` naming the
@@ -48,19 +48,19 @@ QGroundControl SimpleItem), :mod:`.plans` (:class:`MissionPlan`, :class:`FlightP
 (format detection) and :mod:`.flight` (plans to and from AeroDaaS navigation). This package re-exports the
 public API below.
 """
-from ._common import MissionFileError
-from .commands import (
+from aerodaas.missionfile._common import MissionFileError
+from aerodaas.missionfile.commands import (
     COMPLEX_ITEM_COMMAND, MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LAND, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM,
     MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_MISSION, PAYLOAD_COMMANDS, command_name, frame_name,
 )
-from .expand import expand_items
-from .flight import navigation_to_plan, plan_to_flight, plan_to_navigation
-from .items import MissionItem
-from .load import load_mission
-from .plans import FlightPlan, MissionPlan
-from .qgc_plan import load_plan, save_plan
-from .wpl import load_wpl, save_wpl
+from aerodaas.missionfile.expand import expand_items
+from aerodaas.missionfile.flight import navigation_to_plan, plan_to_flight, plan_to_navigation
+from aerodaas.missionfile.items import MissionItem
+from aerodaas.missionfile.load import load_mission
+from aerodaas.missionfile.plans import FlightPlan, MissionPlan
+from aerodaas.missionfile.qgc_plan import load_plan, save_plan
+from aerodaas.missionfile.wpl import load_wpl, save_wpl
 
 __all__ = [
     "MissionFileError", "MissionItem", "MissionPlan", "FlightPlan",

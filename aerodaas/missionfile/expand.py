@@ -7,15 +7,15 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from ..geo import enu_to_geodetic, geodetic_to_enu
-from ..models import GeoPoint
-from ._common import _fail, _is_number
-from .commands import (MAV_CMD_DO_SET_CAM_TRIGG_DIST, MAV_CMD_DO_SET_ROI_NONE, MAV_CMD_DO_SET_ROI_WPNEXT_OFFSET,
+from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.app.models import GeoPoint
+from aerodaas.missionfile._common import _fail, _is_number
+from aerodaas.missionfile.commands import (MAV_CMD_DO_SET_CAM_TRIGG_DIST, MAV_CMD_DO_SET_ROI_NONE, MAV_CMD_DO_SET_ROI_WPNEXT_OFFSET,
                        MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_MISSION)
-from .items import MissionItem, _parse_simple_item
+from aerodaas.missionfile.items import MissionItem, _parse_simple_item
 
 if TYPE_CHECKING:  # annotations only: MissionPlan.expanded_items calls expand_items
-    from .plans import MissionPlan
+    from aerodaas.missionfile.plans import MissionPlan
 
 
 def expand_items(plan: MissionPlan) -> list[MissionItem]:

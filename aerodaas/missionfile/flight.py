@@ -8,17 +8,17 @@ from typing import Any, Iterable, Literal
 
 from pydantic import ValidationError
 
-from ..geo import enu_to_geodetic
-from ..geofence import Geofence, GeofenceConfig
-from ..models import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
-from ._common import MissionFileError, _fail, _first_error
-from .commands import (_AMSL_FRAMES, _FLIGHT_COMMANDS, _RELATIVE_FRAMES, _TERRAIN_FRAMES, MAV_CMD_DO_CHANGE_SPEED,
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.navigation.geofence import Geofence, GeofenceConfig
+from aerodaas.app.models import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
+from aerodaas.missionfile._common import MissionFileError, _fail, _first_error
+from aerodaas.missionfile.commands import (_AMSL_FRAMES, _FLIGHT_COMMANDS, _RELATIVE_FRAMES, _TERRAIN_FRAMES, MAV_CMD_DO_CHANGE_SPEED,
                        MAV_CMD_NAV_LAND, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM,
                        MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT,
                        MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_MISSION, PAYLOAD_COMMANDS, command_name, frame_name)
-from .expand import expand_items
-from .items import MissionItem
-from .plans import FlightPlan, MissionPlan
+from aerodaas.missionfile.expand import expand_items
+from aerodaas.missionfile.items import MissionItem
+from aerodaas.missionfile.plans import FlightPlan, MissionPlan
 
 
 def _latlon_missing(lat: float | None, lon: float | None) -> bool:

@@ -8,8 +8,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from ._common import _fail, _is_number
-from .commands import (_FRAME_NAMES, _GLOBAL_FRAMES, COMPLEX_ITEM_COMMAND, MISSION_FRAMES, command_name,
+from aerodaas.missionfile._common import _fail, _is_number
+from aerodaas.missionfile.commands import (_FRAME_NAMES, _GLOBAL_FRAMES, COMPLEX_ITEM_COMMAND, MISSION_FRAMES, command_name,
                        frame_name)
 
 

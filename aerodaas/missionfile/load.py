@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import _fail, _read_text
-from .plans import MissionPlan
-from .qgc_plan import _parse_plan
-from .wpl import _parse_wpl
+from aerodaas.missionfile._common import _fail, _read_text
+from aerodaas.missionfile.plans import MissionPlan
+from aerodaas.missionfile.qgc_plan import _parse_plan
+from aerodaas.missionfile.wpl import _parse_wpl
 
 
 def load_mission(path: str | Path) -> MissionPlan:

@@ -6,10 +6,10 @@ from typing import Literal
 
 from pydantic import Field
 
-from ..geofence import GeofenceConfig
-from ..models import AeroNavigation, GeoPoint
-from .expand import expand_items
-from .items import MissionItem, _Model
+from aerodaas.navigation.geofence import GeofenceConfig
+from aerodaas.app.models import AeroNavigation, GeoPoint
+from aerodaas.missionfile.expand import expand_items
+from aerodaas.missionfile.items import MissionItem, _Model
 
 
 class MissionPlan(_Model):

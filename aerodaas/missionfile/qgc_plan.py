@@ -13,12 +13,12 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from ..geofence import GeofenceCircle, GeofenceConfig, GeofencePolygon
-from ..models import GeoPoint
-from ._common import MissionFileError, _fail, _first_error, _is_number, _read_text
-from .commands import COMPLEX_ITEM_COMMAND, MAV_FRAME_MISSION
-from .items import MissionItem, _parse_simple_item
-from .plans import MissionPlan
+from aerodaas.navigation.geofence import GeofenceCircle, GeofenceConfig, GeofencePolygon
+from aerodaas.app.models import GeoPoint
+from aerodaas.missionfile._common import MissionFileError, _fail, _first_error, _is_number, _read_text
+from aerodaas.missionfile.commands import COMPLEX_ITEM_COMMAND, MAV_FRAME_MISSION
+from aerodaas.missionfile.items import MissionItem, _parse_simple_item
+from aerodaas.missionfile.plans import MissionPlan
 
 
 def _geopoint(src: str, where: str, value: Any, need_alt: bool = True) -> GeoPoint:

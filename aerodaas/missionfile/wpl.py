@@ -6,13 +6,13 @@ import math
 from decimal import Decimal
 from pathlib import Path
 
-from ..models import GeoPoint
-from ._common import _fail, _read_text
-from .commands import (_AMSL_FRAMES, MAV_CMD_DO_JUMP, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, frame_name,
+from aerodaas.app.models import GeoPoint
+from aerodaas.missionfile._common import _fail, _read_text
+from aerodaas.missionfile.commands import (_AMSL_FRAMES, MAV_CMD_DO_JUMP, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, frame_name,
                        command_name)
-from .expand import expand_items
-from .items import MissionItem, _check_command_frame, _check_position
-from .plans import MissionPlan
+from aerodaas.missionfile.expand import expand_items
+from aerodaas.missionfile.items import MissionItem, _check_command_frame, _check_position
+from aerodaas.missionfile.plans import MissionPlan
 
 
 _WPL_FIELDS = ("seq", "current", "frame", "command", "param1", "param2", "param3", "param4",

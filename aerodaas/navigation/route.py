@@ -5,7 +5,7 @@ polyhedral obstacles", CACM 22(10), 1979): every exclusion zone is grown by a ``
 distance at the return speed plus a margin, so the gate's stopping envelope stays clear too) and approximated by a
 polygon that *contains* the grown zone (a circle of radius R becomes a regular polygon with circumradius
 ``R / cos(pi / n)``); the nodes are the start, the goal and the vertices of the grown zones; an edge is a straight leg
-that enters no grown zone's interior and that :meth:`aerodaas.geofence.Geofence.check_segment` allows (inclusion
+that enters no grown zone's interior and that :meth:`aerodaas.navigation.geofence.Geofence.check_segment` allows (inclusion
 zones included); Dijkstra's algorithm gives the shortest path. Geometry with Shapely. ``None`` when no safe path
 exists: the caller then lands in place.
 """
@@ -17,7 +17,7 @@ from typing import Sequence
 
 from shapely.geometry import LineString, Point, Polygon
 
-from aerodaas.geofence import Geofence
+from aerodaas.navigation.geofence import Geofence
 
 __all__ = ["grown_exclusions", "plan_path"]
 

@@ -1,5 +1,5 @@
 """Return to launch (and every failsafe that returns) through the safety gate: a path around the exclusion zones
-(:func:`aerodaas.navigation.route.plan_path`), each leg then checked by :class:`aerodaas.safety.SafetyGate` exactly as
+(:func:`aerodaas.navigation.route.plan_path`), each leg then checked by :class:`aerodaas.navigation.safety.SafetyGate` exactly as
 a waypoint from an app would be (the first leg from the vehicle's current velocity, with the stopping envelope), or
 no path at all: the caller lands in place."""
 from __future__ import annotations
@@ -19,8 +19,8 @@ def plan_return(gate: Any, position: Sequence[float], velocity: Sequence[float],
     """Plan the way home for a vehicle at ``position`` (ENU m) moving at ``velocity`` (ENU m/s), flown at ``altitude``
     (m above home) and the gate's ``max_speed``. Returns ``(path, "")`` with ``path`` the ENU ``(x, y)`` points from
     the position to ``home``, or ``(None, reason)`` when no path exists or a leg of it is refused by the gate."""
-    from aerodaas.models import Waypoint
-    from aerodaas.safety import SafetyViolation
+    from aerodaas.app.models import Waypoint
+    from aerodaas.navigation.safety import SafetyViolation
 
     clearance = gate.stopping_distance(gate.max_speed) + RTL_MARGIN_M
     start = (float(position[0]), float(position[1]))

@@ -24,7 +24,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from aerodaas.detect import NanoDetDetector, YoloxDetector, _OnnxDetector
+from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, _OnnxDetector
 
 __all__ = ["UltralyticsDetector", "ModelInfo", "inspect_model", "FORMATS", "metadata_names"]
 
@@ -125,11 +125,11 @@ def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
 
 class UltralyticsDetector(_OnnxDetector):
     """An Ultralytics YOLOv5 / YOLOv8 / YOLO11 ONNX export (CPU, onnxruntime); interface as
-    :class:`aerodaas.detect.YoloxDetector`. Pre-processing, decoding and box mapping as the module docstring
+    :class:`aerodaas.perception.detect.YoloxDetector`. Pre-processing, decoding and box mapping as the module docstring
     cites. Class names come from ``class_names=`` or the model's metadata ``names`` (else ``class0..``);
     ``input_size=(H, W)`` is required when the export has dynamic height/width and no ``imgsz`` metadata.
 
-    Images ``(H, W, 3)`` uint8 BGR in, :class:`~aerodaas.models.Detection` out (pixels of the image). Raises
+    Images ``(H, W, 3)`` uint8 BGR in, :class:`~aerodaas.app.models.Detection` out (pixels of the image). Raises
     ValueError as the base class, and RuntimeError at ``detect`` when the output is neither head."""
 
     model_name = "yolox_nano"  # only used by resolve_model's name check; the path is what is loaded

@@ -1,9 +1,9 @@
 """A detector configuration checked on the driver, before Ray starts (issue 28, item 6), and the detector built
 from it on the actor.
 
-:func:`check_detector_options` checks every field of an :class:`~aerodaas.analytics.ObjectDetector` (thresholds,
+:func:`check_detector_options` checks every field of an :class:`~aerodaas.analytics.core.ObjectDetector` (thresholds,
 class names against the model's own names, class groups, input size, the model's format) and raises ValueError
-naming the field and the value; the pre-flight (:func:`aerodaas.preflight.validate`, through
+naming the field and the value; the pre-flight (:func:`aerodaas.runtime.preflight.validate`, through
 ``ObjectDetector.check``) calls it, so ``aerodaas run`` exits 2 before any actor starts.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ import math
 import os
 from typing import Any, Iterable
 
-from aerodaas.models import COCO_CLASSES
+from aerodaas.app.models import COCO_CLASSES
 
 __all__ = ["normalise_classes", "check_detector_options", "build_detector"]
 
@@ -59,7 +59,7 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
     format, input size and class names (:func:`aerodaas.perception.decoders.inspect_model`). Returns
     ``{"format", "class_names", "input_hw"}`` as they will be used. Every error is a ValueError whose message
     starts with ``analytics {name!r}:`` and names the field and the value."""
-    from aerodaas.detect import _check_input_size  # cv2 and onnxruntime load here, not when an app is built
+    from aerodaas.perception.detect import _check_input_size  # cv2 and onnxruntime load here, not when an app is built
     from aerodaas.perception.decoders import FORMATS, inspect_model
 
     pre = f"analytics {name!r}: "
@@ -128,7 +128,7 @@ def build_detector(model: str = "yolox_nano", model_path: str | os.PathLike | No
     ``kwargs`` go to the detector's constructor (thresholds, classes, ``agnostic_nms``, ``class_groups``,
     ``input_size``, ``class_names``, ``intra_op_threads``). Raises ValueError as the constructors and
     :func:`check_detector_options` do."""
-    from aerodaas.detect import make_detector
+    from aerodaas.perception.detect import make_detector
     from aerodaas.perception.decoders import DETECTOR_CLASSES, inspect_model
 
     if model_path is None:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerodaas.models import Detection
+from aerodaas.app.models import Detection
 
 __all__ = ["Tiling", "slice_boxes", "merge_detections", "TiledDetector"]
 
@@ -117,7 +117,7 @@ def merge_detections(dets: list[Detection], merge: str = "greedynmm", match_thre
 
 
 class TiledDetector:
-    """Wraps a detector (:class:`aerodaas.detect.YoloxDetector` and kin) to detect by slices (:class:`Tiling`);
+    """Wraps a detector (:class:`aerodaas.perception.detect.YoloxDetector` and kin) to detect by slices (:class:`Tiling`);
     same interface: ``detect(image) -> list[Detection]`` on ``(H, W, 3)`` uint8 BGR frames, ``detect_batch``,
     ``last_timing`` (ms, summed over the slices), ``batch_dynamic``, ``last_batch``, ``last_batched``."""
 

@@ -1,12 +1,12 @@
 """``TrackAnalytics``: an analytics that turns each drone's detections into ByteTrack tracks with stable ids and
-geo-locates them (issue 28, items 3 and 4). Feed it an :class:`~aerodaas.analytics.ObjectDetector`'s output
+geo-locates them (issue 28, items 3 and 4). Feed it an :class:`~aerodaas.analytics.core.ObjectDetector`'s output
 stream; it keeps one :class:`~aerodaas.perception.tracking.ByteTracker` per drone (:meth:`drone_state`)."""
 from __future__ import annotations
 
 from typing import Any, Iterable
 
-from aerodaas.analytics import Analytics
-from aerodaas.models import Detection, FrameMeta, GeoPoint
+from aerodaas.analytics.core import Analytics
+from aerodaas.app.models import Detection, FrameMeta, GeoPoint
 from aerodaas.perception.geolocate import geolocate_box
 from aerodaas.perception.tracking import ByteTrackConfig, ByteTracker
 

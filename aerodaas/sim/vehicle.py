@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import BatteryConfig, Limits, NoiseConfig
-from ..geo import enu_to_geodetic
-from ..models import Attitude, GeoPoint, Odometry
+from aerodaas.config import BatteryConfig, Limits, NoiseConfig
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.app.models import Attitude, GeoPoint, Odometry
 
 
 @dataclass

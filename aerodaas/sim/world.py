@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..config import GroundConfig, TargetConfig
-from ..models import CameraIntrinsics, FramePose
+from aerodaas.config import GroundConfig, TargetConfig
+from aerodaas.app.models import CameraIntrinsics, FramePose
 
 SKY_BGR = (235, 206, 135)
 

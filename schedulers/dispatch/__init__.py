@@ -7,7 +7,7 @@ package is what runs it, one module per concept:
   the edge executor loop, the poll timer and cloud submission; records every task's terminal state and utility.
 * :mod:`.edge_executors` -- :class:`~.edge_executors.EdgeExecutor` s: :class:`~.edge_executors.EmulatedEdgeExecutor`
   holds the model's profile time (``edge_ms`` x a seeded jitter factor); :class:`~.edge_executors.OnnxEdgeExecutor`
-  runs a real ONNX detector (:func:`aerodaas.detect.make_detector`: YOLOX-Nano, NanoDet-Plus) on the frame;
+  runs a real ONNX detector (:func:`aerodaas.perception.detect.make_detector`: YOLOX-Nano, NanoDet-Plus) on the frame;
   :class:`~.edge_executors.AnalyticsEdgeExecutor` runs an application's analytics.
 * :mod:`.cloud_pool` -- :class:`~.cloud_pool.CloudPool`, the edge-side client of the cloud executors (the Ray actor
   :data:`aerodaas.actors.cloud_executor.CloudExecutorActor`), shared by the dispatchers of one process: batched

@@ -1,5 +1,5 @@
 """The models an executor runs, by workload model name: :class:`DetectorBank` (lazily built ONNX detectors,
-:func:`aerodaas.detect.make_detector`) and :class:`AnalyticsBank` (an application's analytics objects). Both keep
+:func:`aerodaas.perception.detect.make_detector`) and :class:`AnalyticsBank` (an application's analytics objects). Both keep
 one instance per thread, since onnxruntime sessions are not meant to be shared across concurrent ``run`` calls."""
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ class DetectorBank:
                 from None
 
     def detect(self, model: str, frame) -> list:
-        from aerodaas.detect import make_detector
+        from aerodaas.perception.detect import make_detector
 
         cache = getattr(self._local, "cache", None)
         if cache is None:
@@ -45,7 +45,7 @@ class DetectorBank:
 
 
 class AnalyticsBank:
-    """Runs an application's analytics objects (:class:`aerodaas.analytics.Analytics`) by model name, for the
+    """Runs an application's analytics objects (:class:`aerodaas.analytics.core.Analytics`) by model name, for the
     executors of scheduled analytics. Each thread gets its own copy of an analytics (``setup()`` once per copy), so
     an onnxruntime session is never shared by concurrent calls; with ``shared=True`` the given objects themselves
     are used, already set up by the caller (one executor thread: the edge host's own analytics). :meth:`run` returns ``process(frame, meta)`` and keeps the analytics'

@@ -45,13 +45,13 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 from aerodaas.schedulers.analytics_base import AnalyticsTask
 
-from .clock import Clock
-from .emulation import Jitter, NetworkModel, seeded_rng
-from .payload import frame_from_payload
-from .stats import Samples
+from aerodaas.schedulers.dispatch.clock import Clock
+from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel, seeded_rng
+from aerodaas.schedulers.dispatch.payload import frame_from_payload
+from aerodaas.schedulers.dispatch.stats import Samples
 
 if TYPE_CHECKING:  # annotations only: the dispatcher imports this module
-    from .dispatcher import AnalyticsDispatcher
+    from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
 
 __all__ = ["CloudPool"]
 

@@ -58,10 +58,10 @@ from aerodaas.schedulers.analytics_base import (
     AnalyticsScheduler, AnalyticsTask, CloudCounters, Decision, TaskState, Workload, admit_by_time, task_utility,
 )
 
-from .clock import Clock
-from .cloud_pool import CloudPool
-from .edge_executors import EdgeExecutor
-from .stats import Samples
+from aerodaas.schedulers.dispatch.clock import Clock
+from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+from aerodaas.schedulers.dispatch.edge_executors import EdgeExecutor
+from aerodaas.schedulers.dispatch.stats import Samples
 
 __all__ = ["AnalyticsDispatcher", "DROP_STATES"]
 

@@ -2,7 +2,7 @@
 :class:`~aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher`.
 
 :class:`EmulatedEdgeExecutor` holds the model's profile time (``edge_ms`` x a seeded :class:`Jitter` factor);
-:class:`OnnxEdgeExecutor` runs a real ONNX detector (:func:`aerodaas.detect.make_detector`: YOLOX-Nano,
+:class:`OnnxEdgeExecutor` runs a real ONNX detector (:func:`aerodaas.perception.detect.make_detector`: YOLOX-Nano,
 NanoDet-Plus) on the frame; :class:`AnalyticsEdgeExecutor` runs an application's analytics on it.
 """
 from __future__ import annotations
@@ -14,10 +14,10 @@ from typing import Any, Mapping
 
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 
-from .banks import AnalyticsBank, DetectorBank
-from .clock import set_result_if_pending
-from .emulation import Jitter, seeded_rng
-from .payload import frame_from_payload
+from aerodaas.schedulers.dispatch.banks import AnalyticsBank, DetectorBank
+from aerodaas.schedulers.dispatch.clock import set_result_if_pending
+from aerodaas.schedulers.dispatch.emulation import Jitter, seeded_rng
+from aerodaas.schedulers.dispatch.payload import frame_from_payload
 
 __all__ = ["EdgeExecutor", "EmulatedEdgeExecutor", "OnnxEdgeExecutor", "AnalyticsEdgeExecutor"]
 
@@ -67,9 +67,9 @@ class OnnxEdgeExecutor(EdgeExecutor):
 
     ``detector_for``: the detector name for every workload model (``"yolox_nano"``, ``"nanodet_plus_m_416"``) or a
     mapping model -> name (the workload's models are stand-ins: any model may be mapped to either detector).
-    ``detector_kwargs`` go to :func:`aerodaas.detect.make_detector` (``model_path``, ``score_threshold``, ...).
+    ``detector_kwargs`` go to :func:`aerodaas.perception.detect.make_detector` (``model_path``, ``score_threshold``, ...).
     The payload is an ndarray, an ObjectRef to one (same node: zero-copy), or JPEG bytes. The result is the list of
-    :class:`~aerodaas.models.Detection`.
+    :class:`~aerodaas.app.models.Detection`.
     """
 
     def __init__(self, detector_for: Mapping[str, str] | str = "yolox_nano",
@@ -90,7 +90,7 @@ class OnnxEdgeExecutor(EdgeExecutor):
 class AnalyticsEdgeExecutor(EdgeExecutor):
     """Runs an application's analytics on the edge, one task at a time on one worker thread (the edge's one
     accelerator): ``bank.run(task.model, frame, meta)`` for a :class:`FramePayload`. The result is the analytics'
-    output (e.g. a list of :class:`~aerodaas.models.Detection`); ``last_timing`` of the analytics goes to
+    output (e.g. a list of :class:`~aerodaas.app.models.Detection`); ``last_timing`` of the analytics goes to
     ``task.notes["timing"]``."""
 
     def __init__(self, bank: AnalyticsBank) -> None:

@@ -24,7 +24,7 @@ progress), :mod:`.params` (parameter protocol, the vehicle's own speed limits), 
 arming, take-off), :mod:`.offboard` (GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.mission` (the
 mission protocol). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
-from .backend import MavlinkBackend
-from ._common import CommandNotAcknowledged, CommandNotConfirmed
+from aerodaas.backends.mavlink.backend import MavlinkBackend
+from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed
 
 __all__ = ["MavlinkBackend", "CommandNotAcknowledged", "CommandNotConfirmed"]

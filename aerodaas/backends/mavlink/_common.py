@@ -6,7 +6,7 @@ import logging
 import struct
 
 
-from ..base import BackendError
+from aerodaas.backends.base import BackendError
 
 
 #: STATUSTEXT lines are logged here (``robot: text``), at the level of their MAV_SEVERITY

@@ -25,8 +25,8 @@ from __future__ import annotations
 import math
 import time
 
-from ..base import CommandRefused
-from ._common import M, _PX4_NO_ARM_MODES
+from aerodaas.backends.base import CommandRefused
+from aerodaas.backends.mavlink._common import M, _PX4_NO_ARM_MODES
 
 #: EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (EKF_STATUS_FLAGS, ESTIMATOR_STATUS_FLAGS share these low bits)
 _EKF_ATTITUDE, _EKF_VEL_HORIZ, _EKF_POS_HORIZ_ABS = 1, 2, 16

@@ -9,17 +9,17 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ...config import MavlinkConfig
-from ...models import GeoPoint
-from ..base import VehicleBackend
-from .action import ActionMixin
-from .command import CommandMixin
-from .link import LinkMixin
-from .mission import MissionMixin
-from .offboard import OffboardMixin
-from .params import ParamMixin
-from .telemetry import TelemetryMixin
-from ._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
+from aerodaas.config import MavlinkConfig
+from aerodaas.app.models import GeoPoint
+from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.mavlink.action import ActionMixin
+from aerodaas.backends.mavlink.command import CommandMixin
+from aerodaas.backends.mavlink.link import LinkMixin
+from aerodaas.backends.mavlink.mission import MissionMixin
+from aerodaas.backends.mavlink.offboard import OffboardMixin
+from aerodaas.backends.mavlink.params import ParamMixin
+from aerodaas.backends.mavlink.telemetry import TelemetryMixin
+from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
 class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,

@@ -8,8 +8,8 @@ from typing import Any, Callable
 
 from pymavlink import mavutil
 
-from ..base import BackendError, CommandRefused, LinkLost
-from ._common import M, _enum_name, CommandNotAcknowledged, CommandNotConfirmed, _REJECTED_BACKOFF_S, \
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.mavlink._common import M, _enum_name, CommandNotAcknowledged, CommandNotConfirmed, _REJECTED_BACKOFF_S, \
     _STATUSTEXT_FLUSH_S
 
 

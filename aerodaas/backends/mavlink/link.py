@@ -9,9 +9,9 @@ from typing import Any, Callable
 
 from pymavlink import mavutil
 
-from ..base import BackendError, CommandRefused, LinkLost
-from .shared_link import open_link
-from ._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.mavlink.shared_link import open_link
+from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
 
 
 class LinkMixin:

@@ -6,11 +6,11 @@ import time
 from typing import Any, Callable, Literal
 
 
-from ...geo import geodetic_to_enu
-from ...missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
-from ...models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
-from ..base import BackendError, CommandRefused
-from ._common import M, _enum_name, _f32, _GLOBAL_FRAMES
+from aerodaas.navigation.geo import geodetic_to_enu
+from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
+from aerodaas.app.models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.backends.base import BackendError, CommandRefused
+from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _GLOBAL_FRAMES
 
 
 #: MAV_FRAME_GLOBAL_RELATIVE_ALT and its _INT twin: altitudes above home
@@ -55,8 +55,8 @@ class MissionMixin:
         """Upload a mission with the MISSION_ITEM_INT protocol (MISSION_COUNT, answering each MISSION_REQUEST_INT
         / MISSION_REQUEST, until MISSION_ACK).
 
-        ``mission``: a list of :class:`~aerodaas.models.Waypoint` (ENU relative to :attr:`home`, or absolute) and
-        optionally a final land/rtl :class:`~aerodaas.models.ActionCommand`, an :class:`AeroNavigation`, a
+        ``mission``: a list of :class:`~aerodaas.app.models.Waypoint` (ENU relative to :attr:`home`, or absolute) and
+        optionally a final land/rtl :class:`~aerodaas.app.models.ActionCommand`, an :class:`AeroNavigation`, a
         :class:`~aerodaas.missionfile.MissionPlan` (e.g. an imported ``.plan``; ComplexItems expanded) or a list
         of :class:`~aerodaas.missionfile.MissionItem`. Waypoints become MAV_CMD_NAV_WAYPOINT items
         (``navigation_to_plan``: ``takeoff_altitude`` m prepends a NAV_TAKEOFF, ``final_action`` appends

@@ -8,10 +8,10 @@ from typing import Sequence
 
 import numpy as np
 
-from ...geo import enu_to_geodetic
-from ..base import LinkLost
-from .params import px4_speed_limit
-from ._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.backends.base import LinkLost
+from aerodaas.backends.mavlink.params import px4_speed_limit
+from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
 #: lowest target height (metres above the take-off point) goto sends to an armed vehicle

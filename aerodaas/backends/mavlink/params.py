@@ -20,8 +20,8 @@ import threading
 import time
 from typing import Any
 
-from ..base import BackendError
-from ._common import M, _f32
+from aerodaas.backends.base import BackendError
+from aerodaas.backends.mavlink._common import M, _f32
 
 #: PX4's horizontal limits are ``limits.max_speed`` less this margin (m/s), and never below half of it (see
 #: :func:`px4_speed_limit`). PX4's velocity loop holds its *estimate* at MPC_XY_VEL_MAX, and each GPS fusion step

@@ -30,8 +30,8 @@ from typing import Any, Callable
 
 from pymavlink import mavutil
 
-from ..base import BackendError
-from ._common import M, _NOT_VEHICLES
+from aerodaas.backends.base import BackendError
+from aerodaas.backends.mavlink._common import M, _NOT_VEHICLES
 
 #: wall seconds of discovery before ``target_system: auto`` picks the lowest unclaimed id (autopilots send their
 #: HEARTBEAT at 1 Hz, mavlink.io/en/services/heartbeat.html)

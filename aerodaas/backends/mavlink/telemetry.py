@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from ...geo import enu_to_geodetic, geodetic_to_enu
-from ...models import Attitude, GeoPoint, Odometry
-from ._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
+from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.app.models import Attitude, GeoPoint, Odometry
+from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
 class TelemetryMixin:

@@ -37,6 +37,6 @@ holds the shared state): :mod:`.protocol` (the SDK's state packets and ``go`` co
 stream), :mod:`.link` (sockets, receiver threads, keep-alive, the command channel), :mod:`.control` (the motion
 worker and the flight commands) and :mod:`.backend` (the class, its state and odometry).
 """
-from .backend import TelloBackend
+from aerodaas.backends.tello.backend import TelloBackend
 
 __all__ = ["TelloBackend"]

@@ -10,12 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from ...config import TelloConfig
-from ...geo import enu_to_geodetic
-from ...models import Attitude, Odometry
-from ..base import VehicleBackend
-from .control import ControlMixin, _Motion
-from .link import LinkMixin
+from aerodaas.config import TelloConfig
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.app.models import Attitude, Odometry
+from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.tello.control import ControlMixin, _Motion
+from aerodaas.backends.tello.link import LinkMixin
 
 __all__ = ["TelloBackend"]
 

@@ -11,9 +11,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..base import BackendError, CommandRefused, LinkLost
-from .link import _Cancelled
-from .protocol import GO_MAX_CM, GO_MIN_CM, GO_SPEED_CM, go_command
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.tello.link import _Cancelled
+from aerodaas.backends.tello.protocol import GO_MAX_CM, GO_MIN_CM, GO_SPEED_CM, go_command
 
 #: wall seconds a manoeuvre waits, after the sticks were released, for a state packet showing the Tello at rest
 #: (velocity fields 0 dm/s, yaw unchanged); the body-frame ``go`` offset is computed from that pose

@@ -12,9 +12,9 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from ..base import BackendError, CommandRefused, LinkLost
-from .protocol import parse_state
-from .video import H264Reassembler
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.tello.protocol import parse_state
+from aerodaas.backends.tello.video import H264Reassembler
 
 #: the package's logger (named ``aerodaas.backends.tello``, as before the package was split)
 log = logging.getLogger(__package__)

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from .protocol import DATAGRAM_SIZE
+from aerodaas.backends.tello.protocol import DATAGRAM_SIZE
 
 __all__ = ["H264Reassembler"]
 

@@ -6,8 +6,8 @@ firmware's defaults), :mod:`.mission` (mission transfer), :mod:`.mission_run` (f
 MISSION_ITEM_REACHED), :mod:`.telemetry` (streams and messages), :mod:`.flavour` (what was read from the firmware:
 parameter defaults and units, sensor bits, EKF flags), :mod:`.constants`; :mod:`.trace` is the scripted
 ground-station sequence that compares a vehicle (ours or real firmware) with another."""
-from .constants import ARDUCOPTER_MODES, PX4_MODES
-from .link import parse_endpoint
-from .vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink.constants import ARDUCOPTER_MODES, PX4_MODES
+from aerodaas.emulators.mavlink.link import parse_endpoint
+from aerodaas.emulators.mavlink.vehicle import MavlinkVehicleEmulator
 
 __all__ = ["MavlinkVehicleEmulator", "ARDUCOPTER_MODES", "PX4_MODES", "parse_endpoint"]

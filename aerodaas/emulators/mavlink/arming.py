@@ -21,9 +21,9 @@ from __future__ import annotations
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from ...geo import enu_to_geodetic
-from .constants import _AP_ARMABLE, _AP_NEEDS_POSITION, _PX4_MANUAL
-from .flavour import (AP_PREARM_DISPLAY_PERIOD_S, AP_SENSORS, EKF_NO_POSITION, EKF_POSITION,
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.emulators.mavlink.constants import _AP_ARMABLE, _AP_NEEDS_POSITION, _PX4_MANUAL
+from aerodaas.emulators.mavlink.flavour import (AP_PREARM_DISPLAY_PERIOD_S, AP_SENSORS, EKF_NO_POSITION, EKF_POSITION,
                       PX4_HOME_CORRECTION_STEP_M, PX4_HOME_CORRECTION_WINDOW_S, PX4_SENSORS)
 
 M = mavlink

@@ -5,13 +5,13 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .constants import _DATA_STREAMS, _IN_PROGRESS_PERIOD_S, _PX4_DEFAULT_STREAMS, _STREAMABLE
+from aerodaas.emulators.mavlink.constants import _DATA_STREAMS, _IN_PROGRESS_PERIOD_S, _PX4_DEFAULT_STREAMS, _STREAMABLE
 
 
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .link import _Link
+    from aerodaas.emulators.mavlink.link import _Link
 
 M = mavlink
 

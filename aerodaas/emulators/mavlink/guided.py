@@ -7,13 +7,13 @@ from typing import Any, Callable
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .constants import _GLOBAL_FRAMES
+from aerodaas.emulators.mavlink.constants import _GLOBAL_FRAMES
 
 
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .link import _Link
+    from aerodaas.emulators.mavlink.link import _Link
 
 M = mavlink
 

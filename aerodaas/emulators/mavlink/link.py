@@ -10,13 +10,13 @@ from typing import Any, Callable, Literal
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .constants import _STATUSTEXT_LEN
+from aerodaas.emulators.mavlink.constants import _STATUSTEXT_LEN
 
 
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink.vehicle import MavlinkVehicleEmulator
 
 M = mavlink
 

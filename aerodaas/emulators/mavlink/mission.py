@@ -6,13 +6,13 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .constants import _GLOBAL_FRAMES, _MISSION_COMMANDS, _MISSION_FRAMES, _NAV_COMMANDS, _PROTOCOL_TIMEOUT_S
+from aerodaas.emulators.mavlink.constants import _GLOBAL_FRAMES, _MISSION_COMMANDS, _MISSION_FRAMES, _NAV_COMMANDS, _PROTOCOL_TIMEOUT_S
 
 
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .link import _Link
+    from aerodaas.emulators.mavlink.link import _Link
 
 M = mavlink
 

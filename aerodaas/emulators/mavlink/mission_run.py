@@ -7,7 +7,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 
 
-from .flavour import PX4_REACHED_REPEATS
+from aerodaas.emulators.mavlink.flavour import PX4_REACHED_REPEATS
 
 M = mavlink
 

@@ -6,8 +6,8 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .flavour import AIRFRAME_MAX_SPEED, PX4_HOME_MOVED_M
-from .constants import ARDUCOPTER_MODES, PX4_MODES, _AP_NEEDS_POSITION, _PX4_MANUAL, _PX4_NEEDS_POSITION
+from aerodaas.emulators.mavlink.flavour import AIRFRAME_MAX_SPEED, PX4_HOME_MOVED_M
+from aerodaas.emulators.mavlink.constants import ARDUCOPTER_MODES, PX4_MODES, _AP_NEEDS_POSITION, _PX4_MANUAL, _PX4_NEEDS_POSITION
 
 
 M = mavlink

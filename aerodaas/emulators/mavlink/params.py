@@ -11,9 +11,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .link import _Link
+    from aerodaas.emulators.mavlink.link import _Link
 
-from .flavour import SPEED_PARAMS
+from aerodaas.emulators.mavlink.flavour import SPEED_PARAMS
 
 M = mavlink
 

@@ -7,10 +7,10 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from ...geo import enu_to_geodetic, geodetic_to_enu
-from ...models import GeoPoint
-from .constants import _IN_PROGRESS_PERIOD_S, _PROTOCOL_RETRIES
-from .flavour import EKF_STATUS_REPORT_ID
+from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.app.models import GeoPoint
+from aerodaas.emulators.mavlink.constants import _IN_PROGRESS_PERIOD_S, _PROTOCOL_RETRIES
+from aerodaas.emulators.mavlink.flavour import EKF_STATUS_REPORT_ID
 
 
 M = mavlink

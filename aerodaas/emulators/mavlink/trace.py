@@ -440,7 +440,7 @@ def trace_emulator(autopilot: str, speedup: float = 10.0, wall_limit_s: float = 
     ``udpin``)."""
     import subprocess
 
-    from .. import free_udp_port
+    from aerodaas.emulators import free_udp_port
 
     port = free_udp_port()
     spec = json.dumps({"autopilot": autopilot, "speedup": speedup, **(emulator or {})})

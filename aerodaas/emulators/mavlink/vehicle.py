@@ -48,24 +48,24 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from ...config import Limits, RobotConfig
-from ...models import GeoPoint
-from ...sim.vehicle import SimVehicle
-from .arming import ArmingMixin
-from .commands import CommandMixin
-from .constants import _PX4_DEFAULT_STREAMS
-from .flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
-from .guided import GuidedMixin
-from .link import LinkMixin
-from .mission import MissionMixin
-from .mission_run import MissionRunMixin
-from .modes import ModeMixin
-from .params import ParamMixin
-from .telemetry import TelemetryMixin
+from aerodaas.config import Limits, RobotConfig
+from aerodaas.app.models import GeoPoint
+from aerodaas.sim.vehicle import SimVehicle
+from aerodaas.emulators.mavlink.arming import ArmingMixin
+from aerodaas.emulators.mavlink.commands import CommandMixin
+from aerodaas.emulators.mavlink.constants import _PX4_DEFAULT_STREAMS
+from aerodaas.emulators.mavlink.flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
+from aerodaas.emulators.mavlink.guided import GuidedMixin
+from aerodaas.emulators.mavlink.link import LinkMixin
+from aerodaas.emulators.mavlink.mission import MissionMixin
+from aerodaas.emulators.mavlink.mission_run import MissionRunMixin
+from aerodaas.emulators.mavlink.modes import ModeMixin
+from aerodaas.emulators.mavlink.params import ParamMixin
+from aerodaas.emulators.mavlink.telemetry import TelemetryMixin
 
 if TYPE_CHECKING:
-    from .link import _Link
-    from .mission import _Transfer
+    from aerodaas.emulators.mavlink.link import _Link
+    from aerodaas.emulators.mavlink.mission import _Transfer
 
 M = mavlink
 

@@ -1,0 +1,296 @@
+"""ActorAssembly: builds an actor's components (cameras, analytics, trajectory schedulers, drones) from its spec,
+runs the drones' clock and checkpoints, and answers the driver's calls.
+
+Components hand each other typed messages (:mod:`aerodaas.runtime.messages`): a camera publishes :class:`FrameMsg` (a
+read-only (H, W, 3) uint8 BGR ``ndarray``, shared by every reader of the actor, never copied there), a drone
+:class:`OdometryMsg` and :class:`StatMsg`, an analytics :class:`DetectionsMsg`, :class:`NavigationMsg` or
+:class:`ValueMsg`; each carries its robot, simulated time, the FrameMeta of its frame and the frame's latency
+trace (``capture_wall``: ``time.time()`` when the frame was ready, ``inference_ms``, ``post_ms``), and in
+lock-step its :class:`~.dataplane.Cascade`.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+
+from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
+
+from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
+from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
+from aerodaas.actors.camera import CameraComponent
+from aerodaas.actors.scheduler_component import SchedulerComponent
+
+
+class _Checkpointer:
+    """Sends each drone's checkpoint (:mod:`.checkpoint`) to the run's recorder actor about every ``period_s``
+    wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
+    checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
+
+    def __init__(self, host: DataPlane, drones: list, period_s: float = 2.0) -> None:
+        self.host, self.period_s = host, period_s
+        self.on = "recorder" in (getattr(host, "peers", None) or {}) and bool(drones)
+        self.last = time.monotonic()
+        self.visited = {id(d): len(d.visited) for d in drones}
+
+    def maybe(self, active: list) -> None:
+        if not self.on:
+            return
+        now = time.monotonic()
+        due = now - self.last >= self.period_s
+        for d in active:
+            if due or len(d.visited) != self.visited.get(id(d)):
+                from aerodaas.actors.checkpoint import drone_checkpoint
+
+                self.visited[id(d)] = len(d.visited)
+                # taken here (consistent with the control step), serialised and sent on the pool: the clock
+                # thread never pays for pickling the queue
+                self.host.submit(self._send, d.cfg.id, drone_checkpoint(d))
+        if due:
+            self.last = now
+
+    def _send(self, robot_id: str, cp: dict) -> None:
+        try:
+            self.host.peer("recorder").checkpoint.remote(robot_id, cp)
+        except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
+            self.host.report_error("checkpoint", e)
+            self.on = False
+
+
+class ActorAssembly:
+    """Builds a host's components from the driver's ``spec`` and runs them.
+
+    ``spec`` keys: ``sim`` (SimulationConfig dict), ``world`` (WorldConfig dict, for simulated cameras),
+    ``record`` ({"path", "meta"} or None: the recorder lives on the host that has the drones), ``analytics``
+    ([{"cid", "name", "obj", "buffer"}]), ``robots`` ([{"robot": RobotConfig dict, "drone_cid",
+    "scheduler_cid", "scheduler": TrajectoryScheduler, "preplanned": n, "cameras": [{"cid", "sensor", "props"}],
+    "odom_cids": [...], "stat_cids": [...]}]). Drones connect to their vehicles here, so an unreachable vehicle
+    fails the run before take-off."""
+
+    def __init__(self, host: DataPlane, spec: dict) -> None:
+        from aerodaas.actors.drone import DroneComponent
+        from aerodaas.actors.recorder import RecorderService
+
+        self.host = host
+        self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
+        rec = spec.get("record")
+        if rec:  # the edge host: the file and/or the live view
+            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"))
+        elif spec.get("record_remote"):  # an actor of a recorded run: its messages go to the run's recorder actor
+            from aerodaas.actors.recorder import RemoteRecorder
+
+            self.recorder = RemoteRecorder(host, spec["record_remote"])
+        else:
+            self.recorder = None
+        host.recorder = self.recorder
+        self.comps: dict[str, Any] = {}
+        self.scheduling = AnalyticsSchedulingService(host, spec["analytics_scheduler"]) \
+            if spec.get("analytics_scheduler") else None
+        for a in spec.get("analytics", []):
+            if a.get("scheduled"):
+                comp = ScheduledAnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder, host.epoch_ns,
+                                                   self.scheduling)
+                self.scheduling.add(comp)
+            else:
+                comp = AnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder, host.epoch_ns,
+                                          a.get("buffer", 1))
+            self.comps[a["cid"]] = host.add(comp)
+        if self.scheduling is not None:
+            self.scheduling.start()
+        self.drones: list[DroneComponent] = []
+        world = None
+        for r in spec.get("robots", []):
+            cfg = RobotConfig.model_validate(r["robot"])
+            sched = host.add(SchedulerComponent(host, r["scheduler_cid"], cfg.id, r["scheduler"], self.recorder,
+                                                host.epoch_ns, r["robot"]))
+            drone = DroneComponent(r["drone_cid"], r["robot"], host, sched, self.recorder, host.epoch_ns,
+                                   r["preplanned"], r["odom_cids"], r["stat_cids"])
+            sched.drone = drone
+            for c in r["cameras"]:
+                if c["props"].get("source", "sim") == "sim" and world is None:
+                    from aerodaas.sim.world import World
+
+                    w = WorldConfig.model_validate(spec["world"])
+                    world = World(w.ground, w.targets)  # one texture for every camera of this host
+                cam = CameraComponent(host, c["cid"], cfg.id, c["sensor"], c["props"], world, drone.backend,
+                                      self.recorder, host.epoch_ns)
+                drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
+                self.comps[c["cid"]] = cam
+            self.comps[r["drone_cid"]] = drone
+            self.comps[r["scheduler_cid"]] = sched
+            self.drones.append(drone)
+        # real cameras are not synchronised: spread the fleet's capture phases over one frame period
+        for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
+            if isinstance(c, AnalyticsComponent):
+                c.abort = self._abort_all
+        if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
+            self.recorder.on_failure.append(
+                lambda info, drones=tuple(self.drones): [d._event("recording_failed", **info) for d in drones])
+        cams = [c for d in self.drones for c in d.cameras]
+        for i, c in enumerate(cams):
+            c["next_t"] = i / (len(cams) * c["fps"])
+        # robots that name their MAVLink system id claim it before 'auto' ones take the lowest unclaimed id on a
+        # shared link (aerodaas.backends.mavlink.shared_link)
+        errors: dict[str, str] = {}
+        for d in sorted(self.drones, key=lambda d: not isinstance(getattr(d.cfg.mavlink, "target_system", None), int)):
+            try:
+                d.connect()
+            except Exception as e:  # noqa: BLE001 - every robot gets its own error (RobotsNotConnected)
+                errors[d.cfg.id] = f"{type(e).__name__}: {e}"
+        if errors:
+            from aerodaas.backends.base import RobotsNotConnected
+
+            for d in self.drones:  # the run will not start: hand the connected vehicles back untouched
+                if d.cfg.id not in errors:
+                    try:
+                        d.backend.close()
+                    except Exception:  # noqa: BLE001
+                        pass
+            raise RobotsNotConnected(errors)
+
+    def describe(self) -> dict:
+        live = getattr(self.recorder, "live", None)
+        return {"host": self.host.host_id, "tier": self.host.tier, "components": sorted(self.comps),
+                "pid": __import__("os").getpid(), "threads": self.host.pool._max_workers,
+                "live_url": live.url if live is not None else None}
+
+    def lookup(self, cid: str) -> Any:
+        try:
+            return self.comps[cid]
+        except KeyError:
+            raise KeyError(f"host {self.host.host_id!r} has no component {cid!r}; it has {sorted(self.comps)}") from None
+
+    # ------------------------------------------------------------------ the clock
+    def run(self, timeout_s: float | None = None, resume: bool = False) -> dict[str, dict]:
+        """Fly every drone of this host to the end of its mission; returns robot id -> report. ``resume``: the
+        drones were restored from checkpoints (a restarted actor): no arming, no take-off, the mission goes on.
+
+        One clock for the fleet: every ``1/physics_hz`` simulated seconds each backend steps (simulator) or is
+        polled (real vehicles), odometry is published at its rate, due cameras capture, and each drone's control
+        tick runs at ``control_rate_hz``. Time runs at ``speedup`` x wall time (lock-step: as fast as the
+        analytics allow). A control tick that runs later than one control period after its due wall time (the
+        period divided by ``speedup``) is counted as missed."""
+        sim, drones = self.sim, self.drones
+        dt = 1.0 / sim.physics_hz
+        lock = sim.lockstep
+        for d in drones:
+            if resume and getattr(d, "restored_from", None) is not None:
+                continue
+            d.start()
+        wall0 = time.monotonic()
+        step = 0
+        active = [d for d in drones if not d.done]
+        checkpoints = _Checkpointer(self.host, drones)
+        self.tick_lateness: list[float] = []
+        try:
+            while active:
+                step += 1
+                nominal = step * dt
+                if not lock:  # simulated time ``nominal`` is computed when wall time reaches it, not one step early
+                    lag = wall0 + nominal / sim.speedup - time.monotonic()
+                    if lag > 0:
+                        time.sleep(lag)
+                tok = Cascade() if lock else None
+                for d in active:
+                    d.step(dt, tok)
+                for d in active:
+                    b = d.backend
+                    for cam in d.cameras:
+                        if b.t + 1e-9 >= cam["next_t"]:
+                            cam["next_t"] += 1.0 / cam["fps"]
+                            if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
+                                cam["next_t"] = b.t + 1.0 / cam["fps"]
+                            cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
+                if tok is not None:
+                    tok.wait()
+                now = time.monotonic()
+                finished = []
+                for d in active:
+                    if d.backend.t + 1e-9 >= d.next_tick:
+                        due = d.next_tick
+                        d.next_tick += d.tick_period
+                        if not lock:
+                            late = now - (wall0 + due / sim.speedup) if d.backend.clock == "sim" else 0.0
+                            self.tick_lateness.append(late)
+                            if late > d.tick_period / sim.speedup:
+                                d.missed_ticks += 1
+                        if d.control_tick():
+                            finished.append(d)
+                    elif d._end_req is not None and d.control_tick():
+                        finished.append(d)
+                for d in finished:
+                    d.finish()
+                    active.remove(d)
+                checkpoints.maybe(active)
+                if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
+                    for d in active:
+                        d.outcome = "timeout"
+                        d._event("timeout", wall_s=timeout_s)
+                        d.finish()
+                    active = []
+        finally:
+            for d in drones:
+                d.close()
+            if self.scheduling is not None:
+                try:
+                    self.scheduling.finish()
+                except Exception as e:  # reported; the drones' reports must still come back
+                    self.host.report_error("analytics_scheduler", e)
+        return {d.cfg.id: d.report() for d in drones}
+
+    def _abort_all(self, reason: str) -> None:
+        """End every drone's mission as failed with ``reason``: this host's drones directly, the others through
+        their host (an analytics on the cloud tier aborting drones on the edge)."""
+        for d in self.drones:
+            d.error = reason
+            d.end_mission("failed")
+        peers = getattr(self.host, "peers", {}) or {}
+        for cid, hid in getattr(self.host, "location", {}).items():
+            if cid.endswith("/drone") and hid in peers and not any(d.cid == cid for d in self.drones):
+                self.host.peer(hid).call.remote(cid, "end_mission", "failed")
+
+    # ------------------------------------------------------------------ end
+    def drain(self) -> bool:
+        """The drones are done: let the analytics scheduler (a dispatcher actor) finish its tasks in flight, so that
+        its report counts every task in a terminal state. Returns True when there was one."""
+        if self.scheduling is None:
+            return False
+        try:
+            self.scheduling.finish()
+        except Exception as e:  # reported; the report must still come back
+            self.host.report_error("analytics_scheduler", e)
+        return True
+
+    def stats(self) -> dict:
+        out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
+        gcp = self.host.gc_pauses_ms
+        out["_host"] = {"errors": self.host.errors[-10:], "error_count": len(self.host.errors),
+                        "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
+                        "first_processed_wall": self.host.first_processed_wall,
+                        "frame_copies": self.host.copies.snapshot(),
+                        "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])]),
+                        # a host without the recorder (cloud): messages it could not hand to the edge recorder
+                        "record_send_errors": list(getattr(self.recorder, "send_errors", []))[-5:]}
+        if self.scheduling is not None:
+            out["_analytics_scheduler"] = self.scheduling.report()
+        return out
+
+    def close(self) -> dict:
+        if self.scheduling is not None:
+            try:
+                self.scheduling.finish()
+            except Exception as e:  # reported, never blocks closing the recording
+                self.host.report_error("analytics_scheduler", e)
+        self.host.close()
+        for c in self.comps.values():
+            close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None
+            if callable(close):
+                try:
+                    close()
+                except Exception:
+                    pass
+        return self.recorder.close() if self.recorder is not None else {}
+
+    def recording_report(self) -> dict:
+        """The recorder's :meth:`~.recorder.RecorderService.report` (failure, lost messages), {} without one."""
+        return self.recorder.report() if self.recorder is not None else {}

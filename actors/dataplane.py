@@ -1,0 +1,590 @@
+"""The data plane inside one actor of a run: its components hand items to each other in memory, and items for
+components of other actors leave through outlets.
+
+Every component of an application — a drone (its vehicle backend, flight logic, odometry and stat-stream
+sensors), a camera, an analytics, a trajectory scheduler — lives in one of the run's Ray actors (a drone actor, an
+analytics actor, a dispatcher actor; :mod:`aerodaas.runtime.dataflow` decides which). Each actor holds one :class:`DataPlane`:
+
+* a component is a *mailbox actor* (:class:`Component`): it processes one item at a time, in order; an item
+  for an idle component runs **in the delivering thread** (no thread hop, no serialisation, no copy: a frame
+  is the same ``ndarray`` object from the camera to the last colocated analytics); an item for a busy component
+  is queued up to its stream ``buffer`` (then dropped and counted, so a slow consumer never stalls the camera or
+  the control loop); items waiting for an analytics that takes batches go to it in one call;
+* in a drone actor the clock thread (:class:`~.assembly.ActorAssembly`) steps every vehicle, publishes
+  odometry and the stat-stream, triggers camera captures and runs each drone's control ticks; it never runs
+  components itself: it submits work to a small thread pool (OpenCV and onnxruntime release the GIL, so renders
+  and inference overlap on 2 cores);
+* when an analytics hands navigation to the trajectory scheduler, the drone applies it at once (not at its next
+  control tick), so the end-to-end latency ends at the command reaching the vehicle backend.
+
+Items for a component of another actor (:class:`~aerodaas.runtime.messages.Message` kinds, typed) leave through that
+edge's outlet, bounded in flight: a same-node channel when the other actor serves one on this machine
+(:mod:`.channel`: the frame copied once into shared memory, the message and its reply on a Unix socket), else a
+Ray actor call (:class:`RemoteOutlet`: the frame put once into the object store on one tier, JPEG-encoded across
+tiers). Outputs bound for the sender come back in the reply of the same delivery.
+
+Frame copies per frame (counted in :class:`FrameCopies`, ``DataPlane.copies``, reported in the actor's stats as
+``frame_copies``): the camera materialises the pixels once (render, or the vehicle's decoded video, or a
+recording's decoded JPEG); from there **0 copies** to every reader in the same actor (follow analytics, scheduler
+and drone get detections and navigation, not pixels); **+1 JPEG encode** when the run is recorded (in the
+recorder's writer thread, or the sending actor's for the run's recorder actor); **+1 copy** into a channel slot
+per delivery to another actor on the same machine (read in place there); **+1 JPEG encode on the sending actor
+and +1 decode on the receiving one** per edge that crosses tiers; +1 ``ray.put`` per delivery to an actor of the
+same tier on another machine (or with ``same_node_transport: ray``; the receiver's ``ray.get`` maps the object
+store's shared memory on its node).
+
+Lock-step: with ``lockstep`` the clock waits after every frame (and odometry message) for its whole cascade —
+every item derived from it, in this actor and in others — before simulated time moves on (:class:`Cascade`);
+queues are then unbounded, so nothing is dropped, and deliveries to other actors are Ray calls (the cascade
+follows their ObjectRefs).
+"""
+from __future__ import annotations
+
+import gc
+import os
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+import ray
+
+from aerodaas.runtime.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
+
+__all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "DataPlane", "encode_frame", "decode_frame"]
+
+
+def percentiles(values: list[float]) -> dict[str, float]:
+    """``{"median", "p99", "n"}`` of ``values`` (0.0 for an empty list)."""
+    a = np.asarray(values if values else [0.0], float)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(values)}
+
+
+class FrameCopies:
+    """Counts, in one host process, every place where a frame's pixels are materialised or copied (see the module
+    docstring for the per-frame totals). Counters, in frames:
+
+    * ``materialised``: frames produced by a camera (the one allocation of the pixels);
+    * ``tier_jpeg_encoded`` / ``tier_jpeg_decoded``: frames JPEG-encoded here to cross to a host of another tier /
+      decoded here on arrival from one;
+    * ``object_store_put`` / ``object_store_get``: frames sent to / received from a host of the same tier as an
+      ObjectRef;
+    * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`.channel`; the
+      receiver reads the slot in place);
+    * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
+
+    Handing a frame to a component of the same host copies nothing and is not counted. Thread-safe; a count costs
+    one uncontended lock (well under a microsecond)."""
+
+    FIELDS = ("materialised", "tier_jpeg_encoded", "tier_jpeg_decoded", "object_store_put", "object_store_get",
+              "channel_copy", "recorder_jpeg_encoded")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._n = dict.fromkeys(self.FIELDS, 0)
+
+    def count(self, what: str, n: int = 1) -> None:
+        """Add ``n`` frames to counter ``what`` (one of :attr:`FIELDS`; KeyError otherwise)."""
+        with self._lock:
+            self._n[what] += n
+
+    def snapshot(self) -> dict[str, int]:
+        """The counters now, ``{name: frames}``."""
+        with self._lock:
+            return dict(self._n)
+
+
+class Cascade:
+    """Counts the outstanding work derived from one lock-step item (a frame or an odometry message).
+
+    :meth:`add` when an item derived from it is accepted by a component (or sent to another host), :meth:`done`
+    when that item was processed and its outputs were handed on; :meth:`wait` blocks until nothing is left.
+    Remote work is tracked by the ObjectRefs of the calls, whose results list further refs (their own remote
+    sends)."""
+
+    __slots__ = ("_n", "_cv", "_refs")
+
+    def __init__(self) -> None:
+        self._n = 0
+        self._cv = threading.Condition(threading.Lock())
+        self._refs: list = []
+
+    def add(self) -> None:
+        with self._cv:
+            self._n += 1
+
+    def done(self) -> None:
+        with self._cv:
+            self._n -= 1
+            if self._n <= 0:
+                self._cv.notify_all()
+
+    def add_ref(self, ref: Any) -> None:
+        with self._cv:
+            self._refs.append(ref)
+
+    def wait(self, timeout_s: float = 120.0) -> None:
+        """Block until every derived item is done. Raises TimeoutError after ``timeout_s`` seconds."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            with self._cv:
+                while self._n > 0:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        raise TimeoutError(f"lock-step: {self._n} items still in flight after {timeout_s:.0f} s")
+                    self._cv.wait(left)
+                refs, self._refs = self._refs, []
+            if not refs:
+                return
+            for res in ray.get(refs, timeout=max(0.1, deadline - time.monotonic())):
+                for r in res or ():
+                    if isinstance(r, ray.ObjectRef):
+                        self.add_ref(r)
+
+
+def encode_frame(frame: np.ndarray, quality: int = 85) -> bytes:
+    """(H, W, 3) uint8 BGR -> JPEG bytes (for frames crossing tiers). Raises ValueError if encoding fails."""
+    ok, buf = cv2.imencode(".jpg", frame, [int(cv2.IMWRITE_JPEG_QUALITY), int(quality)])
+    if not ok:
+        raise ValueError(f"cannot JPEG-encode a frame of shape {getattr(frame, 'shape', None)}")
+    return buf.tobytes()
+
+
+def decode_frame(data: bytes) -> np.ndarray:
+    """JPEG bytes -> read-only (H, W, 3) uint8 BGR. Raises ValueError for undecodable bytes."""
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if img is None:
+        raise ValueError(f"cannot decode a {len(data)}-byte JPEG frame")
+    img.flags.writeable = False
+    return img
+
+
+class Component:
+    """A mailbox actor inside a :class:`DataPlane`: :meth:`offer` runs :meth:`handle` at once in the caller's thread
+    when the component is idle, queues the item when it is busy (up to ``buffer - 1`` waiting items; unbounded in
+    lock-step), and drops it otherwise (counted in ``dropped``); the thread that is processing drains the queue,
+    in order. :meth:`handle` returns the envelopes to publish downstream (or None); when nothing waits the
+    component is released before they are published, so a slow subscriber never keeps its producer busy. An
+    exception in :meth:`handle` or while publishing is recorded and counted in ``errors``; the mailbox keeps
+    draining. Subclasses override :meth:`handle`. Thread-safe."""
+
+    kind = "component"
+
+    def __init__(self, host: "DataPlane", cid: str, buffer: int = 1) -> None:
+        self.host, self.cid = host, cid
+        self.capacity = max(0, int(buffer) - 1)
+        self._m = threading.Lock()
+        self._busy = False
+        self._q: deque = deque()
+        self.received = 0
+        self.dropped = 0
+        self.errors = 0
+
+    def offer(self, port: Port, msg: Message) -> bool:
+        """Deliver one message; returns False when it was dropped (the component is busy and its queue full)."""
+        tok = msg.tok
+        with self._m:
+            self.received += 1
+            if self._busy:
+                if tok is not None or len(self._q) < self.capacity:
+                    self._q.append((port, msg))
+                    if tok is not None:
+                        tok.add()
+                    return True
+                self.dropped += 1
+                return False
+            self._busy = True
+            if tok is not None:
+                tok.add()
+        self._run(port, msg)
+        return True
+
+    def _run(self, port: Port, msg: Message) -> None:
+        """Process ``msg``, hand its outputs on, then keep draining the mailbox in this thread until it is empty
+        (resubmitting each waiting item to the pool would queue it behind every pending capture: starvation)."""
+        while True:
+            batch = [(port, msg)]
+            limit = self.batch_limit()
+            if limit > 1:  # items waiting (e.g. frames of several drones for one detector): one call for them
+                with self._m:
+                    while self._q and len(batch) < limit:
+                        batch.append(self._q.popleft())
+            try:
+                outs = self.handle_batch(batch) if len(batch) > 1 else [self.handle(port, msg)]
+            except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
+                self.errors += 1
+                outs = [None] * len(batch)
+                self.host.report_error(self.cid, e)
+            with self._m:
+                nxt = self._q.popleft() if self._q else None
+                if nxt is None:
+                    self._busy = False
+            for (_, m_in), out in zip(batch, outs):
+                try:
+                    if out:
+                        self.host.publish(self.cid, out, m_in.tok)
+                except Exception as e:  # a failing subscriber must not leave this mailbox busy with items queued
+                    self.errors += 1
+                    self.host.report_error(self.cid, e)
+                finally:
+                    if m_in.tok is not None:
+                        m_in.tok.done()
+            if nxt is None:
+                return
+            port, msg = nxt
+
+    def handle(self, port: Port, msg: Message) -> list[Message] | None:
+        """Process one message; return the messages to publish (or None)."""
+        return None
+
+    def batch_limit(self) -> int:
+        """How many waiting items :meth:`handle_batch` may take at once (1: no batching, the default)."""
+        return 1
+
+    def handle_batch(self, items: list[tuple[Port, Message]]) -> list[list[Message] | None]:
+        """Process several ``(port, message)`` items in one go; one result per item, in order (default: one
+        :meth:`handle` call each)."""
+        return [self.handle(p, m) for p, m in items]
+
+    def mailbox_stats(self) -> dict:
+        return {"received": self.received, "dropped": self.dropped, "errors": self.errors}
+
+
+class RemoteOutlet:
+    """The producer's end of an edge to a component on another host (a Ray actor call to ``DataPlane.deliver``).
+
+    Allows ``buffer`` calls in flight; when the consumer is still busy with them a new item is dropped and
+    counted. Frames are JPEG-encoded when the edge crosses tiers (``jpeg``), else sent as an ObjectRef."""
+
+    transport = "ray"
+
+    def __init__(self, handle: Any, cid: str, port: Port, buffer: int, jpeg: bool,
+                 copies: FrameCopies | None = None, reply_to: str | None = None,
+                 on_reply: Callable[[list], None] | None = None) -> None:
+        self.handle, self.cid, self.port = handle, cid, port
+        #: this host's id: the consumer returns the outputs bound for this host in the call's reply (one actor call
+        #: per round trip instead of two); ``on_reply`` hands them to the local components
+        self.reply_to, self.on_reply = reply_to, on_reply
+        self.copies = copies if copies is not None else FrameCopies()
+        self.buffer = max(1, int(buffer))
+        self.jpeg = jpeg
+        self.in_flight: list = []
+        self.sent = 0
+        self.dropped = 0
+        self.failed = 0  # calls that ended in an error (the consumer's actor died or restarted meanwhile)
+        self._lock = threading.Lock()
+
+    def _reap(self) -> None:
+        """Forget finished calls; count those that failed (frames in flight when the consumer died)."""
+        done, self.in_flight = ray.wait(self.in_flight, num_returns=len(self.in_flight), timeout=0)
+        for ref in done:
+            try:
+                ray.get(ref, timeout=0)
+            except Exception:  # noqa: BLE001 - ActorDiedError, ActorUnavailableError, the consumer's own error
+                self.failed += 1
+
+    def send(self, msg: Message) -> Any:
+        """Send one message (without its lock-step token); returns the call's ObjectRef or None if dropped. A frame
+        is put into the object store (or JPEG-encoded, across tiers) once per message, however many consumers of
+        other actors it has (the message keeps the ref)."""
+        tok = msg.tok
+        with self._lock:
+            if tok is None and self.in_flight:
+                self._reap()
+                if len(self.in_flight) >= self.buffer:
+                    self.dropped += 1
+                    return None
+            if isinstance(msg, FrameMsg):
+                t0 = time.time()
+                if self.jpeg:
+                    if msg.jpeg is None:
+                        msg.jpeg = EncodedFrame(encode_frame(msg.data))
+                        self.copies.count("tier_jpeg_encoded")
+                    wire = msg.to_wire(msg.jpeg)
+                else:
+                    if msg.ref is None:
+                        msg.ref = ray.put(msg.data)
+                        self.copies.count("object_store_put")
+                    wire = msg.to_wire(msg.ref)
+                # where the time of a hop goes (see SchedulerComponent's latency records): put/encode, then the call
+                wire.trace.update(put_ms=(time.time() - t0) * 1e3, sent_wall=time.time())
+            else:
+                wire = msg.to_wire()
+            d = Delivery(self.cid, self.port, wire, lockstep=tok is not None,
+                         reply_to=self.reply_to if tok is None else None)
+            ref = self.handle.deliver.remote(d)
+            self.sent += 1
+            if tok is None:
+                self.in_flight.append(ref)
+                if self.on_reply is not None:
+                    ref.future().add_done_callback(self._replied)
+            else:
+                tok.add_ref(ref)
+            return ref
+
+    def _replied(self, fut: Any) -> None:
+        """The consumer's reply (Ray's callback thread: hand over, never block it)."""
+        try:
+            out = fut.result()
+        except Exception:  # noqa: BLE001 - counted as failed when reaped
+            return
+        if out:
+            self.on_reply(out)
+
+    def stats(self) -> dict:
+        with self._lock:
+            if self.in_flight:
+                self._reap()
+        return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
+                "dropped": self.dropped, "failed": self.failed}
+
+
+class DataPlane:
+    """One actor's share of a run: its components, the routes between them, the outlets to other actors and the
+    worker pool. Plain Python: :class:`~.actor_base.ActorBase` is the Ray actor around it.
+
+    ``routes`` maps a producing component id to its subscribers ``[(component id, port, buffer)]``; components
+    of other hosts are reached through ``peers`` (host id -> actor handle) and ``location`` (component id ->
+    host id). ``tier`` decides whether a frame sent to a peer of another tier is JPEG-encoded."""
+
+    def __init__(self, host_id: str, tier: str, epoch_ns: int, lockstep: bool = False, workers: int | None = None,
+                 recorder: Any = None) -> None:
+        self.host_id, self.tier, self.epoch_ns, self.lockstep = host_id, tier, epoch_ns, lockstep
+        n = workers or max(2, min(4, (os.cpu_count() or 2)))
+        self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
+        self.components: dict[str, Component] = {}
+        self.routes: dict[str, list[tuple[str, Port, int, tuple | None]]] = {}
+        self.location: dict[str, str] = {}
+        self.tiers: dict[str, str] = {host_id: tier}
+        self.peers: dict[str, Any] = {}
+        self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel.ChannelOutlet
+        #: the run's channel key (bytes) when actors on this machine talk through same-node channels
+        #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``, or lock-step)
+        self.channel_key: bytes | None = None
+        self._tl = threading.local()  # .reply: (host id of the caller, [Delivery]) while a deliver runs
+        self.recorder = recorder
+        self.copies = FrameCopies()
+        self.errors: list[dict] = []
+        self.first_processed_wall: float | None = None
+        self._closed = False
+        self.gc_pauses_ms: list[float] = []
+        self._gc_t0 = 0.0
+
+    def watch_gc(self) -> None:
+        """Freeze what setup allocated (long-lived: models, textures, configs) out of the collector's sight and
+        time every collection from now on (``gc_pauses_ms``): a full collection stalls every thread."""
+        gc.collect()
+        gc.freeze()
+
+        def cb(phase: str, info: dict) -> None:
+            if phase == "start":
+                self._gc_t0 = time.perf_counter()
+            elif info.get("generation", 0) >= 1:
+                self.gc_pauses_ms.append((time.perf_counter() - self._gc_t0) * 1e3)
+
+        gc.callbacks.append(cb)
+
+    # ------------------------------------------------------------------ wiring
+    def add(self, comp: Component) -> Component:
+        self.components[comp.cid] = comp
+        self.location[comp.cid] = self.host_id
+        return comp
+
+    def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> None:
+        """``routes``: producer id -> ``[(consumer id, port, buffer, robots or None)]``; ``location``: component id
+        -> host id; ``tiers``: host id -> tier; ``peers``: host id -> Ray actor name (resolved on first use, so a
+        restarted actor is reached under the same name) or actor handle."""
+        self.routes = {k: [tuple(s) if len(s) == 4 else (*s, None) for s in v] for k, v in routes.items()}
+        self.location.update(location)
+        self.tiers.update(tiers)
+        self.peers = dict(peers)
+
+    def peer(self, host_id: str) -> Any:
+        """The actor handle of host ``host_id`` (looked up by name once, then cached). Raises KeyError."""
+        p = self.peers[host_id]
+        if isinstance(p, str):
+            p = self.peers[host_id] = ray.get_actor(p)
+        return p
+
+    # ------------------------------------------------------------------ delivery
+    def submit(self, fn: Callable, *args: Any) -> None:
+        if not self._closed:
+            self.pool.submit(self._guard, fn, *args)
+
+    def _guard(self, fn: Callable, *args: Any) -> None:
+        try:
+            fn(*args)
+        except Exception as e:  # pool jobs must never die silently
+            self.report_error(getattr(fn, "__qualname__", str(fn)), e)
+
+    def publish(self, src: str, msgs: list[Message], tok: Cascade | None = None, inline: bool = True) -> None:
+        """Hand ``msgs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
+        in this thread when ``inline`` (zero hops for a chain), the others on the pool; remote ones through their
+        :class:`RemoteOutlet` on the pool (JPEG encoding stays off the hot path)."""
+        subs = self.routes.get(src)
+        if not subs:
+            return
+        for msg in msgs:
+            if tok is not None:
+                msg.tok = tok
+            local = []
+            robot = msg.robot
+            for cid, port, buf, only in subs:
+                if only is not None and robot not in only:
+                    continue  # an edge to a replica or a drone's own copy carries only its drones' items
+                comp = self.components.get(cid)
+                if comp is not None:
+                    local.append((comp, port))
+                elif tok is None and self._reply_to(cid, port, msg):
+                    continue  # returned to the calling actor in the reply of its deliver call
+                else:
+                    out = self._outlet(src, cid, port, buf)
+                    if tok is not None:
+                        out.send(msg)  # lock-step: sent now, its ref joins the cascade
+                    else:
+                        self.submit(out.send, msg)
+            last = len(local) - 1
+            for i, (comp, port) in enumerate(local):
+                if inline and i == last:
+                    comp.offer(port, msg)
+                else:
+                    if tok is not None:
+                        tok.add()  # keep the cascade open until the pool picks it up
+                        self.submit(self._offer_then_done, comp, port, msg, tok)
+                    else:
+                        self.submit(comp.offer, port, msg)
+
+    def _reply_to(self, cid: str, port: Port, msg: Message) -> bool:
+        """While a deliver call from host H runs in this thread, an item for a component of H goes back in that
+        call's reply instead of a call of its own (not frames: their pixels never travel in a reply)."""
+        rep = getattr(self._tl, "reply", None)
+        if rep is None or isinstance(msg, FrameMsg) or self.location.get(cid) != rep[0]:
+            return False
+        item = msg.to_wire()
+        item.trace["replied_wall"] = time.time()
+        rep[1].append(Delivery(cid, port, item))
+        return True
+
+    def on_reply(self, items: list[Delivery], inline: bool = False) -> None:
+        """Items another actor returned in a deliver call's reply: offered to their components on the pool, or in
+        this thread when ``inline`` (a channel's reader thread; never Ray's callback thread, which must not
+        block)."""
+        now = time.time()
+        for d in items:
+            tr = d.msg.trace
+            if "replied_wall" in tr:
+                tr["reply_ms"] = (now - tr.pop("replied_wall")) * 1e3
+            comp = self.components.get(d.cid)
+            if comp is None:
+                continue
+            if inline:
+                comp.offer(d.port, d.msg)
+            else:
+                self.submit(comp.offer, d.port, d.msg)
+
+    @staticmethod
+    def _offer_then_done(comp: Component, port: Port, msg: Message, tok: Cascade) -> None:
+        try:
+            comp.offer(port, msg)
+        finally:
+            tok.done()
+
+    def _outlet(self, src: str, cid: str, port: Port, buffer: int) -> Any:
+        """The outlet of edge ``src`` -> ``cid`` (another actor's component), made on first use: a same-node
+        channel when the peer serves one on this machine (:mod:`.channel`), else Ray calls
+        (:class:`RemoteOutlet`). Raises KeyError for a component no actor of the run has."""
+        key = (src, cid, port)
+        o = self._outlets.get(key)
+        if o is None:
+            hid = self.location.get(cid)
+            if hid is None or hid not in self.peers:
+                raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
+            o = self._channel_outlet(hid, cid, port, buffer)
+            if o is None:
+                o = RemoteOutlet(self.peer(hid), cid, port, buffer, jpeg=self.tiers.get(hid, self.tier) != self.tier,
+                                 copies=self.copies, reply_to=self.host_id, on_reply=self.on_reply)
+            self._outlets[key] = o
+        return o
+
+    def _channel_outlet(self, hid: str, cid: str, port: Port, buffer: int) -> Any:
+        """A :class:`~.channel.ChannelOutlet` to host ``hid`` when channels are on and ``hid`` serves one on this
+        machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
+        if self.channel_key is None or self.lockstep or self.tiers.get(hid, self.tier) != self.tier:
+            return None
+        from aerodaas.actors.channel import ChannelOutlet, channel_address
+
+        try:
+            return ChannelOutlet(channel_address(self.channel_key, hid), self.channel_key, cid, port, buffer,
+                                 reply_to=self.host_id, on_reply=lambda items: self.on_reply(items, inline=True),
+                                 copies=self.copies)
+        except Exception:  # noqa: BLE001 - not on this machine (or not serving): Ray calls
+            return None
+
+    def deliver(self, d: Delivery) -> list:
+        """A message from another host. A frame's pixels arrive as JPEG bytes or an ObjectRef and are decoded (or
+        mapped) once here. Returns the replies (Delivery items for the sender's components, see
+        :class:`~aerodaas.runtime.messages.Delivery`); in lock-step the whole local cascade runs before this returns and the
+        result lists the refs of the remote sends it caused (for the sender's :class:`Cascade`)."""
+        msg = d.msg
+        t_arrived = time.time()
+        if isinstance(msg, FrameMsg):
+            if isinstance(msg.data, EncodedFrame):
+                msg.data = decode_frame(msg.data.jpeg)
+                self.copies.count("tier_jpeg_decoded")
+            elif isinstance(msg.data, ray.ObjectRef):
+                msg.data = ray.get(msg.data)
+                self.copies.count("object_store_get")
+            if "sent_wall" in msg.trace:
+                msg.trace.update(call_ms=(t_arrived - msg.trace["sent_wall"]) * 1e3,
+                                 get_ms=(time.time() - t_arrived) * 1e3)
+        comp = self.components[d.cid]
+        if not d.lockstep:
+            if d.reply_to is None:
+                comp.offer(d.port, msg)
+                return []
+            self._tl.reply = (d.reply_to, [])
+            try:
+                comp.offer(d.port, msg)
+                return list(self._tl.reply[1])
+            finally:
+                self._tl.reply = None
+        tok = Cascade()
+        msg.tok = tok
+        comp.offer(d.port, msg)
+        with tok._cv:
+            while tok._n > 0:
+                tok._cv.wait(1.0)
+            refs, tok._refs = tok._refs, []
+        return refs
+
+    # ------------------------------------------------------------------ bookkeeping
+    def report_error(self, where: str, e: BaseException) -> None:
+        rec = {"where": where, "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(),
+               "t_wall": time.time()}
+        self.errors.append(rec)
+        if len(self.errors) <= 5:
+            print(f"aerodaas: error in {where}: {rec['error']}", file=sys.stderr, flush=True)
+
+    def mark_processed(self) -> None:
+        """Called by analytics when they finish an item: remembers the wall time of the first one (startup bench)."""
+        if self.first_processed_wall is None:
+            from aerodaas.runtime.startup_probe import probe
+
+            self.first_processed_wall = time.time()
+            probe("first_processed")
+
+    def outlet_stats(self, src: str) -> list[dict]:
+        return [o.stats() for (s, _, _), o in self._outlets.items() if s == src]
+
+    def close(self) -> None:
+        self._closed = True
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        for o in list(self._outlets.values()):
+            close = getattr(o, "close", None)
+            if callable(close):
+                close()

@@ -1,0 +1,1 @@
+"""Analytics (IAnalyse / INavigableAnalyse) and the built-in ones."""

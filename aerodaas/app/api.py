@@ -1,0 +1,327 @@
+"""The AeroDaaS application API (paper Table 2, in Python style): IEnvironment, IRobot, ISensor, ICompute.
+
+Applications build a dataflow at module level (sensors -> analytics -> schedulers -> robot) and call
+``robot.start_mission()``, which starts the Ray actors, flies the mission and returns a
+:class:`aerodaas.runtime.driver.MissionResult`. Nothing touches Ray or a drone before ``start_mission()``, so a
+malformed configuration or an invalid waypoint fails before any actor starts.
+"""
+from __future__ import annotations
+
+import inspect
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from aerodaas.config import ComputeConfig, EnvironmentConfig, RobotConfig, SensorConfig, load_environment_config
+from aerodaas.app.data import AeroStreamData
+from aerodaas.app.models import AeroNavigation, PriorityQueue
+
+__all__ = ["Environment", "Robot", "Sensor", "ComputeResource", "MISSION_LISTENERS"]
+
+#: Callables ``fn(result)`` told of every :class:`aerodaas.runtime.driver.MissionResult` that a mission start returns —
+#: :meth:`Robot.start_mission` and :meth:`Environment.start_mission` (a fleet) alike. ``aerodaas run`` listens here
+#: for its summary and exit code, so an application may start its mission either way.
+MISSION_LISTENERS: list[Callable[[Any], None]] = []
+
+
+def _fly(env: "Environment", robots: list["Robot"], timeout: float | None):
+    """Run the mission of ``robots`` (blocks), tell :data:`MISSION_LISTENERS`, return the MissionResult."""
+    from aerodaas.runtime.driver import run_mission
+
+    result = run_mission(env, robots, timeout=timeout)
+    for listener in list(MISSION_LISTENERS):
+        listener(result)
+    return result
+
+
+class ComputeResource:
+    """ICompute / IDeployable target: a compute resource on tier ``edge`` or ``cloud``."""
+
+    def __init__(self, cfg: ComputeConfig) -> None:
+        self.cfg = cfg
+        self.id = cfg.id
+        self.tier = cfg.tier
+
+    def get_compute_properties(self) -> dict:
+        """Processing power, memory, accelerators… as configured, plus ``tier``."""
+        return {"tier": self.tier, **self.cfg.properties}
+
+    def __repr__(self) -> str:
+        return f"ComputeResource({self.id!r}, tier={self.tier!r})"
+
+
+class Sensor:
+    """ISensor (push and pull): a robot's or the environment's sensor."""
+
+    def __init__(self, cfg: SensorConfig, robot: "Robot | None" = None) -> None:
+        self.cfg = cfg
+        self.robot = robot
+        self._stream = AeroStreamData(source=self, buffer=cfg.buffer)
+
+    @property
+    def id(self) -> str:
+        return self.cfg.id
+
+    @property
+    def type(self) -> str:
+        return self.cfg.type
+
+    def get_sensor_id(self) -> str:
+        return self.cfg.id
+
+    def get_sensor_property(self, prop: str) -> Any:
+        """A configured property (e.g. ``fps``, ``width``); raises KeyError naming the sensor and property."""
+        if prop == "type":
+            return self.cfg.type
+        if prop not in self.cfg.properties:
+            raise KeyError(f"sensor {self.id!r} has no property {prop!r}; it has {sorted(self.cfg.properties)}")
+        return self.cfg.properties[prop]
+
+    def get_data_stream(self) -> AeroStreamData:
+        """The sensor's stream (push: analytics subscribe to it; pull: ``get_data()`` while a mission runs)."""
+        return self._stream
+
+    def __repr__(self) -> str:
+        return f"Sensor({self.id!r}, type={self.type!r})"
+
+
+class Robot:
+    """IRobot: a drone of the environment."""
+
+    def __init__(self, cfg: RobotConfig, env: "Environment") -> None:
+        self.cfg = cfg
+        self.env = env
+        self.id = cfg.id
+        self.sensors = {s.id: Sensor(s, self) for s in cfg.sensors}
+        self.navigations: list[AeroNavigation] = []
+        self.scheduler = None
+        self._start_hooks: list[Callable] = []
+        self._end_hooks: list[Callable] = []
+        self._handle = None  # the drone component's handle while running
+
+    # -- sensors
+    def has_sensors(self) -> bool:
+        return bool(self.sensors)
+
+    def get_sensors(self) -> list[Sensor]:
+        return list(self.sensors.values())
+
+    def get_sensor_by_id(self, sensor_id: str) -> Sensor:
+        """Raises KeyError naming the robot and the known sensor ids."""
+        try:
+            return self.sensors[sensor_id]
+        except KeyError:
+            raise KeyError(f"robot {self.id!r} has no sensor {sensor_id!r}; it has {sorted(self.sensors)}") from None
+
+    # -- navigation
+    def is_navigable(self) -> bool:
+        """False for a robot whose backend only reports (``replay`` of a recorded flight)."""
+        from aerodaas.backends import NAVIGABLE
+
+        return NAVIGABLE.get(self.cfg.backend, True)
+
+    def navigate(self, nav: AeroNavigation | PriorityQueue | Any) -> None:
+        """Fly ``nav`` (usually the result of ``scheduler.generate_navigation``) with the environment's
+        trajectory scheduler; navigation that the scheduler has not queued yet is queued now. Raises
+        :class:`aerodaas.backends.NotNavigable` for a robot that cannot fly (``is_navigable()`` is False)."""
+        if not self.is_navigable():
+            from aerodaas.backends import NotNavigable
+
+            raise NotNavigable(f"robot {self.id!r}: backend {self.cfg.backend!r} is not navigable "
+                               f"(is_navigable() is False); it replays a recorded flight")
+        sched = self.env.trajectory_scheduler()
+        self.scheduler = sched
+        data = nav.data if isinstance(nav, PriorityQueue) else nav
+        if isinstance(data, AeroNavigation):
+            queued = any(m.items and data.waypoints and m.items[0] is data.waypoints[0] for m in sched._missions)
+            if not queued:
+                sched.generate_navigation(nav)
+        self.navigations.append(data)
+
+    # -- mission lifecycle
+    def on_mission_start(self, hook: Callable[["Robot"], None]) -> None:
+        """startMission user hook: ``hook(robot)`` runs before take-off."""
+        self._start_hooks.append(hook)
+
+    def on_mission_end(self, hook: Callable[["Robot", Any], None]) -> None:
+        """endMission user hook: ``hook(robot, result)`` runs after the mission ends."""
+        self._end_hooks.append(hook)
+
+    def start_mission(self, timeout: float | None = None):
+        """Start the actors, fly the mission to its end, and return the MissionResult (blocks)."""
+        return _fly(self.env, [self], timeout)
+
+    def end_mission(self, reason: str = "ended") -> None:
+        """End the running mission now (the run stops; the result's outcome is ``reason``)."""
+        if self._handle is not None:
+            import ray
+
+            ray.get(self._handle.end_mission.remote(reason))
+
+    def pause_mission(self) -> None:
+        """Hover in place until :meth:`resume_mission`."""
+        if self._handle is None:
+            raise RuntimeError(f"robot {self.id!r}: no mission is running")
+        import ray
+
+        ray.get(self._handle.pause_mission.remote())
+
+    def resume_mission(self) -> None:
+        if self._handle is None:
+            raise RuntimeError(f"robot {self.id!r}: no mission is running")
+        import ray
+
+        ray.get(self._handle.resume_mission.remote())
+
+    def __repr__(self) -> str:
+        return f"Robot({self.id!r}, backend={self.cfg.backend!r})"
+
+
+class Environment:
+    """IEnvironment, built from an ``environment.json``. A relative path is looked up in the working
+    directory, then next to the application file. Raises :class:`aerodaas.config.ConfigError`."""
+
+    def __init__(self, path: str | os.PathLike | EnvironmentConfig) -> None:
+        from aerodaas.runtime.driver import OPTIONS
+
+        if isinstance(path, EnvironmentConfig):
+            cfg = path
+        else:
+            if OPTIONS.env_path:
+                path = OPTIONS.env_path
+            p = Path(path)
+            if not p.is_absolute() and not p.exists():
+                caller = Path(inspect.stack()[1].filename).resolve().parent
+                if (caller / p).exists():
+                    p = caller / p
+            cfg = load_environment_config(p)
+        if OPTIONS.early_ray:  # `aerodaas run`: Ray starts only once the environment is known to be valid
+            from aerodaas.runtime.driver import start_ray_early
+
+            start_ray_early(OPTIONS.address)
+        self.cfg = cfg
+        self.robots = {r.id: Robot(r, self) for r in cfg.robots}
+        self.env_sensors = {s.id: Sensor(s) for s in cfg.env_sensors}
+        self.compute = {c.id: ComputeResource(c) for c in cfg.compute}
+        self._trajectory_scheduler = None
+        self.hitl = None  # the running HitlServer (url, token) while a mission with the HITL API runs
+
+    # -- sensors
+    def has_env_sensors(self) -> bool:
+        return bool(self.env_sensors)
+
+    def get_env_sensors(self) -> list[Sensor]:
+        return list(self.env_sensors.values())
+
+    def get_env_sensor_by_id(self, sensor_id: str) -> Sensor:
+        if sensor_id not in self.env_sensors:
+            raise KeyError(f"no environment sensor {sensor_id!r}; known: {sorted(self.env_sensors)}")
+        return self.env_sensors[sensor_id]
+
+    def is_robot_sensor_available(self, sensor_type_or_id: str) -> bool:
+        """True if some robot has a sensor with this id or type."""
+        return any(s.id == sensor_type_or_id or s.type == sensor_type_or_id
+                   for r in self.robots.values() for s in r.sensors.values())
+
+    def get_robot_sensors(self) -> list[Sensor]:
+        return [s for r in self.robots.values() for s in r.sensors.values()]
+
+    # -- robots
+    def get_env_robots(self) -> list[Robot]:
+        return list(self.robots.values())
+
+    def get_robot_by_id(self, robot_id: str) -> Robot:
+        """Raises KeyError naming the unknown id and the known ones."""
+        if robot_id not in self.robots:
+            raise KeyError(f"unknown robot id {robot_id!r}; the environment has {sorted(self.robots)}")
+        return self.robots[robot_id]
+
+    # -- compute
+    def get_compute_resources(self) -> list[ComputeResource]:
+        return list(self.compute.values())
+
+    def get_compute_resource_by_id(self, compute_id: str) -> ComputeResource:
+        if compute_id not in self.compute:
+            raise KeyError(f"unknown compute resource {compute_id!r}; the environment has {sorted(self.compute)}")
+        return self.compute[compute_id]
+
+    # -- the fleet
+    def start_mission(self, robots: list["Robot"] | None = None, timeout: float | None = None):
+        """Fly several robots together (default: every robot of the environment) on one clock; blocks and returns
+        one MissionResult with a report per robot. Robots sharing the environment's trajectory scheduler each get
+        their own waypoint queue holding the missions they were told to ``navigate``. ``robots`` holds Robots of
+        this environment or their ids. Raises KeyError for an unknown id and ValueError naming the item for anything
+        else, or a robot given twice, before anything starts."""
+        if isinstance(robots, (Robot, str)):
+            robots = [robots]
+        given = list(robots) if robots is not None else self.get_env_robots()
+        robots = []
+        for i, r in enumerate(given):
+            if isinstance(r, str):
+                r = self.get_robot_by_id(r)
+            if not isinstance(r, Robot) or self.robots.get(r.id) is not r:
+                raise ValueError(f"start_mission: robots[{i}] must be a Robot of this environment or its id "
+                                 f"(one of {sorted(self.robots)}), got {r!r}")
+            if r in robots:
+                raise ValueError(f"start_mission: robots[{i}] ({r.id!r}) is given twice")
+            robots.append(r)
+        return _fly(self, robots, timeout)
+
+    # -- schedulers
+    def set_trajectory_scheduler(self, scheduler: Any) -> None:
+        """Plug in the trajectory scheduler (an INavigate, e.g. NearestNeighborScheduler)."""
+        self._trajectory_scheduler = scheduler
+
+    def _register_scheduler_instance(self, scheduler: Any) -> None:
+        if self._trajectory_scheduler is None:
+            self._trajectory_scheduler = scheduler
+
+    def trajectory_scheduler(self) -> Any:
+        if self._trajectory_scheduler is None:
+            from aerodaas.schedulers import TrajectoryScheduler
+
+            self._trajectory_scheduler = TrajectoryScheduler(self)
+        return self._trajectory_scheduler
+
+    def set_analytics_scheduler(self, name: str, models: dict | None = None, *, workload: str | None = None,
+                                load: str | None = None, cloud_executors: int | None = None,
+                                network: str | list[str] | None = None) -> None:
+        """Plug in the analytics scheduler by name (the paper's setAnalyticsScheduler), as ``analytics_scheduler``
+        in ``environment.json`` does; arguments given here replace the file's.
+
+        ``name``: ``default`` (every analytics runs where it is deployed) or a registered scheduler (``DEMS``,
+        ``DEMS-A``, ``GEMS``, ``E+C``, ``DEM``, ``CLOUD``, ``EDGE_EDF``, ..., ``GAINPLAN``). ``models``: analytics name
+        -> QoS dict (``deadline_ms``, ``edge_ms``, ``cloud_ms``, ``benefit``, ``edge_cost``, ``cloud_cost``; ms and
+        utility units) or a model name of ``workload`` under ``load``. Each frame reaching a named analytics then
+        becomes a task the scheduler runs on the edge, sends to the cloud, or drops. See
+        :class:`aerodaas.config.AnalyticsSchedulerConfig`. Raises ConfigError naming the bad field and value."""
+        from pydantic import ValidationError
+
+        from aerodaas.config import AnalyticsSchedulerConfig, ConfigError, _format_errors
+
+        cur = self.cfg.analytics_scheduler.model_dump()
+        cur["name"] = name
+        for k, v in (("models", models), ("workload", workload), ("load", load),
+                     ("cloud_executors", cloud_executors), ("network", network)):
+            if v is not None:
+                cur[k] = v
+        if workload is not None:
+            cur["workload"] = str(self.cfg.resolve_path(workload, "analytics_scheduler.workload"))
+        try:
+            cfg = AnalyticsSchedulerConfig.model_validate(cur)
+        except ValidationError as e:
+            raise ConfigError(_format_errors(e, "set_analytics_scheduler").replace("\n  ", "\n  analytics_scheduler.")) from None
+        if cfg.name != "default":
+            cfg.resolved_workload(self.cfg)
+        self.cfg.analytics_scheduler = cfg
+
+    @property
+    def analytics_scheduler(self) -> str:
+        """Name of the analytics scheduler in use (``default``: none)."""
+        return self.cfg.analytics_scheduler.name
+
+    # camelCase aliases for readers of the paper
+    getRobotById = get_robot_by_id
+    getComputeResourceById = get_compute_resource_by_id
+    setTrajectoryScheduler = set_trajectory_scheduler
+    setAnalyticsScheduler = set_analytics_scheduler

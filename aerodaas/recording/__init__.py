@@ -1,0 +1,1 @@
+"""Recording: MCAP writing, reading, recovery, JSON schemas and mission metrics."""

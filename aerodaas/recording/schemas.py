@@ -1,0 +1,197 @@
+"""JSON Schemas of the recording's JSON channels, generated from pydantic models.
+
+Every JSON channel AeroDaaS records (``/mission/state``, ``/<robot>/odometry``, ``/<robot>/events``, ...) names a
+schema (``aerodaas.MissionState``, ...). This module holds one pydantic model per schema name, documenting each
+field with its unit, and :func:`json_schema_for` turns it into the JSON Schema written into the MCAP ``Schema``
+record (encoding ``"jsonschema"``), so that Foxglove's Plot and Raw Message panels know the fields and any
+JSON Schema validator can check the messages. The schemas come from ``model_json_schema(mode="serialization")``
+(JSON Schema draft 2020-12, pydantic's generator), with ``$defs`` inlined where pydantic puts them.
+
+The models describe what the components write; they are not used to build the messages (the hot path writes
+plain dicts), so a test validates recorded messages against these schemas (tests/test_live_and_foxglove.py).
+"""
+from __future__ import annotations
+
+from typing import Any, Optional
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from aerodaas.app.models import AeroNavigation, Odometry, Waypoint
+
+__all__ = ["JSON_SCHEMA_MODELS", "json_schema_for"]
+
+
+class _Open(BaseModel):
+    """Known fields typed; further keys allowed (events carry event-specific keys)."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class MissionState(BaseModel):
+    """A flight-state change of one robot (``/mission/state``)."""
+
+    robot: str
+    state: str = Field(description="new state, e.g. NAVIGATING")
+    previous: str = Field(description="state before the change")
+    t: float = Field(description="simulation or vehicle time, s")
+
+
+class MissionEvent(_Open):
+    """Something that happened to a robot (``/<robot>/events``): ``event`` names it; event-specific keys follow
+    (e.g. ``waypoint``, ``error_m`` in metres, ``battery_pct`` in percent)."""
+
+    robot: str
+    t: float = Field(description="time of the event, s")
+    event: str
+
+
+class MissionResult(BaseModel):
+    """How a robot's mission ended (``/mission/result``)."""
+
+    robot: str
+    outcome: str = Field(description="success / incomplete / timeout / interrupted / failed")
+    visited: int = Field(description="pre-planned waypoints visited")
+    preplanned_total: int
+    t: float = Field(description="time at the end, s")
+    error: Optional[str] = None
+
+
+class NavCommand(_Open):
+    """A waypoint command sent to the vehicle (``/<robot>/nav/command``); ``local`` is ENU metres from home."""
+
+    kind: str
+    waypoint: Waypoint
+    local: list[float] = Field(description="target, ENU metres from home (x east, y north, z up)")
+    priority: Optional[int] = None
+    autopilot_item: Optional[int] = None
+
+
+class TargetTruth(_Open):
+    """Ground truth of one simulated target at capture time."""
+
+    id: str
+    class_name: str
+    x: float = Field(description="ENU metres east of home")
+    y: float = Field(description="ENU metres north of home")
+    heading: float = Field(description="degrees counter-clockwise from east")
+    vx: float = Field(description="m/s east")
+    vy: float = Field(description="m/s north")
+    present: bool
+    in_view: bool = False
+    fully_in_view: bool = False
+    bbox_px: Optional[list[float]] = Field(default=None, description="pixel box (x0, y0, x1, y1) in the frame")
+
+
+class GroundTruth(BaseModel):
+    """Targets' ground truth for one rendered frame (``/world/targets``)."""
+
+    robot: str
+    seq: int
+    t: float = Field(description="capture time, s")
+    targets: list[TargetTruth]
+
+
+class AnalyticsOutput(_Open):
+    """Free-form output of an analytics (``/<robot>/<analytics>``): whatever dict it returned."""
+
+
+class AnalyticsTask(BaseModel):
+    """One analytics-scheduler task in its terminal state (``/<robot>/<analytics>/tasks``); times in ms since the
+    scheduler started."""
+
+    task_id: int | str
+    model: str
+    state: str = Field(description="done_on_time / done_late / dropped_time / dropped_cost / expired_edge / failed")
+    tier: Optional[str] = Field(default=None, description="edge or cloud (None when never run)")
+    reason: Optional[str] = None
+    arrival_ms: float
+    deadline_ms: float
+    start_ms: Optional[float] = None
+    end_ms: Optional[float] = None
+
+
+class FrameLatency(BaseModel):
+    """Per-frame latency from frame capture to the navigation command reaching the vehicle (``/<robot>/latency``)."""
+
+    robot: str
+    t: float = Field(description="capture time of the frame, s")
+    e2e_ms: float = Field(description="capture to command applied, ms")
+    applied: bool
+    inference_ms: float
+    post_ms: float
+    overhead_ms: float = Field(description="e2e_ms - inference_ms - post_ms: the framework's share, ms")
+
+
+class PlanItem(BaseModel):
+    id: str
+    local: list[float] = Field(description="ENU metres from home")
+    hover_duration: float = Field(description="s")
+
+
+class PlanMission(BaseModel):
+    name: str
+    priority: int
+    items: list[PlanItem]
+
+
+class MissionPlan(BaseModel):
+    """The queued waypoints of a robot whenever they change (``/<robot>/mission/plan``)."""
+
+    robot: str
+    t: float
+    missions: list[PlanMission]
+
+
+#: schema name written on the channel -> the pydantic model describing its messages
+JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
+    "aerodaas.Odometry": Odometry,
+    "aerodaas.MissionState": MissionState,
+    "aerodaas.MissionEvent": MissionEvent,
+    "aerodaas.MissionResult": MissionResult,
+    "aerodaas.NavCommand": NavCommand,
+    "aerodaas.GroundTruth": GroundTruth,
+    "aerodaas.AeroNavigation": AeroNavigation,
+    "aerodaas.AnalyticsOutput": AnalyticsOutput,
+    "aerodaas.AnalyticsTask": AnalyticsTask,
+    "aerodaas.FrameLatency": FrameLatency,
+    "aerodaas.MissionPlan": MissionPlan,
+}
+
+_CACHE: dict[str, dict[str, Any]] = {}
+
+
+#: free-form schemas: their fields are taken from an example message (json_schema_for's ``example``)
+FREE_FORM = ("aerodaas.AnalyticsOutput",)
+_JSON_TYPES = ((bool, "boolean"), ((int, float), "number"), (str, "string"), (list, "array"), (dict, "object"))
+
+
+def _field_schema(value: Any) -> dict[str, Any]:
+    for types, name in _JSON_TYPES:
+        if isinstance(value, types):
+            if name == "array" and value and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                  for v in value):
+                return {"type": "array", "items": {"type": "number"}}
+            return {"type": name}
+    return {}  # null or unknown: any value
+
+
+def json_schema_for(schema_name: str, example: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """The JSON Schema (a dict, ``"type": "object"``, ``"title"`` = ``schema_name``) of a registered schema name,
+    or None for a name this module does not know. For a free-form schema (:data:`FREE_FORM`) with an ``example``
+    message (plain JSON types), each top-level field of the example is declared with its JSON type (numbers as
+    ``number``; a ``null`` accepts anything); other fields stay allowed. Generated once per name (cached)."""
+    if schema_name in FREE_FORM and example:
+        base = dict(json_schema_for(schema_name) or {})
+        base["properties"] = {str(k): _field_schema(v) for k, v in example.items()}
+        return base
+    got = _CACHE.get(schema_name)
+    if got is None:
+        model = JSON_SCHEMA_MODELS.get(schema_name)
+        if model is None:
+            return None
+        got = model.model_json_schema(mode="serialization")
+        got["title"] = schema_name
+        got.setdefault("type", "object")
+        got["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+        _CACHE[schema_name] = got
+    return got

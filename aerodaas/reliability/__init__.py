@@ -1,0 +1,1 @@
+"""The bad-input and fault catalogue (``python -m aerodaas.reliability``)."""

@@ -1,0 +1,247 @@
+"""The bad-input and fault catalogue, and the command that measures it: ``python -m aerodaas.reliability --out
+docs/reliability.md``.
+
+Each input case is something a hostile or unlucky user gives AeroDaaS (an environment file, a command-line flag, a
+record path, a mission file); each must be refused before Ray starts with an error naming the field. Each fault
+case (in :mod:`aerodaas.reliability.faults`) injects a failure into a real run and checks that it ends cleanly.
+The tests (``tests/test_bad_input.py``, ``tests/test_faults.py``, marker ``faults``) run the same cases, so the
+table and the suite cannot drift apart.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+__all__ = ["InputCase", "ENV_CASES", "PATH_CASES", "base_env", "check_env_case", "check_path_case", "main"]
+
+
+def base_env() -> dict:
+    """A valid environment: one simulated drone with a camera and odometry."""
+    return {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}, {"id": "odom", "type": "odometry"}]}]}
+
+
+@dataclass(frozen=True)
+class InputCase:
+    """``name``; ``mutate(env, tmp)`` edits a copy of :func:`base_env` (``tmp``: a scratch folder for files);
+    ``expect``: text the error must contain (the field it names)."""
+
+    name: str
+    mutate: Callable[[dict, Path], None]
+    expect: str
+
+
+def _robot(d: dict) -> dict:
+    return d["robots"][0]
+
+
+def _cam(d: dict) -> dict:
+    return _robot(d)["sensors"][0].setdefault("properties", {})
+
+
+def _png(tmp: Path, w: int = 64, h: int = 48) -> str:
+    import cv2
+    import numpy as np
+
+    p = tmp / f"img_{w}x{h}.png"
+    cv2.imwrite(str(p), np.full((h, w, 3), 128, np.uint8))
+    return str(p)
+
+
+def _tlog_without_position(tmp: Path) -> str:
+    """A MAVLink telemetry log holding only autopilot HEARTBEATs (written with pymavlink): nothing to replay."""
+    import struct
+
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    p = tmp / "heartbeats.tlog"
+    link = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    with open(p, "wb") as f:
+        for i in range(5):
+            msg = mav.MAVLink_heartbeat_message(2, 3, 81, 4, 3, 3)  # quadrotor, ArduPilot, armed GUIDED, active
+            f.write(struct.pack(">Q", 1_700_000_000_000_000 + i * 1_000_000) + msg.pack(link))
+    return str(p)
+
+
+def _target(tmp: Path, tid: str = "car", crop=(0, 0, 10, 10)) -> dict:
+    return {"id": tid, "image": _png(tmp), "crop": list(crop), "path": [{"t": 0, "x": 0, "y": 0}, {"t": 5, "x": 5, "y": 0}]}
+
+
+INF, BIG = float("inf"), 1e308
+_FAR_FENCE = {"circles": [{"center": [47.5, 8.6], "radius": 50, "inclusion": True}]}
+
+#: environment files that must be refused (ConfigError naming the field) before anything starts
+ENV_CASES: list[InputCase] = [
+    InputCase("limits.max_speed Infinity", lambda d, t: _robot(d).update(limits={"max_speed": INF}), "max_speed"),
+    InputCase("limits.max_speed 1e308", lambda d, t: _robot(d).update(limits={"max_speed": BIG}), "max_speed"),
+    InputCase("limits.max_speed NaN", lambda d, t: _robot(d).update(limits={"max_speed": math.nan}), "max_speed"),
+    InputCase("limits.max_speed \"3\" (string)", lambda d, t: _robot(d).update(limits={"max_speed": "3"}), "max_speed"),
+    InputCase("limits.max_speed true", lambda d, t: _robot(d).update(limits={"max_speed": True}), "max_speed"),
+    InputCase("limits.max_altitude -5", lambda d, t: _robot(d).update(limits={"max_altitude": -5}), "max_altitude"),
+    InputCase("home.alt Infinity", lambda d, t: _robot(d).update(home={"lat": 47.0, "lon": 8.0, "alt": INF}), "home.alt"),
+    InputCase("home.alt 1e308", lambda d, t: _robot(d).update(home={"lat": 47.0, "lon": 8.0, "alt": BIG}), "home.alt"),
+    InputCase("home.lat 95", lambda d, t: _robot(d).update(home={"lat": 95.0, "lon": 8.0}), "home.lat"),
+    InputCase("simulation.speedup 1e308", lambda d, t: d.update(simulation={"speedup": BIG}), "simulation.speedup"),
+    InputCase("simulation.speedup Infinity", lambda d, t: d.update(simulation={"speedup": INF}), "simulation.speedup"),
+    InputCase("simulation.physics_hz 0", lambda d, t: d.update(simulation={"physics_hz": 0}), "physics_hz"),
+    InputCase("simulation.lockstep \"yes\"", lambda d, t: d.update(simulation={"lockstep": "yes"}), "lockstep"),
+    InputCase("simulation.lockstep 1", lambda d, t: d.update(simulation={"lockstep": 1}), "lockstep"),
+    InputCase("camera fps 1e308", lambda d, t: _cam(d).update(fps=BIG), "fps"),
+    InputCase("camera fps Infinity", lambda d, t: _cam(d).update(fps=INF), "fps"),
+    InputCase("camera 100000 x 100000", lambda d, t: _cam(d).update(width=100000, height=100000), "width"),
+    InputCase("camera width 640.5", lambda d, t: _cam(d).update(width=640.5), "width"),
+    InputCase("camera property typo 'widht'", lambda d, t: _cam(d).update(widht=640), "did you mean 'width'"),
+    InputCase("camera hfov_deg 200", lambda d, t: _cam(d).update(hfov_deg=200), "hfov_deg"),
+    InputCase("odometry rate_hz 0", lambda d, t: _robot(d)["sensors"][1].update(properties={"rate_hz": 0}), "rate_hz"),
+    InputCase("unknown root key 'robot'", lambda d, t: d.update(robot=[]), "did you mean 'robots'"),
+    InputCase("unknown key limits.max_sped", lambda d, t: _robot(d).update(limits={"max_sped": 3}),
+              "did you mean 'max_speed'"),
+    InputCase("unknown key safety.geofence.circle", lambda d, t: _robot(d).update(safety={"geofence": {"circle": []}}),
+              "did you mean 'circles'"),
+    InputCase("duplicate robot ids", lambda d, t: d["robots"].append({"id": "d1"}), "duplicate ids"),
+    InputCase("duplicate sensor ids", lambda d, t: _robot(d)["sensors"].append({"id": "cam", "type": "odometry"}),
+              "duplicate sensor ids"),
+    InputCase("duplicate target ids", lambda d, t: d.update(world={"targets": [_target(t), _target(t)]}),
+              "world.targets: duplicate ids"),
+    InputCase("target crop outside its image", lambda d, t: d.update(world={"targets": [_target(t, crop=(10, 10, 100, 30))]}),
+              "world.targets.0.crop"),
+    InputCase("ground image not an image", lambda d, t: (t.joinpath("g.png").write_text("x"),
+                                                         d.update(world={"ground": {"image": str(t / "g.png")}})),
+              "world.ground.image"),
+    InputCase("takeoff_altitude 16 above max_altitude 10 (clamp)",
+              lambda d, t: _robot(d).update(takeoff_altitude=16, safety={"max_altitude": 10, "on_violation": "clamp"}),
+              "takeoff_altitude"),
+    InputCase("takeoff_altitude below min_altitude", lambda d, t: _robot(d).update(takeoff_altitude=1, safety={"min_altitude": 3}),
+              "takeoff_altitude"),
+    InputCase("min_altitude >= max_altitude", lambda d, t: _robot(d).update(safety={"min_altitude": 20, "max_altitude": 10}),
+              "min_altitude"),
+    InputCase("inclusion fence not containing home", lambda d, t: _robot(d).update(safety={"geofence": _FAR_FENCE}),
+              "safety.geofence"),
+    InputCase("fence circle radius Infinity",
+              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [{"center": [47.39, 8.54], "radius": INF}]}}),
+              "radius"),
+    InputCase("fence inclusion \"yes\"",
+              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [
+                  {"center": [47.3977, 8.5456], "radius": 50, "inclusion": "yes"}]}}), "inclusion"),
+    InputCase("self-intersecting fence polygon",
+              lambda d, t: _robot(d).update(safety={"geofence": {"polygons": [{"points": [
+                  [47.39, 8.54], [47.40, 8.55], [47.39, 8.55], [47.40, 8.54]]}]}}), "not a simple polygon"),
+    InputCase("safety.command_latency_s -1", lambda d, t: _robot(d).update(safety={"command_latency_s": -1}),
+              "command_latency_s"),
+    InputCase("hitl.port 70000", lambda d, t: d.update(hitl={"port": 70000}), "hitl.port"),
+    InputCase("hitl.token too short", lambda d, t: d.update(hitl={"token": "abc"}), "hitl.token"),
+    InputCase("hitl.enabled \"true\" (string)", lambda d, t: d.update(hitl={"enabled": "true"}), "hitl.enabled"),
+    InputCase("replay log without position data",
+              lambda d, t: _robot(d).update(backend="replay", replay={"log": _tlog_without_position(t)}),
+              "no position fix"),
+    InputCase("battery initial_pct 150", lambda d, t: _robot(d).update(battery={"initial_pct": 150}), "initial_pct"),
+    InputCase("mavlink.setpoint_rate_hz 1e308",
+              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"setpoint_rate_hz": BIG}), "setpoint_rate_hz"),
+]
+
+#: ``--record`` paths that must be refused before anything starts (no folder created)
+PATH_CASES: list[tuple[str, Callable[[Path], str], str]] = [
+    ("missing folder", lambda t: str(t / "no" / "such" / "dir" / "run.mcap"), "does not exist"),
+    ("/proc/x.mcap", lambda t: "/proc/x.mcap", "cannot create"),
+    ("/dev/full", lambda t: "/dev/full", "not a regular file"),
+    ("a directory", lambda t: str(t), "not a regular file"),
+]
+
+
+def check_env_case(case: InputCase, tmp: Path) -> tuple[bool, str]:
+    """(refused with the expected field named, message) for one environment case."""
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    d = copy.deepcopy(base_env())
+    case.mutate(d, tmp)
+    d = json.loads(json.dumps(d))  # what a file would hold (Infinity/NaN survive as JSON extensions)
+    try:
+        parse_environment_config(d, source="case")
+    except ConfigError as e:
+        return case.expect in str(e), str(e)
+    return False, "accepted"
+
+
+def check_path_case(make: Callable[[Path], str], expect: str, tmp: Path) -> tuple[bool, str]:
+    """(refused with the expected reason and nothing created, message) for one ``--record`` path."""
+    from aerodaas.recording.writer import check_record_path
+
+    path = make(tmp)
+    before = Path(path).parent.exists()
+    try:
+        check_record_path(path)
+    except ValueError as e:
+        created = Path(path).parent.exists() and not before
+        return expect in str(e) and not created, str(e)
+    return False, "accepted"
+
+
+def run_inputs() -> dict[str, Any]:
+    """Run every input case; returns counts and the cases accepted wrongly."""
+    rows = []
+    with tempfile.TemporaryDirectory() as td:
+        tmp = Path(td)
+        for c in ENV_CASES:
+            ok, msg = check_env_case(c, tmp)
+            rows.append({"kind": "environment", "name": c.name, "refused": ok, "message": msg})
+        for name, make, expect in PATH_CASES:
+            ok, msg = check_path_case(make, expect, tmp)
+            rows.append({"kind": "--record path", "name": name, "refused": ok, "message": msg})
+    return {"rows": rows, "tried": len(rows), "refused": sum(r["refused"] for r in rows),
+            "accepted_wrongly": [r["name"] for r in rows if not r["refused"]]}
+
+
+def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
+    """``n`` seeded random command sequences (half ``reject``, half ``clamp``) plus the issue's attacks, flown on the
+    simulator's vehicle behind the safety gate (:mod:`aerodaas.reliability.flight`); the worst excursions."""
+    import random
+
+    from aerodaas.reliability.flight import Excursion, fly_commands, random_commands
+
+    total, outside = Excursion(), 0
+    seqs = [random_commands(random.Random(seed + i)) for i in range(n)]
+    seqs += [[("vel", 3.0, 0.0, 0.0, 0.5, 5)] * 80, [("vel", 2.0, 1.2, 0.0, 0.5, 5)] * 80,
+             [("vel", 0.0, 0.0, 1.5, 0.5, 5)] * 60]
+    for i, seq in enumerate(seqs):
+        ex = fly_commands(seq, on_violation="clamp" if i % 2 else "reject")
+        outside += int(ex.outside_inclusion_m > 0 or ex.inside_exclusion_m > 0 or ex.above_max_altitude_m > 0.05)
+        total.merge(ex)
+    return {"sequences": len(seqs), "samples": total.samples, "accepted": total.accepted, "refused": total.rejected,
+            "outside_inclusion_m": total.outside_inclusion_m, "inside_exclusion_m": total.inside_exclusion_m,
+            "above_max_altitude_m": total.above_max_altitude_m, "flown_outside_limits": outside}
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m aerodaas.reliability", description=__doc__.splitlines()[0])
+    p.add_argument("--out", help="write the Markdown report here (default: print it)")
+    p.add_argument("--no-faults", action="store_true", help="only the input cases (no runs)")
+    args = p.parse_args(argv)
+    inputs = run_inputs()
+    flights = run_flights()
+    faults = None
+    if not args.no_faults:
+        from aerodaas.reliability.faults import run_faults
+
+        faults = run_faults()
+    from aerodaas.reliability.faults import render
+
+    text = render(inputs, faults, flights)
+    if args.out:
+        Path(args.out).write_text(text)
+        print(f"wrote {args.out}")
+    else:
+        print(text)
+    bad = inputs["accepted_wrongly"] or flights["flown_outside_limits"] or (
+        faults and any(not f["clean"] for f in faults["rows"]))
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

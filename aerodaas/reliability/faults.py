@@ -1,0 +1,262 @@
+"""Fault injection for ``python -m aerodaas.reliability`` and the ``faults`` tests: real ``aerodaas run`` processes
+on the simulator (the farm survey), each given one fault, each checked for a clean end — the documented exit code,
+a finished recording that mcap's own seeking reader accepts, a summary that says what happened, no traceback and no
+abort. Also renders the report (``docs/reliability.md``)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+__all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
+
+REPO_APPS = Path(__file__).resolve().parents[2] / "apps"
+
+FAILING_APP = '''
+from aerodaas import *
+
+class Flaky(MonitoringAnalytics):
+    """Raises on every 10th odometry sample (an analytics bug)."""
+    name = "flaky"
+    on_error = ON_ERROR
+    n = 0
+    def process(self, odom, meta):
+        self.n += 1
+        if self.n % 10 == 0:
+            raise RuntimeError(f"flaky analytics: bad sample {self.n}")
+        return super().process(odom, meta)
+
+env = Environment(ENV)
+drone = env.get_robot_by_id("quadrotor_base")
+scheduler = NearestNeighborScheduler(env)
+env.set_trajectory_scheduler(scheduler)
+flaky = Flaky(["battery", "height"])
+flaky.deploy(env.get_compute_resource_by_id("edge"))
+flaky.analyse(drone.get_sensor_by_id("odom").get_data_stream())
+wps = [Waypoint(id=f"wp{i}", x=x, y=y, z=1.5, hover_duration=1) for i, (x, y) in enumerate([(0, 0), (0, 4), (4, 4)])]
+drone.navigate(scheduler.generate_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, SchedulingType.ORDERED)))
+result = drone.start_mission()
+'''
+
+
+def mcap_reader_ok(path: str | Path) -> tuple[bool, int, str]:
+    """(mcap's standard seeking reader accepts the file: summary present and every message iterable, message count,
+    reason). The reader is the ``mcap`` package's, not ours."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            r = make_reader(f)
+            summ = r.get_summary()
+            if summ is None:
+                return False, 0, "no summary (unfinished file)"
+            n = sum(1 for _ in r.iter_messages())
+            return n == summ.statistics.message_count, n, "ok"
+    except Exception as e:  # noqa: BLE001 - any reader failure is the verdict
+        return False, 0, f"{type(e).__name__}: {e}"
+
+
+def _run(args: list[str], env: dict | None = None, **kw: Any) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "aerodaas.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})}, **kw)
+
+
+def _wait_size(path: Path, size: int, proc: subprocess.Popen, limit_s: float = 480.0) -> bool:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < limit_s:
+        if proc.poll() is not None:
+            return False
+        if path.exists() and path.stat().st_size >= size:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _no_crash(out: str) -> bool:
+    return "Traceback" not in out and "Aborted" not in out and "core dumped" not in out
+
+
+def _signal_case(sig: int, min_size: int, group: bool = False) -> Callable[[Path], dict]:
+    def run(tmp: Path) -> dict:
+        rec = tmp / "run.mcap"
+        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "1", "--quiet"],
+                 start_new_session=True,
+                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        reached = _wait_size(rec, min_size, p)
+        if group:
+            os.killpg(p.pid, sig)
+        else:
+            p.send_signal(sig)
+        out, _ = p.communicate(timeout=300)
+        ok, n, why = mcap_reader_ok(rec)
+        outcome = None
+        if rec.exists():
+            from aerodaas.recording.writer import summarize_mcap
+
+            outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
+        want = 128 + sig
+        clean = reached and p.returncode == want and ok and _no_crash(out)
+        late = "" if reached else " (the run had not reached the phase to interrupt: machine too loaded)"
+        return {"observed": f"exit {p.returncode}, recording {'finished' if ok else why} ({n} msgs), "
+                            f"outcome {outcome}{late}", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
+    return run
+
+
+def _disk_case(kind: str, after_bytes: int) -> Callable[[Path], dict]:
+    def run(tmp: Path) -> dict:
+        rec = tmp / "run.mcap"
+        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
+                 env={"AERODAAS_FAULT_RECORDER": f"{kind}:{after_bytes}"})
+        out, _ = p.communicate(timeout=600)
+        ok, n, why = mcap_reader_ok(rec)
+        said = "recording: FAILED" in out and "not recorded" in out
+        clean = p.returncode == 1 and ok and said and _no_crash(out)
+        line = next((ln.strip() for ln in out.splitlines() if "recording:" in ln), "(no recording line)")
+        return {"observed": f"exit {p.returncode}, recording {'finished' if ok else why} ({n} msgs); summary: "
+                            f"{line[:160]}", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
+    return run
+
+
+def _analytics_case(on_error: str) -> Callable[[Path], dict]:
+    def run(tmp: Path) -> dict:
+        env = json.loads((REPO_APPS / "farm_survey.json").read_text())
+        env["robots"][0]["sensors"] = [s for s in env["robots"][0]["sensors"] if s["type"] != "camera"]
+        (tmp / "env.json").write_text(json.dumps(env))
+        app = tmp / "flaky_app.py"
+        app.write_text(FAILING_APP.replace("ENV", repr(str(tmp / "env.json"))).replace("ON_ERROR", repr(on_error)))
+        rec = tmp / "run.mcap"
+        p = _run(["run", str(app), "--record", str(rec), "--speedup", "20", "--quiet"])
+        out, _ = p.communicate(timeout=600)
+        ok, n, why = mcap_reader_ok(rec)
+        from aerodaas.recording.writer import read_messages, summarize_mcap
+
+        events = [m for _, _, _, m in read_messages(rec, ["/quadrotor_base/events"])
+                  if m.get("event") == "analytics_error"] if rec.exists() else []
+        outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome") if rec.exists() else None
+        with_tb = bool(events) and all("Traceback" in e.get("traceback", "") for e in events)
+        counted = "FAILED items" in out
+        logged = "RuntimeError: flaky analytics" in out
+        if on_error == "continue":
+            clean = p.returncode == 0 and outcome == "success"
+        else:
+            clean = p.returncode == 1 and outcome == "failed" and len(events) >= 1
+        clean = clean and ok and with_tb and counted and logged
+        return {"observed": f"exit {p.returncode}, outcome {outcome}, {len(events)} analytics_error events with "
+                            f"traceback={with_tb}, counted in summary={counted}, logged={logged}, recording "
+                            f"{'finished' if ok else why}", "clean": clean, "exit": p.returncode,
+                "output": out[-3000:], "events": len(events)}
+    return run
+
+
+def _sigkill_recover(tmp: Path) -> dict:
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "1", "--quiet"],
+             start_new_session=True)
+    reached = _wait_size(rec, 30000, p)
+    os.killpg(p.pid, signal.SIGKILL)
+    p.communicate(timeout=60)
+    last, t0 = -1, time.monotonic()  # Ray's worker holding the recorder dies with its parent: wait for the file
+    while rec.exists() and time.monotonic() - t0 < 120:  # to stop growing
+        size = rec.stat().st_size
+        if size == last:
+            break
+        last = size
+        time.sleep(3.0)
+    before_ok, _, before_why = mcap_reader_ok(rec)
+    from aerodaas.recording.writer import summarize_mcap
+
+    seen = summarize_mcap(rec)["message_count"] if rec.exists() else 0
+    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "recover", str(rec)], capture_output=True, text=True,
+                       timeout=300)
+    ok, n, why = mcap_reader_ok(rec)
+    clean = reached and not before_ok and r.returncode == 0 and ok and n == seen
+    return {"observed": f"before: mcap reader says {before_why!r}; `aerodaas recover` exit {r.returncode}; after: "
+                        f"{'finished' if ok else why}, {n} of the {seen} readable messages", "clean": clean}
+
+
+def _broken_pipe(tmp: Path) -> dict:
+    from aerodaas.recording.writer import McapRecorder
+
+    rec = tmp / "small.mcap"
+    with McapRecorder(rec) as r:
+        for i in range(50):
+            r.write_json(f"/topic/{i}", 1_000 + i, {"i": i}, schema_name="t.T")
+    rd, wr = os.pipe()
+    os.close(rd)  # the reader (`head`) is gone before anything is written
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "info", str(rec)], stdout=wr, stderr=subprocess.PIPE,
+                       text=True, timeout=120)
+    os.close(wr)
+    clean = p.returncode == 141 and "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr
+    return {"observed": f"exit {p.returncode}, stderr {p.stderr.strip()[:80]!r}", "clean": clean}
+
+
+#: (name, expected end, scenario(tmp folder) -> {"observed", "clean", ...})
+FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
+    ("SIGTERM during the flight", "exit 143, recording finished, outcome interrupted", _signal_case(signal.SIGTERM, 20000)),
+    ("SIGTERM while the actors start", "exit 143, recording finished", _signal_case(signal.SIGTERM, 1)),
+    ("Ctrl-C (SIGINT to the process group) during the flight", "exit 130, recording finished",
+     _signal_case(signal.SIGINT, 20000, group=True)),
+    ("disk full (ENOSPC) mid-run", "exit 1, summary says what was lost, recording finished up to the failure",
+     _disk_case("enospc", 150_000)),
+    ("I/O error (EIO) mid-run", "exit 1, summary says what was lost, recording finished up to the failure",
+     _disk_case("eio", 60_000)),
+    ("analytics raising every 10th item, on_error=continue", "exit 0, errors logged with traceback, recorded as "
+     "events, counted in the summary", _analytics_case("continue")),
+    ("analytics raising, on_error=abort", "exit 1, outcome failed, recording finished", _analytics_case("abort")),
+    ("SIGKILL mid-run, then `aerodaas recover`", "recover exit 0; mcap's seeking reader accepts the file",
+     _sigkill_recover),
+    ("`aerodaas info FILE | head` (reader gone)", "exit 141, no BrokenPipeError", _broken_pipe),
+]
+
+
+def run_fault(name: str) -> dict:
+    """Run one fault scenario by name in a scratch folder."""
+    for n, expected, fn in FAULTS:
+        if n == name:
+            with tempfile.TemporaryDirectory() as td:
+                out = fn(Path(td))
+            return {"name": n, "expected": expected, **out}
+    raise KeyError(name)
+
+
+def run_faults() -> dict[str, Any]:
+    return {"rows": [run_fault(n) for n, _, _ in FAULTS]}
+
+
+def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[str, Any] | None = None) -> str:
+    """The Markdown of ``docs/reliability.md``."""
+    lines = ["# Reliability: bad inputs and injected faults", "",
+             "Regenerated by `python -m aerodaas.reliability --out docs/reliability.md` (the same cases run as "
+             "tests: `python -m pytest -m faults tests`).", "",
+             "| inputs tried | rejected before Ray | accepted wrongly |", "|---|---|---|",
+             f"| {inputs['tried']} | {inputs['refused']} | {len(inputs['accepted_wrongly'])} |", ""]
+    if faults is not None:
+        rows = faults["rows"]
+        lines += ["| faults injected | ended clean |", "|---|---|",
+                  f"| {len(rows)} | {sum(1 for r in rows if r['clean'])} |", ""]
+    if extra:
+        e = extra
+        lines += ["| randomized command sequences (simulator) | odometry samples checked | commands accepted / "
+                  "refused | flown outside limits | max outside inclusion fence | max inside exclusion zone | max "
+                  "above max_altitude |", "|---|---|---|---|---|---|---|",
+                  f"| {e['sequences']} | {e['samples']} | {e['accepted']} / {e['refused']} | "
+                  f"{e['flown_outside_limits']} | {e['outside_inclusion_m']:.3f} m | {e['inside_exclusion_m']:.3f} m | "
+                  f"{e['above_max_altitude_m']:.3f} m (tolerance 0.05 m) |", ""]
+    lines += ["## Inputs", "", "| kind | input | refused | error (first line) |", "|---|---|---|---|"]
+    for r in inputs["rows"]:
+        msg = r["message"].splitlines()
+        first = (msg[1] if len(msg) > 1 and msg[0].startswith("invalid environment") else msg[0]).strip()
+        lines.append(f"| {r['kind']} | {r['name']} | {'yes' if r['refused'] else '**NO**'} | "
+                     f"`{first[:140].replace('|', '/')}` |")
+    if faults is not None:
+        lines += ["", "## Faults", "", "| fault | expected end | observed | clean |", "|---|---|---|---|"]
+        for r in faults["rows"]:
+            lines.append(f"| {r['name']} | {r['expected']} | {r['observed'].replace('|', '/')} | "
+                         f"{'yes' if r['clean'] else '**NO**'} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,402 @@
+"""The run's dataflow graph, typed, and its placement on Ray actors — built once from the application.
+
+A :class:`RunPlan` holds:
+
+* **nodes** (:class:`Node`): every component — each robot's drone, cameras, odometry and stat-stream sensors and
+  trajectory scheduler, and every *instance* of an analytics (one per replica, or one copy per drone for a
+  colocated analytics, or one per edge compute for an analytics placed per frame by the analytics scheduler);
+* **edges** (:class:`Edge`): producer -> consumer, entering the consumer at a :class:`Port` (an analytics input, or
+  a trajectory scheduler's priority port, optionally ``replace``), with the stream's buffer and the robots whose
+  items travel on it (an edge to a replica or to a drone's own copy carries only that drone's items);
+* **actors** (:class:`ActorPlan`): which Ray actor each node lives in, its Ray name, its tier and compute
+  resource, and the ``label_selector`` that places it. Roles: ``drone`` (one per drone, or per
+  ``drones_per_actor`` drones: vehicle backend, flight logic, sensors, waypoint queue and colocated analytics),
+  ``analytics`` (one per deployed analytics replica), ``dispatcher`` (one per edge compute resource whose drones
+  feed analytics placed by the analytics scheduler: the scheduler and its edge executor) and ``recorder`` (one per
+  run).
+
+``aerodaas plan APP.py`` prints it without flying (like Ray Serve's build step); :mod:`aerodaas.runtime.driver` starts
+the actors it lists.
+"""
+from __future__ import annotations
+
+import copy
+import os
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from aerodaas.runtime.messages import Port
+
+__all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_plan", "collect_graph"]
+
+Role = Literal["drone", "analytics", "dispatcher", "recorder"]
+
+
+@dataclass(frozen=True)
+class Node:
+    """One component: ``id`` (unique in the run), ``kind``, the robot it belongs to (None for a shared analytics)
+    and the host id of the actor it lives in."""
+
+    id: str
+    kind: Literal["drone", "camera", "odometry", "stat_stream", "scheduler", "analytics"]
+    robot: str | None
+    actor: str
+    analytics: str | None = None  # the analytics' name, for analytics nodes
+
+
+@dataclass(frozen=True)
+class Edge:
+    """``src`` -> ``dst`` at ``port``; ``buffer`` items may wait at the consumer; ``robots``: only items of these
+    robots travel on it (None: all)."""
+
+    src: str
+    dst: str
+    port: Port
+    buffer: int
+    robots: tuple[str, ...] | None = None
+
+    def route(self) -> tuple:
+        """The form the actors route with: ``(dst, port, buffer, robots)``."""
+        return (self.dst, self.port, self.buffer, self.robots)
+
+
+@dataclass
+class ActorPlan:
+    """One Ray actor of the run. ``host_id`` is unique in the run (``drone/d1``, ``analytics/edge/detector#1``,
+    ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``)."""
+
+    host_id: str
+    role: Role
+    name: str
+    tier: str
+    compute: str | None
+    labels: dict[str, str]
+    components: list[str] = field(default_factory=list)
+    spec: dict = field(default_factory=dict)
+
+    def selector(self, placement: "Placement") -> dict[str, str]:
+        """The ``label_selector`` for this actor on the cluster described by ``placement``."""
+        return placement.selector(self.tier, self.labels)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """What the cluster offers: ``has_cloud`` (a live node labelled ``tier=cloud``) and ``local`` (the single
+    node Ray started here, labelled only ``tier=edge``). Local mode keeps everything on this machine: cloud compute
+    may use the edge node and compute labels are not required."""
+
+    has_cloud: bool = False
+    local: bool = False
+
+    def selector(self, tier: str, labels: dict[str, str]) -> dict[str, str]:
+        """``{"tier": tier, **labels}``; cloud actors fall back to ``in(edge,cloud)`` without cloud nodes; local
+        mode drops ``labels`` (this node has none)."""
+        sel = {"tier": tier if tier == "edge" or self.has_cloud else "in(edge,cloud)"}
+        if not self.local:
+            sel.update(labels)
+        return sel
+
+
+@dataclass
+class RunPlan:
+    """The typed dataflow graph of a run and where each node goes (see the module docstring)."""
+
+    run_id: str
+    nodes: dict[str, Node]
+    edges: list[Edge]
+    actors: dict[str, ActorPlan]
+    robots: dict[str, dict]
+    analytics_instances: dict[int, list[str]]
+    #: the run's secret for same-node channels (``same_node_transport: channel``; None: Ray calls only)
+    channel_key: bytes | None = field(default=None, repr=False)
+
+    def routes(self) -> dict[str, list[tuple]]:
+        """Producer id -> its edges in wire form (see :meth:`Edge.route`)."""
+        out: dict[str, list[tuple]] = {}
+        for e in self.edges:
+            out.setdefault(e.src, []).append(e.route())
+        return out
+
+    def location(self) -> dict[str, str]:
+        """Component id -> host id of its actor."""
+        return {n.id: n.actor for n in self.nodes.values()}
+
+    def peer_names(self) -> dict[str, str]:
+        """DataPlane id -> Ray actor name."""
+        return {h: a.name for h, a in self.actors.items()}
+
+    def describe(self, placement: Placement | None = None) -> dict:
+        """A JSON-ready description: actors (role, name, tier, compute, label_selector, components), nodes, edges."""
+        placement = placement or Placement(has_cloud=True)
+        return {"run": self.run_id,
+                "actors": [{"host": a.host_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
+                            "label_selector": a.selector(placement), "components": list(a.components),
+                            **({"mavlink_links": a.spec["mavlink_links"]} if a.spec.get("mavlink_links") else {})}
+                           for a in self.actors.values()],
+                "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
+                           **({"analytics": n.analytics} if n.analytics else {})} for n in self.nodes.values()],
+                "edges": [{"from": e.src, "to": e.dst, "port": e.port.wire(), "buffer": e.buffer,
+                           "robots": list(e.robots) if e.robots is not None else None} for e in self.edges]}
+
+    def text(self, placement: Placement | None = None) -> str:
+        """The plan for humans: one block per actor, then the edges that cross actors."""
+        placement = placement or Placement(has_cloud=True)
+        lines = [f"run {self.run_id}: {len(self.actors)} actors, {len(self.nodes)} components, {len(self.edges)} edges"]
+        for a in self.actors.values():
+            sel = ",".join(f"{k}={v}" for k, v in a.selector(placement).items())
+            lines.append(f"  {a.role:<10} {a.name}  [{sel}]" + (f"  compute {a.compute}" if a.compute else ""))
+            for key, ids in (a.spec.get("mavlink_links") or {}).items():
+                lines.append(f"      mavlink link {key} shared by {', '.join(ids)} (one socket, routed by system id)")
+            for c in a.components:
+                lines.append(f"      {self.nodes[c].kind:<11} {c}")
+        cross = [e for e in self.edges if self.nodes[e.src].actor != self.nodes[e.dst].actor]
+        if cross:
+            lines.append("  edges between actors:")
+            for e in cross:
+                only = f" (items of {', '.join(e.robots)})" if e.robots else ""
+                lines.append(f"      {e.src} -> {e.dst} [{e.port.wire()}]{only}")
+        return "\n".join(lines)
+
+
+def _link_of(robot) -> str | None:
+    mc = robot.cfg.mavlink if robot.cfg.backend == "mavlink" else None
+    return mc.link_key() if mc is not None else None
+
+
+def _drone_chunks(group: list, k: int) -> list[list]:
+    """``group`` (robots of one edge compute, in order) cut into drone actors of at most ``k`` robots, except that
+    robots whose ``mavlink.connection`` names one endpoint always share one actor (one process holds the socket;
+    :mod:`aerodaas.backends.mavlink.shared_link`): such a set is never split, and is an actor of its own when it
+    has more than ``k`` robots."""
+    units: list[list] = []
+    by_link: dict[str, list] = {}
+    for r in group:
+        key = _link_of(r)
+        if key is None:
+            units.append([r])
+        elif key in by_link:
+            by_link[key].append(r)
+        else:
+            by_link[key] = [r]
+            units.append(by_link[key])
+    chunks: list[list] = []
+    for u in units:
+        if chunks and len(chunks[-1]) + len(u) <= k and len(chunks[-1]) < k:
+            chunks[-1].extend(u)
+        else:
+            chunks.append(list(u))
+    return chunks
+
+
+def _shared_links(chunk: list) -> dict[str, list[str]]:
+    """Endpoint -> robot ids, for each MAVLink link that more than one robot of ``chunk`` names."""
+    out: dict[str, list[str]] = {}
+    for r in chunk:
+        key = _link_of(r)
+        if key is not None:
+            out.setdefault(key, []).append(r.id)
+    return {key: ids for key, ids in out.items() if len(ids) > 1}
+
+
+def collect_graph(robot) -> list:
+    """The analytics reachable from ``robot``'s sensors, in topological order."""
+    order, seen = [], set()
+
+    def visit(stream):
+        for sub in stream.subscribers:
+            if id(sub) not in seen:
+                seen.add(id(sub))
+                order.append(sub)
+                visit(sub.output)
+
+    for s in robot.sensors.values():
+        visit(s.get_data_stream())
+    return order
+
+
+def _edge_compute(env, robot) -> tuple[str, dict[str, str]]:
+    """The edge compute resource ``robot`` flies from (``robots[].compute``, default the first edge compute) and
+    its labels; ``("edge", {})`` for an environment without edge compute."""
+    edges = [c for c in env.cfg.compute if c.tier == "edge"]
+    cid = robot.cfg.compute or (edges[0].id if edges else None)
+    for c in edges:
+        if c.id == cid:
+            return c.id, dict(c.labels)
+    return "edge", {}
+
+
+def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, record: str | None = None,
+               live: str | None = None, scheduled: dict[int, Any] | None = None, epoch_ns: int = 0,
+               run_id: str | None = None, max_restarts: int | None = None) -> RunPlan:
+    """Place the application's components on actors (see the module docstring) and compute every edge.
+
+    ``graphs``: robot id -> its analytics (:func:`collect_graph`); ``scheds``: robot id -> its trajectory
+    scheduler; ``scheduled``: id(analytics) -> analytics placed per frame by the analytics scheduler. Pure: starts
+    nothing. Specs hold the objects the actors need (analytics, schedulers), pickled when the actors start."""
+    scheduled = scheduled or {}
+    run_id = run_id or os.urandom(3).hex()
+    k = max(1, int(getattr(env.cfg, "drones_per_actor", 1)))
+    recorded = bool(record or live)
+    sim_d = sim.model_dump()
+    nodes: dict[str, Node] = {}
+    actors: dict[str, ActorPlan] = {}
+
+    def actor(host_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
+        if host_id not in actors:
+            spec: dict = {"sim": sim_d, "role": role}
+            if recorded and role != "recorder":
+                spec["record_remote"] = "recorder"
+            actors[host_id] = ActorPlan(host_id, role, f"aerodaas/{run_id}/{host_id}", tier, compute, dict(labels),
+                                        [], spec)
+        return actors[host_id]
+
+    def add(node: Node) -> None:
+        nodes[node.id] = node
+        actors[node.actor].components.append(node.id)
+
+    rec = actor("recorder", "recorder", "edge", None, {})
+    if recorded:  # the recorder also feeds the live view; without --record it writes no file
+        rec.spec["record"] = {"path": os.path.abspath(record) if record else None, "live": live, "meta": {
+            "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
+            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"}}
+
+    # ---- drones: one actor per drone (or per group of k drones flying from the same edge compute)
+    drone_host: dict[str, str] = {}
+    by_compute: dict[str, list] = {}
+    for r in robots:
+        by_compute.setdefault(_edge_compute(env, r)[0], []).append(r)
+    for comp, group in by_compute.items():
+        for chunk in _drone_chunks(group, k):
+            hid = f"drone/{chunk[0].id}" if len(chunk) == 1 else f"drones/{chunk[0].id}+{len(chunk) - 1}"
+            _, labels = _edge_compute(env, chunk[0])
+            a = actor(hid, "drone", "edge", comp, labels)
+            a.spec.update(world=env.cfg.world.model_dump(mode="json"), robots=[], analytics=[])
+            shared = _shared_links(chunk)
+            if shared:
+                a.spec["mavlink_links"] = shared
+            for r in chunk:
+                drone_host[r.id] = hid
+
+    # ---- analytics instances
+    inst: dict[int, list[tuple[str, str, tuple[str, ...]]]] = {}  # id(a) -> [(cid, host id, robots served)]
+    users: dict[int, list[str]] = {}
+    every: dict[int, Any] = {}
+    for r in robots:
+        for a in graphs[r.id]:
+            users.setdefault(id(a), []).append(r.id)
+            every[id(a)] = a
+    for n, (aid, a) in enumerate(every.items(), start=1):
+        base = f"{a.name}#{n}"
+        served = users[aid]
+        buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
+        inst[aid] = []
+
+        def place(cid: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
+                  scheduled_: bool = False, obj: Any = None) -> None:
+            pa = actor(hid, role, tier, compute, labels)
+            pa.spec.setdefault("analytics", []).append({"cid": cid, "name": a.name, "obj": a if obj is None else obj,
+                                                       "buffer": max(buffer, 8) if scheduled_ else buffer,
+                                                       "scheduled": scheduled_})
+            add(Node(cid, "analytics", robots_[0] if len(robots_) == 1 and hid.startswith("drone") else None, hid,
+                     a.name))
+            inst[aid].append((cid, hid, robots_))
+
+        if aid in scheduled:  # per frame by the analytics scheduler: a copy in each edge compute's dispatcher
+            per: dict[str, list[str]] = {}
+            for rid in served:
+                per.setdefault(actors[drone_host[rid]].compute or "edge", []).append(rid)
+            for comp, rids in per.items():
+                labels = actors[drone_host[rids[0]]].labels
+                cid = base if len(per) == 1 else f"{base}@{comp}"
+                place(cid, f"dispatcher/{comp}", tuple(rids), "dispatcher", "edge", comp, labels, True)
+        elif getattr(a, "colocate", False):  # a copy inside each drone's actor: per-drone state by construction
+            for j, rid in enumerate(served):
+                place(f"{base}@{rid}", drone_host[rid], (rid,), "drone", "edge", None, {},
+                      obj=a if j == 0 else copy.deepcopy(a))
+        else:
+            n_rep = max(1, int(getattr(a, "replicas", 1)))
+            comp = a.compute
+            labels = dict(getattr(getattr(comp, "cfg", None), "labels", {}) or {})
+            cname = getattr(comp, "id", a.compute.tier)
+            for i in range(n_rep):
+                rids = tuple(rid for j, rid in enumerate(served) if j % n_rep == i)
+                if not rids:
+                    continue
+                suffix = f"/r{i}" if n_rep > 1 else ""
+                place(base + suffix, f"analytics/{cname}/{base}{suffix}", rids, "analytics", comp.tier, cname,
+                      labels)
+
+    # ---- drones' own components and every edge
+    edges: list[Edge] = []
+    robot_ids: dict[str, dict] = {}
+
+    def consumers(stream, robot: str | None) -> list[Edge]:
+        """Edges from ``stream`` (of ``robot``'s items when known) to every consumer instance."""
+        out = []
+        for sub in stream.subscribers:
+            # frames for the analytics scheduler: its dispatcher decides what to drop, not the edge's in-flight limit
+            buffer = max(stream.buffer, 8) if id(sub) in scheduled else stream.buffer
+            for cid, _, served in inst.get(id(sub), []):
+                if robot is not None and robot not in served:
+                    continue
+                out.append(Edge("", cid, Port("in"), buffer, served if robot is None else None))
+        for rr in robots:
+            if robot is not None and rr.id != robot:
+                continue
+            for st, prio, replace in scheds[rr.id].stream_inputs:
+                if st is stream:
+                    out.append(Edge("", f"{rr.id}/scheduler", Port("priority", prio, replace), 4,
+                                    (rr.id,) if robot is None else None))
+        return out
+
+    for r in robots:
+        hid = drone_host[r.id]
+        sched = scheds[r.id]
+        preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
+                         for m in sched._missions if m.distance_driven)
+        ids = {"drone": f"{r.id}/drone", "scheduler": f"{r.id}/scheduler", "cameras": {}, "odom": [], "stat": [],
+               "actor": hid}
+        add(Node(ids["drone"], "drone", r.id, hid))
+        add(Node(ids["scheduler"], "scheduler", r.id, hid))
+        cams = []
+        for s in r.sensors.values():
+            cid = f"{r.id}/{s.id}"
+            subs = consumers(s.get_data_stream(), r.id)
+            if s.type == "camera" and (s.get_data_stream().subscribers or recorded):
+                cams.append({"cid": cid, "sensor": s.id, "props": dict(s.cfg.properties)})
+                ids["cameras"][s.id] = cid
+            elif s.type == "odometry" and subs:
+                ids["odom"].append(cid)
+            elif s.type == "stat_stream" and subs:
+                ids["stat"].append(cid)
+            else:
+                continue
+            add(Node(cid, s.type, r.id, hid))
+            edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
+        actors[hid].spec["robots"].append({"robot": r.cfg.model_dump(mode="json"), "drone_cid": ids["drone"],
+                                          "scheduler_cid": ids["scheduler"], "scheduler": sched,
+                                          "preplanned": preplanned, "cameras": cams, "odom_cids": ids["odom"],
+                                          "stat_cids": ids["stat"]})
+        robot_ids[r.id] = ids
+    seen_out: set[str] = set()
+    for aid, a in every.items():
+        for cid, _, served in inst[aid]:
+            if cid in seen_out:
+                continue
+            seen_out.add(cid)
+            only = served[0] if len(served) == 1 else None
+            for e in consumers(a.output, only):
+                robots_ = e.robots if e.robots is not None else None
+                if only is None and robots_ is not None:
+                    robots_ = tuple(x for x in robots_ if x in served) or None
+                    if robots_ is None:
+                        continue  # no robot of this instance goes there
+                edges.append(Edge(cid, e.dst, e.port, e.buffer, robots_))
+    for r in robots:
+        robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
+                                        if r.id in served]
+    for a in actors.values():
+        a.spec["epoch_ns"] = epoch_ns
+    key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
+    return RunPlan(run_id, nodes, edges, actors, robot_ids, {aid: [c for c, _, _ in v] for aid, v in inst.items()},
+                   channel_key=key)

@@ -1,0 +1,553 @@
+"""Runtime glue: checks an application, starts (or joins) Ray, turns the application's dataflow into the run's
+Ray actors (:mod:`aerodaas.runtime.dataflow`: a drone actor per drone, an actor per deployed analytics replica, a
+dispatcher per edge compute with scheduled analytics, a recorder per run), flies the mission
+(:mod:`aerodaas.runtime.supervise`), finishes the recording and returns a :class:`MissionResult`.
+
+Placement uses Ray node labels: an actor for compute on tier ``edge`` gets ``label_selector={"tier": "edge",
+**compute labels}``, tier ``cloud`` ``{"tier": "cloud", ...}``. In local single-node mode (the default) Ray is
+started here with the node labelled ``tier=edge``, cloud compute may use it (``in(edge,cloud)``) and compute labels
+are not required. Ray's token authentication stays on (Ray >= 2.59 enables it for local clusters); the local
+cluster listens on loopback only.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+
+from aerodaas.config import SimulationConfig
+from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
+from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
+from aerodaas.runtime.supervise import error_cause as _cause
+
+
+@dataclass
+class RunOptions:
+    """Options the CLI (or a test) sets before running an application."""
+
+    record: str | None = None
+    speedup: float | None = None
+    lockstep: bool | None = None
+    timeout: float | None = None
+    address: str | None = None
+    env_path: str | None = None
+    progress: bool = True
+    hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
+    hitl_port: int | None = None
+    live: str | None = None  # serve the run to Foxglove over WebSocket on this HOST:PORT (aerodaas.liveview.server)
+    #: a local Ray also starts its dashboard on 127.0.0.1 (``aerodaas run --dashboard``: it serves
+    #: ``ray list actors`` and the actors view; off by default: it adds seconds to the start and on a loaded machine
+    #: can fail to start, which then costs a retry without it)
+    dashboard: bool = False
+    #: the run's id in its actors' names (``aerodaas/<run id>/...``); None: a random one per run
+    run_id: str | None = None
+    #: ``aerodaas plan``: build and check everything, then raise :class:`PlanReady` instead of starting Ray
+    plan_only: bool = False
+    #: start Ray in the background as soon as the application's Environment is validated (``aerodaas run``): an
+    #: invalid environment then fails before any Ray process exists, and a valid one overlaps Ray's start with
+    #: building the rest of the application
+    early_ray: bool = False
+
+
+OPTIONS = RunOptions()
+
+
+@dataclass
+class MissionResult:
+    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed), per-robot
+    reports (visited waypoints, events, state history), per-actor stats, per-frame latency and the recording."""
+
+    outcome: str
+    robots: dict[str, dict]
+    stats: dict[str, Any]
+    latency: dict[str, Any]
+    recording: str | None
+    wall_s: float
+    recording_counts: dict[str, int] = field(default_factory=dict)
+    #: the recorder's failure (disk full, I/O error) or None: ``{error, last_recorded_ns, finished, ...}``; a run
+    #: whose recording failed is not ``ok`` (exit code 1)
+    recording_failure: dict[str, Any] | None = None
+    recording_lost: int = 0
+    recording_start_ns: int | None = None  # log time of sim time 0 (ns)
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome == "success" and self.recording_failure is None
+
+
+_STARTED_RAY = False
+#: stop signals received (SIGINT/SIGTERM through :func:`request_stop`), and whether raising KeyboardInterrupt in the
+#: main thread is safe right now: while the application is built and while a mission runs, yes; while actors are
+#: being set up or torn down, no (an exception inside a Ray call there can leave the core worker half shut down and
+#: abort the process: exit 134 instead of 143, the recording unfinished) — the stop is then taken at the next
+#: safe point, which ends the mission as ``interrupted`` with the recording finished
+STOP_SIGNALS: list[int] = []
+_RAISE_OK = [True]
+
+
+def request_stop(signum: int) -> None:
+    """Called by the CLI's SIGINT/SIGTERM handler (main thread): record the stop and raise KeyboardInterrupt when
+    that is safe now; otherwise the run stops at its next safe point."""
+    STOP_SIGNALS.append(signum)
+    if _RAISE_OK[0]:
+        raise KeyboardInterrupt(f"signal {signum}")
+_EARLY: dict[str, Any] = {}  # the background start of Ray (start_ray_early)
+
+
+#: True when this run attached to the cluster of `aerodaas up` (a local cluster, placed as local mode is)
+_ATTACHED_UP = False
+
+
+def _up_address() -> str | None:
+    """The address of a running `aerodaas up` cluster, unless ``AERODAAS_NO_ATTACH=1``."""
+    if os.environ.get("AERODAAS_NO_ATTACH") == "1":
+        return None
+    from aerodaas.clusters.persistent import attached_address
+
+    return attached_address()
+
+
+def _init_ray(address: str | None) -> None:
+    global _STARTED_RAY
+    import ray
+
+    up_address = None if address else _up_address()
+    if address:
+        ray.init(address=address, log_to_driver=True, include_dashboard=False)
+    elif up_address:
+        # the persistent local cluster of `aerodaas up` (aerodaas.clusters.persistent): loopback, like our own
+        from aerodaas.clusters.local import enable_token_auth
+
+        enable_token_auth()  # the cluster was started with token auth: the driver must present the token
+        restore = _loopback_only()
+        try:
+            ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning")
+        finally:
+            restore()
+        global _ATTACHED_UP
+        _ATTACHED_UP = True
+        print(f"aerodaas: attached to the local cluster of `aerodaas up` at {up_address} (`aerodaas down` stops it)",
+              file=sys.stderr, flush=True)
+    else:
+        # address="local": always a fresh cluster of our own, never one that `ray start` left on this machine
+        # num_cpus=3: the run's actors reserve no CPU (num_cpus=0), so the CPU resource only sizes Ray's pool of
+        # workers prestarted while the app is built: three, which the recorder, a drone and an analytics actor take
+        # (1.4 s instead of 2.0 s from Ray ready to the actors ready, `aerodaas bench startup`)
+        dashboard = OPTIONS.dashboard
+        for attempt in range(3):
+            try:
+                restore = _loopback_only()
+                # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
+                # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
+                # process on the machine (a SITL autopilot, a compiler) starve their control loops
+                ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
+                         dashboard_host="127.0.0.1", log_to_driver=True, _system_config={"worker_niceness": 0},
+                         num_cpus=3, configure_logging=True, logging_level="warning")
+                restore()
+                break
+            except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
+                restore()
+                # Ray gives its raylet a fixed 30 s to register with the GCS (ray/_private/node.py); a heavily
+                # loaded machine can miss that: start again (at most 3 times) rather than fail the run. A dashboard
+                # that fails to start is not worth failing the run for: start again without it
+                ray.shutdown()
+                if dashboard and "dashboard" in str(e).lower() and attempt < 2:
+                    print(f"aerodaas: warning: Ray's dashboard did not start ({str(e).splitlines()[0][:120]}); "
+                          f"running without it", file=sys.stderr, flush=True)
+                    dashboard = False
+                    continue
+                if "timed out during startup" not in str(e) or attempt == 2:
+                    raise
+        _STARTED_RAY = True
+
+
+#: the environment variable with which Ray takes loopback as the node's address (ray/_private/ray_constants.py
+#: ``ENABLE_RAY_CLUSTER``, read by ``services.get_node_ip_address``; Ray's own default on macOS and Windows)
+_RAY_LOCAL_ONLY_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+def _loopback_only() -> Callable[[], None]:
+    """Make the local Ray about to start a loopback-only one: node address 127.0.0.1, so the GCS, raylet, object
+    manager and every worker's gRPC server listen on 127.0.0.1 only (since Ray binds its servers to the node IP,
+    ray-project/ray#55484, #59852), not on the machine's network address. ``ray.init(_node_ip_address=
+    "127.0.0.1")`` does not do it (``resolve_ip_for_localhost`` turns loopback back into the network address).
+    The variable reaches Ray's processes through their environment; the driver's copy of the constant is set too
+    (Ray may already be imported). Returns the function that undoes both once Ray has started (its processes keep
+    the variable; a later ``ray.init(address=...)`` of this process must see the machine's address again). A
+    cluster joined with ``--address`` is never touched."""
+    from ray._private import ray_constants
+
+    before_env, before_const = os.environ.get(_RAY_LOCAL_ONLY_ENV), ray_constants.ENABLE_RAY_CLUSTER
+    os.environ[_RAY_LOCAL_ONLY_ENV] = "0"
+    ray_constants.ENABLE_RAY_CLUSTER = False
+
+    def restore() -> None:
+        ray_constants.ENABLE_RAY_CLUSTER = before_const
+        if before_env is None:
+            os.environ.pop(_RAY_LOCAL_ONLY_ENV, None)
+        else:
+            os.environ[_RAY_LOCAL_ONLY_ENV] = before_env
+
+    return restore
+
+
+def start_ray_early(address: str | None = None) -> None:
+    """Start (or connect to) Ray in a background thread while the application is imported and built; the next
+    :func:`ensure_ray` waits for it. Ray's processes are tied to the thread that started them
+    (``PR_SET_PDEATHSIG``), so that thread stays alive, idle, for the life of the driver."""
+    import threading
+
+    if _EARLY:
+        return
+    ready = threading.Event()
+    _EARLY.update(ready=ready, error=None, address=address)
+
+    def keeper() -> None:
+        import logging
+
+        class _NoSigtermNotice(logging.Filter):  # the CLI installs its own SIGTERM handler in the main thread
+            def filter(self, record: logging.LogRecord) -> bool:
+                return not str(record.msg).startswith("SIGTERM handler is not set")
+
+        logging.getLogger("ray._private.worker").addFilter(_NoSigtermNotice())
+        try:
+            _init_ray(address)
+        except BaseException as e:  # surfaced by ensure_ray in the main thread
+            _EARLY["error"] = e
+        ready.set()
+        threading.Event().wait()
+
+    threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
+
+
+class PlanReady(Exception):
+    """Raised by :func:`run_mission` under ``OPTIONS.plan_only`` (``aerodaas plan``): ``plan`` is the
+    :class:`aerodaas.runtime.dataflow.RunPlan` the run would start; nothing was started."""
+
+    def __init__(self, plan: Any) -> None:
+        super().__init__(f"plan of run {plan.run_id}")
+        self.plan = plan
+
+
+class RayStartError(RuntimeError):
+    """Ray could not be started or reached (the message says which and why); ``aerodaas run`` exits 1 with it."""
+
+
+def ensure_ray(address: str | None = None) -> bool:
+    """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes.
+    Raises :class:`RayStartError`."""
+    import ray
+
+    where = f"the Ray cluster at {address!r}" if address else "a local Ray"
+    if _EARLY and _EARLY["address"] == address:
+        _EARLY["ready"].wait()
+        if _EARLY["error"] is not None:
+            err, _EARLY["error"] = _EARLY["error"], None
+            _EARLY.clear()
+            if isinstance(err, KeyboardInterrupt):
+                raise err
+            raise RayStartError(f"could not start {where}: {type(err).__name__}: {err}") from err
+    if not ray.is_initialized():
+        try:
+            _init_ray(address)
+        except Exception as e:  # noqa: BLE001 - Ray raises bare Exceptions (node start time-outs, ...)
+            raise RayStartError(f"could not start {where}: {type(e).__name__}: {e}") from e
+    return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
+
+
+def shutdown_ray() -> None:
+    global _STARTED_RAY
+    import ray
+
+    if _EARLY:
+        _EARLY["ready"].wait()
+    if _STARTED_RAY and ray.is_initialized():
+        ray.shutdown()
+    _STARTED_RAY = False
+    _EARLY.clear()
+
+
+class ComponentHandle:
+    """A component inside one of the run's actors, used like an actor handle: ``h.status.remote()`` calls
+    ``component.status()`` in its actor's process and returns an ObjectRef."""
+
+    def __init__(self, host: Any, cid: str) -> None:
+        self.host, self.cid = host, cid
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        host, cid = self.host, self.cid
+
+        class _Method:
+            def remote(self, *args: Any, **kwargs: Any) -> Any:
+                return host.call.remote(cid, name, *args, **kwargs)
+
+        return _Method()
+
+    def __repr__(self) -> str:
+        return f"ComponentHandle({self.cid!r})"
+
+
+def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
+    """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
+    copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
+    scheduler's spec. Returns the executors' handles (to kill at the end)."""
+    from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
+    from aerodaas.schedulers.analytics_base import analytics_scheduler_class
+
+    cfg = env.cfg.analytics_scheduler
+    policy_class = analytics_scheduler_class(cfg.name)  # the class travels, not its name
+    analytics = {a.name: a for a in scheduled.values()}
+    executors = start_cloud_executors(cfg.cloud_executors, mode="real", selector=cloud_selector(has_cloud),
+                                      name_prefix="cloud-analytics", analytics=analytics,
+                                      ray_name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics/")
+    for a in plan.actors.values():
+        if a.role == "dispatcher":
+            a.spec["analytics_scheduler"] = {
+                "name": cfg.name, "policy_class": policy_class, "workload": cfg.resolved_workload(env.cfg),
+                "executors": executors,
+                "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
+    return executors
+
+
+def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
+    """The driver's handles per robot (drone, scheduler, cameras, analytics: :class:`ComponentHandle` into their
+    actors), bound to the application's objects (``robot._handle``, live scheduler, pull getters)."""
+    import ray
+
+    loc = plan.location()
+    handles: dict[str, dict] = {}
+    for r in robots:
+        ids = plan.robots[r.id]
+        a_handles = {cid: ComponentHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
+        home = actors[ids["actor"]]
+        handles[r.id] = {"robot": r, "drone": ComponentHandle(home, ids["drone"]),
+                         "scheduler": ComponentHandle(home, ids["scheduler"]), "analytics": a_handles,
+                         "cameras": {sid: ComponentHandle(home, cid) for sid, cid in ids["cameras"].items()},
+                         "sched_obj": r.scheduler or env.trajectory_scheduler()}
+        r._handle = handles[r.id]["drone"]
+        for s in r.sensors.values():
+            s.get_data_stream()._runtime_getter = _pull_getter(s, handles[r.id])
+        for a in graphs[r.id]:
+            mine = [c for c in plan.analytics_instances[id(a)] if c in a_handles]
+            if mine:
+                h = a_handles[mine[0]]
+                a.output._runtime_getter = (lambda h=h: ray.get(h.get_latest.remote()))
+    return handles
+
+
+def run_mission(env, robots: list, timeout: float | None = None) -> MissionResult:
+    """Plan the run's actors (:mod:`aerodaas.runtime.dataflow`), start them, fly (:func:`aerodaas.runtime.supervise.supervise`),
+    finish the recording and tear down. Bad input raises before Ray starts; once actors exist, every failure ends
+    in a :class:`MissionResult` (never a raw traceback) with the recording finished."""
+    import ray
+
+    from aerodaas.runtime.dataflow import Placement, build_plan
+    from aerodaas.runtime.supervise import collect_stats, start_actors, supervise
+
+    opts = OPTIONS
+    timeout = opts.timeout if opts.timeout is not None else timeout
+    sim = SimulationConfig.model_validate(env.cfg.simulation.model_dump())
+    if opts.speedup is not None:
+        sim.speedup = opts.speedup
+    if opts.lockstep is not None:
+        sim.lockstep = opts.lockstep
+    check_clocks(robots, sim)
+    graphs, scheds, scheduled = validate(env, robots, opts)
+
+    from aerodaas.runtime.startup_probe import probe
+
+    probe("app_built")
+    t_start = time.monotonic()
+    if opts.plan_only:
+        raise PlanReady(build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live,
+                                   scheduled=scheduled))
+    if STOP_SIGNALS:  # stopped while the app was built: nothing started, nothing to record
+        raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
+    _RAISE_OK[0] = False  # from here on a stop signal is taken at the safe points (see request_stop)
+    has_cloud = ensure_ray(opts.address)
+    probe("ray_ready")
+    epoch_ns = time.time_ns()
+    plan = build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live, scheduled=scheduled,
+                      epoch_ns=epoch_ns, run_id=opts.run_id or os.environ.get("AERODAAS_RUN_ID") or None)
+    placement = Placement(has_cloud=has_cloud, local=(_STARTED_RAY or _ATTACHED_UP) and not opts.address)
+    if not placement.local:
+        from aerodaas.clusters.placement import placement_warning
+
+        warning = placement_warning(plan)
+        if warning:
+            print(f"aerodaas: warning: {warning}", file=sys.stderr, flush=True)
+    if opts.progress:
+        kinds = {}
+        for a in plan.actors.values():
+            kinds[a.role] = kinds.get(a.role, 0) + 1
+        # `ray list actors` talks to the dashboard's state API, so the hint names the dashboard, not the GCS
+        dashboard_url = ray._private.worker.get_dashboard_url() if (OPTIONS.dashboard or opts.address) else ""
+        print(f"aerodaas: run {plan.run_id}: " + ", ".join(f"{n} {k}" for k, n in kinds.items()) + " actor(s) on Ray "
+              f"{ray.get_runtime_context().gcs_address}" + (f" (see them: RAY_AUTH_MODE=token ray list actors --address "
+              f"http://{dashboard_url})" if dashboard_url else
+              " (run with --dashboard to see them with `ray list actors`)"), flush=True)
+    actors: dict[str, Any] = {}
+    cloud_executors: list = []
+    handles: dict[str, dict] = {}
+    hitl = None
+    reports: dict[str, dict] = {}
+    stats: dict[str, Any] = {}
+    latency: dict[str, Any] = {}
+    counts: dict[str, int] = {}
+    rec_report: dict[str, Any] = {}
+    failure: str | None = None
+    robot_errors: dict[str, str] = {}  # robot id -> its own error when the run could not start
+    try:
+        try:
+            if scheduled:
+                cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
+            actors = start_actors(plan, placement, sim.lockstep, env.cfg.actor_max_restarts)
+            # every actor sets up at once (drones connect to their vehicles); the recorder's answer is read first:
+            # a bad file or live view is the error reported
+            rec_setup = actors["recorder"].setup.remote()
+            others = [h.setup.remote() for hid, h in actors.items() if hid != "recorder"]
+            ray.get(rec_setup)
+            described, first = [], None
+            for ref in others:  # every actor's answer: each robot that could not connect gets its own error
+                try:
+                    described.append(ray.get(ref))
+                except Exception as e:  # noqa: BLE001
+                    per = getattr(getattr(e, "cause", None), "errors", None) or getattr(e, "errors", None)
+                    if isinstance(per, dict):
+                        robot_errors.update(per)
+                    first = first or e
+            if first is not None:
+                raise first
+        except KeyboardInterrupt:
+            raise
+        except Exception as e:  # noqa: BLE001 - e.g. a vehicle that does not answer: a failed run, not a traceback
+            failure = _cause(e)
+            for rid, err in robot_errors.items():
+                print(f"aerodaas: robot {rid!r} could not start: {err}", file=sys.stderr, flush=True)
+            print(f"aerodaas: the run could not start: {failure}", file=sys.stderr, flush=True)
+            described = []
+        for d in [ray.get(actors["recorder"].setup.remote())] if "recorder" in actors and failure is None else []:
+            if d.get("live_url"):
+                print(f"aerodaas: live view at {d['live_url']} (Foxglove: Open connection -> Foxglove WebSocket)",
+                      flush=True)
+        probe("hosts_ready")
+        if failure is None:
+            handles = _bind_handles(plan, actors, robots, graphs, env)
+            for r in robots:
+                h = handles[r.id]
+                if scheds[r.id] is h["sched_obj"]:  # not shared: live add/clear go to this robot's queue
+                    h["sched_obj"]._remote = h["scheduler"]
+            hcfg = env.cfg.hitl
+            if opts.hitl if opts.hitl is not None else hcfg.enabled:
+                from aerodaas.tools.hitl import HitlServer
+
+                hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]}
+                                   for rid, h in handles.items()}, host=hcfg.host,
+                                  port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
+                                  token=hcfg.token, docs=hcfg.docs).start()
+                env.hitl = hitl
+                shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
+                print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
+            for h in handles.values():
+                for hook in h["robot"]._start_hooks:
+                    hook(h["robot"])
+            _RAISE_OK[0] = True
+            t_fly = time.monotonic()
+            reports = supervise(plan, actors, handles, timeout, opts.progress, lambda: bool(STOP_SIGNALS),
+                                restart_wait_s=env.cfg.actor_restart_timeout_s)
+            fly_s = time.monotonic() - t_fly
+            _RAISE_OK[0] = False
+            stats, latency = collect_stats(handles, actors, plan)
+            # the flying part alone (actors started and wired, until the mission ended), s: what benchmarks measure
+            stats["_timing"] = {"mission_s": round(fly_s, 3), "startup_s": round(t_fly - t_start, 3)}
+            stats["_plan"] = {"run": plan.run_id, "actors": {hid: a.name for hid, a in plan.actors.items()},
+                              "placed": {d.get("host"): d.get("node_id") for d in described}}
+    finally:
+        _RAISE_OK[0] = False
+        if hitl is not None:
+            hitl.stop()
+            env.hitl = None
+        counts, rec_report = _close_actors(actors, opts.record)
+        for h in handles.values():
+            h["robot"]._handle = None
+            h["sched_obj"]._remote = None
+            for s in h["robot"].sensors.values():
+                s.get_data_stream()._runtime_getter = None
+        for h in [*actors.values(), *cloud_executors]:
+            try:
+                ray.kill(h, no_restart=True)
+            except Exception:  # noqa: BLE001 - an actor on a lost node is already gone
+                pass
+    _RAISE_OK[0] = True  # back in the application
+    for r in robots:
+        err = robot_errors.get(r.id) or (f"not started: another robot could not connect ({failure})"
+                                         if robot_errors else failure) or "no report (the run did not start)"
+        reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": err})
+    outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
+    outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
+        (o for o in outcomes if o != "success"), "failed")
+    result = MissionResult(outcome=outcome, robots=reports, stats=stats, latency=latency, recording=opts.record,
+                           wall_s=time.monotonic() - t_start, recording_counts=counts,
+                           recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
+                           recording_start_ns=epoch_ns)
+    for h in handles.values():
+        for hook in h["robot"]._end_hooks:
+            hook(h["robot"], result)
+    return result
+
+
+def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
+    """Close every actor (analytics and dispatchers first, drones, the recorder last: everything they recorded
+    reaches the file); returns (message counts, recording report). Never raises."""
+    import ray
+
+    order = sorted((h for h in actors if h != "recorder"), key=lambda h: h.startswith("drone"))
+    pings = {hid: actors[hid].ping.remote() for hid in order}
+    alive = set()
+    for hid, ref in pings.items():  # an actor whose node is gone (pending a restart that cannot happen) is skipped
+        try:
+            ray.get(ref, timeout=10)
+            alive.add(hid)
+        except Exception:  # noqa: BLE001
+            print(f"aerodaas: warning: actor {hid!r} is gone (not closed; the recording has what it sent)",
+                  file=sys.stderr)
+    order = [h for h in order if h in alive]
+    refs = {}
+    for hid in order:
+        try:
+            refs[hid] = actors[hid].close.remote()
+        except Exception:  # noqa: BLE001
+            pass
+    for hid, ref in refs.items():
+        try:
+            ray.get(ref, timeout=60)
+        except Exception as e:  # noqa: BLE001 - a dead actor has nothing left to close
+            if not isinstance(e, ray.exceptions.RayActorError):
+                print(f"aerodaas: warning: actor {hid!r} could not be closed cleanly: {_cause(e)}", file=sys.stderr)
+    counts: dict = {}
+    rep: dict = {}
+    if "recorder" in actors:
+        try:
+            counts = ray.get(actors["recorder"].close.remote(), timeout=120)
+            rep = ray.get(actors["recorder"].recording_report.remote(), timeout=60)
+        except Exception as e:  # noqa: BLE001 - pragma: no cover - reported, never silently lost
+            print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
+                  file=sys.stderr)
+    return counts, rep
+
+
+def _pull_getter(sensor, h: dict):
+    import ray
+
+    def get():
+        if sensor.type == "camera" and sensor.id in h["cameras"]:
+            return ray.get(h["cameras"][sensor.id].get_latest.remote())
+        st = ray.get(h["drone"].status.remote())
+        return st if sensor.type == "stat_stream" else ray.get(h["drone"].report.remote()).get("position")
+
+    return get

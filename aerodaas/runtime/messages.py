@@ -1,0 +1,230 @@
+"""Typed messages of a run: what travels on an edge of the dataflow graph (between the components of one actor and
+between actors), the deliveries actors send each other, and what they send the run's recorder.
+
+* :class:`Port` — where an edge enters its consumer (an analytics input, or a trajectory scheduler's priority
+  port, optionally ``replace``);
+* :class:`Message` and its kinds — :class:`FrameMsg` (a camera frame), :class:`OdometryMsg`, :class:`StatMsg`
+  (a stat-stream transition), :class:`DetectionsMsg`, :class:`NavigationMsg` and :class:`ValueMsg` (anything
+  else an analytics outputs). Every message names the robot it belongs to and its simulated time, carries the
+  :class:`~aerodaas.app.models.FrameMeta` of the frame it derives from (if any) and the frame's latency ``trace``;
+* :class:`Delivery` — one message for one component of another actor (``DataPlane.deliver``), and the replies that
+  come back in the same call; :class:`EncodedFrame` — a frame's pixels as JPEG bytes, the wire form across
+  tiers (on one tier a frame's pixels travel as an ObjectRef or through a same-node channel,
+  :mod:`aerodaas.actors.channel`);
+* :class:`RecordItem` and its kinds — what an actor without the file sends the run's recorder actor.
+
+Frames are (H, W, 3) uint8 BGR, read-only ``ndarray``s shared by every reader of one process (never copied there).
+"""
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+__all__ = ["Port", "Message", "FrameMsg", "OdometryMsg", "StatMsg", "DetectionsMsg", "NavigationMsg", "ValueMsg",
+           "output_message", "EncodedFrame", "Delivery", "RecordItem", "RecordImage", "RecordCamera",
+           "RecordDetections", "RecordOdometry", "RecordJson"]
+
+
+@dataclass(frozen=True)
+class Port:
+    """Where an edge enters its consumer: ``in`` (an analytics input) or ``priority`` (a trajectory scheduler's
+    input at ``priority``; lower wins; ``replace``: the first navigation from it aborts the queued missions,
+    pattern 5 of the paper, §3)."""
+
+    name: Literal["in", "priority"] = "in"
+    priority: int | None = None
+    replace: bool = False
+
+    def wire(self) -> str:
+        """The port for humans and JSON: ``in`` or ``priority:<n>[:replace]``."""
+        if self.name == "in":
+            return "in"
+        return f"priority:{self.priority}" + (":replace" if self.replace else "")
+
+
+@dataclass(eq=False)
+class Message:
+    """One item on an edge. ``robot``: the robot it belongs to; ``sim_t``: simulated seconds (its frame's capture
+    time for derived items); ``data``: the payload (see each kind); ``meta``: the FrameMeta of the frame it derives
+    from, or None; ``trace``: the frame's latency trace (``capture_wall``: ``time.time()`` when the pixels were
+    ready, ``inference_ms``, ``post_ms``, and for an actor hop ``put_ms``/``call_ms``/``get_ms``/``reply_ms``);
+    ``tok``: the lock-step :class:`~aerodaas.actors.dataplane.Cascade` it belongs to (None outside lock-step; never
+    crosses an actor boundary)."""
+
+    robot: str
+    sim_t: float
+    data: Any
+    meta: Any = None
+    trace: dict[str, float] = field(default_factory=dict)
+    tok: Any = field(default=None, repr=False)
+
+    #: the kind's name in recordings and statistics
+    kind: ClassVar[str] = "value"
+
+    def to_wire(self, data: Any = None) -> "Message":
+        """A copy to send to another actor: without the lock-step token, with ``data`` in place of the payload
+        when given (a frame's ObjectRef or JPEG), the trace copied."""
+        return dataclasses.replace(self, data=self.data if data is None else data, trace=dict(self.trace), tok=None)
+
+
+@dataclass(eq=False)
+class FrameMsg(Message):
+    """A camera frame: ``data`` is the read-only (H, W, 3) uint8 BGR ``ndarray`` in a process; between actors an
+    ObjectRef (same tier), an :class:`EncodedFrame` (across tiers) or a same-node channel slot. ``ref``/``jpeg``
+    keep the frame's object-store put and JPEG encode, so a frame sent to several actors is put (or encoded) once."""
+
+    kind: ClassVar[str] = "frame"
+    ref: Any = field(default=None, repr=False)
+    jpeg: Any = field(default=None, repr=False)
+
+    def to_wire(self, data: Any = None) -> "FrameMsg":
+        out = super().to_wire(data)
+        out.ref = out.jpeg = None
+        return out
+
+
+@dataclass(eq=False)
+class OdometryMsg(Message):
+    """An odometry sample: ``data`` is :class:`~aerodaas.app.models.Odometry` as a dict (ENU metres, m/s, degrees)."""
+
+    kind: ClassVar[str] = "odometry"
+
+
+@dataclass(eq=False)
+class StatMsg(Message):
+    """A stat-stream transition: ``data`` is ``{"robot", "state", "previous", "t"}`` (mission FSM states)."""
+
+    kind: ClassVar[str] = "stat"
+
+
+@dataclass(eq=False)
+class DetectionsMsg(Message):
+    """An analytics' detections: ``data`` is a list of :class:`~aerodaas.app.models.Detection` (pixel boxes)."""
+
+    kind: ClassVar[str] = "detections"
+
+
+@dataclass(eq=False)
+class NavigationMsg(Message):
+    """An analytics' navigation: ``data`` is an :class:`~aerodaas.app.models.AeroNavigation`."""
+
+    kind: ClassVar[str] = "nav"
+
+
+@dataclass(eq=False)
+class ValueMsg(Message):
+    """Any other analytics output (e.g. a monitor's dict)."""
+
+    kind: ClassVar[str] = "value"
+
+
+def output_message(out: Any, source: Message, trace: dict[str, float]) -> Message:
+    """The message carrying analytics output ``out`` computed from ``source``: NavigationMsg for an
+    AeroNavigation, DetectionsMsg for a list of Detection (or an empty list), ValueMsg otherwise."""
+    from aerodaas.app.models import AeroNavigation, Detection
+
+    if isinstance(out, AeroNavigation):
+        cls: type[Message] = NavigationMsg
+    elif isinstance(out, list) and (not out or isinstance(out[0], Detection)):
+        cls = DetectionsMsg
+    else:
+        cls = ValueMsg
+    return cls(robot=source.robot, sim_t=source.sim_t, data=out, meta=source.meta, trace=trace)
+
+
+@dataclass(frozen=True)
+class EncodedFrame:
+    """A frame's pixels as JPEG bytes (the wire form across tiers; decoded once by the receiving actor)."""
+
+    jpeg: bytes
+
+
+@dataclass(eq=False)
+class Delivery:
+    """``msg`` for component ``cid`` of another actor, entering it at ``port``. ``lockstep``: the receiver runs the
+    whole local cascade before it returns and answers with the ObjectRefs of the calls it made; ``reply_to``: the
+    sender's host id — outputs bound for the sender's components come back in the reply (a list of Delivery)
+    instead of a call of their own."""
+
+    cid: str
+    port: Port
+    msg: Message
+    lockstep: bool = False
+    reply_to: str | None = None
+
+
+@dataclass(frozen=True)
+class RecordItem(ABC):
+    """What an actor without the file sends the run's recorder actor (:class:`~aerodaas.actors.recorder.
+    RemoteRecorder`); :meth:`apply` hands it to the :class:`~aerodaas.actors.recorder.RecorderService`."""
+
+    @abstractmethod
+    def apply(self, recorder: Any) -> None:
+        """Hand this item to ``recorder`` (a RecorderService: non-blocking)."""
+
+
+@dataclass(frozen=True)
+class RecordImage(RecordItem):
+    """A camera frame for ``topic`` at ``t_ns`` (log time, ns): ``frame`` is JPEG bytes on the wire (encoded by
+    the sender) or the (H, W, 3) uint8 BGR ``ndarray`` before that."""
+
+    topic: str
+    t_ns: int
+    frame: Any
+    frame_id: str
+
+    def apply(self, recorder: Any) -> None:
+        recorder.image(self.topic, self.t_ns, self.frame, self.frame_id)
+
+
+@dataclass(frozen=True)
+class RecordCamera(RecordItem):
+    """A camera's intrinsics (pixels) and mount pitch (degrees) for the transform tree and calibration."""
+
+    robot: str
+    sensor: str
+    intrinsics: dict
+    pitch_deg: float
+
+    def apply(self, recorder: Any) -> None:
+        recorder.camera(self.robot, self.sensor, self.intrinsics, self.pitch_deg)
+
+
+@dataclass(frozen=True)
+class RecordDetections(RecordItem):
+    """Detections for ``topic`` at ``t_ns``; ``image_size`` (W, H) pixels of the frame they were found in."""
+
+    topic: str
+    t_ns: int
+    detections: list
+    image_size: tuple[int, int] | None = None
+
+    def apply(self, recorder: Any) -> None:
+        recorder.detections(self.topic, self.t_ns, self.detections, self.image_size)
+
+
+@dataclass(frozen=True)
+class RecordOdometry(RecordItem):
+    """One odometry sample of ``robot`` (an Odometry dict) at ``t_ns``."""
+
+    robot: str
+    t_ns: int
+    odometry: dict
+
+    def apply(self, recorder: Any) -> None:
+        recorder.odometry(self.robot, self.t_ns, self.odometry)
+
+
+@dataclass(frozen=True)
+class RecordJson(RecordItem):
+    """A JSON message for ``topic`` at ``t_ns`` with the JSON Schema named ``schema_name``."""
+
+    topic: str
+    t_ns: int
+    obj: dict
+    schema_name: str
+
+    def apply(self, recorder: Any) -> None:
+        recorder.json(self.topic, self.t_ns, self.obj, self.schema_name)

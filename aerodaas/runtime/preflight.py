@@ -1,0 +1,159 @@
+"""Everything checked before any actor of a run starts (``aerodaas run`` and ``start_mission``): the recording's
+path, each robot's trajectory scheduler (a fork per robot of a shared one), its pre-planned missions against its
+safety limits, an autopilot mission's shape, the clocks (lock-step needs simulated vehicles) and the analytics the
+analytics scheduler places per frame. Each check raises ConfigError / ValueError / SafetyViolation naming the field
+and the value; nothing here starts Ray."""
+from __future__ import annotations
+
+from typing import Any
+
+from aerodaas.config import SimulationConfig
+
+__all__ = ["validate", "check_clocks", "robot_schedulers", "scheduled_analytics", "check_preplanned",
+           "check_autopilot_mission"]
+
+
+def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
+    """The analytics the environment's analytics scheduler places per frame (id -> analytics): those named in
+    ``analytics_scheduler.models``. Raises ConfigError for a named analytics the application does not have, two
+    scheduled analytics sharing a name, or one that is not fed by camera frames."""
+    from aerodaas.config import ConfigError
+
+    cfg = env.cfg.analytics_scheduler
+    if cfg.name == "default":
+        return {}
+    every = {id(a): a for g in graphs.values() for a in g}
+    out = {i: a for i, a in every.items() if a.name in cfg.models}
+    names = [a.name for a in out.values()]
+    for name in cfg.models:
+        if name not in names:
+            raise ConfigError(f"analytics_scheduler.models.{name}: the application has no analytics named {name!r} "
+                              f"(it has {sorted({a.name for a in every.values()})})")
+        if names.count(name) > 1:
+            raise ConfigError(f"analytics_scheduler.models.{name}: {names.count(name)} analytics share the name "
+                              f"{name!r}; give each scheduled analytics its own name")
+    for a in out.values():
+        bad = [getattr(st.source, "id", repr(st.source)) for st in a.inputs
+               if getattr(st.source, "type", None) != "camera"]
+        if bad or not a.inputs:
+            raise ConfigError(f"analytics_scheduler.models.{a.name}: a scheduled analytics takes camera frames, but "
+                              f"{a.name!r} is fed by {bad or 'nothing'}")
+    return out
+
+
+def robot_schedulers(env, robots: list) -> dict[str, Any]:
+    """Each robot's trajectory scheduler. Robots that share one scheduler object (the application plugged one into
+    the environment) get a fork each, holding the missions that robot navigates. Raises ValueError for a queued
+    mission that no robot navigates when several robots share the scheduler (its drone would be a guess)."""
+    by_sched: dict[int, list] = {}
+    for r in robots:
+        by_sched.setdefault(id(r.scheduler or env.trajectory_scheduler()), []).append(r)
+    out: dict[str, Any] = {}
+    for group in by_sched.values():
+        sched = group[0].scheduler or env.trajectory_scheduler()
+        if len(group) == 1:
+            out[group[0].id] = sched
+            continue
+        owned: dict[str, list] = {r.id: [] for r in group}
+        for m in sched._missions:
+            owners = [r for r in group if any(w is i for nav in r.navigations for w in nav.waypoints for i in m.items)]
+            if not owners:
+                raise ValueError(f"mission {m.name!r} (priority {m.priority}) is queued in the shared trajectory scheduler "
+                                 f"but no robot navigates it; call robot.navigate(...) for one of "
+                                 f"{[r.id for r in group]}")
+            owned[owners[0].id].append(m)
+        for r in group:
+            out[r.id] = sched.fork(owned[r.id])
+    return out
+
+
+def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
+    """Everything checked before any actor starts (``opts``: the run's :class:`~aerodaas.runtime.driver.RunOptions`):
+    returns (graphs, schedulers, scheduled analytics). Raises ConfigError / ValueError naming the field."""
+    from aerodaas.config import ConfigError
+    from aerodaas.runtime.dataflow import collect_graph
+
+    if opts.record:
+        from aerodaas.recording.writer import check_record_path
+
+        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
+    graphs = {}
+    scheds = robot_schedulers(env, robots)
+    for r in robots:
+        analytics = collect_graph(r)
+        for a in analytics:
+            if a.compute is None:
+                a.deploy(env.get_compute_resources()[0])
+            check = getattr(a, "check", None)
+            if callable(check):
+                check()
+            if getattr(a, "on_error", "continue") not in ("continue", "abort"):
+                raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
+                                  f"{getattr(a, 'on_error')!r}")
+        graphs[r.id] = analytics
+        check_preplanned(r, scheds[r.id])
+        check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
+    return graphs, scheds, scheduled_analytics(env, graphs)
+
+
+def check_clocks(robots: list, sim: SimulationConfig) -> None:
+    """Real vehicles live in real time: lock-step needs every robot on the simulator. Raises ConfigError. A run
+    that only replays logs runs its clock at the replay rate (so odometry keeps its rate in log time)."""
+    from aerodaas.config import ConfigError
+
+    if robots and all(r.cfg.backend == "replay" for r in robots):
+        sim.speedup = max(r.cfg.replay.rate for r in robots)
+
+    real = [r.id for r in robots if r.cfg.backend != "sim"]
+    if real and sim.lockstep:
+        raise ConfigError(f"simulation.lockstep: true needs every robot on backend 'sim'; {real} fly real or "
+                          f"emulated vehicles, which cannot wait for the analytics (set lockstep to false)")
+
+
+def check_preplanned(robot, sched) -> None:
+    """Check every queued mission of ``robot`` against its safety limits before any actor starts (legs chained
+    from the take-off point). Raises :class:`aerodaas.navigation.safety.SafetyViolation`; clamped items replace the
+    originals."""
+    from aerodaas.app.models import AeroNavigation, SchedulingType
+    from aerodaas.navigation.safety import SafetyGate
+
+    gate = SafetyGate(robot.cfg.safety, robot.cfg.limits, robot.cfg.home)
+    start = (0.0, 0.0, robot.cfg.takeoff_altitude)
+    for m in sched._missions:
+        nav = AeroNavigation(waypoints=list(m.items), scheduling_type=SchedulingType.ORDERED, name=m.name)
+        m.items = list(gate.check_navigation(nav, start).waypoints)
+
+
+def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
+    """``mavlink.use_autopilot_mission``: the robot's navigation must be a static, pre-planned waypoint list that
+    an uploaded mission can express. Raises ConfigError naming the field and the reason: analytics navigating
+    through the scheduler, the HITL API on (both add waypoints mid-flight), time-driven navigation, velocity
+    commands or a land/rtl action before the end (MissionFileError), or no waypoints at all."""
+    from aerodaas.config import ConfigError
+    from aerodaas.missionfile import MissionFileError, navigation_to_plan
+    from aerodaas.app.models import AeroNavigation, SchedulingType, Waypoint
+
+    mc = robot.cfg.mavlink
+    if robot.cfg.backend != "mavlink" or mc is None or not mc.use_autopilot_mission:
+        return
+    field = f"robots[{robot.id!r}].mavlink.use_autopilot_mission: true"
+    if sched.stream_inputs:
+        raise ConfigError(f"{field} flies a mission uploaded before take-off, but {len(sched.stream_inputs)} analytics "
+                          "stream(s) navigate this robot through its trajectory scheduler (analytics-driven "
+                          "navigation); set it to false to fly with position/velocity targets")
+    if hitl_on:
+        raise ConfigError(f"{field} flies a mission uploaded before take-off, but the human-in-the-loop API is on "
+                          "(hitl.enabled / --hitl) and could add waypoints mid-flight; turn one of them off")
+    timed = [m.name for m in sched._missions if not m.distance_driven]
+    if timed:
+        raise ConfigError(f"{field}: navigation {timed} is time-driven; an autopilot mission holds only "
+                          "distance-driven waypoints")
+    items = sched.queued()
+    if not any(isinstance(i, Waypoint) for i in items):
+        raise ConfigError(f"{field}: robot {robot.id!r} has no pre-planned waypoints to upload "
+                          "(call drone.navigate(...) before start_mission())")
+    try:
+        navigation_to_plan(AeroNavigation(waypoints=items, scheduling_type=SchedulingType.ORDERED), robot.cfg.home,
+                           "land", takeoff_altitude=robot.cfg.takeoff_altitude)
+    except MissionFileError as e:
+        raise ConfigError(f"{field}: the navigation cannot be an autopilot mission: {e}") from None

@@ -1,0 +1,324 @@
+"""The driver's side of a running mission: start the plan's actors, wait for the drone actors while showing
+progress, and contain whatever dies.
+
+Fault handling (each is a test in ``tests/test_faults_actors.py``):
+
+* a **drone actor** that dies (process killed, native crash) is restarted by Ray (``max_restarts``); the restarted
+  actor restores its drones from their last checkpoints (:mod:`aerodaas.actors.checkpoint`), and
+  :func:`supervise` calls its ``run`` again with ``resume=True``. The drone's events say
+  ``resumed_after_restart`` and its report counts ``actor_restarts``;
+* a drone actor that cannot come back (restarts used up, its node lost with no other node to take it) ends its
+  drones with outcome ``lost`` — the other drones fly on; the recorder actor records their ``/mission/result``;
+* an **analytics or dispatcher actor** that dies is restarted by Ray and rebuilds itself; frames that were in
+  flight are counted as failed by the senders (``failed`` in the outlets' stats), and navigation resumes with the
+  next frame. Nothing in the driver waits for it;
+* whatever happens, :func:`collect_stats` and the closing in :mod:`aerodaas.runtime.driver` take what they can get from
+  the actors that are left and never raise.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any, Callable
+
+__all__ = ["start_actors", "supervise", "collect_stats", "progress_lines", "LOST"]
+
+#: outcome of a drone whose actor died and could not be restarted
+LOST = "lost"
+
+
+def actor_class(role: str):
+    """The Ray actor class for a plan role."""
+    if role == "drone":
+        from aerodaas.actors.drone_actor import DroneActor
+
+        return DroneActor
+    if role == "analytics":
+        from aerodaas.actors.analytics_actor import AnalyticsActor
+
+        return AnalyticsActor
+    if role == "dispatcher":
+        from aerodaas.actors.analytics_actor import DispatcherActor
+
+        return DispatcherActor
+    raise ValueError(f"no actor class for role {role!r}")
+
+
+def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -> dict:
+    """Create every actor of ``plan``: the recorder first, on the driver's node, never restarted; the others named,
+    placed with their ``label_selector`` and restartable ``max_restarts`` times. Returns host id -> actor handle.
+    Nothing is set up yet. Raises what Ray raises for an impossible placement option."""
+    from aerodaas.actors.recorder_actor import RecorderActor
+
+    wiring = {"routes": plan.routes(), "location": plan.location(),
+              "tiers": {h: a.tier for h, a in plan.actors.items()}, "peers": plan.peer_names(),
+              "channel_key": plan.channel_key}
+    import ray
+    from ray import cloudpickle
+
+    handles: dict[str, Any] = {}
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    rec_plan = plan.actors["recorder"]
+    # the recorder writes the driver's file: it runs on the driver's node, whatever other edge nodes exist (and
+    # lives as long as the driver does, so losing another node never loses the recording)
+    here = NodeAffinitySchedulingStrategy(node_id=ray.get_runtime_context().get_node_id(), soft=False)
+    handles["recorder"] = RecorderActor.options(name=rec_plan.name, scheduling_strategy=here).remote(rec_plan.spec)
+    # every other actor reads its spec (analytics, schedulers: possibly large) and the wiring from the recorder
+    # actor, which lives as long as the run: a restarted actor reads the same again, and no constructor argument
+    # sits in the object store (Ray cannot promise those across restarts, ray-project/ray#53727). Not waited for:
+    # the other actors start while the recorder's process does (their spec_of waits for it), not after
+    handles["recorder"].keep_specs.remote(
+        {hid: cloudpickle.dumps(a.spec) for hid, a in plan.actors.items() if hid != "recorder"},
+        cloudpickle.dumps(wiring))
+    for hid, a in plan.actors.items():
+        if hid == "recorder":
+            continue
+        opts = {"name": a.name, "label_selector": a.selector(placement), "max_restarts": max_restarts}
+        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier, None, None, lockstep)
+    return handles
+
+
+def _is_actor_death(e: BaseException) -> bool:
+    import ray
+
+    return isinstance(e, (ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError))
+
+
+def _await_restart(handle: Any, deadline_s: float) -> bool:
+    """Wait (at most ``deadline_s``) for a dead actor to come back restarted; False when it is gone for good."""
+    import ray
+
+    t_end = time.monotonic() + deadline_s
+    while time.monotonic() < t_end:
+        try:
+            ray.get(handle.ping.remote(), timeout=max(1.0, min(10.0, t_end - time.monotonic())))
+            return True
+        except ray.exceptions.ActorDiedError:
+            return False
+        except Exception:  # noqa: BLE001 - restarting (unavailable) or slow: try again
+            time.sleep(0.5)
+    return False
+
+
+def _lost_report(rid: str, why: str, checkpoint: dict | None) -> dict:
+    cp = checkpoint or {}
+    return {"robot": rid, "outcome": LOST, "error": why, "t": cp.get("t", 0.0), "state": cp.get("state", "unknown"),
+            "visited": len(cp.get("visited", [])), "visited_waypoints": cp.get("visited", []),
+            "preplanned_total": cp.get("preplanned_total", 0), "events": cp.get("events", []),
+            "battery_pct": None, "position": [0.0, 0.0, 0.0]}
+
+
+def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, progress: bool,
+              stop_requested: Callable[[], bool], restart_wait_s: float = 90.0) -> dict:
+    """Run every drone actor to the end of its missions and return robot id -> report (see the module docstring
+    for what happens when actors die). ``handles``: robot id -> the driver's component handles (progress and
+    Ctrl-C). Ctrl-C (KeyboardInterrupt) ends every mission as ``interrupted``, waits for the reports and
+    re-raises nothing: the outcome says so."""
+    import ray
+
+    drones = {hid: a for hid, a in plan.actors.items() if a.role == "drone"}
+    robots_of = {hid: [r["robot"]["id"] for r in a.spec["robots"]] for hid, a in drones.items()}
+    t0 = time.monotonic()
+
+    def remaining() -> float | None:
+        return None if timeout is None else max(1.0, timeout - (time.monotonic() - t0))
+
+    refs = {actors[hid].run.remote(remaining()): hid for hid in drones}
+    restarts = {hid: 0 for hid in drones}
+    reports: dict[str, dict] = {}
+    live = None
+    if progress and sys.stdout.isatty():
+        from rich.live import Live
+
+        live = Live(refresh_per_second=4, transient=False)
+        live.start()
+    last_print = 0.0
+    interrupted = False
+    try:
+        if stop_requested():
+            raise KeyboardInterrupt("stop requested while the actors started")
+        while refs:
+            ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.5)
+            for ref in ready:
+                hid = refs.pop(ref)
+                try:
+                    reports.update(ray.get(ref))
+                except Exception as e:  # noqa: BLE001 - contained here: every drone ends with a defined outcome
+                    if _is_actor_death(e) and _await_restart(actors[hid], restart_wait_s):
+                        restarts[hid] += 1
+                        print(f"aerodaas: drone actor {plan.actors[hid].name} died and was restarted; resuming "
+                              f"its mission", file=sys.stderr, flush=True)
+                        refs[actors[hid].run.remote(remaining(), resume=True)] = hid
+                        continue
+                    why = (f"drone actor {plan.actors[hid].name} lost: {type(e).__name__}: {_first_line(e)}"
+                           if _is_actor_death(e) else error_cause(e))
+                    print(f"aerodaas: {why}", file=sys.stderr, flush=True)
+                    for rid in robots_of[hid]:
+                        cp = _last_checkpoint(actors.get("recorder"), rid)
+                        reports[rid] = _lost_report(rid, why, cp) if _is_actor_death(e) else \
+                            {**_lost_report(rid, why, cp), "outcome": "failed"}
+                        _record_result(actors.get("recorder"), plan, rid, reports[rid])
+            if progress and refs:
+                lines = progress_lines(handles, t0)
+                if live is not None:
+                    from rich.text import Text
+
+                    live.update(Text("\n".join(lines)))
+                elif time.monotonic() - last_print > 5.0:
+                    print("\n".join(lines), flush=True)
+                    last_print = time.monotonic()
+    except KeyboardInterrupt:
+        interrupted = True
+        for h in handles.values():
+            try:
+                ray.get(h["drone"].end_mission.remote("interrupted"), timeout=5)
+            except Exception:  # noqa: BLE001 - an actor that is gone has nothing to end
+                pass
+        for ref, hid in list(refs.items()):
+            try:
+                reports.update(ray.get(ref, timeout=20))
+            except Exception as e:  # noqa: BLE001
+                for rid in robots_of[hid]:
+                    reports[rid] = {"robot": rid, "outcome": "interrupted", "error": _first_line(e)}
+    finally:
+        if live is not None:
+            live.stop()
+    for hid, n in restarts.items():
+        for rid in robots_of[hid]:
+            if rid in reports:
+                reports[rid]["actor_restarts"] = n
+    if interrupted:
+        for rep in reports.values():
+            rep["outcome"] = "interrupted"
+    return reports
+
+
+def error_cause(e: BaseException) -> str:
+    """``Type: message`` of the exception an actor call failed with, without Ray's RayTaskError wrapping (whose
+    first line names only the actor method and pid): the cause's type and the last line of its message."""
+    cause = getattr(e, "cause", None)
+    if isinstance(cause, BaseException):
+        e = cause
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[-1] if lines else ''}".rstrip(": ")
+
+
+def _first_line(e: BaseException) -> str:
+    s = str(e).strip().splitlines()
+    return s[0] if s else type(e).__name__
+
+
+def _last_checkpoint(recorder: Any, rid: str) -> dict | None:
+    import ray
+
+    if recorder is None:
+        return None
+    try:
+        return ray.get(recorder.last_checkpoint.remote(rid), timeout=10)
+    except Exception:  # noqa: BLE001
+        return None
+
+
+def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
+    import ray
+
+    if recorder is None:
+        return
+    epoch_ns = plan.actors["recorder"].spec.get("epoch_ns", 0)
+    try:
+        ray.get(recorder.mission_result.remote(rid, epoch_ns + int(rep.get("t", 0.0) * 1e9), {
+            "outcome": rep["outcome"], "visited": rep.get("visited", 0), "preplanned_total":
+            rep.get("preplanned_total", 0), "t": rep.get("t", 0.0), "error": rep.get("error")}), timeout=10)
+    except Exception:  # noqa: BLE001 - reported in the summary anyway
+        pass
+
+
+def progress_lines(handles: dict, t0: float) -> list[str]:
+    """One line per flying drone: time, state, waypoints, position, battery, camera FPS, detections, link."""
+    import ray
+
+    from aerodaas.runtime.report import pct
+
+    lines = []
+    for rid, h in handles.items():
+        try:
+            st = ray.get(h["drone"].status.remote(), timeout=2)
+        except Exception:  # noqa: BLE001 - an actor restarting: no line this time
+            continue
+        if st.get("outcome"):
+            continue
+        rendered = st["frames"] - st["frames_dropped_at_camera"]  # frames actually captured, not skipped ticks
+        fps = rendered / max(time.monotonic() - t0, 1e-6)
+        dets = ""
+        for a in h["analytics"].values():
+            try:
+                s = ray.get(a.stats.remote(), timeout=2)
+            except Exception:  # noqa: BLE001
+                continue
+            if "frames_with_detections" in s:
+                dets = f" detections {s['frames_with_detections']}/{s['frames']}"
+                cloud = (s.get("frames_by_tier") or {}).get("cloud")
+                if cloud:  # frames the analytics scheduler sent to the cloud (counted above too)
+                    dets += f" (cloud {cloud})"
+        x, y, z = st["position"]
+        link = "" if st.get("link_ok", True) else " LINK LOST"
+        lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "
+                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {pct(st['battery_pct'])} "
+                     f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
+    return lines
+
+
+def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
+    """Per-robot stats (scheduler, cameras, analytics) and per-frame latency from every actor still alive; an
+    actor that is gone contributes ``{"error": ...}`` under ``_hosts``. Never raises."""
+    import ray
+
+    drains = [h.drain.remote() for hid, h in actors.items() if plan.actors[hid].role == "dispatcher"]
+    for ref in drains:  # the analytics schedulers finish their tasks in flight before they report
+        try:
+            ray.get(ref, timeout=60)
+        except Exception:  # noqa: BLE001 - a dispatcher that is gone reports what it can below
+            pass
+    refs = {hid: h.stats.remote() for hid, h in actors.items()}
+    host_stats: dict[str, dict] = {}
+    for hid, ref in refs.items():
+        try:
+            host_stats[hid] = ray.get(ref, timeout=30)
+        except Exception as e:  # noqa: BLE001 - a lost node, a dead actor: what is left is still reported
+            host_stats[hid] = {"_host": {"error": f"{type(e).__name__}: {_first_line(e)}"}}
+    every = {cid: s for hs in host_stats.values() for cid, s in hs.items() if not cid.startswith("_")}
+    stats: dict[str, Any] = {"_hosts": {h: hs.get("_host", {}) for h, hs in host_stats.items()}}
+    scheds = [hs["_analytics_scheduler"] for hs in host_stats.values() if hs.get("_analytics_scheduler")]
+    if len(scheds) == 1:
+        stats["analytics_scheduler"] = scheds[0]
+    elif scheds:
+        stats["analytics_scheduler"] = _merge_scheduler_reports(scheds)
+        stats["analytics_schedulers"] = scheds
+    latency: dict[str, Any] = {}
+    for rid, h in handles.items():
+        s: dict[str, Any] = {"scheduler": every.get(h["scheduler"].cid, {})}
+        s["cameras"] = {sid: every.get(c.cid, {}) for sid, c in h["cameras"].items()}
+        s["analytics"] = [every.get(cid, {}) for cid in h["analytics"]]
+        stats[rid] = s
+        sch = s["scheduler"]
+        if "e2e_ms" in sch:
+            latency[rid] = {k: sch[k] for k in ("e2e_ms", "overhead_ms", "inference_ms")}
+            latency[rid]["frames"] = sch["frames_with_latency"]
+    return stats, latency
+
+
+def _merge_scheduler_reports(reps: list[dict]) -> dict:
+    """One summary of several dispatchers' reports (counts summed; rates recomputed from the sums)."""
+    out: dict[str, Any] = {"scheduler": reps[0].get("scheduler"), "dispatchers": len(reps)}
+    for key in ("submitted", "utility", "cloud_cost"):
+        out[key] = sum(r.get(key, 0) or 0 for r in reps)
+    for key in ("states", "tiers"):
+        agg: dict[str, int] = {}
+        for r in reps:
+            for k, v in (r.get(key) or {}).items():
+                agg[k] = agg.get(k, 0) + v
+        out[key] = agg
+    on_time = sum((r.get("on_time_rate", 0) or 0) * (r.get("submitted", 0) or 0) for r in reps)
+    out["on_time_rate"] = on_time / out["submitted"] if out["submitted"] else 0.0
+    return out

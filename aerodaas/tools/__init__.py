@@ -1,0 +1,1 @@
+"""Tools around runs: figures from recordings and the human-in-the-loop API."""

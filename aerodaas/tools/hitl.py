@@ -1,0 +1,365 @@
+"""Human-in-the-loop (HITL) HTTP API: a remote user steers running missions.
+
+Built with FastAPI (request validation with the same pydantic models as the rest of AeroDaaS, 422 responses that
+name the bad field; the OpenAPI docs ``/docs`` and ``/openapi.json`` only with ``hitl.docs: true``, and then behind
+the token) served by uvicorn in a daemon thread of the
+driver process, which already holds the drone and scheduler actor handles. We chose this over a Ray Serve
+deployment because Serve starts a controller and proxy actors (~2 more Ray worker processes, ~170 MB) for
+a handful of low-rate requests per mission.
+
+Every request needs ``Authorization: Bearer <token>``; the token is given in ``environment.json``
+(``hitl.token``) or generated at start and printed once. A missing or wrong token gets 401, a malformed
+request or one outside the safety limits 422 (NaN/Infinity, strings for numbers, unknown keys, ids over
+:data:`MAX_ID_CHARS` characters, more than :data:`MAX_WAYPOINTS_PER_REQUEST` waypoints, a planned tour whose leg
+crosses the geofence), a body over :data:`MAX_BODY_BYTES` 413, an unknown drone 404, and none of them change
+anything.
+Loopback-only (127.0.0.1) unless ``hitl.host`` says otherwise.
+
+Endpoints (JSON):
+
+* ``GET  /drones``                      every drone: state, position (ENU m), battery %, queued navigation
+* ``GET  /drones/{id}``                 one drone
+* ``POST /drones/{id}/waypoints``       ``{"waypoints": [{"x", "y", "z", "hover_duration"?, "id"?, ...}],
+  "index"?: int, "priority"?: int, "scheduling_type"?: "UNORDERED" | "ORDERED"}`` -> the new queue
+* ``POST /drones/{id}/clear``           ``{"priority"?: int}`` abort queued navigation (never resumes)
+* ``POST /drones/{id}/pause`` / ``resume``
+
+The connection (url and token) is also written to ``$AERODAAS_STATE_DIR/hitl.json`` (default
+``~/.aerodaas``; mode 0600) while the server runs, so ``aerodaas inject`` finds it without flags.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import secrets
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+
+__all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
+
+
+def state_file() -> Path:
+    """Where a running server publishes its url and token: ``$AERODAAS_STATE_DIR/hitl.json``."""
+    return Path(os.environ.get("AERODAAS_STATE_DIR", Path.home() / ".aerodaas")) / "hitl.json"
+
+
+#: limits of one request: body bytes (413 beyond), waypoints per request (422 beyond; the robot's
+#: ``max_waypoints_per_request`` and ``max_queued_items`` apply too), characters of a waypoint id
+MAX_BODY_BYTES = 256 * 1024
+MAX_WAYPOINTS_PER_REQUEST = 1000
+MAX_ID_CHARS = 64
+
+
+class WaypointIn(Waypoint):
+    """A waypoint in a request: a :class:`aerodaas.app.models.Waypoint` (same fields and checks) whose ``id`` is
+    optional (the server assigns ``hitl<N>``) and at most :data:`MAX_ID_CHARS` printable characters. ``x``/``y``/``z``
+    are ENU metres from home (or lat/lon/alt with ``waypoint_type="absolute"``). Numbers must be JSON numbers
+    (strict: ``"3"`` and ``true`` are refused) and finite."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    id: str | None = Field(default=None, min_length=1, max_length=MAX_ID_CHARS, pattern=r"^[\x21-\x7e]+$")
+
+
+class AddWaypointsRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+    waypoints: list[WaypointIn] = Field(min_length=1, max_length=MAX_WAYPOINTS_PER_REQUEST)
+    index: int | None = Field(default=None, ge=0, le=1_000_000)
+    priority: int | None = Field(default=None, ge=0, le=1_000_000)
+    scheduling_type: SchedulingType = Field(default=SchedulingType.UNORDERED, strict=False)
+
+
+class ClearRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+    priority: int | None = Field(default=None, ge=0, le=1_000_000)
+
+
+def _json_safe(v: Any, depth: int = 0) -> Any:
+    """An echo of request input that JSON can carry: non-finite floats as strings, long strings and deep or long
+    containers cut (an error reply never fails to serialise, and never echoes a megabyte back)."""
+    import math
+
+    if isinstance(v, float) and not math.isfinite(v):
+        return repr(v)
+    if isinstance(v, str):
+        return v if len(v) <= 80 else v[:77] + "..."
+    if depth > 3:
+        return "..."
+    if isinstance(v, dict):
+        return {str(k)[:80]: _json_safe(x, depth + 1) for k, x in list(v.items())[:20]}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x, depth + 1) for x in list(v)[:20]]
+    if v is None or isinstance(v, (bool, int, float)):
+        return v
+    return repr(v)[:80]
+
+
+class _BodyLimit:
+    """ASGI middleware: a request body over ``limit`` bytes is answered 413 before it is read into memory or
+    parsed (declared Content-Length, or counted while streaming)."""
+
+    def __init__(self, app: Any, limit: int) -> None:
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        declared = dict(scope.get("headers") or []).get(b"content-length")
+        too_big = False
+        try:
+            too_big = declared is not None and int(declared) > self.limit
+        except ValueError:
+            too_big = True
+        if too_big:
+            return await self._reject(send)
+        seen = 0
+
+        async def limited() -> dict:
+            nonlocal seen
+            msg = await receive()
+            if msg["type"] == "http.request":
+                seen += len(msg.get("body", b""))
+                if seen > self.limit:
+                    raise _TooLarge()
+            return msg
+
+        try:
+            await self.app(scope, limited, send)
+        except _TooLarge:
+            await self._reject(send)
+
+    async def _reject(self, send: Any) -> None:
+        body = json.dumps({"detail": f"request body larger than {self.limit} bytes"}).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+        await send({"type": "http.response.body", "body": body})
+
+
+class _TooLarge(Exception):
+    pass
+
+
+class HitlServer:
+    """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": handle of the drone component,
+    "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns once the server accepts connections."""
+
+    def __init__(self, drones: dict[str, dict], host: str = "127.0.0.1", port: int = 8470,
+                 token: str | None = None, docs: bool = False, get: Any = None) -> None:
+        self.drones = drones
+        self.docs = docs  # /docs and /openapi.json: off unless asked for, and then behind the token
+        self._get = get  # how a call's result is awaited (default ray.get; tests pass a local one)
+        self.host, self.port = host, port
+        self.token = token or secrets.token_urlsafe(24)
+        self.generated_token = token is None
+        self._ids = itertools.count(1)
+        self._server = None
+        self._thread: threading.Thread | None = None
+        self.requests = 0
+        self.app = self._build_app()
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    # ------------------------------------------------------------------ app
+    def _build_app(self):
+        import ray
+
+        from aerodaas.navigation.safety import SafetyViolation
+
+        from fastapi.exceptions import RequestValidationError
+
+        # no unauthenticated documentation: /docs, /redoc and /openapi.json are off (see ``docs`` for the guarded ones)
+        app = FastAPI(title="AeroDaaS human-in-the-loop API", version="1", docs_url=None, redoc_url=None,
+                      openapi_url=None)
+        app.add_middleware(_BodyLimit, limit=MAX_BODY_BYTES)
+        server = self
+        get = self._get or ray.get
+
+        def call(method: Any, *args: Any) -> Any:
+            """Call a component method and wait; a remote exception is re-raised as its cause."""
+            try:
+                return get(method.remote(*args), timeout=10)
+            except ray.exceptions.RayTaskError as e:
+                cause = getattr(e, "cause", None)
+                if isinstance(cause, Exception):
+                    raise cause from None
+                raise
+
+        from starlette.exceptions import HTTPException as StarletteHTTPException
+
+        @app.exception_handler(StarletteHTTPException)
+        async def _http(_req: Request, e: StarletteHTTPException) -> JSONResponse:
+            # FastAPI answers an undecodable body 400; a malformed body is 422 like every other one
+            code = 422 if e.status_code == 400 else e.status_code
+            return JSONResponse(status_code=code, content={"detail": _json_safe(e.detail)}, headers=e.headers)
+
+        @app.exception_handler(RequestValidationError)
+        async def _invalid(_req: Request, e: RequestValidationError) -> JSONResponse:
+            errors = [{"loc": list(d.get("loc", [])), "msg": str(d.get("msg", ""))[:300], "type": d.get("type"),
+                       "input": _json_safe(d.get("input"))} for d in e.errors()[:20]]
+            return JSONResponse(status_code=422, content={"detail": errors})
+
+        def auth(request: Request) -> None:
+            server.requests += 1
+            h = request.headers.get("authorization", "")
+            scheme, _, tok = h.partition(" ")
+            if scheme.lower() != "bearer" or not secrets.compare_digest(tok.strip().encode(), server.token.encode()):
+                raise HTTPException(401, "missing or invalid bearer token", headers={"WWW-Authenticate": "Bearer"})
+
+        def drone(robot_id: str) -> dict:
+            if robot_id not in server.drones:
+                raise HTTPException(404, f"unknown drone {robot_id!r}; known: {sorted(server.drones)}")
+            return server.drones[robot_id]
+
+        def describe(robot_id: str) -> dict:
+            h = drone(robot_id)
+            st = call(h["drone"].status)
+            st["queue"] = call(h["scheduler"].snapshot)
+            return st
+
+        @app.exception_handler(SafetyViolation)
+        async def _safety(_req: Request, e: SafetyViolation) -> JSONResponse:
+            return JSONResponse(status_code=422, content={"detail": [{
+                "loc": ["body", "waypoints", str(e.item_id)[:80], e.field], "msg": str(e)[:500], "type": "safety_limit",
+                "input": _json_safe(e.value)}]})
+
+        @app.get("/drones", dependencies=[Depends(auth)])
+        def list_drones() -> list[dict]:
+            return [describe(rid) for rid in server.drones]
+
+        @app.get("/drones/{robot_id}", dependencies=[Depends(auth)])
+        def get_drone(robot_id: str) -> dict:
+            return describe(robot_id)
+
+        @app.post("/drones/{robot_id}/waypoints", dependencies=[Depends(auth)])
+        def add_waypoints(robot_id: str, req: AddWaypointsRequest) -> dict:
+            h = drone(robot_id)
+            queued = {i.get("id") for m in call(h["scheduler"].snapshot) for i in m["items"]}
+            wps = []
+            for w in req.waypoints:
+                wid = w.id or f"hitl{next(server._ids)}"
+                while w.id is None and wid in queued:
+                    wid = f"hitl{next(server._ids)}"
+                if wid in queued:
+                    raise HTTPException(422, f"waypoints: id {wid!r} is already queued")
+                wps.append(Waypoint(**{**w.model_dump(), "id": wid}))
+            ids = [w.id for w in wps]
+            if len(set(ids)) != len(ids):
+                raise HTTPException(422, f"waypoints: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
+            try:
+                nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, req.scheduling_type, name="hitl")
+                out = call(h["scheduler"].add_navigation, nav, req.index, req.priority)
+            except SafetyViolation:
+                raise
+            except (IndexError, ValueError, TypeError) as e:
+                raise HTTPException(422, str(e)[:500]) from None
+            return {"added": ids, **out}
+
+        @app.post("/drones/{robot_id}/clear", dependencies=[Depends(auth)])
+        def clear(robot_id: str, req: ClearRequest | None = None) -> dict:
+            h = drone(robot_id)
+            call(h["scheduler"].clear_navigation, req.priority if req else None)
+            return {"cleared": True, "queue": call(h["scheduler"].snapshot)}
+
+        @app.post("/drones/{robot_id}/pause", dependencies=[Depends(auth)])
+        def pause(robot_id: str) -> dict:
+            call(drone(robot_id)["drone"].pause_mission)
+            return {"paused": True}
+
+        @app.post("/drones/{robot_id}/resume", dependencies=[Depends(auth)])
+        def resume(robot_id: str) -> dict:
+            call(drone(robot_id)["drone"].resume_mission)
+            return {"resumed": True}
+
+        if self.docs:  # hitl.docs: true: the documentation, behind the same bearer token as everything else
+            from fastapi.openapi.docs import get_swagger_ui_html
+
+            @app.get("/openapi.json", dependencies=[Depends(auth)], include_in_schema=False)
+            def openapi() -> dict:
+                return app.openapi()
+
+            @app.get("/docs", dependencies=[Depends(auth)], include_in_schema=False)
+            def docs():
+                return get_swagger_ui_html(openapi_url="/openapi.json", title=app.title)
+
+        return app
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self, timeout: float = 10.0) -> "HitlServer":
+        """Serve in a daemon thread; returns when listening (the real port is known then). Raises
+        RuntimeError if the server could not start (e.g. the port is taken)."""
+        import uvicorn
+
+        config = uvicorn.Config(self.app, host=self.host, port=self.port, log_level="warning", access_log=False,
+                                lifespan="off")
+        self._server = uvicorn.Server(config)
+        self._server.install_signal_handlers = lambda: None  # the driver keeps Ctrl-C
+        self._thread = threading.Thread(target=self._server.run, name="aerodaas-hitl", daemon=True)
+        self._thread.start()
+        t0 = time.monotonic()
+        while not self._server.started:
+            if not self._thread.is_alive() or time.monotonic() - t0 > timeout:
+                raise RuntimeError(f"HITL API could not start on {self.host}:{self.port} (port in use?)")
+            time.sleep(0.02)
+        sock = self._server.servers[0].sockets[0]
+        self.port = sock.getsockname()[1]
+        f = state_file()
+        f.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(f, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as fh:
+            json.dump({"url": self.url, "token": self.token, "pid": os.getpid(), "drones": sorted(self.drones)}, fh)
+        return self
+
+    def stop(self) -> None:
+        if self._server is not None:
+            self._server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        try:
+            f = state_file()
+            if f.is_file() and json.loads(f.read_text()).get("pid") == os.getpid():
+                f.unlink()
+        except (OSError, ValueError):
+            pass
+
+
+def request(method: str, path: str, body: Any = None, url: str | None = None, token: str | None = None,
+            timeout: float = 10.0) -> tuple[int, Any]:
+    """Minimal client (stdlib only): returns (HTTP status, decoded JSON). ``url``/``token`` default to
+    ``$AERODAAS_HITL_URL``/``$AERODAAS_HITL_TOKEN``, then the running server's :func:`state_file`.
+    Raises RuntimeError when no server can be found."""
+    import urllib.error
+    import urllib.request
+
+    url = url or os.environ.get("AERODAAS_HITL_URL")
+    token = token or os.environ.get("AERODAAS_HITL_TOKEN")
+    if not url or not token:
+        f = state_file()
+        if not f.is_file():
+            raise RuntimeError(f"no HITL server found: give --url and --token, set AERODAAS_HITL_URL/"
+                               f"AERODAAS_HITL_TOKEN, or start a run with hitl enabled (writes {f})")
+        info = json.loads(f.read_text())
+        url, token = url or info["url"], token or info["token"]
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url.rstrip("/") + path, data=data, method=method,
+                                 headers={"Authorization": f"Bearer {token}", "Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=timeout) as r:
+            return r.status, json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as e:
+        raw = e.read()
+        try:
+            return e.code, json.loads(raw)
+        except ValueError:
+            return e.code, raw.decode(errors="replace")
+    except urllib.error.URLError as e:
+        raise RuntimeError(f"cannot reach the HITL API at {url}: {e.reason}") from None
