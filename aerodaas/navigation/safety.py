@@ -74,6 +74,8 @@ class SafetyGate:
         self.min_alt = float(safety.min_altitude)
         self.max_speed = min(float(limits.max_speed), float(safety.max_speed if safety.max_speed is not None
                                                             else math.inf))
+        #: a backend flies a waypoint without its own speed at the robot's limits.max_speed
+        self._backend_default_speed = float(limits.max_speed)
         self.max_vspeed = float(limits.max_vertical_speed)
         self.clamp = safety.on_violation == "clamp"
         self.accel = float(limits.max_acceleration)
@@ -91,11 +93,13 @@ class SafetyGate:
         With ``from_position`` (local ENU metres), the leg from there to the waypoint is also checked against
         the geofence; with ``velocity`` too (ENU m/s, the vehicle's now), the predicted turn towards the waypoint
         and the stopping distance from every point of it (see the module docstring). A waypoint without its own
-        ``speed`` gets the effective ``max_speed`` (the minimum of ``limits.max_speed`` and ``safety.max_speed``):
-        otherwise a backend would fly it at its own default, the robot's ``limits.max_speed``."""
+        ``speed`` gets the effective ``max_speed`` (the minimum of ``limits.max_speed`` and ``safety.max_speed``) when
+        that is below ``limits.max_speed``, the speed a backend flies it at otherwise."""
         x, y, z = wp.to_local(self.home)
         upd: dict[str, Any] = {}
-        if wp.speed is None:
+        if wp.speed is None and self.max_speed < self._backend_default_speed:
+            # only where the backend's default would be too fast: a speed on every waypoint would add a
+            # DO_CHANGE_SPEED item to every uploaded autopilot mission for nothing
             wp = wp.model_copy(update={"speed": self.max_speed})
         if z > self.max_alt or z < self.min_alt:
             if not self.clamp:
