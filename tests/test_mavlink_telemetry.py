@@ -37,7 +37,9 @@ def window_speeds(odo: list[dict], lo_s: float = 1.0, hi_s: float = 1.3) -> list
 @pytest.mark.e2e
 @pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
 def test_odometry_is_recorded_once_per_vehicle_sample(ray_session, run_options, tmp_path, flavour):
-    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, params=PX4_AT_SPEED[flavour],
+    # at 3x the vehicle's 10 Hz stream is 30 samples per wall second, well inside what the odometry sensor's
+    # 50 Hz poll takes on a loaded machine (at 10x, 100 per wall second, the poll fell behind and skipped samples)
+    emu, env_path = _mavlink_variant("farm_survey", flavour, 3.0, tmp_path, params=PX4_AT_SPEED[flavour],
                                      mavlink={"stream_rate_hz": STREAM_HZ})
     cfg = json.loads(env_path.read_text())
     for s in cfg["robots"][0]["sensors"]:
