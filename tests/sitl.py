@@ -506,14 +506,19 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     masters = " ".join(f"--master={connection(autopilot, i)}" for i in range(n))
     router = (f"( cd {shlex.quote(str(workdir))} && exec {py} -m MAVProxy.mavproxy {masters} "
               f"--out=udp:127.0.0.1:{ROUTER_PORT} --daemon --non-interactive --streamrate=-1 "
-              f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & ) ; ")
+              f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & "
+              f"echo $! > {shlex.quote(str(workdir / 'router.pid'))} ) ; ")
     watchers = "".join(f"( {py} -m tests.sitl observe-raw {monitor_connection(autopilot, i)} "
                        f"{shlex.quote(str(workdir / f'observed{i}.json'))} 900 > "
-                       f"{shlex.quote(str(workdir / f'observer{i}.log'))} 2>&1 & ) ; " for i in range(n))
+                       f"{shlex.quote(str(workdir / f'observer{i}.log'))} 2>&1 & "
+                       f"echo $! > {shlex.quote(str(workdir / f'observer{i}.pid'))} ) ; " for i in range(n))
     wait_obs = " ".join(f"{shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))
     step = (router + watchers + aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap")
             + f"; rc=$?; for k in $(seq 1 600); do ok=1; for f in {wait_obs}; do [ -e $f ] || ok=0; done; "
-              "[ $ok = 1 ] && break; sleep 0.5; done; exit $rc")
+              "[ $ok = 1 ] && break; sleep 0.5; done; "
+              # the router and the observers are detached (their own process groups): stop them by pid, or they
+              # outlive the test and load the ones after it
+              f"kill $(cat {shlex.quote(str(workdir))}/*.pid) 2>/dev/null; exit $rc")
     run_in_namespace(autopilot, workdir, [step], n=n, sysids=True, timeout_s=1500, speedup=FLEET_SPEEDUP.get(autopilot))
     rc, text = step_result(workdir, 0)
     observed = []
