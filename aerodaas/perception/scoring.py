@@ -103,15 +103,12 @@ def load_annotations(path: str | Path, images_dir: str | Path, names: list[str] 
     return out
 
 
-_iou = iou_matrix
-
-
 def match(det_boxes: np.ndarray, det_scores: np.ndarray, gt_boxes: np.ndarray, iou_thr: float) -> np.ndarray:
     """True-positive flag per detection (one image, one class), greedy in descending score (VOC rule above)."""
     tp = np.zeros(len(det_boxes), dtype=bool)
     if len(det_boxes) == 0 or len(gt_boxes) == 0:
         return tp
-    ious = _iou(np.asarray(det_boxes, float), np.asarray(gt_boxes, float))
+    ious = iou_matrix(np.asarray(det_boxes, float), np.asarray(gt_boxes, float))
     used = np.zeros(len(gt_boxes), dtype=bool)
     for i in np.argsort(-np.asarray(det_scores), kind="stable"):
         cand = np.where(used, -1.0, ious[i])
