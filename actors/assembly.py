@@ -75,6 +75,11 @@ class ActorAssembly:
         self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
         rec = spec.get("record")
         if rec:  # the edge host: the file and/or the live view
+            if rec.get("schemas"):  # plug-in sensors' message schemas, from their declarations
+                from aerodaas.recording.schemas import register_json_schema
+
+                for name, js in rec["schemas"].items():
+                    register_json_schema(name, js)
             self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"))
         elif spec.get("record_remote"):  # an actor of a recorded run: its messages go to the run's recorder actor
             from aerodaas.actors.recorder import RemoteRecorder
@@ -100,6 +105,10 @@ class ActorAssembly:
         self.drones: list[DroneComponent] = []
         world = None
         for r in spec.get("robots", []):
+            if r.get("plugins"):  # plug-in classes carried in the spec: known here before the config is checked
+                from aerodaas.plugins.registry import adopt
+
+                adopt(r["plugins"])
             cfg = RobotConfig.model_validate(r["robot"])
             sched = host.add(SchedulerComponent(host, r["scheduler_cid"], cfg.id, r["scheduler"], self.recorder,
                                                 host.epoch_ns, r["robot"]))
@@ -116,6 +125,12 @@ class ActorAssembly:
                                       self.recorder, host.epoch_ns)
                 drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
                 self.comps[c["cid"]] = cam
+            for ps in r.get("plugin_sensors", ()):
+                from aerodaas.actors.plugin_sensor import PluginSensorComponent
+
+                comp = PluginSensorComponent(host, ps, cfg.id, self.recorder, host.epoch_ns)
+                drone.plugin_sensors.append(comp)
+                self.comps[ps["cid"]] = comp
             self.comps[r["drone_cid"]] = drone
             self.comps[r["scheduler_cid"]] = sched
             self.drones.append(drone)

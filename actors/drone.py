@@ -52,6 +52,7 @@ class DroneComponent(AutopilotFlight):
         self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
         self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the host runtime
+        self.plugin_sensors: list = []  # PluginSensorComponent (aerodaas.actors.plugin_sensor), filled likewise
         self.rejected: list[dict] = []
         self.visited: list[dict] = []
         self.events: list[dict] = []
@@ -256,6 +257,8 @@ class DroneComponent(AutopilotFlight):
             if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
                 self.next_odom = self.backend.t + self.odom_period
             self.publish_odometry(tok)
+        for ps in self.plugin_sensors:  # plug-in sensors sample the vehicle state at their own rate
+            ps.maybe_sample(self.backend, tok)
 
     def _new_sample(self) -> bool:
         """Whether the backend has a position sample not yet published (always, for a backend without

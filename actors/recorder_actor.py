@@ -42,6 +42,10 @@ class RecorderActor:
         with self._setup_lock:
             try:
                 if rec and self.recorder is None:
+                    from aerodaas.recording.schemas import register_json_schema
+
+                    for name, js in (rec.get("schemas") or {}).items():  # plug-in sensors' message schemas
+                        register_json_schema(name, js)
                     self.recorder = RecorderService(rec.get("path"), rec.get("meta"), live=rec.get("live"),
                                                     max_pending_frames=64)
             finally:

@@ -514,6 +514,9 @@ def main(argv: list[str] | None = None) -> int:
     i.set_defaults(func=_cmd_info)
     s = sub.add_parser("schema", help="print the JSON Schema of environment.json")
     s.set_defaults(func=_cmd_schema)
+    from aerodaas.plugins.listing import add_parser as _add_plugins_parser
+
+    _add_plugins_parser(sub)
     j = sub.add_parser("inject", help="add waypoints to a running mission through the human-in-the-loop API")
     j.add_argument("--drone", required=True, help="robot id")
     j.add_argument("--waypoint", required=True, action="append", type=_parse_waypoint,

@@ -353,7 +353,6 @@ class CloudCounters:
 
 
 # --------------------------------------------------------------------------------------------- registry
-_REGISTRY: dict[str, type[AnalyticsScheduler]] = {}
 
 
 def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: float) -> float | None:
@@ -383,62 +382,50 @@ def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: f
 
 
 def register_analytics_scheduler(cls: type[AnalyticsScheduler]) -> type[AnalyticsScheduler]:
-    """Class decorator: make ``cls`` available by ``cls.name`` (raises ValueError on a duplicate or empty name)."""
+    """Class decorator: make ``cls`` available by ``cls.name`` in the plug-in registry
+    (:mod:`aerodaas.plugins.registry`, kind ``analytics_scheduler``, origin ``builtin`` or ``decorator in FILE``).
+    Raises ValueError on a duplicate or empty name."""
+    from aerodaas.plugins import registry
+
     if not cls.name:
         raise ValueError(f"{cls.__name__}: an analytics scheduler needs a non-empty 'name'")
-    if cls.name in _REGISTRY and _REGISTRY[cls.name] is not cls:
-        raise ValueError(f"analytics scheduler name {cls.name!r} is already taken by {_REGISTRY[cls.name].__name__}")
-    _REGISTRY[cls.name] = cls
-    return cls
+    return registry.register(cls, "analytics_scheduler", cls.name)
 
 
 def analytics_scheduler_names() -> list[str]:
-    """Registered names, in registration order."""
-    _load_builtins()
-    return list(_REGISTRY)
+    """Registered names (built-ins, decorators, installed entry points), in registration order."""
+    from aerodaas.plugins import registry
+
+    return registry.names("analytics_scheduler")
 
 
 def analytics_scheduler_class(name: str) -> type[AnalyticsScheduler]:
-    """The class registered as ``name`` in this process (built-ins, and whatever the application registered with
-    :func:`register_analytics_scheduler`). The runtime carries this class, not its name, to the dispatcher actors:
-    the registry is per process, and an application's class exists only where the application ran (Ray pickles a
-    class defined in the application by value). Raises ValueError naming the known schedulers."""
-    _load_builtins()
-    if name not in _REGISTRY:
-        raise ValueError(f"unknown analytics scheduler {name!r}; available: {list(_REGISTRY)}")
-    return _REGISTRY[name]
+    """The class registered as ``name`` (built-ins, whatever the application registered with
+    :func:`register_analytics_scheduler`, an installed entry point of group ``aerodaas.analytics_schedulers``, or
+    ``"module.path:ClassName"``). The runtime carries this class, not its name, to the dispatcher actors: an
+    application's class exists only where the application ran (Ray pickles a class defined in the application by
+    value). Raises ValueError (:class:`aerodaas.plugins.registry.UnknownPlugin`) naming the known schedulers and
+    where each came from."""
+    from aerodaas.plugins import registry
+
+    return registry.get("analytics_scheduler", name)
 
 
 def make_analytics_scheduler(name: str, workload: Workload, **kwargs: Any) -> AnalyticsScheduler:
     """Instantiate the scheduler registered as ``name``. Raises ValueError naming the known schedulers."""
-    _load_builtins()
-    if name not in _REGISTRY:
-        raise ValueError(f"unknown analytics scheduler {name!r}; available: {list(_REGISTRY)}")
-    return _REGISTRY[name](workload, **kwargs)
+    return analytics_scheduler_class(name)(workload, **kwargs)
 
 
 def filter_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
     """The entries of ``options`` that the scheduler registered as ``name`` accepts (its ``options``), None values
     left out: how a benchmark applies one setting (e.g. ``estimator="max:5"``) to every policy that has it."""
-    _load_builtins()
-    accepted = _REGISTRY[name].options if name in _REGISTRY else ()
+    try:
+        accepted = analytics_scheduler_class(name).options
+    except ValueError:
+        accepted = ()
     return {k: v for k, v in options.items() if k in accepted and v is not None}
-
-
-def _load_builtins() -> None:
-    import importlib
-
-    for mod in _BUILTIN_MODULES:
-        importlib.import_module(mod)
-
-
-#: modules that register the built-in analytics schedulers when imported
-_BUILTIN_MODULES: list[str] = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
-                                "aerodaas.schedulers.analytics_gainplan", "aerodaas.schedulers.analytics_evplan",
-                                "aerodaas.schedulers.analytics_laplan"]
 
 
 def iter_schedulers(names: Iterable[str] | None = None) -> list[type[AnalyticsScheduler]]:
     """The scheduler classes for ``names`` (all registered ones when None)."""
-    _load_builtins()
-    return [_REGISTRY[n] for n in (names or _REGISTRY)]
+    return [analytics_scheduler_class(n) for n in (names or analytics_scheduler_names())]

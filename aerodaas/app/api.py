@@ -116,9 +116,9 @@ class Robot:
     # -- navigation
     def is_navigable(self) -> bool:
         """False for a robot whose backend only reports (``replay`` of a recorded flight)."""
-        from aerodaas.backends import NAVIGABLE
+        from aerodaas.backends import is_navigable
 
-        return NAVIGABLE.get(self.cfg.backend, True)
+        return is_navigable(self.cfg.backend)
 
     def navigate(self, nav: AeroNavigation | PriorityQueue | Any) -> None:
         """Fly ``nav`` (usually the result of ``scheduler.generate_navigation``) with the environment's

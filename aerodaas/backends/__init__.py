@@ -5,30 +5,37 @@ from __future__ import annotations
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
-           "NAVIGABLE"]
+           "backend_class", "is_navigable", "backend_clock", "NAVIGABLE"]
 
 #: whether each backend can fly navigation (the replay of a log only reports); known without importing drivers
 NAVIGABLE = {"sim": True, "mavlink": True, "tello": True, "replay": False}
 
 
+def backend_class(name: str) -> type[VehicleBackend]:
+    """The backend class ``name`` (a ``robots[].backend`` value) names: a built-in (imported lazily, so a robot on
+    the simulator never imports pymavlink), a plug-in registered with a decorator or installed under the entry
+    point group ``aerodaas.backends``, or ``"module.path:ClassName"`` (:mod:`aerodaas.plugins.registry`). Raises
+    ValueError (UnknownPlugin) listing the available backends and where each came from."""
+    from aerodaas.plugins import registry
+
+    return registry.get("backend", name)
+
+
+def is_navigable(name: str) -> bool:
+    """Whether backend ``name`` can fly navigation (known without importing the built-in drivers)."""
+    if name in NAVIGABLE:
+        return NAVIGABLE[name]
+    return bool(getattr(backend_class(name), "navigable", True))
+
+
+def backend_clock(name: str) -> str:
+    """``"sim"`` for a backend that moves only when stepped (lock-step is possible), else ``"vehicle"``."""
+    if name in NAVIGABLE:
+        return "sim" if name == "sim" else "vehicle"
+    return str(getattr(backend_class(name), "clock", "vehicle"))
+
+
 def make_backend(cfg) -> VehicleBackend:
-    """The backend for ``cfg`` (an :class:`aerodaas.config.RobotConfig`). Imports the driver lazily, so a robot on
-    the simulator never imports pymavlink. Raises ValueError for an unknown ``backend``."""
-    if cfg.backend == "sim":
-        from aerodaas.backends.sim import SimBackend
-
-        return SimBackend(cfg)
-    if cfg.backend == "mavlink":
-        from aerodaas.backends.mavlink import MavlinkBackend
-
-        return MavlinkBackend(cfg)
-    if cfg.backend == "tello":
-        from aerodaas.backends.tello import TelloBackend
-
-        return TelloBackend(cfg)
-    if cfg.backend == "replay":
-        from aerodaas.backends.replay import ReplayBackend
-
-        return ReplayBackend(cfg)
-    raise ValueError(f"robots[{cfg.id!r}].backend: unknown backend {cfg.backend!r}; "
-                     f"choose from ['sim', 'mavlink', 'tello', 'replay']")
+    """The backend for ``cfg`` (an :class:`aerodaas.config.RobotConfig`): ``backend_class(cfg.backend)(cfg)``.
+    Raises ValueError for an unknown ``backend``."""
+    return backend_class(cfg.backend)(cfg)

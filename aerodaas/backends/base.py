@@ -82,6 +82,23 @@ class VehicleBackend(abc.ABC):
     clock: ClassVar[str] = "vehicle"
     #: False for backends that only report (replay): navigation raises :class:`NotNavigable`
     navigable: ClassVar[bool] = True
+    #: plug-in declaration (:mod:`aerodaas.plugins.registry`): a backend plug-in is one module with one subclass
+    #: of this class (or of a built-in backend such as :class:`aerodaas.backends.sim.SimBackend`), constructed as
+    #: ``Backend(cfg)`` with the robot's :class:`aerodaas.config.RobotConfig`; ``Config`` is the pydantic model of
+    #: its own settings (``robots[].backend_config``, validated before Ray starts; read them with
+    #: :meth:`options`); it produces the vehicle state (odometry, battery, events) and consumes flight commands
+    plugin_kind: ClassVar[str] = "backend"
+    Config: ClassVar[Any] = None
+    produces: ClassVar[tuple] = ("odometry", "events")
+    consumes: ClassVar[tuple] = ("flight_commands",)
+
+    @classmethod
+    def options(cls, cfg: Any) -> Any:
+        """The robot's ``backend_config`` validated against ``Config`` (None when the class declares none).
+        Raises pydantic's ValidationError."""
+        if cls.Config is None:
+            return None
+        return cls.Config.model_validate(getattr(cfg, "backend_config", None) or {})
 
     def __init__(self, robot_id: str, home: GeoPoint) -> None:
         self.robot_id = robot_id

@@ -179,11 +179,12 @@ class AnalyticsSchedulerConfig(_Cfg):
     def _check(self) -> "AnalyticsSchedulerConfig":
         if self.name == "default":
             return self
-        from aerodaas.schedulers.analytics_base import analytics_scheduler_names
+        from aerodaas.plugins import registry
 
-        names = analytics_scheduler_names()
-        if self.name not in names:
-            raise ValueError(f"name: unknown analytics scheduler {self.name!r}; available: ['default', {', '.join(map(repr, names))}]")
+        try:  # a registered name, an installed entry point or "module.path:ClassName"; the class is imported here
+            registry.get("analytics_scheduler", self.name)
+        except registry.UnknownPlugin as e:
+            raise ValueError(f"name: {e} (or 'default')") from None
         if not self.models:
             raise ValueError(f"models: the {self.name} scheduler needs the QoS of at least one analytics "
                              f"(analytics name -> {{deadline_ms, edge_ms, cloud_ms, benefit, edge_cost, cloud_cost}})")

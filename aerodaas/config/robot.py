@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.app.models import GeoPoint
@@ -98,14 +98,17 @@ class SensorConfig(_Cfg):
     ``/<robot>/camera/<sensor id>`` as AeroDaaS records it)."""
 
     id: str = Field(min_length=1)
-    type: Literal["camera", "odometry", "stat_stream"]
+    type: str = Field(min_length=1, description="camera, odometry, stat_stream, or a sensor plug-in: a registered "
+                      "name (decorator, installed entry point of group aerodaas.sensors) or 'module.path:ClassName'")
     properties: dict[str, Any] = Field(default_factory=dict)
     buffer: int = Field(default=1, ge=1)
 
     @model_validator(mode="after")
     def _check_props(self) -> "SensorConfig":
         p = self.properties
-        spec = SENSOR_PROPERTIES.get(self.type, {})
+        if self.type not in SENSOR_PROPERTIES:
+            return self  # a plug-in sensor type: checked against its Config by check_plugin_sensors
+        spec = SENSOR_PROPERTIES[self.type]
         for k in p:
             if k not in spec:
                 raise ValueError(f"properties.{k}: unknown {self.type} property{did_you_mean(k, spec)}; "
@@ -297,7 +300,11 @@ class RobotConfig(_Cfg):
     settings in ``replay``; not navigable)."""
 
     id: str = Field(min_length=1)
-    backend: Literal["sim", "mavlink", "tello", "replay"] = "sim"
+    backend: str = Field(default="sim", min_length=1, description="sim, mavlink, tello, replay, or a backend "
+                         "plug-in: a registered name (decorator, installed entry point of group aerodaas.backends) "
+                         "or 'module.path:ClassName'")
+    backend_config: dict[str, Any] = Field(default_factory=dict, description="a backend plug-in's own settings, "
+                                           "validated against its Config model")
     mavlink: MavlinkConfig | None = None
     tello: TelloConfig | None = None
     replay: ReplayConfig | None = None
@@ -320,6 +327,19 @@ class RobotConfig(_Cfg):
     max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
                                   "all missions of this robot; more are refused (HTTP 422 / navigation_refused)")
 
+    @field_validator("backend")
+    @classmethod
+    def _known_backend(cls, v: str, info) -> str:
+        if v not in BUILTIN_BACKENDS:
+            from aerodaas.plugins import registry
+
+            try:
+                registry.get("backend", v)
+            except registry.UnknownPlugin as e:
+                rid = info.data.get("id")
+                raise ValueError(f"robot {rid!r}: {e}" if rid else str(e)) from None
+        return v
+
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
         ids = [s.id for s in self.sensors]
@@ -328,6 +348,7 @@ class RobotConfig(_Cfg):
             raise ValueError(f"sensors: duplicate sensor ids {dup}")
         if not any(s.type == "stat_stream" for s in self.sensors):
             self.sensors.append(SensorConfig(id="stat", type="stat_stream"))
+        check_plugin_backend(self)
         if self.backend == "mavlink" and self.mavlink is None:
             self.mavlink = MavlinkConfig()
         if self.backend == "tello" and self.tello is None:
@@ -348,8 +369,71 @@ class RobotConfig(_Cfg):
         if self.takeoff_altitude < self.safety.min_altitude:
             raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is below safety.min_altitude "
                              f"({self.safety.min_altitude:g} m); the drone would hover below the floor it must keep")
+        check_plugin_sensors(self.sensors, f"robot {self.id!r}", "sensors")
         for j, s in enumerate(self.sensors):
             if s.type == "camera" and s.properties.get("source") == "backend" and self.backend not in BACKENDS_WITH_CAMERA:
                 raise ValueError(f"sensors.{j}.properties.source: 'backend' needs a backend with its own camera "
                                  f"stream ({list(BACKENDS_WITH_CAMERA)}), but backend is {self.backend!r}")
         return self
+
+
+def check_plugin_sensors(sensors: list[SensorConfig], owner: str, field: str) -> None:
+    """Resolve every sensor whose ``type`` is not built in through the plug-in registry
+    (:mod:`aerodaas.plugins.registry`, kind ``sensor``) and validate its ``properties`` against the plug-in's
+    ``Config`` (completed with its defaults). Raises ValueError naming ``owner`` (the robot), the sensor id, its
+    type and every available sensor type with its origin; or the property that is wrong."""
+    from pydantic import ValidationError
+
+    from aerodaas.plugins import registry
+
+    for j, s in enumerate(sensors):
+        if s.type in SENSOR_PROPERTIES:
+            continue
+        try:
+            cls = registry.get("sensor", s.type)
+        except registry.UnknownPlugin as e:
+            raise ValueError(f"{field}.{j}.type: {owner}, sensor {s.id!r}: {e}") from None
+        if not hasattr(cls, "validate_properties"):
+            raise ValueError(f"{field}.{j}.type: {owner}, sensor {s.id!r}: {s.type!r} resolves to {cls.__name__}, "
+                             f"which is not a SensorPlugin (aerodaas.plugins.sensor)")
+        try:
+            s.properties = cls.validate_properties(s.properties)
+        except ValidationError as e:
+            err = e.errors()[0]
+            loc = ".".join(str(x) for x in err["loc"])
+            raise ValueError(f"{field}.{j}.properties.{loc}: {owner}, sensor {s.id!r} ({s.type}): {err['msg']}, "
+                             f"got {err.get('input')!r}") from None
+
+
+BUILTIN_BACKENDS = ("sim", "mavlink", "tello", "replay")
+
+
+def check_plugin_backend(robot: "RobotConfig") -> None:
+    """A ``backend`` that is not built in is resolved through the plug-in registry (kind ``backend``) and its
+    ``backend_config`` validated against the plug-in's ``Config``. Raises ValueError naming the robot, the backend
+    and the available backends with their origins, or the wrong setting."""
+    if robot.backend in BUILTIN_BACKENDS:
+        if robot.backend_config:
+            raise ValueError(f"backend_config: robot {robot.id!r}: backend {robot.backend!r} takes its settings in "
+                             f"'{robot.backend}', not backend_config")
+        return
+    from pydantic import ValidationError
+
+    from aerodaas.plugins import registry
+
+    try:
+        cls = registry.get("backend", robot.backend)
+    except registry.UnknownPlugin as e:
+        raise ValueError(f"backend: robot {robot.id!r}: {e}") from None
+    if not hasattr(cls, "options"):
+        raise ValueError(f"backend: robot {robot.id!r}: {robot.backend!r} resolves to {cls.__name__}, which is not a "
+                         f"VehicleBackend (aerodaas.backends.base)")
+    try:
+        opts = cls.options(robot)
+    except ValidationError as e:
+        err = e.errors()[0]
+        loc = ".".join(str(x) for x in err["loc"])
+        raise ValueError(f"backend_config.{loc}: robot {robot.id!r} ({robot.backend}): {err['msg']}, got "
+                         f"{err.get('input')!r}") from None
+    if opts is not None:
+        robot.backend_config = opts.model_dump(mode="json")

@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from aerodaas.app.models import AeroNavigation, Odometry, Waypoint
 
-__all__ = ["JSON_SCHEMA_MODELS", "json_schema_for"]
+__all__ = ["JSON_SCHEMA_MODELS", "json_schema_for", "register_json_schema"]
 
 
 class _Open(BaseModel):
@@ -158,6 +158,17 @@ JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
 }
 
 _CACHE: dict[str, dict[str, Any]] = {}
+#: schemas declared by plug-ins (a sensor plug-in's message model), registered in the recorder's process
+_DECLARED: dict[str, dict[str, Any]] = {}
+
+
+def register_json_schema(schema_name: str, schema: dict[str, Any]) -> None:
+    """Make ``schema`` (a JSON Schema dict) the schema of ``schema_name`` in this process: how a plug-in's message
+    model (:meth:`aerodaas.plugins.sensor.SensorPlugin.json_schema`) reaches the recorder. A built-in name cannot
+    be replaced (ValueError)."""
+    if schema_name in JSON_SCHEMA_MODELS:
+        raise ValueError(f"schema {schema_name!r} is built in; a plug-in names its own schema")
+    _DECLARED[schema_name] = dict(schema)
 
 
 #: free-form schemas: their fields are taken from an example message (json_schema_for's ``example``)
@@ -184,7 +195,7 @@ def json_schema_for(schema_name: str, example: dict[str, Any] | None = None) -> 
         base = dict(json_schema_for(schema_name) or {})
         base["properties"] = {str(k): _field_schema(v) for k, v in example.items()}
         return base
-    got = _CACHE.get(schema_name)
+    got = _CACHE.get(schema_name) or _DECLARED.get(schema_name)
     if got is None:
         model = JSON_SCHEMA_MODELS.get(schema_name)
         if model is None:

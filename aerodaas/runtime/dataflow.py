@@ -38,10 +38,12 @@ class Node:
     and the host id of the actor it lives in."""
 
     id: str
-    kind: Literal["drone", "camera", "odometry", "stat_stream", "scheduler", "analytics"]
+    kind: Literal["drone", "camera", "odometry", "stat_stream", "sensor", "scheduler", "analytics"]
     robot: str | None
     actor: str
     analytics: str | None = None  # the analytics' name, for analytics nodes
+    #: a plug-in sensor's type and the schema its readings are recorded with (``sensor`` nodes)
+    plugin: str | None = None
 
 
 @dataclass(frozen=True)
@@ -134,7 +136,8 @@ class RunPlan:
                             **({"mavlink_links": a.spec["mavlink_links"]} if a.spec.get("mavlink_links") else {})}
                            for a in self.actors.values()],
                 "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
-                           **({"analytics": n.analytics} if n.analytics else {})} for n in self.nodes.values()],
+                           **({"analytics": n.analytics} if n.analytics else {}),
+                           **({"plugin": n.plugin} if n.plugin else {})} for n in self.nodes.values()],
                 "edges": [{"from": e.src, "to": e.dst, "port": e.port.wire(), "buffer": e.buffer,
                            "robots": list(e.robots) if e.robots is not None else None} for e in self.edges]}
 
@@ -148,7 +151,8 @@ class RunPlan:
             for key, ids in (a.spec.get("mavlink_links") or {}).items():
                 lines.append(f"      mavlink link {key} shared by {', '.join(ids)} (one socket, routed by system id)")
             for c in a.components:
-                lines.append(f"      {self.nodes[c].kind:<11} {c}")
+                plug = f"  ({self.nodes[c].plugin})" if self.nodes[c].plugin else ""
+                lines.append(f"      {self.nodes[c].kind:<11} {c}{plug}")
         cross = [e for e in self.edges if self.nodes[e.src].actor != self.nodes[e.dst].actor]
         if cross:
             lines.append("  edges between actors:")
@@ -196,6 +200,37 @@ def _shared_links(chunk: list) -> dict[str, list[str]]:
         if key is not None:
             out.setdefault(key, []).append(r.id)
     return {key: ids for key, ids in out.items() if len(ids) > 1}
+
+
+def sensor_plugin_spec(sensor, cid: str) -> dict:
+    """What a drone actor needs to run plug-in sensor ``sensor`` (an :class:`aerodaas.app.api.Sensor` whose type is
+    not built in): its component id, sensor id, type, the plug-in class itself (it travels to the actor), its
+    validated properties, and its recording schema (``{name: JSON Schema}``; empty when the plug-in names a
+    schema the recorder knows)."""
+    from aerodaas.plugins import registry
+
+    entry = registry.resolve("sensor", sensor.type)
+    cls = entry.load()
+    js = cls.json_schema()
+    return {"cid": cid, "sensor": sensor.id, "type": sensor.type, "cls": cls, "origin": entry.origin,
+            "properties": dict(sensor.cfg.properties), "schema_name": cls.schema_name(),
+            "schema": {cls.schema_name(): js} if js else {}}
+
+
+def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
+    """The plug-in classes ``cfg`` (a RobotConfig) names — a plug-in backend and plug-in sensor types — as
+    ``(kind, name, class, origin)``: they travel with the drone actor's spec and are registered there before the
+    robot's configuration is validated again (:func:`aerodaas.plugins.registry.adopt`)."""
+    from aerodaas.config.robot import BUILTIN_BACKENDS, SENSOR_PROPERTIES
+    from aerodaas.plugins import registry
+
+    wanted = [("backend", cfg.backend)] if cfg.backend not in BUILTIN_BACKENDS else []
+    wanted += [("sensor", s.type) for s in cfg.sensors if s.type not in SENSOR_PROPERTIES]
+    out = []
+    for kind, name in dict.fromkeys(wanted):
+        e = registry.resolve(kind, name)
+        out.append((kind, name, e.load(), e.origin))
+    return out
 
 
 def collect_graph(robot) -> list:
@@ -329,6 +364,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     # ---- drones' own components and every edge
     edges: list[Edge] = []
     robot_ids: dict[str, dict] = {}
+    schemas: dict[str, dict] = {}  # plug-in sensors' schema name -> JSON Schema, for the recorder
 
     def consumers(stream, robot: str | None) -> list[Edge]:
         """Edges from ``stream`` (of ``robot``'s items when known) to every consumer instance."""
@@ -359,6 +395,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         add(Node(ids["drone"], "drone", r.id, hid))
         add(Node(ids["scheduler"], "scheduler", r.id, hid))
         cams = []
+        plugin_sensors: list[dict] = []
         for s in r.sensors.values():
             cid = f"{r.id}/{s.id}"
             subs = consumers(s.get_data_stream(), r.id)
@@ -369,14 +406,20 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 ids["odom"].append(cid)
             elif s.type == "stat_stream" and subs:
                 ids["stat"].append(cid)
+            elif s.type not in ("camera", "odometry", "stat_stream"):  # a plug-in: always sampled and recorded
+                plugin_sensors.append(sensor_plugin_spec(s, cid))
+                schemas.update(plugin_sensors[-1].pop("schema"))
             else:
                 continue
-            add(Node(cid, s.type, r.id, hid))
+            ps = plugin_sensors[-1] if plugin_sensors and plugin_sensors[-1]["cid"] == cid else None
+            add(Node(cid, "sensor" if ps else s.type, r.id, hid,
+                     plugin=f"{ps['type']} -> {ps['schema_name']}" if ps else None))
             edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
         actors[hid].spec["robots"].append({"robot": r.cfg.model_dump(mode="json"), "drone_cid": ids["drone"],
                                           "scheduler_cid": ids["scheduler"], "scheduler": sched,
                                           "preplanned": preplanned, "cameras": cams, "odom_cids": ids["odom"],
-                                          "stat_cids": ids["stat"]})
+                                          "stat_cids": ids["stat"], "plugin_sensors": plugin_sensors,
+                                          "plugins": robot_plugins(r.cfg)})
         robot_ids[r.id] = ids
     seen_out: set[str] = set()
     for aid, a in every.items():
@@ -395,6 +438,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     for r in robots:
         robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
                                         if r.id in served]
+    if recorded and schemas:
+        rec.spec["record"]["schemas"] = schemas
     for a in actors.values():
         a.spec["epoch_ns"] = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None

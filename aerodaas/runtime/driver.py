@@ -372,6 +372,10 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
+    from aerodaas.plugins.registry import by_value_modules
+
+    for mod in by_value_modules():  # plug-ins reached by an import path outside any installed package
+        ray.cloudpickle.register_pickle_by_value(sys.modules[mod])
     plan = build_plan(env, robots, graphs, scheds, sim, record=opts.record, live=opts.live, scheduled=scheduled,
                       epoch_ns=epoch_ns, run_id=opts.run_id or os.environ.get("AERODAAS_RUN_ID") or None)
     placement = Placement(has_cloud=has_cloud, local=(_STARTED_RAY or _ATTACHED_UP) and not opts.address)

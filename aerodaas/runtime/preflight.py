@@ -104,7 +104,9 @@ def check_clocks(robots: list, sim: SimulationConfig) -> None:
     if robots and all(r.cfg.backend == "replay" for r in robots):
         sim.speedup = max(r.cfg.replay.rate for r in robots)
 
-    real = [r.id for r in robots if r.cfg.backend != "sim"]
+    from aerodaas.backends import backend_clock
+
+    real = [r.id for r in robots if backend_clock(r.cfg.backend) != "sim"]
     if real and sim.lockstep:
         raise ConfigError(f"simulation.lockstep: true needs every robot on backend 'sim'; {real} fly real or "
                           f"emulated vehicles, which cannot wait for the analytics (set lockstep to false)")

@@ -1,0 +1,324 @@
+"""One registry for every extension point of AeroDaaS: vehicle backends, sensor types, analytics, trajectory
+schedulers and analytics (edge/cloud placement) schedulers.
+
+A plug-in is a class that declares what it is (class attributes, see :class:`PluginDeclaration`): its ``kind``
+(one of :data:`KINDS`), its name (the word ``environment.json`` or the application uses), its ``Config`` (a
+pydantic model of its settings) and the messages it ``produces`` and ``consumes``. It reaches the registry in one
+of three ways, and the registry remembers which (its *origin*):
+
+* ``builtin`` — shipped in the ``aerodaas`` package;
+* ``decorator in FILE`` — the application (or any module) applied :func:`register` / :func:`plugin` (or one of the
+  kind-specific decorators such as :func:`aerodaas.schedulers.analytics_base.register_analytics_scheduler`);
+* ``import path MODULE:CLASS`` — ``environment.json`` names the class itself where a name is accepted
+  (``"backend": "my_pkg.wind:GustyBackend"``, a sensor's ``"type"``, ``analytics_scheduler.name``);
+* ``entry point DIST`` — an installed distribution declares it in its metadata under the group of its kind
+  (:data:`ENTRY_POINT_GROUPS`: ``aerodaas.backends``, ``aerodaas.sensors``, ``aerodaas.analytics``,
+  ``aerodaas.trajectory_schedulers``, ``aerodaas.analytics_schedulers``), the packaging convention read with
+  :func:`importlib.metadata.entry_points` (Python Packaging User Guide, "Entry points specification").
+
+What travels to the actors is the class object itself, inside the actor's spec: Ray serialises it with
+cloudpickle, by value when it was defined in the application (``__main__``) or in a module reached by an import
+path outside any installed distribution (:func:`by_value_modules`), by reference (module and name, imported on the
+worker) when it comes from an installed package. Never only its name: a name means nothing in another process.
+
+An unknown name raises :class:`UnknownPlugin` (a ValueError) naming the kind, the name and every available plug-in
+with its origin; configuration validation turns it into a ConfigError before Ray starts (``aerodaas run``: exit 2).
+"""
+from __future__ import annotations
+
+import importlib
+import inspect
+import sys
+import threading
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable
+
+__all__ = ["KINDS", "ENTRY_POINT_GROUPS", "PluginEntry", "UnknownPlugin", "register", "plugin", "get", "resolve",
+           "entries", "names", "describe_all", "adopt", "by_value_modules", "plugin_name", "is_import_path"]
+
+#: the extension points, and the ``importlib.metadata`` entry-point group of each
+ENTRY_POINT_GROUPS: dict[str, str] = {
+    "backend": "aerodaas.backends",
+    "sensor": "aerodaas.sensors",
+    "analytics": "aerodaas.analytics",
+    "trajectory_scheduler": "aerodaas.trajectory_schedulers",
+    "analytics_scheduler": "aerodaas.analytics_schedulers",
+}
+KINDS: tuple[str, ...] = tuple(ENTRY_POINT_GROUPS)
+
+
+class UnknownPlugin(ValueError):
+    """No plug-in of ``kind`` is called ``name``. The message lists what is available and where each came from."""
+
+    def __init__(self, kind: str, name: str, available: list["PluginEntry"], why: str = "") -> None:
+        self.kind, self.name = kind, name
+        avail = ", ".join(f"{e.name!r} ({e.origin})" for e in available) or "none"
+        extra = f": {why}" if why else ""
+        super().__init__(f"unknown {kind.replace('_', ' ')} {name!r}{extra}; available: {avail}")
+
+
+@dataclass
+class PluginEntry:
+    """One registered plug-in: ``kind``, ``name``, ``origin`` (see the module docstring), ``target``
+    (``"module:attr"``, where the class lives) and ``cls`` once loaded (imports are deferred until first use, so
+    that listing the simulator backend never imports pymavlink)."""
+
+    kind: str
+    name: str
+    origin: str
+    target: str
+    cls: type | None = field(default=None, repr=False)
+    error: str | None = None  # why loading failed (an entry point whose module does not import)
+
+    def load(self) -> type:
+        """The plug-in class (imported on first use). Raises ImportError/AttributeError naming the target."""
+        if self.cls is None:
+            mod, _, attr = self.target.partition(":")
+            obj: Any = importlib.import_module(mod)
+            for part in attr.split("."):
+                obj = getattr(obj, part)
+            self.cls = obj
+        return self.cls
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-ready description: kind, name, origin, class, config fields, produces/consumes."""
+        out: dict[str, Any] = {"kind": self.kind, "name": self.name, "origin": self.origin, "class": self.target}
+        cls = self.cls
+        if cls is None and (self.origin == "builtin" or self.origin.startswith("entry point")):
+            try:
+                cls = self.load()
+            except Exception as e:  # noqa: BLE001 - listed with its error, never fatal for a listing
+                self.error = f"{type(e).__name__}: {e}"
+        if self.error:
+            out["error"] = self.error
+        if cls is not None:
+            cfg = getattr(cls, "Config", None)
+            if isinstance(cfg, type) and hasattr(cfg, "model_fields"):
+                out["config"] = sorted(cfg.model_fields)
+            for k in ("produces", "consumes"):
+                v = getattr(cls, k, None)
+                if v:
+                    out[k] = [getattr(x, "__name__", str(x)) for x in v]
+        return out
+
+
+_LOCK = threading.RLock()
+_ENTRIES: dict[str, dict[str, PluginEntry]] = {k: {} for k in KINDS}
+_LOADED = {"builtins": False, "entry_points": False}
+_BY_VALUE: set[str] = set()
+
+#: built-in plug-ins whose classes are imported only when used: (kind, name, target)
+_BUILTIN_TARGETS: list[tuple[str, str, str]] = [
+    ("backend", "sim", "aerodaas.backends.sim:SimBackend"),
+    ("backend", "mavlink", "aerodaas.backends.mavlink:MavlinkBackend"),
+    ("backend", "tello", "aerodaas.backends.tello:TelloBackend"),
+    ("backend", "replay", "aerodaas.backends.replay:ReplayBackend"),
+    # the three built-in sensor types are part of the drone actor (its camera component and vehicle state)
+    ("sensor", "camera", "aerodaas.actors.camera:CameraComponent"),
+    ("sensor", "odometry", "aerodaas.actors.drone:DroneComponent"),
+    ("sensor", "stat_stream", "aerodaas.actors.drone:DroneComponent"),
+    ("analytics", "ObjectDetector", "aerodaas.analytics.core:ObjectDetector"),
+    ("analytics", "FollowAnalytics", "aerodaas.analytics.core:FollowAnalytics"),
+    ("analytics", "MonitoringAnalytics", "aerodaas.analytics.core:MonitoringAnalytics"),
+    ("trajectory_scheduler", "TrajectoryScheduler", "aerodaas.schedulers:TrajectoryScheduler"),
+    ("trajectory_scheduler", "NearestNeighborScheduler", "aerodaas.schedulers:NearestNeighborScheduler"),
+]
+#: modules that register the built-in analytics schedulers (with the decorator) when imported
+_BUILTIN_MODULES = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
+                    "aerodaas.schedulers.analytics_gainplan", "aerodaas.schedulers.analytics_evplan",
+                    "aerodaas.schedulers.analytics_laplan"]
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in ENTRY_POINT_GROUPS:
+        raise ValueError(f"unknown plug-in kind {kind!r}; kinds: {list(KINDS)}")
+
+
+def plugin_name(cls: type, kind: str | None = None) -> str:
+    """The name ``cls`` registers under: ``plugin_name`` if set, else ``kind`` for a vehicle backend (the
+    ``backend`` value of ``environment.json``), else ``name``, else the class name."""
+    explicit = getattr(cls, "plugin_name", None)
+    if explicit:
+        return str(explicit)
+    kind = kind or getattr(cls, "plugin_kind", None)
+    if kind == "backend" and isinstance(getattr(cls, "kind", None), str) and cls.kind:
+        return cls.kind
+    n = getattr(cls, "name", None)
+    return n if isinstance(n, str) and n else cls.__name__
+
+
+def _origin_of(cls: type) -> str:
+    mod = getattr(cls, "__module__", "") or ""
+    if mod == "aerodaas" or mod.startswith("aerodaas."):
+        return "builtin"
+    try:
+        where = inspect.getsourcefile(cls) or getattr(sys.modules.get(mod), "__file__", None) or mod
+    except TypeError:
+        where = getattr(sys.modules.get(mod), "__file__", None) or mod
+    return f"decorator in {where}"
+
+
+def register(cls: type, kind: str | None = None, name: str | None = None, *, origin: str | None = None) -> type:
+    """Register ``cls`` as a plug-in of ``kind`` (default its ``plugin_kind``) under ``name`` (default
+    :func:`plugin_name`). Returns ``cls`` (usable as a decorator body). Raises ValueError for an unknown kind, an
+    empty name, or a name already taken by another class."""
+    kind = kind or getattr(cls, "plugin_kind", None)
+    if kind is None:
+        raise ValueError(f"{cls.__name__}: a plug-in class declares its kind (plugin_kind = one of {list(KINDS)})")
+    _check_kind(kind)
+    name = name or plugin_name(cls, kind)
+    if not name:
+        raise ValueError(f"{cls.__name__}: a {kind} plug-in needs a non-empty name")
+    origin = origin or _origin_of(cls)
+    target = f"{cls.__module__}:{cls.__qualname__}"
+    with _LOCK:
+        old = _ENTRIES[kind].get(name)
+        if old is not None and old.target != target:
+            raise ValueError(f"{kind.replace('_', ' ')} name {name!r} is already taken by {old.target} ({old.origin})")
+        if old is not None and old.origin.startswith("entry point"):
+            origin = old.origin  # the entry point's module registered itself on import: keep where it came from
+        _ENTRIES[kind][name] = PluginEntry(kind, name, origin, target, cls)
+    return cls
+
+
+def plugin(kind: str, name: str | None = None) -> Callable[[type], type]:
+    """Class decorator: ``@plugin("sensor")`` registers the class as a plug-in of ``kind`` (see :func:`register`)."""
+    _check_kind(kind)
+
+    def deco(cls: type) -> type:
+        return register(cls, kind, name)
+
+    return deco
+
+
+def _load_builtins() -> None:
+    if _LOADED["builtins"]:
+        return
+    with _LOCK:
+        if _LOADED["builtins"]:
+            return
+        _LOADED["builtins"] = True
+        for kind, name, target in _BUILTIN_TARGETS:
+            _ENTRIES[kind].setdefault(name, PluginEntry(kind, name, "builtin", target))
+        for mod in _BUILTIN_MODULES:
+            importlib.import_module(mod)
+
+
+def _load_entry_points() -> None:
+    if _LOADED["entry_points"]:
+        return
+    from importlib.metadata import entry_points
+
+    with _LOCK:
+        if _LOADED["entry_points"]:
+            return
+        _LOADED["entry_points"] = True
+        for kind, group in ENTRY_POINT_GROUPS.items():
+            for ep in entry_points(group=group):
+                dist = getattr(getattr(ep, "dist", None), "name", None) or "?"
+                if ep.name not in _ENTRIES[kind]:
+                    _ENTRIES[kind][ep.name] = PluginEntry(kind, ep.name, f"entry point {dist}", ep.value)
+
+
+def is_import_path(name: str) -> bool:
+    """Whether ``name`` has the form ``"module.path:ClassName"``."""
+    mod, sep, attr = name.partition(":")
+    return bool(sep and mod and attr) and all(p.isidentifier() for p in mod.split(".") + attr.split("."))
+
+
+def _from_import_path(kind: str, name: str) -> PluginEntry:
+    mod = name.partition(":")[0]
+    entry = PluginEntry(kind, name, f"import path {name}", name)
+    try:
+        cls = entry.load()
+    except Exception as e:  # noqa: BLE001 - reported as an unknown plug-in with the cause
+        raise UnknownPlugin(kind, name, entries(kind), f"cannot import it ({type(e).__name__}: {e})") from None
+    if not isinstance(cls, type):
+        raise UnknownPlugin(kind, name, entries(kind), f"{name} is a {type(cls).__name__}, not a class")
+    declared = getattr(cls, "plugin_kind", kind)
+    if declared != kind:
+        raise UnknownPlugin(kind, name, entries(kind), f"{name} declares plugin_kind {declared!r}")
+    if not _installed(sys.modules[mod]):
+        _BY_VALUE.add(mod)
+    with _LOCK:
+        _ENTRIES[kind][name] = entry
+    return entry
+
+
+def _installed(module: Any) -> bool:
+    """Whether ``module`` comes from an installed distribution (site-packages, or an editable install that
+    ``importlib.metadata`` knows): a worker can then import it; else it must travel by value."""
+    path = getattr(module, "__file__", None) or ""
+    if "site-packages" in path or "dist-packages" in path:
+        return True
+    try:
+        from importlib.metadata import packages_distributions
+
+        top = module.__name__.split(".")[0]
+        return top in packages_distributions()
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def resolve(kind: str, name: str) -> PluginEntry:
+    """The registry entry of plug-in ``name`` of ``kind``: registered (decorator), built in, an installed entry
+    point, or — when ``name`` is ``"module.path:ClassName"`` — that class. Raises :class:`UnknownPlugin`."""
+    _check_kind(kind)
+    with _LOCK:
+        e = _ENTRIES[kind].get(name)
+    if e is None:
+        _load_builtins()
+        e = _ENTRIES[kind].get(name)
+    if e is None:
+        _load_entry_points()
+        e = _ENTRIES[kind].get(name)
+    if e is None and is_import_path(name):
+        e = _from_import_path(kind, name)
+    if e is None:
+        raise UnknownPlugin(kind, name, entries(kind))
+    return e
+
+
+def get(kind: str, name: str) -> type:
+    """The class of plug-in ``name`` of ``kind`` (see :func:`resolve`). Raises :class:`UnknownPlugin`, also when
+    the class cannot be imported (the message names the target and the import error)."""
+    e = resolve(kind, name)
+    try:
+        return e.load()
+    except Exception as ex:  # noqa: BLE001
+        raise UnknownPlugin(kind, name, entries(kind),
+                            f"{e.target} ({e.origin}) does not import: {type(ex).__name__}: {ex}") from None
+
+
+def entries(kind: str | None = None) -> list[PluginEntry]:
+    """Every registered plug-in (of ``kind``), built-ins and installed entry points included, in kind order."""
+    _load_builtins()
+    _load_entry_points()
+    kinds: Iterable[str] = [kind] if kind else KINDS
+    with _LOCK:
+        return [e for k in kinds for e in _ENTRIES[k].values()]
+
+
+def names(kind: str) -> list[str]:
+    """The names of every plug-in of ``kind``."""
+    return [e.name for e in entries(kind)]
+
+
+def describe_all(kind: str | None = None) -> list[dict[str, Any]]:
+    """:meth:`PluginEntry.describe` of every plug-in (``aerodaas plugins --json``)."""
+    return [e.describe() for e in entries(kind)]
+
+
+def adopt(carried: Iterable[tuple[str, str, type, str]]) -> None:
+    """Register plug-in classes that travelled to this process in an actor's spec, ``(kind, name, class, origin)``,
+    under the name and origin the driver resolved them with (a class defined in the application, or reached by an
+    import path, is known here only this way)."""
+    with _LOCK:
+        for kind, name, cls, origin in carried:
+            _ENTRIES[kind][name] = PluginEntry(kind, name, origin, f"{cls.__module__}:{cls.__qualname__}", cls)
+
+
+def by_value_modules() -> list[str]:
+    """Modules reached by an import path that no installed distribution provides: their classes must travel to
+    the actors by value (``ray.cloudpickle.register_pickle_by_value``, called by the driver before actors start)."""
+    return sorted(_BY_VALUE)
