@@ -1,0 +1,10 @@
+"""An AeroDaaS plug-in package: one module per extension point (see docs/extending.md of AeroDaaS).
+
+* :mod:`.gas` — sensor type ``gas_concentration`` (a Gaussian gas plume sampled at the vehicle's position);
+* :mod:`.wind` — vehicle backend ``gusty_sim`` (the embedded simulator with wind gusts);
+* :mod:`.threshold` — analytics ``gas_threshold`` (gas reading -> hover-here navigation command);
+* :mod:`.probe` — analytics ``frame_probe`` (a cheap per-frame analytics for the analytics scheduler to place);
+* :mod:`.placement` — analytics scheduler ``THIN_EDGE_FIFO`` (EDGE_FIFO that sheds every k-th frame).
+
+Each is declared as an entry point in ``pyproject.toml``; nothing here is imported by AeroDaaS until a run names it.
+"""
