@@ -52,8 +52,11 @@ class UnknownPlugin(ValueError):
 
     def __init__(self, kind: str, name: str, available: list["PluginEntry"], why: str = "") -> None:
         self.kind, self.name = kind, name
+        import difflib
+
         avail = ", ".join(f"{e.name!r} ({e.origin})" for e in available) or "none"
-        extra = f": {why}" if why else ""
+        close = difflib.get_close_matches(name, [e.name for e in available], n=1)
+        extra = f": {why}" if why else (f" (did you mean {close[0]!r}?)" if close else "")
         super().__init__(f"unknown {kind.replace('_', ' ')} {name!r}{extra}; available: {avail}")
 
 

@@ -1,0 +1,206 @@
+"""The plug-in example (examples/plugins, docs/extending.md) installed the way a user installs a package — pip, into
+a private target folder put on PYTHONPATH, so nothing global changes and Ray's workers (children of this
+environment) import it too — then found through its entry points, run with ``aerodaas run`` on local Ray and on a
+two-node LocalCluster, and checked from the recording: each plug-in did its job."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from aerodaas.recording.writer import read_messages
+
+from .conftest import REPO
+
+EXAMPLE = REPO / "examples" / "plugins"
+PLUGINS = {("sensor", "gas_concentration"), ("backend", "gusty_sim"), ("analytics", "gas_threshold"),
+           ("analytics", "frame_probe"), ("analytics_scheduler", "THIN_EDGE_FIFO")}
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """(copy of the example, environment with the installed package on PYTHONPATH)."""
+    root = tmp_path_factory.mktemp("plugins")
+    src = root / "src"
+    shutil.copytree(EXAMPLE, src, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    site = root / "site"
+    p = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index",
+                        "--target", str(site), str(src)], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(site)] + [x for x in [env.get("PYTHONPATH")] if x])
+    return src, env
+
+
+def _aerodaas(args: list[str], env: dict, cwd, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "aerodaas.cli", *args], capture_output=True, text=True, env=env,
+                          cwd=cwd, timeout=timeout)
+
+
+def test_the_installed_package_registers_every_plugin_by_entry_point(installed, tmp_path):
+    src, env = installed
+    p = _aerodaas(["plugins", "--json"], env, tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    rows = {(r["kind"], r["name"]): r for r in json.loads(p.stdout)}
+    for key in PLUGINS:
+        assert rows[key]["origin"] == "entry point aerodaas-example-plugins", rows.get(key)
+        assert "error" not in rows[key], rows[key]
+    assert "source_x" in rows[("sensor", "gas_concentration")]["config"]
+    assert rows[("backend", "sim")]["origin"] == "builtin" and rows[("analytics_scheduler", "DEMS")]["origin"] == "builtin"
+    # the framework never names the example's sensor type: a new sensor type is one file of the package
+    g = subprocess.run(["git", "grep", "-n", "gas_concentration", "--", "aerodaas", "actors", "schedulers"], cwd=REPO,
+                       capture_output=True, text=True)
+    assert g.returncode == 1 and not g.stdout, g.stdout
+
+
+def _env_with(src, tmp_path, mutate) -> str:
+    cfg = json.loads((src / "app" / "gas_survey.json").read_text())
+    mutate(cfg)
+    path = tmp_path / "env.json"
+    path.write_text(json.dumps(cfg))
+    return str(path)
+
+
+def test_a_misspelt_sensor_type_stops_before_ray_naming_robot_sensor_and_what_is_available(installed, tmp_path):
+    src, env = installed
+    bad = _env_with(src, tmp_path, lambda c: c["robots"][0]["sensors"][1].update(type="gas_concentraton"))
+    p = _aerodaas(["run", str(src / "app" / "gas_survey.py"), "--env", bad, "--quiet"], env, tmp_path)
+    err = p.stdout + p.stderr
+    assert p.returncode == 2, err[-3000:]
+    for part in ("sensors.1.type", "'uav'", "'gas'", "'gas_concentraton'",
+                 "'gas_concentration' (entry point aerodaas-example-plugins)", "'camera' (builtin)"):
+        assert part in err, (part, err[-3000:])
+    assert "Started a local Ray instance" not in err and "ray.init" not in err
+    bad_backend = _env_with(src, tmp_path, lambda c: c["robots"][0].update(backend="gusty"))
+    p = _aerodaas(["plan", str(src / "app" / "gas_survey.py"), "--env", bad_backend], env, tmp_path)
+    err = p.stdout + p.stderr
+    assert p.returncode == 2 and "robots.0.backend" in err and "'gusty_sim' (entry point" in err, err[-3000:]
+    bad_prop = _env_with(src, tmp_path, lambda c: c["robots"][0]["sensors"][1]["properties"].update(spread_m=-1))
+    p = _aerodaas(["plan", str(src / "app" / "gas_survey.py"), "--env", bad_prop], env, tmp_path)
+    err = p.stdout + p.stderr
+    assert p.returncode == 2 and "sensors.1.properties.spread_m" in err and "-1" in err, err[-3000:]
+
+
+def test_an_import_path_names_a_plugin_class_in_environment_json(installed, tmp_path):
+    src, env = installed
+    path_env = _env_with(src, tmp_path, lambda c: (
+        c["robots"][0]["sensors"][1].update(type="aerodaas_example_plugins.gas:GasConcentrationSensor"),
+        c["robots"][0].update(backend="aerodaas_example_plugins.wind:GustySimBackend")))
+    p = _aerodaas(["plan", str(src / "app" / "gas_survey.py"), "--env", path_env, "--json"], env, tmp_path)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    plan = json.loads(p.stdout)
+    gas = next(n for n in plan["nodes"] if n["id"] == "uav/gas")
+    assert gas["kind"] == "sensor" and gas["plugin"].endswith("aerodaas_example_plugins.GasReading"), gas
+
+
+def _plume(props: dict, pos: list[float]) -> float:
+    d2 = (pos[0] - props["source_x"]) ** 2 + (pos[1] - props["source_y"]) ** 2
+    return props["background_ppm"] + props["peak_ppm"] * math.exp(-d2 / (2 * props["spread_m"] ** 2))
+
+
+def _check_recording(rec: str, src) -> None:
+    from mcap.reader import make_reader
+
+    cfg = json.loads((src / "app" / "gas_survey.json").read_text())
+    props = {"background_ppm": 0.4, **cfg["robots"][0]["sensors"][1]["properties"]}
+    msgs: dict[str, list] = {}
+    for topic, _, _, m in read_messages(rec):
+        msgs.setdefault(topic, []).append(m)
+    result = msgs["/mission/result"][-1]
+    assert result["outcome"] == "success", result
+
+    # the sensor: its channel, recorded with the JSON Schema of its pydantic message model, readings that follow
+    # the plume at the position where they were taken (noise 0.5 ppm)
+    with open(rec, "rb") as f:
+        summary = make_reader(f).get_summary()
+    ch = next(c for c in summary.channels.values() if c.topic == "/uav/gas")
+    schema = summary.schemas[ch.schema_id]
+    assert schema.name == "aerodaas_example_plugins.GasReading" and schema.encoding == "jsonschema"
+    assert {"ppm", "position", "t"} <= set(json.loads(schema.data)["properties"])
+    gas = msgs["/uav/gas"]
+    assert len(gas) >= 20, len(gas)
+    assert max(g["ppm"] for g in gas) > 100 and min(g["ppm"] for g in gas) < 2
+    assert all(abs(g["ppm"] - _plume(props, g["position"])) < 3.0 for g in gas), \
+        max(abs(g["ppm"] - _plume(props, g["position"])) for g in gas)
+
+    # the backend: it flew the survey (odometry out to x = 36 m) and its gusts happened in flight
+    events = msgs["/uav/events"]
+    gusts = [e for e in events if e["event"] == "wind_gust"]
+    assert len(gusts) >= 5 and all(e["speed_mps"] == 1.0 for e in gusts), len(gusts)
+    assert max(o["position"][0] for o in msgs["/uav/odometry"]) > 35.0
+    reached = [e["waypoint"] for e in events if e["event"] == "waypoint_reached"]
+
+    # the analytics: one hover command where the gas first crossed 60 ppm, flown before the survey went on
+    navs = msgs["/uav/gas_threshold/navigation"]
+    assert len(navs) == 1, navs
+    wp = navs[0]["waypoints"][0]
+    assert wp["id"] == "gas-hover-1" and wp["hover_duration"] == 2.0
+    first_high = next(g for g in gas if g["ppm"] >= 60.0)
+    assert math.dist(first_high["position"], (wp["x"], wp["y"], wp["z"])) < 0.5, (first_high, wp)
+    assert reached == ["wp1", "gas-hover-1", "wp2", "wp3", "wp4"], reached
+
+    # the analytics scheduler: every third frame_probe task shed with its reason, the others run on the edge
+    tasks = msgs["/uav/frame_probe/tasks"]
+    shed = [t for t in tasks if t["reason"] == "thin-edge-fifo: shed"]
+    assert len(tasks) >= 30 and abs(len(shed) - len(tasks) / 3) <= 1, (len(shed), len(tasks))
+    assert all(t["state"] == "dropped_cost" for t in shed)
+    assert sum(t["state"] == "done_on_time" and t["tier"] == "edge" for t in tasks) >= len(tasks) // 2
+    assert len(msgs["/uav/frame_probe"]) >= len(tasks) // 2
+
+
+def test_the_example_app_runs_on_local_ray_and_each_plugin_does_its_job(installed, tmp_path):
+    src, env = installed
+    rec = tmp_path / "gas.mcap"
+    p = _aerodaas(["run", str(src / "app" / "gas_survey.py"), "--record", str(rec), "--quiet", "--timeout", "300"],
+                  env, tmp_path, timeout=600)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+    _check_recording(str(rec), src)
+
+
+CLUSTER = textwrap.dedent('''
+    import json, os, subprocess, sys
+    from aerodaas.clusters.local import LocalCluster
+
+    app, env_file, rec = sys.argv[1:4]
+    with LocalCluster(cloud_nodes=0, edge_nodes=2, edge_labels=[{"aerodaas/site": "a"}, {"aerodaas/site": "b"}],
+                      connect=False, worker_niceness=0) as lc:
+        p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", app, "--env", env_file, "--record", rec,
+                            "--quiet", "--timeout", "300", "--address", lc.address], capture_output=True, text=True,
+                           timeout=900)
+    print("RESULT " + json.dumps({"rc": p.returncode, "out": p.stdout[-3000:], "err": p.stderr[-3000:]}))
+''')
+
+
+@pytest.mark.cluster
+def test_the_example_app_runs_on_a_two_node_local_cluster(installed, tmp_path):
+    """The drone actor (gusty backend, gas sensor, frame probe's dispatcher and its scheduler) flies from site a,
+    the gas-threshold analytics runs on site b: both nodes import the installed package."""
+    src, env = installed
+
+    def two_sites(c):
+        c["compute"] = [{"id": "base", "tier": "edge", "labels": {"aerodaas/site": "a"}},
+                        {"id": "edge", "tier": "edge", "labels": {"aerodaas/site": "b"}}]
+        c["robots"][0]["compute"] = "base"
+
+    env_file = _env_with(src, tmp_path, two_sites)
+    p = _aerodaas(["plan", str(src / "app" / "gas_survey.py"), "--env", env_file, "--json"], env, tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    sel = {a["role"] + ":" + ",".join(a["components"]): a["label_selector"].get("aerodaas/site")
+           for a in json.loads(p.stdout)["actors"]}
+    assert sel["analytics:gas_threshold#2"] == "b" and sel["dispatcher:frame_probe#1"] == "a", sel
+    rec = tmp_path / "cluster.mcap"
+    script = tmp_path / "cluster_run.py"
+    script.write_text(CLUSTER)
+    p = subprocess.run([sys.executable, str(script), str(src / "app" / "gas_survey.py"), env_file, str(rec)],
+                       capture_output=True, text=True, env=env, cwd=REPO, timeout=1200)
+    line = next((ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")), None)
+    assert line, p.stdout[-3000:] + p.stderr[-3000:]
+    out = json.loads(line[len("RESULT "):])
+    assert out["rc"] == 0, out
+    _check_recording(str(rec), src)
