@@ -251,7 +251,8 @@ class ActorAssembly:
                     self.scheduling.finish()
                 except Exception as e:  # reported; the drones' reports must still come back
                     self.host.report_error("analytics_scheduler", e)
-        return {d.cfg.id: d.report() for d in drones}
+        return {d.cfg.id: {**d.report(), "plugin_sensors": {ps.sensor_id: ps.stats() for ps in d.plugin_sensors}}
+                for d in drones}
 
     def _abort_all(self, reason: str) -> None:
         """End every drone's mission as failed with ``reason``: this host's drones directly, the others through

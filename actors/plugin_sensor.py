@@ -24,6 +24,7 @@ class PluginSensorComponent:
         self.host, self.recorder, self.epoch_ns = host, recorder, epoch_ns
         self.topic = f"/{robot_id}/{spec['sensor']}"
         self.schema = cls.schema_name()
+        self.type = spec.get("type", cls.name)
         self.period = 1.0 / self.plugin.rate_hz
         self.next_t = 0.0
         self.readings = 0
@@ -37,11 +38,24 @@ class PluginSensorComponent:
         self.next_t += self.period
         if t > self.next_t + self.period:  # the vehicle clock jumped: do not burst
             self.next_t = t + self.period
-        out = self.plugin.sample(backend.odometry(), t)
-        if out is None:
+        try:
+            out = self.plugin.sample(backend.odometry(), t)
+            if out is None:
+                return
+            data = out.model_dump(mode="json") if hasattr(out, "model_dump") else dict(out)
+        except Exception as e:  # noqa: BLE001 - a failing sensor loses its reading, never the flight
+            self.errors += 1
+            if self.recorder is not None and self.errors <= 5:  # recorded (the first five), counted in the summary
+                self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(t * 1e9),
+                                   {"robot": self.robot_id, "t": t, "event": "sensor_error", "sensor": self.sensor_id,
+                                    "error": f"{type(e).__name__}: {e}"}, "aerodaas.MissionEvent")
             return
-        data = out.model_dump(mode="json") if hasattr(out, "model_dump") else dict(out)
         self.readings += 1
         if self.recorder is not None:
             self.recorder.json(self.topic, self.epoch_ns + int(t * 1e9), data, self.schema)
         self.host.publish(self.cid, [ValueMsg(robot=self.robot_id, sim_t=t, data=data)], tok, inline=False)
+
+    def stats(self) -> dict:
+        """``{"type", "schema", "readings", "topic"}`` for the run's summary."""
+        return {"type": self.type, "schema": self.schema, "readings": self.readings, "topic": self.topic,
+                "errors": self.errors}

@@ -35,6 +35,7 @@ def installed(tmp_path_factory):
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site)] + [x for x in [env.get("PYTHONPATH")] if x])
+    env["AERODAAS_NO_ATTACH"] = "1"  # a Ray of this test's own (its workers see PYTHONPATH), never `aerodaas up`'s
     return src, env
 
 

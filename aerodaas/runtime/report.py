@@ -35,6 +35,9 @@ def format_summary(result: Any) -> str:
             lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
                          f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by busy "
                          f"consumers")
+        for sid, ps in (rep.get("plugin_sensors") or {}).items():  # from each sensor plug-in's declaration
+            lines.append(f"    sensor {sid} ({ps['type']}): {ps['readings']} readings on {ps['topic']} "
+                         f"[{ps['schema']}]" + (f", {ps['errors']} failed" if ps.get("errors") else ""))
         for a in st.get("analytics", []):
             if not a:
                 continue
