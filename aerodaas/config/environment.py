@@ -170,6 +170,18 @@ class AnalyticsSchedulerConfig(_Cfg):
     network: list[str] = Field(default_factory=lambda: ["none"])
     jpeg_quality: int = Field(default=90, ge=10, le=100, description="JPEG quality of frames sent to the cloud")
 
+    @field_validator("name")
+    @classmethod
+    def _known_scheduler(cls, v: str) -> str:
+        if v != "default":
+            from aerodaas.plugins import registry
+
+            try:  # a registered name, an installed entry point or "module.path:ClassName"; imported here
+                registry.get("analytics_scheduler", v)
+            except registry.UnknownPlugin as e:
+                raise ValueError(f"{e} (or 'default')") from None
+        return v
+
     @field_validator("network", mode="before")
     @classmethod
     def _one_or_many(cls, v: Any) -> Any:
@@ -179,12 +191,6 @@ class AnalyticsSchedulerConfig(_Cfg):
     def _check(self) -> "AnalyticsSchedulerConfig":
         if self.name == "default":
             return self
-        from aerodaas.plugins import registry
-
-        try:  # a registered name, an installed entry point or "module.path:ClassName"; the class is imported here
-            registry.get("analytics_scheduler", self.name)
-        except registry.UnknownPlugin as e:
-            raise ValueError(f"name: {e} (or 'default')") from None
         if not self.models:
             raise ValueError(f"models: the {self.name} scheduler needs the QoS of at least one analytics "
                              f"(analytics name -> {{deadline_ms, edge_ms, cloud_ms, benefit, edge_cost, cloud_cost}})")

@@ -32,6 +32,7 @@ def cmd_plugins(args: argparse.Namespace) -> int:
             print(f"error: --app {args.app!r}: not a Python file", file=sys.stderr)
             return 2
         mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod  # so that its classes know their file (the origin "decorator in FILE")
         try:
             spec.loader.exec_module(mod)
         except Exception as e:  # noqa: BLE001

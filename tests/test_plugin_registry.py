@@ -1,0 +1,142 @@
+"""The plug-in registry (aerodaas.plugins.registry): one registry for the five kinds, each registration with its
+origin; unknown names refused with what is available; a sensor type written in an application (decorator) is
+checked, planned and listed without any framework edit. No Ray."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from aerodaas.config import ConfigError, parse_environment_config
+from aerodaas.plugins import SensorPlugin, SensorPluginConfig, registry
+
+
+
+def test_builtins_of_every_kind_are_listed_with_their_origin():
+    rows = {(r["kind"], r["name"]): r for r in registry.describe_all()}
+    assert {k for k, _ in rows} == set(registry.KINDS)
+    for key in [("backend", "sim"), ("backend", "mavlink"), ("sensor", "camera"), ("analytics", "ObjectDetector"),
+                ("trajectory_scheduler", "NearestNeighborScheduler"), ("analytics_scheduler", "DEMS")]:
+        assert rows[key]["origin"] == "builtin", rows[key]
+    from aerodaas.schedulers.analytics_base import analytics_scheduler_class, analytics_scheduler_names
+    from aerodaas.schedulers.analytics_dems import Dems
+
+    assert analytics_scheduler_class("DEMS") is Dems and "EDGE_FIFO" in analytics_scheduler_names()
+
+
+def test_unknown_name_lists_what_is_available_and_suggests_the_closest():
+    with pytest.raises(registry.UnknownPlugin) as e:
+        registry.get("analytics_scheduler", "GAINPLAM")
+    msg = str(e.value)
+    assert "unknown analytics scheduler 'GAINPLAM'" in msg and "(did you mean 'GAINPLAN'?)" in msg
+    assert "'EDGE_FIFO' (builtin)" in msg
+    with pytest.raises(registry.UnknownPlugin, match="cannot import it"):
+        registry.get("backend", "no_such_module_xyz:Backend")
+    with pytest.raises(ValueError, match="unknown plug-in kind"):
+        registry.get("camera", "x")
+
+
+def test_a_decorated_class_records_its_file_and_a_second_class_cannot_take_its_name():
+    from aerodaas.plugins import register_sensor
+
+    @register_sensor
+    class Thermo(SensorPlugin):
+        name = "test_thermo_registry"
+
+        def sample(self, state, t):
+            return {"t": t}
+
+    e = registry.resolve("sensor", "test_thermo_registry")
+    assert e.cls is Thermo and e.origin == f"decorator in {__file__}"
+    register_sensor(Thermo)  # the same class again: fine
+
+    class Other(SensorPlugin):
+        name = "test_thermo_registry"
+
+    with pytest.raises(ValueError, match="already taken"):
+        register_sensor(Other)
+
+
+def test_an_import_path_resolves_and_is_recorded_as_such():
+    cls = registry.get("analytics_scheduler", "aerodaas.schedulers.analytics_baselines:EdgeFifo")
+    from aerodaas.schedulers.analytics_baselines import EdgeFifo
+
+    assert cls is EdgeFifo
+    e = registry.resolve("analytics_scheduler", "aerodaas.schedulers.analytics_baselines:EdgeFifo")
+    assert e.origin == "import path aerodaas.schedulers.analytics_baselines:EdgeFifo"
+    cfg = {"robots": [{"id": "d1"}], "analytics_scheduler": {
+        "name": "aerodaas.schedulers.analytics_baselines:EdgeFifo",
+        "models": {"det": {"deadline_ms": 100, "edge_ms": 5, "cloud_ms": 50, "benefit": 1}}}}
+    assert parse_environment_config(cfg).analytics_scheduler.name.endswith(":EdgeFifo")
+    cfg["analytics_scheduler"]["name"] = "aerodaas.schedulers.analytics_baselines:EdgeFifoo"
+    with pytest.raises(ConfigError, match="analytics_scheduler.name"):
+        parse_environment_config(cfg)
+
+
+def test_sensor_properties_are_checked_against_the_plugins_config_model():
+    class Cfg(SensorPluginConfig):
+        lo: float = 0.0
+
+    class Probe(SensorPlugin):
+        name = "test_probe_props"
+        Config = Cfg
+
+    registry.register(Probe)
+    good = {"robots": [{"id": "d1", "sensors": [{"id": "p", "type": "test_probe_props", "properties": {"lo": 2}}]}]}
+    r = parse_environment_config(good).robots[0]
+    assert r.sensors[0].properties == {"rate_hz": 1.0, "lo": 2.0}
+    bad = json.loads(json.dumps(good))
+    bad["robots"][0]["sensors"][0]["properties"] = {"hi": 1}
+    with pytest.raises(ConfigError) as e:
+        parse_environment_config(bad)
+    assert "sensors.0.properties.hi" in str(e.value) and "'p'" in str(e.value)
+
+
+APP = textwrap.dedent('''
+    from pydantic import BaseModel
+
+    from aerodaas import Environment, NearestNeighborScheduler
+    from aerodaas.config import parse_environment_config
+    from aerodaas.plugins import SensorPlugin, register_sensor
+
+
+    class Level(BaseModel):
+        robot: str
+        level: float
+
+
+    @register_sensor
+    class Altimeter(SensorPlugin):
+        name = "my_altimeter"
+        Message = Level
+
+        def sample(self, state, t):
+            return Level(robot=self.robot_id, level=state.position[2])
+
+
+    env = Environment(parse_environment_config({
+        "robots": [{"id": "uav", "takeoff_altitude": 3.0, "sensors": [{"id": "alt", "type": "my_altimeter"}]}]}))
+    env.set_trajectory_scheduler(NearestNeighborScheduler(env))
+    env.get_robot_by_id("uav").start_mission()
+''')
+
+
+def test_a_sensor_written_in_the_app_is_planned_and_listed_without_starting_ray(tmp_path):
+    app = tmp_path / "my_app.py"
+    app.write_text(APP)
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", str(app), "--json"], capture_output=True,
+                       text=True, cwd=tmp_path, timeout=120)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    node = next(n for n in json.loads(p.stdout)["nodes"] if n["id"] == "uav/alt")
+    assert node["kind"] == "sensor" and node["plugin"] == "my_altimeter -> __main__.Level", node
+    plug = tmp_path / "plug.py"
+    plug.write_text(APP.split("env = Environment")[0])
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plugins", "--json", "--kind", "sensor", "--app",
+                        str(plug)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    rows = {r["name"]: r for r in json.loads(p.stdout)}
+    assert rows["my_altimeter"]["origin"] == f"decorator in {plug}", rows["my_altimeter"]
+    assert rows["camera"]["origin"] == "builtin"
