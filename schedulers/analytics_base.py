@@ -208,6 +208,10 @@ class AnalyticsScheduler(abc.ABC):
     """
 
     name: ClassVar[str] = ""
+    #: plug-in declaration (aerodaas.plugins.registry): registered under :attr:`name`
+    plugin_kind: ClassVar[str] = "analytics_scheduler"
+    consumes: ClassVar[tuple] = ("analytics_task",)
+    produces: ClassVar[tuple] = ("placement_decision",)
     #: whether this policy ever uses the cloud (False for the edge-only baselines)
     uses_cloud: ClassVar[bool] = True
     #: keyword options the constructor accepts (e.g. ``estimator``, ``eviction_scan``); see :func:`filter_options`

@@ -68,6 +68,10 @@ class TrajectoryScheduler:
     """
 
     name = "ordered"
+    #: plug-in declaration (aerodaas.plugins.registry): registered under its class name (or ``plugin_name``)
+    plugin_kind = "trajectory_scheduler"
+    consumes: tuple = ("navigation",)
+    produces: tuple = ("waypoint_order",)
 
     def __init__(self, env: Any = None, start: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         self.env = env

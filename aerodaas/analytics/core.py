@@ -57,6 +57,11 @@ class Analytics:
     instance (``detector.on_error = "abort"``) or the class; anything else is refused before Ray starts."""
 
     name: str = "analytics"
+    #: plug-in declaration (aerodaas.plugins.registry; docs/extending.md): its kind; ``consumes``/``produces`` name
+    #: the messages it takes and returns (e.g. ``("frame",)`` -> ``(Detection,)``), for ``aerodaas plugins``
+    plugin_kind: str = "analytics"
+    consumes: tuple = ()
+    produces: tuple = ()
     on_error: str = "continue"
     #: Most items the runtime should hand to one :meth:`process_batch` call (1: no batching pays off). Read on the
     #: actor after :meth:`setup`; the ONNX detectors raise it when their model takes a dynamic batch.
@@ -207,6 +212,7 @@ class ObjectDetector(Analytics):
 
     name = "detector"
     stateful = False
+    consumes, produces = ("frame",), ("detections",)
 
     def __init__(self, model: str = "yolox_nano", model_path: str | None = None,
                  classes: Iterable[str] | str | None = None, score_threshold: float = 0.3,
@@ -389,6 +395,7 @@ class FollowAnalytics(NavigableAnalytics):
     """
 
     name = "follow"
+    consumes, produces = ("detections",), ("navigation",)
 
     def __init__(self, target_classes: Iterable[str] = ("car", "truck", "bus"), kp: float = 0.8, ki: float = 0.02,
                  kd: float = 0.1, max_speed: float = 4.0, command_duration: float = 0.5, gate_m: float = 4.0,
@@ -519,6 +526,7 @@ class MonitoringAnalytics(Analytics):
     :meth:`stats`; ``summary`` is over all drones) and names the drone in each warning."""
 
     name = "monitor"
+    consumes, produces = ("odometry",), ("value",)
     FIELDS = ("battery", "height", "gps", "speed")
 
     def __init__(self, watch: Iterable[str] = ("battery", "height", "gps"), limits: dict[str, float] | None = None,

@@ -123,8 +123,13 @@ _BUILTIN_TARGETS: list[tuple[str, str, str]] = [
     ("analytics", "ObjectDetector", "aerodaas.analytics.core:ObjectDetector"),
     ("analytics", "FollowAnalytics", "aerodaas.analytics.core:FollowAnalytics"),
     ("analytics", "MonitoringAnalytics", "aerodaas.analytics.core:MonitoringAnalytics"),
+    ("analytics", "FallDetector", "aerodaas.analytics.extra:FallDetector"),
+    ("analytics", "StructureLocator", "aerodaas.analytics.extra:StructureLocator"),
+    ("analytics", "InspectionPlanner", "aerodaas.analytics.extra:InspectionPlanner"),
+    ("analytics", "TrackAnalytics", "aerodaas.perception.track_analytics:TrackAnalytics"),
     ("trajectory_scheduler", "TrajectoryScheduler", "aerodaas.schedulers:TrajectoryScheduler"),
     ("trajectory_scheduler", "NearestNeighborScheduler", "aerodaas.schedulers:NearestNeighborScheduler"),
+    ("trajectory_scheduler", "TwoOptScheduler", "aerodaas.schedulers.two_opt:TwoOptScheduler"),
 ]
 #: modules that register the built-in analytics schedulers (with the decorator) when imported
 _BUILTIN_MODULES = ["aerodaas.schedulers.analytics_baselines", "aerodaas.schedulers.analytics_dems",
@@ -144,6 +149,8 @@ def plugin_name(cls: type, kind: str | None = None) -> str:
     if explicit:
         return str(explicit)
     kind = kind or getattr(cls, "plugin_kind", None)
+    if kind == "trajectory_scheduler":  # their ``name`` says how they order ("ordered"), shared by subclasses
+        return cls.__name__
     if kind == "backend" and isinstance(getattr(cls, "kind", None), str) and cls.kind:
         return cls.kind
     n = getattr(cls, "name", None)
