@@ -155,6 +155,7 @@ def _check_recording(rec: str, src) -> None:
     assert len(msgs["/uav/frame_probe"]) >= len(tasks) // 2
 
 
+@pytest.mark.e2e
 def test_the_example_app_runs_on_local_ray_and_each_plugin_does_its_job(installed, tmp_path):
     src, env = installed
     rec = tmp_path / "gas.mcap"
