@@ -140,3 +140,9 @@ def test_a_sensor_written_in_the_app_is_planned_and_listed_without_starting_ray(
     rows = {r["name"]: r for r in json.loads(p.stdout)}
     assert rows["my_altimeter"]["origin"] == f"decorator in {plug}", rows["my_altimeter"]
     assert rows["camera"]["origin"] == "builtin"
+
+
+def test_an_environment_sensor_of_unknown_type_is_refused_not_skipped():
+    with pytest.raises(ConfigError) as e:
+        parse_environment_config({"robots": [{"id": "d1"}], "env_sensors": [{"id": "x", "type": "camara"}]})
+    assert "env_sensors.0.type" in str(e.value) and "'camara'" in str(e.value)

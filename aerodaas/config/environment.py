@@ -272,7 +272,13 @@ class EnvironmentConfig(_Cfg):
                 raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
                                  f"environment (edge: {edges})")
         _check_shared_links(self.robots)
+        from aerodaas.config.robot import SENSOR_PROPERTIES
+
         for j, s in enumerate(self.env_sensors):
+            if s.type not in SENSOR_PROPERTIES:
+                raise ValueError(f"env_sensors.{j}.type: sensor {s.id!r} has type {s.type!r}; an environment sensor is "
+                                 f"one of {sorted(SENSOR_PROPERTIES)} (a sensor plug-in samples a robot's state: "
+                                 f"list it under robots[].sensors)")
             src = s.properties.get("source") if s.type == "camera" else None
             if src == "backend":
                 raise ValueError(f"env_sensors.{j}.properties.source: 'backend' is for a robot's camera; an "
