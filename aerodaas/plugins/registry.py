@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "PluginEntry", "UnknownPlugin", "register", "plugin", "get", "resolve",
-           "entries", "names", "describe_all", "adopt", "by_value_modules", "plugin_name", "is_import_path"]
+           "entries", "names", "describe_all", "adopt", "by_value_modules", "plugin_package_paths", "plugin_name", "is_import_path"]
 
 #: the extension points, and the ``importlib.metadata`` entry-point group of each
 ENTRY_POINT_GROUPS: dict[str, str] = {
@@ -326,6 +326,33 @@ def adopt(carried: Iterable[tuple[str, str, type, str]]) -> None:
     with _LOCK:
         for kind, name, cls, origin in carried:
             _ENTRIES[kind][name] = PluginEntry(kind, name, origin, f"{cls.__module__}:{cls.__qualname__}", cls)
+
+
+def plugin_package_paths() -> list[str]:
+    """The folder (or single file) of every installed plug-in package: the top-level module of each entry point in
+    the aerodaas groups, found without importing it. The driver ships them to a cluster it attaches to as Ray's
+    job-level ``runtime_env={"py_modules": [...]}`` (Ray docs, "Environment Dependencies"), so that nodes where
+    the package is not installed import it too. ``aerodaas`` itself is never shipped."""
+    import importlib.util
+    from importlib.metadata import entry_points
+
+    out: list[str] = []
+    for group in ENTRY_POINT_GROUPS.values():
+        for ep in entry_points(group=group):
+            top = ep.value.split(":")[0].split(".")[0].strip()
+            if not top or top == "aerodaas":
+                continue
+            try:
+                spec = importlib.util.find_spec(top)
+            except (ImportError, ValueError):
+                continue
+            if spec is None:
+                continue
+            locs = list(spec.submodule_search_locations or [])
+            path = locs[0] if locs else spec.origin
+            if path and path not in out:
+                out.append(path)
+    return out
 
 
 def by_value_modules() -> list[str]:

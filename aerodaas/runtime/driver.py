@@ -115,8 +115,14 @@ def _init_ray(address: str | None) -> None:
     import ray
 
     up_address = None if address else _up_address()
+    # installed plug-in packages (entry points) travel to a cluster we attach to: its nodes may not have them
+    from aerodaas.plugins.registry import plugin_package_paths
+
+    ship = plugin_package_paths() if (address or up_address) and os.environ.get("AERODAAS_SHIP_PLUGINS") != "0" \
+        else []
+    renv = {"runtime_env": {"py_modules": ship}} if ship else {}
     if address:
-        ray.init(address=address, log_to_driver=True, include_dashboard=False)
+        ray.init(address=address, log_to_driver=True, include_dashboard=False, **renv)
     elif up_address:
         # the persistent local cluster of `aerodaas up` (aerodaas.clusters.persistent): loopback, like our own
         from aerodaas.clusters.local import enable_token_auth
@@ -124,7 +130,7 @@ def _init_ray(address: str | None) -> None:
         enable_token_auth()  # the cluster was started with token auth: the driver must present the token
         restore = _loopback_only()
         try:
-            ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning")
+            ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning", **renv)
         finally:
             restore()
         global _ATTACHED_UP
