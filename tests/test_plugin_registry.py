@@ -146,3 +146,38 @@ def test_an_environment_sensor_of_unknown_type_is_refused_not_skipped():
     with pytest.raises(ConfigError) as e:
         parse_environment_config({"robots": [{"id": "d1"}], "env_sensors": [{"id": "x", "type": "camara"}]})
     assert "env_sensors.0.type" in str(e.value) and "'camara'" in str(e.value)
+
+
+@pytest.mark.e2e
+def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
+    """The decorator path on Ray: the app's sensor class (and its pydantic message model) live only in the app,
+    travel to the drone actor by value, sample the vehicle state there and are recorded with their schema."""
+    from mcap.reader import make_reader
+
+    from aerodaas.recording.writer import read_messages
+
+    app = tmp_path / "my_app.py"
+    app.write_text(APP.replace('"sensors": [{"id": "alt", "type": "my_altimeter"}]',
+                               '"sensors": [{"id": "alt", "type": "my_altimeter", "properties": {"rate_hz": 5}}], '
+                               '"idle_land_s": 1.0').replace(
+        'env.get_robot_by_id("uav").start_mission()', textwrap.dedent('''
+            from aerodaas import AeroListData, PriorityQueue, Waypoint
+            sched = env.trajectory_scheduler()
+            d = env.get_robot_by_id("uav")
+            d.navigate(sched.generate_navigation(PriorityQueue(AeroListData(
+                [Waypoint(id="h", x=0.0, y=0.0, z=3.0, hover_duration=2.0)]), priority=2)))
+            env.start_mission([d])''')))
+    rec = tmp_path / "run.mcap"
+    env = dict(__import__("os").environ, AERODAAS_NO_ATTACH="1")
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet",
+                        "--timeout", "240"], capture_output=True, text=True, cwd=tmp_path, timeout=600, env=env)
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    assert "sensor alt (my_altimeter):" in p.stdout
+    levels = [m for t, _, _, m in read_messages(str(rec)) if t == "/uav/alt"]
+    assert len(levels) >= 20 and all(m["robot"] == "uav" for m in levels)
+    assert max(m["level"] for m in levels) > 2.5 and min(m["level"] for m in levels) < 0.5  # took off, landed
+    with open(rec, "rb") as f:
+        summary = make_reader(f).get_summary()
+    ch = next(c for c in summary.channels.values() if c.topic == "/uav/alt")
+    assert summary.schemas[ch.schema_id].name == "__main__.Level"
+    assert set(json.loads(summary.schemas[ch.schema_id].data)["properties"]) == {"robot", "level"}
