@@ -16,6 +16,7 @@ from typing import Any
 import ray
 
 from aerodaas.runtime.messages import Delivery
+from aerodaas.runtime.startup_probe import probe
 
 from aerodaas.actors.dataplane import DataPlane
 
@@ -47,6 +48,7 @@ class ActorBase:
 
     def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None, lockstep: bool = False,
                  workers: int | None = None, switch_interval_s: float | None = 0.0005) -> None:
+        probe(f"actor_init:{host_id}")  # the constructor runs: the worker is up and this module imported
         if switch_interval_s:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
             # to move on by up to 5 ms; the actors are latency-bound, not throughput-bound
@@ -98,6 +100,7 @@ class ActorBase:
 
         if self.runtime is None:
             self.runtime = ActorAssembly(self.host, self.spec)
+            probe(f"actor_setup:{self.host.host_id}")  # its components built (drones connected)
             self.host.watch_gc()
         return self.describe()
 

@@ -32,7 +32,8 @@ def test_bench_overhead_json_has_every_column_every_layout_and_the_honest_tail(t
     colo, actors, actors_ray = rep["results"]
     for row in (colo, actors, actors_ray):
         assert row["resolution"] == "320x240" and row["detector"] == "stub" and row["fps"] == 30
-        for key in ("framework_overhead_ms", "bare_loop_overhead_ms", "naive_ray_overhead_ms", "dora_rs_overhead_ms"):
+        for key in ("framework_overhead_ms", "bare_loop_overhead_ms", "naive_ray_overhead_ms", "dora_rs_overhead_ms",
+                    "dora_rs_grouped_overhead_ms"):
             assert key in row
     assert colo["layout"] == "colocated" and actors["layout"] == "actors" and actors_ray["layout"] == "actors-ray"
     # frames left the drone actor: not at all / through the same-node channel / through Ray
@@ -66,11 +67,12 @@ def test_bench_overhead_json_has_every_column_every_layout_and_the_honest_tail(t
         h = colo["honest_overhead_ms"][name]
         assert set(h) == {"median", "p99"} and h["median"] <= h["p99"]
     assert colo["honest_overhead_ms"]["naive_ray"]["median"] >= colo["naive_ray_overhead_ms"]["median"] - 0.5
-    dora = colo["dora_rs"]
-    if dora["available"]:
-        assert dora["commands_applied"] > 0 and colo["dora_rs_overhead_ms"]["median"] >= 0
-    else:                                                                  # not installed: said so, never a number
-        assert colo["dora_rs_overhead_ms"] is None and "dora" in dora["reason"]
+    for peer in ("dora_rs", "dora_rs_grouped"):                           # both dora-rs shapes
+        dora = colo[peer]
+        if dora["available"]:
+            assert dora["commands_applied"] > 0 and colo[f"{peer}_overhead_ms"]["median"] >= 0
+        else:                                                              # not installed: said so, never a number
+            assert colo[f"{peer}_overhead_ms"] is None and "dora" in dora["reason"]
 
 
 def test_bench_startup_json_reports_phases_in_order(tmp_path):

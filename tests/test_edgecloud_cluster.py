@@ -52,12 +52,14 @@ def _executor(label: str):
     return CloudExecutorActor.options(label_selector={"tier": "cloud", "cloud-node": label}).remote(f"cloud-{label}")
 
 
+@pytest.mark.cluster
 def test_token_auth_is_on(cluster):
     from ray._raylet import AuthenticationMode, get_authentication_mode
 
     assert get_authentication_mode() == AuthenticationMode.TOKEN
 
 
+@pytest.mark.cluster
 @needs_workload
 def test_edge_host_runs_on_the_edge_node_and_cloud_executors_on_cloud_nodes(cluster):
     import ray
@@ -86,6 +88,7 @@ def test_edge_host_runs_on_the_edge_node_and_cloud_executors_on_cloud_nodes(clus
             ray.kill(a)
 
 
+@pytest.mark.cluster
 @needs_workload
 def test_benchmark_smoke_run_gives_json_and_a_plot(cluster, tmp_path, monkeypatch):
     from aerodaas.cli import main
@@ -145,6 +148,7 @@ class CloudFirst(AnalyticsScheduler):
         return list(self.queue)
 
 
+@pytest.mark.cluster
 @needs_workload
 def test_losing_cloud_nodes_mid_run_fails_or_retries_in_flight_tasks_and_moves_new_ones_to_the_edge(cluster):
     """Remove cloud node c0 (one of two executors dies: its in-flight tasks are retried on c1 or failed), then c1
@@ -217,6 +221,7 @@ def test_losing_cloud_nodes_mid_run_fails_or_retries_in_flight_tasks_and_moves_n
     assert all(t.reason for t in after if t.state is not TaskState.DONE_ON_TIME)
 
 
+@pytest.mark.cluster
 def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, run_options, tmp_path):
     """An application whose detector is placed per frame by DEMS (edge overloaded, so the cloud takes a share) loses
     the cloud node mid-mission: the mission still succeeds, the report names the lost executor and its node, tasks in
@@ -258,6 +263,7 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
     assert all(t["reason"] for t in after if t["state"] != "done_on_time")
 
 
+@pytest.mark.cluster
 @needs_data
 def test_real_detector_runs_on_a_cloud_node_of_the_cluster(cluster, run_options, data_env, tmp_path):
     """Real mode across nodes: CLOUD sends every frame, JPEG-encoded, to an executor on a tier=cloud node of the

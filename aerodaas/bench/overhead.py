@@ -22,7 +22,9 @@ round) until each has had ``--duration`` seconds, so a drift in the machine's lo
 * ``bare_loop`` — one process, plain function calls: the floor;
 * ``naive_ray`` — one Ray actor per component, ``ray.put`` + actor call per hop (:mod:`.peers_naive_ray`);
 * ``dora_rs`` — one dora-rs 1.1 node process per component, shared memory (:mod:`.peers_dora`; the optional
-  ``bench`` extra; reported as unavailable, with the reason, when it is not installed).
+  ``bench`` extra; reported as unavailable, with the reason, when it is not installed);
+* ``dora_rs_grouped`` — dora-rs grouped like the ``actors`` layout: camera, follow, scheduler and drone in one
+  node process, the detector in another (2 crossings per frame, as ours), the same-shape peer.
 
 The *honest tail* (stub only): end-to-end plus capture dispatch (camera tick -> render start) minus the stub's
 *nominal* time, so the stub's sleep overshoot and every stall count (the paper's definition subtracts the measured
@@ -48,7 +50,7 @@ from aerodaas.bench.pipeline import (FPS, CameraStage, CommandStage, DetectStage
 RESOLUTIONS = ((1280, 720), (640, 480))
 LAYOUTS = ("colocated", "actors", "actors-ray")
 NOT_MEASURED = "not flown in this invocation"
-PEERS = ("bare_loop", "naive_ray", "dora_rs")
+PEERS = ("bare_loop", "naive_ray", "dora_rs", "dora_rs_grouped")
 
 
 class FrameworkWindows:
@@ -185,7 +187,8 @@ def _peer(name: str, width: int, height: int, kind: str, stub_ms: float) -> tupl
         from aerodaas.bench.peers_dora import DoraPipeline, unavailable_reason
 
         reason = unavailable_reason()
-        return (None, reason) if reason else (DoraPipeline(width, height, kind, stub_ms), None)
+        shape = "grouped" if name == "dora_rs_grouped" else "per_component"
+        return (None, reason) if reason else (DoraPipeline(width, height, kind, stub_ms, shape=shape), None)
     except Exception as e:  # a peer that cannot start is reported as such, never as a number
         return None, f"{type(e).__name__}: {e}"
 
@@ -238,7 +241,7 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
 
 def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
     cols = {"bare_loop": "bare_loop_overhead_ms", "naive_ray": "naive_ray_overhead_ms",
-            "dora_rs": "dora_rs_overhead_ms"}
+            "dora_rs": "dora_rs_overhead_ms", "dora_rs_grouped": "dora_rs_grouped_overhead_ms"}
     fw = rep.get(f"framework:{layout}")
     row: dict[str, Any] = {"resolution": f"{width}x{height}", "detector": kind, "fps": int(FPS), "layout": layout,
                            "status": "measured" if fw else NOT_MEASURED,
@@ -311,7 +314,8 @@ def _fmt(mp_: dict | None) -> str:
 def _line(row: dict) -> str:
     return (f"overhead {row['detector']:5s} {row['resolution']} {row['layout']:10s} median/p99 ms: "
             f"framework {_fmt(row['framework_overhead_ms'])} | bare {_fmt(row['bare_loop_overhead_ms'])} | "
-            f"naive Ray {_fmt(row['naive_ray_overhead_ms'])} | dora-rs {_fmt(row['dora_rs_overhead_ms'])}"
+            f"naive Ray {_fmt(row['naive_ray_overhead_ms'])} | dora-rs {_fmt(row['dora_rs_overhead_ms'])} | "
+            f"dora-rs grouped {_fmt(row['dora_rs_grouped_overhead_ms'])}"
             + "".join(f" | {k[:-3]} {_fmt(v)}" for k, v in ((row.get("framework") or {}).get("hop_ms") or {}).items()))
 
 

@@ -1,11 +1,19 @@
-"""The dora-rs peer of ``aerodaas bench overhead``: the same pipeline (see :mod:`aerodaas.bench.pipeline`) on dora-rs
-1.1 (``pip install 'aerodaas[bench]'``), one Python node process per component, wired by a ``dataflow.yml``
-generated into a temporary directory and run with ``dora run`` (local mode, no coordinator). On one machine dora
+"""The dora-rs peers of ``aerodaas bench overhead``: the same pipeline (see :mod:`aerodaas.bench.pipeline`) on dora-rs
+1.1 (``pip install 'aerodaas[bench]'``), wired by a ``dataflow.yml`` generated into a temporary directory and run
+with ``dora run`` (local mode, no coordinator), in two shapes:
+
+* ``per_component`` (``dora_rs``): one Python node process per component, 5 processes, 4 crossings;
+* ``grouped`` (``dora_rs_grouped``): grouped as the AeroDaaS ``actors`` layout is — camera, follow, scheduler and
+  drone in one node process, the detector in another: 2 processes, 2 crossings (frame out, detections back), so the
+  two runtimes are compared on the same topology.
+ On one machine dora
 moves every message of at least 4096 bytes (``ZERO_COPY_THRESHOLD`` in dora's node API) through shared memory, so
 a frame is written once into a shared-memory sample and read zero-copy by the detector; small messages (pickled
 detections, navigation, setpoint) are inline.
 
-    camera --frame (uint8 Arrow array + JSON metadata)--> detector --dets--> follow --nav--> scheduler --item--> drone
+    per_component: camera --frame (uint8 Arrow array + JSON metadata)--> detector --dets--> follow --nav-->
+                   scheduler --item--> drone
+    grouped:       group(camera) --frame--> detector --dets--> group(follow -> scheduler -> drone, in-process)
 
 Control from the benchmark process goes through files in that directory (so the nodes need no extra ports): each
 node writes ``ready_<node>`` once set up; the camera produces frames while the monotonic deadline in ``window``
@@ -26,10 +34,17 @@ import tempfile
 import time
 from pathlib import Path
 
-NODES = ("camera", "detector", "follow", "scheduler", "drone")
-_EDGES = {"detector": ("frame", "camera/frame"), "follow": ("dets", "detector/dets"),
-          "scheduler": ("nav", "follow/nav"), "drone": ("item", "scheduler/item")}
-_OUTPUT = {"camera": "frame", "detector": "dets", "follow": "nav", "scheduler": "item"}
+#: per shape: node ids, node -> (input port, source), node -> output
+SHAPES = {
+    "per_component": (("camera", "detector", "follow", "scheduler", "drone"),
+                      {"detector": ("frame", "camera/frame"), "follow": ("dets", "detector/dets"),
+                       "scheduler": ("nav", "follow/nav"), "drone": ("item", "scheduler/item")},
+                      {"camera": "frame", "detector": "dets", "follow": "nav", "scheduler": "item"}),
+    "grouped": (("group", "detector"),
+                {"detector": ("frame", "group/frame"), "group": ("dets", "detector/dets")},
+                {"group": "frame", "detector": "dets"}),
+}
+NODES = SHAPES["per_component"][0]
 
 
 def dora_cli() -> str | None:
@@ -49,43 +64,49 @@ def unavailable_reason() -> str | None:
     return None
 
 
-def dataflow_yaml(workdir: str) -> str:
-    """The dataflow descriptor: one custom Python node per component (dora's YAML spec: ``nodes[].path``,
-    ``args``, ``inputs`` ``<node>/<output>``, ``outputs``)."""
+def dataflow_yaml(workdir: str, shape: str = "per_component") -> str:
+    """The dataflow descriptor of ``shape`` (see :data:`SHAPES`): custom Python nodes (dora's YAML spec:
+    ``nodes[].path``, ``args``, ``inputs`` ``<node>/<output>``, ``outputs``). Raises KeyError for an unknown
+    shape."""
+    nodes, edges, outputs = SHAPES[shape]
     lines = ["nodes:"]
-    for node in NODES:
+    for node in nodes:
         lines += [f"  - id: {node}", f"    path: {sys.executable}",
                   f"    args: -u -m aerodaas.bench.peers_dora {node} {workdir}"]
-        if node in _EDGES:
-            port, src = _EDGES[node]
+        if node in edges:
+            port, src = edges[node]
             lines += ["    inputs:", f"      {port}:", f"        source: {src}", "        queue_size: 10"]
-        if node in _OUTPUT:
-            lines += ["    outputs:", f"      - {_OUTPUT[node]}"]
+        if node in outputs:
+            lines += ["    outputs:", f"      - {outputs[node]}"]
     return "\n".join(lines) + "\n"
 
 
 class DoraPipeline:
-    """Starts ``dora run`` on the generated dataflow and waits for every node to be set up (``timeout_s``);
-    :meth:`window` runs the camera for a while and returns the rows of applied commands. Raises RuntimeError when
-    dora exits or a node is not ready in time (the log tail is in the message)."""
+    """Starts ``dora run`` on the generated dataflow of ``shape`` (``per_component`` or ``grouped``, see the module
+    docstring) and waits for every node to be set up (``timeout_s``); :meth:`window` runs the camera for a while and
+    returns the rows of applied commands. Raises RuntimeError when dora exits or a node is not ready in time (the
+    log tail is in the message)."""
 
-    name = "dora_rs"
-
-    def __init__(self, width: int, height: int, kind: str, stub_ms: float, timeout_s: float = 180.0) -> None:
+    def __init__(self, width: int, height: int, kind: str, stub_ms: float, timeout_s: float = 180.0,
+                 shape: str = "per_component") -> None:
         reason = unavailable_reason()
         if reason:
             raise RuntimeError(reason)
+        if shape not in SHAPES:
+            raise ValueError(f"dora shape: {shape!r} is not one of {sorted(SHAPES)}")
+        self.name = "dora_rs" if shape == "per_component" else "dora_rs_grouped"
+        nodes = SHAPES[shape][0]
         self.dir = tempfile.mkdtemp(prefix="aerodaas-dora-")
         Path(self.dir, "params.json").write_text(json.dumps({"width": width, "height": height, "kind": kind,
                                                              "stub_ms": stub_ms}))
         self._set_window(0.0)
-        Path(self.dir, "dataflow.yml").write_text(dataflow_yaml(self.dir))
+        Path(self.dir, "dataflow.yml").write_text(dataflow_yaml(self.dir, shape))
         self.log = open(Path(self.dir, "dora.log"), "w")
         self.proc = subprocess.Popen([dora_cli(), "run", "dataflow.yml", "--log-level", "warn"], cwd=self.dir,
                                      stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
         self._offset = 0
         deadline = time.monotonic() + timeout_s
-        while not all(Path(self.dir, f"ready_{n}").exists() for n in NODES):
+        while not all(Path(self.dir, f"ready_{n}").exists() for n in nodes):
             if self.proc.poll() is not None or time.monotonic() > deadline:
                 tail = self._log_tail()
                 self.close()
@@ -227,6 +248,76 @@ def _worker(node, p: dict, workdir: str, role: str) -> None:
         rows.close()
 
 
+def _group(node, p: dict, workdir: str) -> None:
+    """The grouped shape's first node: the camera, paced at the pipeline's FPS, and, in the same process, follow ->
+    scheduler -> drone on every detection message that comes back (no crossing between them, as in the AeroDaaS
+    drone actor). Between frames it waits on its input with ``node.next(timeout)`` until the next frame is due."""
+    import pyarrow as pa
+
+    from aerodaas.bench import pipeline as pl
+
+    rc = pl.parsed_config(p["width"], p["height"], p["kind"]).robots[0]
+    cam, follow = pl.CameraStage(p["width"], p["height"], p["kind"]), pl.FollowStage()
+    sched, drone = pl.CommandStage(rc), pl.DroneStage(rc)
+    rows = open(Path(workdir, "rows.jsonl"), "a", buffering=1)
+    Path(workdir, "ready_group").touch()
+    pacer, t0, until, last = pl.Pacer(pl.FPS), time.monotonic(), 0.0, time.monotonic()
+    win = Path(workdir, "window")
+
+    def on_dets(ev) -> None:
+        nonlocal last
+        t_in = time.monotonic()
+        dets, meta, tr = _unpack(ev["value"])
+        tr["hop_detector_group"] = t_in - tr["out"]
+        nav, ms = follow(dets, meta)
+        if nav is None:
+            return
+        tr["post_ms"] += ms
+        item = sched(nav, tuple(meta.pose.position), meta.capture_time)
+        if item is None:
+            return
+        now = time.monotonic()
+        drone.step(min(0.1, now - last))
+        last = now
+        drone.apply(item)
+        tr["applied"] = time.monotonic()
+        del tr["out"], tr["seq"], tr["t"]
+        rows.write(json.dumps(tr) + "\n")
+
+    try:
+        while True:
+            now = time.monotonic()
+            if now >= until:  # idle between windows: answers still in flight, then STOP or a new window
+                ev = node.next(timeout=0.02)
+                if ev is not None and ev["type"] == "STOP":
+                    return
+                if ev is not None and ev["type"] == "INPUT":
+                    on_dets(ev)
+                    continue
+                if time.monotonic() - now < 0.01:  # a timeout comes back as an ERROR event: never spin
+                    time.sleep(0.01)
+                until = float(win.read_text() or 0.0)
+                pacer.restart()
+                continue
+            due = pacer.next_t - now
+            if due > 0.0005:  # the next frame is not due yet: serve detections meanwhile
+                ev = node.next(timeout=due)
+                if ev is not None and ev["type"] == "STOP":
+                    return
+                if ev is not None and ev["type"] == "INPUT":
+                    on_dets(ev)
+                if time.monotonic() < pacer.next_t:
+                    continue
+            tick = pacer.wait()
+            start = time.monotonic()
+            frame, meta = cam.capture((0.0, 0.0, pl.HOVER_M), 0.0, start - t0)
+            ready = time.monotonic()
+            tr = {"tick": tick, "start": start, "ready": ready, "seq": meta.seq, "t": meta.capture_time, "out": ready}
+            node.send_output("frame", pa.array(frame.reshape(-1)), {"trace": json.dumps(tr)})
+    finally:
+        rows.close()
+
+
 def node_main(argv: list[str]) -> int:
     """Entry point of a node process: ``NODE WORKDIR``."""
     from dora import Node
@@ -236,6 +327,8 @@ def node_main(argv: list[str]) -> int:
     node = Node()
     if role == "camera":
         _camera(node, p, workdir)
+    elif role == "group":
+        _group(node, p, workdir)
     else:
         _worker(node, p, workdir, role)
     return 0
