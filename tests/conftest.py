@@ -10,6 +10,11 @@ REPO = Path(__file__).resolve().parents[1]
 DATA_DIR = Path(os.environ.get("AERODAAS_DATA_DIR", REPO.parent / "shared" / "data")).resolve()
 MODEL_DIR = Path(os.environ.get("AERODAAS_MODEL_DIR", DATA_DIR / "models")).resolve()
 
+# a test's `aerodaas run` starts a Ray of its own: never attach to a cluster of `aerodaas up` that the developer left
+# running (its workers would run that cluster's installed code, not this checkout's); the tests of `up` itself and
+# `bench startup --mode attached` use a private AERODAAS_STATE_DIR and clear this
+os.environ.setdefault("AERODAAS_NO_ATTACH", "1")
+
 needs_data = pytest.mark.skipif(not (DATA_DIR / "imagery").is_dir() or not (MODEL_DIR / "yolox_nano.onnx").is_file(),
                                 reason=f"shared data not found at {DATA_DIR} (set AERODAAS_DATA_DIR / AERODAAS_MODEL_DIR)")
 
