@@ -75,7 +75,8 @@ class ActorAssembly:
         self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
         rec = spec.get("record")
         if rec:  # the edge host: the file and/or the live view
-            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"))
+            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"),
+                                            homes=rec.get("homes"), declare=rec.get("declare"))
         elif spec.get("record_remote"):  # an actor of a recorded run: its messages go to the run's recorder actor
             from aerodaas.actors.recorder import RemoteRecorder
 

@@ -43,7 +43,8 @@ class RecorderActor:
             try:
                 if rec and self.recorder is None:
                     self.recorder = RecorderService(rec.get("path"), rec.get("meta"), live=rec.get("live"),
-                                                    max_pending_frames=64)
+                                                    max_pending_frames=64, homes=rec.get("homes"),
+                                                    declare=rec.get("declare"))
             finally:
                 self._set_up.set()
         live = getattr(self.recorder, "live", None)

@@ -22,6 +22,7 @@ import numpy as np
 
 from aerodaas.app.data import AeroStreamData
 from aerodaas.app.models import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
+from aerodaas.perception.track_records import TrackRecording
 
 __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "ObjectDetector",
            "FollowAnalytics", "FollowTrack", "MonitoringAnalytics", "source_robot"]
@@ -358,7 +359,7 @@ class FollowTrack:
         self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
 
-class FollowAnalytics(NavigableAnalytics):
+class FollowAnalytics(TrackRecording, NavigableAnalytics):
     """Follow a detected target: turns its pixel box into ENU velocity commands with a PID controller.
 
     The box centre is back-projected through the frame's camera pose onto the ground plane
@@ -385,7 +386,9 @@ class FollowAnalytics(NavigableAnalytics):
     each drone runs its own ByteTracker on the target-class detections; the followed id is kept while that track
     is seen, whatever other boxes come near, and ByteTrack re-acquires it under the same id after a short occlusion
     (``track_buffer`` frames); when the id is gone for good, the track nearest the predicted ground position within
-    ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before.
+    ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before. With a tracker
+    the drone's tracks are also recorded in a run (:mod:`aerodaas.perception.track_records`, under
+    ``/{robot}/{name}/tracks``: image annotations with the track ids, a 3-D scene and a ``LocationFix`` per track).
     """
 
     name = "follow"
@@ -403,6 +406,11 @@ class FollowAnalytics(NavigableAnalytics):
         self.kp, self.ki, self.kd = kp, ki, kd
         self.max_speed, self.command_duration = max_speed, command_duration
         self.gate_m, self.confirm_hits, self.lost_after = gate_m, confirm_hits, lost_after
+
+    @property
+    def records_tracks(self) -> bool:  # type: ignore[override]
+        """True with a ``tracker``: the runtime records this follow's tracks."""
+        return self.tracker is not None
 
     def track_of(self, robot_id: str) -> FollowTrack | None:
         """The follow state of drone ``robot_id`` (None before its first frame)."""
@@ -425,12 +433,14 @@ class FollowAnalytics(NavigableAnalytics):
         cands = []
         ids: list[int | None] = []
         if self.tracker is not None:
+            from aerodaas.perception.track_records import track_rows
             from aerodaas.perception.tracking import ByteTracker
 
             if st.tracker is None:
                 st.tracker = ByteTracker(self.tracker)
-            seen = [(tr.detection, tr.track_id) for tr in
-                    st.tracker.update([d for d in dets if d.class_name in self.target_classes])]
+            active = st.tracker.update([d for d in dets if d.class_name in self.target_classes])
+            self.keep_tracks(meta, track_rows(active, meta))  # recorded by the runtime (perception.track_records)
+            seen = [(tr.detection, tr.track_id) for tr in active]
         else:
             seen = [(d, None) for d in dets if d.class_name in self.target_classes]
         for d, tid in seen:
