@@ -127,3 +127,89 @@ def test_write_tracks_writes_annotations_scene_and_one_fix_per_track(tmp_path):
     e, n, _ = geodetic_to_enu(got["/d1/tracks/tracks/1/fix"].latitude, got["/d1/tracks/tracks/1/fix"].longitude,
                               0.0, home)
     assert abs(e - 10.0) < 0.05 and abs(n - 5.0) < 0.05
+
+
+# ------------------------------------------------------------------ the runtime's side, without Ray
+class _Host:
+    def mark_processed(self) -> None:
+        pass
+
+
+class _Recorder:
+    """Collects what the analytics component hands the recorder."""
+
+    def __init__(self) -> None:
+        self.got: list[tuple] = []
+        self.other: list[str] = []
+
+    def tracks(self, prefix, t_ns, robot, rows, size):
+        self.got.append((prefix, t_ns, robot, rows, size))
+
+    def json(self, topic, *a):
+        self.other.append(topic)
+
+    def detections(self, topic, *a):
+        self.other.append(topic)
+
+
+class _StubDetector:
+    """Stands in for the onnxruntime detector inside ObjectDetector: the cars of ``CARS`` as boxes."""
+
+    last_timing = {"inference_ms": 1.0, "preprocess_ms": 0.1, "postprocess_ms": 0.1}
+
+    def __init__(self, meta_of) -> None:
+        self.meta_of = meta_of
+
+    def detect(self, frame):
+        return list(self.meta_of(frame))
+
+
+def _frame_meta(robot: str, seq: int):
+    from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
+
+    return FrameMeta(robot_id=robot, sensor_id="cam", seq=seq, capture_time=0.2 * seq, wall_time=0.0,
+                     pose=FramePose(position=(0.0, 0.0, 20.0), yaw=90.0, camera_pitch=90.0),
+                     intrinsics=CameraIntrinsics.from_hfov(320, 240, 60.0))
+
+
+def _car(x: float):
+    from aerodaas.app.models import Detection
+
+    return Detection(class_id=2, class_name="car", score=0.9, box=(x, 100.0, x + 30.0, 120.0))
+
+
+@pytest.mark.parametrize("kind", ["detector", "follow", "plain_follow"])
+def test_the_analytics_component_records_each_drones_tracks_whatever_the_output(kind):
+    """ObjectDetector(tracker=...) and FollowAnalytics(tracker=...) hand their tracks to the recorder under
+    /<robot>/<name>/tracks on every frame (the follow's output is often None); a follow without a tracker records
+    none. Two drones share the analytics: each keeps its own track ids."""
+    from aerodaas import ByteTrackConfig, FollowAnalytics, ObjectDetector
+    from aerodaas.actors.analytics_component import AnalyticsComponent
+    from aerodaas.runtime.messages import DetectionsMsg, FrameMsg
+
+    if kind == "detector":
+        obj = ObjectDetector(tracker=ByteTrackConfig())
+        obj.setup = lambda: None
+        obj.detector = _StubDetector(lambda frame: [_car(frame[0])])
+    else:
+        obj = FollowAnalytics(target_classes=["car"], tracker=ByteTrackConfig() if kind == "follow" else None)
+    rec = _Recorder()
+    comp = AnalyticsComponent(_Host(), "c#1", obj.name, obj, rec, epoch_ns=10**18)
+    for seq in range(6):
+        for robot, x in (("d1", 40.0 + 3 * seq), ("d2", 200.0 - 3 * seq)):
+            meta = _frame_meta(robot, seq)
+            if kind == "detector":
+                msg = FrameMsg(robot=robot, sim_t=meta.capture_time, data=[x], meta=meta, trace={})
+            else:
+                msg = DetectionsMsg(robot=robot, sim_t=meta.capture_time, data=[_car(x)], meta=meta, trace={})
+            comp.handle(None, msg)
+    if kind == "plain_follow":
+        assert rec.got == []
+        return
+    assert len(rec.got) == 12
+    for robot in ("d1", "d2"):
+        mine = [r for r in rec.got if r[2] == robot]
+        assert {r[0] for r in mine} == {f"/{robot}/{obj.name}/tracks"}
+        assert [[row["track_id"] for row in r[3]] for r in mine] == [[1]] * 6  # one car, one stable id per drone
+        assert all(r[4] == (320, 240) and r[3][0]["enu"] is not None for r in mine)
+    assert rec.got[0][1] == 10**18  # the frame's log time (epoch + capture time)

@@ -22,7 +22,7 @@ import numpy as np
 
 from aerodaas.app.data import AeroStreamData
 from aerodaas.app.models import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
-from aerodaas.perception.track_records import TrackRecording
+from aerodaas.perception.track_records import TrackRecording, track_and_keep
 
 __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "ObjectDetector",
            "FollowAnalytics", "FollowTrack", "MonitoringAnalytics", "source_robot"]
@@ -183,7 +183,7 @@ class NavigableAnalytics(Analytics):
 INavigableAnalyse = NavigableAnalytics
 
 
-class ObjectDetector(Analytics):
+class ObjectDetector(TrackRecording, Analytics):
     """ONNX object detector on onnxruntime (YOLOX-Nano by default). Input frames (H, W, 3) uint8 BGR; output a
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
     without it the model is resolved by :func:`aerodaas.perception.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
@@ -204,7 +204,11 @@ class ObjectDetector(Analytics):
     :meth:`process_batch` runs the frames of several drones in one onnxruntime call, up to ``batch`` frames, when
     the model's input has a dynamic batch dimension (:attr:`max_batch` is then ``batch``). The shipped YOLOX-Nano
     and NanoDet-Plus exports have a fixed batch of 1: with them :attr:`max_batch` is 1 and :meth:`process_batch`
-    is a loop over :meth:`process`. Raises ValueError for ``batch`` < 1."""
+    is a loop over :meth:`process`. Raises ValueError for ``batch`` < 1.
+
+    ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` also runs ByteTrack per drone on the
+    detections (the output stays the detections); each drone's geo-located tracks are recorded in a run under
+    ``/{robot}/{name}/tracks`` (:mod:`aerodaas.perception.track_records`). The detector is then :attr:`stateful`."""
 
     name = "detector"
     stateful = False
@@ -215,7 +219,7 @@ class ObjectDetector(Analytics):
                  name: str | None = None, threads: int = 1, batch: int = 8, *, format: str = "auto",
                  nms_threshold: float = 0.45, agnostic_nms: bool = False,
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
-                 class_names: Sequence[str] | None = None, tiling: Any = None) -> None:
+                 class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None) -> None:
         from aerodaas.perception.options import normalise_classes
 
         super().__init__(name)
@@ -234,6 +238,10 @@ class ObjectDetector(Analytics):
         self.input_size = tuple(input_size) if input_size is not None else None
         self.class_names = list(class_names) if class_names is not None else None
         self.tiling = tiling
+        self.tracker = tracker
+        if tracker is not None:
+            tracker.check()
+            self.stateful = True  # one ByteTracker per drone: each drone's frames must reach the same replica
         self.detector = None
         self.shipped = None  # the model's bytes, read by check() on the driver
         self.last_timing: dict[str, float] = {}
@@ -251,6 +259,8 @@ class ObjectDetector(Analytics):
 
         if self.tiling is not None:
             self.tiling.check()
+        if self.tracker is not None:
+            self.tracker.check()
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
         check_detector_options(name=self.name, model=self.model, model_path=self.model_path, format=self.format,
                                classes=self.classes, score_threshold=self.score_threshold,
@@ -293,6 +303,8 @@ class ObjectDetector(Analytics):
         self.last_timing = {"inference_ms": t["inference_ms"], "pre_ms": t["preprocess_ms"], "post_ms": t["postprocess_ms"]}
         self.n_frames += 1
         self.n_with_dets += bool(dets)
+        if self.tracker is not None:
+            track_and_keep(self, dets, meta, self.tracker)
         return dets
 
     def process_batch(self, items: Sequence[tuple[np.ndarray, FrameMeta | None]]) -> list[list[Detection]]:
@@ -310,6 +322,9 @@ class ObjectDetector(Analytics):
         self.n_frames += n
         self.n_with_dets += sum(bool(d) for d in out)
         self.n_batched += self.detector.last_batched
+        if self.tracker is not None:
+            for dets, (_, meta) in zip(out, items):
+                track_and_keep(self, dets, meta, self.tracker)
         return out
 
     def stats(self) -> dict:
@@ -407,10 +422,6 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
         self.max_speed, self.command_duration = max_speed, command_duration
         self.gate_m, self.confirm_hits, self.lost_after = gate_m, confirm_hits, lost_after
 
-    @property
-    def records_tracks(self) -> bool:  # type: ignore[override]
-        """True with a ``tracker``: the runtime records this follow's tracks."""
-        return self.tracker is not None
 
     def track_of(self, robot_id: str) -> FollowTrack | None:
         """The follow state of drone ``robot_id`` (None before its first frame)."""

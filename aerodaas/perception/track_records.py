@@ -2,7 +2,8 @@
 the recorder writes it.
 
 An analytics that tracks (:class:`~aerodaas.perception.track_analytics.TrackAnalytics`, or
-:class:`~aerodaas.analytics.core.FollowAnalytics` with a ``tracker``) sets ``records_tracks`` and keeps, per drone,
+:class:`~aerodaas.analytics.core.ObjectDetector` / :class:`~aerodaas.analytics.core.FollowAnalytics` with a
+``tracker``) sets ``records_tracks`` and keeps, per drone,
 the rows of its last tracker update (:func:`track_rows`); the runtime's analytics component takes them with
 ``recorded_tracks(meta)`` after every processed frame (also when the analytics' own output is None, e.g. a follow
 that issues no command) and hands them to the recorder, which writes for drone ``robot`` and analytics ``name``,
@@ -28,7 +29,7 @@ import numpy as np
 
 from aerodaas.app.models import FrameMeta, GeoPoint
 
-__all__ = ["TrackRecording", "track_rows", "write_tracks", "declared_track_channels", "tracks_prefix"]
+__all__ = ["TrackRecording", "track_and_keep", "track_rows", "write_tracks", "declared_track_channels", "tracks_prefix"]
 
 _ORIGIN = GeoPoint(lat=0.0, lon=0.0, alt=0.0)
 
@@ -133,9 +134,13 @@ def declared_track_channels(robots: Iterable[str], graphs: dict[str, Iterable[An
 class TrackRecording:
     """Mixin of the analytics that track: :meth:`keep_tracks` stores a frame's rows per drone and the runtime's
     analytics component takes them once with :meth:`recorded_tracks` to record them (module docstring).
-    ``records_tracks`` says whether this analytics has tracks to record (True by default)."""
+    :attr:`records_tracks` says whether this analytics has tracks to record: whether it has a ``tracker``
+    (a :class:`~aerodaas.perception.tracking.ByteTrackConfig`)."""
 
-    records_tracks: bool = True
+    @property
+    def records_tracks(self) -> bool:
+        """True when the analytics tracks (its ``tracker`` is set): the runtime then records its tracks."""
+        return getattr(self, "tracker", None) is not None
 
     def keep_tracks(self, meta: FrameMeta | None, rows: list[dict[str, Any]]) -> None:
         """Keep ``rows`` (:func:`track_rows`) as drone ``meta.robot_id``'s tracks of frame ``meta.seq``."""
@@ -153,3 +158,17 @@ class TrackRecording:
             return None
         del kept[meta.robot_id]
         return got[1]
+
+
+def track_and_keep(analytics: Any, dets: list, meta: FrameMeta | None, config: Any,
+                   classes: Iterable[str] | None = None) -> list:
+    """Advance ``analytics``' ByteTracker of the drone of ``meta`` (one per drone, in its
+    :meth:`~aerodaas.analytics.core.Analytics.drone_state`) with ``dets`` (only ``classes`` when given), keep the
+    geo-located rows for the recorder (:meth:`TrackRecording.keep_tracks`) and return the active tracks."""
+    from aerodaas.perception.tracking import ByteTracker
+
+    tr = analytics.drone_state(dets, meta, lambda: ByteTracker(config))
+    keep = dets if classes is None else [d for d in dets if d.class_name in classes]
+    active = tr.update(keep)
+    analytics.keep_tracks(meta, track_rows(active, meta))
+    return active
