@@ -17,7 +17,8 @@ vehicles = ["car", "truck", "bus"]
 detector = ObjectDetector("yolox_nano", classes=vehicles, score_threshold=0.15)
 detector.deploy(edge)
 # follows one ByteTrack track id; its geo-located tracks are recorded (/quadrotor_base/follow/tracks)
-follow = FollowAnalytics(target_classes=vehicles, tracker=ByteTrackConfig(high_threshold=0.15, new_track_threshold=0.15))
+track_cfg = ByteTrackConfig(high_threshold=0.15, new_track_threshold=0.15)  # the detector's threshold
+follow = FollowAnalytics(target_classes=vehicles, tracker=track_cfg)
 follow.deploy(edge, colocate=True)  # cheap and per drone: runs inside the drone actor, no hop
 car_nav = follow.analyse(detector.analyse(frames))
 scheduler.add_navigation(PriorityQueue(car_nav, priority=1))

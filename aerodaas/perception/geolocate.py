@@ -116,7 +116,8 @@ def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[in
                 position_covariance=[float(x) for x in cov9], position_covariance_type=kind))
         pose = Pose(position=Vector3(x=f.enu[0], y=f.enu[1], z=f.enu[2]), orientation=Quaternion(w=1.0))
         ent = SceneEntity(timestamp=stamp, frame_id="enu", id=f"{robot_id}/track/{tid}",
-                          metadata=[KeyValuePair(key="robot", value=robot_id), KeyValuePair(key="track_id", value=str(tid)),
+                          metadata=[KeyValuePair(key="robot", value=robot_id),
+                                    KeyValuePair(key="track_id", value=str(tid)),
                                     KeyValuePair(key="sigma_m", value=f"{f.sigma_m:.3f}")])
         ent.spheres.append(SpherePrimitive(pose=pose, size=Vector3(x=4 * np.sqrt(c[0, 0]), y=4 * np.sqrt(c[1, 1]),
                                                                    z=0.2), color=Color(r=1.0, g=0.5, b=0.0, a=0.5)))
