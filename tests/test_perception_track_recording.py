@@ -1,7 +1,7 @@
 """Geo-located tracks recorded during a run (issue 28, item 4).
 
 tests/apps/fleet_tracks.py: two simulated drones at 20 m, each over two of the simulator's cars (moving and parked); a
-pixel colour detector and one shared TrackAnalytics. From the recording (read with the ``mcap`` library): the track
+pixel colour detector (missing 10 % of the cars, 20 % at a low score) and one shared TrackAnalytics. From the recording (read with the ``mcap`` library): the track
 channels of both drones exist (declared from the plan, so they are in the file's channel list), each track of the
 scene is matched against the simulator's truth (``/world/targets``, written by the camera from the world model, not
 from our detections): at most 1 id switch per 100 frames and a geo-location error within 1.5 m at 20 m altitude; the
@@ -53,7 +53,7 @@ def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_option
     rep = score_tracks(run_options.record)  # against /world/targets, at 19-21 m
     assert rep["frames"] >= 100, rep  # both drones hovered 25 s at 20 m, 5 frames/s
     assert all(r["frames"] >= 50 and r["matched"] >= 50 for r in rep["per_robot"].values()), rep
-    assert rep["recall"] >= 0.9, rep
+    assert rep["recall"] >= 0.8, rep  # the detector misses 10 % of the cars on purpose: no track on those frames
     assert rep["id_switches_per_100_frames"] <= 1.0, rep
     assert rep["error_m"]["max"] <= 1.5, rep
     frames = rep["frames"]
