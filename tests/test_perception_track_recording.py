@@ -213,3 +213,24 @@ def test_the_analytics_component_records_each_drones_tracks_whatever_the_output(
         assert [[row["track_id"] for row in r[3]] for r in mine] == [[1]] * 6  # one car, one stable id per drone
         assert all(r[4] == (320, 240) and r[3][0]["enu"] is not None for r in mine)
     assert rec.got[0][1] == 10**18  # the frame's log time (epoch + capture time)
+
+
+def test_bench_tracks_refuses_a_recording_without_truth_or_tracks(tmp_path):
+    """`aerodaas bench tracks` on a recording that is not a simulated run with a tracking analytics: exit 2 with the
+    reason, no traceback."""
+    import subprocess
+    import sys
+
+    from aerodaas.recording.writer import McapRecorder
+
+    path = tmp_path / "plain.mcap"
+    with McapRecorder(path) as rec:
+        rec.write_json("/d1/odometry", 1, {"robot_id": "d1", "position": [0, 0, 20]}, schema_name="aerodaas.Odometry")
+    with pytest.raises(ValueError, match="world/targets"):
+        score_tracks(str(path))
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "tracks", str(path)], capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 2 and "no /world/targets" in p.stdout + p.stderr, (p.stdout, p.stderr)
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "tracks", str(tmp_path / "none.mcap")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "no such file" in p.stdout + p.stderr
