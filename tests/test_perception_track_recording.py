@@ -234,3 +234,55 @@ def test_bench_tracks_refuses_a_recording_without_truth_or_tracks(tmp_path):
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "tracks", str(tmp_path / "none.mcap")],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "no such file" in p.stdout + p.stderr
+
+
+@pytest.mark.e2e
+def test_the_live_view_advertises_the_track_channels_from_the_start_and_serves_the_tracks(tmp_path):
+    """`aerodaas run tests/apps/fleet_tracks.py --live` with a Foxglove protocol client (tests/foxglove_ws_client.py,
+    written from the spec): the track image and scene channels are advertised before the camera's (declared from
+    the plan, not created by a first message), per-track LocationFix channels appear, and the scene arrives live
+    with the track entities."""
+    import subprocess
+    import sys
+    import threading
+
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    from .foxglove_ws_client import collect, schema_bytes
+
+    p = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "run", str(APP), "--live", "127.0.0.1:0", "--quiet"],
+                         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out: list[str] = []
+    url_ready = threading.Event()
+
+    def pump():
+        for line in p.stdout:
+            out.append(line)
+            if "live view at" in line:
+                url_ready.set()
+        url_ready.set()
+
+    threading.Thread(target=pump, daemon=True).start()
+    try:
+        assert url_ready.wait(240) and any("live view at" in ln for ln in out), "".join(out)
+        url = next(w for ln in out if "live view at" in ln for w in ln.split() if w.startswith("ws://")).rstrip(".,;")
+        scene, cam = "/d1/tracks/tracks/scene", "/d1/camera/cam"
+        got = collect(url, {scene: 10**9, "/d1/tracks/tracks": 10**9}, timeout_s=300)
+        assert p.wait(timeout=240) == 0, "".join(out)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    order = [topic for _t, op, topic in got["timeline"] if op == "advertise"]
+    assert order.index(scene) < order.index(cam) and order.index("/d1/tracks/tracks") < order.index(cam), order
+    assert any(t.startswith("/d1/tracks/tracks/") and t.endswith("/fix") for t in order), order
+    ch = got["channels"][scene]
+    assert ch["schemaName"] == "foxglove.SceneUpdate" and ch["encoding"] == "protobuf"
+    fds = descriptor_pb2.FileDescriptorSet.FromString(schema_bytes(ch))  # decode with the advertised schema only
+    pool = descriptor_pool.DescriptorPool()
+    for fd in fds.file:
+        pool.Add(fd)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName("foxglove.SceneUpdate"))
+    msgs = [cls.FromString(d) for _t, d in got["messages"][scene]]
+    assert len(msgs) >= 50, len(msgs)
+    ids = {e.id for m in msgs for e in m.entities}
+    assert ids and all(i.startswith("d1/track/") for i in ids), ids
