@@ -128,6 +128,7 @@ class AnalyticsComponent(Component):
         self.proc_ms.append(dt_ms)
         self.processed += 1
         self.host.mark_processed()
+        self._record_tracks(msg)
         if out is None:
             return None
         self.outputs += 1
@@ -151,6 +152,22 @@ class AnalyticsComponent(Component):
             elif isinstance(out, dict):
                 self.recorder.json(f"/{robot}/{self.name}", t_ns, out, "aerodaas.AnalyticsOutput")
         return [res]
+
+    def _record_tracks(self, msg: Message) -> None:
+        """A tracking analytics' tracks of this frame (``recorded_tracks``, :mod:`aerodaas.perception.track_records`)
+        go to the recorder under ``/<robot>/<name>/tracks``, whatever the analytics' own output was."""
+        take = getattr(self.obj, "recorded_tracks", None)
+        if self.recorder is None or not callable(take) or not getattr(self.obj, "records_tracks", False):
+            return
+        rows = take(msg.meta)
+        if rows is None:
+            return
+        from aerodaas.perception.track_records import tracks_prefix
+
+        meta = msg.meta
+        size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None
+        self.recorder.tracks(tracks_prefix(msg.robot, self.name), self.epoch_ns + int(msg.sim_t * 1e9), msg.robot,
+                             rows, size)
 
     def get_latest(self) -> Any:
         return self.latest

@@ -80,7 +80,8 @@ class ActorAssembly:
 
                 for name, js in rec["schemas"].items():
                     register_json_schema(name, js)
-            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"))
+            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"),
+                                            homes=rec.get("homes"), declare=rec.get("declare"))
         elif spec.get("record_remote"):  # an actor of a recorded run: its messages go to the run's recorder actor
             from aerodaas.actors.recorder import RemoteRecorder
 

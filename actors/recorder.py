@@ -35,7 +35,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.runtime.messages import RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson, RecordOdometry
+from aerodaas.runtime.messages import (RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson,
+                                       RecordOdometry, RecordTracks)
 from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 
 TF_TOPIC = "/tf"
@@ -46,11 +47,20 @@ class RecorderService:
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
     telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
     ``recorder_jpeg_encoded`` in ``copies`` (the host's :class:`~.dataplane.FrameCopies`) when given. All methods are
-    thread-safe and return at once."""
+    thread-safe and return at once.
+
+    ``homes``: robot id -> its home (a :class:`~aerodaas.app.models.GeoPoint` or its dict), for the lat/lon of
+    recorded tracks. ``declare``: ``[(topic, schema)]`` of protobuf channels known from the plan (the track channels,
+    :func:`aerodaas.perception.track_records.declared_track_channels`), registered in the file and advertised by the
+    live view before the first message."""
 
     def __init__(self, path: str | None, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
                  max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
-                 live: str | None = None) -> None:
+                 live: str | None = None, homes: dict[str, Any] | None = None,
+                 declare: list[tuple[str, str]] | None = None) -> None:
+        from aerodaas.app.models import GeoPoint
+
+        self.homes = {r: GeoPoint.model_validate(h) for r, h in (homes or {}).items()}
         self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality)
         self.path = path
         #: the live Foxglove WebSocket server (``live`` = its HOST:PORT), fed by the same writer
@@ -64,6 +74,10 @@ class RecorderService:
                 self.rec.close()
                 raise
             self.rec.add_sink(self.live.publish)
+        for topic, schema in declare or ():
+            record = self.rec.declare_proto(topic, schema)
+            if self.live is not None:
+                self.live.advertise(topic, *record, "protobuf")
         self._cameras: dict[str, list[tuple[str, tuple]]] = {}  # robot -> [(camera frame, mount quaternion)]
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._pending_frames = 0
@@ -110,6 +124,10 @@ class RecorderService:
 
     def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
         self._put(("odometry", robot, t_ns, odom))
+
+    def tracks(self, prefix: str, t_ns: int, robot: str, rows: list, image_size: tuple[int, int] | None = None) -> None:
+        """One frame's geo-located tracks (:func:`aerodaas.perception.track_records.write_tracks`)."""
+        self._put(("tracks", prefix, t_ns, robot, rows, image_size))
 
     def json(self, topic: str, t_ns: int, obj: dict, schema_name: str) -> None:
         self._put(("json", topic, t_ns, obj, schema_name))
@@ -175,6 +193,11 @@ class RecorderService:
         elif kind == "json":
             _, topic, t_ns, obj, schema = item
             r.write_json(topic, t_ns, obj, schema_name=schema)
+        elif kind == "tracks":
+            from aerodaas.perception.track_records import write_tracks
+
+            _, prefix, t_ns, robot, rows, size = item
+            write_tracks(r, prefix, t_ns, robot, rows, self.homes.get(robot), size)
         elif kind == "odometry":
             _, robot, t_ns, odom = item
             g = odom["geodetic"]
@@ -305,6 +328,9 @@ class RemoteRecorder:
 
     def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
         self._put(RecordOdometry(robot, t_ns, odom))
+
+    def tracks(self, prefix: str, t_ns: int, robot: str, rows: list, image_size: tuple[int, int] | None = None) -> None:
+        self._put(RecordTracks(prefix, t_ns, robot, list(rows), image_size))
 
     def json(self, topic: str, t_ns: int, obj: dict, schema_name: str) -> None:
         self._put(RecordJson(topic, t_ns, obj, schema_name))

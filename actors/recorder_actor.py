@@ -47,7 +47,8 @@ class RecorderActor:
                     for name, js in (rec.get("schemas") or {}).items():  # plug-in sensors' message schemas
                         register_json_schema(name, js)
                     self.recorder = RecorderService(rec.get("path"), rec.get("meta"), live=rec.get("live"),
-                                                    max_pending_frames=64)
+                                                    max_pending_frames=64, homes=rec.get("homes"),
+                                                    declare=rec.get("declare"))
             finally:
                 self._set_up.set()
         live = getattr(self.recorder, "live", None)

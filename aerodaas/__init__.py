@@ -15,6 +15,8 @@ from aerodaas.navigation.fsm import IllegalTransition, MissionState
 from aerodaas.app.models import (ActionCommand, AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue,
                      SchedulingType, VelocityCommand, Waypoint)
 from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
+from aerodaas.perception.track_analytics import TrackAnalytics
+from aerodaas.perception.tracking import ByteTrackConfig
 
 IEnvironment, IRobot, ISensor, ICompute = Environment, Robot, Sensor, ComputeResource
 AeroNav = AeroNavigation
@@ -26,5 +28,5 @@ __all__ = [
     "MonitoringAnalytics", "AeroData", "IAeroData", "AeroListData", "AeroStreamData", "AeroNavigation", "AeroNav",
     "NavigationType", "SchedulingType", "PriorityQueue", "Waypoint", "VelocityCommand", "Odometry", "Detection",
     "MissionState", "IllegalTransition", "ConfigError", "TrajectoryScheduler", "NearestNeighborScheduler",
-    "INavigate", "TwoOptScheduler", "ActionCommand",
+    "INavigate", "TwoOptScheduler", "ActionCommand", "TrackAnalytics", "ByteTrackConfig",
 ]

@@ -14,9 +14,12 @@ survey = AeroListData([Waypoint(id=f"wp{i + 1}", x=x, y=-4, z=16, hover_duration
 drone_nav = scheduler.generate_navigation(PriorityQueue(survey, priority=2))
 
 vehicles = ["car", "truck", "bus"]
-detector = ObjectDetector("yolox_nano", classes=vehicles, score_threshold=0.15)
+# one NMS over the vehicle classes: a car is not also reported as a truck (two tracks on one vehicle)
+detector = ObjectDetector("yolox_nano", classes=vehicles, score_threshold=0.15, class_groups={"vehicle": vehicles})
 detector.deploy(edge)
-follow = FollowAnalytics(target_classes=vehicles)
+# follows one ByteTrack track id; its geo-located tracks are recorded (/quadrotor_base/follow/tracks)
+track_cfg = ByteTrackConfig(high_threshold=0.15, new_track_threshold=0.15)  # the detector's threshold
+follow = FollowAnalytics(target_classes=vehicles, tracker=track_cfg)
 follow.deploy(edge, colocate=True)  # cheap and per drone: runs inside the drone actor, no hop
 car_nav = follow.analyse(detector.analyse(frames))
 scheduler.add_navigation(PriorityQueue(car_nav, priority=1))

@@ -77,6 +77,9 @@ def validate_recording(path: Path, robot: str, cameras: dict[str, dict]) -> dict
             elif schema.name == "foxglove.CompressedImage":
                 assert decoded.format == "jpeg" and decoded.data[:2] == b"\xff\xd8"
                 images.setdefault(channel.topic, []).append(decoded)
+            elif schema.name == "foxglove.LocationFix" and "/tracks/" in channel.topic:
+                # a geo-located track (aerodaas.perception.track_records): the object's WGS-84 fix, with covariance
+                assert decoded.frame_id == "wgs84" and decoded.position_covariance_type != 0, channel.topic
             elif schema.name == "foxglove.LocationFix":
                 locations.add(decoded.frame_id)
     assert sum(counts.values()) == summary.statistics.message_count  # every message was decoded

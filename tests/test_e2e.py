@@ -80,6 +80,9 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
     c = validate_recording(rec, "quadrotor_base", cams)["counts"]
     assert c["/quadrotor_base/detector/detections"] > 50 and c["/quadrotor_base/follow/navigation"] > 0
     assert c["/quadrotor_base/camera/cam1/calibration"] == c["/quadrotor_base/camera/cam1"]
+    # the follow tracks (issue 28): its geo-located tracks are recorded, the car's among them
+    assert c["/quadrotor_base/follow/tracks/scene"] > 20 and c["/quadrotor_base/follow/tracks"] > 20, c
+    assert any(t.startswith("/quadrotor_base/follow/tracks/") and t.endswith("/fix") for t in c), c
 
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):

@@ -153,7 +153,8 @@ def test_docs_layout_is_the_generated_vehicle_tracking_layout_with_the_panels_as
     from aerodaas.liveview.layout import build_layout
 
     doc = json.loads((REPO / "docs" / "foxglove-layout.json").read_text())
-    assert doc == build_layout("quadrotor_base", "cam1", ["/quadrotor_base/detector/detections"])
+    assert doc == build_layout("quadrotor_base", "cam1", ["/quadrotor_base/detector/detections"],
+                               tracks=["/quadrotor_base/follow/tracks"])  # the app's follow tracks (issue 28)
     panels = _panels(doc["content"])
     kinds = {p["panelType"]: p["config"] for p in panels}
     assert {"Image", "ThreeDee", "Map", "StateTransitions", "Plot"} <= set(kinds)
@@ -161,6 +162,8 @@ def test_docs_layout_is_the_generated_vehicle_tracking_layout_with_the_panels_as
     assert img["imageTopic"] == "/quadrotor_base/camera/cam1"
     assert img["calibrationTopic"] == "/quadrotor_base/camera/cam1/calibration"
     assert img["annotations"]["/quadrotor_base/detector/detections"]["visible"] is True
+    assert img["annotations"]["/quadrotor_base/follow/tracks"]["visible"] is True  # track ids on the image
+    assert kinds["ThreeDee"]["topics"]["/quadrotor_base/follow/tracks/scene"]["visible"] is True
     assert kinds["ThreeDee"]["followTf"] == "quadrotor_base/base_link"
     assert kinds["Map"]["followTopic"] == "/quadrotor_base/gps"
     assert [p["value"] for p in kinds["Plot"]["paths"]] == ["/quadrotor_base/odometry.battery_pct",

@@ -22,6 +22,7 @@ import numpy as np
 
 from aerodaas.app.data import AeroStreamData
 from aerodaas.app.models import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
+from aerodaas.perception.track_records import TrackRecording, track_and_keep
 
 __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "ObjectDetector",
            "FollowAnalytics", "FollowTrack", "MonitoringAnalytics", "source_robot"]
@@ -187,7 +188,7 @@ class NavigableAnalytics(Analytics):
 INavigableAnalyse = NavigableAnalytics
 
 
-class ObjectDetector(Analytics):
+class ObjectDetector(TrackRecording, Analytics):
     """ONNX object detector on onnxruntime (YOLOX-Nano by default). Input frames (H, W, 3) uint8 BGR; output a
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
     without it the model is resolved by :func:`aerodaas.perception.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
@@ -208,7 +209,11 @@ class ObjectDetector(Analytics):
     :meth:`process_batch` runs the frames of several drones in one onnxruntime call, up to ``batch`` frames, when
     the model's input has a dynamic batch dimension (:attr:`max_batch` is then ``batch``). The shipped YOLOX-Nano
     and NanoDet-Plus exports have a fixed batch of 1: with them :attr:`max_batch` is 1 and :meth:`process_batch`
-    is a loop over :meth:`process`. Raises ValueError for ``batch`` < 1."""
+    is a loop over :meth:`process`. Raises ValueError for ``batch`` < 1.
+
+    ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` also runs ByteTrack per drone on the
+    detections (the output stays the detections); each drone's geo-located tracks are recorded in a run under
+    ``/{robot}/{name}/tracks`` (:mod:`aerodaas.perception.track_records`). The detector is then :attr:`stateful`."""
 
     name = "detector"
     stateful = False
@@ -220,7 +225,7 @@ class ObjectDetector(Analytics):
                  name: str | None = None, threads: int = 1, batch: int = 8, *, format: str = "auto",
                  nms_threshold: float = 0.45, agnostic_nms: bool = False,
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
-                 class_names: Sequence[str] | None = None, tiling: Any = None) -> None:
+                 class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None) -> None:
         from aerodaas.perception.options import normalise_classes
 
         super().__init__(name)
@@ -239,6 +244,10 @@ class ObjectDetector(Analytics):
         self.input_size = tuple(input_size) if input_size is not None else None
         self.class_names = list(class_names) if class_names is not None else None
         self.tiling = tiling
+        self.tracker = tracker
+        if tracker is not None:
+            tracker.check()
+            self.stateful = True  # one ByteTracker per drone: each drone's frames must reach the same replica
         self.detector = None
         self.shipped = None  # the model's bytes, read by check() on the driver
         self.last_timing: dict[str, float] = {}
@@ -256,6 +265,8 @@ class ObjectDetector(Analytics):
 
         if self.tiling is not None:
             self.tiling.check()
+        if self.tracker is not None:
+            self.tracker.check()
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
         check_detector_options(name=self.name, model=self.model, model_path=self.model_path, format=self.format,
                                classes=self.classes, score_threshold=self.score_threshold,
@@ -298,6 +309,8 @@ class ObjectDetector(Analytics):
         self.last_timing = {"inference_ms": t["inference_ms"], "pre_ms": t["preprocess_ms"], "post_ms": t["postprocess_ms"]}
         self.n_frames += 1
         self.n_with_dets += bool(dets)
+        if self.tracker is not None:
+            track_and_keep(self, dets, meta, self.tracker)
         return dets
 
     def process_batch(self, items: Sequence[tuple[np.ndarray, FrameMeta | None]]) -> list[list[Detection]]:
@@ -315,6 +328,9 @@ class ObjectDetector(Analytics):
         self.n_frames += n
         self.n_with_dets += sum(bool(d) for d in out)
         self.n_batched += self.detector.last_batched
+        if self.tracker is not None:
+            for dets, (_, meta) in zip(out, items):
+                track_and_keep(self, dets, meta, self.tracker)
         return out
 
     def stats(self) -> dict:
@@ -364,7 +380,7 @@ class FollowTrack:
         self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
 
-class FollowAnalytics(NavigableAnalytics):
+class FollowAnalytics(TrackRecording, NavigableAnalytics):
     """Follow a detected target: turns its pixel box into ENU velocity commands with a PID controller.
 
     The box centre is back-projected through the frame's camera pose onto the ground plane
@@ -391,7 +407,9 @@ class FollowAnalytics(NavigableAnalytics):
     each drone runs its own ByteTracker on the target-class detections; the followed id is kept while that track
     is seen, whatever other boxes come near, and ByteTrack re-acquires it under the same id after a short occlusion
     (``track_buffer`` frames); when the id is gone for good, the track nearest the predicted ground position within
-    ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before.
+    ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before. With a tracker
+    the drone's tracks are also recorded in a run (:mod:`aerodaas.perception.track_records`, under
+    ``/{robot}/{name}/tracks``: image annotations with the track ids, a 3-D scene and a ``LocationFix`` per track).
     """
 
     name = "follow"
@@ -410,6 +428,7 @@ class FollowAnalytics(NavigableAnalytics):
         self.kp, self.ki, self.kd = kp, ki, kd
         self.max_speed, self.command_duration = max_speed, command_duration
         self.gate_m, self.confirm_hits, self.lost_after = gate_m, confirm_hits, lost_after
+
 
     def track_of(self, robot_id: str) -> FollowTrack | None:
         """The follow state of drone ``robot_id`` (None before its first frame)."""
@@ -432,12 +451,14 @@ class FollowAnalytics(NavigableAnalytics):
         cands = []
         ids: list[int | None] = []
         if self.tracker is not None:
+            from aerodaas.perception.track_records import track_rows
             from aerodaas.perception.tracking import ByteTracker
 
             if st.tracker is None:
                 st.tracker = ByteTracker(self.tracker)
-            seen = [(tr.detection, tr.track_id) for tr in
-                    st.tracker.update([d for d in dets if d.class_name in self.target_classes])]
+            active = st.tracker.update([d for d in dets if d.class_name in self.target_classes])
+            self.keep_tracks(meta, track_rows(active, meta))  # recorded by the runtime (perception.track_records)
+            seen = [(tr.detection, tr.track_id) for tr in active]
         else:
             seen = [(d, None) for d in dets if d.class_name in self.target_classes]
         for d, tid in seen:

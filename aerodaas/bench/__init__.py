@@ -40,7 +40,7 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from aerodaas.bench import detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours
+    from aerodaas.bench import detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours, tracks
 
     tours.add_parser(bench_subparsers)
     schedulers.add_parser(bench_subparsers)
@@ -50,3 +50,4 @@ def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     tello_video.add_parser(bench_subparsers)
     raypath.add_parser(bench_subparsers)
     detect.add_parser(bench_subparsers)
+    tracks.add_parser(bench_subparsers)

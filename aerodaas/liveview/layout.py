@@ -2,11 +2,13 @@
 https://docs.foxglove.dev/docs/visualization/layouts), so the JSON is the format the Foxglove app imports
 ("Layouts" -> "Import from file").
 
-Panels: the camera with its detections overlaid and its calibration (Image), the vehicle in 3-D with the transform
-tree, its camera frustum and its pose (3D), the GPS track (Map), the mission state over time (State Transitions),
+Panels: the camera with its detections (and the track ids of a tracking analytics) overlaid and its calibration
+(Image), the vehicle in 3-D with the transform tree, its camera frustum, its pose and the geo-located tracks (3D),
+the GPS track and each track's position (Map), the mission state over time (State Transitions),
 battery percent and altitude (Plot) and the robot's events (Raw Messages). Topics follow the recorder's names
 (``/<robot>/camera/<sensor>``, ``/<robot>/<analytics>/detections``, ``/<robot>/gps``, ``/<robot>/pose``, ``/tf``,
-``/mission/state``, ``/<robot>/odometry``, ``/<robot>/events``). ``docs/foxglove-layout.json`` is
+``/mission/state``, ``/<robot>/odometry``, ``/<robot>/events``; tracks under ``/<robot>/<analytics>/tracks``, see
+:mod:`aerodaas.perception.track_records`). ``docs/foxglove-layout.json`` is
 :func:`build_layout` for ``apps/vehicle_tracking.py``; ``aerodaas layout RUN.mcap`` writes one for any recording.
 """
 from __future__ import annotations
@@ -18,11 +20,17 @@ from typing import Any
 __all__ = ["build_layout", "layout_for_recording"]
 
 
-def build_layout(robot: str, camera: str | None = None, detections: list[str] | None = None) -> dict[str, Any]:
+def build_layout(robot: str, camera: str | None = None, detections: list[str] | None = None,
+                 tracks: list[str] | None = None, fixes: list[str] | None = None) -> dict[str, Any]:
     """The layout (a JSON-ready dict, Foxglove layout ``version`` 1) for ``robot``'s camera sensor ``camera`` (None:
-    no camera panel) with the ``foxglove.ImageAnnotations`` topics ``detections`` overlaid."""
+    no camera panel) with the ``foxglove.ImageAnnotations`` topics ``detections`` overlaid. ``tracks``: topic
+    prefixes of tracking analytics (``/<robot>/<analytics>/tracks``): their image annotations join the camera, their
+    ``/scene`` the 3D panel; ``fixes``: per-track ``LocationFix`` topics known (from a recording) for the Map panel,
+    which shows every LocationFix topic anyway (a track's topic appears with its track)."""
     import foxglove.layouts as fl
 
+    tracks = list(tracks or [])
+    detections = list(detections or []) + [t for t in tracks if t not in (detections or [])]
     image_topic = f"/{robot}/camera/{camera}" if camera else None
     base, cam_frame = f"{robot}/base_link", f"{robot}/{camera}" if camera else None
     image = fl.ImagePanel(title=f"{robot} camera + detections", config=fl.ImageConfig(image_mode=fl.ImageModeConfig(
@@ -33,11 +41,15 @@ def build_layout(robot: str, camera: str | None = None, detections: list[str] | 
         three_d_topics[f"{image_topic}/calibration"] = fl.BaseRendererCameraTopicSettings(visible=True, distance=2.0)
         three_d_topics[image_topic] = fl.BaseRendererImageTopicSettings(visible=True,
                                                                          camera_info_topic=f"{image_topic}/calibration")
+    for p in tracks:
+        three_d_topics[f"{p}/scene"] = fl.BaseRendererSceneUpdateTopicSettings(visible=True)
     three_d = fl.ThreeDeePanel(title="3D: enu -> base_link -> camera", config=fl.ThreeDeeConfig(
         follow_tf=base, fixed_frame="enu", follow_mode="follow-position", topics=three_d_topics))
     gps = f"/{robot}/gps"
-    map_panel = fl.MapPanel(title=f"{robot} GPS", config=fl.MapConfig(
-        follow_topic=gps, layer="map", topic_config={gps: fl.MapTopicSettings(history_mode="all")}))
+    map_topics = {gps: fl.MapTopicSettings(history_mode="all")}
+    map_topics.update({f: fl.MapTopicSettings(history_mode="all", point_display_mode="dot") for f in fixes or []})
+    map_panel = fl.MapPanel(title=f"{robot} GPS" + (" + tracks" if tracks else ""), config=fl.MapConfig(
+        follow_topic=gps, layer="map", topic_config=map_topics))
     states = fl.StateTransitionsPanel(title="mission state", config=fl.StateTransitionsConfig(paths=[
         fl.StateTransitionsSeries(value=f'/mission/state{{robot=="{robot}"}}.state', label=f"{robot} state")]))
     odom = f"/{robot}/odometry"
@@ -55,9 +67,9 @@ def build_layout(robot: str, camera: str | None = None, detections: list[str] | 
 
 
 def layout_for_recording(path: str | os.PathLike) -> dict[str, Any]:
-    """:func:`build_layout` for the first robot of a recording that has a pose channel, its first camera and every
-    detections channel of that robot (read from the file's channels). Raises ValueError when the recording has no
-    robot pose channel, ``FileNotFoundError`` when it does not exist."""
+    """:func:`build_layout` for the first robot of a recording that has a pose channel, its first camera, every
+    detections channel of that robot and its recorded tracks (read from the file's channels). Raises ValueError when
+    the recording has no robot pose channel, ``FileNotFoundError`` when it does not exist."""
     from aerodaas.recording.writer import summarize_mcap
 
     chans = summarize_mcap(path)["channels"]
@@ -69,4 +81,8 @@ def layout_for_recording(path: str | os.PathLike) -> dict[str, Any]:
     cams = [c["topic"].split("/")[3] for c in chans if c["schema"] == "foxglove.CompressedImage"
             and c["topic"].startswith(f"/{robot}/camera/") and c["topic"].count("/") == 3]
     dets = [c["topic"] for c in chans if c["schema"] == "foxglove.ImageAnnotations" and c["topic"].startswith(f"/{robot}/")]
-    return build_layout(robot, cams[0] if cams else None, dets)
+    tracks = [c["topic"][:-len("/scene")] for c in chans if c["schema"] == "foxglove.SceneUpdate"
+              and c["topic"].startswith(f"/{robot}/") and c["topic"].endswith("/tracks/scene")]
+    fixes = [c["topic"] for c in chans if c["schema"] == "foxglove.LocationFix"
+             and any(c["topic"].startswith(f"{p}/") and c["topic"].endswith("/fix") for p in tracks)]
+    return build_layout(robot, cams[0] if cams else None, [d for d in dets if d not in tracks], tracks, fixes)

@@ -20,7 +20,9 @@ first.
 Nothing is lost for a client that subscribes to a channel soon after it is advertised (within ``catchup_s``): the
 messages the channel carried before the subscription are sent to that client alone (the SDK's per-sink ``log``), so a
 client connected from the start receives every message of every channel; a later subscriber to a latched topic
-(:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result) receives its latest message. At
+(:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result, a tracking analytics' 3-D scene and each
+track's last ``LocationFix``) receives its latest message. Channels the run declares from its plan (the track
+channels, :mod:`aerodaas.perception.track_records`) are advertised before their first message. At
 :meth:`LiveServer.stop` the server waits (bounded) until every client is subscribed to every channel, so the last
 channel of a run (``/mission/result``) reaches it before the server closes.
 """
@@ -37,7 +39,7 @@ __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LATCHED_SUFFIXES", "LiveServer", "ch
            "replay"]
 
 #: topics ending so keep their latest message for late subscribers (ROS's "latched" topics)
-LATCHED_SUFFIXES = ("mission/plan", "camera_info", "calibration", "mission/result")
+LATCHED_SUFFIXES = ("mission/plan", "camera_info", "calibration", "mission/result", "tracks/scene", "/fix")
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765  # Foxglove's default for its WebSocket connection

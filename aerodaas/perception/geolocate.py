@@ -80,37 +80,48 @@ def geolocate_box(box: tuple[float, float, float, float], pose: FramePose, k: Ca
                      float(np.sqrt(np.linalg.eigvalsh(cov).max())))
 
 
-def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[int, GroundFix]) -> None:
+def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[int, GroundFix], *,
+                       prefix: str | None = None, with_fix: bool = True) -> None:
     """Record each track's :class:`GroundFix` (``fixes``: track id -> fix) on ``recorder``
     (:class:`aerodaas.recording.writer.McapRecorder`): one ``foxglove.LocationFix`` per track on
-    ``/{robot_id}/tracks/{id}/fix`` (ENU covariance, ``DIAGONAL_KNOWN`` when the axes are uncorrelated else
-    ``KNOWN``), and one ``foxglove.SceneUpdate`` on ``/{robot_id}/tracks/scene`` (frame ``enu``) with a flat
-    ellipse-sized sphere (2 sigma) and the track id as text per track."""
+    ``{prefix}/{id}/fix`` (ENU covariance, ``DIAGONAL_KNOWN`` when the axes are uncorrelated else ``KNOWN``), and
+    one ``foxglove.SceneUpdate`` on ``{prefix}/scene`` (frame ``enu``) that first deletes every entity of the topic
+    (``SceneEntityDeletion`` ``ALL``: a track that ended leaves the scene) and then holds, per track, a flat
+    ellipse-sized sphere (2 sigma, entity id ``{robot_id}/track/{id}``) and the track id as text. ``prefix``
+    defaults to ``/{robot_id}/tracks`` (the runtime passes ``/{robot}/{analytics}/tracks``); ``with_fix=False`` writes
+    the scene only (no home known, so no lat/lon)."""
     from foxglove_schemas_protobuf.Color_pb2 import Color
+    from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
     from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
     from foxglove_schemas_protobuf.Pose_pb2 import Pose
     from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
     from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
+    from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletion
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
     from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive
     from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
     from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
     from google.protobuf.timestamp_pb2 import Timestamp
 
+    prefix = prefix or f"/{robot_id}/tracks"
     stamp = Timestamp(seconds=log_time_ns // 1_000_000_000, nanos=log_time_ns % 1_000_000_000)
-    scene = SceneUpdate()
+    scene = SceneUpdate(deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletion.ALL)])
     for tid, f in sorted(fixes.items()):
         c = f.cov
         cov9 = [c[0, 0], c[0, 1], 0.0, c[1, 0], c[1, 1], 0.0, 0.0, 0.0, 0.0]
         kind = LocationFix.DIAGONAL_KNOWN if abs(c[0, 1]) < 1e-12 else LocationFix.KNOWN
-        recorder.write_proto(f"/{robot_id}/tracks/{tid}/fix", log_time_ns, LocationFix(
-            timestamp=stamp, frame_id="wgs84", latitude=f.lat, longitude=f.lon, altitude=f.alt,
-            position_covariance=[float(x) for x in cov9], position_covariance_type=kind))
+        if with_fix:
+            recorder.write_proto(f"{prefix}/{tid}/fix", log_time_ns, LocationFix(
+                timestamp=stamp, frame_id="wgs84", latitude=f.lat, longitude=f.lon, altitude=f.alt,
+                position_covariance=[float(x) for x in cov9], position_covariance_type=kind))
         pose = Pose(position=Vector3(x=f.enu[0], y=f.enu[1], z=f.enu[2]), orientation=Quaternion(w=1.0))
-        ent = SceneEntity(timestamp=stamp, frame_id="enu", id=f"{robot_id}/track/{tid}")
+        ent = SceneEntity(timestamp=stamp, frame_id="enu", id=f"{robot_id}/track/{tid}",
+                          metadata=[KeyValuePair(key="robot", value=robot_id),
+                                    KeyValuePair(key="track_id", value=str(tid)),
+                                    KeyValuePair(key="sigma_m", value=f"{f.sigma_m:.3f}")])
         ent.spheres.append(SpherePrimitive(pose=pose, size=Vector3(x=4 * np.sqrt(c[0, 0]), y=4 * np.sqrt(c[1, 1]),
                                                                    z=0.2), color=Color(r=1.0, g=0.5, b=0.0, a=0.5)))
         ent.texts.append(TextPrimitive(pose=pose, billboard=True, font_size=14.0, scale_invariant=True,
                                        color=Color(r=1.0, g=1.0, b=1.0, a=1.0), text=f"{robot_id} #{tid}"))
         scene.entities.append(ent)
-    recorder.write_proto(f"/{robot_id}/tracks/scene", log_time_ns, scene)
+    recorder.write_proto(f"{prefix}/scene", log_time_ns, scene)

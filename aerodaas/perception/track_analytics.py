@@ -7,14 +7,17 @@ from typing import Any, Iterable
 
 from aerodaas.analytics.core import Analytics
 from aerodaas.app.models import Detection, FrameMeta, GeoPoint
-from aerodaas.perception.geolocate import geolocate_box
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.perception.track_records import TrackRecording, track_rows
 from aerodaas.perception.tracking import ByteTrackConfig, ByteTracker
 
 __all__ = ["TrackAnalytics"]
 
 
-class TrackAnalytics(Analytics):
-    """Per drone ByteTrack on ``classes`` (None: all) plus the ground position of every active track.
+class TrackAnalytics(TrackRecording, Analytics):
+    """Per drone ByteTrack on ``classes`` (None: all) plus the ground position of every active track; in a run
+    the tracks are also recorded (:mod:`aerodaas.perception.track_records`: image annotations, 3-D scene and a
+    ``LocationFix`` per track under ``/{robot}/{name}/tracks``).
 
     Output per frame: a list of dicts ``{"robot", "track_id", "class_name", "score", "box"`` (pixels),
     ``"enu"`` ``(x, y, z)`` metres, ``"sigma_m"`` (1-sigma horizontal, metres), ``"lat"``, ``"lon"`` (degrees,
@@ -40,20 +43,17 @@ class TrackAnalytics(Analytics):
     def process(self, dets: list[Detection], meta: FrameMeta | None) -> list[dict[str, Any]]:
         tr: ByteTracker = self.drone_state(dets, meta, lambda: ByteTracker(self.tracker))
         keep = [d for d in dets if self.classes is None or d.class_name in self.classes]
-        out = []
         robot = getattr(meta, "robot_id", "")
-        for t in tr.update(keep):
-            d = t.detection
-            row: dict[str, Any] = {"robot": robot, "track_id": t.track_id, "class_name": d.class_name,
-                                   "score": d.score, "box": d.box, "enu": None, "sigma_m": None}
-            if meta is not None:
-                fix = geolocate_box(d.box, meta.pose, meta.intrinsics, self.home or GeoPoint(lat=0.0, lon=0.0,
-                                                                                           alt=0.0),
-                                    ground_z=self.ground_z)
-                if fix is not None:
-                    row["enu"], row["sigma_m"] = fix.enu, fix.sigma_m
-                    if self.home is not None:
-                        row["lat"], row["lon"] = fix.lat, fix.lon
+        rows = track_rows(tr.update(keep), meta, ground_z=self.ground_z)
+        self.keep_tracks(meta, rows)  # recorded by the runtime (aerodaas.perception.track_records)
+        out = []
+        for r in rows:
+            row: dict[str, Any] = {"robot": robot, "track_id": r["track_id"], "class_name": r["class_name"],
+                                   "score": r["score"], "box": tuple(r["box"]),
+                                   "enu": None if r["enu"] is None else tuple(r["enu"]), "sigma_m": r["sigma_m"]}
+            if r["enu"] is not None and self.home is not None:
+                geo = enu_to_geodetic(*r["enu"], self.home)
+                row["lat"], row["lon"] = geo.lat, geo.lon
             out.append(row)
         return out
 

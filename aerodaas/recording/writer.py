@@ -299,6 +299,31 @@ class McapRecorder:
         self._write(topic, log_time_ns, f"protobuf:{full_name}", make_schema, ("protobuf", full_name),
                     "protobuf", msg.SerializeToString())
 
+    def declare_proto(self, topic: str, schema_name: str) -> tuple[str, str, bytes]:
+        """Register ``topic`` for the Foxglove protobuf schema ``schema_name`` (e.g. ``"foxglove.SceneUpdate"``)
+        before its first message, so the channel is in the file (and can be advertised live) from the start;
+        returns its schema record ``(name, "protobuf", FileDescriptorSet bytes)``. Raises ``ValueError`` for a
+        name that is not a Foxglove schema or a topic that already carries another kind."""
+        import importlib
+
+        pkg, _, short = schema_name.partition(".")
+        try:
+            if pkg != "foxglove" or not short.isidentifier():
+                raise ImportError
+            cls = getattr(importlib.import_module(f"foxglove_schemas_protobuf.{short}_pb2"), short)
+        except (ImportError, AttributeError):
+            raise ValueError(f"declare_proto({topic!r}): {schema_name!r} is not a foxglove protobuf schema") from None
+
+        def make_schema() -> tuple[str, str, bytes]:
+            return schema_name, "protobuf", build_file_descriptor_set(cls).SerializeToString()
+
+        with self._lock:
+            if self._closed:
+                raise RuntimeError(f"McapRecorder for {str(self.path)!r} is closed; cannot declare {topic!r}")
+            self._channel_for(topic, f"protobuf:{schema_name}", make_schema, ("protobuf", schema_name), "protobuf")
+            self._stream.sync()
+            return self._schema_records[topic]
+
     # ---------------------------------------------------------------------------------------------------------
     def write_image(self, topic: str, log_time_ns: int, image_bgr: np.ndarray | None = None, *,
                     jpeg: bytes | None = None, frame_id: str = "camera") -> None:

@@ -361,6 +361,12 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 place(base + suffix, f"analytics/{cname}/{base}{suffix}", rids, "analytics", comp.tier, cname,
                       labels)
 
+    if recorded:  # the drones' homes (lat/lon of recorded tracks) and the track channels known from the plan
+        from aerodaas.perception.track_records import declared_track_channels
+
+        rec.spec["record"]["homes"] = {r.id: getattr(r, "cfg", r).home.model_dump() for r in robots}
+        rec.spec["record"]["declare"] = declared_track_channels([r.id for r in robots], graphs)
+
     # ---- drones' own components and every edge
     edges: list[Edge] = []
     robot_ids: dict[str, dict] = {}

@@ -206,6 +206,21 @@ class RecordDetections(RecordItem):
 
 
 @dataclass(frozen=True)
+class RecordTracks(RecordItem):
+    """One frame's geo-located tracks of drone ``robot`` under topic ``prefix`` at ``t_ns``: ``rows`` as
+    :func:`aerodaas.perception.track_records.track_rows` makes them; ``image_size`` (W, H) pixels of the frame."""
+
+    prefix: str
+    t_ns: int
+    robot: str
+    rows: list
+    image_size: tuple[int, int] | None = None
+
+    def apply(self, recorder: Any) -> None:
+        recorder.tracks(self.prefix, self.t_ns, self.robot, self.rows, self.image_size)
+
+
+@dataclass(frozen=True)
 class RecordOdometry(RecordItem):
     """One odometry sample of ``robot`` (an Odometry dict) at ``t_ns``."""
 
