@@ -45,7 +45,7 @@ class ActorBase:
     (:class:`aerodaas.runtime.dataflow.ActorPlan.spec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
     None: read them from the run's recorder actor (how the runtime starts them)."""
 
-    def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None, lockstep: bool = False,
+    def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None,
                  workers: int | None = None, switch_interval_s: float | None = 0.0005) -> None:
         if switch_interval_s:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
@@ -57,11 +57,11 @@ class ActorBase:
             spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
             spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
-        self.host = DataPlane(host_id, tier, int(spec.get("epoch_ns", 0)), lockstep, workers)
+        self.host = DataPlane(host_id, tier, int(spec.get("epoch_ns", 0)), workers)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None
-        key = wiring.get("channel_key") if not lockstep else None
+        key = wiring.get("channel_key")
         if key:  # same-node channels (aerodaas.actors.channel): use the peers', serve ours (below)
             self.host.channel_key = key
         self.runtime: Any = None
@@ -113,7 +113,8 @@ class ActorBase:
     pid = ping
 
     def deliver(self, d: Delivery) -> list:
-        """A message from another actor for one of this actor's components (see :meth:`.host.DataPlane.deliver`)."""
+        """A message from another actor for one of this actor's components (see :meth:`.dataplane.DataPlane.deliver`:
+        a lock-step delivery returns once its cascade here is done)."""
         return self.host.deliver(d)
 
     def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:

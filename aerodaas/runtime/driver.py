@@ -406,7 +406,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         try:
             if scheduled:
                 cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
-            actors = start_actors(plan, placement, sim.lockstep, env.cfg.actor_max_restarts)
+            actors = start_actors(plan, placement, env.cfg.actor_max_restarts)
             # every actor sets up at once (drones connect to their vehicles); the recorder's answer is read first:
             # a bad file or live view is the error reported
             rec_setup = actors["recorder"].setup.remote()

@@ -44,7 +44,7 @@ def actor_class(role: str):
     raise ValueError(f"no actor class for role {role!r}")
 
 
-def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -> dict:
+def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
     """Create every actor of ``plan``: the recorder first, on the driver's node, never restarted; the others named,
     placed with their ``label_selector`` and restartable ``max_restarts`` times. Returns host id -> actor handle.
     Nothing is set up yet. Raises what Ray raises for an impossible placement option."""
@@ -75,7 +75,7 @@ def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -
         if hid == "recorder":
             continue
         opts = {"name": a.name, "label_selector": a.selector(placement), "max_restarts": max_restarts}
-        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier, None, None, lockstep)
+        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier, None, None)
     return handles
 
 
