@@ -16,6 +16,7 @@ from typing import Any
 import ray
 
 from aerodaas.runtime.messages import Delivery
+from aerodaas.runtime.specs import ActorSpec
 
 from aerodaas.actors.dataplane import DataPlane
 
@@ -42,10 +43,10 @@ def _recorder_name(name: str) -> str:
 
 class ActorBase:
     """Plain base of the run's Ray actors (see the module docstring). ``spec``: the actor's part of the plan
-    (:class:`aerodaas.runtime.dataflow.ActorPlan.spec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
+    (:class:`~aerodaas.runtime.specs.ActorSpec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
     None: read them from the run's recorder actor (how the runtime starts them)."""
 
-    def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None,
+    def __init__(self, host_id: str, tier: str, spec: ActorSpec | None, wiring: dict | None,
                  workers: int | None = None, switch_interval_s: float | None = 0.0005) -> None:
         if switch_interval_s:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
@@ -57,7 +58,7 @@ class ActorBase:
             spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
             spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
-        self.host = DataPlane(host_id, tier, int(spec.get("epoch_ns", 0)), workers)
+        self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None

@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -84,6 +85,7 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     from aerodaas.config import SimulationConfig
     from aerodaas.runtime.dataflow import build_plan, collect_graph
     from aerodaas.runtime.driver import _robot_schedulers
+    from aerodaas.runtime.specs import RecordSpec
 
     robots = robots or env.get_env_robots()
     env.cfg.drones_per_actor = len(robots)
@@ -95,10 +97,8 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     sim = SimulationConfig(lockstep=lockstep)
     plan = build_plan(env, robots, graphs, _robot_schedulers(env, robots), sim)
     (hid,) = [h for h, a in plan.actors.items() if a.role == "drone"]
-    spec = dict(plan.actors[hid].spec)
-    spec.pop("record_remote", None)
-    if record:
-        spec["record"] = {"path": record, "meta": {}}
+    spec = dataclasses.replace(plan.actors[hid].spec, record_remote=None,
+                               record=RecordSpec(record) if record else None)
     host = DataPlane(hid, "edge", 0, workers=2)
     rt = ActorAssembly(host, spec)
     host.connect(plan.routes(), plan.location(), {h: a.tier for h, a in plan.actors.items()}, {})

@@ -26,10 +26,9 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from aerodaas.runtime.messages import Port
+from aerodaas.runtime.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
 
 __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_plan", "collect_graph"]
-
-Role = Literal["drone", "analytics", "dispatcher", "recorder"]
 
 
 @dataclass(frozen=True)
@@ -63,7 +62,8 @@ class Edge:
 @dataclass
 class ActorPlan:
     """One Ray actor of the run. ``host_id`` is unique in the run (``drone/d1``, ``analytics/edge/detector#1``,
-    ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``)."""
+    ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``); ``spec``:
+    what the actor is built from (:class:`~aerodaas.runtime.specs.ActorSpec`)."""
 
     host_id: str
     role: Role
@@ -72,7 +72,11 @@ class ActorPlan:
     compute: str | None
     labels: dict[str, str]
     components: list[str] = field(default_factory=list)
-    spec: dict = field(default_factory=dict)
+    spec: ActorSpec | None = None
+
+    def __post_init__(self) -> None:
+        if self.spec is None:
+            self.spec = ActorSpec(self.role)
 
     def selector(self, placement: "Placement") -> dict[str, str]:
         """The ``label_selector`` for this actor on the cluster described by ``placement``."""
@@ -131,7 +135,7 @@ class RunPlan:
         return {"run": self.run_id,
                 "actors": [{"host": a.host_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
                             "label_selector": a.selector(placement), "components": list(a.components),
-                            **({"mavlink_links": a.spec["mavlink_links"]} if a.spec.get("mavlink_links") else {})}
+                            **({"mavlink_links": a.spec.mavlink_links} if a.spec.mavlink_links else {})}
                            for a in self.actors.values()],
                 "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
                            **({"analytics": n.analytics} if n.analytics else {})} for n in self.nodes.values()],
@@ -145,7 +149,7 @@ class RunPlan:
         for a in self.actors.values():
             sel = ",".join(f"{k}={v}" for k, v in a.selector(placement).items())
             lines.append(f"  {a.role:<10} {a.name}  [{sel}]" + (f"  compute {a.compute}" if a.compute else ""))
-            for key, ids in (a.spec.get("mavlink_links") or {}).items():
+            for key, ids in a.spec.mavlink_links.items():
                 lines.append(f"      mavlink link {key} shared by {', '.join(ids)} (one socket, routed by system id)")
             for c in a.components:
                 lines.append(f"      {self.nodes[c].kind:<11} {c}")
@@ -243,9 +247,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
 
     def actor(host_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
         if host_id not in actors:
-            spec: dict = {"sim": sim_d, "role": role}
-            if recorded and role != "recorder":
-                spec["record_remote"] = "recorder"
+            spec = ActorSpec(role, sim=sim_d, record_remote="recorder" if recorded and role != "recorder" else None)
             actors[host_id] = ActorPlan(host_id, role, f"aerodaas/{run_id}/{host_id}", tier, compute, dict(labels),
                                         [], spec)
         return actors[host_id]
@@ -256,9 +258,9 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
 
     rec = actor("recorder", "recorder", "edge", None, {})
     if recorded:  # the recorder also feeds the live view; without --record it writes no file
-        rec.spec["record"] = {"path": os.path.abspath(record) if record else None, "live": live, "meta": {
+        rec.spec.record = RecordSpec(os.path.abspath(record) if record else None, live, {
             "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
-            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"}}
+            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"})
 
     # ---- drones: one actor per drone (or per group of k drones flying from the same edge compute)
     drone_host: dict[str, str] = {}
@@ -270,10 +272,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
             hid = f"drone/{chunk[0].id}" if len(chunk) == 1 else f"drones/{chunk[0].id}+{len(chunk) - 1}"
             _, labels = _edge_compute(env, chunk[0])
             a = actor(hid, "drone", "edge", comp, labels)
-            a.spec.update(world=env.cfg.world.model_dump(mode="json"), robots=[], analytics=[])
-            shared = _shared_links(chunk)
-            if shared:
-                a.spec["mavlink_links"] = shared
+            a.spec.world = env.cfg.world.model_dump(mode="json")
+            a.spec.mavlink_links = _shared_links(chunk)
             for r in chunk:
                 drone_host[r.id] = hid
 
@@ -294,9 +294,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         def place(cid: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
                   scheduled_: bool = False, obj: Any = None) -> None:
             pa = actor(hid, role, tier, compute, labels)
-            pa.spec.setdefault("analytics", []).append({"cid": cid, "name": a.name, "obj": a if obj is None else obj,
-                                                       "buffer": max(buffer, 8) if scheduled_ else buffer,
-                                                       "scheduled": scheduled_})
+            pa.spec.analytics.append(AnalyticsSpec(cid, a.name, a if obj is None else obj,
+                                                   max(buffer, 8) if scheduled_ else buffer, scheduled_))
             add(Node(cid, "analytics", robots_[0] if len(robots_) == 1 and hid.startswith("drone") else None, hid,
                      a.name))
             inst[aid].append((cid, hid, robots_))
@@ -363,7 +362,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
             cid = f"{r.id}/{s.id}"
             subs = consumers(s.get_data_stream(), r.id)
             if s.type == "camera" and (s.get_data_stream().subscribers or recorded):
-                cams.append({"cid": cid, "sensor": s.id, "props": dict(s.cfg.properties)})
+                cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties)))
                 ids["cameras"][s.id] = cid
             elif s.type == "odometry" and subs:
                 ids["odom"].append(cid)
@@ -373,10 +372,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 continue
             add(Node(cid, s.type, r.id, hid))
             edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
-        actors[hid].spec["robots"].append({"robot": r.cfg.model_dump(mode="json"), "drone_cid": ids["drone"],
-                                          "scheduler_cid": ids["scheduler"], "scheduler": sched,
-                                          "preplanned": preplanned, "cameras": cams, "odom_cids": ids["odom"],
-                                          "stat_cids": ids["stat"]})
+        actors[hid].spec.robots.append(RobotSpec(r.cfg.model_dump(mode="json"), ids["drone"], ids["scheduler"], sched,
+                                                 preplanned, cams, ids["odom"], ids["stat"]))
         robot_ids[r.id] = ids
     seen_out: set[str] = set()
     for aid, a in every.items():
@@ -396,7 +393,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
                                         if r.id in served]
     for a in actors.values():
-        a.spec["epoch_ns"] = epoch_ns
+        a.spec.epoch_ns = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
     return RunPlan(run_id, nodes, edges, actors, robot_ids, {aid: [c for c, _, _ in v] for aid, v in inst.items()},
                    channel_key=key)

@@ -297,6 +297,7 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
     from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
+    from aerodaas.runtime.specs import AnalyticsSchedulerSpec
     from aerodaas.schedulers.analytics_base import analytics_scheduler_class
 
     cfg = env.cfg.analytics_scheduler
@@ -307,10 +308,9 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
                                       ray_name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics/")
     for a in plan.actors.values():
         if a.role == "dispatcher":
-            a.spec["analytics_scheduler"] = {
-                "name": cfg.name, "policy_class": policy_class, "workload": cfg.resolved_workload(env.cfg),
-                "executors": executors,
-                "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
+            a.spec.analytics_scheduler = AnalyticsSchedulerSpec(
+                cfg.name, policy_class, cfg.resolved_workload(env.cfg), executors, list(cfg.network),
+                cfg.jpeg_quality, 0)
     return executors
 
 
