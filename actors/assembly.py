@@ -15,6 +15,7 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
+from aerodaas.runtime.ids import is_drone
 from aerodaas.runtime.specs import ActorSpec
 
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
@@ -246,7 +247,7 @@ class ActorAssembly:
             d.end_mission("failed")
         peers = getattr(self.host, "peers", {}) or {}
         for cid, hid in getattr(self.host, "location", {}).items():
-            if cid.endswith("/drone") and hid in peers and not any(d.cid == cid for d in self.drones):
+            if is_drone(cid) and hid in peers and not any(d.cid == cid for d in self.drones):
                 self.host.peer(hid).call.remote(cid, "end_mission", "failed")
 
     # ------------------------------------------------------------------ end

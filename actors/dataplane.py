@@ -410,7 +410,10 @@ class DataPlane:
         -> host id; ``tiers``: host id -> tier; ``peers``: host id -> Ray actor name (resolved on first use, so a
         restarted actor is reached under the same name) or actor handle."""
         self.routes = {k: [tuple(s) if len(s) == 4 else (*s, None) for s in v] for k, v in routes.items()}
-        self.location.update(location)
+        merged = dict(location)  # the plan's typed ids (ComponentId: kind, robot) are the keys kept
+        for cid, hid in self.location.items():
+            merged.setdefault(cid, hid)
+        self.location = merged
         self.tiers.update(tiers)
         self.peers = dict(peers)
 

@@ -23,8 +23,9 @@ from __future__ import annotations
 import copy
 import os
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
+from aerodaas.runtime.ids import ComponentId, ComponentKind
 from aerodaas.runtime.messages import Port
 from aerodaas.runtime.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
 
@@ -33,11 +34,12 @@ __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_p
 
 @dataclass(frozen=True)
 class Node:
-    """One component: ``id`` (unique in the run), ``kind``, the robot it belongs to (None for a shared analytics)
-    and the host id of the actor it lives in."""
+    """One component: ``id`` (unique in the run; a :class:`~aerodaas.runtime.ids.ComponentId` that knows its
+    ``kind`` and robot), ``kind``, the robot it belongs to (None for a shared analytics) and the host id of the
+    actor it lives in."""
 
-    id: str
-    kind: Literal["drone", "camera", "odometry", "stat_stream", "scheduler", "analytics"]
+    id: ComponentId
+    kind: ComponentKind
     robot: str | None
     actor: str
     analytics: str | None = None  # the analytics' name, for analytics nodes
@@ -291,13 +293,13 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
         inst[aid] = []
 
-        def place(cid: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
+        def place(name: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
                   scheduled_: bool = False, obj: Any = None) -> None:
             pa = actor(hid, role, tier, compute, labels)
+            cid = ComponentId(name, "analytics", robots_[0] if len(robots_) == 1 and role == "drone" else None)
             pa.spec.analytics.append(AnalyticsSpec(cid, a.name, a if obj is None else obj,
                                                    max(buffer, 8) if scheduled_ else buffer, scheduled_))
-            add(Node(cid, "analytics", robots_[0] if len(robots_) == 1 and hid.startswith("drone") else None, hid,
-                     a.name))
+            add(Node(cid, "analytics", cid.robot, hid, a.name))
             inst[aid].append((cid, hid, robots_))
 
         if aid in scheduled:  # per frame by the analytics scheduler: a copy in each edge compute's dispatcher
@@ -344,7 +346,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 continue
             for st, prio, replace in scheds[rr.id].stream_inputs:
                 if st is stream:
-                    out.append(Edge("", f"{rr.id}/scheduler", Port("priority", prio, replace), 4,
+                    out.append(Edge("", ComponentId.scheduler(rr.id), Port("priority", prio, replace), 4,
                                     (rr.id,) if robot is None else None))
         return out
 
@@ -353,13 +355,14 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         sched = scheds[r.id]
         preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
                          for m in sched._missions if m.distance_driven)
-        ids = {"drone": f"{r.id}/drone", "scheduler": f"{r.id}/scheduler", "cameras": {}, "odom": [], "stat": [],
+        ids = {"drone": ComponentId.drone(r.id), "scheduler": ComponentId.scheduler(r.id), "cameras": {}, "odom": [],
+               "stat": [],
                "actor": hid}
         add(Node(ids["drone"], "drone", r.id, hid))
         add(Node(ids["scheduler"], "scheduler", r.id, hid))
         cams = []
         for s in r.sensors.values():
-            cid = f"{r.id}/{s.id}"
+            cid = ComponentId.sensor(r.id, s.id, s.type)
             subs = consumers(s.get_data_stream(), r.id)
             if s.type == "camera" and (s.get_data_stream().subscribers or recorded):
                 cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties)))
