@@ -354,7 +354,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         hid = drone_host[r.id]
         sched = scheds[r.id]
         preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
-                         for m in sched._missions if m.distance_driven)
+                         for m in sched.missions() if m.distance_driven)
         ids = {"drone": ComponentId.drone(r.id), "scheduler": ComponentId.scheduler(r.id), "cameras": {}, "odom": [],
                "stat": [],
                "actor": hid}
