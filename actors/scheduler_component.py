@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 
@@ -13,6 +14,19 @@ from aerodaas.app.models import AeroNavigation, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
 
 from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
+
+
+@dataclass(frozen=True)
+class Order:
+    """What the trajectory scheduler tells the drone to fly at one control tick: ``item`` (the head of the best
+    queued mission: a Waypoint, a VelocityCommand or an ActionCommand; None: nothing queued), how many items of
+    pre-planned (distance-driven) missions are left (``preplanned_left``), and the ``priority`` and name
+    (``mission``) of the mission the item belongs to (None without an item)."""
+
+    item: Any
+    preplanned_left: int
+    priority: int | None = None
+    mission: str | None = None
 
 
 class SchedulerComponent(Component):
@@ -52,16 +66,18 @@ class SchedulerComponent(Component):
         self._replaced: set[Port] = set()
         self.drone: Any = None  # the DroneComponent, set by the host runtime
 
-    def tick(self, now: float, position: tuple) -> dict:
+    def tick(self, now: float, position: tuple) -> Order:
+        """The drone's control tick at simulated time ``now`` (s) and ``position`` (ENU metres): what to fly now
+        (see :class:`Order`)."""
         self.now, self.position = now, tuple(position)
         if self._plan_sig is None:
             self._record_plan()
         cur = self.s.current(now)
         left = self.s.pending(distance_driven_only=True)
         if cur is None:
-            return {"item": None, "preplanned_left": left}
+            return Order(None, left)
         m, item = cur
-        return {"item": item, "priority": m.priority, "mission": m.name, "preplanned_left": left}
+        return Order(item, left, m.priority, m.name)
 
     def queued(self) -> list:
         """Every queued item in flying order (see :meth:`TrajectoryScheduler.queued`)."""
