@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any
+from typing import Any, Callable
 
 import ray
 
@@ -118,14 +118,20 @@ class ActorBase:
         a lock-step delivery returns once its cascade here is done)."""
         return self.host.deliver(d)
 
-    def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:
-        """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
-        if method.startswith("_"):
-            raise AttributeError(f"component {cid!r}: {method!r} is not public")
+    def call(self, cid: str, method: Callable, *args: Any, **kwargs: Any) -> Any:
+        """Call ``method`` — a public method of the component's class, the function itself (e.g.
+        ``DroneComponent.status``, see :mod:`aerodaas.runtime.handles`), never its name — on component ``cid``
+        with ``args``; a subclass's override runs. Raises TypeError when ``method`` is not a public method of the
+        component's class (or a base of it), KeyError for an unknown component, RuntimeError before setup."""
         if self.runtime is None:
             raise RuntimeError(f"actor {self.host.host_id!r} is not set up yet (component {cid!r})")
         comp = self.runtime.lookup(cid)
-        return getattr(comp, method)(*args, **kwargs)
+        name = getattr(method, "__name__", "")
+        if not callable(method) or name.startswith("_") or not any(
+                vars(k).get(name) is method for k in type(comp).__mro__):
+            raise TypeError(f"component {cid!r} ({type(comp).__name__}): {method!r} is not one of its public "
+                            f"methods")
+        return getattr(comp, name)(*args, **kwargs)
 
     def drain(self) -> bool:
         """Finish the work in flight once the drones are done (the analytics scheduler's tasks)."""

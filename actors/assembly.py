@@ -246,9 +246,11 @@ class ActorAssembly:
             d.error = reason
             d.end_mission("failed")
         peers = getattr(self.host, "peers", {}) or {}
+        from aerodaas.actors.drone import DroneComponent
+
         for cid, hid in getattr(self.host, "location", {}).items():
             if is_drone(cid) and hid in peers and not any(d.cid == cid for d in self.drones):
-                self.host.peer(hid).call.remote(cid, "end_mission", "failed")
+                self.host.peer(hid).call.remote(cid, DroneComponent.end_mission, "failed")
 
     # ------------------------------------------------------------------ end
     def drain(self) -> bool:

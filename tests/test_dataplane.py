@@ -360,6 +360,31 @@ def test_lockstep_frames_travel_by_channel_and_every_frame_is_processed(ray_sess
     assert res.stats["d00"]["scheduler"]["frames_with_latency"] > 0
 
 
+def test_components_are_called_by_their_methods_never_by_name():
+    """An actor runs a component's public method given as the function itself (what the driver's typed handles
+    send); a method name, another component class's method or a private method is refused with a TypeError, and
+    a handle has no attribute for a method it does not declare (a typo fails in the driver)."""
+    from aerodaas.actors.actor_base import ActorBase
+    from aerodaas.actors.drone import DroneComponent
+    from aerodaas.actors.scheduler_component import SchedulerComponent
+    from aerodaas.runtime.handles import DroneHandle
+
+    env = _env(1)
+    host, rt, _ = _host_for(env)
+    try:
+        actor = object.__new__(ActorBase)  # the Ray actor's plain body, without Ray
+        actor.host, actor.runtime = host, rt
+        assert actor.call("d00/drone", DroneComponent.status)["robot"] == "d00"
+        assert actor.call("d00/scheduler", SchedulerComponent.snapshot) == rt.comps["d00/scheduler"].snapshot()
+        for bad in ("status", SchedulerComponent.snapshot, DroneComponent._event):
+            with pytest.raises(TypeError, match="not one of its public methods"):
+                actor.call("d00/drone", bad)
+        with pytest.raises(AttributeError):
+            DroneHandle(None, "d00/drone").statuss  # noqa: B018 - the typo itself is the test
+    finally:
+        rt.close()
+
+
 def test_navigation_reaches_the_backend_before_the_next_tick():
     env = _env(1)
     drone = env.get_robot_by_id("d00")

@@ -270,28 +270,6 @@ def shutdown_ray() -> None:
     _EARLY.clear()
 
 
-class ComponentHandle:
-    """A component inside one of the run's actors, used like an actor handle: ``h.status.remote()`` calls
-    ``component.status()`` in its actor's process and returns an ObjectRef."""
-
-    def __init__(self, host: Any, cid: str) -> None:
-        self.host, self.cid = host, cid
-
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("_"):
-            raise AttributeError(name)
-        host, cid = self.host, self.cid
-
-        class _Method:
-            def remote(self, *args: Any, **kwargs: Any) -> Any:
-                return host.call.remote(cid, name, *args, **kwargs)
-
-        return _Method()
-
-    def __repr__(self) -> str:
-        return f"ComponentHandle({self.cid!r})"
-
-
 def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
@@ -319,15 +297,17 @@ def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
     actors), bound to the application's objects (``robot._handle``, live scheduler, pull getters)."""
     import ray
 
+    from aerodaas.runtime.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
+
     loc = plan.location()
     handles: dict[str, dict] = {}
     for r in robots:
         ids = plan.robots[r.id]
-        a_handles = {cid: ComponentHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
+        a_handles = {cid: AnalyticsHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
         home = actors[ids["actor"]]
-        handles[r.id] = {"robot": r, "drone": ComponentHandle(home, ids["drone"]),
-                         "scheduler": ComponentHandle(home, ids["scheduler"]), "analytics": a_handles,
-                         "cameras": {sid: ComponentHandle(home, cid) for sid, cid in ids["cameras"].items()},
+        handles[r.id] = {"robot": r, "drone": DroneHandle(home, ids["drone"]),
+                         "scheduler": SchedulerHandle(home, ids["scheduler"]), "analytics": a_handles,
+                         "cameras": {sid: CameraHandle(home, cid) for sid, cid in ids["cameras"].items()},
                          "sched_obj": r.scheduler or env.trajectory_scheduler()}
         r._handle = handles[r.id]["drone"]
         for s in r.sensors.values():
