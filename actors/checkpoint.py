@@ -44,8 +44,7 @@ def restore_drone(d: Any, cp: dict) -> None:
         state = S(cp["state"])
         if state == S.WAYPOINT_HOLD:
             state = S.NAVIGATING
-        d.fsm._state = state
-        d.fsm.history = list(cp.get("history") or []) + [(cp["t"], state)]
+        d.fsm.restore(state, list(cp.get("history") or []) + [(cp["t"], state)])
         for k in ("events", "visited", "preplanned_left", "takeoff_altitude", "flew_something", "idle_since", "outcome",
                   "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected"):
             if k in cp:

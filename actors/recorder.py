@@ -215,12 +215,7 @@ class RecorderService:
             if item is not _STOP:
                 lost += 1
         self.lost += lost
-        durable = rec._stream.durable
-        try:
-            rec._file.close()  # its pending buffer cannot be written: close the descriptor anyway
-        except OSError:
-            pass
-        rec._closed = True
+        durable = rec.abandon()  # its pending buffer cannot be written: the descriptor is closed anyway
         finished = False
         try:
             os.truncate(rec.path, durable)  # the file ends at a complete record: an unfinished but valid MCAP
