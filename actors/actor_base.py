@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any
+from typing import Any, Callable
 
 import ray
 
 from aerodaas.runtime.messages import Delivery
+from aerodaas.runtime.specs import ActorSpec
 from aerodaas.runtime.startup_probe import probe
 
 from aerodaas.actors.dataplane import DataPlane
@@ -43,10 +44,10 @@ def _recorder_name(name: str) -> str:
 
 class ActorBase:
     """Plain base of the run's Ray actors (see the module docstring). ``spec``: the actor's part of the plan
-    (:class:`aerodaas.runtime.dataflow.ActorPlan.spec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
+    (:class:`~aerodaas.runtime.specs.ActorSpec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
     None: read them from the run's recorder actor (how the runtime starts them)."""
 
-    def __init__(self, host_id: str, tier: str, spec: dict | None, wiring: dict | None, lockstep: bool = False,
+    def __init__(self, host_id: str, tier: str, spec: ActorSpec | None, wiring: dict | None,
                  workers: int | None = None, switch_interval_s: float | None = 0.0005) -> None:
         probe(f"actor_init:{host_id}")  # the constructor runs: the worker is up and this module imported
         if switch_interval_s:
@@ -59,11 +60,11 @@ class ActorBase:
             spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
             spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
-        self.host = DataPlane(host_id, tier, int(spec.get("epoch_ns", 0)), lockstep, workers)
+        self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None
-        key = wiring.get("channel_key") if not lockstep else None
+        key = wiring.get("channel_key")
         if key:  # same-node channels (aerodaas.actors.channel): use the peers', serve ours (below)
             self.host.channel_key = key
         self.runtime: Any = None
@@ -116,17 +117,24 @@ class ActorBase:
     pid = ping
 
     def deliver(self, d: Delivery) -> list:
-        """A message from another actor for one of this actor's components (see :meth:`.host.DataPlane.deliver`)."""
+        """A message from another actor for one of this actor's components (see :meth:`.dataplane.DataPlane.deliver`:
+        a lock-step delivery returns once its cascade here is done)."""
         return self.host.deliver(d)
 
-    def call(self, cid: str, method: str, *args: Any, **kwargs: Any) -> Any:
-        """Call a component's public method (status, snapshot, add_navigation, pause_mission, ...)."""
-        if method.startswith("_"):
-            raise AttributeError(f"component {cid!r}: {method!r} is not public")
+    def call(self, cid: str, method: Callable, *args: Any, **kwargs: Any) -> Any:
+        """Call ``method`` — a public method of the component's class, the function itself (e.g.
+        ``DroneComponent.status``, see :mod:`aerodaas.runtime.handles`), never its name — on component ``cid``
+        with ``args``; a subclass's override runs. Raises TypeError when ``method`` is not a public method of the
+        component's class (or a base of it), KeyError for an unknown component, RuntimeError before setup."""
         if self.runtime is None:
             raise RuntimeError(f"actor {self.host.host_id!r} is not set up yet (component {cid!r})")
         comp = self.runtime.lookup(cid)
-        return getattr(comp, method)(*args, **kwargs)
+        name = getattr(method, "__name__", "")
+        if not callable(method) or name.startswith("_") or not any(
+                vars(k).get(name) is method for k in type(comp).__mro__):
+            raise TypeError(f"component {cid!r} ({type(comp).__name__}): {method!r} is not one of its public "
+                            f"methods")
+        return getattr(comp, name)(*args, **kwargs)
 
     def drain(self) -> bool:
         """Finish the work in flight once the drones are done (the analytics scheduler's tasks)."""

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from aerodaas.runtime.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
+from aerodaas.runtime.specs import AnalyticsSchedulerSpec
 
 from aerodaas.actors.dataplane import Component, DataPlane
 
@@ -273,14 +274,13 @@ class AnalyticsSchedulingService:
     analytics on the JPEG. A cloud executor that dies (its node lost) is handled by the pool: in-flight tasks are
     retried or FAILED, the policy is told when no cloud is left, and the mission goes on.
 
-    ``spec``: ``{"name", "policy_class" (the :class:`AnalyticsScheduler` subclass, resolved in the driver, where an
-    application's own scheduler is registered), "workload" (Workload), "executors" ([CloudExecutorActor handles], may be empty),
-    "network" ([NetworkModel specs]), "jpeg_quality", "seed"}``."""
+    ``spec``: the dispatcher actor's :class:`~aerodaas.runtime.specs.AnalyticsSchedulerSpec` (the scheduler's
+    class itself, resolved in the driver where an application's own scheduler is registered)."""
 
-    def __init__(self, host: DataPlane, spec: dict) -> None:
+    def __init__(self, host: DataPlane, spec: AnalyticsSchedulerSpec) -> None:
         self.host = host
         self.spec = spec
-        self.name = spec["name"]
+        self.name = spec.name
         self.comps: dict[str, ScheduledAnalyticsComponent] = {}
         self.dispatcher = None
         self.final: dict | None = None
@@ -296,13 +296,13 @@ class AnalyticsSchedulingService:
         from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
         from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
         from aerodaas.schedulers.dispatch.emulation import NetworkModel
-        w = self.spec["workload"]
-        policy = self.spec["policy_class"](w)
+        w = self.spec.workload
+        policy = self.spec.policy_class(w)
         bank = AnalyticsBank({n: c.obj for n, c in self.comps.items()}, shared=True)
-        ex = list(self.spec.get("executors") or [])
-        pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.get("network") or ["none"],
-                                                                     seed=int(self.spec.get("seed", 0))),
-                         jpeg_quality=int(self.spec.get("jpeg_quality", 90))) if ex else None
+        ex = list(self.spec.executors)
+        pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.network or ["none"],
+                                                                     seed=int(self.spec.seed)),
+                         jpeg_quality=int(self.spec.jpeg_quality)) if ex else None
         self.dispatcher = AnalyticsDispatcher(policy, AnalyticsEdgeExecutor(bank), pool, edge_id=self.host.host_id,
                                               on_result=self._on_result, keep_tasks=False)
         self.dispatcher.start_background()

@@ -15,6 +15,8 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
+from aerodaas.runtime.ids import is_drone
+from aerodaas.runtime.specs import ActorSpec
 
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
 from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
@@ -58,82 +60,81 @@ class _Checkpointer:
 
 
 class ActorAssembly:
-    """Builds a host's components from the driver's ``spec`` and runs them.
+    """Builds an actor's components from its :class:`~aerodaas.runtime.specs.ActorSpec` and runs them: the
+    recorder (a file of its own with ``spec.record``, else the run's recorder actor with ``spec.record_remote``),
+    the analytics instances (``spec.analytics``), and per robot (``spec.robots``) its trajectory scheduler, drone
+    and cameras (simulated ones render ``spec.world``). Drones connect to their vehicles here, so an unreachable
+    vehicle fails the run before take-off (:class:`~aerodaas.backends.base.RobotsNotConnected`)."""
 
-    ``spec`` keys: ``sim`` (SimulationConfig dict), ``world`` (WorldConfig dict, for simulated cameras),
-    ``record`` ({"path", "meta"} or None: the recorder lives on the host that has the drones), ``analytics``
-    ([{"cid", "name", "obj", "buffer"}]), ``robots`` ([{"robot": RobotConfig dict, "drone_cid",
-    "scheduler_cid", "scheduler": TrajectoryScheduler, "preplanned": n, "cameras": [{"cid", "sensor", "props"}],
-    "odom_cids": [...], "stat_cids": [...]}]). Drones connect to their vehicles here, so an unreachable vehicle
-    fails the run before take-off."""
-
-    def __init__(self, host: DataPlane, spec: dict) -> None:
+    def __init__(self, host: DataPlane, spec: ActorSpec) -> None:
         from aerodaas.actors.drone import DroneComponent
         from aerodaas.actors.recorder import RecorderService
 
         self.host = host
-        self.sim = SimulationConfig.model_validate(spec.get("sim") or {})
-        rec = spec.get("record")
-        if rec:  # the edge host: the file and/or the live view
-            if rec.get("schemas"):  # plug-in sensors' message schemas, from their declarations
+        self.sim = SimulationConfig.model_validate(spec.sim)
+        rec = spec.record
+        if rec is not None:  # an actor with the file and/or the live view
+            if rec.schemas:  # plug-in sensors' message schemas, from their declarations
                 from aerodaas.recording.schemas import register_json_schema
 
-                for name, js in rec["schemas"].items():
+                for name, js in rec.schemas.items():
                     register_json_schema(name, js)
-            self.recorder = RecorderService(rec.get("path"), rec.get("meta"), copies=host.copies, live=rec.get("live"),
-                                            homes=rec.get("homes"), declare=rec.get("declare"))
-        elif spec.get("record_remote"):  # an actor of a recorded run: its messages go to the run's recorder actor
+            self.recorder = RecorderService(rec.path, rec.meta, copies=host.copies, live=rec.live, homes=rec.homes,
+                                            declare=rec.declare)
+        elif spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
             from aerodaas.actors.recorder import RemoteRecorder
 
-            self.recorder = RemoteRecorder(host, spec["record_remote"])
+            self.recorder = RemoteRecorder(host, spec.record_remote)
         else:
             self.recorder = None
         host.recorder = self.recorder
         self.comps: dict[str, Any] = {}
-        self.scheduling = AnalyticsSchedulingService(host, spec["analytics_scheduler"]) \
-            if spec.get("analytics_scheduler") else None
-        for a in spec.get("analytics", []):
-            if a.get("scheduled"):
-                comp = ScheduledAnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder, host.epoch_ns,
+        self.scheduling = AnalyticsSchedulingService(host, spec.analytics_scheduler) \
+            if spec.analytics_scheduler is not None else None
+        for a in spec.analytics:
+            if a.scheduled:
+                if self.scheduling is None:
+                    raise ValueError(f"analytics {a.cid!r} is placed by the analytics scheduler, but actor "
+                                     f"{host.host_id!r} has no analytics_scheduler spec")
+                comp = ScheduledAnalyticsComponent(host, a.cid, a.name, a.obj, self.recorder, host.epoch_ns,
                                                    self.scheduling)
                 self.scheduling.add(comp)
             else:
-                comp = AnalyticsComponent(host, a["cid"], a["name"], a["obj"], self.recorder, host.epoch_ns,
-                                          a.get("buffer", 1))
-            self.comps[a["cid"]] = host.add(comp)
+                comp = AnalyticsComponent(host, a.cid, a.name, a.obj, self.recorder, host.epoch_ns, a.buffer)
+            self.comps[a.cid] = host.add(comp)
         if self.scheduling is not None:
             self.scheduling.start()
         self.drones: list[DroneComponent] = []
         world = None
-        for r in spec.get("robots", []):
-            if r.get("plugins"):  # plug-in classes carried in the spec: known here before the config is checked
+        for r in spec.robots:
+            if r.plugins:  # plug-in classes carried in the spec: known here before the config is checked
                 from aerodaas.plugins.registry import adopt
 
-                adopt(r["plugins"])
-            cfg = RobotConfig.model_validate(r["robot"])
-            sched = host.add(SchedulerComponent(host, r["scheduler_cid"], cfg.id, r["scheduler"], self.recorder,
-                                                host.epoch_ns, r["robot"]))
-            drone = DroneComponent(r["drone_cid"], r["robot"], host, sched, self.recorder, host.epoch_ns,
-                                   r["preplanned"], r["odom_cids"], r["stat_cids"])
+                adopt(r.plugins)
+            cfg = RobotConfig.model_validate(r.robot)
+            sched = host.add(SchedulerComponent(host, r.scheduler_cid, cfg.id, r.scheduler, self.recorder,
+                                                host.epoch_ns, r.robot))
+            drone = DroneComponent(r.drone_cid, r.robot, host, sched, self.recorder, host.epoch_ns,
+                                   r.preplanned, r.odom_cids, r.stat_cids)
             sched.drone = drone
-            for c in r["cameras"]:
-                if c["props"].get("source", "sim") == "sim" and world is None:
+            for c in r.cameras:
+                if c.props.get("source", "sim") == "sim" and world is None:
                     from aerodaas.sim.world import World
 
-                    w = WorldConfig.model_validate(spec["world"])
+                    w = WorldConfig.model_validate(spec.world)
                     world = World(w.ground, w.targets)  # one texture for every camera of this host
-                cam = CameraComponent(host, c["cid"], cfg.id, c["sensor"], c["props"], world, drone.backend,
+                cam = CameraComponent(host, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
                                       self.recorder, host.epoch_ns)
                 drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
-                self.comps[c["cid"]] = cam
-            for ps in r.get("plugin_sensors", ()):
+                self.comps[c.cid] = cam
+            for ps in r.plugin_sensors:
                 from aerodaas.actors.plugin_sensor import PluginSensorComponent
 
                 comp = PluginSensorComponent(host, ps, cfg.id, self.recorder, host.epoch_ns)
                 drone.plugin_sensors.append(comp)
                 self.comps[ps["cid"]] = comp
-            self.comps[r["drone_cid"]] = drone
-            self.comps[r["scheduler_cid"]] = sched
+            self.comps[r.drone_cid] = drone
+            self.comps[r.scheduler_cid] = sched
             self.drones.append(drone)
         # real cameras are not synchronised: spread the fleet's capture phases over one frame period
         for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
@@ -262,9 +263,11 @@ class ActorAssembly:
             d.error = reason
             d.end_mission("failed")
         peers = getattr(self.host, "peers", {}) or {}
+        from aerodaas.actors.drone import DroneComponent
+
         for cid, hid in getattr(self.host, "location", {}).items():
-            if cid.endswith("/drone") and hid in peers and not any(d.cid == cid for d in self.drones):
-                self.host.peer(hid).call.remote(cid, "end_mission", "failed")
+            if is_drone(cid) and hid in peers and not any(d.cid == cid for d in self.drones):
+                self.host.peer(hid).call.remote(cid, DroneComponent.end_mission, "failed")
 
     # ------------------------------------------------------------------ end
     def drain(self) -> bool:

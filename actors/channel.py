@@ -23,8 +23,10 @@ and restarts:
 Addresses are Linux abstract Unix sockets named from the run and the receiving actor (:func:`channel_address`):
 an actor of another machine (or another network namespace) is simply not found there, and the sender falls back
 to Ray (an ObjectRef on the same tier, JPEG across tiers). Every actor of a run serves one (:class:`ChannelServer`);
-a restarted actor serves it again under the same address and senders reconnect. Lock-step runs keep Ray calls
-(their cascades are tracked by ObjectRefs).
+a restarted actor serves it again under the same address and senders reconnect. Lock-step runs use the same
+channels: a delivery of a lock-step cascade (:attr:`~aerodaas.runtime.messages.Delivery.cascade`) is answered when
+the receiver's cascade for it is done (never blocking the connection's thread), and the sender's cascade stays
+open until that answer and its replies were handed on.
 
 Wire messages: :class:`ChannelSend` (sender -> receiver), :class:`ChannelDone` and :class:`SlotFree` (receiver ->
 sender); a frame's ``data`` on the wire is a :class:`SlotFrame`.
@@ -135,7 +137,9 @@ class ChannelServer:
     """The receiving end of every channel into one actor: listens on :func:`channel_address`, authenticates each
     sender with the run's key and serves it on a thread of its own. ``deliver(d) -> replies`` is the actor's
     :meth:`~.dataplane.DataPlane.deliver`; it runs in the connection's thread (as a Ray actor call runs in one of the actor's
-    threads). Raises OSError if the address is taken (another live process serves it)."""
+    threads); for a delivery of a lock-step cascade it is called as ``deliver(d, answer)``, returns None and calls
+    ``answer(replies)`` once the cascade is done (from whichever thread finished it). Raises OSError if the
+    address is taken (another live process serves it)."""
 
     def __init__(self, address: str, key: bytes, deliver: Callable[[Delivery], list],
                  on_error: Callable[[str, BaseException], None] | None = None) -> None:
@@ -230,7 +234,12 @@ class ChannelServer:
                     elif isinstance(d.msg, FrameMsg) and isinstance(d.msg.data, np.ndarray):
                         d.msg.data.flags.writeable = False  # sent inline: shared by every reader here too
                         d.msg.trace["get_ms"] = 0.0
-                    replies = self._deliver(d)
+                    if d.cascade:  # answered when the cascade it starts here is done; this thread reads on
+                        self._deliver(d, lambda r, seq=seq: send(ChannelDone(seq, r, None, take_freed())))
+                        d = None
+                        continue
+                    else:
+                        replies = self._deliver(d)
                 except Exception as e:  # noqa: BLE001 - answered as failed; the actor goes on
                     self.failed += 1
                     error = f"{type(e).__name__}: {e}"
@@ -311,7 +320,8 @@ class ChannelOutlet:
         self.retry_s = retry_s
         self._lock = threading.Lock()
         self._slots: dict[str, _Slot] = {}
-        self._in_flight: dict[int, str | None] = {}  # seq -> slot name (None: no frame)
+        #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None)
+        self._in_flight: dict[int, tuple[str | None, Any]] = {}
         self._seq = 0
         self._conn: Any = None
         self._next_try = 0.0
@@ -337,30 +347,46 @@ class ChannelOutlet:
                 break
             if isinstance(item, ChannelDone):
                 with self._lock:
-                    self._in_flight.pop(item.seq, None)
+                    _, tok = self._in_flight.pop(item.seq, (None, None))
                     if item.error is not None:
                         self.failed += 1
                     self._free(item.freed)
-                if item.replies:
-                    try:
-                        self.on_reply(item.replies)
-                    except Exception:  # noqa: BLE001 - the receiving component counts its own errors
-                        pass
+                try:
+                    if item.replies:
+                        if tok is not None:  # the replies join the cascade that waited for this answer
+                            for d in item.replies:
+                                d.msg.tok = tok
+                        try:
+                            self.on_reply(item.replies)
+                        except Exception:  # noqa: BLE001 - the receiving component counts its own errors
+                            pass
+                finally:
+                    if tok is not None:
+                        tok.done()
             elif isinstance(item, SlotFree):
                 with self._lock:
                     self._free(item.names)
+        lost: list = []
         with self._lock:  # the peer died (or closed): what was in flight is lost; its mappings went with it
             if self._conn is conn:
                 self._conn = None
                 self.failed += len(self._in_flight)
-                self._in_flight.clear()
+                lost = self._take_in_flight()
                 for s in self._slots.values():
                     s.free = True
                 self._next_try = time.monotonic() + self.retry_s
+        for tok in lost:  # a lost delivery no longer holds its lock-step cascade open
+            tok.done()
         try:
             conn.close()
         except OSError:
             pass
+
+    def _take_in_flight(self) -> list:
+        """Caller holds ``_lock``: forget every delivery in flight; returns the cascades they held open."""
+        toks = [tok for _, tok in self._in_flight.values() if tok is not None]
+        self._in_flight.clear()
+        return toks
 
     def _free(self, names: tuple[str, ...]) -> None:
         """Caller holds ``_lock``: slots ``names`` may be written again."""
@@ -403,13 +429,16 @@ class ChannelOutlet:
         return s
 
     def send(self, msg: Message) -> int | None:
-        """Send one message (never a lock-step one); returns its delivery number, or None when dropped (too many in
-        flight, or the peer is down: counted in ``dropped`` / ``failed``)."""
+        """Send one message; returns its delivery number, or None when dropped (too many in flight, or the peer is
+        down: counted in ``dropped`` / ``failed``). A message of a lock-step cascade (``msg.tok``) is never dropped
+        for being over ``buffer`` (the clock bounds what is in flight); the cascade stays open until the receiver
+        answered that its own cascade for it is done, and the replies in that answer were handed on."""
+        tok = msg.tok
         with self._lock:
             if not self._ensure():
                 self.failed += 1
                 return None
-            if len(self._in_flight) >= self.buffer:
+            if tok is None and len(self._in_flight) >= self.buffer:
                 self.dropped += 1
                 return None
             slot_name = None
@@ -433,13 +462,16 @@ class ChannelOutlet:
             self._seq += 1
             seq = self._seq
             try:
-                self._conn.send(ChannelSend(seq, Delivery(self.cid, self.port, wire, reply_to=self.reply_to)))
+                self._conn.send(ChannelSend(seq, Delivery(self.cid, self.port, wire, cascade=tok is not None,
+                                                          reply_to=self.reply_to)))
             except (OSError, ValueError):
                 if slot_name is not None:
                     self._slots[slot_name].free = True
                 self.failed += 1
                 return None
-            self._in_flight[seq] = slot_name
+            if tok is not None:
+                tok.add()  # the reader thread cannot see the answer before this lock is released
+            self._in_flight[seq] = (slot_name, tok)
             self.sent += 1
             return seq
 
@@ -455,6 +487,9 @@ class ChannelOutlet:
             self.closed = True
             conn, self._conn = self._conn, None
             slots, self._slots = list(self._slots.values()), {}
+            lost = self._take_in_flight()
+        for tok in lost:
+            tok.done()
         if conn is not None:
             _shutdown(conn)
             try:

@@ -20,21 +20,15 @@ _SEQ = itertools.count(1)
 
 def drone_checkpoint(d: Any) -> dict:
     """A checkpoint of DroneComponent ``d`` (taken under its lock, so it is consistent with one control step)."""
-    from aerodaas.schedulers.base import Mission
-
     with d.lock:
-        s = d.scheduler.s
-        with s._lock:  # the items themselves are never changed in place: copying the lists is enough
-            missions = [Mission(m.priority, m.seq, m.name, list(m.items), m.distance_driven, dict(m.segment_of))
-                        for m in s._missions]
-            completed = list(s.completed)
+        q = d.scheduler.s.queue_state()  # the items themselves are never changed in place: list copies suffice
         return {"seq": next(_SEQ), "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
                 "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(d.visited),
                 "events": list(d.events[-50:]), "preplanned_left": d.preplanned_left, "preplanned_total": d.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
                 "flew_something": d.flew_something, "idle_since": d.idle_since, "outcome": d.outcome,
                 "error": d.error, "ticks": d.ticks, "missed_ticks": d.missed_ticks, "next_tick": d.next_tick,
-                "next_odom": d.next_odom, "rejected": list(d.rejected), "missions": missions,
-                "completed": completed, "segments_issued": getattr(s, "_segments_issued", 0), "seq_missions": s._seq,
+                "next_odom": d.next_odom, "rejected": list(d.rejected), "missions": q["missions"],
+                "completed": q["completed"], "segments_issued": q["segments_issued"], "seq_missions": q["seq"],
                 "cameras": [c["next_t"] for c in d.cameras]}
 
 
@@ -45,18 +39,12 @@ def restore_drone(d: Any, cp: dict) -> None:
     with d.lock:
         if cp.get("vehicle") is not None:
             d.backend.restore(cp["vehicle"])
-        s = d.scheduler.s
-        with s._lock:
-            s._missions = cp["missions"]
-            s.completed = list(cp["completed"])
-            s._seq = cp.get("seq_missions", s._seq)
-            if cp.get("segments_issued"):
-                s._segments_issued = cp["segments_issued"]
+        d.scheduler.s.restore_queue(cp["missions"], cp["completed"], cp.get("seq_missions"),
+                                    cp.get("segments_issued"))
         state = S(cp["state"])
         if state == S.WAYPOINT_HOLD:
             state = S.NAVIGATING
-        d.fsm._state = state
-        d.fsm.history = list(cp.get("history") or []) + [(cp["t"], state)]
+        d.fsm.restore(state, list(cp.get("history") or []) + [(cp["t"], state)])
         for k in ("events", "visited", "preplanned_left", "takeoff_altitude", "flew_something", "idle_since", "outcome",
                   "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected"):
             if k in cp:

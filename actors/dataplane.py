@@ -33,10 +33,13 @@ and +1 decode on the receiving one** per edge that crosses tiers; +1 ``ray.put``
 same tier on another machine (or with ``same_node_transport: ray``; the receiver's ``ray.get`` maps the object
 store's shared memory on its node).
 
-Lock-step: with ``lockstep`` the clock waits after every frame (and odometry message) for its whole cascade —
-every item derived from it, in this actor and in others — before simulated time moves on (:class:`Cascade`);
-queues are then unbounded, so nothing is dropped, and deliveries to other actors are Ray calls (the cascade
-follows their ObjectRefs).
+Lock-step is a property of the clock, not of the transport: with ``lockstep`` the clock waits after every frame
+(and odometry message) for its whole cascade — every item derived from it, in this actor and in others — before
+simulated time moves on (:class:`Cascade`). Items travel over the same outlets either way (a same-node channel, or
+Ray calls across nodes and tiers); an item that belongs to a cascade is never dropped (the clock bounds what is in
+flight) and its delivery is answered only once the receiver's own cascade for it is done
+(:attr:`~aerodaas.runtime.messages.Delivery.cascade`): the sender's cascade stays open until that answer arrived and
+the replies in it were handed on.
 """
 from __future__ import annotations
 
@@ -54,6 +57,7 @@ import cv2
 import numpy as np
 import ray
 
+from aerodaas.actors.cascade import Cascade
 from aerodaas.runtime.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
 
 __all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "DataPlane", "encode_frame", "decode_frame"]
@@ -97,54 +101,6 @@ class FrameCopies:
         """The counters now, ``{name: frames}``."""
         with self._lock:
             return dict(self._n)
-
-
-class Cascade:
-    """Counts the outstanding work derived from one lock-step item (a frame or an odometry message).
-
-    :meth:`add` when an item derived from it is accepted by a component (or sent to another host), :meth:`done`
-    when that item was processed and its outputs were handed on; :meth:`wait` blocks until nothing is left.
-    Remote work is tracked by the ObjectRefs of the calls, whose results list further refs (their own remote
-    sends)."""
-
-    __slots__ = ("_n", "_cv", "_refs")
-
-    def __init__(self) -> None:
-        self._n = 0
-        self._cv = threading.Condition(threading.Lock())
-        self._refs: list = []
-
-    def add(self) -> None:
-        with self._cv:
-            self._n += 1
-
-    def done(self) -> None:
-        with self._cv:
-            self._n -= 1
-            if self._n <= 0:
-                self._cv.notify_all()
-
-    def add_ref(self, ref: Any) -> None:
-        with self._cv:
-            self._refs.append(ref)
-
-    def wait(self, timeout_s: float = 120.0) -> None:
-        """Block until every derived item is done. Raises TimeoutError after ``timeout_s`` seconds."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            with self._cv:
-                while self._n > 0:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        raise TimeoutError(f"lock-step: {self._n} items still in flight after {timeout_s:.0f} s")
-                    self._cv.wait(left)
-                refs, self._refs = self._refs, []
-            if not refs:
-                return
-            for res in ray.get(refs, timeout=max(0.1, deadline - time.monotonic())):
-                for r in res or ():
-                    if isinstance(r, ray.ObjectRef):
-                        self.add_ref(r)
 
 
 def encode_frame(frame: np.ndarray, quality: int = 85) -> bytes:
@@ -289,16 +245,18 @@ class RemoteOutlet:
                 self.failed += 1
 
     def send(self, msg: Message) -> Any:
-        """Send one message (without its lock-step token); returns the call's ObjectRef or None if dropped. A frame
-        is put into the object store (or JPEG-encoded, across tiers) once per message, however many consumers of
-        other actors it has (the message keeps the ref)."""
+        """Send one message; returns the call's ObjectRef or None if dropped. A frame is put into the object store
+        (or JPEG-encoded, across tiers) once per message, however many consumers of other actors it has (the
+        message keeps the ref). A message of a lock-step :class:`Cascade` (``msg.tok``) is never dropped: the
+        cascade stays open until the call returned (the receiver's cascade for it is done) and its replies were
+        handed on."""
         tok = msg.tok
         with self._lock:
-            if tok is None and self.in_flight:
+            if self.in_flight:
                 self._reap()
-                if len(self.in_flight) >= self.buffer:
-                    self.dropped += 1
-                    return None
+            if tok is None and len(self.in_flight) >= self.buffer:
+                self.dropped += 1
+                return None
             if isinstance(msg, FrameMsg):
                 t0 = time.time()
                 if self.jpeg:
@@ -315,26 +273,32 @@ class RemoteOutlet:
                 wire.trace.update(put_ms=(time.time() - t0) * 1e3, sent_wall=time.time())
             else:
                 wire = msg.to_wire()
-            d = Delivery(self.cid, self.port, wire, lockstep=tok is not None,
-                         reply_to=self.reply_to if tok is None else None)
+            d = Delivery(self.cid, self.port, wire, cascade=tok is not None, reply_to=self.reply_to)
             ref = self.handle.deliver.remote(d)
             self.sent += 1
-            if tok is None:
-                self.in_flight.append(ref)
-                if self.on_reply is not None:
-                    ref.future().add_done_callback(self._replied)
-            else:
-                tok.add_ref(ref)
+            self.in_flight.append(ref)
+            if tok is not None:
+                tok.add()
+            if self.on_reply is not None or tok is not None:
+                ref.future().add_done_callback(lambda fut, tok=tok: self._replied(fut, tok))
             return ref
 
-    def _replied(self, fut: Any) -> None:
-        """The consumer's reply (Ray's callback thread: hand over, never block it)."""
+    def _replied(self, fut: Any, tok: Cascade | None) -> None:
+        """The consumer's reply (Ray's callback thread: hand over, never block it); then the cascade's hold on the
+        call is released (the replies joined it first)."""
         try:
-            out = fut.result()
-        except Exception:  # noqa: BLE001 - counted as failed when reaped
-            return
-        if out:
-            self.on_reply(out)
+            try:
+                out = fut.result()
+            except Exception:  # noqa: BLE001 - counted as failed when reaped
+                out = None
+            if out and self.on_reply is not None:
+                if tok is not None:
+                    for item in out:
+                        item.msg.tok = tok
+                self.on_reply(out)
+        finally:
+            if tok is not None:
+                tok.done()
 
     def stats(self) -> dict:
         with self._lock:
@@ -352,9 +316,9 @@ class DataPlane:
     of other hosts are reached through ``peers`` (host id -> actor handle) and ``location`` (component id ->
     host id). ``tier`` decides whether a frame sent to a peer of another tier is JPEG-encoded."""
 
-    def __init__(self, host_id: str, tier: str, epoch_ns: int, lockstep: bool = False, workers: int | None = None,
+    def __init__(self, host_id: str, tier: str, epoch_ns: int, workers: int | None = None,
                  recorder: Any = None) -> None:
-        self.host_id, self.tier, self.epoch_ns, self.lockstep = host_id, tier, epoch_ns, lockstep
+        self.host_id, self.tier, self.epoch_ns = host_id, tier, epoch_ns
         n = workers or max(2, min(4, (os.cpu_count() or 2)))
         self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
         self.components: dict[str, Component] = {}
@@ -364,7 +328,7 @@ class DataPlane:
         self.peers: dict[str, Any] = {}
         self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel.ChannelOutlet
         #: the run's channel key (bytes) when actors on this machine talk through same-node channels
-        #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``, or lock-step)
+        #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``)
         self.channel_key: bytes | None = None
         self._tl = threading.local()  # .reply: (host id of the caller, [Delivery]) while a deliver runs
         self.recorder = recorder
@@ -400,7 +364,10 @@ class DataPlane:
         -> host id; ``tiers``: host id -> tier; ``peers``: host id -> Ray actor name (resolved on first use, so a
         restarted actor is reached under the same name) or actor handle."""
         self.routes = {k: [tuple(s) if len(s) == 4 else (*s, None) for s in v] for k, v in routes.items()}
-        self.location.update(location)
+        merged = dict(location)  # the plan's typed ids (ComponentId: kind, robot) are the keys kept
+        for cid, hid in self.location.items():
+            merged.setdefault(cid, hid)
+        self.location = merged
         self.tiers.update(tiers)
         self.peers = dict(peers)
 
@@ -425,7 +392,8 @@ class DataPlane:
     def publish(self, src: str, msgs: list[Message], tok: Cascade | None = None, inline: bool = True) -> None:
         """Hand ``msgs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
         in this thread when ``inline`` (zero hops for a chain), the others on the pool; remote ones through their
-        :class:`RemoteOutlet` on the pool (JPEG encoding stays off the hot path)."""
+        outlet on the pool (JPEG encoding stays off the hot path), or in the reply of the deliver call this thread
+        is answering. ``tok``: the lock-step cascade the messages join (it stays open until each is handed on)."""
         subs = self.routes.get(src)
         if not subs:
             return
@@ -440,24 +408,31 @@ class DataPlane:
                 comp = self.components.get(cid)
                 if comp is not None:
                     local.append((comp, port))
-                elif tok is None and self._reply_to(cid, port, msg):
-                    continue  # returned to the calling actor in the reply of its deliver call
-                else:
-                    out = self._outlet(src, cid, port, buf)
-                    if tok is not None:
-                        out.send(msg)  # lock-step: sent now, its ref joins the cascade
-                    else:
-                        self.submit(out.send, msg)
+                elif not self._reply_to(cid, port, msg):  # else: returned to the caller in its deliver's reply
+                    self.later(tok, self._outlet(src, cid, port, buf).send, msg)
             last = len(local) - 1
             for i, (comp, port) in enumerate(local):
                 if inline and i == last:
                     comp.offer(port, msg)
                 else:
-                    if tok is not None:
-                        tok.add()  # keep the cascade open until the pool picks it up
-                        self.submit(self._offer_then_done, comp, port, msg, tok)
-                    else:
-                        self.submit(comp.offer, port, msg)
+                    self.later(tok, comp.offer, port, msg)
+
+    def later(self, tok: Cascade | None, fn: Callable, *args: Any) -> None:
+        """Run ``fn(*args)`` on the pool; ``tok`` (a lock-step cascade, or None) stays open until it ran."""
+        if tok is None:
+            self.submit(fn, *args)
+            return
+        tok.add()
+        if self._closed:
+            tok.done()
+        else:
+            self.pool.submit(self._then_done, tok, fn, *args)
+
+    def _then_done(self, tok: Cascade, fn: Callable, *args: Any) -> None:
+        try:
+            self._guard(fn, *args)
+        finally:
+            tok.done()
 
     def _reply_to(self, cid: str, port: Port, msg: Message) -> bool:
         """While a deliver call from host H runs in this thread, an item for a component of H goes back in that
@@ -471,9 +446,9 @@ class DataPlane:
         return True
 
     def on_reply(self, items: list[Delivery], inline: bool = False) -> None:
-        """Items another actor returned in a deliver call's reply: offered to their components on the pool, or in
-        this thread when ``inline`` (a channel's reader thread; never Ray's callback thread, which must not
-        block)."""
+        """Items another actor returned in a deliver call's reply (each message's ``tok``: the cascade of the call
+        it answers, set by the outlet): offered to their components on the pool, or in this thread when ``inline``
+        (a channel's reader thread; never Ray's callback thread, which must not block)."""
         now = time.time()
         for d in items:
             tr = d.msg.trace
@@ -485,14 +460,7 @@ class DataPlane:
             if inline:
                 comp.offer(d.port, d.msg)
             else:
-                self.submit(comp.offer, d.port, d.msg)
-
-    @staticmethod
-    def _offer_then_done(comp: Component, port: Port, msg: Message, tok: Cascade) -> None:
-        try:
-            comp.offer(port, msg)
-        finally:
-            tok.done()
+                self.later(d.msg.tok, comp.offer, d.port, d.msg)
 
     def _outlet(self, src: str, cid: str, port: Port, buffer: int) -> Any:
         """The outlet of edge ``src`` -> ``cid`` (another actor's component), made on first use: a same-node
@@ -514,7 +482,7 @@ class DataPlane:
     def _channel_outlet(self, hid: str, cid: str, port: Port, buffer: int) -> Any:
         """A :class:`~.channel.ChannelOutlet` to host ``hid`` when channels are on and ``hid`` serves one on this
         machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
-        if self.channel_key is None or self.lockstep or self.tiers.get(hid, self.tier) != self.tier:
+        if self.channel_key is None or self.tiers.get(hid, self.tier) != self.tier:
             return None
         from aerodaas.actors.channel import ChannelOutlet, channel_address
 
@@ -525,11 +493,16 @@ class DataPlane:
         except Exception:  # noqa: BLE001 - not on this machine (or not serving): Ray calls
             return None
 
-    def deliver(self, d: Delivery) -> list:
-        """A message from another host. A frame's pixels arrive as JPEG bytes or an ObjectRef and are decoded (or
+    def deliver(self, d: Delivery, answer: Callable[[list], None] | None = None) -> list | None:
+        """A message from another actor. A frame's pixels arrive as JPEG bytes or an ObjectRef and are decoded (or
         mapped) once here. Returns the replies (Delivery items for the sender's components, see
-        :class:`~aerodaas.runtime.messages.Delivery`); in lock-step the whole local cascade runs before this returns and the
-        result lists the refs of the remote sends it caused (for the sender's :class:`Cascade`)."""
+        :class:`~aerodaas.runtime.messages.Delivery`) once the message was handed to its component.
+
+        A delivery the sender's lock-step cascade waits for (``d.cascade``) is answered only when the cascade it
+        starts here is done (every item derived from it, here and in the actors it reached): with ``answer``
+        (a channel: its reader thread never blocks) this returns None and ``answer(replies)`` is called then, in
+        the thread that finished the cascade; without (a Ray call) this blocks until then and returns the replies.
+        Raises KeyError for an unknown component, TimeoutError after 120 s of a cascade that does not end."""
         msg = d.msg
         t_arrived = time.time()
         if isinstance(msg, FrameMsg):
@@ -543,24 +516,42 @@ class DataPlane:
                 msg.trace.update(call_ms=(t_arrived - msg.trace["sent_wall"]) * 1e3,
                                  get_ms=(time.time() - t_arrived) * 1e3)
         comp = self.components[d.cid]
-        if not d.lockstep:
-            if d.reply_to is None:
-                comp.offer(d.port, msg)
-                return []
-            self._tl.reply = (d.reply_to, [])
-            try:
-                comp.offer(d.port, msg)
-                return list(self._tl.reply[1])
-            finally:
-                self._tl.reply = None
-        tok = Cascade()
+        if not d.cascade:
+            return self._offer(comp, d)
+        replies: list = []
+        finished = threading.Event()
+
+        def on_done() -> None:
+            if answer is None:
+                finished.set()
+            else:
+                answer(replies)
+
+        tok = Cascade(on_done=on_done, hold=True)
         msg.tok = tok
-        comp.offer(d.port, msg)
-        with tok._cv:
-            while tok._n > 0:
-                tok._cv.wait(1.0)
-            refs, tok._refs = tok._refs, []
-        return refs
+        try:
+            replies.extend(self._offer(comp, d))
+        finally:
+            tok.done()  # the hold: from here the last derived item to finish answers
+        if answer is not None:
+            return None
+        if not finished.wait(120.0):
+            raise TimeoutError(f"lock-step: a delivery to {d.cid!r} still had {tok.outstanding} items in flight "
+                               f"after 120 s")
+        return replies
+
+    def _offer(self, comp: Component, d: Delivery) -> list:
+        """Offer ``d`` to ``comp`` in this thread, collecting the items for the sender's components (``reply_to``)
+        into the returned list."""
+        if d.reply_to is None:
+            comp.offer(d.port, d.msg)
+            return []
+        self._tl.reply = (d.reply_to, [])
+        try:
+            comp.offer(d.port, d.msg)
+            return list(self._tl.reply[1])
+        finally:
+            self._tl.reply = None
 
     # ------------------------------------------------------------------ bookkeeping
     def report_error(self, where: str, e: BaseException) -> None:

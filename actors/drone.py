@@ -433,8 +433,8 @@ class DroneComponent(AutopilotFlight):
                 v.hold()
             return False
         res = self.scheduler.tick(t, pos)
-        item = res["item"]
-        self.preplanned_left = res["preplanned_left"]
+        item = res.item
+        self.preplanned_left = res.preplanned_left
         if item is not None:
             self.idle_since = None
             self.flew_something = True
@@ -447,7 +447,7 @@ class DroneComponent(AutopilotFlight):
                 self._reject(t, item, e)
                 return False
         if isinstance(item, ActionCommand):
-            self._event("action", action=item.action, reason=item.reason, priority=res["priority"])
+            self._event("action", action=item.action, reason=item.reason, priority=res.priority)
             if st == S.TRACKING:
                 self._event("tracking_ended")
             self.scheduler.discard(item.id, "executed")
@@ -462,7 +462,7 @@ class DroneComponent(AutopilotFlight):
         if isinstance(item, VelocityCommand):
             if st != S.TRACKING:
                 fsm.transition(S.TRACKING, t)
-                self._event("tracking_started", priority=res["priority"], mission=res["mission"],
+                self._event("tracking_started", priority=res.priority, mission=res.mission,
                             preempted=self.active_wp)
             v.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
             self.active_wp, self.hold_until = None, None
@@ -475,12 +475,12 @@ class DroneComponent(AutopilotFlight):
                 self.active_wp, self.hold_until, self._hold = item.id, None, None
                 v.goto(target, item.speed)
                 fsm.transition(S.NAVIGATING, t)
-                self._event("navigate", waypoint=item.id, target=list(target), priority=res["priority"],
-                            mission=res["mission"])
+                self._event("navigate", waypoint=item.id, target=list(target), priority=res.priority,
+                            mission=res.mission)
                 if self.recorder is not None:
                     self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t),
                                        {"kind": "waypoint", "waypoint": item.model_dump(), "local": list(target),
-                                        "priority": res["priority"]}, "aerodaas.NavCommand")
+                                        "priority": res.priority}, "aerodaas.NavCommand")
                 return False
             dist = math.dist(pos, target)
             speed = math.hypot(*tuple(float(c) for c in v.velocity)[:2])
@@ -523,7 +523,7 @@ class DroneComponent(AutopilotFlight):
             self._event("tracking_ended")
         if self.idle_since is None:
             self.idle_since = t
-        done_plan = self.preplanned_total > 0 and res["preplanned_left"] == 0 and len(self.visited) > 0
+        done_plan = self.preplanned_total > 0 and res.preplanned_left == 0 and len(self.visited) > 0
         had_mission = self.flew_something or self.preplanned_total > 0
         idle_too_long = had_mission and t - self.idle_since >= self.cfg.idle_land_s
         if done_plan or idle_too_long:

@@ -43,7 +43,7 @@ class AutopilotFlight:
         (``waypoint_done``; also for items whose reports were lost with the link), on NAV_LAND -> LANDING, on
         NAV_RETURN_TO_LAUNCH -> RETURNING (the autopilot's RTL). Sends nothing to the vehicle."""
         res = self.scheduler.tick(t, pos)  # records the plan; the queue itself is only popped as items complete
-        self.preplanned_left = res["preplanned_left"]
+        self.preplanned_left = res.preplanned_left
         events, self._ap_events = self._ap_events, []
         for ev in events:
             n = ev.get("item")

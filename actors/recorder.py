@@ -42,6 +42,13 @@ from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 TF_TOPIC = "/tf"
 
 
+class _Stop:
+    """The writer thread's last queue item (:meth:`RecorderService.close`)."""
+
+
+_STOP = _Stop()
+
+
 class RecorderService:
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
@@ -109,7 +116,7 @@ class RecorderService:
                 self.frames_dropped += 1
                 return False
             self._pending_frames += 1
-        self._q.put(("image", topic, t_ns, frame, frame_id))
+        self._q.put(RecordImage(topic, t_ns, frame, frame_id))
         return True
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
@@ -117,22 +124,22 @@ class RecorderService:
         (optical frame, pitched ``pitch_deg`` below the horizon, 90 = nadir) and each of its images on
         ``/<robot>/camera/<sensor>`` is followed by a ``foxglove.CameraCalibration`` built from ``intrinsics``
         (``width``, ``height`` in pixels, ``fx``, ``fy``, ``cx``, ``cy`` in pixels)."""
-        self._put(("camera", robot, sensor, dict(intrinsics), float(pitch_deg)))
+        self._put(RecordCamera(robot, sensor, dict(intrinsics), float(pitch_deg)))
 
     def detections(self, topic: str, t_ns: int, dets: list, image_size: tuple[int, int] | None = None) -> None:
-        self._put(("detections", topic, t_ns, dets, image_size))
+        self._put(RecordDetections(topic, t_ns, dets, image_size))
 
     def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
-        self._put(("odometry", robot, t_ns, odom))
+        self._put(RecordOdometry(robot, t_ns, odom))
 
     def tracks(self, prefix: str, t_ns: int, robot: str, rows: list, image_size: tuple[int, int] | None = None) -> None:
         """One frame's geo-located tracks (:func:`aerodaas.perception.track_records.write_tracks`)."""
-        self._put(("tracks", prefix, t_ns, robot, rows, image_size))
+        self._put(RecordTracks(prefix, t_ns, robot, list(rows), image_size))
 
     def json(self, topic: str, t_ns: int, obj: dict, schema_name: str) -> None:
-        self._put(("json", topic, t_ns, obj, schema_name))
+        self._put(RecordJson(topic, t_ns, obj, schema_name))
 
-    def _put(self, item: tuple) -> None:
+    def _put(self, item: RecordItem) -> None:
         if self.failure is not None:
             self.lost += 1
         elif not self.closed:
@@ -146,19 +153,21 @@ class RecorderService:
                 item = self._q.get(timeout=0.5)
             except queue.Empty:
                 item = None
-            if item is not None and item[0] == "stop":
+            if item is _STOP:
                 return
             try:
                 if item is not None:
                     try:
                         self._write(item)
-                        self.last_t_ns = item[2]
+                        t_ns = getattr(item, "t_ns", None)
+                        if t_ns is not None:
+                            self.last_t_ns = t_ns
                     except OSError:
                         raise
                     except Exception as e:  # a bad message must not stop the recording
-                        self.write_errors.append(f"{item[0]} {item[1]}: {type(e).__name__}: {e}")
+                        self.write_errors.append(f"{type(item).__name__} {_what(item)}: {type(e).__name__}: {e}")
                     finally:
-                        if item[0] == "image":
+                        if isinstance(item, RecordImage):
                             with self._lock:
                                 self._pending_frames -= 1
                 if time.monotonic() - last_flush > self.flush_every_s:
@@ -168,11 +177,10 @@ class RecorderService:
                 self._fail(e)
                 return
 
-    def _write(self, item: tuple) -> None:
-        kind = item[0]
+    def _write(self, item: RecordItem) -> None:
         r = self.rec
-        if kind == "image":
-            _, topic, t_ns, frame, frame_id = item
+        if isinstance(item, RecordImage):
+            topic, t_ns, frame, frame_id = item.topic, item.t_ns, item.frame, item.frame_id
             if isinstance(frame, (bytes, bytearray)):  # encoded by the sending actor (RemoteRecorder)
                 r.write_image(topic, t_ns, jpeg=bytes(frame), frame_id=frame_id)
             else:
@@ -182,24 +190,21 @@ class RecorderService:
             k = self._intrinsics.get(frame_id)
             if k is not None:
                 r.write_camera_calibration(f"{topic}/calibration", t_ns, frame_id=frame_id, **k)
-        elif kind == "camera":
-            _, robot, sensor, k, pitch = item
-            frame = f"{robot}/{sensor}"
+        elif isinstance(item, RecordCamera):
+            k, robot = item.intrinsics, item.robot
+            frame = f"{robot}/{item.sensor}"
             self._intrinsics[frame] = {n: k[n] for n in ("width", "height", "fx", "fy", "cx", "cy")}
-            self._cameras.setdefault(robot, []).append((frame, camera_mount_quaternion(pitch)))
-        elif kind == "detections":
-            _, topic, t_ns, dets, size = item
-            r.write_detections(topic, t_ns, dets, image_size=size)
-        elif kind == "json":
-            _, topic, t_ns, obj, schema = item
-            r.write_json(topic, t_ns, obj, schema_name=schema)
-        elif kind == "tracks":
+            self._cameras.setdefault(robot, []).append((frame, camera_mount_quaternion(item.pitch_deg)))
+        elif isinstance(item, RecordDetections):
+            r.write_detections(item.topic, item.t_ns, item.detections, image_size=item.image_size)
+        elif isinstance(item, RecordJson):
+            r.write_json(item.topic, item.t_ns, item.obj, schema_name=item.schema_name)
+        elif isinstance(item, RecordTracks):
             from aerodaas.perception.track_records import write_tracks
 
-            _, prefix, t_ns, robot, rows, size = item
-            write_tracks(r, prefix, t_ns, robot, rows, self.homes.get(robot), size)
-        elif kind == "odometry":
-            _, robot, t_ns, odom = item
+            write_tracks(r, item.prefix, item.t_ns, item.robot, item.rows, self.homes.get(item.robot), item.image_size)
+        elif isinstance(item, RecordOdometry):
+            robot, t_ns, odom = item.robot, item.t_ns, item.odometry
             g = odom["geodetic"]
             r.write_location(f"/{robot}/gps", t_ns, g["lat"], g["lon"], g["alt"], frame_id=f"{robot}/gps")
             att = odom["attitude"]
@@ -212,6 +217,8 @@ class RecorderService:
             for frame, q in self._cameras.get(robot, ()):
                 r.write_transform(TF_TOPIC, t_ns, base, frame, (0.0, 0.0, 0.0), quaternion=q)
             r.write_json(f"/{robot}/odometry", t_ns, odom, schema_name="aerodaas.Odometry")
+        else:
+            raise TypeError(f"the recorder cannot write a {type(item).__name__}")
 
     def _fail(self, e: OSError) -> None:
         """The writer hit ``e``: cut the file back to the last record boundary the OS took, try to finish it, count
@@ -227,15 +234,10 @@ class RecorderService:
                 item = self._q.get_nowait()
             except queue.Empty:
                 break
-            if item[0] != "stop":
+            if item is not _STOP:
                 lost += 1
         self.lost += lost
-        durable = rec._stream.durable
-        try:
-            rec._file.close()  # its pending buffer cannot be written: close the descriptor anyway
-        except OSError:
-            pass
-        rec._closed = True
+        durable = rec.abandon()  # its pending buffer cannot be written: the descriptor is closed anyway
         finished = False
         try:
             os.truncate(rec.path, durable)  # the file ends at a complete record: an unfinished but valid MCAP
@@ -257,7 +259,7 @@ class RecorderService:
         """Write what is queued, finish the file (summary and footer) and return the per-topic message counts."""
         if not self.closed:
             self.closed = True
-            self._q.put(("stop",))
+            self._q.put(_STOP)
             self._thread.join(timeout_s)
             try:
                 if self.failure is None:
@@ -278,6 +280,11 @@ class RecorderService:
 
     def counts(self) -> dict[str, int]:
         return dict(self.rec.message_counts)
+
+
+def _what(item: RecordItem) -> str:
+    """The topic (or robot) an item is for, for error messages."""
+    return str(getattr(item, "topic", None) or getattr(item, "robot", ""))
 
 
 class RemoteRecorder:

@@ -16,12 +16,15 @@ from typing import Any
 
 import ray
 
+from aerodaas.runtime.specs import ActorSpec
+
 
 @ray.remote(num_cpus=0, max_concurrency=16, max_restarts=0)
 class RecorderActor:
-    """``spec``: ``{"record": {"path", "live", "meta"} | absent, "epoch_ns"}`` (see the module docstring)."""
+    """``spec``: the recorder's :class:`~aerodaas.runtime.specs.ActorSpec` (``record``: the file and live view, or
+    None; ``epoch_ns``), see the module docstring."""
 
-    def __init__(self, spec: dict) -> None:
+    def __init__(self, spec: ActorSpec) -> None:
         self.spec = spec
         self.recorder: Any = None
         self._cp: dict[str, dict] = {}
@@ -38,17 +41,16 @@ class RecorderActor:
         a busy live port)."""
         from aerodaas.actors.recorder import RecorderService
 
-        rec = self.spec.get("record")
+        rec = self.spec.record
         with self._setup_lock:
             try:
-                if rec and self.recorder is None:
+                if rec is not None and self.recorder is None:
                     from aerodaas.recording.schemas import register_json_schema
 
-                    for name, js in (rec.get("schemas") or {}).items():  # plug-in sensors' message schemas
+                    for name, js in rec.schemas.items():  # plug-in sensors' message schemas
                         register_json_schema(name, js)
-                    self.recorder = RecorderService(rec.get("path"), rec.get("meta"), live=rec.get("live"),
-                                                    max_pending_frames=64, homes=rec.get("homes"),
-                                                    declare=rec.get("declare"))
+                    self.recorder = RecorderService(rec.path, rec.meta, live=rec.live, max_pending_frames=64,
+                                                    homes=rec.homes, declare=rec.declare)
             finally:
                 self._set_up.set()
         live = getattr(self.recorder, "live", None)

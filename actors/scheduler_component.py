@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 
@@ -13,6 +14,19 @@ from aerodaas.app.models import AeroNavigation, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
 
 from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
+
+
+@dataclass(frozen=True)
+class Order:
+    """What the trajectory scheduler tells the drone to fly at one control tick: ``item`` (the head of the best
+    queued mission: a Waypoint, a VelocityCommand or an ActionCommand; None: nothing queued), how many items of
+    pre-planned (distance-driven) missions are left (``preplanned_left``), and the ``priority`` and name
+    (``mission``) of the mission the item belongs to (None without an item)."""
+
+    item: Any
+    preplanned_left: int
+    priority: int | None = None
+    mission: str | None = None
 
 
 class SchedulerComponent(Component):
@@ -52,16 +66,18 @@ class SchedulerComponent(Component):
         self._replaced: set[Port] = set()
         self.drone: Any = None  # the DroneComponent, set by the host runtime
 
-    def tick(self, now: float, position: tuple) -> dict:
+    def tick(self, now: float, position: tuple) -> Order:
+        """The drone's control tick at simulated time ``now`` (s) and ``position`` (ENU metres): what to fly now
+        (see :class:`Order`)."""
         self.now, self.position = now, tuple(position)
         if self._plan_sig is None:
             self._record_plan()
         cur = self.s.current(now)
         left = self.s.pending(distance_driven_only=True)
         if cur is None:
-            return {"item": None, "preplanned_left": left}
+            return Order(None, left)
         m, item = cur
-        return {"item": item, "priority": m.priority, "mission": m.name, "preplanned_left": left}
+        return Order(item, left, m.priority, m.name)
 
     def queued(self) -> list:
         """Every queued item in flying order (see :meth:`TrajectoryScheduler.queued`)."""
@@ -131,7 +147,7 @@ class SchedulerComponent(Component):
     def add_navigation(self, nav: Any, index: int | None = None, priority: int | None = None) -> dict:
         """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
         changes nothing; returns the queue snapshot on success."""
-        nav_, prio = self.s._unwrap(nav, priority)
+        nav_, prio = self.s.unwrap_navigation(nav, priority)
         self._check_bounds(nav_)
         nav_ = self.gate.check_navigation(nav_, self.position)
         self._plan_and_add(nav_, index, prio)
@@ -158,39 +174,11 @@ class SchedulerComponent(Component):
         that mission, from the drone's position, is checked against the geofence (SafetyViolation naming the leg:
         nothing is queued, never a silent drop in flight), and the plan is committed under the lock, keeping what
         happened meanwhile (waypoints reached or discarded, navigation added by others)."""
-        from aerodaas.schedulers.base import Mission
-
         with self._plan_lock:
             position = self.position
-            with self.s._lock:
-                snap = [Mission(m.priority, m.seq, m.name, list(m.items), m.distance_driven, dict(m.segment_of))
-                        for m in self.s._missions]
-                cur = self.s._find(prio)
-                if index is not None and index > (len(cur.items) if cur is not None else 0):
-                    raise IndexError(f"index: {index} is out of range for the priority-{prio} mission of "
-                                     f"{len(cur.items) if cur is not None else 0} items")
-            twin = self.s.fork(snap)
-            twin.add_navigation(nav, index=index, priority=prio, position=position)  # the planning
-            planned = twin._find(prio)
-            self._check_tour(planned.items if planned is not None else [], position)
-            added = {id(i) for i in nav.waypoints}
-            with self.s._lock:
-                real = self.s._find(prio)
-                alive = {id(i) for i in real.items} if real is not None else set()
-                in_plan = {id(i) for i in planned.items}
-                items = [i for i in planned.items if id(i) in alive or id(i) in added]
-                items += [i for i in (real.items if real is not None else []) if id(i) not in in_plan]
-                tags = [planned.segment_of.get(id(i), real.segment_of.get(id(i), 0) if real is not None else 0)
-                        for i in items]
-                issued = getattr(twin, "_segments_issued", 0)
-                if issued > getattr(self.s, "_segments_issued", 0):
-                    self.s._segments_issued = issued
-                if real is None:
-                    self.s._seq += 1
-                    real = Mission(prio, self.s._seq, planned.name, [], planned.distance_driven)
-                    self.s._missions.append(real)
-                real.items = items
-                real.set_segment_ids(tags)
+            plan = self.s.plan_addition(nav, index, prio, position)  # the planning, on a copy of the queue
+            self._check_tour(plan.mission.items if plan.mission is not None else [], position)
+            self.s.commit_addition(plan)
 
     def _check_tour(self, items: list, position: tuple) -> None:
         """Every leg of a planned tour (from ``position`` through its waypoints, ENU metres) against the geofence."""
@@ -219,12 +207,11 @@ class SchedulerComponent(Component):
     def _record_plan(self) -> None:
         """Record the queued waypoints (with local ENU targets) when they changed since the last record."""
         missions = []
-        with self.s._lock:
-            for m in sorted(self.s._missions, key=lambda m: (m.priority, m.seq)):
-                items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
-                          "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
-                if items:
-                    missions.append({"name": m.name, "priority": m.priority, "items": items})
+        for m in self.s.missions():
+            items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                      "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+            if items:
+                missions.append({"name": m.name, "priority": m.priority, "items": items})
         sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
         if sig == self._plan_sig:
             return

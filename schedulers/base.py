@@ -48,6 +48,11 @@ class Mission:
         """Tag ``items`` (parallel ``ids``); forgets every other entry."""
         self.segment_of = {id(i): t for i, t in zip(self.items, ids) if t}
 
+    def copy(self) -> "Mission":
+        """A copy with its own item list and segment tags (the items themselves are shared)."""
+        return Mission(self.priority, self.seq, self.name, list(self.items), self.distance_driven,
+                       dict(self.segment_of))
+
     def __getstate__(self) -> dict:
         d = self.__dict__.copy()
         d["segment_of"] = self.segment_ids  # object ids do not survive pickling; positions do
@@ -59,6 +64,18 @@ class Mission:
         self.segment_of = {}
         if isinstance(ids, list):
             self.set_segment_ids(ids)
+
+
+@dataclass(frozen=True)
+class PlannedAddition:
+    """Navigation planned by :meth:`TrajectoryScheduler.plan_addition`, not yet queued: the ``priority`` it goes
+    to, the planned ``mission`` of that priority (None: nothing to add), the ids (``id()``) of the items it adds
+    and the scheduler's count of fixed runs after planning."""
+
+    priority: int
+    mission: Mission | None
+    added: frozenset
+    segments_issued: int
 
 
 class TrajectoryScheduler:
@@ -154,7 +171,7 @@ class TrajectoryScheduler:
 
         Accepts an AeroNavigation, a PriorityQueue wrapping one (or a list of waypoints), or a plain list.
         Raises TypeError for anything else."""
-        nav, prio = self._unwrap(nav, priority)
+        nav, prio = self.unwrap_navigation(nav, priority)
         scheduled = self.schedule(nav)
         self._enqueue(scheduled, prio, fixed=nav.scheduling_type == SchedulingType.ORDERED)
         return scheduled
@@ -193,10 +210,10 @@ class TrajectoryScheduler:
         if self._remote is not None:
             import ray
 
-            nav_, prio_ = self._unwrap(nav, priority)
+            nav_, prio_ = self.unwrap_navigation(nav, priority)
             ray.get(self._remote.add_navigation.remote(nav_, index, prio_))
             return
-        nav, prio = self._unwrap(nav, priority)
+        nav, prio = self.unwrap_navigation(nav, priority)
         with self._lock:
             m = self._find(prio)
             fixed = nav.scheduling_type == SchedulingType.ORDERED
@@ -282,6 +299,72 @@ class TrajectoryScheduler:
         with self._lock:
             return [i for m in sorted(self._missions, key=lambda m: (m.priority, m.seq)) for i in m.items]
 
+    # ------------------------------------------------------------------ the queue, for the drone actor that owns it
+    def missions(self) -> list[Mission]:
+        """Copies of the queued missions in flying order (priority, then age): the lists and segment tags are
+        copies, the items themselves are shared (they are never changed in place)."""
+        with self._lock:
+            return [m.copy() for m in sorted(self._missions, key=lambda m: (m.priority, m.seq))]
+
+    def plan_addition(self, nav: AeroNavigation, index: int | None, priority: int,
+                      position: Sequence[float]) -> "PlannedAddition":
+        """Plan adding ``nav`` at ``priority`` (``index``: as :meth:`add_navigation`) from ``position`` (ENU
+        metres) on a copy of the queue: the queue is neither changed nor locked while :meth:`order` runs, so a long
+        re-plan never holds the drone's control tick. Commit it with :meth:`commit_addition`. Raises IndexError
+        when ``index`` is beyond the end of that priority's mission, and what :meth:`add_navigation` raises."""
+        with self._lock:
+            snap = [m.copy() for m in self._missions]
+            cur = self._find(priority)
+            n = len(cur.items) if cur is not None else 0
+            if index is not None and index > n:
+                raise IndexError(f"index: {index} is out of range for the priority-{priority} mission of {n} items")
+        twin = self.fork(snap)
+        twin.add_navigation(nav, index=index, priority=priority, position=position)
+        planned = twin._find(priority)
+        return PlannedAddition(priority, planned.copy() if planned is not None else None,
+                               frozenset(id(i) for i in nav.waypoints), getattr(twin, "_segments_issued", 0))
+
+    def commit_addition(self, plan: "PlannedAddition") -> None:
+        """Put a :meth:`plan_addition` result into the queue, keeping what happened since it was planned: items
+        reached or discarded meanwhile stay gone, items added by others meanwhile stay (after the plan's)."""
+        planned = plan.mission
+        if planned is None:
+            return
+        with self._lock:
+            real = self._find(plan.priority)
+            alive = {id(i) for i in real.items} if real is not None else set()
+            in_plan = {id(i) for i in planned.items}
+            items = [i for i in planned.items if id(i) in alive or id(i) in plan.added]
+            items += [i for i in (real.items if real is not None else []) if id(i) not in in_plan]
+            tags = [planned.segment_of.get(id(i), real.segment_of.get(id(i), 0) if real is not None else 0)
+                    for i in items]
+            if plan.segments_issued > getattr(self, "_segments_issued", 0):
+                self._segments_issued = plan.segments_issued
+            if real is None:
+                self._seq += 1
+                real = Mission(plan.priority, self._seq, planned.name, [], planned.distance_driven)
+                self._missions.append(real)
+            real.items = items
+            real.set_segment_ids(tags)
+
+    def queue_state(self) -> dict:
+        """The queue for a checkpoint: ``{"missions": [Mission copies], "completed": [ids], "seq": n,
+        "segments_issued": n}`` (consistent: taken under the queue's lock)."""
+        with self._lock:
+            return {"missions": [m.copy() for m in self._missions], "completed": list(self.completed),
+                    "seq": self._seq, "segments_issued": getattr(self, "_segments_issued", 0)}
+
+    def restore_queue(self, missions: list[Mission], completed: list[str], seq: int | None = None,
+                      segments_issued: int | None = None) -> None:
+        """Put a :meth:`queue_state` back (a restarted drone actor resuming its mission)."""
+        with self._lock:
+            self._missions = list(missions)
+            self.completed = list(completed)
+            if seq is not None:
+                self._seq = seq
+            if segments_issued:
+                self._segments_issued = segments_issued
+
     def snapshot(self) -> list[dict]:
         with self._lock:
             return [{"name": m.name, "priority": m.priority, "items": [i.model_dump() for i in m.items]}
@@ -333,7 +416,10 @@ class TrajectoryScheduler:
         m.set_segment_ids(tags + rest_tags)
 
     @staticmethod
-    def _unwrap(nav: Any, priority: int | None) -> tuple[AeroNavigation, int]:
+    def unwrap_navigation(nav: Any, priority: int | None) -> tuple[AeroNavigation, int]:
+        """``(AeroNavigation, priority)`` from an AeroNavigation, a PriorityQueue wrapping one (or a list of
+        waypoints) or a plain list; ``priority`` overrides the PriorityQueue's (default 2). Raises TypeError for
+        anything else."""
         prio = priority
         if isinstance(nav, PriorityQueue):
             prio = nav.priority if priority is None else priority

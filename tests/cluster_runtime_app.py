@@ -116,7 +116,9 @@ def node_loss(out_dir: str) -> dict:
 
                 h = ray.get_actor("aerodaas/loss/drone/d01")
                 for _ in range(200):  # until d01 is in the air, on its way
-                    st = ray.get(h.call.remote("d01/drone", "status"))
+                    from aerodaas.actors.drone import DroneComponent
+
+                    st = ray.get(h.call.remote("d01/drone", DroneComponent.status))
                     if st["state"] in ("NAVIGATING", "WAYPOINT_HOLD"):
                         break
                     time.sleep(0.2)

@@ -23,13 +23,19 @@ def _aerodaas(*args: str, timeout: float) -> subprocess.CompletedProcess:
 def test_bench_overhead_json_has_every_column_every_layout_and_the_honest_tail(tmp_path):
     out = tmp_path / "o.json"
     p = _aerodaas("bench", "overhead", "--detector", "stub", "--stub-ms", "2", "--resolution", "320x240",
-                  "--duration", "2", "--window", "2", "--layout", "all", "--record", "--out", str(out), timeout=600)
+                  "--duration", "2", "--window", "2", "--layout", "all", "--lockstep", "--record", "--out", str(out),
+                  timeout=600)
     assert p.returncode == 0, p.stderr[-2000:]
     rep = json.loads(out.read_text())
     assert rep["benchmark"] == "overhead" and rep["machine"]["cpu_count"] >= 1 and rep["machine"]["ray"]
-    assert rep["layouts"] == ["colocated", "actors", "actors-ray"] and rep["recorded"] is True
+    assert rep["layouts"] == ["colocated", "actors", "actors-ray", "actors+lockstep"] and rep["recorded"] is True
     assert rep["load"]["load_avg_1min_at_windows"]["n"] >= 3              # one load sample per window
-    colo, actors, actors_ray = rep["results"]
+    colo, actors, actors_ray, lockstep = rep["results"]
+    # --lockstep: the actors layout under the lock-step clock, on the same channel, every frame through
+    ls = lockstep["framework"]
+    assert lockstep["layout"] == "actors+lockstep" and ls["lockstep"] and not actors["framework"]["lockstep"]
+    assert ls["frame_transport"] == ["channel"] and ls["frames_dropped_busy_detector"] == 0
+    assert ls["commands_applied"] > 0 and ls["host_errors"] == 0
     for row in (colo, actors, actors_ray):
         assert row["resolution"] == "320x240" and row["detector"] == "stub" and row["fps"] == 30
         for key in ("framework_overhead_ms", "bare_loop_overhead_ms", "naive_ray_overhead_ms", "dora_rs_overhead_ms",

@@ -161,3 +161,50 @@ def test_nobody_serving_or_a_wrong_key_is_refused(address):
             ChannelOutlet(address, os.urandom(32), "x", Port("in"), 1, None, lambda r: None)
     finally:
         srv.close()
+
+
+def test_a_lockstep_delivery_holds_the_senders_cascade_until_the_receivers_cascade_is_done(address):
+    """Lock-step over the channel (no Ray calls): a frame of a cascade is sent even beyond ``buffer`` (never
+    dropped), the receiver answers only when its own cascade for it is done (here: when released), and the sender's
+    cascade stays open until that answer arrived and its replies — which join the same cascade — were handed on."""
+    from aerodaas.actors.cascade import Cascade
+
+    pending: list = []
+
+    def deliver(d: Delivery, answer=None):
+        assert d.cascade and answer is not None  # a lock-step delivery: answered later, the reader never blocks
+        pending.append((answer, Receiver()(d)))
+        return None
+
+    srv = ChannelServer(address, KEY, deliver)
+    handed: list = []
+    holds: list = []
+
+    def on_reply(items):  # the sender's components: each reply keeps the cascade open while it is processed
+        for d in items:
+            d.msg.tok.add()
+            holds.append(d.msg.tok)
+            handed.append(d)
+
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=on_reply)
+    try:
+        tok = Cascade()
+        for i in range(3):  # three frames of one cascade with buffer=1: none dropped
+            f = _frame(i, shape=(8, 8, 3))
+            f.tok = tok
+            assert out.send(f) is not None
+        assert _wait(lambda: len(pending) == 3)
+        assert out.stats()["dropped"] == 0 and tok.outstanding == 3
+        with pytest.raises(TimeoutError):
+            tok.wait(0.2)  # the receiver's cascades are not done: simulated time must not move on
+        for answer, replies in pending:
+            answer(replies)
+        assert _wait(lambda: len(handed) == 3)
+        assert all(d.msg.tok is tok for d in handed) and tok.outstanding == 3  # the replies' own work holds it
+        for t in holds:
+            t.done()
+        tok.wait(5)
+        assert tok.outstanding == 0 and out.stats()["failed"] == 0
+    finally:
+        out.close()
+        srv.close()

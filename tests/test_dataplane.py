@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -84,6 +85,7 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     from aerodaas.config import SimulationConfig
     from aerodaas.runtime.dataflow import build_plan, collect_graph
     from aerodaas.runtime.driver import _robot_schedulers
+    from aerodaas.runtime.specs import RecordSpec
 
     robots = robots or env.get_env_robots()
     env.cfg.drones_per_actor = len(robots)
@@ -95,11 +97,9 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     sim = SimulationConfig(lockstep=lockstep)
     plan = build_plan(env, robots, graphs, _robot_schedulers(env, robots), sim)
     (hid,) = [h for h, a in plan.actors.items() if a.role == "drone"]
-    spec = dict(plan.actors[hid].spec)
-    spec.pop("record_remote", None)
-    if record:
-        spec["record"] = {"path": record, "meta": {}}
-    host = DataPlane(hid, "edge", 0, lockstep=lockstep, workers=2)
+    spec = dataclasses.replace(plan.actors[hid].spec, record_remote=None,
+                               record=RecordSpec(record) if record else None)
+    host = DataPlane(hid, "edge", 0, workers=2)
     rt = ActorAssembly(host, spec)
     host.connect(plan.routes(), plan.location(), {h: a.tier for h, a in plan.actors.items()}, {})
     return host, rt, plan
@@ -259,8 +259,9 @@ def test_frame_copies_on_the_edge_hot_path_and_the_recorder(tmp_path):
 @pytest.mark.parametrize("where", ["edge", "cloud"])
 def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_session, run_options, where):
     """A real lock-step run with a frame analytics in its own actor: on the same tier every frame the drone actor
-    materialises is put into the object store once and read once by the analytics actor; across tiers (cloud) it
-    is JPEG-encoded once by the drone actor and decoded once by the analytics actor — nothing else."""
+    materialises is copied once into a same-node channel slot (lock-step uses the same transport as a free-running
+    run) and read in place by the analytics actor; across tiers (cloud) it is JPEG-encoded once by the drone actor
+    and decoded once by the analytics actor — nothing else."""
     env = _env(1, lockstep=True)
     probe = FrameProbe()
     probe.deploy(env.get_compute_resource_by_id(where))
@@ -277,11 +278,12 @@ def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_se
     assert n > 0 and analysed["processed"] == analysed["received"] == n  # lock-step: every frame crossed
     assert [o["sent"] for o in cam["outlets"]] == [n] and cam["outlets"][0]["dropped"] == 0
     cross = where != "edge"
+    assert cam["outlets"][0]["transport"] == ("ray" if cross else "channel")
     assert drone == {"materialised": n, "tier_jpeg_encoded": n if cross else 0, "tier_jpeg_decoded": 0,
-                     "object_store_put": 0 if cross else n, "object_store_get": 0, "recorder_jpeg_encoded": 0,
-                     "channel_copy": 0}  # lock-step cascades are tracked by Ray calls: no channel
+                     "object_store_put": 0, "object_store_get": 0, "recorder_jpeg_encoded": 0,
+                     "channel_copy": 0 if cross else n}
     assert ana == {"materialised": 0, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": n if cross else 0,
-                   "object_store_put": 0, "object_store_get": 0 if cross else n, "recorder_jpeg_encoded": 0,
+                   "object_store_put": 0, "object_store_get": 0, "recorder_jpeg_encoded": 0,
                    "channel_copy": 0}
 
 
@@ -321,6 +323,66 @@ def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, 
     lat = res.stats["d00"]["scheduler"]
     assert lat["frames_with_latency"] > 0  # navigation from the other actor's detections reached this drone
     assert all(k in r for r in lat["latency_records"] for k in ("put_ms", "call_ms", "get_ms"))
+
+
+def test_lockstep_frames_travel_by_channel_and_every_frame_is_processed(ray_session, run_options):
+    """Lock-step is a property of the clock, not of the transport: a lock-step run with the detector in its own
+    actor on this node moves every frame over the same-node channel (copied once into a slot, nothing through the
+    object store), drops none, and the detector processes exactly the frames that were sent; each frame's
+    detections come back in the channel's answer within the frame's cascade, so the follow analytics in the drone
+    actor sees every one of them (from the runtime's counters, not from timing)."""
+    env = _env(1, lockstep=True)
+    drone = env.get_robot_by_id("d00")
+    from aerodaas.schedulers import TrajectoryScheduler
+
+    sched = TrajectoryScheduler(env)
+    env.set_trajectory_scheduler(sched)
+    det = Spotter()
+    det.deploy(env.get_compute_resource_by_id("edge"))  # its own actor
+    follow = FollowAnalytics(target_classes=["car"], confirm_hits=1)
+    follow.deploy(env.get_compute_resource_by_id("edge"), colocate=True)
+    sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
+                                       priority=1))
+    res = env.start_mission(timeout=4.0)
+    hosts = res.stats["_hosts"]
+    assert all(h["error_count"] == 0 for h in hosts.values())
+    d_copies, a_copies = hosts["drone/d00"]["frame_copies"], hosts["analytics/edge/spotter#1"]["frame_copies"]
+    cam = res.stats["d00"]["cameras"]["cam"]
+    (outlet,) = cam["outlets"]
+    sent = outlet["sent"]
+    by_name = {a["name"]: a for a in res.stats["d00"]["analytics"]}
+    spotter, follow_stats = by_name["spotter"], by_name["follow"]
+    assert outlet["transport"] == "channel" and outlet["dropped"] == outlet["failed"] == 0
+    assert sent == cam["frames"] > 10
+    assert spotter["received"] == spotter["processed"] == sent and spotter["dropped"] == spotter["errors"] == 0
+    assert d_copies["channel_copy"] == sent and d_copies["object_store_put"] == a_copies["object_store_get"] == 0
+    assert follow_stats["received"] == sent and follow_stats["dropped"] == 0  # every reply, within its cascade
+    assert res.stats["d00"]["scheduler"]["frames_with_latency"] > 0
+
+
+def test_components_are_called_by_their_methods_never_by_name():
+    """An actor runs a component's public method given as the function itself (what the driver's typed handles
+    send); a method name, another component class's method or a private method is refused with a TypeError, and
+    a handle has no attribute for a method it does not declare (a typo fails in the driver)."""
+    from aerodaas.actors.actor_base import ActorBase
+    from aerodaas.actors.drone import DroneComponent
+    from aerodaas.actors.scheduler_component import SchedulerComponent
+    from aerodaas.runtime.handles import DroneHandle
+
+    env = _env(1)
+    host, rt, _ = _host_for(env)
+    try:
+        actor = object.__new__(ActorBase)  # the Ray actor's plain body, without Ray
+        actor.host, actor.runtime = host, rt
+        assert actor.call("d00/drone", DroneComponent.status)["robot"] == "d00"
+        assert actor.call("d00/scheduler", SchedulerComponent.snapshot) == rt.comps["d00/scheduler"].snapshot()
+        for bad in ("status", SchedulerComponent.snapshot, DroneComponent._event):
+            with pytest.raises(TypeError, match="not one of its public methods"):
+                actor.call("d00/drone", bad)
+        with pytest.raises(AttributeError):
+            DroneHandle(None, "d00/drone").statuss  # noqa: B018 - the typo itself is the test
+    finally:
+        rt.close()
 
 
 def test_navigation_reaches_the_backend_before_the_next_tick():

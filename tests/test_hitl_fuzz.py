@@ -267,6 +267,6 @@ def test_planning_runs_outside_the_lock_the_control_tick_needs(api):
     still_planning = planner.is_alive()
     release.set()
     planner.join(60)
-    assert ticks and ticks[0]["item"].id == "a"  # the tick answered from the queue as it was
+    assert ticks and ticks[0].item.id == "a"  # the tick answered from the queue as it was
     assert still_planning  # ... while the plan was in progress
     assert [i["id"] for m in comp.snapshot() for i in m["items"]][:1] == ["a"] and len(comp.snapshot()[0]["items"]) == 51

@@ -22,6 +22,8 @@ from pathlib import Path
 import pytest
 
 from aerodaas import AeroListData, Analytics, Environment, FollowAnalytics, PriorityQueue, Waypoint
+from aerodaas.actors.drone import DroneComponent
+from aerodaas.actors.scheduler_component import SchedulerComponent
 from aerodaas.config import parse_environment_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,7 +71,7 @@ def _kill_when(actor_name: str, status_cid: str, ready, out: dict, no_restart: b
         for _ in range(600):
             try:
                 h = ray.get_actor(actor_name)
-                st = ray.get(h.call.remote(status_cid, "status"), timeout=10)
+                st = ray.get(h.call.remote(status_cid, DroneComponent.status), timeout=10)
                 if ready(st):
                     out["status"] = st
                     out["wall"] = time.time()
@@ -160,7 +162,7 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
         for _ in range(600):
             try:
                 d = ray.get_actor("aerodaas/kill-analytics/drone/d00")
-                s = ray.get(d.call.remote("d00/scheduler", "stats"), timeout=10)
+                s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
                 if s["frames_with_latency"] >= 5:
                     counts["before"] = s["frames_with_latency"]
                     killed["wall"] = time.time()
@@ -171,10 +173,10 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
             time.sleep(0.1)
         for _ in range(600):  # navigation resumes: new commands applied after the restart
             try:
-                s = ray.get(d.call.remote("d00/scheduler", "stats"), timeout=10)
+                s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
                 if s["frames_with_latency"] >= counts["before"] + 5:
                     counts["after"] = s["frames_with_latency"]
-                    ray.get(d.call.remote("d00/drone", "end_mission", "ended"), timeout=10)
+                    ray.get(d.call.remote("d00/drone", DroneComponent.end_mission, "ended"), timeout=10)
                     return
             except Exception:  # noqa: BLE001
                 pass

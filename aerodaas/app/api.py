@@ -133,7 +133,7 @@ class Robot:
         self.scheduler = sched
         data = nav.data if isinstance(nav, PriorityQueue) else nav
         if isinstance(data, AeroNavigation):
-            queued = any(m.items and data.waypoints and m.items[0] is data.waypoints[0] for m in sched._missions)
+            queued = any(m.items and data.waypoints and m.items[0] is data.waypoints[0] for m in sched.missions())
             if not queued:
                 sched.generate_navigation(nav)
         self.navigations.append(data)

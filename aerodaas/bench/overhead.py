@@ -17,7 +17,9 @@ round) until each has had ``--duration`` seconds, so a drift in the machine's lo
   shared-memory slot, the message and the detections coming back on a Unix socket, :mod:`aerodaas.actors.channel`
   — to the follow controller colocated in the drone actor) and ``actors-ray`` (the same actors with
   ``same_node_transport: ray``: the frame ``ray.put`` once and an actor call per frame, the detections in the
-  call's reply); one short mission per window (its take-off is not measured), optionally recorded (``--record``: then an unrecorded copy joins the rotation,
+  call's reply) and, with ``--lockstep``, ``actors+lockstep`` (the ``actors`` layout under the lock-step clock the
+  shipped apps use: the same channel, the clock waiting for each frame's cascade, nothing dropped); one short
+  mission per window (its take-off is not measured), optionally recorded (``--record``: then an unrecorded copy joins the rotation,
   ``framework_unrecorded_overhead_ms``, so the recording's cost shows);
 * ``bare_loop`` — one process, plain function calls: the floor;
 * ``naive_ray`` — one Ray actor per component, ``ray.put`` + actor call per hop (:mod:`.peers_naive_ray`);
@@ -49,6 +51,9 @@ from aerodaas.bench.pipeline import (FPS, CameraStage, CommandStage, DetectStage
 
 RESOLUTIONS = ((1280, 720), (640, 480))
 LAYOUTS = ("colocated", "actors", "actors-ray")
+#: a layout flown under the lock-step clock (``--lockstep``): ``<layout>+lockstep``
+LOCKSTEP = "+lockstep"
+ALL_LAYOUTS = (*LAYOUTS, *(f"{x}{LOCKSTEP}" for x in LAYOUTS))
 NOT_MEASURED = "not flown in this invocation"
 PEERS = ("bare_loop", "naive_ray", "dora_rs", "dora_rs_grouped")
 
@@ -76,12 +81,14 @@ class FrameworkWindows:
 
         width, height, kind, stub_ms = self.args
         env = Environment(parsed_config(width, height, kind))
-        env.cfg.same_node_transport = "ray" if self.layout == "actors-ray" else "channel"
+        layout, lockstep = self.layout.removesuffix(LOCKSTEP), self.layout.endswith(LOCKSTEP)
+        env.cfg.same_node_transport = "ray" if layout == "actors-ray" else "channel"
+        env.cfg.simulation.lockstep = lockstep  # the clock waits for each frame's cascade (the shipped apps' mode)
         drone = env.get_robot_by_id("uav")
         edge = env.get_compute_resource_by_id("edge")
         sched = TrajectoryScheduler(env)
         det = make_detector(kind, stub_ms)
-        det.deploy(edge, colocate=self.layout == "colocated")
+        det.deploy(edge, colocate=layout == "colocated")
         follow = FollowAnalytics(target_classes=["car", "truck", "bus"], confirm_hits=1, lost_after=1e9)
         follow.deploy(edge, colocate=True)
         sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
@@ -125,7 +132,8 @@ class FrameworkWindows:
                # from the camera's clock tick to its render starting on the host's thread pool (per window median
                # and p99 from the camera's stats: the runtime does not pair it with each frame's latency record)
                "capture_dispatch_ms": {"median": d_med, "p99": d_p99},
-               "layout": self.layout, "recorded": self.record_dir is not None,
+               "layout": self.layout, "lockstep": self.layout.endswith(LOCKSTEP),
+               "recorded": self.record_dir is not None,
                # how the frames left the drone actor: [] (colocated), ["channel"] or ["ray"]
                "frame_transport": sorted(t for t in i["transports"] if t),
                "recording_bytes": i["recording_bytes"],
@@ -312,7 +320,7 @@ def _fmt(mp_: dict | None) -> str:
 
 
 def _line(row: dict) -> str:
-    return (f"overhead {row['detector']:5s} {row['resolution']} {row['layout']:10s} median/p99 ms: "
+    return (f"overhead {row['detector']:5s} {row['resolution']} {row['layout']:15s} median/p99 ms: "
             f"framework {_fmt(row['framework_overhead_ms'])} | bare {_fmt(row['bare_loop_overhead_ms'])} | "
             f"naive Ray {_fmt(row['naive_ray_overhead_ms'])} | dora-rs {_fmt(row['dora_rs_overhead_ms'])} | "
             f"dora-rs grouped {_fmt(row['dora_rs_grouped_overhead_ms'])}"
@@ -336,10 +344,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--stub-ms", type=float, default=10.0, help="inference time of the fixed-cost stub detector, ms")
     p.add_argument("--detector", choices=["stub", "yolox", "both"], default="both")
     p.add_argument("--resolution", action="append", help="WxH (repeatable; default 1280x720 and 640x480)")
-    p.add_argument("--layout", choices=[*LAYOUTS, "both", "all"], default="all",
+    p.add_argument("--layout", choices=[*ALL_LAYOUTS, "both", "all"], default="all",
                    help="AeroDaaS layout(s) to fly: colocated (zero hops), actors (the detector in its own actor, "
                         "same-node channel), actors-ray (its own actor, Ray calls), both (colocated + actors), "
-                        "all (default)")
+                        "all (default); LAYOUT+lockstep flies LAYOUT under the lock-step clock")
+    p.add_argument("--lockstep", action="store_true",
+                   help="also fly the actors layout under the lock-step clock the shipped apps use "
+                        "(row actors+lockstep: same channel, the clock waits for each frame's cascade)")
     p.add_argument("--record", action="store_true", help="record the AeroDaaS runs to MCAP (recording cost shows)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
@@ -371,6 +382,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       file=sys.stderr)
                 return 2
         layouts = {"both": ("colocated", "actors"), "all": LAYOUTS}.get(a.layout, (a.layout,))
+        if a.lockstep and f"actors{LOCKSTEP}" not in layouts:
+            layouts = (*layouts, f"actors{LOCKSTEP}")
         emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
         return 0
 

@@ -255,7 +255,8 @@ class EnvironmentConfig(_Cfg):
         "same machine: 'channel' (the frame copied once into a shared-memory slot the receiver reads in place, the "
         "message and its reply on a persistent authenticated Unix socket: no Ray call per frame) or 'ray' (ray.put "
         "of the frame and an actor call per message). Actors on different machines always use Ray (an ObjectRef on "
-        "one tier, JPEG across tiers); lock-step runs always use Ray calls")
+        "one tier, JPEG across tiers), in lock-step runs too (lock-step only makes the clock wait for each frame's "
+        "cascade)")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
 
     @model_validator(mode="after")

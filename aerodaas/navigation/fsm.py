@@ -81,6 +81,13 @@ class MissionFSM:
     def state(self) -> MissionState:
         return self._state
 
+    def restore(self, state: MissionState | str, history: list[tuple[float, MissionState]]) -> None:
+        """Put a checkpointed state and its history back (a restarted drone actor resuming its mission), without a
+        transition: no listener is called."""
+        with self._lock:
+            self._state = MissionState(state)
+            self.history = list(history)
+
     def add_listener(self, listener: Callable[[MissionState, MissionState, float], None]) -> None:
         self._listeners.append(listener)
 

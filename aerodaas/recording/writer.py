@@ -532,6 +532,19 @@ class McapRecorder:
             if fsync:
                 os.fsync(self._file.fileno())
 
+    def abandon(self) -> int:
+        """The disk failed: close the file's descriptor without writing anything more (its pending buffer cannot
+        be written) and stop taking messages. Returns the byte offset of the last record boundary the OS took (cut
+        the file there for an unfinished but valid MCAP)."""
+        with self._lock:
+            durable = self._stream.durable
+            try:
+                self._file.close()
+            except OSError:
+                pass
+            self._closed = True
+            return durable
+
     def close(self) -> None:
         """Finish the file (last chunk, summary section with statistics/indexes, footer) and close it.
         Idempotent; writes afterwards raise ``RuntimeError``."""

@@ -23,22 +23,23 @@ from __future__ import annotations
 import copy
 import os
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
+from aerodaas.runtime.ids import ComponentId, ComponentKind
 from aerodaas.runtime.messages import Port
+from aerodaas.runtime.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
 
 __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_plan", "collect_graph"]
-
-Role = Literal["drone", "analytics", "dispatcher", "recorder"]
 
 
 @dataclass(frozen=True)
 class Node:
-    """One component: ``id`` (unique in the run), ``kind``, the robot it belongs to (None for a shared analytics)
-    and the host id of the actor it lives in."""
+    """One component: ``id`` (unique in the run; a :class:`~aerodaas.runtime.ids.ComponentId` that knows its
+    ``kind`` and robot), ``kind``, the robot it belongs to (None for a shared analytics) and the host id of the
+    actor it lives in."""
 
-    id: str
-    kind: Literal["drone", "camera", "odometry", "stat_stream", "sensor", "scheduler", "analytics"]
+    id: ComponentId
+    kind: ComponentKind
     robot: str | None
     actor: str
     analytics: str | None = None  # the analytics' name, for analytics nodes
@@ -65,7 +66,8 @@ class Edge:
 @dataclass
 class ActorPlan:
     """One Ray actor of the run. ``host_id`` is unique in the run (``drone/d1``, ``analytics/edge/detector#1``,
-    ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``)."""
+    ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``); ``spec``:
+    what the actor is built from (:class:`~aerodaas.runtime.specs.ActorSpec`)."""
 
     host_id: str
     role: Role
@@ -74,7 +76,11 @@ class ActorPlan:
     compute: str | None
     labels: dict[str, str]
     components: list[str] = field(default_factory=list)
-    spec: dict = field(default_factory=dict)
+    spec: ActorSpec | None = None
+
+    def __post_init__(self) -> None:
+        if self.spec is None:
+            self.spec = ActorSpec(self.role)
 
     def selector(self, placement: "Placement") -> dict[str, str]:
         """The ``label_selector`` for this actor on the cluster described by ``placement``."""
@@ -133,7 +139,7 @@ class RunPlan:
         return {"run": self.run_id,
                 "actors": [{"host": a.host_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
                             "label_selector": a.selector(placement), "components": list(a.components),
-                            **({"mavlink_links": a.spec["mavlink_links"]} if a.spec.get("mavlink_links") else {})}
+                            **({"mavlink_links": a.spec.mavlink_links} if a.spec.mavlink_links else {})}
                            for a in self.actors.values()],
                 "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
                            **({"analytics": n.analytics} if n.analytics else {}),
@@ -148,7 +154,7 @@ class RunPlan:
         for a in self.actors.values():
             sel = ",".join(f"{k}={v}" for k, v in a.selector(placement).items())
             lines.append(f"  {a.role:<10} {a.name}  [{sel}]" + (f"  compute {a.compute}" if a.compute else ""))
-            for key, ids in (a.spec.get("mavlink_links") or {}).items():
+            for key, ids in a.spec.mavlink_links.items():
                 lines.append(f"      mavlink link {key} shared by {', '.join(ids)} (one socket, routed by system id)")
             for c in a.components:
                 plug = f"  ({self.nodes[c].plugin})" if self.nodes[c].plugin else ""
@@ -278,9 +284,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
 
     def actor(host_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
         if host_id not in actors:
-            spec: dict = {"sim": sim_d, "role": role}
-            if recorded and role != "recorder":
-                spec["record_remote"] = "recorder"
+            spec = ActorSpec(role, sim=sim_d, record_remote="recorder" if recorded and role != "recorder" else None)
             actors[host_id] = ActorPlan(host_id, role, f"aerodaas/{run_id}/{host_id}", tier, compute, dict(labels),
                                         [], spec)
         return actors[host_id]
@@ -291,9 +295,9 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
 
     rec = actor("recorder", "recorder", "edge", None, {})
     if recorded:  # the recorder also feeds the live view; without --record it writes no file
-        rec.spec["record"] = {"path": os.path.abspath(record) if record else None, "live": live, "meta": {
+        rec.spec.record = RecordSpec(os.path.abspath(record) if record else None, live, {
             "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
-            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"}}
+            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"})
 
     # ---- drones: one actor per drone (or per group of k drones flying from the same edge compute)
     drone_host: dict[str, str] = {}
@@ -305,10 +309,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
             hid = f"drone/{chunk[0].id}" if len(chunk) == 1 else f"drones/{chunk[0].id}+{len(chunk) - 1}"
             _, labels = _edge_compute(env, chunk[0])
             a = actor(hid, "drone", "edge", comp, labels)
-            a.spec.update(world=env.cfg.world.model_dump(mode="json"), robots=[], analytics=[])
-            shared = _shared_links(chunk)
-            if shared:
-                a.spec["mavlink_links"] = shared
+            a.spec.world = env.cfg.world.model_dump(mode="json")
+            a.spec.mavlink_links = _shared_links(chunk)
             for r in chunk:
                 drone_host[r.id] = hid
 
@@ -326,14 +328,13 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         buffer = sum(s.buffer for s in a.inputs) or 1  # a shared analytics keeps each input's share
         inst[aid] = []
 
-        def place(cid: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
+        def place(name: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
                   scheduled_: bool = False, obj: Any = None) -> None:
             pa = actor(hid, role, tier, compute, labels)
-            pa.spec.setdefault("analytics", []).append({"cid": cid, "name": a.name, "obj": a if obj is None else obj,
-                                                       "buffer": max(buffer, 8) if scheduled_ else buffer,
-                                                       "scheduled": scheduled_})
-            add(Node(cid, "analytics", robots_[0] if len(robots_) == 1 and hid.startswith("drone") else None, hid,
-                     a.name))
+            cid = ComponentId(name, "analytics", robots_[0] if len(robots_) == 1 and role == "drone" else None)
+            pa.spec.analytics.append(AnalyticsSpec(cid, a.name, a if obj is None else obj,
+                                                   max(buffer, 8) if scheduled_ else buffer, scheduled_))
+            add(Node(cid, "analytics", cid.robot, hid, a.name))
             inst[aid].append((cid, hid, robots_))
 
         if aid in scheduled:  # per frame by the analytics scheduler: a copy in each edge compute's dispatcher
@@ -364,8 +365,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     if recorded:  # the drones' homes (lat/lon of recorded tracks) and the track channels known from the plan
         from aerodaas.perception.track_records import declared_track_channels
 
-        rec.spec["record"]["homes"] = {r.id: getattr(r, "cfg", r).home.model_dump() for r in robots}
-        rec.spec["record"]["declare"] = declared_track_channels([r.id for r in robots], graphs)
+        rec.spec.record.homes = {r.id: getattr(r, "cfg", r).home.model_dump() for r in robots}
+        rec.spec.record.declare = declared_track_channels([r.id for r in robots], graphs)
 
     # ---- drones' own components and every edge
     edges: list[Edge] = []
@@ -387,7 +388,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 continue
             for st, prio, replace in scheds[rr.id].stream_inputs:
                 if st is stream:
-                    out.append(Edge("", f"{rr.id}/scheduler", Port("priority", prio, replace), 4,
+                    out.append(Edge("", ComponentId.scheduler(rr.id), Port("priority", prio, replace), 4,
                                     (rr.id,) if robot is None else None))
         return out
 
@@ -395,18 +396,20 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         hid = drone_host[r.id]
         sched = scheds[r.id]
         preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
-                         for m in sched._missions if m.distance_driven)
-        ids = {"drone": f"{r.id}/drone", "scheduler": f"{r.id}/scheduler", "cameras": {}, "odom": [], "stat": [],
+                         for m in sched.missions() if m.distance_driven)
+        ids = {"drone": ComponentId.drone(r.id), "scheduler": ComponentId.scheduler(r.id), "cameras": {}, "odom": [],
+               "stat": [],
                "actor": hid}
         add(Node(ids["drone"], "drone", r.id, hid))
         add(Node(ids["scheduler"], "scheduler", r.id, hid))
         cams = []
         plugin_sensors: list[dict] = []
         for s in r.sensors.values():
-            cid = f"{r.id}/{s.id}"
+            # a plug-in sensor's type is its own name: its component is of kind "sensor"
+            cid = ComponentId.sensor(r.id, s.id, s.type if s.type in ("camera", "odometry", "stat_stream") else "sensor")
             subs = consumers(s.get_data_stream(), r.id)
             if s.type == "camera" and (s.get_data_stream().subscribers or recorded):
-                cams.append({"cid": cid, "sensor": s.id, "props": dict(s.cfg.properties)})
+                cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties)))
                 ids["cameras"][s.id] = cid
             elif s.type == "odometry" and subs:
                 ids["odom"].append(cid)
@@ -421,11 +424,9 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
             add(Node(cid, "sensor" if ps else s.type, r.id, hid,
                      plugin=f"{ps['type']} -> {ps['schema_name']}" if ps else None))
             edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
-        actors[hid].spec["robots"].append({"robot": r.cfg.model_dump(mode="json"), "drone_cid": ids["drone"],
-                                          "scheduler_cid": ids["scheduler"], "scheduler": sched,
-                                          "preplanned": preplanned, "cameras": cams, "odom_cids": ids["odom"],
-                                          "stat_cids": ids["stat"], "plugin_sensors": plugin_sensors,
-                                          "plugins": robot_plugins(r.cfg)})
+        actors[hid].spec.robots.append(RobotSpec(r.cfg.model_dump(mode="json"), ids["drone"], ids["scheduler"], sched,
+                                                 preplanned, cams, ids["odom"], ids["stat"], plugin_sensors,
+                                                 robot_plugins(r.cfg)))
         robot_ids[r.id] = ids
     seen_out: set[str] = set()
     for aid, a in every.items():
@@ -445,9 +446,9 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
                                         if r.id in served]
     if recorded and schemas:
-        rec.spec["record"]["schemas"] = schemas
+        rec.spec.record.schemas = schemas
     for a in actors.values():
-        a.spec["epoch_ns"] = epoch_ns
+        a.spec.epoch_ns = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
     return RunPlan(run_id, nodes, edges, actors, robot_ids, {aid: [c for c, _, _ in v] for aid, v in inst.items()},
                    channel_key=key)

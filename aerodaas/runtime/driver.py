@@ -312,33 +312,12 @@ def shutdown_ray() -> None:
     _EARLY.clear()
 
 
-class ComponentHandle:
-    """A component inside one of the run's actors, used like an actor handle: ``h.status.remote()`` calls
-    ``component.status()`` in its actor's process and returns an ObjectRef."""
-
-    def __init__(self, host: Any, cid: str) -> None:
-        self.host, self.cid = host, cid
-
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("_"):
-            raise AttributeError(name)
-        host, cid = self.host, self.cid
-
-        class _Method:
-            def remote(self, *args: Any, **kwargs: Any) -> Any:
-                return host.call.remote(cid, name, *args, **kwargs)
-
-        return _Method()
-
-    def __repr__(self) -> str:
-        return f"ComponentHandle({self.cid!r})"
-
-
 def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
     from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
+    from aerodaas.runtime.specs import AnalyticsSchedulerSpec
     from aerodaas.schedulers.analytics_base import analytics_scheduler_class
 
     cfg = env.cfg.analytics_scheduler
@@ -349,10 +328,9 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
                                       ray_name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics/")
     for a in plan.actors.values():
         if a.role == "dispatcher":
-            a.spec["analytics_scheduler"] = {
-                "name": cfg.name, "policy_class": policy_class, "workload": cfg.resolved_workload(env.cfg),
-                "executors": executors,
-                "network": list(cfg.network), "jpeg_quality": cfg.jpeg_quality, "seed": 0}
+            a.spec.analytics_scheduler = AnalyticsSchedulerSpec(
+                cfg.name, policy_class, cfg.resolved_workload(env.cfg), executors, list(cfg.network),
+                cfg.jpeg_quality, 0)
     return executors
 
 
@@ -361,15 +339,17 @@ def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
     actors), bound to the application's objects (``robot._handle``, live scheduler, pull getters)."""
     import ray
 
+    from aerodaas.runtime.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
+
     loc = plan.location()
     handles: dict[str, dict] = {}
     for r in robots:
         ids = plan.robots[r.id]
-        a_handles = {cid: ComponentHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
+        a_handles = {cid: AnalyticsHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
         home = actors[ids["actor"]]
-        handles[r.id] = {"robot": r, "drone": ComponentHandle(home, ids["drone"]),
-                         "scheduler": ComponentHandle(home, ids["scheduler"]), "analytics": a_handles,
-                         "cameras": {sid: ComponentHandle(home, cid) for sid, cid in ids["cameras"].items()},
+        handles[r.id] = {"robot": r, "drone": DroneHandle(home, ids["drone"]),
+                         "scheduler": SchedulerHandle(home, ids["scheduler"]), "analytics": a_handles,
+                         "cameras": {sid: CameraHandle(home, cid) for sid, cid in ids["cameras"].items()},
                          "sched_obj": r.scheduler or env.trajectory_scheduler()}
         r._handle = handles[r.id]["drone"]
         for s in r.sensors.values():
@@ -452,7 +432,7 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
         try:
             if scheduled:
                 cloud_executors = _start_scheduling(env, plan, scheduled, has_cloud)
-            actors = start_actors(plan, placement, sim.lockstep, env.cfg.actor_max_restarts)
+            actors = start_actors(plan, placement, env.cfg.actor_max_restarts)
             probe("actors_created")
             # every actor sets up at once (drones connect to their vehicles); the recorder's answer is read first:
             # a bad file or live view is the error reported

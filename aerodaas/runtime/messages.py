@@ -51,7 +51,7 @@ class Message:
     from, or None; ``trace``: the frame's latency trace (``capture_wall``: ``time.time()`` when the pixels were
     ready, ``inference_ms``, ``post_ms``, and for an actor hop ``put_ms``/``call_ms``/``get_ms``/``reply_ms``);
     ``tok``: the lock-step :class:`~aerodaas.actors.dataplane.Cascade` it belongs to (None outside lock-step; never
-    crosses an actor boundary)."""
+    crosses an actor boundary: a delivery carries ``cascade`` instead)."""
 
     robot: str
     sim_t: float
@@ -143,15 +143,16 @@ class EncodedFrame:
 
 @dataclass(eq=False)
 class Delivery:
-    """``msg`` for component ``cid`` of another actor, entering it at ``port``. ``lockstep``: the receiver runs the
-    whole local cascade before it returns and answers with the ObjectRefs of the calls it made; ``reply_to``: the
-    sender's host id — outputs bound for the sender's components come back in the reply (a list of Delivery)
-    instead of a call of their own."""
+    """``msg`` for component ``cid`` of another actor, entering it at ``port``. ``cascade``: the sender's lock-step
+    clock waits for everything derived from this message, so the receiver answers (the channel's done, the Ray
+    call's return) only once its own cascade for it is done, whatever the transport; ``reply_to``: the sender's
+    host id — outputs bound for the sender's components come back in the reply (a list of Delivery) instead of a
+    call of their own."""
 
     cid: str
     port: Port
     msg: Message
-    lockstep: bool = False
+    cascade: bool = False
     reply_to: str | None = None
 
 

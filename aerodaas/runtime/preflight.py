@@ -55,7 +55,7 @@ def robot_schedulers(env, robots: list) -> dict[str, Any]:
             out[group[0].id] = sched
             continue
         owned: dict[str, list] = {r.id: [] for r in group}
-        for m in sched._missions:
+        for m in sched.missions():
             owners = [r for r in group if any(w is i for nav in r.navigations for w in nav.waypoints for i in m.items)]
             if not owners:
                 raise ValueError(f"mission {m.name!r} (priority {m.priority}) is queued in the shared trajectory scheduler "
@@ -146,7 +146,7 @@ def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
     if hitl_on:
         raise ConfigError(f"{field} flies a mission uploaded before take-off, but the human-in-the-loop API is on "
                           "(hitl.enabled / --hitl) and could add waypoints mid-flight; turn one of them off")
-    timed = [m.name for m in sched._missions if not m.distance_driven]
+    timed = [m.name for m in sched.missions() if not m.distance_driven]
     if timed:
         raise ConfigError(f"{field}: navigation {timed} is time-driven; an autopilot mission holds only "
                           "distance-driven waypoints")

@@ -44,7 +44,7 @@ def actor_class(role: str):
     raise ValueError(f"no actor class for role {role!r}")
 
 
-def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -> dict:
+def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
     """Create every actor of ``plan``: the recorder first, on the driver's node, never restarted; the others named,
     placed with their ``label_selector`` and restartable ``max_restarts`` times. Returns host id -> actor handle.
     Nothing is set up yet. Raises what Ray raises for an impossible placement option."""
@@ -75,7 +75,7 @@ def start_actors(plan: Any, placement: Any, lockstep: bool, max_restarts: int) -
         if hid == "recorder":
             continue
         opts = {"name": a.name, "label_selector": a.selector(placement), "max_restarts": max_restarts}
-        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier, None, None, lockstep)
+        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier, None, None)
     return handles
 
 
@@ -118,7 +118,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     import ray
 
     drones = {hid: a for hid, a in plan.actors.items() if a.role == "drone"}
-    robots_of = {hid: [r["robot"]["id"] for r in a.spec["robots"]] for hid, a in drones.items()}
+    robots_of = {hid: [r.robot_id for r in a.spec.robots] for hid, a in drones.items()}
     t0 = time.monotonic()
 
     def remaining() -> float | None:
@@ -225,7 +225,7 @@ def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
 
     if recorder is None:
         return
-    epoch_ns = plan.actors["recorder"].spec.get("epoch_ns", 0)
+    epoch_ns = plan.actors["recorder"].spec.epoch_ns
     try:
         ray.get(recorder.mission_result.remote(rid, epoch_ns + int(rep.get("t", 0.0) * 1e9), {
             "outcome": rep["outcome"], "visited": rep.get("visited", 0), "preplanned_total":
