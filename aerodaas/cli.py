@@ -372,7 +372,9 @@ def _mission_backend(args: argparse.Namespace, home=None):
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
 
-    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout)
+    fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
+    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
+                       fence=fence)
     cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
     backend = make_backend(cfg)
     backend.connect()
@@ -386,7 +388,10 @@ def _cmd_mission(args: argparse.Namespace) -> int:
     """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
     through the MAVLink backend's mission protocol. The file is read and every item checked (with
     :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
-    sent; a download is written only once complete."""
+    sent; a download is written only once complete. A ``.plan``'s geofence goes up first (MAV_MISSION_TYPE_FENCE
+    items and the fence parameters, ``--fence-action``; read back and compared: a mismatch stops the upload before
+    the mission is sent), then its rally points (MAV_MISSION_TYPE_RALLY), then the mission
+    (:mod:`aerodaas.backends.mavlink.fence`)."""
     from aerodaas.backends import BackendError
     from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
 
@@ -406,15 +411,18 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             backend = _mission_backend(args, plan.home)
             if plan.home is None:  # AMSL altitudes need a home: the vehicle's (still before anything is sent)
                 plan_to_flight(plan, backend.home)
+            fence = plan.geofence
+            if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
+                got = backend.apply_fence(fence)
+                print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
+                      f"circle(s), {got['items']} fence items) uploaded and read back; "
+                      + ", ".join(f"{k} {v:g}" for k, v in got["params"].items()), flush=True)
+            if plan.rally_points:
+                n = backend.upload_rally(plan.rally_points)
+                print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
             sent = backend.upload_mission(plan)
             print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
                   f"{args.connection}", flush=True)
-            fence = plan.geofence
-            if not fence.is_empty:  # never silently: the vehicle has no fence from this file (issue 26 item 2)
-                print(f"{name}: WARNING: the geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), "
-                      f"{len(fence.circles)} circle(s)) was checked against the mission but NOT uploaded: the "
-                      f"vehicle keeps its own fence (ArduPilot FENCE_*, PX4 GF_*); set it with your ground station "
-                      f"(docs/operations.md)", file=sys.stderr, flush=True)
             if args.start:
                 backend.arm()
                 backend.start_mission()
@@ -549,6 +557,9 @@ def main(argv: list[str] | None = None) -> int:
     mu = msub.add_parser("upload", help="check FILE (.plan, .waypoints, .txt) and upload it (MISSION_ITEM_INT)")
     mu.add_argument("file")
     mu.add_argument("--start", action="store_true", help="then arm and start it (ArduPilot AUTO / PX4 AUTO.MISSION)")
+    mu.add_argument("--fence-action", choices=["rtl", "land", "hold", "report"], default="rtl",
+                    help="the vehicle's own action when it breaches the plan's geofence (ArduPilot FENCE_ACTION, PX4 "
+                         "GF_ACTION; default rtl)")
     md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
     md.add_argument("--out", required=True, metavar="FILE")
     for m in (mu, md):

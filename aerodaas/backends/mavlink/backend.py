@@ -14,6 +14,7 @@ from aerodaas.app.models import GeoPoint
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
+from aerodaas.backends.mavlink.fence import FenceMixin
 from aerodaas.backends.mavlink.link import LinkMixin
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
@@ -23,7 +24,7 @@ from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, l
 
 
 class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,
-                     VehicleBackend):
+                     FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
@@ -127,6 +128,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._att_wall = 0.0
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
+        #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
+        self.safety = cfg.safety
         self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
         self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
@@ -142,4 +145,5 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
         self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)
         self._init_params()
+        self._init_fence()
 
