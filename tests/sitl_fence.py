@@ -9,8 +9,8 @@ Everything the tests judge is read from the firmware with raw pymavlink on the f
   ``aerodaas run`` process tree (the driver, Ray and its workers: our gate is gone), read the fence as above, then
   act as a runaway client would (a companion computer stuck on its last command, a second ground station): stream a
   velocity target (SET_POSITION_TARGET_LOCAL_NED, velocity only) straight out of the fence, until the firmware
-  leaves GUIDED by itself or ``push_s`` wall seconds pass; then follow the vehicle until it has disarmed (or the
-  timeout). Records every GLOBAL_POSITION_INT (the firmware's ``time_boot_ms``), the mode of every HEARTBEAT,
+  leaves GUIDED by itself or ``push_s`` wall seconds pass; then, if the firmware took its fence action, follow the
+  vehicle until it has disarmed (or the timeout), else 2 s more (it hovers where its fence held it). Records every GLOBAL_POSITION_INT (the firmware's ``time_boot_ms``), the mode of every HEARTBEAT,
   FENCE_STATUS and STATUSTEXT.
 """
 from __future__ import annotations
@@ -172,7 +172,7 @@ def kill_tree(pid: int) -> list[int]:
 
 
 def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: float = 4.0, push_speed: float = 2.5,
-                  push_s: float = 60.0, timeout_s: float = 400.0) -> int:
+                  push_s: float = 25.0, timeout_s: float = 400.0) -> int:
     w = Watcher(conn, home)
     w.wait_vehicle(120)
     end = time.monotonic() + timeout_s
@@ -204,8 +204,13 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
         while time.monotonic() < stop:
             w.pump(0.05)
     t_push_end = w.t_boot
-    while time.monotonic() < end and (w.armed or not w.was_armed):
-        w.pump()
+    if w.mode not in ("GUIDED", "OFFBOARD"):  # the firmware's fence action: follow it to the ground
+        while time.monotonic() < end and w.armed:
+            w.pump()
+    else:  # still held in GUIDED (fence avoidance): a few more samples, then leave it hovering
+        stop = time.monotonic() + 2.0
+        while time.monotonic() < stop:
+            w.pump()
     Path(out).write_text(json.dumps({
         "killed": killed, "alive_after_kill": alive, "t_kill": t_kill, "t_push": t_push, "t_push_end": t_push_end,
         "push": [ve, vn], "pushed": pushed, "fence": fence, "samples": w.samples, "modes": w.modes,

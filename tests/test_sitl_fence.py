@@ -146,16 +146,23 @@ def test_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in
         [[5003, RADIUS_M, round(c[0] * 1e7), round(c[1] * 1e7)]]
     p = fence["params"]
     assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ALT_MAX"], p["FENCE_ACTION"]) == (1, 5, MAX_ALT_M, 1), p
-    # pushed straight out at 2.5 m/s, the vehicle never got further from the centre than the radius plus its
-    # braking distance, and it came close to the boundary (the push was real)
-    after = [s for s in obs["samples"] if s[0] >= obs["t_push"]]
-    assert after, "no telemetry after the kill"
-    far = max(math.hypot(s[1], s[2]) for s in after)
-    assert far >= RADIUS_M - p.get("FENCE_MARGIN", 2.0) - 1.0, far
-    assert far <= RADIUS_M + 3.0, far
-    # the firmware took its fence action by itself (FENCE_ACTION 1: RTL), landed and disarmed near home
+    # pushed straight out at 2.5 m/s for 25 wall seconds (~125 s of firmware time), the vehicle came to the
+    # boundary (the push was real) and the firmware kept it in: either its fence avoidance held it short of the fence
+    # (ArduCopter AC_Avoid in GUIDED, AVOID_ENABLE's fence bit by default: it stops FENCE_MARGIN inside, no breach)
+    # or it breached and took its FENCE_ACTION (RTL) within its braking distance
+    pushed = [s for s in obs["samples"] if obs["t_push"] <= s[0] <= obs["t_push_end"]]
+    assert len(pushed) > 50, "no telemetry while pushed"
+    far = max(math.hypot(s[1], s[2]) for s in pushed)
+    assert far >= RADIUS_M - p["FENCE_MARGIN"] - 1.0, far
     modes = [m for t, m in obs["modes"] if t >= obs["t_kill"]]
-    assert "RTL" in modes or "LAND" in modes, (modes, obs["texts"][-10:], obs["fence_status"][-3:])
-    assert not obs["armed_at_end"], modes
-    last = obs["samples"][-1]
-    assert math.hypot(last[1], last[2]) < 5.0 and last[3] < 0.5, last
+    breaches = max((f["breach_count"] for f in obs["fence_status"] if f["t"] >= obs["t_kill"]), default=0)
+    if any(m in ("RTL", "LAND", "BRAKE", "SMART_RTL") for m in modes):  # the fence action, then home and down
+        assert breaches > 0 and far <= RADIUS_M + 3.0, (far, breaches, modes)
+        assert not obs["armed_at_end"], modes
+        last = obs["samples"][-1]
+        assert math.hypot(last[1], last[2]) < 5.0 and last[3] < 0.5, last
+    else:  # held inside without a breach, still pushed: at most the margin's worth of creep, and standing still
+        assert breaches == 0 and far <= RADIUS_M, (far, breaches)
+        tail = [s for s in pushed if s[0] >= obs["t_push_end"] - 5.0]
+        spread = max(math.hypot(a[1] - b[1], a[2] - b[2]) for a in tail for b in tail)
+        assert spread < 1.0, spread
