@@ -135,6 +135,28 @@ class Watcher:
             params[name] = float(v)
         return {"items": items, "params": params}
 
+    def upload_mission(self, points: list[tuple[float, float, float]]) -> bool:
+        """A plain mission (ArduPilot: home placeholder at 0, then NAV_WAYPOINTs at ``(lat, lon, alt above home)``),
+        MISSION_ITEM_INT answers to each request; True on MISSION_ACK accepted."""
+        s, c = self.sysid, self.compid
+        items = [(0, 16, self.home.lat, self.home.lon, 0.0)] + [(3, 16, la, lo, z) for la, lo, z in points]
+        self.m.mav.mission_count_send(s, c, len(items), 0)
+        end = time.monotonic() + 20
+        while time.monotonic() < end:
+            msg = self.pump(0.2, want=("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"))
+            if msg is None or getattr(msg, "mission_type", 0) != 0:
+                continue
+            if msg.get_type() == "MISSION_ACK":
+                return msg.type == 0
+            frame, cmd, la, lo, z = items[msg.seq]
+            self.m.mav.mission_item_int_send(s, c, msg.seq, frame, cmd, 0, 1, 0, 0, 0, 0,
+                                             int(round(la * 1e7)), int(round(lo * 1e7)), z, 0)
+        return False
+
+    def set_mode(self, custom_mode: int) -> None:
+        """MAV_CMD_DO_SET_MODE (custom mode: ArduCopter AUTO 3, GUIDED 4)."""
+        self.m.mav.command_long_send(self.sysid, self.compid, 176, 0, 1, custom_mode, 0, 0, 0, 0, 0)
+
     def push(self, ve: float, vn: float) -> None:
         """One velocity-only target in MAV_FRAME_LOCAL_NED (north, east m/s), as a runaway client sends it."""
         self.m.mav.set_position_target_local_ned_send(0, self.sysid, self.compid, 1, 0b110111000111,
@@ -204,16 +226,33 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
         while time.monotonic() < stop:
             w.pump(0.05)
     t_push_end = w.t_boot
-    if w.mode not in ("GUIDED", "OFFBOARD"):  # the firmware's fence action: follow it to the ground
+    t_auto = None
+    uploaded = False
+    if w.mode in ("GUIDED", "OFFBOARD") and w.autopilot == "ardupilot":
+        # held by fence avoidance (GUIDED velocity control): now a mission waypoint 35 m from home (out of a 20 m fence), flown
+        # in AUTO, where ArduCopter applies no fence avoidance: the fence itself must act (breach -> FENCE_ACTION)
+        from aerodaas.navigation.geo import enu_to_geodetic
+
+        g = enu_to_geodetic(35.0 * ve / push_speed, 35.0 * vn / push_speed, 0.0, home)  # 35 m out, the push's way
+        uploaded = w.upload_mission([(g.lat, g.lon, 1.5)])
+        t_auto = w.t_boot
+        for _ in range(5):
+            w.set_mode(3)
+            stop = time.monotonic() + 1.0
+            while time.monotonic() < stop:
+                w.pump(0.05)
+            if w.mode != "GUIDED":
+                break
+    if w.mode not in ("GUIDED", "OFFBOARD"):  # AUTO, then the firmware's fence action: follow it to the ground
         while time.monotonic() < end and w.armed:
             w.pump()
-    else:  # still held in GUIDED (fence avoidance): a few more samples, then leave it hovering
+    else:  # still held in GUIDED: a few more samples, then leave it hovering
         stop = time.monotonic() + 2.0
         while time.monotonic() < stop:
             w.pump()
     Path(out).write_text(json.dumps({
         "killed": killed, "alive_after_kill": alive, "t_kill": t_kill, "t_push": t_push, "t_push_end": t_push_end,
-        "push": [ve, vn], "pushed": pushed, "fence": fence, "samples": w.samples, "modes": w.modes,
+        "push": [ve, vn], "pushed": pushed, "t_auto": t_auto, "mission_uploaded": uploaded, "fence": fence, "samples": w.samples, "modes": w.modes,
         "fence_status": w.fence_status, "texts": w.texts, "armed_at_end": w.armed}))
     return 0
 

@@ -146,23 +146,28 @@ def test_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in
         [[5003, RADIUS_M, round(c[0] * 1e7), round(c[1] * 1e7)]]
     p = fence["params"]
     assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ALT_MAX"], p["FENCE_ACTION"]) == (1, 5, MAX_ALT_M, 1), p
-    # pushed straight out at 2.5 m/s for 25 wall seconds (~125 s of firmware time), the vehicle came to the
-    # boundary (the push was real) and the firmware kept it in: either its fence avoidance held it short of the fence
-    # (ArduCopter AC_Avoid in GUIDED, AVOID_ENABLE's fence bit by default: it stops FENCE_MARGIN inside, no breach)
-    # or it breached and took its FENCE_ACTION (RTL) within its braking distance
+    # phase 1, pushed straight out at 2.5 m/s in GUIDED for 25 wall seconds (~125 s of firmware time): the vehicle
+    # came to the boundary (the push was real) and ArduCopter's fence avoidance (AC_Avoid in GUIDED velocity
+    # control, AVOID_ENABLE's fence bit by default) held it FENCE_MARGIN inside: no breach, standing still
     pushed = [s for s in obs["samples"] if obs["t_push"] <= s[0] <= obs["t_push_end"]]
     assert len(pushed) > 50, "no telemetry while pushed"
     far = max(math.hypot(s[1], s[2]) for s in pushed)
-    assert far >= RADIUS_M - p["FENCE_MARGIN"] - 1.0, far
-    modes = [m for t, m in obs["modes"] if t >= obs["t_kill"]]
-    breaches = max((f["breach_count"] for f in obs["fence_status"] if f["t"] >= obs["t_kill"]), default=0)
-    if any(m in ("RTL", "LAND", "BRAKE", "SMART_RTL") for m in modes):  # the fence action, then home and down
-        assert breaches > 0 and far <= RADIUS_M + 3.0, (far, breaches, modes)
-        assert not obs["armed_at_end"], modes
-        last = obs["samples"][-1]
-        assert math.hypot(last[1], last[2]) < 5.0 and last[3] < 0.5, last
-    else:  # held inside without a breach, still pushed: at most the margin's worth of creep, and standing still
-        assert breaches == 0 and far <= RADIUS_M, (far, breaches)
-        tail = [s for s in pushed if s[0] >= obs["t_push_end"] - 5.0]
-        spread = max(math.hypot(a[1] - b[1], a[2] - b[2]) for a in tail for b in tail)
-        assert spread < 1.0, spread
+    assert RADIUS_M - p["FENCE_MARGIN"] - 1.0 <= far <= RADIUS_M, far
+    breaches = max((f["breach_count"] for f in obs["fence_status"] if obs["t_kill"] <= f["t"] <= obs["t_push_end"]),
+                   default=0)
+    assert breaches == 0, breaches
+    tail = [s for s in pushed if s[0] >= obs["t_push_end"] - 5.0]
+    assert max(math.hypot(a[1] - b[1], a[2] - b[2]) for a in tail for b in tail) < 1.0
+    # phase 2, a mission waypoint 35 m out flown in AUTO (no avoidance there): the fence itself acts. The firmware
+    # reports the breach (FENCE_STATUS), takes its FENCE_ACTION (1: RTL) by itself within its braking distance of the
+    # boundary, flies home, lands and disarms
+    assert obs["mission_uploaded"] and obs["t_auto"] is not None
+    modes = [m for t, m in obs["modes"] if t >= obs["t_auto"]]
+    assert modes[:2] == ["AUTO", "RTL"], (modes, obs["texts"][-8:])
+    assert max(f["breach_count"] for f in obs["fence_status"]) > 0
+    after = [s for s in obs["samples"] if s[0] >= obs["t_auto"]]
+    beyond = max(math.hypot(s[1], s[2]) for s in after) - RADIUS_M
+    assert beyond <= 3.0, beyond
+    assert not obs["armed_at_end"], modes
+    last = obs["samples"][-1]
+    assert math.hypot(last[1], last[2]) < 3.0 and last[3] < 0.5, last
