@@ -384,6 +384,32 @@ def _mission_backend(args: argparse.Namespace, home=None):
     return backend
 
 
+def _download_fence_and_rally(backend, plan, out: Path, name: str):
+    """``plan`` with the vehicle's fence (MAV_MISSION_TYPE_FENCE) and rally points (MAV_MISSION_TYPE_RALLY); what
+    cannot be read, or cannot be stored in ``out`` (QGC WPL holds neither), is said on stderr, never dropped
+    silently."""
+    from aerodaas.backends import BackendError
+    from aerodaas.backends.mavlink.fence import FENCE, RALLY, fence_from_items
+
+    update = {}
+    try:
+        update["geofence"] = fence_from_items(backend.download_items(FENCE))
+    except (BackendError, ValueError) as e:
+        print(f"{name}: WARNING: the vehicle's geofence could not be read ({e}); {str(out)!r} has none",
+              file=sys.stderr, flush=True)
+    try:
+        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.download_items(RALLY)]
+    except BackendError as e:
+        print(f"{name}: WARNING: the vehicle's rally points could not be read ({e}); {str(out)!r} has none",
+              file=sys.stderr, flush=True)
+    plan = plan.model_copy(update=update)
+    if out.suffix.lower() != ".plan" and (not plan.geofence.is_empty or plan.rally_points):
+        print(f"{name}: WARNING: the vehicle's geofence ({len(plan.geofence.polygons)} polygon(s), "
+              f"{len(plan.geofence.circles)} circle(s)) and {len(plan.rally_points)} rally point(s) cannot be stored "
+              f"in a QGC WPL file; download to a .plan to keep them", file=sys.stderr, flush=True)
+    return plan
+
+
 def _cmd_mission(args: argparse.Namespace) -> int:
     """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
     through the MAVLink backend's mission protocol. The file is read and every item checked (with
@@ -435,6 +461,7 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             backend = _mission_backend(args)
             plan = backend.download_mission().model_copy(update={
                 "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
+            plan = _download_fence_and_rally(backend, plan, out, name)
             tmp = out.with_name(out.name + ".part")
             (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
             os.replace(tmp, out)  # never a half-written mission file

@@ -180,3 +180,43 @@ def test_mission_upload_sends_the_plan_geofence_and_rally_points(vehicle, tmp_pa
     assert emu.snapshot()["mission_len"] == 5 + (1 if autopilot == "ardupilot" else 0)
     out = capsys.readouterr().out
     assert "geofence of" in out and "2 rally point(s)" in out
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_mission_download_keeps_the_vehicle_fence_and_rally_points(vehicle, tmp_path, autopilot, capsys):
+    from aerodaas.missionfile import load_mission
+
+    doc = json.loads(SQUARE.read_text())
+    doc["geoFence"] = {"version": 2, "polygons": [
+        {"version": 1, "inclusion": False, "polygon": [list(_ll(5, 5)), list(_ll(8, 5)), list(_ll(8, 8))]}],
+        "circles": [{"version": 1, "inclusion": True, "circle": {"center": [HOME.lat, HOME.lon], "radius": 250.0}}]}
+    doc["rallyPoints"] = {"version": 2, "points": [[*_ll(-10, 0), 15.0]]}
+    plan = tmp_path / "fenced.plan"
+    plan.write_text(json.dumps(doc))
+    emu, _b, address = vehicle(autopilot, fence=None)
+    assert main(["mission", "upload", str(plan), "--connection", address]) == 0
+    back = tmp_path / "back.plan"
+    assert main(["mission", "download", "--connection", address, "--out", str(back)]) == 0
+    got, want = load_mission(back), load_mission(plan)
+    def zones(f):  # on the vehicle's 1e-7 degree grid
+        return ([(p.inclusion, [(round(a, 7), round(b, 7)) for a, b in p.points]) for p in f.polygons],
+                [(c.inclusion, round(c.center[0], 7), round(c.center[1], 7), c.radius) for c in f.circles])
+
+    assert zones(got.geofence) == zones(want.geofence) and len(got.geofence.polygons) == 1
+    assert [(round(a, 7), round(b, 7), round(z, 2)) for a, b, z in got.rally_points] == \
+        [(round(a, 7), round(b, 7), round(z, 2)) for a, b, z in want.rally_points]
+    wpl = tmp_path / "back.waypoints"
+    assert main(["mission", "download", "--connection", address, "--out", str(wpl)]) == 0
+    assert "cannot be stored in a QGC WPL file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad, field", [({"action": "explode"}, "fence.action"),
+                                        ({"home_radius_m": -3}, "fence.home_radius_m"),
+                                        ({"restore": True}, "fence.restore")])
+def test_bad_fence_settings_are_refused_naming_the_field(bad, field):
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    cfg = {"robots": [{"id": "quad", "backend": "mavlink", "home": {"lat": HOME.lat, "lon": HOME.lon, "alt": HOME.alt},
+                       "mavlink": {"connection": "udpin:0.0.0.0:14550", "fence": bad}}]}
+    with pytest.raises(ConfigError, match=rf"robots\.0\.mavlink\.{field}"):
+        parse_environment_config(cfg)

@@ -78,6 +78,30 @@ def rally_items(points: Iterable[tuple[float, float, float]]) -> list[Wire]:
              int(round(lat * 1e7)), int(round(lon * 1e7)), _f32(alt)) for lat, lon, alt in points]
 
 
+def fence_from_items(wire: list[Wire]) -> GeofenceConfig:
+    """The :class:`GeofenceConfig` a vehicle's fence items describe (the inverse of :func:`fence_items`): runs of
+    ``param1`` consecutive vertex items of one command make a polygon, each circle item a circle; a return point
+    (5000) is skipped. Raises ValueError for a polygon whose vertex count does not match its run."""
+    polygons, circles, k = [], [], 0
+    poly_cmds = (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
+    while k < len(wire):
+        _frame, cmd, p1 = wire[k][0], wire[k][1], wire[k][2] or 0.0
+        if cmd in poly_cmds:
+            n = int(round(p1))
+            run = wire[k:k + n]
+            if n < 3 or len(run) < n or any(w[1] != cmd for w in run):
+                raise ValueError(f"fence item {k}: a polygon of {n} vertices, but the items that follow do not hold them")
+            polygons.append({"points": [(w[6] / 1e7, w[7] / 1e7) for w in run],
+                             "inclusion": cmd == M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION})
+            k += n
+            continue
+        if cmd in (M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION):
+            circles.append({"center": (wire[k][6] / 1e7, wire[k][7] / 1e7), "radius": float(p1),
+                            "inclusion": cmd == M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION})
+        k += 1
+    return GeofenceConfig.model_validate({"polygons": polygons, "circles": circles}, strict=False)
+
+
 def compare_items(sent: list[Wire], got: list[Wire], compare_z: bool) -> str | None:
     """Why the items read back differ from those sent (None: they match): count, then per item command, ``x``,
     ``y`` (exact ints), ``param1`` (float32 tolerance) and, with ``compare_z``, ``z`` (ArduPilot returns fence
