@@ -216,10 +216,18 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
     e, n = w.samples[-1][1], w.samples[-1][2]
     d = math.hypot(e, n) or 1.0
     ve, vn = push_speed * (e / d if d > 0.5 else 1.0), push_speed * (n / d if d > 0.5 else 0.0)
+    if w.autopilot == "px4":  # PX4 left OFFBOARD when our setpoint stream stopped: stream first, then OFFBOARD
+        for _ in range(10):
+            w.push(ve, vn)
+            stop = time.monotonic() + 0.1
+            while time.monotonic() < stop:
+                w.pump(0.05)
+        w.m.mav.command_long_send(w.sysid, w.compid, 176, 0, 1, 6, 0, 0, 0, 0, 0)  # custom main mode 6: OFFBOARD
     push_end = time.monotonic() + push_s
+    entering = time.monotonic() + 5.0
     pushed = 0
     t_push = w.t_boot
-    while time.monotonic() < push_end and w.mode in ("GUIDED", "OFFBOARD"):
+    while time.monotonic() < push_end and (w.mode in ("GUIDED", "OFFBOARD") or time.monotonic() < entering):
         w.push(ve, vn)
         pushed += 1
         stop = time.monotonic() + 0.2

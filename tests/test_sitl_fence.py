@@ -111,13 +111,11 @@ def test_px4_mission_upload_leaves_the_plan_fence_on_the_vehicle(px4_upload):
 
 
 # ------------------------------------------------------------------------------------------- the kill test
-@pytest.fixture(scope="module")
-def killed(tmp_path_factory):
-    """The farm survey on ArduCopter with an inclusion circle of :data:`RADIUS_M` around home as the robot's
-    geofence; SIGKILL of the ``aerodaas run`` process tree once it flies, then a runaway client pushes the vehicle
-    out of the fence (``tests/sitl_fence.py kill-and-push``)."""
-    workdir = tmp_path_factory.mktemp("fence_ap_kill")
-    cfg = sitl.mavlink_env("ardupilot", sitl.FARM_ENV, fence={"action": "rtl"})
+def _kill_session(autopilot: str, workdir: Path) -> dict:
+    """The farm survey with an inclusion circle of :data:`RADIUS_M` around home as the robot's geofence; SIGKILL
+    of the ``aerodaas run`` process tree once it flies, then a runaway client pushes the vehicle out of the fence
+    (``tests/sitl_fence.py kill-and-push``)."""
+    cfg = sitl.mavlink_env(autopilot, sitl.FARM_ENV, fence={"action": "rtl"})
     r = cfg["robots"][0]
     r["safety"] = {"geofence": {"circles": [{"center": _ll(0, 0), "radius": RADIUS_M, "inclusion": True}]},
                    "max_altitude": MAX_ALT_M}
@@ -127,12 +125,22 @@ def killed(tmp_path_factory):
     run = sitl.aerodaas_run(sitl.FARM_APP, env, workdir / "run.mcap")
     out = workdir / "kill.json"
     step = (f"{run} > {shlex.quote(str(workdir / 'run.log'))} 2>&1 & RUN=$!; "
-            f"{py} -m tests.sitl_fence kill-and-push {sitl.monitor_connection('ardupilot')} $RUN "
+            f"{py} -m tests.sitl_fence kill-and-push {sitl.monitor_connection(autopilot)} $RUN "
             f"{shlex.quote(str(out))}")
-    sitl.run_in_namespace("ardupilot", workdir, [step], timeout_s=700)
+    sitl.run_in_namespace(autopilot, workdir, [step], timeout_s=700)
     rc, text = sitl.step_result(workdir, 0)
     log = (workdir / "run.log").read_text(errors="replace") if (workdir / "run.log").exists() else ""
     return {"rc": rc, "out": text, "log": log, "obs": json.loads(out.read_text()) if out.exists() else {}}
+
+
+@pytest.fixture(scope="module")
+def killed(tmp_path_factory):
+    return _kill_session("ardupilot", tmp_path_factory.mktemp("fence_ap_kill"))
+
+
+@pytest.fixture(scope="module")
+def px4_killed(tmp_path_factory):
+    return _kill_session("px4", tmp_path_factory.mktemp("fence_px4_kill"))
 
 
 def test_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in(killed):
@@ -168,6 +176,29 @@ def test_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in
     after = [s for s in obs["samples"] if s[0] >= obs["t_auto"]]
     beyond = max(math.hypot(s[1], s[2]) for s in after) - RADIUS_M
     assert beyond <= 3.0, beyond
+    assert not obs["armed_at_end"], modes
+    last = obs["samples"][-1]
+    assert math.hypot(last[1], last[2]) < 3.0 and last[3] < 0.5, last
+
+
+def test_px4_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in(px4_killed):
+    """PX4 SIH: after the kill, PX4 has our fence (GF_ACTION 3 Return); a runaway client puts it back in OFFBOARD
+    and streams a velocity target straight out (PX4 caps it at our MPC_XY_VEL_MAX): the geofence breach makes PX4
+    return by itself (no avoidance in PX4's OFFBOARD with GF_PREDICT 0, the default), then it lands at home."""
+    obs = px4_killed["obs"]
+    assert px4_killed["rc"] == 0 and "error" not in obs, (px4_killed["out"], obs.get("error"),
+                                                          px4_killed["log"][-3000:])
+    assert obs["killed"] and not obs["alive_after_kill"], obs["alive_after_kill"]
+    c = _ll(0, 0)
+    assert [[i[0], round(i[2], 3), i[3], i[4]] for i in obs["fence"]["items"]] == \
+        [[5003, RADIUS_M, round(c[0] * 1e7), round(c[1] * 1e7)]]
+    p = obs["fence"]["params"]
+    assert (p["GF_ACTION"], p["GF_MAX_VER_DIST"]) == (3, MAX_ALT_M), p
+    modes = [m for t, m in obs["modes"] if t >= obs["t_push"]]
+    assert "OFFBOARD" in modes and "RTL" in modes[modes.index("OFFBOARD"):], (modes, obs["texts"][-8:])
+    after = [s for s in obs["samples"] if s[0] >= obs["t_push"]]
+    far = max(math.hypot(s[1], s[2]) for s in after)
+    assert RADIUS_M - 1.0 <= far <= RADIUS_M + 3.0, far
     assert not obs["armed_at_end"], modes
     last = obs["samples"][-1]
     assert math.hypot(last[1], last[2]) < 3.0 and last[3] < 0.5, last
