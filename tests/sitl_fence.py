@@ -201,13 +201,14 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
     flying_since = None
     while time.monotonic() < end:  # the app flies its mission
         w.pump()
-        flying = w.armed and w.mode in ("GUIDED", "OFFBOARD") and w.samples and w.samples[-1][3] > 1.0
+        # ArduCopter arms and takes off in GUIDED (so: above 1 m); PX4 enters OFFBOARD only once in the air
+        flying = w.armed and w.samples and (w.mode == "OFFBOARD" or (w.mode == "GUIDED" and w.samples[-1][3] > 1.0))
         flying_since = (flying_since or time.monotonic()) if flying else None
         if flying_since is not None and time.monotonic() - flying_since >= fly_s:
             break
     else:
         Path(out).write_text(json.dumps({"error": "never saw the vehicle fly the mission", "modes": w.modes,
-                                         "texts": w.texts}))
+                                         "texts": w.texts, "samples": w.samples[-200:]}))
         return 1
     killed = kill_tree(run_pid)
     alive = [p for p in killed if _alive(p)]

@@ -182,9 +182,10 @@ def test_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in
 
 
 def test_px4_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in(px4_killed):
-    """PX4 SIH: after the kill, PX4 has our fence (GF_ACTION 3 Return); a runaway client puts it back in OFFBOARD
-    and streams a velocity target straight out (PX4 caps it at our MPC_XY_VEL_MAX): the geofence breach makes PX4
-    return by itself (no avoidance in PX4's OFFBOARD with GF_PREDICT 0, the default), then it lands at home."""
+    """PX4 SIH: after the kill, PX4 has our fence (GF_ACTION 3 Return; its own offboard-loss failsafe returns it
+    first); a runaway client puts it back in OFFBOARD and streams a velocity target straight out (PX4 caps it at our
+    MPC_XY_VEL_MAX): at the boundary PX4's geofence failsafe holds (COM_FAIL_ACT_T, 5 s) and returns by itself
+    (GF_PREDICT 0, the default: no pre-emptive stop), then it lands at home and disarms."""
     obs = px4_killed["obs"]
     assert px4_killed["rc"] == 0 and "error" not in obs, (px4_killed["out"], obs.get("error"),
                                                           px4_killed["log"][-3000:])
@@ -199,6 +200,9 @@ def test_px4_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicl
     after = [s for s in obs["samples"] if s[0] >= obs["t_push"]]
     far = max(math.hypot(s[1], s[2]) for s in after)
     assert RADIUS_M - 1.0 <= far <= RADIUS_M + 3.0, far
-    assert not obs["armed_at_end"], modes
+    assert any(t.startswith("Geofence") for t in obs["texts"]), obs["texts"]
+    # landed and disarmed at home (PX4's relative altitude drifts by a metre after landing as it re-estimates its
+    # home, COM_HOME_EN: the landing is its own "Landing detected" and the disarm)
+    assert not obs["armed_at_end"] and any(t.startswith("Landing detected") for t in obs["texts"]), modes
     last = obs["samples"][-1]
-    assert math.hypot(last[1], last[2]) < 3.0 and last[3] < 0.5, last
+    assert math.hypot(last[1], last[2]) < 3.0, last
