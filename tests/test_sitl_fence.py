@@ -14,7 +14,6 @@ from pathlib import Path
 import pytest
 
 from . import sitl
-from .sitl_fence import FENCE_PARAMS  # noqa: F401 - documents what is read
 
 _SKIP = sitl.namespace_skip_reason()
 pytestmark = [pytest.mark.sitl, pytest.mark.skipif(_SKIP is not None, reason=_SKIP or "")]

@@ -49,6 +49,8 @@ AP_FENCE_ALT_MAX, AP_FENCE_CIRCLE, AP_FENCE_POLYGON = 1, 2, 4
 #: our ``mavlink.fence.action`` -> (ArduPilot FENCE_ACTION, PX4 GF_ACTION)
 FENCE_ACTIONS = {"report": (0, 1), "rtl": (1, 3), "land": (2, 5), "hold": (4, 2)}
 
+#: the fence parameters of integer type (PX4 takes GF_ACTION only as INT32; ArduPilot converts REAL32 itself)
+_INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
 #: one item on the wire: (frame, command, param1..4, x int, y int, z)
 Wire = tuple
 
@@ -85,7 +87,7 @@ def fence_from_items(wire: list[Wire]) -> GeofenceConfig:
     polygons, circles, k = [], [], 0
     poly_cmds = (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
     while k < len(wire):
-        _frame, cmd, p1 = wire[k][0], wire[k][1], wire[k][2] or 0.0
+        cmd, p1 = wire[k][1], wire[k][2] or 0.0
         if cmd in poly_cmds:
             n = int(round(p1))
             run = wire[k:k + n]
@@ -317,9 +319,8 @@ class FenceMixin:
         try:
             if saved["items"] is not None:
                 self.upload_items(FENCE, saved["items"])
-            want = self.fence_parameters(GeofenceConfig())
             for name, value in saved["params"].items():
-                self.set_parameter(name, value, integer=want.get(name, (0.0, name == "GF_ACTION"))[1])
+                self.set_parameter(name, value, integer=name in _INT_PARAMS)
         except Exception as e:  # noqa: BLE001 - closing: report and go on
             ok = False
             self._event("fence_restore_failed", error=str(e))
