@@ -32,7 +32,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
     vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
     home until the vehicle reports one). Besides the :class:`VehicleBackend` contract it offers
     :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
-    :meth:`set_mode` and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
+    :meth:`set_mode`, :meth:`apply_fence` / :meth:`upload_rally` / :meth:`restore_fence` (the vehicle's own geofence,
+made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
     :attr:`gps_fix_type`, :attr:`command_rtt_ms` (acknowledged command round trips, wall milliseconds).
     Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
     (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
