@@ -372,7 +372,9 @@ def _mission_backend(args: argparse.Namespace, home=None):
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
 
-    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout)
+    fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
+    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
+                       fence=fence)
     cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
     backend = make_backend(cfg)
     backend.connect()
@@ -382,11 +384,40 @@ def _mission_backend(args: argparse.Namespace, home=None):
     return backend
 
 
+def _download_fence_and_rally(backend, plan, out: Path, name: str):
+    """``plan`` with the vehicle's fence (MAV_MISSION_TYPE_FENCE) and rally points (MAV_MISSION_TYPE_RALLY); what
+    cannot be read, or cannot be stored in ``out`` (QGC WPL holds neither), is said on stderr, never dropped
+    silently."""
+    from aerodaas.backends import BackendError
+    from aerodaas.backends.mavlink.fence import FENCE, RALLY, fence_from_items
+
+    update = {}
+    try:
+        update["geofence"] = fence_from_items(backend.download_items(FENCE))
+    except (BackendError, ValueError) as e:
+        print(f"{name}: WARNING: the vehicle's geofence could not be read ({e}); {str(out)!r} has none",
+              file=sys.stderr, flush=True)
+    try:
+        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.download_items(RALLY)]
+    except BackendError as e:
+        print(f"{name}: WARNING: the vehicle's rally points could not be read ({e}); {str(out)!r} has none",
+              file=sys.stderr, flush=True)
+    plan = plan.model_copy(update=update)
+    if out.suffix.lower() != ".plan" and (not plan.geofence.is_empty or plan.rally_points):
+        print(f"{name}: WARNING: the vehicle's geofence ({len(plan.geofence.polygons)} polygon(s), "
+              f"{len(plan.geofence.circles)} circle(s)) and {len(plan.rally_points)} rally point(s) cannot be stored "
+              f"in a QGC WPL file; download to a .plan to keep them", file=sys.stderr, flush=True)
+    return plan
+
+
 def _cmd_mission(args: argparse.Namespace) -> int:
     """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
     through the MAVLink backend's mission protocol. The file is read and every item checked (with
     :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
-    sent; a download is written only once complete."""
+    sent; a download is written only once complete. A ``.plan``'s geofence goes up first (MAV_MISSION_TYPE_FENCE
+    items and the fence parameters, ``--fence-action``; read back and compared: a mismatch stops the upload before
+    the mission is sent), then its rally points (MAV_MISSION_TYPE_RALLY), then the mission
+    (:mod:`aerodaas.backends.mavlink.fence`)."""
     from aerodaas.backends import BackendError
     from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
 
@@ -406,15 +437,18 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             backend = _mission_backend(args, plan.home)
             if plan.home is None:  # AMSL altitudes need a home: the vehicle's (still before anything is sent)
                 plan_to_flight(plan, backend.home)
+            fence = plan.geofence
+            if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
+                got = backend.apply_fence(fence)
+                print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
+                      f"circle(s), {got['items']} fence items) uploaded and read back; "
+                      + ", ".join(f"{k} {v:g}" for k, v in got["params"].items()), flush=True)
+            if plan.rally_points:
+                n = backend.upload_rally(plan.rally_points)
+                print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
             sent = backend.upload_mission(plan)
             print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
                   f"{args.connection}", flush=True)
-            fence = plan.geofence
-            if not fence.is_empty:  # never silently: the vehicle has no fence from this file (issue 26 item 2)
-                print(f"{name}: WARNING: the geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), "
-                      f"{len(fence.circles)} circle(s)) was checked against the mission but NOT uploaded: the "
-                      f"vehicle keeps its own fence (ArduPilot FENCE_*, PX4 GF_*); set it with your ground station "
-                      f"(docs/operations.md)", file=sys.stderr, flush=True)
             if args.start:
                 backend.arm()
                 backend.start_mission()
@@ -427,6 +461,7 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             backend = _mission_backend(args)
             plan = backend.download_mission().model_copy(update={
                 "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
+            plan = _download_fence_and_rally(backend, plan, out, name)
             tmp = out.with_name(out.name + ".part")
             (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
             os.replace(tmp, out)  # never a half-written mission file
@@ -552,6 +587,9 @@ def main(argv: list[str] | None = None) -> int:
     mu = msub.add_parser("upload", help="check FILE (.plan, .waypoints, .txt) and upload it (MISSION_ITEM_INT)")
     mu.add_argument("file")
     mu.add_argument("--start", action="store_true", help="then arm and start it (ArduPilot AUTO / PX4 AUTO.MISSION)")
+    mu.add_argument("--fence-action", choices=["rtl", "land", "hold", "report"], default="rtl",
+                    help="the vehicle's own action when it breaches the plan's geofence (ArduPilot FENCE_ACTION, PX4 "
+                         "GF_ACTION; default rtl)")
     md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
     md.add_argument("--out", required=True, metavar="FILE")
     for m in (mu, md):

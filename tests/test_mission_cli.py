@@ -77,9 +77,9 @@ def test_errors_name_the_file_item_or_connection_and_send_nothing(vehicle, tmp_p
     assert dead in capsys.readouterr().err and not (tmp_path / "x.plan").exists()
 
 
-def test_upload_of_a_plan_with_a_geofence_says_the_fence_was_not_sent(vehicle, tmp_path, capsys):
-    """issue 26: a .plan's geofence left the vehicle without a fence, silently. Until the fence is uploaded
-    (MISSION_TYPE_FENCE), the command says so on stderr, naming the file and the zones."""
+def test_upload_of_a_plan_with_a_geofence_sends_it(vehicle, tmp_path, capsys):
+    """issue 26: a .plan's geofence left the vehicle without a fence, silently. Now it goes up first
+    (MAV_MISSION_TYPE_FENCE, FENCE_ENABLE 1) and the command says so (tests/test_mavlink_fence.py has the rest)."""
     import json
 
     doc = json.loads(SQUARE.read_text())
@@ -90,5 +90,8 @@ def test_upload_of_a_plan_with_a_geofence_says_the_fence_was_not_sent(vehicle, t
     plan.write_text(json.dumps(doc))
     emu, address = vehicle("ardupilot")
     assert main(["mission", "upload", str(plan), "--connection", address]) == 0
-    err = capsys.readouterr().err
-    assert "fenced.plan" in err and "1 circle(s)" in err and "NOT uploaded" in err, err
+    out = capsys.readouterr().out
+    assert "fenced.plan" in out and "1 circle(s)" in out and "FENCE_ENABLE 1" in out, out
+    with emu._lock:
+        assert [(it.command, it.param1) for it in emu.fence_items] == [(5003, 200.0)]
+    assert emu.params["FENCE_ENABLE"] == 1

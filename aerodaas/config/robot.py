@@ -161,6 +161,29 @@ SENSOR_PROPERTIES: dict[str, dict[str, tuple]] = {
 }
 
 
+class MavlinkFenceConfig(_Cfg):
+    """The autopilot's own geofence (``mavlink.fence``): the second line of defence, enforced by the firmware even
+    when our process is gone; our :class:`~aerodaas.navigation.safety.SafetyGate` stays the first.
+
+    ``upload``: on connect, when the robot has a geofence (``safety.geofence`` / ``safety.geofence_plan``), send its
+    polygons and circles as the vehicle's fence (MAVLink mission protocol, ``MAV_MISSION_TYPE_FENCE``) and set the
+    fence parameters (ArduPilot ``FENCE_ENABLE``/``FENCE_TYPE``/``FENCE_ALT_MAX``/``FENCE_ACTION``, PX4
+    ``GF_ACTION``/``GF_MAX_VER_DIST``/``GF_MAX_HOR_DIST``), read everything back and refuse to fly on a mismatch.
+    A robot without a geofence leaves the vehicle's fence as it is. ``max_altitude``: also fence the altitude at
+    ``safety.max_altitude`` (else ``limits.max_altitude``) metres above home. ``home_radius_m``: also a circle of
+    this radius (metres) around home (ArduPilot ``FENCE_TYPE`` bit 2 + ``FENCE_RADIUS``, PX4 ``GF_MAX_HOR_DIST``).
+    ``action``: what the firmware does on a breach: ``rtl`` (ArduPilot FENCE_ACTION 1 "RTL or Land", PX4 GF_ACTION 3
+    "Return"), ``land`` (2 / 5), ``hold`` (ArduPilot 4 "Brake or Land", PX4 2 "Hold"), ``report`` (0 "Report only" /
+    1 "Warning": no action). ``restore_on_close``: when the backend closes with the vehicle disarmed, put the
+    vehicle's previous fence items and parameters back (default: the fence stays, as a fence should)."""
+
+    upload: bool = True
+    action: Literal["rtl", "land", "hold", "report"] = "rtl"
+    max_altitude: bool = True
+    home_radius_m: float | None = Field(default=None, gt=0, le=10_000.0, description="metres")
+    restore_on_close: bool = False
+
+
 class MavlinkConfig(_Cfg):
     """A MAVLink autopilot (ArduPilot or PX4) reached through pymavlink.
 
@@ -220,6 +243,8 @@ class MavlinkConfig(_Cfg):
     #: the link is up, the mission goes on in GUIDED/OFFBOARD (overriding the failsafe: only when the operator
     #: knows why it triggered). docs/operations.md links the autopilots' failsafe documentation.
     on_failsafe: Literal["end", "hold", "resume"] = "end"
+    #: the autopilot's own geofence: uploaded from the robot's safety.geofence (see MavlinkFenceConfig)
+    fence: MavlinkFenceConfig = Field(default_factory=MavlinkFenceConfig)
 
     @model_validator(mode="after")
     def _check_target(self) -> "MavlinkConfig":

@@ -22,7 +22,8 @@ holds the shared state): :mod:`.link` (connection, autopilot HEARTBEAT, I/O thre
 close), :mod:`.command` (command protocol, mode changes), :mod:`.telemetry` (state from the streams, mission
 progress), :mod:`.params` (parameter protocol, the vehicle's own speed limits), :mod:`.action` (readiness,
 arming, take-off), :mod:`.offboard` (GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.mission` (the
-mission protocol). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+mission protocol), :mod:`.fence` (the autopilot's own geofence and rally points: MAV_MISSION_TYPE_FENCE / _RALLY
+transfers, FENCE_* / GF_* parameters, read back before flight). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

@@ -14,6 +14,7 @@ from aerodaas.app.models import GeoPoint
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
+from aerodaas.backends.mavlink.fence import FenceMixin
 from aerodaas.backends.mavlink.link import LinkMixin
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
@@ -23,7 +24,7 @@ from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, l
 
 
 class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,
-                     VehicleBackend):
+                     FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
@@ -31,7 +32,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
     vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
     home until the vehicle reports one). Besides the :class:`VehicleBackend` contract it offers
     :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
-    :meth:`set_mode` and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
+    :meth:`set_mode`, :meth:`apply_fence` / :meth:`upload_rally` / :meth:`restore_fence` (the vehicle's own geofence,
+made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
     :attr:`gps_fix_type`, :attr:`command_rtt_ms` (acknowledged command round trips, wall milliseconds).
     Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
     (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
@@ -127,6 +129,8 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._att_wall = 0.0
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
+        #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
+        self.safety = cfg.safety
         self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
         self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
@@ -142,4 +146,5 @@ class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, Action
         self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
         self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)
         self._init_params()
+        self._init_fence()
 

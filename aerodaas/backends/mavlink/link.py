@@ -74,6 +74,12 @@ class LinkMixin:
             except BaseException:
                 self.close(safe_end=False)
                 raise
+        if self.cfg.fence.upload and not self.safety.geofence.is_empty:
+            try:  # the autopilot's own fence, the second line behind our gate (fence.py)
+                self.apply_fence()
+            except BaseException:
+                self.close(safe_end=False)
+                raise
 
     def close(self, safe_end: bool = True) -> None:
         """Close the link (idempotent, never raises). With ``safe_end`` (default) a vehicle still armed is first
@@ -87,6 +93,11 @@ class LinkMixin:
                 except Exception as e:  # noqa: BLE001 - closing must go on
                     self._event("safe_end_failed", error=str(e))
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
+            if self.cfg.fence.restore_on_close and self._fence_saved:
+                if self._link_ok and not self._armed:
+                    self.restore_fence()
+                else:
+                    self._event("fence_not_restored", reason="link lost" if not self._link_ok else "still armed")
             if self.cfg.restore_params and self._saved_params:
                 if self._link_ok and not self._armed:
                     self.restore_parameters()

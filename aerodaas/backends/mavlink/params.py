@@ -86,18 +86,25 @@ class ParamMixin:
                     self._param_cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
         return {n: self._params[n] for n in names if n in self._params}
 
-    def set_parameter(self, name: str, value: float, wait_s: float | None = None) -> float:
-        """PARAM_SET ``name`` = ``value`` (REAL32) and wait for the PARAM_VALUE echo (re-sent up to
-        ``command_retries`` times, each try ``command_timeout_s``). Returns the value the vehicle reports, which
-        may differ (the firmware clamps to its range). Raises BackendError when no echo comes, LinkLost."""
+    def set_parameter(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
+        """PARAM_SET ``name`` = ``value`` and wait for the PARAM_VALUE echo (re-sent up to ``command_retries``
+        times, each try ``command_timeout_s``). ``integer``: an INT32 parameter; PX4 refuses a PARAM_SET whose type
+        is not the parameter's ("param types mismatch", src/modules/mavlink/mavlink_parameters.cpp) and takes the
+        integer bytewise in the float field (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE); ArduPilot converts
+        the REAL32 value to the parameter's own type (AP_Param), so it always gets REAL32. Returns the value the
+        vehicle reports, which may differ (the firmware clamps to its range). Raises BackendError when no echo
+        comes, LinkLost."""
         self._check_link(f"set parameter {name}")
         wait = self.cfg.command_timeout_s if wait_s is None else wait_s
-        v32 = _f32(value)
+        if integer and self.autopilot == "px4":
+            v32 = struct.unpack("<f", struct.pack("<i", int(round(value))))[0]
+            ptype = M.MAV_PARAM_TYPE_INT32
+        else:
+            v32, ptype = _f32(value), M.MAV_PARAM_TYPE_REAL32
         for _ in range(self.cfg.command_retries + 1):
             with self._param_cv:
                 self._params.pop(name, None)
-            self._send(lambda mav: mav.param_set_send(self._sysid, self._compid, name.encode(), v32,
-                                                      M.MAV_PARAM_TYPE_REAL32))
+            self._send(lambda mav: mav.param_set_send(self._sysid, self._compid, name.encode(), v32, ptype))
             end = time.monotonic() + wait
             with self._param_cv:
                 while name not in self._params and time.monotonic() < end:

@@ -133,13 +133,20 @@ class LinkPort:
 
     def __init__(self, link: SharedLink, robot_id: str) -> None:
         self.link, self.robot_id = link, robot_id
-        self.mav = link.conn.mav
         self.send_lock = link.send_lock
         self.target_system = self.target_component = 0
         self.dropped = 0
         self._q: deque = deque()
         self._cv = threading.Condition()
         self._closed = False
+
+    @property
+    def mav(self) -> Any:
+        """The link's encoder, looked up on every send: pymavlink replaces ``conn.mav`` when it switches to MAVLink 2
+        on the first v2 byte it receives (``mavfile.auto_mavlink_version``); an encoder kept from before went on
+        framing MAVLink 1, which drops every extension field (``mission_type``: a fence upload became a mission
+        upload)."""
+        return self.link.conn.mav
 
     def _put(self, msg: Any) -> None:
         with self._cv:

@@ -16,6 +16,9 @@ M = mavlink
 ARDUPILOT_PARAMS: dict[str, float] = {
     "RTL_ALT": 1500.0, "LAND_SPEED": 50.0, "WPNAV_SPEED": 1000.0, "WPNAV_SPEED_UP": 250.0,
     "WPNAV_SPEED_DN": 150.0, "WPNAV_ACCEL": 250.0, "WPNAV_RADIUS": 200.0, "DISARM_DELAY": 10.0,
+    # AC_Fence (libraries/AC_Fence/AC_Fence.cpp): disabled, all three types, 100 m, RTL or land; FENCE_RADIUS 150 m
+    # is SITL's copter.parm (the library default is 300)
+    "FENCE_ENABLE": 0.0, "FENCE_TYPE": 7.0, "FENCE_ALT_MAX": 100.0, "FENCE_ACTION": 1.0, "FENCE_RADIUS": 150.0,
 }
 #: PX4 parameters (name -> default, SI units). MPC_*: src/modules/mc_pos_control/multicopter_*_params.c
 #: (MPC_XY_CRUISE 5 m/s, MPC_XY_VEL_MAX 12 m/s, MPC_Z_VEL_MAX_UP 3 m/s, MPC_Z_VEL_MAX_DN 1.5 m/s,
@@ -26,7 +29,13 @@ PX4_PARAMS: dict[str, float] = {
     "COM_DISARM_PRFLT": 10.0, "COM_DISARM_LAND": 2.0, "NAV_ACC_RAD": 2.0, "MPC_XY_CRUISE": 5.0,
     "MPC_XY_VEL_MAX": 12.0, "MPC_Z_VEL_MAX_UP": 3.0, "MPC_Z_VEL_MAX_DN": 1.5, "MPC_ACC_HOR": 3.0,
     "COM_HOME_EN": 1.0,
+    # geofence (src/modules/navigator/geofence_params.c): GF_ACTION 2 "Hold mode"; distances 0 = disabled
+    "GF_ACTION": 2.0, "GF_MAX_HOR_DIST": 0.0, "GF_MAX_VER_DIST": 0.0,
 }
+#: PX4 parameters of type INT32: sent and accepted bytewise in PARAM_VALUE/PARAM_SET's float field
+#: (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE); a PARAM_SET typed otherwise is refused without an answer
+#: ("param types mismatch", src/modules/mavlink/mavlink_parameters.cpp)
+PX4_INT_PARAMS = {"GF_ACTION", "MAV_SYS_ID", "COM_HOME_EN"}
 #: parameters whose change alters the leg being flown (the firmware reads them every control cycle)
 SPEED_PARAMS = {"WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_ACCEL", "MPC_XY_CRUISE", "MPC_XY_VEL_MAX",
                 "MPC_Z_VEL_MAX_UP", "MPC_ACC_HOR"}

@@ -28,10 +28,26 @@ class _Transfer:
     items: list = field(default_factory=list)
     deadline: float = 0.0
     retries: int = 0
+    mission_type: int = 0
+
+
+#: the fence items a vehicle accepts (common.xml MAV_CMD_NAV_FENCE_*; ArduPilot MissionItemProtocol_Fence.cpp
+#: convert_MISSION_ITEM_INT_to_AC_PolyFenceItem) and the rally point item (MAV_CMD_NAV_RALLY_POINT)
+_FENCE_COMMANDS = {M.MAV_CMD_NAV_FENCE_RETURN_POINT, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                   M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+                   M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION}
+_TYPED = {M.MAV_MISSION_TYPE_FENCE: ("fence_items", _FENCE_COMMANDS),
+          M.MAV_MISSION_TYPE_RALLY: ("rally_items", {M.MAV_CMD_NAV_RALLY_POINT})}
 
 
 class MissionMixin:
-    """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator` (state lives there)."""
+    """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator` (state lives there).
+
+    Besides the mission it keeps the fence (``fence_items``, MAV_MISSION_TYPE_FENCE) and the rally points
+    (``rally_items``, MAV_MISSION_TYPE_RALLY), each uploaded and downloaded with the same protocol and its own
+    ``mission_type`` (mavlink.io mission protocol, "Mission Types"). Like ArduPilot (MissionItemProtocol_Fence
+    ``get_item_as_mission_item``) a fence item is stored with only its command, ``param1`` (vertex count or radius)
+    and ``x``/``y``, and read back with ``z`` 0; a rally point keeps its altitude."""
 
     def _mission_nav_items(self) -> list[int]:
         first = 0 if self.px4 else 1
@@ -51,7 +67,19 @@ class MissionMixin:
 
     def _on_mission_count(self, link: _Link, msg: Any) -> None:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        if getattr(msg, "mission_type", 0) != M.MAV_MISSION_TYPE_MISSION:
+        mtype = getattr(msg, "mission_type", 0)
+        if mtype in _TYPED:
+            if msg.count == 0:
+                setattr(self, _TYPED[mtype][0], [])
+                self._transfer = None
+                self._mission_ack(link, *src, M.MAV_MISSION_ACCEPTED, mtype)
+            elif msg.count > 700:
+                self._mission_ack(link, *src, M.MAV_MISSION_NO_SPACE, mtype)
+            else:
+                self._transfer = _Transfer(link, src[0], src[1], msg.count, mission_type=mtype)
+                self._request_next()
+            return
+        if mtype != M.MAV_MISSION_TYPE_MISSION:
             self._mission_ack(link, *src, M.MAV_MISSION_UNSUPPORTED, msg.mission_type)
             return
         if msg.count == 0:
@@ -73,7 +101,7 @@ class MissionMixin:
         # MissionItemProtocol.cpp, as the trace shows); PX4 asks with MISSION_REQUEST_INT
         as_int = self.mission_int if self.mission_int is not None else self.px4
         request = self._enc.mission_request_int_encode if as_int else self._enc.mission_request_encode
-        self._send(request(tr.sysid, tr.compid, seq, 0), tr.link)
+        self._send(request(tr.sysid, tr.compid, seq, tr.mission_type), tr.link)
 
     def _check_item(self, msg: Any) -> int:
         if msg.command not in _MISSION_COMMANDS:
@@ -89,7 +117,10 @@ class MissionMixin:
         tr = self._transfer
         if tr is None or link is not tr.link:
             return
-        if getattr(msg, "mission_type", 0) != M.MAV_MISSION_TYPE_MISSION:
+        if getattr(msg, "mission_type", 0) != tr.mission_type:
+            return
+        if tr.mission_type in _TYPED:
+            self._store_typed(link, msg, is_int)
             return
         expected = len(tr.items)
         if msg.seq != expected:
@@ -127,6 +158,32 @@ class MissionMixin:
         else:
             self._request_next()
 
+    def _store_typed(self, link: _Link, msg: Any, is_int: bool) -> None:
+        """A fence or rally item of the transfer in progress (see the class docstring)."""
+        tr = self._transfer
+        attr, commands = _TYPED[tr.mission_type]
+        if msg.seq != len(tr.items):
+            if msg.seq > len(tr.items):
+                self._request_next()
+            return
+        if msg.command not in commands or msg.frame not in _GLOBAL_FRAMES:
+            self._transfer = None
+            res = M.MAV_MISSION_UNSUPPORTED if msg.command not in commands else M.MAV_MISSION_UNSUPPORTED_FRAME
+            self._mission_ack(link, tr.sysid, tr.compid, res, tr.mission_type)
+            return
+        k = 1.0 if is_int else 1e7
+        fence = tr.mission_type == M.MAV_MISSION_TYPE_FENCE
+        tr.items.append(self._enc.mission_item_int_encode(
+            0, 0, msg.seq, M.MAV_FRAME_GLOBAL if fence else msg.frame, msg.command, 0, 1, msg.param1,
+            0.0 if fence else msg.param2, 0.0 if fence else msg.param3, 0.0 if fence else msg.param4,
+            int(round(msg.x * k)), int(round(msg.y * k)), 0.0 if fence else msg.z, tr.mission_type))
+        if len(tr.items) == tr.count:
+            setattr(self, attr, tr.items)
+            self._transfer = None
+            self._mission_ack(link, tr.sysid, tr.compid, M.MAV_MISSION_ACCEPTED, tr.mission_type)
+        else:
+            self._request_next()
+
     def _on_mission_item_int(self, link: _Link, msg: Any) -> None:
         self._store_item(link, msg, True)
 
@@ -139,7 +196,12 @@ class MissionMixin:
         return list(self.mission)
 
     def _on_mission_request_list(self, link: _Link, msg: Any) -> None:
-        if getattr(msg, "mission_type", 0) != M.MAV_MISSION_TYPE_MISSION:
+        mtype = getattr(msg, "mission_type", 0)
+        if mtype in _TYPED:
+            self._send(self._enc.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(),
+                                                      len(getattr(self, _TYPED[mtype][0])), mtype), link)
+            return
+        if mtype != M.MAV_MISSION_TYPE_MISSION:
             self._send(self._enc.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0,
                                                       msg.mission_type), link)
             return
@@ -147,32 +209,43 @@ class MissionMixin:
                                                   len(self._download_items()), 0), link)
 
     def _send_item(self, link: _Link, msg: Any, as_int: bool) -> None:
-        items = self._download_items()
+        mtype = getattr(msg, "mission_type", 0)
+        items = list(getattr(self, _TYPED[mtype][0])) if mtype in _TYPED else self._download_items()
         if not 0 <= msg.seq < len(items):
-            self._mission_ack(link, msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_INVALID_SEQUENCE)
+            self._mission_ack(link, msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_INVALID_SEQUENCE,
+                              mtype)
             return
         it = items[msg.seq]
-        cur = 1 if msg.seq == self.mission_seq else 0
+        cur = 1 if msg.seq == self.mission_seq and mtype == 0 else 0
         if as_int:
             out = self._enc.mission_item_int_encode(msg.get_srcSystem(), msg.get_srcComponent(), msg.seq, it.frame,
                                                     it.command, cur, it.autocontinue, it.param1, it.param2, it.param3,
-                                                    it.param4, it.x, it.y, it.z, 0)
+                                                    it.param4, it.x, it.y, it.z, mtype)
         else:
             k = 1e-7 if it.frame in _GLOBAL_FRAMES else 1.0
             out = self._enc.mission_item_encode(msg.get_srcSystem(), msg.get_srcComponent(), msg.seq, it.frame,
                                                 it.command, cur, it.autocontinue, it.param1, it.param2, it.param3,
-                                                it.param4, it.x * k, it.y * k, it.z, 0)
+                                                it.param4, it.x * k, it.y * k, it.z, mtype)
         self._send(out, link)
 
     def _on_mission_request_int(self, link: _Link, msg: Any) -> None:
-        if getattr(msg, "mission_type", 0) == M.MAV_MISSION_TYPE_MISSION:
+        mtype = getattr(msg, "mission_type", 0)
+        if mtype == M.MAV_MISSION_TYPE_MISSION or mtype in _TYPED:
             self._send_item(link, msg, self.mission_int is not False)  # older firmware answers with MISSION_ITEM
 
     def _on_mission_request(self, link: _Link, msg: Any) -> None:
-        if getattr(msg, "mission_type", 0) == M.MAV_MISSION_TYPE_MISSION:
+        mtype = getattr(msg, "mission_type", 0)
+        if mtype == M.MAV_MISSION_TYPE_MISSION or mtype in _TYPED:
             self._send_item(link, msg, False)
 
     def _on_mission_clear_all(self, link: _Link, msg: Any) -> None:
+        mtype = getattr(msg, "mission_type", 0)
+        if mtype in _TYPED or mtype == M.MAV_MISSION_TYPE_ALL:
+            for attr, _ in ([_TYPED[mtype]] if mtype in _TYPED else _TYPED.values()):
+                setattr(self, attr, [])
+            if mtype in _TYPED:
+                self._mission_ack(link, msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_ACCEPTED, mtype)
+                return
         self.mission = []
         self.mission_seq = 0
         self.mission_state = "idle"

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -13,7 +14,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from aerodaas.emulators.mavlink.link import _Link
 
-from aerodaas.emulators.mavlink.flavour import SPEED_PARAMS
+from aerodaas.emulators.mavlink.flavour import PX4_INT_PARAMS, SPEED_PARAMS
 
 M = mavlink
 
@@ -35,6 +36,10 @@ class ParamMixin:
 
     def _param_msg(self, name: str) -> Any:
         names = list(self.params)
+        if self.px4 and name in PX4_INT_PARAMS:  # bytewise INT32, as PX4 sends its integers
+            value = struct.unpack("<f", struct.pack("<i", int(self.params[name])))[0]
+            return self._enc.param_value_encode(name.encode(), value, M.MAV_PARAM_TYPE_INT32, len(names),
+                                                names.index(name))
         return self._enc.param_value_encode(name.encode(), float(self.params[name]), M.MAV_PARAM_TYPE_REAL32,
                                             len(names), names.index(name))
 
@@ -56,6 +61,13 @@ class ParamMixin:
         name = name.rstrip("\x00")
         # the parameter protocol: an unknown name gets no answer; a known one is stored and its new value
         # broadcast as PARAM_VALUE (REAL32, the firmware's units) - both firmware do so (trace)
-        if name in self.params and math.isfinite(msg.param_value):
-            self._store_param(name, float(msg.param_value))
+        if name not in self.params:
+            return
+        value = float(msg.param_value)
+        if self.px4 and (name in PX4_INT_PARAMS) != (msg.param_type == M.MAV_PARAM_TYPE_INT32):
+            return  # PX4: "param types mismatch", nothing set, no PARAM_VALUE
+        if self.px4 and name in PX4_INT_PARAMS:
+            value = float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+        if math.isfinite(value):
+            self._store_param(name, value)
             self._send(self._param_msg(name))

@@ -201,6 +201,8 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.posvel: tuple | None = None  # active position + velocity feed-forward target (ENU m, m/s)
         self.takeoff_alt: float | None = None
         self.mission: list[Any] = []  # MISSION_ITEM_INT-like messages, wire sequence
+        self.fence_items: list[Any] = []  # MAV_MISSION_TYPE_FENCE items (mission.py), as MISSION_ITEM_INT
+        self.rally_items: list[Any] = []  # MAV_MISSION_TYPE_RALLY items
         self.mission_seq = 0
         self.mission_state = "idle"  # idle / wait_start / running / holding / done
         self.item_reached_at: float | None = None

@@ -1,0 +1,334 @@
+"""The autopilot's own geofence and rally points: the robot's ``safety.geofence`` uploaded to the vehicle over the
+mission protocol with ``mission_type = MAV_MISSION_TYPE_FENCE`` (rally points: ``MAV_MISSION_TYPE_RALLY``), the
+fence parameters set, and everything read back and compared before the robot may fly.
+
+Our :class:`~aerodaas.navigation.safety.SafetyGate` is the first line: it refuses a command that would leave the
+fence before it reaches the vehicle. The autopilot's fence is the second: the firmware checks its own position
+against it every control cycle and takes its fence action on a breach, also when our process is gone.
+
+Protocol (mavlink.io "Mission Protocol", mission types; common.xml ``MAV_CMD_NAV_FENCE_*``):
+
+* a polygon of N vertices is N items ``MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION`` (5001) / ``_EXCLUSION`` (5002),
+  each with ``param1`` = N and the vertex in ``x``/``y`` (degrees x 1e7), in order;
+* a circle is one item ``MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION`` (5003) / ``_EXCLUSION`` (5004), ``param1`` = radius m;
+* a rally point is ``MAV_CMD_NAV_RALLY_POINT`` (5100) in MAV_FRAME_GLOBAL_RELATIVE_ALT (``z`` metres above home).
+
+ArduPilot stores them as ``AC_PolyFenceItem`` (``libraries/GCS_MAVLink/MissionItemProtocol_Fence.cpp``
+``convert_MISSION_ITEM_INT_to_AC_PolyFenceItem``: frames GLOBAL / GLOBAL_INT / GLOBAL_RELATIVE_ALT(_INT) /
+TERRAIN; ``get_item_as_mission_item`` returns ``param1`` = vertex count or radius, the same ``x``/``y`` and
+``z`` = 0), so the read-back compares command, ``x``, ``y`` and ``param1``. PX4 keeps them in its dataman
+(``src/modules/mavlink/mavlink_mission.cpp``; ``param1`` vertex count / radius, ``param2`` inclusion group).
+
+Parameters (firmware units):
+
+* ArduPilot (``libraries/AC_Fence/AC_Fence.h`` / ``AC_Fence.cpp``): ``FENCE_ENABLE`` 0/1; ``FENCE_TYPE`` bitmask
+  1 = max altitude, 2 = circle around home (``FENCE_RADIUS`` m), 4 = polygon (the uploaded inclusion/exclusion
+  polygons *and* circles), 8 = min altitude; ``FENCE_ALT_MAX`` metres above home; ``FENCE_ACTION`` 0 report only,
+  1 RTL or land, 2 always land, 3 SmartRTL or RTL or land, 4 brake or land, 5 SmartRTL or land.
+* PX4 (``src/modules/navigator/geofence_params.c``): ``GF_ACTION`` (INT32) 0 none, 1 warning, 2 hold mode,
+  3 return mode, 4 terminate, 5 land mode; ``GF_MAX_VER_DIST`` / ``GF_MAX_HOR_DIST`` metres from home
+  (0 disables). PX4 refuses a PARAM_SET whose type differs from the parameter's ("param types mismatch",
+  ``src/modules/mavlink/mavlink_parameters.cpp``): INT32 parameters go bytewise in the float field
+  (:meth:`~aerodaas.backends.mavlink.params.ParamMixin.set_parameter` ``integer=True``).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+from aerodaas.backends.base import BackendError, CommandRefused
+from aerodaas.backends.mavlink._common import M, _enum_name, _f32
+from aerodaas.navigation.geofence import GeofenceConfig
+
+FENCE = M.MAV_MISSION_TYPE_FENCE  # 1
+RALLY = M.MAV_MISSION_TYPE_RALLY  # 2
+_TYPE_NAME = {FENCE: "fence", RALLY: "rally points", M.MAV_MISSION_TYPE_MISSION: "mission"}
+
+#: ArduPilot FENCE_TYPE bits (AC_Fence.h AC_FENCE_TYPE_*)
+AP_FENCE_ALT_MAX, AP_FENCE_CIRCLE, AP_FENCE_POLYGON = 1, 2, 4
+#: our ``mavlink.fence.action`` -> (ArduPilot FENCE_ACTION, PX4 GF_ACTION)
+FENCE_ACTIONS = {"report": (0, 1), "rtl": (1, 3), "land": (2, 5), "hold": (4, 2)}
+
+#: the fence parameters of integer type (PX4 takes GF_ACTION only as INT32; ArduPilot converts REAL32 itself)
+_INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
+#: one item on the wire: (frame, command, param1..4, x int, y int, z)
+Wire = tuple
+
+
+def fence_items(fence: GeofenceConfig) -> list[Wire]:
+    """The fence items for ``fence``: each polygon as its vertices (5001/5002, ``param1`` = vertex count), then
+    each circle (5003/5004, ``param1`` = radius m, float32); latitude/longitude as int degrees x 1e7,
+    MAV_FRAME_GLOBAL, ``z`` 0 (fences are 2-D; the altitude fence is a parameter)."""
+    out: list[Wire] = []
+    for poly in fence.polygons:
+        cmd = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION if poly.inclusion else \
+            M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+        for lat, lon in poly.points:
+            out.append((M.MAV_FRAME_GLOBAL, cmd, float(len(poly.points)), 0.0, 0.0, 0.0,
+                        int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0))
+    for c in fence.circles:
+        cmd = M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION if c.inclusion else M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+        out.append((M.MAV_FRAME_GLOBAL, cmd, _f32(c.radius), 0.0, 0.0, 0.0,
+                    int(round(c.center[0] * 1e7)), int(round(c.center[1] * 1e7)), 0.0))
+    return out
+
+
+def rally_items(points: Iterable[tuple[float, float, float]]) -> list[Wire]:
+    """Rally points ``(latitude, longitude, altitude m above home)`` as MAV_CMD_NAV_RALLY_POINT items
+    (MAV_FRAME_GLOBAL_RELATIVE_ALT, as QGroundControl's ``rallyPoints`` mean them)."""
+    return [(M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_CMD_NAV_RALLY_POINT, 0.0, 0.0, 0.0, 0.0,
+             int(round(lat * 1e7)), int(round(lon * 1e7)), _f32(alt)) for lat, lon, alt in points]
+
+
+def fence_from_items(wire: list[Wire]) -> GeofenceConfig:
+    """The :class:`GeofenceConfig` a vehicle's fence items describe (the inverse of :func:`fence_items`): runs of
+    ``param1`` consecutive vertex items of one command make a polygon, each circle item a circle; a return point
+    (5000) is skipped. Raises ValueError for a polygon whose vertex count does not match its run."""
+    polygons, circles, k = [], [], 0
+    poly_cmds = (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
+    while k < len(wire):
+        cmd, p1 = wire[k][1], wire[k][2] or 0.0
+        if cmd in poly_cmds:
+            n = int(round(p1))
+            run = wire[k:k + n]
+            if n < 3 or len(run) < n or any(w[1] != cmd for w in run):
+                raise ValueError(f"fence item {k}: a polygon of {n} vertices, but the items that follow do not hold them")
+            polygons.append({"points": [(w[6] / 1e7, w[7] / 1e7) for w in run],
+                             "inclusion": cmd == M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION})
+            k += n
+            continue
+        if cmd in (M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION):
+            circles.append({"center": (wire[k][6] / 1e7, wire[k][7] / 1e7), "radius": float(p1),
+                            "inclusion": cmd == M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION})
+        k += 1
+    return GeofenceConfig.model_validate({"polygons": polygons, "circles": circles}, strict=False)
+
+
+def compare_items(sent: list[Wire], got: list[Wire], compare_z: bool) -> str | None:
+    """Why the items read back differ from those sent (None: they match): count, then per item command, ``x``,
+    ``y`` (exact ints), ``param1`` (float32 tolerance) and, with ``compare_z``, ``z`` (ArduPilot returns fence
+    items with ``z`` 0 and its own frame, so neither is compared for fences)."""
+    if len(sent) != len(got):
+        return f"{len(got)} items read back, {len(sent)} sent"
+    for k, (a, b) in enumerate(zip(sent, got)):
+        if a[1] != b[1]:
+            return f"item {k}: command {b[1]} read back, {a[1]} sent"
+        if (a[6], a[7]) != (b[6], b[7]):
+            return f"item {k}: position ({b[6] / 1e7:.7f}, {b[7] / 1e7:.7f}) read back, " \
+                   f"({a[6] / 1e7:.7f}, {a[7] / 1e7:.7f}) sent"
+        if not math.isclose(a[2] or 0.0, b[2] or 0.0, rel_tol=1e-6, abs_tol=1e-3):
+            return f"item {k}: param1 {b[2]:g} read back, {a[2]:g} sent"
+        if compare_z and not math.isclose(a[8] or 0.0, b[8] or 0.0, rel_tol=1e-6, abs_tol=1e-2):
+            return f"item {k}: z {b[8]:g} read back, {a[8]:g} sent"
+    return None
+
+
+class FenceMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the vehicle's fence and rally points.
+
+    State: ``_fence_saved`` (the vehicle's fence items and fence parameters before :meth:`apply_fence` changed
+    them, for :meth:`restore_fence`), ``fence_applied`` (what :meth:`apply_fence` verified, or None)."""
+
+    # ------------------------------------------------------------------ typed transfers
+    def _require_mavlink2(self, what: str, mission_type: int) -> None:
+        """``mission_type`` is a MAVLink 2 extension field: framed as MAVLink 1 it is dropped and the vehicle takes
+        a fence for its mission (and overwrites the mission). Raises BackendError on a MAVLink 1 link."""
+        if mission_type != M.MAV_MISSION_TYPE_MISSION and \
+                getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0") != "2.0":
+            raise BackendError(f"robot {self.robot_id!r}: {what}: the link speaks MAVLink 1, which cannot carry "
+                               f"mission_type; the vehicle must send MAVLink 2 (ArduPilot SERIALn_PROTOCOL 2)")
+
+    def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
+        """Upload ``wire`` as the vehicle's items of ``mission_type`` (MISSION_COUNT, each MISSION_REQUEST(_INT)
+        answered with MISSION_ITEM_INT, until MISSION_ACK; all carrying ``mission_type``). An empty list clears
+        them. Raises CommandRefused (MAV_MISSION_RESULT name), BackendError after ``command_retries`` timeouts,
+        LinkLost."""
+        what = f"{_TYPE_NAME.get(mission_type, mission_type)} upload"
+        self._check_link(what)
+        self._require_mavlink2(what, mission_type)
+        n = len(wire)
+
+        def send_item(seq: int) -> None:
+            frame, cmd, p1, p2, p3, p4, xi, yi, z = wire[seq]
+            self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, 1,
+                                                             p1, p2, p3, p4, xi, yi, z, mission_type))
+
+        def resend(last: Any) -> None:
+            if last is None:
+                self._send(lambda mav: mav.mission_count_send(self._sysid, self._compid, n, mission_type))
+            else:
+                send_item(last)
+
+        def on_msg(msg: Any, state: dict) -> bool:
+            t = msg.get_type()
+            if getattr(msg, "mission_type", 0) != mission_type:
+                return False
+            if t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+                if 0 <= msg.seq < n:
+                    state["last"] = msg.seq
+                    state["max"] = max(state["max"], msg.seq)
+                    send_item(msg.seq)
+                return False
+            if t == "MISSION_ACK":
+                if msg.type == M.MAV_MISSION_INVALID_SEQUENCE and state["max"] < n - 1:
+                    return False  # ArduPilot: an answer to a request it had already repeated (see mission.py)
+                if msg.type != M.MAV_MISSION_ACCEPTED:
+                    raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
+                                         self._status_text_since(state["start"]))
+                return state["max"] == n - 1 or n == 0
+            return False
+
+        self._transaction(what, lambda: resend(None), resend, on_msg)
+
+    def download_items(self, mission_type: int) -> list[Wire]:
+        """The vehicle's items of ``mission_type`` (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT per
+        item, MISSION_ACK), as wire tuples ``(frame, command, param1..4, x, y, z)``. Raises CommandRefused,
+        BackendError, LinkLost."""
+        what = f"{_TYPE_NAME.get(mission_type, mission_type)} download"
+        self._check_link(what)
+        self._require_mavlink2(what, mission_type)
+        got: dict[int, Any] = {}
+
+        def begin() -> None:
+            self._send(lambda mav: mav.mission_request_list_send(self._sysid, self._compid, mission_type))
+
+        def request(seq: int) -> None:
+            self._send(lambda mav: mav.mission_request_int_send(self._sysid, self._compid, seq, mission_type))
+
+        def resend(last: Any) -> None:
+            begin() if last is None else request(last)
+
+        def on_msg(msg: Any, state: dict) -> bool:
+            t = msg.get_type()
+            if getattr(msg, "mission_type", 0) != mission_type:
+                return False
+            if t == "MISSION_COUNT" and "count" not in state:
+                state["count"] = msg.count
+                if msg.count == 0:
+                    return True
+                state["last"] = 0
+                request(0)
+            elif t in ("MISSION_ITEM_INT", "MISSION_ITEM") and "count" in state and msg.seq == state["last"]:
+                got[msg.seq] = msg
+                if msg.seq + 1 >= state["count"]:
+                    return True
+                state["last"] = msg.seq + 1
+                request(msg.seq + 1)
+            elif t == "MISSION_ACK" and msg.type != M.MAV_MISSION_ACCEPTED:
+                raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
+                                     self._status_text_since(state["start"]))
+            return False
+
+        self._transaction(what, begin, resend, on_msg)
+        self._send(lambda mav: mav.mission_ack_send(self._sysid, self._compid, M.MAV_MISSION_ACCEPTED, mission_type))
+        out = []
+        for seq in sorted(got):
+            m = got[seq]
+            x, y = (m.x, m.y) if m.get_type() == "MISSION_ITEM_INT" else (round(m.x * 1e7), round(m.y * 1e7))
+            out.append((m.frame, m.command, _f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4),
+                        int(x), int(y), _f32(m.z)))
+        return out
+
+    # ------------------------------------------------------------------ fence
+    def fence_parameters(self, fence: GeofenceConfig) -> dict[str, tuple[float, bool]]:
+        """The fence parameters for ``fence`` and ``mavlink.fence`` on this autopilot: name -> (value in the
+        firmware's unit, INT32 on PX4). See the module docstring for their meaning."""
+        fc = self.cfg.fence
+        max_alt = float(self.safety.max_altitude or self.limits.max_altitude)
+        ap_action, px4_action = FENCE_ACTIONS[fc.action]
+        if self.autopilot == "ardupilot":
+            bits = (AP_FENCE_POLYGON if not fence.is_empty else 0) | (AP_FENCE_ALT_MAX if fc.max_altitude else 0) \
+                | (AP_FENCE_CIRCLE if fc.home_radius_m else 0)
+            out = {"FENCE_TYPE": (float(bits), True), "FENCE_ACTION": (float(ap_action), True)}
+            if fc.max_altitude:
+                out["FENCE_ALT_MAX"] = (max_alt, False)
+            if fc.home_radius_m:
+                out["FENCE_RADIUS"] = (float(fc.home_radius_m), False)
+            out["FENCE_ENABLE"] = (1.0, True)  # last: the fence is complete when it is switched on
+            return out
+        out = {"GF_ACTION": (float(px4_action), True)}
+        if fc.max_altitude:
+            out["GF_MAX_VER_DIST"] = (max_alt, False)
+        if fc.home_radius_m:
+            out["GF_MAX_HOR_DIST"] = (float(fc.home_radius_m), False)
+        return out
+
+    def apply_fence(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
+        """Make ``fence`` (default: the robot's ``safety.geofence``) the vehicle's own fence: keep the vehicle's
+        current fence items and parameters (for :meth:`restore_fence`), upload the items
+        (``MAV_MISSION_TYPE_FENCE``), set the parameters (:meth:`fence_parameters`), then read both back
+        (MISSION_REQUEST_LIST of the fence type, PARAM_REQUEST_READ) and compare. Returns ``{"items": n,
+        "params": {name: value read back}}`` and records a ``fence_uploaded`` event. Raises BackendError naming
+        what differs ("refusing to fly"), CommandRefused when the vehicle rejects an item or lacks a fence
+        parameter (a firmware built without fences), LinkLost."""
+        fence = self.safety.geofence if fence is None else fence
+        wire = fence_items(fence)
+        want = self.fence_parameters(fence)
+        where = f"robot {self.robot_id!r}: autopilot geofence"
+        have = self.read_parameters(list(want))
+        missing = sorted(set(want) - set(have))
+        if missing:
+            raise BackendError(f"{where}: the {self.autopilot} vehicle has no parameter {', '.join(missing)} "
+                               f"(firmware without a geofence?); refusing to fly (set mavlink.fence.upload false "
+                               f"to fly on our gate alone)")
+        if not self._fence_saved:
+            try:
+                before = self.download_items(FENCE)
+            except (BackendError, CommandRefused) as e:
+                before = None
+                self._event("fence_download_failed", error=str(e))
+            self._fence_saved = {"items": before, "params": dict(have)}
+        self.upload_items(FENCE, wire)
+        for name, (value, integer) in want.items():
+            if not math.isclose(have[name], value, rel_tol=1e-6, abs_tol=1e-4):
+                self.set_parameter(name, value, integer=integer)
+        got_items = self.download_items(FENCE)
+        why = compare_items(wire, got_items, compare_z=False)
+        if why is not None:
+            raise BackendError(f"{where}: the fence read back differs from the one uploaded ({why}); refusing to fly")
+        got = self.read_parameters(list(want))
+        for name, (value, _int) in want.items():
+            if name not in got:
+                raise BackendError(f"{where}: {name} could not be read back; refusing to fly")
+            if not math.isclose(got[name], value, rel_tol=1e-5, abs_tol=1e-3):
+                raise BackendError(f"{where}: {name} set to {value:g}, the vehicle reports {got[name]:g}; "
+                                   f"refusing to fly")
+        self.fence_applied = {"items": len(wire), "params": got}
+        self._event("fence_uploaded", items=len(wire), polygons=len(fence.polygons), circles=len(fence.circles),
+                    action=self.cfg.fence.action, **{k: round(v, 3) for k, v in got.items()})
+        return self.fence_applied
+
+    def upload_rally(self, points: list[tuple[float, float, float]]) -> int:
+        """Upload rally points ``(lat, lon, alt m above home)`` (``MAV_MISSION_TYPE_RALLY``) and read them back.
+        Returns how many. Raises BackendError on a mismatch, CommandRefused, LinkLost."""
+        wire = rally_items(points)
+        self.upload_items(RALLY, wire)
+        why = compare_items(wire, self.download_items(RALLY), compare_z=True)
+        if why is not None:
+            raise BackendError(f"robot {self.robot_id!r}: rally points read back differ from those uploaded ({why})")
+        self._event("rally_uploaded", items=len(wire))
+        return len(wire)
+
+    def restore_fence(self) -> bool:
+        """Put back the fence items and fence parameters the vehicle had before :meth:`apply_fence` (best
+        effort, ``fence_restored`` / ``fence_restore_failed`` events). Returns True when all was put back."""
+        saved = self._fence_saved
+        if not saved:
+            return True
+        ok = True
+        try:
+            if saved["items"] is not None:
+                self.upload_items(FENCE, saved["items"])
+            for name, value in saved["params"].items():
+                self.set_parameter(name, value, integer=name in _INT_PARAMS)
+        except Exception as e:  # noqa: BLE001 - closing: report and go on
+            ok = False
+            self._event("fence_restore_failed", error=str(e))
+        if ok:
+            self._fence_saved = None
+            self._event("fence_restored", items=len(saved["items"] or []), **saved["params"])
+        return ok
+
+    def _init_fence(self) -> None:
+        self._fence_saved: dict[str, Any] | None = None
+        self.fence_applied: dict[str, Any] | None = None

@@ -1,0 +1,222 @@
+"""The autopilot's own geofence (issue 26 item 2) against the emulated ArduPilot and PX4 vehicles: the robot's
+``safety.geofence`` goes up as MAV_MISSION_TYPE_FENCE items with the fence parameters on connect, is read back and
+checked (a mismatch refuses to fly), is restored on close when asked, and ``aerodaas mission upload`` sends a
+``.plan``'s fence and rally points. What the vehicle holds is read from the emulator's own state (its stored
+items and parameters), not through the backend's download."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from aerodaas.backends import BackendError, make_backend
+from aerodaas.cli import main
+from aerodaas.config import MavlinkConfig, RobotConfig
+from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.app.models import GeoPoint
+
+from .conftest import DATA_DIR
+
+HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)
+SQUARE = DATA_DIR / "missions" / "qgc_test_simple_square.plan"
+
+
+def _ll(e: float, n: float) -> tuple[float, float]:
+    g = enu_to_geodetic(e, n, 0.0, HOME)
+    return (g.lat, g.lon)
+
+
+#: an inclusion square of 60 m around home, an exclusion circle of 4 m at (10, 10), an inclusion circle of 40 m
+FENCE = {"polygons": [{"points": [_ll(-30, -30), _ll(30, -30), _ll(30, 30), _ll(-30, 30)], "inclusion": True}],
+         "circles": [{"center": _ll(10, 10), "radius": 4.5, "inclusion": False},
+                     {"center": _ll(0, 0), "radius": 40.0, "inclusion": True}]}
+#: the fence items the vehicle must hold: (command, param1, lat e7, lon e7)
+WANT = ([(5001, 4.0, round(a * 1e7), round(b * 1e7)) for a, b in FENCE["polygons"][0]["points"]]
+        + [(5004, 4.5, round(FENCE["circles"][0]["center"][0] * 1e7), round(FENCE["circles"][0]["center"][1] * 1e7)),
+           (5003, 40.0, round(HOME.lat * 1e7), round(HOME.lon * 1e7))])
+
+
+@pytest.fixture
+def vehicle():
+    made: list = []
+
+    def make(autopilot: str, fence: dict | None = FENCE, mavlink: dict | None = None, **safety):
+        emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, gps_lock_s=1.0, home=HOME)
+        made.append(emu)
+        address = emu.start("tcp:127.0.0.1:0")
+        cfg = RobotConfig(id="quad", backend="mavlink", home=HOME,
+                          safety={"geofence": fence or {}, **safety},
+                          mavlink=MavlinkConfig(connection=address, stream_rate_hz=5.0, **(mavlink or {})))
+        b = make_backend(cfg)
+        made.append(b)
+        return emu, b, address
+
+    yield make
+    for obj in reversed(made):
+        obj.close() if hasattr(obj, "robot_id") else obj.stop()
+
+
+def _held(emu) -> list[tuple]:
+    with emu._lock:
+        return [(it.command, round(it.param1, 3), it.x, it.y) for it in emu.fence_items]
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_the_robot_geofence_becomes_the_vehicle_fence_on_connect(vehicle, autopilot):
+    emu, b, _ = vehicle(autopilot, max_altitude=35.0, mavlink={"fence": {"action": "land"}})
+    b.connect(timeout_s=10)
+    assert _held(emu) == WANT
+    p = emu.params
+    if autopilot == "ardupilot":  # FENCE_TYPE: polygon (4, the uploaded zones) + max altitude (1)
+        assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ALT_MAX"], p["FENCE_ACTION"]) == (1, 5, 35, 2)
+    else:  # GF_ACTION 5: land; GF_MAX_VER_DIST the altitude limit; no home circle asked: GF_MAX_HOR_DIST untouched
+        assert (p["GF_ACTION"], p["GF_MAX_VER_DIST"], p["GF_MAX_HOR_DIST"]) == (5, 35, 0)
+    ev = [e for e in b.drain_events() if e["event"] == "fence_uploaded"]
+    assert len(ev) == 1 and ev[0]["items"] == len(WANT) and ev[0]["action"] == "land", ev
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_home_radius_and_hold_action(vehicle, autopilot):
+    emu, b, _ = vehicle(autopilot, mavlink={"fence": {"action": "hold", "home_radius_m": 80, "max_altitude": False}})
+    b.connect(timeout_s=10)
+    p = emu.params
+    if autopilot == "ardupilot":  # polygon (4) + circle around home (2), BRAKE or land (4)
+        assert (p["FENCE_TYPE"], p["FENCE_RADIUS"], p["FENCE_ACTION"], p["FENCE_ALT_MAX"]) == (6, 80, 4, 100)
+    else:
+        assert (p["GF_ACTION"], p["GF_MAX_HOR_DIST"], p["GF_MAX_VER_DIST"]) == (2, 80, 0)
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_a_fence_read_back_different_refuses_to_fly(vehicle, autopilot):
+    emu, b, _ = vehicle(autopilot)
+    store = emu._store_typed
+
+    def corrupt(link, msg, is_int):  # the vehicle keeps the last vertex 1e-7 degrees off
+        store(link, msg, is_int)
+        if emu.fence_items and len(emu.fence_items) == len(WANT):
+            emu.fence_items[3].x += 1
+
+    emu._store_typed = corrupt
+    with pytest.raises(BackendError, match=r"fence read back differs.*item 3: position.*refusing to fly"):
+        b.connect(timeout_s=10)
+
+
+def test_a_parameter_the_vehicle_clamps_refuses_to_fly(vehicle):
+    emu, b, _ = vehicle("ardupilot", max_altitude=35.0)
+    store = emu._store_param
+    emu._store_param = lambda name, value: store(name, min(value, 30.0) if name == "FENCE_ALT_MAX" else value)
+    with pytest.raises(BackendError, match=r"FENCE_ALT_MAX set to 35, the vehicle reports 30; refusing to fly"):
+        b.connect(timeout_s=10)
+
+
+def test_px4_int32_parameter_sent_as_real32_is_refused_by_the_emulator(vehicle):
+    """PX4 refuses a PARAM_SET typed REAL32 for an INT32 parameter ("param types mismatch"): the emulator does
+    too, so the backend's bytewise INT32 GF_ACTION above is what a real PX4 takes."""
+    emu, b, _ = vehicle("px4", fence=None)
+    b.connect(timeout_s=10)
+    with pytest.raises(BackendError, match="no PARAM_VALUE"):
+        b.set_parameter("GF_ACTION", 3.0, wait_s=0.3)
+    assert emu.params["GF_ACTION"] == 2
+    assert b.set_parameter("GF_ACTION", 3.0, integer=True) == 3.0 and emu.params["GF_ACTION"] == 3
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_no_geofence_leaves_the_vehicle_fence_alone(vehicle, autopilot):
+    emu, b, _ = vehicle(autopilot, fence=None)
+    b.connect(timeout_s=10)
+    assert emu.fence_items == []
+    assert emu.params.get("FENCE_ENABLE", 0) == 0 and emu.params.get("GF_ACTION", 2) == 2
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, autopilot):
+    emu, b, address = vehicle(autopilot, mavlink={"fence": {"restore_on_close": True}})
+    # the operator's own fence on the vehicle before our run: one inclusion circle of 100 m
+    prior = make_backend(RobotConfig(id="gcs", backend="mavlink", home=HOME, mavlink=MavlinkConfig(
+        connection=address, stream_rate_hz=5.0, set_speed_limits=False)))
+    prior.connect(timeout_s=10)
+    from aerodaas.backends.mavlink.fence import FENCE as FENCE_TYPE, fence_items
+    from aerodaas.navigation.geofence import GeofenceConfig
+    prior.upload_items(FENCE_TYPE, fence_items(GeofenceConfig(circles=[{"center": _ll(0, 0), "radius": 100.0}])))
+    prior.close()
+    old_items = _held(emu)
+    old = dict(emu.params)
+    b.connect(timeout_s=10)
+    assert _held(emu) == WANT
+    b.close()
+    assert _held(emu) == old_items and len(old_items) == 1
+    names = ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION"] if autopilot == "ardupilot" else \
+        ["GF_ACTION", "GF_MAX_VER_DIST"]
+    assert {n: emu.params[n] for n in names} == {n: old[n] for n in names}
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_mission_upload_sends_the_plan_geofence_and_rally_points(vehicle, tmp_path, autopilot, capsys):
+    """issue 26: a .plan with a 25 m inclusion circle left the vehicle with 0 fence items and FENCE_ENABLE 0."""
+    doc = json.loads(SQUARE.read_text())
+    home = doc["mission"]["plannedHomePosition"]
+    doc["geoFence"] = {"version": 2, "polygons": [
+        {"version": 1, "inclusion": False, "polygon": [list(_ll(5, 5)), list(_ll(8, 5)), list(_ll(8, 8))]}],
+        "circles": [{"version": 1, "inclusion": True, "circle": {"center": home[:2], "radius": 250.0}}]}
+    doc["rallyPoints"] = {"version": 2, "points": [[*_ll(-10, 0), 15.0], [*_ll(0, -12), 20.0]]}
+    plan = tmp_path / "fenced.plan"
+    plan.write_text(json.dumps(doc))
+    emu, _b, address = vehicle(autopilot, fence=None)
+    assert main(["mission", "upload", str(plan), "--connection", address, "--fence-action", "hold"]) == 0, \
+        capsys.readouterr().err
+    held = _held(emu)
+    assert [h[0] for h in held] == [5002, 5002, 5002, 5003] and held[3][1] == 250.0
+    assert held[3][2:] == (round(home[0] * 1e7), round(home[1] * 1e7))
+    with emu._lock:
+        rally = [(it.command, it.frame, it.x, it.y, round(it.z, 2)) for it in emu.rally_items]
+    assert rally == [(5100, 3, round(_ll(-10, 0)[0] * 1e7), round(_ll(-10, 0)[1] * 1e7), 15.0),
+                     (5100, 3, round(_ll(0, -12)[0] * 1e7), round(_ll(0, -12)[1] * 1e7), 20.0)]
+    p = emu.params
+    if autopilot == "ardupilot":
+        assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ACTION"]) == (1, 5, 4)
+    else:
+        assert p["GF_ACTION"] == 2 and p["GF_MAX_VER_DIST"] == 120
+    assert emu.snapshot()["mission_len"] == 5 + (1 if autopilot == "ardupilot" else 0)
+    out = capsys.readouterr().out
+    assert "geofence of" in out and "2 rally point(s)" in out
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_mission_download_keeps_the_vehicle_fence_and_rally_points(vehicle, tmp_path, autopilot, capsys):
+    from aerodaas.missionfile import load_mission
+
+    doc = json.loads(SQUARE.read_text())
+    doc["geoFence"] = {"version": 2, "polygons": [
+        {"version": 1, "inclusion": False, "polygon": [list(_ll(5, 5)), list(_ll(8, 5)), list(_ll(8, 8))]}],
+        "circles": [{"version": 1, "inclusion": True, "circle": {"center": [HOME.lat, HOME.lon], "radius": 250.0}}]}
+    doc["rallyPoints"] = {"version": 2, "points": [[*_ll(-10, 0), 15.0]]}
+    plan = tmp_path / "fenced.plan"
+    plan.write_text(json.dumps(doc))
+    emu, _b, address = vehicle(autopilot, fence=None)
+    assert main(["mission", "upload", str(plan), "--connection", address]) == 0
+    back = tmp_path / "back.plan"
+    assert main(["mission", "download", "--connection", address, "--out", str(back)]) == 0
+    got, want = load_mission(back), load_mission(plan)
+    def zones(f):  # on the vehicle's 1e-7 degree grid
+        return ([(p.inclusion, [(round(a, 7), round(b, 7)) for a, b in p.points]) for p in f.polygons],
+                [(c.inclusion, round(c.center[0], 7), round(c.center[1], 7), c.radius) for c in f.circles])
+
+    assert zones(got.geofence) == zones(want.geofence) and len(got.geofence.polygons) == 1
+    assert [(round(a, 7), round(b, 7), round(z, 2)) for a, b, z in got.rally_points] == \
+        [(round(a, 7), round(b, 7), round(z, 2)) for a, b, z in want.rally_points]
+    wpl = tmp_path / "back.waypoints"
+    assert main(["mission", "download", "--connection", address, "--out", str(wpl)]) == 0
+    assert "cannot be stored in a QGC WPL file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad, field", [({"action": "explode"}, "fence.action"),
+                                        ({"home_radius_m": -3}, "fence.home_radius_m"),
+                                        ({"restore": True}, "fence.restore")])
+def test_bad_fence_settings_are_refused_naming_the_field(bad, field):
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    cfg = {"robots": [{"id": "quad", "backend": "mavlink", "home": {"lat": HOME.lat, "lon": HOME.lon, "alt": HOME.alt},
+                       "mavlink": {"connection": "udpin:0.0.0.0:14550", "fence": bad}}]}
+    with pytest.raises(ConfigError, match=rf"robots\.0\.mavlink\.{field}"):
+        parse_environment_config(cfg)

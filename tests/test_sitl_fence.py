@@ -1,0 +1,207 @@
+"""The autopilot's own geofence on real firmware (issue 26 item 2; marker ``sitl``): what ``aerodaas mission upload``
+and ``aerodaas run`` leave on the vehicle is read back by a separate raw pymavlink client (``tests/sitl_fence.py``),
+and with the driver SIGKILLed mid-mission the firmware's own fence keeps the vehicle in, judged from the firmware's
+telemetry. Default firmware parameters plus what the backend sets; one firmware instance per scenario, each in its
+own loopback-only network namespace (``tests/sitl.py``)."""
+from __future__ import annotations
+
+import json
+import math
+import shlex
+import sys
+from pathlib import Path
+
+import pytest
+
+from . import sitl
+
+_SKIP = sitl.namespace_skip_reason()
+pytestmark = [pytest.mark.sitl, pytest.mark.skipif(_SKIP is not None, reason=_SKIP or "")]
+
+HOME = sitl.FARM_HOME
+#: the kill scenario's inclusion circle around home (m) and altitude fence (m above home)
+RADIUS_M = 20.0
+MAX_ALT_M = 30.0
+
+
+def _ll(e: float, n: float) -> list[float]:
+    from aerodaas.app.models import GeoPoint
+    from aerodaas.navigation.geo import enu_to_geodetic
+
+    g = enu_to_geodetic(e, n, 0.0, GeoPoint(**HOME))
+    return [g.lat, g.lon]
+
+
+def _plan(path: Path) -> Path:
+    """A .plan: take off, two waypoints, land; an inclusion square of 80 m, an exclusion circle of 3 m at (-15, 15),
+    two rally points."""
+    doc = {"fileType": "Plan", "version": 1, "groundStation": "test",
+           "mission": {"version": 2, "firmwareType": 3, "vehicleType": 2, "cruiseSpeed": 5, "hoverSpeed": 1,
+                       "plannedHomePosition": [HOME["lat"], HOME["lon"], HOME["alt"]], "items": [
+                           {"type": "SimpleItem", "doJumpId": k + 1, "command": cmd, "frame": 3, "autoContinue": True,
+                            "params": [0, 0, 0, None, *ll, 2.0], "AMSLAltAboveTerrain": None, "Altitude": 2.0,
+                            "AltitudeMode": 1}
+                           for k, (cmd, ll) in enumerate([(22, _ll(0, 0)), (16, _ll(0, 6)), (16, _ll(6, 6)),
+                                                          (21, _ll(6, 6))])]},
+           "geoFence": {"version": 2, "polygons": [{"version": 1, "inclusion": True, "polygon": [
+               _ll(-40, -40), _ll(40, -40), _ll(40, 40), _ll(-40, 40)]}],
+               "circles": [{"version": 1, "inclusion": False, "circle": {"center": _ll(-15, 15), "radius": 3.0}}]},
+           "rallyPoints": {"version": 2, "points": [[*_ll(-10, 0), 15.0], [*_ll(0, -10), 12.0]]}}
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _want_items() -> list[list]:
+    """The fence items the vehicle must hold after :func:`_plan`'s upload: [command, param1, x, y]."""
+    sq = [_ll(-40, -40), _ll(40, -40), _ll(40, 40), _ll(-40, 40)]
+    c = _ll(-15, 15)
+    return [[5001, 4.0, round(a * 1e7), round(b * 1e7)] for a, b in sq] + \
+        [[5004, 3.0, round(c[0] * 1e7), round(c[1] * 1e7)]]
+
+
+def _upload_session(autopilot: str, workdir: Path) -> dict:
+    workdir.mkdir(parents=True, exist_ok=True)
+    plan = _plan(workdir / "fenced.plan")
+    py = shlex.quote(sys.executable)
+    up = " ".join(shlex.quote(a) for a in [*sitl.AERODAAS, "mission", "upload", str(plan), "--connection",
+                                            sitl.connection(autopilot), "--timeout", "60"])
+    read = f"{py} -m tests.sitl_fence read-fence {sitl.monitor_connection(autopilot)} " \
+           f"{shlex.quote(str(workdir / 'fence.json'))}"
+    sitl.run_in_namespace(autopilot, workdir, [up, read], timeout_s=400)
+    out = {k: sitl.step_result(workdir, k) for k in (0, 1)}
+    f = workdir / "fence.json"
+    return {"upload": out[0], "read": out[1], "fence": json.loads(f.read_text()) if f.exists() else {}}
+
+
+@pytest.fixture(scope="module")
+def ardupilot_upload(tmp_path_factory):
+    return _upload_session("ardupilot", tmp_path_factory.mktemp("fence_ap_upload"))
+
+
+def test_ardupilot_mission_upload_leaves_the_plan_fence_on_the_vehicle(ardupilot_upload):
+    """issue 26: a .plan with a fence left ArduCopter with 0 fence items and FENCE_ENABLE 0. Read back by a
+    separate client: the items are ours and the fence is on (polygon + max altitude, RTL or land)."""
+    rc, text = ardupilot_upload["upload"]
+    assert rc == 0, text
+    assert "rally point(s)" in text, text
+    fence = ardupilot_upload["fence"]
+    assert fence, ardupilot_upload["read"]
+    got = [[c, round(p1, 3), x, y] for c, _frame, p1, x, y in fence["items"]]
+    assert got == _want_items()
+    p = fence["params"]
+    assert p["FENCE_ENABLE"] == 1 and p["FENCE_TYPE"] == 5 and p["FENCE_ACTION"] == 1, p
+    assert p["FENCE_ALT_MAX"] == 120.0, p  # the CLI's robot: limits.max_altitude
+
+
+@pytest.fixture(scope="module")
+def px4_upload(tmp_path_factory):
+    return _upload_session("px4", tmp_path_factory.mktemp("fence_px4_upload"))
+
+
+def test_px4_mission_upload_leaves_the_plan_fence_on_the_vehicle(px4_upload):
+    rc, text = px4_upload["upload"]
+    assert rc == 0, text
+    fence = px4_upload["fence"]
+    assert fence, px4_upload["read"]
+    got = [[c, round(p1, 3), x, y] for c, _frame, p1, x, y in fence["items"]]
+    assert got == _want_items()
+    p = fence["params"]
+    assert p["GF_ACTION"] == 3 and p["GF_MAX_VER_DIST"] == 120.0, p
+
+
+# ------------------------------------------------------------------------------------------- the kill test
+def _kill_session(autopilot: str, workdir: Path) -> dict:
+    """The farm survey with an inclusion circle of :data:`RADIUS_M` around home as the robot's geofence; SIGKILL
+    of the ``aerodaas run`` process tree once it flies, then a runaway client pushes the vehicle out of the fence
+    (``tests/sitl_fence.py kill-and-push``)."""
+    cfg = sitl.mavlink_env(autopilot, sitl.FARM_ENV, fence={"action": "rtl"})
+    r = cfg["robots"][0]
+    r["safety"] = {"geofence": {"circles": [{"center": _ll(0, 0), "radius": RADIUS_M, "inclusion": True}]},
+                   "max_altitude": MAX_ALT_M}
+    env = workdir / "env.json"
+    env.write_text(json.dumps(cfg))
+    py = shlex.quote(sys.executable)
+    run = sitl.aerodaas_run(sitl.FARM_APP, env, workdir / "run.mcap")
+    out = workdir / "kill.json"
+    step = (f"{run} > {shlex.quote(str(workdir / 'run.log'))} 2>&1 & RUN=$!; "
+            f"{py} -m tests.sitl_fence kill-and-push {sitl.monitor_connection(autopilot)} $RUN "
+            f"{shlex.quote(str(out))}")
+    sitl.run_in_namespace(autopilot, workdir, [step], timeout_s=700)
+    rc, text = sitl.step_result(workdir, 0)
+    log = (workdir / "run.log").read_text(errors="replace") if (workdir / "run.log").exists() else ""
+    return {"rc": rc, "out": text, "log": log, "obs": json.loads(out.read_text()) if out.exists() else {}}
+
+
+@pytest.fixture(scope="module")
+def killed(tmp_path_factory):
+    return _kill_session("ardupilot", tmp_path_factory.mktemp("fence_ap_kill"))
+
+
+@pytest.fixture(scope="module")
+def px4_killed(tmp_path_factory):
+    return _kill_session("px4", tmp_path_factory.mktemp("fence_px4_kill"))
+
+
+def test_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in(killed):
+    obs = killed["obs"]
+    assert killed["rc"] == 0 and "error" not in obs, (killed["out"], obs.get("error"), killed["log"][-3000:])
+    assert obs["killed"] and not obs["alive_after_kill"], obs["alive_after_kill"]
+    # after the kill, the vehicle's own fence is the robot's geofence, on
+    fence = obs["fence"]
+    c = _ll(0, 0)
+    assert [[i[0], round(i[2], 3), i[3], i[4]] for i in fence["items"]] == \
+        [[5003, RADIUS_M, round(c[0] * 1e7), round(c[1] * 1e7)]]
+    p = fence["params"]
+    assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ALT_MAX"], p["FENCE_ACTION"]) == (1, 5, MAX_ALT_M, 1), p
+    # phase 1, pushed straight out at 2.5 m/s in GUIDED for 25 wall seconds (~125 s of firmware time): the vehicle
+    # came to the boundary (the push was real) and ArduCopter's fence avoidance (AC_Avoid in GUIDED velocity
+    # control, AVOID_ENABLE's fence bit by default) held it FENCE_MARGIN inside: no breach, standing still
+    pushed = [s for s in obs["samples"] if obs["t_push"] <= s[0] <= obs["t_push_end"]]
+    assert len(pushed) > 50, "no telemetry while pushed"
+    far = max(math.hypot(s[1], s[2]) for s in pushed)
+    assert RADIUS_M - p["FENCE_MARGIN"] - 1.0 <= far <= RADIUS_M, far
+    breaches = max((f["breach_count"] for f in obs["fence_status"] if obs["t_kill"] <= f["t"] <= obs["t_push_end"]),
+                   default=0)
+    assert breaches == 0, breaches
+    tail = [s for s in pushed if s[0] >= obs["t_push_end"] - 5.0]
+    assert max(math.hypot(a[1] - b[1], a[2] - b[2]) for a in tail for b in tail) < 1.0
+    # phase 2, a mission waypoint 35 m out flown in AUTO (no avoidance there): the fence itself acts. The firmware
+    # reports the breach (FENCE_STATUS), takes its FENCE_ACTION (1: RTL) by itself within its braking distance of the
+    # boundary, flies home, lands and disarms
+    assert obs["mission_uploaded"] and obs["t_auto"] is not None
+    modes = [m for t, m in obs["modes"] if t >= obs["t_auto"]]
+    assert modes[:2] == ["AUTO", "RTL"], (modes, obs["texts"][-8:])
+    assert max(f["breach_count"] for f in obs["fence_status"]) > 0
+    after = [s for s in obs["samples"] if s[0] >= obs["t_auto"]]
+    beyond = max(math.hypot(s[1], s[2]) for s in after) - RADIUS_M
+    assert beyond <= 3.0, beyond
+    assert not obs["armed_at_end"], modes
+    last = obs["samples"][-1]
+    assert math.hypot(last[1], last[2]) < 3.0 and last[3] < 0.5, last
+
+
+def test_px4_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicle_in(px4_killed):
+    """PX4 SIH: after the kill, PX4 has our fence (GF_ACTION 3 Return; its own offboard-loss failsafe returns it
+    first); a runaway client puts it back in OFFBOARD and streams a velocity target straight out (PX4 caps it at our
+    MPC_XY_VEL_MAX): at the boundary PX4's geofence failsafe holds (COM_FAIL_ACT_T, 5 s) and returns by itself
+    (GF_PREDICT 0, the default: no pre-emptive stop), then it lands at home and disarms."""
+    obs = px4_killed["obs"]
+    assert px4_killed["rc"] == 0 and "error" not in obs, (px4_killed["out"], obs.get("error"),
+                                                          px4_killed["log"][-3000:])
+    assert obs["killed"] and not obs["alive_after_kill"], obs["alive_after_kill"]
+    c = _ll(0, 0)
+    assert [[i[0], round(i[2], 3), i[3], i[4]] for i in obs["fence"]["items"]] == \
+        [[5003, RADIUS_M, round(c[0] * 1e7), round(c[1] * 1e7)]]
+    p = obs["fence"]["params"]
+    assert (p["GF_ACTION"], p["GF_MAX_VER_DIST"]) == (3, MAX_ALT_M), p
+    modes = [m for t, m in obs["modes"] if t >= obs["t_kill"]]  # OFFBOARD is entered before the push is timed
+    assert "OFFBOARD" in modes and "RTL" in modes[modes.index("OFFBOARD"):], (modes, obs["texts"][-8:])
+    after = [s for s in obs["samples"] if s[0] >= obs["t_push"]]
+    far = max(math.hypot(s[1], s[2]) for s in after)
+    assert RADIUS_M - 1.0 <= far <= RADIUS_M + 3.0, far
+    assert any(t.startswith("Geofence") for t in obs["texts"]), obs["texts"]
+    # landed and disarmed at home (PX4's relative altitude drifts by a metre after landing as it re-estimates its
+    # home, COM_HOME_EN: the landing is its own "Landing detected" and the disarm)
+    assert not obs["armed_at_end"] and any(t.startswith("Landing detected") for t in obs["texts"]), modes
+    last = obs["samples"][-1]
+    assert math.hypot(last[1], last[2]) < 3.0, last
