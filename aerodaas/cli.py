@@ -102,11 +102,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("aerodaas run: interrupted", file=sys.stderr)
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)
-    except (FileNotFoundError, ValueError, KeyError) as e:
-        print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
-        return 2
     except runtime.RayStartError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
+        return 2 if isinstance(e, runtime.RayAddressError) else 1
+    except Exception as e:  # noqa: BLE001 - whose is it: the app's own bug (exit 1) or input we refused (exit 2)
+        from aerodaas.runtime.app_errors import INPUT_ERRORS, app_traceback, raised_by_app
+
+        if isinstance(e, INPUT_ERRORS) and not raised_by_app(e):
+            print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
+            return 2
+        who = f"the application {str(app)!r}" if raised_by_app(e) else "AeroDaaS (a bug: please report it)"
+        print(f"aerodaas run: {who} raised {type(e).__name__}: {e}\n{app_traceback(e, str(app))}".rstrip(),
+              file=sys.stderr)
         return 1
     finally:
         api.MISSION_LISTENERS.remove(on_result)
@@ -121,6 +128,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
     if any(r.outcome == "lost" for r in results):
         return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
+    if any(getattr(r, "recording_losses", None) for r in results):
+        return 4  # the recorder actor died: part of the recording is lost (it went on in a new segment)
     return 0 if all(r.ok for r in results) else 1
 
 
@@ -444,11 +453,19 @@ def _cmd_mission(args: argparse.Namespace) -> int:
 
 
 def _cmd_recover(args: argparse.Namespace) -> int:
-    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recording.recover`. Exit 0 (also for a file that was already
-    finished), 2 for a missing or non-MCAP file or an output that cannot be written."""
+    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recording.recover`; a recording in segments (its
+    recorder actor was restarted: ``FILE``, ``FILE.1.mcap`` ...) is joined into one file
+    (:func:`aerodaas.recording.segments.join_segments`). Exit 0 (also for a file that was already finished), 2 for a
+    missing or non-MCAP file or an output that cannot be written."""
     from aerodaas.recording.recover import recover_mcap
+    from aerodaas.recording.segments import join_segments, list_segments
 
     try:
+        if len(list_segments(args.file)) > 1:
+            j = join_segments(args.file, args.out)
+            print(f"{j['out']}: {len(j['segments'])} segments ({', '.join(j['segments'])}) joined, finished and "
+                  f"indexed: {j['messages']} messages on {j['channels']} channels")
+            return 0
         r = recover_mcap(args.file, args.out)
     except (OSError, ValueError) as e:
         print(f"aerodaas recover: {e}", file=sys.stderr)

@@ -24,6 +24,7 @@ pytestmark = pytest.mark.faults
     "analytics raising every 10th item, on_error=continue",
     "analytics raising, on_error=abort",
     "SIGKILL mid-run, then `aerodaas recover`",
+    "SIGKILL of the recorder actor mid-run",
 ])
 def test_fault_ends_clean(name):
     r = run_fault(name)

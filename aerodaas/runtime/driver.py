@@ -57,7 +57,8 @@ OPTIONS = RunOptions()
 
 @dataclass
 class MissionResult:
-    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed), per-robot
+    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed / recording_lost:
+    the drones finished but the recorder actor died, see ``recording_losses``), per-robot
     reports (visited waypoints, events, state history), per-actor stats, per-frame latency and the recording."""
 
     outcome: str
@@ -72,10 +73,17 @@ class MissionResult:
     recording_failure: dict[str, Any] | None = None
     recording_lost: int = 0
     recording_start_ns: int | None = None  # log time of sim time 0 (ns)
+    #: one entry per death of the recorder actor (it was restarted into a new segment file):
+    #: ``{segment, recorded_until_ns, next_segment, resumed_at_ns, previous_finished}``; a run with a loss is not
+    #: ``ok`` (exit code 4)
+    recording_losses: list[dict] = field(default_factory=list)
+    #: the recording's segment files in order (one unless the recorder actor was restarted)
+    recording_segments: list[str] = field(default_factory=list)
+    recording_duplicates: int = 0  # samples a restarted drone actor sent again, dropped (recorded once)
 
     @property
     def ok(self) -> bool:
-        return self.outcome == "success" and self.recording_failure is None
+        return self.outcome == "success" and self.recording_failure is None and not self.recording_losses
 
 
 _STARTED_RAY = False
@@ -491,10 +499,14 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
+    if outcome == "success" and rec_report.get("losses"):
+        outcome = "recording_lost"  # the drones finished, but the run's truth has a hole: not a success
     result = MissionResult(outcome=outcome, robots=reports, stats=stats, latency=latency, recording=opts.record,
                            wall_s=time.monotonic() - t_start, recording_counts=counts,
                            recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
-                           recording_start_ns=epoch_ns)
+                           recording_start_ns=epoch_ns, recording_losses=rec_report.get("losses") or [],
+                           recording_segments=rec_report.get("segments") or [],
+                           recording_duplicates=rec_report.get("duplicates", 0))
     for h in handles.values():
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
@@ -535,6 +547,11 @@ def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
         try:
             counts = ray.get(actors["recorder"].close.remote(), timeout=120)
             rep = ray.get(actors["recorder"].recording_report.remote(), timeout=60)
+        except ray.exceptions.RayActorError as e:  # it died while closing: its segment stays unfinished
+            rep = {"losses": [{"segment": record, "recorded_until_ns": None, "previous_finished": False,
+                               "error": f"the recorder actor died while closing: {_cause(e)}"}]}
+            print(f"aerodaas: warning: the recorder actor died while closing the recording {record} (run "
+                  f"`aerodaas recover {record}`)", file=sys.stderr)
         except Exception as e:  # noqa: BLE001 - pragma: no cover - reported, never silently lost
             print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
                   file=sys.stderr)
