@@ -36,6 +36,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for flag, v, lo, hi in (("--speedup", args.speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", args.timeout, 0.0, 1e7)):
             if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
                 raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
+        if args.hitl_port is not None and not 0 <= args.hitl_port <= 65535:
+            raise ValueError(f"--hitl-port {args.hitl_port}: outside [0, 65535] (0: any free port)")
+        if args.address is not None:  # parsed, resolved and reachable within 10 s, before any Ray process
+            from aerodaas.runtime.addresses import check_ray_address
+
+            check_ray_address(args.address, timeout_s=10.0)
         if args.env:
             from aerodaas.config import load_environment_config
 

@@ -244,6 +244,10 @@ class RayStartError(RuntimeError):
     """Ray could not be started or reached (the message says which and why); ``aerodaas run`` exits 1 with it."""
 
 
+class RayAddressError(RayStartError):
+    """The Ray cluster of ``--address`` could not be reached (bad input: ``aerodaas run`` exits 2 naming it)."""
+
+
 def ensure_ray(address: str | None = None) -> bool:
     """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes.
     Raises :class:`RayStartError`."""
@@ -257,12 +261,12 @@ def ensure_ray(address: str | None = None) -> bool:
             _EARLY.clear()
             if isinstance(err, KeyboardInterrupt):
                 raise err
-            raise RayStartError(f"could not start {where}: {type(err).__name__}: {err}") from err
+            raise (RayAddressError if address else RayStartError)(f"could not start {where}: {type(err).__name__}: {err}") from err
     if not ray.is_initialized():
         try:
             _init_ray(address)
         except Exception as e:  # noqa: BLE001 - Ray raises bare Exceptions (node start time-outs, ...)
-            raise RayStartError(f"could not start {where}: {type(e).__name__}: {e}") from e
+            raise (RayAddressError if address else RayStartError)(f"could not start {where}: {type(e).__name__}: {e}") from e
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
 
 

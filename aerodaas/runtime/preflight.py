@@ -77,6 +77,9 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
         from aerodaas.recording.writer import check_record_path
 
         check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
+    from aerodaas.runtime.addresses import check_hitl
+
+    check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
     graphs = {}
     scheds = robot_schedulers(env, robots)
     for r in robots:
