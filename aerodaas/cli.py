@@ -71,6 +71,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         o.live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
     results = []
     stop_signal: list[int] = []
+    late_signal: list[int] = []  # signals after a mission's summary, outside any mission: the run is ending anyway
 
     def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd, Ctrl-C: one clean stop
         # Ray's C++ failure-signal handler (absl, chained before this one) answers SIGTERM with alarm(3) and a SIGALRM
@@ -78,6 +79,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         # the signal over: cancel that alarm and its handler.
         signal.alarm(0)
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
+        if results and not runtime.IN_MISSION[0]:
+            # after the summary (the app ending, Ray shutting down): no KeyboardInterrupt from inside ray.shutdown,
+            # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS)
+            late_signal.append(signum)
+            runtime.STOP_SIGNALS.append(signum)
+            return
         stop_signal.append(signum)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -107,7 +114,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     except KeyboardInterrupt:
         print("aerodaas run: interrupted", file=sys.stderr)
-        return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)
+        return 128 + (stop_signal or late_signal or [signal.SIGINT])[0]
     except runtime.RayStartError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2 if isinstance(e, runtime.RayAddressError) else 1
@@ -124,6 +131,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     finally:
         api.MISSION_LISTENERS.remove(on_result)
         o.early_ray = False
+        runtime._RAISE_OK[0] = False  # a signal now is recorded, never raised inside ray.shutdown
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
         signal.signal(signal.SIGINT, previous_sigint)

@@ -25,6 +25,8 @@ pytestmark = pytest.mark.faults
     "analytics raising, on_error=abort",
     "SIGKILL mid-run, then `aerodaas recover`",
     "SIGKILL of the recorder actor mid-run",
+    "SIGTERM right after the summary",
+    "SIGINT right after the summary",
 ])
 def test_fault_ends_clean(name):
     r = run_fault(name)

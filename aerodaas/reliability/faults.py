@@ -244,6 +244,35 @@ def _recorder_kill(tmp: Path) -> dict:
                         f"msgs, outcome {outcome})", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
 
 
+def _signal_after_summary(sig: int) -> Callable[[Path], dict]:
+    """``sig`` sent right after the summary is printed (the app ending, Ray shutting down): no traceback, and the
+    exit code stays the mission's (0 for the survey)."""
+    def run(tmp: Path) -> dict:
+        rec = tmp / "run.mcap"
+        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
+                 start_new_session=True)
+        lines, sent = [], 0
+        assert p.stdout is not None
+        for line in p.stdout:
+            lines.append(line)
+            if line.startswith("mission outcome:"):
+                break
+        if p.poll() is None:  # one signal, as a user's Ctrl-C or a `kill` right after the summary
+            p.send_signal(sig)
+            sent += 1
+        rest, _ = p.communicate(timeout=300)
+        out = "".join(lines) + rest
+        ok, n, why = mcap_reader_ok(rec)
+        success = "mission outcome: success" in out
+        clean = sent >= 1 and success and p.returncode == 0 and ok and _no_crash(out) and \
+            "KeyboardInterrupt" not in out
+        return {"observed": f"{sent} signal(s) after the summary; exit {p.returncode}, outcome success {success}, "
+                            f"KeyboardInterrupt {'KeyboardInterrupt' in out}, recording "
+                            f"{'finished' if ok else why} ({n} msgs)", "clean": clean, "exit": p.returncode,
+                "output": out[-3000:]}
+    return run
+
+
 def _summary_outcome(out: str) -> str:
     """The summary's ``mission outcome: ...`` word plus 'ok' when the run was reported as a success."""
     line = next((ln for ln in out.splitlines() if ln.startswith("mission outcome:")), "")
@@ -282,6 +311,10 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL mid-run, then `aerodaas recover`", "recover exit 0; mcap's seeking reader accepts the file",
      _sigkill_recover),
     ("`aerodaas info FILE | head` (reader gone)", "exit 141, no BrokenPipeError", _broken_pipe),
+    ("SIGTERM right after the summary", "exit 0 (the mission's), no KeyboardInterrupt traceback",
+     _signal_after_summary(signal.SIGTERM)),
+    ("SIGINT right after the summary", "exit 0 (the mission's), no KeyboardInterrupt traceback",
+     _signal_after_summary(signal.SIGINT)),
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, `aerodaas recover` joins the segments", _recorder_kill),
 ]

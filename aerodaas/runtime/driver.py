@@ -94,6 +94,9 @@ _STARTED_RAY = False
 #: safe point, which ends the mission as ``interrupted`` with the recording finished
 STOP_SIGNALS: list[int] = []
 _RAISE_OK = [True]
+#: True while :func:`run_mission` runs (a stop signal then ends the mission); after it, a signal that comes once a
+#: mission's summary was printed does not change the run's exit code (see ``aerodaas run``)
+IN_MISSION = [False]
 
 
 def request_stop(signum: int) -> None:
@@ -356,6 +359,14 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     """Plan the run's actors (:mod:`aerodaas.runtime.dataflow`), start them, fly (:func:`aerodaas.runtime.supervise.supervise`),
     finish the recording and tear down. Bad input raises before Ray starts; once actors exist, every failure ends
     in a :class:`MissionResult` (never a raw traceback) with the recording finished."""
+    IN_MISSION[0] = True
+    try:
+        return _run_mission(env, robots, timeout)
+    finally:
+        IN_MISSION[0] = False
+
+
+def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
     import ray
 
     from aerodaas.runtime.dataflow import Placement, build_plan
