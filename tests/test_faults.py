@@ -27,6 +27,7 @@ pytestmark = pytest.mark.faults
     "SIGKILL of the recorder actor mid-run",
     "SIGTERM right after the summary",
     "SIGINT right after the summary",
+    "HITL clear of the pre-planned survey mid-flight",
 ])
 def test_fault_ends_clean(name):
     r = run_fault(name)

@@ -273,6 +273,52 @@ def _signal_after_summary(sig: int) -> Callable[[Path], dict]:
     return run
 
 
+def _hitl_clear_all(tmp: Path) -> dict:
+    """The farm survey with the HITL API: once the drone has reached its first waypoint, a ``clear`` with a null
+    body (refused, 422) and then ``{"scope": "all"}``: the pre-planned survey is gone, so the run must not report
+    success (outcome incomplete, exit 1), and the summary says how many of the 4 waypoints were flown."""
+    import re
+
+    from aerodaas.tools.hitl import request
+
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet", "--hitl",
+              "--hitl-port", "0"], env={"AERODAAS_STATE_DIR": str(tmp / "state")})
+    assert p.stdout is not None
+    lines, url, token = [], None, None
+    for line in p.stdout:
+        lines.append(line)
+        m = re.search(r"human-in-the-loop API at (\S+)\s+bearer token: (\S+)", line)
+        if m:
+            url, token = m.group(1), m.group(2)
+            break
+    null_status = clear_status = None
+    visited = 0
+    t0 = time.monotonic()
+    while url and p.poll() is None and time.monotonic() - t0 < 300:
+        try:
+            _, st = request("GET", "/drones/quadrotor_base", url=url, token=token, timeout=30)
+            visited = st.get("visited", 0) if isinstance(st, dict) else 0
+        except RuntimeError:
+            break
+        if visited >= 1:
+            null_status, _ = request("POST", "/drones/quadrotor_base/clear", None, url=url, token=token, timeout=30)
+            clear_status, _ = request("POST", "/drones/quadrotor_base/clear", {"scope": "all"}, url=url, token=token,
+                                      timeout=30)
+            break
+        time.sleep(0.5)
+    rest, _ = p.communicate(timeout=600)
+    out = "".join(lines) + rest
+    outcome = _summary_outcome(out)
+    m = re.search(r"waypoints (\d+)/(\d+)", out)
+    flown = f"{m.group(1)}/{m.group(2)}" if m else "?"
+    clean = (null_status == 422 and clear_status == 200 and p.returncode == 1 and "incomplete" in outcome and
+             m is not None and int(m.group(1)) < int(m.group(2)) and _no_crash(out))
+    return {"observed": f"clear null body {null_status}, clear scope all {clear_status} after {visited} waypoint(s); "
+                        f"exit {p.returncode}, {outcome.strip() or 'no summary'}, waypoints {flown}", "clean": clean,
+            "exit": p.returncode, "output": out[-3000:]}
+
+
 def _summary_outcome(out: str) -> str:
     """The summary's ``mission outcome: ...`` word plus 'ok' when the run was reported as a success."""
     line = next((ln for ln in out.splitlines() if ln.startswith("mission outcome:")), "")
@@ -315,6 +361,8 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
      _signal_after_summary(signal.SIGTERM)),
     ("SIGINT right after the summary", "exit 0 (the mission's), no KeyboardInterrupt traceback",
      _signal_after_summary(signal.SIGINT)),
+    ("HITL clear of the pre-planned survey mid-flight", "null body 422; scope all 200; outcome incomplete, exit 1 "
+     "(never success with 1 of 4 waypoints)", _hitl_clear_all),
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, `aerodaas recover` joins the segments", _recorder_kill),
 ]
