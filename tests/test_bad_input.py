@@ -206,3 +206,12 @@ def test_hitl_address_is_checked_before_ray(tmp_path, no_ray, capsys, hitl):
     assert no_ray == []
     err = capsys.readouterr().err
     assert "hitl" in err and "cannot listen" in err and "Traceback" not in err
+
+
+def test_reliability_command_line_and_app_error_cases():
+    """The catalogue's command-line and application cases (``python -m aerodaas.reliability`` shows them): each
+    refused before Ray with exit 2 naming the flag, or reported as the app's own exception (exit 1, traceback)."""
+    from aerodaas.reliability.cli_cases import run_cli_cases
+
+    bad = [(r["name"], r["message"][:300]) for r in run_cli_cases() if not r["refused"]]
+    assert bad == []

@@ -406,7 +406,11 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
                   f"| {e['sequences']} | {e['samples']} | {e['accepted']} / {e['refused']} | "
                   f"{e['flown_outside_limits']} | {e['outside_inclusion_m']:.3f} m | {e['inside_exclusion_m']:.3f} m | "
                   f"{e['above_max_altitude_m']:.3f} m (tolerance 0.05 m) |", ""]
-    lines += ["## Inputs", "", "| kind | input | refused | error (first line) |", "|---|---|---|---|"]
+    lines += ["## Inputs", "", "Command-line rows are refused before Ray (exit 2); application-error rows are the app's "
+              "own exceptions, reported as the app's (exit 1 with its traceback, never \"bad input\"); HITL API "
+              "rows are the documented answers (a drone actor that does not answer is 503 within 2 s: "
+              "`tests/test_hitl_unreachable.py`, needs Ray).", "",
+              "| kind | input | refused / answered as documented | error (first line) |", "|---|---|---|---|"]
     for r in inputs["rows"]:
         msg = r["message"].splitlines()
         first = (msg[1] if len(msg) > 1 and msg[0].startswith("invalid environment") else msg[0]).strip()

@@ -70,22 +70,23 @@ def check_listen(host: object, port: object, option: str) -> tuple[str, int]:
     resolves to an address of this machine, ``port`` an integer in [0, 65535] (0: any free port) that is free.
     Returns (host, port). Raises ValueError naming ``option`` and the value."""
     if not isinstance(host, str) or not host.strip():
-        raise ValueError(f"{option} host {host!r}: not a host name or address")
+        raise ValueError(f"{option}.host {host!r}: not a host name or address")
     if isinstance(port, bool) or not isinstance(port, int):
-        raise ValueError(f"{option} port {port!r}: not an integer")
+        raise ValueError(f"{option}.port {port!r}: not an integer")
     if not 0 <= port <= 65535:
-        raise ValueError(f"{option} port {port}: outside [0, 65535]")
+        raise ValueError(f"{option}.port {port}: outside [0, 65535]")
     try:
         infos = _resolve(host, port, 10.0)
     except (OSError, TimeoutError) as e:
-        raise ValueError(f"{option} host {host!r}: cannot resolve it ({e})") from None
+        raise ValueError(f"{option}.host {host!r}: cannot resolve it ({e})") from None
     family, _, _, _, addr = infos[0]
     with socket.socket(family, socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind(addr)
         except OSError as e:
-            raise ValueError(f"{option} {host}:{port}: cannot listen there ({e.strerror or e})") from None
+            raise ValueError(f"{option}.host / {option}.port {host}:{port}: cannot listen there "
+                             f"({e.strerror or e})") from None
     return host, port
 
 
