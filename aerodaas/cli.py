@@ -185,7 +185,8 @@ def _cmd_down(args: argparse.Namespace) -> int:
 def _cmd_plan(args: argparse.Namespace) -> int:
     """``aerodaas plan APP.py [--env FILE] [--json] [--address ADDR]``: build the application's dataflow graph and
     print the actors it would start, where each goes (its ``label_selector``) and the edges between them, without
-    starting Ray or flying. Exit 0, or 2 for bad input (named) like ``aerodaas run``."""
+    starting Ray or flying. Exit 0, 2 for bad input (named) like ``aerodaas run``, 1 for an exception of the app's
+    own code (with its traceback)."""
     from aerodaas.runtime import driver as runtime
     from aerodaas.config import ConfigError
     from aerodaas.runtime.dataflow import Placement
@@ -209,9 +210,18 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             print(f"aerodaas plan: warning: {warning}", file=sys.stderr)
         print(json.dumps(p.plan.describe(placement), indent=2) if args.json else p.plan.text(placement))
         return 0
-    except (ConfigError, FileNotFoundError, ValueError, KeyError) as e:
+    except ConfigError as e:
         print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
+    except Exception as e:  # noqa: BLE001 - the app's own bug (exit 1, its traceback) or input we refused (exit 2)
+        from aerodaas.runtime.app_errors import INPUT_ERRORS, app_traceback, raised_by_app
+
+        if isinstance(e, INPUT_ERRORS) and not raised_by_app(e):
+            print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
+            return 2
+        print(f"aerodaas plan: the application {str(app)!r} raised {type(e).__name__}: {e}\n"
+              f"{app_traceback(e, str(app))}".rstrip(), file=sys.stderr)
+        return 1
     finally:
         o.plan_only = False
         o.env_path = None

@@ -215,3 +215,11 @@ def test_reliability_command_line_and_app_error_cases():
 
     bad = [(r["name"], r["message"][:300]) for r in run_cli_cases() if not r["refused"]]
     assert bad == []
+
+
+def test_plan_reports_the_apps_own_exception_as_the_apps(tmp_path, capsys):
+    app = tmp_path / "my_app.py"
+    app.write_text("cfg = {}\ncfg['missing']\n")
+    assert cli.main(["plan", str(app)]) == 1
+    err = capsys.readouterr().err
+    assert "the application" in err and "KeyError" in err and "Traceback" in err
