@@ -24,28 +24,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     # everything the command line names is checked before Ray starts (exit 2, naming the bad input)
     try:
-        for flag, v in (("--record", args.record), ("--env", args.env)):
-            if v is not None and not v.strip():
-                raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
-        if args.record:
-            from aerodaas.recording.writer import check_record_path
+        from aerodaas.runtime.preflight import check_run_flags
 
-            check_record_path(args.record)
-        from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
-
-        for flag, v, lo, hi in (("--speedup", args.speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", args.timeout, 0.0, 1e7)):
-            if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
-                raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
-        if args.hitl_port is not None and not 0 <= args.hitl_port <= 65535:
-            raise ValueError(f"--hitl-port {args.hitl_port}: outside [0, 65535] (0: any free port)")
-        if args.address is not None:  # parsed, resolved and reachable within 10 s, before any Ray process
-            from aerodaas.runtime.addresses import check_ray_address
-
-            check_ray_address(args.address, timeout_s=10.0)
-        if args.env:
-            from aerodaas.config import load_environment_config
-
-            load_environment_config(args.env)
+        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address)
     except (ConfigError, ValueError) as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
@@ -119,15 +100,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2 if isinstance(e, runtime.RayAddressError) else 1
     except Exception as e:  # noqa: BLE001 - whose is it: the app's own bug (exit 1) or input we refused (exit 2)
-        from aerodaas.runtime.app_errors import INPUT_ERRORS, app_traceback, raised_by_app
+        from aerodaas.runtime.app_errors import report
 
-        if isinstance(e, INPUT_ERRORS) and not raised_by_app(e):
-            print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
-            return 2
-        who = f"the application {str(app)!r}" if raised_by_app(e) else "AeroDaaS (a bug: please report it)"
-        print(f"aerodaas run: {who} raised {type(e).__name__}: {e}\n{app_traceback(e, str(app))}".rstrip(),
-              file=sys.stderr)
-        return 1
+        return report(e, str(app), "aerodaas run")
     finally:
         api.MISSION_LISTENERS.remove(on_result)
         o.early_ray = False
@@ -214,14 +189,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
     except Exception as e:  # noqa: BLE001 - the app's own bug (exit 1, its traceback) or input we refused (exit 2)
-        from aerodaas.runtime.app_errors import INPUT_ERRORS, app_traceback, raised_by_app
+        from aerodaas.runtime.app_errors import report
 
-        if isinstance(e, INPUT_ERRORS) and not raised_by_app(e):
-            print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
-            return 2
-        print(f"aerodaas plan: the application {str(app)!r} raised {type(e).__name__}: {e}\n"
-              f"{app_traceback(e, str(app))}".rstrip(), file=sys.stderr)
-        return 1
+        return report(e, str(app), "aerodaas plan")
     finally:
         o.plan_only = False
         o.env_path = None

@@ -11,7 +11,7 @@ import sysconfig
 import traceback
 from types import TracebackType
 
-__all__ = ["raised_by_app", "app_traceback", "INPUT_ERRORS"]
+__all__ = ["raised_by_app", "app_traceback", "report", "INPUT_ERRORS"]
 
 #: exception types that, raised by AeroDaaS's own code, mean bad input (exit 2)
 INPUT_ERRORS = (FileNotFoundError, ValueError, KeyError)
@@ -68,3 +68,15 @@ def app_traceback(e: BaseException, app: str) -> str:
     while t is not None and os.path.abspath(t.tb_frame.f_code.co_filename) != app:
         t = t.tb_next
     return "".join(traceback.format_exception(type(e), e, t if t is not None else tb))
+
+
+def report(e: Exception, app: str, prog: str) -> int:
+    """Print ``e`` for the command ``prog`` (``aerodaas run``) and return its exit code: 2 with one line for bad
+    input AeroDaaS refused (:data:`INPUT_ERRORS` raised by its own code), 1 with the traceback (from the app's first
+    frame) for the app's own exception (or, raised in AeroDaaS and not an input error, a bug of ours)."""
+    if isinstance(e, INPUT_ERRORS) and not raised_by_app(e):
+        print(f"{prog}: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
+    who = f"the application {app!r}" if raised_by_app(e) else "AeroDaaS (a bug: please report it)"
+    print(f"{prog}: {who} raised {type(e).__name__}: {e}\n{app_traceback(e, app)}".rstrip(), file=sys.stderr)
+    return 1
