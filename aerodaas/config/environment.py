@@ -140,7 +140,7 @@ class HitlConfig(_Cfg):
     def _token_chars(cls, v: str | None) -> str | None:
         """A bearer token is RFC 6750 section 2.1's ``b64token``: letters, digits and ``-._~+/``, then ``=``
         padding; no blank (16 spaces are not a secret)."""
-        if v is not None and not re.fullmatch(r"[A-Za-z0-9\-._~+/]+=*", v):
+        if v is not None and not re.fullmatch(r"[A-Za-z0-9\-._~+/]{16,}=*", v):  # as aerodaas.tools.hitl.TOKEN_RE
             raise ValueError("a bearer token is 16 to 256 characters of A-Z a-z 0-9 - . _ ~ + / (then '=' padding; "
                              "RFC 6750 section 2.1), no blanks")
         return v
