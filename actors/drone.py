@@ -363,7 +363,9 @@ class DroneComponent(AutopilotFlight):
                 if self.outcome is None:
                     dropped = [r["id"] for r in self.rejected if r.get("item") == "waypoint"]
                     # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
-                    ok = self.preplanned_left == 0 and not dropped and not self.hold_failed
+                    # nor a survey whose pre-planned waypoints were cleared through the HITL API
+                    ok = self.preplanned_left == 0 and not dropped and not self.hold_failed and \
+                        not getattr(self.scheduler, "cleared_preplanned", None)
                     self.outcome = "success" if ok else "incomplete"
                 return True
             return False

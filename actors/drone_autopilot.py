@@ -160,7 +160,8 @@ class AutopilotFlight:
             self.fsm.transition(S.LANDED, t)
             self._event("landed", reason="landed while the link was lost")
             if self.outcome is None:
-                self.outcome = "incomplete" if self.preplanned_left else "success"
+                self.outcome = "incomplete" if self.preplanned_left or getattr(
+                    self.scheduler, "cleared_preplanned", None) else "success"
             return True
         resume = {S.WAYPOINT_HOLD: S.NAVIGATING}.get(prev, prev)
         if resume in (S.ARMED, S.PREFLIGHT):

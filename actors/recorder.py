@@ -99,6 +99,12 @@ class RecorderService:
         self.failure: dict[str, Any] | None = None
         self.lost = 0  # messages offered after a failure (not recorded)
         self.last_t_ns: int | None = None  # log time of the last message written
+        self.first_t_ns: int | None = None  # log time of the first message written
+        #: (kind, robot or topic) -> stamp (ns) of the newest odometry sample / frame written: a drone actor restarted
+        #: from its checkpoint flies again from the checkpoint's time and sends samples whose stamps were recorded
+        #: already; those are dropped here (by the sample's own stamp) and counted in ``duplicates``
+        self._last_stamp: dict[tuple[str, str], int] = {}
+        self.duplicates = 0
         self.on_failure: list[Callable[[dict], None]] = []
         _inject_fault(self.rec)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
@@ -161,7 +167,8 @@ class RecorderService:
                         self._write(item)
                         t_ns = getattr(item, "t_ns", None)
                         if t_ns is not None:
-                            self.last_t_ns = t_ns
+                            self.last_t_ns = max(self.last_t_ns or t_ns, t_ns)
+                            self.first_t_ns = min(self.first_t_ns or t_ns, t_ns)
                     except OSError:
                         raise
                     except Exception as e:  # a bad message must not stop the recording
@@ -177,8 +184,27 @@ class RecorderService:
                 self._fail(e)
                 return
 
+    def _duplicate(self, item: RecordItem) -> bool:
+        """True for an odometry sample or a frame whose stamp is not newer than the last one written for the same
+        robot / image topic (a restarted drone actor re-sending what was recorded before its restart)."""
+        if isinstance(item, RecordOdometry):
+            key = ("odometry", item.robot)
+        elif isinstance(item, RecordImage):
+            key = ("image", item.topic)
+        else:
+            return False
+        t_ns = int(item.t_ns)
+        last = self._last_stamp.get(key)
+        if last is not None and t_ns <= last:
+            self.duplicates += 1
+            return True
+        self._last_stamp[key] = t_ns
+        return False
+
     def _write(self, item: RecordItem) -> None:
         r = self.rec
+        if self._duplicate(item):
+            return
         if isinstance(item, RecordImage):
             topic, t_ns, frame, frame_id = item.topic, item.t_ns, item.frame, item.frame_id
             if isinstance(frame, (bytes, bytearray)):  # encoded by the sending actor (RemoteRecorder)
@@ -274,9 +300,10 @@ class RecorderService:
 
     def report(self) -> dict[str, Any]:
         """``{"failure": None | {error, errno, last_recorded_ns, path, finished, finish_error?}, "lost": n,
-        "frames_dropped": n, "write_errors": [...]}``."""
+        "frames_dropped": n, "duplicates": n, "write_errors": [...]}`` (``duplicates``: samples dropped as already
+        recorded, see :meth:`_duplicate`)."""
         return {"failure": self.failure, "lost": self.lost, "frames_dropped": self.frames_dropped,
-                "write_errors": self.write_errors[-10:]}
+                "duplicates": self.duplicates, "write_errors": self.write_errors[-10:]}
 
     def counts(self) -> dict[str, int]:
         return dict(self.rec.message_counts)

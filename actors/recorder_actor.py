@@ -5,8 +5,16 @@ the live view. It outlives every other actor of the run: whatever dies, the driv
 with a ``/mission/result`` per drone.
 
 It is also the run's memory of the drones: drone actors checkpoint here (:meth:`checkpoint`) and a restarted
-drone actor reads its last checkpoint back (:meth:`last_checkpoint`). It is never restarted (``max_restarts=0``):
-a new process could not reopen a half-written file.
+drone actor reads its last checkpoint back (:meth:`last_checkpoint`).
+
+If its process dies (SIGKILL, a native crash), Ray restarts it (``max_restarts=RECORDER_MAX_RESTARTS``). A new
+process cannot append to the dead one's half-written file, so the restarted recorder opens the next *segment*
+(``RUN.mcap`` -> ``RUN.1.mcap``, :mod:`aerodaas.recording.segments`) at once, in its constructor, and finishes the
+previous segment in the background (:func:`aerodaas.recording.recover.recover_mcap`, so it is readable). What was
+in flight is lost: :meth:`recording_report` then holds ``segments`` and ``losses`` (``recorded_until_ns`` of the
+previous segment, ``resumed_at_ns``), the run says "recording lost at t = ..." and ends with exit code 4.
+``aerodaas recover RUN.mcap`` joins the segments. The driver gives a restarted recorder the specs again
+(:meth:`keep_specs`); checkpoints come back with the drones' next ones.
 """
 from __future__ import annotations
 
@@ -19,7 +27,11 @@ import ray
 from aerodaas.runtime.specs import ActorSpec
 
 
-@ray.remote(num_cpus=0, max_concurrency=16, max_restarts=0)
+#: how often Ray restarts a dead recorder actor (each restart opens a new segment file)
+RECORDER_MAX_RESTARTS = 3
+
+
+@ray.remote(num_cpus=0, max_concurrency=16, max_restarts=RECORDER_MAX_RESTARTS)
 class RecorderActor:
     """``spec``: the recorder's :class:`~aerodaas.runtime.specs.ActorSpec` (``record``: the file and live view, or
     None; ``epoch_ns``), see the module docstring."""
@@ -35,6 +47,54 @@ class RecorderActor:
         self._setup_lock = threading.Lock()
         self._lock = threading.Lock()
         self.received = 0
+        self.segments: list[str] = []
+        self.losses: list[dict] = []
+        self._finishing: threading.Thread | None = None
+        import warnings
+
+        with warnings.catch_warnings():  # Ray's property reads its own deprecated ``actor_id`` internally
+            warnings.simplefilter("ignore")
+            reconstructed = ray.get_runtime_context().was_current_actor_reconstructed
+        if reconstructed:
+            self._restart_segment()
+
+    def _restart_segment(self) -> None:
+        """This process replaces a recorder that died: record into the next segment from now on and finish the
+        previous one (the dead process's, unfinished) in a background thread."""
+        from aerodaas.actors.recorder import RecorderService
+        from aerodaas.recording.segments import next_segment, segment_path
+
+        rec = self.spec.record
+        if rec is None or not rec.path:
+            self._set_up.set()
+            return
+        k, path = next_segment(rec.path)
+        prev = segment_path(rec.path, k - 1)
+        self.segments = [str(segment_path(rec.path, i)) for i in range(k + 1)]
+        loss = {"segment": str(prev), "next_segment": str(path), "recorded_until_ns": None, "resumed_at_ns": None,
+                "previous_finished": False}
+        self.losses.append(loss)
+        try:
+            self.recorder = RecorderService(str(path), rec.meta, max_pending_frames=64, homes=rec.homes,
+                                            declare=rec.declare)
+        except OSError as e:
+            loss["error"] = f"{type(e).__name__}: {e}"
+        finally:
+            self._set_up.set()
+
+        def finish_previous() -> None:
+            from aerodaas.recording.recover import recover_mcap
+            from aerodaas.recording.segments import message_time_range
+
+            try:
+                recover_mcap(prev)
+                loss["recorded_until_ns"] = message_time_range(prev)[1]
+                loss["previous_finished"] = True
+            except Exception as e:  # noqa: BLE001 - reported; `aerodaas recover` can try again
+                loss["finish_error"] = f"{type(e).__name__}: {e}"
+
+        self._finishing = threading.Thread(target=finish_previous, name="aerodaas-finish-segment", daemon=True)
+        self._finishing.start()
 
     def setup(self) -> dict:
         """Open the file and the live view. Raises what :class:`~.recorder.RecorderService` raises (a bad path,
@@ -49,6 +109,11 @@ class RecorderActor:
 
                     for name, js in rec.schemas.items():  # plug-in sensors' message schemas
                         register_json_schema(name, js)
+                    if rec.path:  # segments of an earlier run to the same file would be joined to this one
+                        from aerodaas.recording.segments import remove_stale_segments
+
+                        remove_stale_segments(rec.path)
+                        self.segments = [str(rec.path)]
                     self.recorder = RecorderService(rec.path, rec.meta, live=rec.live, max_pending_frames=64,
                                                     homes=rec.homes, declare=rec.declare)
             finally:
@@ -59,6 +124,14 @@ class RecorderActor:
 
     def ping(self) -> int:
         return os.getpid()
+
+    def status(self) -> dict:
+        """``{"pid", "restarted": bool, "segment": the file written now, "last_t_ns"}`` (the driver polls it to see a
+        restart)."""
+        rec = self.recorder
+        return {"pid": os.getpid(), "restarted": bool(self.losses),
+                "segment": self.segments[-1] if self.segments else None,
+                "last_t_ns": getattr(rec, "last_t_ns", None)}
 
     def record(self, batch: list) -> int:
         """Messages of another actor (:class:`~.recorder.RemoteRecorder`); returns how many were taken. The other
@@ -104,11 +177,22 @@ class RecorderActor:
         return True
 
     def close(self) -> dict:
-        """Finish the file; returns the per-topic message counts."""
+        """Finish the file; returns the per-topic message counts (of this segment)."""
+        if self._finishing is not None:
+            self._finishing.join(120.0)
         return self.recorder.close() if self.recorder is not None else {}
 
     def recording_report(self) -> dict:
-        return self.recorder.report() if self.recorder is not None else {}
+        """:meth:`~aerodaas.actors.recorder.RecorderService.report` plus ``segments`` (the files of this run, in
+        order) and ``losses`` (one per recorder restart: ``segment``, ``recorded_until_ns``, ``next_segment``,
+        ``resumed_at_ns``, ``previous_finished``)."""
+        rep = self.recorder.report() if self.recorder is not None else {}
+        if self.losses:
+            first = None
+            if self.recorder is not None and self.recorder.rec.message_counts:
+                first = getattr(self.recorder, "first_t_ns", None)
+            self.losses[-1]["resumed_at_ns"] = first
+        return {**rep, "segments": list(self.segments), "losses": [dict(x) for x in self.losses]}
 
     def stats(self) -> dict:
         return {"_host": {"received": self.received, "errors": [], "error_count": 0}}

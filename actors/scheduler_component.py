@@ -62,6 +62,9 @@ class SchedulerComponent(Component):
         self._plan_lock = threading.Lock()  # one planner at a time; never the lock the control tick takes
         self.refused: list[dict] = []
         self.discarded: list[dict] = []
+        #: ids of pre-planned waypoints cleared through the HITL API: the mission is then never a success
+        self.cleared_preplanned: list[str] = []
+        self._injected: dict[int, Any] = {}  # id(item) -> item, for the items added through the HITL API
         self._plan_sig: Any = None
         self._replaced: set[Port] = set()
         self.drone: Any = None  # the DroneComponent, set by the host runtime
@@ -151,6 +154,8 @@ class SchedulerComponent(Component):
         self._check_bounds(nav_)
         nav_ = self.gate.check_navigation(nav_, self.position)
         self._plan_and_add(nav_, index, prio)
+        if nav_.name == "hitl":  # added through the HITL API: what ``clear`` with scope "injected" removes
+            self._injected.update({id(w): w for w in nav_.waypoints})
         self._record_plan()
         if self.drone is not None:
             self.drone.nudge()
@@ -197,9 +202,35 @@ class SchedulerComponent(Component):
                                       f"{w.id!r} is refused by the geofence: {why}")
             prev, prev_id = (x, y), repr(w.id)
 
-    def clear_navigation(self, priority: int | None = None) -> None:
-        self.s.clear_navigation(priority)
+    def clear_navigation(self, priority: int | None = None, scope: str = "all", by: str = "app") -> dict:
+        """Abort queued navigation (a cleared mission never resumes): every mission (``scope="all"``) or only the
+        navigation added through the HITL API (``scope="injected"``: items of navigation named ``hitl``), at ``priority``
+        when given. Cleared pre-planned waypoints are recorded as a ``navigation_cleared`` event; cleared by the
+        HITL API (``by="hitl"``) they make the mission ``incomplete`` (:attr:`cleared_preplanned`), never a
+        success. Returns ``{"cleared": [waypoint ids], "preplanned": [ids of pre-planned ones]}``. Raises
+        ValueError for an unknown scope."""
+        if scope not in ("all", "injected"):
+            raise ValueError(f"clear: scope {scope!r} is not 'injected' or 'all'")
+        with self.s._lock:
+            gone: list = []
+            for m in self.s._missions:
+                if priority is not None and m.priority != priority:
+                    continue
+                drop = [i for i in m.items if scope == "all" or id(i) in self._injected]
+                gone += drop
+                m.items = [i for i in m.items if not (scope == "all" or id(i) in self._injected)]
+            self.s._missions = [m for m in self.s._missions if m.items]
+            self.s.cleared += 1
+        ids = [i.id for i in gone if isinstance(i, Waypoint)]
+        pre = [i.id for i in gone if isinstance(i, Waypoint) and id(i) not in self._injected]
+        for i in gone:
+            self._injected.pop(id(i), None)
+        if pre and by == "hitl":
+            self.cleared_preplanned.extend(pre)
+        if ids:
+            self._event("navigation_cleared", scope=scope, by=by, waypoints=ids[:100], preplanned=pre[:100])
         self._record_plan()
+        return {"cleared": ids, "preplanned": pre}
 
     def snapshot(self) -> list[dict]:
         return self.s.snapshot()

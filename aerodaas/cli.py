@@ -24,22 +24,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     # everything the command line names is checked before Ray starts (exit 2, naming the bad input)
     try:
-        for flag, v in (("--record", args.record), ("--env", args.env)):
-            if v is not None and not v.strip():
-                raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
-        if args.record:
-            from aerodaas.recording.writer import check_record_path
+        from aerodaas.runtime.preflight import check_run_flags
 
-            check_record_path(args.record)
-        from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
-
-        for flag, v, lo, hi in (("--speedup", args.speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", args.timeout, 0.0, 1e7)):
-            if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
-                raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
-        if args.env:
-            from aerodaas.config import load_environment_config
-
-            load_environment_config(args.env)
+        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address)
     except (ConfigError, ValueError) as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
@@ -65,6 +52,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         o.live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
     results = []
     stop_signal: list[int] = []
+    late_signal: list[int] = []  # signals after a mission's summary, outside any mission: the run is ending anyway
 
     def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd, Ctrl-C: one clean stop
         # Ray's C++ failure-signal handler (absl, chained before this one) answers SIGTERM with alarm(3) and a SIGALRM
@@ -72,6 +60,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         # the signal over: cancel that alarm and its handler.
         signal.alarm(0)
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
+        if results and not runtime.IN_MISSION[0]:
+            # after the summary (the app ending, Ray shutting down): no KeyboardInterrupt from inside ray.shutdown,
+            # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS)
+            late_signal.append(signum)
+            runtime.STOP_SIGNALS.append(signum)
+            return
         stop_signal.append(signum)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -101,16 +95,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
     except KeyboardInterrupt:
         print("aerodaas run: interrupted", file=sys.stderr)
-        return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)
-    except (FileNotFoundError, ValueError, KeyError) as e:
-        print(f"aerodaas run: {type(e).__name__}: {e}", file=sys.stderr)
-        return 2
+        return 128 + (stop_signal or late_signal or [signal.SIGINT])[0]
     except runtime.RayStartError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(e, runtime.RayAddressError) else 1
+    except Exception as e:  # noqa: BLE001 - whose is it: the app's own bug (exit 1) or input we refused (exit 2)
+        from aerodaas.runtime.app_errors import report
+
+        return report(e, str(app), "aerodaas run")
     finally:
         api.MISSION_LISTENERS.remove(on_result)
         o.early_ray = False
+        runtime._RAISE_OK[0] = False  # a signal now is recorded, never raised inside ray.shutdown
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
         signal.signal(signal.SIGINT, previous_sigint)
@@ -121,6 +117,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
     if any(r.outcome == "lost" for r in results):
         return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
+    if any(getattr(r, "recording_losses", None) for r in results):
+        return 4  # the recorder actor died: part of the recording is lost (it went on in a new segment)
     return 0 if all(r.ok for r in results) else 1
 
 
@@ -162,7 +160,8 @@ def _cmd_down(args: argparse.Namespace) -> int:
 def _cmd_plan(args: argparse.Namespace) -> int:
     """``aerodaas plan APP.py [--env FILE] [--json] [--address ADDR]``: build the application's dataflow graph and
     print the actors it would start, where each goes (its ``label_selector``) and the edges between them, without
-    starting Ray or flying. Exit 0, or 2 for bad input (named) like ``aerodaas run``."""
+    starting Ray or flying. Exit 0, 2 for bad input (named) like ``aerodaas run``, 1 for an exception of the app's
+    own code (with its traceback)."""
     from aerodaas.runtime import driver as runtime
     from aerodaas.config import ConfigError
     from aerodaas.runtime.dataflow import Placement
@@ -186,9 +185,13 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             print(f"aerodaas plan: warning: {warning}", file=sys.stderr)
         print(json.dumps(p.plan.describe(placement), indent=2) if args.json else p.plan.text(placement))
         return 0
-    except (ConfigError, FileNotFoundError, ValueError, KeyError) as e:
+    except ConfigError as e:
         print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
+    except Exception as e:  # noqa: BLE001 - the app's own bug (exit 1, its traceback) or input we refused (exit 2)
+        from aerodaas.runtime.app_errors import report
+
+        return report(e, str(app), "aerodaas plan")
     finally:
         o.plan_only = False
         o.env_path = None
@@ -479,11 +482,19 @@ def _cmd_mission(args: argparse.Namespace) -> int:
 
 
 def _cmd_recover(args: argparse.Namespace) -> int:
-    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recording.recover`. Exit 0 (also for a file that was already
-    finished), 2 for a missing or non-MCAP file or an output that cannot be written."""
+    """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recording.recover`; a recording in segments (its
+    recorder actor was restarted: ``FILE``, ``FILE.1.mcap`` ...) is joined into one file
+    (:func:`aerodaas.recording.segments.join_segments`). Exit 0 (also for a file that was already finished), 2 for a
+    missing or non-MCAP file or an output that cannot be written."""
     from aerodaas.recording.recover import recover_mcap
+    from aerodaas.recording.segments import join_segments, list_segments
 
     try:
+        if len(list_segments(args.file)) > 1:
+            j = join_segments(args.file, args.out)
+            print(f"{j['out']}: {len(j['segments'])} segments ({', '.join(j['segments'])}) joined, finished and "
+                  f"indexed: {j['messages']} messages on {j['channels']} channels")
+            return 0
         r = recover_mcap(args.file, args.out)
     except (OSError, ValueError) as e:
         print(f"aerodaas recover: {e}", file=sys.stderr)

@@ -117,7 +117,10 @@ def test_invalid_environment_subprocess_creates_no_ray_session(tmp_path):
 
 
 @pytest.mark.parametrize("flag,value", [("--speedup", "inf"), ("--speedup", "nan"), ("--speedup", "1e308"),
-                                        ("--timeout", "-1")])
+                                        ("--timeout", "-1"), ("--env", ""), ("--env", "  "), ("--record", ""),
+                                        ("--address", "not-a-host:1"), ("--address", "127.0.0.1:1"),
+                                        ("--address", "127.0.0.1:70000"), ("--hitl-port", "70000"),
+                                        ("--hitl-port", "-1")])
 def test_bad_run_flags_exit_2_before_anything(tmp_path, no_ray, capsys, flag, value):
     app = tmp_path / "app.py"
     app.write_text(APP.format(env=str(tmp_path / "unused.json")))
@@ -143,3 +146,80 @@ def test_mission_upload_refuses_an_empty_mission(tmp_path, capsys):
     # a connection nobody serves: the refusal must come before any connection attempt
     assert cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1"]) == 2
     assert "no items" in capsys.readouterr().err
+
+
+APP_RAISING = """
+from aerodaas import *
+cfg = {{"a": 1}}
+def plan():
+    return cfg[{key!r}]   # the app's own bug
+plan()
+"""
+
+
+@pytest.mark.parametrize("key", ["missing"])
+def test_an_exception_of_the_app_is_the_apps_exit_1_with_its_traceback(tmp_path, no_ray, capsys, key):
+    """A KeyError raised by the application's own code is the app's (exit 1, its traceback), not bad input (2)."""
+    app = tmp_path / "my_app.py"
+    app.write_text(APP_RAISING.format(key=key))
+    assert cli.main(["run", str(app), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert f"the application {str(app)!r} raised KeyError" in err
+    assert "Traceback" in err and "my_app.py" in err and "return cfg[" in err
+    assert "cli.py" not in err  # the traceback starts at the app
+
+
+def test_a_runtime_error_of_the_app_exits_1(tmp_path, no_ray, capsys):
+    app = tmp_path / "app.py"
+    app.write_text("import json\njson.loads('{not json')\n")  # raised inside the standard library, called by the app
+    assert cli.main(["run", str(app), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "the application" in err and "JSONDecodeError" in err and "Traceback" in err
+
+
+def test_bad_input_refused_by_aerodaas_stays_exit_2(tmp_path, no_ray, capsys):
+    """The same exception types raised by AeroDaaS about what the app gave it are bad input (exit 2, one line)."""
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(tmp_path / "no_such_env.json")))
+    assert cli.main(["run", str(app), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no_such_env.json" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("hitl", [{"enabled": True, "host": "127.0.0.1", "port": "BUSY"},
+                                  {"enabled": True, "host": "192.0.2.1", "port": 0}], ids=["port-in-use", "not-here"])
+def test_hitl_address_is_checked_before_ray(tmp_path, no_ray, capsys, hitl):
+    """A HITL port that is taken, or a host that is no address of this machine: exit 2 naming it, Ray never
+    started (it used to fail after Ray started, with a traceback)."""
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        if hitl["port"] == "BUSY":
+            hitl = {**hitl, "port": busy.getsockname()[1]}
+        env = tmp_path / "env.json"
+        env.write_text(json.dumps({"robots": [{"id": "d1"}], "hitl": hitl}))
+        app = tmp_path / "app.py"
+        app.write_text(APP.format(env=str(env)))
+        assert cli.main(["run", str(app), "--quiet"]) == 2
+    assert no_ray == []
+    err = capsys.readouterr().err
+    assert "hitl" in err and "cannot listen" in err and "Traceback" not in err
+
+
+def test_reliability_command_line_and_app_error_cases():
+    """The catalogue's command-line and application cases (``python -m aerodaas.reliability`` shows them): each
+    refused before Ray with exit 2 naming the flag, or reported as the app's own exception (exit 1, traceback)."""
+    from aerodaas.reliability.cli_cases import run_cli_cases
+
+    bad = [(r["name"], r["message"][:300]) for r in run_cli_cases() if not r["refused"]]
+    assert bad == []
+
+
+def test_plan_reports_the_apps_own_exception_as_the_apps(tmp_path, capsys):
+    app = tmp_path / "my_app.py"
+    app.write_text("cfg = {}\ncfg['missing']\n")
+    assert cli.main(["plan", str(app)]) == 1
+    err = capsys.readouterr().err
+    assert "the application" in err and "KeyError" in err and "Traceback" in err

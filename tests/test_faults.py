@@ -24,6 +24,10 @@ pytestmark = pytest.mark.faults
     "analytics raising every 10th item, on_error=continue",
     "analytics raising, on_error=abort",
     "SIGKILL mid-run, then `aerodaas recover`",
+    "SIGKILL of the recorder actor mid-run",
+    "SIGTERM right after the summary",
+    "SIGINT right after the summary",
+    "HITL clear of the pre-planned survey mid-flight",
 ])
 def test_fault_ends_clean(name):
     r = run_fault(name)

@@ -132,6 +132,8 @@ def wp_body(*wps, **kw) -> bytes:
     b'{"waypoints": [{"x": 1, "y": 0, "z": 2}], "index": 99}',
     b'{"waypoints": [{"id": "a", "x": 1, "y": 0, "z": 2}, {"id": "a", "x": 2, "y": 0, "z": 2}]}',
     b'{"waypoints": [{"id": "has space", "x": 1, "y": 0, "z": 2}]}',
+    b'{"waypoints": [{"x": 1, "y": 0, "z": 2, "speed": 1e-300}]}',
+    b'{"waypoints": [{"x": 1, "y": 0, "z": 2, "speed": 0.05}]}',
     b'{"waypoints": [{"x": 1, "y": 0, "z": 2}]',
     b'[1, 2, 3]',
     b'null',
@@ -180,7 +182,7 @@ def test_unordered_tour_crossing_an_exclusion_zone_is_422_at_request_time(api):
                         wp_body({"id": "n1", "x": 5, "y": 6, "z": 2}, {"id": "n2", "x": 15, "y": 6, "z": 2}))
     assert status == 200, body
     assert [i["id"] for m in api.sched.snapshot() for i in m["items"]] == ["n1", "n2"]
-    assert send(api, "POST", "/drones/d1/clear", b"{}")[0] == 200
+    assert send(api, "POST", "/drones/d1/clear", b'{"scope": "all"}')[0] == 200
 
 
 def test_docs_are_off_and_behind_the_token_when_on(api):
@@ -270,3 +272,81 @@ def test_planning_runs_outside_the_lock_the_control_tick_needs(api):
     assert ticks and ticks[0].item.id == "a"  # the tick answered from the queue as it was
     assert still_planning  # ... while the plan was in progress
     assert [i["id"] for m in comp.snapshot() for i in m["items"]][:1] == ["a"] and len(comp.snapshot()[0]["items"]) == 51
+
+
+def test_clear_needs_an_explicit_scope(api):
+    """A null or empty body is 422 and clears nothing; ``injected`` keeps the pre-planned mission, ``all`` clears it
+    and marks its waypoints as cleared pre-planned (the mission can then not end as a success)."""
+    from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+
+    api.sched.add_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="s1", x=-3, y=-3, z=2),
+                                                                            Waypoint(id="s2", x=-6, y=-3, z=2)],
+                                            SchedulingType.ORDERED, name="survey"))
+    assert send(api, "POST", "/drones/d1/waypoints", wp_body({"id": "h1", "x": -1, "y": -8, "z": 2}))[0] == 200
+    before = state(api)
+    for raw in (b"null", b"{}", b"", b'{"scope": "everything"}', b'{"scope": null}'):
+        assert send(api, "POST", "/drones/d1/clear", raw)[0] == 422, raw
+        assert state(api) == before
+    status, body = send(api, "POST", "/drones/d1/clear", b'{"scope": "injected"}')
+    assert status == 200 and body["cleared"] == ["h1"] and body["preplanned"] == []
+    assert [i["id"] for m in api.sched.snapshot() for i in m["items"]] == ["s1", "s2"]
+    assert api.sched.cleared_preplanned == []
+    status, body = send(api, "POST", "/drones/d1/clear", b'{"scope": "all"}')
+    assert status == 200 and body["preplanned"] == ["s1", "s2"] and api.sched.snapshot() == []
+    assert api.sched.cleared_preplanned == ["s1", "s2"]
+    api.sched.cleared_preplanned.clear()
+
+
+def test_same_waypoint_id_from_64_concurrent_requests_is_accepted_once(api, monkeypatch):
+    """64 threads POST a waypoint with one id at once: exactly one is accepted (the check and the add are one
+    step), the others are 422 'already queued', and the queue holds it once. The queue snapshot the check reads is
+    made slow (as a remote call under load is), which without the per-drone lock let several through."""
+    import time as _time
+
+    real_snapshot = api.sched.snapshot
+
+    def slow_snapshot():
+        out = real_snapshot()
+        _time.sleep(0.02)
+        return out
+
+    monkeypatch.setattr(api.sched, "snapshot", slow_snapshot)
+    barrier = threading.Barrier(64)
+    results: list[int] = []
+
+    def post() -> None:
+        barrier.wait()
+        results.append(send(api, "POST", "/drones/d1/waypoints", wp_body({"id": "same", "x": -2, "y": -9, "z": 2}))[0])
+
+    threads = [threading.Thread(target=post) for _ in range(64)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert sorted(results) == [200] + [422] * 63
+    assert [i["id"] for m in api.sched.snapshot() for i in m["items"]].count("same") == 1
+    api.sched.clear_navigation()
+
+
+def test_chunked_body_over_the_limit_is_413(api):
+    before = state(api)
+    c = http.client.HTTPConnection("127.0.0.1", api.srv.port, timeout=60)
+    chunks = (b"x" * 65536 for _ in range(6))  # 384 KiB, no Content-Length: Transfer-Encoding chunked
+    c.request("POST", "/drones/d1/waypoints", body=chunks, encode_chunked=True,
+              headers={"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"})
+    r = c.getresponse()
+    assert r.status == 413, r.read()
+    c.close()
+    # a small chunked body is still read and parsed (422 for this one: not a waypoint request)
+    c = http.client.HTTPConnection("127.0.0.1", api.srv.port, timeout=60)
+    c.request("POST", "/drones/d1/waypoints", body=iter([b'{"waypoints": ', b"[]}"]), encode_chunked=True,
+              headers={"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"})
+    assert c.getresponse().status == 422
+    c.close()
+    assert state(api) == before
+
+
+@pytest.mark.parametrize("token", [" " * 16, "short", "abcdefgh ijklmnop", "\t" * 20])
+def test_server_refuses_weak_tokens(token):
+    with pytest.raises(ValueError, match="hitl.token"):
+        HitlServer({}, port=0, token=token, get=_get)

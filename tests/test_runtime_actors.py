@@ -107,6 +107,13 @@ def test_drone_actor_killed_mid_mission_restarts_and_resumes(ray_session, run_op
     result = _messages(run_options.record, "/mission/result")
     assert [r["outcome"] for r in result] == ["success"]
     odom = [m["position"] for m in _messages(run_options.record, "/d00/odometry")]
+    # no sample recorded twice: the restarted actor flies again from its checkpoint's time, and what it sends with a
+    # stamp already recorded is dropped (mcap's reader: log times strictly increasing on the odometry channel)
+    from mcap.reader import make_reader
+
+    with open(run_options.record, "rb") as f:
+        stamps = [m.log_time for _, _, m in make_reader(f).iter_messages(topics=["/d00/odometry"], log_time_order=False)]
+    assert all(b > a for a, b in zip(stamps, stamps[1:])), [(a, b) for a, b in zip(stamps, stamps[1:]) if b <= a][:5]
     steps = [math.dist(a, b) for a, b in zip(odom, odom[1:])]
     assert max(steps) < 2.0, max(steps)
     for x, y in WAYPOINTS:

@@ -196,7 +196,10 @@ class Environment:
                     p = caller / p
             cfg = load_environment_config(p)
         if OPTIONS.early_ray:  # `aerodaas run`: Ray starts only once the environment is known to be valid
+            from aerodaas.runtime.addresses import check_hitl
             from aerodaas.runtime.driver import start_ray_early
+
+            check_hitl(cfg, OPTIONS)  # the HITL API's host and port: parsed, in range, free (ValueError: exit 2)
 
             start_ray_early(OPTIONS.address)
         self.cfg = cfg

@@ -42,6 +42,9 @@ def _finite(v: float, info) -> float:
 MAX_LOCAL_M = 100_000.0
 #: velocity commands faster than this (m/s, any axis) are refused before any safety limit is consulted
 MAX_COMMAND_SPEED_MPS = 100.0
+#: a waypoint's own ``speed`` below this (m/s) is refused: ArduPilot's WPNAV_SPEED has the same floor (10 cm/s,
+#: ArduCopter parameter docs, range 10..2000 cm/s); 1e-300 m/s would hold the vehicle in place until its battery ends
+MIN_WAYPOINT_SPEED_MPS = 0.1
 
 
 class Waypoint(_Model):
@@ -51,8 +54,8 @@ class Waypoint(_Model):
     ``waypoint_type="absolute"``: ``x`` is latitude (degrees), ``y`` longitude (degrees), ``z`` altitude in
     metres above the home position (the MAVLink ``MAV_FRAME_GLOBAL_RELATIVE_ALT`` convention).
 
-    ``hover_duration`` is seconds to hold position once reached; ``speed`` (m/s, optional) caps the
-    approach speed below the robot's own limit; ``acceptance_radius`` (metres) is how close counts as reached.
+    ``hover_duration`` is seconds to hold position once reached; ``speed`` (m/s, optional, at least
+    :data:`MIN_WAYPOINT_SPEED_MPS`) caps the approach speed below the robot's own limit; ``acceptance_radius`` (metres) is how close counts as reached.
 
     Raises ``pydantic.ValidationError`` for NaN/inf coordinates, negative hover time, out-of-range lat/lon.
     """
@@ -63,7 +66,7 @@ class Waypoint(_Model):
     z: float
     hover_duration: float = Field(default=0.0, ge=0.0, le=86_400.0)
     waypoint_type: Literal["relative", "absolute"] = "relative"
-    speed: float | None = Field(default=None, gt=0.0, le=MAX_COMMAND_SPEED_MPS)
+    speed: float | None = Field(default=None, ge=MIN_WAYPOINT_SPEED_MPS, le=MAX_COMMAND_SPEED_MPS)
     acceptance_radius: float = Field(default=0.3, gt=0.0, le=1000.0)
 
     _chk = field_validator("x", "y", "z", "hover_duration", "speed")(_finite)

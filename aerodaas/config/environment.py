@@ -135,6 +135,36 @@ class HitlConfig(_Cfg):
     token: str | None = Field(default=None, min_length=16, max_length=256)
     docs: bool = Field(default=False, description="serve /docs and /openapi.json (behind the bearer token)")
 
+    @field_validator("token")
+    @classmethod
+    def _token_chars(cls, v: str | None) -> str | None:
+        """A bearer token is RFC 6750 section 2.1's ``b64token``: letters, digits and ``-._~+/``, then ``=``
+        padding; no blank (16 spaces are not a secret)."""
+        if v is not None and not re.fullmatch(r"[A-Za-z0-9\-._~+/]{16,}=*", v):  # as aerodaas.tools.hitl.TOKEN_RE
+            raise ValueError("a bearer token is 16 to 256 characters of A-Z a-z 0-9 - . _ ~ + / (then '=' padding; "
+                             "RFC 6750 section 2.1), no blanks")
+        return v
+
+    @field_validator("host")
+    @classmethod
+    def _host_syntax(cls, v: str) -> str:
+        """A host name (RFC 1123 labels) or an IPv4/IPv6 address; dotted numbers must be a valid IPv4 address
+        (``999.999.1.1`` is not). Whether it is an address of this machine is checked before Ray starts."""
+        import ipaddress
+
+        h = v.strip()
+        if h.startswith("[") and h.endswith("]"):
+            h = h[1:-1]
+        try:
+            ipaddress.ip_address(h)
+            return h
+        except ValueError:
+            pass
+        if re.fullmatch(r"[0-9.]+", h) or not re.fullmatch(
+                r"(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*", h):
+            raise ValueError(f"{v!r} is neither an IP address nor a host name")
+        return h
+
 
 class AnalyticsQosConfig(_Cfg):
     """Quality of service of one scheduled analytics, in the terms of the Ocularone workload (Raj et al., FGCS 2025):

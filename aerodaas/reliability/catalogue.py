@@ -2,7 +2,9 @@
 docs/reliability.md``.
 
 Each input case is something a hostile or unlucky user gives AeroDaaS (an environment file, a command-line flag, a
-record path, a mission file); each must be refused before Ray starts with an error naming the field. Each fault
+record path, a mission file, a HITL request); each must be refused before Ray starts with an error naming the field
+(:mod:`aerodaas.reliability.cli_cases` also holds applications whose own code raises: exit 1 with the app's
+traceback, never "bad input"; :mod:`aerodaas.reliability.hitl_probe` the HITL API's answers). Each fault
 case (in :mod:`aerodaas.reliability.faults`) injects a failure into a real run and checks that it ends cleanly.
 The tests (``tests/test_bad_input.py``, ``tests/test_faults.py``, marker ``faults``) run the same cases, so the
 table and the suite cannot drift apart.
@@ -135,6 +137,11 @@ ENV_CASES: list[InputCase] = [
               "command_latency_s"),
     InputCase("hitl.port 70000", lambda d, t: d.update(hitl={"port": 70000}), "hitl.port"),
     InputCase("hitl.token too short", lambda d, t: d.update(hitl={"token": "abc"}), "hitl.token"),
+    InputCase("hitl.token of 16 spaces", lambda d, t: d.update(hitl={"token": " " * 16}), "hitl.token"),
+    InputCase("hitl.token with a blank", lambda d, t: d.update(hitl={"token": "abcdefgh ijklmnop"}), "hitl.token"),
+    InputCase("hitl.host \"999.999.1.1\"", lambda d, t: d.update(hitl={"host": "999.999.1.1"}), "hitl.host"),
+    InputCase("hitl.host empty", lambda d, t: d.update(hitl={"host": ""}), "hitl.host"),
+    InputCase("hitl.port -1", lambda d, t: d.update(hitl={"port": -1}), "hitl.port"),
     InputCase("hitl.enabled \"true\" (string)", lambda d, t: d.update(hitl={"enabled": "true"}), "hitl.enabled"),
     InputCase("replay log without position data",
               lambda d, t: _robot(d).update(backend="replay", replay={"log": _tlog_without_position(t)}),
@@ -192,6 +199,11 @@ def run_inputs() -> dict[str, Any]:
         for name, make, expect in PATH_CASES:
             ok, msg = check_path_case(make, expect, tmp)
             rows.append({"kind": "--record path", "name": name, "refused": ok, "message": msg})
+    from aerodaas.reliability.cli_cases import run_cli_cases
+    from aerodaas.reliability.hitl_probe import run_hitl_cases
+
+    rows += run_cli_cases()  # flags refused before Ray (exit 2), the app's own exceptions (exit 1, its traceback)
+    rows += run_hitl_cases()  # the HITL API's answers (in-process server, no Ray)
     return {"rows": rows, "tried": len(rows), "refused": sum(r["refused"] for r in rows),
             "accepted_wrongly": [r["name"] for r in rows if not r["refused"]]}
 

@@ -180,6 +180,151 @@ def _sigkill_recover(tmp: Path) -> dict:
                         f"{'finished' if ok else why}, {n} of the {seen} readable messages", "clean": clean}
 
 
+def _descendants(root: int) -> list[int]:
+    """Every process below ``root`` (from /proc's parent ids)."""
+    children: dict[int, list[int]] = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                stat = Path(f"/proc/{d}/stat").read_text()
+            except OSError:
+                continue
+            ppid = int(stat.rsplit(")", 1)[1].split()[1])
+            children.setdefault(ppid, []).append(int(d))
+    out, todo = [], [root]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.append(c)
+            todo.append(c)
+    return out
+
+
+def actor_pids(root: int, actor_class: str) -> list[int]:
+    """Pids of the Ray worker processes below ``root`` that hold an actor of ``actor_class`` (Ray titles them
+    ``ray::<Class>``)."""
+    found = []
+    for pid in _descendants(root):
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0].decode(errors="replace")
+        except OSError:
+            continue
+        if cmd.startswith(f"ray::{actor_class}"):
+            found.append(pid)
+    return found
+
+
+def _recorder_kill(tmp: Path) -> dict:
+    """SIGKILL of the recorder actor's process mid-run: the run must say "recording lost at t = ...", exit 4, the
+    recorder go on in ``run.1.mcap``, and ``aerodaas recover run.mcap`` join both into one readable file."""
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet"],
+             start_new_session=True)
+    reached = _wait_size(rec, 20000, p)
+    pids = actor_pids(p.pid, "RecorderActor") if reached else []
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    out, _ = p.communicate(timeout=600)
+    seg1 = tmp / "run.1.mcap"
+    ok0, n0, why0 = mcap_reader_ok(rec)
+    ok1, n1, why1 = mcap_reader_ok(seg1) if seg1.exists() else (False, 0, "no segment run.1.mcap")
+    said = "recording lost at t = " in out
+    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "recover", str(rec)], capture_output=True, text=True,
+                       timeout=300)
+    ok, n, why = mcap_reader_ok(rec)
+    outcome = None
+    if ok:
+        from aerodaas.recording.writer import summarize_mcap
+
+        outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
+    clean = (reached and len(pids) == 1 and p.returncode == 4 and said and "success" not in _summary_outcome(out)
+             and ok0 and ok1 and r.returncode == 0 and ok and n == n0 + n1 and not seg1.exists() and _no_crash(out))
+    return {"observed": f"exit {p.returncode}, says 'recording lost at t = ...' {said}; segments: run.mcap "
+                        f"{'finished' if ok0 else why0} ({n0} msgs), run.1.mcap {'finished' if ok1 else why1} ({n1} "
+                        f"msgs); `aerodaas recover` exit {r.returncode}: joined {'finished' if ok else why} ({n} "
+                        f"msgs, outcome {outcome})", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
+
+
+def _signal_after_summary(sig: int) -> Callable[[Path], dict]:
+    """``sig`` sent right after the summary is printed (the app ending, Ray shutting down): no traceback, and the
+    exit code stays the mission's (0 for the survey)."""
+    def run(tmp: Path) -> dict:
+        rec = tmp / "run.mcap"
+        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
+                 start_new_session=True)
+        lines, sent = [], 0
+        assert p.stdout is not None
+        for line in p.stdout:
+            lines.append(line)
+            if line.startswith("mission outcome:"):
+                break
+        if p.poll() is None:  # one signal, as a user's Ctrl-C or a `kill` right after the summary
+            p.send_signal(sig)
+            sent += 1
+        rest, _ = p.communicate(timeout=300)
+        out = "".join(lines) + rest
+        ok, n, why = mcap_reader_ok(rec)
+        success = "mission outcome: success" in out
+        clean = sent >= 1 and success and p.returncode == 0 and ok and _no_crash(out) and \
+            "KeyboardInterrupt" not in out
+        return {"observed": f"{sent} signal(s) after the summary; exit {p.returncode}, outcome success {success}, "
+                            f"KeyboardInterrupt {'KeyboardInterrupt' in out}, recording "
+                            f"{'finished' if ok else why} ({n} msgs)", "clean": clean, "exit": p.returncode,
+                "output": out[-3000:]}
+    return run
+
+
+def _hitl_clear_all(tmp: Path) -> dict:
+    """The farm survey with the HITL API: once the drone has reached its first waypoint, a ``clear`` with a null
+    body (refused, 422) and then ``{"scope": "all"}``: the pre-planned survey is gone, so the run must not report
+    success (outcome incomplete, exit 1), and the summary says how many of the 4 waypoints were flown."""
+    import re
+
+    from aerodaas.tools.hitl import request
+
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet", "--hitl",
+              "--hitl-port", "0"], env={"AERODAAS_STATE_DIR": str(tmp / "state")})
+    assert p.stdout is not None
+    lines, url, token = [], None, None
+    for line in p.stdout:
+        lines.append(line)
+        m = re.search(r"human-in-the-loop API at (\S+)\s+bearer token: (\S+)", line)
+        if m:
+            url, token = m.group(1), m.group(2)
+            break
+    null_status = clear_status = None
+    visited = 0
+    t0 = time.monotonic()
+    while url and p.poll() is None and time.monotonic() - t0 < 300:
+        try:
+            _, st = request("GET", "/drones/quadrotor_base", url=url, token=token, timeout=30)
+            visited = st.get("visited", 0) if isinstance(st, dict) else 0
+        except RuntimeError:
+            break
+        if visited >= 1:
+            null_status, _ = request("POST", "/drones/quadrotor_base/clear", None, url=url, token=token, timeout=30)
+            clear_status, _ = request("POST", "/drones/quadrotor_base/clear", {"scope": "all"}, url=url, token=token,
+                                      timeout=30)
+            break
+        time.sleep(0.5)
+    rest, _ = p.communicate(timeout=600)
+    out = "".join(lines) + rest
+    outcome = _summary_outcome(out)
+    m = re.search(r"waypoints (\d+)/(\d+)", out)
+    flown = f"{m.group(1)}/{m.group(2)}" if m else "?"
+    clean = (null_status == 422 and clear_status == 200 and p.returncode == 1 and "incomplete" in outcome and
+             m is not None and int(m.group(1)) < int(m.group(2)) and _no_crash(out))
+    return {"observed": f"clear null body {null_status}, clear scope all {clear_status} after {visited} waypoint(s); "
+                        f"exit {p.returncode}, {outcome.strip() or 'no summary'}, waypoints {flown}", "clean": clean,
+            "exit": p.returncode, "output": out[-3000:]}
+
+
+def _summary_outcome(out: str) -> str:
+    """The summary's ``mission outcome: ...`` word plus 'ok' when the run was reported as a success."""
+    line = next((ln for ln in out.splitlines() if ln.startswith("mission outcome:")), "")
+    return line
+
+
 def _broken_pipe(tmp: Path) -> dict:
     from aerodaas.recording.writer import McapRecorder
 
@@ -212,6 +357,14 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL mid-run, then `aerodaas recover`", "recover exit 0; mcap's seeking reader accepts the file",
      _sigkill_recover),
     ("`aerodaas info FILE | head` (reader gone)", "exit 141, no BrokenPipeError", _broken_pipe),
+    ("SIGTERM right after the summary", "exit 0 (the mission's), no KeyboardInterrupt traceback",
+     _signal_after_summary(signal.SIGTERM)),
+    ("SIGINT right after the summary", "exit 0 (the mission's), no KeyboardInterrupt traceback",
+     _signal_after_summary(signal.SIGINT)),
+    ("HITL clear of the pre-planned survey mid-flight", "null body 422; scope all 200; outcome incomplete, exit 1 "
+     "(never success with 1 of 4 waypoints)", _hitl_clear_all),
+    ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
+     "run.1.mcap, `aerodaas recover` joins the segments", _recorder_kill),
 ]
 
 
@@ -234,6 +387,11 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
     lines = ["# Reliability: bad inputs and injected faults", "",
              "Regenerated by `python -m aerodaas.reliability --out docs/reliability.md` (the same cases run as "
              "tests: `python -m pytest -m faults tests`).", "",
+             "Exit codes of `aerodaas run`: 0 success; 1 mission not successful, the recording failed (disk) or Ray "
+             "could not start; 1 also for an exception raised by the application's own code (its traceback is "
+             "printed); 2 bad input (named, before Ray starts); 3 a drone actor lost for good; 4 the recorder actor "
+             "died mid-run: \"recording lost at t = ...\", outcome `recording_lost`, the recording goes on in a new "
+             "segment (`RUN.1.mcap`), `aerodaas recover RUN.mcap` joins the segments; 130 / 143 Ctrl-C / SIGTERM.", "",
              "| inputs tried | rejected before Ray | accepted wrongly |", "|---|---|---|",
              f"| {inputs['tried']} | {inputs['refused']} | {len(inputs['accepted_wrongly'])} |", ""]
     if faults is not None:
@@ -248,7 +406,11 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
                   f"| {e['sequences']} | {e['samples']} | {e['accepted']} / {e['refused']} | "
                   f"{e['flown_outside_limits']} | {e['outside_inclusion_m']:.3f} m | {e['inside_exclusion_m']:.3f} m | "
                   f"{e['above_max_altitude_m']:.3f} m (tolerance 0.05 m) |", ""]
-    lines += ["## Inputs", "", "| kind | input | refused | error (first line) |", "|---|---|---|---|"]
+    lines += ["## Inputs", "", "Command-line rows are refused before Ray (exit 2); application-error rows are the app's "
+              "own exceptions, reported as the app's (exit 1 with its traceback, never \"bad input\"); HITL API "
+              "rows are the documented answers (a drone actor that does not answer is 503 within 2 s: "
+              "`tests/test_hitl_unreachable.py`, needs Ray).", "",
+              "| kind | input | refused / answered as documented | error (first line) |", "|---|---|---|---|"]
     for r in inputs["rows"]:
         msg = r["message"].splitlines()
         first = (msg[1] if len(msg) > 1 and msg[0].startswith("invalid environment") else msg[0]).strip()

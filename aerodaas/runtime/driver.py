@@ -57,7 +57,8 @@ OPTIONS = RunOptions()
 
 @dataclass
 class MissionResult:
-    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed), per-robot
+    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed / recording_lost:
+    the drones finished but the recorder actor died, see ``recording_losses``), per-robot
     reports (visited waypoints, events, state history), per-actor stats, per-frame latency and the recording."""
 
     outcome: str
@@ -72,10 +73,17 @@ class MissionResult:
     recording_failure: dict[str, Any] | None = None
     recording_lost: int = 0
     recording_start_ns: int | None = None  # log time of sim time 0 (ns)
+    #: one entry per death of the recorder actor (it was restarted into a new segment file):
+    #: ``{segment, recorded_until_ns, next_segment, resumed_at_ns, previous_finished}``; a run with a loss is not
+    #: ``ok`` (exit code 4)
+    recording_losses: list[dict] = field(default_factory=list)
+    #: the recording's segment files in order (one unless the recorder actor was restarted)
+    recording_segments: list[str] = field(default_factory=list)
+    recording_duplicates: int = 0  # samples a restarted drone actor sent again, dropped (recorded once)
 
     @property
     def ok(self) -> bool:
-        return self.outcome == "success" and self.recording_failure is None
+        return self.outcome == "success" and self.recording_failure is None and not self.recording_losses
 
 
 _STARTED_RAY = False
@@ -86,6 +94,9 @@ _STARTED_RAY = False
 #: safe point, which ends the mission as ``interrupted`` with the recording finished
 STOP_SIGNALS: list[int] = []
 _RAISE_OK = [True]
+#: True while :func:`run_mission` runs (a stop signal then ends the mission); after it, a signal that comes once a
+#: mission's summary was printed does not change the run's exit code (see ``aerodaas run``)
+IN_MISSION = [False]
 
 
 def request_stop(signum: int) -> None:
@@ -278,6 +289,10 @@ class RayStartError(RuntimeError):
     """Ray could not be started or reached (the message says which and why); ``aerodaas run`` exits 1 with it."""
 
 
+class RayAddressError(RayStartError):
+    """The Ray cluster of ``--address`` could not be reached (bad input: ``aerodaas run`` exits 2 naming it)."""
+
+
 def ensure_ray(address: str | None = None) -> bool:
     """Connect to (``address``) or start a local Ray; returns True when the cluster has ``tier=cloud`` nodes.
     Raises :class:`RayStartError`."""
@@ -291,12 +306,12 @@ def ensure_ray(address: str | None = None) -> bool:
             _EARLY.clear()
             if isinstance(err, KeyboardInterrupt):
                 raise err
-            raise RayStartError(f"could not start {where}: {type(err).__name__}: {err}") from err
+            raise (RayAddressError if address else RayStartError)(f"could not start {where}: {type(err).__name__}: {err}") from err
     if not ray.is_initialized():
         try:
             _init_ray(address)
         except Exception as e:  # noqa: BLE001 - Ray raises bare Exceptions (node start time-outs, ...)
-            raise RayStartError(f"could not start {where}: {type(e).__name__}: {e}") from e
+            raise (RayAddressError if address else RayStartError)(f"could not start {where}: {type(e).__name__}: {e}") from e
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
 
 
@@ -366,6 +381,14 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     """Plan the run's actors (:mod:`aerodaas.runtime.dataflow`), start them, fly (:func:`aerodaas.runtime.supervise.supervise`),
     finish the recording and tear down. Bad input raises before Ray starts; once actors exist, every failure ends
     in a :class:`MissionResult` (never a raw traceback) with the recording finished."""
+    IN_MISSION[0] = True
+    try:
+        return _run_mission(env, robots, timeout)
+    finally:
+        IN_MISSION[0] = False
+
+
+def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
     import ray
 
     from aerodaas.runtime.dataflow import Placement, build_plan
@@ -518,10 +541,14 @@ def run_mission(env, robots: list, timeout: float | None = None) -> MissionResul
     outcomes = [rep.get("outcome") or "failed" for rep in reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
+    if outcome == "success" and rec_report.get("losses"):
+        outcome = "recording_lost"  # the drones finished, but the run's truth has a hole: not a success
     result = MissionResult(outcome=outcome, robots=reports, stats=stats, latency=latency, recording=opts.record,
                            wall_s=time.monotonic() - t_start, recording_counts=counts,
                            recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
-                           recording_start_ns=epoch_ns)
+                           recording_start_ns=epoch_ns, recording_losses=rec_report.get("losses") or [],
+                           recording_segments=rec_report.get("segments") or [],
+                           recording_duplicates=rec_report.get("duplicates", 0))
     for h in handles.values():
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)
@@ -562,6 +589,11 @@ def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
         try:
             counts = ray.get(actors["recorder"].close.remote(), timeout=120)
             rep = ray.get(actors["recorder"].recording_report.remote(), timeout=60)
+        except ray.exceptions.RayActorError as e:  # it died while closing: its segment stays unfinished
+            rep = {"losses": [{"segment": record, "recorded_until_ns": None, "previous_finished": False,
+                               "error": f"the recorder actor died while closing: {_cause(e)}"}]}
+            print(f"aerodaas: warning: the recorder actor died while closing the recording {record} (run "
+                  f"`aerodaas recover {record}`)", file=sys.stderr)
         except Exception as e:  # noqa: BLE001 - pragma: no cover - reported, never silently lost
             print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
                   file=sys.stderr)

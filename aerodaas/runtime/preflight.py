@@ -77,6 +77,9 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
         from aerodaas.recording.writer import check_record_path
 
         check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
+    from aerodaas.runtime.addresses import check_hitl
+
+    check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
     graphs = {}
     scheds = robot_schedulers(env, robots)
     for r in robots:
@@ -159,3 +162,33 @@ def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
                            "land", takeoff_altitude=robot.cfg.takeoff_altitude)
     except MissionFileError as e:
         raise ConfigError(f"{field}: the navigation cannot be an autopilot mission: {e}") from None
+
+
+def check_run_flags(record: str | None, env: str | None, speedup: float | None, timeout: float | None,
+                    hitl_port: int | None, address: str | None) -> None:
+    """Everything ``aerodaas run``'s command line names, checked before Ray starts: no empty ``--record`` /
+    ``--env``, a writable record path, ``--speedup`` / ``--timeout`` in range, ``--hitl-port`` in [0, 65535], the
+    ``--address`` cluster reachable (:func:`aerodaas.runtime.addresses.check_ray_address`, within 10 s) and the
+    ``--env`` file valid. Raises ValueError / ConfigError naming the flag and the value."""
+    for flag, v in (("--record", record), ("--env", env)):
+        if v is not None and not v.strip():
+            raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
+    if record:
+        from aerodaas.recording.writer import check_record_path
+
+        check_record_path(record)
+    from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
+
+    for flag, v, lo, hi in (("--speedup", speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", timeout, 0.0, 1e7)):
+        if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
+            raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
+    if hitl_port is not None and not 0 <= hitl_port <= 65535:
+        raise ValueError(f"--hitl-port {hitl_port}: outside [0, 65535] (0: any free port)")
+    if address is not None:  # parsed, resolved and reachable within 10 s, before any Ray process
+        from aerodaas.runtime.addresses import check_ray_address
+
+        check_ray_address(address, timeout_s=10.0)
+    if env:
+        from aerodaas.config import load_environment_config
+
+        load_environment_config(env)

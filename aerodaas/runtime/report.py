@@ -71,8 +71,13 @@ def format_summary(result: Any) -> str:
         total = sum(result.recording_counts.values())
         fail = result.recording_failure
         if fail is None:
-            lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
-                         f"channels)")
+            segs = getattr(result, "recording_segments", None) or []
+            if len(segs) > 1:
+                lines.append(f"  recording: {result.recording} in {len(segs)} segments ({', '.join(segs)}; the last "
+                             f"one {total} messages on {len(result.recording_counts)} channels)")
+            else:
+                lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
+                             f"channels)")
         else:
             at = fail.get("last_recorded_ns")
             held = f"up to {(at - result.recording_start_ns) / 1e9:.1f} s" if at and result.recording_start_ns else \
@@ -82,6 +87,18 @@ def format_summary(result: Any) -> str:
             lines.append(f"  recording: FAILED: {fail.get('error')}; {result.recording} holds {held} "
                          f"({fail.get('messages_in_file', '?')} messages, {state}); "
                          f"{result.recording_lost} later messages were not recorded")
+    for loss in getattr(result, "recording_losses", None) or []:
+        until = loss.get("recorded_until_ns")
+        start = result.recording_start_ns
+        at = f"t = {(until - start) / 1e9:.1f} s" if until and start else "t = ? (the segment could not be read)"
+        resumed = loss.get("resumed_at_ns")
+        back = f", recording again from t = {(resumed - start) / 1e9:.1f} s" if resumed and start else ""
+        lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
+                     f"{back} in {loss.get('next_segment', '(no new segment)')} (join the segments: `aerodaas "
+                     f"recover {result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else ""))
+    if getattr(result, "recording_duplicates", 0) and any(r.get("actor_restarts") for r in result.robots.values()):
+        lines.append(f"  recording: {result.recording_duplicates} samples sent again by a restarted drone actor (stamps "
+                     f"already recorded) were recorded once")
     return "\n".join(lines)
 
 

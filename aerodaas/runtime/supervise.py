@@ -50,11 +50,9 @@ def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
     Nothing is set up yet. Raises what Ray raises for an impossible placement option."""
     from aerodaas.actors.recorder_actor import RecorderActor
 
-    wiring = {"routes": plan.routes(), "location": plan.location(),
-              "tiers": {h: a.tier for h, a in plan.actors.items()}, "peers": plan.peer_names(),
-              "channel_key": plan.channel_key}
     import ray
-    from ray import cloudpickle
+
+    from aerodaas.runtime.recorder_watch import recorder_specs
 
     handles: dict[str, Any] = {}
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
@@ -68,9 +66,7 @@ def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
     # actor, which lives as long as the run: a restarted actor reads the same again, and no constructor argument
     # sits in the object store (Ray cannot promise those across restarts, ray-project/ray#53727). Not waited for:
     # the other actors start while the recorder's process does (their spec_of waits for it), not after
-    handles["recorder"].keep_specs.remote(
-        {hid: cloudpickle.dumps(a.spec) for hid, a in plan.actors.items() if hid != "recorder"},
-        cloudpickle.dumps(wiring))
+    handles["recorder"].keep_specs.remote(*recorder_specs(plan))
     for hid, a in plan.actors.items():
         if hid == "recorder":
             continue
@@ -124,6 +120,9 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     def remaining() -> float | None:
         return None if timeout is None else max(1.0, timeout - (time.monotonic() - t0))
 
+    from aerodaas.runtime.recorder_watch import RecorderWatch
+
+    watch = RecorderWatch(actors.get("recorder"), plan)
     refs = {actors[hid].run.remote(remaining()): hid for hid in drones}
     restarts = {hid: 0 for hid in drones}
     reports: dict[str, dict] = {}
@@ -139,6 +138,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
         if stop_requested():
             raise KeyboardInterrupt("stop requested while the actors started")
         while refs:
+            watch.poll()
             ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.5)
             for ref in ready:
                 hid = refs.pop(ref)
@@ -191,6 +191,8 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     if interrupted:
         for rep in reports.values():
             rep["outcome"] = "interrupted"
+    for rep in reports.values():
+        rep["recorder_restarts"] = watch.restarts
     return reports
 
 

@@ -9,10 +9,13 @@ a handful of low-rate requests per mission.
 
 Every request needs ``Authorization: Bearer <token>``; the token is given in ``environment.json``
 (``hitl.token``) or generated at start and printed once. A missing or wrong token gets 401, a malformed
-request or one outside the safety limits 422 (NaN/Infinity, strings for numbers, unknown keys, ids over
+request or one outside the safety limits 422 (a waypoint id already queued too: checked and added under one
+lock per drone, so of concurrent requests with the same id exactly one is accepted) (NaN/Infinity, strings for numbers, unknown keys, ids over
 :data:`MAX_ID_CHARS` characters, more than :data:`MAX_WAYPOINTS_PER_REQUEST` waypoints, a planned tour whose leg
-crosses the geofence), a body over :data:`MAX_BODY_BYTES` 413, an unknown drone 404, and none of them change
-anything.
+crosses the geofence), a body over :data:`MAX_BODY_BYTES` 413 (declared or chunked), an unknown drone 404, a drone
+actor that does not answer within :data:`CALL_TIMEOUT_S` (stopped, restarting, gone) 503 with ``Retry-After``, and
+none of them change anything. A token given to the server must be an RFC 6750 ``b64token`` of at least 16
+characters (no blanks).
 Loopback-only (127.0.0.1) unless ``hitl.host`` says otherwise.
 
 Endpoints (JSON):
@@ -21,7 +24,9 @@ Endpoints (JSON):
 * ``GET  /drones/{id}``                 one drone
 * ``POST /drones/{id}/waypoints``       ``{"waypoints": [{"x", "y", "z", "hover_duration"?, "id"?, ...}],
   "index"?: int, "priority"?: int, "scheduling_type"?: "UNORDERED" | "ORDERED"}`` -> the new queue
-* ``POST /drones/{id}/clear``           ``{"priority"?: int}`` abort queued navigation (never resumes)
+* ``POST /drones/{id}/clear``           ``{"scope": "injected" | "all", "priority"?: int}`` abort queued navigation
+  (never resumes): ``injected`` only what was added through this API, ``all`` the pre-planned mission too (the
+  mission is then ``incomplete``, never a success). The scope is required: an empty or null body is 422
 * ``POST /drones/{id}/pause`` / ``resume``
 
 The connection (url and token) is also written to ``$AERODAAS_STATE_DIR/hitl.json`` (default
@@ -32,11 +37,12 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import re
 import secrets
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Request
 from fastapi.responses import JSONResponse
@@ -57,6 +63,11 @@ def state_file() -> Path:
 MAX_BODY_BYTES = 256 * 1024
 MAX_WAYPOINTS_PER_REQUEST = 1000
 MAX_ID_CHARS = 64
+#: seconds a request waits for a drone or scheduler actor's answer before it is 503 (the whole request stays well
+#: within 2 s)
+CALL_TIMEOUT_S = 1.5
+#: a bearer token (RFC 6750 section 2.1 ``b64token``), at least 16 characters
+TOKEN_RE = re.compile(r"[A-Za-z0-9\-._~+/]{16,256}=*")
 
 
 class WaypointIn(Waypoint):
@@ -78,7 +89,11 @@ class AddWaypointsRequest(BaseModel):
 
 
 class ClearRequest(BaseModel):
+    """``scope``: ``"injected"`` (only navigation added through the HITL API) or ``"all"`` (the pre-planned mission
+    too); required. ``priority``: only missions at this priority."""
+
     model_config = ConfigDict(extra="forbid", strict=True)
+    scope: Literal["injected", "all"]
     priority: int | None = Field(default=None, ge=0, le=1_000_000)
 
 
@@ -120,6 +135,27 @@ class _BodyLimit:
             too_big = True
         if too_big:
             return await self._reject(send)
+        if declared is None:  # chunked (no length declared): read it here, at most limit + 1 bytes, then decide
+            parts, seen, more = [], 0, True
+            while more:
+                msg = await receive()
+                if msg["type"] != "http.request":
+                    return await self.app(scope, receive, send)  # the client went away
+                parts.append(msg.get("body", b""))
+                seen += len(parts[-1])
+                if seen > self.limit:
+                    return await self._reject(send)
+                more = msg.get("more_body", False)
+            body, done = b"".join(parts), False
+
+            async def replay() -> dict:
+                nonlocal done
+                if not done:
+                    done = True
+                    return {"type": "http.request", "body": body, "more_body": False}
+                return await receive()
+
+            return await self.app(scope, replay, send)
         seen = 0
 
         async def limited() -> dict:
@@ -157,7 +193,11 @@ class HitlServer:
         self.docs = docs  # /docs and /openapi.json: off unless asked for, and then behind the token
         self._get = get  # how a call's result is awaited (default ray.get; tests pass a local one)
         self.host, self.port = host, port
+        if token is not None and not TOKEN_RE.fullmatch(token):
+            raise ValueError("hitl.token: 16 to 256 characters of A-Z a-z 0-9 - . _ ~ + / (then '=' padding; RFC 6750 "
+                             "section 2.1), no blanks")
         self.token = token or secrets.token_urlsafe(24)
+        self._locks = {rid: threading.Lock() for rid in drones}  # one add (check + queue) at a time per drone
         self.generated_token = token is None
         self._ids = itertools.count(1)
         self._server = None
@@ -185,14 +225,21 @@ class HitlServer:
         get = self._get or ray.get
 
         def call(method: Any, *args: Any) -> Any:
-            """Call a component method and wait; a remote exception is re-raised as its cause."""
+            """Call a component method and wait at most :data:`CALL_TIMEOUT_S`; a remote exception is re-raised as
+            its cause; an actor that does not answer (stopped, restarting, dead) is 503."""
             try:
-                return get(method.remote(*args), timeout=10)
+                return get(method.remote(*args), timeout=CALL_TIMEOUT_S)
             except ray.exceptions.RayTaskError as e:
                 cause = getattr(e, "cause", None)
                 if isinstance(cause, Exception):
                     raise cause from None
-                raise
+                raise HTTPException(503, f"the drone's actor failed: {str(e).splitlines()[0][:200]}",
+                                    headers={"Retry-After": "1"}) from None
+            except (ray.exceptions.GetTimeoutError, ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError,
+                    ray.exceptions.RayError, TimeoutError) as e:
+                raise HTTPException(503, f"the drone's actor does not answer within {CALL_TIMEOUT_S:g} s (stopped, "
+                                    f"restarting or gone: {type(e).__name__}); retry later",
+                                    headers={"Retry-After": "1"}) from None
 
         from starlette.exceptions import HTTPException as StarletteHTTPException
 
@@ -243,6 +290,16 @@ class HitlServer:
         @app.post("/drones/{robot_id}/waypoints", dependencies=[Depends(auth)])
         def add_waypoints(robot_id: str, req: AddWaypointsRequest) -> dict:
             h = drone(robot_id)
+            lock = server._locks.setdefault(robot_id, threading.Lock())
+            if not lock.acquire(timeout=10.0):
+                raise HTTPException(503, "too many concurrent requests for this drone; retry later",
+                                    headers={"Retry-After": "1"})
+            try:  # the id check and the add are one step: of concurrent requests with one id, one is accepted
+                return _add(h, req)
+            finally:
+                lock.release()
+
+        def _add(h: dict, req: AddWaypointsRequest) -> dict:
             queued = {i.get("id") for m in call(h["scheduler"].snapshot) for i in m["items"]}
             wps = []
             for w in req.waypoints:
@@ -265,10 +322,10 @@ class HitlServer:
             return {"added": ids, **out}
 
         @app.post("/drones/{robot_id}/clear", dependencies=[Depends(auth)])
-        def clear(robot_id: str, req: ClearRequest | None = None) -> dict:
+        def clear(robot_id: str, req: ClearRequest) -> dict:
             h = drone(robot_id)
-            call(h["scheduler"].clear_navigation, req.priority if req else None)
-            return {"cleared": True, "queue": call(h["scheduler"].snapshot)}
+            out = call(h["scheduler"].clear_navigation, req.priority, req.scope, "hitl")
+            return {"cleared": True, "scope": req.scope, **(out or {}), "queue": call(h["scheduler"].snapshot)}
 
         @app.post("/drones/{robot_id}/pause", dependencies=[Depends(auth)])
         def pause(robot_id: str) -> dict:

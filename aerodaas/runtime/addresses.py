@@ -1,0 +1,102 @@
+"""Network addresses ``aerodaas run`` is given, checked before Ray starts and in bounded time: the Ray cluster of
+``--address`` (parsed, port in range, host resolved and its port reachable within ``timeout_s``), and the HITL API's
+host and port (parsed, in range, free here)."""
+from __future__ import annotations
+
+import socket
+import threading
+
+__all__ = ["check_ray_address", "check_listen", "check_hitl"]
+
+
+def _resolve(host: str, port: int, timeout_s: float) -> list:
+    """``socket.getaddrinfo`` bounded by ``timeout_s`` (the resolver itself has no time-out: a thread waits)."""
+    out: dict = {}
+
+    def go() -> None:
+        try:
+            out["infos"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as e:
+            out["error"] = e
+
+    t = threading.Thread(target=go, daemon=True, name="aerodaas-resolve")
+    t.start()
+    t.join(timeout_s)
+    if t.is_alive():
+        raise TimeoutError(f"resolving {host!r} took longer than {timeout_s:g} s")
+    if "error" in out:
+        raise out["error"]
+    return out["infos"]
+
+
+def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--address") -> None:
+    """Check a Ray cluster address ``HOST:PORT`` (or ``ray://HOST:PORT``; ``auto`` and ``local`` are Ray's own and
+    left to it) before Ray is started: the port an integer in [1, 65535], the host resolvable and the port
+    accepting a TCP connection (the GCS) within ``timeout_s`` seconds. Raises ValueError naming ``option`` and the
+    address and saying why."""
+    a = address.strip()
+    if a in ("auto", "local"):
+        return
+    body = a[len("ray://"):] if a.startswith("ray://") else a
+    if body.startswith("["):
+        host, _, port_s = body[1:].partition("]")
+        port_s = port_s[1:] if port_s.startswith(":") else ""
+    else:
+        host, _, port_s = body.rpartition(":")
+    if not host or not port_s:
+        raise ValueError(f"{option} {address!r}: not HOST:PORT (the Ray head's GCS address, e.g. 10.0.0.5:6379)")
+    try:
+        port = int(port_s)
+    except ValueError:
+        raise ValueError(f"{option} {address!r}: port {port_s!r} is not an integer") from None
+    if not 1 <= port <= 65535:
+        raise ValueError(f"{option} {address!r}: port {port} is outside [1, 65535]")
+    try:
+        infos = _resolve(host, port, timeout_s)
+    except (OSError, TimeoutError) as e:
+        raise ValueError(f"{option} {address!r}: cannot resolve host {host!r} ({e})") from None
+    family, kind, proto, _, addr = infos[0]
+    with socket.socket(family, kind, proto) as s:
+        s.settimeout(timeout_s)
+        try:
+            s.connect(addr)
+        except OSError as e:
+            raise ValueError(f"{option} {address!r}: no Ray cluster answers there ({e.strerror or e}; start one with "
+                             f"`ray start --head` or `aerodaas up`)") from None
+
+
+def check_listen(host: object, port: object, option: str) -> tuple[str, int]:
+    """Check that a server can listen on ``host:port`` here before Ray starts: ``host`` a non-empty string that
+    resolves to an address of this machine, ``port`` an integer in [0, 65535] (0: any free port) that is free.
+    Returns (host, port). Raises ValueError naming ``option`` and the value."""
+    if not isinstance(host, str) or not host.strip():
+        raise ValueError(f"{option}.host {host!r}: not a host name or address")
+    if isinstance(port, bool) or not isinstance(port, int):
+        raise ValueError(f"{option}.port {port!r}: not an integer")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"{option}.port {port}: outside [0, 65535]")
+    try:
+        infos = _resolve(host, port, 10.0)
+    except (OSError, TimeoutError) as e:
+        raise ValueError(f"{option}.host {host!r}: cannot resolve it ({e})") from None
+    family, _, _, _, addr = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(addr)
+        except OSError as e:
+            raise ValueError(f"{option}.host / {option}.port {host}:{port}: cannot listen there "
+                             f"({e.strerror or e})") from None
+    return host, port
+
+
+def check_hitl(cfg: object, opts: object) -> None:
+    """When the run will serve the HITL API (``opts.hitl`` or ``cfg.hitl.enabled``), check its host and port
+    (``opts.hitl_port`` over ``cfg.hitl.port``) with :func:`check_listen` before Ray starts. Raises ValueError
+    naming ``hitl.host`` / ``hitl.port``."""
+    h = cfg.hitl  # type: ignore[attr-defined]
+    on = opts.hitl if getattr(opts, "hitl", None) is not None else h.enabled  # type: ignore[attr-defined]
+    if not on:
+        return
+    port = opts.hitl_port if getattr(opts, "hitl_port", None) is not None else h.port  # type: ignore[attr-defined]
+    check_listen(h.host, port, "hitl")
