@@ -50,6 +50,7 @@ from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload
 from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
 from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
+from aerodaas.schedulers import single_machine_jit
 from aerodaas.schedulers.single_machine import max_gain_schedule
 
 __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
@@ -146,6 +147,7 @@ class LaPlan(EvPlan):
         self._wake: float | None = None
         self._first_wake: float | None = None
         self._predicted: dict[tuple, list[float]] = {}  # (drone, model) -> predicted frame times of the plan
+        single_machine_jit.warm_up()  # compile or load the planner's kernel now, not on the first decision
 
     def _ratios(self, model: str) -> list[float]:
         if not self.pool_models:
