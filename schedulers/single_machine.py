@@ -60,20 +60,33 @@ class _Group:
         return self.best[self.pos] if self.pos < len(self.latest) else None
 
 
-def _solve_compiled(gs: list[_Group], gains: list[float]) -> tuple[float, list[tuple[int, float]]]:
-    """The same DP, run by the compiled kernel (:mod:`.single_machine_jit`) on the groups as arrays."""
+def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float) -> tuple[float, list[tuple[int, float]]]:
+    """The same DP, run by the compiled kernel (:mod:`.single_machine_jit`): the groups built as :class:`_Group`
+    builds them (variants by (latest start, index), suffix-best gain; stable sort by release), as arrays."""
     import numpy as np
 
-    vstart = np.zeros(len(gs) + 1, np.int64)
+    rows = []
+    for k, js in enumerate(members.values()):
+        r, _, p, _ = jobs[js[0]]
+        if any(jobs[j][0] != r or jobs[j][2] != p for j in js):
+            raise ValueError("the jobs of one group must share their release and processing time")
+        var = sorted([(jobs[j][1] - p, j) for j in js])
+        bst = [j for _, j in var]
+        for q in range(len(bst) - 2, -1, -1):
+            if gains[bst[q + 1]] > gains[bst[q]]:
+                bst[q] = bst[q + 1]
+        rows.append((max(r, free_at), k, p, var, bst))
+    rows.sort(key=lambda row: row[0])
+    vstart = [0]
     latest, best = [], []
-    for k, grp in enumerate(gs):
-        latest += grp.latest
-        best += grp.best
-        vstart[k + 1] = len(latest)
+    for row in rows:
+        latest += [v for v, _ in row[3]]
+        best += row[4]
+        vstart.append(len(latest))
     gain, nj, nt, npar, node = single_machine_jit.solve(
-        np.array([g.release for g in gs], np.float64), np.array([g.proc for g in gs], np.float64),
-        np.array([g.bit for g in gs], np.uint64), vstart, np.array(latest, np.float64), np.array(best, np.int64),
-        np.array(gains, np.float64), _EPS)
+        np.array([row[0] for row in rows], np.float64), np.array([row[2] for row in rows], np.float64),
+        np.array([1 << row[1] for row in rows], np.uint64), np.array(vstart, np.int64),
+        np.array(latest, np.float64), np.array(best, np.int64), np.array(gains, np.float64), _EPS)
     out = []
     while node >= 0:
         out.append((int(nj[node]), float(nt[node])))
@@ -100,6 +113,8 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             members.setdefault(groups[j] if groups is not None else j, []).append(j)
     if not members:
         return 0.0, []
+    if jit and len(members) <= single_machine_jit.MAX_GROUPS and single_machine_jit.available():
+        return _solve_compiled(members, jobs, gains, free_at)
     gs: list[_Group] = []
     for k, js in enumerate(members.values()):
         r, p = jobs[js[0]][0], jobs[js[0]][2]
@@ -107,8 +122,6 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             raise ValueError("the jobs of one group must share their release and processing time")
         gs.append(_Group(1 << k, max(r, free_at), p, [(jobs[j][1] - p, j) for j in js], gains))
     gs.sort(key=lambda g: g.release)
-    if jit and len(gs) <= single_machine_jit.MAX_GROUPS and single_machine_jit.available():
-        return _solve_compiled(gs, gains)
     releases = sorted({g.release for g in gs})
 
     # The loop below is the label-setting DP written out inline (no helper calls per label: this is LAPLAN's

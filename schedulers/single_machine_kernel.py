@@ -57,6 +57,11 @@ def kernel(rel, proc, bit, vstart, latest, best, gains, eps):
     cj = np.empty(G, np.int64)
     best_gain = 0.0
     best_node = -1
+    # scratch, reused: the store before a release (its labels expand to the new jobs), the pruned store, the masks
+    # inserted at the current time (first-insertion order)
+    ok, og, op = np.empty(16, np.uint64), np.empty(16, np.float64), np.empty(16, np.int64)
+    pk, pg, pp = np.empty(16, np.uint64), np.empty(16, np.float64), np.empty(16, np.int64)
+    fresh = np.empty(16, np.uint64)
     gi = 0
     alive = zero
     expiry = inf
@@ -79,9 +84,8 @@ def kernel(rel, proc, bit, vstart, latest, best, gains, eps):
                 if latest[vstart[g + 1] - 1] < expiry:
                     expiry = latest[vstart[g + 1] - 1]
                 alive |= bit[g]
-            pk = np.empty(max(sn, 1), np.uint64)
-            pg = np.empty(max(sn, 1), np.float64)
-            pp = np.empty(max(sn, 1), np.int64)
+            if sn > pk.shape[0]:
+                pk, pg, pp = np.empty(2 * sn, np.uint64), np.empty(2 * sn, np.float64), np.empty(2 * sn, np.int64)
             pn = 0
             for i in range(sn):
                 k2 = sk[i] & alive
@@ -104,13 +108,13 @@ def kernel(rel, proc, bit, vstart, latest, best, gains, eps):
                     expiry = latest[vstart[gi + 1] - 1]
             gi += 1
         on = sn if nw > 0 else 0
-        ok = sk[:on].copy()
-        og = sg[:on].copy()
-        op = sp[:on].copy()
+        if on > ok.shape[0]:
+            ok, og, op = np.empty(2 * on, np.uint64), np.empty(2 * on, np.float64), np.empty(2 * on, np.int64)
+        for i in range(on):
+            ok[i], og[i], op[i] = sk[i], sg[i], sp[i]
         for a in range(nw):
             active[na] = newly[a]
             na += 1
-        fresh = np.empty(0, np.uint64)
         nf = 0
         while len(heap) > 0 and heap[0][0] == t:
             item = heapq.heappop(heap)
