@@ -205,6 +205,9 @@ class LaPlan(EvPlan):
                     jobs.append((max(at, free), end, proc, g))
                     who.append(k)
         _, sched = max_gain_schedule(jobs, free_at=free, groups=who)
+        self.counters["plans"] += 1
+        if len(set(who)) > single_machine_jit.MAX_GROUPS:  # over the compiled kernel's limit: the Python loop ran
+            self.counters["plans_over_jit_limit"] += 1
         plan = [(who[j], s) for j, s in sched]
         self._first_wake = None
         if plan and plan[0][0] in wakes:

@@ -31,7 +31,12 @@ class EdgeHost:
     """
 
     def __init__(self, name: str = "edge-host") -> None:
+        from aerodaas.schedulers import single_machine_jit
+
         self.name = name
+        # load LAPLAN's compiled planner now (seconds on first use): inside configure() it would overrun the run's
+        # lead time (start_epoch), and a deployment's dispatcher actor likewise loads it when it starts
+        single_machine_jit.warm_up()
         self.dispatchers: dict[str, AnalyticsDispatcher] = {}
         self.pool: CloudPool | None = None
         self.clock: Clock | None = None
@@ -81,8 +86,10 @@ class EdgeHost:
         """Replay ``trace`` rows ``(arrival_ms, edge_id, drone, model)`` (sorted by time, on the run's clock) as
         wall-clock arrivals, then finish every dispatcher. Returns ``{"edges": [report, ...], "cloud": pool
         report}``. Arrivals are submitted with their scheduled time; how late the replay delivered them is reported
-        as ``arrival_lateness``."""
+        as ``arrival_lateness``; ``cpu_s`` is this host process's CPU time over the replay (to tell a host that
+        needs more CPU than the run's wall time from one that got too little of a loaded machine)."""
         loop = asyncio.get_running_loop()
+        cpu0 = time.process_time()
         for group_t, rows in itertools.groupby(trace, key=lambda r: r[0]):
             delay = self.clock.loop_time(loop, group_t) - loop.time()
             if delay > 0:
@@ -96,7 +103,8 @@ class EdgeHost:
             reports = [d.report(samples=True) for d in self.dispatchers.values()]
         out = {"edges": reports, "cloud": self.pool.report() if self.pool else None,
                "cloud_rtt_error_ms": self.pool.rtt_error.values if self.pool else [],
-               "cloud_reply_margin_ms": self.pool.reply_margin.values if self.pool else []}
+               "cloud_reply_margin_ms": self.pool.reply_margin.values if self.pool else [],
+               "cpu_s": time.process_time() - cpu0}  # this host process's CPU over the replay and drain
         return out
 
     async def close(self) -> None:
