@@ -51,7 +51,7 @@ from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
 from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
 from aerodaas.schedulers import single_machine_jit
-from aerodaas.schedulers.single_machine import max_gain_schedule
+from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule
 
 __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
 
@@ -204,10 +204,11 @@ class LaPlan(EvPlan):
                 for end, proc, g in self._variants(m, frame + self.w[m].deadline_ms, fbs[m]):
                     jobs.append((max(at, free), end, proc, g))
                     who.append(k)
+        n_python = SOLVES["python"]
         _, sched = max_gain_schedule(jobs, free_at=free, groups=who)
         self.counters["plans"] += 1
-        if len(set(who)) > single_machine_jit.MAX_GROUPS:  # over the compiled kernel's limit: the Python loop ran
-            self.counters["plans_over_jit_limit"] += 1
+        if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live at once)
+            self.counters["plans_in_python"] += 1
         plan = [(who[j], s) for j, s in sched]
         self._first_wake = None
         if plan and plan[0][0] in wakes:

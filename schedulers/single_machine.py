@@ -60,13 +60,43 @@ class _Group:
         return self.best[self.pos] if self.pos < len(self.latest) else None
 
 
-def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float) -> tuple[float, list[tuple[int, float]]]:
+#: plans solved by the compiled kernel and by the Python loop (the latter: numba missing, ``jit=False`` or more than
+#: 64 groups live at once), per process — LAPLAN reports the Python ones
+SOLVES = {"compiled": 0, "python": 0}
+
+
+def _bits(rows: list) -> list[int] | None:
+    """A bit per group (rows in release order) such that groups live at the same time get different bits: a bit is
+    reused only by a group released more than the longest processing time + 1 ms after the previous owner's last
+    latest start. Then no label still holding the old owner's bit is in the heap when the new owner is released
+    (it was pushed while the old owner could still start, so it is popped by then), and the stored labels have
+    forgotten it (the DP drops a group that can no longer start as soon as time passes it). Subset tests and the
+    store's insertion order do not depend on which bit a group has, so the DP's answer is the same. None if more
+    than 64 bits would be needed."""
+    maxproc = max(row[2] for row in rows)
+    free_after: list[float] = []
+    out = []
+    for row in rows:
+        b = next((k for k, f in enumerate(free_after) if f < row[0]), None)
+        if b is None:
+            if len(free_after) == single_machine_jit.MAX_GROUPS:
+                return None
+            b = len(free_after)
+            free_after.append(0.0)
+        free_after[b] = row[3][-1][0] + maxproc + 1.0
+        out.append(1 << b)
+    return out
+
+
+def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float
+                    ) -> tuple[float, list[tuple[int, float]]] | None:
     """The same DP, run by the compiled kernel (:mod:`.single_machine_jit`): the groups built as :class:`_Group`
-    builds them (variants by (latest start, index), suffix-best gain; stable sort by release), as arrays."""
+    builds them (variants by (latest start, index), suffix-best gain; stable sort by release), as arrays, with
+    bits reused over time (:func:`_bits`). None if more than 64 groups are live at once."""
     import numpy as np
 
     rows = []
-    for k, js in enumerate(members.values()):
+    for js in members.values():
         r, _, p, _ = jobs[js[0]]
         if any(jobs[j][0] != r or jobs[j][2] != p for j in js):
             raise ValueError("the jobs of one group must share their release and processing time")
@@ -75,8 +105,11 @@ def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float) -> 
         for q in range(len(bst) - 2, -1, -1):
             if gains[bst[q + 1]] > gains[bst[q]]:
                 bst[q] = bst[q + 1]
-        rows.append((max(r, free_at), k, p, var, bst))
+        rows.append((max(r, free_at), None, p, var, bst))
     rows.sort(key=lambda row: row[0])
+    bits = _bits(rows)
+    if bits is None:
+        return None
     vstart = [0]
     latest, best = [], []
     for row in rows:
@@ -85,12 +118,13 @@ def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float) -> 
         vstart.append(len(latest))
     gain, nj, nt, npar, node = single_machine_jit.solve(
         np.array([row[0] for row in rows], np.float64), np.array([row[2] for row in rows], np.float64),
-        np.array([1 << row[1] for row in rows], np.uint64), np.array(vstart, np.int64),
+        np.array(bits, np.uint64), np.array(vstart, np.int64),
         np.array(latest, np.float64), np.array(best, np.int64), np.array(gains, np.float64), _EPS)
     out = []
     while node >= 0:
         out.append((int(nj[node]), float(nt[node])))
         node = npar[node]
+    SOLVES["compiled"] += 1
     return float(gain), out[::-1]
 
 
@@ -103,8 +137,8 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
     most one job of a group is chosen (its variants). Returns ``(gain, schedule)``, ``schedule`` = ``[(job index,
     start_ms), ...]`` in start order, every job starting at its release or when the previous one ends, none before
     ``free_at``. Ties prefer the schedule found first. ``jit``: run the DP compiled (:mod:`.single_machine_jit`,
-    numba) when it is installed and there are at most 64 groups — the same algorithm and the same answer, ties
-    included, ~10-30x faster; False (or ``AERODAAS_NO_JIT=1``) runs the pure-Python loop. Raises ValueError if the
+    numba) when it is installed and at most 64 groups are live at once (:func:`_bits`) — the same algorithm and
+    the same answer, ties included, ~5-10x faster; False (or ``AERODAAS_NO_JIT=1``) runs the pure-Python loop. Raises ValueError if the
     jobs of one group differ in release or processing time."""
     gains = [w for *_, w in jobs]
     members: dict[object, list[int]] = {}
@@ -113,8 +147,11 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             members.setdefault(groups[j] if groups is not None else j, []).append(j)
     if not members:
         return 0.0, []
-    if jit and len(members) <= single_machine_jit.MAX_GROUPS and single_machine_jit.available():
-        return _solve_compiled(members, jobs, gains, free_at)
+    if jit and single_machine_jit.available():
+        res = _solve_compiled(members, jobs, gains, free_at)
+        if res is not None:
+            return res
+    SOLVES["python"] += 1
     gs: list[_Group] = []
     for k, js in enumerate(members.values()):
         r, p = jobs[js[0]][0], jobs[js[0]][2]

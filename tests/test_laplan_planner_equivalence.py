@@ -19,7 +19,7 @@ from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers import analytics_laplan, single_machine_jit
 from aerodaas.schedulers.analytics_base import Workload, make_analytics_scheduler
 from aerodaas.schedulers.dispatch.emulation import Jitter
-from aerodaas.schedulers.single_machine import max_gain_schedule
+from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule
 
 from .conftest import DATA_DIR
 from .reference_max_gain_schedule import max_gain_schedule as old_max_gain_schedule
@@ -40,10 +40,10 @@ def test_the_compiled_kernel_is_available():
     assert single_machine_jit.available(), single_machine_jit._state["error"]
 
 
-def _random_instance(rng: random.Random, n_groups: int):
+def _random_instance(rng: random.Random, n_groups: int, span_ms: float = 3000.0):
     jobs, groups = [], []
     for g in range(n_groups):
-        rel = rng.choice([0.0, 100.0, 250.0, float(rng.randrange(0, 3000, 50)), rng.uniform(0, 3000)])
+        rel = rng.choice([0.0, 100.0, 250.0, float(rng.randrange(0, int(span_ms), 50)), rng.uniform(0, span_ms)])
         p = rng.choice([150.0, 244.0, 563.0, 739.0, rng.uniform(50, 800)])
         for _ in range(rng.choice([1, 1, 3, 6])):       # variants: same release and length
             jobs.append((rel, rel + p + rng.choice([0.0, 100.0, 400.0, rng.uniform(-50, 1200)]), p,
@@ -59,12 +59,18 @@ def test_the_solver_returns_the_old_schedule_on_random_instances_with_ties(solve
     f = SOLVERS[solver]
     sizes = [rng.randint(0, 12) for _ in range(250)] + [rng.randint(40, 64) for _ in range(12)] + [70, 80]
     nonempty = 0
-    for n in sizes:                                   # 70 and 80 groups: the compiled path falls back to Python
+    before = dict(SOLVES)
+    for n in sizes:                                   # 70 and 80 groups over 3 s: > 64 live, the Python loop runs
         jobs, free_at, groups = _random_instance(rng, n)
         want = old_max_gain_schedule(jobs, free_at=free_at, groups=groups)
         assert f(jobs, free_at=free_at, groups=groups) == want, (n, jobs, free_at)
         nonempty += bool(want[1])
     assert nonempty > 200                             # the instances are not trivially empty
+    for _ in range(3):                                # 300 groups over 40 s: the compiled kernel reuses bits
+        jobs, free_at, groups = _random_instance(rng, 300, span_ms=40_000.0)
+        assert f(jobs, free_at=free_at, groups=groups) == old_max_gain_schedule(jobs, free_at=free_at, groups=groups)
+    if solver == "compiled":
+        assert SOLVES["python"] - before["python"] >= 1 and SOLVES["compiled"] - before["compiled"] > 200
 
 
 def _run_laplan(w: Workload, tasks, seed: int):
