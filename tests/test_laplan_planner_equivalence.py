@@ -78,8 +78,10 @@ def _run_laplan(w: Workload, tasks, seed: int):
     h = Harness(pol, edge_jitter=Jitter("lognormal", 0.05), cloud_jitter=Jitter("lognormal", 0.1), seed=seed,
                 edge_id="edge00")
     res = h.run([t.__class__(t.task_id, t.drone, t.model, t.arrival_ms, t.deadline_ms) for t in tasks])
+    counters = dict(pol.counters)
+    in_python = counters.pop("plans_in_python", 0)  # which DP ran, not a decision
     return (res.log, [(t.task_id, s) for t, s in res.edge_starts], [(t.task_id, s) for t, s in res.cloud_sends],
-            res.utility, dict(pol.counters))
+            res.utility, counters, in_python)
 
 
 @needs_workload
@@ -97,11 +99,12 @@ def test_laplan_decides_exactly_as_with_the_old_planner(trace, monkeypatch):
                 return _f(*a, **k)
             monkeypatch.setattr(analytics_laplan, "max_gain_schedule", counted)
             runs[name] = _run_laplan(w, tasks, seed)
-        log, starts, sends, utility, counters = runs["old"]
+        log, starts, sends, utility, counters, _ = runs["old"]
+        assert runs["compiled"][5] == 0 and counters["plans"] > 50   # every plan of this run ran compiled
         assert len(starts) > 20 and len(sends) > 20 and utility > 0
         for name in SOLVERS:
             assert runs[name][1] == starts, f"{trace} seed {seed}: {name} solver: other edge starts"
             assert runs[name][2] == sends, f"{trace} seed {seed}: {name} solver: other cloud sends"
             assert runs[name][0] == log, f"{trace} seed {seed}: {name} solver: another decision log"
-            assert runs[name][3:] == (utility, counters)
+            assert runs[name][3:5] == (utility, counters)
     assert calls.count("compiled") == calls.count("old") > 100   # every plan went through the solver under test
