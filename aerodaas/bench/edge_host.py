@@ -6,6 +6,7 @@ edge device) and one shared :class:`~aerodaas.schedulers.dispatch.cloud_pool.Clo
 from __future__ import annotations
 
 import asyncio
+import gc
 import itertools
 import time
 from typing import Any, Mapping, Sequence
@@ -90,6 +91,16 @@ class EdgeHost:
         needs more CPU than the run's wall time from one that got too little of a loaded machine)."""
         loop = asyncio.get_running_loop()
         cpu0 = time.process_time()
+        gc_pauses: list[float] = []   # cyclic-GC passes in this process during the replay (ms, wall)
+        gc_t0 = [0.0]
+
+        def on_gc(phase: str, info: dict) -> None:
+            if phase == "start":
+                gc_t0[0] = time.perf_counter()
+            else:
+                gc_pauses.append((time.perf_counter() - gc_t0[0]) * 1e3)
+
+        gc.callbacks.append(on_gc)
         for group_t, rows in itertools.groupby(trace, key=lambda r: r[0]):
             delay = self.clock.loop_time(loop, group_t) - loop.time()
             if delay > 0:
@@ -99,12 +110,14 @@ class EdgeHost:
             for t_ms, edge_id, drone, model in rows:
                 self.dispatchers[edge_id].submit(drone, model, None, t_ms)
         reports = await asyncio.gather(*(d.finish(drain_timeout_s) for d in self.dispatchers.values()))
+        gc.callbacks.remove(on_gc)
         if samples:
             reports = [d.report(samples=True) for d in self.dispatchers.values()]
         out = {"edges": reports, "cloud": self.pool.report() if self.pool else None,
                "cloud_rtt_error_ms": self.pool.rtt_error.values if self.pool else [],
                "cloud_reply_margin_ms": self.pool.reply_margin.values if self.pool else [],
-               "cpu_s": time.process_time() - cpu0}  # this host process's CPU over the replay and drain
+               "cpu_s": time.process_time() - cpu0,  # this host process's CPU over the replay and drain
+               "gc_pauses_ms": {"n": len(gc_pauses), "total": sum(gc_pauses), "max": max(gc_pauses, default=0.0)}}
         return out
 
     async def close(self) -> None:

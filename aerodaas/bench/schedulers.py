@@ -202,6 +202,7 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
         # CPU of the edge host processes over the replay: where the emulation's time goes (policy decisions plus the
         # dispatchers' timers and cloud calls); per host, beside the policy's own share (sum of decision times)
         "host_cpu_s": [round(out.get("cpu_s", 0.0), 3) for out in host_outs],
+        "host_gc_pauses_ms": [out.get("gc_pauses_ms") for out in host_outs],
         "policy_wall_s": round(sum(dec) / 1e6, 3) if dec else 0.0,
     }
 
