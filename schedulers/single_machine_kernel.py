@@ -1,7 +1,8 @@
 """The compiled kernel of :mod:`aerodaas.schedulers.single_machine_jit` (imports numba: load it lazily).
 
-Module-level ``njit(cache=True)`` functions, so that numba's on-disk cache is reused across processes (functions
-defined in a closure are recompiled in every process).
+Module-level ``njit(cache=True, nogil=True)`` functions: module-level so that numba's on-disk cache is reused across
+processes (functions defined in a closure are recompiled in every process); ``nogil`` releases the GIL while a plan is
+solved, so the other threads of a dispatcher process (its actor loop, the trace replay) are not held up.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 __all__ = ["kernel"]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _at(g, t, pos, vstart, latest, best, eps):
     p = pos[g]
     end = vstart[g + 1]
@@ -22,14 +23,14 @@ def _at(g, t, pos, vstart, latest, best, eps):
     pos[g] = p
     return best[p] if p < end else -1
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _find(keys, n, mask):
     for i in range(n):
         if keys[i] == mask:
             return i
     return -1
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def kernel(rel, proc, bit, vstart, latest, best, gains, eps):
     G = rel.shape[0]
     inf = np.inf
