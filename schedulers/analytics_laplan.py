@@ -50,7 +50,8 @@ from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload
 from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
 from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
-from aerodaas.schedulers.single_machine import max_gain_schedule
+from aerodaas.schedulers import single_machine_jit
+from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule
 
 __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
 
@@ -146,6 +147,7 @@ class LaPlan(EvPlan):
         self._wake: float | None = None
         self._first_wake: float | None = None
         self._predicted: dict[tuple, list[float]] = {}  # (drone, model) -> predicted frame times of the plan
+        single_machine_jit.warm_up()  # compile or load the planner's kernel now, not on the first decision
 
     def _ratios(self, model: str) -> list[float]:
         if not self.pool_models:
@@ -202,7 +204,11 @@ class LaPlan(EvPlan):
                 for end, proc, g in self._variants(m, frame + self.w[m].deadline_ms, fbs[m]):
                     jobs.append((max(at, free), end, proc, g))
                     who.append(k)
+        n_python = SOLVES["python"]
         _, sched = max_gain_schedule(jobs, free_at=free, groups=who)
+        self.counters["plans"] += 1
+        if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live at once)
+            self.counters["plans_in_python"] += 1
         plan = [(who[j], s) for j, s in sched]
         self._first_wake = None
         if plan and plan[0][0] in wakes:

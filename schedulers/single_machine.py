@@ -28,6 +28,8 @@ import heapq
 import itertools
 from typing import Sequence
 
+from aerodaas.schedulers import single_machine_jit
+
 __all__ = ["max_gain_schedule"]
 
 _EPS = 1e-9
@@ -58,16 +60,86 @@ class _Group:
         return self.best[self.pos] if self.pos < len(self.latest) else None
 
 
+#: plans solved by the compiled kernel and by the Python loop (the latter: numba missing, ``jit=False`` or more than
+#: 64 groups live at once), per process — LAPLAN reports the Python ones
+SOLVES = {"compiled": 0, "python": 0}
+
+
+def _bits(rows: list) -> list[int] | None:
+    """A bit per group (rows in release order) such that groups live at the same time get different bits: a bit is
+    reused only by a group released more than the longest processing time + 1 ms after the previous owner's last
+    latest start. Then no label still holding the old owner's bit is in the heap when the new owner is released
+    (it was pushed while the old owner could still start, so it is popped by then), and the stored labels have
+    forgotten it (the DP drops a group that can no longer start as soon as time passes it). Subset tests and the
+    store's insertion order do not depend on which bit a group has, so the DP's answer is the same. None if more
+    than 64 bits would be needed."""
+    maxproc = max(row[2] for row in rows)
+    free_after: list[float] = []
+    out = []
+    for row in rows:
+        b = next((k for k, f in enumerate(free_after) if f < row[0]), None)
+        if b is None:
+            if len(free_after) == single_machine_jit.MAX_GROUPS:
+                return None
+            b = len(free_after)
+            free_after.append(0.0)
+        free_after[b] = row[3][-1][0] + maxproc + 1.0
+        out.append(1 << b)
+    return out
+
+
+def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float
+                    ) -> tuple[float, list[tuple[int, float]]] | None:
+    """The same DP, run by the compiled kernel (:mod:`.single_machine_jit`): the groups built as :class:`_Group`
+    builds them (variants by (latest start, index), suffix-best gain; stable sort by release), as arrays, with
+    bits reused over time (:func:`_bits`). None if more than 64 groups are live at once."""
+    import numpy as np
+
+    rows = []
+    for js in members.values():
+        r, _, p, _ = jobs[js[0]]
+        if any(jobs[j][0] != r or jobs[j][2] != p for j in js):
+            raise ValueError("the jobs of one group must share their release and processing time")
+        var = sorted([(jobs[j][1] - p, j) for j in js])
+        bst = [j for _, j in var]
+        for q in range(len(bst) - 2, -1, -1):
+            if gains[bst[q + 1]] > gains[bst[q]]:
+                bst[q] = bst[q + 1]
+        rows.append((max(r, free_at), None, p, var, bst))
+    rows.sort(key=lambda row: row[0])
+    bits = _bits(rows)
+    if bits is None:
+        return None
+    vstart = [0]
+    latest, best = [], []
+    for row in rows:
+        latest += [v for v, _ in row[3]]
+        best += row[4]
+        vstart.append(len(latest))
+    gain, nj, nt, npar, node = single_machine_jit.solve(
+        np.array([row[0] for row in rows], np.float64), np.array([row[2] for row in rows], np.float64),
+        np.array(bits, np.uint64), np.array(vstart, np.int64),
+        np.array(latest, np.float64), np.array(best, np.int64), np.array(gains, np.float64), _EPS)
+    out = []
+    while node >= 0:
+        out.append((int(nj[node]), float(nt[node])))
+        node = npar[node]
+    SOLVES["compiled"] += 1
+    return float(gain), out[::-1]
+
+
 def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free_at: float = float("-inf"),
-                      groups: Sequence[object] | None = None) -> tuple[float, list[tuple[int, float]]]:
+                      groups: Sequence[object] | None = None, jit: bool = True) -> tuple[float, list[tuple[int, float]]]:
     """The exact optimum of 1 | r_j | Σ w_j U_j (see the module docstring).
 
     ``jobs``: ``(release_ms, deadline_ms, processing_ms, gain)`` each; jobs with gain <= 0 or that cannot fit
     their own window are ignored. ``free_at``: the machine is busy until then (ms). ``groups``: a key per job; at
     most one job of a group is chosen (its variants). Returns ``(gain, schedule)``, ``schedule`` = ``[(job index,
     start_ms), ...]`` in start order, every job starting at its release or when the previous one ends, none before
-    ``free_at``. Ties prefer the schedule found first. Raises ValueError if the jobs of one group differ in
-    release or processing time."""
+    ``free_at``. Ties prefer the schedule found first. ``jit``: run the DP compiled (:mod:`.single_machine_jit`,
+    numba) when it is installed and at most 64 groups are live at once (:func:`_bits`) — the same algorithm and
+    the same answer, ties included, ~5-10x faster; False (or ``AERODAAS_NO_JIT=1``) runs the pure-Python loop. Raises ValueError if the
+    jobs of one group differ in release or processing time."""
     gains = [w for *_, w in jobs]
     members: dict[object, list[int]] = {}
     for j, (r, d, p, w) in enumerate(jobs):
@@ -75,6 +147,11 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             members.setdefault(groups[j] if groups is not None else j, []).append(j)
     if not members:
         return 0.0, []
+    if jit and single_machine_jit.available():
+        res = _solve_compiled(members, jobs, gains, free_at)
+        if res is not None:
+            return res
+    SOLVES["python"] += 1
     gs: list[_Group] = []
     for k, js in enumerate(members.values()):
         r, p = jobs[js[0]][0], jobs[js[0]][2]
@@ -84,40 +161,26 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
     gs.sort(key=lambda g: g.release)
     releases = sorted({g.release for g in gs})
 
+    # The loop below is the label-setting DP written out inline (no helper calls per label: this is LAPLAN's
+    # decision time on the dispatcher). Tie order is the heap's (free time, push counter) order.
     seq = itertools.count()
+    push, pop = heapq.heappush, heapq.heappop
     heap: list = [(releases[0], next(seq), 0, 0.0, None)]  # (free at, tie, used mask, gain, path)
-    store: dict[int, tuple[float, object]] = {}         # used mask (still startable at now) -> (gain, path)
-    active: list[_Group] = []                           # released, a variant still startable
+    store: dict[int, tuple[float, object]] = {}           # used mask (still startable at now) -> (gain, path)
+    sget = store.get
+    active: list[_Group] = []                             # released, a variant still startable
     best_gain, best_path = 0.0, None
-    gi = 0
+    gi, ngs = 0, len(gs)
     alive_mask = 0
-
-    def dominated(mask: int, g: float) -> bool:
-        sub = mask
-        while True:
-            v = store.get(sub)
-            if v is not None and v[0] >= g - _EPS:
-                return True
-            if sub == 0:
-                return False
-            sub = (sub - 1) & mask
-
-    def insert(mask: int, g: float, path) -> None:
-        for k in [k for k, v in store.items() if k & mask == mask and v[0] <= g + _EPS]:
-            del store[k]
-        store[mask] = (g, path)
-
-    def expand(mask: int, g: float, path, t: float, cands: list[tuple[_Group, int]]) -> None:
-        for grp, j in cands:
-            if not mask & grp.bit:
-                heapq.heappush(heap, (t + grp.proc, next(seq), mask | grp.bit, g + gains[j], (j, t, path)))
-
-    expiry = float("inf")  # the earliest time an active group's last variant stops being startable
-    while heap or gi < len(gs):
-        t = min(heap[0][0] if heap else float("inf"), gs[gi].release if gi < len(gs) else float("inf"))
+    inf = float("inf")
+    expiry = inf  # the earliest time an active group's last variant stops being startable
+    while heap or gi < ngs:
+        t = heap[0][0] if heap else inf
+        if gi < ngs and gs[gi].release < t:
+            t = gs[gi].release
         if t > expiry + _EPS:  # time advanced past an expiry: forget used jobs that can no longer start
             active = [grp for grp in active if grp.latest[-1] + _EPS >= t]
-            expiry = min((grp.latest[-1] for grp in active), default=float("inf"))
+            expiry = min((grp.latest[-1] for grp in active), default=inf)
             alive_mask = 0
             for grp in active:
                 alive_mask |= grp.bit
@@ -127,37 +190,65 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
                 if k2 not in pruned or pruned[k2][0] < v[0]:
                     pruned[k2] = v
             store = pruned
+            sget = store.get
         newly: list[_Group] = []
-        while gi < len(gs) and gs[gi].release == t:
-            if gs[gi].at(t) is not None:
-                newly.append(gs[gi])
-                alive_mask |= gs[gi].bit
-                expiry = min(expiry, gs[gi].latest[-1])
+        while gi < ngs and gs[gi].release == t:
+            grp = gs[gi]
+            if grp.at(t) is not None:
+                newly.append(grp)
+                alive_mask |= grp.bit
+                if grp.latest[-1] < expiry:
+                    expiry = grp.latest[-1]
             gi += 1
         old = list(store.items()) if newly else ()
-        active += newly
-        fresh = []
+        if newly:
+            active += newly
+        fresh: dict[int, None] = {}  # masks inserted at t, first-insertion order (a re-insertion expands once)
         while heap and heap[0][0] == t:
-            _, _, mask, g, path = heapq.heappop(heap)
+            _, _, mask, g, path = pop(heap)
             mask &= alive_mask
-            if dominated(mask, g):
+            # dominated: a stored label with a subset of the used jobs and at least the gain
+            lim = g - _EPS
+            sub = mask
+            while True:
+                v = sget(sub)
+                if v is not None and v[0] >= lim:
+                    break
+                if sub == 0:
+                    sub = -1
+                    break
+                sub = (sub - 1) & mask
+            if sub != -1:
                 continue
-            insert(mask, g, path)
-            fresh.append(mask)
+            hi = g + _EPS
+            dead = [k for k, v in store.items() if k & mask == mask and v[0] <= hi]
+            for k in dead:
+                del store[k]
+            store[mask] = (g, path)
+            fresh[mask] = None
             if g > best_gain + _EPS:
                 best_gain, best_path = g, path
         if fresh:
-            cands = [(grp, j) for grp in active if (j := grp.at(t)) is not None]
+            cands = []
+            for grp in active:
+                j = grp.at(t)
+                if j is not None:
+                    cands.append((grp.bit, t + grp.proc, gains[j], j))
             for mask in fresh:
-                if mask in store:
-                    g, path = store[mask]
-                    expand(mask, g, path, t, cands)
+                v = sget(mask)
+                if v is not None:
+                    g, path = v
+                    for bit, end, gj, j in cands:
+                        if not mask & bit:
+                            push(heap, (end, next(seq), mask | bit, g + gj, (j, t, path)))
         if newly:
-            fresh_set = set(fresh)
-            cands = [(grp, grp.at(t)) for grp in newly]
+            cands = [(grp.bit, t + grp.proc, gains[j], j) for grp in newly for j in (grp.at(t),)]
             for mask, (g, path) in old:
-                if mask in store and store[mask][0] == g and mask not in fresh_set:
-                    expand(mask, g, path, t, cands)
+                v = sget(mask)
+                if v is not None and v[0] == g and mask not in fresh:
+                    for bit, end, gj, j in cands:
+                        if not mask & bit:
+                            push(heap, (end, next(seq), mask | bit, g + gj, (j, t, path)))
     out = []
     while best_path is not None:
         j, s, best_path = best_path

@@ -6,6 +6,7 @@ edge device) and one shared :class:`~aerodaas.schedulers.dispatch.cloud_pool.Clo
 from __future__ import annotations
 
 import asyncio
+import gc
 import itertools
 import time
 from typing import Any, Mapping, Sequence
@@ -31,7 +32,12 @@ class EdgeHost:
     """
 
     def __init__(self, name: str = "edge-host") -> None:
+        from aerodaas.schedulers import single_machine_jit
+
         self.name = name
+        # load LAPLAN's compiled planner now (seconds on first use): inside configure() it would overrun the run's
+        # lead time (start_epoch), and a deployment's dispatcher actor likewise loads it when it starts
+        single_machine_jit.warm_up()
         self.dispatchers: dict[str, AnalyticsDispatcher] = {}
         self.pool: CloudPool | None = None
         self.clock: Clock | None = None
@@ -81,8 +87,20 @@ class EdgeHost:
         """Replay ``trace`` rows ``(arrival_ms, edge_id, drone, model)`` (sorted by time, on the run's clock) as
         wall-clock arrivals, then finish every dispatcher. Returns ``{"edges": [report, ...], "cloud": pool
         report}``. Arrivals are submitted with their scheduled time; how late the replay delivered them is reported
-        as ``arrival_lateness``."""
+        as ``arrival_lateness``; ``cpu_s`` is this host process's CPU time over the replay (to tell a host that
+        needs more CPU than the run's wall time from one that got too little of a loaded machine)."""
         loop = asyncio.get_running_loop()
+        cpu0 = time.process_time()
+        gc_pauses: list[float] = []   # cyclic-GC passes in this process during the replay (ms, wall)
+        gc_t0 = [0.0]
+
+        def on_gc(phase: str, info: dict) -> None:
+            if phase == "start":
+                gc_t0[0] = time.perf_counter()
+            else:
+                gc_pauses.append((time.perf_counter() - gc_t0[0]) * 1e3)
+
+        gc.callbacks.append(on_gc)
         for group_t, rows in itertools.groupby(trace, key=lambda r: r[0]):
             delay = self.clock.loop_time(loop, group_t) - loop.time()
             if delay > 0:
@@ -92,11 +110,14 @@ class EdgeHost:
             for t_ms, edge_id, drone, model in rows:
                 self.dispatchers[edge_id].submit(drone, model, None, t_ms)
         reports = await asyncio.gather(*(d.finish(drain_timeout_s) for d in self.dispatchers.values()))
+        gc.callbacks.remove(on_gc)
         if samples:
             reports = [d.report(samples=True) for d in self.dispatchers.values()]
         out = {"edges": reports, "cloud": self.pool.report() if self.pool else None,
                "cloud_rtt_error_ms": self.pool.rtt_error.values if self.pool else [],
-               "cloud_reply_margin_ms": self.pool.reply_margin.values if self.pool else []}
+               "cloud_reply_margin_ms": self.pool.reply_margin.values if self.pool else [],
+               "cpu_s": time.process_time() - cpu0,  # this host process's CPU over the replay and drain
+               "gc_pauses_ms": {"n": len(gc_pauses), "total": sum(gc_pauses), "max": max(gc_pauses, default=0.0)}}
         return out
 
     async def close(self) -> None:

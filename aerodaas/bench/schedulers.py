@@ -199,6 +199,11 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
                        "policy_errors": c["policy_errors"]},
         "counters": {**counters, "cloud_peak_concurrency_per_edge": c["peak"]},
         "cloud_losses": losses, "wall_s": wall_s,
+        # CPU of the edge host processes over the replay: where the emulation's time goes (policy decisions plus the
+        # dispatchers' timers and cloud calls); per host, beside the policy's own share (sum of decision times)
+        "host_cpu_s": [round(out.get("cpu_s", 0.0), 3) for out in host_outs],
+        "host_gc_pauses_ms": [out.get("gc_pauses_ms") for out in host_outs],
+        "policy_wall_s": round(sum(dec) / 1e6, 3) if dec else 0.0,
     }
 
 
@@ -337,7 +342,8 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                     say(f"{load} {name} #{k + 1}: on-time {100 * r['on_time_rate']:.1f}% utility {r['utility']:.0f} "
                         f"cloud cost {r['cloud_cost']:.0f} decision p50/p99 {r['decision_us']['p50']:.1f}/"
                         f"{r['decision_us']['p99']:.1f} us; emulation error p99 {_emulation_p99(r):.1f} ms "
-                        f"({wall:.0f} s)")
+                        f"({wall:.0f} s; edge hosts' CPU {sum(r['host_cpu_s']):.1f} s, max per host "
+                        f"{max(r['host_cpu_s'], default=0):.1f} s; load average {os.getloadavg()[0]:.1f})")
                 row = _with_repeats(reps)
                 row.update(seed=sd, cloud_sigma=sigma, cloud_jitter=cj, scenario=sc,
                            load_avg_1min=round(os.getloadavg()[0], 2), emulation_p99_ms=_emulation_p99(row),
