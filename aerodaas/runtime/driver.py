@@ -234,46 +234,10 @@ def start_ray_early(address: str | None = None) -> None:
             _init_ray(address)
         except BaseException as e:  # surfaced by ensure_ray in the main thread
             _EARLY["error"] = e
-        else:
-            if _ATTACHED_UP:
-                _prewarm_workers()
         ready.set()
         threading.Event().wait()
 
     threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
-
-
-#: the modules every actor of a run imports before its constructor and in its setup (Ray imports an actor's class
-#: module in the worker that hosts it; aerodaas.actors.assembly builds its components)
-_ACTOR_MODULES = ("aerodaas.actors.drone_actor", "aerodaas.actors.analytics_actor", "aerodaas.actors.recorder_actor",
-                  "aerodaas.actors.assembly", "aerodaas.actors.drone", "cv2")
-
-
-def _warm_imports() -> int:
-    import importlib
-
-    for m in _ACTOR_MODULES:
-        importlib.import_module(m)
-    return os.getpid()
-
-
-def _prewarm_workers(n: int | None = None) -> list:
-    """Attached to `aerodaas up`'s cluster: while the application is still being built, give the worker processes
-    Ray prestarts for this job (``num_cpus`` of the cluster, :mod:`aerodaas.clusters.persistent`) the actor modules
-    to import, so that the run's actors, which Ray places on idle workers of the job, find them imported (on this
-    machine kind, most of the time between creating an actor and its constructor running is that import). Fire and
-    forget (the refs are returned, never waited on); ``AERODAAS_NO_PREWARM=1`` turns it off (for A/B start-up
-    measurements). Returns the ObjectRefs of the warm-up tasks."""
-    if os.environ.get("AERODAAS_NO_PREWARM") == "1":
-        return []
-    import ray
-
-    try:
-        n = n or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        warm = ray.remote(num_cpus=0, max_retries=0)(_warm_imports)
-        return [warm.remote() for _ in range(n)]
-    except Exception:  # noqa: BLE001 - an optimisation: never a reason for a run to fail
-        return []
 
 
 class PlanReady(Exception):
