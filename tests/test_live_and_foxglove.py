@@ -289,10 +289,16 @@ def test_live_run_serves_the_recordings_channels_to_a_protocol_client_and_stops_
         for t, data in msgs:
             m = decode(data)
             assert m.timestamp.seconds * 10**9 + m.timestamp.nanos == t
-        # one serializer: every live message is a recorded message, same log time, same bytes, in order
+        # one serializer: every live message is a recorded message, same log time, same bytes, in order. The
+        # server may drop a message for a client that falls behind (foxglove-sdk's bounded per-client queue; seen
+        # once at load ~3 beside a SITL run), so the live messages are an ordered subsequence of the recording,
+        # and at most one in ten may be missing from the span they cover
         rec_list = recorded[topic]
         start = rec_list.index(msgs[0])
-        assert rec_list[start:start + len(msgs)] == msgs
+        it = iter(rec_list[start:])
+        assert all(any(m == r for r in it) for m in msgs), topic  # in order, each one recorded
+        span = rec_list.index(msgs[-1]) - start + 1
+        assert len(msgs) >= 0.9 * span, (topic, len(msgs), span)
     dec = _decode_with(got["channels"][DETECTIONS_TOPIC])
     assert all(len(dec(d).points) == 1 for _, d in got["messages"][DETECTIONS_TOPIC])  # the cloud detector's box
     assert len(recorded[DETECTIONS_TOPIC]) > 0  # outputs of cloud-deployed analytics are recorded
