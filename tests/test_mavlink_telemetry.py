@@ -16,7 +16,7 @@ ODOM_HZ = 50.0  # the odometry sensor asks for more than the vehicle sends
 
 
 def window_speeds(odo: list[dict], lo_s: float = 1.0, hi_s: float = 1.3) -> list[tuple[float, float, float]]:
-    """(t, speed from the recorded positions, the vehicle's mean reported horizontal speed) over every window of
+    """(t, speed from the recorded positions, the magnitude of the vehicle's mean reported horizontal velocity) over every window of
     ``lo_s``-``hi_s`` vehicle seconds in which the reported speed is steady (within 5 % of its mean, above 0.15 m/s: PX4 flies a 0.5 m/s limit at 0.25)."""
     out = []
     for i, a in enumerate(odo):
@@ -28,8 +28,12 @@ def window_speeds(odo: list[dict], lo_s: float = 1.0, hi_s: float = 1.3) -> list
                 vs = [math.hypot(*o["velocity"][:2]) for o in odo[i:j + 1]]
                 mean = sum(vs) / len(vs)
                 if mean > 0.15 and max(vs) < 1.05 * mean and min(vs) > 0.95 * mean:
+                    # the displacement over the window is the integral of the velocity vector: on a turn (a corner
+                    # of the survey flown slowly) it is shorter than speed x time, so compare with the mean vector
+                    vx = sum(o["velocity"][0] for o in odo[i:j + 1]) / len(vs)
+                    vy = sum(o["velocity"][1] for o in odo[i:j + 1]) / len(vs)
                     p, q = a["position"], odo[j]["position"]
-                    out.append((a["t"], math.hypot(q[0] - p[0], q[1] - p[1]) / dt, mean))
+                    out.append((a["t"], math.hypot(q[0] - p[0], q[1] - p[1]) / dt, math.hypot(vx, vy)))
             break
     return out
 
