@@ -26,7 +26,8 @@ class FakeComponents:
     def pid(self) -> int:
         return os.getpid()
 
-    def call(self, cid: str, method: str, *args):
+    def call(self, cid: str, method, *args):
+        method = method.__name__  # the driver's typed handles pass the component class's method itself
         if method == "status":
             return {"state": "NAVIGATING", "position": [0.0, 0.0, 2.0], "visited": 0}
         if method == "snapshot":
@@ -44,13 +45,13 @@ def _send(port: int, method: str, path: str, body: bytes | None = None) -> tuple
 
 
 def test_stopped_or_dead_drone_actor_is_503_never_500(ray_session, tmp_path, monkeypatch):
-    from aerodaas.runtime.driver import ComponentHandle
+    from aerodaas.runtime.handles import DroneHandle, SchedulerHandle
 
     monkeypatch.setenv("AERODAAS_STATE_DIR", str(tmp_path))
     actor = FakeComponents.remote()
     pid = ray.get(actor.pid.remote(), timeout=120)
-    srv = HitlServer({"d1": {"drone": ComponentHandle(actor, "d1/drone"),
-                             "scheduler": ComponentHandle(actor, "d1/scheduler")}}, port=0, token=TOKEN).start()
+    srv = HitlServer({"d1": {"drone": DroneHandle(actor, "d1/drone"),
+                             "scheduler": SchedulerHandle(actor, "d1/scheduler")}}, port=0, token=TOKEN).start()
     try:
         assert _send(srv.port, "GET", "/drones/d1")[0] == 200
         os.kill(pid, signal.SIGSTOP)  # the actor's process stops answering (as a hung or restarting one)
