@@ -252,6 +252,12 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
                 w.pump(0.05)
             if w.mode != "GUIDED":
                 break
+    if w.autopilot == "px4" and w.mode == "OFFBOARD":
+        # the push ended while PX4 was still taking its geofence action (on a loaded machine SIH runs behind the wall
+        # clock): no setpoints now, so it leaves OFFBOARD by itself (the fence's return or the offboard-loss failsafe)
+        stop = time.monotonic() + 60.0
+        while time.monotonic() < stop and w.mode == "OFFBOARD":
+            w.pump()
     if w.mode not in ("GUIDED", "OFFBOARD"):  # AUTO, then the firmware's fence action: follow it to the ground
         while time.monotonic() < end and w.armed:
             w.pump()
