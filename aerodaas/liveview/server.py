@@ -82,20 +82,16 @@ def parse_address(text: str | None, option: str = "--live") -> tuple[str, int]:
 
 def check_bindable(host: str, port: int, option: str = "--live") -> None:
     """Raise ``ValueError`` naming ``option`` when ``host:port`` cannot be listened on here (port taken, address not
-    of this machine), so that ``aerodaas run --live`` fails before anything starts. Port 0 always works."""
-    import socket
+    of this machine, host not resolved within 10 s), so that ``aerodaas run --live`` fails before anything starts.
+    Port 0 always works."""
+    from aerodaas.runtime.addresses import ResolveError, try_bind
 
     try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
-    except OSError as e:
+        try_bind(host, port)
+    except ResolveError as e:
         raise ValueError(f"{option}: cannot resolve {host!r} ({e})") from None
-    family, _, _, _, addr = infos[0]
-    with socket.socket(family, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind(addr)
-        except OSError as e:
-            raise ValueError(f"{option}: cannot listen on {host}:{port} ({e.strerror or e})") from None
+    except OSError as e:
+        raise ValueError(f"{option}: cannot listen on {host}:{port} ({e.strerror or e})") from None
 
 
 class LiveServer:

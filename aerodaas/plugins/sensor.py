@@ -21,6 +21,7 @@ names a plug-in sensor type.
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -37,9 +38,10 @@ class SensorPluginConfig(BaseModel):
     rate_hz: float = Field(default=1.0, gt=0, le=1000.0, description="readings per second (vehicle time)")
 
 
-class SensorPlugin:
+class SensorPlugin(ABC):
     """Base class of a sensor type plug-in (see the module docstring). One instance per configured sensor, built
-    in the drone's actor: ``robot_id``, ``sensor_id`` and ``config`` (an instance of ``Config``)."""
+    in the drone's actor: ``robot_id``, ``sensor_id`` and ``config`` (an instance of ``Config``). A subclass must
+    define :meth:`sample` (an abstract method: building one without it raises TypeError)."""
 
     plugin_kind: ClassVar[str] = "sensor"
     #: the sensor ``type`` in environment.json
@@ -96,8 +98,8 @@ class SensorPlugin:
     def setup(self) -> None:
         """Called once in the actor before the first reading (open a device, seed a generator)."""
 
+    @abstractmethod
     def sample(self, state: Any, t: float) -> BaseModel | dict | None:
         """One reading at vehicle time ``t`` (seconds) given the vehicle ``state`` (an Odometry: ENU metres from
         home, m/s, degrees, ``geodetic`` lat/lon/alt). Return a ``Message`` (or a dict of its fields), or None for
-        no reading now."""
-        raise NotImplementedError(f"{type(self).__name__}.sample")
+        no reading now. An exception is recorded as a ``sensor_error`` event and counted; the flight goes on."""

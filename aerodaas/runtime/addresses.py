@@ -6,7 +6,7 @@ from __future__ import annotations
 import socket
 import threading
 
-__all__ = ["check_ray_address", "check_listen", "check_hitl"]
+__all__ = ["ResolveError", "try_bind", "check_ray_address", "check_listen", "check_hitl"]
 
 
 def _resolve(host: str, port: int, timeout_s: float) -> list:
@@ -27,6 +27,25 @@ def _resolve(host: str, port: int, timeout_s: float) -> list:
     if "error" in out:
         raise out["error"]
     return out["infos"]
+
+
+class ResolveError(OSError):
+    """``host`` did not resolve (or not within the time-out); the message is the resolver's."""
+
+
+def try_bind(host: str, port: int, timeout_s: float = 10.0) -> None:
+    """Whether a TCP server could listen on ``host:port`` here: resolve ``host`` (bounded by ``timeout_s``
+    seconds) and bind one socket to the first address (``SO_REUSEADDR``, closed at once; port 0 always binds).
+    Raises ResolveError when ``host`` does not resolve in time, OSError when the address cannot be bound (port
+    taken, not an address of this machine)."""
+    try:
+        infos = _resolve(host, port, timeout_s)
+    except OSError as e:  # TimeoutError included
+        raise ResolveError(str(e)) from e
+    family, _, _, _, addr = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind(addr)
 
 
 def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--address") -> None:
@@ -76,17 +95,12 @@ def check_listen(host: object, port: object, option: str) -> tuple[str, int]:
     if not 0 <= port <= 65535:
         raise ValueError(f"{option}.port {port}: outside [0, 65535]")
     try:
-        infos = _resolve(host, port, 10.0)
-    except (OSError, TimeoutError) as e:
+        try_bind(host, port)
+    except ResolveError as e:
         raise ValueError(f"{option}.host {host!r}: cannot resolve it ({e})") from None
-    family, _, _, _, addr = infos[0]
-    with socket.socket(family, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind(addr)
-        except OSError as e:
-            raise ValueError(f"{option}.host / {option}.port {host}:{port}: cannot listen there "
-                             f"({e.strerror or e})") from None
+    except OSError as e:
+        raise ValueError(f"{option}.host / {option}.port {host}:{port}: cannot listen there "
+                         f"({e.strerror or e})") from None
     return host, port
 
 
