@@ -187,40 +187,7 @@ class FenceMixin:
         what = f"{_TYPE_NAME.get(mission_type, mission_type)} download"
         self._check_link(what)
         self._require_mavlink2(what, mission_type)
-        got: dict[int, Any] = {}
-
-        def begin() -> None:
-            self._send(lambda mav: mav.mission_request_list_send(self._sysid, self._compid, mission_type))
-
-        def request(seq: int) -> None:
-            self._send(lambda mav: mav.mission_request_int_send(self._sysid, self._compid, seq, mission_type))
-
-        def resend(last: Any) -> None:
-            begin() if last is None else request(last)
-
-        def on_msg(msg: Any, state: dict) -> bool:
-            t = msg.get_type()
-            if getattr(msg, "mission_type", 0) != mission_type:
-                return False
-            if t == "MISSION_COUNT" and "count" not in state:
-                state["count"] = msg.count
-                if msg.count == 0:
-                    return True
-                state["last"] = 0
-                request(0)
-            elif t in ("MISSION_ITEM_INT", "MISSION_ITEM") and "count" in state and msg.seq == state["last"]:
-                got[msg.seq] = msg
-                if msg.seq + 1 >= state["count"]:
-                    return True
-                state["last"] = msg.seq + 1
-                request(msg.seq + 1)
-            elif t == "MISSION_ACK" and msg.type != M.MAV_MISSION_ACCEPTED:
-                raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
-                                     self._status_text_since(state["start"]))
-            return False
-
-        self._transaction(what, begin, resend, on_msg)
-        self._send(lambda mav: mav.mission_ack_send(self._sysid, self._compid, M.MAV_MISSION_ACCEPTED, mission_type))
+        got = self._download_messages(mission_type, what)
         out = []
         for seq in sorted(got):
             m = got[seq]

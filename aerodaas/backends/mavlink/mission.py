@@ -206,29 +206,28 @@ class MissionMixin:
             self._arrived.clear()
             self._reached_fw.clear()
 
-    def download_mission(self) -> MissionPlan:
-        """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
-        item, answered with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM, whose float latitude/longitude
-        degrees are rounded to the same 1e-7 degree grid; MISSION_ACK). Returns a
-        :class:`~aerodaas.missionfile.MissionPlan` with ``home`` = the vehicle's home and ``items`` numbered from 1
-        (ArduPilot's home item at sequence 0 is left out); turn it into waypoints with
-        :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
-        with an error)."""
-        self._check_link("mission download")
+    def _download_messages(self, mission_type: int, what: str) -> dict[int, Any]:
+        """The mission protocol's download of the items of ``mission_type`` (0 mission, 1 fence, 2 rally; MAVLink
+        common.xml MAV_MISSION_TYPE): MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT per item (answered
+        with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM), then our MISSION_ACK; messages of another
+        mission type are ignored. Returns sequence number -> item message. Raises CommandRefused (a MISSION_ACK
+        with an error, named ``what``), BackendError / LinkLost."""
         got: dict[int, Any] = {}
 
         def begin() -> None:
-            self._send(lambda mav: mav.mission_request_list_send(self._sysid, self._compid, 0))
+            self._send(lambda mav: mav.mission_request_list_send(self._sysid, self._compid, mission_type))
 
         def request(seq: int) -> None:
-            self._send(lambda mav: mav.mission_request_int_send(self._sysid, self._compid, seq, 0))
+            self._send(lambda mav: mav.mission_request_int_send(self._sysid, self._compid, seq, mission_type))
 
         def resend(last: Any) -> None:
             begin() if last is None else request(last)
 
         def on_msg(msg: Any, state: dict) -> bool:
             t = msg.get_type()
-            if t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0 and "count" not in state:
+            if getattr(msg, "mission_type", 0) != mission_type:
+                return False
+            if t == "MISSION_COUNT" and "count" not in state:
                 state["count"] = msg.count
                 if msg.count == 0:
                     return True
@@ -241,12 +240,24 @@ class MissionMixin:
                 state["last"] = msg.seq + 1
                 request(msg.seq + 1)
             elif t == "MISSION_ACK" and msg.type != M.MAV_MISSION_ACCEPTED:
-                raise CommandRefused(self.robot_id, "mission download", _enum_name("MAV_MISSION_RESULT", msg.type),
+                raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
                                      self._status_text_since(state["start"]))
             return False
 
-        self._transaction("mission download", begin, resend, on_msg)
-        self._send(lambda mav: mav.mission_ack_send(self._sysid, self._compid, M.MAV_MISSION_ACCEPTED, 0))
+        self._transaction(what, begin, resend, on_msg)
+        self._send(lambda mav: mav.mission_ack_send(self._sysid, self._compid, M.MAV_MISSION_ACCEPTED, mission_type))
+        return got
+
+    def download_mission(self) -> MissionPlan:
+        """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
+        item, answered with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM, whose float latitude/longitude
+        degrees are rounded to the same 1e-7 degree grid; MISSION_ACK). Returns a
+        :class:`~aerodaas.missionfile.MissionPlan` with ``home`` = the vehicle's home and ``items`` numbered from 1
+        (ArduPilot's home item at sequence 0 is left out); turn it into waypoints with
+        :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
+        with an error)."""
+        self._check_link("mission download")
+        got = self._download_messages(0, "mission download")
         items = []
         first = 1 if self.autopilot == "ardupilot" else 0
         for seq in sorted(got):
