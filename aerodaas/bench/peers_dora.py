@@ -158,10 +158,22 @@ def _unpack(value) -> object:
     return pickle.loads(value.to_numpy(zero_copy_only=False).tobytes())
 
 
-def _camera(node, p: dict, workdir: str) -> None:
+def _send_frame(node, cam, tick: float, t0: float) -> None:
+    """Render one frame (the camera's ``tick``, monotonic seconds; ``t0`` the node's start) and send it on the
+    ``frame`` output: a flat uint8 Arrow array of the (H, W, 3) BGR frame, its timing trace as JSON metadata."""
     import pyarrow as pa
 
-    from aerodaas.bench.pipeline import FPS, HOVER_M, CameraStage, Pacer
+    from aerodaas.bench.pipeline import HOVER_M
+
+    start = time.monotonic()
+    frame, meta = cam.capture((0.0, 0.0, HOVER_M), 0.0, start - t0)
+    ready = time.monotonic()
+    tr = {"tick": tick, "start": start, "ready": ready, "seq": meta.seq, "t": meta.capture_time, "out": ready}
+    node.send_output("frame", pa.array(frame.reshape(-1)), {"trace": json.dumps(tr)})
+
+
+def _camera(node, p: dict, workdir: str) -> None:
+    from aerodaas.bench.pipeline import FPS, CameraStage, Pacer
 
     cam = CameraStage(p["width"], p["height"], p["kind"])
     Path(workdir, "ready_camera").touch()
@@ -178,12 +190,7 @@ def _camera(node, p: dict, workdir: str) -> None:
             until = float(win.read_text() or 0.0)
             pacer.restart()
             continue
-        tick = pacer.wait()
-        start = time.monotonic()
-        frame, meta = cam.capture((0.0, 0.0, HOVER_M), 0.0, start - t0)
-        ready = time.monotonic()
-        tr = {"tick": tick, "start": start, "ready": ready, "seq": meta.seq, "t": meta.capture_time, "out": ready}
-        node.send_output("frame", pa.array(frame.reshape(-1)), {"trace": json.dumps(tr)})
+        _send_frame(node, cam, pacer.wait(), t0)
 
 
 def _rebuild_meta(p: dict, tr: dict):
@@ -252,8 +259,6 @@ def _group(node, p: dict, workdir: str) -> None:
     """The grouped shape's first node: the camera, paced at the pipeline's FPS, and, in the same process, follow ->
     scheduler -> drone on every detection message that comes back (no crossing between them, as in the AeroDaaS
     drone actor). Between frames it waits on its input with ``node.next(timeout)`` until the next frame is due."""
-    import pyarrow as pa
-
     from aerodaas.bench import pipeline as pl
 
     rc = pl.parsed_config(p["width"], p["height"], p["kind"]).robots[0]
@@ -308,12 +313,7 @@ def _group(node, p: dict, workdir: str) -> None:
                     on_dets(ev)
                 if time.monotonic() < pacer.next_t:
                     continue
-            tick = pacer.wait()
-            start = time.monotonic()
-            frame, meta = cam.capture((0.0, 0.0, pl.HOVER_M), 0.0, start - t0)
-            ready = time.monotonic()
-            tr = {"tick": tick, "start": start, "ready": ready, "seq": meta.seq, "t": meta.capture_time, "out": ready}
-            node.send_output("frame", pa.array(frame.reshape(-1)), {"trace": json.dumps(tr)})
+            _send_frame(node, cam, pacer.wait(), t0)
     finally:
         rows.close()
 
