@@ -19,7 +19,7 @@ from aerodaas.runtime.messages import Delivery
 from aerodaas.runtime.specs import ActorSpec
 from aerodaas.runtime.startup_probe import probe
 
-from aerodaas.actors.dataplane import DataPlane
+from aerodaas.actors.dataplane import DataPlane, Settled
 
 
 def restarted_actor() -> bool:
@@ -135,6 +135,11 @@ class ActorBase:
             raise TypeError(f"component {cid!r} ({type(comp).__name__}): {method!r} is not one of its public "
                             f"methods")
         return getattr(comp, name)(*args, **kwargs)
+
+    def settle(self, timeout_s: float) -> Settled:
+        """Wait (at most ``timeout_s`` seconds) until nothing of this actor is in flight (see
+        :meth:`.dataplane.DataPlane.settle`); called on every actor once the drones stopped, before the counts."""
+        return self.host.settle(timeout_s)
 
     def drain(self) -> bool:
         """Finish the work in flight once the drones are done (the analytics scheduler's tasks)."""

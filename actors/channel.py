@@ -475,6 +475,11 @@ class ChannelOutlet:
             self.sent += 1
             return seq
 
+    def busy(self) -> bool:
+        """True while a delivery is in flight (sent, not yet answered by the peer)."""
+        with self._lock:
+            return bool(self._in_flight)
+
     def stats(self) -> dict:
         with self._lock:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,

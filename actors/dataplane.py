@@ -50,6 +50,7 @@ import threading
 import time
 import traceback
 from collections import deque
+from dataclasses import dataclass
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
@@ -60,7 +61,18 @@ import ray
 from aerodaas.actors.cascade import Cascade
 from aerodaas.runtime.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
 
-__all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "DataPlane", "encode_frame", "decode_frame"]
+__all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "DataPlane", "Settled", "encode_frame",
+           "decode_frame"]
+
+
+@dataclass(frozen=True)
+class Settled:
+    """What :meth:`DataPlane.settle` found: ``idle`` — nothing was left in flight when it returned (False: its
+    time ran out); ``waited`` — something was in flight when it was called (a message it then handed on may have
+    given another actor work: settle again until no actor waited)."""
+
+    idle: bool
+    waited: bool
 
 
 def percentiles(values: list[float]) -> dict[str, float]:
@@ -210,6 +222,11 @@ class Component:
     def mailbox_stats(self) -> dict:
         return {"received": self.received, "dropped": self.dropped, "errors": self.errors}
 
+    def busy(self) -> bool:
+        """True while a message is being handled or waits in the mailbox."""
+        with self._m:
+            return self._busy or bool(self._q)
+
 
 class RemoteOutlet:
     """The producer's end of an edge to a component on another host (a Ray actor call to ``DataPlane.deliver``).
@@ -283,6 +300,13 @@ class RemoteOutlet:
                 ref.future().add_done_callback(lambda fut, tok=tok: self._replied(fut, tok))
             return ref
 
+    def busy(self) -> bool:
+        """True while a call is in flight (sent, its reply not yet handed on)."""
+        with self._lock:
+            if self.in_flight:
+                self._reap()
+            return bool(self.in_flight)
+
     def _replied(self, fut: Any, tok: Cascade | None) -> None:
         """The consumer's reply (Ray's callback thread: hand over, never block it); then the cascade's hold on the
         call is released (the replies joined it first)."""
@@ -336,6 +360,8 @@ class DataPlane:
         self.errors: list[dict] = []
         self.first_processed_wall: float | None = None
         self._closed = False
+        self._queued = 0  # pool jobs submitted and not yet finished (see settle)
+        self._queued_lock = threading.Lock()
         self.gc_pauses_ms: list[float] = []
         self._gc_t0 = 0.0
 
@@ -381,13 +407,54 @@ class DataPlane:
     # ------------------------------------------------------------------ delivery
     def submit(self, fn: Callable, *args: Any) -> None:
         if not self._closed:
-            self.pool.submit(self._guard, fn, *args)
+            self._pool_submit(self._guard, fn, *args)
+
+    def _pool_submit(self, job: Callable, *args: Any) -> None:
+        """Queue ``job(*args)`` on the pool, counted in ``_queued`` until it ran (see :meth:`settle`)."""
+        with self._queued_lock:
+            self._queued += 1
+        try:
+            self.pool.submit(self._counted, job, *args)
+        except RuntimeError:  # the pool shut down meanwhile (closing): the job never runs
+            with self._queued_lock:
+                self._queued -= 1
+            raise
+
+    def _counted(self, job: Callable, *args: Any) -> None:
+        try:
+            job(*args)
+        finally:
+            with self._queued_lock:
+                self._queued -= 1
 
     def _guard(self, fn: Callable, *args: Any) -> None:
         try:
             fn(*args)
         except Exception as e:  # pool jobs must never die silently
             self.report_error(getattr(fn, "__qualname__", str(fn)), e)
+
+    def busy(self) -> bool:
+        """True while anything of this actor is in flight: a pool job queued or running, a component handling or
+        holding a message, an outlet's call or channel delivery not yet answered."""
+        with self._queued_lock:
+            if self._queued:
+                return True
+        return (any(c.busy() for c in list(self.components.values()))
+                or any(o.busy() for o in list(self._outlets.values())))
+
+    def settle(self, timeout_s: float, poll_s: float = 0.01) -> Settled:
+        """Wait (at most ``timeout_s`` seconds) until nothing of this actor is in flight (:meth:`busy`), so that
+        its counts include every message it sent or received: a frame still on its way to a consumer when the
+        drones stopped is then counted by that consumer too, not lost between the two reports. The producers must
+        have stopped first (else this may wait the whole ``timeout_s``)."""
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        waited = False
+        while self.busy():
+            waited = True
+            if time.monotonic() >= deadline:
+                return Settled(idle=False, waited=True)
+            time.sleep(poll_s)
+        return Settled(idle=True, waited=waited)
 
     def publish(self, src: str, msgs: list[Message], tok: Cascade | None = None, inline: bool = True) -> None:
         """Hand ``msgs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
@@ -426,7 +493,7 @@ class DataPlane:
         if self._closed:
             tok.done()
         else:
-            self.pool.submit(self._then_done, tok, fn, *args)
+            self._pool_submit(self._then_done, tok, fn, *args)
 
     def _then_done(self, tok: Cascade, fn: Callable, *args: Any) -> None:
         try:

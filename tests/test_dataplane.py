@@ -499,3 +499,37 @@ def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
     assert obj.calls == [1, 3], obj.calls  # one alone, then the three that waited in one call
     assert [m.robot for m in published] == ["d00", "d01", "d02", "d03"] and comp.batched == 3
     assert comp.processed == 4 and comp.dropped == 0
+
+
+def test_settle_waits_for_work_in_flight_and_says_when_it_ran_out_of_time():
+    """What the end of a run relies on to count a frame at both ends (see ``aerodaas.runtime.supervise.
+    settle_actors``): ``DataPlane.settle`` returns only once no pool job, mailbox or outlet holds a message; with
+    a consumer stuck it returns after its bound saying so; once idle, a second call had nothing to wait for."""
+    from aerodaas.actors.dataplane import Component, DataPlane
+    from aerodaas.runtime.messages import Message, Port
+
+    release, entered = threading.Event(), threading.Event()
+
+    class Stuck(Component):
+        def handle(self, port, msg):
+            entered.set()
+            release.wait(30)
+            return None
+
+    host = DataPlane("analytics/edge/stuck#1", "edge", 0, workers=2)
+    comp = host.add(Stuck(host, "stuck#1", buffer=2))
+    try:
+        assert host.settle(0.0).idle and not host.settle(0.0).waited  # nothing yet
+        host.later(None, comp.offer, Port("in"), Message(robot="d00", sim_t=0.0, data=None))
+        host.later(None, comp.offer, Port("in"), Message(robot="d00", sim_t=0.1, data=None))  # waits in the mailbox
+        assert entered.wait(30)
+        stuck = host.settle(0.05)
+        assert stuck.waited and not stuck.idle and host.busy()
+        release.set()
+        done = host.settle(30)
+        assert done.idle and done.waited and comp.received == 2 and comp.dropped == 0
+        again = host.settle(0.0)
+        assert again.idle and not again.waited
+    finally:
+        release.set()
+        host.close()

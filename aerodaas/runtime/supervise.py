@@ -21,7 +21,7 @@ import sys
 import time
 from typing import Any, Callable
 
-__all__ = ["start_actors", "supervise", "collect_stats", "progress_lines", "LOST"]
+__all__ = ["start_actors", "supervise", "collect_stats", "settle_actors", "progress_lines", "LOST"]
 
 #: outcome of a drone whose actor died and could not be restarted
 LOST = "lost"
@@ -271,17 +271,46 @@ def progress_lines(handles: dict, t0: float) -> list[str]:
     return lines
 
 
+def settle_actors(actors: dict, budget_s: float = 20.0, rounds: int = 6) -> bool:
+    """Once the drones stopped: let every actor finish what it has in flight (see ``ActorBase.settle``), in rounds,
+    until a round in which no actor had anything to wait for (a message handed on in one round may give another
+    actor work) — at most ``rounds`` rounds and ``budget_s`` seconds in all. Returns True when the actors were
+    found idle; an actor that is gone or does not answer counts as settled (its loss is reported elsewhere)."""
+    import ray
+
+    deadline = time.monotonic() + budget_s
+    for _ in range(rounds):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return False
+        refs = [h.settle.remote(left) for h in actors.values()]
+        done, _ = ray.wait(refs, num_returns=len(refs), timeout=left + 5)  # one bound for all of them
+        waited = False
+        for ref in done:
+            try:
+                waited = ray.get(ref, timeout=0).waited or waited
+            except Exception:  # noqa: BLE001 - a dead or lost actor: nothing of it to wait for
+                continue
+        if not waited:
+            return True
+    return False
+
+
 def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
     """Per-robot stats (scheduler, cameras, analytics) and per-frame latency from every actor still alive; an
     actor that is gone contributes ``{"error": ...}`` under ``_hosts``. Never raises."""
     import ray
 
+    flow = {hid: h for hid, h in actors.items() if plan.actors[hid].role != "recorder"}  # the data plane's actors
+    settle_actors(flow)  # messages on their way between actors when the drones stopped are counted at both ends
     drains = [h.drain.remote() for hid, h in actors.items() if plan.actors[hid].role == "dispatcher"]
     for ref in drains:  # the analytics schedulers finish their tasks in flight before they report
         try:
             ray.get(ref, timeout=60)
         except Exception:  # noqa: BLE001 - a dispatcher that is gone reports what it can below
             pass
+    if drains:
+        settle_actors(flow)  # the tasks' results, handed on
     refs = {hid: h.stats.remote() for hid, h in actors.items()}
     host_stats: dict[str, dict] = {}
     for hid, ref in refs.items():
