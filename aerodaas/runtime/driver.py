@@ -477,6 +477,9 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
             fly_s = time.monotonic() - t_fly
             _RAISE_OK[0] = False
             stats, latency = collect_stats(handles, actors, plan)
+            if not stats["_settle"]["idle"]:
+                print(f"aerodaas: warning: messages were still in flight between actors after "
+                      f"{stats['_settle']['s']:.0f} s; the counts below may leave them out", file=sys.stderr, flush=True)
             # the flying part alone (actors started and wired, until the mission ended), s: what benchmarks measure
             stats["_timing"] = {"mission_s": round(fly_s, 3), "startup_s": round(t_fly - t_start, 3)}
             stats["_plan"] = {"run": plan.run_id, "actors": {hid: a.name for hid, a in plan.actors.items()},

@@ -302,7 +302,8 @@ def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
     import ray
 
     flow = {hid: h for hid, h in actors.items() if plan.actors[hid].role != "recorder"}  # the data plane's actors
-    settle_actors(flow)  # messages on their way between actors when the drones stopped are counted at both ends
+    t0 = time.monotonic()
+    settled = settle_actors(flow)  # messages on their way between actors when the drones stopped: counted at both ends
     drains = [h.drain.remote() for hid, h in actors.items() if plan.actors[hid].role == "dispatcher"]
     for ref in drains:  # the analytics schedulers finish their tasks in flight before they report
         try:
@@ -310,7 +311,7 @@ def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
         except Exception:  # noqa: BLE001 - a dispatcher that is gone reports what it can below
             pass
     if drains:
-        settle_actors(flow)  # the tasks' results, handed on
+        settled = settle_actors(flow) and settled  # the tasks' results, handed on
     refs = {hid: h.stats.remote() for hid, h in actors.items()}
     host_stats: dict[str, dict] = {}
     for hid, ref in refs.items():
@@ -319,7 +320,9 @@ def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
         except Exception as e:  # noqa: BLE001 - a lost node, a dead actor: what is left is still reported
             host_stats[hid] = {"_host": {"error": f"{type(e).__name__}: {_first_line(e)}"}}
     every = {cid: s for hs in host_stats.values() for cid, s in hs.items() if not cid.startswith("_")}
-    stats: dict[str, Any] = {"_hosts": {h: hs.get("_host", {}) for h, hs in host_stats.items()}}
+    stats: dict[str, Any] = {"_hosts": {h: hs.get("_host", {}) for h, hs in host_stats.items()},
+                             #: False: something was still in flight between actors when the counts were taken
+                             "_settle": {"idle": settled, "s": round(time.monotonic() - t0, 3)}}
     scheds = [hs["_analytics_scheduler"] for hs in host_stats.values() if hs.get("_analytics_scheduler")]
     if len(scheds) == 1:
         stats["analytics_scheduler"] = scheds[0]
