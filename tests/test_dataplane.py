@@ -314,6 +314,7 @@ def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, 
     sent = outlet["sent"]
     analysed = next(a for a in res.stats["d00"]["analytics"] if a["name"] == "spotter")
     assert sent > 10 and outlet["transport"] == transport and outlet["failed"] == 0
+    assert res.stats["_settle"]["idle"]  # nothing was left in flight when the counts were taken
     assert analysed["received"] == sent and analysed["errors"] == 0
     if transport == "channel":
         assert d_copies["channel_copy"] == sent and d_copies["object_store_put"] == 0
