@@ -46,12 +46,14 @@ from __future__ import annotations
 import math
 from collections import deque
 
+import numpy as np
+
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload, register_analytics_scheduler
 from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
 from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
 from aerodaas.schedulers import single_machine_jit
-from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule
+from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule_arrays
 
 __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
 
@@ -179,20 +181,31 @@ class LaPlan(EvPlan):
     def schedule(self, now_ms: float) -> list[tuple[tuple, float]]:
         """The current plan: ``[(key, planned start ms)]`` from when the edge is free, keys as :meth:`_key` (a
         predicted task's is its drone, model and predicted frame time). Sets :attr:`_first_wake`: when to re-plan
-        if the plan starts with a predicted task that has not come. Cached while nothing changed."""
+        if the plan starts with a predicted task that has not come. Cached while nothing changed.
+
+        The DP's instance is built as arrays, one row per task and one column per edge-time level (the variants of
+        :meth:`_variants`, with the same arithmetic), and solved by :func:`.single_machine.max_gain_schedule_arrays`
+        — the same plan as the job tuples gave, at a fraction of the Python work per plan."""
         key = (self._version, self.edge_running is None)
         if self._cache is not None and self._cache[0] == key and now_ms <= self._cache[3]:
             self._first_wake = self._cache[2]
             return self._cache[1]
         self._now = now_ms
         free = self._edge_free_at(now_ms)
-        jobs, who, wakes = [], [], {}
+        # per task: release, deadline, profiled edge ms, benefit, edge cost, cloud fallback; its key
+        rel, dl, em, ben, ec, fb, keys = [], [], [], [], [], [], []
+        w = self.w
         for t in self.pool:
-            fb = max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0
-            for end, proc, g in self._variants(t.model, t.deadline_ms, fb):
-                jobs.append((free, end, proc, g))
-                who.append(self._key(t))
+            p = w[t.model]
+            rel.append(free)
+            dl.append(t.deadline_ms)
+            em.append(p.edge_ms)
+            ben.append(p.benefit)
+            ec.append(p.edge_cost)
+            fb.append(max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0)
+            keys.append(self._key(t))
         self._predicted = {}
+        wakes = {}
         if self.horizon_ms > 0:
             fbs: dict[str, float] = {}
             for at, drone, m, wake, frame in self.arrivals.predict(now_ms, self.horizon_ms):
@@ -201,15 +214,34 @@ class LaPlan(EvPlan):
                 k = (drone, m, frame)
                 wakes[k] = wake
                 self._predicted.setdefault((drone, m), []).append(frame)
-                for end, proc, g in self._variants(m, frame + self.w[m].deadline_ms, fbs[m]):
-                    jobs.append((max(at, free), end, proc, g))
-                    who.append(k)
-        n_python = SOLVES["python"]
-        _, sched = max_gain_schedule(jobs, free_at=free, groups=who)
+                p = w[m]
+                rel.append(max(at, free))
+                dl.append(frame + p.deadline_ms)
+                em.append(p.edge_ms)
+                ben.append(p.benefit)
+                ec.append(p.edge_cost)
+                fb.append(fbs[m])
+                keys.append(k)
+        sched: list[tuple[int, float]] = []
+        levels = len(self._tails)
+        if keys:
+            ids: dict[tuple, int] = {}
+            gid = np.array([ids.setdefault(k, len(ids)) for k in keys], np.int64)  # one group per key (its variants)
+            tails = np.array([tl for tl, _ in self._tails], np.float64)
+            chances = np.array([c for _, c in self._tails], np.float64)
+            em_a = np.array(em, np.float64)
+            n_python = SOLVES["python"]
+            _, sched = max_gain_schedule_arrays(
+                np.repeat(np.array(rel, np.float64), levels),
+                (np.array(dl, np.float64)[:, None] - em_a[:, None] * tails[None, :]).ravel(),
+                np.repeat(em_a * self._edge_mean, levels),
+                (chances[None, :] * np.array(ben, np.float64)[:, None] - np.array(ec, np.float64)[:, None]
+                 - np.array(fb, np.float64)[:, None]).ravel(),
+                np.repeat(gid, levels), len(ids), free_at=free)
+            if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live)
+                self.counters["plans_in_python"] += 1
         self.counters["plans"] += 1
-        if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live at once)
-            self.counters["plans_in_python"] += 1
-        plan = [(who[j], s) for j, s in sched]
+        plan = [(keys[j // levels], s) for j, s in sched]
         self._first_wake = None
         if plan and plan[0][0] in wakes:
             self._first_wake = max(plan[0][1], wakes[plan[0][0]])

@@ -30,7 +30,7 @@ from typing import Sequence
 
 from aerodaas.schedulers import single_machine_jit
 
-__all__ = ["max_gain_schedule"]
+__all__ = ["max_gain_schedule", "max_gain_schedule_arrays"]
 
 _EPS = 1e-9
 
@@ -126,6 +126,39 @@ def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float
         node = npar[node]
     SOLVES["compiled"] += 1
     return float(gain), out[::-1]
+
+
+def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int, *, free_at: float = float("-inf"),
+                             jit: bool = True) -> tuple[float, list[tuple[int, float]]]:
+    """:func:`max_gain_schedule` on flat arrays, with the same answer (ties included): ``release``, ``deadline``,
+    ``proc`` (J,) float64 ms, ``gain`` (J,) float64, ``group`` (J,) int64 in ``[0, ngroups)`` (at most one job of
+    a group is chosen). With the compiled kernel the whole preparation runs compiled too (LAPLAN's decision time:
+    the Python preparation of the job tuples cost about twice the DP itself); without it, or above 64 groups live
+    at once, the job tuples are built and :func:`max_gain_schedule` runs. Raises ValueError if the jobs of one group
+    differ in release or processing time."""
+    import numpy as np
+
+    if jit and single_machine_jit.available():
+        gains = np.ascontiguousarray(gain, np.float64)
+        code, rel, p, bit, vstart, latest, best = single_machine_jit.prepare(
+            np.ascontiguousarray(release, np.float64), np.ascontiguousarray(deadline, np.float64),
+            np.ascontiguousarray(proc, np.float64), gains, np.ascontiguousarray(group, np.int64), int(ngroups),
+            float(free_at), _EPS)
+        if code == 1:
+            raise ValueError("the jobs of one group must share their release and processing time")
+        if code == 0:
+            if rel.shape[0] == 0:
+                return 0.0, []
+            total, nj, nt, npar, node = single_machine_jit.solve(rel, p, bit, vstart, latest, best, gains, _EPS)
+            out = []
+            while node >= 0:
+                out.append((int(nj[node]), float(nt[node])))
+                node = npar[node]
+            SOLVES["compiled"] += 1
+            return float(total), out[::-1]
+    jobs = list(zip(np.asarray(release, float).tolist(), np.asarray(deadline, float).tolist(),
+                    np.asarray(proc, float).tolist(), np.asarray(gain, float).tolist()))
+    return max_gain_schedule(jobs, free_at=free_at, groups=np.asarray(group).tolist(), jit=False)
 
 
 def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free_at: float = float("-inf"),

@@ -20,29 +20,31 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["MAX_GROUPS", "available", "solve", "warm_up"]
+__all__ = ["MAX_GROUPS", "available", "prepare", "solve", "warm_up"]
 
 #: the most task groups a uint64 mask holds
 MAX_GROUPS = 64
 
 _kernel = None  # the compiled kernel once loaded
+_prepare = None  # the compiled array builder once loaded
 _state = {"tried": False, "error": None}
 
 
 def available() -> bool:
     """True if the compiled kernel can be used (compiling it on the first call); False if numba is missing or
     ``AERODAAS_NO_JIT`` is set (then :func:`solve` must not be called)."""
-    global _kernel
+    global _kernel, _prepare
     if os.environ.get("AERODAAS_NO_JIT"):
         return False
     if not _state["tried"]:
         _state["tried"] = True
         try:
-            from aerodaas.schedulers.single_machine_kernel import kernel
+            from aerodaas.schedulers.single_machine_kernel import kernel, prepare
         except ImportError as e:  # numba not installed: the pure-Python loop is used
             _state["error"] = e
         else:
             _kernel = kernel
+            _prepare = prepare
     return _kernel is not None
 
 
@@ -54,6 +56,14 @@ def solve(rel, proc, bit, vstart, latest, best, gains, eps: float):
     return _kernel(rel, proc, bit, vstart, latest, best, gains, eps)
 
 
+def prepare(r, d, p, w, gid, ngroups: int, free_at: float, eps: float):
+    """Build :func:`solve`'s arrays from flat job arrays (``r``/``d``/``p``/``w`` (J,) float64 ms and gain, ``gid``
+    (J,) int64 group in ``[0, ngroups)``), compiled; see ``single_machine_kernel.prepare``. Returns ``(code, rel,
+    proc, bit, vstart, latest, best)``, code 0 ok, 1 a group's jobs differ in release or processing time, 2 more
+    than :data:`MAX_GROUPS` groups live at once. Only after :func:`available` returned True."""
+    return _prepare(r, d, p, w, gid, ngroups, free_at, eps, MAX_GROUPS)
+
+
 def warm_up() -> bool:
     """Compile (or load from numba's cache) the kernel now, on a one-job instance, so that the first plan of a run
     does not pay for it (seconds). Returns :func:`available`."""
@@ -63,4 +73,5 @@ def warm_up() -> bool:
 
     solve(np.zeros(1), np.ones(1), np.ones(1, np.uint64), np.array([0, 1], np.int64), np.zeros(1),
           np.zeros(1, np.int64), np.ones(1), 1e-9)
+    prepare(np.zeros(1), np.ones(1), np.ones(1), np.ones(1), np.zeros(1, np.int64), 1, 0.0, 1e-9)
     return True

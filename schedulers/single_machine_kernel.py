@@ -11,7 +11,7 @@ import heapq
 import numba
 import numpy as np
 
-__all__ = ["kernel"]
+__all__ = ["kernel", "prepare"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -203,3 +203,97 @@ def kernel(rel, proc, bit, vstart, latest, best, gains, eps):
                         heapq.heappush(heap, (ce[c], np.int64(seq), mask | cb[c], g + cg[c], np.int64(nn)))
                         nn += 1
     return best_gain, nj[:nn], nt[:nn], npar[:nn], best_node
+
+
+@numba.njit(cache=True, nogil=True)
+def prepare(r, d, p, w, gid, ngroups, free_at, eps, max_groups):
+    """The kernel's arrays from flat job arrays, exactly as ``single_machine._solve_compiled`` builds them from its
+    job tuples: jobs ``j`` (release ``r``, deadline ``d``, processing ``p``, gain ``w``, group ``gid`` in
+    ``[0, ngroups)``) with ``w > 0`` that fit ``max(r, free_at) + p <= d + eps``; groups in the order of their first
+    such job, stably sorted by release; a group's variants by (latest start, job index) with the suffix-best job;
+    bits reused over time as ``single_machine._bits``. Returns ``(code, rel, proc, bit, vstart, latest, best)``:
+    code 0 ok, 1 the jobs of a group differ in release or processing time, 2 more than ``max_groups`` bits."""
+    J = r.shape[0]
+    first = np.full(ngroups, J, np.int64)
+    count = np.zeros(ngroups, np.int64)
+    ok = np.zeros(J, np.bool_)
+    for j in range(J):
+        if w[j] > 0 and max(r[j], free_at) + p[j] <= d[j] + eps:
+            ok[j] = True
+            g = gid[j]
+            if first[g] == J:
+                first[g] = j
+            elif r[j] != r[first[g]] or p[j] != p[first[g]]:
+                return 1, np.empty(0), np.empty(0), np.empty(0, np.uint64), np.zeros(1, np.int64), np.empty(0), \
+                    np.empty(0, np.int64)
+            count[g] += 1
+    present = np.empty(ngroups, np.int64)
+    G = 0
+    for g in range(ngroups):
+        if first[g] < J:
+            present[G] = g
+            G += 1
+    present = present[:G]
+    # members order (first qualifying job), then a stable sort by release
+    present = present[np.argsort(first[present], kind="mergesort")]
+    grel = np.empty(G, np.float64)
+    for i in range(G):
+        grel[i] = max(r[first[present[i]]], free_at)
+    order = present[np.argsort(grel, kind="mergesort")]
+    # the jobs of each group, in job order
+    off = np.zeros(ngroups + 1, np.int64)
+    for g in range(ngroups):
+        off[g + 1] = off[g] + count[g]
+    fill = off[:-1].copy()
+    members = np.empty(off[ngroups], np.int64)
+    for j in range(J):
+        if ok[j]:
+            g = gid[j]
+            members[fill[g]] = j
+            fill[g] += 1
+    rel = np.empty(G, np.float64)
+    proc = np.empty(G, np.float64)
+    bit = np.empty(G, np.uint64)
+    vstart = np.empty(G + 1, np.int64)
+    latest = np.empty(off[ngroups], np.float64)
+    best = np.empty(off[ngroups], np.int64)
+    maxproc = -np.inf
+    for i in range(G):
+        if p[first[order[i]]] > maxproc:
+            maxproc = p[first[order[i]]]
+    free_after = np.empty(max_groups, np.float64)
+    nbits = 0
+    v = 0
+    for i in range(G):
+        g = order[i]
+        j0 = first[g]
+        pg = p[j0]
+        rel[i] = max(r[j0], free_at)
+        proc[i] = pg
+        js = members[off[g]:off[g + 1]]
+        lat = np.empty(js.shape[0], np.float64)
+        for k in range(js.shape[0]):
+            lat[k] = d[js[k]] - pg
+        srt = np.argsort(lat, kind="mergesort")  # ties: job order (js is ascending)
+        vstart[i] = v
+        for k in range(js.shape[0]):
+            latest[v + k] = lat[srt[k]]
+            best[v + k] = js[srt[k]]
+        for k in range(js.shape[0] - 2, -1, -1):  # suffix argmax of the gain (a later variant only if strictly better)
+            if w[best[v + k + 1]] > w[best[v + k]]:
+                best[v + k] = best[v + k + 1]
+        b = -1
+        for k in range(nbits):
+            if free_after[k] < rel[i]:
+                b = k
+                break
+        if b < 0:
+            if nbits == max_groups:
+                return 2, rel, proc, bit, vstart, latest, best
+            b = nbits
+            nbits += 1
+        free_after[b] = latest[v + js.shape[0] - 1] + maxproc + 1.0
+        bit[i] = np.uint64(1) << np.uint64(b)
+        v += js.shape[0]
+    vstart[G] = v
+    return 0, rel, proc, bit, vstart, latest, best

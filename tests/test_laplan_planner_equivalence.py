@@ -19,7 +19,7 @@ from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers import analytics_laplan, single_machine_jit
 from aerodaas.schedulers.analytics_base import Workload, make_analytics_scheduler
 from aerodaas.schedulers.dispatch.emulation import Jitter
-from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule
+from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule, max_gain_schedule_arrays
 
 from .conftest import DATA_DIR
 from .reference_max_gain_schedule import max_gain_schedule as old_max_gain_schedule
@@ -32,7 +32,18 @@ def _python(jobs, *, free_at=float("-inf"), groups=None):
     return max_gain_schedule(jobs, free_at=free_at, groups=groups, jit=False)
 
 
-SOLVERS = {"compiled": max_gain_schedule, "python": _python}
+def _arrays(jobs, *, free_at=float("-inf"), groups=None):
+    """The flat-array entry point LAPLAN uses, its groups numbered in order of first appearance."""
+    import numpy as np
+
+    ids: dict = {}
+    gid = [ids.setdefault(g if groups is not None else j, len(ids)) for j, g in enumerate(groups or [None] * len(jobs))]
+    cols = list(zip(*jobs)) if jobs else [(), (), (), ()]
+    return max_gain_schedule_arrays(*(np.array(c, np.float64) for c in cols), np.array(gid, np.int64), len(ids),
+                                    free_at=free_at)
+
+
+SOLVERS = {"compiled": max_gain_schedule, "python": _python, "arrays": _arrays}
 
 
 def test_the_compiled_kernel_is_available():
@@ -69,7 +80,7 @@ def test_the_solver_returns_the_old_schedule_on_random_instances_with_ties(solve
     for _ in range(3):                                # 300 groups over 40 s: the compiled kernel reuses bits
         jobs, free_at, groups = _random_instance(rng, 300, span_ms=40_000.0)
         assert f(jobs, free_at=free_at, groups=groups) == old_max_gain_schedule(jobs, free_at=free_at, groups=groups)
-    if solver == "compiled":
+    if solver in ("compiled", "arrays"):
         assert SOLVES["python"] - before["python"] >= 1 and SOLVES["compiled"] - before["compiled"] > 200
 
 
@@ -94,10 +105,13 @@ def test_laplan_decides_exactly_as_with_the_old_planner(trace, monkeypatch):
         tasks = fleet_tasks(rows, w)["edge00"]
         runs = {}
         for name, f in [("old", old_max_gain_schedule), *SOLVERS.items()]:
-            def counted(*a, _f=f, _n=name, **k):
+            def counted(release, deadline, proc, gain, group, ngroups, *, free_at, _f=f, _n=name):
                 calls.append(_n)
-                return _f(*a, **k)
-            monkeypatch.setattr(analytics_laplan, "max_gain_schedule", counted)
+                if _n == "arrays":  # what LAPLAN calls
+                    return max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups, free_at=free_at)
+                jobs = list(zip(release.tolist(), deadline.tolist(), proc.tolist(), gain.tolist()))
+                return _f(jobs, free_at=free_at, groups=group.tolist())
+            monkeypatch.setattr(analytics_laplan, "max_gain_schedule_arrays", counted)
             runs[name] = _run_laplan(w, tasks, seed)
         log, starts, sends, utility, counters, _ = runs["old"]
         assert runs["compiled"][5] == 0 and counters["plans"] > 50   # every plan of this run ran compiled
@@ -107,4 +121,4 @@ def test_laplan_decides_exactly_as_with_the_old_planner(trace, monkeypatch):
             assert runs[name][2] == sends, f"{trace} seed {seed}: {name} solver: other cloud sends"
             assert runs[name][0] == log, f"{trace} seed {seed}: {name} solver: another decision log"
             assert runs[name][3:5] == (utility, counters)
-    assert calls.count("compiled") == calls.count("old") > 100   # every plan went through the solver under test
+    assert calls.count("compiled") == calls.count("arrays") == calls.count("old") > 100   # every plan went through the solver under test

@@ -160,6 +160,8 @@ class AnalyticsDispatcher:
         self.policy_errors: list[str] = []
         self.decision_us = Samples(seed=sample_seed)
         self.decision_by_call: dict[str, Samples] = defaultdict(lambda: Samples(cap=50_000, seed=sample_seed))
+        #: policy call name -> CPU ns spent in it (thread time; its wall time also counts waiting for a core)
+        self.policy_cpu_ns: dict[str, int] = defaultdict(int)
         self.edge_hold_error = Samples(seed=sample_seed)
         self.arrival_lateness = Samples(seed=sample_seed)
         self.poll_lateness = Samples(seed=sample_seed)
@@ -246,9 +248,11 @@ class AnalyticsDispatcher:
 
     def _policy(self, name: str, fn, *args):
         t0 = time.perf_counter_ns()
+        c0 = time.thread_time_ns()
         with self._lock:
             out = fn(*args)
         us = (time.perf_counter_ns() - t0) / 1000.0
+        self.policy_cpu_ns[name] += time.thread_time_ns() - c0  # CPU of this thread: the policy's own work
         if name in self.DECISION_CALLS:
             self.decision_us.add(us)
         self.decision_by_call[name].add(us)
@@ -554,6 +558,7 @@ class AnalyticsDispatcher:
             "edge_utilisation": self.edge_busy_ms / dur,
             "decision_us": {**self.decision_us.summary(),
                             "by_call": {k: v.summary() for k, v in self.decision_by_call.items()}},
+            "policy_cpu_s": {k: v / 1e9 for k, v in self.policy_cpu_ns.items()},
             "timing_ms": {"edge_hold_error": self.edge_hold_error.summary(),
                           "arrival_lateness": self.arrival_lateness.summary(),
                           "poll_lateness": self.poll_lateness.summary()},
