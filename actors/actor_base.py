@@ -61,6 +61,7 @@ class ActorBase:
             spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
         self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers)
+        self.host.restart_hold_s = float(spec.restart_hold_s)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None

@@ -218,8 +218,8 @@ class ActorAssembly:
                             if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
                                 cam["next_t"] = b.t + 1.0 / cam["fps"]
                             cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
-                if tok is not None:
-                    tok.wait()
+                if tok is not None:  # a frame for a consumer that Ray restarts waits up to restart_hold_s for it
+                    tok.wait(max(120.0, self.host.restart_hold_s + 60.0))
                 now = time.monotonic()
                 finished = []
                 for d in active:

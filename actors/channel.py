@@ -306,18 +306,24 @@ class ChannelOutlet:
     this outlet; replies are handed to ``on_reply`` (this actor's components) from the outlet's reader thread. If
     the peer dies, the deliveries in flight are counted as ``failed`` and the outlet reconnects (at most every
     ``retry_s`` seconds) once the peer's restarted actor serves its address again; meanwhile sends are dropped and
-    counted as failed. :meth:`connect` raises OSError when nobody serves the address (another machine: use Ray)."""
+    counted as failed — except a lock-step one (its cascade holds the simulated clock): it waits up to ``hold_s``
+    seconds for the restarted peer (counted in ``held``), so that simulated time does not run on without the
+    consumer while Ray restarts it; if the peer is not back by then, the outlet stops waiting (``gave_up``) until it
+    reconnects. :meth:`connect` raises OSError when nobody serves the address (another machine: use Ray)."""
 
     transport = "channel"
 
     def __init__(self, address: str, key: bytes, cid: str, port: Port, buffer: int, reply_to: str | None,
                  on_reply: Callable[[list], None], copies: Any = None, max_slots: int | None = None,
-                 retry_s: float = 0.5) -> None:
+                 retry_s: float = 0.5, hold_s: float = 60.0) -> None:
         self.address, self._key, self.cid, self.port = address, key, cid, port
         self.buffer = max(1, int(buffer))
         self.max_slots = max_slots or min(16, self.buffer + 3)
         self.reply_to, self.on_reply, self.copies = reply_to, on_reply, copies
         self.retry_s = retry_s
+        self.hold_s = max(0.0, float(hold_s))
+        self.held = 0  # lock-step sends that waited for the peer's restart
+        self.gave_up = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
         self._lock = threading.Lock()
         self._slots: dict[str, _Slot] = {}
         #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None)
@@ -404,10 +410,31 @@ class ChannelOutlet:
         try:
             self.connect()
             self.reconnects += 1
+            self.gave_up = False
             return True
         except Exception:  # noqa: BLE001 - the peer is restarting: try again later
             self._next_try = time.monotonic() + self.retry_s
             return False
+
+    def _await_peer(self) -> None:
+        """A lock-step send found the peer down: wait (at most ``hold_s`` seconds, retrying every ``retry_s``) until
+        its restarted actor serves the channel again. The cascade of the message waiting keeps the clock still."""
+        deadline = time.monotonic() + self.hold_s
+        with self._lock:
+            if self._conn is not None or self.closed or self.gave_up:
+                return
+            self.held += 1
+        while True:
+            with self._lock:
+                if self.closed or self._conn is not None:
+                    return
+                self._next_try = 0.0
+                if self._ensure():
+                    return
+                if time.monotonic() >= deadline:
+                    self.gave_up = True
+                    return
+            time.sleep(min(self.retry_s, max(0.0, deadline - time.monotonic())))
 
     # ------------------------------------------------------------------ sending
     def _slot(self, nbytes: int) -> _Slot | None:
@@ -434,6 +461,8 @@ class ChannelOutlet:
         for being over ``buffer`` (the clock bounds what is in flight); the cascade stays open until the receiver
         answered that its own cascade for it is done, and the replies in that answer were handed on."""
         tok = msg.tok
+        if tok is not None and self._conn is None:
+            self._await_peer()
         with self._lock:
             if not self._ensure():
                 self.failed += 1
@@ -484,7 +513,8 @@ class ChannelOutlet:
         with self._lock:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
                     "dropped": self.dropped, "failed": self.failed, "slots": len(self._slots),
-                    "inline_frames": self.inline_frames, "reconnects": self.reconnects}
+                    "inline_frames": self.inline_frames, "reconnects": self.reconnects, "held": self.held,
+                    "gave_up": self.gave_up}
 
     def close(self) -> None:
         """Close the channel and unlink this outlet's slots (a receiver still holding a frame keeps its mapping)."""

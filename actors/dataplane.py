@@ -354,6 +354,8 @@ class DataPlane:
         #: the run's channel key (bytes) when actors on this machine talk through same-node channels
         #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``)
         self.channel_key: bytes | None = None
+        #: lock-step: how long a frame for a consumer actor that died waits for its restart (ActorSpec.restart_hold_s)
+        self.restart_hold_s = 60.0
         self._tl = threading.local()  # .reply: (host id of the caller, [Delivery]) while a deliver runs
         self.recorder = recorder
         self.copies = FrameCopies()
@@ -556,7 +558,7 @@ class DataPlane:
         try:
             return ChannelOutlet(channel_address(self.channel_key, hid), self.channel_key, cid, port, buffer,
                                  reply_to=self.host_id, on_reply=lambda items: self.on_reply(items, inline=True),
-                                 copies=self.copies)
+                                 copies=self.copies, hold_s=self.restart_hold_s)
         except Exception:  # noqa: BLE001 - not on this machine (or not serving): Ray calls
             return None
 

@@ -208,3 +208,47 @@ def test_a_lockstep_delivery_holds_the_senders_cascade_until_the_receivers_casca
     finally:
         out.close()
         srv.close()
+
+
+def test_a_lockstep_send_waits_for_the_restarted_receiver_and_gives_up_after_its_hold(address):
+    """The receiving actor dies and Ray restarts it: a frame of a lock-step cascade waits for the new server (its
+    cascade keeps the clock still) instead of failing; if nobody comes back within ``hold_s`` it fails, and later
+    ones fail at once (no second wait) until the outlet reconnects."""
+    from aerodaas.actors.cascade import Cascade
+
+    srv = ChannelServer(address, KEY, Receiver())
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None,
+                        retry_s=0.02, hold_s=30.0)
+    sent: list = []
+    try:
+        srv.close()  # the receiver died
+        assert _wait(lambda: out._conn is None)
+        f = _frame(1, (8, 8, 3))
+        f.tok = Cascade()
+        t = threading.Thread(target=lambda: sent.append(out.send(f)))
+        t.start()
+        assert _wait(lambda: out.held == 1)  # waiting, not failed
+        assert out.failed == 0 and not sent
+        got: list = []
+
+        def deliver(d: Delivery, answer=None):  # the restarted actor: answers the lock-step delivery at once
+            got.append(d.msg.sim_t)
+            answer([])
+            return None
+
+        srv = ChannelServer(address, KEY, deliver)  # restarted at the same address
+        t.join(30)
+        assert sent and sent[0] is not None and _wait(lambda: len(got) == 1) and _wait(lambda: not out.busy())
+        assert out.failed == 0 and out.reconnects == 1 and not out.gave_up
+        srv.close()
+        assert _wait(lambda: out._conn is None)
+        out.hold_s = 0.05  # nobody comes back this time
+        g = _frame(2, (8, 8, 3))
+        g.tok = Cascade()
+        assert out.send(g) is None and out.gave_up and out.failed == 1
+        h = _frame(3, (8, 8, 3))
+        h.tok = Cascade()
+        assert out.send(h) is None and out.held == 2 and out.failed == 2  # failed at once: no second wait
+    finally:
+        out.close()
+        srv.close()

@@ -117,7 +117,8 @@ class ActorSpec:
     (None: the run is not recorded); ``world``: the :class:`~aerodaas.config.WorldConfig` as a dict (drone actors:
     simulated cameras render it); ``robots``, ``analytics``: its drones and analytics instances;
     ``mavlink_links``: endpoint -> robot ids sharing one MAVLink socket in this actor; ``analytics_scheduler``: a
-    dispatcher actor's scheduler (set by the driver)."""
+    dispatcher actor's scheduler (set by the driver); ``restart_hold_s``: in lock-step, how long a frame for a
+    consumer actor that died waits for Ray to restart it (the environment's ``actor_restart_timeout_s``), seconds."""
 
     role: Role
     sim: dict = field(default_factory=dict)
@@ -129,3 +130,4 @@ class ActorSpec:
     analytics: list[AnalyticsSpec] = field(default_factory=list)
     mavlink_links: dict[str, list[str]] = field(default_factory=dict)
     analytics_scheduler: AnalyticsSchedulerSpec | None = None
+    restart_hold_s: float = 60.0
