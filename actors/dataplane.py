@@ -238,7 +238,8 @@ class RemoteOutlet:
 
     def __init__(self, handle: Any, cid: str, port: Port, buffer: int, jpeg: bool,
                  copies: FrameCopies | None = None, reply_to: str | None = None,
-                 on_reply: Callable[[list], None] | None = None) -> None:
+                 on_reply: Callable[[list], None] | None = None, hold_s: float = 60.0,
+                 retry_s: float = 0.2) -> None:
         self.handle, self.cid, self.port = handle, cid, port
         #: this host's id: the consumer returns the outputs bound for this host in the call's reply (one actor call
         #: per round trip instead of two); ``on_reply`` hands them to the local components
@@ -250,7 +251,14 @@ class RemoteOutlet:
         self.sent = 0
         self.dropped = 0
         self.failed = 0  # calls that ended in an error (the consumer's actor died or restarted meanwhile)
-        self._lock = threading.Lock()
+        #: lock-step: a call refused because the consumer's actor is restarting is sent again every ``retry_s``
+        #: for up to ``hold_s`` seconds (``held`` counts the retries), its cascade keeping the clock still meanwhile
+        self.hold_s, self.retry_s = max(0.0, float(hold_s)), retry_s
+        self.held = 0
+        self._retried: set = set()  # refs of calls that were sent again: not counted as failed when reaped
+        self._retrying = 0  # retries waiting for their timer
+        #: reentrant: a call's future that is already done runs its callback (which takes the lock) at once
+        self._lock = threading.RLock()
 
     def _reap(self) -> None:
         """Forget finished calls; count those that failed (frames in flight when the consumer died)."""
@@ -259,7 +267,10 @@ class RemoteOutlet:
             try:
                 ray.get(ref, timeout=0)
             except Exception:  # noqa: BLE001 - ActorDiedError, ActorUnavailableError, the consumer's own error
-                self.failed += 1
+                if ref in self._retried:
+                    self._retried.discard(ref)
+                else:
+                    self.failed += 1
 
     def send(self, msg: Message) -> Any:
         """Send one message; returns the call's ObjectRef or None if dropped. A frame is put into the object store
@@ -291,28 +302,50 @@ class RemoteOutlet:
             else:
                 wire = msg.to_wire()
             d = Delivery(self.cid, self.port, wire, cascade=tok is not None, reply_to=self.reply_to)
-            ref = self.handle.deliver.remote(d)
             self.sent += 1
-            self.in_flight.append(ref)
             if tok is not None:
                 tok.add()
-            if self.on_reply is not None or tok is not None:
-                ref.future().add_done_callback(lambda fut, tok=tok: self._replied(fut, tok))
-            return ref
+            return self._submit(d, tok, time.monotonic() + self.hold_s)
+
+    def _submit(self, d: Delivery, tok: Cascade | None, hold_until: float) -> Any:
+        """Caller holds ``_lock``: one ``deliver`` call; its reply handled by :meth:`_replied`."""
+        ref = self.handle.deliver.remote(d)
+        self.in_flight.append(ref)
+        if self.on_reply is not None or tok is not None:
+            ref.future().add_done_callback(lambda fut: self._replied(fut, tok, d, ref, hold_until))
+        return ref
+
+    def _resubmit(self, d: Delivery, tok: Cascade, hold_until: float) -> None:
+        with self._lock:
+            self._retrying -= 1
+            self._submit(d, tok, hold_until)
 
     def busy(self) -> bool:
         """True while a call is in flight (sent, its reply not yet handed on)."""
         with self._lock:
             if self.in_flight:
                 self._reap()
-            return bool(self.in_flight)
+            return bool(self.in_flight) or self._retrying > 0
 
-    def _replied(self, fut: Any, tok: Cascade | None) -> None:
+    def _replied(self, fut: Any, tok: Cascade | None, d: Delivery, ref: Any, hold_until: float) -> None:
         """The consumer's reply (Ray's callback thread: hand over, never block it); then the cascade's hold on the
-        call is released (the replies joined it first)."""
+        call is released (the replies joined it first). A lock-step call refused because the consumer's actor is
+        restarting (``ActorUnavailableError``) is sent again after ``retry_s`` while its ``hold_s`` lasts, the
+        cascade still held by the retry."""
         try:
             try:
                 out = fut.result()
+            except ray.exceptions.ActorUnavailableError:
+                out = None
+                if tok is not None and time.monotonic() < hold_until:
+                    with self._lock:
+                        self._retried.add(ref)
+                        self.held += 1
+                        self._retrying += 1
+                    timer = threading.Timer(self.retry_s, self._resubmit, (d, tok, hold_until))
+                    timer.daemon = True
+                    timer.start()
+                    tok = None  # the retry holds the cascade now
             except Exception:  # noqa: BLE001 - counted as failed when reaped
                 out = None
             if out and self.on_reply is not None:
@@ -329,7 +362,7 @@ class RemoteOutlet:
             if self.in_flight:
                 self._reap()
         return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
-                "dropped": self.dropped, "failed": self.failed}
+                "dropped": self.dropped, "failed": self.failed, "held": self.held}
 
 
 class DataPlane:
@@ -544,7 +577,8 @@ class DataPlane:
             o = self._channel_outlet(hid, cid, port, buffer)
             if o is None:
                 o = RemoteOutlet(self.peer(hid), cid, port, buffer, jpeg=self.tiers.get(hid, self.tier) != self.tier,
-                                 copies=self.copies, reply_to=self.host_id, on_reply=self.on_reply)
+                                 copies=self.copies, reply_to=self.host_id, on_reply=self.on_reply,
+                                 hold_s=self.restart_hold_s)
             self._outlets[key] = o
         return o
 
