@@ -288,6 +288,7 @@ class ActorAssembly:
                         "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
                         "first_processed_wall": self.host.first_processed_wall,
                         "frame_copies": self.host.copies.snapshot(),
+                        "lost_consumers": self.host.lost_consumers(),
                         "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])]),
                         # a host without the recorder (cloud): messages it could not hand to the edge recorder
                         "record_send_errors": list(getattr(self.recorder, "send_errors", []))[-5:]}

@@ -308,7 +308,7 @@ class ChannelOutlet:
     ``retry_s`` seconds) once the peer's restarted actor serves its address again; meanwhile sends are dropped and
     counted as failed — except a lock-step one (its cascade holds the simulated clock): it waits up to ``hold_s``
     seconds for the restarted peer (counted in ``held``), so that simulated time does not run on without the
-    consumer while Ray restarts it; if the peer is not back by then, the outlet stops waiting (``gave_up``) until it
+    consumer while Ray restarts it; if the peer is not back by then, the outlet stops waiting and reports its consumer ``lost`` until it
     reconnects. :meth:`connect` raises OSError when nobody serves the address (another machine: use Ray)."""
 
     transport = "channel"
@@ -323,7 +323,7 @@ class ChannelOutlet:
         self.retry_s = retry_s
         self.hold_s = max(0.0, float(hold_s))
         self.held = 0  # lock-step sends that waited for the peer's restart
-        self.gave_up = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
+        self.lost = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
         self._lock = threading.Lock()
         self._slots: dict[str, _Slot] = {}
         #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None)
@@ -410,7 +410,7 @@ class ChannelOutlet:
         try:
             self.connect()
             self.reconnects += 1
-            self.gave_up = False
+            self.lost = False
             return True
         except Exception:  # noqa: BLE001 - the peer is restarting: try again later
             self._next_try = time.monotonic() + self.retry_s
@@ -421,7 +421,7 @@ class ChannelOutlet:
         its restarted actor serves the channel again. The cascade of the message waiting keeps the clock still."""
         deadline = time.monotonic() + self.hold_s
         with self._lock:
-            if self._conn is not None or self.closed or self.gave_up:
+            if self._conn is not None or self.closed or self.lost:
                 return
             self.held += 1
         while True:
@@ -432,7 +432,7 @@ class ChannelOutlet:
                 if self._ensure():
                     return
                 if time.monotonic() >= deadline:
-                    self.gave_up = True
+                    self.lost = True
                     return
             time.sleep(min(self.retry_s, max(0.0, deadline - time.monotonic())))
 
@@ -514,7 +514,7 @@ class ChannelOutlet:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
                     "dropped": self.dropped, "failed": self.failed, "slots": len(self._slots),
                     "inline_frames": self.inline_frames, "reconnects": self.reconnects, "held": self.held,
-                    "gave_up": self.gave_up}
+                    "lost": self.lost}
 
     def close(self) -> None:
         """Close the channel and unlink this outlet's slots (a receiver still holding a frame keeps its mapping)."""

@@ -255,6 +255,7 @@ class RemoteOutlet:
         #: for up to ``hold_s`` seconds (``held`` counts the retries), its cascade keeping the clock still meanwhile
         self.hold_s, self.retry_s = max(0.0, float(hold_s)), retry_s
         self.held = 0
+        self.lost = False  # a lock-step call's hold ran out with the consumer still restarting (see lost_consumers)
         self._retried: set = set()  # refs of calls that were sent again: not counted as failed when reaped
         self._retrying = 0  # retries waiting for their timer
         #: reentrant: a call's future that is already done runs its callback (which takes the lock) at once
@@ -337,7 +338,9 @@ class RemoteOutlet:
                 out = fut.result()
             except ray.exceptions.ActorUnavailableError:
                 out = None
-                if tok is not None and time.monotonic() < hold_until:
+                if tok is not None and time.monotonic() >= hold_until:
+                    self.lost = True
+                elif tok is not None:
                     with self._lock:
                         self._retried.add(ref)
                         self.held += 1
@@ -346,8 +349,14 @@ class RemoteOutlet:
                     timer.daemon = True
                     timer.start()
                     tok = None  # the retry holds the cascade now
+            except ray.exceptions.ActorDiedError:  # gone for good (Ray restarts it no more): counted failed when reaped
+                out = None
+                if tok is not None:
+                    self.lost = True
             except Exception:  # noqa: BLE001 - counted as failed when reaped
                 out = None
+            else:
+                self.lost = False  # answered: the consumer is back
             if out and self.on_reply is not None:
                 if tok is not None:
                     for item in out:
@@ -362,7 +371,7 @@ class RemoteOutlet:
             if self.in_flight:
                 self._reap()
         return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
-                "dropped": self.dropped, "failed": self.failed, "held": self.held}
+                "dropped": self.dropped, "failed": self.failed, "held": self.held, "lost": self.lost}
 
 
 class DataPlane:
@@ -671,6 +680,11 @@ class DataPlane:
 
             self.first_processed_wall = time.time()
             probe("first_processed")
+
+    def lost_consumers(self) -> list[str]:
+        """Ids of the consumers this actor's outlets gave up on: under lock-step their actor died and was not
+        answering again within ``restart_hold_s`` (the run reports them lost)."""
+        return sorted({str(o.cid) for o in list(self._outlets.values()) if getattr(o, "lost", False)})
 
     def outlet_stats(self, src: str) -> list[dict]:
         return [o.stats() for (s, _, _), o in self._outlets.items() if s == src]

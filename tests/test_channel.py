@@ -239,13 +239,13 @@ def test_a_lockstep_send_waits_for_the_restarted_receiver_and_gives_up_after_its
         srv = ChannelServer(address, KEY, deliver)  # restarted at the same address
         t.join(30)
         assert sent and sent[0] is not None and _wait(lambda: len(got) == 1) and _wait(lambda: not out.busy())
-        assert out.failed == 0 and out.reconnects == 1 and not out.gave_up
+        assert out.failed == 0 and out.reconnects == 1 and not out.lost
         srv.close()
         assert _wait(lambda: out._conn is None)
         out.hold_s = 0.05  # nobody comes back this time
         g = _frame(2, (8, 8, 3))
         g.tok = Cascade()
-        assert out.send(g) is None and out.gave_up and out.failed == 1
+        assert out.send(g) is None and out.lost and out.failed == 1
         h = _frame(3, (8, 8, 3))
         h.tok = Cascade()
         assert out.send(h) is None and out.held == 2 and out.failed == 2  # failed at once: no second wait

@@ -19,12 +19,14 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from aerodaas import AeroListData, Analytics, Environment, FollowAnalytics, PriorityQueue, Waypoint
 from aerodaas.actors.drone import DroneComponent
 from aerodaas.actors.scheduler_component import SchedulerComponent
 from aerodaas.config import parse_environment_config
+from aerodaas.runtime.report import format_summary
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.faults
@@ -208,11 +210,77 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
     (outlet,) = cam["outlets"]
     assert outlet["transport"] == transport
     if lockstep:  # the clock held: nothing but what was in flight at the kill is lost, the send waited instead
-        assert outlet["failed"] <= 2 and outlet["held"] >= 1 and not outlet.get("gave_up"), outlet
+        assert outlet["failed"] <= 2 and outlet["held"] >= 1 and not outlet.get("lost"), outlet
+        assert not res.analytics_lost and res.outcome == "ended"
+        times = _log_times(run_options.record)
+        frames, dets = times["/d00/camera/cam"], times["/d00/always_car/detections"]
+        assert len(dets) >= len(frames) - 2, (len(frames), len(dets))  # the frames after the restart were analysed
+        # simulated time did not run on past the outage without analytics: no hole in the detections' sim time
+        # wider than the frame(s) in flight at the kill (frames every 0.1 s)
+        gaps = np.diff(np.asarray(dets, np.int64)) / 1e9
+        assert gaps.max() <= 0.3 + 1e-6, gaps
     else:
         assert outlet["failed"] >= 1, outlet  # the frame(s) in flight when the actor died, and those sent meanwhile
     assert res.stats["d00"]["analytics"][0]["processed"] > 0  # counted by the restarted actor
     assert res.stats["_hosts"]["analytics/edge/always_car#1"].get("error_count", 0) == 0
+
+
+@pytest.mark.parametrize("transport", ["channel", "ray"])
+def test_lockstep_analytics_actor_not_back_is_reported_lost(ray_session, run_options, tmp_path, transport):
+    """Lock-step, the analytics actor killed for good (no restart): the clock holds at most
+    ``actor_restart_timeout_s``, then the mission flies on and the run reports the analytics lost (not ``ok``)."""
+    import ray
+
+    env = _env(fps=10.0)
+    env.cfg.simulation.lockstep = True
+    env.cfg.actor_restart_timeout_s = 3.0
+    env.cfg.same_node_transport = transport
+    drone, sched = _survey(env, hover_s=1.0)
+    edge = env.get_compute_resource_by_id("edge")
+    det = AlwaysCar()
+    det.deploy(edge)
+    follow = FollowAnalytics(target_classes=["car"], confirm_hits=1, lost_after=1e9, max_speed=1.5)
+    follow.deploy(edge, colocate=True)
+    sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
+                                       priority=1))
+    run_options.run_id, run_options.record = f"lost-analytics-{transport}", str(tmp_path / "la.mcap")
+    name = f"aerodaas/lost-analytics-{transport}/analytics/edge/always_car#1"
+    killed: dict = {}
+
+    def go() -> None:
+        for _ in range(600):
+            try:
+                d = ray.get_actor(f"aerodaas/lost-analytics-{transport}/drone/d00")
+                s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
+                if s["frames_with_latency"] >= 5:
+                    ray.kill(ray.get_actor(name), no_restart=True)
+                    killed["ok"] = True
+                    return
+            except Exception:  # noqa: BLE001
+                pass
+            time.sleep(0.1)
+
+    t = threading.Thread(target=go, daemon=True)
+    t.start()
+    res = env.start_mission(timeout=180)
+    t.join(5)
+    assert killed, res.outcome
+    (outlet,) = res.stats["d00"]["cameras"]["cam"]["outlets"]
+    assert outlet["transport"] == transport and outlet["lost"] is True, outlet
+    assert res.analytics_lost == ["always_car#1"] and res.outcome == "analytics_lost" and not res.ok, \
+        (res.outcome, res.analytics_lost)
+    assert "analytics LOST: always_car#1" in format_summary(res)
+
+
+def _log_times(path: str) -> dict[str, list[int]]:
+    """Topic -> log times (ns) of its messages, read with the mcap library's own reader."""
+    from mcap.reader import make_reader
+
+    out: dict[str, list[int]] = {}
+    with open(path, "rb") as f:
+        for _, ch, m in make_reader(f).iter_messages(log_time_order=True):
+            out.setdefault(ch.topic, []).append(m.log_time)
+    return out
 
 
 def _run(args: list[str], timeout: float, env: dict | None = None) -> subprocess.CompletedProcess:

@@ -58,7 +58,8 @@ OPTIONS = RunOptions()
 @dataclass
 class MissionResult:
     """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed / recording_lost:
-    the drones finished but the recorder actor died, see ``recording_losses``), per-robot
+    the drones finished but the recorder actor died, see ``recording_losses`` / analytics_lost: under lock-step an
+    analytics actor did not answer again within ``actor_restart_timeout_s``, see ``analytics_lost``), per-robot
     reports (visited waypoints, events, state history), per-actor stats, per-frame latency and the recording."""
 
     outcome: str
@@ -80,10 +81,14 @@ class MissionResult:
     #: the recording's segment files in order (one unless the recorder actor was restarted)
     recording_segments: list[str] = field(default_factory=list)
     recording_duplicates: int = 0  # samples a restarted drone actor sent again, dropped (recorded once)
+    #: lock-step runs: the consumers (component ids) whose actor died and did not answer again within
+    #: ``actor_restart_timeout_s``; their analytics were lost (outcome ``analytics_lost``, not ``ok``)
+    analytics_lost: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
-        return self.outcome == "success" and self.recording_failure is None and not self.recording_losses
+        return (self.outcome == "success" and self.recording_failure is None and not self.recording_losses
+                and not self.analytics_lost)
 
 
 _STARTED_RAY = False
@@ -510,12 +515,16 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
         (o for o in outcomes if o != "success"), "failed")
     if outcome == "success" and rec_report.get("losses"):
         outcome = "recording_lost"  # the drones finished, but the run's truth has a hole: not a success
+    lost_analytics = sorted({cid for h in (stats.get("_hosts") or {}).values() if isinstance(h, dict)
+                             for cid in h.get("lost_consumers", [])}) if isinstance(stats, dict) else []
+    if outcome == "success" and lost_analytics:
+        outcome = "analytics_lost"  # the drones finished, flying on without an analytics that never came back
     result = MissionResult(outcome=outcome, robots=reports, stats=stats, latency=latency, recording=opts.record,
                            wall_s=time.monotonic() - t_start, recording_counts=counts,
                            recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
                            recording_start_ns=epoch_ns, recording_losses=rec_report.get("losses") or [],
                            recording_segments=rec_report.get("segments") or [],
-                           recording_duplicates=rec_report.get("duplicates", 0))
+                           recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics)
     for h in handles.values():
         for hook in h["robot"]._end_hooks:
             hook(h["robot"], result)

@@ -96,6 +96,9 @@ def format_summary(result: Any) -> str:
         lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
                      f"{back} in {loss.get('next_segment', '(no new segment)')} (join the segments: `aerodaas "
                      f"recover {result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else ""))
+    if getattr(result, "analytics_lost", None):
+        lines.append(f"  analytics LOST: {', '.join(result.analytics_lost)} (its actor died and did not answer again "
+                     f"within actor_restart_timeout_s; the lock-step clock went on without it)")
     if getattr(result, "recording_duplicates", 0) and any(r.get("actor_restarts") for r in result.robots.values()):
         lines.append(f"  recording: {result.recording_duplicates} samples sent again by a restarted drone actor (stamps "
                      f"already recorded) were recorded once")
