@@ -526,6 +526,11 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     masters = " ".join(f"--master={connection(autopilot, i)}" for i in range(n))
     router = (f"( cd {shlex.quote(str(workdir))} && exec {py} -m MAVProxy.mavproxy {masters} "
               f"--out=udp:127.0.0.1:{ROUTER_PORT} --daemon --non-interactive --streamrate=-1 "
+              # MAVProxy's "delayed link" check (mavproxy_link.py handle_msec_timestamp) is for redundant links to
+              # ONE vehicle: a time_boot_ms lower than the highest seen marks the link delayed and its SYS_STATUS,
+              # GLOBAL_POSITION_INT, GPS_RAW_INT, VFR_HUD ... are not forwarded. PX4 stamps messages with their sample
+              # time (not in send order), so about half of a PX4's SYS_STATUS were held back (tlog of 2026-11-23)
+              "--cmd='set checkdelay 0' "
               f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & "
               f"echo $! > {shlex.quote(str(workdir / 'router.pid'))} ) ; ")
     def _watcher(conn: str, first: int, extra: str = "") -> str:
