@@ -77,7 +77,8 @@ def connection(autopilot: str, instance: int = 0) -> str:
 
 def monitor_connection(autopilot: str, instance: int = 0) -> str:
     """A second link to firmware instance ``instance`` (ArduCopter ``--serial1``; PX4's ground-station link,
-    18570+i -> 14550+i), for watchers beside the backend."""
+    18570+i -> 14550: PX4 SITL sends every instance's to 14550, so a PX4 fleet's observer splits it by system id,
+    :func:`observe_raw`), for watchers beside the backend."""
     return f"udpin:127.0.0.1:{14551 + 10 * instance}" if autopilot == "ardupilot" else \
         f"udpin:127.0.0.1:{14550 + instance}"
 
@@ -302,12 +303,17 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     return 0
 
 
-def observe_raw(conn: str, out: str, timeout_s: float) -> int:
+def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str] | None = None) -> int:
     """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
     flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
     and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
     z, vx, vy], ...]}`` to ``out``: t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
-    :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s."""
+    :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s.
+
+    ``per_sysid`` (system id -> output file, ``out`` then unused): several vehicles on one port, each followed on
+    its own. PX4 SITL sends every instance's ground-station link to 127.0.0.1:14550 (``px4-rc.mavlink``: ``mavlink
+    start -x -u 18570+i`` has no ``-o``, so the remote port is the default 14550), so a PX4 fleet is observed on
+    one port and told apart by the MAVLink header's system id."""
     from pymavlink import mavutil
 
     from aerodaas.navigation.geo import geodetic_to_enu
@@ -316,31 +322,43 @@ def observe_raw(conn: str, out: str, timeout_s: float) -> int:
     home = GeoPoint(**FARM_HOME)
     m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
     end = time.monotonic() + timeout_s
-    samples, armed, was_armed, sysid, next_hb, disarmed_at = [], False, False, None, 0.0, None
-    while time.monotonic() < end:
+    outs: dict = dict(per_sysid) if per_sysid else {None: out}
+    st = {k: {"samples": [], "armed": False, "was_armed": False, "disarmed_at": None} for k in outs}
+    seen: set[int] = set()
+    next_hb = 0.0
+
+    def done(s: dict) -> bool:
+        return s["disarmed_at"] is not None and time.monotonic() - s["disarmed_at"] > 1.0
+
+    while time.monotonic() < end and not all(done(s) for s in st.values()):
         if time.monotonic() >= next_hb:
             m.mav.heartbeat_send(6, 8, 0, 0, 4)
-            if sysid is not None:
+            for sysid in sorted(seen):
                 m.mav.command_long_send(sysid, 1, 511, 0, 33, 100000, 0, 0, 0, 0, 0)
             next_hb = time.monotonic() + 1.0
         msg = m.recv_match(type=["HEARTBEAT", "GLOBAL_POSITION_INT"], blocking=True, timeout=0.5)
         if msg is None:
             continue
+        key = msg.get_srcSystem() if per_sysid else None
+        s = st.get(key)
+        if s is None:
+            continue
         if msg.get_type() == "HEARTBEAT":
             if msg.autopilot == 8 or msg.type == 6:
                 continue
-            sysid = msg.get_srcSystem()
-            armed = bool(msg.base_mode & 128)
-            was_armed = was_armed or armed
-            if was_armed and not armed and disarmed_at is None:
-                disarmed_at = time.monotonic()
+            seen.add(msg.get_srcSystem())
+            s["armed"] = bool(msg.base_mode & 128)
+            s["was_armed"] = s["was_armed"] or s["armed"]
+            if s["was_armed"] and not s["armed"] and s["disarmed_at"] is None:
+                s["disarmed_at"] = time.monotonic()
         elif msg.lat or msg.lon:
             e, n, _ = geodetic_to_enu(msg.lat / 1e7, msg.lon / 1e7, home.alt, home)
-            samples.append([msg.time_boot_ms / 1000.0, float(e), float(n), msg.relative_alt / 1000.0,
-                            msg.vy / 100.0, msg.vx / 100.0])
-        if disarmed_at is not None and time.monotonic() - disarmed_at > 1.0:
-            break
-    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not armed, "samples": samples}))
+            s["samples"].append([msg.time_boot_ms / 1000.0, float(e), float(n), msg.relative_alt / 1000.0,
+                                 msg.vy / 100.0, msg.vx / 100.0])
+    for k, path in outs.items():
+        s = st[k]
+        Path(path).write_text(json.dumps({"armed": s["was_armed"], "landed": s["was_armed"] and not s["armed"],
+                                          "samples": s["samples"]}))
     return 0
 
 
@@ -373,7 +391,9 @@ if __name__ == "__main__":
     if sys.argv[1] == "observe":
         sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
     if sys.argv[1] == "observe-raw":
-        sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+        extra = dict(a.split("=", 1) for a in sys.argv[5:])  # SYSID=FILE: several vehicles on one port
+        sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4]),
+                             {int(k): v for k, v in extra.items()} or None))
     if sys.argv[1] == "stop-when-flying":
         sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
     raise SystemExit(f"unknown command {sys.argv[1]!r}")
@@ -506,12 +526,23 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     masters = " ".join(f"--master={connection(autopilot, i)}" for i in range(n))
     router = (f"( cd {shlex.quote(str(workdir))} && exec {py} -m MAVProxy.mavproxy {masters} "
               f"--out=udp:127.0.0.1:{ROUTER_PORT} --daemon --non-interactive --streamrate=-1 "
+              # MAVProxy's "delayed link" check (mavproxy_link.py handle_msec_timestamp) is for redundant links to
+              # ONE vehicle: a time_boot_ms lower than the highest seen marks the link delayed and its SYS_STATUS,
+              # GLOBAL_POSITION_INT, GPS_RAW_INT, VFR_HUD ... are not forwarded. PX4 stamps messages with their sample
+              # time (not in send order), so about half of a PX4's SYS_STATUS were held back (tlog of 2026-11-23)
+              "--cmd='set checkdelay 0' "
               f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & "
               f"echo $! > {shlex.quote(str(workdir / 'router.pid'))} ) ; ")
-    watchers = "".join(f"( {py} -m tests.sitl observe-raw {monitor_connection(autopilot, i)} "
-                       f"{shlex.quote(str(workdir / f'observed{i}.json'))} 900 > "
-                       f"{shlex.quote(str(workdir / f'observer{i}.log'))} 2>&1 & "
-                       f"echo $! > {shlex.quote(str(workdir / f'observer{i}.pid'))} ) ; " for i in range(n))
+    def _watcher(conn: str, first: int, extra: str = "") -> str:
+        return (f"( {py} -m tests.sitl observe-raw {conn} {shlex.quote(str(workdir / f'observed{first}.json'))} 900"
+                f"{extra} > {shlex.quote(str(workdir / f'observer{first}.log'))} 2>&1 & "
+                f"echo $! > {shlex.quote(str(workdir / f'observer{first}.pid'))} ) ; ")
+
+    if autopilot == "px4":  # every PX4 instance's ground-station link goes to 14550: one observer, split by sysid
+        extra = "".join(f" {i + 1}={shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))
+        watchers = _watcher(monitor_connection(autopilot, 0), 0, extra)
+    else:
+        watchers = "".join(_watcher(monitor_connection(autopilot, i), i) for i in range(n))
     wait_obs = " ".join(f"{shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))
     step = (router + watchers + aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap")
             + f"; rc=$?; for k in $(seq 1 600); do ok=1; for f in {wait_obs}; do [ -e $f ] || ok=0; done; "

@@ -23,6 +23,7 @@ This module does the same for :class:`~aerodaas.backends.mavlink.MavlinkBackend`
 """
 from __future__ import annotations
 
+import socket
 import threading
 import time
 from collections import deque
@@ -36,10 +37,13 @@ from aerodaas.backends.mavlink._common import M, _NOT_VEHICLES
 #: wall seconds of discovery before ``target_system: auto`` picks the lowest unclaimed id (autopilots send their
 #: HEARTBEAT at 1 Hz, mavlink.io/en/services/heartbeat.html)
 DISCOVERY_S = 1.5
-#: messages queued per robot; when full the link's reader waits up to :data:`FULL_WAIT_S` for the robot's I/O
-#: thread (TCP flow control then holds the sender back, as a socket of its own would), then drops the oldest
+#: messages queued per robot; when full the oldest is dropped at once (counted in ``LinkPort.dropped``). The reader
+#: never waits for one robot: it serves every vehicle on the link, and a wait for a slow robot (PX4's onboard link
+#: streams HIGHRES_IMU, ATTITUDE_QUATERNION and ODOMETRY at 30-50 Hz each) starved the others, whose datagrams the
+#: kernel then dropped (three PX4 behind one router port: robots 2 and 3 never saw SYS_STATUS or a COMMAND_ACK)
 PORT_QUEUE = 5000
-FULL_WAIT_S = 1.0
+#: bytes of kernel receive buffer asked for a shared UDP socket (several vehicles' streams between two reads)
+RCVBUF_BYTES = 4 * 1024 * 1024
 #: messages kept per unclaimed system id (the latest), handed to the robot that claims it
 PENDING = 200
 
@@ -150,8 +154,6 @@ class LinkPort:
 
     def _put(self, msg: Any) -> None:
         with self._cv:
-            if len(self._q) >= PORT_QUEUE and not self._closed:
-                self._cv.wait_for(lambda: len(self._q) < PORT_QUEUE or self._closed, FULL_WAIT_S)
             if len(self._q) >= PORT_QUEUE:
                 self._q.popleft()
                 self.dropped += 1
@@ -232,6 +234,18 @@ class LinkPort:
                 link.close()
 
 
+def _grow_rcvbuf(conn: Any) -> None:
+    """Ask the kernel for :data:`RCVBUF_BYTES` of receive buffer on a UDP link's socket (pymavlink's ``mavudp.port``;
+    Linux caps it at ``net.core.rmem_max``): a router port carries several vehicles' streams, and datagrams that
+    arrive while the buffer is full are dropped silently. Other link types are left alone."""
+    sock = getattr(conn, "port", None)
+    if isinstance(sock, socket.socket) and sock.type == socket.SOCK_DGRAM:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+        except OSError:
+            pass
+
+
 def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
     """The :class:`LinkPort` of robot ``robot_id`` on the link ``cfg.connection`` names (a
     :class:`~aerodaas.config.MavlinkConfig`), opening the connection when this process has none yet (retried until
@@ -252,6 +266,7 @@ def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
                     last = e
                     conn = None
                 if conn is not None:
+                    _grow_rcvbuf(conn)
                     link = _LINKS[key] = SharedLink(key, conn, cfg.source_system, cfg.source_component)
             if link is not None:
                 if robot_id in link.ports:
