@@ -280,10 +280,18 @@ class Environment:
             self._trajectory_scheduler = scheduler
 
     def trajectory_scheduler(self) -> Any:
+        """The trajectory scheduler: the one the app set, else ``environment.json``'s ``trajectory_scheduler``
+        (a registered name or ``module.path:ClassName``, constructed as ``Class(env)``), else
+        :class:`aerodaas.schedulers.TrajectoryScheduler`."""
         if self._trajectory_scheduler is None:
             from aerodaas.schedulers import TrajectoryScheduler
 
-            self._trajectory_scheduler = TrajectoryScheduler(self)
+            cls = TrajectoryScheduler
+            if self.cfg.trajectory_scheduler is not None:
+                from aerodaas.plugins import registry
+
+                cls = registry.get("trajectory_scheduler", self.cfg.trajectory_scheduler)
+            self._trajectory_scheduler = cls(self)
         return self._trajectory_scheduler
 
     def set_analytics_scheduler(self, name: str, models: dict | None = None, *, workload: str | None = None,

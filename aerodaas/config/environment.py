@@ -264,7 +264,11 @@ class AnalyticsSchedulerConfig(_Cfg):
 
 
 class EnvironmentConfig(_Cfg):
-    """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema."""
+    """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema.
+
+    ``trajectory_scheduler`` is resolved through :mod:`aerodaas.plugins.registry` when the file is validated
+    (before Ray starts); an unknown name is a ``ValueError`` naming the field, the value, the available
+    schedulers and the closest match."""
 
     name: str = "environment"
     robots: list[RobotConfig] = Field(min_length=1)
@@ -274,6 +278,10 @@ class EnvironmentConfig(_Cfg):
     simulation: SimulationConfig = Field(default_factory=SimulationConfig)
     hitl: HitlConfig = Field(default_factory=HitlConfig)
     analytics_scheduler: AnalyticsSchedulerConfig = Field(default_factory=AnalyticsSchedulerConfig)
+    trajectory_scheduler: str | None = Field(
+        default=None, description="the trajectory scheduler used when the app sets none: a registered name "
+        "(TrajectoryScheduler, NearestNeighborScheduler, TwoOptScheduler, a plug-in) or 'module.path:ClassName'; "
+        "constructed as Class(env). Unset: TrajectoryScheduler")
     drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
                                   "1: an actor per drone; more for memory-bound fleets")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
@@ -288,6 +296,18 @@ class EnvironmentConfig(_Cfg):
         "one tier, JPEG across tiers), in lock-step runs too (lock-step only makes the clock wait for each frame's "
         "cascade)")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
+
+    @field_validator("trajectory_scheduler")
+    @classmethod
+    def _known_trajectory_scheduler(cls, v: str | None) -> str | None:
+        if v is not None:
+            from aerodaas.plugins import registry
+
+            try:  # a registered name, an installed entry point or "module.path:ClassName"; imported here
+                registry.get("trajectory_scheduler", v)
+            except registry.UnknownPlugin as e:
+                raise ValueError(str(e)) from None
+        return v
 
     @model_validator(mode="after")
     def _unique(self) -> "EnvironmentConfig":
