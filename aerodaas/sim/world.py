@@ -16,6 +16,7 @@ import numpy as np
 
 from aerodaas.config import GroundConfig, TargetConfig
 from aerodaas.app.models import CameraIntrinsics, FramePose
+from aerodaas.sim import ground_cache
 
 SKY_BGR = (235, 206, 135)
 
@@ -101,6 +102,29 @@ def procedural_ground(cfg: GroundConfig) -> tuple[np.ndarray, float, tuple[float
     return tex, mpp, (n / 2.0, n / 2.0)
 
 
+def ground_pyramid(ground: GroundConfig) -> list[tuple[np.ndarray, float, tuple[float, float]]]:
+    """The ground texture (``ground.image`` or :func:`procedural_ground`) and its mip pyramid (``cv2.pyrDown``
+    until the smaller side is at most 256 px, at most 6 levels), used to avoid aliasing when the camera sees the
+    ground at a coarser sampling than the texture.
+
+    Returns [((H, W, 3) uint8 BGR, metres per pixel, home pixel (x, y))], finest first. Raises ValueError when
+    the image cannot be decoded."""
+    if ground.image:
+        tex = cv2.imread(ground.image, cv2.IMREAD_COLOR)
+        if tex is None:
+            raise ValueError(f"world.ground.image: cannot decode image {ground.image!r}")
+        mpp = ground.metres_per_pixel
+        home = ground.home_px or (tex.shape[1] / 2.0, tex.shape[0] / 2.0)
+    else:
+        tex, mpp, home = procedural_ground(ground)
+    # mip pyramid to avoid aliasing when the camera sees the ground at a coarser sampling than the texture
+    levels = [(tex, mpp, home)]
+    while min(levels[-1][0].shape[:2]) > 256 and len(levels) < 6:
+        t, m, h = levels[-1]
+        levels.append((cv2.pyrDown(t), m * 2.0, (h[0] / 2.0, h[1] / 2.0)))
+    return levels
+
+
 @dataclass
 class _Target:
     cfg: TargetConfig
@@ -118,19 +142,11 @@ class World:
     """Ground texture + moving targets; renders camera frames and reports target ground truth."""
 
     def __init__(self, ground: GroundConfig, targets: list[TargetConfig]) -> None:
-        if ground.image:
-            tex = cv2.imread(ground.image, cv2.IMREAD_COLOR)
-            if tex is None:
-                raise ValueError(f"world.ground.image: cannot decode image {ground.image!r}")
-            mpp = ground.metres_per_pixel
-            home = ground.home_px or (tex.shape[1] / 2.0, tex.shape[0] / 2.0)
+        if ground_cache.enabled():  # one read-only copy per machine, shared by every rendering process
+            key = ground_cache.ground_key(ground.model_dump_json(), ground.image)
+            self.levels = ground_cache.shared_levels(key, lambda: ground_pyramid(ground))
         else:
-            tex, mpp, home = procedural_ground(ground)
-        # mip pyramid to avoid aliasing when the camera sees the ground at a coarser sampling than the texture
-        self.levels: list[tuple[np.ndarray, float, tuple[float, float]]] = [(tex, mpp, home)]
-        while min(self.levels[-1][0].shape[:2]) > 256 and len(self.levels) < 6:
-            t, m, h = self.levels[-1]
-            self.levels.append((cv2.pyrDown(t), m * 2.0, (h[0] / 2.0, h[1] / 2.0)))
+            self.levels = ground_pyramid(ground)
         self.targets: list[_Target] = []
         for t in targets:
             img = cv2.imread(t.image, cv2.IMREAD_COLOR)

@@ -1,0 +1,73 @@
+"""The ground pyramid is stored once per machine and mapped read-only by every rendering process
+(aerodaas.sim.ground_cache): same pixels as the in-heap pyramid, one file per level, keyed by the configuration."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from aerodaas.app.models import CameraIntrinsics, FramePose
+from aerodaas.config import GroundConfig
+from aerodaas.sim import ground_cache
+from aerodaas.sim.world import World, ground_pyramid
+
+GROUND = GroundConfig(seed=3, metres_per_pixel=0.05, size_m=40)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("AERODAAS_GROUND_CACHE_DIR", str(tmp_path / "ground"))
+    monkeypatch.delenv("AERODAAS_GROUND_CACHE", raising=False)
+    return tmp_path / "ground"
+
+
+def _mapped_files(levels):
+    return [os.path.realpath(a.filename) for a, _, _ in levels]
+
+
+def test_worlds_map_one_read_only_copy_with_the_heap_pyramids_pixels(cache, monkeypatch):
+    a, b = World(GROUND, []), World(GROUND, [])
+    assert all(isinstance(lv[0], np.memmap) and not lv[0].flags.writeable for lv in a.levels)
+    assert _mapped_files(a.levels) == _mapped_files(b.levels)
+    assert all(f.startswith(os.path.realpath(cache)) for f in _mapped_files(a.levels))
+    ref = ground_pyramid(GROUND)
+    assert len(ref) == len(a.levels)
+    for (ta, ma, ha), (tr, mr, hr) in zip(a.levels, ref):
+        assert np.array_equal(ta, tr) and ma == mr and ha == hr
+    monkeypatch.setenv("AERODAAS_GROUND_CACHE", "0")
+    heap = World(GROUND, [])
+    assert not any(isinstance(lv[0], np.memmap) for lv in heap.levels)
+    k = CameraIntrinsics.from_hfov(160, 120, 78)
+    pose = FramePose(position=(1, 2, 6), yaw=30)
+    assert np.array_equal(a.render(pose, k, 0.0)[0], heap.render(pose, k, 0.0)[0])
+
+
+def test_another_process_maps_the_pyramid_without_building_it(cache):
+    code = ("from aerodaas.config import GroundConfig; from aerodaas.sim.world import World; "
+            "World(GroundConfig(seed=3, metres_per_pixel=0.05, size_m=40), [])")
+    subprocess.run([sys.executable, "-c", code], check=True, env=dict(os.environ), timeout=120)
+    key = ground_cache.ground_key(GROUND.model_dump_json(), None)
+    built = []
+    levels = ground_cache.shared_levels(key, lambda: built.append(1) or ground_pyramid(GROUND))
+    assert built == [] and isinstance(levels[0][0], np.memmap)
+
+
+def test_key_follows_the_configuration_and_the_image_file(cache, tmp_path):
+    k1 = ground_cache.ground_key(GROUND.model_dump_json(), None)
+    assert k1 != ground_cache.ground_key(GroundConfig(seed=4, metres_per_pixel=0.05, size_m=40).model_dump_json(),
+                                         None)
+    img = tmp_path / "g.png"
+    img.write_bytes(b"x")
+    k2 = ground_cache.ground_key("{}", str(img))
+    img.write_bytes(b"xy")
+    assert k2 != ground_cache.ground_key("{}", str(img))
+
+
+def test_an_unwritable_cache_falls_back_to_the_heap(tmp_path, monkeypatch):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("AERODAAS_GROUND_CACHE_DIR", str(blocker / "ground"))
+    w = World(GROUND, [])
+    assert not isinstance(w.levels[0][0], np.memmap)
+    assert np.array_equal(w.levels[0][0], ground_pyramid(GROUND)[0][0])
