@@ -196,9 +196,10 @@ class LaPlan(EvPlan):
         jobs, who, wakes = [], [], {}
         for t in self.pool:
             fb = max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0
+            k = self._key(t)
             for end, proc, g in self._variants(t.model, t.deadline_ms, fb):
                 jobs.append((free, end, proc, g))
-                who.append(self._key(t))
+                who.append(k)
         self._predicted = {}
         if self.horizon_ms > 0:
             fbs: dict[str, float] = {}
