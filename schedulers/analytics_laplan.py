@@ -149,6 +149,9 @@ class LaPlan(EvPlan):
         self._wake: float | None = None
         self._first_wake: float | None = None
         self._predicted: dict[tuple, list[float]] = {}  # (drone, model) -> predicted frame times of the plan
+        #: model -> [(edge_ms x tail, planned processing ms, chance x benefit - edge cost)] per level (:meth:`_variants`)
+        self._vparts: dict[str, list[tuple[float, float, float]]] = {}
+        self._plan_index: tuple[list, dict] = ([], {})  # (plan, key -> planned start) of the last plan looked up
         single_machine_jit.warm_up()  # compile or load the planner's kernel now, not on the first decision
 
     def _ratios(self, model: str) -> list[float]:
@@ -162,10 +165,14 @@ class LaPlan(EvPlan):
     def _variants(self, model: str, deadline_ms: float, fallback: float) -> list[tuple[float, float, float]]:
         """``(latest end ms, planned processing ms, expected gain)`` per edge-time level of a task of ``model``:
         ending by ``deadline - p * tail`` at the planned (mean) time, it is on time with the level's chance."""
-        p = self.w[model]
-        proc = p.edge_ms * self._edge_mean
-        return [(deadline_ms - p.edge_ms * tail, proc, chance * p.benefit - p.edge_cost - fallback)
-                for tail, chance in self._tails]
+        parts = self._vparts.get(model)
+        if parts is None:  # the deadline- and fallback-free parts, kept until the edge statistics change
+            p = self.w[model]
+            proc = p.edge_ms * self._edge_mean
+            parts = self._vparts[model] = [(p.edge_ms * tail, proc, chance * p.benefit - p.edge_cost)
+                                           for tail, chance in self._tails]
+        # the same float operations in the same order as computing each variant from scratch
+        return [(deadline_ms - lead, proc, g - fallback) for lead, proc, g in parts]
 
     def _predicted_fallback(self, model: str) -> float:
         p = self.w[model]
@@ -256,11 +263,10 @@ class LaPlan(EvPlan):
         return [t for t in self.pool if self._key(t) in keys]
 
     def _planned_start(self, task: AnalyticsTask, now_ms: float) -> float | None:
-        k = self._key(task)
-        for q, s in self.schedule(now_ms):
-            if q == k:
-                return s
-        return None
+        plan = self.schedule(now_ms)
+        if self._plan_index[0] is not plan:  # index the plan once, not a scan per task (keys are unique in a plan)
+            self._plan_index = (plan, {q: s for q, s in reversed(plan)})
+        return self._plan_index[1].get(self._key(task))
 
     # -- the contract
     def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
@@ -347,6 +353,7 @@ class LaPlan(EvPlan):
             if len(xs) >= 10:
                 self._tails = [(max(0.0, xs[min(len(xs) - 1, max(0, math.ceil(q * len(xs)) - 1))] - self._edge_mean), q)
                                for q in self.edge_levels]
+        self._vparts.clear()
         self._version += 1
         return out
 

@@ -218,9 +218,9 @@ def _run_one(hosts, host_edges: list[list[str]], cloud, name: str, workload, tra
     import ray
 
     t = time.time()
-    # lead time: every host configures its dispatchers (and their timers) before the common start; the hosts share
-    # the machine's cores, so it grows with their number as well as with the edges per host
-    start_epoch = time.time() + 0.5 + 0.08 * len(hosts) + 0.02 * sum(len(e) for e in host_edges) / max(1, len(hosts))
+    # lead time for configure(): each host builds its dispatchers and loads the compiled planner; 0.5 s was overrun
+    # with 9 hosts at load average ~40 (2 cores), which aborted the run before its first arrival
+    start_epoch = time.time() + 2.0 + 0.05 * sum(len(e) for e in host_edges) / max(1, len(hosts))
     ray.get([h.configure.remote(scheduler=name, workload=workload, edge_ids=edges, cloud_executors=cloud,
                                 start_epoch=start_epoch, edge_jitter=edge_jitter, cloud_jitter=cloud_jitter,
                                 network=network, seed=seed, reply_lead_ms=reply_lead_ms,
