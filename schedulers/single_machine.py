@@ -116,10 +116,15 @@ def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float
         latest += [v for v, _ in row[3]]
         best += row[4]
         vstart.append(len(latest))
-    gain, nj, nt, npar, node = single_machine_jit.solve(
-        np.array([row[0] for row in rows], np.float64), np.array([row[2] for row in rows], np.float64),
-        np.array(bits, np.uint64), np.array(vstart, np.int64),
-        np.array(latest, np.float64), np.array(best, np.int64), np.array(gains, np.float64), _EPS)
+    return _run_kernel(np.array([row[0] for row in rows], np.float64), np.array([row[2] for row in rows], np.float64),
+                       np.array(bits, np.uint64), np.array(vstart, np.int64), np.array(latest, np.float64),
+                       np.array(best, np.int64), np.array(gains, np.float64))
+
+
+def _run_kernel(rel, proc, bit, vstart, latest, best, gains) -> tuple[float, list[tuple[int, float]]]:
+    """Solve with the compiled kernel (arrays as :func:`.single_machine_jit.solve`); the best path as
+    ``(gain, [(job index, start ms), ...])`` in start order."""
+    gain, nj, nt, npar, node = single_machine_jit.solve(rel, proc, bit, vstart, latest, best, gains, _EPS)
     out = []
     while node >= 0:
         out.append((int(nj[node]), float(nt[node])))
@@ -149,13 +154,7 @@ def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int,
         if code == 0:
             if rel.shape[0] == 0:
                 return 0.0, []
-            total, nj, nt, npar, node = single_machine_jit.solve(rel, p, bit, vstart, latest, best, gains, _EPS)
-            out = []
-            while node >= 0:
-                out.append((int(nj[node]), float(nt[node])))
-                node = npar[node]
-            SOLVES["compiled"] += 1
-            return float(total), out[::-1]
+            return _run_kernel(rel, p, bit, vstart, latest, best, gains)
     jobs = list(zip(np.asarray(release, float).tolist(), np.asarray(deadline, float).tolist(),
                     np.asarray(proc, float).tolist(), np.asarray(gain, float).tolist()))
     return max_gain_schedule(jobs, free_at=free_at, groups=np.asarray(group).tolist(), jit=False)

@@ -177,18 +177,9 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
     counts: dict = {}
 
     def go() -> None:
-        for _ in range(600):
-            try:
-                d = ray.get_actor("aerodaas/kill-analytics/drone/d00")
-                s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
-                if s["frames_with_latency"] >= 5:
-                    counts["before"] = s["frames_with_latency"]
-                    killed["wall"] = time.time()
-                    ray.kill(ray.get_actor(name), no_restart=False)
-                    break
-            except Exception:  # noqa: BLE001
-                pass
-            time.sleep(0.1)
+        counts["before"] = _kill_after_frames("kill-analytics", name, restart=True)
+        killed["wall"] = time.time()
+        d = ray.get_actor("aerodaas/kill-analytics/drone/d00")
         for _ in range(600):  # navigation resumes: new commands applied after the restart
             try:
                 s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
@@ -248,17 +239,8 @@ def test_lockstep_analytics_actor_not_back_is_reported_lost(ray_session, run_opt
     killed: dict = {}
 
     def go() -> None:
-        for _ in range(600):
-            try:
-                d = ray.get_actor(f"aerodaas/lost-analytics-{transport}/drone/d00")
-                s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
-                if s["frames_with_latency"] >= 5:
-                    ray.kill(ray.get_actor(name), no_restart=True)
-                    killed["ok"] = True
-                    return
-            except Exception:  # noqa: BLE001
-                pass
-            time.sleep(0.1)
+        _kill_after_frames(f"lost-analytics-{transport}", name, restart=False)
+        killed["ok"] = True
 
     t = threading.Thread(target=go, daemon=True)
     t.start()
@@ -270,6 +252,24 @@ def test_lockstep_analytics_actor_not_back_is_reported_lost(ray_session, run_opt
     assert res.analytics_lost == ["always_car#1"] and res.outcome == "analytics_lost" and not res.ok, \
         (res.outcome, res.analytics_lost)
     assert "analytics LOST: always_car#1" in format_summary(res)
+
+
+def _kill_after_frames(run: str, actor: str, restart: bool, frames: int = 5) -> int:
+    """Once drone d00's scheduler of run ``run`` has had ``frames`` analysed frames, kill actor ``actor`` (Ray
+    restarts it when ``restart``); returns the count seen then. Polls every 0.1 s (at most 600 times)."""
+    import ray
+
+    for _ in range(600):
+        try:
+            d = ray.get_actor(f"aerodaas/{run}/drone/d00")
+            s = ray.get(d.call.remote("d00/scheduler", SchedulerComponent.stats), timeout=10)
+            if s["frames_with_latency"] >= frames:
+                ray.kill(ray.get_actor(actor), no_restart=not restart)
+                return s["frames_with_latency"]
+        except Exception:  # noqa: BLE001 - the actors are still starting
+            pass
+        time.sleep(0.1)
+    raise TimeoutError(f"run {run}: never {frames} analysed frames")
 
 
 def _log_times(path: str) -> dict[str, list[int]]:
