@@ -60,8 +60,7 @@ class ActorBase:
             spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
             spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
-        self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers)
-        self.host.restart_hold_s = float(spec.restart_hold_s)
+        self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers, restart_hold_s=spec.restart_hold_s)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None

@@ -308,8 +308,9 @@ class ChannelOutlet:
     ``retry_s`` seconds) once the peer's restarted actor serves its address again; meanwhile sends are dropped and
     counted as failed — except a lock-step one (its cascade holds the simulated clock): it waits up to ``hold_s``
     seconds for the restarted peer (counted in ``held``), so that simulated time does not run on without the
-    consumer while Ray restarts it; if the peer is not back by then, the outlet stops waiting and reports its consumer ``lost`` until it
-    reconnects. :meth:`connect` raises OSError when nobody serves the address (another machine: use Ray)."""
+    consumer while Ray restarts it; if the peer is not back by then, the outlet stops waiting and reports its
+    consumer ``lost`` until it reconnects. :meth:`connect` raises OSError when nobody serves the address (another
+    machine: use Ray)."""
 
     transport = "channel"
 

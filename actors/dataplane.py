@@ -383,7 +383,7 @@ class DataPlane:
     host id). ``tier`` decides whether a frame sent to a peer of another tier is JPEG-encoded."""
 
     def __init__(self, host_id: str, tier: str, epoch_ns: int, workers: int | None = None,
-                 recorder: Any = None) -> None:
+                 recorder: Any = None, restart_hold_s: float = 60.0) -> None:
         self.host_id, self.tier, self.epoch_ns = host_id, tier, epoch_ns
         n = workers or max(2, min(4, (os.cpu_count() or 2)))
         self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
@@ -396,8 +396,9 @@ class DataPlane:
         #: the run's channel key (bytes) when actors on this machine talk through same-node channels
         #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``)
         self.channel_key: bytes | None = None
-        #: lock-step: how long a frame for a consumer actor that died waits for its restart (ActorSpec.restart_hold_s)
-        self.restart_hold_s = 60.0
+        #: lock-step: how long (s) a frame for a consumer actor that died waits for its restart
+        #: (``ActorSpec.restart_hold_s``, the environment's ``actor_restart_timeout_s``)
+        self.restart_hold_s = float(restart_hold_s)
         self._tl = threading.local()  # .reply: (host id of the caller, [Delivery]) while a deliver runs
         self.recorder = recorder
         self.copies = FrameCopies()
@@ -684,7 +685,7 @@ class DataPlane:
     def lost_consumers(self) -> list[str]:
         """Ids of the consumers this actor's outlets gave up on: under lock-step their actor died and was not
         answering again within ``restart_hold_s`` (the run reports them lost)."""
-        return sorted({str(o.cid) for o in list(self._outlets.values()) if getattr(o, "lost", False)})
+        return sorted({str(o.cid) for o in list(self._outlets.values()) if o.lost})
 
     def outlet_stats(self, src: str) -> list[dict]:
         return [o.stats() for (s, _, _), o in self._outlets.items() if s == src]

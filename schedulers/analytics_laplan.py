@@ -162,17 +162,23 @@ class LaPlan(EvPlan):
         return self._sorted[model]
 
     # -- the plan
-    def _variants(self, model: str, deadline_ms: float, fallback: float) -> list[tuple[float, float, float]]:
-        """``(latest end ms, planned processing ms, expected gain)`` per edge-time level of a task of ``model``:
-        ending by ``deadline - p * tail`` at the planned (mean) time, it is on time with the level's chance."""
+    def _parts(self, model: str) -> list[tuple[float, float, float]]:
+        """The deadline- and fallback-free parts of a ``model`` task's variants, one per edge-time level:
+        ``(edge ms x tail, planned processing ms, chance x benefit - edge cost)``; kept until the edge statistics
+        change (:meth:`on_edge_done`)."""
         parts = self._vparts.get(model)
-        if parts is None:  # the deadline- and fallback-free parts, kept until the edge statistics change
+        if parts is None:
             p = self.w[model]
             proc = p.edge_ms * self._edge_mean
             parts = self._vparts[model] = [(p.edge_ms * tail, proc, chance * p.benefit - p.edge_cost)
                                            for tail, chance in self._tails]
+        return parts
+
+    def _variants(self, model: str, deadline_ms: float, fallback: float) -> list[tuple[float, float, float]]:
+        """``(latest end ms, planned processing ms, expected gain)`` per edge-time level of a task of ``model``:
+        ending by ``deadline - p * tail`` at the planned (mean) time, it is on time with the level's chance."""
         # the same float operations in the same order as computing each variant from scratch
-        return [(deadline_ms - lead, proc, g - fallback) for lead, proc, g in parts]
+        return [(deadline_ms - lead, proc, g - fallback) for lead, proc, g in self._parts(model)]
 
     def _predicted_fallback(self, model: str) -> float:
         p = self.w[model]
@@ -190,26 +196,23 @@ class LaPlan(EvPlan):
         predicted task's is its drone, model and predicted frame time). Sets :attr:`_first_wake`: when to re-plan
         if the plan starts with a predicted task that has not come. Cached while nothing changed.
 
-        The DP's instance is built as arrays, one row per task and one column per edge-time level (the variants of
-        :meth:`_variants`, with the same arithmetic), and solved by :func:`.single_machine.max_gain_schedule_arrays`
-        — the same plan as the job tuples gave, at a fraction of the Python work per plan."""
+        The DP's instance is built as arrays, one row per task and one column per edge-time level (the variants
+        of :meth:`_variants`, from the same :meth:`_parts`), and solved by
+        :func:`.single_machine.max_gain_schedule_arrays` — the same plan as the job tuples gave, at a fraction of
+        the Python work per plan."""
         key = (self._version, self.edge_running is None)
         if self._cache is not None and self._cache[0] == key and now_ms <= self._cache[3]:
             self._first_wake = self._cache[2]
             return self._cache[1]
         self._now = now_ms
         free = self._edge_free_at(now_ms)
-        # per task: release, deadline, profiled edge ms, benefit, edge cost, cloud fallback; its key
-        rel, dl, em, ben, ec, fb, keys = [], [], [], [], [], [], []
-        w = self.w
+        # per task: release, deadline, cloud fallback, its variants' parts (:meth:`_parts`), its key
+        rel, dl, fb, parts, keys = [], [], [], [], []
         for t in self.pool:
-            p = w[t.model]
             rel.append(free)
             dl.append(t.deadline_ms)
-            em.append(p.edge_ms)
-            ben.append(p.benefit)
-            ec.append(p.edge_cost)
             fb.append(max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0)
+            parts.append(self._parts(t.model))
             keys.append(self._key(t))
         self._predicted = {}
         wakes = {}
@@ -221,29 +224,21 @@ class LaPlan(EvPlan):
                 k = (drone, m, frame)
                 wakes[k] = wake
                 self._predicted.setdefault((drone, m), []).append(frame)
-                p = w[m]
                 rel.append(max(at, free))
-                dl.append(frame + p.deadline_ms)
-                em.append(p.edge_ms)
-                ben.append(p.benefit)
-                ec.append(p.edge_cost)
+                dl.append(frame + self.w[m].deadline_ms)
                 fb.append(fbs[m])
+                parts.append(self._parts(m))
                 keys.append(k)
         sched: list[tuple[int, float]] = []
         levels = len(self._tails)
         if keys:
             ids: dict[tuple, int] = {}
             gid = np.array([ids.setdefault(k, len(ids)) for k in keys], np.int64)  # one group per key (its variants)
-            tails = np.array([tl for tl, _ in self._tails], np.float64)
-            chances = np.array([c for _, c in self._tails], np.float64)
-            em_a = np.array(em, np.float64)
+            pa = np.array(parts, np.float64)  # (tasks, levels, 3): the same operations as :meth:`_variants`
             n_python = SOLVES["python"]
             _, sched = max_gain_schedule_arrays(
-                np.repeat(np.array(rel, np.float64), levels),
-                (np.array(dl, np.float64)[:, None] - em_a[:, None] * tails[None, :]).ravel(),
-                np.repeat(em_a * self._edge_mean, levels),
-                (chances[None, :] * np.array(ben, np.float64)[:, None] - np.array(ec, np.float64)[:, None]
-                 - np.array(fb, np.float64)[:, None]).ravel(),
+                np.repeat(np.array(rel, np.float64), levels), (np.array(dl, np.float64)[:, None] - pa[:, :, 0]).ravel(),
+                pa[:, :, 1].ravel(), (pa[:, :, 2] - np.array(fb, np.float64)[:, None]).ravel(),
                 np.repeat(gid, levels), len(ids), free_at=free)
             if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live)
                 self.counters["plans_in_python"] += 1

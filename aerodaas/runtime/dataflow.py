@@ -285,7 +285,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     def actor(host_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
         if host_id not in actors:
             spec = ActorSpec(role, sim=sim_d, record_remote="recorder" if recorded and role != "recorder" else None,
-                             restart_hold_s=float(getattr(env.cfg, "actor_restart_timeout_s", 60.0)))
+                             restart_hold_s=float(env.cfg.actor_restart_timeout_s))
             actors[host_id] = ActorPlan(host_id, role, f"aerodaas/{run_id}/{host_id}", tier, compute, dict(labels),
                                         [], spec)
         return actors[host_id]
