@@ -10,6 +10,7 @@ import time
 import pytest
 
 from aerodaas.actors.cloud_executor import CloudExecutor
+from aerodaas.schedulers.dispatch.clock import Clock
 from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
 from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
 from aerodaas.schedulers.dispatch.edge_executors import EmulatedEdgeExecutor, OnnxEdgeExecutor
@@ -218,6 +219,50 @@ def test_dems_a_adapts_to_a_latency_step_on_the_runtime_where_dems_keeps_sending
     assert late_cloud["DEMS-A"] < 0.2, late_cloud
     assert out["DEMS-A"][0].policy.cloud_estimate_ms("HV") == pytest.approx(598, abs=15)
     assert out["DEMS-A"][1]["utility"] > out["DEMS"][1]["utility"]
+
+
+class SteppedClock(Clock):
+    """A clock the test sets; every read is 1 µs after the one before it (time passes between two reads)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.t_ms = 0.0
+
+    def now_ms(self) -> float:
+        self.t_ms += 0.001
+        return self.t_ms
+
+
+class EndsAtTheDeadline(EmulatedEdgeExecutor):
+    """An edge whose every run ends exactly at its task's deadline on ``clock``."""
+
+    def __init__(self, clock: SteppedClock) -> None:
+        super().__init__()
+        self.clock = clock
+
+    async def run(self, task, workload, edge_id):
+        self.clock.t_ms = task.deadline_ms - 0.001  # the dispatcher's next read is the deadline itself
+        return None, None
+
+
+def test_a_task_is_on_time_exactly_when_its_recorded_end_is_not_after_its_deadline():
+    """The state and ``end_ms`` come from one clock reading: a task judged on time at its deadline records that
+    reading as its end, not a later one (the CI failure of c603586: end 1400.2038 ms, deadline 1400.2004 ms,
+    DONE_ON_TIME)."""
+    clock = SteppedClock()
+
+    async def run():
+        d = AnalyticsDispatcher(make_analytics_scheduler("EDGE_FIFO", workload("LIGHT")), EndsAtTheDeadline(clock),
+                                None, clock=clock)
+        await d.start()
+        for i in range(3):  # arrivals 1 s apart: each can still make its deadline when it reaches the edge
+            d.submit("d0", "HV", None, 1000.0 * i)
+        return d, await d.finish(1.0)
+
+    d, r = asyncio.run(run())
+    check_accounting(d, r)
+    assert r["states"]["done_on_time"] == 3
+    assert all(t.end_ms == t.deadline_ms for t in d.tasks())
 
 
 def test_poll_timer_fires_at_next_poll_ms():

@@ -344,11 +344,12 @@ class AnalyticsDispatcher:
         if reply.get("ok"):
             state = TaskState.DONE_ON_TIME if now <= task.deadline_ms else TaskState.DONE_LATE
             task.result = reply.get("result")
-            self._finish(task, state, "cloud", task.reason or "cloud", notify=False)
+            self._finish(task, state, "cloud", task.reason or "cloud", notify=False, end_ms=now)
         elif reply.get("failed") or not str(reply.get("error", "")).startswith("cloud re-check"):
-            self._finish(task, TaskState.FAILED, "cloud", reply.get("error") or "cloud failure", notify=False)
+            self._finish(task, TaskState.FAILED, "cloud", reply.get("error") or "cloud failure", notify=False,
+                         end_ms=now)
         else:
-            self._finish(task, TaskState.DROPPED_TIME, "cloud", reply["error"], notify=False)
+            self._finish(task, TaskState.DROPPED_TIME, "cloud", reply["error"], notify=False, end_ms=now)
         self.cloud_counters.on_end(task, now)
         decisions = self._safe("on_cloud_done", [], task, now, latency_ms, about=f"#{task.task_id}")
         self._notify(task)
@@ -422,10 +423,10 @@ class AnalyticsDispatcher:
                 self.edge_hold_error.add(exec_ms - intended)
             now = self.clock.now_ms()
             if error is not None:
-                self._finish(task, TaskState.FAILED, "edge", error, notify=False)
+                self._finish(task, TaskState.FAILED, "edge", error, notify=False, end_ms=now)
             else:
                 self._finish(task, TaskState.DONE_ON_TIME if now <= task.deadline_ms else TaskState.DONE_LATE,
-                             "edge", task.reason or "edge", notify=False)
+                             "edge", task.reason or "edge", notify=False, end_ms=now)
             decisions = self._safe("on_edge_done", [], task, now, exec_ms, about=f"#{task.task_id}")
             self._notify(task)
             self._apply(decisions)
@@ -433,7 +434,9 @@ class AnalyticsDispatcher:
 
     # ------------------------------------------------------------------ terminal states
     def _finish(self, task: AnalyticsTask, state: TaskState, tier: str | None, reason: str,
-                notify: bool = True) -> None:
+                notify: bool = True, end_ms: float | None = None) -> None:
+        """Give ``task`` its terminal ``state``. ``end_ms`` is the clock reading (ms) the caller judged the deadline
+        against, so that ``end_ms <= deadline_ms`` exactly when the state is DONE_ON_TIME; None reads the clock."""
         if task.state is not TaskState.PENDING:
             self._policy_error(f"task #{task.task_id} would end twice ({task.state.value}, then {state.value})")
             return
@@ -441,7 +444,7 @@ class AnalyticsDispatcher:
         if tier is not None:
             task.tier = tier
         task.reason = reason
-        task.end_ms = self.clock.now_ms()
+        task.end_ms = self.clock.now_ms() if end_ms is None else end_ms
         profile = self.workload[task.model]
         u = task_utility(task, profile)
         self.utility += u
