@@ -226,14 +226,29 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
         w.m.mav.command_long_send(w.sysid, w.compid, 176, 0, 1, 6, 0, 0, 0, 0, 0)  # custom main mode 6: OFFBOARD
     push_end = time.monotonic() + push_s
     entering = time.monotonic() + 5.0
-    pushed = 0
+    pushed, reentered = 0, 0
     t_push = w.t_boot
-    while time.monotonic() < push_end and (w.mode in ("GUIDED", "OFFBOARD") or time.monotonic() < entering):
+    texts_before = len(w.texts)
+    next_offboard = time.monotonic() + 1.0
+
+    def fence_acted() -> bool:
+        return any("geofence" in t.lower() for t in w.texts[texts_before:])
+
+    # 20 Hz: PX4's offboard-loss timeout (COM_OF_LOSS_T, 1 s of firmware time) is 0.2 wall seconds at speed-up 5
+    while time.monotonic() < push_end and (w.mode in ("GUIDED", "OFFBOARD") or time.monotonic() < entering
+                                           or (w.autopilot == "px4" and not fence_acted())):
         w.push(ve, vn)
         pushed += 1
-        stop = time.monotonic() + 0.2
+        if w.autopilot == "px4" and w.mode != "OFFBOARD" and not fence_acted() \
+                and time.monotonic() >= next_offboard:
+            # the push stalled (a loaded machine) and PX4's offboard-loss failsafe took over before the fence
+            # acted: a runaway client takes OFFBOARD back, as it did after the kill
+            w.m.mav.command_long_send(w.sysid, w.compid, 176, 0, 1, 6, 0, 0, 0, 0, 0)
+            reentered += 1
+            next_offboard = time.monotonic() + 1.0
+        stop = time.monotonic() + 0.05
         while time.monotonic() < stop:
-            w.pump(0.05)
+            w.pump(0.02)
     t_push_end = w.t_boot
     t_auto = None
     uploaded = False
@@ -267,7 +282,7 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
             w.pump()
     Path(out).write_text(json.dumps({
         "killed": killed, "alive_after_kill": alive, "t_kill": t_kill, "t_push": t_push, "t_push_end": t_push_end,
-        "push": [ve, vn], "pushed": pushed, "t_auto": t_auto, "mission_uploaded": uploaded, "fence": fence, "samples": w.samples, "modes": w.modes,
+        "push": [ve, vn], "pushed": pushed, "reentered": reentered, "t_auto": t_auto, "mission_uploaded": uploaded, "fence": fence, "samples": w.samples, "modes": w.modes,
         "fence_status": w.fence_status, "texts": w.texts, "armed_at_end": w.armed}))
     return 0
 
