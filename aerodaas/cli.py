@@ -143,8 +143,8 @@ def _cmd_up(args: argparse.Namespace) -> int:
 
 
 def _cmd_down(args: argparse.Namespace) -> int:
-    """``aerodaas down``: stop the cluster ``aerodaas up`` started (its processes only). Exit 0, 1 if it would
-    not stop."""
+    """``aerodaas down``: stop the cluster ``aerodaas up`` started (its processes only) and remove the shared
+    ground cache (:func:`aerodaas.sim.ground_cache.clear`). Exit 0, 1 if it would not stop."""
     from aerodaas.clusters.persistent import down
 
     try:
@@ -154,6 +154,12 @@ def _cmd_down(args: argparse.Namespace) -> int:
         return 1
     print("aerodaas down: " + (f"stopped the local cluster at {st['address']} (pid {st['pid']})" if st else
                                "no local cluster of `aerodaas up` is running"), flush=True)
+    from aerodaas.sim import ground_cache
+
+    freed = ground_cache.clear()
+    if freed:
+        print(f"aerodaas down: removed the shared ground cache at {ground_cache.cache_dir()} "
+              f"({freed / 1e6:.1f} MB)", flush=True)
     return 0
 
 

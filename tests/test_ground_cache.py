@@ -71,3 +71,45 @@ def test_an_unwritable_cache_falls_back_to_the_heap(tmp_path, monkeypatch):
     w = World(GROUND, [])
     assert not isinstance(w.levels[0][0], np.memmap)
     assert np.array_equal(w.levels[0][0], ground_pyramid(GROUND)[0][0])
+
+
+def _store(seed: int) -> str:
+    g = GroundConfig(seed=seed, metres_per_pixel=0.05, size_m=40)
+    key = ground_cache.ground_key(g.model_dump_json(), None)
+    ground_cache.shared_levels(key, lambda: ground_pyramid(g))
+    return key
+
+
+def test_the_cache_keeps_the_recently_used_pyramids_within_its_bound(cache, monkeypatch):
+    """Storing a pyramid removes the least recently used others beyond AERODAAS_GROUND_CACHE_MB; loading one
+    marks it used; a crashed builder's old temporary directory goes too."""
+    k1 = _store(1)
+    one = sum(f.stat().st_size for f in (cache / k1).iterdir())
+    k2 = _store(2)
+    os.utime(cache / k1 / "meta.json", (2.0, 2.0))  # both last used long ago, k2 first
+    os.utime(cache / k2 / "meta.json", (1.0, 1.0))
+    _store(2)  # a load: k2 is now the most recently used, k1 the least
+    stale = cache / ".deadbeef-x"
+    stale.mkdir()
+    os.utime(stale, (1.0, 1.0))
+    monkeypatch.setenv("AERODAAS_GROUND_CACHE_MB", str(2.5 * one / 1e6))  # room for two
+    k3 = _store(3)
+    assert sorted(p.name for p in cache.iterdir()) == sorted([k2, k3])
+    monkeypatch.setenv("AERODAAS_GROUND_CACHE_MB", "0")  # no room: the pyramid being stored stays, alone
+    k4 = _store(4)
+    assert [p.name for p in cache.iterdir()] == [k4], (k1, k2, k3, k4)
+
+
+def test_a_bad_cache_bound_is_refused_before_ray_and_down_removes_the_cache(cache, monkeypatch, tmp_path):
+    _store(1)
+    env = dict(os.environ, AERODAAS_GROUND_CACHE_MB="lots")
+    app = tmp_path / "app.py"
+    app.write_text("raise SystemExit('the app must not run')\n")
+    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app)], env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and "AERODAAS_GROUND_CACHE_MB" in r.stderr and "'lots'" in r.stderr, r.stderr
+    env = dict(os.environ, AERODAAS_STATE_DIR=str(tmp_path / "state"))  # no `aerodaas up` cluster there
+    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "down"], env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and "removed the shared ground cache" in r.stdout, (r.stdout, r.stderr)
+    assert not cache.exists()

@@ -169,7 +169,11 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     """Everything ``aerodaas run``'s command line names, checked before Ray starts: no empty ``--record`` /
     ``--env``, a writable record path, ``--speedup`` / ``--timeout`` in range, ``--hitl-port`` in [0, 65535], the
     ``--address`` cluster reachable (:func:`aerodaas.runtime.addresses.check_ray_address`, within 10 s) and the
-    ``--env`` file valid. Raises ValueError / ConfigError naming the flag and the value."""
+    ``--env`` file valid, and ``AERODAAS_GROUND_CACHE_MB`` a number >= 0. Raises ValueError / ConfigError naming the
+    flag (or variable) and the value."""
+    from aerodaas.sim.ground_cache import limit_bytes
+
+    limit_bytes()
     for flag, v in (("--record", record), ("--env", env)):
         if v is not None and not v.strip():
             raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
