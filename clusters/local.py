@@ -76,7 +76,9 @@ class LocalCluster:
                                "LocalCluster with connect=True")
         enable_token_auth()
         from aerodaas.runtime.driver import _loopback_only
+        from aerodaas.runtime.worker_memory import limit_malloc_arenas
 
+        limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
         self._restore_network = _loopback_only()
         self._cloud_cpus = int(cloud_cpus)

@@ -125,6 +125,9 @@ def _serve(cpus: int) -> None:
 
     enable_token_auth()
     _loopback_only()  # kept: this process exists only to run the node
+    from aerodaas.runtime.worker_memory import limit_malloc_arenas
+
+    limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())

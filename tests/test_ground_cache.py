@@ -94,10 +94,11 @@ def test_the_cache_keeps_the_recently_used_pyramids_within_its_bound(cache, monk
     os.utime(stale, (1.0, 1.0))
     monkeypatch.setenv("AERODAAS_GROUND_CACHE_MB", str(2.5 * one / 1e6))  # room for two
     k3 = _store(3)
-    assert sorted(p.name for p in cache.iterdir()) == sorted([k2, k3])
+    assert not stale.exists()
+    assert sorted(p.name for p in cache.iterdir() if p.is_dir()) == sorted([k2, k3])
     monkeypatch.setenv("AERODAAS_GROUND_CACHE_MB", "0")  # no room: the pyramid being stored stays, alone
     k4 = _store(4)
-    assert [p.name for p in cache.iterdir()] == [k4], (k1, k2, k3, k4)
+    assert [p.name for p in cache.iterdir() if p.is_dir()] == [k4]
 
 
 def test_a_bad_cache_bound_is_refused_before_ray_and_down_removes_the_cache(cache, monkeypatch, tmp_path):
@@ -113,3 +114,29 @@ def test_a_bad_cache_bound_is_refused_before_ray_and_down_removes_the_cache(cach
                        timeout=120)
     assert r.returncode == 0 and "removed the shared ground cache" in r.stdout, (r.stdout, r.stderr)
     assert not cache.exists()
+
+
+def test_processes_that_start_together_build_the_ground_once(cache, tmp_path):
+    """Three processes ask for the same ground at once: one builds it (under the cache's lock), the others wait
+    and map its copy."""
+    log = tmp_path / "builds.txt"
+    script = tmp_path / "ask.py"
+    script.write_text(
+        "import os, sys, time\n"
+        "from aerodaas.config import GroundConfig\n"
+        "from aerodaas.sim import ground_cache\n"
+        "from aerodaas.sim.world import ground_pyramid\n"
+        "g = GroundConfig(seed=9, metres_per_pixel=0.05, size_m=40)\n"
+        "def build():\n"
+        "    with open(sys.argv[1], 'a') as f:\n"
+        "        f.write(f'{os.getpid()}\\n')\n"
+        "    time.sleep(1.0)  # the others ask meanwhile\n"
+        "    return ground_pyramid(g)\n"
+        "lv = ground_cache.shared_levels(ground_cache.ground_key(g.model_dump_json(), None), build)\n"
+        "print(type(lv[0][0]).__name__)\n")
+    procs = [subprocess.Popen([sys.executable, str(script), str(log)], env=dict(os.environ), stdout=subprocess.PIPE,
+                              text=True) for _ in range(3)]
+    outs = [p.communicate(timeout=120)[0].strip() for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0]
+    assert outs == ["memmap"] * 3
+    assert len(log.read_text().split()) == 1

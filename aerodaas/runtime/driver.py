@@ -159,6 +159,9 @@ def _init_ray(address: str | None) -> None:
         # workers prestarted while the app is built: three, which the recorder, a drone and an analytics actor take
         # (1.4 s instead of 2.0 s from Ray ready to the actors ready, `aerodaas bench startup`)
         dashboard = OPTIONS.dashboard
+        from aerodaas.runtime.worker_memory import limit_malloc_arenas
+
+        limit_malloc_arenas()  # the workers' C heap: see the module
         for attempt in range(3):
             try:
                 restore = _loopback_only()

@@ -97,7 +97,7 @@ def _entries(root: pathlib.Path) -> list[tuple[float, pathlib.Path, int]]:
     ``meta.json`` (s since the epoch), which :func:`shared_levels` touches on every load."""
     out = []
     for d in root.iterdir() if root.is_dir() else ():
-        if d.name.startswith("."):
+        if d.name.startswith(".") or not d.is_dir():
             continue
         try:
             st = (d / "meta.json").stat()
@@ -119,8 +119,11 @@ def prune(keep: str | None = None, limit: int | None = None, incoming: int = 0) 
     for d in root.iterdir() if root.is_dir() else ():
         try:
             if d.name.startswith(".") and now - d.stat().st_mtime > STALE_BUILD_S:
-                size = _size(d)
-                shutil.rmtree(d)
+                size = _size(d) if d.is_dir() else 0
+                if d.is_dir():
+                    shutil.rmtree(d)
+                else:
+                    d.unlink()  # a builder's lock file
                 removed += size
         except OSError:
             pass
@@ -145,7 +148,7 @@ def clear() -> int:
     root = cache_dir()
     if not root.is_dir():
         return 0
-    size = sum(_size(d) for d in root.iterdir())
+    size = sum(_size(d) for d in root.iterdir() if d.is_dir())
     shutil.rmtree(root, ignore_errors=True)
     return size
 
@@ -156,24 +159,54 @@ def _load(d: pathlib.Path) -> list[Level]:
             for i, m in enumerate(meta["levels"])]
 
 
+def _stored(final: pathlib.Path) -> list[Level] | None:
+    """The pyramid stored at ``final``, mapped (its last use recorded), or None when absent or damaged."""
+    if not (final / "meta.json").exists():
+        return None
+    try:
+        levels = _load(final)
+    except (OSError, ValueError, KeyError):
+        return None  # a damaged copy (or one removed meanwhile): rebuilt by the caller
+    try:
+        os.utime(final / "meta.json")  # its last use, for :func:`prune`
+    except OSError:
+        pass
+    return levels
+
+
 def shared_levels(key: str, build: Callable[[], list[Level]]) -> list[Level]:
     """The pyramid stored under ``key``, mapped read-only; built with ``build()`` and stored first when absent.
+    One process builds it at a time (an exclusive ``flock`` on ``.<key>.lock``): the drone actors of a run, which
+    start together, wait for the first one's copy instead of each building its own (0.6-1.1 s of CPU and ~60 MB
+    of transient memory each).
 
     Returns a list of ((H, W, 3) uint8 BGR read-only array, metres per pixel, home pixel (x, y)). Any OS error
     while storing (no space, read-only file system) falls back to the pyramid ``build()`` returned, in the heap."""
+    import fcntl
+
     root = cache_dir()
     final = root / key
-    if (final / "meta.json").exists():
-        try:
-            levels = _load(final)
-        except (OSError, ValueError, KeyError):
-            levels = None  # a damaged copy (or one removed meanwhile): rebuild below
-        if levels is not None:
-            try:
-                os.utime(final / "meta.json")  # its last use, for :func:`prune`
-            except OSError:
-                pass
-            return levels
+    levels = _stored(final)
+    if levels is not None:
+        return levels
+    lock = None
+    try:
+        root.mkdir(mode=0o700, exist_ok=True)
+        lock = open(root / f".{key}.lock", "a")  # noqa: SIM115 - held until the copy is stored
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released by the kernel if the holder dies
+    except OSError:
+        pass  # no lock (read-only, no space): build anyway, as before
+    try:
+        levels = _stored(final)  # stored by the process that held the lock before us
+        return levels if levels is not None else _build_and_store(key, build)
+    finally:
+        if lock is not None:
+            lock.close()
+
+
+def _build_and_store(key: str, build: Callable[[], list[Level]]) -> list[Level]:
+    root = cache_dir()
+    final = root / key
     levels = build()
     tmp = None
     try:
@@ -195,9 +228,27 @@ def shared_levels(key: str, build: Callable[[], list[Level]]) -> list[Level]:
                 shutil.rmtree(final, ignore_errors=True)
                 os.rename(tmp, final)
                 tmp = None
-        return _load(final)
+        mapped = _load(final)
     except OSError:
         return levels
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+    del levels
+    release_heap()
+    return mapped
+
+
+def release_heap() -> bool:
+    """Give the C heap's free memory back to the system (glibc ``malloc_trim(0)``): glibc keeps part of the freed
+    float32 scratch of a pyramid's build in the process (measured outside Ray with the default ground: 77.1 MB PSS
+    after building without it, 71.5 MB with it, 65.2 MB for a process that only mapped the copy). Returns False
+    where there is no glibc."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        return bool(libc.malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
