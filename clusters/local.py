@@ -79,6 +79,9 @@ class LocalCluster:
         from aerodaas.runtime.worker_memory import limit_malloc_arenas
 
         limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
+        from aerodaas.runtime import reaper
+
+        reaper.ensure_started()  # the nodes' processes end with this process, however it ends
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
         self._restore_network = _loopback_only()
         self._cloud_cpus = int(cloud_cpus)

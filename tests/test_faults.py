@@ -24,6 +24,7 @@ pytestmark = pytest.mark.faults
     "analytics raising every 10th item, on_error=continue",
     "analytics raising, on_error=abort",
     "SIGKILL mid-run, then `aerodaas recover`",
+    "SIGKILL of the driver alone mid-run",
     "SIGKILL of the recorder actor mid-run",
     "SIGTERM right after the summary",
     "SIGINT right after the summary",

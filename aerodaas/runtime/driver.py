@@ -162,6 +162,9 @@ def _init_ray(address: str | None) -> None:
         from aerodaas.runtime.worker_memory import limit_malloc_arenas
 
         limit_malloc_arenas()  # the workers' C heap: see the module
+        from aerodaas.runtime import reaper
+
+        reaper.ensure_started()  # Ray's processes end with this driver, however it ends (see the module)
         for attempt in range(3):
             try:
                 restore = _loopback_only()

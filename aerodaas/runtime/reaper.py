@@ -1,0 +1,117 @@
+"""The run's process reaper: no process of a local run outlives its driver by more than a few seconds.
+
+When ``aerodaas run`` starts its own Ray (local mode), Ray's node processes (GCS, raylet, the dashboard and
+runtime-env agents, the workers that hold the actors) are descendants of the driver. If the driver dies without
+``ray.shutdown`` (SIGKILL, the OOM killer), the raylet and workers go with it, but Ray's agents notice the raylet's
+death, then try to report it to the dead GCS and wait out its client's timeout: measured here (Ray 2.60), the
+dashboard and runtime-env agents of a SIGKILLed driver stayed 60-64 s (``ray/_private/process_watcher.py``,
+``report_raylet_error_logs``).
+
+The reaper is a separate process started with the local Ray (:func:`start`), in its own session so that a
+Ctrl-C to the driver's process group does not reach it. It runs this file as a script (standard library only,
+~10 MB). Every ``period_s`` it records the driver's descendants as (pid, start time) pairs; once the driver is
+gone it waits ``grace_s`` for them to end by themselves (``ray.shutdown`` normally ended them already), then
+SIGKILLs those still alive whose start time still matches (a reused pid is never touched) and exits. It never
+touches a process that was not below the driver: a cluster of ``aerodaas up`` or ``--address`` is not its to end.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+
+__all__ = ["descendants", "ensure_started", "start", "start_time"]
+
+_STARTED: dict[int, subprocess.Popen] = {}  # driver pid -> its reaper (one per process, forks included)
+
+
+def start_time(pid: int) -> int | None:
+    """The start time of ``pid`` (clock ticks since boot, /proc/<pid>/stat field 22), or None if it has ended
+    (or is a zombie)."""
+    try:
+        stat = open(f"/proc/{pid}/stat", encoding="ascii", errors="replace").read()
+    except OSError:
+        return None
+    fields = stat.rsplit(")", 1)[1].split()
+    if fields[0] == "Z":
+        return None
+    return int(fields[19])
+
+
+def descendants(root: int) -> list[int]:
+    """Every process below ``root`` (from /proc's parent ids), children before grandchildren."""
+    children: dict[int, list[int]] = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                stat = open(f"/proc/{d}/stat", encoding="ascii", errors="replace").read()
+            except OSError:
+                continue
+            ppid = int(stat.rsplit(")", 1)[1].split()[1])
+            children.setdefault(ppid, []).append(int(d))
+    out, todo = [], [root]
+    while todo:
+        for c in children.get(todo.pop(0), []):
+            out.append(c)
+            todo.append(c)
+    return out
+
+
+def start(driver_pid: int | None = None, period_s: float = 0.5, grace_s: float = 3.0) -> subprocess.Popen | None:
+    """Start the reaper for ``driver_pid`` (default: this process). Returns its Popen, or None where there is no
+    /proc (not Linux): nothing is reaped there."""
+    if not os.path.isdir("/proc/self"):
+        return None
+    pid = os.getpid() if driver_pid is None else int(driver_pid)
+    return subprocess.Popen([sys.executable, "-S", os.path.abspath(__file__), str(pid), str(period_s), str(grace_s)],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True, close_fds=True)
+
+
+def ensure_started() -> subprocess.Popen | None:
+    """:func:`start` for this process unless its reaper already runs (called before a local Ray starts)."""
+    me = os.getpid()
+    r = _STARTED.get(me)
+    if r is None or r.poll() is not None:
+        r = start(me)
+        if r is not None:
+            _STARTED[me] = r
+    return r
+
+
+def _watch(driver: int, period_s: float, grace_s: float) -> int:
+    born = start_time(driver)
+    if born is None:
+        return 0
+    me = os.getpid()
+    seen: dict[int, int] = {}
+    while start_time(driver) == born:
+        for pid in descendants(driver):
+            if pid != me and pid not in seen:
+                t = start_time(pid)
+                if t is not None:
+                    seen[pid] = t
+        time.sleep(period_s)
+    deadline = time.monotonic() + grace_s
+    while time.monotonic() < deadline and any(start_time(p) == t for p, t in seen.items()):
+        time.sleep(0.1)
+    for pid, t in seen.items():
+        if start_time(pid) == t:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+    return 0
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C meant for the run is not meant for its reaper
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("driver", type=int)
+    ap.add_argument("period_s", type=float)
+    ap.add_argument("grace_s", type=float)
+    a = ap.parse_args()
+    sys.exit(_watch(a.driver, a.period_s, a.grace_s))
