@@ -20,6 +20,8 @@ pytestmark = pytest.mark.faults
 @pytest.mark.e2e
 @pytest.mark.parametrize("name", [
     "SIGTERM while the actors start",
+    "SIGTERM at the slowest speedup (0.01)",
+    "--timeout 8 at the slowest speedup (0.01)",
     "disk full (ENOSPC) mid-run",
     "analytics raising every 10th item, on_error=continue",
     "analytics raising, on_error=abort",

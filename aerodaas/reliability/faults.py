@@ -84,18 +84,24 @@ def _no_crash(out: str) -> bool:
     return "Traceback" not in out and "Aborted" not in out and "core dumped" not in out
 
 
-def _signal_case(sig: int, min_size: int, group: bool = False) -> Callable[[Path], dict]:
+#: a run stopped by a signal or ``--timeout`` ends within this (s) of it, at any speedup the config allows
+STOP_WITHIN_S = 60.0
+
+
+def _signal_case(sig: int, min_size: int, group: bool = False, speedup: float = 1.0) -> Callable[[Path], dict]:
     def run(tmp: Path) -> dict:
         rec = tmp / "run.mcap"
-        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "1", "--quiet"],
-                 start_new_session=True,
+        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", f"{speedup:g}",
+                  "--quiet"], start_new_session=True,
                  preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         reached = _wait_size(rec, min_size, p)
         if group:
             os.killpg(p.pid, sig)
         else:
             p.send_signal(sig)
+        t_sig = time.monotonic()
         out, _ = p.communicate(timeout=300)
+        took = time.monotonic() - t_sig
         ok, n, why = mcap_reader_ok(rec)
         outcome = None
         if rec.exists():
@@ -103,10 +109,30 @@ def _signal_case(sig: int, min_size: int, group: bool = False) -> Callable[[Path
 
             outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
         want = 128 + sig
-        clean = reached and p.returncode == want and ok and _no_crash(out)
+        clean = reached and p.returncode == want and ok and _no_crash(out) and took <= STOP_WITHIN_S
         late = "" if reached else " (the run had not reached the phase to interrupt: machine too loaded)"
-        return {"observed": f"exit {p.returncode}, recording {'finished' if ok else why} ({n} msgs), "
-                            f"outcome {outcome}{late}", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
+        return {"observed": f"exit {p.returncode} {took:.1f} s after the signal, recording "
+                            f"{'finished' if ok else why} ({n} msgs), outcome {outcome}{late}", "clean": clean,
+                "exit": p.returncode, "output": out[-3000:]}
+    return run
+
+
+def _timeout_case(speedup: float, timeout_s: float) -> Callable[[Path], dict]:
+    """``--timeout`` at an extreme speedup: the run ends as ``timeout`` (exit 1) with a finished recording, within
+    :data:`STOP_WITHIN_S` of the timeout (counted from the mission's start)."""
+    def run(tmp: Path) -> dict:
+        rec = tmp / "run.mcap"
+        t0 = time.monotonic()
+        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", f"{speedup:g}",
+                  "--timeout", f"{timeout_s:g}", "--quiet"], start_new_session=True)
+        out, _ = p.communicate(timeout=timeout_s + 600)
+        took = time.monotonic() - t0
+        ok, n, why = mcap_reader_ok(rec)
+        said = "mission outcome: timeout" in out
+        clean = p.returncode == 1 and said and ok and _no_crash(out) and took <= timeout_s + STOP_WITHIN_S
+        return {"observed": f"exit {p.returncode} after {took:.1f} s (timeout {timeout_s:g} s), outcome timeout "
+                            f"{said}, recording {'finished' if ok else why} ({n} msgs)", "clean": clean,
+                "exit": p.returncode, "output": out[-3000:]}
     return run
 
 
@@ -363,6 +389,10 @@ def _broken_pipe(tmp: Path) -> dict:
 FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGTERM during the flight", "exit 143, recording finished, outcome interrupted", _signal_case(signal.SIGTERM, 20000)),
     ("SIGTERM while the actors start", "exit 143, recording finished", _signal_case(signal.SIGTERM, 1)),
+    ("SIGTERM at the slowest speedup (0.01)", f"exit 143 within {STOP_WITHIN_S:g} s, recording finished",
+     _signal_case(signal.SIGTERM, 5000, speedup=0.01)),
+    ("--timeout 8 at the slowest speedup (0.01)", f"exit 1, outcome timeout, within {STOP_WITHIN_S:g} s of the "
+     "timeout, recording finished", _timeout_case(0.01, 8.0)),
     ("Ctrl-C (SIGINT to the process group) during the flight", "exit 130, recording finished",
      _signal_case(signal.SIGINT, 20000, group=True)),
     ("disk full (ENOSPC) mid-run", "exit 1, summary says what was lost, recording finished up to the failure",
