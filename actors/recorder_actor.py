@@ -185,14 +185,26 @@ class RecorderActor:
     def recording_report(self) -> dict:
         """:meth:`~aerodaas.actors.recorder.RecorderService.report` plus ``segments`` (the files of this run, in
         order) and ``losses`` (one per recorder restart: ``segment``, ``recorded_until_ns``, ``next_segment``,
-        ``resumed_at_ns``, ``previous_finished``)."""
+        ``resumed_at_ns``, ``previous_finished``) and ``segment_messages`` (the message count of each segment
+        before this process's, read from its finished summary; None where it cannot be read)."""
+        from aerodaas.recording.segments import message_time_range
+
         rep = self.recorder.report() if self.recorder is not None else {}
         if self.losses:
             first = None
             if self.recorder is not None and self.recorder.rec.message_counts:
                 first = getattr(self.recorder, "first_t_ns", None)
             self.losses[-1]["resumed_at_ns"] = first
-        return {**rep, "segments": list(self.segments), "losses": [dict(x) for x in self.losses]}
+        if self._finishing is not None:
+            self._finishing.join(120.0)
+        counts: list[int | None] = []
+        for seg in self.segments[:-1]:
+            try:
+                counts.append(message_time_range(seg)[2])
+            except Exception:  # noqa: BLE001 - unfinished or unreadable: unknown, said so in the summary
+                counts.append(None)
+        return {**rep, "segments": list(self.segments), "losses": [dict(x) for x in self.losses],
+                "segment_messages": counts}
 
     def stats(self) -> dict:
         return {"_host": {"received": self.received, "errors": [], "error_count": 0}}

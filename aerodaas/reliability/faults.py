@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -272,6 +273,8 @@ def _recorder_kill(tmp: Path) -> dict:
     ok0, n0, why0 = mcap_reader_ok(rec)
     ok1, n1, why1 = mcap_reader_ok(seg1) if seg1.exists() else (False, 0, "no segment run.1.mcap")
     said = "recording lost at t = " in out
+    m = re.search(r"in 2 segments \(.*\): (\d+) messages \((\d+) \+ (\d+)\)", out)
+    summed = (int(m.group(1)), int(m.group(2)), int(m.group(3))) if m else None  # the summary's own counts
     r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "recover", str(rec)], capture_output=True, text=True,
                        timeout=300)
     ok, n, why = mcap_reader_ok(rec)
@@ -281,11 +284,14 @@ def _recorder_kill(tmp: Path) -> dict:
 
         outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
     clean = (reached and len(pids) == 1 and p.returncode == 4 and said and "success" not in _summary_outcome(out)
-             and ok0 and ok1 and r.returncode == 0 and ok and n == n0 + n1 and not seg1.exists() and _no_crash(out))
+             and ok0 and ok1 and r.returncode == 0 and ok and n == n0 + n1 and not seg1.exists() and _no_crash(out)
+             and summed == (n0 + n1, n0, n1))
     return {"observed": f"exit {p.returncode}, says 'recording lost at t = ...' {said}; segments: run.mcap "
                         f"{'finished' if ok0 else why0} ({n0} msgs), run.1.mcap {'finished' if ok1 else why1} ({n1} "
                         f"msgs); `aerodaas recover` exit {r.returncode}: joined {'finished' if ok else why} ({n} "
-                        f"msgs, outcome {outcome})", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
+                        f"msgs, outcome {outcome}); the summary counts {summed[0] if summed else '?'} messages "
+                        f"({' + '.join(map(str, summed[1:])) if summed else 'not summed'})", "clean": clean,
+            "exit": p.returncode, "output": out[-3000:]}
 
 
 def _signal_after_summary(sig: int) -> Callable[[Path], dict]:
@@ -321,8 +327,6 @@ def _hitl_clear_all(tmp: Path) -> dict:
     """The farm survey with the HITL API: once the drone has reached its first waypoint, a ``clear`` with a null
     body (refused, 422) and then ``{"scope": "all"}``: the pre-planned survey is gone, so the run must not report
     success (outcome incomplete, exit 1), and the summary says how many of the 4 waypoints were flown."""
-    import re
-
     from aerodaas.tools.hitl import request
 
     rec = tmp / "run.mcap"
@@ -414,7 +418,7 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL of the driver alone mid-run", f"every process of the run (Ray's agents included) gone within "
      f"{GONE_WITHIN_S:g} s (the test allows {GONE_WITHIN_LOADED_S:g} s on a loaded machine)", _driver_sigkill),
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
-     "run.1.mcap, `aerodaas recover` joins the segments", _recorder_kill),
+     "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them", _recorder_kill),
 ]
 
 

@@ -80,6 +80,8 @@ class MissionResult:
     recording_losses: list[dict] = field(default_factory=list)
     #: the recording's segment files in order (one unless the recorder actor was restarted)
     recording_segments: list[str] = field(default_factory=list)
+    #: message count of each segment before the last (None: unreadable); the last one's is ``recording_counts``
+    recording_segment_messages: list[int | None] = field(default_factory=list)
     recording_duplicates: int = 0  # samples a restarted drone actor sent again, dropped (recorded once)
     #: lock-step runs: the consumers (component ids) whose actor died and did not answer again within
     #: ``actor_restart_timeout_s``; their analytics were lost (outcome ``analytics_lost``, not ``ok``)
@@ -530,6 +532,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
                            recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
                            recording_start_ns=epoch_ns, recording_losses=rec_report.get("losses") or [],
                            recording_segments=rec_report.get("segments") or [],
+                           recording_segment_messages=rec_report.get("segment_messages") or [],
                            recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics)
     for h in handles.values():
         for hook in h["robot"]._end_hooks:

@@ -1,7 +1,8 @@
 """The driver's watch on the run's recorder actor (:class:`RecorderWatch`): a recorder that dies mid-run is
 restarted by Ray into a new segment file (:mod:`aerodaas.actors.recorder_actor`); the driver notices the new
-process, says "recording lost at t = ..." at once, and gives the new recorder the other actors' specs again (a
-drone or analytics actor restarted later reads its spec there)."""
+process, says "recording lost (recorded up to at least t = ...)" at once (the summary gives the segment's exact end),
+and gives the new recorder the other actors' specs again (a drone or analytics actor restarted later reads its spec
+there)."""
 from __future__ import annotations
 
 import sys
@@ -75,8 +76,8 @@ class RecorderWatch:
         self.restarts += 1
         at = None if self.last_t_ns is None else (self.last_t_ns - self.epoch_ns) / 1e9
         self.lost_at_s.append(at)
-        where = "t = ?" if at is None else f"t = {at:.1f} s"
-        print(f"aerodaas: recording lost at {where}: the recorder actor died and was restarted; recording continues "
+        where = "" if at is None else f" (recorded up to at least t = {at:.1f} s; the summary gives the exact time)"
+        print(f"aerodaas: recording lost{where}: the recorder actor died and was restarted; recording continues "
               f"in {st.get('segment')} (join the segments with `aerodaas recover "
               f"{self._path()}`)", file=sys.stderr, flush=True)
         self.last_t_ns = st.get("last_t_ns")

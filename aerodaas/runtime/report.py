@@ -73,8 +73,13 @@ def format_summary(result: Any) -> str:
         if fail is None:
             segs = getattr(result, "recording_segments", None) or []
             if len(segs) > 1:
-                lines.append(f"  recording: {result.recording} in {len(segs)} segments ({', '.join(segs)}; the last "
-                             f"one {total} messages on {len(result.recording_counts)} channels)")
+                before = list(getattr(result, "recording_segment_messages", None) or [])
+                before += [None] * (len(segs) - 1 - len(before))
+                per = [str(n) if n is not None else "?" for n in before[:len(segs) - 1]] + [str(total)]
+                whole = f"{sum(before) + total} messages" if None not in before else \
+                    "? messages (a segment could not be read)"
+                lines.append(f"  recording: {result.recording} in {len(segs)} segments ({', '.join(segs)}): {whole} "
+                             f"({' + '.join(per)}), the last one on {len(result.recording_counts)} channels")
             else:
                 lines.append(f"  recording: {result.recording} ({total} messages on {len(result.recording_counts)} "
                              f"channels)")
