@@ -72,19 +72,13 @@ class RecorderService:
         self.path = path
         #: the live Foxglove WebSocket server (``live`` = its HOST:PORT), fed by the same writer
         self.live = None
+        self._declared = [(topic, self.rec.declare_proto(topic, schema)) for topic, schema in declare or ()]
         if live is not None:
-            from aerodaas.liveview.server import LiveServer
-
             try:
-                self.live = LiveServer(live, name="aerodaas run")
+                self.attach_live(live)
             except BaseException:
                 self.rec.close()
                 raise
-            self.rec.add_sink(self.live.publish)
-        for topic, schema in declare or ():
-            record = self.rec.declare_proto(topic, schema)
-            if self.live is not None:
-                self.live.advertise(topic, *record, "protobuf")
         self._cameras: dict[str, list[tuple[str, tuple]]] = {}  # robot -> [(camera frame, mount quaternion)]
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._pending_frames = 0
@@ -111,6 +105,22 @@ class RecorderService:
         self._thread.start()
 
     # ------------------------------------------------------------------ producers
+
+    def attach_live(self, address: str) -> str:
+        """Start the live view on ``address`` (HOST:PORT) and feed it every message from now on, the declared track
+        channels advertised first; returns its URL (the current one if a live view already runs). Raises
+        ``ValueError`` for a bad address and ``RuntimeError`` when it cannot bind."""
+        from aerodaas.liveview.server import LiveServer
+
+        if self.live is not None:
+            return self.live.url
+        live = LiveServer(address, name="aerodaas run")
+        for topic, record in self._declared:
+            live.advertise(topic, *record, "protobuf")
+        self.live = live
+        self.rec.add_sink(live.publish)
+        return live.url
+
     def image(self, topic: str, t_ns: int, frame: np.ndarray | bytes, frame_id: str) -> bool:
         """Queue a (H, W, 3) uint8 BGR frame (shared, not copied: frames are read-only), or its JPEG bytes already
         encoded by the sending actor. False if dropped."""

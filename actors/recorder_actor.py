@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from typing import Any
 
 import ray
@@ -50,6 +51,7 @@ class RecorderActor:
         self.segments: list[str] = []
         self.losses: list[dict] = []
         self._finishing: threading.Thread | None = None
+        self.live_error: str | None = None  # a restarted recorder that could not serve the live view again
         import warnings
 
         with warnings.catch_warnings():  # Ray's property reads its own deprecated ``actor_id`` internally
@@ -81,6 +83,13 @@ class RecorderActor:
             loss["error"] = f"{type(e).__name__}: {e}"
         finally:
             self._set_up.set()
+        if rec.live and self.recorder is not None:
+            from aerodaas.liveview.server import parse_address
+
+            host, port = parse_address(rec.live)
+            if port:  # a fixed port: serve there again at once (port 0: the driver's watch gives the bound one)
+                threading.Thread(target=self.serve_live, args=(f"{host}:{port}",), name="aerodaas-live-again",
+                                 daemon=True).start()
 
         def finish_previous() -> None:
             from aerodaas.recording.recover import recover_mcap
@@ -122,16 +131,36 @@ class RecorderActor:
         return {"host": "recorder", "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id(),
                 "live_url": live.url if live is not None else None, "components": []}
 
+    def serve_live(self, address: str, attempts: int = 10, every_s: float = 0.5) -> str | None:
+        """Serve the live view on ``address`` (HOST:PORT) unless this process already does: a recorder restarted
+        after its first process died serves the run's live view again where the first one did, so a Foxglove
+        client reconnects to the same URL. Binding is retried ``attempts`` times every ``every_s`` seconds; returns
+        the URL, or None (with ``live_error`` set) when it cannot bind."""
+        rec = self.recorder
+        if rec is None:
+            return None
+        err = None
+        for _ in range(max(1, attempts)):
+            try:
+                with self._setup_lock:
+                    return rec.attach_live(address)
+            except (RuntimeError, ValueError) as e:
+                err = f"{type(e).__name__}: {e}"
+            time.sleep(every_s)
+        self.live_error = err
+        return None
+
     def ping(self) -> int:
         return os.getpid()
 
     def status(self) -> dict:
-        """``{"pid", "restarted": bool, "segment": the file written now, "last_t_ns"}`` (the driver polls it to see a
-        restart)."""
+        """``{"pid", "restarted": bool, "segment": the file written now, "last_t_ns", "live_url"}`` (the driver polls it
+        to see a restart)."""
         rec = self.recorder
+        live = getattr(rec, "live", None)
         return {"pid": os.getpid(), "restarted": bool(self.losses),
                 "segment": self.segments[-1] if self.segments else None,
-                "last_t_ns": getattr(rec, "last_t_ns", None)}
+                "last_t_ns": getattr(rec, "last_t_ns", None), "live_url": live.url if live is not None else None}
 
     def record(self, batch: list) -> int:
         """Messages of another actor (:class:`~.recorder.RemoteRecorder`); returns how many were taken. The other

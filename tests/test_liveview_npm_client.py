@@ -9,8 +9,11 @@ node/npm are missing or npm cannot install the client.
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
 import subprocess
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -20,7 +23,9 @@ from mcap.reader import make_reader
 from aerodaas.liveview.server import LiveServer
 from aerodaas.recording.writer import RecordedMessage
 
-from .test_live_and_foxglove import AERODAAS, APP, ENV, _start, _wait_for_url
+from aerodaas.reliability.faults import actor_pids
+
+from .test_live_and_foxglove import AERODAAS, APP, ENV, REPO, _start, _wait_for_url
 
 JS = Path(__file__).parent / "js"
 
@@ -40,9 +45,9 @@ def node_client():
         if inst.returncode != 0:
             pytest.skip(f"npm install @foxglove/ws-protocol failed (offline?): {inst.stderr[-300:]}")
 
-    def start(url: str, timeout_s: float = 240, subscribe_after_ms: int = 0) -> subprocess.Popen:
-        return subprocess.Popen([node, str(JS / "count_channels.mjs"), url, str(timeout_s), str(subscribe_after_ms)],
-                                cwd=JS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    def start(url: str, timeout_s: float = 240, subscribe_after_ms: int = 0, reconnects: int = 0) -> subprocess.Popen:
+        return subprocess.Popen([node, str(JS / "count_channels.mjs"), url, str(timeout_s), str(subscribe_after_ms),
+                                 str(reconnects)], cwd=JS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     return start
 
 
@@ -73,7 +78,6 @@ def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_ever
             srv.publish(RecordedMessage("/uav/state", "aerodaas.State", "jsonschema", b"{}", "json", 100 + i,
                                         json.dumps({"i": i}).encode()))
         client = node_client(srv.url, 60)
-        import time
         t_end = time.monotonic() + 60
         while srv.subscriptions < 2 and time.monotonic() < t_end:
             time.sleep(0.05)
@@ -118,3 +122,34 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
     print("replay --live per-channel counts:", got["counts"])
     assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"]
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
+
+
+@pytest.mark.faults
+@pytest.mark.e2e
+def test_the_live_view_comes_back_at_the_same_url_after_the_recorder_actor_dies(node_client, tmp_path):
+    """``--live 127.0.0.1:0`` (a port chosen at start): the recorder actor, which serves the live view, is SIGKILLed
+    mid-flight; Ray restarts it into ``run.1.mcap`` and the driver's watch has it serve the live view again on the
+    port the first one bound. Foxglove's client, reconnecting to the same URL as Foxglove's app does, receives the
+    rest of the run -- the odometry and ``/mission/result`` -- until the server closes at the end."""
+    rec = tmp_path / "run.mcap"
+    p, lines = _start([*AERODAAS, "run", str(REPO / "apps" / "farm_survey.py"), "--record", str(rec), "--live",
+                       "127.0.0.1:0", "--speedup", "4", "--quiet"])
+    try:
+        url, _ = _wait_for_url(p, lines, "live view at")
+        client = node_client(url, 400, reconnects=1)
+        t_end = time.monotonic() + 300
+        while (not rec.exists() or rec.stat().st_size < 20000) and p.poll() is None and time.monotonic() < t_end:
+            time.sleep(0.1)
+        pids = actor_pids(p.pid, "RecorderActor")
+        assert len(pids) == 1, pids
+        os.kill(pids[0], signal.SIGKILL)
+        assert p.wait(timeout=300) == 4  # the recording has a hole: documented exit 4
+        got = _finish(client, 120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert got["closed_by_server"] and len(got["connections"]) == 2, got
+    after = got["connections"][1]
+    print("live view after the recorder's restart, per channel:", after)
+    assert after.get("/mission/result", 0) >= 1, after
+    assert sum(n for t, n in after.items() if t.endswith("/odometry")) > 0, after

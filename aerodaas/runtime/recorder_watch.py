@@ -40,6 +40,7 @@ class RecorderWatch:
         self.last_t_ns: int | None = None
         self.restarts = 0
         self.lost_at_s: list[float | None] = []
+        self.live_url: str | None = None  # the live view's URL as the recorder reported it (ws://HOST:PORT)
         self._ref = None
         self._asked = 0.0
 
@@ -71,6 +72,7 @@ class RecorderWatch:
         if self.pid is None or st["pid"] == self.pid:
             self.pid = st["pid"]
             self.last_t_ns = st.get("last_t_ns") or self.last_t_ns
+            self.live_url = st.get("live_url") or self.live_url
             return
         self.pid = st["pid"]
         self.restarts += 1
@@ -83,5 +85,7 @@ class RecorderWatch:
         self.last_t_ns = st.get("last_t_ns")
         try:
             self.recorder.keep_specs.remote(*recorder_specs(self.plan))
+            if self.live_url and not st.get("live_url"):  # the live view where the first recorder bound it
+                self.recorder.serve_live.remote(self.live_url.removeprefix("ws://"))
         except Exception:  # noqa: BLE001
             pass

@@ -1,15 +1,18 @@
 // Foxglove's own client (@foxglove/ws-protocol) for tests/test_liveview_npm_client.py.
-// usage: node count_channels.mjs ws://HOST:PORT TIMEOUT_S [SUBSCRIBE_AFTER_MS]
+// usage: node count_channels.mjs ws://HOST:PORT TIMEOUT_S [SUBSCRIBE_AFTER_MS] [RECONNECTS]
 // Connects (retrying until the server listens), subscribes to every channel as it is advertised (after
 // SUBSCRIBE_AFTER_MS, default 0), counts messages per topic until the server closes the connection, then prints
-// {"protocol", "channels": {topic: {schemaName, encoding}}, "counts": {topic: n}, "statuses": [...]} as JSON.
+// {"protocol", "channels": {topic: {schemaName, encoding}}, "counts": {topic: n}, "statuses": [...],
+// "connections": [{topic: n} per connection]} as JSON. With RECONNECTS > 0 it connects again to the same URL
+// (retrying until a server listens there) after each of the first RECONNECTS closes, as Foxglove's app does.
 import wsProtocol from "@foxglove/ws-protocol";
 const { FoxgloveClient } = wsProtocol;
 import WebSocket from "ws";
 
 const [url, timeoutS, afterMs] = [process.argv[2], Number(process.argv[3] ?? 60), Number(process.argv[4] ?? 0)];
+let reconnects = Number(process.argv[5] ?? 0);
 const deadline = Date.now() + timeoutS * 1000;
-const out = { protocol: null, channels: {}, counts: {}, statuses: [], closed_by_server: false };
+const out = { protocol: null, channels: {}, counts: {}, statuses: [], closed_by_server: false, connections: [] };
 
 function finish(code) {
   process.stdout.write(JSON.stringify(out) + "\n");
@@ -22,7 +25,8 @@ function connect() {
   let opened = false;
   const client = new FoxgloveClient({ ws });
   const subTopic = new Map();
-  client.on("open", () => { opened = true; out.protocol = ws.protocol; });
+  const mine = {};
+  client.on("open", () => { opened = true; out.protocol = ws.protocol; out.connections.push(mine); });
   client.on("error", (e) => {
     if (!opened && Date.now() < deadline) { setTimeout(connect, 200); return; }
     out.statuses.push(`error: ${e?.message ?? e}`);
@@ -39,9 +43,11 @@ function connect() {
   client.on("message", ({ subscriptionId }) => {
     const t = subTopic.get(subscriptionId);
     out.counts[t] = (out.counts[t] ?? 0) + 1;
+    mine[t] = (mine[t] ?? 0) + 1;
   });
   client.on("close", () => {
     if (!opened) return; // a refused connection: retried from "error"
+    if (reconnects > 0) { reconnects -= 1; setTimeout(connect, 200); return; }
     out.closed_by_server = true;
     finish(0);
   });
