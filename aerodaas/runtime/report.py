@@ -35,6 +35,13 @@ def format_summary(result: Any) -> str:
             lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
                          f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by busy "
                          f"consumers")
+            for o in c.get("outlets") or []:  # a consumer whose actor died (and came back, or not)
+                if o.get("reconnects") or o.get("held") or o.get("lost"):
+                    back = "did NOT come back" if o.get("lost") else \
+                        f"was restarted ({o.get('reconnects', 0)} reconnect(s))"
+                    lines.append(f"      frames to {str(o.get('to'))}: its actor died and {back}; {o.get('failed', 0)} "
+                                 f"frame(s) in flight lost" + (f", {o['held']} held (lock-step) until it answered "
+                                                               f"again" if o.get("held") else ""))
         for sid, ps in (rep.get("plugin_sensors") or {}).items():  # from each sensor plug-in's declaration
             lines.append(f"    sensor {sid} ({ps['type']}): {ps['readings']} readings on {ps['topic']} "
                          f"[{ps['schema']}]" + (f", {ps['errors']} failed" if ps.get("errors") else ""))
