@@ -292,7 +292,6 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
 def test_lockstep_analytics_actor_not_back_is_reported_lost(ray_session, run_options, tmp_path, transport):
     """Lock-step, the analytics actor killed for good (no restart): the clock holds at most
     ``actor_restart_timeout_s``, then the mission flies on and the run reports the analytics lost (not ``ok``)."""
-    import ray
 
     env = _env(fps=10.0)
     env.cfg.simulation.lockstep = True
