@@ -14,6 +14,8 @@ import pytest
 
 from aerodaas.reliability.faults import mcap_reader_ok, run_fault
 
+from .conftest import needs_data
+
 pytestmark = pytest.mark.faults
 
 
@@ -33,6 +35,14 @@ pytestmark = pytest.mark.faults
     "HITL clear of the pre-planned survey mid-flight",
 ])
 def test_fault_ends_clean(name):
+    r = run_fault(name)
+    assert r["clean"], f"{name}: expected {r['expected']}; observed {r['observed']}\n{r.get('output', '')}"
+
+
+@pytest.mark.e2e
+@needs_data
+def test_yolox_detector_killed_under_lockstep_ends_clean(data_env):
+    name = "SIGKILL of the YOLOX detector actor under lock-step (apps/vehicle_tracking.py)"
     r = run_fault(name)
     assert r["clean"], f"{name}: expected {r['expected']}; observed {r['observed']}\n{r.get('output', '')}"
 

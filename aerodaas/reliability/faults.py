@@ -209,6 +209,47 @@ def _sigkill_recover(tmp: Path) -> dict:
                         f"{'finished' if ok else why}, {n} of the {seen} readable messages", "clean": clean}
 
 
+def _detector_kill_lockstep(tmp: Path) -> dict:
+    """``apps/vehicle_tracking.py`` as shipped (lock-step on, YOLOX-Nano in its own analytics actor): SIGKILL of the
+    detector's process mid-flight. Ray restarts it, the clock waits for it, the mission succeeds (exit 0); the
+    summary says the detector's actor died and was restarted (never the drone's), and the recording's detections
+    have one hole, at the kill (the frames in flight and the results not yet handed to the recorder)."""
+    model = Path(os.environ.get("AERODAAS_MODEL_DIR", "")) / "yolox_nano.onnx"
+    imagery = Path(os.environ.get("AERODAAS_DATA_DIR", "")) / "imagery"
+    if not model.is_file() or not imagery.is_dir():
+        return {"observed": "not run: set AERODAAS_MODEL_DIR (yolox_nano.onnx) and AERODAAS_DATA_DIR (imagery)",
+                "clean": False}
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "vehicle_tracking.py"), "--record", str(rec), "--quiet"],
+             start_new_session=True)
+    reached = _wait_size(rec, 1_500_000, p)
+    pids = actor_pids(p.pid, "AnalyticsActor") if reached else []
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    out, _ = p.communicate(timeout=900)
+    told = re.search(r"frames to detector#1: its actor died and was restarted \(1 reconnect\(s\)\); (\d+) frame",
+                     out)
+    hole: list[int] = []
+    ok, _, why = mcap_reader_ok(rec)
+    if ok:
+        from mcap.reader import make_reader
+
+        times: dict[str, list[int]] = {}
+        with open(rec, "rb") as f:
+            for _, ch, m in make_reader(f).iter_messages(log_time_order=True):
+                times.setdefault(ch.topic, []).append(m.log_time)
+        dets = set(times.get("/quadrotor_base/detector/detections", []))
+        hole = [i for i, t in enumerate(times.get("/quadrotor_base/camera/cam1", [])) if t not in dets]
+    one_hole = bool(hole) and len(hole) <= 12 and hole == list(range(hole[0], hole[0] + len(hole)))
+    clean = (reached and len(pids) == 1 and p.returncode == 0 and "mission outcome: success" in out and told
+             is not None and "drone actor" not in out and ok and one_hole and _no_crash(out))
+    return {"observed": f"exit {p.returncode}, outcome {_summary_outcome(out)}; the summary says the detector's "
+                        f"actor died and was restarted: {told is not None} ({told.group(1) if told else '?'} frame(s) "
+                        f"in flight lost); recording {'finished' if ok else why}, frames without detections "
+                        f"{hole[:12]}{' (one hole, at the kill)' if one_hole else ''}", "clean": clean,
+            "exit": p.returncode, "output": out[-3000:]}
+
+
 #: how long a run's processes may outlive a SIGKILLed driver (s; issue 25: "beyond 10 s"), and the bound the
 #: test allows on a loaded machine; Ray's agents alone stay 60-64 s (:mod:`aerodaas.runtime.reaper`)
 GONE_WITHIN_S, GONE_WITHIN_LOADED_S = 10.0, 25.0
@@ -417,6 +458,9 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
      "(never success with 1 of 4 waypoints)", _hitl_clear_all),
     ("SIGKILL of the driver alone mid-run", f"every process of the run (Ray's agents included) gone within "
      f"{GONE_WITHIN_S:g} s (the test allows {GONE_WITHIN_LOADED_S:g} s on a loaded machine)", _driver_sigkill),
+    ("SIGKILL of the YOLOX detector actor under lock-step (apps/vehicle_tracking.py)", "exit 0, success; the "
+     "summary names the detector's actor as died and restarted; one hole in the recorded detections, at the kill",
+     _detector_kill_lockstep),
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them", _recorder_kill),
 ]
