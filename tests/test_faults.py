@@ -29,6 +29,7 @@ pytestmark = pytest.mark.faults
     "analytics raising, on_error=abort",
     "SIGKILL mid-run, then `aerodaas recover`",
     "SIGKILL of the driver alone mid-run",
+    "SIGKILL of the raylet mid-run",
     "SIGKILL of the recorder actor mid-run",
     "SIGTERM right after the summary",
     "SIGINT right after the summary",

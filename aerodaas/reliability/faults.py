@@ -250,6 +250,34 @@ def _detector_kill_lockstep(tmp: Path) -> dict:
             "exit": p.returncode, "output": out[-3000:]}
 
 
+def _raylet_kill(tmp: Path) -> dict:
+    """SIGKILL of the raylet (the node's manager) mid-run: every actor of the local node dies with it, the recorder
+    included. Exit 3 (a drone actor lost), the summary says the drone's time is unknown (not a flight of 0 s), and
+    the driver itself finishes the recording, which mcap's reader then accepts."""
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet"],
+             start_new_session=True)
+    reached = _wait_size(rec, 20000, p)
+    killed = []
+    for pid in descendants(p.pid) if reached else []:
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
+        except OSError:
+            continue
+        if cmd.endswith(b"/raylet") or cmd == b"raylet":
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+    out, _ = p.communicate(timeout=600)
+    ok, n, why = mcap_reader_ok(rec)
+    summary = out[out.find("mission outcome:"):] if "mission outcome:" in out else ""
+    unknown = "sim time unknown" in summary and "sim time 0.0 s" not in summary
+    said = "the driver finished it" in summary
+    clean = reached and len(killed) == 1 and p.returncode == 3 and ok and n > 0 and unknown and said
+    return {"observed": f"exit {p.returncode}; summary: sim time unknown {unknown}, 'the driver finished it' {said}; "
+                        f"recording {'finished' if ok else why} ({n} msgs)", "clean": clean, "exit": p.returncode,
+            "output": out[-3000:]}
+
+
 #: how long a run's processes may outlive a SIGKILLed driver (s; issue 25: "beyond 10 s"), and the bound the
 #: test allows on a loaded machine; Ray's agents alone stay 60-64 s (:mod:`aerodaas.runtime.reaper`)
 GONE_WITHIN_S, GONE_WITHIN_LOADED_S = 10.0, 25.0
@@ -461,6 +489,8 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL of the YOLOX detector actor under lock-step (apps/vehicle_tracking.py)", "exit 0, success; the "
      "summary names the detector's actor as died and restarted; one hole in the recorded detections, at the kill",
      _detector_kill_lockstep),
+    ("SIGKILL of the raylet mid-run", "exit 3, the summary says the drone's time is unknown (not 0 s), the "
+     "driver finishes the recording", _raylet_kill),
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them", _recorder_kill),
 ]

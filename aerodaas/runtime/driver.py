@@ -574,15 +574,41 @@ def _close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
         try:
             counts = ray.get(actors["recorder"].close.remote(), timeout=120)
             rep = ray.get(actors["recorder"].recording_report.remote(), timeout=60)
-        except ray.exceptions.RayActorError as e:  # it died while closing: its segment stays unfinished
-            rep = {"losses": [{"segment": record, "recorded_until_ns": None, "previous_finished": False,
-                               "error": f"the recorder actor died while closing: {_cause(e)}"}]}
-            print(f"aerodaas: warning: the recorder actor died while closing the recording {record} (run "
-                  f"`aerodaas recover {record}`)", file=sys.stderr)
+        except ray.exceptions.RayActorError as e:  # it died while closing (its node with it): finish it here
+            loss = {"segment": record, "recorded_until_ns": None, "previous_finished": False,
+                    "error": f"the recorder actor died while closing: {_cause(e)}"}
+            rep = {"losses": [loss]}
+            counts = _finish_orphaned_recording(record, loss)
+            how = f"finished it here: {sum(counts.values())} messages" if loss["previous_finished"] else \
+                f"run `aerodaas recover {record}`"
+            print(f"aerodaas: warning: the recorder actor died while closing the recording {record} ({how})",
+                  file=sys.stderr)
         except Exception as e:  # noqa: BLE001 - pragma: no cover - reported, never silently lost
             print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
                   file=sys.stderr)
     return counts, rep
+
+
+def _finish_orphaned_recording(record: str | None, loss: dict) -> dict[str, int]:
+    """The recording of a recorder actor that died with its node, finished by the driver when the file is on this
+    machine (local mode, `aerodaas up`): rewritten as a finished MCAP (:func:`aerodaas.recording.recover.
+    recover_mcap`, what ``aerodaas recover`` does), ``loss`` updated with ``recorded_until_ns`` and
+    ``previous_finished``. Returns the per-topic message counts it holds ({} when the file is not here or cannot
+    be read; then ``loss["finish_error"]`` says why)."""
+    if not record or not os.path.isfile(record):
+        return {}
+    from aerodaas.recording.reader import summarize_mcap
+    from aerodaas.recording.recover import recover_mcap
+
+    try:
+        recover_mcap(record)
+        summary = summarize_mcap(record)
+    except (OSError, ValueError) as e:
+        loss["finish_error"] = f"{type(e).__name__}: {e}"
+        return {}
+    loss["recorded_until_ns"] = summary.get("end_ns")
+    loss["previous_finished"] = True
+    return {c["topic"]: c["count"] for c in summary.get("channels", [])}
 
 
 def _pull_getter(sensor, h: dict):

@@ -8,9 +8,10 @@ def format_summary(result: Any) -> str:
     """Human-readable end-of-run summary (what ``aerodaas run`` prints)."""
     lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
     for rid, rep in result.robots.items():
-        lines.append(f"  robot {rid}: sim time {rep.get('t', 0):.1f} s, waypoints {rep.get('visited', 0)}/"
-                     f"{rep.get('preplanned_total', 0)}, final state {rep.get('state')}, "
-                     f"battery {pct(rep.get('battery_pct', 0))}")
+        t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
+        lines.append(f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
+                     f", waypoints {rep.get('visited', 0)}/{'?' if total is None else total}, final state "
+                     f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}")
         if rep.get("ended"):
             lines.append(f"    ended: {rep['ended']}")
         for h in rep.get("hold_failed") or []:
@@ -105,9 +106,15 @@ def format_summary(result: Any) -> str:
         at = f"t = {(until - start) / 1e9:.1f} s" if until and start else "t = ? (the segment could not be read)"
         resumed = loss.get("resumed_at_ns")
         back = f", recording again from t = {(resumed - start) / 1e9:.1f} s" if resumed and start else ""
-        lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
-                     f"{back} in {loss.get('next_segment', '(no new segment)')} (join the segments: `aerodaas "
-                     f"recover {result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else ""))
+        if loss.get("next_segment"):
+            lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
+                         f"{back} in {loss['next_segment']} (join the segments: `aerodaas recover "
+                         f"{result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else ""))
+        else:  # it died at the end (with its node): nothing recorded after, the driver finished the file if it could
+            done = "the driver finished it" if loss.get("previous_finished") else \
+                f"UNFINISHED: run `aerodaas recover {loss.get('segment')}`"
+            lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there "
+                         f"({done})" + (f"; {_first(loss['error'])}" if loss.get("error") else ""))
     if getattr(result, "analytics_lost", None):
         lines.append(f"  analytics LOST: {', '.join(result.analytics_lost)} (its actor died and did not answer again "
                      f"within actor_restart_timeout_s; the lock-step clock went on without it)")
@@ -121,3 +128,9 @@ def format_summary(result: Any) -> str:
 def pct(v: float | None) -> str:
     """A battery percentage for humans; None (a log without battery data) is "unknown"."""
     return "unknown" if v is None else f"{v:5.1f}%"
+
+
+def _first(text: str, limit: int = 160) -> str:
+    """The first line of ``text``, at most ``limit`` characters."""
+    line = str(text).splitlines()[0] if str(text) else ""
+    return line if len(line) <= limit else line[:limit - 3] + "..."

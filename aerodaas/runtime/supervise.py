@@ -98,10 +98,13 @@ def _await_restart(handle: Any, deadline_s: float) -> bool:
 
 
 def _lost_report(rid: str, why: str, checkpoint: dict | None) -> dict:
+    """The report of robot ``rid`` whose drone actor is gone, from its last ``checkpoint`` (None: nothing known,
+    e.g. the recorder holding the checkpoints died too; then ``t`` and ``preplanned_total`` are None, shown as
+    unknown, never as a flight of 0 s)."""
     cp = checkpoint or {}
-    return {"robot": rid, "outcome": LOST, "error": why, "t": cp.get("t", 0.0), "state": cp.get("state", "unknown"),
+    return {"robot": rid, "outcome": LOST, "error": why, "t": cp.get("t"), "state": cp.get("state", "unknown"),
             "visited": len(cp.get("visited", [])), "visited_waypoints": cp.get("visited", []),
-            "preplanned_total": cp.get("preplanned_total", 0), "events": cp.get("events", []),
+            "preplanned_total": cp.get("preplanned_total"), "events": cp.get("events", []),
             "battery_pct": None, "position": [0.0, 0.0, 0.0]}
 
 
@@ -229,9 +232,9 @@ def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
         return
     epoch_ns = plan.actors["recorder"].spec.epoch_ns
     try:
-        ray.get(recorder.mission_result.remote(rid, epoch_ns + int(rep.get("t", 0.0) * 1e9), {
+        ray.get(recorder.mission_result.remote(rid, epoch_ns + int((rep.get("t") or 0.0) * 1e9), {
             "outcome": rep["outcome"], "visited": rep.get("visited", 0), "preplanned_total":
-            rep.get("preplanned_total", 0), "t": rep.get("t", 0.0), "error": rep.get("error")}), timeout=10)
+            rep.get("preplanned_total") or 0, "t": rep.get("t") or 0.0, "error": rep.get("error")}), timeout=10)
     except Exception:  # noqa: BLE001 - reported in the summary anyway
         pass
 
