@@ -68,25 +68,34 @@ def _messages(path: str, topic: str) -> list[dict]:
         return [json.loads(m.data) for _, ch, m in make_reader(f).iter_messages(topics=[topic])]
 
 
+def _until(attempt, tries: int = 3000, every_s: float = 0.1) -> bool:
+    """Call ``attempt()`` every ``every_s`` seconds until it returns True (an exception counts as not yet: the
+    actors are still starting, or restarting), at most ``tries`` times; returns whether it did."""
+    for _ in range(tries):
+        try:
+            if attempt():
+                return True
+        except Exception:  # noqa: BLE001 - not started (or not back) yet
+            pass
+        time.sleep(every_s)
+    return False
+
+
 def _kill_when(actor_name: str, status_cid: str, ready, out: dict, no_restart: bool = False) -> threading.Thread:
     """A thread that waits for the actor, then for ``ready(status)``, then SIGKILLs it (``ray.kill``)."""
     import ray
 
-    def go() -> None:
-        for _ in range(600):
-            try:
-                h = ray.get_actor(actor_name)
-                st = ray.get(h.call.remote(status_cid, DroneComponent.status), timeout=10)
-                if ready(st):
-                    out["status"] = st
-                    out["wall"] = time.time()
-                    ray.kill(h, no_restart=no_restart)
-                    return
-            except Exception:  # noqa: BLE001 - not started yet
-                pass
-            time.sleep(0.1)
+    def once() -> bool:
+        h = ray.get_actor(actor_name)
+        st = ray.get(h.call.remote(status_cid, DroneComponent.status), timeout=10)
+        if not ready(st):
+            return False
+        out["status"] = st
+        out["wall"] = time.time()
+        ray.kill(h, no_restart=no_restart)
+        return True
 
-    t = threading.Thread(target=go, daemon=True)
+    t = threading.Thread(target=_until, args=(once, 600), daemon=True)
     t.start()
     return t
 
@@ -237,27 +246,24 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
     name = "aerodaas/kill-yolox/analytics/edge/detector#1"
     seen: dict = {}
 
+    def kill_at_15() -> bool:
+        h = ray.get_actor(name)
+        n = ray.get(h.call.remote("detector#1", AnalyticsComponent.stats), timeout=10)["processed"]
+        if n < 15:
+            return False
+        seen["before"], seen["pid"] = n, ray.get(h.ping.remote(), timeout=10)
+        ray.kill(h, no_restart=False)
+        return True
+
+    def answers_again() -> bool:  # the same name answers from a new process while the mission goes on
+        pid = ray.get(ray.get_actor(name).ping.remote(), timeout=10)
+        if pid != seen["pid"]:
+            seen["pid_after"] = pid
+        return pid != seen["pid"]
+
     def kill() -> None:
-        for _ in range(3000):
-            try:
-                h = ray.get_actor(name)
-                n = ray.get(h.call.remote("detector#1", AnalyticsComponent.stats), timeout=10)["processed"]
-                if n >= 15:
-                    seen["before"], seen["pid"] = n, ray.get(h.ping.remote(), timeout=10)
-                    ray.kill(h, no_restart=False)
-                    break
-            except Exception:  # noqa: BLE001 - not started yet
-                pass
-            time.sleep(0.1)
-        for _ in range(3000):  # the same name answers again from a new process while the mission goes on
-            try:
-                pid = ray.get(ray.get_actor(name).ping.remote(), timeout=10)
-                if pid != seen.get("pid"):
-                    seen["pid_after"] = pid
-                    return
-            except Exception:  # noqa: BLE001 - not started yet
-                pass
-            time.sleep(0.1)
+        if _until(kill_at_15):
+            _until(answers_again)
 
     t = threading.Thread(target=kill, daemon=True)
     t.start()

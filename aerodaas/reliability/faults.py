@@ -209,6 +209,19 @@ def _sigkill_recover(tmp: Path) -> dict:
                         f"{'finished' if ok else why}, {n} of the {seen} readable messages", "clean": clean}
 
 
+def _kill_mid_run(args: list[str], rec: Path, min_size: int, targets: Callable[[int], list[int]],
+                  timeout_s: float = 600.0) -> tuple[subprocess.Popen, str, bool, list[int]]:
+    """``aerodaas run *args`` (its own session); once ``rec`` holds ``min_size`` bytes, SIGKILL the pids
+    ``targets(driver pid)`` names, then wait for the run. Returns (process, output, reached, pids killed)."""
+    p = _run(["run", *args, "--record", str(rec), "--quiet"], start_new_session=True)
+    reached = _wait_size(rec, min_size, p)
+    pids = targets(p.pid) if reached else []
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    out, _ = p.communicate(timeout=timeout_s)
+    return p, out, reached, pids
+
+
 def _detector_kill_lockstep(tmp: Path) -> dict:
     """``apps/vehicle_tracking.py`` as shipped (lock-step on, YOLOX-Nano in its own analytics actor): SIGKILL of the
     detector's process mid-flight. Ray restarts it, the clock waits for it, the mission succeeds (exit 0); the
@@ -220,13 +233,8 @@ def _detector_kill_lockstep(tmp: Path) -> dict:
         return {"observed": "not run: set AERODAAS_MODEL_DIR (yolox_nano.onnx) and AERODAAS_DATA_DIR (imagery)",
                 "clean": False}
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "vehicle_tracking.py"), "--record", str(rec), "--quiet"],
-             start_new_session=True)
-    reached = _wait_size(rec, 1_500_000, p)
-    pids = actor_pids(p.pid, "AnalyticsActor") if reached else []
-    for pid in pids:
-        os.kill(pid, signal.SIGKILL)
-    out, _ = p.communicate(timeout=900)
+    p, out, reached, pids = _kill_mid_run([str(REPO_APPS / "vehicle_tracking.py")], rec, 1_500_000,
+                                          lambda root: actor_pids(root, "AnalyticsActor"), 900.0)
     told = re.search(r"frames to detector#1: its actor died and was restarted \(1 reconnect\(s\)\); (\d+) frame",
                      out)
     hole: list[int] = []
@@ -250,24 +258,26 @@ def _detector_kill_lockstep(tmp: Path) -> dict:
             "exit": p.returncode, "output": out[-3000:]}
 
 
-def _raylet_kill(tmp: Path) -> dict:
-    """SIGKILL of the raylet (the node's manager) mid-run: every actor of the local node dies with it, the recorder
-    included. Exit 3 (a drone actor lost), the summary says the drone's time is unknown (not a flight of 0 s), and
-    the driver itself finishes the recording, which mcap's reader then accepts."""
-    rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet"],
-             start_new_session=True)
-    reached = _wait_size(rec, 20000, p)
-    killed = []
-    for pid in descendants(p.pid) if reached else []:
+def _raylets(root: int) -> list[int]:
+    """Pids of the raylet processes below ``root``."""
+    found = []
+    for pid in descendants(root):
         try:
             cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
         except OSError:
             continue
         if cmd.endswith(b"/raylet") or cmd == b"raylet":
-            os.kill(pid, signal.SIGKILL)
-            killed.append(pid)
-    out, _ = p.communicate(timeout=600)
+            found.append(pid)
+    return found
+
+
+def _raylet_kill(tmp: Path) -> dict:
+    """SIGKILL of the raylet (the node's manager) mid-run: every actor of the local node dies with it, the recorder
+    included. Exit 3 (a drone actor lost), the summary says the drone's time is unknown (not a flight of 0 s), and
+    the driver itself finishes the recording, which mcap's reader then accepts."""
+    rec = tmp / "run.mcap"
+    p, out, reached, killed = _kill_mid_run([str(REPO_APPS / "farm_survey.py"), "--speedup", "4"], rec, 20000,
+                                            _raylets)
     ok, n, why = mcap_reader_ok(rec)
     summary = out[out.find("mission outcome:"):] if "mission outcome:" in out else ""
     unknown = "sim time unknown" in summary and "sim time 0.0 s" not in summary
@@ -331,13 +341,8 @@ def _recorder_kill(tmp: Path) -> dict:
     """SIGKILL of the recorder actor's process mid-run: the run must say "recording lost at t = ...", exit 4, the
     recorder go on in ``run.1.mcap``, and ``aerodaas recover run.mcap`` join both into one readable file."""
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet"],
-             start_new_session=True)
-    reached = _wait_size(rec, 20000, p)
-    pids = actor_pids(p.pid, "RecorderActor") if reached else []
-    for pid in pids:
-        os.kill(pid, signal.SIGKILL)
-    out, _ = p.communicate(timeout=600)
+    p, out, reached, pids = _kill_mid_run([str(REPO_APPS / "farm_survey.py"), "--speedup", "4"], rec, 20000,
+                                          lambda root: actor_pids(root, "RecorderActor"))
     seg1 = tmp / "run.1.mcap"
     ok0, n0, why0 = mcap_reader_ok(rec)
     ok1, n1, why1 = mcap_reader_ok(seg1) if seg1.exists() else (False, 0, "no segment run.1.mcap")
