@@ -281,7 +281,7 @@ class ReplayBackend(VehicleBackend):
     """A recorded flight played back as a vehicle that reports but cannot be commanded (see the module docstring).
 
     Clock ``"vehicle"``: :attr:`t` is log time (seconds since the log's first record) = ``rate`` x wall seconds
-    since :meth:`connect`; :meth:`step` applies every message up to :attr:`t` and never blocks. Odometry's ``t``
+    since the first :meth:`step` (0 until then); :meth:`step` applies every message up to :attr:`t` and never blocks. Odometry's ``t``
     is the log time up to which messages have been applied. Events (:meth:`drain_events`, each with its log time
     ``t``): ``mode`` (name), ``armed``, ``disarmed``, ``status_text`` (severity, text),
     ``mission_item_reached`` (seq; PX4 repeats the message for about a second, reported once per item),
@@ -322,6 +322,7 @@ class ReplayBackend(VehicleBackend):
         self.finished = False
         self._link_monitor = True
         self._events: list[dict[str, Any]] = []
+        self._clock_started = False  # the replay clock runs from the first step (see connect)
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
@@ -341,10 +342,14 @@ class ReplayBackend(VehicleBackend):
                              for h in [_home_of(lm.msg)] if h), None)
         if home is not None:
             self.home = home
-        self._t_wall0 = time.monotonic()
+        # the replay clock starts at the first step of the flight, not here: the actors still set up after connect
+        # (a second on a loaded machine, a minute of a 60x replay's log)
+        self._t_wall0 = None
+        self._clock_started = False
 
     def close(self) -> None:
         self._t_wall0 = None
+        self._clock_started = True  # stopped for good: a later step does not start it again
 
     @property
     def duration_s(self) -> float:
@@ -359,7 +364,11 @@ class ReplayBackend(VehicleBackend):
         return (time.monotonic() - self._t_wall0) * self.rate
 
     def step(self, dt: float) -> None:
-        """Apply every log message with log time <= :attr:`t` (``dt`` is ignored: the log has its own clock)."""
+        """Apply every log message with log time <= :attr:`t` (``dt`` is ignored: the log has its own clock, started
+        by the first call)."""
+        if not self._clock_started:
+            self._clock_started = True
+            self._t_wall0 = time.monotonic() - self._t_applied / self.rate
         now = self.t
         msgs = self._msgs
         while self._i < len(msgs) and msgs[self._i].t <= now:
