@@ -191,7 +191,8 @@ class Environment:
                 path = OPTIONS.env_path
             p = Path(path)
             if not p.is_absolute() and not p.exists():
-                caller = Path(inspect.stack()[1].filename).resolve().parent
+                frame = inspect.currentframe()  # the caller's file, without inspect.stack()'s source reads (~60 ms)
+                caller = Path(frame.f_back.f_code.co_filename if frame and frame.f_back else ".").resolve().parent
                 if (caller / p).exists():
                     p = caller / p
             cfg = load_environment_config(p)
