@@ -154,8 +154,8 @@ class RecorderActor:
         return os.getpid()
 
     def status(self) -> dict:
-        """``{"pid", "restarted": bool, "segment": the file written now, "last_t_ns", "live_url"}`` (the driver polls it
-        to see a restart)."""
+        """``{"pid", "restarted": bool, "segment": the file written now, "last_t_ns", "live_url"}`` (the driver polls
+        it to see a restart)."""
         rec = self.recorder
         live = getattr(rec, "live", None)
         return {"pid": os.getpid(), "restarted": bool(self.losses),
@@ -226,6 +226,8 @@ class RecorderActor:
             self.losses[-1]["resumed_at_ns"] = first
         if self._finishing is not None:
             self._finishing.join(120.0)
+        if self.losses and self.live_error:
+            self.losses[-1]["live_error"] = self.live_error
         counts: list[int | None] = []
         for seg in self.segments[:-1]:
             try:

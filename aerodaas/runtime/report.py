@@ -109,7 +109,9 @@ def format_summary(result: Any) -> str:
         if loss.get("next_segment"):
             lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
                          f"{back} in {loss['next_segment']} (join the segments: `aerodaas recover "
-                         f"{result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else ""))
+                         f"{result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else "")
+                         + (f"; the live view was NOT served again ({loss['live_error']})"
+                            if loss.get("live_error") else ""))
         else:  # it died at the end (with its node): nothing recorded after, the driver finished the file if it could
             done = "the driver finished it" if loss.get("previous_finished") else \
                 f"UNFINISHED: run `aerodaas recover {loss.get('segment')}`"
