@@ -32,13 +32,11 @@ def start_time(pid: int) -> int | None:
     """The start time of ``pid`` (clock ticks since boot, /proc/<pid>/stat field 22), or None if it has ended
     (or is a zombie)."""
     try:
-        stat = open(f"/proc/{pid}/stat", encoding="ascii", errors="replace").read()
-    except OSError:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return None if fields[0] == "Z" else int(fields[19])
+    except (OSError, IndexError, ValueError):  # gone, or caught while the kernel tears it down
         return None
-    fields = stat.rsplit(")", 1)[1].split()
-    if fields[0] == "Z":
-        return None
-    return int(fields[19])
 
 
 def descendants(root: int) -> list[int]:
@@ -47,10 +45,10 @@ def descendants(root: int) -> list[int]:
     for d in os.listdir("/proc"):
         if d.isdigit():
             try:
-                stat = open(f"/proc/{d}/stat", encoding="ascii", errors="replace").read()
-            except OSError:
+                with open(f"/proc/{d}/stat", encoding="ascii", errors="replace") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):  # gone meanwhile
                 continue
-            ppid = int(stat.rsplit(")", 1)[1].split()[1])
             children.setdefault(ppid, []).append(int(d))
     out, todo = [], [root]
     while todo:
@@ -89,11 +87,14 @@ def _watch(driver: int, period_s: float, grace_s: float) -> int:
     me = os.getpid()
     seen: dict[int, int] = {}
     while start_time(driver) == born:
-        for pid in descendants(driver):
-            if pid != me and pid not in seen:
-                t = start_time(pid)
-                if t is not None:
-                    seen[pid] = t
+        try:
+            for pid in descendants(driver):
+                if pid != me and pid not in seen:
+                    t = start_time(pid)
+                    if t is not None:
+                        seen[pid] = t
+        except Exception:  # noqa: BLE001 - a reaper that dies reaps nothing: try again at the next period
+            pass
         time.sleep(period_s)
     deadline = time.monotonic() + grace_s
     while time.monotonic() < deadline and any(start_time(p) == t for p, t in seen.items()):
