@@ -8,10 +8,13 @@ def format_summary(result: Any) -> str:
     """Human-readable end-of-run summary (what ``aerodaas run`` prints)."""
     lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
     for rid, rep in result.robots.items():
-        t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
-        lines.append(f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
-                     f", waypoints {rep.get('visited', 0)}/{'?' if total is None else total}, final state "
-                     f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}")
+        if "t" not in rep and rep.get("state") is None:  # no report from a drone actor: it never flew
+            lines.append(f"  robot {rid}: did not start")
+        else:
+            t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
+            lines.append(f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
+                         f", waypoints {rep.get('visited', 0)}/{'?' if total is None else total}, final state "
+                         f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}")
         if rep.get("ended"):
             lines.append(f"    ended: {rep['ended']}")
         for h in rep.get("hold_failed") or []:
