@@ -281,8 +281,8 @@ class ReplayBackend(VehicleBackend):
     """A recorded flight played back as a vehicle that reports but cannot be commanded (see the module docstring).
 
     Clock ``"vehicle"``: :attr:`t` is log time (seconds since the log's first record) = ``rate`` x wall seconds
-    since the first :meth:`step` (0 until then); :meth:`step` applies every message up to :attr:`t` and never blocks. Odometry's ``t``
-    is the log time up to which messages have been applied. Events (:meth:`drain_events`, each with its log time
+    since the first :meth:`step` (0 until then); :meth:`step` applies every message up to :attr:`t` and never
+    blocks. Odometry's ``t`` is the log time up to which messages have been applied. Events (:meth:`drain_events`, each with its log time
     ``t``): ``mode`` (name), ``armed``, ``disarmed``, ``status_text`` (severity, text),
     ``mission_item_reached`` (seq; PX4 repeats the message for about a second, reported once per item),
     ``home`` (lat, lon, alt), ``link_lost``/``link_regained`` (gaps of HEARTBEAT_TIMEOUT_S in the log's

@@ -258,17 +258,17 @@ def _detector_kill_lockstep(tmp: Path) -> dict:
             "exit": p.returncode, "output": out[-3000:]}
 
 
+def _argv0(pid: int) -> str | None:
+    """The first word of ``pid``'s command line (Ray titles its workers ``ray::<Class>...``), None when gone."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0].decode(errors="replace")
+    except OSError:
+        return None
+
+
 def _raylets(root: int) -> list[int]:
     """Pids of the raylet processes below ``root``."""
-    found = []
-    for pid in descendants(root):
-        try:
-            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
-        except OSError:
-            continue
-        if cmd.endswith(b"/raylet") or cmd == b"raylet":
-            found.append(pid)
-    return found
+    return [pid for pid in descendants(root) if (_argv0(pid) or "").rsplit("/", 1)[-1] == "raylet"]
 
 
 def _raylet_kill(tmp: Path) -> dict:
@@ -302,9 +302,9 @@ def _driver_sigkill(tmp: Path) -> dict:
     reached = _wait_size(rec, 20000, p)
     procs = {}
     for pid in descendants(p.pid):
-        t = start_time(pid)
-        if t is not None:
-            procs[pid] = (t, Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0].decode(errors="replace"))
+        t, cmd = start_time(pid), _argv0(pid)
+        if t is not None and cmd is not None:
+            procs[pid] = (t, cmd)
     p.kill()
     p.communicate(timeout=60)
     t0 = time.monotonic()
@@ -326,15 +326,7 @@ def _driver_sigkill(tmp: Path) -> dict:
 def actor_pids(root: int, actor_class: str) -> list[int]:
     """Pids of the Ray worker processes below ``root`` that hold an actor of ``actor_class`` (Ray titles them
     ``ray::<Class>``)."""
-    found = []
-    for pid in descendants(root):
-        try:
-            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0].decode(errors="replace")
-        except OSError:
-            continue
-        if cmd.startswith(f"ray::{actor_class}"):
-            found.append(pid)
-    return found
+    return [pid for pid in descendants(root) if (_argv0(pid) or "").startswith(f"ray::{actor_class}")]
 
 
 def _recorder_kill(tmp: Path) -> dict:

@@ -28,28 +28,37 @@ __all__ = ["descendants", "ensure_started", "start", "start_time"]
 _STARTED: dict[int, subprocess.Popen] = {}  # driver pid -> its reaper (one per process, forks included)
 
 
-def start_time(pid: int) -> int | None:
-    """The start time of ``pid`` (clock ticks since boot, /proc/<pid>/stat field 22), or None if it has ended
-    (or is a zombie)."""
+def _stat_fields(pid: int | str) -> list[str] | None:
+    """The fields of /proc/<pid>/stat after the command name (field 3, the state, first), or None when the process
+    is gone or was caught while the kernel tears it down."""
     try:
         with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
             fields = f.read().rsplit(")", 1)[1].split()
-        return None if fields[0] == "Z" else int(fields[19])
-    except (OSError, IndexError, ValueError):  # gone, or caught while the kernel tears it down
+    except (OSError, IndexError):
+        return None
+    return fields if len(fields) >= 20 else None
+
+
+def start_time(pid: int) -> int | None:
+    """The start time of ``pid`` (clock ticks since boot, /proc/<pid>/stat field 22), or None if it has ended
+    (or is a zombie)."""
+    fields = _stat_fields(pid)
+    if fields is None or fields[0] == "Z":
+        return None
+    try:
+        return int(fields[19])
+    except ValueError:
         return None
 
 
 def descendants(root: int) -> list[int]:
-    """Every process below ``root`` (from /proc's parent ids), children before grandchildren."""
+    """Every process below ``root`` (from /proc's parent ids, /proc/<pid>/stat field 4), children before
+    grandchildren."""
     children: dict[int, list[int]] = {}
     for d in os.listdir("/proc"):
-        if d.isdigit():
-            try:
-                with open(f"/proc/{d}/stat", encoding="ascii", errors="replace") as f:
-                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):  # gone meanwhile
-                continue
-            children.setdefault(ppid, []).append(int(d))
+        fields = _stat_fields(d) if d.isdigit() else None
+        if fields is not None and fields[1].isdigit():
+            children.setdefault(int(fields[1]), []).append(int(d))
     out, todo = [], [root]
     while todo:
         for c in children.get(todo.pop(0), []):

@@ -84,9 +84,10 @@ def format_summary(result: Any) -> str:
         if fail is None:
             segs = getattr(result, "recording_segments", None) or []
             if len(segs) > 1:
-                before = list(getattr(result, "recording_segment_messages", None) or [])
-                before += [None] * (len(segs) - 1 - len(before))
-                per = [str(n) if n is not None else "?" for n in before[:len(segs) - 1]] + [str(total)]
+                # the earlier segments' counts (None: unreadable or not reported), then the last one's
+                before = (list(getattr(result, "recording_segment_messages", None) or []) + [None] * len(segs))[
+                    :len(segs) - 1]
+                per = ["?" if n is None else str(n) for n in before] + [str(total)]
                 whole = f"{sum(before) + total} messages" if None not in before else \
                     "? messages (a segment could not be read)"
                 lines.append(f"  recording: {result.recording} in {len(segs)} segments ({', '.join(segs)}): {whole} "

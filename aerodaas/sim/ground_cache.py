@@ -119,11 +119,11 @@ def prune(keep: str | None = None, limit: int | None = None, incoming: int = 0) 
     for d in root.iterdir() if root.is_dir() else ():
         try:
             if d.name.startswith(".") and now - d.stat().st_mtime > STALE_BUILD_S:
-                size = _size(d) if d.is_dir() else 0
+                size = _size(d)  # 0 for a builder's lock file
                 if d.is_dir():
                     shutil.rmtree(d)
                 else:
-                    d.unlink()  # a builder's lock file
+                    d.unlink()
                 removed += size
         except OSError:
             pass
@@ -198,19 +198,19 @@ def shared_levels(key: str, build: Callable[[], list[Level]]) -> list[Level]:
         pass  # no lock (read-only, no space): build anyway, as before
     try:
         levels = _stored(final)  # stored by the process that held the lock before us
-        return levels if levels is not None else _build_and_store(key, build)
+        return levels if levels is not None else _build_and_store(final, build)
     finally:
         if lock is not None:
             lock.close()
 
 
-def _build_and_store(key: str, build: Callable[[], list[Level]]) -> list[Level]:
-    root = cache_dir()
-    final = root / key
+def _build_and_store(final: pathlib.Path, build: Callable[[], list[Level]]) -> list[Level]:
+    """``build()``, stored at ``final`` (through a temporary directory beside it and a rename) and mapped; the
+    built pyramid itself when it cannot be stored."""
+    root, key = final.parent, final.name
     levels = build()
     tmp = None
     try:
-        root.mkdir(mode=0o700, exist_ok=True)
         tmp = pathlib.Path(tempfile.mkdtemp(prefix=f".{key}-", dir=root))
         for i, (a, _, _) in enumerate(levels):
             np.save(tmp / f"level{i}.npy", np.ascontiguousarray(a))
