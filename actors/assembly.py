@@ -186,7 +186,8 @@ class ActorAssembly:
         polled (real vehicles), odometry is published at its rate, due cameras capture, and each drone's control
         tick runs at ``control_rate_hz``. Time runs at ``speedup`` x wall time (lock-step: as fast as the
         analytics allow). A control tick that runs later than one control period after its due wall time (the
-        period divided by ``speedup``) is counted as missed."""
+        period divided by ``speedup``) is counted as missed. A drone whose mission has ended keeps stepping, with
+        odometry only, until its recorded odometry shows the end state (:meth:`DroneComponent.settled`)."""
         sim, drones = self.sim, self.drones
         dt = 1.0 / sim.physics_hz
         lock = sim.lockstep
@@ -211,6 +212,8 @@ class ActorAssembly:
                 for d in active:
                     d.step(dt, tok)
                 for d in active:
+                    if d.done:  # settling: odometry only (:meth:`DroneComponent.settled`)
+                        continue
                     b = d.backend
                     for cam in d.cameras:
                         if b.t + 1e-9 >= cam["next_t"]:
@@ -223,7 +226,10 @@ class ActorAssembly:
                 now = time.monotonic()
                 finished = []
                 for d in active:
-                    if d.backend.t + 1e-9 >= d.next_tick:
+                    if d.done:  # the mission ended; its odometry waits for the vehicle's end state
+                        if d.settled():
+                            finished.append(d)
+                    elif d.backend.t + 1e-9 >= d.next_tick:
                         due = d.next_tick
                         d.next_tick += d.tick_period
                         if not lock:
@@ -231,9 +237,9 @@ class ActorAssembly:
                             self.tick_lateness.append(late)
                             if late > d.tick_period / sim.speedup:
                                 d.missed_ticks += 1
-                        if d.control_tick():
+                        if d.control_tick() and d.settled():
                             finished.append(d)
-                    elif d._end_req is not None and d.control_tick():
+                    elif d._end_req is not None and d.control_tick() and d.settled():
                         finished.append(d)
                 for d in finished:
                     d.finish()
@@ -241,8 +247,9 @@ class ActorAssembly:
                 checkpoints.maybe(active)
                 if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
                     for d in active:
-                        d.outcome = "timeout"
-                        d._event("timeout", wall_s=timeout_s)
+                        if not d.done:  # one still settling has ended its mission already
+                            d.outcome = "timeout"
+                            d._event("timeout", wall_s=timeout_s)
                         d.finish()
                     active = []
         finally:

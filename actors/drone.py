@@ -28,6 +28,9 @@ from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 from aerodaas.actors.drone_autopilot import AutopilotFlight
 
+#: wall seconds a finished drone's odometry may wait for a position sample that shows its end state (:meth:`DroneComponent.settled`)
+SETTLE_WALL_S = 2.0
+
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
@@ -83,6 +86,7 @@ class DroneComponent(AutopilotFlight):
         self.missed_ticks = 0
         self.nudges = 0
         self.last_odom: dict | None = None
+        self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
         odom_rate = 10.0
         for s in self.cfg.sensors:
             if s.type == "odometry":
@@ -301,6 +305,23 @@ class DroneComponent(AutopilotFlight):
                 self._event("error", message=self.error, traceback=traceback.format_exc())
                 self.done = True
         return self.done
+
+    def settled(self, wait_s: float = SETTLE_WALL_S) -> bool:
+        """After the mission ended: True once the recorded odometry shows the vehicle's armed / in-air state as the
+        backend reports it now, or ``wait_s`` wall seconds after the first call. A real vehicle reports its landed
+        state (EXTENDED_SYS_STATE) and its disarm (HEARTBEAT) in other messages than its position, so the position
+        sample recorded last may still say "in air"; the clock keeps stepping this drone (odometry only, no control)
+        until the next position sample carries the end state. A backend without ``sample_key`` (the simulator)
+        is settled at once."""
+        import time
+
+        b, o = self.backend, self.last_odom
+        if b.sample_key is None or o is None or (o.get("in_air") == bool(b.in_air) and o.get("armed") == bool(b.armed)):
+            return True
+        now = time.monotonic()
+        if self._settle_until is None:
+            self._settle_until = now + wait_s
+        return now >= self._settle_until
 
     def finish(self) -> None:
         """The run is over for this drone: last odometry and the mission result."""
