@@ -211,16 +211,8 @@ class SchedulerComponent(Component):
         ValueError for an unknown scope."""
         if scope not in ("all", "injected"):
             raise ValueError(f"clear: scope {scope!r} is not 'injected' or 'all'")
-        with self.s._lock:
-            gone: list = []
-            for m in self.s._missions:
-                if priority is not None and m.priority != priority:
-                    continue
-                drop = [i for i in m.items if scope == "all" or id(i) in self._injected]
-                gone += drop
-                m.items = [i for i in m.items if not (scope == "all" or id(i) in self._injected)]
-            self.s._missions = [m for m in self.s._missions if m.items]
-            self.s.cleared += 1
+        injected = self._injected
+        gone = self.s.remove_queued(lambda i: scope == "all" or id(i) in injected, priority)
         ids = [i.id for i in gone if isinstance(i, Waypoint)]
         pre = [i.id for i in gone if isinstance(i, Waypoint) and id(i) not in self._injected]
         for i in gone:

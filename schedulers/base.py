@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 from aerodaas.app.models import AeroNavigation, PriorityQueue, SchedulingType, VelocityCommand, Waypoint
 
@@ -251,6 +251,42 @@ class TrajectoryScheduler:
             else:
                 self._missions = [m for m in self._missions if m.priority != priority]
             self.cleared += 1
+
+    def remove_queued(self, drop: Callable[[Any], bool], priority: int | None = None) -> list:
+        """Abort part of the queue: remove every queued item for which ``drop(item)`` is true, from every mission
+        (or only the missions at ``priority``), in one step under the queue's lock; missions left empty are
+        dropped, and :attr:`cleared` counts the call (even when nothing matched). Returns the removed items in
+        queue order. Acts on this scheduler's own queue (never forwarded to a running scheduler component).
+        ``drop`` runs under the lock: it must not call back into this scheduler. Raises what ``drop`` raises (the
+        queue is then unchanged)."""
+        with self._lock:
+            gone: list = []
+            kept: dict[int, list] = {}  # id(mission) -> the items it keeps
+            for m in self._missions:
+                if priority is None or m.priority == priority:
+                    kept[id(m)] = []
+                    for i in m.items:
+                        (gone if drop(i) else kept[id(m)]).append(i)
+            for m in self._missions:
+                if id(m) in kept:
+                    m.items = kept[id(m)]
+            self._missions = [m for m in self._missions if m.items]
+            self.cleared += 1
+            return gone
+
+    def revise_items(self, revise: Callable[[Mission], Sequence]) -> None:
+        """Replace the items of every queued mission by ``revise(copy of the mission)`` (missions in the order they
+        were queued), e.g. the pre-flight safety check putting clamped waypoints in place of the originals. All or
+        nothing, under the queue's lock: if ``revise`` raises for any mission, the queue is unchanged and the error
+        propagates. A revised list of the same length keeps each position's segment id (a clamped waypoint of a
+        fixed ORDERED run stays in its run); one of another length is free (segment id 0). ``revise`` must not call
+        back into this scheduler."""
+        with self._lock:
+            revised = [list(revise(m.copy())) for m in self._missions]
+            for m, items in zip(self._missions, revised):
+                tags = m.segment_ids
+                m.items = items
+                m.set_segment_ids(tags if len(tags) == len(items) else [])
 
     # ------------------------------------------------------------------ execution side
     def current(self, now: float) -> tuple[Mission, Any] | None:

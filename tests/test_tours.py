@@ -212,6 +212,47 @@ def test_base_fallback_rejects_a_plugin_that_loses_waypoints():
         _mission_with_a_run(s)
 
 
+def test_remove_queued_takes_items_by_predicate_and_priority_in_one_step():
+    s = TrajectoryScheduler()
+    s.generate_navigation(PriorityQueue([wp("a1", 1.0, 0.0), wp("b1", 2.0, 0.0), wp("a2", 3.0, 0.0)], 2))
+    s.generate_navigation(PriorityQueue([wp("a9", 9.0, 0.0)], 1))
+    s.generate_navigation(PriorityQueue([wp("a5", 5.0, 0.0)], 3))
+    cleared = s.cleared
+    gone = s.remove_queued(lambda i: i.id.startswith("a"), priority=2)
+    assert ids(gone) == ["a1", "a2"] and s.cleared == cleared + 1
+    assert {m.priority: ids(m.items) for m in s.missions()} == {1: ["a9"], 2: ["b1"], 3: ["a5"]}
+    assert ids(s.remove_queued(lambda i: i.id in ("a9", "a5"))) == ["a9", "a5"]
+    assert [m.priority for m in s.missions()] == [2]  # the missions left empty are gone
+    assert s.remove_queued(lambda i: False) == [] and s.cleared == cleared + 3  # every call counts
+
+    def boom(item):
+        raise RuntimeError("predicate failed")
+
+    with pytest.raises(RuntimeError, match="predicate failed"):
+        s.remove_queued(boom)
+    assert ids(s.queued()) == ["b1"]  # a failing predicate changes nothing
+
+
+def test_revise_items_replaces_waypoints_and_keeps_them_in_their_fixed_run():
+    s = TwoOptScheduler()
+    run, free = _mission_with_a_run(s)
+    clamped = wp("r1", 40.0, 0.0, 8.0)  # what the pre-flight safety check puts in place of the original r1
+
+    def revise(m):
+        return [clamped if i.id == "r1" else i for i in m.items]
+
+    s.revise_items(revise)
+    (m,) = s.missions()
+    assert any(i is clamped for i in m.items) and not any(i is run[1] for i in m.items)
+    s.add_navigation(AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [wp("g", 50.0, 40.0)], SchedulingType.UNORDERED),
+                     priority=2, position=(-10.0, 0.0, 10.0))
+    _assert_run_contiguous(s.missions()[0].items, ids(run))  # the revised waypoint is still part of its run
+    before = ids(s.queued())
+    with pytest.raises(ValueError, match="unsafe"):
+        s.revise_items(lambda m: (_ for _ in ()).throw(ValueError("unsafe")))
+    assert ids(s.queued()) == before  # all or nothing
+
+
 # ------------------------------------------------------------------------------------------ through INavigate
 def test_priorities_are_never_mixed():
     s = TwoOptScheduler()

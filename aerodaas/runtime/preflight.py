@@ -124,9 +124,12 @@ def check_preplanned(robot, sched) -> None:
 
     gate = SafetyGate(robot.cfg.safety, robot.cfg.limits, robot.cfg.home)
     start = (0.0, 0.0, robot.cfg.takeoff_altitude)
-    for m in sched._missions:
+
+    def check(m) -> list:
         nav = AeroNavigation(waypoints=list(m.items), scheduling_type=SchedulingType.ORDERED, name=m.name)
-        m.items = list(gate.check_navigation(nav, start).waypoints)
+        return gate.check_navigation(nav, start).waypoints
+
+    sched.revise_items(check)
 
 
 def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
