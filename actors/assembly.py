@@ -142,7 +142,7 @@ class ActorAssembly:
                 c.abort = self._abort_all
         if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
             self.recorder.on_failure.append(
-                lambda info, drones=tuple(self.drones): [d._event("recording_failed", **info) for d in drones])
+                lambda info, drones=tuple(self.drones): [d.record_event("recording_failed", **info) for d in drones])
         cams = [c for d in self.drones for c in d.cameras]
         for i, c in enumerate(cams):
             c["next_t"] = i / (len(cams) * c["fps"])
@@ -168,7 +168,7 @@ class ActorAssembly:
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)
         return {"host": self.host.host_id, "tier": self.host.tier, "components": sorted(self.comps),
-                "pid": __import__("os").getpid(), "threads": self.host.pool._max_workers,
+                "pid": __import__("os").getpid(), "threads": self.host.workers,
                 "live_url": live.url if live is not None else None}
 
     def lookup(self, cid: str) -> Any:
@@ -239,7 +239,7 @@ class ActorAssembly:
                                 d.missed_ticks += 1
                         if d.control_tick() and d.settled():
                             finished.append(d)
-                    elif d._end_req is not None and d.control_tick() and d.settled():
+                    elif d.end_requested is not None and d.control_tick() and d.settled():
                         finished.append(d)
                 for d in finished:
                     d.finish()
@@ -249,7 +249,7 @@ class ActorAssembly:
                     for d in active:
                         if not d.done:  # one still settling has ended its mission already
                             d.outcome = "timeout"
-                            d._event("timeout", wall_s=timeout_s)
+                            d.record_event("timeout", wall_s=timeout_s)
                         d.finish()
                     active = []
         finally:

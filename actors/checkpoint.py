@@ -53,8 +53,8 @@ def restore_drone(d: Any, cp: dict) -> None:
         for c, t in zip(d.cameras, cp.get("cameras", [])):
             c["next_t"] = t
         d.restored_from = cp
-        d._event("resumed_after_restart", state=state.value, checkpoint_t=cp["t"],
-                 visited=len(d.visited), heading_to=_head(d))
+        d.record_event("resumed_after_restart", state=state.value, checkpoint_t=cp["t"],
+                       visited=len(d.visited), heading_to=_head(d))
 
 
 def _head(d: Any) -> str | None:

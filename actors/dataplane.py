@@ -386,6 +386,7 @@ class DataPlane:
                  recorder: Any = None, restart_hold_s: float = 60.0) -> None:
         self.host_id, self.tier, self.epoch_ns = host_id, tier, epoch_ns
         n = workers or max(2, min(4, (os.cpu_count() or 2)))
+        self.workers = n  #: threads of the worker pool
         self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
         self.components: dict[str, Component] = {}
         self.routes: dict[str, list[tuple[str, Port, int, tuple | None]]] = {}

@@ -205,6 +205,12 @@ class DroneComponent(AutopilotFlight):
         if self.recorder is not None:
             self.recorder.json(f"/{self.cfg.id}/events", self._t_ns(self.backend.t), ev, "aerodaas.MissionEvent")
 
+    def record_event(self, kind: str, **fields: Any) -> None:
+        """Record mission event ``kind`` with ``fields`` (JSON-serialisable) at the vehicle's time: kept in
+        :attr:`events` (the robot's report) and written to ``/<robot>/events`` (``aerodaas.MissionEvent``). For
+        the actor around the drone: a recording failure, a timeout, a resume after a restart."""
+        self._event(kind, **fields)
+
     def _on_transition(self, old: S, new: S, t: float) -> None:
         msg = {"robot": self.cfg.id, "state": new.value, "previous": old.value, "t": t}
         if self.recorder is not None:
@@ -224,6 +230,12 @@ class DroneComponent(AutopilotFlight):
     def end_mission(self, reason: str = "aborted") -> bool:
         self._end_req = reason
         return True
+
+    @property
+    def end_requested(self) -> str | None:
+        """The reason given to :meth:`end_mission` (the robot's outcome once the next control tick ends it);
+        None while no end was requested."""
+        return self._end_req
 
     def status(self) -> dict:
         b = self.backend
