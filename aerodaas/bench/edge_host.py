@@ -123,7 +123,7 @@ class EdgeHost:
     async def close(self) -> None:
         """Finish any dispatcher still running and release the cloud pool."""
         for d in self.dispatchers.values():
-            if d._loop is not None and not d._closed:
+            if d.running:
                 await d.finish(0.0)
         self.dispatchers = {}
         if self.pool is not None:

@@ -188,12 +188,26 @@ class CloudPool:
         self._tasks.append(self._loop.create_task(self._collector(i)))
         if not was_available:
             for d in list(self.dispatchers):
-                d._on_cloud_availability(True)
+                d.on_cloud_availability(True)
         return info
 
     @property
     def available(self) -> bool:
         return any(self.alive)
+
+    @property
+    def started(self) -> bool:
+        """True once :meth:`start` bound the pool to an event loop (it is then started only once)."""
+        return self._loop is not None
+
+    def fail_in_flight(self, dispatcher: "AnalyticsDispatcher", reason: str) -> int:
+        """End every task of ``dispatcher`` still in flight on the cloud as failed with ``reason`` (its
+        ``on_cloud_reply`` hears ``{"ok": False, "failed": True, "error": reason}``; a reply arriving later is
+        ignored). Returns how many were failed. Call it on the pool's event loop."""
+        keys = [k for k, f in self._inflight.items() if f.dispatcher is dispatcher]
+        for k in keys:
+            self._finish_failed(k, reason)
+        return len(keys)
 
     def in_flight(self, dispatcher: "AnalyticsDispatcher | None" = None) -> int:
         return sum(1 for f in self._inflight.values() if dispatcher is None or f.dispatcher is dispatcher)
@@ -317,14 +331,14 @@ class CloudPool:
         latency = now - f.sent_ms
         if f.intended_ms is not None and r["ok"]:
             self.rtt_error.add(latency - f.intended_ms)
-        f.dispatcher._on_cloud_reply(f.task, r, latency, self.name_of(i))
+        f.dispatcher.on_cloud_reply(f.task, r, latency, self.name_of(i))
 
     def _finish_failed(self, key: int, reason: str) -> None:
         f = self._inflight.pop(key, None)
         if f is None:
             return
         now = f.dispatcher.clock.now_ms()
-        f.dispatcher._on_cloud_reply(f.task, {"ok": False, "error": reason, "failed": True}, now - f.sent_ms, None)
+        f.dispatcher.on_cloud_reply(f.task, {"ok": False, "error": reason, "failed": True}, now - f.sent_ms, None)
 
     def _reroute_or_fail(self, key: int, why: str) -> str:
         """Retry ``key`` on a surviving executor if allowed and the policy still admits it; else FAILED."""
@@ -333,7 +347,7 @@ class CloudPool:
             return "gone"
         d = f.dispatcher
         now = d.clock.now_ms()
-        if self.retry and not f.retried and self.available and d._admits(f.task, now):
+        if self.retry and not f.retried and self.available and d.cloud_admits(f.task, now):
             j = self._pick()
             f.executor, f.retried = j, True
             f.req["sent"] = time.time()
@@ -361,7 +375,7 @@ class CloudPool:
         node = (info.get("node_id") or "?")[:12]
         if not self.available:  # first: a policy reacting to the failures below must already know there is no cloud
             for d in list(self.dispatchers):
-                d._on_cloud_availability(False)
+                d.on_cloud_availability(False)
         for k in keys:
             outcome = self._reroute_or_fail(k, f"cloud executor {ev['name']} (node {node}) died at "
                                                f"{now_ms / 1000:.1f} s while the task was in flight")

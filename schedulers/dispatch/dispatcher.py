@@ -179,10 +179,10 @@ class AnalyticsDispatcher:
         self._wake = asyncio.Event()
         self._idle_event = asyncio.Event()
         if self.cloud is not None:
-            self._owns_cloud = self.cloud._loop is None
+            self._owns_cloud = not self.cloud.started
             await self.cloud.start(self.clock)
             if not self.cloud.available:
-                self._on_cloud_availability(False)
+                self.on_cloud_availability(False)
         self.started_ms = max(0.0, self.clock.now_ms())  # a clock may start in the future (a shared run origin)
         self._edge_task = self._loop.create_task(self._edge_loop())
         return self
@@ -301,11 +301,14 @@ class AnalyticsDispatcher:
             else:
                 self._send_cloud(t, d.reason)
 
-    def _admits(self, task: AnalyticsTask, now_ms: float) -> bool:
+    def cloud_admits(self, task: AnalyticsTask, now_ms: float) -> bool:
+        """Whether the policy still admits ``task`` to the cloud at ``now_ms`` (ms on the run's clock): its
+        ``cloud_admit``; False when the policy raises (counted as a policy error). The cloud pool asks it
+        before it retries a task on another executor."""
         return bool(self._safe("cloud_admit", False, task, now_ms, about=f"#{task.task_id}"))
 
     def _admit_by(self, task: AnalyticsTask, now_ms: float) -> float | None:
-        return admit_by_time(lambda t: self._admits(task, t), now_ms, task.deadline_ms)
+        return admit_by_time(lambda t: self.cloud_admits(task, t), now_ms, task.deadline_ms)
 
     def _send_cloud(self, task: AnalyticsTask, reason: str) -> None:
         now = self.clock.now_ms()
@@ -336,8 +339,12 @@ class AnalyticsDispatcher:
         self._notify(task)
         self._apply(decisions)
 
-    def _on_cloud_reply(self, task: AnalyticsTask, reply: dict, latency_ms: float, executor: str | None) -> None:
-        """A cloud reply (or a failure) for ``task``: set its terminal state, then tell the policy."""
+    def on_cloud_reply(self, task: AnalyticsTask, reply: dict, latency_ms: float, executor: str | None) -> None:
+        """The cloud pool's callback with a reply (or a failure) for ``task``: ``reply`` is the executor's
+        ``{"ok": bool, "result": ..., "error": str}`` (``"failed": True``: the pool gave up on it), ``latency_ms``
+        the round trip on the run's clock (ms), ``executor`` the name of the executor that answered (None: no
+        reply). Sets the task's terminal state, then tells the policy (``on_cloud_done``). A task that is no longer
+        PENDING is ignored. Call it on the dispatcher's event loop."""
         if task.state is not TaskState.PENDING:
             return
         now = self.clock.now_ms()
@@ -355,7 +362,10 @@ class AnalyticsDispatcher:
         self._notify(task)
         self._after_policy(decisions)
 
-    def _on_cloud_availability(self, available: bool) -> None:
+    def on_cloud_availability(self, available: bool) -> None:
+        """The cloud pool's callback when the cloud became unavailable (no executor alive) or available again:
+        recorded in :attr:`cloud_availability_changes` and passed to the policy's ``on_cloud_availability``, whose
+        decisions are applied. Call it on the dispatcher's event loop."""
         now = self.clock.now_ms()
         self.cloud_availability_changes.append({"at_s": now / 1000.0, "available": available})
         decisions = self._safe("on_cloud_availability", [], available, now)
@@ -502,9 +512,7 @@ class AnalyticsDispatcher:
             if t.state is TaskState.PENDING and t.tier is None:
                 self._finish(t, TaskState.DROPPED_TIME, None, "run ended while held by the scheduler")
         if self.cloud is not None:
-            for k, f in list(self.cloud._inflight.items()):
-                if f.dispatcher is self:
-                    self.cloud._finish_failed(k, "run ended while in flight on the cloud")
+            self.cloud.fail_in_flight(self, "run ended while in flight on the cloud")
         if self._pending and any(t.tier == "edge" for t in self._pending_tasks()):
             self._idle_event.clear()
             try:  # the edge runs at most one task: wait for it (bounded by its hold)
@@ -527,6 +535,11 @@ class AnalyticsDispatcher:
                 pass
         self.finished_ms = self.clock.now_ms()
         return self.report()
+
+    @property
+    def running(self) -> bool:
+        """True from :meth:`start` until :meth:`finish` has ended every task (then :meth:`finish` is not needed)."""
+        return self._loop is not None and not self._closed
 
     def _pending_tasks(self) -> list[AnalyticsTask]:
         with self._lock:
