@@ -457,14 +457,4 @@ def _inject_fault(rec: McapRecorder) -> None:
         return
     kind, _, n = spec.partition(":")
     code = {"enospc": errno.ENOSPC, "eio": errno.EIO}[kind.strip().lower()]
-    limit = int(n)
-    f = rec._file
-    real_write = f.write
-
-    def write(data: bytes) -> int:
-        if f.tell() + len(data) > limit:
-            raise OSError(code, os.strerror(code))
-        return real_write(data)
-
-    rec._stream._f = type("_Faulty", (), {"write": staticmethod(write), "flush": f.flush, "tell": f.tell,
-                                          "fileno": f.fileno, "close": f.close})()
+    rec.inject_write_fault(int(n), code)

@@ -29,14 +29,14 @@ class SimBackend(VehicleBackend):
         import copy
 
         v = self.vehicle
-        return copy.deepcopy({"state": v.state, "setpoint": v.setpoint, "t": v.t, "rng": v._rng.bit_generator.state})
+        return copy.deepcopy({"state": v.state, "setpoint": v.setpoint, "t": v.t, "rng": v.noise_state})
 
     def restore(self, state: dict) -> None:
         import copy
 
         v, s = self.vehicle, copy.deepcopy(state)
         v.state, v.setpoint, v.t = s["state"], s["setpoint"], s["t"]
-        v._rng.bit_generator.state = s["rng"]
+        v.noise_state = s["rng"]
 
     def step(self, dt: float) -> None:
         self.vehicle.step(dt)

@@ -210,6 +210,18 @@ class Geofence:
         self._exclusions = [z for z in self._zones if not z.inclusion]
 
     @property
+    def inclusions(self) -> tuple:
+        """The inclusion zones (polygons first, then circles, in config order), in local ENU metres: each has
+        ``kind`` (``"polygon"``/``"circle"``), ``index``, ``label``, ``polygon`` (Shapely; None for a circle),
+        ``center`` (x, y) and ``radius`` (metres)."""
+        return tuple(self._inclusions)
+
+    @property
+    def exclusions(self) -> tuple:
+        """The exclusion zones, as :attr:`inclusions`."""
+        return tuple(self._exclusions)
+
+    @property
     def is_empty(self) -> bool:
         """True when no zone exists (everything allowed)."""
         return not self._zones

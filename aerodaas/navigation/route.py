@@ -29,7 +29,7 @@ def grown_exclusions(fence: Geofence, clearance: float) -> list[Polygon]:
     """Each exclusion zone of ``fence`` grown by ``clearance`` metres, as a Shapely polygon (ENU metres) that contains
     the grown zone (circles: a circumscribed regular polygon of :data:`CIRCLE_VERTICES` vertices)."""
     out = []
-    for z in fence._exclusions:
+    for z in fence.exclusions:
         if z.polygon is not None:
             g = z.polygon.buffer(clearance, join_style="mitre", mitre_limit=2.0) if clearance > 0 else z.polygon
             out.append(g.simplify(0.0))

@@ -134,6 +134,18 @@ class _ChunkFlushingStream:
         if self.pending:
             self.flush()
 
+    def fail_writes_past(self, limit: int, code: int) -> None:
+        """Fault injection: a write that would take the file past ``limit`` bytes raises ``OSError(code)``."""
+        f, real_write = self._f, self._f.write
+
+        def write(data: bytes) -> int:
+            if f.tell() + len(data) > limit:
+                raise OSError(code, os.strerror(code))
+            return real_write(data)
+
+        self._f = type("_Faulty", (), {"write": staticmethod(write), "flush": f.flush, "tell": f.tell,
+                                       "fileno": f.fileno, "close": f.close})()
+
 
 class RecordedMessage(NamedTuple):
     """One message exactly as written to the MCAP file, handed to every sink of a :class:`McapRecorder`
@@ -531,6 +543,13 @@ class McapRecorder:
             self._stream.flush()
             if fsync:
                 os.fsync(self._file.fileno())
+
+    def inject_write_fault(self, limit_bytes: int, code: int) -> None:
+        """Fault injection (tests of the disk-failure path; never called in normal runs): from now on, a write
+        that would take the file past ``limit_bytes`` bytes raises ``OSError(code)`` (e.g. ``errno.ENOSPC``), as
+        a full or failing disk would."""
+        with self._lock:
+            self._stream.fail_writes_past(int(limit_bytes), int(code))
 
     def abandon(self) -> int:
         """The disk failed: close the file's descriptor without writing anything more (its pending buffer cannot

@@ -80,9 +80,7 @@ def fly_commands(commands: Sequence[tuple], on_violation: str = "reject", physic
     veh = SimVehicle("probe", cfg.home, cfg.limits, cfg.battery)
     dt = 1.0 / physics_hz
     steps_per_tick = max(1, round(physics_hz / cfg.control_rate_hz))
-    zones = gate.fence._zones
-    inc = [z for z in zones if z.inclusion]
-    exc = [z for z in zones if not z.inclusion]
+    inc, exc = list(gate.fence.inclusions), list(gate.fence.exclusions)
     ex = Excursion()
 
     def measure() -> None:

@@ -62,6 +62,17 @@ class SimVehicle:
         self.setpoint = Setpoint()
         self.t = 0.0
 
+    @property
+    def noise_state(self) -> dict:
+        """The state of the noise generator (numpy ``bit_generator.state``, a dict; not a copy): with
+        :attr:`state`, :attr:`setpoint` and :attr:`t`, what a checkpoint needs to continue the same noisy run."""
+        return self._rng.bit_generator.state
+
+    @noise_state.setter
+    def noise_state(self, value: dict) -> None:
+        """Restore a :attr:`noise_state`. Raises TypeError/ValueError (numpy) for a state of another generator."""
+        self._rng.bit_generator.state = value
+
     # ------------------------------------------------------------------ dynamics
     def step(self, dt: float) -> None:
         """Advance the simulation by ``dt`` seconds."""

@@ -118,7 +118,7 @@ class SharedLink:
                     self.unrouted += 1
                     self.pending.setdefault(sysid, deque(maxlen=PENDING)).append(msg)
                     continue
-            port._put(msg)
+            port.deliver(msg)
 
     def close(self) -> None:
         self._stop.set()
@@ -152,7 +152,10 @@ class LinkPort:
         upload)."""
         return self.link.conn.mav
 
-    def _put(self, msg: Any) -> None:
+    def deliver(self, msg: Any) -> None:
+        """Queue ``msg`` (a pymavlink message from this robot's vehicle) for :meth:`recv_msg`; called by the
+        :class:`SharedLink`'s reader thread. A full queue (``PORT_QUEUE`` messages) drops its oldest message
+        (counted in :attr:`dropped`). Never blocks, never raises."""
         with self._cv:
             if len(self._q) >= PORT_QUEUE:
                 self._q.popleft()
@@ -208,7 +211,7 @@ class LinkPort:
                     link.claimed[pick] = self.robot_id
                     self.target_system, self.target_component = pick, compid
                     for m in link.pending.pop(pick, ()):
-                        self._put(m)
+                        self.deliver(m)
                     return hb
                 if time.monotonic() >= deadline:
                     seen = sorted(link.seen)

@@ -57,7 +57,7 @@ class _Link:
         self.closed = False
 
     def write(self, buf: bytes) -> None:  # called by MAVLink.send
-        if self.emu._blackhole or self.closed:
+        if self.emu.blackholed or self.closed:
             return
         if self.tcp:
             self.outbuf += buf
@@ -159,6 +159,12 @@ class LinkMixin:
         with self._lock:
             self._blackhole = bool(on)
             self._blackhole_inbound = bool(on and inbound)
+
+    @property
+    def blackholed(self) -> bool:
+        """True while :meth:`set_blackhole` drops everything the vehicle sends (read without the lock: a link
+        write racing a switch sends or drops that one message, as a radio at the edge of its range)."""
+        return self._blackhole
 
     def drop_next(self, msg_type: str, direction: Literal["in", "out"] = "out", count: int = 1) -> None:
         """Lose exactly the next ``count`` messages of type ``msg_type`` (e.g. ``"COMMAND_ACK"``,
