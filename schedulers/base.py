@@ -100,8 +100,8 @@ class TrajectoryScheduler:
         self.cleared = 0
         self.stream_inputs: list[tuple[Any, int, bool]] = []  # (AeroStreamData, priority, replace) wired at start
         self._remote = None  # the scheduler component's handle while a mission runs
-        if env is not None and hasattr(env, "_register_scheduler_instance"):
-            env._register_scheduler_instance(self)
+        if env is not None and hasattr(env, "adopt_scheduler"):
+            env.adopt_scheduler(self)
 
     def __getstate__(self) -> dict:
         d = self.__dict__.copy()
@@ -129,6 +129,12 @@ class TrajectoryScheduler:
             twin.stream_inputs = list(self.stream_inputs)
             twin._remote = None
         return twin
+
+    def bind_remote(self, handle: Any) -> None:
+        """While a mission runs, route :meth:`add_navigation` and :meth:`clear_navigation` to the robot's running
+        scheduler component ``handle`` (a :class:`~aerodaas.runtime.handles.SchedulerHandle`), which holds the live
+        queue; ``None`` (after the run) makes them act on this object's own queue again. Not pickled."""
+        self._remote = handle
 
     # ------------------------------------------------------------------ ordering (plug-in point)
     def order(self, waypoints: list[Waypoint], start: Sequence[float]) -> list[Waypoint]:

@@ -147,6 +147,24 @@ class Robot:
         """endMission user hook: ``hook(robot, result)`` runs after the mission ends."""
         self._end_hooks.append(hook)
 
+    def bind_drone(self, handle: Any) -> None:
+        """Bind the running mission's drone component ``handle`` (a :class:`~aerodaas.runtime.handles.DroneHandle`,
+        set by the driver once the actors run) so :meth:`end_mission`, :meth:`pause_mission` and
+        :meth:`resume_mission` reach the vehicle; ``None`` when the run is over."""
+        self._handle = handle
+
+    def run_start_hooks(self) -> None:
+        """Run the :meth:`on_mission_start` hooks, in the order they were added (the driver calls this before
+        take-off). Raises what a hook raises; the hooks after it do not run."""
+        for hook in self._start_hooks:
+            hook(self)
+
+    def run_end_hooks(self, result: Any) -> None:
+        """Run the :meth:`on_mission_end` hooks with the run's MissionResult ``result``, in the order they were
+        added. Raises what a hook raises; the hooks after it do not run."""
+        for hook in self._end_hooks:
+            hook(self, result)
+
     def start_mission(self, timeout: float | None = None):
         """Start the actors, fly the mission to its end, and return the MissionResult (blocks)."""
         return _fly(self.env, [self], timeout)
@@ -276,7 +294,9 @@ class Environment:
         """Plug in the trajectory scheduler (an INavigate, e.g. NearestNeighborScheduler)."""
         self._trajectory_scheduler = scheduler
 
-    def _register_scheduler_instance(self, scheduler: Any) -> None:
+    def adopt_scheduler(self, scheduler: Any) -> None:
+        """Use ``scheduler`` as the trajectory scheduler unless one is already set (a scheduler constructed with
+        this environment, ``Scheduler(env)``, adopts itself; :meth:`set_trajectory_scheduler` always replaces)."""
         if self._trajectory_scheduler is None:
             self._trajectory_scheduler = scheduler
 

@@ -1,7 +1,7 @@
 """IAeroData: the paper's generic data containers (``getData``/``setData``)."""
 from __future__ import annotations
 
-from typing import Any, Generic, TypeVar
+from typing import Any, Callable, Generic, TypeVar
 
 E = TypeVar("E")
 
@@ -50,6 +50,11 @@ class AeroStreamData(AeroData[Any]):
         self.buffer = buffer
         self.subscribers: list[Any] = []
         self._runtime_getter = None
+
+    def bind_runtime(self, getter: Callable[[], Any] | None) -> None:
+        """While a mission runs, :meth:`get_data` returns ``getter()`` (the driver binds a pull of the stream's
+        newest item from its actor); ``None`` after the run: the last value set again."""
+        self._runtime_getter = getter
 
     def get_data(self) -> Any:
         """Newest item on the stream (needs a running mission; else the last value set, or None)."""

@@ -328,7 +328,7 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
 
 def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
     """The driver's handles per robot (drone, scheduler, cameras, analytics: :class:`ComponentHandle` into their
-    actors), bound to the application's objects (``robot._handle``, live scheduler, pull getters)."""
+    actors), bound to the application's objects (``Robot.bind_drone``, live scheduler, pull getters)."""
     import ray
 
     from aerodaas.runtime.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
@@ -343,14 +343,14 @@ def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
                          "scheduler": SchedulerHandle(home, ids["scheduler"]), "analytics": a_handles,
                          "cameras": {sid: CameraHandle(home, cid) for sid, cid in ids["cameras"].items()},
                          "sched_obj": r.scheduler or env.trajectory_scheduler()}
-        r._handle = handles[r.id]["drone"]
+        r.bind_drone(handles[r.id]["drone"])
         for s in r.sensors.values():
-            s.get_data_stream()._runtime_getter = _pull_getter(s, handles[r.id])
+            s.get_data_stream().bind_runtime(_pull_getter(s, handles[r.id]))
         for a in graphs[r.id]:
             mine = [c for c in plan.analytics_instances[id(a)] if c in a_handles]
             if mine:
                 h = a_handles[mine[0]]
-                a.output._runtime_getter = (lambda h=h: ray.get(h.get_latest.remote()))
+                a.output.bind_runtime(lambda h=h: ray.get(h.get_latest.remote()))
     return handles
 
 
@@ -468,7 +468,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
             for r in robots:
                 h = handles[r.id]
                 if scheds[r.id] is h["sched_obj"]:  # not shared: live add/clear go to this robot's queue
-                    h["sched_obj"]._remote = h["scheduler"]
+                    h["sched_obj"].bind_remote(h["scheduler"])
             hcfg = env.cfg.hitl
             if opts.hitl if opts.hitl is not None else hcfg.enabled:
                 from aerodaas.tools.hitl import HitlServer
@@ -481,8 +481,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
                 shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
                 print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
             for h in handles.values():
-                for hook in h["robot"]._start_hooks:
-                    hook(h["robot"])
+                h["robot"].run_start_hooks()
             _RAISE_OK[0] = True
             t_fly = time.monotonic()
             reports = supervise(plan, actors, handles, timeout, opts.progress, lambda: bool(STOP_SIGNALS),
@@ -504,10 +503,10 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
             env.hitl = None
         counts, rec_report = _close_actors(actors, opts.record)
         for h in handles.values():
-            h["robot"]._handle = None
-            h["sched_obj"]._remote = None
+            h["robot"].bind_drone(None)
+            h["sched_obj"].bind_remote(None)
             for s in h["robot"].sensors.values():
-                s.get_data_stream()._runtime_getter = None
+                s.get_data_stream().bind_runtime(None)
         for h in [*actors.values(), *cloud_executors]:
             try:
                 ray.kill(h, no_restart=True)
@@ -535,8 +534,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
                            recording_segment_messages=rec_report.get("segment_messages") or [],
                            recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics)
     for h in handles.values():
-        for hook in h["robot"]._end_hooks:
-            hook(h["robot"], result)
+        h["robot"].run_end_hooks(result)
     return result
 
 
