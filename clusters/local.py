@@ -7,9 +7,9 @@ authentication stays on: ``RAY_AUTH_MODE=token`` is set for this process (and in
 unless the environment already sets a mode, and a token is generated at ``~/.ray/auth_token`` if none exists
 (what ``ray.init()`` does for a new local cluster since Ray 2.59).
 
-Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.runtime.driver._loopback_only`): node address
-127.0.0.1, so the GCS, raylets, object managers, agents and workers listen on 127.0.0.1 only, never on the machine's
-network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
+Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.runtime.loopback.loopback_only`): node
+address 127.0.0.1, so the GCS, raylets, object managers, agents and workers listen on 127.0.0.1 only, never on the
+machine's network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
 
 ``ray.cluster_utils.Cluster.add_node(**node_args)`` passes its keyword arguments to ``ray._private.parameter.RayParams``,
 which accepts ``labels: dict[str, str]`` (checked on Ray 2.60).
@@ -75,7 +75,7 @@ class LocalCluster:
             raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
                                "LocalCluster with connect=True")
         enable_token_auth()
-        from aerodaas.runtime.driver import _loopback_only
+        from aerodaas.runtime.loopback import loopback_only
         from aerodaas.runtime.worker_memory import limit_malloc_arenas
 
         limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
@@ -83,7 +83,7 @@ class LocalCluster:
 
         reaper.ensure_started()  # the nodes' processes end with this process, however it ends
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
-        self._restore_network = _loopback_only()
+        self._restore_network = loopback_only()
         self._cloud_cpus = int(cloud_cpus)
         self._store = int(object_store_mb) * 1024 * 1024
         first = (edge_labels or [{}])[0] if edge_labels else {}

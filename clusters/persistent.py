@@ -2,7 +2,7 @@
 stops it (issue 27, item 2).
 
 ``aerodaas up`` starts a daemon (``python -m aerodaas.clusters.persistent serve``, its own session) that runs one
-Ray head node with ``ray.cluster_utils.Cluster``: loopback only (:func:`aerodaas.runtime.driver._loopback_only`), token
+Ray head node with ``ray.cluster_utils.Cluster``: loopback only (:func:`aerodaas.runtime.loopback.loopback_only`), token
 authentication on (:func:`aerodaas.clusters.local.enable_token_auth`), labelled ``tier=edge`` and
 ``aerodaas/compute=local``, with its dashboard on 127.0.0.1 (Ray prestarts ``num_cpus`` workers when the driver
 connects). The daemon writes
@@ -121,10 +121,10 @@ def _serve(cpus: int) -> None:
     from ray.cluster_utils import Cluster
 
     from aerodaas.clusters.local import enable_token_auth
-    from aerodaas.runtime.driver import _loopback_only
+    from aerodaas.runtime.loopback import loopback_only
 
     enable_token_auth()
-    _loopback_only()  # kept: this process exists only to run the node
+    loopback_only()  # kept: this process exists only to run the node
     from aerodaas.runtime.worker_memory import limit_malloc_arenas
 
     limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)

@@ -68,7 +68,7 @@ drone.start_mission()
 def no_ray(monkeypatch):
     """Fails the test if anything tries to start or connect to Ray."""
     calls = []
-    monkeypatch.setattr(runtime, "_init_ray", lambda address: calls.append(address))
+    monkeypatch.setattr(runtime, "init_ray", lambda address: calls.append(address))
     monkeypatch.setattr(runtime, "start_ray_early", lambda address=None: calls.append(("early", address)))
     # `aerodaas run` shuts Ray down at its end: here that would be the test session's shared Ray (tests after this
     # one found it gone); nothing was started, so there is nothing to stop

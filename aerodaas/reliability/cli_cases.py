@@ -74,10 +74,10 @@ def run_cli_cases() -> list[dict[str, Any]]:
     from aerodaas.runtime import driver as runtime
 
     rows = []
-    saved = (runtime._init_ray, runtime.start_ray_early, runtime.shutdown_ray)
+    saved = (runtime.init_ray, runtime.start_ray_early, runtime.shutdown_ray)
     saved_opts = runtime.RunOptions(**vars(runtime.OPTIONS))
     started: list = []
-    runtime._init_ray = lambda address: started.append(address)
+    runtime.init_ray = lambda address: started.append(address)
     runtime.start_ray_early = lambda address=None: started.append(("early", address))
     runtime.shutdown_ray = lambda: None
     try:
@@ -98,7 +98,7 @@ def run_cli_cases() -> list[dict[str, Any]]:
                 rows.append({"kind": "command line" if code == 2 else "application error", "name": name,
                              "refused": ok, "message": f"exit {got}: {msg}" if msg else f"exit {got}"})
     finally:
-        runtime._init_ray, runtime.start_ray_early, runtime.shutdown_ray = saved
+        runtime.init_ray, runtime.start_ray_early, runtime.shutdown_ray = saved
         for k, v in vars(saved_opts).items():
             setattr(runtime.OPTIONS, k, v)
         runtime.OPTIONS.early_ray = False

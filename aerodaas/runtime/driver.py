@@ -15,11 +15,12 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 
 from aerodaas.config import SimulationConfig
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
+from aerodaas.runtime.loopback import loopback_only
 from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 from aerodaas.runtime.supervise import error_cause as _cause
 
@@ -128,7 +129,13 @@ def _up_address() -> str | None:
     return attached_address()
 
 
-def _init_ray(address: str | None) -> None:
+def init_ray(address: str | None) -> None:
+    """Start or join Ray for this driver: join the cluster at ``address`` (``ray://`` or ``host:port``); else
+    attach to the persistent local cluster of ``aerodaas up`` if one runs; else start a fresh loopback-only local
+    Ray of our own (:func:`aerodaas.runtime.loopback.loopback_only`), retried up to 3 times when Ray's startup
+    times out on a loaded machine. Installed plug-in packages are shipped to a cluster joined or attached to
+    (``AERODAAS_SHIP_PLUGINS=0``: not). Raises what ``ray.init`` raises. Called by :func:`ensure_ray` /
+    :func:`start_ray_early`."""
     global _STARTED_RAY
     import ray
 
@@ -146,7 +153,7 @@ def _init_ray(address: str | None) -> None:
         from aerodaas.clusters.local import enable_token_auth
 
         enable_token_auth()  # the cluster was started with token auth: the driver must present the token
-        restore = _loopback_only()
+        restore = loopback_only()
         try:
             ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning", **renv)
         finally:
@@ -169,7 +176,7 @@ def _init_ray(address: str | None) -> None:
         reaper.ensure_started()  # Ray's processes end with this driver, however it ends (see the module)
         for attempt in range(3):
             try:
-                restore = _loopback_only()
+                restore = loopback_only()
                 # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
                 # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
                 # process on the machine (a SITL autopilot, a compiler) starve their control loops
@@ -194,36 +201,6 @@ def _init_ray(address: str | None) -> None:
         _STARTED_RAY = True
 
 
-#: the environment variable with which Ray takes loopback as the node's address (ray/_private/ray_constants.py
-#: ``ENABLE_RAY_CLUSTER``, read by ``services.get_node_ip_address``; Ray's own default on macOS and Windows)
-_RAY_LOCAL_ONLY_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
-
-
-def _loopback_only() -> Callable[[], None]:
-    """Make the local Ray about to start a loopback-only one: node address 127.0.0.1, so the GCS, raylet, object
-    manager and every worker's gRPC server listen on 127.0.0.1 only (since Ray binds its servers to the node IP,
-    ray-project/ray#55484, #59852), not on the machine's network address. ``ray.init(_node_ip_address=
-    "127.0.0.1")`` does not do it (``resolve_ip_for_localhost`` turns loopback back into the network address).
-    The variable reaches Ray's processes through their environment; the driver's copy of the constant is set too
-    (Ray may already be imported). Returns the function that undoes both once Ray has started (its processes keep
-    the variable; a later ``ray.init(address=...)`` of this process must see the machine's address again). A
-    cluster joined with ``--address`` is never touched."""
-    from ray._private import ray_constants
-
-    before_env, before_const = os.environ.get(_RAY_LOCAL_ONLY_ENV), ray_constants.ENABLE_RAY_CLUSTER
-    os.environ[_RAY_LOCAL_ONLY_ENV] = "0"
-    ray_constants.ENABLE_RAY_CLUSTER = False
-
-    def restore() -> None:
-        ray_constants.ENABLE_RAY_CLUSTER = before_const
-        if before_env is None:
-            os.environ.pop(_RAY_LOCAL_ONLY_ENV, None)
-        else:
-            os.environ[_RAY_LOCAL_ONLY_ENV] = before_env
-
-    return restore
-
-
 def start_ray_early(address: str | None = None) -> None:
     """Start (or connect to) Ray in a background thread while the application is imported and built; the next
     :func:`ensure_ray` waits for it. Ray's processes are tied to the thread that started them
@@ -244,7 +221,7 @@ def start_ray_early(address: str | None = None) -> None:
 
         logging.getLogger("ray._private.worker").addFilter(_NoSigtermNotice())
         try:
-            _init_ray(address)
+            init_ray(address)
         except BaseException as e:  # surfaced by ensure_ray in the main thread
             _EARLY["error"] = e
         ready.set()
@@ -286,7 +263,7 @@ def ensure_ray(address: str | None = None) -> bool:
             raise (RayAddressError if address else RayStartError)(f"could not start {where}: {type(err).__name__}: {err}") from err
     if not ray.is_initialized():
         try:
-            _init_ray(address)
+            init_ray(address)
         except Exception as e:  # noqa: BLE001 - Ray raises bare Exceptions (node start time-outs, ...)
             raise (RayAddressError if address else RayStartError)(f"could not start {where}: {type(e).__name__}: {e}") from e
     return any(n.get("Labels", {}).get("tier") == "cloud" for n in ray.nodes() if n.get("Alive"))
