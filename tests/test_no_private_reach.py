@@ -1,0 +1,104 @@
+"""No production code reaches into another class's private fields or methods (issue 24, item 5).
+
+Parses every ``.py`` file of ``aerodaas/``, ``actors/``, ``schedulers/`` and ``clusters/`` with
+:mod:`ast` and lists every attribute access ``expr._name`` (single leading underscore, not a dunder)
+whose ``expr`` is not ``self``/``cls``, not a name bound by an ``import`` statement of that file (a
+module, or a name imported from one), and not in the explicit allowlist below. Each allowlist entry
+names the file, the accessed expression and why it is not a reach into another class's internals.
+"""
+from __future__ import annotations
+
+import ast
+import functools
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("aerodaas", "actors", "schedulers", "clusters")
+
+#: (path relative to the repository root, expression as ``ast.unparse`` prints it) -> reason.
+ALLOWED: dict[tuple[str, str], str] = {
+    ("schedulers/base.py", "twin._lock"): "same class: fork() sets up the new TrajectoryScheduler it returns",
+    ("schedulers/base.py", "twin._missions"): "same class: fork() gives the new TrajectoryScheduler its missions",
+    ("schedulers/base.py", "twin._remote"): "same class: a forked TrajectoryScheduler starts unbound",
+    ("schedulers/base.py", "twin._find"): "same class: plan_addition() reads its own forked TrajectoryScheduler",
+    ("aerodaas/tools/hitl.py", "server._locks"): "same class: ``server = self`` in HitlServer's request handlers",
+    ("aerodaas/tools/hitl.py", "server._ids"): "same class: ``server = self`` in HitlServer's request handlers",
+    ("actors/channel.py", "shm._name"): "stdlib SharedMemory: the resource tracker registers the leading-slash "
+                                        "``_name``; the public ``name`` strips the slash, so it cannot unregister "
+                                        "(the documented pre-3.13 workaround; 3.13 has ``track=False``)",
+}
+
+
+def _is_super_call(node: ast.expr) -> bool:
+    """``super()._x``: the object's own (inherited) member, not another class's."""
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "super"
+
+
+def _imported_names(tree: ast.Module) -> set[str]:
+    """Names bound by any ``import`` / ``from ... import`` statement anywhere in the file."""
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            for alias in node.names:
+                names.add((alias.asname or alias.name).split(".")[0])
+    return names
+
+
+def _is_private(attr: str) -> bool:
+    return attr.startswith("_") and not (attr.startswith("__") and attr.endswith("__"))
+
+
+def _scan(tree: ast.Module, rel: str) -> list[tuple[int, str]]:
+    """``(line, expression)`` of every private reach-in of the parsed file ``rel``, sorted by line."""
+    modules = _imported_names(tree)
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Attribute) or not _is_private(node.attr):
+            continue
+        value = node.value
+        if isinstance(value, ast.Name) and (value.id in ("self", "cls") or value.id in modules):
+            continue
+        if _is_super_call(value):
+            continue
+        expr = ast.unparse(node)
+        if (rel, expr) in ALLOWED:
+            continue
+        found.append((node.lineno, expr))
+    return sorted(found)
+
+
+@functools.lru_cache(maxsize=1)
+def _parsed() -> tuple[tuple[str, ast.Module], ...]:
+    """Every production file, parsed once per test session: ``(path relative to the root, tree)``."""
+    out = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            out.append((path.relative_to(ROOT).as_posix(), ast.parse(path.read_text(encoding="utf-8"), str(path))))
+    return tuple(out)
+
+
+def _all_reach_ins() -> list[str]:
+    return [f"{rel}:{line}: {expr}" for rel, tree in _parsed() for line, expr in _scan(tree, rel)]
+
+
+def test_no_code_reaches_into_another_class_private_fields():
+    found = _all_reach_ins()
+    assert not found, (
+        f"{len(found)} private reach-in(s) (use a public method/property of the owning class, "
+        "or add an allowlist entry with a reason if the access is same-class):\n" + "\n".join(found))
+
+
+def test_allowlist_entries_still_exist():
+    """A stale allowlist entry would silently permit a future reach-in at that spot: keep it exact."""
+    seen = {(rel, ast.unparse(n)) for rel, tree in _parsed() for n in ast.walk(tree)
+            if isinstance(n, ast.Attribute) and _is_private(n.attr)}
+    stale = sorted(set(ALLOWED) - seen)
+    assert not stale, f"allowlist entries no longer in the code: {stale}"
+
+
+def test_scanner_flags_a_reach_in_and_ignores_self_cls_modules_super_and_dunders():
+    """The scanner itself, on a small source: only ``other._secret`` and ``self.peer._x`` are reach-ins."""
+    src = ("import os\nfrom pkg import mod\nclass A(B):\n    def f(self, other):\n"
+           "        self._a = cls._b = os._exit\n        mod._helper()\n        other.__dict__\n"
+           "        super()._kick()\n        self.peer._x = 1\n        return other._secret\n")
+    assert _scan(ast.parse(src), "x.py") == [(9, "self.peer._x"), (10, "other._secret")]
