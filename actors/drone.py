@@ -27,14 +27,12 @@ from aerodaas.app.models import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 from aerodaas.actors.drone_autopilot import AutopilotFlight
-
-#: wall seconds a finished drone's odometry may wait for a position sample that shows its end state (:meth:`DroneComponent.settled`)
-SETTLE_WALL_S = 2.0
+from aerodaas.actors.drone_end import RunEnd
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(AutopilotFlight):
+class DroneComponent(RunEnd, AutopilotFlight):
     """See the module docstring. ``scheduler`` is the robot's SchedulerComponent (same host); ``publish(src, envs)``
     hands sensor messages to subscribers; ``recorder`` is the run's RecorderService or None."""
 
@@ -137,63 +135,6 @@ class DroneComponent(AutopilotFlight):
         b.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
         self._event("takeoff", altitude=alt)
-
-    def close(self) -> None:
-        """Close the backend. A real vehicle still armed (run timeout, error, Ctrl-C) is brought down first by the
-        backend's safe end (LAND/RTL, wait for the disarm: ``mavlink.on_close``), and meanwhile its events (the mode
-        change, ``safe_end``), state (LANDING, LANDED) and odometry are recorded until the disarm; :attr:`ended`
-        says how the run ended for this robot."""
-        b = self.backend
-        safe_end = getattr(b, "safe_end", None)
-        if callable(safe_end) and b.navigable and b.armed and b.link_ok and (b.in_air or self.fsm.state != S.LANDED):
-            import threading
-
-            result: dict[str, Any] = {}
-
-            def run() -> None:
-                try:
-                    result["how"] = safe_end()
-                except Exception as e:  # noqa: BLE001 - recorded; closing goes on
-                    result["error"] = f"{type(e).__name__}: {e}"
-
-            self._event("safe_end_started", state=self.fsm.state.value, mode=getattr(b, "mode", None),
-                        on_close=getattr(getattr(b, "cfg", None), "on_close", None))
-            th = threading.Thread(target=run, name=f"safe-end-{self.cfg.id}", daemon=True)
-            th.start()
-            while th.is_alive():
-                th.join(0.05)
-                self._record_safe_end()
-            self._record_safe_end()
-            how = result.get("how") or "failed: " + result.get("error", "?")
-            if how == "nothing":  # not ours to end (armed by someone else), or already down
-                how = "landed" if not b.armed else "left armed (not commanded by us)"
-            self.ended = {"landed": "safe end: landed and disarmed", "disarmed": "safe end: disarmed on the ground",
-                          "timeout": "safe end: TIMEOUT, vehicle still armed",
-                          "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
-                how, f"safe end {how}")
-            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
-        elif self.ended is None:
-            st = self.fsm.state
-            self.ended = ("landed and disarmed" if st == S.LANDED and not b.armed else
-                          f"state {st.value}, {'armed' if b.armed else 'disarmed'}" if b.navigable else
-                          f"observed to the end ({st.value})")
-            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
-        b.close()
-
-    def _record_safe_end(self) -> None:
-        """While the backend's safe end runs: its events, the stat-stream (LANDING, then LANDED at the disarm) and
-        each new odometry sample, recorded as in flight."""
-        b = self.backend
-        for ev in b.drain_events():
-            self._event(ev.pop("event", "backend_event"), **ev)
-        st = self.fsm.state
-        if st not in (S.LANDING, S.LANDED) and getattr(b, "mode", "") in ("LAND", "RTL"):
-            if self.fsm.can(S.LANDING):
-                self.fsm.transition(S.LANDING, b.t)
-        if self.fsm.state == S.LANDING and not b.armed and not b.in_air:
-            self.fsm.transition(S.LANDED, b.t)
-            self._event("landed", reason="safe end")
-        self.publish_odometry()
 
     # ------------------------------------------------------------------ recording helpers
     def _t_ns(self, t: float) -> int:
@@ -317,32 +258,6 @@ class DroneComponent(AutopilotFlight):
                 self._event("error", message=self.error, traceback=traceback.format_exc())
                 self.done = True
         return self.done
-
-    def settled(self, wait_s: float = SETTLE_WALL_S) -> bool:
-        """After the mission ended: True once the recorded odometry shows the vehicle's armed / in-air state as the
-        backend reports it now, or ``wait_s`` wall seconds after the first call. A real vehicle reports its landed
-        state (EXTENDED_SYS_STATE) and its disarm (HEARTBEAT) in other messages than its position, so the position
-        sample recorded last may still say "in air"; the clock keeps stepping this drone (odometry only, no control)
-        until the next position sample carries the end state. A backend without ``sample_key`` (the simulator)
-        is settled at once."""
-        import time
-
-        b, o = self.backend, self.last_odom
-        if b.sample_key is None or o is None or (o.get("in_air") == bool(b.in_air) and o.get("armed") == bool(b.armed)):
-            return True
-        now = time.monotonic()
-        if self._settle_until is None:
-            self._settle_until = now + wait_s
-        return now >= self._settle_until
-
-    def finish(self) -> None:
-        """The run is over for this drone: last odometry and the mission result."""
-        self.publish_odometry()
-        if self.recorder is not None:
-            self.recorder.json("/mission/result", self._t_ns(self.backend.t),
-                               {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
-                                "preplanned_total": self.preplanned_total, "t": self.backend.t,
-                                "error": self.error}, "aerodaas.MissionResult")
 
     def nudge(self) -> bool:
         """New navigation was queued: apply it now (a control step outside the tick; idempotent). Returns True when
