@@ -299,7 +299,7 @@ class _Slot:
 
 class ChannelOutlet:
     """The sending end of an edge to component ``cid`` of a peer actor on the same machine, over that peer's
-    channel (the same interface as :class:`~.dataplane.RemoteOutlet`: :meth:`send`, :meth:`stats`).
+    channel (the same interface as :class:`~.remote_outlet.RemoteOutlet`: :meth:`send`, :meth:`stats`).
 
     At most ``buffer`` deliveries are in flight (sent, not yet answered); a new one beyond that is dropped and
     counted, as a busy consumer's mailbox would. Frames go through at most ``max_slots`` shared-memory slots of
