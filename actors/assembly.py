@@ -244,7 +244,7 @@ class ActorAssembly:
                 for d in finished:
                     d.finish()
                     active.remove(d)
-                checkpoints.maybe(active)
+                checkpoints.maybe([d for d in active if not d.done])  # a settling drone's mission is over
                 if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
                     for d in active:
                         if not d.done:  # one still settling has ended its mission already

@@ -11,8 +11,8 @@ __all__ = ["FrameCopies", "encode_frame", "decode_frame"]
 
 
 class FrameCopies:
-    """Counts, in one host process, every place where a frame's pixels are materialised or copied (see the module
-    docstring for the per-frame totals). Counters, in frames:
+    """Counts, in one host process, every place where a frame's pixels are materialised or copied (see
+    :mod:`aerodaas.actors.dataplane`'s docstring for the per-frame totals). Counters, in frames:
 
     * ``materialised``: frames produced by a camera (the one allocation of the pixels);
     * ``tier_jpeg_encoded`` / ``tier_jpeg_decoded``: frames JPEG-encoded here to cross to a host of another tier /

@@ -75,7 +75,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
     previous_sigint = signal.signal(signal.SIGINT, on_sigterm)
     runtime.STOP_SIGNALS.clear()
-    runtime._RAISE_OK[0] = True  # building the app: a stop may interrupt it at once
+    runtime.allow_stop_interrupt(True)  # building the app: a stop may interrupt it at once
     # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
     # the rest of the app's build; never before, so a bad environment fails at once with no Ray process
     o.early_ray = True
@@ -106,7 +106,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     finally:
         api.MISSION_LISTENERS.remove(on_result)
         o.early_ray = False
-        runtime._RAISE_OK[0] = False  # a signal now is recorded, never raised inside ray.shutdown
+        runtime.allow_stop_interrupt(False)  # a signal now is recorded, never raised inside ray.shutdown
         runtime.shutdown_ray()
         signal.signal(signal.SIGTERM, previous_sigterm)
         signal.signal(signal.SIGINT, previous_sigint)

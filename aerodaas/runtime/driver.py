@@ -107,6 +107,12 @@ _RAISE_OK = [True]
 IN_MISSION = [False]
 
 
+def allow_stop_interrupt(allowed: bool) -> None:
+    """Whether a stop signal (:func:`request_stop`) may raise KeyboardInterrupt in the main thread from now on:
+    True while the application is built, False around Ray's shutdown (see :data:`STOP_SIGNALS`)."""
+    _RAISE_OK[0] = bool(allowed)
+
+
 def request_stop(signum: int) -> None:
     """Called by the CLI's SIGINT/SIGTERM handler (main thread): record the stop and raise KeyboardInterrupt when
     that is safe now; otherwise the run stops at its next safe point."""
