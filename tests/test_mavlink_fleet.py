@@ -220,3 +220,24 @@ def test_each_robot_gets_its_own_connect_error_and_its_own_connect_timeout(ray_s
     text = format_summary(res)
     block_a = text.split("robot a:")[1].split("robot b:")[0]
     assert "within 1.5 s" in block_a and "within 2.5 s" not in block_a, text
+
+
+def test_messages_a_shared_link_drops_are_reported_as_events():
+    """A robot's I/O that falls behind its vehicle on a shared link loses the oldest messages (the link never waits
+    for one robot): the backend says so with a ``link_messages_dropped`` event, counted, at most every 5 s."""
+    from types import SimpleNamespace as NS
+
+    from aerodaas.backends.mavlink import MavlinkBackend
+    from aerodaas.config import MavlinkConfig, RobotConfig
+
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig()))
+    b._conn = NS(dropped=0)
+    b._report_link_drops(100.0)
+    assert [e for e in b.drain_events() if e["event"] == "link_messages_dropped"] == []
+    b._conn.dropped = 7
+    b._report_link_drops(101.0)
+    b._conn.dropped = 9
+    b._report_link_drops(102.0)  # within 5 s of the last report: held back
+    b._report_link_drops(106.5)
+    ev = [e for e in b.drain_events() if e["event"] == "link_messages_dropped"]
+    assert [(e["dropped"], e["total"]) for e in ev] == [(7, 7), (2, 9)]

@@ -118,6 +118,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._sp_sent = 0
         self._sp_next = 0.0
         self._hb_next = 0.0
+        self._drops_seen, self._drops_next = 0, 0.0  # messages the shared link's queue dropped (link.py)
         self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
         self._mode_changes = 0
         self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode

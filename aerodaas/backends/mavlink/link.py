@@ -321,7 +321,19 @@ class LinkMixin:
             return time.monotonic() - self._wall0
         return self._boot_ref[1] + (self._boot_last - self._boot_ref[0]) / 1000.0
 
+    def _report_link_drops(self, now: float) -> None:
+        """A ``link_messages_dropped`` event (and a warning) when the shared link's queue for this robot dropped
+        messages since the last report (:data:`~.shared_link.PORT_QUEUE`: this robot's I/O fell behind what its
+        vehicle sends), at most every 5 wall seconds, with the count since the last report and in all."""
+        total = int(getattr(self._conn, "dropped", 0) or 0)
+        if total > self._drops_seen and now >= self._drops_next:
+            self._event("link_messages_dropped", dropped=total - self._drops_seen, total=total)
+            log.warning("%s: the shared link dropped %d messages of this vehicle (%d in all): its I/O fell behind",
+                        self.robot_id, total - self._drops_seen, total)
+            self._drops_seen, self._drops_next = total, now + 5.0
+
     def _periodic(self, now: float) -> None:
+        self._report_link_drops(now)
         for key, buf in list(self._chunks.items()):
             if now - buf["t"] > _STATUSTEXT_FLUSH_S:
                 self._flush_text(key)
