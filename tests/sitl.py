@@ -389,6 +389,56 @@ def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout
     return 1
 
 
+def freeze_our_drone_when_flying(conn: str, root_pid: int, out: str, delay_s: float, stop_s: float,
+                                 timeout_s: float = 400) -> int:
+    """PX4's own failsafe while AeroDaaS runs: on a second MAVLink link (``conn``), wait for a HEARTBEAT showing the
+    vehicle armed in OFFBOARD, ``delay_s`` wall seconds more, then SIGSTOP our drone actor (the ``ray::DroneActor``
+    process among the descendants of ``root_pid``, the scenario's shell) for ``stop_s`` seconds: our setpoint stream
+    stops, PX4 leaves OFFBOARD after ``COM_OF_LOSS_T`` (its offboard-loss failsafe, ``COM_OBL_RC_ACT``), and when the
+    actor runs again it finds the autopilot in its failsafe mode. Then follow the firmware's HEARTBEATs until it is
+    disarmed (or ``timeout_s``) and write ``{"frozen": bool, "modes": [[time_boot_ms s, mode, armed], ...] (on
+    each change), "landed": bool}`` to ``out``."""
+    import signal
+
+    import psutil
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(conn, source_system=254, source_component=190)
+    end = time.monotonic() + timeout_s
+    modes: list = []
+    frozen = was_armed = landed = False
+    t_boot = 0.0
+    while time.monotonic() < end:
+        msg = m.recv_match(type=["HEARTBEAT", "SYSTEM_TIME", "ATTITUDE"], blocking=True, timeout=1.0)
+        if msg is None:
+            continue
+        if msg.get_type() != "HEARTBEAT":
+            t_boot = getattr(msg, "time_boot_ms", 0) / 1000.0
+            continue
+        if msg.autopilot == 8:
+            continue
+        mode, armed = mavutil.mode_string_v10(msg), bool(msg.base_mode & 128)
+        if not modes or modes[-1][1:] != [mode, armed]:
+            modes.append([t_boot, mode, armed])
+        was_armed = was_armed or armed
+        if was_armed and not armed:
+            landed = True
+            break
+        if not frozen and armed and mode == "OFFBOARD":
+            time.sleep(delay_s)
+            drones = [p for p in psutil.Process(root_pid).children(recursive=True)
+                      if "DroneActor" in " ".join(p.cmdline()[:1])]
+            for p in drones:
+                p.send_signal(signal.SIGSTOP)
+            time.sleep(stop_s)
+            for p in drones:
+                p.send_signal(signal.SIGCONT)
+            frozen = bool(drones)
+            print(f"froze {[p.pid for p in drones]} for {stop_s} s", flush=True)
+    Path(out).write_text(json.dumps({"frozen": frozen, "modes": modes, "landed": landed}))
+    return 0 if frozen else 1
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "observe":
         sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
@@ -396,6 +446,9 @@ if __name__ == "__main__":
         extra = dict(a.split("=", 1) for a in sys.argv[5:])  # SYSID=FILE: several vehicles on one port
         sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4]),
                              {int(k): v for k, v in extra.items()} or None))
+    if sys.argv[1] == "freeze-our-drone":
+        sys.exit(freeze_our_drone_when_flying(sys.argv[2], int(sys.argv[3]), sys.argv[4], float(sys.argv[5]),
+                                              float(sys.argv[6])))
     if sys.argv[1] == "stop-when-flying":
         sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
     raise SystemExit(f"unknown command {sys.argv[1]!r}")
@@ -457,6 +510,9 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     observe = f"{py} -m tests.sitl observe {conn} {shlex.quote(str(workdir / 'observed.json'))} 300"
     stopper = (f"( {py} -m tests.sitl stop-when-flying {monitor_connection(autopilot)} $FW0 3 6 "
                f"> {shlex.quote(str(workdir / 'stopper.log'))} 2>&1 & ) ; ")
+    freezer = (f"( {py} -m tests.sitl freeze-our-drone {monitor_connection(autopilot)} $$ "
+               f"{shlex.quote(str(workdir / 'failsafe_modes.json'))} 3 3 "
+               f"> {shlex.quote(str(workdir / 'freezer.log'))} 2>&1 & ) ; ")
     # every scenario on a vehicle booted for it (the farm survey is relative to where the vehicle takes off)
     scenarios = {
         "guided": [aerodaas_run(FARM_APP, env_guided, workdir / "guided.mcap")],
@@ -465,6 +521,8 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         "fence": [aerodaas_run(FARM_APP, env_fence, workdir / "fence.mcap")],
         "linkloss": [stopper + aerodaas_run(FARM_APP, env_guided, workdir / "linkloss.mcap")],
     }
+    if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
+        scenarios["failsafe"] = [freezer + aerodaas_run(FARM_APP, env_guided, workdir / "failsafe.mcap")]
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
         if only is not None and name not in only:
@@ -474,9 +532,12 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         for k, step in enumerate(steps):
             rc, text = step_result(d, k)
             out[name if k == 0 else "observe"] = {"rc": rc, "out": text}
-    for name in ("guided", "auto", "linkloss"):
+    for name in ("guided", "auto", "linkloss", "failsafe"):
         if name in out:
             out[name]["rec"] = _read_or_note(workdir / f"{name}.mcap")
+    modes = workdir / "failsafe_modes.json"
+    if "failsafe" in out:
+        out["failsafe"]["firmware"] = json.loads(modes.read_text()) if modes.exists() else {}
     obs = workdir / "observed.json"
     if "observe" in out:
         out["observe"]["observed"] = json.loads(obs.read_text()) if obs.exists() else {}
