@@ -456,3 +456,34 @@ for await (const msg of reader.readMessages()) {
 console.log(JSON.stringify({ channels, messages, json_parsed: jsonParsed }));
 await fh.close();
 """
+
+
+def test_stop_waits_for_a_client_that_follows_every_channel_and_not_for_one_that_follows_a_few(monkeypatch):
+    """At the end of a run the server waits (bounded) for a client that follows every channel to subscribe to the
+    ones advertised last (the mission result), and not for one that follows only a few (Foxglove's app, its panels'
+    topics). Measured on a fake clock: how long stop() waited before it closed."""
+    import time as _time
+
+    from aerodaas.liveview import server as srv_mod
+    from aerodaas.liveview.server import LiveServer
+
+    def waited(subs: set[str]) -> float:
+        clock = [1000.0]
+        monkeypatch.setattr(srv_mod.time, "monotonic", lambda: clock[0])
+        monkeypatch.setattr(srv_mod.time, "sleep", lambda s: clock.__setitem__(0, clock[0] + s))
+        srv = LiveServer("127.0.0.1:0")
+        try:
+            for t in ("/old", "/older", "/mission/result"):
+                srv.advertise(t, "aerodaas.X", "jsonschema", b"{}", "json")
+            srv._born["/old"] = srv._born["/older"] = clock[0] - 600.0  # advertised long ago; the result just now
+            srv.subscriptions, srv._client_subs = len(subs), {7: set(subs)}
+            t0 = clock[0]
+            srv.stop(linger_s=0.5)
+            return clock[0] - t0 - 0.5
+        finally:
+            monkeypatch.setattr(srv_mod.time, "monotonic", _time.monotonic)
+            monkeypatch.setattr(srv_mod.time, "sleep", _time.sleep)
+
+    assert waited({"/old", "/older", "/mission/result"}) < 0.1             # has everything: no wait
+    assert waited({"/old"}) < 0.1                                           # follows a few: not waited for
+    assert waited({"/old", "/older"}) >= LiveServer.CATCHUP_WAIT_S - 0.1    # lacks only the new one: waited for

@@ -23,8 +23,9 @@ client connected from the start receives every message of every channel; a later
 (:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result, a tracking analytics' 3-D scene and each
 track's last ``LocationFix``) receives its latest message. Channels the run declares from its plan (the track
 channels, :mod:`aerodaas.perception.track_records`) are advertised before their first message. At
-:meth:`LiveServer.stop` the server waits (bounded) until every client is subscribed to every channel, so the last
-channel of a run (``/mission/result``) reaches it before the server closes.
+:meth:`LiveServer.stop` the server waits (bounded: ``CATCHUP_WAIT_S``) until every client that follows every channel
+has subscribed to the ones advertised last, so the last channel of a run (``/mission/result``) reaches it before the
+server closes; a client that follows only some channels (Foxglove's app: its panels' topics) is not waited for.
 """
 from __future__ import annotations
 
@@ -106,6 +107,10 @@ class LiveServer:
 
     Raises ``ValueError`` for a bad address and ``RuntimeError`` naming the address when the server cannot bind.
     """
+
+    #: at :meth:`stop`, how long (s) to wait for a client that follows every channel to subscribe to the ones
+    #: advertised last (3 s was too short for Foxglove's npm client under load: it missed ``/mission/result``)
+    CATCHUP_WAIT_S = 10.0
 
     def __init__(self, address: str | None = None, *, name: str = "aerodaas", backlog: int = 1024,
                  listener: Any = None, time_capability: bool = False, catchup_s: float = 5.0,
@@ -225,12 +230,17 @@ class LiveServer:
             return
         self.stopped = True
         if linger_s > 0 and self.subscriptions > 0:
-            # clients that subscribe to everything get the channels advertised last (the mission result) first
-            deadline = time.monotonic() + max(3.0, linger_s)
+            # a client that follows every channel gets the ones advertised last (the mission result) first: it lacks
+            # only channels of the last CATCHUP_WAIT_S, and the wait for it is bounded by that; a client that
+            # follows a few channels (Foxglove's app: the topics of its panels) is not waited for
+            t0 = time.monotonic()
+            deadline = t0 + max(self.CATCHUP_WAIT_S, linger_s)
             while time.monotonic() < deadline:
                 with self._lock:
                     topics = set(self._channels)
-                    missing = [c for c, subs in self._client_subs.items() if subs and not topics <= subs]
+                    recent = {t for t in topics if self._born.get(t, 0.0) >= t0 - self.CATCHUP_WAIT_S}
+                    missing = [c for c, subs in self._client_subs.items()
+                               if subs and not topics <= subs and topics - subs <= recent]
                 if not missing:
                     break
                 time.sleep(0.05)
