@@ -114,6 +114,11 @@ def _kill_session(autopilot: str, workdir: Path) -> dict:
     """The farm survey with an inclusion circle of :data:`RADIUS_M` around home as the robot's geofence; SIGKILL
     of the ``aerodaas run`` process tree once it flies, then a runaway client pushes the vehicle out of the fence
     (``tests/sitl_fence.py kill-and-push``)."""
+    # PX4 at 2x, not 5x: its offboard-loss timeout (COM_OF_LOSS_T, 1 s of firmware time) is then 0.5 wall seconds,
+    # not 0.2, so a stall of the runaway client's 20 Hz stream does not hand the vehicle to PX4's RTL before the fence
+    # acts. When it did (2026-11-23, load 2), the client took OFFBOARD back while the RTL climbed towards its return
+    # altitude through our 30 m ceiling: PX4's geofence failsafe was then already taken over and the push reached 34 m
+    speedup = 2.0 if autopilot == "px4" else sitl.SPEEDUP[autopilot]
     cfg = sitl.mavlink_env(autopilot, sitl.FARM_ENV, fence={"action": "rtl"})
     r = cfg["robots"][0]
     r["safety"] = {"geofence": {"circles": [{"center": _ll(0, 0), "radius": RADIUS_M, "inclusion": True}]},
@@ -125,8 +130,8 @@ def _kill_session(autopilot: str, workdir: Path) -> dict:
     out = workdir / "kill.json"
     step = (f"{run} > {shlex.quote(str(workdir / 'run.log'))} 2>&1 & RUN=$!; "
             f"{py} -m tests.sitl_fence kill-and-push {sitl.monitor_connection(autopilot)} $RUN "
-            f"{shlex.quote(str(out))}")
-    sitl.run_in_namespace(autopilot, workdir, [step], timeout_s=700)
+            f"{shlex.quote(str(out))} {25.0 * 5.0 / speedup:g}")  # the same firmware time at every speed-up
+    sitl.run_in_namespace(autopilot, workdir, [step], timeout_s=900, speedup=speedup)
     rc, text = sitl.step_result(workdir, 0)
     log = (workdir / "run.log").read_text(errors="replace") if (workdir / "run.log").exists() else ""
     return {"rc": rc, "out": text, "log": log, "obs": json.loads(out.read_text()) if out.exists() else {}}
