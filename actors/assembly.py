@@ -226,9 +226,8 @@ class ActorAssembly:
                 now = time.monotonic()
                 finished = []
                 for d in active:
-                    if d.done:  # the mission ended; its odometry waits for the vehicle's end state
-                        if d.settled():
-                            finished.append(d)
+                    if d.done:  # the mission ended; its odometry waits for the vehicle's end state (below)
+                        pass
                     elif d.backend.t + 1e-9 >= d.next_tick:
                         due = d.next_tick
                         d.next_tick += d.tick_period
@@ -237,9 +236,10 @@ class ActorAssembly:
                             self.tick_lateness.append(late)
                             if late > d.tick_period / sim.speedup:
                                 d.missed_ticks += 1
-                        if d.control_tick() and d.settled():
-                            finished.append(d)
-                    elif d.end_requested is not None and d.control_tick() and d.settled():
+                        d.control_tick()
+                    elif d.end_requested is not None:
+                        d.control_tick()
+                    if d.done and d.settled():
                         finished.append(d)
                 for d in finished:
                     d.finish()

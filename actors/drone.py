@@ -214,8 +214,9 @@ class DroneComponent(RunEnd, AutopilotFlight):
             if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
                 self.next_odom = self.backend.t + self.odom_period
             self.publish_odometry(tok)
-        for ps in () if self.done else self.plugin_sensors:  # plug-in sensors sample the vehicle state at their
-            ps.maybe_sample(self.backend, tok)  # own rate while the mission runs (a settling drone: odometry only)
+        if not self.done:  # plug-in sensors sample the vehicle state at their own rate while the mission runs
+            for ps in self.plugin_sensors:  # (a drone settling after its mission: odometry only)
+                ps.maybe_sample(self.backend, tok)
 
     def _new_sample(self) -> bool:
         """Whether the backend has a position sample not yet published (always, for a backend without

@@ -251,12 +251,7 @@ class TrajectoryScheduler:
 
             ray.get(self._remote.clear_navigation.remote(priority))
             return
-        with self._lock:
-            if priority is None:
-                self._missions.clear()
-            else:
-                self._missions = [m for m in self._missions if m.priority != priority]
-            self.cleared += 1
+        self.remove_queued(lambda _item: True, priority)
 
     def remove_queued(self, drop: Callable[[Any], bool], priority: int | None = None) -> list:
         """Abort part of the queue: remove every queued item for which ``drop(item)`` is true, from every mission

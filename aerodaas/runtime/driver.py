@@ -373,7 +373,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
                                    scheduled=scheduled))
     if STOP_SIGNALS:  # stopped while the app was built: nothing started, nothing to record
         raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
-    _RAISE_OK[0] = False  # from here on a stop signal is taken at the safe points (see request_stop)
+    allow_stop_interrupt(False)  # from here on a stop signal is taken at the safe points (see request_stop)
     has_cloud = ensure_ray(opts.address)
     probe("ray_ready")
     epoch_ns = time.time_ns()
@@ -465,12 +465,12 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
                 print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
             for h in handles.values():
                 h["robot"].run_start_hooks()
-            _RAISE_OK[0] = True
+            allow_stop_interrupt(True)
             t_fly = time.monotonic()
             reports = supervise(plan, actors, handles, timeout, opts.progress, lambda: bool(STOP_SIGNALS),
                                 restart_wait_s=env.cfg.actor_restart_timeout_s)
             fly_s = time.monotonic() - t_fly
-            _RAISE_OK[0] = False
+            allow_stop_interrupt(False)
             stats, latency = collect_stats(handles, actors, plan)
             if not stats["_settle"]["idle"]:
                 print(f"aerodaas: warning: messages were still in flight between actors after "
@@ -480,7 +480,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
             stats["_plan"] = {"run": plan.run_id, "actors": {hid: a.name for hid, a in plan.actors.items()},
                               "placed": {d.get("host"): d.get("node_id") for d in described}}
     finally:
-        _RAISE_OK[0] = False
+        allow_stop_interrupt(False)
         if hitl is not None:
             hitl.stop()
             env.hitl = None
@@ -495,7 +495,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
                 ray.kill(h, no_restart=True)
             except Exception:  # noqa: BLE001 - an actor on a lost node is already gone
                 pass
-    _RAISE_OK[0] = True  # back in the application
+    allow_stop_interrupt(True)  # back in the application
     for r in robots:
         err = robot_errors.get(r.id) or (f"not started: another robot could not connect ({failure})"
                                          if robot_errors else failure) or "no report (the run did not start)"
