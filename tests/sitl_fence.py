@@ -32,7 +32,7 @@ from aerodaas.navigation.geo import geodetic_to_enu  # noqa: E402
 
 FENCE_PARAMS = {"ardupilot": ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN",
                               "FENCE_RADIUS"],
-                "px4": ["GF_ACTION", "GF_MAX_VER_DIST", "GF_MAX_HOR_DIST"]}
+                "px4": ["GF_ACTION", "GF_MAX_VER_DIST", "GF_MAX_HOR_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT"]}
 MAV_MISSION_TYPE_FENCE = 1
 
 

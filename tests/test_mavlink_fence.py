@@ -72,8 +72,35 @@ def test_the_robot_geofence_becomes_the_vehicle_fence_on_connect(vehicle, autopi
         assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ALT_MAX"], p["FENCE_ACTION"]) == (1, 5, 35, 2)
     else:  # GF_ACTION 5: land; GF_MAX_VER_DIST the altitude limit; no home circle asked: GF_MAX_HOR_DIST untouched
         assert (p["GF_ACTION"], p["GF_MAX_VER_DIST"], p["GF_MAX_HOR_DIST"]) == (5, 35, 0)
+        # PX4's return altitudes (30 m, 10 m) are already under the 35 m fence's ceiling (31.5 m): never raised
+        assert (p["RTL_RETURN_ALT"], p["RTL_DESCEND_ALT"]) == (30, 10)
     ev = [e for e in b.drain_events() if e["event"] == "fence_uploaded"]
     assert len(ev) == 1 and ev[0]["items"] == len(WANT) and ev[0]["action"] == "land", ev
+
+
+def test_px4s_return_altitude_is_lowered_under_the_altitude_fence(vehicle):
+    """PX4's Return climbs to RTL_RETURN_ALT (30 m): at a 30 m altitude fence its own geofence counted that as a
+    breach (PX4 SITL, 2026-11-23). Lowered to 27 m (10 % under); RTL_DESCEND_ALT (10 m) stays; both put back on
+    close when asked."""
+    emu, b, _ = vehicle("px4", max_altitude=30.0, mavlink={"fence": {"restore_on_close": True}})
+    b.connect(timeout_s=10)
+    p = emu.params
+    assert (p["GF_MAX_VER_DIST"], p["RTL_RETURN_ALT"], p["RTL_DESCEND_ALT"]) == (30, 27, 10)
+    ev = [e for e in b.drain_events() if e["event"] == "fence_uploaded"]
+    assert ev and ev[0]["RTL_RETURN_ALT"] == 27, ev
+    b.close()
+    assert (emu.params["RTL_RETURN_ALT"], emu.params["RTL_DESCEND_ALT"]) == (30, 10)
+
+
+def test_a_fence_too_low_for_px4s_return_refuses_to_fly(vehicle):
+    """PX4 keeps RTL_DESCEND_ALT >= 2 m: under a 3 m altitude fence its own Return would breach it. The vehicle's
+    parameters stay as they were."""
+    emu, b, _ = vehicle("px4", max_altitude=3.0, min_altitude=0.5)
+    before = dict(emu.params)
+    with pytest.raises(BackendError, match=r"max_altitude 3 m: PX4's Return mode needs at least 4 m"):
+        b.connect(timeout_s=10)
+    assert {n: emu.params[n] for n in ("GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT")} == \
+        {n: before[n] for n in ("GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT")}
 
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
@@ -147,7 +174,7 @@ def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, a
     b.close()
     assert _held(emu) == old_items and len(old_items) == 1
     names = ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION"] if autopilot == "ardupilot" else \
-        ["GF_ACTION", "GF_MAX_VER_DIST"]
+        ["GF_ACTION", "GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT"]
     assert {n: emu.params[n] for n in names} == {n: old[n] for n in names}
 
 

@@ -30,6 +30,16 @@ Parameters (firmware units):
   (0 disables). PX4 refuses a PARAM_SET whose type differs from the parameter's ("param types mismatch",
   ``src/modules/mavlink/mavlink_parameters.cpp``): INT32 parameters go bytewise in the float field
   (:meth:`~aerodaas.backends.mavlink.params.ParamMixin.set_parameter` ``integer=True``).
+
+The firmware's own return must stay inside the altitude fence. ArduCopter lowers its RTL return target to the
+fence's safe maximum itself (``ArduCopter/mode_rtl.cpp`` ``compute_return_target``: ``fence.get_safe_alt_max()``
+when ``FENCE_TYPE`` has the max-altitude bit). PX4 does not: its Return mode climbs to ``RTL_RETURN_ALT``
+(multicopter default 30 m, ``ROMFS/px4fmu_common/init.d/rc.mc_defaults``; 60 m in ``rtl_params.yaml``), near home
+less (``RTL_CONE_ANG``) but not below ``RTL_DESCEND_ALT`` (10 m), and its geofence counts a breach of
+``GF_MAX_VER_DIST`` during the return (observed on PX4 SITL with a 30 m fence: "RTL: start return at ... (30 m
+above destination)", then "Geofence: exceeding maximum altitude above Home"). So with the altitude fence on, the
+backend lowers both to
+:func:`px4_return_altitude_ceiling` when they are above it (never raises them) and restores them with the fence.
 """
 from __future__ import annotations
 
@@ -51,6 +61,23 @@ FENCE_ACTIONS = {"report": (0, 1), "rtl": (1, 3), "land": (2, 5), "hold": (4, 2)
 
 #: the fence parameters of integer type (PX4 takes GF_ACTION only as INT32; ArduPilot converts REAL32 itself)
 _INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
+#: PX4's return altitudes (metres above home), lowered under the altitude fence; PX4 keeps RTL_DESCEND_ALT >= 2 m
+PX4_RETURN_ALTITUDES = ("RTL_RETURN_ALT", "RTL_DESCEND_ALT")
+PX4_MIN_DESCEND_ALT_M = 2.0
+
+
+def px4_return_altitude_ceiling(max_altitude_m: float) -> float:
+    """The highest PX4 return altitude (metres above home) under an altitude fence at ``max_altitude_m``: 10 % of
+    the fence height below it, at least 2 m below (PX4 overshoots a climb target by a little: its altitude fence
+    must not count the return as a breach). Raises BackendError when that leaves less than PX4's smallest descend
+    altitude (2 m, ``RTL_DESCEND_ALT``'s minimum)."""
+    ceiling = max_altitude_m - max(2.0, 0.1 * max_altitude_m)
+    if ceiling < PX4_MIN_DESCEND_ALT_M:
+        raise BackendError(f"max_altitude {max_altitude_m:g} m: PX4's Return mode needs at least "
+                           f"{PX4_MIN_DESCEND_ALT_M + 2.0:g} m under the altitude fence (RTL_DESCEND_ALT >= "
+                           f"{PX4_MIN_DESCEND_ALT_M:g} m, 2 m margin); raise safety.max_altitude or set "
+                           f"mavlink.fence.max_altitude false")
+    return ceiling
 #: one item on the wire: (frame, command, param1..4, x int, y int, z)
 Wire = tuple
 
@@ -197,9 +224,13 @@ class FenceMixin:
         return out
 
     # ------------------------------------------------------------------ fence
-    def fence_parameters(self, fence: GeofenceConfig) -> dict[str, tuple[float, bool]]:
+    def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
+            -> dict[str, tuple[float, bool]]:
         """The fence parameters for ``fence`` and ``mavlink.fence`` on this autopilot: name -> (value in the
-        firmware's unit, INT32 on PX4). See the module docstring for their meaning."""
+        firmware's unit, INT32 on PX4). See the module docstring for their meaning. ``have``: the vehicle's current
+        values; PX4's return altitudes (:data:`PX4_RETURN_ALTITUDES`) are ceilings, kept when already below
+        :func:`px4_return_altitude_ceiling` (without ``have`` the ceiling itself). Raises BackendError (a fence
+        too low for PX4's return)."""
         fc = self.cfg.fence
         max_alt = float(self.safety.max_altitude or self.limits.max_altitude)
         ap_action, px4_action = FENCE_ACTIONS[fc.action]
@@ -216,6 +247,9 @@ class FenceMixin:
         out = {"GF_ACTION": (float(px4_action), True)}
         if fc.max_altitude:
             out["GF_MAX_VER_DIST"] = (max_alt, False)
+            ceiling = px4_return_altitude_ceiling(max_alt)
+            for name in PX4_RETURN_ALTITUDES:
+                out[name] = (min(ceiling, (have or {}).get(name, ceiling)), False)
         if fc.home_radius_m:
             out["GF_MAX_HOR_DIST"] = (float(fc.home_radius_m), False)
         return out
@@ -230,14 +264,18 @@ class FenceMixin:
         parameter (a firmware built without fences), LinkLost."""
         fence = self.safety.geofence if fence is None else fence
         wire = fence_items(fence)
-        want = self.fence_parameters(fence)
         where = f"robot {self.robot_id!r}: autopilot geofence"
+        try:
+            want = self.fence_parameters(fence)
+        except BackendError as e:
+            raise BackendError(f"{where}: {e}") from None
         have = self.read_parameters(list(want))
         missing = sorted(set(want) - set(have))
         if missing:
             raise BackendError(f"{where}: the {self.autopilot} vehicle has no parameter {', '.join(missing)} "
                                f"(firmware without a geofence?); refusing to fly (set mavlink.fence.upload false "
                                f"to fly on our gate alone)")
+        want = self.fence_parameters(fence, have)
         if not self._fence_saved:
             try:
                 before = self.download_items(FENCE)

@@ -23,9 +23,11 @@ ARDUPILOT_PARAMS: dict[str, float] = {
 #: PX4 parameters (name -> default, SI units). MPC_*: src/modules/mc_pos_control/multicopter_*_params.c
 #: (MPC_XY_CRUISE 5 m/s, MPC_XY_VEL_MAX 12 m/s, MPC_Z_VEL_MAX_UP 3 m/s, MPC_Z_VEL_MAX_DN 1.5 m/s,
 #: MPC_ACC_HOR 3 m/s/s, MPC_LAND_SPEED 0.7 m/s); navigator: NAV_ACC_RAD 2 m, MIS_TAKEOFF_ALT 2.5 m,
-#: RTL_RETURN_ALT; commander: COM_OF_LOSS_T, COM_DISARM_PRFLT 10 s, COM_DISARM_LAND 2 s, COM_HOME_EN 1.
+#: RTL_RETURN_ALT 30 m, RTL_DESCEND_ALT 10 m (multicopter defaults, ROMFS rc.mc_defaults); commander: COM_OF_LOSS_T, COM_DISARM_PRFLT 10 s,
+#: COM_DISARM_LAND 2 s, COM_HOME_EN 1.
 PX4_PARAMS: dict[str, float] = {
-    "RTL_RETURN_ALT": 60.0, "MPC_LAND_SPEED": 0.7, "MIS_TAKEOFF_ALT": 2.5, "COM_OF_LOSS_T": 1.0,
+    "RTL_RETURN_ALT": 30.0, "RTL_DESCEND_ALT": 10.0, "MPC_LAND_SPEED": 0.7, "MIS_TAKEOFF_ALT": 2.5,
+    "COM_OF_LOSS_T": 1.0,
     "COM_DISARM_PRFLT": 10.0, "COM_DISARM_LAND": 2.0, "NAV_ACC_RAD": 2.0, "MPC_XY_CRUISE": 5.0,
     "MPC_XY_VEL_MAX": 12.0, "MPC_Z_VEL_MAX_UP": 3.0, "MPC_Z_VEL_MAX_DN": 1.5, "MPC_ACC_HOR": 3.0,
     "COM_HOME_EN": 1.0,
