@@ -71,3 +71,40 @@ def test_bench_raypath_reports_every_step_of_a_frame_hop(tmp_path):
                           "call_small_inline_roundtrip", "call_frame_by_value_roundtrip"}
     for s in steps.values():
         assert s["n"] == 5 and 0 <= s["median"] <= s["p99"]
+
+
+def test_a_peer_that_dies_mid_run_is_reported_failed_and_the_run_goes_on(monkeypatch):
+    """dora's daemon stopped a node it found stuck (load 11): the whole ``bench overhead`` run raised. Now that peer
+    is reported unavailable with the reason and its windows discarded; the others are measured."""
+    from aerodaas.bench import overhead
+
+    class Fake:
+        def __init__(self, name: str, die_in: int | None = None) -> None:
+            self.name, self.die_in, self.windows, self.closed = name, die_in, 0, False
+
+        def window(self, seconds: float) -> list[dict]:
+            self.windows += 1
+            if self.die_in is not None and self.windows >= self.die_in:
+                raise RuntimeError("dora run exited (0): stuck node `detector`")
+            return [{"t": float(self.windows)}]
+
+        def close(self) -> None:
+            self.closed = True
+
+        def report(self, rows, kind, stub_ms):
+            return {"windows": len(rows)}
+
+    made: dict[str, Fake] = {}
+
+    def peer(name, *_a):
+        made[name] = Fake(name, die_in=3 if name == "dora_rs" else None)  # warm-up, round 1, dies in round 2
+        return made[name], None
+
+    monkeypatch.setattr(overhead, "_peer", peer)
+    monkeypatch.setattr(overhead, "FrameworkWindows", lambda *a: Fake("framework"))
+    monkeypatch.setattr(overhead, "overheads", lambda rows, kind, stub_ms: {"windows": len(rows)})
+    rep = overhead.interleaved(320, 240, "stub", 3.0, 1.0, 2.0, None, [], ("colocated",))
+    assert rep["dora_rs"]["available"] is False and "round 2" in rep["dora_rs"]["reason"]
+    assert "stuck node" in rep["dora_rs"]["reason"]
+    assert rep["naive_ray"] == {"available": True, "windows": 3} and rep["framework:colocated"] == {"windows": 3}
+    assert all(p.closed for p in made.values())

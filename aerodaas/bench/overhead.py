@@ -206,8 +206,9 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
                 on_round: Any = None) -> dict:
     """Every pipeline for ``duration_s`` seconds in round-robin windows of ``window_s`` (order rotated each round,
     ``on_round()`` called after each round: the progress bar;
-    one unmeasured warm-up window first for the peers). Returns ``{name: report}``; an unavailable pipeline's report
-    is ``{"available": False, "reason": ...}``. When
+    one unmeasured warm-up window first for the peers). Returns ``{name: report}``; an unavailable pipeline's report,
+    or a peer's that failed during the run (its windows are then discarded), is ``{"available": False, "reason":
+    ...}``; the framework failing raises. When
     recording (``record_dir``), an unrecorded AeroDaaS runner joins the rotation (``framework_unrecorded``), so the
     recording's cost shows side by side. The runtime is flown in each of ``layouts`` (``framework:<layout>``)."""
     runners: dict[str, Any] = {}
@@ -226,11 +227,20 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
     rows: dict[str, list] = {n: [] for n in runners}
     order = list(runners)
     rounds = max(1, math.ceil(duration_s / window_s))
+    failed: dict[str, str] = {}
     try:
         for k in range(rounds):
             for name in order[k % len(order):] + order[:k % len(order)]:
+                if name in failed:
+                    continue
                 loads.append(os.getloadavg()[0])
-                rows[name] += runners[name].window(min(window_s, duration_s - k * window_s))
+                try:
+                    rows[name] += runners[name].window(min(window_s, duration_s - k * window_s))
+                except Exception as e:  # noqa: BLE001 - a peer that dies mid-run (dora's daemon stops a node it
+                    # finds stuck on a loaded machine) is reported as failed, never as a number; ours must not fail
+                    if name.startswith("framework"):
+                        raise
+                    failed[name] = f"failed in round {k + 1}: {type(e).__name__}: {str(e)[-300:]}"
             if on_round is not None:
                 on_round()
     finally:
@@ -242,8 +252,11 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
         if name.startswith("framework"):
             out[name] = r.report(rows[name], kind, stub_ms)
     for name in PEERS:
-        out[name] = ({"available": True, **overheads(rows[name], kind, stub_ms)} if name in runners
-                     else {"available": False, "reason": missing[name]})
+        if name in failed:
+            out[name] = {"available": False, "reason": failed[name]}
+        else:
+            out[name] = ({"available": True, **overheads(rows[name], kind, stub_ms)} if name in runners
+                         else {"available": False, "reason": missing[name]})
     return out
 
 

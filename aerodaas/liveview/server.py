@@ -19,7 +19,8 @@ first.
 
 Nothing is lost for a client that subscribes to a channel soon after it is advertised (within ``catchup_s``): the
 messages the channel carried before the subscription are sent to that client alone (the SDK's per-sink ``log``), so a
-client connected from the start receives every message of every channel; a later subscriber to a latched topic
+client connected from the start receives every message of every channel, once and in order (during that window a
+channel's messages go to each caught-up client by its sink id, not by broadcast: see :meth:`LiveServer.publish`); a later subscriber to a latched topic
 (:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result, a tracking analytics' 3-D scene and each
 track's last ``LocationFix``) receives its latest message. Channels the run declares from its plan (the track
 channels, :mod:`aerodaas.perception.track_records`) are advertised before their first message. At
@@ -176,17 +177,27 @@ class LiveServer:
         ch = self._channels.get(msg.topic) or self.advertise(msg.topic, msg.schema_name, msg.schema_encoding,
                                                              msg.schema_data, msg.message_encoding)
         data = bytes(msg.data)
-        with self._lock:  # ordered against on_subscribe's catch-up, so no message is sent twice or missed
-            ch.log(data, log_time=msg.log_time_ns)
+        with self._lock:  # ordered against on_subscribe's catch-up, so no message is sent twice or out of order
             t = msg.topic
             early = self._early.get(t)
-            if early is not None:
-                if (time.monotonic() - self._born[t] <= self.catchup_s and len(early) < self._catchup_n
-                        and self._early_bytes[t] + len(data) <= self._catchup_bytes):
-                    early.append((data, msg.log_time_ns))
-                    self._early_bytes[t] += len(data)
-                elif time.monotonic() - self._born[t] > self.catchup_s:
-                    self._early[t] = None  # type: ignore[assignment]  # the window is over: free it
+            if early is not None and not (time.monotonic() - self._born[t] <= self.catchup_s
+                                          and len(early) < self._catchup_n
+                                          and self._early_bytes[t] + len(data) <= self._catchup_bytes):
+                early = self._early[t] = None  # type: ignore[assignment]  # the window is over: free it
+            if early is None:
+                ch.log(data, log_time=msg.log_time_ns)  # to every subscriber
+            else:
+                # the catch-up window: only to the clients whose catch-up was sent. The SDK subscribes a client's
+                # sink *before* it calls on_subscribe (foxglove-sdk connected_client.rs, since its PR #533): a
+                # broadcast in between would reach the client ahead of its catch-up, which then repeats it, out of
+                # order (seen at load 11). A client not caught up yet gets this message with its catch-up instead
+                early.append((data, msg.log_time_ns))
+                self._early_bytes[t] += len(data)
+                # (the SDK's Python Client has only its id: foxglove-sdk allocates a connection's ClientId and SinkId
+                # together, connected_client.rs, and nothing else in this process allocates either, so they agree)
+                for cid, topics in self._client_subs.items():
+                    if t in topics:
+                        ch.log(data, log_time=msg.log_time_ns, sink_id=cid)
             if t.endswith(LATCHED_SUFFIXES):
                 self._latest[t] = (data, msg.log_time_ns)
         self.published += 1
@@ -199,9 +210,8 @@ class LiveServer:
             self.subscriptions += 1
             self._client_subs.setdefault(client.id, set()).add(topic)
             ch = self._channels.get(topic)
-            backlog: list[tuple[bytes, int]] = []
-            if ch is not None and time.monotonic() - self._born.get(topic, 0.0) <= self.catchup_s:
-                backlog = list(self._early.get(topic) or [])
+            # the window is open as long as publish() keeps its messages (it decides, under this lock)
+            backlog: list[tuple[bytes, int]] = list(self._early.get(topic) or []) if ch is not None else []
             latest = self._latest.get(topic)
             if latest is not None and (not backlog or backlog[-1] != latest):
                 backlog.append(latest)
