@@ -39,9 +39,10 @@ class DetectionSink(Analytics):
         return {"lists": self.lists, "classes": dict(self.classes)}
 
 
-def hover_config(fps: float = 15.0, hover_s: float = 6.0, real: bool = False, scheduler: dict | None = None,
+def hover_config(fps: float = 15.0, real: bool = False, scheduler: dict | None = None,
                  lockstep: bool = False) -> dict:
-    """One drone hovering ``hover_s`` seconds at 14 m (over a car on real imagery with ``real``)."""
+    """One drone that hovers at 14 m over a car on real imagery (``real``), else at 5 m over the rendered ground
+    (a stand-in detector does not look: the lower hover saves the climb and the descent's wall seconds)."""
     cam = {"id": "cam", "type": "camera",
            "properties": {"width": 640, "height": 480, "hfov_deg": 78, "fps": fps, "pitch_deg": 90}}
     world: dict = {"ground": {"seed": 1, "metres_per_pixel": 0.05, "size_m": 120}}
@@ -51,7 +52,7 @@ def hover_config(fps: float = 15.0, hover_s: float = 6.0, real: bool = False, sc
                               "crop": [2960, 420, 3230, 600], "length_m": 5.05,
                               "path": [{"t": 0, "x": 0.0, "y": 0.0}, {"t": 100000, "x": 0.0, "y": 0.0}]}]}
     cfg = {"name": "scheduled", "world": world,
-           "robots": [{"id": "uav", "takeoff_altitude": 14.0,
+           "robots": [{"id": "uav", "takeoff_altitude": 14.0 if real else 5.0,
                        "limits": {"max_speed": 3.0, "max_vertical_speed": 4.0, "max_acceleration": 4.0},
                        "sensors": [cam]}],
            "simulation": {"speedup": 1.0, "lockstep": lockstep}}
@@ -72,8 +73,9 @@ def build(cfg: dict, detector: Analytics, hover_s: float = 6.0):
     sink = DetectionSink()
     sink.deploy(edge)
     sink.analyse(detector.analyse(frames))
+    z = cfg["robots"][0]["takeoff_altitude"]
     drone.navigate(sched.generate_navigation(PriorityQueue(AeroListData(
-        [Waypoint(id="hover", x=0.0, y=0.0, z=14.0, hover_duration=hover_s)]), priority=2)))
+        [Waypoint(id="hover", x=0.0, y=0.0, z=z, hover_duration=hover_s)]), priority=2)))
     return env, drone
 
 

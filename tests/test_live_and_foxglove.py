@@ -375,7 +375,7 @@ def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run
     from aerodaas.runtime.driver import format_summary
     from tests.test_analytics_scheduling import QOS, build, hover_config
 
-    env, drone = build(hover_config(fps=15, hover_s=4.0), CountingDetector(80))
+    env, drone = build(hover_config(fps=15), CountingDetector(80), hover_s=4.0)
     env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
     res = drone.start_mission()
     assert res.outcome == "success", res.robots["uav"].get("error")

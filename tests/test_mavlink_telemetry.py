@@ -46,6 +46,9 @@ def test_odometry_is_recorded_once_per_vehicle_sample(ray_session, run_options, 
     emu, env_path = _mavlink_variant("farm_survey", flavour, 3.0, tmp_path, params=PX4_AT_SPEED[flavour],
                                      mavlink={"stream_rate_hz": STREAM_HZ})
     cfg = json.loads(env_path.read_text())
+    # 2 m/s instead of the app's 0.5: the same survey in a third of the wall time, and a stamping error (a sample
+    # under another's time) shows four times as far in the positions
+    cfg["robots"][0]["limits"]["max_speed"] = 2.0
     for s in cfg["robots"][0]["sensors"]:
         if s["type"] == "odometry":
             s["properties"]["rate_hz"] = ODOM_HZ
@@ -60,7 +63,7 @@ def test_odometry_is_recorded_once_per_vehicle_sample(ray_session, run_options, 
     odo = [m for _, m in read_recording(tmp_path / "farm.mcap")["/quadrotor_base/odometry"]]
     ts = [o["t"] for o in odo]
     span = ts[-1] - ts[0]
-    assert span > 60 and all(b > a for a, b in zip(ts, ts[1:])), "recorded times must strictly increase"
+    assert span > 30 and all(b > a for a, b in zip(ts, ts[1:])), ("recorded times must strictly increase", span)
     # at most one record per vehicle sample (10 per vehicle second), though 50/s were asked for; each record a
     # sample of its own (a repeat under a new time stamp would make more)
     assert len(odo) <= STREAM_HZ * span * 1.1 + 5, (len(odo), span)

@@ -48,8 +48,8 @@ APP = textwrap.dedent('''
            "properties": {"width": 320, "height": 240, "hfov_deg": 78, "fps": 10, "pitch_deg": 90}}
     env = Environment(parse_environment_config({
         "name": "user-scheduler", "world": {"ground": {"seed": 1, "metres_per_pixel": 0.05, "size_m": 120}},
-        "robots": [{"id": "uav", "takeoff_altitude": 10.0, "sensors": [cam]}],
-        "simulation": {"speedup": 1.0}}))
+        "robots": [{"id": "uav", "takeoff_altitude": 3.0, "sensors": [cam]}],
+        "simulation": {"speedup": 4.0}}))
     env.set_analytics_scheduler("MY_EDGE_FIFO", {"detector": {"deadline_ms": 500, "edge_ms": 5, "cloud_ms": 100,
                                                               "benefit": 100, "edge_cost": 1, "cloud_cost": 20}})
     drone = env.get_robot_by_id("uav")
@@ -59,7 +59,7 @@ APP = textwrap.dedent('''
     det.deploy(env.get_compute_resource_by_id("edge"))
     det.analyse(drone.get_sensor_by_id("cam").get_data_stream())
     drone.navigate(sched.generate_navigation(PriorityQueue(AeroListData(
-        [Waypoint(id="hover", x=0.0, y=0.0, z=10.0, hover_duration=4.0)]), priority=2)))
+        [Waypoint(id="hover", x=0.0, y=0.0, z=3.0, hover_duration=4.0)]), priority=2)))
     env.start_mission([drone])
 ''')
 
