@@ -7,9 +7,9 @@ It lives in the edge host (:mod:`aerodaas.actors.dataplane`): the host's clock t
 :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` holding the pre-planned navigation it was given) and its
 navigation inbox (:attr:`DroneComponent.inbox`, :class:`~aerodaas.actors.drone_inbox.DroneInbox`), which checks new
 navigation, asks the trajectory scheduler plug-in to plan it into the queue, and hands it to
-:meth:`DroneComponent.apply_navigation` so that it is applied at once. Every command passes the robot's :class:`~aerodaas.navigation.safety.SafetyGate` right before it reaches
-the backend (the one choke point). The backend is whatever ``robots[].backend`` names: the embedded simulator,
-a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
+:meth:`DroneComponent.apply_navigation` so that it is applied at once. Every command passes the robot's
+:class:`~aerodaas.navigation.safety.SafetyGate` right before it reaches the backend (the one choke point). The
+backend is whatever ``robots[].backend`` names: the embedded simulator, a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
 
 With ``mavlink.use_autopilot_mission`` the pre-planned waypoints are uploaded to the autopilot before arming and
 flown as its own mission (ArduPilot AUTO, PX4 AUTO.MISSION); the state machine then follows the autopilot's
@@ -49,7 +49,6 @@ class DroneComponent(RunEnd, AutopilotFlight):
     def __init__(self, cid: str, robot_cfg: dict, host: Any, scheduler: Any, recorder: Any, epoch_ns: int,
                  preplanned_total: int, odom_cids: list[str], stat_cids: list[str], backend: Any = None,
                  inbox_cid: str | None = None) -> None:
-
         self.cid = cid
         self.cfg = RobotConfig.model_validate(robot_cfg)
         self.host = host
