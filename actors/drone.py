@@ -28,10 +28,12 @@ from aerodaas.navigation.fsm import MissionFSM, MissionState as S
 from aerodaas.runtime.messages import OdometryMsg, StatMsg
 from aerodaas.app.models import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.navigation.waypoint_queue import Order
 from aerodaas.schedulers.base import TrajectoryScheduler
 
 from aerodaas.actors.drone_autopilot import AutopilotFlight
 from aerodaas.actors.drone_inbox import DroneInbox
+from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import RunEnd
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
@@ -61,9 +63,13 @@ class DroneComponent(RunEnd, AutopilotFlight):
         self.recorder = recorder
         self.epoch_ns = epoch_ns
         self.odom_cids, self.stat_cids = odom_cids, stat_cids
+        #: the plan record and the items dropped from the queue (shared with the inbox)
+        self.plan_log = MissionPlanLog(self.cfg.id, self.cfg.home, recorder, epoch_ns)
+        #: simulated time (s) and position (ENU metres) at the last control step: where navigation is planned from
+        self.last_tick: tuple[float, tuple] = (0.0, tuple(planner.start))
         #: the drone's navigation port (``<robot>/scheduler``): analytics and the HITL API add navigation there
         self.inbox = DroneInbox(host, inbox_cid or f"{self.cfg.id}/scheduler", self.cfg.id, planner, recorder,
-                                epoch_ns, robot_cfg, self.queue, self)
+                                epoch_ns, robot_cfg, self.queue, self.plan_log, self)
         self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
         self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the host runtime
@@ -291,6 +297,14 @@ class DroneComponent(RunEnd, AutopilotFlight):
             return True
 
     # ------------------------------------------------------------------ flight logic
+    def next_order(self, t: float, pos: tuple) -> Order:
+        """What to fly at simulated time ``t`` (s) from ``pos`` (ENU metres), from this drone's own queue; the first
+        call records the plan. Caller holds ``self.lock``."""
+        self.last_tick = (t, pos)
+        if not self.plan_log.recorded:
+            self.plan_log.record_plan(self.queue, t)
+        return self.queue.order_at(t)
+
     def _control(self) -> bool:
         """One control step; returns True when the mission is over. Caller holds ``self.lock``."""
         v, fsm = self.backend, self.fsm
@@ -329,7 +343,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                     # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
                     # nor a survey whose pre-planned waypoints were cleared through the HITL API
                     ok = self.preplanned_left == 0 and not dropped and not self.hold_failed and \
-                        not self.inbox.cleared_preplanned
+                        not self.plan_log.cleared_preplanned
                     self.outcome = "success" if ok else "incomplete"
                 return True
             return False
@@ -398,7 +412,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                 fsm.transition(S.HOVERING, t)
                 v.hold()
             return False
-        res = self.inbox.tick(t, pos)
+        res = self.next_order(t, pos)
         item = res.item
         self.preplanned_left = res.preplanned_left
         if item is not None:
@@ -416,7 +430,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
             self._event("action", action=item.action, reason=item.reason, priority=res.priority)
             if st == S.TRACKING:
                 self._event("tracking_ended")
-            self.inbox.discard(item.id, "executed")
+            self.plan_log.discard(self.queue, item.id, "executed", t)
             self.preplanned_left = self.queue.pending(distance_driven_only=True)
             if item.action == "land":
                 v.land()
@@ -469,7 +483,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
             if st == S.WAYPOINT_HOLD and self._hold is not None:
                 h = self._hold
                 if h["within_s"] + 1e-9 >= item.hover_duration:
-                    self.inbox.complete(item.id)
+                    self.plan_log.complete(self.queue, item.id, t)
                     self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
                                          "error_m": dist})
                     self._event("waypoint_done", waypoint=item.id, held_s=round(h["within_s"], 3),
@@ -481,7 +495,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                            "max_speed": round(h["max_speed"], 3), "acceptance_radius": item.acceptance_radius}
                     self.hold_failed.append(rec)
                     self._event("hold_failed", **rec)
-                    self.inbox.discard(item.id, "hold_failed")
+                    self.plan_log.discard(self.queue, item.id, "hold_failed", t)
                     self.active_wp, self.hold_until, self._hold = None, None, None
             return False
         # nothing queued
@@ -556,7 +570,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                "item": "waypoint" if isinstance(item, Waypoint) else type(item).__name__}
         self.rejected.append(rec)
         self._event("command_rejected", **rec)
-        self.inbox.discard(rec["id"], f"rejected: {err.reason}")
+        self.plan_log.discard(self.queue, rec["id"], f"rejected: {err.reason}", t)
         if self.fsm.state == S.TRACKING:
             self._event("tracking_ended")
         if self.fsm.state in (S.TRACKING, S.NAVIGATING, S.WAYPOINT_HOLD):

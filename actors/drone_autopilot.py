@@ -2,7 +2,7 @@
 AUTO.MISSION) uploaded and followed by its MISSION_CURRENT / MISSION_ITEM_REACHED reports, the autopilot's own
 failsafes (RTL, LAND, BRAKE: ``mavlink.on_failsafe``), a regained link, and the return to launch around exclusion
 zones. A mixin of :class:`~aerodaas.actors.drone.DroneComponent`, whose state (``fsm``, ``backend``, ``gate``,
-``cfg``, ``queue``, ``inbox``, events) it shares; split from that module so that each stays one concept."""
+``cfg``, ``queue``, ``plan_log``, events) it shares; split from that module so that each stays one concept."""
 from __future__ import annotations
 
 import math
@@ -42,7 +42,7 @@ class AutopilotFlight:
         the autopilot holds for the item's hover time), MISSION_CURRENT moving past a waypoint -> visited
         (``waypoint_done``; also for items whose reports were lost with the link), on NAV_LAND -> LANDING, on
         NAV_RETURN_TO_LAUNCH -> RETURNING (the autopilot's RTL). Sends nothing to the vehicle."""
-        res = self.inbox.tick(t, pos)  # records the plan; the queue itself is only popped as items complete
+        res = self.next_order(t, pos)  # records the plan; the queue itself is only popped as items complete
         self.preplanned_left = res.preplanned_left
         events, self._ap_events = self._ap_events, []
         for ev in events:
@@ -102,7 +102,7 @@ class AutopilotFlight:
         self._ap_done.add(n)
         target = wp.to_local(self.cfg.home)
         at = self._ap_reached[n]
-        self.inbox.complete(wp.id)
+        self.plan_log.complete(self.queue, wp.id, t)
         self.visited.append({"id": wp.id, "t": t, "position": list(at), "target": list(target),
                              "error_m": math.dist(at, target)})
         self._event("waypoint_done", waypoint=wp.id)
@@ -160,7 +160,7 @@ class AutopilotFlight:
             self.fsm.transition(S.LANDED, t)
             self._event("landed", reason="landed while the link was lost")
             if self.outcome is None:
-                self.outcome = "incomplete" if self.preplanned_left or self.inbox.cleared_preplanned else "success"
+                self.outcome = "incomplete" if self.preplanned_left or self.plan_log.cleared_preplanned else "success"
             return True
         resume = {S.WAYPOINT_HOLD: S.NAVIGATING}.get(prev, prev)
         if resume in (S.ARMED, S.PREFLIGHT):

@@ -2,12 +2,12 @@
 (checks, plans with the trajectory scheduler plug-in, commits into the drone's waypoint queue) made part of the drone:
 what it takes the drone applies to the vehicle at once, not at its next control tick.
 
-The drone builds its inbox (:class:`~aerodaas.actors.drone.DroneComponent`, ``inbox``) around its own queue; the
-host runtime registers it under the robot's scheduler component id (``<robot>/scheduler``), where analytics
-streams deliver navigation on its ``priority`` port and the HITL API calls it. Calls go one way: the inbox hands
-what arrived to its drone (:meth:`~aerodaas.actors.drone.DroneComponent.apply_navigation`); the drone reads and pops
-its own queue and asks the inbox only for the bookkeeping around it (the plan record, discards). Nothing on the
-scheduler side (the inbox's base class, the plug-in, the queue) knows a drone.
+The drone builds its inbox (:class:`~aerodaas.actors.drone.DroneComponent`, ``inbox``) around its own queue and
+mission plan log; the host runtime registers it under the robot's scheduler component id (``<robot>/scheduler``),
+where analytics streams deliver navigation on its ``priority`` port and the HITL API calls it. Calls go one way:
+the inbox reads where its drone was at its last control tick and hands what it took to the drone
+(:meth:`~aerodaas.actors.drone.DroneComponent.apply_navigation`); the drone flies from its own queue and never
+calls the inbox. Nothing on the scheduler side (the inbox's base class, the plug-in, the queue) knows a drone.
 """
 from __future__ import annotations
 
@@ -16,18 +16,23 @@ from typing import Any
 from aerodaas.navigation.waypoint_queue import WaypointQueue
 from aerodaas.runtime.messages import Message, Port
 
+from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.scheduler_component import SchedulerComponent
 
 
 class DroneInbox(SchedulerComponent):
-    """The navigation port of ``drone`` (a :class:`~aerodaas.actors.drone.DroneComponent`, whose ``queue`` it fills;
-    other arguments as :class:`SchedulerComponent`). New navigation is applied by the drone at once; the latency
+    """The navigation port of ``drone`` (a :class:`~aerodaas.actors.drone.DroneComponent`, whose ``queue`` it fills
+    and whose ``plan_log`` it shares; other arguments as :class:`SchedulerComponent`). New navigation is applied by the drone at once; the latency
     record's ``applied`` says whether the drone was in a state that flies navigation."""
 
     def __init__(self, host: Any, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
-                 robot_cfg: dict | None, queue: WaypointQueue, drone: Any) -> None:
-        super().__init__(host, cid, robot_id, scheduler, recorder, epoch_ns, robot_cfg, queue=queue)
+                 robot_cfg: dict | None, queue: WaypointQueue, log: MissionPlanLog, drone: Any) -> None:
+        super().__init__(host, cid, robot_id, scheduler, recorder, epoch_ns, robot_cfg, queue=queue, log=log)
         self.owner = drone
+
+    def where(self) -> tuple[float, tuple]:
+        """The drone's simulated time (s) and position (ENU metres) at its last control tick."""
+        return self.owner.last_tick
 
     def handle(self, port: Port, msg: Message) -> None:
         """Take the navigation (see :meth:`SchedulerComponent.take`) and have the drone apply it now."""

@@ -16,6 +16,7 @@ from aerodaas.navigation.safety import SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order, WaypointQueue
 
 from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
+from aerodaas.actors.mission_plan import MissionPlanLog
 
 __all__ = ["Order", "SchedulerComponent"]
 
@@ -29,9 +30,10 @@ class SchedulerComponent(Component):
     Analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.runtime.messages.Port`
     (optionally ``replace``), taken by :meth:`take`; users add navigation through :meth:`add_navigation` (the HITL
     API). Everything added is checked by the robot's :class:`~aerodaas.navigation.safety.SafetyGate` and bounds
-    first (all items or none). The drone that owns the queue calls :meth:`tick` / :meth:`complete` /
-    :meth:`discard` (same host, no actor hop). This class never calls the drone: on its own it leaves new
-    navigation to the drone's next control tick; the drone's port (:class:`~aerodaas.actors.drone_inbox.DroneInbox`)
+    first (all items or none). ``log``: the :class:`~aerodaas.actors.mission_plan.MissionPlanLog` shared with the
+    drone (plan record, discards; default: one of its own). This class never calls the drone, and the drone never
+    calls it: the drone pops its own queue; on its own (with :meth:`tick` standing in for the drone) this inbox
+    leaves new navigation to the next tick, while the drone's port (:class:`~aerodaas.actors.drone_inbox.DroneInbox`)
     has the drone apply it at once. The per-frame latency (frame ready -> command applied to the vehicle) is
     recorded by :meth:`record_latency`; the waypoint plan on ``/<robot>/mission/plan`` at start and whenever the
     queued waypoints change."""
@@ -39,7 +41,8 @@ class SchedulerComponent(Component):
     kind = "scheduler"
 
     def __init__(self, host: DataPlane, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
-                 robot_cfg: dict | None = None, queue: WaypointQueue | None = None) -> None:
+                 robot_cfg: dict | None = None, queue: WaypointQueue | None = None,
+                 log: MissionPlanLog | None = None) -> None:
         from aerodaas.navigation.safety import SafetyGate
 
         super().__init__(host, cid, buffer=4)
@@ -58,41 +61,47 @@ class SchedulerComponent(Component):
         self.max_queued = cfg.max_queued_items
         self._plan_lock = threading.Lock()  # one planner at a time; never the lock the control tick takes
         self.refused: list[dict] = []
-        self.discarded: list[dict] = []
-        #: ids of pre-planned waypoints cleared through the HITL API: the mission is then never a success
-        self.cleared_preplanned: list[str] = []
+        #: the plan record, discards and cleared pre-planned waypoints (shared with the drone that owns the queue)
+        self.log = log if log is not None else MissionPlanLog(robot_id, cfg.home, recorder, epoch_ns)
         self._injected: dict[int, Any] = {}  # id(item) -> item, for the items added through the HITL API
-        self._plan_sig: Any = None
         self._replaced: set[Port] = set()
 
+    @property
+    def discarded(self) -> list[dict]:
+        """Items dropped from the queue without being visited (:attr:`MissionPlanLog.discarded`)."""
+        return self.log.discarded
+
+    @property
+    def cleared_preplanned(self) -> list[str]:
+        """Ids of pre-planned waypoints cleared through the HITL API (the mission is then never a success)."""
+        return self.log.cleared_preplanned
+
+    def where(self) -> tuple[float, tuple]:
+        """``(now, position)``: the simulated time (s) and the drone's position (ENU metres) that navigation is
+        checked and planned from: those of the last :meth:`tick` (the drone's port reads its drone's)."""
+        return self.now, self.position
+
     def tick(self, now: float, position: tuple) -> Order:
-        """The drone's control tick at simulated time ``now`` (s) and ``position`` (ENU metres): what to fly now
-        (see :class:`~aerodaas.navigation.waypoint_queue.Order`); where new navigation is planned from."""
+        """A control tick at simulated time ``now`` (s) and ``position`` (ENU metres), for an inbox used without
+        a drone: what to fly now (see :class:`~aerodaas.navigation.waypoint_queue.Order`)."""
         self.now, self.position = now, tuple(position)
-        if self._plan_sig is None:
+        if not self.log.recorded:
             self._record_plan()
         return self.queue.order_at(now)
 
     def complete(self, item_id: str) -> bool:
-        """The head waypoint ``item_id`` was reached: pop it (recorded in the plan). Returns False if no mission
-        has it at its head."""
-        ok = self.queue.complete(item_id)
-        self._record_plan()
-        return ok
+        """The head waypoint ``item_id`` was reached (see :meth:`MissionPlanLog.complete`)."""
+        return self.log.complete(self.queue, item_id, self.where()[0])
 
     def discard(self, item_id: str, reason: str) -> bool:
-        """Drop the head item ``item_id`` without counting it as visited (rejected by safety, or an executed
-        action). Returns False if no mission has it at its head."""
-        if not self.queue.discard(item_id):
-            return False
-        self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
-        self._record_plan()
-        return True
+        """Drop the head item ``item_id`` without counting it as visited (see :meth:`MissionPlanLog.discard`)."""
+        return self.log.discard(self.queue, item_id, reason, self.where()[0])
 
     def _event(self, event: str, **kw: Any) -> None:
         if self.recorder is not None:
-            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
-                               {"robot": self.robot_id, "t": self.now, "event": event, **kw}, "aerodaas.MissionEvent")
+            now = self.where()[0]
+            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(now * 1e9),
+                               {"robot": self.robot_id, "t": now, "event": event, **kw}, "aerodaas.MissionEvent")
 
     def handle(self, port: Port, msg: Message) -> None:
         """A navigation message on a ``priority`` port: :meth:`take` it; the drone applies it at its next control
@@ -112,13 +121,14 @@ class SchedulerComponent(Component):
         if not isinstance(nav, AeroNavigation) or msg.robot != self.robot_id:
             return False  # a shared analytics navigates each robot through that robot's own inbox
         replace = port.replace and port not in self._replaced
+        now, position = self.where()
         try:
             self._check_bounds(nav, ignore_queue=replace)
-            nav = self.gate.check_navigation(nav, self.position)
+            nav = self.gate.check_navigation(nav, position)
             if replace:
                 self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
                 self.queue.remove_queued(lambda _item: True)
-                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port.wire()}"})
+                self.log.discarded.append({"id": "*", "t": now, "reason": f"mission aborted by {port.wire()}"})
                 self._event("mission_aborted", by=port.wire())
             self._plan_and_add(nav, None, prio)
         except (SafetyViolation, ValueError) as e:  # an analytics asked for something unsafe: refuse it, keep running
@@ -154,12 +164,13 @@ class SchedulerComponent(Component):
         then changes nothing; returns ``{"queued": snapshot, "position": ENU metres, "t": s}`` on success."""
         nav_, prio = self.s.unwrap_navigation(nav, priority)
         self._check_bounds(nav_)
-        nav_ = self.gate.check_navigation(nav_, self.position)
+        now, position = self.where()
+        nav_ = self.gate.check_navigation(nav_, position)
         self._plan_and_add(nav_, index, prio)
         if nav_.name == "hitl":  # added through the HITL API: what ``clear`` with scope "injected" removes
             self._injected.update({id(w): w for w in nav_.waypoints})
         self._record_plan()
-        return {"queued": self.queue.snapshot(), "position": list(self.position), "t": self.now}
+        return {"queued": self.queue.snapshot(), "position": list(position), "t": now}
 
     def _check_bounds(self, nav: AeroNavigation, ignore_queue: bool = False) -> None:
         """Bounded work: at most ``max_waypoints_per_request`` items per request and ``max_queued_items`` queued in
@@ -180,7 +191,7 @@ class SchedulerComponent(Component):
         nothing is queued, never a silent drop in flight), and the plan is committed under the lock, keeping what
         happened meanwhile (waypoints reached or discarded, navigation added by others)."""
         with self._plan_lock:
-            position = self.position
+            position = self.where()[1]
             plan = self.s.plan_addition(self.queue, nav, index, prio, position)  # the planning, on a copy
             self._check_tour(plan.mission.items if plan.mission is not None else [], position)
             self.queue.commit(plan)
@@ -218,7 +229,7 @@ class SchedulerComponent(Component):
         for i in gone:
             self._injected.pop(id(i), None)
         if pre and by == "hitl":
-            self.cleared_preplanned.extend(pre)
+            self.log.cleared_preplanned.extend(pre)
         if ids:
             self._event("navigation_cleared", scope=scope, by=by, waypoints=ids[:100], preplanned=pre[:100])
         self._record_plan()
@@ -229,26 +240,14 @@ class SchedulerComponent(Component):
         return self.queue.snapshot()
 
     def _record_plan(self) -> None:
-        """Record the queued waypoints (with local ENU targets) when they changed since the last record."""
-        missions = []
-        for m in self.queue.missions():
-            items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
-                      "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
-            if items:
-                missions.append({"name": m.name, "priority": m.priority, "items": items})
-        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
-        if sig == self._plan_sig:
-            return
-        self._plan_sig = sig
-        if self.recorder is not None:
-            self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(self.now * 1e9),
-                               {"robot": self.robot_id, "t": self.now, "missions": missions}, "aerodaas.MissionPlan")
+        """Record the queued waypoints when they changed since the last record (:meth:`MissionPlanLog.record_plan`)."""
+        self.log.record_plan(self.queue, self.where()[0])
 
     def stats(self) -> dict:
         """Completed waypoint ids, refusals, discards, the mailbox's counts and latency percentiles (ms)."""
         out: dict[str, Any] = {"completed": list(self.queue.completed), "frames_with_latency": len(self.latency),
                                "refused": self.refused[-20:], "refused_count": len(self.refused),
-                               "discarded": self.discarded, **self.mailbox_stats()}
+                               "discarded": self.log.discarded, **self.mailbox_stats()}
         if self.latency:
             for key in ("e2e_ms", "overhead_ms", "inference_ms"):
                 out[key] = _percentiles([r[key] for r in self.latency])
