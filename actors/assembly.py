@@ -21,7 +21,6 @@ from aerodaas.runtime.specs import ActorSpec
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
 from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
 from aerodaas.actors.camera import CameraComponent
-from aerodaas.actors.scheduler_component import SchedulerComponent
 
 
 class _Checkpointer:
@@ -112,11 +111,10 @@ class ActorAssembly:
 
                 adopt(r.plugins)
             cfg = RobotConfig.model_validate(r.robot)
-            sched = host.add(SchedulerComponent(host, r.scheduler_cid, cfg.id, r.scheduler, self.recorder,
-                                                host.epoch_ns, r.robot))
-            drone = DroneComponent(r.drone_cid, r.robot, host, sched, self.recorder, host.epoch_ns,
-                                   r.preplanned, r.odom_cids, r.stat_cids)
-            sched.drone = drone
+            # the drone owns its waypoint queue and its navigation inbox (registered as <robot>/scheduler)
+            drone = DroneComponent(r.drone_cid, r.robot, host, r.scheduler, self.recorder, host.epoch_ns,
+                                   r.preplanned, r.odom_cids, r.stat_cids, inbox_cid=r.scheduler_cid)
+            inbox = host.add(drone.inbox)
             for c in r.cameras:
                 if c.props.get("source", "sim") == "sim" and world is None:
                     from aerodaas.sim.world import World
@@ -134,7 +132,7 @@ class ActorAssembly:
                 drone.plugin_sensors.append(comp)
                 self.comps[ps["cid"]] = comp
             self.comps[r.drone_cid] = drone
-            self.comps[r.scheduler_cid] = sched
+            self.comps[r.scheduler_cid] = inbox
             self.drones.append(drone)
         # real cameras are not synchronised: spread the fleet's capture phases over one frame period
         for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are

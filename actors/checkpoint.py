@@ -2,9 +2,8 @@
 
 A checkpoint (a picklable dict) holds the vehicle's state when the backend keeps one for us (the simulator:
 :meth:`~aerodaas.backends.base.VehicleBackend.checkpoint`; a real vehicle keeps flying on its own), the mission
-state machine's state, the waypoints visited, the last 50 events (the recording has them all), the trajectory scheduler's queued missions
-and completed items, the
-clocks of the control loop and the drone's counters. :func:`restore_drone` puts them back into a freshly built
+state machine's state, the waypoints visited, the last 50 events (the recording has them all), the drone's waypoint queue (queued missions
+and completed items), the clocks of the control loop and the drone's counters. :func:`restore_drone` puts them back into a freshly built
 :class:`~.drone.DroneComponent`: the waypoint that was being flown to (or held) is flown to again, from where the
 vehicle is, and the events say ``resumed_after_restart``.
 """
@@ -21,7 +20,7 @@ _SEQ = itertools.count(1)
 def drone_checkpoint(d: Any) -> dict:
     """A checkpoint of DroneComponent ``d`` (taken under its lock, so it is consistent with one control step)."""
     with d.lock:
-        q = d.scheduler.s.queue_state()  # the items themselves are never changed in place: list copies suffice
+        q = d.queue.state()  # the items themselves are never changed in place: list copies suffice
         return {"seq": next(_SEQ), "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
                 "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(d.visited),
                 "events": list(d.events[-50:]), "preplanned_left": d.preplanned_left, "preplanned_total": d.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
@@ -39,8 +38,7 @@ def restore_drone(d: Any, cp: dict) -> None:
     with d.lock:
         if cp.get("vehicle") is not None:
             d.backend.restore(cp["vehicle"])
-        d.scheduler.s.restore_queue(cp["missions"], cp["completed"], cp.get("seq_missions"),
-                                    cp.get("segments_issued"))
+        d.queue.restore(cp["missions"], cp["completed"], cp.get("seq_missions"), cp.get("segments_issued"))
         state = S(cp["state"])
         if state == S.WAYPOINT_HOLD:
             state = S.NAVIGATING
@@ -59,5 +57,5 @@ def restore_drone(d: Any, cp: dict) -> None:
 
 def _head(d: Any) -> str | None:
     """The id of the item the drone flies to next (None: nothing queued)."""
-    items = d.scheduler.s.queued()
+    items = d.queue.queued()
     return getattr(items[0], "id", None) if items else None

@@ -14,7 +14,7 @@ analytics actor, a dispatcher actor; :mod:`aerodaas.runtime.dataflow` decides wh
   odometry and the stat-stream, triggers camera captures and runs each drone's control ticks; it never runs
   components itself: it submits work to a small thread pool (OpenCV and onnxruntime release the GIL, so renders
   and inference overlap on 2 cores);
-* when an analytics hands navigation to the trajectory scheduler, the drone applies it at once (not at its next
+* when an analytics hands navigation to a drone's navigation inbox, the drone applies it at once (not at its next
   control tick), so the end-to-end latency ends at the command reaching the vehicle backend.
 
 Items for a component of another actor (:class:`~aerodaas.runtime.messages.Message` kinds, typed) leave through that

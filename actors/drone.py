@@ -3,10 +3,13 @@ hover timers, failsafes), navigation executor, and its odometry and stat-stream 
 vehicle state itself).
 
 It lives in the edge host (:mod:`aerodaas.actors.dataplane`): the host's clock thread calls :meth:`step` and
-:meth:`control_tick`; the trajectory scheduler calls :meth:`nudge` when new navigation arrives so that it is
-applied at once. Every command passes the robot's :class:`~aerodaas.navigation.safety.SafetyGate` right before it reaches
-the backend (the one choke point). The backend is whatever ``robots[].backend`` names: the embedded simulator,
-a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
+:meth:`control_tick`. The drone owns its waypoint queue (:attr:`DroneComponent.queue`, a
+:class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` holding the pre-planned navigation it was given) and its
+navigation inbox (:attr:`DroneComponent.inbox`, :class:`~aerodaas.actors.drone_inbox.DroneInbox`), which checks new
+navigation, asks the trajectory scheduler plug-in to plan it into the queue, and hands it to
+:meth:`DroneComponent.apply_navigation` so that it is applied at once. Every command passes the robot's
+:class:`~aerodaas.navigation.safety.SafetyGate` right before it reaches the backend (the one choke point). The
+backend is whatever ``robots[].backend`` names: the embedded simulator, a MAVLink autopilot, a Tello, or a replayed log (not navigable: the state machine then follows the log).
 
 With ``mavlink.use_autopilot_mission`` the pre-planned waypoints are uploaded to the autopilot before arming and
 flown as its own mission (ArduPilot AUTO, PX4 AUTO.MISSION); the state machine then follows the autopilot's
@@ -25,31 +28,48 @@ from aerodaas.navigation.fsm import MissionFSM, MissionState as S
 from aerodaas.runtime.messages import OdometryMsg, StatMsg
 from aerodaas.app.models import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.navigation.waypoint_queue import Order
+from aerodaas.schedulers.base import TrajectoryScheduler
 
 from aerodaas.actors.drone_autopilot import AutopilotFlight
+from aerodaas.actors.drone_inbox import DroneInbox
+from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import RunEnd
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
 class DroneComponent(RunEnd, AutopilotFlight):
-    """See the module docstring. ``scheduler`` is the robot's SchedulerComponent (same host); ``publish(src, envs)``
-    hands sensor messages to subscribers; ``recorder`` is the run's RecorderService or None."""
+    """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
+    :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
+    navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
+    ``inbox_cid``, default ``<robot>/scheduler``) takes; ``host`` publishes sensor messages to subscribers;
+    ``recorder`` is the run's RecorderService or None."""
 
     kind = "drone"
 
     def __init__(self, cid: str, robot_cfg: dict, host: Any, scheduler: Any, recorder: Any, epoch_ns: int,
-                 preplanned_total: int, odom_cids: list[str], stat_cids: list[str], backend: Any = None) -> None:
+                 preplanned_total: int, odom_cids: list[str], stat_cids: list[str], backend: Any = None,
+                 inbox_cid: str | None = None) -> None:
         self.cid = cid
         self.cfg = RobotConfig.model_validate(robot_cfg)
         self.host = host
         self.backend = backend if backend is not None else make_backend(self.cfg)
         self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home,
                                control_period_s=1.0 / self.cfg.control_rate_hz)
-        self.scheduler = scheduler
+        planner = scheduler if scheduler is not None else TrajectoryScheduler()
+        #: this drone's waypoint queue: the pre-planned navigation it was given, then whatever its inbox takes
+        self.queue = planner.queue.copy()
         self.recorder = recorder
         self.epoch_ns = epoch_ns
         self.odom_cids, self.stat_cids = odom_cids, stat_cids
+        #: the plan record and the items dropped from the queue (shared with the inbox)
+        self.plan_log = MissionPlanLog(self.cfg.id, self.cfg.home, recorder, epoch_ns)
+        #: simulated time (s) and position (ENU metres) at the last control step: where navigation is planned from
+        self.last_tick: tuple[float, tuple] = (0.0, tuple(planner.start))
+        #: the drone's navigation port (``<robot>/scheduler``): analytics and the HITL API add navigation there
+        self.inbox = DroneInbox(host, inbox_cid or f"{self.cfg.id}/scheduler", self.cfg.id, planner, recorder,
+                                epoch_ns, robot_cfg, self.queue, self.plan_log, self)
         self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
         self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the host runtime
@@ -82,7 +102,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
         self.done = False
         self.ticks = 0
         self.missed_ticks = 0
-        self.nudges = 0
+        self.nudges = 0  # navigation applied outside the control tick (:meth:`apply_navigation`)
         self.last_odom: dict | None = None
         self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
         odom_rate = 10.0
@@ -260,9 +280,10 @@ class DroneComponent(RunEnd, AutopilotFlight):
                 self.done = True
         return self.done
 
-    def nudge(self) -> bool:
-        """New navigation was queued: apply it now (a control step outside the tick; idempotent). Returns True when
-        the drone was in a state that flies navigation (so the command reached the backend, or was refused)."""
+    def apply_navigation(self) -> bool:
+        """New navigation was queued by the inbox: apply it now (a control step outside the tick; idempotent).
+        Returns True when the drone was in a state that flies navigation (so the command reached the backend, or
+        was refused)."""
         if self.done:
             return False
         with self.lock:
@@ -276,6 +297,14 @@ class DroneComponent(RunEnd, AutopilotFlight):
             return True
 
     # ------------------------------------------------------------------ flight logic
+    def next_order(self, t: float, pos: tuple) -> Order:
+        """What to fly at simulated time ``t`` (s) from ``pos`` (ENU metres), from this drone's own queue; the first
+        call records the plan. Caller holds ``self.lock``."""
+        self.last_tick = (t, pos)
+        if not self.plan_log.recorded:
+            self.plan_log.record_plan(self.queue, t)
+        return self.queue.order_at(t)
+
     def _control(self) -> bool:
         """One control step; returns True when the mission is over. Caller holds ``self.lock``."""
         v, fsm = self.backend, self.fsm
@@ -314,7 +343,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                     # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
                     # nor a survey whose pre-planned waypoints were cleared through the HITL API
                     ok = self.preplanned_left == 0 and not dropped and not self.hold_failed and \
-                        not getattr(self.scheduler, "cleared_preplanned", None)
+                        not self.plan_log.cleared_preplanned
                     self.outcome = "success" if ok else "incomplete"
                 return True
             return False
@@ -383,7 +412,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                 fsm.transition(S.HOVERING, t)
                 v.hold()
             return False
-        res = self.scheduler.tick(t, pos)
+        res = self.next_order(t, pos)
         item = res.item
         self.preplanned_left = res.preplanned_left
         if item is not None:
@@ -401,8 +430,8 @@ class DroneComponent(RunEnd, AutopilotFlight):
             self._event("action", action=item.action, reason=item.reason, priority=res.priority)
             if st == S.TRACKING:
                 self._event("tracking_ended")
-            self.scheduler.discard(item.id, "executed")
-            self.preplanned_left = self.scheduler.pending()
+            self.plan_log.discard(self.queue, item.id, "executed", t)
+            self.preplanned_left = self.queue.pending(distance_driven_only=True)
             if item.action == "land":
                 v.land()
                 fsm.transition(S.LANDING, t)
@@ -454,7 +483,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
             if st == S.WAYPOINT_HOLD and self._hold is not None:
                 h = self._hold
                 if h["within_s"] + 1e-9 >= item.hover_duration:
-                    self.scheduler.complete(item.id)
+                    self.plan_log.complete(self.queue, item.id, t)
                     self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
                                          "error_m": dist})
                     self._event("waypoint_done", waypoint=item.id, held_s=round(h["within_s"], 3),
@@ -466,7 +495,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                            "max_speed": round(h["max_speed"], 3), "acceptance_radius": item.acceptance_radius}
                     self.hold_failed.append(rec)
                     self._event("hold_failed", **rec)
-                    self.scheduler.discard(item.id, "hold_failed")
+                    self.plan_log.discard(self.queue, item.id, "hold_failed", t)
                     self.active_wp, self.hold_until, self._hold = None, None, None
             return False
         # nothing queued
@@ -541,7 +570,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
                "item": "waypoint" if isinstance(item, Waypoint) else type(item).__name__}
         self.rejected.append(rec)
         self._event("command_rejected", **rec)
-        self.scheduler.discard(rec["id"], f"rejected: {err.reason}")
+        self.plan_log.discard(self.queue, rec["id"], f"rejected: {err.reason}", t)
         if self.fsm.state == S.TRACKING:
             self._event("tracking_ended")
         if self.fsm.state in (S.TRACKING, S.NAVIGATING, S.WAYPOINT_HOLD):

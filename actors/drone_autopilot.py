@@ -2,7 +2,7 @@
 AUTO.MISSION) uploaded and followed by its MISSION_CURRENT / MISSION_ITEM_REACHED reports, the autopilot's own
 failsafes (RTL, LAND, BRAKE: ``mavlink.on_failsafe``), a regained link, and the return to launch around exclusion
 zones. A mixin of :class:`~aerodaas.actors.drone.DroneComponent`, whose state (``fsm``, ``backend``, ``gate``,
-``cfg``, ``scheduler``, events) it shares; split from that module so that each stays one concept."""
+``cfg``, ``queue``, ``plan_log``, events) it shares; split from that module so that each stays one concept."""
 from __future__ import annotations
 
 import math
@@ -19,7 +19,7 @@ class AutopilotFlight:
         its hover time, NAV_LAND at the last one or NAV_RETURN_TO_LAUNCH for a final rtl action), arm, and start
         the mission (MAV_CMD_MISSION_START). Raises the backend's CommandRefused / BackendError."""
         b = self.backend
-        items = self.scheduler.queued()
+        items = self.queue.queued()
         nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, items, SchedulingType.ORDERED, name="autopilot mission")
         sent = b.upload_mission(nav, takeoff_altitude=self.gate.check_takeoff(self.cfg.takeoff_altitude),
                                 final_action="land")
@@ -42,7 +42,7 @@ class AutopilotFlight:
         the autopilot holds for the item's hover time), MISSION_CURRENT moving past a waypoint -> visited
         (``waypoint_done``; also for items whose reports were lost with the link), on NAV_LAND -> LANDING, on
         NAV_RETURN_TO_LAUNCH -> RETURNING (the autopilot's RTL). Sends nothing to the vehicle."""
-        res = self.scheduler.tick(t, pos)  # records the plan; the queue itself is only popped as items complete
+        res = self.next_order(t, pos)  # records the plan; the queue itself is only popped as items complete
         self.preplanned_left = res.preplanned_left
         events, self._ap_events = self._ap_events, []
         for ev in events:
@@ -79,7 +79,7 @@ class AutopilotFlight:
                 self._backend_rtl = True
                 self._to(S.RETURNING, t)
                 self._event("returning", home=[0.0, 0.0], by="autopilot mission")
-        self.preplanned_left = self.scheduler.pending()
+        self.preplanned_left = self.queue.pending(distance_driven_only=True)
         return False
 
     def _ap_waypoint_reached(self, n: int, t: float, pos: tuple) -> None:
@@ -102,7 +102,7 @@ class AutopilotFlight:
         self._ap_done.add(n)
         target = wp.to_local(self.cfg.home)
         at = self._ap_reached[n]
-        self.scheduler.complete(wp.id)
+        self.plan_log.complete(self.queue, wp.id, t)
         self.visited.append({"id": wp.id, "t": t, "position": list(at), "target": list(target),
                              "error_m": math.dist(at, target)})
         self._event("waypoint_done", waypoint=wp.id)
@@ -160,8 +160,7 @@ class AutopilotFlight:
             self.fsm.transition(S.LANDED, t)
             self._event("landed", reason="landed while the link was lost")
             if self.outcome is None:
-                self.outcome = "incomplete" if self.preplanned_left or getattr(
-                    self.scheduler, "cleared_preplanned", None) else "success"
+                self.outcome = "incomplete" if self.preplanned_left or self.plan_log.cleared_preplanned else "success"
             return True
         resume = {S.WAYPOINT_HOLD: S.NAVIGATING}.get(prev, prev)
         if resume in (S.ARMED, S.PREFLIGHT):

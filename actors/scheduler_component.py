@@ -1,10 +1,11 @@
-"""SchedulerComponent: one robot's trajectory scheduler plug-in (INavigate) and its waypoint queue, inside the
-robot's drone actor; navigation from analytics and from users passes its safety gate first."""
+"""SchedulerComponent: a robot's navigation inbox, inside the robot's drone actor. Navigation from analytics (its
+``priority`` port) and from users (the HITL API) is checked by the robot's safety gate and bounds, planned by the
+trajectory scheduler plug-in (INavigate) and committed into the drone's own waypoint queue. One way: it never calls
+the drone; the drone's port (:class:`aerodaas.actors.drone_inbox.DroneInbox`) applies what it took at once."""
 from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any
 
 
@@ -12,43 +13,42 @@ from aerodaas.config import RobotConfig
 from aerodaas.runtime.messages import Message, Port
 from aerodaas.app.models import AeroNavigation, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
+from aerodaas.navigation.waypoint_queue import Order, WaypointQueue
 
 from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
+from aerodaas.actors.mission_plan import MissionPlanLog
 
-
-@dataclass(frozen=True)
-class Order:
-    """What the trajectory scheduler tells the drone to fly at one control tick: ``item`` (the head of the best
-    queued mission: a Waypoint, a VelocityCommand or an ActionCommand; None: nothing queued), how many items of
-    pre-planned (distance-driven) missions are left (``preplanned_left``), and the ``priority`` and name
-    (``mission``) of the mission the item belongs to (None without an item)."""
-
-    item: Any
-    preplanned_left: int
-    priority: int | None = None
-    mission: str | None = None
+__all__ = ["Order", "SchedulerComponent"]
 
 
 class SchedulerComponent(Component):
-    """Hosts one robot's trajectory scheduler (the paper's INavigate plug-in) and its waypoint priority queue.
+    """One robot's navigation inbox: what may enter the drone's waypoint queue, and how it is planned.
 
-    The drone calls :meth:`tick` / :meth:`complete` / :meth:`discard` directly (same host, no actor hop);
-    analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.runtime.messages.Port` (optionally
-    ``replace``); users add navigation
-    through :meth:`add_navigation` (the HITL API). Everything added is checked by the robot's
-    :class:`~aerodaas.navigation.safety.SafetyGate` first (all items or none). New navigation nudges the drone, which applies
-    it at once; the per-frame latency (frame ready -> command applied to the vehicle) is measured here. The
-    waypoint plan is recorded on ``/<robot>/mission/plan`` at start and whenever the queued waypoints change."""
+    ``scheduler``: the robot's trajectory scheduler plug-in (the paper's INavigate), asked to plan every addition;
+    ``queue``: the :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` it commits into (the drone's own;
+    default: the scheduler's :attr:`~aerodaas.schedulers.base.TrajectoryScheduler.queue`, for an inbox on its own).
+    Analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.runtime.messages.Port`
+    (optionally ``replace``), taken by :meth:`take`; users add navigation through :meth:`add_navigation` (the HITL
+    API). Everything added is checked by the robot's :class:`~aerodaas.navigation.safety.SafetyGate` and bounds
+    first (all items or none). ``log``: the :class:`~aerodaas.actors.mission_plan.MissionPlanLog` shared with the
+    drone (plan record, discards; default: one of its own). This class never calls the drone, and the drone never
+    calls it: the drone pops its own queue; on its own (with :meth:`tick` standing in for the drone) this inbox
+    leaves new navigation to the next tick, while the drone's port (:class:`~aerodaas.actors.drone_inbox.DroneInbox`)
+    has the drone apply it at once. The per-frame latency (frame ready -> command applied to the vehicle) is
+    recorded by :meth:`record_latency`; the waypoint plan on ``/<robot>/mission/plan`` at start and whenever the
+    queued waypoints change."""
 
     kind = "scheduler"
 
     def __init__(self, host: DataPlane, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
-                 robot_cfg: dict | None = None) -> None:
+                 robot_cfg: dict | None = None, queue: WaypointQueue | None = None,
+                 log: MissionPlanLog | None = None) -> None:
         from aerodaas.navigation.safety import SafetyGate
 
         super().__init__(host, cid, buffer=4)
         self.robot_id = robot_id
         self.s = scheduler
+        self.queue = queue if queue is not None else scheduler.queue
         self.recorder = recorder
         self.epoch_ns = epoch_ns
         self.position = tuple(scheduler.start)
@@ -61,76 +61,88 @@ class SchedulerComponent(Component):
         self.max_queued = cfg.max_queued_items
         self._plan_lock = threading.Lock()  # one planner at a time; never the lock the control tick takes
         self.refused: list[dict] = []
-        self.discarded: list[dict] = []
-        #: ids of pre-planned waypoints cleared through the HITL API: the mission is then never a success
-        self.cleared_preplanned: list[str] = []
+        #: the plan record, discards and cleared pre-planned waypoints (shared with the drone that owns the queue)
+        self.log = log if log is not None else MissionPlanLog(robot_id, cfg.home, recorder, epoch_ns)
         self._injected: dict[int, Any] = {}  # id(item) -> item, for the items added through the HITL API
-        self._plan_sig: Any = None
         self._replaced: set[Port] = set()
-        self.drone: Any = None  # the DroneComponent, set by the host runtime
+
+    @property
+    def discarded(self) -> list[dict]:
+        """Items dropped from the queue without being visited (:attr:`MissionPlanLog.discarded`)."""
+        return self.log.discarded
+
+    @property
+    def cleared_preplanned(self) -> list[str]:
+        """Ids of pre-planned waypoints cleared through the HITL API (the mission is then never a success)."""
+        return self.log.cleared_preplanned
+
+    def where(self) -> tuple[float, tuple]:
+        """``(now, position)``: the simulated time (s) and the drone's position (ENU metres) that navigation is
+        checked and planned from: those of the last :meth:`tick` (the drone's port reads its drone's)."""
+        return self.now, self.position
 
     def tick(self, now: float, position: tuple) -> Order:
-        """The drone's control tick at simulated time ``now`` (s) and ``position`` (ENU metres): what to fly now
-        (see :class:`Order`)."""
+        """A control tick at simulated time ``now`` (s) and ``position`` (ENU metres), for an inbox used without
+        a drone: what to fly now (see :class:`~aerodaas.navigation.waypoint_queue.Order`)."""
         self.now, self.position = now, tuple(position)
-        if self._plan_sig is None:
+        if not self.log.recorded:
             self._record_plan()
-        cur = self.s.current(now)
-        left = self.s.pending(distance_driven_only=True)
-        if cur is None:
-            return Order(None, left)
-        m, item = cur
-        return Order(item, left, m.priority, m.name)
-
-    def queued(self) -> list:
-        """Every queued item in flying order (see :meth:`TrajectoryScheduler.queued`)."""
-        return self.s.queued()
-
-    def pending(self) -> int:
-        """Queued items of pre-planned (distance-driven) missions."""
-        return self.s.pending(distance_driven_only=True)
+        return self.queue.order_at(now)
 
     def complete(self, item_id: str) -> bool:
-        ok = self.s.complete(item_id)
-        self._record_plan()
-        return ok
+        """The head waypoint ``item_id`` was reached (see :meth:`MissionPlanLog.complete`)."""
+        return self.log.complete(self.queue, item_id, self.where()[0])
 
     def discard(self, item_id: str, reason: str) -> bool:
-        """Drop the head item ``item_id`` without counting it as visited (rejected by safety, or an executed
-        action). Returns False if no mission has it at its head."""
-        if not self.s.discard(item_id):
-            return False
-        self.discarded.append({"id": item_id, "t": self.now, "reason": reason})
-        self._record_plan()
-        return True
+        """Drop the head item ``item_id`` without counting it as visited (see :meth:`MissionPlanLog.discard`)."""
+        return self.log.discard(self.queue, item_id, reason, self.where()[0])
 
     def _event(self, event: str, **kw: Any) -> None:
         if self.recorder is not None:
-            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(self.now * 1e9),
-                               {"robot": self.robot_id, "t": self.now, "event": event, **kw}, "aerodaas.MissionEvent")
+            now = self.where()[0]
+            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(now * 1e9),
+                               {"robot": self.robot_id, "t": now, "event": event, **kw}, "aerodaas.MissionEvent")
 
     def handle(self, port: Port, msg: Message) -> None:
+        """A navigation message on a ``priority`` port: :meth:`take` it; the drone applies it at its next control
+        tick (its own port, :class:`~aerodaas.actors.drone_inbox.DroneInbox`, applies it at once)."""
+        if self.take(port, msg):
+            self.record_latency(msg, applied=False)
+        return None
+
+    def take(self, port: Port, msg: Message) -> bool:
+        """Take the navigation carried by ``msg`` (from analytics, for this robot) into the queue at the port's
+        priority: bounds and safety gate first, a ``replace`` port's first navigation aborts the queued missions
+        (``mission_aborted``), then planned and committed. Returns True when it was queued; False when it is not
+        this robot's navigation or was refused (recorded in :attr:`refused` and a ``navigation_refused`` event: the
+        run goes on)."""
         prio = port.priority if port.name == "priority" else None
         nav = msg.data
         if not isinstance(nav, AeroNavigation) or msg.robot != self.robot_id:
-            return None  # a shared analytics navigates each robot through that robot's own scheduler
+            return False  # a shared analytics navigates each robot through that robot's own inbox
         replace = port.replace and port not in self._replaced
+        now, position = self.where()
         try:
             self._check_bounds(nav, ignore_queue=replace)
-            nav = self.gate.check_navigation(nav, self.position)
+            nav = self.gate.check_navigation(nav, position)
             if replace:
                 self._replaced.add(port)  # pattern 5: the first navigation from this source aborts the queued missions
-                self.s.clear_navigation()
-                self.discarded.append({"id": "*", "t": self.now, "reason": f"mission aborted by {port.wire()}"})
+                self.queue.remove_queued(lambda _item: True)
+                self.log.discarded.append({"id": "*", "t": now, "reason": f"mission aborted by {port.wire()}"})
                 self._event("mission_aborted", by=port.wire())
             self._plan_and_add(nav, None, prio)
         except (SafetyViolation, ValueError) as e:  # an analytics asked for something unsafe: refuse it, keep running
             self.refused.append({"t": msg.sim_t, "source": "analytics", "error": str(e)})
             self._event("navigation_refused", source="analytics", error=str(e))
-            return None
+            return False
         if any(isinstance(w, Waypoint) for w in nav.waypoints) or port.replace:
             self._record_plan()
-        applied = self.drone.nudge() if self.drone is not None else False  # applied now, not at the next tick
+        return True
+
+    def record_latency(self, msg: Message, applied: bool) -> None:
+        """Record the per-frame latency of navigation ``msg`` taken into the queue (``applied``: whether the drone
+        applied it to the vehicle at once) on ``/<robot>/latency``, when its frame carries a capture time; times
+        in milliseconds (``e2e_ms``, ``inference_ms``, ``post_ms``, ``overhead_ms`` and the actor hop's)."""
         tr = msg.trace
         if "capture_wall" in tr:
             e2e = (time.time() - tr["capture_wall"]) * 1e3
@@ -145,21 +157,20 @@ class SchedulerComponent(Component):
             if self.recorder is not None:
                 self.recorder.json(f"/{self.robot_id}/latency", self.epoch_ns + int(rec["t"] * 1e9), rec,
                                    "aerodaas.FrameLatency")
-        return None
 
     def add_navigation(self, nav: Any, index: int | None = None, priority: int | None = None) -> dict:
-        """Add navigation (user or application side). Raises SafetyViolation / IndexError / TypeError and then
-        changes nothing; returns the queue snapshot on success."""
+        """Add navigation (user or application side) to the queue at ``priority`` (``index``: insert at that index
+        of the mission of that priority). Raises SafetyViolation / IndexError / TypeError / ValueError (bounds) and
+        then changes nothing; returns ``{"queued": snapshot, "position": ENU metres, "t": s}`` on success."""
         nav_, prio = self.s.unwrap_navigation(nav, priority)
         self._check_bounds(nav_)
-        nav_ = self.gate.check_navigation(nav_, self.position)
+        now, position = self.where()
+        nav_ = self.gate.check_navigation(nav_, position)
         self._plan_and_add(nav_, index, prio)
         if nav_.name == "hitl":  # added through the HITL API: what ``clear`` with scope "injected" removes
             self._injected.update({id(w): w for w in nav_.waypoints})
         self._record_plan()
-        if self.drone is not None:
-            self.drone.nudge()
-        return {"queued": self.s.snapshot(), "position": list(self.position), "t": self.now}
+        return {"queued": self.queue.snapshot(), "position": list(position), "t": now}
 
     def _check_bounds(self, nav: AeroNavigation, ignore_queue: bool = False) -> None:
         """Bounded work: at most ``max_waypoints_per_request`` items per request and ``max_queued_items`` queued in
@@ -168,7 +179,7 @@ class SchedulerComponent(Component):
         if n > self.max_per_request:
             raise ValueError(f"waypoints: {n} items in one request, more than max_waypoints_per_request "
                              f"({self.max_per_request}) of robot {self.robot_id!r}")
-        queued = 0 if ignore_queue else self.s.pending()
+        queued = 0 if ignore_queue else self.queue.pending()
         if queued + n > self.max_queued:
             raise ValueError(f"waypoints: {queued} items queued + {n} new exceed max_queued_items "
                              f"({self.max_queued}) of robot {self.robot_id!r}")
@@ -180,10 +191,10 @@ class SchedulerComponent(Component):
         nothing is queued, never a silent drop in flight), and the plan is committed under the lock, keeping what
         happened meanwhile (waypoints reached or discarded, navigation added by others)."""
         with self._plan_lock:
-            position = self.position
-            plan = self.s.plan_addition(nav, index, prio, position)  # the planning, on a copy of the queue
+            position = self.where()[1]
+            plan = self.s.plan_addition(self.queue, nav, index, prio, position)  # the planning, on a copy
             self._check_tour(plan.mission.items if plan.mission is not None else [], position)
-            self.s.commit_addition(plan)
+            self.queue.commit(plan)
 
     def _check_tour(self, items: list, position: tuple) -> None:
         """Every leg of a planned tour (from ``position`` through its waypoints, ENU metres) against the geofence."""
@@ -212,41 +223,31 @@ class SchedulerComponent(Component):
         if scope not in ("all", "injected"):
             raise ValueError(f"clear: scope {scope!r} is not 'injected' or 'all'")
         injected = self._injected
-        gone = self.s.remove_queued(lambda i: scope == "all" or id(i) in injected, priority)
+        gone = self.queue.remove_queued(lambda i: scope == "all" or id(i) in injected, priority)
         ids = [i.id for i in gone if isinstance(i, Waypoint)]
         pre = [i.id for i in gone if isinstance(i, Waypoint) and id(i) not in self._injected]
         for i in gone:
             self._injected.pop(id(i), None)
         if pre and by == "hitl":
-            self.cleared_preplanned.extend(pre)
+            self.log.cleared_preplanned.extend(pre)
         if ids:
             self._event("navigation_cleared", scope=scope, by=by, waypoints=ids[:100], preplanned=pre[:100])
         self._record_plan()
         return {"cleared": ids, "preplanned": pre}
 
     def snapshot(self) -> list[dict]:
-        return self.s.snapshot()
+        """The queue as JSON-ready dicts in flying order (:meth:`WaypointQueue.snapshot`)."""
+        return self.queue.snapshot()
 
     def _record_plan(self) -> None:
-        """Record the queued waypoints (with local ENU targets) when they changed since the last record."""
-        missions = []
-        for m in self.s.missions():
-            items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
-                      "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
-            if items:
-                missions.append({"name": m.name, "priority": m.priority, "items": items})
-        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
-        if sig == self._plan_sig:
-            return
-        self._plan_sig = sig
-        if self.recorder is not None:
-            self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(self.now * 1e9),
-                               {"robot": self.robot_id, "t": self.now, "missions": missions}, "aerodaas.MissionPlan")
+        """Record the queued waypoints when they changed since the last record (:meth:`MissionPlanLog.record_plan`)."""
+        self.log.record_plan(self.queue, self.where()[0])
 
     def stats(self) -> dict:
-        out: dict[str, Any] = {"completed": list(self.s.completed), "frames_with_latency": len(self.latency),
+        """Completed waypoint ids, refusals, discards, the mailbox's counts and latency percentiles (ms)."""
+        out: dict[str, Any] = {"completed": list(self.queue.completed), "frames_with_latency": len(self.latency),
                                "refused": self.refused[-20:], "refused_count": len(self.refused),
-                               "discarded": self.discarded, **self.mailbox_stats()}
+                               "discarded": self.log.discarded, **self.mailbox_stats()}
         if self.latency:
             for key in ("e2e_ms", "overhead_ms", "inference_ms"):
                 out[key] = _percentiles([r[key] for r in self.latency])

@@ -1,87 +1,35 @@
-"""The trajectory-scheduler contract (the paper's INavigate) and the waypoint priority queue behind it.
+"""The trajectory-scheduler contract (the paper's INavigate): the planner a drone asks to sequence navigation.
 
-A scheduler holds *missions*: ``(priority, seq, name, items)`` where items are waypoints and/or velocity
-commands. Lower priority numbers win (paper: ``PriorityQueue(data, priority)``). The head of the best
-non-empty mission is what the drone executes; a higher-priority mission preempts the current one, and once
-it is exhausted or cleared the preempted mission resumes at the waypoint it was heading to.
+Plug-ins subclass :class:`TrajectoryScheduler` and override :meth:`~TrajectoryScheduler.order` (how an UNORDERED
+list is sequenced; :meth:`~TrajectoryScheduler.order_segments` to plan with fixed ORDERED runs' exits too).
 
-Plug-ins subclass :class:`TrajectoryScheduler` and override :meth:`order` (how an UNORDERED list is sequenced).
-
-Fixed ORDERED runs: every waypoint in a mission has a segment id (``Mission.segment_ids``): 0 for waypoints that
-came from UNORDERED navigation (free to re-order), n > 0 for waypoints of the ORDERED navigation n. When an
-UNORDERED addition re-plans a mission, each run n is one node (entered at its first waypoint, left at its last)
-that stays contiguous and in its order; only the free waypoints move between runs
-(:meth:`TrajectoryScheduler.order_segments`). An ORDERED addition inserted (``index=``) strictly inside a run joins
-that run; any other ORDERED addition is a run of its own.
+The scheduler does not fly anything and never calls a drone. Before a run it keeps the navigation the application
+queued (``generate_navigation``, ``add_navigation``) in a :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue`
+of its own (:attr:`TrajectoryScheduler.queue`); at start each drone gets a copy of its share and owns it. While the
+run goes on, the drone's navigation inbox (:class:`aerodaas.actors.scheduler_component.SchedulerComponent`) asks
+the scheduler to plan each addition on a copy of the drone's queue (:meth:`TrajectoryScheduler.plan_addition`) and
+commits the result into that queue (:meth:`WaypointQueue.commit`). The queue, its missions, priorities,
+preemption and fixed ORDERED runs are described in :mod:`aerodaas.navigation.waypoint_queue`.
 """
 from __future__ import annotations
 
 import math
-import threading
-from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
 
-from aerodaas.app.models import AeroNavigation, PriorityQueue, SchedulingType, VelocityCommand, Waypoint
+from aerodaas.app.models import AeroNavigation, PriorityQueue, SchedulingType, Waypoint
+from aerodaas.navigation.waypoint_queue import Mission, PlannedAddition, WaypointQueue
+
+__all__ = ["DEFAULT_PRIORITY", "Mission", "PlannedAddition", "TrajectoryScheduler", "WaypointQueue"]
 
 DEFAULT_PRIORITY = 2
-
-
-@dataclass
-class Mission:
-    """One queued mission (one priority): ``items`` in flying order. ``segment_of`` maps ``id(item)`` to the item's
-    segment id (absent = 0 = free, UNORDERED origin; n > 0 = part of the fixed ORDERED run n), so code that pops or
-    inserts ``items`` directly cannot misalign it; pickling (Ray) carries it over by position."""
-
-    priority: int
-    seq: int
-    name: str
-    items: list = field(default_factory=list)
-    distance_driven: bool = True
-    segment_of: dict = field(default_factory=dict, repr=False, compare=False)
-
-    @property
-    def segment_ids(self) -> list[int]:
-        """Segment id of each item (0 = free), parallel to ``items``."""
-        return [self.segment_of.get(id(i), 0) for i in self.items]
-
-    def set_segment_ids(self, ids: Sequence[int]) -> None:
-        """Tag ``items`` (parallel ``ids``); forgets every other entry."""
-        self.segment_of = {id(i): t for i, t in zip(self.items, ids) if t}
-
-    def copy(self) -> "Mission":
-        """A copy with its own item list and segment tags (the items themselves are shared)."""
-        return Mission(self.priority, self.seq, self.name, list(self.items), self.distance_driven,
-                       dict(self.segment_of))
-
-    def __getstate__(self) -> dict:
-        d = self.__dict__.copy()
-        d["segment_of"] = self.segment_ids  # object ids do not survive pickling; positions do
-        return d
-
-    def __setstate__(self, d: dict) -> None:
-        ids = d.pop("segment_of", [])
-        self.__dict__.update(d)
-        self.segment_of = {}
-        if isinstance(ids, list):
-            self.set_segment_ids(ids)
-
-
-@dataclass(frozen=True)
-class PlannedAddition:
-    """Navigation planned by :meth:`TrajectoryScheduler.plan_addition`, not yet queued: the ``priority`` it goes
-    to, the planned ``mission`` of that priority (None: nothing to add), the ids (``id()``) of the items it adds
-    and the scheduler's count of fixed runs after planning."""
-
-    priority: int
-    mission: Mission | None
-    added: frozenset
-    segments_issued: int
 
 
 class TrajectoryScheduler:
     """Base trajectory scheduler (INavigate): keeps the given order (ORDERED); subclasses re-order UNORDERED.
 
-    Thread-safe. Positions are ENU metres relative to the drone's home.
+    Positions are ENU metres relative to the drone's home. :attr:`queue` holds the navigation queued through this
+    object (thread-safe, see :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue`); the planning methods
+    (:meth:`plan_addition`, :meth:`add_to`) work on whichever queue they are given.
     """
 
     name = "ordered"
@@ -93,47 +41,36 @@ class TrajectoryScheduler:
     def __init__(self, env: Any = None, start: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         self.env = env
         self.start = tuple(float(v) for v in start)
-        self._missions: list[Mission] = []
-        self._seq = 0
-        self._lock = threading.RLock()
-        self.completed: list[str] = []
-        self.cleared = 0
+        #: the navigation queued through this scheduler (before a run: the pre-planned missions each drone gets)
+        self.queue = WaypointQueue()
         self.stream_inputs: list[tuple[Any, int, bool]] = []  # (AeroStreamData, priority, replace) wired at start
-        self._remote = None  # the scheduler component's handle while a mission runs
+        self._remote = None  # the robot's navigation inbox handle while a mission runs
         if env is not None and hasattr(env, "adopt_scheduler"):
             env.adopt_scheduler(self)
 
     def __getstate__(self) -> dict:
         d = self.__dict__.copy()
-        d.pop("_lock", None)
         d["env"] = None
         d["_remote"] = None
         d["stream_inputs"] = []
         return d
 
-    def __setstate__(self, d: dict) -> None:
-        self.__dict__.update(d)
-        self._lock = threading.RLock()
-
     def fork(self, missions: list[Mission]) -> "TrajectoryScheduler":
-        """A scheduler of the same class and settings holding only ``missions`` (each robot of a fleet gets its
-        own waypoint queue when an application plugs one scheduler into the environment). Analytics stream
-        inputs are kept: their navigation carries the robot it is meant for."""
+        """A scheduler of the same class and settings whose queue holds only ``missions`` (each robot of a fleet
+        gets its own share when an application plugs one scheduler into the environment). Analytics stream inputs
+        are kept: their navigation carries the robot it is meant for."""
         import copy
 
-        with self._lock:
-            twin = copy.copy(self)
-            twin._lock = threading.RLock()
-            twin._missions = list(missions)
-            twin.completed = []
-            twin.stream_inputs = list(self.stream_inputs)
-            twin._remote = None
+        twin = copy.copy(self)
+        twin.queue = WaypointQueue(missions, self.queue.seq, self.queue.segments_issued)
+        twin.stream_inputs = list(self.stream_inputs)
+        twin.bind_remote(None)
         return twin
 
     def bind_remote(self, handle: Any) -> None:
         """While a mission runs, route :meth:`add_navigation` and :meth:`clear_navigation` to the robot's running
-        scheduler component ``handle`` (a :class:`~aerodaas.runtime.handles.SchedulerHandle`), which holds the live
-        queue; ``None`` (after the run) makes them act on this object's own queue again. Not pickled."""
+        navigation inbox ``handle`` (a :class:`~aerodaas.runtime.handles.SchedulerHandle`), which fills the drone's
+        live queue; ``None`` (after the run) makes them act on :attr:`queue` again. Not pickled."""
         self._remote = handle
 
     # ------------------------------------------------------------------ ordering (plug-in point)
@@ -173,13 +110,14 @@ class TrajectoryScheduler:
 
     # ------------------------------------------------------------------ INavigate
     def generate_navigation(self, nav: AeroNavigation | PriorityQueue | list, priority: int | None = None) -> AeroNavigation:
-        """Schedule ``nav`` (order it if UNORDERED) and enqueue it; returns the scheduled AeroNavigation.
+        """Schedule ``nav`` (order it if UNORDERED) and enqueue it in :attr:`queue`; returns the scheduled
+        AeroNavigation.
 
         Accepts an AeroNavigation, a PriorityQueue wrapping one (or a list of waypoints), or a plain list.
         Raises TypeError for anything else."""
         nav, prio = self.unwrap_navigation(nav, priority)
         scheduled = self.schedule(nav)
-        self._enqueue(scheduled, prio, fixed=nav.scheduling_type == SchedulingType.ORDERED)
+        self._enqueue(self.queue, scheduled, prio, fixed=nav.scheduling_type == SchedulingType.ORDERED)
         return scheduled
 
     #: bounded work: an UNORDERED navigation of more waypoints is refused (ValueError) before any planning
@@ -203,229 +141,126 @@ class TrajectoryScheduler:
         """Add navigation at ``priority`` (default: the PriorityQueue's, else 2). With ``index``, insert the items at
         that index of the existing mission of the same priority (the paper's "append at custom indices");
         otherwise extend it (or create it). UNORDERED additions re-plan the remaining waypoints of that mission
-        from ``position`` (the drone's current position if given).
+        from ``position`` (the drone's current position if given). While a mission runs (:meth:`bind_remote`) the
+        navigation goes to the robot's inbox, which checks and plans it for the drone's live queue.
 
-        A ``PriorityQueue`` wrapping an analytics output stream (AeroStreamData) wires that stream into this
-        scheduler: every AeroNavigation it carries is added at that priority while the mission runs."""
+        A ``PriorityQueue`` wrapping an analytics output stream (AeroStreamData) wires that stream into the robot's
+        inbox: every AeroNavigation it carries is added at that priority while the mission runs. Raises TypeError,
+        IndexError, ValueError as :meth:`add_to`."""
         data = nav.data if isinstance(nav, PriorityQueue) else nav
         if type(data).__name__ == "AeroStreamData":
             self.stream_inputs.append((data, nav.priority if isinstance(nav, PriorityQueue) and priority is None
                                        else (priority if priority is not None else DEFAULT_PRIORITY),
                                        bool(getattr(nav, "replace", False))))
             return
+        nav, prio = self.unwrap_navigation(nav, priority)
         if self._remote is not None:
             import ray
 
-            nav_, prio_ = self.unwrap_navigation(nav, priority)
-            ray.get(self._remote.add_navigation.remote(nav_, index, prio_))
+            ray.get(self._remote.add_navigation.remote(nav, index, prio))
             return
-        nav, prio = self.unwrap_navigation(nav, priority)
-        with self._lock:
-            m = self._find(prio)
-            fixed = nav.scheduling_type == SchedulingType.ORDERED
-            if m is None:
-                self._enqueue(self.schedule(nav, position), prio, fixed=fixed)
-                return
-            items = list(nav.waypoints)
-            tags = m.segment_ids
-            if index is None:
-                index = len(m.items)
-            elif not 0 <= index <= len(m.items):
-                raise IndexError(f"index {index} out of range for a mission of {len(m.items)} items")
-            if not fixed:
-                tag = 0
-            elif 0 < index < len(tags) and tags[index - 1] == tags[index] != 0:
-                tag = tags[index]  # inserted strictly inside a fixed run: it joins the run
-            else:
-                tag = self._new_segment_id()
-            m.items[index:index] = items
-            tags[index:index] = [tag] * len(items)
-            m.set_segment_ids(tags)
-            if not fixed:
-                self._replan(m, position if position is not None else self.start)
+        self.add_to(self.queue, nav, index, prio, position)
+
+    def add_to(self, queue: WaypointQueue, nav: AeroNavigation, index: int | None, priority: int,
+               position: Sequence[float] | None = None) -> None:
+        """Plan ``nav`` into ``queue`` at ``priority``: a new mission (ordered by :meth:`schedule` if UNORDERED),
+        or into the existing mission of that priority at ``index`` (None: at its end; see
+        :meth:`WaypointQueue.insert`), re-planning that mission from ``position`` (ENU metres; default
+        :attr:`start`) when ``nav`` is UNORDERED. Raises IndexError for an ``index`` outside the mission, ValueError
+        for more than :attr:`max_waypoints` UNORDERED waypoints, and what :meth:`order` raises."""
+        fixed = nav.scheduling_type == SchedulingType.ORDERED
+        if queue.mission_at(priority) is None:
+            self._enqueue(queue, self.schedule(nav, position), priority, fixed=fixed)
+            return
+        m = queue.insert(nav.waypoints, priority, index, fixed)
+        if not fixed:
+            self._replan(m, position if position is not None else self.start)
+
+    def plan_addition(self, queue: WaypointQueue, nav: AeroNavigation, index: int | None, priority: int,
+                      position: Sequence[float]) -> PlannedAddition:
+        """Plan adding ``nav`` at ``priority`` (``index``: as :meth:`add_to`) from ``position`` (ENU metres) on a
+        copy of ``queue``: the queue is neither changed nor locked while :meth:`order` runs, so a long re-plan never
+        holds the drone's control tick. Its owner commits the result (:meth:`WaypointQueue.commit`). Raises
+        IndexError when ``index`` is beyond the end of that priority's mission, and what :meth:`add_to` raises."""
+        twin = queue.copy()
+        cur = twin.mission_at(priority)
+        n = len(cur.items) if cur is not None else 0
+        if index is not None and index > n:
+            raise IndexError(f"index: {index} is out of range for the priority-{priority} mission of {n} items")
+        self.add_to(twin, nav, index, priority, position)
+        planned = twin.mission_at(priority)
+        return PlannedAddition(priority, planned.copy() if planned is not None else None,
+                               frozenset(id(i) for i in nav.waypoints), twin.segments_issued)
 
     def clear_navigation(self, priority: int | None = None) -> None:
-        """Abort: drop every queued mission (or only those at ``priority``). A cleared mission never resumes."""
+        """Abort: drop every queued mission (or only those at ``priority``). A cleared mission never resumes. While
+        a mission runs (:meth:`bind_remote`) this clears the drone's live queue."""
         if self._remote is not None:
             import ray
 
             ray.get(self._remote.clear_navigation.remote(priority))
             return
-        self.remove_queued(lambda _item: True, priority)
+        self.queue.remove_queued(lambda _item: True, priority)
 
+    # ------------------------------------------------------------------ the queued navigation (:attr:`queue`)
     def remove_queued(self, drop: Callable[[Any], bool], priority: int | None = None) -> list:
-        """Abort part of the queue: remove every queued item for which ``drop(item)`` is true, from every mission
-        (or only the missions at ``priority``), in one step under the queue's lock; missions left empty are
-        dropped, and :attr:`cleared` counts the call (even when nothing matched). Returns the removed items in
-        queue order. Acts on this scheduler's own queue (never forwarded to a running scheduler component).
-        ``drop`` runs under the lock: it must not call back into this scheduler. Raises what ``drop`` raises (the
-        queue is then unchanged)."""
-        with self._lock:
-            gone: list = []
-            kept: dict[int, list] = {}  # id(mission) -> the items it keeps
-            for m in self._missions:
-                if priority is None or m.priority == priority:
-                    kept[id(m)] = []
-                    for i in m.items:
-                        (gone if drop(i) else kept[id(m)]).append(i)
-            for m in self._missions:
-                if id(m) in kept:
-                    m.items = kept[id(m)]
-            self._missions = [m for m in self._missions if m.items]
-            self.cleared += 1
-            return gone
+        """:meth:`WaypointQueue.remove_queued` of :attr:`queue` (never forwarded to a running drone)."""
+        return self.queue.remove_queued(drop, priority)
 
     def revise_items(self, revise: Callable[[Mission], Sequence]) -> None:
-        """Replace the items of every queued mission by ``revise(copy of the mission)`` (missions in the order they
-        were queued), e.g. the pre-flight safety check putting clamped waypoints in place of the originals. All or
-        nothing, under the queue's lock: if ``revise`` raises for any mission, the queue is unchanged and the error
-        propagates. A revised list of the same length keeps each position's segment id (a clamped waypoint of a
-        fixed ORDERED run stays in its run); one of another length is free (segment id 0). ``revise`` must not call
-        back into this scheduler."""
-        with self._lock:
-            revised = [list(revise(m.copy())) for m in self._missions]
-            for m, items in zip(self._missions, revised):
-                tags = m.segment_ids
-                m.items = items
-                m.set_segment_ids(tags if len(tags) == len(items) else [])
+        """:meth:`WaypointQueue.revise_items` of :attr:`queue` (the pre-flight safety check)."""
+        self.queue.revise_items(revise)
 
-    # ------------------------------------------------------------------ execution side
     def current(self, now: float) -> tuple[Mission, Any] | None:
-        """The (mission, item) the drone should execute at sim time ``now``; expired velocity commands are dropped."""
-        with self._lock:
-            for m in sorted(self._missions, key=lambda m: (m.priority, m.seq)):
-                while m.items and isinstance(m.items[0], VelocityCommand):
-                    v = m.items[0]
-                    if v.issued_at is None:
-                        v.issued_at = now
-                    if now - v.issued_at >= v.duration or (len(m.items) > 1 and isinstance(m.items[1], VelocityCommand)):
-                        m.items.pop(0)  # expired, or superseded by a newer command
-                        continue
-                    break
-                if m.items:
-                    return m, m.items[0]
-            self._missions = [m for m in self._missions if m.items]
-            return None
+        """:meth:`WaypointQueue.current` of :attr:`queue`: the (mission, item) to execute at sim time ``now`` (s)."""
+        return self.queue.current(now)
 
     def complete(self, item_id: str) -> bool:
-        """Mark the head waypoint ``item_id`` of its mission as reached and pop it. Returns False if not at a head."""
-        with self._lock:
-            if not self.discard(item_id):
-                return False
-            self.completed.append(item_id)
-            return True
+        """:meth:`WaypointQueue.complete` of :attr:`queue`."""
+        return self.queue.complete(item_id)
 
     def discard(self, item_id: str) -> bool:
-        """Pop the head item ``item_id`` of its mission without counting it as reached (an item refused by the
-        safety limits, or an executed action). Returns False if no mission has it at its head."""
-        with self._lock:
-            for m in self._missions:
-                if m.items and getattr(m.items[0], "id", None) == item_id:
-                    m.items.pop(0)
-                    return True
-            return False
+        """:meth:`WaypointQueue.discard` of :attr:`queue`."""
+        return self.queue.discard(item_id)
 
     def pending(self, distance_driven_only: bool = False) -> int:
-        """Number of queued items (optionally only in pre-planned, distance-driven missions)."""
-        with self._lock:
-            return sum(len(m.items) for m in self._missions if m.distance_driven or not distance_driven_only)
+        """:meth:`WaypointQueue.pending` of :attr:`queue`."""
+        return self.queue.pending(distance_driven_only)
 
     def queued(self) -> list:
-        """Every queued item in the order the drone would fly them (missions by priority, then age), e.g. to upload
-        a pre-planned mission to an autopilot in one go."""
-        with self._lock:
-            return [i for m in sorted(self._missions, key=lambda m: (m.priority, m.seq)) for i in m.items]
+        """:meth:`WaypointQueue.queued` of :attr:`queue` (every item in flying order)."""
+        return self.queue.queued()
 
-    # ------------------------------------------------------------------ the queue, for the drone actor that owns it
     def missions(self) -> list[Mission]:
-        """Copies of the queued missions in flying order (priority, then age): the lists and segment tags are
-        copies, the items themselves are shared (they are never changed in place)."""
-        with self._lock:
-            return [m.copy() for m in sorted(self._missions, key=lambda m: (m.priority, m.seq))]
-
-    def plan_addition(self, nav: AeroNavigation, index: int | None, priority: int,
-                      position: Sequence[float]) -> "PlannedAddition":
-        """Plan adding ``nav`` at ``priority`` (``index``: as :meth:`add_navigation`) from ``position`` (ENU
-        metres) on a copy of the queue: the queue is neither changed nor locked while :meth:`order` runs, so a long
-        re-plan never holds the drone's control tick. Commit it with :meth:`commit_addition`. Raises IndexError
-        when ``index`` is beyond the end of that priority's mission, and what :meth:`add_navigation` raises."""
-        with self._lock:
-            snap = [m.copy() for m in self._missions]
-            cur = self._find(priority)
-            n = len(cur.items) if cur is not None else 0
-            if index is not None and index > n:
-                raise IndexError(f"index: {index} is out of range for the priority-{priority} mission of {n} items")
-        twin = self.fork(snap)
-        twin.add_navigation(nav, index=index, priority=priority, position=position)
-        planned = twin._find(priority)
-        return PlannedAddition(priority, planned.copy() if planned is not None else None,
-                               frozenset(id(i) for i in nav.waypoints), getattr(twin, "_segments_issued", 0))
-
-    def commit_addition(self, plan: "PlannedAddition") -> None:
-        """Put a :meth:`plan_addition` result into the queue, keeping what happened since it was planned: items
-        reached or discarded meanwhile stay gone, items added by others meanwhile stay (after the plan's)."""
-        planned = plan.mission
-        if planned is None:
-            return
-        with self._lock:
-            real = self._find(plan.priority)
-            alive = {id(i) for i in real.items} if real is not None else set()
-            in_plan = {id(i) for i in planned.items}
-            items = [i for i in planned.items if id(i) in alive or id(i) in plan.added]
-            items += [i for i in (real.items if real is not None else []) if id(i) not in in_plan]
-            tags = [planned.segment_of.get(id(i), real.segment_of.get(id(i), 0) if real is not None else 0)
-                    for i in items]
-            if plan.segments_issued > getattr(self, "_segments_issued", 0):
-                self._segments_issued = plan.segments_issued
-            if real is None:
-                self._seq += 1
-                real = Mission(plan.priority, self._seq, planned.name, [], planned.distance_driven)
-                self._missions.append(real)
-            real.items = items
-            real.set_segment_ids(tags)
-
-    def queue_state(self) -> dict:
-        """The queue for a checkpoint: ``{"missions": [Mission copies], "completed": [ids], "seq": n,
-        "segments_issued": n}`` (consistent: taken under the queue's lock)."""
-        with self._lock:
-            return {"missions": [m.copy() for m in self._missions], "completed": list(self.completed),
-                    "seq": self._seq, "segments_issued": getattr(self, "_segments_issued", 0)}
-
-    def restore_queue(self, missions: list[Mission], completed: list[str], seq: int | None = None,
-                      segments_issued: int | None = None) -> None:
-        """Put a :meth:`queue_state` back (a restarted drone actor resuming its mission)."""
-        with self._lock:
-            self._missions = list(missions)
-            self.completed = list(completed)
-            if seq is not None:
-                self._seq = seq
-            if segments_issued:
-                self._segments_issued = segments_issued
+        """:meth:`WaypointQueue.missions` of :attr:`queue` (copies, in flying order)."""
+        return self.queue.missions()
 
     def snapshot(self) -> list[dict]:
-        with self._lock:
-            return [{"name": m.name, "priority": m.priority, "items": [i.model_dump() for i in m.items]}
-                    for m in sorted(self._missions, key=lambda m: (m.priority, m.seq))]
+        """:meth:`WaypointQueue.snapshot` of :attr:`queue`."""
+        return self.queue.snapshot()
+
+    @property
+    def completed(self) -> list[str]:
+        """Ids of the waypoints of :attr:`queue` reached (:meth:`complete`)."""
+        return self.queue.completed
+
+    @property
+    def cleared(self) -> int:
+        """How many times :attr:`queue` was (partly) cleared (:meth:`remove_queued`)."""
+        return self.queue.cleared
+
+    @property
+    def _missions(self) -> list[Mission]:  # the live missions, as code written before the queue was its own class reads them
+        return self.queue.entries
+
+    @property
+    def _seq(self) -> int:  # likewise: the queue's mission counter
+        return self.queue.seq
 
     # ------------------------------------------------------------------ internals
-    def _find(self, priority: int) -> Mission | None:
-        for m in self._missions:
-            if m.priority == priority:
-                return m
-        return None
-
-    def _enqueue(self, nav: AeroNavigation, priority: int, fixed: bool = False) -> None:
-        with self._lock:
-            self._seq += 1
-            m = Mission(priority, self._seq, nav.name, list(nav.waypoints),
-                        nav.navigation_type.value == "DISTANCE_DRIVEN")
-            if fixed:
-                m.set_segment_ids([self._new_segment_id()] * len(m.items))
-            self._missions.append(m)
-
-    def _new_segment_id(self) -> int:
-        self._segments_issued = getattr(self, "_segments_issued", 0) + 1
-        return self._segments_issued
+    @staticmethod
+    def _enqueue(queue: WaypointQueue, nav: AeroNavigation, priority: int, fixed: bool = False) -> None:
+        queue.enqueue(nav.name, nav.waypoints, priority, nav.navigation_type.value == "DISTANCE_DRIVEN", fixed)
 
     def _replan(self, m: Mission, start: Sequence[float]) -> None:
         """Re-order ``m``'s waypoints from ``start``: fixed runs as single nodes, free waypoints individually;
@@ -452,6 +287,7 @@ class TrajectoryScheduler:
         m.items = items + rest
         m.set_segment_ids(tags + rest_tags)
 
+    @staticmethod
     @staticmethod
     def unwrap_navigation(nav: Any, priority: int | None) -> tuple[AeroNavigation, int]:
         """``(AeroNavigation, priority)`` from an AeroNavigation, a PriorityQueue wrapping one (or a list of

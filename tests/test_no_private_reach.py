@@ -21,10 +21,6 @@ PACKAGES = ("aerodaas", "actors", "schedulers", "clusters")
 
 #: (path relative to the repository root, expression as ``ast.unparse`` prints it) -> reason.
 ALLOWED: dict[tuple[str, str], str] = {
-    ("schedulers/base.py", "twin._lock"): "same class: fork() sets up the new TrajectoryScheduler it returns",
-    ("schedulers/base.py", "twin._missions"): "same class: fork() gives the new TrajectoryScheduler its missions",
-    ("schedulers/base.py", "twin._remote"): "same class: a forked TrajectoryScheduler starts unbound",
-    ("schedulers/base.py", "twin._find"): "same class: plan_addition() reads its own forked TrajectoryScheduler",
     ("aerodaas/tools/hitl.py", "server._locks"): "same class: ``server = self`` in HitlServer's request handlers",
     ("aerodaas/tools/hitl.py", "server._ids"): "same class: ``server = self`` in HitlServer's request handlers",
     ("actors/channel.py", "shm._name"): "stdlib SharedMemory: the resource tracker registers the leading-slash "

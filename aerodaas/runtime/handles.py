@@ -1,6 +1,6 @@
 """The driver's typed handles to components inside the run's actors.
 
-A component (a drone, its trajectory scheduler, a camera, an analytics instance) lives in one of the run's Ray
+A component (a drone, its navigation inbox, a camera, an analytics instance) lives in one of the run's Ray
 actors; the driver, the HITL API and the application reach it through that actor's
 :meth:`~aerodaas.actors.actor_base.ActorBase.call`, which takes the component id and the component class's method
 itself (a function, pickled by reference), never a method name. Each handle class lists the methods it offers as
@@ -73,7 +73,9 @@ class DroneHandle(ComponentHandle):
 
 
 class SchedulerHandle(ComponentHandle):
-    """A robot's trajectory scheduler component (:class:`~aerodaas.actors.scheduler_component.SchedulerComponent`)."""
+    """A robot's navigation inbox (:class:`~aerodaas.actors.scheduler_component.SchedulerComponent`; in a run the
+    drone's own :class:`~aerodaas.actors.drone_inbox.DroneInbox`, which has the drone apply what it adds at once):
+    the drone's waypoint queue (``snapshot``), navigation added and cleared through the HITL API."""
 
     snapshot = remote_method(SchedulerComponent.snapshot)
     add_navigation = remote_method(SchedulerComponent.add_navigation)

@@ -1,8 +1,8 @@
 """Typed messages of a run: what travels on an edge of the dataflow graph (between the components of one actor and
 between actors), the deliveries actors send each other, and what they send the run's recorder.
 
-* :class:`Port` — where an edge enters its consumer (an analytics input, or a trajectory scheduler's priority
-  port, optionally ``replace``);
+* :class:`Port` — where an edge enters its consumer (an analytics input, or the priority port of a drone's
+  navigation inbox ``<robot>/scheduler``, optionally ``replace``);
 * :class:`Message` and its kinds — :class:`FrameMsg` (a camera frame), :class:`OdometryMsg`, :class:`StatMsg`
   (a stat-stream transition), :class:`DetectionsMsg`, :class:`NavigationMsg` and :class:`ValueMsg` (anything
   else an analytics outputs). Every message names the robot it belongs to and its simulated time, carries the
@@ -29,7 +29,7 @@ __all__ = ["Port", "Message", "FrameMsg", "OdometryMsg", "StatMsg", "DetectionsM
 
 @dataclass(frozen=True)
 class Port:
-    """Where an edge enters its consumer: ``in`` (an analytics input) or ``priority`` (a trajectory scheduler's
+    """Where an edge enters its consumer: ``in`` (an analytics input) or ``priority`` (a drone's navigation inbox's
     input at ``priority``; lower wins; ``replace``: the first navigation from it aborts the queued missions,
     pattern 5 of the paper, §3)."""
 

@@ -1,0 +1,68 @@
+"""MissionPlanLog: the record of what happens to one robot's queued navigation besides flying it — the waypoint
+plan on ``/<robot>/mission/plan`` (recorded when the queued waypoints change), the items discarded from the queue
+(refused by the safety limits, executed actions, failed holds, aborted missions) and the pre-planned waypoints
+cleared through the HITL API (the mission is then never a success).
+
+The drone (which pops its queue as it flies) and its navigation inbox (which adds to and clears it) both write here;
+it calls neither of them.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+from aerodaas.app.models import Waypoint
+from aerodaas.navigation.waypoint_queue import WaypointQueue
+
+
+class MissionPlanLog:
+    """See the module. ``home``: the robot's home (the plan's local ENU targets, metres); ``recorder``: the run's
+    recorder or None; ``epoch_ns``: the run's epoch (nanoseconds) that simulated times (s) are added to."""
+
+    def __init__(self, robot_id: str, home: Any, recorder: Any, epoch_ns: int) -> None:
+        self.robot_id, self.home, self.recorder, self.epoch_ns = robot_id, home, recorder, epoch_ns
+        self.discarded: list[dict] = []  # {"id", "t" (s), "reason"}; id "*": the whole queue (mission aborted)
+        #: ids of pre-planned waypoints cleared through the HITL API: the mission is then never a success
+        self.cleared_preplanned: list[str] = []
+        self._sig: Any = None
+        self._lock = threading.Lock()
+
+    @property
+    def recorded(self) -> bool:
+        """Whether a plan was recorded yet."""
+        return self._sig is not None
+
+    def record_plan(self, queue: WaypointQueue, now: float) -> None:
+        """Record ``queue``'s waypoints (with local ENU targets) at sim time ``now`` (s) when they changed since the
+        last record."""
+        missions = []
+        for m in queue.missions():
+            items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                      "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+            if items:
+                missions.append({"name": m.name, "priority": m.priority, "items": items})
+        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
+        with self._lock:
+            if sig == self._sig:
+                return
+            self._sig = sig
+        if self.recorder is not None:
+            self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(now * 1e9),
+                               {"robot": self.robot_id, "t": now, "missions": missions}, "aerodaas.MissionPlan")
+
+    def complete(self, queue: WaypointQueue, item_id: str, now: float) -> bool:
+        """The head waypoint ``item_id`` of ``queue`` was reached at ``now`` (s): pop it and record the plan.
+        Returns False if no mission has it at its head."""
+        ok = queue.complete(item_id)
+        self.record_plan(queue, now)
+        return ok
+
+    def discard(self, queue: WaypointQueue, item_id: str, reason: str, now: float) -> bool:
+        """Drop the head item ``item_id`` of ``queue`` without counting it as visited (rejected by safety, or an
+        executed action) at ``now`` (s): logged with ``reason`` and the plan recorded. Returns False if no mission
+        has it at its head."""
+        if not queue.discard(item_id):
+            return False
+        self.discarded.append({"id": item_id, "t": now, "reason": reason})
+        self.record_plan(queue, now)
+        return True
