@@ -28,6 +28,8 @@ def drone_checkpoint(d: Any) -> dict:
                 "error": d.error, "ticks": d.ticks, "missed_ticks": d.missed_ticks, "next_tick": d.next_tick,
                 "next_odom": d.next_odom, "rejected": list(d.rejected), "missions": q["missions"],
                 "completed": q["completed"], "segments_issued": q["segments_issued"], "seq_missions": q["seq"],
+                "last_tick": [float(d.last_tick[0]), [float(c) for c in d.last_tick[1]]], "discarded": list(d.plan_log.discarded),
+                "cleared_preplanned": list(d.plan_log.cleared_preplanned),
                 "cameras": [c["next_t"] for c in d.cameras]}
 
 
@@ -47,6 +49,11 @@ def restore_drone(d: Any, cp: dict) -> None:
                   "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected"):
             if k in cp:
                 setattr(d, k, cp[k])
+        if cp.get("last_tick") is not None:  # where navigation arriving before the first tick is planned from
+            d.last_tick = (float(cp["last_tick"][0]), tuple(cp["last_tick"][1]))
+        # a run whose pre-planned waypoints were cleared through the HITL API stays never a success
+        d.plan_log.discarded = list(cp.get("discarded") or [])
+        d.plan_log.cleared_preplanned = list(cp.get("cleared_preplanned") or [])
         d.active_wp, d.hold_until = None, None
         for c, t in zip(d.cameras, cp.get("cameras", [])):
             c["next_t"] = t

@@ -35,20 +35,20 @@ class MissionPlanLog:
     def record_plan(self, queue: WaypointQueue, now: float) -> None:
         """Record ``queue``'s waypoints (with local ENU targets) at sim time ``now`` (s) when they changed since the
         last record."""
-        missions = []
-        for m in queue.missions():
-            items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
-                      "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
-            if items:
-                missions.append({"name": m.name, "priority": m.priority, "items": items})
-        sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
-        with self._lock:
+        with self._lock:  # snapshot, compare and record as one: the inbox and the drone's tick both record
+            missions = []
+            for m in queue.missions():
+                items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                          "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+                if items:
+                    missions.append({"name": m.name, "priority": m.priority, "items": items})
+            sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
             if sig == self._sig:
                 return
             self._sig = sig
-        if self.recorder is not None:
-            self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(now * 1e9),
-                               {"robot": self.robot_id, "t": now, "missions": missions}, "aerodaas.MissionPlan")
+            if self.recorder is not None:
+                self.recorder.json(f"/{self.robot_id}/mission/plan", self.epoch_ns + int(now * 1e9),
+                                   {"robot": self.robot_id, "t": now, "missions": missions}, "aerodaas.MissionPlan")
 
     def complete(self, queue: WaypointQueue, item_id: str, now: float) -> bool:
         """The head waypoint ``item_id`` of ``queue`` was reached at ``now`` (s): pop it and record the plan.

@@ -288,7 +288,6 @@ class TrajectoryScheduler:
         m.set_segment_ids(tags + rest_tags)
 
     @staticmethod
-    @staticmethod
     def unwrap_navigation(nav: Any, priority: int | None) -> tuple[AeroNavigation, int]:
         """``(AeroNavigation, priority)`` from an AeroNavigation, a PriorityQueue wrapping one (or a list of
         waypoints) or a plain list; ``priority`` overrides the PriorityQueue's (default 2). Raises TypeError for

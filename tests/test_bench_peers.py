@@ -97,7 +97,8 @@ def test_a_peer_that_dies_mid_run_is_reported_failed_and_the_run_goes_on(monkeyp
     made: dict[str, Fake] = {}
 
     def peer(name, *_a):
-        made[name] = Fake(name, die_in=3 if name == "dora_rs" else None)  # warm-up, round 1, dies in round 2
+        # dora_rs: warm-up, round 1, dies in round 2; dora_rs_grouped dies in its warm-up
+        made[name] = Fake(name, die_in={"dora_rs": 3, "dora_rs_grouped": 1}.get(name))
         return made[name], None
 
     monkeypatch.setattr(overhead, "_peer", peer)
@@ -106,5 +107,6 @@ def test_a_peer_that_dies_mid_run_is_reported_failed_and_the_run_goes_on(monkeyp
     rep = overhead.interleaved(320, 240, "stub", 3.0, 1.0, 2.0, None, [], ("colocated",))
     assert rep["dora_rs"]["available"] is False and "round 2" in rep["dora_rs"]["reason"]
     assert "stuck node" in rep["dora_rs"]["reason"]
+    assert rep["dora_rs_grouped"]["available"] is False and "warm-up" in rep["dora_rs_grouped"]["reason"]
     assert rep["naive_ray"] == {"available": True, "windows": 3} and rep["framework:colocated"] == {"windows": 3}
     assert all(p.closed for p in made.values())

@@ -97,7 +97,7 @@ def test_a_fence_too_low_for_px4s_return_refuses_to_fly(vehicle):
     parameters stay as they were."""
     emu, b, _ = vehicle("px4", max_altitude=3.0, min_altitude=0.5)
     before = dict(emu.params)
-    with pytest.raises(BackendError, match=r"max_altitude 3 m: PX4's Return mode needs at least 4 m"):
+    with pytest.raises(BackendError, match=r"safety.max_altitude 3 m: PX4's Return mode needs at least 4 m"):
         b.connect(timeout_s=10)
     assert {n: emu.params[n] for n in ("GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT")} == \
         {n: before[n] for n in ("GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT")}

@@ -199,8 +199,8 @@ def test_px4_killed_driver_leaves_the_fence_on_and_the_firmware_keeps_the_vehicl
         [[5003, RADIUS_M, round(c[0] * 1e7), round(c[1] * 1e7)]]
     p = obs["fence"]["params"]
     assert (p["GF_ACTION"], p["GF_MAX_VER_DIST"]) == (3, MAX_ALT_M), p
-    # PX4's own Return climbs to RTL_RETURN_ALT (60 m) or near home to RTL_DESCEND_ALT (30 m): the backend lowered
-    # both under the altitude fence, and the firmware's returns after the kill stayed under it (2026-11-23 CI, before
+    # PX4's own Return climbs to RTL_RETURN_ALT (30 m on a multicopter), near home not below RTL_DESCEND_ALT
+    # (10 m): the backend lowered both under the altitude fence, and the firmware's returns after the kill stayed under it (2026-11-23 CI, before
     # the ceiling: the offboard-loss Return climbed to 30 m, PX4 counted an altitude breach and the push never came)
     assert p["RTL_RETURN_ALT"] <= MAX_ALT_M - 3.0 and p["RTL_DESCEND_ALT"] <= MAX_ALT_M - 3.0, p
     after_kill = [s for s in obs["samples"] if s[0] >= obs["t_kill"]]

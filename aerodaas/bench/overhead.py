@@ -217,18 +217,21 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
         if record_dir:
             runners[f"framework_unrecorded:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, None, layout)
     missing: dict[str, str] = {}
-    for name in PEERS:
-        p, why = _peer(name, width, height, kind, stub_ms)
-        if p is None:
-            missing[name] = why or "unavailable"
-        else:
-            runners[name] = p
-            p.window(min(1.0, window_s))  # warm-up: first frames through fresh processes
-    rows: dict[str, list] = {n: [] for n in runners}
-    order = list(runners)
-    rounds = max(1, math.ceil(duration_s / window_s))
     failed: dict[str, str] = {}
     try:
+        for name in PEERS:
+            p, why = _peer(name, width, height, kind, stub_ms)
+            if p is None:
+                missing[name] = why or "unavailable"
+                continue
+            runners[name] = p
+            try:
+                p.window(min(1.0, window_s))  # warm-up: first frames through fresh processes
+            except Exception as e:  # noqa: BLE001 - as a failure in a round (below)
+                failed[name] = f"failed in its warm-up: {type(e).__name__}: {str(e)[-300:]}"
+        rows: dict[str, list] = {n: [] for n in runners}
+        order = list(runners)
+        rounds = max(1, math.ceil(duration_s / window_s))
         for k in range(rounds):
             for name in order[k % len(order):] + order[:k % len(order)]:
                 if name in failed:
@@ -244,9 +247,9 @@ def interleaved(width: int, height: int, kind: str, duration_s: float, window_s:
             if on_round is not None:
                 on_round()
     finally:
-        for name in PEERS:
-            if name in runners:
-                runners[name].close()
+        for r in runners.values():  # the peers' processes and the runtime's Ray actors alike
+            if hasattr(r, "close"):
+                r.close()
     out: dict[str, Any] = {}
     for name, r in runners.items():
         if name.startswith("framework"):

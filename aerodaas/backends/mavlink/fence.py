@@ -66,16 +66,16 @@ PX4_RETURN_ALTITUDES = ("RTL_RETURN_ALT", "RTL_DESCEND_ALT")
 PX4_MIN_DESCEND_ALT_M = 2.0
 
 
-def px4_return_altitude_ceiling(max_altitude_m: float) -> float:
+def px4_return_altitude_ceiling(max_altitude_m: float, field: str = "safety.max_altitude") -> float:
     """The highest PX4 return altitude (metres above home) under an altitude fence at ``max_altitude_m``: 10 % of
     the fence height below it, at least 2 m below (PX4 overshoots a climb target by a little: its altitude fence
     must not count the return as a breach). Raises BackendError when that leaves less than PX4's smallest descend
-    altitude (2 m, ``RTL_DESCEND_ALT``'s minimum)."""
+    altitude (2 m, ``RTL_DESCEND_ALT``'s minimum), naming ``field``, the setting the altitude came from."""
     ceiling = max_altitude_m - max(2.0, 0.1 * max_altitude_m)
     if ceiling < PX4_MIN_DESCEND_ALT_M:
-        raise BackendError(f"max_altitude {max_altitude_m:g} m: PX4's Return mode needs at least "
+        raise BackendError(f"{field} {max_altitude_m:g} m: PX4's Return mode needs at least "
                            f"{PX4_MIN_DESCEND_ALT_M + 2.0:g} m under the altitude fence (RTL_DESCEND_ALT >= "
-                           f"{PX4_MIN_DESCEND_ALT_M:g} m, 2 m margin); raise safety.max_altitude or set "
+                           f"{PX4_MIN_DESCEND_ALT_M:g} m, 2 m margin); raise {field} or set "
                            f"mavlink.fence.max_altitude false")
     return ceiling
 #: one item on the wire: (frame, command, param1..4, x int, y int, z)
@@ -247,7 +247,8 @@ class FenceMixin:
         out = {"GF_ACTION": (float(px4_action), True)}
         if fc.max_altitude:
             out["GF_MAX_VER_DIST"] = (max_alt, False)
-            ceiling = px4_return_altitude_ceiling(max_alt)
+            field = "safety.max_altitude" if self.safety.max_altitude else "limits.max_altitude"
+            ceiling = px4_return_altitude_ceiling(max_alt, field)
             for name in PX4_RETURN_ALTITUDES:
                 out[name] = (min(ceiling, (have or {}).get(name, ceiling)), False)
         if fc.home_radius_m:
@@ -260,7 +261,8 @@ class FenceMixin:
         (``MAV_MISSION_TYPE_FENCE``), set the parameters (:meth:`fence_parameters`), then read both back
         (MISSION_REQUEST_LIST of the fence type, PARAM_REQUEST_READ) and compare. Returns ``{"items": n,
         "params": {name: value read back}}`` and records a ``fence_uploaded`` event. Raises BackendError naming
-        what differs ("refusing to fly"), CommandRefused when the vehicle rejects an item or lacks a fence
+        what differs ("refusing to fly") or a fence too low for PX4's Return (:func:`px4_return_altitude_ceiling`),
+        CommandRefused when the vehicle rejects an item or lacks a fence
         parameter (a firmware built without fences), LinkLost."""
         fence = self.safety.geofence if fence is None else fence
         wire = fence_items(fence)
@@ -274,7 +276,8 @@ class FenceMixin:
         if missing:
             raise BackendError(f"{where}: the {self.autopilot} vehicle has no parameter {', '.join(missing)} "
                                f"(firmware without a geofence?); refusing to fly (set mavlink.fence.upload false "
-                               f"to fly on our gate alone)")
+                               f"to fly on our gate alone, or mavlink.fence.max_altitude false without the altitude "
+                               f"fence and its return altitudes)")
         want = self.fence_parameters(fence, have)
         if not self._fence_saved:
             try:
