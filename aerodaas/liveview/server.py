@@ -186,7 +186,11 @@ class LiveServer:
         data = bytes(msg.data)
         with self._lock:  # ordered against on_subscribe's catch-up, so no message is sent twice or out of order
             t = msg.topic
-            early = self._window(t)
+            early = self._early.get(t)
+            if early is not None and not (time.monotonic() - self._born[t] <= self.catchup_s
+                                          and len(early) < self._catchup_n
+                                          and self._early_bytes[t] + len(data) <= self._catchup_bytes):
+                early = self._early[t] = None  # type: ignore[assignment]  # the window is over: free it
             if early is None:
                 ch.log(data, log_time=msg.log_time_ns)  # to every subscriber
             else:
@@ -194,10 +198,8 @@ class LiveServer:
                 # sink *before* it calls on_subscribe (foxglove-sdk connected_client.rs, since its PR #533): a
                 # broadcast in between would reach the client ahead of its catch-up, which then repeats it, out of
                 # order (seen at load 11). A client not caught up yet gets this message with its catch-up instead
-                # (kept up to the message and byte caps: beyond them a late subscriber of the window misses some)
-                if len(early) < self._catchup_n and self._early_bytes[t] + len(data) <= self._catchup_bytes:
-                    early.append((data, msg.log_time_ns))
-                    self._early_bytes[t] += len(data)
+                early.append((data, msg.log_time_ns))
+                self._early_bytes[t] += len(data)
                 # the SDK's Python Client has only its id, used as the sink id: see the class docstring
                 for cid, topics in self._client_subs.items():
                     if t in topics:
@@ -205,14 +207,6 @@ class LiveServer:
             if t.endswith(LATCHED_SUFFIXES):
                 self._latest[t] = (data, msg.log_time_ns)
         self.published += 1
-
-    def _window(self, topic: str) -> list[tuple[bytes, int]] | None:
-        """The messages kept for the catch-up of ``topic`` while its window is open (``catchup_s`` from its
-        advertisement), else None (the window is over: what was kept is freed). Caller holds the lock."""
-        early = self._early.get(topic)
-        if early is not None and time.monotonic() - self._born[topic] > self.catchup_s:
-            early = self._early[topic] = None  # type: ignore[assignment]
-        return early
 
     # foxglove.websocket.ServerListener (called from the SDK's threads)
     def on_subscribe(self, client: Any, channel: Any) -> None:
@@ -222,8 +216,8 @@ class LiveServer:
             self.subscriptions += 1
             self._client_subs.setdefault(client.id, set()).add(topic)
             ch = self._channels.get(topic)
-            early = self._window(topic) if ch is not None else None
-            backlog: list[tuple[bytes, int]] = list(early or [])
+            # the window is open as long as publish() keeps its messages (it decides, under this lock)
+            backlog: list[tuple[bytes, int]] = list(self._early.get(topic) or []) if ch is not None else []
             latest = self._latest.get(topic)
             if latest is not None and (not backlog or backlog[-1] != latest):
                 backlog.append(latest)
