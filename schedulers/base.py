@@ -249,13 +249,6 @@ class TrajectoryScheduler:
         """How many times :attr:`queue` was (partly) cleared (:meth:`remove_queued`)."""
         return self.queue.cleared
 
-    @property
-    def _missions(self) -> list[Mission]:  # the live missions, as code written before the queue was its own class reads them
-        return self.queue.entries
-
-    @property
-    def _seq(self) -> int:  # likewise: the queue's mission counter
-        return self.queue.seq
 
     # ------------------------------------------------------------------ internals
     @staticmethod

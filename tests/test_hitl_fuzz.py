@@ -110,7 +110,7 @@ def send(api, method: str, path: str, body: bytes | None = None, token: str | No
 
 
 def state(api) -> tuple:
-    return json.dumps(api.sched.snapshot(), sort_keys=True), api.drone.paused, api.sched.s._seq
+    return json.dumps(api.sched.snapshot(), sort_keys=True), api.drone.paused, api.sched.queue.seq
 
 
 def wp_body(*wps, **kw) -> bytes:

@@ -47,7 +47,7 @@ def test_unordered_additions_replan_from_the_drone_position():
     s.generate_navigation(AeroNavigation(waypoints=[wp(1, 0, 0)]))
     s.add_navigation(AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [wp(2, 20, 0), wp(3, 2, 0)],
                                     SchedulingType.UNORDERED), priority=2, position=(0, 0, 2))
-    assert [i.id for i in s._missions[0].items] == ["w1", "w3", "w2"]
+    assert [i.id for i in s.queue.entries[0].items] == ["w1", "w3", "w2"]
 
 
 def test_vehicle_respects_limits_reaches_target_and_drains_battery():

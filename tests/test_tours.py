@@ -147,7 +147,7 @@ def _assert_run_contiguous(items, run_ids):
 def test_ordered_runs_stay_contiguous_and_in_order(cls):
     s = cls()
     run, free = _mission_with_a_run(s)
-    (m,) = s._missions
+    (m,) = s.queue.entries
     assert sorted(ids(m.items)) == sorted(ids(run + free))
     _assert_run_contiguous(m.items, ids(run))
     tags = dict(zip(ids(m.items), m.segment_ids))
@@ -159,7 +159,7 @@ def test_ordered_runs_stay_contiguous_and_in_order(cls):
 def test_two_opt_plans_runs_optimally_with_entry_and_exit():
     s = TwoOptScheduler()
     run, free = _mission_with_a_run(s)
-    got = s._missions[0].items
+    got = s.queue.entries[0].items
     nodes = [run] + [[f] for f in free]
     entries = [(n[0].x, n[0].y, n[0].z) for n in nodes]
     exits = [(n[-1].x, n[-1].y, n[-1].z) for n in nodes]
@@ -175,7 +175,7 @@ def test_two_opt_plans_runs_optimally_with_entry_and_exit():
 def test_run_bookkeeping_insertions_pops_and_pickling():
     s = TwoOptScheduler()
     run, free = _mission_with_a_run(s)
-    m = s._missions[0]
+    m = s.queue.entries[0]
     # an ORDERED insertion strictly inside the run joins it; an appended ORDERED navigation is a run of its own
     k = ids(m.items).index("r1")
     s.add_navigation([wp("j", 60.0, 1.0)], index=k + 1, priority=2)
@@ -194,7 +194,7 @@ def test_run_bookkeeping_insertions_pops_and_pickling():
     _assert_run_contiguous(m.items, ["t1", "t2"])
     # the scheduler travels to its Ray actor by pickling: the runs survive it
     s2 = pickle.loads(pickle.dumps(s))
-    m2 = s2._missions[0]
+    m2 = s2.queue.entries[0]
     assert ids(m2.items) == ids(m.items) and m2.segment_ids == m.segment_ids
     s2.add_navigation(AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [wp("h", -50.0, 20.0)], SchedulingType.UNORDERED),
                       priority=2, position=(0.0, 0.0, 10.0))
@@ -263,7 +263,7 @@ def test_priorities_are_never_mixed():
                      position=(0.0, 0.0, 10.0))
     s.add_navigation(AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [wp("l9", 2.0, 1.0)], SchedulingType.UNORDERED),
                      priority=2, position=(0.0, 0.0, 10.0))
-    by_prio = {m.priority: set(ids(m.items)) for m in s._missions}
+    by_prio = {m.priority: set(ids(m.items)) for m in s.queue.entries}
     assert by_prio == {1: {w.id for w in hi}, 2: {w.id for w in lo} | {"l9"}}
     assert s.current(0.0)[0].priority == 1
 
@@ -283,7 +283,7 @@ def test_end_to_end_generate_then_replan_from_the_drone_position():
     extra = [wp("x1", 400.0, -400.0, 30.0), wp("x2", -450.0, 450.0, 20.0), wp("x3", 10.0, 10.0, 15.0)]
     s.add_navigation(AeroNavigation(NavigationType.ANALYTICS_DRIVEN, extra, SchedulingType.UNORDERED),
                      priority=2, position=pos)
-    left = s._missions[0].items
+    left = s.queue.entries[0].items
     assert len(left) == 10 and {"x1", "x2", "x3"} <= set(ids(left))
     assert length(left, pos) == pytest.approx(optimum(left, pos), abs=1e-6)  # re-planned from ``pos``
     nn = NearestNeighborScheduler().order(list(left), pos)
