@@ -234,7 +234,9 @@ def test_three_vehicles_behind_one_router_port(router_fleet, autopilot):
     assert r["rc"] == 0, r["out"][-3000:] + "\nMAVProxy:\n" + r["mavproxy"]
     for k, obs in enumerate(r["observed"]):
         assert obs.get("armed") and obs.get("landed"), (k, {key: obs.get(key) for key in ("armed", "landed")})
-        flying = [s for s in obs["samples"] if s[3] > 1.0]
+        # in the air (survey at 1.5 m): PX4's relative_alt drifted by up to 0.9 m over a flight on SIH (below), so a
+        # 1.0 m bound dropped the last leg of the third vehicle once (CI of 2026-11-23: its y peaked at 7.38 m)
+        flying = [s for s in obs["samples"] if s[3] > 0.5]
         assert flying, k
         # the firmware flew the survey of the robot with its system id, nobody else's: x near 3k, y up to 8 m
         xs = [s[1] for s in flying]

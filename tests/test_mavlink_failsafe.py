@@ -6,12 +6,14 @@ and the emulated autopilot's own state."""
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 from pymavlink import mavutil
 
 from .sitl import read_recording
 from .test_backends_e2e import PX4_AT_SPEED, _mavlink_variant, _run_app
+from .test_mavlink import fly  # noqa: F401 - the fixture
 
 
 def _rtl_when_navigating(address: str, flavour: str, stop: threading.Event, done: list) -> None:
@@ -78,3 +80,53 @@ def test_an_autopilot_failsafe_pauses_the_mission_and_on_failsafe_decides(ray_se
     else:
         assert res.outcome == "success", (res.outcome, rep.get("error"))
         assert "GUIDED" in modes_after and len(rep["visited_waypoints"]) == 4
+
+
+def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
+    """Our I/O stalls (as under SIGSTOP or a loaded machine) for 3x COM_OF_LOSS_T of vehicle time in OFFBOARD
+    flight: the emulated PX4 runs its offboard-loss failsafe (Return) and, like the real one, would fly OFFBOARD
+    again as soon as setpoints come back (PX4 SITL did: RTL, then OFFBOARD 1 s later, CI run of 2026-11-23). When
+    the stall ends, the backend reads what the vehicle said meanwhile before sending anything, so the firmware never
+    goes back to OFFBOARD; the failsafe is reported; a goto before the caller has the failsafe event is withheld;
+    after it, a goto (``on_failsafe: resume``) switches back on purpose."""
+    from .test_mavlink import dist, run_until
+
+    emu, b = fly("px4", speedup=2.0, params={"COM_OF_LOSS_T": 1.0})
+    assert any(e["event"] == "offboard_loss_timeout" and e["seconds"] == 1.0 for e in b.drain_events())
+    b.arm()
+    b.takeoff(2.0)
+    assert run_until(b, lambda: b.position[2] > 1.8, 15)
+    b.goto((0.0, 30.0, 2.0))
+    assert run_until(b, lambda: b.mode == "OFFBOARD" and b.position[1] > 1.0, 15), (b.mode, b.position)
+    b.drain_events()
+    gate, port = threading.Event(), b._conn  # stall the backend's receive path, as a stopped process would
+    real = port.recv_msg
+
+    def stalled():
+        gate.wait()
+        return real()
+
+    port.recv_msg = stalled
+    end = time.monotonic() + 20
+    while emu.snapshot()["mode"] != "AUTO.RTL" and time.monotonic() < end:
+        time.sleep(0.02)
+    assert emu.snapshot()["mode"] == "AUTO.RTL", emu.snapshot()["mode"]
+    time.sleep(0.3)
+    port.recv_msg = real
+    gate.set()
+    assert run_until(b, lambda: b.failsafe is not None, 10), b.mode
+    run_until(b, lambda: False, 1.5)
+    modes = [m for _, m in emu.mode_log]
+    left = len(modes) - 1 - modes[::-1].index("AUTO.RTL")
+    assert "OFFBOARD" not in modes[left:], emu.mode_log
+    assert b.failsafe["mode"] == "RTL", b.failsafe
+    # the caller has not taken the failsafe event yet: a goto now is withheld, nothing reaches the vehicle
+    b.goto((0.0, 0.0, 2.0))
+    run_until(b, lambda: False, 0.5)
+    assert emu.snapshot()["mode"] == "AUTO.RTL", emu.mode_log
+    events = [e["event"] for e in b.drain_events()]
+    assert "autopilot_failsafe" in events and "command_withheld" in events, events
+    # with the event in hand, the caller may take the vehicle back (mavlink.on_failsafe: resume)
+    b.goto((0.0, 0.0, 2.0))
+    assert run_until(b, lambda: emu.snapshot()["mode"] == "OFFBOARD", 10), emu.mode_log
+    assert run_until(b, lambda: dist(b.position, (0, 0, 2)) < 0.6, 40), b.position

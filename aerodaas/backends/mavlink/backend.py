@@ -117,6 +117,14 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._carrot_s = self._carrot_t = 0.0
         self._sp_sent = 0
         self._sp_next = 0.0
+        # the running stream's last setpoint: wall time, the vehicle's time_boot_ms then (None: no stream running),
+        # and when a stall of it was first seen (offboard.py _stream_may_go_on)
+        self._sp_wall, self._sp_boot_ms, self._stall_seen = 0.0, None, None
+        self._rx_drained = True  # the I/O loop's last round read everything waiting (link.py)
+        #: PX4's offboard-loss timeout COM_OF_LOSS_T (vehicle seconds), read at connect
+        self._offboard_loss_s = 1.0
+        self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled (offboard.py)
+        self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
         self._hb_next = 0.0
         self._drops_seen, self._drops_next = 0, 0.0  # messages the shared link's queue dropped (link.py)
         self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED

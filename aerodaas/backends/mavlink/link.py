@@ -3,6 +3,7 @@ autopilot, the I/O thread (receive, de-duplicate, dispatch; our GCS HEARTBEAT at
 from ``time_boot_ms`` and the telemetry stream requests (MAV_CMD_SET_MESSAGE_INTERVAL, else REQUEST_DATA_STREAM)."""
 from __future__ import annotations
 
+import math
 import threading
 import time
 from typing import Any, Callable
@@ -12,6 +13,9 @@ from pymavlink import mavutil
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
 from aerodaas.backends.mavlink.shared_link import open_link
 from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+
+#: the most wall time (seconds) one round of the I/O loop spends reading a backlog before its periodic sends
+_DRAIN_S = 0.25
 
 
 class LinkMixin:
@@ -68,6 +72,11 @@ class LinkMixin:
         with self._lock:
             self._t_connect = self._raw_t()
             self._t_max = 0.0
+        if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
+            got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
+            if got is not None and math.isfinite(got) and got > 0:
+                self._offboard_loss_s = float(got)
+            self._event("offboard_loss_timeout", seconds=self._offboard_loss_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
                 self.apply_speed_limits()
@@ -147,24 +156,37 @@ class LinkMixin:
 
     # ------------------------------------------------------------------ I/O thread
     def _io_loop(self) -> None:
+        """Receive everything waiting (at most :data:`_DRAIN_S` wall seconds of work), then the periodic sends. A
+        backlog is read before anything is sent: after a stall of this process (a loaded machine, a debugger, a
+        SIGSTOP) the vehicle's messages of the stall are still queued, and a setpoint sent before reading them would
+        act on a vehicle state that is gone (PX4 takes a setpoint stream that comes back as the end of its
+        offboard-loss failsafe and returns to OFFBOARD: failsafe.cpp ``checkModeFallback``; seen on PX4 SITL)."""
         conn = self._conn
         while not self._stop.is_set():
-            try:
-                msg = conn.recv_msg()
-            except Exception:  # noqa: BLE001 - a broken packet or a socket hiccup: keep going
-                msg = None
-                time.sleep(0.01)
-            now = time.monotonic()
-            if msg is not None:
+            got, drained, start = 0, False, time.monotonic()
+            while True:
                 try:
-                    self._dispatch(msg, now)
+                    msg = conn.recv_msg()
+                except Exception:  # noqa: BLE001 - a broken packet or a socket hiccup: keep going
+                    time.sleep(0.01)
+                    break
+                if msg is None:
+                    drained = True
+                    break
+                got += 1
+                try:
+                    self._dispatch(msg, time.monotonic())
                 except Exception as e:  # noqa: BLE001 - a malformed message must never stop telemetry
                     self._event("receive_error", message=msg.get_type(), error=str(e))
+                if time.monotonic() - start > _DRAIN_S:
+                    break
+            now = time.monotonic()
+            self._rx_drained = drained
             try:
                 self._periodic(now)
             except Exception as e:  # noqa: BLE001
                 self._io_error = e
-            if msg is None:
+            if not got:
                 try:
                     conn.select(0.005)
                 except Exception:  # noqa: BLE001
@@ -281,6 +303,7 @@ class LinkMixin:
         texts = [t for (ts, _sev, t) in self._texts if now - ts <= 2.0]
         self.failsafe = {"mode": mode, "previous": previous, "t": round(self.t, 3), "text": "; ".join(texts[-3:])}
         self._stop_setpoints_quiet()
+        self._failsafe_undelivered += 1
         self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
     def _on_boot_ms(self, ms: int) -> None:
@@ -350,7 +373,7 @@ class LinkMixin:
             sp = self._setpoint if self._link_ok else None
         if resume:
             self._request_streams(wait=False)
-        if sp is not None and now >= self._sp_next:
+        if sp is not None and now >= self._sp_next and self._stream_may_go_on(now):
             rate = self.cfg.setpoint_rate_hz if sp[0] == "vel" or self.autopilot == "px4" else 1.0
             self._sp_next = now + max(0.004, 1.0 / (rate * self._ratio))
             self._send_setpoint(sp)

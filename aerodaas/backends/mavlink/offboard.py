@@ -11,7 +11,7 @@ import numpy as np
 from aerodaas.navigation.geo import enu_to_geodetic
 from aerodaas.backends.base import LinkLost
 from aerodaas.backends.mavlink.params import px4_speed_limit
-from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
+from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
 #: lowest target height (metres above the take-off point) goto sends to an armed vehicle
@@ -64,6 +64,43 @@ class OffboardMixin:
             return lat_i, lon_i, self._alt_ref + z, M.MAV_FRAME_GLOBAL_INT
         return lat_i, lon_i, z, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
+    def _stream_may_go_on(self, now: float) -> bool:
+        """May the I/O thread send the next setpoint of the running stream (PX4)? PX4 leaves OFFBOARD when no setpoint
+        came for ``COM_OF_LOSS_T`` seconds of its own clock (its offboard-loss failsafe), and when the stream comes
+        back it ends that failsafe by itself and flies OFFBOARD again (failsafe.cpp ``checkModeFallback``: the
+        fallback lasts while ``offboard_control_signal_lost``; the pilot's mode stays OFFBOARD). So a stream that
+        stopped for longer, because this process stalled or the link was cut while the firmware ran, must not
+        resume: that would undo the autopilot's failsafe before we have even seen it (``mavlink.on_failsafe``).
+
+        After a stall (no setpoint for half of ``COM_OF_LOSS_T`` in wall time at the vehicle's speed-up) this waits
+        until the receive backlog is read and a ``time_boot_ms`` sample received after that has come (the vehicle's
+        clock now). When the vehicle's clock ran more than ``COM_OF_LOSS_T`` since our last setpoint, the stream
+        stops (event ``offboard_stream_stalled``): the autopilot's own mode change that follows, or came while we
+        stalled, is its failsafe (link.py ``_check_failsafe``). A firmware stopped with us (SITL under a debugger)
+        shows no such gap and the stream goes on. ArduPilot has no such failsafe in GUIDED (always True)."""
+        if self.autopilot != "px4" or self._sp_boot_ms is None:
+            return True
+        limit = self._offboard_loss_s
+        if (now - self._sp_wall) * self._ratio > 0.5 * limit:
+            if self._stall_seen is None:
+                self._stall_seen = now
+            if not self._rx_drained or self._boot_wall <= self._stall_seen:
+                return False  # not yet the vehicle's state of now
+        gap_s = (self._boot_last - self._sp_boot_ms) / 1000.0
+        if gap_s > limit:
+            with self._lock:
+                self._setpoint = None
+                self._sp_boot_ms = None
+                self._offboard_lost_at = now
+            self._stall_seen = None
+            self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._mode)
+            log.warning("%s: no setpoint reached the vehicle for %.1f s of its clock (COM_OF_LOSS_T %.1f s): the "
+                        "stream is not resumed; PX4's offboard-loss failsafe has the vehicle", self.robot_id, gap_s,
+                        limit)
+            return False
+        self._stall_seen = None
+        return True
+
     def _send_setpoint(self, sp: tuple) -> None:
         try:
             if sp[0] == "carrot":
@@ -84,22 +121,51 @@ class OffboardMixin:
                     self._boot_ms_out(), self._sysid, self._compid, M.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK,
                     0, 0, 0, vn, ve, vd, 0, 0, 0, 0, yaw_rate))
             self._sp_sent += 1
+            self._sp_wall, self._sp_boot_ms = time.monotonic(), self._boot_last
         except LinkLost:
             pass
 
     def _guided_mode(self) -> str:
         return "OFFBOARD" if self.autopilot == "px4" else "GUIDED"
 
+    def _autopilot_has_it(self, command: str) -> bool:
+        """Whether the autopilot has taken the vehicle in a way the caller has not yet been told of, so that
+        ``command`` must not be sent: an ``autopilot_failsafe`` event not yet handed out by :meth:`drain_events` (our
+        next target would switch it back out of its failsafe before the mission even knows), or a setpoint stream
+        stopped by :meth:`_stream_may_go_on` whose outcome no HEARTBEAT has shown yet (waits at most for 1.5
+        vehicle seconds, one HEARTBEAT and a half). The caller learns the rest from its events (``mavlink.on_failsafe``
+        decides). A withheld command is recorded (``command_withheld``)."""
+        lost_at = self._offboard_lost_at
+        if lost_at is not None:
+            end = time.monotonic() + min(3.0, 1.5 / max(self._ratio, 1e-3))
+            while self._last_hb <= lost_at and time.monotonic() < end and self._link_ok:
+                time.sleep(0.01)
+            with self._lock:
+                fresh = self._last_hb > lost_at
+                if fresh:
+                    self._offboard_lost_at = None
+            if not fresh:
+                self._event("command_withheld", command=command, reason="offboard stream stalled; no HEARTBEAT since")
+                return True
+        if self._failsafe_undelivered:
+            self._event("command_withheld", command=command, reason=f"autopilot failsafe {self._mode}")
+            return True
+        return False
+
     def _enter_guided(self, sp: tuple) -> None:
         """Make ``sp`` the active target and fly it: ArduPilot GUIDED (mode first, then the target), PX4 OFFBOARD
-        (stream first, then the mode switch, which PX4 refuses without a stream)."""
+        (stream first, then the mode switch, which PX4 refuses without a stream). Nothing is sent while the
+        autopilot has the vehicle and the caller does not know yet (:meth:`_autopilot_has_it`)."""
+        if self._autopilot_has_it(sp[0]):
+            return
         guided = self._guided_mode()
         self._in_control = True
         if self.autopilot == "px4":
             with self._lock:
+                if self._setpoint is None:
+                    self._sp_boot_ms = None  # a new stream, not a gap in the old one
                 self._setpoint = sp
-                self._sp_next = 0.0
-            self._send_setpoint(sp)
+                self._sp_next = 0.0  # sent by the I/O thread, after it has read what the vehicle said (link.py)
             if self._mode != guided:
                 start, sent0 = time.monotonic(), self._sp_sent
                 # PX4 wants the stream running before the switch: at least 3 setpoints and 0.3 s of vehicle time
@@ -118,6 +184,7 @@ class OffboardMixin:
     def _stop_setpoints_quiet(self) -> None:
         """Stop streaming our targets, from the I/O thread (the autopilot took over: a failsafe)."""
         self._setpoint = None
+        self._sp_boot_ms = None
 
     def release(self) -> None:
         """Stop streaming targets and leave the vehicle to the mode it is in (the autopilot's failsafe): nothing is
@@ -127,6 +194,7 @@ class OffboardMixin:
     def _stop_setpoints(self) -> None:
         with self._lock:
             self._setpoint = None
+            self._sp_boot_ms = None
 
     def _change_speed(self, speed: float | None) -> None:
         """ArduPilot: MAV_CMD_DO_CHANGE_SPEED (param1 1 = ground speed, param2 m/s, param3 -1 = throttle

@@ -299,12 +299,18 @@ class TelemetryMixin:
                             in_air=self.in_air)
 
     def drain_events(self) -> list[dict[str, Any]]:
+        """See :meth:`~aerodaas.backends.base.VehicleBackend.drain_events`. Once an ``autopilot_failsafe`` event is
+        handed out, targets may be sent again (the caller decides: ``mavlink.on_failsafe``; offboard.py)."""
         out = []
         while self._events:
             try:
-                out.append(self._events.popleft())
+                ev = self._events.popleft()
             except IndexError:
                 break
+            out.append(ev)
+            if ev.get("event") == "autopilot_failsafe":
+                with self._lock:
+                    self._failsafe_undelivered = max(0, self._failsafe_undelivered - 1)
         return out
 
     def _event(self, event: str, **fields: Any) -> None:

@@ -29,6 +29,7 @@ class GuidedMixin:
     def _note_setpoint(self) -> None:
         self.last_setpoint_t = self.t
         self.setpoint_log.append(self.t)
+        self._offboard_signal_back()
 
     def _apply_target(self, pos_enu: np.ndarray | None, vel_enu: np.ndarray | None, yaw_rate_dps: float | None,
                       note: bool = True) -> None:

@@ -54,8 +54,21 @@ class ModeMixin:
         self._text(M.MAV_SEVERITY_WARNING, f"Mode change to {name} failed: {why}")
         return M.MAV_RESULT_FAILED
 
+    def _offboard_signal_back(self) -> None:
+        """A setpoint arrived (PX4): in the offboard-loss fallback, the signal is back and PX4 ends its failsafe by
+        itself, back to the pilot's OFFBOARD (the fallback lasts while ``offboard_control_signal_lost``,
+        failsafe.cpp; PX4 SITL went RTL -> OFFBOARD 1 s after our stream resumed, 2026-11-24)."""
+        if self.px4 and self.offboard_fallback is not None:
+            if self.mode == self.offboard_fallback and self.veh.state.armed:
+                self.offboard_fallback = None
+                self._text(M.MAV_SEVERITY_INFO, "Failsafe cleared: offboard control regained")
+                self._enter("OFFBOARD")
+            else:
+                self.offboard_fallback = None
+
     def _request_mode(self, name: str | None) -> int:
-        """Validate and enter a mode; returns the MAV_RESULT."""
+        """Validate and enter a mode; returns the MAV_RESULT. A commanded mode ends the offboard-loss fallback."""
+        self.offboard_fallback = None
         if name is None:
             if not self.px4:
                 self._text(M.MAV_SEVERITY_WARNING, "Flight mode change failed")
@@ -167,10 +180,13 @@ class ModeMixin:
             self.velocity_deadline = None
             if s.in_air:
                 self.veh.hold()
-        # PX4 offboard loss
+        # PX4 offboard loss: a mode fallback (commander/failsafe/failsafe.cpp checkModeFallback, COM_OBL_RC_ACT).
+        # With the default parameters and no RC, PX4 SITL returns (AUTO.RTL; firmware trace of 2026-11-24). The
+        # pilot's mode stays OFFBOARD: when setpoints come again the fallback ends (see _offboard_signal_back)
         if self.px4 and mode == "OFFBOARD" and self.t - self.last_setpoint_t > self.params["COM_OF_LOSS_T"]:
-            self._text(M.MAV_SEVERITY_WARNING, "Failsafe activated: offboard control lost, holding")
-            self._enter("AUTO.LOITER")
+            self._text(M.MAV_SEVERITY_WARNING, "Failsafe activated: offboard control lost, returning")
+            self._enter("AUTO.RTL")
+            self.offboard_fallback = "AUTO.RTL"
         # take-off completion
         if self.takeoff_alt is not None and s.armed:
             if abs(self._rel()[2] - self.takeoff_alt) < 0.1:

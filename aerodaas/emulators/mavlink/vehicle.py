@@ -192,6 +192,9 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.speed: float | None = None  # DO_CHANGE_SPEED, m/s
         self.phase = ""  # RTL phase: climb / return / land
         self.last_setpoint_t = -1e9
+        #: PX4: the mode its offboard-loss failsafe switched to, while the pilot's mode is still OFFBOARD (None: not
+        #: in that failsafe); a setpoint stream that comes back ends it (modes.py)
+        self.offboard_fallback: str | None = None
         #: vehicle time (s) of every position/velocity target received (the most recent 100 000)
         self.setpoint_log: deque[float] = deque(maxlen=100_000)
         #: (vehicle time s, mode name) of every mode change (the most recent 10 000)
