@@ -106,6 +106,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
         self._boot_last = 0
         self._boot_wall = 0.0  # wall (monotonic) time of the latest time_boot_ms sample
+        self._boot_live = 0.0  # that sample was received after the link's socket was empty at this time
         self._t_connect = 0.0
         self._ratio = 1.0
         self._clock_samples: deque[tuple[float, int]] = deque()
@@ -120,7 +121,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         # the running stream's last setpoint: wall time, the vehicle's time_boot_ms then (None: no stream running),
         # and when a stall of it was first seen (offboard.py _stream_may_go_on)
         self._sp_wall, self._sp_boot_ms, self._stall_seen = 0.0, None, None
-        self._rx_drained = True  # the I/O loop's last round read everything waiting (link.py)
         #: PX4's offboard-loss timeout COM_OF_LOSS_T (vehicle seconds), read at connect
         self._offboard_loss_s = 1.0
         self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled (offboard.py)

@@ -163,7 +163,7 @@ class LinkMixin:
         offboard-loss failsafe and returns to OFFBOARD: failsafe.cpp ``checkModeFallback``; seen on PX4 SITL)."""
         conn = self._conn
         while not self._stop.is_set():
-            got, drained, start = 0, False, time.monotonic()
+            got, start = 0, time.monotonic()
             while True:
                 try:
                     msg = conn.recv_msg()
@@ -171,7 +171,6 @@ class LinkMixin:
                     time.sleep(0.01)
                     break
                 if msg is None:
-                    drained = True
                     break
                 got += 1
                 try:
@@ -181,7 +180,6 @@ class LinkMixin:
                 if time.monotonic() - start > _DRAIN_S:
                     break
             now = time.monotonic()
-            self._rx_drained = drained
             try:
                 self._periodic(now)
             except Exception as e:  # noqa: BLE001
@@ -325,6 +323,7 @@ class LinkMixin:
             resumed = True
         self._reanchor = False
         self._boot_wall = now
+        self._boot_live = self._conn.live_since if self._conn is not None else now  # received after (shared_link.py)
         if resumed:  # only now: the event reads :attr:`t`, which before this sample still counted the silence
             # on top of the re-anchored clock (t jumped by the whole stop x the clock ratio: 28 s at 5x for 6 s)
             self._event("vehicle_clock_resumed")

@@ -73,8 +73,9 @@ class OffboardMixin:
         resume: that would undo the autopilot's failsafe before we have even seen it (``mavlink.on_failsafe``).
 
         After a stall (no setpoint for half of ``COM_OF_LOSS_T`` in wall time at the vehicle's speed-up) this waits
-        until the receive backlog is read and a ``time_boot_ms`` sample received after that has come (the vehicle's
-        clock now). When the vehicle's clock ran more than ``COM_OF_LOSS_T`` since our last setpoint, the stream
+        for a ``time_boot_ms`` sample received after the link's socket was found empty once the stall was seen
+        (``LinkPort.live_since``: the backlog is read, this is the vehicle's clock now; a backlog judged by when we
+        processed it let a stale clock through, in emulation of a SIGSTOPped drone actor). When the vehicle's clock ran more than ``COM_OF_LOSS_T`` since our last setpoint, the stream
         stops (event ``offboard_stream_stalled``): the autopilot's own mode change that follows, or came while we
         stalled, is its failsafe (link.py ``_check_failsafe``). A firmware stopped with us (SITL under a debugger)
         shows no such gap and the stream goes on. ArduPilot has no such failsafe in GUIDED (always True)."""
@@ -84,8 +85,8 @@ class OffboardMixin:
         if (now - self._sp_wall) * self._ratio > 0.5 * limit:
             if self._stall_seen is None:
                 self._stall_seen = now
-            if not self._rx_drained or self._boot_wall <= self._stall_seen:
-                return False  # not yet the vehicle's state of now
+            if self._boot_live <= self._stall_seen:
+                return False  # still the backlog of the stall: not yet the vehicle's state of now
         gap_s = (self._boot_last - self._sp_boot_ms) / 1000.0
         if gap_s > limit:
             with self._lock:

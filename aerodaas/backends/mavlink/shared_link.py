@@ -92,6 +92,9 @@ class SharedLink:
                 msg = None
                 time.sleep(0.01)
             if msg is None:
+                now = time.monotonic()
+                for port in list(self.ports.values()):
+                    port.socket_idle(now)
                 try:
                     conn.select(0.01)
                 except Exception:  # noqa: BLE001
@@ -130,16 +133,30 @@ class SharedLink:
             pass
 
 
+class _SocketIdle:
+    """A mark in a port's queue: the link's socket had nothing more to read at ``t`` (time.monotonic())."""
+
+    __slots__ = ("t",)
+
+    def __init__(self, t: float) -> None:
+        self.t = t
+
+
 class LinkPort:
     """One robot's view of a :class:`SharedLink`: what the backend's I/O thread reads (:meth:`recv_msg`,
     :meth:`select`) and sends through (:attr:`mav`, under :attr:`send_lock`). ``target_system`` /
-    ``target_component``: the vehicle claimed (0 until :meth:`claim`)."""
+    ``target_component``: the vehicle claimed (0 until :meth:`claim`).
+
+    :attr:`live_since`: the latest wall time (time.monotonic()) at which the socket was found empty before the
+    message :meth:`recv_msg` returned last, i.e. that message was received after then: after a stall of this
+    process, a message with ``live_since`` later than the stall's end is no longer the backlog (offboard.py)."""
 
     def __init__(self, link: SharedLink, robot_id: str) -> None:
         self.link, self.robot_id = link, robot_id
         self.send_lock = link.send_lock
         self.target_system = self.target_component = 0
         self.dropped = 0
+        self.live_since = 0.0
         self._q: deque = deque()
         self._cv = threading.Condition()
         self._closed = False
@@ -163,15 +180,26 @@ class LinkPort:
             self._q.append(msg)
             self._cv.notify_all()
 
+    def socket_idle(self, t: float) -> None:
+        """The link's reader found its socket empty at ``t``: mark the queue there (one mark between messages)."""
+        with self._cv:
+            if self._q and isinstance(self._q[-1], _SocketIdle):
+                self._q[-1].t = t
+            elif len(self._q) < PORT_QUEUE:
+                self._q.append(_SocketIdle(t))
+
     def recv_msg(self) -> Any:
         """The next message of this robot's vehicle, or None (never blocks)."""
         with self._cv:
-            if not self._q:
-                return None
-            msg = self._q.popleft()
-            if len(self._q) == PORT_QUEUE - 1:
-                self._cv.notify_all()  # the link's reader may be waiting for room
-            return msg
+            while self._q:
+                msg = self._q.popleft()
+                if len(self._q) == PORT_QUEUE - 1:
+                    self._cv.notify_all()  # the link's reader may be waiting for room
+                if isinstance(msg, _SocketIdle):
+                    self.live_since = msg.t
+                    continue
+                return msg
+            return None
 
     def select(self, timeout: float) -> bool:
         """Wait up to ``timeout`` wall seconds for a message; True when one is waiting."""
