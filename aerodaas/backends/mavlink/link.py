@@ -363,7 +363,11 @@ class LinkMixin:
             self._hb_next = now + 1.0 / max(1.0, min(self._ratio, 20.0))
             self._send_gcs_heartbeat()
         with self._lock:
-            if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s and self._heartbeats_missed(now):
+            # lost only once everything received until past the deadline has been read (LinkPort.live_since): after
+            # a stall of this process the heartbeats of the stall may still wait in the socket
+            read_until = getattr(self._conn, "live_since", now)
+            if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s \
+                    and read_until - self._last_hb > self.cfg.heartbeat_timeout_s and self._heartbeats_missed(now):
                 self._link_ok = False
                 self._event("link_lost", silent_s=round(now - self._last_hb, 3))
                 self._reanchor = True
