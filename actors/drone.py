@@ -228,6 +228,8 @@ class DroneComponent(RunEnd, AutopilotFlight):
                     self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
                 elif ev.get("event") == "autopilot_failsafe":
                     self._failsafe_pending = dict(ev)
+                elif ev.get("event") == "command_withheld":
+                    self._reissue = True  # sent again on the next tick, unless the autopilot's failsafe comes first
                 self._event(ev.pop("event", "backend_event"), **ev)
         if self.backend.t + 1e-9 >= self.next_odom and self._new_sample():
             self.next_odom += self.odom_period

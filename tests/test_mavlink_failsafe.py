@@ -130,3 +130,35 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     b.goto((0.0, 0.0, 2.0))
     assert run_until(b, lambda: emu.snapshot()["mode"] == "OFFBOARD", 10), emu.mode_log
     assert run_until(b, lambda: dist(b.position, (0, 0, 2)) < 0.6, 40), b.position
+
+
+def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
+    """The negative case: our receive path stalls for 2 of PX4's 3 s COM_OF_LOSS_T (1x): past half the timeout, so
+    the backend waits for a sample received after the stall, finds the vehicle's clock short of the timeout and
+    goes on streaming; PX4 never left OFFBOARD, no ``offboard_stream_stalled``, no withheld command."""
+    from .test_mavlink import run_until
+
+    emu, b = fly("px4", speedup=1.0, params={"COM_OF_LOSS_T": 3.0})
+    b.arm()
+    b.takeoff(2.0)
+    assert run_until(b, lambda: b.position[2] > 1.8, 30)
+    b.goto((0.0, 30.0, 2.0))
+    assert run_until(b, lambda: b.mode == "OFFBOARD", 15), b.mode
+    b.drain_events()
+    gate, port = threading.Event(), b._conn
+    real = port.recv_msg
+
+    def stalled():
+        gate.wait()
+        return real()
+
+    port.recv_msg = stalled
+    time.sleep(2.0)
+    port.recv_msg = real
+    gate.set()
+    n0 = len(emu.setpoint_log)
+    run_until(b, lambda: False, 2.0)
+    assert len(emu.setpoint_log) > n0 + 5, (n0, len(emu.setpoint_log))
+    assert [m for _, m in emu.mode_log][-1] == "OFFBOARD", emu.mode_log
+    events = [e["event"] for e in b.drain_events()]
+    assert not {"offboard_stream_stalled", "command_withheld", "autopilot_failsafe"} & set(events), events

@@ -76,6 +76,8 @@ class LinkMixin:
             got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
                 self._offboard_loss_s = float(got)
+            else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
+                self._offboard_loss_s = max(1.0, self._ratio)
             self._event("offboard_loss_timeout", seconds=self._offboard_loss_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
@@ -164,6 +166,8 @@ class LinkMixin:
         conn = self._conn
         while not self._stop.is_set():
             got, start = 0, time.monotonic()
+            # at most a quarter of PX4's offboard-loss timeout (wall seconds at the vehicle's speed-up) between sends
+            budget = min(_DRAIN_S, 0.25 * self._offboard_loss_s / max(self._ratio, 1.0))
             while True:
                 try:
                     msg = conn.recv_msg()
@@ -177,7 +181,7 @@ class LinkMixin:
                     self._dispatch(msg, time.monotonic())
                 except Exception as e:  # noqa: BLE001 - a malformed message must never stop telemetry
                     self._event("receive_error", message=msg.get_type(), error=str(e))
-                if time.monotonic() - start > _DRAIN_S:
+                if time.monotonic() - start > budget:
                     break
             now = time.monotonic()
             try:
@@ -365,9 +369,10 @@ class LinkMixin:
         with self._lock:
             # lost only once everything received until past the deadline has been read (LinkPort.live_since): after
             # a stall of this process the heartbeats of the stall may still wait in the socket
-            read_until = getattr(self._conn, "live_since", now)
-            if self._link_ok and now - self._last_hb > self.cfg.heartbeat_timeout_s \
-                    and read_until - self._last_hb > self.cfg.heartbeat_timeout_s and self._heartbeats_missed(now):
+            # (and in any case after twice the timeout: a link whose socket is never empty, e.g. a noisy serial line)
+            read_until, timeout = getattr(self._conn, "live_since", now), self.cfg.heartbeat_timeout_s
+            if self._link_ok and now - self._last_hb > timeout and self._heartbeats_missed(now) \
+                    and (read_until - self._last_hb > timeout or now - self._last_hb > 2.0 * timeout):
                 self._link_ok = False
                 self._event("link_lost", silent_s=round(now - self._last_hb, 3))
                 self._reanchor = True

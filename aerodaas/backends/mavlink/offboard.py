@@ -79,28 +79,29 @@ class OffboardMixin:
         stops (event ``offboard_stream_stalled``): the autopilot's own mode change that follows, or came while we
         stalled, is its failsafe (link.py ``_check_failsafe``). A firmware stopped with us (SITL under a debugger)
         shows no such gap and the stream goes on. ArduPilot has no such failsafe in GUIDED (always True)."""
-        if self.autopilot != "px4" or self._sp_boot_ms is None:
+        if self.autopilot != "px4":
             return True
-        limit = self._offboard_loss_s
-        if (now - self._sp_wall) * self._ratio > 0.5 * limit:
-            if self._stall_seen is None:
-                self._stall_seen = now
-            if self._boot_live <= self._stall_seen:
-                return False  # still the backlog of the stall: not yet the vehicle's state of now
-        gap_s = (self._boot_last - self._sp_boot_ms) / 1000.0
-        if gap_s > limit:
-            with self._lock:
-                self._setpoint = None
-                self._sp_boot_ms = None
-                self._offboard_lost_at = now
+        with self._lock:  # the caller's thread may stop or replace the stream meanwhile (_stop_setpoints, goto)
+            sp_boot, sp = self._sp_boot_ms, self._setpoint
+            if sp_boot is None or sp is None:
+                return True
+            limit = self._offboard_loss_s
+            if (now - self._sp_wall) * self._ratio > 0.5 * limit:
+                if self._stall_seen is None:
+                    self._stall_seen = now
+                if self._boot_live <= self._stall_seen:
+                    return False  # still the backlog of the stall: not yet the vehicle's state of now
             self._stall_seen = None
-            self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._mode)
-            log.warning("%s: no setpoint reached the vehicle for %.1f s of its clock (COM_OF_LOSS_T %.1f s): the "
-                        "stream is not resumed; PX4's offboard-loss failsafe has the vehicle", self.robot_id, gap_s,
-                        limit)
-            return False
-        self._stall_seen = None
-        return True
+            gap_s = (self._boot_last - sp_boot) / 1000.0
+            if gap_s <= limit:
+                return True
+            self._setpoint = None
+            self._sp_boot_ms = None
+            self._offboard_lost_at = now
+        self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._mode)
+        log.warning("%s: no setpoint reached the vehicle for %.1f s of its clock (COM_OF_LOSS_T %.1f s): the stream "
+                    "is not resumed; PX4's offboard-loss failsafe has the vehicle", self.robot_id, gap_s, limit)
+        return False
 
     def _send_setpoint(self, sp: tuple) -> None:
         try:
@@ -131,11 +132,13 @@ class OffboardMixin:
 
     def _autopilot_has_it(self, command: str) -> bool:
         """Whether the autopilot has taken the vehicle in a way the caller has not yet been told of, so that
-        ``command`` must not be sent: an ``autopilot_failsafe`` event not yet handed out by :meth:`drain_events` (our
-        next target would switch it back out of its failsafe before the mission even knows), or a setpoint stream
-        stopped by :meth:`_stream_may_go_on` whose outcome no HEARTBEAT has shown yet (waits at most for 1.5
-        vehicle seconds, one HEARTBEAT and a half). The caller learns the rest from its events (``mavlink.on_failsafe``
-        decides). A withheld command is recorded (``command_withheld``)."""
+        ``command`` must not be sent (checked before any mode change, speed or target of goto/set_velocity, and again
+        under the lock where the target is installed): an ``autopilot_failsafe`` event not yet handed out by
+        :meth:`drain_events` (our next target or GUIDED/OFFBOARD switch would end its failsafe before the mission
+        even knows), or a setpoint stream stopped by :meth:`_stream_may_go_on` whose outcome no HEARTBEAT has shown
+        yet (waits at most for 1.5 vehicle seconds, one HEARTBEAT and a half, and 3 wall seconds). The caller learns
+        the rest from its events (``mavlink.on_failsafe`` decides); a withheld command is recorded
+        (``command_withheld``) and the drone re-issues its waypoint when no failsafe follows."""
         lost_at = self._offboard_lost_at
         if lost_at is not None:
             end = time.monotonic() + min(3.0, 1.5 / max(self._ratio, 1e-3))
@@ -143,39 +146,56 @@ class OffboardMixin:
                 time.sleep(0.01)
             with self._lock:
                 fresh = self._last_hb > lost_at
-                if fresh:
+                if fresh and self._offboard_lost_at == lost_at:
                     self._offboard_lost_at = None
             if not fresh:
-                self._event("command_withheld", command=command, reason="offboard stream stalled; no HEARTBEAT since")
-                return True
+                return self._withheld(command, "offboard stream stalled; no HEARTBEAT since")
         if self._failsafe_undelivered:
-            self._event("command_withheld", command=command, reason=f"autopilot failsafe {self._mode}")
-            return True
+            return self._withheld(command, f"autopilot failsafe {self._mode}")
         return False
+
+    def _withheld(self, command: str, reason: str) -> bool:
+        self._event("command_withheld", command=command, reason=reason)
+        return True
 
     def _enter_guided(self, sp: tuple) -> None:
         """Make ``sp`` the active target and fly it: ArduPilot GUIDED (mode first, then the target), PX4 OFFBOARD
         (stream first, then the mode switch, which PX4 refuses without a stream). Nothing is sent while the
-        autopilot has the vehicle and the caller does not know yet (:meth:`_autopilot_has_it`)."""
+        autopilot has the vehicle and the caller does not know yet (:meth:`_autopilot_has_it`; checked again under
+        the lock that installs the target, and before the mode switch)."""
         if self._autopilot_has_it(sp[0]):
             return
         guided = self._guided_mode()
         self._in_control = True
         if self.autopilot == "px4":
             with self._lock:
-                if self._setpoint is None:
-                    self._sp_boot_ms = None  # a new stream, not a gap in the old one
-                self._setpoint = sp
-                self._sp_next = 0.0  # sent by the I/O thread, after it has read what the vehicle said (link.py)
+                withhold = bool(self._failsafe_undelivered or self._offboard_lost_at is not None)
+                if not withhold:
+                    if self._setpoint is None:
+                        self._sp_boot_ms = None  # a new stream, not a gap in the old one
+                        self._stall_seen = None
+                    self._setpoint = sp
+                    self._sp_next = 0.0  # sent by the I/O thread, after it read what the vehicle said (link.py)
+            if withhold:
+                self._withheld(sp[0], "autopilot failsafe meanwhile")
+                return
             if self._mode != guided:
                 start, sent0 = time.monotonic(), self._sp_sent
                 # PX4 wants the stream running before the switch: at least 3 setpoints and 0.3 s of vehicle time
                 while (self._sp_sent - sent0 < 3 or (time.monotonic() - start) * self._ratio < 0.3) \
                         and time.monotonic() - start < 2.0:
                     time.sleep(0.005)
+                with self._lock:  # the autopilot may have taken over while the stream started
+                    ours = self._setpoint is sp and not self._failsafe_undelivered
+                if not ours:
+                    self._withheld(sp[0], f"stream stopped before the switch to {guided}")
+                    return
                 self.set_mode(guided)
         else:
             if self._mode != guided:
+                if self._failsafe_undelivered:
+                    self._withheld(sp[0], f"autopilot failsafe {self._mode}")
+                    return
                 self.set_mode(guided)
             with self._lock:
                 self._setpoint = sp
@@ -186,6 +206,7 @@ class OffboardMixin:
         """Stop streaming our targets, from the I/O thread (the autopilot took over: a failsafe)."""
         self._setpoint = None
         self._sp_boot_ms = None
+        self._stall_seen = None
 
     def release(self) -> None:
         """Stop streaming targets and leave the vehicle to the mode it is in (the autopilot's failsafe): nothing is
@@ -196,6 +217,7 @@ class OffboardMixin:
         with self._lock:
             self._setpoint = None
             self._sp_boot_ms = None
+            self._stall_seen = None
 
     def _change_speed(self, speed: float | None) -> None:
         """ArduPilot: MAV_CMD_DO_CHANGE_SPEED (param1 1 = ground speed, param2 m/s, param3 -1 = throttle
@@ -232,6 +254,8 @@ class OffboardMixin:
             self._event("target_raised", asked_m=z, sent_m=_MIN_TARGET_HEIGHT_M,
                         reason="below the take-off point (only LAND goes lower)")
             z = _MIN_TARGET_HEIGHT_M
+        if self._autopilot_has_it("goto"):  # before any mode change or speed command reaches the vehicle
+            return
         if self.autopilot == "px4":
             # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
             # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
@@ -255,6 +279,8 @@ class OffboardMixin:
         if not all(math.isfinite(v) for v in (ve, vn, vu, yaw_rate_dps)):
             raise ValueError(f"set_velocity needs finite m/s and deg/s, got {tuple(v_enu)!r}, {yaw_rate_dps!r}")
         self._check_link("set_velocity")
+        if self._autopilot_has_it("set_velocity"):
+            return
         self._enter_guided(("vel", vn, ve, -vu, -math.radians(yaw_rate_dps)))
 
     def hold(self) -> None:

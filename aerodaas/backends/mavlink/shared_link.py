@@ -86,15 +86,15 @@ class SharedLink:
     def _read(self) -> None:
         conn = self.conn
         while not self._stop.is_set():
+            t_read = time.monotonic()  # before the read: a mark never claims what a stall after the read missed
             try:
                 msg = conn.recv_msg()
             except Exception:  # noqa: BLE001 - a broken packet or a socket hiccup: keep reading
-                msg = None
                 time.sleep(0.01)
+                continue
             if msg is None:
-                now = time.monotonic()
                 for port in list(self.ports.values()):
-                    port.socket_idle(now)
+                    port.socket_idle(t_read)
                 try:
                     conn.select(0.01)
                 except Exception:  # noqa: BLE001
