@@ -327,7 +327,7 @@ class LinkMixin:
             resumed = True
         self._reanchor = False
         self._boot_wall = now
-        self._boot_live = self._conn.live_since if self._conn is not None else now  # received after (shared_link.py)
+        self._boot_live = getattr(self._conn, "live_since", now)  # received after then (shared_link.py LinkPort)
         if resumed:  # only now: the event reads :attr:`t`, which before this sample still counted the silence
             # on top of the re-anchored clock (t jumped by the whole stop x the clock ratio: 28 s at 5x for 6 s)
             self._event("vehicle_clock_resumed")

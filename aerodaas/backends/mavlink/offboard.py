@@ -160,11 +160,9 @@ class OffboardMixin:
 
     def _enter_guided(self, sp: tuple) -> None:
         """Make ``sp`` the active target and fly it: ArduPilot GUIDED (mode first, then the target), PX4 OFFBOARD
-        (stream first, then the mode switch, which PX4 refuses without a stream). Nothing is sent while the
-        autopilot has the vehicle and the caller does not know yet (:meth:`_autopilot_has_it`; checked again under
-        the lock that installs the target, and before the mode switch)."""
-        if self._autopilot_has_it(sp[0]):
-            return
+        (stream first, then the mode switch, which PX4 refuses without a stream). The callers (goto, set_velocity)
+        have checked :meth:`_autopilot_has_it`; it is checked again here under the lock that installs the target,
+        and before the mode switch (the I/O thread may have seen the autopilot's failsafe meanwhile)."""
         guided = self._guided_mode()
         self._in_control = True
         if self.autopilot == "px4":
@@ -215,9 +213,7 @@ class OffboardMixin:
 
     def _stop_setpoints(self) -> None:
         with self._lock:
-            self._setpoint = None
-            self._sp_boot_ms = None
-            self._stall_seen = None
+            self._stop_setpoints_quiet()
 
     def _change_speed(self, speed: float | None) -> None:
         """ArduPilot: MAV_CMD_DO_CHANGE_SPEED (param1 1 = ground speed, param2 m/s, param3 -1 = throttle
