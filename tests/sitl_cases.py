@@ -49,7 +49,6 @@ def router_fleet(autopilot, tmp_path_factory):
     return sitl.router_fleet_session(autopilot, tmp_path_factory.mktemp(f"sitl_{autopilot}_router"))
 
 
-MAX_SPEED = 0.5  # apps/farm_survey.json limits.max_speed, m/s
 HOVER_S = 5.0  # the farm survey's hover_duration
 
 
@@ -92,7 +91,7 @@ def test_farm_survey_from_a_cold_vehicle(session, autopilot):
 
 @pytest.mark.parametrize("run", ["guided", "auto", "linkloss"])
 def test_speed_stays_within_the_limit(session, run, autopilot):
-    """The robot's max_speed (0.5 m/s) + 10 %, from the recorded odometry: the vehicle's own velocity and the
+    """The robot's max_speed (sitl.MAX_SPEED: ArduCopter 0.5, PX4 2 m/s) + 10 %, from the recorded odometry: the vehicle's own velocity and the
     distance flown over every >= 4 s of vehicle time (shorter windows measure the jitter between a position's
     arrival and its time stamp: up to one 0.1 s stream period)."""
     rec = session[run]["rec"]
@@ -106,8 +105,9 @@ def test_speed_stays_within_the_limit(session, run, autopilot):
     pieces = [odo] if not lost else [[o for o in odo if o["t"] < lost[0] - 2.0],
                                      [o for o in odo if o["t"] > (back[-1] if back else 1e9) + 3.0]]
     v_flown = max(max_horizontal_speed(p, window_s=4.0) for p in pieces)
-    print(f"{autopilot} {run}: max speed reported {v_reported:.3f} m/s, flown {v_flown:.3f} m/s (limit {MAX_SPEED})")
-    assert v_reported <= MAX_SPEED * 1.1 and v_flown <= MAX_SPEED * 1.1
+    limit = sitl.MAX_SPEED[autopilot]
+    print(f"{autopilot} {run}: max speed reported {v_reported:.3f} m/s, flown {v_flown:.3f} m/s (limit {limit})")
+    assert v_reported <= limit * 1.1 and v_flown <= limit * 1.1
 
 
 def test_hover_height_from_the_firmware_estimate(session, autopilot):
@@ -230,7 +230,8 @@ def test_three_vehicle_fleet(fleet, autopilot):
         flown = flown_speed(odo, 4.0)
         smooth = sustained_speed(odo, 1.0)
         peaks = sorted(((round(horizontal_speed(o), 3), round(o["t"], 1)) for o in odo), reverse=True)[:5]
-        assert flown <= MAX_SPEED * 1.1 and smooth <= MAX_SPEED * 1.1, (rid, flown, smooth, peaks)
+        limit = sitl.MAX_SPEED[autopilot]
+        assert flown <= limit * 1.1 and smooth <= limit * 1.1, (rid, flown, smooth, peaks)
 
 
 def test_three_vehicles_behind_one_router_port(router_fleet, autopilot):
@@ -283,9 +284,9 @@ def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
         k = ["quadrotor_base", "quadrotor_base_1", "quadrotor_base_2"].index(rid)
         fw = [{"t": s[0], "position": s[1:4]} for s in router_fleet["observed"][k]["samples"]]
         # the vehicle must have flown its legs for the comparison to mean anything: at least 60 % of its cruise
-        # speed (0.3 m/s on ArduCopter as before; PX4 cruises at MPC_XY_VEL_MAX = px4_speed_limit(0.5) = 0.25 m/s:
+        # speed (0.3 m/s on ArduCopter as before; PX4 cruises at MPC_XY_VEL_MAX = px4_speed_limit(max_speed): at 0.5
         # a bound of 0.3 m/s failed a PX4 vehicle that flew 0.297 m/s, recorded 0.295, CI of 2026-11-24)
-        cruise = px4_speed_limit(MAX_SPEED) if autopilot == "px4" else MAX_SPEED
+        cruise = px4_speed_limit(sitl.MAX_SPEED[autopilot]) if autopilot == "px4" else sitl.MAX_SPEED[autopilot]
         for window in (1.0, 2.0):
             ours, theirs = flown_speed(odo, window), flown_speed(fw, window)
             assert theirs > 0.6 * cruise and abs(ours / theirs - 1.0) <= 0.05, (rid, window, ours, theirs)

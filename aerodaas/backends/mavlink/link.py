@@ -505,7 +505,9 @@ class LinkMixin:
             return t
 
     def step(self, dt: float) -> None:
-        """Telemetry arrives on the I/O thread; this only reports that thread's failure (BackendError)."""
+        """Telemetry arrives on the I/O thread; this reports that thread's failure (BackendError) and lowers the
+        vehicle's speed limit when its estimator needs more margin (params.py ``_update_speed_cap``)."""
         if self._io_error is not None:
             raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self._io_error}")
+        self._update_speed_cap()
 

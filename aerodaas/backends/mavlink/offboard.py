@@ -10,7 +10,6 @@ import numpy as np
 
 from aerodaas.navigation.geo import enu_to_geodetic
 from aerodaas.backends.base import LinkLost
-from aerodaas.backends.mavlink.params import px4_speed_limit
 from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
@@ -217,11 +216,12 @@ class OffboardMixin:
 
     def _change_speed(self, speed: float | None) -> None:
         """ArduPilot: MAV_CMD_DO_CHANGE_SPEED (param1 1 = ground speed, param2 m/s, param3 -1 = throttle
-        unchanged) to ``speed`` capped at ``limits.max_speed``; no speed = the limit itself. Never -2 ("back to
+        unchanged) to ``speed`` capped at :meth:`xy_speed_cap` (``limits.max_speed``, less any estimator margin
+        measured in flight); no speed = the limit itself. Never -2 ("back to
         default"): ArduCopter answers it MAV_RESULT_DENIED (``Copter::do_change_speed`` accepts > 0 only). Sent
         again after every mode change (ArduCopter re-initialises its navigation speed from WPNAV_SPEED on mode
         entry). Raises as :meth:`command_long`."""
-        limit = float(self.limits.max_speed)
+        limit = self.xy_speed_cap()
         value = limit if speed is None else min(float(speed), limit)
         key = (round(value, 3), self._mode_changes)
         if key == self._speed_cmd:
@@ -255,7 +255,7 @@ class OffboardMixin:
         if self.autopilot == "px4":
             # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
             # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
-            limit = px4_speed_limit(self.limits.max_speed)
+            limit = self.xy_speed_cap()
             speed = limit if speed is None else min(float(speed), limit)
             self._enter_guided(("carrot", self.position, np.array([x, y, z]), speed, self.t))
             return

@@ -22,6 +22,7 @@ from typing import Any
 
 from aerodaas.backends.base import BackendError
 from aerodaas.backends.mavlink._common import M, _f32
+from aerodaas.backends.mavlink.speed_margin import MIN_STEP_MPS, EstimatorSpeedMargin, SpeedCap
 
 #: PX4's horizontal limits are ``limits.max_speed`` less this margin (m/s), and never below half of it (see
 #: :func:`px4_speed_limit`). PX4's velocity loop holds its *estimate* at MPC_XY_VEL_MAX, and each GPS fusion step
@@ -116,17 +117,66 @@ class ParamMixin:
                            f"{self.cfg.command_retries + 1} tries of {wait:g} s")
 
     # ------------------------------------------------------------------ speed limits
+    def xy_speed_cap(self) -> float:
+        """The horizontal speed (m/s) the vehicle is limited to for the robot's ``limits.max_speed``: the
+        autopilot's rule (ArduCopter ``max_speed``; PX4 :func:`px4_speed_limit`), lowered in flight when the
+        vehicle's estimator needs more margin than that (:mod:`~aerodaas.backends.mavlink.speed_margin`)."""
+        return self._speed_cap.cap_mps if self._speed_cap is not None else self._default_speed_cap()
+
+    def _default_speed_cap(self) -> float:
+        xy = float(self.limits.max_speed)
+        return px4_speed_limit(xy) if self.autopilot == "px4" else xy
+
     def _limit_parameters(self) -> dict[str, float]:
         """The parameters that carry the robot's ``limits`` on this autopilot, in the firmware's units (see the
-        module docstring): ArduCopter cm/s, PX4 m/s."""
-        lim = self.limits
-        xy, z = float(lim.max_speed), float(lim.max_vertical_speed)
+        module docstring): ArduCopter cm/s, PX4 m/s; horizontally :meth:`xy_speed_cap`."""
+        xy, z = self.xy_speed_cap(), float(self.limits.max_vertical_speed)
         if self.autopilot == "ardupilot":
             return {"WPNAV_SPEED": max(20.0, xy * 100.0), "WPNAV_SPEED_UP": max(10.0, z * 100.0),
                     "WPNAV_SPEED_DN": max(10.0, z * 100.0)}
         # PX4's velocity estimate jolts above its setpoint on every GPS fusion correction: a margin (see above)
-        limit = px4_speed_limit(xy)
-        return {"MPC_XY_VEL_MAX": limit, "MPC_XY_CRUISE": limit}
+        return {"MPC_XY_VEL_MAX": xy, "MPC_XY_CRUISE": xy}
+
+    def _on_gnss_speed(self, gnss_speed_mps: float) -> None:
+        """A GPS_RAW_INT ground speed (m/s, 3-D fix): with the vehicle in the air and its estimated speed steady
+        (telemetry.py ``_set_velocity``), one sample of GNSS minus estimated horizontal speed for the speed
+        margin. Caller: the I/O thread."""
+        if self.in_air:
+            with self._lock:
+                if self._est_steady:
+                    self._speed_margin.add(gnss_speed_mps, self._est_hspeed)
+
+    def _update_speed_cap(self) -> None:
+        """Every 2 vehicle seconds (from :meth:`step`): when the measured estimator margin needs a limit at least
+        :data:`~aerodaas.backends.mavlink.speed_margin.MIN_STEP_MPS` below the applied one, set it on the vehicle
+        (``speed_margin`` event with the figures); only ever lowered within a connection. A limit that cannot
+        hold (``max_speed`` too small for the margin) is reported once (``speed_limit_unholdable``). A failed
+        parameter write is reported (``speed_limit_update_failed``) and tried again next time; never raises."""
+        if self.t < self._speed_check_t or not self._limits_applied:
+            return
+        self._speed_check_t = self.t + 2.0
+        xy = float(self.limits.max_speed)
+        with self._lock:
+            cap: SpeedCap = self._speed_margin.cap(xy, self._default_speed_cap(), floor=0.5 * xy)
+        if not cap.holdable and not self._unholdable_reported:
+            self._unholdable_reported = True
+            self._event("speed_limit_unholdable", max_speed=xy, margin_mps=cap.margin_mps, samples=cap.samples,
+                        cap_mps=round(cap.cap_mps, 3),
+                        reason="the vehicle's estimator lets it fly this much faster than its estimate (GNSS, p99): "
+                               "its limit cannot keep it within max_speed + 10 %")
+        if cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS:
+            return
+        before, self._speed_cap = self._speed_cap, cap
+        try:
+            verified = self.apply_speed_limits()
+            if self.autopilot == "ardupilot" and self._speed_cmd is not None and self._speed_cmd[0] > cap.cap_mps:
+                self._change_speed(cap.cap_mps)  # GUIDED flies DO_CHANGE_SPEED, not WPNAV_SPEED
+        except Exception as e:  # noqa: BLE001 - in flight: report, keep flying at the applied limit, retry later
+            self._speed_cap = before
+            self._event("speed_limit_update_failed", cap_mps=round(cap.cap_mps, 3), error=str(e))
+            return
+        self._event("speed_margin", margin_mps=cap.margin_mps, samples=cap.samples, cap_mps=round(cap.cap_mps, 3),
+                    max_speed=xy, **{k: round(v, 3) for k, v in verified.items()})
 
     def apply_speed_limits(self) -> dict[str, float]:
         """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
@@ -180,3 +230,9 @@ class ParamMixin:
         self._param_cv = threading.Condition()
         self._saved_params: dict[str, float] = {}
         self._limits_applied = False
+        self._speed_margin = EstimatorSpeedMargin()
+        self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
+        self._speed_check_t = 0.0  # vehicle time of the next check
+        self._est_hspeed = 0.0  # the estimate's latest horizontal speed, m/s (telemetry.py _set_velocity)
+        self._est_steady = False  # ... and it changed by at most 0.1 m/s since the sample before
+        self._unholdable_reported = False

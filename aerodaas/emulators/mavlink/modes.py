@@ -247,22 +247,24 @@ class ModeMixin:
         unless MAV_CMD_DO_CHANGE_SPEED set another (AC_WPNav::set_speed_NE_cms); PX4 at MPC_XY_CRUISE, or a
         mission's DO_CHANGE_SPEED, never above MPC_XY_VEL_MAX (OFFBOARD position setpoints without a velocity
         fly at MPC_XY_CRUISE too, as observed; DO_CHANGE_SPEED is a navigator command)."""
+        err = self.estimate_speed_error_mps  # the autopilot flies its estimate; the truth is this much faster
         if self.px4:
             base = self.params["MPC_XY_CRUISE"] if self.speed is None or self.mode == "OFFBOARD" else self.speed
-            return max(0.1, min(base, self.params["MPC_XY_VEL_MAX"]))
-        return max(0.1, self.speed if self.speed else self.params["WPNAV_SPEED"] / 100.0)
+            return max(0.1, min(base, self.params["MPC_XY_VEL_MAX"])) + err
+        return max(0.1, self.speed if self.speed else self.params["WPNAV_SPEED"] / 100.0) + err
 
     def _apply_speed_params(self) -> None:
         """The vehicle envelope from the speed parameters (read every control cycle by the firmware, so a
         PARAM_SET changes the leg being flown): horizontal limit, climb rate, acceleration."""
         lim, p = self.veh.limits, self.params
         if self.px4:
-            lim.max_speed = max(0.1, p["MPC_XY_VEL_MAX"])
+            lim.max_speed = max(0.1, p["MPC_XY_VEL_MAX"]) + self.estimate_speed_error_mps
             lim.max_vertical_speed = max(0.1, p["MPC_Z_VEL_MAX_UP"])
             lim.max_acceleration = max(0.1, p["MPC_ACC_HOR"])
         else:  # GUIDED velocity targets too are bounded by the WPNAV speeds (ModeGuided sets the position
             # controller's limits from AC_WPNav's defaults); DO_CHANGE_SPEED may raise them
-            lim.max_speed = min(AIRFRAME_MAX_SPEED, max(p["WPNAV_SPEED"] / 100.0, self.speed or 0.0, 0.1))
+            lim.max_speed = min(AIRFRAME_MAX_SPEED, max(p["WPNAV_SPEED"] / 100.0, self.speed or 0.0, 0.1)) + \
+                self.estimate_speed_error_mps
             lim.max_vertical_speed = max(0.1, p["WPNAV_SPEED_UP"] / 100.0)
             lim.max_acceleration = max(0.1, p["WPNAV_ACCEL"] / 100.0)
         sp = self.veh.setpoint

@@ -90,14 +90,15 @@ class TelemetryMixin:
                     return None
                 return e.global_position_int_encode(boot_ms, 0, 0, 0, 0, 0, 0, 0, 65535)  # ArduPilot: stale zeros
             g, rel = self._geo(), self._rel()
-            vn, ve, vd = s.velocity[1], s.velocity[0], -s.velocity[2]
+            ve, vn, vu = self._estimated_velocity()
+            vd = -vu
             return e.global_position_int_encode(boot_ms, int(round(g.lat * 1e7)), int(round(g.lon * 1e7)),
                                                 int(round(g.alt * 1000)), int(round(rel[2] * 1000)), int(vn * 100),
                                                 int(ve * 100), int(vd * 100), int(self._heading() * 100) % 36000)
         if msg_id == M.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
             if fix < 3:
                 return None
-            p, v = s.position, s.velocity
+            p, v = s.position, self._estimated_velocity()
             return e.local_position_ned_encode(boot_ms, float(p[1]), float(p[0]), float(-p[2]), float(v[1]),
                                                float(v[0]), float(-v[2]))
         if msg_id == M.MAVLINK_MSG_ID_HOME_POSITION:
@@ -137,6 +138,16 @@ class TelemetryMixin:
             version = (1 << 24) | (15 << 16) if self.px4 else (4 << 24) | (5 << 16)
             return e.autopilot_version_encode(caps, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
         return None
+
+    def _estimated_velocity(self) -> np.ndarray:
+        """The velocity the estimator reports (ENU m/s): the true one with its horizontal speed lowered by
+        ``estimate_speed_error_mps`` (GPS_RAW_INT keeps the true speed)."""
+        v = np.array(self.veh.state.velocity, dtype=float)
+        err = self.estimate_speed_error_mps
+        h = float(np.hypot(v[0], v[1]))
+        if err > 0 and h > 0:
+            v[:2] *= max(0.0, h - err) / h
+        return v
 
     def _heading(self) -> float:
         """Compass heading in degrees (clockwise from north) from the simulator's ENU yaw."""

@@ -107,7 +107,8 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
                  message_interval: bool = True, ignore_commands: set[int] | None = None,
                  ack_only_commands: set[int] | None = None, in_progress_commands: set[int] | None = None,
                  mission_int: bool | None = None, ekf_gps_s: float = 1.0, home_alt_drift_m: float | None = None,
-                 deny_default_speed: bool | None = None, seed: int = 0) -> None:
+                 deny_default_speed: bool | None = None, estimate_speed_error_mps: float = 0.0,
+                 seed: int = 0) -> None:
         if autopilot not in ("ardupilot", "px4"):
             raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
         if not (speedup > 0 and math.isfinite(speedup)):
@@ -143,6 +144,12 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         #: bound (m) of PX4's in-flight home-altitude correction (COM_HOME_EN); 0 disables it
         self.home_alt_drift_m = drift
         self._rng = np.random.default_rng(seed)
+        if not (estimate_speed_error_mps >= 0 and math.isfinite(estimate_speed_error_mps)):
+            raise ValueError(f"estimate_speed_error_mps must be a finite number >= 0, got {estimate_speed_error_mps!r}")
+        #: the estimator reports the horizontal speed this much (m/s) below the true one, which GPS_RAW_INT carries:
+        #: an estimator that lets the vehicle fly faster than its limit (stock PX4 SIH: 0.5 m/s at the p99,
+        #: aerodaas.backends.mavlink.speed_margin); the physics flies the true speed at the vehicle's limit + this
+        self.estimate_speed_error_mps = float(estimate_speed_error_mps)
         #: MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 (-2 "default") is DENIED (None: as the flavour's firmware,
         #: ArduCopter denies, PX4 accepts)
         self.deny_default_speed = (not self.px4) if deny_default_speed is None else bool(deny_default_speed)

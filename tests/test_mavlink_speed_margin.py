@@ -1,0 +1,131 @@
+"""The speed margin the MAVLink backend derives from the vehicle's own estimator (GNSS speed against estimated
+speed, aerodaas/backends/mavlink/speed_margin.py): the rule, and the backend lowering the vehicle's own limit on an
+emulated vehicle whose estimator lets it fly faster than it thinks (judged from the emulator's ground truth and its
+parameter store)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from aerodaas.backends import make_backend
+from aerodaas.backends.mavlink.params import px4_speed_limit
+from aerodaas.backends.mavlink.speed_margin import MIN_SAMPLES, SPEED_TOLERANCE, EstimatorSpeedMargin
+from aerodaas.config import Limits, MavlinkConfig, RobotConfig
+from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
+from .test_mavlink import CONFIG_HOME, VEHICLE_HOME, run_until
+
+
+def test_no_margin_before_enough_samples_then_the_p99():
+    m = EstimatorSpeedMargin()
+    for _ in range(MIN_SAMPLES - 1):
+        m.add(1.3, 1.0)
+    cap = m.cap(2.0, 1.75, floor=1.0)
+    assert cap.margin_mps is None and cap.cap_mps == 1.75 and cap.holdable
+    m.add(1.3, 1.0)
+    cap = m.cap(2.0, 1.75, floor=1.0)
+    assert cap.margin_mps == pytest.approx(0.3) and cap.cap_mps == 1.75  # 2.2 - 0.3 = 1.9: the rule is lower
+    m.add(float("nan"), 1.0)
+    assert m.samples == MIN_SAMPLES
+
+
+@settings(max_examples=200, deadline=None)
+@given(max_speed=st.floats(0.2, 15.0), overshoot=st.lists(st.floats(-1.0, 2.0), min_size=MIN_SAMPLES, max_size=400))
+def test_the_cap_plus_the_measured_overshoot_fits_the_tolerance_or_is_reported(max_speed, overshoot):
+    """Whatever the samples: the cap never exceeds the autopilot's rule or falls below the floor, and cap + p99
+    overshoot <= max_speed x 1.1 unless the cap is reported as not holdable."""
+    m = EstimatorSpeedMargin()
+    for d in overshoot:
+        m.add(1.0 + d, 1.0)
+    default, floor = px4_speed_limit(max_speed), 0.5 * max_speed
+    cap = m.cap(max_speed, default, floor)
+    assert floor - 1e-9 <= cap.cap_mps <= default + 1e-9
+    if cap.holdable:
+        assert cap.cap_mps + cap.margin_mps <= max_speed * (1 + SPEED_TOLERANCE) + 1e-3
+    else:
+        assert cap.cap_mps == floor
+
+
+@pytest.fixture
+def vehicle():
+    made: list = []
+
+    def make(autopilot: str, max_speed: float, error_mps: float):
+        emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, home=VEHICLE_HOME, gps_lock_s=1.0,
+                                     estimate_speed_error_mps=error_mps,
+                                     params={"COM_OF_LOSS_T": 3.0} if autopilot == "px4" else None)
+        made.append(emu)
+        address = emu.start("tcp:127.0.0.1:0")
+        b = make_backend(RobotConfig(id="quad", backend="mavlink", home=CONFIG_HOME,
+                                     limits=Limits(max_speed=max_speed),
+                                     mavlink=MavlinkConfig(connection=address, stream_rate_hz=5.0)))
+        made.append(b)
+        b.connect(timeout_s=10)
+        b.arm()
+        b.takeoff(3.0)
+        assert run_until(b, lambda: b.position[2] > 2.8, 20)
+        return emu, b
+
+    yield make
+    for obj in reversed(made):
+        obj.stop() if isinstance(obj, MavlinkVehicleEmulator) else obj.close()
+
+
+def _legs(emu, b, n: int, events: list) -> list[list[float]]:
+    """Fly ``n`` 12 m legs back and forth; the emulator's true horizontal speeds of each leg."""
+    out = []
+    for k in range(n):
+        target = (12.0 if k % 2 == 0 else 0.0, 0.0, 3.0)
+        speeds: list[float] = []
+        b.goto(target)
+        assert run_until(b, lambda: math.dist(b.position, target) < 0.3, 40,
+                         every=lambda: speeds.append(float(np.hypot(*emu.veh.state.velocity[:2])))), b.position
+        events.extend(b.drain_events())
+        out.append(speeds)
+    return out
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_an_estimator_that_underreports_speed_gets_the_vehicles_limit_lowered(vehicle, autopilot):
+    """The estimator reports 0.8 m/s less than the vehicle flies (GNSS has the truth): the vehicle first flies
+    its rule's limit + 0.8 (PX4 1.75 + 0.8, ArduCopter 2.0 + 0.8, beyond 2.2), then the backend lowers the
+    vehicle's own limit (and PX4's moving setpoint) to 2.2 - margin, and the true speed stays within max_speed +
+    10 % from then on."""
+    emu, b = vehicle(autopilot, 2.0, 0.8)
+    events: list = []
+    speeds = _legs(emu, b, 4, events)
+    lowered = [e for e in events if e["event"] == "speed_margin"]
+    assert lowered, [e["event"] for e in events]
+    first = lowered[0]
+    assert first["margin_mps"] == pytest.approx(0.8, abs=0.1) and first["samples"] >= MIN_SAMPLES
+    cap = first["cap_mps"]
+    assert cap == pytest.approx(2.2 - first["margin_mps"], abs=1e-3)
+    param = "MPC_XY_VEL_MAX" if autopilot == "px4" else "WPNAV_SPEED"
+    assert emu.params[param] == pytest.approx(cap * (1 if autopilot == "px4" else 100), rel=1e-3)
+    if autopilot == "ardupilot":  # before: the rule's limit + the estimator's error (the emulated PX4 follows our
+        assert max(speeds[0]) > 2.3  # moving OFFBOARD setpoint's true position, so its error shows only in AUTO)
+    after = _legs(emu, b, 2, events)
+    assert max(max(s) for s in after) <= 2.2 + 0.05, [round(max(s), 3) for s in after]
+    assert not [e for e in events if e["event"] == "speed_limit_unholdable"]
+
+
+def test_a_limit_the_estimator_cannot_hold_is_reported_not_flown_as_held(vehicle):
+    """max_speed 0.5 with an estimator 0.4 m/s short: no limit above the floor (0.25) fits 0.55 - 0.4, so the
+    backend says so once (speed_limit_unholdable, with the figures) and flies at the floor."""
+    emu, b = vehicle("ardupilot", 0.5, 0.4)
+    events: list = []
+    _legs(emu, b, 2, events)
+    bad = [e for e in events if e["event"] == "speed_limit_unholdable"]
+    assert len(bad) == 1 and bad[0]["margin_mps"] == pytest.approx(0.4, abs=0.1) and bad[0]["max_speed"] == 0.5
+    assert emu.params["WPNAV_SPEED"] == pytest.approx(25.0, abs=1e-3)
+
+
+def test_an_honest_estimator_leaves_the_limit_alone(vehicle):
+    emu, b = vehicle("ardupilot", 2.0, 0.0)
+    events: list = []
+    _legs(emu, b, 3, events)
+    assert not [e for e in events if e["event"] in ("speed_margin", "speed_limit_unholdable")]
+    assert emu.params["WPNAV_SPEED"] == pytest.approx(200.0)
