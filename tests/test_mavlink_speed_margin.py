@@ -129,3 +129,17 @@ def test_an_honest_estimator_leaves_the_limit_alone(vehicle):
     _legs(emu, b, 3, events)
     assert not [e for e in events if e["event"] in ("speed_margin", "speed_limit_unholdable")]
     assert emu.params["WPNAV_SPEED"] == pytest.approx(200.0)
+
+
+def test_the_summary_says_when_the_limit_was_lowered_or_cannot_hold():
+    from aerodaas.runtime.driver import MissionResult
+    from aerodaas.runtime.report import format_summary
+
+    events = [{"event": "speed_margin", "margin_mps": 0.62, "samples": 80, "cap_mps": 1.58, "max_speed": 2.0},
+              {"event": "speed_limit_unholdable", "margin_mps": 0.54, "samples": 120, "cap_mps": 0.25,
+               "max_speed": 0.5}]
+    res = MissionResult(outcome="success", robots={"q": {"t": 1.0, "state": "LANDED", "events": events}}, stats={},
+                        latency={}, recording=None, wall_s=1.0)
+    text = format_summary(res)
+    assert "speed limit lowered to 1.58 m/s" in text and "0.62 m/s faster than its estimate" in text
+    assert "speed limit NOT holdable" in text and "max_speed 0.5 m/s" in text

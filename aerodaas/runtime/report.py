@@ -20,6 +20,7 @@ def format_summary(result: Any) -> str:
         for h in rep.get("hold_failed") or []:
             lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
                          f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
+        lines += _speed_margin_lines(rep.get("events") or [])
         if rep.get("failsafe"):
             f = rep["failsafe"]
             lines.append(f"    autopilot failsafe: {f.get('mode')} at t={f.get('t', 0):.1f} s"
@@ -140,3 +141,20 @@ def _first(text: str, limit: int = 160) -> str:
     """The first line of ``text``, at most ``limit`` characters."""
     line = str(text).splitlines()[0] if str(text) else ""
     return line if len(line) <= limit else line[:limit - 3] + "..."
+
+
+def _speed_margin_lines(events: list[dict]) -> list[str]:
+    """What the MAVLink backend's speed margin did (aerodaas/backends/mavlink/speed_margin.py): the vehicle's own
+    limit lowered for its estimator (the last time), or a ``max_speed`` no limit could hold."""
+    out = []
+    lowered = [e for e in events if e.get("event") == "speed_margin"]
+    if lowered:
+        e = lowered[-1]
+        out.append(f"    speed limit lowered to {e.get('cap_mps')} m/s: the vehicle flew up to {e.get('margin_mps')} m/s "
+                   f"faster than its estimate (GNSS, p99 of {e.get('samples')} samples)")
+    for e in events:
+        if e.get("event") == "speed_limit_unholdable":
+            out.append(f"    speed limit NOT holdable: the vehicle flies up to {e.get('margin_mps')} m/s faster than its "
+                       f"estimate (GNSS, p99 of {e.get('samples')} samples), more than max_speed {e.get('max_speed')} "
+                       f"m/s leaves room for; its own limit stays {e.get('cap_mps')} m/s")
+    return out
