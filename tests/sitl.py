@@ -49,6 +49,12 @@ FARM_HOME = {"lat": 13.0213, "lon": 77.5671, "alt": 920.0}
 #: 1.89 m/s over 1 s against 2.2) and so do 0.3 m holds (4 of 4; at 0.5 m/s, with MPC_XY_VEL_MAX 0.25, PX4's
 #: position loop lacked the authority to follow its own estimate's drift: 1 of 4).
 MAX_SPEED = {"ardupilot": 0.5, "px4": 2.0}
+#: the waypoints' acceptance radius (m) the SITL surveys fly with per autopilot (``AERODAAS_SITL_HOLD_RADIUS_M`` of
+#: tests/sitl_survey_app.py and tests/sitl_fleet_app.py): ArduCopter 0.3 m, apps/farm_survey.py's own. Stock PX4 SIH's
+#: estimate wanders from the setpoint PX4 holds it at (the same estimator mismatch as above): its holds at 2 m/s
+#: had a largest error of 0.59-0.69 m and gathered 2.1-4.9 of 5 s within 0.3 m in 15 s (2026-11-24), so the
+#: survey's 0.3 m is not what that vehicle can hold; PX4's own default acceptance radius (NAV_ACC_RAD) is 2 m.
+HOLD_RADIUS = {"ardupilot": 0.3, "px4": 1.0}
 
 
 def namespace_skip_reason() -> str | None:
@@ -190,11 +196,13 @@ def step_result(workdir: Path, k: int) -> tuple[int | None, str]:
     return (int(rc.read_text()) if rc.exists() else None), (out.read_text(errors="replace") if out.exists() else "")
 
 
-def aerodaas_run(app: Path, env: Path, record: Path, timeout_s: float = 600) -> str:
-    """The shell step ``aerodaas run APP --env ENV --record REC --timeout T --quiet``."""
+def aerodaas_run(app: Path, env: Path, record: Path, timeout_s: float = 600, hold_radius_m: float | None = None) -> str:
+    """The shell step ``aerodaas run APP --env ENV --record REC --timeout T --quiet``; ``hold_radius_m``: the
+    waypoints' acceptance radius of the SITL apps (``AERODAAS_SITL_HOLD_RADIUS_M``)."""
     args = [*AERODAAS, "run", str(app), "--env", str(env), "--record", str(record), "--timeout", f"{timeout_s:g}",
             "--quiet"]
-    return " ".join(shlex.quote(a) for a in args)
+    prefix = "" if hold_radius_m is None else f"AERODAAS_SITL_HOLD_RADIUS_M={hold_radius_m:g} "
+    return prefix + " ".join(shlex.quote(a) for a in args)
 
 
 def read_recording(path: Path) -> dict[str, list]:
@@ -458,6 +466,17 @@ if __name__ == "__main__":
 
 # ---------------------------------------------------------------------------------------------- scenarios
 FARM_APP = REPO / "apps" / "farm_survey.py"
+#: the farm survey with HOLD_RADIUS (PX4)
+SURVEY_APP = Path(__file__).with_name("sitl_survey_app.py")
+
+
+def survey_step(autopilot: str, env: Path, record: Path) -> str:
+    """The farm survey for ``autopilot``: apps/farm_survey.py itself where the firmware holds its 0.3 m
+    (ArduCopter), else tests/sitl_survey_app.py with :data:`HOLD_RADIUS`."""
+    radius = HOLD_RADIUS[autopilot]
+    if radius == 0.3:
+        return aerodaas_run(FARM_APP, env, record)
+    return aerodaas_run(SURVEY_APP, env, record, hold_radius_m=radius)
 FARM_ENV = REPO / "apps" / "farm_survey.json"
 FARM_CORNERS = [(0.0, 0.0, 1.5), (0.0, 10.0, 1.5), (10.0, 10.0, 1.5), (10.0, 0.0, 1.5)]
 FLEET_APP = Path(__file__).with_name("sitl_fleet_app.py")
@@ -517,14 +536,14 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
                f"> {shlex.quote(str(workdir / 'freezer.log'))} 2>&1 & ) ; ")
     # every scenario on a vehicle booted for it (the farm survey is relative to where the vehicle takes off)
     scenarios = {
-        "guided": [aerodaas_run(FARM_APP, env_guided, workdir / "guided.mcap")],
-        "auto": [aerodaas_run(FARM_APP, env_auto, workdir / "auto.mcap")],
+        "guided": [survey_step(autopilot, env_guided, workdir / "guided.mcap")],
+        "auto": [survey_step(autopilot, env_auto, workdir / "auto.mcap")],
         "upload": [upload, observe],
-        "fence": [aerodaas_run(FARM_APP, env_fence, workdir / "fence.mcap")],
-        "linkloss": [stopper + aerodaas_run(FARM_APP, env_guided, workdir / "linkloss.mcap")],
+        "fence": [survey_step(autopilot, env_fence, workdir / "fence.mcap")],
+        "linkloss": [stopper + survey_step(autopilot, env_guided, workdir / "linkloss.mcap")],
     }
     if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
-        scenarios["failsafe"] = [freezer + aerodaas_run(FARM_APP, env_guided, workdir / "failsafe.mcap")]
+        scenarios["failsafe"] = [freezer + survey_step(autopilot, env_guided, workdir / "failsafe.mcap")]
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
         if only is not None and name not in only:
@@ -561,7 +580,8 @@ def fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str, Any]:
     # PX4 SIH's CPU grows with its speed factor: three at 5x on 2 cores went silent for 3.4-4.7 s at a time (link
     # lost, OFFBOARD setpoints stopped, PX4's failsafe RTL) once anything else ran beside them; at 2x they keep up
     speedup = FLEET_SPEEDUP.get(autopilot)
-    run_in_namespace(autopilot, workdir, [aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap")], n=n,
+    run_in_namespace(autopilot, workdir, [aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap",
+                                                              hold_radius_m=HOLD_RADIUS[autopilot])], n=n,
                      speedup=speedup)
     rc, text = step_result(workdir, 0)
     rec = workdir / "fleet.mcap"
@@ -609,7 +629,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     else:
         watchers = "".join(_watcher(monitor_connection(autopilot, i), i) for i in range(n))
     wait_obs = " ".join(f"{shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))
-    step = (router + watchers + aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap")
+    step = (router + watchers + aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap", hold_radius_m=HOLD_RADIUS[autopilot])
             + f"; rc=$?; for k in $(seq 1 600); do ok=1; for f in {wait_obs}; do [ -e $f ] || ok=0; done; "
               "[ $ok = 1 ] && break; sleep 0.5; done; "
               # the router and the observers are detached (their own process groups): stop them by pid, or they
