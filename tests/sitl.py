@@ -374,6 +374,45 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     return 0
 
 
+def observe_truth(conn: str, out: str, timeout_s: float) -> int:
+    """Follow a PX4 SIH on its ground-station link in raw pymavlink (system id 253) until it has been armed and is
+    disarmed again (+1 s) or ``timeout_s`` wall seconds: SIH's ground truth (HIL_STATE_QUATERNION) and the
+    estimate (GLOBAL_POSITION_INT), each asked at 20 Hz. Writes ``{"truth": [[wall_s, horizontal m/s, alt m AMSL],
+    ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...]}`` (wall: this observer's monotonic clock;
+    HIL_STATE_QUATERNION carries no time stamp on SIH)."""
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
+    end = time.monotonic() + timeout_s
+    truth, est = [], []
+    sysid, was, disarmed_at, next_req = None, False, None, 0.0
+    while time.monotonic() < end and not (disarmed_at and time.monotonic() - disarmed_at > 1.0):
+        if time.monotonic() >= next_req:
+            m.mav.heartbeat_send(6, 8, 0, 0, 4)
+            for mid in (115, 33) if sysid else ():
+                m.mav.command_long_send(sysid, 1, 511, 0, mid, 50000, 0, 0, 0, 0, 0)
+            next_req = time.monotonic() + 2.0
+        msg = m.recv_match(type=["HEARTBEAT", "HIL_STATE_QUATERNION", "GLOBAL_POSITION_INT"], blocking=True,
+                           timeout=0.5)
+        if msg is None:
+            continue
+        now = time.monotonic()
+        if msg.get_type() == "HEARTBEAT":
+            if msg.autopilot == 8 or msg.type == 6:
+                continue
+            sysid = msg.get_srcSystem()
+            armed = bool(msg.base_mode & 128)
+            was = was or armed
+            if was and not armed and disarmed_at is None:
+                disarmed_at = now
+        elif msg.get_type() == "HIL_STATE_QUATERNION":
+            truth.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.alt / 1000.0])
+        else:
+            est.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.relative_alt / 1000.0])
+    Path(out).write_text(json.dumps({"truth": truth, "estimate": est}))
+    return 0
+
+
 def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout_s: float = 300) -> int:
     """On a second MAVLink link (``conn``: the firmware's other output), wait for a HEARTBEAT showing the vehicle
     armed in a guided mode (GUIDED / OFFBOARD), ``delay_s`` wall seconds more, then SIGSTOP firmware ``pid`` for
@@ -456,6 +495,8 @@ if __name__ == "__main__":
         extra = dict(a.split("=", 1) for a in sys.argv[5:])  # SYSID=FILE: several vehicles on one port
         sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4]),
                              {int(k): v for k, v in extra.items()} or None))
+    if sys.argv[1] == "observe-truth":
+        sys.exit(observe_truth(sys.argv[2], sys.argv[3], float(sys.argv[4])))
     if sys.argv[1] == "freeze-our-drone":
         sys.exit(freeze_our_drone_when_flying(sys.argv[2], int(sys.argv[3]), sys.argv[4], float(sys.argv[5]),
                                               float(sys.argv[6])))
@@ -510,7 +551,8 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     fresh parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas
     mission upload --start`` (then observed until it lands), the farm survey with a geofence exclusion around one
     corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
-    (SIGSTOP/SIGCONT) in flight; ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
+    (SIGSTOP/SIGCONT) in flight; on PX4 also our drone actor frozen in OFFBOARD (its failsafe) and the survey at
+    0.5 m/s with SIH's ground truth observed (``slow``, :func:`observe_truth`); ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
     "observed"}}``."""
     from aerodaas.navigation.geo import enu_to_geodetic
     from aerodaas.app.models import GeoPoint
@@ -544,6 +586,13 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     }
     if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
         scenarios["failsafe"] = [freezer + survey_step(autopilot, env_guided, workdir / "failsafe.mcap")]
+        # the farm survey's own 0.5 m/s on stock PX4 SIH, with SIH's ground truth observed: a limit that cannot hold
+        slow = mavlink_env(autopilot, FARM_ENV)
+        slow["robots"][0]["limits"]["max_speed"] = 0.5
+        truth = (f"( {py} -m tests.sitl observe-truth {monitor_connection(autopilot)} "
+                 f"{shlex.quote(str(workdir / 'truth.json'))} 300 > {shlex.quote(str(workdir / 'truth.log'))} 2>&1 & ) ; ")
+        scenarios["slow"] = [truth + survey_step(autopilot, _write_env(workdir / "slow.json", slow),
+                                                 workdir / "slow.mcap") + "; sleep 3"]
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
         if only is not None and name not in only:
@@ -553,9 +602,12 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         for k, step in enumerate(steps):
             rc, text = step_result(d, k)
             out[name if k == 0 else "observe"] = {"rc": rc, "out": text}
-    for name in ("guided", "auto", "linkloss", "failsafe"):
+    for name in ("guided", "auto", "linkloss", "failsafe", "slow"):
         if name in out:
             out[name]["rec"] = _read_or_note(workdir / f"{name}.mcap")
+    truth = workdir / "truth.json"
+    if "slow" in out:
+        out["slow"]["truth"] = json.loads(truth.read_text()) if truth.exists() else {}
     modes = workdir / "failsafe_modes.json"
     if "failsafe" in out:
         out["failsafe"]["firmware"] = json.loads(modes.read_text()) if modes.exists() else {}
