@@ -9,6 +9,10 @@ from typing import Any
 
 from aerodaas.navigation.fsm import MissionState as S
 
+#: vehicle seconds a landed, still armed vehicle is given to disarm by itself at the end (:meth:`RunEnd._await_disarm`)
+DISARM_WAIT_S = 15.0
+#: ... and wall seconds at most
+DISARM_WAIT_WALL_S = 20.0
 #: wall seconds a finished drone's odometry may wait for a position sample that shows its end state (:meth:`RunEnd.settled`)
 SETTLE_WALL_S = 2.0
 
@@ -50,6 +54,9 @@ class RunEnd:
                           "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
                 how, f"safe end {how}")
             self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+        elif self.ended is None and b.navigable and b.armed and b.link_ok and self.fsm.state == S.LANDED:
+            self.ended = self._await_disarm()
+            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         elif self.ended is None:
             st = self.fsm.state
             self.ended = ("landed and disarmed" if st == S.LANDED and not b.armed else
@@ -57,6 +64,31 @@ class RunEnd:
                           f"observed to the end ({st.value})")
             self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         b.close()
+
+    def _await_disarm(self) -> str:
+        """Landed and still armed at the end of the mission: the autopilot disarms by itself a few seconds after
+        touchdown (PX4 ``COM_DISARM_LAND``, 2 s; ArduCopter ``DISARM_DELAY``, 10 s), so wait for it up to
+        :data:`DISARM_WAIT_S` vehicle seconds (and :data:`DISARM_WAIT_WALL_S` wall seconds) while recording state and
+        odometry, then disarm it ourselves (on the ground; ``disarmed_by_us`` event). Returns how the run ended."""
+        import time
+
+        b = self.backend
+        t_end, wall_end = b.t + DISARM_WAIT_S, time.monotonic() + DISARM_WAIT_WALL_S
+        while b.armed and b.link_ok and not b.in_air and b.t < t_end and time.monotonic() < wall_end:
+            time.sleep(0.05)
+            self._record_safe_end()
+        if not b.armed:
+            return "landed and disarmed"
+        if b.in_air or not b.link_ok:
+            return f"state {self.fsm.state.value}, armed"
+        try:
+            b.disarm()
+        except Exception as e:  # noqa: BLE001 - recorded; closing goes on
+            self._event("disarm_failed", error=f"{type(e).__name__}: {e}")
+            return "landed, still armed (disarm refused)"
+        self._event("disarmed_by_us", waited_s=round(DISARM_WAIT_S, 1))
+        self._record_safe_end()
+        return "landed and disarmed (by us)"
 
     def _record_safe_end(self) -> None:
         """While the backend's safe end runs: its events, the stat-stream (LANDING, then LANDED at the disarm) and

@@ -80,6 +80,9 @@ def _survey_done(run: dict, name: str, autopilot: str, hold_s: float = HOVER_S) 
         assert v["closest_m"] <= r and v["time_within_s"] >= hold_s, (name, visits)
     assert _states(rec)[-1][1] == "LANDED", _states(rec)[-6:]
     assert not odo[-1]["in_air"]
+    # recorded until the disarm (PX4's HEARTBEAT said armed for a moment after touchdown: the run used to end there)
+    end = [e for e in events(rec) if e["event"] == "run_end"]
+    assert end and end[-1]["how"].startswith("landed and disarmed") and not end[-1]["armed"], end
     return visits
 
 
@@ -119,7 +122,8 @@ def test_speed_stays_within_the_limit(session, run, autopilot):
 
 def test_hover_height_from_the_firmware_estimate(session, autopilot):
     """While holding at each waypoint, the firmware's own altitude estimate (GLOBAL_POSITION_INT alt, AMSL) is
-    within 0.3 m of the commanded 1.5 m above the take-off point (the altitude reference fixed at arming)."""
+    within 0.3 m (stock PX4 SIH: 0.5 m) of the commanded 1.5 m above the take-off point (the altitude reference fixed
+    at arming)."""
     rec = session["guided"]["rec"]
     ref = [e["amsl_m"] for e in events(rec) if e["event"] == "altitude_reference"]
     assert ref, "no altitude reference"
@@ -128,7 +132,9 @@ def test_hover_height_from_the_firmware_estimate(session, autopilot):
         errs += [o["geodetic"]["alt"] - ref[-1] - 1.5 for o in odometry(rec) if a + 1.0 <= o["t"] <= b]
     assert len(errs) > 50
     print(f"{autopilot}: hover height error {min(errs):+.3f} .. {max(errs):+.3f} m")
-    assert max(abs(e) for e in errs) <= 0.3
+    # stock PX4 SIH: its altitude estimate wanders as its horizontal one does (tests/sitl.py MAX_SPEED): -0.42 m at
+    # worst on 2026-11-24 (with the EKF2 noise overrides the tests used to add: within 0.24 m)
+    assert max(abs(e) for e in errs) <= (0.5 if autopilot == "px4" else 0.3)
 
 
 def test_autopilot_mission_holds_and_reaches(session, autopilot):
@@ -138,11 +144,14 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
     # the autopilot flies the hold of its own mission: PX4 starts the item's hold time once its own reached check
     # passes (navigator mission_block.cpp is_mission_item_reached: its acceptance radius and NAV_MC_ALT_RAD, on its
     # estimate), so the time within our 0.5 m can fall short of it by the estimate's excursions (4.6 s of 5 in one
-    # CI run); our WAYPOINT_HOLD bound below is the same 1 s
+    # CI run). Our WAYPOINT_HOLD starts when we see the vehicle within the radius and settled (below 0.3 m/s): with
+    # stock PX4's 1 m radius its own reached check (same radius, no settle speed) passes earlier, so our record of
+    # its 5 s hold was 3.8-5.0 s (2026-11-24); a WAYPOINT_HOLD that started at MISSION_ITEM_REACHED would be ~0 s
     _survey_done(session["auto"], "auto", autopilot, hold_s=HOVER_S - 1.0 if autopilot == "px4" else HOVER_S)
     rec = session["auto"]["rec"]
     holds = _holds(rec)
-    assert len(holds) == 4 and all(b - a >= HOVER_S - 1.0 for a, b in holds), holds
+    least = HOVER_S - (2.0 if autopilot == "px4" else 1.0)
+    assert len(holds) == 4 and all(b - a >= least for a, b in holds), holds
     reached = [e["item"] for e in events(rec) if e["event"] == "mission_item_reached"]
     assert len(reached) == len(set(reached)), reached
 

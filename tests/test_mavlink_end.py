@@ -42,3 +42,65 @@ def test_a_run_cut_short_records_the_safe_end_until_disarm(ray_session, run_opti
     assert odo[-1]["t"] > safe_t + 1.0 and not odo[-1]["armed"] and not odo[-1]["in_air"]
     assert rep["ended"] == "safe end: landed and disarmed"
     assert "ended: safe end: landed and disarmed" in format_summary(res)
+
+
+
+@pytest.mark.e2e
+def test_a_completed_mission_is_recorded_until_the_disarm(ray_session, run_options, tmp_path):
+    """The survey completes and the vehicle lands: the run ends only once the vehicle reports itself disarmed (PX4
+    SITL's HEARTBEAT still said armed when the run used to end: "state LANDED, armed"), the disarm is in the
+    recording after the landing, and the summary says "landed and disarmed"."""
+    emu, env_path = _mavlink_variant("farm_survey", "px4", 10.0, tmp_path, params=PX4_AT_SPEED["px4"])
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
+        vehicle = emu.snapshot()
+    finally:
+        emu.stop()
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", rep.get("error")
+    assert not vehicle["armed"]  # the emulated autopilot's own state
+    ev = [m for _, m in read_recording(tmp_path / "farm.mcap")["/quadrotor_base/events"]]
+    names = [e["event"] for e in ev]
+    assert "disarmed" in names[names.index("landed"):], names[-12:]
+    end = next(e for e in ev if e["event"] == "run_end")
+    assert end["how"] == "landed and disarmed" and not end["armed"]
+    assert rep["ended"] == "landed and disarmed" and "ended: landed and disarmed" in format_summary(res)
+
+
+class _Landed:
+    """A landed vehicle that stays armed until told (a firmware whose auto-disarm is off, COM_DISARM_LAND -1, after
+    a disarm it refused at touchdown)."""
+
+    navigable, link_ok, in_air, sample_key = True, True, False, 0
+
+    def __init__(self) -> None:
+        self.armed, self.t, self.disarms = True, 100.0, 0
+
+    def disarm(self) -> None:
+        self.disarms += 1
+        self.armed = False
+
+    def drain_events(self) -> list:
+        self.t += 1.0  # one vehicle second per look
+        return []
+
+
+def test_a_landed_vehicle_that_stays_armed_is_disarmed_by_us_after_its_grace():
+    from aerodaas.actors.drone_end import DISARM_WAIT_S, RunEnd
+    from aerodaas.navigation.fsm import MissionState as S
+
+    class End(RunEnd):
+        def __init__(self) -> None:
+            self.backend, self.events = _Landed(), []
+            self.fsm = type("F", (), {"state": S.LANDED})()
+
+        def _event(self, kind, **kw):
+            self.events.append({"event": kind, "t": self.backend.t, **kw})
+
+        def publish_odometry(self, tok=None):
+            pass
+
+    e = End()
+    assert e._await_disarm() == "landed and disarmed (by us)"
+    assert e.backend.disarms == 1 and e.backend.t >= 100.0 + DISARM_WAIT_S
+    assert [x["event"] for x in e.events] == ["disarmed_by_us"]

@@ -166,7 +166,7 @@ class ModeMixin:
                 self._disarm("auto disarm (no take-off)")
             elif self.took_off and self.landed_at is not None:
                 after = self.params["COM_DISARM_LAND"] if self.px4 else 1.0
-                if self.t - self.landed_at > after:
+                if after >= 0 and self.t - self.landed_at > after:  # PX4: COM_DISARM_LAND -1 disables it
                     self._disarm("landed")
                     if self.px4 and mode in ("AUTO.RTL", "AUTO.LAND"):
                         self._enter("AUTO.LOITER")  # PX4 SIH shows Hold once disarmed after an RTL/LAND (trace)
