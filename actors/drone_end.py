@@ -66,8 +66,9 @@ class RunEnd:
         b.close()
 
     def _await_disarm(self) -> str:
-        """Landed and still armed at the end of the mission: the autopilot disarms by itself a few seconds after
-        touchdown (PX4 ``COM_DISARM_LAND``, 2 s; ArduCopter ``DISARM_DELAY``, 10 s), so wait for it up to
+        """Landed and still armed at the end of the mission (our disarm at touchdown refused while the autopilot's
+        land detector has not confirmed the landing, or its HEARTBEAT not showing it yet): the autopilot disarms by
+        itself after touchdown (PX4 ``COM_DISARM_LAND``, 2 s; ArduCopter in LAND at touchdown), so wait for it up to
         :data:`DISARM_WAIT_S` vehicle seconds (and :data:`DISARM_WAIT_WALL_S` wall seconds) while recording state and
         odometry, then disarm it ourselves (on the ground; ``disarmed_by_us`` event). Returns how the run ended."""
         import time
@@ -86,7 +87,7 @@ class RunEnd:
         except Exception as e:  # noqa: BLE001 - recorded; closing goes on
             self._event("disarm_failed", error=f"{type(e).__name__}: {e}")
             return "landed, still armed (disarm refused)"
-        self._event("disarmed_by_us", waited_s=round(DISARM_WAIT_S, 1))
+        self._event("disarmed_by_us", waited_vehicle_s=round(b.t - t_end + DISARM_WAIT_S, 1))
         self._record_safe_end()
         return "landed and disarmed (by us)"
 

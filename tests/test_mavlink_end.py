@@ -47,10 +47,14 @@ def test_a_run_cut_short_records_the_safe_end_until_disarm(ray_session, run_opti
 
 @pytest.mark.e2e
 def test_a_completed_mission_is_recorded_until_the_disarm(ray_session, run_options, tmp_path):
-    """The survey completes and the vehicle lands: the run ends only once the vehicle reports itself disarmed (PX4
-    SITL's HEARTBEAT still said armed when the run used to end: "state LANDED, armed"), the disarm is in the
-    recording after the landing, and the summary says "landed and disarmed"."""
+    """The survey completes and the vehicle lands. The emulated PX4 denies a disarm until its land detector has
+    confirmed the landing (3 s here), as PX4 does ("Disarming denied: not landed"), so the drone's disarm at
+    touchdown is refused at first: the run ends only once the vehicle reports itself disarmed, the disarm is in the
+    recording after the landing, and the summary says "landed and disarmed". (On PX4 SITL the run used to end at
+    touchdown with "state LANDED, armed": tests/sitl_cases.py _survey_done checks it on the firmware; a vehicle
+    that stays armed is disarmed by us, below.)"""
     emu, env_path = _mavlink_variant("farm_survey", "px4", 10.0, tmp_path, params=PX4_AT_SPEED["px4"])
+    emu.land_detect_s = 3.0
     try:
         res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
         vehicle = emu.snapshot()
@@ -61,7 +65,9 @@ def test_a_completed_mission_is_recorded_until_the_disarm(ray_session, run_optio
     assert not vehicle["armed"]  # the emulated autopilot's own state
     ev = [m for _, m in read_recording(tmp_path / "farm.mcap")["/quadrotor_base/events"]]
     names = [e["event"] for e in ev]
-    assert "disarmed" in names[names.index("landed"):], names[-12:]
+    after = names[names.index("landed"):]
+    assert "disarmed" in after, after
+    assert any(e["event"] == "status_text" and "Disarming denied" in e["text"] for e in ev), after
     end = next(e for e in ev if e["event"] == "run_end")
     assert end["how"] == "landed and disarmed" and not end["armed"]
     assert rep["ended"] == "landed and disarmed" and "ended: landed and disarmed" in format_summary(res)
@@ -104,3 +110,28 @@ def test_a_landed_vehicle_that_stays_armed_is_disarmed_by_us_after_its_grace():
     assert e._await_disarm() == "landed and disarmed (by us)"
     assert e.backend.disarms == 1 and e.backend.t >= 100.0 + DISARM_WAIT_S
     assert [x["event"] for x in e.events] == ["disarmed_by_us"]
+
+
+def test_a_vehicle_in_the_air_again_is_never_disarmed_by_the_wait():
+    from aerodaas.actors.drone_end import RunEnd
+    from aerodaas.navigation.fsm import MissionState as S
+
+    class Airborne(_Landed):
+        def drain_events(self) -> list:
+            self.in_air = self.t > 103.0  # it took off again (a pilot, the autopilot's own logic)
+            return super().drain_events()
+
+    class End(RunEnd):
+        def __init__(self) -> None:
+            self.backend, self.events = Airborne(), []
+            self.fsm = type("F", (), {"state": S.LANDED})()
+
+        def _event(self, kind, **kw):
+            self.events.append({"event": kind, **kw})
+
+        def publish_odometry(self, tok=None):
+            pass
+
+    e = End()
+    assert e._await_disarm() == "state LANDED, armed"
+    assert e.backend.disarms == 0 and e.events == []

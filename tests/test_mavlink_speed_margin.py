@@ -96,18 +96,26 @@ def test_an_estimator_that_underreports_speed_gets_the_vehicles_limit_lowered(ve
     10 % from then on."""
     emu, b = vehicle(autopilot, 2.0, 0.8)
     events: list = []
-    speeds = _legs(emu, b, 4, events)
+    speeds = _legs(emu, b, 2, events)
+    for _ in range(5):  # enough steady samples at speed: 10 vehicle seconds of it (about 3 legs)
+        if any(e["event"] == "speed_margin" for e in events):
+            break
+        _legs(emu, b, 2, events)  # there and back
     lowered = [e for e in events if e["event"] == "speed_margin"]
     assert lowered, [e["event"] for e in events]
     first = lowered[0]
-    assert first["margin_mps"] == pytest.approx(0.8, abs=0.1) and first["samples"] >= MIN_SAMPLES
+    # p99 of samples that are 0.8 once steady (more where the GNSS sample is newer than the estimate in a speed
+    # change: a larger margin only lowers the limit further)
+    assert 0.75 <= first["margin_mps"] <= 1.2 and first["samples"] >= MIN_SAMPLES, first
     cap = first["cap_mps"]
     assert cap == pytest.approx(2.2 - first["margin_mps"], abs=1e-3)
     param = "MPC_XY_VEL_MAX" if autopilot == "px4" else "WPNAV_SPEED"
     assert emu.params[param] == pytest.approx(cap * (1 if autopilot == "px4" else 100), rel=1e-3)
     if autopilot == "ardupilot":  # before: the rule's limit + the estimator's error (the emulated PX4 follows our
         assert max(speeds[0]) > 2.3  # moving OFFBOARD setpoint's true position, so its error shows only in AUTO)
+    n = len(events)
     after = _legs(emu, b, 2, events)
+    assert not [e for e in events[n:] if e["event"] == "speed_limit_update_failed"]
     assert max(max(s) for s in after) <= 2.2 + 0.05, [round(max(s), 3) for s in after]
     assert not [e for e in events if e["event"] == "speed_limit_unholdable"]
 
@@ -117,7 +125,10 @@ def test_a_limit_the_estimator_cannot_hold_is_reported_not_flown_as_held(vehicle
     backend says so once (speed_limit_unholdable, with the figures) and flies at the floor."""
     emu, b = vehicle("ardupilot", 0.5, 0.4)
     events: list = []
-    _legs(emu, b, 2, events)
+    for _ in range(4):  # 12 m legs at 0.9 m/s true: 65 samples at speed in two
+        _legs(emu, b, 2, events)
+        if any(e["event"] == "speed_limit_unholdable" for e in events):
+            break
     bad = [e for e in events if e["event"] == "speed_limit_unholdable"]
     assert len(bad) == 1 and bad[0]["margin_mps"] == pytest.approx(0.4, abs=0.1) and bad[0]["max_speed"] == 0.5
     assert emu.params["WPNAV_SPEED"] == pytest.approx(25.0, abs=1e-3)
@@ -126,7 +137,8 @@ def test_a_limit_the_estimator_cannot_hold_is_reported_not_flown_as_held(vehicle
 def test_an_honest_estimator_leaves_the_limit_alone(vehicle):
     emu, b = vehicle("ardupilot", 2.0, 0.0)
     events: list = []
-    _legs(emu, b, 3, events)
+    _legs(emu, b, 4, events)
+    assert b._speed_margin.samples >= MIN_SAMPLES  # it was measured (0 m/s), not skipped
     assert not [e for e in events if e["event"] in ("speed_margin", "speed_limit_unholdable")]
     assert emu.params["WPNAV_SPEED"] == pytest.approx(200.0)
 

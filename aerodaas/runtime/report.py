@@ -156,5 +156,5 @@ def _speed_margin_lines(events: list[dict]) -> list[str]:
         if e.get("event") == "speed_limit_unholdable":
             out.append(f"    speed limit NOT holdable: the vehicle flies up to {e.get('margin_mps')} m/s faster than its "
                        f"estimate (GNSS, p99 of {e.get('samples')} samples), more than max_speed {e.get('max_speed')} "
-                       f"m/s leaves room for; its own limit stays {e.get('cap_mps')} m/s")
+                       f"m/s leaves room for (the vehicle's own limit: {e.get('cap_mps')} m/s)")
     return out

@@ -97,6 +97,9 @@ class LinkMixin:
         brought down (:meth:`safe_end`), and parameters changed by :meth:`apply_speed_limits` are restored when
         ``restore_params`` says so and the vehicle is disarmed (never in flight: it would speed up). ``safe_end=False``
         hands the vehicle over as it is (``aerodaas mission upload --start``: the autopilot flies on)."""
+        worker = self._speed_worker  # a limit being lowered (params.py): finished before restoring parameters
+        if worker is not None and worker is not threading.current_thread():
+            worker.join(timeout=5.0)
         if self._conn is not None and self._io is not None and not self._stop.is_set():
             if safe_end:
                 try:

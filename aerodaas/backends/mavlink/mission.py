@@ -93,8 +93,9 @@ class MissionMixin:
                 # take-off (COM_HOME_EN): our own waypoints go up as AMSL altitudes above the take-off point
                 frame, z = M.MAV_FRAME_GLOBAL, _f32(self._alt_ref + z)
             if it.command == M.MAV_CMD_DO_CHANGE_SPEED:
-                # never above the robot's limit, never -2 ("default": DENIED by ArduCopter): the limit instead
-                limit = float(self.limits.max_speed)
+                # never above the robot's limit (less any estimator margin measured in flight), never -2
+                # ("default": DENIED by ArduCopter): the limit instead
+                limit = self.xy_speed_cap()
                 p[1] = _f32(limit if p[1] is None or (p[1] <= 0 and p[1] != -1) else min(p[1], limit))
             wire.append((frame, it.command, 1 if it.autocontinue else 0,
                          *[float("nan") if v is None else v for v in p], xi, yi, z))

@@ -27,7 +27,7 @@ from aerodaas.backends.mavlink.speed_margin import MIN_STEP_MPS, EstimatorSpeedM
 #: PX4's horizontal limits are ``limits.max_speed`` less this margin (m/s), and never below half of it (see
 #: :func:`px4_speed_limit`). PX4's velocity loop holds its *estimate* at MPC_XY_VEL_MAX, and each GPS fusion step
 #: of EKF2 moves that estimate (and the position) by a jolt that the loop then flies off: an overshoot in m/s, not
-#: a fraction of the speed. On SIH (EKF2 tuned to its IMU, tests/sitl.py) the reported speed peaked 0.15-0.24 m/s
+#: a fraction of the speed. On SIH (its EKF2 then told SIH's IMU noise) the reported speed peaked 0.15-0.24 m/s
 #: above MPC_XY_VEL_MAX 0.3 in five runs (0.45-0.54 m/s at max_speed 0.5, for 0.2-0.5 s), and the distance flown
 #: over 4 s stayed within MPC_XY_VEL_MAX + 0.13 m/s. On 30 m legs (2026-11-23): at MPC_XY_VEL_MAX 1.5 the
 #: reported peak was +0.04 m/s and the distance flown over 1 s +0.19 m/s; with this rule, max_speed 3.0 (2.75)
@@ -121,9 +121,13 @@ class ParamMixin:
         """The horizontal speed (m/s) the vehicle is limited to for the robot's ``limits.max_speed``: the
         autopilot's rule (ArduCopter ``max_speed``; PX4 :func:`px4_speed_limit`), lowered in flight when the
         vehicle's estimator needs more margin than that (:mod:`~aerodaas.backends.mavlink.speed_margin`)."""
-        return self._speed_cap.cap_mps if self._speed_cap is not None else self._default_speed_cap()
+        cap = self._speed_cap
+        default = self._default_speed_cap()
+        return min(default, cap.cap_mps) if cap is not None else default
 
     def _default_speed_cap(self) -> float:
+        """The autopilot's rule for ``limits.max_speed`` (m/s): ArduCopter the limit itself, PX4
+        :func:`px4_speed_limit`."""
         xy = float(self.limits.max_speed)
         return px4_speed_limit(xy) if self.autopilot == "px4" else xy
 
@@ -138,21 +142,23 @@ class ParamMixin:
         return {"MPC_XY_VEL_MAX": xy, "MPC_XY_CRUISE": xy}
 
     def _on_gnss_speed(self, gnss_speed_mps: float) -> None:
-        """A GPS_RAW_INT ground speed (m/s, 3-D fix): with the vehicle in the air and its estimated speed steady
-        (telemetry.py ``_set_velocity``), one sample of GNSS minus estimated horizontal speed for the speed
-        margin. Caller: the I/O thread."""
-        if self.in_air:
-            with self._lock:
-                if self._est_steady:
-                    self._speed_margin.add(gnss_speed_mps, self._est_hspeed)
+        """A GPS_RAW_INT ground speed (m/s, 3-D fix): with the vehicle in the air, its estimated speed steady
+        (telemetry.py ``_set_velocity``) and at least half the applied limit (where the limit binds: a hovering
+        vehicle's GNSS noise is no overshoot of it), one sample of GNSS minus estimated horizontal speed for the
+        speed margin. Caller: the I/O thread, holding ``_lock``."""
+        with self._lock:
+            if self._est_steady and self._est_hspeed >= 0.5 * self.xy_speed_cap() and self.in_air:
+                self._speed_margin.add(gnss_speed_mps, self._est_hspeed)
 
     def _update_speed_cap(self) -> None:
-        """Every 2 vehicle seconds (from :meth:`step`): when the measured estimator margin needs a limit at least
-        :data:`~aerodaas.backends.mavlink.speed_margin.MIN_STEP_MPS` below the applied one, set it on the vehicle
-        (``speed_margin`` event with the figures); only ever lowered within a connection. A limit that cannot
-        hold (``max_speed`` too small for the margin) is reported once (``speed_limit_unholdable``). A failed
-        parameter write is reported (``speed_limit_update_failed``) and tried again next time; never raises."""
-        if self.t < self._speed_check_t or not self._limits_applied:
+        """Every 2 vehicle seconds (from :meth:`step`, the drone's clock thread; it never blocks there): a limit
+        that cannot hold (``max_speed`` too small for the measured margin) is reported once
+        (``speed_limit_unholdable``); when the margin needs a limit at least
+        :data:`~aerodaas.backends.mavlink.speed_margin.MIN_STEP_MPS` below the applied one and the backend set the
+        vehicle's limits (``set_speed_limits``), a worker thread sets it on the vehicle (:meth:`_lower_speed_limit`;
+        one at a time, not while the link is lost, after a failure again only 2 -> 4 -> ... 30 vehicle seconds
+        later). Only ever lowered within a connection. Never raises."""
+        if self.t < self._speed_check_t:
             return
         self._speed_check_t = self.t + 2.0
         xy = float(self.limits.max_speed)
@@ -164,19 +170,38 @@ class ParamMixin:
                         cap_mps=round(cap.cap_mps, 3),
                         reason="the vehicle's estimator lets it fly this much faster than its estimate (GNSS, p99): "
                                "its limit cannot keep it within max_speed + 10 %")
-        if cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS:
+        worker = self._speed_worker
+        if (not self._limits_applied or not self._link_ok or (worker is not None and worker.is_alive())
+                or self.t < self._speed_retry_t or cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS):
             return
+        self._speed_worker = threading.Thread(target=self._lower_speed_limit, args=(cap,), daemon=True,
+                                              name=f"speed-limit-{self.robot_id}")
+        self._speed_worker.start()
+
+    def _lower_speed_limit(self, cap: SpeedCap) -> None:
+        """Worker thread of :meth:`_update_speed_cap`: set the vehicle's limits to ``cap`` and read them back
+        (``speed_margin`` event), then on ArduPilot in GUIDED/AUTO send DO_CHANGE_SPEED at the new limit (those
+        modes fly it rather than WPNAV_SPEED until the next mode change; a refusal is reported as
+        ``speed_command_refused``, the lowered parameters stay). A failed write: ``speed_limit_update_failed``,
+        the limit stays as it was, the next try waits twice as long (at most 30 vehicle s). Never raises."""
         before, self._speed_cap = self._speed_cap, cap
         try:
             verified = self.apply_speed_limits()
-            if self.autopilot == "ardupilot" and self._speed_cmd is not None and self._speed_cmd[0] > cap.cap_mps:
-                self._change_speed(cap.cap_mps)  # GUIDED flies DO_CHANGE_SPEED, not WPNAV_SPEED
         except Exception as e:  # noqa: BLE001 - in flight: report, keep flying at the applied limit, retry later
             self._speed_cap = before
-            self._event("speed_limit_update_failed", cap_mps=round(cap.cap_mps, 3), error=str(e))
+            self._speed_backoff_s = min(30.0, 2.0 * self._speed_backoff_s)
+            self._speed_retry_t = self.t + self._speed_backoff_s
+            self._event("speed_limit_update_failed", cap_mps=round(cap.cap_mps, 3), error=str(e),
+                        retry_in_s=self._speed_backoff_s)
             return
+        self._speed_backoff_s = 1.0
         self._event("speed_margin", margin_mps=cap.margin_mps, samples=cap.samples, cap_mps=round(cap.cap_mps, 3),
-                    max_speed=xy, **{k: round(v, 3) for k, v in verified.items()})
+                    max_speed=float(self.limits.max_speed), **{k: round(v, 3) for k, v in verified.items()})
+        if self.autopilot == "ardupilot" and self._mode in ("GUIDED", "AUTO"):
+            try:
+                self._change_speed(cap.cap_mps)
+            except Exception as e:  # noqa: BLE001 - reported; WPNAV_SPEED holds from the next mode change
+                self._event("speed_command_refused", cap_mps=round(cap.cap_mps, 3), error=str(e))
 
     def apply_speed_limits(self) -> dict[str, float]:
         """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
@@ -234,5 +259,9 @@ class ParamMixin:
         self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
         self._speed_check_t = 0.0  # vehicle time of the next check
         self._est_hspeed = 0.0  # the estimate's latest horizontal speed, m/s (telemetry.py _set_velocity)
-        self._est_steady = False  # ... and it changed by at most 0.1 m/s since the sample before
+        self._est_steady = False  # ... and it changed at most at 1 m/s^2 since the sample before
+        self._est_ms: int | None = None  # ... and its time_boot_ms
+        self._speed_worker: threading.Thread | None = None  # lowering the vehicle's limit (_lower_speed_limit)
+        self._speed_retry_t = 0.0  # vehicle time before which no new try after a failed one
+        self._speed_backoff_s = 1.0
         self._unholdable_reported = False

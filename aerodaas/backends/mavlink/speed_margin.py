@@ -20,9 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: the speed limit's tolerance: flown speed (over 1 s) within ``max_speed`` x (1 + this)
+#: the speed limit's tolerance: flown speed within ``max_speed`` x (1 + this) (issue 26: over 1 s windows)
 SPEED_TOLERANCE = 0.10
-#: airborne GNSS samples needed before the margin is used (10 s at the backend's 5 Hz GPS_RAW_INT)
+#: airborne GNSS samples needed before the margin is used (10 s at speed at the backend's 5 Hz GPS_RAW_INT; 25 s
+#: where the vehicle only streams it at 2 Hz, REQUEST_DATA_STREAM's EXTENDED_STATUS)
 MIN_SAMPLES = 50
 #: the samples kept (the last minute at 5 Hz): a margin follows the vehicle's recent flight
 WINDOW = 300
@@ -62,6 +63,7 @@ class EstimatorSpeedMargin:
 
     @property
     def samples(self) -> int:
+        """How many samples are kept (at most :data:`WINDOW`)."""
         return len(self._d)
 
     def margin_mps(self) -> float | None:

@@ -30,7 +30,7 @@ class TelemetryMixin:
         if self._mission_wire:
             self._check_arrival()
         if time.monotonic() - self._local_wall > 1.0:  # no fresher LOCAL_POSITION_NED velocity
-            self._set_velocity(self.ned_to_enu((msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)))
+            self._set_velocity(self.ned_to_enu((msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)), msg.time_boot_ms)
         if msg.hdg != 65535 and time.monotonic() - self._att_wall > 1.0:  # no ATTITUDE lately
             self._att = (self._att[0], self._att[1], self.enu_yaw_from_heading(msg.hdg / 100.0))
 
@@ -76,19 +76,21 @@ class TelemetryMixin:
         self._on_boot_ms(msg.time_boot_ms)
         self._local_ned = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
         self._local_wall = time.monotonic()
-        self._set_velocity(self.ned_to_enu((msg.vx, msg.vy, msg.vz)))
+        self._set_velocity(self.ned_to_enu((msg.vx, msg.vy, msg.vz)), msg.time_boot_ms)
         if not self._has_global:  # no global position (indoors): ENU from the EKF origin
             self._pos = self.ned_to_enu((msg.x, msg.y, msg.z))
             self._new_sample(msg.time_boot_ms)
 
-    def _set_velocity(self, v_enu: np.ndarray) -> None:
-        """The estimate's velocity (ENU m/s). Its horizontal speed is what a GNSS speed is compared with
-        (params.py ``_on_gnss_speed``) while it is steady (changed by at most 0.1 m/s since the sample before):
-        the two streams are not sampled together, and in an acceleration the difference of a period is no
-        overshoot (3 m/s^2 over a 0.2 s period is 0.6 m/s)."""
+    def _set_velocity(self, v_enu: np.ndarray, ms: int) -> None:
+        """The estimate's velocity (ENU m/s) at ``time_boot_ms`` ``ms``. Its horizontal speed is what a GNSS
+        speed is compared with (params.py ``_on_gnss_speed``) while it is steady (changed at most at 1 m/s^2 since
+        the sample before): the two streams are not sampled together, and in an acceleration the difference of a
+        period is no overshoot (3 m/s^2 over a 0.2 s period is 0.6 m/s)."""
         h = math.hypot(float(v_enu[0]), float(v_enu[1]))
-        self._est_steady = abs(h - self._est_hspeed) <= 0.1
-        self._est_hspeed = h
+        last = self._est_ms
+        dt = (ms - last) / 1000.0 if last is not None else 0.0
+        self._est_steady = 0.0 < dt <= 1.0 and abs(h - self._est_hspeed) <= 1.0 * dt
+        self._est_hspeed, self._est_ms = h, ms
         self._vel = v_enu
 
     def _new_sample(self, ms: int) -> None:

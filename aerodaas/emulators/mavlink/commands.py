@@ -66,6 +66,10 @@ class CommandMixin:
             force = int(round(p[1])) == 21196
             if p[0] >= 0.5:
                 return self._arm(force)
+            if s.armed and not force and self.px4 and not s.in_air and self.landed_at is not None and \
+                    self.t - self.landed_at < self.land_detect_s:  # PX4's land detector has not said landed yet
+                self._text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
             if s.armed and s.in_air and not force:
                 if self.px4:
                     self._text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")

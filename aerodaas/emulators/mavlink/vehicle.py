@@ -108,7 +108,7 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
                  ack_only_commands: set[int] | None = None, in_progress_commands: set[int] | None = None,
                  mission_int: bool | None = None, ekf_gps_s: float = 1.0, home_alt_drift_m: float | None = None,
                  deny_default_speed: bool | None = None, estimate_speed_error_mps: float = 0.0,
-                 seed: int = 0) -> None:
+                 land_detect_s: float = 0.0, seed: int = 0) -> None:
         if autopilot not in ("ardupilot", "px4"):
             raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
         if not (speedup > 0 and math.isfinite(speedup)):
@@ -150,6 +150,11 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         #: an estimator that lets the vehicle fly faster than its limit (stock PX4 SIH: 0.5 m/s at the p99,
         #: aerodaas.backends.mavlink.speed_margin); the physics flies the true speed at the vehicle's limit + this
         self.estimate_speed_error_mps = float(estimate_speed_error_mps)
+        if not (land_detect_s >= 0 and math.isfinite(land_detect_s)):
+            raise ValueError(f"land_detect_s must be a finite number >= 0, got {land_detect_s!r}")
+        #: PX4: vehicle seconds after touchdown during which an unforced disarm is denied ("Disarming denied: not
+        #: landed": its land detector has not confirmed the landing yet, commander Commander::disarm)
+        self.land_detect_s = float(land_detect_s)
         #: MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 (-2 "default") is DENIED (None: as the flavour's firmware,
         #: ArduCopter denies, PX4 accepts)
         self.deny_default_speed = (not self.px4) if deny_default_speed is None else bool(deny_default_speed)
