@@ -22,7 +22,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
@@ -84,7 +83,7 @@ def connection(autopilot: str, instance: int = 0) -> str:
 def monitor_connection(autopilot: str, instance: int = 0) -> str:
     """A second link to firmware instance ``instance`` (ArduCopter ``--serial1``; PX4's ground-station link,
     18570+i -> 14550: PX4 SITL sends every instance's to 14550, so a PX4 fleet's observer splits it by system id,
-    :func:`observe_raw`), for watchers beside the backend."""
+    :func:`tests.sitl_watchers.observe_raw`), for watchers beside the backend."""
     return f"udpin:127.0.0.1:{14551 + 10 * instance}" if autopilot == "ardupilot" else \
         f"udpin:127.0.0.1:{14550 + instance}"
 
@@ -274,237 +273,6 @@ def sustained_speed(odometry: list[dict], window_s: float) -> float:
     return best
 
 
-def wait_until(cond, timeout_s: float, every_s: float = 0.2) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(every_s)
-    return False
-
-
-def observe(conn: str, out: str, timeout_s: float) -> int:
-    """Follow a vehicle with the MAVLink backend (never commanding it) until it has been armed and is disarmed
-    again, or ``timeout_s`` wall seconds; write ``{"armed": bool, "samples": [[t, x, y, z, vx, vy], ...]`` (x, y
-    ENU metres from :data:`FARM_HOME`, z above the vehicle's home),
-    "events": [...]}`` to ``out``. Used after ``aerodaas mission upload --start`` (the CLI hands the vehicle over)."""
-    from aerodaas.backends import make_backend
-    from aerodaas.config import MavlinkConfig, RobotConfig
-    from aerodaas.navigation.geo import geodetic_to_enu
-    from aerodaas.app.models import GeoPoint
-
-    b = make_backend(RobotConfig(id="observer", backend="mavlink", home=FARM_HOME,
-                                 mavlink=MavlinkConfig(connection=conn, set_speed_limits=False)))
-    b.connect(timeout_s=60)
-    samples, was_armed = [], False
-    end = time.monotonic() + timeout_s
-    try:
-        while time.monotonic() < end:
-            was_armed = was_armed or b.armed
-            g, v = b.odometry().geodetic, b.velocity
-            e, n, _ = geodetic_to_enu(g.lat, g.lon, FARM_HOME["alt"], GeoPoint(**FARM_HOME))
-            samples.append([b.t, float(e), float(n), float(b.position[2]), float(v[0]), float(v[1])])
-            if was_armed and not b.armed and not b.in_air:
-                break
-            time.sleep(0.05)
-    finally:
-        events = b.drain_events()
-        b.close()
-    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not b.armed,
-                                     "samples": samples, "events": events}, default=str))
-    return 0
-
-
-def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str] | None = None) -> int:
-    """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
-    flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
-    and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
-    z, vx, vy], ...]}`` to ``out``: t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
-    :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s.
-
-    ``per_sysid`` (system id -> output file, ``out`` then unused): several vehicles on one port, each followed on
-    its own. PX4 SITL sends every instance's ground-station link to 127.0.0.1:14550 (``px4-rc.mavlink``: ``mavlink
-    start -x -u 18570+i`` has no ``-o``, so the remote port is the default 14550), so a PX4 fleet is observed on
-    one port and told apart by the MAVLink header's system id."""
-    from pymavlink import mavutil
-
-    from aerodaas.navigation.geo import geodetic_to_enu
-    from aerodaas.app.models import GeoPoint
-
-    home = GeoPoint(**FARM_HOME)
-    m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
-    end = time.monotonic() + timeout_s
-    outs: dict = dict(per_sysid) if per_sysid else {None: out}
-    st = {k: {"samples": [], "armed": False, "was_armed": False, "disarmed_at": None} for k in outs}
-    seen: set[int] = set()
-    next_hb = 0.0
-
-    def done(s: dict) -> bool:
-        return s["disarmed_at"] is not None and time.monotonic() - s["disarmed_at"] > 1.0
-
-    while time.monotonic() < end and not all(done(s) for s in st.values()):
-        if time.monotonic() >= next_hb:
-            m.mav.heartbeat_send(6, 8, 0, 0, 4)
-            for sysid in sorted(seen):
-                m.mav.command_long_send(sysid, 1, 511, 0, 33, 100000, 0, 0, 0, 0, 0)
-            next_hb = time.monotonic() + 1.0
-        msg = m.recv_match(type=["HEARTBEAT", "GLOBAL_POSITION_INT"], blocking=True, timeout=0.5)
-        if msg is None:
-            continue
-        key = msg.get_srcSystem() if per_sysid else None
-        s = st.get(key)
-        if s is None:
-            continue
-        if msg.get_type() == "HEARTBEAT":
-            if msg.autopilot == 8 or msg.type == 6:
-                continue
-            seen.add(msg.get_srcSystem())
-            s["armed"] = bool(msg.base_mode & 128)
-            s["was_armed"] = s["was_armed"] or s["armed"]
-            if s["was_armed"] and not s["armed"] and s["disarmed_at"] is None:
-                s["disarmed_at"] = time.monotonic()
-        elif msg.lat or msg.lon:
-            e, n, _ = geodetic_to_enu(msg.lat / 1e7, msg.lon / 1e7, home.alt, home)
-            s["samples"].append([msg.time_boot_ms / 1000.0, float(e), float(n), msg.relative_alt / 1000.0,
-                                 msg.vy / 100.0, msg.vx / 100.0])
-    for k, path in outs.items():
-        s = st[k]
-        Path(path).write_text(json.dumps({"armed": s["was_armed"], "landed": s["was_armed"] and not s["armed"],
-                                          "samples": s["samples"]}))
-    return 0
-
-
-def observe_truth(conn: str, out: str, timeout_s: float) -> int:
-    """Follow a PX4 SIH on its ground-station link in raw pymavlink (system id 253) until it has been armed and is
-    disarmed again (+1 s) or ``timeout_s`` wall seconds: SIH's ground truth (HIL_STATE_QUATERNION) and the
-    estimate (GLOBAL_POSITION_INT), each asked at 20 Hz. Writes ``{"truth": [[wall_s, horizontal m/s, alt m AMSL],
-    ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...]}`` (wall: this observer's monotonic clock;
-    HIL_STATE_QUATERNION carries no time stamp on SIH)."""
-    from pymavlink import mavutil
-
-    m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
-    end = time.monotonic() + timeout_s
-    truth, est = [], []
-    sysid, was, disarmed_at, next_req = None, False, None, 0.0
-    while time.monotonic() < end and not (disarmed_at and time.monotonic() - disarmed_at > 1.0):
-        if time.monotonic() >= next_req:
-            m.mav.heartbeat_send(6, 8, 0, 0, 4)
-            for mid in (115, 33) if sysid else ():
-                m.mav.command_long_send(sysid, 1, 511, 0, mid, 50000, 0, 0, 0, 0, 0)
-            next_req = time.monotonic() + 2.0
-        msg = m.recv_match(type=["HEARTBEAT", "HIL_STATE_QUATERNION", "GLOBAL_POSITION_INT"], blocking=True,
-                           timeout=0.5)
-        if msg is None:
-            continue
-        now = time.monotonic()
-        if msg.get_type() == "HEARTBEAT":
-            if msg.autopilot == 8 or msg.type == 6:
-                continue
-            sysid = msg.get_srcSystem()
-            armed = bool(msg.base_mode & 128)
-            was = was or armed
-            if was and not armed and disarmed_at is None:
-                disarmed_at = now
-        elif msg.get_type() == "HIL_STATE_QUATERNION":
-            truth.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.alt / 1000.0])
-        else:
-            est.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.relative_alt / 1000.0])
-    Path(out).write_text(json.dumps({"truth": truth, "estimate": est}))
-    return 0
-
-
-def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout_s: float = 300) -> int:
-    """On a second MAVLink link (``conn``: the firmware's other output), wait for a HEARTBEAT showing the vehicle
-    armed in a guided mode (GUIDED / OFFBOARD), ``delay_s`` wall seconds more, then SIGSTOP firmware ``pid`` for
-    ``stop_s`` seconds and SIGCONT it (a link loss the runtime must ride out)."""
-    import signal
-
-    from pymavlink import mavutil
-
-    m = mavutil.mavlink_connection(conn, source_system=254, source_component=191)
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        hb = m.recv_match(type="HEARTBEAT", blocking=True, timeout=1.0)
-        if hb is None or hb.autopilot == 8:
-            continue
-        if hb.base_mode & 128 and mavutil.mode_string_v10(hb) in ("GUIDED", "OFFBOARD"):
-            time.sleep(delay_s)
-            os.kill(pid, signal.SIGSTOP)
-            time.sleep(stop_s)
-            os.kill(pid, signal.SIGCONT)
-            print(f"stopped {pid} for {stop_s} s", flush=True)
-            return 0
-    print("never saw the vehicle flying", flush=True)
-    return 1
-
-
-def freeze_our_drone_when_flying(conn: str, root_pid: int, out: str, delay_s: float, stop_s: float,
-                                 timeout_s: float = 400) -> int:
-    """PX4's own failsafe while AeroDaaS runs: on a second MAVLink link (``conn``), wait for a HEARTBEAT showing the
-    vehicle armed in OFFBOARD, ``delay_s`` wall seconds more, then SIGSTOP our drone actor (the ``ray::DroneActor``
-    process among the descendants of ``root_pid``, the scenario's shell) for ``stop_s`` seconds: our setpoint stream
-    stops, PX4 leaves OFFBOARD after ``COM_OF_LOSS_T`` (its offboard-loss failsafe, ``COM_OBL_RC_ACT``), and when the
-    actor runs again it finds the autopilot in its failsafe mode. Then follow the firmware's HEARTBEATs until it is
-    disarmed (or ``timeout_s``) and write ``{"frozen": bool, "modes": [[time_boot_ms s, mode, armed], ...] (on
-    each change), "landed": bool}`` to ``out``."""
-    import signal
-
-    import psutil
-    from pymavlink import mavutil
-
-    m = mavutil.mavlink_connection(conn, source_system=254, source_component=190)
-    end = time.monotonic() + timeout_s
-    modes: list = []
-    frozen = was_armed = landed = False
-    t_boot = 0.0
-    while time.monotonic() < end:
-        msg = m.recv_match(type=["HEARTBEAT", "SYSTEM_TIME", "ATTITUDE"], blocking=True, timeout=1.0)
-        if msg is None:
-            continue
-        if msg.get_type() != "HEARTBEAT":
-            t_boot = getattr(msg, "time_boot_ms", 0) / 1000.0
-            continue
-        if msg.autopilot == 8:
-            continue
-        mode, armed = mavutil.mode_string_v10(msg), bool(msg.base_mode & 128)
-        if not modes or modes[-1][1:] != [mode, armed]:
-            modes.append([t_boot, mode, armed])
-        was_armed = was_armed or armed
-        if was_armed and not armed:
-            landed = True
-            break
-        if not frozen and armed and mode == "OFFBOARD":
-            time.sleep(delay_s)
-            drones = [p for p in psutil.Process(root_pid).children(recursive=True)
-                      if "DroneActor" in " ".join(p.cmdline()[:1])]
-            for p in drones:
-                p.send_signal(signal.SIGSTOP)
-            time.sleep(stop_s)
-            for p in drones:
-                p.send_signal(signal.SIGCONT)
-            frozen = bool(drones)
-            print(f"froze {[p.pid for p in drones]} for {stop_s} s", flush=True)
-    Path(out).write_text(json.dumps({"frozen": frozen, "modes": modes, "landed": landed}))
-    return 0 if frozen else 1
-
-
-if __name__ == "__main__":
-    if sys.argv[1] == "observe":
-        sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
-    if sys.argv[1] == "observe-raw":
-        extra = dict(a.split("=", 1) for a in sys.argv[5:])  # SYSID=FILE: several vehicles on one port
-        sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4]),
-                             {int(k): v for k, v in extra.items()} or None))
-    if sys.argv[1] == "observe-truth":
-        sys.exit(observe_truth(sys.argv[2], sys.argv[3], float(sys.argv[4])))
-    if sys.argv[1] == "freeze-our-drone":
-        sys.exit(freeze_our_drone_when_flying(sys.argv[2], int(sys.argv[3]), sys.argv[4], float(sys.argv[5]),
-                                              float(sys.argv[6])))
-    if sys.argv[1] == "stop-when-flying":
-        sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
-    raise SystemExit(f"unknown command {sys.argv[1]!r}")
-
-
 # ---------------------------------------------------------------------------------------------- scenarios
 FARM_APP = REPO / "apps" / "farm_survey.py"
 #: the farm survey with HOLD_RADIUS (PX4)
@@ -552,7 +320,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     mission upload --start`` (then observed until it lands), the farm survey with a geofence exclusion around one
     corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
     (SIGSTOP/SIGCONT) in flight; on PX4 also our drone actor frozen in OFFBOARD (its failsafe) and the survey at
-    0.5 m/s with SIH's ground truth observed (``slow``, :func:`observe_truth`); ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
+    0.5 m/s with SIH's ground truth observed (``slow``, :func:`tests.sitl_watchers.observe_truth`); ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
     "observed"}}``."""
     from aerodaas.navigation.geo import enu_to_geodetic
     from aerodaas.app.models import GeoPoint
@@ -570,10 +338,10 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     conn = connection(autopilot)
     upload = " ".join(shlex.quote(a) for a in [*AERODAAS, "mission", "upload", str(plan), "--start", "--connection",
                                                 conn, "--timeout", "60"])
-    observe = f"{py} -m tests.sitl observe {conn} {shlex.quote(str(workdir / 'observed.json'))} 300"
-    stopper = (f"( {py} -m tests.sitl stop-when-flying {monitor_connection(autopilot)} $FW0 3 6 "
+    observe = f"{py} -m tests.sitl_watchers observe {conn} {shlex.quote(str(workdir / 'observed.json'))} 300"
+    stopper = (f"( {py} -m tests.sitl_watchers stop-when-flying {monitor_connection(autopilot)} $FW0 3 6 "
                f"> {shlex.quote(str(workdir / 'stopper.log'))} 2>&1 & ) ; ")
-    freezer = (f"( {py} -m tests.sitl freeze-our-drone {monitor_connection(autopilot)} $$ "
+    freezer = (f"( {py} -m tests.sitl_watchers freeze-our-drone {monitor_connection(autopilot)} $$ "
                f"{shlex.quote(str(workdir / 'failsafe_modes.json'))} 3 3 "
                f"> {shlex.quote(str(workdir / 'freezer.log'))} 2>&1 & ) ; ")
     # every scenario on a vehicle booted for it (the farm survey is relative to where the vehicle takes off)
@@ -589,7 +357,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         # the farm survey's own 0.5 m/s on stock PX4 SIH, with SIH's ground truth observed: a limit that cannot hold
         slow = mavlink_env(autopilot, FARM_ENV)
         slow["robots"][0]["limits"]["max_speed"] = 0.5
-        truth = (f"( {py} -m tests.sitl observe-truth {monitor_connection(autopilot)} "
+        truth = (f"( {py} -m tests.sitl_watchers observe-truth {monitor_connection(autopilot)} "
                  f"{shlex.quote(str(workdir / 'truth.json'))} 300 > {shlex.quote(str(workdir / 'truth.log'))} 2>&1 & ) ; ")
         scenarios["slow"] = [truth + survey_step(autopilot, _write_env(workdir / "slow.json", slow),
                                                  workdir / "slow.mcap") + "; sleep 3"]
@@ -651,7 +419,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     """``n`` fresh ArduCopters with system ids 1..n behind ONE MAVProxy output port (as a ground station meets a
     fleet through one telemetry radio or router port): MAVProxy takes each firmware's serial0 as a master and
     forwards everything to ``udp:127.0.0.1:ROUTER_PORT``; the robots all name ``udpin:127.0.0.1:ROUTER_PORT`` with
-    ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`observe_raw`,
+    ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`tests.sitl_watchers.observe_raw`,
     its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log}``."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = mavlink_env(autopilot, FARM_ENV, n=n)
@@ -674,7 +442,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
               f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & "
               f"echo $! > {shlex.quote(str(workdir / 'router.pid'))} ) ; ")
     def _watcher(conn: str, first: int, extra: str = "") -> str:
-        return (f"( {py} -m tests.sitl observe-raw {conn} {shlex.quote(str(workdir / f'observed{first}.json'))} 900"
+        return (f"( {py} -m tests.sitl_watchers observe-raw {conn} {shlex.quote(str(workdir / f'observed{first}.json'))} 900"
                 f"{extra} > {shlex.quote(str(workdir / f'observer{first}.log'))} 2>&1 & "
                 f"echo $! > {shlex.quote(str(workdir / f'observer{first}.pid'))} ) ; ")
 
