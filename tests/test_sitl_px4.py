@@ -31,7 +31,8 @@ def test_a_limit_stock_px4_cannot_hold_is_reported(session):
     run = session["slow"]
     bad = [e for e in events(run["rec"]) if e["event"] == "speed_limit_unholdable"]
     assert len(bad) == 1, [e["event"] for e in events(run["rec"])][-40:]
-    assert bad[0]["max_speed"] == 0.5 and bad[0]["margin_mps"] > 0.3, bad
+    # unholdable means 0.55 - margin < 0.25, i.e. a margin above 0.3 (0.3 at the event's 3 decimals in one run)
+    assert bad[0]["max_speed"] == 0.5 and bad[0]["margin_mps"] >= 0.3, bad
     assert "speed limit NOT holdable" in run["out"], run["out"][-2000:]
     truth, est = np.array(run["truth"]["truth"]), np.array(run["truth"]["estimate"])
     assert len(truth) > 500 and len(est) > 500, (len(truth), len(est))
