@@ -11,20 +11,27 @@ from .sitl import read_recording
 from .test_backends_e2e import PX4_AT_SPEED, _mavlink_variant, _run_app
 
 
-@pytest.mark.e2e
-@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
-def test_a_run_cut_short_records_the_safe_end_until_disarm(ray_session, run_options, tmp_path, flavour):
+def _fly_survey(flavour: str, run_options, tmp_path, land_detect_s: float = 0.0):
+    """apps/farm_survey.py on an emulated ``flavour`` autopilot at 10x; asserts that the emulated autopilot itself
+    ends disarmed. Returns (MissionResult, the recording read with the ``mcap`` package)."""
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, params=PX4_AT_SPEED[flavour])
-    run_options.timeout = 4.0  # wall seconds: 40 s of vehicle time, half the survey
+    emu.land_detect_s = land_detect_s
     try:
         res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
         vehicle = emu.snapshot()
     finally:
         emu.stop()
+    assert not vehicle["armed"]  # the firmware's own state: down and disarmed
+    return res, read_recording(tmp_path / "farm.mcap")
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+def test_a_run_cut_short_records_the_safe_end_until_disarm(ray_session, run_options, tmp_path, flavour):
+    run_options.timeout = 4.0  # wall seconds: 40 s of vehicle time, half the survey
+    res, rec = _fly_survey(flavour, run_options, tmp_path)
     rep = res.robots["quadrotor_base"]
     assert res.outcome == "timeout", rep.get("error")
-    assert not vehicle["armed"]  # the firmware's own state: down and disarmed
-    rec = read_recording(tmp_path / "farm.mcap")
     ev = [m for _, m in rec["/quadrotor_base/events"]]
     names = [e["event"] for e in ev]
     assert "timeout" in names and "safe_end_started" in names, names
@@ -53,17 +60,10 @@ def test_a_completed_mission_is_recorded_until_the_disarm(ray_session, run_optio
     recording after the landing, and the summary says "landed and disarmed". (On PX4 SITL the run used to end at
     touchdown with "state LANDED, armed": tests/sitl_cases.py _survey_done checks it on the firmware; a vehicle
     that stays armed is disarmed by us, below.)"""
-    emu, env_path = _mavlink_variant("farm_survey", "px4", 10.0, tmp_path, params=PX4_AT_SPEED["px4"])
-    emu.land_detect_s = 3.0
-    try:
-        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
-        vehicle = emu.snapshot()
-    finally:
-        emu.stop()
+    res, rec = _fly_survey("px4", run_options, tmp_path, land_detect_s=3.0)
     rep = res.robots["quadrotor_base"]
     assert res.outcome == "success", rep.get("error")
-    assert not vehicle["armed"]  # the emulated autopilot's own state
-    ev = [m for _, m in read_recording(tmp_path / "farm.mcap")["/quadrotor_base/events"]]
+    ev = [m for _, m in rec["/quadrotor_base/events"]]
     names = [e["event"] for e in ev]
     after = names[names.index("landed"):]
     assert "disarmed" in after, after
