@@ -66,7 +66,7 @@ class RunEnd:
         b.close()
 
     def _await_disarm(self) -> str:
-        """Landed and still armed at the end of the mission (our disarm at touchdown refused while the autopilot's
+        """Landed and still armed when the run ends (our disarm at touchdown refused while the autopilot's
         land detector has not confirmed the landing, or its HEARTBEAT not showing it yet): the autopilot disarms by
         itself after touchdown (PX4 ``COM_DISARM_LAND``, 2 s; ArduCopter in LAND at touchdown), so wait for it up to
         :data:`DISARM_WAIT_S` vehicle seconds (and :data:`DISARM_WAIT_WALL_S` wall seconds) while recording state and

@@ -113,7 +113,10 @@ class LinkMixin:
                 else:
                     self._event("fence_not_restored", reason="link lost" if not self._link_ok else "still armed")
             if self.cfg.restore_params and self._saved_params:
-                if self._link_ok and not self._armed:
+                if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
+                    self._event("params_not_restored", reason="speed limit write in progress",
+                                names=sorted(self._saved_params))
+                elif self._link_ok and not self._armed:
                     self.restore_parameters()
                 else:
                     self._event("params_not_restored", reason="link lost" if not self._link_ok else "still armed",
@@ -509,8 +512,10 @@ class LinkMixin:
 
     def step(self, dt: float) -> None:
         """Telemetry arrives on the I/O thread; this reports that thread's failure (BackendError) and lowers the
-        vehicle's speed limit when its estimator needs more margin (params.py ``_update_speed_cap``)."""
+        vehicle's speed limit when its estimator needs more margin (params.py ``_update_speed_cap``, then
+        ``_resend_speed``)."""
         if self._io_error is not None:
             raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self._io_error}")
         self._update_speed_cap()
+        self._resend_speed()
 

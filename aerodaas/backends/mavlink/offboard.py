@@ -221,6 +221,7 @@ class OffboardMixin:
         default"): ArduCopter answers it MAV_RESULT_DENIED (``Copter::do_change_speed`` accepts > 0 only). Sent
         again after every mode change (ArduCopter re-initialises its navigation speed from WPNAV_SPEED on mode
         entry). Raises as :meth:`command_long`."""
+        self._speed_asked = speed
         limit = self.xy_speed_cap()
         value = limit if speed is None else min(float(speed), limit)
         key = (round(value, 3), self._mode_changes)

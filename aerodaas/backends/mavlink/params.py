@@ -180,10 +180,10 @@ class ParamMixin:
 
     def _lower_speed_limit(self, cap: SpeedCap) -> None:
         """Worker thread of :meth:`_update_speed_cap`: set the vehicle's limits to ``cap`` and read them back
-        (``speed_margin`` event), then on ArduPilot in GUIDED/AUTO send DO_CHANGE_SPEED at the new limit (those
-        modes fly it rather than WPNAV_SPEED until the next mode change; a refusal is reported as
-        ``speed_command_refused``, the lowered parameters stay). A failed write: ``speed_limit_update_failed``,
-        the limit stays as it was, the next try waits twice as long (at most 30 vehicle s). Never raises."""
+        (``speed_margin`` event); on ArduPilot with a DO_CHANGE_SPEED in force (GUIDED flies it, not WPNAV_SPEED)
+        :meth:`_resend_speed` sends it again at the new limit from the drone's thread. A failed write:
+        ``speed_limit_update_failed``, the limit stays as it was, the next try waits twice as long (at most 30
+        vehicle s). Never raises."""
         before, self._speed_cap = self._speed_cap, cap
         try:
             verified = self.apply_speed_limits()
@@ -197,11 +197,21 @@ class ParamMixin:
         self._speed_backoff_s = 1.0
         self._event("speed_margin", margin_mps=cap.margin_mps, samples=cap.samples, cap_mps=round(cap.cap_mps, 3),
                     max_speed=float(self.limits.max_speed), **{k: round(v, 3) for k, v in verified.items()})
-        if self.autopilot == "ardupilot" and self._mode in ("GUIDED", "AUTO"):
-            try:
-                self._change_speed(cap.cap_mps)
-            except Exception as e:  # noqa: BLE001 - reported; WPNAV_SPEED holds from the next mode change
-                self._event("speed_command_refused", cap_mps=round(cap.cap_mps, 3), error=str(e))
+        # ArduCopter's GUIDED leg flies the DO_CHANGE_SPEED it was given: the drone's thread sends it again at the
+        # new limit (commands are not sent from this thread: one command exchange at a time)
+        self._speed_resend = self.autopilot == "ardupilot" and self._speed_cmd is not None
+
+    def _resend_speed(self) -> None:
+        """From :meth:`step` (the drone's thread) after the limit was lowered: ArduPilot's DO_CHANGE_SPEED again,
+        for the speed last asked (:meth:`_change_speed` caps it at the new limit); a refusal or timeout is reported
+        (``speed_command_failed``; WPNAV_SPEED holds from the next mode change). Never raises."""
+        if not self._speed_resend:
+            return
+        self._speed_resend = False
+        try:
+            self._change_speed(self._speed_asked)
+        except Exception as e:  # noqa: BLE001 - reported; flying on
+            self._event("speed_command_failed", cap_mps=round(self.xy_speed_cap(), 3), error=str(e))
 
     def apply_speed_limits(self) -> dict[str, float]:
         """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
@@ -264,4 +274,6 @@ class ParamMixin:
         self._speed_worker: threading.Thread | None = None  # lowering the vehicle's limit (_lower_speed_limit)
         self._speed_retry_t = 0.0  # vehicle time before which no new try after a failed one
         self._speed_backoff_s = 1.0
+        self._speed_resend = False  # the lowered limit's DO_CHANGE_SPEED is still to be sent (ArduPilot)
+        self._speed_asked: float | None = None  # the speed of the last DO_CHANGE_SPEED asked (None: the limit)
         self._unholdable_reported = False
