@@ -24,7 +24,9 @@ SCRIPT = REPO / "clusters" / "smoke" / "ray_up_test.sh"
 def test_ray_up_edge_and_cloud_machines(tmp_path):
     result = tmp_path / "result.json"
     env = {**os.environ, "AERODAAS_SMOKE_PYTHON": sys.executable, "AERODAAS_SMOKE_RESULT": str(result)}
-    env.setdefault("AERODAAS_MODEL_DIR", str(MODEL_DIR))
+    # absolute (conftest resolves it): the README's command sets a relative ../shared/data/models, and the script
+    # rsyncs the model from inside its own checkout in /var/tmp, where that path does not exist
+    env["AERODAAS_MODEL_DIR"] = str(MODEL_DIR)
     log = tmp_path / "ray_up_test.log"
     with open(log, "w") as out:
         p = subprocess.Popen(["bash", str(SCRIPT)], env=env, stdin=subprocess.DEVNULL, stdout=out,
