@@ -19,7 +19,7 @@ import pytest
 from aerodaas.backends import BackendError, CommandRefused, LinkLost, make_backend
 from aerodaas.backends.mavlink import CommandNotAcknowledged, CommandNotConfirmed, MavlinkBackend
 from aerodaas.backends.mavlink.params import px4_speed_limit
-from aerodaas.config import MavlinkConfig, RobotConfig
+from aerodaas.config import Limits, MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 from aerodaas.navigation.geo import geodetic_to_enu
 from aerodaas.missionfile import load_mission
@@ -37,11 +37,12 @@ PREARM_PREFIX = {"ardupilot": "Arm: ", "px4": "Preflight Fail: "}  # a refused a
 
 @pytest.fixture
 def fly():
-    """fly(autopilot, speedup=10, emulator kwargs..., mavlink=dict of MavlinkConfig fields) -> (emulator, backend),
-    connected; everything is stopped after the test."""
+    """fly(autopilot, speedup=10, emulator kwargs..., mavlink=dict of MavlinkConfig fields, limits=Limits) ->
+    (emulator, backend), connected; everything is stopped after the test."""
     made: list = []
 
-    def make(autopilot: str, speedup: float = 10.0, mavlink: dict | None = None, connect: bool = True, **emu_kw):
+    def make(autopilot: str, speedup: float = 10.0, mavlink: dict | None = None, connect: bool = True,
+             limits: Limits | None = None, **emu_kw):
         emu_kw.setdefault("home", VEHICLE_HOME)
         emu_kw.setdefault("gps_lock_s", 1.0)
         if autopilot == "px4":
@@ -53,7 +54,8 @@ def fly():
         made.append(emu)
         address = emu.start("tcp:127.0.0.1:0")
         mc = MavlinkConfig(connection=address, **{"stream_rate_hz": 5.0, **(mavlink or {})})
-        backend = make_backend(RobotConfig(id="quad", backend="mavlink", home=CONFIG_HOME, mavlink=mc))
+        backend = make_backend(RobotConfig(id="quad", backend="mavlink", home=CONFIG_HOME, mavlink=mc,
+                                           **({"limits": limits} if limits is not None else {})))
         made.append(backend)
         if connect:
             backend.connect(timeout_s=10)

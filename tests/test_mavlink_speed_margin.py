@@ -10,13 +10,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from aerodaas.backends import make_backend
 from aerodaas.backends.mavlink.params import px4_speed_limit
 from aerodaas.backends.mavlink.speed_margin import MIN_SAMPLES, SPEED_TOLERANCE, EstimatorSpeedMargin
-from aerodaas.config import Limits, MavlinkConfig, RobotConfig
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.config import Limits
 
-from .test_mavlink import CONFIG_HOME, VEHICLE_HOME, run_until
+from .test_mavlink import fly, run_until  # noqa: F401 - fly: the fixture
 
 
 def test_no_margin_before_enough_samples_then_the_p99():
@@ -50,28 +48,16 @@ def test_the_cap_plus_the_measured_overshoot_fits_the_tolerance_or_is_reported(m
 
 
 @pytest.fixture
-def vehicle():
-    made: list = []
-
+def vehicle(fly):
+    """vehicle(autopilot, max_speed m/s, estimator error m/s) -> (emulator, backend), taken off to 3 m."""
     def make(autopilot: str, max_speed: float, error_mps: float):
-        emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, home=VEHICLE_HOME, gps_lock_s=1.0,
-                                     estimate_speed_error_mps=error_mps,
-                                     params={"COM_OF_LOSS_T": 3.0} if autopilot == "px4" else None)
-        made.append(emu)
-        address = emu.start("tcp:127.0.0.1:0")
-        b = make_backend(RobotConfig(id="quad", backend="mavlink", home=CONFIG_HOME,
-                                     limits=Limits(max_speed=max_speed),
-                                     mavlink=MavlinkConfig(connection=address, stream_rate_hz=5.0)))
-        made.append(b)
-        b.connect(timeout_s=10)
+        emu, b = fly(autopilot, limits=Limits(max_speed=max_speed), estimate_speed_error_mps=error_mps)
         b.arm()
         b.takeoff(3.0)
         assert run_until(b, lambda: b.position[2] > 2.8, 20)
         return emu, b
 
-    yield make
-    for obj in reversed(made):
-        obj.stop() if isinstance(obj, MavlinkVehicleEmulator) else obj.close()
+    return make
 
 
 def _legs(emu, b, n: int, events: list) -> list[list[float]]:

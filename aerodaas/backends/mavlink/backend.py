@@ -78,6 +78,9 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
         self._pos_seq = 0  # position samples received
         self._vel = np.zeros(3)
+        self._est_hspeed = 0.0  # its horizontal speed, m/s (telemetry.py _set_velocity) ...
+        self._est_steady = False  # ... changed at most at 1 m/s^2 since the sample before ...
+        self._est_ms: int | None = None  # ... at this time_boot_ms
         self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
         self._geo: GeoPoint | None = None
         self._rel_alt = 0.0

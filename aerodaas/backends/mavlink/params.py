@@ -39,7 +39,14 @@ def px4_speed_limit(max_speed: float) -> float:
     """PX4's ``MPC_XY_VEL_MAX`` / ``MPC_XY_CRUISE`` (m/s) for a robot whose ``limits.max_speed`` is ``max_speed``
     m/s: ``max(max_speed - 0.25, max_speed / 2)`` (0.25 m/s at 0.5, 2.75 m/s at 3). The margin is measured
     overshoot (:data:`_PX4_SPEED_MARGIN_MPS`); ArduCopter needs none (it flies WPNAV_SPEED within the limit)."""
-    return max(float(max_speed) - _PX4_SPEED_MARGIN_MPS, 0.5 * float(max_speed))
+    return max(float(max_speed) - _PX4_SPEED_MARGIN_MPS, speed_floor(max_speed))
+
+
+def speed_floor(max_speed: float) -> float:
+    """The lowest horizontal limit (m/s) the backend gives a vehicle whose ``limits.max_speed`` is ``max_speed``
+    m/s: half of it (PX4's rule above, and the in-flight margin's floor: a vehicle held to a crawl cannot hold its
+    position against its own estimator either)."""
+    return 0.5 * float(max_speed)
 
 
 #: how long (wall seconds, at most ``command_timeout_s``) one round of PARAM_REQUEST_READ waits for its answers
@@ -163,7 +170,7 @@ class ParamMixin:
         self._speed_check_t = self.t + 2.0
         xy = float(self.limits.max_speed)
         with self._lock:
-            cap: SpeedCap = self._speed_margin.cap(xy, self._default_speed_cap(), floor=0.5 * xy)
+            cap: SpeedCap = self._speed_margin.cap(xy, self._default_speed_cap(), floor=speed_floor(xy))
         if not cap.holdable and not self._unholdable_reported:
             self._unholdable_reported = True
             self._event("speed_limit_unholdable", max_speed=xy, margin_mps=cap.margin_mps, samples=cap.samples,
@@ -268,9 +275,6 @@ class ParamMixin:
         self._speed_margin = EstimatorSpeedMargin()
         self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
         self._speed_check_t = 0.0  # vehicle time of the next check
-        self._est_hspeed = 0.0  # the estimate's latest horizontal speed, m/s (telemetry.py _set_velocity)
-        self._est_steady = False  # ... and it changed at most at 1 m/s^2 since the sample before
-        self._est_ms: int | None = None  # ... and its time_boot_ms
         self._speed_worker: threading.Thread | None = None  # lowering the vehicle's limit (_lower_speed_limit)
         self._speed_retry_t = 0.0  # vehicle time before which no new try after a failed one
         self._speed_backoff_s = 1.0

@@ -56,7 +56,8 @@ class EstimatorSpeedMargin:
         self._d: deque[float] = deque(maxlen=WINDOW)
 
     def add(self, gnss_speed_mps: float, estimate_speed_mps: float) -> None:
-        """One airborne sample; non-finite values are ignored."""
+        """One airborne sample: the GNSS ground speed and the estimate's horizontal speed, both m/s. A non-finite
+        difference is ignored (never raises)."""
         d = float(gnss_speed_mps) - float(estimate_speed_mps)
         if math.isfinite(d):
             self._d.append(d)
@@ -73,9 +74,9 @@ class EstimatorSpeedMargin:
         return max(0.0, float(np.percentile(np.fromiter(self._d, float), QUANTILE)))
 
     def cap(self, max_speed: float, default_cap: float, floor: float) -> SpeedCap:
-        """The limit for ``max_speed`` (m/s): ``default_cap`` (the autopilot's measured rule, params.py), lowered to
-        ``max_speed`` x (1 + tolerance) - margin when the measured margin needs it, never below ``floor`` (a vehicle
-        held to a crawl cannot hold its position against its own estimator either)."""
+        """The limit for ``max_speed`` (all m/s): ``default_cap`` (the autopilot's measured rule, params.py), lowered
+        to ``max_speed`` x (1 + tolerance) - margin when the measured margin needs it, never below ``floor``
+        (params.py ``speed_floor``). Never raises."""
         margin = self.margin_mps()
         if margin is None:
             return SpeedCap(default_cap, None, len(self._d), True)
