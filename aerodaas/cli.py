@@ -123,20 +123,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
-    """``aerodaas up [--cpus N]``: start the persistent local cluster (:mod:`aerodaas.clusters.persistent`). Exit 0
-    (also when it already runs), 1 when it cannot start, 2 for a bad ``--cpus``."""
+    """``aerodaas up [--cpus N] [--warm-workers K]``: start the persistent local cluster
+    (:mod:`aerodaas.clusters.persistent`) with K warm workers (:mod:`aerodaas.clusters.warm_pool`). Exit 0 (also
+    when it already runs), 1 when it cannot start, 2 for a bad ``--cpus`` or ``--warm-workers``."""
     from aerodaas.clusters.persistent import up
 
     if not 1 <= args.cpus <= 256:
         print(f"aerodaas up: --cpus must be in [1, 256], got {args.cpus}", file=sys.stderr)
         return 2
+    if not 0 <= args.warm_workers <= 64:
+        print(f"aerodaas up: --warm-workers must be in [0, 64], got {args.warm_workers}", file=sys.stderr)
+        return 2
     try:
-        st = up(cpus=args.cpus)
+        st = up(cpus=args.cpus, warm_workers=args.warm_workers)
     except RuntimeError as e:
         print(e, file=sys.stderr)
         return 1
     what = "already running" if st["already"] else "started"
-    print(f"aerodaas up: local cluster {what} at {st['address']} (pid {st['pid']}, loopback only, tier=edge"
+    warm = f", {st['warm_workers']} warm workers" if st.get("warm_workers") else ""
+    print(f"aerodaas up: local cluster {what} at {st['address']} (pid {st['pid']}, loopback only, tier=edge{warm}"
           + (f", dashboard http://{st['dashboard']}" if st.get("dashboard") else "") + "); `aerodaas run` attaches "
           "to it, `aerodaas down` stops it", flush=True)
     return 0
@@ -541,6 +546,8 @@ def main(argv: list[str] | None = None) -> int:
     upp = sub.add_parser("up", help="start a persistent local Ray cluster (loopback, token auth, tier=edge, "
                                      "dashboard) that `aerodaas run` attaches to")
     upp.add_argument("--cpus", type=int, default=3, help="logical CPUs of the node (sizes the prestarted workers)")
+    upp.add_argument("--warm-workers", type=int, default=4,
+                     help="idle workers kept with the framework imported, for the next run's actors (0: none)")
     upp.set_defaults(func=_cmd_up)
     sub.add_parser("down", help="stop the cluster `aerodaas up` started (only that one)").set_defaults(func=_cmd_down)
     pl = sub.add_parser("plan", help="print the actors an application would start and where, without flying")

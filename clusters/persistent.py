@@ -10,6 +10,11 @@ connects). The daemon writes
 stops; ``aerodaas down`` sends SIGTERM to that pid only, and the daemon stops the processes its node started
 (``Cluster.shutdown``), never ``ray stop`` (which would stop every Ray of the machine).
 
+The daemon keeps ``warm_workers`` idle Python workers with the framework imported
+(:mod:`aerodaas.clusters.warm_pool`), so that a run's actors start in processes that already run. The state file then
+also holds ``warm_workers``, ``warm_idle`` (idle workers at the last look), ``code_fingerprint`` (of the framework's
+code the warm workers imported) and ``sys_path`` (the daemon's import path, which its workers share).
+
 :func:`attached_address` is what ``aerodaas run`` (without ``--address``) consults: the GCS address of a running
 cluster of this kind, or None.
 """
@@ -24,7 +29,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["attached_address", "down", "read_state", "state_path", "up"]
+__all__ = ["attached_address", "await_fresh_workers", "down", "importable_by_cluster", "not_on_cluster_path",
+           "read_state", "state_path", "up"]
 
 
 def state_path() -> Path:
@@ -63,9 +69,48 @@ def attached_address() -> str | None:
     return st.get("address") if st else None
 
 
-def up(cpus: int = 3, timeout_s: float = 180.0) -> dict[str, Any]:
-    """Start the cluster (or return the running one's state with ``"already": True``). Raises RuntimeError when the
-    daemon exits or does not report ready within ``timeout_s`` seconds (its log path is named)."""
+#: idle workers kept warm by default: a drone, an analytics, the recorder and one spare
+DEFAULT_WARM_WORKERS = 4
+
+
+def importable_by_cluster(path: str, st: dict[str, Any]) -> bool:
+    """Whether the package folder (or module file) ``path`` is on the import path of the cluster's daemon, which its
+    workers share (the state's ``sys_path``): such a plug-in package needs no shipping to the workers."""
+    parent = os.path.realpath(os.path.dirname(os.path.abspath(path)))
+    return any(os.path.realpath(p or ".") == parent for p in st.get("sys_path") or [])
+
+
+def not_on_cluster_path(paths: list[str]) -> list[str]:
+    """The plug-in package folders of ``paths`` that the running cluster's workers would not import by themselves
+    (:func:`importable_by_cluster`): only those are shipped with an attached run's job (as ``py_modules``), so that
+    a job with nothing to ship has no runtime environment and its actors can take the warm workers."""
+    st = read_state() or {}
+    return [p for p in paths if not importable_by_cluster(p, st)]
+
+
+def await_fresh_workers(timeout_s: float = 5.0) -> bool:
+    """When the running cluster keeps warm workers that imported other framework code than this driver has (an
+    edit since they started), wait up to ``timeout_s`` seconds for the daemon to replace them (it looks every
+    second). Returns True when the workers are current (or there are none)."""
+    st = read_state() or {}
+    if not st.get("warm_workers"):
+        return True
+    from aerodaas.clusters.warm_pool import code_fingerprint
+
+    fp = code_fingerprint()
+    t_end = time.monotonic() + timeout_s
+    while st.get("code_fingerprint") not in (None, fp):
+        if time.monotonic() > t_end:
+            return False
+        time.sleep(0.1)
+        st = read_state() or {}
+    return True
+
+
+def up(cpus: int = 3, timeout_s: float = 180.0, warm_workers: int = DEFAULT_WARM_WORKERS) -> dict[str, Any]:
+    """Start the cluster (or return the running one's state with ``"already": True``) with ``cpus`` logical CPUs
+    and ``warm_workers`` idle workers kept warm (0: none). Raises RuntimeError when the daemon exits or does not
+    report ready within ``timeout_s`` seconds (its log path is named)."""
     st = read_state()
     if st:
         return {**st, "already": True}
@@ -73,7 +118,8 @@ def up(cpus: int = 3, timeout_s: float = 180.0) -> dict[str, Any]:
     p.parent.mkdir(parents=True, exist_ok=True)
     logf = p.with_suffix(".log")
     with open(logf, "wb") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "aerodaas.clusters.persistent", "serve", str(int(cpus))],
+        proc = subprocess.Popen([sys.executable, "-m", "aerodaas.clusters.persistent", "serve", str(int(cpus)),
+                                 str(int(warm_workers))],
                                 stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
                                 start_new_session=True, close_fds=True)
     t_end = time.monotonic() + timeout_s
@@ -114,8 +160,9 @@ def _zombie(pid: int) -> bool:
         return False
 
 
-def _serve(cpus: int) -> None:
-    """The daemon: start the head node, write the state file, wait for SIGTERM/SIGINT, stop the node."""
+def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
+    """The daemon: start the head node (with ``warm`` warm workers), write the state file, wait for SIGTERM/SIGINT,
+    stop the node."""
     import threading
 
     from ray.cluster_utils import Cluster
@@ -128,19 +175,44 @@ def _serve(cpus: int) -> None:
     from aerodaas.runtime.worker_memory import limit_malloc_arenas
 
     limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
+    system_config: dict[str, Any] = {"worker_niceness": 0}
+    if warm > 0:
+        from aerodaas.clusters.warm_pool import setup_hook_env
+
+        os.environ.update(setup_hook_env())  # the raylet's workers inherit it: each imports the framework at start
+        system_config["num_workers_soft_limit"] = max(cpus, warm)  # idle warm workers are not reaped
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args={
         "num_cpus": cpus, "labels": {"tier": "edge", "aerodaas/compute": "local"},
-        "include_dashboard": True, "dashboard_host": "127.0.0.1",
-        "_system_config": {"worker_niceness": 0}})
+        "include_dashboard": True, "dashboard_host": "127.0.0.1", "_system_config": system_config})
     node = cluster.head_node
     st = {"pid": os.getpid(), "address": cluster.address, "session_dir": node.get_session_dir_path(),
-          "dashboard": getattr(node, "webui_url", None) or "", "started": time.time()}
-    tmp = state_path().with_suffix(".tmp")
-    tmp.write_text(json.dumps(st))
-    tmp.replace(state_path())
+          "dashboard": getattr(node, "webui_url", None) or "", "started": time.time(), "warm_workers": 0,
+          "sys_path": list(sys.path)}
+    lock = threading.Lock()
+
+    def publish(fields: dict[str, Any]) -> None:
+        with lock:
+            if stop.is_set():  # the node is going down: the state file is removed, never written again
+                return
+            st.update(fields)
+            tmp = state_path().with_suffix(".tmp")
+            tmp.write_text(json.dumps(st))
+            tmp.replace(state_path())
+
+    if warm > 0:
+        try:
+            from aerodaas.clusters.warm_pool import code_fingerprint, raylet_pool, run_in_thread
+
+            pool = raylet_pool(node, warm, publish)
+            st.update(warm_workers=warm, code_fingerprint=code_fingerprint())
+            run_in_thread(pool, stop)
+        except (ImportError, AttributeError, OSError, KeyError, IndexError) as e:  # this Ray lacks what it needs
+            st.update(warm_workers=0, warm_error=f"{type(e).__name__}: {e}"[:300])
+            print(f"aerodaas cluster: no warm workers ({st['warm_error']})", flush=True)
+    publish({})
     print(f"aerodaas cluster up: {st}", flush=True)
     try:
         stop.wait()
@@ -155,4 +227,5 @@ def _serve(cpus: int) -> None:
 
 
 if __name__ == "__main__" and len(sys.argv) >= 2 and sys.argv[1] == "serve":
-    _serve(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
+    _serve(int(sys.argv[2]) if len(sys.argv) > 2 else 3,
+           int(sys.argv[3]) if len(sys.argv) > 3 else DEFAULT_WARM_WORKERS)

@@ -11,6 +11,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import time
 
 import pytest
 
@@ -211,3 +212,74 @@ def test_the_example_app_runs_on_a_two_node_local_cluster(installed, tmp_path):
     out = json.loads(line[len("RESULT "):])
     assert out["rc"] == 0, out
     _check_recording(str(rec), src)
+
+
+ACTOR_PIDS = textwrap.dedent('''
+    import json, sys
+    import ray
+    from aerodaas.clusters.local import enable_token_auth
+    from aerodaas.runtime.loopback import loopback_only
+    enable_token_auth(); loopback_only()
+    ray.init(address=sys.argv[1], logging_level="error")
+    from ray.util.state import list_actors
+    print("ACTORS " + json.dumps([{"name": a.name, "pid": a.pid, "state": a.state}
+                                  for a in list_actors(detail=True, limit=1000)]))
+''')
+
+
+def _warm_idle_pids(daemon_pid: int) -> dict[int, str]:
+    """The idle Python workers of the `aerodaas up` daemon's raylet: pid -> the shared libraries they mapped."""
+    import psutil
+
+    out = {}
+    for p in psutil.Process(daemon_pid).children(recursive=True):
+        try:
+            if p.cmdline()[:1] == ["ray::IDLE"]:
+                out[p.pid] = "\n".join(m.path for m in p.memory_maps())
+        except (psutil.Error, IndexError):
+            continue
+    return out
+
+
+@pytest.mark.cluster
+def test_the_example_app_runs_attached_to_aerodaas_up_in_its_warm_workers(installed, tmp_path):
+    """`aerodaas up` keeps warm workers: idle Ray workers, bound to no job yet, that imported the framework when
+    they started (their memory maps hold onnxruntime's library). A run attached to it places its actors in them:
+    Ray's state API gives each actor's pid, and each was an idle warm worker before the run. The user's plug-ins,
+    outside the framework (installed where the cluster's interpreter finds them, so not shipped), reach those
+    workers and do their job (the recording)."""
+    import psutil
+
+    src, env = installed
+    env = {k: v for k, v in env.items() if k != "AERODAAS_NO_ATTACH"}
+    env["AERODAAS_STATE_DIR"] = str(tmp_path / "state")
+    up = _aerodaas(["up", "--cpus", "2", "--warm-workers", "8"], env, tmp_path, timeout=300)
+    assert up.returncode == 0 and "8 warm workers" in up.stdout, up.stdout + up.stderr
+    state = tmp_path / "state" / "cluster.json"
+    st = json.loads(state.read_text())
+    try:
+        warm: dict[int, str] = {}
+        for _ in range(600):  # the pool fills (each worker imports the framework first); bounded, not timed
+            st = json.loads(state.read_text())
+            warm = _warm_idle_pids(st["pid"])
+            if st.get("warm_idle", 0) >= 8 and len(warm) >= 8:
+                break
+            time.sleep(0.2)
+        assert len(warm) >= 8 and st.get("warm_error") is None, (warm.keys(), st)
+        assert all("onnxruntime" in maps for maps in warm.values()), "a warm worker did not import the framework"
+        rec = tmp_path / "gas.mcap"
+        p = _aerodaas(["run", str(src / "app" / "gas_survey.py"), "--record", str(rec), "--quiet", "--timeout",
+                       "300"], env, tmp_path, timeout=600)
+        assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+        assert "attached to the local cluster" in p.stderr, p.stderr[-2000:]
+        _check_recording(str(rec), src)
+        q = subprocess.run([sys.executable, "-c", ACTOR_PIDS, st["address"]], capture_output=True, text=True,
+                           env=env, cwd=tmp_path, timeout=180)
+        line = next((ln for ln in q.stdout.splitlines() if ln.startswith("ACTORS ")), None)
+        assert line, q.stdout[-2000:] + q.stderr[-3000:]
+        actors = [a for a in json.loads(line[len("ACTORS "):]) if a["name"]]
+        assert actors, actors
+        assert all(a["pid"] in warm for a in actors), (actors, sorted(warm))
+    finally:
+        d = _aerodaas(["down"], env, tmp_path)
+    assert d.returncode == 0 and "stopped" in d.stdout, d.stdout + d.stderr

@@ -151,6 +151,10 @@ def init_ray(address: str | None) -> None:
 
     ship = plugin_package_paths() if (address or up_address) and os.environ.get("AERODAAS_SHIP_PLUGINS") != "0" \
         else []
+    if up_address:  # not what `aerodaas up`'s workers import already: their warm pool serves jobs without one
+        from aerodaas.clusters.persistent import not_on_cluster_path
+
+        ship = not_on_cluster_path(ship)
     renv = {"runtime_env": {"py_modules": ship}} if ship else {}
     if address:
         ray.init(address=address, log_to_driver=True, include_dashboard=False, **renv)
@@ -159,6 +163,11 @@ def init_ray(address: str | None) -> None:
         from aerodaas.clusters.local import enable_token_auth
 
         enable_token_auth()  # the cluster was started with token auth: the driver must present the token
+        from aerodaas.clusters.persistent import await_fresh_workers
+
+        if not await_fresh_workers():
+            print("aerodaas: warning: the local cluster's warm workers still hold framework code older than this "
+                  "driver's; `aerodaas down && aerodaas up` restarts them", file=sys.stderr, flush=True)
         restore = loopback_only()
         try:
             ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning", **renv)

@@ -1,0 +1,216 @@
+"""Warm workers for the persistent local cluster of ``aerodaas up`` (issue 27, item 2: a run attached to it reaches
+its first processed frame in about a second).
+
+Ray's worker processes are started per job: every ``aerodaas run`` is a new job (driver), so without help each of its
+actors waits for a fresh Python process that starts Ray's core worker and imports the framework (0.5 s or more of CPU
+each, on a 2-core machine the largest part of an attached start). Two things remove that wait:
+
+- **Workers started ahead, for no job.** The daemon of ``aerodaas up`` asks its raylet for idle Python workers
+  through the raylet's own ``NodeManagerService.PrestartWorkers`` call (``src/ray/protobuf/node_manager.proto``: no
+  ``job_id``, no runtime environment, a keep-alive), the call Ray's core worker uses for the same purpose. Such a
+  worker is bound to the first job that needs one, so the next run's actors are placed in processes that already run.
+  Only jobs without a runtime environment of their own can use them (Ray matches workers by the job's runtime
+  environment hash); that is why an attached run ships no plug-in packages that the cluster's interpreter already
+  imports (:func:`aerodaas.runtime.driver.init_ray`).
+- **The framework imported ahead.** The daemon sets Ray's worker setup hook (``worker_process_setup_hook``, here
+  through the environment variable Ray's ``default_worker.py`` reads at start, inherited from the raylet) to
+  :func:`preimport`, which imports the modules the drone, analytics and recorder actors use. It never raises: a
+  module that fails to import is left to the actor that needs it, which then reports the error as before.
+
+A warm worker holds the framework's code as it was when the worker started. :func:`code_fingerprint` (the path, size
+and modification time of every module file of ``aerodaas``) is checked every second; when it changes, the idle warm
+workers are stopped (SIGTERM) and new ones started, and the state file carries the new fingerprint so that a run
+started in between waits for the refresh (:func:`aerodaas.clusters.persistent.await_fresh_workers`).
+
+Refills wait ``settle_s`` (2 s) after a run took workers, so that starting new workers does not compete with that
+run's own start on a small machine. Idle workers cost memory (``docs/operations.md`` gives the measured PSS).
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+__all__ = ["PREIMPORT_MODULES", "WarmPool", "code_fingerprint", "preimport", "setup_hook_env"]
+
+#: what the drone, analytics and recorder actors import at construction and set-up (measured from the modules loaded
+#: in each actor's worker during ``apps/vehicle_tracking.py``); their own imports bring the rest (numpy, OpenCV,
+#: pydantic, shapely, scipy, mcap)
+PREIMPORT_MODULES = (
+    "aerodaas.actors.drone_actor", "aerodaas.actors.analytics_actor", "aerodaas.actors.recorder_actor",
+    "aerodaas.actors.assembly", "aerodaas.actors.drone", "aerodaas.actors.analytics_component",
+    "aerodaas.actors.scheduler_component", "aerodaas.actors.camera", "aerodaas.actors.recorder",
+    "aerodaas.backends.sim", "aerodaas.sim.world", "aerodaas.perception.detect", "aerodaas.perception.tracking",
+    "aerodaas.recording.writer", "onnxruntime",
+)
+
+#: the environment variable Ray's ``default_worker.py`` reads for a module-path setup hook
+#: (``ray._private.ray_constants.WORKER_PROCESS_SETUP_HOOK_ENV_VAR``)
+_HOOK_ENV_FALLBACK = "__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"
+
+
+def preimport() -> None:
+    """Ray worker setup hook: import :data:`PREIMPORT_MODULES`. Never raises (a failed import is skipped)."""
+    for name in PREIMPORT_MODULES:
+        try:
+            importlib.import_module(name)
+        except BaseException:  # noqa: BLE001 - a warm-up must never stop a worker from starting
+            pass
+
+
+def setup_hook_env() -> dict[str, str]:
+    """The environment entry that makes every worker of a node started with it run :func:`preimport` at start."""
+    try:
+        from ray._private import ray_constants
+
+        key = getattr(ray_constants, "WORKER_PROCESS_SETUP_HOOK_ENV_VAR", _HOOK_ENV_FALLBACK)
+    except ImportError:
+        key = _HOOK_ENV_FALLBACK
+    return {key: f"{__name__}.preimport"}
+
+
+def _package_roots() -> list[str]:
+    import aerodaas
+
+    roots = list(getattr(aerodaas, "__path__", []))
+    for sub in ("actors", "schedulers", "clusters"):  # installed as aerodaas.<sub> from the repository's top level
+        try:
+            mod = importlib.import_module(f"aerodaas.{sub}")
+        except ImportError:
+            continue
+        roots += [p for p in getattr(mod, "__path__", []) if not any(p.startswith(r + os.sep) for r in roots)]
+    return roots
+
+
+def code_fingerprint(roots: list[str] | None = None) -> str:
+    """A digest of every ``*.py`` file under ``roots`` (default: the installed ``aerodaas`` package and the
+    sub-packages installed from the repository's top level): path, size and modification time (ns). Changes when
+    any module file is edited, added or removed. Unreadable folders are skipped; never raises."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=12)
+    for root in sorted(roots if roots is not None else _package_roots()):
+        stack = [root]
+        while stack:
+            d = stack.pop()
+            try:
+                entries = sorted(os.scandir(d), key=lambda e: e.name)
+            except OSError:
+                continue
+            for e in entries:
+                try:
+                    if e.is_dir(follow_symlinks=False):
+                        if e.name != "__pycache__":
+                            stack.append(e.path)
+                    elif e.name.endswith(".py"):
+                        st = e.stat()
+                        h.update(f"{e.path}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
+                except OSError:
+                    continue
+    return h.hexdigest()
+
+
+@dataclass
+class WarmPool:
+    """Keeps ``size`` idle Python workers on one raylet (see the module).
+
+    ``idle_pids()`` lists the raylet's idle or starting workers, ``prestart(n)`` asks the raylet for ``n`` more
+    (it starts at most as many as the node has CPUs per call), ``stop_pid(pid)`` ends one, ``fingerprint()`` is
+    :func:`code_fingerprint`, ``publish(fields)`` reports the pool's state (the daemon writes it to its state file).
+    Call :meth:`step` about once a second from one thread."""
+
+    size: int
+    idle_pids: Callable[[], list[int]]
+    prestart: Callable[[int], None]
+    stop_pid: Callable[[int], None]
+    fingerprint: Callable[[], str] = code_fingerprint
+    publish: Callable[[dict], None] = lambda fields: None
+    settle_s: float = 2.0
+    short_since: float | None = None
+    last_fingerprint: str = ""
+    last_published: dict = field(default_factory=dict)
+    errors: int = 0
+
+    def step(self, now: float) -> None:
+        """One look at the pool: refresh it if the code changed; refill it once it has been short for
+        ``settle_s`` seconds (at once when it was never filled); publish ``warm_idle`` and ``code_fingerprint``.
+        A failed call is counted in ``errors`` and published as ``warm_error``; never raises."""
+        try:
+            fp = self.fingerprint()
+            idle = self.idle_pids()
+            at_once = not self.last_fingerprint  # never filled yet
+            if self.last_fingerprint and fp != self.last_fingerprint:
+                for pid in idle:  # they imported the old code
+                    self.stop_pid(pid)
+                idle, at_once = [], True  # a run may be waiting for fresh workers
+            self.last_fingerprint = fp
+            missing = self.size - len(idle)
+            if missing <= 0:
+                self.short_since = None
+            elif at_once or (self.short_since is not None and now - self.short_since >= self.settle_s):
+                self.prestart(missing)
+                self.short_since = None
+            elif self.short_since is None:
+                self.short_since = now
+            self._publish({"warm_idle": len(idle), "code_fingerprint": fp})
+        except Exception as e:  # noqa: BLE001 - the pool is an optimisation: the cluster keeps running without it
+            self.errors += 1
+            self._publish({"warm_error": f"{type(e).__name__}: {e}"[:300]})
+
+    def _publish(self, fields: dict) -> None:
+        if any(self.last_published.get(k) != v for k, v in fields.items()):
+            self.last_published.update(fields)
+            self.publish(dict(fields))
+
+
+def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
+    """A :class:`WarmPool` on the raylet of ``node`` (a ``ray._private.node.Node`` this process started), using its
+    ``PrestartWorkers`` gRPC call with the cluster's token. Raises ImportError/AttributeError when this Ray lacks
+    what it needs (the daemon then runs without a pool)."""
+    import psutil
+    from ray._private import ray_constants
+    from ray._private.grpc_utils import init_grpc_channel
+    from ray.core.generated import common_pb2, node_manager_pb2, node_manager_pb2_grpc
+
+    raylet = psutil.Process(node.all_processes[ray_constants.PROCESS_TYPE_RAYLET][0].process.pid)
+    stub = node_manager_pb2_grpc.NodeManagerServiceStub(init_grpc_channel(f"127.0.0.1:{node.node_manager_port}"))
+    def idle_pids() -> list[int]:
+        out = []
+        for p in raylet.children():
+            try:
+                cmd = p.cmdline()
+            except psutil.Error:
+                continue
+            if cmd and (cmd[0].startswith("ray::IDLE") or any(c.endswith("default_worker.py") for c in cmd[:3])):
+                out.append(p.pid)
+        return out
+
+    def prestart(n: int) -> None:
+        req = node_manager_pb2.PrestartWorkersRequest(language=common_pb2.PYTHON, num_workers=int(n),
+                                                      keep_alive_duration_secs=24 * 3600)
+        stub.PrestartWorkers(req, timeout=10)
+
+    def stop_pid(pid: int) -> None:
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+
+    return WarmPool(size=size, idle_pids=idle_pids, prestart=prestart, stop_pid=stop_pid, publish=publish)
+
+
+def run_in_thread(pool: WarmPool, stop: threading.Event, period_s: float = 1.0) -> threading.Thread:
+    """Call ``pool.step`` every ``period_s`` seconds until ``stop`` is set (a daemon thread, returned started)."""
+
+    def loop() -> None:
+        while not stop.is_set():
+            pool.step(time.monotonic())
+            stop.wait(period_s)
+
+    t = threading.Thread(target=loop, name="aerodaas-warm-pool", daemon=True)
+    t.start()
+    return t
