@@ -96,6 +96,8 @@ def test_bench_startup_json_reports_phases_in_order(tmp_path):
     # attached to an `aerodaas up` cluster of the benchmark's own (issue 27 item 2), stopped afterwards
     (att,) = rep["attached"]["runs"]
     assert list(att["phases_s"]) == order and rep["cold"]["runs"] == [run]
+    # the attached run started once the cluster's warm pool was full (clusters.warm_pool)
+    assert rep["attached"]["warm_workers"] == 4 and att["warm_idle_at_start"] >= 4
     assert len(rep["load_avg_before"]) == 3 == len(rep["load_avg_after"])
 
 

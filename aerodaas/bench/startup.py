@@ -9,7 +9,8 @@ The run is then interrupted.
 Two modes (``--mode``): ``cold`` (the run starts its own Ray; ``AERODAAS_NO_ATTACH=1``) and ``attached`` (the run
 attaches to a persistent local cluster of ``aerodaas up``, started here under a private ``AERODAAS_STATE_DIR`` with
 the probe file in its environment, since its workers write ``first_processed``, and stopped afterwards; a cluster the
-user started is never touched). The report holds both and the load average before and after (the machine may be shared).
+user started is never touched). Each attached run starts once the cluster's warm pool is full again
+(``warm_idle_at_start`` in the run's record), as when a user starts the next run a few seconds after the last. The report holds both and the load average before and after (the machine may be shared).
 """
 from __future__ import annotations
 
@@ -82,10 +83,27 @@ def measure_once(app: str, timeout_s: float = 120.0, attach: bool = False, probe
             "detail_s": {k: v for k, v in rel.items() if k not in PHASES}}
 
 
+def _await_warm_pool(timeout_s: float = 60.0) -> int:
+    """Wait (at most ``timeout_s``) until the attached cluster's warm pool is full, as it is when a user starts the
+    next run some seconds after the last one; returns the idle warm workers then (0 when it keeps none)."""
+    from aerodaas.clusters.persistent import read_state
+
+    t_end = time.monotonic() + timeout_s
+    while True:
+        st = read_state() or {}
+        idle, want = int(st.get("warm_idle", 0)), int(st.get("warm_workers", 0))
+        if idle >= want or time.monotonic() > t_end:
+            return idle
+        time.sleep(0.2)
+
+
 def _measure(app: str, repeat: int, attach: bool, progress, task, probe_file: Path | None = None) -> dict:
     runs = []
     for i in range(repeat):
+        warm = _await_warm_pool() if attach else None
         r = measure_once(app, attach=attach, probe_file=probe_file)
+        if warm is not None:
+            r["warm_idle_at_start"] = warm
         progress.console.print(f"startup {'attached' if attach else 'cold'} run {i + 1}/{repeat}: "
                                f"{r['seconds_to_first_frame']:.2f} s  {r['phases_s']}")
         progress.advance(task)
@@ -95,7 +113,7 @@ def _measure(app: str, repeat: int, attach: bool, progress, task, probe_file: Pa
             "target_s": 1.5 if attach else 4.0}
 
 
-def run_startup(app: str, repeat: int = 3, mode: str = "both") -> dict:
+def run_startup(app: str, repeat: int = 3, mode: str = "both", warm_workers: int | None = None) -> dict:
     from rich.console import Console
     from rich.progress import Progress
 
@@ -116,11 +134,12 @@ def run_startup(app: str, repeat: int = 3, mode: str = "both") -> dict:
                 os.environ["AERODAAS_STATE_DIR"], os.environ[PROBE_ENV] = d, str(Path(d) / "probe.txt")
                 try:
                     t_up = time.monotonic()
-                    persistent.up()
+                    warm = persistent.DEFAULT_WARM_WORKERS if warm_workers is None else warm_workers
+                    persistent.up(warm_workers=warm)
                     up_s = time.monotonic() - t_up
                     try:
                         out["attached"] = _measure(app, repeat, True, progress, task, Path(d) / "probe.txt")
-                        out["attached"]["aerodaas_up_s"] = round(up_s, 3)
+                        out["attached"].update(aerodaas_up_s=round(up_s, 3), warm_workers=warm)
                     finally:
                         persistent.down()
                 finally:
@@ -142,6 +161,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--mode", choices=["cold", "attached", "both"], default="both",
                    help="cold Ray start, attached to `aerodaas up`'s cluster, or both (default)")
+    p.add_argument("--warm-workers", type=int, default=None,
+                   help="warm workers of the `aerodaas up` cluster of attached runs (default: aerodaas up's; 0: none)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
 
@@ -153,8 +174,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         if a.repeat < 1:
             print(f"aerodaas bench startup: --repeat must be >= 1, got {a.repeat}", file=sys.stderr)
             return 2
+        if a.warm_workers is not None and not 0 <= a.warm_workers <= 64:
+            print(f"aerodaas bench startup: --warm-workers must be in [0, 64], got {a.warm_workers}", file=sys.stderr)
+            return 2
         try:
-            report = run_startup(app, a.repeat, a.mode)
+            report = run_startup(app, a.repeat, a.mode, a.warm_workers)
         except RuntimeError as e:
             print(f"aerodaas bench startup: {e}", file=sys.stderr)
             return 1
