@@ -424,6 +424,26 @@ def _download_fence_and_rally(backend, plan, out: Path, name: str):
     return plan
 
 
+def _upload_bound(kind: str):
+    """argparse type of a positive bound in metres: an ``altitude`` at most ``MAX_ALTITUDE_M`` (10 km), a
+    ``distance`` at most ``MAX_LOCAL_M`` (100 km); argparse names the option in its error (exit 2)."""
+
+    def parse(text: str) -> float:
+        from aerodaas.app.models import MAX_LOCAL_M
+        from aerodaas.config.base import MAX_ALTITUDE_M
+
+        upper = MAX_ALTITUDE_M if kind == "altitude" else MAX_LOCAL_M
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not 0.0 < v <= upper:
+            raise argparse.ArgumentTypeError(f"must be in (0, {upper:g}] metres, got {text}")
+        return v
+
+    return parse
+
+
 def _cmd_mission(args: argparse.Namespace) -> int:
     """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
     through the MAVLink backend's mission protocol. The file is read and every item checked (with
@@ -446,11 +466,12 @@ def _cmd_mission(args: argparse.Namespace) -> int:
             if not plan.items:
                 raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
                                        f"would clear the vehicle's mission)")
+            bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
             if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
-                plan_to_flight(plan)
+                plan_to_flight(plan, **bounds)
             backend = _mission_backend(args, plan.home)
             if plan.home is None:  # AMSL altitudes need a home: the vehicle's (still before anything is sent)
-                plan_to_flight(plan, backend.home)
+                plan_to_flight(plan, backend.home, **bounds)
             fence = plan.geofence
             if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
                 got = backend.apply_fence(fence)
@@ -614,6 +635,11 @@ def main(argv: list[str] | None = None) -> int:
     mu.add_argument("--fence-action", choices=["rtl", "land", "hold", "report"], default="rtl",
                     help="the vehicle's own action when it breaches the plan's geofence (ArduPilot FENCE_ACTION, PX4 "
                          "GF_ACTION; default rtl)")
+    mu.add_argument("--max-altitude", type=_upload_bound("altitude"), default=120.0, metavar="M",
+                    help="refuse items higher than this above home, metres (default 120: the EU open category "
+                         "and FAA Part 107 ceiling)")
+    mu.add_argument("--max-distance", type=_upload_bound("distance"), default=10_000.0, metavar="M",
+                    help="refuse items farther than this from home horizontally, metres (default 10000)")
     md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
     md.add_argument("--out", required=True, metavar="FILE")
     for m in (mu, md):

@@ -136,6 +136,32 @@ def test_bad_record_path_exits_2_before_ray(tmp_path, no_ray, capsys):
     assert "does not exist" in capsys.readouterr().err
 
 
+def _one_waypoint_plan(tmp_path, lat: float, lon: float, alt: float):
+    item = {"type": "SimpleItem", "command": 16, "frame": 3, "params": [0, 0, 0, None, lat, lon, alt],
+            "autoContinue": True, "doJumpId": 1}
+    plan = {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
+            "mission": {"version": 2, "items": [item], "plannedHomePosition": [47.3977, 8.5456, 488.0],
+                        "firmwareType": 12, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5},
+            "geoFence": {"version": 2, "polygons": [], "circles": []}, "rallyPoints": {"version": 2, "points": []}}
+    f = tmp_path / "one.plan"
+    f.write_text(json.dumps(plan))
+    return f
+
+
+@pytest.mark.parametrize("where, flags, said", [
+    ((47.3977, 8.5456, 50_000.0), [], "above max_altitude 120 m"),               # 50 km up (issue 25)
+    ((1.0, 60.0, 30.0), [], "beyond max_distance 10000 m"),                      # ~6,800 km away
+    ((47.3977, 8.5456, 150.0), ["--max-altitude", "100"], "above max_altitude 100 m"),
+    ((47.4077, 8.5456, 30.0), ["--max-distance", "500"], "1112 m from home, beyond max_distance 500 m"),
+])
+def test_mission_upload_refuses_items_too_high_or_too_far_before_connecting(tmp_path, capsys, where, flags, said):
+    f = _one_waypoint_plan(tmp_path, *where)
+    # a connection nobody serves: the refusal must come before any connection attempt
+    assert cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1", *flags]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "item" in err, err
+
+
 def test_mission_upload_refuses_an_empty_mission(tmp_path, capsys):
     plan = {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
             "mission": {"version": 2, "items": [], "plannedHomePosition": [47.3977, 8.5456, 488.0],

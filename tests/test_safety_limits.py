@@ -55,6 +55,28 @@ def test_the_effective_limit_is_the_minimum_of_limits_and_safety():
     assert g.check_waypoint(Waypoint(id="d", x=5, y=0, z=4, speed=0.5)).speed == 0.5
 
 
+def test_nothing_reaches_beyond_max_distance_from_home():
+    g = _gate({}, {})
+    assert g.max_dist == 10_000.0  # the documented default
+    # a mistyped absolute waypoint 6,000+ km away (issue 25): refused, never flown until the battery ends
+    with pytest.raises(SafetyViolation, match="beyond max_distance 10000 m") as e:
+        g.check_waypoint(Waypoint(id="far", x=1.0, y=60.0, z=10.0, waypoint_type="absolute"))
+    assert e.value.field == "position"
+    near = _ll(9_000.0, 0.0)
+    assert g.check_waypoint(Waypoint(id="near", x=near[0], y=near[1], z=10.0, waypoint_type="absolute"))
+    # clamping never moves a waypoint back in: a far one is refused as a geofence breach is
+    c = _gate({}, {"max_distance": 50.0, "on_violation": "clamp"})
+    with pytest.raises(SafetyViolation, match="beyond max_distance 50 m"):
+        c.check_waypoint(Waypoint(id="out", x=40.0, y=40.0, z=5.0))
+    # a velocity command is judged by where it could carry the vehicle, its stopping distance included
+    with pytest.raises(SafetyViolation, match="could reach .* beyond max_distance 50 m") as e:
+        c.check_velocity(VelocityCommand(vx=2.0, duration=30.0), position=(0.0, 0.0, 5.0))
+    assert e.value.field == "velocity"
+    c.check_velocity(VelocityCommand(vx=2.0, duration=5.0), position=(0.0, 0.0, 5.0))  # 10 m out: fine
+    with pytest.raises(SafetyViolation, match="beyond max_distance"):  # already at 48 m, pushing outwards
+        c.check_velocity(VelocityCommand(vx=2.0, duration=2.0), position=(48.0, 0.0, 5.0))
+
+
 def test_clamp_uses_the_minimum_too():
     g = _gate({"max_speed": 3.0, "max_altitude": 6.0}, {"max_speed": 1.0, "on_violation": "clamp"})
     assert g.check_waypoint(Waypoint(id="a", x=5, y=0, z=4, speed=3.0)).speed == 1.0
@@ -120,6 +142,8 @@ def test_plan_return_checks_every_leg_with_the_gate():
     ({"world": {"ground": {"size_m": 100000, "metres_per_pixel": 0.001}}}, "metres_per_pixel"),
     ({"world": {"ground": {"seed": -1}}}, "seed"),
     ({"robots": [{"id": "r", "home": HOME, "noise": {"seed": -1}}]}, "seed"),
+    ({"robots": [{"id": "r", "home": HOME, "safety": {"max_distance": 2e5}}]}, "max_distance"),
+    ({"robots": [{"id": "r", "home": HOME, "safety": {"max_distance": 0}}]}, "max_distance"),
 ])
 def test_out_of_bounds_configs_are_refused(tmp_path, patch, field):
     doc = {"robots": [{"id": "r", "home": HOME}]}

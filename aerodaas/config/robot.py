@@ -9,8 +9,8 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
-from aerodaas.app.models import GeoPoint
-from aerodaas.config.base import (HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
+from aerodaas.app.models import MAX_LOCAL_M, GeoPoint
+from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
                    did_you_mean)
 
@@ -54,8 +54,10 @@ class SafetyConfig(_Cfg):
     polygons and circles (lat/lon degrees, radius metres); ``geofence_plan`` names a QGroundControl ``.plan``
     whose ``geoFence`` is added to it. ``on_violation``: ``reject`` (default) refuses a violating command;
     ``clamp`` clamps altitude and speed into the limits (geofence breaches are always rejected).
-    ``low_battery_rtl_pct``: below this battery percentage the drone returns to launch and lands, whatever the
-    queue holds (the stat-stream shows RETURNING). ``critical_battery_pct``: below this it lands in place."""
+    ``max_distance`` (metres, default 10 km, at most 100 km) bounds the horizontal distance from home of every
+    waypoint and of every velocity command's predicted path: a mistyped absolute waypoint thousands of kilometres
+    away is refused, not flown until the battery ends. ``low_battery_rtl_pct``: below this battery percentage the
+    drone returns to launch and lands, whatever the queue holds (the stat-stream shows RETURNING). ``critical_battery_pct``: below this it lands in place."""
 
     geofence: GeofenceConfig = Field(default_factory=GeofenceConfig)
     geofence_plan: str | None = None
@@ -63,6 +65,9 @@ class SafetyConfig(_Cfg):
     min_altitude: float = Field(default=0.5, ge=0, le=MAX_ALTITUDE_M,
                                 description="metres above home, except take-off/landing")
     max_speed: float | None = Field(default=None, gt=0, le=MAX_SPEED_MPS, description="m/s, horizontal")
+    max_distance: float = Field(default=DEFAULT_MAX_DISTANCE_M, gt=0, le=MAX_LOCAL_M,
+                                description="metres horizontally from home: farther waypoints, and velocity commands "
+                                "that could carry the vehicle farther, are refused (never clamped)")
     command_latency_s: float = Field(default=0.2, ge=0, le=10.0, description="worst-case delay (s) between the gate's "
                                      "check and the vehicle acting on a command (link + autopilot); the stopping "
                                      "envelope of every command includes it")

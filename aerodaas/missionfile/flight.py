@@ -3,6 +3,8 @@ action and geofence a drone flies; :func:`plan_to_navigation` for the waypoints 
 :func:`navigation_to_plan` (the other way, for export)."""
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 from typing import Any, Iterable, Literal
 
@@ -25,8 +27,16 @@ def _latlon_missing(lat: float | None, lon: float | None) -> bool:
     return lat is None or lon is None or (lat == 0.0 and lon == 0.0)
 
 
+def _ground_distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    """Great-circle distance in metres (haversine, mean Earth radius 6,371,008.8 m: IUGG)."""
+    p1, p2 = math.radians(lat1), math.radians(lat2)
+    a = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(math.radians(lon2 - lon1) / 2) ** 2
+    return 2.0 * 6_371_008.8 * math.asin(min(1.0, math.sqrt(a)))
+
+
 def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_commands: Iterable[int] = (),
-                   check_geofence: bool = True, min_altitude: float | None = 0.0) -> FlightPlan:
+                   check_geofence: bool = True, min_altitude: float | None = 0.0, max_altitude: float | None = None,
+                   max_distance: float | None = None) -> FlightPlan:
     """Convert a mission plan into the navigation an AeroDaaS drone flies.
 
     ``home`` (WGS-84, AMSL altitude) overrides ``plan.home``; it is needed for AMSL altitudes
@@ -49,8 +59,10 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
     Anything else — other NAV commands, DO_JUMP, conditions, terrain frames, items after LAND/RTL — raises
     :class:`MissionFileError` naming the file, the item, the command number and name. A waypoint lower than
     ``min_altitude`` metres above home (default 0: below the take-off point, typically an AMSL altitude that
-    was meant relative) raises too; ``None`` disables that check. With ``check_geofence`` every waypoint and
-    leg (from home, and back to home for RTL) must satisfy the plan's geofence."""
+    was meant relative) raises too; ``None`` disables that check. So does a waypoint higher than ``max_altitude``
+    metres above home, or (with a home) farther than ``max_distance`` metres from it horizontally (great-circle
+    distance, mean Earth radius); ``None`` (default) disables those checks. With ``check_geofence`` every waypoint
+    and leg (from home, and back to home for RTL) must satisfy the plan's geofence."""
     src = plan.source or "<plan>"
     skip = frozenset(int(c) for c in skip_commands)
     clash = skip & _FLIGHT_COMMANDS
@@ -90,6 +102,13 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
             raise _fail(src, tag, f"altitude {z:g} m above home is below min_altitude {min_altitude:g} m "
                                   f"({frame_name(item.frame)}, z={item.params[6]!r}"
                                   f"{f', home altitude {home.alt:g} m AMSL' if home is not None else ''})")
+        if max_altitude is not None and z > max_altitude:
+            raise _fail(src, tag, f"altitude {z:g} m above home is above max_altitude {max_altitude:g} m")
+        if max_distance is not None and home is not None:
+            d = _ground_distance_m(home.lat, home.lon, lat, lon)
+            if d > max_distance:
+                raise _fail(src, tag, f"({lat:.7f}, {lon:.7f}) is {d:.0f} m from home, beyond max_distance "
+                                      f"{max_distance:g} m")
         kwargs: dict[str, Any] = {}
         if radius is not None and radius > 0:
             kwargs["acceptance_radius"] = radius

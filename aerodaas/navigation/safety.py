@@ -35,6 +35,7 @@ import math
 from typing import Any, Sequence
 
 from aerodaas.app.models import ActionCommand, AeroNavigation, GeoPoint, VelocityCommand, Waypoint
+from aerodaas.config.base import DEFAULT_MAX_DISTANCE_M
 
 __all__ = ["SafetyViolation", "SafetyGate"]
 
@@ -82,6 +83,8 @@ class SafetyGate:
         self.latency = float(getattr(safety, "command_latency_s", 0.2))
         self.period = float(control_period_s)
         self.fence = Geofence(safety.geofence, home)
+        #: horizontal distance from home (m) no waypoint or velocity command may reach (safety.max_distance)
+        self.max_dist = float(getattr(safety, "max_distance", DEFAULT_MAX_DISTANCE_M))
         self.rejected = 0
         self.clamped = 0
 
@@ -113,6 +116,10 @@ class SafetyGate:
                 self.rejected += 1
                 raise SafetyViolation(wp.id, "speed", wp.speed, f"above max_speed {self.max_speed:g} m/s")
             upd["speed"] = self.max_speed
+        if math.hypot(x, y) > self.max_dist:  # never clamped: a waypoint this far is a typo, not a nudge
+            self.rejected += 1
+            raise SafetyViolation(wp.id, "position", [round(x, 2), round(y, 2)],
+                                  f"{math.hypot(x, y):.0f} m from home, beyond max_distance {self.max_dist:g} m")
         why = self.fence.check_point(x, y)
         if why is None and from_position is not None:
             why = self.fence.check_segment((float(from_position[0]), float(from_position[1])), (x, y))
@@ -196,6 +203,13 @@ class SafetyGate:
                 raise SafetyViolation(cmd.id, "vz", v[2], f"could reach {ez:.2f} m above home (with the stopping "
                                       f"distance at {self.accel:g} m/s^2), outside [{self.min_alt:g}, "
                                       f"{self.max_alt:g}] m within {horizon:g} s")
+            # each predicted point plus its stopping distance (upper bound of how far from home it could end)
+            far = max(math.hypot(q[0], q[1]) + math.hypot(w[0], w[1]) ** 2 / (2.0 * self.accel) for q, w in path)
+            if far > self.max_dist:
+                self.rejected += 1
+                raise SafetyViolation(cmd.id, "velocity", [round(c, 3) for c in v],
+                                      f"could reach {far:.0f} m from home within {horizon:g} s, beyond max_distance "
+                                      f"{self.max_dist:g} m")
             why = self._fence_violation(path)
             if why is not None:
                 self.rejected += 1
