@@ -90,3 +90,20 @@ def test_a_new_run_removes_stale_segments(tmp_path):
     _segment(segment_path(base, 1), 100, 5)
     assert remove_stale_segments(base) == [segment_path(base, 1)]
     assert list_segments(base) == [base]
+
+
+def test_the_runs_own_outcome_wins_over_its_missions(tmp_path):
+    """A recorder that replaced a dead one records ``/run/result`` ``recording_lost`` (actors/recorder_actor.py):
+    summaries of that recording (unfinished or finished) say so, even where every drone's ``/mission/result`` says
+    success and comes later in log time."""
+    from aerodaas.recording.writer import McapRecorder, summarize_mcap
+
+    path = tmp_path / "run.mcap"
+    with McapRecorder(path) as rec:
+        rec.write_json("/run/result", 10, {"outcome": "recording_lost", "losses": []}, schema_name="aerodaas.RunResult")
+        rec.write_json("/mission/result", 20, {"robot": "r", "outcome": "success"}, schema_name="aerodaas.MissionResult")
+    assert summarize_mcap(path)["mission"]["outcome"] == "recording_lost"
+    plain = tmp_path / "plain.mcap"
+    with McapRecorder(plain) as rec:
+        rec.write_json("/mission/result", 20, {"robot": "r", "outcome": "success"}, schema_name="aerodaas.MissionResult")
+    assert summarize_mcap(plain)["mission"]["outcome"] == "success"

@@ -26,6 +26,9 @@ MISSION_STATE_TOPIC = "/mission/state"
 """JSON topic carrying ``{"state": <str>, ...}`` mission state changes."""
 MISSION_RESULT_TOPIC = "/mission/result"
 """JSON topic carrying the final ``{"outcome": <str>, ...}`` of a mission (e.g. ``"success"``)."""
+RUN_RESULT_TOPIC = "/run/result"
+"""JSON topic carrying the run's own outcome where it differs from its missions' (``{"outcome": "recording_lost",
+"losses": [...]}``: the recorder actor died and part of the run was not recorded)."""
 METADATA_NAME = "aerodaas"
 """Name of the MCAP metadata record holding the recorder's ``metadata`` dict."""
 
@@ -179,7 +182,8 @@ def summarize_mcap(path: str | os.PathLike) -> dict[str, Any]:
          "mission": {"outcome": str | None, "final_state": str | None} | None}
 
     ``rate_hz`` is ``count / duration_s`` over the whole recording (0.0 when the duration is 0). ``mission``
-    comes from the last JSON message on ``"/mission/result"`` (key ``"outcome"``) and on ``"/mission/state"``
+    comes from the last JSON message on ``"/run/result"`` if there is one (the run's own outcome, e.g.
+    ``recording_lost``), else on ``"/mission/result"`` (key ``"outcome"``), and on ``"/mission/state"``
     (key ``"state"``); it is ``None`` when neither topic has messages.
 
     Finished files are summarized from their summary section; unfinished (crashed) files are scanned front to
@@ -195,7 +199,7 @@ def summarize_mcap(path: str | os.PathLike) -> dict[str, Any]:
             metadata[k if rec.name == METADATA_NAME else f"{rec.name}.{k}"] = v
 
     last_json: dict[str, Any] = {}
-    mission_topics = (MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC)
+    mission_topics = (RUN_RESULT_TOPIC, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC)
     channel_info: dict[int, dict[str, Any]] = {}
     counts: dict[int, int] = {}
     start_ns: int | None = None
@@ -252,7 +256,7 @@ def summarize_mcap(path: str | os.PathLike) -> dict[str, Any]:
 
     mission = None
     if last_json:
-        result = last_json.get(MISSION_RESULT_TOPIC)
+        result = last_json.get(RUN_RESULT_TOPIC) or last_json.get(MISSION_RESULT_TOPIC)  # the run's outcome wins
         state = last_json.get(MISSION_STATE_TOPIC)
         mission = {"outcome": result.get("outcome") if isinstance(result, dict) else None,
                    "final_state": state.get("state") if isinstance(state, dict) else None}

@@ -351,7 +351,7 @@ def _recorder_kill(tmp: Path) -> dict:
         outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
     clean = (reached and len(pids) == 1 and p.returncode == 4 and said and "success" not in _summary_outcome(out)
              and ok0 and ok1 and r.returncode == 0 and ok and n == n0 + n1 and not seg1.exists() and _no_crash(out)
-             and summed == (n0 + n1, n0, n1))
+             and summed == (n0 + n1, n0, n1) and outcome == "recording_lost")
     return {"observed": f"exit {p.returncode}, says 'recording lost at t = ...' {said}; segments: run.mcap "
                         f"{'finished' if ok0 else why0} ({n0} msgs), run.1.mcap {'finished' if ok1 else why1} ({n1} "
                         f"msgs); `aerodaas recover` exit {r.returncode}: joined {'finished' if ok else why} ({n} "
@@ -489,7 +489,8 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL of the raylet mid-run", "exit 3, the summary says the drone's time is unknown (not 0 s), the "
      "driver finishes the recording", _raylet_kill),
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
-     "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them", _recorder_kill),
+     "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them, the joined "
+     "recording's outcome is recording_lost (/run/result), never success", _recorder_kill),
 ]
 
 
