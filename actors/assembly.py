@@ -144,10 +144,10 @@ class ActorAssembly:
         cams = [c for d in self.drones for c in d.cameras]
         for i, c in enumerate(cams):
             c["next_t"] = i / (len(cams) * c["fps"])
-        # robots that name their MAVLink system id claim it before 'auto' ones take the lowest unclaimed id on a
-        # shared link (aerodaas.backends.mavlink.shared_link)
+        # robots that claim a fixed vehicle identity (a configured MAVLink system id) connect before the ones that
+        # take the lowest unclaimed one on a shared link (VehicleBackend.connects_first)
         errors: dict[str, str] = {}
-        for d in sorted(self.drones, key=lambda d: not isinstance(getattr(d.cfg.mavlink, "target_system", None), int)):
+        for d in sorted(self.drones, key=lambda d: not d.backend.connects_first):
             try:
                 d.connect()
             except Exception as e:  # noqa: BLE001 - every robot gets its own error (RobotsNotConnected)

@@ -114,9 +114,8 @@ class DroneComponent(RunEnd, AutopilotFlight):
         self._odom_key: Any = None  # the backend's sample_key of the last published odometry
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
-        mc = self.cfg.mavlink
-        #: fly the pre-planned waypoints as an uploaded autopilot mission (mavlink.use_autopilot_mission)
-        self.autopilot_mission = bool(self.cfg.backend == "mavlink" and mc is not None and mc.use_autopilot_mission)
+        #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
+        self.autopilot_mission = bool(self.backend.flies_uploaded_mission)
         self._ap_items: dict[int, tuple[str, Waypoint | None]] = {}  # MissionItem seq (from 1) -> (kind, waypoint)
         self._ap_events: list[dict] = []  # mission_current / mission_item_reached from the backend, not yet applied
         self._ap_current = 0

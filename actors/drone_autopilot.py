@@ -24,9 +24,8 @@ class AutopilotFlight:
         sent = b.upload_mission(nav, takeoff_altitude=self.gate.check_takeoff(self.cfg.takeoff_altitude),
                                 final_action="land")
         wps = iter([w for w in items if isinstance(w, Waypoint)])
-        kinds = {16: "waypoint", 22: "takeoff", 21: "land", 20: "rtl"}
         for it in sent:
-            kind = kinds.get(it.command, "other")
+            kind = it.nav_kind
             self._ap_items[it.seq] = (kind, next(wps) if kind == "waypoint" else None)
         self._event("autopilot_mission_uploaded", items=len(sent),
                     waypoints=[w.id for _, w in self._ap_items.values() if w is not None])
@@ -115,7 +114,7 @@ class AutopilotFlight:
         ``resume`` (the current waypoint is re-issued, which switches back to GUIDED/OFFBOARD)."""
         fs, self._failsafe_pending = self._failsafe_pending, None
         v, fsm = self.backend, self.fsm
-        action = getattr(self.cfg.mavlink, "on_failsafe", "end") if self.cfg.mavlink else "end"
+        action = self.backend.failsafe_action
         mode = fs.get("mode", "")
         if self.autopilot_mission and self.preplanned_left == 0 and mode in ("RTL", "LAND"):
             return False  # the uploaded mission's own last item (NAV_RETURN_TO_LAUNCH / NAV_LAND)

@@ -348,6 +348,19 @@ def test_camera_source_config(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="'backend' needs a backend with its own camera stream"):
         RobotConfig(id="d1", sensors=[SensorConfig(id="c", type="camera", properties={"source": "backend"})])
     RobotConfig(id="d1", backend="tello", sensors=[SensorConfig(id="c", type="camera", properties={"source": "backend"})])
+    # the capability is the backend class's own declaration: a plug-in backend with a camera needs no framework edit
+    from aerodaas.backends.sim import SimBackend
+    from aerodaas.plugins import register_backend
+
+    @register_backend
+    class CameraSim(SimBackend):
+        kind = "camera_sim_test"
+        provides_camera = True
+
+    RobotConfig(id="d1", backend="camera_sim_test",
+                sensors=[SensorConfig(id="c", type="camera", properties={"source": "backend"})])
+    with pytest.raises(ValueError, match=r"provides_camera: \[.*'camera_sim_test'.*\]\), but backend is 'sim'"):
+        RobotConfig(id="d1", sensors=[SensorConfig(id="c", type="camera", properties={"source": "backend"})])
 
     (tmp_path / "rec").mkdir()
     (tmp_path / "rec" / "flight.mcap").write_bytes(b"")

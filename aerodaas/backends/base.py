@@ -91,6 +91,31 @@ class VehicleBackend(abc.ABC):
     Config: ClassVar[Any] = None
     produces: ClassVar[tuple] = ("odometry", "events")
     consumes: ClassVar[tuple] = ("flight_commands",)
+    #: whether the vehicle has its own camera stream (:meth:`camera_frame`): a camera sensor with
+    #: ``"source": "backend"`` needs one (checked when the environment is validated, before Ray starts)
+    provides_camera: ClassVar[bool] = False
+
+    # ------------------------------------------------------------------ what the drone asks of a backend
+    @property
+    def flies_uploaded_mission(self) -> bool:
+        """Whether the robot's pre-planned waypoints are flown as a mission uploaded to the vehicle, which then
+        flies it by itself (the backend offers ``upload_mission(nav, takeoff_altitude=, final_action=)`` returning
+        :class:`aerodaas.missionfile.MissionItem` s, ``start_mission()``, and ``mission_current`` /
+        ``mission_item_reached`` events). False here."""
+        return False
+
+    @property
+    def failsafe_action(self) -> str:
+        """What the drone does after the vehicle entered a failsafe mode by itself (an ``autopilot_failsafe``
+        event): ``"end"`` (the vehicle's own RTL/LAND flies on; the default), ``"hold"`` (paused until an operator
+        resumes) or ``"resume"`` (the current waypoint is re-issued)."""
+        return "end"
+
+    @property
+    def connects_first(self) -> bool:
+        """Whether this robot connects before the run's others: it claims a fixed vehicle identity on a link it
+        may share (a configured MAVLink system id) before robots that take the lowest one left. False here."""
+        return False
 
     @classmethod
     def options(cls, cfg: Any) -> Any:

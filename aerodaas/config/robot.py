@@ -88,8 +88,31 @@ class SafetyConfig(_Cfg):
 #: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
 #: Tello's), or a recorded MCAP camera channel
 CAMERA_SOURCES = ("sim", "backend", "mcap")
-#: backends whose :meth:`~aerodaas.backends.base.VehicleBackend.camera_frame` gives frames
-BACKENDS_WITH_CAMERA = ("tello",)
+
+
+def _provides_camera(backend: str) -> bool:
+    """Whether the backend class named ``backend`` declares its own camera stream
+    (:attr:`aerodaas.backends.base.VehicleBackend.provides_camera`)."""
+    from aerodaas.plugins import registry
+
+    try:
+        return bool(getattr(registry.get("backend", backend), "provides_camera", False))
+    except registry.UnknownPlugin:
+        return False
+
+
+def _camera_backends() -> list[str]:
+    """The registered backends that declare a camera stream (for the error message)."""
+    from aerodaas.plugins import registry
+
+    out = []
+    for e in registry.entries("backend"):
+        try:
+            if getattr(e.load(), "provides_camera", False):
+                out.append(e.name)
+        except Exception:  # noqa: BLE001 - a backend that does not import offers no camera
+            continue
+    return out
 
 
 class SensorConfig(_Cfg):
@@ -401,9 +424,9 @@ class RobotConfig(_Cfg):
                              f"({self.safety.min_altitude:g} m); the drone would hover below the floor it must keep")
         check_plugin_sensors(self.sensors, f"robot {self.id!r}", "sensors")
         for j, s in enumerate(self.sensors):
-            if s.type == "camera" and s.properties.get("source") == "backend" and self.backend not in BACKENDS_WITH_CAMERA:
+            if s.type == "camera" and s.properties.get("source") == "backend" and not _provides_camera(self.backend):
                 raise ValueError(f"sensors.{j}.properties.source: 'backend' needs a backend with its own camera "
-                                 f"stream ({list(BACKENDS_WITH_CAMERA)}), but backend is {self.backend!r}")
+                                 f"stream (provides_camera: {_camera_backends()}), but backend is {self.backend!r}")
         return self
 
 

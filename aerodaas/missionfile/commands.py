@@ -16,6 +16,10 @@ MAV_CMD_DO_SET_ROI_WPNEXT_OFFSET = 196
 MAV_CMD_DO_SET_ROI_NONE = 197
 MAV_CMD_DO_SET_CAM_TRIGG_DIST = 206
 
+#: ``MissionItem.nav_kind`` of the navigation commands a drone follows in an uploaded mission
+NAV_KINDS = {MAV_CMD_NAV_WAYPOINT: "waypoint", MAV_CMD_NAV_TAKEOFF: "takeoff", MAV_CMD_NAV_LAND: "land",
+             MAV_CMD_NAV_RETURN_TO_LAUNCH: "rtl"}
+
 MAV_FRAME_GLOBAL = 0
 MAV_FRAME_MISSION = 2
 MAV_FRAME_GLOBAL_RELATIVE_ALT = 3

@@ -82,6 +82,14 @@ class MissionItem(_Model):
         """``complexItemType`` of a ComplexItem (``"survey"``, ``"CorridorScan"``, ``"StructureScan"``...)."""
         return self.raw.get("complexItemType") if self.raw is not None else None
 
+    @property
+    def nav_kind(self) -> str:
+        """What the item makes the vehicle do, in the drone's words: ``"waypoint"`` (NAV_WAYPOINT), ``"takeoff"``,
+        ``"land"``, ``"rtl"`` (NAV_RETURN_TO_LAUNCH), or ``"other"``."""
+        from aerodaas.missionfile.commands import NAV_KINDS
+
+        return NAV_KINDS.get(self.command, "other")
+
     def describe(self) -> str:
         """``"item 3 (MAV_CMD_NAV_LAND (21))"`` / ``"item 2 (ComplexItem 'StructureScan')"`` for messages."""
         if self.raw is not None:

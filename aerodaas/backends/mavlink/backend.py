@@ -48,6 +48,22 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     kind = "mavlink"
     clock = "vehicle"
 
+    @property
+    def flies_uploaded_mission(self) -> bool:
+        """``mavlink.use_autopilot_mission``: the pre-planned waypoints fly as an uploaded AUTO mission."""
+        return bool(self.cfg.use_autopilot_mission)
+
+    @property
+    def failsafe_action(self) -> str:
+        """``mavlink.on_failsafe``."""
+        return self.cfg.on_failsafe
+
+    @property
+    def connects_first(self) -> bool:
+        """A configured ``mavlink.target_system`` is claimed before ``"auto"`` robots pick the lowest id heard
+        (:mod:`aerodaas.backends.mavlink.shared_link`)."""
+        return isinstance(self.cfg.target_system, int)
+
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         super().__init__(cfg.id, cfg.home)
         self.cfg: MavlinkConfig = cfg.mavlink or MavlinkConfig()

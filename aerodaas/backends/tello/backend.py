@@ -38,6 +38,7 @@ class TelloBackend(LinkMixin, ControlMixin, VehicleBackend):
 
     kind = "tello"
     clock = "vehicle"
+    provides_camera = True  # the Tello's H.264 video stream (video.py)
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         super().__init__(cfg.id, cfg.home)
