@@ -21,7 +21,8 @@ from .conftest import REPO
 
 EXAMPLE = REPO / "examples" / "plugins"
 PLUGINS = {("sensor", "gas_concentration"), ("backend", "gusty_sim"), ("analytics", "gas_threshold"),
-           ("analytics", "frame_probe"), ("analytics_scheduler", "THIN_EDGE_FIFO")}
+           ("analytics", "frame_probe"), ("analytics_scheduler", "THIN_EDGE_FIFO"),
+           ("trajectory_scheduler", "eastward_sweep")}
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +60,25 @@ def test_the_installed_package_registers_every_plugin_by_entry_point(installed, 
     g = subprocess.run(["git", "grep", "-n", "gas_concentration", "--", "aerodaas", "actors", "schedulers"], cwd=REPO,
                        capture_output=True, text=True)
     assert g.returncode == 1 and not g.stdout, g.stdout
+
+
+SWEEP = textwrap.dedent('''
+    from aerodaas import NearestNeighborScheduler, Waypoint
+    from aerodaas.plugins import get_plugin
+    pts = [Waypoint(id="b", x=3, y=0, z=5), Waypoint(id="a", x=2, y=9, z=5), Waypoint(id="c", x=-4, y=1, z=5)]
+    sweep = get_plugin("trajectory_scheduler", "eastward_sweep")()
+    print("ORDER", [w.id for w in sweep.order(pts, (0, 0, 5))], [w.id for w in NearestNeighborScheduler().order(pts, (0, 0, 5))])
+''')
+
+
+def test_the_trajectory_scheduler_plugin_orders_west_to_east(installed, tmp_path):
+    """The example's trajectory scheduler, taken from the registry as the app takes it, flies an UNORDERED list
+    west to east where the built-in nearest-neighbour order differs (the e2e tests check the flown order)."""
+    _, env = installed
+    p = subprocess.run([sys.executable, "-c", SWEEP], capture_output=True, text=True, env=env, cwd=tmp_path,
+                       timeout=120)
+    line = next((ln for ln in p.stdout.splitlines() if ln.startswith("ORDER ")), None)
+    assert line == "ORDER ['c', 'a', 'b'] ['b', 'c', 'a']", p.stdout + p.stderr[-2000:]
 
 
 def _env_with(src, tmp_path, mutate) -> str:
@@ -137,6 +157,10 @@ def _check_recording(rec: str, src) -> None:
     assert len(gusts) >= 5 and all(e["speed_mps"] == 1.0 for e in gusts), len(gusts)
     assert max(o["position"][0] for o in msgs["/uav/odometry"]) > 35.0
     reached = [e["waypoint"] for e in events if e["event"] == "waypoint_reached"]
+    # the trajectory scheduler: the survey, listed as wp3, wp1, wp4, wp2, was planned and flown west to east
+    plans = msgs["/uav/mission/plan"]
+    survey = next(m for p in plans for m in p["missions"] if m["priority"] == 2)
+    assert [i["id"] for i in survey["items"]] == ["wp1", "wp2", "wp3", "wp4"], survey
 
     # the analytics: one hover command where the gas first crossed 60 ppm, flown before the survey went on
     navs = msgs["/uav/gas_threshold/navigation"]

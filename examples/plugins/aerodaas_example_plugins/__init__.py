@@ -4,6 +4,7 @@
 * :mod:`.wind` — vehicle backend ``gusty_sim`` (the embedded simulator with wind gusts);
 * :mod:`.threshold` — analytics ``gas_threshold`` (gas reading -> hover-here navigation command);
 * :mod:`.probe` — analytics ``frame_probe`` (a cheap per-frame analytics for the analytics scheduler to place);
+* :mod:`.sweep` — trajectory scheduler ``eastward_sweep`` (an UNORDERED survey flown west to east);
 * :mod:`.placement` — analytics scheduler ``THIN_EDGE_FIFO`` (EDGE_FIFO that sheds every k-th frame).
 
 Each is declared as an entry point in ``pyproject.toml``; nothing here is imported by AeroDaaS until a run names it.

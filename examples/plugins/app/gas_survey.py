@@ -1,8 +1,10 @@
 """Gas survey with plug-ins only (docs/extending.md): a drone on the ``gusty_sim`` backend flies a survey line
 over a gas plume; its ``gas_concentration`` sensor feeds the ``gas_threshold`` analytics, which makes it hover
 where the gas first exceeds the threshold (priority 1 preempts the survey); a ``frame_probe`` on the camera is
-placed per frame by the ``THIN_EDGE_FIFO`` analytics scheduler. The environment names the backend, the sensor
-type and the scheduler; the analytics classes come from the registry (installed entry points).
+placed per frame by the ``THIN_EDGE_FIFO`` analytics scheduler; the survey's waypoints, given in no particular
+order, are flown west to east by the ``eastward_sweep`` trajectory scheduler. The environment names the backend, the
+sensor type and the analytics scheduler; the analytics and trajectory-scheduler classes come from the registry
+(installed entry points).
 Run: aerodaas run examples/plugins/app/gas_survey.py --record gas.mcap"""
 from aerodaas import *
 from aerodaas.plugins import get_plugin
@@ -10,7 +12,7 @@ from aerodaas.plugins import get_plugin
 env = Environment("gas_survey.json")
 edge = env.get_compute_resource_by_id("edge")
 drone = env.get_robot_by_id("uav")
-scheduler = NearestNeighborScheduler(env)
+scheduler = get_plugin("trajectory_scheduler", "eastward_sweep")(env)
 env.set_trajectory_scheduler(scheduler)
 
 GasThreshold = get_plugin("analytics", "gas_threshold")
@@ -20,8 +22,8 @@ scheduler.add_navigation(PriorityQueue(alarm.analyse(drone.get_sensor_by_id("gas
 probe = FrameProbe().deploy(edge)
 probe.analyse(drone.get_sensor_by_id("cam").get_data_stream())
 
-line = [Waypoint(id=f"wp{i + 1}", x=x, y=y, z=8.0, hover_duration=0.5)
-        for i, (x, y) in enumerate([(8, 0), (16, 0), (28, 0), (36, 0)])]
+survey = [Waypoint(id=f"wp{i}", x=x, y=0.0, z=8.0, hover_duration=0.5)
+          for i, x in [(3, 28), (1, 8), (4, 36), (2, 16)]]  # any order: the scheduler sweeps west to east
 drone.navigate(scheduler.generate_navigation(
-    PriorityQueue(AeroNavigation(NavigationType.DISTANCE_DRIVEN, line, SchedulingType.ORDERED), priority=2)))
+    PriorityQueue(AeroNavigation(NavigationType.DISTANCE_DRIVEN, survey, SchedulingType.UNORDERED), priority=2)))
 result = drone.start_mission()
