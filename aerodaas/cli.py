@@ -108,8 +108,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         o.early_ray = False
         runtime.allow_stop_interrupt(False)  # a signal now is recorded, never raised inside ray.shutdown
         runtime.shutdown_ray()
-        signal.signal(signal.SIGTERM, previous_sigterm)
-        signal.signal(signal.SIGINT, previous_sigint)
+        if not (_PROCESS_MAIN[0] and results):
+            signal.signal(signal.SIGTERM, previous_sigterm)
+            signal.signal(signal.SIGINT, previous_sigint)
+        # else the process is this command and ends now: a signal from here to its exit is a late one, recorded by
+        # on_sigterm, and the exit code stays the mission's (restoring the default handler let a SIGTERM sent right
+        # after the summary kill the process with -15)
     if not results:
         print("aerodaas run: the application never called start_mission()", file=sys.stderr)
         return 1
@@ -378,141 +382,6 @@ def _cmd_sim(args: argparse.Namespace) -> int:
             signal.signal(signal.SIGTERM, previous_sigterm)
 
 
-_MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
-
-
-def _mission_backend(args: argparse.Namespace, home=None):
-    """A connected MAVLink backend for ``--connection`` (BackendError / ValueError name the connection)."""
-    from aerodaas.backends import make_backend
-    from aerodaas.config import MavlinkConfig, RobotConfig
-
-    fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
-    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
-                       fence=fence)
-    cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
-    backend = make_backend(cfg)
-    backend.connect()
-    deadline = time.monotonic() + min(args.timeout, 5.0)
-    while not backend.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
-        time.sleep(0.05)
-    return backend
-
-
-def _download_fence_and_rally(backend, plan, out: Path, name: str):
-    """``plan`` with the vehicle's fence (MAV_MISSION_TYPE_FENCE) and rally points (MAV_MISSION_TYPE_RALLY); what
-    cannot be read, or cannot be stored in ``out`` (QGC WPL holds neither), is said on stderr, never dropped
-    silently."""
-    from aerodaas.backends import BackendError
-    from aerodaas.backends.mavlink.fence import FENCE, RALLY, fence_from_items
-
-    update = {}
-    try:
-        update["geofence"] = fence_from_items(backend.download_items(FENCE))
-    except (BackendError, ValueError) as e:
-        print(f"{name}: WARNING: the vehicle's geofence could not be read ({e}); {str(out)!r} has none",
-              file=sys.stderr, flush=True)
-    try:
-        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.download_items(RALLY)]
-    except BackendError as e:
-        print(f"{name}: WARNING: the vehicle's rally points could not be read ({e}); {str(out)!r} has none",
-              file=sys.stderr, flush=True)
-    plan = plan.model_copy(update=update)
-    if out.suffix.lower() != ".plan" and (not plan.geofence.is_empty or plan.rally_points):
-        print(f"{name}: WARNING: the vehicle's geofence ({len(plan.geofence.polygons)} polygon(s), "
-              f"{len(plan.geofence.circles)} circle(s)) and {len(plan.rally_points)} rally point(s) cannot be stored "
-              f"in a QGC WPL file; download to a .plan to keep them", file=sys.stderr, flush=True)
-    return plan
-
-
-def _upload_bound(kind: str):
-    """argparse type of a positive bound in metres: an ``altitude`` at most ``MAX_ALTITUDE_M`` (10 km), a
-    ``distance`` at most ``MAX_LOCAL_M`` (100 km); argparse names the option in its error (exit 2)."""
-
-    def parse(text: str) -> float:
-        from aerodaas.app.models import MAX_LOCAL_M
-        from aerodaas.config.base import MAX_ALTITUDE_M
-
-        upper = MAX_ALTITUDE_M if kind == "altitude" else MAX_LOCAL_M
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not 0.0 < v <= upper:
-            raise argparse.ArgumentTypeError(f"must be in (0, {upper:g}] metres, got {text}")
-        return v
-
-    return parse
-
-
-def _cmd_mission(args: argparse.Namespace) -> int:
-    """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
-    through the MAVLink backend's mission protocol. The file is read and every item checked (with
-    :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
-    sent; a download is written only once complete. A ``.plan``'s geofence goes up first (MAV_MISSION_TYPE_FENCE
-    items and the fence parameters, ``--fence-action``; read back and compared: a mismatch stops the upload before
-    the mission is sent), then its rally points (MAV_MISSION_TYPE_RALLY), then the mission
-    (:mod:`aerodaas.backends.mavlink.fence`)."""
-    from aerodaas.backends import BackendError
-    from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
-
-    name = f"aerodaas mission {args.mission_cmd}"
-    backend = None
-    try:
-        if args.mission_cmd == "upload":
-            path = Path(args.file)
-            if not path.is_file():
-                raise MissionFileError(f"{str(path)!r}: mission file not found")
-            plan = load_mission(path)
-            if not plan.items:
-                raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
-                                       f"would clear the vehicle's mission)")
-            bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
-            if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
-                plan_to_flight(plan, **bounds)
-            backend = _mission_backend(args, plan.home)
-            if plan.home is None:  # AMSL altitudes need a home: the vehicle's (still before anything is sent)
-                plan_to_flight(plan, backend.home, **bounds)
-            fence = plan.geofence
-            if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
-                got = backend.apply_fence(fence)
-                print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
-                      f"circle(s), {got['items']} fence items) uploaded and read back; "
-                      + ", ".join(f"{k} {v:g}" for k, v in got["params"].items()), flush=True)
-            if plan.rally_points:
-                n = backend.upload_rally(plan.rally_points)
-                print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
-            sent = backend.upload_mission(plan)
-            print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
-                  f"{args.connection}", flush=True)
-            if args.start:
-                backend.arm()
-                backend.start_mission()
-                print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
-        else:
-            out = Path(args.out)
-            if out.suffix.lower() not in _MISSION_SUFFIXES:
-                raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
-                                       "(QGroundControl .plan or QGC WPL 110 waypoints)")
-            backend = _mission_backend(args)
-            plan = backend.download_mission().model_copy(update={
-                "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
-            plan = _download_fence_and_rally(backend, plan, out, name)
-            tmp = out.with_name(out.name + ".part")
-            (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
-            os.replace(tmp, out)  # never a half-written mission file
-            print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
-                  f"written to {str(out)!r}", flush=True)
-    except (MissionFileError, BackendError, ValueError, OSError) as e:
-        where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
-            else ""
-        print(f"{name}: {e}{where}", file=sys.stderr)
-        return 2
-    finally:
-        if backend is not None:
-            backend.close(safe_end=False)  # hand the vehicle over as it is: a started mission flies on
-    return 0
-
-
 def _cmd_recover(args: argparse.Namespace) -> int:
     """``aerodaas recover FILE [--out OUT]``: see :mod:`aerodaas.recording.recover`; a recording in segments (its
     recorder actor was restarted: ``FILE``, ``FILE.1.mcap`` ...) is joined into one file
@@ -543,6 +412,11 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 
     print(json.dumps(json_schema(), indent=2))
     return 0
+
+
+#: True when :func:`main` runs as the process's own command (``aerodaas ...``, ``python -m aerodaas.cli``), not
+#: called from other Python code with an argument list
+_PROCESS_MAIN = [False]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -627,27 +501,9 @@ def main(argv: list[str] | None = None) -> int:
     sm.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
     sm.add_argument("--allow-remote", action="store_true", help="allow a non-loopback address")
     sm.set_defaults(func=_cmd_sim)
-    ms = sub.add_parser("mission", help="upload a .plan / QGC WPL mission to a MAVLink vehicle, or download one")
-    msub = ms.add_subparsers(dest="mission_cmd", required=True)
-    mu = msub.add_parser("upload", help="check FILE (.plan, .waypoints, .txt) and upload it (MISSION_ITEM_INT)")
-    mu.add_argument("file")
-    mu.add_argument("--start", action="store_true", help="then arm and start it (ArduPilot AUTO / PX4 AUTO.MISSION)")
-    mu.add_argument("--fence-action", choices=["rtl", "land", "hold", "report"], default="rtl",
-                    help="the vehicle's own action when it breaches the plan's geofence (ArduPilot FENCE_ACTION, PX4 "
-                         "GF_ACTION; default rtl)")
-    mu.add_argument("--max-altitude", type=_upload_bound("altitude"), default=120.0, metavar="M",
-                    help="refuse items higher than this above home, metres (default 120: the EU open category "
-                         "and FAA Part 107 ceiling)")
-    mu.add_argument("--max-distance", type=_upload_bound("distance"), default=10_000.0, metavar="M",
-                    help="refuse items farther than this from home horizontally, metres (default 10000)")
-    md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
-    md.add_argument("--out", required=True, metavar="FILE")
-    for m in (mu, md):
-        m.add_argument("--connection", required=True, metavar="CONN",
-                       help="pymavlink connection string, e.g. tcp:127.0.0.1:5760, udpin:0.0.0.0:14550, /dev/ttyACM0")
-        m.add_argument("--autopilot", choices=["auto", "ardupilot", "px4"], default="auto")
-        m.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the vehicle (default 10)")
-        m.set_defaults(func=_cmd_mission)
+    from aerodaas.tools.mission_cli import add_parser as _add_mission_parser
+
+    _add_mission_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video, raypath; "
                                          "--json for JSON output")
     from aerodaas.bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
@@ -658,6 +514,7 @@ def main(argv: list[str] | None = None) -> int:
     rc.add_argument("file")
     rc.add_argument("--out", help="write here instead of replacing FILE")
     rc.set_defaults(func=_cmd_recover)
+    _PROCESS_MAIN[0] = argv is None
     args = p.parse_args(argv)
     try:
         return args.func(args)

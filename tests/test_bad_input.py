@@ -162,6 +162,19 @@ def test_mission_upload_refuses_items_too_high_or_too_far_before_connecting(tmp_
     assert said in err and "item" in err, err
 
 
+@pytest.mark.parametrize("rally, said", [((47.3977, 8.5456, 500.0), "above max_altitude 120 m"),
+                                         ((1.0, 60.0, 30.0), "beyond max_distance 10000 m")])
+def test_mission_upload_refuses_rally_points_too_high_or_too_far(tmp_path, capsys, rally, said):
+    """The autopilot's RTL may fly to a rally point: the same bounds as the items, before connecting."""
+    f = _one_waypoint_plan(tmp_path, 47.3978, 8.5456, 30.0)
+    plan = json.loads(f.read_text())
+    plan["rallyPoints"]["points"] = [list(rally)]
+    f.write_text(json.dumps(plan))
+    assert cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "rally point 1" in err and said in err, err
+
+
 def test_mission_upload_refuses_an_empty_mission(tmp_path, capsys):
     plan = {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
             "mission": {"version": 2, "items": [], "plannedHomePosition": [47.3977, 8.5456, 488.0],

@@ -27,7 +27,7 @@ def _latlon_missing(lat: float | None, lon: float | None) -> bool:
     return lat is None or lon is None or (lat == 0.0 and lon == 0.0)
 
 
-def _ground_distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+def ground_distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
     """Great-circle distance in metres (haversine, mean Earth radius 6,371,008.8 m: IUGG)."""
     p1, p2 = math.radians(lat1), math.radians(lat2)
     a = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(math.radians(lon2 - lon1) / 2) ** 2
@@ -105,7 +105,7 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
         if max_altitude is not None and z > max_altitude:
             raise _fail(src, tag, f"altitude {z:g} m above home is above max_altitude {max_altitude:g} m")
         if max_distance is not None and home is not None:
-            d = _ground_distance_m(home.lat, home.lon, lat, lon)
+            d = ground_distance_m(home.lat, home.lon, lat, lon)
             if d > max_distance:
                 raise _fail(src, tag, f"({lat:.7f}, {lon:.7f}) is {d:.0f} m from home, beyond max_distance "
                                       f"{max_distance:g} m")

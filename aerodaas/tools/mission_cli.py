@@ -1,0 +1,193 @@
+"""``aerodaas mission upload FILE`` / ``aerodaas mission download --out FILE``: QGroundControl ``.plan`` and
+``QGC WPL 110`` missions to and from a MAVLink vehicle, with no Ray and no environment file (see :func:`cmd_mission`)."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["add_parser", "cmd_mission"]
+
+_MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
+
+
+def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5.0):
+    """A connected MAVLink backend for ``--connection``, after waiting up to ``home_wait_s`` seconds for the
+    vehicle's HOME_POSITION (BackendError / ValueError name the connection)."""
+    from aerodaas.backends import make_backend
+    from aerodaas.config import MavlinkConfig, RobotConfig
+
+    fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
+    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
+                       fence=fence)
+    cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
+    backend = make_backend(cfg)
+    backend.connect()
+    deadline = time.monotonic() + min(args.timeout, home_wait_s)
+    while not backend.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
+        time.sleep(0.05)
+    return backend
+
+
+def _download_fence_and_rally(backend, plan, out: Path, name: str):
+    """``plan`` with the vehicle's fence (MAV_MISSION_TYPE_FENCE) and rally points (MAV_MISSION_TYPE_RALLY); what
+    cannot be read, or cannot be stored in ``out`` (QGC WPL holds neither), is said on stderr, never dropped
+    silently."""
+    from aerodaas.backends import BackendError
+    from aerodaas.backends.mavlink.fence import FENCE, RALLY, fence_from_items
+
+    update = {}
+    try:
+        update["geofence"] = fence_from_items(backend.download_items(FENCE))
+    except (BackendError, ValueError) as e:
+        print(f"{name}: WARNING: the vehicle's geofence could not be read ({e}); {str(out)!r} has none",
+              file=sys.stderr, flush=True)
+    try:
+        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.download_items(RALLY)]
+    except BackendError as e:
+        print(f"{name}: WARNING: the vehicle's rally points could not be read ({e}); {str(out)!r} has none",
+              file=sys.stderr, flush=True)
+    plan = plan.model_copy(update=update)
+    if out.suffix.lower() != ".plan" and (not plan.geofence.is_empty or plan.rally_points):
+        print(f"{name}: WARNING: the vehicle's geofence ({len(plan.geofence.polygons)} polygon(s), "
+              f"{len(plan.geofence.circles)} circle(s)) and {len(plan.rally_points)} rally point(s) cannot be stored "
+              f"in a QGC WPL file; download to a .plan to keep them", file=sys.stderr, flush=True)
+    return plan
+
+
+def check_rally_points(plan, home, *, max_altitude: float, max_distance: float, src: str) -> None:
+    """Refuse rally points (``(lat, lon, altitude above home m)``; the autopilot's RTL may fly to them) higher than
+    ``max_altitude`` metres or farther than ``max_distance`` metres from ``home`` (great-circle). Raises
+    MissionFileError naming the file and the point."""
+    from aerodaas.missionfile import MissionFileError
+    from aerodaas.missionfile.flight import ground_distance_m
+
+    for k, (lat, lon, alt) in enumerate(plan.rally_points):
+        d = ground_distance_m(home.lat, home.lon, lat, lon)
+        if alt > max_altitude or d > max_distance:
+            why = f"altitude {alt:g} m above max_altitude {max_altitude:g} m" if alt > max_altitude else \
+                f"{d:.0f} m from home, beyond max_distance {max_distance:g} m"
+            raise MissionFileError(f"{src!r}: rally point {k + 1} ({lat:.7f}, {lon:.7f}): {why}")
+
+
+def _upload_bound(kind: str):
+    """argparse type of a positive bound in metres: an ``altitude`` at most ``MAX_ALTITUDE_M`` (10 km), a
+    ``distance`` at most ``MAX_LOCAL_M`` (100 km); argparse names the option in its error (exit 2)."""
+
+    def parse(text: str) -> float:
+        from aerodaas.app.models import MAX_LOCAL_M
+        from aerodaas.config.base import MAX_ALTITUDE_M
+
+        upper = MAX_ALTITUDE_M if kind == "altitude" else MAX_LOCAL_M
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not 0.0 < v <= upper:
+            raise argparse.ArgumentTypeError(f"must be in (0, {upper:g}] metres, got {text}")
+        return v
+
+    return parse
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
+    through the MAVLink backend's mission protocol. The file is read and every item checked (with
+    :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
+    sent; a download is written only once complete. A ``.plan``'s geofence goes up first (MAV_MISSION_TYPE_FENCE
+    items and the fence parameters, ``--fence-action``; read back and compared: a mismatch stops the upload before
+    the mission is sent), then its rally points (MAV_MISSION_TYPE_RALLY), then the mission
+    (:mod:`aerodaas.backends.mavlink.fence`)."""
+    from aerodaas.backends import BackendError
+    from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
+
+    name = f"aerodaas mission {args.mission_cmd}"
+    backend = None
+    try:
+        if args.mission_cmd == "upload":
+            path = Path(args.file)
+            if not path.is_file():
+                raise MissionFileError(f"{str(path)!r}: mission file not found")
+            plan = load_mission(path)
+            if not plan.items:
+                raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
+                                       f"would clear the vehicle's mission)")
+            bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
+            if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
+                plan_to_flight(plan, **bounds)
+                check_rally_points(plan, plan.home, **bounds, src=str(path))
+            backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
+            if not backend.home_received:  # the bounds are from where the vehicle is, never from a default
+                raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
+                                       f"within {args.timeout:g} s; nothing was uploaded (the altitude "
+                                       "and distance bounds are measured from it)")
+            # again from the vehicle's own home (still before anything is sent): a .plan's planned home may be
+            # elsewhere; AMSL altitudes need it
+            plan_to_flight(plan, backend.home, **bounds)
+            check_rally_points(plan, backend.home, **bounds, src=str(path))
+            fence = plan.geofence
+            if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
+                got = backend.apply_fence(fence)
+                print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
+                      f"circle(s), {got['items']} fence items) uploaded and read back; "
+                      + ", ".join(f"{k} {v:g}" for k, v in got["params"].items()), flush=True)
+            if plan.rally_points:
+                n = backend.upload_rally(plan.rally_points)
+                print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
+            sent = backend.upload_mission(plan)
+            print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
+                  f"{args.connection}", flush=True)
+            if args.start:
+                backend.arm()
+                backend.start_mission()
+                print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
+        else:
+            out = Path(args.out)
+            if out.suffix.lower() not in _MISSION_SUFFIXES:
+                raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
+                                       "(QGroundControl .plan or QGC WPL 110 waypoints)")
+            backend = _mission_backend(args)
+            plan = backend.download_mission().model_copy(update={
+                "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
+            plan = _download_fence_and_rally(backend, plan, out, name)
+            tmp = out.with_name(out.name + ".part")
+            (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
+            os.replace(tmp, out)  # never a half-written mission file
+            print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
+                  f"written to {str(out)!r}", flush=True)
+    except (MissionFileError, BackendError, ValueError, OSError) as e:
+        where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
+            else ""
+        print(f"{name}: {e}{where}", file=sys.stderr)
+        return 2
+    finally:
+        if backend is not None:
+            backend.close(safe_end=False)  # hand the vehicle over as it is: a started mission flies on
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``mission upload`` / ``mission download`` on the CLI's sub-parsers."""
+    ms = sub.add_parser("mission", help="upload a .plan / QGC WPL mission to a MAVLink vehicle, or download one")
+    msub = ms.add_subparsers(dest="mission_cmd", required=True)
+    mu = msub.add_parser("upload", help="check FILE (.plan, .waypoints, .txt) and upload it (MISSION_ITEM_INT)")
+    mu.add_argument("file")
+    mu.add_argument("--start", action="store_true", help="then arm and start it (ArduPilot AUTO / PX4 AUTO.MISSION)")
+    mu.add_argument("--fence-action", choices=["rtl", "land", "hold", "report"], default="rtl",
+                    help="the vehicle's own action when it breaches the plan's geofence (ArduPilot FENCE_ACTION, PX4 "
+                         "GF_ACTION; default rtl)")
+    mu.add_argument("--max-altitude", type=_upload_bound("altitude"), default=120.0, metavar="M",
+                    help="refuse items higher than this above home, metres (default 120: the EU open category "
+                         "and FAA Part 107 ceiling)")
+    mu.add_argument("--max-distance", type=_upload_bound("distance"), default=10_000.0, metavar="M",
+                    help="refuse items farther than this from home horizontally, metres (default 10000)")
+    md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
+    md.add_argument("--out", required=True, metavar="FILE")
+    for m in (mu, md):
+        m.add_argument("--connection", required=True, metavar="CONN",
+                       help="pymavlink connection string, e.g. tcp:127.0.0.1:5760, udpin:0.0.0.0:14550, /dev/ttyACM0")
+        m.add_argument("--autopilot", choices=["auto", "ardupilot", "px4"], default="auto")
+        m.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the vehicle (default 10)")
+        m.set_defaults(func=cmd_mission)
