@@ -13,7 +13,8 @@ stops; ``aerodaas down`` sends SIGTERM to that pid only, and the daemon stops th
 The daemon keeps ``warm_workers`` idle Python workers with the framework imported
 (:mod:`aerodaas.clusters.warm_pool`), so that a run's actors start in processes that already run. The state file then
 also holds ``warm_workers``, ``warm_idle`` (idle workers at the last look), ``code_fingerprint`` (of the framework's
-code the warm workers imported) and ``sys_path`` (the daemon's import path, which its workers share).
+code the warm workers imported), ``package_roots`` (where that code is) and ``sys_path`` (the import path the
+node's workers share with the daemon).
 
 :func:`attached_address` is what ``aerodaas run`` (without ``--address``) consults: the GCS address of a running
 cluster of this kind, or None.
@@ -77,7 +78,7 @@ def importable_by_cluster(path: str, st: dict[str, Any]) -> bool:
     """Whether the package folder (or module file) ``path`` is on the import path of the cluster's daemon, which its
     workers share (the state's ``sys_path``): such a plug-in package needs no shipping to the workers."""
     parent = os.path.realpath(os.path.dirname(os.path.abspath(path)))
-    return any(os.path.realpath(p or ".") == parent for p in st.get("sys_path") or [])
+    return any(p and os.path.realpath(p) == parent for p in st.get("sys_path") or [])
 
 
 def not_on_cluster_path(paths: list[str]) -> list[str]:
@@ -95,8 +96,10 @@ def await_fresh_workers(timeout_s: float = 5.0) -> bool:
     st = read_state() or {}
     if not st.get("warm_workers"):
         return True
-    from aerodaas.clusters.warm_pool import code_fingerprint
+    from aerodaas.clusters.warm_pool import code_fingerprint, package_roots
 
+    if st.get("package_roots") not in (None, package_roots()):
+        return True  # another install than this driver's: its workers run that one's code in any case
     fp = code_fingerprint()
     t_end = time.monotonic() + timeout_s
     while st.get("code_fingerprint") not in (None, fp):
@@ -176,10 +179,14 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
 
     limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
     system_config: dict[str, Any] = {"worker_niceness": 0}
+    # the import path the node's workers share with this daemon: without sys.path[0], this module's own start
+    # folder (`python -m` puts the caller's working directory there), which workers do not have
+    worker_path = [p for p in sys.path[1:] if p]
     if warm > 0:
         from aerodaas.clusters.warm_pool import setup_hook_env
 
-        os.environ.update(setup_hook_env())  # the raylet's workers inherit it: each imports the framework at start
+        # the raylet's workers inherit it: each imports the framework at start
+        os.environ.update(setup_hook_env(state_path().parent / "warm_hook"))
         system_config["num_workers_soft_limit"] = max(cpus, warm)  # idle warm workers are not reaped
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -190,7 +197,7 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     node = cluster.head_node
     st = {"pid": os.getpid(), "address": cluster.address, "session_dir": node.get_session_dir_path(),
           "dashboard": getattr(node, "webui_url", None) or "", "started": time.time(), "warm_workers": 0,
-          "sys_path": list(sys.path)}
+          "sys_path": worker_path}
     lock = threading.Lock()
 
     def publish(fields: dict[str, Any]) -> None:
@@ -206,8 +213,10 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
         try:
             from aerodaas.clusters.warm_pool import code_fingerprint, raylet_pool, run_in_thread
 
+            from aerodaas.clusters.warm_pool import package_roots
+
             pool = raylet_pool(node, warm, publish)
-            st.update(warm_workers=warm, code_fingerprint=code_fingerprint())
+            st.update(warm_workers=warm, code_fingerprint=code_fingerprint(), package_roots=package_roots())
             run_in_thread(pool, stop)
         except (ImportError, AttributeError, OSError, KeyError, IndexError) as e:  # this Ray lacks what it needs
             st.update(warm_workers=0, warm_error=f"{type(e).__name__}: {e}"[:300])

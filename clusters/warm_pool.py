@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import signal
 import threading
 import time
 from collections.abc import Callable
@@ -62,18 +61,41 @@ def preimport() -> None:
             pass
 
 
-def setup_hook_env() -> dict[str, str]:
-    """The environment entry that makes every worker of a node started with it run :func:`preimport` at start."""
+#: the setup hook's own module, written by :func:`setup_hook_env`: loading it imports nothing, so that a framework
+#: that does not import (an edit in progress) cannot stop a worker from starting (Ray ends a worker whose hook
+#: fails to load, Ray's spill workers included)
+HOOK_MODULE = "aerodaas_warm_hook"
+_HOOK_SOURCE = (
+    '"""Written by `aerodaas up` (aerodaas.clusters.warm_pool): Ray\'s worker setup hook of its node."""\n\n\n'
+    "def preimport():\n"
+    "    try:\n"
+    "        from aerodaas.clusters.warm_pool import preimport as warm\n"
+    "        warm()\n"
+    "    except BaseException:  # a warm-up never stops a worker from starting\n"
+    "        pass\n")
+
+
+def setup_hook_env(hook_dir: str | os.PathLike) -> dict[str, str]:
+    """Write the hook module into ``hook_dir`` and return the environment entries (Ray's setup-hook variable, and
+    ``PYTHONPATH`` with ``hook_dir`` first) that make every worker of a node started with them run
+    :func:`preimport` at start. Raises OSError if the module cannot be written."""
     try:
         from ray._private import ray_constants
 
         key = getattr(ray_constants, "WORKER_PROCESS_SETUP_HOOK_ENV_VAR", _HOOK_ENV_FALLBACK)
     except ImportError:
         key = _HOOK_ENV_FALLBACK
-    return {key: f"{__name__}.preimport"}
+    os.makedirs(hook_dir, exist_ok=True)
+    path = os.path.join(hook_dir, f"{HOOK_MODULE}.py")
+    with open(path, "w") as f:
+        f.write(_HOOK_SOURCE)
+    pp = os.environ.get("PYTHONPATH")
+    return {key: f"{HOOK_MODULE}.preimport", "PYTHONPATH": os.pathsep.join([str(hook_dir)] + ([pp] if pp else []))}
 
 
-def _package_roots() -> list[str]:
+def package_roots() -> list[str]:
+    """The folders of the installed ``aerodaas`` package and of its sub-packages installed from the repository's
+    top level (``actors``, ``schedulers``, ``clusters``)."""
     import aerodaas
 
     roots = list(getattr(aerodaas, "__path__", []))
@@ -87,13 +109,13 @@ def _package_roots() -> list[str]:
 
 
 def code_fingerprint(roots: list[str] | None = None) -> str:
-    """A digest of every ``*.py`` file under ``roots`` (default: the installed ``aerodaas`` package and the
-    sub-packages installed from the repository's top level): path, size and modification time (ns). Changes when
-    any module file is edited, added or removed. Unreadable folders are skipped; never raises."""
+    """A digest of every ``*.py`` file under ``roots`` (default: :func:`package_roots`): its path within its root,
+    size and modification time (ns). Changes when any module file is edited, added or removed. Unreadable folders
+    are skipped; never raises."""
     import hashlib
 
     h = hashlib.blake2b(digest_size=12)
-    for root in sorted(roots if roots is not None else _package_roots()):
+    for root in sorted(roots if roots is not None else package_roots()):
         stack = [root]
         while stack:
             d = stack.pop()
@@ -108,7 +130,8 @@ def code_fingerprint(roots: list[str] | None = None) -> str:
                             stack.append(e.path)
                     elif e.name.endswith(".py"):
                         st = e.stat()
-                        h.update(f"{e.path}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
+                        rel = os.path.relpath(e.path, root)
+                        h.update(f"{os.path.basename(root)}/{rel}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
                 except OSError:
                     continue
     return h.hexdigest()
@@ -118,45 +141,71 @@ def code_fingerprint(roots: list[str] | None = None) -> str:
 class WarmPool:
     """Keeps ``size`` idle Python workers on one raylet (see the module).
 
-    ``idle_pids()`` lists the raylet's idle or starting workers, ``prestart(n)`` asks the raylet for ``n`` more
-    (it starts at most as many as the node has CPUs per call), ``stop_pid(pid)`` ends one, ``fingerprint()`` is
+    ``idle_pids()`` lists the raylet's idle workers, ``starting_pids()`` the workers being started (counted towards
+    the pool, never stopped), ``prestart(n)`` asks the raylet for ``n`` more (it starts at most as many as the node
+    has CPUs per call), ``stop_pids(pids)`` ends idle ones and returns once they are gone, ``fingerprint()`` is
     :func:`code_fingerprint`, ``publish(fields)`` reports the pool's state (the daemon writes it to its state file).
     Call :meth:`step` about once a second from one thread."""
 
     size: int
     idle_pids: Callable[[], list[int]]
     prestart: Callable[[int], None]
-    stop_pid: Callable[[int], None]
+    stop_pids: Callable[[list[int]], None]
+    starting_pids: Callable[[], list[int]] = list
     fingerprint: Callable[[], str] = code_fingerprint
     publish: Callable[[dict], None] = lambda fields: None
+    #: seconds a run's take of workers, or an edit of the framework, must have settled before the pool acts
     settle_s: float = 2.0
+    #: more workers than ``crash_factor * size`` asked for within ``crash_window_s``: they do not stay up (e.g. the
+    #: framework no longer imports); the pool pauses for ``crash_pause_s`` and says so
+    crash_factor: int = 4
+    crash_window_s: float = 60.0
+    crash_pause_s: float = 30.0
     short_since: float | None = None
     last_fingerprint: str = ""
+    pending: tuple[str, float] | None = None  # (new fingerprint, since) while an edit settles
+    asked: list[tuple[float, int]] = field(default_factory=list)  # (time, workers asked for) within crash_window_s
+    paused_until: float = -1.0
     last_published: dict = field(default_factory=dict)
     errors: int = 0
 
     def step(self, now: float) -> None:
-        """One look at the pool: refresh it if the code changed; refill it once it has been short for
-        ``settle_s`` seconds (at once when it was never filled); publish ``warm_idle`` and ``code_fingerprint``.
-        A failed call is counted in ``errors`` and published as ``warm_error``; never raises."""
+        """One look at the pool: once the framework's code has changed and stayed so for ``settle_s``, stop the idle
+        warm workers and refill at once; otherwise refill once the pool has been short for ``settle_s`` (at once
+        when it was never filled); publish ``warm_idle`` (idle workers now) and ``code_fingerprint`` (of the code
+        they hold). A failed call is counted in ``errors`` and published as ``warm_error``; never raises."""
         try:
             fp = self.fingerprint()
             idle = self.idle_pids()
             at_once = not self.last_fingerprint  # never filled yet
             if self.last_fingerprint and fp != self.last_fingerprint:
-                for pid in idle:  # they imported the old code
-                    self.stop_pid(pid)
-                idle, at_once = [], True  # a run may be waiting for fresh workers
-            self.last_fingerprint = fp
-            missing = self.size - len(idle)
+                if self.pending is None or self.pending[0] != fp:
+                    self.pending = (fp, now)  # an edit (a checkout touches many files): wait until it settles
+                elif now - self.pending[1] >= self.settle_s:
+                    self.stop_pids(idle)  # they imported the old code; returns once they are gone
+                    idle, at_once, self.pending = [], True, None
+                    self.last_fingerprint = fp  # published below, after the old workers are gone
+            else:
+                self.pending = None
+                self.last_fingerprint = fp
+            missing = self.size - len(idle) - len(self.starting_pids())
+            self.asked = [(t, n) for t, n in self.asked if now - t < self.crash_window_s]
             if missing <= 0:
                 self.short_since = None
+            elif now < self.paused_until:
+                pass
+            elif sum(n for _, n in self.asked) >= self.crash_factor * self.size:
+                self.paused_until, self.asked = now + self.crash_pause_s, []
+                self._publish({"warm_error": f"more than {self.crash_factor * self.size} workers started within "
+                                             f"{self.crash_window_s:g} s did not stay up; pausing "
+                                             f"{self.crash_pause_s:g} s (does the framework import?)"})
             elif at_once or (self.short_since is not None and now - self.short_since >= self.settle_s):
                 self.prestart(missing)
+                self.asked.append((now, missing))
                 self.short_since = None
             elif self.short_since is None:
                 self.short_since = now
-            self._publish({"warm_idle": len(idle), "code_fingerprint": fp})
+            self._publish({"warm_idle": len(idle), "code_fingerprint": self.last_fingerprint})
         except Exception as e:  # noqa: BLE001 - the pool is an optimisation: the cluster keeps running without it
             self.errors += 1
             self._publish({"warm_error": f"{type(e).__name__}: {e}"[:300]})
@@ -178,15 +227,20 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
 
     raylet = psutil.Process(node.all_processes[ray_constants.PROCESS_TYPE_RAYLET][0].process.pid)
     stub = node_manager_pb2_grpc.NodeManagerServiceStub(init_grpc_channel(f"127.0.0.1:{node.node_manager_port}"))
-    def idle_pids() -> list[int]:
+    def workers(title_idle: bool) -> list[int]:
         out = []
         for p in raylet.children():
             try:
                 cmd = p.cmdline()
             except psutil.Error:
                 continue
-            if cmd and (cmd[0].startswith("ray::IDLE") or any(c.endswith("default_worker.py") for c in cmd[:3])):
+            if not cmd:
+                continue
+            if title_idle and cmd[0] == "ray::IDLE":  # exactly: not ray::IDLE_SPILL_WORKER / _RESTORE_WORKER
                 out.append(p.pid)
+            elif not title_idle and any(c.endswith("default_worker.py") for c in cmd[:3]) \
+                    and not any(c.startswith("--worker-type=") and not c.endswith("=WORKER") for c in cmd):
+                out.append(p.pid)  # a Python worker still starting (importing the framework)
         return out
 
     def prestart(n: int) -> None:
@@ -194,13 +248,20 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
                                                       keep_alive_duration_secs=24 * 3600)
         stub.PrestartWorkers(req, timeout=10)
 
-    def stop_pid(pid: int) -> None:
-        try:
-            os.kill(pid, signal.SIGTERM)
-        except ProcessLookupError:
-            pass
+    def stop_pids(pids: list[int]) -> None:
+        procs = []
+        for pid in pids:
+            try:
+                p = psutil.Process(pid)
+                if p.cmdline()[:1] == ["ray::IDLE"]:  # still idle right now: never a worker that took a task
+                    p.terminate()
+                    procs.append(p)
+            except (psutil.Error, IndexError):
+                continue
+        psutil.wait_procs(procs, timeout=10)
 
-    return WarmPool(size=size, idle_pids=idle_pids, prestart=prestart, stop_pid=stop_pid, publish=publish)
+    return WarmPool(size=size, idle_pids=lambda: workers(True), starting_pids=lambda: workers(False),
+                    prestart=prestart, stop_pids=stop_pids, publish=publish)
 
 
 def run_in_thread(pool: WarmPool, stop: threading.Event, period_s: float = 1.0) -> threading.Thread:
