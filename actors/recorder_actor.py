@@ -207,8 +207,8 @@ class RecorderActor:
 
     def close(self) -> dict:
         """Finish the file; returns the per-topic message counts (of this segment). A recorder that replaced a dead
-        one first records the run's own outcome, ``/run/result`` ``{"outcome": "recording_lost", "losses": [...]}``,
-        last in the file: the recording, joined or not, never reads as a success (the drones' ``/mission/result``
+        one first records the run's own outcome, ``/run/result`` ``{"outcome": "recording_lost", "losses": [...]}``
+        (stamped after the last message written so far): the recording, joined or not, never reads as a success (the drones' ``/mission/result``
         say how each mission went; :func:`aerodaas.recording.reader.summarize` lets the run's outcome win)."""
         if self._finishing is not None:
             self._finishing.join(120.0)
@@ -217,6 +217,8 @@ class RecorderActor:
         if self.losses:
             from aerodaas.recording.reader import RUN_RESULT_TOPIC
 
+            if self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message (recording_report)
+                self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
             t_ns = (getattr(self.recorder, "last_t_ns", None) or 0) + 1
             losses = [{k: x.get(k) for k in ("segment", "recorded_until_ns", "resumed_at_ns")} for x in self.losses]
             self.recorder.json(RUN_RESULT_TOPIC, t_ns, {"outcome": "recording_lost", "losses": losses},

@@ -75,6 +75,10 @@ def test_nothing_reaches_beyond_max_distance_from_home():
     c.check_velocity(VelocityCommand(vx=2.0, duration=5.0), position=(0.0, 0.0, 5.0))  # 10 m out: fine
     with pytest.raises(SafetyViolation, match="beyond max_distance"):  # already at 48 m, pushing outwards
         c.check_velocity(VelocityCommand(vx=2.0, duration=2.0), position=(48.0, 0.0, 5.0))
+    # beyond the limit (pushed out by wind, or the limit was lowered): back home is allowed, farther is not
+    c.check_velocity(VelocityCommand(vx=-1.0, duration=2.0), position=(51.0, 0.0, 5.0))
+    with pytest.raises(SafetyViolation, match="beyond max_distance"):
+        c.check_velocity(VelocityCommand(vy=1.0, duration=2.0), position=(51.0, 0.0, 5.0))
 
 
 def test_clamp_uses_the_minimum_too():

@@ -203,9 +203,13 @@ class SafetyGate:
                 raise SafetyViolation(cmd.id, "vz", v[2], f"could reach {ez:.2f} m above home (with the stopping "
                                       f"distance at {self.accel:g} m/s^2), outside [{self.min_alt:g}, "
                                       f"{self.max_alt:g}] m within {horizon:g} s")
-            # each predicted point plus its stopping distance (upper bound of how far from home it could end)
-            far = max(math.hypot(q[0], q[1]) + math.hypot(w[0], w[1]) ** 2 / (2.0 * self.accel) for q, w in path)
-            if far > self.max_dist:
+            # each predicted point plus its stopping distance (upper bound of how far from home it could end); a
+            # vehicle already beyond the limit may still be commanded back: only going farther than it must is refused
+            def reach(q, w) -> float:
+                return math.hypot(q[0], q[1]) + math.hypot(w[0], w[1]) ** 2 / (2.0 * self.accel)
+
+            far = max(reach(q, w) for q, w in path)
+            if far > max(self.max_dist, reach(*path[0])) + 1e-6:
                 self.rejected += 1
                 raise SafetyViolation(cmd.id, "velocity", [round(c, 3) for c in v],
                                       f"could reach {far:.0f} m from home within {horizon:g} s, beyond max_distance "
