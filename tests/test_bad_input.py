@@ -43,6 +43,16 @@ def test_ulog_without_position_is_refused_before_ray(tmp_path):
         parse_environment_config(env)
 
 
+def test_reliability_file_mission_and_gate_cases(tmp_path):
+    """The catalogue's whole-file cases (aerodaas.reliability.file_cases): malformed JSON files named with the
+    reason, mission uploads refused before connecting, 100,000-item .plan and WPL files read and checked, the safety
+    gate's distance probes; the same rows docs/reliability.md shows."""
+    from aerodaas.reliability.file_cases import run_file_cases
+
+    rows = run_file_cases(tmp_path)
+    assert len(rows) == 13 and [r for r in rows if not r["refused"]] == [], rows
+
+
 def test_far_waypoints_are_refused_without_a_geofence():
     from pydantic import ValidationError
 

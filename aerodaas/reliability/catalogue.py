@@ -147,6 +147,18 @@ ENV_CASES: list[InputCase] = [
               lambda d, t: _robot(d).update(backend="replay", replay={"log": _tlog_without_position(t)}),
               "no position fix"),
     InputCase("battery initial_pct 150", lambda d, t: _robot(d).update(battery={"initial_pct": 150}), "initial_pct"),
+    InputCase("simulation.physics_hz 1 (the gate's model needs >= 10)", lambda d, t: d.update(simulation={"physics_hz": 1}),
+              "physics_hz"),
+    InputCase("simulation.physics_hz 1e-6", lambda d, t: d.update(simulation={"physics_hz": 1e-6}), "physics_hz"),
+    InputCase("simulation.speedup 1e-300", lambda d, t: d.update(simulation={"speedup": 1e-300}), "speedup"),
+    InputCase("simulation.speedup 1e-9", lambda d, t: d.update(simulation={"speedup": 1e-9}), "speedup"),
+    InputCase("ground 100 km at 1 mm/px", lambda d, t: d.update(world={"ground": {"size_m": 100000,
+                                                                                  "metres_per_pixel": 0.001}}),
+              "metres_per_pixel"),
+    InputCase("world.ground.seed -1", lambda d, t: d.update(world={"ground": {"seed": -1}}), "seed"),
+    InputCase("noise.seed -1", lambda d, t: _robot(d).update(noise={"seed": -1}), "seed"),
+    InputCase("safety.max_distance 200 km", lambda d, t: _robot(d).update(safety={"max_distance": 2e5}),
+              "max_distance"),
     InputCase("mavlink.setpoint_rate_hz 1e308",
               lambda d, t: _robot(d).update(backend="mavlink", mavlink={"setpoint_rate_hz": BIG}), "setpoint_rate_hz"),
 ]
@@ -199,6 +211,9 @@ def run_inputs() -> dict[str, Any]:
         for name, make, expect in PATH_CASES:
             ok, msg = check_path_case(make, expect, tmp)
             rows.append({"kind": "--record path", "name": name, "refused": ok, "message": msg})
+        from aerodaas.reliability.file_cases import run_file_cases
+
+        rows += run_file_cases(tmp)  # malformed JSON files, mission files and uploads, safety-gate probes
     from aerodaas.reliability.cli_cases import run_cli_cases
     from aerodaas.reliability.hitl_probe import run_hitl_cases
 
