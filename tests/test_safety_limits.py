@@ -251,3 +251,28 @@ def test_end_to_end_rtl_goes_around_the_exclusion_zone(ray_session, run_options,
     closest = min(math.hypot(p[0] - 12.0, p[1]) for p in poses)
     assert closest >= 4.0, closest  # never inside the exclusion circle (the straight RTL passed 0.02 m from its centre)
     assert math.hypot(poses[-1][0], poses[-1][1]) < 1.0, poses[-1]  # and it got home
+
+
+@pytest.mark.faults
+@pytest.mark.e2e
+def test_end_to_end_low_battery_rtl_goes_around_the_exclusion_zone(ray_session, run_options, tmp_path):
+    """The low-battery failsafe returns by the same planned path as an app's RTL: the drone hovers behind an
+    exclusion circle until its battery falls below low_battery_rtl_pct (energy is simulated, so where that happens
+    does not depend on the machine's speed), then returns around the circle, never inside it, and gets home."""
+    robot = {"id": "r", "home": HOME, "takeoff_altitude": 3.0, "limits": {"max_speed": 2.0},
+             "battery": {"capacity_wh": 6.7, "hover_power_w": 180.0, "speed_power_w_per_mps": 10.0},
+             "safety": {"low_battery_rtl_pct": 50.0, "critical_battery_pct": 0.0,
+                        "geofence": {"circles": [{"center": _ll(12.0, 0.0), "radius": 4.0, "inclusion": False}]}}}
+    rep, msgs = _e2e(tmp_path, run_options, robot,
+                     '[Waypoint(id="a", x=0, y=8, z=3), Waypoint(id="b", x=24, y=8, z=3), '
+                     'Waypoint(id="c", x=24, y=0, z=3, hover_duration=120)]', rtl=False)
+    poses = [m["position"] for m in msgs]
+    failsafe = [e for e in rep["events"] if e.get("event") == "failsafe_rtl"]
+    assert failsafe, rep["events"]  # the battery failsafe, not the end of the mission, brought it home
+    ret = [e for e in rep["events"] if e.get("event") == "returning"]
+    assert ret and len(ret[0]["path"]) > 1, rep["events"]  # a path of several legs, not the straight line
+    at = [p for p in poses if p[0] > 23.0 and abs(p[1]) <= 1.0]
+    assert at, "the drone never got behind the zone (the test would prove nothing)"
+    closest = min(math.hypot(p[0] - 12.0, p[1]) for p in poses)
+    assert closest >= 4.0, closest
+    assert math.hypot(poses[-1][0], poses[-1][1]) < 1.0, poses[-1]

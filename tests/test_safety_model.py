@@ -44,13 +44,23 @@ def test_no_command_sequence_takes_the_drone_outside_its_limits(seq, mode):
     _assert_inside(fly_commands(seq, on_violation=mode))
 
 
+@settings(max_examples=10, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seq=sequences, mode=st.sampled_from(["reject", "clamp"]))
+def test_no_command_sequence_leaves_the_limits_at_the_coarsest_physics_step(seq, mode):
+    """The same property at ``physics_hz`` 10, the coarsest step the configuration allows (issue 25: at 0.5-1 Hz
+    pushes reached 9.6 m against an 8 m fence; such steps are now refused before Ray)."""
+    _assert_inside(fly_commands(seq, on_violation=mode, physics_hz=10.0))
+
+
+@pytest.mark.parametrize("physics_hz", [50.0, 10.0])
 @pytest.mark.parametrize("mode", ["reject", "clamp"])
-def test_the_issue_attacks_stay_inside(mode):
+def test_the_issue_attacks_stay_inside(mode, physics_hz):
     """Repeated 0.5 s commands at 3 m/s towards the fence edge (1.69 m outside before), towards the exclusion zone,
-    and climbing into the ceiling (0.11 m over before); the gate refuses before the stopping distance runs out."""
+    and climbing into the ceiling (0.11 m over before); the gate refuses before the stopping distance runs out, at
+    the default physics step and at the coarsest one allowed."""
     for seq in ([("vel", 3.0, 0.0, 0.0, 0.5, 5)] * 80, [("vel", 2.0, 1.2, 0.0, 0.5, 5)] * 80,
                 [("vel", 0.0, 0.0, 1.5, 0.5, 5)] * 60, [("vel", -2.1, -2.1, 1.5, 0.5, 5)] * 80):
-        ex = fly_commands(seq, on_violation=mode)
+        ex = fly_commands(seq, on_violation=mode, physics_hz=physics_hz)
         _assert_inside(ex)
         assert ex.accepted > 0  # it flew: the gate is not simply refusing everything
 
