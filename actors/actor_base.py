@@ -43,22 +43,23 @@ def _recorder_name(name: str) -> str:
 
 
 class ActorBase:
-    """Plain base of the run's Ray actors (see the module docstring). ``spec``: the actor's part of the plan
-    (:class:`~aerodaas.runtime.specs.ActorSpec`); ``wiring``: ``{"routes", "location", "tiers", "peers"}``; both
-    None: read them from the run's recorder actor (how the runtime starts them)."""
+    """Plain base of the run's Ray actors (see the module docstring). Its part of the plan
+    (:class:`~aerodaas.runtime.specs.ActorSpec`) and its wiring (``{"routes", "location", "tiers", "peers"}``) are read
+    from the run's recorder actor, which keeps every actor's, so that a restarted actor gets them the same way."""
 
-    def __init__(self, host_id: str, tier: str, spec: ActorSpec | None, wiring: dict | None,
-                 workers: int | None = None, switch_interval_s: float | None = 0.0005) -> None:
+    def __init__(self, host_id: str, tier: str, workers: int | None = None,
+                 switch_interval_s: float | None = 0.0005) -> None:
         probe(f"actor_init:{host_id}")  # the constructor runs: the worker is up and this module imported
         if switch_interval_s:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
             # to move on by up to 5 ms; the actors are latency-bound, not throughput-bound
             sys.setswitchinterval(switch_interval_s)
-        if spec is None:  # the run's recorder actor keeps every actor's spec (see aerodaas.runtime.supervise.start_actors)
-            from ray import cloudpickle
+        from ray import cloudpickle
 
-            spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
-            spec, wiring = cloudpickle.loads(spec_b), cloudpickle.loads(wiring_b)
+        # the run's recorder actor keeps every actor's spec (see aerodaas.runtime.supervise.start_actors)
+        spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
+        spec: ActorSpec = cloudpickle.loads(spec_b)
+        wiring: dict = cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
         self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers, restart_hold_s=spec.restart_hold_s)
         self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),

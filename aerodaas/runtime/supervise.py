@@ -71,7 +71,7 @@ def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
         if hid == "recorder":
             continue
         opts = {"name": a.name, "label_selector": a.selector(placement), "max_restarts": max_restarts}
-        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier, None, None)
+        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier)
     return handles
 
 
