@@ -79,6 +79,11 @@ def test_nothing_reaches_beyond_max_distance_from_home():
     c.check_velocity(VelocityCommand(vx=-1.0, duration=2.0), position=(51.0, 0.0, 5.0))
     with pytest.raises(SafetyViolation, match="beyond max_distance"):
         c.check_velocity(VelocityCommand(vy=1.0, duration=2.0), position=(51.0, 0.0, 5.0))
+    # flying home fast earns no allowance to fly out past the limit (its stopping point lies inwards)
+    fast = _gate({"max_speed": 10.0}, {"max_distance": 50.0})
+    with pytest.raises(SafetyViolation, match="beyond max_distance 50 m"):
+        fast.check_velocity(VelocityCommand(vx=10.0, duration=10.0), position=(49.0, 0.0, 5.0),
+                            velocity=(-10.0, 0.0, 0.0))
 
 
 def test_clamp_uses_the_minimum_too():

@@ -203,13 +203,17 @@ class SafetyGate:
                 raise SafetyViolation(cmd.id, "vz", v[2], f"could reach {ez:.2f} m above home (with the stopping "
                                       f"distance at {self.accel:g} m/s^2), outside [{self.min_alt:g}, "
                                       f"{self.max_alt:g}] m within {horizon:g} s")
-            # each predicted point plus its stopping distance (upper bound of how far from home it could end); a
-            # vehicle already beyond the limit may still be commanded back: only going farther than it must is refused
+            # where each predicted point would come to rest (braking at max_acceleration along its velocity); a vehicle
+            # already beyond the limit may still be commanded back: only going farther than the points it reaches
+            # whatever it is told (the command latency, at its present velocity) is refused
             def reach(q, w) -> float:
-                return math.hypot(q[0], q[1]) + math.hypot(w[0], w[1]) ** 2 / (2.0 * self.accel)
+                k = math.hypot(w[0], w[1]) / (2.0 * self.accel)
+                return math.hypot(q[0] + w[0] * k, q[1] + w[1] * k)
 
             far = max(reach(q, w) for q, w in path)
-            if far > max(self.max_dist, reach(*path[0])) + 1e-6:
+            n_latency = int(math.ceil(self.latency / self.PREDICT_DT_S - 1e-9)) + 1
+            unavoidable = max(reach(q, w) for q, w in path[:n_latency])
+            if far > max(self.max_dist, unavoidable) + 1e-6:
                 self.rejected += 1
                 raise SafetyViolation(cmd.id, "velocity", [round(c, 3) for c in v],
                                       f"could reach {far:.0f} m from home within {horizon:g} s, beyond max_distance "
