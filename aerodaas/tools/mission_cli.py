@@ -119,14 +119,18 @@ def cmd_mission(args: argparse.Namespace) -> int:
                 plan_to_flight(plan, **bounds)
                 check_rally_points(plan, plan.home, **bounds, src=str(path))
             backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
-            if not backend.home_received:  # the bounds are from where the vehicle is, never from a default
+            if backend.home_received:
+                # again from the vehicle's own home (still before anything is sent): a .plan's planned home may be
+                # elsewhere; AMSL altitudes need it
+                plan_to_flight(plan, backend.home, **bounds)
+                check_rally_points(plan, backend.home, **bounds, src=str(path))
+            elif plan.home is None:  # the bounds are measured from a home, never from a default one
                 raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
-                                       f"within {args.timeout:g} s; nothing was uploaded (the altitude "
-                                       "and distance bounds are measured from it)")
-            # again from the vehicle's own home (still before anything is sent): a .plan's planned home may be
-            # elsewhere; AMSL altitudes need it
-            plan_to_flight(plan, backend.home, **bounds)
-            check_rally_points(plan, backend.home, **bounds, src=str(path))
+                                       f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
+                                       "altitude and distance bounds are measured from it)")
+            else:  # no GPS fix yet (bench, indoors): checked against the file's planned home above
+                print(f"{name}: warning: the vehicle reported no home position within {args.timeout:g} s; the "
+                      f"items were checked against the file's planned home only", file=sys.stderr, flush=True)
             fence = plan.geofence
             if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
                 got = backend.apply_fence(fence)
