@@ -142,76 +142,99 @@ class WarmPool:
     """Keeps ``size`` idle Python workers on one raylet (see the module).
 
     ``idle_pids()`` lists the raylet's idle workers, ``starting_pids()`` the workers being started (counted towards
-    the pool, never stopped), ``prestart(n)`` asks the raylet for ``n`` more (it starts at most as many as the node
-    has CPUs per call), ``stop_pids(pids)`` ends idle ones and returns once they are gone, ``fingerprint()`` is
-    :func:`code_fingerprint`, ``publish(fields)`` reports the pool's state (the daemon writes it to its state file).
-    Call :meth:`step` about once a second from one thread."""
+    the pool, never stopped while starting), ``prestart(n)`` asks the raylet for ``n`` more (it starts at most as many
+    as the node has CPUs per call), ``stop_pids(pids)`` ends idle ones and returns once they are gone,
+    ``started_at(pid)`` is a worker's start (epoch seconds), ``alive(pid)`` whether it still exists,
+    ``fingerprint()`` is :func:`code_fingerprint`, ``publish(fields)`` reports the pool's state (the daemon writes it
+    to its state file), ``wall()`` is the epoch clock. Call :meth:`step` about once a second from one thread."""
 
     size: int
     idle_pids: Callable[[], list[int]]
     prestart: Callable[[int], None]
     stop_pids: Callable[[list[int]], None]
     starting_pids: Callable[[], list[int]] = list
+    started_at: Callable[[int], float] = lambda pid: 0.0
+    alive: Callable[[int], bool] = lambda pid: True
     fingerprint: Callable[[], str] = code_fingerprint
     publish: Callable[[dict], None] = lambda fields: None
+    wall: Callable[[], float] = time.time
     #: seconds a run's take of workers, or an edit of the framework, must have settled before the pool acts
     settle_s: float = 2.0
-    #: more workers than ``crash_factor * size`` asked for within ``crash_window_s``: they do not stay up (e.g. the
-    #: framework no longer imports); the pool pauses for ``crash_pause_s`` and says so
-    crash_factor: int = 4
+    #: ``size`` workers that ended while starting (never idle, never taken by a job) within ``crash_window_s``: they
+    #: do not stay up (e.g. the framework no longer imports); the pool pauses for ``crash_pause_s`` and says so
     crash_window_s: float = 60.0
     crash_pause_s: float = 30.0
     short_since: float | None = None
-    last_fingerprint: str = ""
-    pending: tuple[str, float] | None = None  # (new fingerprint, since) while an edit settles
-    asked: list[tuple[float, int]] = field(default_factory=list)  # (time, workers asked for) within crash_window_s
+    last_fingerprint: str = ""  # of the code the warm workers hold (published)
+    pending: tuple[str, float, float] | None = None  # (new fingerprint, since, since on the wall clock): settling
+    stale: tuple[str, float] | None = None  # (new fingerprint, wall time of the edit): older workers to replace
+    seen_starting: set = field(default_factory=set)
+    failed: list[float] = field(default_factory=list)  # when workers ended while starting
     paused_until: float = -1.0
     last_published: dict = field(default_factory=dict)
     errors: int = 0
 
     def step(self, now: float) -> None:
-        """One look at the pool: once the framework's code has changed and stayed so for ``settle_s``, stop the idle
-        warm workers and refill at once; otherwise refill once the pool has been short for ``settle_s`` (at once
-        when it was never filled); publish ``warm_idle`` (idle workers now) and ``code_fingerprint`` (of the code
-        they hold). A failed call is counted in ``errors`` and published as ``warm_error``; never raises."""
+        """One look at the pool (see the class): replace workers older than a settled edit of the framework, then
+        publish its new fingerprint; refill once the pool has been short for ``settle_s`` (at once when it was never
+        filled or after an edit); pause when workers do not stay up; publish ``warm_idle`` (idle workers now),
+        ``code_fingerprint`` (of the code they hold) and ``warm_error`` (None when healthy). A failed call is
+        counted in ``errors`` and published as ``warm_error``; never raises."""
         try:
             fp = self.fingerprint()
-            idle = self.idle_pids()
+            idle, starting = self.idle_pids(), self.starting_pids()
+            self._count_failures(now, idle, starting)
             at_once = not self.last_fingerprint  # never filled yet
-            if self.last_fingerprint and fp != self.last_fingerprint:
+            if at_once:
+                self.last_fingerprint = fp
+            elif fp != (self.stale[0] if self.stale else self.last_fingerprint):
                 if self.pending is None or self.pending[0] != fp:
-                    self.pending = (fp, now)  # an edit (a checkout touches many files): wait until it settles
+                    self.pending = (fp, now, self.wall())  # an edit (a checkout touches many files): let it settle
                 elif now - self.pending[1] >= self.settle_s:
-                    self.stop_pids(idle)  # they imported the old code; returns once they are gone
-                    idle, at_once, self.pending = [], True, None
-                    self.last_fingerprint = fp  # published below, after the old workers are gone
+                    self.stale, self.pending = (fp, self.pending[2]), None
             else:
                 self.pending = None
-                self.last_fingerprint = fp
-            missing = self.size - len(idle) - len(self.starting_pids())
-            self.asked = [(t, n) for t, n in self.asked if now - t < self.crash_window_s]
+            if self.stale is not None:  # workers started before the edit hold the old code: replace them
+                old = [p for p in idle if self.started_at(p) < self.stale[1]]
+                if old:
+                    self.stop_pids(old)  # returns once they are gone
+                    idle, at_once = [p for p in idle if p not in old], True
+                if not any(self.started_at(p) < self.stale[1] for p in starting):
+                    self.last_fingerprint, self.stale = self.stale[0], None  # every warm worker is fresh now
+            missing = self.size - len(idle) - len(starting)
+            self.failed = [t for t in self.failed if now - t < self.crash_window_s]
             if missing <= 0:
                 self.short_since = None
             elif now < self.paused_until:
                 pass
-            elif sum(n for _, n in self.asked) >= self.crash_factor * self.size:
-                self.paused_until, self.asked = now + self.crash_pause_s, []
-                self._publish({"warm_error": f"more than {self.crash_factor * self.size} workers started within "
-                                             f"{self.crash_window_s:g} s did not stay up; pausing "
-                                             f"{self.crash_pause_s:g} s (does the framework import?)"})
+            elif len(self.failed) >= self.size:
+                self.paused_until, self.failed = now + self.crash_pause_s, []
+                self._publish({"warm_error": f"{self.size} workers ended while starting within "
+                                             f"{self.crash_window_s:g} s; pausing {self.crash_pause_s:g} s (does the "
+                                             "framework import?)"})
             elif at_once or (self.short_since is not None and now - self.short_since >= self.settle_s):
                 self.prestart(missing)
-                self.asked.append((now, missing))
                 self.short_since = None
             elif self.short_since is None:
                 self.short_since = now
-            self._publish({"warm_idle": len(idle), "code_fingerprint": self.last_fingerprint})
+            fields: dict = {"warm_idle": len(idle), "code_fingerprint": self.last_fingerprint}
+            if len(idle) >= self.size:
+                fields["warm_error"] = None  # healthy again
+            self._publish(fields)
         except Exception as e:  # noqa: BLE001 - the pool is an optimisation: the cluster keeps running without it
             self.errors += 1
             self._publish({"warm_error": f"{type(e).__name__}: {e}"[:300]})
 
+    def _count_failures(self, now: float, idle: list[int], starting: list[int]) -> None:
+        """Workers seen starting that are now neither idle, starting nor alive ended while starting (a job that
+        took one keeps it alive under another title)."""
+        for pid in self.seen_starting - set(idle) - set(starting):
+            if not self.alive(pid):
+                self.failed.append(now)
+        self.seen_starting = set(starting)
+
     def _publish(self, fields: dict) -> None:
-        if any(self.last_published.get(k) != v for k, v in fields.items()):
+        if any(self.last_published.get(k, "unset") != v for k, v in fields.items()):
             self.last_published.update(fields)
             self.publish(dict(fields))
 
@@ -260,8 +283,15 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
                 continue
         psutil.wait_procs(procs, timeout=10)
 
+    def started_at(pid: int) -> float:
+        try:
+            return psutil.Process(pid).create_time()
+        except psutil.Error:
+            return 0.0
+
     return WarmPool(size=size, idle_pids=lambda: workers(True), starting_pids=lambda: workers(False),
-                    prestart=prestart, stop_pids=stop_pids, publish=publish)
+                    prestart=prestart, stop_pids=stop_pids, started_at=started_at, alive=psutil.pid_exists,
+                    publish=publish)
 
 
 def run_in_thread(pool: WarmPool, stop: threading.Event, period_s: float = 1.0) -> threading.Thread:

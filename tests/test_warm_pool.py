@@ -11,28 +11,43 @@ from aerodaas.clusters.warm_pool import WarmPool, code_fingerprint
 
 
 class FakeRaylet:
-    def __init__(self) -> None:
+    """Workers start idle at once (or, with ``start_fails``, start and die); ``clock`` is the wall clock."""
+
+    def __init__(self, start_fails: bool = False) -> None:
         self.idle: list[int] = []
+        self.starting: list[int] = []
+        self.born: dict[int, float] = {}
+        self.dead: set[int] = set()
         self.next_pid = 100
         self.stopped: list[int] = []
         self.prestarts: list[int] = []
         self.fp = "a"
+        self.clock = 0.0
+        self.start_fails = start_fails
         self.published: list[dict] = []
 
     def prestart(self, n: int) -> None:
         self.prestarts.append(n)
         for _ in range(min(n, 2)):  # the raylet starts at most its CPUs' worth per call (here 2)
-            self.idle.append(self.next_pid)
+            self.born[self.next_pid] = self.clock
+            (self.starting if self.start_fails else self.idle).append(self.next_pid)
             self.next_pid += 1
 
     def stop(self, pids: list[int]) -> None:
         for pid in pids:
             self.stopped.append(pid)
             self.idle.remove(pid)
+            self.dead.add(pid)
 
     def pool(self, size: int = 3) -> WarmPool:
-        return WarmPool(size=size, idle_pids=lambda: list(self.idle), prestart=self.prestart, stop_pids=self.stop,
-                        fingerprint=lambda: self.fp, publish=self.published.append, settle_s=2.0)
+        return WarmPool(size=size, idle_pids=lambda: list(self.idle), starting_pids=lambda: list(self.starting),
+                        prestart=self.prestart, stop_pids=self.stop, started_at=lambda pid: self.born[pid],
+                        alive=lambda pid: pid not in self.dead, fingerprint=lambda: self.fp,
+                        publish=self.published.append, wall=lambda: self.clock, settle_s=2.0)
+
+    def step(self, pool: WarmPool, now: float) -> None:
+        self.clock = now
+        pool.step(now)
 
 
 def test_the_pool_fills_at_once_then_refills_only_after_a_run_has_settled():
@@ -56,35 +71,60 @@ def test_the_pool_fills_at_once_then_refills_only_after_a_run_has_settled():
     assert r.published[-1]["warm_idle"] == 1 and r.published[-1]["code_fingerprint"] == "a"
 
 
-def test_a_settled_code_change_stops_the_idle_warm_workers_and_refills_at_once():
+def test_a_settled_code_change_replaces_every_older_warm_worker_before_it_is_published():
     r = FakeRaylet()
     pool = r.pool(size=2)
-    pool.step(0.0)
+    r.step(pool, 0.0)
     old = list(r.idle)
     assert len(old) == 2
     r.fp = "b"  # a module file of the framework was edited ...
-    pool.step(1.0)
+    r.step(pool, 1.0)
     r.fp = "c"  # ... and another (a checkout touches many files): nothing happens until the code settles
-    pool.step(2.0)
-    pool.step(3.0)
+    r.step(pool, 2.0)
+    r.step(pool, 3.0)
     assert r.stopped == [] and r.published[-1]["code_fingerprint"] == "a"  # the workers still hold "a"
-    pool.step(4.0)
-    assert r.stopped == old and r.prestarts == [2, 2] and len(r.idle) == 2 and not set(old) & set(r.idle)
+    r.starting.append(999)  # a worker that began starting before the edit settled (it holds old code) ...
+    r.born[999] = 1.5
+    r.step(pool, 4.0)
+    assert r.stopped == old and r.prestarts == [2, 1] and not set(old) & set(r.idle)
+    assert r.published[-1]["code_fingerprint"] == "a", "published while an old worker was still starting"
+    r.starting.remove(999)  # ... becomes idle: it is replaced too, then the new code is published
+    r.idle.append(999)
+    r.step(pool, 5.0)
+    assert 999 in r.stopped and 999 not in r.idle
     assert r.published[-1]["code_fingerprint"] == "c"
 
 
-def test_workers_that_do_not_stay_up_pause_the_pool():
-    r = FakeRaylet()
-    r.prestart = lambda n: r.prestarts.append(n)  # started, but they never become idle (their start fails)
+def test_workers_that_end_while_starting_pause_the_pool_and_healthy_ones_clear_it():
+    r = FakeRaylet(start_fails=True)
     pool = r.pool(size=2)
-    for k in range(20):
-        pool.step(float(k))
-    assert sum(r.prestarts) == 8 and "did not stay up" in pool.last_published["warm_error"]
-    pool.step(25.0)
-    assert sum(r.prestarts) == 8  # paused for crash_pause_s (30 s from t = 10)
-    pool.step(40.0)
-    pool.step(42.0)
-    assert sum(r.prestarts) == 10  # then tried again, after settle_s
+    t = 0.0
+    while not pool.last_published.get("warm_error") and t < 60:
+        seen = list(r.starting)
+        r.step(pool, t)
+        for pid in seen:  # each start fails: a worker seen starting exits before it is ever idle
+            r.starting.remove(pid)
+            r.dead.add(pid)
+        t += 1.0
+    assert "ended while starting" in pool.last_published["warm_error"]
+    asked = sum(r.prestarts)
+    r.step(pool, t + 20.0)
+    assert sum(r.prestarts) == asked  # paused for crash_pause_s
+    r.start_fails = False  # fixed: workers stay up again, the pool fills and the error is cleared
+    for k in range(6):
+        r.step(pool, t + 31.0 + 2.1 * k)
+    assert len(r.idle) == 2 and pool.last_published["warm_error"] is None
+
+
+def test_a_run_taking_workers_is_no_failure():
+    r = FakeRaylet()
+    pool = r.pool(size=2)
+    r.step(pool, 0.0)
+    for k in range(30):  # a run takes both warm workers every 3 s (they live on as its actors)
+        r.idle.clear()
+        r.step(pool, 1.0 + 3 * k)
+        r.step(pool, 3.1 + 3 * k)
+    assert not pool.failed and "warm_error" not in [k for p in r.published for k, v in p.items() if v]
 
 
 def test_a_failing_raylet_call_is_reported_and_never_raises():
