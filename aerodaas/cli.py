@@ -62,7 +62,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
         if results and not runtime.IN_MISSION[0]:
             # after the summary (the app ending, Ray shutting down): no KeyboardInterrupt from inside ray.shutdown,
-            # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS)
+            # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS).
+            # A second late signal is the user insisting (a hang on the way out): it ends the process as usual
+            if late_signal:
+                signal.signal(signum, signal.SIG_DFL)
+                os.kill(os.getpid(), signum)
+                return
             late_signal.append(signum)
             runtime.STOP_SIGNALS.append(signum)
             return
@@ -414,12 +419,18 @@ def _cmd_schema(args: argparse.Namespace) -> int:
     return 0
 
 
-#: True when :func:`main` runs as the process's own command (``aerodaas ...``, ``python -m aerodaas.cli``), not
-#: called from other Python code with an argument list
+#: True when :func:`main` runs as the process's own command (:func:`console`: ``aerodaas ...``,
+#: ``python -m aerodaas.cli``), not called from other Python code
 _PROCESS_MAIN = [False]
 
 
-def main(argv: list[str] | None = None) -> int:
+def console() -> int:
+    """The ``aerodaas`` command (console script and ``python -m aerodaas.cli``): :func:`main` as the process's own
+    command, whose late-signal handler then stays installed until the process exits."""
+    return main(own_process=True)
+
+
+def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     p = argparse.ArgumentParser(prog="aerodaas", description="AeroDaaS: drones-as-a-service on Ray")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run an application (APP.py) on the embedded simulator or real drones")
@@ -514,7 +525,7 @@ def main(argv: list[str] | None = None) -> int:
     rc.add_argument("file")
     rc.add_argument("--out", help="write here instead of replacing FILE")
     rc.set_defaults(func=_cmd_recover)
-    _PROCESS_MAIN[0] = argv is None
+    _PROCESS_MAIN[0] = own_process
     args = p.parse_args(argv)
     try:
         return args.func(args)
@@ -528,4 +539,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console())
