@@ -157,10 +157,15 @@ def _check_recording(rec: str, src) -> None:
     assert len(gusts) >= 5 and all(e["speed_mps"] == 1.0 for e in gusts), len(gusts)
     assert max(o["position"][0] for o in msgs["/uav/odometry"]) > 35.0
     reached = [e["waypoint"] for e in events if e["event"] == "waypoint_reached"]
-    # the trajectory scheduler: the survey, listed as wp3, wp1, wp4, wp2, was planned and flown west to east
+    # the trajectory scheduler: the survey, listed as wp3, wp1, wp4, wp2, was planned and flown west to east, where
+    # the built-in nearest-neighbour order from home differs (so this check tells the plug-in from the default)
+    from aerodaas import NearestNeighborScheduler, Waypoint
+
     plans = msgs["/uav/mission/plan"]
     survey = next(m for p in plans for m in p["missions"] if m["priority"] == 2)
     assert [i["id"] for i in survey["items"]] == ["wp1", "wp2", "wp3", "wp4"], survey
+    pts = [Waypoint(id=i["id"], x=i["local"][0], y=i["local"][1], z=i["local"][2]) for i in survey["items"]]
+    assert [w.id for w in NearestNeighborScheduler().order(pts, (0.0, 0.0, 8.0))] != ["wp1", "wp2", "wp3", "wp4"]
 
     # the analytics: one hover command where the gas first crossed 60 ppm, flown before the survey went on
     navs = msgs["/uav/gas_threshold/navigation"]
@@ -169,7 +174,7 @@ def _check_recording(rec: str, src) -> None:
     assert wp["id"] == "gas-hover-1" and wp["hover_duration"] == 2.0
     first_high = next(g for g in gas if g["ppm"] >= 60.0)
     assert math.dist(first_high["position"], (wp["x"], wp["y"], wp["z"])) < 0.5, (first_high, wp)
-    assert reached == ["wp1", "gas-hover-1", "wp2", "wp3", "wp4"], reached
+    assert reached == ["wp1", "wp2", "gas-hover-1", "wp3", "wp4"], reached  # the plume is met on the way to wp3
 
     # the analytics scheduler: every third frame_probe task shed with its reason, the others run on the edge
     tasks = msgs["/uav/frame_probe/tasks"]

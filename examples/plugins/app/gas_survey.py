@@ -22,8 +22,9 @@ scheduler.add_navigation(PriorityQueue(alarm.analyse(drone.get_sensor_by_id("gas
 probe = FrameProbe().deploy(edge)
 probe.analyse(drone.get_sensor_by_id("cam").get_data_stream())
 
-survey = [Waypoint(id=f"wp{i}", x=x, y=0.0, z=8.0, hover_duration=0.5)
-          for i, x in [(3, 28), (1, 8), (4, 36), (2, 16)]]  # any order: the scheduler sweeps west to east
+# any order: the scheduler sweeps west to east (nearest-neighbour would fly wp1, wp3, wp4, wp2)
+survey = [Waypoint(id=f"wp{i}", x=x, y=y, z=8.0, hover_duration=0.5)
+          for i, (x, y) in [(3, (26, 0)), (1, (8, 0)), (4, (36, 0)), (2, (16, 20))]]
 drone.navigate(scheduler.generate_navigation(
     PriorityQueue(AeroNavigation(NavigationType.DISTANCE_DRIVEN, survey, SchedulingType.UNORDERED), priority=2)))
 result = drone.start_mission()
