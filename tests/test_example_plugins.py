@@ -18,6 +18,7 @@ import pytest
 from aerodaas.recording.writer import read_messages
 
 from .conftest import REPO
+from .test_liveview_npm_client import node_client  # noqa: F401 - the fixture: Foxglove's npm client
 
 EXAMPLE = REPO / "examples" / "plugins"
 PLUGINS = {("sensor", "gas_concentration"), ("backend", "gusty_sim"), ("analytics", "gas_threshold"),
@@ -312,3 +313,28 @@ def test_the_example_app_runs_attached_to_aerodaas_up_in_its_warm_workers(instal
     finally:
         d = _aerodaas(["down"], env, tmp_path)
     assert d.returncode == 0 and "stopped" in d.stdout, d.stdout + d.stderr
+
+
+@pytest.mark.e2e
+def test_a_plugin_sensor_is_in_the_live_view_channel_for_channel(installed, node_client, tmp_path):
+    """The live view picks up a plug-in sensor from its declaration, as the recorder does: Foxglove's own npm client
+    (tests/js/count_channels.mjs), connected for the whole run of the example app, gets `/uav/gas` with the plug-in's
+    schema name and exactly as many messages on every channel as the recording holds."""
+    from .test_live_and_foxglove import AERODAAS, _start, _wait_for_url
+    from .test_liveview_npm_client import _finish, _recorded_counts
+
+    src, env = installed
+    rec = tmp_path / "gas.mcap"
+    p, lines = _start([*AERODAAS, "run", str(src / "app" / "gas_survey.py"), "--record", str(rec), "--live",
+                       "127.0.0.1:0", "--quiet", "--timeout", "300"], env=env)
+    try:
+        url, _ = _wait_for_url(p, lines, "live view at")
+        got = _finish(node_client(url, 300), 320)
+        assert p.wait(timeout=240) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+    recorded = _recorded_counts(rec)
+    assert recorded.get("/uav/gas", 0) >= 20, recorded
+    assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
+    assert got["channels"]["/uav/gas"]["schemaName"] == "aerodaas_example_plugins.GasReading", got["channels"]
