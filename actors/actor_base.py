@@ -47,9 +47,9 @@ class ActorBase:
     (:class:`~aerodaas.runtime.specs.ActorSpec`) and its wiring (``{"routes", "location", "tiers", "peers"}``) are read
     from the run's recorder actor, which keeps every actor's, so that a restarted actor gets them the same way."""
 
-    def __init__(self, host_id: str, tier: str, workers: int | None = None,
+    def __init__(self, actor_id: str, tier: str, workers: int | None = None,
                  switch_interval_s: float | None = 0.0005) -> None:
-        probe(f"actor_init:{host_id}")  # the constructor runs: the worker is up and this module imported
+        probe(f"actor_init:{actor_id}")  # the constructor runs: the worker is up and this module imported
         if switch_interval_s:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
             # to move on by up to 5 ms; the actors are latency-bound, not throughput-bound
@@ -57,17 +57,17 @@ class ActorBase:
         from ray import cloudpickle
 
         # the run's recorder actor keeps every actor's spec (see aerodaas.runtime.supervise.start_actors)
-        spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(host_id), timeout=60)
+        spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(actor_id), timeout=60)
         spec: ActorSpec = cloudpickle.loads(spec_b)
         wiring: dict = cloudpickle.loads(wiring_b)
         self.spec, self.wiring = spec, wiring
-        self.host = DataPlane(host_id, tier, int(spec.epoch_ns), workers, restart_hold_s=spec.restart_hold_s)
-        self.host.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
+        self.plane = DataPlane(actor_id, tier, int(spec.epoch_ns), workers, restart_hold_s=spec.restart_hold_s)
+        self.plane.connect(wiring.get("routes", {}), wiring.get("location", {}), wiring.get("tiers", {}),
                           wiring.get("peers", {}))
         self.channel = None
         key = wiring.get("channel_key")
         if key:  # same-node channels (aerodaas.actors.channel): use the peers', serve ours (below)
-            self.host.channel_key = key
+            self.plane.channel_key = key
         self.runtime: Any = None
         self.restarts = 0
         if restarted_actor():
@@ -78,18 +78,18 @@ class ActorBase:
             # served, and a frame delivered before its component exists was an error ("KeyError: 'always_car#1'",
             # twice in a full-suite run); until then their sends fail and are counted, as the Ray calls queued by
             # Ray behind this constructor would wait
-            self.channel = self._serve_channel(host_id, key)
+            self.channel = self._serve_channel(actor_id, key)
 
-    def _serve_channel(self, host_id: str, key: bytes) -> Any:
+    def _serve_channel(self, actor_id: str, key: bytes) -> Any:
         """This actor's :class:`~.channel.ChannelServer`, or None when its address cannot be served (peers then
         reach this actor through Ray calls)."""
         from aerodaas.actors.channel import ChannelServer, channel_address
 
         try:
-            return ChannelServer(channel_address(key, host_id), key, self.host.deliver,
-                                 on_error=self.host.report_error)
+            return ChannelServer(channel_address(key, actor_id), key, self.plane.deliver,
+                                 on_error=self.plane.report_error)
         except OSError as e:
-            print(f"aerodaas: actor {host_id!r}: no same-node channel ({e}); peers use Ray calls", file=sys.stderr)
+            print(f"aerodaas: actor {actor_id!r}: no same-node channel ({e}); peers use Ray calls", file=sys.stderr)
             return None
 
     def on_restart(self) -> None:
@@ -101,13 +101,13 @@ class ActorBase:
         from aerodaas.actors.assembly import ActorAssembly
 
         if self.runtime is None:
-            self.runtime = ActorAssembly(self.host, self.spec)
-            probe(f"actor_setup:{self.host.host_id}")  # its components built (drones connected)
-            self.host.watch_gc()
+            self.runtime = ActorAssembly(self.plane, self.spec)
+            probe(f"actor_setup:{self.plane.actor_id}")  # its components built (drones connected)
+            self.plane.watch_gc()
         return self.describe()
 
     def describe(self) -> dict:
-        out = self.runtime.describe() if self.runtime is not None else {"host": self.host.host_id}
+        out = self.runtime.describe() if self.runtime is not None else {"host": self.plane.actor_id}
         return {**out, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id(),
                 "restarts": self.restarts}
 
@@ -120,7 +120,7 @@ class ActorBase:
     def deliver(self, d: Delivery) -> list:
         """A message from another actor for one of this actor's components (see :meth:`.dataplane.DataPlane.deliver`:
         a lock-step delivery returns once its cascade here is done)."""
-        return self.host.deliver(d)
+        return self.plane.deliver(d)
 
     def call(self, cid: str, method: Callable, *args: Any, **kwargs: Any) -> Any:
         """Call ``method`` — a public method of the component's class, the function itself (e.g.
@@ -128,7 +128,7 @@ class ActorBase:
         with ``args``; a subclass's override runs. Raises TypeError when ``method`` is not a public method of the
         component's class (or a base of it), KeyError for an unknown component, RuntimeError before setup."""
         if self.runtime is None:
-            raise RuntimeError(f"actor {self.host.host_id!r} is not set up yet (component {cid!r})")
+            raise RuntimeError(f"actor {self.plane.actor_id!r} is not set up yet (component {cid!r})")
         comp = self.runtime.lookup(cid)
         name = getattr(method, "__name__", "")
         if not callable(method) or name.startswith("_") or not any(
@@ -140,7 +140,7 @@ class ActorBase:
     def settle(self, timeout_s: float) -> Settled:
         """Wait (at most ``timeout_s`` seconds) until nothing of this actor is in flight (see
         :meth:`.dataplane.DataPlane.settle`); called on every actor once the drones stopped, before the counts."""
-        return self.host.settle(timeout_s)
+        return self.plane.settle(timeout_s)
 
     def drain(self) -> bool:
         """Finish the work in flight once the drones are done (the analytics scheduler's tasks)."""

@@ -21,9 +21,9 @@ class AnalyticsComponent(Component):
 
     kind = "analytics"
 
-    def __init__(self, host: DataPlane, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, plane: DataPlane, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
                  buffer: int = 1) -> None:
-        super().__init__(host, cid, buffer)
+        super().__init__(plane, cid, buffer)
         self.name = name
         self.obj = analytics
         self.obj.setup()
@@ -128,7 +128,7 @@ class AnalyticsComponent(Component):
         meta = msg.meta
         self.proc_ms.append(dt_ms)
         self.processed += 1
-        self.host.mark_processed()
+        self.plane.mark_processed()
         self._record_tracks(msg)
         if out is None:
             return None
@@ -179,7 +179,7 @@ class AnalyticsComponent(Component):
                "batched": self.batched,
                "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
                "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
-               "outlets": self.host.outlet_stats(self.cid)}
+               "outlets": self.plane.outlet_stats(self.cid)}
         extra = getattr(self.obj, "stats", None)
         if callable(extra):
             out.update(extra())
@@ -195,9 +195,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
     only counted. Every task's outcome is recorded on ``/<robot>/<name>/tasks``. The mailbox only hands frames to the
     scheduler (microseconds), so it never drops: dropping is the scheduler's decision, with its reason."""
 
-    def __init__(self, host: DataPlane, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, plane: DataPlane, cid: str, name: str, analytics: Any, recorder: Any, epoch_ns: int,
                  service: "AnalyticsSchedulingService") -> None:
-        super().__init__(host, cid, name, analytics, recorder, epoch_ns, buffer=256)
+        super().__init__(plane, cid, name, analytics, recorder, epoch_ns, buffer=256)
         self.service = service
         self.outcomes: dict[str, int] = {}
         #: executed tasks (done on time or late) per tier, and those whose result was non-empty (e.g. detections)
@@ -247,10 +247,10 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
                 timing = task.notes.get("timing") if task.tier == "edge" else {"inference_ms": dt_ms}
                 outs = self._emit(task.result, msg, dt_ms, timing)
                 if outs:
-                    self.host.publish(self.cid, outs, tok)
+                    self.plane.publish(self.cid, outs, tok)
         except Exception as e:  # never lose the hold or the dispatcher's loop over one bad result
             self.errors += 1
-            self.host.report_error(self.cid, e)
+            self.plane.report_error(self.cid, e)
         finally:
             if tok is not None:
                 tok.done()
@@ -267,9 +267,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
 
 
 class AnalyticsSchedulingService:
-    """The edge device's analytics scheduler, inside the edge host: one :class:`aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher`
+    """The edge device's analytics scheduler, inside the edge actor: one :class:`aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher`
     (one policy instance, one edge executor thread, the scheduler's timers) for every scheduled analytics of the
-    host, each analytics being one *model* of the workload. Edge tasks run the host's own analytics objects on the
+    actor, each analytics being one *model* of the workload. Edge tasks run the actor's own analytics objects on the
     camera's frame (no copy); cloud tasks go to ``CloudExecutor`` actors (tier=cloud) that run copies of the same
     analytics on the JPEG. A cloud executor that dies (its node lost) is handled by the pool: in-flight tasks are
     retried or FAILED, the policy is told when no cloud is left, and the mission goes on.
@@ -277,8 +277,8 @@ class AnalyticsSchedulingService:
     ``spec``: the dispatcher actor's :class:`~aerodaas.runtime.specs.AnalyticsSchedulerSpec` (the scheduler's
     class itself, resolved in the driver where an application's own scheduler is registered)."""
 
-    def __init__(self, host: DataPlane, spec: AnalyticsSchedulerSpec) -> None:
-        self.host = host
+    def __init__(self, plane: DataPlane, spec: AnalyticsSchedulerSpec) -> None:
+        self.plane = plane
         self.spec = spec
         self.name = spec.name
         self.comps: dict[str, ScheduledAnalyticsComponent] = {}
@@ -303,7 +303,7 @@ class AnalyticsSchedulingService:
         pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.network or ["none"],
                                                                      seed=int(self.spec.seed)),
                          jpeg_quality=int(self.spec.jpeg_quality)) if ex else None
-        self.dispatcher = AnalyticsDispatcher(policy, AnalyticsEdgeExecutor(bank), pool, edge_id=self.host.host_id,
+        self.dispatcher = AnalyticsDispatcher(policy, AnalyticsEdgeExecutor(bank), pool, edge_id=self.plane.actor_id,
                                               on_result=self._on_result, keep_tasks=False)
         self.dispatcher.start_background()
 

@@ -28,9 +28,9 @@ class _Checkpointer:
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
     checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
 
-    def __init__(self, host: DataPlane, drones: list, period_s: float = 2.0) -> None:
-        self.host, self.period_s = host, period_s
-        self.on = "recorder" in (getattr(host, "peers", None) or {}) and bool(drones)
+    def __init__(self, plane: DataPlane, drones: list, period_s: float = 2.0) -> None:
+        self.plane, self.period_s = plane, period_s
+        self.on = "recorder" in (getattr(plane, "peers", None) or {}) and bool(drones)
         self.last = time.monotonic()
         self.visited = {id(d): len(d.visited) for d in drones}
 
@@ -46,15 +46,15 @@ class _Checkpointer:
                 self.visited[id(d)] = len(d.visited)
                 # taken here (consistent with the control step), serialised and sent on the pool: the clock
                 # thread never pays for pickling the queue
-                self.host.submit(self._send, d.cfg.id, drone_checkpoint(d))
+                self.plane.submit(self._send, d.cfg.id, drone_checkpoint(d))
         if due:
             self.last = now
 
     def _send(self, robot_id: str, cp: dict) -> None:
         try:
-            self.host.peer("recorder").checkpoint.remote(robot_id, cp)
+            self.plane.peer("recorder").checkpoint.remote(robot_id, cp)
         except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
-            self.host.report_error("checkpoint", e)
+            self.plane.report_error("checkpoint", e)
             self.on = False
 
 
@@ -65,11 +65,11 @@ class ActorAssembly:
     and cameras (simulated ones render ``spec.world``). Drones connect to their vehicles here, so an unreachable
     vehicle fails the run before take-off (:class:`~aerodaas.backends.base.RobotsNotConnected`)."""
 
-    def __init__(self, host: DataPlane, spec: ActorSpec) -> None:
+    def __init__(self, plane: DataPlane, spec: ActorSpec) -> None:
         from aerodaas.actors.drone import DroneComponent
         from aerodaas.actors.recorder import RecorderService
 
-        self.host = host
+        self.plane = plane
         self.sim = SimulationConfig.model_validate(spec.sim)
         rec = spec.record
         if rec is not None:  # an actor with the file and/or the live view
@@ -78,29 +78,29 @@ class ActorAssembly:
 
                 for name, js in rec.schemas.items():
                     register_json_schema(name, js)
-            self.recorder = RecorderService(rec.path, rec.meta, copies=host.copies, live=rec.live, homes=rec.homes,
+            self.recorder = RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
                                             declare=rec.declare)
         elif spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
             from aerodaas.actors.recorder import RemoteRecorder
 
-            self.recorder = RemoteRecorder(host, spec.record_remote)
+            self.recorder = RemoteRecorder(plane, spec.record_remote)
         else:
             self.recorder = None
-        host.recorder = self.recorder
+        plane.recorder = self.recorder
         self.comps: dict[str, Any] = {}
-        self.scheduling = AnalyticsSchedulingService(host, spec.analytics_scheduler) \
+        self.scheduling = AnalyticsSchedulingService(plane, spec.analytics_scheduler) \
             if spec.analytics_scheduler is not None else None
         for a in spec.analytics:
             if a.scheduled:
                 if self.scheduling is None:
                     raise ValueError(f"analytics {a.cid!r} is placed by the analytics scheduler, but actor "
-                                     f"{host.host_id!r} has no analytics_scheduler spec")
-                comp = ScheduledAnalyticsComponent(host, a.cid, a.name, a.obj, self.recorder, host.epoch_ns,
+                                     f"{plane.actor_id!r} has no analytics_scheduler spec")
+                comp = ScheduledAnalyticsComponent(plane, a.cid, a.name, a.obj, self.recorder, plane.epoch_ns,
                                                    self.scheduling)
                 self.scheduling.add(comp)
             else:
-                comp = AnalyticsComponent(host, a.cid, a.name, a.obj, self.recorder, host.epoch_ns, a.buffer)
-            self.comps[a.cid] = host.add(comp)
+                comp = AnalyticsComponent(plane, a.cid, a.name, a.obj, self.recorder, plane.epoch_ns, a.buffer)
+            self.comps[a.cid] = plane.add(comp)
         if self.scheduling is not None:
             self.scheduling.start()
         self.drones: list[DroneComponent] = []
@@ -112,23 +112,23 @@ class ActorAssembly:
                 adopt(r.plugins)
             cfg = RobotConfig.model_validate(r.robot)
             # the drone owns its waypoint queue and its navigation inbox (registered as <robot>/scheduler)
-            drone = DroneComponent(r.drone_cid, r.robot, host, r.scheduler, self.recorder, host.epoch_ns,
+            drone = DroneComponent(r.drone_cid, r.robot, plane, r.scheduler, self.recorder, plane.epoch_ns,
                                    r.preplanned, r.odom_cids, r.stat_cids, inbox_cid=r.scheduler_cid)
-            inbox = host.add(drone.inbox)
+            inbox = plane.add(drone.inbox)
             for c in r.cameras:
                 if c.props.get("source", "sim") == "sim" and world is None:
                     from aerodaas.sim.world import World
 
                     w = WorldConfig.model_validate(spec.world)
-                    world = World(w.ground, w.targets)  # one texture for every camera of this host
-                cam = CameraComponent(host, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
-                                      self.recorder, host.epoch_ns)
+                    world = World(w.ground, w.targets)  # one texture for every camera of this actor
+                cam = CameraComponent(plane, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
+                                      self.recorder, plane.epoch_ns)
                 drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
                 self.comps[c.cid] = cam
             for ps in r.plugin_sensors:
                 from aerodaas.actors.plugin_sensor import PluginSensorComponent
 
-                comp = PluginSensorComponent(host, ps, cfg.id, self.recorder, host.epoch_ns)
+                comp = PluginSensorComponent(plane, ps, cfg.id, self.recorder, plane.epoch_ns)
                 drone.plugin_sensors.append(comp)
                 self.comps[ps["cid"]] = comp
             self.comps[r.drone_cid] = drone
@@ -165,19 +165,19 @@ class ActorAssembly:
 
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)
-        return {"host": self.host.host_id, "tier": self.host.tier, "components": sorted(self.comps),
-                "pid": __import__("os").getpid(), "threads": self.host.workers,
+        return {"host": self.plane.actor_id, "tier": self.plane.tier, "components": sorted(self.comps),
+                "pid": __import__("os").getpid(), "threads": self.plane.workers,
                 "live_url": live.url if live is not None else None}
 
     def lookup(self, cid: str) -> Any:
         try:
             return self.comps[cid]
         except KeyError:
-            raise KeyError(f"host {self.host.host_id!r} has no component {cid!r}; it has {sorted(self.comps)}") from None
+            raise KeyError(f"actor {self.plane.actor_id!r} has no component {cid!r}; it has {sorted(self.comps)}") from None
 
     # ------------------------------------------------------------------ the clock
     def run(self, timeout_s: float | None = None, resume: bool = False) -> dict[str, dict]:
-        """Fly every drone of this host to the end of its mission; returns robot id -> report. ``resume``: the
+        """Fly every drone of this actor to the end of its mission; returns robot id -> report. ``resume``: the
         drones were restored from checkpoints (a restarted actor): no arming, no take-off, the mission goes on.
 
         One clock for the fleet: every ``1/physics_hz`` simulated seconds each backend steps (simulator) or is
@@ -196,7 +196,7 @@ class ActorAssembly:
         wall0 = time.monotonic()
         step = 0
         active = [d for d in drones if not d.done]
-        checkpoints = _Checkpointer(self.host, drones)
+        checkpoints = _Checkpointer(self.plane, drones)
         self.tick_lateness: list[float] = []
         try:
             while active:
@@ -220,7 +220,7 @@ class ActorAssembly:
                                 cam["next_t"] = b.t + 1.0 / cam["fps"]
                             cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
                 if tok is not None:  # a frame for a consumer that Ray restarts waits up to restart_hold_s for it
-                    tok.wait(max(120.0, self.host.restart_hold_s + 60.0))
+                    tok.wait(max(120.0, self.plane.restart_hold_s + 60.0))
                 now = time.monotonic()
                 finished = []
                 for d in active:
@@ -257,22 +257,22 @@ class ActorAssembly:
                 try:
                     self.scheduling.finish()
                 except Exception as e:  # reported; the drones' reports must still come back
-                    self.host.report_error("analytics_scheduler", e)
+                    self.plane.report_error("analytics_scheduler", e)
         return {d.cfg.id: {**d.report(), "plugin_sensors": {ps.sensor_id: ps.stats() for ps in d.plugin_sensors}}
                 for d in drones}
 
     def _abort_all(self, reason: str) -> None:
-        """End every drone's mission as failed with ``reason``: this host's drones directly, the others through
-        their host (an analytics on the cloud tier aborting drones on the edge)."""
+        """End every drone's mission as failed with ``reason``: this actor's drones directly, the others through
+        their actor (an analytics on the cloud tier aborting drones on the edge)."""
         for d in self.drones:
             d.error = reason
             d.end_mission("failed")
-        peers = getattr(self.host, "peers", {}) or {}
+        peers = getattr(self.plane, "peers", {}) or {}
         from aerodaas.actors.drone import DroneComponent
 
-        for cid, hid in getattr(self.host, "location", {}).items():
+        for cid, hid in getattr(self.plane, "location", {}).items():
             if is_drone(cid) and hid in peers and not any(d.cid == cid for d in self.drones):
-                self.host.peer(hid).call.remote(cid, DroneComponent.end_mission, "failed")
+                self.plane.peer(hid).call.remote(cid, DroneComponent.end_mission, "failed")
 
     # ------------------------------------------------------------------ end
     def drain(self) -> bool:
@@ -283,19 +283,19 @@ class ActorAssembly:
         try:
             self.scheduling.finish()
         except Exception as e:  # reported; the report must still come back
-            self.host.report_error("analytics_scheduler", e)
+            self.plane.report_error("analytics_scheduler", e)
         return True
 
     def stats(self) -> dict:
         out = {cid: c.stats() for cid, c in self.comps.items() if c.kind in ("camera", "analytics", "scheduler")}
-        gcp = self.host.gc_pauses_ms
-        out["_host"] = {"errors": self.host.errors[-10:], "error_count": len(self.host.errors),
+        gcp = self.plane.gc_pauses_ms
+        out["_host"] = {"errors": self.plane.errors[-10:], "error_count": len(self.plane.errors),
                         "gc_pauses": {"count": len(gcp), "max_ms": max(gcp, default=0.0)},
-                        "first_processed_wall": self.host.first_processed_wall,
-                        "frame_copies": self.host.copies.snapshot(),
-                        "lost_consumers": self.host.lost_consumers(),
+                        "first_processed_wall": self.plane.first_processed_wall,
+                        "frame_copies": self.plane.copies.snapshot(),
+                        "lost_consumers": self.plane.lost_consumers(),
                         "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])]),
-                        # a host without the recorder (cloud): messages it could not hand to the edge recorder
+                        # an actor without the recorder (cloud): messages it could not hand to the edge recorder
                         "record_send_errors": list(getattr(self.recorder, "send_errors", []))[-5:]}
         if self.scheduling is not None:
             out["_analytics_scheduler"] = self.scheduling.report()
@@ -306,8 +306,8 @@ class ActorAssembly:
             try:
                 self.scheduling.finish()
             except Exception as e:  # reported, never blocks closing the recording
-                self.host.report_error("analytics_scheduler", e)
-        self.host.close()
+                self.plane.report_error("analytics_scheduler", e)
+        self.plane.close()
         for c in self.comps.values():
             close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None
             if callable(close):

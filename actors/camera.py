@@ -16,7 +16,7 @@ from aerodaas.actors.dataplane import Cascade, DataPlane
 
 
 class CameraComponent:
-    """A camera sensor. :meth:`capture` (run on the host's pool when the clock says a frame is due) produces one
+    """A camera sensor. :meth:`capture` (run on the actor's pool when the clock says a frame is due) produces one
     frame — rendered by the simulator at the drone's pose (``source: sim``), the backend's own newest frame
     (``source: backend``, e.g. a Tello), or the recorded frame at this time of an MCAP recording's camera channel
     (``source: mcap``, to re-run analytics on a recorded flight) — makes it read-only, and publishes it. While the previous capture is still being
@@ -24,9 +24,9 @@ class CameraComponent:
 
     kind = "camera"
 
-    def __init__(self, host: DataPlane, cid: str, robot_id: str, sensor_id: str, props: dict, world: Any,
+    def __init__(self, plane: DataPlane, cid: str, robot_id: str, sensor_id: str, props: dict, world: Any,
                  backend: Any, recorder: Any, epoch_ns: int) -> None:
-        self.host, self.cid = host, cid
+        self.plane, self.cid = plane, cid
         self.robot_id, self.sensor_id = robot_id, sensor_id
         self.k = CameraIntrinsics.from_hfov(int(props["width"]), int(props["height"]), float(props["hfov_deg"]))
         self.pitch = float(props["pitch_deg"])
@@ -61,7 +61,7 @@ class CameraComponent:
             return False
         if tok is not None:
             tok.add()
-        self.host.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter())
+        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter())
         return True
 
     def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None, ticked: float) -> None:
@@ -73,7 +73,7 @@ class CameraComponent:
             finally:
                 self._busy.release()  # the next frame may be rendered while this one travels downstream
             if msg is not None:
-                self.host.publish(self.cid, [msg], tok, inline=True)
+                self.plane.publish(self.cid, [msg], tok, inline=True)
         finally:
             if tok is not None:
                 tok.done()
@@ -84,7 +84,7 @@ class CameraComponent:
         msg = self._produce(position, yaw, t, seq)
         if msg is None:
             return None
-        self.host.publish(self.cid, [msg], tok, inline=True)
+        self.plane.publish(self.cid, [msg], tok, inline=True)
         return msg.data
 
     def _produce(self, position: tuple, yaw: float, t: float, seq: int,
@@ -105,7 +105,7 @@ class CameraComponent:
         else:
             frame, truth = self.world.render(pose, self.k, t)
         frame.flags.writeable = False  # shared by every reader from here on: nobody may change it
-        self.host.copies.count("materialised")
+        self.plane.copies.count("materialised")
         wall = time.time()
         self.render_ms.append((time.perf_counter() - t0) * 1e3)
         self.frames += 1
@@ -132,4 +132,4 @@ class CameraComponent:
                 "render_ms_median": float(np.median(r)),
                 "dispatch_ms_median": float(np.median(q)), "dispatch_ms_p99": float(np.percentile(q, 99)),
                 "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,
-                "outlets": self.host.outlet_stats(self.cid), "subscribers": len(self.host.routes.get(self.cid, []))}
+                "outlets": self.plane.outlet_stats(self.cid), "subscribers": len(self.plane.routes.get(self.cid, []))}

@@ -54,10 +54,10 @@ __all__ = ["channel_address", "SlotFrame", "ChannelSend", "ChannelDone", "SlotFr
            "ChannelOutlet"]
 
 
-def channel_address(run_key: bytes, host_id: str) -> str:
+def channel_address(run_key: bytes, actor_id: str) -> str:
     """The abstract Unix socket address (Linux) of actor ``host_id``'s channel server in the run whose key is
     ``run_key``: ``\\0aerodaas-`` + 32 hex digits of SHA-256 (fits the 108-byte ``sun_path`` whatever the id)."""
-    return "\0aerodaas-" + hashlib.sha256(run_key + host_id.encode()).hexdigest()[:32]
+    return "\0aerodaas-" + hashlib.sha256(run_key + actor_id.encode()).hexdigest()[:32]
 
 
 @dataclass(frozen=True)

@@ -93,8 +93,8 @@ class Component:
 
     kind = "component"
 
-    def __init__(self, host: "DataPlane", cid: str, buffer: int = 1) -> None:
-        self.host, self.cid = host, cid
+    def __init__(self, plane: "DataPlane", cid: str, buffer: int = 1) -> None:
+        self.plane, self.cid = plane, cid
         self.capacity = max(0, int(buffer) - 1)
         self._m = threading.Lock()
         self._busy = False
@@ -134,10 +134,10 @@ class Component:
                         batch.append(self._q.popleft())
             try:
                 outs = self.handle_batch(batch) if len(batch) > 1 else [self.handle(port, msg)]
-            except Exception as e:  # a failing component never takes the host down: recorded, counted, skipped
+            except Exception as e:  # a failing component never takes the actor down: recorded, counted, skipped
                 self.errors += 1
                 outs = [None] * len(batch)
-                self.host.report_error(self.cid, e)
+                self.plane.report_error(self.cid, e)
             with self._m:
                 nxt = self._q.popleft() if self._q else None
                 if nxt is None:
@@ -145,10 +145,10 @@ class Component:
             for (_, m_in), out in zip(batch, outs):
                 try:
                     if out:
-                        self.host.publish(self.cid, out, m_in.tok)
+                        self.plane.publish(self.cid, out, m_in.tok)
                 except Exception as e:  # a failing subscriber must not leave this mailbox busy with items queued
                     self.errors += 1
-                    self.host.report_error(self.cid, e)
+                    self.plane.report_error(self.cid, e)
                 finally:
                     if m_in.tok is not None:
                         m_in.tok.done()
@@ -183,19 +183,19 @@ class DataPlane:
     worker pool. Plain Python: :class:`~.actor_base.ActorBase` is the Ray actor around it.
 
     ``routes`` maps a producing component id to its subscribers ``[(component id, port, buffer)]``; components
-    of other hosts are reached through ``peers`` (host id -> actor handle) and ``location`` (component id ->
-    host id). ``tier`` decides whether a frame sent to a peer of another tier is JPEG-encoded."""
+    of other actors are reached through ``peers`` (actor id -> actor handle) and ``location`` (component id ->
+    actor id). ``tier`` decides whether a frame sent to a peer of another tier is JPEG-encoded."""
 
-    def __init__(self, host_id: str, tier: str, epoch_ns: int, workers: int | None = None,
+    def __init__(self, actor_id: str, tier: str, epoch_ns: int, workers: int | None = None,
                  recorder: Any = None, restart_hold_s: float = 60.0) -> None:
-        self.host_id, self.tier, self.epoch_ns = host_id, tier, epoch_ns
+        self.actor_id, self.tier, self.epoch_ns = actor_id, tier, epoch_ns
         n = workers or max(2, min(4, (os.cpu_count() or 2)))
         self.workers = n  #: threads of the worker pool
-        self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{host_id}")
+        self.pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"aerodaas-{actor_id}")
         self.components: dict[str, Component] = {}
         self.routes: dict[str, list[tuple[str, Port, int, tuple | None]]] = {}
         self.location: dict[str, str] = {}
-        self.tiers: dict[str, str] = {host_id: tier}
+        self.tiers: dict[str, str] = {actor_id: tier}
         self.peers: dict[str, Any] = {}
         self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel.ChannelOutlet
         #: the run's channel key (bytes) when actors on this machine talk through same-node channels
@@ -204,7 +204,7 @@ class DataPlane:
         #: lock-step: how long (s) a frame for a consumer actor that died waits for its restart
         #: (``ActorSpec.restart_hold_s``, the environment's ``actor_restart_timeout_s``)
         self.restart_hold_s = float(restart_hold_s)
-        self._tl = threading.local()  # .reply: (host id of the caller, [Delivery]) while a deliver runs
+        self._tl = threading.local()  # .reply: (actor id of the caller, [Delivery]) while a deliver runs
         self.recorder = recorder
         self.copies = FrameCopies()
         self.errors: list[dict] = []
@@ -232,12 +232,12 @@ class DataPlane:
     # ------------------------------------------------------------------ wiring
     def add(self, comp: Component) -> Component:
         self.components[comp.cid] = comp
-        self.location[comp.cid] = self.host_id
+        self.location[comp.cid] = self.actor_id
         return comp
 
     def connect(self, routes: dict, location: dict, tiers: dict, peers: dict) -> None:
         """``routes``: producer id -> ``[(consumer id, port, buffer, robots or None)]``; ``location``: component id
-        -> host id; ``tiers``: host id -> tier; ``peers``: host id -> Ray actor name (resolved on first use, so a
+        -> actor id; ``tiers``: actor id -> tier; ``peers``: actor id -> Ray actor name (resolved on first use, so a
         restarted actor is reached under the same name) or actor handle."""
         self.routes = {k: [tuple(s) if len(s) == 4 else (*s, None) for s in v] for k, v in routes.items()}
         merged = dict(location)  # the plan's typed ids (ComponentId: kind, robot) are the keys kept
@@ -247,11 +247,11 @@ class DataPlane:
         self.tiers.update(tiers)
         self.peers = dict(peers)
 
-    def peer(self, host_id: str) -> Any:
-        """The actor handle of host ``host_id`` (looked up by name once, then cached). Raises KeyError."""
-        p = self.peers[host_id]
+    def peer(self, actor_id: str) -> Any:
+        """The actor handle of actor ``host_id`` (looked up by name once, then cached). Raises KeyError."""
+        p = self.peers[actor_id]
         if isinstance(p, str):
-            p = self.peers[host_id] = ray.get_actor(p)
+            p = self.peers[actor_id] = ray.get_actor(p)
         return p
 
     # ------------------------------------------------------------------ delivery
@@ -352,7 +352,7 @@ class DataPlane:
             tok.done()
 
     def _reply_to(self, cid: str, port: Port, msg: Message) -> bool:
-        """While a deliver call from host H runs in this thread, an item for a component of H goes back in that
+        """While a deliver call from actor H runs in this thread, an item for a component of H goes back in that
         call's reply instead of a call of its own (not frames: their pixels never travel in a reply)."""
         rep = getattr(self._tl, "reply", None)
         if rep is None or isinstance(msg, FrameMsg) or self.location.get(cid) != rep[0]:
@@ -388,17 +388,17 @@ class DataPlane:
         if o is None:
             hid = self.location.get(cid)
             if hid is None or hid not in self.peers:
-                raise KeyError(f"host {self.host_id!r}: no route to component {cid!r} (subscriber of {src!r})")
+                raise KeyError(f"actor {self.actor_id!r}: no route to component {cid!r} (subscriber of {src!r})")
             o = self._channel_outlet(hid, cid, port, buffer)
             if o is None:
                 o = RemoteOutlet(self.peer(hid), cid, port, buffer, jpeg=self.tiers.get(hid, self.tier) != self.tier,
-                                 copies=self.copies, reply_to=self.host_id, on_reply=self.on_reply,
+                                 copies=self.copies, reply_to=self.actor_id, on_reply=self.on_reply,
                                  hold_s=self.restart_hold_s)
             self._outlets[key] = o
         return o
 
     def _channel_outlet(self, hid: str, cid: str, port: Port, buffer: int) -> Any:
-        """A :class:`~.channel.ChannelOutlet` to host ``hid`` when channels are on and ``hid`` serves one on this
+        """A :class:`~.channel.ChannelOutlet` to actor ``hid`` when channels are on and ``hid`` serves one on this
         machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
         if self.channel_key is None or self.tiers.get(hid, self.tier) != self.tier:
             return None
@@ -406,7 +406,7 @@ class DataPlane:
 
         try:
             return ChannelOutlet(channel_address(self.channel_key, hid), self.channel_key, cid, port, buffer,
-                                 reply_to=self.host_id, on_reply=lambda items: self.on_reply(items, inline=True),
+                                 reply_to=self.actor_id, on_reply=lambda items: self.on_reply(items, inline=True),
                                  copies=self.copies, hold_s=self.restart_hold_s)
         except Exception:  # noqa: BLE001 - not on this machine (or not serving): Ray calls
             return None

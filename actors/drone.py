@@ -2,7 +2,7 @@
 hover timers, failsafes), navigation executor, and its odometry and stat-stream sensors (their data is the
 vehicle state itself).
 
-It lives in the edge host (:mod:`aerodaas.actors.dataplane`): the host's clock thread calls :meth:`step` and
+It lives in the edge actor (:mod:`aerodaas.actors.dataplane`): the actor's clock thread calls :meth:`step` and
 :meth:`control_tick`. The drone owns its waypoint queue (:attr:`DroneComponent.queue`, a
 :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` holding the pre-planned navigation it was given) and its
 navigation inbox (:attr:`DroneComponent.inbox`, :class:`~aerodaas.actors.drone_inbox.DroneInbox`), which checks new
@@ -43,17 +43,17 @@ class DroneComponent(RunEnd, AutopilotFlight):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
-    ``inbox_cid``, default ``<robot>/scheduler``) takes; ``host`` publishes sensor messages to subscribers;
+    ``inbox_cid``, default ``<robot>/scheduler``) takes; ``plane`` publishes sensor messages to subscribers;
     ``recorder`` is the run's RecorderService or None."""
 
     kind = "drone"
 
-    def __init__(self, cid: str, robot_cfg: dict, host: Any, scheduler: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, cid: str, robot_cfg: dict, plane: Any, scheduler: Any, recorder: Any, epoch_ns: int,
                  preplanned_total: int, odom_cids: list[str], stat_cids: list[str], backend: Any = None,
                  inbox_cid: str | None = None) -> None:
         self.cid = cid
         self.cfg = RobotConfig.model_validate(robot_cfg)
-        self.host = host
+        self.plane = plane
         self.backend = backend if backend is not None else make_backend(self.cfg)
         self.gate = SafetyGate(self.cfg.safety, self.cfg.limits, self.cfg.home,
                                control_period_s=1.0 / self.cfg.control_rate_hz)
@@ -68,11 +68,11 @@ class DroneComponent(RunEnd, AutopilotFlight):
         #: simulated time (s) and position (ENU metres) at the last control step: where navigation is planned from
         self.last_tick: tuple[float, tuple] = (0.0, tuple(planner.start))
         #: the drone's navigation port (``<robot>/scheduler``): analytics and the HITL API add navigation there
-        self.inbox = DroneInbox(host, inbox_cid or f"{self.cfg.id}/scheduler", self.cfg.id, planner, recorder,
+        self.inbox = DroneInbox(plane, inbox_cid or f"{self.cfg.id}/scheduler", self.cfg.id, planner, recorder,
                                 epoch_ns, robot_cfg, self.queue, self.plan_log, self)
         self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
-        self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the host runtime
+        self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the actor's assembly
         self.plugin_sensors: list = []  # PluginSensorComponent (aerodaas.actors.plugin_sensor), filled likewise
         self.rejected: list[dict] = []
         self.visited: list[dict] = []
@@ -176,7 +176,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
         if self.recorder is not None:
             self.recorder.json("/mission/state", self._t_ns(t), msg, "aerodaas.MissionState")
         for cid in self.stat_cids:
-            self.host.publish(cid, [StatMsg(robot=self.cfg.id, sim_t=t, data=msg)], None, inline=False)
+            self.plane.publish(cid, [StatMsg(robot=self.cfg.id, sim_t=t, data=msg)], None, inline=False)
 
     # ------------------------------------------------------------------ control API (any thread)
     def pause_mission(self) -> bool:
@@ -256,7 +256,7 @@ class DroneComponent(RunEnd, AutopilotFlight):
         if self.recorder is not None:
             self.recorder.odometry(self.cfg.id, self._t_ns(odom["t"]), odom)
         for cid in self.odom_cids:
-            self.host.publish(cid, [OdometryMsg(robot=self.cfg.id, sim_t=odom["t"], data=odom)], tok, inline=False)
+            self.plane.publish(cid, [OdometryMsg(robot=self.cfg.id, sim_t=odom["t"], data=odom)], tok, inline=False)
 
     def control_tick(self) -> bool:
         """One control tick (at ``control_rate_hz``); returns True when this drone's mission is over."""

@@ -26,7 +26,7 @@ class DroneActor(ActorBase):
         from aerodaas.actors.checkpoint import restore_drone
 
         self.setup()
-        rec = self.host.peer("recorder")
+        rec = self.plane.peer("recorder")
         for d in self.runtime.drones:
             cp = ray.get(rec.last_checkpoint.remote(d.cfg.id), timeout=30)
             if cp is not None:

@@ -3,7 +3,7 @@
 what it takes the drone applies to the vehicle at once, not at its next control tick.
 
 The drone builds its inbox (:class:`~aerodaas.actors.drone.DroneComponent`, ``inbox``) around its own queue and
-mission plan log; the host runtime registers it under the robot's scheduler component id (``<robot>/scheduler``),
+mission plan log; the actor's assembly registers it under the robot's scheduler component id (``<robot>/scheduler``),
 where analytics streams deliver navigation on its ``priority`` port and the HITL API calls it. Calls go one way:
 the inbox reads where its drone was at its last control tick and hands what it took to the drone
 (:meth:`~aerodaas.actors.drone.DroneComponent.apply_navigation`); the drone flies from its own queue and never
@@ -25,9 +25,9 @@ class DroneInbox(SchedulerComponent):
     and whose ``plan_log`` it shares; other arguments as :class:`SchedulerComponent`). New navigation is applied by the drone at once; the latency
     record's ``applied`` says whether the drone was in a state that flies navigation."""
 
-    def __init__(self, host: Any, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, plane: Any, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
                  robot_cfg: dict | None, queue: WaypointQueue, log: MissionPlanLog, drone: Any) -> None:
-        super().__init__(host, cid, robot_id, scheduler, recorder, epoch_ns, robot_cfg, queue=queue, log=log)
+        super().__init__(plane, cid, robot_id, scheduler, recorder, epoch_ns, robot_cfg, queue=queue, log=log)
         self.owner = drone
 
     def where(self) -> tuple[float, tuple]:

@@ -11,19 +11,19 @@ __all__ = ["FrameCopies", "encode_frame", "decode_frame"]
 
 
 class FrameCopies:
-    """Counts, in one host process, every place where a frame's pixels are materialised or copied (see
+    """Counts, in one actor process, every place where a frame's pixels are materialised or copied (see
     :mod:`aerodaas.actors.dataplane`'s docstring for the per-frame totals). Counters, in frames:
 
     * ``materialised``: frames produced by a camera (the one allocation of the pixels);
-    * ``tier_jpeg_encoded`` / ``tier_jpeg_decoded``: frames JPEG-encoded here to cross to a host of another tier /
+    * ``tier_jpeg_encoded`` / ``tier_jpeg_decoded``: frames JPEG-encoded here to cross to an actor of another tier /
       decoded here on arrival from one;
-    * ``object_store_put`` / ``object_store_get``: frames sent to / received from a host of the same tier as an
+    * ``object_store_put`` / ``object_store_get``: frames sent to / received from an actor of the same tier as an
       ObjectRef;
     * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`.channel`; the
       receiver reads the slot in place);
     * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
 
-    Handing a frame to a component of the same host copies nothing and is not counted. Thread-safe; a count costs
+    Handing a frame to a component of the same actor copies nothing and is not counted. Thread-safe; a count costs
     one uncontended lock (well under a microsecond)."""
 
     FIELDS = ("materialised", "tier_jpeg_encoded", "tier_jpeg_decoded", "object_store_put", "object_store_get",

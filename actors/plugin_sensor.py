@@ -16,12 +16,12 @@ class PluginSensorComponent:
 
     kind = "sensor"
 
-    def __init__(self, host: Any, spec: dict, robot_id: str, recorder: Any, epoch_ns: int) -> None:
+    def __init__(self, plane: Any, spec: dict, robot_id: str, recorder: Any, epoch_ns: int) -> None:
         cls = spec["cls"]
         self.cid, self.sensor_id, self.robot_id = spec["cid"], spec["sensor"], robot_id
         self.plugin = cls(robot_id, spec["sensor"], cls.Config.model_validate(spec["properties"]))
         self.plugin.setup()
-        self.host, self.recorder, self.epoch_ns = host, recorder, epoch_ns
+        self.plane, self.recorder, self.epoch_ns = plane, recorder, epoch_ns
         self.topic = f"/{robot_id}/{spec['sensor']}"
         self.schema = cls.schema_name()
         self.type = spec.get("type", cls.name)
@@ -53,7 +53,7 @@ class PluginSensorComponent:
         self.readings += 1
         if self.recorder is not None:
             self.recorder.json(self.topic, self.epoch_ns + int(t * 1e9), data, self.schema)
-        self.host.publish(self.cid, [ValueMsg(robot=self.robot_id, sim_t=t, data=data)], tok, inline=False)
+        self.plane.publish(self.cid, [ValueMsg(robot=self.robot_id, sim_t=t, data=data)], tok, inline=False)
 
     def stats(self) -> dict:
         """``{"type", "schema", "readings", "topic"}`` for the run's summary."""

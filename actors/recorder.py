@@ -1,4 +1,4 @@
-"""The run's MCAP writer, living in the edge host process (no extra Ray worker, no copy of the frames).
+"""The run's MCAP writer, living in the edge actor process (no extra Ray worker, no copy of the frames).
 
 Every component hands it messages with non-blocking calls; a writer thread JPEG-encodes frames and writes
 everything through :class:`aerodaas.recording.writer.McapRecorder` (zstd chunks, flushed as chunks complete and at
@@ -6,8 +6,8 @@ least every ``flush_every_s`` seconds, so a crash loses at most the last couple 
 (``aerodaas run --live``) the same writer also feeds a :class:`aerodaas.liveview.server.LiveServer`: every message is
 serialized once and goes to the file and to the Foxglove WebSocket clients.
 
-Components on other hosts (analytics deployed on cloud compute) record through a :class:`RemoteRecorder`, which
-batches their messages to the edge host's recorder.
+Components on other actors (analytics deployed on cloud compute) record through a :class:`RemoteRecorder`, which
+batches their messages to the edge actor's recorder.
 
 Frames of reference written for Foxglove's transform tree (on ``/tf``, with every odometry message, so a client
 that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the vehicle's pose),
@@ -53,7 +53,7 @@ class RecorderService:
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
     telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
-    ``recorder_jpeg_encoded`` in ``copies`` (the host's :class:`~.dataplane.FrameCopies`) when given. All methods are
+    ``recorder_jpeg_encoded`` in ``copies`` (the actor's :class:`~.dataplane.FrameCopies`) when given. All methods are
     thread-safe and return at once.
 
     ``homes``: robot id -> its home (a :class:`~aerodaas.app.models.GeoPoint` or its dict), for the lat/lon of
@@ -325,17 +325,17 @@ def _what(item: RecordItem) -> str:
 
 
 class RemoteRecorder:
-    """The recorder of a host without one (e.g. the cloud host of analytics deployed on cloud compute): the same
+    """The recorder of an actor without one (e.g. the cloud actor of analytics deployed on cloud compute): the same
     non-blocking producer calls as :class:`RecorderService` (``detections``, ``json``, ``odometry``, ``camera``;
-    frames are not sent), batched and delivered to the recorder of host ``target`` (the edge host) through its
+    frames are not sent), batched and delivered to the recorder of actor ``target`` (the edge actor) through its
     ``record`` actor method, at most every ``period_s`` seconds from a background thread. :meth:`close` delivers
-    what is left and waits for it. ``host`` is this process's :class:`~.dataplane.DataPlane` (its ``peers`` are known once
-    the hosts are connected).
+    what is left and waits for it. ``plane`` is this process's :class:`~.dataplane.DataPlane` (its ``peers`` are known once
+    the actors are connected).
     Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages)."""
 
-    def __init__(self, host: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
+    def __init__(self, plane: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
                  max_pending_frames: int = 8) -> None:
-        self.host, self.target, self.period_s = host, target, period_s
+        self.plane, self.target, self.period_s = plane, target, period_s
         self.jpeg_quality, self.max_pending_frames = jpeg_quality, max_pending_frames
         self._pending_frames = 0
         self._buf: list[RecordItem] = []
@@ -397,11 +397,11 @@ class RemoteRecorder:
         if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
             batch = [dataclasses.replace(it, frame=encode_frame(it.frame, self.jpeg_quality))
                      if isinstance(it, RecordImage) and isinstance(it.frame, np.ndarray) else it for it in batch]
-            copies = getattr(self.host, "copies", None)
+            copies = getattr(self.plane, "copies", None)
             if copies is not None:
                 copies.count("recorder_jpeg_encoded", frames)
         try:
-            self._refs.append(self.host.peer(self.target).record.remote(batch))
+            self._refs.append(self.plane.peer(self.target).record.remote(batch))
             self.sent += len(batch)
         except Exception as e:  # noqa: BLE001 - reported in stats, never fatal
             self.send_errors.append(f"{type(e).__name__}: {e}")

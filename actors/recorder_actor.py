@@ -177,13 +177,13 @@ class RecorderActor:
         self._specs_kept.set()
         return True
 
-    def spec_of(self, host_id: str, wait_s: float = 60.0) -> tuple[bytes, bytes]:
+    def spec_of(self, actor_id: str, wait_s: float = 60.0) -> tuple[bytes, bytes]:
         """(pickled spec, pickled wiring) of actor ``host_id``, waiting up to ``wait_s`` seconds for
         :meth:`keep_specs` (the driver starts every actor right after this one, without waiting). Raises KeyError
         for an unknown actor, TimeoutError when the specs never came."""
         if not self._specs_kept.wait(wait_s):
-            raise TimeoutError(f"recorder: no specs after {wait_s:g} s (actor {host_id!r} asked)")
-        return self._specs[host_id], self._wiring
+            raise TimeoutError(f"recorder: no specs after {wait_s:g} s (actor {actor_id!r} asked)")
+        return self._specs[actor_id], self._wiring
 
     def checkpoint(self, robot_id: str, state: dict) -> bool:
         """Keep ``state`` as the newest checkpoint of ``robot_id`` (an older one, by vehicle time, is ignored)."""

@@ -17,7 +17,7 @@ __all__ = ["RemoteOutlet"]
 
 
 class RemoteOutlet:
-    """The producer's end of an edge to a component on another host (a Ray actor call to ``DataPlane.deliver``).
+    """The producer's end of an edge to a component on another actor (a Ray actor call to ``DataPlane.deliver``).
 
     Allows ``buffer`` calls in flight; when the consumer is still busy with them a new item is dropped and
     counted. Frames are JPEG-encoded when the edge crosses tiers (``jpeg``), else sent as an ObjectRef."""
@@ -29,7 +29,7 @@ class RemoteOutlet:
                  on_reply: Callable[[list], None] | None = None, hold_s: float = 60.0,
                  retry_s: float = 0.2) -> None:
         self.handle, self.cid, self.port = handle, cid, port
-        #: this host's id: the consumer returns the outputs bound for this host in the call's reply (one actor call
+        #: this actor's id: the consumer returns the outputs bound for this actor in the call's reply (one actor call
         #: per round trip instead of two); ``on_reply`` hands them to the local components
         self.reply_to, self.on_reply = reply_to, on_reply
         self.copies = copies if copies is not None else FrameCopies()

@@ -40,12 +40,12 @@ class SchedulerComponent(Component):
 
     kind = "scheduler"
 
-    def __init__(self, host: DataPlane, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
+    def __init__(self, plane: DataPlane, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
                  robot_cfg: dict | None = None, queue: WaypointQueue | None = None,
                  log: MissionPlanLog | None = None) -> None:
         from aerodaas.navigation.safety import SafetyGate
 
-        super().__init__(host, cid, buffer=4)
+        super().__init__(plane, cid, buffer=4)
         self.robot_id = robot_id
         self.s = scheduler
         self.queue = queue if queue is not None else scheduler.queue

@@ -374,7 +374,7 @@ def test_components_are_called_by_their_methods_never_by_name():
     host, rt, _ = _host_for(env)
     try:
         actor = object.__new__(ActorBase)  # the Ray actor's plain body, without Ray
-        actor.host, actor.runtime = host, rt
+        actor.plane, actor.runtime = host, rt
         assert actor.call("d00/drone", DroneComponent.status)["robot"] == "d00"
         assert actor.call("d00/scheduler", SchedulerComponent.snapshot) == rt.comps["d00/scheduler"].snapshot()
         for bad in ("status", SchedulerComponent.snapshot, DroneComponent._event):

@@ -35,7 +35,7 @@ __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_p
 @dataclass(frozen=True)
 class Node:
     """One component: ``id`` (unique in the run; a :class:`~aerodaas.runtime.ids.ComponentId` that knows its
-    ``kind`` and robot), ``kind``, the robot it belongs to (None for a shared analytics) and the host id of the
+    ``kind`` and robot), ``kind``, the robot it belongs to (None for a shared analytics) and the actor id of the
     actor it lives in."""
 
     id: ComponentId
@@ -69,7 +69,7 @@ class ActorPlan:
     ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``); ``spec``:
     what the actor is built from (:class:`~aerodaas.runtime.specs.ActorSpec`)."""
 
-    host_id: str
+    actor_id: str
     role: Role
     name: str
     tier: str
@@ -126,7 +126,7 @@ class RunPlan:
         return out
 
     def location(self) -> dict[str, str]:
-        """Component id -> host id of its actor."""
+        """Component id -> actor id of its actor."""
         return {n.id: n.actor for n in self.nodes.values()}
 
     def peer_names(self) -> dict[str, str]:
@@ -137,7 +137,7 @@ class RunPlan:
         """A JSON-ready description: actors (role, name, tier, compute, label_selector, components), nodes, edges."""
         placement = placement or Placement(has_cloud=True)
         return {"run": self.run_id,
-                "actors": [{"host": a.host_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
+                "actors": [{"host": a.actor_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
                             "label_selector": a.selector(placement), "components": list(a.components),
                             **({"mavlink_links": a.spec.mavlink_links} if a.spec.mavlink_links else {})}
                            for a in self.actors.values()],
@@ -282,13 +282,13 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     nodes: dict[str, Node] = {}
     actors: dict[str, ActorPlan] = {}
 
-    def actor(host_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
-        if host_id not in actors:
+    def actor(actor_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
+        if actor_id not in actors:
             spec = ActorSpec(role, sim=sim_d, record_remote="recorder" if recorded and role != "recorder" else None,
                              restart_hold_s=float(env.cfg.actor_restart_timeout_s))
-            actors[host_id] = ActorPlan(host_id, role, f"aerodaas/{run_id}/{host_id}", tier, compute, dict(labels),
+            actors[actor_id] = ActorPlan(actor_id, role, f"aerodaas/{run_id}/{actor_id}", tier, compute, dict(labels),
                                         [], spec)
-        return actors[host_id]
+        return actors[actor_id]
 
     def add(node: Node) -> None:
         nodes[node.id] = node
@@ -316,7 +316,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 drone_host[r.id] = hid
 
     # ---- analytics instances
-    inst: dict[int, list[tuple[str, str, tuple[str, ...]]]] = {}  # id(a) -> [(cid, host id, robots served)]
+    inst: dict[int, list[tuple[str, str, tuple[str, ...]]]] = {}  # id(a) -> [(cid, actor id, robots served)]
     users: dict[int, list[str]] = {}
     every: dict[int, Any] = {}
     for r in robots:

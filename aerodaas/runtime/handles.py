@@ -21,16 +21,16 @@ __all__ = ["remote_method", "ComponentHandle", "DroneHandle", "SchedulerHandle",
 
 
 class _BoundCall:
-    """``method`` of component ``cid`` in actor ``host``: :meth:`remote` calls it there."""
+    """``method`` of component ``cid`` in ``actor`` (its Ray handle): :meth:`remote` calls it there."""
 
     __slots__ = ("host", "cid", "method")
 
-    def __init__(self, host: Any, cid: str, method: Callable) -> None:
-        self.host, self.cid, self.method = host, cid, method
+    def __init__(self, actor: Any, cid: str, method: Callable) -> None:
+        self.actor, self.cid, self.method = actor, cid, method
 
     def remote(self, *args: Any, **kwargs: Any) -> Any:
         """Call the method in the component's actor; returns the call's ObjectRef."""
-        return self.host.call.remote(self.cid, self.method, *args, **kwargs)
+        return self.actor.call.remote(self.cid, self.method, *args, **kwargs)
 
     def __repr__(self) -> str:
         return f"<{self.method.__qualname__} of component {self.cid!r}>"
@@ -48,15 +48,15 @@ class remote_method:  # noqa: N801 - used like a decorator/descriptor, as Ray's 
     def __get__(self, handle: Any, owner: type | None = None) -> Any:
         if handle is None:
             return self
-        return _BoundCall(handle.host, handle.cid, self.method)
+        return _BoundCall(handle.actor, handle.cid, self.method)
 
 
 class ComponentHandle:
-    """A component inside one of the run's actors (``host``: that actor's handle; ``cid``: the component id).
+    """A component inside one of the run's actors (``actor``: that actor's handle; ``cid``: the component id).
     Subclasses declare the component's methods the driver may call (:class:`remote_method`)."""
 
-    def __init__(self, host: Any, cid: str) -> None:
-        self.host, self.cid = host, cid
+    def __init__(self, actor: Any, cid: str) -> None:
+        self.actor, self.cid = actor, cid
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.cid!r})"
