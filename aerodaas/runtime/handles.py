@@ -23,7 +23,7 @@ __all__ = ["remote_method", "ComponentHandle", "DroneHandle", "SchedulerHandle",
 class _BoundCall:
     """``method`` of component ``cid`` in ``actor`` (its Ray handle): :meth:`remote` calls it there."""
 
-    __slots__ = ("host", "cid", "method")
+    __slots__ = ("actor", "cid", "method")
 
     def __init__(self, actor: Any, cid: str, method: Callable) -> None:
         self.actor, self.cid, self.method = actor, cid, method
