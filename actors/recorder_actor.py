@@ -208,8 +208,9 @@ class RecorderActor:
     def close(self) -> dict:
         """Finish the file; returns the per-topic message counts (of this segment). A recorder that replaced a dead
         one first records the run's own outcome, ``/run/result`` ``{"outcome": "recording_lost", "losses": [...]}``
-        (stamped after the last message written so far): the recording, joined or not, never reads as a success (the drones' ``/mission/result``
-        say how each mission went; :func:`aerodaas.recording.reader.summarize` lets the run's outcome win)."""
+        (stamped after the last message written so far): the recording, joined or not, never reads as a success
+        (the drones' ``/mission/result`` say how each mission went; :func:`aerodaas.recording.reader.summarize` lets
+        the run's outcome win)."""
         if self._finishing is not None:
             self._finishing.join(120.0)
         if self.recorder is None:

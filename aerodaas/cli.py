@@ -7,7 +7,6 @@ import os
 import runpy
 import signal
 import sys
-import time
 from pathlib import Path
 
 
@@ -452,7 +451,9 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     upp = sub.add_parser("up", help="start a persistent local Ray cluster (loopback, token auth, tier=edge, "
                                      "dashboard) that `aerodaas run` attaches to")
     upp.add_argument("--cpus", type=int, default=3, help="logical CPUs of the node (sizes the prestarted workers)")
-    upp.add_argument("--warm-workers", type=int, default=4,
+    from aerodaas.clusters.persistent import DEFAULT_WARM_WORKERS
+
+    upp.add_argument("--warm-workers", type=int, default=DEFAULT_WARM_WORKERS,
                      help="idle workers kept with the framework imported, for the next run's actors (0: none)")
     upp.set_defaults(func=_cmd_up)
     sub.add_parser("down", help="stop the cluster `aerodaas up` started (only that one)").set_defaults(func=_cmd_down)

@@ -211,13 +211,11 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
 
     if warm > 0:
         try:
-            from aerodaas.clusters.warm_pool import code_fingerprint, raylet_pool, run_in_thread
-
-            from aerodaas.clusters.warm_pool import package_roots
+            from aerodaas.clusters.warm_pool import package_roots, raylet_pool, run_in_thread
 
             pool = raylet_pool(node, warm, publish)
-            st.update(warm_workers=warm, code_fingerprint=code_fingerprint(), package_roots=package_roots())
-            run_in_thread(pool, stop)
+            st.update(warm_workers=warm, package_roots=package_roots())
+            run_in_thread(pool, stop)  # its first look publishes code_fingerprint
         except (ImportError, AttributeError, OSError, KeyError, IndexError) as e:  # this Ray lacks what it needs
             st.update(warm_workers=0, warm_error=f"{type(e).__name__}: {e}"[:300])
             print(f"aerodaas cluster: no warm workers ({st['warm_error']})", flush=True)

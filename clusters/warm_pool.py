@@ -13,17 +13,20 @@ each, on a 2-core machine the largest part of an attached start). Two things rem
   environment hash); that is why an attached run ships no plug-in packages that the cluster's interpreter already
   imports (:func:`aerodaas.runtime.driver.init_ray`).
 - **The framework imported ahead.** The daemon sets Ray's worker setup hook (``worker_process_setup_hook``, here
-  through the environment variable Ray's ``default_worker.py`` reads at start, inherited from the raylet) to
-  :func:`preimport`, which imports the modules the drone, analytics and recorder actors use. It never raises: a
-  module that fails to import is left to the actor that needs it, which then reports the error as before.
+  through the environment variable Ray's ``default_worker.py`` reads at start, inherited from the raylet) to a
+  generated module (:func:`setup_hook_env`) that calls :func:`preimport`, which imports the modules the drone,
+  analytics and recorder actors use. Neither raises: a module that fails to import is left to the actor that needs
+  it, which then reports the error as before.
 
-A warm worker holds the framework's code as it was when the worker started. :func:`code_fingerprint` (the path, size
-and modification time of every module file of ``aerodaas``) is checked every second; when it changes, the idle warm
-workers are stopped (SIGTERM) and new ones started, and the state file carries the new fingerprint so that a run
-started in between waits for the refresh (:func:`aerodaas.clusters.persistent.await_fresh_workers`).
+A warm worker holds the framework's code as it was when the worker started. :func:`code_fingerprint` (the relative
+path, size and modification time of every module file of ``aerodaas``) is checked every second; once a change has
+settled for ``settle_s``, every warm worker started before it is stopped (SIGTERM) and replaced, and only then does
+the state file carry the new fingerprint, so that a run started in between waits for the refresh
+(:func:`aerodaas.clusters.persistent.await_fresh_workers`). :class:`WarmPool` documents the rest (refill delay, the
+pause when workers do not stay up).
 
 Refills wait ``settle_s`` (2 s) after a run took workers, so that starting new workers does not compete with that
-run's own start on a small machine. Idle workers cost memory (``docs/operations.md`` gives the measured PSS).
+run's own start on a small machine. Idle workers cost memory (``docs/clusters.md`` gives the measured PSS).
 """
 from __future__ import annotations
 
@@ -34,7 +37,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-__all__ = ["PREIMPORT_MODULES", "WarmPool", "code_fingerprint", "preimport", "setup_hook_env"]
+__all__ = ["HOOK_MODULE", "PREIMPORT_MODULES", "WarmPool", "code_fingerprint", "package_roots", "preimport",
+           "raylet_pool", "run_in_thread", "setup_hook_env"]
+
+#: the process title Ray gives an idle Python worker (exactly: not ``ray::IDLE_SPILL_WORKER`` / ``_RESTORE_WORKER``)
+IDLE_TITLE = "ray::IDLE"
 
 #: what the drone, analytics and recorder actors import at construction and set-up (measured from the modules loaded
 #: in each actor's worker during ``apps/vehicle_tracking.py``); their own imports bring the rest (numpy, OpenCV,
@@ -250,6 +257,7 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
 
     raylet = psutil.Process(node.all_processes[ray_constants.PROCESS_TYPE_RAYLET][0].process.pid)
     stub = node_manager_pb2_grpc.NodeManagerServiceStub(init_grpc_channel(f"127.0.0.1:{node.node_manager_port}"))
+
     def workers(title_idle: bool) -> list[int]:
         out = []
         for p in raylet.children():
@@ -259,7 +267,7 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
                 continue
             if not cmd:
                 continue
-            if title_idle and cmd[0] == "ray::IDLE":  # exactly: not ray::IDLE_SPILL_WORKER / _RESTORE_WORKER
+            if title_idle and cmd[0] == IDLE_TITLE:
                 out.append(p.pid)
             elif not title_idle and any(c.endswith("default_worker.py") for c in cmd[:3]) \
                     and not any(c.startswith("--worker-type=") and not c.endswith("=WORKER") for c in cmd):
@@ -276,7 +284,7 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
         for pid in pids:
             try:
                 p = psutil.Process(pid)
-                if p.cmdline()[:1] == ["ray::IDLE"]:  # still idle right now: never a worker that took a task
+                if p.cmdline()[:1] == [IDLE_TITLE]:  # still idle right now: never a worker that took a task
                     p.terminate()
                     procs.append(p)
             except (psutil.Error, IndexError):

@@ -278,8 +278,6 @@ def test_the_example_app_runs_attached_to_aerodaas_up_in_its_warm_workers(instal
     Ray's state API gives each actor's pid, and each was an idle warm worker before the run. The user's plug-ins,
     outside the framework (installed where the cluster's interpreter finds them, so not shipped), reach those
     workers and do their job (the recording)."""
-    import psutil
-
     src, env = installed
     env = {k: v for k, v in env.items() if k != "AERODAAS_NO_ATTACH"}
     env["AERODAAS_STATE_DIR"] = str(tmp_path / "state")

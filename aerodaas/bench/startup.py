@@ -10,7 +10,8 @@ Two modes (``--mode``): ``cold`` (the run starts its own Ray; ``AERODAAS_NO_ATTA
 attaches to a persistent local cluster of ``aerodaas up``, started here under a private ``AERODAAS_STATE_DIR`` with
 the probe file in its environment, since its workers write ``first_processed``, and stopped afterwards; a cluster the
 user started is never touched). Each attached run starts once the cluster's warm pool is full again
-(``warm_idle_at_start`` in the run's record), as when a user starts the next run a few seconds after the last. The report holds both and the load average before and after (the machine may be shared).
+(``warm_idle_at_start`` in the run's record), as when a user starts the next run a few seconds after the last. The
+report holds both and the load average before and after (the machine may be shared).
 """
 from __future__ import annotations
 

@@ -57,7 +57,8 @@ class SafetyConfig(_Cfg):
     ``max_distance`` (metres, default 10 km, at most 100 km) bounds the horizontal distance from home of every
     waypoint and of every velocity command's predicted path: a mistyped absolute waypoint thousands of kilometres
     away is refused, not flown until the battery ends. ``low_battery_rtl_pct``: below this battery percentage the
-    drone returns to launch and lands, whatever the queue holds (the stat-stream shows RETURNING). ``critical_battery_pct``: below this it lands in place."""
+    drone returns to launch and lands, whatever the queue holds (the stat-stream shows RETURNING).
+    ``critical_battery_pct``: below this it lands in place."""
 
     geofence: GeofenceConfig = Field(default_factory=GeofenceConfig)
     geofence_plan: str | None = None

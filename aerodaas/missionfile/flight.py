@@ -34,6 +34,19 @@ def ground_distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> flo
     return 2.0 * 6_371_008.8 * math.asin(min(1.0, math.sqrt(a)))
 
 
+def _check_bounds(src: str, tag: str, lat: float, lon: float, z: float, home: GeoPoint | None,
+                  max_altitude: float | None, max_distance: float | None) -> None:
+    """Raise MissionFileError (naming ``src`` and ``tag``) when ``z`` (metres above home) is above ``max_altitude``
+    or (``lat``, ``lon``) (degrees) is farther than ``max_distance`` metres from ``home``; None skips a check."""
+    if max_altitude is not None and z > max_altitude:
+        raise _fail(src, tag, f"altitude {z:g} m above home is above max_altitude {max_altitude:g} m")
+    if max_distance is not None and home is not None:
+        d = ground_distance_m(home.lat, home.lon, lat, lon)
+        if d > max_distance:
+            raise _fail(src, tag, f"({lat:.7f}, {lon:.7f}) is {d:.0f} m from home, beyond max_distance "
+                                  f"{max_distance:g} m")
+
+
 def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_commands: Iterable[int] = (),
                    check_geofence: bool = True, min_altitude: float | None = 0.0, max_altitude: float | None = None,
                    max_distance: float | None = None) -> FlightPlan:
@@ -59,9 +72,9 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
     Anything else — other NAV commands, DO_JUMP, conditions, terrain frames, items after LAND/RTL — raises
     :class:`MissionFileError` naming the file, the item, the command number and name. A waypoint lower than
     ``min_altitude`` metres above home (default 0: below the take-off point, typically an AMSL altitude that
-    was meant relative) raises too; ``None`` disables that check. So does a waypoint higher than ``max_altitude``
-    metres above home, or (with a home) farther than ``max_distance`` metres from it horizontally (great-circle
-    distance, mean Earth radius); ``None`` (default) disables those checks. With ``check_geofence`` every waypoint
+    was meant relative) raises too; ``None`` disables that check. So does a waypoint or rally point higher than
+    ``max_altitude`` metres above home, or (with a home) farther than ``max_distance`` metres from it horizontally
+    (great-circle distance, mean Earth radius); ``None`` (default) disables those checks. With ``check_geofence`` every waypoint
     and leg (from home, and back to home for RTL) must satisfy the plan's geofence."""
     src = plan.source or "<plan>"
     skip = frozenset(int(c) for c in skip_commands)
@@ -102,13 +115,7 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
             raise _fail(src, tag, f"altitude {z:g} m above home is below min_altitude {min_altitude:g} m "
                                   f"({frame_name(item.frame)}, z={item.params[6]!r}"
                                   f"{f', home altitude {home.alt:g} m AMSL' if home is not None else ''})")
-        if max_altitude is not None and z > max_altitude:
-            raise _fail(src, tag, f"altitude {z:g} m above home is above max_altitude {max_altitude:g} m")
-        if max_distance is not None and home is not None:
-            d = ground_distance_m(home.lat, home.lon, lat, lon)
-            if d > max_distance:
-                raise _fail(src, tag, f"({lat:.7f}, {lon:.7f}) is {d:.0f} m from home, beyond max_distance "
-                                      f"{max_distance:g} m")
+        _check_bounds(src, tag, lat, lon, z, home, max_altitude, max_distance)
         kwargs: dict[str, Any] = {}
         if radius is not None and radius > 0:
             kwargs["acceptance_radius"] = radius
@@ -186,6 +193,8 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
 
     from collections import Counter
 
+    for k, (lat, lon, alt) in enumerate(plan.rally_points):  # the autopilot's RTL may fly to them
+        _check_bounds(src, f"rally point {k + 1}", lat, lon, alt, home, max_altitude, max_distance)
     dup = sorted(i for i, n in Counter(w.id for w in waypoints).items() if n > 1)  # linear (ids.count was quadratic)
     if dup:
         raise _fail(src, "items", f"duplicate sequence numbers give duplicate waypoint ids {dup}")

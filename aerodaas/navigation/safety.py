@@ -35,7 +35,6 @@ import math
 from typing import Any, Sequence
 
 from aerodaas.app.models import ActionCommand, AeroNavigation, GeoPoint, VelocityCommand, Waypoint
-from aerodaas.config.base import DEFAULT_MAX_DISTANCE_M
 
 __all__ = ["SafetyViolation", "SafetyGate"]
 
@@ -84,7 +83,7 @@ class SafetyGate:
         self.period = float(control_period_s)
         self.fence = Geofence(safety.geofence, home)
         #: horizontal distance from home (m) no waypoint or velocity command may reach (safety.max_distance)
-        self.max_dist = float(getattr(safety, "max_distance", DEFAULT_MAX_DISTANCE_M))
+        self.max_dist = float(safety.max_distance)
         self.rejected = 0
         self.clamped = 0
 
@@ -116,10 +115,11 @@ class SafetyGate:
                 self.rejected += 1
                 raise SafetyViolation(wp.id, "speed", wp.speed, f"above max_speed {self.max_speed:g} m/s")
             upd["speed"] = self.max_speed
-        if math.hypot(x, y) > self.max_dist:  # never clamped: a waypoint this far is a typo, not a nudge
+        dist = math.hypot(x, y)
+        if dist > self.max_dist:  # never clamped: a waypoint this far is a typo, not a nudge
             self.rejected += 1
             raise SafetyViolation(wp.id, "position", [round(x, 2), round(y, 2)],
-                                  f"{math.hypot(x, y):.0f} m from home, beyond max_distance {self.max_dist:g} m")
+                                  f"{dist:.0f} m from home, beyond max_distance {self.max_dist:g} m")
         why = self.fence.check_point(x, y)
         if why is None and from_position is not None:
             why = self.fence.check_segment((float(from_position[0]), float(from_position[1])), (x, y))

@@ -57,21 +57,6 @@ def _download_fence_and_rally(backend, plan, out: Path, name: str):
     return plan
 
 
-def check_rally_points(plan, home, *, max_altitude: float, max_distance: float, src: str) -> None:
-    """Refuse rally points (``(lat, lon, altitude above home m)``; the autopilot's RTL may fly to them) higher than
-    ``max_altitude`` metres or farther than ``max_distance`` metres from ``home`` (great-circle). Raises
-    MissionFileError naming the file and the point."""
-    from aerodaas.missionfile import MissionFileError
-    from aerodaas.missionfile.flight import ground_distance_m
-
-    for k, (lat, lon, alt) in enumerate(plan.rally_points):
-        d = ground_distance_m(home.lat, home.lon, lat, lon)
-        if alt > max_altitude or d > max_distance:
-            why = f"altitude {alt:g} m above max_altitude {max_altitude:g} m" if alt > max_altitude else \
-                f"{d:.0f} m from home, beyond max_distance {max_distance:g} m"
-            raise MissionFileError(f"{src!r}: rally point {k + 1} ({lat:.7f}, {lon:.7f}): {why}")
-
-
 def _upload_bound(kind: str):
     """argparse type of a positive bound in metres: an ``altitude`` at most ``MAX_ALTITUDE_M`` (10 km), a
     ``distance`` at most ``MAX_LOCAL_M`` (100 km); argparse names the option in its error (exit 2)."""
@@ -117,13 +102,11 @@ def cmd_mission(args: argparse.Namespace) -> int:
             bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
             if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
                 plan_to_flight(plan, **bounds)
-                check_rally_points(plan, plan.home, **bounds, src=str(path))
             backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
             if backend.home_received:
                 # again from the vehicle's own home (still before anything is sent): a .plan's planned home may be
                 # elsewhere; AMSL altitudes need it
                 plan_to_flight(plan, backend.home, **bounds)
-                check_rally_points(plan, backend.home, **bounds, src=str(path))
             elif plan.home is None:  # the bounds are measured from a home, never from a default one
                 raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
                                        f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
