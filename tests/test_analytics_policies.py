@@ -766,6 +766,29 @@ def test_laplan_expects_the_rest_of_a_frame_while_its_tasks_are_submitted_one_by
     assert pol.next_edge_task(2000.0)[0] is x
 
 
+def test_laplan_does_not_replan_for_the_runtimes_wall_clock_spread_of_one_event():
+    # The Ray runtime's calls for one event reach the policy a fraction of a ms apart (the edge loop's poll timer
+    # fires 0.7 ms late, the predicted X is submitted at 2000.9 with its arrival time 2000): within
+    # replan_tolerance_ms the plan made at 1950 (wait for X, start it at 2000) still holds, so it is not recomputed;
+    # with no tolerance each call finds the plan's first start just passed and plans again. The decision is the same.
+    plans = {}
+    for tol in (0.0, 2.0):
+        pol = make_analytics_scheduler("LAPLAN", LW, replan_tolerance_ms=tol)
+        for t0 in (0.0, 1000.0):
+            x, = _frame(pol, "d0", t0, ["X"])
+            _run_edge(pol, x, t0, 300.0)
+        y, = _frame(pol, "d1", 1950.0, ["Y"])
+        assert pol.next_edge_task(1950.0)[0] is None and pol.next_poll_ms() == 2000.0
+        before = pol.counters["plans"]
+        assert pol.poll(2000.7) == [] and pol.next_edge_task(2000.7)[0] is None
+        x = AnalyticsTask(next(_ids), "d0", "X", 2000.0, 2000.0 + LW["X"].deadline_ms)
+        assert pol.submit(x, 2000.9) == []
+        assert pol.next_edge_task(2001.0)[0] is x
+        plans[tol] = (pol.counters["plans"] - before, pol.counters["plans_start_passed"])
+    assert plans[2.0] == (0, 0)
+    assert plans[0.0][0] >= 1 and plans[0.0][1] >= 1
+
+
 def test_laplan_refuses_bad_options():
     with pytest.raises(ValueError, match="horizon_ms"):
         make_analytics_scheduler("LAPLAN", LW, horizon_ms=-1)
@@ -775,3 +798,6 @@ def test_laplan_refuses_bad_options():
         make_analytics_scheduler("LAPLAN", LW, release_early_ms=-5)
     with pytest.raises(ValueError, match="commit_horizon_ms"):
         make_analytics_scheduler("LAPLAN", LW, commit_horizon_ms=100.0)
+    for bad in (-1.0, 101.0, float("nan")):
+        with pytest.raises(ValueError, match="replan_tolerance_ms"):
+            make_analytics_scheduler("LAPLAN", LW, replan_tolerance_ms=bad)
