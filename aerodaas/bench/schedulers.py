@@ -292,7 +292,10 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
     layout = edge_layout(drones, drones_per_edge)
     n_edges = len(layout)
     ncpu = os.cpu_count() or 2
-    n_hosts = edge_hosts or (1 if ncpu <= 2 else min(n_edges, max(1, ncpu // 2)))
+    # one host process per core and one more: on 2 cores, 80 drones with LAPLAN (2026-11-24, seed 2) gave an
+    # emulation p99 of 5.1 ms with 2 hosts, 4.8-5.5 ms with 3, 7.2 with 4, 6.8-13.3 with 5 and 8.6 with 7 (each host
+    # process brings Ray's own threads; fewer hosts queue more edges behind each decision)
+    n_hosts = edge_hosts or min(n_edges, ncpu + 1)
     n_hosts = max(1, min(n_hosts, n_edges))
     edge_ids = [f"edge{e:02d}" for e in range(n_edges)]
     host_edges = [edge_ids[i::n_hosts] for i in range(n_hosts)]
@@ -381,7 +384,8 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                                           "just-in-time margin (60 ms)"},
         "cluster": {"nodes": nodes, "edge_hosts": host_info, "cloud_executors": cloud_info},
         "arrival_process": {
-            "per_drone": f"one frame every {1000.0 / fps:g} ms from a seeded random phase",
+            "per_drone": f"one frame every {1000.0 / fps:g} ms from a seeded random phase" if trace_spec is None
+            or trace_spec.kind == "periodic" else f"{trace_spec.label()} around a {1000.0 / fps:g} ms frame gap",
             "per_frame": "one task per active model, seeded shuffled order, same arrival time",
             "drones_per_edge": drones_per_edge,
             "source": "dream-lab/ocularone-scheduler: TaskCreation.java (one task per model per batch, shuffled), "
@@ -528,7 +532,7 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--edge-jitter", default="lognormal:0.05", help="edge hold jitter (default lognormal:0.05)")
     p.add_argument("--cloud-jitter", default="lognormal:0.1", help="cloud hold jitter (default lognormal:0.1)")
     p.add_argument("--cloud-nodes", type=int, default=1, help="cloud nodes of the local cluster (default 1)")
-    p.add_argument("--edge-hosts", type=_positive_int, help="edge host actors (default: 1 on <= 2 CPUs)")
+    p.add_argument("--edge-hosts", type=_positive_int, help="edge host actors (default: CPUs + 1, at most one per edge)")
     p.add_argument("--cloud-reply-lead-ms", type=float, default=100.0,
                    help="emulated cloud replies are sent this early and released when due (default 100; 0: off)")
     p.add_argument("--emulation-bound-ms", type=_positive_float, default=EMULATION_BOUND_MS,
