@@ -214,7 +214,7 @@ class LaPlan(EvPlan):
         the Python work per plan."""
         key = (self._version, self.edge_running is None)
         if self._cache is not None and self._cache[0] == key:
-            if now_ms <= self._cache[3]:
+            if now_ms <= self._cache[3]:  # the edge's state as planned, or late by less than the plan's slack
                 self._first_wake = self._cache[2]
                 return self._cache[1]
             # why this plan is recomputed although nothing changed (diagnostics: the runtime's wall clock)
@@ -246,28 +246,36 @@ class LaPlan(EvPlan):
                 keys.append(k)
         sched: list[tuple[int, float]] = []
         levels = len(self._tails)
+        slack = math.inf  # how late every planned task may start and still end by its chosen variant's latest end
         if keys:
             ids: dict[tuple, int] = {}
             gid = np.array([ids.setdefault(k, len(ids)) for k in keys], np.int64)  # one group per key (its variants)
             pa = np.array(parts, np.float64)  # (tasks, levels, 3): the same operations as :meth:`_variants`
+            latest, proc = (np.array(dl, np.float64)[:, None] - pa[:, :, 0]).ravel(), pa[:, :, 1].ravel()
             n_python = SOLVES["python"]
             _, sched = max_gain_schedule_arrays(
-                np.repeat(np.array(rel, np.float64), levels), (np.array(dl, np.float64)[:, None] - pa[:, :, 0]).ravel(),
-                pa[:, :, 1].ravel(), (pa[:, :, 2] - np.array(fb, np.float64)[:, None]).ravel(),
-                np.repeat(gid, levels), len(ids), free_at=free)
+                np.repeat(np.array(rel, np.float64), levels), latest, proc,
+                (pa[:, :, 2] - np.array(fb, np.float64)[:, None]).ravel(), np.repeat(gid, levels), len(ids),
+                free_at=free)
             if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live)
                 self.counters["plans_in_python"] += 1
+            slack = min((latest[j] - s - proc[j] for j, s in sched), default=math.inf)
         self.counters["plans"] += 1
         plan = [(keys[j // levels], s) for j, s in sched]
         self._first_wake = None
         if plan and plan[0][0] in wakes:
             self._first_wake = max(plan[0][1], wakes[plan[0][0]])
         # valid while nothing changes and the edge state it assumed holds: the running task not overdue, or (idle)
-        # until its first start; either for replan_tolerance_ms more (see the module docstring)
-        valid = (free if self.edge_running is not None else (plan[0][1] if plan else math.inf)) \
-            + self.replan_tolerance_ms
-        self._cache = (key, plan, self._first_wake, valid)
+        # until its first start; either up to replan_tolerance_ms more, but never more than the plan's slack
+        # (module docstring)
+        at = free if self.edge_running is not None else (plan[0][1] if plan else math.inf)
+        self._cache = (key, plan, self._first_wake, at + self._tolerance(slack), slack)
         return plan
+
+    def _tolerance(self, slack: float) -> float:
+        """How late (ms) the edge may be on a plan of this ``slack`` before it is recomputed: ``replan_tolerance_ms``,
+        at most the slack (a plan is never kept once a planned task would no longer end by its latest end)."""
+        return min(self.replan_tolerance_ms, max(0.0, slack))
 
     def _plan(self, start_ms: float) -> list[AnalyticsTask]:
         keys = {k for k, _ in self.schedule(self._now)}
@@ -349,8 +357,12 @@ class LaPlan(EvPlan):
         self.pool.remove(first)
         self._version += 1
         # the rest of an optimal plan is optimal for the rest (principle of optimality): keep it while the edge
-        # runs the first task, until that task is due to end
-        self._cache = ((self._version, False), plan[1:], None, now_ms + self.w[first.model].edge_ms)
+        # runs the first task, until that task is due to end. Started ``lag`` ms after its planned start (within the
+        # plan's tolerance), the rest moves as much later and has as much less slack
+        lag, slack = max(0.0, now_ms - plan[0][1]), self._cache[4]  # schedule() above set the cache
+        rest = [(k, s + lag) for k, s in plan[1:]] if lag > 0 else plan[1:]
+        self._cache = ((self._version, False), rest, None,
+                       now_ms + self.w[first.model].edge_ms + self._tolerance(slack - lag), slack - lag)
         if first.notes.get("mode") == OPEN:
             self.counters["open_started_on_edge"] += 1
         return first, drops

@@ -789,6 +789,76 @@ def test_laplan_does_not_replan_for_the_runtimes_wall_clock_spread_of_one_event(
     assert plans[0.0][0] >= 1 and plans[0.0][1] >= 1
 
 
+#: X as in LW; Z short, with a fast cloud (its trigger falls after the edge's planned start of it)
+SW_SPEC = {"models": {
+    "X": {"edge_ms": 300, "cloud_ms": 5000, "benefit": 200, "edge_cost": 0, "cloud_cost": 0},
+    "Z": {"edge_ms": 100, "cloud_ms": 40, "benefit": 100, "edge_cost": 0, "cloud_cost": 10}},
+    "loads": {"late_start": {"X": 320, "Z": 406}, "overrun": {"X": 320, "Z": 351}}}
+SW = Workload.from_dict(SW_SPEC, "late_start")
+
+
+def _one(pol, drone, model, arrival, now, w=SW):
+    tk = AnalyticsTask(next(_ids), drone, model, arrival, arrival + w[model].deadline_ms)
+    return tk, pol.submit(tk, now)
+
+
+def test_laplan_keeps_its_plan_while_the_running_task_overruns_by_less_than_the_tolerance_and_the_slack():
+    # X runs from 0, due to end at 300; Y (deadline 1050, 150 ms) is planned after it with 600 ms of slack. Calls at
+    # 300.5 and 301 (X overrunning) keep the plan with 2 ms of tolerance and recompute it with none.
+    counts = {}
+    for tol in (0.0, 2.0):
+        pol = make_analytics_scheduler("LAPLAN", LW, replan_tolerance_ms=tol)
+        x, = _frame(pol, "d0", 0.0, ["X"])
+        assert pol.next_edge_task(0.0)[0] is x
+        y, = _frame(pol, "d1", 50.0, ["Y"])
+        assert [k for k, _ in pol.schedule(250.0)] == [pol._key(y)]
+        before = pol.counters["plans"]
+        assert pol.poll(300.5) == [] and [k for k, _ in pol.schedule(301.0)] == [pol._key(y)]
+        counts[tol] = (pol.counters["plans"] - before, pol.counters["plans_edge_overran"])
+    assert counts[2.0] == (0, 0)
+    assert counts[0.0][0] >= 1 and counts[0.0][1] >= 1
+
+
+@pytest.mark.parametrize("tol", [0.0, 2.0, 50.0])
+def test_laplan_recomputes_a_plan_started_later_than_its_slack_allows(tol):
+    # Planned at 1995: X (predicted at 2000) 2000-2300, then Z 2300-2400 against Z's deadline 2401: 1 ms of slack.
+    # X is submitted 1.5 ms late (the runtime's replay): the plan no longer holds for Z, whatever the tolerance,
+    # so it is recomputed (X alone), and Z goes to the cloud at its trigger instead of being committed to the edge
+    # and expiring there (which a plan kept for the full tolerance did).
+    pol = make_analytics_scheduler("LAPLAN", SW, replan_tolerance_ms=tol)
+    for t0 in (0.0, 1000.0):
+        x, _ = _one(pol, "d0", "X", t0, t0)
+        _run_edge(pol, x, t0, 300.0)
+    z, out = _one(pol, "d1", "Z", 1995.0, 1995.0)
+    assert out == [] and z.notes["mode"] == "open"
+    assert pol.next_edge_task(1995.0)[0] is None and [k for k, _ in pol.schedule(1995.0)][:2] == [
+        ("d0", "X", 2000.0), pol._key(z)]  # then d0's next frames
+    plans = pol.counters["plans"]
+    x, _ = _one(pol, "d0", "X", 2000.0, 2001.5)
+    assert pol.next_edge_task(2001.5)[0] is x
+    assert pol.counters["plans"] == plans + 1  # recomputed: 1.5 ms late is more than Z's 1 ms of slack
+    due = pol.next_poll_ms()
+    assert 2001.5 < due <= 2301.0
+    decisions = pol.poll(due)
+    assert [(d.kind, d.task) for d in decisions] == [("cloud", z)]
+    assert pol.on_edge_done(x, 2301.5, 300.0) == [] and pol.held_tasks() == []
+
+
+@pytest.mark.parametrize("tol", [0.0, 2.0])
+def test_laplan_recomputes_a_plan_when_the_running_task_overruns_more_than_its_slack(tol):
+    # X runs 0-300 (planned); Z, arriving at 50 with deadline 401, is planned 300-400 (1 ms of slack). Its trigger
+    # poll comes at 301.5 while X overruns: the edge frees later than the plan's slack allows, so Z is not committed
+    # to the edge on the old plan; it goes to the cloud.
+    w = Workload.from_dict(SW_SPEC, "overrun")
+    pol = make_analytics_scheduler("LAPLAN", w, replan_tolerance_ms=tol)
+    x, _ = _one(pol, "d0", "X", 0.0, 0.0, w)
+    assert pol.next_edge_task(0.0)[0] is x
+    z, out = _one(pol, "d1", "Z", 50.0, 50.0, w)
+    assert out == [] and [k for k, _ in pol.schedule(50.0)] == [pol._key(z)]
+    assert pol.next_poll_ms() == pytest.approx(301.0)
+    assert [(d.kind, d.task) for d in pol.poll(301.5)] == [("cloud", z)]
+
+
 def test_laplan_refuses_bad_options():
     with pytest.raises(ValueError, match="horizon_ms"):
         make_analytics_scheduler("LAPLAN", LW, horizon_ms=-1)
