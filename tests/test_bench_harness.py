@@ -292,3 +292,30 @@ def test_cli_harness_mode_prints_the_sweep_json_and_refuses_bad_input(tmp_path, 
                  "--plot", str(png)]) == 2
     with pytest.raises(SystemExit):
         main(["bench", "schedulers", "--harness", "--cloud-sigma", "-1"])
+
+
+@needs_workload
+def test_cli_option_reaches_the_scheduler_that_has_it_and_refuses_what_none_has(tmp_path, monkeypatch, capsys):
+    """``--option KEY=JSON`` sets a scheduler option for the schedulers that have it (here LAPLAN's lookahead: with
+    ``horizon_ms=0`` it predicts nothing), is recorded in the JSON, and is refused when no scheduler of the run has
+    it or its value is out of range (e.g. ``replan_tolerance_ms``, to rerun tables made before its default changed)."""
+    from aerodaas.cli import main
+
+    monkeypatch.setenv("AERODAAS_DATA_DIR", str(DATA_DIR))
+    common = ["bench", "schedulers", "--harness", "--seeds", "1", "--load", "HEAVY", "--cloud-sigma", "0.1",
+              "--drones-per-edge", "3", "--scenarios", "none", "--duration", "20", "--drones", "3", "--processes",
+              "1", "--no-bound", "--json", "--plot", str(tmp_path / "h.png")]
+    predicted = {}
+    for opt in ([], ["--option", "horizon_ms=0", "--option", "replan_tolerance_ms=0"]):
+        assert main([*common, "--schedulers", "DEM", "LAPLAN", *opt]) == 0
+        res = json.loads(capsys.readouterr().out)
+        assert res["config"]["options"] == ({"horizon_ms": 0, "replan_tolerance_ms": 0} if opt else {})
+        laplan = next(r for r in res["results"] if r["scheduler"] == "LAPLAN")
+        predicted[bool(opt)] = laplan["counters"].get("arrived_as_predicted", {"mean": 0})["mean"]
+    assert predicted[False] > 0 and predicted[True] == 0
+    assert main([*common, "--schedulers", "DEM", "--option", "replan_tolerance_ms=0"]) == 2
+    assert "no scheduler of this run has it" in capsys.readouterr().err
+    assert main([*common, "--schedulers", "LAPLAN", "--option", "replan_tolerance_ms=500"]) == 2
+    assert "replan_tolerance_ms" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*common, "--option", "replan_tolerance_ms"])

@@ -21,6 +21,8 @@ import sys
 import time
 from typing import Sequence
 
+from aerodaas.bench.schedulers import scheduler_option
+
 __all__ = ["measure", "main"]
 
 _DECIDE = ("submit", "next_edge_task", "poll", "on_edge_done", "on_cloud_done", "on_cloud_availability")
@@ -103,11 +105,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=60.0)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--trace", default="realistic", help="periodic | realistic | recording:FILE.mcap")
-    p.add_argument("--option", action="append", default=[], metavar="KEY=JSON", help="scheduler option")
+    p.add_argument("--option", type=scheduler_option, action="append", default=[], metavar="KEY=JSON",
+                   help="scheduler option, e.g. replan_tolerance_ms=0; repeatable")
     p.add_argument("--out", help="also write the JSON here")
     a = p.parse_args(argv)
     try:
-        opts = {k: json.loads(v) for k, _, v in (o.partition("=") for o in a.option)}
+        opts = dict(a.option)
         res = measure(a.scheduler, load=a.load, drones_per_edge=a.drones_per_edge, duration_s=a.duration,
                       seed=a.seed, trace=a.trace, options=opts)
     except ValueError as e:

@@ -39,7 +39,7 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from aerodaas.bench import machine_info
 from aerodaas.bench.schedulers_report import (_emulation_p99, compare_with_harness, format_table,  # noqa: F401
@@ -430,6 +430,18 @@ def _emulation_summary(results: list[dict]) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- CLI
+def scheduler_option(text: str) -> tuple[str, Any]:
+    """``--option KEY=JSON`` (e.g. ``replan_tolerance_ms=0``): the key and its JSON value. Raises
+    argparse.ArgumentTypeError naming the text when it is not KEY=JSON."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY=JSON, e.g. replan_tolerance_ms=0")
+    try:
+        return key.strip(), json.loads(raw)
+    except json.JSONDecodeError as e:
+        raise argparse.ArgumentTypeError(f"{text!r}: the value is not JSON ({e.msg})") from None
+
+
 def _positive_float(s: str) -> float:
     v = float(s)
     if not (v > 0 and math.isfinite(v)):
@@ -511,6 +523,9 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
                                        "policy: profile, mean[:K], max[:K] or pQ[:K]")
     p.add_argument("--eviction-scan", choices=("reference", "full"),
                    help="DEM/DEMS eviction scan: reference (PriorityQueue.add, the default) or full")
+    p.add_argument("--option", type=scheduler_option, action="append", default=[], metavar="KEY=JSON",
+                   help="a scheduler option for every scheduler of the run that has it, e.g. replan_tolerance_ms=0 "
+                        "(LAPLAN); repeatable")
     p.add_argument("--trace", default="periodic", metavar="KIND",
                    help="arrival process: periodic (default), realistic (jittered gaps, dropped frames, drones joining "
                         "mid-run) or recording:FILE.mcap (the camera-frame gaps of a recording, scaled to --fps)")
@@ -608,6 +623,13 @@ def _significant(x, digits: int):
 
 def _cmd(args: argparse.Namespace) -> int:
     options = {k: v for k, v in (("estimator", args.estimator), ("eviction_scan", args.eviction_scan)) if v}
+    options.update(args.option)
+    from aerodaas.schedulers.analytics_base import iter_schedulers
+
+    for key, _ in args.option:  # an option no scheduler of the run has is a typo, not a no-op
+        if not any(key in cls.options for cls in iter_schedulers(args.schedulers)):
+            print(f"aerodaas bench schedulers: --option {key}: no scheduler of this run has it", file=sys.stderr)
+            return 2
     try:
         res = _run_harness(args, options) if args.harness else _run_runtime(args, options)
     except ValueError as e:
