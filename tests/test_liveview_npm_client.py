@@ -13,6 +13,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import time
 from collections import Counter
 from pathlib import Path
@@ -86,6 +87,24 @@ def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_ever
     got = _finish(client)
     assert got["protocol"] == "foxglove.websocket.v1", got
     assert got["counts"] == {"/mission/plan": 3, "/uav/state": 5}, got
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="needs Linux scheduling policies")
+def test_channels_created_while_a_client_is_connected_reach_it_even_when_their_creator_is_preempted(node_client):
+    """foxglove-sdk 0.30.3 queues a new channel's advertisement before it can accept a subscription to it
+    (``ConnectedClient::advertise_channels``), so a client that subscribes on the advertisement (Foxglove's app, the
+    npm client) was answered "Unknown channel ID" and never got the channel when the creating thread lost its CPU
+    between the two steps: a test of the example plug-ins lost ``/uav/mission/plan`` so on a loaded machine. The live
+    view's front now holds the SDK's bytes while a channel is created. tests/liveview_channel_race.py provokes the
+    race (27 of 30 channels refused without the hold, measured 2026-11-24)."""
+    node = shutil.which("node")
+    p = subprocess.run([sys.executable, str(Path(__file__).parent / "liveview_channel_race.py"), node,
+                        str(JS / "count_channels.mjs")], capture_output=True, text=True, timeout=240,
+                       env={**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])})
+    assert p.returncode == 0, p.stderr[-2000:]
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    assert not [s for s in got["statuses"] if "Unknown channel" in s], got["statuses"]
+    assert {t: got["counts"].get(t) for t in got["topics"]} == {t: 3 for t in got["topics"]}
 
 
 @pytest.mark.e2e

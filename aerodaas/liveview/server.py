@@ -170,8 +170,11 @@ class LiveServer:
             ch = self._channels.get(topic)
             if ch is None:
                 schema = self._foxglove.Schema(name=schema_name, encoding=schema_encoding, data=bytes(schema_data))
-                ch = self._foxglove.Channel(topic, schema=schema, message_encoding=message_encoding,
-                                            context=self._ctx)
+                # the SDK enqueues the advertisement before it can accept a subscription to the channel: hold it in
+                # the front until the channel is created (aerodaas.liveview.subprotocol, SubprotocolFront.hold)
+                with self._front.hold():
+                    ch = self._foxglove.Channel(topic, schema=schema, message_encoding=message_encoding,
+                                                context=self._ctx)
                 self._channels[topic] = ch
                 self._born[topic] = time.monotonic()
                 self._early[topic], self._early_bytes[topic] = [], 0

@@ -12,6 +12,15 @@ loopback port. Only the HTTP upgrade is touched (RFC 6455 section 4.1/4.2.2): wh
 ``Sec-WebSocket-Protocol`` offers ``foxglove.websocket.v1`` and no ``foxglove.sdk.*`` name, ``foxglove.sdk.v1`` is
 offered to the SDK instead and the SDK's answer is renamed back to ``foxglove.websocket.v1``; every byte after the
 handshake passes through unchanged (the two names denote the same frames).
+
+:meth:`SubprotocolFront.hold` also closes a race of the SDK server (foxglove-sdk 0.30.3, ``connected_client.rs``,
+``ConnectedClient::advertise_channels``): a channel created while a client is connected is *enqueued* for
+advertisement before it is entered in the client's channel map, and the SDK's ``on_subscribe`` rejects a subscription
+to a channel not in that map ("Unknown channel ID: N"). A client that subscribes as soon as it sees the advertisement
+(Foxglove's app, ``@foxglove/ws-protocol``) can be answered so when the creating thread is descheduled between the two
+steps (a loaded machine), and then never receives that channel. While :meth:`hold` is held (around the creation of a
+channel: :meth:`aerodaas.liveview.server.LiveServer.advertise`), nothing the SDK sends is passed on to a client, so no
+advertisement reaches a client before the SDK can accept its subscription.
 """
 from __future__ import annotations
 
@@ -59,12 +68,17 @@ def rewrite_response(header: bytes) -> bytes:
     return header[:m.start()] + f"Sec-WebSocket-Protocol: {LEGACY}\r\n".encode() + header[m.end():]
 
 
-def _pipe(src: socket.socket, dst: socket.socket) -> None:
+def _pipe(src: socket.socket, dst: socket.socket, gate: threading.Lock | None = None) -> None:
+    """Copy ``src`` to ``dst`` until EOF; with ``gate``, each chunk waits while the gate is held (a chunk received
+    before someone took the gate was produced before, so only what the SDK sends during a hold is held back)."""
     try:
         while True:
             data = src.recv(65536)
             if not data:
                 break
+            if gate is not None:
+                with gate:
+                    pass
             dst.sendall(data)
     except OSError:
         pass
@@ -91,6 +105,7 @@ class SubprotocolFront:
         self._backend = ("127.0.0.1", int(backend_port))
         self._conns: list[socket.socket] = []
         self._lock = threading.Lock()
+        self._gate = threading.Lock()  # held by hold(): the SDK's bytes wait before going to a client
         self._closed = False
         threading.Thread(target=self._accept, name="foxglove-front", daemon=True).start()
 
@@ -127,13 +142,20 @@ class SubprotocolFront:
                 answer, rest = _read_header(backend)
                 if not answer:
                     raise OSError("no HTTP answer")
+                with self._gate:  # ``rest`` may hold an advertisement already (see hold)
+                    pass
                 client.sendall(rewrite_response(answer) + rest)
         except OSError:
             client.close()
             backend.close()
             return
-        threading.Thread(target=_pipe, args=(backend, client), daemon=True).start()
+        threading.Thread(target=_pipe, args=(backend, client, self._gate), daemon=True).start()
         _pipe(client, backend)
+
+    def hold(self) -> threading.Lock:
+        """A context manager: while it is held, what the SDK server sends waits in the front instead of reaching
+        the clients (module docstring). Hold it around the creation of a channel, nothing longer."""
+        return self._gate
 
     def close(self) -> None:
         """Stop listening and close every forwarded connection. Idempotent."""
