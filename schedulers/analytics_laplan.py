@@ -39,13 +39,15 @@ fallbacks ``V`` of the open tasks change with time and with each cloud completio
 the HEAVY sweep cells it moved utility by < 0.1 % and cut the plans computed per second from 10.7 to 3.8 per edge.
 
 The edge state a plan assumed holds for ``replan_tolerance_ms`` (default 2 ms) past the instant it planned from (a
-running task's expected end, or an idle edge's first start). On the Ray runtime the calls a dispatcher makes for one
-event (an arrival's ``submit``, then ``next_edge_task`` from the edge loop) reach the policy a fraction of a ms to a
-few ms apart on the wall clock, and with no tolerance each of them found the plan's instant just passed and planned
-again: 40 % more plans than the harness on the same trace (4,401 against 3,178 at 80 drones, 2026-11-24), each ~1 ms
-of CPU, which made the 80-drone emulation late. With 2 ms the runtime computes 3,350. In the harness, where one
-event's calls share one time, it changes utility by under 0.01 % (5 seeds, 80 drones, 30 s, periodic and realistic
-traces; docs/analytics-schedulers.md).
+running task's expected end, or an idle edge's first start), but never longer than the plan's slack (the least, over
+its tasks, of latest end - planned end): a plan is not kept once a planned task, started that much later, would no
+longer end by its chosen variant's latest end; when the first task starts late, the kept rest of the plan moves as
+much later. Why: on the Ray runtime the calls a dispatcher makes for one event (an arrival's ``submit``, the poll
+timer, ``next_edge_task`` from the edge loop) reach the policy a fraction of a ms to a few ms apart on the wall
+clock, and with no tolerance each found the plan's instant just passed and planned again: 4,401 plans against the
+harness's 3,178 on the same 80-drone trace (2026-11-24), each ~1 ms of CPU, which made the 80-drone emulation late.
+In the harness, where one event's calls share one time, it moved the 5-seed mean utility at 80 drones by under
+0.01 % (single seeds by up to 0.09 %) on periodic and realistic traces (docs/analytics-schedulers.md).
 
 There is no ``commit_horizon_ms`` (GAINPLAN/EVPLAN's): at its trigger a task is committed to the edge exactly
 when the plan runs it, wherever it stands.
@@ -125,8 +127,9 @@ class LaPlan(EvPlan):
     """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
     prediction), ``edge_levels`` (on-time chances of the edge-time variants, each in (0, 1]), ``pool_models``
     (default True), ``release_early_ms`` (default 50), ``replan_tolerance_ms`` (default 2, in [0, 100]), and
-    EVPLAN's ``window``, ``tolerance``, ``estimator`` and ``edge_quantile`` (admission only). Terminal states as GAINPLAN's. Raises ValueError for out-of-range options
-    and for ``commit_horizon_ms``, which LAPLAN does not have."""
+    EVPLAN's ``window``, ``tolerance``, ``estimator`` and ``edge_quantile`` (admission only). Terminal states as
+    GAINPLAN's. Raises ValueError for out-of-range options and for ``commit_horizon_ms``, which LAPLAN does not
+    have."""
 
     name = "LAPLAN"
     options = tuple(o for o in EvPlan.options if o != "commit_horizon_ms") + (

@@ -547,7 +547,8 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--edge-jitter", default="lognormal:0.05", help="edge hold jitter (default lognormal:0.05)")
     p.add_argument("--cloud-jitter", default="lognormal:0.1", help="cloud hold jitter (default lognormal:0.1)")
     p.add_argument("--cloud-nodes", type=int, default=1, help="cloud nodes of the local cluster (default 1)")
-    p.add_argument("--edge-hosts", type=_positive_int, help="edge host actors (default: CPUs + 1, at most one per edge)")
+    p.add_argument("--edge-hosts", type=_positive_int,
+                   help="edge host actors (default: CPUs + 1, at most one per edge)")
     p.add_argument("--cloud-reply-lead-ms", type=float, default=100.0,
                    help="emulated cloud replies are sent this early and released when due (default 100; 0: off)")
     p.add_argument("--emulation-bound-ms", type=_positive_float, default=EMULATION_BOUND_MS,
