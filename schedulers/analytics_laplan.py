@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import NamedTuple
 
 import numpy as np
 
@@ -122,6 +123,16 @@ class ArrivalPredictor:
         return out
 
 
+class _CachedPlan(NamedTuple):
+    """LAPLAN's plan as last computed (:meth:`LaPlan.schedule`) or kept after a start (:meth:`LaPlan._pop_edge`)."""
+
+    key: tuple                 # (version, edge idle) it was made for
+    plan: list                 # [(task key, planned start ms)]
+    first_wake: float | None   # when to re-plan if its first task is a predicted one that has not come (ms)
+    valid_until: float         # ms: the edge's planned state plus the tolerance (module docstring)
+    slack: float               # ms: how late every planned task may still start and end by its latest end
+
+
 @register_analytics_scheduler
 class LaPlan(EvPlan):
     """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
@@ -160,7 +171,7 @@ class LaPlan(EvPlan):
         self._edge_mean = 1.0                                  # mean observed edge run / profile ratio
         self._tails: list[tuple[float, float]] = [(0.0, 1.0)]  # (ratio above the mean, on-time chance) per level
         self._version = 0      # bumped whenever the pool, a mode or the edge changes
-        self._cache: tuple | None = None
+        self._cache: _CachedPlan | None = None
         self._wake: float | None = None
         self._first_wake: float | None = None
         self._predicted: dict[tuple, list[float]] = {}  # (drone, model) -> predicted frame times of the plan
@@ -216,10 +227,10 @@ class LaPlan(EvPlan):
         :func:`.single_machine.max_gain_schedule_arrays` — the same plan as the job tuples gave, at a fraction of
         the Python work per plan."""
         key = (self._version, self.edge_running is None)
-        if self._cache is not None and self._cache[0] == key:
-            if now_ms <= self._cache[3]:  # the edge's state as planned, or late by less than the plan's slack
-                self._first_wake = self._cache[2]
-                return self._cache[1]
+        if self._cache is not None and self._cache.key == key:
+            if now_ms <= self._cache.valid_until:  # the edge's state as planned, or late by less than the slack
+                self._first_wake = self._cache.first_wake
+                return self._cache.plan
             # why this plan is recomputed although nothing changed (diagnostics: the runtime's wall clock)
             self.counters["plans_edge_overran" if self.edge_running is not None else "plans_start_passed"] += 1
         self._now = now_ms
@@ -272,7 +283,7 @@ class LaPlan(EvPlan):
         # until its first start; either up to replan_tolerance_ms more, but never more than the plan's slack
         # (module docstring)
         at = free if self.edge_running is not None else (plan[0][1] if plan else math.inf)
-        self._cache = (key, plan, self._first_wake, at + self._tolerance(slack), slack)
+        self._cache = _CachedPlan(key, plan, self._first_wake, at + self._tolerance(slack), slack)
         return plan
 
     def _tolerance(self, slack: float) -> float:
@@ -362,10 +373,10 @@ class LaPlan(EvPlan):
         # the rest of an optimal plan is optimal for the rest (principle of optimality): keep it while the edge
         # runs the first task, until that task is due to end. Started ``lag`` ms after its planned start (within the
         # plan's tolerance), the rest moves as much later and has as much less slack
-        lag, slack = max(0.0, now_ms - plan[0][1]), self._cache[4]  # schedule() above set the cache
+        lag, slack = max(0.0, now_ms - plan[0][1]), self._cache.slack  # schedule() above set the cache
         rest = [(k, s + lag) for k, s in plan[1:]] if lag > 0 else plan[1:]
-        self._cache = ((self._version, False), rest, None,
-                       now_ms + self.w[first.model].edge_ms + self._tolerance(slack - lag), slack - lag)
+        self._cache = _CachedPlan((self._version, False), rest, None,
+                                  now_ms + self.w[first.model].edge_ms + self._tolerance(slack - lag), slack - lag)
         if first.notes.get("mode") == OPEN:
             self.counters["open_started_on_edge"] += 1
         return first, drops

@@ -295,8 +295,7 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
     # one host process per core and one more: on 2 cores, 80 drones with LAPLAN (2026-11-24, seed 2) gave an
     # emulation p99 of 5.1 ms with 2 hosts, 4.8-5.5 ms with 3, 7.2 with 4, 6.8-13.3 with 5 and 8.6 with 7 (each host
     # process brings Ray's own threads; fewer hosts queue more edges behind each decision)
-    n_hosts = edge_hosts or min(n_edges, ncpu + 1)
-    n_hosts = max(1, min(n_hosts, n_edges))
+    n_hosts = max(1, min(edge_hosts or ncpu + 1, n_edges))
     edge_ids = [f"edge{e:02d}" for e in range(n_edges)]
     host_edges = [edge_ids[i::n_hosts] for i in range(n_hosts)]
 
