@@ -25,7 +25,7 @@ from typing import Any
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S
-from aerodaas.runtime.messages import OdometryMsg, StatMsg
+from aerodaas.runtime.messages import StatMsg
 from aerodaas.app.models import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order
@@ -35,11 +35,12 @@ from aerodaas.actors.drone_autopilot import AutopilotFlight
 from aerodaas.actors.drone_inbox import DroneInbox
 from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import RunEnd
+from aerodaas.actors.drone_odometry import OdometryPublisher
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(RunEnd, AutopilotFlight):
+class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -111,7 +112,9 @@ class DroneComponent(RunEnd, AutopilotFlight):
                 odom_rate = float(s.properties.get("rate_hz", 10.0))
         self.odom_period = 1.0 / odom_rate
         self.next_odom = 0.0
-        self._odom_key: Any = None  # the backend's sample_key of the last published odometry
+        self._odom_key: Any = None  # the backend's sample_key when its samples were last drained
+        self._odom_t: float | None = None  # the vehicle time of the last published sample
+        self._odom_fresh = False  # the mission ended: the next drain takes the newest sample only
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
         #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
@@ -230,7 +233,9 @@ class DroneComponent(RunEnd, AutopilotFlight):
                 elif ev.get("event") == "command_withheld":
                     self._reissue = True  # sent again on the next tick, unless the autopilot's failsafe comes first
                 self._event(ev.pop("event", "backend_event"), **ev)
-        if self.backend.t + 1e-9 >= self.next_odom and self._new_sample():
+        if self.backend.sample_key is not None:  # a vehicle's own samples: each one, paced on its own time
+            self.publish_odometry(tok, paced=True)
+        elif self.backend.t + 1e-9 >= self.next_odom:  # the simulator: its state, on the odometry rate's grid
             self.next_odom += self.odom_period
             if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
                 self.next_odom = self.backend.t + self.odom_period
@@ -238,25 +243,6 @@ class DroneComponent(RunEnd, AutopilotFlight):
         if not self.done:  # plug-in sensors sample the vehicle state at their own rate while the mission runs
             for ps in self.plugin_sensors:  # (a drone settling after its mission: odometry only)
                 ps.maybe_sample(self.backend, tok)
-
-    def _new_sample(self) -> bool:
-        """Whether the backend has a position sample not yet published (always, for a backend without
-        ``sample_key``: the simulator's state is new at every step)."""
-        key = self.backend.sample_key
-        return key is None or key != self._odom_key
-
-    def publish_odometry(self, tok: Any = None) -> None:
-        """Record and publish the backend's odometry, once per vehicle sample (a real vehicle's odometry is stamped
-        with its own time of the sample; the same sample is never sent again under a new timestamp)."""
-        if not self._new_sample():
-            return
-        self._odom_key = self.backend.sample_key
-        odom = self.backend.odometry().model_dump(mode="json")
-        self.last_odom = odom
-        if self.recorder is not None:
-            self.recorder.odometry(self.cfg.id, self._t_ns(odom["t"]), odom)
-        for cid in self.odom_cids:
-            self.plane.publish(cid, [OdometryMsg(robot=self.cfg.id, sim_t=odom["t"], data=odom)], tok, inline=False)
 
     def control_tick(self) -> bool:
         """One control tick (at ``control_rate_hz``); returns True when this drone's mission is over."""

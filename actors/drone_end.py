@@ -46,6 +46,7 @@ class RunEnd:
                 th.join(0.05)
                 self._record_safe_end()
             self._record_safe_end()
+            self._await_end_sample()
             how = result.get("how") or "failed: " + result.get("error", "?")
             if how == "nothing":  # not ours to end (armed by someone else), or already down
                 how = "landed" if not b.armed else "left armed (not commanded by us)"
@@ -56,6 +57,7 @@ class RunEnd:
             self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         elif self.ended is None and b.navigable and b.armed and b.link_ok and self.fsm.state == S.LANDED:
             self.ended = self._await_disarm()
+            self._await_end_sample()
             self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         elif self.ended is None:
             st = self.fsm.state
@@ -91,9 +93,21 @@ class RunEnd:
         self._record_safe_end()
         return "landed and disarmed (by us)"
 
+    def _await_end_sample(self) -> None:
+        """Go on recording (:meth:`_record_safe_end`) until the recorded odometry shows the vehicle's end state
+        (:meth:`settled`: a position sample taken after the disarm; bounded by :data:`SETTLE_WALL_S` wall seconds).
+        Each sample is recorded with the state the vehicle had when it was taken, so the one before the disarm
+        still says armed."""
+        import time
+
+        self._settle_until = None  # a wait of its own (settled() may have run out while the drone was landing)
+        while self.backend.link_ok and not self.settled():
+            time.sleep(0.02)
+            self._record_safe_end()
+
     def _record_safe_end(self) -> None:
         """While the backend's safe end runs: its events, the stat-stream (LANDING, then LANDED at the disarm) and
-        each new odometry sample, recorded as in flight."""
+        each new odometry sample (at the odometry sensor's rate)."""
         b = self.backend
         for ev in b.drain_events():
             self._event(ev.pop("event", "backend_event"), **ev)
@@ -104,7 +118,7 @@ class RunEnd:
         if self.fsm.state == S.LANDING and not b.armed and not b.in_air:
             self.fsm.transition(S.LANDED, b.t)
             self._event("landed", reason="safe end")
-        self.publish_odometry()
+        self.publish_odometry(paced=True)
 
     def settled(self, wait_s: float = SETTLE_WALL_S) -> bool:
         """After the mission ended: True once the recorded odometry shows the vehicle's armed / in-air state as the
@@ -124,8 +138,11 @@ class RunEnd:
         return now >= self._settle_until
 
     def finish(self) -> None:
-        """The run is over for this drone: last odometry and the mission result."""
+        """The run is over for this drone: last odometry and the mission result. The drone is no longer stepped:
+        what its vehicle sends meanwhile is not recorded, except from the newest sample on while :meth:`close` brings
+        it down."""
         self.publish_odometry()
+        self._odom_fresh = True
         if self.recorder is not None:
             self.recorder.json("/mission/result", self._t_ns(self.backend.t),
                                {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),

@@ -102,7 +102,7 @@ def test_a_landed_vehicle_that_stays_armed_is_disarmed_by_us_after_its_grace():
         def _event(self, kind, **kw):
             self.events.append({"event": kind, "t": self.backend.t, **kw})
 
-        def publish_odometry(self, tok=None):
+        def publish_odometry(self, tok=None, *, paced=False):
             pass
 
     e = End()
@@ -128,7 +128,7 @@ def test_a_vehicle_in_the_air_again_is_never_disarmed_by_the_wait():
         def _event(self, kind, **kw):
             self.events.append({"event": kind, **kw})
 
-        def publish_odometry(self, tok=None):
+        def publish_odometry(self, tok=None, *, paced=False):
             pass
 
     e = End()

@@ -201,6 +201,16 @@ class VehicleBackend(abc.ABC):
         position again under a new timestamp."""
         return None
 
+    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
+        """The vehicle's position samples not yet handed out, oldest first, each as an
+        :class:`~aerodaas.app.models.Odometry` stamped with the vehicle's own time of the sample. A backend with a
+        :attr:`sample_key` keeps every sample here until the runtime takes it, so a drone whose clock thread was
+        held up (a command waiting for its acknowledgement, a loaded machine) still records each one. The default
+        (the simulator, whose :meth:`odometry` is new at every step, or a backend that keeps no queue):
+        ``[self.odometry()]``. ``newest_only``: the newest sample alone; the others are discarded, not lost (the
+        runtime was not recording them: before the run, or after the drone's mission ended)."""
+        return [self.odometry()]
+
     def drain_events(self) -> list[dict[str, Any]]:
         """Events since the last call, oldest first, each ``{"event": name, ...}``: e.g. ``status_text``
         (severity, text), ``mission_item_reached`` (seq), ``mode`` (name), ``link_lost``, ``link_regained``.

@@ -10,7 +10,7 @@ from typing import Any, Literal
 import numpy as np
 
 from aerodaas.config import MavlinkConfig
-from aerodaas.app.models import GeoPoint
+from aerodaas.app.models import GeoPoint, Odometry
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
@@ -19,7 +19,7 @@ from aerodaas.backends.mavlink.link import LinkMixin
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
 from aerodaas.backends.mavlink.params import ParamMixin
-from aerodaas.backends.mavlink.telemetry import TelemetryMixin
+from aerodaas.backends.mavlink.telemetry import ODOMETRY_QUEUE, TelemetryMixin
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
@@ -93,6 +93,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._pos = np.zeros(3)
         self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
         self._pos_seq = 0  # position samples received
+        #: the odometry of each position sample not yet drained (telemetry.py drain_odometry), oldest first
+        self._odom_q: deque[Odometry] = deque(maxlen=ODOMETRY_QUEUE)
+        self._odom_q_dropped = 0  # samples pushed out of the full queue since it was last drained
+        self._odom_q_drained = False  # drained once: the run takes samples now, an overflow is a loss
         self._vel = np.zeros(3)
         self._est_hspeed = 0.0  # its horizontal speed, m/s (telemetry.py _set_velocity) ...
         self._est_steady = False  # ... changed at most at 1 m/s^2 since the sample before ...

@@ -72,6 +72,7 @@ class LinkMixin:
         with self._lock:
             self._t_connect = self._raw_t()
             self._t_max = 0.0
+            self._odom_q.clear()  # stamped on the clock before the connection's zero
         if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
             got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:

@@ -13,6 +13,11 @@ from aerodaas.app.models import Attitude, GeoPoint, Odometry
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
+#: position samples kept for :meth:`TelemetryMixin.drain_odometry` (60 vehicle seconds at the default 10 Hz stream;
+#: the drone's clock thread drains them every step, so only a thread held up for that long loses any)
+ODOMETRY_QUEUE = 600
+
+
 class TelemetryMixin:
     """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
 
@@ -33,6 +38,7 @@ class TelemetryMixin:
             self._set_velocity(self.ned_to_enu((msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)), msg.time_boot_ms)
         if msg.hdg != 65535 and time.monotonic() - self._att_wall > 1.0:  # no ATTITUDE lately
             self._att = (self._att[0], self._att[1], self.enu_yaw_from_heading(msg.hdg / 100.0))
+        self._queue_odometry()
 
     def _height(self) -> float:
         """Metres above the altitude reference (the take-off point's AMSL altitude, fixed at arming: a frame that
@@ -80,6 +86,7 @@ class TelemetryMixin:
         if not self._has_global:  # no global position (indoors): ENU from the EKF origin
             self._pos = self.ned_to_enu((msg.x, msg.y, msg.z))
             self._new_sample(msg.time_boot_ms)
+            self._queue_odometry()
 
     def _set_velocity(self, v_enu: np.ndarray, ms: int) -> None:
         """The estimate's velocity (ENU m/s) at ``time_boot_ms`` ``ms``. Its horizontal speed is what a GNSS
@@ -311,6 +318,28 @@ class TelemetryMixin:
                             attitude=Attitude(roll=self._att[0], pitch=self._att[1], yaw=self._att[2]),
                             battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._armed,
                             in_air=self.in_air)
+
+    def _queue_odometry(self) -> None:
+        """Keep the odometry of the position sample just received (with the velocity, attitude and state known with
+        it) for :meth:`drain_odometry`. Caller holds ``_lock``."""
+        q = self._odom_q
+        if self._odom_q_drained and len(q) == q.maxlen:
+            self._odom_q_dropped += 1
+        q.append(self.odometry())
+
+    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
+        """See :meth:`~aerodaas.backends.base.VehicleBackend.drain_odometry`: every position sample received since the
+        last call (at most :data:`ODOMETRY_QUEUE`; ``newest_only``: the newest), oldest first, each stamped with its
+        own ``time_boot_ms`` on the run's clock. Samples pushed out of the full queue after a drain of every sample
+        are reported in an ``odometry_samples_dropped`` event (``count``)."""
+        with self._lock:
+            out = list(self._odom_q)[-1:] if newest_only else list(self._odom_q)
+            self._odom_q.clear()
+            dropped = 0 if newest_only else self._odom_q_dropped
+            self._odom_q_dropped, self._odom_q_drained = 0, True
+        if dropped:
+            self._event("odometry_samples_dropped", count=dropped)
+        return out
 
     def drain_events(self) -> list[dict[str, Any]]:
         """See :meth:`~aerodaas.backends.base.VehicleBackend.drain_events`. Once an ``autopilot_failsafe`` event is
