@@ -4,6 +4,7 @@ log; none is on wall-clock time."""
 from __future__ import annotations
 
 import math
+import statistics
 
 import pytest
 
@@ -121,20 +122,27 @@ def test_speed_stays_within_the_limit(session, run, autopilot):
 
 
 def test_hover_height_from_the_firmware_estimate(session, autopilot):
-    """While holding at each waypoint, the firmware's own altitude estimate (GLOBAL_POSITION_INT alt, AMSL) is
-    within 0.3 m (stock PX4 SIH: 0.5 m) of the commanded 1.5 m above the take-off point (the altitude reference fixed
-    at arming)."""
+    """While holding at each waypoint, the firmware's own altitude estimate (GLOBAL_POSITION_INT alt, AMSL) is at
+    the commanded 1.5 m above the take-off point (the altitude reference fixed at arming): each hold's median within
+    0.3 m, every sample within 0.3 m (stock PX4 SIH, whose estimate wanders: 1.0 m)."""
     rec = session["guided"]["rec"]
     ref = [e["amsl_m"] for e in events(rec) if e["event"] == "altitude_reference"]
     assert ref, "no altitude reference"
-    errs = []
+    errs, medians = [], []
     for a, b in _holds(rec):
-        errs += [o["geodetic"]["alt"] - ref[-1] - 1.5 for o in odometry(rec) if a + 1.0 <= o["t"] <= b]
+        hold = [o["geodetic"]["alt"] - ref[-1] - 1.5 for o in odometry(rec) if a + 1.0 <= o["t"] <= b]
+        errs += hold
+        medians += [statistics.median(hold)] if hold else []
     assert len(errs) > 50
-    print(f"{autopilot}: hover height error {min(errs):+.3f} .. {max(errs):+.3f} m")
-    # stock PX4 SIH: its altitude estimate wanders as its horizontal one does (tests/sitl.py MAX_SPEED): -0.42 m at
-    # worst on 2026-11-24 (with the EKF2 noise overrides the tests used to add: within 0.24 m)
-    assert max(abs(e) for e in errs) <= (0.5 if autopilot == "px4" else 0.3)
+    print(f"{autopilot}: hover height error {min(errs):+.3f} .. {max(errs):+.3f} m, per hold median "
+          f"{[round(m, 3) for m in medians]}")
+    # the height we command: each hold's median within 0.3 m (a wrong altitude reference, e.g. PX4's home
+    # re-estimated after take-off, 0.5-0.6 m off in these runs, shifts every sample of a hold)
+    assert all(abs(m) <= 0.3 for m in medians), medians
+    # stock PX4 SIH: its altitude estimate wanders as its horizontal one does (tests/sitl.py MAX_SPEED): within
+    # -0.25 .. +0.19 m idle and with two CPU burners, -0.733 .. +0.394 m in the CI run of 2026-11-24 (with the EKF2
+    # noise overrides the tests used to add: within 0.24 m)
+    assert max(abs(e) for e in errs) <= (1.0 if autopilot == "px4" else 0.3)
 
 
 def test_autopilot_mission_holds_and_reaches(session, autopilot):
@@ -300,10 +308,16 @@ def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
         # and time_boot_ms (a raw pymavlink observer on the vehicle's serial1): within 5 %
         k = ["quadrotor_base", "quadrotor_base_1", "quadrotor_base_2"].index(rid)
         fw = [{"t": s[0], "position": s[1:4]} for s in router_fleet["observed"][k]["samples"]]
-        # the vehicle must have flown its legs for the comparison to mean anything: at least 60 % of its cruise
-        # speed (0.3 m/s on ArduCopter as before; PX4 cruises at MPC_XY_VEL_MAX = px4_speed_limit(max_speed): at 0.5
-        # a bound of 0.3 m/s failed a PX4 vehicle that flew 0.297 m/s, recorded 0.295, CI of 2026-11-24)
+        # the vehicle must have flown its legs for the comparison to mean anything: at least 30 % of its cruise
+        # speed over the window (PX4 cruises at MPC_XY_VEL_MAX = px4_speed_limit(max_speed)). Idle, the vehicles
+        # fly 1.3-1.6 m/s of PX4's 1.75 over 2 s; with two CPU burners PX4 SIH at 2x flew one at 0.99 (2026-11-24)
         cruise = px4_speed_limit(sitl.MAX_SPEED[autopilot]) if autopilot == "px4" else sitl.MAX_SPEED[autopilot]
         for window in (1.0, 2.0):
             ours, theirs = flown_speed(odo, window), flown_speed(fw, window)
-            assert theirs > 0.6 * cruise and abs(ours / theirs - 1.0) <= 0.05, (rid, window, ours, theirs)
+            assert theirs > 0.3 * cruise and abs(ours / theirs - 1.0) <= 0.05, (rid, window, ours, theirs)
+        # every sample the vehicle sent is recorded (at the odometry sensor's 10 Hz, the stream's rate): in flight
+        # no hole of more than 0.45 s, four lost in a row on the router's UDP links (the CI run of 2026-11-24 recorded 1.265 m/s where the firmware
+        # flew 1.434: holes of 0.5-1 s in flight, 4 s with two CPU burners, while the drone's clock thread waited)
+        flying = [o["t"] for o in odo if o["in_air"]]
+        holes = [(round(a, 2), round(b - a, 3)) for a, b in zip(flying, flying[1:]) if b - a > 0.45]
+        assert not holes, (rid, holes)
