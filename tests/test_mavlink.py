@@ -925,52 +925,38 @@ def test_recorded_odometry_ends_with_the_vehicles_end_state():
     bound."""
     from pymavlink.dialects.v20 import common as mav
 
-    from aerodaas.actors.drone import DroneComponent
+    from .mavlink_wire import WiredDrone
 
-    def drone():
-        cfg = RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig())
-        b = MavlinkBackend(cfg)
-        b._link_ok, b._sysid, b._compid = True, 1, 1  # as connect() leaves them after the autopilot's HEARTBEAT
-        return b, DroneComponent("q/drone", cfg.model_dump(mode="json"), None, None, None, 0, 0, [], [], backend=b)
+    def flying(w):
+        w.heartbeat(True)
+        w.landed_state(mav.MAV_LANDED_STATE_IN_AIR)
+        w.drone.publish_odometry()
+        for ms, alt in ((1000, 5.0), (1100, 4.0)):
+            w.position(ms, alt_m=alt)
+            w.drone.publish_odometry()
 
-    enc, dec = mav.MAVLink(None, srcSystem=1, srcComponent=1), mav.MAVLink(None)
+    def landed(w):
+        w.landed_state(mav.MAV_LANDED_STATE_ON_GROUND)
+        w.drone.publish_odometry()
+        w.heartbeat(False)
+        w.drone.publish_odometry()
 
-    def wire(m):  # through the wire format, so every message has its own sequence number as the backend sees them
-        buf = m.pack(enc)
-        enc.seq = (enc.seq + 1) % 256
-        return dec.decode(bytearray(buf))
-
-    def hb(armed: bool):
-        return mav.MAVLink_heartbeat_message(2, 12, (mav.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0) | 1, 0, 4, 3)
-
-    def pos(ms: int, alt_m: float):
-        return mav.MAVLink_global_position_int_message(ms, int(47.3977e7), int(8.5456e7), int((488 + alt_m) * 1e3),
-                                                       int(alt_m * 1e3), 0, 0, 0, 0)
-
-    def state(landed: int):
-        return mav.MAVLink_extended_sys_state_message(0, landed)
-
-    flying = [hb(True), state(mav.MAV_LANDED_STATE_IN_AIR), pos(1000, 5.0), pos(1100, 4.0)]
-    landed = [state(mav.MAV_LANDED_STATE_ON_GROUND), hb(False)]
-    b, d = drone()
-    for m in flying:
-        b._dispatch(wire(m), time.monotonic())
-        d.publish_odometry()
+    w = WiredDrone()
+    d = w.drone
+    flying(w)
     assert d.last_odom["in_air"] and d.last_odom["armed"]
-    for m in landed:  # landed and disarmed, no new position sample: nothing new is recorded
-        b._dispatch(wire(m), time.monotonic())
-        d.publish_odometry()
-    assert not b.in_air and not b.armed and d.last_odom["in_air"]
+    landed(w)  # landed and disarmed, no new position sample: nothing new is recorded
+    assert not w.backend.in_air and not w.backend.armed and d.last_odom["in_air"]
     assert not d.settled(wait_s=60.0)
-    b._dispatch(wire(pos(1200, 0.0)), time.monotonic())
+    w.position(1200, alt_m=0.0)
     d.publish_odometry()
     assert d.last_odom["in_air"] is False and d.last_odom["armed"] is False
     assert d.settled(wait_s=60.0)
 
-    b, d = drone()  # the same, but the vehicle sends no further position
-    for m in flying + landed:
-        b._dispatch(wire(m), time.monotonic())
-        d.publish_odometry()
+    w = WiredDrone()  # the same, but the vehicle sends no further position
+    d = w.drone
+    flying(w)
+    landed(w)
     assert not d.settled(wait_s=0.05)
     time.sleep(0.06)
     assert d.settled(wait_s=0.05)

@@ -9,6 +9,7 @@ import time
 
 import pytest
 
+from .mavlink_wire import WiredDrone
 from .sitl import read_recording
 from .test_backends_e2e import PX4_AT_SPEED, _mavlink_variant, _run_app
 
@@ -87,49 +88,6 @@ def test_odometry_is_recorded_once_per_vehicle_sample(ray_session, run_options, 
         (len(bad), len(w), bad[:10])
 
 
-class _Recorder:
-    """The recorder's calls a drone makes, kept in memory."""
-
-    def __init__(self) -> None:
-        self.odometry_rows: list[dict] = []
-
-    def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
-        self.odometry_rows.append(odom)
-
-    def json(self, *args, **kwargs) -> None:
-        pass
-
-
-def _drone_on_a_wire(rate_hz: float):
-    """A drone (DroneComponent) on a MAVLink backend whose messages the test hands in as the I/O thread would, and
-    an encoder for those messages (through the wire format: each its own sequence number)."""
-    from pymavlink.dialects.v20 import common as mav
-
-    from aerodaas.actors.drone import DroneComponent
-    from aerodaas.backends.mavlink import MavlinkBackend
-    from aerodaas.config import MavlinkConfig, RobotConfig
-
-    cfg = RobotConfig(id="q", backend="mavlink", home={"lat": 47.3977, "lon": 8.5456, "alt": 488.0},
-                      mavlink=MavlinkConfig(), sensors=[{"id": "odom", "type": "odometry", "properties": {"rate_hz": rate_hz}}])
-    b = MavlinkBackend(cfg)
-    b._link_ok, b._sysid, b._compid = True, 1, 1  # as connect() leaves them after the autopilot's HEARTBEAT
-    rec = _Recorder()
-    d = DroneComponent("q/drone", cfg.model_dump(mode="json"), None, None, rec, 0, 0, [], [], backend=b)
-    enc, dec = mav.MAVLink(None, srcSystem=1, srcComponent=1), mav.MAVLink(None)
-
-    def dispatch(m) -> None:
-        buf = m.pack(enc)
-        enc.seq = (enc.seq + 1) % 256
-        b._dispatch(dec.decode(bytearray(buf)), time.monotonic())
-
-    def send(ms: int, north_m: float) -> None:
-        dispatch(mav.MAVLink_global_position_int_message(ms, int((47.3977 + north_m / 111_195.0) * 1e7), int(8.5456e7),
-                                                         int(490_000), 2000, 0, 0, 0, 0))
-
-    send.dispatch = dispatch  # any other message, as the I/O thread would hand it in
-    return d, b, rec, send
-
-
 def test_every_vehicle_sample_is_recorded_though_the_drones_clock_thread_was_held_up():
     """The CI run of 2026-11-24: a PX4 fleet's recordings had holes of 0.5-1.0 vehicle seconds in flight (4 s with
     two CPU burners), and the speed computed from them was 12 % under what the firmware flew. The drone recorded
@@ -140,49 +98,49 @@ def test_every_vehicle_sample_is_recorded_though_the_drones_clock_thread_was_hel
     every sample at 10 Hz; a queue overflowing is reported, never silent."""
     from aerodaas.backends.mavlink.telemetry import ODOMETRY_QUEUE
 
-    d, b, rec, send = _drone_on_a_wire(10.0)
-    send(1000, 0.0)
-    send(1100, 0.1)  # the samples before the run's first step: only the newest is recorded
-    d.step(0.0)
-    assert len(rec.odometry_rows) == 1
-    t0 = rec.odometry_rows[0]["t"]
+    w = WiredDrone(10.0)
+    w.position(1000, 0.0)
+    w.position(1100, 0.1)  # the samples before the run's first step: only the newest is recorded
+    w.drone.step(0.0)
+    assert len(w.recorder.odometry_rows) == 1
+    t0 = w.recorder.odometry_rows[0]["t"]
     for k in range(1, 31):  # three vehicle seconds in which the drone's clock thread did not step
-        send(1100 + 100 * k, 0.1 + 0.05 * k)
-    d.step(0.0)
-    d.step(0.0)  # nothing new: nothing recorded twice
-    rows = rec.odometry_rows[1:]
+        w.position(1100 + 100 * k, 0.1 + 0.05 * k)
+    w.drone.step(0.0)
+    w.drone.step(0.0)  # nothing new: nothing recorded twice
+    rows = w.recorder.odometry_rows[1:]
     assert len(rows) == 30, len(rows)
     assert [round(r["t"] - t0, 3) for r in rows] == [round(0.1 * k, 3) for k in range(1, 31)]
     # each its own position (north metres; the wire carries 1e-7 degrees, ~1.1 cm)
     assert all(abs(r["position"][1] - (0.1 + 0.05 * k)) < 0.015 for k, r in zip(range(1, 31), rows)), rows
 
-    d, b, rec, send = _drone_on_a_wire(5.0)  # the odometry sensor asks for half the vehicle's rate
+    w = WiredDrone(5.0)  # the odometry sensor asks for half the vehicle's rate
     for k in range(31):
-        send(1000 + 100 * k, 0.0)
+        w.position(1000 + 100 * k)
         if k == 0:
-            d.step(0.0)
-    d.step(0.0)
-    ts = [r["t"] for r in rec.odometry_rows]
-    assert len(ts) == 16 and all(abs(b2 - a - 0.2) < 1e-6 for a, b2 in zip(ts, ts[1:])), ts
+            w.drone.step(0.0)
+    w.drone.step(0.0)
+    ts = [r["t"] for r in w.recorder.odometry_rows]
+    assert len(ts) == 16 and all(abs(b - a - 0.2) < 1e-6 for a, b in zip(ts, ts[1:])), ts
 
-    d, b, rec, send = _drone_on_a_wire(10.0)  # a 10 Hz stream whose stamps jitter
+    w = WiredDrone(10.0)  # a 10 Hz stream whose stamps jitter
     jitter = [0, 20, -20, 10, -10, 20, 0, -20, 15, -15] * 3
     for k, j in enumerate(jitter):
-        send(1000 + 100 * k + j, 0.0)
+        w.position(1000 + 100 * k + j)
         if k == 0:
-            d.step(0.0)
-    d.step(0.0)
-    assert len(rec.odometry_rows) == len(jitter)
+            w.drone.step(0.0)
+    w.drone.step(0.0)
+    assert len(w.recorder.odometry_rows) == len(jitter)
 
-    d, b, rec, send = _drone_on_a_wire(10.0)  # held up longer than the queue holds
-    send(1000, 0.0)
-    d.step(0.0)
+    w = WiredDrone(10.0)  # held up longer than the queue holds
+    w.position(1000)
+    w.drone.step(0.0)
     for k in range(1, ODOMETRY_QUEUE + 6):
-        send(1000 + 100 * k, 0.0)
-    d.step(0.0)
-    assert len(rec.odometry_rows) == 1 + ODOMETRY_QUEUE
-    d.step(0.0)  # the backend's event of the drain, recorded with the drone's next step
-    dropped = [e for e in d.events if e["event"] == "odometry_samples_dropped"]
+        w.position(1000 + 100 * k)
+    w.drone.step(0.0)
+    assert len(w.recorder.odometry_rows) == 1 + ODOMETRY_QUEUE
+    w.drone.step(0.0)  # the backend's event of the drain, recorded with the drone's next step
+    dropped = [e for e in w.drone.events if e["event"] == "odometry_samples_dropped"]
     assert [e["count"] for e in dropped] == [5], dropped
 
 
@@ -192,18 +150,18 @@ def test_the_run_end_waits_for_a_sample_taken_after_the_disarm():
     state (settled) had already run out while it was landing: the recording ends disarmed, on the ground."""
     from pymavlink.dialects.v20 import common as mav
 
-    d, b, rec, send = _drone_on_a_wire(10.0)
-    armed = mav.MAV_MODE_FLAG_SAFETY_ARMED | 1
-    send.dispatch(mav.MAVLink_heartbeat_message(2, 12, armed, 0, 4, 3))
-    send.dispatch(mav.MAVLink_extended_sys_state_message(0, mav.MAV_LANDED_STATE_IN_AIR))
-    send(1000, 0.0)
+    w = WiredDrone(10.0)
+    d = w.drone
+    w.heartbeat(True)
+    w.landed_state(mav.MAV_LANDED_STATE_IN_AIR)
+    w.position(1000)
     d.step(0.0)
-    send.dispatch(mav.MAVLink_extended_sys_state_message(0, mav.MAV_LANDED_STATE_ON_GROUND))
-    send.dispatch(mav.MAVLink_heartbeat_message(2, 12, 1, 0, 4, 3))  # landed and disarmed: no sample since
-    assert not b.armed and d.last_odom["armed"]
+    w.landed_state(mav.MAV_LANDED_STATE_ON_GROUND)
+    w.heartbeat(False)  # landed and disarmed: no sample since
+    assert not w.backend.armed and d.last_odom["armed"]
     assert not d.settled(wait_s=0.01)
     time.sleep(0.02)
     assert d.settled(wait_s=0.01)  # the drone's own wait ran out
-    send(1100, 0.0)  # the vehicle's next sample, taken after the disarm
+    w.position(1100)  # the vehicle's next sample, taken after the disarm
     d._await_end_sample()
-    assert rec.odometry_rows[-1]["armed"] is False and rec.odometry_rows[-1]["in_air"] is False
+    assert w.recorder.odometry_rows[-1]["armed"] is False and w.recorder.odometry_rows[-1]["in_air"] is False

@@ -203,7 +203,8 @@ class VehicleBackend(abc.ABC):
 
     def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
         """The vehicle's position samples not yet handed out, oldest first, each as an
-        :class:`~aerodaas.app.models.Odometry` stamped with the vehicle's own time of the sample. A backend with a
+        :class:`~aerodaas.app.models.Odometry` stamped with the vehicle's own time of the sample (``t``, seconds on
+        the run's clock; ENU metres, m/s, degrees as in :meth:`odometry`). Raises nothing. A backend with a
         :attr:`sample_key` keeps every sample here until the runtime takes it, so a drone whose clock thread was
         held up (a command waiting for its acknowledgement, a loaded machine) still records each one. The default
         (the simulator, whose :meth:`odometry` is new at every step, or a backend that keeps no queue):
