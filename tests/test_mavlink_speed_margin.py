@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from aerodaas.backends.mavlink.params import px4_speed_limit
-from aerodaas.backends.mavlink.speed_margin import MIN_SAMPLES, SPEED_TOLERANCE, EstimatorSpeedMargin
+from aerodaas.backends.mavlink.speed_margin import MIN_SAMPLES, MIN_STEP_MPS, SPEED_TOLERANCE, EstimatorSpeedMargin
 from aerodaas.config import Limits
 
 from .test_mavlink import fly, run_until  # noqa: F401 - fly: the fixture
@@ -89,12 +89,16 @@ def test_an_estimator_that_underreports_speed_gets_the_vehicles_limit_lowered(ve
         _legs(emu, b, 2, events)  # there and back
     lowered = [e for e in events if e["event"] == "speed_margin"]
     assert lowered, [e["event"] for e in events]
-    first = lowered[0]
     # p99 of samples that are 0.8 once steady (more where the GNSS sample is newer than the estimate in a speed
-    # change: a larger margin only lowers the limit further)
-    assert 0.75 <= first["margin_mps"] <= 1.2 and first["samples"] >= MIN_SAMPLES, first
-    cap = first["cap_mps"]
-    assert cap == pytest.approx(2.2 - first["margin_mps"], abs=1e-3)
+    # change: a larger margin only lowers the limit further). Between two checks of the test the backend may lower
+    # the limit more than once (CI of 2026-11-24: 1.335 then 1.249 m/s on a loaded machine): each time by a larger
+    # margin, and the vehicle holds the last one
+    for e in lowered:
+        assert 0.75 <= e["margin_mps"] <= 1.2 and e["samples"] >= MIN_SAMPLES, e
+        assert e["cap_mps"] == pytest.approx(2.2 - e["margin_mps"], abs=1e-3), e
+    caps = [e["cap_mps"] for e in lowered]
+    assert all(a - b >= MIN_STEP_MPS - 1e-3 for a, b in zip(caps, caps[1:])), caps  # only lowered, by a step
+    cap = caps[-1]
     param = "MPC_XY_VEL_MAX" if autopilot == "px4" else "WPNAV_SPEED"
     assert emu.params[param] == pytest.approx(cap * (1 if autopilot == "px4" else 100), rel=1e-3)
     if autopilot == "ardupilot":  # before: the rule's limit + the estimator's error (the emulated PX4 follows our
