@@ -277,6 +277,11 @@ def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
     assert b.download_mission().items == sent
     assert emu.dropped == [("out", "COMMAND_ACK"), ("in", "MISSION_COUNT"), ("out", "MISSION_ITEM_INT")]
+    # the two the vehicle sent and the link lost are counted by their sequence numbers (on TCP nothing else is lost)
+    events: list = []
+    assert run_until(b, lambda: events.extend(b.drain_events()) or any(
+        e["event"] == "link_messages_lost" for e in events), 10)
+    assert b._conn.lost == 2 and b._conn.received > 20, (b._conn.lost, b._conn.received)
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)

@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -241,3 +242,53 @@ def test_messages_a_shared_link_drops_are_reported_as_events():
     b._report_link_drops(106.5)
     ev = [e for e in b.drain_events() if e["event"] == "link_messages_dropped"]
     assert [(e["dropped"], e["total"]) for e in ev] == [(7, 7), (2, 9)]
+
+
+def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicle():
+    """Each sender numbers its messages 0-255 per link (MAVLink's SEQ field): the shared link counts what a gap says
+    was lost, per system id and component, across the wrap, and takes a backwards step (a repeat) for no loss;
+    the backend reports it as ``link_messages_lost`` (count since the last report, total, received, percent), at
+    most every 5 s, counted from its own connection."""
+    from types import SimpleNamespace as NS
+
+    from pymavlink.dialects.v20 import ardupilotmega as mav2
+
+    from aerodaas.backends.mavlink import MavlinkBackend
+
+    def wire(sysid: int, compid: int, seqs: list[int]) -> list:
+        enc, dec = mav2.MAVLink(None, srcSystem=sysid, srcComponent=compid), mav2.MAVLink(None)
+        out = []
+        for q in seqs:
+            enc.seq = q
+            out.append(dec.parse_buffer(enc.heartbeat_encode(2, 3, 0, 0, 0).pack(enc))[0])
+        return out
+
+    msgs = iter(wire(1, 1, [250, 251, 253, 254, 2, 3, 3, 4]) + wire(1, 154, [10, 11, 15])
+                + wire(2, 1, [0, 1, 2, 3]))
+    conn = NS(recv_msg=lambda: next(msgs, None), select=lambda t: None, close=lambda: None)
+    link = shared_link.SharedLink("test:1", conn, 255, 190)
+    try:
+        for _ in range(3000):  # the link's reader thread (up to 30 s on a loaded machine)
+            if link.messages == 15:
+                break
+            time.sleep(0.01)
+        # system 1: autopilot 252, 255, 0, 1 lost (4), the repeated 3 no loss; camera 12-14 (3); system 2 none
+        assert link.counts(1) == (11, 7) and link.counts(2) == (4, 0) and link.counts(3) == (0, 0)
+        port = shared_link.LinkPort(link, "q")
+        port.target_system = 1
+        assert (port.received, port.lost) == (11, 7)
+    finally:
+        link.close()
+
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig()))
+    b._conn = NS(dropped=0, received=100, lost=3)
+    b._lost_base = (100, 3)  # what the link had counted for this system id before this connection
+    b._report_link_drops(100.0)
+    b._conn.received, b._conn.lost = 190, 13
+    b._report_link_drops(101.0)
+    b._conn.received, b._conn.lost = 290, 15
+    b._report_link_drops(102.0)  # within 5 s of the last report: held back
+    b._report_link_drops(106.5)
+    ev = [e for e in b.drain_events() if e["event"] == "link_messages_lost"]
+    assert [(e["lost"], e["total"], e["received"], e["lost_pct"]) for e in ev] == [(10, 10, 90, 10.0),
+                                                                                  (2, 12, 190, 5.94)]

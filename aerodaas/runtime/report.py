@@ -21,6 +21,7 @@ def format_summary(result: Any) -> str:
             lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
                          f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
         lines += _speed_margin_lines(rep.get("events") or [])
+        lines += _link_lines(rep.get("events") or [])
         if rep.get("failsafe"):
             f = rep["failsafe"]
             lines.append(f"    autopilot failsafe: {f.get('mode')} at t={f.get('t', 0):.1f} s"
@@ -157,4 +158,21 @@ def _speed_margin_lines(events: list[dict]) -> list[str]:
             out.append(f"    speed limit NOT holdable: the vehicle flies up to {e.get('margin_mps')} m/s faster than its "
                        f"estimate (GNSS, p99 of {e.get('samples')} samples), more than max_speed {e.get('max_speed')} "
                        f"m/s leaves room for (the vehicle's own limit: {e.get('cap_mps')} m/s)")
+    return out
+
+
+def _link_lines(events: list[dict]) -> list[str]:
+    """What the MAVLink backend counted of its link (aerodaas/backends/mavlink/link.py ``_report_link_drops``): the
+    vehicle's messages lost before this process by their sequence numbers, and those its shared link's queue
+    dropped, from the last report of each (reports come at most every 5 s: the counts are lower bounds)."""
+    out = []
+    lost = [e for e in events if e.get("event") == "link_messages_lost"]
+    if lost:
+        e = lost[-1]
+        out.append(f"    MAVLink link: at least {e.get('total')} of {e.get('total', 0) + e.get('received', 0)} messages "
+                   f"from the vehicle lost on the way ({e.get('lost_pct')} %, by their sequence numbers)")
+    dropped = [e for e in events if e.get("event") == "link_messages_dropped"]
+    if dropped:
+        out.append(f"    MAVLink link: {dropped[-1].get('total')} messages of the vehicle dropped here (this process "
+                   "fell behind)")
     return out

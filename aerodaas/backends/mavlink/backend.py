@@ -150,6 +150,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
         self._hb_next = 0.0
         self._drops_seen, self._drops_next = 0, 0.0  # messages the shared link's queue dropped (link.py)
+        # messages lost before the link, by sequence number, since (received, lost) at connect (link.py)
+        self._lost_seen, self._lost_next, self._lost_base = 0, 0.0, (0, 0)
         self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
         self._mode_changes = 0
         self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode

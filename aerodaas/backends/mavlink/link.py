@@ -52,6 +52,8 @@ class LinkMixin:
         except BaseException:
             self.close()
             raise
+        # counted from this connection on (the shared link may have counted this system id for an earlier one)
+        self._drops_seen, self._lost_seen, self._lost_base = 0, 0, (port.received, port.lost)
         self._identify(hb)
         self._on_heartbeat(hb, time.monotonic())
         self._stop.clear()
@@ -357,13 +359,24 @@ class LinkMixin:
     def _report_link_drops(self, now: float) -> None:
         """A ``link_messages_dropped`` event (and a warning) when the shared link's queue for this robot dropped
         messages since the last report (:data:`~.shared_link.PORT_QUEUE`: this robot's I/O fell behind what its
-        vehicle sends), at most every 5 wall seconds, with the count since the last report and in all."""
+        vehicle sends), at most every 5 wall seconds, with the count since the last report and in all; likewise
+        ``link_messages_lost`` (``lost`` since the last report, ``total``, ``received``, ``lost_pct``) for the
+        messages the vehicle's MAVLink sequence numbers say never reached this process (radio, router, kernel buffer;
+        :meth:`~.shared_link.SharedLink._count`)."""
         total = int(getattr(self._conn, "dropped", 0) or 0)
         if total > self._drops_seen and now >= self._drops_next:
             self._event("link_messages_dropped", dropped=total - self._drops_seen, total=total)
             log.warning("%s: the shared link dropped %d messages of this vehicle (%d in all): its I/O fell behind",
                         self.robot_id, total - self._drops_seen, total)
             self._drops_seen, self._drops_next = total, now + 5.0
+        lost = int(getattr(self._conn, "lost", 0) or 0) - self._lost_base[1]
+        if lost > self._lost_seen and now >= self._lost_next:
+            received = int(getattr(self._conn, "received", 0) or 0) - self._lost_base[0]
+            self._event("link_messages_lost", lost=lost - self._lost_seen, total=lost, received=received,
+                        lost_pct=round(100.0 * lost / max(1, lost + received), 2))
+            log.warning("%s: %d messages of this vehicle were lost on the way here (%d of %d in all, by their "
+                        "MAVLink sequence numbers)", self.robot_id, lost - self._lost_seen, lost, lost + received)
+            self._lost_seen, self._lost_next = lost, now + 5.0
 
     def _periodic(self, now: float) -> None:
         self._report_link_drops(now)

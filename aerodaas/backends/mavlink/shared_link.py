@@ -79,6 +79,8 @@ class SharedLink:
         self.pending: dict[int, deque] = {}
         self.messages = 0
         self.unrouted = 0  # messages of a system id no robot claimed
+        #: (system id, component id) -> [last sequence number, messages received, messages lost] (:meth:`_count`)
+        self.sequence: dict[tuple[int, int], list[int]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._read, name=f"mavlink-link-{key}", daemon=True)
         self._thread.start()
@@ -105,6 +107,7 @@ class SharedLink:
                 sysid = msg.get_srcSystem()
             except Exception:  # noqa: BLE001 - BAD_DATA has no header
                 continue
+            self._count(msg, sysid)
             if msg.get_type() == "HEARTBEAT" and is_autopilot_heartbeat(msg, *self.source):
                 with self.cond:
                     if sysid not in self.seen:
@@ -122,6 +125,32 @@ class SharedLink:
                     self.pending.setdefault(sysid, deque(maxlen=PENDING)).append(msg)
                     continue
             port.deliver(msg)
+
+    def _count(self, msg: Any, sysid: int) -> None:
+        """Count ``msg`` in :attr:`sequence` for its sender and the messages its sequence number says were lost
+        before it. A MAVLink sender numbers its messages 0-255 per link, wrapping (MAVLink serialization, "SEQ": "used
+        to detect packet loss"); a router forwards them unchanged, so a gap counts what was lost anywhere between the
+        sender and this socket: the radio, the router, the kernel's buffer. A gap over 127 is taken as a repeat or
+        reordering, not a loss; a loss of 256 or more in a row is invisible: the count is a lower bound (pymavlink's
+        ``mavfile.mav_loss`` counts the same over all senders)."""
+        try:
+            key, seq = (sysid, msg.get_srcComponent()), msg.get_seq()
+        except Exception:  # noqa: BLE001 - BAD_DATA has no header
+            return
+        st = self.sequence.get(key)
+        if st is None:
+            self.sequence[key] = [seq, 1, 0]
+            return
+        gap = (seq - st[0] - 1) % 256
+        st[1] += 1
+        if gap <= 127:
+            st[2] += gap
+        st[0] = seq
+
+    def counts(self, sysid: int) -> tuple[int, int]:
+        """(messages received, messages lost by their sequence numbers) from every component of system ``sysid``."""
+        rows = [v for (s, _), v in list(self.sequence.items()) if s == sysid]
+        return sum(v[1] for v in rows), sum(v[2] for v in rows)
 
     def close(self) -> None:
         self._stop.set()
@@ -200,6 +229,17 @@ class LinkPort:
                     continue
                 return msg
             return None
+
+    @property
+    def received(self) -> int:
+        """Messages from this robot's vehicle (every component of its system id) that reached the link."""
+        return self.link.counts(self.target_system)[0] if self.target_system else 0
+
+    @property
+    def lost(self) -> int:
+        """Messages of this robot's vehicle lost before the link's socket, by their sequence numbers (a lower
+        bound, :meth:`SharedLink._count`); what this robot's own queue dropped is :attr:`dropped`."""
+        return self.link.counts(self.target_system)[1] if self.target_system else 0
 
     def select(self, timeout: float) -> bool:
         """Wait up to ``timeout`` wall seconds for a message; True when one is waiting."""

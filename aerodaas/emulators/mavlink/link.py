@@ -169,7 +169,8 @@ class LinkMixin:
     def drop_next(self, msg_type: str, direction: Literal["in", "out"] = "out", count: int = 1) -> None:
         """Lose exactly the next ``count`` messages of type ``msg_type`` (e.g. ``"COMMAND_ACK"``,
         ``"MISSION_COUNT"``) that the vehicle sends (``"out"``) or receives (``"in"``), like single lost radio
-        packets; each loss is logged in :attr:`dropped`. Raises ValueError for another direction or count < 1."""
+        packets (a lost outgoing one used up its link's sequence number, as on a radio); each loss is logged in
+        :attr:`dropped`. Raises ValueError for another direction or count < 1."""
         if direction not in ("in", "out") or count < 1:
             raise ValueError(f"drop_next: direction must be 'in' or 'out' and count >= 1, got {direction!r}, {count!r}")
         with self._lock:
@@ -301,6 +302,8 @@ class LinkMixin:
 
     def _send(self, msg: Any, link: _Link | None = None) -> None:
         if self._drop_counts and self._dropping("out", msg.get_type()):
+            for lk in ([link] if link is not None else list(self._links)):  # lost on the way: it had its number
+                lk.mav.seq = (lk.mav.seq + 1) % 256
             return
         for lk in ([link] if link is not None else list(self._links)):
             try:
