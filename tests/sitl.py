@@ -244,6 +244,49 @@ def max_horizontal_speed(odometry: list[dict], from_positions: bool = True, wind
     return max(best, flown_speed(odometry, window_s)) if from_positions else best
 
 
+def router_position_times(tlog: Path) -> dict[int, list[float]]:
+    """The firmware's ``time_boot_ms`` (seconds, sorted, unique) of every GLOBAL_POSITION_INT the router received,
+    per system id, from MAVProxy's own telemetry log (``mav.tlog``, read with pymavlink): what reached the router
+    and was forwarded to our port."""
+    from pymavlink import mavutil
+
+    out: dict[int, set[float]] = {}
+    m = mavutil.mavlink_connection(str(tlog))
+    try:
+        while (msg := m.recv_match(type="GLOBAL_POSITION_INT")) is not None:
+            out.setdefault(msg.get_srcSystem(), set()).add(msg.time_boot_ms / 1000.0)
+    finally:
+        m.close()
+    return {k: sorted(v) for k, v in out.items()}
+
+
+def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float) -> tuple[float, list[tuple]]:
+    """Which of the vehicle's samples ``sent`` (its own times, seconds) the recording's odometry times ``recorded``
+    (the run's vehicle clock: the same times shifted by the clock's origin) should hold and does not. The shift is
+    the one that makes the most recorded times land on a sent one (within 2 ms). The drone records at most one
+    sample per ``period_s`` (actors/drone_odometry.py: a sample a full period after the last recorded one is always
+    taken), so a sent sample is missing when it lies at least ``period_s`` after a recorded one and before the next.
+    Returns (the fraction of recorded times that are sent samples, [(gap start, gap length, sample time), ...])."""
+    import bisect
+
+    if not recorded or not sent:
+        return 0.0, []
+    rec = sorted(recorded)
+
+    def near(x: float) -> float:
+        i = bisect.bisect_left(sent, x)
+        return min(abs(sent[j] - x) for j in (i - 1, i) if 0 <= j < len(sent))
+
+    probe, mid = rec[::max(1, len(rec) // 100)], rec[len(rec) // 2]
+    shift = max((mid - f for f in sent), key=lambda d: sum(near(t - d) < 0.002 for t in probe))
+    matched = sum(near(t - shift) < 0.002 for t in rec) / len(rec)
+    missing = []
+    for a, b in zip(rec, rec[1:]):
+        lo, hi = bisect.bisect_left(sent, a - shift + period_s - 1e-6), bisect.bisect_left(sent, b - shift - 0.002)
+        missing += [(round(a, 3), round(b - a, 3), round(f + shift, 3)) for f in sent[lo:hi]]
+    return matched, missing
+
+
 def flown_speed(odometry: list[dict], window_s: float) -> float:
     """Largest horizontal distance flown between samples at least ``window_s`` vehicle seconds apart, divided by
     their time apart (m/s). Shorter windows mostly measure the jitter between a position's arrival and its
@@ -420,7 +463,8 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     fleet through one telemetry radio or router port): MAVProxy takes each firmware's serial0 as a master and
     forwards everything to ``udp:127.0.0.1:ROUTER_PORT``; the robots all name ``udpin:127.0.0.1:ROUTER_PORT`` with
     ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`tests.sitl_watchers.observe_raw`,
-    its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log}``."""
+    its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log,
+    "router_positions": system id -> the position samples the router received (:func:`router_position_times`)}``."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = mavlink_env(autopilot, FARM_ENV, n=n)
     for i, r in enumerate(cfg["robots"]):
@@ -439,6 +483,11 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
               # GLOBAL_POSITION_INT, GPS_RAW_INT, VFR_HUD ... are not forwarded. PX4 stamps messages with their sample
               # time (not in send order), so about half of a PX4's SYS_STATUS were held back (tlog of 2026-11-23)
               "--cmd='set checkdelay 0' "
+              # a router only: none of MAVProxy's ground-station modules (param fetches each PX4's 876 parameters at
+              # start, terrain/wp/fence/rally ask for more, every module looks at every message); with them, and two
+              # CPU burners, MAVProxy lost 45 % of three PX4 onboard streams at start and a robot's PARAM_SET went
+              # unanswered 4 times (2026-11-24). The link module and the tlog are MAVProxy's core
+              "--default-modules=log "
               f"--state-basedir={shlex.quote(str(workdir))} > {shlex.quote(str(workdir / 'mavproxy.log'))} 2>&1 & "
               f"echo $! > {shlex.quote(str(workdir / 'router.pid'))} ) ; ")
     def _watcher(conn: str, first: int, extra: str = "") -> str:
@@ -453,7 +502,8 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
         watchers = "".join(_watcher(monitor_connection(autopilot, i), i) for i in range(n))
     wait_obs = " ".join(f"{shlex.quote(str(workdir / f'observed{i}.json'))}" for i in range(n))
     step = (router + watchers + aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap", hold_radius_m=HOLD_RADIUS[autopilot])
-            + f"; rc=$?; for k in $(seq 1 600); do ok=1; for f in {wait_obs}; do [ -e $f ] || ok=0; done; "
+            # the namespace's UDP counters (RcvbufErrors: datagrams a full socket buffer dropped), for diagnosis
+            + f"; rc=$?; cat /proc/net/snmp > {shlex.quote(str(workdir / 'snmp.txt'))}; for k in $(seq 1 600); do ok=1; for f in {wait_obs}; do [ -e $f ] || ok=0; done; "
               "[ $ok = 1 ] && break; sleep 0.5; done; "
               # the router and the observers are detached (their own process groups): stop them by pid, or they
               # outlive the test and load the ones after it
@@ -466,7 +516,8 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
         observed.append(json.loads(f.read_text()) if f.exists() else {})
     log = workdir / "mavproxy.log"
     return {"rc": rc, "out": text, "rec": _read_or_note(workdir / "fleet.mcap"), "observed": observed,
-            "mavproxy": log.read_text(errors="replace")[-2000:] if log.exists() else ""}
+            "mavproxy": log.read_text(errors="replace")[-2000:] if log.exists() else "",
+            "router_positions": router_position_times(workdir / "mav.tlog") if (workdir / "mav.tlog").exists() else {}}
 
 
 def odometry(rec: dict, robot: str = "quadrotor_base") -> list[dict]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -59,7 +60,7 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
     flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
     and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
-    z, vx, vy], ...]}`` to ``out``: t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
+    z, vx, vy], ...], "complete"}`` to ``out`` (also when stopped by SIGTERM; ``complete``: the disarm was seen): t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
     :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s.
 
     ``per_sysid`` (system id -> output file, ``out`` then unused): several vehicles on one port, each followed on
@@ -68,7 +69,6 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     one port and told apart by the MAVLink header's system id."""
     from pymavlink import mavutil
 
-    from aerodaas.navigation.geo import geodetic_to_enu
     from aerodaas.app.models import GeoPoint
 
     home = GeoPoint(**FARM_HOME)
@@ -77,12 +77,29 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     outs: dict = dict(per_sysid) if per_sysid else {None: out}
     st = {k: {"samples": [], "armed": False, "was_armed": False, "disarmed_at": None} for k in outs}
     seen: set[int] = set()
+    # stopped early (the step's SIGTERM when the run ended without every vehicle landing): write what was seen
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    try:
+        _follow_raw(m, st, seen, end, per_sysid is not None, home)
+    finally:
+        for k, path in outs.items():
+            s = st[k]
+            Path(path).write_text(json.dumps({"armed": s["was_armed"], "landed": s["was_armed"] and not s["armed"],
+                                              "samples": s["samples"], "complete": _done(s)}))
+    return 0
+
+
+def _done(s: dict) -> bool:
+    """A followed vehicle was armed and has been disarmed for 1 s."""
+    return s["disarmed_at"] is not None and time.monotonic() - s["disarmed_at"] > 1.0
+
+
+def _follow_raw(m, st: dict, seen: set, end: float, per_sysid: bool, home) -> None:
+    """observe_raw's loop: until every followed vehicle has been disarmed for 1 s, or ``end``."""
+    from aerodaas.navigation.geo import geodetic_to_enu
+
     next_hb = 0.0
-
-    def done(s: dict) -> bool:
-        return s["disarmed_at"] is not None and time.monotonic() - s["disarmed_at"] > 1.0
-
-    while time.monotonic() < end and not all(done(s) for s in st.values()):
+    while time.monotonic() < end and not all(_done(s) for s in st.values()):
         if time.monotonic() >= next_hb:
             m.mav.heartbeat_send(6, 8, 0, 0, 4)
             for sysid in sorted(seen):
@@ -107,11 +124,6 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
             e, n, _ = geodetic_to_enu(msg.lat / 1e7, msg.lon / 1e7, home.alt, home)
             s["samples"].append([msg.time_boot_ms / 1000.0, float(e), float(n), msg.relative_alt / 1000.0,
                                  msg.vy / 100.0, msg.vx / 100.0])
-    for k, path in outs.items():
-        s = st[k]
-        Path(path).write_text(json.dumps({"armed": s["was_armed"], "landed": s["was_armed"] and not s["armed"],
-                                          "samples": s["samples"]}))
-    return 0
 
 
 def observe_truth(conn: str, out: str, timeout_s: float) -> int:
