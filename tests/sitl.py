@@ -260,13 +260,16 @@ def router_position_times(tlog: Path) -> dict[int, list[float]]:
     return {k: sorted(v) for k, v in out.items()}
 
 
-def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float) -> tuple[float, list[tuple]]:
+def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float,
+                       within: tuple[float, float] | None = None) -> tuple[float, list[tuple]]:
     """Which of the vehicle's samples ``sent`` (its own times, seconds) the recording's odometry times ``recorded``
     (the run's vehicle clock: the same times shifted by the clock's origin) should hold and does not. The shift is
-    the one that makes the most recorded times land on a sent one (within 2 ms). The drone records at most one
+    the one that makes the most recorded times of the judged stretch land on a sent one (within 2 ms). The drone records at most one
     sample per ``period_s`` (actors/drone_odometry.py: a sample a full period after the last recorded one is always
     taken), so a sent sample is missing when it lies at least ``period_s`` after a recorded one and before the next.
-    Returns (the fraction of recorded times that are sent samples, [(gap start, gap length, sample time), ...])."""
+    ``within`` (recorded times, seconds): only that stretch (e.g. the flight) is judged.
+    Returns (the fraction of recorded times there that are sent samples, [(gap start, gap length, sample time),
+    ...])."""
     import bisect
 
     if not recorded or not sent:
@@ -277,12 +280,17 @@ def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float
         i = bisect.bisect_left(sent, x)
         return min(abs(sent[j] - x) for j in (i - 1, i) if 0 <= j < len(sent))
 
-    probe, mid = rec[::max(1, len(rec) // 100)], rec[len(rec) // 2]
+    lo_t, hi_t = within if within is not None else (rec[0], rec[-1])
+    judged = [t for t in rec if lo_t <= t <= hi_t] or rec
+    probe, mid = judged[::max(1, len(judged) // 100)], judged[len(judged) // 2]
     shift = max((mid - f for f in sent), key=lambda d: sum(near(t - d) < 0.002 for t in probe))
-    matched = sum(near(t - shift) < 0.002 for t in rec) / len(rec)
+    matched = sum(near(t - shift) < 0.002 for t in judged) / max(1, len(judged))
     missing = []
     for a, b in zip(rec, rec[1:]):
-        lo, hi = bisect.bisect_left(sent, a - shift + period_s - 1e-6), bisect.bisect_left(sent, b - shift - 0.002)
+        if b < lo_t or a > hi_t:
+            continue
+        lo = bisect.bisect_left(sent, max(a + period_s, lo_t) - shift - 1e-6)
+        hi = bisect.bisect_left(sent, min(b, hi_t) - shift - 0.002)
         missing += [(round(a, 3), round(b - a, 3), round(f + shift, 3)) for f in sent[lo:hi]]
     return matched, missing
 
@@ -464,7 +472,8 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     forwards everything to ``udp:127.0.0.1:ROUTER_PORT``; the robots all name ``udpin:127.0.0.1:ROUTER_PORT`` with
     ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`tests.sitl_watchers.observe_raw`,
     its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log,
-    "router_positions": system id -> the position samples the router received (:func:`router_position_times`)}``."""
+    "router_positions": system id -> the position samples the router received (:func:`router_position_times`),
+    "udp": the namespace's UDP counters}``."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = mavlink_env(autopilot, FARM_ENV, n=n)
     for i, r in enumerate(cfg["robots"]):
@@ -517,7 +526,17 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     log = workdir / "mavproxy.log"
     return {"rc": rc, "out": text, "rec": _read_or_note(workdir / "fleet.mcap"), "observed": observed,
             "mavproxy": log.read_text(errors="replace")[-2000:] if log.exists() else "",
-            "router_positions": router_position_times(workdir / "mav.tlog") if (workdir / "mav.tlog").exists() else {}}
+            "router_positions": router_position_times(workdir / "mav.tlog") if (workdir / "mav.tlog").exists() else {},
+            "udp": _udp_counters(workdir / "snmp.txt")}
+
+
+def _udp_counters(snmp: Path) -> dict[str, int]:
+    """The namespace's UDP counters after the run (``/proc/net/snmp``'s ``Udp:`` lines: InErrors, RcvbufErrors
+    ...), {} when not written."""
+    if not snmp.exists():
+        return {}
+    rows = [line.split()[1:] for line in snmp.read_text().splitlines() if line.startswith("Udp:")]
+    return dict(zip(rows[0], map(int, rows[1]))) if len(rows) >= 2 else {}
 
 
 def odometry(rec: dict, robot: str = "quadrotor_base") -> list[dict]:

@@ -60,7 +60,7 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
     flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
     and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
-    z, vx, vy], ...], "complete"}`` to ``out`` (also when stopped by SIGTERM; ``complete``: the disarm was seen): t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
+    z, vx, vy], ...], "complete"}`` to ``out`` (also when stopped by SIGTERM; ``complete``: it was seen disarmed for 1 s): t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
     :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s.
 
     ``per_sysid`` (system id -> output file, ``out`` then unused): several vehicles on one port, each followed on
@@ -82,10 +82,15 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     try:
         _follow_raw(m, st, seen, end, per_sysid is not None, home)
     finally:
+        # the step takes a file's existence for done: each is written whole (a temporary file renamed), and a
+        # second SIGTERM does not cut the writing short
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         for k, path in outs.items():
             s = st[k]
-            Path(path).write_text(json.dumps({"armed": s["was_armed"], "landed": s["was_armed"] and not s["armed"],
-                                              "samples": s["samples"], "complete": _done(s)}))
+            tmp = Path(f"{path}.tmp")
+            tmp.write_text(json.dumps({"armed": s["was_armed"], "landed": s["was_armed"] and not s["armed"],
+                                       "samples": s["samples"], "complete": _done(s)}))
+            os.replace(tmp, path)
     return 0
 
 

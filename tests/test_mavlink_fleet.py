@@ -246,7 +246,8 @@ def test_messages_a_shared_link_drops_are_reported_as_events():
 
 def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicle():
     """Each sender numbers its messages 0-255 per link (MAVLink's SEQ field): the shared link counts what a gap says
-    was lost, per system id and component, across the wrap, and takes a backwards step (a repeat) for no loss;
+    was lost, per system id and component, across the wrap, and takes a backwards step (a repeat, a message
+    overtaken, a restarted sender) for no further loss;
     the backend reports it as ``link_messages_lost`` (count since the last report, total, received, percent), at
     most every 5 s, counted from its own connection."""
     from types import SimpleNamespace as NS
@@ -264,16 +265,18 @@ def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicl
         return out
 
     msgs = iter(wire(1, 1, [250, 251, 253, 254, 2, 3, 3, 4]) + wire(1, 154, [10, 11, 15])
-                + wire(2, 1, [0, 1, 2, 3]))
+                + wire(2, 1, [0, 2, 1, 3])  # 1 overtaken: counted once at 2, nothing when it comes
+                + wire(3, 1, [100, 101, 40, 41, 42, 43]))  # restarted: three steps back re-sync, no loss
     conn = NS(recv_msg=lambda: next(msgs, None), select=lambda t: None, close=lambda: None)
     link = shared_link.SharedLink("test:1", conn, 255, 190)
     try:
         for _ in range(3000):  # the link's reader thread (up to 30 s on a loaded machine)
-            if link.messages == 15:
+            if link.messages == 21:
                 break
             time.sleep(0.01)
-        # system 1: autopilot 252, 255, 0, 1 lost (4), the repeated 3 no loss; camera 12-14 (3); system 2 none
-        assert link.counts(1) == (11, 7) and link.counts(2) == (4, 0) and link.counts(3) == (0, 0)
+        # system 1: autopilot 252, 255, 0, 1 lost (4), the repeated 3 no loss; camera 12-14 (3)
+        assert link.counts(1) == (11, 7) and link.counts(2) == (4, 1) and link.counts(3) == (6, 0)
+        assert link.counts(4) == (0, 0)
         port = shared_link.LinkPort(link, "q")
         port.target_system = 1
         assert (port.received, port.lost) == (11, 7)

@@ -54,6 +54,7 @@ class LinkMixin:
             raise
         # counted from this connection on (the shared link may have counted this system id for an earlier one)
         self._drops_seen, self._lost_seen, self._lost_base = 0, 0, (port.received, port.lost)
+        self._drops_next = self._lost_next = 0.0
         self._identify(hb)
         self._on_heartbeat(hb, time.monotonic())
         self._stop.clear()

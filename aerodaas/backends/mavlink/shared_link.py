@@ -79,8 +79,10 @@ class SharedLink:
         self.pending: dict[int, deque] = {}
         self.messages = 0
         self.unrouted = 0  # messages of a system id no robot claimed
-        #: (system id, component id) -> [last sequence number, messages received, messages lost] (:meth:`_count`)
-        self.sequence: dict[tuple[int, int], list[int]] = {}
+        #: (system id, component id) -> [last sequence number, backward steps in a row] (:meth:`_count`)
+        self._last_seq: dict[tuple[int, int], list[int]] = {}
+        #: system id -> [messages received, messages lost] (:meth:`_count`; read with one ``dict.get``)
+        self._totals: dict[int, list[int]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._read, name=f"mavlink-link-{key}", daemon=True)
         self._thread.start()
@@ -127,30 +129,37 @@ class SharedLink:
             port.deliver(msg)
 
     def _count(self, msg: Any, sysid: int) -> None:
-        """Count ``msg`` in :attr:`sequence` for its sender and the messages its sequence number says were lost
-        before it. A MAVLink sender numbers its messages 0-255 per link, wrapping (MAVLink serialization, "SEQ": "used
-        to detect packet loss"); a router forwards them unchanged, so a gap counts what was lost anywhere between the
-        sender and this socket: the radio, the router, the kernel's buffer. A gap over 127 is taken as a repeat or
-        reordering, not a loss; a loss of 256 or more in a row is invisible: the count is a lower bound (pymavlink's
-        ``mavfile.mav_loss`` counts the same over all senders)."""
+        """Count ``msg`` for its system id and the messages its sequence number says were lost before it. A MAVLink
+        sender numbers its messages 0-255 per link, wrapping (MAVLink serialization, "SEQ": "used to detect packet
+        loss"); a router forwards them unchanged, so a forward gap counts what was lost anywhere between the sender
+        and this socket: the radio, the router, the kernel's buffer. A step back (a gap over 127: a repeat, or a
+        message overtaken on the way, which its successor's gap already counted once) counts nothing and keeps the
+        last number, until three in a row (the sender restarted) re-sync it. A loss of 256 or more in a row is
+        invisible. Called by the reader thread only; never raises."""
         try:
             key, seq = (sysid, msg.get_srcComponent()), msg.get_seq()
         except Exception:  # noqa: BLE001 - BAD_DATA has no header
             return
-        st = self.sequence.get(key)
+        tot = self._totals.setdefault(sysid, [0, 0])
+        tot[0] += 1
+        st = self._last_seq.get(key)
         if st is None:
-            self.sequence[key] = [seq, 1, 0]
+            self._last_seq[key] = [seq, 0]
             return
         gap = (seq - st[0] - 1) % 256
-        st[1] += 1
-        if gap <= 127:
-            st[2] += gap
-        st[0] = seq
+        if gap > 127:
+            st[1] += 1
+            if st[1] >= 3:
+                st[:] = [seq, 0]
+            return
+        tot[1] += gap
+        st[:] = [seq, 0]
 
     def counts(self, sysid: int) -> tuple[int, int]:
-        """(messages received, messages lost by their sequence numbers) from every component of system ``sysid``."""
-        rows = [v for (s, _), v in list(self.sequence.items()) if s == sysid]
-        return sum(v[1] for v in rows), sum(v[2] for v in rows)
+        """(messages received, messages lost by their sequence numbers) from every component of system ``sysid``
+        since the link opened; (0, 0) for a system not heard. Safe from any thread; never raises."""
+        tot = self._totals.get(sysid)
+        return (tot[0], tot[1]) if tot is not None else (0, 0)
 
     def close(self) -> None:
         self._stop.set()
@@ -232,13 +241,15 @@ class LinkPort:
 
     @property
     def received(self) -> int:
-        """Messages from this robot's vehicle (every component of its system id) that reached the link."""
+        """Messages from this robot's vehicle (every component of its system id) that reached the link; 0 before
+        :meth:`claim`. Never raises."""
         return self.link.counts(self.target_system)[0] if self.target_system else 0
 
     @property
     def lost(self) -> int:
         """Messages of this robot's vehicle lost before the link's socket, by their sequence numbers (a lower
-        bound, :meth:`SharedLink._count`); what this robot's own queue dropped is :attr:`dropped`."""
+        bound, :meth:`SharedLink._count`); 0 before :meth:`claim`. What this robot's own queue dropped is
+        :attr:`dropped`. Never raises."""
         return self.link.counts(self.target_system)[1] if self.target_system else 0
 
     def select(self, timeout: float) -> bool:
