@@ -260,11 +260,16 @@ def router_position_times(tlog: Path) -> dict[int, list[float]]:
     return {k: sorted(v) for k, v in out.items()}
 
 
+#: two times this close (s) are one sample: a recording's time stamps stepped by 2 ms against MAVProxy's near one
+#: ArduCopter's landing (2026-11-24, two CPU burners; an ArduCopter SITL loop is 2.5 ms)
+_SAME_S = 0.005
+
+
 def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float,
                        within: tuple[float, float] | None = None) -> tuple[float, list[tuple]]:
     """Which of the vehicle's samples ``sent`` (its own times, seconds) the recording's odometry times ``recorded``
     (the run's vehicle clock: the same times shifted by the clock's origin) should hold and does not. The shift is
-    the one that makes the most recorded times of the judged stretch land on a sent one (within 2 ms). The drone records at most one
+    the one that makes the most recorded times of the judged stretch land on a sent one (within :data:`_SAME_S`). The drone records at most one
     sample per ``period_s`` (actors/drone_odometry.py: a sample a full period after the last recorded one is always
     taken), so a sent sample is missing when it lies at least ``period_s`` after a recorded one and before the next.
     ``within`` (recorded times, seconds): only that stretch (e.g. the flight) is judged.
@@ -283,14 +288,14 @@ def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float
     lo_t, hi_t = within if within is not None else (rec[0], rec[-1])
     judged = [t for t in rec if lo_t <= t <= hi_t] or rec
     probe, mid = judged[::max(1, len(judged) // 100)], judged[len(judged) // 2]
-    shift = max((mid - f for f in sent), key=lambda d: sum(near(t - d) < 0.002 for t in probe))
-    matched = sum(near(t - shift) < 0.002 for t in judged) / max(1, len(judged))
+    shift = max((mid - f for f in sent), key=lambda d: sum(near(t - d) < _SAME_S for t in probe))
+    matched = sum(near(t - shift) < _SAME_S for t in judged) / max(1, len(judged))
     missing = []
     for a, b in zip(rec, rec[1:]):
         if b < lo_t or a > hi_t:
             continue
         lo = bisect.bisect_left(sent, max(a + period_s, lo_t) - shift - 1e-6)
-        hi = bisect.bisect_left(sent, min(b, hi_t) - shift - 0.002)
+        hi = bisect.bisect_left(sent, min(b, hi_t) - shift - _SAME_S)
         missing += [(round(a, 3), round(b - a, 3), round(f + shift, 3)) for f in sent[lo:hi]]
     return matched, missing
 

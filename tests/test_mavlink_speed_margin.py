@@ -149,3 +149,18 @@ def test_the_summary_says_when_the_limit_was_lowered_or_cannot_hold():
     text = format_summary(res)
     assert "speed limit lowered to 1.58 m/s" in text and "0.62 m/s faster than its estimate" in text
     assert "speed limit NOT holdable" in text and "max_speed 0.5 m/s" in text
+    assert "MAVLink link" not in text
+
+
+def test_the_summary_says_how_many_messages_the_link_lost():
+    from aerodaas.runtime.driver import MissionResult
+    from aerodaas.runtime.report import format_summary
+
+    events = [{"event": "link_messages_lost", "lost": 5, "total": 5, "received": 95, "lost_pct": 5.0},
+              {"event": "link_messages_lost", "lost": 7, "total": 12, "received": 188, "lost_pct": 6.0},
+              {"event": "link_messages_dropped", "dropped": 3, "total": 3}]
+    res = MissionResult(outcome="success", robots={"q": {"t": 1.0, "state": "LANDED", "events": events}}, stats={},
+                        latency={}, recording=None, wall_s=1.0)
+    text = format_summary(res)
+    assert "at least 12 of 200 messages from the vehicle lost on the way (6.0 %" in text, text
+    assert "MAVLink link: 3 messages of the vehicle dropped here" in text, text

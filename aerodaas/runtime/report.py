@@ -148,9 +148,8 @@ def _speed_margin_lines(events: list[dict]) -> list[str]:
     """What the MAVLink backend's speed margin did (aerodaas/backends/mavlink/speed_margin.py): the vehicle's own
     limit lowered for its estimator (the last time), or a ``max_speed`` no limit could hold."""
     out = []
-    lowered = [e for e in events if e.get("event") == "speed_margin"]
-    if lowered:
-        e = lowered[-1]
+    e = _last(events, "speed_margin")
+    if e is not None:
         out.append(f"    speed limit lowered to {e.get('cap_mps')} m/s: the vehicle flew up to {e.get('margin_mps')} m/s "
                    f"faster than its estimate (GNSS, p99 of {e.get('samples')} samples)")
     for e in events:
@@ -166,13 +165,16 @@ def _link_lines(events: list[dict]) -> list[str]:
     vehicle's messages lost before this process by their sequence numbers, and those its shared link's queue
     dropped, from the last report of each (reports come at most every 5 s: the counts are lower bounds)."""
     out = []
-    lost = [e for e in events if e.get("event") == "link_messages_lost"]
-    if lost:
-        e = lost[-1]
+    e = _last(events, "link_messages_lost")
+    if e is not None:
         out.append(f"    MAVLink link: at least {e.get('total')} of {e.get('total', 0) + e.get('received', 0)} messages "
                    f"from the vehicle lost on the way ({e.get('lost_pct')} %, by their sequence numbers)")
-    dropped = [e for e in events if e.get("event") == "link_messages_dropped"]
-    if dropped:
-        out.append(f"    MAVLink link: {dropped[-1].get('total')} messages of the vehicle dropped here (this process "
-                   "fell behind)")
+    e = _last(events, "link_messages_dropped")
+    if e is not None:
+        out.append(f"    MAVLink link: {e.get('total')} messages of the vehicle dropped here (this process fell behind)")
     return out
+
+
+def _last(events: list[dict], name: str) -> dict | None:
+    """The last event called ``name``, or None."""
+    return next((e for e in reversed(events) if e.get("event") == name), None)
