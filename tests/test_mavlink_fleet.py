@@ -255,6 +255,7 @@ def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicl
     from pymavlink.dialects.v20 import ardupilotmega as mav2
 
     from aerodaas.backends.mavlink import MavlinkBackend
+    from aerodaas.backends.mavlink import link as link_mod
 
     def wire(sysid: int, compid: int, seqs: list[int]) -> list:
         enc, dec = mav2.MAVLink(None, srcSystem=sysid, srcComponent=compid), mav2.MAVLink(None)
@@ -285,7 +286,8 @@ def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicl
 
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig()))
     b._conn = NS(dropped=0, received=100, lost=3)
-    b._lost_base = (100, 3)  # what the link had counted for this system id before this connection
+    # what the link had counted for this system id before this connection (as connect() sets it)
+    b._lost_report, b._received_base = link_mod.ReportedCount(3), 100
     b._report_link_drops(100.0)
     b._conn.received, b._conn.lost = 190, 13
     b._report_link_drops(101.0)

@@ -15,7 +15,7 @@ from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
 from aerodaas.backends.mavlink.fence import FenceMixin
-from aerodaas.backends.mavlink.link import LinkMixin
+from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
 from aerodaas.backends.mavlink.params import ParamMixin
@@ -149,9 +149,9 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled (offboard.py)
         self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
         self._hb_next = 0.0
-        self._drops_seen, self._drops_next = 0, 0.0  # messages the shared link's queue dropped (link.py)
-        # messages lost before the link, by sequence number, since (received, lost) at connect (link.py)
-        self._lost_seen, self._lost_next, self._lost_base = 0, 0.0, (0, 0)
+        # messages the shared link's queue dropped, and those lost before it by sequence number, counted from the
+        # connection on (link.py _report_link_drops; the messages received then: _received_base)
+        self._drops_report, self._lost_report, self._received_base = ReportedCount(), ReportedCount(), 0
         self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
         self._mode_changes = 0
         self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode

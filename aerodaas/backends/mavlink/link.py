@@ -18,6 +18,30 @@ from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _lo
 _DRAIN_S = 0.25
 
 
+#: wall seconds between two reports of a :class:`ReportedCount`
+REPORT_EVERY_S = 5.0
+
+
+class ReportedCount:
+    """A growing count (messages dropped, messages lost) reported at most every :data:`REPORT_EVERY_S` wall seconds:
+    ``base`` is what the counter held when this connection began, :attr:`reported` what has been reported since."""
+
+    __slots__ = ("base", "reported", "_next")
+
+    def __init__(self, base: int = 0) -> None:
+        self.base, self.reported, self._next = int(base), 0, 0.0
+
+    def due(self, counter: int, now: float) -> int:
+        """How many of ``counter`` (the counter's value now) are new since the last report, when a report is due at
+        ``now`` (time.monotonic() seconds), and mark them reported; 0 when nothing new or not yet due."""
+        new = counter - self.base - self.reported
+        if new <= 0 or now < self._next:
+            return 0
+        self.reported += new
+        self._next = now + REPORT_EVERY_S
+        return new
+
+
 class LinkMixin:
     """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
 
@@ -53,8 +77,8 @@ class LinkMixin:
             self.close()
             raise
         # counted from this connection on (the shared link may have counted this system id for an earlier one)
-        self._drops_seen, self._lost_seen, self._lost_base = 0, 0, (port.received, port.lost)
-        self._drops_next = self._lost_next = 0.0
+        self._drops_report, self._lost_report = ReportedCount(), ReportedCount(port.lost)
+        self._received_base = port.received
         self._identify(hb)
         self._on_heartbeat(hb, time.monotonic())
         self._stop.clear()
@@ -364,20 +388,20 @@ class LinkMixin:
         ``link_messages_lost`` (``lost`` since the last report, ``total``, ``received``, ``lost_pct``) for the
         messages the vehicle's MAVLink sequence numbers say never reached this process (radio, router, kernel buffer;
         :meth:`~.shared_link.SharedLink._count`)."""
-        total = int(getattr(self._conn, "dropped", 0) or 0)
-        if total > self._drops_seen and now >= self._drops_next:
-            self._event("link_messages_dropped", dropped=total - self._drops_seen, total=total)
+        rep = self._drops_report
+        new = rep.due(int(getattr(self._conn, "dropped", 0) or 0), now)
+        if new:
+            self._event("link_messages_dropped", dropped=new, total=rep.reported)
             log.warning("%s: the shared link dropped %d messages of this vehicle (%d in all): its I/O fell behind",
-                        self.robot_id, total - self._drops_seen, total)
-            self._drops_seen, self._drops_next = total, now + 5.0
-        lost = int(getattr(self._conn, "lost", 0) or 0) - self._lost_base[1]
-        if lost > self._lost_seen and now >= self._lost_next:
-            received = int(getattr(self._conn, "received", 0) or 0) - self._lost_base[0]
-            self._event("link_messages_lost", lost=lost - self._lost_seen, total=lost, received=received,
+                        self.robot_id, new, rep.reported)
+        rep = self._lost_report
+        new = rep.due(int(getattr(self._conn, "lost", 0) or 0), now)
+        if new:
+            lost, received = rep.reported, int(getattr(self._conn, "received", 0) or 0) - self._received_base
+            self._event("link_messages_lost", lost=new, total=lost, received=received,
                         lost_pct=round(100.0 * lost / max(1, lost + received), 2))
             log.warning("%s: %d messages of this vehicle were lost on the way here (%d of %d in all, by their "
-                        "MAVLink sequence numbers)", self.robot_id, lost - self._lost_seen, lost, lost + received)
-            self._lost_seen, self._lost_next = lost, now + 5.0
+                        "MAVLink sequence numbers)", self.robot_id, new, lost, lost + received)
 
     def _periodic(self, now: float) -> None:
         self._report_link_drops(now)

@@ -301,11 +301,12 @@ class LinkMixin:
                 self._text(M.MAV_SEVERITY_ERROR, f"emulator: {msg.get_type()} handling failed: {e}")
 
     def _send(self, msg: Any, link: _Link | None = None) -> None:
+        links = [link] if link is not None else list(self._links)
         if self._drop_counts and self._dropping("out", msg.get_type()):
-            for lk in ([link] if link is not None else list(self._links)):  # lost on the way: it had its number
+            for lk in links:  # lost on the way: it had its number
                 lk.mav.seq = (lk.mav.seq + 1) % 256
             return
-        for lk in ([link] if link is not None else list(self._links)):
+        for lk in links:
             try:
                 lk.mav.send(msg)
             except Exception:  # noqa: BLE001
