@@ -244,59 +244,86 @@ def max_horizontal_speed(odometry: list[dict], from_positions: bool = True, wind
     return max(best, flown_speed(odometry, window_s)) if from_positions else best
 
 
-def router_position_times(tlog: Path) -> dict[int, list[float]]:
-    """The firmware's ``time_boot_ms`` (seconds, sorted, unique) of every GLOBAL_POSITION_INT the router received,
-    per system id, from MAVProxy's own telemetry log (``mav.tlog``, read with pymavlink): what reached the router
-    and was forwarded to our port."""
+#: one GLOBAL_POSITION_INT as sent: (lat, lon in 1e-7 degrees, AMSL alt in mm), the message's own integers
+PositionKey = tuple[int, int, int]
+
+
+def router_positions(tlog: Path) -> dict[int, list[tuple[float, PositionKey]]]:
+    """Every GLOBAL_POSITION_INT the router received, per system id, from MAVProxy's own telemetry log (``mav.tlog``,
+    read with pymavlink): (the firmware's ``time_boot_ms`` in seconds, :data:`PositionKey`), sorted by time, one per
+    time. What reached the router and was forwarded to our port."""
     from pymavlink import mavutil
 
-    out: dict[int, set[float]] = {}
+    out: dict[int, dict[float, PositionKey]] = {}
     m = mavutil.mavlink_connection(str(tlog))
     try:
         while (msg := m.recv_match(type="GLOBAL_POSITION_INT")) is not None:
-            out.setdefault(msg.get_srcSystem(), set()).add(msg.time_boot_ms / 1000.0)
+            out.setdefault(msg.get_srcSystem(), {}).setdefault(msg.time_boot_ms / 1000.0, (msg.lat, msg.lon, msg.alt))
     finally:
         m.close()
-    return {k: sorted(v) for k, v in out.items()}
+    return {k: sorted(v.items()) for k, v in out.items()}
 
 
-#: two times this close (s) are one sample: a recording's time stamps stepped by 2 ms against MAVProxy's near one
-#: ArduCopter's landing (2026-11-24, two CPU burners; an ArduCopter SITL loop is 2.5 ms)
-_SAME_S = 0.005
+def position_key(odometry: dict) -> PositionKey:
+    """The :data:`PositionKey` of a recorded odometry message (its ``geodetic``: the message's integers / 1e7 and
+    / 1000, so rounding recovers them)."""
+    g = odometry["geodetic"]
+    return round(g["lat"] * 1e7), round(g["lon"] * 1e7), round(g["alt"] * 1000)
 
 
-def unrecorded_samples(recorded: list[float], sent: list[float], period_s: float,
-                       within: tuple[float, float] | None = None) -> tuple[float, list[tuple]]:
-    """Which of the vehicle's samples ``sent`` (its own times, seconds) the recording's odometry times ``recorded``
-    (the run's vehicle clock: the same times shifted by the clock's origin) should hold and does not. The shift is
-    the one that makes the most recorded times of the judged stretch land on a sent one (within :data:`_SAME_S`). The drone records at most one
-    sample per ``period_s`` (actors/drone_odometry.py: a sample a full period after the last recorded one is always
-    taken), so a sent sample is missing when it lies at least ``period_s`` after a recorded one and before the next.
-    ``within`` (recorded times, seconds): only that stretch (e.g. the flight) is judged.
-    Returns (the fraction of recorded times there that are sent samples, [(gap start, gap length, sample time),
-    ...])."""
+#: two times this close (s) are one sample: the recording's time is the firmware's time_boot_ms plus one offset (the
+#: run's clock origin), exact but for float rounding
+_SAME_S = 0.0005
+
+
+def unrecorded_samples(recorded: list[tuple[float, PositionKey]], sent: list[tuple[float, PositionKey]],
+                       period_s: float, within: tuple[float, float] | None = None) -> tuple[float, list[tuple]]:
+    """Which of the vehicle's position samples ``sent`` ((its own time in seconds, :data:`PositionKey`), sorted, from
+    :func:`router_positions`) the recording's odometry ``recorded`` ((the run's vehicle clock: the same time plus
+    the clock's origin, :func:`position_key`)) should hold and does not.
+
+    The offset between the two clocks is found from the content: the median of (recorded time - sent time) over the
+    recorded samples whose position the vehicle sent at one time only. (Found from times alone it is ambiguous: a
+    PX4 streams GLOBAL_POSITION_INT at up to 50 Hz to its onboard link, and any offset on a 4 ms grid lands most
+    10 Hz recorded times on some sent time: a first version of this check chose a wrong offset and paired 85 % of
+    the samples with the wrong messages, 2026-11-24.) A recorded sample is one the vehicle sent when a sent one has
+    its time (within :data:`_SAME_S`) and the same position. The drone records at most one sample per ``period_s``
+    (actors/drone_odometry.py: a sample a full period after the last recorded one is always taken), so a sent
+    sample is missing when it lies at least ``period_s`` after a recorded one and before the next. ``within``
+    (recorded times, seconds): only that stretch (e.g. the flight) is judged.
+
+    Returns (the fraction of recorded samples there that are sent samples, [(gap start, gap length, sample time),
+    ...]); (0.0, []) when no recorded position was sent at one time only."""
     import bisect
+    import collections
 
     if not recorded or not sent:
         return 0.0, []
     rec = sorted(recorded)
+    times = [f for f, _ in sent]
+    at = dict(sent)
+    when = collections.defaultdict(list)
+    for f, key in sent:
+        when[key].append(f)
+    lo_t, hi_t = within if within is not None else (rec[0][0], rec[-1][0])
+    judged = [(t, key) for t, key in rec if lo_t <= t <= hi_t] or rec
+    offsets = sorted(t - when[key][0] for t, key in judged if len(when.get(key, ())) == 1)
+    if not offsets:
+        return 0.0, []
+    shift = offsets[len(offsets) // 2]
 
-    def near(x: float) -> float:
-        i = bisect.bisect_left(sent, x)
-        return min(abs(sent[j] - x) for j in (i - 1, i) if 0 <= j < len(sent))
+    def sent_as(t: float, key: PositionKey) -> bool:
+        i = bisect.bisect_left(times, t - shift - _SAME_S)
+        return i < len(times) and times[i] <= t - shift + _SAME_S and at[times[i]] == key
 
-    lo_t, hi_t = within if within is not None else (rec[0], rec[-1])
-    judged = [t for t in rec if lo_t <= t <= hi_t] or rec
-    probe, mid = judged[::max(1, len(judged) // 100)], judged[len(judged) // 2]
-    shift = max((mid - f for f in sent), key=lambda d: sum(near(t - d) < _SAME_S for t in probe))
-    matched = sum(near(t - shift) < _SAME_S for t in judged) / max(1, len(judged))
+    matched = sum(sent_as(t, key) for t, key in judged) / len(judged)
     missing = []
-    for a, b in zip(rec, rec[1:]):
+    for (a, _), (b, _) in zip(rec, rec[1:]):
         if b < lo_t or a > hi_t:
             continue
-        lo = bisect.bisect_left(sent, max(a + period_s, lo_t) - shift - 1e-6)
-        hi = bisect.bisect_left(sent, min(b, hi_t) - shift - _SAME_S)
-        missing += [(round(a, 3), round(b - a, 3), round(f + shift, 3)) for f in sent[lo:hi]]
+        lo = bisect.bisect_left(times, max(a + period_s, lo_t) - shift - 1e-6)
+        hi = bisect.bisect_left(times, min(b, hi_t) - shift - _SAME_S)
+        missing += [(round(a, 3), round(b - a, 3), round(f + shift, 3)) for f in times[lo:hi]]
     return matched, missing
 
 
@@ -477,7 +504,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     forwards everything to ``udp:127.0.0.1:ROUTER_PORT``; the robots all name ``udpin:127.0.0.1:ROUTER_PORT`` with
     ``target_system`` 1..n. Each vehicle's own serial1 is followed by a raw pymavlink observer (:func:`tests.sitl_watchers.observe_raw`,
     its own link, the firmware's own time stamps) for the firmware's telemetry. Returns ``{"rc", "out", "rec", "observed": [per vehicle], "mavproxy": log,
-    "router_positions": system id -> the position samples the router received (:func:`router_position_times`),
+    "router_positions": system id -> the position samples the router received (:func:`router_positions`),
     "udp": the namespace's UDP counters}``."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = mavlink_env(autopilot, FARM_ENV, n=n)
@@ -531,7 +558,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     log = workdir / "mavproxy.log"
     return {"rc": rc, "out": text, "rec": _read_or_note(workdir / "fleet.mcap"), "observed": observed,
             "mavproxy": log.read_text(errors="replace")[-2000:] if log.exists() else "",
-            "router_positions": router_position_times(workdir / "mav.tlog") if (workdir / "mav.tlog").exists() else {},
+            "router_positions": router_positions(workdir / "mav.tlog") if (workdir / "mav.tlog").exists() else {},
             "udp": _udp_counters(workdir / "snmp.txt")}
 
 

@@ -348,9 +348,10 @@ def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
         # with the namespace's UDP RcvbufErrors in the message)
         flying = [o["t"] for o in odo if o["in_air"]]
         assert len(flying) > 100, (rid, len(flying))
-        matched, missing = sitl.unrecorded_samples(ts, router_fleet["router_positions"].get(k + 1, []), 0.1,
+        matched, missing = sitl.unrecorded_samples([(o["t"], sitl.position_key(o)) for o in odo],
+                                                   router_fleet["router_positions"].get(k + 1, []), 0.1,
                                                    within=(flying[0], flying[-1]))
-        assert matched >= 0.99, (rid, len(flying), matched)
+        assert matched == 1.0, (rid, len(flying), matched)
         assert not missing, (rid, len(missing), missing[:10], router_fleet["udp"])
         # and never more than the odometry sensor's 10 Hz (one sample per slot, actors/drone_odometry.py)
         assert len(flying) <= 10.0 * (flying[-1] - flying[0]) * 1.02 + 3, (rid, len(flying), flying[-1] - flying[0])
