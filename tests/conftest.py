@@ -23,12 +23,38 @@ needs_data = pytest.mark.skipif(not (DATA_DIR / "imagery").is_dir() or not (MODE
 SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults")
 
 
+#: the development tier's longest files, longest first (worker-seconds each, 3 workers on the 2-core CI kind of
+#: machine, 2026-11-24: 202 s for the first down to 15 s for the last; 1,497 s in all). ``--dist loadfile`` hands
+#: whole files to the workers in the collection's order, so these start first and the many short files fill in at
+#: the end: a longest-first schedule, 557 s -> about 500 s simulated. Only the order: a file missing here runs after
+#: them, a stale entry costs time, never a result
+LONGEST_FIRST = ("test_backends_e2e.py", "test_bench_cli.py", "test_e2e.py", "test_mavlink.py",
+                 "test_example_plugins.py", "test_missions.py", "test_mavlink_failsafe.py", "test_live_and_foxglove.py",
+                 "test_analytics_scheduling.py", "test_dataplane.py", "test_perception_track_recording.py",
+                 "test_mavlink_telemetry.py", "test_edgecloud.py", "test_plugin_registry.py",
+                 "test_liveview_npm_client.py", "test_mavlink_end.py", "test_mavlink_fleet.py", "test_tello.py",
+                 "test_user_scheduler_plugin.py", "test_mavlink_speed_margin.py",
+                 "test_trajectory_scheduler_in_environment.py", "test_bench_peers.py",
+                 "test_laplan_planner_equivalence.py")
+
+
+def pytest_configure(config):
+    """Under pytest-xdist, keep the collection's order of files (see :data:`LONGEST_FIRST`): xdist otherwise sorts
+    them by their number of tests, which puts the files of a few long end-to-end runs last."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
 def pytest_collection_modifyitems(config, items):
     """Mark every test of a slow group ``slow`` too, so that ``pytest -m "not slow"`` is the development tier
-    (everything but SITL, ``ray up``, cluster and fault runs); CI runs everything."""
+    (everything but SITL, ``ray up``, cluster and fault runs); CI runs everything. On an xdist worker, the files of
+    :data:`LONGEST_FIRST` come first (in that order; the tests of a file keep theirs)."""
     for item in items:
         if any(item.get_closest_marker(g) for g in SLOW_GROUPS):
             item.add_marker(pytest.mark.slow)
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+        items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
 
 
 @pytest.fixture(scope="session")

@@ -259,9 +259,19 @@ def test_vehicle_tracking_app_unchanged_on_a_mavlink_autopilot(ray_session, run_
     m = tracking_metrics(run, "car1")
     # the car was followed (detections -> velocity commands -> the autopilot); how long depends on how many frames a
     # loaded 2-core machine detects in real time, so only that it happened is load-independent
-    assert m["switch_delay_s"] is not None and m["time_within_5m_s"] > 0.0, m
+    assert m["switch_delay_s"] is not None and m["time_within_5m_s"] > 0.0, (m, _timeline(run))
     done = [e["t"] for e in run["events"] if e["event"] == "waypoint_done"]
     assert m["tracking_ended_t"] is not None and max(done) > m["tracking_ended_t"]
+
+
+def _timeline(run: dict) -> list[tuple]:
+    """A failed run's story for the assertion message: the drone's state changes and events (vehicle seconds; a
+    command's name), and the largest gap between recorded odometry samples (where the drone's thread waited)."""
+    rows = [(round(s["t"], 2), s["state"]) for s in run["states"]]
+    rows += [(round(e["t"], 2), e["event"], e.get("command", e.get("name", ""))) for e in run["events"]]
+    ts = [o["t"] for o in run["odometry"]]
+    gap = max(((b - a, a) for a, b in zip(ts, ts[1:])), default=(0.0, 0.0))
+    return sorted(rows)[:200] + [("largest odometry gap (s, from t)", round(gap[0], 2), round(gap[1], 2))]
 
 
 FARM_CORNERS = [(0, 0, 1.5), (0, 10, 1.5), (10, 10, 1.5), (10, 0, 1.5)]

@@ -38,7 +38,8 @@ class CommandMixin:
 
         Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds for the ACK; without one the
         command is re-sent, up to ``retries`` (default ``command_retries``) times, with the ``confirmation``
-        counter raised. MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try
+        counter raised, each time recorded as a ``command_resent`` event (``command``, ``attempt``, ``after``: no
+        COMMAND_ACK or the last result, ``waited_s`` since the first send). MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try
         too: re-sent after min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs; progress
         ACKs follow) the command is not sent again (MAVLink command protocol): its final ACK is awaited until the
         overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send, which bounds every case.
@@ -62,6 +63,10 @@ class CommandMixin:
         for attempt in range(retries + 1):
             if time.monotonic() >= overall:
                 break
+            if attempt:  # the caller waited a whole try: on the record (a tick of the drone may have waited too)
+                self._event("command_resent", command=name, attempt=attempt,
+                            after=_enum_name("MAV_RESULT", last.result) if last is not None else "no COMMAND_ACK",
+                            waited_s=round(time.monotonic() - started, 3))
             sent = time.monotonic()
             self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
             deadline = min(sent + timeout, overall)
