@@ -293,7 +293,8 @@ def unrecorded_samples(recorded: list[tuple[float, PositionKey]], sent: list[tup
     (recorded times, seconds): only that stretch (e.g. the flight) is judged.
 
     Returns (the fraction of recorded samples there that are sent samples, [(gap start, gap length, sample time),
-    ...]); (0.0, []) when no recorded position was sent at one time only."""
+    ...]: every sent sample in a gap, so a 50 Hz stream lists several per missing 10 Hz slot); (0.0, []) when
+    nothing recorded lies within ``within`` or no recorded position was sent at one time only."""
     import bisect
     import collections
 
@@ -306,7 +307,9 @@ def unrecorded_samples(recorded: list[tuple[float, PositionKey]], sent: list[tup
     for f, key in sent:
         when[key].append(f)
     lo_t, hi_t = within if within is not None else (rec[0][0], rec[-1][0])
-    judged = [(t, key) for t, key in rec if lo_t <= t <= hi_t] or rec
+    judged = [(t, key) for t, key in rec if lo_t <= t <= hi_t]
+    if not judged:
+        return 0.0, []
     offsets = sorted(t - when[key][0] for t, key in judged if len(when.get(key, ())) == 1)
     if not offsets:
         return 0.0, []

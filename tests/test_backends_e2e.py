@@ -267,11 +267,12 @@ def test_vehicle_tracking_app_unchanged_on_a_mavlink_autopilot(ray_session, run_
 def _timeline(run: dict) -> list[tuple]:
     """A failed run's story for the assertion message: the drone's state changes and events (vehicle seconds; a
     command's name), and the largest gap between recorded odometry samples (where the drone's thread waited)."""
-    rows = [(round(s["t"], 2), s["state"]) for s in run["states"]]
-    rows += [(round(e["t"], 2), e["event"], e.get("command", e.get("name", ""))) for e in run["events"]]
-    ts = [o["t"] for o in run["odometry"]]
+    rows = [(round(s["t"], 2), s["state"]) for s in run.get("states", [])]
+    rows += [(round(e["t"], 2), e["event"], str(e.get("command", e.get("name", "")))) for e in run.get("events", [])]
+    ts = [o["t"] for o in run.get("odometry", [])]
     gap = max(((b - a, a) for a, b in zip(ts, ts[1:])), default=(0.0, 0.0))
-    return sorted(rows)[:200] + [("largest odometry gap (s, from t)", round(gap[0], 2), round(gap[1], 2))]
+    return sorted(rows, key=lambda r: r[0])[:400] + [("largest odometry gap (s, from t)", round(gap[0], 2),
+                                                      round(gap[1], 2))]
 
 
 FARM_CORNERS = [(0, 0, 1.5), (0, 10, 1.5), (10, 10, 1.5), (10, 0, 1.5)]

@@ -292,6 +292,7 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 1})
     assert run_until(b, lambda: b.home_received, 5)
     mode = "GUIDED" if autopilot == "ardupilot" else "LOITER"
+    b.drain_events()
     emu.drop_next("COMMAND_ACK", count=2)
     b.set_mode(mode)
     assert b.mode == mode
@@ -302,7 +303,9 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     lost = [e["command"] for e in events if e["event"] == "command_ack_lost"]
     assert lost == [f"set mode {mode}", "arm"], lost
     # each sent twice (command_retries 1): the second send is on the record, after a whole try without an answer
-    resent = [(e["command"], e["attempt"], e["after"]) for e in events if e["event"] == "command_resent"]
+    # (the stream requests of the connection may be resent too on a loaded machine: not judged here)
+    resent = [(e["command"], e["attempt"], e["after"]) for e in events
+              if e["event"] == "command_resent" and e["command"] in (f"set mode {mode}", "arm")]
     assert resent == [(f"set mode {mode}", 1, "no COMMAND_ACK"), ("arm", 1, "no COMMAND_ACK")], resent
     assert all(e["waited_s"] >= 0.3 for e in events if e["event"] == "command_resent")
     emu.drop_next("COMMAND_LONG", "in", count=2)  # the vehicle never hears it: no answer, no effect
@@ -583,7 +586,8 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     b.drain_events()
     b.arm()  # rejected twice, accepted on the third try
     assert b.armed and emu.snapshot()["commands_seen"].count(arm) == 3
-    resent = [(e["command"], e["attempt"], e["after"]) for e in b.drain_events() if e["event"] == "command_resent"]
+    resent = [(e["command"], e["attempt"], e["after"]) for e in b.drain_events()
+              if e["event"] == "command_resent" and e["command"] == "arm"]
     assert resent == [("arm", 1, "MAV_RESULT_TEMPORARILY_REJECTED"), ("arm", 2, "MAV_RESULT_TEMPORARILY_REJECTED")]
     speed = M.MAV_CMD_DO_CHANGE_SPEED
     emu.reject_next(speed, 5)

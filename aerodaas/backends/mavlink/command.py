@@ -60,13 +60,15 @@ class CommandMixin:
         started = time.monotonic()
         overall = started + (retries + 1) * timeout
         last: Any = None  # the latest non-final answer: IN_PROGRESS or TEMPORARILY_REJECTED
+        answer: Any = None  # the non-final answer of the try before this one, if it had one
         for attempt in range(retries + 1):
             if time.monotonic() >= overall:
                 break
-            if attempt:  # the caller waited a whole try: on the record (a tick of the drone may have waited too)
+            if attempt:  # on the record: the caller waited meanwhile (a tick of the drone may have waited too)
                 self._event("command_resent", command=name, attempt=attempt,
-                            after=_enum_name("MAV_RESULT", last.result) if last is not None else "no COMMAND_ACK",
+                            after=_enum_name("MAV_RESULT", answer.result) if answer is not None else "no COMMAND_ACK",
                             waited_s=round(time.monotonic() - started, 3))
+            answer = None
             sent = time.monotonic()
             self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
             deadline = min(sent + timeout, overall)
@@ -90,7 +92,7 @@ class CommandMixin:
                     deadline = overall
                     continue
                 if ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
-                    last = ack
+                    last = answer = ack
                     if attempt == retries:
                         break  # no try left to wait for
                     deadline = min(deadline, time.monotonic() + min(timeout, _REJECTED_BACKOFF_S))
