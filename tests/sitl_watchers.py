@@ -60,8 +60,9 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     """Follow a vehicle in raw pymavlink, independent of AeroDaaS (its own link, system id 253): HEARTBEAT's armed
     flag and every GLOBAL_POSITION_INT (asked at 10 Hz with MAV_CMD_SET_MESSAGE_INTERVAL), until it has been armed
     and is disarmed again (+1 s) or ``timeout_s`` wall seconds. Writes ``{"armed", "landed", "samples": [[t, x, y,
-    z, vx, vy], ...], "complete"}`` to ``out`` (also when stopped by SIGTERM; ``complete``: it was seen disarmed for 1 s): t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from
-    :data:`FARM_HOME`, z ``relative_alt`` metres, vx/vy ENU m/s.
+    z, vx, vy], ...], "complete"}`` to ``out`` (also when stopped by SIGTERM; ``complete``: it was seen disarmed
+    for 1 s): t the firmware's own ``time_boot_ms`` in seconds, x/y ENU metres from :data:`FARM_HOME`, z
+    ``relative_alt`` metres, vx/vy ENU m/s.
 
     ``per_sysid`` (system id -> output file, ``out`` then unused): several vehicles on one port, each followed on
     its own. PX4 SITL sends every instance's ground-station link to 127.0.0.1:14550 (``px4-rc.mavlink``: ``mavlink

@@ -38,9 +38,10 @@ class CommandMixin:
 
         Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds for the ACK; without one the
         command is re-sent, up to ``retries`` (default ``command_retries``) times, with the ``confirmation``
-        counter raised, each time recorded as a ``command_resent`` event (``command``, ``attempt``, ``after``: no
-        COMMAND_ACK or the last result, ``waited_s`` since the first send). MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try
-        too: re-sent after min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs; progress
+        counter raised, each time recorded as a ``command_resent`` event (``command``, ``attempt``, ``after``: "no
+        COMMAND_ACK" or the previous try's MAV_RESULT name, ``waited_s``: wall seconds since the first send).
+        MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try too: re-sent after
+        min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs; progress
         ACKs follow) the command is not sent again (MAVLink command protocol): its final ACK is awaited until the
         overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send, which bounds every case.
 
