@@ -2,7 +2,7 @@
 (:mod:`aerodaas.emulators.mavlink.trace`: connect, arm from cold, take off, a 2-waypoint AUTO mission with holds,
 RTL, land) flown on ArduCopter SITL and PX4 SIH (../shared/sitl, each in a private network namespace with only
 loopback, created here) and on our emulator, and the normalised traces compared: mode and arm acknowledgements,
-pre-arm refusals, reached events, speeds, parameters. The differences that remain are the README's
+pre-arm refusals, reached events, speeds, parameters. The differences that remain are docs/backends.md's
 "Emulator vs firmware" table; each is allowed here by name (``ALLOWED``) and nowhere else.
 
 The emulator runs with the firmware's boot timing (GPS fix and EKF position estimate late, as observed) so that
@@ -57,7 +57,7 @@ P=$!
 kill $P; wait $P 2>/dev/null; true
 """
 
-#: differences that remain (README, MAVLink section, "Emulator vs firmware"): summary key -> reason
+#: differences that remain (docs/backends.md, "Emulator vs firmware"): summary key -> reason
 ALLOWED = {
     "ardupilot": {
         "cold_arm": "the first GUIDED arm meets the boot at a different stage (origin set or not)",

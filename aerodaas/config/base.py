@@ -21,7 +21,7 @@ class _Cfg(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
 
-#: Documented physical bounds of the configuration (README "Configuration bounds"). Numbers outside them are
+#: Documented physical bounds of the configuration (docs/safety.md "Configuration bounds"). Numbers outside them are
 #: refused: they are typos or attacks, not vehicles (a 1e308 m/s speed limit disables the check it configures).
 MAX_SPEED_MPS = 100.0  # fastest multirotors are ~ 60 m/s
 MAX_ACCEL_MPS2 = 100.0
