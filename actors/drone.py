@@ -36,11 +36,12 @@ from aerodaas.actors.drone_inbox import DroneInbox
 from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import RunEnd
 from aerodaas.actors.drone_odometry import OdometryPublisher
+from aerodaas.actors.drone_progress import NavigationProgress
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
+class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgress):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -91,6 +92,7 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
         self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
         self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it  # the hold under way: start, last tick, time within the radius, its figures
         self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
+        self._init_progress()
         self._paused_from: S | None = None
         self._link_lost_from: S | None = None
         self._pause_req = threading.Event()
@@ -212,7 +214,8 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
-                "rejected": self.rejected, "hold_failed": self.hold_failed, "ended": self.ended,
+                "rejected": self.rejected, "hold_failed": self.hold_failed, "not_reached": self.not_reached,
+                "ended": self.ended,
                 "failsafe": self.failsafe,
                 "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
@@ -330,6 +333,7 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
                     # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
                     # nor a survey whose pre-planned waypoints were cleared through the HITL API
                     ok = self.preplanned_left == 0 and not dropped and not self.hold_failed and \
+                        not self.not_reached and \
                         not self.plan_log.cleared_preplanned
                     self.outcome = "success" if ok else "incomplete"
                 return True
@@ -442,6 +446,7 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
                 self.active_wp, self.hold_until, self._hold = item.id, None, None
                 v.goto(target, item.speed)
                 fsm.transition(S.NAVIGATING, t)
+                self._start_progress(t, math.dist(pos, target), item.speed)
                 self._event("navigate", waypoint=item.id, target=list(target), priority=res.priority,
                             mission=res.mission)
                 if self.recorder is not None:
@@ -452,6 +457,8 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher):
             dist = math.dist(pos, target)
             speed = math.hypot(*tuple(float(c) for c in v.velocity)[:2])
             within = dist <= item.acceptance_radius
+            if st == S.NAVIGATING and self._check_progress(t, item, target, dist, within):
+                return False  # given up: the next tick flies what is queued next
             hc = self.cfg.hold
             if st == S.NAVIGATING and within and (item.hover_duration <= 0 or speed <= hc.settle_speed):
                 fsm.transition(S.WAYPOINT_HOLD, t)

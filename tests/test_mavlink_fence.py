@@ -31,17 +31,24 @@ def _ll(e: float, n: float) -> tuple[float, float]:
 FENCE = {"polygons": [{"points": [_ll(-30, -30), _ll(30, -30), _ll(30, 30), _ll(-30, 30)], "inclusion": True}],
          "circles": [{"center": _ll(10, 10), "radius": 4.5, "inclusion": False},
                      {"center": _ll(0, 0), "radius": 40.0, "inclusion": True}]}
+#: the same without the inclusion circle: one inclusion zone, what a PX4 vehicle takes (it intersects inclusion zones)
+FENCE_ONE = {"polygons": FENCE["polygons"], "circles": FENCE["circles"][:1]}
 #: the fence items the vehicle must hold: (command, param1, lat e7, lon e7)
-WANT = ([(5001, 4.0, round(a * 1e7), round(b * 1e7)) for a, b in FENCE["polygons"][0]["points"]]
-        + [(5004, 4.5, round(FENCE["circles"][0]["center"][0] * 1e7), round(FENCE["circles"][0]["center"][1] * 1e7)),
-           (5003, 40.0, round(HOME.lat * 1e7), round(HOME.lon * 1e7))])
+WANT_ONE = ([(5001, 4.0, round(a * 1e7), round(b * 1e7)) for a, b in FENCE["polygons"][0]["points"]]
+            + [(5004, 4.5, round(FENCE["circles"][0]["center"][0] * 1e7),
+                round(FENCE["circles"][0]["center"][1] * 1e7))])
+WANT = WANT_ONE + [(5003, 40.0, round(HOME.lat * 1e7), round(HOME.lon * 1e7))]
+#: the default fence of each autopilot's vehicle in these tests, and the items it leaves on the vehicle
+FENCES = {"ardupilot": (FENCE, WANT), "px4": (FENCE_ONE, WANT_ONE)}
+_DEFAULT = object()
 
 
 @pytest.fixture
 def vehicle():
     made: list = []
 
-    def make(autopilot: str, fence: dict | None = FENCE, mavlink: dict | None = None, **safety):
+    def make(autopilot: str, fence: dict | None = _DEFAULT, mavlink: dict | None = None, **safety):
+        fence = FENCES[autopilot][0] if fence is _DEFAULT else fence
         emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, gps_lock_s=1.0, home=HOME)
         made.append(emu)
         address = emu.start("tcp:127.0.0.1:0")
@@ -66,16 +73,50 @@ def _held(emu) -> list[tuple]:
 def test_the_robot_geofence_becomes_the_vehicle_fence_on_connect(vehicle, autopilot):
     emu, b, _ = vehicle(autopilot, max_altitude=35.0, mavlink={"fence": {"action": "land"}})
     b.connect(timeout_s=10)
-    assert _held(emu) == WANT
+    assert _held(emu) == FENCES[autopilot][1]
     p = emu.params
     if autopilot == "ardupilot":  # FENCE_TYPE: polygon (4, the uploaded zones) + max altitude (1)
         assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_ALT_MAX"], p["FENCE_ACTION"]) == (1, 5, 35, 2)
+        assert p["FENCE_OPTIONS"] == 2  # two inclusion zones: their union (INCLUSION_UNION), as our gate
     else:  # GF_ACTION 5: land; GF_MAX_VER_DIST the altitude limit; no home circle asked: GF_MAX_HOR_DIST untouched
         assert (p["GF_ACTION"], p["GF_MAX_VER_DIST"], p["GF_MAX_HOR_DIST"]) == (5, 35, 0)
         # PX4's return altitudes (30 m, 10 m) are already under the 35 m fence's ceiling (31.5 m): never raised
         assert (p["RTL_RETURN_ALT"], p["RTL_DESCEND_ALT"]) == (30, 10)
     ev = [e for e in b.drain_events() if e["event"] == "fence_uploaded"]
-    assert len(ev) == 1 and ev[0]["items"] == len(WANT) and ev[0]["action"] == "land", ev
+    assert len(ev) == 1 and ev[0]["items"] == len(FENCES[autopilot][1]) and ev[0]["action"] == "land", ev
+
+
+def test_ardupilot_union_bit_is_added_to_the_vehicles_options_and_restored(vehicle):
+    """FENCE_OPTIONS bit 1 (INCLUSION_UNION) joins the bits the vehicle already has (here bit 0, DISABLE_MODE_CHANGE)
+    and goes back with the fence; one inclusion zone leaves FENCE_OPTIONS alone."""
+    emu, b, _ = vehicle("ardupilot", mavlink={"fence": {"restore_on_close": True}})
+    emu.params["FENCE_OPTIONS"] = 1.0
+    b.connect(timeout_s=10)
+    assert emu.params["FENCE_OPTIONS"] == 3
+    b.close()
+    assert emu.params["FENCE_OPTIONS"] == 1
+    emu, b, _ = vehicle("ardupilot", fence=FENCE_ONE)
+    b.connect(timeout_s=10)
+    assert emu.params["FENCE_OPTIONS"] == 0 and _held(emu) == WANT_ONE
+
+
+def test_ardupilot_without_fence_options_refuses_several_inclusion_zones(vehicle):
+    """An ArduPilot without FENCE_OPTIONS would intersect the two inclusion zones: refused, the fence not sent."""
+    emu, b, _ = vehicle("ardupilot")
+    del emu.params["FENCE_OPTIONS"]
+    with pytest.raises(BackendError, match=r"no FENCE_OPTIONS parameter.*every one of the fence's 2 inclusion zones"):
+        b.connect(timeout_s=10)
+    assert emu.fence_items == [] and emu.params["FENCE_ENABLE"] == 0
+
+
+def test_px4_refuses_several_inclusion_zones_before_sending_anything(vehicle):
+    """PX4 intersects inclusion zones (navigator geofence.cpp): a robot identified as PX4 on connect (autopilot auto)
+    with two of them is refused before any fence item or parameter is sent."""
+    emu, b, _ = vehicle("px4", fence=FENCE)
+    before = dict(emu.params)
+    with pytest.raises(BackendError, match=r"2 inclusion zones: PX4 requires a position inside every inclusion zone"):
+        b.connect(timeout_s=10)
+    assert emu.fence_items == [] and emu.params == before
 
 
 def test_px4s_return_altitude_is_lowered_under_the_altitude_fence(vehicle):
@@ -105,7 +146,8 @@ def test_a_fence_too_low_for_px4s_return_refuses_to_fly(vehicle):
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_home_radius_and_hold_action(vehicle, autopilot):
-    emu, b, _ = vehicle(autopilot, mavlink={"fence": {"action": "hold", "home_radius_m": 80, "max_altitude": False}})
+    emu, b, _ = vehicle(autopilot, mavlink={"fence": {"action": "hold", "home_radius_m": 80, "max_altitude": False}},
+                        max_distance=80.0)
     b.connect(timeout_s=10)
     p = emu.params
     if autopilot == "ardupilot":  # polygon (4) + circle around home (2), BRAKE or land (4)
@@ -121,7 +163,7 @@ def test_a_fence_read_back_different_refuses_to_fly(vehicle, autopilot):
 
     def corrupt(link, msg, is_int):  # the vehicle keeps the last vertex 1e-7 degrees off
         store(link, msg, is_int)
-        if emu.fence_items and len(emu.fence_items) == len(WANT):
+        if emu.fence_items and len(emu.fence_items) == len(FENCES[autopilot][1]):
             emu.fence_items[3].x += 1
 
     emu._store_typed = corrupt
@@ -170,11 +212,11 @@ def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, a
     old_items = _held(emu)
     old = dict(emu.params)
     b.connect(timeout_s=10)
-    assert _held(emu) == WANT
+    assert _held(emu) == FENCES[autopilot][1]
     b.close()
     assert _held(emu) == old_items and len(old_items) == 1
-    names = ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION"] if autopilot == "ardupilot" else \
-        ["GF_ACTION", "GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT"]
+    names = ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_OPTIONS"] \
+        if autopilot == "ardupilot" else ["GF_ACTION", "GF_MAX_VER_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT"]
     assert {n: emu.params[n] for n in names} == {n: old[n] for n in names}
 
 
@@ -247,3 +289,37 @@ def test_bad_fence_settings_are_refused_naming_the_field(bad, field):
                        "mavlink": {"connection": "udpin:0.0.0.0:14550", "fence": bad}}]}
     with pytest.raises(ConfigError, match=rf"robots\.0\.mavlink\.{field}"):
         parse_environment_config(cfg)
+
+
+def _env(autopilot: str, fence: dict, **mavlink_fence) -> dict:
+    return {"robots": [{"id": "quad", "backend": "mavlink", "home": {"lat": HOME.lat, "lon": HOME.lon, "alt": HOME.alt},
+                        "safety": {"geofence": fence},
+                        "mavlink": {"connection": "udpin:0.0.0.0:14550", "autopilot": autopilot,
+                                    "fence": mavlink_fence}}]}
+
+
+def test_px4_with_several_inclusion_zones_is_refused_before_ray():
+    """A robot configured as PX4 whose geofence has two inclusion zones: ConfigError naming the field, before any
+    actor starts. ArduPilot (FENCE_OPTIONS), a vehicle identified on connect (auto: the backend checks then) and a
+    fence flown on our gate alone (upload false) pass."""
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    with pytest.raises(ConfigError, match=r"robots\.0\.safety\.geofence: robot 'quad' uploads its geofence to a px4 "
+                                          r"vehicle.*2 inclusion zones"):
+        parse_environment_config(_env("px4", FENCE))
+    parse_environment_config(_env("px4", FENCE_ONE))
+    parse_environment_config(_env("ardupilot", FENCE))
+    parse_environment_config(_env("auto", FENCE))
+    parse_environment_config(_env("px4", FENCE, upload=False))
+
+
+def test_a_home_circle_smaller_than_max_distance_is_refused():
+    """mavlink.fence.home_radius_m makes the autopilot refuse targets the gate (safety.max_distance) accepts."""
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    with pytest.raises(ConfigError, match=r"robots\.0\.mavlink\.fence\.home_radius_m: 80 m is below "
+                                          r"safety\.max_distance \(10000 m\)"):
+        parse_environment_config(_env("ardupilot", FENCE_ONE, home_radius_m=80))
+    ok = _env("ardupilot", FENCE_ONE, home_radius_m=80)
+    ok["robots"][0]["safety"]["max_distance"] = 80.0
+    parse_environment_config(ok)

@@ -13,6 +13,7 @@ from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, HOME_ALT_RANGE_M, M
                    MAX_SPEED_MPS, MAX_YAW_RATE_DPS, MIN_PHYSICS_HZ, MIN_SPEEDUP, MAX_GROUND_PX, MAX_SEED,
                    did_you_mean, _Cfg)  # noqa: F401
 from aerodaas.config.robot import (BatteryConfig, CAMERA_SOURCES, Limits, MavlinkConfig, MavlinkFenceConfig, NoiseConfig,
+                    ProgressConfig,
                     ReplayConfig, RobotConfig, SENSOR_PROPERTIES, SafetyConfig, SensorConfig, TelloConfig)  # noqa: F401
 from aerodaas.config.environment import (AnalyticsQosConfig, AnalyticsSchedulerConfig, ComputeConfig, EnvironmentConfig,
                           GroundConfig, HitlConfig, SimulationConfig, TargetConfig, TargetPathPoint, WorldConfig,

@@ -16,7 +16,7 @@ from aerodaas.navigation.geofence import GeofenceConfig
 
 from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
                    MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
-from aerodaas.config.robot import RobotConfig, SensorConfig
+from aerodaas.config.robot import RobotConfig, SensorConfig, check_autopilot_fence
 
 
 _LABEL_KEY = re.compile(r"^([a-z0-9]([-a-z0-9.]*[a-z0-9])?/)?[A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?$")
@@ -489,6 +489,7 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         if why is not None:
             raise ConfigError(f"robots.{i}.safety.geofence: the home position ({r.home.lat}, {r.home.lon}) is {why}; "
                               f"the drone takes off there, so the fence must allow it")
+        check_autopilot_fence(r, f"robots.{i}")
     sched = cfg.analytics_scheduler
     if sched.name != "default":
         if sched.workload is not None and any(isinstance(v, str) for v in sched.models.values()):

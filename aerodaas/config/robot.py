@@ -198,9 +198,12 @@ class MavlinkFenceConfig(_Cfg):
     polygons and circles as the vehicle's fence (MAVLink mission protocol, ``MAV_MISSION_TYPE_FENCE``) and set the
     fence parameters (ArduPilot ``FENCE_ENABLE``/``FENCE_TYPE``/``FENCE_ALT_MAX``/``FENCE_ACTION``, PX4
     ``GF_ACTION``/``GF_MAX_VER_DIST``/``GF_MAX_HOR_DIST``), read everything back and refuse to fly on a mismatch.
-    A robot without a geofence leaves the vehicle's fence as it is. ``max_altitude``: also fence the altitude at
-    ``safety.max_altitude`` (else ``limits.max_altitude``) metres above home. ``home_radius_m``: also a circle of
-    this radius (metres) around home (ArduPilot ``FENCE_TYPE`` bit 2 + ``FENCE_RADIUS``, PX4 ``GF_MAX_HOR_DIST``).
+    A robot without a geofence leaves the vehicle's fence as it is. The vehicle's fence accepts the points our gate
+    does (ArduPilot ``FENCE_OPTIONS`` bit 1 for several inclusion zones; refused for PX4, which intersects them:
+    :func:`check_autopilot_fence`). ``max_altitude``: also fence the altitude at the gate's ceiling, the lower of
+    ``safety.max_altitude`` and ``limits.max_altitude`` (metres above home). ``home_radius_m``: also a circle of this
+    radius (metres) around home (ArduPilot ``FENCE_TYPE`` bit 2 + ``FENCE_RADIUS``, PX4 ``GF_MAX_HOR_DIST``), at
+    least ``safety.max_distance``.
     ``action``: what the firmware does on a breach: ``rtl`` (ArduPilot FENCE_ACTION 1 "RTL or Land", PX4 GF_ACTION 3
     "Return"), ``land`` (2 / 5), ``hold`` (ArduPilot 4 "Brake or Land", PX4 2 "Hold"), ``report`` (0 "Report only" /
     1 "Warning": no action). ``restore_on_close``: when the backend closes with the vehicle disarmed, put the
@@ -348,6 +351,26 @@ class HoldConfig(_Cfg):
     grace_s: float = Field(default=5.0, ge=0, le=MAX_DURATION_S, description="seconds")
 
 
+class ProgressConfig(_Cfg):
+    """How long a waypoint may go without the vehicle getting closer (``progress``; vehicle seconds). Flying towards a
+    waypoint, the distance to it must shrink by ``min_progress_m`` metres within ``stall_s`` seconds (longer for a
+    slow leg: at least the time ``min_progress_m`` takes at a quarter of the leg's speed), or the vehicle be inside
+    the acceptance radius; else a ``navigation_stalled`` event (an autopilot that refuses a target, for its own
+    fence or limits, keeps flying to its previous one without a word). After ``abandon_s`` seconds without progress
+    the waypoint ends as not reached (``waypoint_abandoned``, listed in the summary): the mission is then
+    ``incomplete`` and the drone goes on with what is queued next."""
+
+    min_progress_m: float = Field(default=0.5, gt=0, le=100.0, description="metres")
+    stall_s: float = Field(default=15.0, gt=0, le=MAX_DURATION_S, description="vehicle seconds")
+    abandon_s: float = Field(default=60.0, gt=0, le=MAX_DURATION_S, description="vehicle seconds")
+
+    @model_validator(mode="after")
+    def _order(self) -> "ProgressConfig":
+        if self.abandon_s < self.stall_s:
+            raise ValueError(f"abandon_s ({self.abandon_s:g} s) must be at least stall_s ({self.stall_s:g} s)")
+        return self
+
+
 class RobotConfig(_Cfg):
     """A robot (drone). ``backend`` selects the driver: ``sim`` (the embedded simulator), ``mavlink`` (ArduPilot or
     PX4, settings in ``mavlink``), ``tello`` (DJI Tello, settings in ``tello``) or ``replay`` (a recorded flight,
@@ -368,6 +391,7 @@ class RobotConfig(_Cfg):
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
     safety: SafetyConfig = Field(default_factory=SafetyConfig)
     hold: HoldConfig = Field(default_factory=HoldConfig)
+    progress: ProgressConfig = Field(default_factory=ProgressConfig)
     takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
                                     "[safety.min_altitude, max_altitude]")
     control_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
@@ -491,3 +515,31 @@ def check_plugin_backend(robot: "RobotConfig") -> None:
                          f"{err.get('input')!r}") from None
     if opts is not None:
         robot.backend_config = opts.model_dump(mode="json")
+
+
+def check_autopilot_fence(robot: "RobotConfig", where: str) -> None:
+    """A robot whose MAVLink backend uploads its geofence (``mavlink.fence.upload``) must get an autopilot fence that
+    accepts the same points as its safety gate. Checked here, before any actor starts, where the configuration
+    alone decides it: a PX4 vehicle (``mavlink.autopilot: px4``) with two or more inclusion zones
+    (:func:`aerodaas.navigation.geofence.autopilot_disagreement`), and a ``mavlink.fence.home_radius_m`` below
+    ``safety.max_distance`` (both autopilots refuse a target beyond that circle, ArduPilot silently). A robot without
+    a geofence leaves the vehicle's fence alone and is not checked. A vehicle identified on connect
+    (``autopilot: auto``) is checked by the backend then, before it uploads anything.
+    Raises ConfigError naming ``where`` (the robot's path) and the field."""
+    from aerodaas.config.base import ConfigError
+    from aerodaas.navigation.geofence import autopilot_disagreement
+
+    mc = robot.mavlink
+    if robot.backend != "mavlink" or mc is None or not mc.fence.upload or robot.safety.geofence.is_empty:
+        return  # the backend leaves the vehicle's fence as it is
+    radius = mc.fence.home_radius_m
+    if radius is not None and radius < robot.safety.max_distance:
+        raise ConfigError(f"{where}.mavlink.fence.home_radius_m: {radius:g} m is below safety.max_distance "
+                          f"({robot.safety.max_distance:g} m): the autopilot would refuse targets beyond {radius:g} m "
+                          f"from home that the safety gate accepts; set safety.max_distance to at most {radius:g} m")
+    if mc.autopilot == "auto":
+        return
+    why = autopilot_disagreement(robot.safety.geofence, mc.autopilot)
+    if why is not None:
+        raise ConfigError(f"{where}.safety.geofence: robot {robot.id!r} uploads its geofence to a {mc.autopilot} "
+                          f"vehicle (mavlink.fence.upload): {why}")

@@ -4,9 +4,25 @@ The zone model is the one QGroundControl plans carry (``geoFence`` object, versi
 enforce as mission fence items (``MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION`` 5001 /
 ``..._EXCLUSION`` 5002, ``MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION`` 5003 / ``..._EXCLUSION`` 5004):
 
-* if any **inclusion** zone exists, a position must lie inside at least one of them;
+* if any **inclusion** zone exists, a position must lie inside at least one of them (their *union*);
 * a position must lie inside **no exclusion** zone;
 * an empty configuration allows everything.
+
+The autopilots read several inclusion zones differently, and the vehicle's own fence must accept the same points
+as our gate (:func:`autopilot_disagreement`):
+
+* ArduPilot (``libraries/AC_Fence/AC_PolyFence_loader.cpp`` ``breached(loc)``, which both its breach check and its
+  refusal of a GUIDED/AUTO destination use, ``AC_Fence::check_destination_within_fence``) takes their
+  *intersection* by default and their union when ``FENCE_OPTIONS`` has bit 1 (``AC_Fence::OPTIONS::
+  INCLUSION_UNION``, value 2; ArduCopter's default is 0). Observed on ArduCopter SITL (4.7.0-dev) with two
+  overlapping inclusion circles: a GUIDED target inside one circle only is silently dropped (the vehicle keeps its
+  previous target, no COMMAND_ACK, no text) with ``FENCE_OPTIONS`` 0 and flown with 2. The MAVLink backend sets
+  that bit whenever it uploads two or more inclusion zones.
+* PX4 (``src/modules/navigator/geofence.cpp`` ``isInsidePolygonOrCircle``: ``checksPass &=`` over every zone) takes
+  their *intersection*, with no parameter to change it, and drops a zone that does not hold the home position
+  when uploaded (``checkHomeRequirementsForGeofence``). Observed on PX4 SIH (main 02e73e3b6f) with the same two
+  circles and ``GF_ACTION`` 2: a DO_REPOSITION into one circle only is acknowledged and ignored ("Reposition is
+  outside geofence"). So a fence of two or more inclusion zones is refused for a PX4 vehicle before flight.
 
 Fences are two-dimensional (latitude/longitude); a maximum altitude is a separate vehicle parameter and is
 not modelled here. A position exactly on a zone's boundary counts as inside an inclusion zone and outside
@@ -32,7 +48,7 @@ from shapely.validation import explain_validity
 from aerodaas.navigation.geo import geodetic_to_enu
 from aerodaas.app.models import GeoPoint
 
-__all__ = ["GeofencePolygon", "GeofenceCircle", "GeofenceConfig", "Geofence"]
+__all__ = ["GeofencePolygon", "GeofenceCircle", "GeofenceConfig", "Geofence", "autopilot_disagreement"]
 
 #: Leg coverage tolerance in metres: gaps shorter than this between inclusion zones are ignored (float noise).
 _COVER_TOL_M = 1e-6
@@ -101,6 +117,29 @@ class GeofenceConfig(_Model):
     def is_empty(self) -> bool:
         """True when there is no zone at all (everything is allowed)."""
         return not self.polygons and not self.circles
+
+    @property
+    def inclusion_count(self) -> int:
+        """How many inclusion zones (polygons and circles) there are."""
+        return sum(p.inclusion for p in self.polygons) + sum(c.inclusion for c in self.circles)
+
+
+def autopilot_disagreement(config: GeofenceConfig, autopilot: str) -> str | None:
+    """Why ``autopilot``'s own fence (``"ardupilot"`` or ``"px4"``), once the MAVLink backend has uploaded
+    ``config`` and set its fence parameters, would accept other points than :class:`Geofence` does; None when both
+    accept the same set (see the module docstring for each firmware's rule and its source).
+
+    ArduPilot: None (the backend sets ``FENCE_OPTIONS`` bit 1, the union; a firmware without that parameter is
+    refused by the backend when it finds it missing). PX4: a reason for two or more inclusion zones (PX4 takes
+    their intersection). The home position must also be allowed by every zone for PX4 to keep it; that holds for
+    any fence our gate accepts the home in with at most one inclusion zone (checked where the robot's home is)."""
+    n = config.inclusion_count
+    if autopilot == "px4" and n > 1:
+        return (f"{n} inclusion zones: PX4 requires a position inside every inclusion zone (navigator geofence.cpp "
+                f"isInsidePolygonOrCircle), AeroDaaS inside any one of them, so PX4 would refuse or fence off "
+                f"targets our gate accepts (a DO_REPOSITION into one zone only is acknowledged and ignored); draw the "
+                f"allowed area as one inclusion polygon, or fly on AeroDaaS's gate alone (mavlink.fence.upload false)")
+    return None
 
 
 class _Zone:

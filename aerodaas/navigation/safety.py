@@ -4,8 +4,8 @@
 
 * geofence (inclusion/exclusion polygons and circles, from the config or a QGroundControl ``.plan``): the
   target must be allowed *and* the straight leg from the drone's position to it must not cross a forbidden
-  zone (the same semantics as PX4/ArduPilot fences: inside at least one inclusion zone if any exist, inside no
-  exclusion zone);
+  zone (inside at least one inclusion zone if any exist, inside no exclusion zone: the rule the MAVLink backend
+  makes the autopilot's own fence follow, or refuses before flight; :mod:`aerodaas.navigation.geofence`);
 * maximum altitude, and minimum altitude (metres above home) for everything except landing;
 * maximum horizontal speed (m/s) and maximum vertical speed.
 

@@ -76,6 +76,9 @@ def _target(tmp: Path, tid: str = "car", crop=(0, 0, 10, 10)) -> dict:
 
 INF, BIG = float("inf"), 1e308
 _FAR_FENCE = {"circles": [{"center": [47.5, 8.6], "radius": 50, "inclusion": True}]}
+#: two overlapping inclusion circles, both holding the catalogue's home
+_TWO_CIRCLES = {"circles": [{"center": [47.3977, 8.5456], "radius": 50, "inclusion": True},
+                            {"center": [47.3980, 8.5456], "radius": 50, "inclusion": True}]}
 
 #: environment files that must be refused (ConfigError naming the field) before anything starts
 ENV_CASES: list[InputCase] = [
@@ -124,6 +127,14 @@ ENV_CASES: list[InputCase] = [
               "min_altitude"),
     InputCase("inclusion fence not containing home", lambda d, t: _robot(d).update(safety={"geofence": _FAR_FENCE}),
               "safety.geofence"),
+    InputCase("PX4 robot, two overlapping inclusion circles (PX4 intersects them, our gate takes the union)",
+              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "udpin:127.0.0.1:14540",
+                                                                         "autopilot": "px4"},
+                                            safety={"geofence": _TWO_CIRCLES}), "2 inclusion zones"),
+    InputCase("mavlink.fence.home_radius_m below safety.max_distance",
+              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "udpin:127.0.0.1:14550",
+                                                                         "fence": {"home_radius_m": 80}},
+                                            safety={"geofence": _TWO_CIRCLES}), "fence.home_radius_m"),
     InputCase("fence circle radius Infinity",
               lambda d, t: _robot(d).update(safety={"geofence": {"circles": [{"center": [47.39, 8.54], "radius": INF}]}}),
               "radius"),

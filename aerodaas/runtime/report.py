@@ -20,6 +20,10 @@ def format_summary(result: Any) -> str:
         for h in rep.get("hold_failed") or []:
             lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
                          f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
+        for h in rep.get("not_reached") or []:
+            lines.append(f"    not reached: {h['waypoint']}: no progress towards it for {h['after_s']:g} s, "
+                         f"{h['distance_m']:g} m from it (closest {h['closest_m']:g} m); the autopilot may have refused "
+                         f"the target")
         lines += _speed_margin_lines(rep.get("events") or [])
         lines += _link_lines(rep.get("events") or [])
         if rep.get("failsafe"):

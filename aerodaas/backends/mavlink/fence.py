@@ -24,10 +24,14 @@ Parameters (firmware units):
 * ArduPilot (``libraries/AC_Fence/AC_Fence.h`` / ``AC_Fence.cpp``): ``FENCE_ENABLE`` 0/1; ``FENCE_TYPE`` bitmask
   1 = max altitude, 2 = circle around home (``FENCE_RADIUS`` m), 4 = polygon (the uploaded inclusion/exclusion
   polygons *and* circles), 8 = min altitude; ``FENCE_ALT_MAX`` metres above home; ``FENCE_ACTION`` 0 report only,
-  1 RTL or land, 2 always land, 3 SmartRTL or RTL or land, 4 brake or land, 5 SmartRTL or land.
+  1 RTL or land, 2 always land, 3 SmartRTL or RTL or land, 4 brake or land, 5 SmartRTL or land; ``FENCE_OPTIONS``
+  bit 1 (value 2, ``INCLUSION_UNION``): several inclusion zones allow their union, as our gate does, instead of
+  their intersection (set, keeping the other bits, whenever two or more inclusion zones go up;
+  :func:`aerodaas.navigation.geofence.autopilot_disagreement` and the geofence module docstring).
 * PX4 (``src/modules/navigator/geofence_params.c``): ``GF_ACTION`` (INT32) 0 none, 1 warning, 2 hold mode,
   3 return mode, 4 terminate, 5 land mode; ``GF_MAX_VER_DIST`` / ``GF_MAX_HOR_DIST`` metres from home
-  (0 disables). PX4 refuses a PARAM_SET whose type differs from the parameter's ("param types mismatch",
+  (0 disables). PX4 intersects several inclusion zones and has no parameter to change that: such a fence is refused
+  for a PX4 vehicle before anything is uploaded. PX4 refuses a PARAM_SET whose type differs from the parameter's ("param types mismatch",
   ``src/modules/mavlink/mavlink_parameters.cpp``): INT32 parameters go bytewise in the float field
   (:meth:`~aerodaas.backends.mavlink.params.ParamMixin.set_parameter` ``integer=True``).
 
@@ -48,7 +52,7 @@ from typing import Any, Iterable
 
 from aerodaas.backends.base import BackendError, CommandRefused
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32
-from aerodaas.navigation.geofence import GeofenceConfig
+from aerodaas.navigation.geofence import GeofenceConfig, autopilot_disagreement
 
 FENCE = M.MAV_MISSION_TYPE_FENCE  # 1
 RALLY = M.MAV_MISSION_TYPE_RALLY  # 2
@@ -59,8 +63,10 @@ AP_FENCE_ALT_MAX, AP_FENCE_CIRCLE, AP_FENCE_POLYGON = 1, 2, 4
 #: our ``mavlink.fence.action`` -> (ArduPilot FENCE_ACTION, PX4 GF_ACTION)
 FENCE_ACTIONS = {"report": (0, 1), "rtl": (1, 3), "land": (2, 5), "hold": (4, 2)}
 
+#: ArduPilot FENCE_OPTIONS bit (AC_Fence.h ``OPTIONS::INCLUSION_UNION``): inclusion zones allow their union
+AP_FENCE_INCLUSION_UNION = 2
 #: the fence parameters of integer type (PX4 takes GF_ACTION only as INT32; ArduPilot converts REAL32 itself)
-_INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
+_INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_OPTIONS"}
 #: PX4's return altitudes (metres above home), lowered under the altitude fence; PX4 keeps RTL_DESCEND_ALT >= 2 m
 PX4_RETURN_ALTITUDES = ("RTL_RETURN_ALT", "RTL_DESCEND_ALT")
 PX4_MIN_DESCEND_ALT_M = 2.0
@@ -232,7 +238,8 @@ class FenceMixin:
         :func:`px4_return_altitude_ceiling` (without ``have`` the ceiling itself). Raises BackendError (a fence
         too low for PX4's return)."""
         fc = self.cfg.fence
-        max_alt = float(self.safety.max_altitude or self.limits.max_altitude)
+        # the safety gate's ceiling: the lower of the two settings (safety.py SafetyGate.max_alt)
+        max_alt = min(float(self.limits.max_altitude), float(self.safety.max_altitude or math.inf))
         ap_action, px4_action = FENCE_ACTIONS[fc.action]
         if self.autopilot == "ardupilot":
             bits = (AP_FENCE_POLYGON if not fence.is_empty else 0) | (AP_FENCE_ALT_MAX if fc.max_altitude else 0) \
@@ -242,6 +249,9 @@ class FenceMixin:
                 out["FENCE_ALT_MAX"] = (max_alt, False)
             if fc.home_radius_m:
                 out["FENCE_RADIUS"] = (float(fc.home_radius_m), False)
+            if fence.inclusion_count > 1:  # the union of the inclusion zones, as our gate (the other bits kept)
+                options = int((have or {}).get("FENCE_OPTIONS", 0.0)) | AP_FENCE_INCLUSION_UNION
+                out["FENCE_OPTIONS"] = (float(options), True)
             out["FENCE_ENABLE"] = (1.0, True)  # last: the fence is complete when it is switched on
             return out
         out = {"GF_ACTION": (float(px4_action), True)}
@@ -261,18 +271,29 @@ class FenceMixin:
         (``MAV_MISSION_TYPE_FENCE``), set the parameters (:meth:`fence_parameters`), then read both back
         (MISSION_REQUEST_LIST of the fence type, PARAM_REQUEST_READ) and compare. Returns ``{"items": n,
         "params": {name: value read back}}`` and records a ``fence_uploaded`` event. Raises BackendError naming
-        what differs ("refusing to fly") or a fence too low for PX4's Return (:func:`px4_return_altitude_ceiling`),
+        what differs ("refusing to fly"), a fence the autopilot would read differently from our gate (before anything
+        is sent: :func:`~aerodaas.navigation.geofence.autopilot_disagreement`; an ArduPilot without ``FENCE_OPTIONS``
+        for several inclusion zones) or a fence too low for PX4's Return (:func:`px4_return_altitude_ceiling`),
         CommandRefused when the vehicle rejects an item or lacks a fence
         parameter (a firmware built without fences), LinkLost."""
         fence = self.safety.geofence if fence is None else fence
         wire = fence_items(fence)
         where = f"robot {self.robot_id!r}: autopilot geofence"
+        why = autopilot_disagreement(fence, self.autopilot)
+        if why is not None:
+            raise BackendError(f"{where}: {why}; refusing to fly")
         try:
             want = self.fence_parameters(fence)
         except BackendError as e:
             raise BackendError(f"{where}: {e}") from None
         have = self.read_parameters(list(want))
         missing = sorted(set(want) - set(have))
+        if "FENCE_OPTIONS" in missing:
+            raise BackendError(f"{where}: the vehicle has no FENCE_OPTIONS parameter, so it requires a position "
+                               f"inside every one of the fence's {fence.inclusion_count} inclusion zones where "
+                               f"AeroDaaS accepts one inside any (ArduPilot without AC_Fence's INCLUSION_UNION "
+                               f"option); refusing to fly (draw the allowed area as one inclusion polygon, or set "
+                               f"mavlink.fence.upload false to fly on our gate alone)")
         if missing:
             raise BackendError(f"{where}: the {self.autopilot} vehicle has no parameter {', '.join(missing)} "
                                f"(firmware without a geofence?); refusing to fly (set mavlink.fence.upload false "

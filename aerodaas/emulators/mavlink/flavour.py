@@ -17,8 +17,9 @@ ARDUPILOT_PARAMS: dict[str, float] = {
     "RTL_ALT": 1500.0, "LAND_SPEED": 50.0, "WPNAV_SPEED": 1000.0, "WPNAV_SPEED_UP": 250.0,
     "WPNAV_SPEED_DN": 150.0, "WPNAV_ACCEL": 250.0, "WPNAV_RADIUS": 200.0, "DISARM_DELAY": 10.0,
     # AC_Fence (libraries/AC_Fence/AC_Fence.cpp): disabled, all three types, 100 m, RTL or land; FENCE_RADIUS 150 m
-    # is SITL's copter.parm (the library default is 300)
+    # is SITL's copter.parm (the library default is 300); FENCE_OPTIONS 0 (inclusion zones intersect)
     "FENCE_ENABLE": 0.0, "FENCE_TYPE": 7.0, "FENCE_ALT_MAX": 100.0, "FENCE_ACTION": 1.0, "FENCE_RADIUS": 150.0,
+    "FENCE_OPTIONS": 0.0,
 }
 #: PX4 parameters (name -> default, SI units). MPC_*: src/modules/mc_pos_control/multicopter_*_params.c
 #: (MPC_XY_CRUISE 5 m/s, MPC_XY_VEL_MAX 12 m/s, MPC_Z_VEL_MAX_UP 3 m/s, MPC_Z_VEL_MAX_DN 1.5 m/s,
