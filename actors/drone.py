@@ -155,6 +155,7 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgr
         alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
         self.takeoff_altitude = alt
         b.arm()
+        self._check_vehicle_home()
         self.fsm.transition(S.ARMED, b.t)
         b.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)

@@ -1,5 +1,7 @@
-"""Whether the vehicle flies towards its waypoint (:class:`ProgressWatch`): a target the autopilot refuses or does
-not progress towards becomes an event, and if that persists, the waypoint ends as not reached.
+"""Whether the vehicle flies where the safety gate thinks it does: in the gate's frame (its home, checked once it
+has armed: :meth:`NavigationProgress._check_vehicle_home`) and towards its waypoint (:class:`ProgressWatch`: a
+target the autopilot refuses or does not progress towards becomes an event, and if that persists, the waypoint ends
+as not reached).
 
 Why: an autopilot may drop a position target without a word. ArduCopter in GUIDED ignores a
 SET_POSITION_TARGET_GLOBAL_INT whose destination its own fence refuses (``ModeGuided::set_destination`` returns false
@@ -14,6 +16,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Literal
+
+from aerodaas.backends import BackendError
+from aerodaas.navigation.safety import SafetyViolation
 
 
 @dataclass
@@ -73,6 +78,21 @@ class ProgressWatch:
 class NavigationProgress:
     """Part of :class:`~aerodaas.actors.drone.DroneComponent`: the :class:`ProgressWatch` of the waypoint being flown
     (``_progress``) and the waypoints given up for lack of progress (``not_reached``; never a success)."""
+
+    def _check_vehicle_home(self) -> None:
+        """After arming (an autopilot's home is where it armed): the vehicle's frame must be the gate's
+        (:meth:`~aerodaas.navigation.safety.SafetyGate.check_vehicle_home`, ``safety.home_tolerance_m``); else a
+        ``vehicle_home_refused`` event, disarm, and BackendError, before any take-off."""
+        b = self.backend
+        try:
+            self.gate.check_vehicle_home(b.home, b.position)
+        except SafetyViolation as e:
+            self._event("vehicle_home_refused", reason=e.reason, vehicle_home=[b.home.lat, b.home.lon])
+            try:
+                b.disarm()
+            except BackendError as de:
+                self._event("backend_error", error=str(de))
+            raise BackendError(f"robot {self.cfg.id!r}: refusing to take off: {e.reason}") from None
 
     def _init_progress(self) -> None:
         self._progress: ProgressWatch | None = None

@@ -5,6 +5,9 @@ Everything the tests judge is read from the firmware with raw pymavlink on the f
 
 * ``read-fence``: the fence items (MISSION_REQUEST_LIST with ``mission_type`` FENCE, MISSION_REQUEST_INT per item)
   and the fence parameters (PARAM_REQUEST_READ), written as JSON.
+* ``clear-union``: a second ground station sets ArduPilot's FENCE_OPTIONS back to 0 once the vehicle holds at a
+  point (:func:`clear_union`); ``px4-intersects``: how PX4 reads two overlapping inclusion circles, asked with
+  DO_REPOSITION (:func:`px4_intersects`).
 * ``kill-and-push``: wait until the vehicle flies the app's mission (armed, GUIDED/OFFBOARD, above 1 m), SIGKILL the
   ``aerodaas run`` process tree (the driver, Ray and its workers: our gate is gone), read the fence as above, then
   act as a runaway client would (a companion computer stuck on its last command, a second ground station): stream a
@@ -31,7 +34,7 @@ from aerodaas.app.models import GeoPoint  # noqa: E402
 from aerodaas.navigation.geo import geodetic_to_enu  # noqa: E402
 
 FENCE_PARAMS = {"ardupilot": ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN",
-                              "FENCE_RADIUS"],
+                              "FENCE_RADIUS", "FENCE_OPTIONS"],
                 "px4": ["GF_ACTION", "GF_MAX_VER_DIST", "GF_MAX_HOR_DIST", "RTL_RETURN_ALT", "RTL_DESCEND_ALT"]}
 MAV_MISSION_TYPE_FENCE = 1
 
@@ -287,6 +290,89 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
     return 0
 
 
+def clear_union(conn: str, out: str, home: GeoPoint, x: float, y: float, timeout_s: float = 300.0) -> int:
+    """A second ground station changes the vehicle's fence rule under the run: once the vehicle holds at ENU
+    (``x``, ``y``) (within 0.6 m, above 1 m, armed) with FENCE_OPTIONS 2 (the union our backend set), set
+    FENCE_OPTIONS 0 (ArduPilot's default: inclusion zones intersect), then follow the vehicle until it disarms."""
+    w = Watcher(conn, home)
+    w.wait_vehicle(120)
+    s, c = w.sysid, w.compid
+    end = time.monotonic() + timeout_s
+    cleared = None
+    while time.monotonic() < end and not (w.was_armed and not w.armed):
+        w.pump()
+        if cleared is None and w.armed and w.samples and w.samples[-1][3] > 1.0 \
+                and math.hypot(w.samples[-1][1] - x, w.samples[-1][2] - y) < 0.6:
+            before = w._ask(lambda: w.m.mav.param_request_read_send(s, c, b"FENCE_OPTIONS", -1),
+                            lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == "FENCE_OPTIONS").param_value
+            if before != 2:
+                continue  # our backend has not set it (yet)
+            after = w._ask(lambda: w.m.mav.param_set_send(s, c, b"FENCE_OPTIONS", 0.0, 2),
+                           lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == "FENCE_OPTIONS").param_value
+            cleared = {"t": w.t_boot, "before": before, "after": after, "at": w.samples[-1]}
+    Path(out).write_text(json.dumps({"cleared": cleared, "samples": w.samples, "modes": w.modes,
+                                     "fence_status": w.fence_status, "texts": w.texts, "armed_at_end": w.armed}))
+    return 0
+
+
+#: the overlapping inclusion circles of the fence tests: (east, north, radius) metres from home; home is in both
+OVERLAP_CIRCLES = [(-6.0, 0.0, 10.0), (6.0, 0.0, 10.0)]
+
+
+def px4_intersects(conn: str, out: str, home: GeoPoint, timeout_s: float = 300.0) -> int:
+    """How PX4 reads two overlapping inclusion circles (:data:`OVERLAP_CIRCLES`), asked as a ground station would:
+    upload them as its fence, GF_ACTION 2 (Hold), arm, take off, then DO_REPOSITION to (2, 0) (inside both), then to
+    (-12, 0) (inside the first only), 10 s of the firmware's time each. Records the times of the commands and every
+    position."""
+    import struct
+
+    from aerodaas.navigation.geo import enu_to_geodetic
+
+    w = Watcher(conn, home)
+    w.wait_vehicle(120)
+    s, c = w.sysid, w.compid
+    f = struct.unpack("<f", struct.pack("<i", 2))[0]  # GF_ACTION is INT32, bytewise in the float field
+    w._ask(lambda: w.m.mav.param_set_send(s, c, b"GF_ACTION", f, 6),
+           lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == "GF_ACTION")
+    items = []
+    for e, n, r in OVERLAP_CIRCLES:
+        g = enu_to_geodetic(e, n, 0.0, home)
+        items.append((5003, r, int(round(g.lat * 1e7)), int(round(g.lon * 1e7))))
+    w.m.mav.mission_count_send(s, c, len(items), MAV_MISSION_TYPE_FENCE)
+    acked = None
+    end = time.monotonic() + 30
+    while acked is None and time.monotonic() < end:
+        msg = w.pump(0.2, want=("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"))
+        if msg is None or msg.mission_type != MAV_MISSION_TYPE_FENCE:
+            continue
+        if msg.get_type() == "MISSION_ACK":
+            acked = msg.type
+            break
+        cmd, r, xi, yi = items[msg.seq]
+        w.m.mav.mission_item_int_send(s, c, msg.seq, 0, cmd, 0, 1, r, 0, 0, 0, xi, yi, 0, MAV_MISSION_TYPE_FENCE)
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end and not (w.armed and w.samples and w.samples[-1][3] > 2.0):
+        if not w.armed:
+            w.m.mav.command_long_send(s, c, 400, 0, 1, 0, 0, 0, 0, 0, 0)  # arm
+        elif w.mode != "TAKEOFF":
+            w.m.mav.command_long_send(s, c, 22, 0, 0, 0, 0, math.nan, math.nan, math.nan, home.alt + 5.0)
+        stop = time.monotonic() + 1.0
+        while time.monotonic() < stop:
+            w.pump()
+    commands = []
+    for e, n in ((2.0, 0.0), (-12.0, 0.0)):
+        g = enu_to_geodetic(e, n, 0.0, home)
+        w.m.mav.command_long_send(s, c, 192, 0, -1, 1, 0, math.nan, g.lat, g.lon, home.alt + 5.0)  # DO_REPOSITION
+        t0 = w.t_boot
+        commands.append({"target": [e, n], "t": t0})
+        while time.monotonic() < end and w.t_boot < t0 + 10.0:
+            w.pump()
+    w.m.mav.command_long_send(s, c, 21, 0, 0, 0, 0, 0, 0, 0, 0)  # land where it is
+    Path(out).write_text(json.dumps({"fence_ack": acked, "commands": commands, "samples": w.samples,
+                                     "modes": w.modes, "texts": w.texts}))
+    return 0
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -308,6 +394,10 @@ if __name__ == "__main__":
     h = GeoPoint(**FARM_HOME)
     if sys.argv[1] == "read-fence":
         sys.exit(read_fence(sys.argv[2], sys.argv[3], h))
+    if sys.argv[1] == "clear-union":
+        sys.exit(clear_union(sys.argv[2], sys.argv[3], h, float(sys.argv[4]), float(sys.argv[5])))
+    if sys.argv[1] == "px4-intersects":
+        sys.exit(px4_intersects(sys.argv[2], sys.argv[3], h))
     if sys.argv[1] == "kill-and-push":
         # optional 5th argument: the push's wall seconds (default 25: ~125 s of firmware time at 5x)
         sys.exit(kill_and_push(sys.argv[2], int(sys.argv[3]), sys.argv[4], h,

@@ -323,3 +323,31 @@ def test_a_home_circle_smaller_than_max_distance_is_refused():
     ok = _env("ardupilot", FENCE_ONE, home_radius_m=80)
     ok["robots"][0]["safety"]["max_distance"] = 80.0
     parse_environment_config(ok)
+
+
+def test_a_fence_the_vehicle_clears_after_storing_it_is_uploaded_again(vehicle):
+    """ArduCopter stores a fence of fewer than 3 "vertices" (two circles), then clears it 0.1 s later when the fence
+    before had more (its FENCE_TOTAL bookkeeping, AC_PolyFence_loader::update; seen on SITL). The read-back waits for
+    the firmware to act, finds the fence gone, uploads it again (fence_rewritten), and it stays."""
+    import threading
+
+    two = {"circles": [{"center": _ll(-6, 0), "radius": 10.0}, {"center": _ll(6, 0), "radius": 10.0}]}
+    emu, b, _ = vehicle("ardupilot", fence=two)
+    store, wiped = emu._store_typed, []
+
+    def wipe_once(link, msg, is_int):
+        store(link, msg, is_int)
+        if not wiped and len(emu.fence_items) == 2:
+            wiped.append(True)
+
+            def clear():
+                with emu._lock:
+                    emu.fence_items.clear()
+
+            threading.Timer(0.02, clear).start()
+
+    emu._store_typed = wipe_once
+    b.connect(timeout_s=10)
+    assert wiped and [h[0] for h in _held(emu)] == [5003, 5003]
+    ev = [e["event"] for e in b.drain_events()]
+    assert "fence_rewritten" in ev and "fence_uploaded" in ev, ev

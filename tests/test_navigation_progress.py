@@ -113,3 +113,61 @@ def test_a_target_the_autopilot_drops_is_stalled_then_abandoned(ray_session, run
     assert [v["id"] for v in rep["visited_waypoints"]] == ["a", "c"]
     assert [h["waypoint"] for h in rep["not_reached"]] == ["b"]
     assert "not reached: b: no progress towards it for 10 s" in format_summary(res)
+
+
+def test_a_vehicle_away_from_the_robots_home_is_refused_by_the_gate():
+    """The gate places the fence and relative waypoints from robots[].home; a vehicle whose own home (or position)
+    is farther than safety.home_tolerance_m from it flies every point that far from where the gate thinks."""
+    from aerodaas.app.models import GeoPoint
+    from aerodaas.config import RobotConfig
+    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+
+    home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
+    cfg = RobotConfig(id="d", home=home)
+    gate = SafetyGate(cfg.safety, cfg.limits, home)
+    near, far = enu_to_geodetic(3.0, 0.0, 0.0, home), enu_to_geodetic(12.0, 0.0, 0.0, home)
+    gate.check_vehicle_home(GeoPoint(lat=near.lat, lon=near.lon, alt=488.0), (0.0, 0.0, 0.0))
+    with pytest.raises(SafetyViolation, match=r"its home 12\.0 m from the robot's home.*home_tolerance_m 5 m"):
+        gate.check_vehicle_home(GeoPoint(lat=far.lat, lon=far.lon, alt=488.0), (0.0, 0.0, 0.0))
+    with pytest.raises(SafetyViolation, match=r"its position 9\.0 m from"):  # home right, but it stands elsewhere
+        gate.check_vehicle_home(home, (0.0, 9.0, 0.0))
+
+
+@pytest.mark.e2e
+def test_a_vehicle_armed_away_from_the_robots_home_never_takes_off(ray_session, run_options, tmp_path):
+    """An emulated ArduCopter standing 12 m east of robots[].home (where it arms, its home): refused after arming,
+    disarmed, never in the air; the run says why."""
+    from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
+    from aerodaas.app.models import GeoPoint
+    from aerodaas.config import parse_environment_config
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.navigation.geo import enu_to_geodetic
+
+    home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
+    g = enu_to_geodetic(12.0, 0.0, 0.0, home)
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, home=GeoPoint(lat=g.lat, lon=g.lon, alt=488.0),
+                                 gps_lock_s=1.0)
+    addr = emu.start("tcp:127.0.0.1:0")
+    try:
+        robot = {"id": "d", "takeoff_altitude": 2.0, "home": home.model_dump(), "backend": "mavlink",
+                 "mavlink": {"connection": addr, "autopilot": "ardupilot"}}
+        env = Environment(parse_environment_config({"name": "home", "robots": [robot],
+                                                    "simulation": {"speedup": 5, "lockstep": False}}))
+        d = env.get_robot_by_id("d")
+        d.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=4, y=0, z=2)],
+                                  SchedulingType.ORDERED))
+        run_options.record = str(tmp_path / "home.mcap")
+        res = d.start_mission()
+        snap = emu.snapshot()
+    finally:
+        emu.stop()
+    from .sitl import events, odometry, read_recording
+
+    rep = res.robots["d"]
+    rec = read_recording(tmp_path / "home.mcap")
+    assert res.outcome != "success"
+    assert "refusing to take off: the vehicle reports its home 12.0 m from the robot's home" in str(rep.get("error")), rep
+    assert [e["event"] for e in events(rec, "d") if e["event"] in ("vehicle_home_refused", "takeoff")] == \
+        ["vehicle_home_refused"]
+    assert not snap["armed"] and max((o["position"][2] for o in odometry(rec, "d")), default=0.0) < 0.2

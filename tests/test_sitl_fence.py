@@ -59,23 +59,79 @@ def _want_items() -> list[list]:
         [[5004, 3.0, round(c[0] * 1e7), round(c[1] * 1e7)]]
 
 
-def _upload_session(autopilot: str, workdir: Path) -> dict:
+def _overlap_env(autopilot: str, workdir: Path, name: str, progress: dict | None = None) -> Path:
+    """The app's robot on this firmware with two overlapping inclusion circles as its geofence
+    (:data:`tests.sitl_fence.OVERLAP_CIRCLES`: home in both), the autopilot identified on connect (``auto``), 2 m/s."""
+    from .sitl_fence import OVERLAP_CIRCLES
+
+    cfg = sitl.mavlink_env(autopilot, sitl.FARM_ENV)
+    r = cfg["robots"][0]
+    r["mavlink"]["autopilot"] = "auto"
+    r["limits"]["max_speed"] = 2.0
+    r["safety"] = {"geofence": {"circles": [{"center": _ll(e, n), "radius": rad, "inclusion": True}
+                                            for e, n, rad in OVERLAP_CIRCLES]}}
+    if progress:
+        r["progress"] = progress
+    path = workdir / name
+    path.write_text(json.dumps(cfg))
+    return path
+
+
+def _run(env: Path, record: Path, waypoints: str) -> str:
+    return f"AERODAAS_SITL_WAYPOINTS={shlex.quote(waypoints)} " + sitl.aerodaas_run(OVERLAP_APP, env, record)
+
+
+OVERLAP_APP = Path(__file__).with_name("sitl_overlap_app.py")
+
+
+def _vehicle_session(autopilot: str, workdir: Path) -> dict:
+    """One firmware instance, one step after the other: ``aerodaas mission upload`` of :func:`_plan` and the fence
+    it leaves (read by a separate client); then the fence of two overlapping inclusion circles. ArduCopter: the
+    robot flies a waypoint in each circle only (``union``); then again with a second ground station setting
+    FENCE_OPTIONS back to 0 once the vehicle is up (``intersection``: the firmware drops the next target, our
+    progress watch must say so). PX4: the same robot is refused on connect (``refused``), and a raw client asks PX4
+    itself how it reads the two circles (``px4``)."""
     workdir.mkdir(parents=True, exist_ok=True)
     plan = _plan(workdir / "fenced.plan")
     py = shlex.quote(sys.executable)
+    mon = sitl.monitor_connection(autopilot)
     up = " ".join(shlex.quote(a) for a in [*sitl.AERODAAS, "mission", "upload", str(plan), "--connection",
                                             sitl.connection(autopilot), "--timeout", "60"])
-    read = f"{py} -m tests.sitl_fence read-fence {sitl.monitor_connection(autopilot)} " \
-           f"{shlex.quote(str(workdir / 'fence.json'))}"
-    sitl.run_in_namespace(autopilot, workdir, [up, read], timeout_s=400)
-    out = {k: sitl.step_result(workdir, k) for k in (0, 1)}
-    f = workdir / "fence.json"
-    return {"upload": out[0], "read": out[1], "fence": json.loads(f.read_text()) if f.exists() else {}}
+
+    def read(name: str) -> str:
+        return f"{py} -m tests.sitl_fence read-fence {mon} {shlex.quote(str(workdir / name))}"
+
+    steps = {"upload": up, "read": read("fence.json")}
+    if autopilot == "ardupilot":
+        # back to h (home) at the end: it lands there, and the next run's vehicle arms where robots[].home is
+        steps["union"] = _run(_overlap_env(autopilot, workdir, "union.json"), workdir / "union.mcap",
+                              "a:-12:0:2;b:12:0:2;h:0:0:0")
+        steps["union_fence"] = read("union_fence.json")
+        clear = (f"( {py} -m tests.sitl_fence clear-union {mon} {shlex.quote(str(workdir / 'cleared.json'))} 0 0 "
+                 f"> {shlex.quote(str(workdir / 'clear.log'))} 2>&1 & ) ; sleep 1; ")
+        steps["intersection"] = clear + _run(
+            _overlap_env(autopilot, workdir, "intersection.json", {"stall_s": 5.0, "abandon_s": 15.0}),
+            workdir / "intersection.mcap", "c:0:0:8;d:12:0:0")
+    else:
+        steps["refused"] = _run(_overlap_env(autopilot, workdir, "refused.json"), workdir / "refused.mcap",
+                                "a:-12:0:2")
+        steps["refused_fence"] = read("refused_fence.json")
+        steps["px4"] = f"{py} -m tests.sitl_fence px4-intersects {mon} {shlex.quote(str(workdir / 'px4.json'))}"
+    sitl.run_in_namespace(autopilot, workdir, list(steps.values()), timeout_s=900)
+    out = {name: sitl.step_result(workdir, k) for k, name in enumerate(steps)}
+    for name in ("fence", "union_fence", "refused_fence", "cleared", "px4"):
+        f = workdir / f"{name}.json"
+        out[name] = json.loads(f.read_text()) if f.exists() else {}
+    for name in ("union", "intersection", "refused"):
+        if name in steps:
+            out[f"{name}_rec"] = sitl._read_or_note(workdir / f"{name}.mcap")
+    out["workdir"] = workdir
+    return out
 
 
 @pytest.fixture(scope="module")
 def ardupilot_upload(tmp_path_factory):
-    return _upload_session("ardupilot", tmp_path_factory.mktemp("fence_ap_upload"))
+    return _vehicle_session("ardupilot", tmp_path_factory.mktemp("fence_ap_vehicle"))
 
 
 def test_ardupilot_mission_upload_leaves_the_plan_fence_on_the_vehicle(ardupilot_upload):
@@ -95,7 +151,7 @@ def test_ardupilot_mission_upload_leaves_the_plan_fence_on_the_vehicle(ardupilot
 
 @pytest.fixture(scope="module")
 def px4_upload(tmp_path_factory):
-    return _upload_session("px4", tmp_path_factory.mktemp("fence_px4_upload"))
+    return _vehicle_session("px4", tmp_path_factory.mktemp("fence_px4_vehicle"))
 
 
 def test_px4_mission_upload_leaves_the_plan_fence_on_the_vehicle(px4_upload):
@@ -107,6 +163,89 @@ def test_px4_mission_upload_leaves_the_plan_fence_on_the_vehicle(px4_upload):
     assert got == _want_items()
     p = fence["params"]
     assert p["GF_ACTION"] == 3 and p["GF_MAX_VER_DIST"] == 120.0, p
+
+
+# ------------------------------------------------------------------------- overlapping inclusion zones (issue 40)
+_events = sitl.events
+
+
+def _near(rec: dict, e: float, n: float) -> float:
+    """The closest the vehicle came (m, horizontally) to ENU (e, n), from the recorded odometry (the firmware's
+    GLOBAL_POSITION_INT)."""
+    return min((math.hypot(o["position"][0] - e, o["position"][1] - n) for o in sitl.odometry(rec)),
+               default=math.inf)
+
+
+def test_ardupilot_flies_the_union_of_overlapping_inclusion_zones(ardupilot_upload):
+    """Two overlapping inclusion circles (home in both), a waypoint in each one only: our gate allows them (the
+    union). The backend set FENCE_OPTIONS bit 1 with the fence, so ArduCopter allows them too: both are flown and
+    held, no fence breach, no failsafe, the mission a success. Without the bit ArduCopter silently dropped such a
+    target (issue 40; next test)."""
+    rc, text = ardupilot_upload["union"]
+    rec = ardupilot_upload["union_rec"]
+    ev = _events(rec)
+    assert rc == 0, text[-3000:]
+    assert [e["waypoint"] for e in ev if e["event"] == "waypoint_done"] == ["a", "b", "h"], [e["event"] for e in ev]
+    assert not [e for e in ev if e["event"] in ("autopilot_failsafe", "navigation_stalled", "waypoint_abandoned")]
+    assert _near(rec, -12.0, 0.0) < 0.3 and _near(rec, 12.0, 0.0) < 0.3
+    # ArduCopter cleared the two circles 0.1 s after storing them (FENCE_TOTAL 7 of the plan's fence -> 0:
+    # AC_PolyFence_loader::update); the backend saw it on its settled read-back and wrote them again
+    assert "fence_rewritten" in [e["event"] for e in ev]
+    fence = ardupilot_upload["union_fence"]  # read by a separate client after the run: the fence stays on
+    assert [[i[0], round(i[2], 3)] for i in fence["items"]] == [[5003, 10.0], [5003, 10.0]], fence
+    p = fence["params"]
+    assert (p["FENCE_ENABLE"], p["FENCE_TYPE"], p["FENCE_OPTIONS"]) == (1, 5, 2), p
+
+
+def test_ardupilot_target_dropped_by_its_fence_is_stalled_then_abandoned(ardupilot_upload):
+    """The same fence, but a second ground station sets FENCE_OPTIONS back to 0 (intersection) once the vehicle is
+    up. Waypoint c (home, in both circles) is flown; d (in the second circle only) is then a target ArduCopter drops
+    without a word (it stays at c). Our progress watch makes it an event after progress.stall_s (5 s) and gives the
+    waypoint up after abandon_s (15 s): outcome incomplete, the summary says why."""
+    rc, text = ardupilot_upload["intersection"]
+    cleared = ardupilot_upload["cleared"]
+    assert cleared.get("cleared") and cleared["cleared"]["before"] == 2 and cleared["cleared"]["after"] == 0, \
+        (cleared.get("cleared"), text[-2000:])
+    rec = ardupilot_upload["intersection_rec"]
+    ev = _events(rec)
+    assert rc == 1 and "mission outcome: incomplete" in text, text[-3000:]
+    d = [e for e in ev if e.get("waypoint") == "d"]
+    assert [e["event"] for e in d][:3] == ["navigate", "navigation_stalled", "waypoint_abandoned"], \
+        [e["event"] for e in ev]
+    assert d[1]["since_progress_s"] >= 5.0 and d[2]["since_progress_s"] >= 15.0 and d[2]["distance_m"] > 10.0, d
+    assert "not reached: d: no progress towards it for 15 s" in text, text[-2000:]
+    assert _near(rec, 12.0, 0.0) > 10.0  # the firmware never flew towards d
+    assert not cleared["armed_at_end"], cleared["modes"]
+
+
+def test_px4_refuses_overlapping_inclusion_zones_before_flight(px4_upload):
+    """The same robot on PX4 (identified on connect): refused before anything is uploaded or armed. PX4's fence is
+    still the one ``mission upload`` left (read by a separate client), and the vehicle never armed."""
+    rc, text = px4_upload["refused"]
+    assert rc not in (0, None) and "2 inclusion zones: PX4 requires a position inside every inclusion zone" in text, \
+        text[-3000:]
+    assert px4_upload["refused_fence"]["items"] == px4_upload["fence"]["items"]
+    assert not [e for e in _events(px4_upload["refused_rec"]) if e["event"] == "takeoff"]
+
+
+def test_px4_itself_reads_overlapping_inclusion_zones_as_their_intersection(px4_upload):
+    """Why the robot above is refused, asked of PX4 itself: with the two circles as its fence (GF_ACTION Hold),
+    DO_REPOSITION to a point inside both is flown, one to a point inside the first circle only is acknowledged and
+    ignored (navigator: "Reposition is outside geofence"). Our gate would accept both."""
+    obs = px4_upload["px4"]
+    assert obs.get("fence_ack") == 0 and len(obs.get("commands", [])) == 2, (obs.get("fence_ack"), obs.get("modes"))
+    both, one = obs["commands"]
+
+    def between(a: float, b: float) -> list:
+        return [s for s in obs["samples"] if a <= s[0] <= b]
+
+    moved_to_both = min(math.hypot(s[1] - 2.0, s[2]) for s in between(both["t"], one["t"]))
+    assert moved_to_both < 1.5, moved_to_both
+    at = between(one["t"], one["t"] + 0.5)[0]
+    drift = max(math.hypot(s[1] - at[1], s[2] - at[2]) for s in between(one["t"], one["t"] + 10.0))
+    assert drift < 1.5, drift  # it stayed where it was: the target in one circle only was dropped
+    log = (px4_upload["workdir"] / "fw0.log").read_text(errors="replace")
+    assert "Reposition is outside geofence" in log
 
 
 # ------------------------------------------------------------------------------------------- the kill test

@@ -73,6 +73,10 @@ class SafetyConfig(_Cfg):
                                      "check and the vehicle acting on a command (link + autopilot); the stopping "
                                      "envelope of every command includes it")
     on_violation: Literal["reject", "clamp"] = "reject"
+    home_tolerance_m: float = Field(default=5.0, ge=0, le=1000.0, description="metres: how far a vehicle with its "
+                                    "own home (an autopilot) may be from robots[].home when it arms; farther, the "
+                                    "drone refuses to take off (the gate places the geofence, max_distance and "
+                                    "relative waypoints from robots[].home, the vehicle flies from its own)")
     low_battery_rtl_pct: float = Field(default=20.0, ge=0, le=100)
     critical_battery_pct: float = Field(default=5.0, ge=0, le=100)
 

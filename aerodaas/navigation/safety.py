@@ -229,6 +229,28 @@ class SafetyGate:
             return cmd.model_copy(update=upd)
         return cmd
 
+    def check_vehicle_home(self, vehicle_home: GeoPoint, position: Sequence[float]) -> None:
+        """The gate judges in the robot's frame (ENU metres about ``robots[].home``: the geofence, ``max_distance``,
+        relative waypoints); a vehicle with a home of its own (an autopilot sets it where it arms) reports and flies
+        positions about that one. Raise :class:`SafetyViolation` (field ``home``) when the vehicle's home, or where
+        it stands (``position``, ENU metres about ``vehicle_home``), is more than ``safety.home_tolerance_m``
+        metres from the robot's home: the gate and the vehicle would place every point that far apart. Distances
+        are horizontal (pymap3d ENU)."""
+        from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
+
+        here = enu_to_geodetic(float(position[0]), float(position[1]), 0.0, vehicle_home)
+        tol = float(getattr(self.cfg, "home_tolerance_m", 5.0))
+        for what, g in (("its home", vehicle_home), ("its position", here)):
+            e, n, _ = geodetic_to_enu(g.lat, g.lon, self.home.alt, self.home)
+            off = math.hypot(float(e), float(n))
+            if off > tol:
+                self.rejected += 1
+                raise SafetyViolation("home", "home", [round(g.lat, 7), round(g.lon, 7)],
+                                      f"the vehicle reports {what} {off:.1f} m from the robot's home "
+                                      f"({self.home.lat}, {self.home.lon}), beyond safety.home_tolerance_m "
+                                      f"{tol:g} m: the geofence, max_distance and relative waypoints are placed "
+                                      f"from robots[].home; set it to where the vehicle is")
+
     def check_takeoff(self, altitude: float) -> float:
         """The take-off target altitude (m above home) through the same limits: above the effective ``max_altitude``
         (the minimum of ``limits.max_altitude`` and ``safety.max_altitude``) it is

@@ -48,6 +48,7 @@ backend lowers both to
 from __future__ import annotations
 
 import math
+import time
 from typing import Any, Iterable
 
 from aerodaas.backends.base import BackendError, CommandRefused
@@ -65,6 +66,9 @@ FENCE_ACTIONS = {"report": (0, 1), "rtl": (1, 3), "land": (2, 5), "hold": (4, 2)
 
 #: ArduPilot FENCE_OPTIONS bit (AC_Fence.h ``OPTIONS::INCLUSION_UNION``): inclusion zones allow their union
 AP_FENCE_INCLUSION_UNION = 2
+#: vehicle seconds to let the firmware act on an uploaded fence before it is read back (ArduPilot's loader runs at
+#: 10 Hz: ``AC_PolyFence_loader::update``, see :meth:`FenceMixin._settled_fence`)
+FENCE_SETTLE_S = 1.0
 #: the fence parameters of integer type (PX4 takes GF_ACTION only as INT32; ArduPilot converts REAL32 itself)
 _INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_OPTIONS"}
 #: PX4's return altitudes (metres above home), lowered under the altitude fence; PX4 keeps RTL_DESCEND_ALT >= 2 m
@@ -311,7 +315,7 @@ class FenceMixin:
         for name, (value, integer) in want.items():
             if not math.isclose(have[name], value, rel_tol=1e-6, abs_tol=1e-4):
                 self.set_parameter(name, value, integer=integer)
-        got_items = self.download_items(FENCE)
+        got_items = self._settled_fence(wire)
         why = compare_items(wire, got_items, compare_z=False)
         if why is not None:
             raise BackendError(f"{where}: the fence read back differs from the one uploaded ({why}); refusing to fly")
@@ -326,6 +330,33 @@ class FenceMixin:
         self._event("fence_uploaded", items=len(wire), polygons=len(fence.polygons), circles=len(fence.circles),
                     action=self.cfg.fence.action, **{k: round(v, 3) for k, v in got.items()})
         return self.fence_applied
+
+    def _settled_fence(self, wire: list[Wire]) -> list[Wire]:
+        """The vehicle's fence items once the firmware has acted on the upload of ``wire``
+        (:data:`FENCE_SETTLE_S` vehicle seconds later, at most 5 wall seconds). ArduPilot wipes a fence it has just
+        stored when that fence has fewer than 3 "vertices" (circles count one each, polygons their vertices) and the
+        one before had more: ``write_fence`` sets ``FENCE_TOTAL`` to 0 for such a fence (``new_total``) and, within
+        0.1 s, ``update`` takes the change to 0 for an old ground station clearing its fence and formats the
+        storage (``AC_PolyFence_loader.cpp``, ``AC_POLYFENCE_FENCE_POINT_PROTOCOL_SUPPORT``). Seen on ArduCopter SITL
+        (4.7.0-dev): two inclusion circles after a polygon and a circle read back right after the upload, and 0 items
+        0.1 s later, for the whole flight. So the read-back waits, and a fence found wiped is uploaded once more
+        (``FENCE_TOTAL`` is 0 by then and stays so: no second wipe), recorded as ``fence_rewritten``."""
+        got = self._after_vehicle_s(FENCE_SETTLE_S, lambda: self.download_items(FENCE))
+        if wire and not got:
+            self._event("fence_rewritten", items=len(wire), reason="the vehicle cleared the fence after storing it "
+                        "(ArduPilot FENCE_TOTAL bookkeeping)")
+            self.upload_items(FENCE, wire)
+            got = self._after_vehicle_s(FENCE_SETTLE_S, lambda: self.download_items(FENCE))
+        return got
+
+    def _after_vehicle_s(self, seconds: float, then):
+        """``then()`` once the vehicle's clock has run ``seconds`` further (at most 5 wall seconds: a vehicle whose
+        clock does not advance is not waited for longer)."""
+        t0, end = self.t, time.monotonic() + 5.0
+        while self.t - t0 < seconds and time.monotonic() < end:
+            self._check_link("fence read-back")
+            time.sleep(0.02)
+        return then()
 
     def upload_rally(self, points: list[tuple[float, float, float]]) -> int:
         """Upload rally points ``(lat, lon, alt m above home)`` (``MAV_MISSION_TYPE_RALLY``) and read them back.
