@@ -123,6 +123,7 @@ class ActorAssembly:
                     world = World(w.ground, w.targets)  # one texture for every camera of this actor
                 cam = CameraComponent(plane, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
                                       self.recorder, plane.epoch_ns)
+                cam.on_event = drone.record_event
                 drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
                 self.comps[c.cid] = cam
             for ps in r.plugin_sensors:
@@ -308,6 +309,9 @@ class ActorAssembly:
             except Exception as e:  # reported, never blocks closing the recording
                 self.plane.report_error("analytics_scheduler", e)
         self.plane.close()
+        for d in self.drones:
+            for cam in d.cameras:
+                cam["comp"].close()
         for c in self.comps.values():
             close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None
             if callable(close):

@@ -1,11 +1,12 @@
 """CameraComponent: a camera sensor inside its drone's actor (rendered by the simulator, the vehicle's own stream,
-or a recorded MCAP channel); frames are published by reference to every reader in the actor."""
+a recorded MCAP channel, or a video stream: RTSP, RTP/UDP, MPEG-TS/UDP, V4L2, file); frames are published by
+reference to every reader in the actor."""
 from __future__ import annotations
 
 import threading
 import time
 from collections import deque
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -13,6 +14,7 @@ from aerodaas.runtime.messages import FrameMsg
 from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
 
 from aerodaas.actors.dataplane import Cascade, DataPlane
+from aerodaas.video.pose import pose_at
 
 
 class CameraComponent:
@@ -41,6 +43,7 @@ class CameraComponent:
         self.ticks = 0
         self.frames = 0
         self.dropped_at_camera = 0
+        self.not_recorded = 0  # frames the recorder refused (its queue full)
         #: the last frames' render time and capture dispatch delay (clock tick -> render start on the pool), ms
         self.render_ms: deque[float] = deque(maxlen=4096)
         self.dispatch_ms: deque[float] = deque(maxlen=4096)
@@ -48,6 +51,23 @@ class CameraComponent:
         self._busy = threading.Lock()
         self._last_source_t: float | None = None
         self.replay = None
+        #: the robot's event sink (DroneComponent.record_event), set by the actor's assembly: video_lost/restored
+        self.on_event: Callable[..., None] | None = None
+        #: (run time s, position ENU m, yaw deg) at each clock tick: the pose a stream frame is tagged with
+        self._poses: deque[tuple[float, tuple, float]] = deque(maxlen=256)
+        self.stream = None
+        self.latency_ms: deque[float] = deque(maxlen=4096)
+        if self.source not in ("sim", "backend", "mcap"):
+            from aerodaas.video import StreamReader, parse_stream_source
+
+            spec = parse_stream_source(self.source, props.get("transport"), props.get("codec"))
+            self.stream = StreamReader(spec, self.k.width, self.k.height,
+                                       stall_timeout_s=float(props.get("stall_timeout_s") or 2.0),
+                                       name=f"{robot_id}/{sensor_id}").start()
+            self.stream.wait_first(float(props.get("first_frame_timeout_s") or 10.0))  # VideoSourceError names it
+            # polled at twice the stream's nominal rate: a frame waits at most half an interval for its tick, and
+            # a tick without a new frame is not a loss (counted in dropped_at_camera like any tick without a frame)
+            self.fps = 2.0 * self.fps
         if self.source == "mcap":
             from aerodaas.backends.replay import McapCameraReplay
 
@@ -56,6 +76,7 @@ class CameraComponent:
     def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
         """Clock thread: a frame is due. Submits the capture unless the previous one is still running."""
         self.ticks += 1
+        self._poses.append((t, tuple(position), float(yaw)))
         if not self._busy.acquire(blocking=False):
             self.dropped_at_camera += 1
             return False
@@ -81,6 +102,7 @@ class CameraComponent:
     def capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None = None) -> np.ndarray | None:
         """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
         new frame)."""
+        self._poses.append((t, tuple(position), float(yaw)))
         msg = self._produce(position, yaw, t, seq)
         if msg is None:
             return None
@@ -95,7 +117,15 @@ class CameraComponent:
         t0 = time.perf_counter()
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         truth: list = []
-        if self.source in ("backend", "mcap"):
+        timing = None
+        if self.stream is not None:
+            got = self._from_stream(t)
+            if got is None:
+                self.dropped_at_camera += 1
+                return None
+            frame, pose, timing = got
+            t = timing["capture_t"]
+        elif self.source in ("backend", "mcap"):
             got = self.backend.camera_frame() if self.replay is None else self.replay.frame_at(t)
             if got is None or got[1] == self._last_source_t:  # no new frame since the last capture
                 self.dropped_at_camera += 1
@@ -110,16 +140,54 @@ class CameraComponent:
         self.render_ms.append((time.perf_counter() - t0) * 1e3)
         self.frames += 1
         meta = FrameMeta(robot_id=self.robot_id, sensor_id=self.sensor_id, seq=seq, capture_time=t, wall_time=wall,
-                         pose=pose, intrinsics=self.k)
+                         pose=pose, intrinsics=self.k,
+                         arrival_time=timing["arrival_t"] if timing else None,
+                         pose_time=timing["pose_t"] if timing else None)
         self.latest = (frame, meta)
         if self.recorder is not None:  # by reference; encoded by the recorder's thread
             t_ns = self.epoch_ns + int(t * 1e9)
-            self.recorder.image(self.topic, t_ns, frame, f"{self.robot_id}/{self.sensor_id}")
+            if not self.recorder.image(self.topic, t_ns, frame, f"{self.robot_id}/{self.sensor_id}"):
+                self.not_recorded += 1  # the recorder's bounded queue was full: counted, never silent
             if truth:
                 self.recorder.json("/world/targets", t_ns, {"robot": self.robot_id, "seq": seq, "t": t,
                                                             "targets": truth}, "aerodaas.GroundTruth")
+            if timing:  # when the frame was captured and arrived, and the pose it carries
+                self.recorder.json(f"{self.topic}/timing", t_ns, {"robot": self.robot_id, "sensor": self.sensor_id,
+                                                                 "seq": seq, **timing}, "aerodaas.FrameTiming")
         return FrameMsg(robot=self.robot_id, sim_t=t, data=frame, meta=meta,
                         trace={"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0, "dispatch_ms": dispatch_ms})
+
+    def _from_stream(self, t: float) -> tuple[np.ndarray, FramePose, dict] | None:
+        """The stream's newest frame not delivered before, its pose at capture and its timing (run-clock s), or
+        None. Its capture time on the run clock is the tick time ``t`` minus the frame's age (the run clock of a
+        stream camera runs at wall rate: speedup 1, checked before Ray)."""
+        for ev in self.stream.drain_events():
+            if self.on_event is not None:
+                self.on_event(ev.kind, sensor=self.sensor_id, **ev.fields)
+        f = self.stream.take()
+        if f is None:
+            return None
+        now = time.monotonic()
+        capture_t = t - max(0.0, now - f.capture_mono)
+        arrival_t = t - max(0.0, now - f.arrival_mono)
+        position, yaw, pose_t = pose_at(list(self._poses), capture_t)
+        pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
+        self.latency_ms.append((now - f.capture_mono) * 1e3)
+        return f.image, pose, {"capture_t": capture_t, "arrival_t": arrival_t, "pose_t": pose_t,
+                               "stream_seq": f.seq, "age_ms": round((now - f.capture_mono) * 1e3, 2)}
+
+    def close(self) -> None:
+        """Stop the video stream's reader (if any) and record its final counters on ``<topic>/video_stats``
+        (``aerodaas.VideoStats``: decoded = taken + overwritten + waiting; taken - not_recorded frames are in the
+        recording)."""
+        if self.stream is None:
+            return
+        self.stream.close()
+        if self.recorder is not None:
+            t = self._poses[-1][0] if self._poses else 0.0
+            self.recorder.json(f"{self.topic}/video_stats", self.epoch_ns + int(t * 1e9),
+                               {"robot": self.robot_id, "sensor": self.sensor_id, **self._video_stats()},
+                               "aerodaas.VideoStats")
 
     def get_latest(self) -> tuple | None:
         """(frame, FrameMeta) of the newest frame, for pull-style access."""
@@ -132,4 +200,12 @@ class CameraComponent:
                 "render_ms_median": float(np.median(r)),
                 "dispatch_ms_median": float(np.median(q)), "dispatch_ms_p99": float(np.percentile(q, 99)),
                 "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,
-                "outlets": self.plane.outlet_stats(self.cid), "subscribers": len(self.plane.routes.get(self.cid, []))}
+                "outlets": self.plane.outlet_stats(self.cid), "subscribers": len(self.plane.routes.get(self.cid, [])),
+                **({"video": self._video_stats()} if self.stream is not None else {})}
+
+    def _video_stats(self) -> dict:
+        """The stream's counters (:meth:`aerodaas.video.StreamReader.stats`) and its capture-to-delivery latency
+        (ms: median, p99, max) — the glass-to-analytics time up to the camera's hand-off."""
+        lat = np.array(self.latency_ms or [0.0])
+        return {**self.stream.stats(), "not_recorded": self.not_recorded, "latency_ms_median": float(np.median(lat)),
+                "latency_ms_p99": float(np.percentile(lat, 99)), "latency_ms_max": float(lat.max())}

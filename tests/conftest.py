@@ -19,8 +19,9 @@ needs_data = pytest.mark.skipif(not (DATA_DIR / "imagery").is_dir() or not (MODE
                                 reason=f"shared data not found at {DATA_DIR} (set AERODAAS_DATA_DIR / AERODAAS_MODEL_DIR)")
 
 
-#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters and fault runs
-SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults")
+#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs and
+#: missions flown on a real-time video stream
+SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video")
 
 
 #: the development tier's longest files, longest first (worker-seconds each, 3 workers on the 2-core CI kind of

@@ -339,7 +339,8 @@ def test_mcap_camera_replay_frames_and_times(tmp_path):
 
 def test_camera_source_config(tmp_path, monkeypatch):
     assert SensorConfig(id="c", type="camera").properties["source"] == "sim"
-    with pytest.raises(ValueError, match=r"properties.source must be one of \['sim', 'backend', 'mcap'\], got 'usb'"):
+    with pytest.raises(ValueError, match=r"properties.source: unknown camera source 'usb': one of \['sim', 'backend', "
+                                         r"'mcap'\], an rtsp://"):
         SensorConfig(id="c", type="camera", properties={"source": "usb"})
     with pytest.raises(ValueError, match="properties.mcap must name the MCAP recording"):
         SensorConfig(id="c", type="camera", properties={"source": "mcap"})

@@ -274,6 +274,10 @@ class FrameMeta(_Model):
     wall_time: float  # time.time() at capture, s; used for latency accounting
     pose: FramePose
     intrinsics: CameraIntrinsics
+    #: a video stream's frame: when it arrived (run clock, s; capture_time is its capture), and the time the pose
+    #: is of (s; the capture time when odometry brackets it). None for rendered and replayed frames
+    arrival_time: float | None = None
+    pose_time: float | None = None
 
 
 class Detection(_Model):

@@ -331,9 +331,9 @@ class EnvironmentConfig(_Cfg):
                                  f"one of {sorted(SENSOR_PROPERTIES)} (a sensor plug-in samples a robot's state: "
                                  f"list it under robots[].sensors)")
             src = s.properties.get("source") if s.type == "camera" else None
-            if src == "backend":
-                raise ValueError(f"env_sensors.{j}.properties.source: 'backend' is for a robot's camera; an "
-                                 f"environment camera has no backend (use 'sim' or 'mcap')")
+            if src is not None and src not in ("sim", "mcap"):
+                raise ValueError(f"env_sensors.{j}.properties.source: {src!r} is for a robot's camera; an "
+                                 f"environment camera is 'sim' or 'mcap'")
             if src == "mcap" and "topic" not in s.properties:
                 raise ValueError(f"env_sensors.{j}.properties.topic: an environment camera replayed from an MCAP "
                                  f"recording needs the topic to read")
@@ -457,6 +457,13 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         if s.type == "camera" and s.properties.get("source") == "mcap":
             s.properties["mcap"] = str(cfg.resolve_path(s.properties["mcap"], f"{where}.properties.mcap"))
             s.properties.setdefault("topic", f"/{robot_id}/camera/{s.id}")
+        elif s.type == "camera" and s.properties.get("source") not in (None, "sim", "backend"):
+            from aerodaas.video.source import parse_stream_source
+
+            spec = parse_stream_source(s.properties["source"], s.properties.get("transport"),
+                                       s.properties.get("codec"))
+            if spec.kind in ("file", "sdp"):  # a file the camera reads: resolved like every other file, now
+                s.properties["source"] = str(cfg.resolve_path(spec.url, f"{where}.properties.source"))
     for i, r in enumerate(cfg.robots):
         if r.replay is not None:
             r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))

@@ -91,8 +91,10 @@ class SafetyConfig(_Cfg):
 
 
 #: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
-#: Tello's), or a recorded MCAP camera channel
+#: Tello's), or a recorded MCAP camera channel; any other source is a video stream or file (aerodaas.video.source)
 CAMERA_SOURCES = ("sim", "backend", "mcap")
+#: camera properties that only a video stream source uses
+STREAM_PROPERTIES = ("transport", "codec", "first_frame_timeout_s", "stall_timeout_s")
 
 
 def _provides_camera(backend: str) -> bool:
@@ -126,9 +128,12 @@ class SensorConfig(_Cfg):
     (frames kept for a slow consumer; older ones are dropped and counted).
 
     A camera's ``source`` is ``sim`` (default: rendered from the simulated world), ``backend`` (the robot's own
-    video, e.g. a Tello's; needs such a backend) or ``mcap`` (replay a recording: ``mcap`` names the file,
+    video, e.g. a Tello's; needs such a backend), ``mcap`` (replay a recording: ``mcap`` names the file,
     resolved like other files at load time, and ``topic`` its ``foxglove.CompressedImage`` channel, by default
-    ``/<robot>/camera/<sensor id>`` as AeroDaaS records it)."""
+    ``/<robot>/camera/<sensor id>`` as AeroDaaS records it) or a video stream: an ``rtsp://`` URL, ``rtp://host:port``
+    (QGroundControl-style RTP H.264/H.265 on UDP, e.g. port 5600), ``udp://host:port`` (MPEG-TS), an ``.sdp`` file,
+    ``/dev/videoN`` or a video file (looped), with ``transport`` (rtsp: tcp/udp), ``codec`` (rtp: h264/h265),
+    ``first_frame_timeout_s`` (default 10) and ``stall_timeout_s`` (default 2): docs/video.md."""
 
     id: str = Field(min_length=1)
     type: str = Field(min_length=1, description="camera, odometry, stat_stream, or a sensor plug-in: a registered "
@@ -163,8 +168,14 @@ class SensorConfig(_Cfg):
                 raise ValueError(f"properties.{k} must be {what} within {rng}, got {v!r}")
         if self.type == "camera":
             src = p["source"]
-            if src not in CAMERA_SOURCES:
-                raise ValueError(f"properties.source must be one of {list(CAMERA_SOURCES)}, got {src!r}")
+            stream_props = [k for k in STREAM_PROPERTIES if k in p]
+            if src not in CAMERA_SOURCES:  # a video stream or file: checked (scheme, host, port, codec) by its parser
+                from aerodaas.video.source import parse_stream_source
+
+                parse_stream_source(src, p.get("transport"), p.get("codec"))
+            elif stream_props:
+                raise ValueError(f"properties.{stream_props[0]} is only used with a video stream source (rtsp://, "
+                                 f"rtp://, udp://, an .sdp or video file, /dev/videoN), but source is {src!r}")
             if p["hfov_deg"] >= 180:
                 raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
             if src == "mcap":
@@ -188,7 +199,11 @@ SENSOR_PROPERTIES: dict[str, dict[str, tuple]] = {
                "hfov_deg": ("float", 78.0, 0.0, 180.0, True), "fps": ("float", 15.0, 0.0, MAX_CAMERA_FPS, True),
                "pitch_deg": ("float", 90.0, 0.0, 90.0, True), "jpeg_quality": ("int", 80, 1, 100, False),
                "source": ("str", "sim", 0, 0, False), "mcap": ("str", None, 0, 0, False),
-               "topic": ("str", None, 0, 0, False)},
+               "topic": ("str", None, 0, 0, False),
+               # video stream sources only (docs/video.md): RTSP transport, raw RTP codec, timeouts in seconds
+               "transport": ("str", None, 0, 0, False), "codec": ("str", None, 0, 0, False),
+               "first_frame_timeout_s": ("float", None, 0.0, 600.0, True),
+               "stall_timeout_s": ("float", None, 0.0, 60.0, True)},
     "odometry": {"rate_hz": ("float", 10.0, 0.0, MAX_RATE_HZ, True)},
     "stat_stream": {},
 }

@@ -109,6 +109,12 @@ def check_clocks(robots: list, sim: SimulationConfig) -> None:
 
     from aerodaas.backends import backend_clock
 
+    live = [f"{r.id}/{s.id}" for r in robots for s in r.cfg.sensors
+            if s.type == "camera" and s.properties.get("source", "sim") not in ("sim", "backend", "mcap")]
+    if live and (sim.speedup != 1.0 or sim.lockstep):
+        raise ConfigError(f"simulation: the cameras {live} read a video stream, which runs on the wall clock: "
+                          f"speedup must be 1 (got {sim.speedup:g}; also --speedup) and lockstep false (got "
+                          f"{sim.lockstep})")
     real = [r.id for r in robots if backend_clock(r.cfg.backend) != "sim"]
     if real and sim.lockstep:
         raise ConfigError(f"simulation.lockstep: true needs every robot on backend 'sim'; {real} fly real or "

@@ -42,9 +42,20 @@ def format_summary(result: Any) -> str:
             if not c:
                 continue
             dropped = sum(a.get("dropped", 0) for a in st.get("analytics", []) if a)
-            lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
-                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by busy "
-                         f"consumers")
+            if c.get("video"):
+                lines.append(f"    camera {sid}: {c['frames']} frames from its video stream, {dropped} dropped by "
+                             f"busy consumers")
+            else:
+                lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
+                             f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by "
+                             f"busy consumers")
+            v = c.get("video")
+            if v:  # a video stream: what was decoded, what newest-wins replaced, outages, capture-to-hand-off time
+                lines.append(f"      video {v['source']}: {v['decoded']} decoded, {v['overwritten']} replaced by a newer "
+                             f"frame before use, {v.get('not_recorded', 0)} not recorded (recorder busy), "
+                             f"{v['decode_errors']} damaged packets; {v['lost']} outage(s) "
+                             f"({v['outage_s']:.1f} s without video, {v['restored']} restored); capture to "
+                             f"hand-off {v['latency_ms_median']:.0f} ms median, {v['latency_ms_p99']:.0f} ms p99")
             for o in c.get("outlets") or []:  # a consumer whose actor died (and came back, or not)
                 if o.get("reconnects") or o.get("held") or o.get("lost"):
                     back = "did NOT come back" if o.get("lost") else \

@@ -1,0 +1,34 @@
+"""The vehicle's pose at a frame's capture time, from the poses sampled on the run clock.
+
+A stream frame arrives 20-300 ms after its capture while the drone moves (at 5 m/s, 0.5-1.5 m): geo-locating its
+detections with the newest pose puts them that far off. :func:`pose_at` interpolates the pose at the capture time
+between the samples around it.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+
+def pose_at(poses: Sequence[tuple[float, tuple, float]], t: float) -> tuple[tuple, float, float]:
+    """The pose at run time ``t`` (s) from ``poses`` = [(time s, position ENU m (x, y, z), yaw deg), ...] in time
+    order: linear between the two samples around ``t`` (yaw along the shorter arc, result in [-180, 180)),
+    the oldest/newest sample outside them. Returns (position, yaw deg, the time the pose is of: ``t`` when
+    interpolated, else the sample's). An empty ``poses`` gives the origin at ``t``."""
+    if not poses:
+        return (0.0, 0.0, 0.0), 0.0, t
+    if t <= poses[0][0]:
+        return tuple(poses[0][1]), poses[0][2], poses[0][0]
+    if t >= poses[-1][0]:
+        return tuple(poses[-1][1]), poses[-1][2], poses[-1][0]
+    lo, hi = 0, len(poses) - 1
+    while hi - lo > 1:  # bisect: poses[lo][0] <= t < poses[hi][0]
+        mid = (lo + hi) // 2
+        if poses[mid][0] <= t:
+            lo = mid
+        else:
+            hi = mid
+    (t0, p0, y0), (t1, p1, y1) = poses[lo], poses[hi]
+    a = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+    dy = (y1 - y0 + 180.0) % 360.0 - 180.0
+    pos = tuple(float(c0 + a * (c1 - c0)) for c0, c1 in zip(p0, p1))
+    return pos, (y0 + a * dy + 180.0) % 360.0 - 180.0, t

@@ -1,0 +1,189 @@
+"""Video stream camera sources (aerodaas.video): the source grammar checked before Ray, the capture clock, the pose
+at capture, and the reader against real encoded footage — a file, and MPEG-TS and RTP H.264 on UDP from a sender
+process that is killed and restarted (an outage). No Ray here: the missions flown on streams are in
+test_video_missions.py (slow group ``video``)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from aerodaas.config import ConfigError
+from aerodaas.config.robot import SensorConfig
+from aerodaas.video import CaptureClock, StreamReader, VideoSourceError, parse_stream_source
+from aerodaas.video.pose import pose_at
+from .conftest import REPO, needs_data
+from .video_rig import Sender, free_udp_port, make_footage
+
+
+@pytest.mark.parametrize("source,kind,fmt", [
+    ("rtsp://192.168.144.25:8554/main.264", "rtsp", "rtsp"),
+    ("rtsps://cam.local/live", "rtsp", "rtsp"),
+    ("rtp://0.0.0.0:5600", "rtp", "sdp"),
+    ("rtp://:5600", "rtp", "sdp"),
+    ("udp://127.0.0.1:5000", "mpegts_udp", "mpegts"),
+    ("/dev/video0", "v4l2", "video4linux2"),
+    ("cam.sdp", "sdp", "sdp"),
+    ("clip.mp4", "file", None),
+    ("file:///data/clip.MKV", "file", None),
+])
+def test_stream_sources_accepted(source, kind, fmt):
+    spec = parse_stream_source(source)
+    assert (spec.kind, spec.format) == (kind, fmt)
+    assert spec.live == (kind != "file")
+    if kind == "rtsp":
+        assert spec.options["rtsp_transport"] == "tcp"
+    if kind == "rtp":  # QGC's UDP 5600 has no SDP: we describe it (RFC 4566), H.264 on payload type 96
+        assert spec.port == 5600 and "m=video 5600 RTP/AVP 96" in spec.sdp_text()
+        assert "a=rtpmap:96 H264/90000" in spec.sdp_text()
+    assert parse_stream_source("rtp://0.0.0.0:5600", codec="h265").sdp_text().count("H265/90000") == 1
+
+
+@pytest.mark.parametrize("source,props,match", [
+    ("usb", {}, r"properties.source: unknown camera source 'usb'"),
+    ("http://cam/stream", {}, r"unknown camera source 'http://cam/stream'"),
+    ("rtsp:///path", {}, r"'rtsp:///path' names no host"),
+    ("rtsp://cam:99999/x", {}, r"invalid port"),
+    ("rtp://0.0.0.0", {}, r"needs a UDP/TCP port in \[1, 65535\]"),
+    ("udp://1.2.3.4:5000/path", {}, r"host:port only"),
+    (" rtsp://cam/x", {}, r"without surrounding blanks"),
+    ("rtsp://cam/x", {"transport": "quic"}, r"properties.transport must be 'tcp' or 'udp', got 'quic'"),
+    ("rtp://0.0.0.0:5600", {"codec": "vp8"}, r"properties.codec must be one of \['h264', 'h265'\], got 'vp8'"),
+    ("udp://0.0.0.0:5000", {"transport": "tcp"}, r"properties.transport is only used with an rtsp:// source"),
+    ("rtsp://cam/x", {"codec": "h264"}, r"properties.codec is only used with an rtp:// source"),
+    ("sim", {"stall_timeout_s": 3.0}, r"properties.stall_timeout_s is only used with a video stream source"),
+    ("rtsp://cam/x", {"first_frame_timeout_s": 0}, r"properties.first_frame_timeout_s must be a finite number "
+                                                    r"within \(0, 600\]"),
+    ("rtsp://cam/x", {"stall_timeout_s": "2"}, r"properties.stall_timeout_s must be a finite number"),
+])
+def test_bad_stream_sources_name_the_property(source, props, match):
+    with pytest.raises(ValueError, match=match):
+        SensorConfig(id="c", type="camera", properties={"source": source, **props})
+
+
+def _env_with_camera(tmp_path: Path, props: dict, simulation: dict | None = None) -> Path:
+    env = json.loads((REPO / "apps" / "vehicle_tracking.json").read_text())
+    env["robots"][0]["sensors"][0]["properties"].update(props)
+    env["simulation"] = simulation or {"speedup": 1, "lockstep": False}
+    env.pop("world")
+    p = tmp_path / "env.json"
+    p.write_text(json.dumps(env))
+    return p
+
+
+def test_environment_resolves_a_video_file_and_refuses_a_missing_one(tmp_path):
+    from aerodaas.config import load_environment_config as load_environment
+
+    (tmp_path / "clip.mp4").write_bytes(b"\0")
+    cfg = load_environment(str(_env_with_camera(tmp_path, {"source": "clip.mp4"})))
+    assert cfg.robots[0].sensors[0].properties["source"] == str(tmp_path / "clip.mp4")
+    with pytest.raises(ConfigError, match=r"robots.0.sensors.0.properties.source.*'gone.mp4'"):
+        load_environment(str(_env_with_camera(tmp_path, {"source": "gone.mp4"})))
+
+
+def test_a_stream_camera_needs_the_wall_clock_refused_before_ray(tmp_path):
+    """A live stream cannot run at speedup 10 or wait in lock-step: exit 2 before Ray, naming the camera."""
+    env = _env_with_camera(tmp_path, {"source": "udp://127.0.0.1:5999"}, {"speedup": 10, "lockstep": True})
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
+                        "--env", str(env), "--quiet"], capture_output=True, text=True, timeout=300,
+                       cwd=tmp_path)
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert "quadrotor_base/cam1" in p.stderr + p.stdout and "speedup must be 1" in p.stderr + p.stdout
+    assert "Started a local Ray instance" not in p.stderr + p.stdout
+
+
+def test_capture_clock_takes_the_fastest_frame_as_transit_floor_and_reanchors_on_a_restart():
+    c = CaptureClock()
+    assert c.capture(10.0, 100.30) == pytest.approx(100.30)  # first frame: its own arrival
+    assert c.capture(10.1, 100.35) == pytest.approx(100.35)  # faster: the floor moves (offset 90.25)
+    assert c.capture(10.2, 100.60) == pytest.approx(100.45)  # slower (jitter): capture keeps the sender's spacing
+    assert c.capture(0.0, 101.00) == pytest.approx(101.00)  # PTS went back: the sender restarted
+    assert c.resets == 1
+    assert c.capture(None, 7.0) == 7.0
+
+
+def test_pose_at_interpolates_between_samples_and_along_the_short_yaw_arc():
+    poses = [(0.0, (0.0, 0.0, 10.0), 170.0), (0.1, (1.0, 0.0, 10.0), -170.0), (0.2, (2.0, 1.0, 10.0), -160.0)]
+    pos, yaw, t = pose_at(poses, 0.05)
+    assert pos == pytest.approx((0.5, 0.0, 10.0)) and yaw == pytest.approx(-180.0) and t == 0.05
+    pos, yaw, t = pose_at(poses, 0.15)
+    assert pos == pytest.approx((1.5, 0.5, 10.0)) and yaw == pytest.approx(-165.0)
+    assert pose_at(poses, -1.0)[2] == 0.0 and pose_at(poses, 9.0)[2] == 0.2  # clamped: says which sample
+
+
+@pytest.fixture(scope="module")
+def footage(tmp_path_factory):
+    if not (Path(__import__("os").environ.get("AERODAAS_DATA_DIR", REPO.parent / "shared" / "data")) /
+            "imagery").is_dir():
+        pytest.skip("shared data not found (set AERODAAS_DATA_DIR)")
+    return make_footage(tmp_path_factory.mktemp("video") / "pan.mp4", seconds=3.0)
+
+
+def _pump(reader: StreamReader, until, deadline_s: float = 120.0) -> list:
+    """Take frames until ``until(frames, events)`` holds (a generous deadline, not a timing bound)."""
+    frames, events = [], []
+    end = time.monotonic() + deadline_s
+    while not until(frames, events):
+        assert time.monotonic() < end, (reader.stats(), events)
+        f = reader.take()
+        if f is not None:
+            frames.append(f)
+        events += reader.drain_events()
+        time.sleep(0.01)
+    return frames, events
+
+
+@needs_data
+def test_a_file_plays_at_its_rate_looped_each_frame_delivered_once(footage):
+    r = StreamReader(parse_stream_source(str(footage)), 320, 240).start()
+    try:
+        r.wait_first(60)
+        frames, _ = _pump(r, lambda f, e: r.stats()["decoded"] >= 45)  # 3 s of 10 fps: past the first loop
+    finally:
+        r.close()
+    st = r.stats()
+    seqs = [f.seq for f in frames]
+    assert seqs == sorted(set(seqs)), "a frame delivered twice or out of order"
+    assert st["decoded"] == st["taken"] + st["overwritten"] + st["waiting"]
+    assert st["opens"] >= 2 and st["lost"] == 0  # looped by reopening; a file's end is not an outage
+    assert frames[0].image.shape == (240, 320, 3) and not frames[0].image.flags.writeable
+
+
+@needs_data
+@pytest.mark.parametrize("scheme", ["udp", "rtp"])
+def test_a_udp_stream_survives_an_outage_with_events(footage, scheme):
+    """MPEG-TS and QGC-style RTP H.264 (no SDP from the sender) on UDP: frames arrive, the sender dies (a link
+    outage), video_lost is queued; it comes back, video_restored with the outage; no frame delivered twice."""
+    port = free_udp_port()
+    url = f"{scheme}://127.0.0.1:{port}"
+    sender = Sender(footage, url).start()
+    r = StreamReader(parse_stream_source(url), 320, 240, stall_timeout_s=1.0).start()
+    try:
+        r.wait_first(60)
+        before, _ = _pump(r, lambda f, e: len(f) >= 5)
+        sender.stop()
+        _, lost = _pump(r, lambda f, e: any(x.kind == "video_lost" for x in e))
+        sender.start()
+        after, restored = _pump(r, lambda f, e: any(x.kind == "video_restored" for x in e) and len(f) >= 5)
+    finally:
+        sender.stop()
+        r.close()
+    ev = {e.kind: e for e in lost + restored}
+    assert ev["video_lost"].fields["url"] == url
+    assert ev["video_restored"].fields["outage_s"] > 0 and ev["video_restored"].mono > ev["video_lost"].mono
+    seqs = [f.seq for f in before + after]
+    assert seqs == sorted(set(seqs))
+    st = r.stats()
+    assert (st["lost"], st["restored"]) == (1, 1) and st["decoded"] == st["taken"] + st["overwritten"] + st["waiting"]
+    assert all(f.capture_mono <= f.arrival_mono for f in before + after)
+
+
+def test_no_first_frame_is_an_error_naming_the_url():
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    r = StreamReader(parse_stream_source(url), 64, 48, stall_timeout_s=0.5, open_timeout_s=0.5).start()
+    with pytest.raises(VideoSourceError, match=rf"no video frame from '{url}' within 1 s"):
+        r.wait_first(1.0)

@@ -1,0 +1,112 @@
+"""Test rig for video sources: real aerial footage made from $AERODAAS_DATA_DIR imagery, and a sender process that
+streams it the way a drone's video link does (MPEG-TS on UDP, or raw RTP H.264 as QGroundControl receives on UDP
+5600), encoded with PyAV's bundled libx264. Run as a script it is the sender:
+
+    python tests/video_rig.py FILE.mp4 udp://127.0.0.1:PORT      # MPEG-TS
+    python tests/video_rig.py FILE.mp4 rtp://127.0.0.1:PORT      # RTP H.264 (in-band SPS/PPS on every keyframe)
+
+It plays the file at its frame rate in a loop until killed; a frame counter is not drawn (the footage is real)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_IMAGE = "imagery/brighton_beach/DJI_0033.JPG"
+
+
+def make_footage(out: Path, *, seconds: float = 6.0, fps: int = 10, size: tuple[int, int] = (640, 480),
+                 image: str = DEFAULT_IMAGE, gop: int = 10,
+                 pan: tuple[float, float, float] = (0.55, 0.62, 0.02)) -> Path:
+    """Write an H.264 MP4 (``size`` px, ``fps``) panning slowly across a real aerial photo from
+    $AERODAAS_DATA_DIR: its left edge from ``pan[0]`` to ``pan[1]`` of the photo's width, its top at ``pan[2]`` of
+    its height (the default passes over the parked cars of DJI_0033). Raises FileNotFoundError when the photo is
+    missing."""
+    import av
+    import cv2
+
+    src = Path(os.environ.get("AERODAAS_DATA_DIR", "")) / image
+    photo = cv2.imread(str(src))
+    if photo is None:
+        raise FileNotFoundError(f"aerial photo {src} not found (set AERODAAS_DATA_DIR)")
+    w, h = size
+    crop_w = photo.shape[1] // 3  # about 25 m of ground across: a car is ~120 px long, as from 16 m up
+    crop_h = crop_w * h // w
+    n = int(seconds * fps)
+    x0, x1, y = int(pan[0] * photo.shape[1]), int(pan[1] * photo.shape[1]), int(pan[2] * photo.shape[0])
+    with av.open(str(out), "w") as c:
+        s = c.add_stream("libx264", rate=fps)
+        s.width, s.height, s.pix_fmt = w, h, "yuv420p"
+        s.options = {"g": str(gop), "bf": "0", "tune": "zerolatency", "preset": "ultrafast"}
+        for i in range(n):
+            x = min(int(x0 + (x1 - x0) * i / max(n - 1, 1)), photo.shape[1] - crop_w)
+            y = min(y, photo.shape[0] - crop_h)
+            frame = cv2.resize(photo[y:y + crop_h, x:x + crop_w], (w, h), interpolation=cv2.INTER_AREA)
+            for p in s.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="bgr24")):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    return out
+
+
+def send(path: str, url: str) -> None:
+    """Stream ``path`` to ``url`` (udp:// as MPEG-TS, rtp:// as RTP H.264) in real time, looping, until killed."""
+    import av
+
+    fmt = "rtp" if url.startswith("rtp://") else "mpegts"
+    out = av.open(url + ("?pkt_size=1200" if fmt == "rtp" else "?pkt_size=1316"), "w", format=fmt)
+    src = av.open(path)
+    ist = src.streams.video[0]
+    fps = float(ist.average_rate or 10)
+    st = out.add_stream("libx264", rate=int(round(fps)))
+    st.width, st.height, st.pix_fmt = ist.codec_context.width, ist.codec_context.height, "yuv420p"
+    st.options = {"g": str(int(round(fps))), "bf": "0", "tune": "zerolatency", "preset": "ultrafast",
+                  "x264-params": "repeat-headers=1"}
+    frames = [f.to_ndarray(format="bgr24") for f in src.decode(ist)]
+    src.close()
+    t0, i = time.monotonic(), 0
+    while True:
+        img = frames[i % len(frames)]
+        vf = av.VideoFrame.from_ndarray(img, format="bgr24")
+        vf.pts = i
+        for p in st.encode(vf):
+            out.mux(p)
+        i += 1
+        delay = t0 + i / fps - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+
+
+class Sender:
+    """A sender subprocess (this file run as a script); :meth:`stop` kills it (a link outage), :meth:`start` starts
+    it again."""
+
+    def __init__(self, path: Path, url: str) -> None:
+        self.path, self.url, self.proc = str(path), url, None
+
+    def start(self) -> "Sender":
+        self.proc = subprocess.Popen([sys.executable, __file__, self.path, self.url], stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL)
+        return self
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait(timeout=30)
+            self.proc = None
+
+
+def free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+if __name__ == "__main__":
+    send(sys.argv[1], sys.argv[2])
