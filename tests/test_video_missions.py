@@ -17,7 +17,7 @@ from aerodaas.recording.metrics import load_run
 from aerodaas.recording.reader import read_messages
 from aerodaas.tools.hitl import request, state_file
 from .conftest import REPO, needs_data
-from .video_rig import Sender, free_udp_port, make_footage
+from .video_rig import RtspServer, Sender, free_udp_port, make_footage
 
 APP = REPO / "apps" / "vehicle_tracking.py"
 
@@ -40,10 +40,17 @@ def _wait_flying(proc, deadline_s: float = 300.0) -> None:
 
 @pytest.mark.video
 @needs_data
-@pytest.mark.parametrize("scheme,port", [("udp", None), ("rtp", 5600)])
+@pytest.mark.parametrize("scheme,port", [("udp", None), ("rtp", 5600), ("rtsp", None)])
 def test_vehicle_tracking_on_a_stream_survives_a_5s_outage(tmp_path, monkeypatch, scheme, port):
-    footage = make_footage(tmp_path / "pan.mp4", seconds=6.0)
-    url = f"{scheme}://127.0.0.1:{port or free_udp_port()}"
+    """MPEG-TS on UDP, RTP H.264 on UDP 5600 (the sender dies for 5 s), and RTSP from GStreamer's gst-rtsp-server
+    (the server dies for 5 s: the TCP session drops and must be opened again)."""
+    footage = make_footage(tmp_path / "pan.mp4", seconds=8.0, empty_s=22.0)  # cars, then none: the follow ends
+    if scheme == "rtsp":
+        sender = RtspServer(footage)
+        url = sender.url
+    else:
+        url = f"{scheme}://127.0.0.1:{port or free_udp_port()}"
+        sender = Sender(footage, url)
     env = json.loads((REPO / "apps" / "vehicle_tracking.json").read_text())
     env["robots"][0]["sensors"][0]["properties"]["source"] = url
     env["simulation"] = {"speedup": 1, "lockstep": False, "physics_hz": 50}
@@ -51,7 +58,7 @@ def test_vehicle_tracking_on_a_stream_survives_a_5s_outage(tmp_path, monkeypatch
     env_path.write_text(json.dumps(env))
     rec = tmp_path / "run.mcap"
     monkeypatch.setenv("AERODAAS_STATE_DIR", str(tmp_path / "state"))
-    sender = Sender(footage, url).start()
+    sender.start()
     proc = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "run", str(APP), "--env", str(env_path),
                              "--record", str(rec), "--timeout", "400", "--quiet", "--hitl", "--hitl-port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
@@ -62,7 +69,7 @@ def test_vehicle_tracking_on_a_stream_survives_a_5s_outage(tmp_path, monkeypatch
         sender.start()
         out, _ = proc.communicate(timeout=600)
     finally:
-        sender.stop()
+        sender.stop_all()
         if proc.poll() is None:
             proc.kill()
     print(out[-3000:])

@@ -16,36 +16,48 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_IMAGE = "imagery/brighton_beach/DJI_0033.JPG"
+DEFAULT_IMAGE = "imagery/brighton_beach/DJI_0031.JPG"
+EMPTY_IMAGE = "imagery/brighton_beach/DJI_0025.JPG"
 
 
-def make_footage(out: Path, *, seconds: float = 6.0, fps: int = 10, size: tuple[int, int] = (640, 480),
-                 image: str = DEFAULT_IMAGE, gop: int = 10,
-                 pan: tuple[float, float, float] = (0.55, 0.62, 0.02)) -> Path:
-    """Write an H.264 MP4 (``size`` px, ``fps``) panning slowly across a real aerial photo from
-    $AERODAAS_DATA_DIR: its left edge from ``pan[0]`` to ``pan[1]`` of the photo's width, its top at ``pan[2]`` of
-    its height (the default passes over the parked cars of DJI_0033). Raises FileNotFoundError when the photo is
+def make_footage(out: Path, *, seconds: float = 8.0, empty_s: float = 0.0, fps: int = 10,
+                 size: tuple[int, int] = (640, 480), image: str = DEFAULT_IMAGE, gop: int = 10,
+                 pan: tuple[float, float, float] = (0.333, 0.5, 0.278), empty_image: str = EMPTY_IMAGE) -> Path:
+    """Write an H.264 MP4 (``size`` px, ``fps``) of real aerial photos from $AERODAAS_DATA_DIR: ``seconds`` of a
+    slow pan over parked cars (its left edge from ``pan[0]`` to ``pan[1]`` of the photo's width and back, its top at
+    ``pan[2]`` of its height: the default passes over the cars of DJI_0031, which YOLOX-Nano finds in every
+    position at scores 0.34-0.61), then ``empty_s`` seconds over ground with no vehicle (DJI_0025's lawn: none
+    found anywhere in it), so that a follow ends and the survey resumes. Raises FileNotFoundError when a photo is
     missing."""
     import av
     import cv2
 
-    src = Path(os.environ.get("AERODAAS_DATA_DIR", "")) / image
-    photo = cv2.imread(str(src))
-    if photo is None:
-        raise FileNotFoundError(f"aerial photo {src} not found (set AERODAAS_DATA_DIR)")
+    def load(name: str) -> np.ndarray:
+        src = Path(os.environ.get("AERODAAS_DATA_DIR", "")) / name
+        photo = cv2.imread(str(src))
+        if photo is None:
+            raise FileNotFoundError(f"aerial photo {src} not found (set AERODAAS_DATA_DIR)")
+        return photo
+
+    photo, empty = load(image), load(empty_image) if empty_s > 0 else None
     w, h = size
     crop_w = photo.shape[1] // 3  # about 25 m of ground across: a car is ~120 px long, as from 16 m up
     crop_h = crop_w * h // w
-    n = int(seconds * fps)
+    n, n_empty = int(seconds * fps), int(empty_s * fps)
     x0, x1, y = int(pan[0] * photo.shape[1]), int(pan[1] * photo.shape[1]), int(pan[2] * photo.shape[0])
     with av.open(str(out), "w") as c:
         s = c.add_stream("libx264", rate=fps)
         s.width, s.height, s.pix_fmt = w, h, "yuv420p"
         s.options = {"g": str(gop), "bf": "0", "tune": "zerolatency", "preset": "ultrafast"}
-        for i in range(n):
-            x = min(int(x0 + (x1 - x0) * i / max(n - 1, 1)), photo.shape[1] - crop_w)
-            y = min(y, photo.shape[0] - crop_h)
-            frame = cv2.resize(photo[y:y + crop_h, x:x + crop_w], (w, h), interpolation=cv2.INTER_AREA)
+        for i in range(n + n_empty):
+            if i < n:
+                a = 1.0 - abs(2.0 * i / max(n - 1, 1) - 1.0)  # 0 -> 1 -> 0
+                x = min(int(x0 + (x1 - x0) * a), photo.shape[1] - crop_w)
+                crop = photo[min(y, photo.shape[0] - crop_h):][:crop_h, x:x + crop_w]
+            else:
+                x = int((empty.shape[1] - crop_w) * (i - n) / max(n_empty, 1))
+                crop = empty[:crop_h, x:x + crop_w]
+            frame = cv2.resize(crop, (w, h), interpolation=cv2.INTER_AREA)
             for p in s.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="bgr24")):
                 c.mux(p)
         for p in s.encode():
@@ -66,19 +78,18 @@ def send(path: str, url: str) -> None:
     st.width, st.height, st.pix_fmt = ist.codec_context.width, ist.codec_context.height, "yuv420p"
     st.options = {"g": str(int(round(fps))), "bf": "0", "tune": "zerolatency", "preset": "ultrafast",
                   "x264-params": "repeat-headers=1"}
-    frames = [f.to_ndarray(format="bgr24") for f in src.decode(ist)]
-    src.close()
     t0, i = time.monotonic(), 0
     while True:
-        img = frames[i % len(frames)]
-        vf = av.VideoFrame.from_ndarray(img, format="bgr24")
-        vf.pts = i
-        for p in st.encode(vf):
-            out.mux(p)
-        i += 1
-        delay = t0 + i / fps - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
+        for f in src.decode(ist):
+            vf = av.VideoFrame.from_ndarray(f.to_ndarray(format="bgr24"), format="bgr24")
+            vf.pts = i
+            for p in st.encode(vf):
+                out.mux(p)
+            i += 1
+            delay = t0 + i / fps - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        src.seek(0)
 
 
 class Sender:
@@ -98,6 +109,55 @@ class Sender:
             self.proc.kill()
             self.proc.wait(timeout=30)
             self.proc = None
+
+    stop_all = stop
+
+
+class RtspServer:
+    """GStreamer's RTSP server (tests/rtsp_server.py, run by /usr/bin/python3 with PyGObject from Debian's
+    python3-gi) serving ``rtsp://127.0.0.1:PORT/cam`` relayed from a looping MPEG-TS :class:`Sender`.
+    :meth:`stop` kills the server only (an RTSP outage: the TCP session drops); :meth:`start` brings it back.
+    Raises AssertionError naming the missing Debian packages when it cannot start: in CI the test fails."""
+
+    PACKAGES = "gstreamer1.0-rtsp gir1.2-gst-rtsp-server-1.0 python3-gi gstreamer1.0-plugins-{base,good,bad}"
+
+    def __init__(self, footage: Path) -> None:
+        self.port, self.ts_port = free_tcp_port(), free_udp_port()
+        self.url = f"rtsp://127.0.0.1:{self.port}/cam"
+        self.sender = Sender(footage, f"udp://127.0.0.1:{self.ts_port}")
+        self.proc = None
+
+    def start(self) -> "RtspServer":
+        if self.sender.proc is None:
+            self.sender.start()
+        self.proc = subprocess.Popen(["/usr/bin/python3", str(Path(__file__).with_name("rtsp_server.py")),
+                                      str(self.port), str(self.ts_port)], stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True)
+        line = self.proc.stdout.readline()
+        if line.strip() != "ready":
+            err = self.proc.stderr.read()[-2000:]
+            self.stop_all()
+            raise AssertionError(f"the GStreamer RTSP server did not start (install the Debian packages "
+                                 f"{self.PACKAGES}, as the README's test command does): {err}")
+        return self
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait(timeout=30)
+            self.proc = None
+
+    def stop_all(self) -> None:
+        self.stop()
+        self.sender.stop()
+
+
+def free_tcp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def free_udp_port() -> int:

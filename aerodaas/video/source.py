@@ -117,8 +117,8 @@ def parse_stream_source(source: str, transport: str | None = None, codec: str | 
         if u.path not in ("", "/") or u.query:
             raise ValueError(f"{where}: {source!r}: a {scheme}:// source is host:port only")
         if scheme == "udp":
-            return StreamSpec("mpegts_udp", source, f"udp://{host}:{port}?overrun_nonfatal=1&fifo_size=1000000",
-                              "mpegts", {}, host=host, port=port)
+            url = f"udp://{host}:{port}?overrun_nonfatal=1&fifo_size=1000000&buffer_size=4194304"
+            return StreamSpec("mpegts_udp", source, url, "mpegts", {}, host=host, port=port)
         return StreamSpec("rtp", source, None, "sdp", {"protocol_whitelist": "file,udp,rtp"}, host=host, port=port,
                           codec=codec or "h264")
     if scheme == "file":
