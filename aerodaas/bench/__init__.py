@@ -40,7 +40,8 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from aerodaas.bench import detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours, tracks
+    from aerodaas.bench import (detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours, tracks,
+                                video)
 
     tours.add_parser(bench_subparsers)
     schedulers.add_parser(bench_subparsers)
@@ -51,3 +52,4 @@ def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     raypath.add_parser(bench_subparsers)
     detect.add_parser(bench_subparsers)
     tracks.add_parser(bench_subparsers)
+    video.add_parser(bench_subparsers)
