@@ -80,10 +80,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     previous_sigint = signal.signal(signal.SIGINT, on_sigterm)
     runtime.STOP_SIGNALS.clear()
     runtime.allow_stop_interrupt(True)  # building the app: a stop may interrupt it at once
-    # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
-    # the rest of the app's build; never before, so a bad environment fails at once with no Ray process
-    o.early_ray = True
-
     from aerodaas.app import api
 
     def on_result(res) -> None:  # every mission start counts (robot.start_mission() or a fleet's env.start_mission())
@@ -93,6 +89,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     api.MISSION_LISTENERS.append(on_result)
     sys.path.insert(0, str(app.resolve().parent))
     try:
+        _build_without_ray(app)
+        # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
+        # the rest of the app's build; the build above already checked all of it, so no error of the application
+        # comes after Ray started
+        o.early_ray = True
         runpy.run_path(str(app), run_name="__main__")
     except ConfigError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
@@ -174,6 +175,28 @@ def _cmd_down(args: argparse.Namespace) -> int:
         print(f"aerodaas down: removed the shared ground cache at {ground_cache.cache_dir()} "
               f"({freed / 1e6:.1f} MB)", flush=True)
     return 0
+
+
+def _build_without_ray(app: Path) -> None:
+    """Build the application as ``aerodaas plan`` does — its environment, robots, plug-ins, analytics and their
+    options, schedulers, the pre-flight checks and the dataflow graph — without Ray, stopping at its first mission
+    start (:class:`~aerodaas.runtime.driver.PlanReady`). Whatever the application gets wrong raises here, before
+    any Ray process exists (the caller maps it to exit 2, or 1 for the app's own bug). The app's own prints are
+    kept for the real run (not shown twice)."""
+    import contextlib
+    import io
+
+    from aerodaas.runtime import driver as runtime
+
+    o = runtime.OPTIONS
+    o.plan_only, o.early_ray = True, False
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            runpy.run_path(str(app), run_name="__main__")
+    except runtime.PlanReady:
+        pass
+    finally:
+        o.plan_only = False
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:

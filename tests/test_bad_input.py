@@ -99,14 +99,36 @@ def test_invalid_environment_never_starts_ray(tmp_path, no_ray, capsys, via_flag
     assert "robots.0.limits.max_speed" in capsys.readouterr().err
 
 
-def test_valid_environment_starts_ray_early_only_after_validation(tmp_path, no_ray, monkeypatch):
-    """The early start is begun by Environment() once the file validated (and a later bad waypoint still fails)."""
+def test_an_application_error_after_a_valid_environment_never_starts_ray(tmp_path, no_ray, monkeypatch):
+    """`aerodaas run` builds the whole application without Ray first (as `aerodaas plan` does): a bad waypoint
+    after a valid Environment() fails before the early start is even begun."""
     good = tmp_path / "good.json"
     good.write_text(json.dumps({"robots": [{"id": "d1"}]}))
     app = tmp_path / "app.py"
     app.write_text(APP.format(env=str(good)).replace("x=1, y=0, z=2", "x=1, y=0, z=500"))
     assert cli.main(["run", str(app), "--quiet"]) == 2  # z 500 m above max_altitude 120: SafetyViolation
-    assert no_ray == [("early", None)]
+    assert no_ray == []
+
+
+def test_a_bad_detector_option_fails_before_ray_subprocess(tmp_path):
+    """Issue 38: `Tiling(tile=16)` in an app was reported ~10 s after Ray started. Now: exit 2 naming the field,
+    and Ray never created a session in a fresh RAY_TMPDIR."""
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"robots": [{"id": "d1"}]}))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(good)).replace(
+        "drone.start_mission()", "from aerodaas.perception.tiling import Tiling\n"
+        "d = ObjectDetector('yolox_nano', classes=['car'], tiling=Tiling(tile=16))\n"
+        "d.deploy(env.get_compute_resources()[0])\n"
+        "drone.start_mission()"))
+    ray_tmp = tmp_path / "ray"
+    ray_tmp.mkdir()
+    env = {**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)}
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert p.returncode == 2, p.stderr
+    assert "tiling.tile must be an integer number of pixels within [32, 8192], got 16" in p.stderr
+    assert list(ray_tmp.iterdir()) == []
 
 
 def test_invalid_environment_subprocess_creates_no_ray_session(tmp_path):

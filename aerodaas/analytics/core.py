@@ -244,6 +244,8 @@ class ObjectDetector(TrackRecording, Analytics):
         self.input_size = tuple(input_size) if input_size is not None else None
         self.class_names = list(class_names) if class_names is not None else None
         self.tiling = tiling
+        if tiling is not None:  # a bad slice size fails where the app wrote it (ValueError naming the field)
+            tiling.check()
         self.tracker = tracker
         if tracker is not None:
             tracker.check()
