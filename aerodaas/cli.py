@@ -25,12 +25,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     try:
         from aerodaas.runtime.preflight import check_run_flags
 
-        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address)
+        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address,
+                        app=str(app), overwrite=args.overwrite)
     except (ConfigError, ValueError) as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
     o = runtime.OPTIONS
     o.record, o.speedup, o.timeout, o.address = args.record, args.speedup, args.timeout, args.address
+    o.overwrite = bool(args.overwrite)
     o.env_path = str(Path(args.env).resolve()) if args.env else None
     o.lockstep = True if args.lockstep else None
     o.dashboard = bool(getattr(args, "dashboard", False))
@@ -462,6 +464,8 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     r.add_argument("--speedup", type=float, help="simulation speed-up over real time (default: from the env file)")
     r.add_argument("--lockstep", action="store_true", help="simulated time waits for analytics on every frame")
     r.add_argument("--timeout", type=float, help="wall-clock limit in seconds")
+    r.add_argument("--overwrite", action="store_true", help="let --record replace an existing file that is not an "
+                   "AeroDaaS recording (the app and its environment file are never replaced)")
     r.add_argument("--address", help="attach to an existing Ray cluster (e.g. 'auto') instead of starting one")
     r.add_argument("--quiet", action="store_true", help="no live progress")
     r.add_argument("--dashboard", action="store_true",

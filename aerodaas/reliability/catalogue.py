@@ -180,6 +180,8 @@ PATH_CASES: list[tuple[str, Callable[[Path], str], str]] = [
     ("/proc/x.mcap", lambda t: "/proc/x.mcap", "cannot create"),
     ("/dev/full", lambda t: "/dev/full", "not a regular file"),
     ("a directory", lambda t: str(t), "not a regular file"),
+    ("an existing file that is not a recording", lambda t: (t / "notes.txt").write_text("mine") and str(t / "notes.txt"),
+     "not an AeroDaaS recording; pass --overwrite"),
 ]
 
 

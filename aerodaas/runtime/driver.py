@@ -51,6 +51,8 @@ class RunOptions:
     #: invalid environment then fails before any Ray process exists, and a valid one overlaps Ray's start with
     #: building the rest of the application
     early_ray: bool = False
+    #: --overwrite: --record may replace an existing file that is not an AeroDaaS recording
+    overwrite: bool = False
 
 
 OPTIONS = RunOptions()

@@ -76,7 +76,7 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
     if opts.record:
         from aerodaas.recording.writer import check_record_path
 
-        check_record_path(opts.record)  # ValueError naming the path: before Ray, no folder created
+        check_record_path(opts.record, overwrite=opts.overwrite)  # ValueError naming the path: before Ray
     from aerodaas.runtime.addresses import check_hitl
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
@@ -174,7 +174,8 @@ def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
 
 
 def check_run_flags(record: str | None, env: str | None, speedup: float | None, timeout: float | None,
-                    hitl_port: int | None, address: str | None) -> None:
+                    hitl_port: int | None, address: str | None, *, app: str | None = None,
+                    overwrite: bool = False) -> None:
     """Everything ``aerodaas run``'s command line names, checked before Ray starts: no empty ``--record`` /
     ``--env``, a writable record path, ``--speedup`` / ``--timeout`` in range, ``--hitl-port`` in [0, 65535], the
     ``--address`` cluster reachable (:func:`aerodaas.runtime.addresses.check_ray_address`, within 10 s) and the
@@ -189,7 +190,7 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     if record:
         from aerodaas.recording.writer import check_record_path
 
-        check_record_path(record)
+        check_record_path(record, overwrite=overwrite, protect=tuple(q for q in (app, env) if q))
     from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
 
     for flag, v, lo, hi in (("--speedup", speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", timeout, 0.0, 1e7)):
