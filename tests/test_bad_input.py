@@ -121,14 +121,19 @@ def test_a_bad_detector_option_fails_before_ray_subprocess(tmp_path):
         "d = ObjectDetector('yolox_nano', classes=['car'], tiling=Tiling(tile=16))\n"
         "d.deploy(env.get_compute_resources()[0])\n"
         "drone.start_mission()"))
-    ray_tmp = tmp_path / "ray"
-    ray_tmp.mkdir()
-    env = {**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)}
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
-                       text=True, env=env, timeout=300)
+    p, ray_tmp = _run_in_fresh_ray_tmp(tmp_path, app)
     assert p.returncode == 2, p.stderr
     assert "tiling.tile must be an integer number of pixels within [32, 8192], got 16" in p.stderr
     assert list(ray_tmp.iterdir()) == []
+
+
+def _run_in_fresh_ray_tmp(tmp_path, app):
+    """`aerodaas run APP --quiet` in a subprocess whose RAY_TMPDIR is a new empty folder: (result, that folder)."""
+    ray_tmp = tmp_path / "ray"
+    ray_tmp.mkdir()
+    env = {**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)}
+    return subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
+                          text=True, env=env, timeout=300), ray_tmp
 
 
 def test_invalid_environment_subprocess_creates_no_ray_session(tmp_path):
@@ -138,11 +143,7 @@ def test_invalid_environment_subprocess_creates_no_ray_session(tmp_path):
                                                                       "properties": {"widht": 640}}]}]}))
     app = tmp_path / "app.py"
     app.write_text(APP.format(env=str(bad)))
-    ray_tmp = tmp_path / "ray"
-    ray_tmp.mkdir()
-    env = {**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)}
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
-                       text=True, env=env, timeout=120)
+    p, ray_tmp = _run_in_fresh_ray_tmp(tmp_path, app)
     assert p.returncode == 2, p.stderr
     assert "did you mean 'width'" in p.stderr and "Traceback" not in p.stderr
     assert list(ray_tmp.iterdir()) == []  # no session_* folder: no gcs_server/raylet was ever spawned

@@ -92,6 +92,14 @@ def send(path: str, url: str) -> None:
         src.seek(0)
 
 
+def _kill(proc: "subprocess.Popen | None") -> None:
+    """Kill ``proc`` (if any) and reap it; returns None (the caller's new handle)."""
+    if proc is not None:
+        proc.kill()
+        proc.wait(timeout=30)
+    return None
+
+
 class Sender:
     """A sender subprocess (this file run as a script); :meth:`stop` kills it (a link outage), :meth:`start` starts
     it again."""
@@ -105,10 +113,7 @@ class Sender:
         return self
 
     def stop(self) -> None:
-        if self.proc is not None:
-            self.proc.kill()
-            self.proc.wait(timeout=30)
-            self.proc = None
+        self.proc = _kill(self.proc)
 
     stop_all = stop
 
@@ -142,10 +147,7 @@ class RtspServer:
         return self
 
     def stop(self) -> None:
-        if self.proc is not None:
-            self.proc.kill()
-            self.proc.wait(timeout=30)
-            self.proc = None
+        self.proc = _kill(self.proc)
 
     def stop_all(self) -> None:
         self.stop()
