@@ -155,6 +155,7 @@ class ChannelServer:
             raise
         self._closed = False
         self._conns: set = set()
+        self._conns_lock = threading.Lock()
         self.connections = 0
         self.received = 0
         self.failed = 0
@@ -176,15 +177,25 @@ class ChannelServer:
             threading.Thread(target=self._serve, args=(conn,), name="aerodaas-channel-in", daemon=True).start()
 
     def _serve(self, conn: Any) -> None:
-        """One sender: authenticate (the run's key, both ways), then hand over each delivery and answer it."""
+        """One sender: authenticate (the run's key, both ways), then hand over each delivery and answer it.
+
+        The connection is known to :meth:`close` before the handshake: the sender's side of the handshake ends one
+        message before ours, so a sender may already send while we still authenticate — a close() then must still
+        end this connection, or the sender would wait for an answer from a server that stopped."""
+        with self._conns_lock:
+            if self._closed:
+                conn.close()
+                return
+            self._conns.add(conn)
         try:
             mpc.deliver_challenge(conn, self._key)
             mpc.answer_challenge(conn, self._key)
-        except Exception:  # noqa: BLE001 - not one of the run's actors: drop it
+        except Exception:  # noqa: BLE001 - not one of the run's actors (or closed under us): drop it
+            with self._conns_lock:
+                self._conns.discard(conn)
             conn.close()
             return
         self.connections += 1
-        self._conns.add(conn)
         send_lock = threading.Lock()
         maps: dict[str, SharedMemory] = {}
         freed: deque[str] = deque()  # slots whose frames were collected, not yet told (filled by finalizers)
@@ -249,7 +260,8 @@ class ChannelServer:
         finally:
             stop.set()
             wake.set()
-            self._conns.discard(conn)
+            with self._conns_lock:
+                self._conns.discard(conn)
             conn.close()
             for shm in maps.values():
                 try:
@@ -272,12 +284,14 @@ class ChannelServer:
     def close(self) -> None:
         """Stop serving: the address is released and every sender's connection is closed (they count what they had
         in flight as failed)."""
-        self._closed = True
+        with self._conns_lock:
+            self._closed = True
+            conns = list(self._conns)
+        for conn in conns:
+            _shutdown(conn)
         if self._acceptor is not threading.current_thread():
             self._acceptor.join(2.0)  # it leaves accept() within its timeout; then the address is free at once
         self._sock.close()
-        for conn in list(self._conns):
-            _shutdown(conn)
 
 
 class _Slot:
@@ -504,6 +518,12 @@ class ChannelOutlet:
             self._in_flight[seq] = (slot_name, tok)
             self.sent += 1
             return seq
+
+    @property
+    def connected(self) -> bool:
+        """True while the channel to the peer is open (False from the peer's death until the next reconnect)."""
+        with self._lock:
+            return self._conn is not None
 
     def busy(self) -> bool:
         """True while a delivery is in flight (sent, not yet answered by the peer)."""

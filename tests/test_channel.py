@@ -140,9 +140,47 @@ def test_a_restarted_receiver_is_reconnected_and_in_flight_items_count_as_failed
         assert out.send(_frame(1, (48, 64, 3))) is not None
         srv.close()  # the receiving actor dies with a delivery in flight
         rx.gate.set()
-        assert _wait(lambda: out.failed >= 1 and out._conn is None)
+        assert _wait(lambda: out.failed >= 1 and not out.connected)
         rx2 = Receiver()
         srv = ChannelServer(address, KEY, rx2)  # restarted: the same address again
+        assert _wait(lambda: out.send(_frame(2, (48, 64, 3))) is not None)
+        assert _wait(lambda: len(rx2.got) == 1) and rx2.got[0][3][2] == 2 and out.reconnects >= 1
+    finally:
+        out.close()
+        srv.close()
+
+
+def test_a_server_closed_while_it_still_authenticates_a_sender_ends_that_connection_too(address, monkeypatch):
+    """The sender's side of the handshake ends one message before the server's: a close() in that gap must still
+    end the connection (CI once saw a delivery answered by a server closed before it), so the in-flight delivery
+    counts as failed and a restarted server is reconnected to."""
+    import aerodaas.actors.channel as channel
+
+    real = channel.mpc.answer_challenge
+    server_authenticating = threading.Event()
+    closed = threading.Event()
+
+    def slow_server_side(conn, key):  # the server's last handshake step, held open until the server was closed
+        real(conn, key)
+        if threading.current_thread().name == "aerodaas-channel-in":
+            server_authenticating.set()
+            closed.wait(10)
+
+    monkeypatch.setattr(channel.mpc, "answer_challenge", slow_server_side)
+    rx = Receiver()
+    srv = ChannelServer(address, KEY, rx)
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=2, reply_to=None, on_reply=lambda r: None,
+                        retry_s=0.05)
+    try:
+        assert out.send(_frame(1, (48, 64, 3))) is not None
+        assert server_authenticating.wait(10)
+        srv.close()
+        closed.set()
+        assert _wait(lambda: out.failed >= 1 and not out.connected)
+        assert rx.got == []  # the closed server handed nothing on
+        monkeypatch.setattr(channel.mpc, "answer_challenge", real)
+        rx2 = Receiver()
+        srv = ChannelServer(address, KEY, rx2)
         assert _wait(lambda: out.send(_frame(2, (48, 64, 3))) is not None)
         assert _wait(lambda: len(rx2.got) == 1) and rx2.got[0][3][2] == 2 and out.reconnects >= 1
     finally:
