@@ -5,6 +5,8 @@ Everything the tests judge is read from the firmware with raw pymavlink on the f
 
 * ``read-fence``: the fence items (MISSION_REQUEST_LIST with ``mission_type`` FENCE, MISSION_REQUEST_INT per item)
   and the fence parameters (PARAM_REQUEST_READ), written as JSON.
+* ``read-params``: every parameter of the vehicle; ``mission-flight``: follow a mission someone else started until the
+  vehicle disarms, then every parameter.
 * ``clear-union``: a second ground station sets ArduPilot's FENCE_OPTIONS back to 0 once the vehicle holds at a
   point (:func:`clear_union`); ``px4-intersects``: how PX4 reads two overlapping inclusion circles, asked with
   DO_REPOSITION (:func:`px4_intersects`).
@@ -137,6 +139,32 @@ class Watcher:
                 v = struct.unpack("<i", struct.pack("<f", v))[0]
             params[name] = float(v)
         return {"items": items, "params": params}
+
+    def read_all_params(self, timeout_s: float = 60.0) -> dict[str, float]:
+        """Every parameter of the vehicle (PARAM_REQUEST_LIST, then PARAM_REQUEST_READ by index for those a lossy
+        link dropped), as floats in the firmware's units (PX4's integers decoded from their bytes)."""
+        import struct
+
+        s, c = self.sysid, self.compid
+        got: dict[int, tuple[str, float]] = {}
+        total = None
+        end = time.monotonic() + timeout_s
+        self.m.mav.param_request_list_send(s, c)
+        quiet = time.monotonic() + 3.0
+        while time.monotonic() < end and (total is None or len(got) < total):
+            msg = self.pump(0.1, want=("PARAM_VALUE",))
+            if msg is not None and msg.param_index != 65535:
+                total = msg.param_count
+                v = msg.param_value
+                if self.autopilot == "px4" and msg.param_type in (1, 2, 3, 4, 5, 6):
+                    v = struct.unpack("<i", struct.pack("<f", v))[0]
+                got[msg.param_index] = (msg.param_id, float(v))
+                quiet = time.monotonic() + 1.0
+            elif time.monotonic() > quiet and total is not None:  # the list ended with gaps: ask for each
+                for i in [i for i in range(total) if i not in got][:20]:
+                    self.m.mav.param_request_read_send(s, c, b"", i)
+                quiet = time.monotonic() + 1.0
+        return {name: v for name, v in got.values()}
 
     def upload_mission(self, points: list[tuple[float, float, float]]) -> bool:
         """A plain mission (ArduPilot: home placeholder at 0, then NAV_WAYPOINTs at ``(lat, lon, alt above home)``),
@@ -315,6 +343,28 @@ def clear_union(conn: str, out: str, home: GeoPoint, x: float, y: float, timeout
     return 0
 
 
+def read_params(conn: str, out: str, home: GeoPoint) -> int:
+    w = Watcher(conn, home)
+    w.wait_vehicle(120)
+    Path(out).write_text(json.dumps(w.read_all_params()))
+    return 0
+
+
+def mission_flight(conn: str, out: str, home: GeoPoint, timeout_s: float = 400.0) -> int:
+    """Follow a mission someone else started (``aerodaas mission upload --start``) until the vehicle has landed and
+    disarmed, then read every parameter: positions (the firmware's GLOBAL_POSITION_INT), modes, texts, params."""
+    w = Watcher(conn, home)
+    w.wait_vehicle(120)
+    end = time.monotonic() + timeout_s
+    arming = time.monotonic() + 60.0  # a mission that was not started: no arming to wait for
+    while time.monotonic() < end and not (w.was_armed and not w.armed) and (w.was_armed or time.monotonic() < arming):
+        w.pump()
+    params = w.read_all_params()
+    Path(out).write_text(json.dumps({"samples": w.samples, "modes": w.modes, "texts": w.texts,
+                                     "was_armed": w.was_armed, "armed_at_end": w.armed, "params": params}))
+    return 0
+
+
 #: the overlapping inclusion circles of the fence tests: (east, north, radius) metres from home; home is in both
 OVERLAP_CIRCLES = [(-6.0, 0.0, 10.0), (6.0, 0.0, 10.0)]
 
@@ -394,6 +444,10 @@ if __name__ == "__main__":
     h = GeoPoint(**FARM_HOME)
     if sys.argv[1] == "read-fence":
         sys.exit(read_fence(sys.argv[2], sys.argv[3], h))
+    if sys.argv[1] == "read-params":
+        sys.exit(read_params(sys.argv[2], sys.argv[3], h))
+    if sys.argv[1] == "mission-flight":
+        sys.exit(mission_flight(sys.argv[2], sys.argv[3], h))
     if sys.argv[1] == "clear-union":
         sys.exit(clear_union(sys.argv[2], sys.argv[3], h, float(sys.argv[4]), float(sys.argv[5])))
     if sys.argv[1] == "px4-intersects":

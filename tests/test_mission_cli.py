@@ -91,7 +91,103 @@ def test_upload_of_a_plan_with_a_geofence_sends_it(vehicle, tmp_path, capsys):
     emu, address = vehicle("ardupilot")
     assert main(["mission", "upload", str(plan), "--connection", address]) == 0
     out = capsys.readouterr().out
-    assert "fenced.plan" in out and "1 circle(s)" in out and "FENCE_ENABLE 1" in out, out
+    assert "fenced.plan" in out and "1 circle(s)" in out and "FENCE_ENABLE 0 -> 1" in out, out
     with emu._lock:
         assert [(it.command, it.param1) for it in emu.fence_items] == [(5003, 200.0)]
     assert emu.params["FENCE_ENABLE"] == 1
+
+
+HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)
+
+
+def _wpl(path, rows):
+    """A QGC WPL 110 file: home row, then ``rows`` of (command, frame, p1, p2, east m, north m, z) about HOME."""
+    from aerodaas.navigation.geo import enu_to_geodetic
+
+    lines = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME.lat:.7f}\t{HOME.lon:.7f}\t{HOME.alt:.2f}\t1"]
+    for k, (cmd, frame, p1, p2, e, n, z) in enumerate(rows, start=1):
+        g = enu_to_geodetic(e, n, 0.0, HOME)
+        lat, lon = (g.lat, g.lon) if frame != 2 else (0.0, 0.0)
+        lines.append(f"{k}\t0\t{frame}\t{cmd}\t{p1}\t{p2}\t0\t0\t{lat:.7f}\t{lon:.7f}\t{z}\t1")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+#: take off to 5 m, a waypoint, DO_CHANGE_SPEED 5 m/s (ground), a waypoint, land
+SPEEDY = [(22, 3, 0, 0, 0, 0, 5.0), (16, 3, 0, 0, 0, 20, 5.0), (178, 2, 1, 5, 0, 0, 0), (16, 3, 0, 0, 20, 20, 5.0),
+          (21, 3, 0, 0, 20, 20, 0.0)]
+
+
+def _stored(emu) -> list[tuple]:
+    """(command, param2) of the emulated vehicle's mission, ArduPilot's home item left out."""
+    with emu._lock:
+        return [(it.command, round(it.param2, 3)) for it in emu.mission[1:]]
+
+
+def test_items_are_measured_from_the_vehicles_home_not_the_files(vehicle, tmp_path, capsys):
+    """issue 40: a mission 537 m from the vehicle was refused as 9,238 km, measured from the file's planned home.
+    A .plan planned at the other end of the world, its items beside the vehicle, goes up; items 537 m from the
+    vehicle are refused by --max-distance 500 as 537 m, wherever the file planned its home."""
+    import json
+
+    emu, address = vehicle("ardupilot")
+    doc = json.loads(SQUARE.read_text())
+    doc["mission"]["plannedHomePosition"] = [-33.8568, 151.2153, 10.0]  # Sydney
+    far_home = tmp_path / "far_home.plan"
+    far_home.write_text(json.dumps(doc))
+    assert main(["mission", "upload", str(far_home), "--connection", address]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    out = _wpl(tmp_path / "out.waypoints", [(22, 3, 0, 0, 0, 537, 5.0), (21, 3, 0, 0, 0, 537, 0.0)])
+    assert main(["mission", "upload", str(out), "--connection", address, "--max-distance", "500"]) == 2
+    err = capsys.readouterr().err
+    assert "is 537 m from home, beyond max_distance 500 m" in err, err
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_the_files_speeds_go_up_as_written_and_no_parameter_changes(vehicle, tmp_path, capsys, autopilot):
+    """issue 40: DO_CHANGE_SPEED 5 m/s went up as 2 m/s without a word, and --start left WPNAV_SPEED 1000 -> 200,
+    WPNAV_SPEED_UP 250 -> 100, WPNAV_SPEED_DN 150 -> 100 on the vehicle. Now the file goes up as written, the
+    read-back says so, and every vehicle parameter is as before, also after --start."""
+    emu, address = vehicle(autopilot)
+    before = dict(emu.params)
+    path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
+    assert main(["mission", "upload", str(path), "--connection", address, "--start"]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "read back: the vehicle holds the 5 items as sent" in out, out
+    assert _stored(emu)[2] == (178, 5.0) if autopilot == "ardupilot" else True
+    assert emu.snapshot()["armed"]
+    assert emu.params == before
+
+
+def test_max_speed_caps_the_files_speeds_and_says_so_per_item(vehicle, tmp_path, capsys):
+    """--max-speed 2: the file's DO_CHANGE_SPEED 5 m/s goes up as 2 (said with its item), and since the vehicle's own
+    cruise speed (WPNAV_SPEED 1000 cm/s) is above the cap, a DO_CHANGE_SPEED 2 m/s is inserted after the take-off
+    (said too); WPNAV_SPEED itself is untouched."""
+    emu, address = vehicle("ardupilot")
+    path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
+    assert main(["mission", "upload", str(path), "--connection", address, "--max-speed", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "before item 2 inserted: DO_CHANGE_SPEED 2 m/s (--max-speed 2 m/s; the vehicle's own cruise speed is " \
+           "10 m/s)" in out, out
+    assert "item 3 (MAV_CMD_DO_CHANGE_SPEED (178)): DO_CHANGE_SPEED 5 m/s capped to 2 m/s (--max-speed 2 m/s)" in out
+    assert _stored(emu) == [(22, 0.0), (178, 2.0), (16, 0.0), (178, 2.0), (16, 0.0), (21, 0.0)]
+    assert emu.params["WPNAV_SPEED"] == 1000.0
+
+
+def test_a_mission_the_vehicle_stores_differently_is_not_started(vehicle, tmp_path, capsys):
+    """The read-back after the upload: a vehicle that keeps the second waypoint 1e-5 degree off holds another flight:
+    exit 2, named, and --start does not arm."""
+    emu, address = vehicle("ardupilot")
+    store = emu._store_item
+
+    def shift(link, msg, is_int):
+        if getattr(msg, "mission_type", 0) == 0 and msg.seq == 4:
+            msg.x += 100
+        store(link, msg, is_int)
+
+    emu._store_item = shift
+    path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
+    assert main(["mission", "upload", str(path), "--connection", address, "--start"]) == 2
+    err = capsys.readouterr().err
+    assert "the mission read back differs from the one sent: item 4 (MAV_CMD_NAV_WAYPOINT (16)): latitude" in err, err
+    assert "not started" in err and not emu.snapshot()["armed"]

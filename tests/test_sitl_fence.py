@@ -77,6 +77,25 @@ def _overlap_env(autopilot: str, workdir: Path, name: str, progress: dict | None
     return path
 
 
+#: the mission file of ``mission upload --start``: (command, frame, param1..4, east m, north m, z), about HOME: take
+#: off to 5 m, DO_CHANGE_SPEED 3 m/s ground speed (neither autopilot's default: ArduCopter WPNAV_SPEED 10 m/s, PX4
+#: MPC_XY_CRUISE 5 m/s; nor the 2 m/s the upload capped it to before), a 30 m square's three sides, land at home
+SPEED_MPS = 3.0
+MISSION = [(22, 3, 0, 0, 0, 0, 0, 0, 5.0), (178, 2, 1, SPEED_MPS, -1, 0, None, None, 0.0),
+           (16, 3, 0, 0, 0, 0, 0, 30, 5.0), (16, 3, 0, 0, 0, 0, 30, 30, 5.0), (16, 3, 0, 0, 0, 0, 0, 0, 5.0),
+           (21, 3, 0, 0, 0, 0, 0, 0, 0.0)]
+
+
+def _mission_file(path: Path) -> Path:
+    """:data:`MISSION` as a QGC WPL 110 file (row 0: home)."""
+    rows = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME['lat']:.7f}\t{HOME['lon']:.7f}\t{HOME['alt']:.2f}\t1"]
+    for k, (cmd, frame, p1, p2, p3, p4, e, n, z) in enumerate(MISSION, start=1):
+        lat, lon = (0.0, 0.0) if e is None else _ll(e, n)
+        rows.append(f"{k}\t0\t{frame}\t{cmd}\t{p1}\t{p2}\t{p3}\t{p4}\t{lat:.7f}\t{lon:.7f}\t{z}\t1")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
 def _run(env: Path, record: Path, waypoints: str) -> str:
     return f"AERODAAS_SITL_WAYPOINTS={shlex.quote(waypoints)} " + sitl.aerodaas_run(OVERLAP_APP, env, record)
 
@@ -102,6 +121,15 @@ def _vehicle_session(autopilot: str, workdir: Path) -> dict:
         return f"{py} -m tests.sitl_fence read-fence {mon} {shlex.quote(str(workdir / name))}"
 
     steps = {"upload": up, "read": read("fence.json")}
+    # mission upload --start of a file without a fence: flown as written, nothing else changed (issue 40 item 8)
+    mission = _mission_file(workdir / "mission.waypoints")
+    steps["params_before"] = f"{py} -m tests.sitl_fence read-params {mon} {shlex.quote(str(workdir / 'before.json'))}"
+    steps["start"] = " ".join(shlex.quote(a) for a in [*sitl.AERODAAS, "mission", "upload", str(mission), "--start",
+                                                        "--connection", sitl.connection(autopilot), "--timeout", "60"])
+    steps["flight"] = f"{py} -m tests.sitl_fence mission-flight {mon} {shlex.quote(str(workdir / 'flight.json'))}"
+    steps["download"] = " ".join(shlex.quote(a) for a in [
+        *sitl.AERODAAS, "mission", "download", "--out", str(workdir / "back.waypoints"), "--connection",
+        sitl.connection(autopilot), "--timeout", "60"])
     if autopilot == "ardupilot":
         # back to h (home) at the end: it lands there, and the next run's vehicle arms where robots[].home is
         steps["union"] = _run(_overlap_env(autopilot, workdir, "union.json"), workdir / "union.mcap",
@@ -119,7 +147,7 @@ def _vehicle_session(autopilot: str, workdir: Path) -> dict:
         steps["px4"] = f"{py} -m tests.sitl_fence px4-intersects {mon} {shlex.quote(str(workdir / 'px4.json'))}"
     sitl.run_in_namespace(autopilot, workdir, list(steps.values()), timeout_s=900)
     out = {name: sitl.step_result(workdir, k) for k, name in enumerate(steps)}
-    for name in ("fence", "union_fence", "refused_fence", "cleared", "px4"):
+    for name in ("fence", "union_fence", "refused_fence", "cleared", "px4", "before", "flight"):
         f = workdir / f"{name}.json"
         out[name] = json.loads(f.read_text()) if f.exists() else {}
     for name in ("union", "intersection", "refused"):
@@ -163,6 +191,58 @@ def test_px4_mission_upload_leaves_the_plan_fence_on_the_vehicle(px4_upload):
     assert got == _want_items()
     p = fence["params"]
     assert p["GF_ACTION"] == 3 and p["GF_MAX_VER_DIST"] == 120.0, p
+
+
+# ------------------------------------------------------------------ mission upload --start is faithful (issue 40)
+#: parameters the firmware itself changes by flying or by holding a mission (not settings anyone made): ArduCopter's
+#: statistics (AP_Stats: STAT_RUNTIME, STAT_FLTTIME, STAT_DISTFLWN...), its mission count MIS_TOTAL (the uploaded
+#: mission itself) and its hover throttle learnt in flight (MOT_THST_HOVER, saved with MOT_HOVER_LEARN 2, the default);
+#: PX4's flight-time counters (LND_FLIGHT_T_HI/LO) and flight id (COM_FLIGHT_UUID)
+_FIRMWARE_OWN = ("STAT_", "MIS_TOTAL", "MOT_THST_HOVER", "LND_FLIGHT_T_", "COM_FLIGHT_UUID")
+
+
+def _mission_upload_start(session: dict) -> None:
+    """``aerodaas mission upload FILE --start``, then the vehicle followed until it disarmed, then ``aerodaas mission
+    download``: the vehicle flew the file's DO_CHANGE_SPEED 3 m/s (its firmware's telemetry: the fastest second of
+    the flight within 15 %; before, the upload capped it to 2 m/s without a word), every parameter afterwards equals
+    its value before (firmware-kept counters aside; before, WPNAV_SPEED 1000 -> 200 and its climb and descent speeds
+    stayed changed), and the mission downloaded equals the file item by item, but for the fields the upload named."""
+    from aerodaas.missionfile import load_mission
+    from aerodaas.missionfile.upload import mission_differences
+
+    rc, upload = session["start"]
+    assert rc == 0, upload[-3000:]
+    assert "read back: the vehicle holds the 6 items as sent" in upload and "capped" not in upload, upload[-2000:]
+    flight = session["flight"]
+    assert flight.get("was_armed") and not flight.get("armed_at_end"), (flight.get("modes"), flight.get("texts"))
+    samples = [s for s in flight["samples"] if s[3] > 1.0]
+    fastest = max(math.hypot(b[1] - a[1], b[2] - a[2]) / (b[0] - a[0])
+                  for i, a in enumerate(samples) for b in samples[i:i + 40] if 1.0 <= b[0] - a[0] <= 1.2)
+    assert abs(fastest - SPEED_MPS) <= 0.15 * SPEED_MPS, fastest
+    last = flight["samples"][-1]
+    assert math.hypot(last[1], last[2]) < 3.0, last  # landed at home
+    before, after = session["before"], flight["params"]
+    assert len(before) > 300 and set(before) == set(after), (len(before), set(before) ^ set(after))
+    changed = {k: (before[k], after[k]) for k in before
+               if before[k] != after[k] and not k.startswith(_FIRMWARE_OWN)}
+    assert changed == {}, changed
+    rc, text = session["download"]
+    assert rc == 0, text[-2000:]
+    sent = load_mission(session["workdir"] / "mission.waypoints").expanded_items()
+    back = load_mission(session["workdir"] / "back.waypoints").expanded_items()
+    # equal, but for fields the vehicle does not keep as sent, each named by the upload (ArduCopter 4.7.0-dev returns
+    # NAV_LAND with param4 1 for the 0 sent; PX4 keeps everything): nothing that changes the flight, nothing silent
+    diffs = mission_differences(sent, back)
+    assert not [d for d in diffs if d.flight], diffs
+    assert all(f"the vehicle stored {d} (a field it does not keep)" in upload for d in diffs), (diffs, upload)
+
+
+def test_ardupilot_mission_upload_start_flies_the_file_and_leaves_the_parameters(ardupilot_upload):
+    _mission_upload_start(ardupilot_upload)
+
+
+def test_px4_mission_upload_start_flies_the_file_and_leaves_the_parameters(px4_upload):
+    _mission_upload_start(px4_upload)
 
 
 # ------------------------------------------------------------------------- overlapping inclusion zones (issue 40)

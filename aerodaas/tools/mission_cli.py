@@ -13,6 +13,7 @@ __all__ = ["add_parser", "cmd_mission"]
 _MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
 
 
+
 def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5.0):
     """A connected MAVLink backend for ``--connection``, after waiting up to ``home_wait_s`` seconds for the
     vehicle's HOME_POSITION (BackendError / ValueError name the connection)."""
@@ -20,8 +21,10 @@ def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5
     from aerodaas.config import MavlinkConfig, RobotConfig
 
     fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
+    # set_speed_limits False: the vehicle's own speed parameters are left as they are (a started mission flies on
+    # after we close, so nothing changed could be put back); the file's speeds, capped by --max-speed, are the mission
     mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
-                       fence=fence)
+                       fence=fence, set_speed_limits=False)
     cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
     backend = make_backend(cfg)
     backend.connect()
@@ -57,21 +60,51 @@ def _download_fence_and_rally(backend, plan, out: Path, name: str):
     return plan
 
 
+def _cruise_speed(backend) -> float | None:
+    """The vehicle's own cruise speed in m/s (ArduCopter ``WPNAV_SPEED`` cm/s, PX4 ``MPC_XY_CRUISE`` m/s), read and
+    left as it is; None when it does not answer."""
+    name, unit = ("WPNAV_SPEED", 0.01) if backend.autopilot == "ardupilot" else ("MPC_XY_CRUISE", 1.0)
+    got = backend.read_parameters([name])
+    return got[name] * unit if name in got else None
+
+
+def _check_read_back(backend, sent, name: str) -> None:
+    """Download the vehicle's mission and compare it with ``sent`` (:func:`~aerodaas.missionfile.upload.
+    mission_differences`): prints what it stored differently; raises BackendError when that changes the flight
+    (command, frame, position, altitude, a speed, the number of items)."""
+    from aerodaas.backends import BackendError
+    from aerodaas.missionfile.upload import mission_differences
+
+    stored = backend.download_mission().items
+    diffs = mission_differences(sent, stored)
+    flight = [d for d in diffs if d.flight]
+    for d in diffs:
+        if not d.flight:
+            print(f"{name}: note: the vehicle stored {d} (a field it does not keep)", file=sys.stderr, flush=True)
+    if flight:
+        raise BackendError("the mission read back differs from the one sent: "
+                           + "; ".join(str(d) for d in flight[:5]) + "; not started")
+    print(f"{name}: read back: the vehicle holds the {len(stored)} items as sent"
+          + (f", but for {len(diffs)} field(s) it does not keep (above)" if diffs else ""), flush=True)
+
+
 def _upload_bound(kind: str):
-    """argparse type of a positive bound in metres: an ``altitude`` at most ``MAX_ALTITUDE_M`` (10 km), a
-    ``distance`` at most ``MAX_LOCAL_M`` (100 km); argparse names the option in its error (exit 2)."""
+    """argparse type of a positive bound: an ``altitude`` at most ``MAX_ALTITUDE_M`` (10 km), a ``distance`` at most
+    ``MAX_LOCAL_M`` (100 km), a ``speed`` at most ``MAX_SPEED_MPS`` m/s; argparse names the option in its error
+    (exit 2)."""
 
     def parse(text: str) -> float:
         from aerodaas.app.models import MAX_LOCAL_M
-        from aerodaas.config.base import MAX_ALTITUDE_M
+        from aerodaas.config.base import MAX_ALTITUDE_M, MAX_SPEED_MPS
 
-        upper = MAX_ALTITUDE_M if kind == "altitude" else MAX_LOCAL_M
+        upper = {"altitude": MAX_ALTITUDE_M, "distance": MAX_LOCAL_M, "speed": MAX_SPEED_MPS}[kind]
+        unit = "m/s" if kind == "speed" else "metres"
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
         if not 0.0 < v <= upper:
-            raise argparse.ArgumentTypeError(f"must be in (0, {upper:g}] metres, got {text}")
+            raise argparse.ArgumentTypeError(f"must be in (0, {upper:g}] {unit}, got {text}")
         return v
 
     return parse
@@ -79,12 +112,15 @@ def _upload_bound(kind: str):
 
 def cmd_mission(args: argparse.Namespace) -> int:
     """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
-    through the MAVLink backend's mission protocol. The file is read and every item checked (with
-    :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly) before anything is
-    sent; a download is written only once complete. A ``.plan``'s geofence goes up first (MAV_MISSION_TYPE_FENCE
-    items and the fence parameters, ``--fence-action``; read back and compared: a mismatch stops the upload before
-    the mission is sent), then its rally points (MAV_MISSION_TYPE_RALLY), then the mission
-    (:mod:`aerodaas.backends.mavlink.fence`)."""
+    through the MAVLink backend's mission protocol. The file is read and its items checked before anything is
+    sent (with :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly; the altitude,
+    distance and geofence bounds measured from the vehicle's own home, the file's planned home only when the
+    vehicle reports none); a download is written only once complete. A ``.plan``'s geofence goes up first
+    (MAV_MISSION_TYPE_FENCE items and the fence parameters, ``--fence-action``; read back and compared: a mismatch
+    stops the upload before the mission is sent; each fence parameter changed is printed with its old value), then
+    its rally points (MAV_MISSION_TYPE_RALLY), then the mission as written: its speeds unless ``--max-speed`` caps
+    them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`); no other vehicle parameter
+    is changed. The mission is then read back and compared (a different flight: exit 2, not started)."""
     from aerodaas.backends import BackendError
     from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
 
@@ -100,32 +136,45 @@ def cmd_mission(args: argparse.Namespace) -> int:
                 raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
                                        f"would clear the vehicle's mission)")
             bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
-            if plan.home is not None:  # items, frames, altitudes, geofence: refused here, before connecting
-                plan_to_flight(plan, **bounds)
+            # the file alone, before connecting: commands, frames, order (the bounds are measured from the vehicle's
+            # home, so not yet; a planned home only stands in for AMSL altitudes here)
+            from aerodaas.app.models import GeoPoint
+
+            plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
+                           min_altitude=None)
             backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
-            if backend.home_received:
-                # again from the vehicle's own home (still before anything is sent): a .plan's planned home may be
-                # elsewhere; AMSL altitudes need it
+            if backend.home_received:  # as documented: from the vehicle's own home, whatever the file planned
                 plan_to_flight(plan, backend.home, **bounds)
             elif plan.home is None:  # the bounds are measured from a home, never from a default one
                 raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
                                        f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
                                        "altitude and distance bounds are measured from it)")
-            else:  # no GPS fix yet (bench, indoors): checked against the file's planned home above
+            else:  # no GPS fix yet (bench, indoors)
                 print(f"{name}: warning: the vehicle reported no home position within {args.timeout:g} s; the "
-                      f"items were checked against the file's planned home only", file=sys.stderr, flush=True)
+                      f"items are checked against the file's planned home only", file=sys.stderr, flush=True)
+                plan_to_flight(plan, plan.home, **bounds)
             fence = plan.geofence
             if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
                 got = backend.apply_fence(fence)
+                changed = [f"{k} {got['before'][k]:g} -> {v:g}" for k, v in got["params"].items()
+                           if abs(got["before"][k] - v) > 1e-6]
                 print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
-                      f"circle(s), {got['items']} fence items) uploaded and read back; "
-                      + ", ".join(f"{k} {v:g}" for k, v in got["params"].items()), flush=True)
+                      f"circle(s), {got['items']} fence items) uploaded and read back; it stays on the vehicle with "
+                      f"its parameters: " + (", ".join(changed) or "none changed"), flush=True)
             if plan.rally_points:
                 n = backend.upload_rally(plan.rally_points)
                 print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
-            sent = backend.upload_mission(plan)
+            items = plan.expanded_items()
+            if args.max_speed is not None:
+                from aerodaas.missionfile.upload import cap_speeds
+
+                items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
+                for c in changes:
+                    print(f"{name}: {c}", flush=True)
+            sent = backend.upload_mission(items)
             print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
                   f"{args.connection}", flush=True)
+            _check_read_back(backend, sent, name)
             if args.start:
                 backend.arm()
                 backend.start_mission()
@@ -170,6 +219,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          "and FAA Part 107 ceiling)")
     mu.add_argument("--max-distance", type=_upload_bound("distance"), default=10_000.0, metavar="M",
                     help="refuse items farther than this from home horizontally, metres (default 10000)")
+    mu.add_argument("--max-speed", type=_upload_bound("speed"), default=None, metavar="M/S",
+                    help="cap the file's speeds (DO_CHANGE_SPEED items) at this, m/s, and start the flight at it when "
+                         "the vehicle's own cruise speed is higher; each item changed is printed (default: the "
+                         "file's speeds as written)")
     md = msub.add_parser("download", help="download the vehicle's mission into --out (.plan, .waypoints or .txt)")
     md.add_argument("--out", required=True, metavar="FILE")
     for m in (mu, md):

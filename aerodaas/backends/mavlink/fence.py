@@ -274,7 +274,8 @@ class FenceMixin:
         current fence items and parameters (for :meth:`restore_fence`), upload the items
         (``MAV_MISSION_TYPE_FENCE``), set the parameters (:meth:`fence_parameters`), then read both back
         (MISSION_REQUEST_LIST of the fence type, PARAM_REQUEST_READ) and compare. Returns ``{"items": n,
-        "params": {name: value read back}}`` and records a ``fence_uploaded`` event. Raises BackendError naming
+        "params": {name: value read back}, "before": {name: the vehicle's value before}}`` and records a
+        ``fence_uploaded`` event. Raises BackendError naming
         what differs ("refusing to fly"), a fence the autopilot would read differently from our gate (before anything
         is sent: :func:`~aerodaas.navigation.geofence.autopilot_disagreement`; an ArduPilot without ``FENCE_OPTIONS``
         for several inclusion zones) or a fence too low for PX4's Return (:func:`px4_return_altitude_ceiling`),
@@ -326,7 +327,7 @@ class FenceMixin:
             if not math.isclose(got[name], value, rel_tol=1e-5, abs_tol=1e-3):
                 raise BackendError(f"{where}: {name} set to {value:g}, the vehicle reports {got[name]:g}; "
                                    f"refusing to fly")
-        self.fence_applied = {"items": len(wire), "params": got}
+        self.fence_applied = {"items": len(wire), "params": got, "before": {n: have[n] for n in want}}
         self._event("fence_uploaded", items=len(wire), polygons=len(fence.polygons), circles=len(fence.circles),
                     action=self.cfg.fence.action, **{k: round(v, 3) for k, v in got.items()})
         return self.fence_applied

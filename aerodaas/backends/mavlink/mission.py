@@ -64,7 +64,8 @@ class MissionMixin:
         from waypoints carry absolute altitudes (MAV_FRAME_GLOBAL: the take-off point's AMSL altitude, fixed here
         while the vehicle stands on it, + the height), since PX4 keeps re-estimating the home altitude that
         MAV_FRAME_GLOBAL_RELATIVE_ALT refers to for minutes after take-off (``COM_HOME_EN``; commander
-        ``HomePosition``); given mission items (a file) keep their frames.
+        ``HomePosition``); given mission items (a file) keep their frames and their speeds (DO_CHANGE_SPEED); the
+        speeds of items built from waypoints are capped at the robot's limit.
 
         Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
         which :meth:`download_mission` returns unchanged. Raises CommandRefused (MAV_MISSION_RESULT name) when the
@@ -92,9 +93,10 @@ class MissionMixin:
                 # PX4 resolves home-relative altitudes with a home it keeps re-estimating for minutes after
                 # take-off (COM_HOME_EN): our own waypoints go up as AMSL altitudes above the take-off point
                 frame, z = M.MAV_FRAME_GLOBAL, _f32(self._alt_ref + z)
-            if it.command == M.MAV_CMD_DO_CHANGE_SPEED:
-                # never above the robot's limit (less any estimator margin measured in flight), never -2
-                # ("default": DENIED by ArduCopter): the limit instead
+            if it.command == M.MAV_CMD_DO_CHANGE_SPEED and built:
+                # our own waypoints' speeds: never above the robot's limit (less any estimator margin measured in
+                # flight), never -2 ("default": DENIED by ArduCopter): the limit instead. Given items (a mission
+                # file) go up as written (``aerodaas mission upload --max-speed`` caps them itself, and says so)
                 limit = self.xy_speed_cap()
                 p[1] = _f32(limit if p[1] is None or (p[1] <= 0 and p[1] != -1) else min(p[1], limit))
             wire.append((frame, it.command, 1 if it.autocontinue else 0,

@@ -1,0 +1,131 @@
+"""A mission file sent to a vehicle as written: the speeds an explicit limit caps (:func:`cap_speeds`, each change
+said), and what the vehicle stored compared with what was sent (:func:`mission_differences`).
+
+``aerodaas mission upload`` (:mod:`aerodaas.tools.mission_cli`) uses both: the file's ``MAV_CMD_DO_CHANGE_SPEED``
+items fly as written unless ``--max-speed`` caps them, and the mission is read back after the upload, every field
+the vehicle stored differently named. Autopilots keep less than a mission item can say: ArduCopter keeps only the
+hold time of a ``MAV_CMD_NAV_WAYPOINT`` (``AP_Mission::mavlink_int_to_mission_cmd``: ``cmd.p1 = packet.param1``;
+acceptance radius, pass radius and yaw read back as 0), so those differences are reported, not hidden; a changed
+command, frame, position, altitude or speed is a different flight.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Sequence
+
+from aerodaas.missionfile.commands import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_TAKEOFF, MAV_FRAME_MISSION,
+                                           _GLOBAL_FRAMES)
+from aerodaas.missionfile.items import MissionItem
+
+__all__ = ["ItemDifference", "mission_differences", "SpeedChange", "cap_speeds"]
+
+#: a frame and its ``_INT`` twin (common.xml: the same meaning, x/y as integers on the wire)
+_FRAME_ALIAS = {5: 0, 6: 3, 11: 10}
+_FIELDS = ("param1", "param2", "param3", "param4", "x", "y", "z")
+
+
+class ItemDifference(NamedTuple):
+    """One field the vehicle stored differently: ``index`` (1-based position in the mission), ``item`` (the sent
+    item's description), ``field`` (``command``, ``frame``, ``param1``..``param4``, ``latitude``, ``longitude``,
+    ``altitude`` or ``count``), the ``sent`` and ``stored`` values (None: unset/NaN) and whether it changes the
+    flight (``flight``: command, frame, position, altitude, a speed, the number of items)."""
+
+    index: int
+    item: str
+    field: str
+    sent: float | int | None
+    stored: float | int | None
+    flight: bool
+
+    def __str__(self) -> str:
+        def show(v):
+            return "unset" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
+
+        return f"{self.item}: {self.field} {show(self.sent)} sent, {show(self.stored)} stored"
+
+
+def _same(a: float | None, b: float | None, abs_tol: float, rel_tol: float = 0.0) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return math.isclose(a, b, rel_tol=rel_tol, abs_tol=abs_tol)
+
+
+def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionItem]) -> list[ItemDifference]:
+    """What the vehicle's mission (``stored``: a download, ArduPilot's home item left out) holds differently from
+    ``sent`` (the items as uploaded: latitude/longitude on the 1e-7 degree grid, params as float32). Compared per
+    item: command, frame (a frame equals its ``_INT`` twin; not compared for an item without a position), params (float32 tolerance; a 0 stored for an unset
+    param is a difference), latitude/longitude (within 0.6e-7 degree) and altitude (1 mm). A different number of
+    items is one ``count`` difference (the items are then compared as far as both go)."""
+    out: list[ItemDifference] = []
+    if len(sent) != len(stored):
+        out.append(ItemDifference(0, "mission", "count", len(sent), len(stored), True))
+    for k, (a, b) in enumerate(zip(sent, stored), start=1):
+        tag = a.describe().replace(f"item {a.seq} ", f"item {k} ")
+        if a.command != b.command:
+            out.append(ItemDifference(k, tag, "command", a.command, b.command, True))
+            continue
+        fa, fb = _FRAME_ALIAS.get(a.frame, a.frame), _FRAME_ALIAS.get(b.frame, b.frame)
+        positional = fa in _GLOBAL_FRAMES
+        if fa != fb and positional:  # an item without a position has no frame to keep (ArduPilot returns 0 for 2)
+            out.append(ItemDifference(k, tag, "frame", a.frame, b.frame, True))
+        for i, name in enumerate(_FIELDS):
+            pa, pb = a.params[i], b.params[i]
+            if i in (4, 5) and positional:
+                if not _same(pa, pb, 0.6e-7):
+                    out.append(ItemDifference(k, tag, "latitude" if i == 4 else "longitude", pa, pb, True))
+            elif i == 6 and positional:
+                if not _same(pa, pb, 1e-3, rel_tol=1e-6):
+                    out.append(ItemDifference(k, tag, "altitude", pa, pb, True))
+            elif not _same(pa, pb, 1e-6, rel_tol=1e-6):  # float32 on the wire
+                speed = a.command == MAV_CMD_DO_CHANGE_SPEED and i == 1
+                out.append(ItemDifference(k, tag, name, pa, pb, speed))
+    return out
+
+
+class SpeedChange(NamedTuple):
+    """What :func:`cap_speeds` did to one item: ``index`` (1-based position in the items it returned), ``item``
+    (description), ``was`` (m/s as written; None: an item inserted) and ``now`` (m/s sent), ``why``."""
+
+    index: int
+    item: str
+    was: float | None
+    now: float
+    why: str
+
+    def __str__(self) -> str:
+        if self.was is None:
+            return f"{self.item} inserted: DO_CHANGE_SPEED {self.now:g} m/s ({self.why})"
+        if self.was == -2:
+            return f"{self.item}: DO_CHANGE_SPEED -2 (the vehicle's default) set to {self.now:g} m/s ({self.why})"
+        return f"{self.item}: DO_CHANGE_SPEED {self.was:g} m/s capped to {self.now:g} m/s ({self.why})"
+
+
+def cap_speeds(items: Sequence[MissionItem], max_speed: float,
+               cruise_speed: float | None) -> tuple[list[MissionItem], list[SpeedChange]]:
+    """``items`` with every ``MAV_CMD_DO_CHANGE_SPEED`` (178) above ``max_speed`` m/s lowered to it, and one
+    ``DO_CHANGE_SPEED`` ground speed ``max_speed`` inserted (after a leading ``NAV_TAKEOFF``) when the flight would
+    otherwise start at the vehicle's own cruise speed ``cruise_speed`` m/s above the cap (None: unknown, inserted
+    too); a ``-2`` ("the vehicle's default") becomes the cap when that default is above it. Returns the items,
+    renumbered from 1, and one :class:`SpeedChange` per item changed or inserted. ``param2`` -1 ("no change") and
+    speeds within the cap are kept as written."""
+    out: list[MissionItem] = []
+    changes: list[SpeedChange] = []
+    why = f"--max-speed {max_speed:g} m/s"
+    default_too_fast = cruise_speed is None or cruise_speed > max_speed + 1e-6
+    insert_at = 1 if items and items[0].command == MAV_CMD_NAV_TAKEOFF else 0
+    speed_set_before_flight = any(it.command == MAV_CMD_DO_CHANGE_SPEED for it in items[:insert_at + 1])
+    for k, it in enumerate(items):
+        if k == insert_at and default_too_fast and not speed_set_before_flight:
+            out.append(MissionItem(seq=0, command=MAV_CMD_DO_CHANGE_SPEED, frame=MAV_FRAME_MISSION,
+                                   params=[1.0, max_speed, -1.0, 0.0, 0.0, 0.0, 0.0]))
+            cruise = "unknown" if cruise_speed is None else f"{cruise_speed:g} m/s"
+            changes.append(SpeedChange(len(out), f"before item {k + 1}", None, max_speed,
+                                       f"{why}; the vehicle's own cruise speed is {cruise}"))
+        new = it
+        if it.command == MAV_CMD_DO_CHANGE_SPEED and it.params[1] is not None:
+            v = it.params[1]
+            if v > max_speed + 1e-6 or (v == -2 and default_too_fast):
+                new = it.model_copy(update={"params": [it.params[0], max_speed, *it.params[2:]]})
+                changes.append(SpeedChange(len(out) + 1, it.describe(), v, max_speed, why))
+        out.append(new)
+    return [m.model_copy(update={"seq": k}) for k, m in enumerate(out, start=1)], changes
