@@ -4,6 +4,7 @@ streams it the way a drone's video link does (MPEG-TS on UDP, or raw RTP H.264 a
 
     python tests/video_rig.py FILE.mp4 udp://127.0.0.1:PORT      # MPEG-TS
     python tests/video_rig.py FILE.mp4 rtp://127.0.0.1:PORT      # RTP H.264 (in-band SPS/PPS on every keyframe)
+    python tests/video_rig.py rtsp FILE.mp4 PORT TS_PORT         # GStreamer's RTSP server, rtsp://127.0.0.1:PORT/cam
 
 It plays the file at its frame rate in a loop until killed; a frame counter is not drawn (the footage is real)."""
 from __future__ import annotations
@@ -126,8 +127,8 @@ class RtspServer:
 
     PACKAGES = "gstreamer1.0-rtsp gir1.2-gst-rtsp-server-1.0 python3-gi gstreamer1.0-plugins-{base,good,bad}"
 
-    def __init__(self, footage: Path) -> None:
-        self.port, self.ts_port = free_tcp_port(), free_udp_port()
+    def __init__(self, footage: Path, port: int | None = None, ts_port: int | None = None) -> None:
+        self.port, self.ts_port = port or free_tcp_port(), ts_port or free_udp_port()
         self.url = f"rtsp://127.0.0.1:{self.port}/cam"
         self.sender = Sender(footage, f"udp://127.0.0.1:{self.ts_port}")
         self.proc = None
@@ -170,5 +171,19 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
+def serve_rtsp(footage: str, port: int, ts_port: int) -> None:
+    """:class:`RtspServer` on ``port`` (its MPEG-TS relay on UDP ``ts_port``) until this process is killed (then
+    both children die with it: they are in its process group, which whoever started it kills)."""
+    server = RtspServer(Path(footage), port, ts_port).start()
+    try:
+        while server.proc.poll() is None:
+            time.sleep(0.5)
+    finally:
+        server.stop_all()
+
+
 if __name__ == "__main__":
-    send(sys.argv[1], sys.argv[2])
+    if sys.argv[1] == "rtsp":  # rtsp FOOTAGE PORT TS_PORT: a GStreamer RTSP server (tests/test_sitl_video.py)
+        serve_rtsp(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
+    else:  # FOOTAGE URL: a sender
+        send(sys.argv[1], sys.argv[2])
