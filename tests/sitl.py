@@ -422,8 +422,10 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     plan = _mission_file(workdir / "mission.waypoints", FARM_HOME)
     py = shlex.quote(sys.executable)
     conn = connection(autopilot)
+    # --max-speed 2: the file sets no speed, so the vehicle would fly at its own cruise speed (ArduCopter
+    # WPNAV_SPEED 10 m/s, PX4 MPC_XY_CRUISE 5 m/s); the cap inserts a DO_CHANGE_SPEED 2 m/s after the take-off
     upload = " ".join(shlex.quote(a) for a in [*AERODAAS, "mission", "upload", str(plan), "--start", "--connection",
-                                                conn, "--timeout", "60"])
+                                                conn, "--timeout", "60", "--max-speed", "2"])
     observe = f"{py} -m tests.sitl_watchers observe {conn} {shlex.quote(str(workdir / 'observed.json'))} 300"
     stopper = (f"( {py} -m tests.sitl_watchers stop-when-flying {monitor_connection(autopilot)} $FW0 3 6 "
                f"> {shlex.quote(str(workdir / 'stopper.log'))} 2>&1 & ) ; ")

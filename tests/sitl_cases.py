@@ -189,17 +189,19 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
 
 
 def test_mission_upload_start(session, autopilot):
-    """`aerodaas mission upload FILE --start` on the landed vehicle: uploaded, armed, flown by the autopilot
-    (an observer on the link sees both waypoints at 2 m) and landed."""
+    """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED
+    2 m/s inserted after the take-off (said), armed, flown by the autopilot at no more than that (an observer on the
+    link sees both waypoints at 2 m) and landed."""
     up = session["upload"]
     assert up["rc"] == 0, up["out"][-2000:]
+    assert "inserted: DO_CHANGE_SPEED 2 m/s (--max-speed 2 m/s" in up["out"], up["out"][-2000:]
     obs = session["observe"]["observed"]
     assert obs.get("armed") and obs.get("landed"), session["observe"]["out"][-2000:]
     pts = [(s[1], s[2], s[3]) for s in obs["samples"]]
     for wp in ((0.0, 6.0, 2.0), (6.0, 6.0, 2.0)):
         assert min(math.dist(p, wp) for p in pts) < 1.0, wp
     v = max(math.hypot(s[4], s[5]) for s in obs["samples"])
-    print(f"{autopilot} mission upload --start: max speed {v:.2f} m/s (vehicle limit 2.0)")
+    print(f"{autopilot} mission upload --start: max speed {v:.2f} m/s (--max-speed 2)")
     assert v <= 2.0 * 1.1
 
 
