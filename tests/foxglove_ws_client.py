@@ -64,9 +64,10 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
                         out["server_info"] = body
                     elif body.get("op") == "advertise":
                         new = []
+                        now = round(time.monotonic() - t0, 3)  # one time per message: its channels come together
                         for ch in body["channels"]:
                             out["channels"][ch["topic"]] = ch
-                            out["timeline"].append((round(time.monotonic() - t0, 3), "advertise", ch["topic"]))
+                            out["timeline"].append((now, "advertise", ch["topic"]))
                             if ch["topic"] in want and ch["topic"] not in subs.values():
                                 subs[next_sub] = ch["topic"]
                                 new.append({"id": next_sub, "channelId": ch["id"]})
