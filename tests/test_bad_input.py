@@ -183,29 +183,59 @@ def _one_waypoint_plan(tmp_path, lat: float, lon: float, alt: float):
 
 @pytest.mark.parametrize("where, flags, said", [
     ((47.3977, 8.5456, 50_000.0), [], "above max_altitude 120 m"),               # 50 km up (issue 25)
-    ((1.0, 60.0, 30.0), [], "beyond max_distance 10000 m"),                      # ~6,800 km away
     ((47.3977, 8.5456, 150.0), ["--max-altitude", "100"], "above max_altitude 100 m"),
-    ((47.4077, 8.5456, 30.0), ["--max-distance", "500"], "1112 m from home, beyond max_distance 500 m"),
 ])
-def test_mission_upload_refuses_items_too_high_or_too_far_before_connecting(tmp_path, capsys, where, flags, said):
+def test_mission_upload_refuses_items_too_high_before_connecting(tmp_path, capsys, where, flags, said):
+    """A home-relative altitude needs no home: refused before any connection attempt."""
     f = _one_waypoint_plan(tmp_path, *where)
-    # a connection nobody serves: the refusal must come before any connection attempt
     assert cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1", *flags]) == 2
     err = capsys.readouterr().err
     assert said in err and "item" in err, err
 
 
+@pytest.fixture
+def vehicle_at_home():
+    """An emulated ArduCopter whose home is the test plans' planned home; yields (emulator, connection)."""
+    from aerodaas.app.models import GeoPoint
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=10.0, gps_lock_s=1.0,
+                                 home=GeoPoint(lat=47.3977, lon=8.5456, alt=488.0))
+    try:
+        yield emu, emu.start("tcp:127.0.0.1:0")
+    finally:
+        emu.stop()
+
+
+@pytest.mark.parametrize("where, flags, said", [
+    ((1.0, 60.0, 30.0), [], "beyond max_distance 10000 m"),                      # ~6,800 km away
+    ((47.4077, 8.5456, 30.0), ["--max-distance", "500"], "1112 m from home, beyond max_distance 500 m"),
+])
+def test_mission_upload_refuses_items_too_far_from_the_vehicles_home_before_sending(tmp_path, capsys, vehicle_at_home,
+                                                                                    where, flags, said):
+    """Distances are measured from the vehicle's reported home (issue 40.8), and refused before anything is sent."""
+    emu, conn = vehicle_at_home
+    f = _one_waypoint_plan(tmp_path, *where)
+    assert cli.main(["mission", "upload", str(f), "--connection", conn, "--timeout", "10", *flags]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "item" in err, err
+    assert emu.snapshot()["mission_len"] <= 1  # nothing uploaded (ArduPilot keeps its home at 0)
+
+
 @pytest.mark.parametrize("rally, said", [((47.3977, 8.5456, 500.0), "above max_altitude 120 m"),
                                          ((1.0, 60.0, 30.0), "beyond max_distance 10000 m")])
-def test_mission_upload_refuses_rally_points_too_high_or_too_far(tmp_path, capsys, rally, said):
-    """The autopilot's RTL may fly to a rally point: the same bounds as the items, before connecting."""
+def test_mission_upload_refuses_rally_points_too_high_or_too_far(tmp_path, capsys, vehicle_at_home, rally, said):
+    """The autopilot's RTL may fly to a rally point: the same bounds as the items (the height before connecting, the
+    distance from the vehicle's home), before anything is sent."""
+    emu, conn = vehicle_at_home
     f = _one_waypoint_plan(tmp_path, 47.3978, 8.5456, 30.0)
     plan = json.loads(f.read_text())
     plan["rallyPoints"]["points"] = [list(rally)]
     f.write_text(json.dumps(plan))
-    assert cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1"]) == 2
+    assert cli.main(["mission", "upload", str(f), "--connection", conn, "--timeout", "10"]) == 2
     err = capsys.readouterr().err
     assert "rally point 1" in err and said in err, err
+    assert emu.snapshot()["mission_len"] <= 1
 
 
 def test_mission_upload_refuses_an_empty_mission(tmp_path, capsys):

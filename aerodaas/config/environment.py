@@ -16,6 +16,7 @@ from aerodaas.navigation.geofence import GeofenceConfig
 
 from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
                    MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
+from aerodaas.config.ids import Identifier, check_unique
 from aerodaas.config.robot import RobotConfig, SensorConfig, check_autopilot_fence
 
 
@@ -30,7 +31,7 @@ class ComputeConfig(_Cfg):
     ``properties`` e.g. cpus, memory_gb, accelerators (informative). Label keys and values follow Ray's (Kubernetes')
     label syntax: ``[prefix/]name`` of at most 63 characters, alphanumerics, ``-``, ``_``, ``.``."""
 
-    id: str = Field(min_length=1)
+    id: Identifier
     tier: Literal["edge", "cloud"]
     labels: dict[str, str] = Field(default_factory=dict)
     properties: dict[str, Any] = Field(default_factory=dict)
@@ -91,7 +92,7 @@ class TargetConfig(_Cfg):
     its right edge, i.e. the crop image points east). The target exists between the first and last ``path``
     times; it is linearly interpolated in between."""
 
-    id: str = Field(min_length=1)
+    id: Identifier
     class_name: str = "car"
     image: str
     crop: Annotated[tuple[int, int, int, int], Strict(False)]
@@ -313,10 +314,7 @@ class EnvironmentConfig(_Cfg):
     def _unique(self) -> "EnvironmentConfig":
         for name, items in (("robots", self.robots), ("compute", self.compute), ("env_sensors", self.env_sensors),
                             ("world.targets", self.world.targets)):
-            ids = [i.id for i in items]
-            dup = sorted({i for i in ids if ids.count(i) > 1})
-            if dup:
-                raise ValueError(f"{name}: duplicate ids {dup}")
+            check_unique([i.id for i in items], name)
         edges = [c.id for c in self.compute if c.tier == "edge"]
         for j, r in enumerate(self.robots):
             if r.compute is not None and r.compute not in edges:

@@ -10,6 +10,7 @@ from pydantic import Field, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.app.models import MAX_LOCAL_M, GeoPoint
+from aerodaas.config.ids import Identifier, RobotId, check_topic_name, check_unique
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
                    did_you_mean)
@@ -135,7 +136,7 @@ class SensorConfig(_Cfg):
     ``/dev/videoN`` or a video file (looped), with ``transport`` (rtsp: tcp/udp), ``codec`` (rtp: h264/h265),
     ``first_frame_timeout_s`` (default 10) and ``stall_timeout_s`` (default 2): docs/video.md."""
 
-    id: str = Field(min_length=1)
+    id: Identifier
     type: str = Field(min_length=1, description="camera, odometry, stat_stream, or a sensor plug-in: a registered "
                       "name (decorator, installed entry point of group aerodaas.sensors) or 'module.path:ClassName'")
     properties: dict[str, Any] = Field(default_factory=dict)
@@ -144,8 +145,9 @@ class SensorConfig(_Cfg):
     @model_validator(mode="after")
     def _check_props(self) -> "SensorConfig":
         p = self.properties
-        if self.type not in SENSOR_PROPERTIES:
-            return self  # a plug-in sensor type: checked against its Config by check_plugin_sensors
+        if self.type not in SENSOR_PROPERTIES:  # a plug-in sensor type: checked against its Config by check_plugin_sensors
+            check_topic_name(self.id, f"sensor id (a {self.type!r} plug-in sensor records on /<robot>/<id>)")
+            return self
         spec = SENSOR_PROPERTIES[self.type]
         for k in p:
             if k not in spec:
@@ -395,7 +397,7 @@ class RobotConfig(_Cfg):
     PX4, settings in ``mavlink``), ``tello`` (DJI Tello, settings in ``tello``) or ``replay`` (a recorded flight,
     settings in ``replay``; not navigable)."""
 
-    id: str = Field(min_length=1)
+    id: RobotId
     backend: str = Field(default="sim", min_length=1, description="sim, mavlink, tello, replay, or a backend "
                          "plug-in: a registered name (decorator, installed entry point of group aerodaas.backends) "
                          "or 'module.path:ClassName'")
@@ -439,10 +441,7 @@ class RobotConfig(_Cfg):
 
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
-        ids = [s.id for s in self.sensors]
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        if dup:
-            raise ValueError(f"sensors: duplicate sensor ids {dup}")
+        check_unique([s.id for s in self.sensors], "sensors")
         if not any(s.type == "stat_stream" for s in self.sensors):
             self.sensors.append(SensorConfig(id="stat", type="stat_stream"))
         check_plugin_backend(self)

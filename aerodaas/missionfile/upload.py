@@ -13,11 +13,12 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Sequence
 
+from aerodaas.missionfile._common import _fail
 from aerodaas.missionfile.commands import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_TAKEOFF, MAV_FRAME_MISSION,
-                                           _GLOBAL_FRAMES)
+                                           _GLOBAL_FRAMES, _RELATIVE_FRAMES)
 from aerodaas.missionfile.items import MissionItem
 
-__all__ = ["ItemDifference", "mission_differences", "SpeedChange", "cap_speeds"]
+__all__ = ["ItemDifference", "mission_differences", "SpeedChange", "cap_speeds", "check_relative_altitudes"]
 
 #: a frame and its ``_INT`` twin (common.xml: the same meaning, x/y as integers on the wire)
 _FRAME_ALIAS = {5: 0, 6: 3, 11: 10}
@@ -129,3 +130,20 @@ def cap_speeds(items: Sequence[MissionItem], max_speed: float,
                 changes.append(SpeedChange(len(out) + 1, it.describe(), v, max_speed, why))
         out.append(new)
     return [m.model_copy(update={"seq": k}) for k, m in enumerate(out, start=1)], changes
+
+
+def check_relative_altitudes(plan, max_altitude: float) -> None:
+    """The altitude bound that needs no home, checked before connecting to the vehicle: items in a home-relative
+    frame (``MAV_FRAME_GLOBAL_RELATIVE_ALT`` 3 / ``_INT`` 6) and rally points (home-relative in a ``.plan``) higher
+    than ``max_altitude`` metres raise :class:`~aerodaas.missionfile.MissionFileError` naming the file and the item,
+    as :func:`~aerodaas.missionfile.plan_to_flight` does. AMSL items and every distance are checked once the vehicle's
+    home is known."""
+    src = plan.source or "<plan>"
+    for it in plan.expanded_items():
+        z = it.params[6]
+        if it.frame in _RELATIVE_FRAMES and z is not None and z > max_altitude:
+            raise _fail(src, it.describe(), f"altitude {z:g} m above home is above max_altitude {max_altitude:g} m")
+    for k, (lat, lon, alt) in enumerate(plan.rally_points):
+        if alt > max_altitude:
+            raise _fail(src, f"rally point {k + 1} ({lat:.7f}, {lon:.7f})",
+                        f"altitude {alt:g} m above home is above max_altitude {max_altitude:g} m")

@@ -170,8 +170,8 @@ def _origin_of(cls: type) -> str:
 
 def register(cls: type, kind: str | None = None, name: str | None = None, *, origin: str | None = None) -> type:
     """Register ``cls`` as a plug-in of ``kind`` (default its ``plugin_kind``) under ``name`` (default
-    :func:`plugin_name`). Returns ``cls`` (usable as a decorator body). Raises ValueError for an unknown kind, an
-    empty name, or a name already taken by another class."""
+    :func:`plugin_name`). Returns ``cls`` (usable as a decorator body). Raises ValueError for an unknown kind, a
+    name outside the plug-in name grammar (:func:`aerodaas.config.ids.check_plugin_name`), or a name already taken by another class."""
     kind = kind or getattr(cls, "plugin_kind", None)
     if kind is None:
         raise ValueError(f"{cls.__name__}: a plug-in class declares its kind (plugin_kind = one of {list(KINDS)})")
@@ -179,6 +179,9 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     name = name or plugin_name(cls, kind)
     if not name:
         raise ValueError(f"{cls.__name__}: a {kind} plug-in needs a non-empty name")
+    from aerodaas.config.ids import check_plugin_name
+
+    check_plugin_name(name, f"{cls.__name__}: {kind.replace('_', ' ')} plug-in name")
     origin = origin or _origin_of(cls)
     target = f"{cls.__module__}:{cls.__qualname__}"
     with _LOCK:

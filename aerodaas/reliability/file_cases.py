@@ -97,18 +97,28 @@ def _json_file_row(name: str, data: bytes, expect: str, tmp: Path) -> dict[str, 
 def _upload_row(name: str, fname: str, text: str, flags: list[str], expect: str, tmp: Path) -> dict[str, Any]:
     from aerodaas import cli
 
+    from aerodaas.app.models import GeoPoint
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
     f = tmp / fname
     f.write_text(text)
     err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            # a connection nobody serves: the refusal must come before any connection attempt
-            code = cli.main(["mission", "upload", str(f), "--connection", "tcp:127.0.0.1:9", "--timeout", "1",
-                             *flags])
-        except SystemExit as e:  # argparse's refusal of a flag
-            code = int(e.code or 0)
+    # an emulated vehicle at the plans' home (distances are measured from the vehicle's home): the refusal must come
+    # before anything is sent
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=10.0, gps_lock_s=1.0,
+                                 home=GeoPoint(lat=HOME[0], lon=HOME[1], alt=HOME[2]))
+    try:
+        conn = emu.start("tcp:127.0.0.1:0")
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            try:
+                code = cli.main(["mission", "upload", str(f), "--connection", conn, "--timeout", "10", *flags])
+            except SystemExit as e:  # argparse's refusal of a flag
+                code = int(e.code or 0)
+        sent = emu.snapshot()["mission_len"] > 1  # ArduPilot keeps its home at 0
+    finally:
+        emu.stop()
     msg = err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else ""
-    return {"kind": "mission upload", "name": name, "refused": code == 2 and expect in err.getvalue(),
+    return {"kind": "mission upload", "name": name, "refused": code == 2 and expect in err.getvalue() and not sent,
             "message": f"exit {code}: {msg}"}
 
 

@@ -84,6 +84,12 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
     scheds = robot_schedulers(env, robots)
     for r in robots:
         analytics = collect_graph(r)
+        from aerodaas.config.ids import check_analytics_names
+
+        try:  # its name is part of its topics (/<robot>/<name>/detections): the id grammar, one name per analytics
+            check_analytics_names(r.id, [(a.name, type(a).__name__) for a in analytics], [s.id for s in r.cfg.sensors])
+        except ValueError as e:
+            raise ConfigError(f"{e}; each analytics of a robot records under its own name: give it name=...") from None
         for a in analytics:
             if a.compute is None:
                 a.deploy(env.get_compute_resources()[0])

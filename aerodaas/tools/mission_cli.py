@@ -142,6 +142,9 @@ def cmd_mission(args: argparse.Namespace) -> int:
 
             plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
                            min_altitude=None)
+            from aerodaas.missionfile.upload import check_relative_altitudes
+
+            check_relative_altitudes(plan, args.max_altitude)  # needs no home: refused before connecting
             backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
             if backend.home_received:  # as documented: from the vehicle's own home, whatever the file planned
                 plan_to_flight(plan, backend.home, **bounds)
