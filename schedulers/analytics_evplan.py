@@ -13,7 +13,7 @@ edge runs at 5 % edge jitter).
 
 Rules (all times ms; ``c`` = the model's profile cloud time, ``b`` benefit, ``cc`` cloud cost):
 
-* Latency model: per model, the ratios ``observed round trip / c`` of the last ``window`` (20) cloud completions
+* Latency model: per model, the ratios ``observed round trip / c`` of the last ``window`` (100) cloud completions
   (the pooled ratios of every model while a model has fewer than 5; the profile, ratio 1, before any). ``P(s)`` =
   the fraction of those ratios with ``ratio * c <= s``: the chance a task sent with ``s`` ms left is on time.
 * Expected cloud value of a task at time t: ``V(t) = P(deadline - t) * b - cc``. A task is *open* (keeps a cloud
@@ -46,7 +46,7 @@ __all__ = ["EvPlan"]
 
 @register_analytics_scheduler
 class EvPlan(GainPlan):
-    """EVPLAN (see the module docstring). Options: ``window`` (cloud ratios kept per model, default 20),
+    """EVPLAN (see the module docstring). Options: ``window`` (cloud ratios kept per model, default 100),
     ``tolerance`` (cloud on-time probability a hold may cost, default 0.02), ``edge_quantile`` (of the edge-time
     ratios the plan uses, default 0.95), ``estimator`` (point-estimate mode), ``commit_horizon_ms`` (as GAINPLAN).
     Raises ValueError for out-of-range options."""

@@ -319,3 +319,21 @@ def test_cli_option_reaches_the_scheduler_that_has_it_and_refuses_what_none_has(
     assert "replan_tolerance_ms" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*common, "--option", "replan_tolerance_ms"])
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["--harness", "--network-variability", "const:500"], "--network-variability"),
+    (["--harness", "--cloud-jitter", "lognormal:0.3"], "--cloud-jitter"),
+    (["--harness", "--repeat", "2", "--cloud-nodes", "2"], "--cloud-nodes, --repeat"),
+    (["--processes", "1"], "--processes"),
+    (["--no-bound", "--exact-bound", "HEAVY"], "--no-bound, --exact-bound"),
+])
+def test_an_option_the_mode_does_not_use_is_refused_naming_it(argv, named, tmp_path, capsys):
+    """issue 41.4: the harness ignored --network-variability and --cloud-jitter (with const:500 the utility was
+    40,786 either way); an option the chosen mode would not use is exit 2, before any run (no Ray, no job)."""
+    from aerodaas.cli import main
+
+    assert main(["bench", "schedulers", *argv, "--plot", str(tmp_path / "h.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"aerodaas bench schedulers: {named}: not used by" in err, err
+    assert not (tmp_path / "h.png").exists()

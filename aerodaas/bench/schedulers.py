@@ -544,19 +544,20 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
                    help="extra cloud latency: const:MS, normal:MEAN,SD, lognormal:MEDIAN,SIGMA, +MS@T1-T2 (episode, "
                         "seconds), walk:STEP,MAX[,EVERY]; repeatable")
     p.add_argument("--edge-jitter", default="lognormal:0.05", help="edge hold jitter (default lognormal:0.05)")
-    p.add_argument("--cloud-jitter", default="lognormal:0.1", help="cloud hold jitter (default lognormal:0.1)")
-    p.add_argument("--cloud-nodes", type=int, default=1, help="cloud nodes of the local cluster (default 1)")
+    p.add_argument("--cloud-jitter", help="runtime: cloud hold jitter (default lognormal:0.1; --harness sweeps "
+                                          "--cloud-sigma instead)")
+    p.add_argument("--cloud-nodes", type=int, help="runtime: cloud nodes of the local cluster (default 1)")
     p.add_argument("--edge-hosts", type=_positive_int,
                    help="edge host actors (default: CPUs + 1, at most one per edge)")
-    p.add_argument("--cloud-reply-lead-ms", type=float, default=100.0,
+    p.add_argument("--cloud-reply-lead-ms", type=float,
                    help="emulated cloud replies are sent this early and released when due (default 100; 0: off)")
-    p.add_argument("--emulation-bound-ms", type=_positive_float, default=EMULATION_BOUND_MS,
+    p.add_argument("--emulation-bound-ms", type=_positive_float,
                    help=f"a runtime run whose worst timing error p99 exceeds this is marked invalid (default "
                         f"{EMULATION_BOUND_MS:g})")
     p.add_argument("--compare-harness", action="store_true",
                    help="runtime: also run the harness on the same traces and draws and say whether each result lies "
                         "within the harness's CI")
-    p.add_argument("--repeat", type=_positive_int, default=1, help="runs per scheduler, load and seed (default 1)")
+    p.add_argument("--repeat", type=_positive_int, help="runtime: runs per scheduler, load and seed (default 1)")
     p.add_argument("--address", help="run on this Ray cluster (e.g. 'auto') instead of starting a local one")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON result to FILE")
@@ -572,6 +573,21 @@ def _trace_spec(args: argparse.Namespace):
 
     return TraceSpec.parse(args.trace, jitter=args.trace_jitter, drop=args.trace_drop, joins=args.trace_joins,
                            leaves=args.trace_leaves)
+
+
+#: options only one mode uses (attribute -> option): given to the other mode, they are refused (issue 41.4: the
+#: harness ignored --network-variability and --cloud-jitter: a const:500 network gave the same utility as none)
+RUNTIME_ONLY = {"network_variability": "--network-variability", "cloud_jitter": "--cloud-jitter",
+                "cloud_nodes": "--cloud-nodes", "edge_hosts": "--edge-hosts",
+                "cloud_reply_lead_ms": "--cloud-reply-lead-ms", "emulation_bound_ms": "--emulation-bound-ms",
+                "compare_harness": "--compare-harness", "repeat": "--repeat", "address": "--address"}
+HARNESS_ONLY = {"processes": "--processes", "no_bound": "--no-bound", "exact_bound": "--exact-bound"}
+
+
+def unused_options(args: argparse.Namespace) -> list[str]:
+    """The options given (not None / not False) that the chosen mode (``--harness`` or the runtime) does not use."""
+    other = RUNTIME_ONLY if args.harness else HARNESS_ONLY
+    return [opt for attr, opt in other.items() if getattr(args, attr, None) not in (None, False)]
 
 
 def _run_harness(args: argparse.Namespace, options: dict) -> dict:
@@ -593,10 +609,13 @@ def _run_runtime(args: argparse.Namespace, options: dict) -> dict:
     out = None
     for dpe in args.drones_per_edge or [DEFAULT_DRONES_PER_EDGE]:
         res = run_schedulers(args.schedulers, args.load or ["MEDIUM"], args.drones or 80, args.duration or 60.0,
-                             args.seed, dpe, args.fps, args.network_variability, args.edge_jitter, args.cloud_jitter,
-                             args.cloud_nodes, None, args.edge_hosts, args.address, args.repeat,
-                             reply_lead_ms=args.cloud_reply_lead_ms, seeds=args.seeds, cloud_sigmas=args.cloud_sigma,
-                             scenarios=args.scenarios, options=options, emulation_bound_ms=args.emulation_bound_ms,
+                             args.seed, dpe, args.fps, args.network_variability, args.edge_jitter,
+                             args.cloud_jitter or "lognormal:0.1",
+                             1 if args.cloud_nodes is None else args.cloud_nodes, None, args.edge_hosts, args.address,
+                             args.repeat or 1,
+                             reply_lead_ms=100.0 if args.cloud_reply_lead_ms is None else args.cloud_reply_lead_ms,
+                             seeds=args.seeds, cloud_sigmas=args.cloud_sigma, scenarios=args.scenarios,
+                             options=options, emulation_bound_ms=args.emulation_bound_ms or EMULATION_BOUND_MS,
                              trace=_trace_spec(args))
         if args.compare_harness:
             res["harness_comparison"] = compare_with_harness(res)
@@ -626,6 +645,13 @@ def _cmd(args: argparse.Namespace) -> int:
     options.update(args.option)
     from aerodaas.schedulers.analytics_base import iter_schedulers
 
+    unused = unused_options(args)
+    if unused:  # an option this mode does not use would be silently ignored: its result would not be what was asked
+        mode, other = ("--harness", "the runtime (without --harness)") if args.harness else \
+            ("the runtime", "--harness")
+        print(f"aerodaas bench schedulers: {', '.join(unused)}: not used by {mode} (only by {other}); drop "
+              f"{'it' if len(unused) == 1 else 'them'}", file=sys.stderr)
+        return 2
     for key, _ in args.option:  # an option no scheduler of the run has is a typo, not a no-op
         if not any(key in cls.options for cls in iter_schedulers(args.schedulers)):
             print(f"aerodaas bench schedulers: --option {key}: no scheduler of this run has it", file=sys.stderr)
