@@ -423,9 +423,10 @@ def test_link_cut_mid_mission_then_recovers(ray_session, run_options, tmp_path, 
             assert states[i + 1] in ("NAVIGATING", "WAYPOINT_HOLD", "HOVERING"), states
     assert states[lost + 1] in ("NAVIGATING", "WAYPOINT_HOLD") and states[-1] == "LANDED", states
     # shown while the link was down (the vehicle's clock runs on without telemetry), not only once it returned:
-    # of the 12 s outage, 5 s pass before the heartbeat timeout
+    # of the 12 s outage, 5 s pass before the heartbeat timeout, so about 7 s of it; no upper bound: how late the
+    # regain is seen is a question of load (12.4 s beside two CPU burners at load 15-20), for the benchmarks
     lost_for = run["states"][lost + 1]["t"] - run["states"][lost]["t"]
-    assert 4.0 < lost_for < 10.0, lost_for
+    assert lost_for > 4.0, lost_for
     kinds = [e["event"] for e in run["events"]]
     assert kinds.index("link_lost") < kinds.index("link_regained")
     # what the ground station still sent while the vehicle could not hear it: once the loss was detected
