@@ -35,6 +35,7 @@ import math
 from typing import Any, Sequence
 
 from aerodaas.app.models import ActionCommand, AeroNavigation, GeoPoint, VelocityCommand, Waypoint
+from aerodaas.navigation.braking import braking_speed, limited_change
 
 __all__ = ["SafetyViolation", "SafetyGate"]
 
@@ -131,8 +132,10 @@ class SafetyGate:
             vel0 = tuple(float(c) for c in velocity) if velocity is not None else (0.0, 0.0, 0.0)
             tz = upd.get("z", z)
             for _ in range(4):  # the approach of the vehicle model may overshoot the target altitude
-                turn, path = self._predict_goto(from_position, vel0, (x, y, tz), speed)
-                over = max(max(p[2] for p in path), self._z_range(turn)[0]) - self.max_alt
+                turn, path, samples = self._predict_goto(from_position, vel0, (x, y, tz), speed)
+                # the path, and the stop (a hold) from any point of it: a climb with horizontal speed stops higher
+                # than its target (0.52-0.57 m above max_altitude when a hold came mid-climb, issue 40.6)
+                over = max(max(p[2] for p in path), self._z_range(turn)[0], self._z_range(samples)[0]) - self.max_alt
                 if over <= 1e-9 or not self.clamp:
                     break
                 tz -= over + 0.01
@@ -271,12 +274,10 @@ class SafetyGate:
         """Metres a point mass at ``speed`` m/s needs to stop at ``max_acceleration``: ``v² / (2 a)``."""
         return speed * speed / (2.0 * self.accel)
 
-    def _accelerate(self, v: list[float], desired: Sequence[float], dt: float) -> None:
-        dv = [d - c for d, c in zip(desired, v)]
-        n = math.sqrt(sum(c * c for c in dv))
-        lim = self.accel * dt
-        if n > lim:
-            dv = [c * lim / n for c in dv]
+    def _accelerate(self, v: list[float], desired: Sequence[float], dt: float, vertical_first: bool = False) -> None:
+        """``v`` moved towards ``desired`` as the simulator's step does (:func:`~aerodaas.navigation.braking.
+        limited_change`; ``vertical_first`` for a position target)."""
+        dv = limited_change([d - c for d, c in zip(desired, v)], self.accel * dt, vertical_first)
         for i in range(3):
             v[i] += dv[i]
 
@@ -300,14 +301,17 @@ class SafetyGate:
     def _predict_goto(self, position: Sequence[float], vel0: Sequence[float], target: Sequence[float],
                       speed: float, dt: float = 0.02) -> tuple[list, list]:
         """A position target flown from ``position`` at ``vel0``: the latency at ``vel0``, then the trapezoidal law
-        of :mod:`aerodaas.sim.vehicle` (horizontal speed ``min(v_max, sqrt(2 a d), d / dt)``, vertical likewise,
-        the velocity changing by at most ``a dt``) until it has settled on the target (at most 120 s), integrated
+        of :mod:`aerodaas.sim.vehicle` (horizontal speed ``min(v_max, sqrt(2 a d), d / dt)``, vertical the
+        braking speed of :mod:`aerodaas.navigation.braking`, the velocity changing by at most ``a dt``, the vertical
+        change first) until it has settled on the target (at most 120 s), integrated
         at ``dt`` (the simulator's physics step). Returns (the turn: (position, velocity) samples every
         :attr:`PREDICT_DT_S` until the velocity points at the target, for the stopping fan; the whole path's
-        positions)."""
+        positions; (position, velocity) samples of the whole path every :attr:`PREDICT_DT_S`, for the stop from any
+        point of it under ``max_altitude``)."""
         p, v = [float(c) for c in position], [float(c) for c in vel0]
         turn = [(tuple(p), tuple(v))]
         path = [tuple(p)]
+        samples = [(tuple(p), tuple(v))]
         t, aligned, every = 0.0, False, max(1, round(self.PREDICT_DT_S / dt))
         n = 0
         while t < 120.0:
@@ -321,21 +325,24 @@ class SafetyGate:
                     desired[0], desired[1] = err[0] / dh * vh, err[1] / dh * vh
                 dz = abs(err[2])
                 if dz > 1e-6:
-                    desired[2] = math.copysign(min(self.max_vspeed, math.sqrt(2.0 * self.accel * dz), dz / dt), err[2])
+                    desired[2] = math.copysign(min(self.max_vspeed, braking_speed(dz, self.accel, dt)), err[2])
                 if not aligned:
                     vh_now = math.hypot(v[0], v[1])
                     aligned = vh_now < 1e-3 or dh < 1e-3 or (v[0] * err[0] + v[1] * err[1]) / (vh_now * dh) > 0.999
                 if dh < 1e-3 and dz < 1e-3 and math.sqrt(sum(c * c for c in v)) < 1e-3:
                     break
-            self._accelerate(v, desired, dt)
+            self._accelerate(v, desired, dt, vertical_first=t >= self.latency - 1e-9)
             p = [a + b * dt for a, b in zip(p, v)]
             t += dt
             n += 1
             path.append(tuple(p))
-            if not aligned and n % every == 0:
-                turn.append((tuple(p), tuple(v)))
+            if n % every == 0:
+                samples.append((tuple(p), tuple(v)))
+                if not aligned:
+                    turn.append((tuple(p), tuple(v)))
         turn.append((tuple(p), tuple(v)))
-        return turn, path
+        samples.append((tuple(p), tuple(v)))
+        return turn, path, samples
 
     def _stop_point(self, p: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
         n = math.sqrt(sum(c * c for c in v))

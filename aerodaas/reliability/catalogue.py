@@ -264,7 +264,7 @@ def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
              [("vel", 0.0, 0.0, 1.5, 0.5, 5)] * 60]
     for i, seq in enumerate(seqs):
         ex = fly_commands(seq, on_violation="clamp" if i % 2 else "reject")
-        outside += int(ex.outside_inclusion_m > 0 or ex.inside_exclusion_m > 0 or ex.above_max_altitude_m > 0.05)
+        outside += int(ex.outside_inclusion_m > 0 or ex.inside_exclusion_m > 0 or ex.above_max_altitude_m > 1e-6)
         total.merge(ex)
     return {"sequences": len(seqs), "samples": total.samples, "accepted": total.accepted, "refused": total.rejected,
             "outside_inclusion_m": total.outside_inclusion_m, "inside_exclusion_m": total.inside_exclusion_m,

@@ -533,7 +533,7 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
                   "above max_altitude |", "|---|---|---|---|---|---|---|",
                   f"| {e['sequences']} | {e['samples']} | {e['accepted']} / {e['refused']} | "
                   f"{e['flown_outside_limits']} | {e['outside_inclusion_m']:.3f} m | {e['inside_exclusion_m']:.3f} m | "
-                  f"{e['above_max_altitude_m']:.3f} m (tolerance 0.05 m) |", ""]
+                  f"{e['above_max_altitude_m']:.3f} m (tolerance 1e-6 m) |", ""]
     lines += ["## Inputs", "", "Command-line rows are refused before Ray (exit 2); application-error rows are the app's "
               "own exceptions, reported as the app's (exit 1 with its traceback, never \"bad input\"); HITL API "
               "rows are the documented answers (a drone actor that does not answer is 503 within 2 s: "

@@ -4,10 +4,13 @@ model and GPS derived from the local position.
 Model (per physics step ``dt`` seconds):
 
 * A setpoint gives a desired ENU velocity: for a position target, the speed towards it is
-  ``min(v_max, sqrt(2 * a_max * distance))`` (so it arrives without overshoot: the standard
-  trapezoidal-velocity profile), horizontal and vertical axes limited separately; for a velocity target
-  the commanded velocity, clipped to the limits.
-* The actual velocity moves towards the desired one by at most ``a_max * dt`` (acceleration limit).
+  ``min(v_max, sqrt(2 * a_max * distance))`` horizontally (the standard trapezoidal-velocity profile) and
+  vertically the discrete-time braking speed (:func:`aerodaas.navigation.braking.braking_speed`: no overshoot at
+  any physics step, so a waypoint under ``max_altitude`` is never passed), axes limited separately; for a velocity
+  target the commanded velocity, clipped to the limits.
+* A hold brakes to rest at ``a_max`` along the velocity (the safety gate's stopping model), then hovers there.
+* The actual velocity moves towards the desired one by at most ``a_max * dt`` (acceleration limit; for a position
+  target the vertical change first: :func:`aerodaas.navigation.braking.limited_change`).
 * Yaw moves towards the desired yaw by at most ``max_yaw_rate * dt``.
 * Battery: energy drawn while airborne is ``(P_hover + k * |v|) * dt`` joules (W·s), voltage is linear in
   state of charge between empty and full (a deliberately simple LiPo model).
@@ -20,14 +23,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aerodaas.config import BatteryConfig, Limits, NoiseConfig
+from aerodaas.navigation.braking import braking_speed, limited_change
 from aerodaas.navigation.geo import enu_to_geodetic
 from aerodaas.app.models import Attitude, GeoPoint, Odometry
 
 
 @dataclass
 class Setpoint:
-    """``mode``: 'idle' (on ground), 'hold' (hover at ``target``), 'position' (fly to ``target``),
-    'velocity' (hold ``velocity`` m/s), 'land' (descend at ``land_speed`` m/s)."""
+    """``mode``: 'idle' (on ground), 'hold' (brake, then hover at ``target``: where it came to rest), 'position'
+    (fly to ``target``), 'velocity' (hold ``velocity`` m/s), 'land' (descend at ``land_speed`` m/s). ``stopped``:
+    a hold has come to rest (before, it brakes)."""
 
     mode: str = "idle"
     target: tuple[float, float, float] | None = None
@@ -35,6 +40,7 @@ class Setpoint:
     speed: float | None = None  # m/s cap for position mode
     yaw_rate: float = 0.0  # deg/s for velocity mode
     land_speed: float = 0.5
+    stopped: bool = False
 
 
 @dataclass
@@ -91,7 +97,7 @@ class SimVehicle:
                 desired[:2] = err[:2] / dh * vh
             dz = abs(err[2])
             if dz > 1e-6:
-                vz = min(lim.max_vertical_speed, math.sqrt(2.0 * lim.max_acceleration * dz), dz / dt)
+                vz = min(lim.max_vertical_speed, braking_speed(dz, lim.max_acceleration, dt))
                 desired[2] = math.copysign(vz, err[2])
         elif sp.mode == "velocity":
             desired[:] = sp.velocity
@@ -103,16 +109,18 @@ class SimVehicle:
             s.yaw = (s.yaw + yr * dt) % 360.0
         elif sp.mode == "land":
             desired[2] = -min(sp.land_speed, lim.max_vertical_speed)
-        elif sp.mode == "hold" and sp.target is not None:
+        elif sp.mode == "hold" and sp.target is not None and sp.stopped:
             err = np.asarray(sp.target, float) - s.position
             desired = np.clip(err * 1.5, -lim.max_speed, lim.max_speed)
-        dv = desired - s.velocity
-        n = float(np.linalg.norm(dv))
-        amax = lim.max_acceleration * dt
-        if n > amax:
-            dv *= amax / n
-        s.velocity += dv
+        # a hold not yet at rest brakes at the full acceleration along its velocity (desired 0): the stop the safety
+        # gate predicts from every point (v^2 / 2a along v); steering back to where the hold was commanded at the
+        # same time took part of the budget and passed that stop point (0.57 m above max_altitude, issue 40.6)
+        # a position target: the vertical change first, so a climb brakes under its target whatever the turn needs
+        s.velocity += np.asarray(limited_change(desired - s.velocity, lim.max_acceleration * dt,
+                                                vertical_first=sp.mode == "position"))
         s.position += s.velocity * dt
+        if sp.mode == "hold" and not sp.stopped and not s.velocity.any():
+            sp.stopped, sp.target = True, tuple(float(c) for c in s.position)  # at rest: hover here
         if s.position[2] <= 0.0:
             s.position[2] = 0.0
             if s.velocity[2] < 0:
