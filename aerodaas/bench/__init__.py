@@ -40,11 +40,11 @@ def machine_info() -> dict:
 
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
-    from aerodaas.bench import (detect, fleet, overhead, raypath, schedulers, startup, tello_video, tours, tracks,
-                                video)
+    from aerodaas.bench import (detect, fleet, overhead, raypath, schedulers_cli, startup, tello_video, tours,
+                                tracks, video)
 
     tours.add_parser(bench_subparsers)
-    schedulers.add_parser(bench_subparsers)
+    schedulers_cli.add_parser(bench_subparsers)
     overhead.add_parser(bench_subparsers)
     fleet.add_parser(bench_subparsers)
     startup.add_parser(bench_subparsers)

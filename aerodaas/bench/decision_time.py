@@ -21,7 +21,7 @@ import sys
 import time
 from typing import Sequence
 
-from aerodaas.bench.schedulers import scheduler_option
+from aerodaas.bench.schedulers_cli import scheduler_option
 
 __all__ = ["measure", "main"]
 
