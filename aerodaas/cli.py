@@ -197,6 +197,15 @@ def _build_without_ray(app: Path) -> None:
             runpy.run_path(str(app), run_name="__main__")
     except runtime.PlanReady:
         pass
+    except SystemExit as e:  # the app or a module it imports exited while building: nothing would fly (exit 0 before)
+        tb = e.__traceback__
+        while tb is not None and tb.tb_next is not None:
+            tb = tb.tb_next
+        where = f" in {tb.tb_frame.f_code.co_filename} line {tb.tb_lineno}" if tb is not None else ""
+        from aerodaas.config import ConfigError
+
+        raise ConfigError(f"{app}: sys.exit({e.code!r}) was called{where} while the application was being built, "
+                          f"before its first start_mission(); nothing flew") from None
     finally:
         o.plan_only = False
 

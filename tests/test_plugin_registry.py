@@ -181,3 +181,56 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
     ch = next(c for c in summary.channels.values() if c.topic == "/uav/alt")
     assert summary.schemas[ch.schema_id].name == "__main__.Level"
     assert set(json.loads(summary.schemas[ch.schema_id].data)["properties"]) == {"robot", "level"}
+
+
+def test_a_builtins_name_is_taken_from_the_start_unless_the_registration_says_it_replaces():
+    """issue 40.5: an app's backend named ``sim`` silently replaced the simulator (the built-ins were registered
+    lazily, after it). Now refused naming the built-in, unless ``replaces=True`` / ``plugin_replaces = True``."""
+    from aerodaas.backends.sim import SimBackend
+
+    class MySim(SimBackend):
+        kind = "sim"
+
+    with pytest.raises(ValueError, match=r"backend name 'sim' is already taken by aerodaas\.backends\.sim:\w+ "
+                                         r"\(builtin\).*replaces=True"):
+        registry.register(MySim, "backend")
+    assert registry.get("backend", "sim") is not MySim
+
+    class Gusty(SimBackend):
+        kind = "sim_replacement_test"
+
+    class Replacing(SimBackend):
+        kind = "sim_replacement_test"
+        plugin_replaces = True
+
+    registry.register(Gusty, "backend")
+    registry.register(Replacing, "backend")  # it says so: the later one holds the name
+    assert registry.get("backend", "sim_replacement_test") is Replacing
+
+
+def test_a_plugin_module_that_exits_on_import_is_an_error_naming_it(tmp_path, monkeypatch):
+    """A module that calls sys.exit(0) while imported ended runs with exit 0 and no flight."""
+    (tmp_path / "exiting_plugin.py").write_text("import sys\nsys.exit(0)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(registry.UnknownPlugin, match=r"module 'exiting_plugin' called sys\.exit\(0\) while being "
+                                                      r"imported"):
+        registry.get("sensor", "exiting_plugin:Thing")
+
+
+def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    (tmp_path / "exiting_helper.py").write_text("import sys\n\nsys.exit(0)\n")
+    env = tmp_path / "env.json"
+    env.write_text(json.dumps({"robots": [{"id": "d1"}]}))
+    app = tmp_path / "app.py"
+    app.write_text(f"from aerodaas import *\nimport exiting_helper\nenv = Environment({str(env)!r})\n"
+                   "drone = env.get_robot_by_id('d1')\nresult = drone.start_mission()\n")
+    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(tmp_path / "r.mcap")],
+                       capture_output=True, text=True, timeout=180, env={**__import__("os").environ,
+                                                                         "RAY_TMPDIR": str(tmp_path / "ray")})
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert "sys.exit(0) was called in" in r.stderr and "exiting_helper.py line 3" in r.stderr, r.stderr[-2000:]
+    assert not (tmp_path / "ray").exists() or not any((tmp_path / "ray").iterdir())  # no Ray session started

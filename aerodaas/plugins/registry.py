@@ -74,10 +74,14 @@ class PluginEntry:
     error: str | None = None  # why loading failed (an entry point whose module does not import)
 
     def load(self) -> type:
-        """The plug-in class (imported on first use). Raises ImportError/AttributeError naming the target."""
+        """The plug-in class (imported on first use). Raises ImportError/AttributeError naming the target, also for
+        a module that calls ``sys.exit`` while it is imported (it ended runs with exit 0 and no flight)."""
         if self.cls is None:
             mod, _, attr = self.target.partition(":")
-            obj: Any = importlib.import_module(mod)
+            try:
+                obj: Any = importlib.import_module(mod)
+            except SystemExit as e:
+                raise ImportError(f"module {mod!r} called sys.exit({e.code!r}) while being imported") from None
             for part in attr.split("."):
                 obj = getattr(obj, part)
             self.cls = obj
@@ -168,10 +172,14 @@ def _origin_of(cls: type) -> str:
     return f"decorator in {where}"
 
 
-def register(cls: type, kind: str | None = None, name: str | None = None, *, origin: str | None = None) -> type:
+def register(cls: type, kind: str | None = None, name: str | None = None, *, origin: str | None = None,
+             replaces: bool | None = None) -> type:
     """Register ``cls`` as a plug-in of ``kind`` (default its ``plugin_kind``) under ``name`` (default
     :func:`plugin_name`). Returns ``cls`` (usable as a decorator body). Raises ValueError for an unknown kind, a
-    name outside the plug-in name grammar (:func:`aerodaas.config.ids.check_plugin_name`), or a name already taken by another class."""
+    name outside the plug-in name grammar (:func:`aerodaas.config.ids.check_plugin_name`), or a name already taken
+    by another class — a built-in's too (``sim``, ``camera``, ``ObjectDetector``...: a user backend called ``sim``
+    replaced the simulator silently, issue 40.5) — unless the registration says it replaces it: ``replaces=True``
+    or the class attribute ``plugin_replaces = True``."""
     kind = kind or getattr(cls, "plugin_kind", None)
     if kind is None:
         raise ValueError(f"{cls.__name__}: a plug-in class declares its kind (plugin_kind = one of {list(KINDS)})")
@@ -184,22 +192,27 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     check_plugin_name(name, f"{cls.__name__}: {kind.replace('_', ' ')} plug-in name")
     origin = origin or _origin_of(cls)
     target = f"{cls.__module__}:{cls.__qualname__}"
+    if replaces is None:
+        replaces = getattr(cls, "plugin_replaces", False) is True
+    _load_builtins()  # a built-in's name is taken from the start, not only once something asked for it
     with _LOCK:
         old = _ENTRIES[kind].get(name)
-        if old is not None and old.target != target:
-            raise ValueError(f"{kind.replace('_', ' ')} name {name!r} is already taken by {old.target} ({old.origin})")
+        if old is not None and old.target != target and not replaces:
+            raise ValueError(f"{kind.replace('_', ' ')} name {name!r} is already taken by {old.target} ({old.origin}); "
+                             f"choose another name, or say that it replaces it (replaces=True / plugin_replaces = True)")
         if old is not None and old.origin.startswith("entry point"):
             origin = old.origin  # the entry point's module registered itself on import: keep where it came from
         _ENTRIES[kind][name] = PluginEntry(kind, name, origin, target, cls)
     return cls
 
 
-def plugin(kind: str, name: str | None = None) -> Callable[[type], type]:
-    """Class decorator: ``@plugin("sensor")`` registers the class as a plug-in of ``kind`` (see :func:`register`)."""
+def plugin(kind: str, name: str | None = None, *, replaces: bool | None = None) -> Callable[[type], type]:
+    """Class decorator: ``@plugin("sensor")`` registers the class as a plug-in of ``kind`` (see :func:`register`;
+    ``replaces=True`` to take a name already taken)."""
     _check_kind(kind)
 
     def deco(cls: type) -> type:
-        return register(cls, kind, name)
+        return register(cls, kind, name, replaces=replaces)
 
     return deco
 
