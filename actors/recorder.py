@@ -87,6 +87,7 @@ class RecorderService:
         self.flush_every_s = flush_every_s
         self.copies = copies
         self.frames_dropped = 0
+        self.dropped_by_topic: dict[str, int] = {}  # frames refused here (queue full / closed), per image topic offered
         self.write_errors: list[str] = []
         self.closed = False
         self._intrinsics: dict[str, dict] = {}  # camera frame -> intrinsics (writer thread only)
@@ -128,8 +129,10 @@ class RecorderService:
             if self.failure is not None:
                 self.lost += 1
                 return False
+            self.dropped_by_topic.setdefault(topic, 0)  # every image topic offered: its count (0 too) is recorded
             if self.closed or self._pending_frames >= self.max_pending_frames:
                 self.frames_dropped += 1
+                self.dropped_by_topic[topic] += 1
                 return False
             self._pending_frames += 1
         self._q.put(RecordImage(topic, t_ns, frame, frame_id))
@@ -292,9 +295,17 @@ class RecorderService:
 
     # ------------------------------------------------------------------ end
     def close(self, timeout_s: float = 30.0) -> dict[str, Any]:
-        """Write what is queued, finish the file (summary and footer) and return the per-topic message counts."""
+        """Write what is queued and ``/run/recorder_drops`` (the frames refused here, per image topic; when any
+        image was offered), finish the file (summary and footer) and return the per-topic message counts."""
         if not self.closed:
-            self.closed = True
+            with self._lock:
+                self.closed = True
+                drops = dict(self.dropped_by_topic)
+            # the frames this recorder refused, per topic, as the file's last message: a reader can account for
+            # every frame a camera took (its own not_recorded counts the ones refused before they left its actor)
+            if drops:  # a run that recorded images (a file without any stays as it was)
+                self._q.put(RecordJson("/run/recorder_drops", self.last_t_ns or 0,
+                                       {"frames_dropped": drops, "total": sum(drops.values())}, "aerodaas.RecorderDrops"))
             self._q.put(_STOP)
             self._thread.join(timeout_s)
             try:

@@ -17,16 +17,14 @@ from pathlib import Path
 import pytest
 
 from aerodaas.recording.metrics import load_run
-from aerodaas.recording.reader import read_messages
 from . import sitl
 from .conftest import REPO, needs_data
-from .video_rig import make_footage
+from .video_rig import check_stream_recording, make_footage
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(1800)]
 
 APP = REPO / "apps" / "vehicle_tracking.py"
 ROBOT = "quadrotor_base"
-TOPIC = f"/{ROBOT}/camera/cam1"
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -73,31 +71,11 @@ def test_vehicle_tracking_flies_on_arducopter_with_its_camera_from_a_stream(tmp_
     run = load_run(str(rec))
     detections = [(t, boxes) for t, boxes in run["detections"] if boxes]
     assert len(detections) >= 5, len(detections)  # cars in the real footage, seen through the stream
-    images, timing, stats, follow, odometry = 0, [], None, [], []
-    for tp, schema, t, msg in read_messages(str(rec)):
-        if tp == TOPIC and schema == "foxglove.CompressedImage":
-            images += 1
-        elif tp == f"/{ROBOT}/follow/navigation":
-            follow.append(t)
-        elif tp == f"{TOPIC}/timing":
-            timing.append(msg)
-        elif tp == f"{TOPIC}/video_stats":
-            stats = msg
-        elif tp == f"/{ROBOT}/odometry":
-            odometry.append((t, msg))
+    got = check_stream_recording(rec, ROBOT)  # every frame accounted for, every pose tag at its capture time
+    follow, odometry, stats = got["follow"], got["odometry"], got["stats"]
     assert follow, "the follow analytics never commanded the vehicle from the stream's detections"
     # the firmware's own odometry: the vehicle flew (took off to the app's 16 m) and was still reporting after the
     # first follow command
     assert odometry and max(m["position"][2] for _, m in odometry) > 10.0
     assert any(t > follow[0] for t, _ in odometry)
-    assert stats is not None and stats["taken"] > 0, stats
-    assert images == stats["taken"] - stats["not_recorded"] and len(timing) == stats["taken"], (images, stats)
-    assert stats["decoded"] == stats["taken"] + stats["overwritten"] + stats["waiting"], stats
-    # the pose each frame carries is the vehicle's at its capture time (within one 10 Hz odometry interval), once
-    # the camera has a second of the firmware's poses behind it
-    t_first = timing[0]["arrival_t"]
-    late = [m for m in timing if m["arrival_t"] > t_first + 1.0]
-    assert late and all(abs(m["pose_t"] - m["capture_t"]) <= 0.1 for m in late)
-    assert all(m["capture_t"] <= m["arrival_t"] for m in timing)
-    assert not [e for e in run["events"] if e["event"] == "video_lost"], "the stream was never interrupted"
-    assert 0.0 < stats["latency_ms_median"] <= stats["latency_ms_p99"] < 5000.0, stats  # glass to analytics
+    assert 0.0 < stats["latency_ms_median"] <= stats["latency_ms_p99"], stats  # glass to analytics, measured

@@ -14,10 +14,9 @@ import time
 import pytest
 
 from aerodaas.recording.metrics import load_run
-from aerodaas.recording.reader import read_messages
 from aerodaas.tools.hitl import request, state_file
 from .conftest import REPO, needs_data
-from .video_rig import RtspServer, Sender, free_udp_port, make_footage
+from .video_rig import RtspServer, Sender, check_stream_recording, free_udp_port, make_footage
 
 APP = REPO / "apps" / "vehicle_tracking.py"
 
@@ -80,26 +79,7 @@ def test_vehicle_tracking_on_a_stream_survives_a_5s_outage(tmp_path, monkeypatch
     restored = next(e for e in run["events"] if e["event"] == "video_restored")
     assert restored["url"] == url and restored["outage_s"] >= 4.0, restored  # it was down for (at least) 5 s
     assert sum(1 for _, boxes in run["detections"] if boxes) >= 5  # cars in the real footage
-    topic = "/quadrotor_base/camera/cam1"
-    images, timing, stats, follow = 0, [], None, 0
-    for tp, schema, _t, msg in read_messages(str(rec)):
-        if tp == topic and schema == "foxglove.CompressedImage":
-            images += 1
-        elif tp == "/quadrotor_base/follow/navigation":
-            follow += 1
-        elif tp == f"{topic}/timing":
-            timing.append(msg)
-        elif tp == f"{topic}/video_stats":
-            stats = msg
-    assert follow >= 1  # the follow analytics commanded the drone from the stream's detections
-    assert stats is not None and stats["lost"] >= 1 and stats["restored"] >= 1, stats
-    # every frame taken from the stream is in the recording, but the ones the recorder's full queue refused,
-    # which are counted
-    assert images == stats["taken"] - stats["not_recorded"] and len(timing) == stats["taken"], (images, stats)
-    assert stats["decoded"] == stats["taken"] + stats["overwritten"] + stats["waiting"], stats
-    # the pose each frame carries is the vehicle's at its capture time (interpolated between 20 Hz samples: within
-    # one 10 Hz odometry interval), once the camera has a second of poses behind it
-    t_first = timing[0]["arrival_t"]
-    late = [m for m in timing if m["arrival_t"] > t_first + 1.0]
-    assert late and all(abs(m["pose_t"] - m["capture_t"]) <= 0.1 for m in late)
-    assert all(m["capture_t"] <= m["arrival_t"] for m in timing)
+    got = check_stream_recording(rec)  # every frame accounted for, every pose tag at its capture time
+    assert got["follow"]  # the follow analytics commanded the drone from the stream's detections
+    stats = got["stats"]
+    assert stats["lost"] >= 1 and stats["restored"] >= 1, stats

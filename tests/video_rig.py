@@ -155,6 +155,43 @@ class RtspServer:
         self.sender.stop()
 
 
+def check_stream_recording(rec: Path, robot: str = "quadrotor_base", camera: str = "cam1") -> dict:
+    """Read a run's recording of a stream camera and assert what every stream run must hold: every frame taken from
+    the stream recorded, but the ones refused before they left the camera's actor (``not_recorded``) or by the
+    recorder actor's full queue (``/run/recorder_drops``), each counted; every decoded frame
+    taken, replaced or still waiting, and each frame's pose tag at its capture time (within one 10 Hz odometry
+    interval, once the camera has a second of poses behind it). Returns ``{"stats", "timing", "follow" (log times
+    of the follow analytics' navigation), "odometry" ([(log time, message)])}`` for the test's own assertions."""
+    from aerodaas.recording.reader import read_messages
+
+    topic = f"/{robot}/camera/{camera}"
+    images, timing, stats, follow, odometry, drops = 0, [], None, [], [], None
+    for tp, schema, t, msg in read_messages(str(rec)):
+        if tp == "/run/recorder_drops":
+            drops = msg
+        elif tp == topic and schema == "foxglove.CompressedImage":
+            images += 1
+        elif tp == f"/{robot}/follow/navigation":
+            follow.append(t)
+        elif tp == f"{topic}/timing":
+            timing.append(msg)
+        elif tp == f"{topic}/video_stats":
+            stats = msg
+        elif tp == f"/{robot}/odometry":
+            odometry.append((t, msg))
+    assert stats is not None and stats["taken"] > 0, stats
+    assert drops is not None, "the recording has no /run/recorder_drops"
+    at_recorder = drops["frames_dropped"].get(topic, 0)  # refused by the recorder actor's full queue, counted there
+    assert images == stats["taken"] - stats["not_recorded"] - at_recorder and len(timing) == stats["taken"], \
+        (images, stats, drops)
+    assert stats["decoded"] == stats["taken"] + stats["overwritten"] + stats["waiting"], stats
+    t_first = timing[0]["arrival_t"]
+    late = [m for m in timing if m["arrival_t"] > t_first + 1.0]
+    assert late and all(abs(m["pose_t"] - m["capture_t"]) <= 0.1 for m in late)
+    assert all(m["capture_t"] <= m["arrival_t"] for m in timing)
+    return {"stats": stats, "timing": timing, "follow": follow, "odometry": odometry}
+
+
 def free_tcp_port() -> int:
     import socket
 

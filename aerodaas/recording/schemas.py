@@ -142,6 +142,14 @@ class MissionPlan(BaseModel):
     missions: list[PlanMission]
 
 
+class RecorderDrops(BaseModel):
+    """The frames the recorder refused (its bounded queue full, or closed), per image topic offered: the recording's
+    last message (``/run/recorder_drops``), so a reader accounts for every frame a camera took."""
+
+    frames_dropped: dict[str, int] = Field(description="image topic -> frames refused (0: none)")
+    total: int
+
+
 #: schema name written on the channel -> the pydantic model describing its messages
 JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.Odometry": Odometry,
@@ -155,6 +163,7 @@ JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.AnalyticsTask": AnalyticsTask,
     "aerodaas.FrameLatency": FrameLatency,
     "aerodaas.MissionPlan": MissionPlan,
+    "aerodaas.RecorderDrops": RecorderDrops,
 }
 
 _CACHE: dict[str, dict[str, Any]] = {}
