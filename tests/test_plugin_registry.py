@@ -234,3 +234,17 @@ def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_pat
     assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
     assert "sys.exit(0) was called in" in r.stderr and "exiting_helper.py line 3" in r.stderr, r.stderr[-2000:]
     assert not (tmp_path / "ray").exists() or not any((tmp_path / "ray").iterdir())  # no Ray session started
+
+
+def test_each_builtin_plugin_module_imports_first_in_a_fresh_process():
+    """A built-in module registers its classes while it is imported; that registration must not load the other
+    built-ins (which import it back, half-initialised): a dispatcher actor unpickling a DEMS policy died with
+    'cannot import name CLOUD_TRIGGER_BUFFER_MS from partially initialized module'."""
+    import subprocess
+    import sys
+
+    mods = list(registry._BUILTIN_MODULES)
+    code = "import importlib, sys; importlib.import_module(sys.argv[1])"
+    for m in mods:
+        r = subprocess.run([sys.executable, "-c", code, m], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, (m, r.stderr[-1500:])

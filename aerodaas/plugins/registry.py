@@ -194,7 +194,9 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     target = f"{cls.__module__}:{cls.__qualname__}"
     if replaces is None:
         replaces = getattr(cls, "plugin_replaces", False) is True
-    _load_builtins()  # a built-in's name is taken from the start, not only once something asked for it
+    if origin != "builtin":  # a built-in's name is taken from the start, not only once something asked for it (a
+        # built-in module registers itself while the built-ins load: loading them from there would be circular)
+        _load_builtins()
     with _LOCK:
         old = _ENTRIES[kind].get(name)
         if old is not None and old.target != target and not replaces:
