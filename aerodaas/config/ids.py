@@ -6,13 +6,13 @@ part of Ray actor names, MCAP topics (``/<robot>/camera/<sensor>``, ``/<robot>/<
 and log lines, so nothing in it may separate, hide or look like something else: no ``/`` (a topic separator), no
 ``#`` (component instance numbers), no blanks, control or format characters (a newline, NUL, a right-to-left
 override, a zero-width space), no non-ASCII letters (look-alike twins, NFC/NFD spellings). A plug-in's registered
-name, which names no topic, may also hold ``+`` and ``.`` (:data:`PLUGIN_NAME_PATTERN`: the paper's ``E+C``). Ids of one kind are
-unique case-insensitively (``d1`` and ``D1`` are one robot to a reader of the logs). A name under a robot's topics
+name, which names no topic, may also hold ``+`` and ``.`` (:data:`PLUGIN_NAME_PATTERN`: the paper's ``E+C``). Ids
+of one kind are unique case-insensitively (``d1`` and ``D1`` are one robot to a reader of the logs). A name under a robot's topics
 (an analytics, a plug-in sensor) may not be one of the segments AeroDaaS itself records there (:data:`RESERVED`):
 a sensor plug-in called ``odometry`` would share the robot's odometry channel.
 
-Together these make every component's topics distinct: :func:`robot_topic` is injective over valid ids (the
-property ``tests/test_ids.py`` checks with hypothesis).
+Together these make every component's topics distinct (the property ``tests/test_ids.py`` checks with hypothesis:
+every topic an accepted environment records has one owner).
 """
 from __future__ import annotations
 
@@ -22,8 +22,9 @@ from typing import Annotated, Iterable
 
 from pydantic import AfterValidator
 
-__all__ = ["ID_PATTERN", "MAX_ID_LENGTH", "RESERVED", "ROOT_RESERVED", "check_id", "check_robot_id", "check_unique", "check_topic_name", "check_plugin_name", "PLUGIN_NAME_PATTERN", "check_analytics_names", "Identifier", "RobotId",
-           "robot_topic"]
+__all__ = ["ID_PATTERN", "MAX_ID_LENGTH", "PLUGIN_NAME_PATTERN", "RESERVED", "ROOT_RESERVED", "Identifier", "RobotId",
+           "check_analytics_names", "check_id", "check_plugin_name", "check_robot_id", "check_topic_name",
+           "check_unique"]
 
 MAX_ID_LENGTH = 64
 ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,63}")
@@ -118,12 +119,3 @@ def check_analytics_names(robot: str, names: list[tuple[str, str]], sensors: lis
 Identifier = Annotated[str, AfterValidator(check_id)]
 #: a pydantic field type for a robot's id
 RobotId = Annotated[str, AfterValidator(check_robot_id)]
-
-
-def robot_topic(robot: str, *segments: str) -> str:
-    """The MCAP topic ``/<robot>/<segment>/...`` (robot and segments valid ids or :data:`RESERVED` words). Raises
-    ValueError for a segment that is not an id (it would hide a separator)."""
-    for s in (robot, *segments):
-        if ID_PATTERN.fullmatch(s) is None:
-            raise ValueError(f"topic segment {s!r} is not an id")
-    return "/" + "/".join((robot, *segments))
