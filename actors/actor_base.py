@@ -15,9 +15,9 @@ from typing import Any, Callable
 
 import ray
 
-from aerodaas.runtime.messages import Delivery
-from aerodaas.runtime.specs import ActorSpec
-from aerodaas.runtime.startup_probe import probe
+from aerodaas.protocol.messages import Delivery
+from aerodaas.protocol.specs import ActorSpec
+from aerodaas.protocol.startup_probe import probe
 
 from aerodaas.actors.dataplane import DataPlane, Settled
 
@@ -44,7 +44,7 @@ def _recorder_name(name: str) -> str:
 
 class ActorBase:
     """Plain base of the run's Ray actors (see the module docstring). Its part of the plan
-    (:class:`~aerodaas.runtime.specs.ActorSpec`) and its wiring (``{"routes", "location", "tiers", "peers"}``) are read
+    (:class:`~aerodaas.protocol.specs.ActorSpec`) and its wiring (``{"routes", "location", "tiers", "peers"}``) are read
     from the run's recorder actor, which keeps every actor's, so that a restarted actor gets them the same way."""
 
     def __init__(self, actor_id: str, tier: str, workers: int | None = None,

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.runtime.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
-from aerodaas.runtime.specs import AnalyticsSchedulerSpec
+from aerodaas.protocol.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
+from aerodaas.protocol.specs import AnalyticsSchedulerSpec
 
 from aerodaas.actors.dataplane import Component, DataPlane
 
@@ -274,7 +274,7 @@ class AnalyticsSchedulingService:
     analytics on the JPEG. A cloud executor that dies (its node lost) is handled by the pool: in-flight tasks are
     retried or FAILED, the policy is told when no cloud is left, and the mission goes on.
 
-    ``spec``: the dispatcher actor's :class:`~aerodaas.runtime.specs.AnalyticsSchedulerSpec` (the scheduler's
+    ``spec``: the dispatcher actor's :class:`~aerodaas.protocol.specs.AnalyticsSchedulerSpec` (the scheduler's
     class itself, resolved in the driver where an application's own scheduler is registered)."""
 
     def __init__(self, plane: DataPlane, spec: AnalyticsSchedulerSpec) -> None:

@@ -1,7 +1,7 @@
 """ActorAssembly: builds an actor's components (cameras, analytics, trajectory schedulers, drones) from its spec,
 runs the drones' clock and checkpoints, and answers the driver's calls.
 
-Components hand each other typed messages (:mod:`aerodaas.runtime.messages`): a camera publishes :class:`FrameMsg` (a
+Components hand each other typed messages (:mod:`aerodaas.protocol.messages`): a camera publishes :class:`FrameMsg` (a
 read-only (H, W, 3) uint8 BGR ``ndarray``, shared by every reader of the actor, never copied there), a drone
 :class:`OdometryMsg` and :class:`StatMsg`, an analytics :class:`DetectionsMsg`, :class:`NavigationMsg` or
 :class:`ValueMsg`; each carries its robot, simulated time, the FrameMeta of its frame and the frame's latency
@@ -15,8 +15,8 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
-from aerodaas.runtime.ids import is_drone
-from aerodaas.runtime.specs import ActorSpec
+from aerodaas.protocol.ids import is_drone
+from aerodaas.protocol.specs import ActorSpec
 
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
 from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
@@ -59,7 +59,7 @@ class _Checkpointer:
 
 
 class ActorAssembly:
-    """Builds an actor's components from its :class:`~aerodaas.runtime.specs.ActorSpec` and runs them: the
+    """Builds an actor's components from its :class:`~aerodaas.protocol.specs.ActorSpec` and runs them: the
     recorder (a file of its own with ``spec.record``, else the run's recorder actor with ``spec.record_remote``),
     the analytics instances (``spec.analytics``), and per robot (``spec.robots``) its trajectory scheduler, drone
     and cameras (simulated ones render ``spec.world``). Drones connect to their vehicles here, so an unreachable

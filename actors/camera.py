@@ -10,8 +10,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.runtime.messages import FrameMsg
-from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
+from aerodaas.protocol.messages import FrameMsg
+from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
 from aerodaas.actors.dataplane import Cascade, DataPlane
 from aerodaas.video.pose import pose_at

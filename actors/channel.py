@@ -10,7 +10,7 @@ and restarts:
 * the frame's pixels are copied once into a **shared-memory slot** (POSIX shared memory,
   :class:`multiprocessing.shared_memory.SharedMemory`) owned by the sending actor, which the receiver maps and reads
   in place (a read-only (H, W, 3) uint8 BGR ``ndarray`` over the slot; no copy on the receiving side);
-* the message itself (a :class:`~aerodaas.runtime.messages.Delivery`, small) travels on a **persistent, authenticated Unix
+* the message itself (a :class:`~aerodaas.protocol.messages.Delivery`, small) travels on a **persistent, authenticated Unix
   socket** (:mod:`multiprocessing.connection`: HMAC challenge with the run's key both ways), and the outputs bound
   for the sender (detections, navigation) come back on the same socket as soon as the receiver is done — no Ray
   task submission per frame in either direction;
@@ -24,7 +24,7 @@ Addresses are Linux abstract Unix sockets named from the run and the receiving a
 an actor of another machine (or another network namespace) is simply not found there, and the sender falls back
 to Ray (an ObjectRef on the same tier, JPEG across tiers). Every actor of a run serves one (:class:`ChannelServer`);
 a restarted actor serves it again under the same address and senders reconnect. Lock-step runs use the same
-channels: a delivery of a lock-step cascade (:attr:`~aerodaas.runtime.messages.Delivery.cascade`) is answered when
+channels: a delivery of a lock-step cascade (:attr:`~aerodaas.protocol.messages.Delivery.cascade`) is answered when
 the receiver's cascade for it is done (never blocking the connection's thread), and the sender's cascade stays
 open until that answer and its replies were handed on.
 
@@ -48,7 +48,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.runtime.messages import Delivery, FrameMsg, Message, Port
+from aerodaas.protocol.messages import Delivery, FrameMsg, Message, Port
 
 __all__ = ["channel_address", "SlotFrame", "ChannelSend", "ChannelDone", "SlotFree", "ChannelServer",
            "ChannelOutlet"]

@@ -17,7 +17,7 @@ analytics actor, a dispatcher actor; :mod:`aerodaas.runtime.dataflow` decides wh
 * when an analytics hands navigation to a drone's navigation inbox, the drone applies it at once (not at its next
   control tick), so the end-to-end latency ends at the command reaching the vehicle backend.
 
-Items for a component of another actor (:class:`~aerodaas.runtime.messages.Message` kinds, typed) leave through that
+Items for a component of another actor (:class:`~aerodaas.protocol.messages.Message` kinds, typed) leave through that
 edge's outlet, bounded in flight: a same-node channel when the other actor serves one on this machine
 (:mod:`.channel`: the frame copied once into shared memory, the message and its reply on a Unix socket), else a
 Ray actor call (:class:`RemoteOutlet`: the frame put once into the object store on one tier, JPEG-encoded across
@@ -38,7 +38,7 @@ Lock-step is a property of the clock, not of the transport: with ``lockstep`` th
 simulated time moves on (:class:`Cascade`). Items travel over the same outlets either way (a same-node channel, or
 Ray calls across nodes and tiers); an item that belongs to a cascade is never dropped (the clock bounds what is in
 flight) and its delivery is answered only once the receiver's own cascade for it is done
-(:attr:`~aerodaas.runtime.messages.Delivery.cascade`): the sender's cascade stays open until that answer arrived and
+(:attr:`~aerodaas.protocol.messages.Delivery.cascade`): the sender's cascade stays open until that answer arrived and
 the replies in it were handed on.
 """
 from __future__ import annotations
@@ -60,7 +60,7 @@ import ray
 from aerodaas.actors.cascade import Cascade
 from aerodaas.actors.frames import FrameCopies, decode_frame, encode_frame
 from aerodaas.actors.remote_outlet import RemoteOutlet
-from aerodaas.runtime.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
+from aerodaas.protocol.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
 
 __all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "DataPlane", "Settled", "encode_frame",
            "decode_frame"]
@@ -414,7 +414,7 @@ class DataPlane:
     def deliver(self, d: Delivery, answer: Callable[[list], None] | None = None) -> list | None:
         """A message from another actor. A frame's pixels arrive as JPEG bytes or an ObjectRef and are decoded (or
         mapped) once here. Returns the replies (Delivery items for the sender's components, see
-        :class:`~aerodaas.runtime.messages.Delivery`) once the message was handed to its component.
+        :class:`~aerodaas.protocol.messages.Delivery`) once the message was handed to its component.
 
         A delivery the sender's lock-step cascade waits for (``d.cascade``) is answered only when the cascade it
         starts here is done (every item derived from it, here and in the actors it reached): with ``answer``
@@ -482,7 +482,7 @@ class DataPlane:
     def mark_processed(self) -> None:
         """Called by analytics when they finish an item: remembers the wall time of the first one (startup bench)."""
         if self.first_processed_wall is None:
-            from aerodaas.runtime.startup_probe import probe
+            from aerodaas.protocol.startup_probe import probe
 
             self.first_processed_wall = time.time()
             probe("first_processed")

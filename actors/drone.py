@@ -25,8 +25,8 @@ from typing import Any
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S
-from aerodaas.runtime.messages import StatMsg
-from aerodaas.app.models import ActionCommand, VelocityCommand, Waypoint
+from aerodaas.protocol.messages import StatMsg
+from aerodaas.model.types import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order
 from aerodaas.schedulers.base import TrajectoryScheduler

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 
 from aerodaas.navigation.fsm import MissionState as S
-from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 
 
 class AutopilotFlight:

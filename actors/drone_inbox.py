@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import Any
 
 from aerodaas.navigation.waypoint_queue import WaypointQueue
-from aerodaas.runtime.messages import Message, Port
+from aerodaas.protocol.messages import Message, Port
 
 from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.scheduler_component import SchedulerComponent

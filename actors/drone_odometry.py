@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from aerodaas.runtime.messages import OdometryMsg
+from aerodaas.protocol.messages import OdometryMsg
 
 
 class OdometryPublisher:

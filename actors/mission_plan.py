@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from aerodaas.app.models import Waypoint
+from aerodaas.model.types import Waypoint
 from aerodaas.navigation.waypoint_queue import WaypointQueue
 
 

@@ -2,12 +2,12 @@
 drone's actor. The drone's clock calls :meth:`PluginSensorComponent.maybe_sample` after every step; when the
 sensor is due (``rate_hz``, vehicle time) it samples the vehicle state, records the reading on
 ``/<robot>/<sensor id>`` with the plug-in's schema and publishes it to the sensor's subscribers as a
-:class:`~aerodaas.runtime.messages.ValueMsg` (in lock-step, as part of the step's cascade)."""
+:class:`~aerodaas.protocol.messages.ValueMsg` (in lock-step, as part of the step's cascade)."""
 from __future__ import annotations
 
 from typing import Any
 
-from aerodaas.runtime.messages import ValueMsg
+from aerodaas.protocol.messages import ValueMsg
 
 
 class PluginSensorComponent:

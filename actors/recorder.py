@@ -35,7 +35,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.runtime.messages import (RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson,
+from aerodaas.protocol.messages import (RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson,
                                        RecordOdometry, RecordTracks)
 from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 
@@ -56,7 +56,7 @@ class RecorderService:
     ``recorder_jpeg_encoded`` in ``copies`` (the actor's :class:`~.dataplane.FrameCopies`) when given. All methods are
     thread-safe and return at once.
 
-    ``homes``: robot id -> its home (a :class:`~aerodaas.app.models.GeoPoint` or its dict), for the lat/lon of
+    ``homes``: robot id -> its home (a :class:`~aerodaas.model.types.GeoPoint` or its dict), for the lat/lon of
     recorded tracks. ``declare``: ``[(topic, schema)]`` of protobuf channels known from the plan (the track channels,
     :func:`aerodaas.perception.track_records.declared_track_channels`), registered in the file and advertised by the
     live view before the first message."""
@@ -65,7 +65,7 @@ class RecorderService:
                  max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
                  live: str | None = None, homes: dict[str, Any] | None = None,
                  declare: list[tuple[str, str]] | None = None) -> None:
-        from aerodaas.app.models import GeoPoint
+        from aerodaas.model.types import GeoPoint
 
         self.homes = {r: GeoPoint.model_validate(h) for r, h in (homes or {}).items()}
         self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality)
@@ -452,7 +452,7 @@ class RemoteRecorder:
 
 def deliver(recorder: Any, batch: list[RecordItem]) -> int:
     """Hand a :class:`RemoteRecorder` batch to ``recorder`` (the run's :class:`RecorderService`); returns the
-    number of items. Raises TypeError for anything that is not a :class:`~aerodaas.runtime.messages.RecordItem`."""
+    number of items. Raises TypeError for anything that is not a :class:`~aerodaas.protocol.messages.RecordItem`."""
     for item in batch:
         if not isinstance(item, RecordItem):
             raise TypeError(f"remote recorder: {type(item).__name__} is not a RecordItem")

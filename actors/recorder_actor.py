@@ -25,7 +25,7 @@ from typing import Any
 
 import ray
 
-from aerodaas.runtime.specs import ActorSpec
+from aerodaas.protocol.specs import ActorSpec
 
 
 #: how often Ray restarts a dead recorder actor (each restart opens a new segment file)
@@ -34,7 +34,7 @@ RECORDER_MAX_RESTARTS = 3
 
 @ray.remote(num_cpus=0, max_concurrency=16, max_restarts=RECORDER_MAX_RESTARTS)
 class RecorderActor:
-    """``spec``: the recorder's :class:`~aerodaas.runtime.specs.ActorSpec` (``record``: the file and live view, or
+    """``spec``: the recorder's :class:`~aerodaas.protocol.specs.ActorSpec` (``record``: the file and live view, or
     None; ``epoch_ns``), see the module docstring."""
 
     def __init__(self, spec: ActorSpec) -> None:

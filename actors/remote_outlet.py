@@ -11,7 +11,7 @@ import ray
 
 from aerodaas.actors.cascade import Cascade
 from aerodaas.actors.frames import FrameCopies, encode_frame
-from aerodaas.runtime.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
+from aerodaas.protocol.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
 
 __all__ = ["RemoteOutlet"]
 

@@ -10,8 +10,8 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig
-from aerodaas.runtime.messages import Message, Port
-from aerodaas.app.models import AeroNavigation, Waypoint
+from aerodaas.protocol.messages import Message, Port
+from aerodaas.model.types import AeroNavigation, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order, WaypointQueue
 
@@ -27,7 +27,7 @@ class SchedulerComponent(Component):
     ``scheduler``: the robot's trajectory scheduler plug-in (the paper's INavigate), asked to plan every addition;
     ``queue``: the :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` it commits into (the drone's own;
     default: the scheduler's :attr:`~aerodaas.schedulers.base.TrajectoryScheduler.queue`, for an inbox on its own).
-    Analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.runtime.messages.Port`
+    Analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.protocol.messages.Port`
     (optionally ``replace``), taken by :meth:`take`; users add navigation through :meth:`add_navigation` (the HITL
     API). Everything added is checked by the robot's :class:`~aerodaas.navigation.safety.SafetyGate` and bounds
     first (all items or none). ``log``: the :class:`~aerodaas.actors.mission_plan.MissionPlanLog` shared with the

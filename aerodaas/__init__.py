@@ -10,12 +10,12 @@ from aerodaas.analytics.core import (Analytics, FollowAnalytics, IAnalyse, INavi
                         NavigableAnalytics, ObjectDetector)
 from aerodaas.app.api import ComputeResource, Environment, Robot, Sensor
 from aerodaas.config import ConfigError
-from aerodaas.app.data import AeroData, AeroListData, AeroStreamData, IAeroData
+from aerodaas.model.data import AeroData, AeroListData, AeroStreamData, IAeroData
 from aerodaas.navigation.fsm import IllegalTransition, MissionState
-from aerodaas.app.models import (ActionCommand, AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue,
+from aerodaas.model.types import (ActionCommand, AeroNavigation, Detection, NavigationType, Odometry, PriorityQueue,
                      SchedulingType, VelocityCommand, Waypoint)
 from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
-from aerodaas.perception.track_analytics import TrackAnalytics
+from aerodaas.analytics.track import TrackAnalytics
 from aerodaas.perception.tracking import ByteTrackConfig
 
 IEnvironment, IRobot, ISensor, ICompute = Environment, Robot, Sensor, ComputeResource

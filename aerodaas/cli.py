@@ -11,7 +11,7 @@ from pathlib import Path
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from aerodaas.runtime.startup_probe import probe
+    from aerodaas.protocol.startup_probe import probe
 
     probe("cli")
     from aerodaas.runtime import driver as runtime
@@ -377,7 +377,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     import time
 
     from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
 
     home = None
     if args.home:

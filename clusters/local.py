@@ -7,7 +7,7 @@ authentication stays on: ``RAY_AUTH_MODE=token`` is set for this process (and in
 unless the environment already sets a mode, and a token is generated at ``~/.ray/auth_token`` if none exists
 (what ``ray.init()`` does for a new local cluster since Ray 2.59).
 
-Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.runtime.loopback.loopback_only`): node
+Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.clusters.loopback.loopback_only`): node
 address 127.0.0.1, so the GCS, raylets, object managers, agents and workers listen on 127.0.0.1 only, never on the
 machine's network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
 
@@ -75,11 +75,11 @@ class LocalCluster:
             raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
                                "LocalCluster with connect=True")
         enable_token_auth()
-        from aerodaas.runtime.loopback import loopback_only
-        from aerodaas.runtime.worker_memory import limit_malloc_arenas
+        from aerodaas.clusters.loopback import loopback_only
+        from aerodaas.clusters.worker_memory import limit_malloc_arenas
 
-        limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
-        from aerodaas.runtime import reaper
+        limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
+        from aerodaas.clusters import reaper
 
         reaper.ensure_started()  # the nodes' processes end with this process, however it ends
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()

@@ -2,7 +2,7 @@
 stops it (issue 27, item 2).
 
 ``aerodaas up`` starts a daemon (``python -m aerodaas.clusters.persistent serve``, its own session) that runs one
-Ray head node with ``ray.cluster_utils.Cluster``: loopback only (:func:`aerodaas.runtime.loopback.loopback_only`), token
+Ray head node with ``ray.cluster_utils.Cluster``: loopback only (:func:`aerodaas.clusters.loopback.loopback_only`), token
 authentication on (:func:`aerodaas.clusters.local.enable_token_auth`), labelled ``tier=edge`` and
 ``aerodaas/compute=local``, with its dashboard on 127.0.0.1 (Ray prestarts ``num_cpus`` workers when the driver
 connects). The daemon writes
@@ -171,13 +171,13 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     from ray.cluster_utils import Cluster
 
     from aerodaas.clusters.local import enable_token_auth
-    from aerodaas.runtime.loopback import loopback_only
+    from aerodaas.clusters.loopback import loopback_only
 
     enable_token_auth()
     loopback_only()  # kept: this process exists only to run the node
-    from aerodaas.runtime.worker_memory import limit_malloc_arenas
+    from aerodaas.clusters.worker_memory import limit_malloc_arenas
 
-    limit_malloc_arenas()  # the workers' C heap (aerodaas.runtime.worker_memory)
+    limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
     system_config: dict[str, Any] = {"worker_niceness": 0}
     # the import path the node's workers share with this daemon: without sys.path[0], this module's own start
     # folder (`python -m` puts the caller's working directory there), which workers do not have

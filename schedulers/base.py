@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Iterable, Sequence
 
-from aerodaas.app.models import AeroNavigation, PriorityQueue, SchedulingType, Waypoint
+from aerodaas.model.types import AeroNavigation, PriorityQueue, SchedulingType, Waypoint
 from aerodaas.navigation.waypoint_queue import Mission, PlannedAddition, WaypointQueue
 
 __all__ = ["DEFAULT_PRIORITY", "Mission", "PlannedAddition", "TrajectoryScheduler", "WaypointQueue"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from aerodaas.app.models import Waypoint
+from aerodaas.model.types import Waypoint
 
 from aerodaas.schedulers.base import TrajectoryScheduler
 

@@ -57,7 +57,7 @@ from typing import Sequence
 
 import numpy as np
 
-from aerodaas.app.models import Waypoint
+from aerodaas.model.types import Waypoint
 
 from aerodaas.schedulers.base import TrajectoryScheduler
 

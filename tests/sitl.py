@@ -386,8 +386,8 @@ def _write_env(path: Path, cfg: dict) -> Path:
 
 def _mission_file(path: Path, home: dict) -> Path:
     """A QGC WPL 110 mission: take off (at home) to 2 m, two waypoints 6 m apart (hold 3 s), land."""
-    from aerodaas.navigation.geo import enu_to_geodetic
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.geo import enu_to_geodetic
+    from aerodaas.model.types import GeoPoint
 
     h = GeoPoint(**home)
     a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
@@ -408,8 +408,8 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     (SIGSTOP/SIGCONT) in flight; on PX4 also our drone actor frozen in OFFBOARD (its failsafe) and the survey at
     0.5 m/s with SIH's ground truth observed (``slow``, :func:`tests.sitl_watchers.observe_truth`); ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
     "observed"}}``."""
-    from aerodaas.navigation.geo import enu_to_geodetic
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.geo import enu_to_geodetic
+    from aerodaas.model.types import GeoPoint
 
     workdir.mkdir(parents=True, exist_ok=True)
     env_guided = _write_env(workdir / "guided.json", mavlink_env(autopilot, FARM_ENV))

@@ -32,8 +32,8 @@ os.environ["MAVLINK20"] = "1"  # fence items need MAVLink 2 (mission_type is an 
 
 from pymavlink import mavutil  # noqa: E402
 
-from aerodaas.app.models import GeoPoint  # noqa: E402
-from aerodaas.navigation.geo import geodetic_to_enu  # noqa: E402
+from aerodaas.model.types import GeoPoint  # noqa: E402
+from aerodaas.model.geo import geodetic_to_enu  # noqa: E402
 
 FENCE_PARAMS = {"ardupilot": ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN",
                               "FENCE_RADIUS", "FENCE_OPTIONS"],
@@ -286,7 +286,7 @@ def kill_and_push(conn: str, run_pid: int, out: str, home: GeoPoint, fly_s: floa
     if w.mode in ("GUIDED", "OFFBOARD") and w.autopilot == "ardupilot":
         # held by fence avoidance (GUIDED velocity control): now a mission waypoint 35 m from home (out of a 20 m fence), flown
         # in AUTO, where ArduCopter applies no fence avoidance: the fence itself must act (breach -> FENCE_ACTION)
-        from aerodaas.navigation.geo import enu_to_geodetic
+        from aerodaas.model.geo import enu_to_geodetic
 
         g = enu_to_geodetic(35.0 * ve / push_speed, 35.0 * vn / push_speed, 0.0, home)  # 35 m out, the push's way
         uploaded = w.upload_mission([(g.lat, g.lon, 1.5)])
@@ -376,7 +376,7 @@ def px4_intersects(conn: str, out: str, home: GeoPoint, timeout_s: float = 300.0
     position."""
     import struct
 
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic
 
     w = Watcher(conn, home)
     w.wait_vehicle(120)

@@ -31,8 +31,8 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     "events": [...]}`` to ``out``. Used after ``aerodaas mission upload --start`` (the CLI hands the vehicle over)."""
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
-    from aerodaas.navigation.geo import geodetic_to_enu
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.geo import geodetic_to_enu
+    from aerodaas.model.types import GeoPoint
 
     b = make_backend(RobotConfig(id="observer", backend="mavlink", home=FARM_HOME,
                                  mavlink=MavlinkConfig(connection=conn, set_speed_limits=False)))
@@ -70,7 +70,7 @@ def observe_raw(conn: str, out: str, timeout_s: float, per_sysid: dict[int, str]
     one port and told apart by the MAVLink header's system id."""
     from pymavlink import mavutil
 
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
 
     home = GeoPoint(**FARM_HOME)
     m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
@@ -102,7 +102,7 @@ def _done(s: dict) -> bool:
 
 def _follow_raw(m, st: dict, seen: set, end: float, per_sysid: bool, home) -> None:
     """observe_raw's loop: until every followed vehicle has been disarmed for 1 s, or ``end``."""
-    from aerodaas.navigation.geo import geodetic_to_enu
+    from aerodaas.model.geo import geodetic_to_enu
 
     next_hb = 0.0
     while time.monotonic() < end and not all(_done(s) for s in st.values()):

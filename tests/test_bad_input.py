@@ -56,7 +56,7 @@ def test_reliability_file_mission_and_gate_cases(tmp_path):
 def test_far_waypoints_are_refused_without_a_geofence():
     from pydantic import ValidationError
 
-    from aerodaas.app.models import VelocityCommand, Waypoint
+    from aerodaas.model.types import VelocityCommand, Waypoint
 
     with pytest.raises(ValidationError, match="within"):
         Waypoint(id="w", x=1e308, y=0, z=5)
@@ -196,7 +196,7 @@ def test_mission_upload_refuses_items_too_high_before_connecting(tmp_path, capsy
 @pytest.fixture
 def vehicle_at_home():
     """An emulated ArduCopter whose home is the test plans' planned home; yields (emulator, connection)."""
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
     from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 
     emu = MavlinkVehicleEmulator("ardupilot", speedup=10.0, gps_lock_s=1.0,

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from aerodaas.actors.channel import ChannelOutlet, ChannelServer, channel_address
-from aerodaas.runtime.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
-from aerodaas.app.models import AeroNavigation
+from aerodaas.protocol.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
+from aerodaas.model.types import AeroNavigation
 
 KEY = os.urandom(32)
 

@@ -20,7 +20,7 @@ import pytest
 
 from aerodaas import Analytics, Environment, FollowAnalytics, PriorityQueue
 from aerodaas.config import parse_environment_config
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 
 
 def _env(n_drones: int = 1, fps: float = 10.0, lockstep: bool = False) -> Environment:
@@ -85,7 +85,7 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     from aerodaas.config import SimulationConfig
     from aerodaas.runtime.dataflow import build_plan, collect_graph
     from aerodaas.runtime.driver import _robot_schedulers
-    from aerodaas.runtime.specs import RecordSpec
+    from aerodaas.protocol.specs import RecordSpec
 
     robots = robots or env.get_env_robots()
     env.cfg.drones_per_actor = len(robots)
@@ -472,8 +472,8 @@ def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
     process_batch call (its max_batch allows 4); every frame still gets its own output, in order."""
     from aerodaas.actors.analytics_component import AnalyticsComponent
     from aerodaas.actors.dataplane import DataPlane
-    from aerodaas.runtime.messages import FrameMsg, Port
-    from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
+    from aerodaas.protocol.messages import FrameMsg, Port
+    from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
     host = DataPlane("analytics/edge/batchprobe#1", "edge", 0, workers=2)
     obj = BatchProbe()
@@ -507,7 +507,7 @@ def test_settle_waits_for_work_in_flight_and_says_when_it_ran_out_of_time():
     settle_actors``): ``DataPlane.settle`` returns only once no pool job, mailbox or outlet holds a message; with
     a consumer stuck it returns after its bound saying so; once idle, a second call had nothing to wait for."""
     from aerodaas.actors.dataplane import Component, DataPlane
-    from aerodaas.runtime.messages import Message, Port
+    from aerodaas.protocol.messages import Message, Port
 
     release, entered = threading.Event(), threading.Event()
 

@@ -248,7 +248,7 @@ ACTOR_PIDS = textwrap.dedent('''
     import json, sys
     import ray
     from aerodaas.clusters.local import enable_token_auth
-    from aerodaas.runtime.loopback import loopback_only
+    from aerodaas.clusters.loopback import loopback_only
     enable_token_auth(); loopback_only()
     ray.init(address=sys.argv[1], logging_level="error")
     from ray.util.state import list_actors

@@ -4,7 +4,7 @@ import pytest
 from pydantic import ValidationError
 
 from aerodaas.navigation.fsm import TRANSITIONS, IllegalTransition, MissionFSM, MissionState
-from aerodaas.app.models import AeroNavigation, CameraIntrinsics, GeoPoint, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import AeroNavigation, CameraIntrinsics, GeoPoint, NavigationType, SchedulingType, Waypoint
 
 
 def test_fsm_has_the_papers_13_states_plus_link_lost_and_rejects_illegal_transitions():

@@ -4,9 +4,9 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
-from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.navigation.geofence import Geofence, GeofenceCircle, GeofenceConfig, GeofencePolygon
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 
 HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)
 

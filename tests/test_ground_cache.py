@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from aerodaas.app.models import CameraIntrinsics, FramePose
+from aerodaas.model.types import CameraIntrinsics, FramePose
 from aerodaas.config import GroundConfig
 from aerodaas.sim import ground_cache
 from aerodaas.sim.world import World, ground_pyramid

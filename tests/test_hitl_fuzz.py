@@ -244,7 +244,7 @@ def test_planning_runs_outside_the_lock_the_control_tick_needs(api):
     the lock the drone's control tick takes: tick() completes while the planning is provably still running."""
     comp = SchedulerComponent(None, "d2/scheduler", "d2", NearestNeighborScheduler(start=(0, 0, 2)), None, 0,
                               robot_cfg={**ROBOT, "id": "d2"})
-    from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 
     comp.add_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=-5, y=-5, z=2)],
                                        SchedulingType.ORDERED))
@@ -277,7 +277,7 @@ def test_planning_runs_outside_the_lock_the_control_tick_needs(api):
 def test_clear_needs_an_explicit_scope(api):
     """A null or empty body is 422 and clears nothing; ``injected`` keeps the pre-planned mission, ``all`` clears it
     and marks its waypoints as cleared pre-planned (the mission can then not end as a success)."""
-    from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 
     api.sched.add_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="s1", x=-3, y=-3, z=2),
                                                                             Waypoint(id="s2", x=-6, y=-3, z=2)],

@@ -1,4 +1,4 @@
-"""One id grammar (issue 40.2, aerodaas.config.ids): robots, sensors, compute resources, targets, analytics and
+"""One id grammar (issue 40.2, aerodaas.model.ids): robots, sensors, compute resources, targets, analytics and
 plug-in names. Ids with a newline, NUL, blanks, '/', a right-to-left override, a zero-width space, non-ASCII
 look-alikes or case twins were accepted; robot ``a`` with camera ``camera/X`` and robot ``a/camera`` with camera
 ``X`` shared one topic (84 frames rendered, 37 recorded, "success")."""
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from aerodaas.config import ConfigError, parse_environment_config
-from aerodaas.config.ids import RESERVED, ROOT_RESERVED, check_id
+from aerodaas.model.ids import RESERVED, ROOT_RESERVED, check_id
 
 GOOD_IDS = ["d1", "quadrotor_base", "Edge-2", "x" * 64, "A"]
 BAD_IDS = {
@@ -156,7 +156,7 @@ def _topics(robot: str, sensors: list[tuple[str, str]], analytics: list[str]) ->
 def test_no_two_components_of_an_accepted_environment_share_a_topic(robots):
     """For any robots / sensors / analytics names the validators accept, every topic has one owner (and none is a
     top-level topic: /mission/..., /run/..., /world/...)."""
-    from aerodaas.config.ids import check_analytics_names, check_topic_name, check_unique
+    from aerodaas.model.ids import check_analytics_names, check_topic_name, check_unique
 
     env = _env([{"id": rid, "sensors": [{"id": sid, "type": t} for sid, t in sensors if t != "plugin"]}
                 for rid, sensors, _ in robots])

@@ -21,9 +21,9 @@ from aerodaas.backends.mavlink import CommandNotAcknowledged, CommandNotConfirme
 from aerodaas.backends.mavlink.params import px4_speed_limit
 from aerodaas.config import Limits, MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-from aerodaas.navigation.geo import geodetic_to_enu
+from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.missionfile import load_mission
-from aerodaas.app.models import GeoPoint, Waypoint
+from aerodaas.model.types import GeoPoint, Waypoint
 
 from .conftest import DATA_DIR
 

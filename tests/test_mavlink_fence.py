@@ -13,8 +13,8 @@ from aerodaas.backends import BackendError, make_backend
 from aerodaas.cli import main
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-from aerodaas.navigation.geo import enu_to_geodetic
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.model.types import GeoPoint
 
 from .conftest import DATA_DIR
 

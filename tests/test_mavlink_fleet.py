@@ -17,7 +17,7 @@ from aerodaas.backends import BackendError, make_backend
 from aerodaas.backends.mavlink import shared_link
 from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, load_environment_config
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 
 from .test_mavlink import run_until
 from .udp_fanout import UdpFanout

@@ -8,7 +8,7 @@ import pytest
 from aerodaas.cli import main
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 
 from .conftest import DATA_DIR
 
@@ -102,7 +102,7 @@ HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)
 
 def _wpl(path, rows):
     """A QGC WPL 110 file: home row, then ``rows`` of (command, frame, p1, p2, east m, north m, z) about HOME."""
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic
 
     lines = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME.lat:.7f}\t{HOME.lon:.7f}\t{HOME.alt:.2f}\t1"]
     for k, (cmd, frame, p1, p2, e, n, z) in enumerate(rows, start=1):

@@ -10,13 +10,13 @@ import math
 
 import pytest
 
-from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.navigation.geofence import GeofenceCircle, GeofenceConfig, GeofencePolygon
 from aerodaas.missionfile import (
     PAYLOAD_COMMANDS, FlightPlan, MissionFileError, MissionItem, MissionPlan, load_mission, load_plan, load_wpl,
     navigation_to_plan, plan_to_flight, plan_to_navigation, save_plan, save_wpl,
 )
-from aerodaas.app.models import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
+from aerodaas.model.types import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
 
 from .conftest import DATA_DIR
 
@@ -467,11 +467,11 @@ def test_plan_geofence_and_rally_points_round_trip(tmp_path):
 
 
 def test_navigation_ending_with_an_action_command_exports_that_action():
-    import aerodaas.app.models as models
+    import aerodaas.model.types as models
 
     action_cls = getattr(models, "ActionCommand", None)
     if action_cls is None:
-        pytest.skip("aerodaas.app.models has no ActionCommand (land/rtl) in this tree")
+        pytest.skip("aerodaas.model.types has no ActionCommand (land/rtl) in this tree")
     nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=5, y=5, z=10),
                                                           action_cls(id="home", action="rtl")])
     plan = navigation_to_plan(nav, HOME, "land")

@@ -62,7 +62,7 @@ def test_a_target_the_autopilot_drops_is_stalled_then_abandoned(ray_session, run
     import numpy as np
 
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
     from aerodaas.config import parse_environment_config
     from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
     from aerodaas.runtime.report import format_summary
@@ -118,9 +118,9 @@ def test_a_target_the_autopilot_drops_is_stalled_then_abandoned(ray_session, run
 def test_a_vehicle_away_from_the_robots_home_is_refused_by_the_gate():
     """The gate places the fence and relative waypoints from robots[].home; a vehicle whose own home (or position)
     is farther than safety.home_tolerance_m from it flies every point that far from where the gate thinks."""
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
     from aerodaas.config import RobotConfig
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic
     from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
@@ -139,10 +139,10 @@ def test_a_vehicle_armed_away_from_the_robots_home_never_takes_off(ray_session, 
     """An emulated ArduCopter standing 12 m east of robots[].home (where it arms, its home): refused after arming,
     disarmed, never in the air; the run says why."""
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
     from aerodaas.config import parse_environment_config
     from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic
 
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
     g = enu_to_geodetic(12.0, 0.0, 0.0, home)

@@ -12,7 +12,7 @@ import pytest
 from aerodaas import Analytics, FollowAnalytics, MonitoringAnalytics
 from aerodaas.analytics.core import source_robot
 from aerodaas.analytics.extra import FallDetector, InspectionPlanner
-from aerodaas.app.models import ActionCommand, CameraIntrinsics, Detection, FrameMeta, FramePose, VelocityCommand
+from aerodaas.model.types import ActionCommand, CameraIntrinsics, Detection, FrameMeta, FramePose, VelocityCommand
 from aerodaas.sim.world import project_points
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)
@@ -216,7 +216,7 @@ def test_a_slow_detectors_follow_commands_leave_no_gap_for_the_preempted_survey(
     two detections (it did with 0.5 s commands: TRACKING and NAVIGATING alternated every 0.1-0.4 s)."""
     from schedulers.base import TrajectoryScheduler
 
-    from aerodaas.app.models import AeroNavigation, NavigationType, PriorityQueue, Waypoint
+    from aerodaas.model.types import AeroNavigation, NavigationType, PriorityQueue, Waypoint
 
     follow = FollowAnalytics(target_classes=["car"], confirm_hits=1)
     sched = TrajectoryScheduler()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from aerodaas import FollowAnalytics
-from aerodaas.app.models import CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
 from aerodaas.perception.tracking import ByteTrackConfig
 from aerodaas.sim.world import project_points
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aerodaas.navigation.geo import geodetic_to_enu
-from aerodaas.app.models import CameraIntrinsics, FramePose, GeoPoint
+from aerodaas.model.geo import geodetic_to_enu
+from aerodaas.model.types import CameraIntrinsics, FramePose, GeoPoint
 from aerodaas.perception.geolocate import geolocate_box, record_track_fixes
 from aerodaas.sim.world import project_points
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 from aerodaas.perception.scoring import GroundTruth, load_annotations, match, score
 from aerodaas.perception.tiling import TiledDetector, Tiling, merge_detections, slice_boxes
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from aerodaas.app.models import CameraIntrinsics, Detection, FrameMeta, FramePose, GeoPoint
-from aerodaas.perception.track_analytics import TrackAnalytics
+from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose, GeoPoint
+from aerodaas.analytics.track import TrackAnalytics
 from aerodaas.sim.world import project_points
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)

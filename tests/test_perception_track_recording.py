@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 from aerodaas.bench.tracks import score_tracks
-from aerodaas.navigation.geo import geodetic_to_enu
+from aerodaas.model.geo import geodetic_to_enu
 
 from .conftest import REPO
 
@@ -83,7 +83,7 @@ def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_option
 def test_declared_track_channels_exist_before_any_message_and_are_advertised_live(tmp_path):
     from aerodaas.actors.recorder import RecorderService
     from aerodaas.perception.track_records import declared_track_channels
-    from aerodaas.perception.track_analytics import TrackAnalytics
+    from aerodaas.analytics.track import TrackAnalytics
     from aerodaas import FollowAnalytics
     from aerodaas.perception.tracking import ByteTrackConfig
 
@@ -102,7 +102,7 @@ def test_declared_track_channels_exist_before_any_message_and_are_advertised_liv
 
 
 def test_write_tracks_writes_annotations_scene_and_one_fix_per_track(tmp_path):
-    from aerodaas.app.models import CameraIntrinsics, Detection, FrameMeta, FramePose
+    from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
     from aerodaas.perception.track_records import track_rows, write_tracks
     from aerodaas.perception.tracking import ByteTracker
     from aerodaas.recording.reader import read_messages
@@ -165,7 +165,7 @@ class _StubDetector:
 
 
 def _frame_meta(robot: str, seq: int):
-    from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
+    from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
     return FrameMeta(robot_id=robot, sensor_id="cam", seq=seq, capture_time=0.2 * seq, wall_time=0.0,
                      pose=FramePose(position=(0.0, 0.0, 20.0), yaw=90.0, camera_pitch=90.0),
@@ -173,7 +173,7 @@ def _frame_meta(robot: str, seq: int):
 
 
 def _car(x: float):
-    from aerodaas.app.models import Detection
+    from aerodaas.model.types import Detection
 
     return Detection(class_id=2, class_name="car", score=0.9, box=(x, 100.0, x + 30.0, 120.0))
 
@@ -185,7 +185,7 @@ def test_the_analytics_component_records_each_drones_tracks_whatever_the_output(
     none. Two drones share the analytics: each keeps its own track ids."""
     from aerodaas import ByteTrackConfig, FollowAnalytics, ObjectDetector
     from aerodaas.actors.analytics_component import AnalyticsComponent
-    from aerodaas.runtime.messages import DetectionsMsg, FrameMsg
+    from aerodaas.protocol.messages import DetectionsMsg, FrameMsg
 
     if kind == "detector":
         obj = ObjectDetector(tracker=ByteTrackConfig())

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 from aerodaas.perception.tracking import ByteTrackConfig, ByteTracker
 
 

@@ -40,7 +40,7 @@ def test_up_starts_one_loopback_head_and_down_stops_only_its_processes(tmp_path)
         # a driver attaches with the token (and, as the node is loopback-only, as 127.0.0.1: Ray's local-only switch)
         # and sees the node's labels
         probe = ("import ray; from aerodaas.clusters.local import enable_token_auth; enable_token_auth(); "
-                 "from aerodaas.runtime.loopback import loopback_only; loopback_only(); "
+                 "from aerodaas.clusters.loopback import loopback_only; loopback_only(); "
                  f"ray.init(address={st['address']!r}, logging_level='error'); "
                  "import json; print('LABELS', json.dumps([n['Labels'] for n in ray.nodes() if n['Alive']]))")
         q = subprocess.run([sys.executable, "-c", probe], cwd=REPO, env=env, capture_output=True, text=True,

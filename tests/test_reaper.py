@@ -1,4 +1,4 @@
-"""The run's process reaper (aerodaas.runtime.reaper): what was below a driver is ended once the driver is gone,
+"""The run's process reaper (aerodaas.clusters.reaper): what was below a driver is ended once the driver is gone,
 nothing else is touched."""
 import os
 import subprocess
@@ -6,7 +6,7 @@ import sys
 import textwrap
 import time
 
-from aerodaas.runtime.reaper import descendants, start_time
+from aerodaas.clusters.reaper import descendants, start_time
 
 
 def _alive(pid: int) -> bool:
@@ -30,7 +30,7 @@ def test_what_was_below_a_dead_driver_is_ended_and_nothing_else(tmp_path):
     pidfile = tmp_path / "grandchild.pid"
     driver = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import subprocess, time
-        from aerodaas.runtime import reaper
+        from aerodaas.clusters import reaper
         reaper.start(period_s=0.1, grace_s=1.0)
         g = subprocess.Popen(["sleep", "300"], start_new_session=True)
         open({str(pidfile)!r}, "w").write(str(g.pid))

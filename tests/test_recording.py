@@ -16,7 +16,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 from aerodaas.recording.writer import McapRecorder, quaternion_from_euler_deg, read_messages, summarize_mcap
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

@@ -155,7 +155,7 @@ class AlwaysCar(Analytics):
     name = "always_car"
 
     def process(self, frame, meta):
-        from aerodaas.app.models import Detection
+        from aerodaas.model.types import Detection
 
         h, w = frame.shape[:2]
         time.sleep(0.1)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import pytest
 
 from aerodaas.config import RobotConfig
-from aerodaas.app.models import AeroNavigation, VelocityCommand, Waypoint
+from aerodaas.model.types import AeroNavigation, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 HOME = {"lat": 47.0, "lon": 8.0, "alt": 400.0}
@@ -53,7 +53,7 @@ def test_geofence_exclusion_zone_blocks_points_legs_and_velocity():
 def test_camera_on_the_ground_renders():
     """A landed drone (camera height 0) must not make the ground homography singular."""
     from aerodaas.config import GroundConfig
-    from aerodaas.app.models import CameraIntrinsics, FramePose
+    from aerodaas.model.types import CameraIntrinsics, FramePose
     from aerodaas.sim.world import World
 
     w = World(GroundConfig(seed=1, size_m=20), [])

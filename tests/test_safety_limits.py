@@ -12,7 +12,7 @@ import pytest
 
 from aerodaas.config import ConfigError, RobotConfig, load_environment_config
 from aerodaas.navigation.geofence import Geofence
-from aerodaas.app.models import GeoPoint, VelocityCommand, Waypoint
+from aerodaas.model.types import GeoPoint, VelocityCommand, Waypoint
 from aerodaas.navigation.route import plan_path
 from aerodaas.navigation.rtl import plan_return
 from aerodaas.reliability.flight import PROBE_ENV
@@ -186,7 +186,7 @@ def test_speedup_below_the_bound_is_refused_before_ray(tmp_path, capsys):
 APP = '''
 from aerodaas import *
 from aerodaas.analytics.core import NavigableAnalytics
-from aerodaas.app.models import ActionCommand, AeroNavigation, NavigationType
+from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType
 
 class GoHome(NavigableAnalytics):
     """Once the drone is behind the exclusion circle, on the line from home through its centre: an app's RTL."""

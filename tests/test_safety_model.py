@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from aerodaas.config import RobotConfig
-from aerodaas.app.models import VelocityCommand, Waypoint
+from aerodaas.model.types import VelocityCommand, Waypoint
 from aerodaas.reliability.flight import fly_commands
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
@@ -113,7 +113,7 @@ APP = '''
 import math
 from aerodaas import *
 from aerodaas.analytics.core import NavigableAnalytics
-from aerodaas.app.models import AeroNavigation, NavigationType, VelocityCommand
+from aerodaas.model.types import AeroNavigation, NavigationType, VelocityCommand
 
 class Push(NavigableAnalytics):
     """Every odometry sample: 0.5 s at 3 m/s along a heading that turns slowly (east, then north-east, ...),

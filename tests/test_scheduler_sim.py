@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from aerodaas.config import BatteryConfig, GroundConfig, Limits
-from aerodaas.app.models import (AeroNavigation, CameraIntrinsics, FramePose, GeoPoint, NavigationType, PriorityQueue,
+from aerodaas.model.types import (AeroNavigation, CameraIntrinsics, FramePose, GeoPoint, NavigationType, PriorityQueue,
                              SchedulingType, VelocityCommand, Waypoint)
 from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler
 from aerodaas.sim.vehicle import SimVehicle

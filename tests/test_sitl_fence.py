@@ -25,8 +25,8 @@ MAX_ALT_M = 30.0
 
 
 def _ll(e: float, n: float) -> list[float]:
-    from aerodaas.app.models import GeoPoint
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.types import GeoPoint
+    from aerodaas.model.geo import enu_to_geodetic
 
     g = enu_to_geodetic(e, n, 0.0, GeoPoint(**HOME))
     return [g.lat, g.lon]

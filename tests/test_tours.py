@@ -10,7 +10,8 @@ import pytest
 
 from aerodaas.bench.tours import disaster_survey, held_karp_open_path, open_path_lower_bound, random_instance
 from aerodaas.cli import main
-from aerodaas.app.models import AeroNavigation, NavigationType, PriorityQueue, SchedulingType, VelocityCommand, Waypoint
+from aerodaas.model.types import (AeroNavigation, NavigationType, PriorityQueue, SchedulingType, VelocityCommand,
+                                  Waypoint)
 from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
 from aerodaas.schedulers.two_opt import improve_path, nearest_neighbour_path, node_cost_matrix, path_cost
 

@@ -26,7 +26,7 @@ SCHED = textwrap.dedent('''
 
 APP = textwrap.dedent('''
     from aerodaas import AeroNavigation, Environment, Waypoint
-    from aerodaas.app.models import SchedulingType
+    from aerodaas.model.types import SchedulingType
 
     env = Environment("environment.json")
     drone = env.get_robot_by_id("uav")

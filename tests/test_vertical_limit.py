@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 from aerodaas.config import BatteryConfig, Limits
 from aerodaas.config.base import MIN_PHYSICS_HZ
 from aerodaas.navigation.braking import braking_speed, limited_change

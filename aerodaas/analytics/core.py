@@ -20,8 +20,8 @@ from typing import Any, Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
 
-from aerodaas.app.data import AeroStreamData
-from aerodaas.app.models import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
+from aerodaas.model.data import AeroStreamData
+from aerodaas.model.types import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
 from aerodaas.perception.track_records import TrackRecording, track_and_keep
 
 __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "ObjectDetector",
@@ -34,8 +34,8 @@ def source_robot(data: Any, meta: Any) -> str:
     """The id of the drone (robot) an analytics input item comes from.
 
     * A camera frame, and everything an analytics derives from one (detections, navigation), travels with the
-      frame's :class:`~aerodaas.app.models.FrameMeta`: its ``robot_id``.
-    * Odometry (``meta`` None) is an :class:`~aerodaas.app.models.Odometry` dict or model: its ``robot_id``.
+      frame's :class:`~aerodaas.model.types.FrameMeta`: its ``robot_id``.
+    * Odometry (``meta`` None) is an :class:`~aerodaas.model.types.Odometry` dict or model: its ``robot_id``.
     * A stat-stream message (``meta`` None) is a dict with a ``robot`` field.
 
     Returns ``""`` when the item names no drone (an environment sensor's value): such items share one state."""

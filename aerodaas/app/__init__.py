@@ -1,1 +1,1 @@
-"""The application API (paper Table 2): environment, robots, sensors, compute, data containers, the data model."""
+"""The application API (paper Table 2): environment, robots, sensors, compute (the data model is `aerodaas.model`)."""

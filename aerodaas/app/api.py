@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from aerodaas.config import ComputeConfig, EnvironmentConfig, RobotConfig, SensorConfig, load_environment_config
-from aerodaas.app.data import AeroStreamData
-from aerodaas.app.models import AeroNavigation, PriorityQueue
+from aerodaas.model.data import AeroStreamData
+from aerodaas.model.types import AeroNavigation, PriorityQueue
 
 __all__ = ["Environment", "Robot", "Sensor", "ComputeResource", "MISSION_LISTENERS"]
 
@@ -215,7 +215,7 @@ class Environment:
                     p = caller / p
             cfg = load_environment_config(p)
         if OPTIONS.early_ray:  # `aerodaas run`: Ray starts only once the environment is known to be valid
-            from aerodaas.runtime.addresses import check_hitl
+            from aerodaas.clusters.addresses import check_hitl
             from aerodaas.runtime.driver import start_ray_early
 
             check_hitl(cfg, OPTIONS)  # the HITL API's host and port: parsed, in range, free (ValueError: exit 2)

@@ -26,7 +26,7 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from aerodaas.app.models import GeoPoint, Odometry
+from aerodaas.model.types import GeoPoint, Odometry
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
 
@@ -191,7 +191,7 @@ class VehicleBackend(abc.ABC):
 
     @abc.abstractmethod
     def odometry(self) -> Odometry:
-        """The current :class:`~aerodaas.app.models.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
+        """The current :class:`~aerodaas.model.types.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
         for backends with a :attr:`sample_key`)."""
 
     @property
@@ -203,7 +203,7 @@ class VehicleBackend(abc.ABC):
 
     def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
         """The vehicle's position samples not yet handed out, oldest first, each as an
-        :class:`~aerodaas.app.models.Odometry` stamped with the vehicle's own time of the sample (``t``, seconds on
+        :class:`~aerodaas.model.types.Odometry` stamped with the vehicle's own time of the sample (``t``, seconds on
         the run's clock; ENU metres, m/s, degrees as in :meth:`odometry`). Raises nothing. A backend with a
         :attr:`sample_key` keeps every sample here until the runtime takes it, so a drone whose clock thread was
         held up (a command waiting for its acknowledgement, a loaded machine) still records each one. The default

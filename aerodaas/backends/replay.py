@@ -42,8 +42,8 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from aerodaas.navigation.geo import geodetic_to_enu
-from aerodaas.app.models import Attitude, GeoPoint, Odometry
+from aerodaas.model.geo import geodetic_to_enu
+from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
 
 __all__ = ["ReplayBackend", "McapCameraReplay", "check_log", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]

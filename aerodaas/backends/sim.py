@@ -5,7 +5,7 @@ from typing import Sequence
 
 import numpy as np
 
-from aerodaas.app.models import Odometry
+from aerodaas.model.types import Odometry
 from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.backends.base import VehicleBackend
 

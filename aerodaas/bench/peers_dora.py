@@ -194,7 +194,7 @@ def _camera(node, p: dict, workdir: str) -> None:
 
 
 def _rebuild_meta(p: dict, tr: dict):
-    from aerodaas.app.models import CameraIntrinsics, FrameMeta, FramePose
+    from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
     from aerodaas.bench.pipeline import HOVER_M
 

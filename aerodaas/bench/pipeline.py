@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from aerodaas.analytics.core import Analytics
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 
 FPS = 30.0
 HOVER_M = 14.0  # metres above the target
@@ -107,7 +107,7 @@ class CameraStage:
     """Renders one (H, W, 3) uint8 read-only frame at a pose (metres ENU, yaw degrees) and builds its FrameMeta."""
 
     def __init__(self, width: int, height: int, kind: str) -> None:
-        from aerodaas.app.models import CameraIntrinsics
+        from aerodaas.model.types import CameraIntrinsics
         from aerodaas.sim.world import World
 
         cfg = parsed_config(width, height, kind)
@@ -116,7 +116,7 @@ class CameraStage:
         self.seq = 0
 
     def capture(self, position: tuple, yaw: float, t: float) -> tuple[np.ndarray, Any]:
-        from aerodaas.app.models import FrameMeta, FramePose
+        from aerodaas.model.types import FrameMeta, FramePose
 
         self.seq += 1
         pose = FramePose(position=tuple(float(c) for c in position), yaw=float(yaw), camera_pitch=90)
@@ -152,7 +152,7 @@ class FollowStage:
         self.follow.setup()
 
     def __call__(self, dets: list, meta: Any) -> tuple[Any, float]:
-        from aerodaas.app.models import AeroNavigation
+        from aerodaas.model.types import AeroNavigation
 
         t0 = time.perf_counter()
         nav = self.follow.process(dets, meta)

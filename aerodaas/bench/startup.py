@@ -2,7 +2,7 @@
 
 Each repetition starts ``aerodaas run APP --quiet`` as a fresh process (a cold Ray start included) with
 ``AERODAAS_STARTUP_PROBE`` naming a file; the runtime appends ``<phase> <unix time>`` lines to it
-(:func:`aerodaas.runtime.startup_probe.probe`; ``cli``: the command started, ``app_built``: the application's dataflow is built,
+(:func:`aerodaas.protocol.startup_probe.probe`; ``cli``: the command started, ``app_built``: the application's dataflow is built,
 ``ray_ready``, ``hosts_ready``: every host set up and wired, ``first_processed``: the first item an analytics finished).
 The run is then interrupted.
 
@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from aerodaas.runtime.startup_probe import PROBE_ENV
+from aerodaas.protocol.startup_probe import PROBE_ENV
 
 
 #: the start-up phases every run reports (``detail_s`` has the rest: ``actors_created`` when the driver has asked Ray

@@ -119,7 +119,7 @@ def open_path_lower_bound(D, upper: float, max_iter: int = 400) -> float:
 # ---------------------------------------------------------------------------------------------- instances
 def random_instance(rng, n: int) -> list:
     """``n`` waypoints uniform in the 1 km x 1 km square centred on home, altitude uniform in [10, 60] m."""
-    from aerodaas.app.models import Waypoint
+    from aerodaas.model.types import Waypoint
 
     xy = rng.uniform(-AREA_M / 2.0, AREA_M / 2.0, size=(n, 2))
     z = rng.uniform(*ALT_RANGE_M, size=n)
@@ -235,7 +235,7 @@ def disaster_survey(schedulers: dict | None = None) -> dict:
     UNORDERED (everything left may be re-ordered), or ORDERED (the survey's remaining waypoints stay one fixed
     run, the injected ones are free). Distances in metres; "given order" = survey in its given order, then the
     injected waypoints in injection order."""
-    from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
     from aerodaas.schedulers import TrajectoryScheduler
     from aerodaas.schedulers.two_opt import node_cost_matrix
 

@@ -28,7 +28,7 @@ MAX_ACCEL_MPS2 = 100.0
 MAX_YAW_RATE_DPS = 3600.0
 MAX_ALTITUDE_M = 10_000.0  # above home
 #: horizontal distance from home (metres) of any waypoint or velocity command: the default of
-#: ``safety.max_distance`` (its upper bound is ``aerodaas.app.models.MAX_LOCAL_M``, 100 km)
+#: ``safety.max_distance`` (its upper bound is ``aerodaas.model.types.MAX_LOCAL_M``, 100 km)
 DEFAULT_MAX_DISTANCE_M = 10_000.0
 HOME_ALT_RANGE_M = (-500.0, 9_000.0)  # AMSL: below the Dead Sea shore .. above Everest
 MAX_CAMERA_PX = 8192  # per side

@@ -16,7 +16,7 @@ from aerodaas.navigation.geofence import GeofenceConfig
 
 from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
                    MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
-from aerodaas.config.ids import Identifier, check_unique
+from aerodaas.model.ids import Identifier, check_unique
 from aerodaas.config.robot import RobotConfig, SensorConfig, check_autopilot_fence
 
 
@@ -244,7 +244,7 @@ class AnalyticsSchedulerConfig(_Cfg):
             path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
                 else Path(self.workload)
             try:
-                from aerodaas.config.jsonfile import read_json
+                from aerodaas.model.jsonfile import read_json
 
                 data = read_json(path)
             except (OSError, ValueError) as e:
@@ -518,7 +518,7 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"environment file {str(p)!r} not found")
-    from aerodaas.config.jsonfile import JsonFileError, read_json
+    from aerodaas.model.jsonfile import JsonFileError, read_json
 
     try:
         data = read_json(p)

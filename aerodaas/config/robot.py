@@ -9,8 +9,8 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
-from aerodaas.app.models import MAX_LOCAL_M, GeoPoint
-from aerodaas.config.ids import Identifier, RobotId, check_topic_name, check_unique
+from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
+from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
                    did_you_mean)

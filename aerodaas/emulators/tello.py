@@ -38,7 +38,7 @@ from typing import Callable
 import numpy as np
 
 from aerodaas.config import BatteryConfig, GroundConfig, Limits
-from aerodaas.app.models import CameraIntrinsics, FramePose, GeoPoint
+from aerodaas.model.types import CameraIntrinsics, FramePose, GeoPoint
 from aerodaas.sim.vehicle import Setpoint, SimVehicle
 from aerodaas.sim.world import CAMERA_MIN_HEIGHT_M, World
 

@@ -86,7 +86,7 @@ def check_bindable(host: str, port: int, option: str = "--live") -> None:
     """Raise ``ValueError`` naming ``option`` when ``host:port`` cannot be listened on here (port taken, address not
     of this machine, host not resolved within 10 s), so that ``aerodaas run --live`` fails before anything starts.
     Port 0 always works."""
-    from aerodaas.runtime.addresses import ResolveError, try_bind
+    from aerodaas.clusters.addresses import ResolveError, try_bind
 
     try:
         try_bind(host, port)

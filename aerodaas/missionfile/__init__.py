@@ -10,7 +10,7 @@ above mean sea level in ``MAV_FRAME_GLOBAL`` 0 / ``MAV_FRAME_GLOBAL_INT`` 5, abo
   lossless for every item: ``.plan`` ComplexItems (survey, corridor scan, structure scan, landing patterns)
   are kept verbatim in :attr:`MissionItem.raw` and written back unchanged.
 * :func:`plan_to_flight` turns a plan into what an AeroDaaS drone flies: an ordered
-  :class:`~aerodaas.app.models.AeroNavigation` of absolute waypoints (latitude, longitude, metres above home), a
+  :class:`~aerodaas.model.types.AeroNavigation` of absolute waypoints (latitude, longitude, metres above home), a
   terminal action (land, return to launch, or hover) and the plan's geofence. :func:`plan_to_navigation` is
   the shortcut to the navigation alone; :func:`navigation_to_plan` goes the other way.
 * Nothing is dropped silently. Commands the drone cannot honour raise :class:`MissionFileError` naming the

@@ -7,8 +7,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.model.types import GeoPoint
 from aerodaas.missionfile._common import _fail, _is_number
 from aerodaas.missionfile.commands import (MAV_CMD_DO_SET_CAM_TRIGG_DIST, MAV_CMD_DO_SET_ROI_NONE, MAV_CMD_DO_SET_ROI_WPNEXT_OFFSET,
                        MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_MISSION)

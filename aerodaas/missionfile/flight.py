@@ -10,9 +10,9 @@ from typing import Any, Iterable, Literal
 
 from pydantic import ValidationError
 
-from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.navigation.geofence import Geofence, GeofenceConfig
-from aerodaas.app.models import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
+from aerodaas.model.types import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
 from aerodaas.missionfile._common import MissionFileError, _fail, _first_error
 from aerodaas.missionfile.commands import (_AMSL_FRAMES, _FLIGHT_COMMANDS, _RELATIVE_FRAMES, _TERRAIN_FRAMES, MAV_CMD_DO_CHANGE_SPEED,
                        MAV_CMD_NAV_LAND, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM,

@@ -7,7 +7,7 @@ from typing import Literal
 from pydantic import Field
 
 from aerodaas.navigation.geofence import GeofenceConfig
-from aerodaas.app.models import AeroNavigation, GeoPoint
+from aerodaas.model.types import AeroNavigation, GeoPoint
 from aerodaas.missionfile.expand import expand_items
 from aerodaas.missionfile.items import MissionItem, _Model
 

@@ -14,7 +14,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from aerodaas.navigation.geofence import GeofenceCircle, GeofenceConfig, GeofencePolygon
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 from aerodaas.missionfile._common import MissionFileError, _fail, _first_error, _is_number, _read_text
 from aerodaas.missionfile.commands import COMPLEX_ITEM_COMMAND, MAV_FRAME_MISSION
 from aerodaas.missionfile.items import MissionItem, _parse_simple_item
@@ -46,7 +46,7 @@ def _complex_item_count(raw: dict[str, Any]) -> int:
 
 
 def _parse_plan(text: str, src: str) -> MissionPlan:
-    from aerodaas.config.jsonfile import JsonFileError, parse_json
+    from aerodaas.model.jsonfile import JsonFileError, parse_json
 
     try:
         doc = parse_json(text, src)

@@ -6,7 +6,7 @@ import math
 from decimal import Decimal
 from pathlib import Path
 
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 from aerodaas.missionfile._common import _fail, _read_text
 from aerodaas.missionfile.commands import (_AMSL_FRAMES, MAV_CMD_DO_JUMP, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, frame_name,
                        command_name)

@@ -30,7 +30,7 @@ an exclusion zone (i.e. the boundary itself is allowed).
 
 :class:`GeofenceConfig` is the pydantic model embedded in ``environment.json`` and in
 :class:`aerodaas.missionfile.MissionPlan`. :class:`Geofence` projects it to ENU metres about a home
-:class:`~aerodaas.app.models.GeoPoint` (pymap3d via :mod:`aerodaas.navigation.geo`) and answers point and leg queries with
+:class:`~aerodaas.model.types.GeoPoint` (pymap3d via :mod:`aerodaas.model.geo`) and answers point and leg queries with
 Shapely (GEOS) geometry; circle tests are exact (distance to centre), not polygonised.
 
 Sources: QGroundControl plan file format (docs ``qgc-dev-guide/file_formats/plan.md``;
@@ -45,8 +45,8 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator
 from shapely.geometry import LineString, Point, Polygon
 from shapely.validation import explain_validity
 
-from aerodaas.navigation.geo import geodetic_to_enu
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.geo import geodetic_to_enu
+from aerodaas.model.types import GeoPoint
 
 __all__ = ["GeofencePolygon", "GeofenceCircle", "GeofenceConfig", "Geofence", "autopilot_disagreement"]
 

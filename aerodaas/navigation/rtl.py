@@ -19,7 +19,7 @@ def plan_return(gate: Any, position: Sequence[float], velocity: Sequence[float],
     """Plan the way home for a vehicle at ``position`` (ENU m) moving at ``velocity`` (ENU m/s), flown at ``altitude``
     (m above home) and the gate's ``max_speed``. Returns ``(path, "")`` with ``path`` the ENU ``(x, y)`` points from
     the position to ``home``, or ``(None, reason)`` when no path exists or a leg of it is refused by the gate."""
-    from aerodaas.app.models import Waypoint
+    from aerodaas.model.types import Waypoint
     from aerodaas.navigation.safety import SafetyViolation
 
     clearance = gate.stopping_distance(gate.max_speed) + RTL_MARGIN_M

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from typing import Any, Sequence
 
-from aerodaas.app.models import ActionCommand, AeroNavigation, GeoPoint, VelocityCommand, Waypoint
+from aerodaas.model.types import ActionCommand, AeroNavigation, GeoPoint, VelocityCommand, Waypoint
 from aerodaas.navigation.braking import braking_speed, limited_change
 
 __all__ = ["SafetyViolation", "SafetyGate"]
@@ -239,7 +239,7 @@ class SafetyGate:
         it stands (``position``, ENU metres about ``vehicle_home``), is more than ``safety.home_tolerance_m``
         metres from the robot's home: the gate and the vehicle would place every point that far apart. Distances
         are horizontal (pymap3d ENU)."""
-        from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
+        from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 
         here = enu_to_geodetic(float(position[0]), float(position[1]), 0.0, vehicle_home)
         tol = float(getattr(self.cfg, "home_tolerance_m", 5.0))

@@ -23,7 +23,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
-from aerodaas.app.models import VelocityCommand
+from aerodaas.model.types import VelocityCommand
 
 
 @dataclass

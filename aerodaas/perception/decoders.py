@@ -129,7 +129,7 @@ class UltralyticsDetector(_OnnxDetector):
     cites. Class names come from ``class_names=`` or the model's metadata ``names`` (else ``class0..``);
     ``input_size=(H, W)`` is required when the export has dynamic height/width and no ``imgsz`` metadata.
 
-    Images ``(H, W, 3)`` uint8 BGR in, :class:`~aerodaas.app.models.Detection` out (pixels of the image). Raises
+    Images ``(H, W, 3)`` uint8 BGR in, :class:`~aerodaas.model.types.Detection` out (pixels of the image). Raises
     ValueError as the base class, and RuntimeError at ``detect`` when the output is neither head."""
 
     model_name = "yolox_nano"  # only used by resolve_model's name check; the path is what is loaded

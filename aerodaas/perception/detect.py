@@ -29,7 +29,7 @@ from typing import Iterable, Sequence
 import cv2
 import numpy as np
 
-from aerodaas.app.models import COCO_CLASSES, Detection
+from aerodaas.model.types import COCO_CLASSES, Detection
 
 __all__ = [
     "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
@@ -224,7 +224,7 @@ class _OnnxDetector:
     def detect(self, image_bgr: np.ndarray) -> list[Detection]:
         """Detect COCO objects in one ``(H, W, 3)`` ``uint8`` BGR image of any size.
 
-        Returns :class:`~aerodaas.app.models.Detection` objects sorted by descending score, boxes
+        Returns :class:`~aerodaas.model.types.Detection` objects sorted by descending score, boxes
         ``(x0, y0, x1, y1)`` in pixels of ``image_bgr`` clipped to ``[0, W] x [0, H]``. Only classes in
         ``classes`` (if given) whose score reaches their threshold are kept, then class-aware NMS is applied.
         Sets ``self.last_timing`` (``preprocess_ms``, ``inference_ms``, ``postprocess_ms``; ``time.perf_counter``).

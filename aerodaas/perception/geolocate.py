@@ -8,7 +8,7 @@ the ground in an oblique view; the centre in a nadir view, where both coincide) 
 The uncertainty is first-order propagation (``Sigma = J S J^T``, J by central differences) of independent errors
 on the pixel (``sigma_px`` plus 10 % of the box size: where in the box the object's footprint is), the yaw and the
 camera pitch (``sigma_att_deg``) and the height above ground (``sigma_alt_m``); it grows with altitude and with
-obliquity, as it should. Lat/lon from ENU: :func:`aerodaas.navigation.geo.enu_to_geodetic` (pymap3d, WGS-84).
+obliquity, as it should. Lat/lon from ENU: :func:`aerodaas.model.geo.enu_to_geodetic` (pymap3d, WGS-84).
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerodaas.app.models import CameraIntrinsics, FramePose, GeoPoint
+from aerodaas.model.types import CameraIntrinsics, FramePose, GeoPoint
 
 __all__ = ["GroundFix", "geolocate_box", "record_track_fixes"]
 
@@ -73,7 +73,7 @@ def geolocate_box(box: tuple[float, float, float, float], pose: FramePose, k: Ca
         cols.append(np.zeros(2) if a is None or b is None else (a - b) / 2 * scale)
     j = np.stack(cols, axis=1)  # (2, 5), each column already scaled by its sigma
     cov = j @ j.T
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic
 
     geo = enu_to_geodetic(float(g[0]), float(g[1]), float(ground_z), home)
     return GroundFix((float(g[0]), float(g[1]), float(ground_z)), geo.lat, geo.lon, geo.alt, cov,

@@ -12,7 +12,7 @@ import math
 import os
 from typing import Any, Iterable
 
-from aerodaas.app.models import COCO_CLASSES
+from aerodaas.model.types import COCO_CLASSES
 
 __all__ = ["normalise_classes", "check_detector_options", "build_detector"]
 

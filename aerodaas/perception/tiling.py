@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 
 __all__ = ["Tiling", "slice_boxes", "merge_detections", "TiledDetector"]
 

@@ -1,7 +1,7 @@
 """Geo-located tracks in a run's recording (issue 28, item 4): what a tracking analytics hands the recorder and how
 the recorder writes it.
 
-An analytics that tracks (:class:`~aerodaas.perception.track_analytics.TrackAnalytics`, or
+An analytics that tracks (:class:`~aerodaas.analytics.track.TrackAnalytics`, or
 :class:`~aerodaas.analytics.core.ObjectDetector` / :class:`~aerodaas.analytics.core.FollowAnalytics` with a
 ``tracker``) sets ``records_tracks`` and keeps, per drone,
 the rows of its last tracker update (:func:`track_rows`); the runtime's analytics component takes them with
@@ -27,7 +27,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from aerodaas.app.models import FrameMeta, GeoPoint
+from aerodaas.model.types import FrameMeta, GeoPoint
 
 __all__ = ["TrackRecording", "track_and_keep", "track_rows", "write_tracks", "declared_track_channels", "tracks_prefix"]
 
@@ -73,7 +73,7 @@ def write_tracks(recorder: Any, prefix: str, log_time_ns: int, robot: str, rows:
     from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
     from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 
-    from aerodaas.navigation.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic
     from aerodaas.perception.geolocate import GroundFix, record_track_fixes
     from aerodaas.recording.values import _timestamp
 

@@ -1,6 +1,6 @@
 """Multi-object tracking with stable track ids: ByteTrack (Zhang, Sun, Jiang, Yu, Weng, Yuan, Luo, Liu, Wang,
 "ByteTrack: Multi-Object Tracking by Associating Every Detection Box", ECCV 2022, Algorithm 1; reference code
-``ifzhang/ByteTrack`` ``yolox/tracker/byte_tracker.py``), on our :class:`~aerodaas.app.models.Detection` boxes.
+``ifzhang/ByteTrack`` ``yolox/tracker/byte_tracker.py``), on our :class:`~aerodaas.model.types.Detection` boxes.
 
 Per frame:
 
@@ -29,7 +29,7 @@ import numpy as np
 
 from aerodaas.perception.boxes import iou_matrix
 
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 
 __all__ = ["ByteTrackConfig", "Track", "ByteTracker"]
 

@@ -130,7 +130,7 @@ _BUILTIN_TARGETS: list[tuple[str, str, str]] = [
     ("analytics", "FallDetector", "aerodaas.analytics.extra:FallDetector"),
     ("analytics", "StructureLocator", "aerodaas.analytics.extra:StructureLocator"),
     ("analytics", "InspectionPlanner", "aerodaas.analytics.extra:InspectionPlanner"),
-    ("analytics", "TrackAnalytics", "aerodaas.perception.track_analytics:TrackAnalytics"),
+    ("analytics", "TrackAnalytics", "aerodaas.analytics.track:TrackAnalytics"),
     ("trajectory_scheduler", "TrajectoryScheduler", "aerodaas.schedulers:TrajectoryScheduler"),
     ("trajectory_scheduler", "NearestNeighborScheduler", "aerodaas.schedulers:NearestNeighborScheduler"),
     ("trajectory_scheduler", "TwoOptScheduler", "aerodaas.schedulers.two_opt:TwoOptScheduler"),
@@ -176,7 +176,7 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
              replaces: bool | None = None) -> type:
     """Register ``cls`` as a plug-in of ``kind`` (default its ``plugin_kind``) under ``name`` (default
     :func:`plugin_name`). Returns ``cls`` (usable as a decorator body). Raises ValueError for an unknown kind, a
-    name outside the plug-in name grammar (:func:`aerodaas.config.ids.check_plugin_name`), or a name already taken
+    name outside the plug-in name grammar (:func:`aerodaas.model.ids.check_plugin_name`), or a name already taken
     by another class — a built-in's too (``sim``, ``camera``, ``ObjectDetector``...: a user backend called ``sim``
     replaced the simulator silently, issue 40.5) — unless the registration says it replaces it: ``replaces=True``
     or the class attribute ``plugin_replaces = True``."""
@@ -187,7 +187,7 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     name = name or plugin_name(cls, kind)
     if not name:
         raise ValueError(f"{cls.__name__}: a {kind} plug-in needs a non-empty name")
-    from aerodaas.config.ids import check_plugin_name
+    from aerodaas.model.ids import check_plugin_name
 
     check_plugin_name(name, f"{cls.__name__}: {kind.replace('_', ' ')} plug-in name")
     origin = origin or _origin_of(cls)

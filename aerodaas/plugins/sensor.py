@@ -11,7 +11,7 @@ The class declares
   (``model_json_schema(mode="serialization")``, JSON Schema draft 2020-12), unless ``record_schema`` names a schema
   the recorder already knows (:mod:`aerodaas.recording.schemas`);
 * how it produces readings — :meth:`SensorPlugin.sample` is called by the drone's actor at ``rate_hz`` (vehicle
-  time) with the vehicle state (an :class:`aerodaas.app.models.Odometry`: ENU metres from home, m/s, degrees,
+  time) with the vehicle state (an :class:`aerodaas.model.types.Odometry`: ENU metres from home, m/s, degrees,
   geodetic position) and the vehicle time in seconds.
 
 Each reading is recorded on ``/<robot>/<sensor id>`` and published on the sensor's stream (``get_data_stream()``):

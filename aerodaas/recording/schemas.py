@@ -16,7 +16,7 @@ from typing import Any, Optional
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from aerodaas.app.models import AeroNavigation, Odometry, Waypoint
+from aerodaas.model.types import AeroNavigation, Odometry, Waypoint
 
 __all__ = ["JSON_SCHEMA_MODELS", "json_schema_for", "register_json_schema"]
 

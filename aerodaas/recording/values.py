@@ -115,7 +115,7 @@ def _jsonable(o: Any) -> Any:
 
 
 def _detection_fields(det: Any) -> tuple[tuple[float, float, float, float], float, str, int | None]:
-    """(box, score, class_name, class_id) from a :class:`~aerodaas.app.models.Detection`-like object or dict."""
+    """(box, score, class_name, class_id) from a :class:`~aerodaas.model.types.Detection`-like object or dict."""
     get = det.get if isinstance(det, Mapping) else (lambda k, d=None: getattr(det, k, d))
     box = get("box")
     if box is None or len(box) != 4:

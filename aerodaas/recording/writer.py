@@ -64,7 +64,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from aerodaas.recording.reader import (  # noqa: F401 - the readers and topic names stay importable from here
     METADATA_NAME, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC, read_messages, summarize_mcap,
 )
-from aerodaas.app.models import Detection
+from aerodaas.model.types import Detection
 from aerodaas.recording.schemas import json_schema_for
 from aerodaas.recording.values import (_check_time, _class_color, _detection_fields, _finite, _jsonable,  # noqa: F401
                             _timestamp, _vec3, camera_mount_quaternion, quaternion_from_euler_deg)
@@ -374,7 +374,7 @@ class McapRecorder:
                          image_size: tuple[int, int] | None = None) -> None:
         """Write a ``foxglove.ImageAnnotations`` overlay for the image with the same timestamp.
 
-        ``detections``: :class:`aerodaas.app.models.Detection` objects (or objects/dicts with ``box``, ``score``,
+        ``detections``: :class:`aerodaas.model.types.Detection` objects (or objects/dicts with ``box``, ``score``,
         ``class_name`` and optionally ``class_id``); ``box`` is pixel ``(x0, y0, x1, y1)``, origin top-left.
         Each detection becomes a closed ``LINE_LOOP`` points annotation through the 4 box corners (colour per
         class; metadata ``class_name``/``class_id``/``score``) and a ``TextAnnotation`` ``"<class_name> 0.87"``

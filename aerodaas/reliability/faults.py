@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from aerodaas.runtime.reaper import descendants, start_time
+from aerodaas.clusters.reaper import descendants, start_time
 
 __all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
 
@@ -289,7 +289,7 @@ def _raylet_kill(tmp: Path) -> dict:
 
 
 #: how long a run's processes may outlive a SIGKILLed driver (s; issue 25: "beyond 10 s"), and the bound the
-#: test allows on a loaded machine; Ray's agents alone stay 60-64 s (:mod:`aerodaas.runtime.reaper`)
+#: test allows on a loaded machine; Ray's agents alone stay 60-64 s (:mod:`aerodaas.clusters.reaper`)
 GONE_WITHIN_S, GONE_WITHIN_LOADED_S = 10.0, 25.0
 
 

@@ -97,7 +97,7 @@ def _json_file_row(name: str, data: bytes, expect: str, tmp: Path) -> dict[str, 
 def _upload_row(name: str, fname: str, text: str, flags: list[str], expect: str, tmp: Path) -> dict[str, Any]:
     from aerodaas import cli
 
-    from aerodaas.app.models import GeoPoint
+    from aerodaas.model.types import GeoPoint
     from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 
     f = tmp / fname
@@ -137,7 +137,7 @@ def _big_file_row(name: str, fname: str, text: str, tmp: Path) -> dict[str, Any]
 
 
 def _gate_rows() -> list[dict[str, Any]]:
-    from aerodaas.app.models import VelocityCommand, Waypoint
+    from aerodaas.model.types import VelocityCommand, Waypoint
     from aerodaas.config import RobotConfig
     from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 

@@ -71,7 +71,7 @@ def fly_commands(commands: Sequence[tuple], on_violation: str = "reject", physic
     step (from the vehicle's odometry, noise-free)."""
     from shapely.geometry import Point
 
-    from aerodaas.app.models import VelocityCommand, Waypoint
+    from aerodaas.model.types import VelocityCommand, Waypoint
     from aerodaas.navigation.safety import SafetyGate, SafetyViolation
     from aerodaas.sim.vehicle import SimVehicle
 

@@ -59,7 +59,7 @@ def _send(port: int, method: str, path: str, body: Any = None, chunked: bool = F
 def run_hitl_cases() -> list[dict[str, Any]]:
     """Rows ``{"kind": "HITL API", "name", "refused", "message"}`` (``refused``: answered as documented)."""
     from aerodaas.actors.scheduler_component import SchedulerComponent
-    from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
     from aerodaas.schedulers import NearestNeighborScheduler
     from aerodaas.tools.hitl import HitlServer
 

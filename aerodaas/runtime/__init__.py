@@ -1,1 +1,1 @@
-"""The runtime and data plane's driver side: the typed dataflow graph, messages, pre-flight checks, start-up and supervision of a run."""
+"""The runtime, the driver side of a run: the typed dataflow graph, pre-flight checks, start-up and supervision."""

@@ -25,16 +25,16 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from aerodaas.runtime.ids import ComponentId, ComponentKind
-from aerodaas.runtime.messages import Port
-from aerodaas.runtime.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
+from aerodaas.protocol.ids import ComponentId, ComponentKind
+from aerodaas.protocol.messages import Port
+from aerodaas.protocol.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
 
 __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_plan", "collect_graph"]
 
 
 @dataclass(frozen=True)
 class Node:
-    """One component: ``id`` (unique in the run; a :class:`~aerodaas.runtime.ids.ComponentId` that knows its
+    """One component: ``id`` (unique in the run; a :class:`~aerodaas.protocol.ids.ComponentId` that knows its
     ``kind`` and robot), ``kind``, the robot it belongs to (None for a shared analytics) and the actor id of the
     actor it lives in."""
 
@@ -67,7 +67,7 @@ class Edge:
 class ActorPlan:
     """One Ray actor of the run. ``host_id`` is unique in the run (``drone/d1``, ``analytics/edge/detector#1``,
     ``dispatcher/edge``, ``recorder``); ``name`` is its Ray actor name (``aerodaas/<run>/<host_id>``); ``spec``:
-    what the actor is built from (:class:`~aerodaas.runtime.specs.ActorSpec`)."""
+    what the actor is built from (:class:`~aerodaas.protocol.specs.ActorSpec`)."""
 
     actor_id: str
     role: Role

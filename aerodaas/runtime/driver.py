@@ -20,7 +20,7 @@ from typing import Any
 
 from aerodaas.config import SimulationConfig
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
-from aerodaas.runtime.loopback import loopback_only
+from aerodaas.clusters.loopback import loopback_only
 from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 from aerodaas.runtime.supervise import error_cause as _cause
 
@@ -140,7 +140,7 @@ def _up_address() -> str | None:
 def init_ray(address: str | None) -> None:
     """Start or join Ray for this driver: join the cluster at ``address`` (``ray://`` or ``host:port``); else
     attach to the persistent local cluster of ``aerodaas up`` if one runs; else start a fresh loopback-only local
-    Ray of our own (:func:`aerodaas.runtime.loopback.loopback_only`), retried up to 3 times when Ray's startup
+    Ray of our own (:func:`aerodaas.clusters.loopback.loopback_only`), retried up to 3 times when Ray's startup
     times out on a loaded machine. Installed plug-in packages are shipped to a cluster joined or attached to
     (``AERODAAS_SHIP_PLUGINS=0``: not). Raises what ``ray.init`` raises. Called by :func:`ensure_ray` /
     :func:`start_ray_early`."""
@@ -185,10 +185,10 @@ def init_ray(address: str | None) -> None:
         # workers prestarted while the app is built: three, which the recorder, a drone and an analytics actor take
         # (1.4 s instead of 2.0 s from Ray ready to the actors ready, `aerodaas bench startup`)
         dashboard = OPTIONS.dashboard
-        from aerodaas.runtime.worker_memory import limit_malloc_arenas
+        from aerodaas.clusters.worker_memory import limit_malloc_arenas
 
         limit_malloc_arenas()  # the workers' C heap: see the module
-        from aerodaas.runtime import reaper
+        from aerodaas.clusters import reaper
 
         reaper.ensure_started()  # Ray's processes end with this driver, however it ends (see the module)
         for attempt in range(3):
@@ -303,7 +303,7 @@ def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
     from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
-    from aerodaas.runtime.specs import AnalyticsSchedulerSpec
+    from aerodaas.protocol.specs import AnalyticsSchedulerSpec
     from aerodaas.schedulers.analytics_base import analytics_scheduler_class
 
     cfg = env.cfg.analytics_scheduler
@@ -375,7 +375,7 @@ def _run_mission(env, robots: list, timeout: float | None) -> MissionResult:
     check_clocks(robots, sim)
     graphs, scheds, scheduled = validate(env, robots, opts)
 
-    from aerodaas.runtime.startup_probe import probe
+    from aerodaas.protocol.startup_probe import probe
 
     probe("app_built")
     t_start = time.monotonic()

@@ -77,14 +77,14 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
         from aerodaas.recording.writer import check_record_path
 
         check_record_path(opts.record, overwrite=opts.overwrite)  # ValueError naming the path: before Ray
-    from aerodaas.runtime.addresses import check_hitl
+    from aerodaas.clusters.addresses import check_hitl
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
     graphs = {}
     scheds = robot_schedulers(env, robots)
     for r in robots:
         analytics = collect_graph(r)
-        from aerodaas.config.ids import check_analytics_names
+        from aerodaas.model.ids import check_analytics_names
 
         try:  # its name is part of its topics (/<robot>/<name>/detections): the id grammar, one name per analytics
             check_analytics_names(r.id, [(a.name, type(a).__name__) for a in analytics], [s.id for s in r.cfg.sensors])
@@ -131,7 +131,7 @@ def check_preplanned(robot, sched) -> None:
     """Check every queued mission of ``robot`` against its safety limits before any actor starts (legs chained
     from the take-off point). Raises :class:`aerodaas.navigation.safety.SafetyViolation`; clamped items replace the
     originals."""
-    from aerodaas.app.models import AeroNavigation, SchedulingType
+    from aerodaas.model.types import AeroNavigation, SchedulingType
     from aerodaas.navigation.safety import SafetyGate
 
     gate = SafetyGate(robot.cfg.safety, robot.cfg.limits, robot.cfg.home)
@@ -151,7 +151,7 @@ def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
     commands or a land/rtl action before the end (MissionFileError), or no waypoints at all."""
     from aerodaas.config import ConfigError
     from aerodaas.missionfile import MissionFileError, navigation_to_plan
-    from aerodaas.app.models import AeroNavigation, SchedulingType, Waypoint
+    from aerodaas.model.types import AeroNavigation, SchedulingType, Waypoint
 
     mc = robot.cfg.mavlink
     if robot.cfg.backend != "mavlink" or mc is None or not mc.use_autopilot_mission:
@@ -184,7 +184,7 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
                     overwrite: bool = False) -> None:
     """Everything ``aerodaas run``'s command line names, checked before Ray starts: no empty ``--record`` /
     ``--env``, a writable record path, ``--speedup`` / ``--timeout`` in range, ``--hitl-port`` in [0, 65535], the
-    ``--address`` cluster reachable (:func:`aerodaas.runtime.addresses.check_ray_address`, within 10 s) and the
+    ``--address`` cluster reachable (:func:`aerodaas.clusters.addresses.check_ray_address`, within 10 s) and the
     ``--env`` file valid, and ``AERODAAS_GROUND_CACHE_MB`` a number >= 0. Raises ValueError / ConfigError naming the
     flag (or variable) and the value."""
     from aerodaas.sim.ground_cache import limit_bytes
@@ -205,7 +205,7 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     if hitl_port is not None and not 0 <= hitl_port <= 65535:
         raise ValueError(f"--hitl-port {hitl_port}: outside [0, 65535] (0: any free port)")
     if address is not None:  # parsed, resolved and reachable within 10 s, before any Ray process
-        from aerodaas.runtime.addresses import check_ray_address
+        from aerodaas.clusters.addresses import check_ray_address
 
         check_ray_address(address, timeout_s=10.0)
     if env:

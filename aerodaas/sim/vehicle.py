@@ -24,8 +24,8 @@ import numpy as np
 
 from aerodaas.config import BatteryConfig, Limits, NoiseConfig
 from aerodaas.navigation.braking import braking_speed, limited_change
-from aerodaas.navigation.geo import enu_to_geodetic
-from aerodaas.app.models import Attitude, GeoPoint, Odometry
+from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.model.types import Attitude, GeoPoint, Odometry
 
 
 @dataclass

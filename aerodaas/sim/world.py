@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from aerodaas.config import GroundConfig, TargetConfig
-from aerodaas.app.models import CameraIntrinsics, FramePose
+from aerodaas.model.types import CameraIntrinsics, FramePose
 from aerodaas.sim import ground_cache
 
 SKY_BGR = (235, 206, 135)

@@ -48,7 +48,7 @@ from fastapi import Depends, FastAPI, HTTPException, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from aerodaas.app.models import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 
 __all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
 
@@ -71,7 +71,7 @@ TOKEN_RE = re.compile(r"[A-Za-z0-9\-._~+/]{16,256}=*")
 
 
 class WaypointIn(Waypoint):
-    """A waypoint in a request: a :class:`aerodaas.app.models.Waypoint` (same fields and checks) whose ``id`` is
+    """A waypoint in a request: a :class:`aerodaas.model.types.Waypoint` (same fields and checks) whose ``id`` is
     optional (the server assigns ``hitl<N>``) and at most :data:`MAX_ID_CHARS` printable characters. ``x``/``y``/``z``
     are ENU metres from home (or lat/lon/alt with ``waypoint_type="absolute"``). Numbers must be JSON numbers
     (strict: ``"3"`` and ``true`` are refused) and finite."""

@@ -94,7 +94,7 @@ def _upload_bound(kind: str):
     (exit 2)."""
 
     def parse(text: str) -> float:
-        from aerodaas.app.models import MAX_LOCAL_M
+        from aerodaas.model.types import MAX_LOCAL_M
         from aerodaas.config.base import MAX_ALTITUDE_M, MAX_SPEED_MPS
 
         upper = {"altitude": MAX_ALTITUDE_M, "distance": MAX_LOCAL_M, "speed": MAX_SPEED_MPS}[kind]
@@ -138,7 +138,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
             bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
             # the file alone, before connecting: commands, frames, order (the bounds are measured from the vehicle's
             # home, so not yet; a planned home only stands in for AMSL altitudes here)
-            from aerodaas.app.models import GeoPoint
+            from aerodaas.model.types import GeoPoint
 
             plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
                            min_altitude=None)

@@ -69,7 +69,7 @@ class OnnxEdgeExecutor(EdgeExecutor):
     mapping model -> name (the workload's models are stand-ins: any model may be mapped to either detector).
     ``detector_kwargs`` go to :func:`aerodaas.perception.detect.make_detector` (``model_path``, ``score_threshold``, ...).
     The payload is an ndarray, an ObjectRef to one (same node: zero-copy), or JPEG bytes. The result is the list of
-    :class:`~aerodaas.app.models.Detection`.
+    :class:`~aerodaas.model.types.Detection`.
     """
 
     def __init__(self, detector_for: Mapping[str, str] | str = "yolox_nano",
@@ -90,7 +90,7 @@ class OnnxEdgeExecutor(EdgeExecutor):
 class AnalyticsEdgeExecutor(EdgeExecutor):
     """Runs an application's analytics on the edge, one task at a time on one worker thread (the edge's one
     accelerator): ``bank.run(task.model, frame, meta)`` for a :class:`FramePayload`. The result is the analytics'
-    output (e.g. a list of :class:`~aerodaas.app.models.Detection`); ``last_timing`` of the analytics goes to
+    output (e.g. a list of :class:`~aerodaas.model.types.Detection`); ``last_timing`` of the analytics goes to
     ``task.notes["timing"]``."""
 
     def __init__(self, bank: AnalyticsBank) -> None:

@@ -10,7 +10,7 @@ __all__ = ["FramePayload", "frame_from_payload"]
 
 class FramePayload:
     """A task payload of an application's frame path: ``frame`` ((H, W, 3) uint8 BGR ndarray, the camera's own
-    object: never copied on the edge), ``meta`` (:class:`~aerodaas.app.models.FrameMeta`, sent to the cloud with the
+    object: never copied on the edge), ``meta`` (:class:`~aerodaas.model.types.FrameMeta`, sent to the cloud with the
     JPEG) and ``context`` (edge-side only: what the caller needs to hand the result on; never sent)."""
 
     __slots__ = ("frame", "meta", "context")

@@ -10,7 +10,7 @@ from typing import Any, Literal
 import numpy as np
 
 from aerodaas.config import MavlinkConfig
-from aerodaas.app.models import GeoPoint, Odometry
+from aerodaas.model.types import GeoPoint, Odometry
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin

@@ -6,9 +6,9 @@ import time
 from typing import Any, Callable, Literal
 
 
-from aerodaas.navigation.geo import geodetic_to_enu
+from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
-from aerodaas.app.models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.backends.base import BackendError, CommandRefused
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _GLOBAL_FRAMES
 
@@ -55,8 +55,8 @@ class MissionMixin:
         """Upload a mission with the MISSION_ITEM_INT protocol (MISSION_COUNT, answering each MISSION_REQUEST_INT
         / MISSION_REQUEST, until MISSION_ACK).
 
-        ``mission``: a list of :class:`~aerodaas.app.models.Waypoint` (ENU relative to :attr:`home`, or absolute) and
-        optionally a final land/rtl :class:`~aerodaas.app.models.ActionCommand`, an :class:`AeroNavigation`, a
+        ``mission``: a list of :class:`~aerodaas.model.types.Waypoint` (ENU relative to :attr:`home`, or absolute) and
+        optionally a final land/rtl :class:`~aerodaas.model.types.ActionCommand`, an :class:`AeroNavigation`, a
         :class:`~aerodaas.missionfile.MissionPlan` (e.g. an imported ``.plan``; ComplexItems expanded) or a list
         of :class:`~aerodaas.missionfile.MissionItem`. Waypoints become MAV_CMD_NAV_WAYPOINT items
         (``navigation_to_plan``: ``takeoff_altitude`` m prepends a NAV_TAKEOFF, ``final_action`` appends

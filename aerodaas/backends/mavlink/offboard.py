@@ -8,7 +8,7 @@ from typing import Sequence
 
 import numpy as np
 
-from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.backends.base import LinkLost
 from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
-from aerodaas.app.models import Attitude, GeoPoint, Odometry
+from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 

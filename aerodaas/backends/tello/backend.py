@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from aerodaas.config import TelloConfig
-from aerodaas.navigation.geo import enu_to_geodetic
-from aerodaas.app.models import Attitude, Odometry
+from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.model.types import Attitude, Odometry
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.tello.control import ControlMixin, _Motion
 from aerodaas.backends.tello.link import LinkMixin

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.emulators.mavlink.constants import _AP_ARMABLE, _AP_NEEDS_POSITION, _PX4_MANUAL
 from aerodaas.emulators.mavlink.flavour import (AP_PREARM_DISPLAY_PERIOD_S, AP_SENSORS, EKF_NO_POSITION, EKF_POSITION,
                       PX4_HOME_CORRECTION_STEP_M, PX4_HOME_CORRECTION_WINDOW_S, PX4_SENSORS)

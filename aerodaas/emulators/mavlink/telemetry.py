@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from aerodaas.navigation.geo import enu_to_geodetic, geodetic_to_enu
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
+from aerodaas.model.types import GeoPoint
 from aerodaas.emulators.mavlink.constants import _IN_PROGRESS_PERIOD_S, _PROTOCOL_RETRIES
 from aerodaas.emulators.mavlink.flavour import EKF_STATUS_REPORT_ID
 

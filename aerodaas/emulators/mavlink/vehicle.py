@@ -49,7 +49,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from aerodaas.config import Limits, RobotConfig
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.emulators.mavlink.arming import ArmingMixin
 from aerodaas.emulators.mavlink.commands import CommandMixin

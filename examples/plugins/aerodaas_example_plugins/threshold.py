@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pydantic import BaseModel, Field
 
 from aerodaas.analytics.core import NavigableAnalytics
-from aerodaas.app.models import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
 
 
 class GasThresholdConfig(BaseModel):

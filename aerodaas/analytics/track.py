@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import Any, Iterable
 
 from aerodaas.analytics.core import Analytics
-from aerodaas.app.models import Detection, FrameMeta, GeoPoint
-from aerodaas.navigation.geo import enu_to_geodetic
+from aerodaas.model.types import Detection, FrameMeta, GeoPoint
+from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.perception.track_records import TrackRecording, track_rows
 from aerodaas.perception.tracking import ByteTrackConfig, ByteTracker
 

@@ -6,7 +6,7 @@ between actors), the deliveries actors send each other, and what they send the r
 * :class:`Message` and its kinds — :class:`FrameMsg` (a camera frame), :class:`OdometryMsg`, :class:`StatMsg`
   (a stat-stream transition), :class:`DetectionsMsg`, :class:`NavigationMsg` and :class:`ValueMsg` (anything
   else an analytics outputs). Every message names the robot it belongs to and its simulated time, carries the
-  :class:`~aerodaas.app.models.FrameMeta` of the frame it derives from (if any) and the frame's latency ``trace``;
+  :class:`~aerodaas.model.types.FrameMeta` of the frame it derives from (if any) and the frame's latency ``trace``;
 * :class:`Delivery` — one message for one component of another actor (``DataPlane.deliver``), and the replies that
   come back in the same call; :class:`EncodedFrame` — a frame's pixels as JPEG bytes, the wire form across
   tiers (on one tier a frame's pixels travel as an ObjectRef or through a same-node channel,
@@ -87,7 +87,7 @@ class FrameMsg(Message):
 
 @dataclass(eq=False)
 class OdometryMsg(Message):
-    """An odometry sample: ``data`` is :class:`~aerodaas.app.models.Odometry` as a dict (ENU metres, m/s, degrees)."""
+    """An odometry sample: ``data`` is :class:`~aerodaas.model.types.Odometry` as a dict (ENU metres, m/s, degrees)."""
 
     kind: ClassVar[str] = "odometry"
 
@@ -101,14 +101,14 @@ class StatMsg(Message):
 
 @dataclass(eq=False)
 class DetectionsMsg(Message):
-    """An analytics' detections: ``data`` is a list of :class:`~aerodaas.app.models.Detection` (pixel boxes)."""
+    """An analytics' detections: ``data`` is a list of :class:`~aerodaas.model.types.Detection` (pixel boxes)."""
 
     kind: ClassVar[str] = "detections"
 
 
 @dataclass(eq=False)
 class NavigationMsg(Message):
-    """An analytics' navigation: ``data`` is an :class:`~aerodaas.app.models.AeroNavigation`."""
+    """An analytics' navigation: ``data`` is an :class:`~aerodaas.model.types.AeroNavigation`."""
 
     kind: ClassVar[str] = "nav"
 
@@ -123,7 +123,7 @@ class ValueMsg(Message):
 def output_message(out: Any, source: Message, trace: dict[str, float]) -> Message:
     """The message carrying analytics output ``out`` computed from ``source``: NavigationMsg for an
     AeroNavigation, DetectionsMsg for a list of Detection (or an empty list), ValueMsg otherwise."""
-    from aerodaas.app.models import AeroNavigation, Detection
+    from aerodaas.model.types import AeroNavigation, Detection
 
     if isinstance(out, AeroNavigation):
         cls: type[Message] = NavigationMsg

@@ -89,7 +89,7 @@ class Waypoint(_Model):
         """ENU metres of this waypoint relative to ``home`` (geodetic conversion via pymap3d)."""
         if self.waypoint_type == "relative":
             return (self.x, self.y, self.z)
-        from aerodaas.navigation.geo import geodetic_to_enu
+        from aerodaas.model.geo import geodetic_to_enu
 
         e, n, _ = geodetic_to_enu(self.x, self.y, home.alt, home)
         return (e, n, self.z)

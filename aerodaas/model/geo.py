@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pymap3d
 
-from aerodaas.app.models import GeoPoint
+from aerodaas.model.types import GeoPoint
 
 
 def enu_to_geodetic(e: float, n: float, u: float, home: GeoPoint) -> GeoPoint:
