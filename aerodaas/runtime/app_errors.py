@@ -21,7 +21,7 @@ def _ours() -> tuple[str, ...]:
     import aerodaas
 
     roots = {os.path.dirname(os.path.abspath(aerodaas.__file__))}
-    for name in ("aerodaas.actors", "aerodaas.schedulers"):
+    for name in ("aerodaas.actors", "aerodaas.schedulers", "aerodaas.clusters"):
         mod = sys.modules.get(name)
         if mod is not None and getattr(mod, "__file__", None):
             roots.add(os.path.dirname(os.path.abspath(mod.__file__)))
@@ -45,7 +45,7 @@ def _frames(tb: TracebackType | None) -> list[str]:
 
 def raised_by_app(e: BaseException) -> bool:
     """True when the innermost non-library frame of ``e``'s traceback is the application's code (not AeroDaaS's
-    packages ``aerodaas``, ``aerodaas.actors``, ``aerodaas.schedulers``). An exception without a traceback is not
+    packages ``aerodaas``, ``aerodaas.actors``, ``aerodaas.schedulers``, ``aerodaas.clusters``). An exception without a traceback is not
     the app's."""
     ours, libs = _ours(), _libraries()
     for f in reversed(_frames(e.__traceback__)):
