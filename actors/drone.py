@@ -24,6 +24,8 @@ from typing import Any
 
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
+from aerodaas.config.robot import sensor_class
+from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S
 from aerodaas.protocol.messages import StatMsg
 from aerodaas.model.types import ActionCommand, VelocityCommand, Waypoint
@@ -110,7 +112,7 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgr
         self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
         odom_rate = 10.0
         for s in self.cfg.sensors:
-            if s.type == "odometry":
+            if sensor_class(s.type).delivery is SensorDelivery.VEHICLE_STATE:
                 odom_rate = float(s.properties.get("rate_hz", 10.0))
         self.odom_period = 1.0 / odom_rate
         self.next_odom = 0.0

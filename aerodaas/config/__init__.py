@@ -14,7 +14,7 @@ from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, HOME_ALT_RANGE_M, M
                    did_you_mean, _Cfg)  # noqa: F401
 from aerodaas.config.robot import (BatteryConfig, CAMERA_SOURCES, Limits, MavlinkConfig, MavlinkFenceConfig, NoiseConfig,
                     ProgressConfig,
-                    ReplayConfig, RobotConfig, SENSOR_PROPERTIES, SafetyConfig, SensorConfig, TelloConfig)  # noqa: F401
+                    ReplayConfig, RobotConfig, SafetyConfig, SensorConfig, TelloConfig)  # noqa: F401
 from aerodaas.config.environment import (AnalyticsQosConfig, AnalyticsSchedulerConfig, ComputeConfig, EnvironmentConfig,
                           GroundConfig, HitlConfig, SimulationConfig, TargetConfig, TargetPathPoint, WorldConfig,
                           json_schema, load_environment_config, parse_environment_config, _format_errors)  # noqa: F401

@@ -321,20 +321,21 @@ class EnvironmentConfig(_Cfg):
                 raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
                                  f"environment (edge: {edges})")
         _check_shared_links(self.robots)
-        from aerodaas.config.robot import SENSOR_PROPERTIES
+        from aerodaas.config.robot import sensor_class
+        from aerodaas.plugins import registry
 
         for j, s in enumerate(self.env_sensors):
-            if s.type not in SENSOR_PROPERTIES:
+            try:
+                cls = sensor_class(s.type)
+            except registry.UnknownPlugin:
+                cls = None
+            if not getattr(cls, "environment_sensor", False):
+                kinds = sorted(e.name for e in registry.entries("sensor")
+                               if e.origin == "builtin" and getattr(e.load(), "environment_sensor", False))
                 raise ValueError(f"env_sensors.{j}.type: sensor {s.id!r} has type {s.type!r}; an environment sensor is "
-                                 f"one of {sorted(SENSOR_PROPERTIES)} (a sensor plug-in samples a robot's state: "
+                                 f"one of {kinds} (a sensor plug-in samples a robot's state: "
                                  f"list it under robots[].sensors)")
-            src = s.properties.get("source") if s.type == "camera" else None
-            if src is not None and src not in ("sim", "mcap"):
-                raise ValueError(f"env_sensors.{j}.properties.source: {src!r} is for a robot's camera; an "
-                                 f"environment camera is 'sim' or 'mcap'")
-            if src == "mcap" and "topic" not in s.properties:
-                raise ValueError(f"env_sensors.{j}.properties.topic: an environment camera replayed from an MCAP "
-                                 f"recording needs the topic to read")
+            cls.check_for_environment(s.properties, f"env_sensors.{j}")
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:
@@ -449,19 +450,12 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         if t.crop[2] > w or t.crop[3] > h:
             raise ConfigError(f"world.targets.{i}.crop: {list(t.crop)} reaches outside its image {t.image!r} "
                               f"({w} x {h} px); x1 must be <= {w} and y1 <= {h}")
-    cameras = [(f"robots.{i}.sensors.{j}", r.id, s) for i, r in enumerate(cfg.robots) for j, s in enumerate(r.sensors)]
-    cameras += [(f"env_sensors.{j}", None, s) for j, s in enumerate(cfg.env_sensors)]
-    for where, robot_id, s in cameras:
-        if s.type == "camera" and s.properties.get("source") == "mcap":
-            s.properties["mcap"] = str(cfg.resolve_path(s.properties["mcap"], f"{where}.properties.mcap"))
-            s.properties.setdefault("topic", f"/{robot_id}/camera/{s.id}")
-        elif s.type == "camera" and s.properties.get("source") not in (None, "sim", "backend"):
-            from aerodaas.video.source import parse_stream_source
+    sensors = [(f"robots.{i}.sensors.{j}", r.id, s) for i, r in enumerate(cfg.robots) for j, s in enumerate(r.sensors)]
+    sensors += [(f"env_sensors.{j}", None, s) for j, s in enumerate(cfg.env_sensors)]
+    from aerodaas.config.robot import sensor_class
 
-            spec = parse_stream_source(s.properties["source"], s.properties.get("transport"),
-                                       s.properties.get("codec"))
-            if spec.kind in ("file", "sdp"):  # a file the camera reads: resolved like every other file, now
-                s.properties["source"] = str(cfg.resolve_path(spec.url, f"{where}.properties.source"))
+    for where, robot_id, s in sensors:
+        sensor_class(s.type).resolve_files(s.properties, cfg.resolve_path, where, robot_id, s.id)
     for i, r in enumerate(cfg.robots):
         if r.replay is not None:
             r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))

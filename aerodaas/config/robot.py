@@ -3,14 +3,15 @@ sensor noise, safety rules, sensors, backend (the simulator, a MAVLink autopilot
 backend's own settings."""
 from __future__ import annotations
 
-import math
 from typing import Any, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
+from aerodaas.plugins.builtin_sensors import CAMERA_SOURCES, STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
+from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
                    did_you_mean)
@@ -91,42 +92,85 @@ class SafetyConfig(_Cfg):
         return self
 
 
-#: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
-#: Tello's), or a recorded MCAP camera channel; any other source is a video stream or file (aerodaas.video.source)
-CAMERA_SOURCES = ("sim", "backend", "mcap")
-#: camera properties that only a video stream source uses
-STREAM_PROPERTIES = ("transport", "codec", "first_frame_timeout_s", "stall_timeout_s")
+def sensor_class(type_: str) -> type:
+    """The sensor class (:class:`aerodaas.plugins.sensor.SensorPlugin`) a sensor ``type`` names: a built-in
+    (:mod:`aerodaas.plugins.builtin_sensors`), a registered plug-in, an installed entry point or
+    ``"module.path:ClassName"``. Raises :class:`aerodaas.plugins.registry.UnknownPlugin` (a ValueError) listing the
+    available sensor types with their origins."""
+    from aerodaas.plugins import registry
+
+    return registry.get("sensor", type_)
 
 
-def _provides_camera(backend: str) -> bool:
-    """Whether the backend class named ``backend`` declares its own camera stream
-    (:attr:`aerodaas.backends.base.VehicleBackend.provides_camera`)."""
+def properties_error(cls: type, err: ValidationError) -> str:
+    """The first error of validating a sensor's ``properties`` against ``cls.Config``, worded as
+    ``properties.<name> must be an integer within [1, 8192], got 0`` (type and range errors of numbers),
+    ``properties.<name>: unknown camera property (did you mean 'width'?); known: [...]``, or the model's own
+    message (``properties.mcap must name ...``)."""
+    e = err.errors()[0]
+    loc = ".".join(str(x) for x in e["loc"])
+    fields = cls.Config.model_fields
+    if not loc:  # a check of the whole model: its message names the property
+        msg = str(e.get("ctx", {}).get("error", e["msg"]))
+        return msg if msg.startswith("properties.") else f"properties: {msg}"
+    if e["type"] == "extra_forbidden":
+        return f"properties.{loc}: unknown {cls.name or cls.__name__} property{did_you_mean(loc, fields)}; " \
+               f"known: {sorted(fields)}"
+    f = fields.get(str(e["loc"][0]))
+    v = e.get("input")
+    if f is not None and len(e["loc"]) == 1:
+        lo = hi = None
+        lo_open = hi_open = False
+        for m in f.metadata:
+            for attr, is_lo, is_open in (("gt", True, True), ("ge", True, False), ("lt", False, True),
+                                         ("le", False, False)):
+                x = getattr(m, attr, None)
+                if x is not None and is_lo:
+                    lo, lo_open = x, is_open
+                elif x is not None:
+                    hi, hi_open = x, is_open
+        ann = str(f.annotation)
+        if lo is not None or hi is not None:
+            what = "an integer" if "int" in ann else "a finite number"
+            rng = f"{'(' if lo_open else '['}{lo if lo is not None else '-inf':g}, " \
+                  f"{hi if hi is not None else 'inf':g}{')' if hi_open else ']'}" if lo is not None and hi is not None \
+                else ""
+            return f"properties.{loc} must be {what}{' within ' + rng if rng else ''}, got {v!r}"
+        if "str" in ann:
+            return f"properties.{loc} must be a non-empty string, got {v!r}"
+    return f"properties.{loc}: {e['msg']}, got {v!r}"
+
+
+def _known_sensor(type_: str) -> type | None:
+    """The class sensor ``type_`` names, None when it names none (reported where the robot is known)."""
     from aerodaas.plugins import registry
 
     try:
-        return bool(getattr(registry.get("backend", backend), "provides_camera", False))
+        cls = sensor_class(type_)
     except registry.UnknownPlugin:
-        return False
+        return None
+    return cls if hasattr(cls, "validate_properties") else None
 
 
-def _camera_backends() -> list[str]:
-    """The registered backends that declare a camera stream (for the error message)."""
-    from aerodaas.plugins import registry
-
-    out = []
-    for e in registry.entries("backend"):
-        try:
-            if getattr(e.load(), "provides_camera", False):
-                out.append(e.name)
-        except Exception:  # noqa: BLE001 - a backend that does not import offers no camera
-            continue
-    return out
+def check_sensor_properties(type_: str, properties: dict[str, Any]) -> dict[str, Any] | None:
+    """``properties`` validated against the ``Config`` of sensor type ``type_`` and completed with its defaults;
+    None when ``type_`` names no sensor class (an unknown type, or a class that is not a SensorPlugin, is reported
+    with the robot's context by :func:`check_plugin_sensors`). Raises ValueError worded by
+    :func:`properties_error`."""
+    cls = _known_sensor(type_)
+    if cls is None:
+        return None
+    try:
+        return cls.validate_properties(properties)
+    except ValidationError as e:
+        raise ValueError(properties_error(cls, e)) from None
 
 
 class SensorConfig(_Cfg):
     """A sensor. ``type``: ``camera`` (properties width, height in px, hfov_deg, fps, pitch_deg with 90 = nadir,
-    jpeg_quality, source), ``odometry`` (rate_hz) or ``stat_stream``. ``buffer`` is the stream buffer length
-    (frames kept for a slow consumer; older ones are dropped and counted).
+    jpeg_quality, source), ``odometry`` (rate_hz), ``stat_stream``, or a sensor plug-in; each type's ``properties``
+    are checked against its class's ``Config`` (:mod:`aerodaas.plugins.builtin_sensors` for the built-ins).
+    ``buffer`` is the stream buffer length (frames kept for a slow consumer; older ones are dropped and counted).
 
     A camera's ``source`` is ``sim`` (default: rendered from the simulated world), ``backend`` (the robot's own
     video, e.g. a Tello's; needs such a backend), ``mcap`` (replay a recording: ``mcap`` names the file,
@@ -140,75 +184,17 @@ class SensorConfig(_Cfg):
     type: str = Field(min_length=1, description="camera, odometry, stat_stream, or a sensor plug-in: a registered "
                       "name (decorator, installed entry point of group aerodaas.sensors) or 'module.path:ClassName'")
     properties: dict[str, Any] = Field(default_factory=dict)
-    buffer: int = Field(default=1, ge=1)
+    buffer: int = Field(default=1, ge=1, le=100_000)
 
     @model_validator(mode="after")
     def _check_props(self) -> "SensorConfig":
-        p = self.properties
-        if self.type not in SENSOR_PROPERTIES:  # a plug-in sensor type: checked against its Config by check_plugin_sensors
-            check_topic_name(self.id, f"sensor id (a {self.type!r} plug-in sensor records on /<robot>/<id>)")
-            return self
-        spec = SENSOR_PROPERTIES[self.type]
-        for k in p:
-            if k not in spec:
-                raise ValueError(f"properties.{k}: unknown {self.type} property{did_you_mean(k, spec)}; "
-                                 f"known: {sorted(spec)}")
-        for k, (kind, default, lo, hi, lo_open) in spec.items():
-            if k not in p:
-                if default is not None:
-                    p[k] = default
-                continue
-            v = p[k]
-            if kind == "str":
-                if not isinstance(v, str) or not v:
-                    raise ValueError(f"properties.{k} must be a non-empty string, got {v!r}")
-                continue
-            ok_type = isinstance(v, int) if kind == "int" else isinstance(v, (int, float))
-            if isinstance(v, bool) or not ok_type or not math.isfinite(v) or v > hi or (v <= lo if lo_open else v < lo):
-                what = "an integer" if kind == "int" else "a finite number"
-                rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
-                raise ValueError(f"properties.{k} must be {what} within {rng}, got {v!r}")
-        if self.type == "camera":
-            src = p["source"]
-            stream_props = [k for k in STREAM_PROPERTIES if k in p]
-            if src not in CAMERA_SOURCES:  # a video stream or file: checked (scheme, host, port, codec) by its parser
-                from aerodaas.video.source import parse_stream_source
-
-                parse_stream_source(src, p.get("transport"), p.get("codec"))
-            elif stream_props:
-                raise ValueError(f"properties.{stream_props[0]} is only used with a video stream source (rtsp://, "
-                                 f"rtp://, udp://, an .sdp or video file, /dev/videoN), but source is {src!r}")
-            if p["hfov_deg"] >= 180:
-                raise ValueError(f"properties.hfov_deg must be within (0, 180), got {p['hfov_deg']!r}")
-            if src == "mcap":
-                if not p.get("mcap"):
-                    raise ValueError(f"properties.mcap must name the MCAP recording to replay when properties.source "
-                                     f"is 'mcap', got {p.get('mcap')!r}")
-                if "topic" in p and not p["topic"].startswith("/"):
-                    raise ValueError(f"properties.topic must be an MCAP topic starting with '/', got {p['topic']!r}")
-            else:
-                for k in ("mcap", "topic"):
-                    if k in p:
-                        raise ValueError(f"properties.{k} is only used with properties.source 'mcap', "
-                                         f"but source is {src!r}")
+        cls = _known_sensor(self.type)
+        if cls is None or getattr(cls, "own_topic", True):
+            check_topic_name(self.id, f"sensor id (a {self.type!r} sensor records on /<robot>/<id>)")
+        props = check_sensor_properties(self.type, self.properties)
+        if props is not None:
+            self.properties = props
         return self
-
-
-#: the properties of each sensor type: name -> (kind, default, low, high, low bound exclusive). Camera sizes are
-#: pixels, fps frames/s, angles degrees (pitch 90 = nadir), rates Hz. Unknown properties are refused.
-SENSOR_PROPERTIES: dict[str, dict[str, tuple]] = {
-    "camera": {"width": ("int", 640, 1, MAX_CAMERA_PX, False), "height": ("int", 480, 1, MAX_CAMERA_PX, False),
-               "hfov_deg": ("float", 78.0, 0.0, 180.0, True), "fps": ("float", 15.0, 0.0, MAX_CAMERA_FPS, True),
-               "pitch_deg": ("float", 90.0, 0.0, 90.0, True), "jpeg_quality": ("int", 80, 1, 100, False),
-               "source": ("str", "sim", 0, 0, False), "mcap": ("str", None, 0, 0, False),
-               "topic": ("str", None, 0, 0, False),
-               # video stream sources only (docs/video.md): RTSP transport, raw RTP codec, timeouts in seconds
-               "transport": ("str", None, 0, 0, False), "codec": ("str", None, 0, 0, False),
-               "first_frame_timeout_s": ("float", None, 0.0, 600.0, True),
-               "stall_timeout_s": ("float", None, 0.0, 60.0, True)},
-    "odometry": {"rate_hz": ("float", 10.0, 0.0, MAX_RATE_HZ, True)},
-    "stat_stream": {},
-}
 
 
 class MavlinkFenceConfig(_Cfg):
@@ -426,6 +412,21 @@ class RobotConfig(_Cfg):
     max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
                                   "all missions of this robot; more are refused (HTTP 422 / navigation_refused)")
 
+    @model_validator(mode="before")
+    @classmethod
+    def _sensor_properties(cls, data: Any) -> Any:
+        """Each sensor's ``properties`` checked against its type's ``Config`` with the robot named in the error
+        (``sensors.<j>.properties.<name> ... (robot 'd1', sensor 'cam')``)."""
+        if not isinstance(data, dict) or not isinstance(data.get("sensors"), list):
+            return data
+        for j, s in enumerate(data["sensors"]):
+            if isinstance(s, dict) and isinstance(s.get("type"), str) and isinstance(s.get("properties", {}), dict):
+                try:
+                    check_sensor_properties(s["type"], dict(s.get("properties") or {}))
+                except ValueError as e:
+                    raise ValueError(f"sensors.{j}.{e} (robot {data.get('id')!r}, sensor {s.get('id')!r})") from None
+        return data
+
     @field_validator("backend")
     @classmethod
     def _known_backend(cls, v: str, info) -> str:
@@ -442,8 +443,9 @@ class RobotConfig(_Cfg):
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
         check_unique([s.id for s in self.sensors], "sensors")
-        if not any(s.type == "stat_stream" for s in self.sensors):
-            self.sensors.append(SensorConfig(id="stat", type="stat_stream"))
+        status = SensorDelivery.MISSION_STATUS
+        if not any(getattr(_known_sensor(s.type), "delivery", None) is status for s in self.sensors):
+            self.sensors.append(SensorConfig(id=StatStreamSensor.default_id, type=StatStreamSensor.name))
         check_plugin_backend(self)
         if self.backend == "mavlink" and self.mavlink is None:
             self.mavlink = MavlinkConfig()
@@ -467,38 +469,26 @@ class RobotConfig(_Cfg):
                              f"({self.safety.min_altitude:g} m); the drone would hover below the floor it must keep")
         check_plugin_sensors(self.sensors, f"robot {self.id!r}", "sensors")
         for j, s in enumerate(self.sensors):
-            if s.type == "camera" and s.properties.get("source") == "backend" and not _provides_camera(self.backend):
-                raise ValueError(f"sensors.{j}.properties.source: 'backend' needs a backend with its own camera "
-                                 f"stream (provides_camera: {_camera_backends()}), but backend is {self.backend!r}")
+            sensor_class(s.type).check_for_robot(s.properties, self, f"sensors.{j}")
         return self
 
 
 def check_plugin_sensors(sensors: list[SensorConfig], owner: str, field: str) -> None:
-    """Resolve every sensor whose ``type`` is not built in through the plug-in registry
-    (:mod:`aerodaas.plugins.registry`, kind ``sensor``) and validate its ``properties`` against the plug-in's
-    ``Config`` (completed with its defaults). Raises ValueError naming ``owner`` (the robot), the sensor id, its
-    type and every available sensor type with its origin; or the property that is wrong."""
-    from pydantic import ValidationError
-
+    """Resolve every sensor's ``type`` through the plug-in registry (:mod:`aerodaas.plugins.registry`, kind
+    ``sensor``: the built-ins of :mod:`aerodaas.plugins.builtin_sensors` and plug-ins alike; their ``properties``
+    were validated against the class's ``Config`` with the sensor). Raises ValueError naming ``owner`` (the robot),
+    the sensor id, its type and every available sensor type with its origin, or a class that is not a
+    SensorPlugin."""
     from aerodaas.plugins import registry
 
     for j, s in enumerate(sensors):
-        if s.type in SENSOR_PROPERTIES:
-            continue
         try:
-            cls = registry.get("sensor", s.type)
+            cls = sensor_class(s.type)
         except registry.UnknownPlugin as e:
             raise ValueError(f"{field}.{j}.type: {owner}, sensor {s.id!r}: {e}") from None
         if not hasattr(cls, "validate_properties"):
             raise ValueError(f"{field}.{j}.type: {owner}, sensor {s.id!r}: {s.type!r} resolves to {cls.__name__}, "
                              f"which is not a SensorPlugin (aerodaas.plugins.sensor)")
-        try:
-            s.properties = cls.validate_properties(s.properties)
-        except ValidationError as e:
-            err = e.errors()[0]
-            loc = ".".join(str(x) for x in err["loc"])
-            raise ValueError(f"{field}.{j}.properties.{loc}: {owner}, sensor {s.id!r} ({s.type}): {err['msg']}, "
-                             f"got {err.get('input')!r}") from None
 
 
 BUILTIN_BACKENDS = ("sim", "mavlink", "tello", "replay")

@@ -120,10 +120,10 @@ _BUILTIN_TARGETS: list[tuple[str, str, str]] = [
     ("backend", "mavlink", "aerodaas.backends.mavlink:MavlinkBackend"),
     ("backend", "tello", "aerodaas.backends.tello:TelloBackend"),
     ("backend", "replay", "aerodaas.backends.replay:ReplayBackend"),
-    # the three built-in sensor types are part of the drone actor (its camera component and vehicle state)
-    ("sensor", "camera", "aerodaas.actors.camera:CameraComponent"),
-    ("sensor", "odometry", "aerodaas.actors.drone:DroneComponent"),
-    ("sensor", "stat_stream", "aerodaas.actors.drone:DroneComponent"),
+    # the built-in sensor types: declarations (SensorPlugin subclasses) of what the drone actor itself produces
+    ("sensor", "camera", "aerodaas.plugins.builtin_sensors:CameraSensor"),
+    ("sensor", "odometry", "aerodaas.plugins.builtin_sensors:OdometrySensor"),
+    ("sensor", "stat_stream", "aerodaas.plugins.builtin_sensors:StatStreamSensor"),
     ("analytics", "ObjectDetector", "aerodaas.analytics.core:ObjectDetector"),
     ("analytics", "FollowAnalytics", "aerodaas.analytics.core:FollowAnalytics"),
     ("analytics", "MonitoringAnalytics", "aerodaas.analytics.core:MonitoringAnalytics"),

@@ -21,21 +21,42 @@ names a plug-in sensor type.
 """
 from __future__ import annotations
 
+import enum
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["SensorPlugin", "SensorPluginConfig"]
+__all__ = ["SensorPlugin", "SensorPluginConfig", "SensorPropertiesBase", "SensorDelivery"]
 
 
-class SensorPluginConfig(BaseModel):
-    """Base of a sensor plug-in's ``properties``: ``rate_hz`` (readings per second of vehicle time, (0, 1000]);
-    unknown properties are refused."""
+class SensorDelivery(enum.Enum):
+    """Where a sensor type's readings come from in the drone's actor (declared by the class, so that the framework
+    wires a sensor by what it is, never by its type name):
+
+    * ``SAMPLED`` — :meth:`SensorPlugin.sample` at ``rate_hz`` of vehicle time, every reading recorded (plug-ins);
+    * ``CAMERA`` — frames of the actor's camera component (rendered, the vehicle's own video, a replayed
+      recording or a video stream), recorded when subscribed or when the run records;
+    * ``VEHICLE_STATE`` — the vehicle's odometry, published at the sensor's ``rate_hz``;
+    * ``MISSION_STATUS`` — the drone's stat-stream (mission state, battery, current waypoint)."""
+
+    SAMPLED = "sampled"
+    CAMERA = "camera"
+    VEHICLE_STATE = "vehicle_state"
+    MISSION_STATUS = "mission_status"
+
+
+class SensorPropertiesBase(BaseModel):
+    """Base of every sensor type's ``properties`` model: unknown properties are refused, numbers are finite."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    rate_hz: float = Field(default=1.0, gt=0, le=1000.0, description="readings per second (vehicle time)")
+
+class SensorPluginConfig(SensorPropertiesBase):
+    """Base of a sampled sensor's ``properties``: ``rate_hz`` (readings per second of vehicle time, (0, 1000];
+    a number, not a string or a boolean); unknown properties are refused."""
+
+    rate_hz: float = Field(default=1.0, gt=0, le=1000.0, strict=True, description="readings per second (vehicle time)")
 
 
 class SensorPlugin(ABC):
@@ -46,7 +67,17 @@ class SensorPlugin(ABC):
     plugin_kind: ClassVar[str] = "sensor"
     #: the sensor ``type`` in environment.json
     name: ClassVar[str] = ""
-    Config: ClassVar[type[SensorPluginConfig]] = SensorPluginConfig
+    Config: ClassVar[type[SensorPropertiesBase]] = SensorPluginConfig
+    #: where the readings come from (:class:`SensorDelivery`); a plug-in is sampled
+    delivery: ClassVar[SensorDelivery] = SensorDelivery.SAMPLED
+    #: the kind of the sensor's component in the plan (:class:`aerodaas.protocol.ids.ComponentId`)
+    component_kind: ClassVar[str] = "sensor"
+    #: whether an environment-level sensor (``env_sensors[]``) may be of this type (not a robot's)
+    environment_sensor: ClassVar[bool] = False
+    #: whether its readings are recorded on ``/<robot>/<sensor id>`` (the id must then be usable as a topic name)
+    own_topic: ClassVar[bool] = True
+    #: a sensor id to add this type under to every robot that has none of it (None: only when configured)
+    default_id: ClassVar[str | None] = None
     #: one reading (what :meth:`sample` returns)
     Message: ClassVar[type[BaseModel] | None] = None
     #: a schema name the recorder already knows, to record readings with instead of ``Message``'s JSON Schema
@@ -69,6 +100,29 @@ class SensorPlugin(ABC):
         """``properties`` checked against ``Config`` and completed with its defaults (a JSON-ready dict). Raises
         pydantic's ValidationError."""
         return cls.Config.model_validate(properties).model_dump(mode="json")
+
+    @classmethod
+    def check_for_robot(cls, properties: dict[str, Any], robot: Any, where: str) -> None:
+        """Checks of validated ``properties`` that need the robot (an :class:`aerodaas.config.RobotConfig`: its
+        backend, say), before Ray starts. ``where`` is the sensor's path (``sensors.<j>``). Raises ValueError naming
+        ``where`` and the property. Nothing here."""
+
+    @classmethod
+    def check_for_environment(cls, properties: dict[str, Any], where: str) -> None:
+        """Checks of an environment-level sensor's validated ``properties`` (``env_sensors.<j>``). Raises
+        ValueError naming ``where`` and the property. Nothing here."""
+
+    @classmethod
+    def resolve_files(cls, properties: dict[str, Any], resolve: Callable[[str, str], Any], where: str,
+                      robot_id: str | None, sensor_id: str) -> None:
+        """Resolve the files ``properties`` name, in place, when the environment file is loaded (``resolve(path,
+        field)`` returns the absolute path or raises ConfigError naming ``field``). Nothing here."""
+
+    @classmethod
+    def reads_wall_clock(cls, properties: dict[str, Any]) -> bool:
+        """Whether this sensor's readings run on the wall clock (a live video stream): the run then needs speedup 1
+        and no lock-step. False here."""
+        return False
 
     @classmethod
     def schema_name(cls) -> str:

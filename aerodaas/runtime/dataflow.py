@@ -25,6 +25,8 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
+from aerodaas.config.robot import sensor_class
+from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.protocol.ids import ComponentId, ComponentKind
 from aerodaas.protocol.messages import Port
 from aerodaas.protocol.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
@@ -227,15 +229,14 @@ def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
     """The plug-in classes ``cfg`` (a RobotConfig) names — a plug-in backend and plug-in sensor types — as
     ``(kind, name, class, origin)``: they travel with the drone actor's spec and are registered there before the
     robot's configuration is validated again (:func:`aerodaas.plugins.registry.adopt`)."""
-    from aerodaas.config.robot import BUILTIN_BACKENDS, SENSOR_PROPERTIES
     from aerodaas.plugins import registry
 
-    wanted = [("backend", cfg.backend)] if cfg.backend not in BUILTIN_BACKENDS else []
-    wanted += [("sensor", s.type) for s in cfg.sensors if s.type not in SENSOR_PROPERTIES]
+    wanted = [("backend", cfg.backend)] + [("sensor", s.type) for s in cfg.sensors]
     out = []
     for kind, name in dict.fromkeys(wanted):
         e = registry.resolve(kind, name)
-        out.append((kind, name, e.load(), e.origin))
+        if e.origin != "builtin":  # a built-in is known in every process that imports aerodaas
+            out.append((kind, name, e.load(), e.origin))
     return out
 
 
@@ -406,23 +407,24 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         cams = []
         plugin_sensors: list[dict] = []
         for s in r.sensors.values():
-            # a plug-in sensor's type is its own name: its component is of kind "sensor"
-            cid = ComponentId.sensor(r.id, s.id, s.type if s.type in ("camera", "odometry", "stat_stream") else "sensor")
+            # the sensor's class says where its readings come from (built-ins and plug-ins alike)
+            scls = sensor_class(s.type)
+            cid = ComponentId.sensor(r.id, s.id, scls.component_kind)
             subs = consumers(s.get_data_stream(), r.id)
-            if s.type == "camera" and (s.get_data_stream().subscribers or recorded):
+            if scls.delivery is SensorDelivery.CAMERA and (s.get_data_stream().subscribers or recorded):
                 cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties)))
                 ids["cameras"][s.id] = cid
-            elif s.type == "odometry" and subs:
+            elif scls.delivery is SensorDelivery.VEHICLE_STATE and subs:
                 ids["odom"].append(cid)
-            elif s.type == "stat_stream" and subs:
+            elif scls.delivery is SensorDelivery.MISSION_STATUS and subs:
                 ids["stat"].append(cid)
-            elif s.type not in ("camera", "odometry", "stat_stream"):  # a plug-in: always sampled and recorded
+            elif scls.delivery is SensorDelivery.SAMPLED:  # always sampled and recorded
                 plugin_sensors.append(sensor_plugin_spec(s, cid))
                 schemas.update(plugin_sensors[-1].pop("schema"))
             else:
                 continue
             ps = plugin_sensors[-1] if plugin_sensors and plugin_sensors[-1]["cid"] == cid else None
-            add(Node(cid, "sensor" if ps else s.type, r.id, hid,
+            add(Node(cid, scls.component_kind, r.id, hid,
                      plugin=f"{ps['type']} -> {ps['schema_name']}" if ps else None))
             edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
         actors[hid].spec.robots.append(RobotSpec(r.cfg.model_dump(mode="json"), ids["drone"], ids["scheduler"], sched,

@@ -606,10 +606,15 @@ def _finish_orphaned_recording(record: str | None, loss: dict) -> dict[str, int]
 def _pull_getter(sensor, h: dict):
     import ray
 
+    from aerodaas.config.robot import sensor_class
+    from aerodaas.plugins.sensor import SensorDelivery
+
+    delivery = sensor_class(sensor.type).delivery
+
     def get():
-        if sensor.type == "camera" and sensor.id in h["cameras"]:
+        if delivery is SensorDelivery.CAMERA and sensor.id in h["cameras"]:
             return ray.get(h["cameras"][sensor.id].get_latest.remote())
         st = ray.get(h["drone"].status.remote())
-        return st if sensor.type == "stat_stream" else ray.get(h["drone"].report.remote()).get("position")
+        return st if delivery is SensorDelivery.MISSION_STATUS else ray.get(h["drone"].report.remote()).get("position")
 
     return get

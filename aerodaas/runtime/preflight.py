@@ -32,9 +32,18 @@ def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
         if names.count(name) > 1:
             raise ConfigError(f"analytics_scheduler.models.{name}: {names.count(name)} analytics share the name "
                               f"{name!r}; give each scheduled analytics its own name")
+    from aerodaas.config.robot import sensor_class
+    from aerodaas.plugins.sensor import SensorDelivery
+
+    def camera(src) -> bool:  # a sensor whose class delivers camera frames (an analytics' output is not)
+        type_ = getattr(src, "type", None)
+        try:
+            return isinstance(type_, str) and sensor_class(type_).delivery is SensorDelivery.CAMERA
+        except ValueError:
+            return False
+
     for a in out.values():
-        bad = [getattr(st.source, "id", repr(st.source)) for st in a.inputs
-               if getattr(st.source, "type", None) != "camera"]
+        bad = [getattr(st.source, "id", repr(st.source)) for st in a.inputs if not camera(st.source)]
         if bad or not a.inputs:
             raise ConfigError(f"analytics_scheduler.models.{a.name}: a scheduled analytics takes camera frames, but "
                               f"{a.name!r} is fed by {bad or 'nothing'}")
@@ -115,8 +124,9 @@ def check_clocks(robots: list, sim: SimulationConfig) -> None:
 
     from aerodaas.backends import backend_clock
 
-    live = [f"{r.id}/{s.id}" for r in robots for s in r.cfg.sensors
-            if s.type == "camera" and s.properties.get("source", "sim") not in ("sim", "backend", "mcap")]
+    from aerodaas.config.robot import sensor_class
+
+    live = [f"{r.id}/{s.id}" for r in robots for s in r.cfg.sensors if sensor_class(s.type).reads_wall_clock(s.properties)]
     if live and (sim.speedup != 1.0 or sim.lockstep):
         raise ConfigError(f"simulation: the cameras {live} read a video stream, which runs on the wall clock: "
                           f"speedup must be 1 (got {sim.speedup:g}; also --speedup) and lockstep false (got "
