@@ -5,10 +5,7 @@ from __future__ import annotations
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
-           "backend_class", "is_navigable", "backend_clock", "NAVIGABLE"]
-
-#: whether each backend can fly navigation (the replay of a log only reports); known without importing drivers
-NAVIGABLE = {"sim": True, "mavlink": True, "tello": True, "replay": False}
+           "backend_class", "is_navigable", "backend_clock"]
 
 
 def backend_class(name: str) -> type[VehicleBackend]:
@@ -22,16 +19,13 @@ def backend_class(name: str) -> type[VehicleBackend]:
 
 
 def is_navigable(name: str) -> bool:
-    """Whether backend ``name`` can fly navigation (known without importing the built-in drivers)."""
-    if name in NAVIGABLE:
-        return NAVIGABLE[name]
+    """Whether backend ``name`` can fly navigation (its class's ``navigable``; the replay of a log only reports)."""
     return bool(getattr(backend_class(name), "navigable", True))
 
 
 def backend_clock(name: str) -> str:
-    """``"sim"`` for a backend that moves only when stepped (lock-step is possible), else ``"vehicle"``."""
-    if name in NAVIGABLE:
-        return "sim" if name == "sim" else "vehicle"
+    """``"sim"`` for a backend that moves only when stepped (lock-step is possible), else ``"vehicle"`` (its
+    class's ``clock``)."""
     return str(getattr(backend_class(name), "clock", "vehicle"))
 
 

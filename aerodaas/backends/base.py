@@ -89,6 +89,9 @@ class VehicleBackend(abc.ABC):
     #: :meth:`options`); it produces the vehicle state (odometry, battery, events) and consumes flight commands
     plugin_kind: ClassVar[str] = "backend"
     Config: ClassVar[Any] = None
+    #: a settings section named after the backend, accepted as an alias of ``backend_config`` (the built-ins'
+    #: ``mavlink``, ``tello``, ``replay`` sections of existing environment files); None: ``backend_config`` only
+    config_section: ClassVar[str | None] = None
     produces: ClassVar[tuple] = ("odometry", "events")
     consumes: ClassVar[tuple] = ("flight_commands",)
     #: whether the vehicle has its own camera stream (:meth:`camera_frame`): a camera sensor with
@@ -124,6 +127,42 @@ class VehicleBackend(abc.ABC):
         if cls.Config is None:
             return None
         return cls.Config.model_validate(getattr(cfg, "backend_config", None) or {})
+
+    # ------------------------------------------------------------------ pre-flight checks (before Ray starts)
+    # Each takes robots' configurations (aerodaas.config.RobotConfig); the framework calls them for every robot
+    # on this backend, whatever its name. Errors are aerodaas.config.ConfigError (or ValueError inside the
+    # environment's validation) naming the field and the value.
+    @classmethod
+    def check_config(cls, robot: Any, where: str) -> None:
+        """Checks of one robot's configuration that only this backend knows (``where``: ``robots.<i>``), once its
+        files are resolved. Nothing here."""
+
+    @classmethod
+    def check_fleet(cls, robots: list[tuple[int, Any]]) -> None:
+        """Checks across the environment's robots on this backend, ``(index in robots[], RobotConfig)``. Raises
+        ValueError naming ``robots.<i>.<field>``. Nothing here."""
+
+    @classmethod
+    def resolve_files(cls, robot: Any, resolve: Any, where: str) -> None:
+        """Resolve the files the robot's settings name, in place in ``robot.backend_config`` (``resolve(path,
+        field)`` returns the absolute path or raises ConfigError naming ``field``). Nothing here."""
+
+    @classmethod
+    def link_key(cls, robot: Any) -> str | None:
+        """The endpoint of a link several robots may share (one process must then hold it: their drone actor is
+        one), or None: the robot has a link of its own. None here."""
+        return None
+
+    @classmethod
+    def clock_rate(cls, robot: Any) -> float | None:
+        """Vehicle seconds per wall second when the configuration sets it (a replayed log's ``rate``): a run on
+        such backends only runs its clock at the fastest of them. None here (the run's ``speedup`` applies)."""
+        return None
+
+    @classmethod
+    def check_mission(cls, robot: Any, sched: Any, hitl_on: bool) -> None:
+        """Checks of the robot's queued navigation (``robot``: the application's :class:`aerodaas.app.api.Robot`,
+        ``sched`` its trajectory scheduler) that only this backend knows, before any actor starts. Nothing here."""
 
     def __init__(self, robot_id: str, home: GeoPoint) -> None:
         self.robot_id = robot_id

@@ -45,6 +45,7 @@ import numpy as np
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
+from aerodaas.config.backends import ReplayConfig
 
 __all__ = ["ReplayBackend", "McapCameraReplay", "check_log", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
 
@@ -294,13 +295,32 @@ class ReplayBackend(VehicleBackend):
     kind = "replay"
     clock = "vehicle"
     navigable = False
+    Config = ReplayConfig
+    config_section = "replay"
 
-    def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig with a ``replay`` section
+    @classmethod
+    def resolve_files(cls, robot: Any, resolve: Any, where: str) -> None:
+        """The log (``replay.log``), resolved like every file of the environment and checked to hold a flight
+        (:func:`check_log`): a missing or empty log fails before Ray starts. Raises ConfigError naming the field."""
+        from aerodaas.config.base import ConfigError
+
+        field = f"{where}.{cls.config_section}.log"
+        robot.backend_config["log"] = log = str(resolve(cls.options(robot).log, field))
+        try:
+            check_log(log)
+        except BackendError as e:
+            raise ConfigError(f"{field}: {e}") from None
+
+    @classmethod
+    def clock_rate(cls, robot: Any) -> float | None:
+        """``replay.rate``: log seconds per wall second."""
+        return float(cls.options(robot).rate)
+
+    def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig (settings: ReplayConfig)
         super().__init__(cfg.id, cfg.home)
-        if cfg.replay is None:
-            raise BackendError(f"robot {cfg.id!r}: backend 'replay' needs a 'replay' section naming the log")
-        self.log_path = str(cfg.replay.log)
-        self.rate = float(cfg.replay.rate)
+        settings = self.options(cfg)
+        self.log_path = str(settings.log)
+        self.rate = float(settings.rate)
         self.info: dict[str, Any] = {}
         self._msgs: list[LogMessage] = []
         self._i = 0

@@ -6,6 +6,7 @@ from typing import Sequence
 import numpy as np
 
 from aerodaas.model.types import Odometry
+from aerodaas.config.backends import SimConfig
 from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.backends.base import VehicleBackend
 
@@ -15,6 +16,7 @@ class SimBackend(VehicleBackend):
 
     kind = "sim"
     clock = "sim"
+    Config = SimConfig  # no settings of its own: the vehicle is the robot's limits, battery and noise
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         super().__init__(cfg.id, cfg.home)

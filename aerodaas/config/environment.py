@@ -17,7 +17,7 @@ from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
                    MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
 from aerodaas.model.ids import Identifier, check_unique
-from aerodaas.config.robot import RobotConfig, SensorConfig, check_autopilot_fence
+from aerodaas.config.robot import RobotConfig, SensorConfig
 
 
 _LABEL_KEY = re.compile(r"^([a-z0-9]([-a-z0-9.]*[a-z0-9])?/)?[A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?$")
@@ -320,7 +320,13 @@ class EnvironmentConfig(_Cfg):
             if r.compute is not None and r.compute not in edges:
                 raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
                                  f"environment (edge: {edges})")
-        _check_shared_links(self.robots)
+        from aerodaas.plugins import registry
+
+        by_backend: dict[type, list] = {}
+        for j, r in enumerate(self.robots):
+            by_backend.setdefault(registry.get("backend", r.backend), []).append((j, r))
+        for backend_cls, on_it in by_backend.items():  # each backend's own checks across its robots
+            backend_cls.check_fleet(on_it)
         from aerodaas.config.robot import sensor_class
         from aerodaas.plugins import registry
 
@@ -355,40 +361,6 @@ class EnvironmentConfig(_Cfg):
                 return c.resolve()
         raise ConfigError(f"{field}: file {rel!r} not found (looked in: {', '.join(str(c) for c in cands)}); "
                           f"set {DATA_DIR_ENV} to the folder that holds it, or give an absolute path")
-
-
-def _check_shared_links(robots: list) -> None:
-    """Robots whose ``mavlink.connection`` names one endpoint share one link (one socket, routed by system id;
-    :mod:`aerodaas.backends.mavlink.shared_link`): each needs its own ``target_system``, one drone actor flies them
-    all (so one edge compute), and they speak as one ground station (``source_system``, ``source_component``,
-    ``baud`` alike). Raises ValueError naming both robots."""
-    first: dict[str, int] = {}
-    ids: dict[tuple[str, int], int] = {}
-    for j, r in enumerate(robots):
-        mc = r.mavlink if r.backend == "mavlink" else None
-        if mc is None:
-            continue
-        key = mc.link_key()
-        if key not in first:
-            first[key] = j
-        else:
-            i = first[key]
-            a = robots[i]
-            for field in ("source_system", "source_component", "baud"):
-                if getattr(a.mavlink, field) != getattr(mc, field):
-                    raise ValueError(f"robots.{j}.mavlink.{field}: robots {a.id!r} and {r.id!r} share the link "
-                                     f"{key} (one socket) but give {field} {getattr(a.mavlink, field)!r} and "
-                                     f"{getattr(mc, field)!r}; a link speaks as one ground station")
-            if a.compute != r.compute:
-                raise ValueError(f"robots.{j}.compute: robots {a.id!r} and {r.id!r} share the link {key} (one socket, "
-                                 f"so one drone actor) but name edge computes {a.compute!r} and {r.compute!r}")
-        if isinstance(mc.target_system, int):
-            if (key, mc.target_system) in ids:
-                i = ids[(key, mc.target_system)]
-                raise ValueError(f"robots.{j}.mavlink.target_system: robots {robots[i].id!r} and {r.id!r} both fly "
-                                 f"system id {mc.target_system} on the link {key}; each robot on one link needs its "
-                                 f"own target_system (or 'auto')")
-            ids[(key, mc.target_system)] = j
 
 
 def _format_errors(err: ValidationError, source: str) -> str:
@@ -457,15 +429,9 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     for where, robot_id, s in sensors:
         sensor_class(s.type).resolve_files(s.properties, cfg.resolve_path, where, robot_id, s.id)
     for i, r in enumerate(cfg.robots):
-        if r.replay is not None:
-            r.replay.log = str(cfg.resolve_path(r.replay.log, f"robots.{i}.replay.log"))
-            from aerodaas.backends.base import BackendError
-            from aerodaas.backends.replay import check_log
+        from aerodaas.plugins import registry
 
-            try:
-                check_log(r.replay.log)
-            except BackendError as e:
-                raise ConfigError(f"robots.{i}.replay.log: {e}") from None
+        registry.get("backend", r.backend).resolve_files(r, cfg.resolve_path, f"robots.{i}")
         if r.safety.geofence_plan:
             field = f"robots.{i}.safety.geofence_plan"
             path = cfg.resolve_path(r.safety.geofence_plan, field)
@@ -488,7 +454,7 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         if why is not None:
             raise ConfigError(f"robots.{i}.safety.geofence: the home position ({r.home.lat}, {r.home.lon}) is {why}; "
                               f"the drone takes off there, so the fence must allow it")
-        check_autopilot_fence(r, f"robots.{i}")
+        registry.get("backend", r.backend).check_config(r, f"robots.{i}")
     sched = cfg.analytics_scheduler
     if sched.name != "default":
         if sched.workload is not None and any(isinstance(v, str) for v in sched.models.values()):

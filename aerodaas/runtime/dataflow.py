@@ -171,8 +171,9 @@ class RunPlan:
 
 
 def _link_of(robot) -> str | None:
-    mc = robot.cfg.mavlink if robot.cfg.backend == "mavlink" else None
-    return mc.link_key() if mc is not None else None
+    from aerodaas.backends import backend_class
+
+    return backend_class(robot.cfg.backend).link_key(robot.cfg)
 
 
 def _drone_chunks(group: list, k: int) -> list[list]:

@@ -9,8 +9,7 @@ from typing import Any
 
 from aerodaas.config import SimulationConfig
 
-__all__ = ["validate", "check_clocks", "robot_schedulers", "scheduled_analytics", "check_preplanned",
-           "check_autopilot_mission"]
+__all__ = ["validate", "check_clocks", "robot_schedulers", "scheduled_analytics", "check_preplanned"]
 
 
 def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
@@ -110,7 +109,10 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
                                   f"{getattr(a, 'on_error')!r}")
         graphs[r.id] = analytics
         check_preplanned(r, scheds[r.id])
-        check_autopilot_mission(r, scheds[r.id], opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
+        from aerodaas.backends import backend_class
+
+        backend_class(r.cfg.backend).check_mission(r, scheds[r.id],
+                                                   opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
     return graphs, scheds, scheduled_analytics(env, graphs)
 
 
@@ -119,8 +121,11 @@ def check_clocks(robots: list, sim: SimulationConfig) -> None:
     that only replays logs runs its clock at the replay rate (so odometry keeps its rate in log time)."""
     from aerodaas.config import ConfigError
 
-    if robots and all(r.cfg.backend == "replay" for r in robots):
-        sim.speedup = max(r.cfg.replay.rate for r in robots)
+    from aerodaas.backends import backend_class
+
+    rates = [backend_class(r.cfg.backend).clock_rate(r.cfg) for r in robots]
+    if robots and all(x is not None for x in rates):  # e.g. every robot replays a log: its rate is the clock's
+        sim.speedup = max(rates)
 
     from aerodaas.backends import backend_clock
 
@@ -152,41 +157,6 @@ def check_preplanned(robot, sched) -> None:
         return gate.check_navigation(nav, start).waypoints
 
     sched.revise_items(check)
-
-
-def check_autopilot_mission(robot, sched, hitl_on: bool) -> None:
-    """``mavlink.use_autopilot_mission``: the robot's navigation must be a static, pre-planned waypoint list that
-    an uploaded mission can express. Raises ConfigError naming the field and the reason: analytics navigating
-    through the scheduler, the HITL API on (both add waypoints mid-flight), time-driven navigation, velocity
-    commands or a land/rtl action before the end (MissionFileError), or no waypoints at all."""
-    from aerodaas.config import ConfigError
-    from aerodaas.missionfile import MissionFileError, navigation_to_plan
-    from aerodaas.model.types import AeroNavigation, SchedulingType, Waypoint
-
-    mc = robot.cfg.mavlink
-    if robot.cfg.backend != "mavlink" or mc is None or not mc.use_autopilot_mission:
-        return
-    field = f"robots[{robot.id!r}].mavlink.use_autopilot_mission: true"
-    if sched.stream_inputs:
-        raise ConfigError(f"{field} flies a mission uploaded before take-off, but {len(sched.stream_inputs)} analytics "
-                          "stream(s) navigate this robot through its trajectory scheduler (analytics-driven "
-                          "navigation); set it to false to fly with position/velocity targets")
-    if hitl_on:
-        raise ConfigError(f"{field} flies a mission uploaded before take-off, but the human-in-the-loop API is on "
-                          "(hitl.enabled / --hitl) and could add waypoints mid-flight; turn one of them off")
-    timed = [m.name for m in sched.missions() if not m.distance_driven]
-    if timed:
-        raise ConfigError(f"{field}: navigation {timed} is time-driven; an autopilot mission holds only "
-                          "distance-driven waypoints")
-    items = sched.queued()
-    if not any(isinstance(i, Waypoint) for i in items):
-        raise ConfigError(f"{field}: robot {robot.id!r} has no pre-planned waypoints to upload "
-                          "(call drone.navigate(...) before start_mission())")
-    try:
-        navigation_to_plan(AeroNavigation(waypoints=items, scheduling_type=SchedulingType.ORDERED), robot.cfg.home,
-                           "land", takeoff_altitude=robot.cfg.takeoff_altitude)
-    except MissionFileError as e:
-        raise ConfigError(f"{field}: the navigation cannot be an autopilot mission: {e}") from None
 
 
 def check_run_flags(record: str | None, env: str | None, speedup: float | None, timeout: float | None,

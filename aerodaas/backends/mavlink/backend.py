@@ -47,6 +47,35 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
 
     kind = "mavlink"
     clock = "vehicle"
+    Config = MavlinkConfig
+    config_section = "mavlink"
+
+    # the pre-flight checks of its settings (aerodaas.backends.mavlink.preflight), run before Ray starts
+    @classmethod
+    def check_config(cls, robot: Any, where: str) -> None:
+        """The autopilot's own fence must accept what the safety gate accepts (``mavlink.fence``)."""
+        from aerodaas.backends.mavlink.preflight import check_autopilot_fence
+
+        check_autopilot_fence(robot, where)
+
+    @classmethod
+    def check_fleet(cls, robots: list[tuple[int, Any]]) -> None:
+        """Robots on one link (``mavlink.connection``) speak as one ground station to distinct system ids."""
+        from aerodaas.backends.mavlink.preflight import check_shared_links
+
+        check_shared_links(robots)
+
+    @classmethod
+    def link_key(cls, robot: Any) -> str | None:
+        """The endpoint ``mavlink.connection`` names (:meth:`MavlinkConfig.link_key`): robots on one share a process."""
+        return cls.options(robot).link_key()
+
+    @classmethod
+    def check_mission(cls, robot: Any, sched: Any, hitl_on: bool) -> None:
+        """``mavlink.use_autopilot_mission``: the navigation must be expressible as an uploaded mission."""
+        from aerodaas.backends.mavlink.preflight import check_autopilot_mission
+
+        check_autopilot_mission(robot, sched, hitl_on)
 
     @property
     def flies_uploaded_mission(self) -> bool:
@@ -66,7 +95,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         super().__init__(cfg.id, cfg.home)
-        self.cfg: MavlinkConfig = cfg.mavlink or MavlinkConfig()
+        self.cfg: MavlinkConfig = self.options(cfg)
         self.config_home: GeoPoint = cfg.home
         self.autopilot: Literal["ardupilot", "px4"] | None = None
         self.vehicle_type: str = ""

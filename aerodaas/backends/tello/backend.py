@@ -40,11 +40,13 @@ class TelloBackend(LinkMixin, ControlMixin, VehicleBackend):
 
     kind = "tello"
     clock = "vehicle"
+    Config = TelloConfig
+    config_section = "tello"
     provides_camera = True  # the Tello's H.264 video stream (video.py)
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         super().__init__(cfg.id, cfg.home)
-        self.cfg: TelloConfig = cfg.tello or TelloConfig()
+        self.cfg: TelloConfig = self.options(cfg)
         self.limits = cfg.limits
         self._state_lock = threading.Lock()
         self._cmd_lock = threading.Lock()

@@ -1,0 +1,76 @@
+"""Built-ins through the plug-in contract (issue 39.1): the built-in sensor types and backends are registered
+classes with pydantic ``Config`` models, their settings read from ``backend_config`` (a built-in's section is an
+alias), strict and bounded, and listed by ``aerodaas plugins`` like any plug-in."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from pydantic import BaseModel
+
+from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, parse_environment_config
+from aerodaas.plugins import SensorPlugin, registry
+from aerodaas.backends.base import VehicleBackend
+
+
+def _robot(**kw) -> dict:
+    return {"robots": [{"id": "d1", **kw}]}
+
+
+@pytest.mark.parametrize("name", ["camera", "odometry", "stat_stream"])
+def test_each_builtin_sensor_is_a_sensor_plugin_with_a_config_model(name):
+    e = registry.resolve("sensor", name)
+    cls = e.load()
+    assert e.origin == "builtin" and issubclass(cls, SensorPlugin) and cls.name == name
+    assert issubclass(cls.Config, BaseModel) and cls.Config.model_config.get("extra") == "forbid"
+
+
+@pytest.mark.parametrize("name", ["sim", "mavlink", "tello", "replay"])
+def test_each_builtin_backend_declares_its_settings_model(name):
+    cls = registry.get("backend", name)
+    assert issubclass(cls, VehicleBackend) and cls.kind == name
+    assert issubclass(cls.Config, BaseModel) and cls.Config.model_config.get("strict") is True
+
+
+def test_aerodaas_plugins_lists_builtins_with_their_settings():
+    out = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plugins", "--json"], capture_output=True, text=True,
+                         check=True, timeout=120)
+    rows = {(r["kind"], r["name"]): r for r in json.loads(out.stdout)}
+    assert rows[("sensor", "camera")]["origin"] == "builtin" and "width" in rows[("sensor", "camera")]["config"]
+    assert rows[("sensor", "odometry")]["config"] == ["rate_hz"]
+    assert "connection" in rows[("backend", "mavlink")]["config"] and rows[("backend", "replay")]["config"] == ["log", "rate"]
+
+
+def test_a_builtin_section_and_backend_config_are_one_place():
+    legacy = parse_environment_config(_robot(backend="mavlink", mavlink={"connection": "udpin:0.0.0.0:14551"})).robots[0]
+    new = parse_environment_config(_robot(backend="mavlink", backend_config={"connection": "udpin:0.0.0.0:14551"}))
+    assert legacy.backend_config == new.robots[0].backend_config and legacy.backend_config["baud"] == 57600
+    assert legacy.mavlink == MavlinkConfig(connection="udpin:0.0.0.0:14551")  # the old attribute still reads it
+    assert RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig(baud=9600)).backend_settings().baud == 9600
+    assert parse_environment_config(_robot()).robots[0].mavlink is None  # a simulator has no MAVLink settings
+    with pytest.raises(ConfigError, match=r"not both"):
+        parse_environment_config(_robot(backend="mavlink", mavlink={"baud": 9600}, backend_config={"baud": 9600}))
+
+
+@pytest.mark.parametrize("robot,match", [
+    ({"backend": "mavlink", "mavlink": {"baud": "9600"}}, r"robots\.0\.mavlink\.baud: Input should be a valid integer"),
+    ({"backend": "mavlink", "backend_config": {"baud": True}}, r"robots\.0\.backend_config\.baud"),
+    ({"backend": "tello", "tello": {"keepalive_s": 20}}, r"robots\.0\.tello\.keepalive_s"),
+    ({"backend": "replay", "replay": {"log": "x.tlog", "rate": 0}}, r"robots\.0\.replay\.rate"),
+    ({"backend": "replay"}, r"robots\.0\.backend_config\.log: Field required"),
+    ({"backend": "sim", "backend_config": {"speed": 1}}, r"robots\.0\.backend_config\.speed: unknown key"),
+    ({"backend": "tello", "mavlink": {"baud": 9600}}, r"mavlink: baud: 9600 needs backend 'mavlink'.*'tello'"),
+    ({"sensors": [{"id": "c", "type": "camera", "properties": {"width": "640"}}]},
+     r"sensors\.0\.properties\.width must be an integer within \[1, 8192\], got '640'"),
+    ({"sensors": [{"id": "c", "type": "camera", "properties": {"fps": True}}]},
+     r"sensors\.0\.properties\.fps must be a finite number within \(0, 240\], got True"),
+    ({"sensors": [{"id": "o", "type": "odometry", "properties": {"rate_hz": 5000}}]},
+     r"sensors\.0\.properties\.rate_hz must be a finite number within \(0, 1000\], got 5000"),
+    ({"sensors": [{"id": "s", "type": "stat_stream", "properties": {"rate_hz": 1}}]},
+     r"sensors\.0\.properties\.rate_hz: unknown stat_stream property"),
+])
+def test_builtin_settings_are_strict_bounded_and_named_in_errors(robot, match):
+    with pytest.raises(ConfigError, match=match):
+        parse_environment_config(_robot(**robot))
