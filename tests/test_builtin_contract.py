@@ -74,3 +74,18 @@ def test_a_builtin_section_and_backend_config_are_one_place():
 def test_builtin_settings_are_strict_bounded_and_named_in_errors(robot, match):
     with pytest.raises(ConfigError, match=match):
         parse_environment_config(_robot(**robot))
+
+
+def test_the_schema_still_describes_the_builtin_sections():
+    jsonschema = pytest.importorskip("jsonschema")
+    from aerodaas.config import json_schema
+
+    schema = json_schema()
+    robot = schema["$defs"]["RobotConfig"]["properties"]
+    assert {"mavlink", "tello", "replay", "backend_config"} <= set(robot)
+    assert robot["mavlink"]["properties"]["fence"]["properties"]["action"]["enum"] == ["rtl", "land", "hold", "report"]
+    good = _robot(backend="mavlink", mavlink={"connection": "udpin:0.0.0.0:14550", "fence": {"action": "land"}})
+    jsonschema.validate(good, schema)
+    good["robots"][0]["mavlink"]["fence"]["action"] = "explode"
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(good, schema)

@@ -15,7 +15,7 @@ from pydantic import BaseModel, Field, ValidationError, model_validator
 from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg
 
 __all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",
-           "backend_settings_into_config"]
+           "backend_settings_into_config", "add_section_schemas"]
 
 
 class SimConfig(_Cfg):
@@ -235,3 +235,31 @@ def _refuse_other_sections(keys: set[str], data: dict[str, Any], backend: str) -
             what = ", ".join(f"{k}: {json.dumps(v, default=str)}" for k, v in given.items()) or "its settings"
             raise ValueError(f"{section}: {what} needs backend {e.name!r} (the '{section}' section configures "
                              f"it), but backend is {backend!r}")
+
+
+def add_section_schemas(schema: dict[str, Any]) -> None:
+    """Add the settings sections of the built-in backends (``mavlink``, ``tello``, ``replay``: each class's
+    ``config_section``, with the JSON Schema of its ``Config``, references inlined) to ``schema``, the JSON Schema
+    of a robot, so that ``aerodaas schema`` still describes them (pydantic ``json_schema_extra``)."""
+    from aerodaas.plugins import registry
+
+    for e in registry.entries("backend"):
+        if e.origin != "builtin":
+            continue
+        cls = e.load()
+        section, config = getattr(cls, "config_section", None), getattr(cls, "Config", None)
+        if section and config is not None:
+            js = config.model_json_schema()
+            defs = js.pop("$defs", {})
+            schema.setdefault("properties", {})[section] = _inline(js, defs)
+
+
+def _inline(node: Any, defs: dict[str, Any]) -> Any:
+    if isinstance(node, dict):
+        ref = node.get("$ref")
+        if isinstance(ref, str) and ref.startswith("#/$defs/"):
+            return _inline(defs[ref.split("/")[-1]], defs)
+        return {k: _inline(v, defs) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_inline(v, defs) for v in node]
+    return node

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
@@ -13,7 +13,7 @@ from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_uniq
 from aerodaas.plugins.builtin_sensors import CAMERA_SOURCES, STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
 from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayConfig, SimConfig,  # noqa: F401
-                                      TelloConfig, backend_settings_into_config)
+                                      TelloConfig, add_section_schemas, backend_settings_into_config)
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
                    did_you_mean)
@@ -239,6 +239,8 @@ class RobotConfig(_Cfg):
     alike, :mod:`aerodaas.config.backends`); a built-in's section named after it (``mavlink``, ``tello``,
     ``replay``: the backend's ``config_section``) is accepted as an alias of ``backend_config``. The validated
     settings: :meth:`backend_settings`."""
+
+    model_config = ConfigDict(**_Cfg.model_config, json_schema_extra=add_section_schemas)
 
     id: RobotId
     backend: str = Field(default="sim", min_length=1, description="sim, mavlink, tello, replay, or a backend "
