@@ -111,7 +111,7 @@ class PluginEntry:
 
 _LOCK = threading.RLock()
 _ENTRIES: dict[str, dict[str, PluginEntry]] = {k: {} for k in KINDS}
-_LOADED = {"builtins": False, "entry_points": False}
+_LOADED = {"builtins": False, "builtin_targets": False, "entry_points": False}
 _BY_VALUE: set[str] = set()
 
 #: built-in plug-ins whose classes are imported only when used: (kind, name, target)
@@ -219,15 +219,27 @@ def plugin(kind: str, name: str | None = None, *, replaces: bool | None = None) 
     return deco
 
 
+def _load_builtin_targets() -> None:
+    """Register the built-ins of :data:`_BUILTIN_TARGETS` (nothing imported: a configuration that names a built-in
+    sensor or backend needs no analytics scheduler module)."""
+    if _LOADED["builtin_targets"]:
+        return
+    with _LOCK:
+        if _LOADED["builtin_targets"]:
+            return
+        _LOADED["builtin_targets"] = True
+        for kind, name, target in _BUILTIN_TARGETS:
+            _ENTRIES[kind].setdefault(name, PluginEntry(kind, name, "builtin", target))
+
+
 def _load_builtins() -> None:
     if _LOADED["builtins"]:
         return
+    _load_builtin_targets()
     with _LOCK:
         if _LOADED["builtins"]:
             return
         _LOADED["builtins"] = True
-        for kind, name, target in _BUILTIN_TARGETS:
-            _ENTRIES[kind].setdefault(name, PluginEntry(kind, name, "builtin", target))
         for mod in _BUILTIN_MODULES:
             importlib.import_module(mod)
 
@@ -293,6 +305,9 @@ def resolve(kind: str, name: str) -> PluginEntry:
     point, or — when ``name`` is ``"module.path:ClassName"`` — that class. Raises :class:`UnknownPlugin`."""
     _check_kind(kind)
     with _LOCK:
+        e = _ENTRIES[kind].get(name)
+    if e is None:
+        _load_builtin_targets()
         e = _ENTRIES[kind].get(name)
     if e is None:
         _load_builtins()
