@@ -1,11 +1,14 @@
 #!/bin/sh
 # The test rig's Debian packages (Debian 12 / Ubuntu 22.04+): GStreamer's RTSP server and PyGObject for the system
 # python (tests/rtsp_server.py runs under /usr/bin/python3), with the elements the relay uses (udpsrc, tsdemux,
-# h264parse, rtph264pay). The video tests fail, never skip, without them. Run by the README's test command and CI.
+# h264parse, rtph264pay), and FFmpeg's decoders for GStreamer (gstreamer1.0-libav: avdec_h264, what the GStreamer
+# appsink peer of `aerodaas bench video` decodes with, as a user's pipeline would). The video tests fail, never skip,
+# without them. Run by the README's test command and CI.
 set -e
-PKGS="gstreamer1.0-rtsp gir1.2-gst-rtsp-server-1.0 python3-gi gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad"
+PKGS="gstreamer1.0-rtsp gir1.2-gst-rtsp-server-1.0 python3-gi gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav"
 if /usr/bin/python3 -c "import gi; gi.require_version('GstRtspServer', '1.0'); from gi.repository import GstRtspServer" 2>/dev/null \
-   && command -v gst-inspect-1.0 >/dev/null 2>&1 && gst-inspect-1.0 tsdemux >/dev/null 2>&1; then
+   && command -v gst-inspect-1.0 >/dev/null 2>&1 && gst-inspect-1.0 tsdemux >/dev/null 2>&1 \
+   && gst-inspect-1.0 avdec_h264 >/dev/null 2>&1; then
   exit 0  # already there
 fi
 SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"

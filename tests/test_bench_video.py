@@ -13,7 +13,9 @@ def test_bench_video_reports_every_reader(tmp_path):
                         "--seconds", "2", "--out", str(out)], capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-2000:]
     r = json.loads(out.read_text())
-    assert r["machine"]["cpu_count"] and {x["reader"] for x in r["runs"]} == {"ours", "pyav", "opencv"}
+    assert r["machine"]["cpu_count"] and {x["reader"] for x in r["runs"]} == {"ours", "pyav", "opencv", "gstreamer"}
+    gst = next(x for x in r["runs"] if x["reader"] == "gstreamer")
+    assert gst["decoder"] in ("avdec_h264", "openh264dec"), gst  # decodebin's choice, read from the pipeline
     for x in r["runs"]:
         assert x["frames_received"] >= 5, x  # the markers were read back: indices matched to their glass times
         assert x["latency_ms"]["p50"] > 0 and x["frames_received"] <= x["frames_sent_meanwhile"] + 1, x

@@ -1,6 +1,7 @@
 """``aerodaas bench video``: glass-to-analytics latency and decode cost of a drone's video stream — our reader
 (:class:`aerodaas.video.StreamReader`, polled as the camera polls it) against the loops a user would otherwise
-write: a bare PyAV decode loop and OpenCV's ``VideoCapture(url, CAP_FFMPEG)`` with its default buffering.
+write: a bare PyAV decode loop, OpenCV's ``VideoCapture(url, CAP_FFMPEG)`` with its default buffering, and a
+GStreamer ``appsink`` pipeline (:mod:`aerodaas.bench.video_gst`, run under the system Python that has PyGObject).
 
 A sender process encodes frames (a real aerial photo from $AERODAAS_DATA_DIR when there is one) with PyAV's
 libx264 (ultrafast, zerolatency, a keyframe a second, no B-frames) and streams them as MPEG-TS on loopback UDP. Each
@@ -9,7 +10,7 @@ the monotonic time just before it encodes each one ("glass"). A reader decodes, 
 top-left corner only, the same cost for every reader) and counts ``latency = time the frame is in the consumer's
 hands - its glass time`` (CLOCK_MONOTONIC is one clock for every process on the host). Per reader and resolution:
 latency percentiles (ms), frames received vs sent, CPU per stream (% of one core: this process's CPU time over the
-wall time, marker search included) and CPU ms per frame. Each reader gets a fresh sender: nothing carries over.
+wall time, marker search included; for GStreamer its own process's CPU time is added) and CPU ms per frame. Each reader gets a fresh sender: nothing carries over.
 """
 from __future__ import annotations
 
@@ -26,7 +27,11 @@ from pathlib import Path
 #: the ArUco dictionary and the marker's size (px) and position (top-left corner, margin px)
 ARUCO_DICT = "DICT_4X4_1000"
 MARKER_PX, MARGIN_PX = 160, 16
-READERS = ("ours", "pyav", "opencv")
+READERS = ("ours", "pyav", "opencv", "gstreamer")
+#: the interpreter that runs the GStreamer peer: one with PyGObject (Debian's python3-gi is for /usr/bin/python3)
+GST_PYTHON = os.environ.get("AERODAAS_GST_PYTHON", "/usr/bin/python3")
+#: the square of pixels (top-left) that holds the marker: what every reader searches
+ROI_PX = MARKER_PX + 3 * MARGIN_PX
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080)}
 
 
@@ -81,7 +86,7 @@ class _Marker:
         self.last = -1
 
     def index(self, img) -> int | None:
-        roi = img[:MARKER_PX + 3 * MARGIN_PX, :MARKER_PX + 3 * MARGIN_PX]
+        roi = img[:ROI_PX, :ROI_PX]
         _, ids, _ = self.detector.detectMarkers(roi)
         if ids is None or len(ids) != 1:
             return None
@@ -94,21 +99,25 @@ class _Marker:
         return idx
 
 
-def _read(reader: str, url: str, width: int, height: int, fps: float, seconds: float) -> list[tuple[int, float]]:
-    """Run one reader for ``seconds``: [(frame index, time in the consumer's hands)]."""
+def _read(reader: str, url: str, width: int, height: int, fps: float,
+          seconds: float) -> tuple[list[tuple[int, float]], dict]:
+    """Run one reader for ``seconds``: ([(frame index, time in the consumer's hands)], facts of the reader: for
+    GStreamer the decoder it chose and its process's CPU seconds)."""
     marker = _Marker()
     got: list[tuple[int, float]] = []
     end = time.monotonic() + 60.0  # the first frame within a minute; then ``seconds`` of reading from it
 
-    def note(img) -> None:
+    def note(img, t: float | None = None) -> None:
         nonlocal end
-        t = time.monotonic()
+        t = time.monotonic() if t is None else t
         idx = marker.index(img)
         if idx is not None:
             if not got:
                 end = t + seconds
             got.append((idx, t))
 
+    if reader == "gstreamer":
+        return got, _read_gstreamer(url, seconds, note)
     if reader == "ours":
         from aerodaas.video import StreamReader, parse_stream_source
 
@@ -147,7 +156,53 @@ def _read(reader: str, url: str, width: int, height: int, fps: float, seconds: f
                     break
         finally:
             cap.release()
-    return got
+    return got, {}
+
+
+def _read_gstreamer(url: str, seconds: float, note) -> dict:
+    """The GStreamer appsink peer: :mod:`aerodaas.bench.video_gst` in a process of :data:`GST_PYTHON`, whose records
+    (arrival time taken at the pull, the marker's corner of the frame) are searched here like every reader's frames.
+
+    :raises RuntimeError: the system Python has no PyGObject/GStreamer (it names the packages), or the peer failed
+    """
+    import struct
+
+    import numpy as np
+
+    from aerodaas.bench.video_gst import HEADER
+
+    port = url.rsplit(":", 1)[1]
+    script = str(Path(__file__).with_name("video_gst.py"))
+    proc = subprocess.Popen([GST_PYTHON, script, port, str(seconds), str(ROI_PX)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    try:
+        while True:
+            head = proc.stdout.read(HEADER.size)
+            if len(head) < HEADER.size:
+                break
+            t, w, h = HEADER.unpack(head)
+            rows, cols = min(ROI_PX, h), min(ROI_PX, w)
+            body = proc.stdout.read(rows * ROI_PX * 3)
+            if len(body) < rows * ROI_PX * 3:
+                break
+            img = np.frombuffer(body, np.uint8).reshape(rows, ROI_PX, 3)[:, :cols]
+            note(img, t)
+        err = proc.stderr.read().decode(errors="replace")
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+    facts = None
+    for line in reversed(err.splitlines()):
+        try:
+            facts = json.loads(line)
+            break
+        except (ValueError, struct.error):
+            continue
+    if proc.returncode not in (0, -9) or facts is None:
+        raise RuntimeError(f"the GStreamer peer ({GST_PYTHON} {script}) failed: it needs PyGObject and GStreamer's "
+                           f"base/good/bad plug-ins (Debian python3-gi, gstreamer1.0-plugins-*; "
+                           f"sh tests/install-rig.sh installs them): {err[-800:]}")
+    return facts
 
 
 def run_one(reader: str, size: str, fps: float, seconds: float) -> dict:
@@ -164,8 +219,8 @@ def run_one(reader: str, size: str, fps: float, seconds: float) -> dict:
                                  url, str(width), str(height), str(fps), log], env=dict(os.environ))
         try:
             cpu0, wall0 = time.process_time(), time.monotonic()
-            got = _read(reader, url, width, height, fps, seconds)
-            cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+            got, facts = _read(reader, url, width, height, fps, seconds)
+            cpu, wall = time.process_time() - cpu0 + facts.get("cpu_s", 0.0), time.monotonic() - wall0
         finally:
             proc.kill()
             proc.wait(timeout=30)
@@ -181,6 +236,7 @@ def run_one(reader: str, size: str, fps: float, seconds: float) -> dict:
         s = sorted(lat)
         p["p99"] = round(s[min(len(s) - 1, int(0.99 * len(s)))], 2)
     return {"reader": reader, "size": size, "fps": fps, "seconds": seconds, "latency_ms": p,
+            **({"decoder": facts["decoder"]} if "decoder" in facts else {}),
             "frames_received": len(got), "frames_sent_meanwhile": sent,
             "cpu_percent_of_one_core": round(100.0 * cpu / wall, 1) if wall else None,
             "cpu_ms_per_frame": round(1e3 * cpu / len(got), 2) if got else None}
@@ -218,7 +274,7 @@ def main(args: argparse.Namespace) -> int:
 
 def add_parser(sub) -> None:
     p = sub.add_parser("video", help="video stream latency (ArUco frame counter) and decode CPU: ours vs bare PyAV "
-                                     "vs OpenCV CAP_FFMPEG, at 720p and 1080p")
+                                     "vs OpenCV CAP_FFMPEG vs a GStreamer appsink, at 720p and 1080p")
     p.add_argument("--readers", default=",".join(READERS), help=f"comma-separated, of {list(READERS)}")
     p.add_argument("--sizes", default="720p,1080p", help=f"comma-separated, of {list(SIZES)}")
     p.add_argument("--fps", type=float, default=30.0, help="stream frame rate (1-120)")
