@@ -1,0 +1,241 @@
+"""MAVLink gimbal protocol v2 and camera protocol v2, the ground-station side: point a vehicle's gimbal, follow its
+reported attitude, and discover its cameras' video streams.
+
+The autopilot is the gimbal manager (ArduPilot 4.3+ for every mount type, PX4's ``gimbal`` module): we send
+``MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW`` (1000) or ``MAV_CMD_DO_SET_ROI_LOCATION`` (195) to it and read the gimbal
+device's ``GIMBAL_DEVICE_ATTITUDE_STATUS`` (285) and the manager's ``GIMBAL_MANAGER_INFORMATION`` (280, its limits).
+Cameras answer ``MAV_CMD_REQUEST_MESSAGE`` (512) for ``CAMERA_INFORMATION`` (259) and ``VIDEO_STREAM_INFORMATION``
+(269), whose ``uri`` is what a camera source reads (https://mavlink.io/en/services/gimbal_v2.html,
+https://mavlink.io/en/services/camera.html, "Video Streaming"). Angle conventions:
+:mod:`aerodaas.navigation.gimbal`.
+"""
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from aerodaas.navigation.gimbal import GimbalLimits, euler_from_quaternion
+
+__all__ = ["GimbalAttitude", "GimbalManager", "VideoStream", "CameraDiscovery", "MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW",
+           "MAV_CMD_DO_SET_ROI_LOCATION", "MAV_CMD_DO_SET_ROI_NONE", "MAV_CMD_REQUEST_MESSAGE"]
+
+MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW = 1000
+MAV_CMD_DO_SET_ROI_LOCATION = 195
+MAV_CMD_DO_SET_ROI_NONE = 197
+MAV_CMD_REQUEST_MESSAGE = 512
+MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
+MSG_CAMERA_INFORMATION, MSG_VIDEO_STREAM_INFORMATION = 259, 269
+#: GIMBAL_DEVICE_FLAGS bits (common.xml)
+_YAW_IN_VEHICLE_FRAME, _YAW_IN_EARTH_FRAME, _YAW_LOCK = 32, 64, 16
+#: VIDEO_STREAM_TYPE: how a camera serves its stream, as the URI scheme AeroDaaS's camera source reads it
+_STREAM_TYPES = {0: "rtsp", 1: "rtpudp", 2: "tcp_mpeg", 3: "mpeg_ts"}
+
+
+class CommandSender(Protocol):
+    """Sends one COMMAND_LONG and waits for its acceptance (the MAVLink backend's ``command_long``): ``name`` for
+    errors, ``command`` the MAV_CMD number, up to seven float params. Raises the backend's errors on refusal."""
+
+    def __call__(self, name: str, command: int, *params: float) -> None: ...
+
+
+class CommandIntSender(Protocol):
+    """Sends one COMMAND_INT (positions as integers: latitude/longitude degrees x 1e7 in ``x``/``y``, ``z`` metres
+    in ``frame``) and waits for its acceptance. Raises the backend's errors on refusal."""
+
+    def __call__(self, name: str, command: int, frame: int, params: tuple[float, float, float, float], x: int,
+                 y: int, z: float) -> None: ...
+
+
+@dataclass(frozen=True)
+class GimbalAttitude:
+    """A gimbal's attitude as its device reports it: degrees (pitch -90 = nadir; yaw relative to the vehicle's
+    nose, positive right, unless ``yaw_in_earth_frame``: then from north, clockwise), ``t_s`` the receiver's time
+    of the report in seconds, ``time_boot_ms`` the vehicle's."""
+
+    t_s: float
+    time_boot_ms: int
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    yaw_in_earth_frame: bool
+    gimbal_device_id: int
+
+    @classmethod
+    def from_status(cls, msg: Any, t_s: float) -> "GimbalAttitude":
+        """From a GIMBAL_DEVICE_ATTITUDE_STATUS. The yaw is in the earth frame when the flags say
+        YAW_IN_EARTH_FRAME, or (older devices, neither frame flag) YAW_LOCK (common.xml GIMBAL_DEVICE_FLAGS).
+        Raises ValueError for a quaternion that is not an attitude (NaN: unknown)."""
+        roll, pitch, yaw = euler_from_quaternion(tuple(msg.q))
+        flags = int(msg.flags)
+        earth = bool(flags & _YAW_IN_EARTH_FRAME) or (not flags & _YAW_IN_VEHICLE_FRAME and bool(flags & _YAW_LOCK))
+        return cls(t_s=t_s, time_boot_ms=int(msg.time_boot_ms), roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw,
+                   yaw_in_earth_frame=earth, gimbal_device_id=int(getattr(msg, "gimbal_device_id", 0)))
+
+
+class GimbalManager:
+    """Points a vehicle's gimbal within ``limits`` (checked here, before anything is sent) and keeps its latest
+    attitude and the limits the vehicle itself reports. One object per vehicle; :meth:`on_message` is fed every
+    message from the vehicle (any thread), :meth:`point` / :meth:`point_at` are called from the control thread."""
+
+    def __init__(self, send: CommandSender, send_int: CommandIntSender, limits: GimbalLimits | None = None,
+                 gimbal_device_id: int = 0) -> None:
+        self._send, self._send_int = send, send_int
+        self.limits = limits or GimbalLimits()
+        self.gimbal_device_id = gimbal_device_id
+        self._lock = threading.Lock()
+        self._attitude: GimbalAttitude | None = None
+        self._vehicle_limits: GimbalLimits | None = None
+
+    def point(self, pitch_deg: float, yaw_deg: float) -> None:
+        """Aim the gimbal at ``pitch_deg`` (up positive, -90 nadir) and ``yaw_deg`` (relative to the vehicle's nose,
+        positive right), degrees, with MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW (rates NaN: the gimbal's own; flags 0:
+        yaw follows the vehicle). Raises ValueError (naming the axis and value) outside :attr:`limits` or the
+        vehicle's own reported limits, and the sender's errors when the autopilot refuses."""
+        self.limits.check(pitch_deg, yaw_deg)
+        if self._vehicle_limits is not None:
+            self._vehicle_limits.check(pitch_deg, yaw_deg)
+        nan = float("nan")
+        self._send("DO_GIMBAL_MANAGER_PITCHYAW", MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, float(pitch_deg),
+                   float(yaw_deg), nan, nan, 0.0, 0.0, float(self.gimbal_device_id))
+
+    def point_at(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
+        """Let the autopilot keep the gimbal on a region of interest: MAV_CMD_DO_SET_ROI_LOCATION as a COMMAND_INT
+        in MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (latitude and longitude in degrees, ``alt_m`` metres above home).
+        COMMAND_INT, as the MAVLink command protocol asks for commands that carry a position: a COMMAND_LONG's
+        float32 longitude resolves only about 1 m at 100 degrees. The autopilot points from its own position (its
+        GLOBAL_POSITION_INT reads 0 N 0 E until its EKF has an origin). Raises ValueError for a non-finite or
+        impossible position."""
+        if not (math.isfinite(lat_deg) and math.isfinite(lon_deg) and math.isfinite(alt_m)) \
+                or not -90.0 <= lat_deg <= 90.0 or not -180.0 <= lon_deg <= 180.0:
+            raise ValueError(f"gimbal region of interest lat {lat_deg!r}, lon {lon_deg!r}, alt {alt_m!r} is not a "
+                             f"position")
+        self._send_int("DO_SET_ROI_LOCATION", MAV_CMD_DO_SET_ROI_LOCATION, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                       (float(self.gimbal_device_id), 0.0, 0.0, 0.0), int(round(lat_deg * 1e7)),
+                       int(round(lon_deg * 1e7)), float(alt_m))
+
+    def release(self) -> None:
+        """Stop pointing at a region of interest (MAV_CMD_DO_SET_ROI_NONE)."""
+        self._send("DO_SET_ROI_NONE", MAV_CMD_DO_SET_ROI_NONE, float(self.gimbal_device_id))
+
+    def on_message(self, msg: Any, t_s: float) -> GimbalAttitude | None:
+        """Take a message from the vehicle; returns the new attitude for a GIMBAL_DEVICE_ATTITUDE_STATUS with a
+        known attitude (None otherwise). GIMBAL_MANAGER_INFORMATION updates the vehicle's limits (radians on the
+        wire)."""
+        kind = msg.get_type()
+        if kind == "GIMBAL_DEVICE_ATTITUDE_STATUS":
+            try:
+                att = GimbalAttitude.from_status(msg, t_s)
+            except ValueError:
+                return None
+            with self._lock:
+                self._attitude = att
+            return att
+        if kind == "GIMBAL_MANAGER_INFORMATION":
+            try:
+                lim = GimbalLimits(pitch_min_deg=math.degrees(msg.pitch_min), pitch_max_deg=math.degrees(msg.pitch_max),
+                                   yaw_min_deg=max(-180.0, math.degrees(msg.yaw_min)),
+                                   yaw_max_deg=min(180.0, math.degrees(msg.yaw_max)), rate_deg_s=self.limits.rate_deg_s)
+            except ValueError:
+                return None  # a manager reporting no usable limits: ours stand alone
+            with self._lock:
+                self._vehicle_limits = lim
+        return None
+
+    @property
+    def attitude(self) -> GimbalAttitude | None:
+        """The latest reported attitude (None before the first)."""
+        with self._lock:
+            return self._attitude
+
+    @property
+    def vehicle_limits(self) -> GimbalLimits | None:
+        """The limits the vehicle's gimbal manager reported (None before its GIMBAL_MANAGER_INFORMATION)."""
+        with self._lock:
+            return self._vehicle_limits
+
+
+@dataclass(frozen=True)
+class VideoStream:
+    """One video stream a MAVLink camera announced (VIDEO_STREAM_INFORMATION): ``uri`` as sent, ``kind`` one of
+    rtsp, rtpudp, tcp_mpeg, mpeg_ts, ``resolution`` (width, height) px, ``framerate_hz``, ``hfov_deg``, the
+    sending ``component`` and ``stream_id``."""
+
+    component: int
+    stream_id: int
+    kind: str
+    uri: str
+    name: str
+    resolution: tuple[int, int]
+    framerate_hz: float
+    hfov_deg: int
+
+    @property
+    def source(self) -> str:
+        """The URI as a camera ``source`` AeroDaaS reads: RTSP as it is; an RTP/UDP stream given as a bare port
+        (QGroundControl's convention, e.g. "5600") becomes ``rtp://0.0.0.0:5600``; MPEG-TS on UDP ``udp://...``."""
+        uri = self.uri.strip()
+        if self.kind == "rtpudp" and uri.isdigit():
+            return f"rtp://0.0.0.0:{uri}"
+        if self.kind == "mpeg_ts" and uri.isdigit():
+            return f"udp://0.0.0.0:{uri}"
+        return uri
+
+
+class CameraDiscovery:
+    """Collects the video streams that MAVLink cameras announce (camera protocol v2). :meth:`requests` gives the
+    MAV_CMD_REQUEST_MESSAGE params to send (to the camera component, or broadcast); :meth:`on_message` takes
+    every message from the vehicle's system; :meth:`streams` / :meth:`choose` read the result."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._streams: dict[tuple[int, int], VideoStream] = {}
+        self._cameras: dict[int, str] = {}
+
+    @staticmethod
+    def requests() -> list[tuple[str, int, tuple[float, ...]]]:
+        """(name, MAV_CMD, params) to send: CAMERA_INFORMATION, then VIDEO_STREAM_INFORMATION of every stream
+        (param2 0 = all streams)."""
+        return [("REQUEST_MESSAGE CAMERA_INFORMATION", MAV_CMD_REQUEST_MESSAGE, (float(MSG_CAMERA_INFORMATION),)),
+                ("REQUEST_MESSAGE VIDEO_STREAM_INFORMATION", MAV_CMD_REQUEST_MESSAGE,
+                 (float(MSG_VIDEO_STREAM_INFORMATION), 0.0))]
+
+    def on_message(self, msg: Any) -> VideoStream | None:
+        """Take a message; returns the stream a VIDEO_STREAM_INFORMATION announced (None otherwise)."""
+        kind = msg.get_type()
+        comp = int(msg.get_srcComponent())
+        if kind == "CAMERA_INFORMATION":
+            name = bytes(msg.vendor_name).rstrip(b"\0").decode(errors="replace") + " " + \
+                bytes(msg.model_name).rstrip(b"\0").decode(errors="replace")
+            with self._lock:
+                self._cameras[comp] = name.strip()
+            return None
+        if kind != "VIDEO_STREAM_INFORMATION":
+            return None
+        uri = msg.uri if isinstance(msg.uri, str) else bytes(msg.uri).rstrip(b"\0").decode(errors="replace")
+        name = msg.name if isinstance(msg.name, str) else bytes(msg.name).rstrip(b"\0").decode(errors="replace")
+        s = VideoStream(component=comp, stream_id=int(msg.stream_id), kind=_STREAM_TYPES.get(int(msg.type), "unknown"),
+                        uri=uri, name=name, resolution=(int(msg.resolution_h), int(msg.resolution_v)),
+                        framerate_hz=float(msg.framerate), hfov_deg=int(msg.hfov))
+        with self._lock:
+            self._streams[(comp, s.stream_id)] = s
+        return s
+
+    def streams(self) -> list[VideoStream]:
+        """Every stream announced so far, by component and stream id."""
+        with self._lock:
+            return [self._streams[k] for k in sorted(self._streams)]
+
+    def cameras(self) -> dict[int, str]:
+        """Component id -> "vendor model" of every camera that sent CAMERA_INFORMATION."""
+        with self._lock:
+            return dict(self._cameras)
+
+    def choose(self, name: str | None = None) -> VideoStream | None:
+        """The stream called ``name`` (None: the first announced with a URI), or None when there is none."""
+        for s in self.streams():
+            if s.uri and (name is None or s.name == name):
+                return s
+        return None
+
