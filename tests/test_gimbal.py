@@ -141,3 +141,33 @@ def test_camera_discovery_reads_the_announced_streams():
     assert s1.source == "rtsp://192.168.144.25:8554/main.264" and s1.resolution == (1280, 720) and s1.hfov_deg == 81
     assert s2.source == "rtp://0.0.0.0:5600" and s2.kind == "rtpudp"
     assert d.choose() == s1 and d.choose("qgc") == s2 and d.choose("nope") is None
+
+
+def test_the_emulated_gimbal_and_camera_speak_what_the_manager_reads():
+    from aerodaas.emulators.mavlink.gimbal import EmulatedCamera, EmulatedGimbal
+
+    enc = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    g = EmulatedGimbal(GimbalLimits(rate_deg_s=90.0))
+    assert g.command(1000, [-100.0, 0, math.nan, math.nan, 0, 0, 0], lambda *a: a) == mav.MAV_RESULT_DENIED
+    assert g.command(1000, [-45.0, 30.0, math.nan, math.nan, 0, 0, 0], lambda *a: a) == mav.MAV_RESULT_ACCEPTED
+    for _ in range(20):
+        g.step(0.1, (0.0, 0.0, 10.0), 90.0)
+    m = GimbalManager(lambda *a: None, lambda *a: None)
+    att = m.on_message(_wire_built(g.build(285, enc, 1000), enc), 1.0)
+    assert att.pitch_deg == pytest.approx(-45.0) and att.yaw_deg == pytest.approx(30.0)
+    m.on_message(_wire_built(g.build(280, enc, 1000), enc), 1.0)
+    assert m.vehicle_limits.pitch_min_deg == pytest.approx(-90.0)
+    # a region of interest: the emulator aims from the vehicle's pose as the firmware does
+    assert g.command(195, [0, 0, 0, 0, 1.0, 2.0, 3.0], lambda lat, lon, alt: (30.0, 40.0, 0.0)) == 0
+    for _ in range(40):
+        g.step(0.1, (0.0, 0.0, 50.0), 90.0)
+    assert (g.model.pitch_deg, g.model.yaw_deg) == pytest.approx(roi_angles((0, 0, 50), 90.0, (30, 40, 0)))
+    cam = EmulatedCamera("rtsp://127.0.0.1:8554/cam")
+    d = CameraDiscovery()
+    d.on_message(_wire_built(cam.build(259, mav.MAVLink(None, 1, 100), 5), mav.MAVLink(None, 1, 100)))
+    d.on_message(_wire_built(cam.build(269, mav.MAVLink(None, 1, 100), 5), mav.MAVLink(None, 1, 100)))
+    assert d.cameras() == {100: "AeroDaaS emulated camera"} and d.choose().source == "rtsp://127.0.0.1:8554/cam"
+
+
+def _wire_built(msg, enc):
+    return mav.MAVLink(None).parse_char(bytearray(msg.pack(enc)))
