@@ -175,6 +175,12 @@ def _read_gstreamer(url: str, seconds: float, note) -> dict:
     script = str(Path(__file__).with_name("video_gst.py"))
     proc = subprocess.Popen([GST_PYTHON, script, port, str(seconds), str(ROI_PX)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
+    try:  # room for several records (130 kB each): the peer must not wait on our marker search between pulls
+        import fcntl
+
+        fcntl.fcntl(proc.stdout.fileno(), fcntl.F_SETPIPE_SZ, 1 << 20)
+    except (ImportError, AttributeError, OSError):
+        pass
     try:
         while True:
             head = proc.stdout.read(HEADER.size)
