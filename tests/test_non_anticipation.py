@@ -1,30 +1,46 @@
-"""Non-anticipation of every analytics-scheduler policy, with a test that two deliberately cheating policies cannot
-pass.
+"""Non-anticipation of every analytics-scheduler policy, by construction, with five cheating policies it must catch.
 
 A policy is non-anticipative when its decisions before any time T depend only on what was revealed before T: the
 arrivals before T, and the edge and cloud execution times of the tasks that *completed* before T. The test runs each
-policy twice per cut T on runs that agree on everything revealed before T and differ in everything revealed at or
-after it: the arrivals at or after T (another seeded trace), and every edge or cloud draw that completes at or after
-T (re-drawn from another seed, kept at or after T so it is still unrevealed before T). The decision logs and edge
-starts before T must be identical.
+policy on runs that agree on everything revealed before T and differ in everything revealed at or after it: the
+arrivals at or after T (another trace), and every edge or cloud draw that completes at or after T (re-drawn from
+another seed, kept at or after T so it is still unrevealed before T). The decision logs and edge starts before T
+must be identical.
+
+By construction (issue 41; :mod:`aerodaas.bench.isolation`): every trace and every draw comes from a 256-bit secret
+(:func:`secret_seed`), recorded in the check's result only after the runs; the post-cut run replays the past
+exactly (the same secret for draws that complete before T) and re-draws the rest from a fresh secret; the policy
+runs in a fresh process for every run (:class:`IsolatedPolicy`), built from its name alone, holding no harness, no
+trace and no seed; and a warm-up run with its own secrets comes first, so a cache kept across runs holds another
+run's future.
 
 Cuts: uniform ones, plus cuts just before arrivals (1 ms and 1 µs before), so that a policy reading arrivals even a
 few hundred ms ahead is caught; cloud and edge times are jittered (lognormal σ 0.2 / 0.05), so a policy reading a
-draw before the task completes is caught. The two cheats below (fixtures, never production code) must be caught:
-``PeekArrivals`` (DEM that sends a task straight to the cloud when another frame arrives within 300 ms) and
-``PeekDraws`` (DEM whose cloud re-check reads the true, not yet revealed, cloud round trip).
+draw before the task completes is caught.
+
+The five cheats (``tests/anticipation_cheats.py``): ``PeekArrivals`` and ``PeekDraws`` are handed the future
+(trace, draws) and must be *flagged* by the cut comparison (at >= 2 cuts). ``RecomputeDraw`` (walks the stack to
+the harness's seed), ``InferSeed`` (searches the public seeding scheme) and ``CrossRunCache`` (latencies kept across
+runs of a process) must *reach nothing*: isolated, with secret seeds, their decisions are exactly honest DEM's on
+the same secret draws; and the test shows that each of the three fooled the old protocol (public seeds, the
+policy in the harness's process, one process for every run): 0 cuts flagged while its decisions were not DEM's.
+No policy can be flagged for anticipation it cannot commit: for these three, "caught" is "its trick is shown to
+work without the protections and to change nothing with them".
 """
 from __future__ import annotations
 
+import math
 import random
+from dataclasses import dataclass, field
 
 import pytest
 
-from aerodaas.bench.harness import Harness, make_trace
-from aerodaas.schedulers.analytics_base import (AnalyticsTask, Decision, Workload, make_analytics_scheduler)
-from aerodaas.schedulers.analytics_dems import Dem
+from aerodaas.bench.harness import Harness, Result, make_trace
+from aerodaas.bench.isolation import IsolatedPolicy, secret_seed
+from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.dispatch.emulation import Jitter, seeded_rng
 
+from . import anticipation_cheats as cheats
 from .conftest import DATA_DIR
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
@@ -32,38 +48,13 @@ needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no wor
 
 REAL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
         "GAINPLAN", "EVPLAN", "LAPLAN"]
-SEED = 7
+#: the old protocol's public seeds (trace, draws, re-draws, other trace), kept to show what it let through
+PUBLIC = (21, 7, 1007, 99)
 DURATION_S = 12.0
 
 
-# ------------------------------------------------------------------------------------------------ the cheats
-class PeekArrivals(Dem):
-    """CHEAT (test fixture): DEM that reads the trace ahead — a task whose frame is followed by another drone's
-    frame within ``lookahead_ms`` goes straight to the cloud, as if it knew the edge would be contended."""
-
-    name = "CHEAT_PEEK_ARRIVALS"
-    lookahead_ms = 300.0
-
-    def peek(self, trace, harness) -> None:
-        self._arrivals = sorted((t.arrival_ms, t.drone) for t in trace)
-
-    def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
-        if any(now_ms < a <= now_ms + self.lookahead_ms and d != task.drone for a, d in self._arrivals):
-            return [self._cloud_or_drop(task, now_ms, "peeked: contention ahead")]
-        return super().submit(task, now_ms)
-
-
-class PeekDraws(Dem):
-    """CHEAT (test fixture): DEM whose cloud re-check reads the task's true cloud round trip (the harness's draw)
-    instead of the profile — the draw a real dispatcher only learns when the reply comes back."""
-
-    name = "CHEAT_PEEK_DRAWS"
-
-    def peek(self, trace, harness) -> None:
-        self._draw = harness.cloud_round_trip_ms
-
-    def cloud_admit(self, task: AnalyticsTask, now_ms: float) -> bool:
-        return now_ms + self._draw(task, now_ms) <= task.deadline_ms
+def _ref(cls) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
 
 
 # ------------------------------------------------------------------------------------------------ the cut runs
@@ -71,15 +62,18 @@ class CutHarness(Harness):
     """The policy harness with every edge and cloud draw that completes at or after ``cut`` re-drawn from
     ``alt_seed`` (and held at or after ``cut``, so it stays unrevealed before it). ``cut`` None: the plain draws."""
 
-    def __init__(self, policy, *, cut: float | None, alt_seed: int, **kw) -> None:
+    def __init__(self, policy, *, cut: float | None, alt_seed, **kw) -> None:
         super().__init__(policy, **kw)
         self.cut, self.alt_seed = cut, alt_seed
 
     def _alt(self, base: float, start: float, profile_ms: float, jitter: Jitter, kind: str, task) -> float:
         if self.cut is None or start + base < self.cut:
             return base
-        alt = profile_ms * jitter.factor(seeded_rng(self.alt_seed, kind, self.edge_id, task.task_id))
-        return max(alt, self.cut - start)
+        alt = max(profile_ms * jitter.factor(seeded_rng(self.alt_seed, kind, self.edge_id, task.task_id)),
+                  self.cut - start)
+        while start + alt < self.cut:  # start + (cut - start) can round below the cut: it would be revealed before it
+            alt = math.nextafter(alt, math.inf)
+        return alt
 
     def edge_hold_ms(self, task):
         return self._alt(super().edge_hold_ms(task), self.now, self.w[task.model].edge_ms, self.edge_jitter, "edge",
@@ -94,15 +88,22 @@ def _copy(tasks):
     return [AnalyticsTask(t.task_id, t.drone, t.model, t.arrival_ms, t.deadline_ms) for t in tasks]
 
 
-def _run(make, w, trace, cut, alt_seed: int = SEED + 1000):
-    pol = make(w)
+def _run(policy, w, trace, cut, seed, alt_seed) -> Result:
+    """One run. ``policy``: a registered name or ``"module:Class"`` (isolated: a fresh process) or a class (in the
+    harness's process, handed the trace and the harness if it has ``peek``)."""
+    pol = IsolatedPolicy(policy, w) if isinstance(policy, str) else policy(w)
+    # admit_probes False: the cloud re-check asked once, at the send time (what decides the send), not bisected
+    # into an admit-by time: a pipe round trip per call to an isolated policy
     h = CutHarness(pol, cut=cut, alt_seed=alt_seed, edge_jitter=Jitter("lognormal", 0.05),
-                   cloud_jitter=Jitter("lognormal", 0.2), seed=SEED)
+                   cloud_jitter=Jitter("lognormal", 0.2), seed=seed, admit_probes=False)
     trace = _copy(trace)
     if hasattr(pol, "peek"):
         pol.peek(trace, h)
-    res = h.run(trace)
-    return res
+    try:
+        return h.run(trace)
+    finally:
+        if isinstance(pol, IsolatedPolicy):
+            pol.close()
 
 
 def _before(res, cut):
@@ -120,47 +121,123 @@ def cuts(trace, n_uniform: int = 6, n_arrivals: int = 8, seed: int = 3) -> list[
                   + [a - 0.001 for a in picks])
 
 
-def violations(make, w) -> list[float]:
-    """The cuts at which ``make(w)``'s decisions before the cut differ between the two runs (see module doc)."""
-    a = make_trace(w, drones=3, duration_s=DURATION_S, seed=21, jitter_ms=250.0)
-    other = make_trace(w, drones=3, duration_s=DURATION_S, seed=99, jitter_ms=250.0)
-    out = []
-    for cut in cuts(a):
+@dataclass
+class Check:
+    """The outcome of :func:`check`: the cuts, those flagged, the reference run and the seeds it used (recorded
+    after the runs; bytes for secrets)."""
+
+    cuts: list[float]
+    flagged: list[float]
+    reference: Result
+    trace: list
+    seeds: dict = field(default_factory=dict)
+
+
+def _trace_seed(secret: bool, public: int) -> int:
+    return int.from_bytes(secret_seed(), "little") if secret else public
+
+
+def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 1) -> Check:
+    """Run ``policy`` (see :func:`_run`) through the cut comparison. ``secret`` False: the old protocol's public
+    seeds (:data:`PUBLIC`), the same re-draw seed at every cut. ``warm_up``: one run before the reference run (its
+    own secrets, or, publicly, the reference run's own seeds: what a cross-run cache needs to pass). ``every``: use
+    every n-th cut only."""
+    trace_seed, seed = _trace_seed(secret, PUBLIC[0]), (secret_seed() if secret else PUBLIC[1])
+    a = make_trace(w, drones=3, duration_s=DURATION_S, seed=trace_seed, jitter_ms=250.0)
+    if warm_up:
+        wt = a if not secret else make_trace(w, drones=3, duration_s=DURATION_S, seed=_trace_seed(True, 0),
+                                             jitter_ms=250.0)
+        _run(policy, w, wt, None, secret_seed() if secret else seed, None)
+    ra = _run(policy, w, a, None, seed, None)
+    flagged = []
+    for cut in cuts(a)[::every]:
+        other = make_trace(w, drones=3, duration_s=DURATION_S, seed=_trace_seed(secret, PUBLIC[3]), jitter_ms=250.0)
         prefix = [t for t in a if t.arrival_ms < cut]
         b = prefix + [AnalyticsTask(len(prefix) + i, t.drone, t.model, t.arrival_ms, t.deadline_ms)
                       for i, t in enumerate(t for t in other if t.arrival_ms >= cut)]
         assert [(t.drone, t.model, t.arrival_ms) for t in a[len(prefix):]] != \
             [(t.drone, t.model, t.arrival_ms) for t in b[len(prefix):]]      # the futures really differ
-        ra, rb = _run(make, w, a, None), _run(make, w, b, cut)
-        before_a, before_b = _before(ra, cut), _before(rb, cut)
+        rb = _run(policy, w, b, cut, seed, secret_seed() if secret else PUBLIC[2])
+        before_a = _before(ra, cut)
         assert before_a[0], f"nothing decided before the cut {cut}"
-        if before_a != before_b:
-            out.append(cut)
-    return out
+        if before_a != _before(rb, cut):
+            flagged.append(cut)
+    return Check(cuts(a)[::every], flagged, ra, a, {"trace": trace_seed, "draws": seed})
+
+
+def _heavy() -> Workload:
+    return Workload.from_file(WORKLOAD_JSON, "HEAVY")
 
 
 @needs_workload
 @pytest.mark.parametrize("name", REAL)
 def test_policy_is_non_anticipative(name):
-    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
-    assert violations(lambda w: make_analytics_scheduler(name, w), w) == []
+    res = check(name, _heavy())
+    assert res.flagged == [], f"{name} anticipates at cuts {res.flagged} (seeds, recorded after the run: {res.seeds})"
 
 
 @needs_workload
-@pytest.mark.parametrize("cheat", [PeekArrivals, PeekDraws])
-def test_cheating_policies_are_caught(cheat):
-    """Each cheat must be caught at several cuts (one would already fail the test of a real policy)."""
-    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
-    assert len(violations(cheat, w)) >= 2
+@pytest.mark.parametrize("cheat", [cheats.PeekArrivals, cheats.PeekDraws])
+def test_cheats_handed_the_future_are_flagged(cheat):
+    """A policy handed the future (in the harness's process) is flagged at several cuts: the comparison sees it."""
+    res = check(cheat, _heavy())
+    assert len(res.flagged) >= 2, res.flagged
+
+
+@needs_workload
+@pytest.mark.parametrize("cheat", [cheats.RecomputeDraw, cheats.InferSeed, cheats.CrossRunCache])
+def test_attacks_on_the_harness_reach_nothing(cheat):
+    """In a fresh process with a secret seed the attack finds no harness, no seed and no earlier run: the cheat's
+    decisions are exactly DEM's on the same secret trace and draws (its trick changed nothing), and no cut flags
+    it (a warm-up run first, as a cache needs)."""
+    w = _heavy()
+    res = check(_ref(cheat), w, every=4)
+    assert res.flagged == []
+    dem = _run("DEM", w, res.trace, None, res.seeds["draws"], None)
+    assert res.reference.log == dem.log
+    assert [(t.task_id, s) for t, s in res.reference.edge_starts] == [(t.task_id, s) for t, s in dem.edge_starts]
+
+
+@needs_workload
+@pytest.mark.parametrize("cheat", [cheats.RecomputeDraw, cheats.InferSeed, cheats.CrossRunCache])
+def test_the_old_protocol_was_fooled(cheat):
+    """Why the protections: with the old protocol (public seeds, the policy in the harness's process, the same
+    process for every run) each of the three attacks changes decisions (it is not DEM) and yet no cut flags it."""
+    w = _heavy()
+    cheats.CrossRunCache.seen.clear()
+    try:
+        res = check(cheat, w, secret=False)
+    finally:
+        cheats.CrossRunCache.seen.clear()
+    dem = _run(cheats.Dem, w, res.trace, None, PUBLIC[1], None)
+    assert res.flagged == []
+    assert res.reference.log != dem.log
+
+
+@needs_workload
+@pytest.mark.parametrize("name", ["DEMS-A", "LAPLAN"])
+def test_an_isolated_policy_decides_as_in_process(name):
+    """The process boundary changes no decision: the same policy on the same secret trace and draws, isolated and
+    in the harness's process, gives the same decision log and edge starts."""
+    from aerodaas.schedulers.analytics_base import analytics_scheduler_class
+
+    w = _heavy()
+    trace = make_trace(w, drones=3, duration_s=DURATION_S, seed=_trace_seed(True, 0), jitter_ms=250.0)
+    seed = secret_seed()
+    iso, local = _run(name, w, trace, None, seed, None), _run(analytics_scheduler_class(name), w, trace, None, seed, None)
+    assert iso.log == local.log
+    assert [(t.task_id, s) for t, s in iso.edge_starts] == [(t.task_id, s) for t, s in local.edge_starts]
+    assert iso.utility == local.utility
 
 
 @needs_workload
 def test_cheats_are_caught_only_by_what_changes_after_the_cut():
     """Sanity of the method: with the same future (the same trace, the draws after the cut "re-drawn" from the same
-    seed), no cheat is flagged at any cut — a cheat is caught for what it read from the future, not for noise of
-    the cut machinery."""
-    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
-    a = make_trace(w, drones=3, duration_s=DURATION_S, seed=21, jitter_ms=250.0)
-    for cheat in (PeekArrivals, PeekDraws):
-        for cut in cuts(a):
-            assert _before(_run(cheat, w, a, None), cut) == _before(_run(cheat, w, a, cut, alt_seed=SEED), cut)
+    seed), no cheat handed the future is flagged at any cut — a cheat is caught for what it read from the future,
+    not for noise of the cut machinery."""
+    w = _heavy()
+    a = make_trace(w, drones=3, duration_s=DURATION_S, seed=_trace_seed(True, 0), jitter_ms=250.0)
+    seed = secret_seed()
+    for cheat in (cheats.PeekArrivals, cheats.PeekDraws):
+        for cut in cuts(a)[::3]:
+            assert _before(_run(cheat, w, a, None, seed, None), cut) == _before(_run(cheat, w, a, cut, seed, seed), cut)

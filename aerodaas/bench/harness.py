@@ -90,19 +90,22 @@ class Harness:
     """Run ``policy`` over a trace on simulated time (see the module docstring). ``cloud_down``: (start_ms, end_ms)
     intervals during which the cloud is reported unavailable. ``admit_probes`` False calls ``cloud_admit`` once
     per cloud task instead of bisecting as the dispatcher does (a pure policy gives the same result either way).
-    ``edge_jitter`` / ``cloud_jitter`` / ``network`` / ``seed`` / ``edge_id``: the runtime's timing model."""
+    ``edge_jitter`` / ``cloud_jitter`` / ``network`` / ``seed`` / ``edge_id``: the runtime's timing model; ``seed``
+    an int (published runs) or 32 secret bytes (:func:`aerodaas.bench.isolation.secret_seed`, the non-anticipation
+    test: a draw can then be neither recomputed nor its seed searched for)."""
 
     def __init__(self, policy: AnalyticsScheduler, *, cloud_extra_ms: float | Callable = 0.0,
                  cloud_down: Sequence[tuple[float, float]] = (), admit_probes: bool = True,
                  edge_jitter: Jitter | None = None, cloud_jitter: Jitter | None = None,
-                 network: NetworkModel | None = None, seed: int = 0, edge_id: str = "edge00") -> None:
+                 network: NetworkModel | None = None, seed: int | bytes = 0, edge_id: str = "edge00") -> None:
         self.p = policy
         self.admit_probes = admit_probes
         self.w = policy.w
         self.extra = cloud_extra_ms if callable(cloud_extra_ms) else (lambda task, t, c=float(cloud_extra_ms): c)
         self.cloud_down = list(cloud_down)
         self.edge_jitter, self.cloud_jitter, self.network = edge_jitter, cloud_jitter, network
-        self.seed, self.edge_id = int(seed), edge_id
+        # an int (a published, reproducible run) or bytes (a secret from aerodaas.bench.isolation.secret_seed)
+        self.seed, self.edge_id = (seed if isinstance(seed, bytes) else int(seed)), edge_id
         self.cloud = CloudCounters()
         self._events: list = []
         self._seq = itertools.count()
