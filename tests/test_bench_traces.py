@@ -158,3 +158,54 @@ def test_cli_rejects_a_bad_trace_before_running(tmp_path):
                         "--out", str(tmp_path / "x.json")], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "trace kind" in p.stderr and "bursty" in p.stderr
     assert not (tmp_path / "x.json").exists()
+
+
+@pytest.mark.parametrize("kind", ["pareto", "onoff", "flush"])
+def test_bursty_traces_keep_the_mean_rate_and_are_seeded(kind):
+    spec = TraceSpec.parse(kind)
+    runs = [frame_times(spec, f"d{i}", 0, 3, i, 1000.0, 600_000.0, seed=5) for i in range(12)]
+    assert runs[0] == frame_times(spec, "d0", 0, 3, 0, 1000.0, 600_000.0, seed=5)           # seeded
+    assert runs[0] != frame_times(spec, "d0", 0, 3, 0, 1000.0, 600_000.0, seed=6)
+    rate = sum(len(ts) for ts in runs) / 12 / 600.0
+    assert 0.9 < rate < 1.15, rate                   # the mean rate of 1 frame/s (Pareto's tail converges slowly)
+    assert all(all(b > a for a, b in zip(ts, ts[1:])) for ts in runs)
+    from aerodaas.bench.traces import gap_stats
+    assert min(gap_stats(ts)["cv"] for ts in runs) > 0.5     # bursty: far from periodic (cv 0)
+
+
+def test_bursty_trace_shapes():
+    on = frame_times(TraceSpec.parse("onoff", on_s=3.0, off_s=3.0), "d0", 0, 1, 0, 1000.0, 60_000.0, seed=1)
+    gaps = sorted({round(b - a) for a, b in zip(on, on[1:])})
+    assert gaps[0] == 500 and max(gaps) > 3000        # 2 fps within a burst, then 3 s of silence
+    fl = frame_times(TraceSpec.parse("flush", stall_s=2.0, stall_every_s=6.0, flush_gap_ms=2.0), "d0", 0, 1, 0,
+                     1000.0, 120_000.0, seed=1)
+    gaps = [round(b - a, 3) for a, b in zip(fl, fl[1:])]
+    assert min(gaps) == 2.0 and max(gaps) > 1000.0    # buffered frames flushed 2 ms apart after a stall
+    pa = frame_times(TraceSpec.parse("pareto", alpha=1.5), "d0", 0, 1, 0, 1000.0, 600_000.0, seed=1)
+    gaps = [b - a for a, b in zip(pa, pa[1:])]
+    assert min(gaps) >= 1000.0 / 3 - 1e-3 and max(gaps) > 5000.0   # Pareto scale period/3, a heavy tail
+
+
+def test_trace_parameters_a_kind_does_not_use_are_refused():
+    with pytest.raises(ValueError, match="onoff takes no alpha"):
+        TraceSpec.parse("onoff", alpha=2.0)
+    with pytest.raises(ValueError, match="pareto takes no jitter"):
+        TraceSpec.parse("pareto", jitter=0.1)
+    with pytest.raises(ValueError, match="trace alpha"):
+        TraceSpec.parse("pareto", alpha=1.0)
+    with pytest.raises(ValueError, match="trace stall_s"):
+        TraceSpec.parse("flush", stall_s=0.0)
+    assert TraceSpec.parse("flush", stall_s=1.0).stall_s == 1.0
+    assert TraceSpec.parse("realistic") == TraceSpec("realistic", jitter=0.2, drop=0.1, joins=1)
+
+
+def test_the_cli_takes_the_bursty_trace_options(tmp_path):
+    from aerodaas.bench.schedulers_cli import _trace_spec, add_parser
+    import argparse
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    p = add_parser(sub)
+    args = p.parse_args(["--harness", "--trace", "onoff", "--trace-on-s", "2", "--trace-off-s", "4"])
+    assert _trace_spec(args) == TraceSpec("onoff", on_s=2.0, off_s=4.0)
+    with pytest.raises(ValueError, match="takes no"):
+        _trace_spec(p.parse_args(["--harness", "--trace", "periodic", "--trace-stall-s", "1"]))

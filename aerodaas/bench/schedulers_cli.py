@@ -112,19 +112,34 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
                         "(LAPLAN); repeatable")
     p.add_argument("--trace", default="periodic", metavar="KIND",
                    help="arrival process: periodic (default), realistic (jittered gaps, dropped frames, drones joining "
-                        "mid-run) or recording:FILE.mcap (the camera-frame gaps of a recording, scaled to --fps)")
+                        "mid-run), pareto (heavy-tailed gaps), onoff (bursts and silences), flush (a link that stalls "
+                        "and flushes its buffered frames) or recording:FILE.mcap (the camera-frame gaps of a "
+                        "recording, scaled to --fps); every kind keeps the mean rate --fps")
     p.add_argument("--trace-jitter", type=float, metavar="FRACTION",
                    help="realistic: each frame gap x (1 + U(-f, f)) (default 0.2)")
     p.add_argument("--trace-drop", type=float, metavar="P", help="realistic/recording: frame loss probability "
                                                                  "(default 0.1 realistic, 0 recording)")
     p.add_argument("--trace-joins", type=int, metavar="N", help="drones per edge joining mid-run (default 1 realistic)")
     p.add_argument("--trace-leaves", type=int, metavar="N", help="drones per edge leaving mid-run (default 0)")
+    p.add_argument("--trace-alpha", type=float, metavar="A", help="pareto: the gaps' Pareto shape, > 1 (default 1.5)")
+    p.add_argument("--trace-on-s", type=float, metavar="S", help="onoff: seconds of frames per burst (default 3)")
+    p.add_argument("--trace-off-s", type=float, metavar="S", help="onoff: seconds of silence after a burst (default 3)")
+    p.add_argument("--trace-stall-s", type=float, metavar="S", help="flush: mean stall of the link (default 2 s)")
+    p.add_argument("--trace-stall-every-s", type=float, metavar="S",
+                   help="flush: mean time the link is up between stalls (default 6 s)")
+    p.add_argument("--trace-flush-gap-ms", type=float, metavar="MS",
+                   help="flush: gap between the buffered frames delivered after a stall (default 2 ms)")
     p.add_argument("--fps", type=_positive_float, default=DEFAULT_FPS,
                    help=f"frames (1-frame batches) per second per drone (default {DEFAULT_FPS:g})")
     p.add_argument("--processes", type=_positive_int, help="--harness worker processes (default: min(2, CPUs))")
     p.add_argument("--no-bound", action="store_true", help="--harness: skip the upper bounds")
     p.add_argument("--exact-bound", type=_loads, default=None, metavar="LOADS",
                    help="--harness: loads whose cells also get the exact and non-anticipative bounds (default HEAVY)")
+    p.add_argument("--exact-bound-budget-s", type=_positive_float, metavar="S",
+                   help="--harness: wall-clock seconds each edge's exact bound may take (default 120); past it the "
+                        "bound is reported 'not computed' beside the LP bound")
+    p.add_argument("--exact-bound-memory-mb", type=_positive_float, metavar="MIB",
+                   help="--harness: memory each edge's exact bound may take (default 1024 MiB)")
     p.add_argument("--network-variability", action="append", metavar="SPEC",
                    help="extra cloud latency: const:MS, normal:MEAN,SD, lognormal:MEDIAN,SIGMA, +MS@T1-T2 (episode, "
                         "seconds), walk:STEP,MAX[,EVERY]; repeatable")
@@ -152,12 +167,17 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     return p
 
 
+#: the TraceSpec parameters set by ``--trace-<name>`` options (``_`` as ``-``)
+TRACE_PARAMS = ("jitter", "drop", "joins", "leaves", "alpha", "on_s", "off_s", "stall_s", "stall_every_s",
+                "flush_gap_ms")
+
+
 def _trace_spec(args: argparse.Namespace):
-    """The :class:`aerodaas.bench.traces.TraceSpec` of the ``--trace*`` options (ValueError naming the field)."""
+    """The :class:`aerodaas.bench.traces.TraceSpec` of the ``--trace*`` options (ValueError naming the field, and
+    for an option the kind does not use)."""
     from aerodaas.bench.traces import TraceSpec
 
-    return TraceSpec.parse(args.trace, jitter=args.trace_jitter, drop=args.trace_drop, joins=args.trace_joins,
-                           leaves=args.trace_leaves)
+    return TraceSpec.parse(args.trace, **{k: getattr(args, f"trace_{k}") for k in TRACE_PARAMS})
 
 
 #: options only one mode uses (attribute -> option): given to the other mode, they are refused (issue 41.4: the
@@ -166,7 +186,8 @@ RUNTIME_ONLY = {"network_variability": "--network-variability", "cloud_jitter": 
                 "cloud_nodes": "--cloud-nodes", "edge_hosts": "--edge-hosts",
                 "cloud_reply_lead_ms": "--cloud-reply-lead-ms", "emulation_bound_ms": "--emulation-bound-ms",
                 "compare_harness": "--compare-harness", "repeat": "--repeat", "address": "--address"}
-HARNESS_ONLY = {"processes": "--processes", "no_bound": "--no-bound", "exact_bound": "--exact-bound"}
+HARNESS_ONLY = {"processes": "--processes", "no_bound": "--no-bound", "exact_bound": "--exact-bound",
+                "exact_bound_budget_s": "--exact-bound-budget-s", "exact_bound_memory_mb": "--exact-bound-memory-mb"}
 
 
 def unused_options(args: argparse.Namespace) -> list[str]:
@@ -176,6 +197,7 @@ def unused_options(args: argparse.Namespace) -> list[str]:
 
 
 def _run_harness(args: argparse.Namespace, options: dict) -> dict:
+    from aerodaas.bench.bound import Budget
     from aerodaas.bench.sweep import run_sweep
 
     def progress(done: int, total: int) -> None:
@@ -187,7 +209,9 @@ def _run_harness(args: argparse.Namespace, options: dict) -> dict:
                      seeds=list(range(args.seed, args.seed + args.seeds)), drones=args.drones,
                      duration_s=args.duration or 120.0, fps=args.fps, schedulers=args.schedulers, options=options,
                      edge_jitter=args.edge_jitter, processes=args.processes, bound=not args.no_bound,
-                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress, trace=_trace_spec(args))
+                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress, trace=_trace_spec(args),
+                     bound_budget=Budget(args.exact_bound_budget_s or Budget.time_s,
+                                         args.exact_bound_memory_mb or Budget.memory_mb))
 
 
 def _run_runtime(args: argparse.Namespace, options: dict) -> dict:

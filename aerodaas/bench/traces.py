@@ -1,8 +1,11 @@
 """Frame-arrival processes for the scheduler benchmarks: periodic, realistic (jittered gaps, dropped frames, drones
-joining and leaving mid-run) and replayed from a recording's camera-frame timestamps.
+joining and leaving mid-run), bursty (heavy-tailed gaps, on/off bursts, a link that stalls and flushes) and replayed
+from a recording's camera-frame timestamps.
 
 Real drone video is not periodic: encoders and links jitter each frame gap, frames are lost on the link, and drones
-join and leave a fleet mid-mission. :func:`frame_times` gives one drone's frame send times (ms) for a
+join and leave a fleet mid-mission. It also arrives in bursts (issue 41): encoder GOPs and paused streams (on/off),
+heavy-tailed gaps, and a link that stalls and then delivers its buffered frames back to back. Every bursty kind keeps
+the mean frame rate (``1/period``), so a trace differs from the periodic one in its shape only. :func:`frame_times` gives one drone's frame send times (ms) for a
 :class:`TraceSpec`; :func:`aerodaas.bench.schedulers.make_trace` turns them into the benchmark's task rows.
 
 Every draw is seeded per (seed, drone) (:func:`random.Random` of a string, which CPython seeds through SHA-512), so a
@@ -18,7 +21,12 @@ from typing import Sequence
 
 __all__ = ["TraceSpec", "TRACE_KINDS", "frame_times", "recording_frame_gaps", "gap_stats", "IMAGE_SCHEMAS"]
 
-TRACE_KINDS = ("periodic", "realistic", "recording")
+TRACE_KINDS = ("periodic", "realistic", "recording", "pareto", "onoff", "flush")
+#: the parameters each kind uses (any other given is refused: an option that would be silently ignored)
+KIND_PARAMS = {"periodic": (), "realistic": ("jitter", "drop", "joins", "leaves"),
+               "recording": ("drop", "joins", "leaves"), "pareto": ("alpha", "drop", "joins", "leaves"),
+               "onoff": ("on_s", "off_s", "drop", "joins", "leaves"),
+               "flush": ("stall_s", "stall_every_s", "flush_gap_ms", "drop", "joins", "leaves")}
 #: MCAP schemas whose messages are camera frames (foxglove.CompressedImage / RawImage, as the recorder writes them)
 IMAGE_SCHEMAS = ("foxglove.CompressedImage", "foxglove.RawImage")
 
@@ -35,9 +43,18 @@ class TraceSpec:
       camera topic; fleet drone *i* replays stream *i* mod *n* from a seeded gap index, looping), scaled so the mean
       gap is ``1/fps`` s (the real gap *shape* at the benchmark's rate), with ``drop``, ``joins`` and ``leaves`` as
       above (defaults 0 for a recording: its own losses are already in its gaps).
+    - ``"pareto"``: i.i.d. Pareto gaps of shape ``alpha`` (> 1; 1.5: infinite variance) and scale ``period x (alpha
+      - 1) / alpha`` (mean gap = period; :meth:`random.Random.paretovariate`).
+    - ``"onoff"``: each drone alternates ``on_s`` s of frames at ``(on_s + off_s) / on_s`` x the rate and ``off_s`` s
+      of silence, from a seeded phase of the cycle (an encoder's bursts, a stream that pauses).
+    - ``"flush"``: frames are made every period, but the link stalls — up for an exponential time of mean
+      ``stall_every_s`` s, then down for an exponential time of mean ``stall_s`` s; frames made while it is down
+      arrive when it comes back, ``flush_gap_ms`` ms apart (a buffer flushed).
+    ``drop``, ``joins`` and ``leaves`` apply to the bursty kinds as to ``"realistic"`` (default 0).
 
     Raises ValueError (naming the field and value) for a bad kind, a jitter outside [0, 1), a drop outside [0, 1),
-    negative joins/leaves, or ``recording`` missing for kind ``"recording"``.
+    negative joins/leaves, ``recording`` missing for kind ``"recording"``, ``alpha`` <= 1, non-positive on/off,
+    stall or flush times.
     """
 
     kind: str = "periodic"
@@ -46,6 +63,12 @@ class TraceSpec:
     joins: int = 0
     leaves: int = 0
     recording: str | None = None
+    alpha: float = 1.5
+    on_s: float = 3.0
+    off_s: float = 3.0
+    stall_s: float = 2.0
+    stall_every_s: float = 6.0
+    flush_gap_ms: float = 2.0
 
     def __post_init__(self) -> None:
         if self.kind not in TRACE_KINDS:
@@ -58,36 +81,52 @@ class TraceSpec:
             raise ValueError(f"trace joins/leaves: integers >= 0 needed, got {self.joins}/{self.leaves}")
         if self.kind == "recording" and not self.recording:
             raise ValueError("trace recording: a recording's path is needed for kind 'recording'")
+        if not (self.alpha > 1 and math.isfinite(self.alpha)):
+            raise ValueError(f"trace alpha: a Pareto shape > 1 needed (a finite mean gap), got {self.alpha}")
+        for name in ("on_s", "off_s", "stall_s", "stall_every_s", "flush_gap_ms"):
+            v = getattr(self, name)
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"trace {name}: a finite number > 0 needed, got {v}")
 
     @classmethod
-    def parse(cls, text: str, *, jitter: float | None = None, drop: float | None = None, joins: int | None = None,
-              leaves: int | None = None) -> "TraceSpec":
-        """``"periodic"``, ``"realistic"`` or ``"recording:PATH"`` plus optional overrides (None: the kind's
-        default). Raises ValueError as the constructor, and for a missing recording file."""
+    def parse(cls, text: str, **given: float | int | None) -> "TraceSpec":
+        """``"periodic"``, ``"realistic"``, ``"pareto"``, ``"onoff"``, ``"flush"`` or ``"recording:PATH"`` plus
+        optional parameters (``jitter``, ``drop``, ``joins``, ``leaves``, ``alpha``, ``on_s``, ``off_s``,
+        ``stall_s``, ``stall_every_s``, ``flush_gap_ms``; None: the kind's default). Raises ValueError as the
+        constructor, for a missing recording file, and for a parameter the kind does not use (it would be
+        silently ignored)."""
         kind, _, path = text.partition(":")
         if kind == "recording" and not Path(path).is_file():
             raise ValueError(f"trace recording: no file {path!r}")
-        given = {"jitter": jitter, "drop": drop, "joins": joins, "leaves": leaves}
-        if kind == "periodic" and any(v for v in given.values()):
-            raise ValueError(f"trace periodic takes no jitter/drop/joins/leaves (got {given}); use 'realistic'")
-        base = _DEFAULTS.get(kind)
-        if base is None:
+        if kind not in KIND_PARAMS:
             raise ValueError(f"trace kind: choose from {list(TRACE_KINDS)}, got {kind!r}")
-        vals = {k: base[k] if v is None else v for k, v in given.items()}
+        unknown = sorted(set(given) - set(_DEFAULTS))
+        if unknown:
+            raise ValueError(f"trace parameters: unknown {unknown}; known {sorted(_DEFAULTS)}")
+        unused = {k: v for k, v in given.items() if v is not None and k not in KIND_PARAMS[kind]}
+        if unused:
+            hint = "; use 'realistic'" if kind == "periodic" else ""
+            raise ValueError(f"trace {kind} takes no {'/'.join(unused)} (got {unused}): it uses "
+                             f"{list(KIND_PARAMS[kind]) or 'no parameter'}{hint}")
+        vals = {k: given.get(k) if given.get(k) is not None else _DEFAULTS[k].get(kind, _DEFAULTS[k]["*"])
+                for k in _DEFAULTS}
         return cls(kind, recording=path if kind == "recording" else None, **vals)
 
     def label(self) -> str:
         """Short description for reports, e.g. ``realistic(jitter 0.2, drop 0.1, joins 1, leaves 0)``."""
         if self.kind == "periodic":
             return "periodic"
-        src = f"recording {Path(self.recording).name}, " if self.recording else f"jitter {self.jitter:g}, "
-        return f"{self.kind}({src}drop {self.drop:g}, joins {self.joins}, leaves {self.leaves})"
+        shape = {"recording": f"recording {Path(self.recording or '').name}, ", "realistic": f"jitter {self.jitter:g}, ",
+                 "pareto": f"alpha {self.alpha:g}, ", "onoff": f"on {self.on_s:g} s, off {self.off_s:g} s, ",
+                 "flush": f"stall {self.stall_s:g} s every {self.stall_every_s:g} s, flushed "
+                          f"{self.flush_gap_ms:g} ms apart, "}[self.kind]
+        return f"{self.kind}({shape}drop {self.drop:g}, joins {self.joins}, leaves {self.leaves})"
 
 
-#: per kind, the defaults of jitter, drop, joins and leaves (a recording's own losses are already in its gaps)
-_DEFAULTS = {"periodic": dict(jitter=0.0, drop=0.0, joins=0, leaves=0),
-             "realistic": dict(jitter=0.2, drop=0.1, joins=1, leaves=0),
-             "recording": dict(jitter=0.0, drop=0.0, joins=0, leaves=0)}
+#: per parameter, its default by kind ("*": every other kind); a recording's own losses are already in its gaps
+_DEFAULTS = {"jitter": {"realistic": 0.2, "*": 0.0}, "drop": {"realistic": 0.1, "*": 0.0},
+             "joins": {"realistic": 1, "*": 0}, "leaves": {"*": 0}, "alpha": {"*": 1.5}, "on_s": {"*": 3.0},
+             "off_s": {"*": 3.0}, "stall_s": {"*": 2.0}, "stall_every_s": {"*": 6.0}, "flush_gap_ms": {"*": 2.0}}
 
 _GAP_CACHE: dict[str, list[list[float]]] = {}
 
@@ -130,6 +169,21 @@ def frame_times(spec: TraceSpec, drone: str, index_on_edge: int, drones_on_edge:
         start = rng.uniform(0.2, 0.5) * duration_ms
     if index_on_edge < spec.leaves:
         end = rng.uniform(0.5, 0.8) * duration_ms
+    if spec.kind in ("onoff", "flush"):
+        times = (_onoff_times if spec.kind == "onoff" else _flush_times)(spec, rng, start, end, period_ms)
+        return [round(t, 3) for t in times if not rng.random() < spec.drop]
+    gap = _gap_process(spec, rng, index_in_fleet, period_ms)
+    t = start + rng.uniform(0.0, period_ms)
+    out = []
+    while t < end:  # the loss draw before each gap draw: the published realistic traces' order of draws
+        if not rng.random() < spec.drop:
+            out.append(round(t, 3))
+        t += gap()
+    return out
+
+
+def _gap_process(spec: TraceSpec, rng: random.Random, index_in_fleet: int, period_ms: float):
+    """The next-gap function (ms) of the kinds made of i.i.d. or replayed gaps."""
     if spec.kind == "recording":
         streams = recording_frame_gaps(spec.recording)
         gaps = streams[index_in_fleet % len(streams)]
@@ -140,15 +194,51 @@ def frame_times(spec: TraceSpec, drone: str, index_on_edge: int, drones_on_edge:
             nonlocal k
             k = (k + 1) % len(gaps)
             return max(gaps[k] * scale, 1e-3)
-    else:
-        def gap() -> float:
-            return period_ms * (1.0 + rng.uniform(-spec.jitter, spec.jitter))
-    t = start + rng.uniform(0.0, period_ms)
+        return gap
+    if spec.kind == "pareto":
+        xm = period_ms * (spec.alpha - 1.0) / spec.alpha
+        return lambda: xm * rng.paretovariate(spec.alpha)
+    return lambda: period_ms * (1.0 + rng.uniform(-spec.jitter, spec.jitter))
+
+
+def _onoff_times(spec: TraceSpec, rng: random.Random, start: float, end: float, period_ms: float) -> list[float]:
+    """Frames every ``period x on / (on + off)`` ms while on, none while off, from a seeded phase of the cycle."""
+    on, cycle = spec.on_s * 1000.0, (spec.on_s + spec.off_s) * 1000.0
+    gap = period_ms * on / cycle
+    t0 = start - rng.uniform(0.0, cycle)          # the cycle began this long before the drone's start
     out = []
+    k = 0
+    while True:
+        c = t0 + k * cycle
+        if c >= end:
+            return out
+        t = c
+        while t < c + on and t < end:
+            if t >= start:
+                out.append(t)
+            t += gap
+        k += 1
+
+
+def _flush_times(spec: TraceSpec, rng: random.Random, start: float, end: float, period_ms: float) -> list[float]:
+    """Frames made every period; the link alternates up (exponential, mean ``stall_every_s``) and down
+    (exponential, mean ``stall_s``); a frame made while it is down arrives when it is back up, the buffered frames
+    ``flush_gap_ms`` apart, never before an earlier frame."""
+    up = start + rng.expovariate(1.0 / (spec.stall_every_s * 1000.0)) * rng.random()  # a seeded point of the cycle
+    down = up + rng.expovariate(1.0 / (spec.stall_s * 1000.0))
+    out: list[float] = []
+    t = start + rng.uniform(0.0, period_ms)
     while t < end:
-        if not rng.random() < spec.drop:
-            out.append(round(t, 3))
-        t += gap()
+        while t >= down:                               # the link's next stall
+            up = down + rng.expovariate(1.0 / (spec.stall_every_s * 1000.0))
+            down = up + rng.expovariate(1.0 / (spec.stall_s * 1000.0))
+        at = down if t >= up else t                    # made during a stall: delivered when it ends
+        if out:                                        # behind the frames still being flushed
+            at = max(at, out[-1] + spec.flush_gap_ms)
+        if at >= end:
+            break
+        out.append(at)
+        t += period_ms
     return out
 
 
