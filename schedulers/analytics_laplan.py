@@ -235,7 +235,25 @@ class LaPlan(EvPlan):
             self.counters["plans_edge_overran" if self.edge_running is not None else "plans_start_passed"] += 1
         self._now = now_ms
         free = self._edge_free_at(now_ms)
-        # per task: release, deadline, cloud fallback, its variants' parts (:meth:`_parts`), its key
+        rel, dl, fb, parts, keys, wakes, n_pool = self._instance(now_ms, free)
+        levels = len(self._tails)
+        sched, slack, rows = self._solve(rel, dl, fb, parts, keys, free, n_pool)
+        self.counters["plans"] += 1
+        plan = [(keys[rows[j // levels]], s) for j, s in sched]
+        self._first_wake = None
+        if plan and plan[0][0] in wakes:
+            self._first_wake = max(plan[0][1], wakes[plan[0][0]])
+        # valid while nothing changes and the edge state it assumed holds: the running task not overdue, or (idle)
+        # until its first start; either up to replan_tolerance_ms more, but never more than the plan's slack
+        # (module docstring)
+        at = free if self.edge_running is not None else (plan[0][1] if plan else math.inf)
+        self._cache = _CachedPlan(key, plan, self._first_wake, at + self._tolerance(slack), slack)
+        return plan
+
+    def _instance(self, now_ms: float, free: float) -> tuple[list, list, list, list, list, dict, int]:
+        """The plan's rows, the pool's first, then the predicted tasks': release, deadline, cloud fallback, variant
+        parts (:meth:`_parts`) and key (:meth:`_key`) per task; the predicted tasks' wake times by key; the number
+        of pool rows. Sets :attr:`_predicted`."""
         rel, dl, fb, parts, keys = [], [], [], [], []
         for t in self.pool:
             rel.append(free)
@@ -243,6 +261,7 @@ class LaPlan(EvPlan):
             fb.append(max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0)
             parts.append(self._parts(t.model))
             keys.append(self._key(t))
+        n_pool = len(keys)
         self._predicted = {}
         wakes = {}
         if self.horizon_ms > 0:
@@ -258,33 +277,54 @@ class LaPlan(EvPlan):
                 fb.append(fbs[m])
                 parts.append(self._parts(m))
                 keys.append(k)
-        sched: list[tuple[int, float]] = []
+        return rel, dl, fb, parts, keys, wakes, n_pool
+
+    def _solve(self, rel: list, dl: list, fb: list, parts: list, keys: list, free: float, n_pool: int
+               ) -> tuple[list[tuple[int, float]], float, list[int]]:
+        """The max-gain schedule of the rows (:meth:`_instance`): ``(schedule as [(row x levels + level, start)],
+        slack ms, the rows it was solved over)``. When more than 64 task groups would be live at once (the compiled
+        kernel's limit; a burst of flushed frames), the rows are reduced until they fit instead of running the
+        exponential pure-Python DP: the latest half of the predicted tasks first, then the pool's half with the
+        least gain (counted: ``plans_reduced``). Without numba the Python DP runs (counted: ``plans_in_python``)."""
+        rows = list(range(len(keys)))
+        if not rows:
+            return [], math.inf, rows
         levels = len(self._tails)
-        slack = math.inf  # how late every planned task may start and still end by its chosen variant's latest end
-        if keys:
+        pa_all = np.array(parts, np.float64)  # (tasks, levels, 3): the same operations as :meth:`_variants`
+        rel_a, dl_a, fb_a = np.array(rel, np.float64), np.array(dl, np.float64), np.array(fb, np.float64)
+        reduced = False
+        while True:
+            idx = np.array(rows, np.int64)
+            pa = pa_all[idx]
             ids: dict[tuple, int] = {}
-            gid = np.array([ids.setdefault(k, len(ids)) for k in keys], np.int64)  # one group per key (its variants)
-            pa = np.array(parts, np.float64)  # (tasks, levels, 3): the same operations as :meth:`_variants`
-            latest, proc = (np.array(dl, np.float64)[:, None] - pa[:, :, 0]).ravel(), pa[:, :, 1].ravel()
+            gid = np.array([ids.setdefault(keys[r], len(ids)) for r in rows], np.int64)  # one group per key
+            latest, proc = (dl_a[idx][:, None] - pa[:, :, 0]).ravel(), pa[:, :, 1].ravel()
             n_python = SOLVES["python"]
-            _, sched = max_gain_schedule_arrays(
-                np.repeat(np.array(rel, np.float64), levels), latest, proc,
-                (pa[:, :, 2] - np.array(fb, np.float64)[:, None]).ravel(), np.repeat(gid, levels), len(ids),
-                free_at=free)
-            if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing, or > 64 groups live)
-                self.counters["plans_in_python"] += 1
-            slack = min((latest[j] - s - proc[j] for j, s in sched), default=math.inf)
-        self.counters["plans"] += 1
-        plan = [(keys[j // levels], s) for j, s in sched]
-        self._first_wake = None
-        if plan and plan[0][0] in wakes:
-            self._first_wake = max(plan[0][1], wakes[plan[0][0]])
-        # valid while nothing changes and the edge state it assumed holds: the running task not overdue, or (idle)
-        # until its first start; either up to replan_tolerance_ms more, but never more than the plan's slack
-        # (module docstring)
-        at = free if self.edge_running is not None else (plan[0][1] if plan else math.inf)
-        self._cache = _CachedPlan(key, plan, self._first_wake, at + self._tolerance(slack), slack)
-        return plan
+            got = max_gain_schedule_arrays(
+                np.repeat(rel_a[idx], levels), latest, proc, (pa[:, :, 2] - fb_a[idx][:, None]).ravel(),
+                np.repeat(gid, levels), len(ids), free_at=free, python_fallback=False)
+            if got is not None:
+                break
+            reduced = True
+            rows = self._fewer_rows(rows, rel, fb, parts, n_pool)
+        if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing)
+            self.counters["plans_in_python"] += 1
+        if reduced:
+            self.counters["plans_reduced"] += 1
+        sched = got[1]
+        return sched, min((latest[j] - s - proc[j] for j, s in sched), default=math.inf), rows
+
+    @staticmethod
+    def _fewer_rows(rows: list[int], rel: list, fb: list, parts: list, n_pool: int) -> list[int]:
+        """``rows`` less the latest-released half of its predicted rows, or, with none left, less the half of its
+        pool rows with the least best gain (their top variant's gain less the cloud fallback)."""
+        pred = sorted((r for r in rows if r >= n_pool), key=lambda r: (rel[r], r))
+        if pred:
+            drop = set(pred[len(pred) // 2:])
+        else:
+            by_gain = sorted(rows, key=lambda r: (max(g for *_, g in parts[r]) - fb[r], -r))
+            drop = set(by_gain[:max(1, len(by_gain) // 2)])
+        return [r for r in rows if r not in drop]
 
     def _tolerance(self, slack: float) -> float:
         """How late (ms) the edge may be on a plan of this ``slack`` before it is recomputed: ``replan_tolerance_ms``,

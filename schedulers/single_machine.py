@@ -134,13 +134,16 @@ def _run_kernel(rel, proc, bit, vstart, latest, best, gains) -> tuple[float, lis
 
 
 def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int, *, free_at: float = float("-inf"),
-                             jit: bool = True) -> tuple[float, list[tuple[int, float]]]:
+                             jit: bool = True, python_fallback: bool = True
+                             ) -> tuple[float, list[tuple[int, float]]] | None:
     """:func:`max_gain_schedule` on flat arrays, with the same answer (ties included): ``release``, ``deadline``,
     ``proc`` (J,) float64 ms, ``gain`` (J,) float64, ``group`` (J,) int64 in ``[0, ngroups)`` (at most one job of
     a group is chosen). With the compiled kernel the whole preparation runs compiled too (LAPLAN's decision time:
     the Python preparation of the job tuples cost about twice the DP itself); without it, or above 64 groups live
-    at once, the job tuples are built and :func:`max_gain_schedule` runs. Raises ValueError if the jobs of one group
-    differ in release or processing time."""
+    at once, the job tuples are built and :func:`max_gain_schedule` runs — unless ``python_fallback`` is False:
+    then None is returned when the compiled kernel is there but more than 64 groups are live (the pure-Python DP is
+    exponential in the live groups: 67 ms for one LAPLAN plan on a stall-and-flush trace, issue 41). Raises
+    ValueError if the jobs of one group differ in release or processing time."""
     import numpy as np
 
     if jit and single_machine_jit.available():
@@ -155,6 +158,8 @@ def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int,
             if rel.shape[0] == 0:
                 return 0.0, []
             return _run_kernel(rel, p, bit, vstart, latest, best, gains)
+        if not python_fallback:
+            return None
     jobs = list(zip(np.asarray(release, float).tolist(), np.asarray(deadline, float).tolist(),
                     np.asarray(proc, float).tolist(), np.asarray(gain, float).tolist()))
     return max_gain_schedule(jobs, free_at=free_at, groups=np.asarray(group).tolist(), jit=False)

@@ -327,6 +327,7 @@ def test_cli_option_reaches_the_scheduler_that_has_it_and_refuses_what_none_has(
     (["--harness", "--repeat", "2", "--cloud-nodes", "2"], "--cloud-nodes, --repeat"),
     (["--processes", "1"], "--processes"),
     (["--no-bound", "--exact-bound", "HEAVY"], "--no-bound, --exact-bound"),
+    (["--exact-bound-budget-s", "5"], "--exact-bound-budget-s"),
 ])
 def test_an_option_the_mode_does_not_use_is_refused_naming_it(argv, named, tmp_path, capsys):
     """issue 41.4: the harness ignored --network-variability and --cloud-jitter (with const:500 the utility was
@@ -337,3 +338,39 @@ def test_an_option_the_mode_does_not_use_is_refused_naming_it(argv, named, tmp_p
     err = capsys.readouterr().err
     assert f"aerodaas bench schedulers: {named}: not used by" in err, err
     assert not (tmp_path / "h.png").exists()
+
+
+# --------------------------------------------------------------------------------------------- bounded work
+def _spin():
+    while True:
+        pass
+
+
+def _grab():
+    return [bytearray(2 ** 20) for _ in range(400)]  # 400 MiB
+
+
+def test_bounded_runs_within_its_budget_or_says_what_ran_out():
+    """issue 41.5: the exact bound ran over 5 min and 2 GB on a stall-and-flush trace; now it is cut off and said."""
+    from aerodaas.bench.bound import Budget, bounded
+
+    assert bounded(lambda: 6 * 7, Budget(60.0, 256.0)) == ("ok", 42)
+    assert bounded(_spin, Budget(0.5, 256.0)) == ("time", None)
+    assert bounded(_grab, Budget(60.0, 64.0)) == ("memory", None)
+    with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+        bounded(lambda: 1 / 0, Budget(60.0, 256.0))
+    with pytest.raises(ValueError, match="budget"):
+        Budget(0.0, 1.0)
+
+
+@needs_workload
+def test_an_exact_bound_out_of_budget_is_not_computed_with_the_lp_beside_it():
+    from aerodaas.bench.bound import Budget
+
+    res = run_sweep(loads=["HEAVY"], sigmas=[0.0], drones_per_edge=[2], scenarios=["none"], seeds=[0, 1], edges=1,
+                    duration_s=8, schedulers=["DEM"], processes=1, workload_path=WORKLOAD_JSON,
+                    bound_budget=Budget(1e-3, 256.0))
+    r = res["results"][0]
+    assert r["upper_bound_kind"] == "lp" and "bound_na" not in r and r["bound_lp"]["mean"] > 0
+    assert r["bounds_not_computed"]["seed 0"]["exact"].startswith("time budget ran out on edge00")
+    assert res["config"]["exact_bound_budget"] == {"time_s": 1e-3, "memory_mb": 256.0}

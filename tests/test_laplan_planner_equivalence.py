@@ -17,7 +17,7 @@ from aerodaas.bench.harness import Harness, fleet_tasks
 from aerodaas.bench.schedulers import make_trace
 from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers import analytics_laplan, single_machine_jit
-from aerodaas.schedulers.analytics_base import Workload, make_analytics_scheduler
+from aerodaas.schedulers.analytics_base import TaskState, Workload, make_analytics_scheduler
 from aerodaas.schedulers.dispatch.emulation import Jitter
 from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule, max_gain_schedule_arrays
 
@@ -105,10 +105,11 @@ def test_laplan_decides_exactly_as_with_the_old_planner(trace, monkeypatch):
         tasks = fleet_tasks(rows, w)["edge00"]
         runs = {}
         for name, f in [("old", old_max_gain_schedule), *SOLVERS.items()]:
-            def counted(release, deadline, proc, gain, group, ngroups, *, free_at, _f=f, _n=name):
+            def counted(release, deadline, proc, gain, group, ngroups, *, free_at, _f=f, _n=name, **kw):
                 calls.append(_n)
                 if _n == "arrays":  # what LAPLAN calls
-                    return max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups, free_at=free_at)
+                    return max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups, free_at=free_at,
+                                                    **kw)
                 jobs = list(zip(release.tolist(), deadline.tolist(), proc.tolist(), gain.tolist()))
                 return _f(jobs, free_at=free_at, groups=group.tolist())
             monkeypatch.setattr(analytics_laplan, "max_gain_schedule_arrays", counted)
@@ -122,3 +123,19 @@ def test_laplan_decides_exactly_as_with_the_old_planner(trace, monkeypatch):
             assert runs[name][0] == log, f"{trace} seed {seed}: {name} solver: another decision log"
             assert runs[name][3:5] == (utility, counters)
     assert calls.count("compiled") == calls.count("arrays") == calls.count("old") > 100   # every plan went through the solver under test
+
+
+@needs_workload
+def test_a_flushed_burst_is_planned_compiled_on_a_reduced_instance_not_in_python():
+    """issue 41.5: on a stall-and-flush trace more than 64 task groups were live in one plan and LAPLAN's DP fell
+    back to pure Python (7 times in a run, one decision of 67 ms). Now the plan's instance is reduced until the
+    compiled kernel takes it (the latest predicted tasks first), counted, and no plan runs in Python."""
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+    spec = TraceSpec.parse("flush", stall_s=4.0, stall_every_s=4.0)
+    tasks = fleet_tasks(make_trace(w, 6, 40.0, 300, 6, 1.0, spec), w)["edge00"]
+    pol = make_analytics_scheduler("LAPLAN", w)
+    res = Harness(pol, edge_jitter=Jitter("lognormal", 0.05), cloud_jitter=Jitter("lognormal", 0.1), seed=300,
+                  edge_id="edge00").run(tasks)
+    assert pol.counters["plans_reduced"] >= 1 and pol.counters["plans_in_python"] == 0
+    assert pol.counters["plans"] > 50 and res.utility > 0
+    assert all(t.state is not TaskState.PENDING for t in res.tasks) and not res.double_terminal and not res.bad_dispatch

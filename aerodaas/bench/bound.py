@@ -32,12 +32,86 @@ bound on the mean over seeds, not on every seed (a lucky seed can lie above it b
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+import os
+import pickle
+import resource
+import select
+import signal
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
 
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.single_machine import max_gain_schedule
 
-__all__ = ["utility_upper_bound", "lognormal_on_time_chance", "lognormal_slack", "EDGE_LEVELS"]
+__all__ = ["utility_upper_bound", "lognormal_on_time_chance", "lognormal_slack", "EDGE_LEVELS", "Budget",
+           "bounded", "NOT_COMPUTED"]
+
+#: what a bound that ran out of its budget reports instead of a number
+NOT_COMPUTED = "not computed"
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Time (s, wall clock) and memory (MiB of address space above the process's own at the start) one exact
+    bound may use. Why (issue 41): on a stall-and-flush trace one edge's exact bound ran over 5 min and 2 GB (the
+    flushed frames put more than 64 task groups in one window, and the DP's label sets grow exponentially)."""
+
+    time_s: float = 120.0
+    memory_mb: float = 1024.0
+
+    def __post_init__(self) -> None:
+        if not (self.time_s > 0 and self.memory_mb > 0):
+            raise ValueError(f"bound budget: time_s and memory_mb must be > 0, got {self.time_s}, {self.memory_mb}")
+
+
+def _vsize() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def bounded(fn: Callable[[], Any], budget: Budget) -> tuple[str, Any]:
+    """Run ``fn()`` in a forked child under ``budget`` (address space limited with ``RLIMIT_AS``, killed at the
+    time limit): ``("ok", value)``, ``("time", None)``, ``("memory", None)``; re-raises in the caller an
+    exception ``fn`` raised (RuntimeError with its text). Linux (``os.fork``, ``/proc``)."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: compute, send, exit without running the parent's atexit handlers
+        try:
+            os.close(r)
+            limit = _vsize() + int(budget.memory_mb * 2 ** 20)
+            resource.setrlimit(resource.RLIMIT_AS, (limit, resource.getrlimit(resource.RLIMIT_AS)[1]))
+            try:
+                out = ("ok", fn())
+            except MemoryError:
+                out = ("memory", None)
+            except BaseException as e:  # noqa: BLE001 - handed to the parent
+                out = ("error", f"{type(e).__name__}: {e}")
+            data = pickle.dumps(out)
+            with os.fdopen(w, "wb") as f:
+                f.write(data)
+        finally:
+            os._exit(0)
+    os.close(w)
+    chunks, end = [], time.monotonic() + budget.time_s
+    with os.fdopen(r, "rb") as f:
+        while True:
+            left = end - time.monotonic()
+            if left <= 0 or not select.select([f], [], [], left)[0]:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                return ("time", None)
+            b = os.read(f.fileno(), 1 << 20)
+            if not b:
+                break
+            chunks.append(b)
+    _, status = os.waitpid(pid, 0)
+    if not chunks:  # killed by the kernel (e.g. out of memory) before it could answer
+        return ("memory", None)
+    kind, value = pickle.loads(b"".join(chunks))
+    if kind == "error":
+        raise RuntimeError(f"exact bound failed: {value}")
+    return kind, value
 
 #: on-time chances at which the non-anticipative edge reward steps (see :func:`utility_upper_bound`)
 EDGE_LEVELS = (0.9999, 0.999, 0.995, 0.99, 0.98, 0.96, 0.94, 0.92, 0.9, 0.87, 0.84, 0.8, 0.75, 0.7, 0.65, 0.6, 0.55,

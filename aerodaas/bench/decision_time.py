@@ -1,8 +1,8 @@
 """Decision time of one analytics dispatcher's policy: p50/p99 of the CPU time a policy spends per dispatcher event.
 
 The policy is driven by the deterministic harness (:mod:`aerodaas.bench.harness`) over one edge of the runtime
-benchmark's trace (HEAVY, 3 drones per edge by default, periodic or realistic arrivals); every call the dispatcher
-makes on an event (``submit`` on arrival, ``poll``, ``on_edge_done`` / ``on_cloud_done`` on completion, then
+benchmark's trace (HEAVY, 3 drones per edge by default; any trace kind of :mod:`aerodaas.bench.traces`); every call
+the dispatcher makes on an event (``submit`` on arrival, ``poll``, ``on_edge_done`` / ``on_cloud_done`` on completion, then
 ``next_edge_task``) is timed with :func:`time.perf_counter` (wall, ``decision_ms``) and :func:`time.thread_time`
 (CPU of this thread, ``decision_cpu_ms``: what the policy costs, less sensitive to other processes on a loaded
 machine), and the calls of one event are summed into one decision.
@@ -94,7 +94,10 @@ def measure(scheduler: str = "LAPLAN", *, load: str = "HEAVY", drones_per_edge: 
             "decision_cpu_ms": {"p50": _pct(cpu_events, 0.5), "p99": _pct(cpu_events, 0.99), "max": max(cpu_events),
                                 "mean": sum(cpu_events) / len(cpu_events)},
             "cloud_admit_ms": {"p50": _pct(probes, 0.5), "p99": _pct(probes, 0.99), "calls": len(probes)},
-            "cpu_s": cpu, "load_average": list(os.getloadavg()), "counters": dict(pol.counters)}
+            "cpu_s": cpu, "load_average": list(os.getloadavg()), "counters": dict(pol.counters),
+            # the slow paths, never silent (issue 41.5): plans solved by the pure-Python DP (numba missing) and plans
+            # whose instance was cut to fit the compiled kernel's 64 live task groups (LAPLAN's counters)
+            "slow_path": {k: pol.counters.get(k, 0) for k in ("plans", "plans_in_python", "plans_reduced")}}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -104,7 +107,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--drones-per-edge", type=int, default=3)
     p.add_argument("--duration", type=float, default=60.0)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--trace", default="realistic", help="periodic | realistic | recording:FILE.mcap")
+    p.add_argument("--trace", default="realistic",
+                   help="periodic | realistic | pareto | onoff | flush | recording:FILE.mcap (default parameters)")
     p.add_argument("--option", type=scheduler_option, action="append", default=[], metavar="KEY=JSON",
                    help="scheduler option, e.g. replan_tolerance_ms=0; repeatable")
     p.add_argument("--out", help="also write the JSON here")

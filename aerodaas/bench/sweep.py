@@ -109,20 +109,24 @@ def _send_times(net, task) -> list[float]:
     return out
 
 
-def _bounds(per_edge: dict, w, specs: list[str], seed: int, ej, cj, exact: bool) -> dict:
+def _bounds(per_edge: dict, w, specs: list[str], seed: int, ej, cj, exact: bool, budget=None) -> dict:
     """The upper bounds of one (cell, seed), summed over the edges (see :mod:`aerodaas.bench.bound`): ``lp``
     always; with ``exact``, ``exact`` (clairvoyant, non-preemptive) and ``na`` (non-anticipative: expected cloud
-    value and expected edge reward by start time; only for lognormal or no edge jitter)."""
-    from aerodaas.bench.bound import lognormal_on_time_chance, lognormal_slack, utility_upper_bound
+    value and expected edge reward by start time; only for lognormal or no edge jitter). Each exact DP of an edge
+    runs under ``budget`` (:class:`aerodaas.bench.bound.Budget`, default one): a bound of which some edge ran out is
+    None, and ``not_computed`` says which (``{"exact": "time on edge03", ...}``); the LP is always there beside it."""
+    from aerodaas.bench.bound import Budget, bounded, lognormal_on_time_chance, lognormal_slack, utility_upper_bound
     from aerodaas.bench.harness import Harness
     from aerodaas.schedulers.analytics_base import make_analytics_scheduler
     from aerodaas.schedulers.dispatch.emulation import NetworkModel
 
-    out = {"lp": 0.0}
+    budget = budget or Budget()
+    out: dict = {"lp": 0.0}
     if exact:
         out["exact"] = 0.0
         if ej.kind in ("none", "lognormal"):
             out["na"] = 0.0
+    missing: dict[str, str] = {}
     sigma_e = ej.sigma if ej.kind == "lognormal" else 0.0
     for edge, tasks in per_edge.items():
         net = NetworkModel.parse(specs, seed)
@@ -130,17 +134,24 @@ def _bounds(per_edge: dict, w, specs: list[str], seed: int, ej, cj, exact: bool)
                     edge_id=edge)
         sends = lambda t, net=net: _send_times(net, t)  # noqa: E731
         out["lp"] += utility_upper_bound(tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms, sends)["bound"]
-        if not exact:
-            continue
-        out["exact"] += utility_upper_bound(tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms, sends,
-                                            method="exact")["bound"]
-        if "na" in out:
-            def chance(t, s, net=net):
-                return lognormal_on_time_chance(w[t.model].cloud_ms, cj.sigma, t.deadline_ms - s, net.offset_ms(s))
 
-            out["na"] += utility_upper_bound(
-                tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms, sends, method="exact", cloud_chance=chance,
-                edge_slack=lambda t, chance_: lognormal_slack(w[t.model].edge_ms, sigma_e, chance_))["bound"]
+        def chance(t, s, net=net):
+            return lognormal_on_time_chance(w[t.model].cloud_ms, cj.sigma, t.deadline_ms - s, net.offset_ms(s))
+
+        kw = {"exact": {}, "na": {"cloud_chance": chance,
+                                  "edge_slack": lambda t, c: lognormal_slack(w[t.model].edge_ms, sigma_e, c)}}
+        for name in [k for k in ("exact", "na") if k in out]:
+            if out[name] is None:
+                continue  # an earlier edge ran out: the sum is not computed anyway
+            status, value = bounded(lambda kw_=kw[name]: utility_upper_bound(
+                tasks, w, h.edge_hold_ms, h.cloud_round_trip_ms, sends, method="exact", **kw_)["bound"], budget)
+            if status == "ok":
+                out[name] += value
+            else:
+                out[name] = None
+                missing[name] = f"{status} budget ran out on {edge} ({budget.time_s:g} s, {budget.memory_mb:g} MiB)"
+    if missing:
+        out["not_computed"] = missing
     return out
 
 
@@ -151,7 +162,7 @@ def _job(args: tuple) -> dict:
     from aerodaas.schedulers.analytics_base import Workload
     from aerodaas.schedulers.dispatch.emulation import Jitter
 
-    cell, seed, drones, duration_s, fps, names, options, edge_jitter, wpath, bound, exact, trace = args
+    cell, seed, drones, duration_s, fps, names, options, edge_jitter, wpath, bound, exact, trace, budget = args
     t0 = time.process_time()
     w = Workload.from_file(wpath, cell.load)
     specs = scenario_specs(cell.scenario, duration_s)
@@ -162,7 +173,7 @@ def _job(args: tuple) -> dict:
         out["results"][name] = run_fleet(name, w, per_edge, seed=seed, edge_jitter=ej, cloud_jitter=cj,
                                          network_specs=specs, options=options)
     if bound:
-        out["bounds"] = _bounds(per_edge, w, specs, seed, ej, cj, exact)
+        out["bounds"] = _bounds(per_edge, w, specs, seed, ej, cj, exact, budget)
     out["cpu_s"] = time.process_time() - t0
     return out
 
@@ -173,7 +184,7 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
               schedulers: Sequence[str] | None = None, options: dict | None = None,
               edge_jitter: str = "lognormal:0.05", workload_path: str | os.PathLike | None = None,
               processes: int | None = None, bound: bool = True, exact_bound_loads: Sequence[str] = ("HEAVY",),
-              progress=None, trace=None) -> dict:
+              progress=None, trace=None, bound_budget=None) -> dict:
     """Run the sweep; returns the JSON-able result (``config``, ``cells``, ``results``, ``jobs``).
 
     ``drones``: fleet size per run (default ``edges`` x drones per edge). Scenarios other than ``"none"`` are run
@@ -182,6 +193,8 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     for the loads in ``exact_bound_loads`` the exact and the non-anticipative bounds too (seconds per edge at
     HEAVY; at MEDIUM the long deadlines make the exact one slow, and the LP is already within 1 % of the best
     policy there). ``trace``: the arrival process (:class:`aerodaas.bench.traces.TraceSpec`; default periodic).
+    ``bound_budget``: the time and memory each edge's exact DP may use (:class:`aerodaas.bench.bound.Budget`;
+    default 120 s, 1 GiB): past it the bound is reported "not computed", with the LP bound beside it.
     Raises ValueError for bad parameters, before any work starts."""
     from aerodaas.bench import machine_info
     from aerodaas.bench.schedulers import LOADS, default_workload_path
@@ -212,11 +225,14 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     w0 = Workload.from_file(wpath, loads[0])
     for n in names:  # a bad option value (e.g. an estimator spec) fails here, not in a worker
         make_analytics_scheduler(n, w0, **filter_options(n, options or {}))
+    from aerodaas.bench.bound import Budget
+
+    budget = bound_budget or Budget()
     scenario_loads = list(scenario_loads or ["HEAVY"])
     cells = [Cell(ld, float(s), int(d), sc) for sc in scenarios for ld in loads for d in drones_per_edge
              for s in sigmas if sc == "none" or ld in scenario_loads]
     jobs = [(c, seed, drones or edges * c.drones_per_edge, duration_s, fps, names, dict(options or {}), edge_jitter,
-             wpath, bound, bound and c.load in exact_bound_loads, trace) for c in cells for seed in seeds]
+             wpath, bound, bound and c.load in exact_bound_loads, trace, budget) for c in cells for seed in seeds]
     procs = processes or min(2, os.cpu_count() or 1)
     t0 = time.time()
     done = []
@@ -247,6 +263,7 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
                    "cloud_jitter": "lognormal:<cloud_sigma>", "options": dict(options or {}), "workload": wpath,
                    "processes": procs, "bounds": BOUND_NAMES if bound else None,
                    "exact_bound_loads": list(exact_bound_loads) if bound else [], "ours": OURS,
+                   "exact_bound_budget": asdict(budget) if bound else None,
                    "baselines": list(BASELINES)},
         "results": results, "claims": claims(results),
         "wall_s": time.time() - t0, "cpu_s": sum(r["cpu_s"] for r in done),
@@ -261,8 +278,11 @@ def aggregate(jobs: Sequence[dict], names: Sequence[str]) -> list[dict]:
     out = []
     for key, js in by_cell.items():
         cell = js[0]["cell"]
+        # a bound enters only if it was computed on every seed (an exact one may have run out of its budget)
         bounds = {k: [j["bounds"][k] for j in js] for k in ("lp", "exact", "na")
-                  if all(k in j.get("bounds", {}) for j in js)}
+                  if all(j.get("bounds", {}).get(k) is not None for j in js)}
+        not_computed = {f"seed {j['seed']}": j["bounds"]["not_computed"] for j in js
+                        if j.get("bounds", {}).get("not_computed")}
         for name in names:
             rs = [j["results"][name] for j in js]
             counters = sorted({k for r in rs for k in r["counters"]})
@@ -288,6 +308,8 @@ def aggregate(jobs: Sequence[dict], names: Sequence[str]) -> list[dict]:
                 if "na" in bounds:
                     row["bound_na"] = mean_ci(bounds["na"])
                     row["fraction_of_na_bound"] = mean_ci([r["utility"] / b for r, b in zip(rs, bounds["na"])])
+                if not_computed:  # said, with the LP beside it (bound_lp), never left out silently
+                    row["bounds_not_computed"] = not_computed
             out.append(row)
     return out
 
@@ -358,7 +380,9 @@ def format_sweep(res: dict) -> str:
             b = r.get("upper_bound")
             bs = "" if not b else (f"  (bounds: LP {_pm(r['bound_lp'])}" +
                                    (f", exact {_pm(r['upper_bound'])}" if r["upper_bound_kind"] == "exact" else "") +
-                                   (f", non-anticipative {_pm(r['bound_na'])}" if "bound_na" in r else "") + ")")
+                                   (f", non-anticipative {_pm(r['bound_na'])}" if "bound_na" in r else "") +
+                                   (f"; not computed: {r['bounds_not_computed']}" if r.get("bounds_not_computed")
+                                    else "") + ")")
             lines += ["", f"{r['load']}  cloud sigma {r['cloud_sigma']:g}  {r['drones_per_edge']} drones/edge  network "
                           f"{r['scenario']}" + bs]
         c = {k: v["mean"] for k, v in r["counters"].items()}

@@ -5,8 +5,8 @@ from a recording's camera-frame timestamps.
 Real drone video is not periodic: encoders and links jitter each frame gap, frames are lost on the link, and drones
 join and leave a fleet mid-mission. It also arrives in bursts (issue 41): encoder GOPs and paused streams (on/off),
 heavy-tailed gaps, and a link that stalls and then delivers its buffered frames back to back. Every bursty kind keeps
-the mean frame rate (``1/period``), so a trace differs from the periodic one in its shape only. :func:`frame_times` gives one drone's frame send times (ms) for a
-:class:`TraceSpec`; :func:`aerodaas.bench.schedulers.make_trace` turns them into the benchmark's task rows.
+the mean frame rate (``1/period``), so a trace differs from the periodic one in its shape only.
+:func:`frame_times` gives one drone's frame send times (ms) for a :class:`TraceSpec`; :func:`aerodaas.bench.schedulers.make_trace` turns them into the benchmark's task rows.
 
 Every draw is seeded per (seed, drone) (:func:`random.Random` of a string, which CPython seeds through SHA-512), so a
 drone's frames do not depend on the other drones nor on the fleet size.
@@ -116,7 +116,8 @@ class TraceSpec:
         """Short description for reports, e.g. ``realistic(jitter 0.2, drop 0.1, joins 1, leaves 0)``."""
         if self.kind == "periodic":
             return "periodic"
-        shape = {"recording": f"recording {Path(self.recording or '').name}, ", "realistic": f"jitter {self.jitter:g}, ",
+        shape = {"recording": f"recording {Path(self.recording or '').name}, ",
+                 "realistic": f"jitter {self.jitter:g}, ",
                  "pareto": f"alpha {self.alpha:g}, ", "onoff": f"on {self.on_s:g} s, off {self.off_s:g} s, ",
                  "flush": f"stall {self.stall_s:g} s every {self.stall_every_s:g} s, flushed "
                           f"{self.flush_gap_ms:g} ms apart, "}[self.kind]
