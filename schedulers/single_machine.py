@@ -189,6 +189,13 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
         if res is not None:
             return res
     SOLVES["python"] += 1
+    return _label_setting(_groups(members, jobs, gains, free_at), gains)
+
+
+def _groups(members: dict, jobs: Sequence[tuple[float, float, float, float]], gains: list[float], free_at: float
+            ) -> list[_Group]:
+    """The DP's groups (a bit each), sorted by release. Raises ValueError if a group's jobs differ in release or
+    processing time."""
     gs: list[_Group] = []
     for k, js in enumerate(members.values()):
         r, p = jobs[js[0]][0], jobs[js[0]][2]
@@ -196,17 +203,22 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
             raise ValueError("the jobs of one group must share their release and processing time")
         gs.append(_Group(1 << k, max(r, free_at), p, [(jobs[j][1] - p, j) for j in js], gains))
     gs.sort(key=lambda g: g.release)
-    releases = sorted({g.release for g in gs})
+    return gs
 
-    # The loop below is the label-setting DP written out inline (no helper calls per label: this is LAPLAN's
-    # decision time on the dispatcher). Tie order is the heap's (free time, push counter) order.
+
+def _label_setting(gs: list[_Group], gains: list[float]) -> tuple[float, list[tuple[int, float]]]:
+    """The label-setting DP of the module docstring over the groups ``gs`` (sorted by release): ``(best gain,
+    [(job index, start ms)])``. One pass per time ``t`` (a label's free time or a release): forget the jobs that can
+    no longer start (:func:`_forget`), release the groups of ``t``, keep the labels free at ``t`` that no stored one
+    dominates (:func:`_settle`), and extend them and the older ones by the jobs startable at ``t``
+    (:func:`_extend`). The per-label work is written out inline in those steps (no helper call per label: this is
+    LAPLAN's decision time when numba is missing). Tie order is the heap's (free time, push counter) order."""
+    releases = sorted({g.release for g in gs})
     seq = itertools.count()
-    push, pop = heapq.heappush, heapq.heappop
     heap: list = [(releases[0], next(seq), 0, 0.0, None)]  # (free at, tie, used mask, gain, path)
     store: dict[int, tuple[float, object]] = {}           # used mask (still startable at now) -> (gain, path)
-    sget = store.get
     active: list[_Group] = []                             # released, a variant still startable
-    best_gain, best_path = 0.0, None
+    best: list = [0.0, None]                              # best gain and its path
     gi, ngs = 0, len(gs)
     alive_mask = 0
     inf = float("inf")
@@ -216,18 +228,7 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
         if gi < ngs and gs[gi].release < t:
             t = gs[gi].release
         if t > expiry + _EPS:  # time advanced past an expiry: forget used jobs that can no longer start
-            active = [grp for grp in active if grp.latest[-1] + _EPS >= t]
-            expiry = min((grp.latest[-1] for grp in active), default=inf)
-            alive_mask = 0
-            for grp in active:
-                alive_mask |= grp.bit
-            pruned: dict[int, tuple[float, object]] = {}
-            for k, v in store.items():
-                k2 = k & alive_mask
-                if k2 not in pruned or pruned[k2][0] < v[0]:
-                    pruned[k2] = v
-            store = pruned
-            sget = store.get
+            active, store, alive_mask, expiry = _forget(active, store, t)
         newly: list[_Group] = []
         while gi < ngs and gs[gi].release == t:
             grp = gs[gi]
@@ -240,54 +241,88 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
         old = list(store.items()) if newly else ()
         if newly:
             active += newly
-        fresh: dict[int, None] = {}  # masks inserted at t, first-insertion order (a re-insertion expands once)
-        while heap and heap[0][0] == t:
-            _, _, mask, g, path = pop(heap)
-            mask &= alive_mask
-            # dominated: a stored label with a subset of the used jobs and at least the gain
-            lim = g - _EPS
-            sub = mask
-            while True:
-                v = sget(sub)
-                if v is not None and v[0] >= lim:
-                    break
-                if sub == 0:
-                    sub = -1
-                    break
-                sub = (sub - 1) & mask
-            if sub != -1:
-                continue
-            hi = g + _EPS
-            dead = [k for k, v in store.items() if k & mask == mask and v[0] <= hi]
-            for k in dead:
-                del store[k]
-            store[mask] = (g, path)
-            fresh[mask] = None
-            if g > best_gain + _EPS:
-                best_gain, best_path = g, path
-        if fresh:
-            cands = []
-            for grp in active:
-                j = grp.at(t)
-                if j is not None:
-                    cands.append((grp.bit, t + grp.proc, gains[j], j))
-            for mask in fresh:
-                v = sget(mask)
-                if v is not None:
-                    g, path = v
-                    for bit, end, gj, j in cands:
-                        if not mask & bit:
-                            push(heap, (end, next(seq), mask | bit, g + gj, (j, t, path)))
-        if newly:
-            cands = [(grp.bit, t + grp.proc, gains[j], j) for grp in newly for j in (grp.at(t),)]
-            for mask, (g, path) in old:
-                v = sget(mask)
-                if v is not None and v[0] == g and mask not in fresh:
-                    for bit, end, gj, j in cands:
-                        if not mask & bit:
-                            push(heap, (end, next(seq), mask | bit, g + gj, (j, t, path)))
+        fresh = _settle(t, heap, store, alive_mask, best)
+        _extend(t, heap, seq, store, gains, active, fresh, newly, old)
     out = []
+    best_path = best[1]
     while best_path is not None:
         j, s, best_path = best_path
         out.append((j, s))
-    return best_gain, out[::-1]
+    return best[0], out[::-1]
+
+
+def _forget(active: list[_Group], store: dict, t: float) -> tuple[list[_Group], dict, int, float]:
+    """At ``t``: the groups still startable, the store with the used jobs that can no longer start masked out (the
+    best gain per masked key), their bits and the next expiry."""
+    active = [grp for grp in active if grp.latest[-1] + _EPS >= t]
+    expiry = min((grp.latest[-1] for grp in active), default=float("inf"))
+    alive_mask = 0
+    for grp in active:
+        alive_mask |= grp.bit
+    pruned: dict[int, tuple[float, object]] = {}
+    for k, v in store.items():
+        k2 = k & alive_mask
+        if k2 not in pruned or pruned[k2][0] < v[0]:
+            pruned[k2] = v
+    return active, pruned, alive_mask, expiry
+
+
+def _settle(t: float, heap: list, store: dict, alive_mask: int, best: list) -> dict[int, None]:
+    """Pop the labels free at ``t``; store each one no stored label dominates (a subset of its used jobs with at
+    least its gain), removing those it dominates; update ``best``. Returns the masks stored at ``t`` in
+    first-insertion order (a re-insertion extends once)."""
+    pop, sget = heapq.heappop, store.get
+    fresh: dict[int, None] = {}
+    while heap and heap[0][0] == t:
+        _, _, mask, g, path = pop(heap)
+        mask &= alive_mask
+        lim = g - _EPS
+        sub = mask
+        while True:  # the submasks of mask, down to 0: a stored one with at least the gain dominates
+            v = sget(sub)
+            if v is not None and v[0] >= lim:
+                break
+            if sub == 0:
+                sub = -1
+                break
+            sub = (sub - 1) & mask
+        if sub != -1:
+            continue
+        hi = g + _EPS
+        dead = [k for k, v in store.items() if k & mask == mask and v[0] <= hi]
+        for k in dead:
+            del store[k]
+        store[mask] = (g, path)
+        fresh[mask] = None
+        if g > best[0] + _EPS:
+            best[0], best[1] = g, path
+    return fresh
+
+
+def _extend(t: float, heap: list, seq, store: dict, gains: list[float], active: list[_Group], fresh: dict,
+            newly: list[_Group], old) -> None:
+    """Push the labels of starting, at ``t``, a job not used yet: every job startable at ``t`` after a label stored at
+    ``t`` (``fresh``), and the jobs released at ``t`` (``newly``) after a label stored earlier and still kept
+    (``old``, as it was before ``t``)."""
+    push, sget = heapq.heappush, store.get
+    if fresh:
+        cands = []
+        for grp in active:
+            j = grp.at(t)
+            if j is not None:
+                cands.append((grp.bit, t + grp.proc, gains[j], j))
+        for mask in fresh:
+            v = sget(mask)
+            if v is not None:
+                g, path = v
+                for bit, end, gj, j in cands:
+                    if not mask & bit:
+                        push(heap, (end, next(seq), mask | bit, g + gj, (j, t, path)))
+    if newly:
+        cands = [(grp.bit, t + grp.proc, gains[j], j) for grp in newly for j in (grp.at(t),)]
+        for mask, (g, path) in old:
+            v = sget(mask)
+            if v is not None and v[0] == g and mask not in fresh:
+                for bit, end, gj, j in cands:
+                    if not mask & bit:
+                        push(heap, (end, next(seq), mask | bit, g + gj, (j, t, path)))
