@@ -30,6 +30,7 @@ actual vs intended edge hold, actual vs intended cloud round trip, how late poli
 from __future__ import annotations
 
 from dataclasses import asdict
+import functools
 import itertools
 import math
 import os
@@ -231,33 +232,17 @@ def _run_one(hosts, host_edges: list[list[str]], cloud, name: str, workload, tra
     return outs + [{"wall_s": time.time() - t}]
 
 
-def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str] = ("MEDIUM",), drones: int = 80,
-                   duration_s: float = 60.0, seed: int = 0, drones_per_edge: int = DEFAULT_DRONES_PER_EDGE,
-                   fps: float = DEFAULT_FPS, network: Sequence[str] | None = None,
-                   edge_jitter: str = "lognormal:0.05", cloud_jitter: str = "lognormal:0.1", cloud_nodes: int = 1,
-                   cloud_executors: int | None = None, edge_hosts: int | None = None, address: str | None = None,
-                   repeat: int = 1, drain_s: float = 10.0, workload_path: str | os.PathLike | None = None,
-                   progress: bool = True, reply_lead_ms: float = 100.0, seeds: int = 1,
-                   cloud_sigmas: Sequence[float] | None = None, scenarios: Sequence[str] | None = None,
-                   options: dict | None = None, emulation_bound_ms: float = EMULATION_BOUND_MS, trace=None) -> dict:
-    """Run the benchmark; returns the JSON-able result (see the module docstring): ``runs`` (one row per
-    scheduler, load, cloud sigma, scenario and seed ``seed .. seed + seeds - 1``) and ``results`` (per scheduler,
-    load, sigma and scenario: every figure as mean ± 95 % CI over the seeds, :func:`summarize_runs`).
-    ``cloud_sigmas``: lognormal cloud jitter sigmas to sweep (overrides ``cloud_jitter``); ``scenarios``: network
-    scenarios of :mod:`aerodaas.bench.sweep` added to ``network``; ``options``: scheduler options (``estimator``,
-    ``eviction_scan``) for every policy that accepts them; ``trace``: the arrival process
-    (:class:`aerodaas.bench.traces.TraceSpec`, default periodic). A run whose worst emulation timing error p99 exceeds
-    ``emulation_bound_ms`` is marked invalid. Raises ValueError for an unknown scheduler or load, or bad numbers,
-    before starting Ray."""
+def _checked(schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_jitter, cloud_jitter, network,
+             cloud_sigmas, scenarios, duration_s, workload_path, options) -> tuple:
+    """:func:`run_schedulers`'s parameters checked before Ray starts (ValueError naming the field): the scheduler
+    names, the (sigma, cloud jitter) pairs, the scenarios and their network specs, the workload's path, the
+    workloads by load and each scheduler's options (every scheduler built once with them)."""
     from aerodaas.bench.sweep import scenario_specs
     from aerodaas.schedulers.analytics_base import filter_options
-    from aerodaas.actors.cloud_executor import start_cloud_executors
-    from aerodaas.bench.edge_host import EdgeHostActor
     from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
     from aerodaas.schedulers.analytics_base import Workload, analytics_scheduler_names
 
     known = analytics_scheduler_names()
-    trace_spec = trace
     names = list(schedulers) if schedulers else known
     unknown = [n for n in names if n not in known]
     if unknown:
@@ -287,19 +272,130 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
     opts = {n: filter_options(n, options or {}) for n in names}
     for n in names:  # a bad option value fails here, before Ray
         make_analytics_scheduler(n, workloads[loads[0]], **opts[n])
-    layout = edge_layout(drones, drones_per_edge)
-    n_edges = len(layout)
-    ncpu = os.cpu_count() or 2
-    # one host process per core and one more: on 2 cores, 80 drones with LAPLAN (2026-11-24, seed 2) gave an
-    # emulation p99 of 5.1 ms with 2 hosts, 4.8-5.5 ms with 3, 7.2 with 4, 6.8-13.3 with 5 and 8.6 with 7 (each host
-    # process brings Ray's own threads; fewer hosts queue more edges behind each decision)
-    n_hosts = max(1, min(edge_hosts or ncpu + 1, n_edges))
-    edge_ids = [f"edge{e:02d}" for e in range(n_edges)]
-    host_edges = [edge_ids[i::n_hosts] for i in range(n_hosts)]
+    return names, jitters, scen, nets, wpath, workloads, opts
 
-    def say(msg: str) -> None:
-        if progress:
-            print(f"[bench schedulers] {msg}", file=sys.stderr, flush=True)
+
+def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, repeat, trace_spec, edge_jitter,
+            cloud_jitter, network, seed, cloud_nodes, address, n_hosts, n_cloud, wpath, reply_lead_ms, jitters, scen,
+            options, emulation_bound_ms) -> dict:
+    """The runtime result's ``config``: every option that shaped it (issue 41.4)."""
+    from aerodaas.schedulers.dispatch.emulation import NetworkModel
+
+    return {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
+            "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
+            "trace": asdict(trace_spec) if trace_spec is not None else None,
+            "edge_jitter": edge_jitter, "cloud_jitter": cloud_jitter,
+            "network_variability": list(network or []), "network": NetworkModel.parse(network, seed).describe(),
+            "cloud_nodes": cloud_nodes if not address else None, "address": address,
+            "edge_hosts": n_hosts, "cloud_executors": n_cloud, "workload": str(wpath), "mode": "emulated",
+            "cloud_reply_lead_ms": reply_lead_ms, "worker_niceness": 0 if not address else None,
+            "cloud_sigma": [j[0] for j in jitters], "scenarios": scen, "options": dict(options or {}),
+            "emulation_bound_ms": emulation_bound_ms,
+            "emulation_bound_why": "a run is valid only if its worst timing error p99 (arrival, edge hold, cloud "
+                                   "round trip, poll) stays within this bound, a sixth of the smallest "
+                                   "just-in-time margin (60 ms)"}
+
+
+def _arrival_process(trace_spec, fps: float, drones_per_edge: int) -> dict:
+    """The runtime result's ``arrival_process``: the per-drone process and where its rules come from."""
+    return {
+        "per_drone": f"one frame every {1000.0 / fps:g} ms from a seeded random phase" if trace_spec is None
+        or trace_spec.kind == "periodic" else f"{trace_spec.label()} around a {1000.0 / fps:g} ms frame gap",
+        "per_frame": "one task per active model, seeded shuffled order, same arrival time",
+        "drones_per_edge": drones_per_edge,
+        "source": "dream-lab/ocularone-scheduler: TaskCreation.java (one task per model per batch, shuffled), "
+                  "DNNPerfModel keyed by frame count 1, conf/config.yaml batch_length 1 s; paper: >80 drones, "
+                  ">25 VIPs, several drones per Jetson Nano edge (arXiv 2412.20860)"}
+
+
+def _start_actors(nodes: list[dict], address: str | None, cloud_executors: int | None, n_hosts: int) -> tuple:
+    """The edge host actors (on the ``tier=edge`` node) and the cloud executors (one per cloud node unless
+    ``cloud_executors``). Raises ValueError when no node is labelled ``tier=edge``."""
+    from aerodaas.actors.cloud_executor import start_cloud_executors
+    from aerodaas.bench.edge_host import EdgeHostActor
+
+    if not any(n["labels"].get("tier") == "edge" for n in nodes):
+        raise ValueError(f"the cluster at {address!r} has no node labelled tier=edge (start the edge node with "
+                         "`ray start --labels tier=edge`, see docs/clusters.md)")
+    n_cloud_nodes = sum(1 for n in nodes if n["labels"].get("tier") == "cloud")
+    cloud = start_cloud_executors(cloud_executors or max(1, n_cloud_nodes)) if (n_cloud_nodes or address) else []
+    hosts = [EdgeHostActor.options(label_selector={"tier": "edge"}).remote(f"edge-host{i}") for i in range(n_hosts)]
+    return hosts, cloud
+
+
+def _kill(ray, actors) -> None:
+    """Kill the benchmark's actors (on a shared cluster, --address, leave nothing behind)."""
+    for actor in actors:
+        try:
+            ray.kill(actor)
+        except Exception:
+            pass
+
+
+def _measure(hosts, host_edges, cloud, name: str, w, by_host, k: int, say, *, shape: tuple, **run_kw) -> dict:
+    """Repeat ``k`` of scheduler ``name`` on the hosts (:func:`_run_one` with ``run_kw``), merged into one result
+    (:func:`_merge`; ``shape`` = (load, drones, edges, drones per edge)) and reported through ``say``."""
+    load, drones, n_edges, drones_per_edge = shape
+    outs = _run_one(hosts, host_edges, cloud, name, w, by_host, **run_kw)
+    wall = outs.pop()["wall_s"]
+    r = _merge(name, load, drones, n_edges, drones_per_edge, outs, wall)
+    say(f"{load} {name} #{k + 1}: on-time {100 * r['on_time_rate']:.1f}% utility {r['utility']:.0f} "
+        f"cloud cost {r['cloud_cost']:.0f} decision p50/p99 {r['decision_us']['p50']:.1f}/"
+        f"{r['decision_us']['p99']:.1f} us; emulation error p99 {_emulation_p99(r):.1f} ms "
+        f"({wall:.0f} s; edge hosts' CPU {sum(r['host_cpu_s']):.1f} s, max per host "
+        f"{max(r['host_cpu_s'], default=0):.1f} s; load average {os.getloadavg()[0]:.1f})")
+    return r
+
+
+def _host_edges(edge_hosts: int | None, n_edges: int) -> list[list[str]]:
+    """The edge ids each edge host actor runs: ``edge_hosts`` hosts (default one per core and one more: on 2 cores,
+    80 drones with LAPLAN (2026-11-24, seed 2) gave an emulation p99 of 5.1 ms with 2 hosts, 4.8-5.5 ms with 3, 7.2
+    with 4, 6.8-13.3 with 5 and 8.6 with 7; each host process brings Ray's own threads, fewer hosts queue more edges
+    behind each decision), at most one per edge, the edges dealt round-robin."""
+    n_hosts = max(1, min(edge_hosts or (os.cpu_count() or 2) + 1, n_edges))
+    edge_ids = [f"edge{e:02d}" for e in range(n_edges)]
+    return [edge_ids[i::n_hosts] for i in range(n_hosts)]
+
+
+def _say(progress: bool, msg: str) -> None:
+    if progress:
+        print(f"[bench schedulers] {msg}", file=sys.stderr, flush=True)
+
+
+def _warm_up_scheduler(names: Sequence[str]) -> str:
+    """The scheduler of the warm-up run (not recorded): one that uses the cloud, so that every code path (actor
+    imports, the cloud link) is hot before the measured runs."""
+    from aerodaas.schedulers.analytics_base import iter_schedulers
+
+    return next((c.name for c in iter_schedulers(names) if c.uses_cloud), names[0])
+
+
+def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str] = ("MEDIUM",), drones: int = 80,
+                   duration_s: float = 60.0, seed: int = 0, drones_per_edge: int = DEFAULT_DRONES_PER_EDGE,
+                   fps: float = DEFAULT_FPS, network: Sequence[str] | None = None,
+                   edge_jitter: str = "lognormal:0.05", cloud_jitter: str = "lognormal:0.1", cloud_nodes: int = 1,
+                   cloud_executors: int | None = None, edge_hosts: int | None = None, address: str | None = None,
+                   repeat: int = 1, drain_s: float = 10.0, workload_path: str | os.PathLike | None = None,
+                   progress: bool = True, reply_lead_ms: float = 100.0, seeds: int = 1,
+                   cloud_sigmas: Sequence[float] | None = None, scenarios: Sequence[str] | None = None,
+                   options: dict | None = None, emulation_bound_ms: float = EMULATION_BOUND_MS, trace=None) -> dict:
+    """Run the benchmark; returns the JSON-able result (see the module docstring): ``runs`` (one row per
+    scheduler, load, cloud sigma, scenario and seed ``seed .. seed + seeds - 1``) and ``results`` (per scheduler,
+    load, sigma and scenario: every figure as mean ± 95 % CI over the seeds, :func:`summarize_runs`).
+    ``cloud_sigmas``: lognormal cloud jitter sigmas to sweep (overrides ``cloud_jitter``); ``scenarios``: network
+    scenarios of :mod:`aerodaas.bench.sweep` added to ``network``; ``options``: scheduler options (``estimator``,
+    ``eviction_scan``) for every policy that accepts them; ``trace``: the arrival process
+    (:class:`aerodaas.bench.traces.TraceSpec`, default periodic). A run whose worst emulation timing error p99 exceeds
+    ``emulation_bound_ms`` is marked invalid. Raises ValueError for an unknown scheduler or load, or bad numbers,
+    before starting Ray."""
+    trace_spec = trace
+    names, jitters, scen, nets, wpath, workloads, opts = _checked(
+        schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_jitter, cloud_jitter, network,
+        cloud_sigmas, scenarios, duration_s, workload_path, options)
+    n_edges = len(edge_layout(drones, drones_per_edge))
+    host_edges = _host_edges(edge_hosts, n_edges)
+    n_hosts = len(host_edges)
+    say = functools.partial(_say, progress)
 
     cluster = _Cluster(address, cloud_nodes)
     results, t_all = [], time.time()
@@ -308,29 +404,17 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
 
     try:
         nodes = cluster.nodes()
-        if not any(n["labels"].get("tier") == "edge" for n in nodes):
-            raise ValueError(f"the cluster at {address!r} has no node labelled tier=edge (start the edge node with "
-                             "`ray start --labels tier=edge`, see docs/clusters.md)")
-        n_cloud_nodes = sum(1 for n in nodes if n["labels"].get("tier") == "cloud")
-        cloud = start_cloud_executors(cloud_executors or max(1, n_cloud_nodes)) if (n_cloud_nodes or address) else []
-        hosts = [EdgeHostActor.options(label_selector={"tier": "edge"}).remote(f"edge-host{i}")
-                 for i in range(n_hosts)]
+        hosts, cloud = _start_actors(nodes, address, cloud_executors, n_hosts)
         host_info = ray.get([h.info.remote() for h in hosts])
         cloud_info = ray.get([c.info.remote() for c in cloud])
-        say(f"cluster: {len(nodes)} nodes ({n_cloud_nodes} cloud); {n_edges} edges on {n_hosts} host actor(s); "
-            f"{len(cloud)} cloud executor(s)")
-        # warm-up, not recorded: one short run of a scheduler that uses the cloud, so every code path (actor
-        # imports, the cloud link) is hot before the measured runs
-        from aerodaas.schedulers.analytics_base import iter_schedulers
-
-        w0 = workloads[loads[0]]
+        say(f"cluster: {len(nodes)} nodes; {n_edges} edges on {n_hosts} host actor(s); {len(cloud)} cloud "
+            "executor(s)")
         host_of = {e: i for i, es in enumerate(host_edges) for e in es}
-        warm_name = next((c.name for c in iter_schedulers(names) if c.uses_cloud), names[0])
-        warm = make_trace(w0, min(drones, 2 * drones_per_edge), 0.6, seed + 7919, drones_per_edge, fps)
-        _run_one(hosts, host_edges, cloud, warm_name, w0,
+        warm = make_trace(workloads[loads[0]], min(drones, 2 * drones_per_edge), 0.6, seed + 7919, drones_per_edge, fps)
+        _run_one(hosts, host_edges, cloud, _warm_up_scheduler(names), workloads[loads[0]],
                  [[r for r in warm if host_of[r[1]] == i] for i in range(n_hosts)], seed=seed,
                  edge_jitter=edge_jitter, cloud_jitter=cloud_jitter, network=network, drain_s=drain_s,
-                 reply_lead_ms=reply_lead_ms)
+                 reply_lead_ms=reply_lead_ms)  # warm-up, not recorded (see _warm_up_scheduler)
         for load, (sigma, cj), sc, sd in itertools.product(loads, jitters, scen, range(seed, seed + seeds)):
             w = workloads[load]
             trace = make_trace(w, drones, duration_s, sd, drones_per_edge, fps, trace_spec)
@@ -338,56 +422,26 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
             say(f"{load} cloud jitter {cj} network {sc} seed {sd}: {len(trace)} tasks from {drones} drones over "
                 f"{duration_s:g} s (load average {os.getloadavg()[0]:.2f})")
             for name in names:
-                reps = []
-                for k in range(repeat):
-                    outs = _run_one(hosts, host_edges, cloud, name, w, by_host, seed=sd, edge_jitter=edge_jitter,
-                                    cloud_jitter=cj, network=nets[sc], drain_s=drain_s,
-                                    reply_lead_ms=reply_lead_ms, options=opts[name])
-                    wall = outs.pop()["wall_s"]
-                    reps.append(_merge(name, load, drones, n_edges, drones_per_edge, outs, wall))
-                    r = reps[-1]
-                    say(f"{load} {name} #{k + 1}: on-time {100 * r['on_time_rate']:.1f}% utility {r['utility']:.0f} "
-                        f"cloud cost {r['cloud_cost']:.0f} decision p50/p99 {r['decision_us']['p50']:.1f}/"
-                        f"{r['decision_us']['p99']:.1f} us; emulation error p99 {_emulation_p99(r):.1f} ms "
-                        f"({wall:.0f} s; edge hosts' CPU {sum(r['host_cpu_s']):.1f} s, max per host "
-                        f"{max(r['host_cpu_s'], default=0):.1f} s; load average {os.getloadavg()[0]:.1f})")
+                reps = [_measure(hosts, host_edges, cloud, name, w, by_host, k, say, seed=sd, edge_jitter=edge_jitter,
+                                 cloud_jitter=cj, network=nets[sc], drain_s=drain_s, reply_lead_ms=reply_lead_ms,
+                                 options=opts[name], shape=(load, drones, n_edges, drones_per_edge))
+                        for k in range(repeat)]
                 row = _with_repeats(reps)
                 row.update(seed=sd, cloud_sigma=sigma, cloud_jitter=cj, scenario=sc,
                            load_avg_1min=round(os.getloadavg()[0], 2), emulation_p99_ms=_emulation_p99(row),
                            emulation_valid=_emulation_p99(row) <= emulation_bound_ms)
                 results.append(row)
     finally:
-        for actor in (*hosts, *cloud):  # on a shared cluster (--address) leave nothing behind
-            try:
-                ray.kill(actor)
-            except Exception:
-                pass
+        _kill(ray, (*hosts, *cloud))
         cluster.close()
     return {
         "benchmark": "schedulers", "mode": "runtime", "machine": machine_info(), "seed": seed,
         "seeds": list(range(seed, seed + seeds)),
-        "config": {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
-                   "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
-                   "trace": asdict(trace_spec) if trace_spec is not None else None,
-                   "edge_jitter": edge_jitter, "cloud_jitter": cloud_jitter,
-                   "network_variability": list(network or []), "network": NetworkModel.parse(network, seed).describe(),
-                   "cloud_nodes": cloud_nodes if not address else None, "address": address,
-                   "edge_hosts": n_hosts, "cloud_executors": len(cloud), "workload": str(wpath), "mode": "emulated",
-                   "cloud_reply_lead_ms": reply_lead_ms, "worker_niceness": 0 if not address else None,
-                   "cloud_sigma": [j[0] for j in jitters], "scenarios": scen, "options": dict(options or {}),
-                   "emulation_bound_ms": emulation_bound_ms,
-                   "emulation_bound_why": "a run is valid only if its worst timing error p99 (arrival, edge hold, "
-                                          "cloud round trip, poll) stays within this bound, a sixth of the smallest "
-                                          "just-in-time margin (60 ms)"},
+        "config": _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, repeat, trace_spec,
+                          edge_jitter, cloud_jitter, network, seed, cloud_nodes, address, n_hosts, len(cloud), wpath,
+                          reply_lead_ms, jitters, scen, options, emulation_bound_ms),
         "cluster": {"nodes": nodes, "edge_hosts": host_info, "cloud_executors": cloud_info},
-        "arrival_process": {
-            "per_drone": f"one frame every {1000.0 / fps:g} ms from a seeded random phase" if trace_spec is None
-            or trace_spec.kind == "periodic" else f"{trace_spec.label()} around a {1000.0 / fps:g} ms frame gap",
-            "per_frame": "one task per active model, seeded shuffled order, same arrival time",
-            "drones_per_edge": drones_per_edge,
-            "source": "dream-lab/ocularone-scheduler: TaskCreation.java (one task per model per batch, shuffled), "
-                      "DNNPerfModel keyed by frame count 1, conf/config.yaml batch_length 1 s; paper: >80 drones, "
-                      ">25 VIPs, several drones per Jetson Nano edge (arXiv 2412.20860)"},
+        "arrival_process": _arrival_process(trace_spec, fps, drones_per_edge),
         "runs": results, "results": summarize_runs(results), "emulation": _emulation_summary(results),
         "wall_s": time.time() - t_all,
     }

@@ -197,12 +197,51 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     default 120 s, 1 GiB): past it the bound is reported "not computed", with the LP bound beside it.
     Raises ValueError for bad parameters, before any work starts."""
     from aerodaas.bench import machine_info
+
+    names = list(schedulers or DEFAULT_SCHEDULERS)
+    wpath = _checked(names, loads, sigmas, drones_per_edge, scenarios, seeds, duration_s, edge_jitter, workload_path,
+                     options)
+    from aerodaas.bench.bound import Budget
+
+    budget = bound_budget or Budget()
+    scenario_loads = list(scenario_loads or ["HEAVY"])
+    cells = [Cell(ld, float(s), int(d), sc) for sc in scenarios for ld in loads for d in drones_per_edge
+             for s in sigmas if sc == "none" or ld in scenario_loads]
+    jobs = [(c, seed, drones or edges * c.drones_per_edge, duration_s, fps, names, dict(options or {}), edge_jitter,
+             wpath, bound, bound and c.load in exact_bound_loads, trace, budget) for c in cells for seed in seeds]
+    procs = processes or min(2, os.cpu_count() or 1)
+    t0 = time.time()
+    done = _run_jobs(jobs, procs, progress)
+    done.sort(key=lambda r: (cells.index(Cell(**r["cell"])), r["seed"]))
+    results = aggregate(done, names)
+    return {
+        "benchmark": "schedulers", "mode": "harness", "machine": machine_info(),
+        "config": {"schedulers": names, "loads": list(loads), "cloud_sigma": list(sigmas),
+                   "drones_per_edge": list(drones_per_edge), "scenarios": list(scenarios),
+                   "scenario_loads": scenario_loads, "scenario_specs": {s: SCENARIOS[s] for s in scenarios},
+                   "seeds": list(seeds), "drones": drones, "edges_per_run": None if drones else edges,
+                   "duration_s": duration_s, "fps": fps, "edge_jitter": edge_jitter,
+                   "trace": asdict(trace) if trace is not None else None,
+                   "trace_label": trace.label() if trace is not None else "periodic",
+                   "cloud_jitter": "lognormal:<cloud_sigma>", "options": dict(options or {}), "workload": wpath,
+                   "processes": procs, "bounds": BOUND_NAMES if bound else None,
+                   "exact_bound_loads": list(exact_bound_loads) if bound else [], "ours": OURS,
+                   "exact_bound_budget": asdict(budget) if bound else None,
+                   "baselines": list(BASELINES)},
+        "results": results, "claims": claims(results),
+        "wall_s": time.time() - t0, "cpu_s": sum(r["cpu_s"] for r in done),
+    }
+
+
+def _checked(names, loads, sigmas, drones_per_edge, scenarios, seeds, duration_s, edge_jitter, workload_path,
+             options) -> str:
+    """The sweep's parameters checked before any work (ValueError naming the field); returns the workload's path.
+    Every scheduler is built once with its options, so a bad option value fails here, not in a worker."""
     from aerodaas.bench.schedulers import LOADS, default_workload_path
     from aerodaas.schedulers.dispatch.emulation import Jitter
     from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options,
                                                     make_analytics_scheduler)
 
-    names = list(schedulers or DEFAULT_SCHEDULERS)
     unknown = [n for n in names if n not in analytics_scheduler_names()]
     if unknown:
         raise ValueError(f"schedulers: unknown {unknown}; registered: {analytics_scheduler_names()}")
@@ -223,19 +262,15 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     if not Path(wpath).is_file():
         raise ValueError(f"workload file not found: {wpath} (set AERODAAS_DATA_DIR)")
     w0 = Workload.from_file(wpath, loads[0])
-    for n in names:  # a bad option value (e.g. an estimator spec) fails here, not in a worker
+    for n in names:
         make_analytics_scheduler(n, w0, **filter_options(n, options or {}))
-    from aerodaas.bench.bound import Budget
+    return wpath
 
-    budget = bound_budget or Budget()
-    scenario_loads = list(scenario_loads or ["HEAVY"])
-    cells = [Cell(ld, float(s), int(d), sc) for sc in scenarios for ld in loads for d in drones_per_edge
-             for s in sigmas if sc == "none" or ld in scenario_loads]
-    jobs = [(c, seed, drones or edges * c.drones_per_edge, duration_s, fps, names, dict(options or {}), edge_jitter,
-             wpath, bound, bound and c.load in exact_bound_loads, trace, budget) for c in cells for seed in seeds]
-    procs = processes or min(2, os.cpu_count() or 1)
-    t0 = time.time()
-    done = []
+
+def _run_jobs(jobs: list, procs: int, progress) -> list[dict]:
+    """Every job through :func:`_job`, in ``procs`` forked worker processes (or here for one), reporting
+    ``progress(done, total)``; the results in completion order."""
+    done: list[dict] = []
     if procs > 1 and len(jobs) > 1:
         import multiprocessing
 
@@ -244,30 +279,12 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
                 done.append(r)
                 if progress:
                     progress(len(done), len(jobs))
-    else:
-        for j in jobs:
-            done.append(_job(j))
-            if progress:
-                progress(len(done), len(jobs))
-    done.sort(key=lambda r: (cells.index(Cell(**r["cell"])), r["seed"]))
-    results = aggregate(done, names)
-    return {
-        "benchmark": "schedulers", "mode": "harness", "machine": machine_info(),
-        "config": {"schedulers": names, "loads": list(loads), "cloud_sigma": list(sigmas),
-                   "drones_per_edge": list(drones_per_edge), "scenarios": list(scenarios),
-                   "scenario_loads": scenario_loads, "scenario_specs": {s: SCENARIOS[s] for s in scenarios},
-                   "seeds": list(seeds), "drones": drones, "edges_per_run": None if drones else edges,
-                   "duration_s": duration_s, "fps": fps, "edge_jitter": edge_jitter,
-                   "trace": asdict(trace) if trace is not None else None,
-                   "trace_label": trace.label() if trace is not None else "periodic",
-                   "cloud_jitter": "lognormal:<cloud_sigma>", "options": dict(options or {}), "workload": wpath,
-                   "processes": procs, "bounds": BOUND_NAMES if bound else None,
-                   "exact_bound_loads": list(exact_bound_loads) if bound else [], "ours": OURS,
-                   "exact_bound_budget": asdict(budget) if bound else None,
-                   "baselines": list(BASELINES)},
-        "results": results, "claims": claims(results),
-        "wall_s": time.time() - t0, "cpu_s": sum(r["cpu_s"] for r in done),
-    }
+        return done
+    for j in jobs:
+        done.append(_job(j))
+        if progress:
+            progress(len(done), len(jobs))
+    return done
 
 
 def aggregate(jobs: Sequence[dict], names: Sequence[str]) -> list[dict]:
