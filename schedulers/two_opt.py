@@ -225,39 +225,69 @@ def _local_search(D: list[list[float]], neigh: list[list[int]], neigh_d: list[li
     """2-opt + Or-opt on the open path ``t`` (in place; ``pos`` is scratch space for node positions) until no
     candidate move improves it. ``seeds`` are the nodes whose don't-look bits start cleared. Returns the total
     change of the path length (<= 0, metres)."""
-    m = len(t) - 1
-    total = 0.0
-    for k, v in enumerate(t):
-        pos[v] = k
-    inq = [False] * (m + 1)
-    queue: deque[int] = deque()
-    for v in seeds:
-        if v and not inq[v]:
-            inq[v] = True
-            queue.append(v)
+    return _LocalSearch(D, neigh, neigh_d, t, pos, asym, or_opt_max).run(seeds)
 
-    P: list[float] = []
 
-    def prefix() -> None:
-        # P[k] = sum over q < k of (D[t[q+1]][t[q]] - D[t[q]][t[q+1]]): reversal penalty of an asymmetric sub-path
+class _LocalSearch:
+    """The state of one :func:`_local_search`: the path ``t`` and node positions ``pos`` (both updated in place),
+    the don't-look queue, and for an asymmetric ``D`` the prefix sums of the reversal penalty."""
+
+    def __init__(self, D, neigh, neigh_d, t: list[int], pos: list[int], asym: bool, or_opt_max: int) -> None:
+        self.D, self.neigh, self.neigh_d, self.t, self.pos = D, neigh, neigh_d, t, pos
+        self.asym, self.or_opt_max = asym, or_opt_max
+        self.m = len(t) - 1
+        for k, v in enumerate(t):
+            pos[v] = k
+        self.inq = [False] * (self.m + 1)
+        self.queue: deque[int] = deque()
+        #: P[k] = sum over q < k of (D[t[q+1]][t[q]] - D[t[q]][t[q+1]]): reversal penalty of an asymmetric sub-path
+        self.P: list[float] = []
+        if asym:
+            self.prefix()
+
+    def run(self, seeds) -> float:
+        """Improve until no queued node has an improving move; the total change of the path length."""
+        self.push(*seeds)
+        total = 0.0
+        queue, inq = self.queue, self.inq
+        while queue:
+            a = queue.popleft()
+            inq[a] = False
+            d = self.try_two_opt(a) or self.try_or_opt(a)
+            if d:
+                total += d
+                self.push(a)
+        return total
+
+    def prefix(self) -> None:
+        D, t, P = self.D, self.t, self.P
         P.clear()
         acc = 0.0
         P.append(0.0)
-        for q in range(m):
+        for q in range(self.m):
             x, y = t[q], t[q + 1]
             acc += D[y][x] - D[x][y]
             P.append(acc)
 
-    if asym:
-        prefix()
-
-    def push(*nodes: int) -> None:
+    def push(self, *nodes: int) -> None:
         for v in nodes:
-            if v and not inq[v]:
-                inq[v] = True
-                queue.append(v)
+            if v and not self.inq[v]:
+                self.inq[v] = True
+                self.queue.append(v)
 
-    def try_two_opt(a: int) -> float:
+    def _moved(self, lo: int, hi: int, ends) -> None:
+        """Positions ``lo..hi`` of the path changed: update ``pos``, the penalty sums, and queue ``ends``."""
+        t, pos = self.t, self.pos
+        for k in range(lo, hi + 1):
+            pos[t[k]] = k
+        if self.asym:
+            self.prefix()
+        self.push(*ends)
+
+    def try_two_opt(self, a: int) -> float:
+        """The best improving 2-opt move that adds an edge from ``a`` to one of its neighbours, applied; its
+        change of the path length (0.0: none)."""
+        D, t, pos, m, P, asym = self.D, self.t, self.pos, self.m, self.P, self.asym
         pa = pos[a]
         best_d, best_ij = -_EPS, None
         # Each candidate adds the edge a-b. "out" moves remove a's outgoing edge (a is the last node: none),
@@ -266,7 +296,7 @@ def _local_search(D: list[list[float]], neigh: list[list[int]], neigh_d: list[li
         last = pa == m
         out_a = 0.0 if last else D[a][t[pa + 1]]
         in_a = D[t[pa - 1]][a]
-        na, nd = neigh[a], neigh_d[a]
+        na, nd = self.neigh[a], self.neigh_d[a]
         for k in range(len(na)):
             db = nd[k]
             use_out = last or db < out_a
@@ -302,68 +332,75 @@ def _local_search(D: list[list[float]], neigh: list[list[int]], neigh_d: list[li
         i, j = best_ij
         ends = (t[i], t[i + 1], t[j], t[j + 1] if j < m else 0)
         t[i + 1:j + 1] = t[i + 1:j + 1][::-1]
-        for k in range(i + 1, j + 1):
-            pos[t[k]] = k
-        if asym:
-            prefix()
-        push(*ends)
+        self._moved(i + 1, j, ends)
         return best_d
 
-    def try_or_opt(a: int) -> float:
-        pa = pos[a]
+    def try_or_opt(self, a: int) -> float:
+        """The best improving Or-opt move of a chain of up to ``or_opt_max`` nodes starting or ending at ``a``,
+        applied; its change of the path length (0.0: none)."""
+        pa, m = self.pos[a], self.m
         best_d, best_mv = -_EPS, None
-        chains = []
-        for L in range(1, or_opt_max + 1):
-            if pa + L - 1 <= m:
-                chains.append((pa, L))
+        for L in range(1, self.or_opt_max + 1):
+            chains = [pa] if pa + L - 1 <= m else []
             if L > 1 and pa - L + 1 >= 1:
-                chains.append((pa - L + 1, L))
-        for p, L in chains:
-            e = p + L - 1
-            f, l = t[p], t[e]
-            prev = t[p - 1]
-            if e < m:
-                nxt = t[e + 1]
-                gain = D[prev][f] + D[l][nxt] - D[prev][nxt]
-            else:
-                gain = D[prev][f]
-            if gain <= _EPS:
-                continue
-            rev_pen = 0.0
-            if asym and L > 1:
-                rev_pen = sum(D[t[q + 1]][t[q]] - D[t[q]][t[q + 1]] for q in range(p, e))
-            # candidate insertion points q (insert between t[q] and t[q+1]): u=t[q] near an end, or v=t[q+1] near one
-            qs = []
-            for end in ((f, l) if L > 1 else (f,)):
-                ne, nde = neigh[end], neigh_d[end]
-                for k in range(len(ne)):
-                    if nde[k] >= gain:
-                        break
-                    pb = pos[ne[k]]
-                    qs.append(pb)
-                    if pb >= 1:
-                        qs.append(pb - 1)
-            if e < m:
-                qs.append(m)  # append at the end of the path
-            for q in qs:
-                if p - 1 <= q <= e:
-                    continue
-                u = t[q]
-                if q < m:
-                    v = t[q + 1]
-                    base = -D[u][v]
-                    fwd = base + D[u][f] + D[l][v]
-                    bwd = base + D[u][l] + D[f][v] + rev_pen if L > 1 else fwd
-                else:
-                    fwd = D[u][f]
-                    bwd = D[u][l] + rev_pen if L > 1 else fwd
-                if fwd - gain < best_d:
-                    best_d, best_mv = fwd - gain, (p, L, q, False)
-                if bwd - gain < best_d:
-                    best_d, best_mv = bwd - gain, (p, L, q, True)
+                chains.append(pa - L + 1)
+            for p in chains:
+                best_d, best_mv = self._best_insertion(p, L, best_d, best_mv)
         if best_mv is None:
             return 0.0
-        p, L, q, rev = best_mv
+        self._apply_or_opt(*best_mv)
+        return best_d
+
+    def _best_insertion(self, p: int, L: int, best_d: float, best_mv):
+        """The chain ``t[p..p+L-1]`` moved between ``t[q]`` and ``t[q+1]`` (forward or reversed) for the candidate
+        ``q`` near its ends: the better of ``(best_d, best_mv)`` and the best such move."""
+        D, t, pos, m = self.D, self.t, self.pos, self.m
+        e = p + L - 1
+        f, l = t[p], t[e]
+        prev = t[p - 1]
+        if e < m:
+            nxt = t[e + 1]
+            gain = D[prev][f] + D[l][nxt] - D[prev][nxt]
+        else:
+            gain = D[prev][f]
+        if gain <= _EPS:
+            return best_d, best_mv
+        rev_pen = 0.0
+        if self.asym and L > 1:
+            rev_pen = sum(D[t[q + 1]][t[q]] - D[t[q]][t[q + 1]] for q in range(p, e))
+        # candidate insertion points q (insert between t[q] and t[q+1]): u=t[q] near an end, or v=t[q+1] near one
+        qs = []
+        for end in ((f, l) if L > 1 else (f,)):
+            ne, nde = self.neigh[end], self.neigh_d[end]
+            for k in range(len(ne)):
+                if nde[k] >= gain:
+                    break
+                pb = pos[ne[k]]
+                qs.append(pb)
+                if pb >= 1:
+                    qs.append(pb - 1)
+        if e < m:
+            qs.append(m)  # append at the end of the path
+        for q in qs:
+            if p - 1 <= q <= e:
+                continue
+            u = t[q]
+            if q < m:
+                v = t[q + 1]
+                base = -D[u][v]
+                fwd = base + D[u][f] + D[l][v]
+                bwd = base + D[u][l] + D[f][v] + rev_pen if L > 1 else fwd
+            else:
+                fwd = D[u][f]
+                bwd = D[u][l] + rev_pen if L > 1 else fwd
+            if fwd - gain < best_d:
+                best_d, best_mv = fwd - gain, (p, L, q, False)
+            if bwd - gain < best_d:
+                best_d, best_mv = bwd - gain, (p, L, q, True)
+        return best_d, best_mv
+
+    def _apply_or_opt(self, p: int, L: int, q: int, rev: bool) -> None:
+        t, m = self.t, self.m
         e = p + L - 1
         chain = t[p:e + 1]
         if rev:
@@ -379,21 +416,7 @@ def _local_search(D: list[list[float]], neigh: list[list[int]], neigh_d: list[li
         else:
             lo, hi = p, q
             t[lo:hi + 1] = t[e + 1:q + 1] + chain
-        for k in range(lo, hi + 1):
-            pos[t[k]] = k
-        if asym:
-            prefix()
-        push(*ends)
-        return best_d
-
-    while queue:
-        a = queue.popleft()
-        inq[a] = False
-        d = try_two_opt(a) or try_or_opt(a)
-        if d:
-            total += d
-            push(a)
-    return total
+        self._moved(lo, hi, ends)
 
 
 class TwoOptScheduler(TrajectoryScheduler):
