@@ -17,7 +17,8 @@ model's few samples no longer decide its ``V``), and a task is acted on ``releas
 default DEMS's 50 ms):
 
 * Arrival prediction, learned online: per drone, the period is the gap between its last two frames (tasks of one
-  frame share an arrival time) and the frame's models are the last frame's. The frames of the next
+  frame share an arrival time), or with ``gap_window`` k > 1 the median of its last k gaps (bursty video: a burst's
+  gap rather than the silence before it or a flush's 2 ms; issue 41), and the frame's models are the last frame's. The frames of the next
   ``horizon_ms`` (default 2,000) are predicted at ``last + k * period``; a frame overdue by more than a tenth of
   the period stops the drone's predictions until it sends again (a stopped or irregular drone is not waited for).
 * Edge plan: the exact max-gain schedule with release times (:func:`.single_machine.max_gain_schedule`) over the
@@ -78,12 +79,20 @@ class ArrivalPredictor:
 
     ``overdue``: fraction of the period after which a missing frame stops the drone's predictions; ``same_frame_ms``:
     tasks of one drone this close in arrival time belong to one frame; ``frame_grace_ms``: how long the rest of a
-    frame whose first tasks have arrived is still expected (its tasks are submitted one by one)."""
+    frame whose first tasks have arrived is still expected (its tasks are submitted one by one); ``gap_window``: the
+    period is the median of the drone's last ``gap_window`` frame gaps (1: the last gap). Raises ValueError for a
+    ``gap_window`` that is not an integer >= 1."""
 
-    def __init__(self, overdue: float = 0.1, same_frame_ms: float = 50.0, frame_grace_ms: float = 20.0) -> None:
+    def __init__(self, overdue: float = 0.1, same_frame_ms: float = 50.0, frame_grace_ms: float = 20.0,
+                 gap_window: int = 1) -> None:
         self.overdue, self.same_frame_ms, self.frame_grace_ms = overdue, same_frame_ms, frame_grace_ms
+        if not (isinstance(gap_window, int) and gap_window >= 1):
+            raise ValueError(f"gap_window must be an integer >= 1, got {gap_window!r}")
+        self.gap_window = gap_window
         #: drone -> [current frame arrival ms, period ms or None, models seen in it, models of the frame before]
         self.drones: dict[str, list] = {}
+        #: drone -> its last ``gap_window`` frame gaps (ms)
+        self._gaps: dict[str, deque] = {}
 
     def observe(self, task: AnalyticsTask) -> None:
         """Learn from an arrived task: a task within ``same_frame_ms`` of its drone's current frame joins it; a
@@ -95,7 +104,14 @@ class ArrivalPredictor:
             if task.model not in st[2]:
                 st[2].append(task.model)
         elif task.arrival_ms > st[0]:
-            st[1] = task.arrival_ms - st[0]
+            gap = task.arrival_ms - st[0]
+            if self.gap_window == 1:
+                st[1] = gap
+            else:  # the median of the last gaps: a burst's gap, not the silence before it or a flush's 2 ms
+                gaps = self._gaps.setdefault(task.drone, deque(maxlen=self.gap_window))
+                gaps.append(gap)
+                srt = sorted(gaps)
+                st[1] = srt[len(srt) // 2]
             st[0], st[2], st[3] = task.arrival_ms, [task.model], st[2]
 
     def predict(self, now_ms: float, horizon_ms: float) -> list[tuple[float, str, str, float, float]]:
@@ -137,18 +153,20 @@ class _CachedPlan(NamedTuple):
 class LaPlan(EvPlan):
     """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
     prediction), ``edge_levels`` (on-time chances of the edge-time variants, each in (0, 1]), ``pool_models``
-    (default True), ``release_early_ms`` (default 50), ``replan_tolerance_ms`` (default 2, in [0, 100]), and
+    (default True), ``release_early_ms`` (default 50), ``replan_tolerance_ms`` (default 2, in [0, 100]),
+    ``gap_window`` (default 1: the period is the last frame gap; k: the median of the last k, see the module), and
     EVPLAN's ``window``, ``tolerance``, ``estimator`` and ``edge_quantile`` (admission only). Terminal states as
     GAINPLAN's. Raises ValueError for out-of-range options and for ``commit_horizon_ms``, which LAPLAN does not
     have."""
 
     name = "LAPLAN"
     options = tuple(o for o in EvPlan.options if o != "commit_horizon_ms") + (
-        "horizon_ms", "edge_levels", "pool_models", "release_early_ms", "replan_tolerance_ms")
+        "horizon_ms", "edge_levels", "pool_models", "release_early_ms", "replan_tolerance_ms", "gap_window")
 
     def __init__(self, workload: Workload, *, horizon_ms: float = 2000.0,
                  edge_levels: tuple[float, ...] = EDGE_LEVELS, pool_models: bool = True,
-                 release_early_ms: float = JIT_EARLY_MS, replan_tolerance_ms: float = 2.0, **kw) -> None:
+                 release_early_ms: float = JIT_EARLY_MS, replan_tolerance_ms: float = 2.0, gap_window: int = 1,
+                 **kw) -> None:
         if "commit_horizon_ms" in kw:
             raise ValueError(f"LAPLAN has no commit_horizon_ms (got {kw['commit_horizon_ms']!r}): its plan decides "
                              "which tasks are committed to the edge")
@@ -159,7 +177,7 @@ class LaPlan(EvPlan):
         if not levels or not all(0 < q <= 1 for q in levels):
             raise ValueError(f"edge_levels must be probabilities in (0, 1], got {edge_levels!r}")
         self.horizon_ms, self.edge_levels = float(horizon_ms), levels
-        self.arrivals = ArrivalPredictor()
+        self.arrivals = ArrivalPredictor(gap_window=gap_window)
         self.pool_models = bool(pool_models)
         if not 0 <= release_early_ms:
             raise ValueError(f"release_early_ms must be >= 0, got {release_early_ms!r}")

@@ -70,3 +70,24 @@ def test_incremental_preparation_gives_the_same_decisions(seed, dpe, realistic, 
     assert fast[2] == ref[2], "other cloud sends"
     assert fast[0] == ref[0], "another decision log"
     assert fast[3:] == ref[3:]
+
+
+def test_the_arrival_predictor_takes_a_bursts_gap_with_a_gap_window():
+    """issue 41: on/off video (frames 500 ms apart for 3 s, then 3 s of silence): with the last gap as the period a
+    drone's first frame after a silence predicts the next one 3.5 s on; the median of the last 5 gaps keeps 500 ms.
+    After a stall's flush (frames 2 ms apart) the median keeps the 1 s period too."""
+    from aerodaas.schedulers.analytics_base import AnalyticsTask
+    from aerodaas.schedulers.analytics_laplan import ArrivalPredictor
+
+    def feed(pred, times):
+        for n, t in enumerate(times):
+            pred.observe(AnalyticsTask(n, "d0", "DEO", t, t + 950.0))
+        return pred.drones["d0"][1]
+
+    onoff = [0, 500, 1000, 1500, 2000, 2500, 6000]
+    assert feed(ArrivalPredictor(), onoff) == 3500
+    assert feed(ArrivalPredictor(gap_window=5), onoff) == 500
+    flush = [0, 1000, 2000, 3000, 5500, 5502, 5504, 6000]
+    assert feed(ArrivalPredictor(gap_window=5), flush) == 1000
+    with pytest.raises(ValueError, match="gap_window"):
+        ArrivalPredictor(gap_window=0)
