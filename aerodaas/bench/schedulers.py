@@ -277,7 +277,7 @@ def _checked(schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_
 
 def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, repeat, trace_spec, edge_jitter,
             cloud_jitter, network, seed, cloud_nodes, address, n_hosts, n_cloud, wpath, reply_lead_ms, jitters, scen,
-            options, emulation_bound_ms) -> dict:
+            options, emulation_bound_ms, drain_s) -> dict:
     """The runtime result's ``config``: every option that shaped it (issue 41.4)."""
     from aerodaas.schedulers.dispatch.emulation import NetworkModel
 
@@ -290,7 +290,7 @@ def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, rep
             "edge_hosts": n_hosts, "cloud_executors": n_cloud, "workload": str(wpath), "mode": "emulated",
             "cloud_reply_lead_ms": reply_lead_ms, "worker_niceness": 0 if not address else None,
             "cloud_sigma": [j[0] for j in jitters], "scenarios": scen, "options": dict(options or {}),
-            "emulation_bound_ms": emulation_bound_ms,
+            "emulation_bound_ms": emulation_bound_ms, "drain_s": drain_s,
             "emulation_bound_why": "a run is valid only if its worst timing error p99 (arrival, edge hold, cloud "
                                    "round trip, poll) stays within this bound, a sixth of the smallest "
                                    "just-in-time margin (60 ms)"}
@@ -439,7 +439,7 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
         "seeds": list(range(seed, seed + seeds)),
         "config": _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, repeat, trace_spec,
                           edge_jitter, cloud_jitter, network, seed, cloud_nodes, address, n_hosts, len(cloud), wpath,
-                          reply_lead_ms, jitters, scen, options, emulation_bound_ms),
+                          reply_lead_ms, jitters, scen, options, emulation_bound_ms, drain_s),
         "cluster": {"nodes": nodes, "edge_hosts": host_info, "cloud_executors": cloud_info},
         "arrival_process": _arrival_process(trace_spec, fps, drones_per_edge),
         "runs": results, "results": summarize_runs(results), "emulation": _emulation_summary(results),
