@@ -133,3 +133,12 @@ class CrossRunCache(_KnowsDraws):
 
     def _known_ms(self, task: AnalyticsTask) -> float | None:
         return self.seen.get(task.task_id)
+
+
+class Raises(Dem):
+    """Not a cheat: a policy that fails on its first arrival (the isolated process must report its traceback)."""
+
+    name = "TEST_RAISES"
+
+    def submit(self, task: AnalyticsTask, now_ms: float) -> list[Decision]:
+        return [1 / 0]

@@ -241,3 +241,15 @@ def test_cheats_are_caught_only_by_what_changes_after_the_cut():
     for cheat in (cheats.PeekArrivals, cheats.PeekDraws):
         for cut in cuts(a)[::3]:
             assert _before(_run(cheat, w, a, None, seed, None), cut) == _before(_run(cheat, w, a, cut, seed, seed), cut)
+
+
+@needs_workload
+def test_an_isolated_policy_that_raises_is_reported_with_its_traceback():
+    from aerodaas.bench.isolation import PolicyProcessError
+
+    w = _heavy()
+    trace = make_trace(w, drones=1, duration_s=2.0, seed=1, jitter_ms=0.0)
+    with pytest.raises(PolicyProcessError, match="ZeroDivisionError"):
+        _run(_ref(cheats.Raises), w, trace, None, secret_seed(), None)
+    with pytest.raises(PolicyProcessError, match="NO_SUCH_POLICY"):
+        IsolatedPolicy("NO_SUCH_POLICY", w)

@@ -203,7 +203,10 @@ class IsolatedPolicy(AnalyticsScheduler):
             self._dirty.pop(t.task_id, None)
         sync = [_row(t) for t in self._dirty.values()]
         self._dirty.clear()
-        self._conn.send((call, float(now_ms), [_row(t) for t in tasks], extra, sync))
+        try:
+            self._conn.send((call, float(now_ms), [_row(t) for t in tasks], extra, sync))
+        except OSError as e:  # the process ended (it raised earlier, or died)
+            raise PolicyProcessError(f"the policy process ended (exit code {self._proc.exitcode}): {e}") from None
         if call in _CHANGES or sync:  # a pure query leaves the known poll time as it was, unless tasks changed
             self._poll_known = call in _CHANGES
         return self._answer(call in _CHANGES)
