@@ -2,44 +2,28 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
-import runpy
 import signal
 import sys
 from pathlib import Path
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    from aerodaas.protocol.startup_probe import probe
-
-    probe("cli")
-    from aerodaas.runtime import driver as runtime
+def _run_options(args: argparse.Namespace) -> "RunOptions | int":  # noqa: F821
+    """``aerodaas run``'s flags as the run's options, every one checked before Ray starts (exit 2 naming the bad
+    input: the returned int)."""
     from aerodaas.config import ConfigError
+    from aerodaas.runtime.options import RunOptions
+    from aerodaas.runtime.preflight import check_run_flags
 
-    app = Path(args.app)
-    if not app.is_file():
-        print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
-        return 2
-    # everything the command line names is checked before Ray starts (exit 2, naming the bad input)
     try:
-        from aerodaas.runtime.preflight import check_run_flags
-
         check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address,
-                        app=str(app), overwrite=args.overwrite)
+                        app=str(args.app), overwrite=args.overwrite)
     except (ConfigError, ValueError) as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
-    o = runtime.OPTIONS
-    o.record, o.speedup, o.timeout, o.address = args.record, args.speedup, args.timeout, args.address
-    o.overwrite = bool(args.overwrite)
-    o.env_path = str(Path(args.env).resolve()) if args.env else None
-    o.lockstep = True if args.lockstep else None
-    o.dashboard = bool(getattr(args, "dashboard", False))
-    o.progress = not args.quiet
-    o.hitl = True if args.hitl else None
-    o.hitl_port = args.hitl_port
-    o.live = None
+    live = None
     if args.live is not None:
         from aerodaas.liveview.server import check_bindable, parse_address
 
@@ -50,59 +34,105 @@ def _cmd_run(args: argparse.Namespace) -> int:
         except ValueError as e:
             print(f"aerodaas run: {e}", file=sys.stderr)
             return 2
-        o.live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-    results = []
-    stop_signal: list[int] = []
-    late_signal: list[int] = []  # signals after a mission's summary, outside any mission: the run is ending anyway
+        live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
+                      overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
+                      lockstep=True if args.lockstep else None, dashboard=bool(getattr(args, "dashboard", False)),
+                      progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live)
 
-    def on_sigterm(signum, frame):  # `kill`, `docker stop`, systemd, Ctrl-C: one clean stop
+
+class _StopSignals:
+    """``aerodaas run``'s SIGTERM/SIGINT handling (`kill`, `docker stop`, systemd, Ctrl-C): one clean stop of the
+    mission; after a mission's summary, a signal is a late one that does not change the exit code."""
+
+    def __init__(self, results: list) -> None:
+        self.results = results
+        self.stop: list[int] = []
+        self.late: list[int] = []
+        self.previous: tuple = ()
+
+    def __call__(self, signum, frame) -> None:
+        from aerodaas.runtime import driver as runtime
+
         # Ray's C++ failure-signal handler (absl, chained before this one) answers SIGTERM with alarm(3) and a SIGALRM
         # handler that aborts: the clean stop takes longer than 3 s, so the run died with SIGABRT (exit 134). We take
         # the signal over: cancel that alarm and its handler.
         signal.alarm(0)
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
-        if results and not runtime.IN_MISSION[0]:
+        if self.results and not runtime.IN_MISSION[0]:
             # after the summary (the app ending, Ray shutting down): no KeyboardInterrupt from inside ray.shutdown,
             # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS).
             # A second late signal is the user insisting (a hang on the way out): it ends the process as usual
-            if late_signal:
+            if self.late:
                 signal.signal(signum, signal.SIG_DFL)
                 os.kill(os.getpid(), signum)
                 return
-            late_signal.append(signum)
+            self.late.append(signum)
             runtime.STOP_SIGNALS.append(signum)
             return
-        stop_signal.append(signum)
+        self.stop.append(signum)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         runtime.request_stop(signum)  # raises KeyboardInterrupt where that is safe, else stops at the next safe point
 
-    # installed before Ray starts: the driver's own fatal-signal handler then chains to this one
-    previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
-    previous_sigint = signal.signal(signal.SIGINT, on_sigterm)
-    runtime.STOP_SIGNALS.clear()
-    runtime.allow_stop_interrupt(True)  # building the app: a stop may interrupt it at once
-    from aerodaas.app import api
+    def install(self) -> None:
+        """Installed before Ray starts: the driver's own fatal-signal handler then chains to this one."""
+        self.previous = (signal.signal(signal.SIGTERM, self), signal.signal(signal.SIGINT, self))
 
-    def on_result(res) -> None:  # every mission start counts (robot.start_mission() or a fleet's env.start_mission())
+    def restore(self) -> None:
+        signal.signal(signal.SIGTERM, self.previous[0])
+        signal.signal(signal.SIGINT, self.previous[1])
+
+
+def _exit_code(results: list, stop: list[int]) -> int:
+    """``aerodaas run``'s exit code for its missions' results (see the README)."""
+    if not results:
+        print("aerodaas run: the application never called start_mission()", file=sys.stderr)
+        return 1
+    if stop or any(r.outcome == "interrupted" for r in results):
+        return 128 + (stop[0] if stop else signal.SIGINT)  # the shell's convention: 130 / 143
+    if any(r.outcome == "lost" for r in results):
+        return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
+    if any(getattr(r, "recording_losses", None) for r in results):
+        return 4  # the recorder actor died: part of the recording is lost (it went on in a new segment)
+    return 0 if all(r.ok for r in results) else 1
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    """``aerodaas run APP.py``: load the application (:func:`aerodaas.runtime.app_loader.load_app`: no Ray, nothing
+    flies; bad input exits 2 before any Ray process exists), then fly it (:func:`aerodaas.runtime.driver.run_file`)
+    and print each mission's summary."""
+    from aerodaas.protocol.startup_probe import probe
+
+    probe("cli")
+    from aerodaas.config import ConfigError
+    from aerodaas.runtime import driver as runtime
+
+    app = Path(args.app)
+    if not app.is_file():
+        print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
+        return 2
+    opts = _run_options(args)
+    if isinstance(opts, int):
+        return opts
+    results: list = []
+    signals = _StopSignals(results)
+    signals.install()
+    runtime.STOP_SIGNALS.clear()
+    runtime.allow_stop_interrupt(True)  # loading the app: a stop may interrupt it at once
+
+    def on_result(res) -> None:  # every mission of the app counts
         results.append(res)
         print(runtime.format_summary(res), flush=True)
 
-    api.MISSION_LISTENERS.append(on_result)
-    sys.path.insert(0, str(app.resolve().parent))
     try:
-        _build_without_ray(app)
-        # Ray starts in the background once the app's Environment has been validated (api.Environment), overlapping
-        # the rest of the app's build; the build above already checked all of it, so no error of the application
-        # comes after Ray started
-        o.early_ray = True
-        runpy.run_path(str(app), run_name="__main__")
+        runtime.run_file(str(app), opts, on_result=on_result)
     except ConfigError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("aerodaas run: interrupted", file=sys.stderr)
-        return 128 + (stop_signal or late_signal or [signal.SIGINT])[0]
+        return 128 + (signals.stop or signals.late or [signal.SIGINT])[0]
     except runtime.RayStartError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2 if isinstance(e, runtime.RayAddressError) else 1
@@ -111,26 +141,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
         return report(e, str(app), "aerodaas run")
     finally:
-        api.MISSION_LISTENERS.remove(on_result)
-        o.early_ray = False
         runtime.allow_stop_interrupt(False)  # a signal now is recorded, never raised inside ray.shutdown
         runtime.shutdown_ray()
         if not (_PROCESS_MAIN[0] and results):
-            signal.signal(signal.SIGTERM, previous_sigterm)
-            signal.signal(signal.SIGINT, previous_sigint)
+            signals.restore()
         # else the process is this command and ends now: a signal from here to its exit is a late one, recorded by
-        # on_sigterm, and the exit code stays the mission's (restoring the default handler let a SIGTERM sent right
+        # the handler, and the exit code stays the mission's (restoring the default handler let a SIGTERM sent right
         # after the summary kill the process with -15)
-    if not results:
-        print("aerodaas run: the application never called start_mission()", file=sys.stderr)
-        return 1
-    if stop_signal or any(r.outcome == "interrupted" for r in results):
-        return 128 + (stop_signal[0] if stop_signal else signal.SIGINT)  # the shell's convention: 130 / 143
-    if any(r.outcome == "lost" for r in results):
-        return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
-    if any(getattr(r, "recording_losses", None) for r in results):
-        return 4  # the recorder actor died: part of the recording is lost (it went on in a new segment)
-    return 0 if all(r.ok for r in results) else 1
+    return _exit_code(results, signals.stop)
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
@@ -179,77 +197,51 @@ def _cmd_down(args: argparse.Namespace) -> int:
     return 0
 
 
-def _build_without_ray(app: Path) -> None:
-    """Build the application as ``aerodaas plan`` does — its environment, robots, plug-ins, analytics and their
-    options, schedulers, the pre-flight checks and the dataflow graph — without Ray, stopping at its first mission
-    start (:class:`~aerodaas.runtime.driver.PlanReady`). Whatever the application gets wrong raises here, before
-    any Ray process exists (the caller maps it to exit 2, or 1 for the app's own bug). The app's own prints are
-    kept for the real run (not shown twice)."""
-    import contextlib
-    import io
-
-    from aerodaas.runtime import driver as runtime
-
-    o = runtime.OPTIONS
-    o.plan_only, o.early_ray = True, False
-    try:
-        with contextlib.redirect_stdout(io.StringIO()):
-            runpy.run_path(str(app), run_name="__main__")
-    except runtime.PlanReady:
-        pass
-    except SystemExit as e:  # the app or a module it imports exited while building: nothing would fly (exit 0 before)
-        tb = e.__traceback__
-        while tb is not None and tb.tb_next is not None:
-            tb = tb.tb_next
-        where = f" in {tb.tb_frame.f_code.co_filename} line {tb.tb_lineno}" if tb is not None else ""
-        from aerodaas.config import ConfigError
-
-        raise ConfigError(f"{app}: sys.exit({e.code!r}) was called{where} while the application was being built, "
-                          f"before its first start_mission(); nothing flew") from None
-    finally:
-        o.plan_only = False
-
-
-def _cmd_plan(args: argparse.Namespace) -> int:
-    """``aerodaas plan APP.py [--env FILE] [--json] [--address ADDR]``: build the application's dataflow graph and
-    print the actors it would start, where each goes (its ``label_selector``) and the edges between them, without
-    starting Ray or flying. Exit 0, 2 for bad input (named) like ``aerodaas run``, 1 for an exception of the app's
-    own code (with its traceback)."""
-    from aerodaas.runtime import driver as runtime
+def _load(args: argparse.Namespace, prog: str):
+    """Load ``args.app`` (:func:`aerodaas.runtime.app_loader.load_app`, ``--env`` over the environment it names)
+    without Ray; returns the :class:`~aerodaas.runtime.app_loader.Application`, or the exit code after printing why
+    not: 2 for bad input (named), 1 for an exception of the app's own code (with its traceback). What the app
+    prints goes to standard error."""
     from aerodaas.config import ConfigError
-    from aerodaas.runtime.dataflow import Placement
+    from aerodaas.runtime.app_loader import load_app
 
     app = Path(args.app)
     if not app.is_file():
-        print(f"aerodaas plan: application file {str(app)!r} not found", file=sys.stderr)
+        print(f"{prog}: application file {str(app)!r} not found", file=sys.stderr)
         return 2
-    o = runtime.OPTIONS
-    o.env_path = str(Path(args.env).resolve()) if args.env else None
-    o.plan_only, o.early_ray = True, False
-    sys.path.insert(0, str(app.resolve().parent))
     try:
-        runpy.run_path(str(app), run_name="__main__")
-    except runtime.PlanReady as p:
-        from aerodaas.clusters.placement import placement_warning
-
-        placement = Placement(has_cloud=True, local=False)
-        warning = placement_warning(p.plan)
-        if warning:
-            print(f"aerodaas plan: warning: {warning}", file=sys.stderr)
-        print(json.dumps(p.plan.describe(placement), indent=2) if args.json else p.plan.text(placement))
-        return 0
+        with contextlib.redirect_stdout(sys.stderr):  # the app's own prints: not in the plan's output (--json)
+            return load_app(app, str(Path(args.env).resolve()) if getattr(args, "env", None) else None)
     except ConfigError as e:
-        print(f"aerodaas plan: {type(e).__name__}: {e}", file=sys.stderr)
+        print(f"{prog}: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
     except Exception as e:  # noqa: BLE001 - the app's own bug (exit 1, its traceback) or input we refused (exit 2)
         from aerodaas.runtime.app_errors import report
 
-        return report(e, str(app), "aerodaas plan")
-    finally:
-        o.plan_only = False
-        o.env_path = None
-    print("aerodaas plan: the application never called start_mission()", file=sys.stderr)
-    return 2
+        return report(e, str(app), prog)
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    """``aerodaas plan APP.py [--env FILE] [--json]``: load the application and print the actors its run would
+    start, where each goes (its ``label_selector``) and the edges between them, without starting Ray or flying.
+    Exit 0, 2 for bad input (named) like ``aerodaas run``, 1 for an exception of the app's own code (with its
+    traceback)."""
+    from aerodaas.clusters.placement import placement_warning
+    from aerodaas.runtime.dataflow import Placement
+
+    app = _load(args, "aerodaas plan")
+    if isinstance(app, int):
+        return app
+    if app.mission is None:
+        print("aerodaas plan: the application never called start_mission()", file=sys.stderr)
+        return 2
+    plan = app.plan()
+    placement = Placement(has_cloud=True, local=False)
+    warning = placement_warning(plan)
+    if warning:
+        print(f"aerodaas plan: warning: {warning}", file=sys.stderr)
+    print(json.dumps(plan.describe(placement), indent=2) if args.json else plan.text(placement))
+    return 0
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
@@ -463,9 +455,8 @@ def console() -> int:
     return main(own_process=True)
 
 
-def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
-    p = argparse.ArgumentParser(prog="aerodaas", description="AeroDaaS: drones-as-a-service on Ray")
-    sub = p.add_subparsers(dest="cmd", required=True)
+def _add_run_parsers(sub) -> None:
+    """``run``, ``up``, ``down`` and ``plan``."""
     r = sub.add_parser("run", help="run an application (APP.py) on the embedded simulator or real drones")
     r.add_argument("app")
     r.add_argument("--env", help="environment.json to use instead of the one the app names")
@@ -498,6 +489,10 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     pl.add_argument("--env", help="environment.json to use instead of the one the app names")
     pl.add_argument("--json", action="store_true", help="the plan as JSON (actors, nodes, edges)")
     pl.set_defaults(func=_cmd_plan)
+
+
+def _add_recording_parsers(sub) -> None:
+    """``replay``, ``layout``, ``info``, ``schema``, ``plugins`` and ``recover``."""
     rp = sub.add_parser("replay", help="serve an MCAP recording to Foxglove over WebSocket, at 1x or faster")
     rp.add_argument("file")
     rp.add_argument("--live", nargs="?", const="", required=True, metavar="HOST:PORT",
@@ -519,6 +514,15 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     from aerodaas.plugins.listing import add_parser as _add_plugins_parser
 
     _add_plugins_parser(sub)
+    rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "
+                                        "indexed one")
+    rc.add_argument("file")
+    rc.add_argument("--out", help="write here instead of replacing FILE")
+    rc.set_defaults(func=_cmd_recover)
+
+
+def _add_tool_parsers(sub) -> None:
+    """``inject``, ``plot``, ``sim``, ``mission`` and ``bench``."""
     j = sub.add_parser("inject", help="add waypoints to a running mission through the human-in-the-loop API")
     j.add_argument("--drone", required=True, help="robot id")
     j.add_argument("--waypoint", required=True, action="append", type=_parse_waypoint,
@@ -557,11 +561,15 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     from aerodaas.bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command
 
     _add_bench_parsers(bench.add_subparsers(dest="bench_cmd", required=True, metavar="BENCHMARK"))
-    rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "
-                                        "indexed one")
-    rc.add_argument("file")
-    rc.add_argument("--out", help="write here instead of replacing FILE")
-    rc.set_defaults(func=_cmd_recover)
+
+
+def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
+    """The ``aerodaas`` command line (``argv``: its arguments; default ``sys.argv[1:]``); returns the exit code."""
+    p = argparse.ArgumentParser(prog="aerodaas", description="AeroDaaS: drones-as-a-service on Ray")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    _add_run_parsers(sub)
+    _add_recording_parsers(sub)
+    _add_tool_parsers(sub)
     _PROCESS_MAIN[0] = own_process
     args = p.parse_args(argv)
     try:

@@ -51,8 +51,8 @@ def try_bind(host: str, port: int, timeout_s: float = 10.0) -> None:
 def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--address") -> None:
     """Check a Ray cluster address ``HOST:PORT`` (or ``ray://HOST:PORT``; ``auto`` and ``local`` are Ray's own and
     left to it) before Ray is started: the port an integer in [1, 65535], the host resolvable and the port
-    accepting a TCP connection (the GCS) within ``timeout_s`` seconds. Raises ValueError naming ``option`` and the
-    address and saying why."""
+    accepting a TCP connection and answering it as an HTTP/2 (gRPC) server does, as Ray's GCS does, within
+    ``timeout_s`` seconds each. Raises ValueError naming ``option`` and the address and saying why."""
     a = address.strip()
     if a in ("auto", "local"):
         return
@@ -82,6 +82,37 @@ def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--ad
         except OSError as e:
             raise ValueError(f"{option} {address!r}: no Ray cluster answers there ({e.strerror or e}; start one with "
                              f"`ray start --head` or `aerodaas up`)") from None
+        why = _grpc_answer(s)
+    if why:
+        raise ValueError(f"{option} {address!r}: the port accepts connections but is not a Ray cluster ({why} "
+                         f"within {timeout_s:g} s; Ray's GCS and Ray Client server speak gRPC over HTTP/2): give the "
+                         f"Ray head's GCS address (`ray start --head` prints it) or start one with `aerodaas up`")
+
+
+#: an HTTP/2 client's connection preface and an empty SETTINGS frame (RFC 9113 section 3.4, 6.5)
+_H2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 0x4, 0, 0, 0, 0, 0])
+
+
+def _grpc_answer(s: socket.socket) -> str:
+    """Whether the server on the connected socket ``s`` (its time-out set) speaks HTTP/2, as every gRPC server and
+    so Ray's GCS does: send the client connection preface and read the server's first frame, which must be a
+    SETTINGS frame (type 0x4; RFC 9113 section 3.4). Returns "" when it is, else why not. A port that accepts TCP but
+    never answers (a ``--address`` to such a port hung ``ray.init`` for 821 s) ends at the socket's time-out."""
+    try:
+        s.sendall(_H2_PREFACE)
+        head = b""
+        while len(head) < 9:
+            chunk = s.recv(9 - len(head))
+            if not chunk:
+                return "it closed the connection without an HTTP/2 SETTINGS frame"
+            head += chunk
+    except socket.timeout:
+        return "no HTTP/2 SETTINGS frame came back"
+    except OSError as e:
+        return f"the connection failed: {e.strerror or e}"
+    if head[3] != 0x4:
+        return f"its first bytes {head[:9]!r} are not an HTTP/2 SETTINGS frame"
+    return ""
 
 
 def check_listen(host: object, port: object, option: str) -> tuple[str, int]:

@@ -82,10 +82,10 @@ def placement(out_dir: str) -> dict:
         for i, drone in enumerate(env.get_env_robots()):
             dets["ab"[i % 2]].analyse(drone.get_sensor_by_id("cam").get_data_stream())
             _survey(env, drone, sched, 1.0, i)
-        runtime.OPTIONS.progress, runtime.OPTIONS.address, runtime.OPTIONS.run_id = False, lc.address, "place"
+        opts = runtime.RunOptions(progress=False, address=lc.address, run_id="place")
         seen: dict = {}
         env.get_robot_by_id("d00").on_mission_start(lambda r: seen.update(actors=_actors_by_node()))
-        res = env.start_mission(timeout=60)
+        res = env.start_mission(timeout=60, options=opts)
         return {"outcome": res.outcome, "actors": seen.get("actors", []),
                 "outcomes": {k: v.get("outcome") for k, v in res.robots.items()},
                 "scheduler": {k: res.stats.get("analytics_scheduler", {}).get(k) for k in ("submitted", "tiers")}}
@@ -106,8 +106,7 @@ def node_loss(out_dir: str) -> dict:
         env.set_trajectory_scheduler(sched)
         for i, drone in enumerate(env.get_env_robots()):
             _survey(env, drone, sched, 4.0, i)
-        runtime.OPTIONS.progress, runtime.OPTIONS.address, runtime.OPTIONS.run_id = False, lc.address, "loss"
-        runtime.OPTIONS.record = rec
+        opts = runtime.RunOptions(progress=False, address=lc.address, run_id="loss", record=rec)
         killed: dict = {}
 
         def kill_later(robot) -> None:
@@ -128,7 +127,7 @@ def node_loss(out_dir: str) -> dict:
             threading.Thread(target=go, daemon=True).start()
 
         env.get_robot_by_id("d00").on_mission_start(kill_later)
-        res = env.start_mission(timeout=120)
+        res = env.start_mission(timeout=120, options=opts)
         return {"outcome": res.outcome, "killed": killed, "recording": rec,
                 "robots": {k: {"outcome": v.get("outcome"), "visited": v.get("visited"), "error": v.get("error")}
                            for k, v in res.robots.items()},

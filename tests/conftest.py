@@ -69,15 +69,12 @@ def ray_session():
 
 
 @pytest.fixture
-def run_options(tmp_path):
-    """Reset the runtime's CLI options around a test."""
-    from aerodaas.runtime import driver as runtime
+def run_options():
+    """The test's own run options (no progress lines), passed explicitly to what runs the mission
+    (``start_mission(options=...)``, :func:`aerodaas.runtime.driver.run_file`)."""
+    from aerodaas.runtime.options import RunOptions
 
-    saved = runtime.RunOptions(**vars(runtime.OPTIONS))
-    runtime.OPTIONS.progress = False
-    yield runtime.OPTIONS
-    for k, v in vars(saved).items():
-        setattr(runtime.OPTIONS, k, v)
+    return RunOptions(progress=False)
 
 
 @pytest.fixture

@@ -133,10 +133,10 @@ def test_a_scheduled_analytics_that_the_app_lacks_or_that_is_not_fed_frames_fail
     started = ray.is_initialized()
     env, drone = build(hover_config(scheduler={"name": "DEMS", "models": {"tracker": QOS}}), FixedCostDetector(5))
     with pytest.raises(ConfigError, match=r"analytics_scheduler\.models\.tracker: the application has no analytics"):
-        drone.start_mission()
+        drone.start_mission(options=run_options)
     env, drone = build(hover_config(scheduler={"name": "DEMS", "models": {"sink": QOS}}), FixedCostDetector(5))
     with pytest.raises(ConfigError, match=r"models\.sink: a scheduled analytics takes camera frames"):
-        drone.start_mission()
+        drone.start_mission(options=run_options)
     assert ray.is_initialized() == started  # refused before Ray was even needed
 
 
@@ -147,7 +147,7 @@ def test_dems_splits_an_overloaded_detector_between_edge_and_cloud(ray_session, 
     env, drone = build(hover_config(fps=15), FixedCostDetector(80))
     env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
     run_options.record = str(tmp_path / "dems.mcap")
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert res.outcome == "success", res.robots["uav"].get("error")
     rep = _check_accounting(res, run_options.record)
     assert rep["scheduler"] == "DEMS"
@@ -174,7 +174,7 @@ def test_cloud_executors_run_the_real_detector_on_jpeg_frames_in_lockstep(ray_se
         "yolox_nano", classes=["car", "truck", "bus"], score_threshold=0.15), hover_s=4.0)
     env.set_analytics_scheduler("CLOUD", {"detector": {**QOS, "deadline_ms": 5000, "cloud_ms": 400}})
     run_options.record = str(tmp_path / "cloud.mcap")
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert res.outcome == "success", res.robots["uav"].get("error")
     rep = _check_accounting(res, run_options.record)
     frames = res.stats["uav"]["cameras"]["cam"]["frames"]

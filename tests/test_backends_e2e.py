@@ -56,7 +56,7 @@ def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_sessi
     monitor = MonitoringAnalytics(["battery", "height", "speed"])
     monitor.analyse(drone.get_sensor_by_id("odom").get_data_stream())
     run_options.record = str(tmp_path / "replay.mcap")
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert res.outcome == "success", res.robots["px4"].get("error")
     run = load_run(run_options.record)
     _assert_flight_phases(run)
@@ -87,7 +87,7 @@ def test_a_replayed_px4_ulog_drives_the_same_stat_stream(ray_session, run_option
     env = Environment(parse_environment_config(cfg))
     drone = env.get_robot_by_id("px4")
     run_options.record = str(tmp_path / "replay-ulog.mcap")
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert res.outcome == "success", res.robots["px4"].get("error")
     run = load_run(run_options.record)
     _assert_flight_phases(run)
@@ -118,7 +118,7 @@ def test_a_tello_flies_the_survey_and_feeds_its_own_video_to_analytics(ray_sessi
                Waypoint(id="b", x=1.0, y=1.0, z=1.2, hover_duration=0.5, acceptance_radius=0.3)]
         drone.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, SchedulingType.ORDERED))
         run_options.record = str(tmp_path / "tello.mcap")
-        res = drone.start_mission(timeout=90)
+        res = drone.start_mission(timeout=90, options=run_options)
         rep = res.robots["tello"]
         assert res.outcome == "success", (rep.get("error"), rep["state_history"])
         assert [v["id"] for v in rep["visited_waypoints"]] == ["a", "b"]
@@ -197,12 +197,12 @@ def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path, mavlink: 
 
 
 def _run_app(app: str, env_path, opts, record) -> "MissionResult":  # noqa: F821
-    import runpy
+    from aerodaas.runtime.driver import run_file
 
     from .conftest import REPO
 
     opts.env_path, opts.record = str(env_path), str(record)
-    return runpy.run_path(str(REPO / "apps" / f"{app}.py"), run_name="__main__")["result"]
+    return run_file(str(REPO / "apps" / f"{app}.py"), opts)[-1]
 
 
 #: PX4's COM_OF_LOSS_T counts vehicle time; the emulator scales it by its speed-up as PX4 SITL's rcS does (10 s at
@@ -355,7 +355,7 @@ def test_autopilot_mission_refuses_what_it_cannot_fly_before_any_actor_starts(ru
         d = env.get_robot_by_id("uav")
         build(env, d)
         with pytest.raises(ConfigError, match=r"robots\['uav'\]\.mavlink\.use_autopilot_mission: true") as e:
-            d.start_mission(timeout=5)
+            d.start_mission(timeout=5, options=run_options)
         assert expect[name] in str(e.value), (name, str(e.value))
     assert ray.is_initialized() == was_up  # nothing was started
     with pytest.raises(ConfigError, match=r"use_autopilot_mission: true needs backend 'mavlink'.*'sim'"):

@@ -77,14 +77,16 @@ drone.start_mission()
 @pytest.fixture
 def no_ray(monkeypatch):
     """Fails the test if anything tries to start or connect to Ray."""
+    from aerodaas.runtime import ray_start
+
     calls = []
-    monkeypatch.setattr(runtime, "init_ray", lambda address: calls.append(address))
-    monkeypatch.setattr(runtime, "start_ray_early", lambda address=None: calls.append(("early", address)))
+    monkeypatch.setattr(ray_start, "init_ray", lambda address, dashboard=False: calls.append(address))
+    monkeypatch.setattr(ray_start, "start_ray_early",
+                        lambda address=None, dashboard=False: calls.append(("early", address)))
     # `aerodaas run` shuts Ray down at its end: here that would be the test session's shared Ray (tests after this
     # one found it gone); nothing was started, so there is nothing to stop
     monkeypatch.setattr(runtime, "shutdown_ray", lambda: None)
     yield calls
-    runtime.OPTIONS.early_ray = False
 
 
 @pytest.mark.parametrize("via_flag", [True, False], ids=["--env", "named-by-the-app"])
@@ -129,8 +131,9 @@ def test_a_bad_detector_option_fails_before_ray_subprocess(tmp_path):
 
 def _run_in_fresh_ray_tmp(tmp_path, app):
     """`aerodaas run APP --quiet` in a subprocess whose RAY_TMPDIR is a new empty folder: (result, that folder)."""
-    ray_tmp = tmp_path / "ray"
-    ray_tmp.mkdir()
+    from tests.test_app_value import fresh_ray_tmp
+
+    ray_tmp = fresh_ray_tmp(tmp_path)
     env = {**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)}
     return subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
                           text=True, env=env, timeout=300), ray_tmp

@@ -201,7 +201,7 @@ def test_a_drone_actor_per_drone_an_actor_per_analytics_and_a_recorder(ray_sessi
         seen["workers"] = sorted(p.pid for p in _worker_processes() if p.pid not in before)
 
     env.get_robot_by_id("d00").on_mission_start(count)
-    res = env.start_mission(timeout=2.0)
+    res = env.start_mission(timeout=2.0, options=run_options)
     assert set(res.robots) == {f"d{i:02d}" for i in range(n)}
     n_actors = -(-n // per_actor)
     assert sorted(seen["pids"].values()) == seen["workers"], seen  # every worker process of the run is named
@@ -266,7 +266,7 @@ def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_se
     probe = FrameProbe()
     probe.deploy(env.get_compute_resource_by_id(where))
     probe.analyse(env.get_robot_by_id("d00").get_sensor_by_id("cam").get_data_stream())
-    res = env.start_mission(timeout=3.0)
+    res = env.start_mission(timeout=3.0, options=run_options)
     hosts = res.stats["_hosts"]
     a_host = f"analytics/{where}/probe#1"
     assert set(hosts) == {"recorder", "drone/d00", a_host}
@@ -306,7 +306,7 @@ def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, 
     follow.deploy(env.get_compute_resource_by_id("edge"), colocate=True)  # in the drone actor: results come back
     sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
                                        priority=1))
-    res = env.start_mission(timeout=4.0)
+    res = env.start_mission(timeout=4.0, options=run_options)
     hosts = res.stats["_hosts"]
     d_copies, a_copies = hosts["drone/d00"]["frame_copies"], hosts["analytics/edge/spotter#1"]["frame_copies"]
     cam = res.stats["d00"]["cameras"]["cam"]
@@ -344,7 +344,7 @@ def test_lockstep_frames_travel_by_channel_and_every_frame_is_processed(ray_sess
     follow.deploy(env.get_compute_resource_by_id("edge"), colocate=True)
     sched.add_navigation(PriorityQueue(follow.analyse(det.analyse(drone.get_sensor_by_id("cam").get_data_stream())),
                                        priority=1))
-    res = env.start_mission(timeout=4.0)
+    res = env.start_mission(timeout=4.0, options=run_options)
     hosts = res.stats["_hosts"]
     assert all(h["error_count"] == 0 for h in hosts.values())
     d_copies, a_copies = hosts["drone/d00"]["frame_copies"], hosts["analytics/edge/spotter#1"]["frame_copies"]

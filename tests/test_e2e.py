@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import json
 import os
-import runpy
 import signal
 import subprocess
 import sys
@@ -14,6 +13,7 @@ import pytest
 
 from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
 from aerodaas.recording.writer import read_messages, summarize_mcap
+from aerodaas.runtime.driver import run_file
 
 from .conftest import REPO, needs_data
 from .mcap_validation import validate_recording
@@ -26,9 +26,9 @@ def run_app(name: str, opts, **kw):
     for k, v in kw.items():
         setattr(opts, k, v)
     t0 = time.monotonic()
-    g = runpy.run_path(str(APPS / name), run_name="__main__")
+    res = run_file(str(APPS / name), opts)[-1]
     print(f"{name}: wall {time.monotonic() - t0:.1f} s")
-    return g["result"]
+    return res
 
 
 def test_farm_survey_visits_all_waypoints_and_records_foxglove_schemas(ray_session, run_options, tmp_path):
@@ -106,7 +106,7 @@ def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_opti
     ObjectDetector().analyse(drone.get_sensor_by_id("cam1").get_data_stream())
     run_options.record = str(tmp_path / "never.mcap")
     with pytest.raises(ModelNotFoundError, match="AERODAAS_MODEL_DIR"):
-        drone.start_mission()
+        drone.start_mission(options=run_options)
     assert started == [] and not (tmp_path / "never.mcap").exists()
 
 

@@ -244,7 +244,7 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
         removed.append(cluster.remove_cloud_node(cluster.cloud_nodes.index(node)))
 
     drone.on_mission_start(lambda r: threading.Timer(8.0, lose_cloud).start())
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert removed, "the cloud node was never removed"
     assert res.outcome == "success", res.robots["uav"].get("error")
     rep = res.stats["analytics_scheduler"]
@@ -283,7 +283,7 @@ def test_real_detector_runs_on_a_cloud_node_of_the_cluster(cluster, run_options,
             "nanodet", classes=["car", "truck", "bus"], score_threshold=0.2), hover_s=3.0)
         env.set_analytics_scheduler("CLOUD", {"detector": {**QOS, "deadline_ms": 5000, "cloud_ms": 400}})
         run_options.record = str(tmp_path / "cloud-node.mcap")
-        res = drone.start_mission()
+        res = drone.start_mission(options=run_options)
     finally:
         cluster.remove_cloud_node(cluster.cloud_nodes.index(node), graceful=True)
     assert res.outcome == "success", res.robots["uav"].get("error")

@@ -4,12 +4,14 @@ preempts each survey; from the recording, each drone flew over its own car and n
 got its own navigation."""
 from __future__ import annotations
 
-import runpy
+import sys
 
 import numpy as np
 import pytest
 
 from aerodaas.recording.writer import read_messages
+from aerodaas.runtime.app_loader import app_module_name
+from aerodaas.runtime.driver import run_file
 
 from .conftest import REPO
 
@@ -20,8 +22,7 @@ APP = REPO / "tests" / "apps" / "fleet_follow.py"
 def test_a_shared_follow_flies_each_drone_over_its_own_car(ray_session, run_options, tmp_path):
     run_options.record = str(tmp_path / "follow.mcap")
     run_options.speedup = 50.0
-    g = runpy.run_path(str(APP), run_name="__main__")
-    res = g["result"]
+    res = run_file(str(APP), run_options)[-1]
     assert res.outcome == "success", res.robots
     odom: dict[str, list] = {"d1": [], "d2": []}
     navs: dict[str, int] = {}
@@ -30,7 +31,7 @@ def test_a_shared_follow_flies_each_drone_over_its_own_car(ray_session, run_opti
             odom[msg["robot_id"]].append(msg["position"][:2])
         elif topic.endswith("/follow/navigation"):
             navs[topic] = navs.get(topic, 0) + 1
-    cars = g["CARS"]
+    cars = sys.modules[app_module_name(APP)].CARS  # the app as loaded: its module
     for rid, own, other in (("d1", "car_west", "car_east"), ("d2", "car_east", "car_west")):
         xy = np.array(odom[rid])
         to_own = np.linalg.norm(xy - cars[own], axis=1)

@@ -29,7 +29,7 @@ def _fly(run_options, tmp_path, noise: dict, hold: dict | None = None, backend: 
            Waypoint(id="b", x=6, y=6, z=2, hover_duration=3, acceptance_radius=0.3)]
     d.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, SchedulingType.ORDERED))
     run_options.record = str(tmp_path / "holds.mcap")
-    res = d.start_mission()
+    res = d.start_mission(options=run_options)
     ev = [m for _, m in read_recording(tmp_path / "holds.mcap")["/d/events"]]
     return res, ev
 

@@ -377,7 +377,7 @@ def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run
 
     env, drone = build(hover_config(fps=15), CountingDetector(80), hover_s=4.0)
     env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert res.outcome == "success", res.robots["uav"].get("error")
     det = next(a for a in res.stats["uav"]["analytics"] if a.get("name") == "detector")
     tiers = res.stats["analytics_scheduler"]["tiers"]

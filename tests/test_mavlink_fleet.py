@@ -213,7 +213,7 @@ def test_each_robot_gets_its_own_connect_error_and_its_own_connect_timeout(ray_s
                                                 "compute": [{"id": "edge", "tier": "edge"}]}))
     for r in env.get_env_robots():
         r.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id=r.id + "_a", x=1, y=0, z=2)]))
-    res = env.start_mission(env.get_env_robots())
+    res = env.start_mission(env.get_env_robots(), options=run_options)
     assert res.outcome == "failed"
     ea, eb = res.robots["a"]["error"], res.robots["b"]["error"]
     assert "robot 'a'" in ea and "within 1.5 s" in ea and "robot 'b'" not in ea, ea

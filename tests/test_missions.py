@@ -194,12 +194,12 @@ def test_safety_limits_reject_clamp_and_low_battery_rtl(ray_session, run_options
     drone = env.get_robot_by_id("quadrotor_base")
     drone.navigate(AeroNavigation(waypoints=[Waypoint(id="ok", x=1, y=0, z=2), Waypoint(id="high", x=1, y=1, z=50)]))
     with pytest.raises(SafetyViolation, match="high.*max_altitude"):
-        drone.start_mission()
+        drone.start_mission(options=run_options)
 
     env = env_with(max_altitude=10, on_violation="clamp")
     drone = env.get_robot_by_id("quadrotor_base")
     drone.navigate(AeroNavigation(waypoints=[Waypoint(id="high", x=1, y=1, z=50, hover_duration=1)]))
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     assert res.outcome == "success"
     # clamped to the ceiling, lowered by what the approach would overshoot (the gate's dynamics model)
     assert 9.9 <= max(v["target"][2] for v in res.robots["quadrotor_base"]["visited_waypoints"]) <= 10.0
@@ -213,7 +213,7 @@ def test_safety_limits_reject_clamp_and_low_battery_rtl(ray_session, run_options
                                              for i in range(8)]))
     rec = tmp_path / "rtl.mcap"
     run_options.record = str(rec)
-    res = drone.start_mission()
+    res = drone.start_mission(options=run_options)
     rep = res.robots["quadrotor_base"]
     assert res.outcome == "failsafe_rtl" and rep["state"] == "LANDED", rep["outcome"]
     assert len(rep["visited_waypoints"]) < 8

@@ -93,7 +93,7 @@ def test_a_target_the_autopilot_drops_is_stalled_then_abandoned(ray_session, run
         wps = [Waypoint(id="a", x=4, y=0, z=2), Waypoint(id="b", x=0, y=8, z=2), Waypoint(id="c", x=0, y=-4, z=2)]
         d.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, SchedulingType.ORDERED))
         run_options.record = str(tmp_path / "progress.mcap")
-        res = d.start_mission()
+        res = d.start_mission(options=run_options)
     finally:
         emu.stop()
     ev = [m for _, m in read_recording(tmp_path / "progress.mcap")["/d/events"]]
@@ -158,7 +158,7 @@ def test_a_vehicle_armed_away_from_the_robots_home_never_takes_off(ray_session, 
         d.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=4, y=0, z=2)],
                                   SchedulingType.ORDERED))
         run_options.record = str(tmp_path / "home.mcap")
-        res = d.start_mission()
+        res = d.start_mission(options=run_options)
         snap = emu.snapshot()
     finally:
         emu.stop()

@@ -13,7 +13,6 @@ the live view; write_tracks' three kinds of messages.
 from __future__ import annotations
 
 import json
-import runpy
 
 import numpy as np
 import pytest
@@ -22,6 +21,7 @@ from mcap.reader import make_reader
 from aerodaas.model.types import GeoPoint
 from aerodaas.bench.tracks import score_tracks
 from aerodaas.model.geo import geodetic_to_enu
+from aerodaas.runtime.driver import run_file
 
 from .conftest import REPO
 
@@ -41,8 +41,7 @@ def _read(path):
 @pytest.mark.e2e
 def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_options, tmp_path):
     run_options.record = str(tmp_path / "tracks.mcap")
-    g = runpy.run_path(str(APP), run_name="__main__")
-    res = g["result"]
+    res = run_file(str(APP), run_options)[-1]
     assert res.outcome == "success", res.robots
     chans, msgs = _read(run_options.record)
     for robot in ("d1", "d2"):

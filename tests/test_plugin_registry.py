@@ -131,7 +131,7 @@ def test_a_sensor_written_in_the_app_is_planned_and_listed_without_starting_ray(
                        text=True, cwd=tmp_path, timeout=120)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     node = next(n for n in json.loads(p.stdout)["nodes"] if n["id"] == "uav/alt")
-    assert node["kind"] == "sensor" and node["plugin"] == "my_altimeter -> __main__.Level", node
+    assert node["kind"] == "sensor" and node["plugin"] == "my_altimeter -> aerodaas_app_my_app.Level", node
     plug = tmp_path / "plug.py"
     plug.write_text(APP.split("env = Environment")[0])
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plugins", "--json", "--kind", "sensor", "--app",
@@ -179,7 +179,7 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
     with open(rec, "rb") as f:
         summary = make_reader(f).get_summary()
     ch = next(c for c in summary.channels.values() if c.topic == "/uav/alt")
-    assert summary.schemas[ch.schema_id].name == "__main__.Level"
+    assert summary.schemas[ch.schema_id].name == "aerodaas_app_my_app.Level"  # as `plan` names it
     assert set(json.loads(summary.schemas[ch.schema_id].data)["properties"]) == {"robot", "level"}
 
 

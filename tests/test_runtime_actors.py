@@ -107,7 +107,7 @@ def test_drone_actor_killed_mid_mission_restarts_and_resumes(ray_session, run_op
     killed: dict = {}
     t = _kill_when("aerodaas/kill-drone/drone/d00", "d00/drone",
                    lambda st: st["visited"] >= 1 and st["state"] == "NAVIGATING", killed)
-    res = env.start_mission(timeout=240)
+    res = env.start_mission(timeout=240, options=run_options)
     t.join(5)
     rep = res.robots["d00"]
     assert killed, "the drone actor was never killed"
@@ -205,7 +205,7 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
 
     t = threading.Thread(target=go, daemon=True)
     t.start()
-    res = env.start_mission(timeout=180)
+    res = env.start_mission(timeout=180, options=run_options)
     t.join(5)
     assert killed and "after" in counts, (killed, counts, res.outcome)
     assert res.robots["d00"]["outcome"] == "ended" and not res.robots["d00"].get("error")
@@ -236,7 +236,7 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
     answers to the same name), the simulated clock waits for it, the mission succeeds, the drone actor is not restarted nor
     said to be, and the restarted detector analyses the rest of the flight (the recording, read with mcap's reader:
     at most the frames in flight at the kill lack detections)."""
-    import runpy
+    from aerodaas.runtime.driver import run_file
 
     import ray
 
@@ -267,7 +267,7 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
 
     t = threading.Thread(target=kill, daemon=True)
     t.start()
-    res = runpy.run_path(str(ROOT / "apps" / "vehicle_tracking.py"), run_name="__main__")["result"]
+    res = run_file(str(ROOT / "apps" / "vehicle_tracking.py"), run_options)[-1]
     t.join(5)
     err = capfd.readouterr().err
     assert seen, "the detector never analysed 15 frames"
@@ -321,7 +321,7 @@ def test_lockstep_analytics_actor_not_back_is_reported_lost(ray_session, run_opt
 
     t = threading.Thread(target=go, daemon=True)
     t.start()
-    res = env.start_mission(timeout=180)
+    res = env.start_mission(timeout=180, options=run_options)
     t.join(5)
     assert killed, res.outcome
     (outlet,) = res.stats["d00"]["cameras"]["cam"]["outlets"]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import runpy
 
 import pytest
 
@@ -17,6 +16,7 @@ from aerodaas.navigation.route import plan_path
 from aerodaas.navigation.rtl import plan_return
 from aerodaas.reliability.flight import PROBE_ENV
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.runtime.driver import run_file
 
 HOME = {"lat": 47.3977, "lon": 8.5456, "alt": 488.0}
 
@@ -222,7 +222,7 @@ def _e2e(tmp_path, run_options, robot: dict, waypoints: str, rtl: bool):
     app.write_text(APP.replace("ENV", repr(str(env))).replace("WAYPOINTS", waypoints).replace("RTL", str(rtl)))
     rec = tmp_path / "run.mcap"
     run_options.record = str(rec)
-    res = runpy.run_path(str(app), run_name="__main__")["result"]
+    res = run_file(str(app), run_options)[-1]
     msgs = [m for _, _, _, m in read_messages(rec, ["/r/odometry"])]
     return res.robots["r"], msgs
 

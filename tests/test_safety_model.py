@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import runpy
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -16,6 +15,7 @@ from aerodaas.config import RobotConfig
 from aerodaas.model.types import VelocityCommand, Waypoint
 from aerodaas.reliability.flight import fly_commands
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.runtime.driver import run_file
 
 pytestmark = pytest.mark.faults
 
@@ -155,7 +155,7 @@ def test_end_to_end_velocity_attack_stays_inside_on_the_recorded_odometry(ray_se
     app.write_text(APP.replace("ENV", repr(str(env))))
     rec = tmp_path / "run.mcap"
     run_options.record = str(rec)
-    res = runpy.run_path(str(app), run_name="__main__")["result"]
+    res = run_file(str(app), run_options)[-1]
     rep = res.robots["probe"]
     assert rep["outcome"] in ("success", "incomplete"), rep
     cfg = PROBE_ENV()

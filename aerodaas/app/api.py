@@ -1,9 +1,11 @@
 """The AeroDaaS application API (paper Table 2, in Python style): IEnvironment, IRobot, ISensor, ICompute.
 
 Applications build a dataflow at module level (sensors -> analytics -> schedulers -> robot) and call
-``robot.start_mission()``, which starts the Ray actors, flies the mission and returns a
-:class:`aerodaas.runtime.driver.MissionResult`. Nothing touches Ray or a drone before ``start_mission()``, so a
-malformed configuration or an invalid waypoint fails before any actor starts.
+``robot.start_mission()``. Loaded by ``aerodaas run`` / ``plan`` / ``plugins`` (:mod:`aerodaas.runtime.app_loader`),
+that call only marks where the mission starts: the application is a value the runner flies. Run as a plain script,
+it starts the Ray actors, flies the mission and returns a :class:`aerodaas.runtime.driver.MissionResult`. Nothing
+here starts Ray (an :class:`Environment` never does), so a malformed configuration or an invalid waypoint fails
+before any actor starts.
 """
 from __future__ import annotations
 
@@ -24,14 +26,19 @@ __all__ = ["Environment", "Robot", "Sensor", "ComputeResource", "MISSION_LISTENE
 MISSION_LISTENERS: list[Callable[[Any], None]] = []
 
 
-def _fly(env: "Environment", robots: list["Robot"], timeout: float | None):
-    """Run the mission of ``robots`` (blocks), tell :data:`MISSION_LISTENERS`, return the MissionResult."""
+def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, options: Any = None):
+    """While an application is loaded, mark its mission's start (:func:`aerodaas.runtime.app_loader.mark_mission`:
+    nothing flies); else run the mission of ``robots`` under ``options`` (a
+    :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults), which tells :data:`MISSION_LISTENERS`, and
+    return the MissionResult (blocks)."""
+    from aerodaas.runtime.app_loader import is_sentinel, mark_mission
+
+    marked = mark_mission(env, robots, timeout)
+    if not is_sentinel(marked):
+        return marked  # a mission of the application that already flew (loaded again after it)
     from aerodaas.runtime.driver import run_mission
 
-    result = run_mission(env, robots, timeout=timeout)
-    for listener in list(MISSION_LISTENERS):
-        listener(result)
-    return result
+    return run_mission(env, robots, options, timeout)
 
 
 class ComputeResource:
@@ -165,9 +172,11 @@ class Robot:
         for hook in self._end_hooks:
             hook(self, result)
 
-    def start_mission(self, timeout: float | None = None):
-        """Start the actors, fly the mission to its end, and return the MissionResult (blocks)."""
-        return _fly(self.env, [self], timeout)
+    def start_mission(self, timeout: float | None = None, *, options: Any = None):
+        """Start the actors, fly the mission to its end (``timeout``: wall seconds), and return the MissionResult
+        (blocks); ``options``: the run's :class:`~aerodaas.runtime.options.RunOptions` (recording, speed-up, ...).
+        While the application is loaded (``aerodaas run``), only marks the mission's start."""
+        return _fly(self.env, [self], timeout, options)
 
     def end_mission(self, reason: str = "ended") -> None:
         """End the running mission now (the run stops; the result's outcome is ``reason``)."""
@@ -197,16 +206,15 @@ class Robot:
 
 class Environment:
     """IEnvironment, built from an ``environment.json``. A relative path is looked up in the working
-    directory, then next to the application file. Raises :class:`aerodaas.config.ConfigError`."""
+    directory, then next to the application file. Raises :class:`aerodaas.config.ConfigError`. Never starts Ray."""
 
     def __init__(self, path: str | os.PathLike | EnvironmentConfig) -> None:
-        from aerodaas.runtime.driver import OPTIONS
+        from aerodaas.runtime.app_loader import env_path_override
 
         if isinstance(path, EnvironmentConfig):
             cfg = path
         else:
-            if OPTIONS.env_path:
-                path = OPTIONS.env_path
+            path = env_path_override() or path  # `aerodaas run --env FILE` while the application loads
             p = Path(path)
             if not p.is_absolute() and not p.exists():
                 frame = inspect.currentframe()  # the caller's file, without inspect.stack()'s source reads (~60 ms)
@@ -214,13 +222,6 @@ class Environment:
                 if (caller / p).exists():
                     p = caller / p
             cfg = load_environment_config(p)
-        if OPTIONS.early_ray:  # `aerodaas run`: Ray starts only once the environment is known to be valid
-            from aerodaas.clusters.addresses import check_hitl
-            from aerodaas.runtime.driver import start_ray_early
-
-            check_hitl(cfg, OPTIONS)  # the HITL API's host and port: parsed, in range, free (ValueError: exit 2)
-
-            start_ray_early(OPTIONS.address)
         self.cfg = cfg
         self.robots = {r.id: Robot(r, self) for r in cfg.robots}
         self.env_sensors = {s.id: Sensor(s) for s in cfg.env_sensors}
@@ -268,12 +269,14 @@ class Environment:
         return self.compute[compute_id]
 
     # -- the fleet
-    def start_mission(self, robots: list["Robot"] | None = None, timeout: float | None = None):
+    def start_mission(self, robots: list["Robot"] | None = None, timeout: float | None = None, *,
+                      options: Any = None):
         """Fly several robots together (default: every robot of the environment) on one clock; blocks and returns
         one MissionResult with a report per robot. Robots sharing the environment's trajectory scheduler each get
         their own waypoint queue holding the missions they were told to ``navigate``. ``robots`` holds Robots of
-        this environment or their ids. Raises KeyError for an unknown id and ValueError naming the item for anything
-        else, or a robot given twice, before anything starts."""
+        this environment or their ids; ``options``: the run's :class:`~aerodaas.runtime.options.RunOptions`. Raises
+        KeyError for an unknown id and ValueError naming the item for anything else, or a robot given twice, before
+        anything starts. While the application is loaded (``aerodaas run``), only marks the mission's start."""
         if isinstance(robots, (Robot, str)):
             robots = [robots]
         given = list(robots) if robots is not None else self.get_env_robots()
@@ -287,7 +290,7 @@ class Environment:
             if r in robots:
                 raise ValueError(f"start_mission: robots[{i}] ({r.id!r}) is given twice")
             robots.append(r)
-        return _fly(self, robots, timeout)
+        return _fly(self, robots, timeout, options)
 
     # -- schedulers
     def set_trajectory_scheduler(self, scheduler: Any) -> None:

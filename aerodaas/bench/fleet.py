@@ -113,7 +113,7 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
 
     runtime.shutdown_ray()
-    runtime.OPTIONS.progress = False
+    opts = runtime.RunOptions(progress=False)
     env, _ = build_fleet(n, drones_per_actor, edge_nodes)
     lc, nodes = None, None
     if edge_nodes > 1:
@@ -122,19 +122,18 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
         lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes, worker_niceness=0,
                           edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
         nodes = lc.cluster.list_all_nodes()
-        runtime.OPTIONS.address = lc.address
+        opts.address = lc.address
     try:
-        runtime.ensure_ray(runtime.OPTIONS.address)
+        runtime.ensure_ray(opts.address)
         time.sleep(2.0)  # let Ray's own processes settle before measuring
         procs = ray_processes(nodes)
         cpu0, wall0 = cpu_seconds(procs), time.monotonic()
         with MemorySampler(1.0, nodes) as mem:
-            res = env.start_mission(timeout=duration_s)
+            res = env.start_mission(timeout=duration_s, options=opts)
         wall = time.monotonic() - wall0
         cpu = cpu_seconds(ray_processes(nodes)) - cpu0
         names = {nd.node_id: f"edge node {j}" for j, nd in enumerate(lc.edge_nodes)} if lc else {}
     finally:
-        runtime.OPTIONS.address = None
         runtime.shutdown_ray()
         if lc is not None:
             lc.shutdown()

@@ -95,11 +95,8 @@ class FrameworkWindows:
                                            priority=1))
         self.n += 1
         rec = os.path.join(self.record_dir, f"w{self.n}.mcap") if self.record_dir else None
-        runtime.OPTIONS.progress, runtime.OPTIONS.record = False, rec
-        try:
-            res = drone.start_mission(timeout=seconds + HOVER_M / 4.0 + 4.0)  # climb at 4 m/s, then settle
-        finally:
-            runtime.OPTIONS.record = None
+        res = drone.start_mission(timeout=seconds + HOVER_M / 4.0 + 4.0,  # climb at 4 m/s, then settle
+                                  options=runtime.RunOptions(progress=False, record=rec))
         cam = res.stats["uav"]["cameras"]["cam"]
         i = self.info
         i["frames_captured"] += cam.get("frames", 0)
@@ -298,7 +295,6 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
     from aerodaas.bench import machine_info
 
     machine = machine_info()
-    runtime.OPTIONS.progress = False
     runtime.ensure_ray()
     from aerodaas.bench.progress import bench_progress
 

@@ -103,7 +103,6 @@ def run_raypath(repeat: int = 300) -> dict:
     from aerodaas.bench import machine_info
 
     machine = machine_info()
-    runtime.OPTIONS.progress = False
     runtime.ensure_ray()
     try:
         res = measure(repeat)

@@ -14,27 +14,25 @@ def add_parser(sub) -> None:
                                         "analytics schedulers) with its kind and origin")
     pp.add_argument("--json", action="store_true", help="a JSON list instead of a table")
     pp.add_argument("--kind", choices=KINDS, help="only this kind")
-    pp.add_argument("--app", metavar="FILE.py", help="import this module first (its decorators register plug-ins)")
+    pp.add_argument("--app", metavar="FILE.py", help="load this application first (its decorators register plug-ins; "
+                                                      "its mission is not flown)")
     pp.set_defaults(func=cmd_plugins)
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:
-    """Print the registry; exit code 2 if ``--app`` cannot be imported."""
+    """Print the registry; exit code 2 if ``--app`` cannot be loaded
+    (:func:`aerodaas.runtime.app_loader.load_app`: never starts Ray)."""
     from aerodaas.plugins.registry import describe_all
 
-    if args.app:
-        import importlib.util
-        import os
+    if args.app:  # loaded as `aerodaas run` loads it (one module name): no Ray, its mission only marked, not flown
+        import contextlib
         import sys
 
-        spec = importlib.util.spec_from_file_location("aerodaas_plugins_app", os.path.abspath(args.app))
-        if spec is None or spec.loader is None:
-            print(f"error: --app {args.app!r}: not a Python file", file=sys.stderr)
-            return 2
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = mod  # so that its classes know their file (the origin "decorator in FILE")
+        from aerodaas.runtime.app_loader import load_app
+
         try:
-            spec.loader.exec_module(mod)
+            with contextlib.redirect_stdout(sys.stderr):  # the app's own prints: not in the listing (--json)
+                load_app(args.app)
         except Exception as e:  # noqa: BLE001
             print(f"error: --app {args.app!r}: {type(e).__name__}: {e}", file=sys.stderr)
             return 2

@@ -72,13 +72,13 @@ def run_cli_cases() -> list[dict[str, Any]]:
 
     from aerodaas import cli
     from aerodaas.runtime import driver as runtime
+    from aerodaas.runtime import ray_start
 
     rows = []
-    saved = (runtime.init_ray, runtime.start_ray_early, runtime.shutdown_ray)
-    saved_opts = runtime.RunOptions(**vars(runtime.OPTIONS))
+    saved = (ray_start.init_ray, ray_start.start_ray_early, runtime.shutdown_ray)
     started: list = []
-    runtime.init_ray = lambda address: started.append(address)
-    runtime.start_ray_early = lambda address=None: started.append(("early", address))
+    ray_start.init_ray = lambda address, dashboard=False: started.append(address)
+    ray_start.start_ray_early = lambda address=None, dashboard=False: started.append(("early", address))
     runtime.shutdown_ray = lambda: None
     try:
         for name, make, code, expect in CLI_CASES:
@@ -98,8 +98,5 @@ def run_cli_cases() -> list[dict[str, Any]]:
                 rows.append({"kind": "command line" if code == 2 else "application error", "name": name,
                              "refused": ok, "message": f"exit {got}: {msg}" if msg else f"exit {got}"})
     finally:
-        runtime.init_ray, runtime.start_ray_early, runtime.shutdown_ray = saved
-        for k, v in vars(saved_opts).items():
-            setattr(runtime.OPTIONS, k, v)
-        runtime.OPTIONS.early_ray = False
+        ray_start.init_ray, ray_start.start_ray_early, runtime.shutdown_ray = saved
     return rows

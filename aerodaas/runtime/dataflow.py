@@ -268,41 +268,37 @@ def _edge_compute(env, robot) -> tuple[str, dict[str, str]]:
     return "edge", {}
 
 
-def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, record: str | None = None,
-               live: str | None = None, scheduled: dict[int, Any] | None = None, epoch_ns: int = 0,
-               run_id: str | None = None, max_restarts: int | None = None) -> RunPlan:
-    """Place the application's components on actors (see the module docstring) and compute every edge.
+@dataclass
+class _PlanState:
+    """What :func:`build_plan` accumulates: the nodes and the actors (by actor id) of the run."""
 
-    ``graphs``: robot id -> its analytics (:func:`collect_graph`); ``scheds``: robot id -> its trajectory
-    scheduler; ``scheduled``: id(analytics) -> analytics placed per frame by the analytics scheduler. Pure: starts
-    nothing. Specs hold the objects the actors need (analytics, schedulers), pickled when the actors start."""
-    scheduled = scheduled or {}
-    run_id = run_id or os.urandom(3).hex()
-    k = max(1, int(getattr(env.cfg, "drones_per_actor", 1)))
-    recorded = bool(record or live)
-    sim_d = sim.model_dump()
-    nodes: dict[str, Node] = {}
-    actors: dict[str, ActorPlan] = {}
+    run_id: str
+    env: Any
+    sim_d: dict
+    recorded: bool
+    nodes: dict[str, Node] = field(default_factory=dict)
+    actors: dict[str, ActorPlan] = field(default_factory=dict)
 
-    def actor(actor_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
-        if actor_id not in actors:
-            spec = ActorSpec(role, sim=sim_d, record_remote="recorder" if recorded and role != "recorder" else None,
-                             restart_hold_s=float(env.cfg.actor_restart_timeout_s))
-            actors[actor_id] = ActorPlan(actor_id, role, f"aerodaas/{run_id}/{actor_id}", tier, compute, dict(labels),
-                                        [], spec)
-        return actors[actor_id]
+    def actor(self, actor_id: str, role: Role, tier: str, compute: str | None, labels: dict) -> ActorPlan:
+        """The actor ``actor_id``, created on first use."""
+        if actor_id not in self.actors:
+            spec = ActorSpec(role, sim=self.sim_d,
+                             record_remote="recorder" if self.recorded and role != "recorder" else None,
+                             restart_hold_s=float(self.env.cfg.actor_restart_timeout_s))
+            self.actors[actor_id] = ActorPlan(actor_id, role, f"aerodaas/{self.run_id}/{actor_id}", tier, compute,
+                                              dict(labels), [], spec)
+        return self.actors[actor_id]
 
-    def add(node: Node) -> None:
-        nodes[node.id] = node
-        actors[node.actor].components.append(node.id)
+    def add(self, node: Node) -> None:
+        """Add ``node`` to its actor."""
+        self.nodes[node.id] = node
+        self.actors[node.actor].components.append(node.id)
 
-    rec = actor("recorder", "recorder", "edge", None, {})
-    if recorded:  # the recorder also feeds the live view; without --record it writes no file
-        rec.spec.record = RecordSpec(os.path.abspath(record) if record else None, live, {
-            "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
-            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"})
 
-    # ---- drones: one actor per drone (or per group of k drones flying from the same edge compute)
+def _place_drones(st: _PlanState, robots: list, k: int) -> dict[str, str]:
+    """Drone actors: one per drone (or per group of ``k`` drones flying from the same edge compute). Returns robot
+    id -> its drone actor's id."""
+    env = st.env
     drone_host: dict[str, str] = {}
     by_compute: dict[str, list] = {}
     for r in robots:
@@ -311,13 +307,20 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         for chunk in _drone_chunks(group, k):
             hid = f"drone/{chunk[0].id}" if len(chunk) == 1 else f"drones/{chunk[0].id}+{len(chunk) - 1}"
             _, labels = _edge_compute(env, chunk[0])
-            a = actor(hid, "drone", "edge", comp, labels)
+            a = st.actor(hid, "drone", "edge", comp, labels)
             a.spec.world = env.cfg.world.model_dump(mode="json")
             a.spec.mavlink_links = _shared_links(chunk)
             for r in chunk:
                 drone_host[r.id] = hid
+    return drone_host
 
-    # ---- analytics instances
+
+def _place_analytics(st: _PlanState, robots: list, graphs: dict, scheduled: dict,
+                     drone_host: dict[str, str]) -> tuple[dict, dict]:
+    """Analytics instances: a copy per edge compute's dispatcher (placed per frame by the analytics scheduler), a
+    copy inside each drone's actor (colocated), else one actor per replica, each serving a share of the drones.
+    Returns (id(a) -> [(component id, actor id, robots served)], id(a) -> analytics)."""
+    actors = st.actors
     inst: dict[int, list[tuple[str, str, tuple[str, ...]]]] = {}  # id(a) -> [(cid, actor id, robots served)]
     users: dict[int, list[str]] = {}
     every: dict[int, Any] = {}
@@ -333,11 +336,11 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
 
         def place(name: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
                   scheduled_: bool = False, obj: Any = None) -> None:
-            pa = actor(hid, role, tier, compute, labels)
+            pa = st.actor(hid, role, tier, compute, labels)
             cid = ComponentId(name, "analytics", robots_[0] if len(robots_) == 1 and role == "drone" else None)
             pa.spec.analytics.append(AnalyticsSpec(cid, a.name, a if obj is None else obj,
                                                    max(buffer, 8) if scheduled_ else buffer, scheduled_))
-            add(Node(cid, "analytics", cid.robot, hid, a.name))
+            st.add(Node(cid, "analytics", cid.robot, hid, a.name))
             inst[aid].append((cid, hid, robots_))
 
         if aid in scheduled:  # per frame by the analytics scheduler: a copy in each edge compute's dispatcher
@@ -364,20 +367,14 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                 suffix = f"/r{i}" if n_rep > 1 else ""
                 place(base + suffix, f"analytics/{cname}/{base}{suffix}", rids, "analytics", comp.tier, cname,
                       labels)
+    return inst, every
 
-    if recorded:  # the drones' homes (lat/lon of recorded tracks) and the track channels known from the plan
-        from aerodaas.perception.track_records import declared_track_channels
 
-        rec.spec.record.homes = {r.id: getattr(r, "cfg", r).home.model_dump() for r in robots}
-        rec.spec.record.declare = declared_track_channels([r.id for r in robots], graphs)
-
-    # ---- drones' own components and every edge
-    edges: list[Edge] = []
-    robot_ids: dict[str, dict] = {}
-    schemas: dict[str, dict] = {}  # plug-in sensors' schema name -> JSON Schema, for the recorder
+def _consumers_of(robots: list, scheds: dict, scheduled: dict, inst: dict):
+    """The function ``consumers(stream, robot)``: the edges (``src`` left empty) from ``stream`` (of ``robot``'s
+    items when known) to every consumer instance: analytics instances and trajectory schedulers' priority ports."""
 
     def consumers(stream, robot: str | None) -> list[Edge]:
-        """Edges from ``stream`` (of ``robot``'s items when known) to every consumer instance."""
         out = []
         for sub in stream.subscribers:
             # frames for the analytics scheduler: its dispatcher decides what to drop, not the edge's in-flight limit
@@ -395,6 +392,16 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                                     (rr.id,) if robot is None else None))
         return out
 
+    return consumers
+
+
+def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: dict[str, str], consumers,
+                      edges: list[Edge], schemas: dict[str, dict]) -> dict[str, dict]:
+    """Each robot's own components in its drone actor (drone, trajectory scheduler, sensors that feed something or
+    are recorded, plug-in sensors), their edges, and its :class:`~aerodaas.protocol.specs.RobotSpec`. Returns robot id
+    -> its component ids."""
+    recorded, actors, add = st.recorded, st.actors, st.add
+    robot_ids: dict[str, dict] = {}
     for r in robots:
         hid = drone_host[r.id]
         sched = scheds[r.id]
@@ -432,6 +439,13 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                                                  preplanned, cams, ids["odom"], ids["stat"], plugin_sensors,
                                                  robot_plugins(r.cfg)))
         robot_ids[r.id] = ids
+    return robot_ids
+
+
+def _analytics_edges(every: dict, inst: dict, consumers) -> list[Edge]:
+    """The edges out of every analytics instance (to analytics downstream and to trajectory schedulers), each
+    carrying only the robots the instance serves."""
+    edges: list[Edge] = []
     seen_out: set[str] = set()
     for aid, a in every.items():
         for cid, _, served in inst[aid]:
@@ -446,13 +460,46 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
                     if robots_ is None:
                         continue  # no robot of this instance goes there
                 edges.append(Edge(cid, e.dst, e.port, e.buffer, robots_))
+    return edges
+
+
+def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, record: str | None = None,
+               live: str | None = None, scheduled: dict[int, Any] | None = None, epoch_ns: int = 0,
+               run_id: str | None = None, max_restarts: int | None = None) -> RunPlan:
+    """Place the application's components on actors (see the module docstring) and compute every edge.
+
+    ``graphs``: robot id -> its analytics (:func:`collect_graph`); ``scheds``: robot id -> its trajectory
+    scheduler; ``scheduled``: id(analytics) -> analytics placed per frame by the analytics scheduler. Pure: starts
+    nothing. Specs hold the objects the actors need (analytics, schedulers), pickled when the actors start."""
+    scheduled = scheduled or {}
+    run_id = run_id or os.urandom(3).hex()
+    k = max(1, int(getattr(env.cfg, "drones_per_actor", 1)))
+    recorded = bool(record or live)
+    st = _PlanState(run_id, env, sim.model_dump(), recorded)
+    rec = st.actor("recorder", "recorder", "edge", None, {})
+    if recorded:  # the recorder also feeds the live view; without --record it writes no file
+        rec.spec.record = RecordSpec(os.path.abspath(record) if record else None, live, {
+            "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
+            "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"})
+    drone_host = _place_drones(st, robots, k)
+    inst, every = _place_analytics(st, robots, graphs, scheduled, drone_host)
+    if recorded:  # the drones' homes (lat/lon of recorded tracks) and the track channels known from the plan
+        from aerodaas.perception.track_records import declared_track_channels
+
+        rec.spec.record.homes = {r.id: getattr(r, "cfg", r).home.model_dump() for r in robots}
+        rec.spec.record.declare = declared_track_channels([r.id for r in robots], graphs)
+    consumers = _consumers_of(robots, scheds, scheduled, inst)
+    edges: list[Edge] = []
+    schemas: dict[str, dict] = {}  # plug-in sensors' schema name -> JSON Schema, for the recorder
+    robot_ids = _drone_components(st, robots, scheds, drone_host, consumers, edges, schemas)
+    edges.extend(_analytics_edges(every, inst, consumers))
     for r in robots:
         robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
                                         if r.id in served]
     if recorded and schemas:
         rec.spec.record.schemas = schemas
-    for a in actors.values():
+    for a in st.actors.values():
         a.spec.epoch_ns = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
-    return RunPlan(run_id, nodes, edges, actors, robot_ids, {aid: [c for c, _, _ in v] for aid, v in inst.items()},
-                   channel_key=key)
+    return RunPlan(run_id, st.nodes, edges, st.actors, robot_ids,
+                   {aid: [c for c, _, _ in v] for aid, v in inst.items()}, channel_key=key)

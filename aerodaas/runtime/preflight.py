@@ -9,7 +9,8 @@ from typing import Any
 
 from aerodaas.config import SimulationConfig
 
-__all__ = ["validate", "check_clocks", "robot_schedulers", "scheduled_analytics", "check_preplanned"]
+__all__ = ["validate", "validate_graph", "check_options", "simulation_for", "check_clocks", "robot_schedulers",
+           "scheduled_analytics", "check_preplanned"]
 
 
 def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
@@ -75,25 +76,21 @@ def robot_schedulers(env, robots: list) -> dict[str, Any]:
     return out
 
 
-def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
-    """Everything checked before any actor starts (``opts``: the run's :class:`~aerodaas.runtime.driver.RunOptions`):
-    returns (graphs, schedulers, scheduled analytics). Raises ConfigError / ValueError naming the field."""
+def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
+    """The checks of the application itself, whatever the run's options (done when it is loaded,
+    :mod:`aerodaas.runtime.app_loader`): each robot's analytics (names, deployment, options), its trajectory
+    scheduler and pre-planned missions, an autopilot mission's shape, the analytics scheduler's analytics and the
+    clocks under the environment's simulation settings. Returns (graphs, schedulers, scheduled analytics). Raises
+    ConfigError / ValueError / SafetyViolation naming the field."""
     from aerodaas.config import ConfigError
+    from aerodaas.model.ids import check_analytics_names
     from aerodaas.runtime.dataflow import collect_graph
 
-    if opts.record:
-        from aerodaas.recording.writer import check_record_path
-
-        check_record_path(opts.record, overwrite=opts.overwrite)  # ValueError naming the path: before Ray
-    from aerodaas.clusters.addresses import check_hitl
-
-    check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
+    simulation_for(env, robots, None)
     graphs = {}
     scheds = robot_schedulers(env, robots)
     for r in robots:
         analytics = collect_graph(r)
-        from aerodaas.model.ids import check_analytics_names
-
         try:  # its name is part of its topics (/<robot>/<name>/detections): the id grammar, one name per analytics
             check_analytics_names(r.id, [(a.name, type(a).__name__) for a in analytics], [s.id for s in r.cfg.sensors])
         except ValueError as e:
@@ -111,9 +108,49 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
         check_preplanned(r, scheds[r.id])
         from aerodaas.backends import backend_class
 
-        backend_class(r.cfg.backend).check_mission(r, scheds[r.id],
-                                                   opts.hitl if opts.hitl is not None else env.cfg.hitl.enabled)
+        backend_class(r.cfg.backend).check_mission(r, scheds[r.id], env.cfg.hitl.enabled)
     return graphs, scheds, scheduled_analytics(env, graphs)
+
+
+def check_options(env, robots: list, scheds: dict, opts: Any) -> SimulationConfig:
+    """The checks of a run's options (``opts``: :class:`~aerodaas.runtime.options.RunOptions`) against the
+    application, before Ray starts: the recording's path, the HITL API's host and port, an autopilot mission with
+    ``--hitl``, the clocks under ``--speedup`` / ``--lockstep``. Returns the run's simulation settings
+    (:func:`simulation_for`). Raises ConfigError / ValueError naming the field or flag."""
+    if opts.record:
+        from aerodaas.recording.writer import check_record_path
+
+        check_record_path(opts.record, overwrite=opts.overwrite)  # ValueError naming the path: before Ray
+    from aerodaas.clusters.addresses import check_hitl
+
+    check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
+    if opts.hitl and not env.cfg.hitl.enabled:  # --hitl: a backend's mission may refuse the HITL API
+        from aerodaas.backends import backend_class
+
+        for r in robots:
+            backend_class(r.cfg.backend).check_mission(r, scheds[r.id], True)
+    return simulation_for(env, robots, opts)
+
+
+def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
+    """:func:`validate_graph` and :func:`check_options` (``opts``: the run's
+    :class:`~aerodaas.runtime.options.RunOptions`): returns (graphs, schedulers, scheduled analytics). Raises
+    ConfigError / ValueError naming the field."""
+    out = validate_graph(env, robots)
+    check_options(env, robots, out[1], opts)
+    return out
+
+
+def simulation_for(env, robots: list, opts: Any) -> SimulationConfig:
+    """The run's simulation settings: the environment's, ``opts.speedup`` / ``opts.lockstep`` over them (``opts``
+    None: none), checked with :func:`check_clocks` (which sets a replay-only run's speed-up). Raises ConfigError."""
+    sim = SimulationConfig.model_validate(env.cfg.simulation.model_dump())
+    if opts is not None and opts.speedup is not None:
+        sim.speedup = opts.speedup
+    if opts is not None and opts.lockstep is not None:
+        sim.lockstep = opts.lockstep
+    check_clocks(robots, sim)
+    return sim
 
 
 def check_clocks(robots: list, sim: SimulationConfig) -> None:

@@ -1,0 +1,35 @@
+"""The options of one run (``aerodaas run``'s flags, or a test's): a value handed to the runner
+(:func:`aerodaas.runtime.driver.run_application` / :func:`~aerodaas.runtime.driver.run_mission`); nothing reads
+them from a global."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["RunOptions"]
+
+
+@dataclass
+class RunOptions:
+    """Options of one run; None: the environment file's value. ``speedup``: simulated seconds per wall second;
+    ``timeout``: wall-clock limit of the mission, s; ``record``: the MCAP file to write; ``address``: the Ray
+    cluster to join (None: a local Ray); ``env_path``: an environment file used instead of the one the application
+    names (applies while the application is loaded)."""
+
+    record: str | None = None
+    speedup: float | None = None
+    lockstep: bool | None = None
+    timeout: float | None = None
+    address: str | None = None
+    env_path: str | None = None
+    progress: bool = True
+    hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
+    hitl_port: int | None = None
+    live: str | None = None  # serve the run to Foxglove over WebSocket on this HOST:PORT (aerodaas.liveview.server)
+    #: a local Ray also starts its dashboard on 127.0.0.1 (``aerodaas run --dashboard``: it serves
+    #: ``ray list actors`` and the actors view; off by default: it adds seconds to the start and on a loaded machine
+    #: can fail to start, which then costs a retry without it)
+    dashboard: bool = False
+    #: the run's id in its actors' names (``aerodaas/<run id>/...``); None: a random one per run
+    run_id: str | None = None
+    #: --overwrite: --record may replace an existing file that is not an AeroDaaS recording
+    overwrite: bool = False
