@@ -8,9 +8,13 @@ import os
 import signal
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from aerodaas.runtime.options import RunOptions
 
 
-def _run_options(args: argparse.Namespace) -> "RunOptions | int":  # noqa: F821
+def _run_options(args: argparse.Namespace) -> "RunOptions | int":
     """``aerodaas run``'s flags as the run's options, every one checked before Ray starts (exit 2 naming the bad
     input: the returned int)."""
     from aerodaas.config import ConfigError

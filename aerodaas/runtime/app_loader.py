@@ -153,17 +153,17 @@ def mark_mission(env: Any, robots: list, timeout: float | None) -> Any:
     load = _LOADING.get()
     if load is None:
         return _NOT_LOADING
-    k = load.marks
+    index = load.marks
     load.marks += 1
-    if k < len(load.flown):
+    if index < len(load.flown):
         if load.marks == len(load.flown) and load.stdout is not None:  # the replay of what ran is over: show output
             sys.stdout, load.stdout = load.stdout, None
-        return load.flown[k]
+        return load.flown[index]
     from aerodaas.runtime.preflight import validate_graph
 
     graphs, scheds, scheduled = validate_graph(env, robots)
     line, top = _caller_in_app(load.path)
-    graph = AppGraph(MappingProxyType({k: tuple(v) for k, v in graphs.items()}), MappingProxyType(dict(scheds)),
+    graph = AppGraph(MappingProxyType({rid: tuple(v) for rid, v in graphs.items()}), MappingProxyType(dict(scheds)),
                      MappingProxyType(dict(scheduled)))
     raise MissionMarked(MissionStart(env, tuple(robots), timeout, line, top), graph)
 
