@@ -35,8 +35,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.protocol.messages import (RecordCamera, RecordDetections, RecordImage, RecordItem, RecordJson,
-                                       RecordOdometry, RecordTracks)
+from aerodaas.protocol.messages import (ProducerLedger, RecordCamera, RecordDetections, RecordImage, RecordItem,
+                                       RecordJson, RecordOdometry, RecordTracks)
 from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 
 TF_TOPIC = "/tf"
@@ -98,8 +98,11 @@ class RecorderService:
         #: (kind, robot or topic) -> stamp (ns) of the newest odometry sample / frame written: a drone actor restarted
         #: from its checkpoint flies again from the checkpoint's time and sends samples whose stamps were recorded
         #: already; those are dropped here (by the sample's own stamp) and counted in ``duplicates``
-        self._last_stamp: dict[tuple[str, str], int] = {}
+        self._last_stamp: dict[tuple[str, str], tuple[int, int]] = {}  # (newest stamp, its sequence number)
         self.duplicates = 0
+        self.duplicates_by_topic: dict[str, int] = {}
+        #: messages numbered here, per stream (producers in this process; the other actors' come with their ledgers)
+        self.produced_here: dict[str, int] = {}
         self.on_failure: list[Callable[[dict], None]] = []
         _inject_fault(self.rec)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
@@ -122,20 +125,22 @@ class RecorderService:
         self.rec.add_sink(live.publish)
         return live.url
 
-    def image(self, topic: str, t_ns: int, frame: np.ndarray | bytes, frame_id: str) -> bool:
+    def image(self, topic: str, t_ns: int, frame: np.ndarray | bytes, frame_id: str, seq: int = -1) -> bool:
         """Queue a (H, W, 3) uint8 BGR frame (shared, not copied: frames are read-only), or its JPEG bytes already
-        encoded by the sending actor. False if dropped."""
+        encoded by the sending actor. False if dropped. ``seq``: the producer's sequence number on ``topic`` (-1:
+        numbered here, see :meth:`_numbered`)."""
         with self._lock:
             if self.failure is not None:
                 self.lost += 1
                 return False
+            item = self._numbered(RecordImage(topic, t_ns, frame, frame_id, seq)) if not self.closed else None
             self.dropped_by_topic.setdefault(topic, 0)  # every image topic offered: its count (0 too) is recorded
-            if self.closed or self._pending_frames >= self.max_pending_frames:
+            if item is None or self._pending_frames >= self.max_pending_frames:
                 self.frames_dropped += 1
                 self.dropped_by_topic[topic] += 1
                 return False
             self._pending_frames += 1
-        self._q.put(RecordImage(topic, t_ns, frame, frame_id))
+        self._q.put(item)
         return True
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
@@ -145,24 +150,39 @@ class RecorderService:
         (``width``, ``height`` in pixels, ``fx``, ``fy``, ``cx``, ``cy`` in pixels)."""
         self._put(RecordCamera(robot, sensor, dict(intrinsics), float(pitch_deg)))
 
-    def detections(self, topic: str, t_ns: int, dets: list, image_size: tuple[int, int] | None = None) -> None:
-        self._put(RecordDetections(topic, t_ns, dets, image_size))
+    def detections(self, topic: str, t_ns: int, dets: list, image_size: tuple[int, int] | None = None,
+                   seq: int = -1) -> None:
+        self._put(RecordDetections(topic, t_ns, dets, image_size, seq))
 
-    def odometry(self, robot: str, t_ns: int, odom: dict) -> None:
-        self._put(RecordOdometry(robot, t_ns, odom))
+    def odometry(self, robot: str, t_ns: int, odom: dict, seq: int = -1) -> None:
+        self._put(RecordOdometry(robot, t_ns, odom, seq))
 
     def tracks(self, prefix: str, t_ns: int, robot: str, rows: list, image_size: tuple[int, int] | None = None) -> None:
         """One frame's geo-located tracks (:func:`aerodaas.perception.track_records.write_tracks`)."""
         self._put(RecordTracks(prefix, t_ns, robot, list(rows), image_size))
 
-    def json(self, topic: str, t_ns: int, obj: dict, schema_name: str) -> None:
-        self._put(RecordJson(topic, t_ns, obj, schema_name))
+    def json(self, topic: str, t_ns: int, obj: dict, schema_name: str, seq: int = -1) -> None:
+        self._put(RecordJson(topic, t_ns, obj, schema_name, seq))
 
     def _put(self, item: RecordItem) -> None:
         if self.failure is not None:
             self.lost += 1
-        elif not self.closed:
-            self._q.put(item)
+            return
+        with self._lock:
+            if self.closed:
+                return
+            item = self._numbered(item)
+        self._q.put(item)
+
+    def _numbered(self, item: RecordItem) -> RecordItem:
+        """``item`` with a sequence number: a producer in this process (``seq`` -1) is numbered here, per stream, and
+        counted in ``produced_here``. Caller holds ``_lock``."""
+        stream = item.stream()
+        if stream is None or getattr(item, "seq", 0) >= 0:
+            return item
+        n = self.produced_here.get(stream, 0)
+        self.produced_here[stream] = n + 1
+        return item.numbered(n)
 
     # ------------------------------------------------------------------ writer thread
     def _writer(self) -> None:
@@ -198,26 +218,41 @@ class RecorderService:
                 return
 
     def _duplicate(self, item: RecordItem) -> bool:
-        """True for an odometry sample or a frame whose stamp is not newer than the last one written for the same
-        robot / image topic (a restarted drone actor re-sending what was recorded before its restart)."""
+        """True for an odometry sample or a frame that a restarted drone actor sent again: its stamp is not newer
+        than the newest one written for the same robot / image topic while its sequence number is larger than
+        that one's (the restarted producer numbers on from its ledger, but flies again from its checkpoint's time).
+        A sample with a smaller number is one that arrived late (batches of one producer may be handed on out of
+        order, e.g. after the recorder actor stalled): it is written, never taken for a duplicate."""
         if isinstance(item, RecordOdometry):
             key = ("odometry", item.robot)
         elif isinstance(item, RecordImage):
             key = ("image", item.topic)
         else:
             return False
-        t_ns = int(item.t_ns)
+        t_ns, seq = int(item.t_ns), int(item.seq)
         last = self._last_stamp.get(key)
-        if last is not None and t_ns <= last:
-            self.duplicates += 1
-            return True
-        self._last_stamp[key] = t_ns
+        if last is not None and t_ns <= last[0]:
+            if seq > last[1]:
+                self.duplicates += 1
+                stream = item.stream() or ""
+                self.duplicates_by_topic[stream] = self.duplicates_by_topic.get(stream, 0) + 1
+                return True
+            return False
+        self._last_stamp[key] = (t_ns, seq)
         return False
 
     def _write(self, item: RecordItem) -> None:
         r = self.rec
         if self._duplicate(item):
             return
+        r.set_sequence(getattr(item, "seq", None))
+        try:
+            self._write_item(item)
+        finally:
+            r.set_sequence(None)
+
+    def _write_item(self, item: RecordItem) -> None:
+        r = self.rec
         if isinstance(item, RecordImage):
             topic, t_ns, frame, frame_id = item.topic, item.t_ns, item.frame, item.frame_id
             if isinstance(frame, (bytes, bytearray)):  # encoded by the sending actor (RemoteRecorder)
@@ -294,9 +329,13 @@ class RecorderService:
                 pass
 
     # ------------------------------------------------------------------ end
-    def close(self, timeout_s: float = 30.0) -> dict[str, Any]:
+    def close(self, timeout_s: float = 30.0, produced: dict[str, int] | None = None,
+              recorded_before: dict[str, int] | None = None, run_losses: list[dict] | None = None) -> dict[str, Any]:
         """Write what is queued and ``/run/recorder_drops`` (the frames refused here, per image topic; when any
-        image was offered), finish the file (summary and footer) and return the per-topic message counts."""
+        image was offered), then the run's accounting (:meth:`_write_accounting`), finish the file (summary and
+        footer) and return the per-topic message counts. ``produced``: the other actors' ledgers (topic -> messages
+        they numbered, :class:`~aerodaas.protocol.messages.ProducerLedger`); ``recorded_before``: topic -> messages
+        in the earlier segments of this run; ``run_losses``: the recorder actor's deaths (its ``losses``)."""
         if not self.closed:
             with self._lock:
                 self.closed = True
@@ -311,6 +350,7 @@ class RecorderService:
             try:
                 if self.failure is None:
                     try:
+                        self._write_accounting(produced or {}, recorded_before or {}, run_losses or [])
                         self.rec.close()
                     except OSError as e:  # the summary itself does not fit: the same clean failure
                         self._fail(e)
@@ -318,6 +358,38 @@ class RecorderService:
                 if self.live is not None:  # after the last message: a client sees the whole run
                     self.live.stop()
         return dict(self.rec.message_counts)
+
+    def _write_accounting(self, produced: dict[str, int], recorded_before: dict[str, int],
+                          run_losses: list[dict]) -> None:
+        """The file's last messages (the writer thread has ended): ``/run/accounting`` (per stream: the messages
+        its producers numbered, and those dropped here as sent again by a restarted drone actor; a reader derives
+        each channel's loss from it and the file's own counts, :func:`aerodaas.recording.accounting.account`),
+        then, when the run lost anything — a recorder death (``run_losses``) or a message numbered but in none of
+        the run's segments — ``/run/result`` ``{"outcome": "recording_lost", "losses": [...], "lost": {topic:
+        n}}``, so that no reader takes the drones' own ``success`` for the run's."""
+        from aerodaas.recording.accounting import ACCOUNTING_TOPIC, lost_per_channel
+        from aerodaas.recording.reader import RUN_RESULT_TOPIC
+
+        if self.live is not None:
+            for peer, at in list(self.live.dropped_clients):
+                self.rec.write_json("/run/events", self.last_t_ns or 0, {
+                    "event": "live_client_dropped", "client": peer, "wall_time": at,
+                    "after_s": self.live.client_send_timeout_s}, schema_name="aerodaas.LiveClientDropped")
+        totals = dict(produced)
+        for topic, n in self.produced_here.items():
+            totals[topic] = totals.get(topic, 0) + n
+        if not totals:
+            return
+        t_ns = (self.last_t_ns or 0) + 1
+        lost = lost_per_channel(totals, dict(self.duplicates_by_topic),
+                                {t: self.rec.message_counts.get(t, 0) + recorded_before.get(t, 0) for t in totals})
+        if run_losses or lost:
+            losses = [{k: x.get(k) for k in ("segment", "recorded_until_ns", "resumed_at_ns")} for x in run_losses]
+            self.rec.write_json(RUN_RESULT_TOPIC, t_ns, {"outcome": "recording_lost", "losses": losses, "lost": lost},
+                                schema_name="aerodaas.RunResult")
+        self.rec.write_json(ACCOUNTING_TOPIC, t_ns, {"channels": {
+            t: {"produced": n, "duplicates": self.duplicates_by_topic.get(t, 0)} for t, n in sorted(totals.items())}},
+            schema_name="aerodaas.RunAccounting")
 
     def report(self) -> dict[str, Any]:
         """``{"failure": None | {error, errno, last_recorded_ns, path, finished, finish_error?}, "lost": n,
@@ -342,16 +414,26 @@ class RemoteRecorder:
     ``record`` actor method, at most every ``period_s`` seconds from a background thread. :meth:`close` delivers
     what is left and waits for it. ``plane`` is this process's :class:`~.dataplane.DataPlane` (its ``peers`` are known once
     the actors are connected).
-    Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages)."""
+    Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages).
+
+    Every item is numbered on its stream when offered (a frame dropped here too: its number is never recorded, a
+    gap the accounting counts); numbers go on from this actor's count the recorder actor holds (a restarted actor
+    asks for it before its first batch, :meth:`_base`), and each batch carries this actor's counts so far
+    (:class:`~aerodaas.protocol.messages.ProducerLedger`)."""
 
     def __init__(self, plane: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
-                 max_pending_frames: int = 8) -> None:
+                 max_pending_frames: int = 256, max_pending_bytes: int = 256 << 20) -> None:
         self.plane, self.target, self.period_s = plane, target, period_s
         self.jpeg_quality, self.max_pending_frames = jpeg_quality, max_pending_frames
+        self.max_pending_bytes = max_pending_bytes
         self._pending_frames = 0
+        self._pending_bytes = 0
         self._buf: list[RecordItem] = []
         self._lock = threading.Lock()
         self._refs: list = []
+        self._offered: dict[str, int] = {}  # stream -> items numbered by this process (before adding _base)
+        self._base_counts: dict[str, int] | None = None  # this actor's counts before this process (the ledger)
+        self._ledger_sent: dict[str, int] = {}  # _offered as of the last batch sent
         self.sent = 0
         self.send_errors: list[str] = []
         self.frames_dropped = 0
@@ -365,14 +447,20 @@ class RemoteRecorder:
 
     def image(self, topic: str, t_ns: int, frame: np.ndarray, frame_id: str) -> bool:
         """Queue a (H, W, 3) uint8 BGR frame (shared, not copied); it is JPEG-encoded here, on the sending thread,
-        and crosses to the recorder as JPEG bytes. At most ``max_pending_frames`` wait; beyond that a frame is
-        dropped and counted (False)."""
+        and crosses to the recorder as JPEG bytes. At most ``max_pending_frames`` frames of at most
+        ``max_pending_bytes`` bytes in all wait (a sending thread starved for a second or two under load loses
+        none: 8 frames per 0.1 s lost 159 of 412 at --speedup 20 on a loaded 2-core machine); beyond that a frame
+        is dropped and counted (False): a gap in its topic's sequence numbers, lost in the accounting."""
+        size = int(getattr(frame, "nbytes", None) or len(frame))
         with self._lock:
-            if self.closed or self._pending_frames >= self.max_pending_frames:
+            item = self._number(RecordImage(topic, t_ns, frame, frame_id))
+            if self.closed or self._pending_frames >= self.max_pending_frames or \
+                    self._pending_bytes + size > self.max_pending_bytes:
                 self.frames_dropped += 1
                 return False
             self._pending_frames += 1
-            self._buf.append(RecordImage(topic, t_ns, frame, frame_id))
+            self._pending_bytes += size
+            self._buf.append(item)
         return True
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
@@ -393,18 +481,52 @@ class RemoteRecorder:
     def _put(self, item: RecordItem) -> None:
         with self._lock:
             if not self.closed:
-                self._buf.append(item)
+                self._buf.append(self._number(item))
+
+    def _number(self, item: RecordItem) -> RecordItem:
+        """``item`` numbered within this process on its stream (caller holds the lock; :meth:`_send` adds the
+        actor's count from before this process)."""
+        stream = item.stream()
+        if stream is None:
+            return item
+        n = self._offered.get(stream, 0)
+        self._offered[stream] = n + 1
+        return item.numbered(n)
+
+    def _base(self) -> dict[str, int] | None:
+        """This actor's counts per stream from before this process (its earlier incarnations', kept by the recorder
+        actor; {} for a first start), asked once; None while the recorder actor does not answer (asked again at
+        the next batch, which waits until then)."""
+        import ray
+
+        if self._base_counts is None:
+            try:
+                self._base_counts = dict(ray.get(self.plane.peer(self.target).produced_of.remote(self.plane.actor_id),
+                                                 timeout=10))
+            except Exception as e:  # noqa: BLE001 - the recorder busy or restarting: try again with the next batch
+                self.send_errors.append(f"ledger: {type(e).__name__}: {e}")
+                return None
+        return self._base_counts
 
     def _send(self) -> None:
         import ray
 
         from aerodaas.actors.dataplane import encode_frame
 
+        base = self._base()
+        if base is None:
+            return
         with self._lock:
             batch, self._buf = self._buf, []
-            frames, self._pending_frames = self._pending_frames, 0
-        if not batch:
+            frames, self._pending_frames, self._pending_bytes = self._pending_frames, 0, 0
+            offered = dict(self._offered)
+        if not batch and offered == self._ledger_sent:
             return
+        self._ledger_sent = offered
+        batch = [it.numbered(base.get(it.stream() or "", 0) + it.seq) if getattr(it, "seq", -1) >= 0 else it
+                 for it in batch]
+        ledger = ProducerLedger(self.plane.actor_id,
+                                {**base, **{k: base.get(k, 0) + n for k, n in offered.items()}})
         if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
             batch = [dataclasses.replace(it, frame=encode_frame(it.frame, self.jpeg_quality))
                      if isinstance(it, RecordImage) and isinstance(it.frame, np.ndarray) else it for it in batch]
@@ -412,7 +534,7 @@ class RemoteRecorder:
             if copies is not None:
                 copies.count("recorder_jpeg_encoded", frames)
         try:
-            self._refs.append(self.plane.peer(self.target).record.remote(batch))
+            self._refs.append(self.plane.peer(self.target).record.remote(batch, ledger))
             self.sent += len(batch)
         except Exception as e:  # noqa: BLE001 - reported in stats, never fatal
             self.send_errors.append(f"{type(e).__name__}: {e}")

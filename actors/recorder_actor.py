@@ -25,6 +25,7 @@ from typing import Any
 
 import ray
 
+from aerodaas.protocol.messages import ProducerLedger
 from aerodaas.protocol.specs import ActorSpec
 
 
@@ -47,6 +48,7 @@ class RecorderActor:
         self._set_up = threading.Event()  # setup() done (or failed): record() may hand messages on
         self._setup_lock = threading.Lock()
         self._lock = threading.Lock()
+        self._produced: dict[str, dict[str, int]] = {}  # producer host id -> stream -> messages it numbered
         self.received = 0
         self.segments: list[str] = []
         self.losses: list[dict] = []
@@ -62,7 +64,9 @@ class RecorderActor:
 
     def _restart_segment(self) -> None:
         """This process replaces a recorder that died: record into the next segment from now on and finish the
-        previous one (the dead process's, unfinished) in a background thread."""
+        previous one (the dead process's, unfinished) in a background thread. Every earlier segment ended with a
+        death of this actor: each is one of ``losses`` (a second death was reported alone before: the first one's
+        loss lived in the process that died second)."""
         from aerodaas.actors.recorder import RecorderService
         from aerodaas.recording.segments import next_segment, segment_path
 
@@ -73,6 +77,8 @@ class RecorderActor:
         k, path = next_segment(rec.path)
         prev = segment_path(rec.path, k - 1)
         self.segments = [str(segment_path(rec.path, i)) for i in range(k + 1)]
+        for i in range(k - 1):  # deaths before the last one: their segments were finished by the next recorder
+            self.losses.append(_earlier_loss(segment_path(rec.path, i), segment_path(rec.path, i + 1)))
         loss = {"segment": str(prev), "next_segment": str(path), "recorded_until_ns": None, "resumed_at_ns": None,
                 "previous_finished": False}
         self.losses.append(loss)
@@ -97,8 +103,10 @@ class RecorderActor:
 
             try:
                 recover_mcap(prev)
-                loss["recorded_until_ns"] = message_time_range(prev)[1]
+                first, loss["recorded_until_ns"], _ = message_time_range(prev)
                 loss["previous_finished"] = True
+                if len(self.losses) > 1 and self.losses[-2].get("resumed_at_ns") is None:
+                    self.losses[-2]["resumed_at_ns"] = first  # the death before: recorded again from prev's start
             except Exception as e:  # noqa: BLE001 - reported; `aerodaas recover` can try again
                 loss["finish_error"] = f"{type(e).__name__}: {e}"
 
@@ -162,14 +170,40 @@ class RecorderActor:
                 "segment": self.segments[-1] if self.segments else None,
                 "last_t_ns": getattr(rec, "last_t_ns", None), "live_url": live.url if live is not None else None}
 
-    def record(self, batch: list) -> int:
-        """Messages of another actor (:class:`~.recorder.RemoteRecorder`); returns how many were taken. The other
-        actors set up while this one does: their first messages wait (at most 60 s) for the file to be open."""
+    def record(self, batch: list, ledger: ProducerLedger | None = None) -> int:
+        """Messages of another actor (:class:`~.recorder.RemoteRecorder`) and its counts so far (``ledger``, kept:
+        :meth:`produced_of`); returns how many were taken. The other actors set up while this one does: their
+        first messages wait (at most 60 s) for the file to be open."""
         from aerodaas.actors.recorder import deliver
 
+        if ledger is not None:
+            self.keep_ledger(ledger)
         self._set_up.wait(60.0)
         self.received += len(batch)
         return deliver(self.recorder, batch) if self.recorder is not None else 0
+
+    def keep_ledger(self, ledger: ProducerLedger) -> None:
+        """Keep the largest count per stream of ``ledger.producer`` (batches may arrive out of order)."""
+        with self._lock:
+            mine = self._produced.setdefault(ledger.producer, {})
+            for topic, n in ledger.produced.items():
+                if n > mine.get(topic, 0):
+                    mine[topic] = n
+
+    def produced_of(self, producer: str) -> dict[str, int]:
+        """Stream -> messages actor ``producer`` numbered so far, as its batches said ({} for one never heard
+        of): a restarted producer numbers on from here, so its sequence numbers never restart from 0."""
+        with self._lock:
+            return dict(self._produced.get(producer, {}))
+
+    def produced_totals(self) -> dict[str, int]:
+        """Stream -> messages numbered by every producer (summed)."""
+        with self._lock:
+            out: dict[str, int] = {}
+            for counts in self._produced.values():
+                for topic, n in counts.items():
+                    out[topic] = out.get(topic, 0) + n
+            return out
 
     def keep_specs(self, specs: dict[str, bytes], wiring: bytes) -> bool:
         """Keep every other actor's pickled spec and the run's pickled wiring (read by :meth:`spec_of`)."""
@@ -206,25 +240,35 @@ class RecorderActor:
         return True
 
     def close(self) -> dict:
-        """Finish the file; returns the per-topic message counts (of this segment). A recorder that replaced a dead
-        one first records the run's own outcome, ``/run/result`` ``{"outcome": "recording_lost", "losses": [...]}``
+        """Finish the file; returns the per-topic message counts (of this segment). The file ends with the run's
+        accounting (:meth:`~.recorder.RecorderService.close`: the producers' counts, the messages in the earlier
+        segments) and, when the run lost anything — this recorder replaced a dead one, or a numbered message is in
+        no segment — ``/run/result`` ``{"outcome": "recording_lost", "losses": [...], "lost": {topic: n}}``
         (stamped after the last message written so far): the recording, joined or not, never reads as a success
-        (the drones' ``/mission/result`` say how each mission went; :func:`aerodaas.recording.reader.summarize` lets
-        the run's outcome win)."""
+        (the drones' ``/mission/result`` say how each mission went; :func:`aerodaas.recording.reader.summarize`
+        lets the run's outcome win)."""
         if self._finishing is not None:
             self._finishing.join(120.0)
         if self.recorder is None:
             return {}
-        if self.losses:
-            from aerodaas.recording.reader import RUN_RESULT_TOPIC
+        if self.losses and self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message
+            self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
+        return self.recorder.close(produced=self.produced_totals(), recorded_before=self._earlier_counts(),
+                                   run_losses=list(self.losses))
 
-            if self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message (recording_report)
-                self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
-            t_ns = (getattr(self.recorder, "last_t_ns", None) or 0) + 1
-            losses = [{k: x.get(k) for k in ("segment", "recorded_until_ns", "resumed_at_ns")} for x in self.losses]
-            self.recorder.json(RUN_RESULT_TOPIC, t_ns, {"outcome": "recording_lost", "losses": losses},
-                               "aerodaas.RunResult")
-        return self.recorder.close()
+    def _earlier_counts(self) -> dict[str, int]:
+        """Topic -> messages in this run's earlier segments (finished by now; an unreadable one counts 0, so its
+        messages count as lost)."""
+        from aerodaas.recording.reader import summarize_mcap
+
+        out: dict[str, int] = {}
+        for seg in self.segments[:-1]:
+            try:
+                for c in summarize_mcap(seg)["channels"]:
+                    out[c["topic"]] = out.get(c["topic"], 0) + c["count"]
+            except Exception:  # noqa: BLE001 - unreadable: its messages are not there to count
+                continue
+        return out
 
     def recording_report(self) -> dict:
         """:meth:`~aerodaas.actors.recorder.RecorderService.report` plus ``segments`` (the files of this run, in
@@ -254,3 +298,20 @@ class RecorderActor:
 
     def stats(self) -> dict:
         return {"_host": {"received": self.received, "errors": [], "error_count": 0}}
+
+
+def _earlier_loss(segment: Any, following: Any) -> dict:
+    """The loss of a recorder death before the last one: ``segment`` ended there, ``following`` went on (both
+    finished by the recorder that followed; None times where one cannot be read)."""
+    from aerodaas.recording.segments import message_time_range
+
+    loss = {"segment": str(segment), "next_segment": str(following), "recorded_until_ns": None,
+            "resumed_at_ns": None, "previous_finished": False}
+    try:
+        loss["recorded_until_ns"] = message_time_range(segment)[1]
+        loss["previous_finished"] = True
+        loss["resumed_at_ns"] = message_time_range(following)[0]
+    except Exception as e:  # noqa: BLE001 - reported; `aerodaas recover` can try again
+        loss["finish_error"] = f"{type(e).__name__}: {e}"
+    return loss
+

@@ -97,8 +97,8 @@ def _exit_code(results: list, stop: list[int]) -> int:
         return 128 + (stop[0] if stop else signal.SIGINT)  # the shell's convention: 130 / 143
     if any(r.outcome == "lost" for r in results):
         return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
-    if any(getattr(r, "recording_losses", None) for r in results):
-        return 4  # the recorder actor died: part of the recording is lost (it went on in a new segment)
+    if any(getattr(r, "recording_losses", None) or r.outcome == "recording_lost" for r in results):
+        return 4  # the recorder actor died or a producer's numbered message is in no segment: part of the run lost
     return 0 if all(r.ok for r in results) else 1
 
 
@@ -325,6 +325,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
     w = max((len(c["topic"]) for c in s["channels"]), default=10)
     for c in s["channels"]:
         print(f"  {c['topic']:<{w}}  {c['schema']:<28} {c['count']:>7} msgs  {c['rate_hz']:7.2f} Hz")
+    acc = s.get("accounting")
+    if acc is not None:  # per channel: the producers' sequence numbers against the file's messages
+        print(f"accounting: {acc['lost_total']} numbered messages lost" + (":" if acc["lost"] else ""))
+        for topic, n in acc["lost"].items():
+            c = acc["channels"][topic]
+            print(f"  {topic:<{w}}  {n} lost, {c['recorded']} of {c['produced'] - c['duplicates']} recorded")
     return 0
 
 

@@ -12,6 +12,7 @@ import time
 
 import pytest
 
+from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS
 from aerodaas.reliability.faults import mcap_reader_ok, run_fault
 
 from .conftest import needs_data
@@ -38,6 +39,18 @@ pytestmark = pytest.mark.faults
 def test_fault_ends_clean(name):
     r = run_fault(name)
     assert r["clean"], f"{name}: expected {r['expected']}; observed {r['observed']}\n{r.get('output', '')}"
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("name", [n for n, _, _ in ACCOUNTING_FAULTS])
+def test_recorder_stall_and_deaths_end_with_the_files_truth(name):
+    """Issue 40.1: a stalled recorder and a twice-killed recorder end not-success exactly when the recording lacks
+    a numbered message, and the summary's lost count per channel is what the file lacks, read with mcap's reader
+    (the producers' count in /run/accounting less the messages on the channel in every segment)."""
+    r = run_fault(name)
+    assert r["clean"], f"{name}: expected {r['expected']}; observed {r['observed']}\n{r.get('output', '')}"
+    if "twice" in name:  # two deaths: part of the run was not recorded
+        assert r["exit"] == 4 and r["lost"], r["observed"]
 
 
 @pytest.mark.e2e

@@ -49,4 +49,4 @@ def test_a_recording_without_images_has_no_drops_channel(tmp_path):
     svc = RecorderService(str(path), flush_every_s=0.0)
     svc.json("/d1/events", 1, {"event": "x"}, "aerodaas.MissionEvent")
     svc.close()
-    assert [t for t, *_ in read_messages(str(path))] == ["/d1/events"]
+    assert [t for t, *_ in read_messages(str(path))] == ["/d1/events", "/run/accounting"]

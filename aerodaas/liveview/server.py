@@ -102,7 +102,9 @@ class LiveServer:
     ``address`` is parsed by :func:`parse_address`. Channels are created on a topic's first message (or ahead with
     :meth:`advertise`) in a context of their own (nothing leaks into foxglove's global context). :meth:`publish`
     is thread-safe and does not block: the SDK queues per client (``backlog`` messages; the oldest data message is
-    dropped for a slow client) and sends from its own threads. ``playback_range`` (ns) announces a replay's time
+    dropped for a slow client) and sends from its own threads; a client that stops reading altogether is dropped
+    once a send to it waited ``client_send_timeout_s`` (listed in ``dropped_clients``; the recorder records a
+    ``live_client_dropped`` event), so it never holds the run's end. ``playback_range`` (ns) announces a replay's time
     range; ``listener`` is told of subscriptions (``on_subscribe``/``on_unsubscribe``, a
     ``foxglove.websocket.ServerListener`` subset).
 
@@ -119,16 +121,21 @@ class LiveServer:
     #: at :meth:`stop`, how long (s) to wait for a client that follows every channel to subscribe to the ones
     #: advertised last (3 s was too short for Foxglove's npm client under load: it missed ``/mission/result``)
     CATCHUP_WAIT_S = 10.0
+    #: at :meth:`stop`, how long (s) the SDK's server may take to stop before the connections it still serves are
+    #: closed under it (a client that stopped reading held it ~120 s)
+    STOP_WAIT_S = 5.0
 
     def __init__(self, address: str | None = None, *, name: str = "aerodaas", backlog: int = 1024,
                  listener: Any = None, time_capability: bool = False, catchup_s: float = 5.0,
-                 catchup_messages: int = 256, catchup_bytes: int = 32 << 20) -> None:
+                 catchup_messages: int = 256, catchup_bytes: int = 32 << 20, client_send_timeout_s: float = 10.0
+                 ) -> None:
         import foxglove
         from foxglove.websocket import Capability
 
         from aerodaas.liveview.subprotocol import SubprotocolFront
 
         self.host, port = parse_address(address)
+        self.client_send_timeout_s = float(client_send_timeout_s)
         self._foxglove = foxglove
         self._ctx = foxglove.Context()
         self._channels: dict[str, Any] = {}
@@ -144,6 +151,8 @@ class LiveServer:
         self._latest: dict[str, tuple[bytes, int]] = {}  # latched topic -> its latest message
         self._client_subs: dict[int, set[str]] = {}  # client id -> topics subscribed
         self.catchup_sent = 0
+        #: clients dropped for not reading (their address, ``time.time()``): see :class:`SubprotocolFront`
+        self.dropped_clients: list[tuple[str, float]] = []
         try:  # the SDK on a loopback port of its own, fronted for both subprotocol names (module docstring)
             self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._ctx,
                                                  message_backlog_size=backlog, server_listener=self,
@@ -151,11 +160,15 @@ class LiveServer:
         except Exception as e:  # the SDK raises its own error type for bind failures
             raise RuntimeError(f"live view: cannot start the foxglove-sdk server ({e})") from e
         try:
-            self._front = SubprotocolFront(self.host, port, int(self._server.port))
+            self._front = SubprotocolFront(self.host, port, int(self._server.port),
+                                           send_timeout_s=client_send_timeout_s, on_drop=self._client_dropped)
         except OSError as e:
             self._server.stop()
             raise RuntimeError(f"live view: cannot serve on {self.host}:{port} ({e.strerror or e})") from e
         self.port = self._front.port
+
+    def _client_dropped(self, peer: str) -> None:
+        self.dropped_clients.append((peer, time.time()))
 
     @property
     def url(self) -> str:
@@ -268,8 +281,13 @@ class LiveServer:
             channels, self._channels = list(self._channels.values()), {}
         for ch in channels:
             ch.close()
-        self._server.stop()
+        # the SDK's stop waits for its connections; one to a client that stopped reading (the front's pipe blocked
+        # on it) would hold it for minutes: bounded, then the front's connections are closed, which releases it
+        done = threading.Thread(target=self._server.stop, name="aerodaas-live-stop", daemon=True)
+        done.start()
+        done.join(self.STOP_WAIT_S)
         self._front.close()
+        done.join(self.STOP_WAIT_S)
 
     def __enter__(self) -> "LiveServer":
         return self

@@ -26,7 +26,9 @@ from __future__ import annotations
 
 import re
 import socket
+import struct
 import threading
+from collections.abc import Callable
 
 __all__ = ["LEGACY", "SDK", "SubprotocolFront"]
 
@@ -68,9 +70,12 @@ def rewrite_response(header: bytes) -> bytes:
     return header[:m.start()] + f"Sec-WebSocket-Protocol: {LEGACY}\r\n".encode() + header[m.end():]
 
 
-def _pipe(src: socket.socket, dst: socket.socket, gate: threading.Lock | None = None) -> None:
+def _pipe(src: socket.socket, dst: socket.socket, gate: threading.Lock | None = None,
+          on_stall: Callable[[], None] | None = None) -> None:
     """Copy ``src`` to ``dst`` until EOF; with ``gate``, each chunk waits while the gate is held (a chunk received
-    before someone took the gate was produced before, so only what the SDK sends during a hold is held back)."""
+    before someone took the gate was produced before, so only what the SDK sends during a hold is held back).
+    A send to ``dst`` that times out (its ``SO_SNDTIMEO``: the reader stopped reading and the kernel's buffers are
+    full) ends the connection and calls ``on_stall``."""
     try:
         while True:
             data = src.recv(65536)
@@ -80,6 +85,9 @@ def _pipe(src: socket.socket, dst: socket.socket, gate: threading.Lock | None = 
                 with gate:
                     pass
             dst.sendall(data)
+    except (BlockingIOError, TimeoutError):
+        if on_stall is not None:
+            on_stall()
     except OSError:
         pass
     finally:
@@ -93,9 +101,15 @@ def _pipe(src: socket.socket, dst: socket.socket, gate: threading.Lock | None = 
 class SubprotocolFront:
     """Listen on ``host:port`` (0 = any free port) and forward to ``127.0.0.1:backend_port``, renaming the
     subprotocol as the module docstring describes. ``port`` is the port bound. Raises ``OSError`` when the address
-    cannot be bound. :meth:`close` stops accepting and closes the connections it forwards."""
+    cannot be bound. :meth:`close` stops accepting and closes the connections it forwards.
 
-    def __init__(self, host: str, port: int, backend_port: int) -> None:
+    A client that stops reading is dropped: once the kernel's buffers towards it are full (the bounded queue, with
+    the SDK's own ``backlog`` behind it), a send that waits ``send_timeout_s`` seconds ends its connection, counted
+    in ``dropped`` and told to ``on_drop(peer address)``; it never holds the run (a client that stopped reading
+    held the end of a run for ~120 s before)."""
+
+    def __init__(self, host: str, port: int, backend_port: int, send_timeout_s: float = 10.0,
+                 on_drop: Callable[[str], None] | None = None) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._listen = socket.socket(family, socket.SOCK_STREAM)
         self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -107,6 +121,8 @@ class SubprotocolFront:
         self._lock = threading.Lock()
         self._gate = threading.Lock()  # held by hold(): the SDK's bytes wait before going to a client
         self._closed = False
+        self.send_timeout_s, self._on_drop = float(send_timeout_s), on_drop
+        self.dropped = 0
         threading.Thread(target=self._accept, name="foxglove-front", daemon=True).start()
 
     def _accept(self) -> None:
@@ -149,8 +165,21 @@ class SubprotocolFront:
             client.close()
             backend.close()
             return
-        threading.Thread(target=_pipe, args=(backend, client, self._gate), daemon=True).start()
+        sec = int(self.send_timeout_s)
+        client.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO,
+                          struct.pack("ll", sec, int((self.send_timeout_s - sec) * 1e6)))
+        try:
+            peer = "%s:%s" % client.getpeername()[:2]
+        except OSError:
+            peer = "?"
+        threading.Thread(target=_pipe, args=(backend, client, self._gate, lambda: self._dropped(peer)),
+                         daemon=True).start()
         _pipe(client, backend)
+
+    def _dropped(self, peer: str) -> None:
+        self.dropped += 1
+        if self._on_drop is not None:
+            self._on_drop(peer)
 
     def hold(self) -> threading.Lock:
         """A context manager: while it is held, what the SDK server sends waits in the front instead of reaching

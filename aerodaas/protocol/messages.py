@@ -24,7 +24,7 @@ from typing import Any, ClassVar, Literal
 
 __all__ = ["Port", "Message", "FrameMsg", "OdometryMsg", "StatMsg", "DetectionsMsg", "NavigationMsg", "ValueMsg",
            "output_message", "EncodedFrame", "Delivery", "RecordItem", "RecordImage", "RecordCamera",
-           "RecordDetections", "RecordOdometry", "RecordJson"]
+           "RecordDetections", "RecordOdometry", "RecordJson", "ProducerLedger"]
 
 
 @dataclass(frozen=True)
@@ -159,11 +159,37 @@ class Delivery:
 @dataclass(frozen=True)
 class RecordItem(ABC):
     """What an actor without the file sends the run's recorder actor (:class:`~aerodaas.actors.recorder.
-    RemoteRecorder`); :meth:`apply` hands it to the :class:`~aerodaas.actors.recorder.RecorderService`."""
+    RemoteRecorder`); :meth:`apply` hands it to the :class:`~aerodaas.actors.recorder.RecorderService`.
+
+    The kinds counted on a :meth:`stream` (image, detections, odometry, JSON) end with ``seq``: its producer's
+    sequence number on that stream
+    (0, 1, 2 ... per producer actor and stream, counting every message offered, also those dropped before they
+    reached the file; continued across the producer's restarts), written as the MCAP message's ``sequence``; -1
+    until the producer numbered it."""
 
     @abstractmethod
     def apply(self, recorder: Any) -> None:
         """Hand this item to ``recorder`` (a RecorderService: non-blocking)."""
+
+    def stream(self) -> str | None:
+        """The topic this item's sequence number counts on (what the recording's accounting is per), or None
+        for an item that is not counted (a camera's registration, a tracking analytics' tracks)."""
+        return getattr(self, "topic", None)
+
+    def numbered(self, seq: int) -> "RecordItem":
+        """This item with sequence number ``seq``."""
+        return dataclasses.replace(self, seq=seq) if hasattr(self, "seq") else self
+
+
+@dataclass(frozen=True)
+class ProducerLedger:
+    """What one producer actor (``producer``: its host id) had offered the recorder per stream (topic -> messages
+    numbered so far, the frames it dropped itself included), sent with each of its batches; the recorder actor
+    keeps the largest per producer and stream, and gives it back to a restarted producer, whose numbering goes on
+    from there (:class:`~aerodaas.actors.recorder.RemoteRecorder`)."""
+
+    producer: str
+    produced: dict[str, int]
 
 
 @dataclass(frozen=True)
@@ -175,9 +201,10 @@ class RecordImage(RecordItem):
     t_ns: int
     frame: Any
     frame_id: str
+    seq: int = -1
 
     def apply(self, recorder: Any) -> None:
-        recorder.image(self.topic, self.t_ns, self.frame, self.frame_id)
+        recorder.image(self.topic, self.t_ns, self.frame, self.frame_id, seq=self.seq)
 
 
 @dataclass(frozen=True)
@@ -201,9 +228,10 @@ class RecordDetections(RecordItem):
     t_ns: int
     detections: list
     image_size: tuple[int, int] | None = None
+    seq: int = -1
 
     def apply(self, recorder: Any) -> None:
-        recorder.detections(self.topic, self.t_ns, self.detections, self.image_size)
+        recorder.detections(self.topic, self.t_ns, self.detections, self.image_size, seq=self.seq)
 
 
 @dataclass(frozen=True)
@@ -220,6 +248,9 @@ class RecordTracks(RecordItem):
     def apply(self, recorder: Any) -> None:
         recorder.tracks(self.prefix, self.t_ns, self.robot, self.rows, self.image_size)
 
+    def stream(self) -> str | None:
+        return None  # several topics per frame, some only when there are tracks: not counted
+
 
 @dataclass(frozen=True)
 class RecordOdometry(RecordItem):
@@ -228,9 +259,13 @@ class RecordOdometry(RecordItem):
     robot: str
     t_ns: int
     odometry: dict
+    seq: int = -1
 
     def apply(self, recorder: Any) -> None:
-        recorder.odometry(self.robot, self.t_ns, self.odometry)
+        recorder.odometry(self.robot, self.t_ns, self.odometry, seq=self.seq)
+
+    def stream(self) -> str | None:
+        return f"/{self.robot}/odometry"
 
 
 @dataclass(frozen=True)
@@ -241,6 +276,7 @@ class RecordJson(RecordItem):
     t_ns: int
     obj: dict
     schema_name: str
+    seq: int = -1
 
     def apply(self, recorder: Any) -> None:
-        recorder.json(self.topic, self.t_ns, self.obj, self.schema_name)
+        recorder.json(self.topic, self.t_ns, self.obj, self.schema_name, seq=self.seq)

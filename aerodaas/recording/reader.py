@@ -189,80 +189,119 @@ def summarize_mcap(path: str | os.PathLike) -> dict[str, Any]:
     Finished files are summarized from their summary section; unfinished (crashed) files are scanned front to
     back up to the last complete chunk and reported with ``finished=False``.
 
+    ``accounting`` is the recording's per-channel accounting (:mod:`aerodaas.recording.accounting`: produced,
+    duplicates, recorded, lost, from ``/run/accounting`` and the file's own counts; ``lost``: the channels that
+    lost any; None for a file without ``/run/accounting``); ``accounting_message`` the raw message.
+
     Raises ``FileNotFoundError`` if ``path`` does not exist and ``ValueError`` if it is not an MCAP file.
     """
     f, finished = _open_mcap(path)
-    metadata: dict[str, str] = {}
-
-    def add_metadata(rec: Metadata) -> None:
-        for k, v in rec.metadata.items():
-            metadata[k if rec.name == METADATA_NAME else f"{rec.name}.{k}"] = v
-
-    last_json: dict[str, Any] = {}
-    mission_topics = (RUN_RESULT_TOPIC, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC)
-    channel_info: dict[int, dict[str, Any]] = {}
-    counts: dict[int, int] = {}
-    start_ns: int | None = None
-    end_ns: int | None = None
-    message_count = 0
     with f:
-        summary = None
+        scan = _ScanResult()
         if finished:
-            try:
-                reader = make_reader(f)
-                summary = reader.get_summary()
-            except _TRUNCATION_ERRORS:
-                summary, finished = None, False
-        if summary is not None and summary.statistics is not None:
-            stats = summary.statistics
-            message_count = stats.message_count
-            if message_count:
-                start_ns, end_ns = stats.message_start_time, stats.message_end_time
-            for cid, ch in summary.channels.items():
-                schema = summary.schemas.get(ch.schema_id)
-                channel_info[cid] = {"topic": ch.topic, "schema": schema.name if schema else "",
-                                     "encoding": ch.message_encoding}
-            counts = dict(stats.channel_message_counts)
-            for rec in reader.iter_metadata():
-                add_metadata(rec)
-            present = [t for t in mission_topics if any(c["topic"] == t and counts.get(cid)
-                                                        for cid, c in channel_info.items())]
-            for topic in present:
-                for _schema, ch, msg in reader.iter_messages(topics=[topic], log_time_order=True, reverse=True):
-                    if ch.message_encoding == "json":
-                        last_json[topic] = _safe_json(msg.data)
-                    break
-        else:
-            last_time: dict[str, int] = {}
-            for schema, ch, msg in _scan_linear(f, on_metadata=add_metadata):
-                if ch.id not in channel_info:
-                    channel_info[ch.id] = {"topic": ch.topic, "schema": schema.name if schema else "",
-                                           "encoding": ch.message_encoding}
-                counts[ch.id] = counts.get(ch.id, 0) + 1
-                message_count += 1
-                t = msg.log_time
-                start_ns = t if start_ns is None else min(start_ns, t)
-                end_ns = t if end_ns is None else max(end_ns, t)
-                if ch.topic in mission_topics and ch.message_encoding == "json" and t >= last_time.get(ch.topic, -1):
-                    last_time[ch.topic] = t
-                    last_json[ch.topic] = _safe_json(msg.data)
+            finished = _scan_summary(f, scan)
+        if not finished:
+            _scan_records(f, scan)
+    return _summary_dict(path, scan, finished)
 
+
+#: topics whose last JSON message the summary reads (the run's and its missions' outcome, the accounting)
+_SUMMARY_TOPICS = (RUN_RESULT_TOPIC, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC, "/run/accounting")
+
+
+class _ScanResult:
+    """What :func:`summarize_mcap` gathers from a file: channel id -> {topic, schema, encoding} and count, the
+    message count and time range, the metadata, and the last JSON message of each of :data:`_SUMMARY_TOPICS`."""
+
+    def __init__(self) -> None:
+        self.channels: dict[int, dict[str, Any]] = {}
+        self.counts: dict[int, int] = {}
+        self.message_count = 0
+        self.start_ns: int | None = None
+        self.end_ns: int | None = None
+        self.metadata: dict[str, str] = {}
+        self.last_json: dict[str, Any] = {}
+
+    def add_metadata(self, rec: Metadata) -> None:
+        for k, v in rec.metadata.items():
+            self.metadata[k if rec.name == METADATA_NAME else f"{rec.name}.{k}"] = v
+
+    def add_channel(self, cid: int, ch: Channel, schema: Schema | None) -> None:
+        self.channels[cid] = {"topic": ch.topic, "schema": schema.name if schema else "",
+                              "encoding": ch.message_encoding}
+
+
+def _scan_summary(f: Any, scan: _ScanResult) -> bool:
+    """Fill ``scan`` from a finished file's summary section (and the last message of each summary topic through
+    the index); False when the summary cannot be read (then the file is scanned as unfinished)."""
+    try:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+    except _TRUNCATION_ERRORS:
+        return False
+    if summary is None or summary.statistics is None:
+        return False
+    stats = summary.statistics
+    scan.message_count = stats.message_count
+    if stats.message_count:
+        scan.start_ns, scan.end_ns = stats.message_start_time, stats.message_end_time
+    for cid, ch in summary.channels.items():
+        scan.add_channel(cid, ch, summary.schemas.get(ch.schema_id))
+    scan.counts = dict(stats.channel_message_counts)
+    for rec in reader.iter_metadata():
+        scan.add_metadata(rec)
+    present = [t for t in _SUMMARY_TOPICS if any(c["topic"] == t and scan.counts.get(cid)
+                                                 for cid, c in scan.channels.items())]
+    for topic in present:
+        for _schema, ch, msg in reader.iter_messages(topics=[topic], log_time_order=True, reverse=True):
+            if ch.message_encoding == "json":
+                scan.last_json[topic] = _safe_json(msg.data)
+            break
+    return True
+
+
+def _scan_records(f: Any, scan: _ScanResult) -> None:
+    """Fill ``scan`` reading an unfinished (crashed) file front to back, up to its last complete chunk."""
+    last_time: dict[str, int] = {}
+    for schema, ch, msg in _scan_linear(f, on_metadata=scan.add_metadata):
+        if ch.id not in scan.channels:
+            scan.add_channel(ch.id, ch, schema)
+        scan.counts[ch.id] = scan.counts.get(ch.id, 0) + 1
+        scan.message_count += 1
+        t = msg.log_time
+        scan.start_ns = t if scan.start_ns is None else min(scan.start_ns, t)
+        scan.end_ns = t if scan.end_ns is None else max(scan.end_ns, t)
+        if ch.topic in _SUMMARY_TOPICS and ch.message_encoding == "json" and t >= last_time.get(ch.topic, -1):
+            last_time[ch.topic] = t
+            scan.last_json[ch.topic] = _safe_json(msg.data)
+
+
+def _summary_dict(path: Any, scan: _ScanResult, finished: bool) -> dict[str, Any]:
+    """The dict :func:`summarize_mcap` returns, from what was scanned."""
+    from aerodaas.recording.accounting import ACCOUNTING_TOPIC, account_channels, as_report
+
+    start_ns, end_ns = scan.start_ns, scan.end_ns
     duration_s = (end_ns - start_ns) / 1e9 if start_ns is not None and end_ns is not None else 0.0
     channels = []
-    for cid, info in channel_info.items():
-        n = int(counts.get(cid, 0))
+    for cid, info in scan.channels.items():
+        n = int(scan.counts.get(cid, 0))
         channels.append({**info, "count": n, "rate_hz": (n / duration_s) if duration_s > 0 else 0.0})
     channels.sort(key=lambda c: (c["topic"], c["schema"]))
-
+    last_json = scan.last_json
     mission = None
-    if last_json:
+    if any(t in last_json for t in (RUN_RESULT_TOPIC, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC)):
         result = last_json.get(RUN_RESULT_TOPIC) or last_json.get(MISSION_RESULT_TOPIC)  # the run's outcome wins
         state = last_json.get(MISSION_STATE_TOPIC)
         mission = {"outcome": result.get("outcome") if isinstance(result, dict) else None,
                    "final_state": state.get("state") if isinstance(state, dict) else None}
+    counts: dict[str, int] = {}
+    for c in channels:
+        counts[c["topic"]] = counts.get(c["topic"], 0) + c["count"]
+    acc = account_channels(last_json.get(ACCOUNTING_TOPIC), counts)
     return {"path": str(path), "duration_s": duration_s, "start_ns": start_ns, "end_ns": end_ns,
-            "message_count": int(message_count), "channels": channels, "metadata": metadata,
-            "mission": mission, "finished": bool(finished)}
+            "message_count": int(scan.message_count), "channels": channels, "metadata": scan.metadata,
+            "mission": mission, "finished": bool(finished), "accounting": None if acc is None else as_report(acc),
+            "accounting_message": last_json.get(ACCOUNTING_TOPIC)}
 
 
 def _safe_json(data: bytes) -> Any:

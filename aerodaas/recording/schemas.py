@@ -150,6 +150,21 @@ class RecorderDrops(BaseModel):
     total: int
 
 
+class ChannelProduced(BaseModel):
+    """One stream's producers' count (``/run/accounting``)."""
+
+    produced: int = Field(description="messages its producers numbered (sequence numbers handed out), the ones "
+                                      "dropped before the file included")
+    duplicates: int = Field(description="messages sent again by a restarted drone actor, deliberately not recorded")
+
+
+class RunAccounting(BaseModel):
+    """The recording's accounting (``/run/accounting``, its last message): per stream (topic) what its producers
+    numbered; a channel's loss is ``produced - duplicates - messages in the recording`` (all segments)."""
+
+    channels: dict[str, ChannelProduced]
+
+
 #: schema name written on the channel -> the pydantic model describing its messages
 JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.Odometry": Odometry,
@@ -164,6 +179,7 @@ JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.FrameLatency": FrameLatency,
     "aerodaas.MissionPlan": MissionPlan,
     "aerodaas.RecorderDrops": RecorderDrops,
+    "aerodaas.RunAccounting": RunAccounting,
 }
 
 _CACHE: dict[str, dict[str, Any]] = {}

@@ -208,6 +208,7 @@ class McapRecorder:
         self._sinks: list[Callable[[RecordedMessage], None]] = []
         self._default_schema_text: dict[str, str] = {}  # topic -> its generated JSON Schema (write_json)
         self.sink_errors: list[str] = []
+        self._sequence: int | None = None  # set_sequence: the producer's number for the messages that follow
         try:
             if path is not None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -275,13 +276,22 @@ class McapRecorder:
             channel_id = self._channel_for(topic, kind, make_schema, schema_key, message_encoding)
             self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
                                      publish_time=log_time_ns,
-                                     sequence=self.message_counts.get(topic, 0) & 0xFFFFFFFF)
+                                     sequence=(self.message_counts.get(topic, 0) if self._sequence is None
+                                               else self._sequence) & 0xFFFFFFFF)
             self.message_counts[topic] = self.message_counts.get(topic, 0) + 1
             # A completed chunk was just written to the stream: hand it to the OS so it survives a crash.
             self._stream.sync()
             if self._sinks:
                 self._to_sinks(RecordedMessage(topic, *self._schema_records[topic], message_encoding, log_time_ns,
                                                data))
+
+    def set_sequence(self, seq: int | None) -> None:
+        """Write ``seq`` as the MCAP ``sequence`` of the messages that follow (the producer's number of the item
+        they come from, :class:`~aerodaas.protocol.messages.RecordItem`; messages derived from one item, e.g. an
+        odometry sample's pose, fix and transforms, share it); None: each topic's own count of written messages
+        (the default). MCAP's Message.sequence is "an optional message counter assigned by the publisher, to
+        detect message gaps" (MCAP specification, Message record), 32 bits: wraps at 2**32."""
+        self._sequence = None if seq is None else int(seq)
 
     def add_sink(self, sink: Callable[[RecordedMessage], None]) -> None:
         """Also hand every message written from now on to ``sink`` (called in the writing thread, under the

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS
 from aerodaas.clusters.reaper import descendants, start_time
 
 __all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
@@ -495,6 +496,7 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them, the joined "
      "recording's outcome is recording_lost (/run/result), never success", _recorder_kill),
+    *ACCOUNTING_FAULTS,  # the recording's end-to-end accounting under stalls and deaths (issue 40.1)
 ]
 
 

@@ -60,11 +60,20 @@ class MissionResult:
     #: lock-step runs: the consumers (component ids) whose actor died and did not answer again within
     #: ``actor_restart_timeout_s``; their analytics were lost (outcome ``analytics_lost``, not ``ok``)
     analytics_lost: list[str] = field(default_factory=list)
+    #: the recording's per-channel accounting, derived from the file(s) (:func:`aerodaas.recording.accounting.
+    #: account_recording`: produced, recorded, lost per channel; ``lost_total``); None without one. A run whose
+    #: recording lacks a numbered message is not ``ok`` (outcome ``recording_lost``, exit code 4)
+    recording_accounting: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
         return (self.outcome == "success" and self.recording_failure is None and not self.recording_losses
-                and not self.analytics_lost)
+                and not self.analytics_lost and not self.recording_lost_messages)
+
+    @property
+    def recording_lost_messages(self) -> int:
+        """Messages numbered by their producers that are in no segment of the recording (0 without accounting)."""
+        return int((self.recording_accounting or {}).get("lost_total", 0))
 
 
 #: stop signals received (SIGINT/SIGTERM through :func:`request_stop`), and whether raising KeyboardInterrupt in the
@@ -410,6 +419,22 @@ def _run_mission(run: _Run) -> MissionResult:
     return _result(run, counts, rec_report)
 
 
+def _recording_accounting(record: str | None, rec_report: dict) -> dict[str, Any] | None:
+    """The recording's accounting read back from its file(s) (``rec_report["segments"]``, else ``record``),
+    None without a recording or when it cannot be read (the summary then says what the recorder reported)."""
+    paths = rec_report.get("segments") or ([record] if record else [])
+    if not paths or not all(os.path.isfile(p) for p in paths):
+        return None
+    from aerodaas.recording.accounting import account_recording
+
+    try:
+        return account_recording(paths)
+    except (OSError, ValueError) as e:
+        print(f"aerodaas: warning: the recording's accounting could not be read: {type(e).__name__}: {e}",
+              file=sys.stderr)
+        return None
+
+
 def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
     """The run's :class:`MissionResult` (a robot without a report failed; a lost recording segment or analytics
     is not a success); the application's end hooks are told it."""
@@ -421,20 +446,22 @@ def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
     outcomes = [rep.get("outcome") or "failed" for rep in run.reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")
-    if outcome == "success" and rec_report.get("losses"):
-        outcome = "recording_lost"  # the drones finished, but the run's truth has a hole: not a success
+    accounting = _recording_accounting(run.opts.record, rec_report)
     stats = run.stats
     lost_analytics = sorted({cid for h in (stats.get("_hosts") or {}).values() if isinstance(h, dict)
                              for cid in h.get("lost_consumers", [])}) if isinstance(stats, dict) else []
     if outcome == "success" and lost_analytics:
         outcome = "analytics_lost"  # the drones finished, flying on without an analytics that never came back
+    if outcome == "success" and (rec_report.get("losses") or (accounting or {}).get("lost_total")):
+        outcome = "recording_lost"  # the drones finished, but the run's truth has a hole: not a success
     result = MissionResult(outcome=outcome, robots=run.reports, stats=stats, latency=run.latency,
                            recording=run.opts.record, wall_s=time.monotonic() - run.t_start, recording_counts=counts,
                            recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
                            recording_start_ns=run.epoch_ns, recording_losses=rec_report.get("losses") or [],
                            recording_segments=rec_report.get("segments") or [],
                            recording_segment_messages=rec_report.get("segment_messages") or [],
-                           recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics)
+                           recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics,
+                           recording_accounting=accounting)
     for h in run.handles.values():
         h["robot"].run_end_hooks(result)
     return result

@@ -5,96 +5,151 @@ from typing import Any
 
 
 def format_summary(result: Any) -> str:
-    """Human-readable end-of-run summary (what ``aerodaas run`` prints)."""
+    """Human-readable end-of-run summary (what ``aerodaas run`` prints): the outcome, per robot its flight, cameras,
+    sensors, analytics and latency, the analytics scheduler, then the recording and what it lost."""
     lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
+    acc = getattr(result, "recording_accounting", None) or {}
     for rid, rep in result.robots.items():
-        if "t" not in rep and rep.get("state") is None:  # no report from a drone actor: it never flew
-            lines.append(f"  robot {rid}: did not start")
-        else:
-            t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
-            lines.append(f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
-                         f", waypoints {rep.get('visited', 0)}/{'?' if total is None else total}, final state "
-                         f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}")
-        if rep.get("ended"):
-            lines.append(f"    ended: {rep['ended']}")
-        for h in rep.get("hold_failed") or []:
-            lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
-                         f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
-        for h in rep.get("not_reached") or []:
-            lines.append(f"    not reached: {h['waypoint']}: no progress towards it for {h['after_s']:g} s, "
-                         f"{h['distance_m']:g} m from it (closest {h['closest_m']:g} m); the autopilot may have refused "
-                         f"the target")
-        lines += _speed_margin_lines(rep.get("events") or [])
-        lines += _link_lines(rep.get("events") or [])
-        if rep.get("failsafe"):
-            f = rep["failsafe"]
-            lines.append(f"    autopilot failsafe: {f.get('mode')} at t={f.get('t', 0):.1f} s"
-                         + (f" ({f['text']})" if f.get("text") else "") + f"; on_failsafe {f.get('action')}")
-        if rep.get("error"):
-            lines.append(f"    error: {rep['error']}")
-        if rep.get("actor_restarts"):
-            resumed = [e for e in rep.get("events", []) if e.get("event") == "resumed_after_restart"]
-            at = "; ".join(f"resumed at t={e.get('checkpoint_t', 0):.1f} s heading to {e.get('heading_to')}"
-                           for e in resumed)
-            lines.append(f"    drone actor restarted {rep['actor_restarts']} time(s)" + (f": {at}" if at else ""))
         st = result.stats.get(rid, {})
-        for sid, c in st.get("cameras", {}).items():
-            if not c:
-                continue
-            dropped = sum(a.get("dropped", 0) for a in st.get("analytics", []) if a)
-            if c.get("video"):
-                lines.append(f"    camera {sid}: {c['frames']} frames from its video stream, {dropped} dropped by "
-                             f"busy consumers")
-            else:
-                lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
-                             f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by "
-                             f"busy consumers")
-            v = c.get("video")
-            if v:  # a video stream: what was decoded, what newest-wins replaced, outages, capture-to-hand-off time
-                lines.append(f"      video {v['source']}: {v['decoded']} decoded, {v['overwritten']} replaced by a newer "
-                             f"frame before use, {v.get('not_recorded', 0)} not recorded (recorder busy), "
-                             f"{v['decode_errors']} damaged packets; {v['lost']} outage(s) "
-                             f"({v['outage_s']:.1f} s without video, {v['restored']} restored); capture to "
-                             f"hand-off {v['latency_ms_median']:.0f} ms median, {v['latency_ms_p99']:.0f} ms p99")
-            for o in c.get("outlets") or []:  # a consumer whose actor died (and came back, or not)
-                if o.get("reconnects") or o.get("held") or o.get("lost"):
-                    back = "did NOT come back" if o.get("lost") else \
-                        f"was restarted ({o.get('reconnects', 0)} reconnect(s))"
-                    lines.append(f"      frames to {str(o.get('to'))}: its actor died and {back}; {o.get('failed', 0)} "
-                                 f"frame(s) in flight lost" + (f", {o['held']} held (lock-step) until it answered "
-                                                               f"again" if o.get("held") else ""))
+        lines += _robot_lines(rid, rep)
+        lines += _camera_lines(st, rep)
         for sid, ps in (rep.get("plugin_sensors") or {}).items():  # from each sensor plug-in's declaration
             lines.append(f"    sensor {sid} ({ps['type']}): {ps['readings']} readings on {ps['topic']} "
                          f"[{ps['schema']}]" + (f", {ps['errors']} failed" if ps.get("errors") else ""))
-        for a in st.get("analytics", []):
-            if not a:
-                continue
-            extra = ""
-            if "frames_with_detections" in a:
-                extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"
-            if "commands" in a:
-                extra = f", {a['commands']} navigation commands"
-            if a.get("failures"):
-                extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
-                          f"{a.get('last_failure')})")
-            lines.append(f"    analytics {a['name']}: {a['processed']} items, {a['process_ms_median']:.1f} ms median{extra}")
+        lines += _analytics_lines(rid, st, acc)
         lat = result.latency.get(rid)
         if lat:
             lines.append(f"    per-frame latency over {lat['frames']} frames: end-to-end median "
                          f"{lat['e2e_ms']['median']:.1f} ms (p99 {lat['e2e_ms']['p99']:.1f}), inference median "
                          f"{lat['inference_ms']['median']:.1f} ms, framework overhead median "
                          f"{lat['overhead_ms']['median']:.1f} ms (p99 {lat['overhead_ms']['p99']:.1f})")
-    sr = result.stats.get("analytics_scheduler")
-    if sr:
-        st = sr.get("states", {})
-        lines.append(f"  analytics scheduler {sr.get('scheduler')}: {sr.get('submitted', 0)} tasks, on time "
-                     f"{100 * sr.get('on_time_rate', 0):.1f}% (edge {sr.get('tiers', {}).get('edge', 0)}, cloud "
-                     f"{sr.get('tiers', {}).get('cloud', 0)}), utility {sr.get('utility', 0):.0f}, cloud cost "
-                     f"{sr.get('cloud_cost', 0):.0f}; " + ", ".join(f"{k} {v}" for k, v in st.items() if v))
-        for ev in (sr.get("cloud") or {}).get("losses", []):
-            lines.append(f"    cloud executor {ev.get('name')} lost at {ev.get('at_s', 0):.1f} s ({ev.get('error')}): "
-                         f"{ev.get('in_flight', 0)} tasks in flight, {ev.get('retried', 0)} retried, "
-                         f"{ev.get('failed', 0)} failed")
+    lines += _scheduler_lines(result.stats.get("analytics_scheduler"), acc)
+    lines += _recording_lines(result)
+    lines += _accounting_lines(acc)
+    if getattr(result, "analytics_lost", None):
+        lines.append(f"  analytics LOST: {', '.join(result.analytics_lost)} (its actor died and did not answer again "
+                     f"within actor_restart_timeout_s; the lock-step clock went on without it)")
+    if getattr(result, "recording_duplicates", 0) and any(r.get("actor_restarts") for r in result.robots.values()):
+        lines.append(f"  recording: {result.recording_duplicates} samples sent again by a restarted drone actor (stamps "
+                     f"already recorded) were recorded once")
+    return "\n".join(lines)
+
+
+def _robot_lines(rid: str, rep: dict) -> list[str]:
+    """A robot's flight: time, waypoints, state, battery, how it ended, holds and targets it missed, the MAVLink
+    link and failsafe, errors and drone actor restarts."""
+    if "t" not in rep and rep.get("state") is None:  # no report from a drone actor: it never flew
+        lines = [f"  robot {rid}: did not start"]
+    else:
+        t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
+        lines = [f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
+                 f", waypoints {rep.get('visited', 0)}/{'?' if total is None else total}, final state "
+                 f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}"]
+    if rep.get("ended"):
+        lines.append(f"    ended: {rep['ended']}")
+    for h in rep.get("hold_failed") or []:
+        lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
+                     f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
+    for h in rep.get("not_reached") or []:
+        lines.append(f"    not reached: {h['waypoint']}: no progress towards it for {h['after_s']:g} s, "
+                     f"{h['distance_m']:g} m from it (closest {h['closest_m']:g} m); the autopilot may have refused "
+                     f"the target")
+    lines += _speed_margin_lines(rep.get("events") or [])
+    lines += _link_lines(rep.get("events") or [])
+    if rep.get("failsafe"):
+        f = rep["failsafe"]
+        lines.append(f"    autopilot failsafe: {f.get('mode')} at t={f.get('t', 0):.1f} s"
+                     + (f" ({f['text']})" if f.get("text") else "") + f"; on_failsafe {f.get('action')}")
+    if rep.get("error"):
+        lines.append(f"    error: {rep['error']}")
+    if rep.get("actor_restarts"):
+        resumed = [e for e in rep.get("events", []) if e.get("event") == "resumed_after_restart"]
+        at = "; ".join(f"resumed at t={e.get('checkpoint_t', 0):.1f} s heading to {e.get('heading_to')}"
+                       for e in resumed)
+        lines.append(f"    drone actor restarted {rep['actor_restarts']} time(s)" + (f": {at}" if at else ""))
+    return lines
+
+
+def _camera_lines(st: dict, rep: dict) -> list[str]:
+    """A robot's cameras: frames, drops, a video stream's decoding and outages, consumers whose actor died."""
+    lines = []
+    for sid, c in st.get("cameras", {}).items():
+        if not c:
+            continue
+        dropped = sum(a.get("dropped", 0) for a in st.get("analytics", []) if a)
+        if c.get("video"):
+            lines.append(f"    camera {sid}: {c['frames']} frames from its video stream, {dropped} dropped by "
+                         f"busy consumers")
+        else:
+            lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
+                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by "
+                         f"busy consumers")
+        v = c.get("video")
+        if v:  # a video stream: what was decoded, what newest-wins replaced, outages, capture-to-hand-off time
+            lines.append(f"      video {v['source']}: {v['decoded']} decoded, {v['overwritten']} replaced by a newer "
+                         f"frame before use, {v.get('not_recorded', 0)} not recorded (recorder busy), "
+                         f"{v['decode_errors']} damaged packets; {v['lost']} outage(s) "
+                         f"({v['outage_s']:.1f} s without video, {v['restored']} restored); capture to "
+                         f"hand-off {v['latency_ms_median']:.0f} ms median, {v['latency_ms_p99']:.0f} ms p99")
+        for o in c.get("outlets") or []:  # a consumer whose actor died (and came back, or not)
+            if o.get("reconnects") or o.get("held") or o.get("lost"):
+                back = "did NOT come back" if o.get("lost") else \
+                    f"was restarted ({o.get('reconnects', 0)} reconnect(s))"
+                lines.append(f"      frames to {str(o.get('to'))}: its actor died and {back}; {o.get('failed', 0)} "
+                             f"frame(s) in flight lost" + (f", {o['held']} held (lock-step) until it answered "
+                                                           f"again" if o.get("held") else ""))
+    return lines
+
+
+def _analytics_lines(rid: str, st: dict, acc: dict) -> list[str]:
+    """A robot's analytics: items processed, detections, commands, failures (their actor's own counts, which
+    restart with it), and what the recording holds of each (counted from the file: it survives restarts)."""
+    lines = []
+    chans = acc.get("channels") or {}
+    for a in st.get("analytics", []):
+        if not a:
+            continue
+        extra = ""
+        if "frames_with_detections" in a:
+            extra = f", detections in {a['frames_with_detections']}/{a['frames']} frames"
+        if "commands" in a:
+            extra = f", {a['commands']} navigation commands"
+        if a.get("failures"):
+            extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
+                      f"{a.get('last_failure')})")
+        recorded = sum(c["recorded"] for t, c in chans.items() if t == f"/{rid}/{a['name']}"
+                       or t.startswith(f"/{rid}/{a['name']}/"))
+        extra += f"; {recorded} outputs in the recording" if chans else ""
+        lines.append(f"    analytics {a['name']}: {a['processed']} items, {a['process_ms_median']:.1f} ms median{extra}")
+    missing = sum(1 for a in st.get("analytics", []) if not a)
+    if missing:
+        lines.append(f"    {missing} analytics without a report (its actor died or is gone; see the recording's "
+                     f"accounting below)")
+    return lines
+
+
+def _scheduler_lines(sr: dict | None, acc: dict) -> list[str]:
+    """The analytics scheduler's tasks (its dispatchers' counts) and what the recording holds of them."""
+    if not sr:
+        return []
+    st = sr.get("states", {})
+    chans = acc.get("channels") or {}
+    recorded = sum(c["recorded"] for t, c in chans.items() if t.endswith("/tasks"))
+    lines = [f"  analytics scheduler {sr.get('scheduler')}: {sr.get('submitted', 0)} tasks, on time "
+             f"{100 * sr.get('on_time_rate', 0):.1f}% (edge {sr.get('tiers', {}).get('edge', 0)}, cloud "
+             f"{sr.get('tiers', {}).get('cloud', 0)}), utility {sr.get('utility', 0):.0f}, cloud cost "
+             f"{sr.get('cloud_cost', 0):.0f}; " + ", ".join(f"{k} {v}" for k, v in st.items() if v)
+             + (f"; {recorded} task records in the recording" if chans else "")]
+    for ev in (sr.get("cloud") or {}).get("losses", []):
+        lines.append(f"    cloud executor {ev.get('name')} lost at {ev.get('at_s', 0):.1f} s ({ev.get('error')}): "
+                     f"{ev.get('in_flight', 0)} tasks in flight, {ev.get('retried', 0)} retried, "
+                     f"{ev.get('failed', 0)} failed")
+    return lines
+
+
+def _recording_lines(result: Any) -> list[str]:
+    """The recording: its file or segments and message counts, a disk failure, each recorder actor death."""
+    lines = []
     if result.recording:
         total = sum(result.recording_counts.values())
         fail = result.recording_failure
@@ -122,30 +177,45 @@ def format_summary(result: Any) -> str:
                          f"({fail.get('messages_in_file', '?')} messages, {state}); "
                          f"{result.recording_lost} later messages were not recorded")
     for loss in getattr(result, "recording_losses", None) or []:
-        until = loss.get("recorded_until_ns")
-        start = result.recording_start_ns
-        at = f"t = {(until - start) / 1e9:.1f} s" if until and start else "t = ? (the segment could not be read)"
-        resumed = loss.get("resumed_at_ns")
-        back = f", recording again from t = {(resumed - start) / 1e9:.1f} s" if resumed and start else ""
-        if loss.get("next_segment"):
-            lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
-                         f"{back} in {loss['next_segment']} (join the segments: `aerodaas recover "
-                         f"{result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else "")
-                         + (f"; the live view was NOT served again ({loss['live_error']})"
-                            if loss.get("live_error") else ""))
-        else:  # it died at the end (with its node): nothing recorded after, the driver finished the file if it could
-            done = "the driver finished it" if loss.get("previous_finished") else \
-                f"UNFINISHED: run `aerodaas recover {loss.get('segment')}`"
-            lines.append(f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there "
-                         f"({done})" + (f"; {_first(loss['error'])}" if loss.get("error") else ""))
-    if getattr(result, "analytics_lost", None):
-        lines.append(f"  analytics LOST: {', '.join(result.analytics_lost)} (its actor died and did not answer again "
-                     f"within actor_restart_timeout_s; the lock-step clock went on without it)")
-    if getattr(result, "recording_duplicates", 0) and any(r.get("actor_restarts") for r in result.robots.values()):
-        lines.append(f"  recording: {result.recording_duplicates} samples sent again by a restarted drone actor (stamps "
-                     f"already recorded) were recorded once")
-    return "\n".join(lines)
+        lines.append(_loss_line(loss, result))
+    return lines
 
+
+def _loss_line(loss: dict, result: Any) -> str:
+    """One death of the recorder actor: where its segment ends, where the recording went on."""
+    until = loss.get("recorded_until_ns")
+    start = result.recording_start_ns
+    at = f"t = {(until - start) / 1e9:.1f} s" if until and start else "t = ? (the segment could not be read)"
+    resumed = loss.get("resumed_at_ns")
+    back = f", recording again from t = {(resumed - start) / 1e9:.1f} s" if resumed and start else ""
+    if loss.get("next_segment"):
+        return (f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there"
+                f"{back} in {loss['next_segment']} (join the segments: `aerodaas recover "
+                f"{result.recording}`)" + (f"; {loss['error']}" if loss.get("error") else "")
+                + (f"; the live view was NOT served again ({loss['live_error']})" if loss.get("live_error") else ""))
+    # it died at the end (with its node): nothing recorded after, the driver finished the file if it could
+    done = "the driver finished it" if loss.get("previous_finished") else \
+        f"UNFINISHED: run `aerodaas recover {loss.get('segment')}`"
+    return (f"  recording lost at {at}: the recorder actor died; {loss.get('segment')} ends there "
+            f"({done})" + (f"; {_first(loss['error'])}" if loss.get("error") else ""))
+
+
+def _accounting_lines(acc: dict) -> list[str]:
+    """What the recording lacks per channel (:mod:`aerodaas.recording.accounting`: the producers' sequence
+    numbers against the messages in the file), or that it lacks nothing."""
+    chans = acc.get("channels") or {}
+    if not chans:
+        return []
+    lost = acc.get("lost") or {}
+    produced = sum(c["produced"] - c["duplicates"] for c in chans.values())
+    if not lost:
+        return [f"  recording accounting: all {produced} numbered messages of {len(chans)} channels are recorded"]
+    lines = [f"  recording LOST {acc.get('lost_total', 0)} of {produced} numbered messages on {len(lost)} channel(s) "
+             f"(their producers' sequence numbers against the file):"]
+    for topic, n in lost.items():
+        c = chans[topic]
+        lines.append(f"    {topic}: {n} lost, {c['recorded']} of {c['produced'] - c['duplicates']} recorded")
+    return lines
 
 
 def pct(v: float | None) -> str:

@@ -1,0 +1,89 @@
+"""End-to-end accounting of a recording: what each channel lost, derived from the file.
+
+Every message a producer actor offers the recorder is numbered on its stream (its topic): 0, 1, 2 ... per producer,
+the messages it dropped itself included, the numbering continued across the producer's restarts (the recorder
+actor keeps each producer's count, :class:`~aerodaas.protocol.messages.ProducerLedger`). The number is the MCAP
+message's ``sequence`` (readable by any MCAP reader), and the recording's last message, ``/run/accounting``
+(:class:`~aerodaas.recording.schemas.RunAccounting`), holds per stream how many its producers numbered and how
+many were deliberately not recorded (sent again by a restarted drone actor). A channel's loss is then
+
+    lost = produced - duplicates - messages on the channel in the recording (every segment of the run)
+
+whatever the cause: a recorder that stalled or died, a full queue, a producer killed between its batches, a
+batch that never arrived. What is not knowable: the messages a producer numbered after its last batch reached the
+recorder actor when it was killed (at most one batching period, 0.1 s, of that actor's messages) and everything
+numbered while the recorder actor itself was dead and before the producer's next batch (the producer's next batch
+carries its whole count again, so only a producer killed in that window goes uncounted).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+from typing import Any
+
+__all__ = ["ACCOUNTING_TOPIC", "ChannelAccount", "lost_per_channel", "account_channels", "account_recording",
+           "as_report"]
+
+ACCOUNTING_TOPIC = "/run/accounting"
+"""JSON topic of the recording's accounting (:class:`~aerodaas.recording.schemas.RunAccounting`)."""
+
+
+@dataclass(frozen=True)
+class ChannelAccount:
+    """One channel's accounting (messages): ``produced`` numbered by its producers, ``duplicates`` deliberately
+    not recorded, ``recorded`` in the recording, ``lost`` = produced - duplicates - recorded (never below 0)."""
+
+    produced: int
+    duplicates: int
+    recorded: int
+    lost: int
+
+
+def lost_per_channel(produced: dict[str, int], duplicates: dict[str, int], recorded: dict[str, int]
+                     ) -> dict[str, int]:
+    """Topic -> messages lost, for the topics that lost any (see the module docstring for the rule)."""
+    lost = {t: n - duplicates.get(t, 0) - recorded.get(t, 0) for t, n in produced.items()}
+    return {t: n for t, n in sorted(lost.items()) if n > 0}
+
+
+def account_channels(accounting: Any, counts: dict[str, int]) -> dict[str, ChannelAccount] | None:
+    """Per channel accounting from a ``/run/accounting`` message (its decoded JSON; None or malformed: None) and
+    ``counts`` (topic -> messages in the recording)."""
+    chans = accounting.get("channels") if isinstance(accounting, dict) else None
+    if not isinstance(chans, dict):
+        return None
+    out = {}
+    for topic, c in sorted(chans.items()):
+        if not isinstance(c, dict):
+            continue
+        produced, dup = int(c.get("produced", 0)), int(c.get("duplicates", 0))
+        rec = int(counts.get(topic, 0))
+        out[topic] = ChannelAccount(produced, dup, rec, max(0, produced - dup - rec))
+    return out
+
+
+def account_recording(paths: list[str | os.PathLike]) -> dict[str, Any] | None:
+    """The accounting of a run recorded in ``paths`` (its segments in order, or the one file): ``{"channels":
+    {topic: {produced, duplicates, recorded, lost}}, "lost": {topic: n} (only channels that lost any),
+    "lost_total": n}``, with each channel's messages counted over every segment and the producers' counts from the
+    last ``/run/accounting``; None when no segment has one (a recording made before accounting, or cut short
+    before its end). Raises what :func:`aerodaas.recording.reader.summarize_mcap` raises."""
+    from aerodaas.recording.reader import summarize_mcap
+
+    counts: dict[str, int] = {}
+    accounting = None
+    for p in paths:
+        s = summarize_mcap(p)
+        for c in s["channels"]:
+            counts[c["topic"]] = counts.get(c["topic"], 0) + c["count"]
+        accounting = s.get("accounting_message") or accounting
+    chans = account_channels(accounting, counts)
+    if chans is None:
+        return None
+    return as_report(chans)
+
+
+def as_report(chans: dict[str, ChannelAccount]) -> dict[str, Any]:
+    """The JSON form of per-channel accounts (see :func:`account_recording`)."""
+    lost = {t: c.lost for t, c in chans.items() if c.lost}
+    return {"channels": {t: asdict(c) for t, c in chans.items()}, "lost": lost, "lost_total": sum(lost.values())}

@@ -1,0 +1,140 @@
+"""Fault scenarios of the recording's end-to-end accounting (issue 40.1): real ``aerodaas run`` processes of the farm
+survey (camera, odometry, a monitoring analytics) whose recorder actor is stalled or killed mid-run. Each ends clean
+when the outcome tells the truth: not ``success`` (exit 4, ``recording_lost``) exactly when the recording lacks a
+message its producers numbered, and the summary's per-channel lost counts equal what the file lacks — read back
+with the ``mcap`` package's own reader: per channel, the producers' count in ``/run/accounting`` less the messages
+deliberately not recorded less the messages in every segment, and the sequence numbers there distinct."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import time
+from pathlib import Path
+from typing import Any
+
+__all__ = ["ACCOUNTING_FAULTS", "file_losses", "summary_losses"]
+
+#: how long the recorder actor is stopped (s): the issue's stall
+STALL_S = 20.0
+
+
+def file_losses(paths: list[Path]) -> tuple[dict[str, int], list[str]]:
+    """(topic -> messages lost, problems) of a run recorded in ``paths`` (its segments in order), read with mcap's
+    reader alone: the last ``/run/accounting`` gives what the producers numbered; a channel loses what it lacks of
+    that. ``problems``: a sequence number recorded twice on a channel with one producer, or one not below the
+    producers' count, or no accounting at all."""
+    from mcap.reader import make_reader
+
+    counts: dict[str, int] = {}
+    seqs: dict[str, list[int]] = {}
+    accounting = None
+    for p in paths:
+        with open(p, "rb") as f:
+            for _, ch, m in make_reader(f).iter_messages(log_time_order=False):
+                counts[ch.topic] = counts.get(ch.topic, 0) + 1
+                seqs.setdefault(ch.topic, []).append(m.sequence)
+                if ch.topic == "/run/accounting":
+                    accounting = json.loads(m.data)
+    if accounting is None:
+        return {}, ["no /run/accounting in the recording"]
+    lost, problems = {}, []
+    for topic, c in accounting["channels"].items():
+        n = c["produced"] - c["duplicates"] - counts.get(topic, 0)
+        if n:
+            lost[topic] = n
+        got = seqs.get(topic, [])
+        if topic.endswith(("/odometry", "/monitor")) or "/camera/" in topic:  # one producer each
+            if len(set(got)) != len(got):
+                problems.append(f"{topic}: a sequence number recorded twice")
+            if got and max(got) >= c["produced"]:
+                problems.append(f"{topic}: sequence {max(got)} not below the producers' {c['produced']}")
+    return lost, problems
+
+
+def summary_losses(out: str) -> dict[str, int]:
+    """Topic -> lost, as the run's summary printed it (``    /topic: N lost, R of P recorded``)."""
+    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^\s+(/\S+): (\d+) lost, \d+ of \d+ recorded$", out,
+                                                              re.MULTILINE)}
+
+
+def _segments(rec: Path) -> list[Path]:
+    from aerodaas.recording.segments import segment_path
+
+    out, k = [rec], 1
+    while segment_path(rec, k).exists():
+        out.append(Path(segment_path(rec, k)))
+        k += 1
+    return out
+
+
+def _verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: bool, what: str) -> dict:
+    """Clean when the exit code and outcome match the file's truth and the summary's counts equal the file's."""
+    from aerodaas.reliability.faults import _no_crash, _summary_outcome, mcap_reader_ok
+
+    segs = _segments(rec)
+    readable = all(mcap_reader_ok(s)[0] for s in segs)
+    lost, problems = file_losses(segs) if readable else ({}, ["a segment is not readable"])
+    said = summary_losses(out)
+    truthful = (p.returncode == 4 and "recording_lost" in _summary_outcome(out)) if lost else \
+        (p.returncode == 0 and "success" in _summary_outcome(out))
+    clean = reached and readable and not problems and truthful and said == lost and extra_ok and _no_crash(out)
+    return {"observed": f"{what}; exit {p.returncode}, {_summary_outcome(out).strip() or 'no summary'}; "
+                        f"{len(segs)} segment(s); the file lacks {sum(lost.values())} numbered messages "
+                        f"({', '.join(f'{t} {n}' for t, n in lost.items()) or 'none'}), the summary says "
+                        f"{sum(said.values())}" + (f"; {'; '.join(problems)}" if problems else ""),
+            "clean": clean, "exit": p.returncode, "output": out[-3000:], "lost": lost}
+
+
+def _recorder_stall(tmp: Path) -> dict:
+    """SIGSTOP of the recorder actor for :data:`STALL_S` s mid-flight, then SIGCONT (the issue's stall: exit 0 and
+    "success" with 517 of 1,288 frames recorded before)."""
+    from aerodaas.reliability.faults import REPO_APPS, _run, _wait_size, actor_pids
+
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+             start_new_session=True)
+    reached = _wait_size(rec, 20000, p)
+    pids = actor_pids(p.pid, "RecorderActor") if reached else []
+    for pid in pids:
+        os.kill(pid, signal.SIGSTOP)
+    time.sleep(STALL_S if pids else 0)
+    for pid in pids:
+        os.kill(pid, signal.SIGCONT)
+    out, _ = p.communicate(timeout=900)
+    return _verdict(p, out, rec, reached and len(pids) == 1, True,
+                    f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
+
+
+def _recorder_killed_twice(tmp: Path) -> dict:
+    """SIGKILL of the recorder actor, and again once its restart records into ``run.1.mcap``: both deaths are
+    reported (only the second one was before) and the three segments account for every numbered message."""
+    from aerodaas.reliability.faults import REPO_APPS, _run, _wait_size, actor_pids
+
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+             start_new_session=True)
+    reached = _wait_size(rec, 20000, p)
+    killed = []
+    for seg in (rec.with_name("run.1.mcap"), None):
+        pids = actor_pids(p.pid, "RecorderActor") if reached else []
+        for pid in pids:
+            os.kill(pid, signal.SIGKILL)
+        killed += pids
+        if seg is not None:
+            reached = reached and _wait_size(seg, 20000, p)
+    out, _ = p.communicate(timeout=900)
+    deaths = len(re.findall(r"^  recording lost at t = .*: the recorder actor died", out, re.MULTILINE))
+    return _verdict(p, out, rec, reached and len(killed) == 2, deaths == 2,
+                    f"{len(killed)} recorder deaths, {deaths} reported")
+
+
+#: (name, expected end, scenario(tmp folder) -> {"observed", "clean", ...}), joined to the fault catalogue
+ACCOUNTING_FAULTS = [
+    (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run, then SIGCONT", "exit 4 and recording_lost when the "
+     "file lacks a numbered message (else exit 0, success); the summary's lost counts per channel equal what the "
+     "file lacks (mcap's reader: /run/accounting against the messages)", _recorder_stall),
+    ("SIGKILL of the recorder actor twice mid-run", "exit 4, recording_lost, both deaths reported; the summary's lost "
+     "counts per channel equal what the three segments lack (mcap's reader)", _recorder_killed_twice),
+]
