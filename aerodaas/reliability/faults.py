@@ -525,7 +525,9 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
              "could not start; 1 also for an exception raised by the application's own code (its traceback is "
              "printed); 2 bad input (named, before Ray starts); 3 a drone actor lost for good; 4 the recorder actor "
              "died mid-run: \"recording lost at t = ...\", outcome `recording_lost`, the recording goes on in a new "
-             "segment (`RUN.1.mcap`), `aerodaas recover RUN.mcap` joins the segments; 130 / 143 Ctrl-C / SIGTERM.", "",
+             "segment (`RUN.1.mcap`), `aerodaas recover RUN.mcap` joins the segments; 4 also when a message its "
+             "producer numbered is in no segment (the summary lists the lost count per channel, from the file's "
+             "sequence numbers and `/run/accounting`); 130 / 143 Ctrl-C / SIGTERM.", "",
              "| inputs tried | rejected before Ray | accepted wrongly |", "|---|---|---|",
              f"| {inputs['tried']} | {inputs['refused']} | {len(inputs['accepted_wrongly'])} |", ""]
     if faults is not None:
