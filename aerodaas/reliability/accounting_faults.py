@@ -130,6 +130,113 @@ def _recorder_killed_twice(tmp: Path) -> dict:
                     f"{len(killed)} recorder deaths, {deaths} reported")
 
 
+def _ws_frame(sock: Any) -> tuple[int, bytes]:
+    """One WebSocket frame from the server (RFC 6455 §5.2: unmasked): (opcode, payload)."""
+    def exact(n: int) -> bytes:
+        buf = b""
+        while len(buf) < n:
+            got = sock.recv(n - len(buf))
+            if not got:
+                raise ConnectionError("closed")
+            buf += got
+        return buf
+
+    b0, b1 = exact(2)
+    n = b1 & 0x7F
+    if n == 126:
+        n = int.from_bytes(exact(2), "big")
+    elif n == 127:
+        n = int.from_bytes(exact(8), "big")
+    return b0 & 0x0F, exact(n)
+
+
+def _ws_send_text(sock: Any, text: str) -> None:
+    """A masked text frame from the client (RFC 6455 §5.3)."""
+    data, key = text.encode(), os.urandom(4)
+    head = bytes([0x81]) + (bytes([0x80 | len(data)]) if len(data) < 126 else
+                            bytes([0x80 | 126]) + len(data).to_bytes(2, "big"))
+    sock.sendall(head + key + bytes(b ^ key[i % 4] for i, b in enumerate(data)))
+
+
+def _stalled_client(port: int, proc: Any, want: str, limit_s: float = 300.0) -> tuple[bool, Any]:
+    """Connect to the live view on ``port``, subscribe to every channel advertised until ``want`` is, then stop
+    reading (its receive buffer 4 KiB). Returns (subscribed to ``want``, the socket, left open: the caller closes
+    it once the run ended; None when it could not connect)."""
+    import base64
+    import socket
+
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < limit_s and proc.poll() is None:
+        try:
+            sock = socket.socket()
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            sock.connect(("127.0.0.1", port))
+            break
+        except OSError:
+            sock.close()
+            time.sleep(0.5)
+    else:
+        return False, None
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                  f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+                  f"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n").encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += sock.recv(1)
+    sub = 0
+    while time.monotonic() - t0 < limit_s:
+        op, payload = _ws_frame(sock)
+        if op != 1:
+            continue
+        msg = json.loads(payload)
+        if msg.get("op") == "advertise":
+            chans = msg.get("channels", [])
+            subs = [{"id": sub + i, "channelId": c["id"]} for i, c in enumerate(chans)]
+            sub += len(subs)
+            _ws_send_text(sock, json.dumps({"op": "subscribe", "subscriptions": subs}))
+            if any(c.get("topic") == want for c in chans):
+                return True, sock
+    return False, sock
+
+
+def _live_client_stalled(tmp: Path) -> dict:
+    """``aerodaas run --live``: a client subscribes to every channel (the camera's too) and then stops reading. It is
+    dropped (a ``live_client_dropped`` event in the recording) and never holds the run: the run ends with the
+    summary's message count equal to the file's (it said "0 messages" after ~120 s before)."""
+    import socket
+
+    from aerodaas.reliability.faults import REPO_APPS, _run, mcap_reader_ok
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    rec = tmp / "run.mcap"
+    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet",
+              "--live", f"127.0.0.1:{port}"], start_new_session=True)
+    sock = None
+    try:
+        subscribed, sock = _stalled_client(port, p, "/quadrotor_base/camera/cam1")
+    except (OSError, ValueError):
+        subscribed = False
+    out, _ = p.communicate(timeout=900)
+    if sock is not None:
+        sock.close()
+    ok, n, _ = mcap_reader_ok(rec)
+    dropped = 0
+    if ok:
+        from mcap.reader import make_reader
+
+        with open(rec, "rb") as f:
+            dropped = sum(json.loads(m.data).get("event") == "live_client_dropped"
+                          for _, _, m in make_reader(f).iter_messages(topics=["/run/events"]))
+    m = re.search(r"recording: \S+ \((\d+) messages", out)
+    counted = m is not None and int(m.group(1)) == n
+    return _verdict(p, out, rec, subscribed, dropped == 1 and counted,
+                    f"client subscribed to every channel then stopped reading: {subscribed}; dropped events "
+                    f"{dropped}; the summary counts {m.group(1) if m else '?'} of the file's {n} messages")
+
+
 #: (name, expected end, scenario(tmp folder) -> {"observed", "clean", ...}), joined to the fault catalogue
 ACCOUNTING_FAULTS = [
     (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run, then SIGCONT", "exit 4 and recording_lost when the "
@@ -137,4 +244,7 @@ ACCOUNTING_FAULTS = [
      "file lacks (mcap's reader: /run/accounting against the messages)", _recorder_stall),
     ("SIGKILL of the recorder actor twice mid-run", "exit 4, recording_lost, both deaths reported; the summary's lost "
      "counts per channel equal what the three segments lack (mcap's reader)", _recorder_killed_twice),
+    ("a live-view client that stops reading mid-run (--live)", "the client is dropped (a live_client_dropped event "
+     "in the recording), the run ends with the summary counting the file's messages; exit code and outcome as the "
+     "file's accounting says", _live_client_stalled),
 ]
