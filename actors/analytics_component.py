@@ -40,6 +40,20 @@ class AnalyticsComponent(Component):
         self.last_failure: str | None = None
         self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
         self.aborted = False
+        if recorder is not None:  # its outputs are accounted against its inputs (aerodaas.recording.accounting)
+            recorder.declare_analytics(cid, name)
+
+    def offer(self, port: Port, msg: Message) -> bool:
+        """:meth:`Component.offer`; an item its full mailbox drops (load shed) is counted as taken without output."""
+        ok = super().offer(port, msg)
+        if not ok:
+            self._no_output(msg)
+        return ok
+
+    def _no_output(self, msg: Message) -> None:
+        """An item taken without recording an output: not a loss of the output channel (recording accounting)."""
+        if self.recorder is not None:
+            self.recorder.count_no_output(self.cid, self.name, msg.robot)
 
     def handle(self, port: Port, msg: Message) -> list[Message] | None:
         if self._stale(msg):
@@ -82,6 +96,7 @@ class AnalyticsComponent(Component):
             key = (meta.robot_id, meta.sensor_id)
             if meta.capture_time < self._newest.get(key, -1.0):
                 self.stale += 1
+                self._no_output(msg)
                 return True
             self._newest[key] = meta.capture_time
         return False
@@ -104,6 +119,7 @@ class AnalyticsComponent(Component):
         import traceback
 
         self.failures += 1
+        self._no_output(msg)
         tb = traceback.format_exc()
         self.last_failure = f"{type(e).__name__}: {e}"
         if self.failures <= 5 or self.failures % 100 == 0:
@@ -131,6 +147,7 @@ class AnalyticsComponent(Component):
         self.plane.mark_processed()
         self._record_tracks(msg)
         if out is None:
+            self._no_output(msg)
             return None
         self.outputs += 1
         self.latest = out
@@ -152,6 +169,8 @@ class AnalyticsComponent(Component):
                                    "aerodaas.AeroNavigation")
             elif isinstance(out, dict):
                 self.recorder.json(f"/{robot}/{self.name}", t_ns, out, "aerodaas.AnalyticsOutput")
+            else:
+                self._no_output(msg)  # an output of another kind is published, not recorded
         return [res]
 
     def _record_tracks(self, msg: Message) -> None:
@@ -242,6 +261,8 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
                        "reason": task.reason, "arrival_ms": task.arrival_ms, "deadline_ms": task.deadline_ms,
                        "start_ms": task.start_ms, "end_ms": task.end_ms}
                 self.recorder.json(f"/{robot}/{self.name}/tasks", t_ns, rec, "aerodaas.AnalyticsTask")
+            if state != "done_on_time":
+                self._no_output(msg)  # the scheduler dropped it, or its result came late: no output recorded
             if state == "done_on_time":
                 dt_ms = (task.end_ms - task.start_ms) if task.start_ms is not None and task.end_ms is not None else 0.0
                 timing = task.notes.get("timing") if task.tier == "edge" else {"inference_ms": dt_ms}

@@ -340,6 +340,8 @@ class ChannelOutlet:
         self.retry_s = retry_s
         self.hold_s = max(0.0, float(hold_s))
         self.held = 0  # lock-step sends that waited for the peer's restart
+        #: called with each item dropped because ``buffer`` deliveries are in flight (see RemoteOutlet.on_shed)
+        self.on_shed: Callable[[Message], None] | None = None
         self.lost = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
         self._lock = threading.Lock()
         self._slots: dict[str, _Slot] = {}
@@ -486,6 +488,8 @@ class ChannelOutlet:
                 return None
             if tok is None and len(self._in_flight) >= self.buffer:
                 self.dropped += 1
+                if self.on_shed is not None:
+                    self.on_shed(msg)
                 return None
             slot_name = None
             t0 = time.time()

@@ -319,9 +319,12 @@ class DataPlane:
                 msg.tok = tok
             local = []
             robot = msg.robot
+            rec = self.recorder
             for cid, port, buf, only in subs:
                 if only is not None and robot not in only:
                     continue  # an edge to a replica or a drone's own copy carries only its drones' items
+                if rec is not None and getattr(cid, "kind", None) == "analytics":
+                    rec.count_offered(cid, robot)  # its outputs are accounted against it (recording accounting)
                 comp = self.components.get(cid)
                 if comp is not None:
                     local.append((comp, port))
@@ -394,6 +397,9 @@ class DataPlane:
                 o = RemoteOutlet(self.peer(hid), cid, port, buffer, jpeg=self.tiers.get(hid, self.tier) != self.tier,
                                  copies=self.copies, reply_to=self.actor_id, on_reply=self.on_reply,
                                  hold_s=self.restart_hold_s)
+            rec = self.recorder
+            if rec is not None and getattr(cid, "kind", None) == "analytics":  # load shed: taken without output
+                o.on_shed = lambda msg, cid=cid: rec.count_no_output(cid, "", msg.robot)
             self._outlets[key] = o
         return o
 

@@ -103,6 +103,7 @@ class RecorderService:
         self.duplicates_by_topic: dict[str, int] = {}
         #: messages numbered here, per stream (producers in this process; the other actors' come with their ledgers)
         self.produced_here: dict[str, int] = {}
+        self._counts = _AnalyticsCounts()  # analytics inputs and items without output of this process
         self.on_failure: list[Callable[[dict], None]] = []
         _inject_fault(self.rec)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
@@ -329,13 +330,13 @@ class RecorderService:
                 pass
 
     # ------------------------------------------------------------------ end
-    def close(self, timeout_s: float = 30.0, produced: dict[str, int] | None = None,
+    def close(self, timeout_s: float = 30.0, ledgers: list[ProducerLedger] | None = None,
               recorded_before: dict[str, int] | None = None, run_losses: list[dict] | None = None) -> dict[str, Any]:
         """Write what is queued and ``/run/recorder_drops`` (the frames refused here, per image topic; when any
         image was offered), then the run's accounting (:meth:`_write_accounting`), finish the file (summary and
-        footer) and return the per-topic message counts. ``produced``: the other actors' ledgers (topic -> messages
-        they numbered, :class:`~aerodaas.protocol.messages.ProducerLedger`); ``recorded_before``: topic -> messages
-        in the earlier segments of this run; ``run_losses``: the recorder actor's deaths (its ``losses``)."""
+        footer) and return the per-topic message counts. ``ledgers``: the other actors' counts
+        (:class:`~aerodaas.protocol.messages.ProducerLedger`); ``recorded_before``: topic -> messages in the earlier
+        segments of this run; ``run_losses``: the recorder actor's deaths (its ``losses``)."""
         if not self.closed:
             with self._lock:
                 self.closed = True
@@ -350,7 +351,7 @@ class RecorderService:
             try:
                 if self.failure is None:
                     try:
-                        self._write_accounting(produced or {}, recorded_before or {}, run_losses or [])
+                        self._write_accounting(ledgers or [], recorded_before or {}, run_losses or [])
                         self.rec.close()
                     except OSError as e:  # the summary itself does not fit: the same clean failure
                         self._fail(e)
@@ -359,15 +360,31 @@ class RecorderService:
                     self.live.stop()
         return dict(self.rec.message_counts)
 
-    def _write_accounting(self, produced: dict[str, int], recorded_before: dict[str, int],
+    # ------------------------------------------------------------------ accounting (producers in this process)
+    def count_offered(self, cid: str, robot: str) -> None:
+        """See :meth:`RemoteRecorder.count_offered`."""
+        with self._lock:
+            self._counts.offered(cid, robot)
+
+    def count_no_output(self, cid: str, name: str, robot: str) -> None:
+        """See :meth:`RemoteRecorder.count_no_output`."""
+        with self._lock:
+            self._counts.no_output(cid, name, robot)
+
+    def declare_analytics(self, cid: str, name: str) -> None:
+        """See :meth:`RemoteRecorder.declare_analytics`."""
+        with self._lock:
+            self._counts.names[str(cid)] = name
+
+    def _write_accounting(self, ledgers: list[ProducerLedger], recorded_before: dict[str, int],
                           run_losses: list[dict]) -> None:
-        """The file's last messages (the writer thread has ended): ``/run/accounting`` (per stream: the messages
-        its producers numbered, and those dropped here as sent again by a restarted drone actor; a reader derives
-        each channel's loss from it and the file's own counts, :func:`aerodaas.recording.accounting.account`),
-        then, when the run lost anything — a recorder death (``run_losses``) or a message numbered but in none of
-        the run's segments — ``/run/result`` ``{"outcome": "recording_lost", "losses": [...], "lost": {topic:
-        n}}``, so that no reader takes the drones' own ``success`` for the run's."""
-        from aerodaas.recording.accounting import ACCOUNTING_TOPIC, lost_per_channel
+        """The file's last messages (the writer thread has ended): ``/run/accounting``
+        (:func:`aerodaas.recording.accounting.accounting_message`: per stream what its producers numbered and what
+        was dropped here as sent again by a restarted drone actor; per analytics what it was offered and took
+        without an output), then, when the run lost anything — a recorder death (``run_losses``) or a message
+        numbered but in none of the run's segments — ``/run/result`` ``{"outcome": "recording_lost", "losses":
+        [...], "lost": {topic: n}}``, so that no reader takes the drones' own ``success`` for the run's."""
+        from aerodaas.recording.accounting import ACCOUNTING_TOPIC, account_channels, accounting_message
         from aerodaas.recording.reader import RUN_RESULT_TOPIC
 
         if self.live is not None:
@@ -375,21 +392,20 @@ class RecorderService:
                 self.rec.write_json("/run/events", self.last_t_ns or 0, {
                     "event": "live_client_dropped", "client": peer, "wall_time": at,
                     "after_s": self.live.client_send_timeout_s}, schema_name="aerodaas.LiveClientDropped")
-        totals = dict(produced)
-        for topic, n in self.produced_here.items():
-            totals[topic] = totals.get(topic, 0) + n
-        if not totals:
+        here = ProducerLedger("recorder", dict(self.produced_here), *self._counts.snapshot())
+        msg = accounting_message([*ledgers, here], dict(self.duplicates_by_topic))
+        if not msg["channels"] and not msg["analytics"]:
             return
         t_ns = (self.last_t_ns or 0) + 1
-        lost = lost_per_channel(totals, dict(self.duplicates_by_topic),
-                                {t: self.rec.message_counts.get(t, 0) + recorded_before.get(t, 0) for t in totals})
+        counts = dict(recorded_before)
+        for topic, n in self.rec.message_counts.items():
+            counts[topic] = counts.get(topic, 0) + n
+        lost = {t: c.lost for t, c in (account_channels(msg, counts) or {}).items() if c.lost}
         if run_losses or lost:
             losses = [{k: x.get(k) for k in ("segment", "recorded_until_ns", "resumed_at_ns")} for x in run_losses]
             self.rec.write_json(RUN_RESULT_TOPIC, t_ns, {"outcome": "recording_lost", "losses": losses, "lost": lost},
                                 schema_name="aerodaas.RunResult")
-        self.rec.write_json(ACCOUNTING_TOPIC, t_ns, {"channels": {
-            t: {"produced": n, "duplicates": self.duplicates_by_topic.get(t, 0)} for t, n in sorted(totals.items())}},
-            schema_name="aerodaas.RunAccounting")
+        self.rec.write_json(ACCOUNTING_TOPIC, t_ns, msg, schema_name="aerodaas.RunAccounting")
 
     def report(self) -> dict[str, Any]:
         """``{"failure": None | {error, errno, last_recorded_ns, path, finished, finish_error?}, "lost": n,
@@ -400,6 +416,32 @@ class RecorderService:
 
     def counts(self) -> dict[str, int]:
         return dict(self.rec.message_counts)
+
+
+class _AnalyticsCounts:
+    """The analytics counts of a :class:`~aerodaas.protocol.messages.ProducerLedger` kept by one process: items
+    offered to each analytics component per robot, items each of its analytics took without a recorded output, the
+    analytics' names. Not thread-safe: the owner holds its lock."""
+
+    def __init__(self) -> None:
+        self.offered_to: dict[str, dict[str, int]] = {}
+        self.without: dict[str, dict[str, int]] = {}
+        self.names: dict[str, str] = {}
+
+    def offered(self, cid: str, robot: str) -> None:
+        per = self.offered_to.setdefault(str(cid), {})
+        per[robot] = per.get(robot, 0) + 1
+
+    def no_output(self, cid: str, name: str, robot: str) -> None:
+        if name:  # "": a sender's count (an item its outlet shed), the analytics names itself
+            self.names[str(cid)] = name
+        per = self.without.setdefault(str(cid), {})
+        per[robot] = per.get(robot, 0) + 1
+
+    def snapshot(self) -> tuple[dict, dict, dict]:
+        """(offered_to, no_output, names), copied."""
+        return ({k: dict(v) for k, v in self.offered_to.items()}, {k: dict(v) for k, v in self.without.items()},
+                dict(self.names))
 
 
 def _what(item: RecordItem) -> str:
@@ -432,8 +474,9 @@ class RemoteRecorder:
         self._lock = threading.Lock()
         self._refs: list = []
         self._offered: dict[str, int] = {}  # stream -> items numbered by this process (before adding _base)
-        self._base_counts: dict[str, int] | None = None  # this actor's counts before this process (the ledger)
-        self._ledger_sent: dict[str, int] = {}  # _offered as of the last batch sent
+        self._counts = _AnalyticsCounts()  # analytics inputs offered / taken without output, by this process
+        self._base_ledger: ProducerLedger | None = None  # this actor's counts before this process
+        self._ledger_sent: Any = None  # the counts as of the last batch sent
         self.sent = 0
         self.send_errors: list[str] = []
         self.frames_dropped = 0
@@ -493,20 +536,35 @@ class RemoteRecorder:
         self._offered[stream] = n + 1
         return item.numbered(n)
 
-    def _base(self) -> dict[str, int] | None:
-        """This actor's counts per stream from before this process (its earlier incarnations', kept by the recorder
-        actor; {} for a first start), asked once; None while the recorder actor does not answer (asked again at
-        the next batch, which waits until then)."""
+    def count_offered(self, cid: str, robot: str) -> None:
+        """One item handed to analytics component ``cid`` for ``robot`` (its outputs are accounted against it)."""
+        with self._lock:
+            self._counts.offered(cid, robot)
+
+    def count_no_output(self, cid: str, name: str, robot: str) -> None:
+        """Analytics ``name`` (component ``cid``) took an item of ``robot`` without recording an output."""
+        with self._lock:
+            self._counts.no_output(cid, name, robot)
+
+    def declare_analytics(self, cid: str, name: str) -> None:
+        """Analytics component ``cid`` of this actor records under ``/<robot>/<name>``."""
+        with self._lock:
+            self._counts.names[cid] = name
+
+    def _base(self) -> ProducerLedger | None:
+        """This actor's counts from before this process (its earlier incarnations', kept by the recorder actor;
+        empty for a first start), asked once; None while the recorder actor does not answer (asked again at the
+        next batch, which waits until then)."""
         import ray
 
-        if self._base_counts is None:
+        if self._base_ledger is None:
             try:
-                self._base_counts = dict(ray.get(self.plane.peer(self.target).produced_of.remote(self.plane.actor_id),
-                                                 timeout=10))
+                self._base_ledger = ray.get(self.plane.peer(self.target).ledger_of.remote(self.plane.actor_id),
+                                            timeout=10)
             except Exception as e:  # noqa: BLE001 - the recorder busy or restarting: try again with the next batch
                 self.send_errors.append(f"ledger: {type(e).__name__}: {e}")
                 return None
-        return self._base_counts
+        return self._base_ledger
 
     def _send(self) -> None:
         import ray
@@ -519,14 +577,12 @@ class RemoteRecorder:
         with self._lock:
             batch, self._buf = self._buf, []
             frames, self._pending_frames, self._pending_bytes = self._pending_frames, 0, 0
-            offered = dict(self._offered)
-        if not batch and offered == self._ledger_sent:
+            ledger = base.plus(dict(self._offered), *self._counts.snapshot())
+        if not batch and ledger == self._ledger_sent:
             return
-        self._ledger_sent = offered
-        batch = [it.numbered(base.get(it.stream() or "", 0) + it.seq) if getattr(it, "seq", -1) >= 0 else it
-                 for it in batch]
-        ledger = ProducerLedger(self.plane.actor_id,
-                                {**base, **{k: base.get(k, 0) + n for k, n in offered.items()}})
+        self._ledger_sent = ledger
+        batch = [it.numbered(base.produced.get(it.stream() or "", 0) + it.seq) if getattr(it, "seq", -1) >= 0
+                 else it for it in batch]
         if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
             batch = [dataclasses.replace(it, frame=encode_frame(it.frame, self.jpeg_quality))
                      if isinstance(it, RecordImage) and isinstance(it.frame, np.ndarray) else it for it in batch]

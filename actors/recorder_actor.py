@@ -48,7 +48,7 @@ class RecorderActor:
         self._set_up = threading.Event()  # setup() done (or failed): record() may hand messages on
         self._setup_lock = threading.Lock()
         self._lock = threading.Lock()
-        self._produced: dict[str, dict[str, int]] = {}  # producer host id -> stream -> messages it numbered
+        self._ledgers: dict[str, ProducerLedger] = {}  # producer host id -> its counts (the largest seen)
         self.received = 0
         self.segments: list[str] = []
         self.losses: list[dict] = []
@@ -172,7 +172,7 @@ class RecorderActor:
 
     def record(self, batch: list, ledger: ProducerLedger | None = None) -> int:
         """Messages of another actor (:class:`~.recorder.RemoteRecorder`) and its counts so far (``ledger``, kept:
-        :meth:`produced_of`); returns how many were taken. The other actors set up while this one does: their
+        :meth:`ledger_of`); returns how many were taken. The other actors set up while this one does: their
         first messages wait (at most 60 s) for the file to be open."""
         from aerodaas.actors.recorder import deliver
 
@@ -183,27 +183,21 @@ class RecorderActor:
         return deliver(self.recorder, batch) if self.recorder is not None else 0
 
     def keep_ledger(self, ledger: ProducerLedger) -> None:
-        """Keep the largest count per stream of ``ledger.producer`` (batches may arrive out of order)."""
+        """Keep the largest count per key of ``ledger.producer`` (batches may arrive out of order)."""
         with self._lock:
-            mine = self._produced.setdefault(ledger.producer, {})
-            for topic, n in ledger.produced.items():
-                if n > mine.get(topic, 0):
-                    mine[topic] = n
+            old = self._ledgers.get(ledger.producer)
+            self._ledgers[ledger.producer] = ledger if old is None else old.merged(ledger)
 
-    def produced_of(self, producer: str) -> dict[str, int]:
-        """Stream -> messages actor ``producer`` numbered so far, as its batches said ({} for one never heard
-        of): a restarted producer numbers on from here, so its sequence numbers never restart from 0."""
+    def ledger_of(self, producer: str) -> ProducerLedger:
+        """Actor ``producer``'s counts so far, as its batches said (empty for one never heard of): a restarted
+        producer counts on from here, so its sequence numbers never restart from 0."""
         with self._lock:
-            return dict(self._produced.get(producer, {}))
+            return self._ledgers.get(producer) or ProducerLedger(producer, {})
 
-    def produced_totals(self) -> dict[str, int]:
-        """Stream -> messages numbered by every producer (summed)."""
+    def ledgers(self) -> list[ProducerLedger]:
+        """Every producer's counts."""
         with self._lock:
-            out: dict[str, int] = {}
-            for counts in self._produced.values():
-                for topic, n in counts.items():
-                    out[topic] = out.get(topic, 0) + n
-            return out
+            return list(self._ledgers.values())
 
     def keep_specs(self, specs: dict[str, bytes], wiring: bytes) -> bool:
         """Keep every other actor's pickled spec and the run's pickled wiring (read by :meth:`spec_of`)."""
@@ -253,7 +247,7 @@ class RecorderActor:
             return {}
         if self.losses and self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message
             self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
-        return self.recorder.close(produced=self.produced_totals(), recorded_before=self._earlier_counts(),
+        return self.recorder.close(ledgers=self.ledgers(), recorded_before=self._earlier_counts(),
                                    run_losses=list(self.losses))
 
     def _earlier_counts(self) -> dict[str, int]:

@@ -43,6 +43,9 @@ class RemoteOutlet:
         #: for up to ``hold_s`` seconds (``held`` counts the retries), its cascade keeping the clock still meanwhile
         self.hold_s, self.retry_s = max(0.0, float(hold_s)), retry_s
         self.held = 0
+        #: called with each item dropped because ``buffer`` calls are in flight (load shed, not lost: the recording's
+        #: accounting counts it as taken without output, :mod:`aerodaas.recording.accounting`)
+        self.on_shed: Callable[[Message], None] | None = None
         self.lost = False  # a lock-step call's hold ran out with the consumer still restarting (see lost_consumers)
         self._retried: set = set()  # refs of calls that were sent again: not counted as failed when reaped
         self._retrying = 0  # retries waiting for their timer
@@ -73,6 +76,8 @@ class RemoteOutlet:
                 self._reap()
             if tok is None and len(self.in_flight) >= self.buffer:
                 self.dropped += 1
+                if self.on_shed is not None:
+                    self.on_shed(msg)
                 return None
             if isinstance(msg, FrameMsg):
                 t0 = time.time()

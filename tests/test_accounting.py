@@ -9,8 +9,9 @@ import numpy as np
 from mcap.reader import make_reader
 
 from aerodaas.actors.recorder import RecorderService
-from aerodaas.recording.accounting import account_recording, lost_per_channel
+from aerodaas.recording.accounting import account_recording
 from aerodaas.recording.reader import summarize_mcap
+from aerodaas.protocol.messages import ProducerLedger
 
 
 def _sequences(path, topic: str) -> list[int]:
@@ -29,7 +30,7 @@ def test_producer_numbers_are_the_mcap_sequence_and_gaps_are_the_loss(tmp_path):
         svc.odometry("d1", 1_000_000 * (k + 1), {"geodetic": {"lat": 0.0, "lon": 0.0, "alt": 0.0},
                                                  "attitude": {"roll": 0.0, "pitch": 0.0, "yaw": 0.0},
                                                  "position": [0.0, 0.0, float(k)]}, seq=k)
-    svc.close(produced={"/d1/odometry": 10})
+    svc.close(ledgers=[ProducerLedger("d1", {"/d1/odometry": 10})])
     assert _sequences(path, "/d1/odometry") == sorted(delivered)
     assert _sequences(path, "/d1/pose") == sorted(delivered)  # a sample's derived messages share its number
     acc = summarize_mcap(path)["accounting"]
@@ -46,7 +47,7 @@ def test_a_restarted_producer_sending_again_is_a_duplicate_not_a_loss(tmp_path):
     for seq, t in [(0, 1), (1, 2), (2, 3), (3, 2), (4, 3), (5, 4)]:  # 3 and 4: t = 2, 3 sent again
         svc.json("/d1/x", t, {"t": t}, "t.X", seq=seq)
         svc.image("/d1/camera/c", t * 1_000_000, b"\xff\xd8jpeg", "d1/c", seq=seq)
-    svc.close(produced={"/d1/x": 6, "/d1/camera/c": 6})
+    svc.close(ledgers=[ProducerLedger("d1", {"/d1/x": 6, "/d1/camera/c": 6})])
     acc = summarize_mcap(path)["accounting"]
     assert acc["channels"]["/d1/camera/c"] == {"produced": 6, "duplicates": 2, "recorded": 4, "lost": 0}
     assert acc["channels"]["/d1/x"] == {"produced": 6, "duplicates": 0, "recorded": 6, "lost": 0}  # JSON: kept
@@ -85,12 +86,25 @@ def test_segments_are_counted_together(tmp_path):
     second = RecorderService(str(b), flush_every_s=0.0)
     for k in range(5, 8):
         second.json("/d1/x", k + 1, {"k": k}, "t.X", seq=k)
-    second.close(produced={"/d1/x": 9}, recorded_before={"/d1/x": 3},
+    second.close(ledgers=[ProducerLedger("d1", {"/d1/x": 9})], recorded_before={"/d1/x": 3},
                  run_losses=[{"segment": str(a), "recorded_until_ns": 3, "resumed_at_ns": 6}])
     acc = account_recording([a, b])
     assert acc["channels"]["/d1/x"]["recorded"] == 6 and acc["lost"] == {"/d1/x": 3}
     assert summarize_mcap(b)["mission"]["outcome"] == "recording_lost"
 
 
-def test_lost_per_channel_lists_only_losses():
-    assert lost_per_channel({"/a": 5, "/b": 3}, {"/a": 1}, {"/a": 4, "/b": 1}) == {"/b": 2}
+def test_an_analytics_output_channel_is_accounted_against_its_inputs(tmp_path):
+    """Senders offered a monitor 10 items of d1; it took 2 without an output (None, a shed item) and recorded 5 (its
+    actor died with 3 in flight): the output channel lost 3, whatever the analytics numbered itself."""
+    path = tmp_path / "r.mcap"
+    svc = RecorderService(str(path), flush_every_s=0.0)
+    for k in range(5):
+        svc.json("/d1/monitor", k + 1, {"k": k}, "aerodaas.AnalyticsOutput", seq=k)
+    drone = ProducerLedger("drone", {}, offered_to={"monitor#1": {"d1": 10}})
+    monitor = ProducerLedger("analytics", {"/d1/monitor": 5}, no_output={"monitor#1": {"d1": 1}},
+                             analytics={"monitor#1": "monitor"})
+    shed = ProducerLedger("drone2", {}, no_output={"monitor#1": {"d1": 1}})  # the sender's outlet shed one
+    svc.close(ledgers=[drone, monitor, shed])
+    acc = account_recording([path])
+    assert acc["channels"]["/d1/monitor"] == {"produced": 8, "duplicates": 0, "recorded": 5, "lost": 3}
+    assert acc["lost"] == {"/d1/monitor": 3}

@@ -185,11 +185,44 @@ class RecordItem(ABC):
 class ProducerLedger:
     """What one producer actor (``producer``: its host id) had offered the recorder per stream (topic -> messages
     numbered so far, the frames it dropped itself included), sent with each of its batches; the recorder actor
-    keeps the largest per producer and stream, and gives it back to a restarted producer, whose numbering goes on
-    from there (:class:`~aerodaas.actors.recorder.RemoteRecorder`)."""
+    keeps the largest per producer and key, and gives it back to a restarted producer, whose counts go on from
+    there (:class:`~aerodaas.actors.recorder.RemoteRecorder`).
+
+    An analytics' recorded outputs are accounted against its inputs: ``offered_to`` counts the items this actor
+    handed each analytics component (consumer component id -> robot -> items), ``no_output`` the items each of this
+    actor's analytics took without recording an output (its own component id -> robot -> items: ``process``
+    returned None or something unrecorded, raised, a stale item, a task the analytics scheduler did not run on
+    time) and ``analytics`` names them (component id -> analytics name, the ``/<robot>/<name>`` of its topics)."""
 
     producer: str
     produced: dict[str, int]
+    offered_to: dict[str, dict[str, int]] = field(default_factory=dict)
+    no_output: dict[str, dict[str, int]] = field(default_factory=dict)
+    analytics: dict[str, str] = field(default_factory=dict)
+
+    def merged(self, other: "ProducerLedger") -> "ProducerLedger":
+        """The largest count of each key of this ledger and ``other`` (batches may arrive out of order)."""
+        def most(a: dict, b: dict) -> dict:
+            return {k: max(a.get(k, 0), b.get(k, 0)) for k in {*a, *b}}
+
+        def most2(a: dict, b: dict) -> dict:
+            return {k: most(a.get(k, {}), b.get(k, {})) for k in {*a, *b}}
+
+        return ProducerLedger(self.producer, most(self.produced, other.produced),
+                              most2(self.offered_to, other.offered_to), most2(self.no_output, other.no_output),
+                              {**self.analytics, **other.analytics})
+
+    def plus(self, produced: dict[str, int], offered_to: dict[str, dict[str, int]],
+             no_output: dict[str, dict[str, int]], analytics: dict[str, str]) -> "ProducerLedger":
+        """This ledger (an earlier incarnation's counts) with a later incarnation's counts added."""
+        def add(a: dict, b: dict) -> dict:
+            return {k: a.get(k, 0) + b.get(k, 0) for k in {*a, *b}}
+
+        def add2(a: dict, b: dict) -> dict:
+            return {k: add(a.get(k, {}), b.get(k, {})) for k in {*a, *b}}
+
+        return ProducerLedger(self.producer, add(self.produced, produced), add2(self.offered_to, offered_to),
+                              add2(self.no_output, no_output), {**self.analytics, **analytics})
 
 
 @dataclass(frozen=True)

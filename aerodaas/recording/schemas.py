@@ -158,11 +158,20 @@ class ChannelProduced(BaseModel):
     duplicates: int = Field(description="messages sent again by a restarted drone actor, deliberately not recorded")
 
 
+class AnalyticsInputs(BaseModel):
+    """One analytics' inputs for one robot (``/run/accounting``)."""
+
+    offered: int = Field(description="items its senders handed it")
+    no_output: int = Field(description="items it took without recording an output (None, raised, stale, not run)")
+
+
 class RunAccounting(BaseModel):
     """The recording's accounting (``/run/accounting``, its last message): per stream (topic) what its producers
-    numbered; a channel's loss is ``produced - duplicates - messages in the recording`` (all segments)."""
+    numbered; a channel's loss is ``produced - duplicates - messages in the recording`` (all segments); per
+    analytics (``/<robot>/<name>``) its inputs, against which its output topics are accounted."""
 
     channels: dict[str, ChannelProduced]
+    analytics: dict[str, AnalyticsInputs] = Field(default_factory=dict)
 
 
 #: schema name written on the channel -> the pydantic model describing its messages
