@@ -81,7 +81,7 @@ class ActorAssembly:
             self.recorder = RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
                                             declare=rec.declare)
         elif spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
-            from aerodaas.actors.recorder import RemoteRecorder
+            from aerodaas.actors.remote_recorder import RemoteRecorder
 
             self.recorder = RemoteRecorder(plane, spec.record_remote)
         else:

@@ -1,5 +1,5 @@
 """RecorderActor: the run's recorder, one per run, named ``aerodaas/<run>/recorder`` and placed on the driver's
-edge node. Every other actor records through a :class:`~.recorder.RemoteRecorder` that batches its messages here
+edge node. Every other actor records through a :class:`~.remote_recorder.RemoteRecorder` that batches its messages here
 (frames as JPEG bytes, encoded by the sender); a :class:`~.recorder.RecorderService` writes the MCAP file and feeds
 the live view. It outlives every other actor of the run: whatever dies, the driver still finishes the recording
 with a ``/mission/result`` per drone.
@@ -171,8 +171,8 @@ class RecorderActor:
                 "last_t_ns": getattr(rec, "last_t_ns", None), "live_url": live.url if live is not None else None}
 
     def record(self, batch: list, ledger: ProducerLedger | None = None) -> int:
-        """Messages of another actor (:class:`~.recorder.RemoteRecorder`) and its counts so far (``ledger``, kept:
-        :meth:`ledger_of`); returns how many were taken. The other actors set up while this one does: their
+        """Messages of another actor (:class:`~.remote_recorder.RemoteRecorder`) and its counts so far (``ledger``,
+        kept: :meth:`ledger_of`); returns how many were taken. The other actors set up while this one does: their
         first messages wait (at most 60 s) for the file to be open."""
         from aerodaas.actors.recorder import deliver
 

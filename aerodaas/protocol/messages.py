@@ -158,7 +158,7 @@ class Delivery:
 
 @dataclass(frozen=True)
 class RecordItem(ABC):
-    """What an actor without the file sends the run's recorder actor (:class:`~aerodaas.actors.recorder.
+    """What an actor without the file sends the run's recorder actor (:class:`~aerodaas.actors.remote_recorder.
     RemoteRecorder`); :meth:`apply` hands it to the :class:`~aerodaas.actors.recorder.RecorderService`.
 
     The kinds counted on a :meth:`stream` (image, detections, odometry, JSON) end with ``seq``: its producer's
@@ -186,7 +186,7 @@ class ProducerLedger:
     """What one producer actor (``producer``: its host id) had offered the recorder per stream (topic -> messages
     numbered so far, the frames it dropped itself included), sent with each of its batches; the recorder actor
     keeps the largest per producer and key, and gives it back to a restarted producer, whose counts go on from
-    there (:class:`~aerodaas.actors.recorder.RemoteRecorder`).
+    there (:class:`~aerodaas.actors.remote_recorder.RemoteRecorder`).
 
     An analytics' recorded outputs are accounted against its inputs: ``offered_to`` counts the items this actor
     handed each analytics component (consumer component id -> robot -> items), ``no_output`` the items each of this
