@@ -187,7 +187,12 @@ class AutopilotFlight:
             self._rtl_path = None
             self.backend.land()
             self.fsm.transition(S.LANDING, t)
-            self._event("landing", reason=f"return to launch impossible: {why}; landing in place")
+            away = math.hypot(pos[0], pos[1])
+            # landing away from home is not the return asked for: never a success (it was, 43 m from home)
+            self.outcome = self.outcome or "rtl_failed"
+            self._event("rtl_impossible", reason=why, distance_from_home_m=round(away, 1))
+            self._event("landing", reason=f"return to launch impossible: {why}; landing in place {away:.0f} m from "
+                                          f"home")
             return
         # the autopilot's own RTL flies straight home: only when the straight leg is the planned path
         straight = len(path) == 2

@@ -581,6 +581,11 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     _add_recording_parsers(sub)
     _add_tool_parsers(sub)
     _PROCESS_MAIN[0] = own_process
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["inject"]:  # its values may start with '-' (a token, a waypoint south-west of home)
+        from aerodaas.tools.hitl import inject_argv
+
+        argv = inject_argv(argv)
     args = p.parse_args(argv)
     try:
         return args.func(args)

@@ -328,3 +328,92 @@ def test_plan_reports_the_apps_own_exception_as_the_apps(tmp_path, capsys):
     assert cli.main(["plan", str(app)]) == 1
     err = capsys.readouterr().err
     assert "the application" in err and "KeyError" in err and "Traceback" in err
+
+
+def test_reliability_issue_40_cases(tmp_path):
+    """The catalogue's cases of issue 40 items 4 and 9 (aerodaas.reliability.app_cases): app values of the wrong type
+    or out of bounds, an empty navigation, 50,000 pre-planned waypoints and a NaN waypoint made with model_construct
+    (exit 2 before Ray), plug-in modules that do not import (named), --record naming the run's inputs, a WPL numbered
+    1, 1, 5, the safety gate's own check, `aerodaas inject` values starting with '-'."""
+    from aerodaas.reliability.app_cases import run_app_cases
+
+    rows = run_app_cases(tmp_path)
+    assert len(rows) == 21
+    assert [(r["name"], r["message"][:300]) for r in rows if not r["refused"] or r.get("traceback")] == []
+    assert {r["category"] for r in rows} == {"strict types", "bounds / cross-field", "app-level errors",
+                                             "output paths", "plug-in imports", "mission files", "safety gate",
+                                             "command line"}
+
+
+def test_app_values_are_strictly_typed_numbers():
+    """Issue 40.4: pydantic's lax mode read Waypoint(x='1', y=True) as (1.0, 1.0) and home.lat "13.02" as 13.02."""
+    import numpy as np
+    from pydantic import ValidationError
+
+    from aerodaas.model.types import GeoPoint, PriorityQueue, VelocityCommand, Waypoint
+
+    for bad in ({"x": "1"}, {"y": True}, {"z": np.bool_(True)}, {"hover_duration": "2"}, {"speed": "1"}):
+        with pytest.raises(ValidationError, match="must be a number"):
+            Waypoint(id="w", **{"x": 1, "y": 0, "z": 2, **bad})
+    w = Waypoint(id="w", x=np.float32(1.5), y=np.int64(2), z=3)  # numpy numbers are numbers
+    assert (w.x, w.y, w.z) == (1.5, 2.0, 3.0) and type(w.y) is float
+    with pytest.raises(ValidationError, match="must be a number"):
+        GeoPoint(lat="13.02", lon=80.0)
+    with pytest.raises(ValidationError, match="yaw_rate"):
+        VelocityCommand(yaw_rate=1e308)
+    with pytest.raises(ValidationError, match="priority"):
+        PriorityQueue(None, True)
+    with pytest.raises(ValidationError, match="replace"):
+        PriorityQueue(None, 1, replace="yes")
+
+
+def test_the_safety_gate_checks_values_itself():
+    """Issue 40.4: a NaN waypoint built with model_construct passed the pre-flight check and the gate (NaN compares
+    False with every limit)."""
+    from aerodaas.model.types import ActionCommand, Waypoint
+    from aerodaas.config import RobotConfig
+    from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+
+    r = RobotConfig.model_validate({"id": "r"})
+    gate = SafetyGate(r.safety, r.limits, r.home)
+    nan = Waypoint.model_construct(id="n", x=float("nan"), y=0.0, z=2.0, hover_duration=0.0,
+                                   waypoint_type="relative", speed=None, acceptance_radius=0.3)
+    with pytest.raises(SafetyViolation, match="x must be a finite number") as e:
+        gate.check_waypoint(nan)
+    assert e.value.field == "x" and gate.rejected == 1
+    with pytest.raises(SafetyViolation, match="action"):
+        gate.check_item(ActionCommand.model_construct(id="a", action="explode", reason=""))
+    ok = Waypoint(id="ok", x=1, y=1, z=2)
+    assert gate.check_waypoint(ok) is ok
+
+
+def test_the_catalogue_guard_reports_tracebacks_and_hangs():
+    """A case that lets an exception out is a traceback row, one that never answers a hang row (the report goes
+    on either way); both fail `python -m aerodaas.reliability`."""
+    import threading
+
+    from aerodaas.reliability.input_report import guarded, summarize
+
+    def raises() -> list:
+        raise RuntimeError("cv2.error stand-in")
+
+    rows = guarded(raises, "environment", "raw exception", "files and images", 30.0)
+    rows += guarded(lambda: [threading.Event().wait(120.0)], "environment", "never answers", "files and images", 0.5)
+    rows += guarded(lambda: [{"kind": "JSON file", "name": "fine", "refused": True, "message": "refused"}],
+                    "file", "batch", "x", 30.0)
+    s = summarize(rows)
+    assert s["tracebacks"] == ["raw exception"] and s["hangs"] == ["never answers"]
+    assert s["accepted_wrongly"] == ["raw exception", "never answers"] and rows[2]["category"] == "files and images"
+
+
+def test_the_summary_never_shows_more_waypoints_reached_than_planned_as_a_fraction():
+    """Issue 40.9: 746 waypoints added through the HITL API to a 1-waypoint survey printed "waypoints 747/1"."""
+    from aerodaas.runtime.driver import MissionResult
+    from aerodaas.runtime.report import format_summary, waypoint_count
+
+    assert waypoint_count(3, 4) == "3/4" and waypoint_count(0, None) == "0/?"
+    rep = {"robot": "d1", "outcome": "success", "t": 100.0, "visited": 747, "preplanned_total": 1,
+           "state": "LANDED", "battery_pct": 50.0}
+    text = format_summary(MissionResult(outcome="success", robots={"d1": rep}, stats={}, latency={}, recording=None,
+                                        wall_s=1.0))
+    assert "waypoints 747 reached (1 pre-planned, at least 746 added in flight)" in text and "747/1" not in text

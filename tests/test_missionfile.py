@@ -400,6 +400,28 @@ def test_malformed_wpl_is_rejected_with_file_line_and_value(tmp_path, body, patt
     assert str(e.value).startswith(str(path))
 
 
+@pytest.mark.parametrize("seqs, line, said", [((1, 1, 5), 4, "seq 1 out of order: the row after seq 1 must be seq 2"),
+                                              ((1, 2, 5), 5, "seq 5 out of order: the row after seq 2 must be seq 3"),
+                                              ((1, 3), 4, "seq 3 out of order")])
+def test_wpl_rows_out_of_sequence_are_refused_not_renumbered(tmp_path, seqs, line, said):
+    """Issue 40.9: a WPL numbered 1, 1, 5 was renumbered 1, 2, 3 silently (and a DO_JUMP target with it)."""
+    rows = ["QGC WPL 110", "0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5456\t488\t1"]
+    rows += [f"{q}\t0\t3\t16\t0\t0\t0\t0\t47.3978\t8.5456\t20\t1" for q in seqs]
+    path = write(tmp_path, "seq.waypoints", "\n".join(rows) + "\n")
+    with pytest.raises(MissionFileError, match=rf"line {line} .*{said}"):
+        load_wpl(path)
+
+
+def test_wpl_without_a_home_row_may_count_from_0_or_1(tmp_path):
+    for first in (0, 1):
+        rows = ["QGC WPL 110", f"{first}\t0\t3\t22\t0\t0\t0\t0\t47.3977\t8.5456\t10\t1"]  # take-off: no home row
+        rows += [f"{first + 1}\t0\t3\t16\t0\t0\t0\t0\t47.3978\t8.5456\t20\t1"]
+        plan = load_wpl(write(tmp_path, f"nohome{first}.waypoints", "\n".join(rows) + "\n"))
+        assert [i.seq for i in plan.items] == [1, 2] and plan.home is None
+    with pytest.raises(MissionFileError, match=r"line 2 .*: seq must start at 0 \(the home row\) or 1, got 2"):
+        load_wpl(write(tmp_path, "from2.waypoints", "QGC WPL 110\n2\t0\t3\t22\t0\t0\t0\t0\t47.3977\t8.5456\t10\t1\n"))
+
+
 def test_wpl_accepts_crlf_blank_lines_and_a_bom(tmp_path):
     text = "\ufeffQGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5455\t488\t1\n\n" + GOOD_ROW + "\n"
     plan = load_wpl(write(tmp_path, "crlf.txt", text, newline="\r\n"))

@@ -239,6 +239,37 @@ def test_end_to_end_waypoints_fly_at_the_lower_safety_speed(ray_session, run_opt
     assert max(speeds) <= 1.05, max(speeds)
 
 
+#: an inclusion fence shaped like a U upside down (ENU metres): home in the left arm, the right arm 15 m away across
+#: the gap; no exclusion zone
+_U_FENCE = [(-5, -5), (5, -5), (5, 20), (20, 20), (20, -5), (30, -5), (30, 30), (-5, 30)]
+
+
+def test_no_path_home_inside_the_inclusion_zones_says_so():
+    """Issue 40.9: with inclusion zones only, the reason spoke of exclusion zones that do not exist."""
+    r = _robot({"max_speed": 2.0}, {"geofence": {"polygons": [{"points": [_ll(*p) for p in _U_FENCE]}]}})
+    path, why = plan_return(SafetyGate(r.safety, r.limits, r.home), (24.0, 0.0, 3.0), (0.0, 0.0, 0.0), 3.0)
+    assert path is None
+    assert "stays inside the inclusion zones" in why and "24 m from home" in why and "exclusion" not in why, why
+
+
+@pytest.mark.faults
+@pytest.mark.e2e
+def test_end_to_end_rtl_that_cannot_be_flown_is_not_a_success(ray_session, run_options, tmp_path):
+    """Issue 40.9: an app's RTL with no path home inside the fence lands in place, away from home: the outcome is
+    ``rtl_failed`` (it was "success", 43 m from home), the event says how far and why."""
+    robot = {"id": "r", "home": HOME, "takeoff_altitude": 3.0, "limits": {"max_speed": 2.0},
+             "safety": {"geofence": {"polygons": [{"points": [_ll(*p) for p in _U_FENCE]}]}}}
+    rep, msgs = _e2e(tmp_path, run_options, robot,
+                     '[Waypoint(id="a", x=0, y=25, z=3), Waypoint(id="b", x=25, y=25, z=3), '
+                     'Waypoint(id="c", x=24, y=0, z=3)]', rtl=True)
+    assert rep["outcome"] == "rtl_failed", rep
+    ev = [e for e in rep["events"] if e.get("event") == "rtl_impossible"]
+    assert len(ev) == 1 and 20.0 < ev[0]["distance_from_home_m"] < 28.0, rep["events"]
+    assert "inclusion zones" in ev[0]["reason"] and "exclusion" not in ev[0]["reason"], ev
+    end = msgs[-1]["position"]
+    assert math.hypot(end[0], end[1]) > 20.0 and end[2] < 0.5, end  # landed where it was, not at home
+
+
 @pytest.mark.faults
 @pytest.mark.e2e
 def test_end_to_end_rtl_goes_around_the_exclusion_zone(ray_session, run_options, tmp_path):

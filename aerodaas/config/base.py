@@ -46,6 +46,12 @@ MIN_PHYSICS_HZ = 10.0
 MAX_GROUND_PX = 16384
 #: random seeds: numpy's legacy generators take 0 .. 2**32 - 1
 MAX_SEED = 2**32 - 1
+#: slowest control loop (Hz): the drone's tick checks the battery failsafes, the geofence and the queue; at 1e-6 Hz
+#: it sat in take-off until the battery read 0 %, no failsafe fired and the run ended armed
+MIN_CONTROL_HZ = 1.0
+#: largest image file (ground texture, target crops), pixels per side, read from the file's header before decoding:
+#: a PNG "decompression bomb" (a few KB that decode to gigabytes) raised cv2.error; as MAX_GROUND_PX
+MAX_IMAGE_SIDE_PX = 16384
 MAX_DURATION_S = 86_400.0  # timeouts and intervals: one day
 MAX_BATTERY_WH = 100_000.0
 MAX_POWER_W = 1_000_000.0

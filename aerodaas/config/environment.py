@@ -14,8 +14,8 @@ from pydantic import BaseModel, Field, Strict, ValidationError, field_validator,
 
 from aerodaas.navigation.geofence import GeofenceConfig
 
-from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_RATE_HZ, MAX_SEED, MAX_SPEEDUP,
-                   MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
+from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ,
+                   MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
 from aerodaas.model.ids import Identifier, check_unique
 from aerodaas.config.robot import RobotConfig, SensorConfig
 
@@ -54,7 +54,8 @@ class ComputeConfig(_Cfg):
 class GroundConfig(_Cfg):
     """The textured ground plane. With ``image`` (any PNG/JPEG) and ``metres_per_pixel``, the image is laid on
     the ground with its top edge north; ``home_px`` is the pixel (x, y) under the home position (default:
-    image centre). Without ``image``, a procedural ground is generated from ``seed``."""
+    image centre), on the image (checked against the image's size when the file is read). Without ``image``, a
+    procedural ground is generated from ``seed``, centred on home (no ``home_px``)."""
 
     image: str | None = None
     metres_per_pixel: float = Field(default=0.05, gt=0, le=100_000)
@@ -64,6 +65,9 @@ class GroundConfig(_Cfg):
 
     @model_validator(mode="after")
     def _bounded_texture(self) -> "GroundConfig":
+        if self.home_px is not None and self.image is None:
+            raise ValueError(f"home_px: {list(self.home_px)} places an image on the ground, but there is no image (the "
+                             f"procedural ground is centred on home)")
         if self.image is None and self.size_m / self.metres_per_pixel > MAX_GROUND_PX:
             raise ValueError(f"size_m / metres_per_pixel = {self.size_m:g} / {self.metres_per_pixel:g} = "
                              f"{self.size_m / self.metres_per_pixel:.4g} px per side, above {MAX_GROUND_PX} (the ground "
@@ -413,9 +417,13 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         raise ConfigError(_format_errors(e, source)) from None
     cfg.base_dir = base_dir
     # resolve referenced files now, so a missing image fails before any actor starts
-    if cfg.world.ground.image:
-        cfg.world.ground.image = str(cfg.resolve_path(cfg.world.ground.image, "world.ground.image"))
-        _image_size(cfg.world.ground.image, "world.ground.image")
+    ground = cfg.world.ground
+    if ground.image:
+        ground.image = str(cfg.resolve_path(ground.image, "world.ground.image"))
+        w, h = _image_size(ground.image, "world.ground.image")
+        if ground.home_px is not None and not (0 <= ground.home_px[0] <= w and 0 <= ground.home_px[1] <= h):
+            raise ConfigError(f"world.ground.home_px: {list(ground.home_px)} is not a pixel of the image "
+                              f"{ground.image!r} ({w} x {h} px): x must be within [0, {w}] and y within [0, {h}]")
     for i, t in enumerate(cfg.world.targets):
         t.image = str(cfg.resolve_path(t.image, f"world.targets.{i}.image"))
         w, h = _image_size(t.image, f"world.targets.{i}.image")
@@ -463,10 +471,35 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     return cfg
 
 
-def _image_size(path: str, field: str) -> tuple[int, int]:
-    """(width, height) in pixels of an image file, read with OpenCV; ConfigError naming ``field`` if unreadable."""
-    import cv2
+#: largest image (pixels in all) a ground or target image may have: 300 MB as 8-bit RGB, under Pillow's own
+#: decompression-bomb bound (2 x Image.MAX_IMAGE_PIXELS = 179 MP)
+MAX_IMAGE_PIXELS = 100_000_000
 
+
+def _image_size(path: str, field: str) -> tuple[int, int]:
+    """(width, height) in pixels of an image file. The size is read from the file's header first (Pillow decodes
+    nothing to open a file) and refused above :data:`MAX_IMAGE_SIDE_PX` per side or :data:`MAX_IMAGE_PIXELS` in all:
+    a PNG "decompression bomb" (a few KB declaring 100,000 x 100,000 px) made ``cv2.imread`` raise ``cv2.error``
+    (OpenCV's own bound, CV_IO_MAX_IMAGE_PIXELS) or allocate gigabytes. Only then is it decoded with OpenCV, which
+    must read it. Raises ConfigError naming ``field``, the file and the size."""
+    import warnings
+
+    import cv2
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our own bound follows
+            with Image.open(path) as im:
+                w, h = (int(v) for v in im.size)
+    except Image.DecompressionBombError as e:
+        raise ConfigError(f"{field}: {str(path)!r}: {e} (from its header; at most {MAX_IMAGE_SIDE_PX} px per side "
+                          f"and {MAX_IMAGE_PIXELS} px in all; nothing was decoded)") from None
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as e:
+        raise ConfigError(f"{field}: {str(path)!r} is not an image file (PNG, JPEG, ...): {e}") from None
+    if max(w, h) > MAX_IMAGE_SIDE_PX or w * h > MAX_IMAGE_PIXELS:
+        raise ConfigError(f"{field}: {str(path)!r} is {w} x {h} px (from its header), above {MAX_IMAGE_SIDE_PX} px "
+                          f"per side or {MAX_IMAGE_PIXELS} px in all; nothing was decoded")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ConfigError(f"{field}: {str(path)!r} is not an image OpenCV can read (PNG, JPEG, ...)")

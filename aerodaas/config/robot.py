@@ -15,8 +15,8 @@ from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayConfig, SimConfig,  # noqa: F401
                                       TelloConfig, add_section_schemas, backend_settings_into_config)
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
-                   MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS, MAX_YAW_RATE_DPS, _Cfg,
-                   did_you_mean)
+                   MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS,
+                   MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean)
 
 
 class Limits(_Cfg):
@@ -32,7 +32,8 @@ class Limits(_Cfg):
 
 class BatteryConfig(_Cfg):
     """Battery model: energy drawn = (hover_power_w + speed_power_w_per_mps * |v|) * dt.
-    Voltage is linear between ``voltage_empty`` and ``voltage_full`` in state of charge (a simple LiPo model)."""
+    Voltage is linear between ``voltage_empty`` and ``voltage_full`` in state of charge (a simple LiPo model);
+    ``voltage_empty`` must be below ``voltage_full`` (else the voltage rises as the battery drains)."""
 
     capacity_wh: float = Field(default=60.0, gt=0, le=MAX_BATTERY_WH)
     hover_power_w: float = Field(default=180.0, ge=0, le=MAX_POWER_W)
@@ -40,6 +41,13 @@ class BatteryConfig(_Cfg):
     voltage_full: float = Field(default=16.8, gt=0, le=1000)
     voltage_empty: float = Field(default=13.2, gt=0, le=1000)
     initial_pct: float = Field(default=100.0, ge=0, le=100)
+
+    @model_validator(mode="after")
+    def _voltages(self) -> "BatteryConfig":
+        if self.voltage_empty >= self.voltage_full:
+            raise ValueError(f"voltage_empty ({self.voltage_empty:g} V) must be below voltage_full "
+                             f"({self.voltage_full:g} V)")
+        return self
 
 
 class NoiseConfig(_Cfg):
@@ -258,7 +266,8 @@ class RobotConfig(_Cfg):
     progress: ProgressConfig = Field(default_factory=ProgressConfig)
     takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
                                     "[safety.min_altitude, max_altitude]")
-    control_rate_hz: float = Field(default=10.0, gt=0, le=MAX_RATE_HZ)
+    control_rate_hz: float = Field(default=10.0, ge=MIN_CONTROL_HZ, le=MAX_RATE_HZ, description="the drone's control "
+                                   "loop (Hz): failsafes, geofence and queue are checked at every tick")
     idle_land_s: float = Field(default=10.0, gt=0, le=MAX_DURATION_S, description="land after this many seconds (sim time) with "
                                "nothing queued, once some navigation has been flown")
     sensors: list[SensorConfig] = Field(default_factory=list)
@@ -334,6 +343,11 @@ class RobotConfig(_Cfg):
             which = "safety.max_altitude" if self.safety.max_altitude is not None else "limits.max_altitude"
             raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is above {which} ({max_alt:g} m); the "
                              f"take-off target passes the same safety gate as every command")
+        start, rtl = self.battery.initial_pct, self.safety.low_battery_rtl_pct
+        if start <= rtl:
+            raise ValueError(f"battery.initial_pct: a start at {start:g} % is at or below safety.low_battery_rtl_pct "
+                             f"({rtl:g} %; critical_battery_pct {self.safety.critical_battery_pct:g} %): the drone "
+                             f"would take off only to return (or land) at once")
         if self.takeoff_altitude < self.safety.min_altitude:
             raise ValueError(f"takeoff_altitude: {self.takeoff_altitude:g} m is below safety.min_altitude "
                              f"({self.safety.min_altitude:g} m); the drone would hover below the floor it must keep")

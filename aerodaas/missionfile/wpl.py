@@ -29,7 +29,7 @@ def _parse_wpl(text: str, src: str) -> MissionPlan:
         raise _fail(src, "line 1", f"expected the header 'QGC WPL 110', got {header!r:.80}")
     home_row_allowed = parts[2] == "110"  # QGroundControl: 110 = ArduPilot file with home in row 0; 120 = no home
 
-    rows: list[tuple[int, MissionItem]] = []
+    rows: list[tuple[int, MissionItem, int]] = []  # (line, item, seq in the file)
     for lineno, line in enumerate(lines[1:], start=2):
         s = line.strip()
         if not s or s.startswith("#"):
@@ -63,13 +63,19 @@ def _parse_wpl(text: str, src: str) -> MissionPlan:
                 raise _fail(src, where, f"{_WPL_FIELDS[i]} must be finite, got {fields[i]!r}")
             params.append(None if math.isnan(v) else v)
         _check_position(src, where, frame, params)
+        expected = rows[-1][2] + 1 if rows else None
+        if expected is None and ints[0] > 1:
+            raise _fail(src, where, f"seq must start at 0 (the home row) or 1, got {ints[0]}")
+        if expected is not None and ints[0] != expected:  # DO_JUMP targets name seq numbers: never renumbered
+            raise _fail(src, where, f"seq {ints[0]} out of order: the row after seq {expected - 1} must be seq "
+                                    f"{expected} (rows are numbered consecutively; DO_JUMP targets refer to them)")
         rows.append((lineno, MissionItem(seq=0, command=command, frame=frame, params=params,
-                                         autocontinue=bool(ints[11]))))
+                                         autocontinue=bool(ints[11])), ints[0]))
 
     home = None
     home_row = bool(rows) and home_row_allowed and rows[0][1].command == MAV_CMD_NAV_WAYPOINT
     if home_row:
-        lineno, h = rows.pop(0)
+        lineno, h, _ = rows.pop(0)
         lat, lon, alt = h.params[4], h.params[5], h.params[6]
         if not (lat in (None, 0.0) and lon in (None, 0.0)):  # all-zero row = home not set (Mission Planner)
             if h.frame not in _AMSL_FRAMES:
@@ -81,7 +87,7 @@ def _parse_wpl(text: str, src: str) -> MissionPlan:
                                                                    f"got {lat!r}, {lon!r}, {alt!r}")
             home = GeoPoint(lat=lat, lon=lon, alt=alt)
     items = []
-    for k, (_, item) in enumerate(rows):
+    for k, (_, item, _) in enumerate(rows):
         params = list(item.params)
         if not home_row and item.command == MAV_CMD_DO_JUMP and params[0] is not None:
             params[0] += 1  # DO_JUMP targets in a file without home row count from 0; ours count home as 0
@@ -98,8 +104,10 @@ def load_wpl(path: str | Path) -> MissionPlan:
     QGroundControl convention; an all-zero home row means "home not set"). A file whose first row is another
     command (MAVSDK's PX4 sample starts with ``MAV_CMD_NAV_TAKEOFF``), or a ``QGC WPL 120`` file, has no home row:
     every row is a mission item and ``MAV_CMD_DO_JUMP`` targets are shifted by one, as QGroundControl does.
-    Items are numbered 1..n (``seq``) in file order. Raises :class:`MissionFileError` naming the file, line and
-    value for a wrong header, a malformed row, an unknown frame or an out-of-range latitude/longitude."""
+    The rows' ``seq`` must count up by one from 0 or 1 (a file numbered 1, 1, 5 was renumbered silently, and its
+    DO_JUMP targets with it). Items are numbered 1..n (``seq``) in file order. Raises :class:`MissionFileError` naming the file, line and
+    value for a wrong header, a malformed row, a row out of sequence, an unknown frame or an out-of-range
+    latitude/longitude."""
     path = Path(path)
     return _parse_wpl(_read_text(path), str(path))
 

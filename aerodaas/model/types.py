@@ -13,10 +13,11 @@ field and the bad value, so an invalid waypoint never reaches a drone.
 from __future__ import annotations
 
 import math
+import numbers
 from enum import Enum
-from typing import Any, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict, field_validator, model_validator
 
 __all__ = [
     "Waypoint", "VelocityCommand", "ActionCommand", "NavigationType", "SchedulingType", "AeroNavigation", "PriorityQueue",
@@ -27,6 +28,26 @@ __all__ = [
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=False, validate_assignment=True)
+
+    def __init__(self, /, **data: Any) -> None:
+        # validated in this frame, which is AeroDaaS's: ``aerodaas run`` reports a refused value as bad input (exit 2,
+        # aerodaas.runtime.app_errors), not as the application's own exception (exit 1 with its traceback)
+        super().__init__(**data)
+
+
+def _number(v: Any) -> Any:
+    """A number as given (any real: ``int``, ``float``, numpy scalars), as a ``float``; a string, a ``bool`` or
+    anything else is refused: ``Waypoint(x="1", y=True)`` is a typo, not a coordinate (pydantic's lax mode read them
+    as 1.0 and 1.0)."""
+    if isinstance(v, numbers.Real) and not isinstance(v, bool) and type(v).__name__ != "bool_":
+        return float(v)
+    raise ValueError(f"must be a number (int or float), got {type(v).__name__} {v!r:.40}")
+
+
+#: a strictly typed number: ints and floats (numpy's too) only, never a string or a bool
+Number = Annotated[float, BeforeValidator(_number)]
+#: a strictly typed boolean: ``True`` / ``False`` only (not ``"yes"``, ``1``)
+StrictBool = Annotated[bool, Strict()]
 
 
 def _finite(v: float, info) -> float:
@@ -45,6 +66,9 @@ MAX_COMMAND_SPEED_MPS = 100.0
 #: a waypoint's own ``speed`` below this (m/s) is refused: ArduPilot's WPNAV_SPEED has the same floor (10 cm/s,
 #: ArduCopter parameter docs, range 10..2000 cm/s); 1e-300 m/s would hold the vehicle in place until its battery ends
 MIN_WAYPOINT_SPEED_MPS = 0.1
+#: velocity commands turning faster than this (deg/s) are refused (the configuration's own bound on
+#: ``limits.max_yaw_rate``, aerodaas.config.base.MAX_YAW_RATE_DPS: 10 turns a second)
+MAX_COMMAND_YAW_RATE_DPS = 3600.0
 
 
 class Waypoint(_Model):
@@ -57,17 +81,18 @@ class Waypoint(_Model):
     ``hover_duration`` is seconds to hold position once reached; ``speed`` (m/s, optional, at least
     :data:`MIN_WAYPOINT_SPEED_MPS`) caps the approach speed below the robot's own limit; ``acceptance_radius`` (metres) is how close counts as reached.
 
-    Raises ``pydantic.ValidationError`` for NaN/inf coordinates, negative hover time, out-of-range lat/lon.
+    Raises ``pydantic.ValidationError`` for NaN/inf coordinates, strings or booleans given for numbers
+    (``x="1"``, ``y=True``), negative hover time, out-of-range lat/lon.
     """
 
     id: str = Field(min_length=1)
-    x: float
-    y: float
-    z: float
-    hover_duration: float = Field(default=0.0, ge=0.0, le=86_400.0)
+    x: Number
+    y: Number
+    z: Number
+    hover_duration: Number = Field(default=0.0, ge=0.0, le=86_400.0)
     waypoint_type: Literal["relative", "absolute"] = "relative"
-    speed: float | None = Field(default=None, ge=MIN_WAYPOINT_SPEED_MPS, le=MAX_COMMAND_SPEED_MPS)
-    acceptance_radius: float = Field(default=0.3, gt=0.0, le=1000.0)
+    speed: Number | None = Field(default=None, ge=MIN_WAYPOINT_SPEED_MPS, le=MAX_COMMAND_SPEED_MPS)
+    acceptance_radius: Number = Field(default=0.3, gt=0.0, le=1000.0)
 
     _chk = field_validator("x", "y", "z", "hover_duration", "speed")(_finite)
 
@@ -99,18 +124,19 @@ class VelocityCommand(_Model):
     """A velocity setpoint held for ``duration`` seconds: ENU ``vx``/``vy``/``vz`` in m/s, ``yaw_rate`` deg/s.
 
     Used by analytics-driven navigation (e.g. the follow analytics). Raises ``pydantic.ValidationError`` for
-    non-finite values or a non-positive duration.
+    non-finite values, strings or booleans for numbers, speeds beyond +-:data:`MAX_COMMAND_SPEED_MPS`, a yaw rate
+    beyond +-:data:`MAX_COMMAND_YAW_RATE_DPS` or a non-positive duration.
     """
 
     id: str = "vel"
-    vx: float = 0.0
-    vy: float = 0.0
-    vz: float = 0.0
-    yaw_rate: float = 0.0
-    duration: float = Field(default=0.5, gt=0.0, le=3600.0)
-    issued_at: float | None = None  # sim time (s) the command was issued; set by the scheduler if None
+    vx: Number = 0.0
+    vy: Number = 0.0
+    vz: Number = 0.0
+    yaw_rate: Number = Field(default=0.0, ge=-MAX_COMMAND_YAW_RATE_DPS, le=MAX_COMMAND_YAW_RATE_DPS)
+    duration: Number = Field(default=0.5, gt=0.0, le=3600.0)
+    issued_at: Number | None = None  # sim time (s) the command was issued; set by the scheduler if None
 
-    _chk = field_validator("vx", "vy", "vz", "yaw_rate", "duration")(_finite)
+    _chk = field_validator("vx", "vy", "vz", "yaw_rate", "duration", "issued_at")(_finite)
 
     def left_at(self, now: float) -> "VelocityCommand":
         """This command as it stands at sim time ``now`` (s): ``duration`` cut to the seconds left of it since
@@ -195,19 +221,20 @@ class PriorityQueue(_Model):
     abort); without it a higher priority only preempts (pattern 4, the old mission resumes)."""
 
     data: Any
-    priority: int = Field(default=2, ge=0)
-    replace: bool = False
+    priority: Annotated[int, Strict()] = Field(default=2, ge=0, le=1_000_000)
+    replace: StrictBool = False
 
     def __init__(self, data: Any = None, priority: int = 2, **kwargs: Any) -> None:
         super().__init__(data=data, priority=priority, **kwargs)
 
 
 class GeoPoint(_Model):
-    """WGS-84 position: latitude/longitude in degrees, altitude in metres (ellipsoidal)."""
+    """WGS-84 position: latitude/longitude in degrees, altitude in metres (ellipsoidal). Numbers only: a string
+    (``"13.02"``) or a boolean is refused."""
 
-    lat: float = Field(ge=-90.0, le=90.0)
-    lon: float = Field(ge=-180.0, le=180.0)
-    alt: float = 0.0
+    lat: Number = Field(ge=-90.0, le=90.0)
+    lon: Number = Field(ge=-180.0, le=180.0)
+    alt: Number = 0.0
 
     _chk = field_validator("lat", "lon", "alt")(_finite)
 

@@ -4,6 +4,7 @@ a waypoint from an app would be (the first leg from the vehicle's current veloci
 no path at all: the caller lands in place."""
 from __future__ import annotations
 
+import math
 from typing import Any, Sequence
 
 from aerodaas.navigation.route import plan_path
@@ -26,7 +27,14 @@ def plan_return(gate: Any, position: Sequence[float], velocity: Sequence[float],
     start = (float(position[0]), float(position[1]))
     path = plan_path(gate.fence, start, home, clearance) if not gate.fence.is_empty else [start, tuple(home)]
     if path is None:
-        return None, f"no path home keeps {clearance:.1f} m clear of the exclusion zones"
+        where = f"({start[0]:.1f}, {start[1]:.1f}) m, {math.hypot(*start):.0f} m from home"
+        if gate.fence.exclusions:
+            return None, (f"no path home from {where} keeps {clearance:.1f} m clear of the exclusion zones and inside "
+                          f"the inclusion zones")
+        # inclusion zones only (a fence without exclusion zones was reported as one before): the straight leg
+        # leaves them, and the planner routes around exclusion zones only
+        why = gate.fence.check_point(*start) or gate.fence.check_segment(start, tuple(home))
+        return None, f"no path home from {where} stays inside the inclusion zones" + (f" ({why})" if why else "")
     prev, vel = (start[0], start[1], float(position[2])), tuple(float(c) for c in velocity)
     for i, (x, y) in enumerate(path[1:]):
         wp = Waypoint(id=f"rtl-{i}", x=x, y=y, z=altitude, speed=gate.max_speed)

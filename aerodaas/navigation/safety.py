@@ -98,6 +98,7 @@ class SafetyGate:
         and the stopping distance from every point of it (see the module docstring). A waypoint without its own
         ``speed`` gets the effective ``max_speed`` (the minimum of ``limits.max_speed`` and ``safety.max_speed``) when
         that is below ``limits.max_speed``, the speed a backend flies it at otherwise."""
+        self._check_values(wp)
         x, y, z = wp.to_local(self.home)
         upd: dict[str, Any] = {}
         if wp.speed is None and self.max_speed < self._backend_default_speed:
@@ -174,6 +175,7 @@ class SafetyGate:
         period, the stopping distance from every point) must stay under ``max_altitude``, above ``min_altitude``
         when descending, and inside the geofence. An altitude breach is clamped by zeroing ``vz`` when clamping
         (if the envelope is then still outside, the command is rejected); a geofence breach is always rejected."""
+        self._check_values(cmd)
         upd: dict[str, Any] = {}
         h = math.hypot(cmd.vx, cmd.vy)
         if h > self.max_speed + 1e-9:
@@ -268,6 +270,23 @@ class SafetyGate:
             self.clamped += 1
             return self.max_alt
         return float(altitude)
+
+    def _check_values(self, item: Any) -> None:
+        """The gate checks the item's values itself, whatever built it: every field validated again against its
+        model (finite numbers, no strings or booleans for numbers, the models' bounds). An item made with
+        ``model_construct`` or changed by ``model_copy(update=...)`` skips pydantic's validation: a NaN waypoint
+        built so passed the pre-flight check and the gate (every comparison with NaN is False) before. Raises
+        :class:`SafetyViolation` naming the field and its value."""
+        from pydantic import ValidationError
+
+        try:
+            type(item).model_validate(dict(item.__dict__))
+        except ValidationError as e:
+            err = e.errors()[0]
+            field = ".".join(str(x) for x in err["loc"]) or "item"
+            self.rejected += 1
+            raise SafetyViolation(str(getattr(item, "id", "?")), field, err.get("input"),
+                                  f"not a valid {type(item).__name__} ({err['msg']})") from None
 
     # ------------------------------------------------------------------ the dynamics model
     def stopping_distance(self, speed: float) -> float:
@@ -380,6 +399,7 @@ class SafetyGate:
         if isinstance(item, VelocityCommand):
             return self.check_velocity(item, position, velocity)
         if isinstance(item, ActionCommand):
+            self._check_values(item)
             return item
         raise TypeError(f"unknown navigation item {type(item).__name__}")
 

@@ -12,6 +12,7 @@ table and the suite cannot drift apart.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 import os
@@ -31,11 +32,17 @@ def base_env() -> dict:
 @dataclass(frozen=True)
 class InputCase:
     """``name``; ``mutate(env, tmp)`` edits a copy of :func:`base_env` (``tmp``: a scratch folder for files);
-    ``expect``: text the error must contain (the field it names)."""
+    ``expect``: text the error must contain (the field it names); ``category``: the report's group (ids, strict
+    types, bounds / cross-field, ...)."""
 
     name: str
     mutate: Callable[[dict, Path], None]
     expect: str
+    category: str = ""
+
+
+def _category(category: str, cases: list[InputCase]) -> list[InputCase]:
+    return [dataclasses.replace(c, category=category) for c in cases]
 
 
 def _robot(d: dict) -> dict:
@@ -52,6 +59,21 @@ def _png(tmp: Path, w: int = 64, h: int = 48) -> str:
 
     p = tmp / f"img_{w}x{h}.png"
     cv2.imwrite(str(p), np.full((h, w, 3), 128, np.uint8))
+    return str(p)
+
+
+def _png_bomb(tmp: Path, w: int = 100_000, h: int = 100_000) -> str:
+    """A PNG "decompression bomb": a valid 8-bit grey PNG whose header declares ``w`` x ``h`` pixels (10 GB decoded)
+    in a file of a few hundred bytes (its data holds the first rows only: the header alone must refuse it)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    p = tmp / f"bomb_{w}x{h}.png"
+    p.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+                  + chunk(b"IDAT", zlib.compress(b"\0" * (w + 1) * 4, 9)) + chunk(b"IEND", b""))
     return str(p)
 
 
@@ -81,37 +103,11 @@ _TWO_CIRCLES = {"circles": [{"center": [47.3977, 8.5456], "radius": 50, "inclusi
                             {"center": [47.3980, 8.5456], "radius": 50, "inclusion": True}]}
 
 #: environment files that must be refused (ConfigError naming the field) before anything starts
-ENV_CASES: list[InputCase] = [
-    InputCase("limits.max_speed Infinity", lambda d, t: _robot(d).update(limits={"max_speed": INF}), "max_speed"),
-    InputCase("limits.max_speed 1e308", lambda d, t: _robot(d).update(limits={"max_speed": BIG}), "max_speed"),
-    InputCase("limits.max_speed NaN", lambda d, t: _robot(d).update(limits={"max_speed": math.nan}), "max_speed"),
-    InputCase("limits.max_speed \"3\" (string)", lambda d, t: _robot(d).update(limits={"max_speed": "3"}), "max_speed"),
-    InputCase("limits.max_speed true", lambda d, t: _robot(d).update(limits={"max_speed": True}), "max_speed"),
-    InputCase("limits.max_altitude -5", lambda d, t: _robot(d).update(limits={"max_altitude": -5}), "max_altitude"),
-    InputCase("home.alt Infinity", lambda d, t: _robot(d).update(home={"lat": 47.0, "lon": 8.0, "alt": INF}), "home.alt"),
-    InputCase("home.alt 1e308", lambda d, t: _robot(d).update(home={"lat": 47.0, "lon": 8.0, "alt": BIG}), "home.alt"),
-    InputCase("home.lat 95", lambda d, t: _robot(d).update(home={"lat": 95.0, "lon": 8.0}), "home.lat"),
-    InputCase("simulation.speedup 1e308", lambda d, t: d.update(simulation={"speedup": BIG}), "simulation.speedup"),
-    InputCase("simulation.speedup Infinity", lambda d, t: d.update(simulation={"speedup": INF}), "simulation.speedup"),
-    InputCase("simulation.physics_hz 0", lambda d, t: d.update(simulation={"physics_hz": 0}), "physics_hz"),
-    InputCase("simulation.lockstep \"yes\"", lambda d, t: d.update(simulation={"lockstep": "yes"}), "lockstep"),
-    InputCase("simulation.lockstep 1", lambda d, t: d.update(simulation={"lockstep": 1}), "lockstep"),
-    InputCase("camera fps 1e308", lambda d, t: _cam(d).update(fps=BIG), "fps"),
-    InputCase("camera fps Infinity", lambda d, t: _cam(d).update(fps=INF), "fps"),
-    InputCase("camera 100000 x 100000", lambda d, t: _cam(d).update(width=100000, height=100000), "width"),
-    InputCase("camera width 640.5", lambda d, t: _cam(d).update(width=640.5), "width"),
-    InputCase("camera property typo 'widht'", lambda d, t: _cam(d).update(widht=640), "did you mean 'width'"),
-    InputCase("camera hfov_deg 200", lambda d, t: _cam(d).update(hfov_deg=200), "hfov_deg"),
-    InputCase("odometry rate_hz 0", lambda d, t: _robot(d)["sensors"][1].update(properties={"rate_hz": 0}), "rate_hz"),
-    InputCase("unknown root key 'robot'", lambda d, t: d.update(robot=[]), "did you mean 'robots'"),
-    InputCase("unknown key limits.max_sped", lambda d, t: _robot(d).update(limits={"max_sped": 3}),
-              "did you mean 'max_speed'"),
-    InputCase("unknown key safety.geofence.circle", lambda d, t: _robot(d).update(safety={"geofence": {"circle": []}}),
-              "did you mean 'circles'"),
+#: environment cases of category 'ids'
+ID_CASES: list[InputCase] = _category('ids', [
     InputCase("duplicate robot ids", lambda d, t: d["robots"].append({"id": "d1"}), "duplicate ids"),
     InputCase("duplicate sensor ids", lambda d, t: _robot(d)["sensors"].append({"id": "cam", "type": "odometry"}),
               "sensors: duplicate ids"),
-    # one id grammar (issue 40.2): ids name topics, actors and files
     InputCase("robot id with a newline", lambda d, t: _robot(d).update(id="d1\n"), "robots.0.id"),
     InputCase("robot id with NUL", lambda d, t: _robot(d).update(id="d\x001"), "robots.0.id"),
     InputCase("robot id with a right-to-left override", lambda d, t: _robot(d).update(id="d\u202e1"), "U+202E"),
@@ -128,11 +124,49 @@ ENV_CASES: list[InputCase] = [
     InputCase("robot id of 65 characters", lambda d, t: _robot(d).update(id="d" * 65), "longer than 64"),
     InputCase("duplicate target ids", lambda d, t: d.update(world={"targets": [_target(t), _target(t)]}),
               "world.targets: duplicate ids"),
-    InputCase("target crop outside its image", lambda d, t: d.update(world={"targets": [_target(t, crop=(10, 10, 100, 30))]}),
-              "world.targets.0.crop"),
-    InputCase("ground image not an image", lambda d, t: (t.joinpath("g.png").write_text("x"),
-                                                         d.update(world={"ground": {"image": str(t / "g.png")}})),
-              "world.ground.image"),
+])
+
+#: environment cases of category 'strict types'
+STRICT_TYPE_CASES: list[InputCase] = _category('strict types', [
+    InputCase("limits.max_speed \"3\" (string)", lambda d, t: _robot(d).update(limits={"max_speed": "3"}), "max_speed"),
+    InputCase("limits.max_speed true", lambda d, t: _robot(d).update(limits={"max_speed": True}), "max_speed"),
+    InputCase("simulation.lockstep \"yes\"", lambda d, t: d.update(simulation={"lockstep": "yes"}), "lockstep"),
+    InputCase("simulation.lockstep 1", lambda d, t: d.update(simulation={"lockstep": 1}), "lockstep"),
+    InputCase("camera width 640.5", lambda d, t: _cam(d).update(width=640.5), "width"),
+    InputCase("fence inclusion \"yes\"",
+              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [
+                  {"center": [47.3977, 8.5456], "radius": 50, "inclusion": "yes"}]}}), "inclusion"),
+    InputCase("hitl.enabled \"true\" (string)", lambda d, t: d.update(hitl={"enabled": "true"}), "hitl.enabled"),
+    # issue 40.4: strict numbers everywhere (a JSON string or boolean is never a number)
+    InputCase("home.lat \"13.02\" (string)", lambda d, t: _robot(d).update(home={"lat": "13.02", "lon": 8.0}), "home.lat"),
+    InputCase("battery.capacity_wh \"60\" (string)", lambda d, t: _robot(d).update(battery={"capacity_wh": "60"}),
+              "capacity_wh"),
+    InputCase("takeoff_altitude true", lambda d, t: _robot(d).update(takeoff_altitude=True), "takeoff_altitude"),
+    InputCase("control_rate_hz \"10\" (string)", lambda d, t: _robot(d).update(control_rate_hz="10"), "control_rate_hz"),
+    InputCase("sensor buffer \"2\" (string)", lambda d, t: _robot(d)["sensors"][1].update(buffer="2"), "buffer"),
+    InputCase("max_queued_items 10.5 (not an integer)", lambda d, t: _robot(d).update(max_queued_items=10.5),
+              "max_queued_items"),
+    InputCase("world.ground.home_px [\"10\", 10]",
+              lambda d, t: d.update(world={"ground": {"image": _png(t), "home_px": ["10", 10]}}), "home_px"),
+])
+
+#: environment cases of category 'bounds / cross-field'
+BOUND_CASES: list[InputCase] = _category('bounds / cross-field', [
+    InputCase("limits.max_speed Infinity", lambda d, t: _robot(d).update(limits={"max_speed": INF}), "max_speed"),
+    InputCase("limits.max_speed 1e308", lambda d, t: _robot(d).update(limits={"max_speed": BIG}), "max_speed"),
+    InputCase("limits.max_speed NaN", lambda d, t: _robot(d).update(limits={"max_speed": math.nan}), "max_speed"),
+    InputCase("limits.max_altitude -5", lambda d, t: _robot(d).update(limits={"max_altitude": -5}), "max_altitude"),
+    InputCase("home.alt Infinity", lambda d, t: _robot(d).update(home={"lat": 47.0, "lon": 8.0, "alt": INF}), "home.alt"),
+    InputCase("home.alt 1e308", lambda d, t: _robot(d).update(home={"lat": 47.0, "lon": 8.0, "alt": BIG}), "home.alt"),
+    InputCase("home.lat 95", lambda d, t: _robot(d).update(home={"lat": 95.0, "lon": 8.0}), "home.lat"),
+    InputCase("simulation.speedup 1e308", lambda d, t: d.update(simulation={"speedup": BIG}), "simulation.speedup"),
+    InputCase("simulation.speedup Infinity", lambda d, t: d.update(simulation={"speedup": INF}), "simulation.speedup"),
+    InputCase("simulation.physics_hz 0", lambda d, t: d.update(simulation={"physics_hz": 0}), "physics_hz"),
+    InputCase("camera fps 1e308", lambda d, t: _cam(d).update(fps=BIG), "fps"),
+    InputCase("camera fps Infinity", lambda d, t: _cam(d).update(fps=INF), "fps"),
+    InputCase("camera 100000 x 100000", lambda d, t: _cam(d).update(width=100000, height=100000), "width"),
+    InputCase("camera hfov_deg 200", lambda d, t: _cam(d).update(hfov_deg=200), "hfov_deg"),
+    InputCase("odometry rate_hz 0", lambda d, t: _robot(d)["sensors"][1].update(properties={"rate_hz": 0}), "rate_hz"),
     InputCase("takeoff_altitude 16 above max_altitude 10 (clamp)",
               lambda d, t: _robot(d).update(takeoff_altitude=16, safety={"max_altitude": 10, "on_violation": "clamp"}),
               "takeoff_altitude"),
@@ -140,38 +174,8 @@ ENV_CASES: list[InputCase] = [
               "takeoff_altitude"),
     InputCase("min_altitude >= max_altitude", lambda d, t: _robot(d).update(safety={"min_altitude": 20, "max_altitude": 10}),
               "min_altitude"),
-    InputCase("inclusion fence not containing home", lambda d, t: _robot(d).update(safety={"geofence": _FAR_FENCE}),
-              "safety.geofence"),
-    InputCase("PX4 robot, two overlapping inclusion circles (PX4 intersects them, our gate takes the union)",
-              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "udpin:127.0.0.1:14540",
-                                                                         "autopilot": "px4"},
-                                            safety={"geofence": _TWO_CIRCLES}), "2 inclusion zones"),
-    InputCase("mavlink.fence.home_radius_m below safety.max_distance",
-              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "udpin:127.0.0.1:14550",
-                                                                         "fence": {"home_radius_m": 80}},
-                                            safety={"geofence": _TWO_CIRCLES}), "fence.home_radius_m"),
-    InputCase("fence circle radius Infinity",
-              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [{"center": [47.39, 8.54], "radius": INF}]}}),
-              "radius"),
-    InputCase("fence inclusion \"yes\"",
-              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [
-                  {"center": [47.3977, 8.5456], "radius": 50, "inclusion": "yes"}]}}), "inclusion"),
-    InputCase("self-intersecting fence polygon",
-              lambda d, t: _robot(d).update(safety={"geofence": {"polygons": [{"points": [
-                  [47.39, 8.54], [47.40, 8.55], [47.39, 8.55], [47.40, 8.54]]}]}}), "not a simple polygon"),
     InputCase("safety.command_latency_s -1", lambda d, t: _robot(d).update(safety={"command_latency_s": -1}),
               "command_latency_s"),
-    InputCase("hitl.port 70000", lambda d, t: d.update(hitl={"port": 70000}), "hitl.port"),
-    InputCase("hitl.token too short", lambda d, t: d.update(hitl={"token": "abc"}), "hitl.token"),
-    InputCase("hitl.token of 16 spaces", lambda d, t: d.update(hitl={"token": " " * 16}), "hitl.token"),
-    InputCase("hitl.token with a blank", lambda d, t: d.update(hitl={"token": "abcdefgh ijklmnop"}), "hitl.token"),
-    InputCase("hitl.host \"999.999.1.1\"", lambda d, t: d.update(hitl={"host": "999.999.1.1"}), "hitl.host"),
-    InputCase("hitl.host empty", lambda d, t: d.update(hitl={"host": ""}), "hitl.host"),
-    InputCase("hitl.port -1", lambda d, t: d.update(hitl={"port": -1}), "hitl.port"),
-    InputCase("hitl.enabled \"true\" (string)", lambda d, t: d.update(hitl={"enabled": "true"}), "hitl.enabled"),
-    InputCase("replay log without position data",
-              lambda d, t: _robot(d).update(backend="replay", replay={"log": _tlog_without_position(t)}),
-              "no position fix"),
     InputCase("battery initial_pct 150", lambda d, t: _robot(d).update(battery={"initial_pct": 150}), "initial_pct"),
     InputCase("simulation.physics_hz 1 (the gate's model needs >= 10)", lambda d, t: d.update(simulation={"physics_hz": 1}),
               "physics_hz"),
@@ -187,7 +191,82 @@ ENV_CASES: list[InputCase] = [
               "max_distance"),
     InputCase("mavlink.setpoint_rate_hz 1e308",
               lambda d, t: _robot(d).update(backend="mavlink", mavlink={"setpoint_rate_hz": BIG}), "setpoint_rate_hz"),
-]
+    # issue 40.4: every rate, size and duration bounded, the cross-field rules
+    InputCase("control_rate_hz 1e-6", lambda d, t: _robot(d).update(control_rate_hz=1e-6), "control_rate_hz"),
+    InputCase("limits.max_yaw_rate 1e308", lambda d, t: _robot(d).update(limits={"max_yaw_rate": BIG}), "max_yaw_rate"),
+    InputCase("idle_land_s 1e308", lambda d, t: _robot(d).update(idle_land_s=BIG), "idle_land_s"),
+    InputCase("sensor buffer 10^15", lambda d, t: _robot(d)["sensors"][1].update(buffer=10**15), "buffer"),
+    InputCase("battery voltage_empty 17 above voltage_full 16.8",
+              lambda d, t: _robot(d).update(battery={"voltage_empty": 17.0, "voltage_full": 16.8}), "voltage_empty"),
+    InputCase("battery start 4 % below critical_battery_pct 5 %",
+              lambda d, t: _robot(d).update(battery={"initial_pct": 4}), "battery.initial_pct"),
+    InputCase("battery start 20 % at low_battery_rtl_pct 20 %",
+              lambda d, t: _robot(d).update(battery={"initial_pct": 20}), "battery.initial_pct"),
+    InputCase("world.ground.home_px [1e300, -1e300]",
+              lambda d, t: d.update(world={"ground": {"image": _png(t), "home_px": [1e300, -1e300]}}), "home_px"),
+    InputCase("world.ground.home_px without an image", lambda d, t: d.update(world={"ground": {"home_px": [1, 1]}}),
+              "home_px"),
+])
+
+#: environment cases of category 'unknown keys'
+KEY_CASES: list[InputCase] = _category('unknown keys', [
+    InputCase("camera property typo 'widht'", lambda d, t: _cam(d).update(widht=640), "did you mean 'width'"),
+    InputCase("unknown root key 'robot'", lambda d, t: d.update(robot=[]), "did you mean 'robots'"),
+    InputCase("unknown key limits.max_sped", lambda d, t: _robot(d).update(limits={"max_sped": 3}),
+              "did you mean 'max_speed'"),
+    InputCase("unknown key safety.geofence.circle", lambda d, t: _robot(d).update(safety={"geofence": {"circle": []}}),
+              "did you mean 'circles'"),
+])
+
+#: environment cases of category 'geofence'
+GEOFENCE_CASES: list[InputCase] = _category('geofence', [
+    InputCase("inclusion fence not containing home", lambda d, t: _robot(d).update(safety={"geofence": _FAR_FENCE}),
+              "safety.geofence"),
+    InputCase("PX4 robot, two overlapping inclusion circles (PX4 intersects them, our gate takes the union)",
+              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "udpin:127.0.0.1:14540",
+                                                                         "autopilot": "px4"},
+                                            safety={"geofence": _TWO_CIRCLES}), "2 inclusion zones"),
+    InputCase("mavlink.fence.home_radius_m below safety.max_distance",
+              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "udpin:127.0.0.1:14550",
+                                                                         "fence": {"home_radius_m": 80}},
+                                            safety={"geofence": _TWO_CIRCLES}), "fence.home_radius_m"),
+    InputCase("fence circle radius Infinity",
+              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [{"center": [47.39, 8.54], "radius": INF}]}}),
+              "radius"),
+    InputCase("self-intersecting fence polygon",
+              lambda d, t: _robot(d).update(safety={"geofence": {"polygons": [{"points": [
+                  [47.39, 8.54], [47.40, 8.55], [47.39, 8.55], [47.40, 8.54]]}]}}), "not a simple polygon"),
+])
+
+#: environment cases of category 'files and images'
+FILE_REF_CASES: list[InputCase] = _category('files and images', [
+    InputCase("target crop outside its image", lambda d, t: d.update(world={"targets": [_target(t, crop=(10, 10, 100, 30))]}),
+              "world.targets.0.crop"),
+    InputCase("ground image not an image", lambda d, t: (t.joinpath("g.png").write_text("x"),
+                                                         d.update(world={"ground": {"image": str(t / "g.png")}})),
+              "world.ground.image"),
+    InputCase("replay log without position data",
+              lambda d, t: _robot(d).update(backend="replay", replay={"log": _tlog_without_position(t)}),
+              "no position fix"),
+    InputCase("ground image a PNG bomb (header 100000 x 100000 px)",
+              lambda d, t: d.update(world={"ground": {"image": _png_bomb(t)}}), "world.ground.image"),
+    InputCase("target image a PNG bomb (header 100000 x 100000 px)",
+              lambda d, t: d.update(world={"targets": [{**_target(t), "image": _png_bomb(t)}]}), "world.targets.0.image"),
+])
+
+#: environment cases of category 'HITL settings'
+HITL_SETTING_CASES: list[InputCase] = _category('HITL settings', [
+    InputCase("hitl.port 70000", lambda d, t: d.update(hitl={"port": 70000}), "hitl.port"),
+    InputCase("hitl.token too short", lambda d, t: d.update(hitl={"token": "abc"}), "hitl.token"),
+    InputCase("hitl.token of 16 spaces", lambda d, t: d.update(hitl={"token": " " * 16}), "hitl.token"),
+    InputCase("hitl.token with a blank", lambda d, t: d.update(hitl={"token": "abcdefgh ijklmnop"}), "hitl.token"),
+    InputCase("hitl.host \"999.999.1.1\"", lambda d, t: d.update(hitl={"host": "999.999.1.1"}), "hitl.host"),
+    InputCase("hitl.host empty", lambda d, t: d.update(hitl={"host": ""}), "hitl.host"),
+    InputCase("hitl.port -1", lambda d, t: d.update(hitl={"port": -1}), "hitl.port"),
+])
+
+#: every environment file that must be refused (ConfigError naming the field) before anything starts
+ENV_CASES: list[InputCase] = [*ID_CASES, *STRICT_TYPE_CASES, *BOUND_CASES, *KEY_CASES, *GEOFENCE_CASES, *FILE_REF_CASES, *HITL_SETTING_CASES]
 
 #: ``--record`` paths that must be refused before anything starts (no folder created)
 PATH_CASES: list[tuple[str, Callable[[Path], str], str]] = [
@@ -229,26 +308,40 @@ def check_path_case(make: Callable[[Path], str], expect: str, tmp: Path) -> tupl
 
 
 def run_inputs() -> dict[str, Any]:
-    """Run every input case; returns counts and the cases accepted wrongly."""
-    rows = []
+    """Run every input case, each (or each batch) under :func:`aerodaas.reliability.input_report.guarded`; returns
+    the rows (with their category) and the counts: tried, refused, accepted wrongly, tracebacks, hangs."""
+    from aerodaas.reliability.input_report import guarded, summarize
+
+    rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as td:
         tmp = Path(td)
         for c in ENV_CASES:
-            ok, msg = check_env_case(c, tmp)
-            rows.append({"kind": "environment", "name": c.name, "refused": ok, "message": msg})
+            def env_row(c: InputCase = c) -> list[dict[str, Any]]:
+                ok, msg = check_env_case(c, tmp)
+                return [{"kind": "environment", "category": c.category, "name": c.name, "refused": ok,
+                         "message": msg}]
+
+            rows += guarded(env_row, "environment", c.name, c.category, 120.0)
         for name, make, expect in PATH_CASES:
-            ok, msg = check_path_case(make, expect, tmp)
-            rows.append({"kind": "--record path", "name": name, "refused": ok, "message": msg})
+            def path_row(name: str = name, make=make, expect: str = expect) -> list[dict[str, Any]]:
+                ok, msg = check_path_case(make, expect, tmp)
+                return [{"kind": "--record path", "name": name, "refused": ok, "message": msg}]
+
+            rows += guarded(path_row, "--record path", name, "output paths", 120.0)
+        from aerodaas.reliability.app_cases import run_app_cases
         from aerodaas.reliability.file_cases import run_file_cases
 
-        rows += run_file_cases(tmp)  # malformed JSON files, mission files and uploads, safety-gate probes
+        # malformed JSON files, mission files and uploads, safety-gate probes
+        rows += guarded(lambda: run_file_cases(tmp), "file", "file, mission and gate cases", "files and images", 1800.0)
+        # app values, plug-in imports, output paths, WPL numbering, the gate's own check, `aerodaas inject`
+        rows += guarded(lambda: run_app_cases(tmp), "application", "issue 40 cases", "app-level errors", 900.0)
     from aerodaas.reliability.cli_cases import run_cli_cases
     from aerodaas.reliability.hitl_probe import run_hitl_cases
 
-    rows += run_cli_cases()  # flags refused before Ray (exit 2), the app's own exceptions (exit 1, its traceback)
-    rows += run_hitl_cases()  # the HITL API's answers (in-process server, no Ray)
-    return {"rows": rows, "tried": len(rows), "refused": sum(r["refused"] for r in rows),
-            "accepted_wrongly": [r["name"] for r in rows if not r["refused"]]}
+    # flags refused before Ray (exit 2), the app's own exceptions (exit 1, its traceback)
+    rows += guarded(run_cli_cases, "command line", "command-line cases", "command line", 900.0)
+    rows += guarded(run_hitl_cases, "HITL API", "HITL API cases", "HITL API", 900.0)  # in-process server, no Ray
+    return summarize(rows)
 
 
 def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
@@ -293,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {args.out}")
     else:
         print(text)
-    bad = inputs["accepted_wrongly"] or flights["flown_outside_limits"] or (
+    bad = inputs["accepted_wrongly"] or inputs["tracebacks"] or inputs["hangs"] or flights["flown_outside_limits"] or (
         faults and any(not f["clean"] for f in faults["rows"]))
     return 1 if bad else 0
 

@@ -65,9 +65,11 @@ CLI_CASES: list[tuple[str, Callable[[Path], list[str]], int, str]] = [
 ]
 
 
-def run_cli_cases() -> list[dict[str, Any]]:
-    """Run every :data:`CLI_CASES` case; rows ``{"kind", "name", "refused", "message"}`` (``refused``: the
-    expected exit code, the expected text, Ray never started, and a traceback exactly for the app's own errors)."""
+def run_cli_cases(cases: list | None = None, category: str | None = None) -> list[dict[str, Any]]:
+    """Run ``cases`` (default :data:`CLI_CASES`) as ``aerodaas run ARGV --quiet``; rows ``{"kind", "category",
+    "name", "refused", "message", "traceback"}`` (``refused``: the expected exit code, the expected text, Ray never
+    started, and a traceback exactly for the app's own errors; ``traceback``: one printed where none belongs).
+    ``category``: the rows' report group (default: "command line" for exit 2, "app-level errors" for exit 1)."""
     import tempfile
 
     from aerodaas import cli
@@ -81,7 +83,7 @@ def run_cli_cases() -> list[dict[str, Any]]:
     ray_start.start_ray_early = lambda address=None, dashboard=False: started.append(("early", address))
     runtime.shutdown_ray = lambda: None
     try:
-        for name, make, code, expect in CLI_CASES:
+        for name, make, code, expect in (CLI_CASES if cases is None else cases):
             with tempfile.TemporaryDirectory() as td:
                 started.clear()
                 err = io.StringIO()
@@ -96,7 +98,9 @@ def run_cli_cases() -> list[dict[str, Any]]:
                 tb_ok = ("Traceback" in msg) == (code == 1)
                 ok = got == code and expect in msg and not started and tb_ok
                 rows.append({"kind": "command line" if code == 2 else "application error", "name": name,
-                             "refused": ok, "message": f"exit {got}: {msg}" if msg else f"exit {got}"})
+                             "category": category or ("command line" if code == 2 else "app-level errors"),
+                             "refused": ok, "message": f"exit {got}: {msg}" if msg else f"exit {got}",
+                             "traceback": "Traceback" in msg and code != 1})
     finally:
         ray_start.init_ray, ray_start.start_ray_early, runtime.shutdown_ray = saved
     return rows

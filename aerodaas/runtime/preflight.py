@@ -181,10 +181,24 @@ def check_clocks(robots: list, sim: SimulationConfig) -> None:
 
 def check_preplanned(robot, sched) -> None:
     """Check every queued mission of ``robot`` against its safety limits before any actor starts (legs chained
-    from the take-off point). Raises :class:`aerodaas.navigation.safety.SafetyViolation`; clamped items replace the
-    originals."""
+    from the take-off point). Raises ConfigError for a navigation without items (the drone took off and hovered
+    until the battery failsafe, 960 s) and for more pre-planned items than ``max_queued_items`` (the cap bounded only
+    what was added in flight: 50,000 pre-planned waypoints were accepted), else
+    :class:`aerodaas.navigation.safety.SafetyViolation`; clamped items replace the originals."""
     from aerodaas.model.types import AeroNavigation, SchedulingType
+    from aerodaas.config import ConfigError
     from aerodaas.navigation.safety import SafetyGate
+
+    for nav in getattr(robot, "navigations", []):
+        if isinstance(nav, AeroNavigation) and not nav.waypoints:
+            raise ConfigError(f"robot {robot.id!r}: navigation {nav.name!r} holds no waypoints or commands "
+                              f"(drone.navigate(...) of an empty AeroNavigation); the drone would take off and hover "
+                              f"until its battery failsafe")
+    cap, n = robot.cfg.max_queued_items, sched.pending()
+    if n > cap:
+        raise ConfigError(f"robots[{robot.id!r}].max_queued_items: {n} pre-planned navigation items, more than "
+                          f"{cap} (the bound on everything queued for a robot; raise it in environment.json, at "
+                          f"most 1000000)")
 
     gate = SafetyGate(robot.cfg.safety, robot.cfg.limits, robot.cfg.home)
     start = (0.0, 0.0, robot.cfg.takeoff_altitude)

@@ -4,6 +4,17 @@ from __future__ import annotations
 from typing import Any
 
 
+def waypoint_count(visited: int, preplanned: int | None) -> str:
+    """``3/4``: waypoints reached of those pre-planned (``?`` when unknown); with more reached than pre-planned
+    (waypoints added in flight, HITL or analytics) the fraction would read "747/1": then ``747 reached (1
+    pre-planned, at least 746 added in flight)``."""
+    if preplanned is None:
+        return f"{visited}/?"
+    if visited <= preplanned:
+        return f"{visited}/{preplanned}"
+    return f"{visited} reached ({preplanned} pre-planned, at least {visited - preplanned} added in flight)"
+
+
 def format_summary(result: Any) -> str:
     """Human-readable end-of-run summary (what ``aerodaas run`` prints): the outcome, per robot its flight, cameras,
     sensors, analytics and latency, the analytics scheduler, then the recording and what it lost."""
@@ -43,7 +54,7 @@ def _robot_lines(rid: str, rep: dict) -> list[str]:
     else:
         t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
         lines = [f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
-                 f", waypoints {rep.get('visited', 0)}/{'?' if total is None else total}, final state "
+                 f", waypoints {waypoint_count(rep.get('visited', 0), total)}, final state "
                  f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}"]
     if rep.get("ended"):
         lines.append(f"    ended: {rep['ended']}")

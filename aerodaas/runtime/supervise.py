@@ -243,7 +243,7 @@ def progress_lines(handles: dict, t0: float) -> list[str]:
     """One line per flying drone: time, state, waypoints, position, battery, camera FPS, detections, link."""
     import ray
 
-    from aerodaas.runtime.report import pct
+    from aerodaas.runtime.report import pct, waypoint_count
 
     lines = []
     for rid, h in handles.items():
@@ -268,7 +268,7 @@ def progress_lines(handles: dict, t0: float) -> list[str]:
                     dets += f" (cloud {cloud})"
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
-        lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {st['visited']}/{st['preplanned_total']} "
+        lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {waypoint_count(st['visited'], st['preplanned_total'])} "
                      f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {pct(st['battery_pct'])} "
                      f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
     return lines

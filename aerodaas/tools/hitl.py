@@ -420,3 +420,25 @@ def request(method: str, path: str, body: Any = None, url: str | None = None, to
             return e.code, raw.decode(errors="replace")
     except urllib.error.URLError as e:
         raise RuntimeError(f"cannot reach the HITL API at {url}: {e.reason}") from None
+
+
+#: options of ``aerodaas inject`` whose value may start with '-': a bearer token (base64url: one in 64 starts so), a
+#: waypoint west or south of home (``-3,2,5``)
+INJECT_VALUE_OPTIONS = ("--drone", "--waypoint", "--index", "--priority", "--url", "--token")
+
+
+def inject_argv(argv: list[str]) -> list[str]:
+    """``aerodaas`` command-line ``argv`` with, for the ``inject`` command, each ``OPTION VALUE`` of
+    :data:`INJECT_VALUE_OPTIONS` written ``OPTION=VALUE``: argparse reads a separate value that starts with '-' as an
+    option of its own (``--token -abc...`` failed with "expected one argument"). Other commands are left as given."""
+    if argv[:1] != ["inject"]:
+        return argv
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in INJECT_VALUE_OPTIONS and i + 1 < len(argv):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out

@@ -1,0 +1,234 @@
+"""Input cases of issue 40 (items 4 and 9) that are not one environment field, for ``python -m aerodaas.reliability``:
+
+* values an application gives the API (``Waypoint(x="1")``, ``y=True``, a yaw rate of 1e308), an empty navigation,
+  a pre-planned mission above ``max_queued_items``, a NaN waypoint built with ``model_construct``: ``aerodaas run``
+  exits 2 naming the field, before Ray starts;
+* items built without validation handed to the safety gate itself (it checks every value again);
+* plug-in modules that do not import (a missing module, an exception or ``sys.exit`` while imported, a syntax error,
+  a missing class): the environment is refused naming the field, the module and the error;
+* output paths that are the run's own inputs (the application, its environment file) or a device;
+* a WPL file numbered out of sequence, and ``aerodaas inject`` values that start with '-'.
+
+Each row: ``{"kind", "category", "name", "refused", "message"}`` as in
+:func:`aerodaas.reliability.catalogue.run_inputs` (``refused``: refused, or answered, as documented)."""
+from __future__ import annotations
+
+import contextlib
+import io
+import sys
+import uuid
+from pathlib import Path
+from typing import Any, Callable
+
+from aerodaas.reliability.cli_cases import _app
+
+__all__ = ["APP_VALUE_CASES", "OUTPUT_PATH_CASES", "PLUGIN_MODULES", "plugin_cases", "run_app_cases"]
+
+_APP = """
+from aerodaas import *
+env = Environment({env!r})
+drone = env.get_robot_by_id("d1")
+{body}
+drone.start_mission()
+"""
+
+
+def _app_body(body: str) -> Callable[[Path], list[str]]:
+    """argv of ``aerodaas run`` for an application that navigates with ``body`` (its environment: one drone)."""
+    return lambda t: [_app(t, _APP.format(env=str(t / "cli_env.json"), body=body))]
+
+
+def _nav(items: str) -> str:
+    return f"drone.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, {items}))"
+
+
+_NAN_WP = ('Waypoint.model_construct(id="n", x=float("nan"), y=0.0, z=2.0, hover_duration=0.0, '
+           'waypoint_type="relative", speed=None, acceptance_radius=0.3)')
+
+#: (name, argv after ``run``, expected exit code, text the message must contain, category)
+APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
+    ('Waypoint(x="1") (a string)', _app_body(_nav('[Waypoint(id="a", x="1", y=0, z=2)]')), 2, "got str '1'",
+     "strict types"),
+    ("Waypoint(y=True) (a boolean)", _app_body(_nav('[Waypoint(id="a", x=1, y=True, z=2)]')), 2, "got bool",
+     "strict types"),
+    ('PriorityQueue(nav, priority="1")',
+     _app_body('drone.navigate(PriorityQueue(AeroNavigation(NavigationType.DISTANCE_DRIVEN, '
+               '[Waypoint(id="a", x=1, y=0, z=2)]), priority="1"))'), 2, "priority", "strict types"),
+    ("VelocityCommand(yaw_rate=1e308)", _app_body(_nav("[VelocityCommand(yaw_rate=1e308)]")), 2, "yaw_rate",
+     "bounds / cross-field"),
+    ("an empty navigation", _app_body(_nav("[]")), 2, "holds no waypoints", "app-level errors"),
+    ("50,000 pre-planned waypoints (max_queued_items 5000)",
+     _app_body(_nav('[Waypoint(id=f"w{i}", x=i % 50, y=i // 50 % 50, z=2) for i in range(50000)]')), 2,
+     "max_queued_items", "app-level errors"),
+    ("a NaN waypoint built with model_construct", _app_body(_nav(f"[{_NAN_WP}]")), 2, "not a valid Waypoint",
+     "app-level errors"),
+]
+
+
+def _record_into(which: str) -> Callable[[Path], list[str]]:
+    def make(t: Path) -> list[str]:
+        app = _app(t)
+        target = {"app": app, "env": str(t / "cli_env.json"), "null": "/dev/null"}[which]
+        return [app, "--record", target]
+    return make
+
+
+#: ``--record`` given the run's own inputs or a device: (name, argv after ``run``, exit code, text, category)
+OUTPUT_PATH_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
+    ("--record names the application itself", _record_into("app"), 2, "--record", "output paths"),
+    ("--record names the environment file", _record_into("env"), 2, "--record", "output paths"),
+    ("--record /dev/null", _record_into("null"), 2, "not a regular file", "output paths"),
+]
+
+#: plug-in modules written for the plug-in cases: stem -> source
+PLUGIN_MODULES = {
+    "raises": "raise ZeroDivisionError('division by zero at import')\n",
+    "exits": "import sys\nsys.exit(0)\n",
+    "syntax": "def broken(:\n    pass\n",
+    "empty": "X = 1\n",
+}
+
+
+def plugin_cases(tag: str) -> list[tuple[str, Callable[[dict], None], str]]:
+    """(name, edit of a valid environment, text the error must contain) naming plug-ins in the modules of
+    :data:`PLUGIN_MODULES` written as ``aerodaas_case_<stem>_<tag>`` (``tag``: unique per run, so that no module is
+    cached from a previous run)."""
+    def mod(stem: str) -> str:
+        return f"aerodaas_case_{stem}_{tag}"
+
+    def robot(d: dict) -> dict:
+        return d["robots"][0]
+
+    return [
+        ("backend from a module that does not exist",
+         lambda d: robot(d).update(backend=f"no_such_module_{tag}:Backend"), "ModuleNotFoundError"),
+        ("backend from a module raising ZeroDivisionError when imported",
+         lambda d: robot(d).update(backend=f"{mod('raises')}:Backend"), "ZeroDivisionError"),
+        ("backend from a module calling sys.exit(0) when imported",
+         lambda d: robot(d).update(backend=f"{mod('exits')}:Backend"), "sys.exit"),
+        ("sensor type from a module with a syntax error",
+         lambda d: robot(d)["sensors"].append({"id": "gas", "type": f"{mod('syntax')}:GasSensor"}), "SyntaxError"),
+        ("trajectory_scheduler naming a class its module lacks",
+         lambda d: d.update(trajectory_scheduler=f"{mod('empty')}:Planner"), "AttributeError"),
+    ]
+
+
+def _plugin_rows(tmp: Path) -> list[dict[str, Any]]:
+    import copy
+    import json
+
+    from aerodaas.config import ConfigError, parse_environment_config
+    from aerodaas.reliability.catalogue import base_env
+
+    tag = uuid.uuid4().hex[:8]
+    folder = tmp / f"plugins_{tag}"
+    folder.mkdir()
+    for stem, text in PLUGIN_MODULES.items():
+        (folder / f"aerodaas_case_{stem}_{tag}.py").write_text(text)
+    rows = []
+    sys.path.insert(0, str(folder))
+    try:
+        for name, edit, expect in plugin_cases(tag):
+            d = copy.deepcopy(base_env())
+            edit(d)
+            try:
+                parse_environment_config(json.loads(json.dumps(d)), source="case")
+                ok, msg = False, "accepted"
+            except ConfigError as e:
+                ok, msg = expect in str(e) and "Traceback" not in str(e), str(e)
+            rows.append({"kind": "environment", "category": "plug-in imports", "name": name, "refused": ok,
+                         "message": msg})
+    finally:
+        sys.path.remove(str(folder))
+    return rows
+
+
+def _wpl_row(tmp: Path) -> dict[str, Any]:
+    from aerodaas.missionfile import MissionFileError, load_mission
+
+    rows = ["QGC WPL 110", "0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5456\t488\t1"]
+    rows += [f"{seq}\t0\t3\t16\t0\t0\t0\t0\t47.3978\t8.5456\t20\t1" for seq in (1, 1, 5)]
+    p = tmp / "numbered_1_1_5.waypoints"
+    p.write_text("\n".join(rows) + "\n")
+    try:
+        load_mission(p)
+        ok, msg = False, "accepted (renumbered)"
+    except MissionFileError as e:
+        ok, msg = "line 4" in str(e) and "seq 1 out of order" in str(e), str(e)
+    return {"kind": "mission file", "category": "mission files", "name": "QGC WPL numbered 1, 1, 5", "refused": ok,
+            "message": msg}
+
+
+def _gate_rows() -> list[dict[str, Any]]:
+    from aerodaas.model.types import VelocityCommand, Waypoint
+    from aerodaas.config import RobotConfig
+    from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+
+    r = RobotConfig.model_validate({"id": "r"})
+    gate = SafetyGate(r.safety, r.limits, r.home)
+    rows = []
+    for name, item, field in [
+        ("a NaN waypoint built with model_construct",
+         Waypoint.model_construct(id="n", x=float("nan"), y=0.0, z=2.0, hover_duration=0.0, waypoint_type="relative",
+                                  speed=None, acceptance_radius=0.3), "x"),
+        ('a waypoint whose z was set to "5" without validation', Waypoint(id="s", x=1, y=0, z=2).model_copy(
+            update={"z": "5"}), "z"),
+        ("a velocity command with yaw_rate 1e308 built with model_construct",
+         VelocityCommand.model_construct(id="v", vx=0.0, vy=0.0, vz=0.0, yaw_rate=1e308, duration=0.5,
+                                         issued_at=None), "yaw_rate"),
+    ]:
+        try:
+            gate.check_item(item, (0.0, 0.0, 2.0), (0.0, 0.0, 0.0))
+            rows.append({"kind": "safety gate", "category": "safety gate", "name": name, "refused": False,
+                         "message": "accepted"})
+        except SafetyViolation as e:
+            rows.append({"kind": "safety gate", "category": "safety gate", "name": name,
+                         "refused": e.field == field, "message": str(e)})
+    return rows
+
+
+def _inject_rows() -> list[dict[str, Any]]:
+    """``aerodaas inject`` with a token and a waypoint that start with '-' (argparse read them as options: about one
+    token in 64 failed): the request must carry them as given. The HTTP call is captured, not sent."""
+    from aerodaas import cli
+    from aerodaas.tools import hitl
+
+    token = "-" + "t0k3n" * 5
+    sent: list = []
+    saved = hitl.request
+    hitl.request = lambda method, path, body=None, **kw: (sent.append((path, body, kw)) or (200, {"added": ["w"]}))
+    rows = []
+    try:
+        for name, argv, check in [
+            ("inject --token starting with '-'", ["--token", token, "--waypoint", "1,2,3"],
+             lambda b, kw: kw.get("token") == token),
+            ("inject --waypoint -3,-2,5 (south-west of home)", ["--token", "a" * 24, "--waypoint", "-3,-2,5"],
+             lambda b, kw: b["waypoints"] == [{"x": -3.0, "y": -2.0, "z": 5.0}]),
+        ]:
+            sent.clear()
+            err = io.StringIO()
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                try:
+                    code = cli.main(["inject", "--drone", "d1", "--url", "http://127.0.0.1:9", *argv])
+                except SystemExit as e:  # argparse's refusal
+                    code = int(e.code or 0)
+            ok = code == 0 and len(sent) == 1 and check(sent[0][1], sent[0][2])
+            rows.append({"kind": "command line", "category": "command line", "name": name, "refused": ok,
+                         "message": f"exit {code}: " + (f"sent {sent[0][1]}" if sent else err.getvalue().strip()[:200])})
+    finally:
+        hitl.request = saved
+    return rows
+
+
+def run_app_cases(tmp: Path) -> list[dict[str, Any]]:
+    """Every case of this module (files written under ``tmp``)."""
+    from aerodaas.reliability.cli_cases import run_cli_cases
+
+    rows = []
+    for name, make, code, expect, category in APP_VALUE_CASES + OUTPUT_PATH_CASES:
+        rows += run_cli_cases([(name, make, code, expect)], category)
+    rows += _plugin_rows(tmp)
+    rows.append(_wpl_row(tmp))
+    rows += _gate_rows()
+    rows += _inject_rows()
+    return rows
