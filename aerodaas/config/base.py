@@ -52,6 +52,9 @@ MIN_CONTROL_HZ = 1.0
 #: largest image file (ground texture, target crops), pixels per side, read from the file's header before decoding:
 #: a PNG "decompression bomb" (a few KB that decode to gigabytes) raised cv2.error; as MAX_GROUND_PX
 MAX_IMAGE_SIDE_PX = 16384
+#: most items of one list in environment.json (robots, compute resources, sensors, world targets): far above any
+#: fleet (the fleet benchmark flies 40), and a bound on the work validation does
+MAX_LIST_ITEMS = 1000
 MAX_DURATION_S = 86_400.0  # timeouts and intervals: one day
 MAX_BATTERY_WH = 100_000.0
 MAX_POWER_W = 1_000_000.0

@@ -15,7 +15,8 @@ from pydantic import BaseModel, Field, Strict, ValidationError, field_validator,
 from aerodaas.navigation.geofence import GeofenceConfig
 
 from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ,
-                   MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg, did_you_mean)
+                   MAX_LIST_ITEMS, MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg,
+                   did_you_mean)
 from aerodaas.model.ids import Identifier, check_unique
 from aerodaas.config.robot import RobotConfig, SensorConfig
 
@@ -101,7 +102,7 @@ class TargetConfig(_Cfg):
     image: str
     crop: Annotated[tuple[int, int, int, int], Strict(False)]
     length_m: float = Field(default=4.3, gt=0, le=100_000)
-    path: list[TargetPathPoint] = Field(min_length=2)
+    path: list[TargetPathPoint] = Field(min_length=2, max_length=100_000)
 
     @model_validator(mode="after")
     def _check(self) -> "TargetConfig":
@@ -116,7 +117,7 @@ class TargetConfig(_Cfg):
 
 class WorldConfig(_Cfg):
     ground: GroundConfig = Field(default_factory=GroundConfig)
-    targets: list[TargetConfig] = Field(default_factory=list)
+    targets: list[TargetConfig] = Field(default_factory=list, max_length=MAX_LIST_ITEMS)
 
 
 class SimulationConfig(_Cfg):
@@ -276,9 +277,10 @@ class EnvironmentConfig(_Cfg):
     schedulers and the closest match."""
 
     name: str = "environment"
-    robots: list[RobotConfig] = Field(min_length=1)
-    env_sensors: list[SensorConfig] = Field(default_factory=list)
-    compute: list[ComputeConfig] = Field(default_factory=lambda: [ComputeConfig(id="edge", tier="edge")])
+    robots: list[RobotConfig] = Field(min_length=1, max_length=MAX_LIST_ITEMS)
+    env_sensors: list[SensorConfig] = Field(default_factory=list, max_length=MAX_LIST_ITEMS)
+    compute: list[ComputeConfig] = Field(default_factory=lambda: [ComputeConfig(id="edge", tier="edge")],
+                                         max_length=MAX_LIST_ITEMS)
     world: WorldConfig = Field(default_factory=WorldConfig)
     simulation: SimulationConfig = Field(default_factory=SimulationConfig)
     hitl: HitlConfig = Field(default_factory=HitlConfig)

@@ -16,7 +16,7 @@ from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayC
                                       TelloConfig, add_section_schemas, backend_settings_into_config)
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS,
-                   MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean)
+                   MAX_LIST_ITEMS, MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean)
 
 
 class Limits(_Cfg):
@@ -270,7 +270,7 @@ class RobotConfig(_Cfg):
                                    "loop (Hz): failsafes, geofence and queue are checked at every tick")
     idle_land_s: float = Field(default=10.0, gt=0, le=MAX_DURATION_S, description="land after this many seconds (sim time) with "
                                "nothing queued, once some navigation has been flown")
-    sensors: list[SensorConfig] = Field(default_factory=list)
+    sensors: list[SensorConfig] = Field(default_factory=list, max_length=MAX_LIST_ITEMS)
     compute: str | None = Field(default=None, description="id of the edge compute resource this robot flies from "
                                 "(its drone actor runs there); default: the environment's first edge compute")
     max_waypoints_per_request: int = Field(default=1000, ge=1, le=100_000, description="bounded work: items in one "

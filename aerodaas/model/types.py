@@ -85,7 +85,7 @@ class Waypoint(_Model):
     (``x="1"``, ``y=True``), negative hover time, out-of-range lat/lon.
     """
 
-    id: str = Field(min_length=1)
+    id: str = Field(min_length=1, max_length=256)
     x: Number
     y: Number
     z: Number

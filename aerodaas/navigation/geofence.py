@@ -71,7 +71,7 @@ class GeofencePolygon(_Model):
     vehicle must stay inside, ``False`` that it must stay out. Must be a simple (non self-intersecting) polygon
     once projected; that is checked when a :class:`Geofence` is built."""
 
-    points: list[Annotated[tuple[float, float], Strict(False)]] = Field(min_length=3)
+    points: list[Annotated[tuple[float, float], Strict(False)]] = Field(min_length=3, max_length=100_000)
     inclusion: bool = True
 
     @field_validator("points")
@@ -110,8 +110,8 @@ class GeofenceConfig(_Model):
     """All fence zones of a mission or environment (QGroundControl ``geoFence``: ``polygons`` and ``circles``).
     Zones are referred to by their index in ``polygons`` / ``circles`` in every message."""
 
-    polygons: list[GeofencePolygon] = Field(default_factory=list)
-    circles: list[GeofenceCircle] = Field(default_factory=list)
+    polygons: list[GeofencePolygon] = Field(default_factory=list, max_length=1000)
+    circles: list[GeofenceCircle] = Field(default_factory=list, max_length=1000)
 
     @property
     def is_empty(self) -> bool:

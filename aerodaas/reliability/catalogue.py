@@ -204,6 +204,11 @@ BOUND_CASES: list[InputCase] = _category('bounds / cross-field', [
               lambda d, t: _robot(d).update(battery={"initial_pct": 20}), "battery.initial_pct"),
     InputCase("world.ground.home_px [1e300, -1e300]",
               lambda d, t: d.update(world={"ground": {"image": _png(t), "home_px": [1e300, -1e300]}}), "home_px"),
+    InputCase("1,001 robots", lambda d, t: d.update(robots=[{"id": f"d{i}"} for i in range(1001)]), "robots"),
+    InputCase("a fence of 1,001 circles",
+              lambda d, t: _robot(d).update(safety={"geofence": {"circles": [
+                  {"center": [47.3977, 8.5456], "radius": 50 + i, "inclusion": True} for i in range(1001)]}}),
+              "circles"),
     InputCase("world.ground.home_px without an image", lambda d, t: d.update(world={"ground": {"home_px": [1, 1]}}),
               "home_px"),
 ])
