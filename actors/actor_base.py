@@ -124,7 +124,7 @@ class ActorBase:
 
     def call(self, cid: str, method: Callable, *args: Any, **kwargs: Any) -> Any:
         """Call ``method`` — a public method of the component's class, the function itself (e.g.
-        ``DroneComponent.status``, see :mod:`aerodaas.runtime.handles`), never its name — on component ``cid``
+        ``DroneComponent.status``, see :mod:`aerodaas.actors.handles`), never its name — on component ``cid``
         with ``args``; a subclass's override runs. Raises TypeError when ``method`` is not a public method of the
         component's class (or a base of it), KeyError for an unknown component, RuntimeError before setup."""
         if self.runtime is None:

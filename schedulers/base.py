@@ -69,7 +69,7 @@ class TrajectoryScheduler:
 
     def bind_remote(self, handle: Any) -> None:
         """While a mission runs, route :meth:`add_navigation` and :meth:`clear_navigation` to the robot's running
-        navigation inbox ``handle`` (a :class:`~aerodaas.runtime.handles.SchedulerHandle`), which fills the drone's
+        navigation inbox ``handle`` (a :class:`~aerodaas.actors.handles.SchedulerHandle`), which fills the drone's
         live queue; ``None`` (after the run) makes them act on :attr:`queue` again. Not pickled."""
         self._remote = handle
 

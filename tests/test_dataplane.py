@@ -368,7 +368,7 @@ def test_components_are_called_by_their_methods_never_by_name():
     from aerodaas.actors.actor_base import ActorBase
     from aerodaas.actors.drone import DroneComponent
     from aerodaas.actors.scheduler_component import SchedulerComponent
-    from aerodaas.runtime.handles import DroneHandle
+    from aerodaas.actors.handles import DroneHandle
 
     env = _env(1)
     host, rt, _ = _host_for(env)

@@ -45,7 +45,7 @@ def _send(port: int, method: str, path: str, body: bytes | None = None) -> tuple
 
 
 def test_stopped_or_dead_drone_actor_is_503_never_500(ray_session, tmp_path, monkeypatch):
-    from aerodaas.runtime.handles import DroneHandle, SchedulerHandle
+    from aerodaas.actors.handles import DroneHandle, SchedulerHandle
 
     monkeypatch.setenv("AERODAAS_STATE_DIR", str(tmp_path))
     actor = FakeComponents.remote()

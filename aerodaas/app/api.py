@@ -155,7 +155,7 @@ class Robot:
         self._end_hooks.append(hook)
 
     def bind_drone(self, handle: Any) -> None:
-        """Bind the running mission's drone component ``handle`` (a :class:`~aerodaas.runtime.handles.DroneHandle`,
+        """Bind the running mission's drone component ``handle`` (a :class:`~aerodaas.actors.handles.DroneHandle`,
         set by the driver once the actors run) so :meth:`end_mission`, :meth:`pause_mission` and
         :meth:`resume_mission` reach the vehicle; ``None`` when the run is over."""
         self._handle = handle

@@ -129,7 +129,7 @@ def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
     actors), bound to the application's objects (``Robot.bind_drone``, live scheduler, pull getters)."""
     import ray
 
-    from aerodaas.runtime.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
+    from aerodaas.actors.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
 
     loc = plan.location()
     handles: dict[str, dict] = {}
