@@ -68,7 +68,7 @@ def test_every_json_schema_is_generated_from_a_model_and_declares_its_fields():
 
 
 def test_camera_mount_is_the_simulators_camera_in_the_body_frame():
-    from aerodaas.sim.world import camera_rotation
+    from aerodaas.model.camera import camera_rotation
 
     for yaw in (0.0, 37.0, 200.0):
         for pitch in (90.0, 45.0, 10.0):

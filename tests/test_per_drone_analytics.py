@@ -13,7 +13,7 @@ from aerodaas import Analytics, FollowAnalytics, MonitoringAnalytics
 from aerodaas.analytics.core import source_robot
 from aerodaas.analytics.extra import FallDetector, InspectionPlanner
 from aerodaas.model.types import ActionCommand, CameraIntrinsics, Detection, FrameMeta, FramePose, VelocityCommand
-from aerodaas.sim.world import project_points
+from aerodaas.model.camera import project_points
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)
 

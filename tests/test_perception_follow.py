@@ -7,7 +7,7 @@ import numpy as np
 from aerodaas import FollowAnalytics
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
 from aerodaas.perception.tracking import ByteTrackConfig
-from aerodaas.sim.world import project_points
+from aerodaas.model.camera import project_points
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)
 DRONE = (0.0, 0.0, 20.0)

@@ -8,7 +8,7 @@ import pytest
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import CameraIntrinsics, FramePose, GeoPoint
 from aerodaas.perception.geolocate import geolocate_box, record_track_fixes
-from aerodaas.sim.world import project_points
+from aerodaas.model.camera import project_points
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)
 HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)

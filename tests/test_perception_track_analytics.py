@@ -7,7 +7,7 @@ import numpy as np
 
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose, GeoPoint
 from aerodaas.analytics.track import TrackAnalytics
-from aerodaas.sim.world import project_points
+from aerodaas.model.camera import project_points
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)
 HOME = GeoPoint(lat=47.397742, lon=8.545594, alt=488.0)

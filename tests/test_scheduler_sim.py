@@ -8,7 +8,8 @@ from aerodaas.model.types import (AeroNavigation, CameraIntrinsics, FramePose, G
                              SchedulingType, VelocityCommand, Waypoint)
 from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler
 from aerodaas.sim.vehicle import SimVehicle
-from aerodaas.sim.world import World, pixel_to_ground, project_points
+from aerodaas.model.camera import pixel_to_ground, project_points
+from aerodaas.sim.world import World
 
 
 def wp(i, x, y, z=2.0, **kw):

@@ -386,7 +386,7 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
     """Follow a detected target: turns its pixel box into ENU velocity commands with a PID controller.
 
     The box centre is back-projected through the frame's camera pose onto the ground plane
-    (:func:`aerodaas.sim.world.pixel_to_ground`), giving the target's ground position; a simple gated track
+    (:func:`aerodaas.model.camera.pixel_to_ground`), giving the target's ground position; a simple gated track
     (nearest detection to the predicted position) keeps it locked. The command is
     ``v = kp·e + ki·∫e dt + kd·de/dt + v_target`` where ``e`` is the horizontal ground error in metres
     (target minus drone), ``kp`` in 1/s, ``ki`` in 1/s², ``kd`` dimensionless, and ``v_target`` the
@@ -442,7 +442,7 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
         return sum(st.commands for st in self.drone_states().values())
 
     def generate_navigation(self, dets: list[Detection], meta: FrameMeta | None) -> AeroNavigation | None:
-        from aerodaas.sim.world import pixel_to_ground
+        from aerodaas.model.camera import pixel_to_ground
 
         if meta is None:
             return None

@@ -317,7 +317,7 @@ class InspectionPlanner(NavigableAnalytics):
         return st.planned if st is not None else None
 
     def generate_navigation(self, dets: list[Detection], meta: FrameMeta | None) -> AeroNavigation | None:
-        from aerodaas.sim.world import pixel_to_ground
+        from aerodaas.model.camera import pixel_to_ground
 
         if meta is None:
             return None

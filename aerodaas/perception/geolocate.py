@@ -4,7 +4,7 @@ ground plane, as ENU metres and WGS-84 lat/lon with its uncertainty, and its rec
 
 The position is the intersection of the ray through the box's bottom-centre pixel (where a standing object meets
 the ground in an oblique view; the centre in a nadir view, where both coincide) with the plane
-``z = ground_z`` (:func:`aerodaas.sim.world.pixel_to_ground`, the same pinhole model as the simulator's camera).
+``z = ground_z`` (:func:`aerodaas.model.camera.pixel_to_ground`, the same pinhole model as the simulator's camera).
 The uncertainty is first-order propagation (``Sigma = J S J^T``, J by central differences) of independent errors
 on the pixel (``sigma_px`` plus 10 % of the box size: where in the box the object's footprint is), the yaw and the
 camera pitch (``sigma_att_deg``) and the height above ground (``sigma_alt_m``); it grows with altitude and with
@@ -35,7 +35,7 @@ class GroundFix:
 
 
 def _ground(u, v, pose: FramePose, k: CameraIntrinsics, ground_z: float, dyaw=0.0, dpitch=0.0, dalt=0.0):
-    from aerodaas.sim.world import pixel_to_ground
+    from aerodaas.model.camera import pixel_to_ground
 
     p = pose.model_copy(update={"yaw": pose.yaw + dyaw, "camera_pitch": pose.camera_pitch + dpitch,
                                 "position": (pose.position[0], pose.position[1], pose.position[2] + dalt)})

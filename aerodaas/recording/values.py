@@ -57,7 +57,7 @@ def camera_mount_quaternion(pitch_deg: float) -> tuple[float, float, float, floa
 
     It is the ROS optical-frame rotation ``rpy = (-90°, 0, -90°)`` (REP 103) followed by a pitch of ``pitch_deg``
     about the body's +y axis (positive pitch tilts the nose down in a z-up frame). Matches the simulator's
-    camera (:func:`aerodaas.sim.world.camera_rotation`). Raises ``ValueError`` for a non-finite angle."""
+    camera (:func:`aerodaas.model.camera.camera_rotation`). Raises ``ValueError`` for a non-finite angle."""
     optical = quaternion_from_euler_deg(-90.0, 0.0, -90.0)
     return _quat_mul(quaternion_from_euler_deg(0.0, pitch_deg, 0.0), optical)
 

@@ -6,7 +6,7 @@ Run: aerodaas run tests/apps/fleet_follow.py --record follow.mcap"""
 import numpy as np
 
 from aerodaas import *
-from aerodaas.sim.world import project_points
+from aerodaas.model.camera import project_points
 
 CARS = {"car_west": (-12.0, 0.0), "car_east": (12.0, 0.0)}  # ENU metres from the (shared) home
 GONE_AT = 14.0  # s: the cars leave the scene
