@@ -103,9 +103,10 @@ def setup_hook_env(hook_dir: str | os.PathLike) -> dict[str, str]:
 def package_roots() -> list[str]:
     """The folders of the installed ``aerodaas`` package and of its sub-packages installed from the repository's
     top level (``actors``, ``schedulers``, ``clusters``)."""
-    import aerodaas
+    import importlib.util
 
-    roots = list(getattr(aerodaas, "__path__", []))
+    spec = importlib.util.find_spec("aerodaas")  # the package's folder, without importing its public API
+    roots = list(spec.submodule_search_locations or []) if spec is not None else []
     for sub in ("actors", "schedulers", "clusters"):  # installed as aerodaas.<sub> from the repository's top level
         try:
             mod = importlib.import_module(f"aerodaas.{sub}")

@@ -84,7 +84,8 @@ def _grid_offset(i: int, n: int) -> tuple[float, float]:
 def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
     """The fleet application: environment, an analytics colocated with each drone's camera, a looping survey per
     drone."""
-    from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
+    from aerodaas.app.api import Environment
+    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
     from aerodaas.config import parse_environment_config
     from aerodaas.schedulers import TrajectoryScheduler
 

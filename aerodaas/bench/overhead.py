@@ -73,7 +73,9 @@ class FrameworkWindows:
                                 "dispatch": [], "recording_bytes": 0, "transports": set()}
 
     def window(self, seconds: float) -> list[dict]:
-        from aerodaas import Environment, FollowAnalytics, PriorityQueue
+        from aerodaas.analytics.core import FollowAnalytics
+        from aerodaas.app.api import Environment
+        from aerodaas.model.types import PriorityQueue
         from aerodaas.runtime import driver as runtime
         from aerodaas.schedulers import TrajectoryScheduler
 

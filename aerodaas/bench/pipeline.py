@@ -146,7 +146,7 @@ class FollowStage:
     """The follow analytics; returns ``(AeroNavigation or None, ms spent)`` (the ms count as post-processing)."""
 
     def __init__(self) -> None:
-        from aerodaas import FollowAnalytics
+        from aerodaas.analytics.core import FollowAnalytics
 
         self.follow = FollowAnalytics(target_classes=["car", "truck", "bus"], confirm_hits=1, lost_after=1e9)
         self.follow.setup()

@@ -18,9 +18,7 @@ INPUT_ERRORS = (FileNotFoundError, ValueError, KeyError)
 
 
 def _ours() -> tuple[str, ...]:
-    import aerodaas
-
-    roots = {os.path.dirname(os.path.abspath(aerodaas.__file__))}
+    roots = {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))}  # aerodaas/ (this file: aerodaas/runtime/)
     for name in ("aerodaas.actors", "aerodaas.schedulers", "aerodaas.clusters"):
         mod = sys.modules.get(name)
         if mod is not None and getattr(mod, "__file__", None):
