@@ -8,7 +8,7 @@ Their readings are made by the drone's actor itself (the camera component, the v
 stat-stream), not by :meth:`SensorPlugin.sample`: these classes are declarations, never instantiated.
 
 Units: camera sizes in pixels, fps in frames/s, angles in degrees (``pitch_deg`` 90 = nadir), rates in Hz,
-timeouts in seconds; the bounds are :mod:`aerodaas.config.base`'s (docs/safety.md "Configuration bounds").
+timeouts in seconds; the bounds are :mod:`aerodaas.model.bounds`' (docs/safety.md "Configuration bounds").
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from typing import Any, Callable, ClassVar
 
 from pydantic import Field, model_validator
 
-from aerodaas.config.base import MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_RATE_HZ
+from aerodaas.model.bounds import MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_RATE_HZ
 from aerodaas.plugins.sensor import SensorDelivery, SensorPlugin, SensorPropertiesBase
 
 __all__ = ["CameraProperties", "OdometryProperties", "StatStreamProperties", "CameraSensor", "OdometrySensor",
