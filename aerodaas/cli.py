@@ -521,7 +521,7 @@ def _add_recording_parsers(sub) -> None:
     i.set_defaults(func=_cmd_info)
     s = sub.add_parser("schema", help="print the JSON Schema of environment.json")
     s.set_defaults(func=_cmd_schema)
-    from aerodaas.plugins.listing import add_parser as _add_plugins_parser
+    from aerodaas.plugins_cli import add_parser as _add_plugins_parser
 
     _add_plugins_parser(sub)
     rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "

@@ -230,11 +230,11 @@ def test_nothing_imports_the_top_layer():
     assert not bad, "imports of the top layer or of an entry point:\n" + "\n".join(bad)
 
 
-def test_the_runtime_does_not_import_the_actors():
-    """The runtime is handed the actor classes (:class:`aerodaas.protocol.actor_kit.ActorKit`); the actors and
-    the runtime share :mod:`aerodaas.protocol`, below both."""
+def test_the_actors_do_not_import_the_runtime():
+    """The actors and the runtime share :mod:`aerodaas.protocol` (messages, specs, component ids), below both: the
+    runtime starts the actors, the actors never import it."""
     g = package_graph()
-    assert not g.get(("runtime", "actors")), "\n".join(g[("runtime", "actors")])
+    assert not g.get(("actors", "runtime")), "\n".join(g[("actors", "runtime")])
     assert g.get(("actors", "protocol")) and g.get(("runtime", "protocol"))  # the reader sees both sides
 
 

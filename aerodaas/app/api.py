@@ -17,13 +17,13 @@ from typing import Any, Callable
 from aerodaas.config import ComputeConfig, EnvironmentConfig, RobotConfig, SensorConfig, load_environment_config
 from aerodaas.model.data import AeroStreamData
 from aerodaas.model.types import AeroNavigation, PriorityQueue
+from aerodaas.runtime.options import MISSION_LISTENERS as _MISSION_LISTENERS
 
 __all__ = ["Environment", "Robot", "Sensor", "ComputeResource", "MISSION_LISTENERS"]
 
-#: Callables ``fn(result)`` told of every :class:`aerodaas.runtime.driver.MissionResult` that a mission start returns —
-#: :meth:`Robot.start_mission` and :meth:`Environment.start_mission` (a fleet) alike. ``aerodaas run`` listens here
-#: for its summary and exit code, so an application may start its mission either way.
-MISSION_LISTENERS: list[Callable[[Any], None]] = []
+#: the callables told of every mission's result (:data:`aerodaas.runtime.options.MISSION_LISTENERS`: the runtime
+#: tells them and sits below this API)
+MISSION_LISTENERS = _MISSION_LISTENERS
 
 
 def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, options: Any = None):

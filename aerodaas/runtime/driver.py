@@ -199,8 +199,8 @@ def run_mission(env, robots: list, options: RunOptions | None = None, timeout: f
 
 def _fly(env, robots: list, graph: tuple, opts: RunOptions, timeout: float | None,
          by_value: tuple[str, ...]) -> MissionResult:
-    """Check ``opts``, run the mission, tell :data:`aerodaas.app.api.MISSION_LISTENERS`."""
-    from aerodaas.app.api import MISSION_LISTENERS
+    """Check ``opts``, run the mission, tell :data:`aerodaas.runtime.options.MISSION_LISTENERS`."""
+    from aerodaas.runtime.options import MISSION_LISTENERS
     from aerodaas.runtime.preflight import check_options
 
     sim = check_options(env, robots, graph[1], opts)
