@@ -8,7 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.protocol.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, output_message
+from aerodaas.analytics.contract import Emissions, collecting, event_record
+from aerodaas.protocol.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, ValueMsg, output_message
 from aerodaas.protocol.specs import AnalyticsSchedulerSpec
 
 from aerodaas.actors.dataplane import Component, DataPlane
@@ -17,7 +18,13 @@ from aerodaas.actors.dataplane import Component, DataPlane
 class AnalyticsComponent(Component):
     """Hosts one analytics (IAnalyse / INavigableAnalyse) object: ``setup()`` once, then ``process()`` on every
     delivered item; non-None outputs are recorded and published. An item older than the newest one already
-    processed from the same source (possible when two pool threads race) is skipped as stale."""
+    processed from the same source (possible when two pool threads race) is skipped as stale.
+
+    The analytics' output contract (:mod:`aerodaas.analytics.contract`): a declared ``Output`` is checked and
+    recorded with its own schema, then published as a JSON-ready dict; what it sends to a named output
+    (:meth:`~aerodaas.analytics.base.Analytics.emit`) is recorded on ``/<robot>/<name>/<output>`` and published
+    from the component id ``<cid>:<output>`` (the plan routes each named output from there); its events go to
+    ``/<robot>/events`` and are counted per kind (``events`` in :meth:`stats`)."""
 
     kind = "analytics"
 
@@ -40,6 +47,10 @@ class AnalyticsComponent(Component):
         self.last_failure: str | None = None
         self.on_error = getattr(analytics, "on_error", "continue")  # continue | abort (checked before Ray)
         self.aborted = False
+        self.output_model = getattr(analytics, "Output", None)  # None: free-form output
+        self.named_outputs = dict(getattr(analytics, "named_outputs", None) or {})
+        self.events: dict[str, int] = {}  # kind -> events emitted
+        self.named_counts: dict[str, int] = {k: 0 for k in self.named_outputs}
         if recorder is not None:  # its outputs are accounted against its inputs (aerodaas.recording.accounting)
             recorder.declare_analytics(cid, name)
 
@@ -77,7 +88,8 @@ class AnalyticsComponent(Component):
             return out
         t0 = time.perf_counter()
         try:
-            res = self.obj.process_batch([(m.data, m.meta) for _, m in fresh])
+            with collecting() as em:
+                res = self.obj.process_batch([(m.data, m.meta) for _, m in fresh])
         except Exception:  # noqa: BLE001 - find the culprit item by item
             res = None
         dt_ms = (time.perf_counter() - t0) * 1e3 / len(fresh)
@@ -87,8 +99,14 @@ class AnalyticsComponent(Component):
                 out[index[id(e)]] = self._process_one(e)
             else:
                 self.batched += 1
-                out[index[id(e)]] = self._emit(res[j], e, dt_ms, getattr(self.obj, "last_timing", None))
+                out[index[id(e)]] = self._emit(res[j], e, dt_ms, getattr(self.obj, "last_timing", None),
+                                               self._of_item(em, j))
         return out
+
+    @staticmethod
+    def _of_item(em: Emissions, j: int) -> Emissions:
+        """What was emitted while item ``j`` of a batch was processed."""
+        return Emissions([x for x in em.events if x[0] == j], [x for x in em.outputs if x[0] == j])
 
     def _stale(self, msg: Message) -> bool:
         meta = msg.meta
@@ -104,12 +122,13 @@ class AnalyticsComponent(Component):
     def _process_one(self, msg: Message) -> list[Message] | None:
         t0 = time.perf_counter()
         try:
-            out = self.obj.process(msg.data, msg.meta)
+            with collecting() as em:
+                out = self.obj.process(msg.data, msg.meta)
         except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
             self._failed(e, msg)
             return None
         dt_ms = (time.perf_counter() - t0) * 1e3
-        return self._emit(out, msg, dt_ms, getattr(self.obj, "last_timing", None))
+        return self._emit(out, msg, dt_ms, getattr(self.obj, "last_timing", None), em)
 
     def _failed(self, e: Exception, msg: Message) -> None:
         """An exception in ``process``: logged with its traceback (the first 5, then every 100th), recorded as an
@@ -137,15 +156,25 @@ class AnalyticsComponent(Component):
             if callable(abort):
                 abort(f"analytics {self.name!r} raised {self.last_failure} (on_error=abort)")
 
-    def _emit(self, out: Any, msg: Message, dt_ms: float, timing: dict | None) -> list[Message] | None:
-        """Count one processed item that took ``dt_ms`` (ms) and, for a non-None output, record it and return the
-        message to publish; ``timing["inference_ms"]`` (if given) splits ``dt_ms`` into inference and
-        post-processing in the latency trace."""
+    def _emit(self, out: Any, msg: Message, dt_ms: float, timing: dict | None,
+              emitted: Emissions | None = None) -> list[Message] | None:
+        """Count one processed item that took ``dt_ms`` (ms), record and publish what it ``emitted`` (events, named
+        outputs) and, for a non-None output, record it and return the message to publish; ``timing["inference_ms"]``
+        (if given) splits ``dt_ms`` into inference and post-processing in the latency trace. An output that is not
+        the declared ``Output`` is a failure of the item (:meth:`_failed`)."""
         meta = msg.meta
+        if out is not None and self.output_model is not None:
+            try:
+                out = self._typed(out)
+            except Exception as e:  # noqa: BLE001 - the analytics broke its declared contract: an item failure
+                self._failed(e, msg)
+                return None
         self.proc_ms.append(dt_ms)
         self.processed += 1
         self.plane.mark_processed()
         self._record_tracks(msg)
+        if emitted is not None and (emitted.events or emitted.outputs):
+            self._emitted(emitted, msg)
         if out is None:
             self._no_output(msg)
             return None
@@ -161,7 +190,11 @@ class AnalyticsComponent(Component):
         robot = msg.robot
         if self.recorder is not None:
             t_ns = self.epoch_ns + int(msg.sim_t * 1e9)
-            if isinstance(res, DetectionsMsg):
+            if self.output_model is not None:
+                from aerodaas.analytics.contract import schema_name
+
+                self.recorder.json(f"/{robot}/{self.name}", t_ns, out, schema_name(self.output_model))
+            elif isinstance(res, DetectionsMsg):
                 size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None
                 self.recorder.detections(f"/{robot}/{self.name}/detections", t_ns, out, size)
             elif isinstance(res, NavigationMsg):
@@ -172,6 +205,36 @@ class AnalyticsComponent(Component):
             else:
                 self._no_output(msg)  # an output of another kind is published, not recorded
         return [res]
+
+    def _typed(self, out: Any) -> dict:
+        """``out`` as the declared ``Output`` model's JSON-ready dict. Raises TypeError naming the analytics, the
+        declared model and what was returned; pydantic's ValidationError for a dict that is not the model."""
+        model = self.output_model
+        if isinstance(out, model):
+            return out.model_dump(mode="json")
+        if isinstance(out, dict):
+            return model.model_validate(out).model_dump(mode="json")
+        raise TypeError(f"analytics {self.name!r} returned a {type(out).__name__}, but it declares Output = "
+                        f"{model.__name__} (return a {model.__name__}, a dict of its fields, or None)")
+
+    def _emitted(self, em: Emissions, msg: Message) -> None:
+        """Record ``em``'s events on ``/<robot>/events`` and its named outputs on ``/<robot>/<name>/<output>``, and
+        publish each named output from ``<cid>:<output>``, all with ``msg``'s robot and time."""
+        from aerodaas.analytics.contract import schema_name
+
+        robot, t_ns = msg.robot, self.epoch_ns + int(msg.sim_t * 1e9)
+        for _, ev in em.events:
+            self.events[ev.kind] = self.events.get(ev.kind, 0) + 1
+            if self.recorder is not None:
+                self.recorder.json(f"/{robot}/events", t_ns, event_record(robot, msg.sim_t, self.name, ev),
+                                   "aerodaas.MissionEvent")
+        for _, no in em.outputs:
+            self.named_counts[no.output] = self.named_counts.get(no.output, 0) + 1
+            data = no.message.model_dump(mode="json")
+            if self.recorder is not None:
+                self.recorder.json(f"/{robot}/{self.name}/{no.output}", t_ns, data, schema_name(type(no.message)))
+            self.plane.publish(f"{self.cid}:{no.output}", [ValueMsg(robot=robot, sim_t=msg.sim_t, data=data,
+                                                                    trace=dict(msg.trace))], msg.tok, inline=False)
 
     def _record_tracks(self, msg: Message) -> None:
         """A tracking analytics' tracks of this frame (``recorded_tracks``, :mod:`aerodaas.perception.track_records`)
@@ -198,7 +261,8 @@ class AnalyticsComponent(Component):
                "batched": self.batched,
                "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
                "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
-               "outlets": self.plane.outlet_stats(self.cid)}
+               "outlets": self.plane.outlet_stats(self.cid), "events": dict(self.events),
+               "named_outputs": dict(self.named_counts)}
         extra = getattr(self.obj, "stats", None)
         if callable(extra):
             out.update(extra())
@@ -263,12 +327,17 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
                 self.recorder.json(f"/{robot}/{self.name}/tasks", t_ns, rec, "aerodaas.AnalyticsTask")
             if state != "done_on_time":
                 self._no_output(msg)  # the scheduler dropped it, or its result came late: no output recorded
+            # the edge executor ran this actor's own object, outside a collector: what it emitted is on the object
+            # (a cloud copy's emissions stay in its executor actor and are not recorded)
+            emitted = self.obj.take_emissions() if hasattr(self.obj, "take_emissions") else None
             if state == "done_on_time":
                 dt_ms = (task.end_ms - task.start_ms) if task.start_ms is not None and task.end_ms is not None else 0.0
                 timing = task.notes.get("timing") if task.tier == "edge" else {"inference_ms": dt_ms}
-                outs = self._emit(task.result, msg, dt_ms, timing)
+                outs = self._emit(task.result, msg, dt_ms, timing, emitted)
                 if outs:
                     self.plane.publish(self.cid, outs, tok)
+            elif emitted is not None and (emitted.events or emitted.outputs):
+                self._emitted(emitted, msg)
         except Exception as e:  # never lose the hold or the dispatcher's loop over one bad result
             self.errors += 1
             self.plane.report_error(self.cid, e)

@@ -251,6 +251,8 @@ def collect_graph(robot) -> list:
                 seen.add(id(sub))
                 order.append(sub)
                 visit(sub.output)
+                for named in (getattr(sub, "named_streams", None) or {}).values():  # its named outputs' subscribers
+                    visit(named)
 
     for s in robot.sensors.values():
         visit(s.get_data_stream())
@@ -442,24 +444,31 @@ def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: di
     return robot_ids
 
 
-def _analytics_edges(every: dict, inst: dict, consumers) -> list[Edge]:
+def _analytics_edges(st: _PlanState, every: dict, inst: dict, consumers) -> list[Edge]:
     """The edges out of every analytics instance (to analytics downstream and to trajectory schedulers), each
-    carrying only the robots the instance serves."""
+    carrying only the robots the instance serves; a named output that feeds anything is a producer node of its own
+    (``<instance>:<output>``, in the instance's actor)."""
     edges: list[Edge] = []
     seen_out: set[str] = set()
     for aid, a in every.items():
-        for cid, _, served in inst[aid]:
+        for cid, hid, served in inst[aid]:
             if cid in seen_out:
                 continue
             seen_out.add(cid)
             only = served[0] if len(served) == 1 else None
-            for e in consumers(a.output, only):
-                robots_ = e.robots if e.robots is not None else None
-                if only is None and robots_ is not None:
-                    robots_ = tuple(x for x in robots_ if x in served) or None
-                    if robots_ is None:
-                        continue  # no robot of this instance goes there
-                edges.append(Edge(cid, e.dst, e.port, e.buffer, robots_))
+            outs = [(cid, a.output)]
+            for out_name, named in (getattr(a, "named_streams", None) or {}).items():
+                src = ComponentId(f"{cid}:{out_name}", "analytics", cid.robot)
+                st.add(Node(src, "analytics", cid.robot, hid, a.name, plugin=f"named output {out_name}"))
+                outs.append((src, named))
+            for src, stream in outs:
+                for e in consumers(stream, only):
+                    robots_ = e.robots if e.robots is not None else None
+                    if only is None and robots_ is not None:
+                        robots_ = tuple(x for x in robots_ if x in served) or None
+                        if robots_ is None:
+                            continue  # no robot of this instance goes there
+                    edges.append(Edge(src, e.dst, e.port, e.buffer, robots_))
     return edges
 
 
@@ -492,10 +501,14 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     edges: list[Edge] = []
     schemas: dict[str, dict] = {}  # plug-in sensors' schema name -> JSON Schema, for the recorder
     robot_ids = _drone_components(st, robots, scheds, drone_host, consumers, edges, schemas)
-    edges.extend(_analytics_edges(every, inst, consumers))
+    edges.extend(_analytics_edges(st, every, inst, consumers))
     for r in robots:
         robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
                                         if r.id in served]
+    from aerodaas.analytics.contract import output_schemas
+
+    for a in every.values():  # analytics' declared output models (Output, named_outputs)
+        schemas.update(output_schemas(a))
     if recorded and schemas:
         rec.spec.record.schemas = schemas
     for a in st.actors.values():

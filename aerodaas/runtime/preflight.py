@@ -1,6 +1,7 @@
 """Everything checked before any actor of a run starts (``aerodaas run`` and ``start_mission``): the recording's
 path, each robot's trajectory scheduler (a fork per robot of a shared one), its pre-planned missions against its
-safety limits, an autopilot mission's shape, the clocks (lock-step needs simulated vehicles) and the analytics the
+safety limits, an autopilot mission's shape, the clocks (lock-step needs simulated vehicles), each analytics' output
+contract (its declared messages, and ``consumes`` against the streams that feed it) and the analytics the
 analytics scheduler places per frame. Each check raises ConfigError / ValueError / SafetyViolation naming the field
 and the value; nothing here starts Ray."""
 from __future__ import annotations
@@ -104,6 +105,10 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
             if getattr(a, "on_error", "continue") not in ("continue", "abort"):
                 raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
                                   f"{getattr(a, 'on_error')!r}")
+            from aerodaas.analytics.contract import check_consumes, check_declaration
+
+            check_declaration(a)  # Output / named_outputs / consumes well-formed (ContractError, a ValueError)
+            check_consumes(a)  # each feeding stream carries a type it consumes
         graphs[r.id] = analytics
         check_preplanned(r, scheds[r.id])
         from aerodaas.backends import backend_class

@@ -128,6 +128,10 @@ def _analytics_lines(rid: str, st: dict, acc: dict) -> list[str]:
         if a.get("failures"):
             extra += (f", {a['failures']} FAILED items (on_error={a.get('on_error')}; last: "
                       f"{a.get('last_failure')})")
+        if a.get("named_outputs"):  # the analytics' declared outputs (aerodaas.analytics.contract)
+            extra += ", outputs " + ", ".join(f"{k} {v}" for k, v in a["named_outputs"].items())
+        if a.get("events"):  # what it recorded with emit_event, by kind
+            extra += ", events " + ", ".join(f"{k} x{v}" for k, v in sorted(a["events"].items()))
         recorded = sum(c["recorded"] for t, c in chans.items() if t == f"/{rid}/{a['name']}"
                        or t.startswith(f"/{rid}/{a['name']}/"))
         extra += f"; {recorded} outputs in the recording" if chans else ""

@@ -1,8 +1,9 @@
 """Gas survey with plug-ins only (docs/extending.md): a drone on the ``gusty_sim`` backend flies a survey line
 over a gas plume; its ``gas_concentration`` sensor feeds the ``gas_threshold`` analytics, which makes it hover
-where the gas first exceeds the threshold (priority 1 preempts the survey); a ``frame_probe`` on the camera is
-placed per frame by the ``THIN_EDGE_FIFO`` analytics scheduler; the survey's waypoints, given in no particular
-order, are flown west to east by the ``eastward_sweep`` trajectory scheduler. The environment names the backend, the
+where the gas first exceeds the threshold (priority 1 preempts the survey), and the ``gas_plume`` analytics,
+which records whether the drone is inside the plume, each crossing, and an event on entering and leaving it; a
+``frame_probe`` on the camera is placed per frame by the ``THIN_EDGE_FIFO`` analytics scheduler; the survey's
+waypoints, given in no particular order, are flown west to east by the ``eastward_sweep`` trajectory scheduler. The environment names the backend, the
 sensor type and the analytics scheduler; the analytics and trajectory-scheduler classes come from the registry
 (installed entry points).
 Run: aerodaas run examples/plugins/app/gas_survey.py --record gas.mcap"""
@@ -19,6 +20,9 @@ GasThreshold = get_plugin("analytics", "gas_threshold")
 FrameProbe = get_plugin("analytics", "frame_probe")
 alarm = GasThreshold(hover_ppm=60.0, rearm_ppm=30.0, hover_s=2.0).deploy(edge)
 scheduler.add_navigation(PriorityQueue(alarm.analyse(drone.get_sensor_by_id("gas").get_data_stream()), priority=1))
+PlumeTracker = get_plugin("analytics", "gas_plume")
+plume = PlumeTracker(enter_ppm=30.0, exit_ppm=15.0).deploy(edge)
+plume.analyse(drone.get_sensor_by_id("gas").get_data_stream())  # a status per reading, a crossing, two events
 probe = FrameProbe().deploy(edge)
 probe.analyse(drone.get_sensor_by_id("cam").get_data_stream())
 
