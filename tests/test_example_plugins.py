@@ -22,7 +22,7 @@ from .test_liveview_npm_client import node_client  # noqa: F401 - the fixture: F
 
 EXAMPLE = REPO / "examples" / "plugins"
 PLUGINS = {("sensor", "gas_concentration"), ("backend", "gusty_sim"), ("analytics", "gas_threshold"),
-           ("analytics", "frame_probe"), ("analytics_scheduler", "THIN_EDGE_FIFO"),
+           ("analytics", "frame_probe"), ("analytics", "gas_plume"), ("analytics_scheduler", "THIN_EDGE_FIFO"),
            ("trajectory_scheduler", "eastward_sweep")}
 
 
@@ -177,6 +177,8 @@ def _check_recording(rec: str, src) -> None:
     assert math.dist(first_high["position"], (wp["x"], wp["y"], wp["z"])) < 0.5, (first_high, wp)
     assert reached == ["wp1", "wp2", "gas-hover-1", "wp3", "wp4"], reached  # the plume is met on the way to wp3
 
+    _check_plume(rec, msgs, summary)
+
     # the analytics scheduler: every third frame_probe task shed with its reason, the others run on the edge
     tasks = msgs["/uav/frame_probe/tasks"]
     shed = [t for t in tasks if t["reason"] == "thin-edge-fifo: shed"]
@@ -184,6 +186,33 @@ def _check_recording(rec: str, src) -> None:
     assert all(t["state"] == "dropped_cost" for t in shed)
     assert sum(t["state"] == "done_on_time" and t["tier"] == "edge" for t in tasks) >= len(tasks) // 2
     assert len(msgs["/uav/frame_probe"]) >= len(tasks) // 2
+
+
+def _check_plume(rec: str, msgs: dict[str, list], summary) -> None:
+    """The non-navigable analytics with an output contract (gas_plume): its typed status per reading, its named
+    output ``crossing`` (each on a channel with its pydantic model's JSON Schema) and its two events."""
+    schemas = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    for topic, name, fields in (("/uav/gas_plume", "aerodaas_example_plugins.PlumeStatus",
+                                 {"ppm", "inside", "peak_ppm"}),
+                                ("/uav/gas_plume/crossing", "aerodaas_example_plugins.PlumeCrossing",
+                                 {"entered_t", "left_t", "peak_ppm", "peak_position", "width_m"})):
+        assert schemas[topic].name == name and schemas[topic].encoding == "jsonschema", (topic, schemas[topic])
+        assert fields <= set(json.loads(schemas[topic].data)["properties"]), (topic, schemas[topic].data)
+    by_t = {g["t"]: g for g in msgs["/uav/gas"]}
+    statuses = msgs["/uav/gas_plume"]
+    assert len(statuses) >= len(by_t) // 2, (len(statuses), len(by_t))  # a busy analytics may skip readings
+    assert all(by_t[s["t"]]["ppm"] == s["ppm"] for s in statuses)  # each status is of the reading it names
+    mine = [e for e in msgs["/uav/events"] if e.get("analytics") == "gas_plume"]
+    assert [e["event"] for e in mine] == ["plume_entered", "plume_left"], mine  # the survey crosses it once
+    entered, left = mine
+    assert entered["ppm"] >= 30.0 > 15.0 > left["ppm"], mine
+    assert entered["t"] == next(s["t"] for s in statuses if s["inside"])  # the first status inside
+    crossing = msgs["/uav/gas_plume/crossing"]
+    assert len(crossing) == 1, crossing
+    c = crossing[0]
+    assert (c["entered_t"], c["left_t"]) == (entered["t"], left["t"]) and c["peak_ppm"] == left["peak_ppm"], (c, mine)
+    assert c["peak_ppm"] == max(s["ppm"] for s in statuses if entered["t"] <= s["t"] < left["t"]) > 100, c
+    assert math.isclose(c["width_m"], math.dist(entered["position"][:2], left["position"][:2])), c
 
 
 @pytest.mark.e2e
@@ -194,6 +223,9 @@ def test_the_example_app_runs_on_local_ray_and_each_plugin_does_its_job(installe
                   env, tmp_path, timeout=600)
     assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
     _check_recording(str(rec), src)
+    # the run's summary counts the analytics' named outputs and its events by kind
+    line = next((ln for ln in p.stdout.splitlines() if "analytics gas_plume:" in ln), "")
+    assert "outputs crossing 1" in line and "events plume_entered x1, plume_left x1" in line, p.stdout[-3000:]
 
 
 CLUSTER = textwrap.dedent('''
@@ -317,7 +349,9 @@ def test_the_example_app_runs_attached_to_aerodaas_up_in_its_warm_workers(instal
 def test_a_plugin_sensor_is_in_the_live_view_channel_for_channel(installed, node_client, tmp_path):
     """The live view picks up a plug-in sensor from its declaration, as the recorder does: Foxglove's own npm client
     (tests/js/count_channels.mjs), connected for the whole run of the example app, gets `/uav/gas` with the plug-in's
-    schema name and exactly as many messages on every channel as the recording holds."""
+    schema name and exactly as many messages on every channel as the recording holds; the gas_plume analytics'
+    outputs with their schema names, and its plume_entered / plume_left events among the drone's, each as
+    recorded."""
     from .test_live_and_foxglove import AERODAAS, _start, _wait_for_url
     from .test_liveview_npm_client import _finish, _recorded_counts
 
@@ -327,7 +361,7 @@ def test_a_plugin_sensor_is_in_the_live_view_channel_for_channel(installed, node
                        "127.0.0.1:0", "--quiet", "--timeout", "300"], env=env)
     try:
         url, _ = _wait_for_url(p, lines, "live view at")
-        got = _finish(node_client(url, 300), 320)
+        got = _finish(node_client(url, 300, keep=("/uav/events",)), 320)
         assert p.wait(timeout=240) == 0
     finally:
         if p.poll() is None:
@@ -336,3 +370,11 @@ def test_a_plugin_sensor_is_in_the_live_view_channel_for_channel(installed, node
     assert recorded.get("/uav/gas", 0) >= 20, recorded
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
     assert got["channels"]["/uav/gas"]["schemaName"] == "aerodaas_example_plugins.GasReading", got["channels"]
+    # the analytics' typed outputs and its events reach Foxglove's client as they reach the recording
+    assert got["channels"]["/uav/gas_plume"]["schemaName"] == "aerodaas_example_plugins.PlumeStatus", got["channels"]
+    assert got["channels"]["/uav/gas_plume/crossing"]["schemaName"] == "aerodaas_example_plugins.PlumeCrossing"
+    live = [json.loads(m) for m in got["messages"]["/uav/events"]]
+    recorded_events = [m for topic, _, _, m in read_messages(str(rec)) if topic == "/uav/events"]
+    assert live == recorded_events, (len(live), len(recorded_events))
+    assert [(e["event"], e["analytics"]) for e in live if "analytics" in e] == [
+        ("plume_entered", "gas_plume"), ("plume_left", "gas_plume")], live

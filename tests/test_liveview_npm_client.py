@@ -46,9 +46,12 @@ def node_client():
         if inst.returncode != 0:
             pytest.skip(f"npm install @foxglove/ws-protocol failed (offline?): {inst.stderr[-300:]}")
 
-    def start(url: str, timeout_s: float = 240, subscribe_after_ms: int = 0, reconnects: int = 0) -> subprocess.Popen:
+    def start(url: str, timeout_s: float = 240, subscribe_after_ms: int = 0, reconnects: int = 0,
+              keep: tuple[str, ...] = ()) -> subprocess.Popen:
+        """The client on ``url``; ``keep``: topics whose payloads it returns (``messages``), not only counts."""
         return subprocess.Popen([node, str(JS / "count_channels.mjs"), url, str(timeout_s), str(subscribe_after_ms),
-                                 str(reconnects)], cwd=JS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                 str(reconnects), ",".join(keep)], cwd=JS, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
     return start
 
 

@@ -86,6 +86,11 @@ class Analytics:
     #: (route by :func:`source_robot`). False (e.g. :class:`ObjectDetector`): any replica may take any item.
     stateful: bool = True
 
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        if cls.Output is not None and "produces" not in cls.__dict__:  # listed by `aerodaas plugins` as a sensor's
+            cls.produces = (cls.Output, *dict(cls.named_outputs or {}).values())
+
     def __init__(self, name: str | None = None) -> None:
         if name:
             self.name = name

@@ -1,18 +1,22 @@
 // Foxglove's own client (@foxglove/ws-protocol) for tests/test_liveview_npm_client.py.
-// usage: node count_channels.mjs ws://HOST:PORT TIMEOUT_S [SUBSCRIBE_AFTER_MS] [RECONNECTS]
+// usage: node count_channels.mjs ws://HOST:PORT TIMEOUT_S [SUBSCRIBE_AFTER_MS] [RECONNECTS] [KEEP_TOPICS]
 // Connects (retrying until the server listens), subscribes to every channel as it is advertised (after
 // SUBSCRIBE_AFTER_MS, default 0), counts messages per topic until the server closes the connection, then prints
 // {"protocol", "channels": {topic: {schemaName, encoding}}, "counts": {topic: n}, "statuses": [...],
 // "connections": [{topic: n} per connection]} as JSON. With RECONNECTS > 0 it connects again to the same URL
 // (retrying until a server listens there) after each of the first RECONNECTS closes, as Foxglove's app does.
+// KEEP_TOPICS (comma-separated): the payloads of these topics' messages are kept as text in "messages": {topic: [..]}.
 import wsProtocol from "@foxglove/ws-protocol";
 const { FoxgloveClient } = wsProtocol;
 import WebSocket from "ws";
 
 const [url, timeoutS, afterMs] = [process.argv[2], Number(process.argv[3] ?? 60), Number(process.argv[4] ?? 0)];
 let reconnects = Number(process.argv[5] ?? 0);
+const keep = new Set((process.argv[6] ?? "").split(",").filter((t) => t));
 const deadline = Date.now() + timeoutS * 1000;
-const out = { protocol: null, channels: {}, counts: {}, statuses: [], closed_by_server: false, connections: [] };
+const out = { protocol: null, channels: {}, counts: {}, statuses: [], closed_by_server: false, connections: [],
+  messages: {} };
+const text = new TextDecoder();
 
 function finish(code) {
   process.stdout.write(JSON.stringify(out) + "\n");
@@ -40,8 +44,9 @@ function connect() {
       if (afterMs > 0) setTimeout(sub, afterMs); else sub();
     }
   });
-  client.on("message", ({ subscriptionId }) => {
+  client.on("message", ({ subscriptionId, data }) => {
     const t = subTopic.get(subscriptionId);
+    if (keep.has(t)) (out.messages[t] ??= []).push(text.decode(data));
     out.counts[t] = (out.counts[t] ?? 0) + 1;
     mine[t] = (mine[t] ?? 0) + 1;
   });

@@ -3,9 +3,9 @@ over a gas plume; its ``gas_concentration`` sensor feeds the ``gas_threshold`` a
 where the gas first exceeds the threshold (priority 1 preempts the survey), and the ``gas_plume`` analytics,
 which records whether the drone is inside the plume, each crossing, and an event on entering and leaving it; a
 ``frame_probe`` on the camera is placed per frame by the ``THIN_EDGE_FIFO`` analytics scheduler; the survey's
-waypoints, given in no particular order, are flown west to east by the ``eastward_sweep`` trajectory scheduler. The environment names the backend, the
-sensor type and the analytics scheduler; the analytics and trajectory-scheduler classes come from the registry
-(installed entry points).
+waypoints, given in no particular order, are flown west to east by the ``eastward_sweep`` trajectory scheduler. The
+environment names the backend, the sensor type and the analytics scheduler; the analytics and trajectory-scheduler
+classes come from the registry (installed entry points).
 Run: aerodaas run examples/plugins/app/gas_survey.py --record gas.mcap"""
 from aerodaas import *
 from aerodaas.plugins import get_plugin
