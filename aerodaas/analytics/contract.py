@@ -181,7 +181,8 @@ def stream_types(stream: AeroStreamData) -> tuple[str, ...]:
     ``consumes`` check applies to it).
 
     * a built-in sensor's stream: ``frame`` (camera), ``odometry``, ``stat`` (stat stream);
-    * a plug-in sensor's: its type (``gas_concentration``) and its ``Message`` model's schema name;
+    * a plug-in sensor's: its type (e.g. ``thermometer``; the plug-in's ``name`` too when the type is a
+      ``module:Class`` path) and its ``Message`` model's schema name;
     * an analytics' main output: its ``Output`` model, else its declared ``produces``;
     * a named output: its model."""
     src = stream.source
@@ -195,10 +196,13 @@ def stream_types(stream: AeroStreamData) -> tuple[str, ...]:
         from aerodaas.plugins import registry
 
         try:
-            msg = getattr(registry.resolve("sensor", sensor_type).load(), "Message", None)
+            cls = registry.resolve("sensor", sensor_type).load()
         except Exception:  # noqa: BLE001 - an unknown type is refused by the configuration, naming it
-            msg = None
-        return (sensor_type,) + ((_token(msg),) if _is_model(msg) else ())
+            cls = None
+        msg = getattr(cls, "Message", None)
+        name = getattr(cls, "name", None)  # the plug-in's own name, also when the type is a "module:Class" path
+        names = (sensor_type,) + ((name,) if isinstance(name, str) and name and name != sensor_type else ())
+        return names + ((_token(msg),) if _is_model(msg) else ())
     out = getattr(src, "Output", None)
     if _is_model(out):
         return (_token(out),)
