@@ -18,6 +18,7 @@ from aerodaas.analytics.contract import ContractError, check_declaration
 from aerodaas.recording.writer import read_messages
 from aerodaas.runtime.messages import Port, ValueMsg
 
+from .conftest import REPO
 from .test_example_plugins import _aerodaas, _env_with, installed  # noqa: F401 - the fixture: the installed example
 
 
@@ -279,3 +280,17 @@ def test_a_downstream_analytics_subscribes_to_a_named_output(installed, tmp_path
     names = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
     assert names["/uav/crossing_log"] == "__main__.CrossingNote", names
     assert "analytics crossing_log: 1 items" in p.stdout, p.stdout[-3000:]
+
+
+@pytest.mark.parametrize("app", sorted(p.name for p in (REPO / "apps").glob("*.py")))
+def test_every_shipped_app_passes_the_consumes_check(app, tmp_path):
+    """The shipped apps wire built-in analytics that declare ``consumes`` (detector on frames, follow on detections,
+    monitor on odometry): the check refuses none of them."""
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", str(REPO / "apps" / app), "--json"],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    plan = json.loads(p.stdout[p.stdout.index("\n{") + 1 if not p.stdout.startswith("{") else 0:])  # after notes
+    assert any(n["kind"] == "analytics" for n in plan["nodes"])
