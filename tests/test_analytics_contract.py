@@ -16,7 +16,7 @@ from pydantic import BaseModel, ValidationError
 from aerodaas.analytics.base import Analytics
 from aerodaas.analytics.contract import ContractError, check_declaration
 from aerodaas.recording.writer import read_messages
-from aerodaas.runtime.messages import Port, ValueMsg
+from aerodaas.protocol.messages import Port, ValueMsg
 
 from .conftest import REPO
 from .test_example_plugins import _aerodaas, _env_with, installed  # noqa: F401 - the fixture: the installed example
