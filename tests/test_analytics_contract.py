@@ -184,7 +184,7 @@ def test_a_builtin_analytics_fed_the_wrong_stream_stops_the_run_before_ray(tmp_p
     err = p.stdout + p.stderr
     assert p.returncode == 2, err[-3000:]
     assert ("analytics 'monitor' (MonitoringAnalytics) consumes ['odometry'], but it is fed sensor 'cam' (camera), "
-            "which carries ['frame']") in err, err[-3000:]
+            "which carries ['frame', 'camera']") in err, err[-3000:]
     assert "Started a local Ray instance" not in err
 
 

@@ -180,9 +180,9 @@ def stream_types(stream: AeroStreamData) -> tuple[str, ...]:
     """The types a stream carries, each as :func:`_token` names it; empty when the stream says nothing (then no
     ``consumes`` check applies to it).
 
-    * a built-in sensor's stream: ``frame`` (camera), ``odometry``, ``stat`` (stat stream);
-    * a plug-in sensor's: its type (e.g. ``thermometer``; the plug-in's ``name`` too when the type is a
-      ``module:Class`` path) and its ``Message`` model's schema name;
+    * a sensor's stream: what the drone actor delivers by the sensor class's ``delivery`` (``frame`` for camera
+      frames, ``odometry`` for the vehicle state, ``stat`` for the mission status), its type (e.g. ``thermometer``;
+      the plug-in's ``name`` too when the type is a ``module:Class`` path) and its ``Message`` model's schema name;
     * an analytics' main output: its ``Output`` model, else its declared ``produces``;
     * a named output: its model."""
     src = stream.source
@@ -190,19 +190,20 @@ def stream_types(stream: AeroStreamData) -> tuple[str, ...]:
         return (_token(src.named_outputs[stream.output]),)
     sensor_type = getattr(src, "type", None)
     if isinstance(sensor_type, str) and not hasattr(src, "analyse"):  # a robot's sensor (aerodaas.app.api.Sensor)
-        builtin = {"camera": "frame", "odometry": "odometry", "stat_stream": "stat"}
-        if sensor_type in builtin:
-            return (builtin[sensor_type],)
         from aerodaas.plugins import registry
+        from aerodaas.plugins.sensor import SensorDelivery
 
         try:
             cls = registry.resolve("sensor", sensor_type).load()
         except Exception:  # noqa: BLE001 - an unknown type is refused by the configuration, naming it
             cls = None
+        # what the drone actor delivers itself, by the class's declared delivery (never by its type name)
+        delivered = {SensorDelivery.CAMERA: "frame", SensorDelivery.VEHICLE_STATE: "odometry",
+                     SensorDelivery.MISSION_STATUS: "stat"}.get(getattr(cls, "delivery", None))
         msg = getattr(cls, "Message", None)
         name = getattr(cls, "name", None)  # the plug-in's own name, also when the type is a "module:Class" path
         names = (sensor_type,) + ((name,) if isinstance(name, str) and name and name != sensor_type else ())
-        return names + ((_token(msg),) if _is_model(msg) else ())
+        return ((delivered,) if delivered else ()) + names + ((_token(msg),) if _is_model(msg) else ())
     out = getattr(src, "Output", None)
     if _is_model(out):
         return (_token(out),)
