@@ -277,8 +277,10 @@ def test_a_downstream_analytics_subscribes_to_a_named_output(installed, tmp_path
 
     with open(rec, "rb") as f:
         summary = make_reader(f).get_summary()
-    names = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
-    assert names["/uav/crossing_log"] == "__main__.CrossingNote", names
+    schema = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}["/uav/crossing_log"]
+    # the app's own model: named after the module the app runs as (<its module>.CrossingNote), with its fields
+    assert schema.name.endswith(".CrossingNote") and schema.encoding == "jsonschema", schema
+    assert {"width_m", "duration_s"} <= set(json.loads(schema.data)["properties"]), schema.data
     assert "analytics crossing_log: 1 items" in p.stdout, p.stdout[-3000:]
 
 
