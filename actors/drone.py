@@ -24,11 +24,9 @@ from typing import Any
 
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
-from aerodaas.config.robot import sensor_class
-from aerodaas.plugins.sensor import SensorDelivery
-from aerodaas.navigation.fsm import MissionFSM, MissionState as S
+from aerodaas.navigation.fsm import MissionFSM, MissionState as S, handler_table
 from aerodaas.protocol.messages import StatMsg
-from aerodaas.model.types import ActionCommand, VelocityCommand, Waypoint
+from aerodaas.model.types import Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order
 from aerodaas.schedulers.base import TrajectoryScheduler
@@ -39,11 +37,12 @@ from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import RunEnd
 from aerodaas.actors.drone_odometry import OdometryPublisher
 from aerodaas.actors.drone_progress import NavigationProgress
+from aerodaas.actors.drone_queue_flight import QueueFlight, WaypointHold
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgress):
+class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, OdometryPublisher, NavigationProgress):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -90,9 +89,9 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgr
         self.hold_until: float | None = None
         #: how the run ended for this robot (set when it closes): e.g. "landed and disarmed", "safe end: landed ..."
         self.ended: str | None = None
-        self._hold: dict | None = None
+        self._hold: WaypointHold | None = None  # the hold under way at the reached waypoint
         self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
-        self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it  # the hold under way: start, last tick, time within the radius, its figures
+        self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it
         self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
         self._init_progress()
         self._paused_from: S | None = None
@@ -110,24 +109,15 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgr
         self.nudges = 0  # navigation applied outside the control tick (:meth:`apply_navigation`)
         self.last_odom: dict | None = None
         self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
-        odom_rate = 10.0
-        for s in self.cfg.sensors:
-            if sensor_class(s.type).delivery is SensorDelivery.VEHICLE_STATE:
-                odom_rate = float(s.properties.get("rate_hz", 10.0))
-        self.odom_period = 1.0 / odom_rate
-        self.next_odom = 0.0
-        self._odom_key: Any = None  # the backend's sample_key when its samples were last drained
-        self._odom_t: float | None = None  # the vehicle time of the last published sample
-        self._odom_fresh = False  # the mission ended: the next drain takes the newest sample only
+        self._init_odometry()
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
-        #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
-        self.autopilot_mission = bool(self.backend.flies_uploaded_mission)
-        self._ap_items: dict[int, tuple[str, Waypoint | None]] = {}  # MissionItem seq (from 1) -> (kind, waypoint)
-        self._ap_events: list[dict] = []  # mission_current / mission_item_reached from the backend, not yet applied
-        self._ap_current = 0
-        self._ap_reached: dict[int, tuple] = {}  # item -> where the vehicle was when the autopilot reported it
-        self._ap_done: set[int] = set()
+        self._init_autopilot()
+        #: the control step's handler of each mission state (:meth:`_control`), checked against the state table
+        self._handlers = handler_table({
+            S.LINK_LOST: self._on_link_lost, S.LANDING: self._on_landing, S.EMERGENCY: self._on_emergency,
+            S.RETURNING: self._on_returning, S.PAUSED: self._on_paused, S.TAKING_OFF: self._on_taking_off,
+            **{st: self._on_airborne for st in (*_ACTIVE, S.IDLE, S.PREFLIGHT, S.ARMED, S.LANDED)}})
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float | None = None) -> None:
@@ -299,220 +289,170 @@ class DroneComponent(RunEnd, AutopilotFlight, OdometryPublisher, NavigationProgr
         return self.queue.order_at(t)
 
     def _control(self) -> bool:
-        """One control step; returns True when the mission is over. Caller holds ``self.lock``."""
-        v, fsm = self.backend, self.fsm
-        t, st = v.t, fsm.state
-        pos = tuple(float(c) for c in v.position)
+        """One control step: what holds in every mission state (a replayed log is only observed; the link dropped;
+        an autopilot failsafe; a short link drop to recover from), then the handler of the current mission state
+        (:attr:`_handlers`, one per state of the state machine's table). Returns True when the mission is over.
+        Caller holds ``self.lock``."""
+        v, st = self.backend, self.fsm.state
+        t = v.t
         if not v.navigable:
             return self._observe(t, st)
         if not v.link_ok:
             if st not in (S.LINK_LOST, S.LANDED):
                 self._link_lost_from = st
-                fsm.transition(S.LINK_LOST, t)
+                self.fsm.transition(S.LINK_LOST, t)
                 self._event("link_lost", previous=st.value)
             return False
         if self._failsafe_pending is not None:
             return self._on_autopilot_failsafe(t, st)
-        if st == S.LINK_LOST:
-            self._reissue = False
-            return self._link_regained(t)
-        if self._reissue:  # a drop shorter than a control tick: the state machine never saw it, the vehicle may have
-            self._reissue = False
-            if st in (S.NAVIGATING, S.WAYPOINT_HOLD) and not self.autopilot_mission:
-                self._event("link_blip", resuming=st.value)
-                if st == S.WAYPOINT_HOLD:
-                    fsm.transition(S.NAVIGATING, t)
-                self.active_wp, self.hold_until = None, None
-        if st == S.LANDING:
+        if self._reissue and st != S.LINK_LOST:
+            self._on_link_blip(t, st)
+        return self._handlers[self.fsm.state](t, tuple(float(c) for c in v.position))
+
+    def _on_link_blip(self, t: float, st: S) -> None:
+        """A link drop shorter than a control tick: the state machine never saw it, but the vehicle may have left
+        guided/offboard meanwhile, so the active waypoint is sent again."""
+        self._reissue = False
+        if st in (S.NAVIGATING, S.WAYPOINT_HOLD) and not self.autopilot_mission:
+            self._event("link_blip", resuming=st.value)
+            if st == S.WAYPOINT_HOLD:
+                self.fsm.transition(S.NAVIGATING, t)
+            self.active_wp, self.hold_until = None, None
+
+    # ------------------------------------------------------------------ one handler per mission state
+    # Each takes the vehicle time ``t`` (s) and position ``pos`` (ENU metres) and returns True when the mission is
+    # over. IDLE, PREFLIGHT, ARMED and LANDED get no control ticks (start() leaves ARMED in the same call; LANDED
+    # ends the mission): they share the airborne handler, as they always did.
+    def _on_link_lost(self, t: float, pos: tuple) -> bool:
+        self._reissue = False
+        return self._link_regained(t)
+
+    def _on_landing(self, t: float, pos: tuple) -> bool:
+        """On the ground: LANDED, disarm, and the outcome (success only if everything planned was flown)."""
+        v = self.backend
+        if v.in_air:
+            return False
+        self.fsm.transition(S.LANDED, t)
+        try:
+            v.disarm()
+        except BackendError as e:
+            self._event("backend_error", error=str(e))
+        self._event("landed")
+        if self.outcome is None:
+            self.outcome = "success" if self._all_flown() else "incomplete"
+        return True
+
+    def _all_flown(self) -> bool:
+        """Every pre-planned waypoint flown: none refused in flight (not flown), none whose hold failed (not held),
+        none given up (not reached), and none cleared through the HITL API."""
+        refused = any(r.get("item") == "waypoint" for r in self.rejected)
+        return (self.preplanned_left == 0 and not refused and not self.hold_failed and not self.not_reached
+                and not self.plan_log.cleared_preplanned)
+
+    def _on_emergency(self, t: float, pos: tuple) -> bool:
+        self.backend.land()
+        self.fsm.transition(S.LANDING, t)
+        return False
+
+    def _on_returning(self, t: float, pos: tuple) -> bool:
+        """Fly the return path leg by leg (or let the autopilot's RTL fly it), then land at home."""
+        if self._battery_critical(t):
+            return False
+        v = self.backend
+        if self._backend_rtl:
             if not v.in_air:
-                fsm.transition(S.LANDED, t)
-                try:
-                    v.disarm()
-                except BackendError as e:
-                    self._event("backend_error", error=str(e))
-                self._event("landed")
-                if self.outcome is None:
-                    dropped = [r["id"] for r in self.rejected if r.get("item") == "waypoint"]
-                    # a waypoint refused in flight was not flown, one whose hold failed was not held: never a success
-                    # nor a survey whose pre-planned waypoints were cleared through the HITL API
-                    ok = self.preplanned_left == 0 and not dropped and not self.hold_failed and \
-                        not self.not_reached and \
-                        not self.plan_log.cleared_preplanned
-                    self.outcome = "success" if ok else "incomplete"
-                return True
+                self.fsm.transition(S.LANDING, t)
             return False
-        if st == S.EMERGENCY:
+        path = getattr(self, "_rtl_path", None)
+        if path and len(path) > 1 and math.hypot(pos[0] - path[0][0], pos[1] - path[0][1]) <= 0.5:
+            path.pop(0)  # the next leg of the path around the exclusion zones
+            v.goto(path[0], self.gate.max_speed)
+            self._event("rtl_leg", target=list(path[0]), legs_left=len(path))
+        elif math.hypot(pos[0], pos[1]) <= 0.5:
             v.land()
-            fsm.transition(S.LANDING, t)
+            self.fsm.transition(S.LANDING, t)
+            self._event("landing", reason="return to launch")
+        return False
+
+    def _on_paused(self, t: float, pos: tuple) -> bool:
+        """Hover until resumeMission(), then go back to what was paused; a landing meanwhile ends the flight."""
+        if self._failsafe_or_pause(t, pos):
             return False
-        safety = self.cfg.safety
-        if v.battery_pct < safety.critical_battery_pct and v.in_air:
-            self._event("battery_critical", battery_pct=v.battery_pct)
-            self.outcome = "failed"
-            fsm.transition(S.EMERGENCY, t)
+        v = self.backend
+        if not v.in_air and not v.armed and self.flew_something_or_took_off():
+            # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
+            self.fsm.transition(S.LANDING, t)
+            self.outcome = self.outcome or ("failsafe" if self.failsafe else "incomplete")
+            self._event("landing", reason="landed while paused")
             return False
-        if st == S.RETURNING:
-            if self._backend_rtl:
-                if not v.in_air:
-                    fsm.transition(S.LANDING, t)
-                return False
-            path = getattr(self, "_rtl_path", None)
-            if path and len(path) > 1 and math.hypot(pos[0] - path[0][0], pos[1] - path[0][1]) <= 0.5:
-                path.pop(0)  # the next leg of the path around the exclusion zones
-                v.goto(path[0], self.gate.max_speed)
-                self._event("rtl_leg", target=list(path[0]), legs_left=len(path))
-            elif math.hypot(pos[0], pos[1]) <= 0.5:
-                v.land()
-                fsm.transition(S.LANDING, t)
-                self._event("landing", reason="return to launch")
+        if not self._resume_req.is_set():
             return False
+        self._resume_req.clear()
+        back = self._paused_from or S.HOVERING
+        self.fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
+        self._event("resumed")
+        if self.autopilot_mission:
+            v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
+        elif back == S.TAKING_OFF:
+            v.takeoff(self.takeoff_altitude)
+        self.active_wp = None
+        self.hold_until = None
+        return False
+
+    def _on_taking_off(self, t: float, pos: tuple) -> bool:
+        """HOVERING once at the take-off altitude (10 cm)."""
+        if self._failsafe_or_pause(t, pos):
+            return False
+        if self.autopilot_mission:
+            return self._follow_autopilot_mission(t, pos)
+        v = self.backend
+        if abs(v.position[2] - self.takeoff_altitude) < 0.1:
+            self.fsm.transition(S.HOVERING, t)
+            v.hold()
+        return False
+
+    def _on_airborne(self, t: float, pos: tuple) -> bool:
+        """HOVERING, NAVIGATING, WAYPOINT_HOLD, TRACKING: fly what the queue says (or follow the autopilot's own
+        mission)."""
+        if self._failsafe_or_pause(t, pos):
+            return False
+        if self.autopilot_mission:
+            return self._follow_autopilot_mission(t, pos)
+        self._fly_queue(t, pos)
+        return False
+
+    # ------------------------------------------------------------------ failsafes and pause
+    def _battery_critical(self, t: float) -> bool:
+        """Below ``safety.critical_battery_pct`` in the air: EMERGENCY (outcome failed). True when it acted."""
+        v = self.backend
+        if not (v.battery_pct < self.cfg.safety.critical_battery_pct and v.in_air):
+            return False
+        self._event("battery_critical", battery_pct=v.battery_pct)
+        self.outcome = "failed"
+        self.fsm.transition(S.EMERGENCY, t)
+        return True
+
+    def _failsafe_or_pause(self, t: float, pos: tuple) -> bool:
+        """The battery failsafes (critical: EMERGENCY; below ``safety.low_battery_rtl_pct``: return to launch) and
+        a pauseMission() request (PAUSED, hovering). True when one of them took this control step."""
+        v, safety = self.backend, self.cfg.safety
+        if self._battery_critical(t):
+            return True
         if v.battery_pct < safety.low_battery_rtl_pct and v.in_air:
             self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
             self.outcome = "failsafe_rtl"
             self._return_to_launch(t, pos)
+            return True
+        if not self._pause_req.is_set():
             return False
-        if self._pause_req.is_set():
-            self._pause_req.clear()
-            if st != S.PAUSED and fsm.can(S.PAUSED):
-                self._paused_from = st
-                v.hold()
-                fsm.transition(S.PAUSED, t)
-                self._event("paused")
-            return False
-        if st == S.PAUSED:
-            if not v.in_air and not v.armed and self.flew_something_or_took_off():
-                # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
-                fsm.transition(S.LANDING, t)
-                self.outcome = self.outcome or ("failsafe" if self.failsafe else "incomplete")
-                self._event("landing", reason="landed while paused")
-                return False
-            if not self._resume_req.is_set():
-                return False
-            self._resume_req.clear()
-            back = self._paused_from or S.HOVERING
-            fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
-            self._event("resumed")
-            if self.autopilot_mission:
-                v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
-            elif back == S.TAKING_OFF:
-                v.takeoff(self.takeoff_altitude)
-            self.active_wp = None
-            self.hold_until = None
-            return False
-        if self.autopilot_mission:
-            return self._follow_autopilot_mission(t, pos)
-        if st == S.TAKING_OFF:
-            if abs(v.position[2] - self.takeoff_altitude) < 0.1:
-                fsm.transition(S.HOVERING, t)
-                v.hold()
-            return False
-        res = self.next_order(t, pos)
-        item = res.item
-        self.preplanned_left = res.preplanned_left
-        if item is not None:
-            self.idle_since = None
-            self.flew_something = True
-        if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and self.active_wp == item.id):
-            try:  # the choke point: nothing outside the safety limits reaches the backend
-                # a velocity command is checked for the time it has left (its fence horizon shrinks as it runs)
-                left = item.left_at(t) if isinstance(item, VelocityCommand) else item
-                item = self.gate.check_item(left, pos, tuple(float(c) for c in v.velocity))
-            except SafetyViolation as e:
-                self._reject(t, item, e)
-                return False
-        if isinstance(item, ActionCommand):
-            self._event("action", action=item.action, reason=item.reason, priority=res.priority)
-            if st == S.TRACKING:
-                self._event("tracking_ended")
-            self.plan_log.discard(self.queue, item.id, "executed", t)
-            self.preplanned_left = self.queue.pending(distance_driven_only=True)
-            if item.action == "land":
-                v.land()
-                fsm.transition(S.LANDING, t)
-                self._event("landing", reason=item.reason or "land command")
-            else:
-                self._return_to_launch(t, pos)
-            return False
-        if isinstance(item, VelocityCommand):
-            if st != S.TRACKING:
-                fsm.transition(S.TRACKING, t)
-                self._event("tracking_started", priority=res.priority, mission=res.mission,
-                            preempted=self.active_wp)
-            v.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
-            self.active_wp, self.hold_until = None, None
-            return False
-        if isinstance(item, Waypoint):
-            target = item.to_local(self.cfg.home)
-            if self.active_wp != item.id:
-                if st == S.TRACKING:
-                    self._event("tracking_ended")
-                self.active_wp, self.hold_until, self._hold = item.id, None, None
-                v.goto(target, item.speed)
-                fsm.transition(S.NAVIGATING, t)
-                self._start_progress(t, math.dist(pos, target), item.speed)
-                self._event("navigate", waypoint=item.id, target=list(target), priority=res.priority,
-                            mission=res.mission)
-                if self.recorder is not None:
-                    self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t),
-                                       {"kind": "waypoint", "waypoint": item.model_dump(), "local": list(target),
-                                        "priority": res.priority}, "aerodaas.NavCommand")
-                return False
-            dist = math.dist(pos, target)
-            speed = math.hypot(*tuple(float(c) for c in v.velocity)[:2])
-            within = dist <= item.acceptance_radius
-            if st == S.NAVIGATING and self._check_progress(t, item, target, dist, within):
-                return False  # given up: the next tick flies what is queued next
-            hc = self.cfg.hold
-            if st == S.NAVIGATING and within and (item.hover_duration <= 0 or speed <= hc.settle_speed):
-                fsm.transition(S.WAYPOINT_HOLD, t)
-                st = S.WAYPOINT_HOLD
-                v.goto(target)  # keep station on the exact waypoint
-                self.hold_until = t + item.hover_duration
-                self._hold = {"start": t, "last": t, "within_s": 0.0, "max_error_m": dist, "max_speed": speed}
-                self._event("waypoint_reached", waypoint=item.id, error_m=dist, speed=round(speed, 3))
-            elif st == S.WAYPOINT_HOLD and self._hold is not None:
-                h = self._hold
-                if within:  # only time within the radius counts (the previous tick's interval, ended in it)
-                    h["within_s"] += t - h["last"]
-                h["last"] = t
-                h["max_error_m"] = max(h["max_error_m"], dist)
-                h["max_speed"] = max(h["max_speed"], speed)
-            if st == S.WAYPOINT_HOLD and self._hold is not None:
-                h = self._hold
-                if h["within_s"] + 1e-9 >= item.hover_duration:
-                    self.plan_log.complete(self.queue, item.id, t)
-                    self.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target),
-                                         "error_m": dist})
-                    self._event("waypoint_done", waypoint=item.id, held_s=round(h["within_s"], 3),
-                                max_error_m=round(h["max_error_m"], 3))
-                    self.active_wp, self.hold_until, self._hold = None, None, None
-                elif t - h["start"] > hc.max_time_factor * item.hover_duration + hc.grace_s:
-                    rec = {"waypoint": item.id, "held_s": round(h["within_s"], 3), "needed_s": item.hover_duration,
-                           "elapsed_s": round(t - h["start"], 3), "max_error_m": round(h["max_error_m"], 3),
-                           "max_speed": round(h["max_speed"], 3), "acceptance_radius": item.acceptance_radius}
-                    self.hold_failed.append(rec)
-                    self._event("hold_failed", **rec)
-                    self.plan_log.discard(self.queue, item.id, "hold_failed", t)
-                    self.active_wp, self.hold_until, self._hold = None, None, None
-            return False
-        # nothing queued
-        if st == S.TRACKING:
-            self._event("tracking_ended")
-        if self.idle_since is None:
-            self.idle_since = t
-        done_plan = self.preplanned_total > 0 and res.preplanned_left == 0 and len(self.visited) > 0
-        had_mission = self.flew_something or self.preplanned_total > 0
-        idle_too_long = had_mission and t - self.idle_since >= self.cfg.idle_land_s
-        if done_plan or idle_too_long:
-            v.land()
-            fsm.transition(S.LANDING, t)
-            self._event("landing", reason="mission complete" if done_plan else
-                        f"nothing to do for {self.cfg.idle_land_s:g} s")
-            return False
-        if st != S.HOVERING:
-            fsm.transition(S.HOVERING, t)
+        self._pause_req.clear()
+        st = self.fsm.state
+        if st != S.PAUSED and self.fsm.can(S.PAUSED):
+            self._paused_from = st
             v.hold()
-        return False
+            self.fsm.transition(S.PAUSED, t)
+            self._event("paused")
+        return True
 
     # ------------------------------------------------------------------ autopilot mission
     def _to(self, state: S, t: float) -> None:

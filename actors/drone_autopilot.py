@@ -14,6 +14,16 @@ from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType,
 class AutopilotFlight:
     """Mixin: the autopilot's own mission, failsafes, link regain and the return to launch (see the module)."""
 
+    def _init_autopilot(self) -> None:
+        """Whether the pre-planned waypoints fly as the autopilot's own mission, and that mission's bookkeeping."""
+        #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
+        self.autopilot_mission = bool(self.backend.flies_uploaded_mission)
+        self._ap_items: dict[int, tuple[str, Waypoint | None]] = {}  # MissionItem seq (from 1) -> (kind, waypoint)
+        self._ap_events: list[dict] = []  # mission_current / mission_item_reached from the backend, not yet applied
+        self._ap_current = 0
+        self._ap_reached: dict[int, tuple] = {}  # item -> where the vehicle was when the autopilot reported it
+        self._ap_done: set[int] = set()
+
     def _start_autopilot_mission(self) -> None:
         """Upload the queued waypoints in flying order (NAV_TAKEOFF to ``takeoff_altitude``, NAV_WAYPOINT each with
         its hover time, NAV_LAND at the last one or NAV_RETURN_TO_LAUNCH for a final rtl action), arm, and start

@@ -7,11 +7,26 @@ from __future__ import annotations
 
 from typing import Any
 
+from aerodaas.config.robot import sensor_class
+from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.protocol.messages import OdometryMsg
 
 
 class OdometryPublisher:
     """Part of :class:`~aerodaas.actors.drone.DroneComponent`."""
+
+    def _init_odometry(self) -> None:
+        """The odometry sensor's period (``rate_hz`` of the robot's odometry sensor, default 10 Hz) and the drain's
+        bookkeeping."""
+        odom_rate = 10.0
+        for s in self.cfg.sensors:
+            if sensor_class(s.type).delivery is SensorDelivery.VEHICLE_STATE:
+                odom_rate = float(s.properties.get("rate_hz", 10.0))
+        self.odom_period = 1.0 / odom_rate
+        self.next_odom = 0.0
+        self._odom_key: Any = None  # the backend's sample_key when its samples were last drained
+        self._odom_t: float | None = None  # the vehicle time of the last published sample
+        self._odom_fresh = False  # the mission ended: the next drain takes the newest sample only
 
     def publish_odometry(self, tok: Any = None, *, paced: bool = False) -> None:
         """Record and publish odometry. The simulator (no ``sample_key``): its state now. A vehicle: each of its

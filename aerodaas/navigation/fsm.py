@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 from enum import Enum
-from typing import Callable
+from typing import Callable, Mapping, TypeVar
 
 
 class MissionState(str, Enum):
@@ -59,6 +59,21 @@ for _s in (S.ARMED, S.TAKING_OFF, S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.T
            S.LANDING):
     TRANSITIONS[_s] = TRANSITIONS[_s] | {S.LINK_LOST}
 assert len(MissionState) == 14 and set(TRANSITIONS) == set(MissionState)
+
+
+H = TypeVar("H")
+
+
+def handler_table(handlers: Mapping[MissionState, H]) -> dict[MissionState, H]:
+    """A per-state dispatch table checked against :data:`TRANSITIONS`: exactly one handler for every mission state
+    (e.g. the drone's control step, :meth:`~aerodaas.actors.drone.DroneComponent._control`). Raises ValueError
+    naming the states without a handler, or the keys that are not mission states."""
+    missing = set(TRANSITIONS) - set(handlers)
+    unknown = [k for k in handlers if k not in TRANSITIONS]
+    if missing or unknown:
+        raise ValueError(f"handler table: no handler for {sorted(s.value for s in missing)}"
+                         + (f"; not mission states: {unknown}" if unknown else ""))
+    return dict(handlers)
 
 
 class IllegalTransition(RuntimeError):
