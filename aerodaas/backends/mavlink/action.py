@@ -161,3 +161,10 @@ class ActionMixin:
             if self._mode != "GUIDED":
                 self.set_mode("GUIDED")
             self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_m)
+
+    def _init_action(self) -> None:
+        """Who flies: an arm() under way, whether we are in control (then safe_end() is ours), the altitude reference
+        pinned by a mission upload."""
+        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
+        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
+        self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it

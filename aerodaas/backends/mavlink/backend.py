@@ -1,16 +1,13 @@
 """The MAVLink vehicle backend: one class composed of one mixin per MAVLink concern (see the package docstring)."""
 from __future__ import annotations
 
-import queue
 import threading
 import time
 from collections import deque
 from typing import Any, Literal
 
-import numpy as np
-
 from aerodaas.config import MavlinkConfig
-from aerodaas.model.types import GeoPoint, Odometry
+from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
@@ -19,7 +16,7 @@ from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
 from aerodaas.backends.mavlink.params import ParamMixin
-from aerodaas.backends.mavlink.telemetry import ODOMETRY_QUEUE, TelemetryMixin
+from aerodaas.backends.mavlink.telemetry import TelemetryMixin
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
@@ -99,7 +96,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.config_home: GeoPoint = cfg.home
         self.autopilot: Literal["ardupilot", "px4"] | None = None
         self.vehicle_type: str = ""
-        self.command_rtt_ms: list[float] = []
         #: every message the receive path saw, unknown and malformed ones included
         self.messages_received = 0
         self._conn: Any = None
@@ -109,48 +105,15 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._stop = threading.Event()
         self._io: threading.Thread | None = None
         self._io_error: BaseException | None = None
-        self._events: deque[dict[str, Any]] = deque(maxlen=2000)
-        self._acks: queue.Queue = queue.Queue()
-        self._mission_q: queue.Queue = queue.Queue()
-        self._mission_active = False
         self._recent: deque[tuple] = deque(maxlen=32)  # (sys, comp, seq, msgid, crc) for duplicate packets
         self._texts: deque[tuple[float, int, str]] = deque(maxlen=50)
         #: long STATUSTEXTs being reassembled: (component, id) -> {"t": first chunk, "severity", "parts": {seq: text}}
         self._chunks: dict[tuple[int, int], dict[str, Any]] = {}
         self._ap_modes: dict[str, int] = {}
-        # state (guarded by _lock)
-        self._pos = np.zeros(3)
-        self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
-        self._pos_seq = 0  # position samples received
-        #: the odometry of each position sample not yet drained (telemetry.py drain_odometry), oldest first
-        self._odom_q: deque[Odometry] = deque(maxlen=ODOMETRY_QUEUE)
-        self._odom_q_dropped = 0  # samples pushed out of the full queue since it was last drained
-        self._odom_q_drained = False  # drained once: the run takes samples now, an overflow is a loss
-        self._vel = np.zeros(3)
-        self._est_hspeed = 0.0  # its horizontal speed, m/s (telemetry.py _set_velocity) ...
-        self._est_steady = False  # ... changed at most at 1 m/s^2 since the sample before ...
-        self._est_ms: int | None = None  # ... at this time_boot_ms
-        self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
-        self._geo: GeoPoint | None = None
-        self._rel_alt = 0.0
-        self._has_global = False
-        self._local_ned: tuple[float, ...] | None = None
-        self._local_wall = 0.0
         self._armed = False
         self._mode = ""
         self._system_status = 0
-        self._landed_state = 0
-        self._landed_wall = 0.0
-        self._battery: float | None = None
-        self._battery_v = 0.0
-        self._gps_fix = -1
-        self._sensors: tuple[int, int, int] | None = None
-        self._home_received = False
         self._was_armed = False  # armed once: the ENU origin (home) stays put until the next arm() (telemetry.py)
-        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
-        self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
-        self._mission_seq = -1
-        self._last_reached: tuple[int, float] = (-1, 0.0)
         self._link_ok = False
         self._last_hb = 0.0
         self._hb_boot_ms = 0  # the vehicle's time_boot_ms when its latest HEARTBEAT came (link.py _periodic)
@@ -164,50 +127,28 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._clock_samples: deque[tuple[float, int]] = deque()
         self._t_max = 0.0
         self._reanchor = False  # the link was lost: the next time_boot_ms may re-anchor the clock (link.py)
-        # outgoing
-        self._setpoint: tuple | None = None
-        self._carrot_sp: tuple | None = None  # the speed-capped goto being flown, its progress (m) and time (s)
-        self._carrot_s = self._carrot_t = 0.0
-        self._sp_sent = 0
-        self._sp_next = 0.0
-        # the running stream's last setpoint: wall time, the vehicle's time_boot_ms then (None: no stream running),
-        # and when a stall of it was first seen (offboard.py _stream_may_go_on)
-        self._sp_wall, self._sp_boot_ms, self._stall_seen = 0.0, None, None
-        #: PX4's offboard-loss timeout COM_OF_LOSS_T (vehicle seconds), read at connect
-        self._offboard_loss_s = 1.0
-        self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled (offboard.py)
         self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
         self._hb_next = 0.0
         # messages the shared link's queue dropped, and those lost before it by sequence number, counted from the
         # connection on (link.py _report_link_drops; the messages received then: _received_base)
         self._drops_report, self._lost_report, self._received_base = ReportedCount(), ReportedCount(), 0
-        self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
         self._mode_changes = 0
-        self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode
         #: the autopilot's failsafe, when it entered one by itself: {"mode", "previous", "t", "text"} (link.py)
         self.failsafe: dict[str, Any] | None = None
         self._stream_legacy = False
         self._ever_linked = False
         self._resume_streams = False
-        self._att_wall = 0.0
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
         #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
         self.safety = cfg.safety
-        self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
         self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
-        self._health_seen = 0  # every SYS_STATUS health bit ever reported
-        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
-        self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
-        self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it
-        self._home_moved_alt = 0.0
-        self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
-        self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
-        self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
-        #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
-        self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
-        self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)
+        self._init_command()
+        self._init_telemetry()
+        self._init_action()
+        self._init_offboard()
+        self._init_mission()
         self._init_params()
         self._init_fence()
 

@@ -69,39 +69,57 @@ class CommandMixin:
                 self._event("command_resent", command=name, attempt=attempt,
                             after=_enum_name("MAV_RESULT", answer.result) if answer is not None else "no COMMAND_ACK",
                             waited_s=round(time.monotonic() - started, 3))
-            answer = None
             sent = time.monotonic()
             self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
-            deadline = min(sent + timeout, overall)
-            while True:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                try:
-                    _, ack = self._acks.get(timeout=min(remaining, 0.05))
-                except queue.Empty:
-                    if not self._link_ok:
-                        raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
-                    continue
-                if ack.command != command:
-                    continue
-                if ack.result == M.MAV_RESULT_ACCEPTED:
-                    self.command_rtt_ms.append((time.monotonic() - sent) * 1000.0)
-                    return
-                if ack.result == M.MAV_RESULT_IN_PROGRESS:  # it runs: wait for the final ACK, never re-send
-                    last = ack
-                    deadline = overall
-                    continue
-                if ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
-                    last = answer = ack
-                    if attempt == retries:
-                        break  # no try left to wait for
-                    deadline = min(deadline, time.monotonic() + min(timeout, _REJECTED_BACKOFF_S))
-                    continue
-                raise CommandRefused(self.robot_id, name, _enum_name("MAV_RESULT", ack.result),
-                                     self._status_text_since(started))
+            accepted, latest, answer = self._await_ack(name, command, started, sent, min(sent + timeout, overall),
+                                                       overall, attempt == retries, min(timeout, _REJECTED_BACKOFF_S))
+            if accepted:
+                return
+            last = latest if latest is not None else last
             if last is not None and last.result == M.MAV_RESULT_IN_PROGRESS:
                 break
+        self._command_failed(name, command, last, started, retries, timeout)
+
+    def _await_ack(self, name: str, command: int, started: float, sent: float, deadline: float, overall: float,
+                   last_try: bool, backoff_s: float) -> tuple[bool, Any, Any]:
+        """One try of :meth:`command_long`: wait for the COMMAND_ACK of ``command`` sent at ``sent`` until
+        ``deadline`` (monotonic seconds); IN_PROGRESS moves that to ``overall`` (never re-sent), TEMPORARILY_REJECTED
+        to at most ``backoff_s`` from now (or ends the try on the ``last_try``). Returns (accepted, the try's latest
+        non-final ACK, its latest TEMPORARILY_REJECTED ACK). Raises CommandRefused for a refusing final result,
+        LinkLost when the link goes down."""
+        latest: Any = None
+        rejected: Any = None
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False, latest, rejected
+            try:
+                _, ack = self._acks.get(timeout=min(remaining, 0.05))
+            except queue.Empty:
+                if not self._link_ok:
+                    raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
+                continue
+            if ack.command != command:
+                continue
+            if ack.result == M.MAV_RESULT_ACCEPTED:
+                self.command_rtt_ms.append((time.monotonic() - sent) * 1000.0)
+                return True, latest, rejected
+            if ack.result == M.MAV_RESULT_IN_PROGRESS:  # it runs: wait for the final ACK, never re-send
+                latest = ack
+                deadline = overall
+                continue
+            if ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
+                latest = rejected = ack
+                if last_try:
+                    return False, latest, rejected  # no try left to wait for
+                deadline = min(deadline, time.monotonic() + backoff_s)
+                continue
+            raise CommandRefused(self.robot_id, name, _enum_name("MAV_RESULT", ack.result),
+                                 self._status_text_since(started))
+
+    def _command_failed(self, name: str, command: int, last: Any, started: float, retries: int,
+                        timeout: float) -> None:
+        """Raise why :meth:`command_long` got no accepted COMMAND_ACK (``last``: the latest non-final one)."""
         if not self._link_ok:
             raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
         if last is not None and last.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
@@ -187,3 +205,8 @@ class CommandMixin:
                                           self._status_text_since(sent, wait_s=0.0))
             time.sleep(0.005)
 
+    def _init_command(self) -> None:
+        """The command protocol's state: COMMAND_ACKs waiting to be taken, round trips, our last mode request."""
+        self.command_rtt_ms: list[float] = []
+        self._acks: queue.Queue = queue.Queue()
+        self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode

@@ -76,6 +76,18 @@ class MissionMixin:
         if absolute and (self._alt_ref is None or not self._armed):
             self._fix_altitude_reference()  # the take-off point, where the vehicle stands now
             self._alt_ref_pinned = True  # arm() keeps it: the mission's altitudes are relative to it
+        wire, sent_items = self._wire_items(items, built, absolute)
+        self._check_link("mission upload")
+        self._send_mission(wire)
+        self._remember_waypoints(wire)
+        self._event("mission_uploaded", count=len(sent_items))
+        return sent_items
+
+    def _wire_items(self, items: list[MissionItem], built: bool,
+                    absolute: bool) -> tuple[list[tuple], list[MissionItem]]:
+        """The MISSION_ITEM_INT fields of ``items`` (frame, command, autocontinue, param1-4, x, y, z; ArduPilot's
+        home placeholder first) and the items as sent (see :meth:`upload_mission`: ``built`` from waypoints, their
+        speeds capped; ``absolute``: home-relative altitudes sent as AMSL above the take-off point)."""
         wire: list[tuple] = []
         sent_items: list[MissionItem] = []
         for k, it in enumerate(items):
@@ -107,7 +119,11 @@ class MissionMixin:
             h = self.home
             wire.insert(0, (0, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, 0.0, int(round(h.lat * 1e7)),
                             int(round(h.lon * 1e7)), float(h.alt)))
-        self._check_link("mission upload")
+        return wire, sent_items
+
+    def _send_mission(self, wire: list[tuple]) -> None:
+        """The upload transfer of the ``wire`` items (MISSION_COUNT, each item as the autopilot requests it, until
+        its MISSION_ACK). Raises CommandRefused for a refusing MISSION_ACK."""
         n = len(wire)
 
         def send_item(seq: int, as_int: bool) -> None:
@@ -145,9 +161,6 @@ class MissionMixin:
             return False
 
         self._transaction("mission upload", lambda: resend(None), resend, on_msg)
-        self._remember_waypoints(wire)
-        self._event("mission_uploaded", count=len(sent_items))
-        return sent_items
 
     def _transaction(self, name: str, begin: Callable[[], None], resend: Callable[[Any], None],
                      on_msg: Callable[[Any, dict], bool]) -> dict:
@@ -303,3 +316,12 @@ class MissionMixin:
             self.set_mode("MISSION" if self.autopilot == "px4" else "AUTO")
         else:
             self.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
+
+    def _init_mission(self) -> None:
+        """The mission protocol's state: its message queue, the transfer under way, the uploaded mission's wire items."""
+        self._mission_q: queue.Queue = queue.Queue()
+        self._mission_active = False
+        self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
+        #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
+        self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
+        self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)

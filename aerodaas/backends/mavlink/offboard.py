@@ -349,3 +349,20 @@ class OffboardMixin:
         result = "landed" if not self._armed else ("link lost" if not self._link_ok else "timeout")
         self._event("safe_end", result=result, mode=mode, vehicle_s=round(self.t - t0, 2))
         return result
+
+    def _init_offboard(self) -> None:
+        """The outgoing target state: the active position/velocity setpoint and its stream, the speed-capped goto
+        (carrot), the offboard-loss watch and the last DO_CHANGE_SPEED."""
+        # outgoing
+        self._setpoint: tuple | None = None
+        self._carrot_sp: tuple | None = None  # the speed-capped goto being flown, its progress (m) and time (s)
+        self._carrot_s = self._carrot_t = 0.0
+        self._sp_sent = 0
+        self._sp_next = 0.0
+        # the running stream's last setpoint: wall time, the vehicle's time_boot_ms then (None: no stream running),
+        # and when a stall of it was first seen (offboard.py _stream_may_go_on)
+        self._sp_wall, self._sp_boot_ms, self._stall_seen = 0.0, None, None
+        #: PX4's offboard-loss timeout COM_OF_LOSS_T (vehicle seconds), read at connect
+        self._offboard_loss_s = 1.0
+        self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled (offboard.py)
+        self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -359,3 +360,42 @@ class TelemetryMixin:
     def _event(self, event: str, **fields: Any) -> None:
         self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
 
+    def _init_telemetry(self) -> None:
+        """The telemetry state (guarded by ``_lock``): the vehicle's latest position, velocity, attitude, battery, GPS, home and
+        mission progress as its streams report them, the odometry queue and the event queue."""
+        self._events: deque[dict[str, Any]] = deque(maxlen=2000)
+        # state (guarded by _lock)
+        self._pos = np.zeros(3)
+        self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
+        self._pos_seq = 0  # position samples received
+        #: the odometry of each position sample not yet drained (telemetry.py drain_odometry), oldest first
+        self._odom_q: deque[Odometry] = deque(maxlen=ODOMETRY_QUEUE)
+        self._odom_q_dropped = 0  # samples pushed out of the full queue since it was last drained
+        self._odom_q_drained = False  # drained once: the run takes samples now, an overflow is a loss
+        self._vel = np.zeros(3)
+        self._est_hspeed = 0.0  # its horizontal speed, m/s (telemetry.py _set_velocity) ...
+        self._est_steady = False  # ... changed at most at 1 m/s^2 since the sample before ...
+        self._est_ms: int | None = None  # ... at this time_boot_ms
+        self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
+        self._geo: GeoPoint | None = None
+        self._rel_alt = 0.0
+        self._has_global = False
+        self._local_ned: tuple[float, ...] | None = None
+        self._local_wall = 0.0
+        self._landed_state = 0
+        self._landed_wall = 0.0
+        self._battery: float | None = None
+        self._battery_v = 0.0
+        self._gps_fix = -1
+        self._sensors: tuple[int, int, int] | None = None
+        self._home_received = False
+        self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
+        self._mission_seq = -1
+        self._last_reached: tuple[int, float] = (-1, 0.0)
+        self._att_wall = 0.0
+        self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
+        self._health_seen = 0  # every SYS_STATUS health bit ever reported
+        self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
+        self._home_moved_alt = 0.0
+        self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
+        self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
