@@ -23,6 +23,18 @@ from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSch
 from aerodaas.actors.camera import CameraComponent
 
 
+def _capture_due(d: Any, tok: Any) -> None:
+    """Drone ``d``'s cameras whose next frame is due at its vehicle time capture (in lock-step, as part of the
+    cascade ``tok``); after a jump of the vehicle clock the next frame is one period on, not a burst."""
+    b = d.backend
+    for cam in d.cameras:
+        if b.t + 1e-9 >= cam["next_t"]:
+            cam["next_t"] += 1.0 / cam["fps"]
+            if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
+                cam["next_t"] = b.t + 1.0 / cam["fps"]
+            cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
+
+
 class _Checkpointer:
     """Sends each drone's checkpoint (:mod:`.checkpoint`) to the run's recorder actor about every ``period_s``
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
@@ -67,10 +79,37 @@ class ActorAssembly:
 
     def __init__(self, plane: DataPlane, spec: ActorSpec) -> None:
         from aerodaas.actors.drone import DroneComponent
-        from aerodaas.actors.recorder import RecorderService
 
         self.plane = plane
         self.sim = SimulationConfig.model_validate(spec.sim)
+        self.recorder = self._make_recorder(plane, spec)
+        plane.recorder = self.recorder
+        self.comps: dict[str, Any] = {}
+        self.scheduling = AnalyticsSchedulingService(plane, spec.analytics_scheduler) \
+            if spec.analytics_scheduler is not None else None
+        self._add_analytics(plane, spec)
+        self.drones: list[DroneComponent] = []
+        world = None
+        for r in spec.robots:
+            world = self._add_robot(plane, spec, r, world)
+        # real cameras are not synchronised: spread the fleet's capture phases over one frame period
+        for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
+            if isinstance(c, AnalyticsComponent):
+                c.abort = self._abort_all
+        if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
+            self.recorder.on_failure.append(
+                lambda info, drones=tuple(self.drones): [d.record_event("recording_failed", **info) for d in drones])
+        cams = [c for d in self.drones for c in d.cameras]
+        for i, c in enumerate(cams):
+            c["next_t"] = i / (len(cams) * c["fps"])
+        self._connect_all()
+
+    @staticmethod
+    def _make_recorder(plane: DataPlane, spec: ActorSpec) -> Any:
+        """A file of its own (and/or the live view) with ``spec.record``, the run's recorder actor with
+        ``spec.record_remote``, else None."""
+        from aerodaas.actors.recorder import RecorderService
+
         rec = spec.record
         if rec is not None:  # an actor with the file and/or the live view
             if rec.schemas:  # plug-in sensors' message schemas, from their declarations
@@ -78,18 +117,17 @@ class ActorAssembly:
 
                 for name, js in rec.schemas.items():
                     register_json_schema(name, js)
-            self.recorder = RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
-                                            declare=rec.declare)
-        elif spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
+            return RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
+                                   declare=rec.declare)
+        if spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
             from aerodaas.actors.remote_recorder import RemoteRecorder
 
-            self.recorder = RemoteRecorder(plane, spec.record_remote)
-        else:
-            self.recorder = None
-        plane.recorder = self.recorder
-        self.comps: dict[str, Any] = {}
-        self.scheduling = AnalyticsSchedulingService(plane, spec.analytics_scheduler) \
-            if spec.analytics_scheduler is not None else None
+            return RemoteRecorder(plane, spec.record_remote)
+        return None
+
+    def _add_analytics(self, plane: DataPlane, spec: ActorSpec) -> None:
+        """The analytics instances; those the analytics scheduler places go to its service (started here). Raises
+        ValueError for a scheduled analytics in an actor without an analytics scheduler."""
         for a in spec.analytics:
             if a.scheduled:
                 if self.scheduling is None:
@@ -103,50 +141,48 @@ class ActorAssembly:
             self.comps[a.cid] = plane.add(comp)
         if self.scheduling is not None:
             self.scheduling.start()
-        self.drones: list[DroneComponent] = []
-        world = None
-        for r in spec.robots:
-            if r.plugins:  # plug-in classes carried in the spec: known here before the config is checked
-                from aerodaas.plugins.registry import adopt
 
-                adopt(r.plugins)
-            cfg = RobotConfig.model_validate(r.robot)
-            # the drone owns its waypoint queue and its navigation inbox (registered as <robot>/scheduler)
-            drone = DroneComponent(r.drone_cid, r.robot, plane, r.scheduler, self.recorder, plane.epoch_ns,
-                                   r.preplanned, r.odom_cids, r.stat_cids, inbox_cid=r.scheduler_cid)
-            inbox = plane.add(drone.inbox)
-            for c in r.cameras:
-                if c.props.get("source", "sim") == "sim" and world is None:
-                    from aerodaas.sim.world import World
+    def _add_robot(self, plane: DataPlane, spec: ActorSpec, r: Any, world: Any) -> Any:
+        """Robot ``r``'s drone (with its navigation inbox), cameras and plug-in sensors. ``world``: the simulated
+        world its cameras render, made on the first simulated camera of this actor; returns it."""
+        from aerodaas.actors.drone import DroneComponent
 
-                    w = WorldConfig.model_validate(spec.world)
-                    world = World(w.ground, w.targets)  # one texture for every camera of this actor
-                cam = CameraComponent(plane, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
-                                      self.recorder, plane.epoch_ns)
-                cam.on_event = drone.record_event
-                drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
-                self.comps[c.cid] = cam
-            for ps in r.plugin_sensors:
-                from aerodaas.actors.plugin_sensor import PluginSensorComponent
+        if r.plugins:  # plug-in classes carried in the spec: known here before the config is checked
+            from aerodaas.plugins.registry import adopt
 
-                comp = PluginSensorComponent(plane, ps, cfg.id, self.recorder, plane.epoch_ns)
-                drone.plugin_sensors.append(comp)
-                self.comps[ps["cid"]] = comp
-            self.comps[r.drone_cid] = drone
-            self.comps[r.scheduler_cid] = inbox
-            self.drones.append(drone)
-        # real cameras are not synchronised: spread the fleet's capture phases over one frame period
-        for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
-            if isinstance(c, AnalyticsComponent):
-                c.abort = self._abort_all
-        if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
-            self.recorder.on_failure.append(
-                lambda info, drones=tuple(self.drones): [d.record_event("recording_failed", **info) for d in drones])
-        cams = [c for d in self.drones for c in d.cameras]
-        for i, c in enumerate(cams):
-            c["next_t"] = i / (len(cams) * c["fps"])
-        # robots that claim a fixed vehicle identity (a configured MAVLink system id) connect before the ones that
-        # take the lowest unclaimed one on a shared link (VehicleBackend.connects_first)
+            adopt(r.plugins)
+        cfg = RobotConfig.model_validate(r.robot)
+        # the drone owns its waypoint queue and its navigation inbox (registered as <robot>/scheduler)
+        drone = DroneComponent(r.drone_cid, r.robot, plane, r.scheduler, self.recorder, plane.epoch_ns,
+                               r.preplanned, r.odom_cids, r.stat_cids, inbox_cid=r.scheduler_cid)
+        inbox = plane.add(drone.inbox)
+        for c in r.cameras:
+            if c.props.get("source", "sim") == "sim" and world is None:
+                from aerodaas.sim.world import World
+
+                w = WorldConfig.model_validate(spec.world)
+                world = World(w.ground, w.targets)  # one texture for every camera of this actor
+            cam = CameraComponent(plane, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
+                                  self.recorder, plane.epoch_ns)
+            cam.on_event = drone.record_event
+            drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
+            self.comps[c.cid] = cam
+        for ps in r.plugin_sensors:
+            from aerodaas.actors.plugin_sensor import PluginSensorComponent
+
+            comp = PluginSensorComponent(plane, ps, cfg.id, self.recorder, plane.epoch_ns)
+            drone.plugin_sensors.append(comp)
+            self.comps[ps["cid"]] = comp
+        self.comps[r.drone_cid] = drone
+        self.comps[r.scheduler_cid] = inbox
+        self.drones.append(drone)
+        return world
+
+    def _connect_all(self) -> None:
+        """Connect every drone to its vehicle. Robots that claim a fixed vehicle identity (a configured MAVLink
+        system id) connect before the ones that take the lowest unclaimed one on a shared link
+        (VehicleBackend.connects_first). Raises RobotsNotConnected naming each robot's error (the connected
+        vehicles are handed back untouched)."""
         errors: dict[str, str] = {}
         for d in sorted(self.drones, key=lambda d: not d.backend.connects_first):
             try:
@@ -211,35 +247,12 @@ class ActorAssembly:
                 for d in active:
                     d.step(dt, tok)
                 for d in active:
-                    if d.done:  # settling: odometry only (:meth:`DroneComponent.settled`)
-                        continue
-                    b = d.backend
-                    for cam in d.cameras:
-                        if b.t + 1e-9 >= cam["next_t"]:
-                            cam["next_t"] += 1.0 / cam["fps"]
-                            if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
-                                cam["next_t"] = b.t + 1.0 / cam["fps"]
-                            cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
+                    if not d.done:  # settling: odometry only (:meth:`DroneComponent.settled`)
+                        _capture_due(d, tok)
                 if tok is not None:  # a frame for a consumer that Ray restarts waits up to restart_hold_s for it
                     tok.wait(max(120.0, self.plane.restart_hold_s + 60.0))
                 now = time.monotonic()
-                finished = []
-                for d in active:
-                    if d.done:  # the mission ended; its odometry waits for the vehicle's end state (below)
-                        pass
-                    elif d.backend.t + 1e-9 >= d.next_tick:
-                        due = d.next_tick
-                        d.next_tick += d.tick_period
-                        if not lock:
-                            late = now - (wall0 + due / sim.speedup) if d.backend.clock == "sim" else 0.0
-                            self.tick_lateness.append(late)
-                            if late > d.tick_period / sim.speedup:
-                                d.missed_ticks += 1
-                        d.control_tick()
-                    elif d.end_requested is not None:
-                        d.control_tick()
-                    if d.done and d.settled():
-                        finished.append(d)
+                finished = [d for d in active if self._control_due(d, now, wall0)]
                 for d in finished:
                     d.finish()
                     active.remove(d)
@@ -261,6 +274,26 @@ class ActorAssembly:
                     self.plane.report_error("analytics_scheduler", e)
         return {d.cfg.id: {**d.report(), "plugin_sensors": {ps.sensor_id: ps.stats() for ps in d.plugin_sensors}}
                 for d in drones}
+
+    def _control_due(self, d: Any, now: float, wall0: float) -> bool:
+        """Drone ``d``'s control tick when due (or its end requested) at wall time ``now`` (monotonic s; the run's
+        clock began at ``wall0``), its lateness counted outside lock-step. True when its mission ended and its
+        recorded odometry shows the vehicle's end state (then it is finished)."""
+        sim = self.sim
+        if d.done:  # the mission ended; its odometry waits for the vehicle's end state (below)
+            pass
+        elif d.backend.t + 1e-9 >= d.next_tick:
+            due = d.next_tick
+            d.next_tick += d.tick_period
+            if not sim.lockstep:
+                late = now - (wall0 + due / sim.speedup) if d.backend.clock == "sim" else 0.0
+                self.tick_lateness.append(late)
+                if late > d.tick_period / sim.speedup:
+                    d.missed_ticks += 1
+            d.control_tick()
+        elif d.end_requested is not None:
+            d.control_tick()
+        return d.done and d.settled()
 
     def _abort_all(self, reason: str) -> None:
         """End every drone's mission as failed with ``reason``: this actor's drones directly, the others through

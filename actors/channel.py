@@ -133,6 +133,55 @@ def _attach(name: str) -> SharedMemory:
     return shm
 
 
+class _SenderSession:
+    """One authenticated sender's connection on the receiving side: answers are sent under one lock (a cascade's
+    answer comes from another thread), the slots it mapped (``maps``: shared-memory name -> segment), and the slots
+    whose frames were collected since the last answer (``freed``, filled by finalizers; ``wake`` tells the
+    thread that reports those freed after their delivery was answered, :meth:`late_frees`)."""
+
+    def __init__(self, conn: Any) -> None:
+        self.conn = conn
+        self.send_lock = threading.Lock()
+        self.maps: dict[str, SharedMemory] = {}
+        self.freed: deque[str] = deque()
+        self.wake = threading.Event()
+        self.stop = threading.Event()
+        threading.Thread(target=self.late_frees, name="aerodaas-channel-free", daemon=True).start()
+
+    def send(self, obj: Any) -> None:
+        with self.send_lock:
+            try:
+                self.conn.send(obj)
+            except (OSError, ValueError):  # the sender is gone: nothing to tell it
+                pass
+
+    def take_freed(self) -> tuple[str, ...]:
+        out = []
+        while self.freed:
+            out.append(self.freed.popleft())
+        return tuple(out)
+
+    def late_frees(self) -> None:
+        """Frames that outlived their delivery (kept, queued): told when collected."""
+        while not self.stop.is_set():
+            self.wake.wait(0.5)
+            self.wake.clear()
+            names = self.take_freed()
+            if names:
+                self.send(SlotFree(names))
+
+    def close(self) -> None:
+        """Stop the late-frees thread, close the connection and unmap the slots no frame holds any more."""
+        self.stop.set()
+        self.wake.set()
+        self.conn.close()
+        for shm in self.maps.values():
+            try:
+                shm.close()
+            except BufferError:  # an analytics still holds a frame of it: unmapped when that is collected
+                pass
+
+
 class ChannelServer:
     """The receiving end of every channel into one actor: listens on :func:`channel_address`, authenticates each
     sender with the run's key and serves it on a thread of its own. ``deliver(d) -> replies`` is the actor's
@@ -182,48 +231,11 @@ class ChannelServer:
         The connection is known to :meth:`close` before the handshake: the sender's side of the handshake ends one
         message before ours, so a sender may already send while we still authenticate — a close() then must still
         end this connection, or the sender would wait for an answer from a server that stopped."""
-        with self._conns_lock:
-            if self._closed:
-                conn.close()
-                return
-            self._conns.add(conn)
-        try:
-            mpc.deliver_challenge(conn, self._key)
-            mpc.answer_challenge(conn, self._key)
-        except Exception:  # noqa: BLE001 - not one of the run's actors (or closed under us): drop it
-            with self._conns_lock:
-                self._conns.discard(conn)
-            conn.close()
+        if not self._accept(conn):
             return
         self.connections += 1
-        send_lock = threading.Lock()
-        maps: dict[str, SharedMemory] = {}
-        freed: deque[str] = deque()  # slots whose frames were collected, not yet told (filled by finalizers)
-        wake = threading.Event()
-        stop = threading.Event()
-
-        def send(obj: Any) -> None:
-            with send_lock:
-                try:
-                    conn.send(obj)
-                except (OSError, ValueError):  # the sender is gone: nothing to tell it
-                    pass
-
-        def take_freed() -> tuple[str, ...]:
-            out = []
-            while freed:
-                out.append(freed.popleft())
-            return tuple(out)
-
-        def late_frees() -> None:  # frames that outlived their delivery (kept, queued): told when collected
-            while not stop.is_set():
-                wake.wait(0.5)
-                wake.clear()
-                names = take_freed()
-                if names:
-                    send(SlotFree(names))
-
-        threading.Thread(target=late_frees, name="aerodaas-channel-free", daemon=True).start()
+        session = _SenderSession(conn)
+        maps, freed, wake, send = session.maps, session.freed, session.wake, session.send
         try:
             while True:
                 try:
@@ -248,7 +260,7 @@ class ChannelServer:
                         d.msg.data.flags.writeable = False  # sent inline: shared by every reader here too
                         d.msg.trace["get_ms"] = 0.0
                     if d.cascade:  # answered when the cascade it starts here is done; this thread reads on
-                        self._deliver(d, lambda r, seq=seq: send(ChannelDone(seq, r, None, take_freed())))
+                        self._deliver(d, lambda r, seq=seq: send(ChannelDone(seq, r, None, session.take_freed())))
                         d = None
                         continue
                     else:
@@ -258,18 +270,29 @@ class ChannelServer:
                     error = f"{type(e).__name__}: {e}"
                     self._on_error("channel", e)
                 d = None  # this thread's last reference to the frame: usually frees its slot right here
-                send(ChannelDone(seq, replies, error, take_freed()))
+                send(ChannelDone(seq, replies, error, session.take_freed()))
         finally:
-            stop.set()
-            wake.set()
+            with self._conns_lock:
+                self._conns.discard(conn)
+            session.close()
+
+    def _accept(self, conn: Any) -> bool:
+        """Register ``conn`` (known to :meth:`close` before the handshake) and authenticate it with the run's key,
+        both ways. False (closed) when the server is closed or the peer is not one of the run's actors."""
+        with self._conns_lock:
+            if self._closed:
+                conn.close()
+                return False
+            self._conns.add(conn)
+        try:
+            mpc.deliver_challenge(conn, self._key)
+            mpc.answer_challenge(conn, self._key)
+        except Exception:  # noqa: BLE001 - not one of the run's actors (or closed under us): drop it
             with self._conns_lock:
                 self._conns.discard(conn)
             conn.close()
-            for shm in maps.values():
-                try:
-                    shm.close()
-                except BufferError:  # an analytics still holds a frame of it: unmapped when that is collected
-                    pass
+            return False
+        return True
 
     @staticmethod
     def _map(sf: SlotFrame, maps: dict[str, SharedMemory], freed: deque, wake: threading.Event) -> np.ndarray:

@@ -21,8 +21,6 @@ PACKAGES = ("aerodaas", "actors", "schedulers", "clusters")
 
 #: (path relative to the repository root, expression as ``ast.unparse`` prints it) -> reason.
 ALLOWED: dict[tuple[str, str], str] = {
-    ("aerodaas/tools/hitl.py", "server._locks"): "same class: ``server = self`` in HitlServer's request handlers",
-    ("aerodaas/tools/hitl.py", "server._ids"): "same class: ``server = self`` in HitlServer's request handlers",
     ("actors/channel.py", "shm._name"): "stdlib SharedMemory: the resource tracker registers the leading-slash "
                                         "``_name``; the public ``name`` strips the slash, so it cannot unregister "
                                         "(the documented pre-3.13 workaround; 3.13 has ``track=False``)",

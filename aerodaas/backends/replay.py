@@ -194,8 +194,19 @@ def load_ulog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
         ulog = ULog(str(p), list(ULOG_TOPICS))
     except Exception as e:  # noqa: BLE001 - pyulog raises bare Exceptions / struct errors on bad files
         raise BackendError(f"replay.log: {str(p)!r} is not a readable ULog: {type(e).__name__}: {e}") from e
-    start_us = ulog.start_timestamp
-    rows: list[tuple[int, int, str, dict[str, Any]]] = []  # (timestamp us, topic order, topic, sample)
+    rows, found = _ulog_rows(ulog, p)
+    conv = _UlogConverter()
+    out: list[LogMessage] = []
+    for ts, _, topic, f in rows:
+        out.extend(conv.convert((ts - ulog.start_timestamp) / 1e6, topic, f))
+    return out, {"t0": None, "format": "ulog", "topics": sorted(set(found)), "dropouts": len(ulog.dropouts)}
+
+
+def _ulog_rows(ulog: Any, p: Path) -> tuple[list[tuple[int, int, str, dict[str, Any]]], list[str]]:
+    """The samples of :data:`ULOG_TOPICS` (first instance) and the log's text messages (topic ``"log"``), as
+    (timestamp us, topic order, topic, sample) sorted by time then topic, and the topics found. Raises BackendError
+    when there is no ``vehicle_global_position``."""
+    rows: list[tuple[int, int, str, dict[str, Any]]] = []
     found = []
     for d in ulog.data_list:
         if d.multi_id != 0 or d.name not in ULOG_TOPICS:
@@ -212,61 +223,79 @@ def load_ulog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
         rows.append((int(m.timestamp), len(ULOG_TOPICS), "log",
                      {"level": level if 0 <= level <= 7 else 6, "text": m.message}))
     rows.sort(key=lambda r: (r[0], r[1]))
+    return rows, found
 
-    out: list[LogMessage] = []
-    vel_ned = (0.0, 0.0, 0.0)
-    home_alt: float | None = None
-    status: tuple[bool, str] | None = None
-    landed: bool | None = None
-    reached = -1
-    for ts, _, topic, f in rows:
-        t = (ts - start_us) / 1e6
+
+class _UlogConverter:
+    """One ULog sample at a time into the MAVLink-like messages of a replay (see :func:`load_ulog`), with what it
+    carries over: the latest NED velocity (m/s), the home altitude (m AMSL), the armed state and mode, the landed
+    state and the last reached mission item (HEARTBEAT, EXTENDED_SYS_STATE and MISSION_ITEM_REACHED on change)."""
+
+    def __init__(self) -> None:
+        self.vel_ned = (0.0, 0.0, 0.0)
+        self.home_alt: float | None = None
+        self.status: tuple[bool, str] | None = None
+        self.landed: bool | None = None
+        self.reached = -1
+
+    def convert(self, t: float, topic: str, f: dict[str, Any]) -> list[LogMessage]:
+        """The messages of sample ``f`` of ``topic`` at ``t`` seconds since the log's start."""
         if topic == "vehicle_local_position":
-            vel_ned = (f.get("vx", 0.0), f.get("vy", 0.0), f.get("vz", 0.0))
+            self.vel_ned = (f.get("vx", 0.0), f.get("vy", 0.0), f.get("vz", 0.0))
         elif topic == "vehicle_global_position":
-            if not (math.isfinite(f["lat"]) and math.isfinite(f["lon"]) and math.isfinite(f["alt"])):
-                continue
-            if home_alt is None:
-                home_alt = f["alt"]
-            out.append(LogMessage(t, "GLOBAL_POSITION_INT", _UlogMsg(
-                "GLOBAL_POSITION_INT", lat=round(f["lat"] * 1e7), lon=round(f["lon"] * 1e7), alt=round(f["alt"] * 1000),
-                relative_alt=round((f["alt"] - home_alt) * 1000), vx=round(vel_ned[0] * 100),
-                vy=round(vel_ned[1] * 100), vz=round(vel_ned[2] * 100))))
+            return self._position(t, f)
         elif topic == "home_position":
             if math.isfinite(f["lat"]) and math.isfinite(f["lon"]):
-                home_alt = f["alt"]
-                out.append(LogMessage(t, "HOME_POSITION", _UlogMsg(
+                self.home_alt = f["alt"]
+                return [LogMessage(t, "HOME_POSITION", _UlogMsg(
                     "HOME_POSITION", latitude=round(f["lat"] * 1e7), longitude=round(f["lon"] * 1e7),
-                    altitude=round(f["alt"] * 1000))))
+                    altitude=round(f["alt"] * 1000)))]
         elif topic == "vehicle_attitude":
             roll, pitch, yaw = _euler_from_quaternion(f["q[0]"], f["q[1]"], f["q[2]"], f["q[3]"])
-            out.append(LogMessage(t, "ATTITUDE", _UlogMsg("ATTITUDE", roll=roll, pitch=pitch, yaw=yaw)))
+            return [LogMessage(t, "ATTITUDE", _UlogMsg("ATTITUDE", roll=roll, pitch=pitch, yaw=yaw))]
         elif topic == "battery_status":
             rem = f.get("remaining", -1.0)
             pct = round(rem * 100) if 0.0 <= rem <= 1.0 else -1
-            out.append(LogMessage(t, "BATTERY_STATUS", _UlogMsg("BATTERY_STATUS", battery_remaining=pct)))
-            out.append(LogMessage(t, "SYS_STATUS", _UlogMsg(
-                "SYS_STATUS", voltage_battery=round(f.get("voltage_v", 0.0) * 1000), battery_remaining=pct)))
-        elif topic == "vehicle_status":
+            return [LogMessage(t, "BATTERY_STATUS", _UlogMsg("BATTERY_STATUS", battery_remaining=pct)),
+                    LogMessage(t, "SYS_STATUS", _UlogMsg(
+                        "SYS_STATUS", voltage_battery=round(f.get("voltage_v", 0.0) * 1000), battery_remaining=pct))]
+        elif topic == "log":
+            return [LogMessage(t, "STATUSTEXT", _UlogMsg("STATUSTEXT", severity=f["level"], text=f["text"]))]
+        else:
+            return self._on_change(t, topic, f)
+        return []
+
+    def _position(self, t: float, f: dict[str, Any]) -> list[LogMessage]:
+        if not (math.isfinite(f["lat"]) and math.isfinite(f["lon"]) and math.isfinite(f["alt"])):
+            return []
+        if self.home_alt is None:
+            self.home_alt = f["alt"]
+        v = self.vel_ned
+        return [LogMessage(t, "GLOBAL_POSITION_INT", _UlogMsg(
+            "GLOBAL_POSITION_INT", lat=round(f["lat"] * 1e7), lon=round(f["lon"] * 1e7), alt=round(f["alt"] * 1000),
+            relative_alt=round((f["alt"] - self.home_alt) * 1000), vx=round(v[0] * 100), vy=round(v[1] * 100),
+            vz=round(v[2] * 100)))]
+
+    def _on_change(self, t: float, topic: str, f: dict[str, Any]) -> list[LogMessage]:
+        """vehicle_status, vehicle_land_detected, mission_result: a message when what they say changed."""
+        if topic == "vehicle_status":
             now = (int(f["arming_state"]) == _PX4_ARMING_STATE_ARMED,
                    PX4_NAV_STATE_MODES.get(int(f["nav_state"]), f"NAV_STATE_{int(f['nav_state'])}"))
-            if now != status:
-                status = now
-                out.append(LogMessage(t, "HEARTBEAT", _UlogMsg(
-                    "HEARTBEAT", base_mode=_MAV_MODE_FLAG_SAFETY_ARMED if now[0] else 0, mode_name=now[1])))
+            if now != self.status:
+                self.status = now
+                return [LogMessage(t, "HEARTBEAT", _UlogMsg(
+                    "HEARTBEAT", base_mode=_MAV_MODE_FLAG_SAFETY_ARMED if now[0] else 0, mode_name=now[1]))]
         elif topic == "vehicle_land_detected":
-            if bool(f["landed"]) != landed:
-                landed = bool(f["landed"])
-                out.append(LogMessage(t, "EXTENDED_SYS_STATE", _UlogMsg(
-                    "EXTENDED_SYS_STATE", landed_state=1 if landed else 2)))
+            if bool(f["landed"]) != self.landed:
+                self.landed = bool(f["landed"])
+                return [LogMessage(t, "EXTENDED_SYS_STATE", _UlogMsg(
+                    "EXTENDED_SYS_STATE", landed_state=1 if self.landed else 2))]
         elif topic == "mission_result":
             seq = int(f.get("seq_reached", -1))
-            if seq >= 0 and seq != reached:
-                reached = seq
-                out.append(LogMessage(t, "MISSION_ITEM_REACHED", _UlogMsg("MISSION_ITEM_REACHED", seq=seq)))
-        elif topic == "log":
-            out.append(LogMessage(t, "STATUSTEXT", _UlogMsg("STATUSTEXT", severity=f["level"], text=f["text"])))
-    return out, {"t0": None, "format": "ulog", "topics": sorted(set(found)), "dropouts": len(ulog.dropouts)}
+            if seq >= 0 and seq != self.reached:
+                self.reached = seq
+                return [LogMessage(t, "MISSION_ITEM_REACHED", _UlogMsg("MISSION_ITEM_REACHED", seq=seq))]
+        return []
 
 
 def _home_of(m: Any) -> GeoPoint | None:

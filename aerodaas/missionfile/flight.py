@@ -84,16 +84,67 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
                          f"{', '.join(command_name(c) for c in sorted(clash))}")
     home = home if home is not None else plan.home
     items = expand_items(plan)
+    fb = _FlightBuilder(src, home, skip, min_altitude, max_altitude, max_distance)
+    for k, item in enumerate(items):
+        fb.item(item, items[k + 1:])
 
-    waypoints: list[Waypoint] = []
-    skipped: list[str] = []
-    final: str | None = None
-    terminal: MissionItem | None = None
-    speed: float | None = None
-    last: tuple[float, float, float] | None = None  # lat, lon, altitude above home of the previous waypoint
+    from collections import Counter
 
-    def altitude(item: MissionItem, tag: str) -> float:
-        z = item.params[6]
+    for k, (lat, lon, alt) in enumerate(plan.rally_points):  # the autopilot's RTL may fly to them
+        _check_bounds(src, f"rally point {k + 1}", lat, lon, alt, home, max_altitude, max_distance)
+    waypoints = fb.waypoints
+    dup = sorted(i for i, n in Counter(w.id for w in waypoints).items() if n > 1)  # linear (ids.count was quadratic)
+    if dup:
+        raise _fail(src, "items", f"duplicate sequence numbers give duplicate waypoint ids {dup}")
+    if check_geofence and not plan.geofence.is_empty and waypoints:
+        _check_flight_geofence(src, plan.geofence, home, waypoints, fb.final)
+    name = Path(plan.source).stem if plan.source else "mission"
+    nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, waypoints, SchedulingType.ORDERED, name=name)
+    return FlightPlan(navigation=nav, final_action=fb.final or "hover", geofence=plan.geofence, home=home,
+                      skipped=fb.skipped)
+
+
+class _FlightBuilder:
+    """:func:`plan_to_flight`'s walk over the mission items, one at a time (:meth:`item`), with what it collects:
+    the waypoints, the skipped items, the final action and the item that ended the mission, the speed in force
+    (m/s; None: the default) and the previous waypoint's latitude, longitude and altitude above home (m). Errors
+    are :class:`MissionFileError` naming the file ``src`` and the item."""
+
+    def __init__(self, src: str, home: GeoPoint | None, skip: frozenset[int], min_altitude: float | None,
+                 max_altitude: float | None, max_distance: float | None) -> None:
+        self.src, self.home, self.skip = src, home, skip
+        self.min_altitude, self.max_altitude, self.max_distance = min_altitude, max_altitude, max_distance
+        self.waypoints: list[Waypoint] = []
+        self.skipped: list[str] = []
+        self.final: str | None = None
+        self.terminal: MissionItem | None = None
+        self.speed: float | None = None
+        self.last: tuple[float, float, float] | None = None
+
+    def item(self, item: MissionItem, rest: list[MissionItem]) -> None:
+        """Take one item (``rest``: the items after it)."""
+        tag, cmd = item.describe(), item.command
+        if cmd in self.skip:
+            self.skipped.append(f"{tag} skipped")
+            return
+        if self.terminal is not None:
+            raise _fail(self.src, tag, f"comes after the terminal {self.terminal.describe()} and would never run")
+        if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM):
+            self._position_item(item, tag, rest)
+        elif cmd == MAV_CMD_NAV_LAND:
+            self._land(item, tag)
+        elif cmd == MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            self.final, self.terminal = "rtl", item
+        elif cmd == MAV_CMD_DO_CHANGE_SPEED:
+            self._change_speed(item, tag)
+        else:
+            hint = " (pass skip_commands=PAYLOAD_COMMANDS to skip camera/gimbal commands)" \
+                if cmd in PAYLOAD_COMMANDS else ""
+            raise _fail(self.src, tag, f"{command_name(cmd)} is not supported by AeroDaaS navigation{hint}")
+
+    def _altitude(self, item: MissionItem, tag: str) -> float:
+        """The item's altitude above home (m), from a relative or an AMSL frame."""
+        src, z = self.src, item.params[6]
         if item.frame in _TERRAIN_FRAMES:
             raise _fail(src, tag, f"{frame_name(item.frame)} altitudes are above terrain; AeroDaaS has no "
                                   "terrain model")
@@ -103,107 +154,86 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
             raise _fail(src, tag, "altitude (z) is not set")
         if item.frame in _RELATIVE_FRAMES:
             return z
-        if home is None:
+        if self.home is None:
             raise _fail(src, tag, f"{frame_name(item.frame)} altitude {z:g} m is above mean sea level; converting "
                                   "it to altitude above home needs the home position (plan has none; pass home=)")
-        return z - home.alt
+        return z - self.home.alt
 
-    def add_waypoint(item: MissionItem, tag: str, lat: float, lon: float, z: float, hover: float = 0.0,
-                     radius: float | None = None, wp_id: str | None = None) -> None:
-        nonlocal last
+    def _add_waypoint(self, item: MissionItem, tag: str, lat: float, lon: float, z: float, hover: float = 0.0,
+                      radius: float | None = None, wp_id: str | None = None) -> None:
+        home, min_altitude = self.home, self.min_altitude
         if min_altitude is not None and z < min_altitude:
-            raise _fail(src, tag, f"altitude {z:g} m above home is below min_altitude {min_altitude:g} m "
-                                  f"({frame_name(item.frame)}, z={item.params[6]!r}"
-                                  f"{f', home altitude {home.alt:g} m AMSL' if home is not None else ''})")
-        _check_bounds(src, tag, lat, lon, z, home, max_altitude, max_distance)
+            raise _fail(self.src, tag, f"altitude {z:g} m above home is below min_altitude {min_altitude:g} m "
+                                       f"({frame_name(item.frame)}, z={item.params[6]!r}"
+                                       f"{f', home altitude {home.alt:g} m AMSL' if home is not None else ''})")
+        _check_bounds(self.src, tag, lat, lon, z, home, self.max_altitude, self.max_distance)
         kwargs: dict[str, Any] = {}
         if radius is not None and radius > 0:
             kwargs["acceptance_radius"] = radius
         try:
-            waypoints.append(Waypoint(id=wp_id or f"item{item.seq}", x=lat, y=lon, z=z, hover_duration=hover,
-                                      waypoint_type="absolute", speed=speed, **kwargs))
+            self.waypoints.append(Waypoint(id=wp_id or f"item{item.seq}", x=lat, y=lon, z=z, hover_duration=hover,
+                                           waypoint_type="absolute", speed=self.speed, **kwargs))
         except ValidationError as e:
-            raise _fail(src, tag, _first_error(e)) from None
-        last = (lat, lon, z)
+            raise _fail(self.src, tag, _first_error(e)) from None
+        self.last = (lat, lon, z)
 
-    for k, item in enumerate(items):
-        tag = item.describe()
-        cmd = item.command
-        if cmd in skip:
-            skipped.append(f"{tag} skipped")
-            continue
-        if terminal is not None:
-            raise _fail(src, tag, f"comes after the terminal {terminal.describe()} and would never run")
-        p = item.params
-        if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LOITER_UNLIM):
-            lat, lon = p[4], p[5]
-            if _latlon_missing(lat, lon):
-                if cmd == MAV_CMD_NAV_WAYPOINT:
-                    raise _fail(src, tag, f"latitude/longitude not set (x={lat!r}, y={lon!r})")
-                if cmd != MAV_CMD_NAV_TAKEOFF and last is not None:
-                    lat, lon = last[0], last[1]  # loiter at the current position
-                elif home is not None:
-                    lat, lon = home.lat, home.lon
-                else:
-                    raise _fail(src, tag, "has no latitude/longitude, so it acts at the vehicle's current (home) "
-                                          "position, which is unknown (plan has no home; pass home=)")
-            z = altitude(item, tag)
-            hover, radius = 0.0, None
-            if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
-                hover = p[0] or 0.0
-                if hover < 0:
-                    raise _fail(src, tag, f"param1 (hold/loiter time) must be >= 0 s, got {hover!r}")
+    def _position_item(self, item: MissionItem, tag: str, rest: list[MissionItem]) -> None:
+        """NAV_WAYPOINT, NAV_TAKEOFF, NAV_LOITER_TIME, NAV_LOITER_UNLIM: a waypoint."""
+        src, cmd, p = self.src, item.command, item.params
+        lat, lon = p[4], p[5]
+        if _latlon_missing(lat, lon):
             if cmd == MAV_CMD_NAV_WAYPOINT:
-                radius = p[1]
-            if cmd == MAV_CMD_NAV_LOITER_UNLIM:
-                rest = [it for it in items[k + 1:] if it.command not in skip]
-                if rest:
-                    raise _fail(src, tag, f"loiters forever, so the following {rest[0].describe()} would never run")
-                final = "hover"
-            add_waypoint(item, tag, lat, lon, z, hover, radius)
-        elif cmd == MAV_CMD_NAV_LAND:
-            lat, lon = p[4], p[5]
-            if item.frame != MAV_FRAME_MISSION and not _latlon_missing(lat, lon):
-                here = last[:2] if last is not None else (home.lat, home.lon) if home is not None else None
-                if here is None or abs(lat - here[0]) > 1e-7 or abs(lon - here[1]) > 1e-7:
-                    if last is None:
-                        raise _fail(src, tag, f"lands at ({lat}, {lon}) before any waypoint gave an altitude to fly "
-                                              "there at; add a takeoff or waypoint first")
-                    add_waypoint(item, tag, lat, lon, last[2], wp_id=f"item{item.seq}_approach")
-            final, terminal = "land", item
-        elif cmd == MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            final, terminal = "rtl", item
-        elif cmd == MAV_CMD_DO_CHANGE_SPEED:
-            kind, value = p[0], p[1]
-            if kind not in (0.0, 1.0, None):
-                raise _fail(src, tag, f"param1 speed type {kind!r} (climb/descent speed) is not supported; only "
-                                      "0 (airspeed) and 1 (ground speed)")
-            if value is None or value == -1:
-                pass
-            elif value == -2:
-                speed = None
-            elif value > 0:
-                speed = value
+                raise _fail(src, tag, f"latitude/longitude not set (x={lat!r}, y={lon!r})")
+            if cmd != MAV_CMD_NAV_TAKEOFF and self.last is not None:
+                lat, lon = self.last[0], self.last[1]  # loiter at the current position
+            elif self.home is not None:
+                lat, lon = self.home.lat, self.home.lon
             else:
-                raise _fail(src, tag, f"param2 speed must be > 0 m/s, -1 (no change) or -2 (default), got {value!r}")
+                raise _fail(src, tag, "has no latitude/longitude, so it acts at the vehicle's current (home) "
+                                      "position, which is unknown (plan has no home; pass home=)")
+        z = self._altitude(item, tag)
+        hover, radius = 0.0, None
+        if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
+            hover = p[0] or 0.0
+            if hover < 0:
+                raise _fail(src, tag, f"param1 (hold/loiter time) must be >= 0 s, got {hover!r}")
+        if cmd == MAV_CMD_NAV_WAYPOINT:
+            radius = p[1]
+        if cmd == MAV_CMD_NAV_LOITER_UNLIM:
+            after = [it for it in rest if it.command not in self.skip]
+            if after:
+                raise _fail(src, tag, f"loiters forever, so the following {after[0].describe()} would never run")
+            self.final = "hover"
+        self._add_waypoint(item, tag, lat, lon, z, hover, radius)
+
+    def _land(self, item: MissionItem, tag: str) -> None:
+        """NAV_LAND: the final action, after a transit waypoint at the previous altitude if it lands elsewhere."""
+        lat, lon = item.params[4], item.params[5]
+        last, home = self.last, self.home
+        if item.frame != MAV_FRAME_MISSION and not _latlon_missing(lat, lon):
+            here = last[:2] if last is not None else (home.lat, home.lon) if home is not None else None
+            if here is None or abs(lat - here[0]) > 1e-7 or abs(lon - here[1]) > 1e-7:
+                if last is None:
+                    raise _fail(self.src, tag, f"lands at ({lat}, {lon}) before any waypoint gave an altitude to "
+                                               "fly there at; add a takeoff or waypoint first")
+                self._add_waypoint(item, tag, lat, lon, last[2], wp_id=f"item{item.seq}_approach")
+        self.final, self.terminal = "land", item
+
+    def _change_speed(self, item: MissionItem, tag: str) -> None:
+        """DO_CHANGE_SPEED: the speed of the following waypoints."""
+        kind, value = item.params[0], item.params[1]
+        if kind not in (0.0, 1.0, None):
+            raise _fail(self.src, tag, f"param1 speed type {kind!r} (climb/descent speed) is not supported; only "
+                                       "0 (airspeed) and 1 (ground speed)")
+        if value is None or value == -1:
+            pass
+        elif value == -2:
+            self.speed = None
+        elif value > 0:
+            self.speed = value
         else:
-            hint = " (pass skip_commands=PAYLOAD_COMMANDS to skip camera/gimbal commands)" \
-                if cmd in PAYLOAD_COMMANDS else ""
-            raise _fail(src, tag, f"{command_name(cmd)} is not supported by AeroDaaS navigation{hint}")
-
-    from collections import Counter
-
-    for k, (lat, lon, alt) in enumerate(plan.rally_points):  # the autopilot's RTL may fly to them
-        _check_bounds(src, f"rally point {k + 1}", lat, lon, alt, home, max_altitude, max_distance)
-    dup = sorted(i for i, n in Counter(w.id for w in waypoints).items() if n > 1)  # linear (ids.count was quadratic)
-    if dup:
-        raise _fail(src, "items", f"duplicate sequence numbers give duplicate waypoint ids {dup}")
-    if check_geofence and not plan.geofence.is_empty and waypoints:
-        _check_flight_geofence(src, plan.geofence, home, waypoints, final)
-    name = Path(plan.source).stem if plan.source else "mission"
-    nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, waypoints, SchedulingType.ORDERED, name=name)
-    return FlightPlan(navigation=nav, final_action=final or "hover", geofence=plan.geofence, home=home,
-                      skipped=skipped)
+            raise _fail(self.src, tag, f"param2 speed must be > 0 m/s, -1 (no change) or -2 (default), "
+                                       f"got {value!r}")
 
 
 def _check_flight_geofence(src: str, config: GeofenceConfig, home: GeoPoint | None, waypoints: list[Waypoint],

@@ -116,8 +116,6 @@ class _OnnxDetector:
         input_size: tuple[int, int] | None = None,
         class_names: Sequence[str] | None = None,
     ) -> None:
-        import onnxruntime as ort
-
         if not 0.0 <= score_threshold <= 1.0:
             raise ValueError(f"score_threshold must be within [0, 1], got {score_threshold}")
         if not 0.0 <= nms_threshold <= 1.0:
@@ -129,11 +127,23 @@ class _OnnxDetector:
         self.agnostic_nms = bool(agnostic_nms)
 
         self.model_path = resolve_model(self.model_name, model_path)
+        self._open_session(int(intra_op_threads), input_size)
+        self._init_classes(class_names, class_thresholds, classes, class_groups)
+        self.last_timing: dict[str, float] = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
+        self.last_batch = 1  # most images in one onnxruntime call of the last detect / detect_batch
+        self.last_batched = 0  # images of the last detect_batch that shared an onnxruntime call with others
+
+    def _open_session(self, intra_op_threads: int, input_size: tuple[int, int] | None) -> None:
+        """The onnxruntime session (CPU, ``intra_op_threads`` threads) and its input: name, (H, W) size (the model's
+        fixed one, ``input_size``, or the subclass's default), whether the batch is dynamic, the output names.
+        Raises ValueError for a model whose input is not NCHW or an ``input_size`` its fixed input contradicts."""
+        import onnxruntime as ort
+
         so = ort.SessionOptions()
-        so.intra_op_num_threads = int(intra_op_threads)
+        so.intra_op_num_threads = intra_op_threads
         so.inter_op_num_threads = 1
         so.log_severity_level = 3  # the NanoDet export triggers one harmless warning per initializer
-        self.intra_op_threads = int(intra_op_threads)
+        self.intra_op_threads = intra_op_threads
         self.session = ort.InferenceSession(str(self.model_path), sess_options=so, providers=["CPUExecutionProvider"])
         inp = self.session.get_inputs()[0]
         self.input_name: str = inp.name
@@ -156,6 +166,11 @@ class _OnnxDetector:
         self.batch_dynamic: bool = not isinstance(shape[0], int)
         self.output_names = [o.name for o in self.session.get_outputs()]
 
+    def _init_classes(self, class_names: Sequence[str] | None, class_thresholds: dict[str, float] | None,
+                      classes: Iterable[str] | str | None, class_groups: dict[str, Iterable[str]] | None) -> None:
+        """Class names (given, or the model's), per-class score thresholds (+inf for the classes left out by
+        ``classes``) and each class's NMS group. Raises ValueError naming an unknown class or a threshold outside
+        [0, 1]."""
         names = tuple(class_names) if class_names is not None else self._model_class_names()
         self.class_names: tuple[str, ...] = tuple(str(n) for n in names)
         index = {n: i for i, n in enumerate(self.class_names)}
@@ -199,9 +214,6 @@ class _OnnxDetector:
         if self.agnostic_nms:
             group[:] = 0
         self._nms_group = group
-        self.last_timing: dict[str, float] = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
-        self.last_batch = 1  # most images in one onnxruntime call of the last detect / detect_batch
-        self.last_batched = 0  # images of the last detect_batch that shared an onnxruntime call with others
 
     def _model_class_names(self) -> Sequence[str]:
         """The class names the model itself carries (subclasses read metadata); default COCO's 80."""

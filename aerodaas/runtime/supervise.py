@@ -144,24 +144,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
             watch.poll()
             ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.5)
             for ref in ready:
-                hid = refs.pop(ref)
-                try:
-                    reports.update(ray.get(ref))
-                except Exception as e:  # noqa: BLE001 - contained here: every drone ends with a defined outcome
-                    if _is_actor_death(e) and _await_restart(actors[hid], restart_wait_s):
-                        restarts[hid] += 1
-                        print(f"aerodaas: drone actor {plan.actors[hid].name} died and was restarted; resuming "
-                              f"its mission", file=sys.stderr, flush=True)
-                        refs[actors[hid].run.remote(remaining(), resume=True)] = hid
-                        continue
-                    why = (f"drone actor {plan.actors[hid].name} lost: {type(e).__name__}: {_first_line(e)}"
-                           if _is_actor_death(e) else error_cause(e))
-                    print(f"aerodaas: {why}", file=sys.stderr, flush=True)
-                    for rid in robots_of[hid]:
-                        cp = _last_checkpoint(actors.get("recorder"), rid)
-                        reports[rid] = _lost_report(rid, why, cp) if _is_actor_death(e) else \
-                            {**_lost_report(rid, why, cp), "outcome": "failed"}
-                        _record_result(actors.get("recorder"), plan, rid, reports[rid])
+                _collect(ref, refs, reports, restarts, plan, actors, robots_of, remaining, restart_wait_s)
             if progress and refs:
                 lines = progress_lines(handles, t0)
                 if live is not None:
@@ -173,17 +156,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
                     last_print = time.monotonic()
     except KeyboardInterrupt:
         interrupted = True
-        for h in handles.values():
-            try:
-                ray.get(h["drone"].end_mission.remote("interrupted"), timeout=5)
-            except Exception:  # noqa: BLE001 - an actor that is gone has nothing to end
-                pass
-        for ref, hid in list(refs.items()):
-            try:
-                reports.update(ray.get(ref, timeout=20))
-            except Exception as e:  # noqa: BLE001
-                for rid in robots_of[hid]:
-                    reports[rid] = {"robot": rid, "outcome": "interrupted", "error": _first_line(e)}
+        _interrupt(handles, refs, reports, robots_of)
     finally:
         if live is not None:
             live.stop()
@@ -197,6 +170,52 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     for rep in reports.values():
         rep["recorder_restarts"] = watch.restarts
     return reports
+
+
+def _collect(ref: Any, refs: dict, reports: dict, restarts: dict, plan: Any, actors: dict, robots_of: dict,
+             remaining: Callable[[], float | None], restart_wait_s: float) -> None:
+    """A drone actor's run call ``ref`` (one of ``refs``, ref -> actor id) returned: its reports; or the actor died
+    and Ray restarted it within ``restart_wait_s`` (its run resumed, counted in ``restarts``); or its robots end
+    ``lost`` (``failed`` for another error) with their last checkpoint, recorded as their result."""
+    import ray
+
+    hid = refs.pop(ref)
+    try:
+        reports.update(ray.get(ref))
+        return
+    except Exception as e:  # noqa: BLE001 - contained here: every drone ends with a defined outcome
+        err = e
+    if _is_actor_death(err) and _await_restart(actors[hid], restart_wait_s):
+        restarts[hid] += 1
+        print(f"aerodaas: drone actor {plan.actors[hid].name} died and was restarted; resuming "
+              f"its mission", file=sys.stderr, flush=True)
+        refs[actors[hid].run.remote(remaining(), resume=True)] = hid
+        return
+    why = (f"drone actor {plan.actors[hid].name} lost: {type(err).__name__}: {_first_line(err)}"
+           if _is_actor_death(err) else error_cause(err))
+    print(f"aerodaas: {why}", file=sys.stderr, flush=True)
+    for rid in robots_of[hid]:
+        cp = _last_checkpoint(actors.get("recorder"), rid)
+        reports[rid] = _lost_report(rid, why, cp) if _is_actor_death(err) else \
+            {**_lost_report(rid, why, cp), "outcome": "failed"}
+        _record_result(actors.get("recorder"), plan, rid, reports[rid])
+
+
+def _interrupt(handles: dict, refs: dict, reports: dict, robots_of: dict) -> None:
+    """Ctrl-C: end every mission as ``interrupted`` and wait (bounded) for the reports of the runs in ``refs``."""
+    import ray
+
+    for h in handles.values():
+        try:
+            ray.get(h["drone"].end_mission.remote("interrupted"), timeout=5)
+        except Exception:  # noqa: BLE001 - an actor that is gone has nothing to end
+            pass
+    for ref, hid in list(refs.items()):
+        try:
+            reports.update(ray.get(ref, timeout=20))
+        except Exception as e:  # noqa: BLE001
+            for rid in robots_of[hid]:
+                reports[rid] = {"robot": rid, "outcome": "interrupted", "error": _first_line(e)}
 
 
 def error_cause(e: BaseException) -> str:

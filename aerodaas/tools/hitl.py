@@ -183,6 +183,33 @@ class _TooLarge(Exception):
     pass
 
 
+def _add_error_handlers(app: Any) -> None:
+    """Error answers as JSON: an HTTP error (an undecodable body is 422 like every malformed one), a request that
+    does not validate (at most 20 errors), and a waypoint outside the safety limits (422, ``safety_limit``)."""
+    from fastapi.exceptions import RequestValidationError
+    from starlette.exceptions import HTTPException as StarletteHTTPException
+
+    from aerodaas.navigation.safety import SafetyViolation
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_req: Request, e: StarletteHTTPException) -> JSONResponse:
+        # FastAPI answers an undecodable body 400; a malformed body is 422 like every other one
+        code = 422 if e.status_code == 400 else e.status_code
+        return JSONResponse(status_code=code, content={"detail": _json_safe(e.detail)}, headers=e.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(_req: Request, e: RequestValidationError) -> JSONResponse:
+        errors = [{"loc": list(d.get("loc", [])), "msg": str(d.get("msg", ""))[:300], "type": d.get("type"),
+                   "input": _json_safe(d.get("input"))} for d in e.errors()[:20]]
+        return JSONResponse(status_code=422, content={"detail": errors})
+
+    @app.exception_handler(SafetyViolation)
+    async def _safety(_req: Request, e: SafetyViolation) -> JSONResponse:
+        return JSONResponse(status_code=422, content={"detail": [{
+            "loc": ["body", "waypoints", str(e.item_id)[:80], e.field], "msg": str(e)[:500], "type": "safety_limit",
+            "input": _json_safe(e.value)}]})
+
+
 class HitlServer:
     """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": handle of the drone component,
     "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns once the server accepts connections."""
@@ -211,144 +238,130 @@ class HitlServer:
 
     # ------------------------------------------------------------------ app
     def _build_app(self):
-        import ray
-
-        from aerodaas.navigation.safety import SafetyViolation
-
-        from fastapi.exceptions import RequestValidationError
-
+        """The FastAPI app: its error answers (:func:`_add_error_handlers`), the drone routes behind the bearer
+        token and, with ``hitl.docs``, the guarded documentation."""
         # no unauthenticated documentation: /docs, /redoc and /openapi.json are off (see ``docs`` for the guarded ones)
         app = FastAPI(title="AeroDaaS human-in-the-loop API", version="1", docs_url=None, redoc_url=None,
                       openapi_url=None)
         app.add_middleware(_BodyLimit, limit=MAX_BODY_BYTES)
-        server = self
+        _add_error_handlers(app)
+        self._add_routes(app)
+        if self.docs:  # hitl.docs: true: the documentation, behind the same bearer token as everything else
+            from fastapi.openapi.docs import get_swagger_ui_html
+
+            @app.get("/openapi.json", dependencies=[Depends(self._auth)], include_in_schema=False)
+            def openapi() -> dict:
+                return app.openapi()
+
+            @app.get("/docs", dependencies=[Depends(self._auth)], include_in_schema=False)
+            def docs():
+                return get_swagger_ui_html(openapi_url="/openapi.json", title=app.title)
+
+        return app
+
+    def _call(self, method: Any, *args: Any) -> Any:
+        """Call a component method and wait at most :data:`CALL_TIMEOUT_S`; a remote exception is re-raised as
+        its cause; an actor that does not answer (stopped, restarting, dead) is 503."""
+        import ray
+
         get = self._get or ray.get
+        try:
+            return get(method.remote(*args), timeout=CALL_TIMEOUT_S)
+        except ray.exceptions.RayTaskError as e:
+            cause = getattr(e, "cause", None)
+            if isinstance(cause, Exception):
+                raise cause from None
+            raise HTTPException(503, f"the drone's actor failed: {str(e).splitlines()[0][:200]}",
+                                headers={"Retry-After": "1"}) from None
+        except (ray.exceptions.GetTimeoutError, ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError,
+                ray.exceptions.RayError, TimeoutError) as e:
+            raise HTTPException(503, f"the drone's actor does not answer within {CALL_TIMEOUT_S:g} s (stopped, "
+                                f"restarting or gone: {type(e).__name__}); retry later",
+                                headers={"Retry-After": "1"}) from None
 
-        def call(method: Any, *args: Any) -> Any:
-            """Call a component method and wait at most :data:`CALL_TIMEOUT_S`; a remote exception is re-raised as
-            its cause; an actor that does not answer (stopped, restarting, dead) is 503."""
-            try:
-                return get(method.remote(*args), timeout=CALL_TIMEOUT_S)
-            except ray.exceptions.RayTaskError as e:
-                cause = getattr(e, "cause", None)
-                if isinstance(cause, Exception):
-                    raise cause from None
-                raise HTTPException(503, f"the drone's actor failed: {str(e).splitlines()[0][:200]}",
-                                    headers={"Retry-After": "1"}) from None
-            except (ray.exceptions.GetTimeoutError, ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError,
-                    ray.exceptions.RayError, TimeoutError) as e:
-                raise HTTPException(503, f"the drone's actor does not answer within {CALL_TIMEOUT_S:g} s (stopped, "
-                                    f"restarting or gone: {type(e).__name__}); retry later",
-                                    headers={"Retry-After": "1"}) from None
+    def _auth(self, request: Request) -> None:
+        """The bearer token (401 without it); counts the request."""
+        self.requests += 1
+        h = request.headers.get("authorization", "")
+        scheme, _, tok = h.partition(" ")
+        if scheme.lower() != "bearer" or not secrets.compare_digest(tok.strip().encode(), self.token.encode()):
+            raise HTTPException(401, "missing or invalid bearer token", headers={"WWW-Authenticate": "Bearer"})
 
-        from starlette.exceptions import HTTPException as StarletteHTTPException
+    def _drone(self, robot_id: str) -> dict:
+        if robot_id not in self.drones:
+            raise HTTPException(404, f"unknown drone {robot_id!r}; known: {sorted(self.drones)}")
+        return self.drones[robot_id]
 
-        @app.exception_handler(StarletteHTTPException)
-        async def _http(_req: Request, e: StarletteHTTPException) -> JSONResponse:
-            # FastAPI answers an undecodable body 400; a malformed body is 422 like every other one
-            code = 422 if e.status_code == 400 else e.status_code
-            return JSONResponse(status_code=code, content={"detail": _json_safe(e.detail)}, headers=e.headers)
+    def _describe(self, robot_id: str) -> dict:
+        h = self._drone(robot_id)
+        st = self._call(h["drone"].status)
+        st["queue"] = self._call(h["scheduler"].snapshot)
+        return st
 
-        @app.exception_handler(RequestValidationError)
-        async def _invalid(_req: Request, e: RequestValidationError) -> JSONResponse:
-            errors = [{"loc": list(d.get("loc", [])), "msg": str(d.get("msg", ""))[:300], "type": d.get("type"),
-                       "input": _json_safe(d.get("input"))} for d in e.errors()[:20]]
-            return JSONResponse(status_code=422, content={"detail": errors})
+    def _add_routes(self, app: Any) -> None:
+        """The drone routes: list, get, add waypoints, clear, pause, resume."""
+        call, drone, guarded = self._call, self._drone, [Depends(self._auth)]
 
-        def auth(request: Request) -> None:
-            server.requests += 1
-            h = request.headers.get("authorization", "")
-            scheme, _, tok = h.partition(" ")
-            if scheme.lower() != "bearer" or not secrets.compare_digest(tok.strip().encode(), server.token.encode()):
-                raise HTTPException(401, "missing or invalid bearer token", headers={"WWW-Authenticate": "Bearer"})
-
-        def drone(robot_id: str) -> dict:
-            if robot_id not in server.drones:
-                raise HTTPException(404, f"unknown drone {robot_id!r}; known: {sorted(server.drones)}")
-            return server.drones[robot_id]
-
-        def describe(robot_id: str) -> dict:
-            h = drone(robot_id)
-            st = call(h["drone"].status)
-            st["queue"] = call(h["scheduler"].snapshot)
-            return st
-
-        @app.exception_handler(SafetyViolation)
-        async def _safety(_req: Request, e: SafetyViolation) -> JSONResponse:
-            return JSONResponse(status_code=422, content={"detail": [{
-                "loc": ["body", "waypoints", str(e.item_id)[:80], e.field], "msg": str(e)[:500], "type": "safety_limit",
-                "input": _json_safe(e.value)}]})
-
-        @app.get("/drones", dependencies=[Depends(auth)])
+        @app.get("/drones", dependencies=guarded)
         def list_drones() -> list[dict]:
-            return [describe(rid) for rid in server.drones]
+            return [self._describe(rid) for rid in self.drones]
 
-        @app.get("/drones/{robot_id}", dependencies=[Depends(auth)])
+        @app.get("/drones/{robot_id}", dependencies=guarded)
         def get_drone(robot_id: str) -> dict:
-            return describe(robot_id)
+            return self._describe(robot_id)
 
-        @app.post("/drones/{robot_id}/waypoints", dependencies=[Depends(auth)])
+        @app.post("/drones/{robot_id}/waypoints", dependencies=guarded)
         def add_waypoints(robot_id: str, req: AddWaypointsRequest) -> dict:
             h = drone(robot_id)
-            lock = server._locks.setdefault(robot_id, threading.Lock())
+            lock = self._locks.setdefault(robot_id, threading.Lock())
             if not lock.acquire(timeout=10.0):
                 raise HTTPException(503, "too many concurrent requests for this drone; retry later",
                                     headers={"Retry-After": "1"})
             try:  # the id check and the add are one step: of concurrent requests with one id, one is accepted
-                return _add(h, req)
+                return self._add(h, req)
             finally:
                 lock.release()
 
-        def _add(h: dict, req: AddWaypointsRequest) -> dict:
-            queued = {i.get("id") for m in call(h["scheduler"].snapshot) for i in m["items"]}
-            wps = []
-            for w in req.waypoints:
-                wid = w.id or f"hitl{next(server._ids)}"
-                while w.id is None and wid in queued:
-                    wid = f"hitl{next(server._ids)}"
-                if wid in queued:
-                    raise HTTPException(422, f"waypoints: id {wid!r} is already queued")
-                wps.append(Waypoint(**{**w.model_dump(), "id": wid}))
-            ids = [w.id for w in wps]
-            if len(set(ids)) != len(ids):
-                raise HTTPException(422, f"waypoints: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
-            try:
-                nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, req.scheduling_type, name="hitl")
-                out = call(h["scheduler"].add_navigation, nav, req.index, req.priority)
-            except SafetyViolation:
-                raise
-            except (IndexError, ValueError, TypeError) as e:
-                raise HTTPException(422, str(e)[:500]) from None
-            return {"added": ids, **out}
-
-        @app.post("/drones/{robot_id}/clear", dependencies=[Depends(auth)])
+        @app.post("/drones/{robot_id}/clear", dependencies=guarded)
         def clear(robot_id: str, req: ClearRequest) -> dict:
             h = drone(robot_id)
             out = call(h["scheduler"].clear_navigation, req.priority, req.scope, "hitl")
             return {"cleared": True, "scope": req.scope, **(out or {}), "queue": call(h["scheduler"].snapshot)}
 
-        @app.post("/drones/{robot_id}/pause", dependencies=[Depends(auth)])
+        @app.post("/drones/{robot_id}/pause", dependencies=guarded)
         def pause(robot_id: str) -> dict:
             call(drone(robot_id)["drone"].pause_mission)
             return {"paused": True}
 
-        @app.post("/drones/{robot_id}/resume", dependencies=[Depends(auth)])
+        @app.post("/drones/{robot_id}/resume", dependencies=guarded)
         def resume(robot_id: str) -> dict:
             call(drone(robot_id)["drone"].resume_mission)
             return {"resumed": True}
 
-        if self.docs:  # hitl.docs: true: the documentation, behind the same bearer token as everything else
-            from fastapi.openapi.docs import get_swagger_ui_html
+    def _add(self, h: dict, req: AddWaypointsRequest) -> dict:
+        """Queue the request's waypoints on drone ``h`` (ids given or ``hitl<n>``, none already queued)."""
+        from aerodaas.navigation.safety import SafetyViolation
 
-            @app.get("/openapi.json", dependencies=[Depends(auth)], include_in_schema=False)
-            def openapi() -> dict:
-                return app.openapi()
-
-            @app.get("/docs", dependencies=[Depends(auth)], include_in_schema=False)
-            def docs():
-                return get_swagger_ui_html(openapi_url="/openapi.json", title=app.title)
-
-        return app
+        queued = {i.get("id") for m in self._call(h["scheduler"].snapshot) for i in m["items"]}
+        wps = []
+        for w in req.waypoints:
+            wid = w.id or f"hitl{next(self._ids)}"
+            while w.id is None and wid in queued:
+                wid = f"hitl{next(self._ids)}"
+            if wid in queued:
+                raise HTTPException(422, f"waypoints: id {wid!r} is already queued")
+            wps.append(Waypoint(**{**w.model_dump(), "id": wid}))
+        ids = [w.id for w in wps]
+        if len(set(ids)) != len(ids):
+            raise HTTPException(422, f"waypoints: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
+        try:
+            nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, wps, req.scheduling_type, name="hitl")
+            out = self._call(h["scheduler"].add_navigation, nav, req.index, req.priority)
+        except SafetyViolation:
+            raise
+        except (IndexError, ValueError, TypeError) as e:
+            raise HTTPException(422, str(e)[:500]) from None
+        return {"added": ids, **out}
 
     # ------------------------------------------------------------------ lifecycle
     def start(self, timeout: float = 10.0) -> "HitlServer":

@@ -7,6 +7,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 __all__ = ["add_parser", "cmd_mission"]
 
@@ -122,89 +123,119 @@ def cmd_mission(args: argparse.Namespace) -> int:
     them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`); no other vehicle parameter
     is changed. The mission is then read back and compared (a different flight: exit 2, not started)."""
     from aerodaas.backends import BackendError
-    from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
+    from aerodaas.missionfile import MissionFileError
 
     name = f"aerodaas mission {args.mission_cmd}"
-    backend = None
+    opened: list = []  # the backend once connected: closed at the end, whatever happened
     try:
         if args.mission_cmd == "upload":
-            path = Path(args.file)
-            if not path.is_file():
-                raise MissionFileError(f"{str(path)!r}: mission file not found")
-            plan = load_mission(path)
-            if not plan.items:
-                raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
-                                       f"would clear the vehicle's mission)")
-            bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
-            # the file alone, before connecting: commands, frames, order (the bounds are measured from the vehicle's
-            # home, so not yet; a planned home only stands in for AMSL altitudes here)
-            from aerodaas.model.types import GeoPoint
-
-            plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
-                           min_altitude=None)
-            from aerodaas.missionfile.upload import check_relative_altitudes
-
-            check_relative_altitudes(plan, args.max_altitude)  # needs no home: refused before connecting
-            backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
-            if backend.home_received:  # as documented: from the vehicle's own home, whatever the file planned
-                plan_to_flight(plan, backend.home, **bounds)
-            elif plan.home is None:  # the bounds are measured from a home, never from a default one
-                raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
-                                       f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
-                                       "altitude and distance bounds are measured from it)")
-            else:  # no GPS fix yet (bench, indoors)
-                print(f"{name}: warning: the vehicle reported no home position within {args.timeout:g} s; the "
-                      f"items are checked against the file's planned home only", file=sys.stderr, flush=True)
-                plan_to_flight(plan, plan.home, **bounds)
-            fence = plan.geofence
-            if not fence.is_empty:  # the fence first: the vehicle must never fly this mission without it
-                got = backend.apply_fence(fence)
-                changed = [f"{k} {got['before'][k]:g} -> {v:g}" for k, v in got["params"].items()
-                           if abs(got["before"][k] - v) > 1e-6]
-                print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
-                      f"circle(s), {got['items']} fence items) uploaded and read back; it stays on the vehicle with "
-                      f"its parameters: " + (", ".join(changed) or "none changed"), flush=True)
-            if plan.rally_points:
-                n = backend.upload_rally(plan.rally_points)
-                print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
-            items = plan.expanded_items()
-            if args.max_speed is not None:
-                from aerodaas.missionfile.upload import cap_speeds
-
-                items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
-                for c in changes:
-                    print(f"{name}: {c}", flush=True)
-            sent = backend.upload_mission(items)
-            print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
-                  f"{args.connection}", flush=True)
-            _check_read_back(backend, sent, name)
-            if args.start:
-                backend.arm()
-                backend.start_mission()
-                print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
+            _upload(args, name, opened)
         else:
-            out = Path(args.out)
-            if out.suffix.lower() not in _MISSION_SUFFIXES:
-                raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
-                                       "(QGroundControl .plan or QGC WPL 110 waypoints)")
-            backend = _mission_backend(args)
-            plan = backend.download_mission().model_copy(update={
-                "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
-            plan = _download_fence_and_rally(backend, plan, out, name)
-            tmp = out.with_name(out.name + ".part")
-            (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
-            os.replace(tmp, out)  # never a half-written mission file
-            print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
-                  f"written to {str(out)!r}", flush=True)
+            _download(args, name, opened)
     except (MissionFileError, BackendError, ValueError, OSError) as e:
         where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
             else ""
         print(f"{name}: {e}{where}", file=sys.stderr)
         return 2
     finally:
-        if backend is not None:
+        for backend in opened:
             backend.close(safe_end=False)  # hand the vehicle over as it is: a started mission flies on
     return 0
+
+
+def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
+    """``aerodaas mission upload`` (see :func:`cmd_mission`); the backend it connects goes into ``opened``."""
+    from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise MissionFileError(f"{str(path)!r}: mission file not found")
+    plan = load_mission(path)
+    if not plan.items:
+        raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
+                               f"would clear the vehicle's mission)")
+    # the file alone, before connecting: commands, frames, order (the bounds are measured from the vehicle's
+    # home, so not yet; a planned home only stands in for AMSL altitudes here)
+    from aerodaas.model.types import GeoPoint
+
+    plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
+                   min_altitude=None)
+    from aerodaas.missionfile.upload import check_relative_altitudes
+
+    check_relative_altitudes(plan, args.max_altitude)  # needs no home: refused before connecting
+    backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
+    opened.append(backend)
+    _check_from_vehicle_home(args, name, plan, backend, path)
+    _upload_fence_and_rally(name, plan, backend, path)
+    items = plan.expanded_items()
+    if args.max_speed is not None:
+        from aerodaas.missionfile.upload import cap_speeds
+
+        items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
+        for c in changes:
+            print(f"{name}: {c}", flush=True)
+    sent = backend.upload_mission(items)
+    print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
+          f"{args.connection}", flush=True)
+    _check_read_back(backend, sent, name)
+    if args.start:
+        backend.arm()
+        backend.start_mission()
+        print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
+
+
+def _check_from_vehicle_home(args: argparse.Namespace, name: str, plan: Any, backend: Any, path: Path) -> None:
+    """The altitude, distance and geofence bounds, measured from the vehicle's own home (the file's planned home
+    only when the vehicle reports none). Raises MissionFileError when neither has one."""
+    from aerodaas.missionfile import MissionFileError, plan_to_flight
+
+    bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
+    if backend.home_received:  # as documented: from the vehicle's own home, whatever the file planned
+        plan_to_flight(plan, backend.home, **bounds)
+    elif plan.home is None:  # the bounds are measured from a home, never from a default one
+        raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
+                               f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
+                               "altitude and distance bounds are measured from it)")
+    else:  # no GPS fix yet (bench, indoors)
+        print(f"{name}: warning: the vehicle reported no home position within {args.timeout:g} s; the "
+              f"items are checked against the file's planned home only", file=sys.stderr, flush=True)
+        plan_to_flight(plan, plan.home, **bounds)
+
+
+def _upload_fence_and_rally(name: str, plan: Any, backend: Any, path: Path) -> None:
+    """A ``.plan``'s geofence first (the vehicle must never fly its mission without it; each fence parameter
+    changed is printed), then its rally points; both read back by the backend."""
+    fence = plan.geofence
+    if not fence.is_empty:
+        got = backend.apply_fence(fence)
+        changed = [f"{k} {got['before'][k]:g} -> {v:g}" for k, v in got["params"].items()
+                   if abs(got["before"][k] - v) > 1e-6]
+        print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
+              f"circle(s), {got['items']} fence items) uploaded and read back; it stays on the vehicle with "
+              f"its parameters: " + (", ".join(changed) or "none changed"), flush=True)
+    if plan.rally_points:
+        n = backend.upload_rally(plan.rally_points)
+        print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
+
+
+def _download(args: argparse.Namespace, name: str, opened: list) -> None:
+    """``aerodaas mission download --out FILE`` (see :func:`cmd_mission`): written only once complete."""
+    from aerodaas.missionfile import MissionFileError, save_plan, save_wpl
+
+    out = Path(args.out)
+    if out.suffix.lower() not in _MISSION_SUFFIXES:
+        raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
+                               "(QGroundControl .plan or QGC WPL 110 waypoints)")
+    backend = _mission_backend(args)
+    opened.append(backend)
+    plan = backend.download_mission().model_copy(update={
+        "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
+    plan = _download_fence_and_rally(backend, plan, out, name)
+    tmp = out.with_name(out.name + ".part")
+    (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
+    os.replace(tmp, out)  # never a half-written mission file
+    print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
+          f"written to {str(out)!r}", flush=True)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

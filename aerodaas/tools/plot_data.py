@@ -117,19 +117,7 @@ def load_plot_data(path: str | Path) -> RunData:
     notes: list[str] = []
     if not summary["finished"]:
         notes.append(f"{path} is unfinished (the recorder did not close it); plotting what was readable")
-    topics = sorted({c["topic"] for c in summary["channels"]
-                     if c["encoding"] == "json" and (_ROBOT_TOPIC.match(c["topic"]) or c["topic"] in
-                                                      (MISSION_STATE_TOPIC, MISSION_RESULT_TOPIC, TARGETS_TOPIC))})
-    by_topic: dict[str, list[tuple[int, Any]]] = {}
-    if topics:
-        try:
-            for topic, _schema, t_ns, msg in read_messages(path, topics=topics):
-                if isinstance(msg, dict):
-                    by_topic.setdefault(topic, []).append((t_ns, msg))
-        except _TRUNCATION_ERRORS as e:
-            notes.append(f"stopped reading at a corrupt record ({type(e).__name__}: {e}); plotting what was read")
-    for msgs in by_topic.values():  # unfinished files are read in write order
-        msgs.sort(key=lambda m: m[0])
+    by_topic = _read_by_topic(path, summary, notes)
     times = [m[0][0] for m in by_topic.values() if m]
     t0_ns = summary["start_ns"] if summary["start_ns"] is not None else (min(times) if times else None)
     if times and t0_ns is not None:
@@ -158,32 +146,62 @@ def load_plot_data(path: str | Path) -> RunData:
             robot(msg["robot"])
 
     for name, r in robots.items():
-        odo = [(sec(t), msg) for t, msg in per_robot.get((name, "odometry"), [])
-               if _vec3(msg.get("position")) is not None]
-        if odo:
-            r.t = np.array([t for t, _ in odo])
-            r.position = np.array([_vec3(msg["position"]) for _, msg in odo])
-            r.battery_pct = np.array([_num(msg.get("battery_pct")) for _, msg in odo])
-        r.states = [(sec(t), str(msg["state"])) for t, msg in state_msgs
-                    if "state" in msg and msg.get("robot", name) == name]
-        results = [msg for _t, msg in result_msgs if msg.get("robot", name) == name]
-        r.outcome = results[-1].get("outcome") if results else None
-        r.events = [(sec(t), msg) for t, msg in per_robot.get((name, "events"), [])]
-        lat = [msg for _t, msg in per_robot.get((name, "latency"), [])]
-        if lat:
-            e2e = np.array([_num(m.get("e2e_ms")) for m in lat])
-            inf = np.array([_num(m.get("inference_ms"), 0.0) for m in lat])
-            post = np.array([_num(m.get("post_ms"), 0.0) for m in lat])
-            ovh = np.array([_num(m.get("overhead_ms"), max(0.0, _num(m.get("e2e_ms"), 0.0) - _num(
-                m.get("inference_ms"), 0.0) - _num(m.get("post_ms"), 0.0))) for m in lat])
-            r.latency = {"e2e_ms": e2e, "inference_ms": inf, "post_ms": post, "overhead_ms": ovh}
-        _planned_waypoints(r, per_robot.get((name, "mission/plan"), []), per_robot.get((name, "nav/command"), []),
-                           sec)
+        _fill_robot(r, name, per_robot, state_msgs, result_msgs, sec)
+    targets = _target_tracks(by_topic.get(TARGETS_TOPIC, []), sec)
+    return RunData(path, bool(summary["finished"]), t0_ns, dict(sorted(robots.items())), targets, notes)
 
+
+def _read_by_topic(path: Path, summary: dict, notes: list[str]) -> dict[str, list[tuple[int, Any]]]:
+    """The JSON messages of the robot channels and the mission state, result and target channels, per topic in
+    time order (ns); reading stops at a corrupt record, with a note."""
+    topics = sorted({c["topic"] for c in summary["channels"]
+                     if c["encoding"] == "json" and (_ROBOT_TOPIC.match(c["topic"]) or c["topic"] in
+                                                      (MISSION_STATE_TOPIC, MISSION_RESULT_TOPIC, TARGETS_TOPIC))})
+    by_topic: dict[str, list[tuple[int, Any]]] = {}
+    if topics:
+        try:
+            for topic, _schema, t_ns, msg in read_messages(path, topics=topics):
+                if isinstance(msg, dict):
+                    by_topic.setdefault(topic, []).append((t_ns, msg))
+        except _TRUNCATION_ERRORS as e:
+            notes.append(f"stopped reading at a corrupt record ({type(e).__name__}: {e}); plotting what was read")
+    for msgs in by_topic.values():  # unfinished files are read in write order
+        msgs.sort(key=lambda m: m[0])
+    return by_topic
+
+
+def _fill_robot(r: RobotRun, name: str, per_robot: dict, state_msgs: list, result_msgs: list, sec: Any) -> None:
+    """Robot ``name``'s odometry, states, outcome, events, per-frame latency and planned waypoints (times in
+    seconds from the recording's start: ``sec(t_ns)``)."""
+    odo = [(sec(t), msg) for t, msg in per_robot.get((name, "odometry"), [])
+           if _vec3(msg.get("position")) is not None]
+    if odo:
+        r.t = np.array([t for t, _ in odo])
+        r.position = np.array([_vec3(msg["position"]) for _, msg in odo])
+        r.battery_pct = np.array([_num(msg.get("battery_pct")) for _, msg in odo])
+    r.states = [(sec(t), str(msg["state"])) for t, msg in state_msgs
+                if "state" in msg and msg.get("robot", name) == name]
+    results = [msg for _t, msg in result_msgs if msg.get("robot", name) == name]
+    r.outcome = results[-1].get("outcome") if results else None
+    r.events = [(sec(t), msg) for t, msg in per_robot.get((name, "events"), [])]
+    lat = [msg for _t, msg in per_robot.get((name, "latency"), [])]
+    if lat:
+        e2e = np.array([_num(m.get("e2e_ms")) for m in lat])
+        inf = np.array([_num(m.get("inference_ms"), 0.0) for m in lat])
+        post = np.array([_num(m.get("post_ms"), 0.0) for m in lat])
+        ovh = np.array([_num(m.get("overhead_ms"), max(0.0, _num(m.get("e2e_ms"), 0.0) - _num(
+            m.get("inference_ms"), 0.0) - _num(m.get("post_ms"), 0.0))) for m in lat])
+        r.latency = {"e2e_ms": e2e, "inference_ms": inf, "post_ms": post, "overhead_ms": ovh}
+    _planned_waypoints(r, per_robot.get((name, "mission/plan"), []), per_robot.get((name, "nav/command"), []),
+                       sec)
+
+
+def _target_tracks(msgs: list[tuple[int, dict]], sec: Any) -> dict[str, TargetTrack]:
+    """Each target's ground-truth track (x, y ENU m; NaN while absent) from the ``/world/targets`` messages."""
     targets: dict[str, TargetTrack] = {}
     samples: dict[str, dict[float, tuple[float, float]]] = {}
     classes: dict[str, str] = {}
-    for t_ns, msg in by_topic.get(TARGETS_TOPIC, []):
+    for t_ns, msg in msgs:
         for tg in msg.get("targets") or []:
             if not isinstance(tg, dict) or "id" not in tg:
                 continue
@@ -195,7 +213,7 @@ def load_plot_data(path: str | Path) -> RunData:
     for tid, s in samples.items():
         ts = np.array(sorted(s))
         targets[tid] = TargetTrack(tid, classes[tid], ts, np.array([s[t] for t in ts], dtype=float).reshape(-1, 2))
-    return RunData(path, bool(summary["finished"]), t0_ns, dict(sorted(robots.items())), targets, notes)
+    return targets
 
 
 def _planned_waypoints(r: RobotRun, plan_msgs: list[tuple[int, dict]], cmd_msgs: list[tuple[int, dict]],

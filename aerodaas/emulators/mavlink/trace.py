@@ -272,9 +272,25 @@ def run_trace(conn: str, autopilot: str, *, wall_limit_s: float = 600.0, alt: fl
 
 
 def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow: float) -> None:
+    """The traced flight, stage by stage (``tr["stage"]`` says where it stopped): pre-flight, arm, take-off, a
+    two-leg mission, return to launch."""
     if not T.wait(lambda: T.mode is not None, 1e9):
         tr["stage"] = "no heartbeat"
         return
+    _preflight(T, tr)
+    armed_at = _arm(T, tr)
+    if armed_at is None:
+        return
+    took_off, home_alt = _takeoff(T, tr, armed_at)
+    if not took_off:
+        return
+    flown = _mission(T, tr, leg1, leg2, hold, slow)
+    if flown is not None:
+        _return_to_launch(T, tr, *flown, home_alt)
+
+
+def _preflight(T: _Tracer, tr: dict) -> None:
+    """Telemetry streams, the pre-arm mode, an arm before the vehicle is ready (its refusal), the parameters."""
     tr["stage"] = "streams"
     for mid, hz in _STREAMS_HZ.items():
         res = T.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, mid, 1e6 / hz)
@@ -296,6 +312,10 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     tr["stage"] = "params"
     tr["params"] = {n: T.param(n) for n in _PARAMS[T.ap]}
     tr["param_unknown"] = T.param("NO_SUCH_PARAM")
+
+
+def _arm(T: _Tracer, tr: dict) -> float | None:
+    """Arm, retried each vehicle second (at most 180 tries); the vehicle time it armed at, None if it never did."""
     tr["stage"] = "arm"
     armed_at = None
     for _ in range(180):
@@ -314,8 +334,11 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
             armed_at = T.vt
             break
         T.sleep(1.0)
-    if armed_at is None:
-        return
+    return armed_at
+
+
+def _takeoff(T: _Tracer, tr: dict, armed_at: float) -> tuple[bool, float | None]:
+    """Take off to ``T.alt``: (reached it, the home altitude at arming)."""
     tr["armable_after_s"] = round(armed_at, 2)
     T.wait(lambda: bool(T.home_alts), 3.0)
     home_alt = T.home_alts[-1][1] if T.home_alts else None
@@ -326,9 +349,16 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     tr["takeoff_ack"] = _res(res)
     if not T.wait(lambda: T.pos is not None and T.pos.relative_alt / 1000.0 > T.alt - 0.5, 60.0):
         tr["stage"] = "takeoff timeout"
-        return
+        return False, home_alt
     tr["takeoff_done_t"] = round(T.vt, 2)
     T.wait(lambda: T.mode in ("LOITER", "GUIDED") and T.speed_log and T.speed_log[-1][1] < 0.3, 20.0)
+    return True, home_alt
+
+
+def _mission(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float,
+             slow: float) -> tuple[list[dict], float, int] | None:
+    """Upload and fly the two-leg mission (the speed parameter lowered to ``slow`` m/s after the first leg): (the
+    legs, the vehicle time it started, the STATUSTEXT count before it), None when it did not fly."""
     lat0, lon0 = T.pos.lat / 1e7, T.pos.lon / 1e7
     wp1 = _offset(lat0, lon0, leg1, 0.0)
     wp2 = _offset(wp1[0], wp1[1], 0.0, leg2)
@@ -339,7 +369,7 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     tr["stage"] = "mission upload"
     T.m.mav.mission_count_send(T.sysid, T.compid, len(items), M.MAV_MISSION_TYPE_MISSION)
     if not T.wait(lambda: bool(T.mission_acks), 15.0):
-        return
+        return None
     tr["mission_ack"] = M.enums["MAV_MISSION_RESULT"][T.mission_acks[-1]].name
     n_texts = len(T.texts)
     tr["stage"] = "mission"
@@ -347,7 +377,7 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     t_start = T.vt
     res = T.set_mode("MISSION" if T.px4 else "AUTO", tries=3, why="mission")
     if res != M.MAV_RESULT_ACCEPTED:
-        return
+        return None
     legs: list[dict] = []
     T.wps = [wp1, wp2]
     for k in range(2):
@@ -359,7 +389,7 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
         late = k == 1 and legs[0].get("param_set_t", 0.0) > T.arrivals[0] + hold - 0.5
         if not T.wait(lambda: k in T.arrivals, 120.0):
             tr["stage"] = f"wp{k + 1} timeout"
-            return
+            return None
         arrived = T.arrivals[k]
         # None: the parameter's echo came after the leg (a loaded machine), so the leg says nothing about it
         vmax = None if late else max((v for t, v in T.speed_log if t_leg <= t <= arrived), default=None)
@@ -372,6 +402,12 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
         if not T.wait(lambda: any(s == seq for _, s in T.reached), hold + 20.0):
             leg["reached"] = None
         legs.append(leg)
+    return legs, t_start, n_texts
+
+
+def _return_to_launch(T: _Tracer, tr: dict, legs: list[dict], t_start: float, n_texts: int,
+                      home_alt: float | None) -> None:
+    """After the mission: its texts, the parameters restored, RTL to the landing, and the reached reports."""
     tr["legs"] = legs
     T.wait(lambda: T.mode not in ("AUTO", "MISSION"), 4.0)  # mission end: PX4 goes to LOITER, ArduPilot stays
     tr["after_mission_mode"] = T.mode
@@ -396,6 +432,8 @@ def _sequence(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float, slow:
     if home_alt is not None:
         after = [a for t, a in T.home_alts if t > tr["takeoff_done_t"]]
         tr["home_alt_drift_m"] = round(max((abs(a - home_alt) for a in after), default=0.0), 3)
+
+
 
 
 def summarise(tr: dict) -> dict:

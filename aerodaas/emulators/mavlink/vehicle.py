@@ -130,6 +130,19 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.ignore_commands = set(ignore_commands or ())
         self.ack_only_commands = set(ack_only_commands or ())
         self.in_progress_commands = set(in_progress_commands or ())
+        self._init_emulated_firmware(ekf_gps_s, mission_int, home_alt_drift_m, seed, estimate_speed_error_mps,
+                                     land_detect_s, deny_default_speed)
+        self._init_params(system_id, params)
+        self._init_links(system_id, component_id)
+        self._init_state()
+        self._apply_speed_params()
+
+    def _init_emulated_firmware(self, ekf_gps_s: float, mission_int: bool | None, home_alt_drift_m: float | None,
+                                seed: int, estimate_speed_error_mps: float, land_detect_s: float,
+                                deny_default_speed: bool | None) -> None:
+        """The firmware behaviours the emulator models (see :meth:`__init__`'s arguments). Raises ValueError naming
+        the argument for a value out of range."""
+        autopilot = self.autopilot
         if not (ekf_gps_s >= 0 and math.isfinite(ekf_gps_s)):
             raise ValueError(f"ekf_gps_s must be a finite number >= 0, got {ekf_gps_s!r}")
         #: vehicle seconds from the GPS fix until the EKF fuses GPS (a position estimate); the firmware takes
@@ -158,6 +171,11 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         #: MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 (-2 "default") is DENIED (None: as the flavour's firmware,
         #: ArduCopter denies, PX4 accepts)
         self.deny_default_speed = (not self.px4) if deny_default_speed is None else bool(deny_default_speed)
+
+    def _init_params(self, system_id: int, params: dict[str, float] | None) -> None:
+        """The flavour's parameters (with the system id) and the given overrides. Raises ValueError for an unknown
+        parameter name."""
+        autopilot = self.autopilot
         self._rejections: dict[int, list[int]] = {}  # MAV_CMD -> results still to answer (reject_next)
         self._in_progress: dict[int, tuple[_Link, int, int, float, int]] = {}  # cmd -> (link, sys, comp, next t, %)
         self._statustext_id = 0
@@ -173,6 +191,9 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
             if k not in self.params:
                 raise ValueError(f"params: unknown {autopilot} parameter {k!r}; known: {sorted(self.params)}")
             self.params[k] = float(v)
+
+    def _init_links(self, system_id: int, component_id: int) -> None:
+        """The MAVLink encoder, the I/O thread's sockets and links, and the link faults tests inject."""
         self._enc = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._lock = threading.RLock()
         self._stop = threading.Event()
@@ -192,6 +213,9 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         #: (wall monotonic s, message type) of every message that arrived while the inbound link was cut
         self.blackholed_inbound: list[tuple[float, str]] = []
         self.prearm_failure: str | None = None
+
+    def _init_state(self) -> None:
+        """The vehicle's state: clock, mode, home, targets, mission and fence items, message intervals."""
         # vehicle state
         self.t = 0.0
         self.boot_ms0 = 73_421  # the autopilot booted a while before we count
@@ -238,7 +262,6 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self.statustexts: list[str] = []
         self.commands_seen: list[int] = []
         self.bad_packets = 0
-        self._apply_speed_params()
 
     def snapshot(self) -> dict[str, Any]:
         """The vehicle's state: ``t`` (vehicle seconds), ``mode``, ``armed``, ``in_air``, ``position`` (ENU metres
