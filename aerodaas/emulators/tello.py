@@ -282,6 +282,13 @@ class TelloEmulator:
             return f"unknown command: {text}"
         if self._manoeuvre is not None:
             return "error Not joystick"
+        return self._motion(word, args, addr)
+
+    def _motion(self, word: str, args: list[str], addr: tuple[str, int]) -> str | None:
+        """A manoeuvre command (SDK 2.0: takeoff, land, go, up/down/forward/back/left/right in cm, cw/ccw in
+        degrees): its error reply, or None (the reply comes when it is done)."""
+        v = self.vehicle
+        flying = v.state.in_air
         if word == "takeoff":
             if flying:
                 return "error"
@@ -303,6 +310,11 @@ class TelloEmulator:
             v.hold()
             self._yaw_target = v.state.yaw + (-n[0] if word == "cw" else n[0])
             return self._begin(word, addr, lambda: self._yaw_target is None)
+        return self._move(word, args, addr)
+
+    def _move(self, word: str, args: list[str], addr: tuple[str, int]) -> str | None:
+        """go x y z speed (cm, cm/s, body frame) or a straight move of n cm: a goto to the target in the world."""
+        v = self.vehicle
         if word == "go":
             n = self._ints(args, 4)
             if (n is None or not all(-500 <= c <= 500 for c in n[:3]) or not 10 <= n[3] <= 100

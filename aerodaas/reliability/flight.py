@@ -69,67 +69,94 @@ def fly_commands(commands: Sequence[tuple], on_violation: str = "reject", physic
     (as the drone does) and expires after its duration (then the vehicle holds); a waypoint is checked once when it
     becomes active. Take-off to the configured altitude first. Returns the worst excursions seen at every physics
     step (from the vehicle's odometry, noise-free)."""
-    from shapely.geometry import Point
+    flight = _ProbeFlight(_probe_robot(on_violation), physics_hz)
+    flight.take_off()
+    for c in commands:
+        if c[0] == "hold":
+            flight.veh.hold()
+            flight.run_ticks(int(c[1]))
+        elif c[0] == "wp":
+            flight.waypoint(c[1], c[2], c[3], int(c[4]))
+        else:
+            flight.velocity(c[1], c[2], c[3], c[4], int(c[5]))
+    return flight.ex
 
-    from aerodaas.model.types import VelocityCommand, Waypoint
-    from aerodaas.navigation.safety import SafetyGate, SafetyViolation
-    from aerodaas.sim.vehicle import SimVehicle
 
-    cfg = _probe_robot(on_violation)
-    gate = SafetyGate(cfg.safety, cfg.limits, cfg.home, control_period_s=1.0 / cfg.control_rate_hz)
-    veh = SimVehicle("probe", cfg.home, cfg.limits, cfg.battery)
-    dt = 1.0 / physics_hz
-    steps_per_tick = max(1, round(physics_hz / cfg.control_rate_hz))
-    inc, exc = list(gate.fence.inclusions), list(gate.fence.exclusions)
-    ex = Excursion()
+class _ProbeFlight:
+    """:func:`fly_commands`' vehicle behind the probe robot ``cfg``'s gate, stepped at ``physics_hz`` with the
+    gate's control ticks, and the excursions measured at every physics step."""
 
-    def measure() -> None:
-        o = veh.odometry()
+    def __init__(self, cfg: Any, physics_hz: float) -> None:
+        from shapely.geometry import Point
+
+        from aerodaas.navigation.safety import SafetyGate
+        from aerodaas.sim.vehicle import SimVehicle
+
+        self.point = Point
+        self.cfg = cfg
+        self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home, control_period_s=1.0 / cfg.control_rate_hz)
+        self.veh = SimVehicle("probe", cfg.home, cfg.limits, cfg.battery)
+        self.dt = 1.0 / physics_hz
+        self.steps_per_tick = max(1, round(physics_hz / cfg.control_rate_hz))
+        self.inc, self.exc = list(self.gate.fence.inclusions), list(self.gate.fence.exclusions)
+        self.ex = Excursion()
+
+    def measure(self) -> None:
+        """The vehicle's excursions now (noise-free odometry): outside the inclusion zones, inside the exclusion
+        zones, above the maximum altitude (m); the worst of each is kept with where it happened."""
+        Point, ex, o = self.point, self.ex, self.veh.odometry()
         x, y, z = o.position
         ex.samples += 1
-        if inc:
-            out = min(_outside(zn, x, y, Point) for zn in inc)
+        if self.inc:
+            out = min(_outside(zn, x, y, Point) for zn in self.inc)
             if out > ex.outside_inclusion_m:
                 ex.outside_inclusion_m, ex.worst["inclusion"] = out, (x, y, z)
-        for zn in exc:
+        for zn in self.exc:
             depth = _inside(zn, x, y, Point)
             if depth > ex.inside_exclusion_m:
                 ex.inside_exclusion_m, ex.worst["exclusion"] = depth, (x, y, z)
-        if z - gate.max_alt > ex.above_max_altitude_m:
-            ex.above_max_altitude_m, ex.worst["altitude"] = z - gate.max_alt, (x, y, z)
+        if z - self.gate.max_alt > ex.above_max_altitude_m:
+            ex.above_max_altitude_m, ex.worst["altitude"] = z - self.gate.max_alt, (x, y, z)
 
-    def run_ticks(n: int, on_tick) -> None:
+    def run_ticks(self, n: int, on_tick: Any = None) -> None:
+        """``n`` control ticks: ``on_tick()`` at each, then the physics steps of one tick, each measured."""
         for _ in range(n):
-            on_tick()
-            for _ in range(steps_per_tick):
-                veh.step(dt)
-                measure()
+            if on_tick is not None:
+                on_tick()
+            for _ in range(self.steps_per_tick):
+                self.veh.step(self.dt)
+                self.measure()
 
-    veh.arm()
-    veh.takeoff(gate.check_takeoff(cfg.takeoff_altitude))
-    run_ticks(60, lambda: None)
-    for c in commands:
-        kind = c[0]
-        if kind == "hold":
+    def take_off(self) -> None:
+        self.veh.arm()
+        self.veh.takeoff(self.gate.check_takeoff(self.cfg.takeoff_altitude))
+        self.run_ticks(60)
+
+    def waypoint(self, x: float, y: float, z: float, ticks: int) -> None:
+        """A waypoint, checked once by the gate when it becomes active (refused: the vehicle holds)."""
+        from aerodaas.model.types import Waypoint
+        from aerodaas.navigation.safety import SafetyViolation
+
+        veh, wp = self.veh, Waypoint(id="w", x=x, y=y, z=z)
+        try:
+            wp = self.gate.check_waypoint(wp, tuple(veh.state.position), tuple(veh.state.velocity))
+            veh.goto(wp.to_local(self.cfg.home), wp.speed)
+            self.ex.accepted += 1
+        except SafetyViolation:
+            self.ex.rejected += 1
             veh.hold()
-            run_ticks(int(c[1]), lambda: None)
-            continue
-        if kind == "wp":
-            wp = Waypoint(id="w", x=c[1], y=c[2], z=c[3])
-            try:
-                wp = gate.check_waypoint(wp, tuple(veh.state.position), tuple(veh.state.velocity))
-                veh.goto(wp.to_local(cfg.home), wp.speed)
-                ex.accepted += 1
-            except SafetyViolation:
-                ex.rejected += 1
-                veh.hold()
-            run_ticks(int(c[4]), lambda: None)
-            continue
-        cmd = VelocityCommand(vx=c[1], vy=c[2], vz=c[3], duration=c[4])
-        left = [c[4]]
-        live = [True]
+        self.run_ticks(ticks)
 
-        def tick(cmd=cmd, left=left, live=live) -> None:
+    def velocity(self, vx: float, vy: float, vz: float, duration_s: float, ticks: int) -> None:
+        """A velocity command re-checked at every tick (as the drone does) until it expires after ``duration_s``
+        or is refused; then the vehicle holds."""
+        from aerodaas.model.types import VelocityCommand
+        from aerodaas.navigation.safety import SafetyViolation
+
+        cmd, veh, ex = VelocityCommand(vx=vx, vy=vy, vz=vz, duration=duration_s), self.veh, self.ex
+        left, live = [duration_s], [True]
+
+        def tick() -> None:
             if not live[0]:
                 return
             if left[0] <= 1e-9:  # expired: nothing queued, the drone holds
@@ -137,17 +164,16 @@ def fly_commands(commands: Sequence[tuple], on_violation: str = "reject", physic
                 veh.hold()
                 return
             try:
-                ok = gate.check_velocity(cmd, tuple(veh.state.position), tuple(veh.state.velocity))
+                ok = self.gate.check_velocity(cmd, tuple(veh.state.position), tuple(veh.state.velocity))
                 veh.set_velocity((ok.vx, ok.vy, ok.vz))
                 ex.accepted += 1
             except SafetyViolation:
                 ex.rejected += 1
                 live[0] = False
                 veh.hold()
-            left[0] -= 1.0 / cfg.control_rate_hz
+            left[0] -= 1.0 / self.cfg.control_rate_hz
 
-        run_ticks(int(c[5]), tick)
-    return ex
+        self.run_ticks(ticks, tick)
 
 
 def _outside(zone: Any, x: float, y: float, Point: Any) -> float:

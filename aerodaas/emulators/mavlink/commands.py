@@ -61,25 +61,10 @@ class CommandMixin:
         self._send(self._enc.command_ack_encode(cmd, result, 0, 0, *src), link)
 
     def _execute(self, link: _Link, cmd: int, p: list[float], frame: int | None) -> int | None:
-        s = self.veh.state
+        """Run COMMAND_LONG/_INT ``cmd`` with params ``p``: its MAV_RESULT, or None when the answer was sent here
+        (a requested message follows its ACK)."""
         if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = int(round(p[1])) == 21196
-            if p[0] >= 0.5:
-                return self._arm(force)
-            if s.armed and not force and self.px4 and not s.in_air and self.landed_at is not None and \
-                    self.t - self.landed_at < self.land_detect_s:  # PX4's land detector has not said landed yet
-                self._text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
-                return M.MAV_RESULT_TEMPORARILY_REJECTED
-            if s.armed and s.in_air and not force:
-                if self.px4:
-                    self._text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
-                    return M.MAV_RESULT_TEMPORARILY_REJECTED
-                self._text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying")
-                return M.MAV_RESULT_FAILED
-            if s.armed:
-                s.in_air = False
-                self._disarm("external command")
-            return M.MAV_RESULT_ACCEPTED
+            return self._arm_disarm(p)
         if cmd == M.MAV_CMD_DO_SET_MODE:
             if not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 return M.MAV_RESULT_UNSUPPORTED if self.px4 else M.MAV_RESULT_FAILED
@@ -91,41 +76,9 @@ class CommandMixin:
         if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             return self._request_mode("AUTO.RTL" if self.px4 else "RTL")
         if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
-            if self.deny_default_speed:
-                # ArduCopter/GCS_MAVLink_Copter.cpp handle_MAV_CMD_DO_CHANGE_SPEED: a speed that is not positive
-                # (-1 "no change", -2 "default") is DENIED; climb/descent speeds (param1 2/3) change those rates
-                if not p[1] > 0 or int(p[0]) not in (0, 1, 2, 3):
-                    return M.MAV_RESULT_DENIED
-                if int(p[0]) in (0, 1):
-                    self.speed = float(p[1])
-            elif p[1] == -2:  # PX4 Navigator: -2 restores the default cruise speed
-                self.speed = None
-            elif p[1] > 0:
-                self.speed = float(p[1])
-            elif p[1] != -1:
-                return M.MAV_RESULT_DENIED
-            self._apply_speed_params()  # the leg being flown changes speed too
-            return M.MAV_RESULT_ACCEPTED
+            return self._change_speed(p)
         if cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            if not self.message_interval_supported:
-                return M.MAV_RESULT_UNSUPPORTED
-            msg_id, interval = int(p[0]), p[1]
-            if msg_id not in _STREAMABLE:
-                return M.MAV_RESULT_DENIED
-            if interval == -1:
-                self._intervals.pop(msg_id, None)
-            elif interval == 0:
-                default = _PX4_DEFAULT_STREAMS.get(msg_id) if self.px4 else None
-                if default:
-                    self._intervals[msg_id] = 1.0 / default
-                else:
-                    self._intervals.pop(msg_id, None)
-            elif interval > 0:
-                self._intervals[msg_id] = interval / 1e6  # µs -> vehicle seconds
-                self._next_due[msg_id] = self.t
-            else:
-                return M.MAV_RESULT_DENIED
-            return M.MAV_RESULT_ACCEPTED
+            return self._set_message_interval(p)
         if cmd in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             msg_id = {M.MAV_CMD_GET_HOME_POSITION: M.MAVLINK_MSG_ID_HOME_POSITION,
                       M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: M.MAVLINK_MSG_ID_AUTOPILOT_VERSION}.get(cmd, int(p[0]))
@@ -144,6 +97,68 @@ class CommandMixin:
             self._set_current(seq)
             return M.MAV_RESULT_ACCEPTED
         return M.MAV_RESULT_UNSUPPORTED
+
+    def _arm_disarm(self, p: list[float]) -> int:
+        """MAV_CMD_COMPONENT_ARM_DISARM (param2 21196 forces): a disarm in the air, or on PX4 before its land
+        detector confirmed the landing, is refused as the firmware refuses it."""
+        s = self.veh.state
+        force = int(round(p[1])) == 21196
+        if p[0] >= 0.5:
+            return self._arm(force)
+        if s.armed and not force and self.px4 and not s.in_air and self.landed_at is not None and \
+                self.t - self.landed_at < self.land_detect_s:  # PX4's land detector has not said landed yet
+            self._text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+            return M.MAV_RESULT_TEMPORARILY_REJECTED
+        if s.armed and s.in_air and not force:
+            if self.px4:
+                self._text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
+            self._text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying")
+            return M.MAV_RESULT_FAILED
+        if s.armed:
+            s.in_air = False
+            self._disarm("external command")
+        return M.MAV_RESULT_ACCEPTED
+
+    def _change_speed(self, p: list[float]) -> int:
+        """MAV_CMD_DO_CHANGE_SPEED (param1 speed type, param2 m/s)."""
+        if self.deny_default_speed:
+            # ArduCopter/GCS_MAVLink_Copter.cpp handle_MAV_CMD_DO_CHANGE_SPEED: a speed that is not positive
+            # (-1 "no change", -2 "default") is DENIED; climb/descent speeds (param1 2/3) change those rates
+            if not p[1] > 0 or int(p[0]) not in (0, 1, 2, 3):
+                return M.MAV_RESULT_DENIED
+            if int(p[0]) in (0, 1):
+                self.speed = float(p[1])
+        elif p[1] == -2:  # PX4 Navigator: -2 restores the default cruise speed
+            self.speed = None
+        elif p[1] > 0:
+            self.speed = float(p[1])
+        elif p[1] != -1:
+            return M.MAV_RESULT_DENIED
+        self._apply_speed_params()  # the leg being flown changes speed too
+        return M.MAV_RESULT_ACCEPTED
+
+    def _set_message_interval(self, p: list[float]) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL (param1 message id, param2 interval µs; -1 stops, 0 the default)."""
+        if not self.message_interval_supported:
+            return M.MAV_RESULT_UNSUPPORTED
+        msg_id, interval = int(p[0]), p[1]
+        if msg_id not in _STREAMABLE:
+            return M.MAV_RESULT_DENIED
+        if interval == -1:
+            self._intervals.pop(msg_id, None)
+        elif interval == 0:
+            default = _PX4_DEFAULT_STREAMS.get(msg_id) if self.px4 else None
+            if default:
+                self._intervals[msg_id] = 1.0 / default
+            else:
+                self._intervals.pop(msg_id, None)
+        elif interval > 0:
+            self._intervals[msg_id] = interval / 1e6  # µs -> vehicle seconds
+            self._next_due[msg_id] = self.t
+        else:
+            return M.MAV_RESULT_DENIED
+        return M.MAV_RESULT_ACCEPTED
 
     def _takeoff_command(self, p: list[float]) -> int:
         s = self.veh.state

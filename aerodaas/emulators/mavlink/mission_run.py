@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -64,33 +65,7 @@ class MissionRunMixin:
         it = self.mission[self.mission_seq]
         cmd = it.command
         if cmd in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_LOITER_UNLIM):
-            if it.x == 0 and it.y == 0:
-                g = self._geo()
-                lat, lon = g.lat, g.lon
-            else:
-                lat, lon = it.x / 1e7, it.y / 1e7
-            if not self.item_started:  # the target is fixed when the item starts (relative to home then)
-                self.item_started = True
-                self._item_target = self._global_to_enu(lat, lon, it.z, it.frame)
-                self._goto_enu(self._item_target)
-                if not self.px4:  # AP_Mission start_command: "Mission: <index> <type>"
-                    self._text(M.MAV_SEVERITY_INFO, f"Mission: {self.mission_seq} WP")
-            target = self._item_target
-            if self.px4:  # navigator: within the acceptance radius (NAV_ACC_RAD or the item's param2)
-                radius = it.param2 if cmd == M.MAV_CMD_NAV_WAYPOINT and it.param2 > 0 else self.params["NAV_ACC_RAD"]
-            else:  # AC_WPNav::reached_wp_destination: the S-curve has ended at the point (and within WPNAV_RADIUS)
-                radius = min(0.3, self.params["WPNAV_RADIUS"] / 100.0)
-            d_h = math.hypot(*(target[:2] - s.position[:2]))
-            d_v = abs(target[2] - s.position[2])
-            if self.item_reached_at is None and d_h <= radius and d_v <= 1.0:
-                self.item_reached_at = self.t  # arrival: the hold (param1, s) starts
-            if self.item_reached_at is not None:
-                # both firmware send MISSION_ITEM_REACHED when the hold is over, then go on (ArduCopter/
-                # mode_auto.cpp ModeAuto::verify_nav_wp / verify_loiter_time; PX4 src/modules/navigator/
-                # mission_block.cpp is_mission_item_reached); LOITER_UNLIM is never reached
-                hold = it.param1 if cmd in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME) else math.inf
-                if self.t - self.item_reached_at >= max(0.0, hold):
-                    self._item_done()
+            self._fly_item(it, cmd)
         elif cmd == M.MAV_CMD_NAV_TAKEOFF:
             alt = self._global_to_enu(self.origin.lat, self.origin.lon, it.z, it.frame)[2] - self.home_enu[2]
             if not self.item_started:
@@ -118,6 +93,38 @@ class MissionRunMixin:
         elif cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             self._item_done()
             self._enter("AUTO.RTL" if self.px4 else "RTL")
+
+    def _fly_item(self, it: Any, cmd: int) -> None:
+        """NAV_WAYPOINT, NAV_LOITER_TIME, NAV_LOITER_UNLIM: fly to the item (its target fixed when it starts; no
+        position: where the vehicle is), arrive within the firmware's radius, hold param1 s, then done."""
+        s = self.veh.state
+        if it.x == 0 and it.y == 0:
+            g = self._geo()
+            lat, lon = g.lat, g.lon
+        else:
+            lat, lon = it.x / 1e7, it.y / 1e7
+        if not self.item_started:  # the target is fixed when the item starts (relative to home then)
+            self.item_started = True
+            self._item_target = self._global_to_enu(lat, lon, it.z, it.frame)
+            self._goto_enu(self._item_target)
+            if not self.px4:  # AP_Mission start_command: "Mission: <index> <type>"
+                self._text(M.MAV_SEVERITY_INFO, f"Mission: {self.mission_seq} WP")
+        target = self._item_target
+        if self.px4:  # navigator: within the acceptance radius (NAV_ACC_RAD or the item's param2)
+            radius = it.param2 if cmd == M.MAV_CMD_NAV_WAYPOINT and it.param2 > 0 else self.params["NAV_ACC_RAD"]
+        else:  # AC_WPNav::reached_wp_destination: the S-curve has ended at the point (and within WPNAV_RADIUS)
+            radius = min(0.3, self.params["WPNAV_RADIUS"] / 100.0)
+        d_h = math.hypot(*(target[:2] - s.position[:2]))
+        d_v = abs(target[2] - s.position[2])
+        if self.item_reached_at is None and d_h <= radius and d_v <= 1.0:
+            self.item_reached_at = self.t  # arrival: the hold (param1, s) starts
+        if self.item_reached_at is not None:
+            # both firmware send MISSION_ITEM_REACHED when the hold is over, then go on (ArduCopter/
+            # mode_auto.cpp ModeAuto::verify_nav_wp / verify_loiter_time; PX4 src/modules/navigator/
+            # mission_block.cpp is_mission_item_reached); LOITER_UNLIM is never reached
+            hold = it.param1 if cmd in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME) else math.inf
+            if self.t - self.item_reached_at >= max(0.0, hold):
+                self._item_done()
 
     def _item_done(self) -> None:
         """The current item is complete: MISSION_ITEM_REACHED for it and the next item current. PX4 publishes both

@@ -16,6 +16,11 @@ from aerodaas.emulators.mavlink.flavour import EKF_STATUS_REPORT_ID
 M = mavlink
 
 
+#: the messages :meth:`TelemetryMixin._build_position` builds
+_POSITION_MESSAGES = frozenset({M.MAVLINK_MSG_ID_GPS_RAW_INT, M.MAVLINK_MSG_ID_ATTITUDE,
+                                M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+                                M.MAVLINK_MSG_ID_HOME_POSITION})
+
 class TelemetryMixin:
     """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator` (state lives there)."""
 
@@ -52,28 +57,16 @@ class TelemetryMixin:
 
     def _build(self, msg_id: int) -> Any | None:
         """The message ``msg_id`` for the current state, or None when the vehicle has none to send."""
-        e, s = self._enc, self.veh.state
         boot_ms = int(self.boot_ms0 + self.t * 1000.0) & 0xFFFFFFFF
         fix = self._fix_type()
-        if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
-            base, custom = self._mode_number()
-            if self.px4:
-                status = M.MAV_STATE_ACTIVE if s.armed else M.MAV_STATE_STANDBY
-            else:
-                status = M.MAV_STATE_ACTIVE if s.in_air else M.MAV_STATE_STANDBY
-            ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
-            return e.heartbeat_encode(M.MAV_TYPE_QUADROTOR, ap, base, custom, status, 3)
-        if msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
-            present, enabled, health = self._sensors()
-            return e.sys_status_encode(present, enabled, health, 250, int(self.veh.battery_voltage * 1000), -1,
-                                       int(round(self.veh.battery_pct)), 0, 0, 0, 0, 0, 0)
-        if msg_id == EKF_STATUS_REPORT_ID:
-            if self.px4:
-                return None
-            ok = self._position_ok()
-            return e.ekf_status_report_encode(self._ekf_flags(), 0.1, 0.1 if ok else 1.0, 0.1, 0.1, 0.0)
-        if msg_id == M.MAVLINK_MSG_ID_SYSTEM_TIME:
-            return e.system_time_encode(int((1.7e9 + self.t) * 1e6), boot_ms)
+        if msg_id in _POSITION_MESSAGES:
+            return self._build_position(msg_id, boot_ms, fix)
+        return self._build_status(msg_id, boot_ms)
+
+    def _build_position(self, msg_id: int, boot_ms: int, fix: int) -> Any | None:
+        """GPS_RAW_INT, ATTITUDE, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, HOME_POSITION (``fix``: the GPS fix
+        type; without a 3D fix there is no position)."""
+        e, s = self._enc, self.veh.state
         if msg_id == M.MAVLINK_MSG_ID_GPS_RAW_INT:
             g = self._geo()
             v = float(np.hypot(s.velocity[0], s.velocity[1]))
@@ -109,6 +102,31 @@ class TelemetryMixin:
             return e.home_position_encode(int(round(h.lat * 1e7)), int(round(h.lon * 1e7)), int(round(h.alt * 1000)),
                                           float(hx[1]), float(hx[0]), float(-hx[2]), [1, 0, 0, 0], 0, 0, 0,
                                           int(self.t * 1e6))
+        return None
+
+    def _build_status(self, msg_id: int, boot_ms: int) -> Any | None:
+        """HEARTBEAT, SYS_STATUS, EKF_STATUS_REPORT, SYSTEM_TIME, EXTENDED_SYS_STATE, BATTERY_STATUS, MISSION_CURRENT,
+        VFR_HUD, AUTOPILOT_VERSION."""
+        e, s = self._enc, self.veh.state
+        if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
+            base, custom = self._mode_number()
+            if self.px4:
+                status = M.MAV_STATE_ACTIVE if s.armed else M.MAV_STATE_STANDBY
+            else:
+                status = M.MAV_STATE_ACTIVE if s.in_air else M.MAV_STATE_STANDBY
+            ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
+            return e.heartbeat_encode(M.MAV_TYPE_QUADROTOR, ap, base, custom, status, 3)
+        if msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
+            present, enabled, health = self._sensors()
+            return e.sys_status_encode(present, enabled, health, 250, int(self.veh.battery_voltage * 1000), -1,
+                                       int(round(self.veh.battery_pct)), 0, 0, 0, 0, 0, 0)
+        if msg_id == EKF_STATUS_REPORT_ID:
+            if self.px4:
+                return None
+            ok = self._position_ok()
+            return e.ekf_status_report_encode(self._ekf_flags(), 0.1, 0.1 if ok else 1.0, 0.1, 0.1, 0.0)
+        if msg_id == M.MAVLINK_MSG_ID_SYSTEM_TIME:
+            return e.system_time_encode(int((1.7e9 + self.t) * 1e6), boot_ms)
         if msg_id == M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
             if not s.in_air:
                 landed = M.MAV_LANDED_STATE_ON_GROUND
