@@ -90,9 +90,10 @@ def test_edge_fifo_overloaded_expires_tasks_and_accounts_for_all():
     expired = [t for t in d.tasks() if t.state is TaskState.EXPIRED_EDGE]
     assert all("left when it reached the head of the edge queue" in t.reason and t.tier is None for t in expired)
     assert r["edge_utilisation"] > 0.5
-    # the edge executor emulates the profile: jitter none, so each hold is the profile's edge_ms within a few ms
+    # the edge executor emulates the profile: jitter none, so no hold is shorter than the profile's edge_ms (how
+    # much longer depends on the machine's load: `aerodaas bench schedulers` reports edge_hold_error)
     assert r["timing_ms"]["edge_hold_error"]["n"] > 0
-    assert abs(r["timing_ms"]["edge_hold_error"]["p50"]) < 20
+    assert min(d.edge_hold_error.values) >= -1.0, r["timing_ms"]
 
 
 def test_cloud_only_sends_positive_utility_tasks_and_drops_the_rest_for_cost():
@@ -274,10 +275,11 @@ def test_poll_timer_fires_at_next_poll_ms():
     d, r, _ = asyncio.run(drive(policy, trace))
     check_accounting(d, r)
     assert r["states"]["done_on_time"] == 3
-    for t in d.tasks():  # sent at its due time, not at arrival
-        assert t.start_ms == pytest.approx(t.deadline_ms - w[t.model].cloud_ms - 20.0, abs=30.0)
+    for t in d.tasks():  # sent at its due time, not at arrival (and still on time: done_on_time above)
+        assert t.start_ms >= t.deadline_ms - w[t.model].cloud_ms - 20.0 - 1.0 > t.arrival_ms, (t, w[t.model])
     assert len(policy.polls) >= 2
-    assert r["timing_ms"]["poll_lateness"]["p50"] < 20
+    # no poll fires before its time (how late it fires depends on the machine's load: `aerodaas bench schedulers`)
+    assert r["timing_ms"]["poll_lateness"]["n"] >= 2 and min(d.poll_lateness.values) >= -1.0, r["timing_ms"]
 
 
 class OverdueCloud(JustInTimeCloud):
@@ -295,8 +297,9 @@ def test_poll_lateness_times_the_timer_not_a_due_time_already_past_when_armed():
     d, r, _ = asyncio.run(drive(policy, [(0.0, "d0", "HV"), (50.0, "d1", "HV"), (100.0, "d2", "MD")]))
     check_accounting(d, r)
     assert len(policy.polls) >= 3 and r["states"]["done_on_time"] == 3
-    # each poll ran right after it was armed, 200 ms after its due time: that is no loop lag
-    assert r["timing_ms"]["poll_lateness"]["n"] >= 3 and r["timing_ms"]["poll_lateness"]["max"] < 50, r["timing_ms"]
+    # each poll ran right after it was armed, 200 ms after its due time: that is no loop lag. Measured from the due
+    # time each would be 200 ms late or more; from when it was armed, far less (a generous bound for a loaded host)
+    assert r["timing_ms"]["poll_lateness"]["n"] >= 3 and r["timing_ms"]["poll_lateness"]["max"] < 150, r["timing_ms"]
 
 
 def test_held_tasks_are_dropped_when_the_run_ends():
