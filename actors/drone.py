@@ -3,7 +3,9 @@ hover timers, failsafes), navigation executor, and its odometry and stat-stream 
 vehicle state itself).
 
 It lives in the edge actor (:mod:`aerodaas.actors.dataplane`): the actor's clock thread calls :meth:`step` and
-:meth:`control_tick`. The drone owns its waypoint queue (:attr:`DroneComponent.queue`, a
+:meth:`control_tick`. A control step checks what holds in every state (link, autopilot failsafe), then runs the
+handler of the current mission state (``_on_landing``, ``_on_returning``, ``_on_paused``, ...), from a table with
+one handler per state of :data:`~aerodaas.navigation.fsm.TRANSITIONS` (:func:`~aerodaas.navigation.fsm.handler_table`). The drone owns its waypoint queue (:attr:`DroneComponent.queue`, a
 :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` holding the pre-planned navigation it was given) and its
 navigation inbox (:attr:`DroneComponent.inbox`, :class:`~aerodaas.actors.drone_inbox.DroneInbox`), which checks new
 navigation, asks the trajectory scheduler plug-in to plan it into the queue, and hands it to
@@ -42,7 +44,7 @@ from aerodaas.actors.drone_queue_flight import QueueFlight, WaypointHold
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, OdometryPublisher, NavigationProgress):
+class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -107,9 +109,10 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, OdometryPublisher, Na
         self.ticks = 0
         self.missed_ticks = 0
         self.nudges = 0  # navigation applied outside the control tick (:meth:`apply_navigation`)
-        self.last_odom: dict | None = None
         self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
-        self._init_odometry()
+        #: the drone's odometry sensor (recorded and published from the vehicle's state or its own samples)
+        self.odometry = OdometryPublisher(self.backend, self.cfg.id, recorder, plane, odom_cids,
+                                          OdometryPublisher.rate_of(self.cfg), self._t_ns)
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
         self._init_autopilot()
@@ -213,6 +216,25 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, OdometryPublisher, Na
                 "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
+    # ------------------------------------------------------------------ odometry (the drone's odometry object)
+    def publish_odometry(self, tok: Any = None, *, paced: bool = False) -> None:
+        """Record and publish odometry now (:meth:`OdometryPublisher.publish`)."""
+        self.odometry.publish(tok, paced=paced)
+
+    @property
+    def last_odom(self) -> dict | None:
+        """The latest odometry sample published (None before the first)."""
+        return self.odometry.last
+
+    @property
+    def next_odom(self) -> float:
+        """The vehicle time (s) of the odometry's next slot (checkpointed with the drone)."""
+        return self.odometry.next_t
+
+    @next_odom.setter
+    def next_odom(self, t: float) -> None:
+        self.odometry.next_t = t
+
     # ------------------------------------------------------------------ the clock thread
     def step(self, dt: float, tok: Any = None) -> None:
         """Advance the backend (simulator: ``dt`` seconds; others: process what arrived) and publish odometry
@@ -229,13 +251,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, OdometryPublisher, Na
                 elif ev.get("event") == "command_withheld":
                     self._reissue = True  # sent again on the next tick, unless the autopilot's failsafe comes first
                 self._event(ev.pop("event", "backend_event"), **ev)
-        if self.backend.sample_key is not None:  # a vehicle's own samples: each one, paced on its own time
-            self.publish_odometry(tok, paced=True)
-        elif self.backend.t + 1e-9 >= self.next_odom:  # the simulator: its state, on the odometry rate's grid
-            self.next_odom += self.odom_period
-            if self.backend.t > self.next_odom + self.odom_period:  # vehicle clock jumped: do not burst
-                self.next_odom = self.backend.t + self.odom_period
-            self.publish_odometry(tok)
+        self.odometry.on_step(tok)
         if not self.done:  # plug-in sensors sample the vehicle state at their own rate while the mission runs
             for ps in self.plugin_sensors:  # (a drone settling after its mission: odometry only)
                 ps.maybe_sample(self.backend, tok)

@@ -142,7 +142,7 @@ class RunEnd:
         what its vehicle sends meanwhile is not recorded, except from the newest sample on while :meth:`close` brings
         it down."""
         self.publish_odometry()
-        self._odom_fresh = True
+        self.odometry.mission_ended()
         if self.recorder is not None:
             self.recorder.json("/mission/result", self._t_ns(self.backend.t),
                                {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),

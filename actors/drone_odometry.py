@@ -1,11 +1,11 @@
-"""A drone's odometry: what it records and publishes of its vehicle's position. The simulator's state is taken on the
-odometry sensor's rate; a real vehicle's own position samples are each recorded once, stamped with the vehicle's
-time of the sample, none lost while the drone's clock thread waited. A mixin of
-:class:`~aerodaas.actors.drone.DroneComponent`, whose state (``backend``, ``cfg``, ``recorder``, ``plane``,
-``odom_cids``, ``odom_period``, ``next_odom``) it shares; split from that module so that each stays one concept."""
+"""A drone's odometry sensor: what it records and publishes of its vehicle's position. The simulator's state is taken
+on the odometry sensor's rate; a real vehicle's own position samples are each recorded once, stamped with the
+vehicle's time of the sample, none lost while the drone's clock thread waited. An object of its drone
+(:attr:`~aerodaas.actors.drone.DroneComponent.odometry`), given the vehicle backend, the recorder and the subscribers
+it publishes to; it knows nothing else of the drone."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from aerodaas.config.robot import sensor_class
 from aerodaas.plugins.sensor import SensorDelivery
@@ -13,22 +13,48 @@ from aerodaas.protocol.messages import OdometryMsg
 
 
 class OdometryPublisher:
-    """Part of :class:`~aerodaas.actors.drone.DroneComponent`."""
+    """The odometry of robot ``robot_id`` flying ``backend``: recorded to ``recorder`` (None: not recorded; stamps
+    in nanoseconds from ``t_ns(t)``, ``t`` vehicle seconds) and published on ``plane`` to ``cids``, at ``rate_hz``.
+    :attr:`last` is the latest sample published (a dict of :class:`~aerodaas.app.models.Odometry`), :attr:`next_t`
+    the vehicle time (s) of the next slot (checkpointed with the drone)."""
 
-    def _init_odometry(self) -> None:
-        """The odometry sensor's period (``rate_hz`` of the robot's odometry sensor, default 10 Hz) and the drain's
-        bookkeeping."""
-        odom_rate = 10.0
-        for s in self.cfg.sensors:
+    def __init__(self, backend: Any, robot_id: str, recorder: Any, plane: Any, cids: list[str], rate_hz: float,
+                 t_ns: Callable[[float], int]) -> None:
+        self.backend, self.robot_id, self.recorder, self.plane, self.cids = backend, robot_id, recorder, plane, cids
+        self.t_ns = t_ns
+        self.period = 1.0 / rate_hz
+        self.next_t = 0.0
+        self.last: dict | None = None
+        self._key: Any = None  # the backend's sample_key when its samples were last drained
+        self._t: float | None = None  # the vehicle time of the last published sample
+        self._fresh = False  # the mission ended: the next drain takes the newest sample only
+
+    @staticmethod
+    def rate_of(robot_cfg: Any) -> float:
+        """The ``rate_hz`` (Hz) of the robot's odometry sensor, default 10."""
+        rate = 10.0
+        for s in robot_cfg.sensors:
             if sensor_class(s.type).delivery is SensorDelivery.VEHICLE_STATE:
-                odom_rate = float(s.properties.get("rate_hz", 10.0))
-        self.odom_period = 1.0 / odom_rate
-        self.next_odom = 0.0
-        self._odom_key: Any = None  # the backend's sample_key when its samples were last drained
-        self._odom_t: float | None = None  # the vehicle time of the last published sample
-        self._odom_fresh = False  # the mission ended: the next drain takes the newest sample only
+                rate = float(s.properties.get("rate_hz", 10.0))
+        return rate
 
-    def publish_odometry(self, tok: Any = None, *, paced: bool = False) -> None:
+    def on_step(self, tok: Any = None) -> None:
+        """After a step of the vehicle (the clock thread): a vehicle's own samples, each one, paced on its own time;
+        the simulator's state on the odometry rate's grid (after a jump of the vehicle clock, no burst)."""
+        b = self.backend
+        if b.sample_key is not None:
+            self.publish(tok, paced=True)
+        elif b.t + 1e-9 >= self.next_t:
+            self.next_t += self.period
+            if b.t > self.next_t + self.period:  # vehicle clock jumped: do not burst
+                self.next_t = b.t + self.period
+            self.publish(tok)
+
+    def mission_ended(self) -> None:
+        """The drone is no longer stepped: the next drain takes the newest sample only."""
+        self._fresh = True
+
+    def publish(self, tok: Any = None, *, paced: bool = False) -> None:
         """Record and publish odometry. The simulator (no ``sample_key``): its state now. A vehicle: each of its
         position samples not yet published (:meth:`~aerodaas.backends.base.VehicleBackend.drain_odometry`), oldest
         first, stamped with the vehicle's own time of the sample, never one twice, so a clock thread held up (a
@@ -41,30 +67,30 @@ class OdometryPublisher:
         if key is None:
             self._publish(b.odometry().model_dump(mode="json"), tok)
             return
-        if key == self._odom_key:
+        if key == self._key:
             return
-        self._odom_key = key
+        self._key = key
         # the first (not what the vehicle sent before the run), or the first since the mission ended (the drone
         # was no longer stepped): the newest only
-        fresh = self._odom_t is None or self._odom_fresh
-        self._odom_fresh = False
+        fresh = self._t is None or self._fresh
+        self._fresh = False
         samples = b.drain_odometry(newest_only=fresh)
         if samples and fresh:  # the slots start here at the latest (a drone restored from a checkpoint as well)
-            self.next_odom = min(self.next_odom, samples[-1].t)
-        samples = [o for o in samples if self._odom_t is None or o.t > self._odom_t]
-        slack = 0.25 * self.odom_period
+            self.next_t = min(self.next_t, samples[-1].t)
+        samples = [o for o in samples if self._t is None or o.t > self._t]
+        slack = 0.25 * self.period
         for i, o in enumerate(samples):
-            if o.t + slack < self.next_odom and (paced or i < len(samples) - 1):
+            if o.t + slack < self.next_t and (paced or i < len(samples) - 1):
                 continue
-            self.next_odom += self.odom_period
-            if o.t > self.next_odom:  # after a gap in the samples: the slots go on from this one
-                self.next_odom = o.t + self.odom_period
-            self._odom_t = o.t
+            self.next_t += self.period
+            if o.t > self.next_t:  # after a gap in the samples: the slots go on from this one
+                self.next_t = o.t + self.period
+            self._t = o.t
             self._publish(o.model_dump(mode="json"), tok)
 
     def _publish(self, odom: dict, tok: Any) -> None:
-        self.last_odom = odom
+        self.last = odom
         if self.recorder is not None:
-            self.recorder.odometry(self.cfg.id, self._t_ns(odom["t"]), odom)
-        for cid in self.odom_cids:
-            self.plane.publish(cid, [OdometryMsg(robot=self.cfg.id, sim_t=odom["t"], data=odom)], tok, inline=False)
+            self.recorder.odometry(self.robot_id, self.t_ns(odom["t"]), odom)
+        for cid in self.cids:
+            self.plane.publish(cid, [OdometryMsg(robot=self.robot_id, sim_t=odom["t"], data=odom)], tok, inline=False)

@@ -17,8 +17,8 @@ Flavour differences handled here: ArduPilot flies targets in GUIDED, PX4 in OFFB
 setpoint stream runs); MAV_CMD_NAV_TAKEOFF ``param7`` is metres above home on ArduPilot and metres above mean sea
 level on PX4; ArduPilot missions carry home at sequence 0.
 
-One module per MAVLink concern, the way MAVSDK splits its plugins (each a mixin of :class:`MavlinkBackend`, which
-holds the shared state): :mod:`.link` (connection, autopilot HEARTBEAT, I/O thread, vehicle clock, streams,
+One module per MAVLink concern, the way MAVSDK splits its plugins (each a mixin of :class:`MavlinkBackend`; each
+module declares the state it owns in its ``_init_<concern>``, the link's is the backend's own): :mod:`.link` (connection, autopilot HEARTBEAT, I/O thread, vehicle clock, streams,
 close), :mod:`.command` (command protocol, mode changes), :mod:`.telemetry` (state from the streams, mission
 progress), :mod:`.params` (parameter protocol, the vehicle's own speed limits), :mod:`.action` (readiness,
 arming, take-off), :mod:`.offboard` (GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.mission` (the
