@@ -224,15 +224,18 @@ class IsolatedPolicy(AnalyticsScheduler):
         return self._back(self._call(_Call.SUBMIT, now_ms, (task,)))
 
     def next_edge_task(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
+        task, decisions = self._pop_edge(now_ms)
+        if task is not None:
+            self.edge_running = task
+        return task, decisions
+
+    def _pop_edge(self, now_ms: float) -> tuple[AnalyticsTask | None, list[Decision]]:
+        """The policy process's choice of the next edge task (its own edge bookkeeping stays there)."""
         tid, rows = self._call(_Call.NEXT_EDGE_TASK, now_ms)
         task = None if tid is None else self._tasks[tid]
         if task is not None:
             self._dirty[tid] = task
-            self.edge_running = task
         return task, self._back(rows)
-
-    def _pop_edge(self, now_ms: float):  # pragma: no cover - next_edge_task is overridden
-        raise NotImplementedError
 
     def on_edge_done(self, task: AnalyticsTask, now_ms: float, exec_ms: float) -> list[Decision]:
         self.edge_running = None
