@@ -15,7 +15,7 @@ from pymavlink.dialects.v20 import common as mav
 from aerodaas.backends.mavlink.gimbal import CameraDiscovery, GimbalManager
 from aerodaas.navigation.gimbal import (GimbalLimits, GimbalModel, camera_angles, euler_from_quaternion,
                                         quaternion_from_euler, roi_angles, wrap_deg)
-from aerodaas.sim.world import camera_rotation
+from aerodaas.model.camera import camera_rotation
 
 finite = st.floats(-500, 500, allow_nan=False)
 

@@ -150,6 +150,13 @@ class _Recorder:
     def detections(self, topic, *a):
         self.other.append(topic)
 
+    def declare_analytics(self, cid, name):
+        """The component declares itself so its outputs are accounted against its inputs."""
+        self.declared = (cid, name)
+
+    def count_no_output(self, *a):
+        """A frame processed without an output (counted, not recorded)."""
+
 
 class _StubDetector:
     """Stands in for the onnxruntime detector inside ObjectDetector: the cars of ``CARS`` as boxes."""
