@@ -21,7 +21,7 @@ needs_data = pytest.mark.skipif(not (DATA_DIR / "imagery").is_dir() or not (MODE
 
 #: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs and
 #: missions flown on a real-time video stream
-SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video")
+SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime")
 
 
 #: the development tier's longest files, longest first (worker-seconds each, 3 workers on the 2-core CI kind of
@@ -48,7 +48,7 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(config, items):
     """Mark every test of a slow group ``slow`` too, so that ``pytest -m "not slow"`` is the development tier
-    (everything but SITL, ``ray up``, cluster and fault runs); CI runs everything. On an xdist worker, the files of
+    (everything but SITL, ``ray up``, cluster, fault, video and real-time runs); CI runs everything. On an xdist worker, the files of
     :data:`LONGEST_FIRST` come first (in that order; the tests of a file keep theirs)."""
     for item in items:
         if any(item.get_closest_marker(g) for g in SLOW_GROUPS):
