@@ -37,7 +37,7 @@ import numpy as np
 from aerodaas.protocol.messages import (ProducerLedger, RecordCamera, RecordDetections, RecordImage, RecordItem,
                                        RecordJson, RecordOdometry, RecordTracks)
 from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
-from aerodaas.actors.remote_recorder import AnalyticsCounts
+from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts
 
 TF_TOPIC = "/tf"
 
@@ -49,7 +49,7 @@ class _Stop:
 _STOP = _Stop()
 
 
-class RecorderService:
+class RecorderService(AnalyticsAccounting):
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
     telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
@@ -103,7 +103,7 @@ class RecorderService:
         self.duplicates_by_topic: dict[str, int] = {}
         #: messages numbered here, per stream (producers in this process; the other actors' come with their ledgers)
         self.produced_here: dict[str, int] = {}
-        self._counts = AnalyticsCounts()  # analytics inputs and items without output of this process
+        self.analytics_counts = AnalyticsCounts()  # analytics inputs and items without output of this process
         self.on_failure: list[Callable[[dict], None]] = []
         _inject_fault(self.rec)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
@@ -361,21 +361,6 @@ class RecorderService:
         return dict(self.rec.message_counts)
 
     # ------------------------------------------------------------------ accounting (producers in this process)
-    def count_offered(self, cid: str, robot: str) -> None:
-        """See :meth:`~.remote_recorder.RemoteRecorder.count_offered`."""
-        with self._lock:
-            self._counts.offered(cid, robot)
-
-    def count_no_output(self, cid: str, name: str, robot: str) -> None:
-        """See :meth:`~.remote_recorder.RemoteRecorder.count_no_output`."""
-        with self._lock:
-            self._counts.no_output(cid, name, robot)
-
-    def declare_analytics(self, cid: str, name: str) -> None:
-        """See :meth:`~.remote_recorder.RemoteRecorder.declare_analytics`."""
-        with self._lock:
-            self._counts.names[str(cid)] = name
-
     def _write_accounting(self, ledgers: list[ProducerLedger], recorded_before: dict[str, int],
                           run_losses: list[dict]) -> None:
         """The file's last messages (the writer thread has ended): ``/run/accounting``
@@ -392,7 +377,7 @@ class RecorderService:
                 self.rec.write_json("/run/events", self.last_t_ns or 0, {
                     "event": "live_client_dropped", "client": peer, "wall_time": at,
                     "after_s": self.live.client_send_timeout_s}, schema_name="aerodaas.LiveClientDropped")
-        here = ProducerLedger("recorder", dict(self.produced_here), *self._counts.snapshot())
+        here = ProducerLedger("recorder", dict(self.produced_here), *self.analytics_counts.snapshot())
         msg = accounting_message([*ledgers, here], dict(self.duplicates_by_topic))
         if not msg["channels"] and not msg["analytics"]:
             return

@@ -13,36 +13,67 @@ import numpy as np
 from aerodaas.protocol.messages import (ProducerLedger, RecordCamera, RecordDetections, RecordImage, RecordItem,
                                        RecordJson, RecordOdometry, RecordTracks)
 
-__all__ = ["RemoteRecorder", "AnalyticsCounts"]
+__all__ = ["RemoteRecorder", "AnalyticsCounts", "AnalyticsAccounting"]
 
 
 class AnalyticsCounts:
     """The analytics counts of a :class:`~aerodaas.protocol.messages.ProducerLedger` kept by one process: items
     offered to each analytics component per robot, items each of its analytics took without a recorded output, the
-    analytics' names. Not thread-safe: the owner holds its lock."""
+    analytics' names. Thread-safe (one internal lock): analytics threads count while the sender snapshots."""
 
     def __init__(self) -> None:
+        self._lock = threading.Lock()
         self.offered_to: dict[str, dict[str, int]] = {}
         self.without: dict[str, dict[str, int]] = {}
         self.names: dict[str, str] = {}
 
     def offered(self, cid: str, robot: str) -> None:
-        per = self.offered_to.setdefault(str(cid), {})
-        per[robot] = per.get(robot, 0) + 1
+        """One item offered to component ``cid`` for ``robot``."""
+        with self._lock:
+            per = self.offered_to.setdefault(str(cid), {})
+            per[robot] = per.get(robot, 0) + 1
 
     def no_output(self, cid: str, name: str, robot: str) -> None:
-        if name:  # "": a sender's count (an item its outlet shed), the analytics names itself
+        """One item of ``robot`` that analytics ``name`` of component ``cid`` took without a recorded output."""
+        with self._lock:
+            if name:  # "": a sender's count (an item its outlet shed), the analytics names itself
+                self.names[str(cid)] = name
+            per = self.without.setdefault(str(cid), {})
+            per[robot] = per.get(robot, 0) + 1
+
+    def declare(self, cid: str, name: str) -> None:
+        """Component ``cid`` records under ``/<robot>/<name>``."""
+        with self._lock:
             self.names[str(cid)] = name
-        per = self.without.setdefault(str(cid), {})
-        per[robot] = per.get(robot, 0) + 1
 
     def snapshot(self) -> tuple[dict, dict, dict]:
         """(offered_to, no_output, names), copied."""
-        return ({k: dict(v) for k, v in self.offered_to.items()}, {k: dict(v) for k, v in self.without.items()},
-                dict(self.names))
+        with self._lock:
+            return ({k: dict(v) for k, v in self.offered_to.items()},
+                    {k: dict(v) for k, v in self.without.items()}, dict(self.names))
 
 
-class RemoteRecorder:
+class AnalyticsAccounting:
+    """The accounting calls an analytics component makes on its recorder (the run's
+    :class:`~aerodaas.actors.recorder.RecorderService` in the recorder actor's process, a :class:`RemoteRecorder`
+    elsewhere), kept in :attr:`analytics_counts`, which the subclass creates in its ``__init__``."""
+
+    analytics_counts: AnalyticsCounts
+
+    def count_offered(self, cid: str, robot: str) -> None:
+        """One item handed to analytics component ``cid`` for ``robot`` (its outputs are accounted against it)."""
+        self.analytics_counts.offered(cid, robot)
+
+    def count_no_output(self, cid: str, name: str, robot: str) -> None:
+        """Analytics ``name`` (component ``cid``) took an item of ``robot`` without recording an output."""
+        self.analytics_counts.no_output(cid, name, robot)
+
+    def declare_analytics(self, cid: str, name: str) -> None:
+        """Analytics component ``cid`` of this actor records under ``/<robot>/<name>``."""
+        self.analytics_counts.declare(cid, name)
+
+
+class RemoteRecorder(AnalyticsAccounting):
     """The recorder of an actor without one (e.g. the cloud actor of analytics deployed on cloud compute): the same
     non-blocking producer calls as :class:`RecorderService` (``detections``, ``json``, ``odometry``, ``camera``;
     frames are not sent), batched and delivered to the recorder of actor ``target`` (the edge actor) through its
@@ -67,7 +98,7 @@ class RemoteRecorder:
         self._lock = threading.Lock()
         self._refs: list = []
         self._offered: dict[str, int] = {}  # stream -> items numbered by this process (before adding _base)
-        self._counts = AnalyticsCounts()  # analytics inputs offered / taken without output, by this process
+        self.analytics_counts = AnalyticsCounts()  # analytics inputs offered / taken without output, by this process
         self._base_ledger: ProducerLedger | None = None  # this actor's counts before this process
         self._ledger_sent: Any = None  # the counts as of the last batch sent
         self.sent = 0
@@ -129,21 +160,6 @@ class RemoteRecorder:
         self._offered[stream] = n + 1
         return item.numbered(n)
 
-    def count_offered(self, cid: str, robot: str) -> None:
-        """One item handed to analytics component ``cid`` for ``robot`` (its outputs are accounted against it)."""
-        with self._lock:
-            self._counts.offered(cid, robot)
-
-    def count_no_output(self, cid: str, name: str, robot: str) -> None:
-        """Analytics ``name`` (component ``cid``) took an item of ``robot`` without recording an output."""
-        with self._lock:
-            self._counts.no_output(cid, name, robot)
-
-    def declare_analytics(self, cid: str, name: str) -> None:
-        """Analytics component ``cid`` of this actor records under ``/<robot>/<name>``."""
-        with self._lock:
-            self._counts.names[cid] = name
-
     def _base(self) -> ProducerLedger | None:
         """This actor's counts from before this process (its earlier incarnations', kept by the recorder actor;
         empty for a first start), asked once; None while the recorder actor does not answer (asked again at the
@@ -170,7 +186,7 @@ class RemoteRecorder:
         with self._lock:
             batch, self._buf = self._buf, []
             frames, self._pending_frames, self._pending_bytes = self._pending_frames, 0, 0
-            ledger = base.plus(dict(self._offered), *self._counts.snapshot())
+            ledger = base.plus(dict(self._offered), *self.analytics_counts.snapshot())
         if not batch and ledger == self._ledger_sent:
             return
         self._ledger_sent = ledger
