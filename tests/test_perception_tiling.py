@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -127,3 +128,22 @@ def test_bench_detect_cli_scores_our_annotations(tmp_path):
         assert r["boxes_per_frame"] == car["n_det"]  # one image, only cars scored
     assert rep["results"][0]["classes"]["car"]["n_det"] >= rep["results"][1]["classes"]["car"]["n_det"]
     assert main(["bench", "detect", "--images", str(images), "--annotations", str(ann), "--thresholds", "15"]) == 2
+
+
+def test_bench_detect_groups_score_member_classes_as_one():
+    """``--group vehicle=car,truck``: a car the model calls a truck counts as a found vehicle; a malformed spec is a
+    ValueError naming it (the CLI exits 2)."""
+    from aerodaas.bench.detect import _relabel, parse_groups
+
+    group_of = parse_groups(["vehicle=car, truck,bus", "human=person"])
+    assert group_of == {"car": "vehicle", "truck": "vehicle", "bus": "vehicle", "person": "human"}
+    gt = GroundTruth("a.jpg", np.array([[0, 0, 10, 10], [20, 20, 30, 30]], float),
+                     [group_of.get(c, c) for c in ("car", "truck")])
+    dets = _relabel([_d((0, 0, 10, 10), 0.9, "truck"), _d((20, 20, 30, 30), 0.8, "car"),
+                     _d((50, 50, 60, 60), 0.7, "traffic light")], group_of)
+    assert [d.class_name for d in dets] == ["vehicle", "vehicle", "traffic light"]
+    s = score([(dets, gt)], "vehicle", 0.5)
+    assert (s.n_gt, s.n_det, s.recall, s.precision) == (2, 2, 1.0, 1.0)
+    for bad in ("vehicle", "=car", "vehicle="):
+        with pytest.raises(ValueError, match=re.escape(f"--group {bad!r}: expected NAME=class,class,...")):
+            parse_groups([bad])

@@ -1,6 +1,7 @@
 """The built-in ONNX object detector analytics (:class:`ObjectDetector`): camera frames in, detections out."""
 from __future__ import annotations
 
+import os
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -26,8 +27,11 @@ class ObjectDetector(TrackRecording, Analytics):
     YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes. ``nms_threshold`` (IoU),
     ``agnostic_nms`` (one NMS over all classes) and ``class_groups`` (``{"vehicle": ["car", "truck", "bus"]}``:
     class-agnostic NMS within a group); ``class_thresholds`` per class. ``tiling``: a
-    :class:`aerodaas.perception.tiling.Tiling` for small objects in large frames. All options are checked by
-    :meth:`check` in the pre-flight, before Ray starts; :meth:`process` before :meth:`setup` raises RuntimeError.
+    :class:`aerodaas.perception.tiling.Tiling` for small objects in large frames. Options that need no model file
+    (thresholds, ``format``, ``model`` name, ``input_size``, ``threads``, ``batch``, tiling, tracker) raise
+    ValueError naming the field and the value where the detector is built; :meth:`check` checks them again with the
+    model's class names and the model file in the pre-flight, before Ray starts (``aerodaas run``/``plan`` exit 2);
+    :meth:`process` before :meth:`setup` raises RuntimeError.
 
     Several drones may share one detector: it remembers nothing between frames (not :attr:`stateful`), and
     :meth:`process_batch` runs the frames of several drones in one onnxruntime call, up to ``batch`` frames, when
@@ -50,9 +54,13 @@ class ObjectDetector(TrackRecording, Analytics):
                  nms_threshold: float = 0.45, agnostic_nms: bool = False,
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
                  class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None) -> None:
-        from aerodaas.perception.options import normalise_classes
+        from aerodaas.perception.options import check_detector_values, normalise_classes
 
         super().__init__(name)
+        # what needs no model file fails where the app wrote it; the model's own names in check() (pre-flight)
+        check_detector_values(name=self.name, model=model, model_path=model_path, format=format,
+                              score_threshold=score_threshold, nms_threshold=nms_threshold,
+                              class_thresholds=class_thresholds, input_size=input_size, threads=threads)
         if not (isinstance(batch, int) and batch >= 1):
             raise ValueError(f"ObjectDetector batch must be an integer >= 1 (frames per inference call), got {batch!r}")
         self.batch = batch
@@ -93,12 +101,14 @@ class ObjectDetector(TrackRecording, Analytics):
             self.tiling.check()
         if self.tracker is not None:
             self.tracker.check()
+        if self.model_path is not None and not os.path.isfile(self.model_path):
+            raise ValueError(f"analytics {self.name!r}: model_path={str(self.model_path)!r} is not a file")
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
         check_detector_options(name=self.name, model=self.model, model_path=self.model_path, format=self.format,
                                classes=self.classes, score_threshold=self.score_threshold,
                                nms_threshold=self.nms_threshold, class_thresholds=self.class_thresholds,
                                class_groups=self.class_groups, input_size=self.input_size,
-                               class_names=self.class_names)
+                               class_names=self.class_names, threads=self.threads)
         self.shipped = ShippedModel.read(self.model_path)
 
     def setup(self) -> None:

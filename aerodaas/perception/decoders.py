@@ -25,11 +25,9 @@ import cv2
 import numpy as np
 
 from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, _OnnxDetector
+from aerodaas.perception.options import FORMATS  # the output formats inspect_model recognises / format= accepts
 
 __all__ = ["UltralyticsDetector", "ModelInfo", "inspect_model", "FORMATS", "metadata_names"]
-
-#: the output formats :func:`inspect_model` recognises / ``format=`` accepts
-FORMATS = ("auto", "yolox", "nanodet", "ultralytics")
 
 
 def metadata_names(meta: dict[str, str]) -> list[str] | None:

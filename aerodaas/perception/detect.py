@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from aerodaas.model.types import COCO_CLASSES, Detection
+from aerodaas.perception.options import check_input_size
 
 __all__ = [
     "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
@@ -65,17 +66,7 @@ def _some(names: Sequence[str], n: int = 12) -> str:
     return ", ".join(names[:n]) + (f", ... ({len(names)} in all)" if len(names) > n else "")
 
 
-def _check_input_size(input_size) -> tuple[int, int]:
-    """``(H, W)`` in pixels, both positive multiples of 32 (the largest stride of the supported heads), at most
-    4096. Raises ValueError naming the value."""
-    try:
-        ih, iw = (int(v) for v in input_size)
-        ok = all(float(v) == int(v) for v in input_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"input_size must be (H, W) in pixels, got {input_size!r}") from None
-    if not ok or not (32 <= ih <= 4096 and 32 <= iw <= 4096) or ih % 32 or iw % 32:
-        raise ValueError(f"input_size must be (H, W) with each a multiple of 32 within [32, 4096], got {input_size!r}")
-    return ih, iw
+
 
 
 def _nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarray:
@@ -152,7 +143,7 @@ class _OnnxDetector:
             raise ValueError(f"{self.model_path}: expected an NCHW input, got {inp.name} {shape}")
         fixed_hw = all(isinstance(d, int) for d in shape[2:])
         if input_size is not None:
-            ih, iw = _check_input_size(input_size)
+            ih, iw = check_input_size(input_size)
             if fixed_hw and (ih, iw) != (int(shape[2]), int(shape[3])):
                 raise ValueError(f"input_size={tuple(input_size)!r} but {self.model_path} has a fixed input "
                                  f"{tuple(shape[2:])} (H, W); omit input_size or export with dynamic axes")

@@ -14,7 +14,10 @@ from typing import Any, Iterable
 
 from aerodaas.model.types import COCO_CLASSES
 
-__all__ = ["normalise_classes", "check_detector_options", "build_detector"]
+__all__ = ["FORMATS", "normalise_classes", "check_input_size", "check_detector_values", "check_detector_options", "build_detector"]
+
+#: the ONNX output heads the decoders read (:mod:`aerodaas.perception.decoders`); ``"auto"``: from the graph
+FORMATS = ("auto", "yolox", "nanodet", "ultralytics")
 
 _SHIPPED_FORMAT = {"yolox_nano": "yolox", "yolox": "yolox", "nanodet_plus_m_416": "nanodet", "nanodet": "nanodet"}
 
@@ -48,30 +51,68 @@ def _unit(field: str, v: Any) -> float:
     return f
 
 
+def check_input_size(input_size: Any) -> tuple[int, int]:
+    """``(H, W)`` in pixels, both positive multiples of 32 (the largest stride of the supported heads), at most
+    4096. Raises ValueError naming the value."""
+    try:
+        ih, iw = (int(v) for v in input_size)
+        ok = all(float(v) == int(v) for v in input_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"input_size must be (H, W) in pixels, got {input_size!r}") from None
+    if not ok or not (32 <= ih <= 4096 and 32 <= iw <= 4096) or ih % 32 or iw % 32:
+        raise ValueError(f"input_size must be (H, W) with each a multiple of 32 within [32, 4096], got {input_size!r}")
+    return ih, iw
+
+
+def check_detector_values(*, name: str = "detector", model: str = "yolox_nano", model_path: Any = None,
+                          format: str = "auto", score_threshold: float = 0.3, nms_threshold: float = 0.45,
+                          class_thresholds: dict[str, float] | None = None, input_size: Any = None,
+                          threads: int = 1) -> None:
+    """The checks of a detector configuration that need no model file (thresholds in [0, 1], ``format``, a known
+    shipped ``model`` name or a ``model_path`` string, ``input_size`` multiples of 32, ``threads`` an integer >= 0
+    (onnxruntime intra-op threads; 0 is its default)): cheap, without cv2 or onnxruntime, so
+    :class:`~aerodaas.analytics.detector.ObjectDetector` runs them where the app builds it. Raises ValueError
+    starting with ``analytics {name!r}:`` and naming the field and the value."""
+    try:
+        _unit("score_threshold", score_threshold)
+        _unit("nms_threshold", nms_threshold)
+        for c, v in (class_thresholds or {}).items():
+            _unit(f"class_thresholds[{c!r}]", v)
+        if format not in FORMATS:
+            raise ValueError(f"format must be one of {list(FORMATS)}, got {format!r}")
+        if input_size is not None:
+            check_input_size(input_size)
+        if model_path is None and model not in _SHIPPED_FORMAT:
+            raise ValueError(f"model must be one of {sorted(_SHIPPED_FORMAT)} or model_path must name an ONNX file, "
+                             f"got model={model!r}")
+        if model_path is not None and not isinstance(model_path, (str, os.PathLike)):
+            raise ValueError(f"model_path must be a file path, got {model_path!r}")
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
+            raise ValueError(f"threads must be an integer >= 0 (onnxruntime intra-op threads, 0: its default), "
+                             f"got {threads!r}")
+    except ValueError as e:
+        raise ValueError(f"analytics {name!r}: {e}") from None
+
+
 def check_detector_options(*, name: str = "detector", model: str = "yolox_nano", model_path: str | None = None,
                            format: str = "auto", classes: Iterable[str] | None = None,
                            score_threshold: float = 0.3, nms_threshold: float = 0.45,
                            class_thresholds: dict[str, float] | None = None,
                            class_groups: dict[str, Iterable[str]] | None = None,
                            input_size: tuple[int, int] | None = None,
-                           class_names: list[str] | None = None) -> dict[str, Any]:
+                           class_names: list[str] | None = None, threads: int = 1) -> dict[str, Any]:
     """Check a detector configuration without Ray; ``model_path`` (if given) is opened with onnxruntime to read its
     format, input size and class names (:func:`aerodaas.perception.decoders.inspect_model`). Returns
     ``{"format", "class_names", "input_hw"}`` as they will be used. Every error is a ValueError whose message
     starts with ``analytics {name!r}:`` and names the field and the value."""
-    from aerodaas.perception.detect import _check_input_size  # cv2 and onnxruntime load here, not when an app is built
-    from aerodaas.perception.decoders import FORMATS, inspect_model
+    from aerodaas.perception.decoders import inspect_model  # cv2 and onnxruntime load here, not when an app is built
 
+    check_detector_values(name=name, model=model, model_path=model_path, format=format,
+                          score_threshold=score_threshold, nms_threshold=nms_threshold,
+                          class_thresholds=class_thresholds, input_size=input_size, threads=threads)
     pre = f"analytics {name!r}: "
     try:
-        _unit("score_threshold", score_threshold)
-        _unit("nms_threshold", nms_threshold)
-        if format not in FORMATS:
-            raise ValueError(f"format must be one of {list(FORMATS)}, got {format!r}")
-        hw = _check_input_size(input_size) if input_size is not None else None
-        if model_path is None and model not in _SHIPPED_FORMAT:
-            raise ValueError(f"model must be one of {sorted(_SHIPPED_FORMAT)} or model_path must name an ONNX file, "
-                             f"got model={model!r}")
+        hw = check_input_size(input_size) if input_size is not None else None
         names: list[str] | None = list(class_names) if class_names is not None else None
         fmt = _SHIPPED_FORMAT.get(model, "yolox") if format == "auto" and model_path is None else format
         if model_path is not None:
@@ -110,8 +151,6 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
         cls = normalise_classes(classes)
         if cls is not None:
             _known("classes", cls)
-        for c, v in (class_thresholds or {}).items():
-            _unit(f"class_thresholds[{c!r}]", v)
         _known("class_thresholds", list(class_thresholds or {}))
         for g, members in (class_groups or {}).items():
             m = normalise_classes(members, f"class_groups[{g!r}]")

@@ -34,7 +34,9 @@ __all__ = ["Tiling", "slice_boxes", "merge_detections", "TiledDetector"]
 class Tiling:
     """Tiled inference options: ``tile`` (pixels, square slice side, >= 32), ``overlap`` (fraction of the tile in
     [0, 0.9)), ``full_frame`` (also run the whole frame, letterboxed), ``merge`` (``"nms"`` or ``"greedynmm"``),
-    ``match_threshold`` (IoU for nms, IOS for greedynmm, in (0, 1]), ``agnostic`` (merge across classes)."""
+    ``match_threshold`` (IoU for nms, IOS for greedynmm, in (0, 1]), ``agnostic`` (merge across classes).
+    Checked where it is written (``Tiling(tile=16)`` raises ValueError naming the field and the value), and again by
+    :meth:`check` in the pre-flight, before Ray starts, for a field changed afterwards."""
 
     tile: int = 640
     overlap: float = 0.2
@@ -42,6 +44,9 @@ class Tiling:
     merge: str = "greedynmm"
     match_threshold: float = 0.5
     agnostic: bool = True
+
+    def __post_init__(self) -> None:
+        self.check()
 
     def check(self) -> None:
         """Raises ValueError naming the field and the value."""
@@ -53,6 +58,9 @@ class Tiling:
             raise ValueError(f"tiling.merge must be 'nms' or 'greedynmm', got {self.merge!r}")
         if not isinstance(self.match_threshold, (int, float)) or not 0.0 < float(self.match_threshold) <= 1.0:
             raise ValueError(f"tiling.match_threshold must be within (0, 1], got {self.match_threshold!r}")
+        for f in ("full_frame", "agnostic"):
+            if not isinstance(getattr(self, f), bool):
+                raise ValueError(f"tiling.{f} must be True or False, got {getattr(self, f)!r}")
 
 
 def slice_boxes(h: int, w: int, tile: int, overlap: float) -> list[tuple[int, int, int, int]]:

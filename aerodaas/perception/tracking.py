@@ -46,6 +46,9 @@ class ByteTrackConfig:
     match_threshold: float = 0.8
     track_buffer: int = 30
 
+    def __post_init__(self) -> None:  # checked where the app writes it, and again in the pre-flight
+        self.check()
+
     def check(self) -> None:
         """Raises ValueError naming the field and the value."""
         for f in ("high_threshold", "low_threshold", "new_track_threshold", "match_threshold"):
