@@ -147,3 +147,25 @@ def test_bench_detect_groups_score_member_classes_as_one():
     for bad in ("vehicle", "=car", "vehicle="):
         with pytest.raises(ValueError, match=re.escape(f"--group {bad!r}: expected NAME=class,class,...")):
             parse_groups([bad])
+
+
+def test_visdrone_annotations_read_as_the_toolkit_defines_them(tmp_path):
+    """VisDrone-DET lines ``left,top,width,height,score,category,truncation,occlusion``: category 4 is a car, 1 a
+    pedestrian; score 0 and category 0 (ignored region) are left out; a malformed line names file, line and value."""
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "0000001_02999_d_0000005.jpg"), np.zeros((100, 200, 3), np.uint8))
+    ann = tmp_path / "annotations"
+    ann.mkdir()
+    (ann / "0000001_02999_d_0000005.txt").write_text(
+        "684,8,273,116,0,0,0,0\n"      # ignored region
+        "10,20,30,15,1,4,0,1\n"        # car
+        "50,60,8,20,1,1,0,0\n"         # pedestrian
+        "70,60,8,20,0,2,0,0\n"         # not evaluated (score 0)
+        "100,5,40,30,1,9,1,0,\n")      # bus, trailing comma as some files have
+    (g,) = load_annotations(ann, tmp_path, format="visdrone")
+    assert g.classes == ["car", "pedestrian", "bus"]
+    assert g.boxes.tolist() == [[10, 20, 40, 35], [50, 60, 58, 80], [100, 5, 140, 35]]
+    (ann / "0000001_02999_d_0000005.txt").write_text("10,20,0,15,1,4,0,1\n")
+    with pytest.raises(ValueError, match=r"0000001_02999_d_0000005.txt:1: expected .* got '10,20,0,15,1,4,0,1'"):
+        load_annotations(ann, tmp_path, format="visdrone")

@@ -58,7 +58,7 @@ def run_detect(a: argparse.Namespace) -> dict:
     from aerodaas.perception.scoring import load_annotations, score
     from aerodaas.perception.tiling import TiledDetector, Tiling
 
-    gts = load_annotations(a.annotations, a.images, a.names)
+    gts = load_annotations(a.annotations, a.images, a.names, a.annotation_format)
     group_of = parse_groups(a.group)
     for g in gts:
         g.classes = [group_of.get(c, c) for c in g.classes]
@@ -158,7 +158,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("detect", help="score a detector on annotated images (COCO JSON or YOLO txt): recall/precision, "
                                       "AP50, ms/frame; --sweep over input size, tiling, threshold")
     p.add_argument("--images", required=True, help="folder of the images")
-    p.add_argument("--annotations", required=True, help="COCO .json file or folder of YOLO .txt labels")
+    p.add_argument("--annotations", required=True,
+                   help="COCO .json file, folder of YOLO .txt labels, or VisDrone-DET annotations folder")
+    p.add_argument("--annotation-format", default="auto", choices=["auto", "coco", "yolo", "visdrone"],
+                   help="auto: a .json file is COCO, a folder YOLO; visdrone: a VisDrone-DET annotations folder")
     p.add_argument("--names", nargs="+", help="class names of YOLO labels (else classes.txt in the label folder)")
     p.add_argument("--model", default="yolox_nano", help="shipped model name (yolox_nano, nanodet_plus_m_416)")
     p.add_argument("--model-path", help="bring your own ONNX model")

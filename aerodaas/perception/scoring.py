@@ -9,7 +9,7 @@ AP is the area under the precision-recall curve with precision made monotone (th
 
 Annotations: COCO JSON (``images``, ``annotations`` with ``bbox`` ``[x, y, w, h]`` pixels, ``categories``) or a
 YOLO txt folder (one ``<image stem>.txt`` per image with ``class cx cy w h`` normalised to [0, 1], and a
-``classes.txt`` / ``names`` list, or ``--names``).
+``classes.txt`` / ``names`` list, or ``--names``), or a VisDrone-DET ``annotations`` folder (:func:`load_visdrone`).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from aerodaas.perception.boxes import iou_matrix
 
-__all__ = ["GroundTruth", "load_annotations", "match", "ClassScore", "score"]
+__all__ = ["GroundTruth", "load_annotations", "load_visdrone", "VISDRONE_CLASSES", "match", "ClassScore", "score"]
 
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 
@@ -45,10 +45,54 @@ def _image_size(path: Path) -> tuple[int, int]:
     return im.shape[0], im.shape[1]
 
 
-def load_annotations(path: str | Path, images_dir: str | Path, names: list[str] | None = None) -> list[GroundTruth]:
-    """Read ``path`` (COCO ``.json`` file, or a folder of YOLO ``.txt`` files) into one :class:`GroundTruth` per
-    annotated image that exists in ``images_dir``. Raises ValueError naming the file and the field for a malformed
-    file, a box with non-positive size, an unknown category id, or no image found."""
+#: VisDrone-DET ``object_category`` 1..11 (0 is an ignored region), from the VisDrone2018-DET toolkit's README
+VISDRONE_CLASSES = ("pedestrian", "people", "bicycle", "car", "van", "truck", "tricycle", "awning-tricycle", "bus",
+                    "motor", "others")
+
+
+def load_visdrone(path: str | Path, images_dir: str | Path) -> list[GroundTruth]:
+    """A VisDrone-DET ``annotations`` folder: one ``<image stem>.txt`` per image, each line ``bbox_left, bbox_top,
+    bbox_width, bbox_height, score, object_category, truncation, occlusion`` (pixels; the VisDrone2018-DET toolkit's
+    format). Boxes with ``score`` 0 (not evaluated) and category 0 (ignored regions) are left out, so a detection in
+    an ignored region counts as a false positive here (the toolkit drops it instead: precision is a lower bound);
+    categories 1..11 are :data:`VISDRONE_CLASSES`. Raises ValueError naming the file, line and value."""
+    path, images_dir = Path(path), Path(images_dir)
+    out: list[GroundTruth] = []
+    for img in sorted(p for p in images_dir.iterdir() if p.suffix.lower() in IMAGE_EXTS):
+        lab = path / (img.stem + ".txt")
+        if not lab.is_file():
+            continue
+        boxes, cls = [], []
+        for n, ln in enumerate(lab.read_text().splitlines()):
+            if not ln.strip():
+                continue
+            try:
+                x, y, w, h, sc, cat = (int(float(v)) for v in ln.replace(" ", "").split(",")[:6])
+                if w <= 0 or h <= 0 or not 0 <= cat <= len(VISDRONE_CLASSES):
+                    raise ValueError
+            except ValueError:
+                raise ValueError(f"{lab}:{n + 1}: expected 'left,top,width,height,score,category,...' with a "
+                                 f"positive size and a category in 0..{len(VISDRONE_CLASSES)}, got {ln!r}") from None
+            if sc == 0 or cat == 0:
+                continue
+            boxes.append((x, y, x + w, y + h))
+            cls.append(VISDRONE_CLASSES[cat - 1])
+        out.append(GroundTruth(img.name, np.array(boxes, float).reshape(-1, 4), cls))
+    if not out:
+        raise ValueError(f"annotations={str(path)!r}: none of its images is in {images_dir}")
+    return out
+
+
+def load_annotations(path: str | Path, images_dir: str | Path, names: list[str] | None = None,
+                     format: str = "auto") -> list[GroundTruth]:
+    """Read ``path`` (COCO ``.json`` file, a folder of YOLO ``.txt`` files, or with ``format="visdrone"`` a
+    VisDrone-DET folder, :func:`load_visdrone`) into one :class:`GroundTruth` per annotated image that exists in
+    ``images_dir``. Raises ValueError naming the file and the field for a malformed file, a box with non-positive
+    size, an unknown category id, or no image found."""
+    if format == "visdrone":
+        return load_visdrone(path, images_dir)
+    if format not in ("auto", "coco", "yolo"):
+        raise ValueError(f"annotation format must be auto, coco, yolo or visdrone, got {format!r}")
     path, images_dir = Path(path), Path(images_dir)
     out: list[GroundTruth] = []
     if path.is_file() and path.suffix.lower() == ".json":
