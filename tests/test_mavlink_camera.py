@@ -170,3 +170,26 @@ def test_vehicle_tracking_reads_the_stream_the_vehicle_announces(tmp_path, monke
     assert sum(1 for _, boxes in run["detections"] if boxes) >= 5  # cars in the real footage
     got = check_stream_recording(rec)  # every frame accounted for, every pose tag at its capture time
     assert got["stats"]["source"] == server.url and got["stats"]["discovered"].startswith("announced over MAVLink")
+
+
+@needs_data  # the app's detector model
+def test_a_run_without_the_announced_camera_fails_naming_it(tmp_path):
+    """The whole run: no camera on the vehicle -> the robot's error says so, exit code 1, before take-off."""
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=1.0, gps_lock_s=0.5)
+    addr = emu.start("tcp:127.0.0.1:0")
+    env = _env({"source": "mavlink", "discovery_timeout_s": 2.0},
+               {"backend": "mavlink", "mavlink": {"connection": addr, "autopilot": "ardupilot"}})
+    env_path = tmp_path / "env.json"
+    env_path.write_text(json.dumps(env))
+    try:
+        proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
+                               "--env", str(env_path), "--record", str(tmp_path / "run.mcap")],
+                              capture_output=True, text=True, timeout=600, env=dict(os.environ))
+        armed = emu.snapshot()["armed"] or emu.took_off
+    finally:
+        emu.stop()
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 1, out[-3000:]
+    assert "StreamDiscoveryError: robot 'quadrotor_base' camera 'cam1': properties.source 'mavlink' found no video " \
+           "stream within 2 s" in out, out[-3000:]
+    assert not armed  # handed back untouched
