@@ -21,19 +21,11 @@ def test_discovery_finds_the_stream_the_firmware_announces(tmp_path):
     reason = sitl.namespace_skip_reason()
     if reason:
         pytest.fail(reason)
-    (tmp_path / "scripts").mkdir()
+    (tmp_path / "scripts").mkdir()  # the firmware runs in tmp_path: its Lua scripts folder
     shutil.copy(sitl.REPO / "tests" / "sitl_camera" / "announce_stream.lua", tmp_path / "scripts")
-    parm = tmp_path / "scripting.parm"
-    parm.write_text("SCR_ENABLE 1\n")  # Lua scripting (off by default); CAM1_TYPE is set by the probe
-    d = sitl.ARDUCOPTER.parent
-    home = sitl.FARM_HOME
-    firmware = (f"cd {shlex.quote(str(tmp_path))} && ( {shlex.quote(str(sitl.ARDUCOPTER))} --model + --speedup 1 -I0 "
-                f"-w --defaults {shlex.quote(str(d / 'copter.parm'))},{shlex.quote(str(parm))} "
-                f"--home {home['lat']},{home['lon']},{home['alt']},0 --serial0 udpclient:127.0.0.1:14550 "
-                f"> {shlex.quote(str(tmp_path / 'fw.log'))} 2>&1 & ) ; true")
-    probe = f"{shlex.quote(sys.executable)} tests/sitl_camera_probe.py udpin:127.0.0.1:14550 60"
-    sitl.run_in_namespace("ardupilot", tmp_path, [firmware, probe], with_firmware=False, timeout_s=600)
-    rc, out = sitl.step_result(tmp_path, 1)
+    probe = f"{shlex.quote(sys.executable)} tests/sitl_camera_probe.py {sitl.connection('ardupilot')} 60"
+    sitl.run_in_namespace("ardupilot", tmp_path, [probe], speedup=1.0, timeout_s=600)
+    rc, out = sitl.step_result(tmp_path, 0)
     assert rc == 0, out[-3000:]
     got = json.loads(out.strip().splitlines()[-1])
     assert got["source"] == got["uri"] == "rtsp://127.0.0.1:8554/cam" and got["stream_type"] == "RTSP", got
