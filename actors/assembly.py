@@ -187,8 +187,14 @@ class ActorAssembly:
         for d in sorted(self.drones, key=lambda d: not d.backend.connects_first):
             try:
                 d.connect()
+                for c in d.cameras:  # a camera reading the stream the vehicle announces (source "mavlink")
+                    c["comp"].on_vehicle_connected()
             except Exception as e:  # noqa: BLE001 - every robot gets its own error (RobotsNotConnected)
                 errors[d.cfg.id] = f"{type(e).__name__}: {e}"
+                try:  # idempotent: a vehicle connected before its camera failed is handed back too
+                    d.backend.close()
+                except Exception:  # noqa: BLE001
+                    pass
         if errors:
             from aerodaas.backends.base import RobotsNotConnected
 

@@ -56,15 +56,14 @@ class CameraComponent:
         #: (run time s, position ENU m, yaw deg) at each clock tick: the pose a stream frame is tagged with
         self._poses: deque[tuple[float, tuple, float]] = deque(maxlen=256)
         self.stream = None
+        self._last_capture_t = float("-inf")  # run-clock capture time of the stream's previous frame
         self.latency_ms: deque[float] = deque(maxlen=4096)
+        self._props = props
+        #: source "mavlink": the stream the vehicle announced (opened by on_vehicle_connected)
+        self.discovered = None
         if self.source not in ("sim", "backend", "mcap"):
-            from aerodaas.video import StreamReader, parse_stream_source
-
-            spec = parse_stream_source(self.source, props.get("transport"), props.get("codec"))
-            self.stream = StreamReader(spec, self.k.width, self.k.height,
-                                       stall_timeout_s=float(props.get("stall_timeout_s") or 2.0),
-                                       name=f"{robot_id}/{sensor_id}").start()
-            self.stream.wait_first(float(props.get("first_frame_timeout_s") or 10.0))  # VideoSourceError names it
+            if self.source != "mavlink":
+                self._open_stream(self.source, props.get("codec"))
             # polled at twice the stream's nominal rate: a frame waits at most half an interval for its tick, and
             # a tick without a new frame is not a loss (counted in dropped_at_camera like any tick without a frame)
             self.fps = 2.0 * self.fps
@@ -72,6 +71,41 @@ class CameraComponent:
             from aerodaas.backends.replay import McapCameraReplay
 
             self.replay = McapCameraReplay(props["mcap"], props.get("topic") or f"/{robot_id}/camera/{sensor_id}")
+
+    def _open_stream(self, source: str, codec: str | None) -> None:
+        """Read video ``source`` (checked as configured sources are) and wait for its first frame
+        (``first_frame_timeout_s``, default 10 s; VideoSourceError names the URL)."""
+        from aerodaas.video import StreamReader, parse_stream_source
+
+        props = self._props
+        spec = parse_stream_source(source, props.get("transport") if source.startswith("rtsp") else None, codec)
+        self.stream = StreamReader(spec, self.k.width, self.k.height,
+                                   stall_timeout_s=float(props.get("stall_timeout_s") or 2.0),
+                                   name=f"{self.robot_id}/{self.sensor_id}").start()
+        self.stream.wait_first(float(props.get("first_frame_timeout_s") or 10.0))
+
+    def on_vehicle_connected(self) -> None:
+        """After the robot's backend connected: a camera with ``source: "mavlink"`` asks the backend for the
+        stream the vehicle announces (camera protocol v2: ``camera_component``, ``stream_id``,
+        ``discovery_timeout_s``), records a ``video_discovered`` event and reads the URL like a configured one.
+        Raises StreamDiscoveryError (naming robot, sensor and what was asked) or VideoSourceError."""
+        if self.source != "mavlink" or self.stream is not None:
+            return
+        from aerodaas.video.discovery import DEFAULT_DISCOVERY_TIMEOUT_S, StreamDiscoveryError, StreamRequest
+
+        p = self._props
+        req = StreamRequest(self.robot_id, self.sensor_id, p.get("camera_component"), p.get("stream_id"),
+                            float(p.get("discovery_timeout_s") or DEFAULT_DISCOVERY_TIMEOUT_S))
+        found = self.backend.discover_video_stream(req)
+        self.discovered = found
+        if self.on_event is not None:
+            self.on_event("video_discovered", sensor=self.sensor_id, **found.event_fields())
+        codec = p.get("codec") or found.codec if found.source.startswith("rtp://") else None
+        try:
+            self._open_stream(found.source, codec)
+        except ValueError as e:  # a URI this camera source cannot read: the discovery's failure, named
+            raise StreamDiscoveryError(f"{req.where()}: the vehicle announced {found.uri!r} "
+                                       f"({found.describe()}), which is not a readable stream: {e}") from None
 
     def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
         """Clock thread: a frame is due. Submits the capture unless the previous one is still running."""
@@ -125,6 +159,9 @@ class CameraComponent:
                 return None
             frame, pose, timing = got
             t = timing["capture_t"]
+        elif self.source == "mavlink":  # its stream not discovered (yet): no frame
+            self.dropped_at_camera += 1
+            return None
         elif self.source in ("backend", "mcap"):
             got = self.backend.camera_frame() if self.replay is None else self.replay.frame_at(t)
             if got is None or got[1] == self._last_source_t:  # no new frame since the last capture
@@ -168,8 +205,12 @@ class CameraComponent:
         if f is None:
             return None
         now = time.monotonic()
-        capture_t = t - max(0.0, now - f.capture_mono)
-        arrival_t = t - max(0.0, now - f.arrival_mono)
+        # never before the previous frame's: a vehicle clock that stalls while the wall clock runs (a real
+        # autopilot's time_boot_ms, a starved emulator) would order two frames backwards, and the recorder takes a
+        # frame not newer than the last one for a frame sent again (seen under load 37: 7 of 911 frames)
+        capture_t = max(t - max(0.0, now - f.capture_mono), self._last_capture_t + 1e-6)
+        arrival_t = max(t - max(0.0, now - f.arrival_mono), capture_t)
+        self._last_capture_t = capture_t
         position, yaw, pose_t = pose_at(list(self._poses), capture_t)
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         self.latency_ms.append((now - f.capture_mono) * 1e3)
@@ -207,5 +248,6 @@ class CameraComponent:
         """The stream's counters (:meth:`aerodaas.video.StreamReader.stats`) and its capture-to-delivery latency
         (ms: median, p99, max) — the glass-to-analytics time up to the camera's hand-off."""
         lat = np.array(self.latency_ms or [0.0])
-        return {**self.stream.stats(), "not_recorded": self.not_recorded, "latency_ms_median": float(np.median(lat)),
+        found = {"discovered": self.discovered.describe()} if self.discovered is not None else {}
+        return {**self.stream.stats(), **found, "not_recorded": self.not_recorded, "latency_ms_median": float(np.median(lat)),
                 "latency_ms_p99": float(np.percentile(lat, 99)), "latency_ms_max": float(lat.max())}

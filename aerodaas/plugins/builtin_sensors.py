@@ -20,13 +20,16 @@ from aerodaas.model.bounds import MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_RATE_HZ
 from aerodaas.plugins.sensor import SensorDelivery, SensorPlugin, SensorPropertiesBase
 
 __all__ = ["CameraProperties", "OdometryProperties", "StatStreamProperties", "CameraSensor", "OdometrySensor",
-           "StatStreamSensor", "CAMERA_SOURCES", "STREAM_PROPERTIES"]
+           "StatStreamSensor", "CAMERA_SOURCES", "STREAM_PROPERTIES", "MAVLINK_SOURCE", "DISCOVERY_PROPERTIES"]
 
 #: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
 #: Tello's), or a recorded MCAP camera channel; any other source is a video stream or file (aerodaas.video.source)
 CAMERA_SOURCES = ("sim", "backend", "mcap")
 #: camera properties that only a video stream source uses
 STREAM_PROPERTIES = ("transport", "codec", "first_frame_timeout_s", "stall_timeout_s")
+#: the source whose stream the vehicle announces over MAVLink (aerodaas.video.discovery), and its own properties
+MAVLINK_SOURCE = "mavlink"
+DISCOVERY_PROPERTIES = ("camera_component", "stream_id", "discovery_timeout_s")
 _Text = Field(default=None, min_length=1, strict=True)
 
 
@@ -34,7 +37,9 @@ class CameraProperties(SensorPropertiesBase):
     """A camera's ``properties`` (see :class:`aerodaas.config.SensorConfig` for ``source``): ``width``/``height``
     pixels [1, 8192], ``hfov_deg`` (0, 180), ``fps`` (0, 240], ``pitch_deg`` (0, 90] (90 = nadir),
     ``jpeg_quality`` [1, 100]; a video stream's ``transport``/``codec`` and timeouts in seconds,
-    ``first_frame_timeout_s`` (0, 600], ``stall_timeout_s`` (0, 60]."""
+    ``first_frame_timeout_s`` (0, 600], ``stall_timeout_s`` (0, 60]; with ``source: "mavlink"`` (the stream the
+    vehicle announces, docs/video.md) ``camera_component`` [1, 255] (MAVLink component id; default the first camera
+    found), ``stream_id`` [1, 255] (default the lowest-numbered) and ``discovery_timeout_s`` (0, 120] (default 10)."""
 
     width: int = Field(default=640, ge=1, le=MAX_CAMERA_PX, strict=True, description="pixels")
     height: int = Field(default=480, ge=1, le=MAX_CAMERA_PX, strict=True, description="pixels")
@@ -49,12 +54,24 @@ class CameraProperties(SensorPropertiesBase):
     codec: str | None = _Text
     first_frame_timeout_s: float | None = Field(default=None, gt=0.0, le=600.0, strict=True, description="seconds")
     stall_timeout_s: float | None = Field(default=None, gt=0.0, le=60.0, strict=True, description="seconds")
+    camera_component: int | None = Field(default=None, ge=1, le=255, strict=True, description="MAVLink component id")
+    stream_id: int | None = Field(default=None, ge=1, le=255, strict=True)
+    discovery_timeout_s: float | None = Field(default=None, gt=0.0, le=120.0, strict=True, description="seconds")
 
     @model_validator(mode="after")
     def _check_source(self) -> "CameraProperties":
         src = self.source
         stream_props = [k for k in STREAM_PROPERTIES if getattr(self, k) is not None]
-        if src not in CAMERA_SOURCES:  # a video stream or file: checked (scheme, host, port, codec) by its parser
+        discovery_props = [k for k in DISCOVERY_PROPERTIES if getattr(self, k) is not None]
+        if discovery_props and src != MAVLINK_SOURCE:
+            raise ValueError(f"properties.{discovery_props[0]} is only used with properties.source 'mavlink' (the "
+                             f"stream the vehicle announces), but source is {src!r}")
+        if src == MAVLINK_SOURCE:  # the URL comes from the vehicle once connected; checked by the video source then
+            if self.codec is not None and self.codec not in ("h264", "h265"):
+                raise ValueError(f"properties.codec must be one of ['h264', 'h265'], got {self.codec!r}")
+            if self.transport is not None and self.transport not in ("tcp", "udp"):
+                raise ValueError(f"properties.transport must be 'tcp' or 'udp', got {self.transport!r}")
+        elif src not in CAMERA_SOURCES:  # a video stream or file: checked (scheme, host, port, codec) by its parser
             from aerodaas.video.source import parse_stream_source
 
             parse_stream_source(src, self.transport, self.codec)
@@ -107,16 +124,15 @@ class CameraSensor(SensorPlugin):
 
     @classmethod
     def check_for_robot(cls, properties: dict[str, Any], robot: Any, where: str) -> None:
-        """``source: backend`` needs a backend that declares its own camera stream (``provides_camera``)."""
-        from aerodaas.plugins import registry
-
-        if properties.get("source") != "backend":
+        """``source: backend`` needs a backend that declares its own camera stream (``provides_camera``);
+        ``source: mavlink`` one that discovers the vehicle's announced streams (``discovers_video_streams``)."""
+        if properties.get("source") == MAVLINK_SOURCE:
+            if not _backend_declares(robot.backend, "discovers_video_streams"):
+                raise ValueError(f"{where}.properties.source: 'mavlink' asks the vehicle for its camera's stream "
+                                 f"over MAVLink, so the robot's backend must be 'mavlink', but backend is "
+                                 f"{robot.backend!r}")
             return
-        try:
-            ok = bool(getattr(registry.get("backend", robot.backend), "provides_camera", False))
-        except registry.UnknownPlugin:
-            ok = False
-        if not ok:
+        if properties.get("source") == "backend" and not _backend_declares(robot.backend, "provides_camera"):
             raise ValueError(f"{where}.properties.source: 'backend' needs a backend with its own camera stream "
                              f"(provides_camera: {_camera_backends()}), but backend is {robot.backend!r}")
 
@@ -139,7 +155,7 @@ class CameraSensor(SensorPlugin):
         if src == "mcap":
             properties["mcap"] = str(resolve(properties["mcap"], f"{where}.properties.mcap"))
             properties.setdefault("topic", f"/{robot_id}/camera/{sensor_id}")
-        elif src not in (None, *CAMERA_SOURCES):
+        elif src not in (None, MAVLINK_SOURCE, *CAMERA_SOURCES):
             from aerodaas.video.source import parse_stream_source
 
             spec = parse_stream_source(src, properties.get("transport"), properties.get("codec"))
@@ -175,6 +191,16 @@ class StatStreamSensor(SensorPlugin):
     component_kind = "stat_stream"
     own_topic = False  # /mission/state
     default_id = "stat"
+
+
+def _backend_declares(backend: str, flag: str) -> bool:
+    """Whether the registered backend ``backend`` declares the class attribute ``flag`` true."""
+    from aerodaas.plugins import registry
+
+    try:
+        return bool(getattr(registry.get("backend", backend), flag, False))
+    except registry.UnknownPlugin:
+        return False
 
 
 def _camera_backends() -> list[str]:

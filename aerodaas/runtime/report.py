@@ -102,6 +102,8 @@ def _camera_lines(st: dict, rep: dict) -> list[str]:
                          f"{v['decode_errors']} damaged packets; {v['lost']} outage(s) "
                          f"({v['outage_s']:.1f} s without video, {v['restored']} restored); capture to "
                          f"hand-off {v['latency_ms_median']:.0f} ms median, {v['latency_ms_p99']:.0f} ms p99")
+            if v.get("discovered"):  # source "mavlink": where the URL came from
+                lines.append(f"      {v['source']} {v['discovered']}")
         for o in c.get("outlets") or []:  # a consumer whose actor died (and came back, or not)
             if o.get("reconnects") or o.get("held") or o.get("lost"):
                 back = "did NOT come back" if o.get("lost") else \

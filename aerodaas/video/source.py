@@ -29,12 +29,13 @@ VIDEO_FILE_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi", ".ts", ".m2ts", ".h264", 
 #: the dynamic RTP payload type senders use for H.264/H.265 (QGC, GStreamer's rtph264pay default: 96)
 DEFAULT_PAYLOAD_TYPE = 96
 
-StreamKind = Literal["rtsp", "rtp", "mpegts_udp", "sdp", "v4l2", "file"]
+StreamKind = Literal["rtsp", "rtp", "mpegts_udp", "mpegts_tcp", "sdp", "v4l2", "file"]
 
 
 @dataclass(frozen=True)
 class StreamSpec:
-    """A checked video source. ``kind``: rtsp, rtp (raw RTP on UDP, described by an SDP we write), mpegts_udp, sdp
+    """A checked video source. ``kind``: rtsp, rtp (raw RTP on UDP, described by an SDP we write), mpegts_udp,
+    mpegts_tcp (MPEG-TS from a TCP server, as a MAVLink camera announces VIDEO_STREAM_TYPE_TCP_MPEG), sdp
     (the sender's SDP file), v4l2, file. ``url``: what FFmpeg opens (for rtp: None until :meth:`sdp_text` is
     written to a file); ``format``: FFmpeg demuxer name or None (probe); ``options``: FFmpeg AVOptions;
     ``live``: a stream that can stop (reopened with backoff) as opposed to a file (looped at EOF);
@@ -77,7 +78,8 @@ def parse_stream_source(source: str, transport: str | None = None, codec: str | 
 
     Accepted: ``rtsp://host[:port]/path`` and ``rtsps://`` (``transport`` ``tcp``, the default, or ``udp``);
     ``rtp://[host]:port`` (raw RTP, e.g. ``rtp://0.0.0.0:5600`` for QGC-style senders; ``codec`` ``h264``, the
-    default, or ``h265``); ``udp://[host]:port`` (MPEG-TS); a path ending in ``.sdp`` (the sender's SDP file);
+    default, or ``h265``); ``udp://[host]:port`` (MPEG-TS); ``tcp://host:port`` (MPEG-TS from a TCP server);
+    a path ending in ``.sdp`` (the sender's SDP file);
     ``/dev/videoN`` (V4L2); a path or ``file:`` URL ending in a video suffix (:data:`VIDEO_FILE_SUFFIXES`).
     Raises ValueError naming ``where`` (or the property) and the value; file existence is checked by the
     environment loader, which resolves paths."""
@@ -105,6 +107,16 @@ def parse_stream_source(source: str, transport: str | None = None, codec: str | 
         except ValueError:
             raise ValueError(f"{where}: {source!r} has an invalid port") from None
         return StreamSpec("rtsp", source, source, "rtsp", {"rtsp_transport": transport or "tcp"})
+    if scheme == "tcp":
+        u = urlsplit(source)
+        try:
+            port = _port(u.port, where, source)
+        except ValueError as e:
+            raise ValueError(str(e) if "needs" in str(e) else f"{where}: {source!r} has an invalid port") from None
+        if not u.hostname or u.path not in ("", "/") or u.query:
+            raise ValueError(f"{where}: {source!r}: a tcp:// source (MPEG-TS from a TCP server) is host:port only")
+        return StreamSpec("mpegts_tcp", source, f"tcp://{u.hostname}:{port}", "mpegts", {}, host=u.hostname,
+                          port=port)
     if scheme in ("rtp", "udp"):
         u = urlsplit(source)
         try:
@@ -125,7 +137,7 @@ def parse_stream_source(source: str, transport: str | None = None, codec: str | 
         source_path = source[len("file://"):]
     elif scheme:
         raise ValueError(f"{where}: unknown camera source {source!r}: one of {list(NON_STREAM_SOURCES)}, an "
-                         f"rtsp://, rtsps://, rtp:// or udp:// URL, an .sdp file, /dev/videoN or a video file")
+                         f"rtsp://, rtsps://, rtp://, udp:// or tcp:// URL, an .sdp file, /dev/videoN or a video file")
     else:
         source_path = source
     if re.fullmatch(r"/dev/video\d+", source_path):
@@ -136,7 +148,7 @@ def parse_stream_source(source: str, transport: str | None = None, codec: str | 
     if low.endswith(VIDEO_FILE_SUFFIXES):
         return StreamSpec("file", source, source_path, None, {}, live=False)
     raise ValueError(f"{where}: unknown camera source {source!r}: one of {list(NON_STREAM_SOURCES)}, an rtsp://, "
-                     f"rtsps://, rtp:// or udp:// URL, an .sdp file, /dev/videoN or a video file "
+                     f"rtsps://, rtp://, udp:// or tcp:// URL, an .sdp file, /dev/videoN or a video file "
                      f"({', '.join(VIDEO_FILE_SUFFIXES)})")
 
 

@@ -44,6 +44,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
 
     kind = "mavlink"
     clock = "vehicle"
+    #: a camera with ``source: "mavlink"`` reads the stream the vehicle announces (:meth:`discover_video_stream`)
+    discovers_video_streams = True
     Config = MavlinkConfig
     config_section = "mavlink"
 
@@ -151,4 +153,22 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._init_mission()
         self._init_params()
         self._init_fence()
+        from aerodaas.backends.mavlink.camera import CameraFinder
+
+        self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
+
+    def discover_video_stream(self, request: Any) -> Any:
+        """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with
+        ``source: "mavlink"``: ``request`` an :class:`aerodaas.video.discovery.StreamRequest`, returns its
+        :class:`~aerodaas.video.discovery.DiscoveredStream`. Raises
+        :class:`~aerodaas.video.discovery.StreamDiscoveryError` after ``request.timeout_s`` without one, LinkLost
+        when the link is down."""
+        self._check_link("camera discovery")
+        return self._cameras.discover(request, self._compid)
+
+    def _request_of(self, component: int, command: int, params: tuple) -> None:
+        """COMMAND_LONG ``command`` to ``component`` of the vehicle's system, not waited for (its answer is a
+        message: camera.py)."""
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        self._send(lambda mav: mav.command_long_send(self._sysid, component, command, 0, *p))
 

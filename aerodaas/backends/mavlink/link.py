@@ -240,6 +240,7 @@ class LinkMixin:
         src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
         if self._sysid and src_sys != self._sysid:
             return
+        self._cameras.on_message(msg)  # cameras are components of their own: before the autopilot-only filter
         if mtype == "HEARTBEAT":
             if src_comp == self._compid and self._is_autopilot_heartbeat(msg):
                 self._on_heartbeat(msg, now)

@@ -339,5 +339,6 @@ class LinkMixin:
         if handler is None:
             return
         if mtype not in ("HEARTBEAT", "REQUEST_DATA_STREAM") and not self._for_us(msg):
+            self._camera_command(link, msg)  # a camera component's, if one is attached (camera.py)
             return
         handler(link, msg)

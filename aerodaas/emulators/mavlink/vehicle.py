@@ -52,6 +52,7 @@ from aerodaas.config import Limits, RobotConfig
 from aerodaas.model.types import GeoPoint
 from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.emulators.mavlink.arming import ArmingMixin
+from aerodaas.emulators.mavlink.camera import CameraHostMixin
 from aerodaas.emulators.mavlink.commands import CommandMixin
 from aerodaas.emulators.mavlink.constants import _PX4_DEFAULT_STREAMS
 from aerodaas.emulators.mavlink.flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
@@ -73,7 +74,7 @@ __all__ = ["MavlinkVehicleEmulator"]
 
 
 class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, ParamMixin, MissionMixin,
-                             MissionRunMixin, TelemetryMixin):
+                             MissionRunMixin, TelemetryMixin, CameraHostMixin):
     """A simulated ArduPilot Copter or PX4 multicopter speaking MAVLink 2 over TCP (server) or UDP.
 
     ``autopilot``: ``"ardupilot"`` or ``"px4"``. ``robot``: battery, yaw rate, altitude and home from a
