@@ -12,6 +12,7 @@ from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
 from aerodaas.backends.mavlink.fence import FenceMixin
+from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
@@ -46,6 +47,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     clock = "vehicle"
     Config = MavlinkConfig
     config_section = "mavlink"
+    provides_gimbal = True  # gimbal protocol v2 through the autopilot's gimbal manager (gimbal.py GimbalConcern)
 
     # the pre-flight checks of its settings (aerodaas.backends.mavlink.preflight), run before Ray starts
     @classmethod
@@ -151,4 +153,29 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._init_mission()
         self._init_params()
         self._init_fence()
+        #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
+        self.gimbal = GimbalConcern(self, cfg.gimbal)
+
+    # the gimbal (aerodaas.backends.mavlink.gimbal.GimbalConcern)
+    def point_gimbal(self, cmd: Any) -> None:
+        """Point the vehicle's gimbal (:meth:`GimbalConcern.point`)."""
+        self.gimbal.point(cmd)
+
+    def gimbal_attitude(self) -> Any:
+        """The latest GIMBAL_DEVICE_ATTITUDE_STATUS as a GimbalAttitude (None before the first)."""
+        return self.gimbal.latest()
+
+    def drain_gimbal(self) -> list:
+        """Every GIMBAL_DEVICE_ATTITUDE_STATUS not handed out yet, oldest first."""
+        return self.gimbal.drain()
+
+    def _on_gimbal_device_attitude_status(self, msg: Any) -> None:
+        self.gimbal.on_message(msg)
+
+    def _on_gimbal_manager_information(self, msg: Any) -> None:
+        self.gimbal.on_message(msg)
+
+    def _streams(self) -> tuple:
+        """The telemetry messages requested (link.py), and the gimbal's attitude when a gimbal is configured."""
+        return super()._streams() + self.gimbal.streams()
 
