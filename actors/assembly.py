@@ -154,7 +154,8 @@ class ActorAssembly:
         cfg = RobotConfig.model_validate(r.robot)
         # the drone owns its waypoint queue and its navigation inbox (registered as <robot>/scheduler)
         drone = DroneComponent(r.drone_cid, r.robot, plane, r.scheduler, self.recorder, plane.epoch_ns,
-                               r.preplanned, r.odom_cids, r.stat_cids, inbox_cid=r.scheduler_cid)
+                               r.preplanned, r.odom_cids, r.stat_cids, inbox_cid=r.scheduler_cid,
+                               gimbal_commands=r.gimbal)
         inbox = plane.add(drone.inbox)
         for c in r.cameras:
             if c.props.get("source", "sim") == "sim" and world is None:

@@ -14,6 +14,7 @@ from aerodaas.protocol.messages import FrameMsg
 from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
 from aerodaas.actors.dataplane import Cascade, DataPlane
+from aerodaas.navigation.gimbal import camera_angles, wrap_deg
 from aerodaas.video.pose import pose_at
 
 
@@ -116,15 +117,20 @@ class CameraComponent:
             return False
         if tok is not None:
             tok.add()
-        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter())
+        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter(), self._gimbal())
         return True
 
-    def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None, ticked: float) -> None:
+    def _gimbal(self) -> Any:
+        """The gimbal's attitude now (the clock thread, at the frame's tick), or None: no gimbal."""
+        return self.backend.gimbal_attitude() if self.backend is not None else None
+
+    def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None, ticked: float,
+                 gimbal: Any = None) -> None:
         dispatch_ms = (time.perf_counter() - ticked) * 1e3
         self.dispatch_ms.append(dispatch_ms)
         try:
             try:
-                msg = self._produce(position, yaw, t, seq, dispatch_ms)
+                msg = self._produce(position, yaw, t, seq, dispatch_ms, gimbal)
             finally:
                 self._busy.release()  # the next frame may be rendered while this one travels downstream
             if msg is not None:
@@ -137,19 +143,20 @@ class CameraComponent:
         """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
         new frame)."""
         self._poses.append((t, tuple(position), float(yaw)))
-        msg = self._produce(position, yaw, t, seq)
+        msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal())
         if msg is None:
             return None
         self.plane.publish(self.cid, [msg], tok, inline=True)
         return msg.data
 
     def _produce(self, position: tuple, yaw: float, t: float, seq: int,
-                 dispatch_ms: float = 0.0) -> FrameMsg | None:
+                 dispatch_ms: float = 0.0, gimbal: Any = None) -> FrameMsg | None:
         """Render (or fetch) the frame, make it read-only, record it; returns its message. ``dispatch_ms``: how long
         the capture waited for a pool thread after the clock's tick (it joins the frame's trace: the honest tail of
-        ``aerodaas bench overhead`` counts it frame by frame)."""
+        ``aerodaas bench overhead`` counts it frame by frame); ``gimbal``: the gimbal's attitude at the tick (the
+        camera's heading and pitch then come from it) or None (the configured mount ``pitch_deg``)."""
         t0 = time.perf_counter()
-        pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
+        pose = self._frame_pose(position, yaw, gimbal)
         truth: list = []
         timing = None
         if self.stream is not None:
@@ -158,6 +165,7 @@ class CameraComponent:
                 self.dropped_at_camera += 1
                 return None
             frame, pose, timing = got
+            pose = self._frame_pose(pose.position, pose.yaw, gimbal)
             t = timing["capture_t"]
         elif self.source == "mavlink":  # its stream not discovered (yet): no frame
             self.dropped_at_camera += 1
@@ -188,11 +196,28 @@ class CameraComponent:
             if truth:
                 self.recorder.json("/world/targets", t_ns, {"robot": self.robot_id, "seq": seq, "t": t,
                                                             "targets": truth}, "aerodaas.GroundTruth")
+            if gimbal is not None:  # the pose the frame carries, with the gimbal's angles
+                self.recorder.json(f"{self.topic}/pose", t_ns, {
+                    "robot": self.robot_id, "sensor": self.sensor_id, "seq": seq, "t": t,
+                    "position": [float(c) for c in pose.position], "yaw": pose.yaw, "camera_pitch": pose.camera_pitch,
+                    "gimbal_pitch_deg": gimbal.pitch_deg, "gimbal_yaw_deg": gimbal.yaw_deg}, "aerodaas.FramePose")
             if timing:  # when the frame was captured and arrived, and the pose it carries
                 self.recorder.json(f"{self.topic}/timing", t_ns, {"robot": self.robot_id, "sensor": self.sensor_id,
                                                                  "seq": seq, **timing}, "aerodaas.FrameTiming")
         return FrameMsg(robot=self.robot_id, sim_t=t, data=frame, meta=meta,
                         trace={"capture_wall": wall, "inference_ms": 0.0, "post_ms": 0.0, "dispatch_ms": dispatch_ms})
+
+    def _frame_pose(self, position: tuple, yaw: float, gimbal: Any) -> FramePose:
+        """The camera's pose: the vehicle's ``position`` (ENU m), and its heading and pitch from the ``gimbal``'s
+        attitude (:func:`aerodaas.navigation.gimbal.camera_angles`; an earth-frame yaw is from north, clockwise)
+        or, without one, the vehicle's ``yaw`` (ENU degrees) and the mount's ``pitch_deg``."""
+        if gimbal is None:
+            return FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
+        if gimbal.yaw_in_earth_frame:
+            heading, pitch = wrap_deg(90.0 - gimbal.yaw_deg), -gimbal.pitch_deg
+        else:
+            heading, pitch = camera_angles(yaw, gimbal.pitch_deg, gimbal.yaw_deg)
+        return FramePose(position=position, yaw=heading, camera_pitch=pitch)
 
     def _from_stream(self, t: float) -> tuple[np.ndarray, FramePose, dict] | None:
         """The stream's newest frame not delivered before, its pose at capture and its timing (run-clock s), or

@@ -37,6 +37,7 @@ from aerodaas.actors.drone_autopilot import AutopilotFlight
 from aerodaas.actors.drone_inbox import DroneInbox
 from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import RunEnd
+from aerodaas.actors.drone_gimbal import DroneGimbal
 from aerodaas.actors.drone_odometry import OdometryPublisher
 from aerodaas.actors.drone_progress import NavigationProgress
 from aerodaas.actors.drone_queue_flight import QueueFlight, WaypointHold
@@ -55,7 +56,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
 
     def __init__(self, cid: str, robot_cfg: dict, plane: Any, scheduler: Any, recorder: Any, epoch_ns: int,
                  preplanned_total: int, odom_cids: list[str], stat_cids: list[str], backend: Any = None,
-                 inbox_cid: str | None = None) -> None:
+                 inbox_cid: str | None = None, gimbal_commands: list | None = None) -> None:
         self.cid = cid
         self.cfg = RobotConfig.model_validate(robot_cfg)
         self.plane = plane
@@ -113,6 +114,9 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
         #: the drone's odometry sensor (recorded and published from the vehicle's state or its own samples)
         self.odometry = OdometryPublisher(self.backend, self.cfg.id, recorder, plane, odom_cids,
                                           OdometryPublisher.rate_of(self.cfg), self._t_ns)
+        #: the camera gimbal: commands through the safety gate, attitude recorded on /<robot>/gimbal
+        self.gimbal = DroneGimbal(self.backend, self.cfg.id, self.cfg.gimbal, self.gate, recorder, self._t_ns,
+                                  self._event, OdometryPublisher.rate_of(self.cfg), gimbal_commands)
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
         self._init_autopilot()
@@ -144,6 +148,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
         if not b.navigable:
             self._event("observing", backend=self.cfg.backend)
             return
+        self.gimbal.start()  # what the application pointed the gimbal at before the mission started
         if self.autopilot_mission:
             self._start_autopilot_mission()
             return
@@ -191,6 +196,18 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
     def end_mission(self, reason: str = "aborted") -> bool:
         self._end_req = reason
         return True
+
+    def point_gimbal(self, cmd: Any) -> None:
+        """Carry out gimbal command ``cmd`` (:data:`aerodaas.protocol.gimbal.GimbalCommand`) now: the safety gate
+        checks it against the robot's ``gimbal`` limits, then the backend sends it (:class:`DroneGimbal`). Raises
+        GimbalError (nothing sent) or the backend's error when the vehicle refuses."""
+        with self.lock:
+            self.gimbal.command(cmd)
+
+    def gimbal_attitude(self) -> dict | None:
+        """The gimbal's latest attitude (``aerodaas.GimbalAttitude`` fields: vehicle time ``t``, ``q``, degrees),
+        None before the first report or without a gimbal."""
+        return self.gimbal.attitude()
 
     @property
     def end_requested(self) -> str | None:
@@ -252,6 +269,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
                     self._reissue = True  # sent again on the next tick, unless the autopilot's failsafe comes first
                 self._event(ev.pop("event", "backend_event"), **ev)
         self.odometry.on_step(tok)
+        self.gimbal.on_step()
         if not self.done:  # plug-in sensors sample the vehicle state at their own rate while the mission runs
             for ps in self.plugin_sensors:  # (a drone settling after its mission: odometry only)
                 ps.maybe_sample(self.backend, tok)

@@ -70,6 +70,8 @@ class DroneHandle(ComponentHandle):
     pause_mission = remote_method(DroneComponent.pause_mission)
     resume_mission = remote_method(DroneComponent.resume_mission)
     end_mission = remote_method(DroneComponent.end_mission)
+    point_gimbal = remote_method(DroneComponent.point_gimbal)
+    gimbal_attitude = remote_method(DroneComponent.gimbal_attitude)
 
 
 class SchedulerHandle(ComponentHandle):

@@ -20,7 +20,9 @@ pytestmark = [pytest.mark.sitl]
 MOUNT_PARAMS = "MNT1_TYPE 1\nSERVO9_FUNCTION 7\nSERVO10_FUNCTION 6\n"
 
 
-def test_the_firmware_points_its_mount_where_the_gimbal_manager_says(tmp_path):
+def _firmware(tmp_path) -> str:
+    """The shell step that starts ArduCopter SITL with the mount parameters, real time, sending to UDP 14550 (the
+    test fails when no private network namespace can be made)."""
     reason = sitl.namespace_skip_reason()
     if reason:
         pytest.fail(reason)
@@ -28,10 +30,14 @@ def test_the_firmware_points_its_mount_where_the_gimbal_manager_says(tmp_path):
     parm.write_text(MOUNT_PARAMS)
     d = sitl.ARDUCOPTER.parent
     home = sitl.FARM_HOME
-    firmware = (f"cd {shlex.quote(str(tmp_path))} && ( {shlex.quote(str(sitl.ARDUCOPTER))} --model + --speedup 1 -I0 -w "
-                f"--defaults {shlex.quote(str(d / 'copter.parm'))},{shlex.quote(str(parm))} "
-                f"--home {home['lat']},{home['lon']},{home['alt']},0 --serial0 udpclient:127.0.0.1:14550 "
-                f"> {shlex.quote(str(tmp_path / 'fw.log'))} 2>&1 & ) ; true")
+    return (f"cd {shlex.quote(str(tmp_path))} && ( {shlex.quote(str(sitl.ARDUCOPTER))} --model + --speedup 1 -I0 -w "
+            f"--defaults {shlex.quote(str(d / 'copter.parm'))},{shlex.quote(str(parm))} "
+            f"--home {home['lat']},{home['lon']},{home['alt']},0 --serial0 udpclient:127.0.0.1:14550 "
+            f"> {shlex.quote(str(tmp_path / 'fw.log'))} 2>&1 & ) ; true")
+
+
+def test_the_firmware_points_its_mount_where_the_gimbal_manager_says(tmp_path):
+    firmware = _firmware(tmp_path)
     probe = f"{shlex.quote(sys.executable)} tests/sitl_gimbal_probe.py udpin:127.0.0.1:14550"
     sitl.run_in_namespace("ardupilot", tmp_path, [firmware, probe], with_firmware=False, timeout_s=600)
     rc, out = sitl.step_result(tmp_path, 1)
@@ -50,3 +56,25 @@ def test_the_firmware_points_its_mount_where_the_gimbal_manager_says(tmp_path):
     assert rep["pitch_deg"] == pytest.approx(pred[0], abs=2.0) and \
         abs((rep["yaw_deg"] - pred[1] + 180) % 360 - 180) < 2.0, r
     assert r["commands_sent"] == [1000, 195, 197], r
+
+
+def test_our_mavlink_backend_points_the_firmware_mount(tmp_path):
+    """The MAVLink backend a drone actor holds (robot ``gimbal`` section; ``point_gimbal``, ``drain_gimbal``), not
+    the probe's bare manager: the firmware's own GIMBAL_DEVICE_ATTITUDE_STATUS shows the angle asked for, then the
+    angles to a region of interest given in ENU metres (converted by the backend to a COMMAND_INT location)."""
+    firmware = _firmware(tmp_path)
+    home = sitl.FARM_HOME
+    probe = (f"{shlex.quote(sys.executable)} tests/sitl_gimbal_backend_probe.py udpin:127.0.0.1:14550 "
+             f"{home['lat']} {home['lon']} {home['alt']}")
+    sitl.run_in_namespace("ardupilot", tmp_path, [firmware, probe], with_firmware=False, timeout_s=600)
+    rc, out = sitl.step_result(tmp_path, 1)
+    assert rc == 0, out[-3000:]
+    r = json.loads(out.strip().splitlines()[-1])
+    rep = r["pitchyaw"]
+    assert rep and not rep["earth"], r
+    assert rep["pitch_deg"] == pytest.approx(-45, abs=1.0) and rep["yaw_deg"] == pytest.approx(30, abs=1.0), r
+    pred, rep = r["roi"]["predicted"], r["roi"]["reported"]
+    assert rep and pred[0] < -20, r
+    assert rep["pitch_deg"] == pytest.approx(pred[0], abs=2.0) and \
+        abs((rep["yaw_deg"] - pred[1] + 180) % 360 - 180) < 2.0, r
+    assert r["reports"] > 0 and r["sources"] == ["mavlink"], r

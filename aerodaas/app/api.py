@@ -105,6 +105,8 @@ class Robot:
         self._start_hooks: list[Callable] = []
         self._end_hooks: list[Callable] = []
         self._handle = None  # the drone component's handle while running
+        #: gimbal commands given before the mission started (carried out in order at take-off)
+        self.gimbal_commands: list = []
 
     # -- sensors
     def has_sensors(self) -> bool:
@@ -199,6 +201,71 @@ class Robot:
         import ray
 
         ray.get(self._handle.resume_mission.remote())
+
+    # -- the camera gimbal (gimbal protocol v2 conventions: aerodaas.navigation.gimbal)
+    def point_gimbal(self, pitch_deg: float, yaw_deg: float = 0.0) -> None:
+        """Point the camera gimbal at ``pitch_deg`` (0 the horizon, -90 straight down) and ``yaw_deg`` (relative to
+        the vehicle's nose, positive right), degrees, within the robot's ``gimbal`` limits. Before the mission
+        starts the command is kept and carried out at take-off; while it runs it is sent now (through the drone's
+        safety gate; the simulator's gimbal slews at ``rate_deg_s``, a MAVLink vehicle gets
+        MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW). Raises :class:`~aerodaas.navigation.gimbal.GimbalError` naming the
+        field and value (not finite, out of limits, no gimbal section) before anything is sent, and the backend's
+        error when the vehicle refuses."""
+        from aerodaas.protocol.gimbal import GimbalPoint
+
+        self._gimbal(GimbalPoint(pitch_deg, yaw_deg))
+
+    def set_gimbal_roi(self, x: float, y: float, z: float = 0.0) -> None:
+        """Keep the camera on the region of interest at (``x``, ``y``, ``z``) ENU metres from home (the simulator
+        aims from the vehicle's pose at every step; a MAVLink vehicle gets MAV_CMD_DO_SET_ROI_LOCATION). Raises
+        GimbalError as :meth:`point_gimbal`."""
+        from aerodaas.protocol.gimbal import GimbalRoi
+
+        self._gimbal(GimbalRoi(x, y, z))
+
+    def clear_gimbal_roi(self) -> None:
+        """Stop following the region of interest (MAV_CMD_DO_SET_ROI_NONE); the gimbal stays where it points."""
+        from aerodaas.protocol.gimbal import GimbalRelease
+
+        self._gimbal(GimbalRelease())
+
+    def gimbal_attitude(self) -> dict | None:
+        """The gimbal's latest attitude while the mission runs (``t`` vehicle s, ``q`` (w, x, y, z), ``pitch_deg``,
+        ``yaw_deg``, ...: the ``aerodaas.GimbalAttitude`` record), None before the first report. Raises
+        RuntimeError when no mission is running."""
+        if self._handle is None:
+            raise RuntimeError(f"robot {self.id!r}: no mission is running")
+        import ray
+
+        return ray.get(self._handle.gimbal_attitude.remote())
+
+    def _gimbal(self, cmd) -> None:
+        """Check ``cmd`` against the robot's gimbal limits (GimbalError naming the field and value), then keep it
+        for take-off or send it to the running drone (its error raised here, typed)."""
+        from aerodaas.navigation.gimbal import GimbalError
+        from aerodaas.protocol.gimbal import GimbalPoint, GimbalRoi
+
+        lim = self.cfg.gimbal
+        if lim is None:
+            raise GimbalError(f"robot {self.id!r} has no gimbal: add a 'gimbal' section to its configuration "
+                              f"(pitch_min_deg, pitch_max_deg, yaw_min_deg, yaw_max_deg, rate_deg_s)")
+        try:
+            if isinstance(cmd, GimbalPoint):
+                lim.check(cmd.pitch_deg, cmd.yaw_deg)
+            elif isinstance(cmd, GimbalRoi):
+                lim.check_roi(cmd.x, cmd.y, cmd.z)
+        except GimbalError as e:
+            raise GimbalError(f"robot {self.id!r}: {e}", e.field, e.value) from None
+        if self._handle is None:
+            self.gimbal_commands.append(cmd)
+            return
+        import ray
+
+        try:
+            ray.get(self._handle.point_gimbal.remote(cmd))
+        except ray.exceptions.RayTaskError as e:
+            cause = getattr(e, "cause", None)
+            raise (cause if isinstance(cause, Exception) else e) from None
 
     def __repr__(self) -> str:
         return f"Robot({self.id!r}, backend={self.cfg.backend!r})"

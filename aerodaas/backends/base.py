@@ -97,6 +97,9 @@ class VehicleBackend(abc.ABC):
     #: whether the vehicle has its own camera stream (:meth:`camera_frame`): a camera sensor with
     #: ``"source": "backend"`` needs one (checked when the environment is validated, before Ray starts)
     provides_camera: ClassVar[bool] = False
+    #: whether the vehicle has a camera gimbal the drone can point (:meth:`point_gimbal`, :meth:`gimbal_attitude`):
+    #: a robot's ``gimbal`` section needs one (checked when the environment is validated, before Ray starts)
+    provides_gimbal: ClassVar[bool] = False
 
     # ------------------------------------------------------------------ what the drone asks of a backend
     @property
@@ -294,6 +297,26 @@ class VehicleBackend(abc.ABC):
         """For vehicles with their own camera stream (the Tello): the newest decoded frame, (H, W, 3) uint8 BGR,
         and its time on :attr:`t`'s clock; None when no frame arrived yet or the backend has no camera."""
         return None
+
+    def point_gimbal(self, cmd: Any) -> None:
+        """Carry out a gimbal command (:data:`aerodaas.protocol.gimbal.GimbalCommand`: pitch/yaw degrees, a region of
+        interest in ENU metres, or its release), already checked against the robot's gimbal limits. Raises
+        :class:`BackendError` when the vehicle refuses it; here (no gimbal) always."""
+        raise BackendError(f"robot {self.robot_id!r}: backend {self.kind!r} has no gimbal")
+
+    def gimbal_attitude(self) -> Any:
+        """The gimbal's latest attitude (:class:`aerodaas.protocol.gimbal.GimbalAttitude`, vehicle time), or None
+        when there is no gimbal or no report yet (the default)."""
+        return None
+
+    def drain_gimbal(self) -> list:
+        """Every gimbal attitude not handed out yet, oldest first (what the drone records on ``/<robot>/gimbal``).
+        Default: the newest once per change of :meth:`gimbal_attitude`."""
+        att = self.gimbal_attitude()
+        if att is None or att == getattr(self, "_gimbal_drained", None):
+            return []
+        self._gimbal_drained = att
+        return [att]
 
     # ------------------------------------------------------------------ helpers for subclasses
     def _require_navigable(self, command: str) -> None:

@@ -7,6 +7,7 @@ import numpy as np
 
 from aerodaas.model.types import Odometry
 from aerodaas.config.backends import SimConfig
+from aerodaas.sim.gimbal import SimGimbal
 from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.backends.base import VehicleBackend
 
@@ -17,10 +18,31 @@ class SimBackend(VehicleBackend):
     kind = "sim"
     clock = "sim"
     Config = SimConfig  # no settings of its own: the vehicle is the robot's limits, battery and noise
+    provides_gimbal = True  # a simulated gimbal when the robot has a ``gimbal`` section (aerodaas.sim.gimbal)
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         super().__init__(cfg.id, cfg.home)
         self.vehicle = SimVehicle(cfg.id, cfg.home, cfg.limits, cfg.battery, cfg.noise)
+        #: the camera gimbal (None: the robot has no ``gimbal`` section), starting at the first camera's mount
+        self.gimbal = SimGimbal(cfg.gimbal, -self._mount_pitch(cfg)) if cfg.gimbal is not None else None
+
+    @staticmethod
+    def _mount_pitch(cfg) -> float:
+        """The first camera sensor's ``pitch_deg`` (below the horizon; 90 = nadir), 90 without a camera."""
+        for s in cfg.sensors:
+            if "pitch_deg" in s.properties:
+                return float(s.properties["pitch_deg"])
+        return 90.0
+
+    def point_gimbal(self, cmd) -> None:
+        """Command the simulated gimbal (:class:`~aerodaas.sim.gimbal.SimGimbal`); it slews at its rate."""
+        if self.gimbal is None:
+            super().point_gimbal(cmd)
+        self.gimbal.command(cmd)
+
+    def gimbal_attitude(self):
+        """The simulated gimbal's attitude now (None without a gimbal)."""
+        return None if self.gimbal is None else self.gimbal.attitude(self.vehicle.t)
 
     @property
     def t(self) -> float:
@@ -31,7 +53,8 @@ class SimBackend(VehicleBackend):
         import copy
 
         v = self.vehicle
-        return copy.deepcopy({"state": v.state, "setpoint": v.setpoint, "t": v.t, "rng": v.noise_state})
+        return copy.deepcopy({"state": v.state, "setpoint": v.setpoint, "t": v.t, "rng": v.noise_state,
+                              "gimbal": None if self.gimbal is None else self.gimbal.state()})
 
     def restore(self, state: dict) -> None:
         import copy
@@ -39,9 +62,13 @@ class SimBackend(VehicleBackend):
         v, s = self.vehicle, copy.deepcopy(state)
         v.state, v.setpoint, v.t = s["state"], s["setpoint"], s["t"]
         v.noise_state = s["rng"]
+        if self.gimbal is not None and s.get("gimbal"):
+            self.gimbal.restore(s["gimbal"])
 
     def step(self, dt: float) -> None:
         self.vehicle.step(dt)
+        if self.gimbal is not None:
+            self.gimbal.step(dt, self.vehicle.state.position, self.vehicle.state.yaw)
 
     @property
     def position(self) -> np.ndarray:

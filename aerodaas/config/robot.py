@@ -8,6 +8,7 @@ from typing import Any, Literal
 from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
+from aerodaas.navigation.gimbal import GimbalLimits
 from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
 from aerodaas.plugins.builtin_sensors import CAMERA_SOURCES, STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
@@ -277,6 +278,8 @@ class RobotConfig(_Cfg):
                                            "navigation added while flying (HITL request, analytics output)")
     max_queued_items: int = Field(default=5000, ge=1, le=1_000_000, description="bounded work: items queued in "
                                   "all missions of this robot; more are refused (HTTP 422 / navigation_refused)")
+    gimbal: GimbalLimits | None = Field(default=None, description="the camera gimbal's limits (pitch/yaw min/max "
+                                        "degrees, slew rate_deg_s); absent: the robot has no gimbal to point")
 
     @model_validator(mode="before")
     @classmethod
@@ -354,7 +357,24 @@ class RobotConfig(_Cfg):
         check_plugin_sensors(self.sensors, f"robot {self.id!r}", "sensors")
         for j, s in enumerate(self.sensors):
             sensor_class(s.type).check_for_robot(s.properties, self, f"sensors.{j}")
+        if self.gimbal is not None:
+            _check_gimbal_backend(self)
         return self
+
+
+def _check_gimbal_backend(robot: "RobotConfig") -> None:
+    """A ``gimbal`` section needs a backend that declares one (``provides_gimbal``). Raises ValueError naming the
+    robot and its backend."""
+    from aerodaas.plugins import registry
+
+    try:
+        cls = registry.get("backend", robot.backend)
+    except registry.UnknownPlugin:
+        return  # reported by the backend's own check
+    if not getattr(cls, "provides_gimbal", False):
+        raise ValueError(f"gimbal: robot {robot.id!r} has a gimbal section, but its backend {robot.backend!r} has no "
+                         f"gimbal to point (provides_gimbal is False): remove the section or use the simulator or "
+                         f"a MAVLink autopilot")
 
 
 def check_plugin_sensors(sensors: list[SensorConfig], owner: str, field: str) -> None:

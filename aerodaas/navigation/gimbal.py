@@ -17,13 +17,29 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["GimbalLimits", "GimbalModel", "roi_angles", "camera_angles", "quaternion_from_euler",
+__all__ = ["GimbalError", "GimbalLimits", "MAX_ROI_M", "GimbalModel", "roi_angles", "camera_angles", "quaternion_from_euler",
            "euler_from_quaternion", "wrap_deg"]
 
 
 def wrap_deg(a: float) -> float:
     """``a`` degrees wrapped into [-180, 180)."""
     return (a + 180.0) % 360.0 - 180.0
+
+
+#: how far (ENU metres, each axis) a region of interest may be from home: a bound on bad input, not a sensor range
+MAX_ROI_M = 100_000.0
+
+
+class GimbalError(ValueError):
+    """A gimbal command that cannot be carried out: the robot has no gimbal, or a value (``field``, ``value``) is
+    not finite or outside the gimbal's limits. Raised before anything is sent to the vehicle."""
+
+    def __init__(self, message: str, field: str = "gimbal", value: object = None) -> None:
+        super().__init__(message)
+        self.field, self.value = field, value
+
+    def __reduce__(self):  # picklable across Ray workers
+        return (GimbalError, (str(self), self.field, self.value))
 
 
 class GimbalLimits(BaseModel):
@@ -54,12 +70,21 @@ class GimbalLimits(BaseModel):
         return self.yaw_max_deg - self.yaw_min_deg >= 360.0 - 1e-9
 
     def check(self, pitch_deg: float, yaw_deg: float) -> None:
-        """Raise ValueError naming the axis and value when (pitch, yaw) degrees is not finite or outside the
-        limits."""
+        """Raise :class:`GimbalError` (a ValueError) naming the axis and value when (pitch, yaw) degrees is not a
+        finite number or is outside the limits."""
         for name, v, lo, hi in (("pitch_deg", pitch_deg, self.pitch_min_deg, self.pitch_max_deg),
                                 ("yaw_deg", yaw_deg, self.yaw_min_deg, self.yaw_max_deg)):
-            if not math.isfinite(v) or not lo <= v <= hi:
-                raise ValueError(f"gimbal {name} {v!r} is outside the gimbal's limits [{lo}, {hi}] degrees")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+                raise GimbalError(f"gimbal {name} {v!r} is outside the gimbal's limits [{lo}, {hi}] degrees", name, v)
+
+    @staticmethod
+    def check_roi(x: float, y: float, z: float) -> None:
+        """Raise :class:`GimbalError` naming the coordinate and value when a region of interest (ENU metres from
+        home) is not finite or farther than :data:`MAX_ROI_M` on an axis."""
+        for name, v in (("x", x), ("y", y), ("z", z)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > MAX_ROI_M:
+                raise GimbalError(f"gimbal region of interest {name} {v!r} is not a finite ENU coordinate within "
+                                  f"±{MAX_ROI_M:g} m of home", f"roi_{name}", v)
 
     def clamp(self, pitch_deg: float, yaw_deg: float) -> tuple[float, float]:
         """(pitch, yaw) degrees brought within the limits (yaw wrapped first). Raises ValueError if not finite."""

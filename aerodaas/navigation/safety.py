@@ -417,5 +417,19 @@ class SafetyGate:
             return nav
         return nav.model_copy(update={"waypoints": out})
 
+    def check_gimbal(self, limits: Any, pitch_deg: float | None = None, yaw_deg: float | None = None,
+                     roi_enu: Sequence[float] | None = None) -> None:
+        """A gimbal command against the robot's gimbal ``limits`` (:class:`aerodaas.navigation.gimbal.GimbalLimits`):
+        pitch/yaw degrees within them, or a region of interest (ENU metres) finite and near home. Raises
+        :class:`SafetyViolation` (item ``gimbal``, the field and value) and counts it as rejected."""
+        try:
+            if roi_enu is not None:
+                limits.check_roi(*roi_enu)
+            else:
+                limits.check(pitch_deg, yaw_deg)
+        except ValueError as e:
+            self.rejected += 1
+            raise SafetyViolation("gimbal", getattr(e, "field", "gimbal"), getattr(e, "value", None), str(e)) from None
+
     def stats(self) -> dict:
         return {"rejected": self.rejected, "clamped": self.clamped}

@@ -43,7 +43,8 @@ class RobotSpec:
     distance-driven missions hold at start; ``odom_cids``/``stat_cids``: its odometry and stat-stream sensors that
     have subscribers; ``plugin_sensors``: its plug-in sensors (:func:`aerodaas.plugins.sensor.sensor_plugin_spec`:
     component id, type, the plug-in class, its settings); ``plugins``: the plug-in classes its configuration names
-    (:func:`aerodaas.plugins.registry.robot_plugins`), registered in the actor before the configuration is checked."""
+    (:func:`aerodaas.plugins.registry.robot_plugins`), registered in the actor before the configuration is checked;
+    ``gimbal``: the gimbal commands given before the mission started."""
 
     robot: dict
     drone_cid: str
@@ -55,6 +56,9 @@ class RobotSpec:
     stat_cids: list[str] = field(default_factory=list)
     plugin_sensors: list[dict] = field(default_factory=list)
     plugins: Any = None
+    #: gimbal commands (:data:`aerodaas.protocol.gimbal.GimbalCommand`) the application gave before the mission
+    #: started, carried out in order at take-off
+    gimbal: list = field(default_factory=list)
 
     @property
     def robot_id(self) -> str:

@@ -41,6 +41,10 @@ def load_run(path: str) -> dict[str, Any]:
                 out["states"].append(msg)
             elif topic == "/mission/result":
                 out["result"].append(msg)
+            elif schema == "aerodaas.GimbalAttitude":
+                out["gimbal"].append(msg)
+            elif schema == "aerodaas.FramePose":
+                out["frame_poses"].append(msg)
     return dict(out)
 
 

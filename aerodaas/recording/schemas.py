@@ -174,6 +174,36 @@ class RunAccounting(BaseModel):
     analytics: dict[str, AnalyticsInputs] = Field(default_factory=dict)
 
 
+class GimbalAttitude(BaseModel):
+    """A robot's camera gimbal attitude (``/<robot>/gimbal``): the simulator's gimbal model, or the vehicle's
+    GIMBAL_DEVICE_ATTITUDE_STATUS (gimbal protocol v2 conventions: pitch 0 at the horizon, -90 straight down; yaw
+    relative to the vehicle's nose, positive right, unless ``yaw_in_earth_frame``)."""
+
+    robot: str
+    t: float = Field(description="vehicle time, s (a MAVLink report: when it was received)")
+    q: list[float] = Field(description="attitude quaternion (w, x, y, z), FRD, ZYX order, as MAVLink's q")
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    yaw_in_earth_frame: bool = Field(description="yaw from north (clockwise) instead of from the vehicle's nose")
+    source: str = Field(description="sim (the simulator's gimbal) or mavlink (the vehicle's report)")
+
+
+class FramePose(BaseModel):
+    """The pose a camera frame was rendered or tagged with (``/<robot>/camera/<sensor>/pose``, robots with a
+    gimbal): the vehicle's position, the camera's heading and pitch from the gimbal's attitude at capture."""
+
+    robot: str
+    sensor: str
+    seq: int
+    t: float = Field(description="capture time, s")
+    position: list[float] = Field(description="ENU metres from home")
+    yaw: float = Field(description="camera heading, degrees counter-clockwise from east (ENU)")
+    camera_pitch: float = Field(description="camera pitch below the horizon, degrees (90 = nadir)")
+    gimbal_pitch_deg: float
+    gimbal_yaw_deg: float = Field(description="relative to the vehicle's nose, positive right")
+
+
 #: schema name written on the channel -> the pydantic model describing its messages
 JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.Odometry": Odometry,
@@ -189,6 +219,8 @@ JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.MissionPlan": MissionPlan,
     "aerodaas.RecorderDrops": RecorderDrops,
     "aerodaas.RunAccounting": RunAccounting,
+    "aerodaas.GimbalAttitude": GimbalAttitude,
+    "aerodaas.FramePose": FramePose,
 }
 
 _CACHE: dict[str, dict[str, Any]] = {}

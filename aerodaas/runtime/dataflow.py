@@ -439,7 +439,7 @@ def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: di
             edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
         actors[hid].spec.robots.append(RobotSpec(r.cfg.model_dump(mode="json"), ids["drone"], ids["scheduler"], sched,
                                                  preplanned, cams, ids["odom"], ids["stat"], plugin_sensors,
-                                                 robot_plugins(r.cfg)))
+                                                 robot_plugins(r.cfg), list(getattr(r, "gimbal_commands", ()))))
         robot_ids[r.id] = ids
     return robot_ids
 

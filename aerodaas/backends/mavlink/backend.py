@@ -12,6 +12,7 @@ from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
 from aerodaas.backends.mavlink.command import CommandMixin
 from aerodaas.backends.mavlink.fence import FenceMixin
+from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
@@ -48,6 +49,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     discovers_video_streams = True
     Config = MavlinkConfig
     config_section = "mavlink"
+    provides_gimbal = True  # gimbal protocol v2 through the autopilot's gimbal manager (gimbal.py GimbalConcern)
 
     # the pre-flight checks of its settings (aerodaas.backends.mavlink.preflight), run before Ray starts
     @classmethod
@@ -156,6 +158,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         from aerodaas.backends.mavlink.camera import CameraFinder
 
         self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
+        #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
+        self.gimbal = GimbalConcern(self, cfg.gimbal)
 
     def discover_video_stream(self, request: Any) -> Any:
         """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with
@@ -171,4 +175,27 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         message: camera.py)."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         self._send(lambda mav: mav.command_long_send(self._sysid, component, command, 0, *p))
+
+    # the gimbal (aerodaas.backends.mavlink.gimbal.GimbalConcern)
+    def point_gimbal(self, cmd: Any) -> None:
+        """Point the vehicle's gimbal (:meth:`GimbalConcern.point`)."""
+        self.gimbal.point(cmd)
+
+    def gimbal_attitude(self) -> Any:
+        """The latest GIMBAL_DEVICE_ATTITUDE_STATUS as a GimbalAttitude (None before the first)."""
+        return self.gimbal.latest()
+
+    def drain_gimbal(self) -> list:
+        """Every GIMBAL_DEVICE_ATTITUDE_STATUS not handed out yet, oldest first."""
+        return self.gimbal.drain()
+
+    def _on_gimbal_device_attitude_status(self, msg: Any) -> None:
+        self.gimbal.on_message(msg)
+
+    def _on_gimbal_manager_information(self, msg: Any) -> None:
+        self.gimbal.on_message(msg)
+
+    def _streams(self) -> tuple:
+        """The telemetry messages requested (link.py), and the gimbal's attitude when a gimbal is configured."""
+        return super()._streams() + self.gimbal.streams()
 

@@ -51,6 +51,22 @@ class CommandMixin:
         deadline."""
         self._check_link(name)
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        self._command_tries(name, command, lambda mav, attempt: mav.command_long_send(
+            self._sysid, self._compid, command, min(attempt, 255), *p), retries, timeout_s)
+
+    def command_int(self, name: str, command: int, frame: int, params: tuple[float, float, float, float], x: int,
+                    y: int, z: float, retries: int | None = None, timeout_s: float | None = None) -> None:
+        """Send COMMAND_INT ``command`` in MAV_FRAME ``frame`` (params 1-4; ``x``/``y`` latitude/longitude degrees
+        x 1e7, ``z`` metres in the frame) and wait for its COMMAND_ACK, re-sent and refused as
+        :meth:`command_long` (the MAVLink command protocol asks for COMMAND_INT for commands that carry a
+        position). Raises what :meth:`command_long` raises."""
+        self._check_link(name)
+        p = [float(v) for v in params] + [0.0] * (4 - len(params))
+        self._command_tries(name, command, lambda mav, attempt: mav.command_int_send(
+            self._sysid, self._compid, frame, command, 0, 0, *p[:4], int(x), int(y), float(z)), retries, timeout_s)
+
+    def _command_tries(self, name: str, command: int, send: Any, retries: int | None, timeout_s: float | None) -> None:
+        """The tries of one command (:meth:`command_long`'s rules): ``send(mav, attempt)`` sends it once."""
         retries = self.cfg.command_retries if retries is None else retries
         timeout = self.cfg.command_timeout_s if timeout_s is None else timeout_s
         while True:  # drop acknowledgements nobody waited for
@@ -70,7 +86,7 @@ class CommandMixin:
                             after=_enum_name("MAV_RESULT", answer.result) if answer is not None else "no COMMAND_ACK",
                             waited_s=round(time.monotonic() - started, 3))
             sent = time.monotonic()
-            self._send(lambda mav: mav.command_long_send(self._sysid, self._compid, command, min(attempt, 255), *p))
+            self._send(lambda mav, attempt=attempt: send(mav, attempt))
             accepted, latest, answer = self._await_ack(name, command, started, sent, min(sent + timeout, overall),
                                                        overall, attempt == retries, min(timeout, _REJECTED_BACKOFF_S))
             if accepted:

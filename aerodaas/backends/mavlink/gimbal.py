@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import math
 import threading
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.navigation.gimbal import GimbalLimits, euler_from_quaternion
+from aerodaas.protocol import gimbal as proto
 
-__all__ = ["GimbalAttitude", "GimbalManager", "VideoStream", "CameraDiscovery", "MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW",
+__all__ = ["GimbalAttitude", "GimbalManager", "GimbalConcern", "VideoStream", "CameraDiscovery", "MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW",
            "MAV_CMD_DO_SET_ROI_LOCATION", "MAV_CMD_DO_SET_ROI_NONE", "MAV_CMD_REQUEST_MESSAGE"]
 
 MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW = 1000
@@ -154,6 +157,70 @@ class GimbalManager:
         """The limits the vehicle's gimbal manager reported (None before its GIMBAL_MANAGER_INFORMATION)."""
         with self._lock:
             return self._vehicle_limits
+
+
+class GimbalConcern:
+    """The MAVLink backend's gimbal (``backend.gimbal``): carries out the drone's gimbal commands
+    (:data:`aerodaas.protocol.gimbal.GimbalCommand`) through a :class:`GimbalManager` speaking with the backend's
+    ``command_long`` / ``command_int``, converts a region of interest from ENU metres to the vehicle's home-relative
+    latitude/longitude/altitude, and keeps the GIMBAL_DEVICE_ATTITUDE_STATUS reports (up to 600, oldest dropped) for
+    the drone to record. ``backend``: a :class:`~aerodaas.backends.mavlink.MavlinkBackend` (its ``home``, ``t``,
+    ``command_long``, ``command_int``); ``limits``: the robot's ``gimbal`` section (None: no gimbal configured)."""
+
+    #: GIMBAL_DEVICE_ATTITUDE_STATUS's rate asked of the vehicle (SET_MESSAGE_INTERVAL), Hz
+    STATUS_HZ = 10.0
+
+    def __init__(self, backend: Any, limits: GimbalLimits | None) -> None:
+        self.backend = backend
+        self.configured = limits is not None
+        self.manager = GimbalManager(backend.command_long, backend.command_int, limits)
+        self._reports: deque[proto.GimbalAttitude] = deque(maxlen=600)
+        self._latest: proto.GimbalAttitude | None = None
+        self._lock = threading.Lock()
+
+    def streams(self) -> tuple:
+        """(message id, Hz) to request of the vehicle: GIMBAL_DEVICE_ATTITUDE_STATUS when a gimbal is configured."""
+        return ((285, self.STATUS_HZ),) if self.configured else ()
+
+    def point(self, cmd: proto.GimbalCommand) -> None:
+        """Send ``cmd`` (pitch/yaw: DO_GIMBAL_MANAGER_PITCHYAW; ROI: DO_SET_ROI_LOCATION at the ENU point's
+        latitude/longitude and ``z`` metres above home; release: DO_SET_ROI_NONE). Raises the backend's
+        CommandRefused / LinkLost / BackendError, ValueError for values outside the limits."""
+        if isinstance(cmd, proto.GimbalPoint):
+            self.manager.point(cmd.pitch_deg, cmd.yaw_deg)
+        elif isinstance(cmd, proto.GimbalRoi):
+            g = enu_to_geodetic(cmd.x, cmd.y, cmd.z, self.backend.home)
+            self.manager.point_at(g.lat, g.lon, cmd.z)
+        elif isinstance(cmd, proto.GimbalRelease):
+            self.manager.release()
+        else:
+            raise TypeError(f"not a gimbal command: {cmd!r}")
+
+    def on_message(self, msg: Any) -> None:
+        """A GIMBAL_DEVICE_ATTITUDE_STATUS or GIMBAL_MANAGER_INFORMATION from the vehicle (the I/O thread)."""
+        att = self.manager.on_message(msg, float(self.backend.t))
+        if att is None:
+            return
+        q = tuple(float(v) for v in msg.q)
+        n = math.sqrt(sum(v * v for v in q)) or 1.0
+        rec = proto.GimbalAttitude(t=att.t_s, q=tuple(v / n for v in q), roll_deg=att.roll_deg,
+                                   pitch_deg=att.pitch_deg, yaw_deg=att.yaw_deg,
+                                   yaw_in_earth_frame=att.yaw_in_earth_frame, source="mavlink")
+        with self._lock:
+            self._reports.append(rec)
+            self._latest = rec
+
+    def latest(self) -> proto.GimbalAttitude | None:
+        """The latest reported attitude (None before the first)."""
+        with self._lock:
+            return self._latest
+
+    def drain(self) -> list[proto.GimbalAttitude]:
+        """Every report not handed out yet, oldest first."""
+        with self._lock:
+            out = list(self._reports)
+            self._reports.clear()
+        return out
 
 
 @dataclass(frozen=True)

@@ -96,7 +96,9 @@ class CommandMixin:
                 return M.MAV_RESULT_DENIED
             self._set_current(seq)
             return M.MAV_RESULT_ACCEPTED
-        return M.MAV_RESULT_UNSUPPORTED
+        rel = M.MAV_FRAME_GLOBAL_RELATIVE_ALT if frame is None else frame
+        gimbal = self.gimbal.command(cmd, p, lambda lat, lon, alt: self._global_to_enu(lat, lon, alt, rel))
+        return M.MAV_RESULT_UNSUPPORTED if gimbal is None else gimbal
 
     def _arm_disarm(self, p: list[float]) -> int:
         """MAV_CMD_COMPONENT_ARM_DISARM (param2 21196 forces): a disarm in the air, or on PX4 before its land

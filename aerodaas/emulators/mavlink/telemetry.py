@@ -62,7 +62,8 @@ class TelemetryMixin:
         fix = self._fix_type()
         if msg_id in _POSITION_MESSAGES:
             return self._build_position(msg_id, boot_ms, fix)
-        return self._build_status(msg_id, boot_ms)
+        gimbal = self.gimbal.build(msg_id, self._enc, boot_ms)  # GIMBAL_DEVICE_ATTITUDE_STATUS, _MANAGER_INFORMATION
+        return gimbal if gimbal is not None else self._build_status(msg_id, boot_ms)
 
     def _build_position(self, msg_id: int, boot_ms: int, fix: int) -> Any | None:
         """GPS_RAW_INT, ATTITUDE, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, HOME_POSITION (``fix``: the GPS fix

@@ -55,6 +55,7 @@ from aerodaas.emulators.mavlink.arming import ArmingMixin
 from aerodaas.emulators.mavlink.camera import CameraHostMixin
 from aerodaas.emulators.mavlink.commands import CommandMixin
 from aerodaas.emulators.mavlink.constants import _PX4_DEFAULT_STREAMS
+from aerodaas.emulators.mavlink.gimbal import EmulatedGimbal
 from aerodaas.emulators.mavlink.flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
 from aerodaas.emulators.mavlink.guided import GuidedMixin
 from aerodaas.emulators.mavlink.link import LinkMixin
@@ -137,6 +138,9 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self._init_links(system_id, component_id)
         self._init_state()
         self._apply_speed_params()
+        #: the vehicle's gimbal (a servo mount, as ArduCopter's MNT1_TYPE 1; the robot's ``gimbal`` limits or
+        #: ArduPilot's defaults): gimbal.py
+        self.gimbal = EmulatedGimbal(robot.gimbal)
 
     def _init_emulated_firmware(self, ekf_gps_s: float, mission_int: bool | None, home_alt_drift_m: float | None,
                                 seed: int, estimate_speed_error_mps: float, land_detect_s: float,
@@ -296,4 +300,5 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         if was_in_air and not s.in_air:
             self.landed_at = self.t
         self._autopilot_logic()
+        self.gimbal.step(dt, tuple(float(c) for c in s.position), float(s.yaw))
         self._stream()
