@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 from pydantic import ValidationError
 from pymavlink.dialects.v20 import common as mav
 
-from aerodaas.backends.mavlink.gimbal import CameraDiscovery, GimbalManager
+from aerodaas.backends.mavlink.gimbal import GimbalManager
 from aerodaas.navigation.gimbal import (GimbalLimits, GimbalModel, camera_angles, euler_from_quaternion,
                                         quaternion_from_euler, roi_angles, wrap_deg)
 from aerodaas.model.camera import camera_rotation
@@ -124,27 +124,8 @@ def test_the_manager_reads_the_device_attitude():
     assert m.on_message(unknown, 8.0) is None and m.attitude == att  # an unknown attitude replaces nothing
 
 
-def test_camera_discovery_reads_the_announced_streams():
-    d = CameraDiscovery()
-    assert [c for _, c, _ in d.requests()] == [512, 512]
-    cam = _wire(mav.MAVLink_camera_information_message(
-        100, b"Siyi".ljust(32, b"\0"), b"A8 mini".ljust(32, b"\0"), 0, 4.5, 6.2, 4.6, 1920, 1080, 0, 256, 0, b"",
-        0, 0), src_component=100)
-    assert d.on_message(cam) is None and d.cameras() == {100: "Siyi A8 mini"}
-    rtsp = _wire(mav.MAVLink_video_stream_information_message(
-        1, 2, mav.VIDEO_STREAM_TYPE_RTSP, 1, 30.0, 1280, 720, 4000, 0, 81, b"main",
-        b"rtsp://192.168.144.25:8554/main.264", mav.VIDEO_STREAM_ENCODING_H264, 0), src_component=100)
-    udp = _wire(mav.MAVLink_video_stream_information_message(
-        2, 2, mav.VIDEO_STREAM_TYPE_RTPUDP, 1, 30.0, 640, 480, 1000, 0, 81, b"qgc", b"5600",
-        mav.VIDEO_STREAM_ENCODING_H264, 0), src_component=100)
-    s1, s2 = d.on_message(rtsp), d.on_message(udp)
-    assert s1.source == "rtsp://192.168.144.25:8554/main.264" and s1.resolution == (1280, 720) and s1.hfov_deg == 81
-    assert s2.source == "rtp://0.0.0.0:5600" and s2.kind == "rtpudp"
-    assert d.choose() == s1 and d.choose("qgc") == s2 and d.choose("nope") is None
-
-
-def test_the_emulated_gimbal_and_camera_speak_what_the_manager_reads():
-    from aerodaas.emulators.mavlink.gimbal import EmulatedCamera, EmulatedGimbal
+def test_the_emulated_gimbal_speaks_what_the_manager_reads():
+    from aerodaas.emulators.mavlink.gimbal import EmulatedGimbal
 
     enc = mav.MAVLink(None, srcSystem=1, srcComponent=1)
     g = EmulatedGimbal(GimbalLimits(rate_deg_s=90.0))
@@ -162,11 +143,6 @@ def test_the_emulated_gimbal_and_camera_speak_what_the_manager_reads():
     for _ in range(40):
         g.step(0.1, (0.0, 0.0, 50.0), 90.0)
     assert (g.model.pitch_deg, g.model.yaw_deg) == pytest.approx(roi_angles((0, 0, 50), 90.0, (30, 40, 0)))
-    cam = EmulatedCamera("rtsp://127.0.0.1:8554/cam")
-    d = CameraDiscovery()
-    d.on_message(_wire_built(cam.build(259, mav.MAVLink(None, 1, 100), 5), mav.MAVLink(None, 1, 100)))
-    d.on_message(_wire_built(cam.build(269, mav.MAVLink(None, 1, 100), 5), mav.MAVLink(None, 1, 100)))
-    assert d.cameras() == {100: "AeroDaaS emulated camera"} and d.choose().source == "rtsp://127.0.0.1:8554/cam"
 
 
 def _wire_built(msg, enc):

@@ -76,7 +76,7 @@ def _segments(rec: Path) -> list[Path]:
     return out
 
 
-def _verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: bool, what: str) -> dict:
+def accounting_verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: bool, what: str) -> dict:
     """Clean when the exit code and outcome match the file's truth and the summary's counts equal the file's."""
     from aerodaas.reliability.faults import _no_crash, _summary_outcome, mcap_reader_ok
 
@@ -110,7 +110,7 @@ def _recorder_stall(tmp: Path) -> dict:
     for pid in pids:
         os.kill(pid, signal.SIGCONT)
     out, _ = p.communicate(timeout=900)
-    return _verdict(p, out, rec, reached and len(pids) == 1, True,
+    return accounting_verdict(p, out, rec, reached and len(pids) == 1, True,
                     f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
 
 
@@ -133,7 +133,7 @@ def _recorder_killed_twice(tmp: Path) -> dict:
             reached = reached and _wait_size(seg, 20000, p)
     out, _ = p.communicate(timeout=900)
     deaths = len(re.findall(r"^  recording lost at t = .*: the recorder actor died", out, re.MULTILINE))
-    return _verdict(p, out, rec, reached and len(killed) == 2, deaths == 2,
+    return accounting_verdict(p, out, rec, reached and len(killed) == 2, deaths == 2,
                     f"{len(killed)} recorder deaths, {deaths} reported")
 
 
@@ -239,7 +239,7 @@ def _live_client_stalled(tmp: Path) -> dict:
                           for _, _, m in make_reader(f).iter_messages(topics=["/run/events"]))
     m = re.search(r"recording: \S+ \((\d+) messages", out)
     counted = m is not None and int(m.group(1)) == n
-    return _verdict(p, out, rec, subscribed, dropped == 1 and counted,
+    return accounting_verdict(p, out, rec, subscribed, dropped == 1 and counted,
                     f"client subscribed to every channel then stopped reading: {subscribed}; dropped events "
                     f"{dropped}; the summary counts {m.group(1) if m else '?'} of the file's {n} messages")
 
@@ -266,7 +266,7 @@ def _analytics_killed_twice(tmp: Path) -> dict:
             killed.append(pid)
         time.sleep(3.0 if pids else 0)  # the restarted actor records a little before its second death
     out, _ = p.communicate(timeout=900)
-    res = _verdict(p, out, rec, reached and len(killed) == 2, True, f"{len(killed)} analytics actor deaths")
+    res = accounting_verdict(p, out, rec, reached and len(killed) == 2, True, f"{len(killed)} analytics actor deaths")
     res["clean"] = res["clean"] and bool(res["lost"].get("/quadrotor_base/monitor"))
     return res
 

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS
+from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting_verdict
 from aerodaas.clusters.reaper import descendants, start_time
 
 __all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
@@ -229,9 +229,12 @@ def _kill_mid_run(args: list[str], rec: Path, min_size: int, targets: Callable[[
 
 def _detector_kill_lockstep(tmp: Path) -> dict:
     """``apps/vehicle_tracking.py`` as shipped (lock-step on, YOLOX-Nano in its own analytics actor): SIGKILL of the
-    detector's process mid-flight. Ray restarts it, the clock waits for it, the mission succeeds (exit 0); the
-    summary says the detector's actor died and was restarted (never the drone's), and the recording's detections
-    have one hole, at the kill (the frames in flight and the results not yet handed to the recorder)."""
+    detector's process mid-flight. Ray restarts it, the clock waits for it, the mission flies on; the summary says
+    the detector's actor died and was restarted (never the drone's), and the recording's detections have one hole,
+    at the kill (the frames in flight and the results not yet handed to the recorder). Those frames were offered to
+    the detector and never answered: the recording's accounting counts them lost, so the run ends ``recording_lost``
+    (exit 4) with the summary's lost count per channel equal to what the file lacks — never ``success`` with a
+    hole (exit 0 only when nothing was in flight at the kill)."""
     model = Path(os.environ.get("AERODAAS_MODEL_DIR", "")) / "yolox_nano.onnx"
     imagery = Path(os.environ.get("AERODAAS_DATA_DIR", "")) / "imagery"
     if not model.is_file() or not imagery.is_dir():
@@ -242,25 +245,31 @@ def _detector_kill_lockstep(tmp: Path) -> dict:
                                           lambda root: actor_pids(root, "AnalyticsActor"), 900.0)
     told = re.search(r"frames to detector#1: its actor died and was restarted \(1 reconnect\(s\)\); (\d+) frame",
                      out)
-    hole: list[int] = []
-    ok, _, why = mcap_reader_ok(rec)
-    if ok:
-        from mcap.reader import make_reader
-
-        times: dict[str, list[int]] = {}
-        with open(rec, "rb") as f:
-            for _, ch, m in make_reader(f).iter_messages(log_time_order=True):
-                times.setdefault(ch.topic, []).append(m.log_time)
-        dets = set(times.get("/quadrotor_base/detector/detections", []))
-        hole = [i for i, t in enumerate(times.get("/quadrotor_base/camera/cam1", [])) if t not in dets]
+    hole = _frames_without_detections(rec)
     one_hole = bool(hole) and len(hole) <= 12 and hole == list(range(hole[0], hole[0] + len(hole)))
-    clean = (reached and len(pids) == 1 and p.returncode == 0 and "mission outcome: success" in out and told
-             is not None and "drone actor" not in out and ok and one_hole and _no_crash(out))
-    return {"observed": f"exit {p.returncode}, outcome {_summary_outcome(out)}; the summary says the detector's "
-                        f"actor died and was restarted: {told is not None} ({told.group(1) if told else '?'} frame(s) "
-                        f"in flight lost); recording {'finished' if ok else why}, frames without detections "
-                        f"{hole[:12]}{' (one hole, at the kill)' if one_hole else ''}", "clean": clean,
-            "exit": p.returncode, "output": out[-3000:]}
+    said = (f"the summary says the detector's actor died and was restarted: {told is not None} "
+            f"({told.group(1) if told else '?'} frame(s) in flight lost); frames without detections "
+            f"{hole[:12]}{' (one hole, at the kill)' if one_hole else ''}")
+    res = accounting_verdict(p, out, rec, reached and len(pids) == 1,
+                             told is not None and "drone actor" not in out and (one_hole or not hole), said)
+    res["clean"] = res["clean"] and (one_hole or not res["lost"])  # a loss is the hole at the kill, nothing else
+    return res
+
+
+def _frames_without_detections(rec: Path) -> list[int]:
+    """Indices of the camera frames of ``rec`` (``/quadrotor_base/camera/cam1``) with no detections message of the
+    same log time; [] when the file is unreadable."""
+    ok, _, _ = mcap_reader_ok(rec)
+    if not ok:
+        return []
+    from mcap.reader import make_reader
+
+    times: dict[str, list[int]] = {}
+    with open(rec, "rb") as f:
+        for _, ch, m in make_reader(f).iter_messages(log_time_order=True):
+            times.setdefault(ch.topic, []).append(m.log_time)
+    dets = set(times.get("/quadrotor_base/detector/detections", []))
+    return [i for i, t in enumerate(times.get("/quadrotor_base/camera/cam1", [])) if t not in dets]
 
 
 def _argv0(pid: int) -> str | None:
@@ -488,8 +497,10 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
      "(never success with 1 of 4 waypoints)", _hitl_clear_all),
     ("SIGKILL of the driver alone mid-run", f"every process of the run (Ray's agents included) gone within "
      f"{GONE_WITHIN_S:g} s (the test allows {GONE_WITHIN_LOADED_S:g} s on a loaded machine)", _driver_sigkill),
-    ("SIGKILL of the YOLOX detector actor under lock-step (apps/vehicle_tracking.py)", "exit 0, success; the "
-     "summary names the detector's actor as died and restarted; one hole in the recorded detections, at the kill",
+    ("SIGKILL of the YOLOX detector actor under lock-step (apps/vehicle_tracking.py)", "exit 4, recording_lost "
+     "(the frames in flight at the kill were never answered; exit 0 only if none was); the summary names the "
+     "detector's actor as died and restarted and its lost counts per channel equal what the file lacks; one hole in "
+     "the recorded detections, at the kill",
      _detector_kill_lockstep),
     ("SIGKILL of the raylet mid-run", "exit 3, the summary says the drone's time is unknown (not 0 s), the "
      "driver finishes the recording", _raylet_kill),

@@ -1,13 +1,10 @@
-"""MAVLink gimbal protocol v2 and camera protocol v2, the ground-station side: point a vehicle's gimbal, follow its
-reported attitude, and discover its cameras' video streams.
+"""MAVLink gimbal protocol v2, the ground-station side: point a vehicle's gimbal and follow its reported attitude
+(camera discovery, camera protocol v2, is :mod:`aerodaas.backends.mavlink.camera`).
 
 The autopilot is the gimbal manager (ArduPilot 4.3+ for every mount type, PX4's ``gimbal`` module): we send
 ``MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW`` (1000) or ``MAV_CMD_DO_SET_ROI_LOCATION`` (195) to it and read the gimbal
-device's ``GIMBAL_DEVICE_ATTITUDE_STATUS`` (285) and the manager's ``GIMBAL_MANAGER_INFORMATION`` (280, its limits).
-Cameras answer ``MAV_CMD_REQUEST_MESSAGE`` (512) for ``CAMERA_INFORMATION`` (259) and ``VIDEO_STREAM_INFORMATION``
-(269), whose ``uri`` is what a camera source reads (https://mavlink.io/en/services/gimbal_v2.html,
-https://mavlink.io/en/services/camera.html, "Video Streaming"). Angle conventions:
-:mod:`aerodaas.navigation.gimbal`.
+device's ``GIMBAL_DEVICE_ATTITUDE_STATUS`` (285) and the manager's ``GIMBAL_MANAGER_INFORMATION`` (280, its limits)
+(https://mavlink.io/en/services/gimbal_v2.html). Angle conventions: :mod:`aerodaas.navigation.gimbal`.
 """
 from __future__ import annotations
 
@@ -21,7 +18,7 @@ from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.navigation.gimbal import GimbalLimits, euler_from_quaternion
 from aerodaas.protocol import gimbal as proto
 
-__all__ = ["GimbalAttitude", "GimbalManager", "GimbalConcern", "VideoStream", "CameraDiscovery", "MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW",
+__all__ = ["GimbalAttitude", "GimbalManager", "GimbalConcern", "MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW",
            "MAV_CMD_DO_SET_ROI_LOCATION", "MAV_CMD_DO_SET_ROI_NONE", "MAV_CMD_REQUEST_MESSAGE"]
 
 MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW = 1000
@@ -33,7 +30,6 @@ MSG_CAMERA_INFORMATION, MSG_VIDEO_STREAM_INFORMATION = 259, 269
 #: GIMBAL_DEVICE_FLAGS bits (common.xml)
 _YAW_IN_VEHICLE_FRAME, _YAW_IN_EARTH_FRAME, _YAW_LOCK = 32, 64, 16
 #: VIDEO_STREAM_TYPE: how a camera serves its stream, as the URI scheme AeroDaaS's camera source reads it
-_STREAM_TYPES = {0: "rtsp", 1: "rtpudp", 2: "tcp_mpeg", 3: "mpeg_ts"}
 
 
 class CommandSender(Protocol):
@@ -221,88 +217,3 @@ class GimbalConcern:
             out = list(self._reports)
             self._reports.clear()
         return out
-
-
-@dataclass(frozen=True)
-class VideoStream:
-    """One video stream a MAVLink camera announced (VIDEO_STREAM_INFORMATION): ``uri`` as sent, ``kind`` one of
-    rtsp, rtpudp, tcp_mpeg, mpeg_ts, ``resolution`` (width, height) px, ``framerate_hz``, ``hfov_deg``, the
-    sending ``component`` and ``stream_id``."""
-
-    component: int
-    stream_id: int
-    kind: str
-    uri: str
-    name: str
-    resolution: tuple[int, int]
-    framerate_hz: float
-    hfov_deg: int
-
-    @property
-    def source(self) -> str:
-        """The URI as a camera ``source`` AeroDaaS reads: RTSP as it is; an RTP/UDP stream given as a bare port
-        (QGroundControl's convention, e.g. "5600") becomes ``rtp://0.0.0.0:5600``; MPEG-TS on UDP ``udp://...``."""
-        uri = self.uri.strip()
-        if self.kind == "rtpudp" and uri.isdigit():
-            return f"rtp://0.0.0.0:{uri}"
-        if self.kind == "mpeg_ts" and uri.isdigit():
-            return f"udp://0.0.0.0:{uri}"
-        return uri
-
-
-class CameraDiscovery:
-    """Collects the video streams that MAVLink cameras announce (camera protocol v2). :meth:`requests` gives the
-    MAV_CMD_REQUEST_MESSAGE params to send (to the camera component, or broadcast); :meth:`on_message` takes
-    every message from the vehicle's system; :meth:`streams` / :meth:`choose` read the result."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._streams: dict[tuple[int, int], VideoStream] = {}
-        self._cameras: dict[int, str] = {}
-
-    @staticmethod
-    def requests() -> list[tuple[str, int, tuple[float, ...]]]:
-        """(name, MAV_CMD, params) to send: CAMERA_INFORMATION, then VIDEO_STREAM_INFORMATION of every stream
-        (param2 0 = all streams)."""
-        return [("REQUEST_MESSAGE CAMERA_INFORMATION", MAV_CMD_REQUEST_MESSAGE, (float(MSG_CAMERA_INFORMATION),)),
-                ("REQUEST_MESSAGE VIDEO_STREAM_INFORMATION", MAV_CMD_REQUEST_MESSAGE,
-                 (float(MSG_VIDEO_STREAM_INFORMATION), 0.0))]
-
-    def on_message(self, msg: Any) -> VideoStream | None:
-        """Take a message; returns the stream a VIDEO_STREAM_INFORMATION announced (None otherwise)."""
-        kind = msg.get_type()
-        comp = int(msg.get_srcComponent())
-        if kind == "CAMERA_INFORMATION":
-            name = bytes(msg.vendor_name).rstrip(b"\0").decode(errors="replace") + " " + \
-                bytes(msg.model_name).rstrip(b"\0").decode(errors="replace")
-            with self._lock:
-                self._cameras[comp] = name.strip()
-            return None
-        if kind != "VIDEO_STREAM_INFORMATION":
-            return None
-        uri = msg.uri if isinstance(msg.uri, str) else bytes(msg.uri).rstrip(b"\0").decode(errors="replace")
-        name = msg.name if isinstance(msg.name, str) else bytes(msg.name).rstrip(b"\0").decode(errors="replace")
-        s = VideoStream(component=comp, stream_id=int(msg.stream_id), kind=_STREAM_TYPES.get(int(msg.type), "unknown"),
-                        uri=uri, name=name, resolution=(int(msg.resolution_h), int(msg.resolution_v)),
-                        framerate_hz=float(msg.framerate), hfov_deg=int(msg.hfov))
-        with self._lock:
-            self._streams[(comp, s.stream_id)] = s
-        return s
-
-    def streams(self) -> list[VideoStream]:
-        """Every stream announced so far, by component and stream id."""
-        with self._lock:
-            return [self._streams[k] for k in sorted(self._streams)]
-
-    def cameras(self) -> dict[int, str]:
-        """Component id -> "vendor model" of every camera that sent CAMERA_INFORMATION."""
-        with self._lock:
-            return dict(self._cameras)
-
-    def choose(self, name: str | None = None) -> VideoStream | None:
-        """The stream called ``name`` (None: the first announced with a URI), or None when there is none."""
-        for s in self.streams():
-            if s.uri and (name is None or s.name == name):
-                return s
-        return None
-
