@@ -140,15 +140,15 @@ class LinkMixin:
                     self.restore_fence()
                 else:
                     self._event("fence_not_restored", reason="link lost" if not self._link_ok else "still armed")
-            if self.cfg.restore_params and self._saved_params:
+            if self.cfg.restore_params and self.parameters.changed:
                 if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
                     self._event("params_not_restored", reason="speed limit write in progress",
-                                names=sorted(self._saved_params))
+                                names=self.parameters.changed)
                 elif self._link_ok and not self._armed:
                     self.restore_parameters()
                 else:
                     self._event("params_not_restored", reason="link lost" if not self._link_ok else "still armed",
-                                names=sorted(self._saved_params))
+                                names=self.parameters.changed)
         self._stop.set()
         if self._io is not None and self._io is not threading.current_thread():
             self._io.join(timeout=2)
