@@ -135,7 +135,7 @@ class LinkMixin:
                 except Exception as e:  # noqa: BLE001 - closing must go on
                     self._event("safe_end_failed", error=str(e))
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
-            if self.cfg.fence.restore_on_close and self._fence_saved:
+            if self.cfg.fence.restore_on_close and self.fence.has_saved:
                 if self._link_ok and not self._armed:
                     self.restore_fence()
                 else:
