@@ -52,13 +52,11 @@ import time
 from typing import Any, Callable, Iterable, Protocol
 
 from aerodaas.backends.base import BackendError, CommandRefused
-from aerodaas.backends.mavlink._common import M, _enum_name, _f32
+from aerodaas.backends.mavlink._common import M, _f32
 from aerodaas.backends.mavlink.params import LinkCheck, ParameterProtocol
+from aerodaas.backends.mavlink.transfer import FENCE, RALLY, Wire  # noqa: F401 - FENCE/RALLY: API
 from aerodaas.navigation.geofence import GeofenceConfig, autopilot_disagreement
 
-FENCE = M.MAV_MISSION_TYPE_FENCE  # 1
-RALLY = M.MAV_MISSION_TYPE_RALLY  # 2
-_TYPE_NAME = {FENCE: "fence", RALLY: "rally points", M.MAV_MISSION_TYPE_MISSION: "mission"}
 
 #: ArduPilot FENCE_TYPE bits (AC_Fence.h AC_FENCE_TYPE_*)
 AP_FENCE_ALT_MAX, AP_FENCE_CIRCLE, AP_FENCE_POLYGON = 1, 2, 4
@@ -89,8 +87,6 @@ def px4_return_altitude_ceiling(max_altitude_m: float, field: str = "safety.max_
                            f"{PX4_MIN_DESCEND_ALT_M:g} m, 2 m margin); raise {field} or set "
                            f"mavlink.fence.max_altitude false")
     return ceiling
-#: one item on the wire: (frame, command, param1..4, x int, y int, z)
-Wire = tuple
 
 
 def fence_items(fence: GeofenceConfig) -> list[Wire]:
@@ -162,8 +158,8 @@ def compare_items(sent: list[Wire], got: list[Wire], compare_z: bool) -> str | N
 
 
 class ItemTransfer(Protocol):
-    """The mission protocol's typed transfers (the backend's :meth:`FenceMixin.upload_items` /
-    :meth:`FenceMixin.download_items`): items of a MAV_MISSION_TYPE to and from the vehicle, as wire tuples."""
+    """The mission protocol's typed transfers (:class:`~aerodaas.backends.mavlink.transfer.MissionTransfer`):
+    items of a MAV_MISSION_TYPE to and from the vehicle, as wire tuples."""
 
     def upload_items(self, mission_type: int, wire: list[Wire]) -> None: ...
 
@@ -357,77 +353,21 @@ class AutopilotFence:
 
 
 class FenceMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the mission protocol's typed transfers (fence,
-    rally) and the entry points of the vehicle's fence, an :class:`AutopilotFence` (``self.fence``)."""
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the entry points of the typed transfers (the
+    backend's :class:`~aerodaas.backends.mavlink.transfer.MissionTransfer`, ``self.transfers``) and of the
+    vehicle's fence, an :class:`AutopilotFence` (``self.fence``)."""
 
     fence: AutopilotFence
+    transfers: Any
 
     # ------------------------------------------------------------------ typed transfers
-    def _require_mavlink2(self, what: str, mission_type: int) -> None:
-        """``mission_type`` is a MAVLink 2 extension field: framed as MAVLink 1 it is dropped and the vehicle takes
-        a fence for its mission (and overwrites the mission). Raises BackendError on a MAVLink 1 link."""
-        if mission_type != M.MAV_MISSION_TYPE_MISSION and \
-                getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0") != "2.0":
-            raise BackendError(f"robot {self.robot_id!r}: {what}: the link speaks MAVLink 1, which cannot carry "
-                               f"mission_type; the vehicle must send MAVLink 2 (ArduPilot SERIALn_PROTOCOL 2)")
-
     def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
-        """Upload ``wire`` as the vehicle's items of ``mission_type`` (MISSION_COUNT, each MISSION_REQUEST(_INT)
-        answered with MISSION_ITEM_INT, until MISSION_ACK; all carrying ``mission_type``). An empty list clears
-        them. Raises CommandRefused (MAV_MISSION_RESULT name), BackendError after ``command_retries`` timeouts,
-        LinkLost."""
-        what = f"{_TYPE_NAME.get(mission_type, mission_type)} upload"
-        self._check_link(what)
-        self._require_mavlink2(what, mission_type)
-        n = len(wire)
-
-        def send_item(seq: int) -> None:
-            frame, cmd, p1, p2, p3, p4, xi, yi, z = wire[seq]
-            self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, 1,
-                                                             p1, p2, p3, p4, xi, yi, z, mission_type))
-
-        def resend(last: Any) -> None:
-            if last is None:
-                self._send(lambda mav: mav.mission_count_send(self._sysid, self._compid, n, mission_type))
-            else:
-                send_item(last)
-
-        def on_msg(msg: Any, state: dict) -> bool:
-            t = msg.get_type()
-            if getattr(msg, "mission_type", 0) != mission_type:
-                return False
-            if t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-                if 0 <= msg.seq < n:
-                    state["last"] = msg.seq
-                    state["max"] = max(state["max"], msg.seq)
-                    send_item(msg.seq)
-                return False
-            if t == "MISSION_ACK":
-                if msg.type == M.MAV_MISSION_INVALID_SEQUENCE and state["max"] < n - 1:
-                    return False  # ArduPilot: an answer to a request it had already repeated (see mission.py)
-                if msg.type != M.MAV_MISSION_ACCEPTED:
-                    raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
-                                         self._status_text_since(state["start"]))
-                return state["max"] == n - 1 or n == 0
-            return False
-
-        self._transaction(what, lambda: resend(None), resend, on_msg)
+        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.upload_items`."""
+        self.transfers.upload_items(mission_type, wire)
 
     def download_items(self, mission_type: int) -> list[Wire]:
-        """The vehicle's items of ``mission_type`` (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT per
-        item, MISSION_ACK), as wire tuples ``(frame, command, param1..4, x, y, z)``. Raises CommandRefused,
-        BackendError, LinkLost."""
-        what = f"{_TYPE_NAME.get(mission_type, mission_type)} download"
-        self._check_link(what)
-        self._require_mavlink2(what, mission_type)
-        got = self._download_messages(mission_type, what)
-        out = []
-        for seq in sorted(got):
-            m = got[seq]
-            x, y = (m.x, m.y) if m.get_type() == "MISSION_ITEM_INT" else (round(m.x * 1e7), round(m.y * 1e7))
-            out.append((m.frame, m.command, _f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4),
-                        int(x), int(y), _f32(m.z)))
-        return out
+        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.download_items`."""
+        return self.transfers.download_items(mission_type)
 
     # ------------------------------------------------------------------ the fence (the backend's AutopilotFence)
     def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
@@ -455,5 +395,5 @@ class FenceMixin:
     def _init_fence(self) -> None:
         """The vehicle's fence as an object of its own, given the parameter protocol and the typed transfers."""
         self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
-                                    transfers=self, autopilot=lambda: self.autopilot, vehicle_time=lambda: self.t,
+                                    transfers=self.transfers, autopilot=lambda: self.autopilot, vehicle_time=lambda: self.t,
                                     check_link=self._check_link, event=self._event)

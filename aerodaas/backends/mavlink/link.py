@@ -255,8 +255,7 @@ class LinkMixin:
             return
         if mtype in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT", "MISSION_ITEM_INT",
                      "MISSION_ITEM"):
-            if self._mission_active and getattr(msg, "target_system", 0) in (0, self.cfg.source_system):
-                self._mission_q.put(msg)
+            self.transfers.offer(msg)  # kept for the exchange under way, when it is for us (transfer.py)
             return
         handler = getattr(self, f"_on_{mtype.lower()}", None)
         if handler is not None:
