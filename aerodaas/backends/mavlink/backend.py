@@ -1,4 +1,5 @@
-"""The MAVLink vehicle backend: one class composed of one mixin per MAVLink concern (see the package docstring)."""
+"""The MAVLink vehicle backend: one class holding the concern objects (parameters, mission transfers, fence) and
+the mix-ins of the other MAVLink concerns (see the package docstring)."""
 from __future__ import annotations
 
 import threading
