@@ -10,56 +10,13 @@ before anything is sent.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
-
 from aerodaas.actors.analytics_component import AnalyticsComponent
 from aerodaas.actors.camera import CameraComponent
 from aerodaas.actors.drone import DroneComponent
 from aerodaas.actors.scheduler_component import SchedulerComponent
+from aerodaas.protocol.handles import ComponentHandle, remote_method
 
 __all__ = ["remote_method", "ComponentHandle", "DroneHandle", "SchedulerHandle", "CameraHandle", "AnalyticsHandle"]
-
-
-class _BoundCall:
-    """``method`` of component ``cid`` in ``actor`` (its Ray handle): :meth:`remote` calls it there."""
-
-    __slots__ = ("actor", "cid", "method")
-
-    def __init__(self, actor: Any, cid: str, method: Callable) -> None:
-        self.actor, self.cid, self.method = actor, cid, method
-
-    def remote(self, *args: Any, **kwargs: Any) -> Any:
-        """Call the method in the component's actor; returns the call's ObjectRef."""
-        return self.actor.call.remote(self.cid, self.method, *args, **kwargs)
-
-    def __repr__(self) -> str:
-        return f"<{self.method.__qualname__} of component {self.cid!r}>"
-
-
-class remote_method:  # noqa: N801 - used like a decorator/descriptor, as Ray's own ``ray.method``
-    """A public method of a component class, called in the component's actor through a handle (a descriptor on
-    :class:`ComponentHandle` subclasses). Raises TypeError for a private name."""
-
-    def __init__(self, method: Callable) -> None:
-        if method.__name__.startswith("_"):
-            raise TypeError(f"{method.__qualname__} is not a public component method")
-        self.method = method
-
-    def __get__(self, handle: Any, owner: type | None = None) -> Any:
-        if handle is None:
-            return self
-        return _BoundCall(handle.actor, handle.cid, self.method)
-
-
-class ComponentHandle:
-    """A component inside one of the run's actors (``actor``: that actor's handle; ``cid``: the component id).
-    Subclasses declare the component's methods the driver may call (:class:`remote_method`)."""
-
-    def __init__(self, actor: Any, cid: str) -> None:
-        self.actor, self.cid = actor, cid
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.cid!r})"
 
 
 class DroneHandle(ComponentHandle):

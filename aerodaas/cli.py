@@ -109,6 +109,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from aerodaas.protocol.startup_probe import probe
 
     probe("cli")
+    from aerodaas.app.api import with_builtin_actors
     from aerodaas.config import ConfigError
     from aerodaas.runtime import driver as runtime
 
@@ -130,7 +131,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(runtime.format_summary(res), flush=True)
 
     try:
-        runtime.run_file(str(app), opts, on_result=on_result)
+        # the run's actors are handed to the runtime (which imports none): the built-in ones
+        runtime.run_file(str(app), with_builtin_actors(opts), on_result=on_result)
     except ConfigError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2

@@ -70,11 +70,12 @@ def ray_session():
 
 @pytest.fixture
 def run_options():
-    """The test's own run options (no progress lines), passed explicitly to what runs the mission
-    (``start_mission(options=...)``, :func:`aerodaas.runtime.driver.run_file`)."""
+    """The test's own run options (no progress lines, the built-in actor classes), passed explicitly to what runs
+    the mission (``start_mission(options=...)``, :func:`aerodaas.runtime.driver.run_file`)."""
+    from aerodaas.actors.catalogue import BUILTIN_ACTORS
     from aerodaas.runtime.options import RunOptions
 
-    return RunOptions(progress=False)
+    return RunOptions(progress=False, actors=BUILTIN_ACTORS)
 
 
 @pytest.fixture

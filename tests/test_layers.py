@@ -238,6 +238,17 @@ def test_the_actors_do_not_import_the_runtime():
     assert g.get(("actors", "protocol")) and g.get(("runtime", "protocol"))  # the reader sees both sides
 
 
+def test_the_runtime_does_not_import_the_actors():
+    """The runtime starts the actors from the classes its entry point hands it
+    (:class:`aerodaas.protocol.actor_classes.ActorClasses` on ``RunOptions.actors``) and binds the driver's handles
+    from them: no module of the runtime imports a module of ``aerodaas.actors`` (in functions and under
+    ``TYPE_CHECKING`` included), so the runtime does not depend on any concrete actor."""
+    g = package_graph()
+    bad = g.get(("runtime", "actors"), [])
+    assert not bad, "the runtime imports actor modules:\n" + "\n".join(bad)
+    assert g.get(("actors", "protocol")) and ("aerodaas.runtime.supervise" in MODULES)  # the reader sees the packages
+
+
 #: imports every module named on the command line first in its own forked child of one process that has already
 #: imported the third-party libraries (not ``aerodaas``: its modules are removed from ``sys.modules`` before forking),
 #: so a module is imported with nothing of ours loaded, as in a fresh interpreter, at a fraction of the cost

@@ -38,7 +38,23 @@ def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, optio
         return marked  # a mission of the application that already flew (loaded again after it)
     from aerodaas.runtime.driver import run_mission
 
-    return run_mission(env, robots, options, timeout)
+    return run_mission(env, robots, with_builtin_actors(options), timeout)
+
+
+def with_builtin_actors(options: Any = None) -> Any:
+    """``options`` (a :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) with the built-in actor
+    classes (:data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`) when it names none: the application API hands the
+    runtime the actors it starts (the runtime imports no actor module). Imports Ray."""
+    import dataclasses
+
+    from aerodaas.runtime.options import RunOptions
+
+    opts = options if options is not None else RunOptions()
+    if opts.actors is not None:
+        return opts
+    from aerodaas.actors.catalogue import BUILTIN_ACTORS
+
+    return dataclasses.replace(opts, actors=BUILTIN_ACTORS)
 
 
 class ComputeResource:

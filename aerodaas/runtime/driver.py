@@ -17,16 +17,19 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from aerodaas.runtime import ray_start
-from aerodaas.runtime.options import RunOptions
+from aerodaas.runtime.options import RunOptions, actor_classes
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
                                         shutdown_ray, start_ray_early)
 from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 from aerodaas.runtime.supervise import error_cause as _cause
 from aerodaas.runtime.teardown import close_actors
+
+if TYPE_CHECKING:
+    from aerodaas.protocol.actor_classes import ActorClasses
 
 
 @dataclass
@@ -102,49 +105,50 @@ def request_stop(signum: int) -> None:
         raise KeyboardInterrupt(f"signal {signum}")
 
 
-def _start_scheduling(env, plan, scheduled: dict, has_cloud: bool) -> list:
+def _start_scheduling(run: "_Run", placement: Any) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
-    from aerodaas.actors.cloud_executor import cloud_selector, start_cloud_executors
     from aerodaas.protocol.specs import AnalyticsSchedulerSpec
     from aerodaas.schedulers.analytics_base import analytics_scheduler_class
 
-    cfg = env.cfg.analytics_scheduler
+    cfg = run.env.cfg.analytics_scheduler
     policy_class = analytics_scheduler_class(cfg.name)  # the class travels, not its name
-    analytics = {a.name: a for a in scheduled.values()}
-    executors = start_cloud_executors(cfg.cloud_executors, mode="real", selector=cloud_selector(has_cloud),
-                                      name_prefix="cloud-analytics", analytics=analytics,
-                                      ray_name_prefix=f"aerodaas/{plan.run_id}/cloud-analytics/")
-    for a in plan.actors.values():
+    analytics = {a.name: a for a in run.scheduled.values()}
+    # cloud actors go to tier=cloud nodes, or to this node without any (placement: no compute labels here)
+    executors = run.classes.start_cloud_executors(cfg.cloud_executors, mode="real",
+                                                  selector=placement.selector("cloud", {}),
+                                                  name_prefix="cloud-analytics", analytics=analytics,
+                                                  ray_name_prefix=f"aerodaas/{run.plan.run_id}/cloud-analytics/")
+    for a in run.plan.actors.values():
         if a.role == "dispatcher":
             a.spec.analytics_scheduler = AnalyticsSchedulerSpec(
-                cfg.name, policy_class, cfg.resolved_workload(env.cfg), executors, list(cfg.network),
+                cfg.name, policy_class, cfg.resolved_workload(run.env.cfg), executors, list(cfg.network),
                 cfg.jpeg_quality, 0)
     return executors
 
 
-def _bind_handles(plan, actors: dict, robots: list, graphs: dict, env) -> dict:
-    """The driver's handles per robot (drone, scheduler, cameras, analytics: :class:`ComponentHandle` into their
-    actors), bound to the application's objects (``Robot.bind_drone``, live scheduler, pull getters)."""
+def _bind_handles(run: "_Run") -> dict:
+    """The driver's handles per robot (drone, scheduler, cameras, analytics: the
+    :class:`~aerodaas.protocol.handles.ComponentHandle` classes of ``run.classes`` into their actors), bound to the
+    application's objects (``Robot.bind_drone``, live scheduler, pull getters)."""
     import ray
 
-    from aerodaas.actors.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
-
+    plan, actors, classes = run.plan, run.actors, run.classes
     loc = plan.location()
     handles: dict[str, dict] = {}
-    for r in robots:
+    for r in run.robots:
         ids = plan.robots[r.id]
-        a_handles = {cid: AnalyticsHandle(actors[loc[cid]], cid) for cid in ids["analytics"]}
+        a_handles = {cid: classes.analytics_handle(actors[loc[cid]], cid) for cid in ids["analytics"]}
         home = actors[ids["actor"]]
-        handles[r.id] = {"robot": r, "drone": DroneHandle(home, ids["drone"]),
-                         "scheduler": SchedulerHandle(home, ids["scheduler"]), "analytics": a_handles,
-                         "cameras": {sid: CameraHandle(home, cid) for sid, cid in ids["cameras"].items()},
-                         "sched_obj": r.scheduler or env.trajectory_scheduler()}
+        handles[r.id] = {"robot": r, "drone": classes.drone_handle(home, ids["drone"]),
+                         "scheduler": classes.scheduler_handle(home, ids["scheduler"]), "analytics": a_handles,
+                         "cameras": {sid: classes.camera_handle(home, cid) for sid, cid in ids["cameras"].items()},
+                         "sched_obj": r.scheduler or run.env.trajectory_scheduler()}
         r.bind_drone(handles[r.id]["drone"])
         for s in r.sensors.values():
             s.get_data_stream().bind_runtime(_pull_getter(s, handles[r.id]))
-        for a in graphs[r.id]:
+        for a in run.graphs[r.id]:
             mine = [c for c in plan.analytics_instances[id(a)] if c in a_handles]
             if mine:
                 h = a_handles[mine[0]]
@@ -203,6 +207,7 @@ def _fly(env, robots: list, graph: tuple, opts: RunOptions, timeout: float | Non
     from aerodaas.runtime.options import MISSION_LISTENERS
     from aerodaas.runtime.preflight import check_options
 
+    actor_classes(opts)  # the entry point handed the actor classes (ValueError before Ray otherwise)
     sim = check_options(env, robots, graph[1], opts)
     ray_start.start_ray_early(opts.address, opts.dashboard)  # in its own thread (see there), overlapping the plan
     IN_MISSION[0] = True
@@ -241,6 +246,11 @@ class _Run:
     latency: dict = field(default_factory=dict)
     failure: str | None = None
     robot_errors: dict = field(default_factory=dict)  # robot id -> its own error when the run could not start
+
+    @property
+    def classes(self) -> ActorClasses:
+        """The run's actor and handle classes (``opts.actors``, handed by the entry point)."""
+        return actor_classes(self.opts)
 
 
 def _plan_run(run: _Run) -> Any:
@@ -296,8 +306,8 @@ def _start_actors(run: _Run, placement: Any) -> list:
     from aerodaas.runtime.supervise import start_actors
 
     if run.scheduled:
-        run.cloud_executors = _start_scheduling(run.env, run.plan, run.scheduled, run.has_cloud)
-    run.actors = start_actors(run.plan, placement, run.env.cfg.actor_max_restarts)
+        run.cloud_executors = _start_scheduling(run, placement)
+    run.actors = start_actors(run.plan, placement, run.env.cfg.actor_max_restarts, run.classes)
     probe("actors_created")
     rec_setup = run.actors["recorder"].setup.remote()
     others = [h.setup.remote() for hid, h in run.actors.items() if hid != "recorder"]
@@ -410,7 +420,7 @@ def _run_mission(run: _Run) -> MissionResult:
                       flush=True)
         probe("hosts_ready")
         if run.failure is None:
-            run.handles = _bind_handles(run.plan, run.actors, run.robots, run.graphs, run.env)
+            run.handles = _bind_handles(run)
             hitl = _start_hitl(run)
             _supervise(run, described)
     finally:

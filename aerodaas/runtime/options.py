@@ -4,9 +4,12 @@ them from a global."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-__all__ = ["RunOptions", "MISSION_LISTENERS"]
+if TYPE_CHECKING:
+    from aerodaas.protocol.actor_classes import ActorClasses
+
+__all__ = ["RunOptions", "MISSION_LISTENERS", "actor_classes"]
 
 #: Callables ``fn(result)`` told of every :class:`aerodaas.runtime.driver.MissionResult` that a mission start returns —
 #: :meth:`Robot.start_mission` and :meth:`Environment.start_mission` (a fleet) alike. ``aerodaas run`` listens here
@@ -40,3 +43,16 @@ class RunOptions:
     run_id: str | None = None
     #: --overwrite: --record may replace an existing file that is not an AeroDaaS recording
     overwrite: bool = False
+    #: the run's actor classes and component handle classes (the runtime imports no actor module): the entry point
+    #: that starts the run sets them — ``start_mission()`` and ``aerodaas run`` the built-in
+    #: :data:`aerodaas.actors.catalogue.BUILTIN_ACTORS` when None; the runner refuses None (ValueError, before Ray)
+    actors: ActorClasses | None = None
+
+
+def actor_classes(opts: RunOptions) -> ActorClasses:
+    """``opts.actors``. Raises ValueError (before Ray starts) when the entry point handed none."""
+    if opts.actors is None:
+        raise ValueError("RunOptions.actors: None; the code that starts a run hands the runtime its actor classes "
+                         "(RunOptions(actors=aerodaas.actors.catalogue.BUILTIN_ACTORS), as start_mission() and "
+                         "`aerodaas run` do)")
+    return opts.actors

@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:
+    from aerodaas.protocol.actor_classes import ActorClasses
 
 __all__ = ["start_actors", "supervise", "collect_stats", "settle_actors", "progress_lines", "LOST"]
 
@@ -27,29 +30,11 @@ __all__ = ["start_actors", "supervise", "collect_stats", "settle_actors", "progr
 LOST = "lost"
 
 
-def actor_class(role: str):
-    """The Ray actor class for a plan role."""
-    if role == "drone":
-        from aerodaas.actors.drone_actor import DroneActor
-
-        return DroneActor
-    if role == "analytics":
-        from aerodaas.actors.analytics_actor import AnalyticsActor
-
-        return AnalyticsActor
-    if role == "dispatcher":
-        from aerodaas.actors.analytics_actor import DispatcherActor
-
-        return DispatcherActor
-    raise ValueError(f"no actor class for role {role!r}")
-
-
-def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
-    """Create every actor of ``plan``: the recorder first, on the driver's node, never restarted; the others named,
-    placed with their ``label_selector`` and restartable ``max_restarts`` times. Returns host id -> actor handle.
-    Nothing is set up yet. Raises what Ray raises for an impossible placement option."""
-    from aerodaas.actors.recorder_actor import RecorderActor
-
+def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorClasses) -> dict:
+    """Create every actor of ``plan`` from ``classes`` (the run's actor classes, handed by its entry point): the
+    recorder first, on the driver's node, never restarted; the others named, placed with their ``label_selector``
+    and restartable ``max_restarts`` times. Returns host id -> actor handle. Nothing is set up yet. Raises what Ray
+    raises for an impossible placement option."""
     import ray
 
     from aerodaas.runtime.recorder_watch import recorder_specs
@@ -61,7 +46,7 @@ def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
     # the recorder writes the driver's file: it runs on the driver's node, whatever other edge nodes exist (and
     # lives as long as the driver does, so losing another node never loses the recording)
     here = NodeAffinitySchedulingStrategy(node_id=ray.get_runtime_context().get_node_id(), soft=False)
-    handles["recorder"] = RecorderActor.options(name=rec_plan.name, scheduling_strategy=here).remote(rec_plan.spec)
+    handles["recorder"] = classes.recorder.options(name=rec_plan.name, scheduling_strategy=here).remote(rec_plan.spec)
     # every other actor reads its spec (analytics, schedulers: possibly large) and the wiring from the recorder
     # actor, which lives as long as the run: a restarted actor reads the same again, and no constructor argument
     # sits in the object store (Ray cannot promise those across restarts, ray-project/ray#53727). Not waited for:
@@ -71,7 +56,7 @@ def start_actors(plan: Any, placement: Any, max_restarts: int) -> dict:
         if hid == "recorder":
             continue
         opts = {"name": a.name, "label_selector": a.selector(placement), "max_restarts": max_restarts}
-        handles[hid] = actor_class(a.role).options(**opts).remote(hid, a.tier)
+        handles[hid] = classes.for_role(a.role).options(**opts).remote(hid, a.tier)
     return handles
 
 

@@ -1,4 +1,5 @@
-"""The MAVLink vehicle backend: one class composed of one mixin per MAVLink concern (see the package docstring)."""
+"""The MAVLink vehicle backend: one class holding the concern objects (parameters, mission transfers, fence) and
+the mix-ins of the other MAVLink concerns (see the package docstring)."""
 from __future__ import annotations
 
 import threading
@@ -16,7 +17,7 @@ from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import MissionMixin
 from aerodaas.backends.mavlink.offboard import OffboardMixin
-from aerodaas.backends.mavlink.params import ParamMixin
+from aerodaas.backends.mavlink.params import ParameterProtocol, ParamMixin
 from aerodaas.backends.mavlink.telemetry import TelemetryMixin
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
@@ -148,6 +149,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.safety = cfg.safety
         self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
+        #: the parameter protocol (params.py), talking to the link through what it is given
+        self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
+                                            target=lambda: (self._sysid, self._compid),
+                                            is_px4=lambda: self.autopilot == "px4")
         self._init_command()
         self._init_telemetry()
         self._init_action()

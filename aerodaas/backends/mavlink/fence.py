@@ -33,7 +33,7 @@ Parameters (firmware units):
   (0 disables). PX4 intersects several inclusion zones and has no parameter to change that: such a fence is refused
   for a PX4 vehicle before anything is uploaded. PX4 refuses a PARAM_SET whose type differs from the parameter's ("param types mismatch",
   ``src/modules/mavlink/mavlink_parameters.cpp``): INT32 parameters go bytewise in the float field
-  (:meth:`~aerodaas.backends.mavlink.params.ParamMixin.set_parameter` ``integer=True``).
+  (:meth:`~aerodaas.backends.mavlink.params.ParameterProtocol.set` ``integer=True``).
 
 The firmware's own return must stay inside the altitude fence. ArduCopter lowers its RTL return target to the
 fence's safe maximum itself (``ArduCopter/mode_rtl.cpp`` ``compute_return_target``: ``fence.get_safe_alt_max()``
@@ -49,15 +49,14 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable, Protocol
 
 from aerodaas.backends.base import BackendError, CommandRefused
-from aerodaas.backends.mavlink._common import M, _enum_name, _f32
+from aerodaas.backends.mavlink._common import M, _f32
+from aerodaas.backends.mavlink.params import LinkCheck, ParameterProtocol
+from aerodaas.backends.mavlink.transfer import FENCE, RALLY, Wire  # noqa: F401 - FENCE/RALLY: API
 from aerodaas.navigation.geofence import GeofenceConfig, autopilot_disagreement
 
-FENCE = M.MAV_MISSION_TYPE_FENCE  # 1
-RALLY = M.MAV_MISSION_TYPE_RALLY  # 2
-_TYPE_NAME = {FENCE: "fence", RALLY: "rally points", M.MAV_MISSION_TYPE_MISSION: "mission"}
 
 #: ArduPilot FENCE_TYPE bits (AC_Fence.h AC_FENCE_TYPE_*)
 AP_FENCE_ALT_MAX, AP_FENCE_CIRCLE, AP_FENCE_POLYGON = 1, 2, 4
@@ -88,8 +87,6 @@ def px4_return_altitude_ceiling(max_altitude_m: float, field: str = "safety.max_
                            f"{PX4_MIN_DESCEND_ALT_M:g} m, 2 m margin); raise {field} or set "
                            f"mavlink.fence.max_altitude false")
     return ceiling
-#: one item on the wire: (frame, command, param1..4, x int, y int, z)
-Wire = tuple
 
 
 def fence_items(fence: GeofenceConfig) -> list[Wire]:
@@ -160,80 +157,44 @@ def compare_items(sent: list[Wire], got: list[Wire], compare_z: bool) -> str | N
     return None
 
 
-class FenceMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the vehicle's fence and rally points.
+class ItemTransfer(Protocol):
+    """The mission protocol's typed transfers (:class:`~aerodaas.backends.mavlink.transfer.MissionTransfer`):
+    items of a MAV_MISSION_TYPE to and from the vehicle, as wire tuples."""
 
-    State: ``_fence_saved`` (the vehicle's fence items and fence parameters before :meth:`apply_fence` changed
-    them, for :meth:`restore_fence`), ``fence_applied`` (what :meth:`apply_fence` verified, or None)."""
+    def upload_items(self, mission_type: int, wire: list[Wire]) -> None: ...
 
-    # ------------------------------------------------------------------ typed transfers
-    def _require_mavlink2(self, what: str, mission_type: int) -> None:
-        """``mission_type`` is a MAVLink 2 extension field: framed as MAVLink 1 it is dropped and the vehicle takes
-        a fence for its mission (and overwrites the mission). Raises BackendError on a MAVLink 1 link."""
-        if mission_type != M.MAV_MISSION_TYPE_MISSION and \
-                getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0") != "2.0":
-            raise BackendError(f"robot {self.robot_id!r}: {what}: the link speaks MAVLink 1, which cannot carry "
-                               f"mission_type; the vehicle must send MAVLink 2 (ArduPilot SERIALn_PROTOCOL 2)")
+    def download_items(self, mission_type: int) -> list[Wire]: ...
 
-    def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
-        """Upload ``wire`` as the vehicle's items of ``mission_type`` (MISSION_COUNT, each MISSION_REQUEST(_INT)
-        answered with MISSION_ITEM_INT, until MISSION_ACK; all carrying ``mission_type``). An empty list clears
-        them. Raises CommandRefused (MAV_MISSION_RESULT name), BackendError after ``command_retries`` timeouts,
-        LinkLost."""
-        what = f"{_TYPE_NAME.get(mission_type, mission_type)} upload"
-        self._check_link(what)
-        self._require_mavlink2(what, mission_type)
-        n = len(wire)
 
-        def send_item(seq: int) -> None:
-            frame, cmd, p1, p2, p3, p4, xi, yi, z = wire[seq]
-            self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, 1,
-                                                             p1, p2, p3, p4, xi, yi, z, mission_type))
+class AutopilotFence:
+    """The vehicle's own geofence and rally points, a concern object of
+    :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see the module docstring for the firmware's rules).
 
-        def resend(last: Any) -> None:
-            if last is None:
-                self._send(lambda mav: mav.mission_count_send(self._sysid, self._compid, n, mission_type))
-            else:
-                send_item(last)
+    It talks to the others only through what it is given: ``params`` (the backend's
+    :class:`~aerodaas.backends.mavlink.params.ParameterProtocol`), ``transfers`` (:class:`ItemTransfer`), and the
+    callables ``autopilot`` (``"ardupilot"`` / ``"px4"``, known once connected), ``vehicle_time`` (the vehicle's
+    clock, s), ``check_link`` and ``event`` (records a backend event). ``settings``: ``mavlink.fence``
+    (:class:`~aerodaas.config.backends.MavlinkFenceConfig`); ``limits`` and ``safety``: the robot's (the altitude
+    ceiling, the default fence).
 
-        def on_msg(msg: Any, state: dict) -> bool:
-            t = msg.get_type()
-            if getattr(msg, "mission_type", 0) != mission_type:
-                return False
-            if t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-                if 0 <= msg.seq < n:
-                    state["last"] = msg.seq
-                    state["max"] = max(state["max"], msg.seq)
-                    send_item(msg.seq)
-                return False
-            if t == "MISSION_ACK":
-                if msg.type == M.MAV_MISSION_INVALID_SEQUENCE and state["max"] < n - 1:
-                    return False  # ArduPilot: an answer to a request it had already repeated (see mission.py)
-                if msg.type != M.MAV_MISSION_ACCEPTED:
-                    raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
-                                         self._status_text_since(state["start"]))
-                return state["max"] == n - 1 or n == 0
-            return False
+    State: ``applied`` (what :meth:`apply` verified, or None) and the vehicle's fence items and fence parameters
+    before :meth:`apply` changed them (for :meth:`restore`; :attr:`has_saved`)."""
 
-        self._transaction(what, lambda: resend(None), resend, on_msg)
+    def __init__(self, robot_id: str, settings: Any, limits: Any, safety: Any, *, params: ParameterProtocol,
+                 transfers: ItemTransfer, autopilot: Callable[[], str | None], vehicle_time: Callable[[], float],
+                 check_link: LinkCheck, event: Callable[..., None]) -> None:
+        self.robot_id, self._settings, self.limits, self.safety = robot_id, settings, limits, safety
+        self._params, self._transfers = params, transfers
+        self._autopilot, self._vehicle_time, self._check_link, self._event = autopilot, vehicle_time, check_link, event
+        self._saved: dict[str, Any] | None = None
+        #: what :meth:`apply` verified (``{"items", "params", "before"}``), or None
+        self.applied: dict[str, Any] | None = None
 
-    def download_items(self, mission_type: int) -> list[Wire]:
-        """The vehicle's items of ``mission_type`` (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT per
-        item, MISSION_ACK), as wire tuples ``(frame, command, param1..4, x, y, z)``. Raises CommandRefused,
-        BackendError, LinkLost."""
-        what = f"{_TYPE_NAME.get(mission_type, mission_type)} download"
-        self._check_link(what)
-        self._require_mavlink2(what, mission_type)
-        got = self._download_messages(mission_type, what)
-        out = []
-        for seq in sorted(got):
-            m = got[seq]
-            x, y = (m.x, m.y) if m.get_type() == "MISSION_ITEM_INT" else (round(m.x * 1e7), round(m.y * 1e7))
-            out.append((m.frame, m.command, _f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4),
-                        int(x), int(y), _f32(m.z)))
-        return out
+    @property
+    def has_saved(self) -> bool:
+        """The vehicle's fence before :meth:`apply` is kept, to be put back by :meth:`restore`."""
+        return bool(self._saved)
 
-    # ------------------------------------------------------------------ fence
     def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
             -> dict[str, tuple[float, bool]]:
         """The fence parameters for ``fence`` and ``mavlink.fence`` on this autopilot: name -> (value in the
@@ -241,11 +202,11 @@ class FenceMixin:
         values; PX4's return altitudes (:data:`PX4_RETURN_ALTITUDES`) are ceilings, kept when already below
         :func:`px4_return_altitude_ceiling` (without ``have`` the ceiling itself). Raises BackendError (a fence
         too low for PX4's return)."""
-        fc = self.cfg.fence
+        fc = self._settings
         # the safety gate's ceiling: the lower of the two settings (safety.py SafetyGate.max_alt)
         max_alt = min(float(self.limits.max_altitude), float(self.safety.max_altitude or math.inf))
         ap_action, px4_action = FENCE_ACTIONS[fc.action]
-        if self.autopilot == "ardupilot":
+        if self._autopilot() == "ardupilot":
             bits = (AP_FENCE_POLYGON if not fence.is_empty else 0) | (AP_FENCE_ALT_MAX if fc.max_altitude else 0) \
                 | (AP_FENCE_CIRCLE if fc.home_radius_m else 0)
             out = {"FENCE_TYPE": (float(bits), True), "FENCE_ACTION": (float(ap_action), True)}
@@ -269,9 +230,9 @@ class FenceMixin:
             out["GF_MAX_HOR_DIST"] = (float(fc.home_radius_m), False)
         return out
 
-    def apply_fence(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
+    def apply(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
         """Make ``fence`` (default: the robot's ``safety.geofence``) the vehicle's own fence: keep the vehicle's
-        current fence items and parameters (for :meth:`restore_fence`), upload the items
+        current fence items and parameters (for :meth:`restore`), upload the items
         (``MAV_MISSION_TYPE_FENCE``), set the parameters (:meth:`fence_parameters`), then read both back
         (MISSION_REQUEST_LIST of the fence type, PARAM_REQUEST_READ) and compare. Returns ``{"items": n,
         "params": {name: value read back}, "before": {name: the vehicle's value before}}`` and records a
@@ -284,14 +245,14 @@ class FenceMixin:
         fence = self.safety.geofence if fence is None else fence
         wire = fence_items(fence)
         where = f"robot {self.robot_id!r}: autopilot geofence"
-        why = autopilot_disagreement(fence, self.autopilot)
+        why = autopilot_disagreement(fence, self._autopilot())
         if why is not None:
             raise BackendError(f"{where}: {why}; refusing to fly")
         try:
             want = self.fence_parameters(fence)
         except BackendError as e:
             raise BackendError(f"{where}: {e}") from None
-        have = self.read_parameters(list(want))
+        have = self._params.read(list(want))
         missing = sorted(set(want) - set(have))
         if "FENCE_OPTIONS" in missing:
             raise BackendError(f"{where}: the vehicle has no FENCE_OPTIONS parameter, so it requires a position "
@@ -300,37 +261,37 @@ class FenceMixin:
                                f"option); refusing to fly (draw the allowed area as one inclusion polygon, or set "
                                f"mavlink.fence.upload false to fly on our gate alone)")
         if missing:
-            raise BackendError(f"{where}: the {self.autopilot} vehicle has no parameter {', '.join(missing)} "
+            raise BackendError(f"{where}: the {self._autopilot()} vehicle has no parameter {', '.join(missing)} "
                                f"(firmware without a geofence?); refusing to fly (set mavlink.fence.upload false "
                                f"to fly on our gate alone, or mavlink.fence.max_altitude false without the altitude "
                                f"fence and its return altitudes)")
         want = self.fence_parameters(fence, have)
-        if not self._fence_saved:
+        if not self._saved:
             try:
-                before = self.download_items(FENCE)
+                before = self._transfers.download_items(FENCE)
             except (BackendError, CommandRefused) as e:
                 before = None
                 self._event("fence_download_failed", error=str(e))
-            self._fence_saved = {"items": before, "params": dict(have)}
-        self.upload_items(FENCE, wire)
+            self._saved = {"items": before, "params": dict(have)}
+        self._transfers.upload_items(FENCE, wire)
         for name, (value, integer) in want.items():
             if not math.isclose(have[name], value, rel_tol=1e-6, abs_tol=1e-4):
-                self.set_parameter(name, value, integer=integer)
+                self._params.set(name, value, integer=integer)
         got_items = self._settled_fence(wire)
         why = compare_items(wire, got_items, compare_z=False)
         if why is not None:
             raise BackendError(f"{where}: the fence read back differs from the one uploaded ({why}); refusing to fly")
-        got = self.read_parameters(list(want))
+        got = self._params.read(list(want))
         for name, (value, _int) in want.items():
             if name not in got:
                 raise BackendError(f"{where}: {name} could not be read back; refusing to fly")
             if not math.isclose(got[name], value, rel_tol=1e-5, abs_tol=1e-3):
                 raise BackendError(f"{where}: {name} set to {value:g}, the vehicle reports {got[name]:g}; "
                                    f"refusing to fly")
-        self.fence_applied = {"items": len(wire), "params": got, "before": {n: have[n] for n in want}}
+        self.applied = {"items": len(wire), "params": got, "before": {n: have[n] for n in want}}
         self._event("fence_uploaded", items=len(wire), polygons=len(fence.polygons), circles=len(fence.circles),
-                    action=self.cfg.fence.action, **{k: round(v, 3) for k, v in got.items()})
-        return self.fence_applied
+                    action=self._settings.action, **{k: round(v, 3) for k, v in got.items()})
+        return self.applied
 
     def _settled_fence(self, wire: list[Wire]) -> list[Wire]:
         """The vehicle's fence items once the firmware has acted on the upload of ``wire``
@@ -342,19 +303,19 @@ class FenceMixin:
         (4.7.0-dev): two inclusion circles after a polygon and a circle read back right after the upload, and 0 items
         0.1 s later, for the whole flight. So the read-back waits, and a fence found wiped is uploaded once more
         (``FENCE_TOTAL`` is 0 by then and stays so: no second wipe), recorded as ``fence_rewritten``."""
-        got = self._after_vehicle_s(FENCE_SETTLE_S, lambda: self.download_items(FENCE))
+        got = self._after_vehicle_s(FENCE_SETTLE_S, lambda: self._transfers.download_items(FENCE))
         if wire and not got:
             self._event("fence_rewritten", items=len(wire), reason="the vehicle cleared the fence after storing it "
                         "(ArduPilot FENCE_TOTAL bookkeeping)")
-            self.upload_items(FENCE, wire)
-            got = self._after_vehicle_s(FENCE_SETTLE_S, lambda: self.download_items(FENCE))
+            self._transfers.upload_items(FENCE, wire)
+            got = self._after_vehicle_s(FENCE_SETTLE_S, lambda: self._transfers.download_items(FENCE))
         return got
 
     def _after_vehicle_s(self, seconds: float, then):
         """``then()`` once the vehicle's clock has run ``seconds`` further (at most 5 wall seconds: a vehicle whose
         clock does not advance is not waited for longer)."""
-        t0, end = self.t, time.monotonic() + 5.0
-        while self.t - t0 < seconds and time.monotonic() < end:
+        t0, end = self._vehicle_time(), time.monotonic() + 5.0
+        while self._vehicle_time() - t0 < seconds and time.monotonic() < end:
             self._check_link("fence read-back")
             time.sleep(0.02)
         return then()
@@ -363,33 +324,76 @@ class FenceMixin:
         """Upload rally points ``(lat, lon, alt m above home)`` (``MAV_MISSION_TYPE_RALLY``) and read them back.
         Returns how many. Raises BackendError on a mismatch, CommandRefused, LinkLost."""
         wire = rally_items(points)
-        self.upload_items(RALLY, wire)
-        why = compare_items(wire, self.download_items(RALLY), compare_z=True)
+        self._transfers.upload_items(RALLY, wire)
+        why = compare_items(wire, self._transfers.download_items(RALLY), compare_z=True)
         if why is not None:
             raise BackendError(f"robot {self.robot_id!r}: rally points read back differ from those uploaded ({why})")
         self._event("rally_uploaded", items=len(wire))
         return len(wire)
 
-    def restore_fence(self) -> bool:
-        """Put back the fence items and fence parameters the vehicle had before :meth:`apply_fence` (best
+    def restore(self) -> bool:
+        """Put back the fence items and fence parameters the vehicle had before :meth:`apply` (best
         effort, ``fence_restored`` / ``fence_restore_failed`` events). Returns True when all was put back."""
-        saved = self._fence_saved
+        saved = self._saved
         if not saved:
             return True
         ok = True
         try:
             if saved["items"] is not None:
-                self.upload_items(FENCE, saved["items"])
+                self._transfers.upload_items(FENCE, saved["items"])
             for name, value in saved["params"].items():
-                self.set_parameter(name, value, integer=name in _INT_PARAMS)
+                self._params.set(name, value, integer=name in _INT_PARAMS)
         except Exception as e:  # noqa: BLE001 - closing: report and go on
             ok = False
             self._event("fence_restore_failed", error=str(e))
         if ok:
-            self._fence_saved = None
+            self._saved = None
             self._event("fence_restored", items=len(saved["items"] or []), **saved["params"])
         return ok
 
+
+class FenceMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the entry points of the typed transfers (the
+    backend's :class:`~aerodaas.backends.mavlink.transfer.MissionTransfer`, ``self.transfers``) and of the
+    vehicle's fence, an :class:`AutopilotFence` (``self.fence``)."""
+
+    fence: AutopilotFence
+    transfers: Any
+
+    # ------------------------------------------------------------------ typed transfers
+    def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
+        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.upload_items`."""
+        self.transfers.upload_items(mission_type, wire)
+
+    def download_items(self, mission_type: int) -> list[Wire]:
+        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.download_items`."""
+        return self.transfers.download_items(mission_type)
+
+    # ------------------------------------------------------------------ the fence (the backend's AutopilotFence)
+    def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
+            -> dict[str, tuple[float, bool]]:
+        """:meth:`AutopilotFence.fence_parameters`."""
+        return self.fence.fence_parameters(fence, have)
+
+    def apply_fence(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
+        """:meth:`AutopilotFence.apply`."""
+        return self.fence.apply(fence)
+
+    def upload_rally(self, points: list[tuple[float, float, float]]) -> int:
+        """:meth:`AutopilotFence.upload_rally`."""
+        return self.fence.upload_rally(points)
+
+    def restore_fence(self) -> bool:
+        """:meth:`AutopilotFence.restore`."""
+        return self.fence.restore()
+
+    @property
+    def fence_applied(self) -> dict[str, Any] | None:
+        """:attr:`AutopilotFence.applied`."""
+        return self.fence.applied
+
     def _init_fence(self) -> None:
-        self._fence_saved: dict[str, Any] | None = None
-        self.fence_applied: dict[str, Any] | None = None
+        """The vehicle's fence as an object of its own, given the parameter protocol and the typed transfers."""
+        self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
+                                    transfers=self.transfers, autopilot=lambda: self.autopilot, vehicle_time=lambda: self.t,
+                                    check_link=self._check_link, event=self._event)

@@ -135,20 +135,20 @@ class LinkMixin:
                 except Exception as e:  # noqa: BLE001 - closing must go on
                     self._event("safe_end_failed", error=str(e))
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
-            if self.cfg.fence.restore_on_close and self._fence_saved:
+            if self.cfg.fence.restore_on_close and self.fence.has_saved:
                 if self._link_ok and not self._armed:
                     self.restore_fence()
                 else:
                     self._event("fence_not_restored", reason="link lost" if not self._link_ok else "still armed")
-            if self.cfg.restore_params and self._saved_params:
+            if self.cfg.restore_params and self.parameters.changed:
                 if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
                     self._event("params_not_restored", reason="speed limit write in progress",
-                                names=sorted(self._saved_params))
+                                names=self.parameters.changed)
                 elif self._link_ok and not self._armed:
                     self.restore_parameters()
                 else:
                     self._event("params_not_restored", reason="link lost" if not self._link_ok else "still armed",
-                                names=sorted(self._saved_params))
+                                names=self.parameters.changed)
         self._stop.set()
         if self._io is not None and self._io is not threading.current_thread():
             self._io.join(timeout=2)
@@ -256,8 +256,7 @@ class LinkMixin:
             return
         if mtype in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT", "MISSION_ITEM_INT",
                      "MISSION_ITEM"):
-            if self._mission_active and getattr(msg, "target_system", 0) in (0, self.cfg.source_system):
-                self._mission_q.put(msg)
+            self.transfers.offer(msg)  # kept for the exchange under way, when it is for us (transfer.py)
             return
         handler = getattr(self, f"_on_{mtype.lower()}", None)
         if handler is not None:

@@ -1,16 +1,14 @@
 """The mission protocol (mavlink.io mission microservice): upload, download, clear and start, in the INT form."""
 from __future__ import annotations
 
-import queue
-import time
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
 from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
-from aerodaas.backends.base import BackendError, CommandRefused
-from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _GLOBAL_FRAMES
+from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
+from aerodaas.backends.mavlink.transfer import MissionTransfer
 
 
 #: MAV_FRAME_GLOBAL_RELATIVE_ALT and its _INT twin: altitudes above home
@@ -78,7 +76,7 @@ class MissionMixin:
             self._alt_ref_pinned = True  # arm() keeps it: the mission's altitudes are relative to it
         wire, sent_items = self._wire_items(items, built, absolute)
         self._check_link("mission upload")
-        self._send_mission(wire)
+        self.transfers.upload_mission(wire)
         self._remember_waypoints(wire)
         self._event("mission_uploaded", count=len(sent_items))
         return sent_items
@@ -121,90 +119,6 @@ class MissionMixin:
                             int(round(h.lon * 1e7)), float(h.alt)))
         return wire, sent_items
 
-    def _send_mission(self, wire: list[tuple]) -> None:
-        """The upload transfer of the ``wire`` items (MISSION_COUNT, each item as the autopilot requests it, until
-        its MISSION_ACK). Raises CommandRefused for a refusing MISSION_ACK."""
-        n = len(wire)
-
-        def send_item(seq: int, as_int: bool) -> None:
-            # always MISSION_ITEM_INT, also to a MISSION_REQUEST (ArduPilot: "GCS should send MISSION_ITEM_INT";
-            # the float MISSION_ITEM loses ~0.4 m of latitude/longitude in float32)
-            frame, cmd, auto, p1, p2, p3, p4, xi, yi, z = wire[seq]
-            self._send(lambda mav: mav.mission_item_int_send(self._sysid, self._compid, seq, frame, cmd, 0, auto,
-                                                             p1, p2, p3, p4, xi, yi, z, 0))
-
-        def resend(last: Any) -> None:
-            if last is None:
-                self._send(lambda mav: mav.mission_count_send(self._sysid, self._compid, n, 0))
-            else:
-                send_item(*last)
-
-        def on_msg(msg: Any, state: dict) -> bool:
-            t = msg.get_type()
-            if t in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and getattr(msg, "mission_type", 0) == 0:
-                if 0 <= msg.seq < n:
-                    state["last"] = (msg.seq, t == "MISSION_REQUEST_INT")
-                    state["max"] = max(state["max"], msg.seq)
-                    send_item(*state["last"])
-                return False
-            if t == "MISSION_ACK" and getattr(msg, "mission_type", 0) == 0:
-                if msg.type == M.MAV_MISSION_INVALID_SEQUENCE and state["max"] < n - 1:
-                    # ArduPilot answers an item that is not the one it asks for now (our answer to a request it
-                    # had already repeated) with this ACK and goes on with the transfer (MissionItemProtocol::
-                    # handle_mission_item); the next MISSION_REQUEST follows
-                    self._event("mission_item_out_of_sequence", last_requested=state["max"])
-                    return False
-                if msg.type != M.MAV_MISSION_ACCEPTED:
-                    raise CommandRefused(self.robot_id, "mission upload", _enum_name("MAV_MISSION_RESULT", msg.type),
-                                         self._status_text_since(state["start"]))
-                return state["max"] == n - 1 or n == 0
-            return False
-
-        self._transaction("mission upload", lambda: resend(None), resend, on_msg)
-
-    def _transaction(self, name: str, begin: Callable[[], None], resend: Callable[[Any], None],
-                     on_msg: Callable[[Any, dict], bool]) -> dict:
-        """Run one mission-protocol exchange: ``begin()``, then feed every mission message to ``on_msg`` until it
-        returns True; after ``command_timeout_s`` without progress ``resend(state["last"])`` up to
-        ``command_retries`` times (only a message that advances the exchange, i.e. changes ``state``, resets the
-        count, so a vehicle answering with something we do not use cannot keep it going for ever)."""
-        while True:
-            try:
-                self._mission_q.get_nowait()
-            except queue.Empty:
-                break
-        state: dict[str, Any] = {"last": None, "max": -1, "start": time.monotonic()}
-        self._mission_active = True
-        try:
-            begin()
-            retries = 0
-            deadline = time.monotonic() + self.cfg.command_timeout_s
-            while True:
-                remaining = deadline - time.monotonic()
-                msg = None
-                if remaining > 0:
-                    try:
-                        msg = self._mission_q.get(timeout=remaining)
-                    except queue.Empty:
-                        pass
-                if msg is None:
-                    self._check_link(name)
-                    retries += 1
-                    if retries > self.cfg.command_retries:
-                        raise BackendError(f"robot {self.robot_id!r}: {name}: no usable answer after {retries} "
-                                           f"tries of {self.cfg.command_timeout_s:g} s")
-                    resend(state["last"])
-                    deadline = time.monotonic() + self.cfg.command_timeout_s
-                    continue
-                before = (state["last"], state["max"], state.get("count"))
-                if on_msg(msg, state):
-                    return state
-                if (state["last"], state["max"], state.get("count")) != before:
-                    retries = 0
-                    deadline = time.monotonic() + self.cfg.command_timeout_s
-        finally:
-            self._mission_active = False
-
     def _remember_waypoints(self, wire: list[tuple]) -> None:
         """Keep each uploaded NAV_WAYPOINT's horizontal position (ENU metres from :attr:`home`) and acceptance
         radius by wire sequence number, for the arrival report (telemetry.py ``_check_arrival``)."""
@@ -222,48 +136,6 @@ class MissionMixin:
             self._arrived.clear()
             self._reached_fw.clear()
 
-    def _download_messages(self, mission_type: int, what: str) -> dict[int, Any]:
-        """The mission protocol's download of the items of ``mission_type`` (0 mission, 1 fence, 2 rally; MAVLink
-        common.xml MAV_MISSION_TYPE): MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT per item (answered
-        with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM), then our MISSION_ACK; messages of another
-        mission type are ignored. Returns sequence number -> item message. Raises CommandRefused (a MISSION_ACK
-        with an error, named ``what``), BackendError / LinkLost."""
-        got: dict[int, Any] = {}
-
-        def begin() -> None:
-            self._send(lambda mav: mav.mission_request_list_send(self._sysid, self._compid, mission_type))
-
-        def request(seq: int) -> None:
-            self._send(lambda mav: mav.mission_request_int_send(self._sysid, self._compid, seq, mission_type))
-
-        def resend(last: Any) -> None:
-            begin() if last is None else request(last)
-
-        def on_msg(msg: Any, state: dict) -> bool:
-            t = msg.get_type()
-            if getattr(msg, "mission_type", 0) != mission_type:
-                return False
-            if t == "MISSION_COUNT" and "count" not in state:
-                state["count"] = msg.count
-                if msg.count == 0:
-                    return True
-                state["last"] = 0
-                request(0)
-            elif t in ("MISSION_ITEM_INT", "MISSION_ITEM") and "count" in state and msg.seq == state["last"]:
-                got[msg.seq] = msg
-                if msg.seq + 1 >= state["count"]:
-                    return True
-                state["last"] = msg.seq + 1
-                request(msg.seq + 1)
-            elif t == "MISSION_ACK" and msg.type != M.MAV_MISSION_ACCEPTED:
-                raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
-                                     self._status_text_since(state["start"]))
-            return False
-
-        self._transaction(what, begin, resend, on_msg)
-        self._send(lambda mav: mav.mission_ack_send(self._sysid, self._compid, M.MAV_MISSION_ACCEPTED, mission_type))
-        return got
-
     def download_mission(self) -> MissionPlan:
         """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
         item, answered with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM, whose float latitude/longitude
@@ -273,7 +145,7 @@ class MissionMixin:
         :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
         with an error)."""
         self._check_link("mission download")
-        got = self._download_messages(0, "mission download")
+        got = self.transfers.download_messages(0, "mission download")
         items = []
         first = 1 if self.autopilot == "ardupilot" else 0
         for seq in sorted(got):
@@ -293,17 +165,7 @@ class MissionMixin:
 
     def clear_mission(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
-        self._check_link("mission clear")
-
-        def on_msg(msg: Any, state: dict) -> bool:
-            if msg.get_type() == "MISSION_ACK":
-                if msg.type != M.MAV_MISSION_ACCEPTED:
-                    raise CommandRefused(self.robot_id, "mission clear", _enum_name("MAV_MISSION_RESULT", msg.type))
-                return True
-            return False
-
-        clear = lambda *_: self._send(lambda mav: mav.mission_clear_all_send(self._sysid, self._compid, 0))  # noqa: E731
-        self._transaction("mission clear", clear, clear, on_msg)
+        self.transfers.clear_mission()
 
     def start_mission(self) -> None:
         """Fly the uploaded mission: in the air switch to AUTO (ArduPilot) / MISSION (PX4); on the ground (armed)
@@ -318,9 +180,12 @@ class MissionMixin:
             self.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
 
     def _init_mission(self) -> None:
-        """The mission protocol's state: its message queue, the transfer under way, the uploaded mission's wire items."""
-        self._mission_q: queue.Queue = queue.Queue()
-        self._mission_active = False
+        """The mission's state: its transfers (:class:`MissionTransfer`), the uploaded mission's wire items."""
+        #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
+        self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
+                                         target=lambda: (self._sysid, self._compid),
+                                         status_text_since=self._status_text_since, event=self._event,
+                                         wire_version=lambda: getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0"))
         self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
         #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
         self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)

@@ -18,7 +18,7 @@ import math
 import struct
 import threading
 import time
-from typing import Any
+from typing import Any, Callable, Protocol
 
 from aerodaas.backends.base import BackendError
 from aerodaas.backends.mavlink._common import M, _f32
@@ -53,48 +53,86 @@ def speed_floor(max_speed: float) -> float:
 _PARAM_READ_WAIT_S = 0.6
 
 
-class ParamMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: parameter reads/writes and speed limits.
+class VehicleSender(Protocol):
+    """Sends one message on the vehicle's link (the backend's link: one sender at a time): ``build(mav)`` calls a
+    pymavlink ``*_send`` method. Raises LinkLost when the link is down or the send fails."""
 
-    State: ``_params`` (name -> float value from the latest PARAM_VALUE), ``_param_cv`` (notified on each),
-    ``_saved_params`` (the user's values before we changed them, restored by :meth:`restore_parameters`)."""
+    def __call__(self, build: Callable[[Any], None]) -> None: ...
 
-    def _on_param_value(self, msg: Any) -> None:
+
+class LinkCheck(Protocol):
+    """Raises BackendError / LinkLost, naming ``command``, unless the vehicle's link is up."""
+
+    def __call__(self, command: str) -> None: ...
+
+
+class ParameterProtocol:
+    """The MAVLink parameter protocol with one vehicle (mavlink.io: PARAM_REQUEST_READ / PARAM_SET, answered by
+    PARAM_VALUE), a concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend`.
+
+    It talks to the link only through what it is given: ``send`` and ``check_link`` (the link's), ``target`` (the
+    vehicle's system and component id, known once connected) and ``is_px4`` (whether the autopilot is PX4: its
+    integers travel bytewise). ``settings``: ``command_timeout_s`` and ``command_retries``. :meth:`on_param_value`
+    is fed every PARAM_VALUE (the I/O thread); reads and writes wait on them (the control thread).
+
+    State: the latest value per parameter (name -> float), a condition notified on each, and the user's values of
+    the parameters AeroDaaS changed (:meth:`remember_original`, put back by :meth:`restore`)."""
+
+    def __init__(self, robot_id: str, settings: Any, *, send: VehicleSender, check_link: LinkCheck,
+                 target: Callable[[], tuple[int, int]], is_px4: Callable[[], bool]) -> None:
+        self.robot_id, self._settings = robot_id, settings
+        self._send, self._check_link, self._target, self._is_px4 = send, check_link, target, is_px4
+        self._values: dict[str, float] = {}
+        self._cv = threading.Condition()
+        self._originals: dict[str, float] = {}
+
+    @property
+    def changed(self) -> list[str]:
+        """The parameters whose user's value is kept for :meth:`restore`, sorted."""
+        return sorted(self._originals)
+
+    def remember_original(self, name: str, value: float) -> None:
+        """Keep ``value`` as the user's value of ``name`` (the first one given wins) for :meth:`restore`."""
+        self._originals.setdefault(name, value)
+
+    def on_param_value(self, msg: Any) -> None:
+        """A PARAM_VALUE from the vehicle: its value (PX4's integers decoded bytewise) is the parameter's latest."""
         name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
         name = name.rstrip("\x00")
         value = float(msg.param_value)
         if msg.param_type in (M.MAV_PARAM_TYPE_INT32, M.MAV_PARAM_TYPE_UINT32, M.MAV_PARAM_TYPE_INT16,
                               M.MAV_PARAM_TYPE_UINT16, M.MAV_PARAM_TYPE_INT8, M.MAV_PARAM_TYPE_UINT8) \
-                and self.autopilot == "px4":
+                and self._is_px4():
             # PX4 sends integers bytewise in the float field (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
             value = float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
-        with self._param_cv:
-            self._params[name] = value
-            self._param_cv.notify_all()
+        with self._cv:
+            self._values[name] = value
+            self._cv.notify_all()
 
-    def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
+    def read(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
         """Read ``names`` with PARAM_REQUEST_READ (all at once, re-asked once for those still missing), waiting up
         to ``wait_s`` wall seconds per round (default min(``command_timeout_s``, 0.6)). Returns the values that
         came (floats, in the parameter's own unit); a name without answer is absent (the firmware lacks it).
         Raises LinkLost."""
         self._check_link("read parameters")
-        wait = min(self.cfg.command_timeout_s, _PARAM_READ_WAIT_S) if wait_s is None else wait_s
-        with self._param_cv:
+        wait = min(self._settings.command_timeout_s, _PARAM_READ_WAIT_S) if wait_s is None else wait_s
+        with self._cv:
             for n in names:
-                self._params.pop(n, None)
+                self._values.pop(n, None)
         for _ in range(2):
-            missing = [n for n in names if n not in self._params]
+            missing = [n for n in names if n not in self._values]
             if not missing:
                 break
+            sysid, compid = self._target()
             for n in missing:
-                self._send(lambda mav, n=n: mav.param_request_read_send(self._sysid, self._compid, n.encode(), -1))
+                self._send(lambda mav, n=n: mav.param_request_read_send(sysid, compid, n.encode(), -1))
             end = time.monotonic() + wait
-            with self._param_cv:
-                while any(n not in self._params for n in missing) and time.monotonic() < end:
-                    self._param_cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
-        return {n: self._params[n] for n in names if n in self._params}
+            with self._cv:
+                while any(n not in self._values for n in missing) and time.monotonic() < end:
+                    self._cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
+        return {n: self._values[n] for n in names if n in self._values}
 
-    def set_parameter(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
+    def set(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
         """PARAM_SET ``name`` = ``value`` and wait for the PARAM_VALUE echo (re-sent up to ``command_retries``
         times, each try ``command_timeout_s``). ``integer``: an INT32 parameter; PX4 refuses a PARAM_SET whose type
         is not the parameter's ("param types mismatch", src/modules/mavlink/mavlink_parameters.cpp) and takes the
@@ -103,25 +141,60 @@ class ParamMixin:
         vehicle reports, which may differ (the firmware clamps to its range). Raises BackendError when no echo
         comes, LinkLost."""
         self._check_link(f"set parameter {name}")
-        wait = self.cfg.command_timeout_s if wait_s is None else wait_s
-        if integer and self.autopilot == "px4":
+        retries = self._settings.command_retries
+        wait = self._settings.command_timeout_s if wait_s is None else wait_s
+        if integer and self._is_px4():
             v32 = struct.unpack("<f", struct.pack("<i", int(round(value))))[0]
             ptype = M.MAV_PARAM_TYPE_INT32
         else:
             v32, ptype = _f32(value), M.MAV_PARAM_TYPE_REAL32
-        for _ in range(self.cfg.command_retries + 1):
-            with self._param_cv:
-                self._params.pop(name, None)
-            self._send(lambda mav: mav.param_set_send(self._sysid, self._compid, name.encode(), v32, ptype))
+        for _ in range(retries + 1):
+            with self._cv:
+                self._values.pop(name, None)
+            sysid, compid = self._target()
+            self._send(lambda mav: mav.param_set_send(sysid, compid, name.encode(), v32, ptype))
             end = time.monotonic() + wait
-            with self._param_cv:
-                while name not in self._params and time.monotonic() < end:
-                    self._param_cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
-                if name in self._params:
-                    return self._params[name]
+            with self._cv:
+                while name not in self._values and time.monotonic() < end:
+                    self._cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
+                if name in self._values:
+                    return self._values[name]
             self._check_link(f"set parameter {name}")
         raise BackendError(f"robot {self.robot_id!r}: set parameter {name}: no PARAM_VALUE after "
-                           f"{self.cfg.command_retries + 1} tries of {wait:g} s")
+                           f"{retries + 1} tries of {wait:g} s")
+
+    def restore(self, event: Callable[..., None]) -> dict[str, float]:
+        """Put back the user's values kept by :meth:`remember_original` (best effort: a parameter whose echo does
+        not come is reported through ``event`` as ``param_restore_failed``; ``params_restored`` names what was put
+        back). Returns what was restored. Never raises."""
+        done = {}
+        for name, value in list(self._originals.items()):
+            try:
+                done[name] = self.set(name, value)
+                self._originals.pop(name, None)
+            except Exception as e:  # noqa: BLE001 - closing: report and go on
+                event("param_restore_failed", name=name, error=str(e))
+        if done:
+            event("params_restored", **{k: round(v, 3) for k, v in done.items()})
+        return done
+
+
+class ParamMixin:
+    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the parameter protocol's entry points (the
+    backend's :class:`ParameterProtocol`, ``self.parameters``) and the vehicle's speed limits."""
+
+    parameters: ParameterProtocol
+
+    def _on_param_value(self, msg: Any) -> None:
+        self.parameters.on_param_value(msg)
+
+    def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
+        """:meth:`ParameterProtocol.read`."""
+        return self.parameters.read(names, wait_s)
+
+    def set_parameter(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
+        """:meth:`ParameterProtocol.set`."""
+        return self.parameters.set(name, value, wait_s, integer)
 
     # ------------------------------------------------------------------ speed limits
     def xy_speed_cap(self) -> float:
@@ -236,7 +309,7 @@ class ParamMixin:
             target = want[name]
             if abs(value - target) <= 1e-3 * max(1.0, abs(target)):
                 continue
-            self._saved_params.setdefault(name, value)
+            self.parameters.remember_original(name, value)
             changed[name] = target
         for name, target in changed.items():
             got = self.set_parameter(name, target)
@@ -253,24 +326,12 @@ class ParamMixin:
         return verified
 
     def restore_parameters(self) -> dict[str, float]:
-        """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them (best effort: a
-        parameter whose echo does not come is reported in a ``param_restore_failed`` event). Returns what was
-        restored. Never raises."""
-        done = {}
-        for name, value in list(self._saved_params.items()):
-            try:
-                done[name] = self.set_parameter(name, value)
-                self._saved_params.pop(name, None)
-            except Exception as e:  # noqa: BLE001 - closing: report and go on
-                self._event("param_restore_failed", name=name, error=str(e))
-        if done:
-            self._event("params_restored", **{k: round(v, 3) for k, v in done.items()})
-        return done
+        """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them
+        (:meth:`ParameterProtocol.restore`, reported as events). Returns what was restored. Never raises."""
+        return self.parameters.restore(self._event)
 
     def _init_params(self) -> None:
-        self._params: dict[str, float] = {}
-        self._param_cv = threading.Condition()
-        self._saved_params: dict[str, float] = {}
+        """The speed limits' state (the parameters' own is :attr:`parameters`')."""
         self._limits_applied = False
         self._speed_margin = EstimatorSpeedMargin()
         self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
