@@ -233,9 +233,10 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
                                                                               tmp_path, capfd):
     """``apps/vehicle_tracking.py`` as shipped (lock-step on, YOLOX-Nano in its own actor): once the detector actor
     has analysed 15 frames (its own count), it is SIGKILLed by its exact name. Ray restarts it (a new process
-    answers to the same name), the simulated clock waits for it, the mission succeeds, the drone actor is not restarted nor
-    said to be, and the restarted detector analyses the rest of the flight (the recording, read with mcap's reader:
-    at most the frames in flight at the kill lack detections)."""
+    answers to the same name), the simulated clock waits for it, the drone's mission succeeds (the run's outcome is
+    recording_lost when frames in flight were lost, and the file lacks exactly those), the drone actor is not
+    restarted nor said to be, and the restarted detector analyses the rest of the flight (the recording, read with
+    mcap's reader: at most the frames in flight at the kill lack detections)."""
     from aerodaas.runtime.driver import run_file
 
     import ray
@@ -271,7 +272,13 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
     t.join(5)
     err = capfd.readouterr().err
     assert seen, "the detector never analysed 15 frames"
-    assert res.outcome == "success", (res.outcome, res.robots["quadrotor_base"].get("error"), err[-2000:])
+    # the mission flew on; the frames in flight at the kill were offered to the detector and never answered: the
+    # recording's accounting counts them lost on the detections channel (recording_lost, never success with a hole)
+    lost = (res.recording_accounting or {}).get("lost", {})
+    assert set(lost) <= {"/quadrotor_base/detector/detections"}, lost
+    assert res.outcome == ("recording_lost" if lost else "success"), \
+        (res.outcome, lost, res.robots["quadrotor_base"].get("error"), err[-2000:])
+    assert res.robots["quadrotor_base"]["outcome"] == "success", res.robots["quadrotor_base"].get("error")
     assert res.robots["quadrotor_base"].get("actor_restarts", 0) == 0 and "drone actor" not in err, err[-2000:]
     assert seen.get("pid_after"), "the detector actor did not answer again from a new process"
     det = res.stats["_hosts"]["analytics/edge/detector#1"]
@@ -287,8 +294,9 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
                      r"in flight lost, [1-9]\d* held \(lock-step\)", summary), summary
     print("frames without detections:", missing, "of", len(frames), "; the detector had analysed", seen["before"])
     # one hole, at the kill: the frames in the channel's 2 slots and the detections the dead process had not yet
-    # handed to the recorder (it batches every 0.1 s of wall time: ~5 frames at this run's pace)
+    # handed to the recorder (it batches every 0.1 s of wall time: ~5 frames at this run's pace), each counted lost
     assert len(missing) <= 12 and missing == list(range(missing[0], missing[0] + len(missing))), missing
+    assert sum(lost.values()) == len(missing), (lost, missing)
     # the restarted process's own count: it analysed the rest of the flight
     (stats,) = [a for a in res.stats["quadrotor_base"]["analytics"] if a.get("name") == "detector"]
     assert stats["processed"] >= len(frames) - missing[-1] - 1 > 0, (stats, len(frames), missing)
