@@ -21,6 +21,9 @@ default DEMS's 50 ms):
   gap rather than the silence before it or a flush's 2 ms; issue 41), and the frame's models are the last frame's. The frames of the next
   ``horizon_ms`` (default 2,000) are predicted at ``last + k * period``; a frame overdue by more than a tenth of
   the period stops the drone's predictions until it sends again (a stopped or irregular drone is not waited for).
+  With ``arrivals="burst"`` the burst/idle model of :class:`.analytics_arrivals.BurstArrivalPredictor` predicts
+  instead (the burst's gap on the drone's phase grid, a flush not moving the phase, the burst's end, and for
+  heavy-tailed gaps one frame at the gap's quantile given the wait, its gain in the plan weighted by that chance).
 * Edge plan: the exact max-gain schedule with release times (:func:`.single_machine.max_gain_schedule`) over the
   pool (release: when the edge is free) and the predicted tasks (release: their predicted arrival), each with
   EVPLAN's gain (edge utility - max(0, V); a predicted task's V at its arrival). Processing times are the profile's
