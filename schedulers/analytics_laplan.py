@@ -21,6 +21,9 @@ default DEMS's 50 ms):
   gap rather than the silence before it or a flush's 2 ms; issue 41), and the frame's models are the last frame's. The frames of the next
   ``horizon_ms`` (default 2,000) are predicted at ``last + k * period``; a frame overdue by more than a tenth of
   the period stops the drone's predictions until it sends again (a stopped or irregular drone is not waited for).
+  With ``arrivals="burst"`` the burst/idle model of :class:`.analytics_arrivals.BurstArrivalPredictor` predicts
+  instead (the burst's gap on the drone's phase grid, a flush not moving the phase, the burst's end, and for
+  heavy-tailed gaps one frame at the gap's quantile given the wait, its gain in the plan weighted by that chance).
 * Edge plan: the exact max-gain schedule with release times (:func:`.single_machine.max_gain_schedule`) over the
   pool (release: when the edge is free) and the predicted tasks (release: their predicted arrival), each with
   EVPLAN's gain (edge utility - max(0, V); a predicted task's V at its arrival). Processing times are the profile's
@@ -61,6 +64,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from aerodaas.schedulers.analytics_arrivals import ArrivalPredictor, BurstArrivalPredictor
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload, register_analytics_scheduler
 from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
@@ -72,71 +76,6 @@ __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
 
 #: on-time chances at which a planned edge task's expected gain is evaluated (its start-time variants)
 EDGE_LEVELS = (0.7, 0.8, 0.9, 0.95, 0.98, 0.995)
-
-
-class ArrivalPredictor:
-    """Per-drone periodic arrival model learned from the tasks seen (see the module docstring).
-
-    ``overdue``: fraction of the period after which a missing frame stops the drone's predictions; ``same_frame_ms``:
-    tasks of one drone this close in arrival time belong to one frame; ``frame_grace_ms``: how long the rest of a
-    frame whose first tasks have arrived is still expected (its tasks are submitted one by one); ``gap_window``: the
-    period is the median of the drone's last ``gap_window`` frame gaps (1: the last gap). Raises ValueError for a
-    ``gap_window`` that is not an integer >= 1."""
-
-    def __init__(self, overdue: float = 0.1, same_frame_ms: float = 50.0, frame_grace_ms: float = 20.0,
-                 gap_window: int = 1) -> None:
-        self.overdue, self.same_frame_ms, self.frame_grace_ms = overdue, same_frame_ms, frame_grace_ms
-        if not (isinstance(gap_window, int) and gap_window >= 1):
-            raise ValueError(f"gap_window must be an integer >= 1, got {gap_window!r}")
-        self.gap_window = gap_window
-        #: drone -> [current frame arrival ms, period ms or None, models seen in it, models of the frame before]
-        self.drones: dict[str, list] = {}
-        #: drone -> its last ``gap_window`` frame gaps (ms)
-        self._gaps: dict[str, deque] = {}
-
-    def observe(self, task: AnalyticsTask) -> None:
-        """Learn from an arrived task: a task within ``same_frame_ms`` of its drone's current frame joins it; a
-        later one starts the next frame and sets the drone's period to the gap between the two frames."""
-        st = self.drones.get(task.drone)
-        if st is None:
-            self.drones[task.drone] = [task.arrival_ms, None, [task.model], []]
-        elif abs(task.arrival_ms - st[0]) < self.same_frame_ms:  # same frame
-            if task.model not in st[2]:
-                st[2].append(task.model)
-        elif task.arrival_ms > st[0]:
-            gap = task.arrival_ms - st[0]
-            if self.gap_window == 1:
-                st[1] = gap
-            else:  # the median of the last gaps: a burst's gap, not the silence before it or a flush's 2 ms
-                gaps = self._gaps.setdefault(task.drone, deque(maxlen=self.gap_window))
-                gaps.append(gap)
-                srt = sorted(gaps)
-                st[1] = srt[len(srt) // 2]
-            st[0], st[2], st[3] = task.arrival_ms, [task.model], st[2]
-
-    def predict(self, now_ms: float, horizon_ms: float) -> list[tuple[float, str, str, float, float]]:
-        """``(arrival_ms, drone, model, wake_ms, frame_ms)`` of the tasks still expected: the rest of a frame being submitted
-        (the previous frame's models not seen yet, within ``frame_grace_ms``) and each drone's next frames within
-        ``horizon_ms`` of its next frame (so the set changes only when a task arrives or a frame goes missing). An
-        overdue frame within its grace is predicted at ``now_ms`` and ``wake_ms`` (when to re-plan if it has not
-        come) is the end of its grace; otherwise ``wake_ms`` is its predicted arrival. ``frame_ms``: the frame's own
-        (predicted) time, which identifies it."""
-        out = []
-        for drone, (last, period, seen, before) in self.drones.items():
-            if now_ms < last + self.frame_grace_ms:
-                out += [(now_ms, drone, m, last + self.frame_grace_ms, last) for m in before if m not in seen]
-            if not period or period <= 0:
-                continue
-            t = last + period
-            if t + self.overdue * period <= now_ms:
-                continue  # a frame is missing: do not wait for this drone
-            models = seen if len(seen) >= len(before) else before
-            until = t + horizon_ms
-            while t <= until:
-                wake = t if t > now_ms else t + self.overdue * period
-                out += [(max(t, now_ms), drone, m, wake, t) for m in models]
-                t += period
-        return out
 
 
 class _CachedPlan(NamedTuple):
@@ -154,19 +93,23 @@ class LaPlan(EvPlan):
     """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
     prediction), ``edge_levels`` (on-time chances of the edge-time variants, each in (0, 1]), ``pool_models``
     (default True), ``release_early_ms`` (default 50), ``replan_tolerance_ms`` (default 2, in [0, 100]),
-    ``gap_window`` (default 1: the period is the last frame gap; k: the median of the last k, see the module), and
+    ``gap_window`` (default 1: the period is the last frame gap; k: the median of the last k, see the module),
+    ``arrivals`` (``"last"``, default: :class:`.analytics_arrivals.ArrivalPredictor`; ``"burst"``: the burst/idle
+    and hazard model :class:`.analytics_arrivals.BurstArrivalPredictor`, issue 41), ``burst_quantile`` (its
+    ``quantile``, default 0.5), and
     EVPLAN's ``window``, ``tolerance``, ``estimator`` and ``edge_quantile`` (admission only). Terminal states as
     GAINPLAN's. Raises ValueError for out-of-range options and for ``commit_horizon_ms``, which LAPLAN does not
     have."""
 
     name = "LAPLAN"
     options = tuple(o for o in EvPlan.options if o != "commit_horizon_ms") + (
-        "horizon_ms", "edge_levels", "pool_models", "release_early_ms", "replan_tolerance_ms", "gap_window")
+        "horizon_ms", "edge_levels", "pool_models", "release_early_ms", "replan_tolerance_ms", "gap_window", "arrivals",
+        "burst_quantile")
 
     def __init__(self, workload: Workload, *, horizon_ms: float = 2000.0,
                  edge_levels: tuple[float, ...] = EDGE_LEVELS, pool_models: bool = True,
                  release_early_ms: float = JIT_EARLY_MS, replan_tolerance_ms: float = 2.0, gap_window: int = 1,
-                 **kw) -> None:
+                 arrivals: str = "last", burst_quantile: float = 0.5, **kw) -> None:
         if "commit_horizon_ms" in kw:
             raise ValueError(f"LAPLAN has no commit_horizon_ms (got {kw['commit_horizon_ms']!r}): its plan decides "
                              "which tasks are committed to the edge")
@@ -177,7 +120,14 @@ class LaPlan(EvPlan):
         if not levels or not all(0 < q <= 1 for q in levels):
             raise ValueError(f"edge_levels must be probabilities in (0, 1], got {edge_levels!r}")
         self.horizon_ms, self.edge_levels = float(horizon_ms), levels
-        self.arrivals = ArrivalPredictor(gap_window=gap_window)
+        if arrivals == "last":
+            self.arrivals: ArrivalPredictor = ArrivalPredictor(gap_window=gap_window)
+        elif arrivals == "burst":
+            if gap_window != 1:
+                raise ValueError(f"gap_window={gap_window!r} is for arrivals='last'; the burst predictor keeps its own")
+            self.arrivals = BurstArrivalPredictor(quantile=burst_quantile)
+        else:
+            raise ValueError(f"arrivals must be 'last' or 'burst', got {arrivals!r}")
         self.pool_models = bool(pool_models)
         if not 0 <= release_early_ms:
             raise ValueError(f"release_early_ms must be >= 0, got {release_early_ms!r}")
@@ -253,9 +203,9 @@ class LaPlan(EvPlan):
             self.counters["plans_edge_overran" if self.edge_running is not None else "plans_start_passed"] += 1
         self._now = now_ms
         free = self._edge_free_at(now_ms)
-        rel, dl, fb, parts, keys, wakes, n_pool = self._instance(now_ms, free)
+        rel, dl, fb, wt, parts, keys, wakes, n_pool = self._instance(now_ms, free)
         levels = len(self._tails)
-        sched, slack, rows = self._solve(rel, dl, fb, parts, keys, free, n_pool)
+        sched, slack, rows = self._solve(rel, dl, fb, wt, parts, keys, free, n_pool)
         self.counters["plans"] += 1
         plan = [(keys[rows[j // levels]], s) for j, s in sched]
         self._first_wake = None
@@ -268,15 +218,17 @@ class LaPlan(EvPlan):
         self._cache = _CachedPlan(key, plan, self._first_wake, at + self._tolerance(slack), slack)
         return plan
 
-    def _instance(self, now_ms: float, free: float) -> tuple[list, list, list, list, list, dict, int]:
-        """The plan's rows, the pool's first, then the predicted tasks': release, deadline, cloud fallback, variant
-        parts (:meth:`_parts`) and key (:meth:`_key`) per task; the predicted tasks' wake times by key; the number
-        of pool rows. Sets :attr:`_predicted`."""
-        rel, dl, fb, parts, keys = [], [], [], [], []
+    def _instance(self, now_ms: float, free: float) -> tuple[list, list, list, list, list, list, dict, int]:
+        """The plan's rows, the pool's first, then the predicted tasks': release, deadline, cloud fallback, gain
+        weight (1 but for a predicted task the predictor is unsure of), variant parts (:meth:`_parts`) and key
+        (:meth:`_key`) per task; the predicted tasks' wake times by key; the number of pool rows. Sets
+        :attr:`_predicted`."""
+        rel, dl, fb, wt, parts, keys = [], [], [], [], [], []
         for t in self.pool:
             rel.append(free)
             dl.append(t.deadline_ms)
             fb.append(max(0.0, self.cloud_value(t, now_ms)) if t.notes.get("mode") == OPEN else 0.0)
+            wt.append(1.0)
             parts.append(self._parts(t.model))
             keys.append(self._key(t))
         n_pool = len(keys)
@@ -284,7 +236,7 @@ class LaPlan(EvPlan):
         wakes = {}
         if self.horizon_ms > 0:
             fbs: dict[str, float] = {}
-            for at, drone, m, wake, frame in self.arrivals.predict(now_ms, self.horizon_ms):
+            for at, drone, m, wake, frame, weight in self.arrivals.predict(now_ms, self.horizon_ms):
                 if m not in fbs:
                     fbs[m] = self._predicted_fallback(m)
                 k = (drone, m, frame)
@@ -293,11 +245,12 @@ class LaPlan(EvPlan):
                 rel.append(max(at, free))
                 dl.append(frame + self.w[m].deadline_ms)
                 fb.append(fbs[m])
+                wt.append(weight)
                 parts.append(self._parts(m))
                 keys.append(k)
-        return rel, dl, fb, parts, keys, wakes, n_pool
+        return rel, dl, fb, wt, parts, keys, wakes, n_pool
 
-    def _solve(self, rel: list, dl: list, fb: list, parts: list, keys: list, free: float, n_pool: int
+    def _solve(self, rel: list, dl: list, fb: list, wt: list, parts: list, keys: list, free: float, n_pool: int
                ) -> tuple[list[tuple[int, float]], float, list[int]]:
         """The max-gain schedule of the rows (:meth:`_instance`): ``(schedule as [(row x levels + level, start)],
         slack ms, the rows it was solved over)``. When more than 64 task groups would be live at once (the compiled
@@ -310,6 +263,7 @@ class LaPlan(EvPlan):
         levels = len(self._tails)
         pa_all = np.array(parts, np.float64)  # (tasks, levels, 3): the same operations as :meth:`_variants`
         rel_a, dl_a, fb_a = np.array(rel, np.float64), np.array(dl, np.float64), np.array(fb, np.float64)
+        wt_a = np.array(wt, np.float64)  # x 1.0 is exact: unweighted rows keep their gains bit for bit
         reduced = False
         while True:
             idx = np.array(rows, np.int64)
@@ -319,7 +273,7 @@ class LaPlan(EvPlan):
             latest, proc = (dl_a[idx][:, None] - pa[:, :, 0]).ravel(), pa[:, :, 1].ravel()
             n_python = SOLVES["python"]
             got = max_gain_schedule_arrays(
-                np.repeat(rel_a[idx], levels), latest, proc, (pa[:, :, 2] - fb_a[idx][:, None]).ravel(),
+                np.repeat(rel_a[idx], levels), latest, proc, ((pa[:, :, 2] - fb_a[idx][:, None]) * wt_a[idx][:, None]).ravel(),
                 np.repeat(gid, levels), len(ids), free_at=free, python_fallback=False)
             if got is not None:
                 break

@@ -723,14 +723,14 @@ def test_arrival_predictor_learns_each_drones_period_and_stops_waiting_for_a_mis
     for t in (0.0, 1000.0):
         for m in ("X", "Y"):
             ap.observe(AnalyticsTask(next(_ids), "d0", m, t, t + 500))
-    assert ap.predict(1500.0, 1000.0) == [(2000.0, "d0", m, 2000.0, 2000.0) for m in ("X", "Y")] + \
-        [(3000.0, "d0", m, 3000.0, 3000.0) for m in ("X", "Y")]
+    assert ap.predict(1500.0, 1000.0) == [(2000.0, "d0", m, 2000.0, 2000.0, 1.0) for m in ("X", "Y")] + \
+        [(3000.0, "d0", m, 3000.0, 3000.0, 1.0) for m in ("X", "Y")]    # the last field: the gain's weight
     # overdue within a tenth of the period: expected now, re-plan at the end of the grace
-    assert ap.predict(2050.0, 0.0) == [(2050.0, "d0", m, 2100.0, 2000.0) for m in ("X", "Y")]
+    assert ap.predict(2050.0, 0.0) == [(2050.0, "d0", m, 2100.0, 2000.0, 1.0) for m in ("X", "Y")]
     assert ap.predict(2100.0, 5000.0) == []            # missing: not waited for
     # the first task of a frame has come: the rest of it is expected now
     ap.observe(AnalyticsTask(next(_ids), "d0", "Y", 2100.0, 3100.0))
-    assert ap.predict(2100.0, 0.0)[0] == (2100.0, "d0", "X", 2120.0, 2100.0)
+    assert ap.predict(2100.0, 0.0)[0] == (2100.0, "d0", "X", 2120.0, 2100.0, 1.0)
 
 
 def test_laplan_keeps_the_edge_free_for_a_predicted_high_gain_task():
