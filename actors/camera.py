@@ -3,6 +3,7 @@ a recorded MCAP channel, or a video stream: RTSP, RTP/UDP, MPEG-TS/UDP, V4L2, fi
 reference to every reader in the actor."""
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from collections import deque
@@ -14,8 +15,8 @@ from aerodaas.protocol.messages import FrameMsg
 from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
 from aerodaas.actors.dataplane import Cascade, DataPlane
-from aerodaas.navigation.gimbal import camera_angles, wrap_deg
-from aerodaas.video.pose import pose_at
+from aerodaas.navigation.gimbal import camera_angles, quaternion_from_euler, wrap_deg
+from aerodaas.video.pose import angles_at, pose_at
 
 
 class CameraComponent:
@@ -56,6 +57,9 @@ class CameraComponent:
         self.on_event: Callable[..., None] | None = None
         #: (run time s, position ENU m, yaw deg) at each clock tick: the pose a stream frame is tagged with
         self._poses: deque[tuple[float, tuple, float]] = deque(maxlen=256)
+        #: the gimbal's attitude at each tick (run clock s, GimbalAttitude): a stream frame's is the one at its
+        #: capture time (aerodaas.video.pose.angles_at)
+        self._gimbals: deque[tuple[float, Any]] = deque(maxlen=256)
         self.stream = None
         self._last_capture_t = float("-inf")  # run-clock capture time of the stream's previous frame
         self.latency_ms: deque[float] = deque(maxlen=4096)
@@ -117,12 +121,30 @@ class CameraComponent:
             return False
         if tok is not None:
             tok.add()
-        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter(), self._gimbal())
+        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter(), self._gimbal(t))
         return True
 
-    def _gimbal(self) -> Any:
-        """The gimbal's attitude now (the clock thread, at the frame's tick), or None: no gimbal."""
-        return self.backend.gimbal_attitude() if self.backend is not None else None
+    def _gimbal(self, t: float) -> Any:
+        """The gimbal's attitude now (the clock thread, at the frame's tick at run time ``t`` s), kept for the
+        stream frames captured around it; None: no gimbal."""
+        g = self.backend.gimbal_attitude() if self.backend is not None else None
+        if g is not None and (not self._gimbals or t > self._gimbals[-1][0]):
+            self._gimbals.append((t, g))
+        return g
+
+    def _gimbal_at(self, t: float, tick: Any) -> Any:
+        """The gimbal's attitude at run time ``t`` (a stream frame's capture, s): interpolated between the ticks'
+        attitudes around it (:func:`aerodaas.video.pose.angles_at`); ``tick`` (the tick's own) when there are none."""
+        if tick is None or not self._gimbals:
+            return tick
+        samples = list(self._gimbals)
+        got = angles_at([(ts, (g.roll_deg, g.pitch_deg, g.yaw_deg)) for ts, g in samples], t)
+        if got is None:
+            return tick
+        (roll, pitch, yaw), _ = got
+        near = min(samples, key=lambda s: abs(s[0] - t))[1]  # frame and yaw reference of the nearest report
+        return dataclasses.replace(near, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw,
+                                   q=quaternion_from_euler(roll, pitch, yaw))
 
     def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None, ticked: float,
                  gimbal: Any = None) -> None:
@@ -143,7 +165,7 @@ class CameraComponent:
         """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
         new frame)."""
         self._poses.append((t, tuple(position), float(yaw)))
-        msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal())
+        msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal(t))
         if msg is None:
             return None
         self.plane.publish(self.cid, [msg], tok, inline=True)
@@ -165,8 +187,9 @@ class CameraComponent:
                 self.dropped_at_camera += 1
                 return None
             frame, pose, timing = got
-            pose = self._frame_pose(pose.position, pose.yaw, gimbal)
             t = timing["capture_t"]
+            gimbal = self._gimbal_at(t, gimbal)  # the gimbal's attitude at the frame's capture, as its position
+            pose = self._frame_pose(pose.position, pose.yaw, gimbal)
         elif self.source == "mavlink":  # its stream not discovered (yet): no frame
             self.dropped_at_camera += 1
             return None

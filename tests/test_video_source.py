@@ -115,6 +115,42 @@ def test_pose_at_interpolates_between_samples_and_along_the_short_yaw_arc():
     assert pose_at(poses, -1.0)[2] == 0.0 and pose_at(poses, 9.0)[2] == 0.2  # clamped: says which sample
 
 
+def test_angles_at_interpolates_each_angle_along_the_short_arc():
+    from aerodaas.video.pose import angles_at
+
+    samples = [(0.0, (0.0, -10.0, 170.0)), (0.1, (0.0, -30.0, -170.0))]
+    (roll, pitch, yaw), t = angles_at(samples, 0.025)
+    assert (roll, pitch, yaw, t) == pytest.approx((0.0, -15.0, 175.0, 0.025))
+    assert angles_at(samples, 0.05)[0][2] == pytest.approx(-180.0)  # across +-180, not through 0
+    assert angles_at(samples, 5.0) == ((0.0, -30.0, -170.0), 0.1) and angles_at([], 1.0) is None
+
+
+def test_a_stream_frame_carries_the_gimbal_attitude_of_its_capture_time():
+    """The camera keeps the gimbal's attitude of every tick; a stream frame captured between two ticks gets the
+    attitude interpolated at its capture time (issue 38 item 2), not the one of the tick that delivered it."""
+    from collections import deque
+
+    from aerodaas.actors.camera import CameraComponent
+    from aerodaas.navigation.gimbal import euler_from_quaternion
+    from aerodaas.protocol.gimbal import GimbalAttitude
+
+    reports = iter([GimbalAttitude(t=10.0, q=(1.0, 0.0, 0.0, 0.0), roll_deg=0.0, pitch_deg=-10.0, yaw_deg=20.0),
+                    GimbalAttitude(t=10.2, q=(1.0, 0.0, 0.0, 0.0), roll_deg=0.0, pitch_deg=-50.0, yaw_deg=40.0)])
+
+    class Backend:
+        def gimbal_attitude(self):
+            return next(reports)
+
+    cam = CameraComponent.__new__(CameraComponent)  # only the gimbal bookkeeping, no plane or stream
+    cam.backend, cam._gimbals = Backend(), deque(maxlen=256)
+    cam._gimbal(1.0)
+    tick = cam._gimbal(1.2)
+    g = cam._gimbal_at(1.05, tick)  # captured a quarter of the way between the ticks
+    assert (g.pitch_deg, g.yaw_deg) == pytest.approx((-20.0, 25.0))
+    assert euler_from_quaternion(g.q) == pytest.approx((0.0, -20.0, 25.0), abs=1e-6)  # q agrees with the angles
+    assert cam._gimbal_at(1.05, None) is None  # no gimbal: none
+
+
 @pytest.fixture(scope="module")
 def footage(tmp_path_factory):
     if not (Path(__import__("os").environ.get("AERODAAS_DATA_DIR", REPO.parent / "shared" / "data")) /

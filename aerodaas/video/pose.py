@@ -32,3 +32,27 @@ def pose_at(poses: Sequence[tuple[float, tuple, float]], t: float) -> tuple[tupl
     dy = (y1 - y0 + 180.0) % 360.0 - 180.0
     pos = tuple(float(c0 + a * (c1 - c0)) for c0, c1 in zip(p0, p1))
     return pos, (y0 + a * dy + 180.0) % 360.0 - 180.0, t
+
+
+def angles_at(samples: Sequence[tuple[float, tuple[float, ...]]], t: float) -> tuple[tuple[float, ...], float] | None:
+    """Angles (degrees) at run time ``t`` (s) from ``samples`` = [(time s, (angle deg, ...)), ...] in time order —
+    a gimbal's (roll, pitch, yaw) at a stream frame's capture time: each angle linear between the two samples
+    around ``t`` along the shorter arc (result in [-180, 180)), the oldest/newest sample outside them. Returns
+    (angles, the time they are of: ``t`` when interpolated, else the sample's); None for no samples."""
+    if not samples:
+        return None
+    if t <= samples[0][0]:
+        return tuple(samples[0][1]), samples[0][0]
+    if t >= samples[-1][0]:
+        return tuple(samples[-1][1]), samples[-1][0]
+    lo, hi = 0, len(samples) - 1
+    while hi - lo > 1:  # bisect: samples[lo][0] <= t < samples[hi][0]
+        mid = (lo + hi) // 2
+        if samples[mid][0] <= t:
+            lo = mid
+        else:
+            hi = mid
+    (t0, a0), (t1, a1) = samples[lo], samples[hi]
+    f = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+    return tuple((x0 + f * ((x1 - x0 + 180.0) % 360.0 - 180.0) + 180.0) % 360.0 - 180.0
+                 for x0, x1 in zip(a0, a1)), t
