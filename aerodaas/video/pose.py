@@ -16,19 +16,10 @@ def pose_at(poses: Sequence[tuple[float, tuple, float]], t: float) -> tuple[tupl
     interpolated, else the sample's). An empty ``poses`` gives the origin at ``t``."""
     if not poses:
         return (0.0, 0.0, 0.0), 0.0, t
-    if t <= poses[0][0]:
-        return tuple(poses[0][1]), poses[0][2], poses[0][0]
-    if t >= poses[-1][0]:
-        return tuple(poses[-1][1]), poses[-1][2], poses[-1][0]
-    lo, hi = 0, len(poses) - 1
-    while hi - lo > 1:  # bisect: poses[lo][0] <= t < poses[hi][0]
-        mid = (lo + hi) // 2
-        if poses[mid][0] <= t:
-            lo = mid
-        else:
-            hi = mid
-    (t0, p0, y0), (t1, p1, y1) = poses[lo], poses[hi]
-    a = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+    lo, hi, a = _bracket([p[0] for p in poses], t)
+    if hi is None:  # outside the samples: the nearest one, and its time
+        return tuple(poses[lo][1]), poses[lo][2], poses[lo][0]
+    (_, p0, y0), (_, p1, y1) = poses[lo], poses[hi]
     dy = (y1 - y0 + 180.0) % 360.0 - 180.0
     pos = tuple(float(c0 + a * (c1 - c0)) for c0, c1 in zip(p0, p1))
     return pos, (y0 + a * dy + 180.0) % 360.0 - 180.0, t
@@ -41,18 +32,27 @@ def angles_at(samples: Sequence[tuple[float, tuple[float, ...]]], t: float) -> t
     (angles, the time they are of: ``t`` when interpolated, else the sample's); None for no samples."""
     if not samples:
         return None
-    if t <= samples[0][0]:
-        return tuple(samples[0][1]), samples[0][0]
-    if t >= samples[-1][0]:
-        return tuple(samples[-1][1]), samples[-1][0]
-    lo, hi = 0, len(samples) - 1
-    while hi - lo > 1:  # bisect: samples[lo][0] <= t < samples[hi][0]
+    lo, hi, f = _bracket([smp[0] for smp in samples], t)
+    if hi is None:  # outside the samples: the nearest one, and its time
+        return tuple(samples[lo][1]), samples[lo][0]
+    a0, a1 = samples[lo][1], samples[hi][1]
+    return tuple((x0 + f * ((x1 - x0 + 180.0) % 360.0 - 180.0) + 180.0) % 360.0 - 180.0
+                 for x0, x1 in zip(a0, a1)), t
+
+
+def _bracket(times: Sequence[float], t: float) -> tuple[int, int | None, float]:
+    """Where run time ``t`` (s) falls in the non-empty, ordered sample ``times``: (lo, hi, fraction of the way from
+    ``times[lo]`` to ``times[hi]``), or (index of the oldest/newest sample, None, 0.0) outside them."""
+    if t <= times[0]:
+        return 0, None, 0.0
+    if t >= times[-1]:
+        return len(times) - 1, None, 0.0
+    lo, hi = 0, len(times) - 1
+    while hi - lo > 1:  # bisect: times[lo] <= t < times[hi]
         mid = (lo + hi) // 2
-        if samples[mid][0] <= t:
+        if times[mid] <= t:
             lo = mid
         else:
             hi = mid
-    (t0, a0), (t1, a1) = samples[lo], samples[hi]
-    f = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-    return tuple((x0 + f * ((x1 - x0 + 180.0) % 360.0 - 180.0) + 180.0) % 360.0 - 180.0
-                 for x0, x1 in zip(a0, a1)), t
+    t0, t1 = times[lo], times[hi]
+    return lo, hi, (t - t0) / (t1 - t0) if t1 > t0 else 0.0
