@@ -424,11 +424,15 @@ def test_link_cut_mid_mission_then_recovers(ray_session, run_options, tmp_path, 
         if s == "LINK_LOST":
             assert states[i + 1] in ("NAVIGATING", "WAYPOINT_HOLD", "HOVERING"), states
     assert states[lost + 1] in ("NAVIGATING", "WAYPOINT_HOLD") and states[-1] == "LANDED", states
-    # shown while the link was down (the vehicle's clock runs on without telemetry), not only once it returned:
-    # of the 12 s outage, 5 s pass before the heartbeat timeout, so about 7 s of it; no upper bound: how late the
-    # regain is seen is a question of load (12.4 s beside two CPU burners at load 15-20), for the benchmarks
-    lost_for = run["states"][lost + 1]["t"] - run["states"][lost]["t"]
-    assert lost_for > 4.0, lost_for
+    # shown while the link was down (the vehicle's clock runs on without telemetry), not only once it returned: a
+    # LINK_LOST begins inside the outage's hole in the vehicle's odometry (its longest gap), before the first
+    # odometry after the link came back. Not a duration: how much of the 0.7 s of wall time between the timeout
+    # and the link's return is left once the loss is seen is a question of load (in CI, three test workers on two
+    # cores left 0.1 s of it), and a first LINK_LOST may be a late heartbeat on a starved machine, not the cut
+    odo_t = [o["t"] for o in run["odometry"]]
+    hole = max(range(1, len(odo_t)), key=lambda i: odo_t[i] - odo_t[i - 1])
+    seen = [s["t"] for s in run["states"] if s["state"] == "LINK_LOST"]
+    assert any(odo_t[hole - 1] <= t < odo_t[hole] for t in seen), (odo_t[hole - 1], odo_t[hole], seen)
     kinds = [e["event"] for e in run["events"]]
     assert kinds.index("link_lost") < kinds.index("link_regained")
     # what the ground station still sent while the vehicle could not hear it: once the loss was detected
