@@ -278,6 +278,7 @@ sys.exit(1 if bad else 0)
 """
 
 
+@pytest.mark.timeout(1800)  # ~330 modules, each in a forked child: ~320 s at load 10-16, past the default 600 s at 40
 def test_every_module_imports_first_in_a_fresh_process():
     """Each production module imports on its own, first (no import-order dependence, no circular import that the
     usual order hides: a dispatcher actor unpickling a DEMS policy died of one). ``__main__`` modules run when

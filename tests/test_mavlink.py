@@ -138,6 +138,7 @@ def test_connect_arm_takeoff_square_velocity_land_rtl(fly, autopilot):
     assert 1.0 < b.clock_ratio < 14
 
 
+@pytest.mark.realtime  # PX4's setpoints at 20 Hz wall: a starved sender is its offboard-loss failsafe (it lands)
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_goto_speed_cap(fly, autopilot):
     """goto(speed=0.5): ArduPilot through DO_CHANGE_SPEED, PX4 (which flies OFFBOARD position setpoints at its own
