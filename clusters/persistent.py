@@ -211,9 +211,9 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
 
     if warm > 0:
         try:
-            from aerodaas.clusters.warm_pool import package_roots, raylet_pool, run_in_thread
+            from aerodaas.clusters.warm_pool import READY_DIR, package_roots, raylet_pool, run_in_thread
 
-            pool = raylet_pool(node, warm, publish)
+            pool = raylet_pool(node, warm, publish, ready_dir=state_path().parent / "warm_hook" / READY_DIR)
             st.update(warm_workers=warm, package_roots=package_roots())
             run_in_thread(pool, stop)  # its first look publishes code_fingerprint
         except (ImportError, AttributeError, OSError, KeyError, IndexError) as e:  # this Ray lacks what it needs

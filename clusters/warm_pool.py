@@ -37,8 +37,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-__all__ = ["HOOK_MODULE", "PREIMPORT_MODULES", "WarmPool", "code_fingerprint", "package_roots", "preimport",
-           "raylet_pool", "run_in_thread", "setup_hook_env"]
+__all__ = ["HOOK_MODULE", "PREIMPORT_MODULES", "READY_DIR", "WarmPool", "code_fingerprint", "forget_ended",
+           "hook_done", "package_roots", "preimport", "raylet_pool", "run_in_thread", "setup_hook_env"]
 
 #: the process title Ray gives an idle Python worker (exactly: not ``ray::IDLE_SPILL_WORKER`` / ``_RESTORE_WORKER``)
 IDLE_TITLE = "ray::IDLE"
@@ -68,6 +68,8 @@ def preimport() -> None:
             pass
 
 
+#: the folder beside the hook module where each worker leaves an empty file named by its pid once its hook has run
+READY_DIR = "ready"
 #: the setup hook's own module, written by :func:`setup_hook_env`: loading it imports nothing, so that a framework
 #: that does not import (an edit in progress) cannot stop a worker from starting (Ray ends a worker whose hook
 #: fails to load, Ray's spill workers included)
@@ -79,11 +81,18 @@ _HOOK_SOURCE = (
     "        from aerodaas.clusters.warm_pool import preimport as warm\n"
     "        warm()\n"
     "    except BaseException:  # a warm-up never stops a worker from starting\n"
+    "        pass\n"
+    "    try:  # done: the worker is warm (Ray titles it ray::IDLE before its hook runs, not after)\n"
+    "        import os\n"
+    f"        ready = os.path.join(os.path.dirname(os.path.abspath(__file__)), {READY_DIR!r})\n"
+    "        os.makedirs(ready, exist_ok=True)\n"
+    "        open(os.path.join(ready, str(os.getpid())), 'w').close()\n"
+    "    except BaseException:\n"
     "        pass\n")
 
 
 def setup_hook_env(hook_dir: str | os.PathLike) -> dict[str, str]:
-    """Write the hook module into ``hook_dir`` and return the environment entries (Ray's setup-hook variable, and
+    """Write the hook module into ``hook_dir`` (and empty its :data:`READY_DIR`) and return the environment entries (Ray's setup-hook variable, and
     ``PYTHONPATH`` with ``hook_dir`` first) that make every worker of a node started with them run
     :func:`preimport` at start. Raises OSError if the module cannot be written."""
     try:
@@ -93,6 +102,13 @@ def setup_hook_env(hook_dir: str | os.PathLike) -> dict[str, str]:
     except ImportError:
         key = _HOOK_ENV_FALLBACK
     os.makedirs(hook_dir, exist_ok=True)
+    ready = os.path.join(hook_dir, READY_DIR)
+    if os.path.isdir(ready):  # an earlier daemon's workers
+        for name in os.listdir(ready):
+            try:
+                os.remove(os.path.join(ready, name))
+            except OSError:
+                pass
     path = os.path.join(hook_dir, f"{HOOK_MODULE}.py")
     with open(path, "w") as f:
         f.write(_HOOK_SOURCE)
@@ -247,10 +263,41 @@ class WarmPool:
             self.publish(dict(fields))
 
 
-def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
+def hook_done(ready_dir: str | os.PathLike | None, pid: int, started_at: float) -> bool:
+    """Whether the worker ``pid`` (started at ``started_at``, epoch seconds) has run the setup hook: its file in
+    ``ready_dir`` (the hook folder's :data:`READY_DIR`) exists and was written after the worker started (not by an
+    earlier process with the same pid). ``ready_dir`` None: no hook, every worker counts as done."""
+    if ready_dir is None:
+        return True
+    try:
+        return os.stat(os.path.join(ready_dir, str(pid))).st_mtime >= started_at - 1.0  # the stat clock's grain
+    except OSError:
+        return False
+
+
+def forget_ended(ready_dir: str | os.PathLike | None, alive: set[int]) -> None:
+    """Remove the ready files of workers no longer in ``alive`` (pids). Never raises."""
+    if ready_dir is None:
+        return
+    try:
+        names = os.listdir(ready_dir)
+    except OSError:
+        return
+    for name in names:
+        if name.isdigit() and int(name) not in alive:
+            try:
+                os.remove(os.path.join(ready_dir, name))
+            except OSError:
+                pass
+
+
+def raylet_pool(node, size: int, publish: Callable[[dict], None],
+                ready_dir: str | os.PathLike | None = None) -> WarmPool:
     """A :class:`WarmPool` on the raylet of ``node`` (a ``ray._private.node.Node`` this process started), using its
-    ``PrestartWorkers`` gRPC call with the cluster's token. Raises ImportError/AttributeError when this Ray lacks
-    what it needs (the daemon then runs without a pool)."""
+    ``PrestartWorkers`` gRPC call with the cluster's token. ``ready_dir``: the hook folder's :data:`READY_DIR`; a
+    worker Ray titles ``ray::IDLE`` counts as idle only once its hook has run (:func:`hook_done`; Ray sets the
+    title when the worker connects, before the hook imports the framework), as starting until then. Raises
+    ImportError/AttributeError when this Ray lacks what it needs (the daemon then runs without a pool)."""
     import psutil
     from ray._private import ray_constants
     from ray._private.grpc_utils import init_grpc_channel
@@ -260,19 +307,21 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None]) -> WarmPool:
     stub = node_manager_pb2_grpc.NodeManagerServiceStub(init_grpc_channel(f"127.0.0.1:{node.node_manager_port}"))
 
     def workers(title_idle: bool) -> list[int]:
-        out = []
-        for p in raylet.children():
+        out, children = [], raylet.children()
+        for p in children:
             try:
                 cmd = p.cmdline()
+                if cmd and cmd[0] == IDLE_TITLE:
+                    warm = hook_done(ready_dir, p.pid, p.create_time())
+                    if warm == title_idle:  # idle with its hook run; starting while the hook imports
+                        out.append(p.pid)
+                elif cmd and not title_idle and any(c.endswith("default_worker.py") for c in cmd[:3]) \
+                        and not any(c.startswith("--worker-type=") and not c.endswith("=WORKER") for c in cmd):
+                    out.append(p.pid)  # a Python worker still starting (not yet connected)
             except psutil.Error:
                 continue
-            if not cmd:
-                continue
-            if title_idle and cmd[0] == IDLE_TITLE:
-                out.append(p.pid)
-            elif not title_idle and any(c.endswith("default_worker.py") for c in cmd[:3]) \
-                    and not any(c.startswith("--worker-type=") and not c.endswith("=WORKER") for c in cmd):
-                out.append(p.pid)  # a Python worker still starting (importing the framework)
+        if title_idle:
+            forget_ended(ready_dir, {p.pid for p in children})
         return out
 
     def prestart(n: int) -> None:

@@ -289,14 +289,17 @@ ACTOR_PIDS = textwrap.dedent('''
 ''')
 
 
-def _warm_idle_pids(daemon_pid: int) -> dict[int, str]:
-    """The idle Python workers of the `aerodaas up` daemon's raylet: pid -> the shared libraries they mapped."""
+def _warm_idle_pids(daemon_pid: int, ready_dir) -> dict[int, str]:
+    """The idle Python workers of the `aerodaas up` daemon's raylet whose setup hook has run (Ray titles a worker
+    ray::IDLE when it connects, before its hook imports the framework): pid -> the shared libraries they mapped."""
     import psutil
+
+    from aerodaas.clusters.warm_pool import hook_done
 
     out = {}
     for p in psutil.Process(daemon_pid).children(recursive=True):
         try:
-            if p.cmdline()[:1] == ["ray::IDLE"]:
+            if p.cmdline()[:1] == ["ray::IDLE"] and hook_done(ready_dir, p.pid, p.create_time()):
                 out[p.pid] = "\n".join(m.path for m in p.memory_maps())
         except (psutil.Error, IndexError):
             continue
@@ -321,7 +324,7 @@ def test_the_example_app_runs_attached_to_aerodaas_up_in_its_warm_workers(instal
         warm: dict[int, str] = {}
         for _ in range(600):  # the pool fills (each worker imports the framework first); bounded, not timed
             st = json.loads(state.read_text())
-            warm = _warm_idle_pids(st["pid"])
+            warm = _warm_idle_pids(st["pid"], tmp_path / "state" / "warm_hook" / "ready")
             if st.get("warm_idle", 0) >= 8 and len(warm) >= 8:
                 break
             time.sleep(0.2)

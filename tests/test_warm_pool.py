@@ -175,6 +175,37 @@ def test_the_setup_hook_never_stops_a_worker(monkeypatch, tmp_path):
     hook.preimport()
 
 
+def test_a_worker_counts_as_warm_only_once_its_hook_has_run(tmp_path):
+    """Ray titles a worker ray::IDLE when it connects, before its setup hook imports the framework: the pool counts
+    it idle only once the hook left its ready file, written after the worker started (a file left by an earlier
+    process with the same pid does not count); files of ended workers are removed, and a new daemon starts empty."""
+    import importlib
+    import sys
+
+    import psutil
+
+    ready = tmp_path / "hook" / warm_pool.READY_DIR
+    me = psutil.Process()
+    warm_pool.setup_hook_env(tmp_path / "hook")
+    assert not warm_pool.hook_done(ready, me.pid, me.create_time())  # connected, hook not run yet
+    sys.path.insert(0, str(tmp_path / "hook"))
+    try:
+        sys.modules.pop(warm_pool.HOOK_MODULE, None)
+        importlib.import_module(warm_pool.HOOK_MODULE).preimport()
+    finally:
+        sys.path.remove(str(tmp_path / "hook"))
+        sys.modules.pop(warm_pool.HOOK_MODULE, None)
+    assert warm_pool.hook_done(ready, me.pid, me.create_time())
+    # the same pid, for a process started after the file was written: not this worker's file
+    assert not warm_pool.hook_done(ready, me.pid, (ready / str(me.pid)).stat().st_mtime + 5.0)
+    assert warm_pool.hook_done(None, me.pid, me.create_time())  # no hook configured: nothing to wait for
+    (ready / "999999999").touch()
+    warm_pool.forget_ended(ready, {me.pid})
+    assert sorted(p.name for p in ready.iterdir()) == [str(me.pid)]
+    warm_pool.setup_hook_env(tmp_path / "hook")  # a new daemon: its workers write their own
+    assert list(ready.iterdir()) == []
+
+
 def test_a_plugin_on_the_cluster_import_path_is_not_shipped(tmp_path):
     site = tmp_path / "site"
     (site / "plug").mkdir(parents=True)
