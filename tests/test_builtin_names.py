@@ -20,7 +20,7 @@ BACKENDS = frozenset({"sim", "mavlink", "tello", "replay"})
 SUBJECTS = {"type": SENSORS, "sensor_type": SENSORS, "backend": BACKENDS, "backend_name": BACKENDS,
             "kind": BACKENDS, "name": BACKENDS | SENSORS}
 #: production code: the framework, its actors and schedulers (the emulators are simulated vehicles, not framework)
-ROOTS = ("aerodaas", "actors", "schedulers")
+ROOTS = ("aerodaas", "actors", "schedulers", "clusters")
 EXCLUDED = ("aerodaas/emulators/",)
 
 

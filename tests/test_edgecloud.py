@@ -150,6 +150,7 @@ def test_cloud_recheck_refuses_a_request_that_arrives_past_its_admit_by_time():
     assert (ex.executed, ex.refused) == (1, 1)
 
 
+@pytest.mark.realtime  # on time or late by the wall clock of a real event loop: the serial tier, not beside 2 workers
 def test_network_latency_after_the_recheck_makes_a_task_late_not_refused():
     w = workload("LIGHT")  # HV: deadline 650, cloud 398 -> admitted until 252 ms after arrival
     trace = [(0.0, "d0", "HV"), (10.0, "d1", "HV")]
@@ -159,13 +160,13 @@ def test_network_latency_after_the_recheck_makes_a_task_late_not_refused():
     assert r["states"]["done_late"] == 2
     assert r["cloud_cost"] > 0 and r["utility"] < 0
     lat = [t.end_ms - t.start_ms for t in d.tasks()]
-    assert all(950 < x < 1300 for x in lat), lat
-    # 200 ms extra: 398 + 200 = 598 ms < 650 ms deadline
-    d, r, _ = asyncio.run(drive(SendAllToCloud(w), trace, network="const:200"))
+    assert all(x > 950 for x in lat), lat  # no upper bound: how late is a question of load, for the benchmarks
+    # 100 ms extra: 398 + 100 = 498 ms, 152 ms inside the 650 ms deadline (200 ms extra left 52 ms, lost at load 20)
+    d, r, _ = asyncio.run(drive(SendAllToCloud(w), trace, network="const:100"))
     check_accounting(d, r)
     assert r["states"]["done_on_time"] == 2
     lat = [t.end_ms - t.start_ms for t in d.tasks()]
-    assert all(550 < x < 900 for x in lat), lat
+    assert all(x > 450 for x in lat), lat
 
 
 class JustInTimeCloud(AnalyticsScheduler):
@@ -294,6 +295,7 @@ class OverdueCloud(JustInTimeCloud):
         return t.arrival_ms - 200.0
 
 
+@pytest.mark.realtime  # a wall-clock bound on the event loop's lag: the serial tier, not beside 2 workers
 def test_poll_lateness_times_the_timer_not_a_due_time_already_past_when_armed():
     policy = OverdueCloud(workload("LIGHT"))
     d, r, _ = asyncio.run(drive(policy, [(0.0, "d0", "HV"), (50.0, "d1", "HV"), (100.0, "d2", "MD")]))
