@@ -10,6 +10,7 @@ import anything and no sub-package imports them. The layer order is in ``docs/ar
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from collections import defaultdict
@@ -287,3 +288,44 @@ def test_every_module_imports_first_in_a_fresh_process():
     r = subprocess.run([sys.executable, "-c", _FRESH_IMPORTS, *mods], capture_output=True, text=True, timeout=1800,
                        cwd=ROOT / "tests")
     assert r.returncode == 0, f"modules that do not import first:\n{r.stdout[-4000:]}{r.stderr[-2000:]}"
+
+
+def documented_layers() -> dict[str, int]:
+    """Sub-package → its line in the layer block of ``docs/architecture.md`` (bottom 0): the names on each numbered
+    line, parenthesised remarks left out; the top layer (``aerodaas/__init__.py``, the CLI) is :data:`TOP`, and an
+    entry point (``reliability``) one line above it."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    block = text.split("**Layers.**", 1)[1].split("```", 2)[1]
+    block = re.sub(r"\([^)]*\)", " ", block, flags=re.S)
+    levels: dict[str, int] = {}
+    level = -1
+    for line in block.splitlines():
+        m = re.match(r"\s*(\d+)\s+(.*)", line)
+        if m:
+            level = int(m.group(1))
+            if "aerodaas/__init__.py" in m.group(2):
+                levels[TOP] = level
+                continue
+        words = re.findall(r"[a-z_]+", m.group(2) if m else line)
+        for w in words:
+            if w in SUBPACKAGES:
+                levels[w] = level + (1 if w in ENTRY_POINTS else 0)
+    return levels
+
+
+def test_every_import_goes_down_the_documented_layers():
+    """The layer order that docs/architecture.md shows is the one the code has: every sub-package is on a line,
+    and every import between sub-packages goes to a lower line (the docs and the code cannot drift apart)."""
+    levels = documented_layers()
+    missing = sorted(set(SUBPACKAGES) - set(levels))
+    assert not missing, f"sub-packages not in the layer block of docs/architecture.md: {missing}"
+    upward = [f"{src} (line {levels[src]}) -> {dst} (line {levels[dst]}): {edges[0]}"
+              for (src, dst), edges in sorted(package_graph().items()) if levels[dst] >= levels[src]]
+    assert not upward, "imports that do not go down the documented layers:\n" + "\n".join(upward)
+
+
+def test_the_layer_reader_reads_the_block():
+    """The reader itself: known placements of the documented block."""
+    levels = documented_layers()
+    assert levels["model"] == 0 and levels["video"] == 0 and levels["clusters"] == 0
+    assert levels["runtime"] == 8 and levels["actors"] == 7 and levels[TOP] == 11 and levels["reliability"] == 12
