@@ -119,8 +119,15 @@ class Analytics:
         (``index of the drone % n``), so per-drone state (tracks, integrators) stays in one place.
         ``colocate=True``: no actor of its own; a copy runs inside the actor of each drone that feeds it (zero
         actor hops, the drone's own process and GIL: for cheap per-drone analytics such as a follow controller);
-        ``compute`` then only names where the drones fly from. Raises ValueError for ``replicas`` < 1 or
-        ``replicas`` > 1 with ``colocate``."""
+        ``compute`` then only names where the drones fly from. Raises ValueError for a ``compute`` that is not a
+        compute resource (``deploy("edge")``: a name, not ``env.get_compute_resource_by_id("edge")``; it failed in
+        the runtime as an AttributeError), ``replicas`` < 1 or ``replicas`` > 1 with ``colocate``. That it is one
+        of the environment's is checked when the application is loaded
+        (:func:`aerodaas.runtime.preflight.validate_graph`)."""
+        if not (isinstance(getattr(compute, "id", None), str) and getattr(compute, "tier", None) in ("edge", "cloud")):
+            hint = f" (use env.get_compute_resource_by_id({compute!r}))" if isinstance(compute, str) else ""
+            raise ValueError(f"analytics {self.name!r}: deploy() takes one of the environment's compute resources, "
+                             f"got {type(compute).__name__} {compute!r}{hint}")
         if not isinstance(replicas, int) or isinstance(replicas, bool) or replicas < 1:
             raise ValueError(f"analytics {self.name!r}: replicas must be an integer >= 1, got {replicas!r}")
         if colocate and replicas != 1:

@@ -33,8 +33,9 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
-__all__ = ["KINDS", "ENTRY_POINT_GROUPS", "PluginEntry", "UnknownPlugin", "register", "plugin", "get", "resolve",
-           "entries", "names", "describe_all", "adopt", "by_value_modules", "plugin_package_paths", "plugin_name", "is_import_path"]
+__all__ = ["KINDS", "ENTRY_POINT_GROUPS", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
+           "register", "plugin", "get", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
+           "plugin_package_paths", "plugin_name", "is_import_path"]
 
 #: the extension points, and the ``importlib.metadata`` entry-point group of each
 ENTRY_POINT_GROUPS: dict[str, str] = {
@@ -58,6 +59,43 @@ class UnknownPlugin(ValueError):
         close = difflib.get_close_matches(name, [e.name for e in available], n=1)
         extra = f": {why}" if why else (f" (did you mean {close[0]!r}?)" if close else "")
         super().__init__(f"unknown {kind.replace('_', ' ')} {name!r}{extra}; available: {avail}")
+
+
+class InvalidPlugin(UnknownPlugin):
+    """A plug-in class was found but its declaration cannot be used (its ``Config`` is not a pydantic model): the
+    message names the kind, the name, the class and what is wrong. An UnknownPlugin, so that every check of a
+    configured name reports it with its field."""
+
+    def __init__(self, kind: str, name: str, message: str) -> None:
+        ValueError.__init__(self, message)
+        self.kind, self.name = kind, name
+
+
+def declaration_error(cls: Any, kind: str, name: str) -> str | None:
+    """What is wrong with the declaration of plug-in class ``cls`` registered as ``name`` of ``kind``, None when
+    nothing: ``Config``, when declared (not None), must be a pydantic BaseModel subclass — the framework validates the
+    plug-in's settings with ``Config.model_validate`` when the environment is loaded, and anything else failed there
+    as a raw AttributeError (issue 40.5). A class that is itself a pydantic model keeps pydantic's own ``Config``."""
+    from pydantic import BaseModel
+
+    cfg = getattr(cls, "Config", None)
+    if cfg is None or (isinstance(cfg, type) and issubclass(cfg, BaseModel)):
+        return None
+    if isinstance(cls, type) and issubclass(cls, BaseModel):
+        return None
+    what = f"the class {cfg.__module__}.{cfg.__qualname__}, which is not a pydantic BaseModel" \
+        if isinstance(cfg, type) else f"{type(cfg).__name__} {cfg!r:.80}"
+    base = " (subclass aerodaas.plugins.SensorPluginConfig)" if kind == "sensor" else ""
+    where = f"{getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', cls)}"
+    return (f"{kind.replace('_', ' ')} plug-in {name!r} (class {where}): Config must be a pydantic BaseModel "
+            f"subclass, the model of its settings{base}, or None; got {what}")
+
+
+def _check_declaration(cls: Any, kind: str, name: str) -> None:
+    """Raise :class:`InvalidPlugin` for what :func:`declaration_error` finds."""
+    why = declaration_error(cls, kind, name)
+    if why:
+        raise InvalidPlugin(kind, name, why)
 
 
 @dataclass
@@ -96,8 +134,9 @@ class PluginEntry:
                 cls = self.load()
             except Exception as e:  # noqa: BLE001 - listed with its error, never fatal for a listing
                 self.error = f"{type(e).__name__}: {e}"
-        if self.error:
-            out["error"] = self.error
+        error = self.error or (declaration_error(cls, self.kind, self.name) if cls is not None else None)
+        if error:
+            out["error"] = error
         if cls is not None:
             cfg = getattr(cls, "Config", None)
             if isinstance(cfg, type) and hasattr(cfg, "model_fields"):
@@ -176,7 +215,8 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
              replaces: bool | None = None) -> type:
     """Register ``cls`` as a plug-in of ``kind`` (default its ``plugin_kind``) under ``name`` (default
     :func:`plugin_name`). Returns ``cls`` (usable as a decorator body). Raises ValueError for an unknown kind, a
-    name outside the plug-in name grammar (:func:`aerodaas.model.ids.check_plugin_name`), or a name already taken
+    name outside the plug-in name grammar (:func:`aerodaas.model.ids.check_plugin_name`), :class:`InvalidPlugin` (a
+    ValueError) for a ``Config`` that is not a pydantic model (:func:`declaration_error`), or a name already taken
     by another class — a built-in's too (``sim``, ``camera``, ``ObjectDetector``...: a user backend called ``sim``
     replaced the simulator silently, issue 40.5) — unless the registration says it replaces it: ``replaces=True``
     or the class attribute ``plugin_replaces = True``."""
@@ -190,6 +230,7 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     from aerodaas.model.ids import check_plugin_name
 
     check_plugin_name(name, f"{cls.__name__}: {kind.replace('_', ' ')} plug-in name")
+    _check_declaration(cls, kind, name)
     origin = origin or _origin_of(cls)
     target = f"{cls.__module__}:{cls.__qualname__}"
     if replaces is None:
@@ -278,6 +319,7 @@ def _from_import_path(kind: str, name: str) -> PluginEntry:
     declared = getattr(cls, "plugin_kind", kind)
     if declared != kind:
         raise UnknownPlugin(kind, name, entries(kind), f"{name} declares plugin_kind {declared!r}")
+    _check_declaration(cls, kind, name)
     if not _installed(sys.modules[mod]):
         _BY_VALUE.add(mod)
     with _LOCK:
@@ -324,13 +366,16 @@ def resolve(kind: str, name: str) -> PluginEntry:
 
 def get(kind: str, name: str) -> type:
     """The class of plug-in ``name`` of ``kind`` (see :func:`resolve`). Raises :class:`UnknownPlugin`, also when
-    the class cannot be imported (the message names the target and the import error)."""
+    the class cannot be imported (the message names the target and the import error), and :class:`InvalidPlugin`
+    (an UnknownPlugin) for a class whose declaration cannot be used (:func:`declaration_error`)."""
     e = resolve(kind, name)
     try:
-        return e.load()
+        cls = e.load()
     except Exception as ex:  # noqa: BLE001
         raise UnknownPlugin(kind, name, entries(kind),
                             f"{e.target} ({e.origin}) does not import: {type(ex).__name__}: {ex}") from None
+    _check_declaration(cls, kind, name)  # an entry point's class, or a Config replaced after registration
+    return cls
 
 
 def entries(kind: str | None = None) -> list[PluginEntry]:

@@ -195,13 +195,42 @@ def _exit_error(path: str, e: SystemExit):
                        f"before its first start_mission(); nothing flew")
 
 
+def _ran_app_code(e: BaseException, path: str) -> bool:
+    """Whether a frame of the app file ``path`` is in ``e``'s traceback (else ``e`` was raised compiling the file,
+    before any of its code ran)."""
+    tb = e.__traceback__
+    while tb is not None:
+        if os.path.abspath(tb.tb_frame.f_code.co_filename) == path:
+            return True
+        tb = tb.tb_next
+    return False
+
+
+def _syntax_error(path: str, e: SyntaxError):
+    """The ConfigError for an app file that is not valid Python (``e`` raised compiling it): the file, the line,
+    Python's reason and the line itself with a caret under the column. Bad input, not a bug of AeroDaaS (it was
+    reported as one, exit 1)."""
+    from aerodaas.config import ConfigError
+
+    text = (e.text or "").rstrip("\n")
+    shown = text.lstrip()
+    caret = ""
+    if shown and e.offset:
+        col = max(0, min(len(text), e.offset - 1) - (len(text) - len(shown)))
+        caret = f"\n    {' ' * col}^"
+    where = f", line {e.lineno}" if e.lineno else ""
+    return ConfigError(f"application file {path!r}{where}: not valid Python: {type(e).__name__}: {e.msg}"
+                       + (f"\n    {shown}{caret}" if shown else ""))
+
+
 def load_app(path: str | os.PathLike, env_path: str | None = None, *, flown: tuple = ()) -> Application:
     """Load the app file ``path`` into an :class:`Application` (see the module docstring): run it as the module
     :func:`app_module_name` (its folder first on ``sys.path``) until its first ``start_mission()`` not in
     ``flown`` (the results of its missions already flown, returned by those calls; the file's output up to there
     is not shown again), or to its end. ``env_path``: an environment file used instead of the one it names.
-    Starts no Ray, flies nothing. Raises FileNotFoundError for a missing file, ConfigError for an app that calls
-    ``sys.exit`` while loading, and whatever the application's code or the checks raise."""
+    Starts no Ray, flies nothing. Raises FileNotFoundError for a missing file, ConfigError for a file that is not
+    valid Python (naming the file and line) or an app that calls ``sys.exit`` while loading, and whatever the
+    application's code or the checks raise."""
     p = os.path.abspath(path)
     if not os.path.isfile(p):
         raise FileNotFoundError(f"application file {str(path)!r} not found")
@@ -224,6 +253,10 @@ def load_app(path: str | os.PathLike, env_path: str | None = None, *, flown: tup
         return Application(p, name, m.start, m.graph, _code_after(p, m.start), len(flown))
     except SystemExit as e:
         raise _exit_error(str(path), e) from None
+    except SyntaxError as e:
+        if _ran_app_code(e, p):
+            raise  # a module the app imports, or code it compiles itself: the app's own error
+        raise _syntax_error(str(path), e) from None
     finally:
         _LOADING.reset(token)
         if load.stdout is not None:
