@@ -338,7 +338,7 @@ def test_reliability_issue_40_cases(tmp_path):
     from aerodaas.reliability.app_cases import run_app_cases
 
     rows = run_app_cases(tmp_path)
-    assert len(rows) == 21
+    assert len(rows) == 28
     assert [(r["name"], r["message"][:300]) for r in rows if not r["refused"] or r.get("traceback")] == []
     assert {r["category"] for r in rows} == {"strict types", "bounds / cross-field", "app-level errors",
                                              "output paths", "plug-in imports", "mission files", "safety gate",

@@ -10,7 +10,7 @@ import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field, Strict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, PrivateAttr, Strict, ValidationError, field_validator, model_validator
 
 from aerodaas.navigation.geofence import GeofenceConfig
 
@@ -303,6 +303,13 @@ class EnvironmentConfig(_Cfg):
         "one tier, JPEG across tiers), in lock-step runs too (lock-step only makes the clock wait for each frame's "
         "cascade)")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
+    _source_file: str | None = PrivateAttr(default=None)
+
+    @property
+    def source_file(self) -> str | None:
+        """The absolute path of the file this configuration was read from (:func:`load_environment_config`), None
+        when it was built from a dict: an input of the run, which ``--record`` never overwrites."""
+        return self._source_file
 
     @field_validator("trajectory_scheduler")
     @classmethod
@@ -521,7 +528,9 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
         raise ConfigError(f"environment file {e}") from None
     except OSError as e:
         raise ConfigError(f"environment file {str(p)!r}: cannot read ({e.strerror or e})") from None
-    return parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
+    cfg = parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
+    cfg._source_file = str(p.resolve())
+    return cfg
 
 
 def json_schema() -> dict[str, Any]:

@@ -5,8 +5,12 @@
   exits 2 naming the field, before Ray starts;
 * items built without validation handed to the safety gate itself (it checks every value again);
 * plug-in modules that do not import (a missing module, an exception or ``sys.exit`` while imported, a syntax error,
-  a missing class): the environment is refused naming the field, the module and the error;
-* output paths that are the run's own inputs (the application, its environment file) or a device;
+  a missing class) and plug-ins whose ``Config`` is not a pydantic model (by import path, or registered in the
+  app): refused naming the field, the plug-in, the class and the error;
+* errors of the application itself that AeroDaaS refuses before Ray (exit 2): ``deploy("edge")`` (a name, not a
+  compute resource) and a syntax error in the app file (named with its line);
+* output paths that are the run's own inputs (the application, its environment file, also when the app opens it
+  and ``--overwrite`` is given) or a device;
 * a WPL file numbered out of sequence, and ``aerodaas inject`` values that start with '-'.
 
 Each row: ``{"kind", "category", "name", "refused", "message"}`` as in
@@ -62,21 +66,41 @@ APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = 
      "max_queued_items", "app-level errors"),
     ("a NaN waypoint built with model_construct", _app_body(_nav(f"[{_NAN_WP}]")), 2, "not a valid Waypoint",
      "app-level errors"),
+    ('analytics.deploy("edge") (a name, not a compute resource)',
+     _app_body('MonitoringAnalytics(name="mon").deploy("edge")'), 2, "analytics 'mon': deploy() takes one of the "
+     "environment's compute resources, got str 'edge'", "app-level errors"),
+    ('an analytics whose compute was set to "edge" after deploy()',
+     _app_body('mon = MonitoringAnalytics(name="mon").deploy(env.get_compute_resources()[0])\nmon.compute = "edge"\n'
+               'mon.analyse(drone.get_sensor_by_id("stat").get_data_stream())\n'
+               + _nav('[Waypoint(id="a", x=1, y=0, z=2)]')), 2,
+     "analytics 'mon': deployed on str 'edge', which is not a compute resource of this environment",
+     "app-level errors"),
+    ("a syntax error in the application file", lambda t: [_app(t, "from aerodaas import *\nenv = Environment(\n")], 2,
+     "line 2: not valid Python: SyntaxError", "app-level errors"),
+    ("a plug-in sensor of the app whose Config is a dict",
+     lambda t: [_app(t, "from aerodaas.plugins import SensorPlugin, register_sensor\n\n\n@register_sensor\n"
+                        "class Gas(SensorPlugin):\n    name = 'gas'\n    Config = {'rate_hz': 1.0}\n\n"
+                        "    def sample(self, state, t):\n        return None\n")], 2,
+     "sensor plug-in 'gas' (class aerodaas_app_cli_app.Gas): Config must be a pydantic BaseModel subclass",
+     "plug-in imports"),
 ]
 
 
-def _record_into(which: str) -> Callable[[Path], list[str]]:
+def _record_into(which: str, *extra: str) -> Callable[[Path], list[str]]:
     def make(t: Path) -> list[str]:
-        app = _app(t)
+        app = _app(t)  # its environment file: opened by the app itself (Environment(path)), no --env
         target = {"app": app, "env": str(t / "cli_env.json"), "null": "/dev/null"}[which]
-        return [app, "--record", target]
+        return [app, "--record", target, *extra]
     return make
 
 
+_INPUT = "is an input of this run"
 #: ``--record`` given the run's own inputs or a device: (name, argv after ``run``, exit code, text, category)
 OUTPUT_PATH_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
-    ("--record names the application itself", _record_into("app"), 2, "--record", "output paths"),
-    ("--record names the environment file", _record_into("env"), 2, "--record", "output paths"),
+    ("--record names the application itself", _record_into("app"), 2, _INPUT, "output paths"),
+    ("--record names the environment file", _record_into("env"), 2, _INPUT, "output paths"),
+    ("--record names the environment file the app opens, with --overwrite", _record_into("env", "--overwrite"), 2,
+     _INPUT, "output paths"),
     ("--record /dev/null", _record_into("null"), 2, "not a regular file", "output paths"),
 ]
 
@@ -86,6 +110,9 @@ PLUGIN_MODULES = {
     "exits": "import sys\nsys.exit(0)\n",
     "syntax": "def broken(:\n    pass\n",
     "empty": "X = 1\n",
+    "badconfig": ("from aerodaas.backends.sim import SimBackend\nfrom aerodaas.plugins import SensorPlugin\n\n\n"
+                  "class GasSensor(SensorPlugin):\n    Config = 5\n\n    def sample(self, state, t):\n"
+                  "        return None\n\n\nclass Backend(SimBackend):\n    Config = dict\n"),
 }
 
 
@@ -110,6 +137,14 @@ def plugin_cases(tag: str) -> list[tuple[str, Callable[[dict], None], str]]:
          lambda d: robot(d)["sensors"].append({"id": "gas", "type": f"{mod('syntax')}:GasSensor"}), "SyntaxError"),
         ("trajectory_scheduler naming a class its module lacks",
          lambda d: d.update(trajectory_scheduler=f"{mod('empty')}:Planner"), "AttributeError"),
+        ("sensor type whose Config is 5 (not a pydantic model)",
+         lambda d: robot(d)["sensors"].append({"id": "gas", "type": f"{mod('badconfig')}:GasSensor"}),
+         "Config must be a pydantic BaseModel subclass, the model of its settings (subclass aerodaas.plugins."
+         "SensorPluginConfig), or None; got int 5"),
+        ("backend whose Config is dict (not a pydantic model)",
+         lambda d: robot(d).update(backend=f"{mod('badconfig')}:Backend"),
+         "Config must be a pydantic BaseModel subclass, the model of its settings, or None; got the class "
+         "builtins.dict"),
     ]
 
 

@@ -203,12 +203,14 @@ def run_mission(env, robots: list, options: RunOptions | None = None, timeout: f
 
 def _fly(env, robots: list, graph: tuple, opts: RunOptions, timeout: float | None,
          by_value: tuple[str, ...]) -> MissionResult:
-    """Check ``opts``, run the mission, tell :data:`aerodaas.runtime.options.MISSION_LISTENERS`."""
+    """Check ``opts``, run the mission, tell :data:`aerodaas.runtime.options.MISSION_LISTENERS`. The app's file
+    (``by_value``'s modules, or ``__main__`` of ``python app.py``) is an input ``--record`` never overwrites."""
     from aerodaas.runtime.options import MISSION_LISTENERS
     from aerodaas.runtime.preflight import check_options
 
     actor_classes(opts)  # the entry point handed the actor classes (ValueError before Ray otherwise)
-    sim = check_options(env, robots, graph[1], opts)
+    files = (getattr(sys.modules.get(m), "__file__", None) for m in (*by_value, "__main__"))
+    sim = check_options(env, robots, graph[1], opts, inputs=tuple(f for f in files if f))
     ray_start.start_ray_early(opts.address, opts.dashboard)  # in its own thread (see there), overlapping the plan
     IN_MISSION[0] = True
     try:

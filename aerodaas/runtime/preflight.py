@@ -10,8 +10,8 @@ from typing import Any
 
 from aerodaas.config import SimulationConfig
 
-__all__ = ["validate", "validate_graph", "check_options", "simulation_for", "check_clocks", "robot_schedulers",
-           "scheduled_analytics", "check_preplanned"]
+__all__ = ["validate", "validate_graph", "check_options", "check_deployment", "simulation_for", "check_clocks",
+           "robot_schedulers", "scheduled_analytics", "check_preplanned"]
 
 
 def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
@@ -99,6 +99,7 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
         for a in analytics:
             if a.compute is None:
                 a.deploy(env.get_compute_resources()[0])
+            check_deployment(env, a)
             check = getattr(a, "check", None)
             if callable(check):
                 check()
@@ -117,15 +118,37 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
     return graphs, scheds, scheduled_analytics(env, graphs)
 
 
-def check_options(env, robots: list, scheds: dict, opts: Any) -> SimulationConfig:
+def check_deployment(env, analytics) -> None:
+    """``analytics`` is deployed on one of ``env``'s compute resources (``deploy(compute)`` with what
+    ``env.get_compute_resource_by_id`` returns). Raises ConfigError naming the analytics and the value given: a name
+    (``deploy("edge")``, or ``analytics.compute = "edge"``) or another object failed after Ray started, as an
+    AttributeError reported as a bug of AeroDaaS."""
+    from aerodaas.config import ConfigError
+
+    comp, known = analytics.compute, env.get_compute_resources()
+    if any(comp is c for c in known):
+        return
+    same = [c for c in known if c.id == getattr(comp, "id", None) and c.tier == getattr(comp, "tier", None)]
+    if same and getattr(comp, "cfg", None) == same[0].cfg:  # the same resource of another Environment of the file
+        return
+    ids = [c.id for c in known]
+    hint = f"; use env.get_compute_resource_by_id({comp!r})" if isinstance(comp, str) and comp in ids else ""
+    raise ConfigError(f"analytics {analytics.name!r}: deployed on {type(comp).__name__} {comp!r}, which is not a "
+                      f"compute resource of this environment (it has {ids}){hint}")
+
+
+def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple = ()) -> SimulationConfig:
     """The checks of a run's options (``opts``: :class:`~aerodaas.runtime.options.RunOptions`) against the
-    application, before Ray starts: the recording's path, the HITL API's host and port, an autopilot mission with
-    ``--hitl``, the clocks under ``--speedup`` / ``--lockstep``. Returns the run's simulation settings
-    (:func:`simulation_for`). Raises ConfigError / ValueError naming the field or flag."""
+    application, before Ray starts: the recording's path (never one of the run's ``inputs`` — the app file — nor the
+    environment file, whoever named it: ``--env`` or the app's ``Environment("x.json")``, even with
+    ``--overwrite``), the HITL API's host and port, an autopilot mission with ``--hitl``, the clocks under
+    ``--speedup`` / ``--lockstep``. Returns the run's simulation settings (:func:`simulation_for`). Raises
+    ConfigError / ValueError naming the field or flag."""
     if opts.record:
         from aerodaas.recording.writer import check_record_path
 
-        check_record_path(opts.record, overwrite=opts.overwrite)  # ValueError naming the path: before Ray
+        protect = tuple(q for q in (*inputs, getattr(env.cfg, "source_file", None)) if q)
+        check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
     from aerodaas.clusters.addresses import check_hitl
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
@@ -221,8 +244,9 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     """Everything ``aerodaas run``'s command line names, checked before Ray starts: no empty ``--record`` /
     ``--env``, a writable record path, ``--speedup`` / ``--timeout`` in range, ``--hitl-port`` in [0, 65535], the
     ``--address`` cluster reachable (:func:`aerodaas.clusters.addresses.check_ray_address`, within 10 s) and the
-    ``--env`` file valid, and ``AERODAAS_GROUND_CACHE_MB`` a number >= 0. Raises ValueError / ConfigError naming the
-    flag (or variable) and the value."""
+    ``--env`` file valid, and ``AERODAAS_GROUND_CACHE_MB`` a number >= 0. ``overwrite`` is for
+    :func:`check_options`, which refuses an existing file that is not a recording once the application is loaded.
+    Raises ValueError / ConfigError naming the flag (or variable) and the value."""
     from aerodaas.sim.ground_cache import limit_bytes
 
     limit_bytes()
@@ -232,7 +256,9 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     if record:
         from aerodaas.recording.writer import check_record_path
 
-        check_record_path(record, overwrite=overwrite, protect=tuple(q for q in (app, env) if q))
+        # an existing file that is no recording is refused once the app is loaded (check_options): the environment
+        # file the app opens itself is known only then, and is refused as an input, never with "pass --overwrite"
+        check_record_path(record, overwrite=True, protect=tuple(q for q in (app, env) if q))
     from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
 
     for flag, v, lo, hi in (("--speedup", speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", timeout, 0.0, 1e7)):
