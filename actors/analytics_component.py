@@ -308,7 +308,9 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
 
     def on_task_done(self, task: Any) -> None:
         """Called by the dispatcher (its loop thread) once per task, in its terminal state: publish an on-time
-        result, record the outcome, release the lock-step hold."""
+        result, record the outcome (with the utility and cost the dispatcher computed, and the scheduler's name:
+        the recorder tallies these records, :class:`aerodaas.recording.task_tally.TaskTally`), release the
+        lock-step hold."""
         msg: Message = task.payload.context
         tok = msg.tok
         try:
@@ -323,7 +325,8 @@ class ScheduledAnalyticsComponent(AnalyticsComponent):
                 t_ns = self.epoch_ns + int(msg.sim_t * 1e9)
                 rec = {"task_id": task.task_id, "model": task.model, "state": state, "tier": task.tier,
                        "reason": task.reason, "arrival_ms": task.arrival_ms, "deadline_ms": task.deadline_ms,
-                       "start_ms": task.start_ms, "end_ms": task.end_ms}
+                       "start_ms": task.start_ms, "end_ms": task.end_ms, "utility": task.utility,
+                       "cost": task.cost, "scheduler": self.service.policy_name}
                 self.recorder.json(f"/{robot}/{self.name}/tasks", t_ns, rec, "aerodaas.AnalyticsTask")
             if state != "done_on_time":
                 self._no_output(msg)  # the scheduler dropped it, or its result came late: no output recorded
@@ -371,6 +374,8 @@ class AnalyticsSchedulingService:
         self.plane = plane
         self.spec = spec
         self.name = spec.name
+        #: the policy's own name (its report's ``scheduler``), once started; on every task record
+        self.policy_name = spec.name
         self.comps: dict[str, ScheduledAnalyticsComponent] = {}
         self.dispatcher = None
         self.final: dict | None = None
@@ -388,6 +393,7 @@ class AnalyticsSchedulingService:
         from aerodaas.schedulers.dispatch.emulation import NetworkModel
         w = self.spec.workload
         policy = self.spec.policy_class(w)
+        self.policy_name = policy.name or self.name
         bank = AnalyticsBank({n: c.obj for n, c in self.comps.items()}, shared=True)
         ex = list(self.spec.executors)
         pool = CloudPool(ex, mode="real", network=NetworkModel.parse(self.spec.network or ["none"],

@@ -36,6 +36,7 @@ import numpy as np
 
 from aerodaas.protocol.messages import (ProducerLedger, RecordCamera, RecordDetections, RecordImage, RecordItem,
                                        RecordJson, RecordOdometry, RecordTracks)
+from aerodaas.recording.task_tally import TASK_SCHEMA, TaskTally
 from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts
 
@@ -104,6 +105,8 @@ class RecorderService(AnalyticsAccounting):
         #: messages numbered here, per stream (producers in this process; the other actors' come with their ledgers)
         self.produced_here: dict[str, int] = {}
         self.analytics_counts = AnalyticsCounts()  # analytics inputs and items without output of this process
+        #: the analytics scheduler's task records written here, per scheduler (writer thread only): in the accounting
+        self.task_tally = TaskTally()
         self.on_failure: list[Callable[[dict], None]] = []
         _inject_fault(self.rec)
         self._thread = threading.Thread(target=self._writer, name="aerodaas-recorder", daemon=True)
@@ -274,6 +277,8 @@ class RecorderService(AnalyticsAccounting):
             r.write_detections(item.topic, item.t_ns, item.detections, image_size=item.image_size)
         elif isinstance(item, RecordJson):
             r.write_json(item.topic, item.t_ns, item.obj, schema_name=item.schema_name)
+            if item.schema_name == TASK_SCHEMA:
+                self.task_tally.add(item.obj)
         elif isinstance(item, RecordTracks):
             from aerodaas.perception.track_records import write_tracks
 
@@ -331,12 +336,14 @@ class RecorderService(AnalyticsAccounting):
 
     # ------------------------------------------------------------------ end
     def close(self, timeout_s: float = 30.0, ledgers: list[ProducerLedger] | None = None,
-              recorded_before: dict[str, int] | None = None, run_losses: list[dict] | None = None) -> dict[str, Any]:
+              recorded_before: dict[str, int] | None = None, run_losses: list[dict] | None = None,
+              tasks_before: TaskTally | None = None) -> dict[str, Any]:
         """Write what is queued and ``/run/recorder_drops`` (the frames refused here, per image topic; when any
         image was offered), then the run's accounting (:meth:`_write_accounting`), finish the file (summary and
         footer) and return the per-topic message counts. ``ledgers``: the other actors' counts
         (:class:`~aerodaas.protocol.messages.ProducerLedger`); ``recorded_before``: topic -> messages in the earlier
-        segments of this run; ``run_losses``: the recorder actor's deaths (its ``losses``)."""
+        segments of this run; ``run_losses``: the recorder actor's deaths (its ``losses``); ``tasks_before``: the
+        task records in the earlier segments, tallied (:func:`aerodaas.recording.task_tally.tally_recordings`)."""
         if not self.closed:
             with self._lock:
                 self.closed = True
@@ -351,7 +358,8 @@ class RecorderService(AnalyticsAccounting):
             try:
                 if self.failure is None:
                     try:
-                        self._write_accounting(ledgers or [], recorded_before or {}, run_losses or [])
+                        self._write_accounting(ledgers or [], recorded_before or {}, run_losses or [],
+                                               tasks_before or TaskTally())
                         self.rec.close()
                     except OSError as e:  # the summary itself does not fit: the same clean failure
                         self._fail(e)
@@ -362,13 +370,15 @@ class RecorderService(AnalyticsAccounting):
 
     # ------------------------------------------------------------------ accounting (producers in this process)
     def _write_accounting(self, ledgers: list[ProducerLedger], recorded_before: dict[str, int],
-                          run_losses: list[dict]) -> None:
+                          run_losses: list[dict], tasks_before: TaskTally) -> None:
         """The file's last messages (the writer thread has ended): ``/run/accounting``
         (:func:`aerodaas.recording.accounting.accounting_message`: per stream what its producers numbered and what
         was dropped here as sent again by a restarted drone actor; per analytics what it was offered and took
-        without an output), then, when the run lost anything — a recorder death (``run_losses``) or a message
-        numbered but in none of the run's segments — ``/run/result`` ``{"outcome": "recording_lost", "losses":
-        [...], "lost": {topic: n}}``, so that no reader takes the drones' own ``success`` for the run's."""
+        without an output; per analytics scheduler its task records in every segment, ``tasks``:
+        :class:`~aerodaas.recording.task_tally.TaskTally`, when there were any), then, when the run lost anything
+        — a recorder death (``run_losses``) or a message numbered but in none of the run's segments — ``/run/result``
+        ``{"outcome": "recording_lost", "losses": [...], "lost": {topic: n}}``, so that no reader takes the drones'
+        own ``success`` for the run's."""
         from aerodaas.recording.accounting import ACCOUNTING_TOPIC, account_channels, accounting_message
         from aerodaas.recording.reader import RUN_RESULT_TOPIC
 
@@ -379,7 +389,10 @@ class RecorderService(AnalyticsAccounting):
                     "after_s": self.live.client_send_timeout_s}, schema_name="aerodaas.LiveClientDropped")
         here = ProducerLedger("recorder", dict(self.produced_here), *self.analytics_counts.snapshot())
         msg = accounting_message([*ledgers, here], dict(self.duplicates_by_topic))
-        if not msg["channels"] and not msg["analytics"]:
+        tasks = tasks_before.merged(self.task_tally).as_dict()
+        if tasks:
+            msg["tasks"] = tasks
+        if not msg["channels"] and not msg["analytics"] and not tasks:
             return
         t_ns = (self.last_t_ns or 0) + 1
         counts = dict(recorded_before)

@@ -236,19 +236,21 @@ class RecorderActor:
     def close(self) -> dict:
         """Finish the file; returns the per-topic message counts (of this segment). The file ends with the run's
         accounting (:meth:`~.recorder.RecorderService.close`: the producers' counts, the messages in the earlier
-        segments) and, when the run lost anything — this recorder replaced a dead one, or a numbered message is in
-        no segment — ``/run/result`` ``{"outcome": "recording_lost", "losses": [...], "lost": {topic: n}}``
-        (stamped after the last message written so far): the recording, joined or not, never reads as a success
-        (the drones' ``/mission/result`` say how each mission went; :func:`aerodaas.recording.reader.summarize`
-        lets the run's outcome win)."""
+        segments, the task records of every segment tallied per analytics scheduler) and, when the run lost
+        anything — this recorder replaced a dead one, or a numbered message is in no segment — ``/run/result``
+        ``{"outcome": "recording_lost", "losses": [...], "lost": {topic: n}}`` (stamped after the last message
+        written so far): the recording, joined or not, never reads as a success (the drones' ``/mission/result``
+        say how each mission went; :func:`aerodaas.recording.reader.summarize` lets the run's outcome win)."""
         if self._finishing is not None:
             self._finishing.join(120.0)
         if self.recorder is None:
             return {}
         if self.losses and self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message
             self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
+        from aerodaas.recording.task_tally import tally_recordings
+
         return self.recorder.close(ledgers=self.ledgers(), recorded_before=self._earlier_counts(),
-                                   run_losses=list(self.losses))
+                                   run_losses=list(self.losses), tasks_before=tally_recordings(self.segments[:-1]))
 
     def _earlier_counts(self) -> dict[str, int]:
         """Topic -> messages in this run's earlier segments (finished by now; an unreadable one counts 0, so its

@@ -133,8 +133,9 @@ EXECUTED_STATES = (TaskState.DONE_ON_TIME, TaskState.DONE_LATE)
 class AnalyticsTask:
     """One inference task: ``model`` on one frame of ``drone``. ``arrival_ms``/``deadline_ms`` are absolute times
     on the dispatcher's clock (ms). ``payload`` is the frame (opaque to schedulers). The dispatcher fills
-    ``tier`` (where it ran: "edge"/"cloud"), ``start_ms``/``end_ms``, ``state`` and ``reason``; schedulers may
-    keep private notes in ``notes``."""
+    ``tier`` (where it ran: "edge"/"cloud"), ``start_ms``/``end_ms``, ``state`` and ``reason``, and with the
+    terminal state ``utility`` (:func:`task_utility`) and ``cost`` (the edge or cloud cost charged for it, 0 when
+    none was: a dropped task), in the workload's units; schedulers may keep private notes in ``notes``."""
 
     task_id: int
     drone: str
@@ -149,6 +150,8 @@ class AnalyticsTask:
     end_ms: float | None = None
     result: Any = None
     notes: dict = field(default_factory=dict)
+    utility: float | None = None
+    cost: float = 0.0
 
     def slack_ms(self, now_ms: float, exec_ms: float) -> float:
         """Time to spare if ``exec_ms`` of work started now: deadline - now - exec_ms (negative = would miss)."""

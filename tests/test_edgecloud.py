@@ -71,6 +71,10 @@ def check_accounting(d: AnalyticsDispatcher, report: dict) -> None:
     assert all(t.state in TERMINAL_STATES for t in tasks)
     assert sum(report["states"].values()) == len(tasks)
     assert report["utility"] == pytest.approx(sum(task_utility(t, d.workload[t.model]) for t in tasks))
+    # each task carries its utility and the cost charged for it (what its task record holds)
+    assert report["utility"] == pytest.approx(sum(t.utility for t in tasks))
+    assert report["cloud_cost"] == pytest.approx(sum(t.cost for t in tasks if t.tier == "cloud"))
+    assert report["edge_cost"] == pytest.approx(sum(t.cost for t in tasks if t.tier == "edge"))
     for t in tasks:
         assert t.end_ms is not None and t.reason
         if t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE):

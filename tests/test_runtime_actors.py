@@ -5,6 +5,7 @@
 * an analytics actor killed mid-mission restarts; frames in flight count as failed; its navigation resumes;
 * the node of a drone actor lost: that drone ends ``lost``, the other flies on, the recording is finished;
 * a drone actor that dies for good under ``aerodaas run``: summary, finished recording, exit code 3, no traceback;
+* the analytics scheduler's dispatcher actor killed mid-mission: the summary counts the tasks the recording holds;
 * placement on a cluster of two edge nodes and a cloud node, from Ray's GCS: drone actors on their compute's node,
   a dispatcher per edge compute, the cloud executors on the cloud node.
 """
@@ -226,6 +227,76 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
         assert outlet["failed"] >= 1, outlet  # the frame(s) in flight when the actor died, and those sent meanwhile
     assert res.stats["d00"]["analytics"][0]["processed"] > 0  # counted by the restarted actor
     assert res.stats["_hosts"]["analytics/edge/always_car#1"].get("error_count", 0) == 0
+
+
+def test_dispatcher_actor_killed_mid_mission_the_summary_counts_the_recordings_tasks(ray_session, run_options,
+                                                                                     tmp_path):
+    """The analytics scheduler's dispatcher actor is killed mid-mission and Ray restarts it: the restarted one
+    counts its tasks from zero, the recording does not. The summary's scheduler headline (tasks, per state,
+    utility) is what the recording's task records hold (read back with aerodaas.recording.reader), more than the
+    restarted dispatcher counted, and that count is named beside it."""
+    import ray
+
+    from aerodaas.recording.reader import read_messages
+
+    env = _env(fps=5.0)
+    drone, sched = _survey(env, hover_s=30.0)
+    det = AlwaysCar()  # 0.1 s per frame, scheduled per frame on the edge compute's dispatcher
+    det.deploy(env.get_compute_resource_by_id("edge"))
+    det.analyse(drone.get_sensor_by_id("cam").get_data_stream())
+    env.set_analytics_scheduler("DEMS", {"always_car": {"deadline_ms": 300, "edge_ms": 100, "cloud_ms": 120,
+                                                        "benefit": 100, "edge_cost": 1, "cloud_cost": 20}})
+    run_options.run_id, run_options.record = "kill-dispatcher", str(tmp_path / "kd.mcap")
+    name = "aerodaas/kill-dispatcher/dispatcher/edge"
+    seen: dict = {}
+
+    def submitted() -> int:
+        return ray.get(ray.get_actor(name).stats.remote(), timeout=10)["_analytics_scheduler"]["submitted"]
+
+    def pid() -> int:
+        return ray.get(ray.get_actor(name).ping.remote(), timeout=10)
+
+    def go() -> None:
+        def kill() -> bool:
+            if submitted() < 15:
+                return False
+            seen["before"], seen["pid"] = submitted(), pid()
+            ray.kill(ray.get_actor(name), no_restart=False)
+            return True
+
+        def restarted_and_counting() -> bool:  # a new process, which counts from 0
+            return pid() != seen["pid"] and submitted() >= 10
+
+        if _until(kill, 600) and _until(restarted_and_counting, 600):
+            seen["after"] = submitted()
+            d = ray.get_actor("aerodaas/kill-dispatcher/drone/d00")
+            ray.get(d.call.remote("d00/drone", DroneComponent.end_mission, "ended"), timeout=10)
+
+    t = threading.Thread(target=go, daemon=True)
+    t.start()
+    res = env.start_mission(timeout=180, options=run_options)
+    t.join(5)
+    assert "after" in seen, (seen, res.outcome)
+    assert res.robots["d00"]["outcome"] == "ended" and not res.robots["d00"].get("error")
+    records = [m for _, schema, _, m in read_messages(run_options.record, topics=["/d00/always_car/tasks"])
+               if schema == "aerodaas.AnalyticsTask"]
+    states: dict[str, int] = {}
+    for r in records:
+        states[r["state"]] = states.get(r["state"], 0) + 1
+    utility = sum(r["utility"] for r in records)
+    assert all(r["scheduler"] == "DEMS" and r["utility"] is not None for r in records)
+    tally = res.recording_accounting["tasks"]["DEMS"]
+    assert tally["tasks"] == len(records) and tally["states"] == states
+    assert tally["utility"] == pytest.approx(utility)
+    # the restarted dispatcher's own count; the records of the first one's tasks are in the recording too (those
+    # it held or had not yet handed to the recorder when it was killed are not: they reached no terminal state)
+    own = res.stats["analytics_scheduler"]["submitted"]
+    assert seen["after"] <= own < len(records), (seen, own, len(records))
+    line = next(ln for ln in format_summary(res).splitlines() if ln.startswith("  analytics scheduler DEMS"))
+    assert f": {len(records)} tasks (from the recording)" in line, line
+    assert f"utility {utility:.0f}," in line and f"its dispatchers counted {own} (since their last restart)" in line
+    for state, n in states.items():
+        assert f"{state} {n}" in line, line
 
 
 @needs_data

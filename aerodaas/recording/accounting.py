@@ -106,9 +106,11 @@ def account_channels(accounting: Any, counts: dict[str, int]) -> dict[str, Chann
 def account_recording(paths: list[str | os.PathLike]) -> dict[str, Any] | None:
     """The accounting of a run recorded in ``paths`` (its segments in order, or the one file): ``{"channels":
     {topic: {produced, duplicates, recorded, lost}}, "lost": {topic: n} (only channels that lost any),
-    "lost_total": n}``, with each channel's messages counted over every segment and the producers' counts from the
-    last ``/run/accounting``; None when no segment has one (a recording made before accounting, or cut short
-    before its end). Raises what :func:`aerodaas.recording.reader.summarize_mcap` raises."""
+    "lost_total": n, "tasks": {scheduler: {tasks, states, tiers, on_time, utility, cost, cost_by_tier}}}``, with
+    each channel's messages counted over every segment and the producers' counts and the analytics schedulers'
+    task records (:mod:`aerodaas.recording.task_tally`; ``{}`` without any) from the last ``/run/accounting``; None
+    when no segment has one (a recording made before accounting, or cut short before its end). Raises what
+    :func:`aerodaas.recording.reader.summarize_mcap` raises."""
     from aerodaas.recording.reader import summarize_mcap
 
     counts: dict[str, int] = {}
@@ -121,7 +123,8 @@ def account_recording(paths: list[str | os.PathLike]) -> dict[str, Any] | None:
     chans = account_channels(accounting, counts)
     if chans is None:
         return None
-    return as_report(chans)
+    tasks = accounting.get("tasks")
+    return {**as_report(chans), "tasks": dict(tasks) if isinstance(tasks, dict) else {}}
 
 
 def as_report(chans: dict[str, ChannelAccount]) -> dict[str, Any]:

@@ -108,6 +108,10 @@ class AnalyticsTask(BaseModel):
     deadline_ms: float
     start_ms: Optional[float] = None
     end_ms: Optional[float] = None
+    utility: Optional[float] = Field(default=None, description="the task's utility (benefit if on time, less its "
+                                                                "cost), as its dispatcher computed it")
+    cost: Optional[float] = Field(default=None, description="the edge or cloud cost charged for it (0: none)")
+    scheduler: Optional[str] = Field(default=None, description="the analytics scheduler's name (DEMS, ...)")
 
 
 class FrameLatency(BaseModel):
@@ -165,13 +169,28 @@ class AnalyticsInputs(BaseModel):
     no_output: int = Field(description="items it took without recording an output (None, raised, stale, not run)")
 
 
+class SchedulerTasks(BaseModel):
+    """One analytics scheduler's task records in the recording, every segment (``/run/accounting`` ``tasks``,
+    :class:`aerodaas.recording.task_tally.TaskCounts`)."""
+
+    tasks: int = Field(description="task records (one per task, in its terminal state)")
+    states: dict[str, int] = Field(description="terminal state -> tasks")
+    tiers: dict[str, int] = Field(description="edge / cloud / none (never run) -> tasks")
+    on_time: int = Field(description="tasks done on time")
+    utility: float = Field(description="the sum of their utility")
+    cost: float = Field(description="the sum of the edge and cloud cost charged")
+    cost_by_tier: dict[str, float] = Field(default_factory=dict, description="tier -> cost charged")
+
+
 class RunAccounting(BaseModel):
     """The recording's accounting (``/run/accounting``, its last message): per stream (topic) what its producers
     numbered; a channel's loss is ``produced - duplicates - messages in the recording`` (all segments); per
-    analytics (``/<robot>/<name>``) its inputs, against which its output topics are accounted."""
+    analytics (``/<robot>/<name>``) its inputs, against which its output topics are accounted; per analytics
+    scheduler its task records (counted by the recorder, so the counts survive a dispatcher actor's restart)."""
 
     channels: dict[str, ChannelProduced]
     analytics: dict[str, AnalyticsInputs] = Field(default_factory=dict)
+    tasks: dict[str, SchedulerTasks] = Field(default_factory=dict)
 
 
 class GimbalAttitude(BaseModel):

@@ -145,23 +145,63 @@ def _analytics_lines(rid: str, st: dict, acc: dict) -> list[str]:
     return lines
 
 
+#: the order in which the summary lists the tasks' terminal states
+_STATE_ORDER = ("done_on_time", "done_late", "dropped_time", "dropped_cost", "expired_edge", "failed")
+
+
 def _scheduler_lines(sr: dict | None, acc: dict) -> list[str]:
-    """The analytics scheduler's tasks (its dispatchers' counts) and what the recording holds of them."""
-    if not sr:
-        return []
-    st = sr.get("states", {})
-    chans = acc.get("channels") or {}
-    recorded = sum(c["recorded"] for t, c in chans.items() if t.endswith("/tasks"))
-    lines = [f"  analytics scheduler {sr.get('scheduler')}: {sr.get('submitted', 0)} tasks, on time "
-             f"{100 * sr.get('on_time_rate', 0):.1f}% (edge {sr.get('tiers', {}).get('edge', 0)}, cloud "
-             f"{sr.get('tiers', {}).get('cloud', 0)}), utility {sr.get('utility', 0):.0f}, cloud cost "
-             f"{sr.get('cloud_cost', 0):.0f}; " + ", ".join(f"{k} {v}" for k, v in st.items() if v)
-             + (f"; {recorded} task records in the recording" if chans else "")]
-    for ev in (sr.get("cloud") or {}).get("losses", []):
+    """The analytics scheduler's headline (tasks, on-time rate, tiers, utility, cloud cost, states) and its cloud
+    executors lost. With a recording whose accounting tallies the task records (``acc["tasks"]``,
+    :mod:`aerodaas.recording.task_tally`) the headline is the recording's, which survives dispatcher restarts, and
+    the dispatchers' own count (``sr``, which restarts with their actor) is shown only where it differs; without
+    one it is the dispatchers' own counts, with the task records in the recording when there is one."""
+    tally = acc.get("tasks") if isinstance(acc.get("tasks"), dict) else None
+    lines = []
+    if tally is None:
+        if sr:
+            chans = acc.get("channels") or {}
+            recorded = sum(c["recorded"] for t, c in chans.items() if t.endswith("/tasks"))
+            lines.append(_headline(sr.get("scheduler"), f"{sr.get('submitted', 0)} tasks", sr.get("on_time_rate", 0),
+                                   sr.get("tiers") or {}, sr.get("utility", 0), sr.get("cloud_cost", 0),
+                                   sr.get("states") or {})
+                         + (f"; {recorded} task records in the recording" if chans else ""))
+    else:
+        names = list(tally) or ([sr.get("scheduler")] if sr and sr.get("submitted") else [])
+        for name in names:
+            lines.append(_recorded_headline(name, tally.get(name) or {}, sr, len(names)))
+    for ev in ((sr or {}).get("cloud") or {}).get("losses", []):
         lines.append(f"    cloud executor {ev.get('name')} lost at {ev.get('at_s', 0):.1f} s ({ev.get('error')}): "
                      f"{ev.get('in_flight', 0)} tasks in flight, {ev.get('retried', 0)} retried, "
                      f"{ev.get('failed', 0)} failed")
     return lines
+
+
+def _recorded_headline(name: str, t: dict, sr: dict | None, schedulers: int) -> str:
+    """The headline of scheduler ``name`` from the recording's tally ``t`` (``TaskCounts.as_dict``), with its
+    dispatchers' own count from ``sr`` when it differs (a dispatcher actor restarted: its counts began at 0 again;
+    or task records were lost). ``schedulers``: how many schedulers the tally has (more than one: ``sr``, a merged
+    report, cannot be told apart and is not compared)."""
+    n = int(t.get("tasks", 0))
+    line = _headline(name, f"{n} tasks (from the recording)", (t.get("on_time", 0) / n) if n else 0.0,
+                     t.get("tiers") or {}, t.get("utility", 0), (t.get("cost_by_tier") or {}).get("cloud", 0),
+                     t.get("states") or {})
+    own = sr.get("submitted") if sr and schedulers == 1 and sr.get("scheduler") == name else None
+    if own is None and sr is None:
+        return line + "; its dispatchers did not report"
+    if own is not None and own != n:
+        why = "since their last restart" if own < n else f"{own - n} more than the recording holds: task records lost"
+        line += f"; its dispatchers counted {own} ({why})"
+    return line
+
+
+def _headline(name: Any, tasks: str, on_time: float, tiers: dict, utility: float, cloud_cost: float,
+              states: dict) -> str:
+    """``  analytics scheduler DEMS: <tasks>, on time x% (edge e, cloud c), utility U, cloud cost C; <states>``
+    (``on_time``: a fraction; the states with a count, in :data:`_STATE_ORDER`, then any other)."""
+    order = [k for k in _STATE_ORDER if k in states] + sorted(k for k in states if k not in _STATE_ORDER)
+    return (f"  analytics scheduler {name}: {tasks}, on time {100 * (on_time or 0):.1f}% (edge {tiers.get('edge', 0)}, "
+            f"cloud {tiers.get('cloud', 0)}), utility {utility or 0:.0f}, cloud cost {cloud_cost or 0:.0f}; "
+            + ", ".join(f"{k} {states[k]}" for k in order if states[k]))
 
 
 def _recording_lines(result: Any) -> list[str]:

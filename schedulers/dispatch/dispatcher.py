@@ -463,9 +463,12 @@ class AnalyticsDispatcher:
         if state is TaskState.DONE_ON_TIME:
             self.ontime_by_model[task.model] += 1
         charged = state in _DONE_STATES or state is TaskState.FAILED
+        task.utility, task.cost = u, 0.0  # on the task too: its record carries them (the recording's tally)
         if charged and task.tier == "cloud":
+            task.cost = profile.cloud_cost
             self.cloud_cost += profile.cloud_cost
         elif charged and task.tier == "edge":
+            task.cost = profile.edge_cost
             self.edge_cost += profile.edge_cost
         self.states[state.value] += 1
         self.tiers[task.tier or "none"] += 1
