@@ -16,7 +16,7 @@ from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
 from aerodaas.actors.dataplane import Cascade, DataPlane
 from aerodaas.navigation.gimbal import camera_angles, quaternion_from_euler, wrap_deg
-from aerodaas.video.pose import angles_at, pose_at
+from aerodaas.video.pose import angles_at, pose_sampled_at
 
 
 class CameraComponent:
@@ -243,9 +243,12 @@ class CameraComponent:
         return FramePose(position=position, yaw=heading, camera_pitch=pitch)
 
     def _from_stream(self, t: float) -> tuple[np.ndarray, FramePose, dict] | None:
-        """The stream's newest frame not delivered before, its pose at capture and its timing (run-clock s), or
-        None. Its capture time on the run clock is the tick time ``t`` minus the frame's age (the run clock of a
-        stream camera runs at wall rate: speedup 1, checked before Ray)."""
+        """The stream's newest frame not delivered before, its pose at capture and its timing, or None. Its capture
+        time on the run clock is the tick time ``t`` minus the frame's age (the run clock of a stream camera runs at
+        wall rate: speedup 1, checked before Ray). The timing (``aerodaas.FrameTiming``): ``capture_t``,
+        ``arrival_t``, ``pose_t`` (run-clock s), ``age_ms``, ``stream_seq``, the vehicle pose at capture
+        (``position`` ENU m, ``yaw`` ENU deg) and ``pose_samples_t``: the run times (s) of the two ticks' poses it
+        was interpolated between, or of the one used outside them."""
         for ev in self.stream.drain_events():
             if self.on_event is not None:
                 self.on_event(ev.kind, sensor=self.sensor_id, **ev.fields)
@@ -259,11 +262,14 @@ class CameraComponent:
         capture_t = max(t - max(0.0, now - f.capture_mono), self._last_capture_t + 1e-6)
         arrival_t = max(t - max(0.0, now - f.arrival_mono), capture_t)
         self._last_capture_t = capture_t
-        position, yaw, pose_t = pose_at(list(self._poses), capture_t)
+        position, yaw, pose_t, samples_t = pose_sampled_at(list(self._poses), capture_t)
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         self.latency_ms.append((now - f.capture_mono) * 1e3)
+        # the pose itself and the ticks it came from, so that the recording can show it is the capture's
         return f.image, pose, {"capture_t": capture_t, "arrival_t": arrival_t, "pose_t": pose_t,
-                               "stream_seq": f.seq, "age_ms": round((now - f.capture_mono) * 1e3, 2)}
+                               "stream_seq": f.seq, "age_ms": round((now - f.capture_mono) * 1e3, 2),
+                               "position": [float(c) for c in position], "yaw": float(yaw),
+                               "pose_samples_t": list(samples_t)}
 
     def close(self) -> None:
         """Stop the video stream's reader (if any) and record its final counters on ``<topic>/video_stats``

@@ -15,9 +15,9 @@ import pytest
 from aerodaas.config import ConfigError
 from aerodaas.config.robot import SensorConfig
 from aerodaas.video import CaptureClock, StreamReader, VideoSourceError, parse_stream_source
-from aerodaas.video.pose import pose_at
-from .conftest import REPO, needs_data
-from .video_rig import Sender, free_udp_port, make_footage
+from aerodaas.video.pose import pose_at, pose_sampled_at
+from .conftest import DATA_MISSING, REPO, needs_data, skip_or_fail
+from .video_rig import RtspServer, Sender, check_pose_tags, free_udp_port, make_footage
 
 
 @pytest.mark.parametrize("source,kind,fmt", [
@@ -115,6 +115,57 @@ def test_pose_at_interpolates_between_samples_and_along_the_short_yaw_arc():
     assert pose_at(poses, -1.0)[2] == 0.0 and pose_at(poses, 9.0)[2] == 0.2  # clamped: says which sample
 
 
+def test_pose_sampled_at_names_the_samples_it_used():
+    poses = [(0.0, (0.0, 0.0, 10.0), 0.0), (0.1, (1.0, 0.0, 10.0), 10.0), (0.2, (2.0, 0.0, 10.0), 20.0)]
+    pos, yaw, t, samples = pose_sampled_at(poses, 0.15)
+    assert pos == pytest.approx((1.5, 0.0, 10.0)) and yaw == pytest.approx(15.0) and (t, samples) == (0.15, (0.1, 0.2))
+    assert pose_sampled_at(poses, 0.3)[2:] == (0.2, (0.2,)) and pose_sampled_at([], 1.0)[3] == ()
+
+
+def _flight_timing(pose_of: str, latency_s: float = 0.5, speed: float = 5.0) -> tuple[list, list]:
+    """A fabricated stream run: a drone flying east at ``speed`` m/s while swaying north (position
+    (speed t, 2 sin t, 16) m), its 10 Hz odometry, the camera's poses at its 20 Hz ticks, and a 10 fps stream whose
+    frames arrive ``latency_s`` after capture. Each frame's FrameTiming is tagged as the camera does
+    (:func:`pose_sampled_at` on the ticks) at ``pose_of``: ``capture`` (right), ``arrival`` (the newest pose: wrong),
+    or ``arrival_relabelled`` (the arrival's position under the capture's sample times). Returns (timing,
+    odometry)."""
+    import math
+
+    def state(t):
+        return (speed * t, 2.0 * math.sin(t), 16.0), (speed, 2.0 * math.cos(t), 0.0)
+
+    odometry = [{"t": k / 10, "position": list(state(k / 10)[0]), "velocity": list(state(k / 10)[1])}
+                for k in range(201)]
+    ticks = [(k / 20, state(k / 20)[0], 0.0) for k in range(401)]
+    timing = []
+    for k in range(5, 190):
+        capture = k / 10 + 0.013
+        arrival = capture + latency_s
+        known = [p for p in ticks if p[0] <= arrival]  # what the camera has at the frame's hand-off
+        pos, yaw, pose_t, samples = pose_sampled_at(known, arrival if pose_of != "capture" else capture)
+        if pose_of == "arrival_relabelled":
+            samples = pose_sampled_at(known, capture)[3]
+        timing.append({"seq": k, "capture_t": capture, "arrival_t": arrival, "pose_t": pose_t, "position": list(pos),
+                       "yaw": yaw, "pose_samples_t": list(samples)})
+    return timing, odometry
+
+
+def test_the_pose_tag_check_fails_on_a_pose_taken_at_arrival():
+    """tests/video_rig.check_pose_tags (what every stream run's recording is judged by) passes the camera's own
+    tagging and fails a pose taken at the frame's arrival instead of its capture, by its sample times and, when
+    those are relabelled, by its position against the odometry (0.5 s late at 5 m/s: 2.5 m, beyond the 1.7 m the
+    sample gaps allow)."""
+    timing, odometry = _flight_timing("capture")
+    got = check_pose_tags(timing, odometry)
+    assert got["compared"] == got["judged"] > 150 and got["worst_m"] < 0.05
+    with pytest.raises(AssertionError, match=r"pose from the ticks at \[.*\] s, captured at"):
+        check_pose_tags(*_flight_timing("arrival"))
+    with pytest.raises(AssertionError, match=r"m from the odometry there"):
+        check_pose_tags(*_flight_timing("arrival_relabelled"))
+    with pytest.raises(AssertionError, match=r"pose from the ticks at"):  # the newest tick's, 0.19 s after capture
+        check_pose_tags(*_flight_timing("arrival", latency_s=0.2))
+
+
 def test_angles_at_interpolates_each_angle_along_the_short_arc():
     from aerodaas.video.pose import angles_at
 
@@ -153,9 +204,8 @@ def test_a_stream_frame_carries_the_gimbal_attitude_of_its_capture_time():
 
 @pytest.fixture(scope="module")
 def footage(tmp_path_factory):
-    if not (Path(__import__("os").environ.get("AERODAAS_DATA_DIR", REPO.parent / "shared" / "data")) /
-            "imagery").is_dir():
-        pytest.skip("shared data not found (set AERODAAS_DATA_DIR)")
+    if DATA_MISSING is not None:
+        skip_or_fail(DATA_MISSING)
     return make_footage(tmp_path_factory.mktemp("video") / "pan.mp4", seconds=3.0)
 
 
@@ -189,33 +239,110 @@ def test_a_file_plays_at_its_rate_looped_each_frame_delivered_once(footage):
     assert frames[0].image.shape == (240, 320, 3) and not frames[0].image.flags.writeable
 
 
-@needs_data
-@pytest.mark.parametrize("scheme", ["udp", "rtp"])
-def test_a_udp_stream_survives_an_outage_with_events(footage, scheme):
-    """MPEG-TS and QGC-style RTP H.264 (no SDP from the sender) on UDP: frames arrive, the sender dies (a link
-    outage), video_lost is queued; it comes back, video_restored with the outage; no frame delivered twice."""
-    port = free_udp_port()
-    url = f"{scheme}://127.0.0.1:{port}"
-    sender = Sender(footage, url).start()
-    r = StreamReader(parse_stream_source(url), 320, 240, stall_timeout_s=1.0).start()
-    try:
-        r.wait_first(60)
-        before, _ = _pump(r, lambda f, e: len(f) >= 5)
-        sender.stop()
-        _, lost = _pump(r, lambda f, e: any(x.kind == "video_lost" for x in e))
-        sender.start()
-        after, restored = _pump(r, lambda f, e: any(x.kind == "video_restored" for x in e) and len(f) >= 5)
-    finally:
-        sender.stop()
-        r.close()
-    ev = {e.kind: e for e in lost + restored}
-    assert ev["video_lost"].fields["url"] == url
+def _survive_outage(r: StreamReader, stop, start) -> tuple[list, dict]:
+    """Frames from ``r``; ``stop()`` (the sender or server dies: a link outage) until ``video_lost`` is queued;
+    ``start()`` until ``video_restored`` and frames again (generous deadlines, no timing bound). Returns (the frames
+    taken, the events by kind)."""
+    r.wait_first(60)
+    before, _ = _pump(r, lambda f, e: len(f) >= 5)
+    stop()
+    _, lost = _pump(r, lambda f, e: any(x.kind == "video_lost" for x in e))
+    start()
+    after, restored = _pump(r, lambda f, e: any(x.kind == "video_restored" for x in e) and len(f) >= 5)
+    return before + after, {e.kind: e for e in lost + restored}
+
+
+def _assert_survived(r: StreamReader, frames: list, ev: dict, source: str) -> None:
+    """One outage of ``source``, both events naming it, counters that add up, no frame delivered twice."""
+    assert ev["video_lost"].fields["url"] == source
     assert ev["video_restored"].fields["outage_s"] > 0 and ev["video_restored"].mono > ev["video_lost"].mono
-    seqs = [f.seq for f in before + after]
+    seqs = [f.seq for f in frames]
     assert seqs == sorted(set(seqs))
     st = r.stats()
-    assert (st["lost"], st["restored"]) == (1, 1) and st["decoded"] == st["taken"] + st["overwritten"] + st["waiting"]
-    assert all(f.capture_mono <= f.arrival_mono for f in before + after)
+    assert (st["lost"], st["restored"]) == (1, 1) and st["decoded"] == st["taken"] + st["overwritten"] + st["waiting"], \
+        (st, ev)
+    assert all(f.capture_mono <= f.arrival_mono for f in frames)
+    assert frames[0].image.shape == (240, 320, 3)
+
+
+@needs_data
+@pytest.mark.parametrize("scheme,codec", [("udp", "h264"), ("rtp", "h264"), ("rtp", "h265")])
+def test_a_udp_stream_survives_an_outage_with_events(footage, scheme, codec):
+    """MPEG-TS and QGC-style RTP H.264 and H.265 (RFC 7798; no SDP from the sender) on UDP: frames arrive, the
+    sender dies (a link outage), video_lost is queued; it comes back, video_restored with the outage; no frame
+    delivered twice."""
+    url = f"{scheme}://127.0.0.1:{free_udp_port()}"
+    sender = Sender(footage, url, codec).start()
+    r = StreamReader(parse_stream_source(url, codec=codec if scheme == "rtp" else None), 320, 240,
+                     stall_timeout_s=1.0).start()
+    try:
+        frames, ev = _survive_outage(r, sender.stop, sender.start)
+    finally:  # the reader first: a server stopping under it would be a second outage
+        r.close()
+        sender.stop()
+    _assert_survived(r, frames, ev, url)
+
+
+@needs_data
+def test_an_sdp_file_describes_the_senders_rtp(footage, tmp_path):
+    """``source: /path/cam.sdp``: the sender's own SDP file (RFC 4566; H.264 payload 96 with RFC 6184's
+    packetization-mode 1, as FFmpeg's and GStreamer's senders write it), here written by hand for the rig's RTP
+    sender; read, through an outage, like raw RTP."""
+    port = free_udp_port()
+    sdp = tmp_path / "cam.sdp"
+    sdp.write_text("v=0\r\no=- 0 0 IN IP4 127.0.0.1\r\ns=rig sender\r\nc=IN IP4 127.0.0.1\r\nt=0 0\r\n"
+                   f"m=video {port} RTP/AVP 96\r\na=rtpmap:96 H264/90000\r\na=fmtp:96 packetization-mode=1\r\n")
+    spec = parse_stream_source(str(sdp))
+    assert (spec.kind, spec.url, spec.live) == ("sdp", str(sdp), True)
+    sender = Sender(footage, f"rtp://127.0.0.1:{port}").start()
+    r = StreamReader(spec, 320, 240, stall_timeout_s=1.0).start()
+    try:
+        frames, ev = _survive_outage(r, sender.stop, sender.start)
+    finally:  # the reader first: a server stopping under it would be a second outage
+        r.close()
+        sender.stop()
+    _assert_survived(r, frames, ev, str(sdp))
+
+
+def _udp_sockets() -> set[str]:
+    """The inodes of the UDP sockets this process holds (its /proc/self/fd against /proc/net/udp and udp6)."""
+    import os
+
+    inodes = set()
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        with open(table) as f:
+            inodes |= {line.split()[9] for line in list(f)[1:]}
+    held = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:[") and target[8:-1] in inodes:
+            held.add(target[8:-1])
+    return held
+
+
+@needs_data
+def test_rtsp_with_udp_transport_survives_a_server_outage(footage):
+    """``transport: "udp"``: the RTSP session (GStreamer's gst-rtsp-server) carries its RTP on UDP client ports —
+    this process holds at least two more UDP sockets (RTP and RTCP) while it reads — and the server's death and
+    return are an outage like any other."""
+    server = RtspServer(footage)
+    try:
+        server.start()
+    except AssertionError as e:  # the rig's Debian packages are missing: fails in CI
+        skip_or_fail(str(e))
+    idle = _udp_sockets()
+    r = StreamReader(parse_stream_source(server.url, transport="udp"), 320, 240, stall_timeout_s=1.0).start()
+    try:
+        r.wait_first(60)
+        assert len(_udp_sockets() - idle) >= 2, "the RTSP session's media is not on UDP"
+        frames, ev = _survive_outage(r, server.stop, server.start)
+    finally:  # the reader first: a server stopping under it would be a second outage
+        r.close()
+        server.stop_all()
+    _assert_survived(r, frames, ev, server.url)
 
 
 def test_no_first_frame_is_an_error_naming_the_url():

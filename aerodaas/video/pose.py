@@ -2,7 +2,7 @@
 
 A stream frame arrives 20-300 ms after its capture while the drone moves (at 5 m/s, 0.5-1.5 m): geo-locating its
 detections with the newest pose puts them that far off. :func:`pose_at` interpolates the pose at the capture time
-between the samples around it.
+between the samples around it; :func:`pose_sampled_at` also says which samples those were.
 """
 from __future__ import annotations
 
@@ -14,15 +14,25 @@ def pose_at(poses: Sequence[tuple[float, tuple, float]], t: float) -> tuple[tupl
     order: linear between the two samples around ``t`` (yaw along the shorter arc, result in [-180, 180)),
     the oldest/newest sample outside them. Returns (position, yaw deg, the time the pose is of: ``t`` when
     interpolated, else the sample's). An empty ``poses`` gives the origin at ``t``."""
+    position, yaw, pose_t, _ = pose_sampled_at(poses, t)
+    return position, yaw, pose_t
+
+
+def pose_sampled_at(poses: Sequence[tuple[float, tuple, float]], t: float
+                    ) -> tuple[tuple, float, float, tuple[float, ...]]:
+    """:func:`pose_at`, and the run times (s) of the samples the pose came from: the two around ``t`` it was
+    interpolated between, the one sample used outside them, or () for no samples. Returns (position ENU m, yaw
+    deg, the time the pose is of, sample times) — what a frame's timing records so that a check of its pose tag
+    can see which samples were used, not only the time it was asked for."""
     if not poses:
-        return (0.0, 0.0, 0.0), 0.0, t
+        return (0.0, 0.0, 0.0), 0.0, t, ()
     lo, hi, a = _bracket([p[0] for p in poses], t)
     if hi is None:  # outside the samples: the nearest one, and its time
-        return tuple(poses[lo][1]), poses[lo][2], poses[lo][0]
-    (_, p0, y0), (_, p1, y1) = poses[lo], poses[hi]
+        return tuple(poses[lo][1]), poses[lo][2], poses[lo][0], (poses[lo][0],)
+    (t0, p0, y0), (t1, p1, y1) = poses[lo], poses[hi]
     dy = (y1 - y0 + 180.0) % 360.0 - 180.0
     pos = tuple(float(c0 + a * (c1 - c0)) for c0, c1 in zip(p0, p1))
-    return pos, (y0 + a * dy + 180.0) % 360.0 - 180.0, t
+    return pos, (y0 + a * dy + 180.0) % 360.0 - 180.0, t, (t0, t1)
 
 
 def angles_at(samples: Sequence[tuple[float, tuple[float, ...]]], t: float) -> tuple[tuple[float, ...], float] | None:
