@@ -310,10 +310,12 @@ def _cmd_layout(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from aerodaas.recording.video_summary import format_video_streams, video_streams
     from aerodaas.recording.writer import summarize_mcap
 
     try:
         s = summarize_mcap(args.file)
+        s["video"] = video_streams(args.file, s["channels"])  # stream cameras: counters, capture-to-hand-off
     except (OSError, ValueError) as e:
         print(f"aerodaas info: {e}", file=sys.stderr)
         return 2
@@ -333,6 +335,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
         for topic, n in acc["lost"].items():
             c = acc["channels"][topic]
             print(f"  {topic:<{w}}  {n} lost, {c['recorded']} of {c['produced'] - c['duplicates']} recorded")
+    if s["video"]:
+        print("\n".join(["video streams:"] + format_video_streams(s["video"])))
     return 0
 
 
