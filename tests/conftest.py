@@ -42,6 +42,9 @@ def _shared_data() -> None:
 #: a test (or, as ``pytestmark``, a module) that reads the shared imagery or the detector model: skipped without
 #: them, failed in CI (:func:`skip_or_fail`)
 needs_data = pytest.mark.usefixtures("_shared_data")
+#: the same for one case of a parametrized test (``pytest.param(..., marks=needs_data_case)``, which cannot take a
+#: fixture): skipped without the data, run in CI, where it then fails on the missing file
+needs_data_case = pytest.mark.skipif(DATA_MISSING is not None and not os.environ.get("CI"), reason=str(DATA_MISSING))
 
 
 #: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs and

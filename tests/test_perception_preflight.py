@@ -16,7 +16,7 @@ from aerodaas.analytics.detector import ObjectDetector
 from aerodaas.perception.tiling import Tiling
 from aerodaas.perception.tracking import ByteTrackConfig
 
-from .conftest import needs_data
+from .conftest import needs_data_case
 from .test_app_value import _ray_processes_under, fresh_ray_tmp
 
 APP = """from aerodaas import *
@@ -70,14 +70,14 @@ def _assert_refused_before_ray(p, ray_tmp, message):
     assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []
 
 
-@pytest.mark.parametrize("args,message", CASES + [pytest.param(*c, marks=needs_data) for c in NEEDS_MODEL],
+@pytest.mark.parametrize("args,message", CASES + [pytest.param(*c, marks=needs_data_case) for c in NEEDS_MODEL],
                          ids=[a.split(", ", 1)[1] for a, _ in CASES + NEEDS_MODEL])
 def test_plan_refuses_a_bad_detector_setting(tmp_path, args, message):
     p, ray_tmp = _cli(tmp_path, "plan", _app(tmp_path, args))
     _assert_refused_before_ray(p, ray_tmp, message)
 
 
-@pytest.mark.parametrize("args,message", [CASES[0], CASES[2], CASES[4], pytest.param(*NEEDS_MODEL[0], marks=needs_data)],
+@pytest.mark.parametrize("args,message", [CASES[0], CASES[2], CASES[4], pytest.param(*NEEDS_MODEL[0], marks=needs_data_case)],
                          ids=["tile=16", "score_threshold=15", "missing model file", "unknown class"])
 def test_run_refuses_a_bad_detector_setting_before_ray(tmp_path, args, message):
     p, ray_tmp = _cli(tmp_path, "run", _app(tmp_path, args))
