@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["MAX_GROUPS", "available", "prepare", "solve", "warm_up"]
+__all__ = ["MAX_GROUPS", "available", "prepare", "solve", "status", "warm_up"]
 
 #: the most task groups a uint64 mask holds
 MAX_GROUPS = 64
@@ -46,6 +46,21 @@ def available() -> bool:
             _kernel = kernel
             _prepare = prepare
     return _kernel is not None
+
+
+def status() -> dict:
+    """Whether LAPLAN's planner runs compiled in this process, for a benchmark's JSON (it shapes results: only
+    compiled are plans above :data:`MAX_GROUPS` task groups reduced to fit the kernel, else the Python DP solves
+    them whole): ``{"compiled": bool, "why_not": None | str}``, ``why_not`` naming ``AERODAAS_NO_JIT`` or the
+    import error of numba. Calls :func:`available` (imports numba on the first call: about a second)."""
+    compiled = available()
+    if compiled:
+        why = None
+    elif os.environ.get("AERODAAS_NO_JIT"):
+        why = "AERODAAS_NO_JIT is set"
+    else:
+        why = f"{type(_state['error']).__name__}: {_state['error']}"
+    return {"compiled": compiled, "why_not": why}
 
 
 def solve(rel, proc, bit, vstart, latest, best, gains, eps: float):

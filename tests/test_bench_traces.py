@@ -200,12 +200,12 @@ def test_trace_parameters_a_kind_does_not_use_are_refused():
 
 
 def test_the_cli_takes_the_bursty_trace_options(tmp_path):
-    from aerodaas.bench.schedulers_cli import _trace_spec, add_parser
+    from aerodaas.bench.schedulers_cli import add_parser, trace_spec
     import argparse
 
     sub = argparse.ArgumentParser().add_subparsers()
     p = add_parser(sub)
     args = p.parse_args(["--harness", "--trace", "onoff", "--trace-on-s", "2", "--trace-off-s", "4"])
-    assert _trace_spec(args) == TraceSpec("onoff", on_s=2.0, off_s=4.0)
+    assert trace_spec(args) == TraceSpec("onoff", on_s=2.0, off_s=4.0)
     with pytest.raises(ValueError, match="takes no"):
-        _trace_spec(p.parse_args(["--harness", "--trace", "periodic", "--trace-stall-s", "1"]))
+        trace_spec(p.parse_args(["--harness", "--trace", "periodic", "--trace-stall-s", "1"]))

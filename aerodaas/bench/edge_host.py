@@ -43,8 +43,11 @@ class EdgeHost:
         self.clock: Clock | None = None
 
     async def info(self) -> dict:
-        """Where this host runs: ``name``, ``pid``, ``node_id``, node ``labels``."""
-        return {"name": self.name, **where()}
+        """Where this host runs: ``name``, ``pid``, ``node_id``, node ``labels``, and whether LAPLAN's planner runs
+        compiled here (``laplan_planner``: :func:`aerodaas.schedulers.single_machine_jit.status`)."""
+        from aerodaas.schedulers import single_machine_jit
+
+        return {"name": self.name, **where(), "laplan_planner": single_machine_jit.status()}
 
     async def configure(self, *, scheduler: str, workload: Workload, edge_ids: Sequence[str],
                         cloud_executors: Sequence[Any] = (), start_epoch: float | None = None,

@@ -284,7 +284,9 @@ def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, rep
     return {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
             "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
             "trace": asdict(trace_spec) if trace_spec is not None else None,
-            "edge_jitter": edge_jitter, "cloud_jitter": cloud_jitter,
+            # the jitter the measured runs used: a --cloud-sigma sweep replaces it (the CLI refuses the two together)
+            "edge_jitter": edge_jitter,
+            "cloud_jitter": cloud_jitter if jitters[0][0] is None else "lognormal:<cloud_sigma>",
             "network_variability": list(network or []), "network": NetworkModel.parse(network, seed).describe(),
             "cloud_nodes": cloud_nodes if not address else None, "address": address,
             "edge_hosts": n_hosts, "cloud_executors": n_cloud, "workload": str(wpath), "mode": "emulated",
@@ -441,10 +443,21 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
                           edge_jitter, cloud_jitter, network, seed, cloud_nodes, address, n_hosts, len(cloud), wpath,
                           reply_lead_ms, jitters, scen, options, emulation_bound_ms, drain_s),
         "cluster": {"nodes": nodes, "edge_hosts": host_info, "cloud_executors": cloud_info},
+        "laplan_planner": _planner_of(host_info),
         "arrival_process": _arrival_process(trace_spec, fps, drones_per_edge),
         "runs": results, "results": summarize_runs(results), "emulation": _emulation_summary(results),
         "wall_s": time.time() - t_all,
     }
+
+
+def _planner_of(host_info: list[dict]) -> dict:
+    """Whether LAPLAN's planner ran compiled where the policies ran, the edge host actors (their ``info``; see
+    :func:`aerodaas.schedulers.single_machine_jit.status`): compiled only if on every host, ``why_not`` the first
+    host's reason otherwise, and each host's own value in ``per_host``."""
+    per = [h["laplan_planner"] for h in host_info]
+    return {"compiled": all(p["compiled"] for p in per),
+            "why_not": next((p["why_not"] for p in per if not p["compiled"]), None),
+            "per_host": {h["name"]: h["laplan_planner"]["compiled"] for h in host_info}}
 
 
 def _with_repeats(reps: list[dict]) -> dict:

@@ -112,14 +112,17 @@ def _policy_options(p: argparse.ArgumentParser) -> None:
                         "(LAPLAN); repeatable")
 
 
-def _trace_options(p: argparse.ArgumentParser) -> None:
-    """``aerodaas bench schedulers`` options: the arrival trace."""
+def trace_options(p: argparse.ArgumentParser, default: str = "periodic") -> None:
+    """The arrival trace's options (``--trace KIND`` and its ``--trace-*`` parameters, read back with
+    :func:`trace_spec`) on ``p``: ``aerodaas bench schedulers`` and ``python -m aerodaas.bench.decision_time``
+    (``default``: the kind without ``--trace``)."""
     g = p.add_argument_group("the arrival trace")
-    g.add_argument("--trace", default="periodic", metavar="KIND",
-                   help="arrival process: periodic (default), realistic (jittered gaps, dropped frames, drones joining "
+    g.add_argument("--trace", default=default, metavar="KIND",
+                   help="arrival process: periodic, realistic (jittered gaps, dropped frames, drones joining "
                         "mid-run), pareto (heavy-tailed gaps), onoff (bursts and silences), flush (a link that stalls "
                         "and flushes its buffered frames) or recording:FILE.mcap (the camera-frame gaps of a "
-                        "recording, scaled to --fps); every kind keeps the mean rate --fps")
+                        "recording, scaled to the frame rate); every kind keeps the mean frame rate (default "
+                        "%(default)s)")
     g.add_argument("--trace-jitter", type=float, metavar="FRACTION",
                    help="realistic: each frame gap x (1 + U(-f, f)) (default 0.2)")
     g.add_argument("--trace-drop", type=float, metavar="P", help="realistic/recording: frame loss probability "
@@ -156,8 +159,8 @@ def _runtime_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--network-variability", action="append", metavar="SPEC",
                    help="extra cloud latency: const:MS, normal:MEAN,SD, lognormal:MEDIAN,SIGMA, +MS@T1-T2 (episode, "
                         "seconds), walk:STEP,MAX[,EVERY]; repeatable")
-    g.add_argument("--cloud-jitter", help="runtime: cloud hold jitter (default lognormal:0.1; --harness sweeps "
-                                          "--cloud-sigma instead)")
+    g.add_argument("--cloud-jitter", help="runtime: cloud hold jitter (default lognormal:0.1; not with --cloud-sigma, "
+                                          "which sweeps lognormal jitters instead, as --harness does)")
     g.add_argument("--cloud-nodes", type=int, help="runtime: cloud nodes of the local cluster (default 1)")
     g.add_argument("--edge-hosts", type=_positive_int,
                    help="edge host actors (default: CPUs + 1, at most one per edge)")
@@ -195,7 +198,7 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
                     "HEAVY also the exact offline optimum and the non-anticipative bound).")
     _fleet_options(p)
     _policy_options(p)
-    _trace_options(p)
+    trace_options(p)
     _harness_options(p)
     _runtime_options(p)
     _output_options(p)
@@ -208,9 +211,9 @@ TRACE_PARAMS = ("jitter", "drop", "joins", "leaves", "alpha", "on_s", "off_s", "
                 "flush_gap_ms")
 
 
-def _trace_spec(args: argparse.Namespace):
-    """The :class:`aerodaas.bench.traces.TraceSpec` of the ``--trace*`` options (ValueError naming the field, and
-    for an option the kind does not use)."""
+def trace_spec(args: argparse.Namespace):
+    """The :class:`aerodaas.bench.traces.TraceSpec` of the ``--trace*`` options of :func:`trace_options`. Raises
+    ValueError naming the field, and for an option the kind does not use."""
     from aerodaas.bench.traces import TraceSpec
 
     return TraceSpec.parse(args.trace, **{k: getattr(args, f"trace_{k}") for k in TRACE_PARAMS})
@@ -232,6 +235,44 @@ def unused_options(args: argparse.Namespace) -> list[str]:
     return [opt for attr, opt in other.items() if getattr(args, attr, None) not in (None, False)]
 
 
+#: the scheduler options with an option of their own (attribute -> option), like ``--option KEY=JSON``: refused when
+#: no scheduler of the run takes them (issue 41.4: `--estimator` with EDGE_EDF alone was accepted and did nothing)
+SCHEDULER_OPTIONS = {"estimator": "--estimator", "eviction_scan": "--eviction-scan"}
+
+
+def refused(args: argparse.Namespace) -> str | None:
+    """Why the options given cannot run as asked (the message names every option concerned), None when they can:
+    an option the chosen mode does not use (:func:`unused_options`), ``--cloud-sigma`` with ``--cloud-jitter`` on
+    the runtime (the sigma sweep replaces the jitter: one of the two would be ignored), and a scheduler option
+    (``--estimator``, ``--eviction-scan``, ``--option KEY``) that no scheduler of the run takes (the run's
+    schedulers: ``--schedulers``, else the mode's default set), or an unknown scheduler name."""
+    from aerodaas.schedulers.analytics_base import iter_schedulers
+
+    unused = unused_options(args)
+    if unused:  # an option this mode does not use would be silently ignored: its result would not be what was asked
+        mode, other = ("--harness", "the runtime (without --harness)") if args.harness else \
+            ("the runtime", "--harness")
+        return (f"{', '.join(unused)}: not used by {mode} (only by {other}); drop "
+                f"{'it' if len(unused) == 1 else 'them'}")
+    if not args.harness and args.cloud_sigma and args.cloud_jitter:
+        return ("--cloud-sigma, --cloud-jitter: --cloud-sigma sweeps lognormal cloud jitters in place of "
+                "--cloud-jitter, which would be ignored; give one of the two")
+    if args.schedulers is None and args.harness:
+        from aerodaas.bench.sweep import DEFAULT_SCHEDULERS as names
+    else:
+        names = args.schedulers
+    try:
+        classes = iter_schedulers(names)
+    except ValueError as e:
+        return str(e)
+    given = [(opt, attr) for attr, opt in SCHEDULER_OPTIONS.items() if getattr(args, attr, None) is not None]
+    given += [(f"--option {key}", key) for key, _ in args.option]
+    for opt, key in given:  # an option no scheduler of the run has is a typo or a no-op, not a setting
+        if not any(key in cls.options for cls in classes):
+            return f"{opt}: no scheduler of this run has it ({', '.join(c.name for c in classes)}); drop it"
+    return None
+
+
 def _run_harness(args: argparse.Namespace, options: dict) -> dict:
     from aerodaas.bench.bound import Budget
     from aerodaas.bench.sweep import run_sweep
@@ -245,7 +286,7 @@ def _run_harness(args: argparse.Namespace, options: dict) -> dict:
                      seeds=list(range(args.seed, args.seed + args.seeds)), drones=args.drones,
                      duration_s=args.duration or 120.0, fps=args.fps, schedulers=args.schedulers, options=options,
                      edge_jitter=args.edge_jitter, processes=args.processes, bound=not args.no_bound,
-                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress, trace=_trace_spec(args),
+                     exact_bound_loads=args.exact_bound or ["HEAVY"], progress=progress, trace=trace_spec(args),
                      bound_budget=Budget(args.exact_bound_budget_s or Budget.time_s,
                                          args.exact_bound_memory_mb or Budget.memory_mb))
 
@@ -261,7 +302,7 @@ def _run_runtime(args: argparse.Namespace, options: dict) -> dict:
                              reply_lead_ms=100.0 if args.cloud_reply_lead_ms is None else args.cloud_reply_lead_ms,
                              seeds=args.seeds, cloud_sigmas=args.cloud_sigma, scenarios=args.scenarios,
                              options=options, emulation_bound_ms=args.emulation_bound_ms or EMULATION_BOUND_MS,
-                             trace=_trace_spec(args))
+                             trace=trace_spec(args))
         if args.compare_harness:
             res["harness_comparison"] = compare_with_harness(res)
         if out is None:
@@ -288,19 +329,10 @@ def _significant(x, digits: int):
 def _cmd(args: argparse.Namespace) -> int:
     options = {k: v for k, v in (("estimator", args.estimator), ("eviction_scan", args.eviction_scan)) if v}
     options.update(args.option)
-    from aerodaas.schedulers.analytics_base import iter_schedulers
-
-    unused = unused_options(args)
-    if unused:  # an option this mode does not use would be silently ignored: its result would not be what was asked
-        mode, other = ("--harness", "the runtime (without --harness)") if args.harness else \
-            ("the runtime", "--harness")
-        print(f"aerodaas bench schedulers: {', '.join(unused)}: not used by {mode} (only by {other}); drop "
-              f"{'it' if len(unused) == 1 else 'them'}", file=sys.stderr)
+    why = refused(args)
+    if why:
+        print(f"aerodaas bench schedulers: {why}", file=sys.stderr)
         return 2
-    for key, _ in args.option:  # an option no scheduler of the run has is a typo, not a no-op
-        if not any(key in cls.options for cls in iter_schedulers(args.schedulers)):
-            print(f"aerodaas bench schedulers: --option {key}: no scheduler of this run has it", file=sys.stderr)
-            return 2
     try:
         res = _run_harness(args, options) if args.harness else _run_runtime(args, options)
     except ValueError as e:

@@ -197,6 +197,7 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     default 120 s, 1 GiB): past it the bound is reported "not computed", with the LP bound beside it.
     Raises ValueError for bad parameters, before any work starts."""
     from aerodaas.bench import machine_info
+    from aerodaas.schedulers import single_machine_jit
 
     names = list(schedulers or DEFAULT_SCHEDULERS)
     wpath = _checked(names, loads, sigmas, drones_per_edge, scenarios, seeds, duration_s, edge_jitter, workload_path,
@@ -216,6 +217,9 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     results = aggregate(done, names)
     return {
         "benchmark": "schedulers", "mode": "harness", "machine": machine_info(),
+        # compiled or not shapes LAPLAN's plans (reduced to fit the kernel only then); the workers are this
+        # process's children, with its packages and environment
+        "laplan_planner": single_machine_jit.status(),
         "config": {"schedulers": names, "loads": list(loads), "cloud_sigma": list(sigmas),
                    "drones_per_edge": list(drones_per_edge), "scenarios": list(scenarios),
                    "scenario_loads": scenario_loads, "scenario_specs": {s: SCENARIOS[s] for s in scenarios},
