@@ -311,6 +311,12 @@ class EnvironmentConfig(_Cfg):
         when it was built from a dict: an input of the run, which ``--record`` never overwrites."""
         return self._source_file
 
+    def read_from(self, path: str | os.PathLike) -> "EnvironmentConfig":
+        """Note that this configuration was read from the file ``path`` (made absolute): :attr:`source_file`.
+        Returns self."""
+        self._source_file = str(Path(path).resolve())
+        return self
+
     @field_validator("trajectory_scheduler")
     @classmethod
     def _known_trajectory_scheduler(cls, v: str | None) -> str | None:
@@ -529,8 +535,7 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
     except OSError as e:
         raise ConfigError(f"environment file {str(p)!r}: cannot read ({e.strerror or e})") from None
     cfg = parse_environment_config(data, source=str(p), base_dir=str(p.resolve().parent))
-    cfg._source_file = str(p.resolve())
-    return cfg
+    return cfg.read_from(p)
 
 
 def json_schema() -> dict[str, Any]:
