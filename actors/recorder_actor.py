@@ -247,24 +247,29 @@ class RecorderActor:
             return {}
         if self.losses and self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message
             self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
-        from aerodaas.recording.task_tally import tally_recordings
+        counts, tasks = self._earlier_segments()
+        return self.recorder.close(ledgers=self.ledgers(), recorded_before=counts, run_losses=list(self.losses),
+                                   tasks_before=tasks)
 
-        return self.recorder.close(ledgers=self.ledgers(), recorded_before=self._earlier_counts(),
-                                   run_losses=list(self.losses), tasks_before=tally_recordings(self.segments[:-1]))
-
-    def _earlier_counts(self) -> dict[str, int]:
-        """Topic -> messages in this run's earlier segments (finished by now; an unreadable one counts 0, so its
-        messages count as lost)."""
+    def _earlier_segments(self) -> tuple[dict[str, int], Any]:
+        """What this run's earlier segments (finished by now) hold, each file summarized once: topic -> messages,
+        and their task records tallied per scheduler (a :class:`~aerodaas.recording.task_tally.TaskTally`). An
+        unreadable segment counts 0 messages (they count as lost) and adds the task records read before the
+        error."""
         from aerodaas.recording.reader import summarize_mcap
+        from aerodaas.recording.task_tally import TaskTally, tally_recording
 
         out: dict[str, int] = {}
+        tally = TaskTally()
         for seg in self.segments[:-1]:
             try:
-                for c in summarize_mcap(seg)["channels"]:
+                channels = summarize_mcap(seg)["channels"]
+                for c in channels:
                     out[c["topic"]] = out.get(c["topic"], 0) + c["count"]
+                tally_recording(tally, seg, channels)
             except Exception:  # noqa: BLE001 - unreadable: its messages are not there to count
                 continue
-        return out
+        return out, tally
 
     def recording_report(self) -> dict:
         """:meth:`~aerodaas.actors.recorder.RecorderService.report` plus ``segments`` (the files of this run, in

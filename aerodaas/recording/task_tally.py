@@ -14,7 +14,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
-__all__ = ["TASK_SCHEMA", "TaskCounts", "TaskTally", "tally_recordings"]
+__all__ = ["TASK_SCHEMA", "TaskCounts", "TaskTally", "tally_recording", "tally_recordings"]
 
 #: the JSON schema name of a task record
 TASK_SCHEMA = "aerodaas.AnalyticsTask"
@@ -113,17 +113,28 @@ class TaskTally:
 def tally_recordings(paths: Iterable[str | os.PathLike]) -> TaskTally:
     """The task records in the recordings ``paths`` (segments of a run; finished or not), tallied. A file that
     cannot be read (gone, not an MCAP file, cut inside a record) adds what was read of it before the error."""
-    from aerodaas.recording.reader import read_messages, summarize_mcap
+    from aerodaas.recording.reader import summarize_mcap
 
     tally = TaskTally()
     for p in paths:
         try:
-            topics = [c["topic"] for c in summarize_mcap(p)["channels"] if c["schema"] == TASK_SCHEMA]
-            if not topics:
-                continue
-            for _topic, schema, _t, msg in read_messages(p, topics=topics):
-                if schema == TASK_SCHEMA and isinstance(msg, dict):
-                    tally.add(msg)
+            tally_recording(tally, p, summarize_mcap(p)["channels"])
         except Exception:  # noqa: BLE001 - unreadable: its records are not there to count
             continue
+    return tally
+
+
+def tally_recording(tally: TaskTally, path: str | os.PathLike, channels: list[dict[str, Any]]) -> TaskTally:
+    """Add the task records of the recording ``path`` to ``tally``, reading only its task topics; ``channels`` is
+    its channel list as :func:`aerodaas.recording.reader.summarize_mcap` gives it (``topic``, ``schema``), so that
+    a caller that summarized the file already does not read it twice. Returns ``tally``. Raises what
+    :func:`aerodaas.recording.reader.read_messages` raises for an unreadable file (the records read before the
+    error stay counted)."""
+    from aerodaas.recording.reader import read_messages
+
+    topics = [c["topic"] for c in channels if c["schema"] == TASK_SCHEMA]
+    if topics:
+        for _topic, schema, _t, msg in read_messages(path, topics=topics):
+            if schema == TASK_SCHEMA and isinstance(msg, dict):
+                tally.add(msg)
     return tally
