@@ -17,9 +17,9 @@ __all__ = ["DroneGimbal"]
 class DroneGimbal:
     """The gimbal of robot ``robot_id`` on ``backend``, within ``limits`` (None: the robot has no ``gimbal``
     section, and every command raises :class:`GimbalError`), checked by ``gate``. Attitudes are recorded to
-    ``recorder`` (None: not recorded; stamps from ``t_ns(t)``, ``t`` vehicle seconds) at most at ``rate_hz``;
-    ``event(kind, **fields)`` records the drone's events. ``pending``: commands the application gave before the
-    mission started, carried out by :meth:`start`."""
+    ``recorder`` (None: not recorded; stamps from ``t_ns(t)``, ``t`` vehicle seconds) at ``rate_hz`` and at each
+    command; ``event(kind, **fields)`` records the drone's events. ``pending``: commands the application gave
+    before the mission started, carried out by :meth:`start`."""
 
     def __init__(self, backend: Any, robot_id: str, limits: GimbalLimits | None, gate: SafetyGate, recorder: Any,
                  t_ns: Callable[[float], int], event: Callable[..., None], rate_hz: float = 10.0,
@@ -31,6 +31,7 @@ class DroneGimbal:
         self.topic = f"/{robot_id}/gimbal"
         self.next_t = 0.0
         self.recorded = 0
+        self.recorded_t: float | None = None
         self.sent = 0
         self.latest: proto.GimbalAttitude | None = None
 
@@ -64,6 +65,9 @@ class DroneGimbal:
             self.event("gimbal_refused", error=str(e), **cmd.describe())
             raise
         self.sent += 1
+        # the attitude the command was given from is in the recording even between two of its rate slots
+        if self.latest is not None and self.latest.t != self.recorded_t:
+            self._record(self.latest)
         self.event("gimbal_command", **cmd.describe())
 
     def start(self) -> None:
@@ -78,7 +82,7 @@ class DroneGimbal:
 
     def on_step(self) -> None:
         """After a step of the vehicle: record the attitudes the backend reported (each once, at most at
-        ``rate_hz`` on vehicle time)."""
+        ``rate_hz`` on vehicle time; :meth:`command` also records the attitude it was given from)."""
         if self.limits is None:
             return
         for att in self.backend.drain_gimbal():
@@ -87,9 +91,13 @@ class DroneGimbal:
                 continue
             # the next slot on the period's grid, or (after a gap in the reports) one period after this one
             self.next_t = self.next_t + self.period if att.t < self.next_t + self.period else att.t + self.period
-            self.recorded += 1
-            if self.recorder is not None:
-                self.recorder.json(self.topic, self.t_ns(att.t), att.record(self.robot_id), "aerodaas.GimbalAttitude")
+            self._record(att)
+
+    def _record(self, att: proto.GimbalAttitude) -> None:
+        self.recorded += 1
+        self.recorded_t = att.t
+        if self.recorder is not None:
+            self.recorder.json(self.topic, self.t_ns(att.t), att.record(self.robot_id), "aerodaas.GimbalAttitude")
 
     def attitude(self) -> dict | None:
         """The latest attitude (``aerodaas.GimbalAttitude`` fields), None before the first."""
