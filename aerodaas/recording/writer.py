@@ -29,10 +29,13 @@ its summary/footer but every completed chunk is still readable with :func:`read_
 
 Reading helpers (in :mod:`aerodaas.recording.reader`, re-exported here): :func:`summarize_mcap` (what ``aerodaas info
 FILE.mcap`` prints) and :func:`read_messages`.
+
+The stream between mcap's writer and the file is :class:`aerodaas.recording.chunk_stream.ChunkFlushingStream`; the
+checks of where a recording may be written (:func:`check_record_path`, :func:`is_aerodaas_recording`) are in
+:mod:`aerodaas.recording.record_path` (re-exported here).
 """
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
@@ -65,6 +68,10 @@ from aerodaas.recording.reader import (  # noqa: F401 - the readers and topic na
     METADATA_NAME, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC, read_messages, summarize_mcap,
 )
 from aerodaas.model.types import Detection
+from aerodaas.recording.chunk_stream import ChunkFlushingStream
+from aerodaas.recording.record_path import (  # noqa: F401 - the path checks stay importable from here
+    LIBRARY, MCAP_MAGIC, check_record_path, is_aerodaas_recording,
+)
 from aerodaas.recording.schemas import json_schema_for
 from aerodaas.recording.values import (_check_time, _class_color, _detection_fields, _finite, _jsonable,  # noqa: F401
                             _timestamp, _vec3, camera_mount_quaternion, quaternion_from_euler_deg)
@@ -85,7 +92,6 @@ __all__ = [
 TF_TOPIC = "/tf"
 """Conventional topic for ``foxglove.FrameTransform`` messages."""
 
-LIBRARY = "aerodaas"
 _PERMISSIVE_SCHEMA: dict[str, Any] = {"type": "object"}
 try:  # zstd chunks when zstandard is there (a dependency of mcap)
     import zstandard  # noqa: F401
@@ -93,58 +99,6 @@ try:  # zstd chunks when zstandard is there (a dependency of mcap)
     _COMPRESSION = CompressionType.ZSTD
 except ImportError:  # pragma: no cover
     _COMPRESSION = CompressionType.NONE
-
-
-class _ChunkFlushingStream:
-    """Minimal write-only stream handed to :class:`mcap.writer.Writer`.
-
-    mcap's writer keeps the chunk in progress in memory and writes to its output stream only when a record leaves
-    the writer: the header, a metadata record, a completed chunk (plus its message indexes), or the summary and
-    footer at the end. So "something was written since the last check" means "a chunk boundary (or another
-    complete record) was just reached"; :class:`McapRecorder` then calls :meth:`sync` to hand the bytes to the OS.
-    ``tell()`` is answered from a counter so it costs no system call.
-    """
-
-    def __init__(self, f: io.BufferedWriter) -> None:
-        self._f = f
-        self._pos = f.tell()
-        self.pending = False
-        self.durable = self._pos  # bytes handed to the OS by the last successful flush (a record boundary)
-
-    def write(self, data: bytes) -> int:
-        n = self._f.write(data)
-        self._pos += len(data)
-        if data:
-            self.pending = True
-        return n
-
-    def tell(self) -> int:
-        return self._pos
-
-    def seekable(self) -> bool:
-        return False
-
-    def flush(self) -> None:
-        self._f.flush()
-        self.pending = False
-        self.durable = self._pos
-
-    def sync(self) -> None:
-        """Flush to the OS if anything was written since the last flush."""
-        if self.pending:
-            self.flush()
-
-    def fail_writes_past(self, limit: int, code: int) -> None:
-        """Fault injection: a write that would take the file past ``limit`` bytes raises ``OSError(code)``."""
-        f, real_write = self._f, self._f.write
-
-        def write(data: bytes) -> int:
-            if f.tell() + len(data) > limit:
-                raise OSError(code, os.strerror(code))
-            return real_write(data)
-
-        self._f = type("_Faulty", (), {"write": staticmethod(write), "flush": f.flush, "tell": f.tell,
-                                       "fileno": f.fileno, "close": f.close})()
 
 
 class RecordedMessage(NamedTuple):
@@ -216,7 +170,7 @@ class McapRecorder:
         except OSError as e:
             raise OSError(e.errno, f"cannot open MCAP recording file for writing ({e.strerror or e})",
                           str(self.path)) from e
-        self._stream = _ChunkFlushingStream(self._file)
+        self._stream = ChunkFlushingStream(self._file)
         try:
             self._writer = _McapWriter(self._stream, chunk_size=self.chunk_size,
                                        compression=_COMPRESSION if path is not None else CompressionType.NONE)
@@ -586,70 +540,3 @@ class McapRecorder:
                 self._stream.flush()
             finally:
                 self._file.close()
-
-
-#: the MCAP magic (MCAP specification, "Magic") that every recording starts with
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-
-
-def is_aerodaas_recording(p: Path) -> bool:
-    """Whether the file at ``p`` starts as a recording of ours: the MCAP magic, then a Header record (opcode 0x01)
-    whose library is :data:`LIBRARY` (MCAP specification: Header = profile string, library string)."""
-    try:
-        with open(p, "rb") as f:
-            head = f.read(512)
-    except OSError:
-        return False
-    if not head.startswith(MCAP_MAGIC) or len(head) < 9 + 8 + 4 or head[8] != 0x01:
-        return False
-    body = head[17:]
-    n = int.from_bytes(body[:4], "little")
-    lib_at = 4 + n
-    m = int.from_bytes(body[lib_at:lib_at + 4], "little")
-    return body[lib_at + 4:lib_at + 4 + m].decode("utf-8", "replace").startswith(LIBRARY)
-
-
-def check_record_path(path: str | os.PathLike, *, overwrite: bool = False,
-                      protect: tuple[str | os.PathLike, ...] = ()) -> Path:
-    """Check, before anything starts, that a recording can be written at ``path``; returns the absolute path.
-
-    The folder must already exist (nothing is created: a typo must not leave directories behind), the path must be
-    a regular file or not exist yet (``/dev/full``, ``/dev/null``, FIFOs and directories are refused), and the file
-    must be creatable there (``/proc/x.mcap`` is not). Outputs never clobber inputs: an existing file that is not an
-    AeroDaaS recording (:func:`is_aerodaas_recording`) is refused unless ``overwrite`` (``--overwrite``), and the
-    files in ``protect`` (the application, its environment file) always. An existing file is left as it is until
-    the run starts. Raises ValueError naming the path and the reason."""
-    import stat
-
-    p = Path(os.path.abspath(os.path.expanduser(str(path))))
-    if not p.parent.is_dir():
-        raise ValueError(f"--record {str(path)!r}: folder {str(p.parent)!r} does not exist (create it first)")
-    if p.exists() or p.is_symlink():
-        try:
-            mode = p.stat().st_mode
-        except OSError as e:
-            raise ValueError(f"--record {str(path)!r}: {e.strerror}") from None
-        if not stat.S_ISREG(mode):
-            raise ValueError(f"--record {str(path)!r}: not a regular file (a device, directory or pipe cannot hold "
-                             f"a recording)")
-        if not os.access(p, os.W_OK):
-            raise ValueError(f"--record {str(path)!r}: the file is not writable")
-        for q in protect:
-            try:
-                same = q is not None and os.path.samefile(p, q)
-            except OSError:
-                same = False
-            if same:
-                raise ValueError(f"--record {str(path)!r} is an input of this run ({str(q)!r}): a recording never "
-                                 f"overwrites the application or its environment file")
-        if not overwrite and not is_aerodaas_recording(p):
-            raise ValueError(f"--record {str(path)!r}: the file exists and is not an AeroDaaS recording; pass "
-                             f"--overwrite to replace it")
-        return p
-    try:
-        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-    except OSError as e:
-        raise ValueError(f"--record {str(path)!r}: cannot create the file: {e.strerror}") from None
-    os.close(fd)
-    os.unlink(p)
-    return p

@@ -300,7 +300,7 @@ def check_env_case(case: InputCase, tmp: Path) -> tuple[bool, str]:
 
 def check_path_case(make: Callable[[Path], str], expect: str, tmp: Path) -> tuple[bool, str]:
     """(refused with the expected reason and nothing created, message) for one ``--record`` path."""
-    from aerodaas.recording.writer import check_record_path
+    from aerodaas.recording.record_path import check_record_path
 
     path = make(tmp)
     before = Path(path).parent.exists()

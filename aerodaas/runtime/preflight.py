@@ -145,7 +145,7 @@ def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple =
     ``--speedup`` / ``--lockstep``. Returns the run's simulation settings (:func:`simulation_for`). Raises
     ConfigError / ValueError naming the field or flag."""
     if opts.record:
-        from aerodaas.recording.writer import check_record_path
+        from aerodaas.recording.record_path import check_record_path
 
         protect = tuple(q for q in (*inputs, getattr(env.cfg, "source_file", None)) if q)
         check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
@@ -254,7 +254,7 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
         if v is not None and not v.strip():
             raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
     if record:
-        from aerodaas.recording.writer import check_record_path
+        from aerodaas.recording.record_path import check_record_path
 
         # an existing file that is no recording is refused once the app is loaded (check_options): the environment
         # file the app opens itself is known only then, and is refused as an input, never with "pass --overwrite"
