@@ -1,4 +1,7 @@
-"""The ``aerodaas`` command line: ``run``, ``info``, ``schema``, ``sim``, ``mission`` and more."""
+"""The ``aerodaas`` command line: ``run``, ``info``, ``schema``, ``sim``, ``mission`` and more.
+
+Commands with a module of their own register themselves here: ``run`` (:mod:`aerodaas.run_cli`), ``plugins``
+(:mod:`aerodaas.plugins_cli`), ``mission`` (:mod:`aerodaas.tools.mission_cli`), ``bench`` (:mod:`aerodaas.bench`)."""
 from __future__ import annotations
 
 import argparse
@@ -8,153 +11,6 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from aerodaas.runtime.options import RunOptions
-
-
-def _run_options(args: argparse.Namespace) -> "RunOptions | int":
-    """``aerodaas run``'s flags as the run's options, every one checked before Ray starts (exit 2 naming the bad
-    input: the returned int)."""
-    from aerodaas.config import ConfigError
-    from aerodaas.runtime.options import RunOptions
-    from aerodaas.runtime.preflight import check_run_flags
-
-    try:
-        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address,
-                        app=str(args.app), overwrite=args.overwrite)
-    except (ConfigError, ValueError) as e:
-        print(f"aerodaas run: {e}", file=sys.stderr)
-        return 2
-    live = None
-    if args.live is not None:
-        from aerodaas.liveview.server import check_bindable, parse_address
-
-        try:
-            host, port = parse_address(args.live)
-            if not args.address:  # local run: the edge host (which serves) is on this machine
-                check_bindable(host, port)
-        except ValueError as e:
-            print(f"aerodaas run: {e}", file=sys.stderr)
-            return 2
-        live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-    return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
-                      overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
-                      lockstep=True if args.lockstep else None, dashboard=bool(getattr(args, "dashboard", False)),
-                      progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live)
-
-
-class _StopSignals:
-    """``aerodaas run``'s SIGTERM/SIGINT handling (`kill`, `docker stop`, systemd, Ctrl-C): one clean stop of the
-    mission; after a mission's summary, a signal is a late one that does not change the exit code."""
-
-    def __init__(self, results: list) -> None:
-        self.results = results
-        self.stop: list[int] = []
-        self.late: list[int] = []
-        self.previous: tuple = ()
-
-    def __call__(self, signum, frame) -> None:
-        from aerodaas.runtime import driver as runtime
-
-        # Ray's C++ failure-signal handler (absl, chained before this one) answers SIGTERM with alarm(3) and a SIGALRM
-        # handler that aborts: the clean stop takes longer than 3 s, so the run died with SIGABRT (exit 134). We take
-        # the signal over: cancel that alarm and its handler.
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, signal.SIG_DFL)
-        if self.results and not runtime.IN_MISSION[0]:
-            # after the summary (the app ending, Ray shutting down): no KeyboardInterrupt from inside ray.shutdown,
-            # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS).
-            # A second late signal is the user insisting (a hang on the way out): it ends the process as usual
-            if self.late:
-                signal.signal(signum, signal.SIG_DFL)
-                os.kill(os.getpid(), signum)
-                return
-            self.late.append(signum)
-            runtime.STOP_SIGNALS.append(signum)
-            return
-        self.stop.append(signum)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        runtime.request_stop(signum)  # raises KeyboardInterrupt where that is safe, else stops at the next safe point
-
-    def install(self) -> None:
-        """Installed before Ray starts: the driver's own fatal-signal handler then chains to this one."""
-        self.previous = (signal.signal(signal.SIGTERM, self), signal.signal(signal.SIGINT, self))
-
-    def restore(self) -> None:
-        signal.signal(signal.SIGTERM, self.previous[0])
-        signal.signal(signal.SIGINT, self.previous[1])
-
-
-def _exit_code(results: list, stop: list[int]) -> int:
-    """``aerodaas run``'s exit code for its missions' results (see the README)."""
-    if not results:
-        print("aerodaas run: the application never called start_mission()", file=sys.stderr)
-        return 1
-    if stop or any(r.outcome == "interrupted" for r in results):
-        return 128 + (stop[0] if stop else signal.SIGINT)  # the shell's convention: 130 / 143
-    if any(r.outcome == "lost" for r in results):
-        return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
-    if any(getattr(r, "recording_losses", None) or r.outcome == "recording_lost" for r in results):
-        return 4  # the recorder actor died or a producer's numbered message is in no segment: part of the run lost
-    return 0 if all(r.ok for r in results) else 1
-
-
-def _cmd_run(args: argparse.Namespace) -> int:
-    """``aerodaas run APP.py``: load the application (:func:`aerodaas.runtime.app_loader.load_app`: no Ray, nothing
-    flies; bad input exits 2 before any Ray process exists), then fly it (:func:`aerodaas.runtime.driver.run_file`)
-    and print each mission's summary."""
-    from aerodaas.protocol.startup_probe import probe
-
-    probe("cli")
-    from aerodaas.app.api import with_builtin_actors
-    from aerodaas.config import ConfigError
-    from aerodaas.runtime import driver as runtime
-
-    app = Path(args.app)
-    if not app.is_file():
-        print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
-        return 2
-    opts = _run_options(args)
-    if isinstance(opts, int):
-        return opts
-    results: list = []
-    signals = _StopSignals(results)
-    signals.install()
-    runtime.STOP_SIGNALS.clear()
-    runtime.allow_stop_interrupt(True)  # loading the app: a stop may interrupt it at once
-
-    def on_result(res) -> None:  # every mission of the app counts
-        results.append(res)
-        print(runtime.format_summary(res), flush=True)
-
-    try:
-        # the run's actors are handed to the runtime (which imports none): the built-in ones
-        runtime.run_file(str(app), with_builtin_actors(opts), on_result=on_result)
-    except ConfigError as e:
-        print(f"aerodaas run: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("aerodaas run: interrupted", file=sys.stderr)
-        return 128 + (signals.stop or signals.late or [signal.SIGINT])[0]
-    except runtime.RayStartError as e:
-        print(f"aerodaas run: {e}", file=sys.stderr)
-        return 2 if isinstance(e, runtime.RayAddressError) else 1
-    except Exception as e:  # noqa: BLE001 - whose is it: the app's own bug (exit 1) or input we refused (exit 2)
-        from aerodaas.runtime.app_errors import report
-
-        return report(e, str(app), "aerodaas run")
-    finally:
-        runtime.allow_stop_interrupt(False)  # a signal now is recorded, never raised inside ray.shutdown
-        runtime.shutdown_ray()
-        if not (_PROCESS_MAIN[0] and results):
-            signals.restore()
-        # else the process is this command and ends now: a signal from here to its exit is a late one, recorded by
-        # the handler, and the exit code stays the mission's (restoring the default handler let a SIGTERM sent right
-        # after the summary kill the process with -15)
-    return _exit_code(results, signals.stop)
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
@@ -460,11 +316,6 @@ def _cmd_schema(args: argparse.Namespace) -> int:
     return 0
 
 
-#: True when :func:`main` runs as the process's own command (:func:`console`: ``aerodaas ...``,
-#: ``python -m aerodaas.cli``), not called from other Python code
-_PROCESS_MAIN = [False]
-
-
 def console() -> int:
     """The ``aerodaas`` command (console script and ``python -m aerodaas.cli``): :func:`main` as the process's own
     command, whose late-signal handler then stays installed until the process exits."""
@@ -472,25 +323,10 @@ def console() -> int:
 
 
 def _add_run_parsers(sub) -> None:
-    """``run``, ``up``, ``down`` and ``plan``."""
-    r = sub.add_parser("run", help="run an application (APP.py) on the embedded simulator or real drones")
-    r.add_argument("app")
-    r.add_argument("--env", help="environment.json to use instead of the one the app names")
-    r.add_argument("--record", help="write the run to this MCAP file")
-    r.add_argument("--speedup", type=float, help="simulation speed-up over real time (default: from the env file)")
-    r.add_argument("--lockstep", action="store_true", help="simulated time waits for analytics on every frame")
-    r.add_argument("--timeout", type=float, help="wall-clock limit in seconds")
-    r.add_argument("--overwrite", action="store_true", help="let --record replace an existing file that is not an "
-                   "AeroDaaS recording (the app and its environment file are never replaced)")
-    r.add_argument("--address", help="attach to an existing Ray cluster (e.g. 'auto') instead of starting one")
-    r.add_argument("--quiet", action="store_true", help="no live progress")
-    r.add_argument("--dashboard", action="store_true",
-                   help="start Ray's dashboard with the local Ray (127.0.0.1:8265): `ray list actors`, the actors view")
-    r.add_argument("--hitl", action="store_true", help="serve the human-in-the-loop API (token printed once)")
-    r.add_argument("--hitl-port", type=int, help="port of the human-in-the-loop API (0: any free port)")
-    r.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
-                   help="serve the run to Foxglove over WebSocket (default 127.0.0.1:8765; port 0: any free port)")
-    r.set_defaults(func=_cmd_run)
+    """``run`` (:mod:`aerodaas.run_cli`), ``up``, ``down`` and ``plan``."""
+    from aerodaas.run_cli import add_parser as _add_run_parser
+
+    _add_run_parser(sub)
     upp = sub.add_parser("up", help="start a persistent local Ray cluster (loopback, token auth, tier=edge, "
                                      "dashboard) that `aerodaas run` attaches to")
     upp.add_argument("--cpus", type=int, default=3, help="logical CPUs of the node (sizes the prestarted workers)")
@@ -586,13 +422,13 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     _add_run_parsers(sub)
     _add_recording_parsers(sub)
     _add_tool_parsers(sub)
-    _PROCESS_MAIN[0] = own_process
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["inject"]:  # its values may start with '-' (a token, a waypoint south-west of home)
         from aerodaas.tools.hitl import inject_argv
 
         argv = inject_argv(argv)
     args = p.parse_args(argv)
+    args.own_process = own_process  # read by `aerodaas run` (its late-signal handler stays installed to the exit)
     try:
         return args.func(args)
     except BrokenPipeError:  # `aerodaas info FILE | head`: the reader left; end quietly like any Unix filter
