@@ -89,3 +89,48 @@ def test_the_schema_still_describes_the_builtin_sections():
     good["robots"][0]["mavlink"]["fence"]["action"] = "explode"
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(good, schema)
+
+
+@pytest.mark.parametrize("name,consumes,produces", [
+    ("ObjectDetector", ("frame",), ("detections",)), ("FollowAnalytics", ("detections",), ("navigation",)),
+    ("MonitoringAnalytics", ("odometry",), ("value",)), ("TrackAnalytics", ("detections",), ("tracks",)),
+])
+def test_each_core_builtin_analytics_declares_what_it_consumes_and_produces(name, consumes, produces):
+    """The built-in analytics declare their stream types as a plug-in does (docs/extending.md, "An analytics' output
+    contract"): the declaration passes the contract's own check, and ``aerodaas plugins`` lists it."""
+    from aerodaas.analytics.contract import check_declaration
+
+    e = registry.resolve("analytics", name)
+    cls = e.load()
+    assert e.origin == "builtin" and (cls.consumes, cls.produces) == (consumes, produces)
+    check_declaration(cls())
+
+
+def test_track_analytics_is_checked_against_its_feed_and_its_output_fields_are_documented():
+    """TrackAnalytics takes detections (a stream of another type stops the application before Ray, naming both), and
+    every field of its output rows is in docs/extending.md's table of the messages an analytics receives."""
+    from pathlib import Path
+
+    from aerodaas.analytics.contract import ContractError, check_consumes
+    from aerodaas.analytics.core import MonitoringAnalytics, ObjectDetector
+    from aerodaas.analytics.track import TrackAnalytics
+    from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose, GeoPoint
+
+    fed = TrackAnalytics()
+    fed.analyse(ObjectDetector().output)
+    check_consumes(fed)
+    wrong = TrackAnalytics()
+    wrong.analyse(MonitoringAnalytics().output)
+    with pytest.raises(ContractError, match=r"analytics 'tracks' \(TrackAnalytics\) consumes \['detections'\], but it "
+                                            r"is fed the output of analytics 'monitor', which carries \['value'\]"):
+        check_consumes(wrong)
+
+    meta = FrameMeta(robot_id="d1", sensor_id="cam", seq=0, capture_time=0.0, wall_time=0.0,
+                     pose=FramePose(position=(10.0, 5.0, 20.0), yaw=90.0, camera_pitch=90.0),
+                     intrinsics=CameraIntrinsics.from_hfov(320, 240, 60.0))
+    rows = TrackAnalytics(home=GeoPoint(lat=47.0, lon=8.0, alt=400.0)).process(
+        [Detection(class_id=2, class_name="car", score=0.9, box=(150, 110, 170, 130))], meta)
+    assert len(rows) == 1 and rows[0]["track_id"] == 1 and rows[0]["enu"] is not None
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "extending.md").read_text(encoding="utf-8")
+    row = next(line for line in docs.splitlines() if line.startswith("| `TrackAnalytics`, type `tracks` |"))
+    assert all(f'"{k}"' in row for k in rows[0]), (sorted(rows[0]), row)

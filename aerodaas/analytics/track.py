@@ -25,6 +25,9 @@ class TrackAnalytics(TrackRecording, Analytics):
     the terrain height (m, ENU). Raises ValueError for bad tracker options or an empty ``classes``."""
 
     name = "tracks"
+    #: fed by an :class:`~aerodaas.analytics.core.ObjectDetector` (checked when the application is loaded, before
+    #: Ray starts); its output stream carries the track rows above, type ``"tracks"``
+    consumes, produces = ("detections",), ("tracks",)
 
     def __init__(self, classes: Iterable[str] | str | None = None, tracker: ByteTrackConfig | None = None,
                  home: GeoPoint | None = None, ground_z: float = 0.0, name: str | None = None) -> None:
@@ -41,6 +44,11 @@ class TrackAnalytics(TrackRecording, Analytics):
         self.tracker.check()
 
     def process(self, dets: list[Detection], meta: FrameMeta | None) -> list[dict[str, Any]]:
+        """One frame's detections ``dets`` (pixel boxes) and the frame's ``meta`` (its drone, camera pose and
+        intrinsics; None: no ground position) into this drone's ByteTrack update: the detections of ``classes``
+        update the drone's tracker, and every active track becomes one row (fields in the class docstring), by
+        track id; ``[]`` when no track is active. The rows are also kept for the recorder
+        (:meth:`~aerodaas.perception.track_records.TrackRecording.keep_tracks`)."""
         tr: ByteTracker = self.drone_state(dets, meta, lambda: ByteTracker(self.tracker))
         keep = [d for d in dets if self.classes is None or d.class_name in self.classes]
         robot = getattr(meta, "robot_id", "")
