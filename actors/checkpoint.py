@@ -27,7 +27,7 @@ def drone_checkpoint(d: Any) -> dict:
                 "flew_something": d.flew_something, "idle_since": d.idle_since, "outcome": d.outcome,
                 "error": d.error, "ticks": d.ticks, "missed_ticks": d.missed_ticks, "next_tick": d.next_tick,
                 "next_odom": d.next_odom, "rejected": list(d.rejected), "hold_failed": list(d.hold_failed),
-                "not_reached": list(d.not_reached), "missions": q["missions"],
+                "not_reached": list(d.progress.not_reached), "missions": q["missions"],
                 "completed": q["completed"], "segments_issued": q["segments_issued"], "seq_missions": q["seq"],
                 "last_tick": [float(d.last_tick[0]), [float(c) for c in d.last_tick[1]]], "discarded": list(d.plan_log.discarded),
                 "cleared_preplanned": list(d.plan_log.cleared_preplanned),
@@ -47,9 +47,11 @@ def restore_drone(d: Any, cp: dict) -> None:
             state = S.NAVIGATING
         d.fsm.restore(state, list(cp.get("history") or []) + [(cp["t"], state)])
         for k in ("events", "visited", "preplanned_left", "takeoff_altitude", "flew_something", "idle_since", "outcome",
-                  "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected", "hold_failed", "not_reached"):
+                  "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected", "hold_failed"):
             if k in cp:
                 setattr(d, k, cp[k])
+        if "not_reached" in cp:
+            d.progress.not_reached = list(cp["not_reached"])
         if cp.get("last_tick") is not None:  # where navigation arriving before the first tick is planned from
             d.last_tick = (float(cp["last_tick"][0]), tuple(cp["last_tick"][1]))
         # a run whose pre-planned waypoints were cleared through the HITL API stays never a success

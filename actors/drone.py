@@ -45,7 +45,7 @@ from aerodaas.actors.drone_queue_flight import QueueFlight, WaypointHold
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
+class DroneComponent(RunEnd, AutopilotFlight, QueueFlight):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -96,7 +96,8 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
         self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
         self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it
         self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
-        self._init_progress()
+        #: whether the vehicle flies where the gate thinks: its home after arming, its progress on each leg
+        self.progress = NavigationProgress(self.backend, self.cfg.id, self.cfg.progress, self.gate, self._event)
         self._paused_from: S | None = None
         self._link_lost_from: S | None = None
         self._pause_req = threading.Event()
@@ -155,7 +156,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
         alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
         self.takeoff_altitude = alt
         b.arm()
-        self._check_vehicle_home()
+        self.progress.check_vehicle_home()
         self.fsm.transition(S.ARMED, b.t)
         b.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
@@ -227,7 +228,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
 
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
-                "rejected": self.rejected, "hold_failed": self.hold_failed, "not_reached": self.not_reached,
+                "rejected": self.rejected, "hold_failed": self.hold_failed, "not_reached": self.progress.not_reached,
                 "ended": self.ended,
                 "failsafe": self.failsafe,
                 "safety": self.gate.stats(),
@@ -380,7 +381,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight, NavigationProgress):
         """Every pre-planned waypoint flown: none refused in flight (not flown), none whose hold failed (not held),
         none given up (not reached), and none cleared through the HITL API."""
         refused = any(r.get("item") == "waypoint" for r in self.rejected)
-        return (self.preplanned_left == 0 and not refused and not self.hold_failed and not self.not_reached
+        return (self.preplanned_left == 0 and not refused and not self.hold_failed and not self.progress.not_reached
                 and not self.plan_log.cleared_preplanned)
 
     def _on_emergency(self, t: float, pos: tuple) -> bool:

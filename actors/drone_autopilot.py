@@ -40,7 +40,7 @@ class AutopilotFlight:
         self._event("autopilot_mission_uploaded", items=len(sent),
                     waypoints=[w.id for _, w in self._ap_items.values() if w is not None])
         b.arm()
-        self._check_vehicle_home()
+        self.progress.check_vehicle_home()
         self.fsm.transition(S.ARMED, b.t)
         b.start_mission()
         self.fsm.transition(S.TAKING_OFF, b.t)

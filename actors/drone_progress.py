@@ -1,5 +1,5 @@
 """Whether the vehicle flies where the safety gate thinks it does: in the gate's frame (its home, checked once it
-has armed: :meth:`NavigationProgress._check_vehicle_home`) and towards its waypoint (:class:`ProgressWatch`: a
+has armed: :meth:`NavigationProgress.check_vehicle_home`) and towards its waypoint (:class:`ProgressWatch`: a
 target the autopilot refuses or does not progress towards becomes an event, and if that persists, the waypoint ends
 as not reached).
 
@@ -15,10 +15,11 @@ target must shrink by ``progress.min_progress_m`` within a window, or the vehicl
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Callable, Literal
 
 from aerodaas.backends import BackendError
-from aerodaas.navigation.safety import SafetyViolation
+from aerodaas.config import ProgressConfig
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 
 
 @dataclass
@@ -76,10 +77,21 @@ class ProgressWatch:
 
 
 class NavigationProgress:
-    """Part of :class:`~aerodaas.actors.drone.DroneComponent`: the :class:`ProgressWatch` of the waypoint being flown
-    (``_progress``) and the waypoints given up for lack of progress (``not_reached``; never a success)."""
+    """Whether robot ``robot_id``'s vehicle (``backend``) flies where its safety ``gate`` thinks it does: in the
+    gate's frame once it has armed (:meth:`check_vehicle_home`) and towards the waypoint being flown (:meth:`start`
+    a leg, :meth:`check` each tick), judged by ``cfg`` (the robot's :class:`~aerodaas.config.ProgressConfig`);
+    ``event(kind, **fields)`` records the drone's events. ``watch``: the :class:`ProgressWatch` of the leg being
+    flown (None before the first and after one was given up); ``not_reached``: the waypoints given up for lack of
+    progress (never a success). An object of its drone (:attr:`~aerodaas.actors.drone.DroneComponent.progress`); it
+    knows nothing else of the drone."""
 
-    def _check_vehicle_home(self) -> None:
+    def __init__(self, backend: Any, robot_id: str, cfg: ProgressConfig, gate: SafetyGate,
+                 event: Callable[..., None]) -> None:
+        self.backend, self.robot_id, self.cfg, self.gate, self.event = backend, robot_id, cfg, gate, event
+        self.watch: ProgressWatch | None = None
+        self.not_reached: list[dict] = []
+
+    def check_vehicle_home(self) -> None:
         """After arming (an autopilot's home is where it armed): the vehicle's frame must be the gate's
         (:meth:`~aerodaas.navigation.safety.SafetyGate.check_vehicle_home`, ``safety.home_tolerance_m``); else a
         ``vehicle_home_refused`` event, disarm, and BackendError, before any take-off."""
@@ -87,27 +99,24 @@ class NavigationProgress:
         try:
             self.gate.check_vehicle_home(b.home, b.position)
         except SafetyViolation as e:
-            self._event("vehicle_home_refused", reason=e.reason, vehicle_home=[b.home.lat, b.home.lon])
+            self.event("vehicle_home_refused", reason=e.reason, vehicle_home=[b.home.lat, b.home.lon])
             try:
                 b.disarm()
             except BackendError as de:
-                self._event("backend_error", error=str(de))
-            raise BackendError(f"robot {self.cfg.id!r}: refusing to take off: {e.reason}") from None
+                self.event("backend_error", error=str(de))
+            raise BackendError(f"robot {self.robot_id!r}: refusing to take off: {e.reason}") from None
 
-    def _init_progress(self) -> None:
-        self._progress: ProgressWatch | None = None
-        self.not_reached: list[dict] = []
-
-    def _start_progress(self, t: float, distance_m: float, speed_mps: float | None) -> None:
+    def start(self, t: float, distance_m: float, speed_mps: float | None) -> None:
         """A new leg: watched from vehicle time ``t`` at ``distance_m`` from its target, flown at ``speed_mps``
         (None: the gate's speed limit)."""
-        self._progress = ProgressWatch.for_leg(self.cfg.progress, t, distance_m, speed_mps or self.gate.max_speed)
+        self.watch = ProgressWatch.for_leg(self.cfg, t, distance_m, speed_mps or self.gate.max_speed)
 
-    def _check_progress(self, t: float, item, target, distance_m: float, within: bool) -> bool:
-        """Judge one NAVIGATING tick towards ``item`` (its ENU ``target``); records ``navigation_stalled`` /
-        ``navigation_progress_resumed`` events and, once ``progress.abandon_s`` passed without progress, ends the
-        waypoint as not reached (``waypoint_abandoned``, dropped from the queue). Returns True when it did."""
-        w = self._progress
+    def check(self, t: float, item: Any, target: tuple, distance_m: float, within: bool) -> bool:
+        """Judge one NAVIGATING tick towards waypoint ``item`` (its ENU ``target``); records ``navigation_stalled``
+        / ``navigation_progress_resumed`` events and, once ``progress.abandon_s`` passed without progress, gives the
+        waypoint up: a ``waypoint_abandoned`` event, a ``not_reached`` entry, the watch ended. Returns True when it
+        gave the waypoint up (the drone then drops it from its queue)."""
+        w = self.watch
         if w is None:
             return False
         verdict = w.update(t, distance_m, within)
@@ -115,16 +124,15 @@ class NavigationProgress:
             return False
         where = {"waypoint": item.id, "target": [round(float(c), 2) for c in target], **w.figures(t, distance_m)}
         if verdict == "stalled":
-            self._event("navigation_stalled", **where, window_s=round(w.window_s, 1),
-                        note="the vehicle is not getting closer: an autopilot that refuses a target (its own fence "
-                             "or limits) keeps flying to its previous one without a word")
+            self.event("navigation_stalled", **where, window_s=round(w.window_s, 1),
+                       note="the vehicle is not getting closer: an autopilot that refuses a target (its own fence "
+                            "or limits) keeps flying to its previous one without a word")
         elif verdict == "resumed":
-            self._event("navigation_progress_resumed", **where)
+            self.event("navigation_progress_resumed", **where)
         else:
             rec = {**where, "after_s": round(w.abandon_s, 1), "elapsed_s": round(t - w.start_t, 1)}
             self.not_reached.append(rec)
-            self._event("waypoint_abandoned", **rec)
-            self.plan_log.discard(self.queue, item.id, "not_reached", t)
-            self.active_wp, self.hold_until, self._hold, self._progress = None, None, None, None
+            self.event("waypoint_abandoned", **rec)
+            self.watch = None
             return True
         return False

@@ -98,7 +98,7 @@ class QueueFlight:
         self.active_wp, self.hold_until, self._hold = item.id, None, None
         self.backend.goto(target, item.speed)
         self.fsm.transition(S.NAVIGATING, t)
-        self._start_progress(t, math.dist(pos, target), item.speed)
+        self.progress.start(t, math.dist(pos, target), item.speed)
         self._event("navigate", waypoint=item.id, target=list(target), priority=res.priority, mission=res.mission)
         if self.recorder is not None:
             self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t),
@@ -113,8 +113,11 @@ class QueueFlight:
         speed = math.hypot(*tuple(float(c) for c in v.velocity)[:2])
         within = dist <= item.acceptance_radius
         if self.fsm.state == S.NAVIGATING:
-            if self._check_progress(t, item, target, dist, within):
-                return  # given up: the next tick flies what is queued next
+            if self.progress.check(t, item, target, dist, within):
+                # given up for lack of progress: dropped from the queue; the next tick flies what is queued next
+                self.plan_log.discard(self.queue, item.id, "not_reached", t)
+                self.active_wp, self.hold_until, self._hold = None, None, None
+                return
             if not (within and (item.hover_duration <= 0 or speed <= self.cfg.hold.settle_speed)):
                 return
             self.fsm.transition(S.WAYPOINT_HOLD, t)
