@@ -36,7 +36,7 @@ from aerodaas.schedulers.base import TrajectoryScheduler
 from aerodaas.actors.drone_autopilot import AutopilotFlight
 from aerodaas.actors.drone_inbox import DroneInbox
 from aerodaas.actors.mission_plan import MissionPlanLog
-from aerodaas.actors.drone_end import RunEnd
+from aerodaas.actors.drone_end import SETTLE_WALL_S, RunEnd
 from aerodaas.actors.drone_gimbal import DroneGimbal
 from aerodaas.actors.drone_odometry import OdometryPublisher
 from aerodaas.actors.drone_progress import NavigationProgress
@@ -45,7 +45,7 @@ from aerodaas.actors.drone_queue_flight import QueueFlight, WaypointHold
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(RunEnd, AutopilotFlight, QueueFlight):
+class DroneComponent(AutopilotFlight, QueueFlight):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -90,8 +90,6 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight):
         self.flew_something = False
         self.active_wp: str | None = None
         self.hold_until: float | None = None
-        #: how the run ended for this robot (set when it closes): e.g. "landed and disarmed", "safe end: landed ..."
-        self.ended: str | None = None
         self._hold: WaypointHold | None = None  # the hold under way at the reached waypoint
         self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
         self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it
@@ -111,13 +109,14 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight):
         self.ticks = 0
         self.missed_ticks = 0
         self.nudges = 0  # navigation applied outside the control tick (:meth:`apply_navigation`)
-        self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
         #: the drone's odometry sensor (recorded and published from the vehicle's state or its own samples)
         self.odometry = OdometryPublisher(self.backend, self.cfg.id, recorder, plane, odom_cids,
                                           OdometryPublisher.rate_of(self.cfg), self._t_ns)
         #: the camera gimbal: commands through the safety gate, attitude recorded on /<robot>/gimbal
         self.gimbal = DroneGimbal(self.backend, self.cfg.id, self.cfg.gimbal, self.gate, recorder, self._t_ns,
                                   self._event, OdometryPublisher.rate_of(self.cfg), gimbal_commands)
+        #: the end of the run: a real vehicle brought down and recorded until its end state (:attr:`ended`)
+        self.end = RunEnd(self.backend, self.cfg.id, self.fsm, self._event, self.odometry)
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
         self._init_autopilot()
@@ -161,6 +160,28 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight):
         b.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
         self._event("takeoff", altitude=alt)
+
+    def close(self) -> None:
+        """Close the backend, a real vehicle still armed brought down first and recorded until the disarm
+        (:meth:`RunEnd.close <aerodaas.actors.drone_end.RunEnd.close>`)."""
+        self.end.close()
+
+    def settled(self, wait_s: float = SETTLE_WALL_S) -> bool:
+        """After the mission ended: whether the recorded odometry shows the vehicle's end state, or ``wait_s`` wall
+        seconds passed (:meth:`RunEnd.settled <aerodaas.actors.drone_end.RunEnd.settled>`)."""
+        return self.end.settled(wait_s)
+
+    def finish(self) -> None:
+        """The run is over for this drone: last odometry and the mission result. The drone is no longer stepped:
+        what its vehicle sends meanwhile is not recorded, except from the newest sample on while :meth:`close` brings
+        it down."""
+        self.publish_odometry()
+        self.odometry.mission_ended()
+        if self.recorder is not None:
+            self.recorder.json("/mission/result", self._t_ns(self.backend.t),
+                               {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
+                                "preplanned_total": self.preplanned_total, "t": self.backend.t,
+                                "error": self.error}, "aerodaas.MissionResult")
 
     # ------------------------------------------------------------------ recording helpers
     def _t_ns(self, t: float) -> int:
@@ -229,7 +250,7 @@ class DroneComponent(RunEnd, AutopilotFlight, QueueFlight):
     def report(self) -> dict:
         return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
                 "rejected": self.rejected, "hold_failed": self.hold_failed, "not_reached": self.progress.not_reached,
-                "ended": self.ended,
+                "ended": self.end.ended,
                 "failsafe": self.failsafe,
                 "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}

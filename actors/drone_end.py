@@ -1,13 +1,13 @@
 """How a drone's run ends: a real vehicle still armed is brought down by its backend's safe end while its events,
 state and odometry go on being recorded; a finished drone waits (bounded) until its recorded odometry shows the
-vehicle's end state; the last odometry and the mission result are recorded. A mixin of
-:class:`~aerodaas.actors.drone.DroneComponent`, whose state (``fsm``, ``backend``, ``cfg``, ``recorder``, events)
-it shares; split from that module so that each stays one concept."""
+vehicle's end state. An object of its drone (:attr:`~aerodaas.actors.drone.DroneComponent.end`); it knows nothing
+else of the drone (the drone records its last odometry and the mission result itself: ``DroneComponent.finish``)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
-from aerodaas.navigation.fsm import MissionState as S
+from aerodaas.actors.drone_odometry import OdometryPublisher
+from aerodaas.navigation.fsm import MissionFSM, MissionState as S
 
 #: vehicle seconds a landed, still armed vehicle is given to disarm by itself at the end (:meth:`RunEnd._await_disarm`)
 DISARM_WAIT_S = 15.0
@@ -18,7 +18,16 @@ SETTLE_WALL_S = 2.0
 
 
 class RunEnd:
-    """Mixin: the end of a drone's run (see the module)."""
+    """The end of robot ``robot_id``'s run on ``backend`` (see the module): its mission state machine ``fsm`` follows
+    the vehicle down, ``event(kind, **fields)`` records the drone's events and ``odometry`` (the drone's
+    :class:`~aerodaas.actors.drone_odometry.OdometryPublisher`) records and publishes its samples meanwhile.
+    :attr:`ended`: how the run ended for this robot (None until :meth:`close`), e.g. ``"landed and disarmed"``."""
+
+    def __init__(self, backend: Any, robot_id: str, fsm: MissionFSM, event: Callable[..., None],
+                 odometry: OdometryPublisher) -> None:
+        self.backend, self.robot_id, self.fsm, self.event, self.odometry = backend, robot_id, fsm, event, odometry
+        self.ended: str | None = None
+        self._settle_until: float | None = None  # wall deadline of the wait for the end state's first sample
 
     def close(self) -> None:
         """Close the backend. A real vehicle still armed (run timeout, error, Ctrl-C) is brought down first by the
@@ -38,9 +47,9 @@ class RunEnd:
                 except Exception as e:  # noqa: BLE001 - recorded; closing goes on
                     result["error"] = f"{type(e).__name__}: {e}"
 
-            self._event("safe_end_started", state=self.fsm.state.value, mode=getattr(b, "mode", None),
+            self.event("safe_end_started", state=self.fsm.state.value, mode=getattr(b, "mode", None),
                         on_close=getattr(getattr(b, "cfg", None), "on_close", None))
-            th = threading.Thread(target=run, name=f"safe-end-{self.cfg.id}", daemon=True)
+            th = threading.Thread(target=run, name=f"safe-end-{self.robot_id}", daemon=True)
             th.start()
             while th.is_alive():
                 th.join(0.05)
@@ -54,17 +63,17 @@ class RunEnd:
                           "timeout": "safe end: TIMEOUT, vehicle still armed",
                           "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
                 how, f"safe end {how}")
-            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+            self.event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         elif self.ended is None and b.navigable and b.armed and b.link_ok and self.fsm.state == S.LANDED:
             self.ended = self._await_disarm()
             self._await_end_sample()
-            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+            self.event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         elif self.ended is None:
             st = self.fsm.state
             self.ended = ("landed and disarmed" if st == S.LANDED and not b.armed else
                           f"state {st.value}, {'armed' if b.armed else 'disarmed'}" if b.navigable else
                           f"observed to the end ({st.value})")
-            self._event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+            self.event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
         b.close()
 
     def _await_disarm(self) -> str:
@@ -87,9 +96,9 @@ class RunEnd:
         try:
             b.disarm()
         except Exception as e:  # noqa: BLE001 - recorded; closing goes on
-            self._event("disarm_failed", error=f"{type(e).__name__}: {e}")
+            self.event("disarm_failed", error=f"{type(e).__name__}: {e}")
             return "landed, still armed (disarm refused)"
-        self._event("disarmed_by_us", waited_vehicle_s=round(b.t - t_end + DISARM_WAIT_S, 1))
+        self.event("disarmed_by_us", waited_vehicle_s=round(b.t - t_end + DISARM_WAIT_S, 1))
         self._record_safe_end()
         return "landed and disarmed (by us)"
 
@@ -110,15 +119,15 @@ class RunEnd:
         each new odometry sample (at the odometry sensor's rate)."""
         b = self.backend
         for ev in b.drain_events():
-            self._event(ev.pop("event", "backend_event"), **ev)
+            self.event(ev.pop("event", "backend_event"), **ev)
         st = self.fsm.state
         if st not in (S.LANDING, S.LANDED) and getattr(b, "mode", "") in ("LAND", "RTL"):
             if self.fsm.can(S.LANDING):
                 self.fsm.transition(S.LANDING, b.t)
         if self.fsm.state == S.LANDING and not b.armed and not b.in_air:
             self.fsm.transition(S.LANDED, b.t)
-            self._event("landed", reason="safe end")
-        self.publish_odometry(paced=True)
+            self.event("landed", reason="safe end")
+        self.odometry.publish(paced=True)
 
     def settled(self, wait_s: float = SETTLE_WALL_S) -> bool:
         """After the mission ended: True once the recorded odometry shows the vehicle's armed / in-air state as the
@@ -129,22 +138,10 @@ class RunEnd:
         is settled at once."""
         import time
 
-        b, o = self.backend, self.last_odom
+        b, o = self.backend, self.odometry.last
         if b.sample_key is None or o is None or (o.get("in_air") == bool(b.in_air) and o.get("armed") == bool(b.armed)):
             return True
         now = time.monotonic()
         if self._settle_until is None:
             self._settle_until = now + wait_s
         return now >= self._settle_until
-
-    def finish(self) -> None:
-        """The run is over for this drone: last odometry and the mission result. The drone is no longer stepped:
-        what its vehicle sends meanwhile is not recorded, except from the newest sample on while :meth:`close` brings
-        it down."""
-        self.publish_odometry()
-        self.odometry.mission_ended()
-        if self.recorder is not None:
-            self.recorder.json("/mission/result", self._t_ns(self.backend.t),
-                               {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
-                                "preplanned_total": self.preplanned_total, "t": self.backend.t,
-                                "error": self.error}, "aerodaas.MissionResult")

@@ -90,47 +90,41 @@ class _Landed:
         return []
 
 
-def test_a_landed_vehicle_that_stays_armed_is_disarmed_by_us_after_its_grace():
-    from aerodaas.actors.drone_end import DISARM_WAIT_S, RunEnd
-    from aerodaas.navigation.fsm import MissionState as S
+class _NoOdometry:
+    """The drone's odometry publisher, recording nothing."""
 
-    class End(RunEnd):
-        def __init__(self) -> None:
-            self.backend, self.events = _Landed(), []
-            self.fsm = type("F", (), {"state": S.LANDED})()
+    last = None
 
-        def _event(self, kind, **kw):
-            self.events.append({"event": kind, "t": self.backend.t, **kw})
-
-        def publish_odometry(self, tok=None, *, paced=False):
-            pass
-
-    e = End()
-    assert e._await_disarm() == "landed and disarmed (by us)"
-    assert e.backend.disarms == 1 and e.backend.t >= 100.0 + DISARM_WAIT_S
-    assert [x["event"] for x in e.events] == ["disarmed_by_us"]
+    def publish(self, tok=None, *, paced=False):
+        pass
 
 
-def test_a_vehicle_in_the_air_again_is_never_disarmed_by_the_wait():
+def _run_end(backend, events: list):
+    """A drone's RunEnd (the drone's own object) on ``backend``, landed, its events appended to ``events``."""
     from aerodaas.actors.drone_end import RunEnd
     from aerodaas.navigation.fsm import MissionState as S
 
+    return RunEnd(backend, "d1", type("F", (), {"state": S.LANDED})(),
+                  lambda kind, **kw: events.append({"event": kind, "t": backend.t, **kw}), _NoOdometry())
+
+
+def test_a_landed_vehicle_that_stays_armed_is_disarmed_by_us_after_its_grace():
+    from aerodaas.actors.drone_end import DISARM_WAIT_S
+
+    events: list = []
+    e = _run_end(_Landed(), events)
+    assert e._await_disarm() == "landed and disarmed (by us)"
+    assert e.backend.disarms == 1 and e.backend.t >= 100.0 + DISARM_WAIT_S
+    assert [x["event"] for x in events] == ["disarmed_by_us"]
+
+
+def test_a_vehicle_in_the_air_again_is_never_disarmed_by_the_wait():
     class Airborne(_Landed):
         def drain_events(self) -> list:
             self.in_air = self.t > 103.0  # it took off again (a pilot, the autopilot's own logic)
             return super().drain_events()
 
-    class End(RunEnd):
-        def __init__(self) -> None:
-            self.backend, self.events = Airborne(), []
-            self.fsm = type("F", (), {"state": S.LANDED})()
-
-        def _event(self, kind, **kw):
-            self.events.append({"event": kind, **kw})
-
-        def publish_odometry(self, tok=None, *, paced=False):
-            pass
-
-    e = End()
+    events: list = []
+    e = _run_end(Airborne(), events)
     assert e._await_disarm() == "state LANDED, armed"
-    assert e.backend.disarms == 0 and e.events == []
+    assert e.backend.disarms == 0 and events == []

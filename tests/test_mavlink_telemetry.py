@@ -164,5 +164,5 @@ def test_the_run_end_waits_for_a_sample_taken_after_the_disarm():
     time.sleep(0.02)
     assert d.settled(wait_s=0.01)  # the drone's own wait ran out
     w.position(1100)  # the vehicle's next sample, taken after the disarm
-    d._await_end_sample()
+    d.end._await_end_sample()
     assert w.recorder.odometry_rows[-1]["armed"] is False and w.recorder.odometry_rows[-1]["in_air"] is False
