@@ -16,13 +16,14 @@ changes: the observed round-trip / profile ratios are pooled over all models (``
 model's few samples no longer decide its ``V``), and a task is acted on ``release_early_ms`` before its trigger,
 default DEMS's 50 ms):
 
-* Arrival prediction, learned online: per drone, the period is the gap between its last two frames (tasks of one
-  frame share an arrival time), or with ``gap_window`` k > 1 the median of its last k gaps (bursty video: a burst's
+* Arrival prediction, learned online (by default, ``arrivals="burst"``, the burst/idle model described at the end of
+  this bullet; with ``arrivals="last"``, the default until issue 41's held-out sweep, as follows): per drone, the
+  period is the gap between its last two frames (tasks of one frame share an arrival time), or with ``gap_window`` k > 1 the median of its last k gaps (bursty video: a burst's
   gap rather than the silence before it or a flush's 2 ms; issue 41), and the frame's models are the last frame's. The frames of the next
   ``horizon_ms`` (default 2,000) are predicted at ``last + k * period``; a frame overdue by more than a tenth of
   the period stops the drone's predictions until it sends again (a stopped or irregular drone is not waited for).
-  With ``arrivals="burst"`` the burst/idle model of :class:`.analytics_arrivals.BurstArrivalPredictor` predicts
-  instead (the burst's gap on the drone's phase grid, a flush not moving the phase, the burst's end, and for
+  With ``arrivals="burst"`` (the default) the burst/idle model of :class:`.analytics_arrivals.BurstArrivalPredictor`
+  predicts instead (the burst's gap on the drone's phase grid, a flush not moving the phase, the burst's end, and for
   heavy-tailed gaps one frame at the gap's quantile given the wait, its gain in the plan weighted by that chance).
 * Edge plan: the exact max-gain schedule with release times (:func:`.single_machine.max_gain_schedule`) over the
   pool (release: when the edge is free) and the predicted tasks (release: their predicted arrival), each with
@@ -93,10 +94,12 @@ class LaPlan(EvPlan):
     """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
     prediction), ``edge_levels`` (on-time chances of the edge-time variants, each in (0, 1]), ``pool_models``
     (default True), ``release_early_ms`` (default 50), ``replan_tolerance_ms`` (default 2, in [0, 100]),
-    ``gap_window`` (default 1: the period is the last frame gap; k: the median of the last k, see the module),
-    ``arrivals`` (``"last"``, default: :class:`.analytics_arrivals.ArrivalPredictor`; ``"burst"``: the burst/idle
-    and hazard model :class:`.analytics_arrivals.BurstArrivalPredictor`, issue 41), ``burst_quantile`` (its
-    ``quantile``, default 0.5), and
+    ``gap_window`` (``arrivals="last"`` only; default 1: the period is the last frame gap; k: the median of the last
+    k, see the module),
+    ``arrivals`` (``"burst"``, default since issue 41's held-out sweep: the burst/idle and hazard model
+    :class:`.analytics_arrivals.BurstArrivalPredictor`; ``"last"``: the last-gap predictor
+    :class:`.analytics_arrivals.ArrivalPredictor`, the default before, with which the published periodic and
+    realistic sweeps and the Ray runtime results were made), ``burst_quantile`` (its ``quantile``, default 0.5), and
     EVPLAN's ``window``, ``tolerance``, ``estimator`` and ``edge_quantile`` (admission only). Terminal states as
     GAINPLAN's. Raises ValueError for out-of-range options and for ``commit_horizon_ms``, which LAPLAN does not
     have."""
@@ -109,7 +112,7 @@ class LaPlan(EvPlan):
     def __init__(self, workload: Workload, *, horizon_ms: float = 2000.0,
                  edge_levels: tuple[float, ...] = EDGE_LEVELS, pool_models: bool = True,
                  release_early_ms: float = JIT_EARLY_MS, replan_tolerance_ms: float = 2.0, gap_window: int = 1,
-                 arrivals: str = "last", burst_quantile: float = 0.5, **kw) -> None:
+                 arrivals: str = "burst", burst_quantile: float = 0.5, **kw) -> None:
         if "commit_horizon_ms" in kw:
             raise ValueError(f"LAPLAN has no commit_horizon_ms (got {kw['commit_horizon_ms']!r}): its plan decides "
                              "which tasks are committed to the edge")
@@ -124,7 +127,8 @@ class LaPlan(EvPlan):
             self.arrivals: ArrivalPredictor = ArrivalPredictor(gap_window=gap_window)
         elif arrivals == "burst":
             if gap_window != 1:
-                raise ValueError(f"gap_window={gap_window!r} is for arrivals='last'; the burst predictor keeps its own")
+                raise ValueError(f"gap_window={gap_window!r} is for arrivals='last' (pass it too); the burst "
+                                 "predictor, the default, keeps its own")
             self.arrivals = BurstArrivalPredictor(quantile=burst_quantile)
         else:
             raise ValueError(f"arrivals must be 'last' or 'burst', got {arrivals!r}")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import pytest
 
-from aerodaas.schedulers.analytics_arrivals import BurstArrivalPredictor
+from aerodaas.schedulers.analytics_arrivals import ArrivalPredictor, BurstArrivalPredictor
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.analytics_laplan import LaPlan
 
@@ -130,10 +130,16 @@ def test_options_out_of_range_are_refused():
 def test_laplan_option_arrivals():
     w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
     assert isinstance(LaPlan(w, arrivals="burst").arrivals, BurstArrivalPredictor)
+    # the default since issue 41's held-out sweep (seeds 500-507): the last-gap predictor stays as an option
+    assert isinstance(LaPlan(w).arrivals, BurstArrivalPredictor)
+    assert type(LaPlan(w, arrivals="last").arrivals) is ArrivalPredictor
+    assert LaPlan(w, arrivals="last", gap_window=5).arrivals.gap_window == 5
     with pytest.raises(ValueError, match="arrivals"):
         LaPlan(w, arrivals="future")
     with pytest.raises(ValueError, match="gap_window"):
         LaPlan(w, arrivals="burst", gap_window=5)
+    with pytest.raises(ValueError, match="gap_window"):
+        LaPlan(w, gap_window=5)  # the default is the burst predictor: gap_window needs arrivals="last"
 
 
 class BurstLaPlan(LaPlan):
