@@ -144,7 +144,7 @@ class RecorderService(AnalyticsAccounting):
                 self.dropped_by_topic[topic] += 1
                 return False
             self._pending_frames += 1
-        self._q.put(item)
+            self._q.put(item)  # under the lock: see _put
         return True
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
@@ -172,11 +172,10 @@ class RecorderService(AnalyticsAccounting):
         if self.failure is not None:
             self.lost += 1
             return
-        with self._lock:
+        with self._lock:  # numbered and queued at once: never behind close()'s stop mark with a number taken
             if self.closed:
                 return
-            item = self._numbered(item)
-        self._q.put(item)
+            self._q.put(self._numbered(item))
 
     def _numbered(self, item: RecordItem) -> RecordItem:
         """``item`` with a sequence number: a producer in this process (``seq`` -1) is numbered here, per stream, and
