@@ -35,6 +35,12 @@ def _capture_due(d: Any, tok: Any) -> None:
             cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
 
 
+def _halt_cameras(d: Any) -> None:
+    """Drone ``d``'s mission is over: its cameras capture no more (a stream camera's arrivals included)."""
+    for cam in d.cameras:
+        cam["comp"].halt()
+
+
 class _Checkpointer:
     """Sends each drone's checkpoint (:mod:`.checkpoint`) to the run's recorder actor about every ``period_s``
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
@@ -256,11 +262,14 @@ class ActorAssembly:
                 for d in active:
                     if not d.done:  # settling: odometry only (:meth:`DroneComponent.settled`)
                         _capture_due(d, tok)
+                    else:  # no more ticks: a stream camera stops capturing its arrivals too
+                        _halt_cameras(d)
                 if tok is not None:  # a frame for a consumer that Ray restarts waits up to restart_hold_s for it
                     tok.wait(max(120.0, self.plane.restart_hold_s + 60.0))
                 now = time.monotonic()
                 finished = [d for d in active if self._control_due(d, now, wall0)]
                 for d in finished:
+                    _halt_cameras(d)  # (a drone may end and settle in one tick)
                     d.finish()
                     active.remove(d)
                 checkpoints.maybe([d for d in active if not d.done])  # a settling drone's mission is over
@@ -269,10 +278,12 @@ class ActorAssembly:
                         if not d.done:  # one still settling has ended its mission already
                             d.outcome = "timeout"
                             d.record_event("timeout", wall_s=timeout_s)
+                        _halt_cameras(d)
                         d.finish()
                     active = []
         finally:
             for d in drones:
+                _halt_cameras(d)
                 d.close()
             if self.scheduling is not None:
                 try:

@@ -18,13 +18,19 @@ from aerodaas.actors.dataplane import Cascade, DataPlane
 from aerodaas.navigation.gimbal import camera_angles, quaternion_from_euler, wrap_deg
 from aerodaas.video.pose import angles_at, pose_sampled_at
 
+#: how long a stream frame captured after the newest clock tick waits for the next one (s): the clock ticks at
+#: twice the stream's rate, so this is only reached when the clock stalls
+TICK_WAIT_S = 0.25
+
 
 class CameraComponent:
     """A camera sensor. :meth:`capture` (run on the actor's pool when the clock says a frame is due) produces one
     frame — rendered by the simulator at the drone's pose (``source: sim``), the backend's own newest frame
     (``source: backend``, e.g. a Tello), or the recorded frame at this time of an MCAP recording's camera channel
     (``source: mcap``, to re-run analytics on a recorded flight) — makes it read-only, and publishes it. While the previous capture is still being
-    rendered a new one is skipped and counted (``dropped_at_camera``). Frames go to the recorder by reference."""
+    rendered a new one is skipped and counted (``dropped_at_camera``). A video stream's frame (RTSP, RTP/UDP, ...)
+    is captured when it arrives, the clock's ticks giving the poses it is tagged with (:meth:`try_capture`).
+    Frames go to the recorder by reference."""
 
     kind = "camera"
 
@@ -62,6 +68,12 @@ class CameraComponent:
         self._gimbals: deque[tuple[float, Any]] = deque(maxlen=256)
         self.stream = None
         self._last_capture_t = float("-inf")  # run-clock capture time of the stream's previous frame
+        #: (run time s, time.monotonic() s) of the newest clock tick: maps a stream frame's host times to the run
+        #: clock; the condition wakes a capture waiting for the tick after its frame (see _tick_after)
+        self._tick_clock: tuple[float, float] | None = None
+        self._tick_cond = threading.Condition()
+        self._last_gimbal: Any = None  # the gimbal's attitude at the newest tick
+        self._halted = False  # the drone's mission is over: frames arriving now are not captured
         self.latency_ms: deque[float] = deque(maxlen=4096)
         self._props = props
         #: source "mavlink": the stream the vehicle announced (opened by on_vehicle_connected)
@@ -69,8 +81,9 @@ class CameraComponent:
         if self.source not in ("sim", "backend", "mcap"):
             if self.source != "mavlink":
                 self._open_stream(self.source, props.get("codec"))
-            # polled at twice the stream's nominal rate: a frame waits at most half an interval for its tick, and
-            # a tick without a new frame is not a loss (counted in dropped_at_camera like any tick without a frame)
+            # a stream frame is captured when it arrives (the reader wakes the camera: _on_stream_frame); the ticks,
+            # at twice the stream's nominal rate, sample the pose and gimbal the frames are tagged with and take a
+            # frame that arrived while the previous capture was running
             self.fps = 2.0 * self.fps
         if self.source == "mcap":
             from aerodaas.backends.replay import McapCameraReplay
@@ -86,7 +99,7 @@ class CameraComponent:
         spec = parse_stream_source(source, props.get("transport") if source.startswith("rtsp") else None, codec)
         self.stream = StreamReader(spec, self.k.width, self.k.height,
                                    stall_timeout_s=float(props.get("stall_timeout_s") or 2.0),
-                                   name=f"{self.robot_id}/{self.sensor_id}").start()
+                                   name=f"{self.robot_id}/{self.sensor_id}", on_frame=self._on_stream_frame).start()
         self.stream.wait_first(float(props.get("first_frame_timeout_s") or 10.0))
 
     def on_vehicle_connected(self) -> None:
@@ -113,9 +126,16 @@ class CameraComponent:
                                        f"({found.describe()}), which is not a readable stream: {e}") from None
 
     def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
-        """Clock thread: a frame is due. Submits the capture unless the previous one is still running."""
-        self.ticks += 1
+        """Clock thread: a frame is due at run time ``t`` (s), the vehicle at ``position`` (ENU m) with ``yaw``
+        (ENU deg). Submits the capture unless the previous one is still running (then counted in
+        ``dropped_at_camera``). A stream camera samples the pose and gimbal here and captures only a frame that is
+        waiting (one that arrived while the previous capture ran); the others are captured on arrival."""
         self._poses.append((t, tuple(position), float(yaw)))
+        if self.stream is not None:
+            self._last_gimbal = self._gimbal(t)
+            self._note_tick(t)
+            return self.stream.waiting() and self._submit_stream_capture()
+        self.ticks += 1
         if not self._busy.acquire(blocking=False):
             self.dropped_at_camera += 1
             return False
@@ -123,6 +143,42 @@ class CameraComponent:
             tok.add()
         self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter(), self._gimbal(t))
         return True
+
+    def halt(self) -> None:
+        """The drone's mission is over (the clock calls no more :meth:`try_capture`): stream frames that arrive from
+        now on are not captured, and a capture waiting for a tick stops waiting."""
+        with self._tick_cond:
+            self._halted = True
+            self._tick_cond.notify_all()
+
+    def _note_tick(self, t: float) -> None:
+        """A clock tick at run time ``t`` (s), now on the host's monotonic clock."""
+        with self._tick_cond:
+            self._tick_clock = (t, time.monotonic())
+            self._tick_cond.notify_all()
+
+    def _on_stream_frame(self) -> None:
+        """The stream reader's thread: a frame arrived. It is captured now (on the actor's pool) unless the clock has
+        not ticked yet, the mission is over, or a capture is running (that capture's end takes it)."""
+        if self._tick_clock is not None and not self._halted:
+            self._submit_stream_capture()
+
+    def _submit_stream_capture(self) -> bool:
+        """Submit a stream frame's capture unless one is running; its ``seq`` counts the camera's captures."""
+        if not self._busy.acquire(blocking=False):
+            return False
+        self.ticks += 1
+        t, position, yaw = self._poses[-1]
+        self.plane.submit(self._capture, position, yaw, t, self.ticks, None, time.perf_counter(), self._last_gimbal)
+        return True
+
+    def _tick_after(self, mono: float) -> tuple[float, float]:
+        """The newest tick (run time s, monotonic s), once there is one at or after host time ``mono`` (s): a frame
+        captured after the newest tick waits for the next one, so that the ticks' poses enclose its capture (at most
+        :data:`TICK_WAIT_S`; not when the mission is over)."""
+        with self._tick_cond:
+            self._tick_cond.wait_for(lambda: self._halted or self._tick_clock[1] >= mono, timeout=TICK_WAIT_S)
+            return self._tick_clock
 
     def _gimbal(self, t: float) -> Any:
         """The gimbal's attitude now (the clock thread, at the frame's tick at run time ``t`` s), kept for the
@@ -155,6 +211,8 @@ class CameraComponent:
                 msg = self._produce(position, yaw, t, seq, dispatch_ms, gimbal)
             finally:
                 self._busy.release()  # the next frame may be rendered while this one travels downstream
+            if self.stream is not None and not self._halted and self.stream.waiting():
+                self._submit_stream_capture()  # a frame arrived during this capture: taken now, not at a tick
             if msg is not None:
                 self.plane.publish(self.cid, [msg], tok, inline=True)
         finally:
@@ -165,6 +223,7 @@ class CameraComponent:
         """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
         new frame)."""
         self._poses.append((t, tuple(position), float(yaw)))
+        self._note_tick(t)
         msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal(t))
         if msg is None:
             return None
@@ -182,7 +241,7 @@ class CameraComponent:
         truth: list = []
         timing = None
         if self.stream is not None:
-            got = self._from_stream(t)
+            got = self._from_stream()
             if got is None:
                 self.dropped_at_camera += 1
                 return None
@@ -242,25 +301,30 @@ class CameraComponent:
             heading, pitch = camera_angles(yaw, gimbal.pitch_deg, gimbal.yaw_deg)
         return FramePose(position=position, yaw=heading, camera_pitch=pitch)
 
-    def _from_stream(self, t: float) -> tuple[np.ndarray, FramePose, dict] | None:
+    def _from_stream(self) -> tuple[np.ndarray, FramePose, dict] | None:
         """The stream's newest frame not delivered before, its pose at capture and its timing, or None. Its capture
-        time on the run clock is the tick time ``t`` minus the frame's age (the run clock of a stream camera runs at
-        wall rate: speedup 1, checked before Ray). The timing (``aerodaas.FrameTiming``): ``capture_t``,
-        ``arrival_t``, ``pose_t`` (run-clock s), ``age_ms``, ``stream_seq``, the vehicle pose at capture
-        (``position`` ENU m, ``yaw`` ENU deg) and ``pose_samples_t``: the run times (s) of the two ticks' poses it
-        was interpolated between, or of the one used outside them."""
+        and arrival times on the run clock are the newest tick's run time plus their host-time offset from that tick
+        (the run clock of a stream camera runs at wall rate: speedup 1, checked before Ray), with a tick at or after
+        the capture (:meth:`_tick_after`), so that the pose is interpolated between ticks around it. The timing
+        (``aerodaas.FrameTiming``): ``capture_t``, ``arrival_t``, ``pose_t`` (run-clock s), ``age_ms`` (capture to
+        hand-off), ``stream_seq``, the vehicle pose at capture (``position`` ENU m, ``yaw`` ENU deg) and
+        ``pose_samples_t``: the run times (s) of the two ticks' poses it was interpolated between, or of the one
+        used outside them."""
         for ev in self.stream.drain_events():
             if self.on_event is not None:
                 self.on_event(ev.kind, sensor=self.sensor_id, **ev.fields)
         f = self.stream.take()
         if f is None:
             return None
+        capture_mono = min(f.capture_mono, time.monotonic())  # an estimate from the PTS is never in the future
+        tick_t, tick_mono = self._tick_after(capture_mono)
         now = time.monotonic()
         # never before the previous frame's: a vehicle clock that stalls while the wall clock runs (a real
         # autopilot's time_boot_ms, a starved emulator) would order two frames backwards, and the recorder takes a
         # frame not newer than the last one for a frame sent again (seen under load 37: 7 of 911 frames)
-        capture_t = max(t - max(0.0, now - f.capture_mono), self._last_capture_t + 1e-6)
-        arrival_t = max(t - max(0.0, now - f.arrival_mono), capture_t)
+        # (not after the newest tick: one taken after it when the clock stalled or the mission ended has that pose)
+        capture_t = max(tick_t - max(0.0, tick_mono - capture_mono), self._last_capture_t + 1e-6)
+        arrival_t = max(tick_t - (tick_mono - f.arrival_mono), capture_t)
         self._last_capture_t = capture_t
         position, yaw, pose_t, samples_t = pose_sampled_at(list(self._poses), capture_t)
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)

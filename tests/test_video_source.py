@@ -202,6 +202,77 @@ def test_a_stream_frame_carries_the_gimbal_attitude_of_its_capture_time():
     assert cam._gimbal_at(1.05, None) is None  # no gimbal: none
 
 
+class _FakeStream:
+    """A stream reader's consumer side holding frames put by the test (no thread, no FFmpeg)."""
+
+    def __init__(self) -> None:
+        self.slot = None
+
+    def put(self, capture_mono: float, seq: int) -> None:
+        import numpy as np
+
+        from aerodaas.video.reader import VideoFrame
+
+        img = np.zeros((120, 160, 3), np.uint8)
+        img.flags.writeable = False
+        self.slot = VideoFrame(seq, img, capture_mono, capture_mono + 0.02, None)
+
+    def take(self):
+        f, self.slot = self.slot, None
+        return f
+
+    def waiting(self) -> bool:
+        return self.slot is not None
+
+    def drain_events(self) -> list:
+        return []
+
+
+class _InlinePlane:
+    """A data plane that runs every job at once in the caller's thread and keeps what is published."""
+
+    def __init__(self) -> None:
+        self.published: list = []
+        self.copies = type("Copies", (), {"count": lambda self, what: None})()
+
+    def submit(self, fn, *args) -> None:
+        fn(*args)
+
+    def publish(self, cid, msgs, tok, inline=False) -> None:
+        self.published += msgs
+
+
+def test_a_stream_frame_is_handed_off_when_it_arrives_not_at_the_next_tick():
+    """Issue 38: a stream camera captures a frame when the reader says it arrived (no poll on the clock's tick);
+    the ticks give the poses it is tagged with (interpolated at its capture time between the two ticks around it),
+    nothing is captured before the first tick or after the drone's mission ended, and a tick takes only a frame
+    that is waiting."""
+    from aerodaas.actors.camera import CameraComponent
+
+    plane = _InlinePlane()
+    cam = CameraComponent(plane, "cam", "uav", "cam1", {"width": 160, "height": 120, "hfov_deg": 78, "fps": 10,
+                                                        "pitch_deg": 90}, None, None, None, 0)
+    stream = cam.stream = _FakeStream()
+    stream.put(time.monotonic(), 1)
+    cam._on_stream_frame()  # before the clock's first tick: it waits for the tick
+    assert plane.published == [] and stream.waiting()
+    assert cam.try_capture((0.0, 0.0, 10.0), 0.0, 1.0, None)  # the first tick takes the waiting frame
+    assert len(plane.published) == 1 and not stream.waiting()
+    assert not cam.try_capture((2.0, 0.0, 10.0), 0.0, 1.5, None)  # a tick with nothing waiting captures nothing
+    tick_mono = cam._tick_clock[1]
+    stream.put(tick_mono - 0.25, 2)  # captured half-way between the two ticks, arriving now
+    cam._on_stream_frame()  # the arrival alone hands it off
+    assert len(plane.published) == 2
+    msg = plane.published[-1]
+    assert msg.meta.capture_time == pytest.approx(1.25, abs=1e-3)
+    assert msg.meta.pose.position == pytest.approx((1.0, 0.0, 10.0), abs=1e-2)  # between the ticks' poses
+    assert (msg.meta.seq, cam.ticks, cam.frames, cam.dropped_at_camera) == (2, 2, 2, 0)
+    cam.halt()  # the mission is over: an arrival is no longer captured
+    stream.put(time.monotonic(), 3)
+    cam._on_stream_frame()
+    assert len(plane.published) == 2 and stream.waiting()
+
+
 @pytest.fixture(scope="module")
 def footage(tmp_path_factory):
     if DATA_MISSING is not None:

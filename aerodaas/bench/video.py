@@ -1,5 +1,5 @@
 """``aerodaas bench video``: glass-to-analytics latency and decode cost of a drone's video stream — our reader
-(:class:`aerodaas.video.StreamReader`, polled as the camera polls it) against the loops a user would otherwise
+(:class:`aerodaas.video.StreamReader`, taken when it wakes the consumer, as the camera takes it) against the loops a user would otherwise
 write: a bare PyAV decode loop, OpenCV's ``VideoCapture(url, CAP_FFMPEG)`` with its default buffering, and a
 GStreamer ``appsink`` pipeline (:mod:`aerodaas.bench.video_gst`, run under the system Python that has PyGObject).
 
@@ -121,14 +121,16 @@ def _read(reader: str, url: str, width: int, height: int, fps: float,
     if reader == "ours":
         from aerodaas.video import StreamReader, parse_stream_source
 
-        r = StreamReader(parse_stream_source(url), width, height).start()
+        arrived = threading.Event()
+        r = StreamReader(parse_stream_source(url), width, height, on_frame=arrived.set).start()
         try:
             r.wait_first(30.0)
-            while time.monotonic() < end:  # the camera's poll: twice the stream's rate
+            while time.monotonic() < end:  # the camera's hand-off: woken by the reader when a frame arrives
+                arrived.wait(0.5 / fps)  # (the camera's clock also ticks at twice the stream's rate)
+                arrived.clear()
                 f = r.take()
                 if f is not None:
                     note(f.image)
-                time.sleep(0.5 / fps)
         finally:
             r.close()
     elif reader == "pyav":

@@ -17,7 +17,7 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Callable, Literal
 
 import numpy as np
 
@@ -55,12 +55,18 @@ class VideoEvent:
 class StreamReader:
     """Reads ``spec`` in a daemon thread (see the module docstring). ``width``/``height``: the camera's frame size
     in px; ``stall_timeout_s``: no packet for this long means the stream is lost; ``open_timeout_s``: how long one
-    open may take; ``backoff_s``: (first, longest) wait between reopen attempts. Call :meth:`start`, then
-    :meth:`wait_first`, :meth:`take`, :meth:`drain_events`; :meth:`close` at the end."""
+    open may take; ``backoff_s``: (first, longest) wait between reopen attempts; ``on_frame``: called (no
+    arguments, in the reading thread) each time a frame was put into the slot — the consumer's wake-up, so that it
+    takes a frame when it arrives instead of polling; it must not block (an exception from it is counted in
+    ``on_frame_errors`` and the reading goes on). Call :meth:`start`, then :meth:`wait_first`, :meth:`take`,
+    :meth:`drain_events`; :meth:`close` at the end."""
 
     def __init__(self, spec: StreamSpec, width: int, height: int, *, stall_timeout_s: float = 2.0,
-                 open_timeout_s: float = 10.0, backoff_s: tuple[float, float] = (0.25, 4.0), name: str = "") -> None:
+                 open_timeout_s: float = 10.0, backoff_s: tuple[float, float] = (0.25, 4.0), name: str = "",
+                 on_frame: Callable[[], None] | None = None) -> None:
         self.spec, self.width, self.height = spec, int(width), int(height)
+        self.on_frame = on_frame
+        self.on_frame_errors = 0
         self.stall_timeout_s, self.open_timeout_s, self.backoff_s = stall_timeout_s, open_timeout_s, backoff_s
         self.name = name or spec.source
         self.clock = CaptureClock()
@@ -108,6 +114,11 @@ class StreamReader:
                 self.taken += 1
             return f
 
+    def waiting(self) -> bool:
+        """Whether a frame waits in the slot (one :meth:`take` would return)."""
+        with self._lock:
+            return self._slot is not None
+
     def drain_events(self) -> list[VideoEvent]:
         """The events since the last call, oldest first."""
         with self._lock:
@@ -116,14 +127,16 @@ class StreamReader:
 
     def stats(self) -> dict[str, Any]:
         """Counters: decoded, taken, overwritten (newest-wins drops), waiting (0/1), opens, open_failures,
-        decode_errors, lost, restored, outage_s (total seconds without frames after a loss), clock_resets."""
+        decode_errors, lost, restored, outage_s (total seconds without frames after a loss), clock_resets,
+        on_frame_errors."""
         with self._lock:
             waiting = int(self._slot is not None)
             outage = self.outage_s + (time.monotonic() - self._lost_at if self._lost_at is not None else 0.0)
             return {"source": self.spec.source, "kind": self.spec.kind, "decoded": self.decoded, "taken": self.taken,
                     "overwritten": self.overwritten, "waiting": waiting, "opens": self.opens,
                     "open_failures": self.open_failures, "decode_errors": self.decode_errors, "lost": self.lost,
-                    "restored": self.restored, "outage_s": round(outage, 3), "clock_resets": self.clock.resets}
+                    "restored": self.restored, "outage_s": round(outage, 3), "clock_resets": self.clock.resets,
+                    "on_frame_errors": self.on_frame_errors}
 
     def close(self) -> None:
         """Stop the thread (within about one read timeout) and remove the SDP file."""
@@ -234,6 +247,11 @@ class StreamReader:
             self._last_arrival = arrival
             self._attempts_since_loss = 0
         self._first.set()
+        if self.on_frame is not None:
+            try:
+                self.on_frame()
+            except Exception:  # noqa: BLE001 - the consumer's wake-up failing must not stop the stream
+                self.on_frame_errors += 1
 
     def _note_loss(self, reason: str) -> None:
         """The stream stopped (or still cannot be opened): one ``video_lost`` per outage, after a first frame."""
