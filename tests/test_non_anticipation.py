@@ -37,6 +37,7 @@ import pytest
 
 from aerodaas.bench.harness import Harness, Result, make_trace
 from aerodaas.bench.isolation import IsolatedPolicy, secret_seed
+from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.dispatch.emulation import Jitter, seeded_rng
 
@@ -110,15 +111,36 @@ def _before(res, cut):
     return ([e for e in res.log if e[0] < cut], [(t.task_id, s) for t, s in res.edge_starts if s < cut])
 
 
-def cuts(trace, n_uniform: int = 6, n_arrivals: int = 8, seed: int = 3) -> list[float]:
+def cuts(trace, n_uniform: int = 6, n_arrivals: int = 8, seed: int = 3, start_ms: float = 1000.0) -> list[float]:
     """Cut points: ``n_uniform`` uniform in the trace's span, and 1 ms and 1 µs before ``n_arrivals`` arrivals
-    picked at random (not the first second, where little has happened yet)."""
+    picked at random (not before ``start_ms``: the first second, where little has happened yet)."""
     rng = random.Random(seed)
     span = trace[-1].arrival_ms
-    arr = sorted({t.arrival_ms for t in trace if t.arrival_ms > 1000.0})
+    arr = sorted({t.arrival_ms for t in trace if t.arrival_ms > start_ms})
     picks = rng.sample(arr, min(n_arrivals, len(arr)))
-    return sorted([rng.uniform(1000.0, span) for _ in range(n_uniform)] + [a - 1.0 for a in picks]
+    return sorted([rng.uniform(start_ms, span) for _ in range(n_uniform)] + [a - 1.0 for a in picks]
                   + [a - 0.001 for a in picks])
+
+
+#: a drone's frame gap shorter than this (ms; the 1 fps traces' mean gap) is a burst, longer than SILENCE_MS a silence
+BURST_MS, SILENCE_MS = 1000.0, 2000.0
+
+
+def shape_cuts(trace, n: int = 2, seed: int = 5, start_ms: float = 1000.0) -> dict[str, list[float]]:
+    """Cuts inside the bursts and silences of ``trace``: the midpoints of ``n`` of its drones' frame gaps shorter
+    than :data:`BURST_MS` (``"burst"``) and of ``n`` longer than :data:`SILENCE_MS` (``"silence"``), picked at
+    random after ``start_ms`` (a drone's gaps: between its consecutive frames)."""
+    frames: dict[str, list[float]] = {}
+    for t in trace:
+        if not frames.setdefault(t.drone, []) or frames[t.drone][-1] != t.arrival_ms:
+            frames[t.drone].append(t.arrival_ms)
+    gaps = [(a, b) for ts in frames.values() for a, b in zip(ts, ts[1:]) if (a + b) / 2 > start_ms]
+    rng = random.Random(seed)
+    out = {}
+    for name, keep in (("burst", lambda g: g < BURST_MS), ("silence", lambda g: g > SILENCE_MS)):
+        mids = sorted((a + b) / 2 for a, b in gaps if keep(b - a))
+        out[name] = sorted(rng.sample(mids, min(n, len(mids))))
+    return out
 
 
 @dataclass
@@ -131,28 +153,59 @@ class Check:
     reference: Result
     trace: list
     seeds: dict = field(default_factory=dict)
+    #: bursty kinds: the cuts inside the trace's bursts and silences (see :func:`shape_cuts`), also in ``cuts``
+    shape: dict = field(default_factory=dict)
 
 
 def _trace_seed(secret: bool, public: int) -> int:
     return int.from_bytes(secret_seed(), "little") if secret else public
 
 
-def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 1, n_arrivals: int = 8) -> Check:
+def cut_trace(w, seed: int, kind: str | None = None, *, drones: int = 3, duration_s: float = DURATION_S) -> list:
+    """The cut comparison's single-edge trace. ``kind`` None: :func:`aerodaas.bench.harness.make_trace` (1 fps,
+    250 ms jitter; the policy tests' trace). Else a trace kind of :class:`TraceSpec` with its default parameters
+    (``"onoff"``, ``"pareto"``, ``"flush"``: the bursty kinds of issue 41), made as the runtime benchmark and the
+    sweep make it (:func:`aerodaas.bench.schedulers.make_trace`, one edge of ``drones`` drones at 1 fps), its tasks
+    numbered from 0 in arrival order as the harness's trace."""
+    if kind is None:
+        return make_trace(w, drones=drones, duration_s=duration_s, seed=seed, jitter_ms=250.0)
+    from aerodaas.bench.schedulers import make_trace as fleet_trace
+
+    rows = fleet_trace(w, drones, duration_s, seed, drones_per_edge=drones, trace=TraceSpec.parse(kind))
+    return [AnalyticsTask(n, d, m, t, t + w[m].deadline_ms) for n, (t, _, d, m) in enumerate(rows)]
+
+
+def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 1, n_arrivals: int = 8,
+          kind: str | None = None, drones: int = 3, duration_s: float = DURATION_S) -> Check:
     """Run ``policy`` (see :func:`_run`) through the cut comparison. ``secret`` False: the old protocol's public
     seeds (:data:`PUBLIC`), the same re-draw seed at every cut. ``warm_up``: one run before the reference run (its
     own secrets, or, publicly, the reference run's own seeds: what a cross-run cache needs to pass). ``every``: use
-    every n-th cut only. ``n_arrivals``: how many arrivals get a cut just before them (see :func:`cuts`)."""
+    every n-th cut only. ``n_arrivals``: how many arrivals get a cut just before them (see :func:`cuts`).
+    ``kind``, ``drones``, ``duration_s``: the traces (see :func:`cut_trace`; the post-cut future is another trace of
+    the same kind). A bursty kind's cuts begin 1 s after its first frame (the first seconds can be silent: nothing
+    decided before a cut there), its trace is re-drawn (another secret) until it has a burst and a silence after
+    that, and it gets cuts inside both (:func:`shape_cuts`)."""
     trace_seed, seed = _trace_seed(secret, PUBLIC[0]), (secret_seed() if secret else PUBLIC[1])
-    a = make_trace(w, drones=3, duration_s=DURATION_S, seed=trace_seed, jitter_ms=250.0)
+    a = cut_trace(w, trace_seed, kind, drones=drones, duration_s=duration_s)
+    shape = {}
+    if kind is not None:
+        for _ in range(100):
+            shape = shape_cuts(a, start_ms=a[0].arrival_ms + 1000.0)
+            if shape["burst"] and shape["silence"]:
+                break
+            trace_seed = _trace_seed(secret, trace_seed + 1)
+            a = cut_trace(w, trace_seed, kind, drones=drones, duration_s=duration_s)
+        assert shape["burst"] and shape["silence"], f"no {kind} trace with a burst and a silence: {shape}"
     if warm_up:
-        wt = a if not secret else make_trace(w, drones=3, duration_s=DURATION_S, seed=_trace_seed(True, 0),
-                                             jitter_ms=250.0)
+        wt = a if not secret else cut_trace(w, _trace_seed(True, 0), kind, drones=drones, duration_s=duration_s)
         _run(policy, w, wt, None, secret_seed() if secret else seed, None)
     ra = _run(policy, w, a, None, seed, None)
     flagged = []
-    points = cuts(a, n_arrivals=n_arrivals)[::every]
+    start_ms = 1000.0 if kind is None else a[0].arrival_ms + 1000.0
+    points = sorted(cuts(a, n_arrivals=n_arrivals, start_ms=start_ms)[::every] + shape.get("burst", [])
+                    + shape.get("silence", []))
     for cut in points:
-        other = make_trace(w, drones=3, duration_s=DURATION_S, seed=_trace_seed(secret, PUBLIC[3]), jitter_ms=250.0)
+        other = cut_trace(w, _trace_seed(secret, PUBLIC[3]), kind, drones=drones, duration_s=duration_s)
         prefix = [t for t in a if t.arrival_ms < cut]
         b = prefix + [AnalyticsTask(len(prefix) + i, t.drone, t.model, t.arrival_ms, t.deadline_ms)
                       for i, t in enumerate(t for t in other if t.arrival_ms >= cut)]
@@ -165,7 +218,7 @@ def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 
         assert before_a[0] or before_a[1], f"nothing decided before the cut {cut}"
         if before_a != _before(rb, cut):
             flagged.append(cut)
-    return Check(points, flagged, ra, a, {"trace": trace_seed, "draws": seed})
+    return Check(points, flagged, ra, a, {"trace": trace_seed, "draws": seed}, shape)
 
 
 def _heavy() -> Workload:
