@@ -21,6 +21,45 @@ from .video_rig import RtspServer, Sender, check_stream_recording, free_udp_port
 APP = REPO / "apps" / "vehicle_tracking.py"
 
 
+def check_recording_replays_as_a_trace(rec, fps: float = 2.0, seed: int = 1) -> dict[str, int]:
+    """A recording of a real stream as the scheduler benchmarks' trace ``--trace recording:FILE`` (issue 41): its
+    camera-frame gaps are read — :func:`recording_frame_gaps` gives one gap list per camera topic, with as many
+    gaps as the topic has frames minus one, the gaps between their log times (counted here from the MCAP file
+    itself) — and :func:`frame_times` replays them at ``fps``: a drone's replayed gaps are the recorded ones, in
+    order from a seeded start (looping), scaled so their mean is ``1/fps``, and each whole loop of them averages
+    ``1/fps`` s. Returns the frames per camera topic."""
+    from mcap.reader import make_reader
+
+    from aerodaas.bench.traces import IMAGE_SCHEMAS, TraceSpec, frame_times, recording_frame_gaps
+
+    stamps: dict[str, list[int]] = {}
+    with open(rec, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            if schema is not None and schema.name in IMAGE_SCHEMAS:
+                stamps.setdefault(channel.topic, []).append(message.log_time)
+    cams = sorted(t for t, ts in stamps.items() if len(ts) >= 3)
+    assert cams, f"no camera topic with 3 frames in {rec}: {sorted(stamps)}"
+    gaps = recording_frame_gaps(rec)
+    assert [len(g) for g in gaps] == [len(stamps[t]) - 1 for t in cams], ([len(g) for g in gaps], cams)
+    for g, t in zip(gaps, cams):
+        ts = sorted(stamps[t])
+        assert g == pytest.approx([(b - a) / 1e6 for a, b in zip(ts, ts[1:])], abs=1e-6)
+    period = 1000.0 / fps
+    for i, g in enumerate(gaps):                      # fleet drone i replays camera i
+        n, scale = len(g), period / (sum(g) / len(g))
+        want = [max(x * scale, 1e-3) for x in g]
+        times = frame_times(TraceSpec.parse(f"recording:{rec}"), f"d{i}", 0, 1, i, period, (2 * n + 1) * period,
+                            seed)
+        got = [b - a for a, b in zip(times, times[1:])]
+        assert len(got) >= 2 * n, (len(got), n)
+        # the replayed gaps: the recorded ones scaled, in their order from one start (times rounded to 1 us)
+        start = next((k for k in range(n) if all(abs(got[j] - want[(k + j) % n]) <= 2e-3 for j in range(n))), None)
+        assert start is not None, f"{cams[i]}: the replayed gaps are not the recorded ones x {scale:g} in order"
+        for loop in (got[:n], got[n:2 * n]):          # a whole loop of the recording at the requested rate
+            assert sum(loop) / n == pytest.approx(period, rel=1e-3), (sum(loop) / n, period)
+    return {t: len(stamps[t]) for t in cams}
+
+
 def _wait_flying(proc, deadline_s: float = 300.0) -> None:
     """Until the drone is on its mission (the camera streams by then): polled through the HITL API."""
     end = time.monotonic() + deadline_s
@@ -83,3 +122,7 @@ def test_vehicle_tracking_on_a_stream_survives_a_5s_outage(tmp_path, monkeypatch
     assert got["follow"]  # the follow analytics commanded the drone from the stream's detections
     stats = got["stats"]
     assert stats["lost"] >= 1 and stats["restored"] >= 1, stats
+    # the recording replays as a scheduler-benchmark trace (--trace recording:run.mcap): its camera's frame gaps,
+    # the 5 s outage among them, at a requested mean rate
+    frames = check_recording_replays_as_a_trace(rec)
+    assert frames.get("/quadrotor_base/camera/cam1", 0) >= 3, frames
