@@ -146,7 +146,10 @@ class CameraComponent:
 
     def halt(self) -> None:
         """The drone's mission is over (the clock calls no more :meth:`try_capture`): stream frames that arrive from
-        now on are not captured, and a capture waiting for a tick stops waiting."""
+        now on are not captured, and a capture waiting for a tick stops waiting. Called at every step of a settling
+        drone: once halted, it returns at once."""
+        if self._halted:
+            return
         with self._tick_cond:
             self._halted = True
             self._tick_cond.notify_all()
