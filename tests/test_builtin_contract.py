@@ -106,6 +106,34 @@ def test_each_core_builtin_analytics_declares_what_it_consumes_and_produces(name
     check_declaration(cls())
 
 
+@pytest.mark.parametrize("name,consumes,produces", [
+    ("FallDetector", ("frame",), ("navigation",)), ("StructureLocator", ("frame",), ("detections",)),
+    ("InspectionPlanner", ("detections",), ("navigation",)),
+])
+def test_each_extra_builtin_analytics_declares_what_it_consumes_and_produces(name, consumes, produces):
+    """The paper apps' analytics (aerodaas.analytics.extra) declare their stream types too, so a wrong feed stops the
+    application when it is loaded: the planner fed a camera's frames instead of the locator's detections is refused,
+    naming both types; fed the locator it passes."""
+    from aerodaas.analytics.contract import ContractError, check_consumes, check_declaration
+    from aerodaas.analytics.extra import InspectionPlanner, StructureLocator
+
+    e = registry.resolve("analytics", name)
+    cls = e.load()
+    assert e.origin == "builtin" and (cls.consumes, cls.produces) == (consumes, produces)
+    if name != "InspectionPlanner":
+        return
+    check_declaration(cls())
+    locator = StructureLocator("any.jpg", size_m=3.0)
+    fed = InspectionPlanner()
+    fed.analyse(locator.output)
+    check_consumes(fed)
+    wrong = InspectionPlanner()
+    wrong.analyse(InspectionPlanner().output)
+    with pytest.raises(ContractError, match=r"consumes \['detections'\], but it is fed the output of analytics "
+                                            r"'inspection_planner', which carries \['navigation'\]"):
+        check_consumes(wrong)
+
+
 def test_track_analytics_is_checked_against_its_feed_and_its_output_fields_are_documented():
     """TrackAnalytics takes detections (a stream of another type stops the application before Ray, naming both), and
     every field of its output rows is in docs/extending.md's table of the messages an analytics receives."""

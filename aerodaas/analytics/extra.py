@@ -95,6 +95,7 @@ class FallDetector(NavigableAnalytics):
     landing of the drone whose camera saw the fall, once per drone."""
 
     name = "emergency"
+    consumes, produces = ("frame",), ("navigation",)
 
     def __init__(self, model_path: str | None = None, score_threshold: float = 0.5, confirm_frames: int = 3,
                  every_n: int = 1, threads: int = 1, name: str | None = None) -> None:
@@ -218,6 +219,7 @@ class StructureLocator(Analytics):
 
     name = "structure_locator"
     stateful = False
+    consumes, produces = ("frame",), ("detections",)
 
     def __init__(self, template: Any, size_m: float, crop: tuple[int, int, int, int] | None = None,
                  threshold: float = 0.6, name: str | None = None) -> None:
@@ -301,6 +303,7 @@ class InspectionPlanner(NavigableAnalytics):
     it counts confirmations and plans per drone (FrameMeta ``robot_id``)."""
 
     name = "inspection_planner"
+    consumes, produces = ("detections",), ("navigation",)
 
     def __init__(self, base_altitude: float = 5.0, top_altitude: float = 35.0, step_m: float = 10.0,
                  radius_m: float = 6.0, faces: int = 4, hover_s: float = 1.0, confirm_hits: int = 2,
