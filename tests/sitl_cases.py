@@ -148,15 +148,19 @@ def test_hover_height_from_the_firmware_estimate(session, autopilot):
 
 def test_autopilot_mission_holds_and_reaches(session, autopilot):
     """use_autopilot_mission: the same survey uploaded (MISSION_ITEM_INT) and flown in AUTO / AUTO.MISSION: 4/4
-    within 0.5 m and >= 5 s each (PX4: >= 4 s within 0.5 m, below); the stat-stream's WAYPOINT_HOLD covers the hover (it starts on arrival, not
-    when the autopilot's MISSION_ITEM_REACHED comes after the hold); one reached event per item."""
+    within the survey's radius; ArduCopter >= 5 s within 0.5 m at each, PX4 its own hold of each item >= 5 s by its
+    own reports (below); the stat-stream's WAYPOINT_HOLD covers the hover (it starts on arrival, not when the
+    autopilot's MISSION_ITEM_REACHED comes after the hold); one reached event per item."""
     # the autopilot flies the hold of its own mission: PX4 starts the item's hold time once its own reached check
-    # passes (navigator mission_block.cpp is_mission_item_reached: its acceptance radius and NAV_MC_ALT_RAD, on its
-    # estimate), so the time within our 0.5 m can fall short of it by the estimate's excursions (4.6 s of 5 in one
-    # CI run). Our WAYPOINT_HOLD starts when we see the vehicle within the radius and settled (below 0.3 m/s): with
-    # stock PX4's 1 m radius its own reached check (same radius, no settle speed) passes earlier, so our record of
-    # its 5 s hold was 3.8-5.0 s (2026-11-24); a WAYPOINT_HOLD that started at MISSION_ITEM_REACHED would be ~0 s
-    _survey_done(session["auto"], "auto", autopilot, hold_s=HOVER_S - 1.0 if autopilot == "px4" else HOVER_S)
+    # passes (navigator mission_block.cpp is_mission_item_reached: horizontal distance within the item's acceptance
+    # radius, 1 m here, and altitude within NAV_MC_ALT_RAD, 0.8 m by default, on its estimate) and sends
+    # MISSION_ITEM_REACHED when the hold is over. How long its estimate then stays within a sphere of ours is PX4
+    # SIH's wander, not the backend's doing (the backend sends nothing in AUTO.MISSION): 3.8-5.0 s of 5 within 0.5 m
+    # (2026-11-24) and, in one CI run, 3.5 s within 1 m at one corner while the vehicle reached the next corner at
+    # the same vehicle second as in a passing run (48.16 s). So PX4's hold is judged from its own telemetry: from
+    # the first recorded sample inside its reached region to its MISSION_ITEM_REACHED, at least the uploaded hold
+    # less half a second (a 10 Hz sample can come up to 0.3 s after its check passed)
+    visits = _survey_done(session["auto"], "auto", autopilot, hold_s=0.0 if autopilot == "px4" else HOVER_S)
     rec = session["auto"]["rec"]
     holds = _holds(rec)
     assert len(holds) == 4, holds
@@ -183,6 +187,10 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
         assert arrived - 0.2 <= start <= arrived + 1.0 and start < d["t"] - 1.0, (corner, arrived, start, d)
         assert abs(end - d["t"]) <= 1.0, (corner, end, d)
         assert autopilot == "px4" or end - start >= HOVER_S - 1.0, (corner, start, end)
+        if autopilot == "px4":  # PX4's own hold: from its reached region to its MISSION_ITEM_REACHED (see above)
+            inside = next((o["t"] for o in odo if o["t"] >= after - 0.3 and abs(o["position"][2] - corner[2]) <= 0.8
+                           and math.dist(o["position"][:2], corner[:2]) <= sitl.HOLD_RADIUS["px4"]), None)
+            assert inside is not None and d["t"] - inside >= HOVER_S - 0.5, (corner, inside, d, visits)
         after = end
     reached = [e["item"] for e in events(rec) if e["event"] == "mission_item_reached"]
     assert len(reached) == len(set(reached)), reached
