@@ -121,19 +121,23 @@ def _signal_case(sig: int, min_size: int, group: bool = False, speedup: float = 
 
 def _timeout_case(speedup: float, timeout_s: float) -> Callable[[Path], dict]:
     """``--timeout`` at an extreme speedup: the run ends as ``timeout`` (exit 1) with a finished recording, within
-    :data:`STOP_WITHIN_S` of the timeout (counted from the mission's start)."""
+    :data:`STOP_WITHIN_S` of the timeout, counted from when the recording file appears (the recorder opens it while
+    the actors set up, before the mission starts: Ray's own start, 40 s and more on a loaded 2-core machine, is not
+    the timeout's to bound)."""
     def run(tmp: Path) -> dict:
         rec = tmp / "run.mcap"
-        t0 = time.monotonic()
         p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", f"{speedup:g}",
                   "--timeout", f"{timeout_s:g}", "--quiet"], start_new_session=True)
+        t0 = time.monotonic()
+        if _wait_size(rec, 1, p):
+            t0 = time.monotonic()
         out, _ = p.communicate(timeout=timeout_s + 600)
         took = time.monotonic() - t0
         ok, n, why = mcap_reader_ok(rec)
         said = "mission outcome: timeout" in out
         clean = p.returncode == 1 and said and ok and _no_crash(out) and took <= timeout_s + STOP_WITHIN_S
-        return {"observed": f"exit {p.returncode} after {took:.1f} s (timeout {timeout_s:g} s), outcome timeout "
-                            f"{said}, recording {'finished' if ok else why} ({n} msgs)", "clean": clean,
+        return {"observed": f"exit {p.returncode} {took:.1f} s after the recording opened (timeout {timeout_s:g} s), "
+                            f"outcome timeout {said}, recording {'finished' if ok else why} ({n} msgs)", "clean": clean,
                 "exit": p.returncode, "output": out[-3000:]}
     return run
 
