@@ -94,8 +94,10 @@ def test_the_schema_still_describes_the_builtin_sections():
 @pytest.mark.parametrize("name,consumes,produces", [
     ("ObjectDetector", ("frame",), ("detections",)), ("FollowAnalytics", ("detections",), ("navigation",)),
     ("MonitoringAnalytics", ("odometry",), ("value",)), ("TrackAnalytics", ("detections",), ("tracks",)),
+    ("FallDetector", ("frame",), ("navigation",)), ("StructureLocator", ("frame",), ("detections",)),
+    ("InspectionPlanner", ("detections",), ("navigation",)),
 ])
-def test_each_core_builtin_analytics_declares_what_it_consumes_and_produces(name, consumes, produces):
+def test_each_builtin_analytics_declares_what_it_consumes_and_produces(name, consumes, produces):
     """The built-in analytics declare their stream types as a plug-in does (docs/extending.md, "An analytics' output
     contract"): the declaration passes the contract's own check, and ``aerodaas plugins`` lists it."""
     from aerodaas.analytics.contract import check_declaration
@@ -103,29 +105,18 @@ def test_each_core_builtin_analytics_declares_what_it_consumes_and_produces(name
     e = registry.resolve("analytics", name)
     cls = e.load()
     assert e.origin == "builtin" and (cls.consumes, cls.produces) == (consumes, produces)
-    check_declaration(cls())
+    check_declaration(cls(**({"template": "any.jpg", "size_m": 3.0} if name == "StructureLocator" else {})))
 
 
-@pytest.mark.parametrize("name,consumes,produces", [
-    ("FallDetector", ("frame",), ("navigation",)), ("StructureLocator", ("frame",), ("detections",)),
-    ("InspectionPlanner", ("detections",), ("navigation",)),
-])
-def test_each_extra_builtin_analytics_declares_what_it_consumes_and_produces(name, consumes, produces):
-    """The paper apps' analytics (aerodaas.analytics.extra) declare their stream types too, so a wrong feed stops the
-    application when it is loaded: the planner fed a camera's frames instead of the locator's detections is refused,
+def test_the_inspection_planner_is_checked_against_its_feed():
+    """The paper apps' analytics declare their stream types too (above), so a wrong feed stops the application when
+    it is loaded: the planner fed another planner's navigation instead of the locator's detections is refused,
     naming both types; fed the locator it passes."""
-    from aerodaas.analytics.contract import ContractError, check_consumes, check_declaration
+    from aerodaas.analytics.contract import ContractError, check_consumes
     from aerodaas.analytics.extra import InspectionPlanner, StructureLocator
 
-    e = registry.resolve("analytics", name)
-    cls = e.load()
-    assert e.origin == "builtin" and (cls.consumes, cls.produces) == (consumes, produces)
-    if name != "InspectionPlanner":
-        return
-    check_declaration(cls())
-    locator = StructureLocator("any.jpg", size_m=3.0)
     fed = InspectionPlanner()
-    fed.analyse(locator.output)
+    fed.analyse(StructureLocator("any.jpg", size_m=3.0).output)
     check_consumes(fed)
     wrong = InspectionPlanner()
     wrong.analyse(InspectionPlanner().output)
