@@ -19,13 +19,13 @@ level on PX4; ArduPilot missions carry home at sequence 0.
 
 One module per MAVLink concern, the way MAVSDK splits its plugins. The concerns that are objects the backend
 holds declare their state in their ``__init__`` and reach the others only through the typed references and
-callables they are given: ``backend.parameters`` (:class:`~.params.ParameterProtocol`: the parameter protocol),
+callables they are given: ``backend.commands`` (:class:`~.command.CommandProtocol`: the command protocol, mode
+changes confirmed by the HEARTBEAT), ``backend.parameters`` (:class:`~.params.ParameterProtocol`: the parameter protocol),
 ``backend.transfers`` (:class:`~.transfer.MissionTransfer`: every mission-protocol exchange, mission, fence and
 rally items), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight). The others are still mix-ins of :class:`MavlinkBackend`,
 each declaring its state in its ``_init_<concern>`` (the link's is the backend's own): :mod:`.link` (connection,
-autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.command` (command protocol, mode
-changes), :mod:`.telemetry` (state from the streams, mission progress), :mod:`.params` (the vehicle's own speed
+autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams, mission progress), :mod:`.params` (the vehicle's own speed
 limits, over the parameter protocol), :mod:`.action` (readiness, arming, take-off), :mod:`.offboard`
 (GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.mission` (the mission built from waypoints, its
 upload, download and start), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).

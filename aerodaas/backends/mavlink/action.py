@@ -116,8 +116,8 @@ class ActionMixin:
                 elif self.autopilot == "px4" and self._mode in _PX4_NO_ARM_MODES and self._armable():
                     self.set_mode("LOITER")
                 sent = time.monotonic()
-                self._command_with_effect("arm", lambda: self._armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-                self._await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
+                self.commands.command_with_effect("arm", lambda: self._armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+                self.commands.await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
                 break
             except CommandRefused as e:
                 if e.result not in _NOT_YET or time.monotonic() + backoff > end:

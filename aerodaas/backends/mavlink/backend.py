@@ -11,7 +11,7 @@ from aerodaas.config import MavlinkConfig
 from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
-from aerodaas.backends.mavlink.command import CommandMixin
+from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import FenceMixin
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
@@ -22,7 +22,7 @@ from aerodaas.backends.mavlink.telemetry import TelemetryMixin
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, CommandMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,
+class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,
                      FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
@@ -153,7 +153,12 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
                                             target=lambda: (self._sysid, self._compid),
                                             is_px4=lambda: self.autopilot == "px4")
-        self._init_command()
+        #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
+        self.commands = CommandProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
+                                        target=lambda: (self._sysid, self._compid), heartbeat=self,
+                                        boot_ms=lambda: self._boot_last, heartbeat_due=self._heartbeat_due,
+                                        status_text_since=self._status_text_since, mode_params=self._mode_params,
+                                        event=self._event)
         self._init_telemetry()
         self._init_action()
         self._init_offboard()
@@ -165,6 +170,26 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
         #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
         self.gimbal = GimbalConcern(self, cfg.gimbal)
+
+    # the command protocol (aerodaas.backends.mavlink.command.CommandProtocol)
+    def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
+                     timeout_s: float | None = None) -> None:
+        """COMMAND_LONG ``command`` with its COMMAND_ACK awaited (:meth:`CommandProtocol.command_long`)."""
+        self.commands.command_long(name, command, *params, retries=retries, timeout_s=timeout_s)
+
+    def command_int(self, name: str, command: int, frame: int, params: tuple[float, float, float, float], x: int,
+                    y: int, z: float, retries: int | None = None, timeout_s: float | None = None) -> None:
+        """COMMAND_INT ``command`` with its COMMAND_ACK awaited (:meth:`CommandProtocol.command_int`)."""
+        self.commands.command_int(name, command, frame, params, x, y, z, retries=retries, timeout_s=timeout_s)
+
+    def set_mode(self, name: str, confirm_s: float | None = None) -> None:
+        """Switch to flight mode ``name``, confirmed by the HEARTBEAT (:meth:`CommandProtocol.set_mode`)."""
+        self.commands.set_mode(name, confirm_s)
+
+    @property
+    def command_rtt_ms(self) -> list[float]:
+        """Acknowledged command round trips, wall milliseconds (:attr:`CommandProtocol.rtt_ms`)."""
+        return self.commands.rtt_ms
 
     def discover_video_stream(self, request: Any) -> Any:
         """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with

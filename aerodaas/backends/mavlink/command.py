@@ -1,35 +1,81 @@
 """The MAVLink command protocol (COMMAND_LONG -> COMMAND_ACK, retries, IN_PROGRESS, TEMPORARILY_REJECTED) and flight
-mode changes confirmed by the HEARTBEAT."""
+mode changes confirmed by the HEARTBEAT. A concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend`."""
 from __future__ import annotations
 
 import queue
 import time
-from typing import Any, Callable
-
-from pymavlink import mavutil
+from typing import Any, Callable, Protocol
 
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
-from aerodaas.backends.mavlink._common import M, _enum_name, CommandNotAcknowledged, CommandNotConfirmed, _REJECTED_BACKOFF_S, \
-    _STATUSTEXT_FLUSH_S
+from aerodaas.backends.mavlink._common import M, _enum_name, CommandNotAcknowledged, CommandNotConfirmed, _REJECTED_BACKOFF_S
+from aerodaas.backends.mavlink.params import LinkCheck, VehicleSender
 
 
-class CommandMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+class HeartbeatView(Protocol):
+    """What the autopilot's latest HEARTBEAT shows (the link's): the flight mode, the armed flag, and whether the
+    link is up (HEARTBEATs keep coming)."""
 
-    def _status_text_since(self, since: float, wait_s: float = 0.3) -> str:
-        """The autopilot's latest STATUSTEXT sent since ``since`` (waiting up to ``wait_s`` for one, and up to
-        :data:`_STATUSTEXT_FLUSH_S` longer while a chunked one begun since then is incomplete), else the latest of
-        the 2 s before."""
-        end = time.monotonic() + wait_s
-        while True:
-            texts = [t for t in list(self._texts) if t[0] >= since]
-            pending = any(b["t"] >= since for b in list(self._chunks.values()))
-            if (texts and not pending) or time.monotonic() >= end + (_STATUSTEXT_FLUSH_S if pending else 0.0):
-                break
-            time.sleep(0.01)
-        if not texts:
-            texts = [t for t in list(self._texts) if t[0] >= since - 2.0]
-        return texts[-1][2] if texts else ""
+    @property
+    def mode(self) -> str: ...
+
+    @property
+    def armed(self) -> bool: ...
+
+    @property
+    def link_ok(self) -> bool: ...
+
+
+class HeartbeatDue(Protocol):
+    """Has a HEARTBEAT been due since ``started`` (monotonic seconds), when the vehicle's time_boot_ms was
+    ``boot0``, for a wait of ``wait_s`` wall seconds (the link's vehicle clock: link.py ``heartbeat_due``)."""
+
+    def __call__(self, started: float, boot0: int, wait_s: float) -> bool: ...
+
+
+class StatusTextSince(Protocol):
+    """The autopilot's latest STATUSTEXT since ``since`` (monotonic seconds), waiting up to ``wait_s`` for one
+    (the link's)."""
+
+    def __call__(self, since: float, wait_s: float = 0.3) -> str: ...
+
+
+class CommandProtocol:
+    """The MAVLink command protocol with one vehicle (COMMAND_LONG / COMMAND_INT -> COMMAND_ACK) and the commands
+    whose effect the HEARTBEAT must show (mode changes, arming).
+
+    It talks to the link only through what it is given: ``send`` and ``check_link`` (the link's), ``target`` (the
+    vehicle's system and component id), ``heartbeat`` (what the latest HEARTBEAT shows), ``boot_ms`` (the
+    vehicle's latest time_boot_ms) and ``heartbeat_due`` (the link's vehicle clock), ``status_text_since`` (the
+    autopilot's latest STATUSTEXT, for refusals), ``mode_params`` (MAV_CMD_DO_SET_MODE's params for a mode name,
+    from the autopilot's mode table; ValueError for an unknown name) and ``event`` (records a backend event).
+    ``settings``: ``command_timeout_s``, ``command_retries``, ``heartbeat_timeout_s``. :meth:`on_command_ack` is
+    fed every COMMAND_ACK for us (the I/O thread); commands wait for them (the control thread).
+
+    State: the COMMAND_ACKs waiting to be taken, the round trips of acknowledged commands (:attr:`rtt_ms`) and our
+    last mode request (:attr:`mode_asked`)."""
+
+    def __init__(self, robot_id: str, settings: Any, *, send: VehicleSender, check_link: LinkCheck,
+                 target: Callable[[], tuple[int, int]], heartbeat: HeartbeatView, boot_ms: Callable[[], int],
+                 heartbeat_due: HeartbeatDue, status_text_since: StatusTextSince,
+                 mode_params: Callable[[str], tuple[float, ...]], event: Callable[..., None]) -> None:
+        self.robot_id, self._settings = robot_id, settings
+        self._send, self._check_link, self._target = send, check_link, target
+        self._heartbeat, self._boot_ms, self._heartbeat_due = heartbeat, boot_ms, heartbeat_due
+        self._status_text_since, self._mode_params, self._event = status_text_since, mode_params, event
+        #: acknowledged command round trips, wall milliseconds
+        self.rtt_ms: list[float] = []
+        self._acks: queue.Queue = queue.Queue()
+        self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode
+
+    @property
+    def mode_asked(self) -> tuple[str, float] | None:
+        """(mode, monotonic seconds) of our last :meth:`set_mode`: a mode we asked for is never taken for the
+        autopilot's failsafe (link.py ``_check_failsafe``)."""
+        return self._mode_asked
+
+    def on_command_ack(self, now: float, msg: Any) -> None:
+        """A COMMAND_ACK addressed to us, received at monotonic ``now``: kept for the command waiting for it."""
+        self._acks.put((now, msg))
 
     def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
                      timeout_s: float | None = None) -> None:
@@ -52,7 +98,7 @@ class CommandMixin:
         self._check_link(name)
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         self._command_tries(name, command, lambda mav, attempt: mav.command_long_send(
-            self._sysid, self._compid, command, min(attempt, 255), *p), retries, timeout_s)
+            *self._target(), command, min(attempt, 255), *p), retries, timeout_s)
 
     def command_int(self, name: str, command: int, frame: int, params: tuple[float, float, float, float], x: int,
                     y: int, z: float, retries: int | None = None, timeout_s: float | None = None) -> None:
@@ -63,12 +109,12 @@ class CommandMixin:
         self._check_link(name)
         p = [float(v) for v in params] + [0.0] * (4 - len(params))
         self._command_tries(name, command, lambda mav, attempt: mav.command_int_send(
-            self._sysid, self._compid, frame, command, 0, 0, *p[:4], int(x), int(y), float(z)), retries, timeout_s)
+            *self._target(), frame, command, 0, 0, *p[:4], int(x), int(y), float(z)), retries, timeout_s)
 
     def _command_tries(self, name: str, command: int, send: Any, retries: int | None, timeout_s: float | None) -> None:
         """The tries of one command (:meth:`command_long`'s rules): ``send(mav, attempt)`` sends it once."""
-        retries = self.cfg.command_retries if retries is None else retries
-        timeout = self.cfg.command_timeout_s if timeout_s is None else timeout_s
+        retries = self._settings.command_retries if retries is None else retries
+        timeout = self._settings.command_timeout_s if timeout_s is None else timeout_s
         while True:  # drop acknowledgements nobody waited for
             try:
                 self._acks.get_nowait()
@@ -112,13 +158,13 @@ class CommandMixin:
             try:
                 _, ack = self._acks.get(timeout=min(remaining, 0.05))
             except queue.Empty:
-                if not self._link_ok:
+                if not self._heartbeat.link_ok:
                     raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
                 continue
             if ack.command != command:
                 continue
             if ack.result == M.MAV_RESULT_ACCEPTED:
-                self.command_rtt_ms.append((time.monotonic() - sent) * 1000.0)
+                self.rtt_ms.append((time.monotonic() - sent) * 1000.0)
                 return True, latest, rejected
             if ack.result == M.MAV_RESULT_IN_PROGRESS:  # it runs: wait for the final ACK, never re-send
                 latest = ack
@@ -136,7 +182,7 @@ class CommandMixin:
     def _command_failed(self, name: str, command: int, last: Any, started: float, retries: int,
                         timeout: float) -> None:
         """Raise why :meth:`command_long` got no accepted COMMAND_ACK (``last``: the latest non-final one)."""
-        if not self._link_ok:
+        if not self._heartbeat.link_ok:
             raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
         if last is not None and last.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
             raise CommandRefused(self.robot_id, name, "MAV_RESULT_TEMPORARILY_REJECTED",
@@ -149,8 +195,8 @@ class CommandMixin:
         raise CommandNotAcknowledged(f"robot {self.robot_id!r}: {name}: no COMMAND_ACK for "
                                      f"{_enum_name('MAV_CMD', command)} after {retries + 1} tries of {timeout:g} s")
 
-    def _command_with_effect(self, name: str, effect, *args, **kw) -> None:
-        """:meth:`command_long` whose effect the HEARTBEAT shows (``effect()``, e.g. the mode or the armed flag):
+    def command_with_effect(self, name: str, effect: Callable[[], bool], *args: Any, **kw: Any) -> None:
+        """:meth:`command_long` (``args``/``kw`` its own) whose effect the HEARTBEAT shows (``effect()``, e.g. the mode or the armed flag):
         when no COMMAND_ACK came at all (:class:`CommandNotAcknowledged`: answers lost, as seen on a loaded
         machine with three PX4 SITL instances, where PX4 armed but none of its acknowledgements arrived) but the
         HEARTBEAT shows the effect within ``heartbeat_timeout_s``, the command is done (``command_ack_lost``
@@ -158,9 +204,9 @@ class CommandMixin:
         try:
             self.command_long(name, *args, **kw)
         except CommandNotAcknowledged:
-            started, boot0 = time.monotonic(), self._boot_last
-            while not effect() and not self._heartbeat_due(started, boot0, self.cfg.heartbeat_timeout_s) \
-                    and self._link_ok:
+            started, boot0 = time.monotonic(), self._boot_ms()
+            while not effect() and not self._heartbeat_due(started, boot0, self._settings.heartbeat_timeout_s) \
+                    and self._heartbeat.link_ok:
                 time.sleep(0.01)
             if not effect():
                 raise
@@ -178,51 +224,25 @@ class CommandMixin:
         name = name.upper()
         sent = time.monotonic()
         self._mode_asked = (name, sent)  # a mode we asked for is never taken for the autopilot's failsafe
-        if self.autopilot == "px4":
-            if name not in mavutil.px4_map:
-                raise ValueError(f"mode {name!r} is not a PX4 mode; choose from {sorted(mavutil.px4_map)}")
-            _, main, sub = mavutil.px4_map[name]
-            self._command_with_effect(f"set mode {name}", lambda: self._mode == name, M.MAV_CMD_DO_SET_MODE,
-                                      M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
-        else:
-            if name not in self._ap_modes:
-                raise ValueError(f"mode {name!r} is not an ArduPilot {self.vehicle_type} mode; choose from "
-                                 f"{sorted(self._ap_modes)}")
-            self._command_with_effect(f"set mode {name}", lambda: self._mode == name, M.MAV_CMD_DO_SET_MODE,
-                                      M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, self._ap_modes[name])
-        self._await_heartbeat(f"set mode {name}", lambda: self._mode == name, f"mode {name}", confirm_s, sent)
+        params = self._mode_params(name)  # ValueError for a mode the autopilot does not have
+        self.command_with_effect(f"set mode {name}", lambda: self._heartbeat.mode == name, M.MAV_CMD_DO_SET_MODE,
+                                 M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, *params)
+        self.await_heartbeat(f"set mode {name}", lambda: self._heartbeat.mode == name, f"mode {name}", confirm_s, sent)
 
-    def _heartbeat_due(self, started: float, boot0: int, wait_s: float) -> bool:
-        """Has a HEARTBEAT been due since ``started`` (monotonic), when the vehicle's time_boot_ms was ``boot0``:
-        ``wait_s`` wall seconds passed, and the vehicle's own clock ran min(``wait_s``, ``heartbeat_timeout_s``)
-        too (an autopilot sends HEARTBEAT at 1 Hz of its clock, which a simulator may run slower than real time;
-        see link.py ``_heartbeats_missed``; a clock that stopped ends the wait through link loss)."""
-        now = time.monotonic()
-        if now - started < wait_s:
-            return False
-        if self._boot_ref is None or now - self._boot_wall > self.cfg.heartbeat_timeout_s:
-            return True  # no clock of the vehicle's to go by: wall time alone
-        return (self._boot_last - boot0) / 1000.0 >= min(wait_s, self.cfg.heartbeat_timeout_s)
-
-    def _await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,
+    def await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,
                          sent: float) -> None:
         """After ``command`` (sent at monotonic ``sent``) was accepted: wait until ``done()`` (the HEARTBEAT shows
         ``expected``) for ``wait_s`` wall seconds (None: the larger of ``command_timeout_s`` and
         ``heartbeat_timeout_s``: the autopilot's HEARTBEAT comes at least that often while the link is up).
         Raises LinkLost or CommandNotConfirmed."""
-        wait = max(self.cfg.command_timeout_s, self.cfg.heartbeat_timeout_s) if wait_s is None else wait_s
-        started, boot0 = time.monotonic(), self._boot_last
+        wait = max(self._settings.command_timeout_s, self._settings.heartbeat_timeout_s) if wait_s is None else wait_s
+        started, boot0 = time.monotonic(), self._boot_ms()
         while not done():
-            if not self._link_ok:
+            if not self._heartbeat.link_ok:
                 raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost before a HEARTBEAT showed {expected}")
             if self._heartbeat_due(started, boot0, wait):
-                observed = f"mode {self._mode or '(none)'}, {'armed' if self._armed else 'disarmed'}"
+                hb = self._heartbeat
+                observed = f"mode {hb.mode or '(none)'}, {'armed' if hb.armed else 'disarmed'}"
                 raise CommandNotConfirmed(self.robot_id, command, expected, observed, wait,
                                           self._status_text_since(sent, wait_s=0.0))
             time.sleep(0.005)
-
-    def _init_command(self) -> None:
-        """The command protocol's state: COMMAND_ACKs waiting to be taken, round trips, our last mode request."""
-        self.command_rtt_ms: list[float] = []
-        self._acks: queue.Queue = queue.Queue()
-        self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode

@@ -190,6 +190,20 @@ class LinkMixin:
         self._event("connected", autopilot=flavour, vehicle_type=self.vehicle_type, system=self._sysid,
                     component=self._compid)
 
+    def _mode_params(self, name: str) -> tuple[float, ...]:
+        """MAV_CMD_DO_SET_MODE's custom mode params (after MAV_MODE_FLAG_CUSTOM_MODE_ENABLED) for flight mode ``name``
+        on the identified autopilot: PX4's main and sub mode (pymavlink's ``px4_map``), ArduPilot's custom mode (the
+        mode table of its vehicle type, learned in :meth:`_identify`). Raises ValueError for an unknown name."""
+        if self.autopilot == "px4":
+            if name not in mavutil.px4_map:
+                raise ValueError(f"mode {name!r} is not a PX4 mode; choose from {sorted(mavutil.px4_map)}")
+            _, main, sub = mavutil.px4_map[name]
+            return main, sub
+        if name not in self._ap_modes:
+            raise ValueError(f"mode {name!r} is not an ArduPilot {self.vehicle_type} mode; choose from "
+                             f"{sorted(self._ap_modes)}")
+        return (self._ap_modes[name],)
+
     # ------------------------------------------------------------------ I/O thread
     def _io_loop(self) -> None:
         """Receive everything waiting (at most :data:`_DRAIN_S` wall seconds of work), then the periodic sends. A
@@ -252,7 +266,7 @@ class LinkMixin:
             return
         if mtype == "COMMAND_ACK":
             if getattr(msg, "target_system", 0) in (0, self.cfg.source_system):
-                self._acks.put((now, msg))
+                self.commands.on_command_ack(now, msg)
             return
         if mtype in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT", "MISSION_ITEM_INT",
                      "MISSION_ITEM"):
@@ -302,6 +316,21 @@ class LinkMixin:
         self._event("status_text", severity=_enum_name("MAV_SEVERITY", severity), text=text)
         log.log(_log_level(severity), "%s: %s", self.robot_id, text)
 
+    def _status_text_since(self, since: float, wait_s: float = 0.3) -> str:
+        """The autopilot's latest STATUSTEXT sent since ``since`` (waiting up to ``wait_s`` for one, and up to
+        :data:`_STATUSTEXT_FLUSH_S` longer while a chunked one begun since then is incomplete), else the latest of
+        the 2 s before."""
+        end = time.monotonic() + wait_s
+        while True:
+            texts = [t for t in list(self._texts) if t[0] >= since]
+            pending = any(b["t"] >= since for b in list(self._chunks.values()))
+            if (texts and not pending) or time.monotonic() >= end + (_STATUSTEXT_FLUSH_S if pending else 0.0):
+                break
+            time.sleep(0.01)
+        if not texts:
+            texts = [t for t in list(self._texts) if t[0] >= since - 2.0]
+        return texts[-1][2] if texts else ""
+
     def _on_heartbeat(self, msg: Any, now: float) -> None:
         with self._lock:
             self._last_hb = now
@@ -331,7 +360,7 @@ class LinkMixin:
         asked for (set_mode): the autopilot's own failsafe (datalink, battery, geofence action, EKF) or a pilot's
         switch. Recorded as :attr:`failsafe` and an ``autopilot_failsafe`` event with the status texts of the last
         2 s (the autopilot says why). Caller holds ``_lock``."""
-        asked = self._mode_asked
+        asked = self.commands.mode_asked
         if not self._armed or mode not in FAILSAFE_MODES.get(self.autopilot or "", ()):
             return
         if asked is not None and asked[0] == mode:
@@ -445,6 +474,19 @@ class LinkMixin:
         if self._boot_ref is None or now - self._boot_wall > timeout:
             return True
         return (self._boot_last - self._hb_boot_ms) / 1000.0 > timeout
+
+
+    def _heartbeat_due(self, started: float, boot0: int, wait_s: float) -> bool:
+        """Has a HEARTBEAT been due since ``started`` (monotonic), when the vehicle's time_boot_ms was ``boot0``:
+        ``wait_s`` wall seconds passed, and the vehicle's own clock ran min(``wait_s``, ``heartbeat_timeout_s``)
+        too (an autopilot sends HEARTBEAT at 1 Hz of its clock, which a simulator may run slower than real time;
+        see link.py ``_heartbeats_missed``; a clock that stopped ends the wait through link loss)."""
+        now = time.monotonic()
+        if now - started < wait_s:
+            return False
+        if self._boot_ref is None or now - self._boot_wall > self.cfg.heartbeat_timeout_s:
+            return True  # no clock of the vehicle's to go by: wall time alone
+        return (self._boot_last - boot0) / 1000.0 >= min(wait_s, self.cfg.heartbeat_timeout_s)
 
     # ------------------------------------------------------------------ sending
     def _send(self, fn: Callable[[Any], None]) -> None:
