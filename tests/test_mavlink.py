@@ -438,8 +438,8 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
     b.autopilot, b._mode = "px4", "MISSION"
     # wire 0 take-off, 1 and 2 waypoints (ENU x, y, radius), 3 land; all autocontinue
-    b._mission_wire = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
-    b._mission_next = (frozenset({0, 1, 2, 3}), 4)
+    b.mission._waypoints = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
+    b.mission._next = (frozenset({0, 1, 2, 3}), 4)
     b._pos = np.array([0.0, 0.1, 1.5])
     with b._lock:
         b._on_mission_current(NS(seq=0))

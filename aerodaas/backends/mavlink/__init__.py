@@ -22,13 +22,13 @@ holds declare their state in their ``__init__`` and reach the others only throug
 callables they are given: ``backend.commands`` (:class:`~.command.CommandProtocol`: the command protocol, mode
 changes confirmed by the HEARTBEAT), ``backend.parameters`` (:class:`~.params.ParameterProtocol`: the parameter protocol),
 ``backend.transfers`` (:class:`~.transfer.MissionTransfer`: every mission-protocol exchange, mission, fence and
-rally items), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
+rally items), ``backend.mission`` (:class:`~.mission.AutopilotMission`: the mission built from waypoints, its
+upload, download and start, and its progress), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight). The others are still mix-ins of :class:`MavlinkBackend`,
-each declaring its state in its ``_init_<concern>`` (the link's is the backend's own): :mod:`.link` (connection,
-autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams, mission progress), :mod:`.params` (the vehicle's own speed
+each declaring its state in its ``_init_<concern>``: :mod:`.link` (connection,
+autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams), :mod:`.params` (the vehicle's own speed
 limits, over the parameter protocol), :mod:`.action` (readiness, arming, take-off), :mod:`.offboard`
-(GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.mission` (the mission built from waypoints, its
-upload, download and start), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+(GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

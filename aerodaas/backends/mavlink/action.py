@@ -162,6 +162,12 @@ class ActionMixin:
                 self.set_mode("GUIDED")
             self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_m)
 
+    def _pin_altitude_reference(self) -> None:
+        """Fix the altitude reference where the vehicle stands now and keep it for the next :meth:`arm` (an uploaded
+        mission's altitudes refer to it: mission.py)."""
+        self._fix_altitude_reference()
+        self._alt_ref_pinned = True
+
     def _init_action(self) -> None:
         """Who flies: an arm() under way, whether we are in control (then safe_end() is ours), the altitude reference
         pinned by a mission upload."""

@@ -1,5 +1,5 @@
-"""The MAVLink vehicle backend: one class holding the concern objects (parameters, mission transfers, fence) and
-the mix-ins of the other MAVLink concerns (see the package docstring)."""
+"""The MAVLink vehicle backend: one class holding the concern objects (commands, parameters, mission transfers, mission,
+fence, gimbal) and the mix-ins of the other MAVLink concerns (see the package docstring)."""
 from __future__ import annotations
 
 import threading
@@ -8,6 +8,7 @@ from collections import deque
 from typing import Any, Literal
 
 from aerodaas.config import MavlinkConfig
+from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import ActionMixin
@@ -15,14 +16,15 @@ from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import FenceMixin
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
-from aerodaas.backends.mavlink.mission import MissionMixin
+from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardMixin
 from aerodaas.backends.mavlink.params import ParameterProtocol, ParamMixin
 from aerodaas.backends.mavlink.telemetry import TelemetryMixin
+from aerodaas.backends.mavlink.transfer import MissionTransfer
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin, MissionMixin,
+class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin,
                      FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
@@ -103,9 +105,47 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.vehicle_type: str = ""
         #: every message the receive path saw, unknown and malformed ones included
         self.messages_received = 0
+        self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
+        self._init_link()
+        #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
+        self.limits = cfg.limits
+        #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
+        self.safety = cfg.safety
+        #: the parameter protocol (params.py), talking to the link through what it is given
+        self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
+                                            target=lambda: (self._sysid, self._compid),
+                                            is_px4=lambda: self.autopilot == "px4")
+        #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
+        self.commands = CommandProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
+                                        target=lambda: (self._sysid, self._compid), heartbeat=self,
+                                        boot_ms=lambda: self._boot_last, heartbeat_due=self._heartbeat_due,
+                                        status_text_since=self._status_text_since, mode_params=self._mode_params,
+                                        event=self._event)
+        self._init_telemetry()
+        self._init_action()
+        self._init_offboard()
+        #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
+        self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
+                                         target=lambda: (self._sysid, self._compid),
+                                         status_text_since=self._status_text_since, event=self._event,
+                                         wire_version=lambda: getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0"))
+        #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
+        self.mission = AutopilotMission(self.robot_id, vehicle=self, commands=self.commands, transfers=self.transfers,
+                                        check_link=self._check_link, event=self._event, lock=self._lock,
+                                        pin_altitude_reference=self._pin_altitude_reference)
+        self._init_params()
+        self._init_fence()
+        from aerodaas.backends.mavlink.camera import CameraFinder
+
+        self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
+        #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
+        self.gimbal = GimbalConcern(self, cfg.gimbal)
+
+    def _init_link(self) -> None:
+        """The link's state (link.py, the backend's own): the connection and I/O thread, the autopilot's identity
+        and HEARTBEAT (mode, armed), status texts, the vehicle clock, link loss and the stream requests."""
         self._conn: Any = None
         self._sysid = self._compid = 0
-        self._lock = threading.RLock()
         self._send_lock = threading.Lock()
         self._stop = threading.Event()
         self._io: threading.Thread | None = None
@@ -143,33 +183,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._stream_legacy = False
         self._ever_linked = False
         self._resume_streams = False
-        #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
-        self.limits = cfg.limits
-        #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
-        self.safety = cfg.safety
         self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
-        #: the parameter protocol (params.py), talking to the link through what it is given
-        self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
-                                            target=lambda: (self._sysid, self._compid),
-                                            is_px4=lambda: self.autopilot == "px4")
-        #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
-        self.commands = CommandProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
-                                        target=lambda: (self._sysid, self._compid), heartbeat=self,
-                                        boot_ms=lambda: self._boot_last, heartbeat_due=self._heartbeat_due,
-                                        status_text_since=self._status_text_since, mode_params=self._mode_params,
-                                        event=self._event)
-        self._init_telemetry()
-        self._init_action()
-        self._init_offboard()
-        self._init_mission()
-        self._init_params()
-        self._init_fence()
-        from aerodaas.backends.mavlink.camera import CameraFinder
-
-        self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
-        #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
-        self.gimbal = GimbalConcern(self, cfg.gimbal)
 
     # the command protocol (aerodaas.backends.mavlink.command.CommandProtocol)
     def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
@@ -190,6 +205,35 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def command_rtt_ms(self) -> list[float]:
         """Acknowledged command round trips, wall milliseconds (:attr:`CommandProtocol.rtt_ms`)."""
         return self.commands.rtt_ms
+
+    # the mission (aerodaas.backends.mavlink.mission.AutopilotMission)
+    def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
+                       final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
+        """Upload a mission with the MISSION_ITEM_INT protocol (:meth:`AutopilotMission.upload`); returns the items
+        as sent."""
+        return self.mission.upload(mission, takeoff_altitude=takeoff_altitude, final_action=final_action)
+
+    def download_mission(self) -> MissionPlan:
+        """Download the autopilot's mission (:meth:`AutopilotMission.download`)."""
+        return self.mission.download()
+
+    def clear_mission(self) -> None:
+        """MISSION_CLEAR_ALL; waits for MISSION_ACK (:meth:`AutopilotMission.clear`)."""
+        self.mission.clear()
+
+    def start_mission(self) -> None:
+        """Fly the uploaded mission (:meth:`AutopilotMission.start`): our target stream stops first, and the vehicle
+        is ours to bring down (:meth:`safe_end`)."""
+        self._require_navigable("start_mission")
+        self._stop_setpoints()
+        self._in_control = True
+        self.mission.start()
+
+    def _on_mission_current(self, msg: Any) -> None:
+        self.mission.on_mission_current(msg)
+
+    def _on_mission_item_reached(self, msg: Any) -> None:
+        self.mission.on_mission_item_reached(msg)
 
     def discover_video_stream(self, request: Any) -> Any:
         """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with

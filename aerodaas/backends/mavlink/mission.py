@@ -1,13 +1,22 @@
-"""The mission protocol (mavlink.io mission microservice): upload, download, clear and start, in the INT form."""
+"""The mission protocol (mavlink.io mission microservice): upload, download, clear and start, in the INT form, and the
+mission's progress (MISSION_CURRENT, MISSION_ITEM_REACHED, arrival at a waypoint). A concern object of
+:class:`~aerodaas.backends.mavlink.MavlinkBackend`."""
 from __future__ import annotations
 
-from typing import Any, Literal
+import math
+import threading
+from typing import Any, Callable, Literal, Protocol
+
+import numpy as np
 
 
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
 from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.model.types import GeoPoint
 from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
+from aerodaas.backends.mavlink.command import CommandProtocol
+from aerodaas.backends.mavlink.params import LinkCheck
 from aerodaas.backends.mavlink.transfer import MissionTransfer
 
 
@@ -17,10 +26,62 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 _ARRIVAL_RADIUS_M = 0.5
 
 
-class MissionMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+class MissionVehicle(Protocol):
+    """What the mission reads of the vehicle (the backend's public state): its home (the ENU origin), autopilot
+    (``"ardupilot"`` / ``"px4"``), position (ENU metres), flight mode, armed flag, whether it is in the air, its
+    altitude reference (AMSL metres, None before the first arming) and its horizontal speed limit (m/s)."""
 
-    # ------------------------------------------------------------------ missions
+    home: GeoPoint
+    autopilot: str | None
+
+    @property
+    def position(self) -> np.ndarray: ...
+
+    @property
+    def mode(self) -> str: ...
+
+    @property
+    def armed(self) -> bool: ...
+
+    @property
+    def in_air(self) -> bool: ...
+
+    @property
+    def altitude_reference(self) -> float | None: ...
+
+    def xy_speed_cap(self) -> float: ...
+
+
+class AutopilotMission:
+    """The vehicle's own mission: built from waypoints (or given as items), uploaded, downloaded, cleared and
+    started over the mission protocol, and its progress reported as events.
+
+    It talks to the vehicle only through what it is given: ``vehicle`` (:class:`MissionVehicle`), ``commands``
+    (the command protocol: mode change, MAV_CMD_MISSION_START), ``transfers`` (the mission protocol's exchanges),
+    ``check_link`` (the link's), ``event`` (records a backend event), ``lock`` (the backend's lock, which guards the
+    progress state; the I/O thread holds it while it feeds :meth:`on_mission_current`,
+    :meth:`on_mission_item_reached` and :meth:`on_position`) and ``pin_altitude_reference`` (fixes the altitude
+    reference where the vehicle stands and keeps it for the next arming: an uploaded mission's altitudes refer to
+    it).
+
+    State: the uploaded mission's NAV_WAYPOINTs by wire sequence number, its autocontinue items and length, the
+    current item, and the items whose arrival we reported and those the autopilot reported reached."""
+
+    def __init__(self, robot_id: str, *, vehicle: MissionVehicle, commands: CommandProtocol,
+                 transfers: MissionTransfer, check_link: LinkCheck, event: Callable[..., None],
+                 lock: threading.RLock, pin_altitude_reference: Callable[[], None]) -> None:
+        self.robot_id = robot_id
+        self._vehicle, self._commands, self._transfers = vehicle, commands, transfers
+        self._check_link, self._event, self._lock = check_link, event, lock
+        self._pin_altitude_reference = pin_altitude_reference
+        self._waypoints: dict[int, tuple[float, float, float]] = {}  # wire seq -> (east, north, arrival radius m)
+        #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
+        self._next: tuple[frozenset[int], int] = (frozenset(), 0)
+        self._current_inferred_from = -1  # the reached item whose successor we took as current
+        self._seq = -1  # the current item (wire seq)
+        self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
+        self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
+
     def _mission_items(self, mission: Any, takeoff_altitude: float | None,
                        final_action: str) -> tuple[list[MissionItem], bool]:
         """The items to upload, and whether we built them from waypoints (True) rather than being given items."""
@@ -42,14 +103,15 @@ class MissionMixin:
                     raise TypeError(f"upload_mission: items must all be Waypoint/ActionCommand or all MissionItem, "
                                     f"got {type(bad).__name__}")
             if nav is not None:
-                items = navigation_to_plan(nav, self.home, final_action, takeoff_altitude=takeoff_altitude).items
+                items = navigation_to_plan(nav, self._vehicle.home, final_action,
+                                           takeoff_altitude=takeoff_altitude).items
         for it in items:
             if it.is_complex:
                 raise ValueError(f"upload_mission: {it.describe()} must be expanded first (pass the MissionPlan)")
         return items, nav is not None
 
-    def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
-                       final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
+    def upload(self, mission: Any, *, takeoff_altitude: float | None = None,
+               final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
         """Upload a mission with the MISSION_ITEM_INT protocol (MISSION_COUNT, answering each MISSION_REQUEST_INT
         / MISSION_REQUEST, until MISSION_ACK).
 
@@ -66,17 +128,17 @@ class MissionMixin:
         speeds of items built from waypoints are capped at the robot's limit.
 
         Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
-        which :meth:`download_mission` returns unchanged. Raises CommandRefused (MAV_MISSION_RESULT name) when the
+        which :meth:`download` returns unchanged. Raises CommandRefused (MAV_MISSION_RESULT name) when the
         autopilot rejects an item, BackendError after ``command_retries`` timeouts, LinkLost, TypeError/ValueError
         for bad input (nothing is sent then)."""
         items, built = self._mission_items(mission, takeoff_altitude, final_action)
-        absolute = built and self.autopilot == "px4"
-        if absolute and (self._alt_ref is None or not self._armed):
-            self._fix_altitude_reference()  # the take-off point, where the vehicle stands now
-            self._alt_ref_pinned = True  # arm() keeps it: the mission's altitudes are relative to it
+        absolute = built and self._vehicle.autopilot == "px4"
+        if absolute and (self._vehicle.altitude_reference is None or not self._vehicle.armed):
+            # the take-off point, where the vehicle stands now; arm() keeps it: the mission's altitudes refer to it
+            self._pin_altitude_reference()
         wire, sent_items = self._wire_items(items, built, absolute)
         self._check_link("mission upload")
-        self.transfers.upload_mission(wire)
+        self._transfers.upload_mission(wire)
         self._remember_waypoints(wire)
         self._event("mission_uploaded", count=len(sent_items))
         return sent_items
@@ -102,41 +164,41 @@ class MissionMixin:
             if absolute and frame in _RELATIVE_FRAMES:
                 # PX4 resolves home-relative altitudes with a home it keeps re-estimating for minutes after
                 # take-off (COM_HOME_EN): our own waypoints go up as AMSL altitudes above the take-off point
-                frame, z = M.MAV_FRAME_GLOBAL, _f32(self._alt_ref + z)
+                frame, z = M.MAV_FRAME_GLOBAL, _f32(self._vehicle.altitude_reference + z)
             if it.command == M.MAV_CMD_DO_CHANGE_SPEED and built:
                 # our own waypoints' speeds: never above the robot's limit (less any estimator margin measured in
                 # flight), never -2 ("default": DENIED by ArduCopter): the limit instead. Given items (a mission
                 # file) go up as written (``aerodaas mission upload --max-speed`` caps them itself, and says so)
-                limit = self.xy_speed_cap()
+                limit = self._vehicle.xy_speed_cap()
                 p[1] = _f32(limit if p[1] is None or (p[1] <= 0 and p[1] != -1) else min(p[1], limit))
             wire.append((frame, it.command, 1 if it.autocontinue else 0,
                          *[float("nan") if v is None else v for v in p], xi, yi, z))
             sent_items.append(MissionItem(seq=k + 1, command=it.command, frame=frame, params=[*p, xs, ys, z],
                                           autocontinue=it.autocontinue))
-        if self.autopilot == "ardupilot":
-            h = self.home
+        if self._vehicle.autopilot == "ardupilot":
+            h = self._vehicle.home
             wire.insert(0, (0, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, 0.0, int(round(h.lat * 1e7)),
                             int(round(h.lon * 1e7)), float(h.alt)))
         return wire, sent_items
 
     def _remember_waypoints(self, wire: list[tuple]) -> None:
         """Keep each uploaded NAV_WAYPOINT's horizontal position (ENU metres from :attr:`home`) and acceptance
-        radius by wire sequence number, for the arrival report (telemetry.py ``_check_arrival``)."""
+        radius by wire sequence number, for the arrival report (:meth:`_check_arrival`)."""
         wps = {}
-        first = 1 if self.autopilot == "ardupilot" else 0
+        first = 1 if self._vehicle.autopilot == "ardupilot" else 0
         for seq, (frame, cmd, _auto, _p1, p2, _p3, _p4, xi, yi, _z) in enumerate(wire):
             if seq >= first and cmd == M.MAV_CMD_NAV_WAYPOINT and frame in _GLOBAL_FRAMES:
-                e, n, _ = geodetic_to_enu(xi / 1e7, yi / 1e7, self.home.alt, self.home)
+                e, n, _ = geodetic_to_enu(xi / 1e7, yi / 1e7, self._vehicle.home.alt, self._vehicle.home)
                 radius = p2 if p2 is not None and p2 == p2 and p2 > 0 else _ARRIVAL_RADIUS_M
                 wps[seq] = (float(e), float(n), min(float(radius), _ARRIVAL_RADIUS_M))
         with self._lock:
-            self._mission_wire = wps
-            self._mission_next = (frozenset(k for k, w in enumerate(wire) if w[2]), len(wire))
+            self._waypoints = wps
+            self._next = (frozenset(k for k, w in enumerate(wire) if w[2]), len(wire))
             self._current_inferred_from = -1
             self._arrived.clear()
             self._reached_fw.clear()
 
-    def download_mission(self) -> MissionPlan:
+    def download(self) -> MissionPlan:
         """Download the autopilot's mission (MISSION_REQUEST_LIST, MISSION_COUNT, MISSION_REQUEST_INT for each
         item, answered with MISSION_ITEM_INT or, by older vehicles, MISSION_ITEM, whose float latitude/longitude
         degrees are rounded to the same 1e-7 degree grid; MISSION_ACK). Returns a
@@ -145,9 +207,9 @@ class MissionMixin:
         :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
         with an error)."""
         self._check_link("mission download")
-        got = self.transfers.download_messages(0, "mission download")
+        got = self._transfers.download_messages(0, "mission download")
         items = []
-        first = 1 if self.autopilot == "ardupilot" else 0
+        first = 1 if self._vehicle.autopilot == "ardupilot" else 0
         for seq in sorted(got):
             if seq < first:
                 continue
@@ -161,32 +223,83 @@ class MissionMixin:
             items.append(MissionItem(seq=seq + 1 - first, command=m.command, frame=m.frame,
                                      params=[_f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4), x, y,
                                              _f32(m.z)], autocontinue=bool(m.autocontinue)))
-        return MissionPlan(home=self.home, items=items)
+        return MissionPlan(home=self._vehicle.home, items=items)
 
-    def clear_mission(self) -> None:
+    def clear(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
-        self.transfers.clear_mission()
+        self._transfers.clear_mission()
 
-    def start_mission(self) -> None:
+    def start(self) -> None:
         """Fly the uploaded mission: in the air switch to AUTO (ArduPilot) / MISSION (PX4); on the ground (armed)
         MAV_CMD_MISSION_START, which starts it from the first item (ArduPilot needs a NAV_TAKEOFF first; PX4
         takes off by itself). Progress arrives as ``mission_current`` / ``mission_item_reached`` events."""
-        self._require_navigable("start_mission")
-        self._stop_setpoints()
-        self._in_control = True
-        if self.in_air:
-            self.set_mode("MISSION" if self.autopilot == "px4" else "AUTO")
+        if self._vehicle.in_air:
+            self._commands.set_mode("MISSION" if self._vehicle.autopilot == "px4" else "AUTO")
         else:
-            self.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
+            self._commands.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
 
-    def _init_mission(self) -> None:
-        """The mission's state: its transfers (:class:`MissionTransfer`), the uploaded mission's wire items."""
-        #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
-        self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
-                                         target=lambda: (self._sysid, self._compid),
-                                         status_text_since=self._status_text_since, event=self._event,
-                                         wire_version=lambda: getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0"))
-        self._mission_wire: dict[int, tuple[float, float, float, int]] = {}  # wire seq -> (lat, lon, z, frame)
-        #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
-        self._mission_next: tuple[frozenset[int], int] = (frozenset(), 0)
-        self._current_inferred_from = -1  # the reached item whose successor we took as current (telemetry.py)
+    # ------------------------------------------------------------------ progress (the I/O thread, under the lock)
+    def on_position(self) -> None:
+        """A new position sample (telemetry.py): an uploaded waypoint may be reached. Caller holds the backend's
+        lock."""
+        if self._waypoints:
+            self._check_arrival()
+
+    def on_mission_current(self, msg: Any) -> None:
+        """MISSION_CURRENT: the autopilot's current item. Caller holds the backend's lock (the I/O thread)."""
+        if msg.seq == self._current_inferred_from:
+            return  # sent before the MISSION_ITEM_REACHED we already advanced on (see on_mission_item_reached)
+        self._current_inferred_from = -1
+        self._set_mission_current(msg.seq)
+
+    def _set_mission_current(self, seq: int, **why: Any) -> None:
+        """Make wire item ``seq`` the current one (a ``mission_current`` event when it changes). Caller holds
+        the backend's lock."""
+        if seq != self._seq:
+            if seq < self._seq:  # the mission restarted (or jumped back): its items may be reached again
+                self._arrived = {s for s in self._arrived if s < seq}
+                self._reached_fw = {s for s in self._reached_fw if s < seq}
+            self._seq = seq
+            self._event("mission_current", seq=seq, item=self._item_number(seq), **why)
+        self._check_arrival()
+
+    def _check_arrival(self) -> None:
+        """In AUTO / AUTO.MISSION, the current item is an uploaded NAV_WAYPOINT and the vehicle is within its
+        arrival radius (horizontal metres): report ``mission_item_reached`` now, when its hold begins. Both
+        autopilots send MISSION_ITEM_REACHED only *after* the hold time (ArduCopter ``ModeAuto::verify_nav_wp``
+        after ``loiter_time``; PX4 navigator after the item's hold, repeated ~10 times at 1 Hz), so without this the
+        stat-stream's WAYPOINT_HOLD would begin when the hover ends. Caller holds the backend's lock."""
+        seq = self._seq
+        wp = self._waypoints.get(seq)
+        if wp is None or seq in self._arrived or seq in self._reached_fw or self._vehicle.mode not in ("AUTO", "MISSION"):
+            return
+        pos = self._vehicle.position
+        if math.hypot(pos[0] - wp[0], pos[1] - wp[1]) <= wp[2]:
+            self._arrived.add(seq)
+            self._event("mission_item_reached", seq=seq, item=self._item_number(seq), by="arrival")
+
+    def _item_number(self, wire_seq: int) -> int:
+        """The :class:`MissionItem` ``seq`` (from 1, as :meth:`upload` returns) of a wire sequence number:
+        ArduPilot's wire numbering already starts at 1 (home is 0), PX4's at 0."""
+        return wire_seq if self._vehicle.autopilot == "ardupilot" else wire_seq + 1
+
+    def on_mission_item_reached(self, msg: Any) -> None:
+        """The autopilot's MISSION_ITEM_REACHED (after the item's hold): reported once per item and mission run
+        (PX4 repeats it). For an item whose arrival :meth:`_check_arrival` already reported it becomes
+        ``mission_item_hold_done``, else ``mission_item_reached`` (take-off, or an item we do not track)."""
+        if msg.seq in self._reached_fw:
+            return
+        self._reached_fw.add(msg.seq)
+        name = "mission_item_hold_done" if msg.seq in self._arrived else "mission_item_reached"
+        self._event(name, seq=msg.seq, item=self._item_number(msg.seq), by="autopilot")
+        # The current item of our own mission moves on with it: both autopilots advance to the next item in the
+        # step that reports the reached one (PX4: navigator Mission advances on the same mission_result that the
+        # MAVLink mission manager sends as MISSION_ITEM_REACHED, then MISSION_CURRENT, in one
+        # MavlinkMissionManager::send(), src/modules/mavlink/mavlink_mission.cpp; ArduPilot: AP_Mission::update
+        # advances once verify_command reports the NAV item complete). A MISSION_CURRENT lost on the link is
+        # repeated only at 1 Hz (PX4's slow-rate resend; our stream request), which delayed the next hold's start
+        # and this hold's end by up to 1 s of vehicle time.
+        auto, count = self._next
+        if msg.seq == self._seq and msg.seq in auto and msg.seq + 1 < count:
+            self._current_inferred_from = msg.seq
+            self._set_mission_current(msg.seq + 1, by="reached")

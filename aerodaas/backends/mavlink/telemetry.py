@@ -1,5 +1,6 @@
-"""Telemetry: the state the autopilot streams (position, velocity, attitude, battery, GPS, landed state, home,
-mission progress) and the :class:`~aerodaas.backends.base.VehicleBackend` state properties built from it."""
+"""Telemetry: the state the autopilot streams (position, velocity, attitude, battery, GPS, landed state, home;
+mission progress is the mission's, :mod:`.mission`) and the :class:`~aerodaas.backends.base.VehicleBackend` state
+properties built from it."""
 from __future__ import annotations
 
 import math
@@ -33,8 +34,7 @@ class TelemetryMixin:
         self._pos = np.array([e, n, self._height()])
         self._new_sample(msg.time_boot_ms)
         self._has_global = True
-        if self._mission_wire:
-            self._check_arrival()
+        self.mission.on_position()
         if time.monotonic() - self._local_wall > 1.0:  # no fresher LOCAL_POSITION_NED velocity
             self._set_velocity(self.ned_to_enu((msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)), msg.time_boot_ms)
         if msg.hdg != 65535 and time.monotonic() - self._att_wall > 1.0:  # no ATTITUDE lately
@@ -193,63 +193,6 @@ class TelemetryMixin:
             self._pos = np.array([e, n, self._height()])
         self._event("home", lat=home.lat, lon=home.lon, alt=home.alt)
 
-    def _on_mission_current(self, msg: Any) -> None:
-        if msg.seq == self._current_inferred_from:
-            return  # sent before the MISSION_ITEM_REACHED we already advanced on (see _on_mission_item_reached)
-        self._current_inferred_from = -1
-        self._set_mission_current(msg.seq)
-
-    def _set_mission_current(self, seq: int, **why: Any) -> None:
-        """Make wire item ``seq`` the current one (a ``mission_current`` event when it changes). Caller holds
-        ``_lock``."""
-        if seq != self._mission_seq:
-            if seq < self._mission_seq:  # the mission restarted (or jumped back): its items may be reached again
-                self._arrived = {s for s in self._arrived if s < seq}
-                self._reached_fw = {s for s in self._reached_fw if s < seq}
-            self._mission_seq = seq
-            self._event("mission_current", seq=seq, item=self._item_number(seq), **why)
-        self._check_arrival()
-
-    def _check_arrival(self) -> None:
-        """In AUTO / AUTO.MISSION, the current item is an uploaded NAV_WAYPOINT and the vehicle is within its
-        arrival radius (horizontal metres): report ``mission_item_reached`` now, when its hold begins. Both
-        autopilots send MISSION_ITEM_REACHED only *after* the hold time (ArduCopter ``ModeAuto::verify_nav_wp``
-        after ``loiter_time``; PX4 navigator after the item's hold, repeated ~10 times at 1 Hz), so without this the
-        stat-stream's WAYPOINT_HOLD would begin when the hover ends. Caller holds ``_lock``."""
-        seq = self._mission_seq
-        wp = self._mission_wire.get(seq)
-        if wp is None or seq in self._arrived or seq in self._reached_fw or self._mode not in ("AUTO", "MISSION"):
-            return
-        if math.hypot(self._pos[0] - wp[0], self._pos[1] - wp[1]) <= wp[2]:
-            self._arrived.add(seq)
-            self._event("mission_item_reached", seq=seq, item=self._item_number(seq), by="arrival")
-
-    def _item_number(self, wire_seq: int) -> int:
-        """The :class:`MissionItem` ``seq`` (from 1, as :meth:`upload_mission` returns) of a wire sequence number:
-        ArduPilot's wire numbering already starts at 1 (home is 0), PX4's at 0."""
-        return wire_seq if self.autopilot == "ardupilot" else wire_seq + 1
-
-    def _on_mission_item_reached(self, msg: Any) -> None:
-        """The autopilot's MISSION_ITEM_REACHED (after the item's hold): reported once per item and mission run
-        (PX4 repeats it). For an item whose arrival :meth:`_check_arrival` already reported it becomes
-        ``mission_item_hold_done``, else ``mission_item_reached`` (take-off, or an item we do not track)."""
-        if msg.seq in self._reached_fw:
-            return
-        self._reached_fw.add(msg.seq)
-        name = "mission_item_hold_done" if msg.seq in self._arrived else "mission_item_reached"
-        self._event(name, seq=msg.seq, item=self._item_number(msg.seq), by="autopilot")
-        # The current item of our own mission moves on with it: both autopilots advance to the next item in the
-        # step that reports the reached one (PX4: navigator Mission advances on the same mission_result that the
-        # MAVLink mission manager sends as MISSION_ITEM_REACHED, then MISSION_CURRENT, in one
-        # MavlinkMissionManager::send(), src/modules/mavlink/mavlink_mission.cpp; ArduPilot: AP_Mission::update
-        # advances once verify_command reports the NAV item complete). A MISSION_CURRENT lost on the link is
-        # repeated only at 1 Hz (PX4's slow-rate resend; our stream request), which delayed the next hold's start
-        # and this hold's end by up to 1 s of vehicle time.
-        auto, count = self._mission_next
-        if msg.seq == self._mission_seq and msg.seq in auto and msg.seq + 1 < count:
-            self._current_inferred_from = msg.seq
-            self._set_mission_current(msg.seq + 1, by="reached")
-
     @property
     def position(self) -> np.ndarray:
         with self._lock:
@@ -361,8 +304,8 @@ class TelemetryMixin:
         self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
 
     def _init_telemetry(self) -> None:
-        """The telemetry state (guarded by ``_lock``): the vehicle's latest position, velocity, attitude, battery, GPS, home and
-        mission progress as its streams report them, the odometry queue and the event queue."""
+        """The telemetry state (guarded by ``_lock``): the vehicle's latest position, velocity, attitude, battery, GPS
+        and home as its streams report them (mission progress: mission.py), the odometry queue and the event queue."""
         self._events: deque[dict[str, Any]] = deque(maxlen=2000)
         # state (guarded by _lock)
         self._pos = np.zeros(3)
@@ -390,12 +333,8 @@ class TelemetryMixin:
         self._sensors: tuple[int, int, int] | None = None
         self._home_received = False
         self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
-        self._mission_seq = -1
-        self._last_reached: tuple[int, float] = (-1, 0.0)
         self._att_wall = 0.0
         self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
         self._health_seen = 0  # every SYS_STATUS health bit ever reported
         self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
         self._home_moved_alt = 0.0
-        self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
-        self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
