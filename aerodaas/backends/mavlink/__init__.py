@@ -23,11 +23,12 @@ callables they are given: ``backend.commands`` (:class:`~.command.CommandProtoco
 changes confirmed by the HEARTBEAT), ``backend.parameters`` (:class:`~.params.ParameterProtocol`: the parameter protocol),
 ``backend.transfers`` (:class:`~.transfer.MissionTransfer`: every mission-protocol exchange, mission, fence and
 rally items), ``backend.mission`` (:class:`~.mission.AutopilotMission`: the mission built from waypoints, its
-upload, download and start, and its progress), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
+upload, download and start, and its progress), ``backend.actions`` (:class:`~.action.VehicleAction`: readiness,
+arming, disarming, take-off), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight). The others are still mix-ins of :class:`MavlinkBackend`,
 each declaring its state in its ``_init_<concern>``: :mod:`.link` (connection,
 autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams), :mod:`.params` (the vehicle's own speed
-limits, over the parameter protocol), :mod:`.action` (readiness, arming, take-off), :mod:`.offboard`
+limits, over the parameter protocol), :mod:`.offboard`
 (GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend

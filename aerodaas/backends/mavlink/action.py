@@ -19,14 +19,21 @@ Even when all of these read ready, an arm can still be refused for a moment (PX4
 health failures first", ArduPilot "PreArm: ..."): MAV_RESULT_FAILED / TEMPORARILY_REJECTED are "not yet" and
 retried with back-off (0.5 s doubling to 4 s, wall) until ``arm_timeout_s`` expires; then the last refusal is
 raised with the autopilot's text.
+
+A concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`VehicleAction`).
 """
 from __future__ import annotations
 
 import math
+import threading
 import time
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol
 
 from aerodaas.backends.base import CommandRefused
 from aerodaas.backends.mavlink._common import M, _PX4_NO_ARM_MODES
+from aerodaas.backends.mavlink.command import CommandProtocol
+from aerodaas.backends.mavlink.params import LinkCheck
 
 #: EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (EKF_STATUS_FLAGS, ESTIMATOR_STATUS_FLAGS share these low bits)
 _EKF_ATTITUDE, _EKF_VEL_HORIZ, _EKF_POS_HORIZ_ABS = 1, 2, 16
@@ -36,42 +43,125 @@ _NOT_YET = ("MAV_RESULT_FAILED", "MAV_RESULT_TEMPORARILY_REJECTED")
 _ARM_BACKOFF_S = (0.5, 4.0)
 
 
-class ActionMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: readiness, arm, disarm, take-off."""
+@dataclass(frozen=True)
+class Readiness:
+    """What the autopilot has reported about its readiness to arm (telemetry and HEARTBEAT, read together under the
+    backend's lock): GPS_RAW_INT ``fix_type`` (-1 before any report), whether HOME_POSITION came, SYS_STATUS
+    ``onboard_control_sensors_present`` / ``_health`` (0 before any) and every health bit ever reported, the
+    EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (None before any), HEARTBEAT ``system_status`` and armed flag,
+    whether ArduPilot's "EKFn IMUm is using GPS" was seen, and whether EKF_STATUS_REPORT will never come (its
+    stream refused, or the legacy REQUEST_DATA_STREAM in use)."""
+
+    gps_fix: int
+    home_received: bool
+    sensors_present: int
+    sensors_health: int
+    health_seen: int
+    ekf_flags: int | None
+    system_status: int
+    armed: bool
+    ekf_using_gps: bool
+    ekf_report_unavailable: bool
+
+
+class ActionVehicle(Protocol):
+    """What the actions read of the vehicle (the backend's public state): its autopilot (``"ardupilot"`` /
+    ``"px4"``), flight mode, armed flag, vehicle clock (:attr:`t`, seconds) and altitude reference (AMSL metres,
+    None before it is fixed)."""
+
+    autopilot: str | None
+
+    @property
+    def mode(self) -> str: ...
+
+    @property
+    def armed(self) -> bool: ...
+
+    @property
+    def t(self) -> float: ...
+
+    @property
+    def altitude_reference(self) -> float | None: ...
+
+
+class VehicleAction:
+    """Readiness, arming, disarming and take-off of one vehicle (see the module docstring).
+
+    It talks to the vehicle only through what it is given: ``vehicle`` (:class:`ActionVehicle`), ``commands`` (the
+    command protocol), ``check_link`` (the link's), ``event`` (records a backend event), ``lock`` (the backend's
+    lock), ``readiness`` (a :class:`Readiness` of the latest reports; caller holds ``lock``), ``home_for_flight``
+    (telemetry: a home the autopilot moved after the last flight becomes the ENU origin; caller holds ``lock``),
+    ``fix_altitude_reference`` (telemetry: heights are measured from where the vehicle stands) and
+    ``stop_setpoints`` (offboard: our target stream stops). ``settings``: ``arm_timeout_s``.
+
+    State: whether an :meth:`arm` runs (:attr:`arming`), whether we are in control (:attr:`in_control`: we armed
+    it or sent it targets or a mission, so :meth:`~aerodaas.backends.mavlink.MavlinkBackend.safe_end` is ours)
+    and whether a mission upload pinned the altitude reference for the next arming."""
+
+    def __init__(self, robot_id: str, settings: Any, *, vehicle: ActionVehicle, commands: CommandProtocol,
+                 check_link: LinkCheck, event: Callable[..., None], lock: threading.RLock,
+                 readiness: Callable[[], Readiness], home_for_flight: Callable[[], None],
+                 fix_altitude_reference: Callable[[], None], stop_setpoints: Callable[[], None]) -> None:
+        self.robot_id, self._settings = robot_id, settings
+        self._vehicle, self._commands, self._check_link, self._event = vehicle, commands, check_link, event
+        self._lock, self._readiness, self._home_for_flight = lock, readiness, home_for_flight
+        self._fix_altitude_reference, self._stop_setpoints = fix_altitude_reference, stop_setpoints
+        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
+        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
+        self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it
+
+    @property
+    def arming(self) -> bool:
+        """An :meth:`arm` runs: the home the autopilot sets where it arms becomes the ENU origin (telemetry.py)."""
+        return self._arming
+
+    @property
+    def in_control(self) -> bool:
+        """We armed the vehicle or sent it targets or a mission: bringing it down at the end is ours to do."""
+        return self._in_control
+
+    def take_control(self) -> None:
+        """We command the vehicle now (targets, a mission): :attr:`in_control`."""
+        self._in_control = True
+
+    def pin_altitude_reference(self) -> None:
+        """Fix the altitude reference where the vehicle stands now and keep it for the next :meth:`arm` (an uploaded
+        mission's altitudes refer to it: mission.py)."""
+        self._fix_altitude_reference()
+        self._alt_ref_pinned = True
 
     def not_ready_reasons(self) -> list[str]:
         """What the autopilot's own reports say is still missing before it can arm in a guided mode (see the module
         docstring); empty when ready. Never blocks."""
         out: list[str] = []
         with self._lock:
-            if 0 <= self._gps_fix < M.GPS_FIX_TYPE_3D_FIX:
-                out.append(f"GPS fix type {self._gps_fix} < 3")
-            if not self._home_received and self._gps_fix >= 0:
-                out.append("no HOME_POSITION yet")
-            present, health = (self._sensors[0], self._sensors[2]) if self._sensors is not None else (0, 0)
-            ekf = self._ekf_flags
-            if self.autopilot == "px4":
-                if not health & M.MAV_SYS_STATUS_PREARM_CHECK:
-                    out.append("SYS_STATUS pre-arm check not healthy")
-                xy = M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-                if (present | self._health_seen) & xy and not health & xy:
-                    out.append("SYS_STATUS XY position control not healthy")
-                if not self._armed and self._system_status != M.MAV_STATE_STANDBY:
-                    out.append(f"HEARTBEAT system_status {self._system_status} (not STANDBY)")
-                if ekf is not None and (ekf & (_EKF_ATTITUDE | _EKF_VEL_HORIZ | _EKF_POS_HORIZ_ABS)
-                                        != (_EKF_ATTITUDE | _EKF_VEL_HORIZ | _EKF_POS_HORIZ_ABS)):
-                    out.append(f"ESTIMATOR_STATUS flags {ekf:#x}: no absolute position")
-            else:
-                for bit, name in ((M.MAV_SYS_STATUS_PREARM_CHECK, "pre-arm"), (M.MAV_SYS_STATUS_AHRS, "AHRS")):
-                    if present & bit and not health & bit:
-                        out.append(f"SYS_STATUS {name} not healthy")
-                if ekf is not None:
-                    pos = ekf & (_EKF_POS_HORIZ_ABS | _EKF_PRED_POS_HORIZ_ABS)
-                    if not (ekf & _EKF_ATTITUDE and ekf & _EKF_VEL_HORIZ and pos) or ekf & _EKF_CONST_POS_MODE:
-                        out.append(f"EKF_STATUS_REPORT flags {ekf:#x}: no absolute position estimate")
-                elif not self._ekf_using_gps and self._gps_fix >= 0 and \
-                        M.MAVLINK_MSG_ID_EKF_STATUS_REPORT not in self._streams_refused and not self._stream_legacy:
-                    out.append("EKF not yet using GPS (no EKF_STATUS_REPORT yet)")
+            r = self._readiness()
+        if 0 <= r.gps_fix < M.GPS_FIX_TYPE_3D_FIX:
+            out.append(f"GPS fix type {r.gps_fix} < 3")
+        if not r.home_received and r.gps_fix >= 0:
+            out.append("no HOME_POSITION yet")
+        present, health, ekf = r.sensors_present, r.sensors_health, r.ekf_flags
+        if self._vehicle.autopilot == "px4":
+            if not health & M.MAV_SYS_STATUS_PREARM_CHECK:
+                out.append("SYS_STATUS pre-arm check not healthy")
+            xy = M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+            if (present | r.health_seen) & xy and not health & xy:
+                out.append("SYS_STATUS XY position control not healthy")
+            if not r.armed and r.system_status != M.MAV_STATE_STANDBY:
+                out.append(f"HEARTBEAT system_status {r.system_status} (not STANDBY)")
+            if ekf is not None and (ekf & (_EKF_ATTITUDE | _EKF_VEL_HORIZ | _EKF_POS_HORIZ_ABS)
+                                    != (_EKF_ATTITUDE | _EKF_VEL_HORIZ | _EKF_POS_HORIZ_ABS)):
+                out.append(f"ESTIMATOR_STATUS flags {ekf:#x}: no absolute position")
+        else:
+            for bit, name in ((M.MAV_SYS_STATUS_PREARM_CHECK, "pre-arm"), (M.MAV_SYS_STATUS_AHRS, "AHRS")):
+                if present & bit and not health & bit:
+                    out.append(f"SYS_STATUS {name} not healthy")
+            if ekf is not None:
+                pos = ekf & (_EKF_POS_HORIZ_ABS | _EKF_PRED_POS_HORIZ_ABS)
+                if not (ekf & _EKF_ATTITUDE and ekf & _EKF_VEL_HORIZ and pos) or ekf & _EKF_CONST_POS_MODE:
+                    out.append(f"EKF_STATUS_REPORT flags {ekf:#x}: no absolute position estimate")
+            elif not r.ekf_using_gps and r.gps_fix >= 0 and not r.ekf_report_unavailable:
+                out.append("EKF not yet using GPS (no EKF_STATUS_REPORT yet)")
         return out
 
     def _armable(self) -> bool:
@@ -92,16 +182,15 @@ class ActionMixin:
         self._check_link("arm")
         with self._lock:  # a new flight: its home (where it arms) becomes the ENU origin (telemetry.py)
             self._arming = True
-            if self._home_after is not None and not self._armed:
-                self._rebase_home(self._home_after)
+            self._home_for_flight()
         try:
             self._arm()
         finally:
             self._arming = False
 
     def _arm(self) -> None:
-        start, t0 = time.monotonic(), self.t
-        end = start + self.cfg.arm_timeout_s
+        start, t0 = time.monotonic(), self._vehicle.t
+        end = start + self._settings.arm_timeout_s
         while self.not_ready_reasons() and time.monotonic() < end:
             self._check_link("arm")
             time.sleep(0.02)
@@ -111,13 +200,15 @@ class ActionMixin:
             try:
                 # not ready when the window closed: ask in the current mode, so the refusal carries the
                 # autopilot's pre-arm reason (a guided mode would be refused first, without it)
-                if self.autopilot == "ardupilot" and self._mode != "GUIDED" and self._armable():
-                    self.set_mode("GUIDED")
-                elif self.autopilot == "px4" and self._mode in _PX4_NO_ARM_MODES and self._armable():
-                    self.set_mode("LOITER")
+                autopilot, mode = self._vehicle.autopilot, self._vehicle.mode
+                if autopilot == "ardupilot" and mode != "GUIDED" and self._armable():
+                    self._commands.set_mode("GUIDED")
+                elif autopilot == "px4" and mode in _PX4_NO_ARM_MODES and self._armable():
+                    self._commands.set_mode("LOITER")
                 sent = time.monotonic()
-                self.commands.command_with_effect("arm", lambda: self._armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-                self.commands.await_heartbeat("arm", lambda: self._armed, "armed", None, sent)
+                armed = lambda: self._vehicle.armed  # noqa: E731 - what the HEARTBEAT must show
+                self._commands.command_with_effect("arm", armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+                self._commands.await_heartbeat("arm", armed, "armed", None, sent)
                 break
             except CommandRefused as e:
                 if e.result not in _NOT_YET or time.monotonic() + backoff > end:
@@ -133,13 +224,13 @@ class ActionMixin:
             self._fix_altitude_reference()
         self._alt_ref_pinned = False
         self._in_control = True
-        self._event("armed_after", wall_s=round(time.monotonic() - start, 3), vehicle_s=round(self.t - t0, 3),
-                    tries=tries)
+        self._event("armed_after", wall_s=round(time.monotonic() - start, 3),
+                    vehicle_s=round(self._vehicle.t - t0, 3), tries=tries)
 
     def disarm(self) -> None:
         """MAV_CMD_COMPONENT_ARM_DISARM(0); autopilots refuse it in flight (CommandRefused)."""
         self._stop_setpoints()
-        self.command_long("disarm", M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+        self._commands.command_long("disarm", M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
 
     def takeoff(self, altitude_m: float) -> None:
         """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above the take-off point. The altitude reference (the
@@ -147,30 +238,17 @@ class ActionMixin:
         (ArduPilot: in GUIDED, ``param7`` relative to home, which ArduPilot sets at arming = the take-off point;
         PX4: ``param7`` AMSL = reference + ``altitude_m``, position NaN = here; PX4 holds (LOITER) when there).
         Raises ValueError for a non-positive or non-finite altitude; CommandRefused / LinkLost / BackendError."""
-        self._require_navigable("takeoff")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude_m must be a positive number of metres, got {altitude_m!r}")
         self._check_link("takeoff")
         self._stop_setpoints()
-        if self._alt_ref is None:
+        if self._vehicle.altitude_reference is None:
             self._fix_altitude_reference()
-        if self.autopilot == "px4":
+        if self._vehicle.autopilot == "px4":
             nan = float("nan")
-            self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, self._alt_ref + altitude_m)
+            self._commands.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan,
+                                        self._vehicle.altitude_reference + altitude_m)
         else:
-            if self._mode != "GUIDED":
-                self.set_mode("GUIDED")
-            self.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_m)
-
-    def _pin_altitude_reference(self) -> None:
-        """Fix the altitude reference where the vehicle stands now and keep it for the next :meth:`arm` (an uploaded
-        mission's altitudes refer to it: mission.py)."""
-        self._fix_altitude_reference()
-        self._alt_ref_pinned = True
-
-    def _init_action(self) -> None:
-        """Who flies: an arm() under way, whether we are in control (then safe_end() is ours), the altitude reference
-        pinned by a mission upload."""
-        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
-        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
-        self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it
+            if self._vehicle.mode != "GUIDED":
+                self._commands.set_mode("GUIDED")
+            self._commands.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_m)

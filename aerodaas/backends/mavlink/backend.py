@@ -11,7 +11,7 @@ from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import VehicleBackend
-from aerodaas.backends.mavlink.action import ActionMixin
+from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import FenceMixin
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
@@ -24,7 +24,7 @@ from aerodaas.backends.mavlink.transfer import MissionTransfer
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin, ActionMixin, OffboardMixin,
+class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin, OffboardMixin,
                      FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
@@ -122,7 +122,12 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                                         status_text_since=self._status_text_since, mode_params=self._mode_params,
                                         event=self._event)
         self._init_telemetry()
-        self._init_action()
+        #: readiness, arming, disarming, take-off (action.py)
+        self.actions = VehicleAction(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
+                                     check_link=self._check_link, event=self._event, lock=self._lock,
+                                     readiness=self._readiness, home_for_flight=self._home_for_flight,
+                                     fix_altitude_reference=self._fix_altitude_reference,
+                                     stop_setpoints=self._stop_setpoints)
         self._init_offboard()
         #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
         self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
@@ -132,7 +137,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
         self.mission = AutopilotMission(self.robot_id, vehicle=self, commands=self.commands, transfers=self.transfers,
                                         check_link=self._check_link, event=self._event, lock=self._lock,
-                                        pin_altitude_reference=self._pin_altitude_reference)
+                                        pin_altitude_reference=self.actions.pin_altitude_reference)
         self._init_params()
         self._init_fence()
         from aerodaas.backends.mavlink.camera import CameraFinder
@@ -206,6 +211,25 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         """Acknowledged command round trips, wall milliseconds (:attr:`CommandProtocol.rtt_ms`)."""
         return self.commands.rtt_ms
 
+    # readiness, arming, take-off (aerodaas.backends.mavlink.action.VehicleAction)
+    def not_ready_reasons(self) -> list[str]:
+        """What the autopilot's own reports say is still missing before it can arm in a guided mode
+        (:meth:`VehicleAction.not_ready_reasons`); empty when ready. Never blocks."""
+        return self.actions.not_ready_reasons()
+
+    def arm(self) -> None:
+        """Arm for a guided flight, bounded by ``arm_timeout_s`` (:meth:`VehicleAction.arm`)."""
+        self.actions.arm()
+
+    def disarm(self) -> None:
+        """MAV_CMD_COMPONENT_ARM_DISARM(0); autopilots refuse it in flight (:meth:`VehicleAction.disarm`)."""
+        self.actions.disarm()
+
+    def takeoff(self, altitude_m: float) -> None:
+        """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above the take-off point (:meth:`VehicleAction.takeoff`)."""
+        self._require_navigable("takeoff")
+        self.actions.takeoff(altitude_m)
+
     # the mission (aerodaas.backends.mavlink.mission.AutopilotMission)
     def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
                        final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
@@ -226,7 +250,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         is ours to bring down (:meth:`safe_end`)."""
         self._require_navigable("start_mission")
         self._stop_setpoints()
-        self._in_control = True
+        self.actions.take_control()
         self.mission.start()
 
     def _on_mission_current(self, msg: Any) -> None:

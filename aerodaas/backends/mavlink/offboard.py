@@ -163,7 +163,7 @@ class OffboardMixin:
         have checked :meth:`_autopilot_has_it`; it is checked again here under the lock that installs the target,
         and before the mode switch (the I/O thread may have seen the autopilot's failsafe meanwhile)."""
         guided = self._guided_mode()
-        self._in_control = True
+        self.actions.take_control()
         if self.autopilot == "px4":
             with self._lock:
                 withhold = bool(self._failsafe_undelivered or self._offboard_lost_at is not None)
@@ -328,7 +328,7 @@ class OffboardMixin:
         stops only once the autopilot's own mode holds it. Returns what was done (``"nothing"``, ``"landed"``,
         ``"disarmed"``, ``"timeout"``, ``"link lost"``), also as a ``safe_end`` event. Raises BackendError /
         CommandRefused when LAND/RTL is refused."""
-        if not self._armed or not self._in_control:
+        if not self._armed or not self.actions.in_control:
             return "nothing"  # disarmed, or armed by someone else and never commanded by us: not ours to end
         if not self._link_ok:
             self._stop_setpoints()

@@ -12,6 +12,7 @@ import numpy as np
 
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
+from aerodaas.backends.mavlink.action import Readiness
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
@@ -175,12 +176,27 @@ class TelemetryMixin:
                 self._home_moved_alt = home.alt
                 self._event("home_moved_in_flight", lat=home.lat, lon=home.lon, alt=home.alt)
             return
-        if moved and self._home_received and self._was_armed and not self._arming:
+        if moved and self._home_received and self._was_armed and not self.actions.arming:
             self._event("home_moved", lat=home.lat, lon=home.lon, alt=home.alt, reason="after landing")
             self._home_after = home
             return
         if moved:
             self._rebase_home(home)
+
+    def _home_for_flight(self) -> None:
+        """A new flight (:meth:`arm`): a home the autopilot moved after the last flight (reported as ``home_moved``)
+        becomes the ENU origin, as the home it sets where it arms will. Caller holds ``_lock``."""
+        if self._home_after is not None and not self._armed:
+            self._rebase_home(self._home_after)
+
+    def _readiness(self) -> Readiness:
+        """The reports readiness is judged from (action.py :class:`Readiness`). Caller holds ``_lock``."""
+        present, health = (self._sensors[0], self._sensors[2]) if self._sensors is not None else (0, 0)
+        return Readiness(gps_fix=self._gps_fix, home_received=self._home_received, sensors_present=present,
+                         sensors_health=health, health_seen=self._health_seen, ekf_flags=self._ekf_flags,
+                         system_status=self._system_status, armed=self._armed, ekf_using_gps=self._ekf_using_gps,
+                         ekf_report_unavailable=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT in self._streams_refused
+                         or self._stream_legacy)
 
     def _rebase_home(self, home: GeoPoint) -> None:
         """Make ``home`` the ENU origin (re-expressing the last fix in it). Caller holds ``_lock``."""
