@@ -24,12 +24,12 @@ changes confirmed by the HEARTBEAT), ``backend.parameters`` (:class:`~.params.Pa
 ``backend.transfers`` (:class:`~.transfer.MissionTransfer`: every mission-protocol exchange, mission, fence and
 rally items), ``backend.mission`` (:class:`~.mission.AutopilotMission`: the mission built from waypoints, its
 upload, download and start, and its progress), ``backend.actions`` (:class:`~.action.VehicleAction`: readiness,
-arming, disarming, take-off), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
+arming, disarming, take-off), ``backend.offboard`` (:class:`~.offboard.OffboardControl`: GUIDED/OFFBOARD
+targets, hold/land/RTL, safe end), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight). The others are still mix-ins of :class:`MavlinkBackend`,
 each declaring its state in its ``_init_<concern>``: :mod:`.link` (connection,
 autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams), :mod:`.params` (the vehicle's own speed
-limits, over the parameter protocol), :mod:`.offboard`
-(GUIDED/OFFBOARD targets, hold/land/RTL, safe end), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+limits, over the parameter protocol), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from typing import Any, Literal
+from typing import Any, Literal, Sequence
 
 from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem, MissionPlan
@@ -17,14 +17,14 @@ from aerodaas.backends.mavlink.fence import FenceMixin
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import AutopilotMission
-from aerodaas.backends.mavlink.offboard import OffboardMixin
+from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, ParamMixin
 from aerodaas.backends.mavlink.telemetry import TelemetryMixin
 from aerodaas.backends.mavlink.transfer import MissionTransfer
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin, OffboardMixin,
+class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin,
                      FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
@@ -128,7 +128,14 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                                      readiness=self._readiness, home_for_flight=self._home_for_flight,
                                      fix_altitude_reference=self._fix_altitude_reference,
                                      stop_setpoints=self._stop_setpoints)
-        self._init_offboard()
+        #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
+        self.offboard = OffboardControl(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
+                                        actions=self.actions, send=self._send,
+                                        target=lambda: (self._sysid, self._compid), boot_ms_out=self._boot_ms_out,
+                                        boot_ms=lambda: self._boot_last, live_since=lambda: self._boot_live,
+                                        last_heartbeat=lambda: self._last_hb, mode_changes=lambda: self._mode_changes,
+                                        failsafe_undelivered=lambda: self._failsafe_undelivered,
+                                        check_link=self._check_link, event=self._event, lock=self._lock)
         #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
         self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
                                          target=lambda: (self._sysid, self._compid),
@@ -229,6 +236,43 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above the take-off point (:meth:`VehicleAction.takeoff`)."""
         self._require_navigable("takeoff")
         self.actions.takeoff(altitude_m)
+
+    # guided control (aerodaas.backends.mavlink.offboard.OffboardControl)
+    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
+        """Fly to ``target_enu`` (ENU metres from home) at most at ``speed`` m/s (:meth:`OffboardControl.goto`)."""
+        self._require_navigable("goto")
+        self.offboard.goto(target_enu, speed)
+
+    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
+        """Hold ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s) (:meth:`OffboardControl.set_velocity`)."""
+        self._require_navigable("set_velocity")
+        self.offboard.set_velocity(v_enu, yaw_rate_dps)
+
+    def hold(self) -> None:
+        """Hover here (:meth:`OffboardControl.hold`)."""
+        self._require_navigable("hold")
+        self.offboard.hold()
+
+    def land(self) -> None:
+        """LAND mode: descend and land here (:meth:`OffboardControl.land`)."""
+        self._require_navigable("land")
+        self.offboard.land()
+
+    def return_to_launch(self) -> bool:
+        """RTL mode (:meth:`OffboardControl.return_to_launch`). Returns True."""
+        self._require_navigable("return_to_launch")
+        return self.offboard.return_to_launch()
+
+    def release(self) -> None:
+        """Stop streaming targets and leave the vehicle to the mode it is in (:meth:`OffboardControl.release`)."""
+        self.offboard.release()
+
+    def safe_end(self) -> str:
+        """Leave the vehicle safe before the link closes (:meth:`OffboardControl.safe_end`); returns what was done."""
+        return self.offboard.safe_end()
+
+    def _stop_setpoints(self) -> None:
+        self.offboard.stop()
 
     # the mission (aerodaas.backends.mavlink.mission.AutopilotMission)
     def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,

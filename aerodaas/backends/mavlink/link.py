@@ -103,10 +103,10 @@ class LinkMixin:
         if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
             got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
-                self._offboard_loss_s = float(got)
+                self.offboard.loss_timeout_s = float(got)
             else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
-                self._offboard_loss_s = max(1.0, self._ratio)
-            self._event("offboard_loss_timeout", seconds=self._offboard_loss_s, read=got is not None)
+                self.offboard.loss_timeout_s = max(1.0, self._ratio)
+            self._event("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
                 self.apply_speed_limits()
@@ -215,7 +215,7 @@ class LinkMixin:
         while not self._stop.is_set():
             got, start = 0, time.monotonic()
             # at most a quarter of PX4's offboard-loss timeout (wall seconds at the vehicle's speed-up) between sends
-            budget = min(_DRAIN_S, 0.25 * self._offboard_loss_s / max(self._ratio, 1.0))
+            budget = min(_DRAIN_S, 0.25 * self.offboard.loss_timeout_s / max(self._ratio, 1.0))
             while True:
                 try:
                     msg = conn.recv_msg()
@@ -367,7 +367,7 @@ class LinkMixin:
             return
         texts = [t for (ts, _sev, t) in self._texts if now - ts <= 2.0]
         self.failsafe = {"mode": mode, "previous": previous, "t": round(self.t, 3), "text": "; ".join(texts[-3:])}
-        self._stop_setpoints_quiet()
+        self.offboard.stop_quiet()
         self._failsafe_undelivered += 1
         self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
@@ -452,13 +452,11 @@ class LinkMixin:
                 self._reanchor = True
             resume = self._resume_streams
             self._resume_streams = False
-            sp = self._setpoint if self._link_ok else None
+            sp = self.offboard.setpoint if self._link_ok else None
         if resume:
             self._request_streams(wait=False)
-        if sp is not None and now >= self._sp_next and self._stream_may_go_on(now):
-            rate = self.cfg.setpoint_rate_hz if sp[0] == "vel" or self.autopilot == "px4" else 1.0
-            self._sp_next = now + max(0.004, 1.0 / (rate * self._ratio))
-            self._send_setpoint(sp)
+        if sp is not None:
+            self.offboard.send_due(sp, now)
 
     def _heartbeats_missed(self, now: float) -> bool:
         """No HEARTBEAT for ``heartbeat_timeout_s`` wall seconds (checked by the caller): is that a lost link? The

@@ -1,15 +1,21 @@
 """Guided/offboard control: position and velocity targets streamed in ArduPilot GUIDED / PX4 OFFBOARD
-(SET_POSITION_TARGET_GLOBAL_INT / _LOCAL_NED), and the hand-over to the autopilot's own hold/land/return modes."""
+(SET_POSITION_TARGET_GLOBAL_INT / _LOCAL_NED), and the hand-over to the autopilot's own hold/land/return modes. A
+concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`OffboardControl`)."""
 from __future__ import annotations
 
 import math
+import threading
 import time
-from typing import Sequence
+from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
 from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.backends.base import LinkLost
+from aerodaas.model.types import GeoPoint
+from aerodaas.backends.base import LinkLost, VehicleBackend
+from aerodaas.backends.mavlink.action import VehicleAction
+from aerodaas.backends.mavlink.command import CommandProtocol
+from aerodaas.backends.mavlink.params import LinkCheck, VehicleSender
 from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
@@ -23,8 +29,118 @@ _MIN_TARGET_HEIGHT_M = 0.5
 _CARROT_LEAD_M = 0.25
 
 
-class OffboardMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+class OffboardVehicle(Protocol):
+    """What guided control reads of the vehicle (the backend's public state): its home (the ENU origin), autopilot
+    (``"ardupilot"`` / ``"px4"``), vehicle clock (:attr:`t`, seconds) and its rate (vehicle seconds per wall
+    second), position (ENU metres), flight mode, armed flag, whether it is in the air, whether the link is up, its
+    altitude reference (AMSL metres, None before it is fixed) and its horizontal speed limit (m/s)."""
+
+    home: GeoPoint
+    autopilot: str | None
+
+    @property
+    def t(self) -> float: ...
+
+    @property
+    def clock_ratio(self) -> float: ...
+
+    @property
+    def position(self) -> np.ndarray: ...
+
+    @property
+    def mode(self) -> str: ...
+
+    @property
+    def armed(self) -> bool: ...
+
+    @property
+    def in_air(self) -> bool: ...
+
+    @property
+    def link_ok(self) -> bool: ...
+
+    @property
+    def altitude_reference(self) -> float | None: ...
+
+    def xy_speed_cap(self) -> float: ...
+
+
+class OffboardControl:
+    """Guided control of one vehicle: the position/velocity target streamed to it, the speed-capped goto, the
+    offboard-loss watch, the last DO_CHANGE_SPEED, the hand-over to the autopilot's own modes and the safe end.
+
+    It talks to the vehicle only through what it is given: ``vehicle`` (:class:`OffboardVehicle`), ``commands``
+    (the command protocol: modes, DO_CHANGE_SPEED), ``actions`` (in control, disarm), ``send`` (the link's),
+    ``target`` (the vehicle's system and component id), ``boot_ms_out`` (our time_boot_ms for the setpoints we
+    send), the link's readings ``boot_ms`` (the vehicle's latest time_boot_ms), ``live_since`` (that sample was
+    received after the link's socket was empty at this monotonic time), ``last_heartbeat`` (monotonic time of the
+    autopilot's latest HEARTBEAT), ``mode_changes`` (how many mode changes the HEARTBEAT showed) and
+    ``failsafe_undelivered`` (``autopilot_failsafe`` events not yet handed out), ``check_link`` (the link's),
+    ``event`` (records a backend event) and ``lock`` (the backend's lock, which guards the target state: the I/O
+    thread sends the stream, :meth:`send_due`). ``settings``: ``setpoint_rate_hz``, ``on_close``,
+    ``safe_end_timeout_s``.
+
+    State: the active setpoint and its stream (when the next is due, how many were sent, the last one's wall and
+    vehicle time, a stall seen), the speed-capped goto's progress, PX4's offboard-loss timeout
+    (:attr:`loss_timeout_s`), when the stream was stopped as stalled, and the last DO_CHANGE_SPEED asked and sent."""
+
+    def __init__(self, robot_id: str, settings: Any, *, vehicle: OffboardVehicle, commands: CommandProtocol,
+                 actions: VehicleAction, send: VehicleSender, target: Callable[[], tuple[int, int]],
+                 boot_ms_out: Callable[[], int], boot_ms: Callable[[], int], live_since: Callable[[], float],
+                 last_heartbeat: Callable[[], float], mode_changes: Callable[[], int],
+                 failsafe_undelivered: Callable[[], int], check_link: LinkCheck, event: Callable[..., None],
+                 lock: threading.RLock) -> None:
+        self.robot_id, self._settings = robot_id, settings
+        self._vehicle, self._commands, self._actions = vehicle, commands, actions
+        self._send, self._target, self._boot_ms_out = send, target, boot_ms_out
+        self._boot_ms, self._live_since, self._last_heartbeat = boot_ms, live_since, last_heartbeat
+        self._mode_changes, self._failsafe_undelivered = mode_changes, failsafe_undelivered
+        self._check_link, self._event, self._lock = check_link, event, lock
+        self._setpoint: tuple | None = None
+        self._carrot_sp: tuple | None = None  # the speed-capped goto being flown, its progress (m) and time (s)
+        self._carrot_s = self._carrot_t = 0.0
+        self._sp_sent = 0
+        self._sp_next = 0.0
+        # the running stream's last setpoint: wall time, the vehicle's time_boot_ms then (None: no stream running),
+        # and when a stall of it was first seen (_stream_may_go_on)
+        self._sp_wall, self._sp_boot_ms, self._stall_seen = 0.0, None, None
+        self._loss_s = 1.0  # PX4's offboard-loss timeout COM_OF_LOSS_T (vehicle seconds), read at connect
+        self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled
+        self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
+        self._speed_asked: float | None = None  # the speed of the last DO_CHANGE_SPEED asked (None: the limit)
+
+    @property
+    def loss_timeout_s(self) -> float:
+        """PX4's offboard-loss timeout ``COM_OF_LOSS_T`` (vehicle seconds; 1 until read at connect)."""
+        return self._loss_s
+
+    @loss_timeout_s.setter
+    def loss_timeout_s(self, seconds: float) -> None:
+        self._loss_s = float(seconds)
+
+    @property
+    def setpoint(self) -> tuple | None:
+        """The active target streamed by the I/O thread (None: no stream). Caller holds the backend's lock."""
+        return self._setpoint
+
+    @property
+    def speed_commanded(self) -> bool:
+        """A DO_CHANGE_SPEED was sent (ArduPilot's GUIDED flies it, not WPNAV_SPEED)."""
+        return self._speed_cmd is not None
+
+    def send_due(self, sp: tuple, now: float) -> None:
+        """The I/O thread at monotonic ``now`` with the active target ``sp``: send it when the next of the stream is
+        due (``setpoint_rate_hz`` in the vehicle's time; ArduPilot's position targets at 1 Hz) and the stream may
+        go on (:meth:`_stream_may_go_on`)."""
+        if now >= self._sp_next and self._stream_may_go_on(now):
+            rate = self._settings.setpoint_rate_hz if sp[0] == "vel" or self._vehicle.autopilot == "px4" else 1.0
+            self._sp_next = now + max(0.004, 1.0 / (rate * self._vehicle.clock_ratio))
+            self._send_setpoint(sp)
+
+    def resend_speed(self) -> None:
+        """ArduPilot's DO_CHANGE_SPEED again for the speed last asked (:meth:`_change_speed` caps it at the limit
+        now in force). Raises as :meth:`CommandProtocol.command_long`."""
+        self._change_speed(self._speed_asked)
 
     def _carrot(self, sp: tuple) -> tuple:
         """A speed-capped goto as the position setpoint to send now: ``("carrot", start_enu, target_enu, speed m/s,
@@ -36,14 +152,14 @@ class OffboardMixin:
         delta = target - start
         length = float(np.linalg.norm(delta))
         with self._lock:
-            now = self.t
+            now = self._vehicle.t
             if self._carrot_sp is not sp:  # a new leg
                 self._carrot_sp, self._carrot_s, self._carrot_t = sp, 0.0, max(now, t0)
             if length < 1e-6:
                 s_now = length
             else:
                 unit = delta / length
-                along = float(np.dot(self._pos - start, unit))  # the vehicle's progress, metres
+                along = float(np.dot(self._vehicle.position - start, unit))  # the vehicle's progress, metres
                 step = speed * max(0.0, now - self._carrot_t)
                 s_now = min(length, max(self._carrot_s, min(self._carrot_s + step, along + _CARROT_LEAD_M)))
             self._carrot_s, self._carrot_t = s_now, now
@@ -51,16 +167,16 @@ class OffboardMixin:
         p = start + delta * frac
         v = delta / length * speed if frac < 1.0 else np.zeros(3)  # velocity feed-forward, ENU
         lat_i, lon_i, alt, frame = self._global_target(float(p[0]), float(p[1]), float(p[2]))
-        return ("posvel", lat_i, lon_i, alt, frame, *self.enu_to_ned(v))
+        return ("posvel", lat_i, lon_i, alt, frame, *VehicleBackend.enu_to_ned(v))
 
     def _global_target(self, x: float, y: float, z: float) -> tuple[int, int, float, int]:
         """ENU metres -> (lat 1e-7 deg, lon 1e-7 deg, altitude m, MAV_FRAME) for SET_POSITION_TARGET_GLOBAL_INT:
         once the altitude reference is fixed (arming), MAV_FRAME_GLOBAL_INT with the AMSL altitude reference +
         ``z`` (a frame that does not move with PX4's re-estimated home); before, relative to home."""
-        g = enu_to_geodetic(x, y, 0.0, self.home)
+        g = enu_to_geodetic(x, y, 0.0, self._vehicle.home)
         lat_i, lon_i = int(round(g.lat * 1e7)), int(round(g.lon * 1e7))
-        if self._alt_ref is not None:
-            return lat_i, lon_i, self._alt_ref + z, M.MAV_FRAME_GLOBAL_INT
+        if self._vehicle.altitude_reference is not None:
+            return lat_i, lon_i, self._vehicle.altitude_reference + z, M.MAV_FRAME_GLOBAL_INT
         return lat_i, lon_i, z, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
     def _stream_may_go_on(self, now: float) -> bool:
@@ -78,26 +194,26 @@ class OffboardMixin:
         stops (event ``offboard_stream_stalled``): the autopilot's own mode change that follows, or came while we
         stalled, is its failsafe (link.py ``_check_failsafe``). A firmware stopped with us (SITL under a debugger)
         shows no such gap and the stream goes on. ArduPilot has no such failsafe in GUIDED (always True)."""
-        if self.autopilot != "px4":
+        if self._vehicle.autopilot != "px4":
             return True
-        with self._lock:  # the caller's thread may stop or replace the stream meanwhile (_stop_setpoints, goto)
+        with self._lock:  # the caller's thread may stop or replace the stream meanwhile (stop, goto)
             sp_boot, sp = self._sp_boot_ms, self._setpoint
             if sp_boot is None or sp is None:
                 return True
-            limit = self._offboard_loss_s
-            if (now - self._sp_wall) * self._ratio > 0.5 * limit:
+            limit = self._loss_s
+            if (now - self._sp_wall) * self._vehicle.clock_ratio > 0.5 * limit:
                 if self._stall_seen is None:
                     self._stall_seen = now
-                if self._boot_live <= self._stall_seen:
+                if self._live_since() <= self._stall_seen:
                     return False  # still the backlog of the stall: not yet the vehicle's state of now
             self._stall_seen = None
-            gap_s = (self._boot_last - sp_boot) / 1000.0
+            gap_s = (self._boot_ms() - sp_boot) / 1000.0
             if gap_s <= limit:
                 return True
             self._setpoint = None
             self._sp_boot_ms = None
             self._offboard_lost_at = now
-        self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._mode)
+        self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._vehicle.mode)
         log.warning("%s: no setpoint reached the vehicle for %.1f s of its clock (COM_OF_LOSS_T %.1f s): the stream "
                     "is not resumed; PX4's offboard-loss failsafe has the vehicle", self.robot_id, gap_s, limit)
         return False
@@ -109,25 +225,25 @@ class OffboardMixin:
             if sp[0] == "pos":
                 _, lat_i, lon_i, alt, frame = sp
                 self._send(lambda mav: mav.set_position_target_global_int_send(
-                    self._boot_ms_out(), self._sysid, self._compid, frame,
+                    self._boot_ms_out(), *self._target(), frame,
                     POSITION_ONLY_MASK, lat_i, lon_i, alt, 0, 0, 0, 0, 0, 0, 0, 0))
             elif sp[0] == "posvel":
                 _, lat_i, lon_i, alt, frame, vn, ve, vd = sp
                 self._send(lambda mav: mav.set_position_target_global_int_send(
-                    self._boot_ms_out(), self._sysid, self._compid, frame,
+                    self._boot_ms_out(), *self._target(), frame,
                     POSITION_VELOCITY_MASK, lat_i, lon_i, alt, vn, ve, vd, 0, 0, 0, 0, 0))
             else:
                 _, vn, ve, vd, yaw_rate = sp
                 self._send(lambda mav: mav.set_position_target_local_ned_send(
-                    self._boot_ms_out(), self._sysid, self._compid, M.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK,
+                    self._boot_ms_out(), *self._target(), M.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK,
                     0, 0, 0, vn, ve, vd, 0, 0, 0, 0, yaw_rate))
             self._sp_sent += 1
-            self._sp_wall, self._sp_boot_ms = time.monotonic(), self._boot_last
+            self._sp_wall, self._sp_boot_ms = time.monotonic(), self._boot_ms()
         except LinkLost:
             pass
 
     def _guided_mode(self) -> str:
-        return "OFFBOARD" if self.autopilot == "px4" else "GUIDED"
+        return "OFFBOARD" if self._vehicle.autopilot == "px4" else "GUIDED"
 
     def _autopilot_has_it(self, command: str) -> bool:
         """Whether the autopilot has taken the vehicle in a way the caller has not yet been told of, so that
@@ -140,17 +256,17 @@ class OffboardMixin:
         (``command_withheld``) and the drone re-issues its waypoint when no failsafe follows."""
         lost_at = self._offboard_lost_at
         if lost_at is not None:
-            end = time.monotonic() + min(3.0, 1.5 / max(self._ratio, 1e-3))
-            while self._last_hb <= lost_at and time.monotonic() < end and self._link_ok:
+            end = time.monotonic() + min(3.0, 1.5 / max(self._vehicle.clock_ratio, 1e-3))
+            while self._last_heartbeat() <= lost_at and time.monotonic() < end and self._vehicle.link_ok:
                 time.sleep(0.01)
             with self._lock:
-                fresh = self._last_hb > lost_at
+                fresh = self._last_heartbeat() > lost_at
                 if fresh and self._offboard_lost_at == lost_at:
                     self._offboard_lost_at = None
             if not fresh:
                 return self._withheld(command, "offboard stream stalled; no HEARTBEAT since")
-        if self._failsafe_undelivered:
-            return self._withheld(command, f"autopilot failsafe {self._mode}")
+        if self._failsafe_undelivered():
+            return self._withheld(command, f"autopilot failsafe {self._vehicle.mode}")
         return False
 
     def _withheld(self, command: str, reason: str) -> bool:
@@ -163,10 +279,10 @@ class OffboardMixin:
         have checked :meth:`_autopilot_has_it`; it is checked again here under the lock that installs the target,
         and before the mode switch (the I/O thread may have seen the autopilot's failsafe meanwhile)."""
         guided = self._guided_mode()
-        self.actions.take_control()
-        if self.autopilot == "px4":
+        self._actions.take_control()
+        if self._vehicle.autopilot == "px4":
             with self._lock:
-                withhold = bool(self._failsafe_undelivered or self._offboard_lost_at is not None)
+                withhold = bool(self._failsafe_undelivered() or self._offboard_lost_at is not None)
                 if not withhold:
                     if self._setpoint is None:
                         self._sp_boot_ms = None  # a new stream, not a gap in the old one
@@ -176,30 +292,30 @@ class OffboardMixin:
             if withhold:
                 self._withheld(sp[0], "autopilot failsafe meanwhile")
                 return
-            if self._mode != guided:
+            if self._vehicle.mode != guided:
                 start, sent0 = time.monotonic(), self._sp_sent
                 # PX4 wants the stream running before the switch: at least 3 setpoints and 0.3 s of vehicle time
-                while (self._sp_sent - sent0 < 3 or (time.monotonic() - start) * self._ratio < 0.3) \
+                while (self._sp_sent - sent0 < 3 or (time.monotonic() - start) * self._vehicle.clock_ratio < 0.3) \
                         and time.monotonic() - start < 2.0:
                     time.sleep(0.005)
                 with self._lock:  # the autopilot may have taken over while the stream started
-                    ours = self._setpoint is sp and not self._failsafe_undelivered
+                    ours = self._setpoint is sp and not self._failsafe_undelivered()
                 if not ours:
                     self._withheld(sp[0], f"stream stopped before the switch to {guided}")
                     return
-                self.set_mode(guided)
+                self._commands.set_mode(guided)
         else:
-            if self._mode != guided:
-                if self._failsafe_undelivered:
-                    self._withheld(sp[0], f"autopilot failsafe {self._mode}")
+            if self._vehicle.mode != guided:
+                if self._failsafe_undelivered():
+                    self._withheld(sp[0], f"autopilot failsafe {self._vehicle.mode}")
                     return
-                self.set_mode(guided)
+                self._commands.set_mode(guided)
             with self._lock:
                 self._setpoint = sp
-                self._sp_next = time.monotonic() + 1.0 / (self.cfg.setpoint_rate_hz * self._ratio)
+                self._sp_next = time.monotonic() + 1.0 / (self._settings.setpoint_rate_hz * self._vehicle.clock_ratio)
             self._send_setpoint(sp)
 
-    def _stop_setpoints_quiet(self) -> None:
+    def stop_quiet(self) -> None:
         """Stop streaming our targets, from the I/O thread (the autopilot took over: a failsafe)."""
         self._setpoint = None
         self._sp_boot_ms = None
@@ -208,11 +324,12 @@ class OffboardMixin:
     def release(self) -> None:
         """Stop streaming targets and leave the vehicle to the mode it is in (the autopilot's failsafe): nothing is
         sent that could switch it back to GUIDED/OFFBOARD."""
-        self._stop_setpoints()
+        self.stop()
 
-    def _stop_setpoints(self) -> None:
+    def stop(self) -> None:
+        """Stop streaming our targets (the caller's thread)."""
         with self._lock:
-            self._stop_setpoints_quiet()
+            self.stop_quiet()
 
     def _change_speed(self, speed: float | None) -> None:
         """ArduPilot: MAV_CMD_DO_CHANGE_SPEED (param1 1 = ground speed, param2 m/s, param3 -1 = throttle
@@ -222,12 +339,12 @@ class OffboardMixin:
         again after every mode change (ArduCopter re-initialises its navigation speed from WPNAV_SPEED on mode
         entry). Raises as :meth:`command_long`."""
         self._speed_asked = speed
-        limit = self.xy_speed_cap()
+        limit = self._vehicle.xy_speed_cap()
         value = limit if speed is None else min(float(speed), limit)
-        key = (round(value, 3), self._mode_changes)
+        key = (round(value, 3), self._mode_changes())
         if key == self._speed_cmd:
             return
-        self.command_long("change speed", M.MAV_CMD_DO_CHANGE_SPEED, 1, value, -1)
+        self._commands.command_long("change speed", M.MAV_CMD_DO_CHANGE_SPEED, 1, value, -1)
         self._speed_cmd = key
 
     def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
@@ -240,30 +357,29 @@ class OffboardMixin:
         streamed setpoint itself moves from here towards the target at ``speed`` per vehicle second, with that
         velocity as feed-forward (position + velocity type mask).
         Raises ValueError for a non-finite target or a non-positive speed."""
-        self._require_navigable("goto")
         x, y, z = (float(v) for v in target_enu)
         if not all(math.isfinite(v) for v in (x, y, z)):
             raise ValueError(f"goto target_enu must be finite metres, got {tuple(target_enu)!r}")
         if speed is not None and not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"goto speed must be a positive number of m/s or None, got {speed!r}")
         self._check_link("goto")
-        if z < _MIN_TARGET_HEIGHT_M and self._armed:
+        if z < _MIN_TARGET_HEIGHT_M and self._vehicle.armed:
             self._event("target_raised", asked_m=z, sent_m=_MIN_TARGET_HEIGHT_M,
                         reason="below the take-off point (only LAND goes lower)")
             z = _MIN_TARGET_HEIGHT_M
         if self._autopilot_has_it("goto"):  # before any mode change or speed command reaches the vehicle
             return
-        if self.autopilot == "px4":
+        if self._vehicle.autopilot == "px4":
             # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
             # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
-            limit = self.xy_speed_cap()
+            limit = self._vehicle.xy_speed_cap()
             speed = limit if speed is None else min(float(speed), limit)
-            self._enter_guided(("carrot", self.position, np.array([x, y, z]), speed, self.t))
+            self._enter_guided(("carrot", self._vehicle.position, np.array([x, y, z]), speed, self._vehicle.t))
             return
         sp = ("pos", *self._global_target(x, y, z))
-        if self.autopilot == "ardupilot":
-            if self._mode != "GUIDED":
-                self.set_mode("GUIDED")
+        if self._vehicle.autopilot == "ardupilot":
+            if self._vehicle.mode != "GUIDED":
+                self._commands.set_mode("GUIDED")
             self._change_speed(speed)
         self._enter_guided(sp)
 
@@ -271,7 +387,6 @@ class OffboardMixin:
         """Hold ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s, counter-clockwise) with
         SET_POSITION_TARGET_LOCAL_NED (MAV_FRAME_LOCAL_NED, velocity + yaw-rate type mask; NED = (v_north, v_east,
         -v_up), yaw rate clockwise rad/s), re-sent at ``setpoint_rate_hz`` vehicle time."""
-        self._require_navigable("set_velocity")
         ve, vn, vu = (float(v) for v in v_enu)
         if not all(math.isfinite(v) for v in (ve, vn, vu, yaw_rate_dps)):
             raise ValueError(f"set_velocity needs finite m/s and deg/s, got {tuple(v_enu)!r}, {yaw_rate_dps!r}")
@@ -283,13 +398,12 @@ class OffboardMixin:
     def hold(self) -> None:
         """Hover here: in GUIDED/OFFBOARD a position target at the current position; otherwise the autopilot's
         hold mode (ArduPilot LOITER, PX4 LOITER/Hold). On the ground it only stops the target stream."""
-        self._require_navigable("hold")
         self._check_link("hold")
-        if not self.in_air:
-            self._stop_setpoints()
+        if not self._vehicle.in_air:
+            self.stop()
             return
-        if self._mode == self._guided_mode():
-            p = self.position
+        if self._vehicle.mode == self._guided_mode():
+            p = self._vehicle.position
             self.goto((p[0], p[1], p[2]))
         else:
             self._autopilot_mode("LOITER")
@@ -297,13 +411,11 @@ class OffboardMixin:
     def land(self) -> None:
         """LAND mode (ArduPilot LAND, PX4 AUTO.LAND): descend and land here; both disarm once landed. Raises as
         :meth:`set_mode`."""
-        self._require_navigable("land")
         self._autopilot_mode("LAND")
 
     def return_to_launch(self) -> bool:
         """RTL mode (ArduPilot RTL, PX4 AUTO.RTL): the autopilot climbs to its return altitude, flies home, lands
         and disarms. Returns True. Raises as :meth:`set_mode`."""
-        self._require_navigable("return_to_launch")
         self._autopilot_mode("RTL")
         return True
 
@@ -313,11 +425,11 @@ class OffboardMixin:
         whose HEARTBEAT has not shown it yet (CommandNotConfirmed) stops it too, so a late switch is not pulled
         back by our setpoints."""
         try:
-            self.set_mode(name)
+            self._commands.set_mode(name)
         except CommandNotConfirmed:
-            self._stop_setpoints()
+            self.stop()
             raise
-        self._stop_setpoints()
+        self.stop()
 
 
     def safe_end(self) -> str:
@@ -328,41 +440,24 @@ class OffboardMixin:
         stops only once the autopilot's own mode holds it. Returns what was done (``"nothing"``, ``"landed"``,
         ``"disarmed"``, ``"timeout"``, ``"link lost"``), also as a ``safe_end`` event. Raises BackendError /
         CommandRefused when LAND/RTL is refused."""
-        if not self._armed or not self.actions.in_control:
+        if not self._vehicle.armed or not self._actions.in_control:
             return "nothing"  # disarmed, or armed by someone else and never commanded by us: not ours to end
-        if not self._link_ok:
-            self._stop_setpoints()
-            self._event("safe_end", result="link lost", mode=self._mode)
+        if not self._vehicle.link_ok:
+            self.stop()
+            self._event("safe_end", result="link lost", mode=self._vehicle.mode)
             return "link lost"
-        if not self.in_air:
-            if self._mode in ("GUIDED", "OFFBOARD"):
-                self.disarm()
+        if not self._vehicle.in_air:
+            if self._vehicle.mode in ("GUIDED", "OFFBOARD"):
+                self._actions.disarm()
                 self._event("safe_end", result="disarmed")
                 return "disarmed"
             return "nothing"
-        mode = "RTL" if self.cfg.on_close == "rtl" else "LAND"
-        if self._mode not in (mode, "LAND", "RTL"):
+        mode = "RTL" if self._settings.on_close == "rtl" else "LAND"
+        if self._vehicle.mode not in (mode, "LAND", "RTL"):
             self._autopilot_mode(mode)
-        t0 = self.t
-        while self._armed and self.t - t0 < self.cfg.safe_end_timeout_s and self._link_ok:
+        t0 = self._vehicle.t
+        while self._vehicle.armed and self._vehicle.t - t0 < self._settings.safe_end_timeout_s and self._vehicle.link_ok:
             time.sleep(0.05)
-        result = "landed" if not self._armed else ("link lost" if not self._link_ok else "timeout")
-        self._event("safe_end", result=result, mode=mode, vehicle_s=round(self.t - t0, 2))
+        result = "landed" if not self._vehicle.armed else ("link lost" if not self._vehicle.link_ok else "timeout")
+        self._event("safe_end", result=result, mode=mode, vehicle_s=round(self._vehicle.t - t0, 2))
         return result
-
-    def _init_offboard(self) -> None:
-        """The outgoing target state: the active position/velocity setpoint and its stream, the speed-capped goto
-        (carrot), the offboard-loss watch and the last DO_CHANGE_SPEED."""
-        # outgoing
-        self._setpoint: tuple | None = None
-        self._carrot_sp: tuple | None = None  # the speed-capped goto being flown, its progress (m) and time (s)
-        self._carrot_s = self._carrot_t = 0.0
-        self._sp_sent = 0
-        self._sp_next = 0.0
-        # the running stream's last setpoint: wall time, the vehicle's time_boot_ms then (None: no stream running),
-        # and when a stall of it was first seen (offboard.py _stream_may_go_on)
-        self._sp_wall, self._sp_boot_ms, self._stall_seen = 0.0, None, None
-        #: PX4's offboard-loss timeout COM_OF_LOSS_T (vehicle seconds), read at connect
-        self._offboard_loss_s = 1.0
-        self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled (offboard.py)
-        self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED

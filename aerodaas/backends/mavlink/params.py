@@ -279,17 +279,17 @@ class ParamMixin:
                     max_speed=float(self.limits.max_speed), **{k: round(v, 3) for k, v in verified.items()})
         # ArduCopter's GUIDED leg flies the DO_CHANGE_SPEED it was given: the drone's thread sends it again at the
         # new limit (commands are not sent from this thread: one command exchange at a time)
-        self._speed_resend = self.autopilot == "ardupilot" and self._speed_cmd is not None
+        self._speed_resend = self.autopilot == "ardupilot" and self.offboard.speed_commanded
 
     def _resend_speed(self) -> None:
         """From :meth:`step` (the drone's thread) after the limit was lowered: ArduPilot's DO_CHANGE_SPEED again,
-        for the speed last asked (:meth:`_change_speed` caps it at the new limit); a refusal or timeout is reported
+        for the speed last asked (:meth:`OffboardControl.resend_speed`: capped at the new limit); a refusal or timeout is reported
         (``speed_command_failed``; WPNAV_SPEED holds from the next mode change). Never raises."""
         if not self._speed_resend:
             return
         self._speed_resend = False
         try:
-            self._change_speed(self._speed_asked)
+            self.offboard.resend_speed()
         except Exception as e:  # noqa: BLE001 - reported; flying on
             self._event("speed_command_failed", cap_mps=round(self.xy_speed_cap(), 3), error=str(e))
 
@@ -340,5 +340,4 @@ class ParamMixin:
         self._speed_retry_t = 0.0  # vehicle time before which no new try after a failed one
         self._speed_backoff_s = 1.0
         self._speed_resend = False  # the lowered limit's DO_CHANGE_SPEED is still to be sent (ArduPilot)
-        self._speed_asked: float | None = None  # the speed of the last DO_CHANGE_SPEED asked (None: the limit)
         self._unholdable_reported = False
