@@ -88,7 +88,7 @@ def test_an_estimator_that_underreports_speed_gets_the_vehicles_limit_lowered(ve
         if any(e["event"] == "speed_margin" for e in events):
             break
         _legs(emu, b, 2, events)  # there and back
-    worker = b._speed_worker  # a lowering started in the last leg: its event comes after the vehicle's write
+    worker = b.speed_limits.worker  # a lowering started in the last leg: its event comes after the vehicle's write
     if worker is not None:
         worker.join(timeout=60)
     events.extend(b.drain_events())
@@ -133,7 +133,7 @@ def test_an_honest_estimator_leaves_the_limit_alone(vehicle):
     emu, b = vehicle("ardupilot", 2.0, 0.0)
     events: list = []
     _legs(emu, b, 4, events)
-    assert b._speed_margin.samples >= MIN_SAMPLES  # it was measured (0 m/s), not skipped
+    assert b.speed_limits._speed_margin.samples >= MIN_SAMPLES  # it was measured (0 m/s), not skipped
     assert not [e for e in events if e["event"] in ("speed_margin", "speed_limit_unholdable")]
     assert emu.params["WPNAV_SPEED"] == pytest.approx(200.0)
 

@@ -21,6 +21,8 @@ One module per MAVLink concern, the way MAVSDK splits its plugins. The concerns 
 holds declare their state in their ``__init__`` and reach the others only through the typed references and
 callables they are given: ``backend.commands`` (:class:`~.command.CommandProtocol`: the command protocol, mode
 changes confirmed by the HEARTBEAT), ``backend.parameters`` (:class:`~.params.ParameterProtocol`: the parameter protocol),
+``backend.speed_limits`` (:class:`~.params.SpeedLimits`: the vehicle's own speed limits, lowered in flight for
+the estimator's margin),
 ``backend.transfers`` (:class:`~.transfer.MissionTransfer`: every mission-protocol exchange, mission, fence and
 rally items), ``backend.mission`` (:class:`~.mission.AutopilotMission`: the mission built from waypoints, its
 upload, download and start, and its progress), ``backend.actions`` (:class:`~.action.VehicleAction`: readiness,
@@ -28,8 +30,7 @@ arming, disarming, take-off), ``backend.offboard`` (:class:`~.offboard.OffboardC
 targets, hold/land/RTL, safe end), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight). The others are still mix-ins of :class:`MavlinkBackend`,
 each declaring its state in its ``_init_<concern>``: :mod:`.link` (connection,
-autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams), :mod:`.params` (the vehicle's own speed
-limits, over the parameter protocol), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams), :mod:`.fence` (the entry points of the fence and of the typed transfers). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

@@ -18,13 +18,13 @@ from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
-from aerodaas.backends.mavlink.params import ParameterProtocol, ParamMixin
+from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
 from aerodaas.backends.mavlink.telemetry import TelemetryMixin
 from aerodaas.backends.mavlink.transfer import MissionTransfer
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, TelemetryMixin, ParamMixin,
+class MavlinkBackend(LinkMixin, TelemetryMixin,
                      FenceMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
@@ -145,7 +145,11 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.mission = AutopilotMission(self.robot_id, vehicle=self, commands=self.commands, transfers=self.transfers,
                                         check_link=self._check_link, event=self._event, lock=self._lock,
                                         pin_altitude_reference=self.actions.pin_altitude_reference)
-        self._init_params()
+        #: the vehicle's own speed limits for ``limits``, over the parameter protocol (params.py)
+        self.speed_limits = SpeedLimits(self.robot_id, self.limits, params=self.parameters, vehicle=self,
+                                        event=self._event, lock=self._lock,
+                                        speed_commanded=lambda: self.offboard.speed_commanded,
+                                        change_speed_again=lambda: self.offboard.resend_speed())
         self._init_fence()
         from aerodaas.backends.mavlink.camera import CameraFinder
 
@@ -217,6 +221,33 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def command_rtt_ms(self) -> list[float]:
         """Acknowledged command round trips, wall milliseconds (:attr:`CommandProtocol.rtt_ms`)."""
         return self.commands.rtt_ms
+
+    # parameters (aerodaas.backends.mavlink.params: ParameterProtocol, SpeedLimits)
+    def _on_param_value(self, msg: Any) -> None:
+        self.parameters.on_param_value(msg)
+
+    def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
+        """:meth:`ParameterProtocol.read`."""
+        return self.parameters.read(names, wait_s)
+
+    def set_parameter(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
+        """:meth:`ParameterProtocol.set`."""
+        return self.parameters.set(name, value, wait_s, integer)
+
+    def restore_parameters(self) -> dict[str, float]:
+        """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them
+        (:meth:`ParameterProtocol.restore`, reported as events). Returns what was restored. Never raises."""
+        return self.parameters.restore(self._event)
+
+    def xy_speed_cap(self) -> float:
+        """The horizontal speed (m/s) the vehicle is limited to for the robot's ``limits.max_speed``
+        (:meth:`SpeedLimits.xy_speed_cap`)."""
+        return self.speed_limits.xy_speed_cap()
+
+    def apply_speed_limits(self) -> dict[str, float]:
+        """Make the vehicle's own speed limits the robot's ``limits`` (:meth:`SpeedLimits.apply`); returns the
+        verified values (firmware units)."""
+        return self.speed_limits.apply()
 
     # readiness, arming, take-off (aerodaas.backends.mavlink.action.VehicleAction)
     def not_ready_reasons(self) -> list[str]:

@@ -125,7 +125,7 @@ class LinkMixin:
         brought down (:meth:`safe_end`), and parameters changed by :meth:`apply_speed_limits` are restored when
         ``restore_params`` says so and the vehicle is disarmed (never in flight: it would speed up). ``safe_end=False``
         hands the vehicle over as it is (``aerodaas mission upload --start``: the autopilot flies on)."""
-        worker = self._speed_worker  # a limit being lowered (params.py): finished before restoring parameters
+        worker = self.speed_limits.worker  # a limit being lowered (params.py): finished before restoring parameters
         if worker is not None and worker is not threading.current_thread():
             worker.join(timeout=5.0)
         if self._conn is not None and self._io is not None and not self._stop.is_set():
@@ -591,10 +591,10 @@ class LinkMixin:
 
     def step(self, dt: float) -> None:
         """Telemetry arrives on the I/O thread; this reports that thread's failure (BackendError) and lowers the
-        vehicle's speed limit when its estimator needs more margin (params.py ``_update_speed_cap``, then
-        ``_resend_speed``)."""
+        vehicle's speed limit when its estimator needs more margin (params.py :meth:`SpeedLimits.update`, then
+        :meth:`SpeedLimits.resend_speed`)."""
         if self._io_error is not None:
             raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self._io_error}")
-        self._update_speed_cap()
-        self._resend_speed()
+        self.speed_limits.update()
+        self.speed_limits.resend_speed()
 

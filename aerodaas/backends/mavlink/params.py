@@ -179,24 +179,57 @@ class ParameterProtocol:
         return done
 
 
-class ParamMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the parameter protocol's entry points (the
-    backend's :class:`ParameterProtocol`, ``self.parameters``) and the vehicle's speed limits."""
+class SpeedVehicle(Protocol):
+    """What the speed limits read of the vehicle (the backend's public state): its autopilot (``"ardupilot"`` /
+    ``"px4"``), vehicle clock (:attr:`t`, seconds), whether it is in the air and whether the link is up."""
 
-    parameters: ParameterProtocol
+    autopilot: str | None
 
-    def _on_param_value(self, msg: Any) -> None:
-        self.parameters.on_param_value(msg)
+    @property
+    def t(self) -> float: ...
 
-    def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
-        """:meth:`ParameterProtocol.read`."""
-        return self.parameters.read(names, wait_s)
+    @property
+    def in_air(self) -> bool: ...
 
-    def set_parameter(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
-        """:meth:`ParameterProtocol.set`."""
-        return self.parameters.set(name, value, wait_s, integer)
+    @property
+    def link_ok(self) -> bool: ...
 
-    # ------------------------------------------------------------------ speed limits
+
+class SpeedLimits:
+    """The vehicle's own speed limits for the robot's ``limits`` (see the module docstring), set over the parameter
+    protocol, and lowered in flight when the vehicle's estimator needs more margin
+    (:mod:`~aerodaas.backends.mavlink.speed_margin`).
+
+    It talks to the vehicle only through what it is given: ``limits`` (the robot's :class:`~aerodaas.config.Limits`),
+    ``params`` (the parameter protocol), ``vehicle`` (:class:`SpeedVehicle`), ``event`` (records a backend event),
+    ``lock`` (the backend's lock, which guards the margin's samples: the I/O thread adds them),
+    ``speed_commanded`` (whether a DO_CHANGE_SPEED is in force: ArduPilot's GUIDED flies it, not WPNAV_SPEED) and
+    ``change_speed_again`` (sends that DO_CHANGE_SPEED again at the limit now in force: offboard.py).
+
+    State: whether the limits were applied, the estimator's measured margin and the cap it asks for, the worker
+    thread lowering the limit (:attr:`worker`) and its retry schedule, and a DO_CHANGE_SPEED still to be re-sent."""
+
+    def __init__(self, robot_id: str, limits: Any, *, params: ParameterProtocol, vehicle: SpeedVehicle,
+                 event: Callable[..., None], lock: threading.RLock, speed_commanded: Callable[[], bool],
+                 change_speed_again: Callable[[], None]) -> None:
+        self.robot_id, self.limits = robot_id, limits
+        self._params, self._vehicle, self._event, self._lock = params, vehicle, event, lock
+        self._speed_commanded, self._change_speed_again = speed_commanded, change_speed_again
+        self._limits_applied = False
+        self._speed_margin = EstimatorSpeedMargin()
+        self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
+        self._speed_check_t = 0.0  # vehicle time of the next check
+        self._speed_worker: threading.Thread | None = None  # lowering the vehicle's limit (_lower_speed_limit)
+        self._speed_retry_t = 0.0  # vehicle time before which no new try after a failed one
+        self._speed_backoff_s = 1.0
+        self._speed_resend = False  # the lowered limit's DO_CHANGE_SPEED is still to be sent (ArduPilot)
+        self._unholdable_reported = False
+
+    @property
+    def worker(self) -> threading.Thread | None:
+        """The thread lowering the vehicle's limit (:meth:`update`), if one was started."""
+        return self._speed_worker
+
     def xy_speed_cap(self) -> float:
         """The horizontal speed (m/s) the vehicle is limited to for the robot's ``limits.max_speed``: the
         autopilot's rule (ArduCopter ``max_speed``; PX4 :func:`px4_speed_limit`), lowered in flight when the
@@ -209,38 +242,39 @@ class ParamMixin:
         """The autopilot's rule for ``limits.max_speed`` (m/s): ArduCopter the limit itself, PX4
         :func:`px4_speed_limit`."""
         xy = float(self.limits.max_speed)
-        return px4_speed_limit(xy) if self.autopilot == "px4" else xy
+        return px4_speed_limit(xy) if self._vehicle.autopilot == "px4" else xy
 
     def _limit_parameters(self) -> dict[str, float]:
         """The parameters that carry the robot's ``limits`` on this autopilot, in the firmware's units (see the
         module docstring): ArduCopter cm/s, PX4 m/s; horizontally :meth:`xy_speed_cap`."""
         xy, z = self.xy_speed_cap(), float(self.limits.max_vertical_speed)
-        if self.autopilot == "ardupilot":
+        if self._vehicle.autopilot == "ardupilot":
             return {"WPNAV_SPEED": max(20.0, xy * 100.0), "WPNAV_SPEED_UP": max(10.0, z * 100.0),
                     "WPNAV_SPEED_DN": max(10.0, z * 100.0)}
         # PX4's velocity estimate jolts above its setpoint on every GPS fusion correction: a margin (see above)
         return {"MPC_XY_VEL_MAX": xy, "MPC_XY_CRUISE": xy}
 
-    def _on_gnss_speed(self, gnss_speed_mps: float) -> None:
-        """A GPS_RAW_INT ground speed (m/s, 3-D fix): with the vehicle in the air, its estimated speed steady
-        (telemetry.py ``_set_velocity``) and at least half the applied limit (where the limit binds: a hovering
-        vehicle's GNSS noise is no overshoot of it), one sample of GNSS minus estimated horizontal speed for the
-        speed margin. Caller: the I/O thread, holding ``_lock``."""
+    def on_gnss_speed(self, gnss_speed_mps: float, est_hspeed: float, est_steady: bool) -> None:
+        """A GPS_RAW_INT ground speed (m/s, 3-D fix): with the vehicle in the air, its estimated horizontal speed
+        ``est_hspeed`` (m/s) steady (``est_steady``: telemetry.py ``_set_velocity``) and at least half the applied
+        limit (where the limit binds: a hovering vehicle's GNSS noise is no overshoot of it), one sample of GNSS
+        minus estimated horizontal speed for the speed margin. Caller: the I/O thread, holding the backend's
+        lock."""
         with self._lock:
-            if self._est_steady and self._est_hspeed >= 0.5 * self.xy_speed_cap() and self.in_air:
-                self._speed_margin.add(gnss_speed_mps, self._est_hspeed)
+            if est_steady and est_hspeed >= 0.5 * self.xy_speed_cap() and self._vehicle.in_air:
+                self._speed_margin.add(gnss_speed_mps, est_hspeed)
 
-    def _update_speed_cap(self) -> None:
-        """Every 2 vehicle seconds (from :meth:`step`, the drone's clock thread; it never blocks there): a limit
+    def update(self) -> None:
+        """Every 2 vehicle seconds (from the backend's ``step``, the drone's clock thread; it never blocks there): a limit
         that cannot hold (``max_speed`` too small for the measured margin) is reported once
         (``speed_limit_unholdable``); when the margin needs a limit at least
         :data:`~aerodaas.backends.mavlink.speed_margin.MIN_STEP_MPS` below the applied one and the backend set the
         vehicle's limits (``set_speed_limits``), a worker thread sets it on the vehicle (:meth:`_lower_speed_limit`;
         one at a time, not while the link is lost, after a failure again only 2 -> 4 -> ... 30 vehicle seconds
         later). Only ever lowered within a connection. Never raises."""
-        if self.t < self._speed_check_t:
+        if self._vehicle.t < self._speed_check_t:
             return
-        self._speed_check_t = self.t + 2.0
+        self._speed_check_t = self._vehicle.t + 2.0
         xy = float(self.limits.max_speed)
         with self._lock:
             cap: SpeedCap = self._speed_margin.cap(xy, self._default_speed_cap(), floor=speed_floor(xy))
@@ -251,26 +285,26 @@ class ParamMixin:
                         reason="the vehicle's estimator lets it fly this much faster than its estimate (GNSS, p99): "
                                "its limit cannot keep it within max_speed + 10 %")
         worker = self._speed_worker
-        if (not self._limits_applied or not self._link_ok or (worker is not None and worker.is_alive())
-                or self.t < self._speed_retry_t or cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS):
+        if (not self._limits_applied or not self._vehicle.link_ok or (worker is not None and worker.is_alive())
+                or self._vehicle.t < self._speed_retry_t or cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS):
             return
         self._speed_worker = threading.Thread(target=self._lower_speed_limit, args=(cap,), daemon=True,
                                               name=f"speed-limit-{self.robot_id}")
         self._speed_worker.start()
 
     def _lower_speed_limit(self, cap: SpeedCap) -> None:
-        """Worker thread of :meth:`_update_speed_cap`: set the vehicle's limits to ``cap`` and read them back
+        """Worker thread of :meth:`update`: set the vehicle's limits to ``cap`` and read them back
         (``speed_margin`` event); on ArduPilot with a DO_CHANGE_SPEED in force (GUIDED flies it, not WPNAV_SPEED)
-        :meth:`_resend_speed` sends it again at the new limit from the drone's thread. A failed write:
+        :meth:`resend_speed` sends it again at the new limit from the drone's thread. A failed write:
         ``speed_limit_update_failed``, the limit stays as it was, the next try waits twice as long (at most 30
         vehicle s). Never raises."""
         before, self._speed_cap = self._speed_cap, cap
         try:
-            verified = self.apply_speed_limits()
+            verified = self.apply()
         except Exception as e:  # noqa: BLE001 - in flight: report, keep flying at the applied limit, retry later
             self._speed_cap = before
             self._speed_backoff_s = min(30.0, 2.0 * self._speed_backoff_s)
-            self._speed_retry_t = self.t + self._speed_backoff_s
+            self._speed_retry_t = self._vehicle.t + self._speed_backoff_s
             self._event("speed_limit_update_failed", cap_mps=round(cap.cap_mps, 3), error=str(e),
                         retry_in_s=self._speed_backoff_s)
             return
@@ -279,28 +313,29 @@ class ParamMixin:
                     max_speed=float(self.limits.max_speed), **{k: round(v, 3) for k, v in verified.items()})
         # ArduCopter's GUIDED leg flies the DO_CHANGE_SPEED it was given: the drone's thread sends it again at the
         # new limit (commands are not sent from this thread: one command exchange at a time)
-        self._speed_resend = self.autopilot == "ardupilot" and self.offboard.speed_commanded
+        self._speed_resend = self._vehicle.autopilot == "ardupilot" and self._speed_commanded()
 
-    def _resend_speed(self) -> None:
-        """From :meth:`step` (the drone's thread) after the limit was lowered: ArduPilot's DO_CHANGE_SPEED again,
-        for the speed last asked (:meth:`OffboardControl.resend_speed`: capped at the new limit); a refusal or timeout is reported
-        (``speed_command_failed``; WPNAV_SPEED holds from the next mode change). Never raises."""
+    def resend_speed(self) -> None:
+        """From the backend's ``step`` (the drone's thread) after the limit was lowered: ArduPilot's DO_CHANGE_SPEED
+        again, for the speed last asked (``change_speed_again``: offboard.py ``resend_speed`` caps it at the new
+        limit); a refusal or timeout is reported (``speed_command_failed``; WPNAV_SPEED holds from the next mode
+        change). Never raises."""
         if not self._speed_resend:
             return
         self._speed_resend = False
         try:
-            self.offboard.resend_speed()
+            self._change_speed_again()
         except Exception as e:  # noqa: BLE001 - reported; flying on
             self._event("speed_command_failed", cap_mps=round(self.xy_speed_cap(), 3), error=str(e))
 
-    def apply_speed_limits(self) -> dict[str, float]:
+    def apply(self) -> dict[str, float]:
         """Make the vehicle's own speed limits the robot's ``limits`` (``max_speed``, ``max_vertical_speed``):
-        read each parameter (keeping the user's value for :meth:`restore_parameters`), set the ones that allow
+        read each parameter (keeping the user's value for the backend's ``restore_parameters``), set the ones that allow
         more than the limit, and read every one back (PARAM_VALUE). Returns the verified values (firmware units). Raises BackendError when a value
         read back differs from what was set (beyond float32 rounding) or the firmware never echoes a
         PARAM_SET; LinkLost."""
         want = self._limit_parameters()
-        have = self.read_parameters(list(want))
+        have = self._params.read(list(want))
         for name in want:
             if name not in have:
                 self._event("param_unavailable", name=name)
@@ -309,14 +344,14 @@ class ParamMixin:
             target = want[name]
             if abs(value - target) <= 1e-3 * max(1.0, abs(target)):
                 continue
-            self.parameters.remember_original(name, value)
+            self._params.remember_original(name, value)
             changed[name] = target
         for name, target in changed.items():
-            got = self.set_parameter(name, target)
+            got = self._params.set(name, target)
             if not math.isclose(got, target, rel_tol=1e-4, abs_tol=1e-4):
                 raise BackendError(f"robot {self.robot_id!r}: speed limit {name}: set {target:g}, the vehicle "
                                    f"reports {got:g}")
-        verified = self.read_parameters(list(have)) if changed else have
+        verified = self._params.read(list(have)) if changed else have
         for name, target in changed.items():
             if name in verified and not math.isclose(verified[name], target, rel_tol=1e-4, abs_tol=1e-4):
                 raise BackendError(f"robot {self.robot_id!r}: speed limit {name}: set {target:g}, read back "
@@ -324,20 +359,3 @@ class ParamMixin:
         self._limits_applied = True
         self._event("speed_limits", **{k: round(v, 3) for k, v in verified.items()}, changed=sorted(changed))
         return verified
-
-    def restore_parameters(self) -> dict[str, float]:
-        """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them
-        (:meth:`ParameterProtocol.restore`, reported as events). Returns what was restored. Never raises."""
-        return self.parameters.restore(self._event)
-
-    def _init_params(self) -> None:
-        """The speed limits' state (the parameters' own is :attr:`parameters`')."""
-        self._limits_applied = False
-        self._speed_margin = EstimatorSpeedMargin()
-        self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
-        self._speed_check_t = 0.0  # vehicle time of the next check
-        self._speed_worker: threading.Thread | None = None  # lowering the vehicle's limit (_lower_speed_limit)
-        self._speed_retry_t = 0.0  # vehicle time before which no new try after a failed one
-        self._speed_backoff_s = 1.0
-        self._speed_resend = False  # the lowered limit's DO_CHANGE_SPEED is still to be sent (ArduPilot)
-        self._unholdable_reported = False

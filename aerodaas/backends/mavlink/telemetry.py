@@ -92,7 +92,7 @@ class TelemetryMixin:
 
     def _set_velocity(self, v_enu: np.ndarray, ms: int) -> None:
         """The estimate's velocity (ENU m/s) at ``time_boot_ms`` ``ms``. Its horizontal speed is what a GNSS
-        speed is compared with (params.py ``_on_gnss_speed``) while it is steady (changed at most at 1 m/s^2 since
+        speed is compared with (params.py ``SpeedLimits.on_gnss_speed``) while it is steady (changed at most at 1 m/s^2 since
         the sample before): the two streams are not sampled together, and in an acceleration the difference of a
         period is no overshoot (3 m/s^2 over a 0.2 s period is 0.6 m/s)."""
         h = math.hypot(float(v_enu[0]), float(v_enu[1]))
@@ -152,7 +152,7 @@ class TelemetryMixin:
     def _on_gps_raw_int(self, msg: Any) -> None:
         self._gps_fix = msg.fix_type
         if msg.fix_type >= M.GPS_FIX_TYPE_3D_FIX and msg.vel != 65535:  # UINT16_MAX: speed unknown
-            self._on_gnss_speed(msg.vel / 100.0)
+            self.speed_limits.on_gnss_speed(msg.vel / 100.0, self._est_hspeed, self._est_steady)
 
     def _on_extended_sys_state(self, msg: Any) -> None:
         self._landed_state = msg.landed_state
