@@ -13,19 +13,19 @@ from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.command import CommandProtocol
-from aerodaas.backends.mavlink.fence import FenceMixin
+from aerodaas.backends.mavlink.fence import AutopilotFence
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
 from aerodaas.backends.mavlink.telemetry import TelemetryMixin
-from aerodaas.backends.mavlink.transfer import MissionTransfer
+from aerodaas.backends.mavlink.transfer import MissionTransfer, Wire
+from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, TelemetryMixin,
-                     FenceMixin, VehicleBackend):
+class MavlinkBackend(LinkMixin, TelemetryMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
@@ -150,7 +150,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                                         event=self._event, lock=self._lock,
                                         speed_commanded=lambda: self.offboard.speed_commanded,
                                         change_speed_again=lambda: self.offboard.resend_speed())
-        self._init_fence()
+        #: the vehicle's own geofence and rally points (fence.py), over the parameter protocol and the transfers
+        self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
+                                    transfers=self.transfers, autopilot=lambda: self.autopilot,
+                                    vehicle_time=lambda: self.t, check_link=self._check_link, event=self._event)
         from aerodaas.backends.mavlink.camera import CameraFinder
 
         self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
@@ -333,6 +336,38 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
 
     def _on_mission_item_reached(self, msg: Any) -> None:
         self.mission.on_mission_item_reached(msg)
+
+    # the mission protocol's typed transfers (aerodaas.backends.mavlink.transfer.MissionTransfer)
+    def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
+        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.upload_items`."""
+        self.transfers.upload_items(mission_type, wire)
+
+    def download_items(self, mission_type: int) -> list[Wire]:
+        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.download_items`."""
+        return self.transfers.download_items(mission_type)
+
+    # the vehicle's fence (aerodaas.backends.mavlink.fence.AutopilotFence)
+    def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
+            -> dict[str, tuple[float, bool]]:
+        """The fence parameters for ``fence`` on this autopilot (:meth:`AutopilotFence.fence_parameters`)."""
+        return self.fence.fence_parameters(fence, have)
+
+    def apply_fence(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
+        """Make ``fence`` (default ``safety.geofence``) the vehicle's own, verified (:meth:`AutopilotFence.apply`)."""
+        return self.fence.apply(fence)
+
+    def upload_rally(self, points: list[tuple[float, float, float]]) -> int:
+        """Upload rally points and read them back (:meth:`AutopilotFence.upload_rally`); returns how many."""
+        return self.fence.upload_rally(points)
+
+    def restore_fence(self) -> bool:
+        """Put back the vehicle's fence from before :meth:`apply_fence` (:meth:`AutopilotFence.restore`)."""
+        return self.fence.restore()
+
+    @property
+    def fence_applied(self) -> dict[str, Any] | None:
+        """What :meth:`apply_fence` verified, or None (:attr:`AutopilotFence.applied`)."""
+        return self.fence.applied
 
     def discover_video_stream(self, request: Any) -> Any:
         """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with

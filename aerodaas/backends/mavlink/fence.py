@@ -66,7 +66,7 @@ FENCE_ACTIONS = {"report": (0, 1), "rtl": (1, 3), "land": (2, 5), "hold": (4, 2)
 #: ArduPilot FENCE_OPTIONS bit (AC_Fence.h ``OPTIONS::INCLUSION_UNION``): inclusion zones allow their union
 AP_FENCE_INCLUSION_UNION = 2
 #: vehicle seconds to let the firmware act on an uploaded fence before it is read back (ArduPilot's loader runs at
-#: 10 Hz: ``AC_PolyFence_loader::update``, see :meth:`FenceMixin._settled_fence`)
+#: 10 Hz: ``AC_PolyFence_loader::update``, see :meth:`AutopilotFence._settled_fence`)
 FENCE_SETTLE_S = 1.0
 #: the fence parameters of integer type (PX4 takes GF_ACTION only as INT32; ArduPilot converts REAL32 itself)
 _INT_PARAMS = {"GF_ACTION", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_OPTIONS"}
@@ -351,49 +351,3 @@ class AutopilotFence:
             self._event("fence_restored", items=len(saved["items"] or []), **saved["params"])
         return ok
 
-
-class FenceMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend`: the entry points of the typed transfers (the
-    backend's :class:`~aerodaas.backends.mavlink.transfer.MissionTransfer`, ``self.transfers``) and of the
-    vehicle's fence, an :class:`AutopilotFence` (``self.fence``)."""
-
-    fence: AutopilotFence
-    transfers: Any
-
-    # ------------------------------------------------------------------ typed transfers
-    def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
-        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.upload_items`."""
-        self.transfers.upload_items(mission_type, wire)
-
-    def download_items(self, mission_type: int) -> list[Wire]:
-        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.download_items`."""
-        return self.transfers.download_items(mission_type)
-
-    # ------------------------------------------------------------------ the fence (the backend's AutopilotFence)
-    def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
-            -> dict[str, tuple[float, bool]]:
-        """:meth:`AutopilotFence.fence_parameters`."""
-        return self.fence.fence_parameters(fence, have)
-
-    def apply_fence(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
-        """:meth:`AutopilotFence.apply`."""
-        return self.fence.apply(fence)
-
-    def upload_rally(self, points: list[tuple[float, float, float]]) -> int:
-        """:meth:`AutopilotFence.upload_rally`."""
-        return self.fence.upload_rally(points)
-
-    def restore_fence(self) -> bool:
-        """:meth:`AutopilotFence.restore`."""
-        return self.fence.restore()
-
-    @property
-    def fence_applied(self) -> dict[str, Any] | None:
-        """:attr:`AutopilotFence.applied`."""
-        return self.fence.applied
-
-    def _init_fence(self) -> None:
-        """The vehicle's fence as an object of its own, given the parameter protocol and the typed transfers."""
-        self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
-                                    transfers=self.transfers, autopilot=lambda: self.autopilot, vehicle_time=lambda: self.t,
-                                    check_link=self._check_link, event=self._event)
