@@ -440,17 +440,20 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
     # wire 0 take-off, 1 and 2 waypoints (ENU x, y, radius), 3 land; all autocontinue
     b.mission._waypoints = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
     b.mission._next = (frozenset({0, 1, 2, 3}), 4)
-    b._pos = np.array([0.0, 0.1, 1.5])
+    def at(ms, east, north, up):  # a LOCAL_POSITION_NED sample (no global position): the vehicle is there
+        b.telemetry.on_local_position_ned(NS(time_boot_ms=ms, x=north, y=east, z=-up, vx=0.0, vy=0.0, vz=0.0))
+
+    at(1000, 0.0, 0.1, 1.5)
     with b._lock:
-        b._on_mission_current(NS(seq=0))
-        b._on_mission_item_reached(NS(seq=0))  # take-off done: waypoint 1 (here) is current, its hold begins
-        b._on_mission_current(NS(seq=0))  # stale, sent before the reached one
-        b._on_mission_item_reached(NS(seq=0))  # PX4's repeats
-        b._pos = np.array([0.0, 9.8, 1.5])
-        b._on_mission_item_reached(NS(seq=1))  # hold over: waypoint 2 current, and we are there
-        b._on_mission_current(NS(seq=2))
-        b._on_mission_item_reached(NS(seq=2))
-        b._on_mission_current(NS(seq=3))
+        b.mission.on_mission_current(NS(seq=0))
+        b.mission.on_mission_item_reached(NS(seq=0))  # take-off done: waypoint 1 (here) is current, its hold begins
+        b.mission.on_mission_current(NS(seq=0))  # stale, sent before the reached one
+        b.mission.on_mission_item_reached(NS(seq=0))  # PX4's repeats
+        at(2000, 0.0, 9.8, 1.5)
+        b.mission.on_mission_item_reached(NS(seq=1))  # hold over: waypoint 2 current, and we are there
+        b.mission.on_mission_current(NS(seq=2))
+        b.mission.on_mission_item_reached(NS(seq=2))
+        b.mission.on_mission_current(NS(seq=3))
     ev = [(e["event"], e.get("seq")) for e in b.drain_events()]
     assert ev == [("mission_current", 0), ("mission_item_reached", 0), ("mission_current", 1),
                   ("mission_item_reached", 1), ("mission_item_hold_done", 1), ("mission_current", 2),

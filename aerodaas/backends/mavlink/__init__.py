@@ -28,9 +28,11 @@ rally items), ``backend.mission`` (:class:`~.mission.AutopilotMission`: the miss
 upload, download and start, and its progress), ``backend.actions`` (:class:`~.action.VehicleAction`: readiness,
 arming, disarming, take-off), ``backend.offboard`` (:class:`~.offboard.OffboardControl`: GUIDED/OFFBOARD
 targets, hold/land/RTL, safe end), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
-FENCE_* / GF_* parameters, read back before flight). The others are still mix-ins of :class:`MavlinkBackend`,
+FENCE_* / GF_* parameters, read back before flight),
+``backend.telemetry`` (:class:`~.telemetry.VehicleTelemetry`: the state the streams report, its message handlers
+in an explicit table). The others are still mix-ins of :class:`MavlinkBackend`,
 each declaring its state in its ``_init_<concern>``: :mod:`.link` (connection,
-autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close), :mod:`.telemetry` (state from the streams). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

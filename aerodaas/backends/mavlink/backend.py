@@ -1,5 +1,5 @@
 """The MAVLink vehicle backend: one class holding the concern objects (commands, parameters, mission transfers, mission,
-fence, gimbal) and the mix-ins of the other MAVLink concerns (see the package docstring)."""
+actions, offboard, speed limits, telemetry, fence, gimbal) and the link mix-in (see the package docstring)."""
 from __future__ import annotations
 
 import threading
@@ -7,11 +7,13 @@ import time
 from collections import deque
 from typing import Any, Literal, Sequence
 
+import numpy as np
+
 from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem, MissionPlan
-from aerodaas.model.types import GeoPoint
+from aerodaas.model.types import GeoPoint, Odometry
 from aerodaas.backends.base import VehicleBackend
-from aerodaas.backends.mavlink.action import VehicleAction
+from aerodaas.backends.mavlink.action import Readiness, VehicleAction
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import AutopilotFence
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
@@ -19,13 +21,13 @@ from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
-from aerodaas.backends.mavlink.telemetry import TelemetryMixin
+from aerodaas.backends.mavlink.telemetry import Handler, VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer, Wire
 from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, TelemetryMixin, VehicleBackend):
+class MavlinkBackend(LinkMixin, VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
@@ -106,6 +108,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: every message the receive path saw, unknown and malformed ones included
         self.messages_received = 0
         self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
+        self._events: deque[dict[str, Any]] = deque(maxlen=2000)  # every concern's events (_event, drain_events)
         self._init_link()
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
@@ -121,12 +124,18 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                                         boot_ms=lambda: self._boot_last, heartbeat_due=self._heartbeat_due,
                                         status_text_since=self._status_text_since, mode_params=self._mode_params,
                                         event=self._event)
-        self._init_telemetry()
+        #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
+        self.telemetry = VehicleTelemetry(self.robot_id, vehicle=self, on_boot_ms=self._on_boot_ms,
+                                          sample_time=self._sample_time, t_connect=lambda: self._t_connect,
+                                          was_armed=lambda: self._was_armed, arming=lambda: self.actions.arming,
+                                          on_position=lambda: self.mission.on_position(),
+                                          on_gnss_speed=lambda *a: self.speed_limits.on_gnss_speed(*a),
+                                          event=self._event, lock=self._lock)
         #: readiness, arming, disarming, take-off (action.py)
         self.actions = VehicleAction(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
                                      check_link=self._check_link, event=self._event, lock=self._lock,
-                                     readiness=self._readiness, home_for_flight=self._home_for_flight,
-                                     fix_altitude_reference=self._fix_altitude_reference,
+                                     readiness=self._readiness, home_for_flight=self.telemetry.home_for_flight,
+                                     fix_altitude_reference=self.telemetry.fix_altitude_reference,
                                      stop_setpoints=self._stop_setpoints)
         #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
         self.offboard = OffboardControl(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
@@ -159,6 +168,95 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
         #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
         self.gimbal = GimbalConcern(self, cfg.gimbal)
+        self._handlers = self._message_handlers()
+
+    def _message_handlers(self) -> dict[str, Handler]:
+        """The handler of each message type the I/O thread hands on under ``_lock`` (link.py ``_dispatch``; HEARTBEAT,
+        STATUSTEXT, COMMAND_ACK and the mission protocol's messages are routed before this table)."""
+        return {**self.telemetry.handlers(), "PARAM_VALUE": self.parameters.on_param_value,
+                "MISSION_CURRENT": self.mission.on_mission_current,
+                "MISSION_ITEM_REACHED": self.mission.on_mission_item_reached,
+                "GIMBAL_DEVICE_ATTITUDE_STATUS": self.gimbal.on_message,
+                "GIMBAL_MANAGER_INFORMATION": self.gimbal.on_message}
+
+    # events of every concern, and the state the autopilot streams (aerodaas.backends.mavlink.telemetry)
+    def _event(self, event: str, **fields: Any) -> None:
+        self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
+
+    def drain_events(self) -> list[dict[str, Any]]:
+        """See :meth:`~aerodaas.backends.base.VehicleBackend.drain_events`. Once an ``autopilot_failsafe`` event is
+        handed out, targets may be sent again (the caller decides: ``mavlink.on_failsafe``; offboard.py)."""
+        out = []
+        while self._events:
+            try:
+                ev = self._events.popleft()
+            except IndexError:
+                break
+            out.append(ev)
+            if ev.get("event") == "autopilot_failsafe":
+                with self._lock:
+                    self._failsafe_undelivered = max(0, self._failsafe_undelivered - 1)
+        return out
+
+    def _readiness(self) -> Readiness:
+        """The reports readiness is judged from (:meth:`VehicleTelemetry.readiness` with the link's). Caller holds
+        ``_lock``."""
+        return self.telemetry.readiness(self._system_status, self._ekf_using_gps,
+                                        M.MAVLINK_MSG_ID_EKF_STATUS_REPORT in self._streams_refused
+                                        or self._stream_legacy)
+
+    @property
+    def position(self) -> np.ndarray:
+        """:attr:`VehicleTelemetry.position`."""
+        return self.telemetry.position
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """:attr:`VehicleTelemetry.velocity`."""
+        return self.telemetry.velocity
+
+    @property
+    def yaw(self) -> float:
+        """:attr:`VehicleTelemetry.yaw`."""
+        return self.telemetry.yaw
+
+    @property
+    def in_air(self) -> bool:
+        """:attr:`VehicleTelemetry.in_air`."""
+        return self.telemetry.in_air
+
+    @property
+    def battery_pct(self) -> float:
+        """:attr:`VehicleTelemetry.battery_pct`."""
+        return self.telemetry.battery_pct
+
+    @property
+    def gps_fix_type(self) -> int:
+        """:attr:`VehicleTelemetry.gps_fix_type`."""
+        return self.telemetry.gps_fix_type
+
+    @property
+    def home_received(self) -> bool:
+        """:attr:`VehicleTelemetry.home_received`."""
+        return self.telemetry.home_received
+
+    @property
+    def altitude_reference(self) -> float | None:
+        """:attr:`VehicleTelemetry.altitude_reference`."""
+        return self.telemetry.altitude_reference
+
+    @property
+    def sample_key(self) -> int:
+        """:attr:`VehicleTelemetry.sample_key`."""
+        return self.telemetry.sample_key
+
+    def odometry(self) -> Odometry:
+        """:meth:`VehicleTelemetry.odometry`."""
+        return self.telemetry.odometry()
+
+    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
+        """:meth:`VehicleTelemetry.drain_odometry`."""
+        return self.telemetry.drain_odometry(newest_only)
 
     def _init_link(self) -> None:
         """The link's state (link.py, the backend's own): the connection and I/O thread, the autopilot's identity
@@ -226,9 +324,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         return self.commands.rtt_ms
 
     # parameters (aerodaas.backends.mavlink.params: ParameterProtocol, SpeedLimits)
-    def _on_param_value(self, msg: Any) -> None:
-        self.parameters.on_param_value(msg)
-
     def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
         """:meth:`ParameterProtocol.read`."""
         return self.parameters.read(names, wait_s)
@@ -331,12 +426,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.actions.take_control()
         self.mission.start()
 
-    def _on_mission_current(self, msg: Any) -> None:
-        self.mission.on_mission_current(msg)
-
-    def _on_mission_item_reached(self, msg: Any) -> None:
-        self.mission.on_mission_item_reached(msg)
-
     # the mission protocol's typed transfers (aerodaas.backends.mavlink.transfer.MissionTransfer)
     def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
         """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.upload_items`."""
@@ -396,12 +485,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def drain_gimbal(self) -> list:
         """Every GIMBAL_DEVICE_ATTITUDE_STATUS not handed out yet, oldest first."""
         return self.gimbal.drain()
-
-    def _on_gimbal_device_attitude_status(self, msg: Any) -> None:
-        self.gimbal.on_message(msg)
-
-    def _on_gimbal_manager_information(self, msg: Any) -> None:
-        self.gimbal.on_message(msg)
 
     def _streams(self) -> tuple:
         """The telemetry messages requested (link.py), and the gimbal's attitude when a gimbal is configured."""

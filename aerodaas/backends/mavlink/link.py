@@ -88,7 +88,7 @@ class LinkMixin:
         self._request_home()
         while True:
             with self._lock:
-                ready = self._sensors is not None
+                ready = self.telemetry.sys_status_seen
             if ready:
                 break
             if time.monotonic() > deadline:
@@ -99,7 +99,7 @@ class LinkMixin:
         with self._lock:
             self._t_connect = self._raw_t()
             self._t_max = 0.0
-            self._odom_q.clear()  # stamped on the clock before the connection's zero
+            self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
         if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
             got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
@@ -272,7 +272,7 @@ class LinkMixin:
                      "MISSION_ITEM"):
             self.transfers.offer(msg)  # kept for the exchange under way, when it is for us (transfer.py)
             return
-        handler = getattr(self, f"_on_{mtype.lower()}", None)
+        handler = self._handlers.get(mtype)  # the backend's typed table (backend.py _message_handlers)
         if handler is not None:
             with self._lock:
                 handler(msg)
@@ -404,6 +404,13 @@ class LinkMixin:
             r = (ms - samples[0][1]) / 1000.0 / span
             if 0.05 < r < 200:
                 self._ratio = r
+
+    def _sample_time(self, ms: int) -> float:
+        """``time_boot_ms`` ``ms`` of a sample on the raw vehicle clock (s): its own time when the clock's anchor is
+        not after it, else the clock's latest reading."""
+        if self._boot_ref is not None and self._boot_ref[0] <= ms:
+            return self._boot_ref[1] + (ms - self._boot_ref[0]) / 1000.0
+        return self._raw_t()
 
     def _raw_t(self) -> float:
         if self._boot_ref is None:
@@ -576,6 +583,26 @@ class LinkMixin:
             pass
 
     # ------------------------------------------------------------------ VehicleBackend: state
+    @property
+    def armed(self) -> bool:
+        """The armed flag of the autopilot's latest HEARTBEAT."""
+        return self._armed
+
+    @property
+    def link_ok(self) -> bool:
+        """HEARTBEATs keep coming (false before connect and after ``heartbeat_timeout_s`` without one)."""
+        return self._link_ok
+
+    @property
+    def mode(self) -> str:
+        """The flight mode from the latest HEARTBEAT, in pymavlink's names (``GUIDED``, ``OFFBOARD``, ``LOITER``...)."""
+        return self._mode
+
+    @property
+    def clock_ratio(self) -> float:
+        """Vehicle seconds per wall second, estimated from ``time_boot_ms`` (1 for a real vehicle)."""
+        return self._ratio
+
     @property
     def t(self) -> float:
         with self._lock:

@@ -1,45 +1,125 @@
 """Telemetry: the state the autopilot streams (position, velocity, attitude, battery, GPS, landed state, home;
 mission progress is the mission's, :mod:`.mission`) and the :class:`~aerodaas.backends.base.VehicleBackend` state
-properties built from it."""
+built from it. A concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`VehicleTelemetry`)."""
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections import deque
-from typing import Any
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from aerodaas.backends.base import VehicleBackend
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.mavlink.action import Readiness
-from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
+from aerodaas.backends.mavlink._common import M
 
 
-#: position samples kept for :meth:`TelemetryMixin.drain_odometry` (60 vehicle seconds at the default 10 Hz stream;
-#: the drone's clock thread drains them every step, so only a thread held up for that long loses any)
+#: position samples kept for :meth:`VehicleTelemetry.drain_odometry` (60 vehicle seconds at the default 10 Hz
+#: stream; the drone's clock thread drains them every step, so only a thread held up for that long loses any)
 ODOMETRY_QUEUE = 600
 
+#: a message handler of the I/O thread (link.py ``_dispatch``), called under the backend's lock
+Handler = Callable[[Any], None]
 
-class TelemetryMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
 
-    def _on_global_position_int(self, msg: Any) -> None:
+class TelemetryVehicle(Protocol):
+    """What telemetry reads and sets of the vehicle (the backend's public members): its ENU origin :attr:`home`
+    (telemetry moves it to the autopilot's HOME_POSITION), the HEARTBEAT's armed flag and the run's clock
+    (:attr:`t`, vehicle seconds since connect)."""
+
+    home: GeoPoint
+
+    @property
+    def armed(self) -> bool: ...
+
+    @property
+    def t(self) -> float: ...
+
+
+class VehicleTelemetry:
+    """The vehicle's state as its streams report it (see the module docstring), fed by the I/O thread through the
+    handlers of :meth:`handlers` under the backend's lock.
+
+    It knows only what it is given: ``vehicle`` (:class:`TelemetryVehicle`), the vehicle clock's callables
+    ``on_boot_ms`` (a ``time_boot_ms`` received), ``sample_time`` (a ``time_boot_ms`` on the raw vehicle clock, s)
+    and ``t_connect`` (the raw clock's value at connect, s), ``was_armed`` (armed at least once since connect: the
+    HEARTBEAT's), ``arming`` (an :meth:`~aerodaas.backends.mavlink.action.VehicleAction.arm` is under way),
+    ``on_position`` (the mission's arrival check), ``on_gnss_speed`` (the speed limits' margin: GNSS speed m/s,
+    the estimate's horizontal speed m/s, whether it is steady), ``event`` (records a backend event) and ``lock``
+    (the backend's lock)."""
+
+    def __init__(self, robot_id: str, *, vehicle: TelemetryVehicle, on_boot_ms: Callable[[int], None],
+                 sample_time: Callable[[int], float], t_connect: Callable[[], float], was_armed: Callable[[], bool],
+                 arming: Callable[[], bool], on_position: Callable[[], None],
+                 on_gnss_speed: Callable[[float, float, bool], None], event: Callable[..., None],
+                 lock: threading.RLock) -> None:
+        self.robot_id, self._vehicle, self._lock, self._event = robot_id, vehicle, lock, event
+        self._on_boot_ms, self._sample_time, self._t_connect = on_boot_ms, sample_time, t_connect
+        self._was_armed, self._arming = was_armed, arming
+        self._on_position, self._on_gnss_speed = on_position, on_gnss_speed
+        self._pos = np.zeros(3)
+        self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos
+        self._pos_seq = 0  # position samples received
+        #: the odometry of each position sample not yet drained (drain_odometry), oldest first
+        self._odom_q: deque[Odometry] = deque(maxlen=ODOMETRY_QUEUE)
+        self._odom_q_dropped = 0  # samples pushed out of the full queue since it was last drained
+        self._odom_q_drained = False  # drained once: the run takes samples now, an overflow is a loss
+        self._vel = np.zeros(3)
+        self._est_hspeed = 0.0  # its horizontal speed, m/s (_set_velocity) ...
+        self._est_steady = False  # ... changed at most at 1 m/s^2 since the sample before ...
+        self._est_ms: int | None = None  # ... at this time_boot_ms
+        self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
+        self._geo: GeoPoint | None = None
+        self._rel_alt = 0.0
+        self._has_global = False
+        self._local_ned: tuple[float, ...] | None = None
+        self._local_wall = 0.0
+        self._landed_state = 0
+        self._landed_wall = 0.0
+        self._battery: float | None = None
+        self._battery_v = 0.0
+        self._battery_from = ""
+        self._gps_fix = -1
+        self._sensors: tuple[int, int, int] | None = None
+        self._home_received = False
+        self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
+        self._att_wall = 0.0
+        self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
+        self._health_seen = 0  # every SYS_STATUS health bit ever reported
+        self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
+        self._home_moved_alt = 0.0
+
+    def handlers(self) -> dict[str, Handler]:
+        """The handler of each telemetry message type (MAVLink message name), for the I/O thread's dispatch."""
+        return {"GLOBAL_POSITION_INT": self.on_global_position_int, "LOCAL_POSITION_NED": self.on_local_position_ned,
+                "ATTITUDE": self.on_attitude, "SYSTEM_TIME": self.on_system_time, "SYS_STATUS": self.on_sys_status,
+                "BATTERY_STATUS": self.on_battery_status, "GPS_RAW_INT": self.on_gps_raw_int,
+                "EXTENDED_SYS_STATE": self.on_extended_sys_state, "HOME_POSITION": self.on_home_position,
+                "EKF_STATUS_REPORT": self.on_ekf_status_report, "ESTIMATOR_STATUS": self.on_estimator_status}
+
+    def on_global_position_int(self, msg: Any) -> None:
+        """GLOBAL_POSITION_INT: the position (ENU from home, height above the altitude reference), its velocity
+        and heading when nothing fresher came. Caller holds ``_lock``."""
         self._on_boot_ms(msg.time_boot_ms)
         if msg.lat == 0 and msg.lon == 0:
             return  # ArduPilot sends zeros before its position estimate exists
         lat, lon = msg.lat / 1e7, msg.lon / 1e7
         self._geo = GeoPoint(lat=lat, lon=lon, alt=msg.alt / 1000.0)
         self._rel_alt = msg.relative_alt / 1000.0
-        e, n, _ = geodetic_to_enu(lat, lon, self.home.alt, self.home)
+        e, n, _ = geodetic_to_enu(lat, lon, self._vehicle.home.alt, self._vehicle.home)
         self._pos = np.array([e, n, self._height()])
         self._new_sample(msg.time_boot_ms)
         self._has_global = True
-        self.mission.on_position()
+        self._on_position()
         if time.monotonic() - self._local_wall > 1.0:  # no fresher LOCAL_POSITION_NED velocity
-            self._set_velocity(self.ned_to_enu((msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)), msg.time_boot_ms)
+            v_ned = (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)
+            self._set_velocity(VehicleBackend.ned_to_enu(v_ned), msg.time_boot_ms)
         if msg.hdg != 65535 and time.monotonic() - self._att_wall > 1.0:  # no ATTITUDE lately
-            self._att = (self._att[0], self._att[1], self.enu_yaw_from_heading(msg.hdg / 100.0))
+            self._att = (self._att[0], self._att[1], VehicleBackend.enu_yaw_from_heading(msg.hdg / 100.0))
         self._queue_odometry()
 
     def _height(self) -> float:
@@ -49,7 +129,7 @@ class TelemetryMixin:
             return self._geo.alt - self._alt_ref
         return self._rel_alt
 
-    def _fix_altitude_reference(self) -> None:
+    def fix_altitude_reference(self) -> None:
         """Fix the altitude reference (AMSL metres) for this flight: the vehicle's own AMSL altitude
         (GLOBAL_POSITION_INT ``alt``) where it stands, or, if already in the air, its home altitude (``alt -
         relative_alt``); the configured/received home altitude without a global position. Every height read and
@@ -57,7 +137,7 @@ class TelemetryMixin:
         (``COM_HOME_EN``, commander ``HomePosition::update``)."""
         with self._lock:
             if self._geo is None:
-                ref = self.home.alt
+                ref = self._vehicle.home.alt
             elif self.in_air:
                 ref = self._geo.alt - self._rel_alt
             else:
@@ -65,28 +145,30 @@ class TelemetryMixin:
             self._alt_ref = ref
             if self._geo is not None:
                 self._pos = np.array([self._pos[0], self._pos[1], self._height()])
-        self._event("altitude_reference", amsl_m=round(ref, 3), home_amsl_m=round(self.home.alt, 3))
+        self._event("altitude_reference", amsl_m=round(ref, 3), home_amsl_m=round(self._vehicle.home.alt, 3))
 
     @property
     def altitude_reference(self) -> float | None:
         """The AMSL altitude (metres) heights are measured from since arming, None before the first arming."""
         return self._alt_ref
 
-    def _on_ekf_status_report(self, msg: Any) -> None:
+    def on_ekf_status_report(self, msg: Any) -> None:
         """ArduPilot EKF_STATUS_REPORT: ``flags`` (EKF_STATUS_FLAGS) for readiness."""
         self._ekf_flags = int(msg.flags)
 
-    def _on_estimator_status(self, msg: Any) -> None:
+    def on_estimator_status(self, msg: Any) -> None:
         """PX4 ESTIMATOR_STATUS: ``flags`` (ESTIMATOR_STATUS_FLAGS) for readiness."""
         self._ekf_flags = int(msg.flags)
 
-    def _on_local_position_ned(self, msg: Any) -> None:
+    def on_local_position_ned(self, msg: Any) -> None:
+        """LOCAL_POSITION_NED: the velocity, and the position (ENU from the EKF origin) without a global one.
+        Caller holds ``_lock``."""
         self._on_boot_ms(msg.time_boot_ms)
         self._local_ned = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
         self._local_wall = time.monotonic()
-        self._set_velocity(self.ned_to_enu((msg.vx, msg.vy, msg.vz)), msg.time_boot_ms)
+        self._set_velocity(VehicleBackend.ned_to_enu((msg.vx, msg.vy, msg.vz)), msg.time_boot_ms)
         if not self._has_global:  # no global position (indoors): ENU from the EKF origin
-            self._pos = self.ned_to_enu((msg.x, msg.y, msg.z))
+            self._pos = VehicleBackend.ned_to_enu((msg.x, msg.y, msg.z))
             self._new_sample(msg.time_boot_ms)
             self._queue_odometry()
 
@@ -106,9 +188,7 @@ class TelemetryMixin:
         """A new position sample: its own ``time_boot_ms`` (not the latest of all messages: ATTITUDE or SYSTEM_TIME
         stamped a few ms later may have come first), on the run's clock, stamps the odometry made from it, and
         :attr:`sample_key` changes. Caller holds ``_lock``."""
-        raw = self._raw_t()
-        if self._boot_ref is not None and self._boot_ref[0] <= ms:
-            raw = self._boot_ref[1] + (ms - self._boot_ref[0]) / 1000.0
+        raw = self._sample_time(ms)
         self._pos_t = max(raw, self._pos_t)
         self._pos_seq += 1
 
@@ -119,15 +199,18 @@ class TelemetryMixin:
         new timestamp (:meth:`odometry` is stamped with the sample's own vehicle time)."""
         return self._pos_seq
 
-    def _on_attitude(self, msg: Any) -> None:
+    def on_attitude(self, msg: Any) -> None:
+        """ATTITUDE: roll, pitch (degrees) and ENU yaw. Caller holds ``_lock``."""
         self._on_boot_ms(msg.time_boot_ms)
-        self._att = (math.degrees(msg.roll), math.degrees(msg.pitch), self.enu_yaw_from_heading(math.degrees(msg.yaw)))
+        self._att = (math.degrees(msg.roll), math.degrees(msg.pitch), VehicleBackend.enu_yaw_from_heading(math.degrees(msg.yaw)))
         self._att_wall = time.monotonic()
 
-    def _on_system_time(self, msg: Any) -> None:
+    def on_system_time(self, msg: Any) -> None:
+        """SYSTEM_TIME: a ``time_boot_ms`` for the vehicle clock."""
         self._on_boot_ms(msg.time_boot_ms)
 
-    def _on_sys_status(self, msg: Any) -> None:
+    def on_sys_status(self, msg: Any) -> None:
+        """SYS_STATUS: sensor bits for readiness, the battery (when BATTERY_STATUS gives none) and its voltage."""
         self._sensors = (msg.onboard_control_sensors_present, msg.onboard_control_sensors_enabled,
                          msg.onboard_control_sensors_health)
         self._health_seen |= msg.onboard_control_sensors_health
@@ -137,9 +220,8 @@ class TelemetryMixin:
         if msg.voltage_battery not in (0, 65535):
             self._battery_v = msg.voltage_battery / 1000.0
 
-    _battery_from = ""
-
-    def _on_battery_status(self, msg: Any) -> None:
+    def on_battery_status(self, msg: Any) -> None:
+        """BATTERY_STATUS of battery 0: remaining % and, without SYS_STATUS's, the voltage of its cells."""
         if msg.id != 0:
             return
         if msg.battery_remaining >= 0:
@@ -149,16 +231,18 @@ class TelemetryMixin:
         if cells and not self._battery_v:
             self._battery_v = sum(cells) / 1000.0
 
-    def _on_gps_raw_int(self, msg: Any) -> None:
+    def on_gps_raw_int(self, msg: Any) -> None:
+        """GPS_RAW_INT: the fix type, and with a 3-D fix the GNSS speed for the speed limits' margin."""
         self._gps_fix = msg.fix_type
         if msg.fix_type >= M.GPS_FIX_TYPE_3D_FIX and msg.vel != 65535:  # UINT16_MAX: speed unknown
-            self.speed_limits.on_gnss_speed(msg.vel / 100.0, self._est_hspeed, self._est_steady)
+            self._on_gnss_speed(msg.vel / 100.0, self._est_hspeed, self._est_steady)
 
-    def _on_extended_sys_state(self, msg: Any) -> None:
+    def on_extended_sys_state(self, msg: Any) -> None:
+        """EXTENDED_SYS_STATE: the landed state (for :attr:`in_air`)."""
         self._landed_state = msg.landed_state
         self._landed_wall = time.monotonic()
 
-    def _on_home_position(self, msg: Any) -> None:
+    def on_home_position(self, msg: Any) -> None:
         """HOME_POSITION: the ENU origin until the first arming, and again while :meth:`arm` runs (the autopilot
         sets home where it arms). In flight a moved home (PX4 re-estimates it for minutes after take-off) and,
         after a flight, PX4's home moved to where it landed once disarmed (commander ``HomePosition::update``,
@@ -168,41 +252,42 @@ class TelemetryMixin:
         if self._home_after is not None and abs(home.lat - self._home_after.lat) <= 1e-7 \
                 and abs(home.lon - self._home_after.lon) <= 1e-7 and abs(home.alt - self._home_after.alt) <= 0.01:
             return  # the moved home reported again (HOME_POSITION streams at 0.5 Hz)
-        old = self.home
+        old = self._vehicle.home
         moved = (not self._home_received or abs(home.lat - old.lat) > 1e-7 or abs(home.lon - old.lon) > 1e-7
                  or abs(home.alt - old.alt) > 0.01)
-        if moved and self._home_received and self._armed:
+        if moved and self._home_received and self._vehicle.armed:
             if abs(home.alt - old.alt) > abs(self._home_moved_alt - old.alt) + 0.5:  # a new largest move only
                 self._home_moved_alt = home.alt
                 self._event("home_moved_in_flight", lat=home.lat, lon=home.lon, alt=home.alt)
             return
-        if moved and self._home_received and self._was_armed and not self.actions.arming:
+        if moved and self._home_received and self._was_armed() and not self._arming():
             self._event("home_moved", lat=home.lat, lon=home.lon, alt=home.alt, reason="after landing")
             self._home_after = home
             return
         if moved:
             self._rebase_home(home)
 
-    def _home_for_flight(self) -> None:
+    def home_for_flight(self) -> None:
         """A new flight (:meth:`arm`): a home the autopilot moved after the last flight (reported as ``home_moved``)
         becomes the ENU origin, as the home it sets where it arms will. Caller holds ``_lock``."""
-        if self._home_after is not None and not self._armed:
+        if self._home_after is not None and not self._vehicle.armed:
             self._rebase_home(self._home_after)
 
-    def _readiness(self) -> Readiness:
-        """The reports readiness is judged from (action.py :class:`Readiness`). Caller holds ``_lock``."""
+    def readiness(self, system_status: int, ekf_using_gps: bool, ekf_report_unavailable: bool) -> Readiness:
+        """The reports readiness is judged from (action.py :class:`Readiness`), with the link's: HEARTBEAT
+        ``system_status``, ArduPilot's "EKFn IMUm is using GPS" seen, and whether EKF_STATUS_REPORT will never
+        come. Caller holds ``_lock``."""
         present, health = (self._sensors[0], self._sensors[2]) if self._sensors is not None else (0, 0)
         return Readiness(gps_fix=self._gps_fix, home_received=self._home_received, sensors_present=present,
                          sensors_health=health, health_seen=self._health_seen, ekf_flags=self._ekf_flags,
-                         system_status=self._system_status, armed=self._armed, ekf_using_gps=self._ekf_using_gps,
-                         ekf_report_unavailable=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT in self._streams_refused
-                         or self._stream_legacy)
+                         system_status=system_status, armed=self._vehicle.armed, ekf_using_gps=ekf_using_gps,
+                         ekf_report_unavailable=ekf_report_unavailable)
 
     def _rebase_home(self, home: GeoPoint) -> None:
         """Make ``home`` the ENU origin (re-expressing the last fix in it). Caller holds ``_lock``."""
         self._home_moved_alt = home.alt
         self._home_after = None
-        self.home = home
+        self._vehicle.home = home
         self._home_received = True
         if self._geo is not None:
             e, n, _ = geodetic_to_enu(self._geo.lat, self._geo.lon, home.alt, home)
@@ -210,22 +295,30 @@ class TelemetryMixin:
         self._event("home", lat=home.lat, lon=home.lon, alt=home.alt)
 
     @property
+    def sys_status_seen(self) -> bool:
+        """A SYS_STATUS has come (connect waits for the first)."""
+        return self._sensors is not None
+
+    def clear_odometry(self) -> None:
+        """Forget the queued odometry (stamped on the clock before the connection's zero). Caller holds ``_lock``."""
+        self._odom_q.clear()
+
+    @property
     def position(self) -> np.ndarray:
+        """(3,) ENU metres from home of the latest position sample (a copy)."""
         with self._lock:
             return self._pos.copy()
 
     @property
     def velocity(self) -> np.ndarray:
+        """(3,) ENU m/s of the estimate (LOCAL_POSITION_NED, else GLOBAL_POSITION_INT), a copy."""
         with self._lock:
             return self._vel.copy()
 
     @property
     def yaw(self) -> float:
+        """ENU yaw, degrees (ATTITUDE, else GLOBAL_POSITION_INT ``hdg``)."""
         return self._att[2]
-
-    @property
-    def armed(self) -> bool:
-        return self._armed
 
     @property
     def in_air(self) -> bool:
@@ -234,22 +327,13 @@ class TelemetryMixin:
             if self._landed_state and time.monotonic() - self._landed_wall < 5.0:
                 return self._landed_state in (M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF,
                                               M.MAV_LANDED_STATE_LANDING)
-            return self._armed and self._height() > 0.3
+            return self._vehicle.armed and self._height() > 0.3
 
     @property
     def battery_pct(self) -> float:
         """BATTERY_STATUS (battery 0) remaining %, else SYS_STATUS; 100 while the autopilot reports none."""
         b = self._battery
         return 100.0 if b is None else max(0.0, min(100.0, b))
-
-    @property
-    def link_ok(self) -> bool:
-        return self._link_ok
-
-    @property
-    def mode(self) -> str:
-        """The flight mode from the latest HEARTBEAT, in pymavlink's names (``GUIDED``, ``OFFBOARD``, ``LOITER``...)."""
-        return self._mode
 
     @property
     def gps_fix_type(self) -> int:
@@ -261,22 +345,19 @@ class TelemetryMixin:
         """True once HOME_POSITION replaced the configured home as ENU origin."""
         return self._home_received
 
-    @property
-    def clock_ratio(self) -> float:
-        """Vehicle seconds per wall second, estimated from ``time_boot_ms`` (1 for a real vehicle)."""
-        return self._ratio
-
     def odometry(self) -> Odometry:
+        """The latest position sample with the velocity, attitude, battery and state known with it, stamped with the
+        sample's own vehicle time on the run's clock (never after :attr:`TelemetryVehicle.t`)."""
         with self._lock:
             pos = tuple(float(v) for v in self._pos)
-            geo = self._geo or enu_to_geodetic(pos[0], pos[1], pos[2], self.home)
-            t = self.t
+            geo = self._geo or enu_to_geodetic(pos[0], pos[1], pos[2], self._vehicle.home)
+            t = self._vehicle.t
             if self._pos_seq:  # the sample's own time (time_boot_ms mapped to the run's clock), never after now
-                t = min(t, max(0.0, self._pos_t - self._t_connect))
+                t = min(t, max(0.0, self._pos_t - self._t_connect()))
             return Odometry(robot_id=self.robot_id, t=t, position=pos, geodetic=geo,
                             velocity=tuple(float(v) for v in self._vel),
                             attitude=Attitude(roll=self._att[0], pitch=self._att[1], yaw=self._att[2]),
-                            battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._armed,
+                            battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._vehicle.armed,
                             in_air=self.in_air)
 
     def _queue_odometry(self) -> None:
@@ -301,56 +382,3 @@ class TelemetryMixin:
             self._event("odometry_samples_dropped", count=dropped)
         return out
 
-    def drain_events(self) -> list[dict[str, Any]]:
-        """See :meth:`~aerodaas.backends.base.VehicleBackend.drain_events`. Once an ``autopilot_failsafe`` event is
-        handed out, targets may be sent again (the caller decides: ``mavlink.on_failsafe``; offboard.py)."""
-        out = []
-        while self._events:
-            try:
-                ev = self._events.popleft()
-            except IndexError:
-                break
-            out.append(ev)
-            if ev.get("event") == "autopilot_failsafe":
-                with self._lock:
-                    self._failsafe_undelivered = max(0, self._failsafe_undelivered - 1)
-        return out
-
-    def _event(self, event: str, **fields: Any) -> None:
-        self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
-
-    def _init_telemetry(self) -> None:
-        """The telemetry state (guarded by ``_lock``): the vehicle's latest position, velocity, attitude, battery, GPS
-        and home as its streams report them (mission progress: mission.py), the odometry queue and the event queue."""
-        self._events: deque[dict[str, Any]] = deque(maxlen=2000)
-        # state (guarded by _lock)
-        self._pos = np.zeros(3)
-        self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos (telemetry.py)
-        self._pos_seq = 0  # position samples received
-        #: the odometry of each position sample not yet drained (telemetry.py drain_odometry), oldest first
-        self._odom_q: deque[Odometry] = deque(maxlen=ODOMETRY_QUEUE)
-        self._odom_q_dropped = 0  # samples pushed out of the full queue since it was last drained
-        self._odom_q_drained = False  # drained once: the run takes samples now, an overflow is a loss
-        self._vel = np.zeros(3)
-        self._est_hspeed = 0.0  # its horizontal speed, m/s (telemetry.py _set_velocity) ...
-        self._est_steady = False  # ... changed at most at 1 m/s^2 since the sample before ...
-        self._est_ms: int | None = None  # ... at this time_boot_ms
-        self._att = (0.0, 0.0, 90.0)  # roll, pitch deg; yaw ENU deg
-        self._geo: GeoPoint | None = None
-        self._rel_alt = 0.0
-        self._has_global = False
-        self._local_ned: tuple[float, ...] | None = None
-        self._local_wall = 0.0
-        self._landed_state = 0
-        self._landed_wall = 0.0
-        self._battery: float | None = None
-        self._battery_v = 0.0
-        self._gps_fix = -1
-        self._sensors: tuple[int, int, int] | None = None
-        self._home_received = False
-        self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
-        self._att_wall = 0.0
-        self._ekf_flags: int | None = None  # EKF_STATUS_REPORT (ArduPilot) / ESTIMATOR_STATUS (PX4) flags
-        self._health_seen = 0  # every SYS_STATUS health bit ever reported
-        self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
-        self._home_moved_alt = 0.0
