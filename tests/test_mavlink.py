@@ -369,27 +369,28 @@ def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(mo
     vehicle clock is extrapolated at its last rate; when time_boot_ms resumes from where it stopped, :attr:`t` goes
     on from where it got to. (It once jumped by the whole silence x the clock ratio, 28 s, leaving a gap in the
     recorded odometry: the resume event read t before the new sample's wall time was noted.)"""
-    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
     wall = [1000.0]
     monkeypatch.setattr(time, "monotonic", lambda: wall[0])
-    b._wall0, b._link_ok = wall[0], True
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
+    b._link_ok = True
     ms = 10_000
     for _ in range(50):  # 5 vehicle seconds per wall second
         wall[0] += 0.1
         ms += 500
-        b._on_boot_ms(ms)
+        b.clock.on_boot_ms(ms)
     assert 4.5 < b.clock_ratio < 5.5
     wall[0] += 3.0  # silent: the heartbeat watch declares the link lost (link.py _periodic)
-    b._link_ok, b._reanchor = False, True
+    b._link_ok = False
+    b.clock.link_lost()
     wall[0] += 3.0
     t_silent = b.t
     assert t_silent > 24.0 + 25.0  # 24.5 s of samples, then 6 s of silence extrapolated at 5x
     b._link_ok = True
     wall[0] += 0.1
-    b._on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
+    b.clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
     assert t_silent <= b.t < t_silent + 1.0
     wall[0] += 0.1
-    b._on_boot_ms(ms + 1000)
+    b.clock.on_boot_ms(ms + 1000)
     assert t_silent + 0.3 < b.t < t_silent + 1.5
     assert "vehicle_clock_resumed" in [e["event"] for e in b.drain_events()]
 
@@ -400,26 +401,25 @@ def test_a_slow_vehicle_clock_is_no_lost_link(monkeypatch):
     until its clock has run heartbeat_timeout_s past the last HEARTBEAT, or nothing timestamped arrives any more."""
     from types import SimpleNamespace as NS
 
-    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
     wall = [1000.0]
     monkeypatch.setattr(time, "monotonic", lambda: wall[0])
-    b._wall0, b._conn = wall[0], None
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
     b._send_gcs_heartbeat = lambda: None
     b._request_streams = lambda wait=True: None  # asked again when the link returns
     hb = NS(base_mode=0, custom_mode=0, type=2, autopilot=12, system_status=3, get_type=lambda: "HEARTBEAT")
     ms = 10_000
-    b._on_boot_ms(ms)
+    b.clock.on_boot_ms(ms)
     b._on_heartbeat(hb, wall[0])
     for _ in range(33):  # 3.3 wall s at 0.3x: 0.99 vehicle s, position reports every 0.1 wall s
         wall[0] += 0.1
         ms += 30
-        b._on_boot_ms(ms)
+        b.clock.on_boot_ms(ms)
         b._periodic(wall[0])
     assert b.link_ok
     for _ in range(80):  # 8 more wall s: 2.4 more vehicle s, 3.4 s past the last HEARTBEAT: missed
         wall[0] += 0.1
         ms += 30
-        b._on_boot_ms(ms)
+        b.clock.on_boot_ms(ms)
         b._periodic(wall[0])
     assert not b.link_ok
     b._on_heartbeat(hb, wall[0])

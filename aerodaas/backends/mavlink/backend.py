@@ -14,6 +14,7 @@ from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint, Odometry
 from aerodaas.backends.base import VehicleBackend
 from aerodaas.backends.mavlink.action import Readiness, VehicleAction
+from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import AutopilotFence
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
@@ -110,6 +111,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
         self._events: deque[dict[str, Any]] = deque(maxlen=2000)  # every concern's events (_event, drain_events)
         self._init_link()
+        #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
+        self.clock = VehicleClock(self.cfg, link_ok=lambda: self._link_ok,
+                                  live_since=self._live_since, event=self._event,
+                                  lock=self._lock)
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
         #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
@@ -121,12 +126,12 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
         self.commands = CommandProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
                                         target=lambda: (self._sysid, self._compid), heartbeat=self,
-                                        boot_ms=lambda: self._boot_last, heartbeat_due=self._heartbeat_due,
+                                        boot_ms=lambda: self.clock.boot_ms, heartbeat_due=self.clock.heartbeat_due,
                                         status_text_since=self._status_text_since, mode_params=self._mode_params,
                                         event=self._event)
         #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
-        self.telemetry = VehicleTelemetry(self.robot_id, vehicle=self, on_boot_ms=self._on_boot_ms,
-                                          sample_time=self._sample_time, t_connect=lambda: self._t_connect,
+        self.telemetry = VehicleTelemetry(self.robot_id, vehicle=self, on_boot_ms=self.clock.on_boot_ms,
+                                          sample_time=self.clock.sample_time, t_connect=lambda: self.clock.t_connect,
                                           was_armed=lambda: self._was_armed, arming=lambda: self.actions.arming,
                                           on_position=lambda: self.mission.on_position(),
                                           on_gnss_speed=lambda *a: self.speed_limits.on_gnss_speed(*a),
@@ -140,8 +145,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
         self.offboard = OffboardControl(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
                                         actions=self.actions, send=self._send,
-                                        target=lambda: (self._sysid, self._compid), boot_ms_out=self._boot_ms_out,
-                                        boot_ms=lambda: self._boot_last, live_since=lambda: self._boot_live,
+                                        target=lambda: (self._sysid, self._compid), boot_ms_out=self.clock.boot_ms_out,
+                                        boot_ms=lambda: self.clock.boot_ms, live_since=lambda: self.clock.live_since,
                                         last_heartbeat=lambda: self._last_hb, mode_changes=lambda: self._mode_changes,
                                         failsafe_undelivered=lambda: self._failsafe_undelivered,
                                         check_link=self._check_link, event=self._event, lock=self._lock)
@@ -279,18 +284,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._link_ok = False
         self._last_hb = 0.0
         self._hb_boot_ms = 0  # the vehicle's time_boot_ms when its latest HEARTBEAT came (link.py _periodic)
-        self._wall0 = time.monotonic()
-        self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
-        self._boot_last = 0
-        self._boot_wall = 0.0  # wall (monotonic) time of the latest time_boot_ms sample
-        self._boot_live = 0.0  # that sample was received after the link's socket was empty at this time
-        self._t_connect = 0.0
-        self._ratio = 1.0
-        self._clock_samples: deque[tuple[float, int]] = deque()
-        self._t_max = 0.0
-        self._reanchor = False  # the link was lost: the next time_boot_ms may re-anchor the clock (link.py)
-        self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
         self._hb_next = 0.0
+        self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
         # messages the shared link's queue dropped, and those lost before it by sequence number, counted from the
         # connection on (link.py _report_link_drops; the messages received then: _received_base)
         self._drops_report, self._lost_report, self._received_base = ReportedCount(), ReportedCount(), 0

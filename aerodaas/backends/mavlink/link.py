@@ -12,7 +12,7 @@ from pymavlink import mavutil
 
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
 from aerodaas.backends.mavlink.shared_link import open_link
-from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _CLOCK_STALE_S, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
 
 #: the most wall time (seconds) one round of the I/O loop spends reading a backlog before its periodic sends
 _DRAIN_S = 0.25
@@ -97,15 +97,14 @@ class LinkMixin:
                                    "(telemetry streams not configured?)")
             time.sleep(0.01)
         with self._lock:
-            self._t_connect = self._raw_t()
-            self._t_max = 0.0
+            self.clock.start()
             self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
         if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
             got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
                 self.offboard.loss_timeout_s = float(got)
             else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
-                self.offboard.loss_timeout_s = max(1.0, self._ratio)
+                self.offboard.loss_timeout_s = max(1.0, self.clock.ratio)
             self._event("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
@@ -215,7 +214,7 @@ class LinkMixin:
         while not self._stop.is_set():
             got, start = 0, time.monotonic()
             # at most a quarter of PX4's offboard-loss timeout (wall seconds at the vehicle's speed-up) between sends
-            budget = min(_DRAIN_S, 0.25 * self.offboard.loss_timeout_s / max(self._ratio, 1.0))
+            budget = min(_DRAIN_S, 0.25 * self.offboard.loss_timeout_s / max(self.clock.ratio, 1.0))
             while True:
                 try:
                     msg = conn.recv_msg()
@@ -334,7 +333,7 @@ class LinkMixin:
     def _on_heartbeat(self, msg: Any, now: float) -> None:
         with self._lock:
             self._last_hb = now
-            self._hb_boot_ms = self._boot_last
+            self._hb_boot_ms = self.clock.boot_ms
             if not self._link_ok:
                 self._link_ok = True
                 if self._ever_linked:
@@ -371,52 +370,6 @@ class LinkMixin:
         self._failsafe_undelivered += 1
         self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
-    def _on_boot_ms(self, ms: int) -> None:
-        now = time.monotonic()
-        if self._boot_ref is None or ms + 5000 < self._boot_last:  # first sample, or the autopilot rebooted
-            if self._boot_ref is not None:
-                self._event("vehicle_rebooted")
-            self._boot_ref = (ms, self._raw_t())
-            self._clock_samples.clear()
-        self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
-        resumed = False
-        if self._reanchor and self._raw_t() - self._t_connect < self._t_max - 1.0:
-            # after a link loss, the vehicle's clock stood still while ours ran on (the autopilot was stopped):
-            # go on from where :attr:`t` got to, so the recording has no step back (a short stall of our own
-            # process needs nothing: the vehicle's clock ran on meanwhile)
-            self._boot_ref = (ms, self._t_max + self._t_connect)
-            self._boot_last = ms
-            self._clock_samples.clear()
-            resumed = True
-        self._reanchor = False
-        self._boot_wall = now
-        self._boot_live = getattr(self._conn, "live_since", now)  # received after then (shared_link.py LinkPort)
-        if resumed:  # only now: the event reads :attr:`t`, which before this sample still counted the silence
-            # on top of the re-anchored clock (t jumped by the whole stop x the clock ratio: 28 s at 5x for 6 s)
-            self._event("vehicle_clock_resumed")
-        # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
-        samples = self._clock_samples
-        samples.append((now, ms))
-        while len(samples) > 2 and now - samples[0][0] > 5.0:
-            samples.popleft()
-        span = now - samples[0][0]
-        if span >= 0.2:
-            r = (ms - samples[0][1]) / 1000.0 / span
-            if 0.05 < r < 200:
-                self._ratio = r
-
-    def _sample_time(self, ms: int) -> float:
-        """``time_boot_ms`` ``ms`` of a sample on the raw vehicle clock (s): its own time when the clock's anchor is
-        not after it, else the clock's latest reading."""
-        if self._boot_ref is not None and self._boot_ref[0] <= ms:
-            return self._boot_ref[1] + (ms - self._boot_ref[0]) / 1000.0
-        return self._raw_t()
-
-    def _raw_t(self) -> float:
-        if self._boot_ref is None:
-            return time.monotonic() - self._wall0
-        return self._boot_ref[1] + (self._boot_last - self._boot_ref[0]) / 1000.0
-
     def _report_link_drops(self, now: float) -> None:
         """A ``link_messages_dropped`` event (and a warning) when the shared link's queue for this robot dropped
         messages since the last report (:data:`~.shared_link.PORT_QUEUE`: this robot's I/O fell behind what its
@@ -445,18 +398,18 @@ class LinkMixin:
             if now - buf["t"] > _STATUSTEXT_FLUSH_S:
                 self._flush_text(key)
         if now >= self._hb_next:
-            self._hb_next = now + 1.0 / max(1.0, min(self._ratio, 20.0))
+            self._hb_next = now + 1.0 / max(1.0, min(self.clock.ratio, 20.0))
             self._send_gcs_heartbeat()
         with self._lock:
             # lost only once everything received until past the deadline has been read (LinkPort.live_since): after
             # a stall of this process the heartbeats of the stall may still wait in the socket
             # (and in any case after twice the timeout: a link whose socket is never empty, e.g. a noisy serial line)
-            read_until, timeout = getattr(self._conn, "live_since", now), self.cfg.heartbeat_timeout_s
-            if self._link_ok and now - self._last_hb > timeout and self._heartbeats_missed(now) \
+            read_until, timeout = self._live_since(now), self.cfg.heartbeat_timeout_s
+            if self._link_ok and now - self._last_hb > timeout and self.clock.heartbeats_missed(now, self._hb_boot_ms) \
                     and (read_until - self._last_hb > timeout or now - self._last_hb > 2.0 * timeout):
                 self._link_ok = False
                 self._event("link_lost", silent_s=round(now - self._last_hb, 3))
-                self._reanchor = True
+                self.clock.link_lost()
             resume = self._resume_streams
             self._resume_streams = False
             sp = self.offboard.setpoint if self._link_ok else None
@@ -465,35 +418,12 @@ class LinkMixin:
         if sp is not None:
             self.offboard.send_due(sp, now)
 
-    def _heartbeats_missed(self, now: float) -> bool:
-        """No HEARTBEAT for ``heartbeat_timeout_s`` wall seconds (checked by the caller): is that a lost link? The
-        heartbeat protocol counts *expected* heartbeats that did not come (mavlink.io/en/services/heartbeat.html),
-        and an autopilot sends one per second of its own clock (PX4: the constant-rate 1 Hz HEARTBEAT stream,
-        src/modules/mavlink/mavlink_main.cpp; ArduPilot: its 1 Hz scheduler task). A simulated autopilot that runs
-        slower than real time (PX4 SIH lock-step, three of them on a loaded 2-core machine: heartbeats 3.0-3.7 s
-        of wall time apart while position reports went on) has missed none until its clock, as its timestamped
-        messages show it, has run ``heartbeat_timeout_s`` past its last HEARTBEAT. Lost when those messages stopped
-        too (a stopped process, a cut link) or the vehicle's clock ran on that long without a heartbeat. Caller
-        holds ``_lock``."""
-        timeout = self.cfg.heartbeat_timeout_s
-        if self._boot_ref is None or now - self._boot_wall > timeout:
-            return True
-        return (self._boot_last - self._hb_boot_ms) / 1000.0 > timeout
-
-
-    def _heartbeat_due(self, started: float, boot0: int, wait_s: float) -> bool:
-        """Has a HEARTBEAT been due since ``started`` (monotonic), when the vehicle's time_boot_ms was ``boot0``:
-        ``wait_s`` wall seconds passed, and the vehicle's own clock ran min(``wait_s``, ``heartbeat_timeout_s``)
-        too (an autopilot sends HEARTBEAT at 1 Hz of its clock, which a simulator may run slower than real time;
-        see link.py ``_heartbeats_missed``; a clock that stopped ends the wait through link loss)."""
-        now = time.monotonic()
-        if now - started < wait_s:
-            return False
-        if self._boot_ref is None or now - self._boot_wall > self.cfg.heartbeat_timeout_s:
-            return True  # no clock of the vehicle's to go by: wall time alone
-        return (self._boot_last - boot0) / 1000.0 >= min(wait_s, self.cfg.heartbeat_timeout_s)
-
     # ------------------------------------------------------------------ sending
+    def _live_since(self, now: float) -> float:
+        """Everything received until this wall time has been read (shared_link.py ``LinkPort.live_since``; ``now``
+        without a connection)."""
+        return getattr(self._conn, "live_since", now)
+
     def _send(self, fn: Callable[[Any], None]) -> None:
         conn = self._conn
         if conn is None:
@@ -510,9 +440,6 @@ class LinkMixin:
                                                       M.MAV_STATE_ACTIVE))
         except (LinkLost, Exception):  # noqa: BLE001 - the link may be down; the heartbeat watch reports it
             pass
-
-    def _boot_ms_out(self) -> int:
-        return int((time.monotonic() - self._wall0) * 1000) & 0xFFFFFFFF
 
     def _check_link(self, command: str) -> None:
         if self._conn is None:
@@ -600,21 +527,14 @@ class LinkMixin:
 
     @property
     def clock_ratio(self) -> float:
-        """Vehicle seconds per wall second, estimated from ``time_boot_ms`` (1 for a real vehicle)."""
-        return self._ratio
+        """Vehicle seconds per wall second, estimated from ``time_boot_ms`` (1 for a real vehicle;
+        :attr:`VehicleClock.ratio`)."""
+        return self.clock.ratio
 
     @property
     def t(self) -> float:
-        with self._lock:
-            t = self._raw_t() - self._t_connect
-            silent = time.monotonic() - self._boot_wall
-            if self._boot_ref is not None and (not self._link_ok or silent > _CLOCK_STALE_S):
-                # nothing timestamped arrives (the link is down, or not yet declared down): the vehicle's clock
-                # goes on at its last rate, so odometry and control ticks go on before link loss is declared
-                t += silent * self._ratio
-            t = max(t, self._t_max)
-            self._t_max = t
-            return t
+        """Vehicle seconds since :meth:`connect` (:attr:`VehicleClock.t`)."""
+        return self.clock.t
 
     def step(self, dt: float) -> None:
         """Telemetry arrives on the I/O thread; this reports that thread's failure (BackendError) and lowers the
