@@ -22,6 +22,7 @@ from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
+from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import Handler, VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer, Wire
 from aerodaas.navigation.geofence import GeofenceConfig
@@ -111,6 +112,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
         self._events: deque[dict[str, Any]] = deque(maxlen=2000)  # every concern's events (_event, drain_events)
         self._init_link()
+        #: the autopilot's status texts (statustext.py): reassembled, quoted in refusals, reported
+        self.status_texts = StatusTexts(self.robot_id, event=self._event)
         #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
         self.clock = VehicleClock(self.cfg, link_ok=lambda: self._link_ok,
                                   live_since=self._live_since, event=self._event,
@@ -127,7 +130,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.commands = CommandProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
                                         target=lambda: (self._sysid, self._compid), heartbeat=self,
                                         boot_ms=lambda: self.clock.boot_ms, heartbeat_due=self.clock.heartbeat_due,
-                                        status_text_since=self._status_text_since, mode_params=self._mode_params,
+                                        status_text_since=self.status_texts.since, mode_params=self._mode_params,
                                         event=self._event)
         #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
         self.telemetry = VehicleTelemetry(self.robot_id, vehicle=self, on_boot_ms=self.clock.on_boot_ms,
@@ -153,7 +156,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
         self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
                                          target=lambda: (self._sysid, self._compid),
-                                         status_text_since=self._status_text_since, event=self._event,
+                                         status_text_since=self.status_texts.since, event=self._event,
                                          wire_version=lambda: getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0"))
         #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
         self.mission = AutopilotMission(self.robot_id, vehicle=self, commands=self.commands, transfers=self.transfers,
@@ -206,7 +209,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def _readiness(self) -> Readiness:
         """The reports readiness is judged from (:meth:`VehicleTelemetry.readiness` with the link's). Caller holds
         ``_lock``."""
-        return self.telemetry.readiness(self._system_status, self._ekf_using_gps,
+        return self.telemetry.readiness(self._system_status, self.status_texts.ekf_using_gps,
                                         M.MAVLINK_MSG_ID_EKF_STATUS_REPORT in self._streams_refused
                                         or self._stream_legacy)
 
@@ -265,7 +268,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
 
     def _init_link(self) -> None:
         """The link's state (link.py, the backend's own): the connection and I/O thread, the autopilot's identity
-        and HEARTBEAT (mode, armed), status texts, the vehicle clock, link loss and the stream requests."""
+        and HEARTBEAT (mode, armed), link loss and the stream requests."""
         self._conn: Any = None
         self._sysid = self._compid = 0
         self._send_lock = threading.Lock()
@@ -273,9 +276,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._io: threading.Thread | None = None
         self._io_error: BaseException | None = None
         self._recent: deque[tuple] = deque(maxlen=32)  # (sys, comp, seq, msgid, crc) for duplicate packets
-        self._texts: deque[tuple[float, int, str]] = deque(maxlen=50)
-        #: long STATUSTEXTs being reassembled: (component, id) -> {"t": first chunk, "severity", "parts": {seq: text}}
-        self._chunks: dict[tuple[int, int], dict[str, Any]] = {}
         self._ap_modes: dict[str, int] = {}
         self._armed = False
         self._mode = ""
@@ -295,7 +295,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self._stream_legacy = False
         self._ever_linked = False
         self._resume_streams = False
-        self._ekf_using_gps = False  # ArduPilot's "EKFn IMUm is using GPS" seen
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
 
     # the command protocol (aerodaas.backends.mavlink.command.CommandProtocol)

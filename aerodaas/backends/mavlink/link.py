@@ -12,7 +12,7 @@ from pymavlink import mavutil
 
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
 from aerodaas.backends.mavlink.shared_link import open_link
-from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _STATUSTEXT_FLUSH_S, _STATUSTEXT_LEN, _TELEMETRY
+from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _TELEMETRY
 
 #: the most wall time (seconds) one round of the I/O loop spends reading a backlog before its periodic sends
 _DRAIN_S = 0.25
@@ -259,7 +259,7 @@ class LinkMixin:
                 self._on_heartbeat(msg, now)
             return
         if mtype == "STATUSTEXT":
-            self._on_statustext(msg, now)
+            self.status_texts.on_statustext(msg, now)
             return
         if self._compid and src_comp != self._compid:
             return
@@ -275,60 +275,6 @@ class LinkMixin:
         if handler is not None:
             with self._lock:
                 handler(msg)
-
-    def _on_statustext(self, msg: Any, now: float) -> None:
-        """STATUSTEXT (common.xml): ``id`` 0 is a complete text; a non-zero ``id`` marks chunks of one long text
-        (MAVLink 2 extensions ``id``, ``chunk_seq`` from 0), ended by a chunk shorter than the 50-byte field
-        (pymavlink cuts the text at its NUL) or, if that one is lost, by :data:`_STATUSTEXT_FLUSH_S`. Chunks are
-        joined as bytes and decoded (UTF-8) once whole, so a character split across two chunks survives."""
-        raw = msg.text if isinstance(msg.text, bytes) else str(msg.text).encode("utf-8", errors="replace")
-        raw = raw.split(b"\x00", 1)[0]
-        sid = getattr(msg, "id", 0) or 0
-        if not sid:
-            self._emit_text(now, msg.severity, raw.decode("utf-8", errors="replace"))
-            return
-        key = (msg.get_srcComponent(), sid)
-        buf = self._chunks.get(key)
-        seq = getattr(msg, "chunk_seq", 0) or 0
-        if buf is not None and seq in buf["parts"]:  # the id came round again: the old text lost its last chunk
-            self._flush_text(key)
-            buf = None
-        if buf is None:
-            buf = self._chunks[key] = {"t": now, "severity": msg.severity, "parts": {}}
-        buf["parts"][seq] = raw
-        if len(raw) < _STATUSTEXT_LEN:
-            self._flush_text(key)
-
-    def _flush_text(self, key: tuple[int, int]) -> None:
-        buf = self._chunks.pop(key, None)
-        if buf is not None:
-            whole = b"".join(buf["parts"][k] for k in sorted(buf["parts"]))
-            self._emit_text(buf["t"], buf["severity"], whole.decode("utf-8", errors="replace"))
-
-    def _emit_text(self, t: float, severity: int, text: str) -> None:
-        """One whole status text: kept for :class:`CommandRefused`, a ``status_text`` event and a log line.
-        ArduPilot's "EKFn IMUm is using GPS" also marks the EKF's position estimate as ready (action.py)."""
-        text = text.strip()
-        if "is using GPS" in text and text.startswith("EKF"):
-            self._ekf_using_gps = True
-        self._texts.append((t, severity, text))
-        self._event("status_text", severity=_enum_name("MAV_SEVERITY", severity), text=text)
-        log.log(_log_level(severity), "%s: %s", self.robot_id, text)
-
-    def _status_text_since(self, since: float, wait_s: float = 0.3) -> str:
-        """The autopilot's latest STATUSTEXT sent since ``since`` (waiting up to ``wait_s`` for one, and up to
-        :data:`_STATUSTEXT_FLUSH_S` longer while a chunked one begun since then is incomplete), else the latest of
-        the 2 s before."""
-        end = time.monotonic() + wait_s
-        while True:
-            texts = [t for t in list(self._texts) if t[0] >= since]
-            pending = any(b["t"] >= since for b in list(self._chunks.values()))
-            if (texts and not pending) or time.monotonic() >= end + (_STATUSTEXT_FLUSH_S if pending else 0.0):
-                break
-            time.sleep(0.01)
-        if not texts:
-            texts = [t for t in list(self._texts) if t[0] >= since - 2.0]
-        return texts[-1][2] if texts else ""
 
     def _on_heartbeat(self, msg: Any, now: float) -> None:
         with self._lock:
@@ -364,7 +310,7 @@ class LinkMixin:
             return
         if asked is not None and asked[0] == mode:
             return
-        texts = [t for (ts, _sev, t) in self._texts if now - ts <= 2.0]
+        texts = self.status_texts.recent(now, 2.0)
         self.failsafe = {"mode": mode, "previous": previous, "t": round(self.t, 3), "text": "; ".join(texts[-3:])}
         self.offboard.stop_quiet()
         self._failsafe_undelivered += 1
@@ -394,9 +340,7 @@ class LinkMixin:
 
     def _periodic(self, now: float) -> None:
         self._report_link_drops(now)
-        for key, buf in list(self._chunks.items()):
-            if now - buf["t"] > _STATUSTEXT_FLUSH_S:
-                self._flush_text(key)
+        self.status_texts.flush_stale(now)
         if now >= self._hb_next:
             self._hb_next = now + 1.0 / max(1.0, min(self.clock.ratio, 20.0))
             self._send_gcs_heartbeat()
