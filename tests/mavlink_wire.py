@@ -38,7 +38,7 @@ class WiredDrone:
         cfg = RobotConfig(id="q", backend="mavlink", home=HOME, mavlink=MavlinkConfig(),
                           sensors=[{"id": "odom", "type": "odometry", "properties": {"rate_hz": rate_hz}}])
         self.backend = MavlinkBackend(cfg)
-        self.backend._link_ok, self.backend._sysid, self.backend._compid = True, 1, 1
+        self.backend.link.attach(1, 1)
         self.recorder = MemoryRecorder()
         self.drone = DroneComponent("q/drone", cfg.model_dump(mode="json"), None, None, self.recorder, 0, 0, [], [],
                                     backend=self.backend)
@@ -47,7 +47,7 @@ class WiredDrone:
     def send(self, m) -> None:
         buf = m.pack(self._enc)
         self._enc.seq = (self._enc.seq + 1) % 256
-        self.backend._dispatch(self._dec.decode(bytearray(buf)), time.monotonic())
+        self.backend.link.dispatch(self._dec.decode(bytearray(buf)), time.monotonic())
 
     def position(self, ms: int, north_m: float = 0.0, alt_m: float = 2.0) -> None:
         """GLOBAL_POSITION_INT at ``time_boot_ms`` ``ms``, ``north_m`` metres north of home, ``alt_m`` above it."""

@@ -282,7 +282,7 @@ def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     events: list = []
     assert run_until(b, lambda: events.extend(b.drain_events()) or any(
         e["event"] == "link_messages_lost" for e in events), 10)
-    assert b._conn.lost == 2 and b._conn.received > 20, (b._conn.lost, b._conn.received)
+    assert b.link.port.lost == 2 and b.link.port.received > 20, (b.link.port.lost, b.link.port.received)
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
@@ -369,30 +369,33 @@ def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(mo
     vehicle clock is extrapolated at its last rate; when time_boot_ms resumes from where it stopped, :attr:`t` goes
     on from where it got to. (It once jumped by the whole silence x the clock ratio, 28 s, leaving a gap in the
     recorded odometry: the resume event read t before the new sample's wall time was noted.)"""
+    from aerodaas.backends.mavlink.clock import VehicleClock
+
     wall = [1000.0]
     monkeypatch.setattr(time, "monotonic", lambda: wall[0])
-    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
-    b._link_ok = True
+    link_ok, events = [True], []
+    clock = VehicleClock(MavlinkConfig(), link_ok=lambda: link_ok[0], live_since=lambda now: now,
+                         event=lambda name, **fields: events.append(name), lock=threading.RLock())
     ms = 10_000
     for _ in range(50):  # 5 vehicle seconds per wall second
         wall[0] += 0.1
         ms += 500
-        b.clock.on_boot_ms(ms)
-    assert 4.5 < b.clock_ratio < 5.5
-    wall[0] += 3.0  # silent: the heartbeat watch declares the link lost (link.py _periodic)
-    b._link_ok = False
-    b.clock.link_lost()
+        clock.on_boot_ms(ms)
+    assert 4.5 < clock.ratio < 5.5
+    wall[0] += 3.0  # silent: the heartbeat watch declares the link lost (link.py periodic)
+    link_ok[0] = False
+    clock.link_lost()
     wall[0] += 3.0
-    t_silent = b.t
+    t_silent = clock.t
     assert t_silent > 24.0 + 25.0  # 24.5 s of samples, then 6 s of silence extrapolated at 5x
-    b._link_ok = True
+    link_ok[0] = True
     wall[0] += 0.1
-    b.clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
-    assert t_silent <= b.t < t_silent + 1.0
+    clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
+    assert t_silent <= clock.t < t_silent + 1.0
     wall[0] += 0.1
-    b.clock.on_boot_ms(ms + 1000)
-    assert t_silent + 0.3 < b.t < t_silent + 1.5
-    assert "vehicle_clock_resumed" in [e["event"] for e in b.drain_events()]
+    clock.on_boot_ms(ms + 1000)
+    assert t_silent + 0.3 < clock.t < t_silent + 1.5
+    assert "vehicle_clock_resumed" in events
 
 
 def test_a_slow_vehicle_clock_is_no_lost_link(monkeypatch):
@@ -404,28 +407,27 @@ def test_a_slow_vehicle_clock_is_no_lost_link(monkeypatch):
     wall = [1000.0]
     monkeypatch.setattr(time, "monotonic", lambda: wall[0])
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
-    b._send_gcs_heartbeat = lambda: None
-    b._request_streams = lambda wait=True: None  # asked again when the link returns
+    b.link.request_streams = lambda wait=True: None  # asked again when the link returns
     hb = NS(base_mode=0, custom_mode=0, type=2, autopilot=12, system_status=3, get_type=lambda: "HEARTBEAT")
     ms = 10_000
     b.clock.on_boot_ms(ms)
-    b._on_heartbeat(hb, wall[0])
+    b.link.on_heartbeat(hb, wall[0])
     for _ in range(33):  # 3.3 wall s at 0.3x: 0.99 vehicle s, position reports every 0.1 wall s
         wall[0] += 0.1
         ms += 30
         b.clock.on_boot_ms(ms)
-        b._periodic(wall[0])
+        b.link.periodic(wall[0])
     assert b.link_ok
     for _ in range(80):  # 8 more wall s: 2.4 more vehicle s, 3.4 s past the last HEARTBEAT: missed
         wall[0] += 0.1
         ms += 30
         b.clock.on_boot_ms(ms)
-        b._periodic(wall[0])
+        b.link.periodic(wall[0])
     assert not b.link_ok
-    b._on_heartbeat(hb, wall[0])
+    b.link.on_heartbeat(hb, wall[0])
     assert b.link_ok
     wall[0] += 3.1  # nothing at all arrives: lost after the wall timeout, as before
-    b._periodic(wall[0])
+    b.link.periodic(wall[0])
     assert not b.link_ok
 
 
@@ -435,8 +437,14 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
     MISSION_CURRENT(k) that may still follow is no restart, and every item is reported reached once."""
     from types import SimpleNamespace as NS
 
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
-    b.autopilot, b._mode = "px4", "MISSION"
+    b.link.autopilot = "px4"  # and a HEARTBEAT in PX4's AUTO.MISSION (main mode 4, sub mode 4)
+    b.link.on_heartbeat(NS(base_mode=M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode=(4 << 16) | (4 << 24), type=2,
+                           autopilot=M.MAV_AUTOPILOT_PX4, system_status=3, get_type=lambda: "HEARTBEAT"), 0.0)
+    assert b.mode == "MISSION"
+    b.drain_events()
     # wire 0 take-off, 1 and 2 waypoints (ENU x, y, radius), 3 land; all autocontinue
     b.mission._waypoints = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
     b.mission._next = (frozenset({0, 1, 2, 3}), 4)
@@ -544,7 +552,7 @@ def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
             emu.inject(data)
             time.sleep(0.02)
     assert run_until(b, lambda: b.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
-    assert emu.snapshot()["links"] == 1 and b.link_ok and b._io is not None and b._io.is_alive()
+    assert emu.snapshot()["links"] == 1 and b.link_ok and b.link.io_alive
     b.step(0.05)  # raises if the I/O thread failed
     events = b.drain_events()
     assert not [e for e in events if e["event"] in ("receive_error", "armed", "mode", "link_lost")], events

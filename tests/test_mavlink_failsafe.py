@@ -99,7 +99,7 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     b.goto((0.0, 30.0, 2.0))
     assert run_until(b, lambda: b.mode == "OFFBOARD" and b.position[1] > 1.0, 15), (b.mode, b.position)
     b.drain_events()
-    gate, port = threading.Event(), b._conn  # stall the backend's receive path, as a stopped process would
+    gate, port = threading.Event(), b.link.port  # stall the backend's receive path, as a stopped process would
     real = port.recv_msg
 
     def stalled():
@@ -145,7 +145,7 @@ def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
     b.goto((0.0, 30.0, 2.0))
     assert run_until(b, lambda: b.mode == "OFFBOARD", 15), b.mode
     b.drain_events()
-    gate, port = threading.Event(), b._conn
+    gate, port = threading.Event(), b.link.port
     real = port.recv_msg
 
     def stalled():

@@ -66,7 +66,7 @@ def test_three_vehicles_on_one_link_each_flies_its_own_target(fleet, autopilot):
             backends.append(b)
             b.connect(timeout_s=20)
         by_id = {b.robot_id: b for b in backends}
-        assert [by_id[r]._sysid for r in ("r1", "r2", "r3")] == [1, 2, 3]
+        assert [by_id[r].link.target[0] for r in ("r1", "r2", "r3")] == [1, 2, 3]
         # one socket for the three: one link object in this process, three ports on it
         links = shared_link.links()
         assert list(links) == [MavlinkConfig(connection=conn).link_key()]
@@ -112,7 +112,7 @@ def test_a_system_id_is_claimed_once_and_a_missing_one_times_out_naming_what_was
             c.connect(timeout_s=2)
         d = _backend("d", conn, "auto")
         d.connect(timeout_s=20)
-        assert d._sysid == 1  # the one 'a' did not take
+        assert d.link.target[0] == 1  # the one 'a' did not take
         d.close()
     finally:
         a.close()
@@ -232,14 +232,14 @@ def test_messages_a_shared_link_drops_are_reported_as_events():
     from aerodaas.config import MavlinkConfig, RobotConfig
 
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig()))
-    b._conn = NS(dropped=0)
-    b._report_link_drops(100.0)
+    b.link.port = NS(dropped=0)
+    b.link.losses.report(b.link.port, 100.0)
     assert [e for e in b.drain_events() if e["event"] == "link_messages_dropped"] == []
-    b._conn.dropped = 7
-    b._report_link_drops(101.0)
-    b._conn.dropped = 9
-    b._report_link_drops(102.0)  # within 5 s of the last report: held back
-    b._report_link_drops(106.5)
+    b.link.port.dropped = 7
+    b.link.losses.report(b.link.port, 101.0)
+    b.link.port.dropped = 9
+    b.link.losses.report(b.link.port, 102.0)  # within 5 s of the last report: held back
+    b.link.losses.report(b.link.port, 106.5)
     ev = [e for e in b.drain_events() if e["event"] == "link_messages_dropped"]
     assert [(e["dropped"], e["total"]) for e in ev] == [(7, 7), (2, 9)]
 
@@ -255,7 +255,6 @@ def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicl
     from pymavlink.dialects.v20 import ardupilotmega as mav2
 
     from aerodaas.backends.mavlink import MavlinkBackend
-    from aerodaas.backends.mavlink import link as link_mod
 
     def wire(sysid: int, compid: int, seqs: list[int]) -> list:
         enc, dec = mav2.MAVLink(None, srcSystem=sysid, srcComponent=compid), mav2.MAVLink(None)
@@ -285,15 +284,14 @@ def test_messages_lost_before_the_link_are_counted_by_sequence_number_per_vehicl
         link.close()
 
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig()))
-    b._conn = NS(dropped=0, received=100, lost=3)
-    # what the link had counted for this system id before this connection (as connect() sets it)
-    b._lost_report, b._received_base = link_mod.ReportedCount(3), 100
-    b._report_link_drops(100.0)
-    b._conn.received, b._conn.lost = 190, 13
-    b._report_link_drops(101.0)
-    b._conn.received, b._conn.lost = 290, 15
-    b._report_link_drops(102.0)  # within 5 s of the last report: held back
-    b._report_link_drops(106.5)
+    b.link.port = NS(dropped=0, received=100, lost=3)
+    b.link.losses.count_from(b.link.port)  # what the link had counted for this system id before, as connect() does
+    b.link.losses.report(b.link.port, 100.0)
+    b.link.port.received, b.link.port.lost = 190, 13
+    b.link.losses.report(b.link.port, 101.0)
+    b.link.port.received, b.link.port.lost = 290, 15
+    b.link.losses.report(b.link.port, 102.0)  # within 5 s of the last report: held back
+    b.link.losses.report(b.link.port, 106.5)
     ev = [e for e in b.drain_events() if e["event"] == "link_messages_lost"]
     assert [(e["lost"], e["total"], e["received"], e["lost_pct"]) for e in ev] == [(10, 10, 90, 10.0),
                                                                                   (2, 12, 190, 5.94)]

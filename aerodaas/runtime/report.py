@@ -303,8 +303,8 @@ def _speed_margin_lines(events: list[dict]) -> list[str]:
 
 
 def _link_lines(events: list[dict]) -> list[str]:
-    """What the MAVLink backend counted of its link (aerodaas/backends/mavlink/link.py ``_report_link_drops``): the
-    vehicle's messages lost before this process by their sequence numbers, and those its shared link's queue
+    """What the MAVLink backend counted of its link (aerodaas/backends/mavlink/shared_link.py
+    ``PortLosses.report``): the vehicle's messages lost before this process by their sequence numbers, and those its shared link's queue
     dropped, from the last report of each (reports come at most every 5 s: the counts are lower bounds)."""
     out = []
     e = _last(events, "link_messages_lost")

@@ -30,9 +30,11 @@ arming, disarming, take-off), ``backend.offboard`` (:class:`~.offboard.OffboardC
 targets, hold/land/RTL, safe end), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight),
 ``backend.telemetry`` (:class:`~.telemetry.VehicleTelemetry`: the state the streams report, its message handlers
-in an explicit table). The others are still mix-ins of :class:`MavlinkBackend`,
-each declaring its state in its ``_init_<concern>``: :mod:`.link` (connection,
-autopilot HEARTBEAT, I/O thread, vehicle clock, streams, close). Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+in an explicit table), ``backend.link`` (:class:`~.link.MavlinkLink`: connection, autopilot HEARTBEAT, I/O thread,
+dispatch, stream requests), ``backend.clock`` (:class:`~.clock.VehicleClock`: the vehicle clock from
+``time_boot_ms``), ``backend.status_texts`` (:class:`~.statustext.StatusTexts`). No concern is a mix-in any more:
+:class:`MavlinkBackend` holds them and keeps the :class:`~aerodaas.backends.base.VehicleBackend` surface, connect and
+close. Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

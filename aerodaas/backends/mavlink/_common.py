@@ -45,7 +45,7 @@ _TELEMETRY = ((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, None), (M.MAVLINK_MSG_ID_LO
 #: per autopilot, the estimator report that says when it has a position (action.py readiness), 2 Hz
 _ESTIMATOR_STREAM = {"ardupilot": (M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 2.0),
                      "px4": (M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, 2.0)}
-#: wall seconds without a timestamped message after which the vehicle clock is extrapolated (link.py)
+#: wall seconds without a timestamped message after which the vehicle clock is extrapolated (clock.py)
 _CLOCK_STALE_S = 0.5
 _LEGACY_STREAMS = ((M.MAV_DATA_STREAM_EXTENDED_STATUS, 2.0), (M.MAV_DATA_STREAM_POSITION, None),
                    (M.MAV_DATA_STREAM_EXTRA1, None), (M.MAV_DATA_STREAM_EXTRA3, 1.0))

@@ -1,7 +1,8 @@
 """The MAVLink vehicle backend: one class holding the concern objects (commands, parameters, mission transfers, mission,
-actions, offboard, speed limits, telemetry, fence, gimbal) and the link mix-in (see the package docstring)."""
+actions, offboard, speed limits, telemetry, fence, gimbal, link, clock, status texts; see the package docstring)."""
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import deque
@@ -12,13 +13,13 @@ import numpy as np
 from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint, Odometry
-from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.base import BackendError, VehicleBackend
 from aerodaas.backends.mavlink.action import Readiness, VehicleAction
 from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import AutopilotFence
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
-from aerodaas.backends.mavlink.link import LinkMixin, ReportedCount
+from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
@@ -29,7 +30,7 @@ from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
-class MavlinkBackend(LinkMixin, VehicleBackend):
+class MavlinkBackend(VehicleBackend):
     """An ArduPilot Copter or PX4 multicopter reached over MAVLink (settings: :class:`~aerodaas.config.MavlinkConfig`).
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
@@ -105,62 +106,54 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         super().__init__(cfg.id, cfg.home)
         self.cfg: MavlinkConfig = self.options(cfg)
         self.config_home: GeoPoint = cfg.home
-        self.autopilot: Literal["ardupilot", "px4"] | None = None
-        self.vehicle_type: str = ""
-        #: every message the receive path saw, unknown and malformed ones included
-        self.messages_received = 0
         self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
         self._events: deque[dict[str, Any]] = deque(maxlen=2000)  # every concern's events (_event, drain_events)
         self._init_link()
-        #: the autopilot's status texts (statustext.py): reassembled, quoted in refusals, reported
-        self.status_texts = StatusTexts(self.robot_id, event=self._event)
-        #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
-        self.clock = VehicleClock(self.cfg, link_ok=lambda: self._link_ok,
-                                  live_since=self._live_since, event=self._event,
-                                  lock=self._lock)
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
         #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
         self.safety = cfg.safety
         #: the parameter protocol (params.py), talking to the link through what it is given
-        self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
-                                            target=lambda: (self._sysid, self._compid),
+        self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self.link.send,
+                                            check_link=self.link.check_link, target=lambda: self.link.target,
                                             is_px4=lambda: self.autopilot == "px4")
         #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
-        self.commands = CommandProtocol(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
-                                        target=lambda: (self._sysid, self._compid), heartbeat=self,
+        self.commands = CommandProtocol(self.robot_id, self.cfg, send=self.link.send, check_link=self.link.check_link,
+                                        target=lambda: self.link.target, heartbeat=self,
                                         boot_ms=lambda: self.clock.boot_ms, heartbeat_due=self.clock.heartbeat_due,
-                                        status_text_since=self.status_texts.since, mode_params=self._mode_params,
+                                        status_text_since=self.status_texts.since, mode_params=self.link.mode_params,
                                         event=self._event)
         #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
         self.telemetry = VehicleTelemetry(self.robot_id, vehicle=self, on_boot_ms=self.clock.on_boot_ms,
                                           sample_time=self.clock.sample_time, t_connect=lambda: self.clock.t_connect,
-                                          was_armed=lambda: self._was_armed, arming=lambda: self.actions.arming,
+                                          was_armed=lambda: self.link.was_armed, arming=lambda: self.actions.arming,
                                           on_position=lambda: self.mission.on_position(),
                                           on_gnss_speed=lambda *a: self.speed_limits.on_gnss_speed(*a),
                                           event=self._event, lock=self._lock)
         #: readiness, arming, disarming, take-off (action.py)
         self.actions = VehicleAction(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
-                                     check_link=self._check_link, event=self._event, lock=self._lock,
+                                     check_link=self.link.check_link, event=self._event, lock=self._lock,
                                      readiness=self._readiness, home_for_flight=self.telemetry.home_for_flight,
                                      fix_altitude_reference=self.telemetry.fix_altitude_reference,
                                      stop_setpoints=self._stop_setpoints)
         #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
         self.offboard = OffboardControl(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
-                                        actions=self.actions, send=self._send,
-                                        target=lambda: (self._sysid, self._compid), boot_ms_out=self.clock.boot_ms_out,
+                                        actions=self.actions, send=self.link.send,
+                                        target=lambda: self.link.target, boot_ms_out=self.clock.boot_ms_out,
                                         boot_ms=lambda: self.clock.boot_ms, live_since=lambda: self.clock.live_since,
-                                        last_heartbeat=lambda: self._last_hb, mode_changes=lambda: self._mode_changes,
-                                        failsafe_undelivered=lambda: self._failsafe_undelivered,
-                                        check_link=self._check_link, event=self._event, lock=self._lock)
+                                        last_heartbeat=lambda: self.link.last_heartbeat,
+                                        mode_changes=lambda: self.link.mode_changes,
+                                        failsafe_undelivered=lambda: self.link.failsafe_undelivered,
+                                        check_link=self.link.check_link, event=self._event, lock=self._lock)
         #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
-        self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self._send, check_link=self._check_link,
-                                         target=lambda: (self._sysid, self._compid),
+        self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self.link.send,
+                                         check_link=self.link.check_link, target=lambda: self.link.target,
                                          status_text_since=self.status_texts.since, event=self._event,
-                                         wire_version=lambda: getattr(self._conn.mav, "WIRE_PROTOCOL_VERSION", "2.0"))
+                                         wire_version=lambda: getattr(self.link.port.mav, "WIRE_PROTOCOL_VERSION",
+                                                                      "2.0"))
         #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
         self.mission = AutopilotMission(self.robot_id, vehicle=self, commands=self.commands, transfers=self.transfers,
-                                        check_link=self._check_link, event=self._event, lock=self._lock,
+                                        check_link=self.link.check_link, event=self._event, lock=self._lock,
                                         pin_altitude_reference=self.actions.pin_altitude_reference)
         #: the vehicle's own speed limits for ``limits``, over the parameter protocol (params.py)
         self.speed_limits = SpeedLimits(self.robot_id, self.limits, params=self.parameters, vehicle=self,
@@ -170,22 +163,172 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: the vehicle's own geofence and rally points (fence.py), over the parameter protocol and the transfers
         self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
                                     transfers=self.transfers, autopilot=lambda: self.autopilot,
-                                    vehicle_time=lambda: self.t, check_link=self._check_link, event=self._event)
+                                    vehicle_time=lambda: self.t, check_link=self.link.check_link, event=self._event)
         from aerodaas.backends.mavlink.camera import CameraFinder
 
-        self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py _dispatch
+        self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py dispatch
         #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
         self.gimbal = GimbalConcern(self, cfg.gimbal)
-        self._handlers = self._message_handlers()
+        self.link.handlers = self._message_handlers()
+
+    def _init_link(self) -> None:
+        """The link's concerns: the status texts, the vehicle clock and the link itself (link.py). The link reaches
+        the concerns made after it (commands, transfers, cameras, offboard, gimbal) through the callables given."""
+        #: the autopilot's status texts (statustext.py): reassembled, quoted in refusals, reported
+        self.status_texts = StatusTexts(self.robot_id, event=self._event)
+        #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
+        self.clock = VehicleClock(self.cfg, link_ok=lambda: self.link.link_ok,
+                                  live_since=lambda now: self.link.live_since(now), event=self._event, lock=self._lock)
+        #: the connection, the autopilot's HEARTBEAT, the I/O thread and the stream requests (link.py)
+        self.link = MavlinkLink(self.robot_id, self.cfg, clock=self.clock, texts=self.status_texts, event=self._event,
+                                lock=self._lock, on_command_ack=lambda now, m: self.commands.on_command_ack(now, m),
+                                on_mission_message=lambda m: self.transfers.offer(m),
+                                on_component_message=lambda m: self._cameras.on_message(m),
+                                command_long=self.command_long, mode_asked=lambda: self.commands.mode_asked,
+                                setpoint=lambda: self.offboard.setpoint,
+                                send_setpoint=lambda sp, now: self.offboard.send_due(sp, now),
+                                stop_setpoints=lambda: self.offboard.stop_quiet(),
+                                loss_timeout_s=lambda: self.offboard.loss_timeout_s,
+                                extra_streams=lambda: self.gimbal.streams())
 
     def _message_handlers(self) -> dict[str, Handler]:
-        """The handler of each message type the I/O thread hands on under ``_lock`` (link.py ``_dispatch``; HEARTBEAT,
+        """The handler of each message type the I/O thread hands on under ``_lock`` (link.py ``dispatch``; HEARTBEAT,
         STATUSTEXT, COMMAND_ACK and the mission protocol's messages are routed before this table)."""
         return {**self.telemetry.handlers(), "PARAM_VALUE": self.parameters.on_param_value,
                 "MISSION_CURRENT": self.mission.on_mission_current,
                 "MISSION_ITEM_REACHED": self.mission.on_mission_item_reached,
                 "GIMBAL_DEVICE_ATTITUDE_STATUS": self.gimbal.on_message,
                 "GIMBAL_MANAGER_INFORMATION": self.gimbal.on_message}
+
+    # the link (aerodaas.backends.mavlink.link.MavlinkLink) and the vehicle clock (clock.VehicleClock)
+    def connect(self, timeout_s: float | None = None) -> None:
+        """Open the link (:meth:`MavlinkLink.open`: the autopilot's HEARTBEAT, its identity, the I/O thread, the
+        telemetry streams and HOME_POSITION requested), wait for the first SYS_STATUS, then start the run's clock;
+        on PX4 read COM_OF_LOSS_T, and make the vehicle's speed limits (``set_speed_limits``) and fence
+        (``mavlink.fence.upload``) the robot's. Raises :class:`BackendError` after ``timeout_s`` (default
+        ``connect_timeout_s``) seconds, naming the connection string; ValueError for a vehicle that is not a
+        multirotor or an autopilot that cannot be identified; what applying the limits or the fence raises."""
+        timeout = self.cfg.connect_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout
+        self.link.open(deadline, timeout)
+        while True:
+            with self._lock:
+                ready = self.telemetry.sys_status_seen
+            if ready:
+                break
+            if time.monotonic() > deadline:
+                self.close()
+                raise BackendError(f"robot {self.robot_id!r}: mavlink connection {self.cfg.connection!r}: the "
+                                   f"autopilot sent HEARTBEAT but no SYS_STATUS within {timeout:g} s "
+                                   "(telemetry streams not configured?)")
+            time.sleep(0.01)
+        with self._lock:
+            self.clock.start()
+            self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
+        if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
+            got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
+            if got is not None and math.isfinite(got) and got > 0:
+                self.offboard.loss_timeout_s = float(got)
+            else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
+                self.offboard.loss_timeout_s = max(1.0, self.clock.ratio)
+            self._event("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
+        if self.cfg.set_speed_limits:
+            try:
+                self.apply_speed_limits()
+            except BaseException:
+                self.close(safe_end=False)
+                raise
+        if self.cfg.fence.upload and not self.safety.geofence.is_empty:
+            try:  # the autopilot's own fence, the second line behind our gate (fence.py)
+                self.apply_fence()
+            except BaseException:
+                self.close(safe_end=False)
+                raise
+
+    def close(self, safe_end: bool = True) -> None:
+        """Close the link (idempotent, never raises). With ``safe_end`` (default) a vehicle still armed is first
+        brought down (:meth:`safe_end`), and parameters changed by :meth:`apply_speed_limits` are restored when
+        ``restore_params`` says so and the vehicle is disarmed (never in flight: it would speed up). ``safe_end=False``
+        hands the vehicle over as it is (``aerodaas mission upload --start``: the autopilot flies on)."""
+        worker = self.speed_limits.worker  # a limit being lowered (params.py): finished before restoring parameters
+        if worker is not None and worker is not threading.current_thread():
+            worker.join(timeout=5.0)
+        if self.link.running:
+            if safe_end:
+                try:
+                    self.safe_end()
+                except Exception as e:  # noqa: BLE001 - closing must go on
+                    self._event("safe_end_failed", error=str(e))
+                    log.warning("%s: safe end failed: %s", self.robot_id, e)
+            if self.cfg.fence.restore_on_close and self.fence.has_saved:
+                if self.link_ok and not self.armed:
+                    self.restore_fence()
+                else:
+                    self._event("fence_not_restored", reason="link lost" if not self.link_ok else "still armed")
+            if self.cfg.restore_params and self.parameters.changed:
+                if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
+                    self._event("params_not_restored", reason="speed limit write in progress",
+                                names=self.parameters.changed)
+                elif self.link_ok and not self.armed:
+                    self.restore_parameters()
+                else:
+                    self._event("params_not_restored", reason="link lost" if not self.link_ok else "still armed",
+                                names=self.parameters.changed)
+        self.link.close()
+
+    def step(self, dt: float) -> None:
+        """Telemetry arrives on the I/O thread; this reports that thread's failure (BackendError) and lowers the
+        vehicle's speed limit when its estimator needs more margin (params.py :meth:`SpeedLimits.update`, then
+        :meth:`SpeedLimits.resend_speed`)."""
+        if self.link.io_error is not None:
+            raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self.link.io_error}")
+        self.speed_limits.update()
+        self.speed_limits.resend_speed()
+
+    @property
+    def t(self) -> float:
+        """Vehicle seconds since :meth:`connect` (:attr:`VehicleClock.t`)."""
+        return self.clock.t
+
+    @property
+    def clock_ratio(self) -> float:
+        """Vehicle seconds per wall second (:attr:`VehicleClock.ratio`; 1 for a real vehicle)."""
+        return self.clock.ratio
+
+    @property
+    def autopilot(self) -> Literal["ardupilot", "px4"] | None:
+        """``"ardupilot"`` / ``"px4"`` once connected (:attr:`MavlinkLink.autopilot`)."""
+        return self.link.autopilot
+
+    @property
+    def vehicle_type(self) -> str:
+        """The HEARTBEAT's MAV_TYPE name (:attr:`MavlinkLink.vehicle_type`)."""
+        return self.link.vehicle_type
+
+    @property
+    def messages_received(self) -> int:
+        """Every message the receive path saw, unknown and malformed ones included."""
+        return self.link.messages_received
+
+    @property
+    def failsafe(self) -> dict[str, Any] | None:
+        """The autopilot's failsafe, when it entered one by itself (:attr:`MavlinkLink.failsafe`)."""
+        return self.link.failsafe
+
+    @property
+    def armed(self) -> bool:
+        """The armed flag of the autopilot's latest HEARTBEAT."""
+        return self.link.armed
+
+    @property
+    def link_ok(self) -> bool:
+        """HEARTBEATs keep coming (:attr:`MavlinkLink.link_ok`)."""
+        return self.link.link_ok
+
+    @property
+    def mode(self) -> str:
+        """The flight mode from the latest HEARTBEAT, in pymavlink's names (``GUIDED``, ``OFFBOARD``, ``LOITER``...)."""
+        return self.link.mode
 
     # events of every concern, and the state the autopilot streams (aerodaas.backends.mavlink.telemetry)
     def _event(self, event: str, **fields: Any) -> None:
@@ -203,15 +346,14 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
             out.append(ev)
             if ev.get("event") == "autopilot_failsafe":
                 with self._lock:
-                    self._failsafe_undelivered = max(0, self._failsafe_undelivered - 1)
+                    self.link.failsafe_delivered()
         return out
 
     def _readiness(self) -> Readiness:
         """The reports readiness is judged from (:meth:`VehicleTelemetry.readiness` with the link's). Caller holds
         ``_lock``."""
-        return self.telemetry.readiness(self._system_status, self.status_texts.ekf_using_gps,
-                                        M.MAVLINK_MSG_ID_EKF_STATUS_REPORT in self._streams_refused
-                                        or self._stream_legacy)
+        return self.telemetry.readiness(self.link.system_status, self.status_texts.ekf_using_gps,
+                                        self.link.ekf_report_unavailable)
 
     @property
     def position(self) -> np.ndarray:
@@ -265,37 +407,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
         """:meth:`VehicleTelemetry.drain_odometry`."""
         return self.telemetry.drain_odometry(newest_only)
-
-    def _init_link(self) -> None:
-        """The link's state (link.py, the backend's own): the connection and I/O thread, the autopilot's identity
-        and HEARTBEAT (mode, armed), link loss and the stream requests."""
-        self._conn: Any = None
-        self._sysid = self._compid = 0
-        self._send_lock = threading.Lock()
-        self._stop = threading.Event()
-        self._io: threading.Thread | None = None
-        self._io_error: BaseException | None = None
-        self._recent: deque[tuple] = deque(maxlen=32)  # (sys, comp, seq, msgid, crc) for duplicate packets
-        self._ap_modes: dict[str, int] = {}
-        self._armed = False
-        self._mode = ""
-        self._system_status = 0
-        self._was_armed = False  # armed once: the ENU origin (home) stays put until the next arm() (telemetry.py)
-        self._link_ok = False
-        self._last_hb = 0.0
-        self._hb_boot_ms = 0  # the vehicle's time_boot_ms when its latest HEARTBEAT came (link.py _periodic)
-        self._hb_next = 0.0
-        self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
-        # messages the shared link's queue dropped, and those lost before it by sequence number, counted from the
-        # connection on (link.py _report_link_drops; the messages received then: _received_base)
-        self._drops_report, self._lost_report, self._received_base = ReportedCount(), ReportedCount(), 0
-        self._mode_changes = 0
-        #: the autopilot's failsafe, when it entered one by itself: {"mode", "previous", "t", "text"} (link.py)
-        self.failsafe: dict[str, Any] | None = None
-        self._stream_legacy = False
-        self._ever_linked = False
-        self._resume_streams = False
-        self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
 
     # the command protocol (aerodaas.backends.mavlink.command.CommandProtocol)
     def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
@@ -458,14 +569,15 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         :class:`~aerodaas.video.discovery.DiscoveredStream`. Raises
         :class:`~aerodaas.video.discovery.StreamDiscoveryError` after ``request.timeout_s`` without one, LinkLost
         when the link is down."""
-        self._check_link("camera discovery")
-        return self._cameras.discover(request, self._compid)
+        self.link.check_link("camera discovery")
+        return self._cameras.discover(request, self.link.target[1])
 
     def _request_of(self, component: int, command: int, params: tuple) -> None:
         """COMMAND_LONG ``command`` to ``component`` of the vehicle's system, not waited for (its answer is a
         message: camera.py)."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
-        self._send(lambda mav: mav.command_long_send(self._sysid, component, command, 0, *p))
+        sysid = self.link.target[0]
+        self.link.send(lambda mav: mav.command_long_send(sysid, component, command, 0, *p))
 
     # the gimbal (aerodaas.backends.mavlink.gimbal.GimbalConcern)
     def point_gimbal(self, cmd: Any) -> None:
@@ -479,8 +591,3 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def drain_gimbal(self) -> list:
         """Every GIMBAL_DEVICE_ATTITUDE_STATUS not handed out yet, oldest first."""
         return self.gimbal.drain()
-
-    def _streams(self) -> tuple:
-        """The telemetry messages requested (link.py), and the gimbal's attitude when a gimbal is configured."""
-        return super()._streams() + self.gimbal.streams()
-

@@ -1,63 +1,106 @@
-"""Link and heartbeat (MAVLink heartbeat/connection protocol): opening the pymavlink connection, finding and identifying the
-autopilot, the I/O thread (receive, de-duplicate, dispatch; our GCS HEARTBEAT at 1 Hz; link-loss watch), the vehicle clock
-from ``time_boot_ms`` and the telemetry stream requests (MAV_CMD_SET_MESSAGE_INTERVAL, else REQUEST_DATA_STREAM)."""
+"""Link and heartbeat (MAVLink heartbeat/connection protocol, mavlink.io/en/services/heartbeat.html): opening the
+pymavlink connection, finding and identifying the autopilot, the I/O thread (receive, de-duplicate, dispatch; our GCS
+HEARTBEAT at 1 Hz; link-loss watch) and the telemetry stream requests (MAV_CMD_SET_MESSAGE_INTERVAL, else
+REQUEST_DATA_STREAM). A concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`MavlinkLink`);
+the vehicle clock is :mod:`.clock`'s, the status texts :mod:`.statustext`'s."""
 from __future__ import annotations
 
-import math
 import threading
 import time
-from typing import Any, Callable
+from collections import deque
+from typing import Any, Callable, Literal
 
 from pymavlink import mavutil
 
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
-from aerodaas.backends.mavlink.shared_link import open_link
-from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, _log_level, log, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _TELEMETRY
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.shared_link import PortLosses, open_link
+from aerodaas.backends.mavlink.statustext import StatusTexts
+from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, log, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _TELEMETRY
 
 #: the most wall time (seconds) one round of the I/O loop spends reading a backlog before its periodic sends
 _DRAIN_S = 0.25
 
 
-#: wall seconds between two reports of a :class:`ReportedCount`
-REPORT_EVERY_S = 5.0
+class MavlinkLink:
+    """The link to one autopilot (see the module docstring): the connection, the autopilot's identity and HEARTBEAT
+    (:attr:`armed`, :attr:`mode`, :attr:`link_ok`, its own failsafes), the I/O thread that receives and dispatches
+    every message, our GCS HEARTBEAT, sending, and the telemetry stream requests.
 
+    It knows only what it is given: ``settings`` (:class:`~aerodaas.config.MavlinkConfig`), ``clock`` (the
+    :class:`~aerodaas.backends.mavlink.clock.VehicleClock` the timestamped messages feed), ``texts`` (the
+    :class:`~aerodaas.backends.mavlink.statustext.StatusTexts` STATUSTEXT feeds), ``event`` (records a backend
+    event), ``lock`` (the backend's lock: the I/O thread updates every concern's state under it), and callables:
+    where messages go (``on_command_ack(now, msg)``, ``on_mission_message`` for the mission protocol's
+    exchanges, ``on_component_message`` for every message of the vehicle's system, cameras included, and
+    :attr:`handlers`, the typed table of the other message types), the command protocol's ``command_long`` and
+    ``mode_asked`` (the mode we last asked for: no failsafe), the guided control's ``setpoint`` (the target to
+    stream, or None), ``send_setpoint(setpoint, now)``, ``stop_setpoints`` (on an autopilot failsafe) and
+    ``loss_timeout_s`` (PX4's offboard-loss timeout, vehicle seconds), and ``extra_streams`` (more (message id,
+    Hz) to request). Raises :class:`BackendError` / :class:`LinkLost` as :meth:`open`, :meth:`send` and
+    :meth:`check_link` say."""
 
-class ReportedCount:
-    """A growing count (messages dropped, messages lost) reported at most every :data:`REPORT_EVERY_S` wall seconds:
-    ``base`` is what the counter held when this connection began, :attr:`reported` what has been reported since."""
-
-    __slots__ = ("base", "reported", "_next")
-
-    def __init__(self, base: int = 0) -> None:
-        self.base, self.reported, self._next = int(base), 0, 0.0
-
-    def due(self, counter: int, now: float) -> int:
-        """How many of ``counter`` (the counter's value now) are new since the last report, when a report is due at
-        ``now`` (time.monotonic() seconds), and mark them reported; 0 when nothing new or not yet due."""
-        new = counter - self.base - self.reported
-        if new <= 0 or now < self._next:
-            return 0
-        self.reported += new
-        self._next = now + REPORT_EVERY_S
-        return new
-
-
-class LinkMixin:
-    """Part of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see its docstring for the shared state)."""
+    def __init__(self, robot_id: str, settings: Any, *, clock: VehicleClock, texts: StatusTexts,
+                 event: Callable[..., None], lock: threading.RLock, on_command_ack: Callable[[float, Any], None],
+                 on_mission_message: Callable[[Any], None], on_component_message: Callable[[Any], None],
+                 command_long: Callable[..., None], mode_asked: Callable[[], tuple | None],
+                 setpoint: Callable[[], Any], send_setpoint: Callable[[Any, float], None],
+                 stop_setpoints: Callable[[], None], loss_timeout_s: Callable[[], float],
+                 extra_streams: Callable[[], tuple]) -> None:
+        self.robot_id, self._settings, self._clock, self._texts = robot_id, settings, clock, texts
+        self._event, self._lock = event, lock
+        self._on_command_ack, self._on_mission_message = on_command_ack, on_mission_message
+        self._on_component_message, self._command_long, self._mode_asked = on_component_message, command_long, \
+            mode_asked
+        self._setpoint, self._send_setpoint, self._stop_setpoints = setpoint, send_setpoint, stop_setpoints
+        self._loss_timeout_s, self._extra_streams = loss_timeout_s, extra_streams
+        #: the handler of each other message type (backend.py ``_message_handlers``), called under ``lock``
+        self.handlers: dict[str, Callable[[Any], None]] = {}
+        #: the connection (shared_link.py ``LinkPort``), None when not connected
+        self.port: Any = None
+        #: ``"ardupilot"`` / ``"px4"`` once identified (``mavlink.autopilot``, else the HEARTBEAT's)
+        self.autopilot: Literal["ardupilot", "px4"] | None = None
+        #: the HEARTBEAT's MAV_TYPE name (``MAV_TYPE_QUADROTOR``...)
+        self.vehicle_type: str = ""
+        #: every message the receive path saw, unknown and malformed ones included
+        self.messages_received = 0
+        #: the autopilot's failsafe, when it entered one by itself: {"mode", "previous", "t", "text"}
+        self.failsafe: dict[str, Any] | None = None
+        self._sysid = self._compid = 0
+        self._send_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._io: threading.Thread | None = None
+        self._io_error: BaseException | None = None
+        self._recent: deque[tuple] = deque(maxlen=32)  # (sys, comp, seq, msgid, crc) for duplicate packets
+        self._ap_modes: dict[str, int] = {}
+        self._armed = False
+        self._mode = ""
+        self._system_status = 0
+        self._was_armed = False  # armed once: the ENU origin (home) stays put until the next arm() (telemetry.py)
+        self._link_ok = False
+        self._last_hb = 0.0
+        self._hb_boot_ms = 0  # the vehicle's time_boot_ms when its latest HEARTBEAT came (periodic)
+        self._hb_next = 0.0
+        self._failsafe_undelivered = 0  # autopilot_failsafe events not yet handed out by drain_events
+        #: the messages of this vehicle the shared link dropped or lost, reported as events (shared_link.py)
+        self.losses = PortLosses(robot_id, event)
+        self._mode_changes = 0
+        self._stream_legacy = False
+        self._ever_linked = False
+        self._resume_streams = False
+        self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
 
     # ------------------------------------------------------------------ lifecycle
-    def connect(self, timeout_s: float | None = None) -> None:
+    def open(self, deadline: float, timeout: float) -> None:
         """Open ``mavlink.connection``, wait for the autopilot's HEARTBEAT (GCS and peripheral heartbeats are
-        ignored), identify it, start the I/O thread, request the telemetry streams and HOME_POSITION, and wait
-        for the first SYS_STATUS. Raises :class:`BackendError` after ``timeout_s`` (default
-        ``connect_timeout_s``) seconds, naming the connection string; ValueError for a vehicle that is not a
-        multirotor or an autopilot that cannot be identified."""
-        timeout = self.cfg.connect_timeout_s if timeout_s is None else timeout_s
-        deadline = time.monotonic() + timeout
-        where = f"robot {self.robot_id!r}: mavlink connection {self.cfg.connection!r}"
+        ignored) until ``deadline`` (time.monotonic()), identify it, start the I/O thread, request the telemetry
+        streams and HOME_POSITION. Raises :class:`BackendError` without a HEARTBEAT (``timeout``: the seconds
+        named), naming the connection string; ValueError for a vehicle that is not a multirotor or an autopilot
+        that cannot be identified (closed again in both cases)."""
+        where = f"robot {self.robot_id!r}: mavlink connection {self._settings.connection!r}"
         # one socket per endpoint in this process, shared by every robot that names it (shared_link.py)
-        port = open_link(self.cfg, self.robot_id, deadline)
-        self._conn = port
+        port = open_link(self._settings, self.robot_id, deadline)
+        self.port = port
         self._send_lock = port.send_lock
         next_hb = [0.0]
 
@@ -67,108 +110,66 @@ class LinkMixin:
                 next_hb[0] = time.monotonic() + 1.0
 
         try:
-            hb = port.claim(self.cfg.target_system, deadline, tick)
+            hb = port.claim(self._settings.target_system, deadline, tick)
         except TimeoutError as e:
             self.close()
-            which = ("" if self.cfg.target_system in (None, "auto")
-                     else f" from system id {self.cfg.target_system}")
+            which = ("" if self._settings.target_system in (None, "auto")
+                     else f" from system id {self._settings.target_system}")
             raise BackendError(f"{where}: no autopilot HEARTBEAT{which} within {timeout:g} s ({e})") from None
         except BaseException:
             self.close()
             raise
-        # counted from this connection on (the shared link may have counted this system id for an earlier one)
-        self._drops_report, self._lost_report = ReportedCount(), ReportedCount(port.lost)
-        self._received_base = port.received
-        self._identify(hb)
-        self._on_heartbeat(hb, time.monotonic())
+        self.losses.count_from(port)  # counted from this connection on
+        self.identify(hb)
+        self.on_heartbeat(hb, time.monotonic())
         self._stop.clear()
         self._io = threading.Thread(target=self._io_loop, name=f"mavlink-{self.robot_id}", daemon=True)
         self._io.start()
-        self._request_streams()
-        self._request_home()
-        while True:
-            with self._lock:
-                ready = self.telemetry.sys_status_seen
-            if ready:
-                break
-            if time.monotonic() > deadline:
-                self.close()
-                raise BackendError(f"{where}: the autopilot sent HEARTBEAT but no SYS_STATUS within {timeout:g} s "
-                                   "(telemetry streams not configured?)")
-            time.sleep(0.01)
-        with self._lock:
-            self.clock.start()
-            self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
-        if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
-            got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
-            if got is not None and math.isfinite(got) and got > 0:
-                self.offboard.loss_timeout_s = float(got)
-            else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
-                self.offboard.loss_timeout_s = max(1.0, self.clock.ratio)
-            self._event("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
-        if self.cfg.set_speed_limits:
-            try:
-                self.apply_speed_limits()
-            except BaseException:
-                self.close(safe_end=False)
-                raise
-        if self.cfg.fence.upload and not self.safety.geofence.is_empty:
-            try:  # the autopilot's own fence, the second line behind our gate (fence.py)
-                self.apply_fence()
-            except BaseException:
-                self.close(safe_end=False)
-                raise
+        self.request_streams()
+        self.request_home()
 
-    def close(self, safe_end: bool = True) -> None:
-        """Close the link (idempotent, never raises). With ``safe_end`` (default) a vehicle still armed is first
-        brought down (:meth:`safe_end`), and parameters changed by :meth:`apply_speed_limits` are restored when
-        ``restore_params`` says so and the vehicle is disarmed (never in flight: it would speed up). ``safe_end=False``
-        hands the vehicle over as it is (``aerodaas mission upload --start``: the autopilot flies on)."""
-        worker = self.speed_limits.worker  # a limit being lowered (params.py): finished before restoring parameters
-        if worker is not None and worker is not threading.current_thread():
-            worker.join(timeout=5.0)
-        if self._conn is not None and self._io is not None and not self._stop.is_set():
-            if safe_end:
-                try:
-                    self.safe_end()
-                except Exception as e:  # noqa: BLE001 - closing must go on
-                    self._event("safe_end_failed", error=str(e))
-                    log.warning("%s: safe end failed: %s", self.robot_id, e)
-            if self.cfg.fence.restore_on_close and self.fence.has_saved:
-                if self._link_ok and not self._armed:
-                    self.restore_fence()
-                else:
-                    self._event("fence_not_restored", reason="link lost" if not self._link_ok else "still armed")
-            if self.cfg.restore_params and self.parameters.changed:
-                if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
-                    self._event("params_not_restored", reason="speed limit write in progress",
-                                names=self.parameters.changed)
-                elif self._link_ok and not self._armed:
-                    self.restore_parameters()
-                else:
-                    self._event("params_not_restored", reason="link lost" if not self._link_ok else "still armed",
-                                names=self.parameters.changed)
+    def attach(self, system: int, component: int) -> None:
+        """Take the autopilot at ``system``/``component`` as found and the link as up, without :meth:`open`'s
+        HEARTBEAT exchange (messages handed to :meth:`dispatch` by hand: tests/mavlink_wire.py)."""
+        self._sysid, self._compid, self._link_ok = system, component, True
+
+    @property
+    def running(self) -> bool:
+        """Connected, with the I/O thread started and not yet told to stop."""
+        return self.port is not None and self._io is not None and not self._stop.is_set()
+
+    @property
+    def io_alive(self) -> bool:
+        """The I/O thread is running."""
+        return self._io is not None and self._io.is_alive()
+
+    def close(self) -> None:
+        """Stop the I/O thread and close the connection (idempotent, never raises)."""
         self._stop.set()
         if self._io is not None and self._io is not threading.current_thread():
             self._io.join(timeout=2)
         self._io = None
-        if self._conn is not None:
+        if self.port is not None:
             try:
-                self._conn.close()
+                self.port.close()
             except Exception:  # noqa: BLE001
                 pass
-            self._conn = None
+            self.port = None
 
     def _is_autopilot_heartbeat(self, msg: Any) -> bool:
-        if msg.get_srcSystem() == self.cfg.source_system and msg.get_srcComponent() == self.cfg.source_component:
+        ours = (self._settings.source_system, self._settings.source_component)
+        if (msg.get_srcSystem(), msg.get_srcComponent()) == ours:
             return False
         if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.type in _NOT_VEHICLES:
             return False
         return not self._sysid or msg.get_srcSystem() == self._sysid
 
-    def _identify(self, hb: Any) -> None:
+    def identify(self, hb: Any) -> None:
+        """Take the autopilot of HEARTBEAT ``hb`` as ours: its flavour (``mavlink.autopilot``, else the HEARTBEAT's
+        MAV_AUTOPILOT; an ``autopilot_mismatch`` event when they differ), ids and ArduPilot mode table. Raises
+        ValueError (after closing) for a flavour that cannot be told or a vehicle that is not a multirotor."""
         found = {M.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot", M.MAV_AUTOPILOT_PX4: "px4"}.get(hb.autopilot)
-        flavour = found if self.cfg.autopilot == "auto" else self.cfg.autopilot
+        flavour = found if self._settings.autopilot == "auto" else self._settings.autopilot
         self.vehicle_type = _enum_name("MAV_TYPE", hb.type)
         if flavour is None:
             self.close()
@@ -189,7 +190,7 @@ class LinkMixin:
         self._event("connected", autopilot=flavour, vehicle_type=self.vehicle_type, system=self._sysid,
                     component=self._compid)
 
-    def _mode_params(self, name: str) -> tuple[float, ...]:
+    def mode_params(self, name: str) -> tuple[float, ...]:
         """MAV_CMD_DO_SET_MODE's custom mode params (after MAV_MODE_FLAG_CUSTOM_MODE_ENABLED) for flight mode ``name``
         on the identified autopilot: PX4's main and sub mode (pymavlink's ``px4_map``), ArduPilot's custom mode (the
         mode table of its vehicle type, learned in :meth:`_identify`). Raises ValueError for an unknown name."""
@@ -210,11 +211,11 @@ class LinkMixin:
         SIGSTOP) the vehicle's messages of the stall are still queued, and a setpoint sent before reading them would
         act on a vehicle state that is gone (PX4 takes a setpoint stream that comes back as the end of its
         offboard-loss failsafe and returns to OFFBOARD: failsafe.cpp ``checkModeFallback``; seen on PX4 SITL)."""
-        conn = self._conn
+        conn = self.port
         while not self._stop.is_set():
             got, start = 0, time.monotonic()
             # at most a quarter of PX4's offboard-loss timeout (wall seconds at the vehicle's speed-up) between sends
-            budget = min(_DRAIN_S, 0.25 * self.offboard.loss_timeout_s / max(self.clock.ratio, 1.0))
+            budget = min(_DRAIN_S, 0.25 * self._loss_timeout_s() / max(self._clock.ratio, 1.0))
             while True:
                 try:
                     msg = conn.recv_msg()
@@ -225,14 +226,14 @@ class LinkMixin:
                     break
                 got += 1
                 try:
-                    self._dispatch(msg, time.monotonic())
+                    self.dispatch(msg, time.monotonic())
                 except Exception as e:  # noqa: BLE001 - a malformed message must never stop telemetry
                     self._event("receive_error", message=msg.get_type(), error=str(e))
                 if time.monotonic() - start > budget:
                     break
             now = time.monotonic()
             try:
-                self._periodic(now)
+                self.periodic(now)
             except Exception as e:  # noqa: BLE001
                 self._io_error = e
             if not got:
@@ -241,7 +242,10 @@ class LinkMixin:
                 except Exception:  # noqa: BLE001
                     time.sleep(0.005)
 
-    def _dispatch(self, msg: Any, now: float) -> None:
+    def dispatch(self, msg: Any, now: float) -> None:
+        """One received message (``now``: wall time): counted, skipped when malformed, a duplicate or not the
+        autopilot's system, else handed to its receiver (HEARTBEAT and STATUSTEXT here, COMMAND_ACK, the mission
+        protocol's messages, then :attr:`handlers` under ``lock``)."""
         mtype = msg.get_type()
         self.messages_received += 1
         if mtype == "BAD_DATA" or mtype.startswith("UNKNOWN_"):
@@ -253,33 +257,36 @@ class LinkMixin:
         src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
         if self._sysid and src_sys != self._sysid:
             return
-        self._cameras.on_message(msg)  # cameras are components of their own: before the autopilot-only filter
+        self._on_component_message(msg)  # cameras are components of their own: before the autopilot-only filter
         if mtype == "HEARTBEAT":
             if src_comp == self._compid and self._is_autopilot_heartbeat(msg):
-                self._on_heartbeat(msg, now)
+                self.on_heartbeat(msg, now)
             return
         if mtype == "STATUSTEXT":
-            self.status_texts.on_statustext(msg, now)
+            self._texts.on_statustext(msg, now)
             return
         if self._compid and src_comp != self._compid:
             return
         if mtype == "COMMAND_ACK":
-            if getattr(msg, "target_system", 0) in (0, self.cfg.source_system):
-                self.commands.on_command_ack(now, msg)
+            if getattr(msg, "target_system", 0) in (0, self._settings.source_system):
+                self._on_command_ack(now, msg)
             return
         if mtype in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT", "MISSION_ITEM_INT",
                      "MISSION_ITEM"):
-            self.transfers.offer(msg)  # kept for the exchange under way, when it is for us (transfer.py)
+            self._on_mission_message(msg)  # kept for the exchange under way, when it is for us (transfer.py)
             return
-        handler = self._handlers.get(mtype)  # the backend's typed table (backend.py _message_handlers)
+        handler = self.handlers.get(mtype)  # the backend's typed table (backend.py _message_handlers)
         if handler is not None:
             with self._lock:
                 handler(msg)
 
-    def _on_heartbeat(self, msg: Any, now: float) -> None:
+    def on_heartbeat(self, msg: Any, now: float) -> None:
+        """The autopilot's HEARTBEAT at wall time ``now``: the link is up (``link_regained`` after a loss, the
+        streams asked for again), the armed flag, the mode (a failsafe mode checked: :meth:`_check_failsafe`) and
+        ``system_status``."""
         with self._lock:
             self._last_hb = now
-            self._hb_boot_ms = self.clock.boot_ms
+            self._hb_boot_ms = self._clock.boot_ms
             if not self._link_ok:
                 self._link_ok = True
                 if self._ever_linked:
@@ -305,71 +312,55 @@ class LinkMixin:
         asked for (set_mode): the autopilot's own failsafe (datalink, battery, geofence action, EKF) or a pilot's
         switch. Recorded as :attr:`failsafe` and an ``autopilot_failsafe`` event with the status texts of the last
         2 s (the autopilot says why). Caller holds ``_lock``."""
-        asked = self.commands.mode_asked
+        asked = self._mode_asked()
         if not self._armed or mode not in FAILSAFE_MODES.get(self.autopilot or "", ()):
             return
         if asked is not None and asked[0] == mode:
             return
-        texts = self.status_texts.recent(now, 2.0)
-        self.failsafe = {"mode": mode, "previous": previous, "t": round(self.t, 3), "text": "; ".join(texts[-3:])}
-        self.offboard.stop_quiet()
+        texts = self._texts.recent(now, 2.0)
+        self.failsafe = {"mode": mode, "previous": previous, "t": round(self._clock.t, 3),
+                         "text": "; ".join(texts[-3:])}
+        self._stop_setpoints()
         self._failsafe_undelivered += 1
         self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
-    def _report_link_drops(self, now: float) -> None:
-        """A ``link_messages_dropped`` event (and a warning) when the shared link's queue for this robot dropped
-        messages since the last report (:data:`~.shared_link.PORT_QUEUE`: this robot's I/O fell behind what its
-        vehicle sends), at most every 5 wall seconds, with the count since the last report and in all; likewise
-        ``link_messages_lost`` (``lost`` since the last report, ``total``, ``received``, ``lost_pct``) for the
-        messages the vehicle's MAVLink sequence numbers say never reached this process (radio, router, kernel buffer;
-        :meth:`~.shared_link.SharedLink._count`)."""
-        rep = self._drops_report
-        new = rep.due(int(getattr(self._conn, "dropped", 0) or 0), now)
-        if new:
-            self._event("link_messages_dropped", dropped=new, total=rep.reported)
-            log.warning("%s: the shared link dropped %d messages of this vehicle (%d in all): its I/O fell behind",
-                        self.robot_id, new, rep.reported)
-        rep = self._lost_report
-        new = rep.due(int(getattr(self._conn, "lost", 0) or 0), now)
-        if new:
-            lost, received = rep.reported, int(getattr(self._conn, "received", 0) or 0) - self._received_base
-            self._event("link_messages_lost", lost=new, total=lost, received=received,
-                        lost_pct=round(100.0 * lost / max(1, lost + received), 2))
-            log.warning("%s: %d messages of this vehicle were lost on the way here (%d of %d in all, by their "
-                        "MAVLink sequence numbers)", self.robot_id, new, lost, lost + received)
-
-    def _periodic(self, now: float) -> None:
-        self._report_link_drops(now)
-        self.status_texts.flush_stale(now)
+    def periodic(self, now: float) -> None:
+        """The I/O thread's work after each read (``now``: wall time): link drop reports, stale status texts, our GCS
+        HEARTBEAT (1 Hz of the vehicle's clock, at most 20 Hz), the link-loss watch, and the setpoint stream."""
+        self.losses.report(self.port, now)
+        self._texts.flush_stale(now)
         if now >= self._hb_next:
-            self._hb_next = now + 1.0 / max(1.0, min(self.clock.ratio, 20.0))
+            self._hb_next = now + 1.0 / max(1.0, min(self._clock.ratio, 20.0))
             self._send_gcs_heartbeat()
         with self._lock:
             # lost only once everything received until past the deadline has been read (LinkPort.live_since): after
             # a stall of this process the heartbeats of the stall may still wait in the socket
             # (and in any case after twice the timeout: a link whose socket is never empty, e.g. a noisy serial line)
-            read_until, timeout = self._live_since(now), self.cfg.heartbeat_timeout_s
-            if self._link_ok and now - self._last_hb > timeout and self.clock.heartbeats_missed(now, self._hb_boot_ms) \
+            read_until, timeout = self.live_since(now), self._settings.heartbeat_timeout_s
+            missed = now - self._last_hb > timeout and self._clock.heartbeats_missed(now, self._hb_boot_ms)
+            if self._link_ok and missed \
                     and (read_until - self._last_hb > timeout or now - self._last_hb > 2.0 * timeout):
                 self._link_ok = False
                 self._event("link_lost", silent_s=round(now - self._last_hb, 3))
-                self.clock.link_lost()
+                self._clock.link_lost()
             resume = self._resume_streams
             self._resume_streams = False
-            sp = self.offboard.setpoint if self._link_ok else None
+            sp = self._setpoint() if self._link_ok else None
         if resume:
-            self._request_streams(wait=False)
+            self.request_streams(wait=False)
         if sp is not None:
-            self.offboard.send_due(sp, now)
+            self._send_setpoint(sp, now)
 
     # ------------------------------------------------------------------ sending
-    def _live_since(self, now: float) -> float:
+    def live_since(self, now: float) -> float:
         """Everything received until this wall time has been read (shared_link.py ``LinkPort.live_since``; ``now``
         without a connection)."""
-        return getattr(self._conn, "live_since", now)
+        return getattr(self.port, "live_since", now)
 
-    def _send(self, fn: Callable[[Any], None]) -> None:
-        conn = self._conn
+    def send(self, fn: Callable[[Any], None]) -> None:
+        """Send with ``fn(mav)`` (a pymavlink ``MAVLink`` encoder) under the link's send lock. Raises LinkLost when
+        not connected or the socket fails."""
+        conn = self.port
         if conn is None:
             raise LinkLost(f"robot {self.robot_id!r}: not connected")
         with self._send_lock:
@@ -380,29 +371,31 @@ class LinkMixin:
 
     def _send_gcs_heartbeat(self) -> None:
         try:
-            self._send(lambda mav: mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0,
+            self.send(lambda mav: mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0,
                                                       M.MAV_STATE_ACTIVE))
         except (LinkLost, Exception):  # noqa: BLE001 - the link may be down; the heartbeat watch reports it
             pass
 
-    def _check_link(self, command: str) -> None:
-        if self._conn is None:
+    def check_link(self, command: str) -> None:
+        """Raise before ``command`` runs: BackendError when not connected or the I/O thread failed, LinkLost while
+        the link is lost."""
+        if self.port is None:
             raise BackendError(f"robot {self.robot_id!r}: {command}: not connected (call connect() first)")
         if self._io_error is not None:
             raise BackendError(f"robot {self.robot_id!r}: {command}: the MAVLink I/O thread failed: {self._io_error}")
         if not self._link_ok:
             raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost (no HEARTBEAT for more than "
-                           f"{self.cfg.heartbeat_timeout_s:g} s)")
+                           f"{self._settings.heartbeat_timeout_s:g} s)")
 
     # ------------------------------------------------------------------ streams and home
-    def _request_streams(self, wait: bool = True) -> None:
+    def request_streams(self, wait: bool = True) -> None:
         """MAV_CMD_SET_MESSAGE_INTERVAL for each telemetry message (rates in the vehicle's time); on UNSUPPORTED or
         no acknowledgement fall back to REQUEST_DATA_STREAM. ``wait=False`` (from the I/O thread, after the link
         returns) re-sends the method chosen at connect without waiting for acknowledgements."""
-        rate = self.cfg.stream_rate_hz
+        rate = self._settings.stream_rate_hz
         if not wait:
             for msg_id, hz in self._streams() if not self._stream_legacy else ():
-                self._send(lambda mav, m=msg_id, h=hz: mav.command_long_send(
+                self.send(lambda mav, m=msg_id, h=hz: mav.command_long_send(
                     self._sysid, self._compid, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m, 1e6 / (h or rate), 0, 0, 0, 0, 0))
             if self._stream_legacy:
                 self._legacy_streams(rate)
@@ -410,7 +403,7 @@ class LinkMixin:
         for msg_id, hz in self._streams():
             name = f"SET_MESSAGE_INTERVAL for message {msg_id}"
             try:
-                self.command_long(name, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (hz or rate), retries=1)
+                self._command_long(name, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (hz or rate), retries=1)
             except CommandRefused as e:
                 if e.result == "MAV_RESULT_UNSUPPORTED":
                     self._stream_legacy = True
@@ -427,24 +420,27 @@ class LinkMixin:
             self._legacy_streams(rate)
 
     def _streams(self) -> tuple:
-        """(message id, Hz or None for ``stream_rate_hz``) of every telemetry message requested."""
+        """(message id, Hz or None for ``stream_rate_hz``) of every telemetry message requested (the extra streams:
+        the gimbal's attitude when a gimbal is configured)."""
         extra = _ESTIMATOR_STREAM.get(self.autopilot or "")
-        return _TELEMETRY + ((extra,) if extra else ())
+        return _TELEMETRY + ((extra,) if extra else ()) + self._extra_streams()
 
     def _legacy_streams(self, rate: float) -> None:
         for _ in range(3):  # no acknowledgement exists for REQUEST_DATA_STREAM
             for stream, hz in _LEGACY_STREAMS:
-                self._send(lambda mav, s=stream, h=hz: mav.request_data_stream_send(
+                self.send(lambda mav, s=stream, h=hz: mav.request_data_stream_send(
                     self._sysid, self._compid, s, max(1, int(round(h or rate))), 1))
 
-    def _request_home(self) -> None:
+    def request_home(self) -> None:
+        """MAV_CMD_REQUEST_MESSAGE(HOME_POSITION), MAV_CMD_GET_HOME_POSITION where that is unsupported; a refusal
+        or no answer is no error (the autopilot sends home once it has one). Raises LinkLost."""
         try:
-            self.command_long("request HOME_POSITION", M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION,
+            self._command_long("request HOME_POSITION", M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION,
                               retries=1)
         except CommandRefused as e:
             if e.result == "MAV_RESULT_UNSUPPORTED":
                 try:
-                    self.command_long("request HOME_POSITION", M.MAV_CMD_GET_HOME_POSITION, retries=1)
+                    self._command_long("request HOME_POSITION", M.MAV_CMD_GET_HOME_POSITION, retries=1)
                 except BackendError:
                     pass
             # FAILED / DENIED: no home yet; it is sent when it is set
@@ -453,11 +449,21 @@ class LinkMixin:
         except BackendError:
             pass
 
-    # ------------------------------------------------------------------ VehicleBackend: state
+    # ------------------------------------------------------------------ state
+    @property
+    def target(self) -> tuple[int, int]:
+        """The autopilot's system and component id (0, 0 before it is identified)."""
+        return self._sysid, self._compid
+
     @property
     def armed(self) -> bool:
         """The armed flag of the autopilot's latest HEARTBEAT."""
         return self._armed
+
+    @property
+    def was_armed(self) -> bool:
+        """Armed at least once since the backend was made."""
+        return self._was_armed
 
     @property
     def link_ok(self) -> bool:
@@ -470,22 +476,35 @@ class LinkMixin:
         return self._mode
 
     @property
-    def clock_ratio(self) -> float:
-        """Vehicle seconds per wall second, estimated from ``time_boot_ms`` (1 for a real vehicle;
-        :attr:`VehicleClock.ratio`)."""
-        return self.clock.ratio
+    def mode_changes(self) -> int:
+        """How many times the HEARTBEAT's mode changed."""
+        return self._mode_changes
 
     @property
-    def t(self) -> float:
-        """Vehicle seconds since :meth:`connect` (:attr:`VehicleClock.t`)."""
-        return self.clock.t
+    def system_status(self) -> int:
+        """The latest HEARTBEAT's ``system_status`` (MAV_STATE)."""
+        return self._system_status
 
-    def step(self, dt: float) -> None:
-        """Telemetry arrives on the I/O thread; this reports that thread's failure (BackendError) and lowers the
-        vehicle's speed limit when its estimator needs more margin (params.py :meth:`SpeedLimits.update`, then
-        :meth:`SpeedLimits.resend_speed`)."""
-        if self._io_error is not None:
-            raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self._io_error}")
-        self.speed_limits.update()
-        self.speed_limits.resend_speed()
+    @property
+    def last_heartbeat(self) -> float:
+        """Wall time (time.monotonic()) of the autopilot's latest HEARTBEAT."""
+        return self._last_hb
 
+    @property
+    def ekf_report_unavailable(self) -> bool:
+        """EKF_STATUS_REPORT will never come: its stream was refused, or the legacy REQUEST_DATA_STREAM is in use."""
+        return M.MAVLINK_MSG_ID_EKF_STATUS_REPORT in self._streams_refused or self._stream_legacy
+
+    @property
+    def failsafe_undelivered(self) -> int:
+        """``autopilot_failsafe`` events not yet handed out by the backend's ``drain_events``."""
+        return self._failsafe_undelivered
+
+    def failsafe_delivered(self) -> None:
+        """An ``autopilot_failsafe`` event was handed out. Caller holds ``lock``."""
+        self._failsafe_undelivered = max(0, self._failsafe_undelivered - 1)
+
+    @property
+    def io_error(self) -> BaseException | None:
+        """What stopped the I/O thread's periodic work, if anything did."""
+        return self._io_error

@@ -32,7 +32,7 @@ from typing import Any, Callable
 from pymavlink import mavutil
 
 from aerodaas.backends.base import BackendError
-from aerodaas.backends.mavlink._common import M, _NOT_VEHICLES
+from aerodaas.backends.mavlink._common import M, _NOT_VEHICLES, log
 
 #: wall seconds of discovery before ``target_system: auto`` picks the lowest unclaimed id (autopilots send their
 #: HEARTBEAT at 1 Hz, mavlink.io/en/services/heartbeat.html)
@@ -314,6 +314,69 @@ class LinkPort:
             if not link.ports:
                 _LINKS.pop(link.key, None)
                 link.close()
+
+
+#: wall seconds between two reports of a :class:`ReportedCount`
+REPORT_EVERY_S = 5.0
+
+
+class ReportedCount:
+    """A growing count (messages dropped, messages lost) reported at most every :data:`REPORT_EVERY_S` wall seconds:
+    ``base`` is what the counter held when this connection began, :attr:`reported` what has been reported since."""
+
+    __slots__ = ("base", "reported", "_next")
+
+    def __init__(self, base: int = 0) -> None:
+        self.base, self.reported, self._next = int(base), 0, 0.0
+
+    def due(self, counter: int, now: float) -> int:
+        """How many of ``counter`` (the counter's value now) are new since the last report, when a report is due at
+        ``now`` (time.monotonic() seconds), and mark them reported; 0 when nothing new or not yet due."""
+        new = counter - self.base - self.reported
+        if new <= 0 or now < self._next:
+            return 0
+        self.reported += new
+        self._next = now + REPORT_EVERY_S
+        return new
+
+
+class PortLosses:
+    """The messages of one robot's vehicle that never reached its backend, counted from a connection on
+    (:meth:`count_from`) and reported at most every :data:`REPORT_EVERY_S` wall seconds (:meth:`report`) as events
+    (``event`` records a backend event) and warnings naming ``robot_id``."""
+
+    def __init__(self, robot_id: str, event: Callable[..., None]) -> None:
+        self.robot_id, self._event = robot_id, event
+        self._drops, self._lost, self._received_base = ReportedCount(), ReportedCount(), 0
+
+    def count_from(self, port: Any) -> None:
+        """Count from now on: ``port`` (a :class:`LinkPort`; the shared link may have counted this system id for an
+        earlier connection) has ``lost`` and ``received`` messages so far."""
+        self._drops, self._lost = ReportedCount(), ReportedCount(port.lost)
+        self._received_base = port.received
+
+    def report(self, port: Any, now: float) -> None:
+        """For ``port`` (the robot's :class:`LinkPort`, None when closed) at wall time ``now``: a
+        ``link_messages_dropped`` event (and a warning) when the shared link's queue for this robot dropped messages
+        since the last report (:data:`PORT_QUEUE`: this robot's I/O fell behind what its vehicle sends), at most
+        every 5 wall seconds, with the count since the last report and in all; likewise ``link_messages_lost``
+        (``lost`` since the last report, ``total``, ``received``, ``lost_pct``) for the messages the vehicle's
+        MAVLink sequence numbers say never reached this process (radio, router, kernel buffer;
+        :meth:`SharedLink._count`)."""
+        rep = self._drops
+        new = rep.due(int(getattr(port, "dropped", 0) or 0), now)
+        if new:
+            self._event("link_messages_dropped", dropped=new, total=rep.reported)
+            log.warning("%s: the shared link dropped %d messages of this vehicle (%d in all): its I/O fell behind",
+                        self.robot_id, new, rep.reported)
+        rep = self._lost
+        new = rep.due(int(getattr(port, "lost", 0) or 0), now)
+        if new:
+            lost, received = rep.reported, int(getattr(port, "received", 0) or 0) - self._received_base
+            self._event("link_messages_lost", lost=new, total=lost, received=received,
+                        lost_pct=round(100.0 * lost / max(1, lost + received), 2))
+            log.warning("%s: %d messages of this vehicle were lost on the way here (%d of %d in all, by their "
+                        "MAVLink sequence numbers)", self.robot_id, new, lost, lost + received)
 
 
 def _grow_rcvbuf(conn: Any) -> None:

@@ -22,7 +22,7 @@ from aerodaas.backends.mavlink._common import M
 #: stream; the drone's clock thread drains them every step, so only a thread held up for that long loses any)
 ODOMETRY_QUEUE = 600
 
-#: a message handler of the I/O thread (link.py ``_dispatch``), called under the backend's lock
+#: a message handler of the I/O thread (link.py ``MavlinkLink.dispatch``), called under the backend's lock
 Handler = Callable[[Any], None]
 
 
@@ -202,7 +202,8 @@ class VehicleTelemetry:
     def on_attitude(self, msg: Any) -> None:
         """ATTITUDE: roll, pitch (degrees) and ENU yaw. Caller holds ``_lock``."""
         self._on_boot_ms(msg.time_boot_ms)
-        self._att = (math.degrees(msg.roll), math.degrees(msg.pitch), VehicleBackend.enu_yaw_from_heading(math.degrees(msg.yaw)))
+        yaw = VehicleBackend.enu_yaw_from_heading(math.degrees(msg.yaw))
+        self._att = (math.degrees(msg.roll), math.degrees(msg.pitch), yaw)
         self._att_wall = time.monotonic()
 
     def on_system_time(self, msg: Any) -> None:
