@@ -21,12 +21,14 @@ def drone_checkpoint(d: Any) -> dict:
     """A checkpoint of DroneComponent ``d`` (taken under its lock, so it is consistent with one control step)."""
     with d.lock:
         q = d.queue.state()  # the items themselves are never changed in place: list copies suffice
+        f = d.flight
         return {"seq": next(_SEQ), "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
-                "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(d.visited),
-                "events": list(d.events[-50:]), "preplanned_left": d.preplanned_left, "preplanned_total": d.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
-                "flew_something": d.flew_something, "idle_since": d.idle_since, "outcome": d.outcome,
+                "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(f.visited),
+                "events": list(d.events[-50:]), "preplanned_left": f.preplanned_left,
+                "preplanned_total": f.preplanned_total, "takeoff_altitude": d.takeoff_altitude,
+                "flew_something": f.flew_something, "idle_since": f.idle_since, "outcome": f.outcome,
                 "error": d.error, "ticks": d.ticks, "missed_ticks": d.missed_ticks, "next_tick": d.next_tick,
-                "next_odom": d.next_odom, "rejected": list(d.rejected), "hold_failed": list(d.hold_failed),
+                "next_odom": d.next_odom, "rejected": list(f.rejected), "hold_failed": list(f.hold_failed),
                 "not_reached": list(d.progress.not_reached), "missions": q["missions"],
                 "completed": q["completed"], "segments_issued": q["segments_issued"], "seq_missions": q["seq"],
                 "last_tick": [float(d.last_tick[0]), [float(c) for c in d.last_tick[1]]], "discarded": list(d.plan_log.discarded),
@@ -46,10 +48,12 @@ def restore_drone(d: Any, cp: dict) -> None:
         if state == S.WAYPOINT_HOLD:
             state = S.NAVIGATING
         d.fsm.restore(state, list(cp.get("history") or []) + [(cp["t"], state)])
-        for k in ("events", "visited", "preplanned_left", "takeoff_altitude", "flew_something", "idle_since", "outcome",
-                  "error", "ticks", "missed_ticks", "next_tick", "next_odom", "rejected", "hold_failed"):
+        for k in ("events", "takeoff_altitude", "error", "ticks", "missed_ticks", "next_tick", "next_odom"):
             if k in cp:
                 setattr(d, k, cp[k])
+        for k in ("visited", "preplanned_left", "flew_something", "idle_since", "outcome", "rejected", "hold_failed"):
+            if k in cp:  # the flight state the drone shares with its flights (:mod:`.drone_flight`)
+                setattr(d.flight, k, cp[k])
         if "not_reached" in cp:
             d.progress.not_reached = list(cp["not_reached"])
         if cp.get("last_tick") is not None:  # where navigation arriving before the first tick is planned from
@@ -57,7 +61,7 @@ def restore_drone(d: Any, cp: dict) -> None:
         # a run whose pre-planned waypoints were cleared through the HITL API stays never a success
         d.plan_log.discarded = list(cp.get("discarded") or [])
         d.plan_log.cleared_preplanned = list(cp.get("cleared_preplanned") or [])
-        d.active_wp, d.hold_until = None, None
+        d.flight.active_wp, d.flight.hold_until = None, None
         for c, t in zip(d.cameras, cp.get("cameras", [])):
             c["next_t"] = t
         d.restored_from = cp

@@ -28,8 +28,7 @@ from aerodaas.backends import BackendError, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S, handler_table
 from aerodaas.protocol.messages import StatMsg
-from aerodaas.model.types import Waypoint
-from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.navigation.safety import SafetyGate
 from aerodaas.navigation.waypoint_queue import Order
 from aerodaas.schedulers.base import TrajectoryScheduler
 
@@ -40,12 +39,13 @@ from aerodaas.actors.drone_end import SETTLE_WALL_S, RunEnd
 from aerodaas.actors.drone_gimbal import DroneGimbal
 from aerodaas.actors.drone_odometry import OdometryPublisher
 from aerodaas.actors.drone_progress import NavigationProgress
-from aerodaas.actors.drone_queue_flight import QueueFlight, WaypointHold
+from aerodaas.actors.drone_flight import FlightContext, FlightState
+from aerodaas.actors.drone_queue_flight import QueueFlight
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(AutopilotFlight, QueueFlight):
+class DroneComponent(AutopilotFlight):
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -80,30 +80,20 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         self.fsm = MissionFSM(self._on_transition)
         self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the actor's assembly
         self.plugin_sensors: list = []  # PluginSensorComponent (aerodaas.actors.plugin_sensor), filled likewise
-        self.rejected: list[dict] = []
-        self.visited: list[dict] = []
         self.events: list[dict] = []
-        self.preplanned_total = preplanned_total
-        self.preplanned_left = preplanned_total
         self.takeoff_altitude = self.cfg.takeoff_altitude  # as the safety gate passed it (start())
-        self.idle_since: float | None = None
-        self.flew_something = False
-        self.active_wp: str | None = None
-        self.hold_until: float | None = None
-        self._hold: WaypointHold | None = None  # the hold under way at the reached waypoint
         self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
-        self.failsafe: dict | None = None  # the autopilot's failsafe and what on_failsafe did about it
-        self.hold_failed: list[dict] = []  # waypoints whose hold could not be kept (never reached)
         #: whether the vehicle flies where the gate thinks: its home after arming, its progress on each leg
         self.progress = NavigationProgress(self.backend, self.cfg.id, self.cfg.progress, self.gate, self._event)
-        self._paused_from: S | None = None
-        self._link_lost_from: S | None = None
+        #: the flight state shared with the flight objects: waypoint flown and held, visited, outcome, ...
+        self.flight = FlightState(preplanned_total=preplanned_total, preplanned_left=preplanned_total)
+        ctx = FlightContext(self.cfg, self.backend, self.gate, self.fsm, self.queue, self.plan_log, self.progress,
+                            self._event, self.next_order, self._nav_command)
+        #: flying the drone's own queue (:class:`~aerodaas.actors.drone_queue_flight.QueueFlight`)
+        self.queue_flight = QueueFlight(ctx, self.flight, self._return_to_launch)
         self._pause_req = threading.Event()
         self._resume_req = threading.Event()
         self._end_req: str | None = None
-        self._backend_rtl = False
-        self._reissue = False  # the backend's link dropped and came back: send the active target again
-        self.outcome: str | None = None
         self.error: str | None = None
         self.done = False
         self.ticks = 0
@@ -180,7 +170,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         if self.recorder is not None:
             self.recorder.json("/mission/result", self._t_ns(self.backend.t),
                                {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
-                                "preplanned_total": self.preplanned_total, "t": self.backend.t,
+                                "preplanned_total": self.flight.preplanned_total, "t": self.backend.t,
                                 "error": self.error}, "aerodaas.MissionResult")
 
     # ------------------------------------------------------------------ recording helpers
@@ -192,6 +182,12 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         self.events.append(ev)
         if self.recorder is not None:
             self.recorder.json(f"/{self.cfg.id}/events", self._t_ns(self.backend.t), ev, "aerodaas.MissionEvent")
+
+    def _nav_command(self, t: float, command: dict) -> None:
+        """Record navigation command ``command`` (``aerodaas.NavCommand`` fields) on ``/<robot>/nav/command`` at
+        vehicle time ``t`` (s); nothing without a recorder."""
+        if self.recorder is not None:
+            self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t), command, "aerodaas.NavCommand")
 
     def record_event(self, kind: str, **fields: Any) -> None:
         """Record mission event ``kind`` with ``fields`` (JSON-serialisable) at the vehicle's time: kept in
@@ -232,6 +228,22 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         return self.gimbal.attitude()
 
     @property
+    def visited(self) -> list[dict]:
+        """The waypoints done, in order: id, vehicle time ``t`` (s), ``position`` and ``target`` (ENU metres),
+        ``error_m`` (:attr:`FlightState.visited <aerodaas.actors.drone_flight.FlightState.visited>`)."""
+        return self.flight.visited
+
+    @property
+    def outcome(self) -> str | None:
+        """How this drone's mission ended (``success``, ``incomplete``, ``failsafe``, ``timeout`` ...); None while it
+        runs (:attr:`FlightState.outcome <aerodaas.actors.drone_flight.FlightState.outcome>`)."""
+        return self.flight.outcome
+
+    @outcome.setter
+    def outcome(self, outcome: str | None) -> None:
+        self.flight.outcome = outcome
+
+    @property
     def end_requested(self) -> str | None:
         """The reason given to :meth:`end_mission` (the robot's outcome once the next control tick ends it);
         None while no end was requested."""
@@ -242,16 +254,17 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
         return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
                 "position": [float(v) for v in b.position], "battery_pct": None if b.battery_pct is None else float(b.battery_pct),
-                "visited": len(self.visited), "preplanned_total": self.preplanned_total,
+                "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
                 "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
 
     def report(self) -> dict:
-        return {**self.status(), "visited_waypoints": self.visited, "events": self.events, "error": self.error,
-                "rejected": self.rejected, "hold_failed": self.hold_failed, "not_reached": self.progress.not_reached,
+        f = self.flight
+        return {**self.status(), "visited_waypoints": f.visited, "events": self.events, "error": self.error,
+                "rejected": f.rejected, "hold_failed": f.hold_failed, "not_reached": self.progress.not_reached,
                 "ended": self.end.ended,
-                "failsafe": self.failsafe,
+                "failsafe": f.failsafe,
                 "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
@@ -284,11 +297,11 @@ class DroneComponent(AutopilotFlight, QueueFlight):
                 if self.autopilot_mission and ev.get("event") in ("mission_current", "mission_item_reached"):
                     self._ap_events.append(dict(ev))
                 elif ev.get("event") == "link_regained":
-                    self._reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
+                    self.flight.reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
                 elif ev.get("event") == "autopilot_failsafe":
                     self._failsafe_pending = dict(ev)
                 elif ev.get("event") == "command_withheld":
-                    self._reissue = True  # sent again on the next tick, unless the autopilot's failsafe comes first
+                    self.flight.reissue = True  # sent again on the next tick, unless the autopilot's failsafe comes first
                 self._event(ev.pop("event", "backend_event"), **ev)
         self.odometry.on_step(tok)
         self.gimbal.on_step()
@@ -302,7 +315,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         with self.lock:
             try:
                 if self._end_req is not None:
-                    self.outcome = self._end_req
+                    self.flight.outcome = self._end_req
                     self._event("end_requested", reason=self._end_req)
                     self.done = True
                 elif self._control():
@@ -314,7 +327,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
                 import traceback
 
                 self.error = f"{type(e).__name__}: {e}"
-                self.outcome = "failed"
+                self.flight.outcome = "failed"
                 self._event("error", message=self.error, traceback=traceback.format_exc())
                 self.done = True
         return self.done
@@ -355,32 +368,32 @@ class DroneComponent(AutopilotFlight, QueueFlight):
             return self._observe(t, st)
         if not v.link_ok:
             if st not in (S.LINK_LOST, S.LANDED):
-                self._link_lost_from = st
+                self.flight.link_lost_from = st
                 self.fsm.transition(S.LINK_LOST, t)
                 self._event("link_lost", previous=st.value)
             return False
         if self._failsafe_pending is not None:
             return self._on_autopilot_failsafe(t, st)
-        if self._reissue and st != S.LINK_LOST:
+        if self.flight.reissue and st != S.LINK_LOST:
             self._on_link_blip(t, st)
         return self._handlers[self.fsm.state](t, tuple(float(c) for c in v.position))
 
     def _on_link_blip(self, t: float, st: S) -> None:
         """A link drop shorter than a control tick: the state machine never saw it, but the vehicle may have left
         guided/offboard meanwhile, so the active waypoint is sent again."""
-        self._reissue = False
+        self.flight.reissue = False
         if st in (S.NAVIGATING, S.WAYPOINT_HOLD) and not self.autopilot_mission:
             self._event("link_blip", resuming=st.value)
             if st == S.WAYPOINT_HOLD:
                 self.fsm.transition(S.NAVIGATING, t)
-            self.active_wp, self.hold_until = None, None
+            self.flight.active_wp, self.flight.hold_until = None, None
 
     # ------------------------------------------------------------------ one handler per mission state
     # Each takes the vehicle time ``t`` (s) and position ``pos`` (ENU metres) and returns True when the mission is
     # over. IDLE, PREFLIGHT, ARMED and LANDED get no control ticks (start() leaves ARMED in the same call; LANDED
     # ends the mission): they share the airborne handler, as they always did.
     def _on_link_lost(self, t: float, pos: tuple) -> bool:
-        self._reissue = False
+        self.flight.reissue = False
         return self._link_regained(t)
 
     def _on_landing(self, t: float, pos: tuple) -> bool:
@@ -394,15 +407,16 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         except BackendError as e:
             self._event("backend_error", error=str(e))
         self._event("landed")
-        if self.outcome is None:
-            self.outcome = "success" if self._all_flown() else "incomplete"
+        if self.flight.outcome is None:
+            self.flight.outcome = "success" if self._all_flown() else "incomplete"
         return True
 
     def _all_flown(self) -> bool:
         """Every pre-planned waypoint flown: none refused in flight (not flown), none whose hold failed (not held),
         none given up (not reached), and none cleared through the HITL API."""
-        refused = any(r.get("item") == "waypoint" for r in self.rejected)
-        return (self.preplanned_left == 0 and not refused and not self.hold_failed and not self.progress.not_reached
+        f = self.flight
+        refused = any(r.get("item") == "waypoint" for r in f.rejected)
+        return (f.preplanned_left == 0 and not refused and not f.hold_failed and not self.progress.not_reached
                 and not self.plan_log.cleared_preplanned)
 
     def _on_emergency(self, t: float, pos: tuple) -> bool:
@@ -415,11 +429,11 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         if self._battery_critical(t):
             return False
         v = self.backend
-        if self._backend_rtl:
+        if self.flight.backend_rtl:
             if not v.in_air:
                 self.fsm.transition(S.LANDING, t)
             return False
-        path = getattr(self, "_rtl_path", None)
+        path = self.flight.rtl_path
         if path and len(path) > 1 and math.hypot(pos[0] - path[0][0], pos[1] - path[0][1]) <= 0.5:
             path.pop(0)  # the next leg of the path around the exclusion zones
             v.goto(path[0], self.gate.max_speed)
@@ -438,21 +452,21 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         if not v.in_air and not v.armed and self.flew_something_or_took_off():
             # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
             self.fsm.transition(S.LANDING, t)
-            self.outcome = self.outcome or ("failsafe" if self.failsafe else "incomplete")
+            self.flight.outcome = self.flight.outcome or ("failsafe" if self.flight.failsafe else "incomplete")
             self._event("landing", reason="landed while paused")
             return False
         if not self._resume_req.is_set():
             return False
         self._resume_req.clear()
-        back = self._paused_from or S.HOVERING
+        back = self.flight.paused_from or S.HOVERING
         self.fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
         self._event("resumed")
         if self.autopilot_mission:
             v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
         elif back == S.TAKING_OFF:
             v.takeoff(self.takeoff_altitude)
-        self.active_wp = None
-        self.hold_until = None
+        self.flight.active_wp = None
+        self.flight.hold_until = None
         return False
 
     def _on_taking_off(self, t: float, pos: tuple) -> bool:
@@ -474,7 +488,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
             return False
         if self.autopilot_mission:
             return self._follow_autopilot_mission(t, pos)
-        self._fly_queue(t, pos)
+        self.queue_flight.fly(t, pos)
         return False
 
     # ------------------------------------------------------------------ failsafes and pause
@@ -484,7 +498,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         if not (v.battery_pct < self.cfg.safety.critical_battery_pct and v.in_air):
             return False
         self._event("battery_critical", battery_pct=v.battery_pct)
-        self.outcome = "failed"
+        self.flight.outcome = "failed"
         self.fsm.transition(S.EMERGENCY, t)
         return True
 
@@ -496,7 +510,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
             return True
         if v.battery_pct < safety.low_battery_rtl_pct and v.in_air:
             self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
-            self.outcome = "failsafe_rtl"
+            self.flight.outcome = "failsafe_rtl"
             self._return_to_launch(t, pos)
             return True
         if not self._pause_req.is_set():
@@ -504,7 +518,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         self._pause_req.clear()
         st = self.fsm.state
         if st != S.PAUSED and self.fsm.can(S.PAUSED):
-            self._paused_from = st
+            self.flight.paused_from = st
             v.hold()
             self.fsm.transition(S.PAUSED, t)
             self._event("paused")
@@ -552,21 +566,7 @@ class DroneComponent(AutopilotFlight, QueueFlight):
         elif st == S.LANDING and (not v.in_air or not v.armed):
             fsm.transition(S.LANDED, t)
         if finished:  # the backend recorded its own replay_finished event
-            if self.outcome is None:
-                self.outcome = "success"
+            if self.flight.outcome is None:
+                self.flight.outcome = "success"
             return True
         return False
-
-    def _reject(self, t: float, item: Any, err: SafetyViolation) -> None:
-        """A command outside the safety limits: never sent to the backend; dropped from the queue and recorded."""
-        rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason,
-               "item": "waypoint" if isinstance(item, Waypoint) else type(item).__name__}
-        self.rejected.append(rec)
-        self._event("command_rejected", **rec)
-        self.plan_log.discard(self.queue, rec["id"], f"rejected: {err.reason}", t)
-        if self.fsm.state == S.TRACKING:
-            self._event("tracking_ended")
-        if self.fsm.state in (S.TRACKING, S.NAVIGATING, S.WAYPOINT_HOLD):
-            self.fsm.transition(S.HOVERING, t)
-        self.backend.hold()
-        self.active_wp, self.hold_until = None, None

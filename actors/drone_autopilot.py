@@ -53,7 +53,7 @@ class AutopilotFlight:
         (``waypoint_done``; also for items whose reports were lost with the link), on NAV_LAND -> LANDING, on
         NAV_RETURN_TO_LAUNCH -> RETURNING (the autopilot's RTL). Sends nothing to the vehicle."""
         res = self.next_order(t, pos)  # records the plan; the queue itself is only popped as items complete
-        self.preplanned_left = res.preplanned_left
+        self.flight.preplanned_left = res.preplanned_left
         events, self._ap_events = self._ap_events, []
         for ev in events:
             n = ev.get("item")
@@ -73,23 +73,21 @@ class AutopilotFlight:
             self._ap_current = n
             if kind == "waypoint":
                 target = wp.to_local(self.cfg.home)
-                self.active_wp = wp.id
+                self.flight.active_wp = wp.id
                 self._to(S.NAVIGATING, t)
                 self._event("navigate", waypoint=wp.id, target=list(target), by="autopilot mission", item=n)
-                if self.recorder is not None:
-                    self.recorder.json(f"/{self.cfg.id}/nav/command", self._t_ns(t),
-                                       {"kind": "waypoint", "waypoint": wp.model_dump(), "local": list(target),
-                                        "priority": None, "autopilot_item": n}, "aerodaas.NavCommand")
+                self._nav_command(t, {"kind": "waypoint", "waypoint": wp.model_dump(), "local": list(target),
+                                      "priority": None, "autopilot_item": n})
             elif kind == "land":
-                self.active_wp = None
+                self.flight.active_wp = None
                 self._to(S.LANDING, t)
                 self._event("landing", reason="mission complete", by="autopilot mission")
             elif kind == "rtl":
-                self.active_wp = None
-                self._backend_rtl = True
+                self.flight.active_wp = None
+                self.flight.backend_rtl = True
                 self._to(S.RETURNING, t)
                 self._event("returning", home=[0.0, 0.0], by="autopilot mission")
-        self.preplanned_left = self.queue.pending(distance_driven_only=True)
+        self.flight.preplanned_left = self.queue.pending(distance_driven_only=True)
         return False
 
     def _ap_waypoint_reached(self, n: int, t: float, pos: tuple) -> None:
@@ -113,10 +111,10 @@ class AutopilotFlight:
         target = wp.to_local(self.cfg.home)
         at = self._ap_reached[n]
         self.plan_log.complete(self.queue, wp.id, t)
-        self.visited.append({"id": wp.id, "t": t, "position": list(at), "target": list(target),
+        self.flight.visited.append({"id": wp.id, "t": t, "position": list(at), "target": list(target),
                              "error_m": math.dist(at, target)})
         self._event("waypoint_done", waypoint=wp.id)
-        self.active_wp = None
+        self.flight.active_wp = None
 
     def _on_autopilot_failsafe(self, t: float, st: S) -> bool:
         """The autopilot entered a failsafe mode by itself (backend event ``autopilot_failsafe``): the mission
@@ -127,16 +125,16 @@ class AutopilotFlight:
         v, fsm = self.backend, self.fsm
         action = self.backend.failsafe_action
         mode = fs.get("mode", "")
-        if self.autopilot_mission and self.preplanned_left == 0 and mode in ("RTL", "LAND"):
+        if self.autopilot_mission and self.flight.preplanned_left == 0 and mode in ("RTL", "LAND"):
             return False  # the uploaded mission's own last item (NAV_RETURN_TO_LAUNCH / NAV_LAND)
-        self.failsafe = {"mode": mode, "previous": fs.get("previous"), "t": t, "text": fs.get("text", ""),
+        self.flight.failsafe = {"mode": mode, "previous": fs.get("previous"), "t": t, "text": fs.get("text", ""),
                          "action": action, "state": st.value}
         self._event("failsafe", mode=mode, action=action, state=st.value, text=fs.get("text", ""))
         if st in (S.LANDING, S.LANDED, S.RETURNING):
             return False  # already on the way down: nothing of ours to pause
 
-        self._reissue = False
-        self.active_wp, self.hold_until, self._hold = None, None, None
+        self.flight.reissue = False
+        self.flight.active_wp, self.flight.hold_until, self.flight.hold = None, None, None
         if action == "resume":
             if st == S.LINK_LOST:
                 return self._link_regained(t)
@@ -146,13 +144,13 @@ class AutopilotFlight:
         getattr(v, "release", lambda: None)()
         if action == "hold":
             if st != S.PAUSED and fsm.can(S.PAUSED):
-                self._paused_from = {S.LINK_LOST: self._link_lost_from}.get(st, st)
+                self.flight.paused_from = {S.LINK_LOST: self.flight.link_lost_from}.get(st, st)
                 fsm.transition(S.PAUSED, t)
                 self._event("paused", reason=f"autopilot failsafe {mode}")
             return False
-        self.outcome = "failsafe"
+        self.flight.outcome = "failsafe"
         if mode in ("RTL", "SMART_RTL", "AUTO_RTL"):
-            self._backend_rtl = True
+            self.flight.backend_rtl = True
             fsm.transition(S.RETURNING, t)
             self._event("returning", by="autopilot failsafe", mode=mode)
         else:
@@ -164,25 +162,25 @@ class AutopilotFlight:
 
     def _link_regained(self, t: float) -> bool:
         """The link is back: resume what was going on (re-issuing the active waypoint), or note the landing."""
-        v, prev = self.backend, self._link_lost_from or S.HOVERING
+        v, prev = self.backend, self.flight.link_lost_from or S.HOVERING
         self._event("link_regained", resuming=prev.value)
         if not v.in_air:
             self.fsm.transition(S.LANDED, t)
             self._event("landed", reason="landed while the link was lost")
-            if self.outcome is None:
-                self.outcome = "incomplete" if self.preplanned_left or self.plan_log.cleared_preplanned else "success"
+            if self.flight.outcome is None:
+                self.flight.outcome = "incomplete" if self.flight.preplanned_left or self.plan_log.cleared_preplanned else "success"
             return True
         resume = {S.WAYPOINT_HOLD: S.NAVIGATING}.get(prev, prev)
         if resume in (S.ARMED, S.PREFLIGHT):
             resume = S.TAKING_OFF
         self.fsm.transition(resume, t)
-        self.active_wp, self.hold_until = None, None  # re-issue the current waypoint on the next step
+        self.flight.active_wp, self.flight.hold_until = None, None  # re-issue the current waypoint on the next step
         return False
 
     def _return_to_launch(self, t: float, pos: tuple) -> None:
         """RTL: the autopilot's own mode when it has one; else fly home at the current altitude (at least the
         take-off altitude), then land (see _control)."""
-        self.active_wp, self.hold_until = None, None
+        self.flight.active_wp, self.flight.hold_until = None, None
         if self.fsm.state == S.TRACKING:
             self._event("tracking_ended")
         from aerodaas.navigation.rtl import plan_return
@@ -194,23 +192,23 @@ class AutopilotFlight:
             vel = (0.0, 0.0, 0.0)
         path, why = plan_return(self.gate, pos, vel, alt)
         if path is None:  # no safe path home: land in place (a failsafe never crosses an exclusion zone)
-            self._rtl_path = None
+            self.flight.rtl_path = None
             self.backend.land()
             self.fsm.transition(S.LANDING, t)
             away = math.hypot(pos[0], pos[1])
             # landing away from home is not the return asked for: never a success (it was, 43 m from home)
-            self.outcome = self.outcome or "rtl_failed"
+            self.flight.outcome = self.flight.outcome or "rtl_failed"
             self._event("rtl_impossible", reason=why, distance_from_home_m=round(away, 1))
             self._event("landing", reason=f"return to launch impossible: {why}; landing in place {away:.0f} m from "
                                           f"home")
             return
         # the autopilot's own RTL flies straight home: only when the straight leg is the planned path
         straight = len(path) == 2
-        self._backend_rtl = bool(straight and self.backend.return_to_launch())
-        self._rtl_path = [(x, y, alt) for x, y in path[1:]]
-        if not self._backend_rtl:
-            self.backend.goto(self._rtl_path[0], self.gate.max_speed)
+        self.flight.backend_rtl = bool(straight and self.backend.return_to_launch())
+        self.flight.rtl_path = [(x, y, alt) for x, y in path[1:]]
+        if not self.flight.backend_rtl:
+            self.backend.goto(self.flight.rtl_path[0], self.gate.max_speed)
         self.fsm.transition(S.RETURNING, t)
-        self._event("returning", home=[0.0, 0.0], by="autopilot" if self._backend_rtl else "aerodaas",
-                    path=[list(p) for p in self._rtl_path])
+        self._event("returning", home=[0.0, 0.0], by="autopilot" if self.flight.backend_rtl else "aerodaas",
+                    path=[list(p) for p in self.flight.rtl_path])
 
