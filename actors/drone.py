@@ -17,6 +17,12 @@ With ``mavlink.use_autopilot_mission`` the pre-planned waypoints are uploaded to
 flown as its own mission (ArduPilot AUTO, PX4 AUTO.MISSION); the state machine then follows the autopilot's
 MISSION_CURRENT / MISSION_ITEM_REACHED reports instead of sending targets (the runtime refused, before any actor
 started, every navigation that such a mission cannot express).
+
+The drone composes its flight logic from objects that know nothing else of it: :attr:`DroneComponent.queue_flight`
+(flying its own queue, :mod:`~aerodaas.actors.drone_queue_flight`) and :attr:`DroneComponent.autopilot_flight` (the
+autopilot's own mission, failsafes, link regain, return to launch, :mod:`~aerodaas.actors.drone_autopilot`), both
+given its collaborators and the flight state it shares with them (:attr:`DroneComponent.flight`, a
+:class:`~aerodaas.actors.drone_flight.FlightState`).
 """
 from __future__ import annotations
 
@@ -45,7 +51,7 @@ from aerodaas.actors.drone_queue_flight import QueueFlight
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
 
-class DroneComponent(AutopilotFlight):
+class DroneComponent:
     """See the module docstring. ``scheduler`` is the robot's trajectory scheduler plug-in (a
     :class:`~aerodaas.schedulers.base.TrajectoryScheduler`; None: the base one, nothing pre-planned): its queued
     navigation is copied into this drone's own :attr:`queue`, and it plans what the :attr:`inbox` (component id
@@ -89,8 +95,13 @@ class DroneComponent(AutopilotFlight):
         self.flight = FlightState(preplanned_total=preplanned_total, preplanned_left=preplanned_total)
         ctx = FlightContext(self.cfg, self.backend, self.gate, self.fsm, self.queue, self.plan_log, self.progress,
                             self._event, self.next_order, self._nav_command)
+        #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
+        self.autopilot_mission = bool(self.backend.flies_uploaded_mission)
+        #: the autopilot's own mission, its failsafes, link regain, the return to launch
+        #: (:class:`~aerodaas.actors.drone_autopilot.AutopilotFlight`)
+        self.autopilot_flight = AutopilotFlight(ctx, self.flight, self.autopilot_mission)
         #: flying the drone's own queue (:class:`~aerodaas.actors.drone_queue_flight.QueueFlight`)
-        self.queue_flight = QueueFlight(ctx, self.flight, self._return_to_launch)
+        self.queue_flight = QueueFlight(ctx, self.flight, self.autopilot_flight.return_to_launch)
         self._pause_req = threading.Event()
         self._resume_req = threading.Event()
         self._end_req: str | None = None
@@ -109,7 +120,6 @@ class DroneComponent(AutopilotFlight):
         self.end = RunEnd(self.backend, self.cfg.id, self.fsm, self._event, self.odometry)
         self.tick_period = 1.0 / self.cfg.control_rate_hz
         self.next_tick = 0.0
-        self._init_autopilot()
         #: the control step's handler of each mission state (:meth:`_control`), checked against the state table
         self._handlers = handler_table({
             S.LINK_LOST: self._on_link_lost, S.LANDING: self._on_landing, S.EMERGENCY: self._on_emergency,
@@ -140,7 +150,7 @@ class DroneComponent(AutopilotFlight):
             return
         self.gimbal.start()  # what the application pointed the gimbal at before the mission started
         if self.autopilot_mission:
-            self._start_autopilot_mission()
+            self.autopilot_flight.start_mission()
             return
         alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
         self.takeoff_altitude = alt
@@ -295,7 +305,7 @@ class DroneComponent(AutopilotFlight):
             self.backend.step(dt)
             for ev in self.backend.drain_events():
                 if self.autopilot_mission and ev.get("event") in ("mission_current", "mission_item_reached"):
-                    self._ap_events.append(dict(ev))
+                    self.autopilot_flight.mission_report(ev)
                 elif ev.get("event") == "link_regained":
                     self.flight.reissue = True  # the vehicle may have left guided/offboard meanwhile (PX4's failsafe)
                 elif ev.get("event") == "autopilot_failsafe":
@@ -373,7 +383,8 @@ class DroneComponent(AutopilotFlight):
                 self._event("link_lost", previous=st.value)
             return False
         if self._failsafe_pending is not None:
-            return self._on_autopilot_failsafe(t, st)
+            fs, self._failsafe_pending = self._failsafe_pending, None
+            return self.autopilot_flight.on_failsafe(t, st, fs)
         if self.flight.reissue and st != S.LINK_LOST:
             self._on_link_blip(t, st)
         return self._handlers[self.fsm.state](t, tuple(float(c) for c in v.position))
@@ -394,7 +405,7 @@ class DroneComponent(AutopilotFlight):
     # ends the mission): they share the airborne handler, as they always did.
     def _on_link_lost(self, t: float, pos: tuple) -> bool:
         self.flight.reissue = False
-        return self._link_regained(t)
+        return self.autopilot_flight.link_regained(t)
 
     def _on_landing(self, t: float, pos: tuple) -> bool:
         """On the ground: LANDED, disarm, and the outcome (success only if everything planned was flown)."""
@@ -474,7 +485,7 @@ class DroneComponent(AutopilotFlight):
         if self._failsafe_or_pause(t, pos):
             return False
         if self.autopilot_mission:
-            return self._follow_autopilot_mission(t, pos)
+            return self.autopilot_flight.follow_mission(t, pos)
         v = self.backend
         if abs(v.position[2] - self.takeoff_altitude) < 0.1:
             self.fsm.transition(S.HOVERING, t)
@@ -487,7 +498,7 @@ class DroneComponent(AutopilotFlight):
         if self._failsafe_or_pause(t, pos):
             return False
         if self.autopilot_mission:
-            return self._follow_autopilot_mission(t, pos)
+            return self.autopilot_flight.follow_mission(t, pos)
         self.queue_flight.fly(t, pos)
         return False
 
@@ -511,7 +522,7 @@ class DroneComponent(AutopilotFlight):
         if v.battery_pct < safety.low_battery_rtl_pct and v.in_air:
             self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
             self.flight.outcome = "failsafe_rtl"
-            self._return_to_launch(t, pos)
+            self.autopilot_flight.return_to_launch(t, pos)
             return True
         if not self._pause_req.is_set():
             return False
@@ -524,13 +535,7 @@ class DroneComponent(AutopilotFlight):
             self._event("paused")
         return True
 
-    # ------------------------------------------------------------------ autopilot mission
-    def _to(self, state: S, t: float) -> None:
-        """Transition to ``state``, through HOVERING when the state machine needs it (TAKING_OFF -> NAVIGATING)."""
-        if self.fsm.state != state and not self.fsm.can(state) and self.fsm.can(S.HOVERING):
-            self.fsm.transition(S.HOVERING, t)
-        self.fsm.transition(state, t)
-
+    # ------------------------------------------------------------------ the flight so far, a replayed log
     def flew_something_or_took_off(self) -> bool:
         """The vehicle has been in the air in this run (a landed, disarmed vehicle then means the flight ended)."""
         return any(s in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) for _, s in self.fsm.history)
