@@ -15,6 +15,7 @@ from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import LinkLost, VehicleBackend
 from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.command import CommandProtocol
+from aerodaas.backends.mavlink.mission import MissionVehicle
 from aerodaas.backends.mavlink.params import LinkCheck, VehicleSender
 from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
@@ -29,14 +30,11 @@ _MIN_TARGET_HEIGHT_M = 0.5
 _CARROT_LEAD_M = 0.25
 
 
-class OffboardVehicle(Protocol):
+class OffboardVehicle(MissionVehicle, Protocol):
     """What guided control reads of the vehicle (the backend's public state): its home (the ENU origin), autopilot
     (``"ardupilot"`` / ``"px4"``), vehicle clock (:attr:`t`, seconds) and its rate (vehicle seconds per wall
     second), position (ENU metres), flight mode, armed flag, whether it is in the air, whether the link is up, its
     altitude reference (AMSL metres, None before it is fixed) and its horizontal speed limit (m/s)."""
-
-    home: GeoPoint
-    autopilot: str | None
 
     @property
     def t(self) -> float: ...
@@ -45,24 +43,7 @@ class OffboardVehicle(Protocol):
     def clock_ratio(self) -> float: ...
 
     @property
-    def position(self) -> np.ndarray: ...
-
-    @property
-    def mode(self) -> str: ...
-
-    @property
-    def armed(self) -> bool: ...
-
-    @property
-    def in_air(self) -> bool: ...
-
-    @property
     def link_ok(self) -> bool: ...
-
-    @property
-    def altitude_reference(self) -> float | None: ...
-
-    def xy_speed_cap(self) -> float: ...
 
 
 class OffboardControl:
