@@ -43,6 +43,20 @@ def parse_groups(specs: list[str] | None) -> dict[str, str]:
     return out
 
 
+def parse_input_size(size: str | int) -> tuple[int, int] | None:
+    """``--input-sizes`` item: ``0`` (the model's own), ``N`` (N x N) or ``HxW`` pixels -> (H, W) or None. Raises
+    ValueError naming the value."""
+    text = str(size).lower()
+    try:
+        if "x" in text:
+            h, w = (int(v) for v in text.split("x"))
+            return (h, w)
+        n = int(text)
+    except ValueError:
+        raise ValueError(f"--input-sizes {size!r}: expected N or HxW pixels") from None
+    return (n, n) if n else None
+
+
 def _relabel(dets: list, group_of: dict[str, str]) -> list:
     return [d.model_copy(update={"class_name": group_of[d.class_name]}) if d.class_name in group_of else d
             for d in dets]
@@ -78,7 +92,7 @@ def run_detect(a: argparse.Namespace) -> dict:
                                  format=a.format, score_threshold=min(thresholds),
                                  classes=None if group_of else classes,
                                  intra_op_threads=a.threads, agnostic_nms=a.agnostic_nms,
-                                 input_size=(size, size) if size else None)
+                                 input_size=parse_input_size(size))
             if cfg["tile"]:
                 det = TiledDetector(det, Tiling(tile=cfg["tile"], overlap=a.overlap, full_frame=not a.no_full_frame,
                                                 merge=a.merge))
@@ -101,10 +115,10 @@ def run_detect(a: argparse.Namespace) -> dict:
                     runs.append((time.perf_counter() - t0) * 1e3)
                 ms.append(sorted(runs)[len(runs) // 2])  # median of the repeats: less of the neighbours' load
                 per.append((_relabel(dets, group_of), g))
-                prog.update(task, advance=1, description=f"size {size or 'model'} tile {cfg['tile'] or '-'}")
+                prog.update(task, advance=1, description=f"size {size if size != '0' else 'model'} tile {cfg['tile'] or '-'}")
             for thr in thresholds:
                 kept = [([d for d in ds if d.score >= thr], g) for ds, g in per]
-                row = {"input_size": size or list(getattr(det, "input_hw", ())), "tile": cfg["tile"],
+                row = {"input_size": list(getattr(det, "input_hw", ())), "tile": cfg["tile"],
                        "score_threshold": thr, "ms_per_frame": round(sum(ms) / len(ms), 1),
                        "boxes_per_frame": round(sum(len(d) for d, _ in kept) / len(kept), 2), "classes": {}}
                 for c in classes:
@@ -171,8 +185,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="NAME=a,b,c: score annotated and detected classes a, b, c as one class NAME (e.g. "
                         "vehicle=car,truck,bus,minibus: a car the model calls a truck is found); repeatable")
     p.add_argument("--thresholds", nargs="+", type=float, default=[0.15])
-    p.add_argument("--input-sizes", nargs="+", type=int, default=[0],
-                   help="square input sizes for a dynamic-axes model (0: the model's own)")
+    p.add_argument("--input-sizes", nargs="+", default=["0"],
+                   help="input sizes for a dynamic-axes model: N (N x N) or HxW pixels (0: the model's own)")
     p.add_argument("--tiles", nargs="+", type=int, default=[0], help="tile sizes in pixels (0: whole frame)")
     p.add_argument("--overlap", type=float, default=0.2)
     p.add_argument("--merge", default="greedynmm", choices=["nms", "greedynmm"])

@@ -25,30 +25,10 @@ import cv2
 import numpy as np
 
 from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, _OnnxDetector
+from aerodaas.perception.model_meta import metadata_names
 from aerodaas.perception.options import FORMATS  # the output formats inspect_model recognises / format= accepts
 
 __all__ = ["UltralyticsDetector", "ModelInfo", "inspect_model", "FORMATS", "metadata_names"]
-
-
-def metadata_names(meta: dict[str, str]) -> list[str] | None:
-    """Class names from an ONNX model's metadata ``names`` as Ultralytics writes it (``str`` of a dict
-    ``{index: name}`` or of a list), in index order; None when absent. Raises ValueError for a ``names`` entry
-    that is not a dict/list literal or whose indices are not ``0..n-1``."""
-    raw = meta.get("names")
-    if raw is None:
-        return None
-    try:
-        names = ast.literal_eval(raw)
-    except (ValueError, SyntaxError):
-        raise ValueError(f"model metadata names={raw[:80]!r} is not a dict or list literal") from None
-    if isinstance(names, (list, tuple)):
-        return [str(n) for n in names]
-    if isinstance(names, dict):
-        d = {int(k): str(v) for k, v in names.items()}
-        if sorted(d) != list(range(len(d))):
-            raise ValueError(f"model metadata names has indices {sorted(d)[:10]}..., expected 0..{len(d) - 1}")
-        return [d[i] for i in range(len(d))]
-    raise ValueError(f"model metadata names={raw[:80]!r} is not a dict or list literal")
 
 
 def _anchors(hw: tuple[int, int], strides=(8, 16, 32)) -> int:
@@ -74,7 +54,8 @@ def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
     * several outputs with per-stride ``(1, A, nc)`` scores and ``(1, A, 32)`` distributions: ``nanodet``;
     * one ``(1, A, 5 + nc)`` output with ``A`` = anchors of strides 8/16/32 (one per cell): ``yolox``; with three
       per cell (YOLOv5's anchors) or metadata ``names``: ``ultralytics`` (v5 head);
-    * one ``(1, 4 + nc, A)`` output (channels before anchors): ``ultralytics`` (v8/11 head).
+    * one ``(1, 4 + nc, A)`` output (channels before anchors): ``ultralytics`` (v8/11 head);
+    * metadata ``head`` = ``yolox`` (what ``aerodaas train detector`` writes, with ``names``): ``yolox``.
 
     ``format`` other than ``"auto"`` is taken as given (and checked against the graph where the shape is known).
     Raises ValueError naming the field and value for an unknown ``format``, an input that is not NCHW, or a head
@@ -91,10 +72,13 @@ def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
         raise ValueError(f"model {path}: expected an NCHW image input, got {inp.name} {inp.shape}")
     hw = (inp.shape[2], inp.shape[3])
     input_hw = (int(hw[0]), int(hw[1])) if all(isinstance(d, int) for d in hw) else None
-    names = metadata_names(sess.get_modelmeta().custom_metadata_map)
+    meta = sess.get_modelmeta().custom_metadata_map
+    names = metadata_names(meta)
     outs = [o.shape for o in sess.get_outputs()]
     found, nc = None, None
-    if len(outs) > 1 and all(len(s) == 3 for s in outs):
+    if meta.get("head") == "yolox" and len(outs) == 1 and len(outs[0]) == 3:  # written by `aerodaas train detector`
+        found, nc = "yolox", (outs[0][2] - 5 if isinstance(outs[0][2], int) else None)
+    elif len(outs) > 1 and all(len(s) == 3 for s in outs):
         found = "nanodet"
         nc = next((s[-1] for s in outs if isinstance(s[-1], int) and s[-1] != 32), None)
     elif len(outs) >= 1 and len(outs[0]) == 3:

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from aerodaas.model.types import COCO_CLASSES, Detection
+from aerodaas.perception.model_meta import metadata_names
 from aerodaas.perception.options import check_input_size
 
 __all__ = [
@@ -207,8 +208,10 @@ class _OnnxDetector:
         self._nms_group = group
 
     def _model_class_names(self) -> Sequence[str]:
-        """The class names the model itself carries (subclasses read metadata); default COCO's 80."""
-        return COCO_CLASSES
+        """The class names the model's metadata carries (``names``, :func:`metadata_names`: what
+        ``aerodaas train detector`` writes), else COCO's 80."""
+        names = metadata_names(self.session.get_modelmeta().custom_metadata_map)
+        return COCO_CLASSES if names is None else names
 
     def _default_input_hw(self, shape) -> tuple[int, int]:
         raise ValueError(f"{self.model_path}: the input {self.input_name} {shape} has dynamic height/width; give "
