@@ -364,8 +364,10 @@ def _add_recording_parsers(sub) -> None:
     s = sub.add_parser("schema", help="print the JSON Schema of environment.json")
     s.set_defaults(func=_cmd_schema)
     from aerodaas.plugins_cli import add_parser as _add_plugins_parser
+    from aerodaas.train_cli import add_parser as _add_train_parser
 
     _add_plugins_parser(sub)
+    _add_train_parser(sub)
     rc = sub.add_parser("recover", help="rewrite an unfinished (crashed, killed) MCAP recording as a finished, "
                                         "indexed one")
     rc.add_argument("file")

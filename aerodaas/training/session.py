@@ -1,0 +1,82 @@
+"""One training run from start to shipped file: the model to start from, the loop, the export and its report.
+
+:func:`run_training` is what ``aerodaas train detector`` does on one machine; the report it writes
+(``report.json`` in the run folder) names the exact configuration, seed, per-epoch history, the export's parity and
+the exported file's metrics, so a model card can be written from it.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import time
+from dataclasses import asdict
+from typing import Callable
+
+import torch
+
+from aerodaas.model.types import COCO_CLASSES
+from aerodaas.perception.model_files import resolve_model
+from aerodaas.training.config import TrainConfig
+from aerodaas.training.export import ExportReport, export_checked, quantize_checked
+from aerodaas.training.loop import EpochResult, Trainer, TrainingData, base_rows
+from aerodaas.training.loss import LossParts
+from aerodaas.training.onnx_module import OnnxYolox
+
+__all__ = ["build_model", "run_training", "export_run"]
+
+
+def build_model(cfg: TrainConfig, names: list[str]) -> OnnxYolox:
+    """The module to fine-tune: ``cfg.base_model`` (default the shipped YOLOX-Nano, resolved and sha256-checked by
+    :func:`resolve_model`) with one class row per name (:func:`base_rows`). The base model's class names are its
+    metadata's, else COCO's 80."""
+    from aerodaas.perception.decoders import inspect_model
+
+    path = cfg.base_model or resolve_model("yolox_nano")
+    base_names = inspect_model(path, "yolox").class_names or list(COCO_CLASSES)
+    return OnnxYolox(path, base_rows(names, base_names, cfg.init_from))
+
+
+def export_run(cfg: TrainConfig, trainer: Trainer, started: float) -> dict:
+    """Export the best epoch's EMA weights to ``out/model.onnx`` (checked, scored), quantize when asked, and write
+    ``out/report.json``; returns the report."""
+    best_state = torch.load(cfg.out / "best.pt", weights_only=False)
+    trainer.ema.model.load_state_dict(best_state["ema"])
+    meta = {"aerodaas_training": json.dumps({"seed": cfg.seed, "epoch": best_state["epoch"],
+                                             "base": str(cfg.base_model or "yolox_nano")})}
+    rep = export_checked(trainer.ema.model, cfg.out / "model.onnx", trainer.data.names, trainer.val, meta,
+                         cfg.score_threshold)
+    q_note, q_rep = "not asked (--quantize)", None
+    if cfg.quantize:
+        q_rep, q_note = quantize_checked(rep, trainer.data.names, trainer.val, cfg.out / "model.int8.onnx",
+                                         score_threshold=cfg.score_threshold)
+
+    def _exp(r: ExportReport | None) -> dict | None:
+        return None if r is None else {"path": str(r.path), "size_bytes": r.size_bytes,
+                                       "max_abs_diff": r.max_abs_diff, "metrics": [asdict(m) for m in r.metrics]}
+
+    report = {"config": cfg.model_dump(mode="json"), "names": trainer.data.names,
+              "train_images": len(trainer.data.train), "val_images": len(trainer.data.val),
+              "best_epoch": best_state["epoch"] - 1, "history": [asdict(h) for h in trainer.history],
+              "export": _exp(rep), "int8": _exp(q_rep), "int8_note": q_note,
+              "seconds": round(time.monotonic() - started, 1),
+              "machine": {"cpus": torch.get_num_threads(), "platform": platform.platform(),
+                          "torch": torch.__version__}}
+    (cfg.out / "report.json").write_text(json.dumps(report, indent=1))
+    return report
+
+
+def run_training(cfg: TrainConfig, data: TrainingData,
+                 on_step: Callable[[int, int, LossParts], None] | None = None,
+                 on_epoch: Callable[[EpochResult], None] | None = None) -> dict:
+    """Train on one machine as ``cfg`` says (``--resume``: from ``out/last.pt``), export and report
+    (:func:`export_run`). Raises FileNotFoundError for ``--resume`` without a checkpoint, ValueError for a
+    checkpoint of other classes."""
+    started = time.monotonic()
+    trainer = Trainer(cfg, data, build_model(cfg, data.names), on_step=on_step, on_epoch=on_epoch)
+    if cfg.resume:
+        last = cfg.out / "last.pt"
+        if not last.is_file():
+            raise FileNotFoundError(f"--resume: no checkpoint {last} (run without --resume first)")
+        trainer.restore(torch.load(last, weights_only=False))
+    trainer.fit(cfg.out)
+    return export_run(cfg, trainer, started)

@@ -1,0 +1,178 @@
+"""`aerodaas train detector`, run as a user runs it: on a four-image labelled set it takes one step, exports an ONNX
+model that onnxruntime and the framework's detector load, with the export checked against PyTorch; `--resume`
+continues from the checkpoint; bad labels and options end before training with exit 2, naming the file and value.
+
+The four images are drawn here (grey ground, dark rectangles as cars, small warm blobs as persons), written as a
+labelling tool's YOLO export would be.
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.conftest import MODEL_DIR, needs_data, skip_or_fail
+
+
+NAMES = ["car", "large_vehicle", "person"]
+
+
+def _draw_set(root: Path, n: int = 4, seed: int = 0) -> Path:
+    """A YOLO folder of ``n`` 640x480 frames (cars 40x20 px, trucks 80x30, persons 8x8) with labels."""
+    rng = np.random.default_rng(seed)
+    (root / "images").mkdir(parents=True)
+    (root / "labels").mkdir()
+    (root / "classes.txt").write_text("\n".join(NAMES) + "\n")
+    for i in range(n):
+        im = np.full((480, 640, 3), 120, np.uint8) + rng.integers(0, 20, (480, 640, 3), dtype=np.uint8)
+        lines = []
+        for k in range(6):
+            c = k % 3
+            w, h = ((40, 20), (80, 30), (8, 8))[c]
+            x, y = int(rng.integers(10, 640 - w - 10)), int(rng.integers(10, 480 - h - 10))
+            colour = ((30, 30, 200), (200, 200, 200), (240, 240, 240))[c]
+            cv2.rectangle(im, (x, y), (x + w, y + h), colour, -1)
+            lines.append(f"{c} {(x + w / 2) / 640:.6f} {(y + h / 2) / 480:.6f} {w / 640:.6f} {h / 480:.6f}")
+        cv2.imwrite(str(root / "images" / f"flight{i // 2}_{i:04d}.jpg"), im)
+        (root / "labels" / f"flight{i // 2}_{i:04d}.txt").write_text("\n".join(lines) + "\n")
+    return root
+
+
+def _train(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, "AERODAAS_MODEL_DIR": str(MODEL_DIR), **(env_extra or {})}
+    return subprocess.run([sys.executable, "-m", "aerodaas.cli", "train", "detector", *args], capture_output=True,
+                          text=True, env=env, timeout=600)
+
+
+SMOKE = ("--epochs", "1", "--tiles-per-epoch", "4", "--batch", "2", "--val-tiles", "4", "--tile", "256")
+
+
+@needs_data
+def test_one_step_exports_a_model_that_matches_pytorch(tmp_path):
+    if importlib.util.find_spec("torch") is None:
+        skip_or_fail('the [train] extra (PyTorch) is not installed: pip install -e ".[train]"')
+    data = _draw_set(tmp_path / "set")
+    out = tmp_path / "run"
+    r = _train("--data", str(data), "--val", str(data), "--out", str(out), "--max-steps", "1", *SMOKE)
+    assert r.returncode == 0, r.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["names"] == NAMES
+    assert len(report["history"]) == 1
+    assert report["export"]["max_abs_diff"] <= 1e-3
+    assert (out / "last.pt").is_file() and (out / "best.pt").is_file()
+    # the exported file is what the analytics load: the framework's detector reads its classes from its metadata
+    from aerodaas.perception.decoders import inspect_model
+    from aerodaas.perception.detect import YoloxDetector
+
+    info = inspect_model(out / "model.onnx")
+    assert (info.format, info.class_names, info.n_classes) == ("yolox", NAMES, 3)
+    det = YoloxDetector(str(out / "model.onnx"), input_size=(256, 320), score_threshold=0.01)
+    frame = cv2.imread(str(next((data / "images").iterdir())))
+    for d in det.detect(frame):
+        assert d.class_name in NAMES
+        assert 0 <= d.box[0] <= d.box[2] <= 640 and 0 <= d.box[1] <= d.box[3] <= 480
+    # --resume continues from the checkpoint: a second epoch is added to the same history
+    r2 = _train("--data", str(data), "--val", str(data), "--out", str(out), "--resume",
+                *[a if a != "1" or i != 1 else "2" for i, a in enumerate(SMOKE)], "--max-steps", "4")
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    report2 = json.loads((out / "report.json").read_text())
+    assert [h["epoch"] for h in report2["history"]] == [0, 1]
+
+
+def _case_outside(root: Path) -> tuple[str, ...]:
+    lab = next((root / "labels").iterdir())
+    lab.write_text(lab.read_text() + "0 0.99 0.5 0.2 0.1\n")
+    return (lab.name, "outside")
+
+
+def _case_unknown_class(root: Path) -> tuple[str, ...]:
+    lab = sorted((root / "labels").iterdir())[1]
+    lab.write_text(lab.read_text() + "7 0.5 0.5 0.1 0.1\n")
+    return (lab.name, "class 7 is unknown")
+
+
+def _case_label_without_image(root: Path) -> tuple[str, ...]:
+    (root / "labels" / "ghost_0001.txt").write_text("0 0.5 0.5 0.1 0.1\n")
+    return ("ghost_0001.txt", "without an image")
+
+
+def _case_unreadable_image(root: Path) -> tuple[str, ...]:
+    bad = root / "images" / "broken_0001.jpg"
+    bad.write_bytes(b"not a jpeg")
+    return ("broken_0001.jpg", "cannot be read")
+
+
+def _case_empty(root: Path) -> tuple[str, ...]:
+    for p in (root / "images").iterdir():
+        p.unlink()
+    for p in (root / "labels").iterdir():
+        p.unlink()
+    return ("no labelled image",)
+
+
+def _case_no_names(root: Path) -> tuple[str, ...]:
+    (root / "classes.txt").unlink()
+    return ("no class names", "classes.txt")
+
+
+def _case_malformed_line(root: Path) -> tuple[str, ...]:
+    lab = sorted((root / "labels").iterdir())[2]
+    lab.write_text("car 0.5 0.5 0.1\n")
+    return (f"{lab.name}:1", "'car 0.5 0.5 0.1'")
+
+
+@needs_data
+@pytest.mark.parametrize("case", [_case_outside, _case_unknown_class, _case_label_without_image,
+                                  _case_unreadable_image, _case_empty, _case_no_names, _case_malformed_line],
+                         ids=lambda f: f.__name__[6:])
+def test_bad_labels_end_before_training_naming_the_file(tmp_path, case):
+    data = _draw_set(tmp_path / "set")
+    expected = case(data)
+    out = tmp_path / "run"
+    r = _train("--data", str(data), "--out", str(out), *SMOKE)
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    for text in expected:
+        assert text in r.stderr, (text, r.stderr[-2000:])
+    assert not out.exists(), "nothing may be written before the labels are good"
+
+
+def test_coco_labels_with_a_missing_image_are_refused(tmp_path):
+    (tmp_path / "a.jpg").write_bytes(cv2.imencode(".jpg", np.zeros((40, 60, 3), np.uint8))[1].tobytes())
+    doc = {"images": [{"id": 1, "file_name": "a.jpg"}, {"id": 2, "file_name": "gone.jpg"}],
+           "categories": [{"id": 1, "name": "car"}],
+           "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [5, 5, 10, 10]},
+                           {"id": 2, "image_id": 1, "category_id": 9, "bbox": [5, 5, 10, 10]}]}
+    (tmp_path / "labels.json").write_text(json.dumps(doc))
+    from aerodaas.training.dataset import LabelError, load_set
+
+    with pytest.raises(LabelError) as e:
+        load_set(tmp_path)
+    msg = str(e.value)
+    assert "gone.jpg" in msg and "category_id=9" in msg and "2 problem(s)" in msg
+
+
+@pytest.mark.parametrize("args,field", [(("--tile", "100"), "--tile=100"), (("--epochs", "0"), "--epochs=0"),
+                                        (("--init-from", "car"), "--init-from 'car'")])
+def test_bad_options_are_named(tmp_path, args, field):
+    r = _train("--data", str(tmp_path), "--out", str(tmp_path / "run"), *args)
+    assert r.returncode == 2
+    assert field in r.stderr, r.stderr
+
+
+def test_split_by_sequence_never_splits_a_video(tmp_path):
+    from aerodaas.training.dataset import LabelledImage, split_by_sequence
+
+    items = [LabelledImage(Path(f"/x/{v}_{f:05d}.jpg"), (10, 10), np.zeros((0, 4), np.float32),
+                           np.zeros(0, np.int64)) for v in ("dji0005", "dji0760", "mos", "harbour") for f in range(5)]
+    for seed in range(5):
+        train, val = split_by_sequence(items, 0.25, seed)
+        assert val and train
+        assert not {it.sequence for it in train} & {it.sequence for it in val}
+        assert len(train) + len(val) == len(items)
