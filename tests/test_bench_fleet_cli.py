@@ -23,19 +23,22 @@ def canned(monkeypatch, tmp_path):
     return tmp_path
 
 
-def test_json_also_writes_fleet_png_in_the_current_directory(canned, capsys):
+def test_json_writes_no_file_it_was_not_given(canned, capsys):
+    """issue 49 item 7: without --plot no figure (it used to land as fleet.png in the current directory)."""
     assert cli.main(["bench", "fleet", "--json", "--drones", "1", "--drones", "5", "--duration", "1"]) == 0
-    png = canned / "fleet.png"
-    assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     out = capsys.readouterr()
-    assert json.loads(out.out)["plot"] == str(png)
-    assert f"curve written to {png}" in out.err
+    rep = json.loads(out.out)
+    assert [r["drones"] for r in rep["results"]] == [1, 5] and "plot" not in rep
+    assert list(canned.iterdir()) == [] and "curve written" not in out.err
 
 
-def test_plot_and_out_choose_where_the_curve_goes(canned):
+def test_plot_and_out_write_where_they_are_told(canned, capsys):
     (canned / "r").mkdir()
     assert cli.main(["bench", "fleet", "--drones", "1", "--duration", "1", "--out", "r/run.json"]) == 0
-    assert (canned / "r" / "run.png").is_file() and not (canned / "fleet.png").exists()
-    assert json.loads((canned / "r" / "run.json").read_text())["plot"] == str(canned / "r" / "run.png")
-    assert cli.main(["bench", "fleet", "--drones", "1", "--duration", "1", "--plot", "curve.png"]) == 0
-    assert (canned / "curve.png").is_file() and not (canned / "fleet.png").exists()
+    assert sorted(p.relative_to(canned).as_posix() for p in canned.rglob("*")) == ["r", "r/run.json"]  # no figure
+    assert "plot" not in json.loads((canned / "r" / "run.json").read_text())
+    assert cli.main(["bench", "fleet", "--drones", "1", "--duration", "1", "--plot", "curve.png", "--json"]) == 0
+    png = canned / "curve.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    out = capsys.readouterr()
+    assert json.loads(out.out)["plot"] == str(png) and f"curve written to {png}" in out.err

@@ -2,7 +2,9 @@
 
 Each benchmark is a module here exposing ``add_parser(bench_subparsers)``, which registers its sub-command (its
 options and a ``func(args) -> exit code`` default). :func:`add_parsers` registers them all; the CLI calls it
-once. Modules keep their heavy imports inside functions so ``aerodaas`` starts fast.
+once, and wraps each ``func`` in :class:`ReportOnlyStdout`: a benchmark prints its report with
+:func:`aerodaas.bench.output.print_report`, and whatever else it, Ray or a child process prints goes to standard
+error. Modules keep their heavy imports inside functions so ``aerodaas`` starts fast.
 """
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import argparse
 import os
 import platform
 import sys
+from collections.abc import Callable
 
 
 def machine_info() -> dict:
@@ -38,8 +41,24 @@ def machine_info() -> dict:
     }
 
 
+class ReportOnlyStdout:
+    """A benchmark's ``func(args) -> exit code`` run inside :func:`aerodaas.bench.output.report_only_stdout`, so
+    that its standard output carries its report alone (issue 49 item 7). In the ``aerodaas`` process itself
+    (``args.own_process``) the redirection stays until the exit, where Ray's shutdown may still print."""
+
+    def __init__(self, func: Callable[[argparse.Namespace], int]) -> None:
+        self.func = func
+
+    def __call__(self, args: argparse.Namespace) -> int:
+        from aerodaas.bench.output import report_only_stdout
+
+        with report_only_stdout(restore=not args.own_process):
+            return self.func(args)
+
+
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
-    """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``."""
+    """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``, each one's ``func`` wrapped in
+    :class:`ReportOnlyStdout`."""
     from aerodaas.bench import (detect, fleet, overhead, raypath, schedulers_cli, startup, tello_video, tours,
                                 tracks, video)
 
@@ -53,3 +72,5 @@ def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     detect.add_parser(bench_subparsers)
     tracks.add_parser(bench_subparsers)
     video.add_parser(bench_subparsers)
+    for parser in bench_subparsers.choices.values():
+        parser.set_defaults(func=ReportOnlyStdout(parser.get_default("func")))

@@ -221,14 +221,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             Path(a.out).write_text(text)
         if a.plot:
             plot_pr(report, a.plot)
-        if a.json:
-            print(text)
-        for r in report["results"]:
-            cs = " ".join(f"{c}: R {v['recall@0.5']:.2f} P {v['precision@0.5']:.2f} AP50 {v['ap50']:.2f}"
-                          for c, v in r["classes"].items())
-            print(f"size {r['input_size']} tile {r['tile'] or '-'} thr {r['score_threshold']}: {cs} | "
-                  f"{r['ms_per_frame']:.0f} ms/frame, {r['boxes_per_frame']} boxes/frame")
-        print(f"load average (1 min) {report['load_avg_1min_start']} -> {report['load_avg_1min_end']}")
+        from aerodaas.bench.output import print_report
+
+        lines = [f"size {r['input_size']} tile {r['tile'] or '-'} thr {r['score_threshold']}: "
+                 + " ".join(f"{c}: R {v['recall@0.5']:.2f} P {v['precision@0.5']:.2f} AP50 {v['ap50']:.2f}"
+                            for c, v in r["classes"].items())
+                 + f" | {r['ms_per_frame']:.0f} ms/frame, {r['boxes_per_frame']} boxes/frame"
+                 for r in report["results"]]
+        lines.append(f"load average (1 min) {report['load_avg_1min_start']} -> {report['load_avg_1min_end']}")
+        if a.json:  # the summary is for people: on stderr, so stdout is the JSON document alone
+            print_report(text)
+            print("\n".join(lines), file=sys.stderr)
+        else:
+            print_report("\n".join(lines))
         return 0
 
     p.set_defaults(func=run)

@@ -9,14 +9,13 @@ nodes, one edge compute resource per node (its own ``aerodaas/site`` label), the
 round-robin, and reports the drones each node carried. Reported per run: missed control ticks (%: a tick that runs
 more than one control period late), frames dropped (%: camera ticks whose frame never reached the analytics), CPU
 (% of one core, all Ray processes and the driver), the summed RSS (and PSS) of every Ray process and the driver at
-its peak, and the Ray worker processes (one per drone actor, plus the recorder's). The curve against
-N is always drawn as a PNG (``--plot``; default: the ``--out`` file with ``.png``, else ``fleet.png`` in the current
-directory); its absolute path is printed on stderr and given as ``"plot"`` in the JSON report.
+its peak, and the Ray worker processes (one per drone actor, plus the recorder's). ``--plot FILE`` draws the
+curve against N as a PNG there (no figure without it: a benchmark writes no file it was not given); its absolute
+path is printed on stderr and given as ``"plot"`` in the JSON report.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -248,8 +247,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                                             "the local Ray)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
-    p.add_argument("--plot", help="write the curve as a PNG to this file (default: the --out file with .png, "
-                                  "else fleet.png in the current directory)")
+    p.add_argument("--plot", help="write the curve as a PNG to this file (default: no figure; a benchmark writes "
+                                  "no file it was not given)")
 
     def run(a: argparse.Namespace) -> int:
         if a.duration <= 0:
@@ -265,16 +264,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                   f"{a.edge_nodes}", file=sys.stderr)
             return 2
         report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes)
-        plot = a.plot or (os.path.splitext(a.out)[0] + ".png" if a.out else "fleet.png")
-        report["plot"] = os.path.abspath(plot)
-        text = json.dumps(report, indent=2)
-        if a.out:
-            with open(a.out, "w") as f:
-                f.write(text)
-        plot_fleet(report, plot)
-        print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
-        if a.json:
-            print(text)
+        if a.plot:
+            report["plot"] = os.path.abspath(a.plot)
+        from aerodaas.bench.output import emit_report
+
+        emit_report(report, a.out, a.json)
+        if a.plot:
+            plot_fleet(report, a.plot)
+            print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
         return 0
 
     p.set_defaults(func=run)

@@ -35,7 +35,6 @@ inference window, which hides them).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import shutil
@@ -398,17 +397,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         layouts = {"both": ("colocated", "actors"), "all": LAYOUTS}.get(a.layout, (a.layout,))
         if a.lockstep and f"actors{LOCKSTEP}" not in layouts:
             layouts = (*layouts, f"actors{LOCKSTEP}")
+        from aerodaas.bench.output import emit_report
+
         emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
         return 0
 
     p.set_defaults(func=run)
 
-
-def emit_report(report: dict, out: str | None, to_stdout: bool) -> None:
-    """Write a benchmark's JSON report to ``out`` (if given) and print it (if ``to_stdout``)."""
-    text = json.dumps(report, indent=2)
-    if out:
-        with open(out, "w") as f:
-            f.write(text)
-    if to_stdout:
-        print(text)

@@ -128,7 +128,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         report = run_raypath(a.repeat)
         for k, v in report["results_us"].items():
             print(f"raypath {k:32s} median {v['median']:9.1f} µs  p99 {v['p99']:9.1f} µs", file=sys.stderr)
-        from aerodaas.bench.overhead import emit_report
+        from aerodaas.bench.output import emit_report
 
         emit_report(report, a.out, a.json)
         return 0

@@ -181,8 +181,8 @@ def _output_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("output")
     g.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     g.add_argument("--out", metavar="FILE", help="also write the JSON result to FILE")
-    g.add_argument("--plot", metavar="PNG", help="write the comparison figure to PNG (default: next to --out with a "
-                                                 ".png suffix, else bench_schedulers.png in the working folder)")
+    g.add_argument("--plot", metavar="PNG", help="write the comparison figure to PNG (default: no figure; a "
+                                                 "benchmark writes no file it was not given)")
 
 
 def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -344,17 +344,19 @@ def _cmd(args: argparse.Namespace) -> int:
     try:
         if args.out:
             Path(args.out).write_text(text + "\n", encoding="utf-8")
-        plot = args.plot or (str(Path(args.out).with_suffix(".png")) if args.out else "bench_schedulers.png")
-        write_plot(res, plot)
-        print(f"aerodaas bench schedulers: comparison figure written to {plot}", file=sys.stderr)
+        if args.plot:
+            write_plot(res, args.plot)
+            print(f"aerodaas bench schedulers: comparison figure written to {args.plot}", file=sys.stderr)
     except OSError as e:
         print(f"aerodaas bench schedulers: cannot write output: {e}", file=sys.stderr)
         return 2
+    from aerodaas.bench.output import print_report
+
     if args.harness:
         from aerodaas.bench.sweep import format_sweep
 
-        print(text if args.json else format_sweep(res))
+        print_report(text if args.json else format_sweep(res))
         return 0
-    print(text if args.json else format_table(res))
+    print_report(text if args.json else format_table(res))
     bad = [r for r in res["runs"] if r["accounting"]["pending"] or r["accounting"]["terminal"] != r["tasks"]]
     return 1 if bad else 0

@@ -16,7 +16,6 @@ report holds both and the load average before and after (the machine may be shar
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import signal
@@ -183,11 +182,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         except RuntimeError as e:
             print(f"aerodaas bench startup: {e}", file=sys.stderr)
             return 1
-        text = json.dumps(report, indent=2)
-        if a.out:
-            Path(a.out).write_text(text)
-        if a.json:
-            print(text)
+        from aerodaas.bench.output import emit_report
+
+        emit_report(report, a.out, a.json)
         return 0
 
     p.set_defaults(func=run)

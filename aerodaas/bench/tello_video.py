@@ -189,5 +189,15 @@ def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.Argumen
     t.add_argument("--height", type=int, default=720)
     t.add_argument("--fps", type=float, default=30.0)
     t.add_argument("--seconds", type=float, default=8.0, help="live streaming time per decoder (default 8)")
-    t.set_defaults(func=lambda a: print(json.dumps(run(a.width, a.height, a.fps, a.seconds), indent=2)) or 0)
+    t.add_argument("--json", action="store_true", help="print the JSON report (it is printed either way: this "
+                                                       "benchmark has no table)")
+    t.set_defaults(func=_cmd)
     return t
+
+
+def _cmd(args: argparse.Namespace) -> int:
+    """``aerodaas bench tello-video``: the report of :func:`run` as JSON on standard output."""
+    from aerodaas.bench.output import print_report
+
+    print_report(json.dumps(run(args.width, args.height, args.fps, args.seconds), indent=2))
+    return 0

@@ -351,7 +351,9 @@ def _cmd_tours(args: argparse.Namespace) -> int:
         except OSError as e:
             print(f"aerodaas bench tours: cannot write {args.out!r}: {e}", file=sys.stderr)
             return 2
-    print(text if args.json else format_table(res))
+    from aerodaas.bench.output import print_report
+
+    print_report(text if args.json else format_table(res))
     return 0
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections import defaultdict
 from typing import Any
 
@@ -106,6 +107,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="score frames taken at this altitude above home, metres (default 19 21)")
     p.add_argument("--gate", type=float, default=3.0, help="largest track-to-truth distance that matches, metres")
     p.add_argument("--out", help="write the JSON report here")
+    p.add_argument("--json", action="store_true", help="print the JSON report (it is printed either way: this "
+                                                       "benchmark has no table)")
     p.set_defaults(func=_main)
 
 
@@ -115,20 +118,23 @@ def _main(args: argparse.Namespace) -> int:
     from aerodaas.bench import machine_info
 
     if not os.path.isfile(args.recording):
-        print(f"aerodaas bench tracks: recording {args.recording!r}: no such file")
+        print(f"aerodaas bench tracks: recording {args.recording!r}: no such file", file=sys.stderr)
         return 2
     if not args.altitude[0] <= args.altitude[1] or args.gate <= 0:
-        print(f"aerodaas bench tracks: --altitude {args.altitude} must be MIN <= MAX and --gate {args.gate} > 0")
+        print(f"aerodaas bench tracks: --altitude {args.altitude} must be MIN <= MAX and --gate {args.gate} > 0",
+              file=sys.stderr)
         return 2
     try:
         rep = score_tracks(args.recording, altitude=tuple(args.altitude), gate_m=args.gate)
     except ValueError as e:
-        print(f"aerodaas bench tracks: {e}")
+        print(f"aerodaas bench tracks: {e}", file=sys.stderr)
         return 2
     rep = {"recording": os.path.abspath(args.recording), "machine": machine_info(), **rep}
     text = json.dumps(rep, indent=2)
     if args.out:
         with open(args.out, "w") as f:
             f.write(text + "\n")
-    print(text)
+    from aerodaas.bench.output import print_report
+
+    print_report(text)
     return 0

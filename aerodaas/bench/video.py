@@ -276,7 +276,9 @@ def main(args: argparse.Namespace) -> int:
     text = json.dumps(report, indent=2)
     if args.out:
         Path(args.out).write_text(text)
-    print(text)
+    from aerodaas.bench.output import print_report
+
+    print_report(text)
     return 0
 
 
@@ -288,4 +290,6 @@ def add_parser(sub) -> None:
     p.add_argument("--fps", type=float, default=30.0, help="stream frame rate (1-120)")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds each reader reads")
     p.add_argument("--out", help="also write the JSON report here")
+    p.add_argument("--json", action="store_true", help="print the JSON report (it is printed either way: this "
+                                                       "benchmark has no table)")
     p.set_defaults(func=main)
