@@ -123,7 +123,8 @@ class QueueFlight:
         v = c.backend
         dist = math.dist(pos, target)
         speed = math.hypot(*tuple(float(x) for x in v.velocity)[:2])
-        within = dist <= item.acceptance_radius
+        radius = c.cfg.hold.radius(item.acceptance_radius, v.position_accuracy_m)  # the vehicle's accuracy at least
+        within = dist <= radius
         if c.fsm.state == S.NAVIGATING:
             if c.progress.check(t, item, target, dist, within):
                 # given up for lack of progress: dropped from the queue; the next tick flies what is queued next
@@ -136,13 +137,14 @@ class QueueFlight:
             v.goto(target)  # keep station on the exact waypoint
             f.hold_until = t + item.hover_duration
             f.hold = WaypointHold(start=t, last=t, max_error_m=dist, max_speed=speed)
-            c.event("waypoint_reached", waypoint=item.id, error_m=dist, speed=round(speed, 3))
+            c.event("waypoint_reached", waypoint=item.id, error_m=dist, speed=round(speed, 3),
+                    **_widened(item, radius))
         elif c.fsm.state == S.WAYPOINT_HOLD and f.hold is not None:
             f.hold.update(t, dist, speed, within)
         if c.fsm.state == S.WAYPOINT_HOLD and f.hold is not None:
-            self._end_hold(t, pos, item, target, dist)
+            self._end_hold(t, pos, item, target, dist, radius)
 
-    def _end_hold(self, t: float, pos: tuple, item: Waypoint, target: tuple, dist: float) -> None:
+    def _end_hold(self, t: float, pos: tuple, item: Waypoint, target: tuple, dist: float, radius: float) -> None:
         """The hold's end: done once held long enough within the radius; failed (dropped, never a success) once
         ``hold.max_time_factor`` × ``hover_duration`` + ``hold.grace_s`` passed without that."""
         c, f = self.ctx, self.flight
@@ -155,7 +157,7 @@ class QueueFlight:
         elif t - h.start > hc.max_time_factor * item.hover_duration + hc.grace_s:
             rec = {"waypoint": item.id, "held_s": round(h.within_s, 3), "needed_s": item.hover_duration,
                    "elapsed_s": round(t - h.start, 3), "max_error_m": round(h.max_error_m, 3),
-                   "max_speed": round(h.max_speed, 3), "acceptance_radius": item.acceptance_radius}
+                   "max_speed": round(h.max_speed, 3), "acceptance_radius": radius, **_widened(item, radius)}
             f.hold_failed.append(rec)
             c.event("hold_failed", **rec)
             c.plan_log.discard(c.queue, item.id, "hold_failed", t)
@@ -183,3 +185,12 @@ class QueueFlight:
         if st != S.HOVERING:
             c.fsm.transition(S.HOVERING, t)
             v.hold()
+
+
+def _widened(item: Waypoint, radius: float) -> dict:
+    """``{"radius_widened": {"from_m", "to_m"}}`` when the hold radius is the vehicle's position accuracy, wider than
+    the waypoint's ``acceptance_radius`` (``HoldConfig.radius``); else ``{}``."""
+    if radius > item.acceptance_radius:
+        return {"radius_widened": {"from_m": item.acceptance_radius, "to_m": round(radius, 3),
+                                   "why": "the vehicle's reported position accuracy (GPS_RAW_INT h_acc)"}}
+    return {}

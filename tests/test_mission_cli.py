@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import socket
+from pathlib import Path
 
 import pytest
 
@@ -191,3 +192,37 @@ def test_a_mission_the_vehicle_stores_differently_is_not_started(vehicle, tmp_pa
     err = capsys.readouterr().err
     assert "the mission read back differs from the one sent: item 4 (MAV_CMD_NAV_WAYPOINT (16)): latitude" in err, err
     assert "not started" in err and not emu.snapshot()["armed"]
+
+
+NAVTEST = Path(__file__).parent / "data" / "missions" / "CMAC-copter-navtest.waypoints"
+CMAC = GeoPoint(lat=-35.363261, lon=149.165230, alt=584.0)
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_a_mission_planner_file_with_frame_3_on_every_item_uploads_starts_and_downloads(tmp_path, capsys, autopilot):
+    """issue 47 item 8: Mission Planner's frame 3 on DO_CHANGE_SPEED (item 6) and RTL (item 8). ArduCopter stores them
+    in frame 0 (AP_Mission) and the read-back called that a different flight (exit 2, not started); PX4 refuses them
+    in a global frame (MAV_MISSION_UNSUPPORTED). Now they go up in MAV_FRAME_MISSION, said per item, the read-back
+    compares what each autopilot keeps, and the mission starts; the download flies the same."""
+    emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, gps_lock_s=1.0, home=CMAC)
+    try:
+        address = emu.start("tcp:127.0.0.1:0")
+        assert main(["mission", "upload", str(NAVTEST), "--connection", address, "--start"]) == 0, \
+            capsys.readouterr().err
+        out = capsys.readouterr().out
+        for k, cmd in ((6, "DO_CHANGE_SPEED (178)"), (8, "NAV_RETURN_TO_LAUNCH (20)")):
+            assert f"item {k} (MAV_CMD_{cmd}): frame MAV_FRAME_GLOBAL_RELATIVE_ALT (3) sent as MAV_FRAME_MISSION (2)" \
+                in out, out
+        assert "read back: the vehicle holds the 8 items as sent" in out, out
+        assert emu.snapshot()["armed"]
+        with emu._lock:
+            frames = [it.frame for it in (emu.mission[1:] if autopilot == "ardupilot" else emu.mission)]
+        assert frames == ([3, 3, 3, 3, 3, 0, 3, 0] if autopilot == "ardupilot" else [3, 3, 3, 3, 3, 2, 3, 2])
+        back = tmp_path / "back.waypoints"
+        assert main(["mission", "download", "--out", str(back), "--connection", address]) == 0
+    finally:
+        emu.stop()
+    from aerodaas.missionfile.upload import mission_differences
+
+    diffs = mission_differences(load_mission(NAVTEST).expanded_items(), load_mission(back).expanded_items())
+    assert not [d for d in diffs if d.flight], diffs

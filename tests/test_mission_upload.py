@@ -72,3 +72,47 @@ def test_an_item_without_a_position_has_no_frame_to_compare():
     stored = _speed(1, 5.0).model_copy(update={"frame": 0})
     assert mission_differences([_speed(1, 5.0)], [stored]) == []
     assert [x.field for x in mission_differences([_wp(1)], [_wp(1, frame=0)])] == ["frame"]
+
+
+def _rtl(seq, frame=3):
+    return MissionItem(seq=seq, command=20, frame=frame, params=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+def test_mission_planners_frame_3_on_items_without_a_position_reads_back_as_arducopter_stores_it():
+    """issue 47 item 8: Mission Planner writes DO_CHANGE_SPEED and RTL in frame 3; ArduCopter returns them in frame 0
+    (AP_Mission::mission_cmd_to_mavlink_int: no location stored for them). That was 'a different flight': exit 2."""
+    sent = [_takeoff(1), _wp(2), _speed(3, 5.0).model_copy(update={"frame": 3}), _wp(4), _rtl(5)]
+    stored = [*sent[:2], _speed(3, 5.0).model_copy(update={"frame": 0}), sent[3], _rtl(5, frame=0)]
+    assert mission_differences(sent, stored) == []
+
+
+def test_what_arducopter_drops_of_an_item_without_a_position_is_noted_not_a_different_flight():
+    sent = [_rtl(1).model_copy(update={"params": [0.0, 0.0, 0.0, 0.0, 47.3977420, 8.5455940, 30.0]})]
+    d = mission_differences(sent, [_rtl(1, frame=0)])
+    assert [(x.field, x.stored, x.flight) for x in d] == [("x", 0.0, False), ("y", 0.0, False), ("z", 0.0, False)]
+
+
+def test_a_hold_time_or_a_speed_type_stored_differently_is_a_different_flight():
+    held = _wp(1).model_copy(update={"params": [3.0, *_wp(1).params[1:]]})
+    assert [(x.field, x.flight) for x in mission_differences([held], [_wp(1)])] == [("param1", True)]
+    airspeed = _speed(1, 5.0).model_copy(update={"params": [0.0, 5.0, -1.0, 0.0, 0.0, 0.0, 0.0]})
+    assert [(x.field, x.flight) for x in mission_differences([_speed(1, 5.0)], [airspeed])] == [("param1", True)]
+
+
+def test_a_take_off_pitch_the_vehicle_does_not_keep_is_noted():
+    """QGroundControl's sample .plan: NAV_TAKEOFF param1 15 (pitch, fixed-wing only); a copter stores 0."""
+    pitched = _takeoff(1).model_copy(update={"params": [15.0, *_takeoff(1).params[1:]]})
+    assert [(x.field, x.flight) for x in mission_differences([pitched], [_takeoff(1)])] == [("param1", False)]
+
+
+def test_items_without_a_position_go_up_in_mav_frame_mission_and_each_change_is_said():
+    from aerodaas.missionfile.upload import mission_frames
+
+    items = [_takeoff(1), _speed(2, 5.0).model_copy(update={"frame": 3}), _wp(3), _speed(4, 3.0), _rtl(5)]
+    out, changes = mission_frames(items)
+    assert [it.frame for it in out] == [3, 2, 3, 2, 2]
+    assert [it.params for it in out] == [it.params for it in items]
+    assert [(c.index, c.was, c.now) for c in changes] == [(2, 3, 2), (5, 3, 2)]
+    assert str(changes[1]) == ("item 5 (MAV_CMD_NAV_RETURN_TO_LAUNCH (20)): frame MAV_FRAME_GLOBAL_RELATIVE_ALT (3) "
+                               "sent as MAV_FRAME_MISSION (2) (the command has no position; PX4 refuses it in a "
+                               "global frame, ArduPilot stores no frame for it)")

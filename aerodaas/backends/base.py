@@ -227,6 +227,12 @@ class VehicleBackend(abc.ABC):
         """State of charge in percent, 0-100."""
 
     @property
+    def position_accuracy_m(self) -> float:
+        """The vehicle's reported horizontal position accuracy in metres (1 sigma as the receiver states it; 0:
+        exact or not reported). 0 here: the simulator knows its position exactly."""
+        return 0.0
+
+    @property
     def link_ok(self) -> bool:
         """False while the link is lost (no heartbeat/state for the configured time). Always True in simulation."""
         return True

@@ -214,11 +214,29 @@ class HoldConfig(_Cfg):
     speed is not holding. Only time within the radius counts towards the hover time. A hold that has not gathered
     ``hover_duration`` within the radius after ``max_time_factor`` x ``hover_duration`` + ``grace_s`` seconds
     (vehicle time) since it started ends the waypoint as ``hold_failed`` (an event with its figures), never as
-    reached: the mission is then ``incomplete``."""
+    reached: the mission is then ``incomplete``.
+
+    ``radius_from_vehicle`` (default True): the radius a waypoint is reached and held within is at least the
+    vehicle's reported horizontal position accuracy (``VehicleBackend.position_accuracy_m``: a MAVLink vehicle's
+    GNSS ``GPS_RAW_INT.h_acc``; 0 on the simulator): a smaller ``acceptance_radius`` asks for a hold the vehicle
+    cannot know it keeps, so it is widened to the accuracy and said (``radius_widened`` in the ``waypoint_reached``
+    and ``hold_failed`` events). Measured on SITL with stock parameters (2026-11-26): ArduCopter ``h_acc`` 0.30 m,
+    PX4 SIH 0.90 m (its ``ESTIMATOR_STATUS.pos_horiz_accuracy`` about 0.28 m; the autopilots' own acceptance radii,
+    ArduCopter ``WPNAV_RADIUS`` 200 cm and PX4 ``NAV_ACC_RAD`` 2 m, judge their own missions' arrivals and are not
+    used here: they would let a 10 m survey's holds wander 2 m). False: the waypoint's radius as given."""
 
     settle_speed: float = Field(default=0.3, gt=0, le=MAX_SPEED_MPS, description="m/s, horizontal")
     max_time_factor: float = Field(default=2.0, ge=1.0, le=100.0)
     grace_s: float = Field(default=5.0, ge=0, le=MAX_DURATION_S, description="seconds")
+    radius_from_vehicle: bool = True
+
+    def radius(self, acceptance_radius: float, position_accuracy_m: float) -> float:
+        """The radius (m) a waypoint of ``acceptance_radius`` m is reached and held within on a vehicle whose
+        reported horizontal position accuracy is ``position_accuracy_m`` m (0: exact or unknown): the larger of
+        the two with ``radius_from_vehicle``, else ``acceptance_radius``."""
+        if self.radius_from_vehicle and position_accuracy_m > acceptance_radius:
+            return float(position_accuracy_m)
+        return float(acceptance_radius)
 
 
 class ProgressConfig(_Cfg):

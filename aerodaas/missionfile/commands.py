@@ -65,6 +65,16 @@ _AMSL_FRAMES = frozenset({0, 5})
 _RELATIVE_FRAMES = frozenset({3, 6})
 _TERRAIN_FRAMES = frozenset({10, 11})
 
+#: Commands whose ``x``/``y``/``z`` are a position, read in the item's frame. ArduPilot stores a location, and so a
+#: frame, for these only (``libraries/AP_Mission/AP_Mission.cpp``: ``AP_Mission::stored_in_location``; for any other
+#: command ``mission_cmd_to_mavlink_int`` returns frame 0 and x/y/z 0, whatever was sent). PX4 accepts an item in a
+#: global frame only for its position commands (``src/modules/mavlink/mavlink_mission.cpp``:
+#: ``MavlinkMissionManager::parse_mavlink_mission_item``: NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_LAND,
+#: NAV_TAKEOFF, NAV_LOITER_TO_ALT, DO_SET_ROI(_LOCATION), NAV_VTOL_TAKEOFF/LAND ...; DO_CHANGE_SPEED,
+#: NAV_RETURN_TO_LAUNCH and the other commands without a position only in ``MAV_FRAME_MISSION`` 2, else
+#: ``MAV_MISSION_UNSUPPORTED``) and reads them back in the frame it stored (2 for those). This is ArduPilot's list.
+POSITION_COMMANDS = frozenset({16, 17, 18, 19, 21, 22, 30, 31, 82, 84, 85, 92, 94, 179, 189, 191, 201})
+
 #: Commands that only drive the camera, gimbal or region of interest and leave the flight path unchanged:
 #: DO_SET_ROI_LOCATION 195, DO_SET_ROI_WPNEXT_OFFSET 196, DO_SET_ROI_NONE 197, DO_SET_ROI 201,
 #: DO_DIGICAM_CONFIGURE 202, DO_DIGICAM_CONTROL 203, DO_MOUNT_CONFIGURE 204, DO_MOUNT_CONTROL 205,

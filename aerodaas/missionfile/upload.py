@@ -1,12 +1,21 @@
-"""A mission file sent to a vehicle as written: the speeds an explicit limit caps (:func:`cap_speeds`, each change
-said), and what the vehicle stored compared with what was sent (:func:`mission_differences`).
+"""A mission file sent to a vehicle as written: the frame of a command without a position set to
+``MAV_FRAME_MISSION`` (:func:`mission_frames`), the speeds an explicit limit caps (:func:`cap_speeds`), each change
+said, and what the vehicle stored compared with what was sent (:func:`mission_differences`).
 
-``aerodaas mission upload`` (:mod:`aerodaas.tools.mission_cli`) uses both: the file's ``MAV_CMD_DO_CHANGE_SPEED``
-items fly as written unless ``--max-speed`` caps them, and the mission is read back after the upload, every field
-the vehicle stored differently named. Autopilots keep less than a mission item can say: ArduCopter keeps only the
-hold time of a ``MAV_CMD_NAV_WAYPOINT`` (``AP_Mission::mavlink_int_to_mission_cmd``: ``cmd.p1 = packet.param1``;
-acceptance radius, pass radius and yaw read back as 0), so those differences are reported, not hidden; a changed
-command, frame, position, altitude or speed is a different flight.
+``aerodaas mission upload`` (:mod:`aerodaas.tools.mission_cli`) uses all three. What is compared is what the
+autopilots document storing: the command; the parameters the flight depends on (:data:`FLIGHT_PARAMS`); for a
+command with a position (:data:`~aerodaas.missionfile.commands.POSITION_COMMANDS`) its latitude, longitude,
+altitude and frame. Autopilots keep less than a mission item can say. ArduPilot
+(``libraries/AP_Mission/AP_Mission.cpp``) keeps a location and its frame only for the commands of
+``AP_Mission::stored_in_location``; ``mission_cmd_to_mavlink_int`` returns every other command with frame 0 and
+x/y/z 0 (a Mission Planner file's DO_CHANGE_SPEED or RTL in frame 3 reads back in frame 0), and of a
+``MAV_CMD_NAV_WAYPOINT`` ArduCopter keeps only the hold time (``mavlink_int_to_mission_cmd``: ``cmd.p1 =
+packet.param1``; acceptance radius, pass radius and yaw read back as 0). PX4 (``src/modules/mavlink/
+mavlink_mission.cpp``, ``MavlinkMissionManager::parse_mavlink_mission_item`` / ``format_mavlink_mission_item``,
+the navigator's dataman mission storage) keeps a position command's frame, position, hold time, acceptance radius
+and yaw, takes a command without a position only in ``MAV_FRAME_MISSION`` and returns its seven params as sent.
+Fields a vehicle does not keep are reported, not hidden; a changed command, position, altitude, frame of a
+position, hold time or speed is a different flight.
 """
 from __future__ import annotations
 
@@ -14,22 +23,38 @@ import math
 from typing import NamedTuple, Sequence
 
 from aerodaas.missionfile._common import _fail
-from aerodaas.missionfile.commands import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_TAKEOFF, MAV_FRAME_MISSION,
-                                           _GLOBAL_FRAMES, _RELATIVE_FRAMES)
+from aerodaas.missionfile.commands import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LAND, MAV_CMD_NAV_LOITER_TIME,
+                                           MAV_CMD_NAV_LOITER_UNLIM, MAV_CMD_NAV_RETURN_TO_LAUNCH,
+                                           MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_MISSION,
+                                           POSITION_COMMANDS, _RELATIVE_FRAMES, frame_name)
 from aerodaas.missionfile.items import MissionItem
 
-__all__ = ["ItemDifference", "mission_differences", "SpeedChange", "cap_speeds", "check_relative_altitudes"]
+__all__ = ["ItemDifference", "mission_differences", "FLIGHT_PARAMS", "FrameChange", "mission_frames", "SpeedChange",
+           "cap_speeds", "check_relative_altitudes"]
 
 #: a frame and its ``_INT`` twin (common.xml: the same meaning, x/y as integers on the wire)
 _FRAME_ALIAS = {5: 0, 6: 3, 11: 10}
 _FIELDS = ("param1", "param2", "param3", "param4", "x", "y", "z")
 
+#: For each command AeroDaaS flies from a file, the params (0-based: 0 is param1) that change the flight and that
+#: both autopilots store as sent: a waypoint's and a loiter's hold time (param1: ArduCopter ``cmd.p1``, PX4
+#: ``time_inside``), DO_CHANGE_SPEED's speed type and speed (param1, param2: ArduPilot ``speed_type``/``target_ms``,
+#: PX4 the params as sent). Take-off, land, return to launch and unlimited loiter have none a copter flies by
+#: (pitch, abort altitude, yaw: ArduCopter keeps none of them). Any other command: all four.
+FLIGHT_PARAMS: dict[int, frozenset[int]] = {
+    MAV_CMD_NAV_WAYPOINT: frozenset({0}), MAV_CMD_NAV_LOITER_TIME: frozenset({0}),
+    MAV_CMD_DO_CHANGE_SPEED: frozenset({0, 1}), MAV_CMD_NAV_TAKEOFF: frozenset(), MAV_CMD_NAV_LAND: frozenset(),
+    MAV_CMD_NAV_RETURN_TO_LAUNCH: frozenset(), MAV_CMD_NAV_LOITER_UNLIM: frozenset(),
+}
+_ALL_PARAMS = frozenset({0, 1, 2, 3})
+
 
 class ItemDifference(NamedTuple):
     """One field the vehicle stored differently: ``index`` (1-based position in the mission), ``item`` (the sent
     item's description), ``field`` (``command``, ``frame``, ``param1``..``param4``, ``latitude``, ``longitude``,
-    ``altitude`` or ``count``), the ``sent`` and ``stored`` values (None: unset/NaN) and whether it changes the
-    flight (``flight``: command, frame, position, altitude, a speed, the number of items)."""
+    ``altitude``, ``x``/``y``/``z`` of a command without a position, or ``count``), the ``sent`` and ``stored``
+    values (None: unset/NaN) and whether it changes the flight (``flight``: command, the frame, position or
+    altitude of a command with a position, a param of :data:`FLIGHT_PARAMS`, the number of items)."""
 
     index: int
     item: str
@@ -54,9 +79,13 @@ def _same(a: float | None, b: float | None, abs_tol: float, rel_tol: float = 0.0
 def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionItem]) -> list[ItemDifference]:
     """What the vehicle's mission (``stored``: a download, ArduPilot's home item left out) holds differently from
     ``sent`` (the items as uploaded: latitude/longitude on the 1e-7 degree grid, params as float32). Compared per
-    item: command, frame (a frame equals its ``_INT`` twin; not compared for an item without a position), params (float32 tolerance; a 0 stored for an unset
-    param is a difference), latitude/longitude (within 0.6e-7 degree) and altitude (1 mm). A different number of
-    items is one ``count`` difference (the items are then compared as far as both go)."""
+    item: the command; params (float32 tolerance; a 0 stored for an unset param is a difference), a difference
+    changing the flight for the params of :data:`FLIGHT_PARAMS`; for a command of
+    :data:`~aerodaas.missionfile.commands.POSITION_COMMANDS` the frame (a frame equals its ``_INT`` twin),
+    latitude/longitude (within 0.6e-7 degree) and altitude (1 mm). A command without a position has no frame and
+    no position to keep (ArduPilot returns frame 0, x/y/z 0): its frame is not compared, its x/y/z only as
+    fields it does not keep. A different number of items is one ``count`` difference (the items are then
+    compared as far as both go)."""
     out: list[ItemDifference] = []
     if len(sent) != len(stored):
         out.append(ItemDifference(0, "mission", "count", len(sent), len(stored), True))
@@ -65,10 +94,10 @@ def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionIte
         if a.command != b.command:
             out.append(ItemDifference(k, tag, "command", a.command, b.command, True))
             continue
-        fa, fb = _FRAME_ALIAS.get(a.frame, a.frame), _FRAME_ALIAS.get(b.frame, b.frame)
-        positional = fa in _GLOBAL_FRAMES
-        if fa != fb and positional:  # an item without a position has no frame to keep (ArduPilot returns 0 for 2)
+        positional = a.command in POSITION_COMMANDS
+        if positional and _FRAME_ALIAS.get(a.frame, a.frame) != _FRAME_ALIAS.get(b.frame, b.frame):
             out.append(ItemDifference(k, tag, "frame", a.frame, b.frame, True))
+        flight_params = FLIGHT_PARAMS.get(a.command, _ALL_PARAMS)
         for i, name in enumerate(_FIELDS):
             pa, pb = a.params[i], b.params[i]
             if i in (4, 5) and positional:
@@ -78,9 +107,41 @@ def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionIte
                 if not _same(pa, pb, 1e-3, rel_tol=1e-6):
                     out.append(ItemDifference(k, tag, "altitude", pa, pb, True))
             elif not _same(pa, pb, 1e-6, rel_tol=1e-6):  # float32 on the wire
-                speed = a.command == MAV_CMD_DO_CHANGE_SPEED and i == 1
-                out.append(ItemDifference(k, tag, name, pa, pb, speed))
+                out.append(ItemDifference(k, tag, name, pa, pb, i in flight_params))
     return out
+
+
+class FrameChange(NamedTuple):
+    """What :func:`mission_frames` did to one item: ``index`` (1-based), ``item`` (description), the frame ``was``
+    (as written) and ``now`` (sent)."""
+
+    index: int
+    item: str
+    was: int
+    now: int
+
+    def __str__(self) -> str:
+        return (f"{self.item}: frame {frame_name(self.was)} sent as {frame_name(self.now)} (the command has no "
+                f"position; PX4 refuses it in a global frame, ArduPilot stores no frame for it)")
+
+
+def mission_frames(items: Sequence[MissionItem]) -> tuple[list[MissionItem], list[FrameChange]]:
+    """``items`` with every command without a position (not in
+    :data:`~aerodaas.missionfile.commands.POSITION_COMMANDS`: DO_CHANGE_SPEED, NAV_RETURN_TO_LAUNCH ...) in
+    ``MAV_FRAME_MISSION`` (2), as QGroundControl sends them. Mission Planner writes such items in the frame of
+    the mission (``QGC WPL 110`` rows in frame 3); PX4 answers those with ``MAV_MISSION_UNSUPPORTED``
+    (``MavlinkMissionManager::parse_mavlink_mission_item`` takes them only in ``MAV_FRAME_MISSION``) and
+    ArduPilot keeps no frame for them (``AP_Mission::stored_in_location``). Their params, x, y and z are kept.
+    Returns the items and one :class:`FrameChange` per item changed."""
+    out: list[MissionItem] = []
+    changes: list[FrameChange] = []
+    for k, it in enumerate(items, start=1):
+        if it.command not in POSITION_COMMANDS and it.frame != MAV_FRAME_MISSION:
+            changes.append(FrameChange(k, it.describe().replace(f"item {it.seq} ", f"item {k} "), it.frame,
+                                       MAV_FRAME_MISSION))
+            it = it.model_copy(update={"frame": MAV_FRAME_MISSION})
+        out.append(it)
+    return out, changes
 
 
 class SpeedChange(NamedTuple):

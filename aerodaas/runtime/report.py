@@ -61,6 +61,11 @@ def _robot_lines(rid: str, rep: dict) -> list[str]:
     for h in rep.get("hold_failed") or []:
         lines.append(f"    hold failed at {h['waypoint']}: {h['held_s']:g} of {h['needed_s']:g} s within "
                      f"{h['acceptance_radius']:g} m in {h['elapsed_s']:g} s (largest error {h['max_error_m']:g} m)")
+    widened = [e for e in rep.get("events") or [] if e.get("event") == "waypoint_reached" and e.get("radius_widened")]
+    if widened:
+        lines.append("    holds widened to the vehicle's position accuracy (GPS_RAW_INT h_acc; hold.radius_from_vehicle): "
+                     + ", ".join(f"{e['waypoint']} {e['radius_widened']['from_m']:g} -> {e['radius_widened']['to_m']:g} m"
+                                 for e in widened))
     for h in rep.get("not_reached") or []:
         lines.append(f"    not reached: {h['waypoint']}: no progress towards it for {h['after_s']:g} s, "
                      f"{h['distance_m']:g} m from it (closest {h['closest_m']:g} m); the autopilot may have refused "

@@ -72,7 +72,8 @@ def _cruise_speed(backend) -> float | None:
 def _check_read_back(backend, sent, name: str) -> None:
     """Download the vehicle's mission and compare it with ``sent`` (:func:`~aerodaas.missionfile.upload.
     mission_differences`): prints what it stored differently; raises BackendError when that changes the flight
-    (command, frame, position, altitude, a speed, the number of items)."""
+    (command, the frame, position or altitude of a command with a position, a hold time or speed, the number of
+    items)."""
     from aerodaas.backends import BackendError
     from aerodaas.missionfile.upload import mission_differences
 
@@ -120,8 +121,10 @@ def cmd_mission(args: argparse.Namespace) -> int:
     (MAV_MISSION_TYPE_FENCE items and the fence parameters, ``--fence-action``; read back and compared: a mismatch
     stops the upload before the mission is sent; each fence parameter changed is printed with its old value), then
     its rally points (MAV_MISSION_TYPE_RALLY), then the mission as written: its speeds unless ``--max-speed`` caps
-    them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`); no other vehicle parameter
-    is changed. The mission is then read back and compared (a different flight: exit 2, not started)."""
+    them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`), each command without a
+    position in ``MAV_FRAME_MISSION`` (printed, :func:`~aerodaas.missionfile.upload.mission_frames`); no other
+    vehicle parameter is changed. The mission is then read back and compared as each autopilot stores it
+    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started)."""
     from aerodaas.backends import BackendError
     from aerodaas.missionfile import MissionFileError
 
@@ -167,7 +170,11 @@ def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
     opened.append(backend)
     _check_from_vehicle_home(args, name, plan, backend, path)
     _upload_fence_and_rally(name, plan, backend, path)
-    items = plan.expanded_items()
+    from aerodaas.missionfile.upload import mission_frames
+
+    items, frames = mission_frames(plan.expanded_items())
+    for f in frames:
+        print(f"{name}: {f}", flush=True)
     if args.max_speed is not None:
         from aerodaas.missionfile.upload import cap_speeds
 

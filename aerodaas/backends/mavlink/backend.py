@@ -386,6 +386,12 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         return self.telemetry.gps_fix_type
 
     @property
+    def position_accuracy_m(self) -> float:
+        """The GNSS receiver's horizontal accuracy (:attr:`VehicleTelemetry.gps_h_acc_m`, GPS_RAW_INT ``h_acc``);
+        0 when the vehicle reports none."""
+        return self.telemetry.gps_h_acc_m
+
+    @property
     def home_received(self) -> bool:
         """:attr:`VehicleTelemetry.home_received`."""
         return self.telemetry.home_received

@@ -84,6 +84,7 @@ class VehicleTelemetry:
         self._battery_v = 0.0
         self._battery_from = ""
         self._gps_fix = -1
+        self._gps_h_acc = 0.0  # m, GPS_RAW_INT h_acc; 0: not reported
         self._sensors: tuple[int, int, int] | None = None
         self._home_received = False
         self._home_after: GeoPoint | None = None  # the autopilot's home after a flight, when it moved (reported)
@@ -233,8 +234,11 @@ class VehicleTelemetry:
             self._battery_v = sum(cells) / 1000.0
 
     def on_gps_raw_int(self, msg: Any) -> None:
-        """GPS_RAW_INT: the fix type, and with a 3-D fix the GNSS speed for the speed limits' margin."""
+        """GPS_RAW_INT: the fix type, with a 3-D fix the receiver's horizontal accuracy (``h_acc`` mm, a MAVLink 2
+        extension; 0 or absent: not reported) and the GNSS speed for the speed limits' margin."""
         self._gps_fix = msg.fix_type
+        if msg.fix_type >= M.GPS_FIX_TYPE_3D_FIX:
+            self._gps_h_acc = max(0.0, float(getattr(msg, "h_acc", 0) or 0) / 1000.0)
         if msg.fix_type >= M.GPS_FIX_TYPE_3D_FIX and msg.vel != 65535:  # UINT16_MAX: speed unknown
             self._on_gnss_speed(msg.vel / 100.0, self._est_hspeed, self._est_steady)
 
@@ -340,6 +344,11 @@ class VehicleTelemetry:
     def gps_fix_type(self) -> int:
         """GPS_RAW_INT fix type (GPS_FIX_TYPE; 3 = 3-D), -1 before any report."""
         return self._gps_fix
+
+    @property
+    def gps_h_acc_m(self) -> float:
+        """The receiver's horizontal accuracy (m) of the latest 3-D fix (GPS_RAW_INT ``h_acc``); 0: not reported."""
+        return self._gps_h_acc
 
     @property
     def home_received(self) -> bool:

@@ -15,6 +15,8 @@ if TYPE_CHECKING:
     from aerodaas.emulators.mavlink.link import _Link
 
 M = mavlink
+#: the mission commands with a position (the others: NAV_RETURN_TO_LAUNCH, DO_CHANGE_SPEED)
+_POSITION_COMMANDS = _NAV_COMMANDS - {M.MAV_CMD_NAV_RETURN_TO_LAUNCH}
 
 
 @dataclass
@@ -111,6 +113,10 @@ class MissionMixin:
         if msg.frame not in _MISSION_FRAMES or (positional and msg.frame == M.MAV_FRAME_MISSION
                                                 and msg.command == M.MAV_CMD_NAV_WAYPOINT):
             return M.MAV_MISSION_UNSUPPORTED_FRAME
+        if self.px4 and not positional and msg.frame != M.MAV_FRAME_MISSION:
+            # PX4 takes a command without a position (RTL, DO_CHANGE_SPEED) only in MAV_FRAME_MISSION
+            # (MavlinkMissionManager::parse_mavlink_mission_item: in a global frame, MAV_MISSION_UNSUPPORTED)
+            return M.MAV_MISSION_UNSUPPORTED
         return M.MAV_MISSION_ACCEPTED
 
     def _store_item(self, link: _Link, msg: Any, is_int: bool) -> None:
@@ -144,6 +150,11 @@ class MissionMixin:
                 self._mission_ack(link, tr.sysid, tr.compid, res)
                 self._text(M.MAV_SEVERITY_WARNING, f"Mission item {msg.seq} rejected: command {msg.command}")
                 return
+            if not self.px4 and msg.command not in _POSITION_COMMANDS:
+                # ArduPilot stores no location for it (AP_Mission::stored_in_location) and returns it with frame 0
+                # and x/y/z 0 (AP_Mission::mission_cmd_to_mavlink_int)
+                msg = self._enc.mission_item_int_encode(0, 0, msg.seq, 0, msg.command, msg.current, msg.autocontinue,
+                                                        msg.param1, msg.param2, msg.param3, msg.param4, 0, 0, 0.0, 0)
         tr.items.append(msg)
         if len(tr.items) == tr.count:
             self.mission = tr.items
