@@ -177,6 +177,8 @@ class DroneComponent:
         it down."""
         self.publish_odometry()
         self.odometry.mission_ended()
+        for ps in self.plugin_sensors:  # their failures not yet in an event: one summary each
+            ps.finish(self.backend.t)
         if self.recorder is not None:
             self.recorder.json("/mission/result", self._t_ns(self.backend.t),
                                {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),

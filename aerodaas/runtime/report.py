@@ -19,6 +19,7 @@ def format_summary(result: Any) -> str:
     """Human-readable end-of-run summary (what ``aerodaas run`` prints): the outcome, per robot its flight, cameras,
     sensors, analytics and latency, the analytics scheduler, then the recording and what it lost."""
     lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
+    lines += degraded_lines(getattr(result, "degraded", None) or [])
     acc = getattr(result, "recording_accounting", None) or {}
     for rid, rep in result.robots.items():
         st = result.stats.get(rid, {})
@@ -44,6 +45,18 @@ def format_summary(result: Any) -> str:
         lines.append(f"  recording: {result.recording_duplicates} samples sent again by a restarted drone actor (stamps "
                      f"already recorded) were recorded once")
     return "\n".join(lines)
+
+
+def degraded_lines(failing: list) -> list[str]:
+    """One line per component over its failure limit (:class:`~aerodaas.recording.health.FailureCount`): what it
+    is, how many of its attempts failed, its limit and its first error."""
+    lines = []
+    for c in failing:
+        what = "readings" if c.kind.value == "sensor" else "items"
+        lines.append(f"  DEGRADED: {c.label}: {c.failures} of {c.attempts} {what} failed "
+                     f"({100.0 * c.failures / max(c.attempts, 1):.0f} %, limit max_failure_fraction "
+                     f"{c.limit:g}); first error: {c.first_error}")
+    return lines
 
 
 def _robot_lines(rid: str, rep: dict) -> list[str]:
