@@ -34,7 +34,9 @@ def drone_checkpoint(d: Any) -> dict:
                 "last_tick": [float(d.last_tick[0]), [float(c) for c in d.last_tick[1]]], "discarded": list(d.plan_log.discarded),
                 "cleared_preplanned": list(d.plan_log.cleared_preplanned),
                 "cameras": [c["next_t"] for c in d.cameras],
-                "sensor_health": {ps.sensor_id: ps.health.state() for ps in d.plugin_sensors}}
+                "sensor_health": {ps.sensor_id: ps.health.state() for ps in d.plugin_sensors},
+                # which queued waypoints are pre-planned, by position (object ids do not survive pickling)
+                "preplanned_flags": [[id(i) in f.preplanned_items for i in m.items] for m in q["missions"]]}
 
 
 def restore_drone(d: Any, cp: dict) -> None:
@@ -45,6 +47,8 @@ def restore_drone(d: Any, cp: dict) -> None:
         if cp.get("vehicle") is not None:
             d.backend.restore(cp["vehicle"])
         d.queue.restore(cp["missions"], cp["completed"], cp.get("seq_missions"), cp.get("segments_issued"))
+        d.flight.preplanned_items = {id(i) for m, flags in zip(cp["missions"], cp.get("preplanned_flags") or [])
+                                     for i, pre in zip(m.items, flags) if pre}
         state = S(cp["state"])
         if state == S.WAYPOINT_HOLD:
             state = S.NAVIGATING
