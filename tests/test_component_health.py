@@ -200,3 +200,23 @@ def test_a_limit_outside_0_1_is_refused_naming_the_field():
         check_failure_fraction(A())
     A.max_failure_fraction = 0.5
     check_failure_fraction(A())
+
+
+def test_a_log_restored_from_a_checkpoint_goes_on_counting():
+    """A drone actor restarted from its checkpoint: its sensors' counts go on from there, and the events recorded
+    before and after add up to the total."""
+    before = FailureLog(FailureCount(ComponentKind.SENSOR, "d1", "s", limit=0.5), every=4, period_s=1e9)
+    events = []
+    for i in range(12):
+        before.attempt()
+        events.append(before.failed(float(i), f"E{i}"))
+    after = FailureLog(FailureCount(ComponentKind.SENSOR, "d1", "s", limit=0.5), every=4, period_s=1e9)
+    after.restore(before.state())
+    for i in range(12, 20):
+        after.attempt()
+        events.append(after.failed(float(i), f"E{i}"))
+    events.append(after.summary(20.0))
+    got = [e for e in events if e]
+    assert sum(1 for e in got if e["event"] == "sensor_error") == FIRST_EVENTS  # not 5 more after the restart
+    assert sum(e["failures"] for e in got) == after.count.failures == 20 and after.count.limit == 0.5
+    assert after.count.first_error == "E0"
