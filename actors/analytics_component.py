@@ -11,6 +11,7 @@ import numpy as np
 from aerodaas.analytics.contract import Emissions, collecting, event_record
 from aerodaas.protocol.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, ValueMsg, output_message
 from aerodaas.protocol.specs import AnalyticsSchedulerSpec
+from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION, ComponentKind, FailureCount, FailureLog
 
 from aerodaas.actors.dataplane import Component, DataPlane
 
@@ -51,6 +52,10 @@ class AnalyticsComponent(Component):
         self.named_outputs = dict(getattr(analytics, "named_outputs", None) or {})
         self.events: dict[str, int] = {}  # kind -> events emitted
         self.named_counts: dict[str, int] = {k: 0 for k in self.named_outputs}
+        #: its items and failures (every one counted; the first ones and then summaries recorded as events)
+        self.health = FailureLog(FailureCount(ComponentKind.ANALYTICS, None, name, limit=float(
+            getattr(analytics, "max_failure_fraction", DEFAULT_MAX_FAILURE_FRACTION))))
+        self._failed_at: tuple[str, float] | None = None  # robot and vehicle time (s) of the last failure
         if recorder is not None:  # its outputs are accounted against its inputs (aerodaas.recording.accounting)
             recorder.declare_analytics(cid, name)
 
@@ -131,9 +136,10 @@ class AnalyticsComponent(Component):
         return self._emit(out, msg, dt_ms, getattr(self.obj, "last_timing", None), em)
 
     def _failed(self, e: Exception, msg: Message) -> None:
-        """An exception in ``process``: logged with its traceback (the first 5, then every 100th), recorded as an
-        ``analytics_error`` event of the robot, counted in the run's summary; ``on_error == "abort"`` ends every
-        mission of the run as failed (once)."""
+        """An exception in ``process``: logged with its traceback (the first 5, then every 100th), counted in the
+        run's summary, recorded as an ``analytics_error`` event of the robot (the first ones, then
+        ``analytics_error_summary`` events: :class:`~aerodaas.recording.health.FailureLog`); ``on_error ==
+        "abort"`` ends every mission of the run as failed (once)."""
         import logging
         import traceback
 
@@ -144,17 +150,31 @@ class AnalyticsComponent(Component):
         if self.failures <= 5 or self.failures % 100 == 0:
             logging.getLogger("aerodaas.analytics.core").error("analytics %r failed on item %d (%d failures so far):\n%s",
                                                           self.name, self.processed + self.failures, self.failures, tb)
-        robot = msg.robot
-        if self.recorder is not None:
-            self.recorder.json(f"/{robot}/events", self.epoch_ns + int(msg.sim_t * 1e9),
-                               {"robot": robot, "t": msg.sim_t, "event": "analytics_error",
-                                "analytics": self.name, "error": self.last_failure, "traceback": tb,
-                                "count": self.failures, "on_error": self.on_error}, "aerodaas.MissionEvent")
+        self.health.attempt()
+        self._failed_at = (msg.robot, msg.sim_t)
+        ev = self.health.failed(msg.sim_t, self.last_failure)
+        if ev is not None and ev["event"] == ComponentKind.ANALYTICS.event:
+            ev["traceback"] = tb
+        self._record_failures(ev)
         if self.on_error == "abort" and not self.aborted:
             self.aborted = True
             abort = getattr(self, "abort", None)
             if callable(abort):
                 abort(f"analytics {self.name!r} raised {self.last_failure} (on_error=abort)")
+
+    def _record_failures(self, ev: dict | None) -> None:
+        """Record failure event ``ev`` (None: nothing now) on the events of the robot of the last failure."""
+        if ev is None or self.recorder is None or self._failed_at is None:
+            return
+        robot, t = self._failed_at
+        self.recorder.json(f"/{robot}/events", self.epoch_ns + int(t * 1e9),
+                           {"robot": robot, "t": t, **ev, "on_error": self.on_error}, "aerodaas.MissionEvent")
+
+    def finish_failures(self) -> None:
+        """The run is over: the failures no event carried yet, as one ``analytics_error_summary`` event (at the
+        vehicle time of the last failure)."""
+        if self._failed_at is not None:
+            self._record_failures(self.health.summary(self._failed_at[1]))
 
     def _emit(self, out: Any, msg: Message, dt_ms: float, timing: dict | None,
               emitted: Emissions | None = None) -> list[Message] | None:
@@ -171,6 +191,7 @@ class AnalyticsComponent(Component):
                 return None
         self.proc_ms.append(dt_ms)
         self.processed += 1
+        self.health.attempt()
         self.plane.mark_processed()
         self._record_tracks(msg)
         if emitted is not None and (emitted.events or emitted.outputs):
@@ -261,6 +282,7 @@ class AnalyticsComponent(Component):
                "batched": self.batched,
                "process_ms_median": float(np.median(p)), **self.mailbox_stats(),
                "failures": self.failures, "last_failure": self.last_failure, "on_error": self.on_error,
+               "health": {**self.health.count.as_dict(), "cid": self.cid},
                "outlets": self.plane.outlet_stats(self.cid), "events": dict(self.events),
                "named_outputs": dict(self.named_counts)}
         extra = getattr(self.obj, "stats", None)

@@ -364,6 +364,8 @@ class ActorAssembly:
             for cam in d.cameras:
                 cam["comp"].close()
         for c in self.comps.values():
+            if isinstance(c, AnalyticsComponent):  # its failures not yet in an event: one summary
+                c.finish_failures()
             close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None
             if callable(close):
                 try:

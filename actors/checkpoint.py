@@ -3,7 +3,7 @@
 A checkpoint (a picklable dict) holds the vehicle's state when the backend keeps one for us (the simulator:
 :meth:`~aerodaas.backends.base.VehicleBackend.checkpoint`; a real vehicle keeps flying on its own), the mission
 state machine's state, the waypoints visited, the last 50 events (the recording has them all), the drone's waypoint queue (queued missions
-and completed items), the clocks of the control loop and the drone's counters. :func:`restore_drone` puts them back into a freshly built
+and completed items), the clocks of the control loop and the drone's counters (its plug-in sensors' failures too). :func:`restore_drone` puts them back into a freshly built
 :class:`~.drone.DroneComponent`: the waypoint that was being flown to (or held) is flown to again, from where the
 vehicle is, and the events say ``resumed_after_restart``.
 """
@@ -33,7 +33,10 @@ def drone_checkpoint(d: Any) -> dict:
                 "completed": q["completed"], "segments_issued": q["segments_issued"], "seq_missions": q["seq"],
                 "last_tick": [float(d.last_tick[0]), [float(c) for c in d.last_tick[1]]], "discarded": list(d.plan_log.discarded),
                 "cleared_preplanned": list(d.plan_log.cleared_preplanned),
-                "cameras": [c["next_t"] for c in d.cameras]}
+                "cameras": [c["next_t"] for c in d.cameras],
+                "sensor_health": {ps.sensor_id: ps.health.state() for ps in d.plugin_sensors},
+                # which queued waypoints are pre-planned, by position (object ids do not survive pickling)
+                "preplanned_flags": [[id(i) in f.preplanned_items for i in m.items] for m in q["missions"]]}
 
 
 def restore_drone(d: Any, cp: dict) -> None:
@@ -44,6 +47,8 @@ def restore_drone(d: Any, cp: dict) -> None:
         if cp.get("vehicle") is not None:
             d.backend.restore(cp["vehicle"])
         d.queue.restore(cp["missions"], cp["completed"], cp.get("seq_missions"), cp.get("segments_issued"))
+        d.flight.preplanned_items = {id(i) for m, flags in zip(cp["missions"], cp.get("preplanned_flags") or [])
+                                     for i, pre in zip(m.items, flags) if pre}
         state = S(cp["state"])
         if state == S.WAYPOINT_HOLD:
             state = S.NAVIGATING
@@ -64,6 +69,10 @@ def restore_drone(d: Any, cp: dict) -> None:
         d.flight.active_wp, d.flight.hold_until = None, None
         for c, t in zip(d.cameras, cp.get("cameras", [])):
             c["next_t"] = t
+        health = cp.get("sensor_health") or {}
+        for ps in d.plugin_sensors:  # its readings' failures go on counting (aerodaas.recording.health)
+            if ps.sensor_id in health:
+                ps.health.restore(health[ps.sensor_id])
         d.restored_from = cp
         d.record_event("resumed_after_restart", state=state.value, checkpoint_t=cp["t"],
                        visited=len(d.visited), heading_to=_head(d))

@@ -93,6 +93,7 @@ class DroneComponent:
         self.progress = NavigationProgress(self.backend, self.cfg.id, self.cfg.progress, self.gate, self._event)
         #: the flight state shared with the flight objects: waypoint flown and held, visited, outcome, ...
         self.flight = FlightState(preplanned_total=preplanned_total, preplanned_left=preplanned_total)
+        self.flight.mark_preplanned(self.queue)
         ctx = FlightContext(self.cfg, self.backend, self.gate, self.fsm, self.queue, self.plan_log, self.progress,
                             self._event, self.next_order, self._nav_command)
         #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
@@ -177,10 +178,13 @@ class DroneComponent:
         it down."""
         self.publish_odometry()
         self.odometry.mission_ended()
+        for ps in self.plugin_sensors:  # their failures not yet in an event: one summary each
+            ps.finish(self.backend.t)
         if self.recorder is not None:
             self.recorder.json("/mission/result", self._t_ns(self.backend.t),
                                {"robot": self.cfg.id, "outcome": self.outcome, "visited": len(self.visited),
-                                "preplanned_total": self.flight.preplanned_total, "t": self.backend.t,
+                                "preplanned_total": self.flight.preplanned_total,
+                                "preplanned_reached": self.flight.preplanned_reached, "t": self.backend.t,
                                 "error": self.error}, "aerodaas.MissionResult")
 
     # ------------------------------------------------------------------ recording helpers
@@ -265,6 +269,7 @@ class DroneComponent:
         return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
                 "position": [float(v) for v in b.position], "battery_pct": None if b.battery_pct is None else float(b.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
+                "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
                 "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}

@@ -140,8 +140,8 @@ class AutopilotFlight:
         target = wp.to_local(c.cfg.home)
         at = self._reached[n]
         c.plan_log.complete(c.queue, wp.id, t)
-        f.visited.append({"id": wp.id, "t": t, "position": list(at), "target": list(target),
-                          "error_m": math.dist(at, target)})
+        f.waypoint_done(wp, {"id": wp.id, "t": t, "position": list(at), "target": list(target),
+                             "error_m": math.dist(at, target)})
         c.event("waypoint_done", waypoint=wp.id)
         f.active_wp = None
 

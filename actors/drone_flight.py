@@ -16,6 +16,7 @@ from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState
 from aerodaas.navigation.safety import SafetyGate
+from aerodaas.model.types import Waypoint
 from aerodaas.navigation.waypoint_queue import Order, WaypointQueue
 
 
@@ -52,7 +53,8 @@ class FlightState:
     while it runs); ``failsafe``: the autopilot's failsafe and what was done about it; ``backend_rtl``: the
     autopilot flies the return to launch; ``rtl_path``: else the legs AeroDaaS flies home; ``paused_from`` /
     ``link_lost_from``: the state a pause or a link loss interrupted; ``reissue``: the link dropped and came back,
-    so the active target is sent again."""
+    so the active target is sent again; ``preplanned_items``: the object ids of the queue's pre-planned waypoints
+    not yet done (:meth:`waypoint_done` marks each visited waypoint ``preplanned`` or not)."""
 
     preplanned_total: int = 0
     preplanned_left: int = 0
@@ -71,6 +73,25 @@ class FlightState:
     paused_from: MissionState | None = None
     link_lost_from: MissionState | None = None
     reissue: bool = False
+    preplanned_items: set[int] = field(default_factory=set)
+
+    def mark_preplanned(self, queue: WaypointQueue) -> None:
+        """The waypoints of ``queue``'s pre-planned (distance-driven) missions are the pre-planned ones (the
+        drone's queue as it was given, before anything was added in flight)."""
+        self.preplanned_items = {id(w) for m in queue.missions() if m.distance_driven for w in m.items
+                                 if isinstance(w, Waypoint)}
+
+    def waypoint_done(self, item: Any, rec: dict) -> None:
+        """Waypoint ``item`` (the queue's own object) was reached and held: ``rec`` (``id``, ``t``, ``position``,
+        ``target``, ``error_m``) joins :attr:`visited`, with ``preplanned`` saying whether it was pre-planned."""
+        rec["preplanned"] = id(item) in self.preplanned_items
+        self.preplanned_items.discard(id(item))
+        self.visited.append(rec)
+
+    @property
+    def preplanned_reached(self) -> int:
+        """How many of the pre-planned waypoints were reached (the others visited were added in flight)."""
+        return sum(1 for v in self.visited if v.get("preplanned"))
 
 
 @dataclass(frozen=True)

@@ -151,7 +151,8 @@ class QueueFlight:
         h, hc = f.hold, c.cfg.hold
         if h.within_s + 1e-9 >= item.hover_duration:
             c.plan_log.complete(c.queue, item.id, t)
-            f.visited.append({"id": item.id, "t": t, "position": list(pos), "target": list(target), "error_m": dist})
+            f.waypoint_done(item, {"id": item.id, "t": t, "position": list(pos), "target": list(target),
+                                   "error_m": dist})
             c.event("waypoint_done", waypoint=item.id, held_s=round(h.within_s, 3),
                     max_error_m=round(h.max_error_m, 3))
         elif t - h.start > hc.max_time_factor * item.hover_duration + hc.grace_s:

@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from aerodaas.protocol.messages import ValueMsg
+from aerodaas.recording.health import ComponentKind, FailureCount, FailureLog
 
 
 class PluginSensorComponent:
@@ -28,7 +29,14 @@ class PluginSensorComponent:
         self.period = 1.0 / self.plugin.rate_hz
         self.next_t = 0.0
         self.readings = 0
-        self.errors = 0
+        #: its samples and failures (every one counted; the first ones and then summaries recorded as events)
+        self.health = FailureLog(FailureCount(ComponentKind.SENSOR, robot_id, spec["sensor"],
+                                              limit=spec["max_failure_fraction"]))
+
+    @property
+    def errors(self) -> int:
+        """Readings that raised since this actor (re)started from its checkpoint."""
+        return self.health.count.failures
 
     def maybe_sample(self, backend: Any, tok: Any = None) -> None:
         """Take a reading if one is due at the backend's time ``backend.t``."""
@@ -44,18 +52,28 @@ class PluginSensorComponent:
                 return
             data = out.model_dump(mode="json") if hasattr(out, "model_dump") else dict(out)
         except Exception as e:  # noqa: BLE001 - a failing sensor loses its reading, never the flight
-            self.errors += 1
-            if self.recorder is not None and self.errors <= 5:  # recorded (the first five), counted in the summary
-                self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(t * 1e9),
-                                   {"robot": self.robot_id, "t": t, "event": "sensor_error", "sensor": self.sensor_id,
-                                    "error": f"{type(e).__name__}: {e}"}, "aerodaas.MissionEvent")
+            self.health.attempt()
+            self._record(t, self.health.failed(t, f"{type(e).__name__}: {e}"))
             return
+        self.health.attempt()
         self.readings += 1
         if self.recorder is not None:
             self.recorder.json(self.topic, self.epoch_ns + int(t * 1e9), data, self.schema)
         self.plane.publish(self.cid, [ValueMsg(robot=self.robot_id, sim_t=t, data=data)], tok, inline=False)
 
+    def _record(self, t: float, event: dict | None) -> None:
+        """Record a failure event (:class:`~aerodaas.recording.health.FailureLog`: the first ones, then summaries)
+        of vehicle time ``t`` (s) on the robot's events; None: nothing to record now."""
+        if event is not None and self.recorder is not None:
+            self.recorder.json(f"/{self.robot_id}/events", self.epoch_ns + int(t * 1e9),
+                               {"robot": self.robot_id, "t": t, **event}, "aerodaas.MissionEvent")
+
+    def finish(self, t: float) -> None:
+        """The run ended at vehicle time ``t`` (s): the failures no event carried yet, as a summary event."""
+        self._record(t, self.health.summary(t))
+
     def stats(self) -> dict:
-        """``{"type", "schema", "readings", "topic"}`` for the run's summary."""
+        """``{"type", "schema", "readings", "topic", "errors", "health"}`` for the run's summary (``health``:
+        :meth:`FailureCount.as_dict <aerodaas.recording.health.FailureCount.as_dict>`)."""
         return {"type": self.type, "schema": self.schema, "readings": self.readings, "topic": self.topic,
-                "errors": self.errors}
+                "errors": self.errors, "health": self.health.count.as_dict()}

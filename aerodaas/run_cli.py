@@ -121,6 +121,8 @@ def _exit_code(results: list, stop: list[int]) -> int:
         return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
     if any(getattr(r, "recording_losses", None) or r.outcome == "recording_lost" for r in results):
         return 4  # the recorder actor died or a producer's numbered message is in no segment: part of the run lost
+    if any(r.outcome == "degraded" for r in results):
+        return 5  # a sensor or an analytics failed more often than its limit (aerodaas.recording.health)
     return 0 if all(r.ok for r in results) else 1
 
 

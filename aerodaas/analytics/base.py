@@ -22,6 +22,7 @@ from pydantic import BaseModel
 from aerodaas.analytics.contract import Emissions, NamedOutput, NamedOutputStream, checked_event, current_emissions
 from aerodaas.model.data import AeroStreamData
 from aerodaas.model.types import AeroNavigation, FrameMeta
+from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
 
 __all__ = ["Analytics", "IAnalyse", "INavigableAnalyse", "NavigableAnalytics", "source_robot"]
 
@@ -54,6 +55,8 @@ class Analytics:
     skipped; the error is logged with its traceback, recorded as an ``analytics_error`` event and counted in the
     run's summary) or ``"abort"`` (the same, then every mission of the run ends as ``failed``). Set it on the
     instance (``detector.on_error = "abort"``) or the class; anything else is refused before Ray starts.
+    ``max_failure_fraction`` (default 0.2, a number in [0, 1]): with ``"continue"``, the run ends ``degraded``
+    (exit code 5) when more than this fraction of its items failed (:mod:`aerodaas.recording.health`).
 
     Its output contract (:mod:`aerodaas.analytics.contract`, docs/extending.md): ``Output`` (a typed main output,
     recorded with its JSON Schema), ``named_outputs`` (further typed outputs, each its own stream and channel, sent
@@ -78,6 +81,8 @@ class Analytics:
     #: recorded on ``/<robot>/<name>/<output name>``; the analytics sends to one with :meth:`emit`
     named_outputs: ClassVar[dict[str, type[BaseModel]]] = {}
     on_error: str = "continue"
+    #: the run is ``degraded`` when more than this fraction of its items failed (aerodaas.recording.health)
+    max_failure_fraction: float = DEFAULT_MAX_FAILURE_FRACTION
     #: Most items the runtime should hand to one :meth:`process_batch` call (1: no batching pays off). Read on the
     #: actor after :meth:`setup`; the ONNX detectors raise it when their model takes a dynamic batch.
     max_batch: int = 1

@@ -13,6 +13,7 @@ from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
 from aerodaas.plugins.builtin_sensors import CAMERA_SOURCES, STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
 from aerodaas.plugins.sensor import SensorDelivery
+from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
 from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayConfig, SimConfig,  # noqa: F401
                                       TelloConfig, add_section_schemas, backend_settings_into_config)
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
@@ -189,13 +190,17 @@ class SensorConfig(_Cfg):
     ``/<robot>/camera/<sensor id>`` as AeroDaaS records it) or a video stream: an ``rtsp://`` URL, ``rtp://host:port``
     (QGroundControl-style RTP H.264/H.265 on UDP, e.g. port 5600), ``udp://host:port`` (MPEG-TS), an ``.sdp`` file,
     ``/dev/videoN`` or a video file (looped), with ``transport`` (rtsp: tcp/udp), ``codec`` (rtp: h264/h265),
-    ``first_frame_timeout_s`` (default 10) and ``stall_timeout_s`` (default 2): docs/video.md."""
+    ``first_frame_timeout_s`` (default 10) and ``stall_timeout_s`` (default 2): docs/video.md.
+
+    ``max_failure_fraction`` (a plug-in sensor's): the run is ``degraded`` when more than this fraction of its
+    readings raised (:mod:`aerodaas.recording.health`; default 0.2, 0 = any failure, 1 = never)."""
 
     id: Identifier
     type: str = Field(min_length=1, description="camera, odometry, stat_stream, or a sensor plug-in: a registered "
                       "name (decorator, installed entry point of group aerodaas.sensors) or 'module.path:ClassName'")
     properties: dict[str, Any] = Field(default_factory=dict)
     buffer: int = Field(default=1, ge=1, le=100_000)
+    max_failure_fraction: float = Field(default=DEFAULT_MAX_FAILURE_FRACTION, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _check_props(self) -> "SensorConfig":

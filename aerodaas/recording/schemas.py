@@ -50,8 +50,9 @@ class MissionResult(BaseModel):
 
     robot: str
     outcome: str = Field(description="success / incomplete / timeout / interrupted / failed")
-    visited: int = Field(description="pre-planned waypoints visited")
+    visited: int = Field(description="waypoints visited, pre-planned and added in flight")
     preplanned_total: int
+    preplanned_reached: Optional[int] = Field(default=None, description="pre-planned waypoints visited")
     t: float = Field(description="time at the end, s")
     error: Optional[str] = None
 

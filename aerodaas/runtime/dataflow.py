@@ -214,8 +214,8 @@ def _shared_links(chunk: list) -> dict[str, list[str]]:
 def sensor_plugin_spec(sensor, cid: str) -> dict:
     """What a drone actor needs to run plug-in sensor ``sensor`` (an :class:`aerodaas.app.api.Sensor` whose type is
     not built in): its component id, sensor id, type, the plug-in class itself (it travels to the actor), its
-    validated properties, and its recording schema (``{name: JSON Schema}``; empty when the plug-in names a
-    schema the recorder knows)."""
+    validated properties, its recording schema (``{name: JSON Schema}``; empty when the plug-in names a
+    schema the recorder knows) and its failure limit (``max_failure_fraction``, :mod:`aerodaas.recording.health`)."""
     from aerodaas.plugins import registry
 
     entry = registry.resolve("sensor", sensor.type)
@@ -223,7 +223,7 @@ def sensor_plugin_spec(sensor, cid: str) -> dict:
     js = cls.json_schema()
     return {"cid": cid, "sensor": sensor.id, "type": sensor.type, "cls": cls, "origin": entry.origin,
             "properties": dict(sensor.cfg.properties), "schema_name": cls.schema_name(),
-            "schema": {cls.schema_name(): js} if js else {}}
+            "schema": {cls.schema_name(): js} if js else {}, "max_failure_fraction": sensor.cfg.max_failure_fraction}
 
 
 def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:

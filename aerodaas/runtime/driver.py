@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
+from aerodaas.recording.health import FailureCount
 from aerodaas.runtime import ray_start
 from aerodaas.runtime.options import RunOptions, actor_classes
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
@@ -36,7 +37,8 @@ if TYPE_CHECKING:
 class MissionResult:
     """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed / recording_lost:
     the drones finished but the recorder actor died, see ``recording_losses`` / analytics_lost: under lock-step an
-    analytics actor did not answer again within ``actor_restart_timeout_s``, see ``analytics_lost``), per-robot
+    analytics actor did not answer again within ``actor_restart_timeout_s``, see ``analytics_lost`` / degraded:
+    the drones finished but a sensor or analytics failed more often than its limit, see ``degraded``), per-robot
     reports (visited waypoints, events, state history), per-actor stats, per-frame latency and the recording."""
 
     outcome: str
@@ -67,11 +69,14 @@ class MissionResult:
     #: account_recording`: produced, recorded, lost per channel; ``lost_total``); None without one. A run whose
     #: recording lacks a numbered message is not ``ok`` (outcome ``recording_lost``, exit code 4)
     recording_accounting: dict[str, Any] | None = None
+    #: the components whose failures exceeded their limit (:func:`aerodaas.recording.health.assess`: counted by
+    #: the components and in the recording); a run with any is not ``ok`` (outcome ``degraded``, exit code 5)
+    degraded: list[FailureCount] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
         return (self.outcome == "success" and self.recording_failure is None and not self.recording_losses
-                and not self.analytics_lost and not self.recording_lost_messages)
+                and not self.analytics_lost and not self.recording_lost_messages and not self.degraded)
 
     @property
     def recording_lost_messages(self) -> int:
@@ -466,6 +471,10 @@ def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
         outcome = "analytics_lost"  # the drones finished, flying on without an analytics that never came back
     if outcome == "success" and (rec_report.get("losses") or (accounting or {}).get("lost_total")):
         outcome = "recording_lost"  # the drones finished, but the run's truth has a hole: not a success
+    degraded = component_failures(run.reports, stats, rec_report.get("segments") or (
+        [run.opts.record] if run.opts.record and os.path.isfile(run.opts.record) else []))
+    if outcome == "success" and degraded:
+        outcome = "degraded"  # the drones finished, but a sensor or an analytics failed more than its limit
     result = MissionResult(outcome=outcome, robots=run.reports, stats=stats, latency=run.latency,
                            recording=run.opts.record, wall_s=time.monotonic() - run.t_start, recording_counts=counts,
                            recording_failure=rec_report.get("failure"), recording_lost=rec_report.get("lost", 0),
@@ -473,10 +482,32 @@ def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
                            recording_segments=rec_report.get("segments") or [],
                            recording_segment_messages=rec_report.get("segment_messages") or [],
                            recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics,
-                           recording_accounting=accounting)
+                           recording_accounting=accounting, degraded=degraded)
     for h in run.handles.values():
         h["robot"].run_end_hooks(result)
     return result
+
+
+def component_failures(reports: dict, stats: Any, paths: list[str]) -> list[FailureCount]:
+    """The sensors and analytics over their failure limit (:func:`aerodaas.recording.health.assess`), from their
+    own counts (the drones' ``reports`` for plug-in sensors, the actors' ``stats`` for analytics: one entry per
+    analytics component) and the failures recorded in ``paths`` (the recording's segments; none: own counts
+    only)."""
+    from aerodaas.recording.health import assess, tally_failures
+
+    own: list[FailureCount] = []
+    for rep in reports.values():
+        for ps in (rep.get("plugin_sensors") or {}).values():
+            if isinstance(ps, dict) and ps.get("health"):
+                own.append(FailureCount.from_dict(ps["health"]))
+    seen: set[str] = set()
+    for rid, st in (stats.items() if isinstance(stats, dict) else ()):
+        for a in (st.get("analytics") or []) if isinstance(st, dict) and not rid.startswith("_") else []:
+            h = a.get("health") if isinstance(a, dict) else None
+            if h and h.get("cid") not in seen:  # an analytics serving several robots is listed under each
+                seen.add(h.get("cid"))
+                own.append(FailureCount.from_dict(h))
+    return assess(own, tally_failures(paths) if paths else None)
 
 
 def _pull_getter(sensor, h: dict):

@@ -106,6 +106,7 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
             if getattr(a, "on_error", "continue") not in ("continue", "abort"):
                 raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
                                   f"{getattr(a, 'on_error')!r}")
+            check_failure_fraction(a)
             from aerodaas.analytics.contract import check_consumes, check_declaration
 
             check_declaration(a)  # Output / named_outputs / consumes well-formed (ContractError, a ValueError)
@@ -274,3 +275,13 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
         from aerodaas.config import load_environment_config
 
         load_environment_config(env)
+
+
+def check_failure_fraction(a: Any) -> None:
+    """Refuse an analytics whose ``max_failure_fraction`` is not a number in [0, 1] (ConfigError naming it)."""
+    from aerodaas.config import ConfigError
+
+    f = getattr(a, "max_failure_fraction", 0.0)
+    if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 1.0:
+        raise ConfigError(f"analytics {a.name!r}: max_failure_fraction must be a number in [0, 1] (the fraction of "
+                          f"its items that may fail before the run is degraded), got {f!r}")

@@ -4,12 +4,16 @@ from __future__ import annotations
 from typing import Any
 
 
-def waypoint_count(visited: int, preplanned: int | None) -> str:
-    """``3/4``: waypoints reached of those pre-planned (``?`` when unknown); with more reached than pre-planned
-    (waypoints added in flight, HITL or analytics) the fraction would read "747/1": then ``747 reached (1
-    pre-planned, at least 746 added in flight)``."""
+def waypoint_count(visited: int, preplanned: int | None, reached: int | None = None) -> str:
+    """``3/4``: pre-planned waypoints ``reached`` of those ``preplanned`` (``?`` when unknown); with waypoints added
+    in flight (HITL or analytics) also visited: ``1/4 pre-planned + 8 added in flight``. ``reached`` None (a
+    report that does not say): ``visited`` of ``preplanned``, and ``747 reached (1 pre-planned, at least 746 added
+    in flight)`` when more were visited than pre-planned."""
     if preplanned is None:
         return f"{visited}/?"
+    if reached is not None:
+        extra = visited - reached
+        return f"{reached}/{preplanned}" + (f" pre-planned + {extra} added in flight" if extra else "")
     if visited <= preplanned:
         return f"{visited}/{preplanned}"
     return f"{visited} reached ({preplanned} pre-planned, at least {visited - preplanned} added in flight)"
@@ -19,6 +23,7 @@ def format_summary(result: Any) -> str:
     """Human-readable end-of-run summary (what ``aerodaas run`` prints): the outcome, per robot its flight, cameras,
     sensors, analytics and latency, the analytics scheduler, then the recording and what it lost."""
     lines = [f"mission outcome: {result.outcome}   wall time {result.wall_s:.1f} s"]
+    lines += degraded_lines(getattr(result, "degraded", None) or [])
     acc = getattr(result, "recording_accounting", None) or {}
     for rid, rep in result.robots.items():
         st = result.stats.get(rid, {})
@@ -46,6 +51,18 @@ def format_summary(result: Any) -> str:
     return "\n".join(lines)
 
 
+def degraded_lines(failing: list) -> list[str]:
+    """One line per component over its failure limit (:class:`~aerodaas.recording.health.FailureCount`): what it
+    is, how many of its attempts failed, its limit and its first error."""
+    lines = []
+    for c in failing:
+        what = "readings" if c.kind.value == "sensor" else "items"
+        lines.append(f"  DEGRADED: {c.label}: {c.failures} of {c.attempts} {what} failed "
+                     f"({100.0 * c.failures / max(c.attempts, 1):.0f} %, limit max_failure_fraction "
+                     f"{c.limit:g}); first error: {c.first_error}")
+    return lines
+
+
 def _robot_lines(rid: str, rep: dict) -> list[str]:
     """A robot's flight: time, waypoints, state, battery, how it ended, holds and targets it missed, the MAVLink
     link and failsafe, errors and drone actor restarts."""
@@ -54,7 +71,7 @@ def _robot_lines(rid: str, rep: dict) -> list[str]:
     else:
         t, total = rep.get("t", 0), rep.get("preplanned_total", 0)
         lines = [f"  robot {rid}: sim time " + ("unknown" if t is None else f"{t:.1f} s") +
-                 f", waypoints {waypoint_count(rep.get('visited', 0), total)}, final state "
+                 f", waypoints {waypoint_count(rep.get('visited', 0), total, rep.get('preplanned_reached'))}, final state "
                  f"{rep.get('state')}, battery {pct(rep.get('battery_pct', 0))}"]
     if rep.get("ended"):
         lines.append(f"    ended: {rep['ended']}")

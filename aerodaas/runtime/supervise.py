@@ -90,6 +90,7 @@ def _lost_report(rid: str, why: str, checkpoint: dict | None) -> dict:
     return {"robot": rid, "outcome": LOST, "error": why, "t": cp.get("t"), "state": cp.get("state", "unknown"),
             "visited": len(cp.get("visited", [])), "visited_waypoints": cp.get("visited", []),
             "preplanned_total": cp.get("preplanned_total"), "events": cp.get("events", []),
+            "preplanned_reached": sum(1 for v in cp.get("visited", []) if v.get("preplanned")) if cp else None,
             "battery_pct": None, "position": [0.0, 0.0, 0.0]}
 
 
@@ -238,13 +239,15 @@ def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
     try:
         ray.get(recorder.mission_result.remote(rid, epoch_ns + int((rep.get("t") or 0.0) * 1e9), {
             "outcome": rep["outcome"], "visited": rep.get("visited", 0), "preplanned_total":
-            rep.get("preplanned_total") or 0, "t": rep.get("t") or 0.0, "error": rep.get("error")}), timeout=10)
+            rep.get("preplanned_total") or 0, "preplanned_reached": rep.get("preplanned_reached"),
+            "t": rep.get("t") or 0.0, "error": rep.get("error")}), timeout=10)
     except Exception:  # noqa: BLE001 - reported in the summary anyway
         pass
 
 
 def progress_lines(handles: dict, t0: float) -> list[str]:
-    """One line per flying drone: time, state, waypoints, position, battery, camera FPS, detections, link."""
+    """One line per flying drone: time, state, waypoints, position, battery, camera FPS (a drone with a camera),
+    detections, link."""
     import ray
 
     from aerodaas.runtime.report import pct, waypoint_count
@@ -272,9 +275,10 @@ def progress_lines(handles: dict, t0: float) -> list[str]:
                     dets += f" (cloud {cloud})"
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
-        lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint {waypoint_count(st['visited'], st['preplanned_total'])} "
-                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {pct(st['battery_pct'])} "
-                     f"camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}{dets}{link}")
+        cam = f" camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}" if st.get("cameras", 1) else ""
+        lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint "
+                     f"{waypoint_count(st['visited'], st['preplanned_total'], st.get('preplanned_reached'))} "
+                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {pct(st['battery_pct'])}{cam}{dets}{link}")
     return lines
 
 
