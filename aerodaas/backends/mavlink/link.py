@@ -12,7 +12,7 @@ from typing import Any, Callable, Literal
 
 from pymavlink import mavutil
 
-from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.base import BackendError, CommandRefused, CredentialsRefused, LinkLost
 from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.shared_link import LinkPort, PortLosses, open_link
 from aerodaas.backends.mavlink.signing import LinkSigning, NoSigning
@@ -139,7 +139,7 @@ class MavlinkLink:
     def _signed_heartbeat(self, port: LinkPort, deadline: float, tick: Callable[[], None], timeout: float) -> Any:
         """The first correctly signed autopilot HEARTBEAT of the system ``port`` claimed, reading (and passing
         through the signature check, which counts what it drops) everything the vehicle sent until then; ``tick``
-        between reads. Raises :class:`BackendError` (after closing) at ``deadline`` (time.monotonic()): the vehicle
+        between reads. Raises :class:`CredentialsRefused` (after closing) at ``deadline`` (time.monotonic()): the vehicle
         does not hold our key, or does not sign."""
         system, signing = port.target_system, self._signing
         while time.monotonic() < deadline:
@@ -155,7 +155,7 @@ class MavlinkLink:
                 signing.accept(msg)  # counted and reported when dropped; not dispatched before the vehicle is known
         unsigned, bad = signing.unsigned, signing.bad_signature
         self.close()
-        raise BackendError(f"robot {self.robot_id!r}: no correctly signed heartbeat from system {system} within "
+        raise CredentialsRefused(f"robot {self.robot_id!r}: no correctly signed heartbeat from system {system} within "
                            f"{timeout:g} s on {self._settings.connection!r} (mavlink.signing_key_file "
                            f"{self._settings.signing_key_file!r}; {unsigned} unsigned and {bad} wrongly signed "
                            f"messages from it): the vehicle does not hold this key or does not sign; provision it with "
