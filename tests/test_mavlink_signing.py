@@ -195,3 +195,39 @@ def test_setup_provisions_the_vehicle_and_remove_takes_the_key_away(tmp_path):
         assert emu.params["WPNAV_SPEED"] == 1234.0  # an open vehicle again
     finally:
         emu.stop()
+
+
+def test_vehicles_with_their_own_keys_share_one_link(tmp_path):
+    """Two emulated vehicles (system ids 1 and 2, each its own key) behind one UDP router (tests/udp_fanout.py),
+    two backends on the one link, each with its vehicle's key file: both connect signed, and a parameter written
+    through robot 1 changes vehicle 1 only (vehicle 2 drops what is signed with the other key)."""
+    from aerodaas.backends import make_backend
+    from aerodaas.config import MavlinkConfig, RobotConfig
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
+    from .udp_fanout import UdpFanout
+
+    keys = {1: KEY, 2: OTHER_KEY}
+    emus = {s: MavlinkVehicleEmulator("ardupilot", speedup=5.0, system_id=s, gps_lock_s=1.0, signing_key=k)
+            for s, k in keys.items()}
+    for e in emus.values():
+        e.start("udpin:127.0.0.1:0")
+    router = UdpFanout([int(e.address.rsplit(":", 1)[1]) for e in emus.values()])
+    backends = {}
+    try:
+        for s, k in keys.items():
+            mc = MavlinkConfig(connection=f"udpout:127.0.0.1:{router.gcs_port}", target_system=s,
+                               signing_key_file=_key_file(tmp_path / f"v{s}.key", k), set_speed_limits=False)
+            backends[s] = make_backend(RobotConfig(id=f"r{s}", backend="mavlink", mavlink=mc))
+            backends[s].connect()
+        backends[1].set_parameter("WPNAV_SPEED", 321.0)
+        assert emus[1].params["WPNAV_SPEED"] == 321.0 and emus[2].params["WPNAV_SPEED"] != 321.0
+        assert backends[2].read_parameters(["WPNAV_SPEED"])["WPNAV_SPEED"] != 321.0
+        assert backends[1].signing.bad_signature == 0 and backends[2].signing.bad_signature == 0
+        assert emus[2].signing.rejected > 0  # it heard robot 1's messages, signed with a key it does not hold
+    finally:
+        for b in backends.values():
+            b.close(safe_end=False)
+        router.close()
+        for e in emus.values():
+            e.stop()
