@@ -231,3 +231,57 @@ def test_vehicles_with_their_own_keys_share_one_link(tmp_path):
         router.close()
         for e in emus.values():
             e.stop()
+
+
+def test_spoofed_telemetry_and_commands_in_flight_change_nothing_the_backend_knows(tmp_path):
+    """In flight on a signing emulated ArduCopter (no Ray: the backend driven as the runtime drives it): unsigned
+    GLOBAL_POSITION_INT 100 m north and SYS_STATUS at 5 % written onto the link in the vehicle's name, and an
+    unsigned forced disarm, LAND, flight termination and PARAM_SET from another process. The backend's position
+    and battery never show them, its mode and arming stay, the vehicle flies on, and the dropped messages are
+    ``link_unsigned`` events naming their types."""
+    import numpy as np
+
+    from aerodaas.backends import make_backend
+    from aerodaas.config import MavlinkConfig, RobotConfig
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
+    from .test_mavlink import run_until
+
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, gps_lock_s=1.0, signing_key=KEY)
+    address = emu.start("tcp:127.0.0.1:0")
+    mc = MavlinkConfig(connection=address, target_system=1, signing_key_file=_key_file(tmp_path / "v.key"),
+                       set_speed_limits=False)
+    b = make_backend(RobotConfig(id="r", backend="mavlink", mavlink=mc))
+    try:
+        b.connect()
+        assert run_until(b, lambda: b.home_received, 10)
+        b.arm()
+        b.takeoff(5.0)
+        assert run_until(b, lambda: abs(b.position[2] - 5.0) < 0.3 and b.in_air, 30), b.position
+        mode = b.mode
+        enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # no key: unsigned, in the vehicle's name
+        home = emu.home
+        seen_pos, seen_batt = [], []
+        for _ in range(20):
+            pos = M.MAVLink_global_position_int_message(int(emu.t * 1000) + 1, int((home.lat + 100 / 111_320) * 1e7),
+                                                        int(home.lon * 1e7), int((home.alt + 30) * 1000), 30_000,
+                                                        0, 0, 0, 0)
+            status = M.MAVLink_sys_status_message(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)
+            emu.inject(pos.pack(enc) + status.pack(enc))
+            run_until(b, lambda: False, 0.05)
+            seen_pos.append(float(np.hypot(*b.position[:2])))
+            seen_batt.append(b.battery_pct)
+        _spoof(address)
+        run_until(b, lambda: False, 1.0)
+        events = b.drain_events()
+        vehicle = emu.snapshot()
+    finally:
+        b.close()  # reports the counts not yet reported (LinkSigning.close)
+        emu.stop()
+    events += b.drain_events()
+    assert max(seen_pos) < 5.0 and min(seen_batt) > 50.0, (max(seen_pos), min(seen_batt))
+    assert vehicle["armed"] and vehicle["in_air"] and vehicle["mode"] == mode, vehicle["mode"]
+    dropped = [e for e in events if e["event"] == "link_unsigned"]
+    assert {"GLOBAL_POSITION_INT", "SYS_STATUS"} <= {e.get("message") for e in dropped}, dropped
+    assert max(e["total"] for e in dropped) >= 40, dropped
+    assert emu.params["WPNAV_SPEED"] != 1234.0 and 185 not in vehicle["commands_seen"]
