@@ -285,3 +285,23 @@ def test_spoofed_telemetry_and_commands_in_flight_change_nothing_the_backend_kno
     assert {"GLOBAL_POSITION_INT", "SYS_STATUS"} <= {e.get("message") for e in dropped}, dropped
     assert max(e["total"] for e in dropped) >= 40, dropped
     assert emu.params["WPNAV_SPEED"] != 1234.0 and 185 not in vehicle["commands_seen"]
+
+
+def test_a_refused_key_travels_to_exit_code_2():
+    """The plumbing from the drone actor to ``aerodaas run``'s exit code, without Ray: a CredentialsRefused robot is
+    named in RobotsNotConnected.refused, which survives pickling (Ray carries it so), and a run whose outcome is
+    ``refused`` exits 2, one that merely failed exits 1."""
+    import pickle
+
+    from aerodaas.backends.base import RobotsNotConnected
+    from aerodaas.run_cli import _exit_code
+    from aerodaas.runtime.driver import MissionResult
+
+    e = pickle.loads(pickle.dumps(RobotsNotConnected({"a": "CredentialsRefused: no correctly signed heartbeat",
+                                                      "b": "BackendError: no HEARTBEAT"}, ("a",))))
+    assert e.refused == ("a",) and set(e.errors) == {"a", "b"}
+
+    def result(outcome):
+        return MissionResult(outcome=outcome, robots={}, stats={}, latency={}, recording=None, wall_s=0.0)
+
+    assert _exit_code([result("refused")], []) == 2 and _exit_code([result("failed")], []) == 1
