@@ -190,7 +190,10 @@ class ActorAssembly:
         system id) connect before the ones that take the lowest unclaimed one on a shared link
         (VehicleBackend.connects_first). Raises RobotsNotConnected naming each robot's error (the connected
         vehicles are handed back untouched)."""
+        from aerodaas.backends.base import CredentialsRefused
+
         errors: dict[str, str] = {}
+        refused: list[str] = []  # robots whose vehicle refused our credentials (CredentialsRefused)
         for d in sorted(self.drones, key=lambda d: not d.backend.connects_first):
             try:
                 d.connect()
@@ -198,6 +201,8 @@ class ActorAssembly:
                     c["comp"].on_vehicle_connected()
             except Exception as e:  # noqa: BLE001 - every robot gets its own error (RobotsNotConnected)
                 errors[d.cfg.id] = f"{type(e).__name__}: {e}"
+                if isinstance(e, CredentialsRefused):
+                    refused.append(d.cfg.id)
                 try:  # idempotent: a vehicle connected before its camera failed is handed back too
                     d.backend.close()
                 except Exception:  # noqa: BLE001
@@ -211,7 +216,7 @@ class ActorAssembly:
                         d.backend.close()
                     except Exception:  # noqa: BLE001
                         pass
-            raise RobotsNotConnected(errors)
+            raise RobotsNotConnected(errors, tuple(refused))
 
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)

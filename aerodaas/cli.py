@@ -1,7 +1,8 @@
 """The ``aerodaas`` command line: ``run``, ``info``, ``schema``, ``sim``, ``mission`` and more.
 
 Commands with a module of their own register themselves here: ``run`` (:mod:`aerodaas.run_cli`), ``plugins``
-(:mod:`aerodaas.plugins_cli`), ``mission`` (:mod:`aerodaas.tools.mission_cli`), ``bench`` (:mod:`aerodaas.bench`)."""
+(:mod:`aerodaas.plugins_cli`), ``mission`` (:mod:`aerodaas.tools.mission_cli`), ``mavlink``
+(:mod:`aerodaas.tools.signing_cli`), ``bench`` (:mod:`aerodaas.bench`)."""
 from __future__ import annotations
 
 import argparse
@@ -410,6 +411,9 @@ def _add_tool_parsers(sub) -> None:
     from aerodaas.tools.mission_cli import add_parser as _add_mission_parser
 
     _add_mission_parser(sub)
+    from aerodaas.tools.signing_cli import add_parser as _add_signing_parser
+
+    _add_signing_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: tours, schedulers, overhead, fleet, startup, tello-video, raypath; "
                                          "--json for JSON output")
     from aerodaas.bench import add_parsers as _add_bench_parsers  # each benchmark registers its own sub-command

@@ -117,6 +117,8 @@ def _exit_code(results: list, stop: list[int]) -> int:
         return 1
     if stop or any(r.outcome == "interrupted" for r in results):
         return 128 + (stop[0] if stop else signal.SIGINT)  # the shell's convention: 130 / 143
+    if any(r.outcome == "refused" for r in results):
+        return 2  # a vehicle refused our credentials (a MAVLink signing key it does not hold): input to fix
     if any(r.outcome == "lost" for r in results):
         return 3  # a drone actor died for good (restarts used up, its node lost): its drones' outcome is "lost"
     if any(getattr(r, "recording_losses", None) or r.outcome == "recording_lost" for r in results):

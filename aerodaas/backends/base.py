@@ -35,16 +35,23 @@ class BackendError(RuntimeError):
     """A vehicle backend failed (connection, protocol, timeout). The message names the robot and the step."""
 
 
+class CredentialsRefused(BackendError):
+    """The vehicle answers, but not to our credentials (a MAVLink signing key it does not hold): input the user must
+    fix, not a fault of the link (``aerodaas run`` exits 2)."""
+
+
 class RobotsNotConnected(BackendError):
     """Some robots of one drone actor could not connect to their vehicles: ``errors`` maps each such robot id to
-    its own error (so the summary prints each robot's error under it, not the first one under all)."""
+    its own error (so the summary prints each robot's error under it, not the first one under all); ``refused``:
+    the ids among them whose error was a :class:`CredentialsRefused`."""
 
-    def __init__(self, errors: dict[str, str]) -> None:
+    def __init__(self, errors: dict[str, str], refused: tuple[str, ...] = ()) -> None:
         self.errors = dict(errors)
+        self.refused = tuple(refused)
         super().__init__("; ".join(self.errors.values()))
 
     def __reduce__(self):  # picklable across Ray workers
-        return (RobotsNotConnected, (self.errors,))
+        return (RobotsNotConnected, (self.errors, self.refused))
 
 
 class CommandRefused(BackendError):

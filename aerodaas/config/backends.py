@@ -110,12 +110,21 @@ class MavlinkConfig(_Cfg):
     on_failsafe: Literal["end", "hold", "resume"] = "end"
     #: the autopilot's own geofence: uploaded from the robot's safety.geofence (see MavlinkFenceConfig)
     fence: MavlinkFenceConfig = Field(default_factory=MavlinkFenceConfig)
+    #: MAVLink 2 message signing (docs/security.md): the file holding this vehicle's 32-byte secret key (64 hex
+    #: characters, or 32 raw bytes; mode 0600), resolved like every file of the environment. Every message we send
+    #: is signed with it; every message from the vehicle must be (aerodaas/backends/mavlink/signing.py). Unset: no
+    #: signing. The key itself never goes in the environment file.
+    signing_key_file: str | None = Field(default=None, min_length=1)
 
     @model_validator(mode="after")
     def _check_target(self) -> "MavlinkConfig":
         t = self.target_system
         if isinstance(t, int) and (isinstance(t, bool) or not 1 <= t <= 255):
             raise ValueError(f"target_system: a MAVLink system id is 1-255 (or 'auto'), got {t!r}")
+        k = (self.signing_key_file or "").strip()
+        if len(k) == 64 and all(c in "0123456789abcdefABCDEF" for c in k):  # never echoed: it may be a real key
+            raise ValueError("signing_key_file: this looks like a signing key itself; put the key in a private file "
+                             "(chmod 600) and name that file here")
         return self
 
     def link_key(self) -> str:

@@ -35,7 +35,8 @@ if TYPE_CHECKING:
 
 @dataclass
 class MissionResult:
-    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed / recording_lost:
+    """Outcome of a mission: ``outcome`` (success / incomplete / timeout / interrupted / failed / refused: a vehicle
+    refused our credentials, a MAVLink signing key it does not hold / recording_lost:
     the drones finished but the recorder actor died, see ``recording_losses`` / analytics_lost: under lock-step an
     analytics actor did not answer again within ``actor_restart_timeout_s``, see ``analytics_lost`` / degraded:
     the drones finished but a sensor or analytics failed more often than its limit, see ``degraded``), per-robot
@@ -253,6 +254,7 @@ class _Run:
     latency: dict = field(default_factory=dict)
     failure: str | None = None
     robot_errors: dict = field(default_factory=dict)  # robot id -> its own error when the run could not start
+    robot_refused: set = field(default_factory=set)  # robots whose vehicle refused our credentials (outcome refused)
 
     @property
     def classes(self) -> ActorClasses:
@@ -327,6 +329,8 @@ def _start_actors(run: _Run, placement: Any) -> list:
             per = getattr(getattr(e, "cause", None), "errors", None) or getattr(e, "errors", None)
             if isinstance(per, dict):
                 run.robot_errors.update(per)
+                run.robot_refused.update(getattr(getattr(e, "cause", None), "refused", None)
+                                         or getattr(e, "refused", None) or ())
             first = first or e
     if first is not None:
         raise first
@@ -459,7 +463,8 @@ def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
         err = run.robot_errors.get(r.id) or (f"not started: another robot could not connect ({run.failure})"
                                              if run.robot_errors else run.failure) or \
             "no report (the run did not start)"
-        run.reports.setdefault(r.id, {"robot": r.id, "outcome": "failed", "error": err})
+        run.reports.setdefault(r.id, {"robot": r.id, "error": err,
+                                      "outcome": "refused" if r.id in run.robot_refused else "failed"})
     outcomes = [rep.get("outcome") or "failed" for rep in run.reports.values()]
     outcome = "success" if outcomes and all(o == "success" for o in outcomes) else next(
         (o for o in outcomes if o != "success"), "failed")

@@ -336,6 +336,10 @@ def _link_lines(events: list[dict]) -> list[str]:
     e = _last(events, "link_messages_dropped")
     if e is not None:
         out.append(f"    MAVLink link: {e.get('total')} messages of the vehicle dropped here (this process fell behind)")
+    for name, what in (("link_unsigned", "unsigned"), ("link_bad_signature", "wrongly signed or replayed")):
+        e = _last(events, name)  # MAVLink 2 signing (aerodaas/backends/mavlink/signing.py RejectReport)
+        if e is not None:
+            out.append(f"    MAVLink signing: at least {e.get('total')} {what} messages in the vehicle's name dropped")
     return out
 
 

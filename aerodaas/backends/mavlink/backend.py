@@ -23,6 +23,8 @@ from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
+from aerodaas.backends.mavlink.preflight import resolve_signing_key
+from aerodaas.backends.mavlink.signing import make_signing
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import Handler, VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer, Wire
@@ -66,6 +68,9 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         from aerodaas.backends.mavlink.preflight import check_autopilot_fence
 
         check_autopilot_fence(robot, where)
+
+    #: ``mavlink.signing_key_file`` resolved and checked before Ray starts (preflight.py)
+    resolve_files = classmethod(resolve_signing_key)
 
     @classmethod
     def check_fleet(cls, robots: list[tuple[int, Any]]) -> None:
@@ -179,8 +184,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
         self.clock = VehicleClock(self.cfg, link_ok=lambda: self.link.link_ok,
                                   live_since=lambda now: self.link.live_since(now), event=self._event, lock=self._lock)
-        #: the connection, the autopilot's HEARTBEAT, the I/O thread and the stream requests (link.py)
-        self.link = MavlinkLink(self.robot_id, self.cfg, clock=self.clock, texts=self.status_texts, event=self._event,
+        #: MAVLink 2 signing with the vehicle's key (signing.py; NoSigning without ``mavlink.signing_key_file``)
+        self.signing = make_signing(self.cfg.signing_key_file, self.robot_id, self._event)
+        self.link = MavlinkLink(self.robot_id, self.cfg, clock=self.clock, texts=self.status_texts,  # link.py
+                                signing=self.signing, event=self._event,
                                 lock=self._lock, on_command_ack=lambda now, m: self.commands.on_command_ack(now, m),
                                 on_mission_message=lambda m: self.transfers.offer(m),
                                 on_component_message=lambda m: self._cameras.on_message(m),

@@ -12,9 +12,10 @@ from typing import Any, Callable, Literal
 
 from pymavlink import mavutil
 
-from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.base import BackendError, CommandRefused, CredentialsRefused, LinkLost
 from aerodaas.backends.mavlink.clock import VehicleClock
-from aerodaas.backends.mavlink.shared_link import PortLosses, open_link
+from aerodaas.backends.mavlink.shared_link import LinkPort, PortLosses, open_link
+from aerodaas.backends.mavlink.signing import LinkSigning, NoSigning
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink._common import FAILSAFE_MODES, M, _enum_name, log, _ESTIMATOR_STREAM, _LEGACY_STREAMS, _MULTIROTORS, _NOT_VEHICLES, _TELEMETRY
 
@@ -29,7 +30,9 @@ class MavlinkLink:
 
     It knows only what it is given: ``settings`` (:class:`~aerodaas.config.MavlinkConfig`), ``clock`` (the
     :class:`~aerodaas.backends.mavlink.clock.VehicleClock` the timestamped messages feed), ``texts`` (the
-    :class:`~aerodaas.backends.mavlink.statustext.StatusTexts` STATUSTEXT feeds), ``event`` (records a backend
+    :class:`~aerodaas.backends.mavlink.statustext.StatusTexts` STATUSTEXT feeds), ``signing`` (MAVLink 2 signing,
+    :class:`~aerodaas.backends.mavlink.signing.LinkSigning`, or :class:`~aerodaas.backends.mavlink.signing.NoSigning`:
+    every received message passes its check first, every sent one is signed), ``event`` (records a backend
     event), ``lock`` (the backend's lock: the I/O thread updates every concern's state under it), and callables:
     where messages go (``on_command_ack(now, msg)``, ``on_mission_message`` for the mission protocol's
     exchanges, ``on_component_message`` for every message of the vehicle's system, cameras included, and
@@ -41,13 +44,14 @@ class MavlinkLink:
     :meth:`check_link` say."""
 
     def __init__(self, robot_id: str, settings: Any, *, clock: VehicleClock, texts: StatusTexts,
-                 event: Callable[..., None], lock: threading.RLock, on_command_ack: Callable[[float, Any], None],
+                 signing: LinkSigning | NoSigning, event: Callable[..., None], lock: threading.RLock, on_command_ack: Callable[[float, Any], None],
                  on_mission_message: Callable[[Any], None], on_component_message: Callable[[Any], None],
                  command_long: Callable[..., None], mode_asked: Callable[[], tuple | None],
                  setpoint: Callable[[], Any], send_setpoint: Callable[[Any, float], None],
                  stop_setpoints: Callable[[], None], loss_timeout_s: Callable[[], float],
                  extra_streams: Callable[[], tuple]) -> None:
         self.robot_id, self._settings, self._clock, self._texts = robot_id, settings, clock, texts
+        self._signing = signing
         self._event, self._lock = event, lock
         self._on_command_ack, self._on_mission_message = on_command_ack, on_mission_message
         self._on_component_message, self._command_long, self._mode_asked = on_component_message, command_long, \
@@ -102,6 +106,8 @@ class MavlinkLink:
         port = open_link(self._settings, self.robot_id, deadline)
         self.port = port
         self._send_lock = port.send_lock
+        if self._signing.enabled:
+            port.link.use_signing_encoder()  # before our first (signed) HEARTBEAT
         next_hb = [0.0]
 
         def tick() -> None:  # udpout: the vehicle learns our address from what we send
@@ -119,6 +125,8 @@ class MavlinkLink:
         except BaseException:
             self.close()
             raise
+        if self._signing.enabled:
+            hb = self._signed_heartbeat(port, deadline, tick, timeout)
         self.losses.count_from(port)  # counted from this connection on
         self.identify(hb)
         self.on_heartbeat(hb, time.monotonic())
@@ -127,6 +135,31 @@ class MavlinkLink:
         self._io.start()
         self.request_streams()
         self.request_home()
+
+    def _signed_heartbeat(self, port: LinkPort, deadline: float, tick: Callable[[], None], timeout: float) -> Any:
+        """The first correctly signed autopilot HEARTBEAT of the system ``port`` claimed, reading (and passing
+        through the signature check, which counts what it drops) everything the vehicle sent until then; ``tick``
+        between reads. Raises :class:`CredentialsRefused` (after closing) at ``deadline`` (time.monotonic()): the vehicle
+        does not hold our key, or does not sign."""
+        system, signing = port.target_system, self._signing
+        while time.monotonic() < deadline:
+            msg = port.recv_msg()
+            if msg is None:
+                tick()
+                port.select(0.05)
+                continue
+            if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == system \
+                    and msg.get_srcComponent() == port.target_component and signing.accept(msg):
+                return msg
+            if msg.get_type() not in ("BAD_DATA",) and not msg.get_type().startswith("UNKNOWN_"):
+                signing.accept(msg)  # counted and reported when dropped; not dispatched before the vehicle is known
+        unsigned, bad = signing.unsigned, signing.bad_signature
+        self.close()
+        raise CredentialsRefused(f"robot {self.robot_id!r}: no correctly signed heartbeat from system {system} within "
+                           f"{timeout:g} s on {self._settings.connection!r} (mavlink.signing_key_file "
+                           f"{self._settings.signing_key_file!r}; {unsigned} unsigned and {bad} wrongly signed "
+                           f"messages from it): the vehicle does not hold this key or does not sign; provision it with "
+                           f"`aerodaas mavlink signing setup`")
 
     def attach(self, system: int, component: int) -> None:
         """Take the autopilot at ``system``/``component`` as found and the link as up, without :meth:`open`'s
@@ -149,6 +182,7 @@ class MavlinkLink:
         if self._io is not None and self._io is not threading.current_thread():
             self._io.join(timeout=2)
         self._io = None
+        self._signing.close()
         if self.port is not None:
             try:
                 self.port.close()
@@ -250,6 +284,8 @@ class MavlinkLink:
         self.messages_received += 1
         if mtype == "BAD_DATA" or mtype.startswith("UNKNOWN_"):
             return
+        if not self._signing.accept(msg):
+            return  # unsigned, wrongly signed or replayed: counted and reported by the signing check (signing.py)
         key = (msg.get_srcSystem(), msg.get_srcComponent(), msg.get_seq(), msg.get_msgId(), getattr(msg, "_crc", 0))
         if key in self._recent:
             return  # the same packet again (captured on two links)
@@ -328,6 +364,7 @@ class MavlinkLink:
         """The I/O thread's work after each read (``now``: wall time): link drop reports, stale status texts, our GCS
         HEARTBEAT (1 Hz of the vehicle's clock, at most 20 Hz), the link-loss watch, and the setpoint stream."""
         self.losses.report(self.port, now)
+        self._signing.report(now)
         self._texts.flush_stale(now)
         if now >= self._hb_next:
             self._hb_next = now + 1.0 / max(1.0, min(self._clock.ratio, 20.0))
@@ -365,7 +402,10 @@ class MavlinkLink:
             raise LinkLost(f"robot {self.robot_id!r}: not connected")
         with self._send_lock:
             try:
-                fn(conn.mav)
+                mav = conn.mav
+                self._signing.before_send(mav)
+                fn(mav)
+                self._signing.after_send(mav)
             except OSError as e:
                 raise LinkLost(f"robot {self.robot_id!r}: send failed: {e}") from None
 

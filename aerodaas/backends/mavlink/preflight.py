@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["check_autopilot_fence", "check_shared_links", "check_autopilot_mission"]
+__all__ = ["check_autopilot_fence", "check_shared_links", "check_autopilot_mission", "resolve_signing_key"]
 
 
 def check_autopilot_fence(robot: Any, where: str) -> None:
@@ -35,6 +35,29 @@ def check_autopilot_fence(robot: Any, where: str) -> None:
     if why is not None:
         raise ConfigError(f"{where}.safety.geofence: robot {robot.id!r} uploads its geofence to a {mc.autopilot} "
                           f"vehicle (mavlink.fence.upload): {why}")
+
+
+def resolve_signing_key(cls: Any, robot: Any, resolve: Any, where: str) -> None:
+    """The MAVLink backend's ``resolve_files`` (``cls``: the backend class; ``where``: ``robots.<i>``):
+    ``mavlink.signing_key_file`` resolved with ``resolve(path, field)``
+    (the environment's :meth:`~aerodaas.config.EnvironmentConfig.resolve_path`) and written back absolute, then the
+    key read (signing.py :func:`~aerodaas.backends.mavlink.signing.read_key_file`: a private file of 32 raw bytes or
+    64 hex characters) and its timestamp file checked (:class:`~aerodaas.backends.mavlink.signing.TimestampStore`).
+    Raises ConfigError naming ``field`` and the file (never the key)."""
+    from aerodaas.backends.mavlink.signing import KeyFileError, TimestampStore, read_key_file
+    from aerodaas.config.base import ConfigError
+
+    field = f"{where}.{cls.config_section}.signing_key_file"
+    name = robot.backend_settings().signing_key_file
+    if name is None:
+        return
+    path = str(resolve(name, field))
+    try:
+        read_key_file(path)
+        TimestampStore(path).load()
+    except (KeyFileError, OSError) as e:
+        raise ConfigError(f"{field}: {name!r}: {e}") from None
+    robot.backend_config["signing_key_file"] = path
 
 
 def check_shared_links(robots: list[tuple[int, Any]]) -> None:

@@ -73,6 +73,8 @@ class SharedLink:
         self.claimed: dict[int, str] = {}
         self.seen: dict[int, tuple[int, Any, float]] = {}
         self.send_lock = threading.Lock()
+        #: the encoder every port sends through once a vehicle on the link signs (:meth:`use_signing_encoder`)
+        self.tx: Any = None
         self.cond = threading.Condition()
         self.first_seen: float | None = None
         #: system id -> its latest messages while no robot has claimed it (handed to the robot that claims it)
@@ -86,6 +88,16 @@ class SharedLink:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._read, name=f"mavlink-link-{key}", daemon=True)
         self._thread.start()
+
+    def use_signing_encoder(self) -> None:
+        """From now on every port of this link sends through :attr:`tx`, a MAVLink 2 encoder of its own that parses
+        nothing: signing sets the key of the vehicle each message is for on the encoder (signing.py
+        ``LinkSigning.before_send``), and a key set on ``conn.mav`` would make pymavlink's parser (the reader
+        thread's, with one key for every vehicle) check and reject the other vehicles' messages. One encoder for all
+        ports: one sequence counter on the link. Idempotent."""
+        with self.send_lock:
+            if self.tx is None:
+                self.tx = M.MAVLink(self.conn, srcSystem=self.source[0], srcComponent=self.source[1])
 
     def _read(self) -> None:
         conn = self.conn
@@ -204,8 +216,9 @@ class LinkPort:
         """The link's encoder, looked up on every send: pymavlink replaces ``conn.mav`` when it switches to MAVLink 2
         on the first v2 byte it receives (``mavfile.auto_mavlink_version``); an encoder kept from before went on
         framing MAVLink 1, which drops every extension field (``mission_type``: a fence upload became a mission
-        upload)."""
-        return self.link.conn.mav
+        upload). Once a vehicle on the link signs, the link's own encoder (:meth:`SharedLink.use_signing_encoder`)."""
+        tx = self.link.tx
+        return tx if tx is not None else self.link.conn.mav
 
     def deliver(self, msg: Any) -> None:
         """Queue ``msg`` (a pymavlink message from this robot's vehicle) for :meth:`recv_msg`; called by the

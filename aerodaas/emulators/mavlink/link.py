@@ -53,6 +53,7 @@ class _Link:
         self.emu, self.sock, self.addr, self.tcp = emu, sock, addr, tcp
         self.mav = mavlink.MAVLink(self, srcSystem=emu.system_id, srcComponent=emu.component_id)
         self.mav.robust_parsing = True
+        emu.signing.setup(self.mav)  # MAVLink 2 signing, when the vehicle has a key (signing.py)
         self.outbuf = bytearray()
         self.closed = False
 
@@ -269,6 +270,7 @@ class LinkMixin:
     def _drop(self, link: _Link) -> None:
         if link in self._links:
             self._links.remove(link)
+            self.signing.forget(link.mav)
         if link.tcp:
             try:
                 self._sel.unregister(link.sock)
@@ -335,6 +337,10 @@ class LinkMixin:
 
     def _handle(self, link: _Link, msg: Any) -> None:
         mtype = msg.get_type()
+        if mtype == "SETUP_SIGNING":
+            if self._for_us(msg):  # it passed this link's signature check (or signing is off)
+                self.signing.on_setup_signing(msg)
+            return
         handler: Callable | None = getattr(self, f"_on_{mtype.lower()}", None)
         if handler is None:
             return

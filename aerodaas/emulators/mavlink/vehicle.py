@@ -63,6 +63,7 @@ from aerodaas.emulators.mavlink.mission import MissionMixin
 from aerodaas.emulators.mavlink.mission_run import MissionRunMixin
 from aerodaas.emulators.mavlink.modes import ModeMixin
 from aerodaas.emulators.mavlink.params import ParamMixin
+from aerodaas.emulators.mavlink.signing import EmulatedSigning
 from aerodaas.emulators.mavlink.telemetry import TelemetryMixin
 
 if TYPE_CHECKING:
@@ -98,7 +99,8 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
     and never finished. ``mission_int``: None (default) asks for mission items as the firmware does (ArduPilot
     MISSION_REQUEST, PX4 MISSION_REQUEST_INT) and accepts either item form; True asks with MISSION_REQUEST_INT;
     False emulates older firmware that asks with MISSION_REQUEST and answers MISSION_REQUEST_INT with MISSION_ITEM
-    (latitude/longitude as float degrees).
+    (latitude/longitude as float degrees). ``signing_key``: MAVLink 2 signing on from the start with this 32-byte
+    key (default: off until a SETUP_SIGNING sets a key; :mod:`.signing`).
 
     Use :meth:`start` (returns the bound address), :meth:`stop`, :meth:`snapshot` for the state.
     """
@@ -110,7 +112,7 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
                  ack_only_commands: set[int] | None = None, in_progress_commands: set[int] | None = None,
                  mission_int: bool | None = None, ekf_gps_s: float = 1.0, home_alt_drift_m: float | None = None,
                  deny_default_speed: bool | None = None, estimate_speed_error_mps: float = 0.0,
-                 land_detect_s: float = 0.0, seed: int = 0) -> None:
+                 land_detect_s: float = 0.0, seed: int = 0, signing_key: bytes | None = None) -> None:
         if autopilot not in ("ardupilot", "px4"):
             raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
         if not (speedup > 0 and math.isfinite(speedup)):
@@ -135,6 +137,8 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self._init_emulated_firmware(ekf_gps_s, mission_int, home_alt_drift_m, seed, estimate_speed_error_mps,
                                      land_detect_s, deny_default_speed)
         self._init_params(system_id, params)
+        #: MAVLink 2 signing (signing.py): every link's parser checks, every packet out is signed, once a key is set
+        self.signing = EmulatedSigning(signing_key)
         self._init_links(system_id, component_id)
         self._init_state()
         self._apply_speed_params()
