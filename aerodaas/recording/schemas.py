@@ -49,7 +49,8 @@ class MissionResult(BaseModel):
     """How a robot's mission ended (``/mission/result``)."""
 
     robot: str
-    outcome: str = Field(description="success / incomplete / timeout / interrupted / failed")
+    outcome: str = Field(description="success / incomplete / timeout / interrupted / failed / "
+                         "takeoff_stalled / landing_stalled / rtl_stalled")
     visited: int = Field(description="pre-planned waypoints visited")
     preplanned_total: int
     t: float = Field(description="time at the end, s")
