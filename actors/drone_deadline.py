@@ -81,8 +81,11 @@ class PhaseDeadlines:
         return "abort" if timer.again else c.on_landing_stalled
 
     def _stalled(self, t: float, pos: tuple, timer: PhaseTimer) -> bool:
-        """Record the stall, set the outcome, carry out the action. Returns True when the mission is over."""
+        """Record the stall, set the outcome, carry out the action. Returns True when the mission is over. The
+        deadline is spent first: a command the vehicle refuses (BackendError) leaves the phase, still under way,
+        a new deadline from the next control step, never a stall at every step."""
         ctx, f = self.ctx, self.flight
+        self.timer = None
         action = self._action(timer)
         ctx.event(f"{timer.name}_stalled", deadline_s=round(timer.seconds, 3), elapsed_s=round(t - timer.start, 3),
                   legs=[{"kind": g.kind, "distance_m": round(g.distance_m, 2), "speed_mps": g.speed_mps}
@@ -91,18 +94,16 @@ class PhaseDeadlines:
         f.outcome = f.outcome or f"{timer.name}_stalled"
         v, fsm = ctx.backend, ctx.fsm
         if action == "abort":
-            self.timer = None
             return True
         if action == "hold":
-            self.timer = None
             f.paused_from = timer.state
             v.hold()
             fsm.transition(S.PAUSED, t)
             ctx.event("paused", reason=f"{timer.name} stalled")
             return False
         if timer.state == S.LANDING:  # the landing commanded once more, with a new deadline
-            self.timer = self._start(t, S.LANDING, pos, again=True)
             v.land()
+            self.timer = self._start(t, S.LANDING, pos, again=True)
             ctx.event("landing", reason="landing stalled: commanded again")
             return False
         f.active_wp, f.rtl_path = None, None

@@ -288,3 +288,44 @@ def test_a_ground_vehicle_that_needs_no_take_off_drives_its_mission_without_the_
     assert "takeoff_skipped" in events and not [e for e in events if e.endswith("_stalled")], events
     odo = [m["position"] for t, m in msgs if t == "/r/odometry"]
     assert max(p[2] for p in odo) == 0.0 and max(p[1] for p in odo) > 5.5  # drove to b on the ground
+
+
+@pytest.mark.e2e
+def test_an_emulated_arducopter_whose_motors_lift_nothing_is_stalled_then_landed(ray_session, run_options, tmp_path):
+    """The MAVLink emulator as ArduCopter SITL with every motor failed (SIM_ENGINE_FAIL 15, SIM_ENGINE_MUL 0): it
+    accepts GUIDED, the arm and NAV_TAKEOFF, and never climbs. At the take-off deadline the drone records
+    takeoff_stalled, switches it to LAND (the emulator's own mode log) and the run ends takeoff_stalled."""
+    from aerodaas import Environment
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.model.types import GeoPoint
+
+    from .sitl import events, odometry, read_recording
+
+    home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
+    emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, home=home, gps_lock_s=1.0,
+                                 params={"SIM_ENGINE_FAIL": 15, "SIM_ENGINE_MUL": 0})
+    addr = emu.start("tcp:127.0.0.1:0")
+    try:
+        robot = {"id": "d", "takeoff_altitude": 2.0, "home": home.model_dump(), "backend": "mavlink",
+                 "mavlink": {"connection": addr, "autopilot": "ardupilot"}, "limits": {"max_vertical_speed": 1.0},
+                 "sensors": [{"id": "odom", "type": "odometry", "properties": {"rate_hz": 10}}]}
+        env = Environment(parse_environment_config({"name": "no-lift", "robots": [robot],
+                                                    "simulation": {"speedup": 5, "lockstep": False}}))
+        d = env.get_robot_by_id("d")
+        d.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=4, y=0, z=2)],
+                                  SchedulingType.ORDERED))
+        run_options.record = str(tmp_path / "nolift.mcap")
+        res = d.start_mission(options=run_options)
+        snap = emu.snapshot()
+        modes = [m for _, m in emu.mode_log]
+    finally:
+        emu.stop()
+    rec = read_recording(tmp_path / "nolift.mcap")
+    ev = events(rec, "d")
+    stall = next(e for e in ev if e["event"] == "takeoff_stalled")
+    assert res.outcome == "takeoff_stalled" and res.robots["d"]["state"] == "LANDED", res.robots["d"]
+    assert stall["deadline_s"] == pytest.approx(2.0 * 2.0 / 1.0 + 15.0) and stall["action"] == "land", stall
+    assert stall["height_m"] < 0.2 and max(o["position"][2] for o in odometry(rec, "d")) < 0.2
+    # the vehicle's side: GUIDED (take-off accepted), then LAND, disarmed on the ground
+    assert "GUIDED" in modes and modes[-1] == "LAND" and modes.index("LAND") > modes.index("GUIDED"), modes
+    assert 22 in snap["commands_seen"] and not snap["armed"] and snap["position"][2] < 0.05, snap
