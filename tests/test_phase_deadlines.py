@@ -329,3 +329,22 @@ def test_an_emulated_arducopter_whose_motors_lift_nothing_is_stalled_then_landed
     # the vehicle's side: GUIDED (take-off accepted), then LAND, disarmed on the ground
     assert "GUIDED" in modes and modes[-1] == "LAND" and modes.index("LAND") > modes.index("GUIDED"), modes
     assert 22 in snap["commands_seen"] and not snap["armed"] and snap["position"][2] < 0.05, snap
+
+
+def test_a_return_around_an_exclusion_zone_flies_within_its_deadline():
+    """The return of tests/test_safety_limits.py (around a circle at (12, 0) m, several legs, each flown from rest)
+    at the default deadlines: no phase is stalled, and it lands at home."""
+    import pymap3d
+
+    from aerodaas.model.types import ActionCommand
+
+    home = {"lat": 47.3977, "lon": 8.5456, "alt": 488.0}
+    lat, lon, _ = pymap3d.enu2geodetic(12.0, 0.0, 0.0, home["lat"], home["lon"], home["alt"])
+    items = [Waypoint(id="a", x=0, y=8, z=3), Waypoint(id="b", x=24, y=8, z=3), Waypoint(id="c", x=24, y=0, z=3),
+             Waypoint(id="d", x=24, y=-8, z=3), ActionCommand(id="home", action="rtl")]
+    d, rec = _drone(SimBackend, items, home=home, takeoff_altitude=3.0, limits={"max_speed": 2.0},
+                    safety={"geofence": {"circles": [{"center": [lat, lon], "radius": 4.0, "inclusion": False}]}})
+    _fly(d, 600.0)
+    ret = next(e for e in rec.events if e["event"] == "returning")
+    assert len(ret["path"]) > 1 and not [e for e in rec.events if e["event"].endswith("_stalled")], rec.events[-5:]
+    assert d.fsm.state.value == "LANDED" and abs(d.backend.position[0]) < 1.0 and abs(d.backend.position[1]) < 1.0
