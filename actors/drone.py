@@ -39,6 +39,7 @@ from aerodaas.navigation.waypoint_queue import Order
 from aerodaas.schedulers.base import TrajectoryScheduler
 
 from aerodaas.actors.drone_autopilot import AutopilotFlight
+from aerodaas.actors.drone_deadline import PhaseDeadlines
 from aerodaas.actors.drone_inbox import DroneInbox
 from aerodaas.actors.mission_plan import MissionPlanLog
 from aerodaas.actors.drone_end import SETTLE_WALL_S, RunEnd
@@ -103,6 +104,8 @@ class DroneComponent:
         self.autopilot_flight = AutopilotFlight(ctx, self.flight, self.autopilot_mission)
         #: flying the drone's own queue (:class:`~aerodaas.actors.drone_queue_flight.QueueFlight`)
         self.queue_flight = QueueFlight(ctx, self.flight, self.autopilot_flight.return_to_launch)
+        #: the deadlines of take-off, landing and the return (:class:`~aerodaas.actors.drone_deadline.PhaseDeadlines`)
+        self.deadlines = PhaseDeadlines(ctx, self.flight)
         self._pause_req = threading.Event()
         self._resume_req = threading.Event()
         self._end_req: str | None = None
@@ -143,7 +146,8 @@ class DroneComponent:
                                f"{type(e).__name__}: {e}") from e
 
     def start(self) -> None:
-        """PREFLIGHT -> ARMED -> TAKING_OFF (navigable backends), or PREFLIGHT only (a replayed log)."""
+        """PREFLIGHT -> ARMED -> TAKING_OFF (navigable backends; -> HOVERING for a backend that needs no take-off), or
+        PREFLIGHT only (a replayed log)."""
         b, t = self.backend, self.backend.t
         self.fsm.transition(S.PREFLIGHT, t)
         if not b.navigable:
@@ -152,6 +156,13 @@ class DroneComponent:
         self.gimbal.start()  # what the application pointed the gimbal at before the mission started
         if self.autopilot_mission:
             self.autopilot_flight.start_mission()
+            return
+        if not b.needs_takeoff:  # a ground vehicle: armed, it is ready to drive (no take-off phase to bound)
+            b.arm()
+            self.progress.check_vehicle_home()
+            self.fsm.transition(S.ARMED, b.t)
+            self.fsm.transition(S.HOVERING, b.t)
+            self._event("takeoff_skipped", reason=f"backend {self.cfg.backend!r} needs no take-off")
             return
         alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
         self.takeoff_altitude = alt
@@ -392,7 +403,11 @@ class DroneComponent:
             return self.autopilot_flight.on_failsafe(t, st, fs)
         if self.flight.reissue and st != S.LINK_LOST:
             self._on_link_blip(t, st)
-        return self._handlers[self.fsm.state](t, tuple(float(c) for c in v.position))
+        pos = tuple(float(c) for c in v.position)
+        stalled = self.deadlines.check(t, self.fsm.state, pos)  # take-off, landing, return: each has a deadline
+        if stalled is not None:
+            return stalled
+        return self._handlers[self.fsm.state](t, pos)
 
     def _on_link_blip(self, t: float, st: S) -> None:
         """A link drop shorter than a control tick: the state machine never saw it, but the vehicle may have left

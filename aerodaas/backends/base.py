@@ -89,6 +89,10 @@ class VehicleBackend(abc.ABC):
     clock: ClassVar[str] = "vehicle"
     #: False for backends that only report (replay): navigation raises :class:`NotNavigable`
     navigable: ClassVar[bool] = True
+    #: False for a vehicle that never leaves the ground (a rover, a boat): the drone arms it and goes straight to
+    #: HOVERING (ready, nothing to do), without a take-off command or a take-off phase and its deadline
+    #: (``robots[].deadlines``); its ``in_air`` stays False, so a landing ends at once
+    needs_takeoff: ClassVar[bool] = True
     #: plug-in declaration (:mod:`aerodaas.plugins.registry`): a backend plug-in is one module with one subclass
     #: of this class (or of a built-in backend such as :class:`aerodaas.backends.sim.SimBackend`), constructed as
     #: ``Backend(cfg)`` with the robot's :class:`aerodaas.config.RobotConfig`; ``Config`` is the pydantic model of

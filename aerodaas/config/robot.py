@@ -16,6 +16,7 @@ from aerodaas.plugins.sensor import SensorDelivery
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
 from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayConfig, SimConfig,  # noqa: F401
                                       TelloConfig, add_section_schemas, backend_settings_into_config)
+from aerodaas.config.deadlines import PhaseDeadlinesConfig
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS,
                    MAX_LIST_ITEMS, MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean)
@@ -288,6 +289,9 @@ class RobotConfig(_Cfg):
     safety: SafetyConfig = Field(default_factory=SafetyConfig)
     hold: HoldConfig = Field(default_factory=HoldConfig)
     progress: ProgressConfig = Field(default_factory=ProgressConfig)
+    deadlines: PhaseDeadlinesConfig = Field(default_factory=PhaseDeadlinesConfig, description="how long take-off, "
+                                            "landing and the return to launch may take (vehicle seconds) and what "
+                                            "follows an overrun (aerodaas.config.deadlines)")
     takeoff_altitude: float = Field(default=1.5, gt=0, le=MAX_ALTITUDE_M, description="metres above home; within "
                                     "[safety.min_altitude, max_altitude]")
     control_rate_hz: float = Field(default=10.0, ge=MIN_CONTROL_HZ, le=MAX_RATE_HZ, description="the drone's control "

@@ -49,7 +49,8 @@ class MissionResult(BaseModel):
     """How a robot's mission ended (``/mission/result``)."""
 
     robot: str
-    outcome: str = Field(description="success / incomplete / timeout / interrupted / failed")
+    outcome: str = Field(description="success / incomplete / timeout / interrupted / failed / "
+                         "takeoff_stalled / landing_stalled / rtl_stalled")
     visited: int = Field(description="waypoints visited, pre-planned and added in flight")
     preplanned_total: int
     preplanned_reached: Optional[int] = Field(default=None, description="pre-planned waypoints visited")

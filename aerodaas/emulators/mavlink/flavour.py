@@ -20,6 +20,9 @@ ARDUPILOT_PARAMS: dict[str, float] = {
     # is SITL's copter.parm (the library default is 300); FENCE_OPTIONS 0 (inclusion zones intersect)
     "FENCE_ENABLE": 0.0, "FENCE_TYPE": 7.0, "FENCE_ALT_MAX": 100.0, "FENCE_ACTION": 1.0, "FENCE_RADIUS": 150.0,
     "FENCE_OPTIONS": 0.0,
+    # SITL's engine failure (libraries/SITL/SITL.cpp): the PWM of the motors in the SIM_ENGINE_FAIL bitmask (bit 0:
+    # servo 1) is scaled by SIM_ENGINE_MUL (default 0, applied to no motor); SIM_Aircraft.cpp applies it
+    "SIM_ENGINE_MUL": 0.0, "SIM_ENGINE_FAIL": 0.0,
 }
 #: PX4 parameters (name -> default, SI units). MPC_*: src/modules/mc_pos_control/multicopter_*_params.c
 #: (MPC_XY_CRUISE 5 m/s, MPC_XY_VEL_MAX 12 m/s, MPC_Z_VEL_MAX_UP 3 m/s, MPC_Z_VEL_MAX_DN 1.5 m/s,

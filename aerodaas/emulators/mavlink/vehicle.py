@@ -33,7 +33,8 @@ not carried out), ``in_progress_commands`` (answered MAV_RESULT_IN_PROGRESS fore
 (one-off refusals such as MAV_RESULT_TEMPORARILY_REJECTED), ``mission_int=False`` (firmware that speaks only the
 float MISSION_REQUEST / MISSION_ITEM forms of the mission protocol), :meth:`send_status_text` (STATUSTEXT,
 chunked as MAVLink 2 does when longer than 50 characters) and :meth:`inject` (raw bytes or a message on the
-link, e.g. corrupt packets). :attr:`setpoint_log` and :attr:`mode_log` record every position/velocity target
+link, e.g. corrupt packets), ArduPilot SITL's ``SIM_ENGINE_FAIL`` / ``SIM_ENGINE_MUL`` parameters (motors that lift
+nothing: the vehicle does not climb). :attr:`setpoint_log` and :attr:`mode_log` record every position/velocity target
 and mode change in vehicle time.
 """
 from __future__ import annotations
@@ -287,6 +288,16 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
                     "statustexts": list(self.statustexts), "commands_seen": list(self.commands_seen),
                     "battery_pct": self.veh.battery_pct}
 
+    def _motors_lift(self) -> bool:
+        """Whether the motors can climb. ArduPilot SITL scales the PWM of the motors in ``SIM_ENGINE_FAIL`` (a
+        bitmask, bit 0: servo 1) by ``SIM_ENGINE_MUL`` (libraries/SITL/SITL.cpp, SIM_Aircraft.cpp); the emulator
+        models only whether its quad's four motors together give at least half their thrust (a quadrotor hovers near
+        half throttle): below that it does not climb. PX4: always (SIH has no such parameter)."""
+        if self.px4:
+            return True
+        mask, mul = int(self.params["SIM_ENGINE_FAIL"]), self.params["SIM_ENGINE_MUL"]
+        return sum(mul if mask >> i & 1 else 1.0 for i in range(4)) / 4.0 >= 0.5
+
     def _tick(self, dt: float) -> None:
         self.t += dt
         veh, s = self.veh, self.veh.state
@@ -296,7 +307,10 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self._readiness_tick()
         was_in_air = s.in_air
         if s.armed:
+            z0 = float(s.position[2])
             veh.step(dt)
+            if s.position[2] > z0 and not self._motors_lift():  # full throttle, no climb
+                s.position[2], s.velocity[2], s.in_air = z0, min(float(s.velocity[2]), 0.0), was_in_air
         if s.in_air:
             if not self.took_off:
                 self.took_off_at = self.t
