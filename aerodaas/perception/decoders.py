@@ -16,7 +16,6 @@ Ultralytics export contract (``ultralytics/engine/exporter.py``, ``ultralytics/n
 """
 from __future__ import annotations
 
-import ast
 import os
 from dataclasses import dataclass
 from typing import Sequence
@@ -25,7 +24,7 @@ import cv2
 import numpy as np
 
 from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, _OnnxDetector
-from aerodaas.perception.model_meta import metadata_names
+from aerodaas.perception.model_meta import metadata_imgsz, metadata_names
 from aerodaas.perception.options import FORMATS  # the output formats inspect_model recognises / format= accepts
 
 __all__ = ["UltralyticsDetector", "ModelInfo", "inspect_model", "FORMATS", "metadata_names"]
@@ -46,6 +45,7 @@ class ModelInfo:
     batch_dynamic: bool
     class_names: list[str] | None
     n_classes: int | None
+    default_hw: tuple[int, int] | None = None  # a dynamic model's own default: its imgsz metadata
 
 
 def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
@@ -102,7 +102,7 @@ def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
         raise ValueError(f"format={format!r} but the outputs of {path} ({outs}) are a {found} head")
     if names is not None and nc is not None and len(names) != nc:
         raise ValueError(f"model {path}: metadata names has {len(names)} classes but the output has {nc}")
-    return ModelInfo(format, input_hw, not isinstance(inp.shape[0], int), names, nc)
+    return ModelInfo(format, input_hw, not isinstance(inp.shape[0], int), names, nc, metadata_imgsz(meta))
 
 
 class UltralyticsDetector(_OnnxDetector):
@@ -135,17 +135,6 @@ class UltralyticsDetector(_OnnxDetector):
         if nc is None or nc < 1:
             raise ValueError(f"{self.model_path}: no metadata names and a dynamic output {shp}; give class_names")
         return [f"class{i}" for i in range(nc)]
-
-    def _default_input_hw(self, shape) -> tuple[int, int]:
-        raw = self._meta().get("imgsz")
-        if raw:
-            try:
-                v = ast.literal_eval(raw)
-                v = (v, v) if isinstance(v, int) else tuple(v)
-                return int(v[0]), int(v[1])
-            except (ValueError, SyntaxError, TypeError, IndexError):
-                pass
-        return super()._default_input_hw(shape)
 
     def _preprocess(self, image: np.ndarray):
         ih, iw = self.input_hw

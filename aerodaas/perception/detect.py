@@ -30,13 +30,13 @@ import cv2
 import numpy as np
 
 from aerodaas.model.types import COCO_CLASSES, Detection
-from aerodaas.perception.model_meta import metadata_names
+from aerodaas.perception.model_meta import metadata_imgsz, metadata_names
 from aerodaas.perception.options import check_input_size
 
 __all__ = [
     "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
     "ShippedModel",
-    "YoloxDetector", "NanoDetDetector", "make_detector", "DETECTORS",
+    "YoloxDetector", "NanoDetDetector", "AerialDetector", "make_detector", "DETECTORS",
 ]
 
 log = logging.getLogger(__name__)
@@ -214,6 +214,11 @@ class _OnnxDetector:
         return COCO_CLASSES if names is None else names
 
     def _default_input_hw(self, shape) -> tuple[int, int]:
+        """The input size a dynamic model carries in its metadata (``imgsz``: ``"[H, W]"`` or ``"N"``, as
+        Ultralytics and ``aerodaas train detector`` write it), else ValueError asking for ``input_size``."""
+        hw = metadata_imgsz(self.session.get_modelmeta().custom_metadata_map)
+        if hw is not None:
+            return check_input_size(hw)
         raise ValueError(f"{self.model_path}: the input {self.input_name} {shape} has dynamic height/width; give "
                          f"input_size=(H, W)")
 
@@ -507,7 +512,18 @@ class NanoDetDetector(_OnnxDetector):
         return boxes
 
 
+class AerialDetector(YoloxDetector):
+    """The aerial detector shipped with AeroDaaS (``aerial_nano``: YOLOX-Nano fine-tuned by ``aerodaas train
+    detector`` on openly licensed drone imagery; classes ``car``, ``large_vehicle``, ``person``; sources, licences,
+    training command and measured quality in ``aerodaas/perception/models/MODEL_CARD.md``). Same contract as
+    :class:`YoloxDetector` with dynamic height/width: the default input size is the model's ``imgsz`` metadata
+    (``input_size=(H, W)``, multiples of 32, overrides it)."""
+
+    model_name = "aerial_nano"
+
+
 DETECTORS: dict[str, type[_OnnxDetector]] = {
+    "aerial_nano": AerialDetector,
     "yolox_nano": YoloxDetector,
     "nanodet_plus_m_416": NanoDetDetector,
 }

@@ -31,8 +31,9 @@ MODEL_DIR_ENV = "AERODAAS_MODEL_DIR"
 class ModelSpec:
     """Where a model file comes from.
 
-    ``file``: file name looked up in the model folders; ``url``: download URL pinned to a commit;
-    ``sha256``: hex digest of the exact bytes; ``license``: SPDX id; ``source``: human-readable provenance.
+    ``file``: file name looked up in the model folders; ``url``: download URL pinned to a commit (empty for a
+    model shipped inside the package); ``sha256``: hex digest of the exact bytes; ``license``: SPDX id; ``source``:
+    human-readable provenance; ``packaged``: the file is in :data:`PACKAGED_MODELS_DIR` (installed with AeroDaaS).
     """
 
     file: str
@@ -40,9 +41,23 @@ class ModelSpec:
     sha256: str
     license: str
     source: str = ""
+    packaged: bool = False
+
+
+#: the models installed with the package (the aerial detector and its model card)
+PACKAGED_MODELS_DIR = pathlib.Path(__file__).resolve().parent / "models"
 
 
 MODELS: dict[str, ModelSpec] = {
+    "aerial_nano": ModelSpec(
+        file="aerial_nano.onnx",
+        url="",
+        sha256="69fa98c02be3df5b3598d6c2b07f568b814af99ce599b5961e3bd1edf9c90eed",
+        license="CC-BY-SA-4.0",
+        source="YOLOX-Nano (Apache-2.0) fine-tuned by `aerodaas train detector` on HIT-UAV (CC-BY-4.0) and "
+        "jekhor/aerial-cars-dataset (CC-BY-3.0, CC-BY-SA-4.0); aerodaas/perception/models/MODEL_CARD.md",
+        packaged=True,
+    ),
     "yolox_nano": ModelSpec(
         file="yolox_nano.onnx",
         url="https://raw.githubusercontent.com/Kazuhito00/YOLOX-ONNX-TFLite-Sample/"
@@ -64,7 +79,7 @@ MODELS: dict[str, ModelSpec] = {
 
 
 #: Short names accepted by :func:`resolve_model` and :func:`make_detector`.
-_ALIASES = {"yolox": "yolox_nano", "nanodet": "nanodet_plus_m_416"}
+_ALIASES = {"yolox": "yolox_nano", "nanodet": "nanodet_plus_m_416", "aerial": "aerial_nano"}
 
 
 class ModelNotFoundError(FileNotFoundError):
@@ -146,7 +161,8 @@ def resolve_model(
 ) -> pathlib.Path:
     """Locate the ONNX file of model ``name`` (a key of :data:`MODELS`, or ``"yolox"``/``"nanodet"``); return its path.
 
-    Search order:
+    Search order (a model shipped inside the package, ``ModelSpec.packaged``, is only looked up there, and
+    verified):
 
     1. ``path`` if given: used as is (a user may bring their own ONNX file, so its sha256 is **not** checked);
        raises :class:`ModelNotFoundError` naming the path if it is not a file.
@@ -175,6 +191,13 @@ def resolve_model(
         return p
 
     searched: list[str] = []
+    if spec.packaged:  # installed with the package: always there, always verified
+        cand = PACKAGED_MODELS_DIR / spec.file
+        if not cand.is_file():
+            raise ModelNotFoundError(f"model {name!r}: {cand} is missing from the installed package; reinstall "
+                                     f"aerodaas")
+        _verify(cand, spec)
+        return cand
     env_dir = os.environ.get(MODEL_DIR_ENV)
     if env_dir:
         cand = pathlib.Path(env_dir).expanduser() / spec.file

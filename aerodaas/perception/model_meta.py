@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import ast
 
-__all__ = ["metadata_names"]
+__all__ = ["metadata_names", "metadata_imgsz"]
 
 
 def metadata_names(meta: dict[str, str]) -> list[str] | None:
@@ -26,3 +26,17 @@ def metadata_names(meta: dict[str, str]) -> list[str] | None:
             raise ValueError(f"model metadata names has indices {sorted(d)[:10]}..., expected 0..{len(d) - 1}")
         return [d[i] for i in range(len(d))]
     raise ValueError(f"model metadata names={raw[:80]!r} is not a dict or list literal")
+
+
+def metadata_imgsz(meta: dict[str, str]) -> tuple[int, int] | None:
+    """A dynamic-size model's default input ``(H, W)`` pixels from its metadata ``imgsz`` (``"[H, W]"`` or ``"N"``),
+    or None when absent or not two positive integers."""
+    raw = meta.get("imgsz")
+    if not raw:
+        return None
+    try:
+        v = ast.literal_eval(raw)
+        h, w = (v, v) if isinstance(v, int) else (int(v[0]), int(v[1]))
+    except (ValueError, SyntaxError, TypeError, IndexError):
+        return None
+    return (int(h), int(w)) if h > 0 and w > 0 else None

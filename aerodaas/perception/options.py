@@ -19,7 +19,8 @@ __all__ = ["FORMATS", "normalise_classes", "check_input_size", "check_detector_v
 #: the ONNX output heads the decoders read (:mod:`aerodaas.perception.decoders`); ``"auto"``: from the graph
 FORMATS = ("auto", "yolox", "nanodet", "ultralytics")
 
-_SHIPPED_FORMAT = {"yolox_nano": "yolox", "yolox": "yolox", "nanodet_plus_m_416": "nanodet", "nanodet": "nanodet"}
+_SHIPPED_FORMAT = {"yolox_nano": "yolox", "yolox": "yolox", "nanodet_plus_m_416": "nanodet", "nanodet": "nanodet",
+                   "aerial_nano": "yolox", "aerial": "yolox"}
 
 
 def normalise_classes(classes: Any, field: str = "classes") -> list[str] | None:
@@ -129,6 +130,8 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
                 names = info.class_names
             if info.input_hw is not None and hw is not None and hw != info.input_hw:
                 raise ValueError(f"input_size={tuple(input_size)!r} but the model's input is fixed at {info.input_hw}")
+            if info.input_hw is None and hw is None and info.default_hw is not None:
+                hw = info.default_hw  # the model's imgsz metadata (the shipped aerial model has one)
             if info.input_hw is None and hw is None and fmt != "ultralytics":
                 raise ValueError(f"input_size=None but {model_path} has dynamic height/width; give input_size=(H, W)")
             hw = hw or info.input_hw

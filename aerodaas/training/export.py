@@ -105,9 +105,16 @@ def quantize_checked(report: ExportReport, names: Sequence[str], val: ValTiles, 
     from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
+    import onnx
+    from onnx import version_converter
+
     out = Path(out)
     pre = out.with_suffix(".pre.onnx")
-    quant_pre_process(str(report.path), str(pre))
+    # per-channel weight scales need DequantizeLinear's axis attribute: opset 13 (the YOLOX export is opset 11)
+    onnx.save(version_converter.convert_version(onnx.load(str(report.path)), 13), str(pre))
+    # symbolic shape inference cannot finish on the dynamic batch/height/width graph: ONNX shape inference and the
+    # graph optimisation only (onnxruntime's quantization guide: pre-processing is optional)
+    quant_pre_process(str(pre), str(pre), skip_symbolic_shape=True)
     sess = ort.InferenceSession(str(pre), providers=["CPUExecutionProvider"])
     calib = _Calibration(sess.get_inputs()[0].name, _tiles_nchw(val, min(n_calib, len(val.images))))
     quantize_static(str(pre), str(out), calib, quant_format=QuantFormat.QDQ, per_channel=True,
