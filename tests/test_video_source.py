@@ -5,6 +5,7 @@ test_video_missions.py (slow group ``video``)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -87,13 +88,16 @@ def test_environment_resolves_a_video_file_and_refuses_a_missing_one(tmp_path):
 
 def test_a_stream_camera_needs_the_wall_clock_refused_before_ray(tmp_path):
     """A live stream cannot run at speedup 10 or wait in lock-step: exit 2 before Ray, naming the camera."""
+    from .test_app_value import _ray_processes_under, fresh_ray_tmp
+
     env = _env_with_camera(tmp_path, {"source": "udp://127.0.0.1:5999"}, {"speedup": 10, "lockstep": True})
+    ray_tmp = fresh_ray_tmp(tmp_path)
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
                         "--env", str(env), "--quiet"], capture_output=True, text=True, timeout=300,
-                       cwd=tmp_path)
+                       cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
     assert p.returncode == 2, p.stdout + p.stderr
     assert "quadrotor_base/cam1" in p.stderr + p.stdout and "speedup must be 1" in p.stderr + p.stdout
-    assert "Started a local Ray instance" not in p.stderr + p.stdout
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
 
 
 def test_capture_clock_takes_the_fastest_frame_as_transit_floor_and_reanchors_on_a_restart():
