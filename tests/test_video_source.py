@@ -168,6 +168,11 @@ def test_the_pose_tag_check_fails_on_a_pose_taken_at_arrival():
         check_pose_tags(*_flight_timing("arrival_relabelled"))
     with pytest.raises(AssertionError, match=r"pose from the ticks at"):  # the newest tick's, 0.19 s after capture
         check_pose_tags(*_flight_timing("arrival", latency_s=0.2))
+    # a recording whose odometry surrounds no frame compares zero poses: that is a failure, never a pass
+    timing, odometry = _flight_timing("capture")
+    for few in ([], odometry[:1], [o for o in odometry if o["t"] > 19.5]):
+        with pytest.raises(AssertionError, match=r"no pose tag was compared with the odometry"):
+            check_pose_tags(timing, few)
 
 
 def test_angles_at_interpolates_each_angle_along_the_short_arc():
