@@ -47,6 +47,37 @@ needs_data = pytest.mark.usefixtures("_shared_data")
 needs_data_case = pytest.mark.skipif(DATA_MISSING is not None and not os.environ.get("CI"), reason=str(DATA_MISSING))
 
 
+@pytest.fixture(scope="session")
+def _sitl_rig() -> None:
+    """The real firmware and a private network namespace are there (:func:`tests.sitl.namespace_skip_reason`), or
+    :func:`skip_or_fail`: checked once per session, before the module fixtures that start the firmware."""
+    from tests import sitl
+
+    reason = sitl.namespace_skip_reason()
+    if reason is not None:
+        skip_or_fail(reason)
+
+
+#: a test (or, as ``pytestmark``, a module) flying real SITL firmware in a private network namespace: skipped
+#: without them, failed in CI (:func:`skip_or_fail`)
+needs_sitl = pytest.mark.usefixtures("_sitl_rig")
+
+
+#: the inference workload (the Ocularone trace) that the scheduler tests and benchmarks replay
+WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
+
+
+@pytest.fixture(scope="session")
+def _workload() -> None:
+    """The workload file :data:`WORKLOAD_JSON` is there, or :func:`skip_or_fail`."""
+    if not WORKLOAD_JSON.is_file():
+        skip_or_fail(f"no workload at {WORKLOAD_JSON} (set AERODAAS_DATA_DIR)")
+
+
+#: a test (or, as ``pytestmark``, a module) that replays the workload: skipped without it, failed in CI
+needs_workload = pytest.mark.usefixtures("_workload")
+
+
 #: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs and
 #: missions flown on a real-time video stream
 SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime")

@@ -8,6 +8,7 @@ recording."""
 from __future__ import annotations
 
 import json
+import os
 import textwrap
 
 import pytest
@@ -19,6 +20,7 @@ from aerodaas.recording.writer import read_messages
 from aerodaas.protocol.messages import Port, ValueMsg
 
 from .conftest import REPO
+from .test_app_value import _ray_processes_under, fresh_ray_tmp
 from .test_example_plugins import _aerodaas, _env_with, installed  # noqa: F401 - the fixture: the installed example
 
 
@@ -179,13 +181,14 @@ def test_a_builtin_analytics_fed_the_wrong_stream_stops_the_run_before_ray(tmp_p
                                "robots": [{"id": "uav", "sensors": [{"id": "cam", "type": "camera"}]}]}))
     app = tmp_path / "app.py"
     app.write_text(MONITOR_ON_CAMERA.format(env=env))
+    ray_tmp = fresh_ray_tmp(tmp_path)
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
-                       text=True, cwd=tmp_path, timeout=300)
+                       text=True, cwd=tmp_path, timeout=300, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
     err = p.stdout + p.stderr
     assert p.returncode == 2, err[-3000:]
     assert ("analytics 'monitor' (MonitoringAnalytics) consumes ['odometry'], but it is fed sensor 'cam' (camera), "
             "which carries ['frame', 'camera']") in err, err[-3000:]
-    assert "Started a local Ray instance" not in err
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
 
 
 CROSSING_APP = textwrap.dedent('''
@@ -240,12 +243,13 @@ def _crossing_app(src, tmp_path):
 def test_consuming_the_wrong_output_of_an_analytics_is_refused_when_the_app_is_loaded(installed, tmp_path):
     src, env = installed
     app = _crossing_app(src, tmp_path)
-    p = _aerodaas(["run", str(app), "--quiet"], dict(env, WIRE="status"), tmp_path)
+    ray_tmp = fresh_ray_tmp(tmp_path)
+    p = _aerodaas(["run", str(app), "--quiet"], dict(env, WIRE="status", RAY_TMPDIR=str(ray_tmp)), tmp_path)
     err = p.stdout + p.stderr
     assert p.returncode == 2, err[-3000:]
     assert ("analytics 'crossing_log' (CrossingLog) consumes ['aerodaas_example_plugins.PlumeCrossing'], but it is "
             "fed the output of analytics 'gas_plume', which carries ['aerodaas_example_plugins.PlumeStatus']") in err
-    assert "Started a local Ray instance" not in err
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
 
 
 @pytest.mark.e2e

@@ -16,10 +16,9 @@ from aerodaas.schedulers.analytics_laplan import ArrivalPredictor
 from aerodaas.schedulers.single_machine import max_gain_schedule
 
 from .analytics_harness import Harness, Result, make_trace, run_policy
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 ALL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
        "GAINPLAN", "EVPLAN", "LAPLAN"]

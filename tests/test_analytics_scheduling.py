@@ -10,7 +10,7 @@ from aerodaas import (AeroListData, Analytics, Environment, NearestNeighborSched
 from aerodaas.bench.overhead import FixedCostDetector
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.recording.writer import read_messages
-from tests.conftest import DATA_DIR, needs_data
+from tests.conftest import DATA_DIR, needs_data, needs_workload
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"
 
@@ -113,7 +113,7 @@ def test_unknown_scheduler_and_bad_qos_are_refused_naming_the_field():
     assert env.analytics_scheduler == "DEMS"
 
 
-@pytest.mark.skipif(not WORKLOAD.is_file(), reason=f"workload not found at {WORKLOAD}")
+@needs_workload
 def test_models_can_name_a_workload_profile(monkeypatch):
     monkeypatch.setenv("AERODAAS_DATA_DIR", str(DATA_DIR))
     env = Environment(parse_environment_config(hover_config(scheduler={

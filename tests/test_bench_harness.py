@@ -20,10 +20,9 @@ from aerodaas.schedulers.analytics_base import (AnalyticsTask, TaskState, Worklo
                                                 make_analytics_scheduler)
 from aerodaas.schedulers.analytics_estimators import make_estimator
 
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 JIT = ["DEMS", "DEMS-A", "GEMS", "GAINPLAN", "EVPLAN", "LAPLAN"]
 
 

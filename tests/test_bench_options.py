@@ -14,10 +14,9 @@ import pytest
 from aerodaas.bench import decision_time
 from aerodaas.schedulers import single_machine_jit
 
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 
 # --------------------------------------------------------------------------------------------- decision_time

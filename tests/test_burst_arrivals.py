@@ -15,10 +15,9 @@ from aerodaas.schedulers.analytics_arrivals import ArrivalPredictor, BurstArriva
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.analytics_laplan import LaPlan
 
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 
 def feed(pred, times, drone="d0", models=("DEO",)):

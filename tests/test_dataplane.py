@@ -449,7 +449,8 @@ def test_busy_consumer_drops_and_counts_lockstep_never_drops():
 
 
 class BatchProbe(Analytics):
-    """Takes up to 4 frames per call (``max_batch``) and remembers each call's size; slow, so frames queue."""
+    """Takes up to 4 frames per call (``max_batch``) and remembers each call's size. A single frame's call says it
+    has started (``entered``) and holds on until the test sets ``release``, so frames offered meanwhile queue."""
 
     name = "batchprobe"
     max_batch = 4
@@ -457,15 +458,16 @@ class BatchProbe(Analytics):
     def __init__(self) -> None:
         super().__init__()
         self.calls: list[int] = []
+        self.entered, self.release = threading.Event(), threading.Event()
 
     def process(self, frame, meta):
         self.calls.append(1)
-        time.sleep(0.1)
+        self.entered.set()
+        assert self.release.wait(60), "the test never released the first frame"
         return {"n": 1}
 
     def process_batch(self, items):
         self.calls.append(len(items))
-        time.sleep(0.1)
         return [{"n": len(items)} for _ in items]
 
 
@@ -491,13 +493,12 @@ def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
 
     first = threading.Thread(target=comp.offer, args=(Port("in"), env("d00", 0.1)))
     first.start()
-    time.sleep(0.03)  # d00's frame is being processed: the next three wait
+    assert obj.entered.wait(60)  # d00's frame is being processed (and held there): the next three wait
     for r in ("d01", "d02", "d03"):
         assert comp.offer(Port("in"), env(r, 0.1))
-    first.join(5)
-    deadline = time.time() + 5
-    while len(published) < 4 and time.time() < deadline:
-        time.sleep(0.01)
+    obj.release.set()
+    first.join(60)  # the thread that took d00 drains the mailbox and publishes before it returns
+    assert not first.is_alive()
     host.close()
     assert obj.calls == [1, 3], obj.calls  # one alone, then the three that waited in one call
     assert [m.robot for m in published] == ["d00", "d01", "d02", "d03"] and comp.batched == 3

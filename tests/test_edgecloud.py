@@ -18,10 +18,9 @@ from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
 from aerodaas.schedulers.analytics_base import (
     TERMINAL_STATES, AnalyticsScheduler, Decision, TaskState, Workload, make_analytics_scheduler, task_utility,
 )
-from tests.conftest import DATA_DIR, MODEL_DIR, needs_data
+from tests.conftest import DATA_DIR, MODEL_DIR, needs_data, needs_workload
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD.is_file(), reason=f"workload not found at {WORKLOAD}")
 pytestmark = needs_workload
 
 

@@ -11,10 +11,9 @@ import pytest
 from aerodaas.schedulers.analytics_base import (
     TERMINAL_STATES, AnalyticsScheduler, Decision, TaskState, Workload, task_utility,
 )
-from tests.conftest import DATA_DIR, REPO, needs_data
+from tests.conftest import DATA_DIR, REPO, needs_data, needs_workload
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD.is_file(), reason=f"workload not found at {WORKLOAD}")
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,8 @@ import pytest
 
 from aerodaas.emulators.mavlink.trace import run_trace, summarise, trace_emulator
 
+from .conftest import skip_or_fail
+
 pytestmark = pytest.mark.sitl
 
 SITL = Path(os.environ.get("AERODAAS_SITL_DIR", Path(__file__).resolve().parents[2] / "shared" / "sitl"))
@@ -96,10 +98,10 @@ def _namespace_ok() -> str | None:
 def _firmware_trace(autopilot: str, tmp_path: Path) -> dict:
     exe = SITL / ("arducopter/arducopter" if autopilot == "ardupilot" else "px4/bin/px4")
     if not exe.exists():
-        pytest.skip(f"no firmware at {exe} (set AERODAAS_SITL_DIR)")
+        skip_or_fail(f"no firmware at {exe} (set AERODAAS_SITL_DIR)")
     why = _namespace_ok()
     if why:
-        pytest.skip(why)
+        skip_or_fail(why)
     script = (AP_SCRIPT if autopilot == "ardupilot" else PX4_SCRIPT).format(speedup=SPEEDUP, wall=WALL_LIMIT_S)
     env = {**os.environ, "SITL": str(SITL), "WORK": str(tmp_path), "PY": sys.executable,
            "PYTHONPATH": str(Path(__file__).resolve().parents[1])}

@@ -20,10 +20,10 @@ from aerodaas.schedulers.analytics_base import Workload
 from aerodaas.schedulers.analytics_laplan import LaPlan
 from aerodaas.schedulers.dispatch.emulation import Jitter
 
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-pytestmark = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
+pytestmark = needs_workload
 
 
 class FromScratchLaPlan(LaPlan):

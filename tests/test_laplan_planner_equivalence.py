@@ -21,11 +21,10 @@ from aerodaas.schedulers.analytics_base import TaskState, Workload, make_analyti
 from aerodaas.schedulers.dispatch.emulation import Jitter
 from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule, max_gain_schedule_arrays
 
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 from .reference_max_gain_schedule import max_gain_schedule as old_max_gain_schedule
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 
 def _python(jobs, *, free_at=float("-inf"), groups=None):

@@ -165,13 +165,14 @@ def test_run_refuses_a_system_id_clash_with_exit_2_before_ray(tmp_path):
     env = _env(tmp_path, [_mav("a", "udpin:0.0.0.0:14600", 1), _mav("b", "udpin:0.0.0.0:14600", 1)])
     app = tmp_path / "app.py"
     app.write_text(APP.format(env=str(env)))
-    ray_tmp = tmp_path / "ray"
-    ray_tmp.mkdir()
+    from .test_app_value import _ray_processes_under, fresh_ray_tmp
+
+    ray_tmp = fresh_ray_tmp(tmp_path)
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
                        text=True, timeout=120, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
     assert p.returncode == 2, p.stderr[-2000:]
     assert "'a' and 'b'" in p.stderr and "system id 1" in p.stderr
-    assert list(ray_tmp.iterdir()) == []
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
 
 
 def test_plan_puts_robots_of_one_link_in_one_drone_actor(tmp_path):

@@ -42,10 +42,9 @@ from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.dispatch.emulation import Jitter, seeded_rng
 
 from . import anticipation_cheats as cheats
-from .conftest import DATA_DIR
+from .conftest import DATA_DIR, needs_workload
 
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD_JSON.is_file(), reason=f"no workload at {WORKLOAD_JSON}")
 
 REAL = ["EDGE_FIFO", "EDGE_EDF", "EDGE_SJF", "EDGE_HBF", "EDGE_HUF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS",
         "GAINPLAN", "EVPLAN", "LAPLAN"]

@@ -222,6 +222,9 @@ def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_pat
     import subprocess
     import sys
 
+    from .test_app_value import _ray_processes_under, fresh_ray_tmp
+
+    ray_tmp = fresh_ray_tmp(tmp_path)
     (tmp_path / "exiting_helper.py").write_text("import sys\n\nsys.exit(0)\n")
     env = tmp_path / "env.json"
     env.write_text(json.dumps({"robots": [{"id": "d1"}]}))
@@ -230,10 +233,10 @@ def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_pat
                    "drone = env.get_robot_by_id('d1')\nresult = drone.start_mission()\n")
     r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(tmp_path / "r.mcap")],
                        capture_output=True, text=True, timeout=180, env={**__import__("os").environ,
-                                                                         "RAY_TMPDIR": str(tmp_path / "ray")})
+                                                                         "RAY_TMPDIR": str(ray_tmp)})
     assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
     assert "sys.exit(0) was called in" in r.stderr and "exiting_helper.py line 3" in r.stderr, r.stderr[-2000:]
-    assert not (tmp_path / "ray").exists() or not any((tmp_path / "ray").iterdir())  # no Ray session started
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session started
 
 
 def test_each_builtin_plugin_module_imports_first_in_a_fresh_process():

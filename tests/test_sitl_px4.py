@@ -5,11 +5,11 @@ from __future__ import annotations
 import pytest
 
 from . import sitl
+from .conftest import needs_sitl
 from .sitl_cases import *  # noqa: F401,F403 - the shared cases and fixtures
 
 AUTOPILOT = "px4"
-_SKIP = sitl.namespace_skip_reason()
-pytestmark = [pytest.mark.sitl, pytest.mark.skipif(_SKIP is not None, reason=_SKIP or "")]
+pytestmark = [pytest.mark.sitl, needs_sitl]  # no firmware or namespace: skipped, failed in CI
 
 # PX4 runs its default parameters plus only what our backend sets (no EKF2 tuning: see tests/sitl.py MAX_SPEED for
 # why its robots are limited to 2 m/s: stock SIH flies up to 0.5 m/s faster than its estimate, p99).
@@ -63,3 +63,30 @@ def test_stock_px4_stays_within_its_limit_by_its_ground_truth(session):
     print(f"px4 guided ground truth: p99 {np.percentile(v, 99):.3f} m/s, max {v.max():.3f} m/s, fastest 1 s "
           f"{max(means):.3f} m/s (limit {limit:.2f})")
     assert max(means) <= limit
+
+
+def test_the_autopilots_own_failsafe_is_respected(session, autopilot):
+    """PX4's own failsafe while AeroDaaS runs (issue 26 item 6; PX4 only: ArduCopter has no failsafe for a GUIDED
+    vehicle whose ground station stops, FS_GCS_ENABLE 0): our drone actor is frozen for 3 s wall in OFFBOARD
+    flight, so our setpoint stream stops and PX4 leaves OFFBOARD after COM_OF_LOSS_T (its offboard-loss failsafe,
+    default parameters). From the firmware's own HEARTBEATs: once it left OFFBOARD it never went back (with
+    ``on_failsafe: end``, the default, nothing switches it back) and it landed and disarmed. From the recording: the
+    failsafe was recorded with its mode and the mission's outcome is ``failsafe``, never a success."""
+    run = session["failsafe"]
+    fw = run["firmware"]
+    assert fw.get("frozen"), run["out"][-2000:]
+    modes = [m for _, m, armed in fw["modes"] if armed]
+    assert "OFFBOARD" in modes, fw["modes"]
+    after = modes[modes.index("OFFBOARD"):]
+    left = next((i for i, m in enumerate(after) if m != "OFFBOARD"), None)
+    assert left is not None, fw["modes"]                                 # the firmware left OFFBOARD by itself
+    assert "OFFBOARD" not in after[left:], fw["modes"]                   # ... and we never took it back
+    assert fw.get("landed"), fw["modes"]                                 # it flew its failsafe to the ground
+    rec = run["rec"]
+    ev = events(rec)
+    fs = [e for e in ev if e["event"] == "autopilot_failsafe"]
+    assert fs, [e["event"] for e in ev][-30:]
+    results = [m for _, m in rec.get("/mission/result", [])]
+    assert results and results[-1]["outcome"] == "failsafe", results
+    assert run["rc"] != 0, run["out"][-2000:]                            # a failsafe is no success
+    print(f"{autopilot} failsafe: firmware modes {[m for _, m, _ in fw['modes']]}, recorded {fs[0].get('mode')}")

@@ -5,6 +5,7 @@ test_video_missions.py (slow group ``video``)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -87,13 +88,16 @@ def test_environment_resolves_a_video_file_and_refuses_a_missing_one(tmp_path):
 
 def test_a_stream_camera_needs_the_wall_clock_refused_before_ray(tmp_path):
     """A live stream cannot run at speedup 10 or wait in lock-step: exit 2 before Ray, naming the camera."""
+    from .test_app_value import _ray_processes_under, fresh_ray_tmp
+
     env = _env_with_camera(tmp_path, {"source": "udp://127.0.0.1:5999"}, {"speedup": 10, "lockstep": True})
+    ray_tmp = fresh_ray_tmp(tmp_path)
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
                         "--env", str(env), "--quiet"], capture_output=True, text=True, timeout=300,
-                       cwd=tmp_path)
+                       cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
     assert p.returncode == 2, p.stdout + p.stderr
     assert "quadrotor_base/cam1" in p.stderr + p.stdout and "speedup must be 1" in p.stderr + p.stdout
-    assert "Started a local Ray instance" not in p.stderr + p.stdout
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
 
 
 def test_capture_clock_takes_the_fastest_frame_as_transit_floor_and_reanchors_on_a_restart():
@@ -164,6 +168,11 @@ def test_the_pose_tag_check_fails_on_a_pose_taken_at_arrival():
         check_pose_tags(*_flight_timing("arrival_relabelled"))
     with pytest.raises(AssertionError, match=r"pose from the ticks at"):  # the newest tick's, 0.19 s after capture
         check_pose_tags(*_flight_timing("arrival", latency_s=0.2))
+    # a recording whose odometry surrounds no frame compares zero poses: that is a failure, never a pass
+    timing, odometry = _flight_timing("capture")
+    for few in ([], odometry[:1], [o for o in odometry if o["t"] > 19.5]):
+        with pytest.raises(AssertionError, match=r"no pose tag was compared with the odometry"):
+            check_pose_tags(timing, few)
 
 
 def test_angles_at_interpolates_each_angle_along_the_short_arc():

@@ -240,7 +240,8 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     sample gap within :data:`GAP_WINDOW_S` of the ticks. Speed: the fastest the odometry shows anywhere (sampled
     velocity and distance over sample gaps) plus :data:`SPEED_SLACK_MPS`. A loaded machine delays ticks and samples,
     which widens the gaps and so the tolerance with them: it cannot break the check; a pose taken at arrival
-    instead of capture can (tests/test_video_source.py fabricates one). Raises AssertionError naming the frame.
+    instead of capture can (tests/test_video_source.py fabricates one). Raises AssertionError naming the frame, or
+    when no frame's tag could be compared with the odometry (none inside its time span: a check of zero poses).
     Returns ``{"judged": frames judged by 1, "compared": frames judged by 2, "worst_m": largest position error,
     "worst_ratio": largest error / tolerance}``."""
     assert timing, "no frame timing recorded"
@@ -279,6 +280,8 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
                                 f"{speed:.1f} m/s x gaps); arrived at {m['arrival_t']:.3f} s")
             compared += 1
             worst_m, worst_ratio = max(worst_m, err), max(worst_ratio, err / float(tol))
+    assert compared >= 1, (f"no pose tag was compared with the odometry ({len(late)} frames judged by their ticks, "
+                           f"{len(odo)} odometry samples): a check of zero poses cannot fail")
     return {"judged": len(late), "compared": compared, "worst_m": worst_m, "worst_ratio": worst_ratio}
 
 

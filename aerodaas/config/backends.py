@@ -8,11 +8,12 @@ Strict and bounded: a string or a boolean is not a number, and every rate, size 
 from __future__ import annotations
 
 import json
+import re
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
-from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg
+from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, plugin_config_error
 
 __all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",
            "backend_settings_into_config", "add_section_schemas"]
@@ -47,6 +48,43 @@ class MavlinkFenceConfig(_Cfg):
     max_altitude: bool = True
     home_radius_m: float | None = Field(default=None, gt=0, le=10_000.0, description="metres")
     restore_on_close: bool = False
+
+
+#: the network forms of a pymavlink connection string, ``SCHEME:HOST:PORT`` (pymavlink ``mavutil.
+#: mavlink_connection``: ``tcp``/``tcpin`` -> mavtcp/mavtcpin, ``udpin``/``udp`` -> mavudp listening,
+#: ``udpout``/``udpbcast`` -> mavudp sending)
+MAVLINK_NET_SCHEMES = ("tcp", "tcpin", "udp", "udpin", "udpout", "udpbcast")
+_HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def check_mavlink_connection(conn: str) -> None:
+    """Check a pymavlink connection string before anything connects: ``SCHEME:HOST:PORT`` with a scheme of
+    :data:`MAVLINK_NET_SCHEMES`, a host that is an IPv4 address (four octets 0-255) or a host name (RFC 1123
+    labels; not resolved here) and a port within [1, 65535]; or a serial device (a path such as ``/dev/ttyACM0``,
+    or ``COM3``; it may appear later, so it need not exist yet). Raises ValueError naming the value and what is
+    wrong (``tcp:999.1.1.1:99999`` reached the drone actor, after Ray had started: issue 47 item 5)."""
+    import ipaddress
+
+    s = conn.strip()
+    if s != conn or not s:
+        raise ValueError(f"{conn!r}: a connection string without surrounding blanks")
+    if s.startswith("/") or re.fullmatch(r"COM[0-9]{1,3}", s):
+        return
+    parts = s.split(":")
+    forms = (f"a pymavlink connection string is SCHEME:HOST:PORT with SCHEME one of {list(MAVLINK_NET_SCHEMES)} "
+             f"(e.g. udpin:0.0.0.0:14550, tcp:127.0.0.1:5760) or a serial device (/dev/ttyACM0, COM3)")
+    if len(parts) != 3 or parts[0] not in MAVLINK_NET_SCHEMES:
+        raise ValueError(f"{conn!r} is not a MAVLink connection: {forms}")
+    scheme, host, port = parts
+    if not re.fullmatch(r"[0-9]{1,5}", port) or not 1 <= int(port) <= 65535:
+        raise ValueError(f"{conn!r}: port {port!r} is not within [1, 65535]")
+    if re.fullmatch(r"[0-9.]+", host):
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            raise ValueError(f"{conn!r}: host {host!r} is not an IPv4 address (four numbers 0-255)") from None
+    elif len(host) > 253 or not all(_HOST_LABEL.match(label) for label in host.rstrip(".").split(".")):
+        raise ValueError(f"{conn!r}: host {host!r} is not an IPv4 address or a host name")
 
 
 class MavlinkConfig(_Cfg):
@@ -115,6 +153,12 @@ class MavlinkConfig(_Cfg):
     #: is signed with it; every message from the vehicle must be (aerodaas/backends/mavlink/signing.py). Unset: no
     #: signing. The key itself never goes in the environment file.
     signing_key_file: str | None = Field(default=None, min_length=1)
+
+    @field_validator("connection")
+    @classmethod
+    def _check_connection(cls, v: str) -> str:
+        check_mavlink_connection(v)
+        return v
 
     @model_validator(mode="after")
     def _check_target(self) -> "MavlinkConfig":
@@ -225,6 +269,8 @@ def backend_settings_into_config(data: dict[str, Any], fields: set[str]) -> dict
         raise ValidationError.from_exception_data("RobotConfig", [
             {"type": er["type"], "loc": (where, *er["loc"]), "input": er.get("input"),
              **({"ctx": er["ctx"]} if "ctx" in er else {})} for er in e.errors()]) from None
+    except Exception as e:  # noqa: BLE001 - the plug-in's own validator failed otherwise: its configuration error
+        raise ValueError(plugin_config_error(f"{where} (backend {backend!r})", cls, e)) from None
     return data
 
 

@@ -33,3 +33,14 @@ def did_you_mean(word: str, choices) -> str:
 
     close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def plugin_config_error(what: str, cls: type, err: BaseException) -> str:
+    """The message for an exception other than pydantic's ValidationError raised while a plug-in's ``Config``
+    validated its settings (a validator raising TypeError or KeyError, which pydantic passes on as it is): worded
+    as that plug-in's configuration error, naming ``what`` (``sensor type 'gas'``), the class and the exception,
+    never a traceback (issue 47 item 5)."""
+    config = getattr(cls, "Config", None)
+    model = f"{config.__module__}.{config.__qualname__}" if isinstance(config, type) else repr(config)
+    return (f"{what}: the settings were refused by the plug-in's Config ({model}): {type(err).__name__}: "
+            f"{str(err)[:300] or '(no message)'}")

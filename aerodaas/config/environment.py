@@ -450,7 +450,12 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
     from aerodaas.config.robot import sensor_class
 
     for where, robot_id, s in sensors:
-        sensor_class(s.type).resolve_files(s.properties, cfg.resolve_path, where, robot_id, s.id)
+        try:
+            sensor_class(s.type).resolve_files(s.properties, cfg.resolve_path, where, robot_id, s.id)
+        except ConfigError:
+            raise
+        except ValueError as e:  # a file the sensor reads that is not what it needs (a replay's recording)
+            raise ConfigError(str(e)) from None
     for i, r in enumerate(cfg.robots):
         from aerodaas.plugins import registry
 

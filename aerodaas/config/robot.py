@@ -19,7 +19,8 @@ from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayC
 from aerodaas.config.deadlines import PhaseDeadlinesConfig
 from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
                    MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS,
-                   MAX_LIST_ITEMS, MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean)
+                   MAX_LIST_ITEMS, MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean,
+                   plugin_config_error)
 
 
 class Limits(_Cfg):
@@ -177,6 +178,8 @@ def check_sensor_properties(type_: str, properties: dict[str, Any]) -> dict[str,
         return cls.validate_properties(properties)
     except ValidationError as e:
         raise ValueError(properties_error(cls, e)) from None
+    except Exception as e:  # noqa: BLE001 - the plug-in's own validator failed otherwise: its configuration error
+        raise ValueError(plugin_config_error(f"properties (sensor type {type_!r})", cls, e)) from None
 
 
 class SensorConfig(_Cfg):

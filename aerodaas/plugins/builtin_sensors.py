@@ -92,6 +92,41 @@ class CameraProperties(SensorPropertiesBase):
         return self
 
 
+def check_replay_recording(path: str, topic: str, where: str) -> None:
+    """Before Ray starts: the camera replay's file ``path`` is an MCAP file (read with the ``mcap`` library: its
+    summary section, or front to back when the file is unfinished) and ``topic`` a ``foxglove.CompressedImage``
+    channel with messages in it, what :class:`aerodaas.backends.replay.McapCameraReplay` reads (it refused such a
+    file only in the camera's actor, after Ray had started). ``where`` is the sensor's path
+    (``robots.0.sensors.0``). Raises ValueError naming the property."""
+    from mcap.reader import NonSeekingReader, make_reader
+
+    schemas: dict[str, str] = {}  # topic -> schema name, of the channels with messages
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+            if summary is not None and summary.statistics is not None:
+                counts = summary.statistics.channel_message_counts
+                for cid, ch in summary.channels.items():
+                    if counts.get(cid):
+                        sc = summary.schemas.get(ch.schema_id)
+                        schemas[ch.topic] = sc.name if sc is not None else ""
+            else:  # an unfinished recording: its messages front to back, up to the first of the topic
+                f.seek(0)
+                for sc, ch, _ in NonSeekingReader(f).iter_messages():
+                    schemas.setdefault(ch.topic, sc.name if sc is not None else "")
+                    if ch.topic == topic:
+                        break
+    except Exception as e:  # noqa: BLE001 - whatever the reader cannot read is no recording to replay
+        raise ValueError(f"{where}.properties.mcap: {path!r} is not a readable MCAP recording "
+                         f"({type(e).__name__}: {str(e)[:200]})") from None
+    if topic not in schemas:
+        raise ValueError(f"{where}.properties.topic: {topic!r} is not a channel with messages in the recording "
+                         f"{path!r}; its channels: {sorted(schemas)}")
+    if schemas[topic] != "foxglove.CompressedImage":
+        raise ValueError(f"{where}.properties.topic: {topic!r} in {path!r} carries {schemas[topic]!r}, not "
+                         f"foxglove.CompressedImage (a camera's images)")
+
+
 class OdometryProperties(SensorPropertiesBase):
     """The odometry sensor's ``properties``: ``rate_hz``, samples per second of vehicle time, (0, 1000]."""
 
@@ -155,6 +190,7 @@ class CameraSensor(SensorPlugin):
         if src == "mcap":
             properties["mcap"] = str(resolve(properties["mcap"], f"{where}.properties.mcap"))
             properties.setdefault("topic", f"/{robot_id}/camera/{sensor_id}")
+            check_replay_recording(properties["mcap"], properties["topic"], where)
         elif src not in (None, MAVLINK_SOURCE, *CAMERA_SOURCES):
             from aerodaas.video.source import parse_stream_source
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
-           "register", "plugin", "get", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
+           "register", "plugin", "get", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
            "plugin_package_paths", "plugin_name", "is_import_path"]
 
 #: the extension points, and the ``importlib.metadata`` entry-point group of each
@@ -46,6 +46,16 @@ ENTRY_POINT_GROUPS: dict[str, str] = {
     "analytics_scheduler": "aerodaas.analytics_schedulers",
 }
 KINDS: tuple[str, ...] = tuple(ENTRY_POINT_GROUPS)
+#: the class every plug-in of a kind subclasses (``"module:Class"``, imported when a plug-in is resolved): the
+#: framework constructs and calls a plug-in as one of these (a backend as ``Backend(cfg)``, a trajectory scheduler
+#: as ``Scheduler(env)``), so a class that is not one is refused before it is instantiated
+KIND_BASES: dict[str, str] = {
+    "backend": "aerodaas.backends.base:VehicleBackend",
+    "sensor": "aerodaas.plugins.sensor:SensorPlugin",
+    "analytics": "aerodaas.analytics.base:Analytics",
+    "trajectory_scheduler": "aerodaas.schedulers.base:TrajectoryScheduler",
+    "analytics_scheduler": "aerodaas.schedulers.analytics_base:AnalyticsScheduler",
+}
 
 
 class UnknownPlugin(ValueError):
@@ -91,11 +101,38 @@ def declaration_error(cls: Any, kind: str, name: str) -> str | None:
             f"subclass, the model of its settings{base}, or None; got {what}")
 
 
+def kind_base(kind: str) -> type:
+    """The class every plug-in of ``kind`` subclasses (:data:`KIND_BASES`)."""
+    mod, _, attr = KIND_BASES[kind].partition(":")
+    return getattr(importlib.import_module(mod), attr)
+
+
+def base_error(cls: Any, kind: str, name: str) -> str | None:
+    """What is wrong with ``cls`` as plug-in ``name`` of ``kind`` when it is not a subclass of the kind's base
+    (:func:`kind_base`), None when it is: ``"subprocess:Popen"`` as a trajectory scheduler was accepted and then
+    constructed as ``Popen(env)`` (issue 47 item 5)."""
+    base = kind_base(kind)
+    if isinstance(cls, type) and issubclass(cls, base):
+        return None
+    what = f"class {cls.__module__}.{cls.__qualname__}" if isinstance(cls, type) else f"{type(cls).__name__} {cls!r:.80}"
+    return (f"{kind.replace('_', ' ')} plug-in {name!r} ({what}) is not a subclass of {base.__module__}."
+            f"{base.__qualname__}, the base of every {kind.replace('_', ' ')} plug-in")
+
+
 def _check_declaration(cls: Any, kind: str, name: str) -> None:
     """Raise :class:`InvalidPlugin` for what :func:`declaration_error` finds."""
     why = declaration_error(cls, kind, name)
     if why:
         raise InvalidPlugin(kind, name, why)
+
+
+def _check_plugin_class(cls: Any, kind: str, name: str) -> None:
+    """Raise :class:`InvalidPlugin` for a class that is not of its kind's base (:func:`base_error`) or whose
+    declaration cannot be used (:func:`declaration_error`): what a resolved plug-in must pass before it is used."""
+    why = base_error(cls, kind, name)
+    if why:
+        raise InvalidPlugin(kind, name, why)
+    _check_declaration(cls, kind, name)
 
 
 @dataclass
@@ -319,7 +356,7 @@ def _from_import_path(kind: str, name: str) -> PluginEntry:
     declared = getattr(cls, "plugin_kind", kind)
     if declared != kind:
         raise UnknownPlugin(kind, name, entries(kind), f"{name} declares plugin_kind {declared!r}")
-    _check_declaration(cls, kind, name)
+    _check_plugin_class(cls, kind, name)
     if not _installed(sys.modules[mod]):
         _BY_VALUE.add(mod)
     with _LOCK:
@@ -367,14 +404,15 @@ def resolve(kind: str, name: str) -> PluginEntry:
 def get(kind: str, name: str) -> type:
     """The class of plug-in ``name`` of ``kind`` (see :func:`resolve`). Raises :class:`UnknownPlugin`, also when
     the class cannot be imported (the message names the target and the import error), and :class:`InvalidPlugin`
-    (an UnknownPlugin) for a class whose declaration cannot be used (:func:`declaration_error`)."""
+    (an UnknownPlugin) for a class that does not subclass its kind's base (:func:`base_error`) or whose
+    declaration cannot be used (:func:`declaration_error`)."""
     e = resolve(kind, name)
     try:
         cls = e.load()
     except Exception as ex:  # noqa: BLE001
         raise UnknownPlugin(kind, name, entries(kind),
                             f"{e.target} ({e.origin}) does not import: {type(ex).__name__}: {ex}") from None
-    _check_declaration(cls, kind, name)  # an entry point's class, or a Config replaced after registration
+    _check_plugin_class(cls, kind, name)  # an entry point's class, or a Config replaced after registration
     return cls
 
 

@@ -77,6 +77,12 @@ APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = 
      "app-level errors"),
     ("a syntax error in the application file", lambda t: [_app(t, "from aerodaas import *\nenv = Environment(\n")], 2,
      "line 2: not valid Python: SyntaxError", "app-level errors"),
+    ("trajectory_scheduler 'subprocess:Popen' in environment.json, the app setting its own scheduler",
+     lambda t: [_app(t, _APP.format(env=str(t / "cli_env.json"), body="env.set_trajectory_scheduler("
+                     "NearestNeighborScheduler(env))\n" + _nav('[Waypoint(id="a", x=1, y=0, z=2)]')),
+                env={"robots": [{"id": "d1"}], "trajectory_scheduler": "subprocess:Popen"})], 2,
+     "trajectory scheduler plug-in 'subprocess:Popen' (class subprocess.Popen) is not a subclass of "
+     "aerodaas.schedulers.base.TrajectoryScheduler", "plug-in imports"),
     ("a plug-in sensor of the app whose Config is a dict",
      lambda t: [_app(t, "from aerodaas.plugins import SensorPlugin, register_sensor\n\n\n@register_sensor\n"
                         "class Gas(SensorPlugin):\n    name = 'gas'\n    Config = {'rate_hz': 1.0}\n\n"
@@ -113,6 +119,18 @@ PLUGIN_MODULES = {
     "badconfig": ("from aerodaas.backends.sim import SimBackend\nfrom aerodaas.plugins import SensorPlugin\n\n\n"
                   "class GasSensor(SensorPlugin):\n    Config = 5\n\n    def sample(self, state, t):\n"
                   "        return None\n\n\nclass Backend(SimBackend):\n    Config = dict\n"),
+    # Config validators raising TypeError (pydantic passes anything but ValueError/AssertionError on as it is)
+    "typeerror": ("from pydantic import field_validator\nfrom aerodaas.backends.sim import SimBackend\n"
+                  "from aerodaas.config.backends import SimConfig\n"
+                  "from aerodaas.plugins import SensorPlugin, SensorPluginConfig\n\n\n"
+                  "class RateConfig(SensorPluginConfig):\n    rate_hz: float = 1.0\n\n"
+                  "    @field_validator('rate_hz')\n    @classmethod\n    def _typed(cls, v):\n"
+                  "        raise TypeError('rate_hz must be a Fraction')\n\n\n"
+                  "class GasSensor(SensorPlugin):\n    Config = RateConfig\n\n\n"
+                  "class GainConfig(SimConfig):\n    gain: float = 1.0\n\n"
+                  "    @field_validator('gain')\n    @classmethod\n    def _typed(cls, v):\n"
+                  "        raise TypeError('gain must be a Fraction')\n\n\n"
+                  "class Backend(SimBackend):\n    Config = GainConfig\n"),
 }
 
 
@@ -145,6 +163,28 @@ def plugin_cases(tag: str) -> list[tuple[str, Callable[[dict], None], str]]:
          lambda d: robot(d).update(backend=f"{mod('badconfig')}:Backend"),
          "Config must be a pydantic BaseModel subclass, the model of its settings, or None; got the class "
          "builtins.dict"),
+        # issue 47 item 5: a class that is not of its kind's base (subprocess.Popen was constructed as Popen(env))
+        ("trajectory_scheduler 'subprocess:Popen' (a class, not a TrajectoryScheduler)",
+         lambda d: d.update(trajectory_scheduler="subprocess:Popen"),
+         "trajectory_scheduler: Value error, trajectory scheduler plug-in 'subprocess:Popen' (class subprocess.Popen) "
+         "is not a subclass of aerodaas.schedulers.base.TrajectoryScheduler"),
+        ("backend 'subprocess:Popen' (a class, not a VehicleBackend)",
+         lambda d: robot(d).update(backend="subprocess:Popen"),
+         "is not a subclass of aerodaas.backends.base.VehicleBackend"),
+        ("sensor type 'subprocess:Popen' (a class, not a SensorPlugin)",
+         lambda d: robot(d)["sensors"].append({"id": "gas", "type": "subprocess:Popen"}),
+         "is not a subclass of aerodaas.plugins.sensor.SensorPlugin"),
+        ("analytics_scheduler 'subprocess:Popen' (a class, not an AnalyticsScheduler)",
+         lambda d: d.update(analytics_scheduler={"name": "subprocess:Popen"}),
+         "analytics_scheduler.name: Value error, analytics scheduler plug-in 'subprocess:Popen' (class "
+         "subprocess.Popen) is not a subclass of aerodaas.schedulers.analytics_base.AnalyticsScheduler"),
+        ("sensor type whose Config validator raises TypeError",
+         lambda d: robot(d)["sensors"].append({"id": "gas", "type": f"{mod('typeerror')}:GasSensor",
+                                              "properties": {"rate_hz": 2.0}}),
+         "sensors.2.properties (sensor type 'aerodaas_case_typeerror_"),
+        ("backend whose Config validator raises TypeError",
+         lambda d: robot(d).update(backend=f"{mod('typeerror')}:Backend", backend_config={"gain": 2.0}),
+         "the settings were refused by the plug-in's Config (aerodaas_case_typeerror_"),
     ]
 
 

@@ -92,6 +92,22 @@ def _tlog_without_position(tmp: Path) -> str:
     return str(p)
 
 
+def _replay_camera(tmp: Path, recording: bool) -> dict:
+    """A camera replaying ``source: mcap``: a text file named ``.mcap`` (``recording`` False), or a recording of
+    ours whose only camera channel is another robot's (its own topic absent)."""
+    p = tmp / ("other.mcap" if recording else "notes.mcap")
+    if recording:
+        import numpy as np
+
+        from aerodaas.recording.writer import McapRecorder
+
+        with McapRecorder(p) as rec:
+            rec.write_image("/other/camera/cam", 1, np.zeros((8, 8, 3), np.uint8))
+    else:
+        p.write_text("field notes, not a recording")
+    return {"source": "mcap", "mcap": str(p)}
+
+
 def _target(tmp: Path, tid: str = "car", crop=(0, 0, 10, 10)) -> dict:
     return {"id": tid, "image": _png(tmp), "crop": list(crop), "path": [{"t": 0, "x": 0, "y": 0}, {"t": 5, "x": 5, "y": 0}]}
 
@@ -191,6 +207,9 @@ BOUND_CASES: list[InputCase] = _category('bounds / cross-field', [
               "max_distance"),
     InputCase("mavlink.setpoint_rate_hz 1e308",
               lambda d, t: _robot(d).update(backend="mavlink", mavlink={"setpoint_rate_hz": BIG}), "setpoint_rate_hz"),
+    InputCase("mavlink.connection \"tcp:999.1.1.1:99999\" (issue 47: refused by the drone actor, after Ray)",
+              lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "tcp:999.1.1.1:99999"}),
+              "mavlink.connection"),
     # issue 40.4: every rate, size and duration bounded, the cross-field rules
     InputCase("control_rate_hz 1e-6", lambda d, t: _robot(d).update(control_rate_hz=1e-6), "control_rate_hz"),
     InputCase("limits.max_yaw_rate 1e308", lambda d, t: _robot(d).update(limits={"max_yaw_rate": BIG}), "max_yaw_rate"),
@@ -257,6 +276,11 @@ FILE_REF_CASES: list[InputCase] = _category('files and images', [
               lambda d, t: d.update(world={"ground": {"image": _png_bomb(t)}}), "world.ground.image"),
     InputCase("target image a PNG bomb (header 100000 x 100000 px)",
               lambda d, t: d.update(world={"targets": [{**_target(t), "image": _png_bomb(t)}]}), "world.targets.0.image"),
+    # issue 47 item 5: refused by the camera actor, after Ray had started
+    InputCase("camera source mcap naming a file that is not MCAP",
+              lambda d, t: _cam(d).update(_replay_camera(t, False)), "robots.0.sensors.0.properties.mcap"),
+    InputCase("camera source mcap naming a recording without its topic",
+              lambda d, t: _cam(d).update(_replay_camera(t, True)), "robots.0.sensors.0.properties.topic"),
 ])
 
 #: environment cases of category 'HITL settings'
