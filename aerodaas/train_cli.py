@@ -163,8 +163,8 @@ def _on_ray(cfg, data, address: str | None) -> int:
         metrics = train_on_ray(cfg)
     finally:
         shutdown_ray()
-    print(f"Ray Train job finished: epoch {metrics.get('epoch')}, mean AP50 {metrics.get('mean_ap50')}; "
-          f"checkpoints in {cfg.out}", file=sys.stderr)
+    print(f"Ray Train job finished ({cfg.workers} workers); checkpoints in {cfg.out}"
+          + (f"; last mean AP50 {metrics['mean_ap50']:.3f}" if "mean_ap50" in metrics else ""), file=sys.stderr)
     trainer = Trainer(cfg, data, build_model(cfg, data.names))
     trainer.restore(torch.load(Path(cfg.out) / "last.pt", weights_only=False))
     report = export_run(cfg, trainer, started)

@@ -247,7 +247,7 @@ def test_make_detector(monkeypatch):
 # --------------------------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", sorted(MODELS))
+@pytest.mark.parametrize("name", sorted(n for n, spec in MODELS.items() if not spec.packaged))
 def test_resolve_model_from_env_dir(monkeypatch, name):
     monkeypatch.setenv("AERODAAS_MODEL_DIR", str(_need(MODELS_DIR)))
     p = resolve_model(name, allow_download=False)

@@ -364,7 +364,8 @@ def test_camera_source_config(tmp_path, monkeypatch):
         RobotConfig(id="d1", sensors=[SensorConfig(id="c", type="camera", properties={"source": "backend"})])
 
     (tmp_path / "rec").mkdir()
-    (tmp_path / "rec" / "flight.mcap").write_bytes(b"")
+    with McapRecorder(tmp_path / "rec" / "flight.mcap", jpeg_quality=80) as rec:  # checked before Ray: a real one
+        rec.write_image("/d1/camera/cam", T0, _frame(0))
     monkeypatch.setenv("AERODAAS_DATA_DIR", str(tmp_path))
     env = {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera",
                                                 "properties": {"source": "mcap", "mcap": "rec/flight.mcap"}}]}]}

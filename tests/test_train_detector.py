@@ -176,3 +176,21 @@ def test_split_by_sequence_never_splits_a_video(tmp_path):
         assert val and train
         assert not {it.sequence for it in train} & {it.sequence for it in val}
         assert len(train) + len(val) == len(items)
+
+
+@needs_data
+@pytest.mark.cluster
+def test_workers_run_the_same_training_as_a_ray_train_job(tmp_path):
+    """`--workers 2`: a Ray Train TorchTrainer job of two DDP workers on a local Ray (slow: Ray and two PyTorch
+    worker processes start); rank 0 writes the checkpoints, the driver exports and checks the model."""
+    if importlib.util.find_spec("torch") is None or importlib.util.find_spec("ray.train") is None:
+        skip_or_fail('the [train] extra (PyTorch, ray[train]) is not installed: pip install -e ".[train]"')
+    data = _draw_set(tmp_path / "set")
+    out = tmp_path / "run"
+    r = _train("--data", str(data), "--val", str(data), "--out", str(out), "--workers", "2", *SMOKE)
+    assert r.returncode == 0, r.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["config"]["workers"] == 2
+    assert [h["epoch"] for h in report["history"]] == [0]
+    assert report["export"]["max_abs_diff"] <= 1e-3
+    assert "world_size=2" in r.stderr + r.stdout  # Ray Train's own line: both workers joined the process group

@@ -153,12 +153,18 @@ def _download(spec: ModelSpec, dest_dir: pathlib.Path, timeout: float = 60.0) ->
     return dest
 
 
-def resolve_model(
-    name: str = "yolox_nano",
-    path: str | os.PathLike | None = None,
-    *,
-    allow_download: bool = True,
-) -> pathlib.Path:
+def _packaged_file(name: str, spec: ModelSpec) -> pathlib.Path:
+    """The file of a model installed with the package, sha256-verified. Raises ModelNotFoundError when it is
+    missing (a broken install), ModelChecksumError when its bytes differ."""
+    cand = PACKAGED_MODELS_DIR / spec.file
+    if not cand.is_file():
+        raise ModelNotFoundError(f"model {name!r}: {cand} is missing from the installed package; reinstall aerodaas")
+    _verify(cand, spec)
+    return cand
+
+
+def resolve_model(name: str = "yolox_nano", path: str | os.PathLike | None = None, *,
+                  allow_download: bool = True) -> pathlib.Path:
     """Locate the ONNX file of model ``name`` (a key of :data:`MODELS`, or ``"yolox"``/``"nanodet"``); return its path.
 
     Search order (a model shipped inside the package, ``ModelSpec.packaged``, is only looked up there, and
@@ -192,12 +198,7 @@ def resolve_model(
 
     searched: list[str] = []
     if spec.packaged:  # installed with the package: always there, always verified
-        cand = PACKAGED_MODELS_DIR / spec.file
-        if not cand.is_file():
-            raise ModelNotFoundError(f"model {name!r}: {cand} is missing from the installed package; reinstall "
-                                     f"aerodaas")
-        _verify(cand, spec)
-        return cand
+        return _packaged_file(name, spec)
     env_dir = os.environ.get(MODEL_DIR_ENV)
     if env_dir:
         cand = pathlib.Path(env_dir).expanduser() / spec.file
