@@ -160,7 +160,7 @@ class Trainer:
                 "history": [asdict(h) for h in self.history], "names": self.data.names,
                 "class_rows": self.model.class_rows, "config": self.cfg.model_dump(mode="json")}
 
-    def restore(self, state: dict) -> None:  # noqa: D401
+    def restore(self, state: dict) -> None:
         """Continue from :meth:`state` (raises ValueError when the checkpoint's classes differ)."""
         if state["names"] != self.data.names:
             raise ValueError(f"--resume: the checkpoint's classes {state['names']} differ from {self.data.names}")
@@ -170,7 +170,6 @@ class Trainer:
         self.opt.load_state_dict(state["opt"])
         self.rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"])
-        self.start_epoch = state["epoch"]
         self.best = state["best"]
         self.history = [EpochResult(**{**h, "metrics": [ClassMetrics(**m) for m in h["metrics"]]})
                         for h in state["history"]]
