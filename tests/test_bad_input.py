@@ -338,7 +338,16 @@ def test_reliability_issue_40_cases(tmp_path):
     from aerodaas.reliability.app_cases import run_app_cases
 
     rows = run_app_cases(tmp_path)
-    assert len(rows) == 28
+    names = [r["name"] for r in rows]
+    keys = [(r["category"], r["name"]) for r in rows]
+    assert len(keys) == len(set(keys)), keys  # each case once
+    # the cases this test's docstring names are all there (the catalogue grows: issue 47 item 10 added 7 rows)
+    for needed in ('Waypoint(x="1") (a string)', "an empty navigation",
+                   "50,000 pre-planned waypoints (max_queued_items 5000)", "a NaN waypoint built with model_construct",
+                   "backend from a module that does not exist", "--record names the application itself",
+                   "QGC WPL numbered 1, 1, 5", "inject --token starting with '-'",
+                   "analytics.deploy(\"edge\") (a name, not a compute resource)"):
+        assert needed in names, (needed, names)
     assert [(r["name"], r["message"][:300]) for r in rows if not r["refused"] or r.get("traceback")] == []
     assert {r["category"] for r in rows} == {"strict types", "bounds / cross-field", "app-level errors",
                                              "output paths", "plug-in imports", "mission files", "safety gate",
