@@ -22,7 +22,8 @@ from aerodaas.backends.mavlink.transfer import MissionTransfer
 
 #: MAV_FRAME_GLOBAL_RELATIVE_ALT and its _INT twin: altitudes above home
 _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
-#: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins), at most
+#: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins): ArduPilot at
+#: most this, PX4 the item's own acceptance radius (see AutopilotMission._remember_waypoints); without one, this
 _ARRIVAL_RADIUS_M = 0.5
 
 
@@ -186,11 +187,17 @@ class AutopilotMission:
         radius by wire sequence number, for the arrival report (:meth:`_check_arrival`)."""
         wps = {}
         first = 1 if self._vehicle.autopilot == "ardupilot" else 0
+        # PX4 starts an item's hold when its own reached check passes: horizontal distance within the item's
+        # acceptance radius (navigator mission_block.cpp is_mission_item_reached, Navigator::get_acceptance_radius),
+        # so its arrival radius is that one; stock PX4 SIH then holds 0.6-0.7 m from the waypoint at times and never
+        # came within 0.5 m at one corner of a CI run (no arrival, so the hold had no start). ArduCopter's at most
+        # _ARRIVAL_RADIUS_M
+        px4 = self._vehicle.autopilot == "px4"
         for seq, (frame, cmd, _auto, _p1, p2, _p3, _p4, xi, yi, _z) in enumerate(wire):
             if seq >= first and cmd == M.MAV_CMD_NAV_WAYPOINT and frame in _GLOBAL_FRAMES:
                 e, n, _ = geodetic_to_enu(xi / 1e7, yi / 1e7, self._vehicle.home.alt, self._vehicle.home)
-                radius = p2 if p2 is not None and p2 == p2 and p2 > 0 else _ARRIVAL_RADIUS_M
-                wps[seq] = (float(e), float(n), min(float(radius), _ARRIVAL_RADIUS_M))
+                radius = float(p2) if p2 is not None and p2 == p2 and p2 > 0 else _ARRIVAL_RADIUS_M
+                wps[seq] = (float(e), float(n), radius if px4 else min(radius, _ARRIVAL_RADIUS_M))
         with self._lock:
             self._waypoints = wps
             self._next = (frozenset(k for k, w in enumerate(wire) if w[2]), len(wire))
@@ -210,6 +217,12 @@ class AutopilotMission:
         got = self._transfers.download_messages(0, "mission download")
         items = []
         first = 1 if self._vehicle.autopilot == "ardupilot" else 0
+        # PX4 starts an item's hold when its own reached check passes: horizontal distance within the item's
+        # acceptance radius (navigator mission_block.cpp is_mission_item_reached, Navigator::get_acceptance_radius),
+        # so its arrival radius is that one; stock PX4 SIH then holds 0.6-0.7 m from the waypoint at times and never
+        # came within 0.5 m at one corner of a CI run (no arrival, so the hold had no start). ArduCopter's at most
+        # _ARRIVAL_RADIUS_M
+        px4 = self._vehicle.autopilot == "px4"
         for seq in sorted(got):
             if seq < first:
                 continue
