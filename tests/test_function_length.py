@@ -1,4 +1,5 @@
-"""No production function is 80 lines or longer (issue 39, item 5: units a person can hold in mind).
+"""No production function is 80 lines or longer (issue 39, item 5: units a person can hold in mind), and no module
+over 600 lines (issue 48 item 4).
 
 Parses every ``.py`` file of ``aerodaas/``, ``actors/``, ``schedulers/`` and ``clusters/`` with :mod:`ast` and
 measures each function and method (nested ones too) from its ``def`` line to its last line, docstring and
@@ -65,3 +66,32 @@ def test_the_measure_counts_a_long_function():
     src = "class C:\n    def f(self):\n" + "        x = 1\n" * 79 + "    def g(self):\n" + "        y = 2\n" * 78
     found = dict(_functions(ast.parse(src)))
     assert found == {"C.f": 80, "C.g": 79}
+
+
+#: a production module longer than this fails (the developers' guide: no module over 600 lines)
+MAX_MODULE_LINES = 600
+
+
+def _long_modules(root: Path = ROOT, limit: int = MAX_MODULE_LINES) -> dict[str, int]:
+    """Line count of every ``.py`` module of :data:`PACKAGES` under ``root`` longer than ``limit``."""
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((root / pkg).rglob("*.py")):
+            n = len(path.read_text(encoding="utf-8").splitlines())
+            if n > limit:
+                out[path.relative_to(root).as_posix()] = n
+    return out
+
+
+def test_no_module_is_over_600_lines():
+    long = _long_modules()
+    assert not long, ("modules over 600 lines (split them where their concepts end): "
+                      + "; ".join(f"{p} ({n} lines)" for p, n in sorted(long.items())))
+
+
+def test_the_module_measure_counts_a_long_module(tmp_path):
+    """The measure itself: a 601-line module of a package is found, a 600-line one is not."""
+    (tmp_path / "aerodaas").mkdir()
+    (tmp_path / "aerodaas" / "long.py").write_text("x = 1\n" * 601)
+    (tmp_path / "aerodaas" / "fits.py").write_text("x = 1\n" * 600)
+    assert _long_modules(tmp_path) == {"aerodaas/long.py": 601}

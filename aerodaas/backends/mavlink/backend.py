@@ -15,6 +15,7 @@ from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
 from aerodaas.backends.mavlink.action import Readiness, VehicleAction
+from aerodaas.backends.mavlink.camera import CameraFinder
 from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.fence import AutopilotFence
@@ -169,9 +170,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
                                     transfers=self.transfers, autopilot=lambda: self.autopilot,
                                     vehicle_time=lambda: self.t, check_link=self.link.check_link, event=self._event)
-        from aerodaas.backends.mavlink.camera import CameraFinder
-
-        self._cameras = CameraFinder(self._request_of)  # camera protocol v2 (camera.py), fed by link.py dispatch
+        self._cameras = CameraFinder(self.link)  # camera protocol v2 (camera.py), fed by link.py dispatch
         #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
         self.gimbal = GimbalConcern(self, cfg.gimbal)
         self.link.handlers = self._message_handlers()
@@ -584,13 +583,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         when the link is down."""
         self.link.check_link("camera discovery")
         return self._cameras.discover(request, self.link.target[1])
-
-    def _request_of(self, component: int, command: int, params: tuple) -> None:
-        """COMMAND_LONG ``command`` to ``component`` of the vehicle's system, not waited for (its answer is a
-        message: camera.py)."""
-        p = [float(x) for x in params] + [0.0] * (7 - len(params))
-        sysid = self.link.target[0]
-        self.link.send(lambda mav: mav.command_long_send(sysid, component, command, 0, *p))
 
     # the gimbal (aerodaas.backends.mavlink.gimbal.GimbalConcern)
     def point_gimbal(self, cmd: Any) -> None:

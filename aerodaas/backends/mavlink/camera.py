@@ -16,7 +16,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 from aerodaas.backends.mavlink._common import M, _enum_name
 from aerodaas.video.discovery import (DiscoveredStream, StreamDiscoveryError, StreamRequest, VideoStreamType, codec_of,
@@ -31,8 +31,13 @@ WATCHED = frozenset({"HEARTBEAT", "CAMERA_INFORMATION", "VIDEO_STREAM_INFORMATIO
 _REQUESTS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_CAMERA_INFORMATION,
              M.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION}
 
-#: sends COMMAND_LONG ``command`` with ``params`` to component ``component`` of the vehicle, without waiting
-RequestSender = Callable[[int, int, tuple], None]
+class CameraLink(Protocol):
+    """What the finder needs of the vehicle's link (link.py :class:`MavlinkLink`): ``send(fn)`` calls ``fn`` with
+    the pymavlink ``MAVLink`` object on the I/O side, ``target`` is the vehicle's (system id, component id)."""
+
+    target: tuple[int, int]
+
+    def send(self, fn: Callable[[Any], Any]) -> None: ...
 
 
 def _text(value: Any) -> str:
@@ -59,13 +64,20 @@ class _Camera:
 
 class CameraFinder:
     """The cameras of one vehicle's system. :meth:`on_message` takes every message of the system (the backend's I/O
-    thread); :meth:`discover` (the caller's thread) asks and waits. ``send`` sends a request to a component."""
+    thread); :meth:`discover` (the caller's thread) asks and waits; requests go out on ``link``."""
 
-    def __init__(self, send: RequestSender) -> None:
-        self._send = send
+    def __init__(self, link: CameraLink) -> None:
+        self._link = link
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._cams: dict[int, _Camera] = {}
+
+    def _request(self, component: int, command: int, params: tuple) -> None:
+        """COMMAND_LONG ``command`` with ``params`` (zero-padded to 7) to ``component`` of the vehicle's system, not
+        waited for: the answer is a message (:meth:`on_message`)."""
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        sysid = self._link.target[0]
+        self._link.send(lambda mav: mav.command_long_send(sysid, component, command, 0, *p))
 
     def on_message(self, msg: Any) -> None:
         """Take a message of the vehicle's system (any component): camera HEARTBEATs, CAMERA_INFORMATION,
@@ -152,11 +164,11 @@ class CameraFinder:
         dedicated requests on odd ones."""
         sid = float(stream_id or 0)
         if attempt % 2 == 0:
-            self._send(comp, M.MAV_CMD_REQUEST_MESSAGE, (float(M.MAVLINK_MSG_ID_CAMERA_INFORMATION),))
-            self._send(comp, M.MAV_CMD_REQUEST_MESSAGE, (float(M.MAVLINK_MSG_ID_VIDEO_STREAM_INFORMATION), sid))
+            self._request(comp, M.MAV_CMD_REQUEST_MESSAGE, (float(M.MAVLINK_MSG_ID_CAMERA_INFORMATION),))
+            self._request(comp, M.MAV_CMD_REQUEST_MESSAGE, (float(M.MAVLINK_MSG_ID_VIDEO_STREAM_INFORMATION), sid))
         else:
-            self._send(comp, M.MAV_CMD_REQUEST_CAMERA_INFORMATION, (1.0,))
-            self._send(comp, M.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION, (sid,))
+            self._request(comp, M.MAV_CMD_REQUEST_CAMERA_INFORMATION, (1.0,))
+            self._request(comp, M.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION, (sid,))
 
     def _choice(self, request: StreamRequest, autopilot: int, now: float) -> DiscoveredStream | None:
         """The stream to read, once decided (lock held): the first candidate in order that announced a matching
