@@ -25,6 +25,8 @@ PACKAGE_DIRS = {"aerodaas": ROOT / "aerodaas", "aerodaas.actors": ROOT / "actors
 #: the top layer: the public API (``from aerodaas import *``) and the command line
 TOP = "aerodaas (top)"
 TOP_MODULES = {"aerodaas", "aerodaas.cli", "aerodaas.__main__"}
+#: the sub-packages that belong to the top layer: the sub-commands (one module each, aerodaas/commands/)
+TOP_PACKAGES = {"commands"}
 #: entry points of their own above the top layer, imported by nothing in production: the bad-input and fault
 #: catalogue (``python -m aerodaas.reliability``) drives the command line in-process as a user would
 ENTRY_POINTS = {"reliability"}
@@ -49,8 +51,8 @@ def production_modules() -> dict[str, Path]:
 
 MODULES = production_modules()
 #: the sub-packages: the package folders in ``aerodaas/`` and the three installed from the repository's top level
-SUBPACKAGES = sorted({d.name for d in (ROOT / "aerodaas").iterdir() if (d / "__init__.py").is_file()}
-                     | {"actors", "schedulers", "clusters"})
+SUBPACKAGES = sorted(({d.name for d in (ROOT / "aerodaas").iterdir() if (d / "__init__.py").is_file()}
+                      | {"actors", "schedulers", "clusters"}) - TOP_PACKAGES)
 
 
 def layer_of(module: str) -> str | None:
@@ -59,7 +61,7 @@ def layer_of(module: str) -> str | None:
     parts = module.split(".")
     if parts[0] != "aerodaas":
         return None
-    if len(parts) == 1 or module in TOP_MODULES:
+    if len(parts) == 1 or module in TOP_MODULES or parts[1] in TOP_PACKAGES:
         return TOP
     if parts[1] in SUBPACKAGES:
         return parts[1]

@@ -1,0 +1,61 @@
+"""``aerodaas inject``: waypoints into a running mission through the human-in-the-loop API."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+def parse_waypoint(text: str) -> dict:
+    """``x,y,z[,hover]`` (ENU metres from home, hover seconds) -> a waypoint request dict."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (3, 4):
+        raise argparse.ArgumentTypeError(f"--waypoint expects x,y,z[,hover] (metres, seconds), got {text!r}")
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--waypoint expects numbers x,y,z[,hover], got {text!r}") from None
+    wp = {"x": vals[0], "y": vals[1], "z": vals[2]}
+    if len(vals) == 4:
+        wp["hover_duration"] = vals[3]
+    return wp
+
+
+def run(args: argparse.Namespace) -> int:
+    """``aerodaas inject``: POST the waypoints to the running mission's human-in-the-loop API
+    (:func:`aerodaas.tools.hitl.request`). Exit 0, 1 when the API refuses them (its HTTP status and reason), 2 when
+    it cannot be reached or no token is known."""
+    from aerodaas.tools.hitl import request
+
+    body: dict = {"waypoints": args.waypoint, "scheduling_type": "ORDERED" if args.ordered else "UNORDERED"}
+    if args.index is not None:
+        body["index"] = args.index
+    if args.priority is not None:
+        body["priority"] = args.priority
+    try:
+        status, out = request("POST", f"/drones/{args.drone}/waypoints", body, url=args.url, token=args.token)
+    except RuntimeError as e:
+        print(f"aerodaas inject: {e}", file=sys.stderr)
+        return 2
+    if status != 200:
+        detail = out.get("detail") if isinstance(out, dict) else out
+        if isinstance(detail, list):
+            detail = "; ".join(f"{'.'.join(str(x) for x in d.get('loc', []))}: {d.get('msg')}" for d in detail)
+        print(f"aerodaas inject: HTTP {status}: {detail}", file=sys.stderr)
+        return 1
+    print(json.dumps(out, indent=2) if args.json else f"queued {', '.join(out['added'])} for {args.drone}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    """``aerodaas inject --drone ID --waypoint x,y,z[,hover] ...``."""
+    j = sub.add_parser("inject", help="add waypoints to a running mission through the human-in-the-loop API")
+    j.add_argument("--drone", required=True, help="robot id")
+    j.add_argument("--waypoint", required=True, action="append", type=parse_waypoint,
+                   help="x,y,z[,hover]: ENU metres from home and hover seconds (repeatable)")
+    j.add_argument("--index", type=int, help="insert at this index of the mission (default: append and re-plan)")
+    j.add_argument("--priority", type=int, help="mission priority (lower wins; default 2)")
+    j.add_argument("--ordered", action="store_true", help="keep the given order (default: let the scheduler order)")
+    j.add_argument("--url", help="API url (default: $AERODAAS_HITL_URL or the running server's state file)")
+    j.add_argument("--token", help="bearer token (default: $AERODAAS_HITL_TOKEN or the state file)")
+    j.add_argument("--json", action="store_true", help="print the API's JSON reply")
+    j.set_defaults(func=run)
