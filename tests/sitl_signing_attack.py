@@ -1,21 +1,22 @@
 """The helpers of tests/test_sitl_signing.py run inside the firmware's network namespace (``python -m
 tests.sitl_signing_attack ...``): a control probe, an observer of the firmware's own telemetry, and the attacker.
 
-- ``probe ATTACK_AT OUT.json``: without a key, over ``ATTACK_AT`` (another serial port of the firmware), a
-  MAV_CMD_REQUEST_MESSAGE and a PARAM_REQUEST_READ of ``WPNAV_SPEED``; writes the COMMAND_ACKs and PARAM_VALUEs
-  answered (the control: before provisioning, unsigned messages on that port are taken).
+- ``probe ATTACK_AT OUT.json [no]``: without a key, over ``ATTACK_AT`` (another serial port of the firmware), a
+  MAV_CMD_REQUEST_MESSAGE and a PARAM_REQUEST_READ of ``WPNAV_SPEED`` (unless ``no``); writes the COMMAND_ACKs and
+  PARAM_VALUEs answered and whether each HEARTBEAT was signed (the control: before provisioning, unsigned messages
+  on that port are taken).
 - ``watch WATCH_AT ATTACK_AT SPOOF_AT OUT.json STOP_FILE``: watches the firmware's own telemetry on ``WATCH_AT``
   (ArduCopter's serial0, channel 0, which the firmware treats as its secure USB port: GCS_Signing.cpp
   ``accept_unsigned_callback``, so the observer needs no key) until ``STOP_FILE`` exists, recording a timeline of
-  (firmware seconds, armed, mode, relative altitude, whether the HEARTBEAT was signed) and every ``WPNAV_SPEED`` PARAM_VALUE. It starts the attacker
-  (below) at once, and releases it when the vehicle is armed and more than 1 m up; after the attack it reads
-  ``WPNAV_SPEED`` back. OUT.json: the timeline, the attack's start and end in firmware seconds, the attacker's
-  output, the parameter values seen.
+  (firmware seconds, armed, mode, relative altitude, whether the HEARTBEAT was signed) and every ``WPNAV_SPEED``
+  PARAM_VALUE. It starts the attacker (below) at once, and releases it when the vehicle is armed and more than 1 m
+  up; after the attack it reads ``WPNAV_SPEED`` back. OUT.json: the timeline, the attack's start and end in
+  firmware seconds, the attacker's output, the parameter values seen.
 - ``attack ATTACK_AT SPOOF_AT``: another process without the key, speaking as system 255 component 190 (the ids
-  our backend uses) over ``ATTACK_AT``: 5 rounds 0.2 s apart of a forced disarm, MAV_CMD_DO_FLIGHTTERMINATION,
+  our backend uses) over ``ATTACK_AT``: 5 rounds 0.1 s apart of a forced disarm, MAV_CMD_DO_FLIGHTTERMINATION,
   DO_SET_MODE LAND, PARAM_SET WPNAV_SPEED 1234 and a harmless MAV_CMD_REQUEST_MESSAGE (the probe's), and onto our
   backend's own port ``SPOOF_AT``, in the vehicle's name (system 1, component 1), a GLOBAL_POSITION_INT 100 m north
-  of home and a SYS_STATUS at 5 % battery; then it collects for 2 s every COMMAND_ACK and PARAM_VALUE answered and
+  of home and a SYS_STATUS at 5 % battery; then it collects for 1.5 s every COMMAND_ACK and PARAM_VALUE answered and
   prints them as JSON."""
 from __future__ import annotations
 
@@ -36,8 +37,9 @@ def _connect(address: str, system: int = 255, component: int = 190):
     os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil
 
+    # retries: a TCP port of a firmware still starting on a loaded machine (pymavlink tries every second)
     return mavutil.mavlink_connection(address, source_system=system, source_component=component,
-                                      dialect="ardupilotmega")
+                                      dialect="ardupilotmega", retries=120)
 
 
 def _answers(conn, until: float) -> dict:
@@ -59,17 +61,19 @@ def _answers(conn, until: float) -> dict:
     return {"acks": acks, "params": params, "signed_heartbeats": beats}
 
 
-def probe(attack_at: str, out: str) -> None:
+def probe(attack_at: str, out: str, param: str = "yes") -> None:
+    """``param`` "no": no parameter read (PX4 has no ``WPNAV_SPEED``)."""
     conn = _connect(attack_at)
     got: dict = {"acks": [], "params": [], "signed_heartbeats": []}
-    for _ in range(10):  # until both answered (the firmware may still be starting)
+    for _ in range(10):  # until answered (the firmware may still be starting)
         conn.mav.command_long_send(1, 1, PROBE_CMD[0], 0, PROBE_CMD[1], 0, 0, 0, 0, 0, 0)
-        conn.mav.param_request_read_send(1, 1, PARAM.encode(), -1)
+        if param == "yes":
+            conn.mav.param_request_read_send(1, 1, PARAM.encode(), -1)
         a = _answers(conn, time.monotonic() + 1.0)
         got["acks"] += a["acks"]
         got["params"] += a["params"]
         got["signed_heartbeats"] += a["signed_heartbeats"]
-        if got["acks"] and got["params"]:
+        if got["acks"] and (got["params"] or param != "yes"):
             break
     Path(out).write_text(json.dumps(got))
 
@@ -95,8 +99,8 @@ def attack(attack_at: str, spoof_at: str) -> None:
             spoof.mav.global_position_int_send(t_ms + 50 * (4 * i + k), lat, int(FARM_HOME["lon"] * 1e7),
                                                int((FARM_HOME["alt"] + 30.0) * 1000), 30_000, 0, 0, 0, 0)
             spoof.mav.sys_status_send(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)
-        time.sleep(0.2)
-    print(json.dumps(_answers(conn, time.monotonic() + 2.0)), flush=True)
+        time.sleep(0.1)
+    print(json.dumps(_answers(conn, time.monotonic() + 1.5)), flush=True)
 
 
 def watch(watch_at: str, attack_at: str, spoof_at: str, out: str, stop_file: str) -> None:

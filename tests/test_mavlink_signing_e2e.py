@@ -40,6 +40,7 @@ def _signed_survey(tmp_path, vehicle_key: bytes, key_file_key: bytes, connect_ti
 #: :data:`tests.test_mavlink_signing.SPOOFER`'s messages from a process started (and connected) before the flight
 #: that sends them when told to (a line on its stdin): the attack does not wait for a Python start-up in flight
 READY_SPOOFER = SPOOFER.replace("m = conn.mav\n", "m = conn.mav\nprint('ready', flush=True)\nsys.stdin.readline()\n")
+assert READY_SPOOFER != SPOOFER, "tests.test_mavlink_signing.SPOOFER no longer has the line to wait after"
 
 
 class _Attack(threading.Thread):

@@ -31,7 +31,7 @@ def test_the_shared_px4_build_does_not_sign_and_setup_says_so(tmp_path):
                                                sitl.connection("px4"), "--key-file", key, "--secure-link",
                                                "--timeout", str(SETUP_TIMEOUT_S)])
     probe = (f"{shlex.quote(sys.executable)} -m tests.sitl_signing_attack probe {sitl.monitor_connection('px4')} "
-             f"{shlex.quote(str(tmp_path / 'probe.json'))}")
+             f"{shlex.quote(str(tmp_path / 'probe.json'))} no")
     sitl.run_in_namespace("px4", tmp_path / "ns", [setup, probe], timeout_s=600)
     rc, text = sitl.step_result(tmp_path / "ns", 0)
     assert rc == 1, text[-3000:]
