@@ -111,10 +111,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     """``aerodaas replay FILE.mcap --live [HOST:PORT] [--speed K]``: serve a recording to Foxglove over WebSocket
     (:func:`aerodaas.liveview.server.replay`). Exit 0 when played to the end or stopped (Ctrl-C, SIGTERM), 2 for a bad file,
     address or speed."""
-    from aerodaas.liveview.server import check_bindable, parse_address, replay
+    from aerodaas.liveview.server import check_bindable, live_access, parse_address, replay, write_live_state
 
     try:
-        check_bindable(*parse_address(args.live))
+        host, port = parse_address(args.live)
+        check_bindable(host, port)
+        access = live_access(host, args.tls_cert, args.tls_key, bool(args.insecure))
         if not args.speed > 0:
             raise ValueError(f"--speed must be a positive number (1 = as recorded), got {args.speed!r}")
         if not Path(args.file).is_file():
@@ -129,11 +131,15 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     def ready(server) -> None:
         wait = "" if args.no_wait else "; playback starts when a client subscribes"
-        print(f"aerodaas replay: serving {args.file} at {server.url} ({args.speed:g}x){wait}", flush=True)
+        token = f"; token in {write_live_state(server.url, access)}, owner only" if access.token else ""
+        print(f"aerodaas replay: serving {args.file} at {server.url} ({args.speed:g}x){wait}{token}", flush=True)
+        if access.insecure:
+            print(f"aerodaas replay: WARNING: serving plain WebSocket off loopback ({server.url}, --insecure): the "
+                  f"recording can be read on the network", file=sys.stderr, flush=True)
 
     previous = signal.signal(signal.SIGTERM, on_sigterm)
     try:
-        out = replay(args.file, args.live, speed=args.speed, on_ready=ready,
+        out = replay(args.file, args.live, speed=args.speed, on_ready=ready, access=access,
                      wait_for_client_s=None if args.no_wait else float("inf"))
     except KeyboardInterrupt:
         print("aerodaas replay: stopped", file=sys.stderr, flush=True)
@@ -143,8 +149,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         return 2
     finally:
         signal.signal(signal.SIGTERM, previous)
-    print(f"aerodaas replay: {out['messages']} messages, {out['duration_s']:.1f} s of recording in {out['wall_s']:.1f} s",
-          flush=True)
+    insecure = "; INSECURE: served in clear text off loopback (--insecure)" if access.insecure else ""
+    print(f"aerodaas replay: {out['messages']} messages, {out['duration_s']:.1f} s of recording in {out['wall_s']:.1f} s"
+          f"{insecure}", flush=True)
     return 0
 
 
@@ -221,7 +228,8 @@ def _cmd_inject(args: argparse.Namespace) -> int:
     if args.priority is not None:
         body["priority"] = args.priority
     try:
-        status, out = request("POST", f"/drones/{args.drone}/waypoints", body, url=args.url, token=args.token)
+        status, out = request("POST", f"/drones/{args.drone}/waypoints", body, url=args.url, token=args.token,
+                              cafile=args.cacert)
     except RuntimeError as e:
         print(f"aerodaas inject: {e}", file=sys.stderr)
         return 2
@@ -352,6 +360,9 @@ def _add_recording_parsers(sub) -> None:
                     help="address to serve on (default 127.0.0.1:8765; port 0: any free port)")
     rp.add_argument("--speed", type=float, default=1.0, help="playback speed over the recorded time (default 1)")
     rp.add_argument("--no-wait", action="store_true", help="start at once instead of when a client subscribes")
+    rp.add_argument("--tls-cert", metavar="PEM", help="certificate (chain): serve WSS (needed off loopback)")
+    rp.add_argument("--tls-key", metavar="PEM", help="private key of --tls-cert (mode 0600)")
+    rp.add_argument("--insecure", action="store_true", help="serve plain WebSocket off loopback (no certificate)")
     rp.set_defaults(func=_cmd_replay)
     ly = sub.add_parser("layout", help="write a Foxglove layout (camera + detections, 3D, map, state, battery/altitude) "
                                        "for a recording")
@@ -387,6 +398,8 @@ def _add_tool_parsers(sub) -> None:
     j.add_argument("--ordered", action="store_true", help="keep the given order (default: let the scheduler order)")
     j.add_argument("--url", help="API url (default: $AERODAAS_HITL_URL or the running server's state file)")
     j.add_argument("--token", help="bearer token (default: $AERODAAS_HITL_TOKEN or the state file)")
+    j.add_argument("--cacert", metavar="PEM", help="certificate to trust for an https API (its self-signed certificate "
+                   "or its CA; default: $AERODAAS_HITL_CAFILE, the state file's, then the system's CAs)")
     j.add_argument("--json", action="store_true", help="print the API's JSON reply")
     j.set_defaults(func=_cmd_inject)
     pl = sub.add_parser("plot", help="draw a recording's figures (trajectory, battery/altitude, latency) as PNGs")

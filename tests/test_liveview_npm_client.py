@@ -92,6 +92,38 @@ def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_ever
     assert got["counts"] == {"/mission/plan": 3, "/uav/state": 5}, got
 
 
+def test_the_npm_client_reads_the_live_view_over_wss_with_the_token_and_nothing_without(node_client, tmp_path,
+                                                                                       monkeypatch):
+    """Issue 50 item 3: bound off loopback (all addresses) with a self-signed certificate made here and a token,
+    Foxglove's npm client (``ws`` over Node's TLS, the certificate trusted through ``NODE_EXTRA_CA_CERTS``) gets
+    every message with ``?token=`` in the URL; without the token it gets no channel at all (401 at the upgrade)."""
+    from aerodaas.clusters.tls import ServeAccess
+
+    from .tls_certs import self_signed
+
+    crt, key = self_signed(tmp_path)
+    monkeypatch.setenv("NODE_EXTRA_CA_CERTS", str(crt))
+    token = "npm-wss-token-0123456789"
+    srv = LiveServer("0.0.0.0:0", catchup_s=3600, access=ServeAccess(str(crt), str(key), token))
+    try:
+        for i in range(5):
+            srv.publish(RecordedMessage("/uav/state", "aerodaas.State", "jsonschema", b"{}", "json", 100 + i,
+                                        json.dumps({"i": i}).encode()))
+        refused = node_client(f"wss://127.0.0.1:{srv.port}", 8)
+        client = node_client(f"wss://127.0.0.1:{srv.port}/?token={token}", 60)
+        t_end = time.monotonic() + 60
+        while srv.subscriptions < 1 and time.monotonic() < t_end:
+            time.sleep(0.05)
+        out, _ = refused.communicate(timeout=60)
+    finally:
+        srv.stop(linger_s=1.0)
+    got = _finish(client)
+    assert got["protocol"] == "foxglove.websocket.v1", got
+    assert got["counts"] == {"/uav/state": 5}, got
+    no = json.loads(out)
+    assert refused.returncode == 3 and no["channels"] == {} and no["connections"] == [], no  # timed out, never in
+
+
 @pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="needs Linux scheduling policies")
 def test_channels_created_while_a_client_is_connected_reach_it_even_when_their_creator_is_preempted(node_client):
     """foxglove-sdk 0.30.3 queues a new channel's advertisement before it can accept a subscription to it
