@@ -150,8 +150,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     finally:
         signal.signal(signal.SIGTERM, previous)
     insecure = "; INSECURE: served in clear text off loopback (--insecure)" if access.insecure else ""
-    print(f"aerodaas replay: {out['messages']} messages, {out['duration_s']:.1f} s of recording in {out['wall_s']:.1f} s"
-          f"{insecure}", flush=True)
+    print(f"aerodaas replay: {out['messages']} messages, {out['duration_s']:.1f} s of recording in "
+          f"{out['wall_s']:.1f} s{insecure}", flush=True)
     return 0
 
 

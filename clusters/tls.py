@@ -17,20 +17,19 @@ import os
 import ssl
 import stat
 from dataclasses import dataclass, field
+from pathlib import Path
 
 __all__ = ["ServeAccess", "check_exposure", "check_tls_files", "is_loopback", "server_context", "state_dir",
            "write_private_json"]
 
 
-def state_dir() -> "Path":
+def state_dir() -> Path:
     """Where a running server hands its connection (url, token) to the clients of this user:
     ``$AERODAAS_STATE_DIR``, default ``~/.aerodaas``."""
-    from pathlib import Path
-
     return Path(os.environ.get("AERODAAS_STATE_DIR", Path.home() / ".aerodaas"))
 
 
-def write_private_json(path: "Path", data: dict) -> None:
+def write_private_json(path: Path, data: dict) -> None:
     """Write ``data`` as JSON to ``path`` readable and writable by its owner only (0600), whatever was there before:
     written to a new file created 0600 (never wider, not even for a moment), then renamed over ``path``. The
     folder is created 0700 when missing. Raises OSError."""

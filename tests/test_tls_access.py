@@ -275,6 +275,21 @@ def test_live_view_refuses_clients_without_the_token_or_tls(wss, certs):
     assert _handshake_status(f"{base}/?token=wrong-{TOKEN}", ctx) == 401
     assert _handshake_status(base, ctx, {"Authorization": "Bearer nope-nope-nope-nope"}) == 401
     # a client that does not trust the certificate, and a plain-text client, do not get a WebSocket at all
-    assert _handshake_status(f"{base}/?token={TOKEN}", ssl.create_default_context()) == "ClientConnectorCertificateError"
+    untrusted = _handshake_status(f"{base}/?token={TOKEN}", ssl.create_default_context())
+    assert untrusted == "ClientConnectorCertificateError", untrusted
     assert _handshake_status(f"ws://127.0.0.1:{wss.port}/?token={TOKEN}", False) != 101
     assert wss.subscriptions == 0
+
+
+@pytest.mark.e2e
+def test_insecure_serves_clear_text_off_loopback_and_the_summary_says_so(tmp_path):
+    """``--insecure`` and ``hitl.insecure``: the run serves plain WS and HTTP on every address (the live view still
+    asks its token off loopback), warns at start, and its summary repeats the choice for each server."""
+    app = _app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0, "insecure": True})
+    p, _ = _run_cli(tmp_path, "run", str(app), "--live", "0.0.0.0:0", "--insecure", "--quiet")
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    assert "human-in-the-loop API at http://0.0.0.0:" in p.stdout and "live view at ws://0.0.0.0:" in p.stdout
+    summary = p.stdout[p.stdout.index("mission outcome:"):]
+    assert "INSECURE: the HITL API at http://0.0.0.0:" in summary, summary
+    assert "INSECURE: the live view at ws://0.0.0.0:" in summary, summary
+    assert "WARNING: the live view serves plain WebSocket off loopback" in p.stderr, p.stderr[-2000:]

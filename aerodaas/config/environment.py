@@ -135,7 +135,8 @@ class HitlConfig(_Cfg):
     """Human-in-the-loop HTTP API (see :mod:`aerodaas.tools.hitl`). Loopback-only by default; ``token`` is the
     bearer token (generated at start when not given; either way handed over in the owner-only state file, never
     printed). ``port`` 0 picks a free port. Off loopback: HTTPS with ``tls_cert`` / ``tls_key`` (PEM files, relative
-    to this file or ``$AERODAAS_DATA_DIR``), or plain HTTP only with ``insecure: true`` (:mod:`aerodaas.clusters.tls`)."""
+    to this file or ``$AERODAAS_DATA_DIR``), or plain HTTP only with ``insecure: true``
+    (:mod:`aerodaas.clusters.tls`)."""
 
     enabled: bool = False
     host: str = "127.0.0.1"

@@ -473,7 +473,8 @@ def _analytics_edges(st: _PlanState, every: dict, inst: dict, consumers) -> list
 
 
 def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, record: str | None = None,
-               live: str | None = None, live_access: Any = None, scheduled: dict[int, Any] | None = None, epoch_ns: int = 0,
+               live: str | None = None, live_access: Any = None, scheduled: dict[int, Any] | None = None,
+               epoch_ns: int = 0,
                run_id: str | None = None, max_restarts: int | None = None) -> RunPlan:
     """Place the application's components on actors (see the module docstring) and compute every edge.
 
