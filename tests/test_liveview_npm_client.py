@@ -178,6 +178,43 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
 
 
+@pytest.mark.e2e
+def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, tmp_path, monkeypatch):
+    """Issue 50 item 3: ``aerodaas run --live 0.0.0.0:0 --tls-cert --tls-key`` (a self-signed certificate made
+    here); Foxglove's npm client, given the URL with the token from the owner-only state file and trusting the
+    certificate (``NODE_EXTRA_CA_CERTS``), receives every message of every channel the recording holds."""
+    from .tls_certs import self_signed
+
+    crt, key = self_signed(tmp_path)
+    monkeypatch.setenv("NODE_EXTRA_CA_CERTS", str(crt))
+    state = tmp_path / "state"
+    (tmp_path / "live.json").write_text(json.dumps(ENV))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(tmp_path / "live.json")))
+    rec = tmp_path / "run.mcap"
+    env = {k: v for k, v in os.environ.items() if k != "AERODAAS_LIVE_TOKEN"}
+    p, lines = _start([*AERODAAS, "run", str(app), "--record", str(rec), "--live", "0.0.0.0:0", "--tls-cert",
+                       str(crt), "--tls-key", str(key), "--quiet"], env={**env, "AERODAAS_STATE_DIR": str(state)})
+    try:
+        seen = ""
+        while "live view at" not in seen:
+            line = lines.get(timeout=240)
+            assert line, seen
+            seen += line
+        assert "live view at wss://0.0.0.0:" in seen, seen
+        info = json.loads((state / "live.json").read_text())
+        assert info["token"] not in seen
+        got = _finish(node_client(info["url_with_token"], 300), 320)
+        assert p.wait(timeout=240) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+    recorded = _recorded_counts(rec)
+    assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"], got
+    assert "/mission/result" in recorded
+    assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
+
+
 @pytest.mark.faults
 @pytest.mark.e2e
 def test_the_live_view_comes_back_at_the_same_url_after_the_recorder_actor_dies(node_client, tmp_path):
