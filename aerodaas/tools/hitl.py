@@ -8,7 +8,8 @@ deployment because Serve starts a controller and proxy actors (~2 more Ray worke
 a handful of low-rate requests per mission.
 
 Every request needs ``Authorization: Bearer <token>``; the token is given in ``environment.json``
-(``hitl.token``) or generated at start and printed once. A missing or wrong token gets 401, a malformed
+(``hitl.token``) or generated at start, and never printed (see the state file below). A missing or wrong token gets
+401, a malformed
 request or one outside the safety limits 422 (a waypoint id already queued too: checked and added under one
 lock per drone, so of concurrent requests with the same id exactly one is accepted) (NaN/Infinity, strings for numbers, unknown keys, ids over
 :data:`MAX_ID_CHARS` characters, more than :data:`MAX_WAYPOINTS_PER_REQUEST` waypoints, a planned tour whose leg
