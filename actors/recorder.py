@@ -65,7 +65,7 @@ class RecorderService(AnalyticsAccounting):
     def __init__(self, path: str | None, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
                  max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
                  live: str | None = None, homes: dict[str, Any] | None = None,
-                 declare: list[tuple[str, str]] | None = None) -> None:
+                 declare: list[tuple[str, str]] | None = None, live_access: Any = None) -> None:
         from aerodaas.model.types import GeoPoint
 
         self.homes = {r: GeoPoint.model_validate(h) for r, h in (homes or {}).items()}
@@ -73,6 +73,7 @@ class RecorderService(AnalyticsAccounting):
         self.path = path
         #: the live Foxglove WebSocket server (``live`` = its HOST:PORT), fed by the same writer
         self.live = None
+        self.live_access = live_access  # its TLS files and token (aerodaas.clusters.tls.ServeAccess), None: plain
         self._declared = [(topic, self.rec.declare_proto(topic, schema)) for topic, schema in declare or ()]
         if live is not None:
             try:
@@ -122,7 +123,7 @@ class RecorderService(AnalyticsAccounting):
 
         if self.live is not None:
             return self.live.url
-        live = LiveServer(address, name="aerodaas run")
+        live = LiveServer(address, name="aerodaas run", access=self.live_access)
         for topic, record in self._declared:
             live.advertise(topic, *record, "protobuf")
         self.live = live

@@ -84,7 +84,7 @@ class RecorderActor:
         self.losses.append(loss)
         try:
             self.recorder = RecorderService(str(path), rec.meta, max_pending_frames=64, homes=rec.homes,
-                                            declare=rec.declare)
+                                            declare=rec.declare, live_access=rec.live_access)
         except OSError as e:
             loss["error"] = f"{type(e).__name__}: {e}"
         finally:
@@ -132,7 +132,8 @@ class RecorderActor:
                         remove_stale_segments(rec.path)
                         self.segments = [str(rec.path)]
                     self.recorder = RecorderService(rec.path, rec.meta, live=rec.live, max_pending_frames=64,
-                                                    homes=rec.homes, declare=rec.declare)
+                                                    homes=rec.homes, declare=rec.declare,
+                                                    live_access=rec.live_access)
             finally:
                 self._set_up.set()
         live = getattr(self.recorder, "live", None)

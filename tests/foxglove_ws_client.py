@@ -30,7 +30,8 @@ SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
 _UNKNOWN_CHANNEL = re.compile(r"Unknown channel ID: (\d+)")
 
 
-async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_timeout_s: float) -> dict[str, Any]:
+async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_timeout_s: float, ssl: Any = True,
+                   headers: dict | None = None) -> dict[str, Any]:
     import aiohttp
 
     out: dict[str, Any] = {"server_info": None, "channels": {}, "messages": {t: [] for t in want}, "protocol": None,
@@ -41,7 +42,8 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
         t_conn = time.monotonic() + connect_timeout_s
         while True:  # the server may not listen yet
             try:
-                ws = await session.ws_connect(url, protocols=SUBPROTOCOLS, max_msg_size=0, compress=0)
+                ws = await session.ws_connect(url, protocols=SUBPROTOCOLS, max_msg_size=0, compress=0, ssl=ssl,
+                                              headers=headers)
                 break
             except aiohttp.ClientConnectorError:
                 if time.monotonic() > t_conn:
@@ -97,12 +99,15 @@ async def _collect(url: str, want: dict[str, int], timeout_s: float, connect_tim
     return out
 
 
-def collect(url: str, want: dict[str, int], timeout_s: float = 60.0, connect_timeout_s: float = 30.0) -> dict:
+def collect(url: str, want: dict[str, int], timeout_s: float = 60.0, connect_timeout_s: float = 30.0,
+            ssl: Any = True, headers: dict | None = None) -> dict:
     """Connect to ``url``, subscribe to every topic of ``want`` as soon as it is advertised, and gather messages
     until each topic has ``want[topic]`` of them, the server closes, or ``timeout_s`` passes. Returns
     ``{"server_info", "channels": {topic: advertised channel}, "messages": {topic: [(log_time_ns, bytes)]},
-    "protocol", "closed_by_server", "timeline": [(seconds since connect, "advertise" | "closed", topic)]}``."""
-    return asyncio.run(_collect(url, want, timeout_s, connect_timeout_s))
+    "protocol", "closed_by_server", "timeline": [(seconds since connect, "advertise" | "closed", topic)]}``.
+    ``ssl``: aiohttp's (an ``ssl.SSLContext`` trusting a test certificate for ``wss://``); ``headers``: extra request
+    headers (``Authorization``)."""
+    return asyncio.run(_collect(url, want, timeout_s, connect_timeout_s, ssl, headers))
 
 
 def schema_bytes(channel: dict) -> bytes:

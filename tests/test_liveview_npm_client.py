@@ -92,6 +92,38 @@ def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_ever
     assert got["counts"] == {"/mission/plan": 3, "/uav/state": 5}, got
 
 
+def test_the_npm_client_reads_the_live_view_over_wss_with_the_token_and_nothing_without(node_client, tmp_path,
+                                                                                       monkeypatch):
+    """Issue 50 item 3: bound off loopback (all addresses) with a self-signed certificate made here and a token,
+    Foxglove's npm client (``ws`` over Node's TLS, the certificate trusted through ``NODE_EXTRA_CA_CERTS``) gets
+    every message with ``?token=`` in the URL; without the token it gets no channel at all (401 at the upgrade)."""
+    from aerodaas.clusters.tls import ServeAccess
+
+    from .tls_certs import self_signed
+
+    crt, key = self_signed(tmp_path)
+    monkeypatch.setenv("NODE_EXTRA_CA_CERTS", str(crt))
+    token = "npm-wss-token-0123456789"
+    srv = LiveServer("0.0.0.0:0", catchup_s=3600, access=ServeAccess(str(crt), str(key), token))
+    try:
+        for i in range(5):
+            srv.publish(RecordedMessage("/uav/state", "aerodaas.State", "jsonschema", b"{}", "json", 100 + i,
+                                        json.dumps({"i": i}).encode()))
+        refused = node_client(f"wss://127.0.0.1:{srv.port}", 8)
+        client = node_client(f"wss://127.0.0.1:{srv.port}/?token={token}", 60)
+        t_end = time.monotonic() + 60
+        while srv.subscriptions < 1 and time.monotonic() < t_end:
+            time.sleep(0.05)
+        out, _ = refused.communicate(timeout=60)
+    finally:
+        srv.stop(linger_s=1.0)
+    got = _finish(client)
+    assert got["protocol"] == "foxglove.websocket.v1", got
+    assert got["counts"] == {"/uav/state": 5}, got
+    no = json.loads(out)
+    assert refused.returncode == 3 and no["channels"] == {} and no["connections"] == [], no  # timed out, never in
+
+
 @pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="needs Linux scheduling policies")
 def test_channels_created_while_a_client_is_connected_reach_it_even_when_their_creator_is_preempted(node_client):
     """foxglove-sdk 0.30.3 queues a new channel's advertisement before it can accept a subscription to it
@@ -143,6 +175,43 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
             p.kill()
     print("replay --live per-channel counts:", got["counts"])
     assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"]
+    assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
+
+
+@pytest.mark.e2e
+def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, tmp_path, monkeypatch):
+    """Issue 50 item 3: ``aerodaas run --live 0.0.0.0:0 --tls-cert --tls-key`` (a self-signed certificate made
+    here); Foxglove's npm client, given the URL with the token from the owner-only state file and trusting the
+    certificate (``NODE_EXTRA_CA_CERTS``), receives every message of every channel the recording holds."""
+    from .tls_certs import self_signed
+
+    crt, key = self_signed(tmp_path)
+    monkeypatch.setenv("NODE_EXTRA_CA_CERTS", str(crt))
+    state = tmp_path / "state"
+    (tmp_path / "live.json").write_text(json.dumps(ENV))
+    app = tmp_path / "app.py"
+    app.write_text(APP.format(env=str(tmp_path / "live.json")))
+    rec = tmp_path / "run.mcap"
+    env = {k: v for k, v in os.environ.items() if k != "AERODAAS_LIVE_TOKEN"}
+    p, lines = _start([*AERODAAS, "run", str(app), "--record", str(rec), "--live", "0.0.0.0:0", "--tls-cert",
+                       str(crt), "--tls-key", str(key), "--quiet"], env={**env, "AERODAAS_STATE_DIR": str(state)})
+    try:
+        seen = ""
+        while "live view at" not in seen:
+            line = lines.get(timeout=240)
+            assert line, seen
+            seen += line
+        assert "live view at wss://0.0.0.0:" in seen, seen
+        info = json.loads((state / "live.json").read_text())
+        assert info["token"] not in seen
+        got = _finish(node_client(info["url_with_token"], 300), 320)
+        assert p.wait(timeout=240) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+    recorded = _recorded_counts(rec)
+    assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"], got
+    assert "/mission/result" in recorded
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
 
 

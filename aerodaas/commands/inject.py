@@ -32,7 +32,8 @@ def run(args: argparse.Namespace) -> int:
     if args.priority is not None:
         body["priority"] = args.priority
     try:
-        status, out = request("POST", f"/drones/{args.drone}/waypoints", body, url=args.url, token=args.token)
+        status, out = request("POST", f"/drones/{args.drone}/waypoints", body, url=args.url, token=args.token,
+                              cafile=args.cacert)
     except RuntimeError as e:
         print(f"aerodaas inject: {e}", file=sys.stderr)
         return 2
@@ -57,5 +58,7 @@ def add_parser(sub) -> None:
     j.add_argument("--ordered", action="store_true", help="keep the given order (default: let the scheduler order)")
     j.add_argument("--url", help="API url (default: $AERODAAS_HITL_URL or the running server's state file)")
     j.add_argument("--token", help="bearer token (default: $AERODAAS_HITL_TOKEN or the state file)")
+    j.add_argument("--cacert", metavar="PEM", help="certificate to trust for an https API (its self-signed certificate "
+                   "or its CA; default: $AERODAAS_HITL_CAFILE, the state file's, then the system's CAs)")
     j.add_argument("--json", action="store_true", help="print the API's JSON reply")
     j.set_defaults(func=run)

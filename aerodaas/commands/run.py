@@ -29,10 +29,17 @@ def add_parser(sub) -> None:
     r.add_argument("--quiet", action="store_true", help="no live progress")
     r.add_argument("--dashboard", action="store_true",
                    help="start Ray's dashboard with the local Ray (127.0.0.1:8265): `ray list actors`, the actors view")
-    r.add_argument("--hitl", action="store_true", help="serve the human-in-the-loop API (token printed once)")
+    r.add_argument("--hitl", action="store_true", help="serve the human-in-the-loop API (its token in the owner-only "
+                   "state file $AERODAAS_STATE_DIR/hitl.json)")
     r.add_argument("--hitl-port", type=int, help="port of the human-in-the-loop API (0: any free port)")
     r.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
-                   help="serve the run to Foxglove over WebSocket (default 127.0.0.1:8765; port 0: any free port)")
+                   help="serve the run to Foxglove over WebSocket (default 127.0.0.1:8765; port 0: any free port; "
+                   "off loopback: WSS and a token, see --tls-cert)")
+    r.add_argument("--tls-cert", metavar="PEM", help="certificate (chain) of the HITL API and the live view: they "
+                   "serve HTTPS/WSS (needed to bind off loopback; over hitl.tls_cert)")
+    r.add_argument("--tls-key", metavar="PEM", help="private key of --tls-cert (mode 0600)")
+    r.add_argument("--insecure", action="store_true", help="let the HITL API and the live view serve in clear text "
+                   "off loopback without a certificate (the summary says so)")
     r.set_defaults(func=cmd_run)
 
 
@@ -49,14 +56,15 @@ def _run_options(args: argparse.Namespace) -> "RunOptions | int":
     except (ConfigError, ValueError) as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
-    live = None
+    live = access = None
     if args.live is not None:
-        from aerodaas.liveview.server import check_bindable, parse_address
+        from aerodaas.liveview.server import check_bindable, live_access, parse_address
 
         try:
             host, port = parse_address(args.live)
             if not args.address:  # local run: the edge host (which serves) is on this machine
                 check_bindable(host, port)
+            access = live_access(host, args.tls_cert, args.tls_key, bool(args.insecure))
         except ValueError as e:
             print(f"aerodaas run: {e}", file=sys.stderr)
             return 2
@@ -64,7 +72,8 @@ def _run_options(args: argparse.Namespace) -> "RunOptions | int":
     return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
                       overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
                       lockstep=True if args.lockstep else None, dashboard=bool(getattr(args, "dashboard", False)),
-                      progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live)
+                      progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live,
+                      live_access=access, tls_cert=args.tls_cert, tls_key=args.tls_key, insecure=bool(args.insecure))
 
 
 class _StopSignals:

@@ -133,13 +133,19 @@ class SimulationConfig(_Cfg):
 
 class HitlConfig(_Cfg):
     """Human-in-the-loop HTTP API (see :mod:`aerodaas.tools.hitl`). Loopback-only by default; ``token`` is the
-    bearer token (generated at start and printed once when not given). ``port`` 0 picks a free port."""
+    bearer token (generated at start when not given; either way handed over in the owner-only state file, never
+    printed). ``port`` 0 picks a free port. Off loopback: HTTPS with ``tls_cert`` / ``tls_key`` (PEM files, relative
+    to this file or ``$AERODAAS_DATA_DIR``), or plain HTTP only with ``insecure: true``
+    (:mod:`aerodaas.clusters.tls`)."""
 
     enabled: bool = False
     host: str = "127.0.0.1"
     port: int = Field(default=8470, ge=0, le=65535)
     token: str | None = Field(default=None, min_length=16, max_length=256)
     docs: bool = Field(default=False, description="serve /docs and /openapi.json (behind the bearer token)")
+    tls_cert: str | None = Field(default=None, min_length=1, description="PEM certificate (chain): serve HTTPS")
+    tls_key: str | None = Field(default=None, min_length=1, description="PEM private key of tls_cert (mode 0600)")
+    insecure: bool = Field(default=False, description="serve plain HTTP off loopback (the summary says so)")
 
     @field_validator("token")
     @classmethod

@@ -12,7 +12,10 @@ recorded bytes and log time. One serializer, two outputs: what Foxglove shows li
 * ``aerodaas replay FILE.mcap --live [HOST:PORT] [--speed K]``: :func:`replay` serves a recording at ``K`` times
   real time (log-time spacing kept), by default once a client has subscribed.
 
-The server binds loopback (``127.0.0.1:8765``) unless an address is given: the protocol has no authentication.
+The server binds loopback (``127.0.0.1:8765``) unless an address is given. The protocol has no authentication of
+its own: off loopback the front (:mod:`aerodaas.liveview.subprotocol`) serves ``wss://`` with the run's certificate
+and asks every client for a token (``access``: :class:`aerodaas.clusters.tls.ServeAccess`; :func:`live_access` builds
+it from the command line, before Ray starts).
 Clients may offer either subprotocol name, ``foxglove.sdk.v1`` (the SDK's) or ``foxglove.websocket.v1`` (Foxglove's
 ``@foxglove/ws-protocol`` client): :mod:`aerodaas.liveview.subprotocol` fronts the SDK server, which accepts only the
 first.
@@ -33,12 +36,14 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
+from aerodaas.clusters.tls import ServeAccess, check_exposure, is_loopback, state_dir, write_private_json
 from aerodaas.recording.writer import RecordedMessage
 
-__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LATCHED_SUFFIXES", "LiveServer", "check_bindable", "parse_address",
-           "replay"]
+__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LATCHED_SUFFIXES", "LiveServer", "check_bindable", "live_access",
+           "parse_address", "replay", "write_live_state"]
 
 #: topics ending so keep their latest message for late subscribers (ROS's "latched" topics)
 LATCHED_SUFFIXES = ("mission/plan", "camera_info", "calibration", "mission/result", "tracks/scene", "/fix")
@@ -96,6 +101,41 @@ def check_bindable(host: str, port: int, option: str = "--live") -> None:
         raise ValueError(f"{option}: cannot listen on {host}:{port} ({e.strerror or e})") from None
 
 
+def live_access(host: str, cert: str | None, key: str | None, insecure: bool, option: str = "--live") -> ServeAccess:
+    """The live view's access on ``host`` (:mod:`aerodaas.clusters.tls`): TLS with ``cert``/``key`` (checked), and a
+    token off loopback (``$AERODAAS_LIVE_TOKEN``, else generated: 32 random bytes, base64url) or whenever
+    ``$AERODAAS_LIVE_TOKEN`` is set. Raises ``ValueError`` naming the flag and value (no certificate off loopback
+    without ``--insecure``, a bad certificate or key file, a token in ``$AERODAAS_LIVE_TOKEN`` that is not 16 to 256
+    URL-safe characters)."""
+    import os
+    import re
+    import secrets
+
+    check_exposure(host, cert, key, insecure, option, "--tls-cert", "--tls-key", "--insecure")
+    token = os.environ.get("AERODAAS_LIVE_TOKEN") or None
+    if token is not None and not re.fullmatch(r"[A-Za-z0-9\-._~]{16,256}", token):
+        raise ValueError("AERODAAS_LIVE_TOKEN: 16 to 256 characters of A-Z a-z 0-9 - . _ ~ (it travels in a URL)")
+    if token is None and not is_loopback(host):
+        token = secrets.token_urlsafe(32)
+    return ServeAccess(cert, key, token, insecure and cert is None and not is_loopback(host))
+
+
+def write_live_state(url: str, access: ServeAccess) -> "Path":
+    """Hand the live view's connection to this user: ``$AERODAAS_STATE_DIR/live.json`` (mode 0600:
+    :func:`aerodaas.clusters.tls.write_private_json`) with ``url``, ``token``, ``url_with_token`` (what Foxglove's
+    "Open connection" takes) and ``cafile`` (the certificate to trust). Returns the file's path."""
+    import os
+    from urllib.parse import quote
+
+    f = state_dir() / "live.json"
+    for wildcard in ("://0.0.0.0:", "://[::]:"):  # bound on every address: a client here reaches it as localhost
+        url = url.replace(wildcard, "://localhost:")
+    write_private_json(f, {"url": url, "token": access.token, "pid": os.getpid(),
+                           "url_with_token": f"{url}/?token={quote(access.token or '', safe='')}",
+                           "cafile": os.path.abspath(access.cert_file) if access.cert_file else None})
+    return f
+
+
 class LiveServer:
     """A Foxglove WebSocket server (``foxglove-sdk``) publishing :class:`~aerodaas.recording.writer.RecordedMessage`\\ s.
 
@@ -107,6 +147,8 @@ class LiveServer:
     ``live_client_dropped`` event), so it never holds the run's end. ``playback_range`` (ns) announces a replay's time
     range; ``listener`` is told of subscriptions (``on_subscribe``/``on_unsubscribe``, a
     ``foxglove.websocket.ServerListener`` subset).
+
+    ``access``: TLS and the token clients must present (module docstring; None: plain, no token).
 
     Raises ``ValueError`` for a bad address and ``RuntimeError`` naming the address when the server cannot bind.
 
@@ -127,14 +169,15 @@ class LiveServer:
 
     def __init__(self, address: str | None = None, *, name: str = "aerodaas", backlog: int = 1024,
                  listener: Any = None, time_capability: bool = False, catchup_s: float = 5.0,
-                 catchup_messages: int = 256, catchup_bytes: int = 32 << 20, client_send_timeout_s: float = 10.0
-                 ) -> None:
+                 catchup_messages: int = 256, catchup_bytes: int = 32 << 20, client_send_timeout_s: float = 10.0,
+                 access: ServeAccess | None = None) -> None:
         import foxglove
         from foxglove.websocket import Capability
 
         from aerodaas.liveview.subprotocol import SubprotocolFront
 
         self.host, port = parse_address(address)
+        self.access = access or ServeAccess()
         self.client_send_timeout_s = float(client_send_timeout_s)
         self._foxglove = foxglove
         self._ctx = foxglove.Context()
@@ -161,7 +204,8 @@ class LiveServer:
             raise RuntimeError(f"live view: cannot start the foxglove-sdk server ({e})") from e
         try:
             self._front = SubprotocolFront(self.host, port, int(self._server.port),
-                                           send_timeout_s=client_send_timeout_s, on_drop=self._client_dropped)
+                                           send_timeout_s=client_send_timeout_s, on_drop=self._client_dropped,
+                                           context=self.access.context(), token=self.access.token)
         except OSError as e:
             self._server.stop()
             raise RuntimeError(f"live view: cannot serve on {self.host}:{port} ({e.strerror or e})") from e
@@ -172,9 +216,10 @@ class LiveServer:
 
     @property
     def url(self) -> str:
-        """``ws://HOST:PORT`` (what Foxglove's "Open connection" -> "Foxglove WebSocket" takes)."""
+        """``ws://HOST:PORT``, ``wss://`` with TLS (what Foxglove's "Open connection" -> "Foxglove WebSocket" takes;
+        with a token, add ``/?token=...``). Never the token itself."""
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"ws://{host}:{self.port}"
+        return f"{'wss' if self.access.tls else 'ws'}://{host}:{self.port}"
 
     def advertise(self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes,
                   message_encoding: str) -> Any:
@@ -313,14 +358,16 @@ class _SubscriptionWatch:
 
 def replay(path: str, address: str | None = None, *, speed: float = 1.0, wait_for_client_s: float | None = None,
            settle_s: float = 1.0, stop: threading.Event | None = None,
-           on_ready: Callable[[LiveServer], None] | None = None) -> dict[str, Any]:
+           on_ready: Callable[[LiveServer], None] | None = None, access: ServeAccess | None = None
+           ) -> dict[str, Any]:
     """Serve the MCAP recording ``path`` live, ``speed`` times faster than it was recorded (1.0 = as recorded).
 
     Every channel of a finished file is advertised first; then, if ``wait_for_client_s`` is not None, playback
     waits (at most that many seconds; ``float('inf')`` = until it happens) for a client's first subscription, and
     ``settle_s`` more seconds for its other subscriptions (Foxglove subscribes panel by panel). Messages are then
     sent in log-time order (write order for an unfinished, crashed file, up to its last complete chunk) with their
-    log-time spacing divided by ``speed``. ``on_ready(server)`` is called once the server listens. ``stop`` ends
+    log-time spacing divided by ``speed``. ``access``: TLS and token (:func:`live_access`). ``on_ready(server)`` is
+    called once the server listens. ``stop`` ends
     playback early. Returns ``{"url", "messages", "duration_s" (log time), "wall_s", "waited_s"}``.
 
     Raises ``FileNotFoundError``/``ValueError`` for a missing or non-MCAP file, ``ValueError`` for ``speed <= 0``
@@ -338,7 +385,8 @@ def replay(path: str, address: str | None = None, *, speed: float = 1.0, wait_fo
     f, finished = _open_mcap(path)
     watch = _SubscriptionWatch()
     with f:
-        server = LiveServer(address, name=f"aerodaas replay {path}", listener=watch, time_capability=True)
+        server = LiveServer(address, name=f"aerodaas replay {path}", listener=watch, time_capability=True,
+                            access=access)
         try:
             if finished:
                 summary = make_reader(f).get_summary()

@@ -21,21 +21,36 @@ to a channel not in that map ("Unknown channel ID: N"). A client that subscribes
 steps (a loaded machine), and then never receives that channel. While :meth:`hold` is held (around the creation of a
 channel: :meth:`aerodaas.liveview.server.LiveServer.advertise`), nothing the SDK sends is passed on to a client, so no
 advertisement reaches a client before the SDK can accept its subscription.
+
+Access (``aerodaas.clusters.tls``): with a TLS context the front terminates TLS (:class:`~aerodaas.liveview.tls_stream.
+TlsStream`; the SDK server behind it stays on loopback) and serves ``wss://``; with a token it answers every upgrade
+request that does not carry it ``401 Unauthorized`` and closes, before a byte reaches the SDK. A client presents the
+token as the query parameter ``token`` of the URL (``wss://HOST:PORT/?token=...``: what a browser's WebSocket, and so
+Foxglove's app, can send) or as an ``Authorization: Bearer ...`` header (RFC 6750; Node's ``ws``, Python's
+``websockets``); the parameter is removed from the request before it is forwarded, so the SDK never sees it.
 """
 from __future__ import annotations
 
 import re
+import secrets
 import socket
+import ssl
 import struct
 import threading
 from collections.abc import Callable
+from urllib.parse import parse_qsl, urlencode
 
-__all__ = ["LEGACY", "SDK", "SubprotocolFront"]
+from aerodaas.liveview.tls_stream import TlsStream
+
+__all__ = ["LEGACY", "SDK", "SubprotocolFront", "authorize"]
 
 LEGACY = "foxglove.websocket.v1"
 SDK = "foxglove.sdk.v1"
 _MAX_HEADER = 64 * 1024  # an HTTP upgrade request is a few hundred bytes; bound what we buffer
 _PROTO_LINE = re.compile(rb"(?im)^sec-websocket-protocol:[ \t]*([^\r\n]*)\r\n")
+_AUTH_LINE = re.compile(rb"(?im)^authorization:[ \t]*bearer[ \t]+([^\r\n]*?)[ \t]*\r\n")
+_UNAUTHORIZED = (b"HTTP/1.1 401 Unauthorized\r\nWWW-Authenticate: Bearer\r\nContent-Type: text/plain\r\n"
+                 b"Content-Length: 47\r\nConnection: close\r\n\r\nmissing or invalid token (?token=... or Bearer)")
 
 
 def _read_header(sock: socket.socket) -> tuple[bytes, bytes]:
@@ -60,6 +75,25 @@ def rewrite_request(header: bytes) -> tuple[bytes, bool]:
         return header, False
     line = f"Sec-WebSocket-Protocol: {SDK}\r\n".encode()
     return header[:m.start()] + line + header[m.end():], True
+
+
+def authorize(header: bytes, token: str) -> tuple[bytes, bool]:
+    """Check the upgrade request ``header`` for ``token`` (the query parameter ``token`` or an ``Authorization:
+    Bearer`` header, compared in constant time) -> ``(header without the token parameter, accepted)``."""
+    line_end = header.find(b"\r\n")
+    parts = header[:line_end].split(b" ")
+    if line_end < 0 or len(parts) != 3:
+        return header, False
+    path, _, query = parts[1].partition(b"?")
+    pairs = parse_qsl(query.decode("latin-1"), keep_blank_values=True)
+    given = [v for k, v in pairs if k == "token"]
+    m = _AUTH_LINE.search(header)
+    if m is not None:
+        given.append(m.group(1).decode("latin-1"))
+    ok = any(secrets.compare_digest(g.encode("latin-1"), token.encode()) for g in given)
+    rest = urlencode([(k, v) for k, v in pairs if k != "token"]).encode("latin-1")
+    target = path + (b"?" + rest if rest else b"")
+    return b" ".join((parts[0], target, parts[2])) + header[line_end:], ok
 
 
 def rewrite_response(header: bytes) -> bytes:
@@ -100,7 +134,8 @@ def _pipe(src: socket.socket, dst: socket.socket, gate: threading.Lock | None = 
 
 class SubprotocolFront:
     """Listen on ``host:port`` (0 = any free port) and forward to ``127.0.0.1:backend_port``, renaming the
-    subprotocol as the module docstring describes. ``port`` is the port bound. Raises ``OSError`` when the address
+    subprotocol as the module docstring describes; with ``context`` over TLS, with ``token`` only for clients that
+    present it (module docstring). ``port`` is the port bound. Raises ``OSError`` when the address
     cannot be bound. :meth:`close` stops accepting and closes the connections it forwards.
 
     A client that stops reading is dropped: once the kernel's buffers towards it are full (the bounded queue, with
@@ -109,7 +144,9 @@ class SubprotocolFront:
     held the end of a run for ~120 s before)."""
 
     def __init__(self, host: str, port: int, backend_port: int, send_timeout_s: float = 10.0,
-                 on_drop: Callable[[str], None] | None = None) -> None:
+                 on_drop: Callable[[str], None] | None = None, context: ssl.SSLContext | None = None,
+                 token: str | None = None) -> None:
+        self._context, self._token = context, token
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._listen = socket.socket(family, socket.SOCK_STREAM)
         self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -134,6 +171,7 @@ class SubprotocolFront:
             threading.Thread(target=self._serve, args=(client,), daemon=True).start()
 
     def _serve(self, client: socket.socket) -> None:
+        raw = client
         try:
             backend = socket.create_connection(self._backend, timeout=10)
             backend.settimeout(None)
@@ -148,10 +186,19 @@ class SubprotocolFront:
             self._conns += [client, backend]
         try:
             client.settimeout(10)
+            if self._context is not None:
+                tls = TlsStream(raw, self._context)
+                tls.handshake()
+                client = tls  # type: ignore[assignment]
             header, rest = _read_header(client)
             client.settimeout(None)
             if not header:
                 raise OSError("no HTTP header")
+            if self._token is not None:
+                header, ok = authorize(header, self._token)
+                if not ok:
+                    client.sendall(_UNAUTHORIZED)
+                    raise OSError("no valid token")
             header, renamed = rewrite_request(header)
             backend.sendall(header + rest)
             if renamed:
@@ -161,8 +208,12 @@ class SubprotocolFront:
                 with self._gate:  # ``rest`` may hold an advertisement already (see hold)
                     pass
                 client.sendall(rewrite_response(answer) + rest)
-        except OSError:
-            client.close()
+        except (OSError, ssl.SSLError):
+            try:
+                raw.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            raw.close()
             backend.close()
             return
         sec = int(self.send_timeout_s)

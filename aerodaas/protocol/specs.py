@@ -93,6 +93,8 @@ class RecordSpec:
     schemas: dict[str, dict] = field(default_factory=dict)
     homes: dict[str, dict] | None = None
     declare: Any = None
+    #: the live view's TLS files and token (:class:`aerodaas.clusters.tls.ServeAccess`; its repr hides the token)
+    live_access: Any = None
 
 
 @dataclass(frozen=True)

@@ -473,7 +473,8 @@ def _analytics_edges(st: _PlanState, every: dict, inst: dict, consumers) -> list
 
 
 def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, record: str | None = None,
-               live: str | None = None, scheduled: dict[int, Any] | None = None, epoch_ns: int = 0,
+               live: str | None = None, live_access: Any = None, scheduled: dict[int, Any] | None = None,
+               epoch_ns: int = 0,
                run_id: str | None = None, max_restarts: int | None = None) -> RunPlan:
     """Place the application's components on actors (see the module docstring) and compute every edge.
 
@@ -490,6 +491,7 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         rec.spec.record = RecordSpec(os.path.abspath(record) if record else None, live, {
             "environment": env.cfg.name, "robots": ",".join(r.id for r in robots), "speedup": str(sim.speedup),
             "lockstep": str(sim.lockstep), "run": run_id, "aerodaas": "0.1.0"})
+        rec.spec.record.live_access = live_access
     drone_host = _place_drones(st, robots, k)
     inst, every = _place_analytics(st, robots, graphs, scheduled, drone_host)
     if recorded:  # the drones' homes (lat/lon of recorded tracks) and the track channels known from the plan

@@ -73,6 +73,9 @@ class MissionResult:
     #: the components whose failures exceeded their limit (:func:`aerodaas.recording.health.assess`: counted by
     #: the components and in the recording); a run with any is not ``ok`` (outcome ``degraded``, exit code 5)
     degraded: list[FailureCount] = field(default_factory=list)
+    #: the servers this run exposed in clear text off loopback by choice (``--insecure``, ``hitl.insecure``): "the
+    #: HITL API at http://..." ; the summary repeats them
+    insecure: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -255,6 +258,7 @@ class _Run:
     failure: str | None = None
     robot_errors: dict = field(default_factory=dict)  # robot id -> its own error when the run could not start
     robot_refused: set = field(default_factory=set)  # robots whose vehicle refused our credentials (outcome refused)
+    insecure: list = field(default_factory=list)  # servers of the run in clear text off loopback (--insecure)
 
     @property
     def classes(self) -> ActorClasses:
@@ -283,6 +287,7 @@ def _plan_run(run: _Run) -> Any:
         if mod in sys.modules:
             ray.cloudpickle.register_pickle_by_value(sys.modules[mod])
     run.plan = build_plan(run.env, run.robots, run.graphs, run.scheds, run.sim, record=opts.record, live=opts.live,
+                          live_access=opts.live_access,
                           scheduled=run.scheduled, epoch_ns=run.epoch_ns,
                           run_id=opts.run_id or os.environ.get("AERODAAS_RUN_ID") or None)
     placement = Placement(has_cloud=run.has_cloud, local=ray_start.started_here() and not opts.address)
@@ -338,18 +343,26 @@ def _start_actors(run: _Run, placement: Any) -> list:
 
 
 def _start_hitl(run: _Run):
-    """The human-in-the-loop API of the run when it is on (``--hitl`` or ``hitl.enabled``), started; else None."""
-    from aerodaas.tools.hitl import HitlServer
+    """The human-in-the-loop API of the run when it is on (``--hitl`` or ``hitl.enabled``), started; else None.
+    The token is not printed: the console says where the owner-only state file is (``aerodaas inject`` reads it)."""
+    from aerodaas.runtime.preflight import hitl_access
+    from aerodaas.tools.hitl import HitlServer, state_file
 
     hcfg, opts = run.env.cfg.hitl, run.opts
     if not (opts.hitl if opts.hitl is not None else hcfg.enabled):
         return None
+    access = hitl_access(run.env, opts)
     hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in run.handles.items()},
                       host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
-                      token=hcfg.token, docs=hcfg.docs).start()
+                      token=hcfg.token, docs=hcfg.docs, cert_file=access.cert_file, key_file=access.key_file).start()
     run.env.hitl = hitl
-    shown = hitl.token if hitl.generated_token else "(the token from environment.json)"
-    print(f"aerodaas: human-in-the-loop API at {hitl.url}  bearer token: {shown}", flush=True)
+    source = "generated" if hitl.generated_token else "from environment.json"
+    print(f"aerodaas: human-in-the-loop API at {hitl.url}  (bearer token {source}: in {state_file()}, owner only)",
+          flush=True)
+    if access.insecure:
+        run.insecure.append(f"the HITL API at {hitl.url}")
+        print(f"aerodaas: WARNING: the HITL API serves plain HTTP off loopback ({hitl.url}, insecure): its token "
+              f"and requests can be read on the network", file=sys.stderr, flush=True)
     return hitl
 
 
@@ -403,6 +416,22 @@ def _release(run: _Run, hitl: Any) -> tuple[dict, dict]:
     return counts, rec_report
 
 
+def _announce_live(run: _Run, url: str) -> None:
+    """Print where the live view is; with a token, write it to the owner-only state file ``live.json``
+    (:func:`aerodaas.liveview.server.write_live_state`) and print that file's path, never the token."""
+    from aerodaas.liveview.server import write_live_state
+
+    access = run.opts.live_access
+    where = ""
+    if access is not None and access.token:
+        where = f"; token in {write_live_state(url, access)}, owner only: add /?token=... to the URL"
+    print(f"aerodaas: live view at {url} (Foxglove: Open connection -> Foxglove WebSocket{where})", flush=True)
+    if access is not None and access.insecure:
+        run.insecure.append(f"the live view at {url}")
+        print(f"aerodaas: WARNING: the live view serves plain WebSocket off loopback ({url}, --insecure): the run "
+              f"can be read on the network", file=sys.stderr, flush=True)
+
+
 def _run_mission(run: _Run) -> MissionResult:
     """Plan, start, fly and tear down ``run``; every failure once Ray runs ends in the result."""
     import ray
@@ -427,8 +456,7 @@ def _run_mission(run: _Run) -> MissionResult:
         if "recorder" in run.actors and run.failure is None:
             live_url = ray.get(run.actors["recorder"].setup.remote()).get("live_url")
             if live_url:
-                print(f"aerodaas: live view at {live_url} (Foxglove: Open connection -> Foxglove WebSocket)",
-                      flush=True)
+                _announce_live(run, live_url)
         probe("hosts_ready")
         if run.failure is None:
             run.handles = _bind_handles(run)
@@ -487,7 +515,7 @@ def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
                            recording_segments=rec_report.get("segments") or [],
                            recording_segment_messages=rec_report.get("segment_messages") or [],
                            recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics,
-                           recording_accounting=accounting, degraded=degraded)
+                           recording_accounting=accounting, degraded=degraded, insecure=list(run.insecure))
     for h in run.handles.values():
         h["robot"].run_end_hooks(result)
     return result

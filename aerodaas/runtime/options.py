@@ -35,6 +35,14 @@ class RunOptions:
     hitl: bool | None = None  # force the human-in-the-loop API on/off (default: environment.json hitl.enabled)
     hitl_port: int | None = None
     live: str | None = None  # serve the run to Foxglove over WebSocket on this HOST:PORT (aerodaas.liveview.server)
+    #: the live view's TLS files and token (:class:`aerodaas.clusters.tls.ServeAccess`; ``aerodaas run`` builds it
+    #: with :func:`aerodaas.liveview.server.live_access`); None: plain, no token (loopback)
+    live_access: Any = None
+    #: ``--tls-cert`` / ``--tls-key``: the certificate and key of the HITL API (over ``hitl.tls_*``) and the live view
+    tls_cert: str | None = None
+    tls_key: str | None = None
+    #: ``--insecure``: the HITL API and the live view may serve in clear text off loopback (the summary says so)
+    insecure: bool = False
     #: a local Ray also starts its dashboard on 127.0.0.1 (``aerodaas run --dashboard``: it serves
     #: ``ray list actors`` and the actors view; off by default: it adds seconds to the start and on a loaded machine
     #: can fail to start, which then costs a retry without it)

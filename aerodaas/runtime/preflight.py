@@ -153,12 +153,40 @@ def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple =
     from aerodaas.clusters.addresses import check_hitl
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
+    hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
     if opts.hitl and not env.cfg.hitl.enabled:  # --hitl: a backend's mission may refuse the HITL API
         from aerodaas.backends import backend_class
 
         for r in robots:
             backend_class(r.cfg.backend).check_mission(r, scheds[r.id], True)
     return simulation_for(env, robots, opts)
+
+
+def hitl_access(env, opts: Any, check: bool = False) -> Any:
+    """The HITL API's TLS files and ``insecure`` choice as a :class:`aerodaas.clusters.tls.ServeAccess` (no token: the
+    server holds its own): ``--tls-cert`` / ``--tls-key`` (``opts.tls_cert``/``tls_key``) over ``hitl.tls_cert`` /
+    ``hitl.tls_key`` (resolved like every file of the environment), ``--insecure`` or ``hitl.insecure``;
+    ``insecure`` is kept only when it matters (clear text off loopback). With ``check`` (before Ray starts) and the
+    API on: :func:`aerodaas.clusters.tls.check_exposure`. Raises ConfigError / ValueError naming the field and value."""
+    from aerodaas.clusters.tls import ServeAccess, check_exposure, is_loopback
+
+    h = env.cfg.hitl
+    if not (opts.hitl if getattr(opts, "hitl", None) is not None else h.enabled):
+        return ServeAccess()
+    files, fields = [], []
+    for given, cfg_value, flag, name in ((getattr(opts, "tls_cert", None), h.tls_cert, "--tls-cert", "hitl.tls_cert"),
+                                         (getattr(opts, "tls_key", None), h.tls_key, "--tls-key", "hitl.tls_key")):
+        if given:
+            files.append(given)
+            fields.append(flag)
+        else:
+            files.append(str(env.cfg.resolve_path(cfg_value, name)) if cfg_value else None)
+            fields.append(name)
+    insecure = bool(getattr(opts, "insecure", False) or h.insecure)
+    if check:
+        check_exposure(h.host, files[0], files[1], insecure, "hitl.host", fields[0], fields[1],
+                       "hitl.insecure or --insecure")
+    return ServeAccess(files[0], files[1], None, insecure and files[0] is None and not is_loopback(h.host))
 
 
 def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:

@@ -86,6 +86,6 @@ class RecorderWatch:
         try:
             self.recorder.keep_specs.remote(*recorder_specs(self.plan))
             if self.live_url and not st.get("live_url"):  # the live view where the first recorder bound it
-                self.recorder.serve_live.remote(self.live_url.removeprefix("ws://"))
+                self.recorder.serve_live.remote(self.live_url.split("://", 1)[-1])
         except Exception:  # noqa: BLE001
             pass

@@ -45,6 +45,9 @@ def format_summary(result: Any) -> str:
     if getattr(result, "analytics_lost", None):
         lines.append(f"  analytics LOST: {', '.join(result.analytics_lost)} (its actor died and did not answer again "
                      f"within actor_restart_timeout_s; the lock-step clock went on without it)")
+    for what in getattr(result, "insecure", None) or []:
+        lines.append(f"  INSECURE: {what} was served in clear text off loopback (--insecure / hitl.insecure): its "
+                     f"token and data could be read by anyone on that network")
     if getattr(result, "recording_duplicates", 0) and any(r.get("actor_restarts") for r in result.robots.values()):
         lines.append(f"  recording: {result.recording_duplicates} samples sent again by a restarted drone actor (stamps "
                      f"already recorded) were recorded once")

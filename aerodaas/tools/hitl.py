@@ -8,7 +8,8 @@ deployment because Serve starts a controller and proxy actors (~2 more Ray worke
 a handful of low-rate requests per mission.
 
 Every request needs ``Authorization: Bearer <token>``; the token is given in ``environment.json``
-(``hitl.token``) or generated at start and printed once. A missing or wrong token gets 401, a malformed
+(``hitl.token``) or generated at start, and never printed (see the state file below). A missing or wrong token gets
+401, a malformed
 request or one outside the safety limits 422 (a waypoint id already queued too: checked and added under one
 lock per drone, so of concurrent requests with the same id exactly one is accepted) (NaN/Infinity, strings for numbers, unknown keys, ids over
 :data:`MAX_ID_CHARS` characters, more than :data:`MAX_WAYPOINTS_PER_REQUEST` waypoints, a planned tour whose leg
@@ -16,7 +17,10 @@ crosses the geofence), a body over :data:`MAX_BODY_BYTES` 413 (declared or chunk
 actor that does not answer within :data:`CALL_TIMEOUT_S` (stopped, restarting, gone) 503 with ``Retry-After``, and
 none of them change anything. A token given to the server must be an RFC 6750 ``b64token`` of at least 16
 characters (no blanks).
-Loopback-only (127.0.0.1) unless ``hitl.host`` says otherwise.
+Loopback-only (127.0.0.1) unless ``hitl.host`` says otherwise; off loopback it serves HTTPS with ``hitl.tls_cert`` /
+``hitl.tls_key`` (or ``--tls-cert`` / ``--tls-key``; uvicorn over Python's :mod:`ssl`) and refuses plain HTTP unless
+``hitl.insecure`` / ``--insecure`` says so (:mod:`aerodaas.clusters.tls`, checked before Ray starts). The token is never
+printed: it is in the state file below, readable by its owner only.
 
 Endpoints (JSON):
 
@@ -29,8 +33,9 @@ Endpoints (JSON):
   mission is then ``incomplete``, never a success). The scope is required: an empty or null body is 422
 * ``POST /drones/{id}/pause`` / ``resume``
 
-The connection (url and token) is also written to ``$AERODAAS_STATE_DIR/hitl.json`` (default
-``~/.aerodaas``; mode 0600) while the server runs, so ``aerodaas inject`` finds it without flags.
+The connection (url, token and, with TLS, the certificate to trust: ``cafile``) is written to
+``$AERODAAS_STATE_DIR/hitl.json`` (default ``~/.aerodaas``; mode 0600, created so: never readable by others, not even
+for a moment) while the server runs, so ``aerodaas inject`` finds it without flags.
 """
 from __future__ import annotations
 
@@ -54,8 +59,11 @@ __all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
 
 
 def state_file() -> Path:
-    """Where a running server publishes its url and token: ``$AERODAAS_STATE_DIR/hitl.json``."""
-    return Path(os.environ.get("AERODAAS_STATE_DIR", Path.home() / ".aerodaas")) / "hitl.json"
+    """Where a running server publishes its url and token: ``$AERODAAS_STATE_DIR/hitl.json``
+    (:func:`aerodaas.clusters.tls.state_dir`)."""
+    from aerodaas.clusters.tls import state_dir
+
+    return state_dir() / "hitl.json"
 
 
 #: limits of one request: body bytes (413 beyond), waypoints per request (422 beyond; the robot's
@@ -212,14 +220,18 @@ def _add_error_handlers(app: Any) -> None:
 
 class HitlServer:
     """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": handle of the drone component,
-    "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns once the server accepts connections."""
+    "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns
+    once the server accepts connections. ``cert_file`` / ``key_file``: PEM certificate and key, served as HTTPS
+    (checked first: :func:`aerodaas.clusters.tls.check_tls_files`)."""
 
     def __init__(self, drones: dict[str, dict], host: str = "127.0.0.1", port: int = 8470,
-                 token: str | None = None, docs: bool = False, get: Any = None) -> None:
+                 token: str | None = None, docs: bool = False, get: Any = None, cert_file: str | None = None,
+                 key_file: str | None = None) -> None:
         self.drones = drones
         self.docs = docs  # /docs and /openapi.json: off unless asked for, and then behind the token
         self._get = get  # how a call's result is awaited (default ray.get; tests pass a local one)
         self.host, self.port = host, port
+        self.cert_file, self.key_file = cert_file, key_file
         if token is not None and not TOKEN_RE.fullmatch(token):
             raise ValueError("hitl.token: 16 to 256 characters of A-Z a-z 0-9 - . _ ~ + / (then '=' padding; RFC 6750 "
                              "section 2.1), no blanks")
@@ -234,7 +246,17 @@ class HitlServer:
 
     @property
     def url(self) -> str:
-        return f"http://{self.host}:{self.port}"
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{'https' if self.cert_file else 'http'}://{host}:{self.port}"
+
+    @property
+    def local_url(self) -> str:
+        """:attr:`url` as a client on this machine reaches it: a wildcard host (``0.0.0.0``, ``::``) becomes
+        ``localhost`` (the name a certificate for local use carries; give ``aerodaas inject --url`` the name of
+        yours otherwise). What the state file hands to ``aerodaas inject``."""
+        if self.host in ("0.0.0.0", "::", ""):
+            return f"{'https' if self.cert_file else 'http'}://localhost:{self.port}"
+        return self.url
 
     # ------------------------------------------------------------------ app
     def _build_app(self):
@@ -369,8 +391,9 @@ class HitlServer:
         RuntimeError if the server could not start (e.g. the port is taken)."""
         import uvicorn
 
+        tls = {"ssl_certfile": self.cert_file, "ssl_keyfile": self.key_file} if self.cert_file else {}
         config = uvicorn.Config(self.app, host=self.host, port=self.port, log_level="warning", access_log=False,
-                                lifespan="off")
+                                lifespan="off", **tls)
         self._server = uvicorn.Server(config)
         self._server.install_signal_handlers = lambda: None  # the driver keeps Ctrl-C
         self._thread = threading.Thread(target=self._server.run, name="aerodaas-hitl", daemon=True)
@@ -382,11 +405,11 @@ class HitlServer:
             time.sleep(0.02)
         sock = self._server.servers[0].sockets[0]
         self.port = sock.getsockname()[1]
-        f = state_file()
-        f.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(f, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w") as fh:
-            json.dump({"url": self.url, "token": self.token, "pid": os.getpid(), "drones": sorted(self.drones)}, fh)
+        from aerodaas.clusters.tls import write_private_json
+
+        write_private_json(state_file(), {"url": self.local_url, "token": self.token, "pid": os.getpid(),
+                                          "drones": sorted(self.drones),
+                                          "cafile": os.path.abspath(self.cert_file) if self.cert_file else None})
         return self
 
     def stop(self) -> None:
@@ -403,27 +426,34 @@ class HitlServer:
 
 
 def request(method: str, path: str, body: Any = None, url: str | None = None, token: str | None = None,
-            timeout: float = 10.0) -> tuple[int, Any]:
-    """Minimal client (stdlib only): returns (HTTP status, decoded JSON). ``url``/``token`` default to
-    ``$AERODAAS_HITL_URL``/``$AERODAAS_HITL_TOKEN``, then the running server's :func:`state_file`.
-    Raises RuntimeError when no server can be found."""
+            timeout: float = 10.0, cafile: str | None = None) -> tuple[int, Any]:
+    """Minimal client (stdlib only): returns (HTTP status, decoded JSON). ``url``/``token``/``cafile`` default to
+    ``$AERODAAS_HITL_URL``/``$AERODAAS_HITL_TOKEN``/``$AERODAAS_HITL_CAFILE``, then the running server's
+    :func:`state_file`. An ``https`` URL is verified (certificate and host name) against ``cafile`` (a self-signed
+    server certificate, or the CA that signed it), else the system's CAs. Raises RuntimeError when no server can be
+    found or reached (a certificate that does not verify included)."""
+    import ssl
     import urllib.error
     import urllib.request
 
     url = url or os.environ.get("AERODAAS_HITL_URL")
     token = token or os.environ.get("AERODAAS_HITL_TOKEN")
+    cafile = cafile or os.environ.get("AERODAAS_HITL_CAFILE")
     if not url or not token:
         f = state_file()
         if not f.is_file():
             raise RuntimeError(f"no HITL server found: give --url and --token, set AERODAAS_HITL_URL/"
                                f"AERODAAS_HITL_TOKEN, or start a run with hitl enabled (writes {f})")
         info = json.loads(f.read_text())
+        if not url:
+            cafile = cafile or info.get("cafile")
         url, token = url or info["url"], token or info["token"]
     data = None if body is None else json.dumps(body).encode()
     req = urllib.request.Request(url.rstrip("/") + path, data=data, method=method,
                                  headers={"Authorization": f"Bearer {token}", "Content-Type": "application/json"})
+    context = ssl.create_default_context(cafile=cafile) if url.startswith("https:") else None
     try:
-        with urllib.request.urlopen(req, timeout=timeout) as r:
+        with urllib.request.urlopen(req, timeout=timeout, context=context) as r:
             return r.status, json.loads(r.read() or b"null")
     except urllib.error.HTTPError as e:
         raw = e.read()
@@ -437,7 +467,7 @@ def request(method: str, path: str, body: Any = None, url: str | None = None, to
 
 #: options of ``aerodaas inject`` whose value may start with '-': a bearer token (base64url: one in 64 starts so), a
 #: waypoint west or south of home (``-3,2,5``)
-INJECT_VALUE_OPTIONS = ("--drone", "--waypoint", "--index", "--priority", "--url", "--token")
+INJECT_VALUE_OPTIONS = ("--drone", "--waypoint", "--index", "--priority", "--url", "--token", "--cacert")
 
 
 def inject_argv(argv: list[str]) -> list[str]:
