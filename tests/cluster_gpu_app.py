@@ -3,8 +3,9 @@
 declares no GPU and whose second ``tier=edge`` node declares one logical GPU (this machine has no real one), then
 runs ``aerodaas run`` on it (``--address``) with an app whose detector asks for the CUDA provider. At mission start
 the app writes the run's actors as Ray's state API lists them (``ray.util.state.list_actors``: name, node id,
-required resources). Prints one line ``RESULT {json}``: the run's exit code and output, the actors, the node ids
-(head, GPU node) and the recording's path. Used by ``tests/test_perception_providers.py`` as a subprocess, so the
+required resources). Then the same app with the provider required (no CPU fallback). Prints one line
+``RESULT {json}``: each run's exit code and output, the first run's actors, the node ids (head, GPU node) and its
+recording's path. Used by ``tests/test_perception_providers.py`` as a subprocess, so the
 test session's own Ray is left alone."""
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from aerodaas.perception.providers import Providers
 
 env = Environment({env!r})
 drone = env.get_robot_by_id("d1")
-det = ObjectDetector("yolox_nano", classes=["car"], providers=["CUDAExecutionProvider", "CPUExecutionProvider"])
+det = ObjectDetector("yolox_nano", classes=["car"], providers={providers})
 det.deploy(env.get_compute_resource_by_id("edge"))
 det.analyse(drone.get_sensor_by_id("cam").get_data_stream())
 drone.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN,
@@ -56,16 +57,25 @@ def main(out_dir: str) -> dict:
                    "simulation": {"speedup": 2.0}}, f)
     actors, rec, app = (os.path.join(out_dir, n) for n in ("actors.json", "gpu.mcap", "gpu_app.py"))
     with open(app, "w") as f:
-        f.write(APP.format(env=env, actors=actors))
+        f.write(APP.format(env=env, actors=actors, providers='["CUDAExecutionProvider", "CPUExecutionProvider"]'))
+    required = os.path.join(out_dir, "required_app.py")
+    with open(required, "w") as f:  # no fallback: its actor cannot start on a node without the provider
+        f.write(APP.format(env=env, actors=os.path.join(out_dir, "required_actors.json"),
+                           providers='Providers(names=["CUDAExecutionProvider"], required=True)'))
     with LocalCluster(cloud_nodes=0, edge_cpus=2, connect=False, head_gpus=0, dashboard=True) as lc:
         gpu_node = lc.add_edge_node(num_gpus=1)
         lc.cluster.wait_for_nodes()
-        p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", app, "--address", lc.address, "--record", rec,
-                            "--quiet"], capture_output=True, text=True, timeout=300,
-                           env={**os.environ, "AERODAAS_RUN_ID": "gpu"})
+        def run(path: str, run_id: str, *extra: str) -> subprocess.CompletedProcess:
+            return subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", path, "--address", lc.address, *extra,
+                                   "--quiet"], capture_output=True, text=True, timeout=300,
+                                  env={**os.environ, "AERODAAS_RUN_ID": run_id})
+
+        p = run(app, "gpu", "--record", rec)
         placed = json.load(open(actors)) if os.path.isfile(actors) else None
+        q = run(required, "gpureq")
         return {"returncode": p.returncode, "stdout": p.stdout[-4000:], "stderr": p.stderr[-4000:],
-                "actors": placed, "head": lc.edge_node.node_id, "gpu_node": gpu_node.node_id, "recording": rec}
+                "actors": placed, "head": lc.edge_node.node_id, "gpu_node": gpu_node.node_id, "recording": rec,
+                "required": {"returncode": q.returncode, "stdout": q.stdout[-4000:], "stderr": q.stderr[-4000:]}}
 
 
 if __name__ == "__main__":

@@ -219,10 +219,10 @@ def test_run_refuses_a_required_provider_this_machine_lacks_before_ray(tmp_path,
 @needs_data
 def test_run_stops_with_a_message_when_no_node_has_the_gpu(tmp_path, data_env):
     """This machine's local Ray has no GPU: the actor would stay pending for ever; the run stops (exit 2) naming it."""
-    import ray
+    import shutil
 
-    if not ray.is_initialized() and os.environ.get("CUDA_VISIBLE_DEVICES", "") not in ("", "-1"):
-        pytest.skip("this machine may have a GPU")
+    if shutil.which("nvidia-smi") or os.path.exists("/dev/nvidia0") or os.path.exists("/dev/kfd"):
+        pytest.skip("this machine has a GPU that a local Ray would offer")
     p, _ = _cli(tmp_path, _app(tmp_path, "['CUDAExecutionProvider', 'CPUExecutionProvider']"))
     assert p.returncode == 2, p.stdout[-1500:] + p.stderr[-1500:]
     assert "analytics/edge/detector#1 asks for num_gpus=1 on a node [tier=edge]" in p.stderr, p.stderr[-1500:]
@@ -232,6 +232,7 @@ def test_run_stops_with_a_message_when_no_node_has_the_gpu(tmp_path, data_env):
 @pytest.mark.cluster
 @needs_data
 def test_gpu_provider_lands_on_the_gpu_node_and_falls_back_to_the_cpu_there(tmp_path, data_env):
+    """Then, on the same cluster, the provider required: the run does not start (exit 1), naming the provider."""
     from mcap.reader import make_reader
 
     _cpu_build()
@@ -252,3 +253,10 @@ def test_gpu_provider_lands_on_the_gpu_node_and_falls_back_to_the_cpu_there(tmp_
     assert ev["analytics"] == "detector" and ev["providers"] == [CPU_PROVIDER]
     assert ev["providers_requested"] == [CUDA, CPU_PROVIDER] and "onnxruntime-gpu" in ev["provider_fallback"]
     assert "mission outcome: success" in r["stdout"] and "CPU fallback" in r["stdout"]
+    # required: the analytics cannot start on that node, so the run does not start, and says why
+    q = r["required"]
+    assert q["returncode"] == 1, (q["stdout"], q["stderr"])
+    assert "mission outcome: failed" in q["stdout"]  # the summary names the cause too
+    assert "error: ProviderUnavailableError: analytics 'detector'" in q["stdout"], q["stdout"]
+    assert "analytics 'detector': model yolox_nano.onnx on node" in q["stderr"], q["stderr"]
+    assert "required provider(s) ['CUDAExecutionProvider'] not in this build" in q["stderr"]
