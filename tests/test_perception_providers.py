@@ -142,10 +142,11 @@ drone.start_mission()
 """
 
 
-def _app(tmp_path: Path, providers: str, deploy: str = "", name: str = "app.py") -> Path:
-    env = tmp_path / "env.json"
+def _app(tmp_path: Path, providers: str, deploy: str = "", name: str = "app.py", **extra) -> Path:
+    env = tmp_path / f"{name}.json"
     env.write_text(json.dumps({"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}]}],
-                               "compute": [{"id": "edge", "tier": "edge", "labels": {"aerodaas/site": "a"}}]}))
+                               "compute": [{"id": "edge", "tier": "edge", "labels": {"aerodaas/site": "a"}}],
+                               **extra}))
     app = tmp_path / name
     app.write_text(APP.format(env=str(env), providers=providers, deploy=deploy))
     return app
@@ -171,6 +172,11 @@ def test_the_analytics_actor_asks_ray_for_a_gpu_with_a_gpu_provider(tmp_path, da
     # a colocated copy runs in the drone's actor, which asks for no GPU: refused when the app is loaded
     with pytest.raises(ConfigError, match=r"analytics 'detector': asks Ray for num_gpus=1 .* colocate=True"):
         load_app(_app(tmp_path, "['CUDAExecutionProvider']", ", colocate=True", name="colocated.py"))
+    # so does one the analytics scheduler places per frame (its dispatcher and cloud copies ask for none)
+    qos = {"deadline_ms": 400, "edge_ms": 20, "cloud_ms": 60, "benefit": 100, "edge_cost": 1, "cloud_cost": 5}
+    with pytest.raises(ConfigError, match=r"analytics_scheduler.models.detector: 'detector' asks Ray for num_gpus=1"):
+        load_app(_app(tmp_path, "['CUDAExecutionProvider']", name="scheduled.py",
+                      analytics_scheduler={"name": "DEMS", "models": {"detector": qos}}))
 
 
 def test_gpu_placement_errors_name_the_actor_and_the_nodes():
