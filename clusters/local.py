@@ -55,7 +55,9 @@ class LocalCluster:
     CPU use). ``object_store_mb``: object store per node (MiB). ``connect``: call ``ray.init(address=...)`` for this
     driver (which then runs on the edge node). ``worker_niceness``: the niceness Ray gives worker processes
     (Ray's default is 15, below its control plane; the scheduler benchmark uses 0 so that its timers compete on
-    equal terms with other processes on a shared machine). Raises RuntimeError if Ray is already initialised in this process
+    equal terms with other processes on a shared machine). ``head_gpus``: logical GPUs the head declares to Ray
+    (None: what Ray detects); ``dashboard``: start Ray's dashboard (on Ray's default host, localhost;
+    Ray's state API, ``ray.util.state``, reads it). Raises RuntimeError if Ray is already initialised in this process
     and ``connect`` is True (shut it down first).
 
     Attributes: ``address`` (the GCS address, ``host:port``), ``edge_node``, ``cloud_nodes`` (``ray._private.node.Node``
@@ -65,7 +67,8 @@ class LocalCluster:
     def __init__(self, cloud_nodes: int = 1, *, edge_cpus: int = 2, cloud_cpus: int = 2,
                  object_store_mb: int = 150, connect: bool = True, extra_edge_labels: dict[str, str] | None = None,
                  worker_niceness: int | None = None, edge_nodes: int = 1,
-                 edge_labels: list[dict[str, str]] | None = None) -> None:
+                 edge_labels: list[dict[str, str]] | None = None, head_gpus: float | None = None,
+                 dashboard: bool = False) -> None:
         import ray
         from ray.cluster_utils import Cluster
 
@@ -89,7 +92,9 @@ class LocalCluster:
         first = (edge_labels or [{}])[0] if edge_labels else {}
         head_args: dict[str, Any] = {"num_cpus": int(edge_cpus),
                                      "labels": {"tier": "edge", **(extra_edge_labels or {}), **first},
-                                     "include_dashboard": False, "object_store_memory": self._store}
+                                     "include_dashboard": bool(dashboard), "object_store_memory": self._store}
+        if head_gpus is not None:  # else what Ray detects on this machine
+            head_args["num_gpus"] = head_gpus
         if worker_niceness is not None:  # Ray starts workers at niceness 15 (below the control plane) by default
             head_args["_system_config"] = {"worker_niceness": int(worker_niceness)}
         try:
@@ -118,18 +123,22 @@ class LocalCluster:
             ray.init(address=self.address, include_dashboard=False, log_to_driver=True, logging_level="warning")
             self.connected = True
 
-    def add_cloud_node(self, labels: dict[str, str] | None = None):
-        """Add a ``tier=cloud`` node (extra ``labels`` allowed) and return its handle."""
+    def add_cloud_node(self, labels: dict[str, str] | None = None, num_gpus: float | None = None):
+        """Add a ``tier=cloud`` node (extra ``labels`` allowed; ``num_gpus``: logical GPUs it declares to Ray, a
+        scheduling resource whether or not the machine has them; None: what Ray detects) and return its handle."""
         node = self.cluster.add_node(num_cpus=self._cloud_cpus, labels={"tier": "cloud", **(labels or {})},
-                                     object_store_memory=self._store)
+                                     object_store_memory=self._store,
+                                     **({"num_gpus": num_gpus} if num_gpus is not None else {}))
         self.cloud_nodes.append(node)
         return node
 
-    def add_edge_node(self, labels: dict[str, str] | None = None):
-        """Add another ``tier=edge`` node (extra ``labels`` allowed, e.g. ``{"aerodaas/site": "field-2"}``) and
-        return its handle. The driver stays on the head node (the first edge node)."""
+    def add_edge_node(self, labels: dict[str, str] | None = None, num_gpus: float | None = None):
+        """Add another ``tier=edge`` node (extra ``labels`` allowed, e.g. ``{"aerodaas/site": "field-2"}``;
+        ``num_gpus``: logical GPUs it declares to Ray; None: what Ray detects) and return its handle. The driver
+        stays on the head node (the first edge node)."""
         node = self.cluster.add_node(num_cpus=self._edge_cpus, labels={"tier": "edge", **(labels or {})},
-                                     object_store_memory=self._store)
+                                     object_store_memory=self._store,
+                                     **({"num_gpus": num_gpus} if num_gpus is not None else {}))
         self.edge_nodes.append(node)
         return node
 

@@ -90,6 +90,10 @@ class Analytics:
     #: a runtime that spreads items over ``replicas`` must then send every item of a drone to the same replica
     #: (route by :func:`source_robot`). False (e.g. :class:`ObjectDetector`): any replica may take any item.
     stateful: bool = True
+    #: Ray's logical GPUs its own actor asks for (``deploy(compute)``, each replica), so that Ray places it on a
+    #: node of the compute that has them (0: none). :class:`~aerodaas.analytics.detector.ObjectDetector` sets it
+    #: from its ``providers``; a colocated or scheduled analytics asking for one is refused before Ray starts
+    num_gpus: float = 0.0
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)

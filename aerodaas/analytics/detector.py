@@ -7,6 +7,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from aerodaas.analytics.base import Analytics
+from aerodaas.analytics.contract import current_emissions
 from aerodaas.model.types import Detection, FrameMeta
 from aerodaas.perception.track_records import TrackRecording, track_and_keep
 
@@ -41,7 +42,17 @@ class ObjectDetector(TrackRecording, Analytics):
 
     ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` also runs ByteTrack per drone on the
     detections (the output stays the detections); each drone's geo-located tracks are recorded in a run under
-    ``/{robot}/{name}/tracks`` (:mod:`aerodaas.perception.track_records`). The detector is then :attr:`stateful`."""
+    ``/{robot}/{name}/tracks`` (:mod:`aerodaas.perception.track_records`). The detector is then :attr:`stateful`.
+
+    ``providers`` (issue 46): onnxruntime execution providers in onnxruntime's names, in order of preference — a
+    list (``["CUDAExecutionProvider", "CPUExecutionProvider"]``) or a
+    :class:`aerodaas.perception.providers.Providers` (``required``, ``num_gpus``, provider ``options``); None: the
+    CPU. Names are checked against ``onnxruntime.get_all_providers()`` where the detector is built (ValueError
+    naming the field and the value). With a GPU provider its actor asks Ray for ``num_gpus`` (default 1:
+    :attr:`num_gpus`) and lands on a node of its compute that has one. On that node a provider its onnxruntime does
+    not offer is dropped with a warning and the CPU runs (recorded: an ``onnx_providers`` event on each drone's
+    first frame, the summary's analytics line); with ``required=True`` the analytics fails to start instead
+    (ProviderUnavailableError), and a run on this machine (no ``--address``) is refused before Ray starts."""
 
     name = "detector"
     stateful = False
@@ -53,8 +64,10 @@ class ObjectDetector(TrackRecording, Analytics):
                  name: str | None = None, threads: int = 1, batch: int = 8, *, format: str = "auto",
                  nms_threshold: float = 0.45, agnostic_nms: bool = False,
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
-                 class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None) -> None:
+                 class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None,
+                 providers: Any = None) -> None:
         from aerodaas.perception.options import check_detector_values, normalise_classes
+        from aerodaas.perception.providers import providers_setting
 
         super().__init__(name)
         # what needs no model file fails where the app wrote it; the model's own names in check() (pre-flight)
@@ -82,6 +95,10 @@ class ObjectDetector(TrackRecording, Analytics):
         if tracker is not None:
             tracker.check()
             self.stateful = True  # one ByteTracker per drone: each drone's frames must reach the same replica
+        self.providers = providers_setting(providers, self.name)
+        self.num_gpus = self.providers.ray_gpus() if self.providers is not None else 0.0
+        self.session_providers = None  # what the session runs on (SessionProviders), after setup()
+        self._providers_told: set[str] = set()  # robots whose events say it already
         self.detector = None
         self.shipped = None  # the model's bytes, read by check() on the driver
         self.last_timing: dict[str, float] = {}
@@ -101,6 +118,10 @@ class ObjectDetector(TrackRecording, Analytics):
             self.tiling.check()
         if self.tracker is not None:
             self.tracker.check()
+        from aerodaas.perception.providers import providers_setting
+
+        self.providers = providers_setting(self.providers, self.name)  # a field changed after construction
+        self.num_gpus = self.providers.ray_gpus() if self.providers is not None else 0.0
         if self.model_path is not None and not os.path.isfile(self.model_path):
             raise ValueError(f"analytics {self.name!r}: model_path={str(self.model_path)!r} is not a file")
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
@@ -112,15 +133,23 @@ class ObjectDetector(TrackRecording, Analytics):
         self.shipped = ShippedModel.read(self.model_path)
 
     def setup(self) -> None:
+        """On the actor: load the model into an onnxruntime session on ``providers`` (a provider this node lacks:
+        a warning and the CPU, recorded as :attr:`session_providers`; required: ProviderUnavailableError naming
+        this analytics, the node and the provider) and wrap it for ``tiling``."""
         from aerodaas.perception.options import build_detector
+        from aerodaas.perception.providers import ProviderUnavailableError
 
         path = self.shipped.path_on_this_node(self.model_path) if self.shipped is not None else self.model_path
-        self.detector = build_detector(self.model, model_path=path, format=self.format,
-                                       score_threshold=self.score_threshold, nms_threshold=self.nms_threshold,
-                                       classes=self.classes, class_thresholds=self.class_thresholds,
-                                       intra_op_threads=self.threads, agnostic_nms=self.agnostic_nms,
-                                       class_groups=self.class_groups or None, input_size=self.input_size,
-                                       class_names=self.class_names)
+        try:
+            self.detector = build_detector(self.model, model_path=path, format=self.format,
+                                           score_threshold=self.score_threshold, nms_threshold=self.nms_threshold,
+                                           classes=self.classes, class_thresholds=self.class_thresholds,
+                                           intra_op_threads=self.threads, agnostic_nms=self.agnostic_nms,
+                                           class_groups=self.class_groups or None, input_size=self.input_size,
+                                           class_names=self.class_names, providers=self.providers)
+        except ProviderUnavailableError as e:
+            raise ProviderUnavailableError(f"analytics {self.name!r}: {e}") from None
+        self.session_providers = self.detector.session_providers
         if self.tiling is not None:
             from aerodaas.perception.tiling import TiledDetector
 
@@ -145,9 +174,21 @@ class ObjectDetector(TrackRecording, Analytics):
         self.last_timing = {"inference_ms": t["inference_ms"], "pre_ms": t["preprocess_ms"], "post_ms": t["postprocess_ms"]}
         self.n_frames += 1
         self.n_with_dets += bool(dets)
+        self._tell_providers(meta)
         if self.tracker is not None:
             track_and_keep(self, dets, meta, self.tracker)
         return dets
+
+    def _tell_providers(self, meta: FrameMeta | None) -> None:
+        """With ``providers`` set: an ``onnx_providers`` event on the first frame of each drone (requested, used,
+        the fallback message or None, the node's host), recorded on ``/<robot>/events``."""
+        if self.providers is None or self.session_providers is None:
+            return
+        robot = getattr(meta, "robot_id", None) or ""
+        if robot in self._providers_told:
+            return
+        self._providers_told.add(robot)
+        self.emit_event("onnx_providers", **self.session_providers.as_dict())
 
     def process_batch(self, items: Sequence[tuple[np.ndarray, FrameMeta | None]]) -> list[list[Detection]]:
         """Detections for each ``(frame, meta)`` of ``items`` (frames of any drones), in order, equal to what
@@ -164,12 +205,22 @@ class ObjectDetector(TrackRecording, Analytics):
         self.n_frames += n
         self.n_with_dets += sum(bool(d) for d in out)
         self.n_batched += self.detector.last_batched
+        em = current_emissions()
+        for j, (_, meta) in enumerate(items):
+            if em is not None:
+                em.item = j  # the event belongs to this drone's frame (Analytics.process_batch)
+            self._tell_providers(meta)
         if self.tracker is not None:
             for dets, (_, meta) in zip(out, items):
                 track_and_keep(self, dets, meta, self.tracker)
         return out
 
     def stats(self) -> dict:
-        """``frames``, ``frames_with_detections`` and ``frames_batched`` (inferred in a call with other frames)."""
-        return {"frames": self.n_frames, "frames_with_detections": self.n_with_dets,
-                "frames_batched": getattr(self, "n_batched", 0)}
+        """``frames``, ``frames_with_detections`` and ``frames_batched`` (inferred in a call with other frames);
+        with ``providers`` set also ``providers`` (used), ``providers_requested``, ``provider_fallback`` (the
+        message, or None) and ``host`` (:class:`aerodaas.perception.providers.SessionProviders`)."""
+        out = {"frames": self.n_frames, "frames_with_detections": self.n_with_dets,
+               "frames_batched": getattr(self, "n_batched", 0)}
+        if getattr(self, "providers", None) is not None and self.session_providers is not None:
+            out.update(self.session_providers.as_dict())
+        return out

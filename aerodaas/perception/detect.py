@@ -32,6 +32,7 @@ import numpy as np
 from aerodaas.model.types import COCO_CLASSES, Detection
 from aerodaas.perception.model_meta import metadata_imgsz, metadata_names
 from aerodaas.perception.options import check_input_size
+from aerodaas.perception.providers import Providers, open_session
 
 __all__ = [
     "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
@@ -107,6 +108,7 @@ class _OnnxDetector:
         class_groups: dict[str, Iterable[str]] | None = None,
         input_size: tuple[int, int] | None = None,
         class_names: Sequence[str] | None = None,
+        providers: Providers | None = None,
     ) -> None:
         if not 0.0 <= score_threshold <= 1.0:
             raise ValueError(f"score_threshold must be within [0, 1], got {score_threshold}")
@@ -119,16 +121,19 @@ class _OnnxDetector:
         self.agnostic_nms = bool(agnostic_nms)
 
         self.model_path = resolve_model(self.model_name, model_path)
-        self._open_session(int(intra_op_threads), input_size)
+        self._open_session(int(intra_op_threads), input_size, providers)
         self._init_classes(class_names, class_thresholds, classes, class_groups)
         self.last_timing: dict[str, float] = {"preprocess_ms": 0.0, "inference_ms": 0.0, "postprocess_ms": 0.0}
         self.last_batch = 1  # most images in one onnxruntime call of the last detect / detect_batch
         self.last_batched = 0  # images of the last detect_batch that shared an onnxruntime call with others
 
-    def _open_session(self, intra_op_threads: int, input_size: tuple[int, int] | None) -> None:
-        """The onnxruntime session (CPU, ``intra_op_threads`` threads) and its input: name, (H, W) size (the model's
-        fixed one, ``input_size``, or the subclass's default), whether the batch is dynamic, the output names.
-        Raises ValueError for a model whose input is not NCHW or an ``input_size`` its fixed input contradicts."""
+    def _open_session(self, intra_op_threads: int, input_size: tuple[int, int] | None,
+                      providers: Providers | None = None) -> None:
+        """The onnxruntime session (``intra_op_threads`` threads; on ``providers``, None: the CPU, see
+        :func:`aerodaas.perception.providers.open_session`: what it runs on is :attr:`session_providers`) and its
+        input: name, (H, W) size (the model's fixed one, ``input_size``, or the subclass's default), whether the
+        batch is dynamic, the output names. Raises ValueError for a model whose input is not NCHW or an
+        ``input_size`` its fixed input contradicts, ProviderUnavailableError for a required provider missing."""
         import onnxruntime as ort
 
         so = ort.SessionOptions()
@@ -136,7 +141,8 @@ class _OnnxDetector:
         so.inter_op_num_threads = 1
         so.log_severity_level = 3  # the NanoDet export triggers one harmless warning per initializer
         self.intra_op_threads = intra_op_threads
-        self.session = ort.InferenceSession(str(self.model_path), sess_options=so, providers=["CPUExecutionProvider"])
+        self.session, self.session_providers = open_session(str(self.model_path), so, providers,
+                                                            f"model {os.path.basename(self.model_path)}")
         inp = self.session.get_inputs()[0]
         self.input_name: str = inp.name
         shape = inp.shape

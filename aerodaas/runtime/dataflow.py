@@ -79,6 +79,9 @@ class ActorPlan:
     labels: dict[str, str]
     components: list[str] = field(default_factory=list)
     spec: ActorSpec | None = None
+    #: Ray's logical GPUs the actor asks for (an analytics actor whose analytics asks, e.g. a detector on a GPU
+    #: provider: :attr:`aerodaas.analytics.base.Analytics.num_gpus`); 0: none
+    num_gpus: float = 0.0
 
     def __post_init__(self) -> None:
         if self.spec is None:
@@ -87,6 +90,15 @@ class ActorPlan:
     def selector(self, placement: "Placement") -> dict[str, str]:
         """The ``label_selector`` for this actor on the cluster described by ``placement``."""
         return placement.selector(self.tier, self.labels)
+
+    def ray_options(self, placement: "Placement", max_restarts: int) -> dict[str, Any]:
+        """The options this actor is created with: its Ray ``name``, ``label_selector`` (:meth:`selector`),
+        ``max_restarts`` and, when it asks for GPUs, ``num_gpus``."""
+        opts: dict[str, Any] = {"name": self.name, "label_selector": self.selector(placement),
+                                "max_restarts": max_restarts}
+        if self.num_gpus > 0:
+            opts["num_gpus"] = self.num_gpus
+        return opts
 
 
 @dataclass(frozen=True)
@@ -141,6 +153,7 @@ class RunPlan:
         return {"run": self.run_id,
                 "actors": [{"host": a.actor_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
                             "label_selector": a.selector(placement), "components": list(a.components),
+                            **({"num_gpus": a.num_gpus} if a.num_gpus else {}),
                             **({"mavlink_links": a.spec.mavlink_links} if a.spec.mavlink_links else {})}
                            for a in self.actors.values()],
                 "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
@@ -155,7 +168,8 @@ class RunPlan:
         lines = [f"run {self.run_id}: {len(self.actors)} actors, {len(self.nodes)} components, {len(self.edges)} edges"]
         for a in self.actors.values():
             sel = ",".join(f"{k}={v}" for k, v in a.selector(placement).items())
-            lines.append(f"  {a.role:<10} {a.name}  [{sel}]" + (f"  compute {a.compute}" if a.compute else ""))
+            lines.append(f"  {a.role:<10} {a.name}  [{sel}]" + (f"  compute {a.compute}" if a.compute else "")
+                         + (f"  num_gpus {a.num_gpus:g}" if a.num_gpus else ""))
             for key, ids in a.spec.mavlink_links.items():
                 lines.append(f"      mavlink link {key} shared by {', '.join(ids)} (one socket, routed by system id)")
             for c in a.components:
@@ -339,6 +353,8 @@ def _place_analytics(st: _PlanState, robots: list, graphs: dict, scheduled: dict
         def place(name: str, hid: str, robots_: tuple, role: Role, tier: str, compute: str | None, labels: dict,
                   scheduled_: bool = False, obj: Any = None) -> None:
             pa = st.actor(hid, role, tier, compute, labels)
+            if role == "analytics":  # its own actor: the GPUs it asks for (colocated/scheduled: refused before)
+                pa.num_gpus = max(pa.num_gpus, float(getattr(a, "num_gpus", 0.0) or 0.0))
             cid = ComponentId(name, "analytics", robots_[0] if len(robots_) == 1 and role == "drone" else None)
             pa.spec.analytics.append(AnalyticsSpec(cid, a.name, a if obj is None else obj,
                                                    max(buffer, 8) if scheduled_ else buffer, scheduled_))

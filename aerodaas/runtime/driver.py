@@ -291,6 +291,7 @@ def _plan_run(run: _Run) -> Any:
                           scheduled=run.scheduled, epoch_ns=run.epoch_ns,
                           run_id=opts.run_id or os.environ.get("AERODAAS_RUN_ID") or None)
     placement = Placement(has_cloud=run.has_cloud, local=ray_start.started_here() and not opts.address)
+    _check_gpus(run.plan, placement)
     if not placement.local:
         from aerodaas.clusters.placement import placement_warning
 
@@ -308,6 +309,21 @@ def _plan_run(run: _Run) -> Any:
               f"--address http://{dashboard_url})" if dashboard_url else
               " (run with --dashboard to see them with `ray list actors`)"), flush=True)
     return placement
+
+
+def _check_gpus(plan: Any, placement: Any) -> None:
+    """Every actor asking for GPUs has a live node of its compute with them (else Ray would hold it pending for
+    ever and the run would wait). Raises ConfigError naming each actor, its selector and the nodes' GPUs."""
+    import ray
+
+    from aerodaas.clusters.placement import gpu_placement_errors
+    from aerodaas.config import ConfigError
+
+    if not any(a.num_gpus for a in plan.actors.values()):
+        return
+    errors = gpu_placement_errors(plan, placement, ray.nodes())
+    if errors:
+        raise ConfigError("; ".join(errors))
 
 
 def _start_actors(run: _Run, placement: Any) -> list:

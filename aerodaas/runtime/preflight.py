@@ -11,7 +11,7 @@ from typing import Any
 from aerodaas.config import SimulationConfig
 
 __all__ = ["validate", "validate_graph", "check_options", "check_deployment", "simulation_for", "check_clocks",
-           "robot_schedulers", "scheduled_analytics", "check_preplanned"]
+           "robot_schedulers", "scheduled_analytics", "check_preplanned", "check_required_providers"]
 
 
 def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
@@ -107,6 +107,10 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
                 raise ConfigError(f"analytics {a.name!r}: on_error must be 'continue' or 'abort', got "
                                   f"{getattr(a, 'on_error')!r}")
             check_failure_fraction(a)
+            if getattr(a, "num_gpus", 0.0) and getattr(a, "colocate", False):
+                raise ConfigError(f"analytics {a.name!r}: asks Ray for num_gpus={a.num_gpus:g} (its providers), but "
+                                  f"deploy(..., colocate=True) runs it inside each drone's actor, which asks for "
+                                  f"none; deploy it on its own actor, or set Providers(num_gpus=0)")
             from aerodaas.analytics.contract import check_consumes, check_declaration
 
             check_declaration(a)  # Output / named_outputs / consumes well-formed (ContractError, a ValueError)
@@ -116,7 +120,13 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
         from aerodaas.backends import backend_class
 
         backend_class(r.cfg.backend).check_mission(r, scheds[r.id], env.cfg.hitl.enabled)
-    return graphs, scheds, scheduled_analytics(env, graphs)
+    scheduled = scheduled_analytics(env, graphs)
+    for a in scheduled.values():
+        if getattr(a, "num_gpus", 0.0):
+            raise ConfigError(f"analytics_scheduler.models.{a.name}: {a.name!r} asks Ray for num_gpus={a.num_gpus:g} "
+                              f"(its providers), but the analytics scheduler runs it in its dispatcher and cloud "
+                              f"actors, which ask for none; set Providers(num_gpus=0) or do not schedule it")
+    return graphs, scheds, scheduled
 
 
 def check_deployment(env, analytics) -> None:
@@ -154,6 +164,7 @@ def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple =
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
     hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
+    check_required_providers(robots, opts)
     if opts.hitl and not env.cfg.hitl.enabled:  # --hitl: a backend's mission may refuse the HITL API
         from aerodaas.backends import backend_class
 
@@ -187,6 +198,39 @@ def hitl_access(env, opts: Any, check: bool = False) -> Any:
         check_exposure(h.host, files[0], files[1], insecure, "hitl.host", fields[0], fields[1],
                        "hitl.insecure or --insecure")
     return ServeAccess(files[0], files[1], None, insecure and files[0] is None and not is_loopback(h.host))
+
+
+def check_required_providers(robots: list, opts: Any) -> None:
+    """A run whose actors all run on this machine with this interpreter (no ``--address``, Ray not joined by the
+    application): every onnxruntime provider an analytics requires (``Providers(required=True)``,
+    :mod:`aerodaas.perception.providers`) is offered by this process's onnxruntime. Raises ConfigError naming the
+    analytics and the provider; elsewhere the analytics' actor checks on its node and fails to start."""
+    import sys
+
+    from aerodaas.config import ConfigError
+    from aerodaas.runtime.dataflow import collect_graph
+
+    ray = sys.modules.get("ray")
+    if getattr(opts, "address", None) or (ray is not None and ray.is_initialized()):
+        return
+    seen: set[int] = set()
+    for r in robots:
+        for a in collect_graph(r):
+            prov = getattr(a, "providers", None)
+            if id(a) in seen or not getattr(prov, "required", False):
+                continue
+            seen.add(id(a))
+            from aerodaas.perception.providers import missing_here
+
+            missing = missing_here(prov)
+            if missing:
+                import onnxruntime as ort
+
+                raise ConfigError(f"analytics {a.name!r}: providers.required=True but this machine's onnxruntime "
+                                  f"{ort.__version__} does not offer {missing} (it offers "
+                                  f"{ort.get_available_providers()}); install onnxruntime-gpu / "
+                                  f"onnxruntime-openvino in place of onnxruntime (docs/perception.md, "
+                                  f"\"Accelerators\"), or set required=False for a CPU fallback")
 
 
 def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:

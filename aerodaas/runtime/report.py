@@ -157,6 +157,10 @@ def _analytics_lines(rid: str, st: dict, acc: dict) -> list[str]:
                       f"{a.get('last_failure')})")
         if a.get("named_outputs"):  # the analytics' declared outputs (aerodaas.analytics.contract)
             extra += ", outputs " + ", ".join(f"{k} {v}" for k, v in a["named_outputs"].items())
+        if a.get("providers"):  # a detector with onnxruntime providers set (aerodaas.perception.providers)
+            extra += f", on {'+'.join(a['providers'])} at {a.get('host')}"
+            if a.get("provider_fallback"):
+                extra += f" (asked {'+'.join(a.get('providers_requested') or [])}: not available there, CPU fallback)"
         if a.get("events"):  # what it recorded with emit_event, by kind
             extra += ", events " + ", ".join(f"{k} x{v}" for k, v in sorted(a["events"].items()))
         recorded = sum(c["recorded"] for t, c in chans.items() if t == f"/{rid}/{a['name']}"

@@ -33,7 +33,8 @@ LOST = "lost"
 def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorClasses) -> dict:
     """Create every actor of ``plan`` from ``classes`` (the run's actor classes, handed by its entry point): the
     recorder first, on the driver's node, never restarted; the others named, placed with their ``label_selector``
-    and restartable ``max_restarts`` times. Returns host id -> actor handle. Nothing is set up yet. Raises what Ray
+    (and their ``num_gpus``, :meth:`~aerodaas.runtime.dataflow.ActorPlan.ray_options`) and restartable
+    ``max_restarts`` times. Returns host id -> actor handle. Nothing is set up yet. Raises what Ray
     raises for an impossible placement option."""
     import ray
 
@@ -55,8 +56,7 @@ def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorCla
     for hid, a in plan.actors.items():
         if hid == "recorder":
             continue
-        opts = {"name": a.name, "label_selector": a.selector(placement), "max_restarts": max_restarts}
-        handles[hid] = classes.for_role(a.role).options(**opts).remote(hid, a.tier)
+        handles[hid] = classes.for_role(a.role).options(**a.ray_options(placement, max_restarts)).remote(hid, a.tier)
     return handles
 
 
