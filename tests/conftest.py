@@ -98,6 +98,15 @@ LONGEST_FIRST = ("test_backends_e2e.py", "test_bench_cli.py", "test_e2e.py", "te
                  "test_laplan_planner_equivalence.py")
 
 
+#: the slow tier's other lane, longest first (seconds, serial, 2026-11-26 at load 2-9: test_faults 735, test_ray_up
+#: 280, test_example_plugins 152, test_runtime_actors 146, test_edgecloud_cluster 123, test_bad_input 92,
+#: test_bench_json_stdout 80); after :data:`LONGEST_FIRST` in the rank, which only the development tier's files use
+SLOW_LONGEST_FIRST = ("test_faults.py", "test_ray_up.py", "test_example_plugins.py", "test_runtime_actors.py",
+                      "test_edgecloud_cluster.py", "test_bad_input.py", "test_bench_json_stdout.py",
+                      "test_liveview_npm_client.py", "test_json_inputs.py", "test_perception_providers.py",
+                      "test_train_detector.py", "test_safety_limits.py")
+
+
 def pytest_configure(config):
     """Under pytest-xdist, keep the collection's order of files (see :data:`LONGEST_FIRST`): xdist otherwise sorts
     them by their number of tests, which puts the files of a few long end-to-end runs last."""
@@ -105,16 +114,38 @@ def pytest_configure(config):
         config.option.loadscopereorder = False
 
 
+#: the slow groups whose outcome needs the CPU when the vehicle's or the stream's clock says so (real firmware, a
+#: real-time video sender, a wall-clock runtime): in the slow tier they share one lane, one test at a time
+REALTIME_GROUPS = ("sitl", "video", "realtime")
+#: the name of that lane (an ``xdist_group``); every other slow file is a lane unit of its own
+REALTIME_LANE = "realtime-lane"
+
+
+def slow_lane(item) -> str:
+    """The ``xdist_group`` of a slow test under ``pytest -m slow -n 2 --dist loadgroup`` (CI): every real-time test
+    (:data:`REALTIME_GROUPS`) in :data:`REALTIME_LANE`, so one worker runs them one after the other, never two at
+    once; any other test with the rest of its file (its module fixtures start once: a Ray cluster, a firmware
+    boot), the files handed to the other worker as it frees up. The real-time lane comes first in the collection,
+    so xdist starts it at once and it ends about when the other worker's files do."""
+    if any(item.get_closest_marker(g) for g in REALTIME_GROUPS):
+        return REALTIME_LANE
+    return item.path.name
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook, which reads the xdist_group marks set here
 def pytest_collection_modifyitems(config, items):
     """Mark every test of a slow group ``slow`` too, so that ``pytest -m "not slow"`` is the development tier
-    (everything but SITL, ``ray up``, cluster, fault, video and real-time runs); CI runs everything. On an xdist worker, the files of
-    :data:`LONGEST_FIRST` come first (in that order; the tests of a file keep theirs)."""
+    (everything but SITL, ``ray up``, cluster, fault, video and real-time runs); CI runs everything. Each slow test
+    gets its lane (:func:`slow_lane`, read by ``--dist loadgroup``). On an xdist worker, the real-time lane comes
+    first, then the files of :data:`LONGEST_FIRST` (in that order; the tests of a file keep theirs)."""
     for item in items:
         if any(item.get_closest_marker(g) for g in SLOW_GROUPS):
             item.add_marker(pytest.mark.slow)
+            item.add_marker(pytest.mark.xdist_group(slow_lane(item)))
     if os.environ.get("PYTEST_XDIST_WORKER"):
-        rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-        items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+        rank = {name: i for i, name in enumerate(LONGEST_FIRST + SLOW_LONGEST_FIRST)}
+        items.sort(key=lambda item: (not any(m.args[:1] == (REALTIME_LANE,) for m in item.iter_markers("xdist_group")),
+                                     rank.get(item.path.name, len(rank))))
 
 
 @pytest.fixture(scope="session")
