@@ -219,3 +219,24 @@ def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
     assert not any(o.in_air or o.position[2] != 0.0 for o in path)
     kinds = [e["event"] for e in rec.events]
     assert "takeoff_skipped" in kinds and "takeoff" not in kinds and not [k for k in kinds if k.endswith("_stalled")]
+
+
+def test_the_backend_contract_documents_every_member_and_which_are_required():
+    """docs/extending.md "Writing a vehicle backend from scratch" names every public member of VehicleBackend, and
+    its members table marks exactly the abstract ones required."""
+    import re
+
+    docs = (REPO / "docs" / "extending.md").read_text(encoding="utf-8")
+    section = docs.split("## Writing a vehicle backend from scratch", 1)[1].split("\n## ", 1)[0]
+    public = {n for n in vars(VehicleBackend) if not n.startswith("_")}
+    named = set(re.findall(r"`(\w+)", section))
+    assert public <= named, sorted(public - named)
+    members = section.split("### Members", 1)[1]
+    required: dict[str, bool] = {}
+    for row in members.splitlines():
+        if row.startswith("| `"):
+            first, req = row.split("|")[1:3]
+            for name in re.findall(r"`(\w+)", first):
+                required[name] = req.strip().startswith("**yes**")
+    assert {n for n, r in required.items() if r} == set(VehicleBackend.__abstractmethods__), required
+    assert all(not r for n, r in required.items() if n not in VehicleBackend.__abstractmethods__)
