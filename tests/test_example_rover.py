@@ -6,6 +6,7 @@ hand on simulated time. tests/test_example_plugins.py runs the installed package
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import math
 import sys
 import types
@@ -71,7 +72,7 @@ def test_goto_turns_on_the_spot_then_drives_within_its_limits_and_stops_on_the_t
     odo = _drive(r, 15.0)
     speeds = [math.hypot(*o.velocity[:2]) for o in odo]
     assert all(o.position[2] == 0.0 and not o.in_air for o in odo)
-    assert max(speeds) == pytest.approx(2.0) and all(b - a <= 0.1 + 1e-9 for a, b in zip(speeds, speeds[1:]))
+    assert max(speeds) == pytest.approx(2.0) and all(b - a <= 0.1 + 1e-9 for a, b in itertools.pairwise(speeds))
     # 9 degrees a step at 90 deg/s: on the spot while the target is behind its beam (10 steps), facing it after 20
     assert all(math.hypot(*o.position) < 1e-9 for o in odo[:10]) and math.hypot(*odo[10].position) > 1e-3
     facing = next(i for i, o in enumerate(odo) if min(o.attitude.yaw, 360.0 - o.attitude.yaw) < 1e-6)

@@ -14,8 +14,8 @@ along its heading psi at forward speed v and turns at rate omega,
 integrated exactly over each step for the step's constant (v, omega) (a circular arc, a straight line when omega is
 0). Its own clock (``clock = "sim"``): it moves only in :meth:`RoverBackend.step`, by ``dt`` simulated seconds. The
 controller turns towards the target at up to ``turn_rate_dps`` and drives only as far as it faces it
-(``v * max(0, cos(heading error))``: on the spot while the target is abeam or behind), accelerating and braking at ``accel_mps2`` to stop
-on the target. The battery drains per second while armed and per metre driven; an empty battery stops the rover
+(``v * max(0, cos(heading error))``: on the spot while the target is abeam or behind), accelerating and braking
+at ``accel_mps2`` to stop on the target. The battery drains per second while armed and per metre driven; an empty battery stops the rover
 (a ``battery_empty`` event). Settings: ``robots[].backend_config`` = :class:`RoverConfig`.
 """
 from __future__ import annotations
