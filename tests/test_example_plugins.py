@@ -12,6 +12,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
@@ -21,7 +22,8 @@ from .conftest import REPO
 from .test_liveview_npm_client import node_client  # noqa: F401 - the fixture: Foxglove's npm client
 
 EXAMPLE = REPO / "examples" / "plugins"
-PLUGINS = {("sensor", "gas_concentration"), ("backend", "gusty_sim"), ("analytics", "gas_threshold"),
+PLUGINS = {("sensor", "gas_concentration"), ("backend", "gusty_sim"), ("backend", "ground_rover"),
+           ("analytics", "gas_threshold"),
            ("analytics", "frame_probe"), ("analytics", "gas_plume"), ("analytics_scheduler", "THIN_EDGE_FIFO"),
            ("trajectory_scheduler", "eastward_sweep")}
 
@@ -56,6 +58,7 @@ def test_the_installed_package_registers_every_plugin_by_entry_point(installed, 
         assert rows[key]["origin"] == "entry point aerodaas-example-plugins", rows.get(key)
         assert "error" not in rows[key], rows[key]
     assert "source_x" in rows[("sensor", "gas_concentration")]["config"]
+    assert {"max_speed_mps", "turn_rate_dps"} <= set(rows[("backend", "ground_rover")]["config"])
     assert rows[("backend", "sim")]["origin"] == "builtin" and rows[("analytics_scheduler", "DEMS")]["origin"] == "builtin"
     # the framework never names the example's sensor type: a new sensor type is one file of the package
     g = subprocess.run(["git", "grep", "-n", "gas_concentration", "--", "aerodaas", "actors", "schedulers"], cwd=REPO,
@@ -125,6 +128,72 @@ def test_an_import_path_names_a_plugin_class_in_environment_json(installed, tmp_
     gas = next(n for n in plan["nodes"] if n["id"] == "uav/gas")
     assert gas["kind"] == "sensor" and gas["plugin"].endswith("aerodaas_example_plugins.GasReading"), gas
 
+
+
+ROVER_SETTINGS = textwrap.dedent('''
+    import copy, json, sys
+    from aerodaas.config import ConfigError, parse_environment_config
+    base = json.load(open(sys.argv[1]))
+    for change in ({"backend_config": {"max_speed_mps": -1}}, {"safety": {"min_altitude": 0.5}}):
+        cfg = copy.deepcopy(base)
+        for section, values in change.items():
+            cfg["robots"][0][section].update(values)
+        try:
+            parse_environment_config(cfg)
+            print("ACCEPTED", change)
+        except ConfigError as e:
+            print("REFUSED", str(e).replace(chr(10), " "))
+''')
+
+ROVER_UP = textwrap.dedent('''
+    from aerodaas import *
+    env = Environment("rover_patrol.json")
+    rover = env.get_robot_by_id("rover")
+    rover.navigate(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="hill", x=5, y=0, z=2.0)],
+                                  SchedulingType.ORDERED))
+    rover.start_mission()
+''')
+
+
+def test_the_rover_backend_refuses_bad_settings_and_an_airborne_waypoint_before_ray(installed, tmp_path):
+    """The from-scratch backend's own checks, as the framework runs them for a plug-in when it loads the
+    environment and the app: its Config (the field and value named), its check_config (the safety floor) and its
+    check_mission (a waypoint off the ground; ``aerodaas plan`` exits 2)."""
+    src, env = installed
+    p = subprocess.run([sys.executable, "-c", ROVER_SETTINGS, str(src / "app" / "rover_patrol.json")],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith(("REFUSED", "ACCEPTED"))]
+    assert len(lines) == 2, p.stdout + p.stderr[-3000:]
+    assert lines[0].startswith("REFUSED") and "robots.0.backend_config.max_speed_mps" in lines[0] and "-1" in lines[0]
+    assert lines[1].startswith("REFUSED robots.0.safety.min_altitude: 0.5 m; a rover"), lines[1]
+    up = tmp_path / "rover_up.py"
+    up.write_text(ROVER_UP)
+    (tmp_path / "rover_patrol.json").write_text((src / "app" / "rover_patrol.json").read_text())
+    p = _aerodaas(["plan", str(up)], env, tmp_path)
+    err = p.stdout + p.stderr
+    assert p.returncode == 2 and "robot 'rover': waypoint 'hill' at z = 2 m; a rover" in err, err[-3000:]
+
+
+def _check_rover(rec: str) -> None:
+    """The rover app's recording: it drove to each patrol point (an odometry sample within its 0.3 m acceptance
+    radius, reached and held in order), always on the ground (never an in-air sample, z = 0), and never took off (no
+    TAKING_OFF state, the drone's takeoff_skipped event); its mission a success."""
+    msgs: dict[str, list] = {}
+    for topic, _, _, m in read_messages(rec):
+        msgs.setdefault(topic, []).append(m)
+    result = msgs["/mission/result"][-1]
+    assert result["outcome"] == "success" and result["visited"] == 3, result
+    events = msgs["/rover/events"]
+    assert [e["waypoint"] for e in events if e["event"] == "waypoint_done"] == ["p1", "p2", "p3"], events
+    assert "takeoff_skipped" in [e["event"] for e in events] and "takeoff" not in [e["event"] for e in events]
+    odo = msgs["/rover/odometry"]
+    assert len(odo) > 50 and not [o for o in odo if o["in_air"] or o["position"][2] != 0.0]
+    for point in ((10.0, 0.0, 0.0), (10.0, 8.0, 0.0), (0.0, 8.0, 0.0)):
+        assert min(math.dist(o["position"], point) for o in odo) <= 0.3, point
+    states = [m["state"] for m in msgs["/mission/state"]]
+    assert "TAKING_OFF" not in states and states[:3] == ["PREFLIGHT", "ARMED", "HOVERING"], states
+    end = next(e for e in events if e["event"] == "run_end")
+    assert states[-1] == "LANDED" and end["how"] == "landed and disarmed" and not end["armed"], (states[-3:], end)
 
 def _plume(props: dict, pos: list[float]) -> float:
     d2 = (pos[0] - props["source_x"]) ** 2 + (pos[1] - props["source_y"]) ** 2
@@ -232,19 +301,36 @@ def test_the_example_app_runs_on_local_ray_and_each_plugin_does_its_job(installe
     assert "outputs crossing 1" in line and "events plume_entered x1, plume_left x1" in line, p.stdout[-3000:]
 
 
+
+@pytest.mark.e2e
+def test_the_rover_app_drives_its_patrol_on_local_ray(installed, tmp_path):
+    """The from-scratch ground-rover backend, installed by entry point, run by ``aerodaas run``: exit 0 and a
+    recording of a patrol driven on the ground."""
+    src, env = installed
+    rec = tmp_path / "rover.mcap"
+    p = _aerodaas(["run", str(src / "app" / "rover_patrol.py"), "--record", str(rec), "--quiet", "--timeout", "120"],
+                  env, tmp_path, timeout=300)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+    _check_rover(str(rec))
+
 CLUSTER = textwrap.dedent('''
-    import json, os, subprocess, sys
+    import json, os, subprocess, sys, time
     from aerodaas.clusters.local import LocalCluster
 
-    app, env_file, rec, site = sys.argv[1:5]
+    runs, site = json.loads(sys.argv[1]), sys.argv[2]
     # the cluster's nodes do not have the package (no PYTHONPATH to it): only the driver does, as on a cluster
-    # started elsewhere; the driver ships the installed plug-in packages to the job (runtime_env py_modules)
+    # started elsewhere; the driver ships the installed plug-in packages to the job (runtime_env py_modules). The
+    # apps run one after the other on the same cluster, each a job of its own.
     with LocalCluster(cloud_nodes=0, edge_nodes=2, edge_labels=[{"aerodaas/site": "a"}, {"aerodaas/site": "b"}],
                       connect=False, worker_niceness=0) as lc:
-        p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", app, "--env", env_file, "--record", rec,
-                            "--quiet", "--timeout", "300", "--address", lc.address], capture_output=True, text=True,
-                           timeout=900, env=dict(os.environ, PYTHONPATH=site))
-    print("RESULT " + json.dumps({"rc": p.returncode, "out": p.stdout[-3000:], "err": p.stderr[-3000:]}))
+        for app, env_file, rec in runs:
+            args = ["--env", env_file] if env_file else []
+            t0 = time.monotonic()
+            p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", app, *args, "--record", rec, "--quiet",
+                                "--timeout", "300", "--address", lc.address], capture_output=True, text=True,
+                               timeout=900, env=dict(os.environ, PYTHONPATH=site))
+            print("RESULT " + json.dumps({"app": app, "rc": p.returncode, "wall_s": round(time.monotonic() - t0, 1),
+                                          "out": p.stdout[-3000:], "err": p.stderr[-3000:]}), flush=True)
 ''')
 
 
@@ -252,7 +338,8 @@ CLUSTER = textwrap.dedent('''
 def test_the_example_app_runs_on_a_two_node_local_cluster(installed, tmp_path):
     """The drone actor (gusty backend, gas sensor, frame probe's dispatcher and its scheduler) flies from site a,
     the gas-threshold analytics runs on site b. The cluster's nodes were started without the package; the
-    driver, where it is installed, ships it to them."""
+    driver, where it is installed, ships it to them. Then, on the same cluster, the rover app (its from-scratch
+    backend shipped the same way)."""
     src, env = installed
 
     def two_sites(c):
@@ -266,18 +353,21 @@ def test_the_example_app_runs_on_a_two_node_local_cluster(installed, tmp_path):
     sel = {a["role"] + ":" + ",".join(a["components"]): a["label_selector"].get("aerodaas/site")
            for a in json.loads(p.stdout)["actors"]}
     assert sel["analytics:gas_threshold#2"] == "b" and sel["dispatcher:frame_probe#1"] == "a", sel
-    rec = tmp_path / "cluster.mcap"
+    rec, rover_rec = tmp_path / "cluster.mcap", tmp_path / "rover.mcap"
+    runs = [[str(src / "app" / "gas_survey.py"), env_file, str(rec)],
+            [str(src / "app" / "rover_patrol.py"), None, str(rover_rec)]]
     script = tmp_path / "cluster_run.py"
     script.write_text(CLUSTER)
     site = env["PYTHONPATH"].split(os.pathsep)[0]
     cluster_env = {k: v for k, v in env.items() if k != "PYTHONPATH"}
-    p = subprocess.run([sys.executable, str(script), str(src / "app" / "gas_survey.py"), env_file, str(rec), site],
-                       capture_output=True, text=True, env=cluster_env, cwd=tmp_path, timeout=1200)
-    line = next((ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")), None)
-    assert line, p.stdout[-3000:] + p.stderr[-3000:]
-    out = json.loads(line[len("RESULT "):])
-    assert out["rc"] == 0, out
+    p = subprocess.run([sys.executable, str(script), json.dumps(runs), site], capture_output=True, text=True,
+                       env=cluster_env, cwd=tmp_path, timeout=1800)
+    out = [json.loads(ln[len("RESULT "):]) for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert len(out) == 2, p.stdout[-3000:] + p.stderr[-3000:]
+    assert [o["rc"] for o in out] == [0, 0], out
+    print("cluster runs, wall s:", {Path(o["app"]).name: o["wall_s"] for o in out})  # CI time accounting (-rP)
     _check_recording(str(rec), src)
+    _check_rover(str(rover_rec))
 
 
 ACTOR_PIDS = textwrap.dedent('''

@@ -76,11 +76,24 @@ class NotNavigable(BackendError):
 
 
 class VehicleBackend(abc.ABC):
-    """Driver of one robot. Subclasses set :attr:`kind`, :attr:`clock` and implement the abstract methods.
+    """Driver of one robot. Subclasses set :attr:`kind`, :attr:`clock` and implement the abstract methods (the
+    members docs/extending.md "Writing a vehicle backend from scratch" tables, with units, frames, return types,
+    errors and which are optional; ``examples/plugins/aerodaas_example_plugins/rover.py`` is a complete one).
+
+    Construction: the drone actor builds the backend as ``Backend(cfg)`` with the robot's validated
+    :class:`aerodaas.config.RobotConfig` (:func:`aerodaas.backends.make_backend`, called in
+    ``actors/drone.py``); a subclass's ``__init__(self, cfg)`` calls this class's ``__init__(cfg.id, cfg.home)``
+    and reads its settings with :meth:`options`. It must not open a link there (:meth:`connect` does).
+
+    Errors: a command the vehicle refuses or cannot carry out raises a :class:`BackendError` (a
+    :class:`CommandRefused`, :class:`LinkLost`, :class:`NotNavigable`): during the mission the drone records it as
+    a ``backend_error`` event and the run goes on, and any other exception from a command ends the robot's mission
+    as ``failed``; an exception from :meth:`arm` (the drone's start) or :meth:`step` ends the drone actor's run.
 
     Thread-safety: the runtime calls every method from one thread (the drone's control thread), except
-    :attr:`link_ok`, :meth:`odometry` and the state properties, which may also be read from a status thread and
-    must not block.
+    :attr:`link_ok`, :meth:`odometry` and the state properties (:attr:`t`, :attr:`position`, :attr:`velocity`,
+    :attr:`yaw`, :attr:`armed`, :attr:`in_air`, :attr:`battery_pct`), which may also be read from a status thread
+    and must not block.
     """
 
     #: the ``backend`` name in ``environment.json``
@@ -95,7 +108,8 @@ class VehicleBackend(abc.ABC):
     needs_takeoff: ClassVar[bool] = True
     #: plug-in declaration (:mod:`aerodaas.plugins.registry`): a backend plug-in is one module with one subclass
     #: of this class (or of a built-in backend such as :class:`aerodaas.backends.sim.SimBackend`), constructed as
-    #: ``Backend(cfg)`` with the robot's :class:`aerodaas.config.RobotConfig`; ``Config`` is the pydantic model of
+    #: ``Backend(cfg)`` with the robot's :class:`aerodaas.config.RobotConfig` (its ``__init__(cfg)`` calls this
+    #: class's ``__init__(cfg.id, cfg.home)``); ``Config`` is the pydantic model of
     #: its own settings (``robots[].backend_config``, validated before Ray starts; read them with
     #: :meth:`options`); it produces the vehicle state (odometry, battery, events) and consumes flight commands
     plugin_kind: ClassVar[str] = "backend"
@@ -179,6 +193,8 @@ class VehicleBackend(abc.ABC):
         ``sched`` its trajectory scheduler) that only this backend knows, before any actor starts. Nothing here."""
 
     def __init__(self, robot_id: str, home: GeoPoint) -> None:
+        """Sets :attr:`robot_id` (``robots[].id``) and :attr:`home` (the ENU origin, WGS-84 degrees and metres).
+        Called by a subclass's ``__init__(cfg)`` as ``super().__init__(cfg.id, cfg.home)``; raises nothing."""
         self.robot_id = robot_id
         #: ENU origin; a real vehicle may replace it with its HOME_POSITION when it connects
         self.home = home
@@ -203,39 +219,51 @@ class VehicleBackend(abc.ABC):
     @property
     @abc.abstractmethod
     def t(self) -> float:
-        """Seconds on the vehicle's clock since :meth:`connect` (simulated seconds for the simulator)."""
+        """Seconds on the vehicle's clock since :meth:`connect` (simulated seconds for the simulator); never goes
+        back. Must not block."""
 
     @abc.abstractmethod
     def step(self, dt: float) -> None:
-        """Simulator: advance ``dt`` seconds. Other backends: process incoming messages (non-blocking)."""
+        """Called once per physics step of the run (``dt`` = 1 / ``simulation.physics_hz`` seconds). ``clock ==
+        "sim"``: advance the vehicle ``dt`` simulated seconds. ``"vehicle"``: process incoming messages
+        (non-blocking; ``dt`` is only a hint). Should not raise: an exception leaves the drone actor's run loop (the
+        run fails); report trouble as events (:meth:`drain_events`) or through :attr:`link_ok`."""
 
     @property
     @abc.abstractmethod
     def position(self) -> np.ndarray:
-        """(3,) float ENU metres from home."""
+        """(3,) float ENU metres from :attr:`home` (x east, y north, z up). Must not block."""
 
     @property
     @abc.abstractmethod
     def velocity(self) -> np.ndarray:
-        """(3,) float ENU m/s."""
+        """(3,) float ENU m/s. Must not block."""
 
     @property
     @abc.abstractmethod
     def yaw(self) -> float:
-        """Heading in degrees, ENU convention (counter-clockwise from east)."""
+        """Heading in degrees, ENU convention (counter-clockwise from east; :meth:`enu_yaw_from_heading` converts a
+        compass/NED heading). Must not block."""
 
     @property
     @abc.abstractmethod
-    def armed(self) -> bool: ...
+    def armed(self) -> bool:
+        """True while the motors are armed (as the vehicle last reported it). The drone reads it to judge the
+        flight's end (landed and disarmed) and a disarm by someone else. Must not block; raises nothing."""
 
     @property
     @abc.abstractmethod
-    def in_air(self) -> bool: ...
+    def in_air(self) -> bool:
+        """True while the vehicle is off the ground (the autopilot's land detector; the simulator: above the
+        ground or climbing). The drone ends LANDING (touchdown) and the autopilot's own return on it, and its
+        battery failsafes act only while it is True; always False for a vehicle with ``needs_takeoff = False``.
+        Must not block; raises nothing."""
 
     @property
     @abc.abstractmethod
     def battery_pct(self) -> float:
-        """State of charge in percent, 0-100."""
+        """State of charge in percent, 0-100 (a backend that only reports, ``navigable = False``, may return None:
+        unknown). The drone's battery failsafes compare it with ``safety.*_battery_pct``. Must not block."""
 
     @property
     def position_accuracy_m(self) -> float:
@@ -251,7 +279,8 @@ class VehicleBackend(abc.ABC):
     @abc.abstractmethod
     def odometry(self) -> Odometry:
         """The current :class:`~aerodaas.model.types.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
-        for backends with a :attr:`sample_key`)."""
+        for backends with a :attr:`sample_key`): ENU metres from :attr:`home` and their WGS-84 position, ENU m/s,
+        attitude in degrees (yaw as :attr:`yaw`), battery percent, armed and in-air. Must not block."""
 
     @property
     def sample_key(self) -> Any:
@@ -278,32 +307,46 @@ class VehicleBackend(abc.ABC):
         return []
 
     # ------------------------------------------------------------------ control
+    # Every motion command below (takeoff, goto, set_velocity) has passed the robot's safety gate (geofence,
+    # altitude and speed limits) before it is called; a command returns once the vehicle accepted it, not once it
+    # is carried out (the drone watches the state).
     @abc.abstractmethod
     def arm(self) -> None:
-        """Arm the motors (waiting until the vehicle is armable). Raises CommandRefused / BackendError."""
+        """Arm the motors (waiting until the vehicle is armable); called once, when the drone starts. Raises
+        CommandRefused (the vehicle said no, e.g. a pre-arm check) or BackendError (no answer, the link): the run
+        fails."""
 
     @abc.abstractmethod
-    def disarm(self) -> None: ...
+    def disarm(self) -> None:
+        """Disarm the motors. Called by the drone once the vehicle is on the ground (LANDED), or when it refuses the
+        vehicle's home before a take-off. Raises CommandRefused when the vehicle refuses (e.g. still in the air)
+        or BackendError; the drone records it and, at the end of the run, waits for the autopilot's own disarm."""
 
     @abc.abstractmethod
     def takeoff(self, altitude_m: float) -> None:
-        """Climb to ``altitude_m`` metres above home; returns once the command is accepted (not reached)."""
+        """Climb to ``altitude_m`` metres above home; returns once the command is accepted (not reached). Never
+        called when ``needs_takeoff`` is False. Raises CommandRefused / BackendError."""
 
     @abc.abstractmethod
     def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        """Fly to ``target_enu`` (ENU metres from home) at up to ``speed`` m/s (None: the vehicle's limit)."""
+        """Fly to ``target_enu`` (ENU metres from home, z up; a ground vehicle decides what z means to it) at up
+        to ``speed`` m/s (None: the vehicle's limit). Replaces any previous target. Raises NotNavigable (a
+        backend that only reports), CommandRefused or BackendError."""
 
     @abc.abstractmethod
     def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        """Hold the ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s, counter-clockwise positive)."""
+        """Hold the ENU velocity ``v_enu`` (3 values, m/s) and yaw rate (deg/s, counter-clockwise positive) until
+        the next command. Raises NotNavigable, CommandRefused or BackendError."""
 
     @abc.abstractmethod
     def hold(self) -> None:
-        """Hover where the vehicle is."""
+        """Hover (stop) where the vehicle is. Raises NotNavigable, CommandRefused or BackendError."""
 
     @abc.abstractmethod
     def land(self) -> None:
-        """Descend and land where the vehicle is."""
+        """Descend and land where the vehicle is (a ground vehicle: stop). Raises NotNavigable, CommandRefused or
+        BackendError; the drone then watches :attr:`in_air` for the touchdown (bounded by its landing
+        deadline)."""
 
     def return_to_launch(self) -> bool:
         """Ask the vehicle to return home and land by itself. Returns False when the backend has no such mode

@@ -2,6 +2,8 @@
 
 * :mod:`.gas` — sensor type ``gas_concentration`` (a Gaussian gas plume sampled at the vehicle's position);
 * :mod:`.wind` — vehicle backend ``gusty_sim`` (the embedded simulator with wind gusts);
+* :mod:`.rover` — vehicle backend ``ground_rover`` (a kinematic ground rover written from scratch on the backend
+  contract; it needs no take-off);
 * :mod:`.threshold` — analytics ``gas_threshold`` (gas reading -> hover-here navigation command);
 * :mod:`.plume` — analytics ``gas_plume`` (gas readings -> a typed status per reading, a ``crossing`` named output
   and ``plume_entered``/``plume_left`` events);
