@@ -110,3 +110,42 @@ def test_a_mission_flies_on_a_tls_cluster_that_refuses_drivers_without_its_certi
         assert c[k]["rc"] not in (0, None) and "CONNECTED" not in c[k]["out"], (k, c[k])
         assert "Failed to connect to GCS" in c[k]["err"], (k, c[k])
     assert "Handshake failed" in c["other_ca"]["err"], c["other_ca"]  # refused in the TLS handshake itself
+
+
+def test_ray_tls_files_are_checked_and_named(tmp_path):
+    """No Ray: RayTLS.checked refuses a missing file, a key others may read and a certificate that is not the
+    key's, naming the field and the file; from_environ is None without RAY_USE_TLS and names a missing variable."""
+    from aerodaas.clusters.ray_tls import RayTLS
+
+    from .tls_certs import ca_and_node
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    ca, crt, key = ca_and_node(tmp_path / "a")
+    _, other_crt, _ = ca_and_node(tmp_path / "b")
+    assert RayTLS.checked(crt, key, ca).environ()["RAY_TLS_SERVER_KEY"] == str(key.resolve())
+    with pytest.raises(ValueError, match=r"RayTLS\.ca '.*nope\.crt': not a readable regular file"):
+        RayTLS.checked(crt, key, tmp_path / "nope.crt")
+    with pytest.raises(ValueError, match=r"are not a certificate, its key and an authority"):
+        RayTLS.checked(other_crt, key, ca)
+    key.chmod(0o644)
+    with pytest.raises(ValueError, match=r"RayTLS\.key .*mode 644.*chmod 600"):
+        RayTLS.checked(crt, key, ca)
+    assert RayTLS.from_environ({"RAY_USE_TLS": "0", "RAY_TLS_CA_CERT": str(ca)}) is None
+    with pytest.raises(ValueError, match=r"RAY_TLS_SERVER_KEY is not set"):
+        RayTLS.from_environ({"RAY_USE_TLS": "1", "RAY_TLS_SERVER_CERT": str(crt), "RAY_TLS_CA_CERT": str(ca)})
+
+
+def test_run_address_with_ray_tls_half_set_exits_2_before_ray(tmp_path):
+    """`aerodaas run --address` with RAY_USE_TLS=1 but no certificate variables: exit 2 naming them, before Ray."""
+    import os
+
+    app = tmp_path / "app.py"
+    app.write_text("from aerodaas import *\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_TLS_")} | {"RAY_USE_TLS": "1"}
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet", "--address",
+                        "127.0.0.1:1"], capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
+    assert p.returncode == 2, p.stderr[-2000:]
+    assert "RAY_USE_TLS=1 turns Ray's TLS on, but RAY_TLS_SERVER_CERT, RAY_TLS_SERVER_KEY, RAY_TLS_CA_CERT are not" \
+           in p.stderr, p.stderr[-2000:]
+    assert "Connecting to" not in p.stderr  # Ray was never asked
