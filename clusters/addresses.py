@@ -4,6 +4,7 @@ host and port (parsed, in range, free here)."""
 from __future__ import annotations
 
 import socket
+import ssl
 import threading
 
 __all__ = ["ResolveError", "try_bind", "check_ray_address", "check_listen", "check_hitl"]
@@ -52,7 +53,10 @@ def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--ad
     """Check a Ray cluster address ``HOST:PORT`` (or ``ray://HOST:PORT``; ``auto`` and ``local`` are Ray's own and
     left to it) before Ray is started: the port an integer in [1, 65535], the host resolvable and the port
     accepting a TCP connection and answering it as an HTTP/2 (gRPC) server does, as Ray's GCS does, within
-    ``timeout_s`` seconds each. Raises ValueError naming ``option`` and the address and saying why."""
+    ``timeout_s`` seconds each. With Ray's TLS on in this environment (``RAY_USE_TLS``,
+    :class:`aerodaas.clusters.ray_tls.RayTLS`) the HTTP/2 exchange runs inside a TLS handshake with its
+    certificates, as Ray's own processes connect. Raises ValueError naming ``option`` and the address (or the
+    ``RAY_TLS_*`` variable) and saying why."""
     a = address.strip()
     if a in ("auto", "local"):
         return
@@ -74,6 +78,9 @@ def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--ad
         infos = _resolve(host, port, timeout_s)
     except (OSError, TimeoutError) as e:
         raise ValueError(f"{option} {address!r}: cannot resolve host {host!r} ({e})") from None
+    from aerodaas.clusters.ray_tls import RayTLS
+
+    tls = RayTLS.from_environ()  # Ray's TLS on (RAY_USE_TLS): the check speaks TLS as Ray's processes do
     family, kind, proto, _, addr = infos[0]
     with socket.socket(family, kind, proto) as s:
         s.settimeout(timeout_s)
@@ -82,10 +89,20 @@ def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--ad
         except OSError as e:
             raise ValueError(f"{option} {address!r}: no Ray cluster answers there ({e.strerror or e}; start one with "
                              f"`ray start --head` or `aerodaas up`)") from None
-        why = _grpc_answer(s)
+        if tls is not None:
+            try:
+                with tls.client_context().wrap_socket(s, server_hostname=host) as t:
+                    why = _grpc_answer(t)
+            except (ssl.SSLError, OSError) as e:  # socket.timeout included
+                raise ValueError(f"{option} {address!r}: the TLS handshake with it failed ({e}; RAY_USE_TLS is set: "
+                                 f"the cluster must run Ray's TLS with a certificate signed by RAY_TLS_CA_CERT, and it "
+                                 f"must accept RAY_TLS_SERVER_CERT)") from None
+        else:
+            why = _grpc_answer(s)
     if why:
         raise ValueError(f"{option} {address!r}: the port accepts connections but is not a Ray cluster ({why} "
-                         f"within {timeout_s:g} s; Ray's GCS and Ray Client server speak gRPC over HTTP/2): give the "
+                         f"within {timeout_s:g} s; Ray's GCS and Ray Client server speak gRPC over HTTP/2; a cluster "
+                         f"with Ray's TLS on answers only a client with RAY_USE_TLS=1 and its certificates): give the "
                          f"Ray head's GCS address (`ray start --head` prints it) or start one with `aerodaas up`")
 
 

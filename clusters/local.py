@@ -12,7 +12,8 @@ address 127.0.0.1, so the GCS, raylets, object managers, agents and workers list
 machine's network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
 
 ``ray.cluster_utils.Cluster.add_node(**node_args)`` passes its keyword arguments to ``ray._private.parameter.RayParams``,
-which accepts ``labels: dict[str, str]`` (checked on Ray 2.60).
+which accepts ``labels: dict[str, str]`` (checked on Ray 2.60). With ``tls`` every gRPC channel of the cluster runs
+Ray's mutual TLS (:mod:`aerodaas.clusters.ray_tls`; ``tests/test_ray_tls_cluster.py``).
 
 Usage::
 
@@ -25,7 +26,10 @@ from __future__ import annotations
 
 import logging
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from aerodaas.clusters.ray_tls import RayTLS
 
 __all__ = ["LocalCluster", "enable_token_auth"]
 
@@ -57,8 +61,14 @@ class LocalCluster:
     (Ray's default is 15, below its control plane; the scheduler benchmark uses 0 so that its timers compete on
     equal terms with other processes on a shared machine). ``head_gpus``: logical GPUs the head declares to Ray
     (None: what Ray detects); ``dashboard``: start Ray's dashboard (on Ray's default host, localhost;
-    Ray's state API, ``ray.util.state``, reads it). Raises RuntimeError if Ray is already initialised in this process
-    and ``connect`` is True (shut it down first).
+    Ray's state API, ``ray.util.state``, reads it). ``tls``: run Ray's mutual TLS on every gRPC channel of the
+    cluster with these files (:class:`aerodaas.clusters.ray_tls.RayTLS`): its ``RAY_USE_TLS``/``RAY_TLS_*``
+    variables are set in this process's environment for the cluster's life (:func:`aerodaas.clusters.ray_tls.use_tls`;
+    undone by :meth:`shutdown`), so every node, worker and driver started from here (this process's own
+    ``ray.init``, a subprocess ``aerodaas run --address``) speaks TLS; None leaves the environment as it is. Ray's
+    C++ side of this process reads them once, when it is first used (``ray.init``, the token set-up): start the
+    cluster before any other Ray call of this process, or set the variables before it. Raises
+    RuntimeError if Ray is already initialised in this process and ``connect`` is True (shut it down first).
 
     Attributes: ``address`` (the GCS address, ``host:port``), ``edge_node``, ``cloud_nodes`` (``ray._private.node.Node``
     handles, in the order they were added; removed ones are dropped from the list).
@@ -68,7 +78,7 @@ class LocalCluster:
                  object_store_mb: int = 150, connect: bool = True, extra_edge_labels: dict[str, str] | None = None,
                  worker_niceness: int | None = None, edge_nodes: int = 1,
                  edge_labels: list[dict[str, str]] | None = None, head_gpus: float | None = None,
-                 dashboard: bool = False) -> None:
+                 dashboard: bool = False, tls: "RayTLS | None" = None) -> None:
         import ray
         from ray.cluster_utils import Cluster
 
@@ -77,6 +87,11 @@ class LocalCluster:
         if connect and ray.is_initialized():
             raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
                                "LocalCluster with connect=True")
+        from aerodaas.clusters.ray_tls import use_tls
+
+        # first: Ray's C++ configuration of this process reads the variables once, at its first use (the token
+        # set-up below is one); every node process started afterwards inherits them. Undone by shutdown().
+        self._restore_tls = use_tls(tls)
         enable_token_auth()
         from aerodaas.clusters.loopback import loopback_only
         from aerodaas.clusters.worker_memory import limit_malloc_arenas
@@ -101,6 +116,7 @@ class LocalCluster:
             self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
         except BaseException:
             self._restore_network()
+            self._restore_tls()
             raise
         self.edge_node = self.cluster.head_node
         self.cloud_nodes: list[Any] = []
@@ -116,6 +132,7 @@ class LocalCluster:
         except BaseException:
             self.cluster.shutdown()
             self._restore_network()
+            self._restore_tls()
             raise
         self.address: str = self.cluster.address
         self.connected = False
@@ -177,6 +194,7 @@ class LocalCluster:
         self.connected = False
         self.cluster.shutdown()
         self._restore_network()
+        self._restore_tls()
 
     def __enter__(self) -> "LocalCluster":
         return self

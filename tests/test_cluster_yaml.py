@@ -121,6 +121,8 @@ def test_ray_start_gets_the_ssh_address_label_and_token_mode(name, node):
         assert f"--node-ip-address={ip}" in args and args[args.index("--labels") + 1] == f"tier={tier}"
         if kind == "worker":
             assert "--address=10.213.0.1:6379" in args
+        else:  # the dashboard (HTTP) stays on the head's loopback; `ray dashboard` tunnels to it over SSH
+            assert "--dashboard-host=127.0.0.1" in args, args
         env = calls[calls.index(starts[0]) + 1]
         assert "RAY_AUTH_MODE=token" in env
         if kind == "head" and cfg["provider"]["type"] == "local":
