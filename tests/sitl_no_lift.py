@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from .recorded_calls import RecordedCalls
+
 
 def _link(conn: str):
     from pymavlink import mavutil
@@ -88,23 +90,6 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     return 0
 
 
-class _Recorded:
-    """The recorder's calls a drone makes, kept in memory: events and mission states in order."""
-
-    def __init__(self) -> None:
-        self.events: list[dict] = []
-        self.states: list[str] = []
-
-    def json(self, topic: str, t_ns: int, msg: dict, schema: str) -> None:
-        if topic.endswith("/events"):
-            self.events.append(msg)
-        elif topic == "/mission/state":
-            self.states.append(msg["state"])
-
-    def odometry(self, *args, **kwargs) -> None:
-        pass
-
-
 def drive(env_path: str, out: str, timeout_s: float) -> int:
     """Fly the first robot of ``env_path`` (a MAVLink robot) with the drone's own flight logic
     (:class:`~aerodaas.actors.drone.DroneComponent`, no Ray: its control step every 0.05 wall seconds) to one
@@ -119,7 +104,7 @@ def drive(env_path: str, out: str, timeout_s: float) -> int:
     sched = TrajectoryScheduler()
     sched.add_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=0, y=5, z=1.5)],
                                         SchedulingType.ORDERED))
-    rec = _Recorded()
+    rec = RecordedCalls()
     d = DroneComponent(f"{cfg.id}/drone", cfg.model_dump(mode="json"), None, sched, rec, 0, 1, [], [])
     d.connect(60)
     try:

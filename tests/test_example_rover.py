@@ -19,6 +19,7 @@ from aerodaas.config import ConfigError, RobotConfig
 from aerodaas.model.types import AeroNavigation, GeoPoint, NavigationType, SchedulingType, Waypoint
 
 from .conftest import REPO
+from .recorded_calls import RecordedCalls
 
 
 def _load():
@@ -174,23 +175,6 @@ def test_its_pre_flight_checks_name_the_field_and_the_waypoint():
         rover.RoverBackend.check_mission(types.SimpleNamespace(id="r"), sched, False)
 
 
-class _Recorded:
-    """The recorder's calls a drone makes: events and mission states kept in order."""
-
-    def __init__(self) -> None:
-        self.events: list[dict] = []
-        self.states: list[str] = []
-
-    def json(self, topic: str, t_ns: int, msg: dict, schema: str) -> None:
-        if topic.endswith("/events"):
-            self.events.append(msg)
-        elif topic == "/mission/state":
-            self.states.append(msg["state"])
-
-    def odometry(self, *args, **kwargs) -> None:
-        pass
-
-
 def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
     """The runtime's drone (mission state machine, safety gate, waypoint holds, end of mission) on the rover,
     stepped by hand: it arms and drives (never TAKING_OFF), holds at each point, and its landing is a stop."""
@@ -202,7 +186,7 @@ def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
     cfg = RobotConfig.model_validate({"id": "r", "safety": {"min_altitude": 0.0}, "idle_land_s": 2.0})
     sched = TrajectoryScheduler()
     sched.add_navigation(AeroNavigation(NavigationType.DISTANCE_DRIVEN, patrol, SchedulingType.ORDERED))
-    rec = _Recorded()
+    rec = RecordedCalls()
     backend = rover.RoverBackend(types.SimpleNamespace(id="r", home=cfg.home, backend_config={"start_yaw_deg": 90}))
     d = DroneComponent("r/drone", cfg.model_dump(mode="json"), None, sched, rec, 0, len(patrol), [], [],
                        backend=backend)
