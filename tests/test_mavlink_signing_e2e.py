@@ -129,7 +129,7 @@ def test_a_signed_mission_flies_and_unsigned_spoofs_change_nothing_in_the_record
 
 @pytest.mark.e2e
 def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(ray_session, run_options, tmp_path):
-    from aerodaas.run_cli import _exit_code
+    from aerodaas.commands.run import _exit_code
 
     from .test_backends_e2e import _run_app
 
