@@ -117,18 +117,27 @@ def pytest_configure(config):
 #: the slow groups whose outcome needs the CPU when the vehicle's or the stream's clock says so (real firmware, a
 #: real-time video sender, a wall-clock runtime): in the slow tier they share one lane, one test at a time
 REALTIME_GROUPS = ("sitl", "video", "realtime")
-#: the name of that lane (an ``xdist_group``); every other slow file is a lane unit of its own
+#: the name of that lane (an ``xdist_group``); every other slow file is a lane unit of its own, but for the next
 REALTIME_LANE = "realtime-lane"
+#: the tests that start Ray clusters of several nodes or `aerodaas up`'s persistent cluster share one lane too: they
+#: bind Ray's fixed default ports on loopback (the dashboard's 8265: `aerodaas up` failed with "already occupied"
+#: beside a LocalCluster with a dashboard, 2026-11-26), so two of them never run at once
+CLUSTER_LANE = "cluster-lane"
+CLUSTER_GROUPS = ("cluster", "rayup")
+CLUSTER_FILES = ("test_persistent_cluster.py", "test_example_plugins.py", "test_warm_pool.py")
 
 
 def slow_lane(item) -> str:
     """The ``xdist_group`` of a slow test under ``pytest -m slow -n 2 --dist loadgroup`` (CI): every real-time test
     (:data:`REALTIME_GROUPS`) in :data:`REALTIME_LANE`, so one worker runs them one after the other, never two at
     once; any other test with the rest of its file (its module fixtures start once: a Ray cluster, a firmware
-    boot), the files handed to the other worker as it frees up. The real-time lane comes first in the collection,
+    boot), the files handed to the other worker as it frees up; multi-node and persistent clusters in
+    :data:`CLUSTER_LANE`, one at a time. The real-time lane comes first in the collection,
     so xdist starts it at once and it ends about when the other worker's files do."""
     if any(item.get_closest_marker(g) for g in REALTIME_GROUPS):
         return REALTIME_LANE
+    if any(item.get_closest_marker(g) for g in CLUSTER_GROUPS) or item.path.name in CLUSTER_FILES:
+        return CLUSTER_LANE
     return item.path.name
 
 
