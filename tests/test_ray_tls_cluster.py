@@ -7,6 +7,7 @@ Ray's own GCS connect time-outs (shortened here) and by the subprocess time-out.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -81,9 +82,14 @@ def test_a_mission_flies_on_a_tls_cluster_that_refuses_drivers_without_its_certi
     rec = tmp_path / "farm.mcap"
     script = tmp_path / "tls_cluster.py"
     script.write_text(SCRIPT)
+    # a clean environment: what earlier tests of this worker process left in os.environ (Ray's, the framework's
+    # state variables) must not reach the cluster script (it timed out after other cluster tests, passed alone)
+    keep = ("PATH", "HOME", "LANG", "LC_ALL", "TMPDIR", "PYTHONPATH", "VIRTUAL_ENV", "CI", "AERODAAS_DATA_DIR",
+            "AERODAAS_MODEL_DIR")
+    env = {k: os.environ[k] for k in keep if k in os.environ} | {"AERODAAS_NO_ATTACH": "1"}
     p = subprocess.run([sys.executable, str(script), *map(str, ours), *map(str, other),
                         str(REPO / "apps" / "farm_survey.py"), str(rec)],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=400)
+                       cwd=tmp_path, capture_output=True, text=True, timeout=400, env=env)
     line = next((ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")), None)
     assert p.returncode == 0 and line, p.stdout[-3000:] + p.stderr[-3000:]
     out = json.loads(line[len("RESULT "):])
