@@ -9,11 +9,11 @@ unless the environment already sets a mode, and a token is generated at ``~/.ray
 
 Every node is loopback-only, as ``aerodaas run``'s local Ray (:func:`aerodaas.clusters.loopback.loopback_only`): node
 address 127.0.0.1, so the GCS, raylets, object managers, agents and workers listen on 127.0.0.1 only, never on the
-machine's network address (``tests/test_local_cluster_loopback.py`` lists every listening socket).
+machine's network address (``tests/cluster/test_local_cluster_loopback.py`` lists every listening socket).
 
 ``ray.cluster_utils.Cluster.add_node(**node_args)`` passes its keyword arguments to ``ray._private.parameter.RayParams``,
 which accepts ``labels: dict[str, str]`` (checked on Ray 2.60). With ``tls`` every gRPC channel of the cluster runs
-Ray's mutual TLS (:mod:`aerodaas.clusters.ray_tls`; ``tests/test_ray_tls_cluster.py``).
+Ray's mutual TLS (:mod:`aerodaas.clusters.ray_tls`; ``tests/cluster/test_ray_tls_cluster.py``).
 
 Usage::
 

@@ -7,7 +7,7 @@ Compiled, the same DP takes ~0.05-0.2 ms.
 Same algorithm, same answer: this is a line-by-line port of the Python loop (same float64 arithmetic, same ``_EPS``
 comparisons, the same (free time, push counter) heap order, the stored labels kept in insertion order as the
 Python dict keeps them), so it returns the same schedule, ties included (tested against the pure-Python loop in
-``tests/test_laplan_planner_equivalence.py``). Differences of representation only: a used-job set is a ``uint64``
+``tests/schedulers/test_laplan_planner_equivalence.py``). Differences of representation only: a used-job set is a ``uint64``
 bit mask (so at most :data:`MAX_GROUPS` groups; the caller falls back to Python above), a path is a node index
 (job, start, parent) instead of a nested tuple, and the store of labels is scanned for a subset key instead of
 enumerating the submasks of a mask (both find whether some stored key is a subset of it with enough gain).

@@ -49,9 +49,9 @@ needs_data_case = pytest.mark.skipif(DATA_MISSING is not None and not os.environ
 
 @pytest.fixture(scope="session")
 def _sitl_rig() -> None:
-    """The real firmware and a private network namespace are there (:func:`tests.sitl.namespace_skip_reason`), or
+    """The real firmware and a private network namespace are there (:func:`tests.firmware.sitl.namespace_skip_reason`), or
     :func:`skip_or_fail`: checked once per session, before the module fixtures that start the firmware."""
-    from tests import sitl
+    from tests.firmware import sitl
 
     reason = sitl.namespace_skip_reason()
     if reason is not None:

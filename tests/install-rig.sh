@@ -1,6 +1,6 @@
 #!/bin/sh
 # The test rig's Debian packages (Debian 12 / Ubuntu 22.04+): GStreamer's RTSP server and PyGObject for the system
-# python (tests/rtsp_server.py runs under /usr/bin/python3), with the elements the relay uses (udpsrc, tsdemux,
+# python (tests/video/rtsp_server.py runs under /usr/bin/python3), with the elements the relay uses (udpsrc, tsdemux,
 # h264parse, rtph264pay), and FFmpeg's decoders for GStreamer (gstreamer1.0-libav: avdec_h264, what the GStreamer
 # appsink peer of `aerodaas bench video` decodes with, as a user's pipeline would). The video tests fail, never skip,
 # without them. Run by the README's test command and CI.

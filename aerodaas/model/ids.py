@@ -11,7 +11,7 @@ of one kind are unique case-insensitively (``d1`` and ``D1`` are one robot to a 
 (an analytics, a plug-in sensor) may not be one of the segments AeroDaaS itself records there (:data:`RESERVED`):
 a sensor plug-in called ``odometry`` would share the robot's odometry channel.
 
-Together these make every component's topics distinct (the property ``tests/test_ids.py`` checks with hypothesis:
+Together these make every component's topics distinct (the property ``tests/inputs/test_ids.py`` checks with hypothesis:
 every topic an accepted environment records has one owner).
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The actor classes a run is made of, as one typed record the entry point hands the runtime.
 
 The runtime (:mod:`aerodaas.runtime`) starts the run's actors and binds the driver's handles to their components,
-but imports no module of :mod:`aerodaas.actors` (``tests/test_layers.py`` checks it): whoever starts a run — the
+but imports no module of :mod:`aerodaas.actors` (``tests/architecture/test_layers.py`` checks it): whoever starts a run — the
 application API's ``start_mission()``, ``aerodaas run``, a test's ``run_options`` fixture — puts the classes on
 :attr:`aerodaas.runtime.options.RunOptions.actors`. The built-in record is
 :data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`; a test or benchmark may hand other classes with the same

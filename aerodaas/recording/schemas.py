@@ -8,7 +8,7 @@ JSON Schema validator can check the messages. The schemas come from ``model_json
 (JSON Schema draft 2020-12, pydantic's generator), with ``$defs`` inlined where pydantic puts them.
 
 The models describe what the components write; they are not used to build the messages (the hot path writes
-plain dicts), so a test validates recorded messages against these schemas (tests/test_live_and_foxglove.py).
+plain dicts), so a test validates recorded messages against these schemas (tests/liveview/test_live_and_foxglove.py).
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ record path, a mission file, a HITL request); each must be refused before Ray st
 (:mod:`aerodaas.reliability.cli_cases` also holds applications whose own code raises: exit 1 with the app's
 traceback, never "bad input"; :mod:`aerodaas.reliability.hitl_probe` the HITL API's answers). Each fault
 case (in :mod:`aerodaas.reliability.faults`) injects a failure into a real run and checks that it ends cleanly.
-The tests (``tests/test_bad_input.py``, ``tests/test_faults.py``, marker ``faults``) run the same cases, so the
+The tests (``tests/inputs/test_bad_input.py``, ``tests/runtime/test_faults.py``, marker ``faults``) run the same cases, so the
 table and the suite cannot drift apart.
 """
 from __future__ import annotations

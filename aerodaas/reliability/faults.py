@@ -562,7 +562,7 @@ def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[st
               "error` are the app's own exceptions, reported as the app's (exit 1 with its traceback, never \"bad "
               "input\"), the others values the app gave AeroDaaS (exit 2 naming the field, before Ray); HITL API "
               "rows are the documented answers (a drone actor that does not answer is 503 within 2 s: "
-              "`tests/test_hitl_unreachable.py`, needs Ray). A traceback is an exception other than the documented "
+              "`tests/safety/test_hitl_unreachable.py`, needs Ray). A traceback is an exception other than the documented "
               "refusal, a hang a case without an answer within its time limit.", "",
               *render_input_rows(inputs)]
     if faults is not None:

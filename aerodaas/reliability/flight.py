@@ -2,7 +2,7 @@
 through :class:`aerodaas.navigation.safety.SafetyGate`, exactly as the drone component does (every control tick: the head
 command is checked with the vehicle's position and velocity; a refused one makes the vehicle hold), measuring from
 the vehicle's odometry how far it ever got outside its inclusion fence, into an exclusion zone, or above
-``max_altitude``. Used by ``tests/test_safety_model.py`` (hypothesis) and ``python -m aerodaas.reliability``."""
+``max_altitude``. Used by ``tests/safety/test_safety_model.py`` (hypothesis) and ``python -m aerodaas.reliability``."""
 from __future__ import annotations
 
 import math

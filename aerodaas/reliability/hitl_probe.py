@@ -1,7 +1,7 @@
 """HITL API cases of ``python -m aerodaas.reliability``: the real FastAPI app under uvicorn on loopback, in front
 of a real scheduler component (:class:`aerodaas.actors.scheduler_component.SchedulerComponent`) and a stand-in
 drone, called in-process (no Ray). Each row: what was sent, what came back, whether that is the documented answer.
-A drone actor that does not answer (503) needs Ray: ``tests/test_hitl_unreachable.py``."""
+A drone actor that does not answer (503) needs Ray: ``tests/safety/test_hitl_unreachable.py``."""
 from __future__ import annotations
 
 import http.client

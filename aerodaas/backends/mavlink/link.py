@@ -163,7 +163,7 @@ class MavlinkLink:
 
     def attach(self, system: int, component: int) -> None:
         """Take the autopilot at ``system``/``component`` as found and the link as up, without :meth:`open`'s
-        HEARTBEAT exchange (messages handed to :meth:`dispatch` by hand: tests/mavlink_wire.py)."""
+        HEARTBEAT exchange (messages handed to :meth:`dispatch` by hand: tests/mavlink/mavlink_wire.py)."""
         self._sysid, self._compid, self._link_ok = system, component, True
 
     @property

@@ -1,0 +1,1 @@
+"""Tests: the `aerodaas bench` commands and their harnesses."""

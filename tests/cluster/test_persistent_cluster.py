@@ -1,0 +1,57 @@
+"""``aerodaas up`` / ``aerodaas down`` (issue 27, item 2): one loopback-only, token-authenticated Ray head labelled
+``tier=edge``; ``down`` stops exactly the processes ``up`` started. Uses a private ``AERODAAS_STATE_DIR`` so it never
+meets a cluster the user started."""
+from __future__ import annotations
+
+import ipaddress
+import json
+import os
+import subprocess
+import sys
+
+import psutil
+import pytest
+
+from tests.conftest import REPO
+
+
+def _aerodaas(env: dict, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "aerodaas.cli", *args], cwd=REPO, env=env, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+@pytest.mark.cluster
+def test_up_starts_one_loopback_head_and_down_stops_only_its_processes(tmp_path):
+    env = dict(os.environ, AERODAAS_STATE_DIR=str(tmp_path))
+    p = _aerodaas(env, "up", "--cpus", "1")
+    assert p.returncode == 0 and "started" in p.stdout, p.stdout + p.stderr
+    st = json.loads((tmp_path / "cluster.json").read_text())
+    try:
+        daemon = psutil.Process(st["pid"])
+        procs = [daemon, *daemon.children(recursive=True)]
+        pids = {q.pid for q in procs}
+        assert len(pids) >= 3, procs  # the daemon, the GCS, the raylet (and agents, dashboard)
+        listening = [c for c in psutil.net_connections("inet") if c.status == psutil.CONN_LISTEN and c.pid in pids]
+        assert listening and all(ipaddress.ip_address(c.laddr.ip.removeprefix("::ffff:")).is_loopback
+                                 for c in listening), listening
+        assert st["address"].startswith("127.0.0.1:")
+        again = _aerodaas(env, "up")
+        assert again.returncode == 0 and "already running" in again.stdout and str(st["pid"]) in again.stdout
+        # a driver attaches with the token (and, as the node is loopback-only, as 127.0.0.1: Ray's local-only switch)
+        # and sees the node's labels
+        probe = ("import ray; from aerodaas.clusters.local import enable_token_auth; enable_token_auth(); "
+                 "from aerodaas.clusters.loopback import loopback_only; loopback_only(); "
+                 f"ray.init(address={st['address']!r}, logging_level='error'); "
+                 "import json; print('LABELS', json.dumps([n['Labels'] for n in ray.nodes() if n['Alive']]))")
+        q = subprocess.run([sys.executable, "-c", probe], cwd=REPO, env=env, capture_output=True, text=True,
+                           timeout=180)
+        line = next(ln for ln in q.stdout.splitlines() if ln.startswith("LABELS "))
+        (labels,) = json.loads(line[len("LABELS "):])
+        assert labels["tier"] == "edge" and labels["aerodaas/compute"] == "local"
+    finally:
+        d = _aerodaas(env, "down")
+    assert d.returncode == 0 and "stopped" in d.stdout, d.stdout + d.stderr
+    _, alive = psutil.wait_procs(procs, timeout=60)
+    assert not [q for q in alive if q.status() != psutil.STATUS_ZOMBIE], alive
+    assert not (tmp_path / "cluster.json").exists()
+    assert "no local cluster" in _aerodaas(env, "down").stdout

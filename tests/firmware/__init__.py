@@ -1,0 +1,1 @@
+"""Tests: real ArduCopter and PX4 SITL firmware in private network namespaces (the sitl marker)."""

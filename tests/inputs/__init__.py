@@ -1,0 +1,1 @@
+"""Tests: bad input refused before Ray: applications, environment files, command lines, parsers."""

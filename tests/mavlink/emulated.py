@@ -1,0 +1,34 @@
+"""What the emulated-vehicle tests share: the homes, the firmware's refusal texts, and driving a backend like
+the runtime does (:func:`run_until`)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from aerodaas.model.types import GeoPoint
+
+AUTOPILOTS = ["ardupilot", "px4"]
+CONFIG_HOME = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
+VEHICLE_HOME = GeoPoint(lat=47.39797, lon=8.5456, alt=500.0)  # 30 m north of, 12 m above the configured home
+RTL_PARAMS = {"ardupilot": {"RTL_ALT": 800.0}, "px4": {"RTL_RETURN_ALT": 8.0}}
+REFUSED = {"ardupilot": "MAV_RESULT_FAILED", "px4": "MAV_RESULT_TEMPORARILY_REJECTED"}
+PREARM_PREFIX = {"ardupilot": "Arm: ", "px4": "Preflight Fail: "}  # a refused arm command, as the firmware says
+
+
+
+def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:
+    """Drive the backend like the runtime does (step() at 20 Hz wall) until ``cond()``; ``every()`` each tick."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        backend.step(0.05)
+        if every is not None:
+            every()
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def dist(a, b) -> float:
+    return float(np.linalg.norm(np.asarray(a, float) - np.asarray(b, float)))

@@ -1,0 +1,144 @@
+"""Issue 50 item 1 through the whole runtime (Ray, the drone actor, the recorder): MAVLink 2 signing on the MAVLink
+emulator. A signed survey flies while unsigned telemetry in the vehicle's name and unsigned commands from another
+process are refused (judged from the recording, read with the ``mcap`` package, and the emulated autopilot's own
+state); a key the vehicle does not hold fails before take-off with exit 2."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from tests.mavlink.test_mavlink_signing import KEY, OTHER_KEY, SPOOFER, _key_file
+
+
+def _signed_survey(tmp_path, vehicle_key: bytes, key_file_key: bytes, connect_timeout_s: float = 30.0):
+    """apps/farm_survey.py on an emulated ArduCopter at 10x that signs with ``vehicle_key``, the robot's
+    ``mavlink.signing_key_file`` holding ``key_file_key``. Returns (emulator, environment file)."""
+    from tests.runtime.test_backends_e2e import _mavlink_variant
+
+    key_path = _key_file(tmp_path / "vehicle.key", key_file_key)
+    emu, env_path = _mavlink_variant("farm_survey", "ardupilot", 10.0, tmp_path,
+                                     mavlink={"signing_key_file": key_path, "connect_timeout_s": connect_timeout_s})
+    emu.stop()  # the same vehicle again, now with its key (the variant's emulator was made without one)
+    from aerodaas.config import load_environment_config
+    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
+    robot = load_environment_config(str(env_path)).robots[0]
+    emu = MavlinkVehicleEmulator("ardupilot", robot=robot, speedup=10.0, signing_key=vehicle_key)
+    data = json.loads(env_path.read_text())
+    data["robots"][0]["mavlink"]["connection"] = emu.start("tcp:127.0.0.1:0")
+    env_path.write_text(json.dumps(data))
+    return emu, env_path
+
+
+#: :data:`tests.mavlink.test_mavlink_signing.SPOOFER`'s messages from a process started (and connected) before the flight
+#: that sends them when told to (a line on its stdin): the attack does not wait for a Python start-up in flight
+READY_SPOOFER = SPOOFER.replace("m = conn.mav\n", "m = conn.mav\nprint('ready', flush=True)\nsys.stdin.readline()\n")
+assert READY_SPOOFER != SPOOFER, "tests.mavlink.test_mavlink_signing.SPOOFER no longer has the line to wait after"
+
+
+class _Attack(threading.Thread):
+    """Once the vehicle is in the air: unsigned GLOBAL_POSITION_INT 100 m north of it and SYS_STATUS at 5 % battery
+    written onto the link in the vehicle's name (system 1, component 1), then :data:`READY_SPOOFER` (forced disarm,
+    LAND, flight termination, PARAM_SET, from another process) released. :attr:`done`: it ran while the vehicle was
+    in the air; :attr:`rejected`: the packets the vehicle's parser refused meanwhile. Waits until the vehicle flies
+    or :attr:`stop` is set (no wall-clock limit: the test's own timeout bounds it)."""
+
+    def __init__(self, emu) -> None:
+        super().__init__(daemon=True)
+        self.emu, self.done, self.rejected, self.error = emu, False, 0, None
+        self.stop = threading.Event()
+        self.spoofer = subprocess.Popen([sys.executable, "-c", READY_SPOOFER, emu.address], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def run(self) -> None:
+        try:
+            assert self.spoofer.stdout.readline().strip() == "ready", self.spoofer.stderr.read()[-1500:]
+            while not self.stop.is_set() and not self.emu.snapshot()["in_air"]:
+                time.sleep(0.02)
+            if self.stop.is_set():
+                return
+            rejected0 = self.emu.signing.rejected
+            enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # no key: unsigned
+            home = self.emu.home
+            for i in range(10):
+                lat = int((home.lat + 100.0 / 111_320.0) * 1e7)
+                pos = M.MAVLink_global_position_int_message(int(self.emu.t * 1000) + 1, lat,
+                                                            int(home.lon * 1e7), int((home.alt + 30) * 1000),
+                                                            30_000, 0, 0, 0, 0)
+                status = M.MAVLink_sys_status_message(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)
+                self.emu.inject(pos.pack(enc) + status.pack(enc))
+                time.sleep(0.02)
+            out, err = self.spoofer.communicate("go\n", timeout=120)
+            assert self.spoofer.returncode == 0, err[-1500:]
+            self.rejected = self.emu.signing.rejected - rejected0
+            self.done = self.emu.snapshot()["in_air"]
+        except Exception as e:  # noqa: BLE001 - reported by the test
+            self.error = e
+        finally:
+            if self.spoofer.poll() is None:
+                self.spoofer.kill()
+                self.spoofer.wait()
+
+
+@pytest.mark.e2e
+def test_a_signed_mission_flies_and_unsigned_spoofs_change_nothing_in_the_recording(ray_session, run_options,
+                                                                                    tmp_path):
+    from aerodaas.runtime.report import format_summary
+    from tests.firmware.sitl import read_recording
+    from tests.runtime.test_backends_e2e import _run_app
+
+    emu, env_path = _signed_survey(tmp_path, KEY, KEY)
+    attack = _Attack(emu)
+    attack.start()
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
+    finally:
+        attack.stop.set()
+        attack.join()
+        vehicle = emu.snapshot()
+        params = dict(emu.params)
+        emu.stop()
+    assert attack.error is None and attack.done, attack.error
+    assert attack.rejected >= 20, attack.rejected  # the spoofer's 5 rounds of 4 unsigned messages, all refused
+    rep = res.robots["quadrotor_base"]
+    assert res.outcome == "success", rep.get("error")
+    assert not vehicle["armed"] and 185 not in vehicle["commands_seen"] and params["WPNAV_SPEED"] != 1234.0
+    rec = read_recording(tmp_path / "farm.mcap")
+    ev = [m for _, m in rec["/quadrotor_base/events"]]
+    names = [e["event"] for e in ev]
+    assert not {"battery_critical", "failsafe_rtl", "autopilot_failsafe"} & set(names), names
+    dropped = {e.get("message") for e in ev if e["event"] == "link_unsigned"}
+    assert {"GLOBAL_POSITION_INT", "SYS_STATUS"} <= dropped, [e for e in ev if e["event"] == "link_unsigned"]
+    unsigned_total = max(e["total"] for e in ev if e["event"] == "link_unsigned")
+    assert unsigned_total >= 6  # the first five one by one, then a summary (reports are lower bounds: 5 s apart)
+    odo = [m for _, m in rec["/quadrotor_base/odometry"]]
+    # the survey stays within ~60 m of home; a spoofed fix would put a sample 100 m north
+    far = max(math.hypot(*o["position"][:2]) for o in odo)
+    assert far < 90.0, far
+    assert min(o["battery_pct"] for o in odo if o.get("battery_pct") is not None) > 50.0
+    assert "MAVLink signing: at least" in format_summary(res)
+
+
+@pytest.mark.e2e
+def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(ray_session, run_options, tmp_path):
+    from aerodaas.commands.run import _exit_code
+    from tests.runtime.test_backends_e2e import _run_app
+
+    emu, env_path = _signed_survey(tmp_path, OTHER_KEY, KEY, connect_timeout_s=5.0)
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
+        vehicle, took_off = emu.snapshot(), emu.took_off
+    finally:
+        emu.stop()
+    err = res.robots["quadrotor_base"].get("error", "")
+    assert res.outcome == "refused" and _exit_code([res], []) == 2, (res.outcome, err)
+    assert "no correctly signed heartbeat from system 1 within 5 s" in err, err
+    assert not vehicle["armed"] and not vehicle["in_air"] and vehicle["commands_seen"] == []
+    assert not took_off  # the emulated autopilot's own record: it never left the ground

@@ -1,0 +1,1 @@
+"""Tests: detectors, tiling, tracking, geolocation, the aerial model and its training."""

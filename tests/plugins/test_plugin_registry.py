@@ -1,0 +1,253 @@
+"""The plug-in registry (aerodaas.plugins.registry): one registry for the five kinds, each registration with its
+origin; unknown names refused with what is available; a sensor type written in an application (decorator) is
+checked, planned and listed without any framework edit. No Ray."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from aerodaas.config import ConfigError, parse_environment_config
+from aerodaas.plugins import SensorPlugin, SensorPluginConfig, registry
+
+
+
+def test_builtins_of_every_kind_are_listed_with_their_origin():
+    rows = {(r["kind"], r["name"]): r for r in registry.describe_all()}
+    assert {k for k, _ in rows} == set(registry.KINDS)
+    for key in [("backend", "sim"), ("backend", "mavlink"), ("sensor", "camera"), ("analytics", "ObjectDetector"),
+                ("trajectory_scheduler", "NearestNeighborScheduler"), ("analytics_scheduler", "DEMS")]:
+        assert rows[key]["origin"] == "builtin", rows[key]
+    from aerodaas.schedulers.analytics_base import analytics_scheduler_class, analytics_scheduler_names
+    from aerodaas.schedulers.analytics_dems import Dems
+
+    assert analytics_scheduler_class("DEMS") is Dems and "EDGE_FIFO" in analytics_scheduler_names()
+
+
+def test_unknown_name_lists_what_is_available_and_suggests_the_closest():
+    with pytest.raises(registry.UnknownPlugin) as e:
+        registry.get("analytics_scheduler", "GAINPLAM")
+    msg = str(e.value)
+    assert "unknown analytics scheduler 'GAINPLAM'" in msg and "(did you mean 'GAINPLAN'?)" in msg
+    assert "'EDGE_FIFO' (builtin)" in msg
+    with pytest.raises(registry.UnknownPlugin, match="cannot import it"):
+        registry.get("backend", "no_such_module_xyz:Backend")
+    with pytest.raises(ValueError, match="unknown plug-in kind"):
+        registry.get("camera", "x")
+
+
+def test_a_decorated_class_records_its_file_and_a_second_class_cannot_take_its_name():
+    from aerodaas.plugins import register_sensor
+
+    @register_sensor
+    class Thermo(SensorPlugin):
+        name = "test_thermo_registry"
+
+        def sample(self, state, t):
+            return {"t": t}
+
+    e = registry.resolve("sensor", "test_thermo_registry")
+    assert e.cls is Thermo and e.origin == f"decorator in {__file__}"
+    register_sensor(Thermo)  # the same class again: fine
+
+    class Other(SensorPlugin):
+        name = "test_thermo_registry"
+
+    with pytest.raises(ValueError, match="already taken"):
+        register_sensor(Other)
+
+
+def test_an_import_path_resolves_and_is_recorded_as_such():
+    cls = registry.get("analytics_scheduler", "aerodaas.schedulers.analytics_baselines:EdgeFifo")
+    from aerodaas.schedulers.analytics_baselines import EdgeFifo
+
+    assert cls is EdgeFifo
+    e = registry.resolve("analytics_scheduler", "aerodaas.schedulers.analytics_baselines:EdgeFifo")
+    assert e.origin == "import path aerodaas.schedulers.analytics_baselines:EdgeFifo"
+    cfg = {"robots": [{"id": "d1"}], "analytics_scheduler": {
+        "name": "aerodaas.schedulers.analytics_baselines:EdgeFifo",
+        "models": {"det": {"deadline_ms": 100, "edge_ms": 5, "cloud_ms": 50, "benefit": 1}}}}
+    assert parse_environment_config(cfg).analytics_scheduler.name.endswith(":EdgeFifo")
+    cfg["analytics_scheduler"]["name"] = "aerodaas.schedulers.analytics_baselines:EdgeFifoo"
+    with pytest.raises(ConfigError, match="analytics_scheduler.name"):
+        parse_environment_config(cfg)
+
+
+def test_sensor_properties_are_checked_against_the_plugins_config_model():
+    class Cfg(SensorPluginConfig):
+        lo: float = 0.0
+
+    class Probe(SensorPlugin):
+        name = "test_probe_props"
+        Config = Cfg
+
+    registry.register(Probe)
+    good = {"robots": [{"id": "d1", "sensors": [{"id": "p", "type": "test_probe_props", "properties": {"lo": 2}}]}]}
+    r = parse_environment_config(good).robots[0]
+    assert r.sensors[0].properties == {"rate_hz": 1.0, "lo": 2.0}
+    bad = json.loads(json.dumps(good))
+    bad["robots"][0]["sensors"][0]["properties"] = {"hi": 1}
+    with pytest.raises(ConfigError) as e:
+        parse_environment_config(bad)
+    assert "sensors.0.properties.hi" in str(e.value) and "'p'" in str(e.value)
+
+
+APP = textwrap.dedent('''
+    from pydantic import BaseModel
+
+    from aerodaas import Environment, NearestNeighborScheduler
+    from aerodaas.config import parse_environment_config
+    from aerodaas.plugins import SensorPlugin, register_sensor
+
+
+    class Level(BaseModel):
+        robot: str
+        level: float
+
+
+    @register_sensor
+    class Altimeter(SensorPlugin):
+        name = "my_altimeter"
+        Message = Level
+
+        def sample(self, state, t):
+            return Level(robot=self.robot_id, level=state.position[2])
+
+
+    env = Environment(parse_environment_config({
+        "robots": [{"id": "uav", "takeoff_altitude": 3.0, "sensors": [{"id": "alt", "type": "my_altimeter"}]}]}))
+    env.set_trajectory_scheduler(NearestNeighborScheduler(env))
+    env.get_robot_by_id("uav").start_mission()
+''')
+
+
+def test_a_sensor_written_in_the_app_is_planned_and_listed_without_starting_ray(tmp_path):
+    app = tmp_path / "my_app.py"
+    app.write_text(APP)
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", str(app), "--json"], capture_output=True,
+                       text=True, cwd=tmp_path, timeout=120)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    node = next(n for n in json.loads(p.stdout)["nodes"] if n["id"] == "uav/alt")
+    assert node["kind"] == "sensor" and node["plugin"] == "my_altimeter -> aerodaas_app_my_app.Level", node
+    plug = tmp_path / "plug.py"
+    plug.write_text(APP.split("env = Environment")[0])
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plugins", "--json", "--kind", "sensor", "--app",
+                        str(plug)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    rows = {r["name"]: r for r in json.loads(p.stdout)}
+    assert rows["my_altimeter"]["origin"] == f"decorator in {plug}", rows["my_altimeter"]
+    assert rows["camera"]["origin"] == "builtin"
+
+
+def test_an_environment_sensor_of_unknown_type_is_refused_not_skipped():
+    with pytest.raises(ConfigError) as e:
+        parse_environment_config({"robots": [{"id": "d1"}], "env_sensors": [{"id": "x", "type": "camara"}]})
+    assert "env_sensors.0.type" in str(e.value) and "'camara'" in str(e.value)
+
+
+@pytest.mark.e2e
+def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
+    """The decorator path on Ray: the app's sensor class (and its pydantic message model) live only in the app,
+    travel to the drone actor by value, sample the vehicle state there and are recorded with their schema."""
+    from mcap.reader import make_reader
+
+    from aerodaas.recording.writer import read_messages
+
+    app = tmp_path / "my_app.py"
+    app.write_text(APP.replace('"sensors": [{"id": "alt", "type": "my_altimeter"}]',
+                               '"sensors": [{"id": "alt", "type": "my_altimeter", "properties": {"rate_hz": 5}}], '
+                               '"idle_land_s": 1.0').replace(
+        'env.get_robot_by_id("uav").start_mission()', textwrap.dedent('''
+            from aerodaas import AeroListData, PriorityQueue, Waypoint
+            sched = env.trajectory_scheduler()
+            d = env.get_robot_by_id("uav")
+            d.navigate(sched.generate_navigation(PriorityQueue(AeroListData(
+                [Waypoint(id="h", x=0.0, y=0.0, z=3.0, hover_duration=2.0)]), priority=2)))
+            env.start_mission([d])''')))
+    rec = tmp_path / "run.mcap"
+    env = dict(__import__("os").environ, AERODAAS_NO_ATTACH="1")
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet",
+                        "--timeout", "240"], capture_output=True, text=True, cwd=tmp_path, timeout=600, env=env)
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    assert "sensor alt (my_altimeter):" in p.stdout
+    levels = [m for t, _, _, m in read_messages(str(rec)) if t == "/uav/alt"]
+    assert len(levels) >= 20 and all(m["robot"] == "uav" for m in levels)
+    assert max(m["level"] for m in levels) > 2.5 and min(m["level"] for m in levels) < 0.5  # took off, landed
+    with open(rec, "rb") as f:
+        summary = make_reader(f).get_summary()
+    ch = next(c for c in summary.channels.values() if c.topic == "/uav/alt")
+    assert summary.schemas[ch.schema_id].name == "aerodaas_app_my_app.Level"  # as `plan` names it
+    assert set(json.loads(summary.schemas[ch.schema_id].data)["properties"]) == {"robot", "level"}
+
+
+def test_a_builtins_name_is_taken_from_the_start_unless_the_registration_says_it_replaces():
+    """issue 40.5: an app's backend named ``sim`` silently replaced the simulator (the built-ins were registered
+    lazily, after it). Now refused naming the built-in, unless ``replaces=True`` / ``plugin_replaces = True``."""
+    from aerodaas.backends.sim import SimBackend
+
+    class MySim(SimBackend):
+        kind = "sim"
+
+    with pytest.raises(ValueError, match=r"backend name 'sim' is already taken by aerodaas\.backends\.sim:\w+ "
+                                         r"\(builtin\).*replaces=True"):
+        registry.register(MySim, "backend")
+    assert registry.get("backend", "sim") is not MySim
+
+    class Gusty(SimBackend):
+        kind = "sim_replacement_test"
+
+    class Replacing(SimBackend):
+        kind = "sim_replacement_test"
+        plugin_replaces = True
+
+    registry.register(Gusty, "backend")
+    registry.register(Replacing, "backend")  # it says so: the later one holds the name
+    assert registry.get("backend", "sim_replacement_test") is Replacing
+
+
+def test_a_plugin_module_that_exits_on_import_is_an_error_naming_it(tmp_path, monkeypatch):
+    """A module that calls sys.exit(0) while imported ended runs with exit 0 and no flight."""
+    (tmp_path / "exiting_plugin.py").write_text("import sys\nsys.exit(0)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(registry.UnknownPlugin, match=r"module 'exiting_plugin' called sys\.exit\(0\) while being "
+                                                      r"imported"):
+        registry.get("sensor", "exiting_plugin:Thing")
+
+
+def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
+
+    ray_tmp = fresh_ray_tmp(tmp_path)
+    (tmp_path / "exiting_helper.py").write_text("import sys\n\nsys.exit(0)\n")
+    env = tmp_path / "env.json"
+    env.write_text(json.dumps({"robots": [{"id": "d1"}]}))
+    app = tmp_path / "app.py"
+    app.write_text(f"from aerodaas import *\nimport exiting_helper\nenv = Environment({str(env)!r})\n"
+                   "drone = env.get_robot_by_id('d1')\nresult = drone.start_mission()\n")
+    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(tmp_path / "r.mcap")],
+                       capture_output=True, text=True, timeout=180, env={**__import__("os").environ,
+                                                                         "RAY_TMPDIR": str(ray_tmp)})
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert "sys.exit(0) was called in" in r.stderr and "exiting_helper.py line 3" in r.stderr, r.stderr[-2000:]
+    assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session started
+
+
+def test_each_builtin_plugin_module_imports_first_in_a_fresh_process():
+    """A built-in module registers its classes while it is imported; that registration must not load the other
+    built-ins (which import it back, half-initialised): a dispatcher actor unpickling a DEMS policy died with
+    'cannot import name CLOUD_TRIGGER_BUFFER_MS from partially initialized module'."""
+    import subprocess
+    import sys
+
+    mods = list(registry._BUILTIN_MODULES)
+    code = "import importlib, sys; importlib.import_module(sys.argv[1])"
+    for m in mods:
+        r = subprocess.run([sys.executable, "-c", code, m], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, (m, r.stderr[-1500:])

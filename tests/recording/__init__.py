@@ -1,0 +1,1 @@
+"""Tests: MCAP recording, accounting, segments, replay and plots."""

@@ -1,0 +1,1 @@
+"""Tests: the runtime end to end: actors, data plane, missions, summaries, faults."""

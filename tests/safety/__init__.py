@@ -1,0 +1,1 @@
+"""Tests: geofences, limits, holds, phase deadlines, failsafes, TLS and secrets."""

@@ -1,0 +1,1 @@
+"""Tests: analytics and trajectory schedulers, DEMS/LAPLAN policies and their harness."""
