@@ -60,6 +60,7 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
+    """The module's names, the public API's included before any was used (for ``dir()`` and completion)."""
     return sorted({*globals(), *__all__})
 
 
