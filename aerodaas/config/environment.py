@@ -512,13 +512,14 @@ def _image_size(path: str, field: str) -> tuple[int, int]:
 
     import cv2
     from PIL import Image, UnidentifiedImageError
+    from PIL.JpegImagePlugin import JpegImageFile
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our own bound follows
             with Image.open(path) as im:
                 w, h = (int(v) for v in im.size)
-                jpeg = im.format == "JPEG"
+                jpeg = isinstance(im, JpegImageFile)  # MPO too (a subclass): what DJI cameras write as .JPG
     except Image.DecompressionBombError as e:
         raise ConfigError(f"{field}: {str(path)!r}: {e} (from its header; at most {MAX_IMAGE_SIDE_PX} px per side "
                           f"and {MAX_IMAGE_PIXELS} px in all; nothing was decoded)") from None
