@@ -361,12 +361,14 @@ def _start_actors(run: _Run, placement: Any) -> list:
 def _start_hitl(run: _Run):
     """The human-in-the-loop API of the run when it is on (``--hitl`` or ``hitl.enabled``), started; else None.
     The token is not printed: the console says where the owner-only state file is (``aerodaas inject`` reads it)."""
-    from aerodaas.runtime.preflight import hitl_access
-    from aerodaas.tools.hitl import HitlServer, state_file
-
     hcfg, opts = run.env.cfg.hitl, run.opts
     if not (opts.hitl if opts.hitl is not None else hcfg.enabled):
         return None
+    # only now: the HITL server imports FastAPI (a quarter of a second of CPU between the actors' set-up and the
+    # mission's start, paid by every run when it sat above the check)
+    from aerodaas.runtime.preflight import hitl_access
+    from aerodaas.tools.hitl import HitlServer, state_file
+
     access = hitl_access(run.env, opts)
     hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in run.handles.items()},
                       host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,

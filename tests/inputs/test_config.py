@@ -49,3 +49,32 @@ def test_schema_command_prints_json_schema():
     out = subprocess.run([sys.executable, "-m", "aerodaas.cli", "schema"], capture_output=True, text=True, check=True)
     schema = json.loads(out.stdout)
     assert "robots" in schema["properties"] and "RobotConfig" in schema["$defs"]
+
+
+@pytest.mark.parametrize("fmt", ["JPEG", "MPO"])
+def test_a_jpeg_image_is_checked_at_reduced_scale_and_still_refused_when_unreadable(fmt, tmp_path, monkeypatch):
+    """A JPEG (and an MPO, what DJI cameras write as .JPG) is read by OpenCV at 1/8 scale to prove it decodes (issue
+    49 item 5: the driver's check of the ground and target images); its size is the header's. A file cut after its
+    header (Pillow opens it, OpenCV cannot decode it) is refused naming the field."""
+    import cv2
+    import numpy as np
+    from PIL import Image
+
+    from aerodaas.config.environment import _image_size
+
+    rgb = (np.random.default_rng(0).random((48, 64, 3)) * 255).astype(np.uint8)
+    path = tmp_path / "photo.jpg"
+    Image.fromarray(rgb).save(path, fmt, **({"save_all": True, "append_images": [Image.fromarray(rgb)]}
+                                            if fmt == "MPO" else {}))
+    with Image.open(path) as im:
+        assert im.format == fmt
+    flags = []
+    imread = cv2.imread
+    monkeypatch.setattr(cv2, "imread", lambda p, flag=cv2.IMREAD_COLOR: flags.append(flag) or imread(p, flag))
+    assert _image_size(str(path), "world.ground.image") == (64, 48)
+    assert flags == [cv2.IMREAD_REDUCED_COLOR_8]
+    data = path.read_bytes()
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(data[:data.find(b"\xff\xda")])  # everything before the scan: no image data
+    with pytest.raises(ConfigError, match=r"world\.ground\.image.*not an image OpenCV can read"):
+        _image_size(str(cut), "world.ground.image")

@@ -1,0 +1,92 @@
+"""Start-up cost kept out of processes that do not need it (issue 49 item 5): the heavy third-party libraries are
+imported only where they are used. Each check imports a module in a fresh interpreter and reads ``sys.modules``
+(what Python itself loaded), so no wall-clock time is involved.
+
+- ``aerodaas.cli`` (every ``aerodaas`` command starts with it) imports no heavy library: the public API of
+  ``aerodaas/__init__.py`` is resolved on first use (PEP 562), not at ``import aerodaas``.
+- An actor module, imported as a Ray worker imports it (after ``ray``), imports none of the libraries its actor does
+  not use: the recorder no OpenCV and no onnxruntime, the drone actor no onnxruntime, none of them matplotlib, PyAV
+  or FastAPI.
+- A run without the human-in-the-loop API does not import its server (FastAPI) on the driver.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+#: libraries that cost a start tens to hundreds of milliseconds of CPU each (``python -X importtime``)
+HEAVY = ("onnxruntime", "cv2", "matplotlib", "av", "mcap", "fastapi", "pydantic", "numpy", "scipy", "shapely",
+         "PIL", "ray")
+
+
+def _loaded_after(module: str, before: str = "") -> set[str]:
+    """The heavy libraries of :data:`HEAVY` in ``sys.modules`` of a fresh interpreter after it imported
+    ``before`` (statements) and then ``module``. Raises AssertionError with the child's stderr if it fails."""
+    code = textwrap.dedent(f"""
+        import sys
+        {before}
+        import {module}
+        print(" ".join(m for m in {HEAVY!r} if m in sys.modules))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return set(r.stdout.split())
+
+
+def test_the_command_line_imports_no_heavy_library():
+    assert _loaded_after("aerodaas.cli") == set()
+
+
+def test_the_public_api_is_complete_and_resolved_on_use():
+    """``from aerodaas import *`` yields every name of ``__all__``, aliases included, and an unknown name is an
+    AttributeError naming it."""
+    code = textwrap.dedent("""
+        import sys
+        import aerodaas
+        assert "aerodaas.app.api" not in sys.modules, "import aerodaas built the API"
+        ns = {}
+        exec("from aerodaas import *", ns)
+        missing = sorted(set(aerodaas.__all__) - set(ns))
+        assert not missing, missing
+        from aerodaas.app.api import Environment
+        from aerodaas.schedulers import TrajectoryScheduler
+        assert ns["Environment"] is Environment and ns["IEnvironment"] is Environment
+        assert ns["INavigate"] is TrajectoryScheduler and ns["AeroNav"] is ns["AeroNavigation"]
+        try:
+            aerodaas.NoSuchName
+        except AttributeError as e:
+            assert "NoSuchName" in str(e), e
+        else:
+            raise AssertionError("no AttributeError")
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+@pytest.mark.parametrize("module, unused", [
+    ("aerodaas.actors.recorder_actor", {"cv2", "onnxruntime", "matplotlib", "av", "fastapi", "pydantic", "scipy"}),
+    ("aerodaas.actors.drone_actor", {"onnxruntime", "matplotlib", "av", "fastapi"}),
+    ("aerodaas.actors.analytics_actor", {"matplotlib", "av", "fastapi", "mcap"}),
+])
+def test_an_actor_module_imports_only_what_its_actor_uses(module, unused):
+    loaded = _loaded_after(module, before="import ray")
+    assert not loaded & unused, f"{module} imported {sorted(loaded & unused)}"
+
+
+def test_a_run_without_hitl_does_not_import_its_server():
+    """The driver's HITL step with the API off returns None without importing ``aerodaas.tools.hitl``."""
+    code = textwrap.dedent("""
+        import sys
+        from types import SimpleNamespace
+        from aerodaas.runtime import driver
+        run = SimpleNamespace(env=SimpleNamespace(cfg=SimpleNamespace(hitl=SimpleNamespace(enabled=False))),
+                              opts=SimpleNamespace(hitl=None))
+        assert driver._start_hitl(run) is None
+        print(" ".join(m for m in ("fastapi", "aerodaas.tools.hitl") if m in sys.modules))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == []
