@@ -488,12 +488,13 @@ def _recording_accounting(record: str | None, rec_report: dict) -> dict[str, Any
     """The recording's accounting read back from its file(s) (``rec_report["segments"]``, else ``record``),
     None without a recording or when it cannot be read (the summary then says what the recorder reported)."""
     paths = rec_report.get("segments") or ([record] if record else [])
-    if not paths or not all(os.path.isfile(p) for p in paths):
+    nodes = [r.get("segments") or [] for r in (rec_report.get("nodes") or {}).values()]  # recording.per_node
+    if not paths or not all(os.path.isfile(p) for p in [*paths, *(p for n in nodes for p in n)]):
         return None
-    from aerodaas.recording.accounting import account_recording
+    from aerodaas.runtime.node_recorders import run_accounting
 
     try:
-        return account_recording(paths)
+        return run_accounting(paths, nodes)
     except (OSError, ValueError) as e:
         print(f"aerodaas: warning: the recording's accounting could not be read: {type(e).__name__}: {e}",
               file=sys.stderr)
