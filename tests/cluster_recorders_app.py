@@ -75,7 +75,8 @@ def main(out_dir: str, local: bool = False) -> dict:
             "robots": {k: v.get("outcome") for k, v in res.robots.items()},
             "actors": live.get("actors", []),
             "live_channels": sorted(got.get("channels", {})),
-            "live_counts": {t: len(m) for t, m in (got.get("messages") or {}).items()}}
+            "live_counts": {t: len(m) for t, m in (got.get("messages") or {}).items()},
+            "nodes": res.recording_nodes, "summary": runtime.format_summary(res)}
 
 
 if __name__ == "__main__":

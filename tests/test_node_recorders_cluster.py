@@ -57,8 +57,10 @@ def test_on_one_node_the_per_node_recorders_write_one_run_too(tmp_path):
 
 def _check_files_live_and_merge(tmp_path, r: dict) -> None:
 
-    # each drone's data is in its node's file only
+    # each drone's data is in its node's file only; the run's summary names the files and how to merge them
     main, a, b = (tmp_path / n for n in ("run.mcap", "run.node-edge-a.mcap", "run.node-edge-b.mcap"))
+    assert r["nodes"] == [str(a), str(b)], r["nodes"]
+    assert f"aerodaas merge {main} {a} {b} --out ALL.mcap" in r["summary"], r["summary"]
     ta, tb, tm = _topics(a), _topics(b), _topics(main)
     assert ta.get("/d00/camera/cam", 0) > 0 and ta.get("/d00/odometry", 0) > 0 and "/d01/odometry" not in ta
     assert tb.get("/d01/camera/cam", 0) > 0 and tb.get("/d01/odometry", 0) > 0 and "/d00/odometry" not in tb
