@@ -53,7 +53,8 @@ def test_the_limit_is_the_first_size_that_lost_or_drained_too_long(rows, limit, 
 
 
 @pytest.mark.parametrize("argv, named", [(["--drones", "0"], "--drones"), (["--duration", "0"], "--duration"),
-                                         (["--fps", "-1"], "--fps"), (["--width", "8"], "--width/--height")])
+                                         (["--fps", "-1"], "--fps"), (["--width", "8"], "--width/--height"),
+                                         (["--recorders", "0"], "--recorders")])
 def test_bad_options_are_refused_before_ray_starts(argv, named, capsys):
     assert main(["bench", "recorder", *argv]) == 2
     captured = capsys.readouterr()

@@ -20,6 +20,10 @@ that same path with synthetic drones and measures what reaches the file:
 * side by side, the bare baseline: the same messages (read back from that run's file) written with the ``mcap``
   library directly in one process, zstd chunks of 256 KiB as the recorder writes them.
 
+With ``--recorders R`` the producers are spread over R recorder actors, each writing its own file with its own
+accounting, as ``recording.per_node: true`` gives a run one recorder per node (the files' counts are summed per
+row): on one machine this measures what a second recorder process adds; on a cluster each node adds one.
+
 The report's ``limit`` names the first fleet size that lost messages or drained for longer than one second, and the
 ``ceiling`` is the largest recorded throughput of a size without loss. Nothing is written outside a temporary
 folder (removed at the end).
@@ -167,62 +171,71 @@ def _producer_class() -> Any:
     return ray.remote(num_cpus=0)(BenchProducer)
 
 
-def run_size(n: int, load: DroneLoad, producers: int, folder: Path) -> dict:
-    """One fleet size ``n`` on the running Ray: a fresh recorder actor writing ``folder/run-<n>.mcap`` and
-    ``producers`` producer actors; returns the measured row (see the module docstring)."""
+def run_size(n: int, load: DroneLoad, producers: int, folder: Path, recorders: int = 1) -> dict:
+    """One fleet size ``n`` on the running Ray: ``recorders`` fresh recorder actors (as ``recording.per_node``
+    makes one per node: each writes ``folder/run-<n>-<j>.mcap`` with its own accounting) and ``producers`` producer
+    actors (at least one per recorder; producer i sends to recorder i mod ``recorders``); returns the measured row
+    (see the module docstring)."""
     import ray
 
     from aerodaas.actors.recorder_actor import RecorderActor
     from aerodaas.protocol.specs import ActorSpec, RecordSpec
 
-    path = folder / f"run-{n}.mcap"
+    paths = [folder / f"run-{n}-{j}.mcap" for j in range(recorders)]
     epoch_ns = time.time_ns()
-    recorder = RecorderActor.options(name=f"aerodaas/bench-recorder-{n}-{os.getpid()}").remote(
-        ActorSpec(role="recorder", epoch_ns=epoch_ns, record=RecordSpec(path=str(path))))
-    ray.get(recorder.setup.remote(), timeout=120)
-    k = max(1, min(producers, n))
+    recs = [RecorderActor.options(name=f"aerodaas/bench-recorder-{n}-{j}-{os.getpid()}").remote(
+        ActorSpec(role="recorder", epoch_ns=epoch_ns, record=RecordSpec(path=str(p)))) for j, p in enumerate(paths)]
+    ray.get([r.setup.remote() for r in recs], timeout=120)
+    k = max(recorders, min(producers, n))
     cls = _producer_class()
-    prods = [cls.remote(f"bench-producer-{i}", recorder) for i in range(k)]
+    prods = [cls.remote(f"bench-producer-{i}", recs[i % recorders]) for i in range(k)]
     ray.get([p.ready.remote() for p in prods], timeout=300)
     start_at = time.time() + 1.0  # every producer starts together
     refs = [p.run.remote([r for r in range(n) if r % k == i], load, epoch_ns, start_at) for i, p in enumerate(prods)]
     outs = ray.get(refs)
-    ray.get(recorder.close.remote(), timeout=600)
+    ray.get([r.close.remote() for r in recs], timeout=600)
     finished = time.time()
-    rep = ray.get(recorder.recording_report.remote())
-    for a in (*prods, recorder):
+    reps = ray.get([r.recording_report.remote() for r in recs])
+    for a in (*prods, *recs):
         ray.kill(a)
-    return _row(n, k, load, outs, rep, path, min(o["started"] for o in outs),
-                max(o["last_offer"] for o in outs), finished)
+    row = _row(n, k, load, outs, sum(x.get("frames_dropped", 0) for x in reps), paths,
+               min(o["started"] for o in outs), max(o["last_offer"] for o in outs), finished)
+    return {**row, "recorders": recorders}
 
 
-def _row(n: int, k: int, load: DroneLoad, outs: list[dict], rep: dict, path: Path, start_at: float,
+def _row(n: int, k: int, load: DroneLoad, outs: list[dict], rec_dropped: int, paths: list[Path], start_at: float,
          offered_until: float, finished: float) -> dict:
-    """The measured row of one fleet size (file summary, accounting, throughput over the wall time from the first
-    offer, ``start_at``, until the recorder finished the file, ``finished``; the drain from ``offered_until``, the
-    producers' last offer, until then: delivering and writing what was still behind; baseline)."""
+    """The measured row of one fleet size (files' summaries and accounting summed, throughput over the wall time
+    from the first offer, ``start_at``, until the recorders finished their files, ``finished``; the drain from
+    ``offered_until``, the producers' last offer, until then: delivering and writing what was still behind;
+    baseline over every file)."""
     from aerodaas.recording.accounting import account_recording
     from aerodaas.recording.reader import summarize_mcap
 
-    summary = summarize_mcap(path)
-    recorded = sum(c["count"] for c in summary["channels"])
-    acc = account_recording([path]) or {}
-    size_mb = path.stat().st_size / 1e6
+    channels = [c for p in paths for c in summarize_mcap(p)["channels"]]
+    recorded = sum(c["count"] for c in channels)
+    accs = [account_recording([p]) for p in paths]
+    size_mb = sum(p.stat().st_size for p in paths) / 1e6
     wall = finished - start_at
     drain = finished - offered_until
-    frames = sum(c["count"] for c in summary["channels"] if c["topic"].endswith("/camera/cam"))
+    frames = sum(c["count"] for c in channels if c["topic"].endswith("/camera/cam"))
+    base = [baseline_write(p) for p in paths]
+    secs = sum(b["seconds"] for b in base)
     return {
         "drones": n, "producers": k, "offered_items": sum(o["offered"] for o in outs),
         "frames_offered": int(n * load.duration_s * load.fps), "frames_recorded": frames,
         "frames_dropped_by_producers": sum(o["frames_dropped"] for o in outs),
-        "frames_dropped_by_recorder": rep.get("frames_dropped", 0),
-        "messages_recorded": recorded, "lost_by_accounting": acc.get("lost_total"),
+        "frames_dropped_by_recorder": rec_dropped,
+        "messages_recorded": recorded,
+        "lost_by_accounting": None if None in accs else sum(a["lost_total"] for a in accs),
         "mb_recorded": round(size_mb, 2), "wall_s": round(wall, 2), "drain_s": round(drain, 2),
         "producer_max_lag_s": max(o["max_lag_s"] for o in outs),
         "messages_per_s": round(recorded / wall, 1), "mb_per_s": round(size_mb / wall, 2),
         "offered_mb_per_s": round(n * load.fps * _mean_size(load) / 1e6, 2),
         "send_errors": [e for o in outs for e in o["send_errors"]],
-        "baseline": baseline_write(path),
+        "baseline": {"messages": sum(b["messages"] for b in base), "seconds": round(secs, 3),
+                     "messages_per_s": round(sum(b["messages"] for b in base) / secs, 1),
+                     "mb_per_s": round(size_mb / secs, 2)},
     }
 
 
@@ -261,8 +274,10 @@ def baseline_write(path: Path) -> dict:
             "mb_per_s": round(mb / dt, 2)}
 
 
-def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, frame_source: str) -> dict:
-    """Every fleet size in ``sizes`` on one local Ray (started here, shut down at the end); returns the report."""
+def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, frame_source: str,
+                       recorders: int = 1) -> dict:
+    """Every fleet size in ``sizes`` on one local Ray (started here, shut down at the end), with ``recorders``
+    recorder actors; returns the report."""
     from aerodaas.bench import machine_info
     from aerodaas.bench.progress import bench_progress
     from aerodaas.runtime import driver as runtime
@@ -275,7 +290,7 @@ def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, 
                 bench_progress("bench recorder", total=len(sizes)) as (progress, task):
             for n in sizes:
                 progress.update(task, description=f"bench recorder N={n}")
-                row = run_size(n, load, producers, Path(d))
+                row = run_size(n, load, producers, Path(d), recorders)
                 row["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
                 rows.append(row)
                 progress.advance(task)
@@ -288,7 +303,8 @@ def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, 
         runtime.shutdown_ray()
     return {"benchmark": "recorder", "machine": machine, "load": {"fps": load.fps, "odom_hz": load.odom_hz,
             "duration_s": load.duration_s, "frame_bytes": round(_mean_size(load)), "frame_size": [load.width, load.height],
-            "frame_source": frame_source}, "producers": producers, "results": rows, **_limit(rows)}
+            "frame_source": frame_source}, "producers": producers, "recorders": recorders, "results": rows,
+            **_limit(rows)}
 
 
 def _limit(rows: list[dict]) -> dict:
@@ -317,7 +333,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--odom-hz", type=float, default=10.0, help="odometry samples per second per drone (default 10)")
     p.add_argument("--width", type=int, default=1280, help="frame width, px (default 1280)")
     p.add_argument("--height", type=int, default=720, help="frame height, px (default 720)")
-    p.add_argument("--producers", type=int, default=2, help="producer actors the drones are spread over (default 2)")
+    p.add_argument("--producers", type=int, default=2, help="producer actors the drones are spread over (default 2; "
+                                                            "at least --recorders)")
+    p.add_argument("--recorders", type=int, default=1, help="recorder actors, each writing its own file with its own "
+                                                            "accounting, as recording.per_node makes one per node "
+                                                            "(default 1: the run's one recorder)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
 
@@ -326,6 +346,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         for name, ok, val in (("--drones", all(s >= 1 for s in sizes), list(sizes)),
                               ("--duration", a.duration > 0, a.duration), ("--fps", a.fps > 0, a.fps),
                               ("--odom-hz", a.odom_hz > 0, a.odom_hz), ("--producers", a.producers >= 1, a.producers),
+                              ("--recorders", a.recorders >= 1, a.recorders),
                               ("--width/--height", a.width >= 16 and a.height >= 16, f"{a.width}x{a.height}")):
             if not ok:
                 print(f"aerodaas bench recorder: {name} must be positive (frames at least 16x16), got {val}",
@@ -333,7 +354,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                 return 2
         frames, source = bench_frames(a.width, a.height)
         load = DroneLoad(a.fps, a.odom_hz, a.duration, frames, a.width, a.height)
-        report = run_recorder_bench(sizes, load, a.producers, source)
+        report = run_recorder_bench(sizes, load, a.producers, source, a.recorders)
         from aerodaas.bench.output import emit_report
 
         emit_report(report, a.out, a.json)
