@@ -54,6 +54,7 @@ class RecorderActor:
         self.losses: list[dict] = []
         self._finishing: threading.Thread | None = None
         self.live_error: str | None = None  # a restarted recorder that could not serve the live view again
+        self._forward: Any = None  # a node recorder's LiveForwarder to the driver's recorder (per-node recording)
         import warnings
 
         with warnings.catch_warnings():  # Ray's property reads its own deprecated ``actor_id`` internally
@@ -136,9 +137,33 @@ class RecorderActor:
                                                     live_access=rec.live_access)
             finally:
                 self._set_up.set()
+            if self.spec.record_remote and self.recorder is not None and self._forward is None:
+                self._forward_live()
         live = getattr(self.recorder, "live", None)
         return {"host": "recorder", "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id(),
                 "live_url": live.url if live is not None else None, "components": []}
+
+    def _forward_live(self) -> None:
+        """A node's recorder of a run with a live view (``spec.record_remote`` names the driver's recorder,
+        :mod:`aerodaas.runtime.node_recorders`): every message written is also sent to the driver's recorder,
+        whose actor name is this one's without its last part (``aerodaas/<run>/recorder/<compute>`` ->
+        ``aerodaas/<run>/recorder``), for its live view (:class:`~.live_forward.LiveForwarder`)."""
+        from aerodaas.actors.live_forward import LiveForwarder
+
+        main = ray.get_actor(ray.get_runtime_context().get_actor_name().rsplit("/", 1)[0])
+        self._forward = LiveForwarder(main)
+        self.recorder.rec.add_sink(self._forward)
+
+    def publish_live(self, msgs: list) -> int:
+        """Messages a node's recorder wrote (:class:`~aerodaas.recording.writer.RecordedMessage`), shown on this
+        recorder's live view as if written here (not recorded here: the node's file has them); returns how many
+        were published (0 without a live view)."""
+        live = getattr(self.recorder, "live", None)
+        if live is None:
+            return 0
+        for m in msgs:
+            live.publish(m)
+        return len(msgs)
 
     def serve_live(self, address: str, attempts: int = 10, every_s: float = 0.5) -> str | None:
         """Serve the live view on ``address`` (HOST:PORT) unless this process already does: a recorder restarted
@@ -249,8 +274,11 @@ class RecorderActor:
         if self.losses and self.losses[-1].get("resumed_at_ns") is None:  # this segment's first message
             self.losses[-1]["resumed_at_ns"] = getattr(self.recorder, "first_t_ns", None)
         counts, tasks = self._earlier_segments()
-        return self.recorder.close(ledgers=self.ledgers(), recorded_before=counts, run_losses=list(self.losses),
-                                   tasks_before=tasks)
+        out = self.recorder.close(ledgers=self.ledgers(), recorded_before=counts, run_losses=list(self.losses),
+                                  tasks_before=tasks)
+        if self._forward is not None:  # after the file's last message: the live view sees the node's whole run
+            self._forward.close()
+        return out
 
     def _earlier_segments(self) -> tuple[dict[str, int], Any]:
         """What this run's earlier segments (finished by now) hold, each file summarized once: topic -> messages,

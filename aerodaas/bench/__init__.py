@@ -59,8 +59,8 @@ class ReportOnlyStdout:
 def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     """Register every ``aerodaas bench`` sub-command on ``bench_subparsers``, each one's ``func`` wrapped in
     :class:`ReportOnlyStdout`."""
-    from aerodaas.bench import (detect, fleet, overhead, raypath, schedulers_cli, startup, tello_video, tours,
-                                tracks, video)
+    from aerodaas.bench import (detect, fleet, overhead, raypath, recorder, schedulers_cli, startup, tello_video,
+                                tours, tracks, video)
 
     tours.add_parser(bench_subparsers)
     schedulers_cli.add_parser(bench_subparsers)
@@ -72,5 +72,6 @@ def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     detect.add_parser(bench_subparsers)
     tracks.add_parser(bench_subparsers)
     video.add_parser(bench_subparsers)
+    recorder.add_parser(bench_subparsers)
     for parser in bench_subparsers.choices.values():
         parser.set_defaults(func=ReportOnlyStdout(parser.get_default("func")))

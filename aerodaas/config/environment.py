@@ -275,6 +275,18 @@ class AnalyticsSchedulerConfig(_Cfg):
         return Workload(self.load or "custom", models)
 
 
+class RecordingConfig(_Cfg):
+    """How a run is recorded (``recording`` in ``environment.json``). ``per_node``: one recorder actor per edge
+    compute of the run besides the driver's (each on its compute's nodes, by its labels), writing
+    ``RUN.node-<compute>.mcap`` next to ``RUN.mcap`` with its own accounting; the drones and analytics of that
+    compute record to it, everything else (cloud analytics, the mission results) to the driver's file.
+    ``aerodaas merge`` joins the files into one (``docs/benchmarks.md``: when one recorder is the limit)."""
+
+    per_node: bool = Field(default=False, description="one recorder per edge compute, each writing "
+                           "RUN.node-<compute>.mcap (joined by `aerodaas merge`); false: every actor records into the "
+                           "driver's file")
+
+
 class EnvironmentConfig(_Cfg):
     """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema.
 
@@ -295,6 +307,7 @@ class EnvironmentConfig(_Cfg):
         default=None, description="the trajectory scheduler used when the app sets none: a registered name "
         "(TrajectoryScheduler, NearestNeighborScheduler, TwoOptScheduler, a plug-in) or 'module.path:ClassName'; "
         "constructed as Class(env). Unset: TrajectoryScheduler")
+    recording: RecordingConfig = Field(default_factory=RecordingConfig)
     drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
                                   "1: an actor per drone; more for memory-bound fleets")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "

@@ -529,6 +529,10 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
         schemas.update(output_schemas(a))
     if recorded and schemas:
         rec.spec.record.schemas = schemas
+    if recorded and getattr(getattr(env.cfg, "recording", None), "per_node", False):
+        from aerodaas.runtime.node_recorders import add_node_recorders
+
+        add_node_recorders(st.actors, rec, run_id)  # one recorder per edge compute (recording.per_node)
     for a in st.actors.values():
         a.spec.epoch_ns = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None

@@ -63,6 +63,9 @@ class MissionResult:
     #: message count of each segment before the last (None: unreadable); the last one's is ``recording_counts``
     recording_segment_messages: list[int | None] = field(default_factory=list)
     recording_duplicates: int = 0  # samples a restarted drone actor sent again, dropped (recorded once)
+    #: ``recording.per_node``: each node recorder's file (its first segment); the run's whole recording is these and
+    #: ``recording`` (``aerodaas merge`` joins them)
+    recording_nodes: list[str] = field(default_factory=list)
     #: lock-step runs: the consumers (component ids) whose actor died and did not answer again within
     #: ``actor_restart_timeout_s``; their analytics were lost (outcome ``analytics_lost``, not ``ok``)
     analytics_lost: list[str] = field(default_factory=list)
@@ -490,12 +493,13 @@ def _recording_accounting(record: str | None, rec_report: dict) -> dict[str, Any
     """The recording's accounting read back from its file(s) (``rec_report["segments"]``, else ``record``),
     None without a recording or when it cannot be read (the summary then says what the recorder reported)."""
     paths = rec_report.get("segments") or ([record] if record else [])
-    if not paths or not all(os.path.isfile(p) for p in paths):
+    nodes = [r.get("segments") or [] for r in (rec_report.get("nodes") or {}).values()]  # recording.per_node
+    if not paths or not all(os.path.isfile(p) for p in [*paths, *(p for n in nodes for p in n)]):
         return None
-    from aerodaas.recording.accounting import account_recording
+    from aerodaas.runtime.node_recorders import run_accounting
 
     try:
-        return account_recording(paths)
+        return run_accounting(paths, nodes)
     except (OSError, ValueError) as e:
         print(f"aerodaas: warning: the recording's accounting could not be read: {type(e).__name__}: {e}",
               file=sys.stderr)
@@ -533,6 +537,8 @@ def _result(run: _Run, counts: dict, rec_report: dict) -> MissionResult:
                            recording_segments=rec_report.get("segments") or [],
                            recording_segment_messages=rec_report.get("segment_messages") or [],
                            recording_duplicates=rec_report.get("duplicates", 0), analytics_lost=lost_analytics,
+                           recording_nodes=[(r.get("segments") or [None])[0] or h
+                                            for h, r in (rec_report.get("nodes") or {}).items()],
                            recording_accounting=accounting, degraded=degraded, insecure=list(run.insecure))
     for h in run.handles.values():
         h["robot"].run_end_hooks(result)

@@ -262,6 +262,10 @@ def _recording_lines(result: Any) -> list[str]:
             lines.append(f"  recording: FAILED: {fail.get('error')}; {result.recording} holds {held} "
                          f"({fail.get('messages_in_file', '?')} messages, {state}); "
                          f"{result.recording_lost} later messages were not recorded")
+    nodes = getattr(result, "recording_nodes", None) or []
+    if nodes:  # recording.per_node: the rest of the run is in the node recorders' files
+        lines.append(f"  recording: and one file per node: {', '.join(nodes)} (one file: aerodaas merge "
+                     f"{result.recording} {' '.join(nodes)} --out ALL.mcap)")
     for loss in getattr(result, "recording_losses", None) or []:
         lines.append(_loss_line(loss, result))
     return lines

@@ -56,6 +56,9 @@ def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorCla
     for hid, a in plan.actors.items():
         if hid == "recorder":
             continue
+        if a.role == "recorder":  # a node's recorder (recording.per_node), placed on its compute's nodes
+            handles[hid] = classes.recorder.options(**a.ray_options(placement, max_restarts)).remote(a.spec)
+            continue
         handles[hid] = classes.for_role(a.role).options(**a.ray_options(placement, max_restarts)).remote(hid, a.tier)
     return handles
 

@@ -15,7 +15,10 @@ def close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
     reaches the file); returns (message counts, recording report). Never raises."""
     import ray
 
-    order = sorted((h for h in actors if h != "recorder"), key=lambda h: h.startswith("drone"))
+    from aerodaas.runtime.node_recorders import close_node_recorders, node_recorder_ids
+
+    nodes = node_recorder_ids(actors)
+    order = sorted((h for h in actors if h != "recorder" and h not in nodes), key=lambda h: h.startswith("drone"))
     pings = {hid: actors[hid].ping.remote() for hid in order}
     alive = set()
     for hid, ref in pings.items():  # an actor whose node is gone (pending a restart that cannot happen) is skipped
@@ -38,6 +41,7 @@ def close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
         except Exception as e:  # noqa: BLE001 - a dead actor has nothing left to close
             if not isinstance(e, ray.exceptions.RayActorError):
                 print(f"aerodaas: warning: actor {hid!r} could not be closed cleanly: {_cause(e)}", file=sys.stderr)
+    node_reports = close_node_recorders(actors) if nodes else {}  # after their producers, before the driver's
     counts: dict = {}
     rep: dict = {}
     if "recorder" in actors:
@@ -56,6 +60,10 @@ def close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
         except Exception as e:  # noqa: BLE001 - pragma: no cover - reported, never silently lost
             print(f"aerodaas: warning: the recorder could not be closed cleanly (recording: {record}): {_cause(e)}",
                   file=sys.stderr)
+    if node_reports:  # one recorder per node: their files, and their losses are the run's
+        rep["nodes"] = node_reports
+        rep["losses"] = [*(rep.get("losses") or []), *(x for r in node_reports.values() for x in r.get("losses") or []),
+                         *({"segment": h, "error": r["error"]} for h, r in node_reports.items() if "error" in r)]
     return counts, rep
 
 

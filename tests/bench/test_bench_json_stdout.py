@@ -49,6 +49,8 @@ TINY: dict[str, list] = {
                              "1"], id="detect", marks=needs_data_case)],
     "tracks": [pytest.param(["{recording}"], id="tracks")],
     "video": [pytest.param(["--readers", "ours", "--sizes", "720p", "--fps", "10", "--seconds", "1"], id="video")],
+    "recorder": [pytest.param(["--drones", "2", "--duration", "1", "--width", "160", "--height", "120", "--recorders",
+                               "2"], id="recorder", marks=slow)],
 }
 
 
