@@ -1,11 +1,11 @@
 """``recording.per_node`` in the run's plan (issue 49 item 3): a recorder actor per edge compute, placed by its
 labels, writing ``RUN.node-<compute>.mcap``, and that compute's actors recording to it. The plan only: nothing
-starts (the run on a two-node cluster is ``tests/test_node_recorders_cluster.py``)."""
+starts (the run on a two-node cluster is ``tests/cluster/test_node_recorders_cluster.py``)."""
 from __future__ import annotations
 
 import pytest
 
-from tests.cluster_runtime_app import _cfg
+from tests.cluster.cluster_runtime_app import _cfg
 
 
 def _plan(per_node: bool, tmp_path, live: str | None = None):

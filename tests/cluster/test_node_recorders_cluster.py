@@ -1,6 +1,6 @@
 """One recorder per node on a two-node local cluster (issue 49 item 3): two recorders write one run, each on its
 node, the live view shows both nodes' channels, and ``aerodaas merge`` + ``aerodaas info`` present the run whole
-with the accounting complete. The run is ``tests/cluster_recorders_app.py`` in a subprocess; placement is read from
+with the accounting complete. The run is ``tests/cluster/cluster_recorders_app.py`` in a subprocess; placement is read from
 Ray's GCS, the files with the mcap library's own reader, the live view with a Foxglove protocol client written
 from the spec."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _topics(path) -> dict[str, int]:
@@ -25,7 +25,7 @@ def _topics(path) -> dict[str, int]:
 
 
 def _app(tmp_path, *extra: str) -> dict:
-    p = subprocess.run([sys.executable, "tests/cluster_recorders_app.py", str(tmp_path), *extra], cwd=ROOT,
+    p = subprocess.run([sys.executable, "tests/cluster/cluster_recorders_app.py", str(tmp_path), *extra], cwd=ROOT,
                        capture_output=True, text=True, timeout=600, env=dict(os.environ))
     line = next((ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")), None)
     assert line is not None, (p.returncode, p.stdout[-3000:], p.stderr[-3000:])
@@ -46,6 +46,7 @@ def test_two_node_recorders_write_one_run_that_merge_and_info_present_whole(tmp_
     _check_files_live_and_merge(tmp_path, r)
 
 
+@pytest.mark.cluster  # a whole run with a live-view client: minutes at load, so in the cluster lane beside its two-node twin
 def test_on_one_node_the_per_node_recorders_write_one_run_too(tmp_path):
     """The same run on a single-node local Ray (both node recorders on this node): the files, the live view, the
     merge and the accounting as on the cluster."""

@@ -1,12 +1,12 @@
 """One recorder per node on a fresh :class:`~aerodaas.clusters.local.LocalCluster` (its own Ray, separate raylets
-per node): ``python tests/cluster_recorders_app.py OUT_DIR [local]`` prints one JSON line. Used by
-``tests/test_node_recorders_cluster.py`` as a subprocess, so the test session's own Ray is left alone. ``local``:
+per node): ``python tests/cluster/cluster_recorders_app.py OUT_DIR [local]`` prints one JSON line. Used by
+``tests/cluster/test_node_recorders_cluster.py`` as a subprocess, so the test session's own Ray is left alone. ``local``:
 the same run on a single-node local Ray of its own (labels are not required there: both node recorders run on
 this node), for the development tier.
 
 Two ``tier=edge`` nodes (labels ``aerodaas/site: a`` / ``b``); drone ``d00`` flies from compute ``edge-a``, ``d01``
 from ``edge-b``, each with a camera; ``recording.per_node: true``, recorded to ``OUT_DIR/run.mcap`` with a live
-view on a free loopback port. While the run is up, a Foxglove protocol client (``tests/foxglove_ws_client.py``)
+view on a free loopback port. While the run is up, a Foxglove protocol client (``tests/liveview/foxglove_ws_client.py``)
 gathers both drones' odometry from the live view, and Ray's GCS says on which node every recorder actor is."""
 from __future__ import annotations
 
@@ -40,12 +40,12 @@ def _cluster(local: bool) -> Iterator[str | None]:
 
 
 def main(out_dir: str, local: bool = False) -> dict:
-    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     from aerodaas import AeroListData, Environment, NearestNeighborScheduler, PriorityQueue, Waypoint
     from aerodaas.config import parse_environment_config
     from aerodaas.runtime import driver as runtime
-    from tests.cluster_runtime_app import _actors_by_node, _cfg
-    from tests.foxglove_ws_client import collect
+    from tests.cluster.cluster_runtime_app import _actors_by_node, _cfg
+    from tests.liveview.foxglove_ws_client import collect
 
     cfg = {**_cfg(2, ["a", "b"], 2.0), "recording": {"per_node": True}}
     rec = os.path.join(out_dir, "run.mcap")

@@ -1,5 +1,5 @@
 """``aerodaas bench recorder`` (issue 49 item 3): its parts that need no Ray. The Ray run itself is in
-``tests/test_bench_json_stdout.py`` (slow tier); timing is never asserted."""
+``tests/bench/test_bench_json_stdout.py`` (slow tier); timing is never asserted."""
 from __future__ import annotations
 
 import pytest
