@@ -332,3 +332,24 @@ def test_no_private_table_of_builtins_remains():
     hits = [str(p) for d in ("aerodaas", "actors", "schedulers", "clusters") for p in (root / d).rglob("*.py")
             if "_BUILTIN_TARGETS" in p.read_text(encoding="utf-8") or "_BUILTIN_MODULES" in p.read_text(encoding="utf-8")]
     assert hits == []
+
+
+def test_an_install_without_the_packages_entry_points_is_an_error_saying_how_to_install():
+    """The built-ins come only from the installed metadata: when it declares none (a checkout imported without
+    installing it, or entry points edited without re-installing), asking for any plug-in says so and how to fix it,
+    instead of 'unknown backend sim'. A fresh process whose metadata reader finds nothing of ours."""
+    code = textwrap.dedent('''
+        from aerodaas.plugins import registry
+
+        def nothing_installed(builtin):
+            return []
+
+        registry._distribution_entry_points = nothing_installed
+        try:
+            registry.resolve("backend", "sim")
+        except registry.MissingBuiltins as e:
+            print("MissingBuiltins:", e)
+        ''')
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.startswith("MissingBuiltins:") and "pip install -e ." in r.stdout, r.stdout

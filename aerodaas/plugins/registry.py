@@ -40,6 +40,7 @@ from typing import Any, Callable, Iterable
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "BUILTIN_DIST", "BUILTIN_ORIGIN", "MissingBuiltins", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
            "register", "plugin", "get", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
+           "PluginRegistry", "REGISTRY",
            "plugin_package_paths", "plugin_name", "is_import_path"]
 
 #: the extension points, and the ``importlib.metadata`` entry-point group of each
@@ -214,10 +215,30 @@ class PluginEntry:
         return out
 
 
-_LOCK = threading.RLock()
-_ENTRIES: dict[str, dict[str, PluginEntry]] = {k: {} for k in KINDS}
-_LOADED = {"builtins": False, "entry_points": False}
-_BY_VALUE: set[str] = set()
+def _empty_tables() -> dict[str, dict[str, PluginEntry]]:
+    return {k: {} for k in KINDS}
+
+
+@dataclass
+class PluginRegistry:
+    """The plug-ins known to this process: ``entries`` (kind -> name -> :class:`PluginEntry`), whether this
+    package's own entry points (``builtins_loaded``) and every other distribution's (``entry_points_loaded``) were
+    read from the metadata, and ``by_value`` (modules reached by an import path that no installed distribution
+    provides, :func:`by_value_modules`); ``lock`` guards them (the registry is read from an actor's threads).
+    The module's functions (:func:`register`, :func:`resolve`, :func:`entries`, ...) act on :data:`REGISTRY`."""
+
+    entries: dict[str, dict[str, PluginEntry]] = field(default_factory=_empty_tables)
+    builtins_loaded: bool = False
+    entry_points_loaded: bool = False
+    by_value: set[str] = field(default_factory=set)
+    lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
+
+
+#: the one plug-in registry of this process, and the only module-level mutable state of the framework besides the
+#: process's signal handling and Ray connection (:data:`aerodaas.runtime.process.PROCESS`;
+#: tests/test_module_state.py): a plug-in class registered in a module is known to the whole process, as Python's
+#: own import system knows a module (sys.modules)
+REGISTRY = PluginRegistry()
 
 def _check_kind(kind: str) -> None:
     if kind not in ENTRY_POINT_GROUPS:
@@ -275,15 +296,15 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     if replaces is None:
         replaces = getattr(cls, "plugin_replaces", False) is True
     _load_builtins()  # a built-in's name is taken from the start (metadata only: nothing imported)
-    with _LOCK:
-        old = _ENTRIES[kind].get(name)
+    with REGISTRY.lock:
+        old = REGISTRY.entries[kind].get(name)
         if old is not None and old.target != target and not replaces:
             raise ValueError(f"{kind.replace('_', ' ')} name {name!r} is already taken by {old.target} ({old.origin}); "
                              f"choose another name, or say that it replaces it (replaces=True / plugin_replaces = True)")
         dist = None
         if old is not None and old.target == target and old.dist is not None:
             origin, dist = old.origin, old.dist  # the entry point's module registered itself on import
-        _ENTRIES[kind][name] = PluginEntry(kind, name, origin, target, cls, dist=dist)
+        REGISTRY.entries[kind][name] = PluginEntry(kind, name, origin, target, cls, dist=dist)
     return cls
 
 
@@ -315,31 +336,31 @@ def _distribution_entry_points(builtin: bool) -> list[tuple[str, str, str, str]]
 def _load_builtins() -> None:
     """Register the entry points of this package (the built-ins), before any other distribution's: their names are
     taken from the start. Raises :class:`MissingBuiltins` when the installed metadata declares none."""
-    if _LOADED["builtins"]:
+    if REGISTRY.builtins_loaded:
         return
-    with _LOCK:
-        if _LOADED["builtins"]:
+    with REGISTRY.lock:
+        if REGISTRY.builtins_loaded:
             return
         found = _distribution_entry_points(builtin=True)
         if not found:
             raise MissingBuiltins()
         for kind, name, target, dist in found:
-            _ENTRIES[kind].setdefault(name, PluginEntry(kind, name, BUILTIN_ORIGIN, target, dist=dist))
-        _LOADED["builtins"] = True
+            REGISTRY.entries[kind].setdefault(name, PluginEntry(kind, name, BUILTIN_ORIGIN, target, dist=dist))
+        REGISTRY.builtins_loaded = True
 
 
 def _load_entry_points() -> None:
     """Register the entry points of every other installed distribution (after the built-ins). A name already taken
     (a built-in's, or a class the application registered first) keeps its plug-in."""
     _load_builtins()
-    if _LOADED["entry_points"]:
+    if REGISTRY.entry_points_loaded:
         return
-    with _LOCK:
-        if _LOADED["entry_points"]:
+    with REGISTRY.lock:
+        if REGISTRY.entry_points_loaded:
             return
-        _LOADED["entry_points"] = True
+        REGISTRY.entry_points_loaded = True
         for kind, name, target, dist in _distribution_entry_points(builtin=False):
-            _ENTRIES[kind].setdefault(name, PluginEntry(kind, name, f"entry point {dist}", target, dist=dist))
+            REGISTRY.entries[kind].setdefault(name, PluginEntry(kind, name, f"entry point {dist}", target, dist=dist))
 
 
 def is_import_path(name: str) -> bool:
@@ -362,9 +383,9 @@ def _from_import_path(kind: str, name: str) -> PluginEntry:
         raise UnknownPlugin(kind, name, entries(kind), f"{name} declares plugin_kind {declared!r}")
     _check_plugin_class(cls, kind, name)
     if not _installed(sys.modules[mod]):
-        _BY_VALUE.add(mod)
-    with _LOCK:
-        _ENTRIES[kind][name] = entry
+        REGISTRY.by_value.add(mod)
+    with REGISTRY.lock:
+        REGISTRY.entries[kind][name] = entry
     return entry
 
 
@@ -388,11 +409,11 @@ def resolve(kind: str, name: str) -> PluginEntry:
     built-in is one), or — when ``name`` is ``"module.path:ClassName"`` — that class. Raises
     :class:`UnknownPlugin`, :class:`MissingBuiltins`."""
     _check_kind(kind)
-    with _LOCK:
-        e = _ENTRIES[kind].get(name)
+    with REGISTRY.lock:
+        e = REGISTRY.entries[kind].get(name)
     if e is None:
         _load_entry_points()
-        e = _ENTRIES[kind].get(name)
+        e = REGISTRY.entries[kind].get(name)
     if e is None and is_import_path(name):
         e = _from_import_path(kind, name)
     if e is None:
@@ -419,8 +440,8 @@ def entries(kind: str | None = None) -> list[PluginEntry]:
     """Every registered plug-in (of ``kind``), built-ins and installed entry points included, in kind order."""
     _load_entry_points()
     kinds: Iterable[str] = [kind] if kind else KINDS
-    with _LOCK:
-        return [e for k in kinds for e in _ENTRIES[k].values()]
+    with REGISTRY.lock:
+        return [e for k in kinds for e in REGISTRY.entries[k].values()]
 
 
 def names(kind: str) -> list[str]:
@@ -437,9 +458,9 @@ def adopt(carried: Iterable[tuple[str, str, type, str]]) -> None:
     """Register plug-in classes that travelled to this process in an actor's spec, ``(kind, name, class, origin)``,
     under the name and origin the driver resolved them with (a class defined in the application, or reached by an
     import path, is known here only this way)."""
-    with _LOCK:
+    with REGISTRY.lock:
         for kind, name, cls, origin in carried:
-            _ENTRIES[kind][name] = PluginEntry(kind, name, origin, f"{cls.__module__}:{cls.__qualname__}", cls)
+            REGISTRY.entries[kind][name] = PluginEntry(kind, name, origin, f"{cls.__module__}:{cls.__qualname__}", cls)
 
 
 def plugin_package_paths() -> list[str]:
@@ -472,4 +493,4 @@ def plugin_package_paths() -> list[str]:
 def by_value_modules() -> list[str]:
     """Modules reached by an import path that no installed distribution provides: their classes must travel to
     the actors by value (``ray.cloudpickle.register_pickle_by_value``, called by the driver before actors start)."""
-    return sorted(_BY_VALUE)
+    return sorted(REGISTRY.by_value)
