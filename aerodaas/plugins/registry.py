@@ -321,14 +321,25 @@ def plugin(kind: str, name: str | None = None, *, replaces: bool | None = None) 
 
 def _distribution_entry_points(builtin: bool) -> list[tuple[str, str, str, str]]:
     """``(kind, name, target, dist)`` of every installed entry point in the aerodaas groups, of :data:`BUILTIN_DIST`
-    only (``builtin``) or of every other distribution; read from the metadata, nothing imported."""
-    from importlib.metadata import entry_points
+    only (``builtin``) or of every other distribution; read from the metadata, nothing imported. The built-ins
+    from this package's own metadata alone (under 1 ms), the others from one scan of every installed
+    distribution (``entry_points(group=...)`` once per group scanned them five times: 224 ms against 37 ms at
+    load 26 on the 2-core machine), since every Ray worker that resolves ``sim`` reads the built-ins."""
+    from importlib.metadata import PackageNotFoundError, distribution, entry_points
 
+    kinds = {g: k for k, g in ENTRY_POINT_GROUPS.items()}
+    if builtin:
+        try:
+            own = distribution(BUILTIN_DIST).entry_points
+        except PackageNotFoundError:
+            return []
+        return [(kinds[ep.group], ep.name, ep.value, BUILTIN_DIST) for ep in own if ep.group in kinds]
     out = []
-    for kind, group in ENTRY_POINT_GROUPS.items():
-        for ep in entry_points(group=group):
+    installed = entry_points()
+    for group, kind in kinds.items():
+        for ep in installed.select(group=group):
             dist = getattr(getattr(ep, "dist", None), "name", None) or "?"
-            if (dist == BUILTIN_DIST) == builtin:
+            if dist != BUILTIN_DIST:
                 out.append((kind, ep.name, ep.value, dist))
     return out
 
