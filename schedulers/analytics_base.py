@@ -390,8 +390,8 @@ def admit_by_time(admits: Callable[[float], bool], now_ms: float, deadline_ms: f
 
 def register_analytics_scheduler(cls: type[AnalyticsScheduler]) -> type[AnalyticsScheduler]:
     """Class decorator: make ``cls`` available by ``cls.name`` in the plug-in registry
-    (:mod:`aerodaas.plugins.registry`, kind ``analytics_scheduler``, origin ``builtin`` or ``decorator in FILE``).
-    Raises ValueError on a duplicate or empty name."""
+    (:mod:`aerodaas.plugins.registry`, kind ``analytics_scheduler``, origin ``decorator in FILE``; the built-in schedulers are
+    entry points of this package, see pyproject.toml). Raises ValueError on a duplicate or empty name."""
     from aerodaas.plugins import registry
 
     if not cls.name:

@@ -12,8 +12,7 @@ from __future__ import annotations
 
 from typing import Callable, ClassVar, Iterator
 
-from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState, Workload,
-                             register_analytics_scheduler)
+from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState, Workload)
 
 __all__ = ["PriorityEdgeQueue", "EdgeFifo", "EdgeEdf", "EdgeSjf", "EdgeHbf", "EdgeHuf", "CloudOnly"]
 
@@ -131,14 +130,12 @@ class _EdgeOnly(AnalyticsScheduler):
         return list(self.queue)
 
 
-@register_analytics_scheduler
 class EdgeFifo(_EdgeOnly):
     """EDGE_FIFO (algorithm 1): one edge queue in arrival order."""
 
     name = "EDGE_FIFO"
 
 
-@register_analytics_scheduler
 class EdgeEdf(_EdgeOnly):
     """EDGE_EDF (algorithm 3): priority = the model's relative deadline (ms), ties FIFO — as in the reference,
     the *relative* deadline, so a later task of a tighter model overtakes earlier tasks of looser models."""
@@ -146,21 +143,18 @@ class EdgeEdf(_EdgeOnly):
     name, priority = "EDGE_EDF", staticmethod(lambda p: p.deadline_ms)
 
 
-@register_analytics_scheduler
 class EdgeSjf(_EdgeOnly):
     """EDGE_SJF (algorithm 5): shortest expected edge time first, ties FIFO."""
 
     name, priority = "EDGE_SJF", staticmethod(lambda p: p.edge_ms)
 
 
-@register_analytics_scheduler
 class EdgeHbf(_EdgeOnly):
     """EDGE_HBF (algorithm 7): highest benefit first, ties FIFO."""
 
     name, priority = "EDGE_HBF", staticmethod(lambda p: -p.benefit)
 
 
-@register_analytics_scheduler
 class EdgeHuf(_EdgeOnly):
     """EDGE_HUF (algorithm 9): highest edge utility (benefit - edge cost) first, ties FIFO."""
 
@@ -168,7 +162,6 @@ class EdgeHuf(_EdgeOnly):
 
 
 # --------------------------------------------------------------------------------------------- cloud-only
-@register_analytics_scheduler
 class CloudOnly(AnalyticsScheduler):
     """CLOUD (algorithm 4, "CLD"): every task goes to the cloud at once if its cloud utility is positive, else it
     is dropped for cost. The cloud executor's re-check (base :meth:`cloud_admit`) applies, as in the reference.

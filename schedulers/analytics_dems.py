@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from aerodaas.schedulers.analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, ModelProfile, TaskState,
-                             Workload, register_analytics_scheduler)
+                             Workload)
 from aerodaas.schedulers.analytics_baselines import PriorityEdgeQueue
 from aerodaas.schedulers.analytics_estimators import LatencyEstimator, WindowMeanEstimator, make_estimator
 
@@ -111,7 +111,6 @@ EVICTION_SCANS = ("reference", "full")
 
 
 # --------------------------------------------------------------------------------------------- E+C
-@register_analytics_scheduler
 class EdgeCloud(AnalyticsScheduler):
     """E+C (algorithm 62): a new task is inserted at its EDF slot if the edge backlog ahead of it (remaining time
     of the running task + edge times of the queued tasks ahead) plus its own edge time meets its deadline —
@@ -240,7 +239,6 @@ class EdgeCloud(AnalyticsScheduler):
 
 
 # --------------------------------------------------------------------------------------------- DEM
-@register_analytics_scheduler
 class Dem(EdgeCloud):
     """DEM (algorithm 52): E+C plus *migration*: when a new task is inserted, the queued tasks behind it that
     would now miss their deadline are evicted — only if their summed :meth:`score` is lower than the new task's
@@ -252,7 +250,6 @@ class Dem(EdgeCloud):
 
 
 # --------------------------------------------------------------------------------------------- DEMS
-@register_analytics_scheduler
 class Dems(Dem):
     """DEMS (algorithm 31): DEM plus a tentative cloud queue with just-in-time release and work stealing.
 
@@ -398,7 +395,6 @@ class Dems(Dem):
 
 
 # --------------------------------------------------------------------------------------------- DEMS-A
-@register_analytics_scheduler
 class DemsA(Dems):
     """DEMS-A (algorithm 91): DEMS adapting to cloud latency.
 
@@ -453,7 +449,6 @@ class DemsA(Dems):
 
 
 # --------------------------------------------------------------------------------------------- GEMS
-@register_analytics_scheduler
 class Gems(Dems):
     """GEMS (algorithm 35): DEMS plus a QoE *gatekeeper* (GateKeeper.java, version 0).
 

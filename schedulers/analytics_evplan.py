@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from aerodaas.schedulers.analytics_base import EXECUTED_STATES, AnalyticsTask, Decision, Workload, register_analytics_scheduler
+from aerodaas.schedulers.analytics_base import EXECUTED_STATES, AnalyticsTask, Decision, Workload
 from aerodaas.schedulers.analytics_dems import CLOUD_TRIGGER_BUFFER_MS
 from aerodaas.schedulers.analytics_estimators import make_estimator
 from aerodaas.schedulers.analytics_gainplan import EDGE_ONLY, OPEN, GainPlan, max_gain_edge_plan
@@ -44,7 +44,6 @@ from aerodaas.schedulers.analytics_gainplan import EDGE_ONLY, OPEN, GainPlan, ma
 __all__ = ["EvPlan"]
 
 
-@register_analytics_scheduler
 class EvPlan(GainPlan):
     """EVPLAN (see the module docstring). Options: ``window`` (cloud ratios kept per model, default 100),
     ``tolerance`` (cloud on-time probability a hold may cost, default 0.02), ``edge_quantile`` (of the edge-time

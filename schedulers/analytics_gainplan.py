@@ -35,8 +35,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from aerodaas.schedulers.analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
-                             register_analytics_scheduler)
+from aerodaas.schedulers.analytics_base import (EXECUTED_STATES, AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload)
 from aerodaas.schedulers.analytics_dems import CLOUD_TRIGGER_BUFFER_MS, JIT_EARLY_MS, JIT_LATE_MS
 from aerodaas.schedulers.analytics_estimators import RecentMaxEstimator, make_estimator
 
@@ -74,7 +73,6 @@ def max_gain_edge_plan(items: list[tuple[float, float, float]], start_ms: float)
 PessimisticLatencyEstimator = RecentMaxEstimator
 
 
-@register_analytics_scheduler
 class GainPlan(AnalyticsScheduler):
     """GAINPLAN — rolling max-gain edge plan with just-in-time cloud commitment (see the module docstring).
 

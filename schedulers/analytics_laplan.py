@@ -66,7 +66,7 @@ from typing import NamedTuple
 import numpy as np
 
 from aerodaas.schedulers.analytics_arrivals import ArrivalPredictor, BurstArrivalPredictor
-from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload, register_analytics_scheduler
+from aerodaas.schedulers.analytics_base import AnalyticsTask, Decision, Workload
 from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
 from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
@@ -89,7 +89,6 @@ class _CachedPlan(NamedTuple):
     slack: float               # ms: how late every planned task may still start and end by its latest end
 
 
-@register_analytics_scheduler
 class LaPlan(EvPlan):
     """LAPLAN (see the module docstring). Options: ``horizon_ms`` (lookahead, default 2,000 ms; 0 = no
     prediction), ``edge_levels`` (on-time chances of the edge-time variants, each in (0, 1]), ``pool_models``

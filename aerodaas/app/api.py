@@ -17,20 +17,15 @@ from typing import Any, Callable
 from aerodaas.config import ComputeConfig, EnvironmentConfig, RobotConfig, SensorConfig, load_environment_config
 from aerodaas.model.data import AeroStreamData
 from aerodaas.model.types import AeroNavigation, PriorityQueue
-from aerodaas.runtime.options import MISSION_LISTENERS as _MISSION_LISTENERS
 
-__all__ = ["Environment", "Robot", "Sensor", "ComputeResource", "MISSION_LISTENERS"]
-
-#: the callables told of every mission's result (:data:`aerodaas.runtime.options.MISSION_LISTENERS`: the runtime
-#: tells them and sits below this API)
-MISSION_LISTENERS = _MISSION_LISTENERS
+__all__ = ["Environment", "Robot", "Sensor", "ComputeResource"]
 
 
 def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, options: Any = None):
     """While an application is loaded, mark its mission's start (:func:`aerodaas.runtime.app_loader.mark_mission`:
     nothing flies); else run the mission of ``robots`` under ``options`` (a
-    :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults), which tells :data:`MISSION_LISTENERS`, and
-    return the MissionResult (blocks)."""
+    :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) and return the MissionResult (blocks;
+    ``aerodaas run`` is told each result by :func:`aerodaas.runtime.driver.run_file`)."""
     from aerodaas.runtime.app_loader import is_sentinel, mark_mission
 
     marked = mark_mission(env, robots, timeout)

@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from aerodaas.runtime.process import PROCESS
+
 if TYPE_CHECKING:
     from aerodaas.runtime.options import RunOptions
 
@@ -94,16 +96,16 @@ class _StopSignals:
         # the signal over: cancel that alarm and its handler.
         signal.alarm(0)
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
-        if self.results and not runtime.IN_MISSION[0]:
+        if self.results and not PROCESS.stop.in_mission:
             # after the summary (the app ending, Ray shutting down): no KeyboardInterrupt from inside ray.shutdown,
-            # and the exit code stays the mission's; a further mission of the app does not start (STOP_SIGNALS).
+            # and the exit code stays the mission's; a further mission of the app does not start (PROCESS.stop).
             # A second late signal is the user insisting (a hang on the way out): it ends the process as usual
             if self.late:
                 signal.signal(signum, signal.SIG_DFL)
                 os.kill(os.getpid(), signum)
                 return
             self.late.append(signum)
-            runtime.STOP_SIGNALS.append(signum)
+            PROCESS.stop.record(signum)
             return
         self.stop.append(signum)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one clean stop; a second signal must not cut it short
@@ -158,7 +160,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     results: list = []
     signals = _StopSignals(results)
     signals.install()
-    runtime.STOP_SIGNALS.clear()
+    PROCESS.stop.reset()
     runtime.allow_stop_interrupt(True)  # loading the app: a stop may interrupt it at once
 
     def on_result(res) -> None:  # every mission of the app counts

@@ -299,7 +299,7 @@ def add_section_schemas(schema: dict[str, Any]) -> None:
     from aerodaas.plugins import registry
 
     for e in registry.entries("backend"):
-        if e.origin != "builtin":
+        if not e.builtin:
             continue
         cls = e.load()
         section, config = getattr(cls, "config_section", None), getattr(cls, "Config", None)

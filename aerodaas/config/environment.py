@@ -375,7 +375,7 @@ class EnvironmentConfig(_Cfg):
                 cls = None
             if not getattr(cls, "environment_sensor", False):
                 kinds = sorted(e.name for e in registry.entries("sensor")
-                               if e.origin == "builtin" and getattr(e.load(), "environment_sensor", False))
+                               if e.builtin and getattr(e.load(), "environment_sensor", False))
                 raise ValueError(f"env_sensors.{j}.type: sensor {s.id!r} has type {s.type!r}; an environment sensor is "
                                  f"one of {kinds} (a sensor plug-in samples a robot's state: "
                                  f"list it under robots[].sensors)")

@@ -250,7 +250,7 @@ def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
     out = []
     for kind, name in dict.fromkeys(wanted):
         e = registry.resolve(kind, name)
-        if e.origin != "builtin":  # a built-in is known in every process that imports aerodaas
+        if not e.builtin:  # a built-in is known in every process that imports aerodaas
             out.append((kind, name, e.load(), e.origin))
     return out
 

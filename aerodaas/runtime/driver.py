@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, Callable
 from aerodaas.recording.health import FailureCount
 from aerodaas.runtime import ray_start
 from aerodaas.runtime.options import RunOptions, actor_classes
+from aerodaas.runtime.process import PROCESS
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
                                         shutdown_ray, start_ray_early)
@@ -91,30 +92,18 @@ class MissionResult:
         return int((self.recording_accounting or {}).get("lost_total", 0))
 
 
-#: stop signals received (SIGINT/SIGTERM through :func:`request_stop`), and whether raising KeyboardInterrupt in the
-#: main thread is safe right now: while the application is built and while a mission runs, yes; while actors are
-#: being set up or torn down, no (an exception inside a Ray call there can leave the core worker half shut down and
-#: abort the process: exit 134 instead of 143, the recording unfinished) — the stop is then taken at the next
-#: safe point, which ends the mission as ``interrupted`` with the recording finished
-STOP_SIGNALS: list[int] = []
-_RAISE_OK = [True]
-#: True while :func:`run_mission` runs (a stop signal then ends the mission); after it, a signal that comes once a
-#: mission's summary was printed does not change the run's exit code (see ``aerodaas run``)
-IN_MISSION = [False]
-
-
 def allow_stop_interrupt(allowed: bool) -> None:
     """Whether a stop signal (:func:`request_stop`) may raise KeyboardInterrupt in the main thread from now on:
-    True while the application is built, False around Ray's shutdown (see :data:`STOP_SIGNALS`)."""
-    _RAISE_OK[0] = bool(allowed)
+    True while the application is built, False around Ray's shutdown (the process's
+    :class:`aerodaas.runtime.process.StopState`, which says why)."""
+    PROCESS.stop.raise_ok = bool(allowed)
 
 
 def request_stop(signum: int) -> None:
     """Called by the CLI's SIGINT/SIGTERM handler (main thread): record the stop and raise KeyboardInterrupt when
-    that is safe now; otherwise the run stops at its next safe point."""
-    STOP_SIGNALS.append(signum)
-    if _RAISE_OK[0]:
-        raise KeyboardInterrupt(f"signal {signum}")
+    that is safe now; otherwise the run stops at its next safe point
+    (:meth:`aerodaas.runtime.process.StopState.request`)."""
+    PROCESS.stop.request(signum)
 
 
 def _start_scheduling(run: "_Run", placement: Any) -> list:
@@ -187,7 +176,7 @@ def run_file(path: str, options: RunOptions | None = None,
     its missions in order, each with :func:`run_application`; code of the file after a mission runs once that
     mission flew, with its result (``aerodaas run`` does this). ``on_result`` is told each result. Returns the
     results (empty: the file never called ``start_mission()``). Raises what loading or a run raises; a stop signal
-    (:data:`STOP_SIGNALS`) after a mission ends the file there."""
+    (``aerodaas.runtime.process.PROCESS.stop``) after a mission ends the file there."""
     from aerodaas.runtime.app_loader import load_app
 
     opts = options or RunOptions()
@@ -197,7 +186,7 @@ def run_file(path: str, options: RunOptions | None = None,
         results.append(run_application(app, opts))
         if on_result is not None:
             on_result(results[-1])
-        if not app.continues or STOP_SIGNALS:
+        if not app.continues or PROCESS.stop.stopped():
             break
         app = load_app(path, opts.env_path, flown=tuple(results))
     return results
@@ -215,24 +204,21 @@ def run_mission(env, robots: list, options: RunOptions | None = None, timeout: f
 
 def _fly(env, robots: list, graph: tuple, opts: RunOptions, timeout: float | None,
          by_value: tuple[str, ...]) -> MissionResult:
-    """Check ``opts``, run the mission, tell :data:`aerodaas.runtime.options.MISSION_LISTENERS`. The app's file
-    (``by_value``'s modules, or ``__main__`` of ``python app.py``) is an input ``--record`` never overwrites."""
-    from aerodaas.runtime.options import MISSION_LISTENERS
+    """Check ``opts``, run the mission and return its result (``aerodaas run`` is told it by :func:`run_file`'s
+    ``on_result``). The app's file (``by_value``'s modules, or ``__main__`` of ``python app.py``) is an input
+    ``--record`` never overwrites."""
     from aerodaas.runtime.preflight import check_options
 
     actor_classes(opts)  # the entry point handed the actor classes (ValueError before Ray otherwise)
     files = (getattr(sys.modules.get(m), "__file__", None) for m in (*by_value, "__main__"))
     sim = check_options(env, robots, graph[1], opts, inputs=tuple(f for f in files if f))
     ray_start.start_ray_early(opts.address, opts.dashboard)  # in its own thread (see there), overlapping the plan
-    IN_MISSION[0] = True
+    PROCESS.stop.in_mission = True
     try:
-        result = _run_mission(_Run(env, robots, *graph, sim, opts,
-                                   opts.timeout if opts.timeout is not None else timeout, by_value))
+        return _run_mission(_Run(env, robots, *graph, sim, opts,
+                                 opts.timeout if opts.timeout is not None else timeout, by_value))
     finally:
-        IN_MISSION[0] = False
-    for listener in list(MISSION_LISTENERS):
-        listener(result)
-    return result
+        PROCESS.stop.in_mission = False
 
 
 @dataclass
@@ -280,8 +266,8 @@ def _plan_run(run: _Run) -> Any:
 
     opts = run.opts
     probe("app_built")
-    if STOP_SIGNALS:  # stopped while the app was built: nothing started, nothing to record
-        raise KeyboardInterrupt(f"signal {STOP_SIGNALS[0]}")
+    if PROCESS.stop.stopped():  # stopped while the app was built: nothing started, nothing to record
+        raise KeyboardInterrupt(f"signal {PROCESS.stop.signals[0]}")
     allow_stop_interrupt(False)  # from here on a stop signal is taken at the safe points (see request_stop)
     run.has_cloud = ray_start.ensure_ray(opts.address, opts.dashboard)
     probe("ray_ready")
@@ -401,7 +387,7 @@ def _supervise(run: _Run, described: list) -> None:
     allow_stop_interrupt(True)
     t_fly = time.monotonic()
     run.reports = supervise(run.plan, run.actors, run.handles, run.timeout, run.opts.progress,
-                            lambda: bool(STOP_SIGNALS), restart_wait_s=run.env.cfg.actor_restart_timeout_s)
+                            PROCESS.stop.stopped, restart_wait_s=run.env.cfg.actor_restart_timeout_s)
     fly_s = time.monotonic() - t_fly
     allow_stop_interrupt(False)
     run.stats, run.latency = collect_stats(run.handles, run.actors, run.plan)

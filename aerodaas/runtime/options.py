@@ -4,18 +4,12 @@ them from a global."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from aerodaas.protocol.actor_classes import ActorClasses
 
-__all__ = ["RunOptions", "MISSION_LISTENERS", "actor_classes"]
-
-#: Callables ``fn(result)`` told of every :class:`aerodaas.runtime.driver.MissionResult` that a mission start returns —
-#: :meth:`Robot.start_mission` and :meth:`Environment.start_mission` (a fleet) alike. ``aerodaas run`` listens here
-#: for its summary and exit code, so an application may start its mission either way. (Here, not in the application
-#: API, which imports the runtime: the runtime tells them.)
-MISSION_LISTENERS: list[Callable[[Any], None]] = []
+__all__ = ["RunOptions", "actor_classes"]
 
 
 @dataclass

@@ -11,7 +11,8 @@ import os
 import sys
 import tempfile
 import threading
-from typing import Any
+
+from aerodaas.runtime.process import PROCESS, EarlyStart
 
 __all__ = ["RayStartError", "RayAddressError", "init_ray", "ensure_ray", "start_ray_early", "shutdown_ray",
            "started_here", "ray_temp_dir", "SUN_PATH_MAX", "RAY_SOCKET_SUFFIX_MAX"]
@@ -33,16 +34,10 @@ class RayAddressError(RayStartError):
     """The Ray cluster of ``--address`` could not be reached (bad input: ``aerodaas run`` exits 2 naming it)."""
 
 
-#: what this process started: ``local`` (a Ray of our own, shut down by :func:`shutdown_ray`) and ``attached_up``
-#: (joined the cluster of `aerodaas up`, a local cluster placed as local mode is); process state of the Ray
-#: connection, not run options
-_STATE = {"local": False, "attached_up": False}
-_EARLY: dict[str, Any] = {}  # the background start of Ray (start_ray_early)
-
-
 def started_here() -> bool:
-    """True when this driver runs on a local Ray: its own, or the persistent cluster of ``aerodaas up``."""
-    return _STATE["local"] or _STATE["attached_up"]
+    """True when this driver runs on a local Ray: its own, or the persistent cluster of ``aerodaas up`` (what this
+    process did with Ray is :data:`aerodaas.runtime.process.PROCESS`'s ``ray``, process state, not run options)."""
+    return PROCESS.ray.local or PROCESS.ray.attached_up
 
 
 def ray_temp_dir(environ: dict[str, str] | None = None) -> str:
@@ -105,7 +100,7 @@ def _attach_up(up_address: str, renv: dict) -> None:
         ray.init(address=up_address, log_to_driver=True, configure_logging=True, logging_level="warning", **renv)
     finally:
         restore()
-    _STATE["attached_up"] = True
+    PROCESS.ray.attached_up = True
     print(f"aerodaas: attached to the local cluster of `aerodaas up` at {up_address} (`aerodaas down` stops it)",
           file=sys.stderr, flush=True)
 
@@ -150,7 +145,7 @@ def _start_local(dashboard: bool) -> None:
                 continue
             if "timed out during startup" not in str(e) or attempt == 2:
                 raise
-    _STATE["local"] = True
+    PROCESS.ray.local = True
 
 
 def init_ray(address: str | None, dashboard: bool = False) -> None:
@@ -183,10 +178,9 @@ def start_ray_early(address: str | None = None, dashboard: bool = False) -> None
     to do when Ray is already initialized."""
     import ray
 
-    if _EARLY or ray.is_initialized():
+    if PROCESS.ray.early is not None or ray.is_initialized():
         return
-    ready = threading.Event()
-    _EARLY.update(ready=ready, error=None, address=address)
+    early = PROCESS.ray.early = EarlyStart(address)
 
     def keeper() -> None:
         import logging
@@ -199,8 +193,8 @@ def start_ray_early(address: str | None = None, dashboard: bool = False) -> None
         try:
             init_ray(address, dashboard)
         except BaseException as e:  # surfaced by ensure_ray in the main thread
-            _EARLY["error"] = e
-        ready.set()
+            early.error = e
+        early.ready.set()
         threading.Event().wait()
 
     threading.Thread(target=keeper, name="aerodaas-ray-keeper", daemon=True).start()
@@ -214,11 +208,11 @@ def ensure_ray(address: str | None = None, dashboard: bool = False) -> bool:
 
     where = f"the Ray cluster at {address!r}" if address else "a local Ray"
     err_cls = RayAddressError if address else RayStartError
-    if _EARLY and _EARLY["address"] == address:
-        _EARLY["ready"].wait()
-        if _EARLY["error"] is not None:
-            err, _EARLY["error"] = _EARLY["error"], None
-            _EARLY.clear()
+    early = PROCESS.ray.early
+    if early is not None and early.address == address:
+        early.ready.wait()
+        if early.error is not None:
+            err, PROCESS.ray.early = early.error, None
             if isinstance(err, KeyboardInterrupt):
                 raise err
             raise err_cls(f"could not start {where}: {type(err).__name__}: {err}") from err
@@ -235,9 +229,9 @@ def shutdown_ray() -> None:
     process ends)."""
     import ray
 
-    if _EARLY:
-        _EARLY["ready"].wait()
-    if _STATE["local"] and ray.is_initialized():
+    if PROCESS.ray.early is not None:
+        PROCESS.ray.early.ready.wait()
+    if PROCESS.ray.local and ray.is_initialized():
         ray.shutdown()
-    _STATE["local"] = False
-    _EARLY.clear()
+    PROCESS.ray.local = False
+    PROCESS.ray.early = None

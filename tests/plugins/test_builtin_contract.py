@@ -23,7 +23,7 @@ def _robot(**kw) -> dict:
 def test_each_builtin_sensor_is_a_sensor_plugin_with_a_config_model(name):
     e = registry.resolve("sensor", name)
     cls = e.load()
-    assert e.origin == "builtin" and issubclass(cls, SensorPlugin) and cls.name == name
+    assert e.builtin and issubclass(cls, SensorPlugin) and cls.name == name
     assert issubclass(cls.Config, BaseModel) and cls.Config.model_config.get("extra") == "forbid"
 
 
@@ -38,7 +38,7 @@ def test_aerodaas_plugins_lists_builtins_with_their_settings():
     out = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plugins", "--json"], capture_output=True, text=True,
                          check=True, timeout=120)
     rows = {(r["kind"], r["name"]): r for r in json.loads(out.stdout)}
-    assert rows[("sensor", "camera")]["origin"] == "builtin" and "width" in rows[("sensor", "camera")]["config"]
+    assert rows[("sensor", "camera")]["origin"] == registry.BUILTIN_ORIGIN and "width" in rows[("sensor", "camera")]["config"]
     assert rows[("sensor", "odometry")]["config"] == ["rate_hz"]
     assert "connection" in rows[("backend", "mavlink")]["config"] and rows[("backend", "replay")]["config"] == ["log", "rate"]
 
@@ -104,7 +104,7 @@ def test_each_builtin_analytics_declares_what_it_consumes_and_produces(name, con
 
     e = registry.resolve("analytics", name)
     cls = e.load()
-    assert e.origin == "builtin" and (cls.consumes, cls.produces) == (consumes, produces)
+    assert e.builtin and (cls.consumes, cls.produces) == (consumes, produces)
     check_declaration(cls(**({"template": "any.jpg", "size_m": 3.0} if name == "StructureLocator" else {})))
 
 

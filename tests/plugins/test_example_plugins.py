@@ -59,7 +59,8 @@ def test_the_installed_package_registers_every_plugin_by_entry_point(installed, 
         assert "error" not in rows[key], rows[key]
     assert "source_x" in rows[("sensor", "gas_concentration")]["config"]
     assert {"max_speed_mps", "turn_rate_dps"} <= set(rows[("backend", "ground_rover")]["config"])
-    assert rows[("backend", "sim")]["origin"] == "builtin" and rows[("analytics_scheduler", "DEMS")]["origin"] == "builtin"
+    assert rows[("backend", "sim")]["origin"] == "entry point aerodaas (built-in)"  # one origin column: the distribution
+    assert rows[("analytics_scheduler", "DEMS")]["origin"] == "entry point aerodaas (built-in)"
     # the framework never names the example's sensor type: a new sensor type is one file of the package
     g = subprocess.run(["git", "grep", "-n", "gas_concentration", "--", "aerodaas", "actors", "schedulers"], cwd=REPO,
                        capture_output=True, text=True)
@@ -104,7 +105,7 @@ def test_a_misspelt_sensor_type_stops_before_ray_naming_robot_sensor_and_what_is
     err = p.stdout + p.stderr
     assert p.returncode == 2, err[-3000:]
     for part in ("sensors.1.type", "'uav'", "'gas'", "'gas_concentraton'",
-                 "'gas_concentration' (entry point aerodaas-example-plugins)", "'camera' (builtin)"):
+                 "'gas_concentration' (entry point aerodaas-example-plugins)", "'camera' (entry point aerodaas (built-in))"):
         assert part in err, (part, err[-3000:])
     assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
     bad_backend = _env_with(src, tmp_path, lambda c: c["robots"][0].update(backend="gusty"))

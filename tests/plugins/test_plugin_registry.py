@@ -20,7 +20,7 @@ def test_builtins_of_every_kind_are_listed_with_their_origin():
     assert {k for k, _ in rows} == set(registry.KINDS)
     for key in [("backend", "sim"), ("backend", "mavlink"), ("sensor", "camera"), ("analytics", "ObjectDetector"),
                 ("trajectory_scheduler", "NearestNeighborScheduler"), ("analytics_scheduler", "DEMS")]:
-        assert rows[key]["origin"] == "builtin", rows[key]
+        assert rows[key]["origin"] == registry.BUILTIN_ORIGIN == "entry point aerodaas (built-in)", rows[key]
     from aerodaas.schedulers.analytics_base import analytics_scheduler_class, analytics_scheduler_names
     from aerodaas.schedulers.analytics_dems import Dems
 
@@ -32,7 +32,7 @@ def test_unknown_name_lists_what_is_available_and_suggests_the_closest():
         registry.get("analytics_scheduler", "GAINPLAM")
     msg = str(e.value)
     assert "unknown analytics scheduler 'GAINPLAM'" in msg and "(did you mean 'GAINPLAN'?)" in msg
-    assert "'EDGE_FIFO' (builtin)" in msg
+    assert "'EDGE_FIFO' (entry point aerodaas (built-in))" in msg
     with pytest.raises(registry.UnknownPlugin, match="cannot import it"):
         registry.get("backend", "no_such_module_xyz:Backend")
     with pytest.raises(ValueError, match="unknown plug-in kind"):
@@ -139,7 +139,7 @@ def test_a_sensor_written_in_the_app_is_planned_and_listed_without_starting_ray(
     assert p.returncode == 0, p.stderr[-2000:]
     rows = {r["name"]: r for r in json.loads(p.stdout)}
     assert rows["my_altimeter"]["origin"] == f"decorator in {plug}", rows["my_altimeter"]
-    assert rows["camera"]["origin"] == "builtin"
+    assert rows["camera"]["origin"] == registry.BUILTIN_ORIGIN
 
 
 def test_an_environment_sensor_of_unknown_type_is_refused_not_skipped():
@@ -192,7 +192,7 @@ def test_a_builtins_name_is_taken_from_the_start_unless_the_registration_says_it
         kind = "sim"
 
     with pytest.raises(ValueError, match=r"backend name 'sim' is already taken by aerodaas\.backends\.sim:\w+ "
-                                         r"\(builtin\).*replaces=True"):
+                                         r"\(entry point aerodaas \(built-in\)\).*replaces=True"):
         registry.register(MySim, "backend")
     assert registry.get("backend", "sim") is not MySim
 
@@ -240,14 +240,116 @@ def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_pat
 
 
 def test_each_builtin_plugin_module_imports_first_in_a_fresh_process():
-    """A built-in module registers its classes while it is imported; that registration must not load the other
-    built-ins (which import it back, half-initialised): a dispatcher actor unpickling a DEMS policy died with
-    'cannot import name CLOUD_TRIGGER_BUFFER_MS from partially initialized module'."""
+    """A built-in scheduler module imported first must not load the other built-ins (which import it back,
+    half-initialised): a dispatcher actor unpickling a DEMS policy died with 'cannot import name
+    CLOUD_TRIGGER_BUFFER_MS from partially initialized module'. The modules: those of the package's own
+    analytics-scheduler entry points."""
     import subprocess
     import sys
+    from importlib.metadata import distribution
 
-    mods = list(registry._BUILTIN_MODULES)
+    mods = sorted({ep.value.split(":")[0] for ep in distribution("aerodaas").entry_points
+                   if ep.group == "aerodaas.analytics_schedulers"})
+    assert len(mods) == 5, mods
     code = "import importlib, sys; importlib.import_module(sys.argv[1])"
     for m in mods:
         r = subprocess.run([sys.executable, "-c", code, m], capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, (m, r.stderr[-1500:])
+
+
+def _declared_entry_points() -> dict[str, dict[str, str]]:
+    """``{group: {name: "module:Class"}}`` as this checkout's pyproject.toml declares them."""
+    import tomllib
+    from pathlib import Path
+
+    doc = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text(encoding="utf-8"))
+    return {g: dict(eps) for g, eps in doc["project"]["entry-points"].items() if g.startswith("aerodaas.")}
+
+
+def test_every_builtin_resolves_through_this_packages_own_entry_points():
+    """Issue 48.1: the built-ins are declared as a user's package declares its plug-ins — entry points in
+    pyproject.toml, read from the installed metadata — with no private table. Every built-in the registry knows is
+    one of them, every one resolves (its class a subclass of its kind's base), and the installed metadata is what
+    pyproject.toml declares (an install that predates an edit of the entry points fails here)."""
+    from importlib.metadata import distribution
+
+    declared = _declared_entry_points()
+    installed: dict[str, dict[str, str]] = {}
+    for ep in distribution("aerodaas").entry_points:
+        if ep.group.startswith("aerodaas."):
+            installed.setdefault(ep.group, {})[ep.name] = ep.value
+    assert installed == declared and set(declared) == set(registry.ENTRY_POINT_GROUPS.values())
+    kind_of_group = {g: k for k, g in registry.ENTRY_POINT_GROUPS.items()}
+    for group, eps in declared.items():
+        kind = kind_of_group[group]
+        for name, target in eps.items():
+            e = registry.resolve(kind, name)
+            assert (e.builtin, e.dist, e.origin, e.target) == (True, "aerodaas", registry.BUILTIN_ORIGIN, target), e
+            assert issubclass(registry.get(kind, name), registry.kind_base(kind))
+    builtins = {(e.kind, e.name) for e in registry.entries() if e.builtin}
+    assert builtins == {(kind_of_group[g], n) for g, eps in declared.items() for n in eps}
+    assert sum(map(len, declared.values())) == 31  # 4 backends, 3 sensors, 7 analytics, 3 + 14 schedulers
+
+
+def test_a_plugin_cannot_take_a_builtins_name_in_a_fresh_process():
+    """A clash between a plug-in and a built-in is refused from the first registration of the process, before
+    anything asked for a built-in (the built-ins' names come from the metadata, nothing imported): a sensor called
+    ``camera`` and an analytics scheduler called ``DEMS``, each naming the built-in it collides with."""
+    code = textwrap.dedent('''
+        import sys
+        from aerodaas.plugins import SensorPlugin, register_sensor
+        from aerodaas.schedulers.analytics_base import AnalyticsScheduler, register_analytics_scheduler
+
+        class MyCamera(SensorPlugin):
+            name = "camera"
+
+        class MyDems(AnalyticsScheduler):
+            name = "DEMS"
+
+        for register, cls in ((register_sensor, MyCamera), (register_analytics_scheduler, MyDems)):
+            try:
+                register(cls)
+            except ValueError as e:
+                print(e)
+            else:
+                print("registered", cls.__name__)
+        ''')
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 2 and "registered" not in r.stdout, r.stdout
+    assert ("sensor name 'camera' is already taken by aerodaas.plugins.builtin_sensors:CameraSensor "
+            "(entry point aerodaas (built-in))") in lines[0]
+    assert ("analytics scheduler name 'DEMS' is already taken by aerodaas.schedulers.analytics_dems:Dems "
+            "(entry point aerodaas (built-in))") in lines[1]
+
+
+def test_no_private_table_of_builtins_remains():
+    """Done-criterion of issue 48.1, as the issue states it: no ``_BUILTIN_TARGETS`` or ``_BUILTIN_MODULES``."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    hits = [str(p) for d in ("aerodaas", "actors", "schedulers", "clusters") for p in (root / d).rglob("*.py")
+            if "_BUILTIN_TARGETS" in p.read_text(encoding="utf-8") or "_BUILTIN_MODULES" in p.read_text(encoding="utf-8")]
+    assert hits == []
+
+
+def test_an_install_without_the_packages_entry_points_is_an_error_saying_how_to_install():
+    """The built-ins come only from the installed metadata: when it declares none (a checkout imported without
+    installing it, or entry points edited without re-installing), asking for any plug-in says so and how to fix it,
+    instead of 'unknown backend sim'. A fresh process whose metadata reader finds nothing of ours."""
+    code = textwrap.dedent('''
+        from aerodaas.plugins import registry
+
+        def nothing_installed(builtin):
+            return []
+
+        registry._distribution_entry_points = nothing_installed
+        try:
+            registry.resolve("backend", "sim")
+        except registry.MissingBuiltins as e:
+            print("MissingBuiltins:", e)
+        ''')
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.startswith("MissingBuiltins:") and "pip install -e ." in r.stdout, r.stdout
