@@ -44,6 +44,7 @@ ENTRY_POINT_GROUPS: dict[str, str] = {
     "analytics": "aerodaas.analytics",
     "trajectory_scheduler": "aerodaas.trajectory_schedulers",
     "analytics_scheduler": "aerodaas.analytics_schedulers",
+    "frame_source": "aerodaas.frame_sources",
 }
 KINDS: tuple[str, ...] = tuple(ENTRY_POINT_GROUPS)
 #: the class every plug-in of a kind subclasses (``"module:Class"``, imported when a plug-in is resolved): the
@@ -55,6 +56,7 @@ KIND_BASES: dict[str, str] = {
     "analytics": "aerodaas.analytics.base:Analytics",
     "trajectory_scheduler": "aerodaas.schedulers.base:TrajectoryScheduler",
     "analytics_scheduler": "aerodaas.schedulers.analytics_base:AnalyticsScheduler",
+    "frame_source": "aerodaas.plugins.frames:FrameSource",
 }
 
 
@@ -200,6 +202,12 @@ _BUILTIN_TARGETS: list[tuple[str, str, str]] = [
     ("sensor", "camera", "aerodaas.plugins.builtin_sensors:CameraSensor"),
     ("sensor", "odometry", "aerodaas.plugins.builtin_sensors:OdometrySensor"),
     ("sensor", "stat_stream", "aerodaas.plugins.builtin_sensors:StatStreamSensor"),
+    # where a camera's frames come from (aerodaas.plugins.frames), selected by its properties.source
+    ("frame_source", "sim", "aerodaas.actors.frame_sources:RenderedFrames"),
+    ("frame_source", "backend", "aerodaas.actors.frame_sources:BackendFrames"),
+    ("frame_source", "mcap", "aerodaas.actors.frame_sources:McapFrames"),
+    ("frame_source", "stream", "aerodaas.actors.frame_sources:StreamFrames"),
+    ("frame_source", "mavlink", "aerodaas.actors.frame_sources:MavlinkFrames"),
     ("analytics", "ObjectDetector", "aerodaas.analytics.core:ObjectDetector"),
     ("analytics", "FollowAnalytics", "aerodaas.analytics.core:FollowAnalytics"),
     ("analytics", "MonitoringAnalytics", "aerodaas.analytics.core:MonitoringAnalytics"),
