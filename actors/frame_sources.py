@@ -19,7 +19,8 @@ from typing import Any, Callable, Mapping
 
 from aerodaas.model.types import FramePose
 from aerodaas.plugins.builtin_sensors import DISCOVERY_PROPERTIES, STREAM_PROPERTIES
-from aerodaas.plugins.frames import STREAM_SOURCE, CapturedFrame, FrameSource, FrameSourceContext, LiveFrameSource
+from aerodaas.plugins.frames import (STREAM_SOURCE, CapturedFrame, FrameSource, FrameSourceContext, LiveFrameSource,
+                                    frame_source_names)
 
 __all__ = ["RenderedFrames", "BackendFrames", "McapFrames", "StreamFrames", "MavlinkFrames"]
 
@@ -148,10 +149,17 @@ class StreamFrames(LiveFrameSource):
 
     @classmethod
     def check_properties(cls, properties: Mapping[str, Any], where: str) -> None:
-        """Scheme, host, port and codec, by :func:`aerodaas.video.source.parse_stream_source`."""
+        """Scheme, host, port and codec, by :func:`aerodaas.video.source.parse_stream_source`; a bare word that is
+        no stream is named with the registered frame sources (a misspelt one)."""
         from aerodaas.video.source import parse_stream_source
 
-        parse_stream_source(properties["source"], properties.get("transport"), properties.get("codec"))
+        src = properties["source"]
+        try:
+            parse_stream_source(src, properties.get("transport"), properties.get("codec"))
+        except ValueError as e:
+            if isinstance(src, str) and src.isidentifier():
+                raise ValueError(f"{e}; the registered frame sources: {frame_source_names()}") from None
+            raise
 
     @classmethod
     def resolve_files(cls, properties: dict[str, Any], resolve: Callable[[str, str], Any], where: str,
