@@ -241,12 +241,18 @@ def sensor_plugin_spec(sensor, cid: str) -> dict:
 
 
 def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
-    """The plug-in classes ``cfg`` (a RobotConfig) names — a plug-in backend and plug-in sensor types — as
-    ``(kind, name, class, origin)``: they travel with the drone actor's spec and are registered there before the
-    robot's configuration is validated again (:func:`aerodaas.plugins.registry.adopt`)."""
+    """The plug-in classes ``cfg`` (a RobotConfig) names — a plug-in backend, plug-in sensor types and the plug-in
+    frame sources its cameras' ``properties.source`` name — as ``(kind, name, class, origin)``: they travel with
+    the drone actor's spec and are registered there before the robot's configuration is validated again
+    (:func:`aerodaas.plugins.registry.adopt`; a node without the plug-in's distribution has no entry point of it)."""
     from aerodaas.plugins import registry
 
     wanted = [("backend", cfg.backend)] + [("sensor", s.type) for s in cfg.sensors]
+    sources = set(registry.names("frame_source"))
+    for s in cfg.sensors:
+        src = s.properties.get("source", "sim")
+        if issubclass(sensor_class(s.type), FrameSensor) and (src in sources or registry.is_import_path(src)):
+            wanted.append(("frame_source", src))
     out = []
     for kind, name in dict.fromkeys(wanted):
         e = registry.resolve(kind, name)
