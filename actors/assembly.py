@@ -15,6 +15,7 @@ from typing import Any
 
 
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
+from aerodaas.plugins.frames import frame_source_class
 from aerodaas.protocol.ids import is_drone
 from aerodaas.protocol.specs import ActorSpec
 
@@ -164,13 +165,14 @@ class ActorAssembly:
                                gimbal_commands=r.gimbal)
         inbox = plane.add(drone.inbox)
         for c in r.cameras:
-            if c.props.get("source", "sim") == "sim" and world is None:
+            source = c.source if c.source is not None else frame_source_class(c.props.get("source", "sim"))
+            if source.needs_world and world is None:
                 from aerodaas.sim.world import World
 
                 w = WorldConfig.model_validate(spec.world)
                 world = World(w.ground, w.targets)  # one texture for every camera of this actor
             cam = CameraComponent(plane, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
-                                  self.recorder, plane.epoch_ns)
+                                  self.recorder, plane.epoch_ns, source)
             cam.on_event = drone.record_event
             drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
             self.comps[c.cid] = cam

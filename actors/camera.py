@@ -1,6 +1,7 @@
-"""CameraComponent: a camera sensor inside its drone's actor (rendered by the simulator, the vehicle's own stream,
-a recorded MCAP channel, or a video stream: RTSP, RTP/UDP, MPEG-TS/UDP, V4L2, file); frames are published by
-reference to every reader in the actor."""
+"""CameraComponent: a camera sensor inside its drone's actor; its frames come from a frame source
+(:mod:`aerodaas.plugins.frames`; the built-ins in :mod:`aerodaas.actors.frame_sources`: rendered by the simulator,
+the vehicle's own stream, a recorded MCAP channel, a video stream: RTSP, RTP/UDP, MPEG-TS/UDP, V4L2, file, or one a
+plug-in brings) and are published by reference to every reader in the actor."""
 from __future__ import annotations
 
 import dataclasses
@@ -13,6 +14,7 @@ import numpy as np
 
 from aerodaas.protocol.messages import FrameMsg
 from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
+from aerodaas.plugins.frames import FrameSource, FrameSourceContext, LiveFrameSource, frame_source_class
 
 from aerodaas.actors.dataplane import Cascade, DataPlane
 from aerodaas.navigation.gimbal import camera_angles, quaternion_from_euler, wrap_deg
@@ -24,18 +26,19 @@ TICK_WAIT_S = 0.25
 
 
 class CameraComponent:
-    """A camera sensor. :meth:`capture` (run on the actor's pool when the clock says a frame is due) produces one
-    frame — rendered by the simulator at the drone's pose (``source: sim``), the backend's own newest frame
-    (``source: backend``, e.g. a Tello), or the recorded frame at this time of an MCAP recording's camera channel
-    (``source: mcap``, to re-run analytics on a recorded flight) — makes it read-only, and publishes it. While the previous capture is still being
-    rendered a new one is skipped and counted (``dropped_at_camera``). A video stream's frame (RTSP, RTP/UDP, ...)
-    is captured when it arrives, the clock's ticks giving the poses it is tagged with (:meth:`try_capture`).
-    Frames go to the recorder by reference."""
+    """A camera sensor. :meth:`capture` (run on the actor's pool when the clock says a frame is due) asks its frame
+    source (``src``, a :class:`~aerodaas.plugins.frames.FrameSource` chosen by its sensor class from
+    ``properties.source``; ``source`` overrides it) for the frame at the run time and pose — rendered (``sim``), the
+    backend's own newest frame (``backend``), a recorded MCAP channel's (``mcap``), a plug-in's — makes it
+    read-only, and publishes it. While the previous capture is still being rendered a new one is skipped and
+    counted (``dropped_at_camera``). A live source's frame (a video stream: RTSP, RTP/UDP, ...) is captured when it
+    arrives, the clock's ticks giving the poses it is tagged with (:meth:`try_capture`). Frames go to the recorder
+    by reference."""
 
     kind = "camera"
 
     def __init__(self, plane: DataPlane, cid: str, robot_id: str, sensor_id: str, props: dict, world: Any,
-                 backend: Any, recorder: Any, epoch_ns: int) -> None:
+                 backend: Any, recorder: Any, epoch_ns: int, source: type[FrameSource] | None = None) -> None:
         self.plane, self.cid = plane, cid
         self.robot_id, self.sensor_id = robot_id, sensor_id
         self.k = CameraIntrinsics.from_hfov(int(props["width"]), int(props["height"]), float(props["hfov_deg"]))
@@ -57,8 +60,6 @@ class CameraComponent:
         self.dispatch_ms: deque[float] = deque(maxlen=4096)
         self.latest: tuple | None = None
         self._busy = threading.Lock()
-        self._last_source_t: float | None = None
-        self.replay = None
         #: the robot's event sink (DroneComponent.record_event), set by the actor's assembly: video_lost/restored
         self.on_event: Callable[..., None] | None = None
         #: (run time s, position ENU m, yaw deg) at each clock tick: the pose a stream frame is tagged with
@@ -76,54 +77,38 @@ class CameraComponent:
         self._halted = False  # the drone's mission is over: frames arriving now are not captured
         self.latency_ms: deque[float] = deque(maxlen=4096)
         self._props = props
-        #: source "mavlink": the stream the vehicle announced (opened by on_vehicle_connected)
-        self.discovered = None
-        if self.source not in ("sim", "backend", "mcap"):
-            if self.source != "mavlink":
-                self._open_stream(self.source, props.get("codec"))
+        cls = source if source is not None else frame_source_class(self.source)
+        #: where the frames come from (aerodaas.plugins.frames): a pulled source is asked at each due tick, a live
+        #: one's reader wakes the camera when a frame arrived
+        self.src: FrameSource = cls(FrameSourceContext(robot_id, sensor_id, props, self.k, backend, world))
+        if isinstance(self.src, LiveFrameSource):
+            self.src.start(self._on_stream_frame)
+            self.stream = self.src.reader  # None until the vehicle announced it (source "mavlink")
             # a stream frame is captured when it arrives (the reader wakes the camera: _on_stream_frame); the ticks,
             # at twice the stream's nominal rate, sample the pose and gimbal the frames are tagged with and take a
             # frame that arrived while the previous capture was running
             self.fps = 2.0 * self.fps
-        if self.source == "mcap":
-            from aerodaas.backends.replay import McapCameraReplay
 
-            self.replay = McapCameraReplay(props["mcap"], props.get("topic") or f"/{robot_id}/camera/{sensor_id}")
-
-    def _open_stream(self, source: str, codec: str | None) -> None:
-        """Read video ``source`` (checked as configured sources are) and wait for its first frame
-        (``first_frame_timeout_s``, default 10 s; VideoSourceError names the URL)."""
-        from aerodaas.video import StreamReader, parse_stream_source
-
-        props = self._props
-        spec = parse_stream_source(source, props.get("transport") if source.startswith("rtsp") else None, codec)
-        self.stream = StreamReader(spec, self.k.width, self.k.height,
-                                   stall_timeout_s=float(props.get("stall_timeout_s") or 2.0),
-                                   name=f"{self.robot_id}/{self.sensor_id}", on_frame=self._on_stream_frame).start()
-        self.stream.wait_first(float(props.get("first_frame_timeout_s") or 10.0))
+    @property
+    def discovered(self) -> Any:
+        """The stream the vehicle announced (a DiscoveredStream), None when the source asked for none."""
+        return getattr(self.src, "discovered", None)
 
     def on_vehicle_connected(self) -> None:
-        """After the robot's backend connected: a camera with ``source: "mavlink"`` asks the backend for the
-        stream the vehicle announces (camera protocol v2: ``camera_component``, ``stream_id``,
-        ``discovery_timeout_s``), records a ``video_discovered`` event and reads the URL like a configured one.
-        Raises StreamDiscoveryError (naming robot, sensor and what was asked) or VideoSourceError."""
-        if self.source != "mavlink" or self.stream is not None:
+        """After the robot's backend connected: the frame source's :meth:`~aerodaas.plugins.frames.FrameSource.
+        on_vehicle_connected` (``source: "mavlink"`` asks the backend for the stream the vehicle announces); a
+        stream it found is recorded as a ``video_discovered`` event, also when it then cannot be read. Raises what
+        the source raises (StreamDiscoveryError, VideoSourceError)."""
+        if self.stream is not None:
             return
-        from aerodaas.video.discovery import DEFAULT_DISCOVERY_TIMEOUT_S, StreamDiscoveryError, StreamRequest
-
-        p = self._props
-        req = StreamRequest(self.robot_id, self.sensor_id, p.get("camera_component"), p.get("stream_id"),
-                            float(p.get("discovery_timeout_s") or DEFAULT_DISCOVERY_TIMEOUT_S))
-        found = self.backend.discover_video_stream(req)
-        self.discovered = found
-        if self.on_event is not None:
-            self.on_event("video_discovered", sensor=self.sensor_id, **found.event_fields())
-        codec = p.get("codec") or found.codec if found.source.startswith("rtp://") else None
         try:
-            self._open_stream(found.source, codec)
-        except ValueError as e:  # a URI this camera source cannot read: the discovery's failure, named
-            raise StreamDiscoveryError(f"{req.where()}: the vehicle announced {found.uri!r} "
-                                       f"({found.describe()}), which is not a readable stream: {e}") from None
+            self.src.on_vehicle_connected()
+        finally:
+            found = self.discovered
+            if found is not None and self.on_event is not None:
+                self.on_event("video_discovered", sensor=self.sensor_id, **found.event_fields())
+        if isinstance(self.src, LiveFrameSource):
+            self.stream = self.src.reader
 
     def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
         """Clock thread: a frame is due at run time ``t`` (s), the vehicle at ``position`` (ENU m) with ``yaw``
@@ -252,18 +237,12 @@ class CameraComponent:
             t = timing["capture_t"]
             gimbal = self._gimbal_at(t, gimbal)  # the gimbal's attitude at the frame's capture, as its position
             pose = self._frame_pose(pose.position, pose.yaw, gimbal)
-        elif self.source == "mavlink":  # its stream not discovered (yet): no frame
-            self.dropped_at_camera += 1
-            return None
-        elif self.source in ("backend", "mcap"):
-            got = self.backend.camera_frame() if self.replay is None else self.replay.frame_at(t)
-            if got is None or got[1] == self._last_source_t:  # no new frame since the last capture
+        else:  # a pulled source (a live one not opened yet has no frame)
+            got = self.src.frame_at(t, pose)
+            if got is None:  # no new frame since the last capture
                 self.dropped_at_camera += 1
                 return None
-            frame, t = got
-            self._last_source_t = t
-        else:
-            frame, truth = self.world.render(pose, self.k, t)
+            frame, t, truth = got.image, got.capture_t, list(got.truth)
         frame.flags.writeable = False  # shared by every reader from here on: nobody may change it
         self.plane.copies.count("materialised")
         wall = time.time()
@@ -339,9 +318,13 @@ class CameraComponent:
                                "pose_samples_t": list(samples_t)}
 
     def close(self) -> None:
-        """Stop the video stream's reader (if any) and record its final counters on ``<topic>/video_stats``
-        (``aerodaas.VideoStats``: decoded = taken + overwritten + waiting; taken - not_recorded frames are in the
-        recording)."""
+        """Close the frame source; a video stream's reader (if any) records its final counters on
+        ``<topic>/video_stats`` (``aerodaas.VideoStats``: decoded = taken + overwritten + waiting; taken -
+        not_recorded frames are in the recording)."""
+        try:
+            self.src.close()
+        except Exception as e:  # noqa: BLE001 - reported; the stream's counters must still be recorded
+            self.plane.report_error(f"{self.robot_id}/{self.sensor_id} frame source close", e)
         if self.stream is None:
             return
         self.stream.close()

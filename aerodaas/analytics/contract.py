@@ -191,15 +191,13 @@ def stream_types(stream: AeroStreamData) -> tuple[str, ...]:
     sensor_type = getattr(src, "type", None)
     if isinstance(sensor_type, str) and not hasattr(src, "analyse"):  # a robot's sensor (aerodaas.app.api.Sensor)
         from aerodaas.plugins import registry
-        from aerodaas.plugins.sensor import SensorDelivery
 
         try:
             cls = registry.resolve("sensor", sensor_type).load()
         except Exception:  # noqa: BLE001 - an unknown type is refused by the configuration, naming it
             cls = None
-        # what the drone actor delivers itself, by the class's declared delivery (never by its type name)
-        delivered = {SensorDelivery.CAMERA: "frame", SensorDelivery.VEHICLE_STATE: "odometry",
-                     SensorDelivery.MISSION_STATUS: "stat"}.get(getattr(cls, "delivery", None))
+        # what the drone actor delivers itself, by the class's declared token (never by its type name)
+        delivered = getattr(cls, "delivered_token", None)
         msg = getattr(cls, "Message", None)
         name = getattr(cls, "name", None)  # the plug-in's own name, also when the type is a "module:Class" path
         names = (sensor_type,) + ((name,) if isinstance(name, str) and name and name != sensor_type else ())

@@ -12,7 +12,7 @@ from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, HOME_ALT_RANGE_M, M
                    MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP,
                    MAX_SPEED_MPS, MAX_YAW_RATE_DPS, MIN_PHYSICS_HZ, MIN_SPEEDUP, MAX_GROUND_PX, MAX_SEED,
                    did_you_mean, _Cfg)  # noqa: F401
-from aerodaas.config.robot import (BatteryConfig, CAMERA_SOURCES, Limits, MavlinkConfig, MavlinkFenceConfig, NoiseConfig,
+from aerodaas.config.robot import (BatteryConfig, Limits, MavlinkConfig, MavlinkFenceConfig, NoiseConfig,
                     ProgressConfig,
                     ReplayConfig, RobotConfig, SafetyConfig, SensorConfig, TelloConfig)  # noqa: F401
 from aerodaas.config.environment import (AnalyticsQosConfig, AnalyticsSchedulerConfig, ComputeConfig, EnvironmentConfig,

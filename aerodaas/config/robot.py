@@ -11,8 +11,8 @@ from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.navigation.gimbal import GimbalLimits
 from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
-from aerodaas.plugins.builtin_sensors import CAMERA_SOURCES, STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
-from aerodaas.plugins.sensor import SensorDelivery
+from aerodaas.plugins.builtin_sensors import STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
+from aerodaas.plugins.sensor import MissionStatusSensor
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
 from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayConfig, SimConfig,  # noqa: F401
                                       TelloConfig, add_section_schemas, backend_settings_into_config)
@@ -164,6 +164,11 @@ def _known_sensor(type_: str) -> type | None:
     except registry.UnknownPlugin:
         return None
     return cls if hasattr(cls, "validate_properties") else None
+
+
+def _is_subclass(cls: Any, base: type) -> bool:
+    """Whether ``cls`` is a class and a subclass of ``base`` (False for None: an unknown sensor type)."""
+    return isinstance(cls, type) and issubclass(cls, base)
 
 
 def check_sensor_properties(type_: str, properties: dict[str, Any]) -> dict[str, Any] | None:
@@ -365,8 +370,7 @@ class RobotConfig(_Cfg):
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
         check_unique([s.id for s in self.sensors], "sensors")
-        status = SensorDelivery.MISSION_STATUS
-        if not any(getattr(_known_sensor(s.type), "delivery", None) is status for s in self.sensors):
+        if not any(_is_subclass(_known_sensor(s.type), MissionStatusSensor) for s in self.sensors):
             self.sensors.append(SensorConfig(id=StatStreamSensor.default_id, type=StatStreamSensor.name))
         lo, hi = HOME_ALT_RANGE_M
         if not lo <= self.home.alt <= hi:

@@ -1,7 +1,8 @@
 """The built-in sensor types — ``camera``, ``odometry`` and ``stat_stream`` — declared through the same contract as
 a sensor plug-in (:class:`aerodaas.plugins.sensor.SensorPlugin`): a name, a pydantic ``Config`` of the sensor's
 ``properties`` (strict: a string or a boolean is not a number; every size, rate and duration bounded), and where its
-readings come from (:class:`~aerodaas.plugins.sensor.SensorDelivery`). The framework reads these declarations; it
+the contract that says how their data is produced (:class:`~aerodaas.plugins.sensor.FrameSensor`,
+:class:`~aerodaas.plugins.sensor.VehicleStateSensor`, :class:`~aerodaas.plugins.sensor.MissionStatusSensor`). The framework reads these declarations; it
 never compares a sensor's type with these names.
 
 Their readings are made by the drone's actor itself (the camera component, the vehicle's odometry, the mission's
@@ -17,19 +18,23 @@ from typing import Any, Callable, ClassVar
 from pydantic import Field, model_validator
 
 from aerodaas.model.bounds import MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_RATE_HZ
-from aerodaas.plugins.sensor import SensorDelivery, SensorPlugin, SensorPropertiesBase
+from aerodaas.plugins.frames import frame_source_class
+from aerodaas.plugins.sensor import (FrameSensor, MissionStatusSensor, SensorPropertiesBase,
+                                    VehicleStateSensor)
 
 __all__ = ["CameraProperties", "OdometryProperties", "StatStreamProperties", "CameraSensor", "OdometrySensor",
-           "StatStreamSensor", "CAMERA_SOURCES", "STREAM_PROPERTIES", "MAVLINK_SOURCE", "DISCOVERY_PROPERTIES"]
+           "StatStreamSensor", "STREAM_PROPERTIES", "MAVLINK_SOURCE", "DISCOVERY_PROPERTIES"]
 
-#: where a camera's frames come from: the simulated world, the robot's backend (its own video stream, e.g. the
-#: Tello's), or a recorded MCAP camera channel; any other source is a video stream or file (aerodaas.video.source)
-CAMERA_SOURCES = ("sim", "backend", "mcap")
 #: camera properties that only a video stream source uses
 STREAM_PROPERTIES = ("transport", "codec", "first_frame_timeout_s", "stall_timeout_s")
 #: the source whose stream the vehicle announces over MAVLink (aerodaas.video.discovery), and its own properties
 MAVLINK_SOURCE = "mavlink"
 DISCOVERY_PROPERTIES = ("camera_component", "stream_id", "discovery_timeout_s")
+#: the built-in properties a frame source may use beyond the common ones, and whom they are for (error messages)
+_USED_WITH = {**{k: "properties.source 'mavlink' (the stream the vehicle announces)" for k in DISCOVERY_PROPERTIES},
+              **{k: "a video stream source (rtsp://, rtp://, udp://, an .sdp or video file, /dev/videoN)"
+                 for k in STREAM_PROPERTIES},
+              "mcap": "properties.source 'mcap'", "topic": "properties.source 'mcap'"}
 _Text = Field(default=None, min_length=1, strict=True)
 
 
@@ -60,35 +65,17 @@ class CameraProperties(SensorPropertiesBase):
 
     @model_validator(mode="after")
     def _check_source(self) -> "CameraProperties":
+        """The properties against the frame source ``source`` selects (:func:`aerodaas.plugins.frames.
+        frame_source_class`): a built-in property set that the source does not use is refused, naming it; then the
+        source's own checks (for a source with properties of its own, :meth:`CameraSensor.validate_properties`
+        runs them with those)."""
         src = self.source
-        stream_props = [k for k in STREAM_PROPERTIES if getattr(self, k) is not None]
-        discovery_props = [k for k in DISCOVERY_PROPERTIES if getattr(self, k) is not None]
-        if discovery_props and src != MAVLINK_SOURCE:
-            raise ValueError(f"properties.{discovery_props[0]} is only used with properties.source 'mavlink' (the "
-                             f"stream the vehicle announces), but source is {src!r}")
-        if src == MAVLINK_SOURCE:  # the URL comes from the vehicle once connected; checked by the video source then
-            if self.codec is not None and self.codec not in ("h264", "h265"):
-                raise ValueError(f"properties.codec must be one of ['h264', 'h265'], got {self.codec!r}")
-            if self.transport is not None and self.transport not in ("tcp", "udp"):
-                raise ValueError(f"properties.transport must be 'tcp' or 'udp', got {self.transport!r}")
-        elif src not in CAMERA_SOURCES:  # a video stream or file: checked (scheme, host, port, codec) by its parser
-            from aerodaas.video.source import parse_stream_source
-
-            parse_stream_source(src, self.transport, self.codec)
-        elif stream_props:
-            raise ValueError(f"properties.{stream_props[0]} is only used with a video stream source (rtsp://, "
-                             f"rtp://, udp://, an .sdp or video file, /dev/videoN), but source is {src!r}")
-        if src == "mcap":
-            if not self.mcap:
-                raise ValueError(f"properties.mcap must name the MCAP recording to replay when properties.source "
-                                 f"is 'mcap', got {self.mcap!r}")
-            if self.topic is not None and not self.topic.startswith("/"):
-                raise ValueError(f"properties.topic must be an MCAP topic starting with '/', got {self.topic!r}")
-        else:
-            for k in ("mcap", "topic"):
-                if getattr(self, k) is not None:
-                    raise ValueError(f"properties.{k} is only used with properties.source 'mcap', "
-                                     f"but source is {src!r}")
+        cls = frame_source_class(src)
+        for k in _USED_WITH:
+            if getattr(self, k) is not None and k not in cls.camera_properties:
+                raise ValueError(f"properties.{k} is only used with {_USED_WITH[k]}, but source is {src!r}")
+        if cls.Config is None:
+            cls.check_properties(self.model_dump(exclude_none=True), "properties")
         return self
 
 
@@ -137,47 +124,47 @@ class StatStreamProperties(SensorPropertiesBase):
     """The stat-stream has no properties."""
 
 
-class CameraSensor(SensorPlugin):
-    """``camera``: frames from the drone actor's camera component (``actors/camera.py``), rendered from the
-    simulated world, the vehicle's own video (a backend with ``provides_camera``), a replayed MCAP channel or a
-    video stream. Also allowed as an environment sensor (``env_sensors[]``, from ``sim`` or ``mcap``)."""
+class CameraSensor(FrameSensor):
+    """``camera``: frames from the drone actor's camera component (``actors/camera.py``), produced by the frame
+    source ``properties.source`` selects (:mod:`aerodaas.plugins.frames`; the built-ins in
+    ``actors/frame_sources.py``: rendered, the vehicle's own video, a replayed MCAP channel, a video stream, the
+    stream the vehicle announces). Also allowed as an environment sensor (``env_sensors[]``) with a source that
+    needs no vehicle (``environment_ok``: ``sim``, ``mcap``)."""
 
     name = "camera"
     Config = CameraProperties
-    record_schema = "foxglove.CompressedImage"
-    delivery = SensorDelivery.CAMERA
-    component_kind = "camera"
-    own_topic = False  # /<robot>/camera/<id>
     environment_sensor = True
     consumes: ClassVar[tuple] = ("vehicle_state", "world")
 
     @classmethod
     def validate_properties(cls, properties: dict[str, Any]) -> dict[str, Any]:
-        """As :meth:`SensorPlugin.validate_properties`, without the unset optional properties (the camera reads
-        ``"mcap" in properties`` as "replay a recording")."""
-        return cls.Config.model_validate(properties).model_dump(mode="json", exclude_none=True)
+        """As :meth:`SensorPlugin.validate_properties`, without the unset optional properties. The properties its
+        frame source declares in its own ``Config`` are validated by that model (completed with its defaults), the
+        others by :class:`CameraProperties` (an unknown one refused), then the source's ``check_properties`` runs
+        on them all. Raises pydantic's ValidationError, or ValueError from the source's checks."""
+        source = properties.get("source", "sim")
+        src_cls = cls.frame_source({"source": source}) if isinstance(source, str) else None
+        own = set(src_cls.Config.model_fields) if src_cls is not None and src_cls.Config is not None else set()
+        out = cls.Config.model_validate({k: v for k, v in properties.items() if k not in own}).model_dump(
+            mode="json", exclude_none=True)
+        if own:
+            out.update(src_cls.Config.model_validate({k: v for k, v in properties.items() if k in own})
+                       .model_dump(mode="json"))
+            src_cls.check_properties(out, "properties")
+        return out
 
     @classmethod
     def check_for_robot(cls, properties: dict[str, Any], robot: Any, where: str) -> None:
-        """``source: backend`` needs a backend that declares its own camera stream (``provides_camera``);
-        ``source: mavlink`` one that discovers the vehicle's announced streams (``discovers_video_streams``)."""
-        if properties.get("source") == MAVLINK_SOURCE:
-            if not _backend_declares(robot.backend, "discovers_video_streams"):
-                raise ValueError(f"{where}.properties.source: 'mavlink' asks the vehicle for its camera's stream "
-                                 f"over MAVLink, so the robot's backend must be 'mavlink', but backend is "
-                                 f"{robot.backend!r}")
-            return
-        if properties.get("source") == "backend" and not _backend_declares(robot.backend, "provides_camera"):
-            raise ValueError(f"{where}.properties.source: 'backend' needs a backend with its own camera stream "
-                             f"(provides_camera: {_camera_backends()}), but backend is {robot.backend!r}")
+        """The frame source's own checks with the robot (:meth:`aerodaas.plugins.frames.FrameSource.check_for_robot`)."""
+        cls.frame_source(properties).check_for_robot(properties, robot, where)
 
     @classmethod
     def check_for_environment(cls, properties: dict[str, Any], where: str) -> None:
-        """An environment camera is rendered (``sim``) or replayed (``mcap``, with its ``topic``)."""
+        """An environment camera's source needs no vehicle (``environment_ok``); a replay needs its ``topic``."""
         src = properties.get("source")
-        if src not in ("sim", "mcap"):
-            raise ValueError(f"{where}.properties.source: {src!r} is for a robot's camera; an "
-                             f"environment camera is 'sim' or 'mcap'")
+        if not cls.frame_source(properties).environment_ok:
+            raise ValueError(f"{where}.properties.source: {src!r} is for a robot's camera; an environment camera's "
+                             f"source needs no vehicle: {_environment_sources()}")
         if src == "mcap" and "topic" not in properties:
             raise ValueError(f"{where}.properties.topic: an environment camera replayed from an MCAP "
                              f"recording needs the topic to read")
@@ -185,69 +172,38 @@ class CameraSensor(SensorPlugin):
     @classmethod
     def resolve_files(cls, properties: dict[str, Any], resolve: Callable[[str, str], Any], where: str,
                       robot_id: str | None, sensor_id: str) -> None:
-        """An ``mcap`` replay's recording, a video file or an SDP file: resolved to absolute paths."""
-        src = properties.get("source")
-        if src == "mcap":
-            properties["mcap"] = str(resolve(properties["mcap"], f"{where}.properties.mcap"))
-            properties.setdefault("topic", f"/{robot_id}/camera/{sensor_id}")
-            check_replay_recording(properties["mcap"], properties["topic"], where)
-        elif src not in (None, MAVLINK_SOURCE, *CAMERA_SOURCES):
-            from aerodaas.video.source import parse_stream_source
-
-            spec = parse_stream_source(src, properties.get("transport"), properties.get("codec"))
-            if spec.kind in ("file", "sdp"):  # a file the camera reads: resolved like every other file, now
-                properties["source"] = str(resolve(spec.url, f"{where}.properties.source"))
-
-    @classmethod
-    def reads_wall_clock(cls, properties: dict[str, Any]) -> bool:
-        """A video stream (not ``sim``, ``backend`` or ``mcap``) runs on the wall clock."""
-        return properties.get("source", "sim") not in CAMERA_SOURCES
+        """The files the frame source reads, resolved to absolute paths (its ``resolve_files``)."""
+        cls.frame_source(properties).resolve_files(properties, resolve, where, robot_id, sensor_id)
 
 
-class OdometrySensor(SensorPlugin):
+class OdometrySensor(VehicleStateSensor):
     """``odometry``: the vehicle's position samples (an :class:`aerodaas.model.types.Odometry`: ENU metres from home,
     m/s, degrees, geodetic position), published at ``rate_hz`` of vehicle time."""
 
     name = "odometry"
     Config = OdometryProperties
     record_schema = "aerodaas.Odometry"
-    delivery = SensorDelivery.VEHICLE_STATE
-    component_kind = "odometry"
-    own_topic = False  # /<robot>/odometry
 
 
-class StatStreamSensor(SensorPlugin):
+class StatStreamSensor(MissionStatusSensor):
     """``stat_stream``: the drone's mission status (state, battery, current waypoint). Every robot has one: added as
     ``stat`` when the configuration lists none."""
 
     name = "stat_stream"
     Config = StatStreamProperties
     record_schema = "aerodaas.MissionState"
-    delivery = SensorDelivery.MISSION_STATUS
-    component_kind = "stat_stream"
-    own_topic = False  # /mission/state
     default_id = "stat"
 
 
-def _backend_declares(backend: str, flag: str) -> bool:
-    """Whether the registered backend ``backend`` declares the class attribute ``flag`` true."""
-    from aerodaas.plugins import registry
-
-    try:
-        return bool(getattr(registry.get("backend", backend), flag, False))
-    except registry.UnknownPlugin:
-        return False
-
-
-def _camera_backends() -> list[str]:
-    """The registered backends that declare a camera stream (for the error message)."""
+def _environment_sources() -> list[str]:
+    """The registered frame sources an environment camera may use (for the error message)."""
     from aerodaas.plugins import registry
 
     out = []
-    for e in registry.entries("backend"):
+    for e in registry.entries("frame_source"):
         try:
-            if getattr(e.load(), "provides_camera", False):
+            if getattr(e.load(), "environment_ok", False):
                 out.append(e.name)
-        except Exception:  # noqa: BLE001 - a backend that does not import offers no camera
+        except Exception:  # noqa: BLE001 - a source that does not import is not offered
             continue
     return out

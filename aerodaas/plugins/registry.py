@@ -50,6 +50,7 @@ ENTRY_POINT_GROUPS: dict[str, str] = {
     "analytics": "aerodaas.analytics",
     "trajectory_scheduler": "aerodaas.trajectory_schedulers",
     "analytics_scheduler": "aerodaas.analytics_schedulers",
+    "frame_source": "aerodaas.frame_sources",
 }
 KINDS: tuple[str, ...] = tuple(ENTRY_POINT_GROUPS)
 #: the distribution whose entry points are the built-ins (this package, ``[project] name`` in pyproject.toml)
@@ -65,6 +66,7 @@ KIND_BASES: dict[str, str] = {
     "analytics": "aerodaas.analytics.base:Analytics",
     "trajectory_scheduler": "aerodaas.schedulers.base:TrajectoryScheduler",
     "analytics_scheduler": "aerodaas.schedulers.analytics_base:AnalyticsScheduler",
+    "frame_source": "aerodaas.plugins.frames:FrameSource",
 }
 
 

@@ -10,7 +10,8 @@ The class declares
   names it by :meth:`SensorPlugin.schema_name` with the JSON Schema pydantic derives from it
   (``model_json_schema(mode="serialization")``, JSON Schema draft 2020-12), unless ``record_schema`` names a schema
   the recorder already knows (:mod:`aerodaas.recording.schemas`);
-* how it produces readings — :meth:`SensorPlugin.sample` is called by the drone's actor at ``rate_hz`` (vehicle
+* how its data is produced — by the class it subclasses: :class:`SensorPlugin` itself, sampled readings:
+  :meth:`SensorPlugin.sample` is called by the drone's actor at ``rate_hz`` (vehicle
   time) with the vehicle state (an :class:`aerodaas.model.types.Odometry`: ENU metres from home, m/s, degrees,
   geodetic position) and the vehicle time in seconds.
 
@@ -18,32 +19,22 @@ Each reading is recorded on ``/<robot>/<sensor id>`` and published on the sensor
 an analytics that subscribes receives ``data`` = the reading as a JSON-ready dict, ``meta`` = None. The plan
 (``aerodaas plan``), the recorder and the summary take all of this from the declaration; nothing in the framework
 names a plug-in sensor type.
+
+The other ways a sensor's data is produced are contracts of their own, subclasses of :class:`ActorProducedSensor`
+(the drone's actor makes the data, not :meth:`SensorPlugin.sample`): :class:`FrameSensor` (frames of a frame
+source, :mod:`aerodaas.plugins.frames`, chosen by the sensor's properties), :class:`VehicleStateSensor` (the
+vehicle's odometry) and :class:`MissionStatusSensor` (the drone's mission status). The runtime wires a sensor by
+the contract its class is (``issubclass``), never by its type name.
 """
 from __future__ import annotations
 
-import enum
 from abc import ABC, abstractmethod
 from typing import Any, Callable, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["SensorPlugin", "SensorPluginConfig", "SensorPropertiesBase", "SensorDelivery"]
-
-
-class SensorDelivery(enum.Enum):
-    """Where a sensor type's readings come from in the drone's actor (declared by the class, so that the framework
-    wires a sensor by what it is, never by its type name):
-
-    * ``SAMPLED`` — :meth:`SensorPlugin.sample` at ``rate_hz`` of vehicle time, every reading recorded (plug-ins);
-    * ``CAMERA`` — frames of the actor's camera component (rendered, the vehicle's own video, a replayed
-      recording or a video stream), recorded when subscribed or when the run records;
-    * ``VEHICLE_STATE`` — the vehicle's odometry, published at the sensor's ``rate_hz``;
-    * ``MISSION_STATUS`` — the drone's stat-stream (mission state, battery, current waypoint)."""
-
-    SAMPLED = "sampled"
-    CAMERA = "camera"
-    VEHICLE_STATE = "vehicle_state"
-    MISSION_STATUS = "mission_status"
+__all__ = ["SensorPlugin", "SensorPluginConfig", "SensorPropertiesBase", "ActorProducedSensor", "FrameSensor",
+           "VehicleStateSensor", "MissionStatusSensor"]
 
 
 class SensorPropertiesBase(BaseModel):
@@ -68,8 +59,9 @@ class SensorPlugin(ABC):
     #: the sensor ``type`` in environment.json
     name: ClassVar[str] = ""
     Config: ClassVar[type[SensorPropertiesBase]] = SensorPluginConfig
-    #: where the readings come from (:class:`SensorDelivery`); a plug-in is sampled
-    delivery: ClassVar[SensorDelivery] = SensorDelivery.SAMPLED
+    #: the token an analytics' ``consumes`` names what the drone's actor delivers for this type by ("frame",
+    #: "odometry", "stat"); None for a sampled sensor, whose readings are its ``Message``
+    delivered_token: ClassVar[str | None] = None
     #: the kind of the sensor's component in the plan (:class:`aerodaas.protocol.ids.ComponentId`)
     component_kind: ClassVar[str] = "sensor"
     #: whether an environment-level sensor (``env_sensors[]``) may be of this type (not a robot's)
@@ -157,3 +149,53 @@ class SensorPlugin(ABC):
         """One reading at vehicle time ``t`` (seconds) given the vehicle ``state`` (an Odometry: ENU metres from
         home, m/s, degrees, ``geodetic`` lat/lon/alt). Return a ``Message`` (or a dict of its fields), or None for
         no reading now. An exception is recorded as a ``sensor_error`` event and counted; the flight goes on."""
+
+
+class ActorProducedSensor(SensorPlugin):
+    """Base of the sensor types whose data the drone's actor produces itself (frames, odometry, mission status),
+    not :meth:`sample`: declarations, never instantiated by the framework."""
+
+    def sample(self, state: Any, t: float) -> BaseModel | dict | None:
+        """Not used: raises TypeError (the drone's actor produces this sensor's data)."""
+        raise TypeError(f"sensor type {self.name!r} is produced by the drone's actor, not sampled")
+
+
+class FrameSensor(ActorProducedSensor):
+    """A camera-like sensor: frames ((H, W, 3) uint8 BGR, capture times in seconds on the run's vehicle clock)
+    from the frame source its properties select (:meth:`frame_source`), published and recorded by the drone
+    actor's camera component on ``/<robot>/camera/<id>`` (``foxglove.CompressedImage``)."""
+
+    delivered_token = "frame"
+    component_kind = "camera"
+    own_topic = False  # /<robot>/camera/<id>
+    record_schema = "foxglove.CompressedImage"
+
+    @classmethod
+    def frame_source(cls, properties: dict[str, Any]) -> type:
+        """The :class:`aerodaas.plugins.frames.FrameSource` subclass that produces this sensor's frames, from its
+        validated ``properties`` (``source``, default ``sim``; see :func:`aerodaas.plugins.frames.frame_source_class`)."""
+        from aerodaas.plugins.frames import frame_source_class
+
+        return frame_source_class(properties.get("source", "sim"))
+
+    @classmethod
+    def reads_wall_clock(cls, properties: dict[str, Any]) -> bool:
+        """Whether its frame source's frames arrive on the wall clock (a live video stream)."""
+        return bool(cls.frame_source(properties).wall_clock)
+
+
+class VehicleStateSensor(ActorProducedSensor):
+    """The vehicle's odometry (an :class:`aerodaas.model.types.Odometry`: ENU metres from home, m/s, degrees,
+    geodetic position), published by the drone at the sensor's ``rate_hz`` of vehicle time."""
+
+    delivered_token = "odometry"
+    component_kind = "odometry"
+    own_topic = False  # /<robot>/odometry
+
+
+class MissionStatusSensor(ActorProducedSensor):
+    """The drone's stat-stream (mission state, battery, current waypoint)."""
+
+    delivered_token = "stat"
+    component_kind = "stat_stream"
+    own_topic = False  # /mission/state

@@ -27,12 +27,15 @@ Role = Literal["drone", "analytics", "dispatcher", "recorder"]
 
 @dataclass(frozen=True)
 class CameraSpec:
-    """A camera of a drone: component id ``cid`` (``<robot>/<sensor>``), the sensor's id and its ``properties``
-    from the robot's configuration (resolution in pixels, ``fps``, ``hfov_deg`` degrees, ``source``, ...)."""
+    """A camera of a drone: component id ``cid`` (``<robot>/<sensor>``), the sensor's id, its ``properties``
+    from the robot's configuration (resolution in pixels, ``fps``, ``hfov_deg`` degrees, ``source``, ...) and
+    ``source``, the :class:`aerodaas.plugins.frames.FrameSource` subclass its sensor class chose for them
+    (``FrameSensor.frame_source``; None: the one ``properties.source`` names)."""
 
     cid: str
     sensor: str
     props: dict
+    source: type | None = None
 
 
 @dataclass

@@ -161,10 +161,10 @@ def _analytics_case(on_error: str) -> Callable[[Path], dict]:
     def run(tmp: Path) -> dict:
         env = json.loads((REPO_APPS / "farm_survey.json").read_text())
         from aerodaas.config.robot import sensor_class
-        from aerodaas.plugins.sensor import SensorDelivery
+        from aerodaas.plugins.sensor import FrameSensor
 
         env["robots"][0]["sensors"] = [s for s in env["robots"][0]["sensors"]
-                                       if sensor_class(s["type"]).delivery is not SensorDelivery.CAMERA]
+                                       if not issubclass(sensor_class(s["type"]), FrameSensor)]
         (tmp / "env.json").write_text(json.dumps(env))
         app = tmp / "flaky_app.py"
         app.write_text(FAILING_APP.replace("ENV", repr(str(tmp / "env.json"))).replace("ON_ERROR", repr(on_error)))

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aerodaas.config.robot import sensor_class
-from aerodaas.plugins.sensor import SensorDelivery
+from aerodaas.plugins.sensor import ActorProducedSensor, FrameSensor, MissionStatusSensor, VehicleStateSensor
 from aerodaas.protocol.ids import ComponentId, ComponentKind
 from aerodaas.protocol.messages import Port
 from aerodaas.protocol.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
@@ -241,12 +241,18 @@ def sensor_plugin_spec(sensor, cid: str) -> dict:
 
 
 def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
-    """The plug-in classes ``cfg`` (a RobotConfig) names — a plug-in backend and plug-in sensor types — as
-    ``(kind, name, class, origin)``: they travel with the drone actor's spec and are registered there before the
-    robot's configuration is validated again (:func:`aerodaas.plugins.registry.adopt`)."""
+    """The plug-in classes ``cfg`` (a RobotConfig) names — a plug-in backend, plug-in sensor types and the plug-in
+    frame sources its cameras' ``properties.source`` name — as ``(kind, name, class, origin)``: they travel with
+    the drone actor's spec and are registered there before the robot's configuration is validated again
+    (:func:`aerodaas.plugins.registry.adopt`; a node without the plug-in's distribution has no entry point of it)."""
     from aerodaas.plugins import registry
 
     wanted = [("backend", cfg.backend)] + [("sensor", s.type) for s in cfg.sensors]
+    sources = set(registry.names("frame_source"))
+    for s in cfg.sensors:
+        src = s.properties.get("source", "sim")
+        if issubclass(sensor_class(s.type), FrameSensor) and (src in sources or registry.is_import_path(src)):
+            wanted.append(("frame_source", src))
     out = []
     for kind, name in dict.fromkeys(wanted):
         e = registry.resolve(kind, name)
@@ -433,18 +439,19 @@ def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: di
         cams = []
         plugin_sensors: list[dict] = []
         for s in r.sensors.values():
-            # the sensor's class says where its readings come from (built-ins and plug-ins alike)
+            # the contract the sensor's class is says how its data is produced (built-ins and plug-ins alike): a
+            # frame sensor's frame source is chosen in the actor from its properties (aerodaas.plugins.frames)
             scls = sensor_class(s.type)
             cid = ComponentId.sensor(r.id, s.id, scls.component_kind)
             subs = consumers(s.get_data_stream(), r.id)
-            if scls.delivery is SensorDelivery.CAMERA and (s.get_data_stream().subscribers or recorded):
-                cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties)))
+            if issubclass(scls, FrameSensor) and (s.get_data_stream().subscribers or recorded):
+                cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties), scls.frame_source(s.cfg.properties)))
                 ids["cameras"][s.id] = cid
-            elif scls.delivery is SensorDelivery.VEHICLE_STATE and subs:
+            elif issubclass(scls, VehicleStateSensor) and subs:
                 ids["odom"].append(cid)
-            elif scls.delivery is SensorDelivery.MISSION_STATUS and subs:
+            elif issubclass(scls, MissionStatusSensor) and subs:
                 ids["stat"].append(cid)
-            elif scls.delivery is SensorDelivery.SAMPLED:  # always sampled and recorded
+            elif not issubclass(scls, ActorProducedSensor):  # sampled readings: always sampled and recorded
                 plugin_sensors.append(sensor_plugin_spec(s, cid))
                 schemas.update(plugin_sensors[-1].pop("schema"))
             else:

@@ -557,14 +557,14 @@ def _pull_getter(sensor, h: dict):
     import ray
 
     from aerodaas.config.robot import sensor_class
-    from aerodaas.plugins.sensor import SensorDelivery
+    from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor
 
-    delivery = sensor_class(sensor.type).delivery
+    cls = sensor_class(sensor.type)
 
     def get():
-        if delivery is SensorDelivery.CAMERA and sensor.id in h["cameras"]:
+        if issubclass(cls, FrameSensor) and sensor.id in h["cameras"]:
             return ray.get(h["cameras"][sensor.id].get_latest.remote())
         st = ray.get(h["drone"].status.remote())
-        return st if delivery is SensorDelivery.MISSION_STATUS else ray.get(h["drone"].report.remote()).get("position")
+        return st if issubclass(cls, MissionStatusSensor) else ray.get(h["drone"].report.remote()).get("position")
 
     return get

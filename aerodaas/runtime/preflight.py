@@ -34,12 +34,12 @@ def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
             raise ConfigError(f"analytics_scheduler.models.{name}: {names.count(name)} analytics share the name "
                               f"{name!r}; give each scheduled analytics its own name")
     from aerodaas.config.robot import sensor_class
-    from aerodaas.plugins.sensor import SensorDelivery
+    from aerodaas.plugins.sensor import FrameSensor
 
     def camera(src) -> bool:  # a sensor whose class delivers camera frames (an analytics' output is not)
         type_ = getattr(src, "type", None)
         try:
-            return isinstance(type_, str) and sensor_class(type_).delivery is SensorDelivery.CAMERA
+            return isinstance(type_, str) and issubclass(sensor_class(type_), FrameSensor)
         except ValueError:
             return False
 

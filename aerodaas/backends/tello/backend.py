@@ -12,7 +12,7 @@ import numpy as np
 
 from aerodaas.config import TelloConfig
 from aerodaas.config.robot import sensor_class
-from aerodaas.plugins.sensor import SensorDelivery
+from aerodaas.plugins.sensor import FrameSensor
 from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.model.types import Attitude, Odometry
 from aerodaas.backends.base import VehicleBackend
@@ -84,7 +84,7 @@ class TelloBackend(LinkMixin, ControlMixin, VehicleBackend):
         self.last_status = ""
         #: ids of the robot's camera sensors with ``properties.source: backend``: they need the video stream
         self._video_sensors = [s.id for s in cfg.sensors
-                               if sensor_class(s.type).delivery is SensorDelivery.CAMERA
+                               if issubclass(sensor_class(s.type), FrameSensor)
                                and s.properties.get("source") == "backend"]
 
     # ------------------------------------------------------------------ time and state
