@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
-           "register", "plugin", "get", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
+           "register", "plugin", "get", "class_origin", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
            "plugin_package_paths", "plugin_name", "is_import_path"]
 
 #: the extension points, and the ``importlib.metadata`` entry-point group of each
@@ -428,6 +428,22 @@ def entries(kind: str | None = None) -> list[PluginEntry]:
 def names(kind: str) -> list[str]:
     """The names of every plug-in of ``kind``."""
     return [e.name for e in entries(kind)]
+
+
+def class_origin(kind: str, cls: type) -> tuple[str, str]:
+    """``(name, origin)`` of the class ``cls`` used as a plug-in of ``kind`` (an object the application built, such
+    as its trajectory scheduler), as ``aerodaas plugins`` lists it: the registered entry whose class (or
+    ``module:qualname`` target) is ``cls``; a class that was never registered is named by :func:`plugin_name` and
+    its origin is ``builtin`` when it lives in the ``aerodaas`` package, else ``unregistered class in FILE``.
+    Raises ValueError for an unknown kind."""
+    _check_kind(kind)
+    target = f"{cls.__module__}:{cls.__qualname__}"
+    for e in entries(kind):
+        if e.cls is cls or e.target == target:
+            return e.name, e.origin
+    origin = _origin_of(cls)
+    return plugin_name(cls, kind), origin if origin == "builtin" else origin.replace("decorator in",
+                                                                                    "unregistered class in", 1)
 
 
 def describe_all(kind: str | None = None) -> list[dict[str, Any]]:
