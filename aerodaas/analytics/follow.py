@@ -84,7 +84,7 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
     (``track_buffer`` frames); when the id is gone for good, the track nearest the predicted ground position within
     ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before. With a tracker
     the drone's tracks are also recorded in a run (:mod:`aerodaas.perception.track_records`, under
-    ``/{robot}/{name}/tracks``: image annotations with the track ids, a 3-D scene and a ``LocationFix`` per track).
+    ``/{robot}/{name}/tracks``: image annotations with the track ids, a 3-D scene and the tracks' ``LocationFixes``).
     """
 
     name = "follow"

@@ -16,8 +16,8 @@ __all__ = ["TrackAnalytics"]
 
 class TrackAnalytics(TrackRecording, Analytics):
     """Per drone ByteTrack on ``classes`` (None: all) plus the ground position of every active track; in a run
-    the tracks are also recorded (:mod:`aerodaas.perception.track_records`: image annotations, 3-D scene and a
-    ``LocationFix`` per track under ``/{robot}/{name}/tracks``).
+    the tracks are also recorded (:mod:`aerodaas.perception.track_records`: image annotations, 3-D scene and one
+    ``LocationFixes`` of all tracks under ``/{robot}/{name}/tracks``).
 
     Output per frame: a list of dicts ``{"robot", "track_id", "class_name", "score", "box"`` (pixels),
     ``"enu"`` ``(x, y, z)`` metres, ``"sigma_m"`` (1-sigma horizontal, metres), ``"lat"``, ``"lon"`` (degrees,

@@ -25,8 +25,8 @@ def build_layout(robot: str, camera: str | None = None, detections: list[str] | 
     """The layout (a JSON-ready dict, Foxglove layout ``version`` 1) for ``robot``'s camera sensor ``camera`` (None:
     no camera panel) with the ``foxglove.ImageAnnotations`` topics ``detections`` overlaid. ``tracks``: topic
     prefixes of tracking analytics (``/<robot>/<analytics>/tracks``): their image annotations join the camera, their
-    ``/scene`` the 3D panel; ``fixes``: per-track ``LocationFix`` topics known (from a recording) for the Map panel,
-    which shows every LocationFix topic anyway (a track's topic appears with its track)."""
+    ``/scene`` the 3D panel and their ``/fixes`` (``foxglove.LocationFixes``, every track's position) the Map panel;
+    ``fixes``: further ``LocationFix``/``LocationFixes`` topics for the Map panel."""
     import foxglove.layouts as fl
 
     tracks = list(tracks or [])
@@ -47,7 +47,8 @@ def build_layout(robot: str, camera: str | None = None, detections: list[str] | 
         follow_tf=base, fixed_frame="enu", follow_mode="follow-position", topics=three_d_topics))
     gps = f"/{robot}/gps"
     map_topics = {gps: fl.MapTopicSettings(history_mode="all")}
-    map_topics.update({f: fl.MapTopicSettings(history_mode="all", point_display_mode="dot") for f in fixes or []})
+    map_topics.update({f: fl.MapTopicSettings(history_mode="all", point_display_mode="dot")
+                       for f in [f"{p}/fixes" for p in tracks] + list(fixes or [])})
     map_panel = fl.MapPanel(title=f"{robot} GPS" + (" + tracks" if tracks else ""), config=fl.MapConfig(
         follow_topic=gps, layer="map", topic_config=map_topics))
     states = fl.StateTransitionsPanel(title="mission state", config=fl.StateTransitionsConfig(paths=[
@@ -83,6 +84,4 @@ def layout_for_recording(path: str | os.PathLike) -> dict[str, Any]:
     dets = [c["topic"] for c in chans if c["schema"] == "foxglove.ImageAnnotations" and c["topic"].startswith(f"/{robot}/")]
     tracks = [c["topic"][:-len("/scene")] for c in chans if c["schema"] == "foxglove.SceneUpdate"
               and c["topic"].startswith(f"/{robot}/") and c["topic"].endswith("/tracks/scene")]
-    fixes = [c["topic"] for c in chans if c["schema"] == "foxglove.LocationFix"
-             and any(c["topic"].startswith(f"{p}/") and c["topic"].endswith("/fix") for p in tracks)]
-    return build_layout(robot, cams[0] if cams else None, [d for d in dets if d not in tracks], tracks, fixes)
+    return build_layout(robot, cams[0] if cams else None, [d for d in dets if d not in tracks], tracks)

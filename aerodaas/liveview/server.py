@@ -24,8 +24,8 @@ Nothing is lost for a client that subscribes to a channel soon after it is adver
 messages the channel carried before the subscription are sent to that client alone (the SDK's per-sink ``log``), so a
 client connected from the start receives every message of every channel, once and in order (during that window a
 channel's messages go to each caught-up client by its sink id, not by broadcast: see :meth:`LiveServer.publish`); a later subscriber to a latched topic
-(:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result, a tracking analytics' 3-D scene and each
-track's last ``LocationFix``) receives its latest message. Channels the run declares from its plan (the track
+(:data:`LATCHED_SUFFIXES`: mission plan, camera calibration, mission result, a tracking analytics' 3-D scene and its
+``LocationFixes``, the current tracks on the map) receives its latest message. Channels the run declares from its plan (the track
 channels, :mod:`aerodaas.perception.track_records`) are advertised before their first message. At
 :meth:`LiveServer.stop` the server waits (bounded: ``CATCHUP_WAIT_S``) until every client that follows every channel
 has subscribed to the ones advertised last, so the last channel of a run (``/mission/result``) reaches it before the
@@ -46,7 +46,7 @@ __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LATCHED_SUFFIXES", "LiveServer", "ch
            "parse_address", "replay", "write_live_state"]
 
 #: topics ending so keep their latest message for late subscribers (ROS's "latched" topics)
-LATCHED_SUFFIXES = ("mission/plan", "camera_info", "calibration", "mission/result", "tracks/scene", "/fix")
+LATCHED_SUFFIXES = ("mission/plan", "camera_info", "calibration", "mission/result", "tracks/scene", "tracks/fixes")
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765  # Foxglove's default for its WebSocket connection

@@ -1,6 +1,6 @@
 """Geo-located tracks (issue 28, item 4): a track's ground position from the camera pose, the intrinsics and the
 ground plane, as ENU metres and WGS-84 lat/lon with its uncertainty, and its recording as Foxglove
-``SceneUpdate`` (3-D) and ``LocationFix`` (map) messages.
+``SceneUpdate`` (3-D) and ``LocationFixes`` (map: one message with every track's ``LocationFix``) messages.
 
 The position is the intersection of the ray through the box's bottom-centre pixel (where a standing object meets
 the ground in an oblique view; the centre in a nadir view, where both coincide) with the plane
@@ -13,12 +13,13 @@ obliquity, as it should. Lat/lon from ENU: :func:`aerodaas.model.geo.enu_to_geod
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from aerodaas.model.types import CameraIntrinsics, FramePose, GeoPoint
 
-__all__ = ["GroundFix", "geolocate_box", "record_track_fixes"]
+__all__ = ["GroundFix", "geolocate_box", "record_track_fixes", "track_color"]
 
 
 @dataclass
@@ -80,19 +81,42 @@ def geolocate_box(box: tuple[float, float, float, float], pose: FramePose, k: Ca
                      float(np.sqrt(np.linalg.eigvalsh(cov).max())))
 
 
+def track_color(track_id: int) -> Any:
+    """The colour of track ``track_id`` (a ``foxglove.Color``, alpha 1): golden-ratio steps of the hue (saturation
+    0.85, value 1), so neighbouring ids get distinct colours; the same on the image, in the 3-D scene and on the map."""
+    import colorsys
+
+    from foxglove_schemas_protobuf.Color_pb2 import Color
+
+    r, g, b = colorsys.hsv_to_rgb((track_id * 0.61803398875) % 1.0, 0.85, 1.0)
+    return Color(r=r, g=g, b=b, a=1.0)
+
+
 def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[int, GroundFix], *,
-                       prefix: str | None = None, with_fix: bool = True) -> None:
-    """Record each track's :class:`GroundFix` (``fixes``: track id -> fix) on ``recorder``
-    (:class:`aerodaas.recording.writer.McapRecorder`): one ``foxglove.LocationFix`` per track on
-    ``{prefix}/{id}/fix`` (ENU covariance, ``DIAGONAL_KNOWN`` when the axes are uncorrelated else ``KNOWN``), and
-    one ``foxglove.SceneUpdate`` on ``{prefix}/scene`` (frame ``enu``) that first deletes every entity of the topic
-    (``SceneEntityDeletion`` ``ALL``: a track that ended leaves the scene) and then holds, per track, a flat
-    ellipse-sized sphere (2 sigma, entity id ``{robot_id}/track/{id}``) and the track id as text. ``prefix``
-    defaults to ``/{robot_id}/tracks`` (the runtime passes ``/{robot}/{analytics}/tracks``); ``with_fix=False`` writes
-    the scene only (no home known, so no lat/lon)."""
+                       prefix: str | None = None, with_fix: bool = True,
+                       classes: dict[int, str] | None = None) -> None:
+    """Record one frame's :class:`GroundFix` per track (``fixes``: track id -> fix) on ``recorder``
+    (:class:`aerodaas.recording.writer.McapRecorder`), ``prefix`` defaulting to ``/{robot_id}/tracks`` (the runtime
+    passes ``/{robot}/{analytics}/tracks``):
+
+    * ``{prefix}/fixes``: one ``foxglove.LocationFixes`` (issue 47 item 4: one topic for all tracks, not a channel per
+      track) holding one ``foxglove.LocationFix`` per track, in track id order: frame ``wgs84``, WGS-84 lat/lon
+      (degrees) and altitude (m), the ENU horizontal covariance in m^2 (``DIAGONAL_KNOWN`` when the axes are
+      uncorrelated else ``KNOWN``), ``color`` :func:`track_color` and ``metadata`` ``robot``, ``track_id`` (decimal
+      text) and, when ``classes`` (track id -> class name) names it, ``class_name``. Written on every call, also
+      with no track, so the latest message is the current set of tracks (ended tracks leave the map). Schema:
+      foxglove/schemas ``LocationFixes.proto`` / ``LocationFix.proto`` (``color`` and ``metadata`` as shipped in
+      foxglove-schemas-protobuf 0.4).
+    * ``{prefix}/scene``: one ``foxglove.SceneUpdate`` (frame ``enu``) that first deletes every entity of the topic
+      (``SceneEntityDeletion`` ``ALL``: a track that ended leaves the scene) and then holds, per track, a flat
+      ellipse-sized sphere (2 sigma, the track's colour at alpha 0.5, entity id ``{robot_id}/track/{id}``) and the
+      track id as text.
+
+    ``with_fix=False`` writes the scene only (no home known, so no lat/lon)."""
     from foxglove_schemas_protobuf.Color_pb2 import Color
     from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
     from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+    from foxglove_schemas_protobuf.LocationFixes_pb2 import LocationFixes
     from foxglove_schemas_protobuf.Pose_pb2 import Pose
     from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
     from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
@@ -106,22 +130,31 @@ def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[in
     prefix = prefix or f"/{robot_id}/tracks"
     stamp = Timestamp(seconds=log_time_ns // 1_000_000_000, nanos=log_time_ns % 1_000_000_000)
     scene = SceneUpdate(deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletion.ALL)])
+    located = LocationFixes()
     for tid, f in sorted(fixes.items()):
         c = f.cov
-        cov9 = [c[0, 0], c[0, 1], 0.0, c[1, 0], c[1, 1], 0.0, 0.0, 0.0, 0.0]
-        kind = LocationFix.DIAGONAL_KNOWN if abs(c[0, 1]) < 1e-12 else LocationFix.KNOWN
+        color = track_color(tid)
         if with_fix:
-            recorder.write_proto(f"{prefix}/{tid}/fix", log_time_ns, LocationFix(
+            cov9 = [c[0, 0], c[0, 1], 0.0, c[1, 0], c[1, 1], 0.0, 0.0, 0.0, 0.0]
+            meta = [KeyValuePair(key="robot", value=robot_id), KeyValuePair(key="track_id", value=str(tid))]
+            if classes and tid in classes:
+                meta.append(KeyValuePair(key="class_name", value=str(classes[tid])))
+            located.fixes.append(LocationFix(
                 timestamp=stamp, frame_id="wgs84", latitude=f.lat, longitude=f.lon, altitude=f.alt,
-                position_covariance=[float(x) for x in cov9], position_covariance_type=kind))
+                position_covariance=[float(x) for x in cov9],
+                position_covariance_type=LocationFix.DIAGONAL_KNOWN if abs(c[0, 1]) < 1e-12 else LocationFix.KNOWN,
+                color=color, metadata=meta))
         pose = Pose(position=Vector3(x=f.enu[0], y=f.enu[1], z=f.enu[2]), orientation=Quaternion(w=1.0))
         ent = SceneEntity(timestamp=stamp, frame_id="enu", id=f"{robot_id}/track/{tid}",
                           metadata=[KeyValuePair(key="robot", value=robot_id),
                                     KeyValuePair(key="track_id", value=str(tid)),
                                     KeyValuePair(key="sigma_m", value=f"{f.sigma_m:.3f}")])
         ent.spheres.append(SpherePrimitive(pose=pose, size=Vector3(x=4 * np.sqrt(c[0, 0]), y=4 * np.sqrt(c[1, 1]),
-                                                                   z=0.2), color=Color(r=1.0, g=0.5, b=0.0, a=0.5)))
+                                                                   z=0.2),
+                                           color=Color(r=color.r, g=color.g, b=color.b, a=0.5)))
         ent.texts.append(TextPrimitive(pose=pose, billboard=True, font_size=14.0, scale_invariant=True,
                                        color=Color(r=1.0, g=1.0, b=1.0, a=1.0), text=f"{robot_id} #{tid}"))
         scene.entities.append(ent)
+    if with_fix:
+        recorder.write_proto(f"{prefix}/fixes", log_time_ns, located)
     recorder.write_proto(f"{prefix}/scene", log_time_ns, scene)

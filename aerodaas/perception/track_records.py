@@ -13,13 +13,15 @@ with ``prefix = /{robot}/{name}/tracks`` (the detections of the same analytics a
   time as the frame);
 * ``{prefix}/scene``: ``foxglove.SceneUpdate`` in frame ``enu``, one entity per track id (a 2-sigma disc and the id),
   the previous entities deleted first so that ended tracks leave the 3-D view;
-* ``{prefix}/{id}/fix``: ``foxglove.LocationFix`` per track (WGS-84 from the drone's home, ENU covariance in m^2),
-  for the Map panel.
+* ``{prefix}/fixes``: one ``foxglove.LocationFixes`` per frame for the Map panel, a ``foxglove.LocationFix`` per
+  track (WGS-84 from the drone's home, ENU covariance in m^2, the track's colour, metadata ``robot``, ``track_id``,
+  ``class_name``); one topic for all tracks (issue 47 item 4; it replaced a ``{prefix}/{id}/fix`` channel per track,
+  453 of them on three minutes of real video). Written only when the drone's home is known.
 
-The runtime declares ``{prefix}`` and ``{prefix}/scene`` for every drone and tracking analytics of the plan before the
-run starts (:func:`declared_track_channels`), so the live view advertises them from the first moment; the per-track
-``fix`` channels appear with their track. ``scene`` and ``fix`` are latched in the live view
-(:data:`aerodaas.liveview.server.LATCHED_SUFFIXES`): a late subscriber gets the current scene and each track's last fix.
+The runtime declares ``{prefix}``, ``{prefix}/scene`` and ``{prefix}/fixes`` for every drone and tracking analytics
+of the plan before the run starts (:func:`declared_track_channels`), so the live view advertises them from the first
+moment. ``scene`` and ``fixes`` are latched in the live view (:data:`aerodaas.liveview.server.LATCHED_SUFFIXES`): a
+late subscriber gets the current scene and the current tracks' fixes.
 """
 from __future__ import annotations
 
@@ -74,12 +76,13 @@ def write_tracks(recorder: Any, prefix: str, log_time_ns: int, robot: str, rows:
     from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 
     from aerodaas.model.geo import enu_to_geodetic
-    from aerodaas.perception.geolocate import GroundFix, record_track_fixes
+    from aerodaas.perception.geolocate import GroundFix, record_track_fixes, track_color
     from aerodaas.recording.values import _timestamp
 
     stamp = _timestamp(log_time_ns)
     ann = ImageAnnotations()
     fixes: dict[int, GroundFix] = {}
+    classes: dict[int, str] = {}
     for r in rows:
         tid = int(r["track_id"])
         x0, y0, x1, y1 = (float(c) for c in r["box"])
@@ -87,7 +90,8 @@ def write_tracks(recorder: Any, prefix: str, log_time_ns: int, robot: str, rows:
             w, h = image_size
             x0, x1 = min(max(x0, 0.0), w), min(max(x1, 0.0), w)
             y0, y1 = min(max(y0, 0.0), h), min(max(y1, 0.0), h)
-        color = _track_color(tid)
+        color = track_color(tid)
+        classes[tid] = str(r["class_name"])
         ann.points.append(PointsAnnotation(
             timestamp=stamp, type=PointsAnnotation.LINE_LOOP, thickness=2.0, outline_color=color,
             points=[Point2(x=x0, y=y0), Point2(x=x1, y=y0), Point2(x=x1, y=y1), Point2(x=x0, y=y1)],
@@ -105,29 +109,21 @@ def write_tracks(recorder: Any, prefix: str, log_time_ns: int, robot: str, rows:
             fixes[tid] = GroundFix((e, n, u), geo.lat if geo else float("nan"), geo.lon if geo else float("nan"),
                                    geo.alt if geo else float("nan"), cov, float(sigma or 0.0))
     recorder.write_proto(prefix, log_time_ns, ann)
-    record_track_fixes(recorder, log_time_ns, robot, fixes, prefix=prefix, with_fix=home is not None)
-
-
-def _track_color(tid: int) -> Any:
-    from foxglove_schemas_protobuf.Color_pb2 import Color
-
-    hue = (tid * 0.61803398875) % 1.0  # golden-ratio hues: neighbouring ids get distinct colours
-    import colorsys
-
-    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 1.0)
-    return Color(r=r, g=g, b=b, a=1.0)
+    record_track_fixes(recorder, log_time_ns, robot, fixes, prefix=prefix, with_fix=home is not None,
+                       classes=classes)
 
 
 def declared_track_channels(robots: Iterable[str], graphs: dict[str, Iterable[Any]]) -> list[tuple[str, str]]:
     """``[(topic, schema)]`` of the track channels known from the plan (``graphs``: robot id -> its analytics):
-    ``{prefix}`` (``foxglove.ImageAnnotations``) and ``{prefix}/scene`` (``foxglove.SceneUpdate``) for each drone and
-    each of its analytics with ``records_tracks``."""
+    ``{prefix}`` (``foxglove.ImageAnnotations``), ``{prefix}/scene`` (``foxglove.SceneUpdate``) and ``{prefix}/fixes``
+    (``foxglove.LocationFixes``) for each drone and each of its analytics with ``records_tracks``."""
     out: list[tuple[str, str]] = []
     for rid in robots:
         for a in graphs.get(rid, ()):
             if getattr(a, "records_tracks", False):
                 p = tracks_prefix(rid, a.name)
-                out += [(p, "foxglove.ImageAnnotations"), (f"{p}/scene", "foxglove.SceneUpdate")]
+                out += [(p, "foxglove.ImageAnnotations"), (f"{p}/scene", "foxglove.SceneUpdate"),
+                        (f"{p}/fixes", "foxglove.LocationFixes")]
     return out
 
 

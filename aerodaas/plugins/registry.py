@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "BUILTIN_DIST", "BUILTIN_ORIGIN", "MissingBuiltins", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
-           "register", "plugin", "get", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
+           "register", "plugin", "get", "class_origin", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
            "PluginRegistry", "REGISTRY",
            "plugin_package_paths", "plugin_name", "is_import_path"]
 
@@ -460,6 +460,22 @@ def entries(kind: str | None = None) -> list[PluginEntry]:
 def names(kind: str) -> list[str]:
     """The names of every plug-in of ``kind``."""
     return [e.name for e in entries(kind)]
+
+
+def class_origin(kind: str, cls: type) -> tuple[str, str]:
+    """``(name, origin)`` of the class ``cls`` used as a plug-in of ``kind`` (an object the application built, such
+    as its trajectory scheduler), as ``aerodaas plugins`` lists it: the registered entry whose class (or
+    ``module:qualname`` target) is ``cls``; a class that was never registered is named by :func:`plugin_name` and
+    its origin is :data:`BUILTIN_ORIGIN` when it lives in the ``aerodaas`` package, else ``unregistered class in FILE``.
+    Raises ValueError for an unknown kind."""
+    _check_kind(kind)
+    target = f"{cls.__module__}:{cls.__qualname__}"
+    for e in entries(kind):
+        if e.cls is cls or e.target == target:
+            return e.name, e.origin
+    if (cls.__module__ or "").split(".")[0] == BUILTIN_DIST:  # a class of this package's own
+        return plugin_name(cls, kind), BUILTIN_ORIGIN
+    return plugin_name(cls, kind), _origin_of(cls).replace("decorator in", "unregistered class in", 1)
 
 
 def describe_all(kind: str | None = None) -> list[dict[str, Any]]:

@@ -25,6 +25,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
+from aerodaas.analytics.contract import stream_types
 from aerodaas.config.robot import sensor_class
 from aerodaas.plugins.sensor import ActorProducedSensor, FrameSensor, MissionStatusSensor, VehicleStateSensor
 from aerodaas.protocol.ids import ComponentId, ComponentKind
@@ -52,13 +53,16 @@ class Node:
 @dataclass(frozen=True)
 class Edge:
     """``src`` -> ``dst`` at ``port``; ``buffer`` items may wait at the consumer; ``robots``: only items of these
-    robots travel on it (None: all)."""
+    robots travel on it (None: all); ``types``: the message types it carries, in the stream-type names ``consumes``
+    is checked with (:func:`aerodaas.analytics.contract.stream_types`: ``frame``, ``odometry``, ``stat``, a sensor's
+    type, an output model's schema name ...; ``aerodaas.AnalyticsOutput`` for a free-form analytics output)."""
 
     src: str
     dst: str
     port: Port
     buffer: int
     robots: tuple[str, ...] | None = None
+    types: tuple[str, ...] = ()
 
     def route(self) -> tuple:
         """The form the actors route with: ``(dst, port, buffer, robots)``."""
@@ -131,6 +135,8 @@ class RunPlan:
     analytics_instances: dict[int, list[str]]
     #: the run's secret for same-node channels (``same_node_transport: channel``; None: Ray calls only)
     channel_key: bytes | None = field(default=None, repr=False)
+    #: robot id -> its backend, trajectory scheduler and sensors (:mod:`aerodaas.runtime.plan_robots`)
+    robot_uses: dict[str, Any] = field(default_factory=dict)
 
     def routes(self) -> dict[str, list[tuple]]:
         """Producer id -> its edges in wire form (see :meth:`Edge.route`)."""
@@ -148,7 +154,9 @@ class RunPlan:
         return {h: a.name for h, a in self.actors.items()}
 
     def describe(self, placement: Placement | None = None) -> dict:
-        """A JSON-ready description: actors (role, name, tier, compute, label_selector, components), nodes, edges."""
+        """A JSON-ready description: actors (role, name, tier, compute, label_selector, components), robots (backend,
+        trajectory scheduler and sensors, :meth:`aerodaas.runtime.plan_robots.RobotUse.describe`), nodes, edges
+        (with the message ``types`` each carries)."""
         placement = placement or Placement(has_cloud=True)
         return {"run": self.run_id,
                 "actors": [{"host": a.actor_id, "role": a.role, "name": a.name, "tier": a.tier, "compute": a.compute,
@@ -156,14 +164,17 @@ class RunPlan:
                             **({"num_gpus": a.num_gpus} if a.num_gpus else {}),
                             **({"mavlink_links": a.spec.mavlink_links} if a.spec.mavlink_links else {})}
                            for a in self.actors.values()],
+                "robots": [u.describe() for u in self.robot_uses.values()],
                 "nodes": [{"id": n.id, "kind": n.kind, "robot": n.robot, "actor": n.actor,
                            **({"analytics": n.analytics} if n.analytics else {}),
                            **({"plugin": n.plugin} if n.plugin else {})} for n in self.nodes.values()],
                 "edges": [{"from": e.src, "to": e.dst, "port": e.port.wire(), "buffer": e.buffer,
-                           "robots": list(e.robots) if e.robots is not None else None} for e in self.edges]}
+                           "robots": list(e.robots) if e.robots is not None else None, "types": list(e.types)}
+                          for e in self.edges]}
 
     def text(self, placement: Placement | None = None) -> str:
-        """The plan for humans: one block per actor, then the edges that cross actors."""
+        """The plan for humans: one block per actor, one per robot (backend, trajectory scheduler, sensors), then
+        every edge with the message types it carries (those that cross actors marked)."""
         placement = placement or Placement(has_cloud=True)
         lines = [f"run {self.run_id}: {len(self.actors)} actors, {len(self.nodes)} components, {len(self.edges)} edges"]
         for a in self.actors.values():
@@ -175,12 +186,14 @@ class RunPlan:
             for c in a.components:
                 plug = f"  ({self.nodes[c].plugin})" if self.nodes[c].plugin else ""
                 lines.append(f"      {self.nodes[c].kind:<11} {c}{plug}")
-        cross = [e for e in self.edges if self.nodes[e.src].actor != self.nodes[e.dst].actor]
-        if cross:
-            lines.append("  edges between actors:")
-            for e in cross:
-                only = f" (items of {', '.join(e.robots)})" if e.robots else ""
-                lines.append(f"      {e.src} -> {e.dst} [{e.port.wire()}]{only}")
+        for u in self.robot_uses.values():
+            lines.extend(u.text())
+        if self.edges:
+            lines.append("  edges (* between actors):")
+        for e in self.edges:
+            only = f" (items of {', '.join(e.robots)})" if e.robots else ""
+            cross = "*" if self.nodes[e.src].actor != self.nodes[e.dst].actor else " "
+            lines.append(f"    {cross} {e.src} -> {e.dst} [{e.port.wire()}] {' | '.join(e.types)}{only}")
         return "\n".join(lines)
 
 
@@ -459,7 +472,8 @@ def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: di
             ps = plugin_sensors[-1] if plugin_sensors and plugin_sensors[-1]["cid"] == cid else None
             add(Node(cid, scls.component_kind, r.id, hid,
                      plugin=f"{ps['type']} -> {ps['schema_name']}" if ps else None))
-            edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots) for e in subs)
+            types = tuple(dict.fromkeys(stream_types(s.get_data_stream())))  # "odometry" is delivery and type
+            edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots, types) for e in subs)
         actors[hid].spec.robots.append(RobotSpec(r.cfg.model_dump(mode="json"), ids["drone"], ids["scheduler"], sched,
                                                  preplanned, cams, ids["odom"], ids["stat"], plugin_sensors,
                                                  robot_plugins(r.cfg), list(getattr(r, "gimbal_commands", ()))))
@@ -485,13 +499,14 @@ def _analytics_edges(st: _PlanState, every: dict, inst: dict, consumers) -> list
                 st.add(Node(src, "analytics", cid.robot, hid, a.name, plugin=f"named output {out_name}"))
                 outs.append((src, named))
             for src, stream in outs:
+                types = tuple(dict.fromkeys(stream_types(stream))) or ("aerodaas.AnalyticsOutput",)  # free-form
                 for e in consumers(stream, only):
                     robots_ = e.robots if e.robots is not None else None
                     if only is None and robots_ is not None:
                         robots_ = tuple(x for x in robots_ if x in served) or None
                         if robots_ is None:
                             continue  # no robot of this instance goes there
-                    edges.append(Edge(src, e.dst, e.port, e.buffer, robots_))
+                    edges.append(Edge(src, e.dst, e.port, e.buffer, robots_, types))
     return edges
 
 
@@ -543,5 +558,8 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     for a in st.actors.values():
         a.spec.epoch_ns = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
+    from aerodaas.runtime.plan_robots import robot_uses
+
     return RunPlan(run_id, st.nodes, edges, st.actors, robot_ids,
-                   {aid: [c for c, _, _ in v] for aid, v in inst.items()}, channel_key=key)
+                   {aid: [c for c, _, _ in v] for aid, v in inst.items()}, channel_key=key,
+                   robot_uses=robot_uses(robots, scheds, set(st.nodes)))

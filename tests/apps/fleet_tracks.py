@@ -1,7 +1,7 @@
 """Geo-located tracks recorded in a run (issue 28, item 4): two drones at 20 m, each over its own cars (moving and
 parked, the simulator's targets). A colour "detector" finds the magenta cars in the rendered pixels (it does not
 know the simulator's truth), one TrackAnalytics (ByteTrack per drone + geo-location) is shared by both drones; the
-runtime records each drone's tracks under /<robot>/tracks/tracks (image annotations, /scene, /<id>/fix).
+runtime records each drone's tracks under /<robot>/tracks/tracks (image annotations, /scene, /fixes).
 Run: aerodaas run tests/apps/fleet_tracks.py --record tracks.mcap"""
 import cv2
 import numpy as np

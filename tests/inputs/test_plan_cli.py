@@ -102,3 +102,94 @@ def test_plan_warns_when_two_edge_computes_place_alike_and_not_when_labelled(tmp
     assert "aerodaas/compute" in p.stderr
     p = _plan(str(_two_edge_env(tmp_path, [{"aerodaas/compute": "e0"}, {"aerodaas/compute": "e1"}])), "--json")
     assert p.returncode == 0 and "Ray's choice" not in p.stderr, p.stderr
+
+
+PLAN_APP = '''
+from aerodaas import *
+from aerodaas.bench.overhead import FixedCostDetector
+from aerodaas.plugins import register_trajectory_scheduler
+
+
+@register_trajectory_scheduler
+class PlanCheckSweep(TrajectoryScheduler):
+    """Rows along y, then x (a plug-in registered by decorator in this file)."""
+    name = "plan-check-sweep"
+
+    def order(self, waypoints, start):
+        return sorted(waypoints, key=lambda w: (w.y, w.x))
+
+
+env = Environment({env!r})
+env.set_trajectory_scheduler(PlanCheckSweep(env))
+det = FixedCostDetector(2.0)
+det.deploy(env.get_compute_resource_by_id("cloud"))
+mon = MonitoringAnalytics(watch=("battery",))
+mon.deploy(env.get_compute_resource_by_id("edge"))
+det.analyse(env.get_robot_by_id("d0").get_sensor_by_id("cam").get_data_stream())
+mon.analyse(env.get_robot_by_id("d0").get_sensor_by_id("odom").get_data_stream())
+env.start_mission()
+'''
+
+
+def test_plan_json_is_the_graph_the_runtime_builds_with_edge_types_backends_schedulers_and_every_sensor(tmp_path):
+    """Issue 47 item 3: ``aerodaas plan --json`` names each edge's message types, each robot's backend and trajectory
+    scheduler with their origin (a built-in backend, a scheduler registered by decorator in the app) and every
+    sensor, also an odometry or stat-stream sensor nobody subscribes to. Compared with the graph the runtime builds
+    for the same application (:meth:`Application.plan`, the builder the driver runs, without Ray): the same actors
+    and components, the same routes the actors are wired with, and for each robot what its drone actor is
+    constructed from (the RobotSpec: backend in its configuration, the scheduler object, its sensor components)."""
+    from aerodaas.backends import backend_class
+    from aerodaas.runtime.app_loader import load_app
+
+    env = tmp_path / "env.json"
+    cam = {"type": "camera", "properties": {"width": 64, "height": 48}}
+    env.write_text(json.dumps({
+        "name": "plan-check",
+        "compute": [{"id": "edge", "tier": "edge"}, {"id": "cloud", "tier": "cloud"}],
+        "robots": [{"id": "d0", "sensors": [{"id": "cam", **cam}, {"id": "odom", "type": "odometry"},
+                                            {"id": "stat", "type": "stat_stream"}]},
+                   {"id": "d1", "sensors": [{"id": "cam", **cam}, {"id": "odom", "type": "odometry"}]}]}))
+    app = tmp_path / "plan_check_app.py"
+    app.write_text(PLAN_APP.format(env=str(env)))
+    p = _plan(str(app), "--json")
+    assert p.returncode == 0, p.stderr[-2000:]
+    got = json.loads(p.stdout)
+    text = _plan(str(app))
+    assert text.returncode == 0, text.stderr[-2000:]
+
+    built = load_app(app).plan()  # the runtime's graph of the same application, nothing started
+    host = lambda name: name.split("/", 2)[2]  # noqa: E731 - the Ray name without the (random) run id
+    assert {host(a["name"]): (a["role"], a["components"]) for a in got["actors"]} == {
+        h: (a.role, [str(c) for c in a.components]) for h, a in built.actors.items()}
+    routes = {(src, str(dst), port.wire(), buf, robots) for src, rs in built.routes().items()
+              for dst, port, buf, robots in rs}
+    assert {(e["from"], e["to"], e["port"], e["buffer"], tuple(e["robots"]) if e["robots"] is not None else None)
+            for e in got["edges"]} == routes and len(got["edges"]) == len(routes) == 2
+    types = {(e["from"], e["to"]): e["types"] for e in got["edges"]}
+    assert types[("d0/cam", "detector#1")] == ["frame", "camera"]
+    assert types[("d0/odom", "monitor#2")] == ["odometry"]
+
+    specs = {rs.robot_id: rs for a in built.actors.values() for rs in a.spec.robots}
+    robots = {r["id"]: r for r in got["robots"]}
+    assert sorted(robots) == sorted(specs) == ["d0", "d1"]
+    for rid, r in robots.items():
+        spec = specs[rid]
+        be = backend_class(spec.robot["backend"])
+        assert r["backend"] == {"name": spec.robot["backend"], "origin": "entry point aerodaas (built-in)",
+                                "class": f"{be.__module__}:{be.__qualname__}"}
+        sched = type(spec.scheduler)
+        assert r["trajectory_scheduler"]["class"] == f"{sched.__module__}:{sched.__qualname__}"
+        assert r["trajectory_scheduler"]["name"] == "PlanCheckSweep"
+        assert r["trajectory_scheduler"]["origin"] == f"decorator in {app}", r["trajectory_scheduler"]
+        assert [s["id"] for s in r["sensors"]] == [s["id"] for s in spec.robot["sensors"]]
+        wired = {c.cid for c in spec.cameras} | set(spec.odom_cids) | set(spec.stat_cids) | {
+            ps["cid"] for ps in spec.plugin_sensors}
+        assert {s["component"] for s in r["sensors"] if s["component"]} == {str(c) for c in wired}
+    assert [(s["id"], s["delivery"], s["component"]) for s in robots["d0"]["sensors"]] == [
+        ("cam", "camera", "d0/cam"), ("odom", "vehicle_state", "d0/odom"), ("stat", "mission_status", None)]
+    # d1's sensors feed nothing (and the plan records nothing): listed all the same, with no component
+    assert [(s["id"], s["component"]) for s in robots["d1"]["sensors"]] == [("cam", None), ("odom", None),
+                                                                           ("stat", None)]
+    # the text form says the same
+    assert "robot d0: backend sim (entry point aerodaas (built-in)), trajectory scheduler PlanCheckSweep (decorator in" in text.stdout
+    assert "sensor stat" in text.stdout and "d0/cam -> detector#1 [in] frame | camera" in text.stdout, text.stdout

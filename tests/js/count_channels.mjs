@@ -5,7 +5,9 @@
 // {"protocol", "channels": {topic: {schemaName, encoding}}, "counts": {topic: n}, "statuses": [...],
 // "connections": [{topic: n} per connection]} as JSON. With RECONNECTS > 0 it connects again to the same URL
 // (retrying until a server listens there) after each of the first RECONNECTS closes, as Foxglove's app does.
-// KEEP_TOPICS (comma-separated): the payloads of these topics' messages are kept as text in "messages": {topic: [..]}.
+// KEEP_TOPICS (comma-separated): the payloads of these topics' messages are kept in "messages": {topic: [..]}, as
+// text for JSON channels and base64 for the others, and their channels carry the advertised schemaEncoding and
+// schema (so that the test decodes protobuf payloads with the schema the server sent).
 import wsProtocol from "@foxglove/ws-protocol";
 const { FoxgloveClient } = wsProtocol;
 import WebSocket from "ws";
@@ -29,6 +31,7 @@ function connect() {
   let opened = false;
   const client = new FoxgloveClient({ ws });
   const subTopic = new Map();
+  const subEnc = new Map();
   const mine = {};
   client.on("open", () => { opened = true; out.protocol = ws.protocol; out.connections.push(mine); });
   client.on("error", (e) => {
@@ -39,14 +42,19 @@ function connect() {
   client.on("advertise", (channels) => {
     for (const ch of channels) {
       out.channels[ch.topic] = { schemaName: ch.schemaName, encoding: ch.encoding };
+      if (keep.has(ch.topic)) Object.assign(out.channels[ch.topic], { schemaEncoding: ch.schemaEncoding, schema: ch.schema });
       out.counts[ch.topic] ??= 0;
-      const sub = () => subTopic.set(client.subscribe(ch.id), ch.topic);
+      const sub = () => { const id = client.subscribe(ch.id); subTopic.set(id, ch.topic); subEnc.set(id, ch.encoding); };
       if (afterMs > 0) setTimeout(sub, afterMs); else sub();
     }
   });
   client.on("message", ({ subscriptionId, data }) => {
     const t = subTopic.get(subscriptionId);
-    if (keep.has(t)) (out.messages[t] ??= []).push(text.decode(data));
+    if (keep.has(t)) {
+      const bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+      (out.messages[t] ??= []).push(subEnc.get(subscriptionId) === "json" ? text.decode(bytes)
+        : Buffer.from(bytes).toString("base64"));
+    }
     out.counts[t] = (out.counts[t] ?? 0) + 1;
     mine[t] = (mine[t] ?? 0) + 1;
   });

@@ -10,6 +10,7 @@
 """
 from __future__ import annotations
 
+import base64
 import json
 import queue
 import shutil
@@ -393,10 +394,9 @@ def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run
 # --------------------------------------------------------------------------------------------- npm @mcap/core
 # (The vehicle-tracking recording is validated with validate_recording in tests/runtime/test_e2e.py, on the run that test
 # already makes: one run of the real detector instead of two.)
-@pytest.mark.e2e
-def test_the_recording_reads_with_the_npm_mcap_reader(live_run, tmp_path):
-    """The TypeScript reader (npm @mcap/core, zstd via fzstd) indexes the file, finds every channel with its schema,
-    reads every message and parses every JSON one. Skipped when node/npm are missing or npm cannot install."""
+def _npm_mcap_reader(tmp_path: Path) -> list[str]:
+    """``[node, read.mjs]``: :data:`NODE_READER` with npm ``@mcap/core`` installed in ``tmp_path``. Skips the test
+    when node/npm are missing or npm cannot install."""
     npm, node = shutil.which("npm"), shutil.which("node")
     if not npm or not node:
         pytest.skip("node/npm not installed")
@@ -411,8 +411,47 @@ def test_the_recording_reads_with_the_npm_mcap_reader(live_run, tmp_path):
         pytest.skip(f"npm install @mcap/core failed (offline?): {inst.stderr[-300:]}")
     script = tmp_path / "read.mjs"
     script.write_text(NODE_READER)
+    return [node, str(script)]
+
+
+def test_the_npm_mcap_reader_reads_many_tracks_from_one_location_fixes_topic(tmp_path):
+    """Issue 47 item 4: a recording of 12 frames in which tracks 1-14 come and go (three at a time), read with npm
+    ``@mcap/core``: one ``foxglove.LocationFixes`` channel for all tracks (no channel per track), each of its
+    messages, decoded with the schema the TypeScript reader found in the file, carries that frame's track ids."""
+    from aerodaas.model.types import GeoPoint
+    from aerodaas.perception.track_records import write_tracks
+
+    reader = _npm_mcap_reader(tmp_path)
+    rec, prefix, frames = tmp_path / "tracks.mcap", "/d1/follow/tracks", {}
+    with McapRecorder(rec) as r:
+        for k in range(12):
+            ids = [k + 1, k + 2, k + 3]
+            rows = [{"track_id": i, "class_name": "car", "score": 0.9, "box": [10.0, 10.0, 30.0, 30.0],
+                     "enu": [float(i), 1.0, 0.0], "cov": [[0.3, 0.0], [0.0, 0.3]], "sigma_m": 0.55} for i in ids]
+            frames[10**18 + k * 10**8] = [str(i) for i in ids]
+            write_tracks(r, prefix, 10**18 + k * 10**8, "d1", rows, GeoPoint(lat=13.0, lon=77.5, alt=920.0))
+    p = subprocess.run([*reader, str(rec), f"{prefix}/fixes"], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout)
+    assert {t: v["schema"] for t, v in got["channels"].items()} == {
+        prefix: "foxglove.ImageAnnotations", f"{prefix}/scene": "foxglove.SceneUpdate",
+        f"{prefix}/fixes": "foxglove.LocationFixes"}
+    sch = got["schemas"][f"{prefix}/fixes"]
+    decode = DecoderFactory().decoder_for("protobuf", Schema(id=1, name=sch["name"], encoding=sch["encoding"],
+                                                             data=base64.b64decode(sch["data"])))
+    kept = {int(t): [{kv.key: kv.value for kv in f.metadata}["track_id"] for f in decode(base64.b64decode(d)).fixes]
+            for t, d in got["kept"]}
+    assert kept == frames
+
+
+@pytest.mark.e2e
+def test_the_recording_reads_with_the_npm_mcap_reader(live_run, tmp_path):
+    """The TypeScript reader (npm @mcap/core, zstd via fzstd) indexes the file, finds every channel with its schema,
+    reads every message and parses every JSON one. Skipped when node/npm are missing or npm cannot install."""
     rec = live_run["recording"]
-    p = subprocess.run([node, str(script), str(rec)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    p = subprocess.run([*_npm_mcap_reader(tmp_path), str(rec)], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300)
     assert p.returncode == 0, p.stderr
     got = json.loads(p.stdout)
     with open(rec, "rb") as f:
@@ -442,9 +481,17 @@ const reader = await McapIndexedReader.Initialize({
   readable,
   decompressHandlers: { zstd: (data, size) => decompress(data, new Uint8Array(Number(size))) },
 });
-const channels = {};
+// argv[3] (optional): a topic whose messages are returned as [log_time, base64 payload] in "kept", and its schema
+// (name, encoding, base64 data) in "schemas"
+const keepTopic = process.argv[3];
+const channels = {}, schemas = {}, kept = [];
 for (const ch of reader.channelsById.values()) {
-  channels[ch.topic] = { schema: reader.schemasById.get(ch.schemaId).name, encoding: ch.messageEncoding };
+  const schema = reader.schemasById.get(ch.schemaId);
+  channels[ch.topic] = { schema: schema.name, encoding: ch.messageEncoding };
+  if (ch.topic === keepTopic) {
+    schemas[ch.topic] = { name: schema.name, encoding: schema.encoding,
+      data: Buffer.from(schema.data).toString("base64") };
+  }
 }
 let messages = 0, jsonParsed = 0;
 const dec = new TextDecoder();
@@ -452,8 +499,9 @@ for await (const msg of reader.readMessages()) {
   messages++;
   const ch = reader.channelsById.get(msg.channelId);
   if (ch.messageEncoding === "json") { JSON.parse(dec.decode(msg.data)); jsonParsed++; }
+  if (ch.topic === keepTopic) kept.push([msg.logTime.toString(), Buffer.from(msg.data).toString("base64")]);
 }
-console.log(JSON.stringify({ channels, messages, json_parsed: jsonParsed }));
+console.log(JSON.stringify({ channels, messages, json_parsed: jsonParsed, schemas, kept }));
 await fh.close();
 """
 

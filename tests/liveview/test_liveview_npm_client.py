@@ -92,6 +92,48 @@ def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_ever
     assert got["counts"] == {"/mission/plan": 3, "/uav/state": 5}, got
 
 
+def test_a_late_npm_client_gets_the_current_tracks_as_one_latched_location_fixes_message(node_client):
+    """Issue 47 item 4: three frames of a tracking analytics (tracks 1-3, then 2-4, then 4 and 5) go through the
+    recorder to the live view with no catch-up window; Foxglove's client, subscribing afterwards, is advertised ONE
+    ``foxglove.LocationFixes`` topic for all tracks and receives its latest message only (latched), which, decoded
+    with the schema the server advertised, holds the current tracks 4 and 5 with their ids and colours; the scene is
+    latched too, the image annotations are not."""
+    import base64
+
+    from aerodaas.model.types import GeoPoint
+    from aerodaas.perception.track_records import write_tracks
+    from aerodaas.recording.writer import McapRecorder
+
+    from .test_live_and_foxglove import _decode_with
+
+    prefix = "/d1/tracks/tracks"
+    srv = LiveServer("127.0.0.1:0", catchup_s=0.0)
+    rec = McapRecorder(None)
+    rec.add_sink(srv.publish)
+    try:
+        for k, ids in enumerate(([1, 2, 3], [2, 3, 4], [4, 5])):
+            rows = [{"track_id": i, "class_name": "car", "score": 0.9, "box": [10.0 * i, 10.0, 10.0 * i + 8, 20.0],
+                     "enu": [float(i), 2.0, 0.0], "cov": [[0.4, 0.0], [0.0, 0.4]], "sigma_m": 0.63} for i in ids]
+            write_tracks(rec, prefix, 10**18 + k * 10**8, "d1", rows, GeoPoint(lat=47.0, lon=8.0, alt=400.0),
+                         (320, 240))
+        client = node_client(srv.url, 60, keep=(f"{prefix}/fixes",))
+        t_end = time.monotonic() + 60
+        while srv.subscriptions < 3 and time.monotonic() < t_end:
+            time.sleep(0.05)
+    finally:
+        srv.stop(linger_s=1.0)
+        rec.close()
+    got = _finish(client)
+    assert {t: c["schemaName"] for t, c in got["channels"].items()} == {
+        prefix: "foxglove.ImageAnnotations", f"{prefix}/scene": "foxglove.SceneUpdate",
+        f"{prefix}/fixes": "foxglove.LocationFixes"}, got["channels"]
+    assert got["counts"] == {prefix: 0, f"{prefix}/scene": 1, f"{prefix}/fixes": 1}, got
+    (payload,) = got["messages"][f"{prefix}/fixes"]
+    msg = _decode_with(got["channels"][f"{prefix}/fixes"])(base64.b64decode(payload))
+    assert [{kv.key: kv.value for kv in f.metadata}["track_id"] for f in msg.fixes] == ["4", "5"]
+    assert len({(f.color.r, f.color.g, f.color.b) for f in msg.fixes}) == 2
+
+
 def test_the_npm_client_reads_the_live_view_over_wss_with_the_token_and_nothing_without(node_client, tmp_path,
                                                                                        monkeypatch):
     """Issue 50 item 3: bound off loopback (all addresses) with a self-signed certificate made here and a token,

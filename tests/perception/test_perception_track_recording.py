@@ -47,8 +47,9 @@ def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_option
     for robot in ("d1", "d2"):
         assert chans[f"/{robot}/tracks/tracks"] == "foxglove.ImageAnnotations"
         assert chans[f"/{robot}/tracks/tracks/scene"] == "foxglove.SceneUpdate"
-        fixes = [t for t in chans if t.startswith(f"/{robot}/tracks/tracks/") and t.endswith("/fix")]
-        assert fixes and all(chans[t] == "foxglove.LocationFix" for t in fixes), chans
+        assert chans[f"/{robot}/tracks/tracks/fixes"] == "foxglove.LocationFixes"
+    tracks = sorted(t for t in chans if t.startswith(("/d1/tracks/tracks", "/d2/tracks/tracks")))
+    assert len(tracks) == 6, tracks  # one fixes topic per drone, not one per track
     rep = score_tracks(run_options.record)  # against /world/targets, at 19-21 m
     assert rep["frames"] >= 100, rep  # both drones hovered 25 s at 20 m, 5 frames/s
     assert all(r["frames"] >= 50 and r["matched"] >= 50 for r in rep["per_robot"].values()), rep
@@ -56,27 +57,30 @@ def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_option
     assert rep["id_switches_per_100_frames"] <= 1.0, rep
     assert rep["error_m"]["max"] <= 1.5, rep
     frames = rep["frames"]
-    # each LocationFix is the scene's ENU position through the drone's home, with its covariance
+    # each LocationFix of the fixes is its track's scene ENU position through the drone's home, with its covariance
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
     scene_at = {(topic.rsplit("/", 1)[0], t): m for topic, t, m in msgs if topic.endswith("/scene")}
-    checked = 0
+    checked, ids = 0, set()
     for topic, t, m in msgs:
-        if topic.endswith("/fix") and "/tracks/" in topic:
-            prefix, tid = topic.rsplit("/", 2)[0], int(topic.split("/")[-2])
+        if topic.endswith("/tracks/fixes"):
             ents = {int(dict((kv.key, kv.value) for kv in e.metadata)["track_id"]): e
-                    for e in scene_at[(prefix, t)].entities}
-            e, n, _ = geodetic_to_enu(m.latitude, m.longitude, m.altitude, home)
-            pos = ents[tid].spheres[0].pose.position
-            assert abs(e - pos.x) < 0.01 and abs(n - pos.y) < 0.01
-            assert m.position_covariance[0] > 0 and m.position_covariance[4] > 0
-            checked += 1
-    assert checked >= frames
+                    for e in scene_at[(topic.rsplit("/", 1)[0], t)].entities}
+            tids = [int(dict((kv.key, kv.value) for kv in f.metadata)["track_id"]) for f in m.fixes]
+            assert sorted(tids) == sorted(ents), (topic, t)  # the same tracks on the map as in the scene
+            for tid, f in zip(tids, m.fixes):
+                e, n, _ = geodetic_to_enu(f.latitude, f.longitude, f.altitude, home)
+                pos = ents[tid].spheres[0].pose.position
+                assert abs(e - pos.x) < 0.01 and abs(n - pos.y) < 0.01
+                assert f.position_covariance[0] > 0 and f.position_covariance[4] > 0
+                ids.add((topic, tid))
+                checked += 1
+    assert checked >= frames and len(ids) >= 4, ids  # two cars under each drone
     # `aerodaas layout` of this recording shows the tracks: ids on the image, the scene in 3D, the fixes on the map
     from aerodaas.liveview.layout import layout_for_recording
 
     text = json.dumps(layout_for_recording(run_options.record))
     assert '"/d1/tracks/tracks/scene"' in text and '"/d1/tracks/tracks"' in text
-    assert all(f'"{t}"' in text for t in chans if t.startswith("/d1/tracks/tracks/") and t.endswith("/fix"))
+    assert '"/d1/tracks/tracks/fixes"' in text
 
 
 def test_declared_track_channels_exist_before_any_message_and_are_advertised_live(tmp_path):
@@ -88,8 +92,9 @@ def test_declared_track_channels_exist_before_any_message_and_are_advertised_liv
 
     graphs = {"d1": [TrackAnalytics(), FollowAnalytics()], "d2": [FollowAnalytics(tracker=ByteTrackConfig())]}
     declare = declared_track_channels(["d1", "d2"], graphs)
-    assert [t for t, _ in declare] == ["/d1/tracks/tracks", "/d1/tracks/tracks/scene", "/d2/follow/tracks",
-                                       "/d2/follow/tracks/scene"]  # the plain follow does not track
+    assert [t for t, _ in declare] == ["/d1/tracks/tracks", "/d1/tracks/tracks/scene", "/d1/tracks/tracks/fixes",
+                                       "/d2/follow/tracks", "/d2/follow/tracks/scene",
+                                       "/d2/follow/tracks/fixes"]  # the plain follow does not track
     svc = RecorderService(str(tmp_path / "r.mcap"), live="127.0.0.1:0", declare=declare,
                           homes={"d1": {"lat": 47.0, "lon": 8.0, "alt": 400.0}})
     try:
@@ -100,7 +105,7 @@ def test_declared_track_channels_exist_before_any_message_and_are_advertised_liv
     assert chans == dict(declare) and msgs == []
 
 
-def test_write_tracks_writes_annotations_scene_and_one_fix_per_track(tmp_path):
+def test_write_tracks_writes_annotations_scene_and_one_fixes_message_with_a_fix_per_track(tmp_path):
     from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
     from aerodaas.perception.track_records import track_rows, write_tracks
     from aerodaas.perception.tracking import ByteTracker
@@ -119,13 +124,57 @@ def test_write_tracks_writes_annotations_scene_and_one_fix_per_track(tmp_path):
     with McapRecorder(tmp_path / "t.mcap") as rec:
         write_tracks(rec, "/d1/tracks/tracks", 1_000, "d1", rows, home, (320, 240))
     got = {topic: m for topic, _s, _t, m in read_messages(tmp_path / "t.mcap")}
-    assert set(got) == {"/d1/tracks/tracks", "/d1/tracks/tracks/scene", "/d1/tracks/tracks/1/fix",
-                        "/d1/tracks/tracks/2/fix"}
+    assert set(got) == {"/d1/tracks/tracks", "/d1/tracks/tracks/scene", "/d1/tracks/tracks/fixes"}
     assert [t.text.split()[0] for t in got["/d1/tracks/tracks"].texts] == ["#1", "#2"]
     assert len(got["/d1/tracks/tracks/scene"].deletions) == 1  # ended tracks leave the scene
-    e, n, _ = geodetic_to_enu(got["/d1/tracks/tracks/1/fix"].latitude, got["/d1/tracks/tracks/1/fix"].longitude,
-                              0.0, home)
+    fixes = got["/d1/tracks/tracks/fixes"].fixes
+    assert [dict((kv.key, kv.value) for kv in f.metadata) for f in fixes] == [
+        {"robot": "d1", "track_id": "1", "class_name": "car"}, {"robot": "d1", "track_id": "2", "class_name": "car"}]
+    e, n, _ = geodetic_to_enu(fixes[0].latitude, fixes[0].longitude, 0.0, home)
     assert abs(e - 10.0) < 0.05 and abs(n - 5.0) < 0.05
+    # each track's colour on the map is its box's colour on the image, and the two differ
+    boxes = [p.outline_color for p in got["/d1/tracks/tracks"].points]
+    assert [(f.color.r, f.color.g, f.color.b) for f in fixes] == [(c.r, c.g, c.b) for c in boxes]
+    assert (fixes[0].color.r, fixes[0].color.g, fixes[0].color.b) != (fixes[1].color.r, fixes[1].color.g,
+                                                                      fixes[1].color.b)
+
+
+def test_many_tracks_are_one_fixes_topic_with_every_id_and_info_lists_one_track_topic(tmp_path):
+    """Issue 47 item 4: 30 frames in which 40 tracks come and go (five at a time) give ONE ``foxglove.LocationFixes``
+    channel whose messages carry exactly each frame's track ids (metadata ``track_id``), 40 distinct ids in all;
+    ``aerodaas info`` (the command line) lists three track channels, not one per track."""
+    import subprocess
+    import sys
+
+    from aerodaas.perception.track_records import write_tracks
+    from aerodaas.recording.reader import read_messages
+    from aerodaas.recording.writer import McapRecorder
+
+    home = GeoPoint(lat=47.0, lon=8.0, alt=400.0)
+    frames = {}
+    with McapRecorder(tmp_path / "many.mcap") as rec:
+        for k in range(30):
+            ids = sorted({(k + j) % 40 + 1 for j in range(0, 20, 4)} | {(k * 7) % 40 + 1})
+            rows = [{"track_id": i, "class_name": "car", "score": 0.9, "box": [10.0, 10.0, 30.0, 30.0],
+                     "enu": [float(i), -float(i), 0.0], "cov": [[0.5, 0.0], [0.0, 0.5]], "sigma_m": 0.7}
+                    for i in ids]
+            frames[1_000 + k] = ids
+            write_tracks(rec, "/d1/tracks/tracks", 1_000 + k, "d1", rows, home, (320, 240))
+    got = {}
+    for topic, schema, t, m in read_messages(tmp_path / "many.mcap"):
+        if schema == "foxglove.LocationFixes":
+            assert topic == "/d1/tracks/tracks/fixes"
+            got[t] = [int(dict((kv.key, kv.value) for kv in f.metadata)["track_id"]) for f in m.fixes]
+    assert got == frames
+    all_ids = {i for ids in frames.values() for i in ids}
+    assert len(all_ids) == 40
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "info", str(tmp_path / "many.mcap")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    lines = [ln.split() for ln in p.stdout.splitlines() if "/tracks" in ln]
+    assert [tuple(ln[:3]) for ln in lines] == [("/d1/tracks/tracks", "foxglove.ImageAnnotations", "30"),
+                                                ("/d1/tracks/tracks/fixes", "foxglove.LocationFixes", "30"),
+                                                ("/d1/tracks/tracks/scene", "foxglove.SceneUpdate", "30")], p.stdout
 
 
 # ------------------------------------------------------------------ the runtime's side, without Ray

@@ -38,7 +38,8 @@ def validate_recording(path: Path, robot: str, cameras: dict[str, dict]) -> dict
     via json.loads and validated with jsonschema against its channel's schema); JSON schemas declare their fields;
     the transform tree links enu -> base_link -> gps and each camera's optical frame with its mount pitch; each
     camera has a CameraCalibration per image with the configured intrinsics. ``cameras``: sensor id ->
-    {"width", "height", "hfov_deg", "pitch_deg"}. Returns per-topic counts and what was checked."""
+    {"width", "height", "hfov_deg", "pitch_deg"}. Returns per-topic counts, what was checked and, per
+    ``foxglove.LocationFixes`` topic of geo-located tracks, the set of track ids it carried (``track_ids``)."""
     import jsonschema
 
     counts: dict[str, int] = {}
@@ -46,6 +47,7 @@ def validate_recording(path: Path, robot: str, cameras: dict[str, dict]) -> dict
     calib: dict[str, list] = {}
     images: dict[str, list] = {}
     locations: set[str] = set()
+    track_ids: dict[str, set[int]] = {}  # geo-located tracks: fixes topic -> the track ids its LocationFixes carry
     validators: dict[int, object] = {}
     with open(path, "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
@@ -77,9 +79,15 @@ def validate_recording(path: Path, robot: str, cameras: dict[str, dict]) -> dict
             elif schema.name == "foxglove.CompressedImage":
                 assert decoded.format == "jpeg" and decoded.data[:2] == b"\xff\xd8"
                 images.setdefault(channel.topic, []).append(decoded)
-            elif schema.name == "foxglove.LocationFix" and "/tracks/" in channel.topic:
-                # a geo-located track (aerodaas.perception.track_records): the object's WGS-84 fix, with covariance
-                assert decoded.frame_id == "wgs84" and decoded.position_covariance_type != 0, channel.topic
+            elif schema.name == "foxglove.LocationFixes":
+                # geo-located tracks (aerodaas.perception.track_records): each track's WGS-84 fix, with covariance,
+                # its colour and its id in the metadata
+                assert channel.topic.endswith("/tracks/fixes"), channel.topic
+                for fix in decoded.fixes:
+                    meta = {kv.key: kv.value for kv in fix.metadata}
+                    assert fix.frame_id == "wgs84" and fix.position_covariance_type != 0, channel.topic
+                    assert fix.color.a > 0 and meta["track_id"].isdigit(), (channel.topic, meta)
+                    track_ids.setdefault(channel.topic, set()).add(int(meta["track_id"]))
             elif schema.name == "foxglove.LocationFix":
                 locations.add(decoded.frame_id)
     assert sum(counts.values()) == summary.statistics.message_count  # every message was decoded
@@ -103,4 +111,4 @@ def validate_recording(path: Path, robot: str, cameras: dict[str, dict]) -> dict
         assert list(c.K) == pytest.approx([f_px, 0, props["width"] / 2, 0, f_px, props["height"] / 2, 0, 0, 1])
         assert list(c.P) == pytest.approx([f_px, 0, props["width"] / 2, 0, 0, f_px, props["height"] / 2, 0, 0, 0, 1, 0])
         assert {i.frame_id for i in images[topic]} == {frame}
-    return {"counts": counts, "tf": sorted(tf)}
+    return {"counts": counts, "tf": sorted(tf), "track_ids": track_ids}

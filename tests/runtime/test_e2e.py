@@ -77,12 +77,16 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
     # checked against its channel's JSON Schema, transform tree and camera calibration (tests/recording/mcap_validation.py)
     cfg = json.loads((APPS / "vehicle_tracking.json").read_text())["robots"][0]
     cams = {s["id"]: s["properties"] for s in cfg["sensors"] if s["type"] == "camera"}
-    c = validate_recording(rec, "quadrotor_base", cams)["counts"]
+    checked = validate_recording(rec, "quadrotor_base", cams)
+    c = checked["counts"]
     assert c["/quadrotor_base/detector/detections"] > 50 and c["/quadrotor_base/follow/navigation"] > 0
     assert c["/quadrotor_base/camera/cam1/calibration"] == c["/quadrotor_base/camera/cam1"]
     # the follow tracks (issue 28): its geo-located tracks are recorded, the car's among them
     assert c["/quadrotor_base/follow/tracks/scene"] > 20 and c["/quadrotor_base/follow/tracks"] > 20, c
-    assert any(t.startswith("/quadrotor_base/follow/tracks/") and t.endswith("/fix") for t in c), c
+    # one LocationFixes topic for all of them (issue 47 item 4), a message per scene, the track ids in its fixes
+    assert c["/quadrotor_base/follow/tracks/fixes"] == c["/quadrotor_base/follow/tracks/scene"], c
+    assert not [t for t in c if t.endswith("/fix")], c
+    assert checked["track_ids"]["/quadrotor_base/follow/tracks/fixes"], checked["track_ids"]
 
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
