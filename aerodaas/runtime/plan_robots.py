@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor, VehicleStateSensor
+
 __all__ = ["PluginUse", "SensorUse", "RobotUse", "robot_uses"]
 
 
@@ -33,7 +35,7 @@ class PluginUse:
 @dataclass(frozen=True)
 class SensorUse:
     """One sensor of a robot: ``id``, ``type`` (``sensors[].type``), its plug-in ``origin``, ``delivery`` (how the
-    drone actor gets its readings: :class:`aerodaas.plugins.sensor.SensorDelivery` value) and ``component``: its
+    drone actor gets its readings: :func:`delivery_of`) and ``component``: its
     component id in the plan's graph, None when it feeds nothing and is not a camera or plug-in sensor."""
 
     id: str
@@ -80,6 +82,18 @@ def _use(kind: str, cls: type, name: str | None = None, origin: str | None = Non
     return PluginUse(name, origin, f"{cls.__module__}:{cls.__qualname__}")
 
 
+def delivery_of(sensor_cls: type) -> str:
+    """How the drone actor gets a sensor type's data, named by the sensor contract its class subclasses
+    (:mod:`aerodaas.plugins.sensor`): ``camera`` (a :class:`FrameSensor`), ``vehicle_state``
+    (:class:`VehicleStateSensor`), ``mission_status`` (:class:`MissionStatusSensor`), else ``sampled`` (its
+    :meth:`SensorPlugin.sample` at ``rate_hz``)."""
+    for base, name in ((FrameSensor, "camera"), (VehicleStateSensor, "vehicle_state"),
+                       (MissionStatusSensor, "mission_status")):
+        if issubclass(sensor_cls, base):
+            return name
+    return "sampled"
+
+
 def robot_uses(robots: list, scheds: dict[str, Any], components: set[str]) -> dict[str, RobotUse]:
     """Robot id -> its :class:`RobotUse`. ``robots``: the run's robots (:class:`aerodaas.app.api.Robot`, with
     ``cfg`` and ``sensors``); ``scheds``: robot id -> its trajectory scheduler object; ``components``: the ids of
@@ -96,7 +110,7 @@ def robot_uses(robots: list, scheds: dict[str, Any], components: set[str]) -> di
         for s in r.sensors.values():
             e, scls = registry.resolve("sensor", s.type), sensor_class(s.type)
             cid = ComponentId.sensor(r.id, s.id, scls.component_kind)
-            sensors.append(SensorUse(s.id, s.type, e.origin, scls.delivery.value,
+            sensors.append(SensorUse(s.id, s.type, e.origin, delivery_of(scls),
                                      cid if cid in components else None))
         out[r.id] = RobotUse(r.id, _use("backend", be.load(), be.name, be.origin),
                              _use("trajectory_scheduler", type(scheds[r.id])), tuple(sensors))

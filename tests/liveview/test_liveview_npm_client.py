@@ -104,7 +104,7 @@ def test_a_late_npm_client_gets_the_current_tracks_as_one_latched_location_fixes
     from aerodaas.perception.track_records import write_tracks
     from aerodaas.recording.writer import McapRecorder
 
-    from .test_live_and_foxglove import _decode_with
+    from tests.liveview.test_live_and_foxglove import _decode_with
 
     prefix = "/d1/tracks/tracks"
     srv = LiveServer("127.0.0.1:0", catchup_s=0.0)

@@ -262,7 +262,7 @@ def _declared_entry_points() -> dict[str, dict[str, str]]:
     import tomllib
     from pathlib import Path
 
-    doc = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text(encoding="utf-8"))
+    doc = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text(encoding="utf-8"))
     return {g: dict(eps) for g, eps in doc["project"]["entry-points"].items() if g.startswith("aerodaas.")}
 
 
@@ -328,7 +328,7 @@ def test_no_private_table_of_builtins_remains():
     """Done-criterion of issue 48.1, as the issue states it: no ``_BUILTIN_TARGETS`` or ``_BUILTIN_MODULES``."""
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     hits = [str(p) for d in ("aerodaas", "actors", "schedulers", "clusters") for p in (root / d).rglob("*.py")
             if "_BUILTIN_TARGETS" in p.read_text(encoding="utf-8") or "_BUILTIN_MODULES" in p.read_text(encoding="utf-8")]
     assert hits == []
