@@ -373,27 +373,33 @@ def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(mo
 
     wall = [1000.0]
     monkeypatch.setattr(time, "monotonic", lambda: wall[0])
-    link_ok, events = [True], []
-    clock = VehicleClock(MavlinkConfig(), link_ok=lambda: link_ok[0], live_since=lambda now: now,
-                         event=lambda name, **fields: events.append(name), lock=threading.RLock())
+    class Link:  # the link's HEARTBEAT watch (clock.py LinkHealth), its socket always read empty
+        link_ok = True
+
+        def live_since(self, now: float) -> float:
+            return now
+
+    link, events = Link(), []
+    clock = VehicleClock(MavlinkConfig(), lock=threading.RLock())
+    clock.watch(link)
     ms = 10_000
     for _ in range(50):  # 5 vehicle seconds per wall second
         wall[0] += 0.1
         ms += 500
-        clock.on_boot_ms(ms)
+        events += clock.on_boot_ms(ms)
     assert 4.5 < clock.ratio < 5.5
     wall[0] += 3.0  # silent: the heartbeat watch declares the link lost (link.py periodic)
-    link_ok[0] = False
+    link.link_ok = False
     clock.link_lost()
     wall[0] += 3.0
     t_silent = clock.t
     assert t_silent > 24.0 + 25.0  # 24.5 s of samples, then 6 s of silence extrapolated at 5x
-    link_ok[0] = True
+    link.link_ok = True
     wall[0] += 0.1
-    clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
+    events += clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
     assert t_silent <= clock.t < t_silent + 1.0
     wall[0] += 0.1
-    clock.on_boot_ms(ms + 1000)
+    events += clock.on_boot_ms(ms + 1000)
     assert t_silent + 0.3 < clock.t < t_silent + 1.5
     assert "vehicle_clock_resumed" in events
 
@@ -677,9 +683,10 @@ def test_long_statustext_chunks_are_joined(fly, autopilot, caplog):
     b.drain_events()
     exact = "".join(chr(65 + i % 26) for i in range(100))  # fills two chunks: an empty third one ends it
     emu.send_status_text(exact, M.MAV_SEVERITY_WARNING)
-    assert run_until(b, lambda: any(x["event"] == "status_text" for x in b._events), 3)
-    texts = [x for x in b.drain_events() if x["event"] == "status_text"]
-    assert [(x["text"], x["severity"]) for x in texts] == [(exact, "MAV_SEVERITY_WARNING")]
+    got: list = []
+    assert run_until(b, lambda: bool(got), 3,
+                     every=lambda: got.extend(x for x in b.drain_events() if x["event"] == "status_text"))
+    assert [(x["text"], x["severity"]) for x in got] == [(exact, "MAV_SEVERITY_WARNING")]
     emu.inject(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"x" * 50, 4242, 0))  # its last chunk never comes
     emu.inject(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"short one", 0, 0))
     texts: list = []

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections import deque
 from typing import Any, Literal, Sequence
 
 import numpy as np
@@ -14,10 +13,11 @@ from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
-from aerodaas.backends.mavlink.action import Readiness, VehicleAction
+from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.camera import CameraFinder
 from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.command import CommandProtocol
+from aerodaas.backends.mavlink.events import EventLog
 from aerodaas.backends.mavlink.fence import AutopilotFence
 from aerodaas.backends.mavlink.gimbal import GimbalConcern
 from aerodaas.backends.mavlink.link import MavlinkLink
@@ -27,7 +27,7 @@ from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
 from aerodaas.backends.mavlink.preflight import resolve_signing_key
 from aerodaas.backends.mavlink.signing import make_signing
 from aerodaas.backends.mavlink.statustext import StatusTexts
-from aerodaas.backends.mavlink.telemetry import Handler, VehicleTelemetry
+from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer, Wire
 from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
@@ -109,102 +109,74 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         return isinstance(self.cfg.target_system, int)
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
-        super().__init__(cfg.id, cfg.home)
+        """The concern objects, each given its collaborators (as MAVSDK composes a ``System`` of plugins: each is
+        made on the link and registers what it receives). Raises what :func:`make_signing` raises (key file)."""
         self.cfg: MavlinkConfig = self.options(cfg)
-        self.config_home: GeoPoint = cfg.home
         self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
-        self._events: deque[dict[str, Any]] = deque(maxlen=2000)  # every concern's events (_event, drain_events)
-        self._init_link()
+        #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
+        self.clock = VehicleClock(self.cfg, lock=self._lock)
+        #: every concern's events, stamped with the vehicle clock (events.py; drain_events)
+        self.events = EventLog(self.clock)
+        self._compose(cfg)
+        super().__init__(cfg.id, cfg.home)  # sets home: the telemetry's (the property below)
+        self.config_home: GeoPoint = cfg.home
+
+    def _compose(self, cfg) -> None:
+        """Make the concerns in the order of what each needs. ``cfg``: the robot's configuration."""
+        rid, ev, lock = cfg.id, self.events, self._lock
         #: the robot's flight-envelope limits (aerodaas.config.Limits), also set on the vehicle (params.py)
         self.limits = cfg.limits
         #: the robot's safety rules: its geofence becomes the vehicle's own (fence.py, ``mavlink.fence``)
         self.safety = cfg.safety
-        #: the parameter protocol (params.py), talking to the link through what it is given
-        self.parameters = ParameterProtocol(self.robot_id, self.cfg, send=self.link.send,
-                                            check_link=self.link.check_link, target=lambda: self.link.target,
-                                            is_px4=lambda: self.autopilot == "px4")
-        #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
-        self.commands = CommandProtocol(self.robot_id, self.cfg, send=self.link.send, check_link=self.link.check_link,
-                                        target=lambda: self.link.target, heartbeat=self,
-                                        boot_ms=lambda: self.clock.boot_ms, heartbeat_due=self.clock.heartbeat_due,
-                                        status_text_since=self.status_texts.since, mode_params=self.link.mode_params,
-                                        event=self._event)
-        #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
-        self.telemetry = VehicleTelemetry(self.robot_id, vehicle=self, on_boot_ms=self.clock.on_boot_ms,
-                                          sample_time=self.clock.sample_time, t_connect=lambda: self.clock.t_connect,
-                                          was_armed=lambda: self.link.was_armed, arming=lambda: self.actions.arming,
-                                          on_position=lambda: self.mission.on_position(),
-                                          on_gnss_speed=lambda *a: self.speed_limits.on_gnss_speed(*a),
-                                          event=self._event, lock=self._lock)
-        #: readiness, arming, disarming, take-off (action.py)
-        self.actions = VehicleAction(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
-                                     check_link=self.link.check_link, event=self._event, lock=self._lock,
-                                     readiness=self._readiness, home_for_flight=self.telemetry.home_for_flight,
-                                     fix_altitude_reference=self.telemetry.fix_altitude_reference,
-                                     stop_setpoints=self._stop_setpoints)
-        #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
-        self.offboard = OffboardControl(self.robot_id, self.cfg, vehicle=self, commands=self.commands,
-                                        actions=self.actions, send=self.link.send,
-                                        target=lambda: self.link.target, boot_ms_out=self.clock.boot_ms_out,
-                                        boot_ms=lambda: self.clock.boot_ms, live_since=lambda: self.clock.live_since,
-                                        last_heartbeat=lambda: self.link.last_heartbeat,
-                                        mode_changes=lambda: self.link.mode_changes,
-                                        failsafe_undelivered=lambda: self.link.failsafe_undelivered,
-                                        check_link=self.link.check_link, event=self._event, lock=self._lock)
-        #: the mission protocol's transfers (transfer.py), talking to the link through what it is given
-        self.transfers = MissionTransfer(self.robot_id, self.cfg, send=self.link.send,
-                                         check_link=self.link.check_link, target=lambda: self.link.target,
-                                         status_text_since=self.status_texts.since, event=self._event,
-                                         wire_version=lambda: getattr(self.link.port.mav, "WIRE_PROTOCOL_VERSION",
-                                                                      "2.0"))
-        #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
-        self.mission = AutopilotMission(self.robot_id, vehicle=self, commands=self.commands, transfers=self.transfers,
-                                        check_link=self.link.check_link, event=self._event, lock=self._lock,
-                                        pin_altitude_reference=self.actions.pin_altitude_reference)
-        #: the vehicle's own speed limits for ``limits``, over the parameter protocol (params.py)
-        self.speed_limits = SpeedLimits(self.robot_id, self.limits, params=self.parameters, vehicle=self,
-                                        event=self._event, lock=self._lock,
-                                        speed_commanded=lambda: self.offboard.speed_commanded,
-                                        change_speed_again=lambda: self.offboard.resend_speed())
-        #: the vehicle's own geofence and rally points (fence.py), over the parameter protocol and the transfers
-        self.fence = AutopilotFence(self.robot_id, self.cfg.fence, self.limits, self.safety, params=self.parameters,
-                                    transfers=self.transfers, autopilot=lambda: self.autopilot,
-                                    vehicle_time=lambda: self.t, check_link=self.link.check_link, event=self._event)
-        self._cameras = CameraFinder(self.link)  # camera protocol v2 (camera.py), fed by link.py dispatch
-        #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
-        self.gimbal = GimbalConcern(self, cfg.gimbal)
-        self.link.handlers = self._message_handlers()
-
-    def _init_link(self) -> None:
-        """The link's concerns: the status texts, the vehicle clock and the link itself (link.py). The link reaches
-        the concerns made after it (commands, transfers, cameras, offboard, gimbal) through the callables given."""
         #: the autopilot's status texts (statustext.py): reassembled, quoted in refusals, reported
-        self.status_texts = StatusTexts(self.robot_id, event=self._event)
-        #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
-        self.clock = VehicleClock(self.cfg, link_ok=lambda: self.link.link_ok,
-                                  live_since=lambda now: self.link.live_since(now), event=self._event, lock=self._lock)
+        self.status_texts = StatusTexts(rid, event=ev)
         #: MAVLink 2 signing with the vehicle's key (signing.py; NoSigning without ``mavlink.signing_key_file``)
-        self.signing = make_signing(self.cfg.signing_key_file, self.robot_id, self._event)
-        self.link = MavlinkLink(self.robot_id, self.cfg, clock=self.clock, texts=self.status_texts,  # link.py
-                                signing=self.signing, event=self._event,
-                                lock=self._lock, on_command_ack=lambda now, m: self.commands.on_command_ack(now, m),
-                                on_mission_message=lambda m: self.transfers.offer(m),
-                                on_component_message=lambda m: self._cameras.on_message(m),
-                                command_long=self.command_long, mode_asked=lambda: self.commands.mode_asked,
-                                setpoint=lambda: self.offboard.setpoint,
-                                send_setpoint=lambda sp, now: self.offboard.send_due(sp, now),
-                                stop_setpoints=lambda: self.offboard.stop_quiet(),
-                                loss_timeout_s=lambda: self.offboard.loss_timeout_s,
-                                extra_streams=lambda: self.gimbal.streams())
+        self.signing = make_signing(self.cfg.signing_key_file, rid, ev)
+        #: the link (link.py): connection, HEARTBEAT, the I/O thread that hands each message to its concern
+        self.link = MavlinkLink(rid, self.cfg, clock=self.clock, texts=self.status_texts, signing=self.signing,
+                                event=ev, lock=lock)
+        #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
+        self.commands = CommandProtocol(rid, self.cfg, link=self.link, clock=self.clock, texts=self.status_texts,
+                                        event=ev)
+        #: the parameter protocol (params.py)
+        self.parameters = ParameterProtocol(rid, self.cfg, link=self.link)
+        #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
+        self.telemetry = VehicleTelemetry(rid, cfg.home, link=self.link, clock=self.clock, event=ev,
+                                          lock=lock)
+        #: the vehicle's own speed limits for ``limits``, over the parameter protocol (params.py)
+        self.speed_limits = SpeedLimits(rid, self.limits, params=self.parameters, link=self.link, clock=self.clock,
+                                        telemetry=self.telemetry, event=ev, lock=lock)
+        #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
+        self.offboard = OffboardControl(rid, self.cfg, link=self.link, clock=self.clock, telemetry=self.telemetry,
+                                        speed_limits=self.speed_limits, commands=self.commands, event=ev, lock=lock)
+        #: readiness, arming, disarming, take-off (action.py)
+        self.actions = VehicleAction(rid, self.cfg, link=self.link, clock=self.clock, texts=self.status_texts,
+                                     commands=self.commands, telemetry=self.telemetry, offboard=self.offboard,
+                                     event=ev, lock=lock)
+        #: the mission protocol's transfers (transfer.py)
+        self.transfers = MissionTransfer(rid, self.cfg, link=self.link, texts=self.status_texts, event=ev)
+        #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
+        self.mission = AutopilotMission(rid, link=self.link, telemetry=self.telemetry, speed_limits=self.speed_limits,
+                                        commands=self.commands, transfers=self.transfers, actions=self.actions,
+                                        event=ev, lock=lock)
+        #: the vehicle's own geofence and rally points (fence.py), over the parameter protocol and the transfers
+        self.fence = AutopilotFence(rid, self.cfg.fence, self.limits, self.safety, params=self.parameters,
+                                    transfers=self.transfers, link=self.link, clock=self.clock, event=ev)
+        #: the cameras of the vehicle's system and their video streams (camera.py, camera protocol v2)
+        self.cameras = CameraFinder(self.link)
+        #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
+        self.gimbal = GimbalConcern(cfg.gimbal, commands=self.commands, telemetry=self.telemetry, clock=self.clock,
+                                    link=self.link)
 
-    def _message_handlers(self) -> dict[str, Handler]:
-        """The handler of each message type the I/O thread hands on under ``_lock`` (link.py ``dispatch``; HEARTBEAT,
-        STATUSTEXT, COMMAND_ACK and the mission protocol's messages are routed before this table)."""
-        return {**self.telemetry.handlers(), "PARAM_VALUE": self.parameters.on_param_value,
-                "MISSION_CURRENT": self.mission.on_mission_current,
-                "MISSION_ITEM_REACHED": self.mission.on_mission_item_reached,
-                "GIMBAL_DEVICE_ATTITUDE_STATUS": self.gimbal.on_message,
-                "GIMBAL_MANAGER_INFORMATION": self.gimbal.on_message}
+    @property
+    def home(self) -> GeoPoint:
+        """The ENU origin: the configured home until the autopilot reports its HOME_POSITION
+        (:attr:`VehicleTelemetry.home`)."""
+        return self.telemetry.home
+
+    @home.setter
+    def home(self, value: GeoPoint) -> None:
+        self.telemetry.home = value
 
     # the link (aerodaas.backends.mavlink.link.MavlinkLink) and the vehicle clock (clock.VehicleClock)
     def connect(self, timeout_s: float | None = None) -> None:
@@ -237,7 +209,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                 self.offboard.loss_timeout_s = float(got)
             else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
                 self.offboard.loss_timeout_s = max(1.0, self.clock.ratio)
-            self._event("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
+            self.events("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
                 self.apply_speed_limits()
@@ -264,21 +236,21 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                 try:
                     self.safe_end()
                 except Exception as e:  # noqa: BLE001 - closing must go on
-                    self._event("safe_end_failed", error=str(e))
+                    self.events("safe_end_failed", error=str(e))
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
             if self.cfg.fence.restore_on_close and self.fence.has_saved:
                 if self.link_ok and not self.armed:
                     self.restore_fence()
                 else:
-                    self._event("fence_not_restored", reason="link lost" if not self.link_ok else "still armed")
+                    self.events("fence_not_restored", reason="link lost" if not self.link_ok else "still armed")
             if self.cfg.restore_params and self.parameters.changed:
                 if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
-                    self._event("params_not_restored", reason="speed limit write in progress",
+                    self.events("params_not_restored", reason="speed limit write in progress",
                                 names=self.parameters.changed)
                 elif self.link_ok and not self.armed:
                     self.restore_parameters()
                 else:
-                    self._event("params_not_restored", reason="link lost" if not self.link_ok else "still armed",
+                    self.events("params_not_restored", reason="link lost" if not self.link_ok else "still armed",
                                 names=self.parameters.changed)
         self.link.close()
 
@@ -289,7 +261,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         if self.link.io_error is not None:
             raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self.link.io_error}")
         self.speed_limits.update()
-        self.speed_limits.resend_speed()
+        self.speed_limits.resend_speed(self.offboard)
 
     @property
     def t(self) -> float:
@@ -336,30 +308,16 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         """The flight mode from the latest HEARTBEAT, in pymavlink's names (``GUIDED``, ``OFFBOARD``, ``LOITER``...)."""
         return self.link.mode
 
-    # events of every concern, and the state the autopilot streams (aerodaas.backends.mavlink.telemetry)
-    def _event(self, event: str, **fields: Any) -> None:
-        self._events.append({"event": event, "t": round(self.t, 3), **fields})  # extrapolated while the link is down
-
+    # events of every concern (events.py EventLog), and the state the autopilot streams (telemetry.py)
     def drain_events(self) -> list[dict[str, Any]]:
         """See :meth:`~aerodaas.backends.base.VehicleBackend.drain_events`. Once an ``autopilot_failsafe`` event is
         handed out, targets may be sent again (the caller decides: ``mavlink.on_failsafe``; offboard.py)."""
-        out = []
-        while self._events:
-            try:
-                ev = self._events.popleft()
-            except IndexError:
-                break
-            out.append(ev)
+        out = self.events.drain()
+        for ev in out:
             if ev.get("event") == "autopilot_failsafe":
                 with self._lock:
                     self.link.failsafe_delivered()
         return out
-
-    def _readiness(self) -> Readiness:
-        """The reports readiness is judged from (:meth:`VehicleTelemetry.readiness` with the link's). Caller holds
-        ``_lock``."""
-        return self.telemetry.readiness(self.link.system_status, self.status_texts.ekf_using_gps,
-                                        self.link.ekf_report_unavailable)
 
     @property
     def position(self) -> np.ndarray:
@@ -452,7 +410,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def restore_parameters(self) -> dict[str, float]:
         """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them
         (:meth:`ParameterProtocol.restore`, reported as events). Returns what was restored. Never raises."""
-        return self.parameters.restore(self._event)
+        return self.parameters.restore(self.events)
 
     def xy_speed_cap(self) -> float:
         """The horizontal speed (m/s) the vehicle is limited to for the robot's ``limits.max_speed``
@@ -475,7 +433,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         self.actions.arm()
 
     def disarm(self) -> None:
-        """MAV_CMD_COMPONENT_ARM_DISARM(0); autopilots refuse it in flight (:meth:`VehicleAction.disarm`)."""
+        """MAV_CMD_COMPONENT_ARM_DISARM(0), our target stream stopped first; autopilots refuse it in flight
+        (:meth:`VehicleAction.disarm`)."""
         self.actions.disarm()
 
     def takeoff(self, altitude_m: float) -> None:
@@ -517,9 +476,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         """Leave the vehicle safe before the link closes (:meth:`OffboardControl.safe_end`); returns what was done."""
         return self.offboard.safe_end()
 
-    def _stop_setpoints(self) -> None:
-        self.offboard.stop()
-
     # the mission (aerodaas.backends.mavlink.mission.AutopilotMission)
     def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
                        final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
@@ -539,8 +495,8 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         """Fly the uploaded mission (:meth:`AutopilotMission.start`): our target stream stops first, and the vehicle
         is ours to bring down (:meth:`safe_end`)."""
         self._require_navigable("start_mission")
-        self._stop_setpoints()
-        self.actions.take_control()
+        self.offboard.stop()
+        self.offboard.take_control()
         self.mission.start()
 
     # the mission protocol's typed transfers (aerodaas.backends.mavlink.transfer.MissionTransfer)
@@ -582,7 +538,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         :class:`~aerodaas.video.discovery.StreamDiscoveryError` after ``request.timeout_s`` without one, LinkLost
         when the link is down."""
         self.link.check_link("camera discovery")
-        return self._cameras.discover(request, self.link.target[1])
+        return self.cameras.discover(request, self.link.target[1])
 
     # the gimbal (aerodaas.backends.mavlink.gimbal.GimbalConcern)
     def point_gimbal(self, cmd: Any) -> None:
