@@ -86,9 +86,9 @@ def dist(a, b) -> float:
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_connect_arm_takeoff_square_velocity_land_rtl(fly, autopilot):
     emu, b = fly(autopilot, params=RTL_PARAMS[autopilot])
-    assert b.autopilot == autopilot and b.vehicle_type == "MAV_TYPE_QUADROTOR"
+    assert b.autopilot == autopilot and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
     # HOME_POSITION replaces the configured home as ENU origin
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     assert abs(b.home.lat - VEHICLE_HOME.lat) < 1e-6 and abs(b.home.alt - VEHICLE_HOME.alt) < 0.01
     assert dist(b.position, (0, 0, 0)) < 0.2
     b.arm()
@@ -187,7 +187,7 @@ def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
     assert not b.armed and not emu.snapshot()["armed"]
     # an unknown command is UNSUPPORTED
     with pytest.raises(CommandRefused) as e:
-        b.command_long("bogus", 31999)
+        b.commands.command_long("bogus", 31999)
     assert e.value.result == "MAV_RESULT_UNSUPPORTED"
     emu.set_prearm_failure(None)
     b.arm()
@@ -197,9 +197,9 @@ def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_arm_before_gps_fix_is_refused(fly, autopilot):
     emu, b = fly(autopilot, gps_lock_s=1e6, mavlink={"arm_timeout_s": 0.2})
-    assert not b.home_received and b.gps_fix_type < 3
+    assert not b.telemetry.home_received and b.telemetry.gps_fix_type < 3
     if autopilot == "ardupilot":  # ArduCopter arms without GPS in STABILIZE; GUIDED needs it (mode change accepted)
-        b.set_mode("GUIDED")
+        b.commands.set_mode("GUIDED")
     with pytest.raises(CommandRefused) as e:
         b.arm()
     assert e.value.result == REFUSED[autopilot]
@@ -218,12 +218,12 @@ def test_ardupilot_takeoff_refused_when_disarmed(fly):
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_mission_round_trip_and_auto_flight(fly, autopilot):
     emu, b = fly(autopilot)
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     square = [Waypoint(id=f"wp{i}", x=x, y=y, z=6.0, hover_duration=2.0)
               for i, (x, y) in enumerate([(10, 0), (10, 10), (0, 10)])]
     sent = b.upload_mission(square, takeoff_altitude=6.0, final_action="land")
     assert [it.command for it in sent] == [22, 16, 16, 16, 21]
-    got = b.download_mission()
+    got = b.mission.download()
     assert got.items == sent
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)  # ArduPilot: home
     b.drain_events()
@@ -255,7 +255,7 @@ def test_imported_plan_round_trip(fly, autopilot):
     emu, b = fly(autopilot)
     sent = b.upload_mission(plan)
     assert len(sent) == len(plan.expanded_items())
-    assert b.download_mission().items == sent
+    assert b.mission.download().items == sent
     for s, p in zip(sent, plan.expanded_items()):
         assert s.command == p.command and s.frame == p.frame
         if p.params[4] is not None:
@@ -266,8 +266,8 @@ def test_imported_plan_round_trip(fly, autopilot):
 def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     """Single lost packets: the backend's bounded retries recover each, and nothing else is lost."""
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
-    assert run_until(b, lambda: b.home_received, 5)
-    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     emu.drop_next("COMMAND_ACK")  # the arm command's acknowledgement is lost: re-sent once, then acknowledged
     b.arm()
     assert b.armed and emu.snapshot()["commands_seen"].count(400) == 2
@@ -276,7 +276,7 @@ def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     sent = b.upload_mission(wps, final_action="land")
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)
     emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
-    assert b.download_mission().items == sent
+    assert b.mission.download().items == sent
     assert emu.dropped == [("out", "COMMAND_ACK"), ("in", "MISSION_COUNT"), ("out", "MISSION_ITEM_INT")]
     # the two the vehicle sent and the link lost are counted by their sequence numbers (on TCP nothing else is lost)
     events: list = []
@@ -291,11 +291,11 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     loaded machine: PX4 armed, no ACK arrived, the run died): the HEARTBEAT shows the mode / the armed flag, so
     the command is done (``command_ack_lost``); a command whose effect never shows still raises."""
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 1})
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     mode = "GUIDED" if autopilot == "ardupilot" else "LOITER"
     b.drain_events()
     emu.drop_next("COMMAND_ACK", count=2)
-    b.set_mode(mode)
+    b.commands.set_mode(mode)
     assert b.mode == mode
     emu.drop_next("COMMAND_ACK", count=2)
     b.arm()
@@ -311,7 +311,7 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     assert all(e["waited_s"] >= 0.3 for e in events if e["event"] == "command_resent")
     emu.drop_next("COMMAND_LONG", "in", count=2)  # the vehicle never hears it: no answer, no effect
     with pytest.raises(CommandNotAcknowledged, match="no COMMAND_ACK"):
-        b.set_mode("LAND")
+        b.commands.set_mode("LAND")
     assert b.mode == mode
 
 
@@ -484,7 +484,7 @@ def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopil
     b.arm()
     b.takeoff(3.0)
     assert run_until(b, lambda: b.position[2] > 2.7, 15), b.position
-    assert b.home_received and b.gps_fix_type == 3 and b.in_air
+    assert b.telemetry.home_received and b.telemetry.gps_fix_type == 3 and b.in_air
 
 
 @pytest.mark.realtime  # the stream's gaps in vehicle time: a starved sender stretches them (0.58 s at load 10-16)
@@ -540,7 +540,7 @@ def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
     from pymavlink.dialects.v20 import ardupilotmega as M
 
     emu, b = fly("ardupilot", mavlink={"heartbeat_timeout_s": 1.0})
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     b.drain_events()
     enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # the vehicle's own ids
     rtl_armed = enc.heartbeat_encode(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -552,12 +552,12 @@ def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
     unknown = _frame_v2(0xBEEF1, b"\x01\x02\x03\x04\x05", seq=7)
     rng = np.random.default_rng(5)
     garbage = bytes(rng.integers(0, 256, 300, dtype=np.uint8)) + b"\xfd\xff\x00" + b"\xfe\x09"
-    n0, t0 = b.messages_received, b.t
+    n0, t0 = b.link.messages_received, b.t
     for _ in range(5):
         for data in (garbage, bad_crc, truncated, unknown):
             emu.inject(data)
             time.sleep(0.02)
-    assert run_until(b, lambda: b.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
+    assert run_until(b, lambda: b.link.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
     assert emu.snapshot()["links"] == 1 and b.link_ok and b.link.io_alive
     b.step(0.05)  # raises if the I/O thread failed
     events = b.drain_events()
@@ -578,11 +578,11 @@ def test_accepted_but_never_shown_mode_or_arming_raises(fly, autopilot):
 
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.5, "heartbeat_timeout_s": 1.0},
                  ack_only_commands={M.MAV_CMD_DO_SET_MODE})
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     first, target = ("STABILIZE", "GUIDED") if autopilot == "ardupilot" else ("MANUAL", "LOITER")
     t0 = time.monotonic()
     with pytest.raises(CommandNotConfirmed) as e:
-        b.set_mode(target)
+        b.commands.set_mode(target)
     assert 0.9 < time.monotonic() - t0 < 30.0  # at least max(command_timeout_s, heartbeat_timeout_s), not forever
     assert e.value.expected == f"mode {target}" and e.value.observed == f"mode {first}, disarmed"
     assert f"mode {target}" in str(e.value) and f"shows mode {first}" in str(e.value)
@@ -604,8 +604,8 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     from pymavlink.dialects.v20 import ardupilotmega as M
 
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
-    assert run_until(b, lambda: b.home_received, 5)
-    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     arm = M.MAV_CMD_COMPONENT_ARM_DISARM
     emu.reject_next(arm, 2)
     b.drain_events()
@@ -618,7 +618,7 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     emu.reject_next(speed, 5)
     t0 = time.monotonic()
     with pytest.raises(CommandRefused) as e:
-        b.command_long("change speed", speed, 1, 1.5, -1)
+        b.commands.command_long("change speed", speed, 1, 1.5, -1)
     assert e.value.result == "MAV_RESULT_TEMPORARILY_REJECTED"
     assert e.value.status_text == "Command temporarily rejected: busy"
     assert emu.snapshot()["commands_seen"].count(speed) == 3 and time.monotonic() - t0 < 30.0  # bounded tries
@@ -629,7 +629,7 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     def call() -> None:
         t = time.monotonic()
         try:
-            b.command_long("change speed", speed, 1, 1.5, -1)
+            b.commands.command_long("change speed", speed, 1, 1.5, -1)
         except BaseException as exc:  # noqa: BLE001 - examined below
             box["error"] = exc
         box["s"] = time.monotonic() - t
@@ -649,10 +649,10 @@ def test_mission_round_trip_with_older_firmware_using_mission_item(fly, autopilo
     degrees): upload answers its MISSION_REQUESTs and download accepts its MISSION_ITEM replies, on the same
     1e-7 degree grid, equal to what was sent within float32 precision."""
     emu, b = fly(autopilot, mission_int=False)
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     wps = [Waypoint(id=f"w{i}", x=x, y=y, z=5.0, hover_duration=1.0) for i, (x, y) in enumerate([(12, 3), (-7, 25)])]
     sent = b.upload_mission(wps, takeoff_altitude=5.0, final_action="land")
-    got = b.download_mission().items
+    got = b.mission.download().items
     assert len(got) == len(sent) == 4
     for s_, g in zip(sent, got):
         assert (g.seq, g.command, g.frame, g.autocontinue) == (s_.seq, s_.command, s_.frame, s_.autocontinue)
@@ -850,22 +850,22 @@ def test_real_px4_tlog_through_the_receive_path():
     b = MavlinkBackend(cfg)
     try:
         b.connect(timeout_s=20)
-        assert b.autopilot == "px4" and b.vehicle_type == "MAV_TYPE_QUADROTOR"
+        assert b.autopilot == "px4" and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
         assert done.wait(30)
         from aerodaas.backends.mavlink import shared_link
 
         link = shared_link.links()[cfg.mavlink.link_key()]
         seen = -1
-        while seen != (link.messages, b.messages_received):  # until the receive path has drained the socket
-            seen = (link.messages, b.messages_received)
+        while seen != (link.messages, b.link.messages_received):  # until the receive path has drained the socket
+            seen = (link.messages, b.link.messages_received)
             time.sleep(0.5)
         # the link read every packet; the robot got its own vehicle's (system id 1: 18905 of them; the ground
         # station's 255, a companion's 51 and unparsed ids go elsewhere)
-        assert link.messages > 30000 and b.messages_received > 18000, (link.messages, b.messages_received)
+        assert link.messages > 30000 and b.link.messages_received > 18000, (link.messages, b.link.messages_received)
         b.step(0.1)  # raises if the I/O thread failed
         events = b.drain_events()
         assert not [e for e in events if e["event"] == "receive_error"]
-        assert b.home_received and abs(b.home.lat - 43.7) < 0.3 and abs(b.home.lon + 72.2) < 0.5
+        assert b.telemetry.home_received and abs(b.home.lat - 43.7) < 0.3 and abs(b.home.lon + 72.2) < 0.5
         odo = b.odometry()
         e, n, _ = geodetic_to_enu(odo.geodetic.lat, odo.geodetic.lon, b.home.alt, b.home)
         assert abs(odo.position[0] - e) < 0.01 and abs(odo.position[1] - n) < 0.01

@@ -10,7 +10,7 @@ from typing import Any, Literal, Sequence
 import numpy as np
 
 from aerodaas.config import MavlinkConfig
-from aerodaas.missionfile import MissionItem, MissionPlan
+from aerodaas.missionfile import MissionItem
 from aerodaas.model.types import GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
 from aerodaas.backends.mavlink.action import VehicleAction
@@ -28,8 +28,7 @@ from aerodaas.backends.mavlink.preflight import resolve_signing_key
 from aerodaas.backends.mavlink.signing import make_signing
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
-from aerodaas.backends.mavlink.transfer import MissionTransfer, Wire
-from aerodaas.navigation.geofence import GeofenceConfig
+from aerodaas.backends.mavlink.transfer import MissionTransfer
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
 
 
@@ -39,11 +38,17 @@ class MavlinkBackend(VehicleBackend):
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
     until a timestamped message arrives; while the link is lost it runs on from the last sample at the measured
     vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
-    home until the vehicle reports one). Besides the :class:`VehicleBackend` contract it offers
-    :meth:`upload_mission`, :meth:`download_mission`, :meth:`start_mission`, :meth:`clear_mission`,
-    :meth:`set_mode`, :meth:`apply_fence` / :meth:`upload_rally` / :meth:`restore_fence` (the vehicle's own geofence,
-made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) and the attributes :attr:`autopilot` (``"ardupilot"``/``"px4"``), :attr:`mode`,
-    :attr:`gps_fix_type`, :attr:`command_rtt_ms` (acknowledged command round trips, wall milliseconds).
+    home until the vehicle reports one). Besides the :class:`VehicleBackend` contract (with the optional members
+    :meth:`upload_mission` / :meth:`start_mission` for ``flies_uploaded_mission``, :meth:`release`,
+    :meth:`safe_end`, :meth:`discover_video_stream`) and the attributes :attr:`autopilot`
+    (``"ardupilot"``/``"px4"``) and :attr:`mode`, the MAVLink concerns are its public members, used directly:
+    ``commands`` (COMMAND_LONG/INT, ``set_mode``, ``rtt_ms``), ``parameters`` (``read``/``set``/``restore``),
+    ``speed_limits``, ``mission`` (``upload``/``download``/``clear``/``start``), ``transfers`` (typed mission,
+    fence and rally items), ``fence`` (``apply``/``upload_rally``/``restore``: the vehicle's own geofence, made the
+    robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``), ``actions`` (``not_ready_reasons``),
+    ``offboard``, ``telemetry`` (``home_received``, ``gps_fix_type``, ``altitude_reference``), ``link``
+    (``vehicle_type``, ``failsafe``, ``messages_received``), ``clock``, ``events``, ``status_texts``,
+    ``cameras``, ``gimbal`` (package docstring).
     Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
     (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
     DEBUG).
@@ -158,7 +163,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
         self.mission = AutopilotMission(rid, link=self.link, telemetry=self.telemetry, speed_limits=self.speed_limits,
                                         commands=self.commands, transfers=self.transfers, actions=self.actions,
-                                        event=ev, lock=lock)
+                                        offboard=self.offboard, event=ev, lock=lock)
         #: the vehicle's own geofence and rally points (fence.py), over the parameter protocol and the transfers
         self.fence = AutopilotFence(rid, self.cfg.fence, self.limits, self.safety, params=self.parameters,
                                     transfers=self.transfers, link=self.link, clock=self.clock, event=ev)
@@ -204,7 +209,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
             self.clock.start()
             self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
         if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
-            got = self.read_parameters(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
+            got = self.parameters.read(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
                 self.offboard.loss_timeout_s = float(got)
             else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
@@ -212,13 +217,13 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
             self.events("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
-                self.apply_speed_limits()
+                self.speed_limits.apply()
             except BaseException:
                 self.close(safe_end=False)
                 raise
         if self.cfg.fence.upload and not self.safety.geofence.is_empty:
             try:  # the autopilot's own fence, the second line behind our gate (fence.py)
-                self.apply_fence()
+                self.fence.apply()
             except BaseException:
                 self.close(safe_end=False)
                 raise
@@ -240,7 +245,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
             if self.cfg.fence.restore_on_close and self.fence.has_saved:
                 if self.link_ok and not self.armed:
-                    self.restore_fence()
+                    self.fence.restore()
                 else:
                     self.events("fence_not_restored", reason="link lost" if not self.link_ok else "still armed")
             if self.cfg.restore_params and self.parameters.changed:
@@ -248,7 +253,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
                     self.events("params_not_restored", reason="speed limit write in progress",
                                 names=self.parameters.changed)
                 elif self.link_ok and not self.armed:
-                    self.restore_parameters()
+                    self.parameters.restore(self.events)
                 else:
                     self.events("params_not_restored", reason="link lost" if not self.link_ok else "still armed",
                                 names=self.parameters.changed)
@@ -277,21 +282,6 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def autopilot(self) -> Literal["ardupilot", "px4"] | None:
         """``"ardupilot"`` / ``"px4"`` once connected (:attr:`MavlinkLink.autopilot`)."""
         return self.link.autopilot
-
-    @property
-    def vehicle_type(self) -> str:
-        """The HEARTBEAT's MAV_TYPE name (:attr:`MavlinkLink.vehicle_type`)."""
-        return self.link.vehicle_type
-
-    @property
-    def messages_received(self) -> int:
-        """Every message the receive path saw, unknown and malformed ones included."""
-        return self.link.messages_received
-
-    @property
-    def failsafe(self) -> dict[str, Any] | None:
-        """The autopilot's failsafe, when it entered one by itself (:attr:`MavlinkLink.failsafe`)."""
-        return self.link.failsafe
 
     @property
     def armed(self) -> bool:
@@ -345,25 +335,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         return self.telemetry.battery_pct
 
     @property
-    def gps_fix_type(self) -> int:
-        """:attr:`VehicleTelemetry.gps_fix_type`."""
-        return self.telemetry.gps_fix_type
-
-    @property
     def position_accuracy_m(self) -> float:
         """The GNSS receiver's horizontal accuracy (:attr:`VehicleTelemetry.gps_h_acc_m`, GPS_RAW_INT ``h_acc``);
         0 when the vehicle reports none."""
         return self.telemetry.gps_h_acc_m
-
-    @property
-    def home_received(self) -> bool:
-        """:attr:`VehicleTelemetry.home_received`."""
-        return self.telemetry.home_received
-
-    @property
-    def altitude_reference(self) -> float | None:
-        """:attr:`VehicleTelemetry.altitude_reference`."""
-        return self.telemetry.altitude_reference
 
     @property
     def sample_key(self) -> int:
@@ -378,56 +353,7 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         """:meth:`VehicleTelemetry.drain_odometry`."""
         return self.telemetry.drain_odometry(newest_only)
 
-    # the command protocol (aerodaas.backends.mavlink.command.CommandProtocol)
-    def command_long(self, name: str, command: int, *params: float, retries: int | None = None,
-                     timeout_s: float | None = None) -> None:
-        """COMMAND_LONG ``command`` with its COMMAND_ACK awaited (:meth:`CommandProtocol.command_long`)."""
-        self.commands.command_long(name, command, *params, retries=retries, timeout_s=timeout_s)
-
-    def command_int(self, name: str, command: int, frame: int, params: tuple[float, float, float, float], x: int,
-                    y: int, z: float, retries: int | None = None, timeout_s: float | None = None) -> None:
-        """COMMAND_INT ``command`` with its COMMAND_ACK awaited (:meth:`CommandProtocol.command_int`)."""
-        self.commands.command_int(name, command, frame, params, x, y, z, retries=retries, timeout_s=timeout_s)
-
-    def set_mode(self, name: str, confirm_s: float | None = None) -> None:
-        """Switch to flight mode ``name``, confirmed by the HEARTBEAT (:meth:`CommandProtocol.set_mode`)."""
-        self.commands.set_mode(name, confirm_s)
-
-    @property
-    def command_rtt_ms(self) -> list[float]:
-        """Acknowledged command round trips, wall milliseconds (:attr:`CommandProtocol.rtt_ms`)."""
-        return self.commands.rtt_ms
-
-    # parameters (aerodaas.backends.mavlink.params: ParameterProtocol, SpeedLimits)
-    def read_parameters(self, names: list[str], wait_s: float | None = None) -> dict[str, float]:
-        """:meth:`ParameterProtocol.read`."""
-        return self.parameters.read(names, wait_s)
-
-    def set_parameter(self, name: str, value: float, wait_s: float | None = None, integer: bool = False) -> float:
-        """:meth:`ParameterProtocol.set`."""
-        return self.parameters.set(name, value, wait_s, integer)
-
-    def restore_parameters(self) -> dict[str, float]:
-        """Put back the values the vehicle had before :meth:`apply_speed_limits` changed them
-        (:meth:`ParameterProtocol.restore`, reported as events). Returns what was restored. Never raises."""
-        return self.parameters.restore(self.events)
-
-    def xy_speed_cap(self) -> float:
-        """The horizontal speed (m/s) the vehicle is limited to for the robot's ``limits.max_speed``
-        (:meth:`SpeedLimits.xy_speed_cap`)."""
-        return self.speed_limits.xy_speed_cap()
-
-    def apply_speed_limits(self) -> dict[str, float]:
-        """Make the vehicle's own speed limits the robot's ``limits`` (:meth:`SpeedLimits.apply`); returns the
-        verified values (firmware units)."""
-        return self.speed_limits.apply()
-
     # readiness, arming, take-off (aerodaas.backends.mavlink.action.VehicleAction)
-    def not_ready_reasons(self) -> list[str]:
-        """What the autopilot's own reports say is still missing before it can arm in a guided mode
-        (:meth:`VehicleAction.not_ready_reasons`); empty when ready. Never blocks."""
-        return self.actions.not_ready_reasons()
-
     def arm(self) -> None:
         """Arm for a guided flight, bounded by ``arm_timeout_s`` (:meth:`VehicleAction.arm`)."""
         self.actions.arm()
@@ -483,53 +409,11 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
         as sent."""
         return self.mission.upload(mission, takeoff_altitude=takeoff_altitude, final_action=final_action)
 
-    def download_mission(self) -> MissionPlan:
-        """Download the autopilot's mission (:meth:`AutopilotMission.download`)."""
-        return self.mission.download()
-
-    def clear_mission(self) -> None:
-        """MISSION_CLEAR_ALL; waits for MISSION_ACK (:meth:`AutopilotMission.clear`)."""
-        self.mission.clear()
-
     def start_mission(self) -> None:
         """Fly the uploaded mission (:meth:`AutopilotMission.start`): our target stream stops first, and the vehicle
         is ours to bring down (:meth:`safe_end`)."""
         self._require_navigable("start_mission")
-        self.offboard.stop()
-        self.offboard.take_control()
         self.mission.start()
-
-    # the mission protocol's typed transfers (aerodaas.backends.mavlink.transfer.MissionTransfer)
-    def upload_items(self, mission_type: int, wire: list[Wire]) -> None:
-        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.upload_items`."""
-        self.transfers.upload_items(mission_type, wire)
-
-    def download_items(self, mission_type: int) -> list[Wire]:
-        """:meth:`~aerodaas.backends.mavlink.transfer.MissionTransfer.download_items`."""
-        return self.transfers.download_items(mission_type)
-
-    # the vehicle's fence (aerodaas.backends.mavlink.fence.AutopilotFence)
-    def fence_parameters(self, fence: GeofenceConfig, have: dict[str, float] | None = None) \
-            -> dict[str, tuple[float, bool]]:
-        """The fence parameters for ``fence`` on this autopilot (:meth:`AutopilotFence.fence_parameters`)."""
-        return self.fence.fence_parameters(fence, have)
-
-    def apply_fence(self, fence: GeofenceConfig | None = None) -> dict[str, Any]:
-        """Make ``fence`` (default ``safety.geofence``) the vehicle's own, verified (:meth:`AutopilotFence.apply`)."""
-        return self.fence.apply(fence)
-
-    def upload_rally(self, points: list[tuple[float, float, float]]) -> int:
-        """Upload rally points and read them back (:meth:`AutopilotFence.upload_rally`); returns how many."""
-        return self.fence.upload_rally(points)
-
-    def restore_fence(self) -> bool:
-        """Put back the vehicle's fence from before :meth:`apply_fence` (:meth:`AutopilotFence.restore`)."""
-        return self.fence.restore()
-
-    @property
-    def fence_applied(self) -> dict[str, Any] | None:
-        """What :meth:`apply_fence` verified, or None (:attr:`AutopilotFence.applied`)."""
-        return self.fence.applied
 
     def discover_video_stream(self, request: Any) -> Any:
         """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with

@@ -16,6 +16,7 @@ from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
 from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import SpeedLimits
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer
@@ -36,7 +37,8 @@ class AutopilotMission:
     :meth:`on_mission_current` and :meth:`on_mission_item_reached` with it), ``telemetry`` (home, position, in the
     air, altitude reference; it feeds :meth:`on_position`), ``speed_limits`` (the horizontal speed limit),
     ``commands`` (the command protocol: mode change, MAV_CMD_MISSION_START), ``transfers`` (the mission protocol's
-    exchanges), ``actions`` (fixes the altitude reference where the vehicle stands and keeps it for the next
+    exchanges), ``offboard`` (our target stream stops when the mission starts, and the vehicle is ours to bring
+    down), ``actions`` (fixes the altitude reference where the vehicle stands and keeps it for the next
     arming: an uploaded mission's altitudes refer to it), ``event`` (records a backend event) and ``lock`` (the
     backend's lock, which guards the progress state; the I/O thread holds it while it feeds the handlers).
 
@@ -45,10 +47,10 @@ class AutopilotMission:
 
     def __init__(self, robot_id: str, *, link: MavlinkLink, telemetry: VehicleTelemetry, speed_limits: SpeedLimits,
                  commands: CommandProtocol, transfers: MissionTransfer, actions: VehicleAction,
-                 event: Callable[..., None], lock: threading.RLock) -> None:
+                 offboard: OffboardControl, event: Callable[..., None], lock: threading.RLock) -> None:
         self.robot_id = robot_id
         self._link, self._telemetry, self._speed_limits = link, telemetry, speed_limits
-        self._commands, self._transfers, self._actions = commands, transfers, actions
+        self._commands, self._transfers, self._actions, self._offboard = commands, transfers, actions, offboard
         self._event, self._lock = event, lock
         self._waypoints: dict[int, tuple[float, float, float]] = {}  # wire seq -> (east, north, arrival radius m)
         #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
@@ -223,7 +225,11 @@ class AutopilotMission:
     def start(self) -> None:
         """Fly the uploaded mission: in the air switch to AUTO (ArduPilot) / MISSION (PX4); on the ground (armed)
         MAV_CMD_MISSION_START, which starts it from the first item (ArduPilot needs a NAV_TAKEOFF first; PX4
-        takes off by itself). Progress arrives as ``mission_current`` / ``mission_item_reached`` events."""
+        takes off by itself). Our target stream stops first, and the vehicle is ours to bring down
+        (:attr:`OffboardControl.in_control`). Progress arrives as ``mission_current`` / ``mission_item_reached``
+        events. Raises as :meth:`CommandProtocol.command_long` / :meth:`CommandProtocol.set_mode`."""
+        self._offboard.stop()
+        self._offboard.take_control()
         if self._telemetry.in_air:
             self._commands.set_mode("MISSION" if self._link.autopilot == "px4" else "AUTO")
         else:
