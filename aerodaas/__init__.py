@@ -17,6 +17,7 @@ from aerodaas.model.types import (ActionCommand, AeroNavigation, Detection, Navi
 from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
 from aerodaas.analytics.track import TrackAnalytics
 from aerodaas.perception.tracking import ByteTrackConfig
+from aerodaas.analytics.motion import MovingTarget
 
 IEnvironment, IRobot, ISensor, ICompute = Environment, Robot, Sensor, ComputeResource
 AeroNav = AeroNavigation
@@ -29,4 +30,5 @@ __all__ = [
     "NavigationType", "SchedulingType", "PriorityQueue", "Waypoint", "VelocityCommand", "Odometry", "Detection",
     "MissionState", "IllegalTransition", "ConfigError", "TrajectoryScheduler", "NearestNeighborScheduler",
     "INavigate", "TwoOptScheduler", "ActionCommand", "TrackAnalytics", "ByteTrackConfig",
+    "MovingTarget",
 ]
