@@ -36,6 +36,7 @@ _ORIGIN: dict[str, tuple[str, str]] = {
     "INavigate": ("aerodaas.schedulers", "TrajectoryScheduler"),
     "TrackAnalytics": ("aerodaas.analytics.track", "TrackAnalytics"),
     "ByteTrackConfig": ("aerodaas.perception.tracking", "ByteTrackConfig"),
+    "MovingTarget": ("aerodaas.analytics.motion", "MovingTarget"),
 }
 
 __all__ = [
@@ -45,6 +46,7 @@ __all__ = [
     "NavigationType", "SchedulingType", "PriorityQueue", "Waypoint", "VelocityCommand", "Odometry", "Detection",
     "MissionState", "IllegalTransition", "ConfigError", "TrajectoryScheduler", "NearestNeighborScheduler",
     "INavigate", "TwoOptScheduler", "ActionCommand", "TrackAnalytics", "ByteTrackConfig",
+    "MovingTarget",
 ]
 
 
@@ -67,6 +69,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # what type checkers and IDEs read: the eager imports the lazy table mirrors
     from aerodaas.analytics.core import (Analytics, FollowAnalytics, IAnalyse, INavigableAnalyse,  # noqa: F401
                                          MonitoringAnalytics, NavigableAnalytics, ObjectDetector)
+    from aerodaas.analytics.motion import MovingTarget  # noqa: F401
     from aerodaas.analytics.track import TrackAnalytics  # noqa: F401
     from aerodaas.app.api import ComputeResource, Environment, Robot, Sensor  # noqa: F401
     from aerodaas.config import ConfigError  # noqa: F401

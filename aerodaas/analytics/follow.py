@@ -8,6 +8,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from aerodaas.analytics.base import NavigableAnalytics
+from aerodaas.analytics.motion import MovingTarget, TrackMotion
 from aerodaas.model.types import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
 from aerodaas.perception.track_records import TrackRecording
 
@@ -35,6 +36,7 @@ class FollowTrack:
     last_frame_t: float | None = None
     tracker: Any = None  # this drone's ByteTracker (FollowAnalytics(tracker=...)), None: gated nearest detection
     target_id: int | None = None  # the track id followed (with a tracker)
+    motion: TrackMotion | None = None  # the tracks' recent ground fixes (FollowAnalytics(moving=...))
 
     def saw_frame(self, t: float, longest_gap_s: float) -> None:
         """Note a frame captured at sim time ``t`` (s): ``frame_interval_s`` follows the gaps between frames with
@@ -85,6 +87,12 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
     ``gate_m`` is adopted. ``None`` (default): the gated nearest detection of each frame, as before. With a tracker
     the drone's tracks are also recorded in a run (:mod:`aerodaas.perception.track_records`, under
     ``/{robot}/{name}/tracks``: image annotations with the track ids, a 3-D scene and the tracks' ``LocationFixes``).
+
+    ``moving``: a :class:`aerodaas.analytics.motion.MovingTarget` (needs ``tracker``) adopts only a track whose
+    ground speed over the rule's window is at least its ``min_speed_mps`` (0.5 m/s by default): an aerial detector
+    also sees the parked cars, and without it the first confident parked car was followed (issue 46). A track too
+    new to have a speed is not adopted yet; the adopted one is kept while it is seen, even when it stops.
+    ValueError for ``moving`` without ``tracker`` or with a bad threshold (naming the field and the value).
     """
 
     name = "follow"
@@ -93,10 +101,16 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
     def __init__(self, target_classes: Iterable[str] = ("car", "truck", "bus"), kp: float = 0.8, ki: float = 0.02,
                  kd: float = 0.1, max_speed: float = 4.0, command_duration: float = 0.5, gate_m: float = 4.0,
                  confirm_hits: int = 2, lost_after: float = 2.0, standoff_m: float = 0.0,
-                 name: str | None = None, tracker: Any = None) -> None:
+                 name: str | None = None, tracker: Any = None, moving: MovingTarget | None = None) -> None:
         super().__init__(name)
         if tracker is not None:
             tracker.check()
+        if moving is not None:
+            if tracker is None:
+                raise ValueError("FollowAnalytics.moving needs tracker=ByteTrackConfig(...): a track's speed comes "
+                                 "from its geo-located fixes under one track id")
+            moving.check()
+        self.moving = moving
         self.tracker = tracker
         self.standoff_m = float(standoff_m)
         self.target_classes = set(target_classes)
@@ -141,21 +155,9 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
             if g is not None:
                 cands.append((d, np.array(g)))
                 ids.append(tid)
-        pred = None if st.track is None else st.track + st.track_v * (t - st.track_t)
-        best = None
-        coasting = (st.target_id is not None and st.target_id not in ids
-                    and any(tr.track_id == st.target_id for tr in st.tracker.tracks))
-        if st.target_id is not None and st.target_id in ids:  # the followed track is seen: keep it
-            best = cands[ids.index(st.target_id)]
-        elif coasting:  # hidden but still alive in ByteTrack (lost, within its buffer): adopt no other object
-            best = None
-        elif cands:
-            if pred is None:
-                best = max(cands, key=lambda c: c[0].score)
-            else:
-                c = min(cands, key=lambda c: float(np.linalg.norm(c[1] - pred)))
-                if np.linalg.norm(c[1] - pred) <= self.gate_m:
-                    best = c
+        if self.moving is not None:
+            self._note_motion(st, cands, ids, meta)
+        best = self._choose(st, cands, ids, t)
         if best is not None:
             if self.tracker is not None:
                 st.target_id = ids[next(i for i, c in enumerate(cands) if c is best)]
@@ -193,6 +195,37 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
         cmd = VelocityCommand(id=f"follow-{meta.seq}", vx=float(v[0]), vy=float(v[1]), vz=0.0,
                               duration=self.duration_for(st), issued_at=t)
         return AeroNavigation(NavigationType.ANALYTICS_DRIVEN, [cmd], SchedulingType.ORDERED, name="follow")
+
+    def _choose(self, st: FollowTrack, cands: list, ids: list, t: float):
+        """This frame's target among ``cands`` ((detection, ENU xy) by track id ``ids``; ids None without a
+        tracker) at capture time ``t`` (s), or None: the followed track id while it is seen; nothing while it coasts
+        in ByteTrack's buffer; otherwise, among the candidates :attr:`moving` allows (all without it), the most
+        confident when nothing was followed, else the nearest to the predicted position within ``gate_m``."""
+        if st.target_id is not None and st.target_id in ids:  # the followed track is seen: keep it
+            return cands[ids.index(st.target_id)]
+        if st.target_id is not None and any(tr.track_id == st.target_id for tr in st.tracker.tracks):
+            return None  # hidden but still alive in ByteTrack (lost, within its buffer): adopt no other object
+        eligible = cands if self.moving is None else [c for c, tid in zip(cands, ids) if st.motion.is_moving(tid)]
+        if not eligible:
+            return None
+        if st.track is None:
+            return max(eligible, key=lambda c: c[0].score)
+        pred = st.track + st.track_v * (t - st.track_t)
+        c = min(eligible, key=lambda c: float(np.linalg.norm(c[1] - pred)))
+        return c if np.linalg.norm(c[1] - pred) <= self.gate_m else None
+
+    def _note_motion(self, st: FollowTrack, cands: list, ids: list, meta: FrameMeta) -> None:
+        """Add this frame's ground fixes (``cands``: (detection, ENU xy) by track id ``ids``) to the drone's
+        :class:`TrackMotion`, leaving out boxes within the rule's ``border_px`` of the image edge (cut boxes slide
+        with the drone), and forget the tracks its tracker no longer holds."""
+        if st.motion is None:
+            st.motion = TrackMotion(self.moving)
+        w, h, m = meta.intrinsics.width, meta.intrinsics.height, self.moving.border_px
+        for (d, g), tid in zip(cands, ids):
+            x0, y0, x1, y1 = d.box
+            if x0 > m and y0 > m and x1 < w - m and y1 < h - m:
+                st.motion.add(tid, meta.capture_time, g)
+        st.motion.forget_except({tr.track_id for tr in st.tracker.tracks})
 
     def _longest_command_s(self) -> float:
         """The most a command is stretched to (s): ``lost_after``, and at most 4 x ``command_duration``."""

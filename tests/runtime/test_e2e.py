@@ -69,6 +69,9 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
     assert m["detection_rate"] >= 0.80, m
     assert m["switch_delay_s"] is not None and m["switch_delay_s"] <= 2.0, m
     assert m["time_within_5m_s"] >= 20.0, m
+    # the followed track is the moving car, not one of the parked cars the aerial model also finds (issue 46): the
+    # drone stays over the driving car (ground truth from the recording), whose path runs 30 m past the car park
+    assert m["tracking_error_m"]["median"] <= 2.0, m
     # the survey resumed after the car left: a waypoint was completed after tracking ended
     done = [e["t"] for e in run["events"] if e["event"] == "waypoint_done"]
     assert m["tracking_ended_t"] is not None and max(done) > m["tracking_ended_t"]
