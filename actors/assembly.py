@@ -17,6 +17,7 @@ from typing import Any
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
 from aerodaas.plugins.frames import frame_source_class
 from aerodaas.protocol.ids import is_drone
+from aerodaas.protocol.messages import SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
 
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
@@ -71,7 +72,7 @@ class _Checkpointer:
 
     def _send(self, robot_id: str, cp: dict) -> None:
         try:
-            self.plane.peer("recorder").checkpoint.remote(robot_id, cp)
+            self.plane.peer("recorder").checkpoint.remote(robot_id, SealedCheckpoint.seal(cp))
         except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
             self.plane.report_error("checkpoint", e)
             self.on = False

@@ -30,7 +30,7 @@ class DroneActor(ActorBase):
         for d in self.runtime.drones:
             cp = ray.get(rec.last_checkpoint.remote(d.cfg.id), timeout=30)
             if cp is not None:
-                restore_drone(d, cp)
+                restore_drone(d, cp.open())
 
     def run(self, timeout_s: float | None = None, resume: bool = False) -> dict:
         """Fly this actor's drones to the end of their missions (``resume``: after a restart, from the restored

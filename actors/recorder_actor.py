@@ -25,7 +25,7 @@ from typing import Any
 
 import ray
 
-from aerodaas.protocol.messages import ProducerLedger
+from aerodaas.protocol.messages import ProducerLedger, SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
 
 
@@ -41,7 +41,7 @@ class RecorderActor:
     def __init__(self, spec: ActorSpec) -> None:
         self.spec = spec
         self.recorder: Any = None
-        self._cp: dict[str, dict] = {}
+        self._cp: dict[str, SealedCheckpoint] = {}
         self._specs: dict[str, bytes] = {}
         self._wiring = b""
         self._specs_kept = threading.Event()
@@ -239,15 +239,17 @@ class RecorderActor:
             raise TimeoutError(f"recorder: no specs after {wait_s:g} s (actor {actor_id!r} asked)")
         return self._specs[actor_id], self._wiring
 
-    def checkpoint(self, robot_id: str, state: dict) -> bool:
-        """Keep ``state`` as the newest checkpoint of ``robot_id`` (an older one, by vehicle time, is ignored)."""
+    def checkpoint(self, robot_id: str, sealed: SealedCheckpoint) -> bool:
+        """Keep ``sealed`` as the newest checkpoint of ``robot_id`` (an older one, by its sequence number, is
+        ignored); kept sealed, never unpickled here (:class:`~aerodaas.protocol.messages.SealedCheckpoint`)."""
         with self._lock:
             old = self._cp.get(robot_id)
-            if old is None or state.get("seq", 0) >= old.get("seq", 0):
-                self._cp[robot_id] = state
+            if old is None or sealed.seq >= old.seq:
+                self._cp[robot_id] = sealed
         return True
 
-    def last_checkpoint(self, robot_id: str) -> dict | None:
+    def last_checkpoint(self, robot_id: str) -> SealedCheckpoint | None:
+        """The newest checkpoint of ``robot_id``, sealed (``.open()`` it), or None."""
         return self._cp.get(robot_id)
 
     def mission_result(self, robot_id: str, t_ns: int, result: dict) -> bool:

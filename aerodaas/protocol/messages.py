@@ -182,6 +182,34 @@ class RecordItem(ABC):
 
 
 @dataclass(frozen=True)
+class SealedCheckpoint:
+    """A drone's checkpoint (:func:`aerodaas.actors.checkpoint.drone_checkpoint`) as the recorder actor keeps it:
+    ``robot``, its sequence number ``seq`` (newer is larger) and ``blob``, the state pickled by the drone actor's
+    data-plane pool. The recorder never unpickles it: opening a checkpoint imports the classes in it (numpy, the
+    pydantic waypoints, the mission queue) and, in a recorder that had not imported them yet, that stalled its writer
+    thread for long enough to fill its frame queue, so frames were dropped and the run ended ``recording_lost``
+    (tests/perception/test_fleet_follow.py, at the first checkpoint of the mission). The restarted drone actor and the
+    driver open it (:meth:`open`)."""
+
+    robot: str
+    seq: int
+    blob: bytes
+
+    @classmethod
+    def seal(cls, state: dict) -> "SealedCheckpoint":
+        """Pickle ``state`` (a checkpoint dict with ``robot`` and ``seq``) with Ray's cloudpickle."""
+        from ray import cloudpickle
+
+        return cls(str(state["robot"]), int(state.get("seq", 0)), cloudpickle.dumps(state))
+
+    def open(self) -> dict:
+        """The checkpoint dict again (imports the classes it holds)."""
+        import pickle
+
+        return pickle.loads(self.blob)
+
+
+@dataclass(frozen=True)
 class ProducerLedger:
     """What one producer actor (``producer``: its host id) had offered the recorder per stream (topic -> messages
     numbered so far, the frames it dropped itself included), sent with each of its batches; the recorder actor

@@ -228,7 +228,8 @@ def _last_checkpoint(recorder: Any, rid: str) -> dict | None:
     if recorder is None:
         return None
     try:
-        return ray.get(recorder.last_checkpoint.remote(rid), timeout=10)
+        sealed = ray.get(recorder.last_checkpoint.remote(rid), timeout=10)
+        return None if sealed is None else sealed.open()
     except Exception:  # noqa: BLE001
         return None
 

@@ -295,7 +295,7 @@ def test_bench_tracks_refuses_a_recording_without_truth_or_tracks(tmp_path):
 def test_the_live_view_advertises_the_track_channels_from_the_start_and_serves_the_tracks(tmp_path):
     """`aerodaas run tests/apps/fleet_tracks.py --live` with a Foxglove protocol client (tests/liveview/foxglove_ws_client.py,
     written from the spec): the track image and scene channels are advertised before the camera's (declared from
-    the plan, not created by a first message), per-track LocationFix channels appear, and the scene arrives live
+    the plan, not created by a first message), the tracks' one LocationFixes channel is advertised with them, and the scene arrives live
     with the track entities."""
     import subprocess
     import sys
@@ -335,7 +335,9 @@ def test_the_live_view_advertises_the_track_channels_from_the_start_and_serves_t
         if op == "advertise":
             first.setdefault(topic, t)
     assert first[scene] <= first[cam] and first["/d1/tracks/tracks"] <= first[cam], got["timeline"]
-    assert any(t.startswith("/d1/tracks/tracks/") and t.endswith("/fix") for t in order), order
+    # one LocationFixes topic for all of the drone's tracks (issue 47 item 4), declared from the plan as well
+    assert "/d1/tracks/tracks/fixes" in order and first["/d1/tracks/tracks/fixes"] <= first[cam], got["timeline"]
+    assert not [t for t in order if t.endswith("/fix")], order  # no channel per track any more
     ch = got["channels"][scene]
     assert ch["schemaName"] == "foxglove.SceneUpdate" and ch["encoding"] == "protobuf"
     fds = descriptor_pb2.FileDescriptorSet.FromString(schema_bytes(ch))  # decode with the advertised schema only

@@ -288,7 +288,7 @@ def test_every_builtin_resolves_through_this_packages_own_entry_points():
             assert issubclass(registry.get(kind, name), registry.kind_base(kind))
     builtins = {(e.kind, e.name) for e in registry.entries() if e.builtin}
     assert builtins == {(kind_of_group[g], n) for g, eps in declared.items() for n in eps}
-    assert sum(map(len, declared.values())) == 31  # 4 backends, 3 sensors, 7 analytics, 3 + 14 schedulers
+    assert sum(map(len, declared.values())) == 36  # 4 backends, 3 sensors, 7 analytics, 3 + 14 schedulers, 5 frame sources
 
 
 def test_a_plugin_cannot_take_a_builtins_name_in_a_fresh_process():
