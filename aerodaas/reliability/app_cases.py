@@ -49,6 +49,13 @@ def _nav(items: str) -> str:
 _NAN_WP = ('Waypoint.model_construct(id="n", x=float("nan"), y=0.0, z=2.0, hover_duration=0.0, '
            'waypoint_type="relative", speed=None, acceptance_radius=0.3)')
 
+def _app_timeout(value: str) -> Callable[[Path], list[str]]:
+    """argv of ``aerodaas run`` for a one-waypoint application calling ``drone.start_mission(timeout=<value>)``."""
+    text = _APP.format(env="{env}", body=_nav('[Waypoint(id="a", x=1, y=0, z=2)]'))
+    text = text.replace("drone.start_mission()", f"drone.start_mission(timeout={value})")
+    return lambda t: [_app(t, text.replace("'{env}'", repr(str(t / "cli_env.json"))))]
+
+
 #: (name, argv after ``run``, expected exit code, text the message must contain, category)
 APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
     ('Waypoint(x="1") (a string)', _app_body(_nav('[Waypoint(id="a", x="1", y=0, z=2)]')), 2, "got str '1'",
@@ -61,6 +68,10 @@ APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = 
     ("VelocityCommand(yaw_rate=1e308)", _app_body(_nav("[VelocityCommand(yaw_rate=1e308)]")), 2, "yaw_rate",
      "bounds / cross-field"),
     ("an empty navigation", _app_body(_nav("[]")), 2, "holds no waypoints", "app-level errors"),
+    ("start_mission(timeout=-1)", _app_timeout("-1"), 2, "start_mission(timeout=...) must be a number of "
+     "wall-clock seconds within (0, 1e+07], got -1", "bounds / cross-field"),
+    ('start_mission(timeout="60") (a string)', _app_timeout('"60"'), 2, "start_mission(timeout=...) must be a "
+     "number of wall-clock seconds within (0, 1e+07], got str '60'", "strict types"),
     ("50,000 pre-planned waypoints (max_queued_items 5000)",
      _app_body(_nav('[Waypoint(id=f"w{i}", x=i % 50, y=i // 50 % 50, z=2) for i in range(50000)]')), 2,
      "max_queued_items", "app-level errors"),
