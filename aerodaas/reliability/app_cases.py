@@ -111,6 +111,30 @@ def _record_into(which: str, *extra: str) -> Callable[[Path], list[str]]:
     return make
 
 
+def _record_into_named(kind: str) -> Callable[[Path], list[str]]:
+    """argv of ``aerodaas run --record F --overwrite`` where F is a file the environment names: the ground image
+    (``ground``) or a recorded camera's MCAP, itself a recording of ours (``camera``)."""
+    def make(t: Path) -> list[str]:
+        import numpy as np
+
+        if kind == "ground":
+            import cv2
+
+            target = t / "ground.png"
+            cv2.imwrite(str(target), np.full((32, 32, 3), 90, np.uint8))
+            env: dict[str, Any] = {"robots": [{"id": "d1"}], "world": {"ground": {"image": target.name}}}
+        else:
+            from aerodaas.recording.writer import McapRecorder
+
+            target = t / "camera.mcap"
+            with McapRecorder(target) as rec:
+                rec.write_image("/d1/camera/cam", 1, np.zeros((8, 8, 3), np.uint8))
+            env = {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera", "properties": {
+                "source": "mcap", "mcap": target.name}}]}]}
+        return [_app(t, env=env), "--record", str(target), "--overwrite"]
+    return make
+
+
 _INPUT = "is an input of this run"
 #: ``--record`` given the run's own inputs or a device: (name, argv after ``run``, exit code, text, category)
 OUTPUT_PATH_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
@@ -119,6 +143,10 @@ OUTPUT_PATH_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] 
     ("--record names the environment file the app opens, with --overwrite", _record_into("env", "--overwrite"), 2,
      _INPUT, "output paths"),
     ("--record /dev/null", _record_into("null"), 2, "not a regular file", "output paths"),
+    ("--record names the environment's ground image, with --overwrite", _record_into_named("ground"), 2,
+     "is an input of this run (world.ground.image of the environment", "output paths"),
+    ("--record names a recorded camera's MCAP (a recording of ours), with --overwrite", _record_into_named("camera"),
+     2, "is an input of this run (robots.0.sensors.0.properties.mcap of the environment", "output paths"),
 ]
 
 #: plug-in modules written for the plug-in cases: stem -> source

@@ -151,20 +151,25 @@ def check_deployment(env, analytics) -> None:
 
 def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple = ()) -> SimulationConfig:
     """The checks of a run's options (``opts``: :class:`~aerodaas.runtime.options.RunOptions`) against the
-    application, before Ray starts: the recording's path (never one of the run's ``inputs`` — the app file — nor the
-    environment file, whoever named it: ``--env`` or the app's ``Environment("x.json")``, even with
-    ``--overwrite``), the HITL API's host and port, an autopilot mission with ``--hitl``, the clocks under
-    ``--speedup`` / ``--lockstep``. Returns the run's simulation settings (:func:`simulation_for`). Raises
-    ConfigError / ValueError naming the field or flag."""
-    if opts.record:
-        from aerodaas.recording.record_path import check_record_path
-
-        protect = tuple(q for q in (*inputs, getattr(env.cfg, "source_file", None)) if q)
-        check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
+    application, before Ray starts: the HITL API's host and port, the recording's path (never one of the run's
+    ``inputs`` — the app file —, the environment file, whoever named it: ``--env`` or the app's
+    ``Environment("x.json")``, nor any file the environment names (:attr:`~aerodaas.config.EnvironmentConfig.
+    files_read`: images, logs, recorded cameras, ``.plan`` files, keys, the HITL API's TLS files), even with
+    ``--overwrite``), an autopilot mission with ``--hitl``, the clocks under ``--speedup`` / ``--lockstep``. Returns
+    the run's simulation settings (:func:`simulation_for`). Raises ConfigError / ValueError naming the field or
+    flag."""
     from aerodaas.clusters.addresses import check_hitl
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
-    hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
+    access = hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
+    if opts.record:
+        from aerodaas.recording.record_path import RunInput, check_record_path
+
+        named = [RunInput(f.path, f"{f.field} of the environment") for f in env.cfg.files_read]
+        tls = [RunInput(str(q), flag) for q, flag in ((access.cert_file, "--tls-cert"), (access.key_file, "--tls-key"))
+               if q]
+        protect = (*(q for q in (*inputs, getattr(env.cfg, "source_file", None)) if q), *named, *tls)
+        check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
     check_required_providers(robots, opts)
     if opts.hitl and not env.cfg.hitl.enabled:  # --hitl: a backend's mission may refuse the HITL API
         from aerodaas.backends import backend_class
