@@ -30,7 +30,7 @@ import os
 import queue
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -41,6 +41,15 @@ from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts
 
 TF_TOPIC = "/tf"
+
+
+class _Newest(NamedTuple):
+    """The newest odometry sample or frame written on one channel: its stamp (ns), sequence number and producer
+    incarnation (:meth:`RecorderService._duplicate`)."""
+
+    t_ns: int
+    seq: int
+    incarnation: int
 
 
 class _Stop:
@@ -97,10 +106,10 @@ class RecorderService(AnalyticsAccounting):
         self.lost = 0  # messages offered after a failure (not recorded)
         self.last_t_ns: int | None = None  # log time of the last message written
         self.first_t_ns: int | None = None  # log time of the first message written
-        #: (kind, robot or topic) -> stamp (ns) of the newest odometry sample / frame written: a drone actor restarted
-        #: from its checkpoint flies again from the checkpoint's time and sends samples whose stamps were recorded
-        #: already; those are dropped here (by the sample's own stamp) and counted in ``duplicates``
-        self._last_stamp: dict[tuple[str, str], tuple[int, int]] = {}  # (newest stamp, its sequence number)
+        #: (kind, robot or topic) -> the newest odometry sample / frame written: a drone actor restarted from its
+        #: checkpoint flies again from the checkpoint's time and sends samples whose stamps were recorded already;
+        #: those are dropped here (:meth:`_duplicate`) and counted in ``duplicates``
+        self._last_stamp: dict[tuple[str, str], _Newest] = {}
         self.duplicates = 0
         self.duplicates_by_topic: dict[str, int] = {}
         #: messages numbered here, per stream (producers in this process; the other actors' come with their ledgers)
@@ -130,15 +139,17 @@ class RecorderService(AnalyticsAccounting):
         self.rec.add_sink(live.publish)
         return live.url
 
-    def image(self, topic: str, t_ns: int, frame: np.ndarray | bytes, frame_id: str, seq: int = -1) -> bool:
+    def image(self, topic: str, t_ns: int, frame: np.ndarray | bytes, frame_id: str, seq: int = -1,
+              incarnation: int = 0) -> bool:
         """Queue a (H, W, 3) uint8 BGR frame (shared, not copied: frames are read-only), or its JPEG bytes already
         encoded by the sending actor. False if dropped. ``seq``: the producer's sequence number on ``topic`` (-1:
-        numbered here, see :meth:`_numbered`)."""
+        numbered here, see :meth:`_numbered`); ``incarnation``: the producer's (see :meth:`_duplicate`)."""
         with self._lock:
             if self.failure is not None:
                 self.lost += 1
                 return False
-            item = self._numbered(RecordImage(topic, t_ns, frame, frame_id, seq)) if not self.closed else None
+            item = self._numbered(RecordImage(topic, t_ns, frame, frame_id, seq, incarnation)) \
+                if not self.closed else None
             self.dropped_by_topic.setdefault(topic, 0)  # every image topic offered: its count (0 too) is recorded
             if item is None or self._pending_frames >= self.max_pending_frames:
                 self.frames_dropped += 1
@@ -159,8 +170,9 @@ class RecorderService(AnalyticsAccounting):
                    seq: int = -1) -> None:
         self._put(RecordDetections(topic, t_ns, dets, image_size, seq))
 
-    def odometry(self, robot: str, t_ns: int, odom: dict, seq: int = -1) -> None:
-        self._put(RecordOdometry(robot, t_ns, odom, seq))
+    def odometry(self, robot: str, t_ns: int, odom: dict, seq: int = -1, incarnation: int = 0) -> None:
+        """Queue one odometry sample of ``robot`` at ``t_ns`` (``seq``, ``incarnation``: as :meth:`image`)."""
+        self._put(RecordOdometry(robot, t_ns, odom, seq, incarnation))
 
     def tracks(self, prefix: str, t_ns: int, robot: str, rows: list, image_size: tuple[int, int] | None = None) -> None:
         """One frame's geo-located tracks (:func:`aerodaas.perception.track_records.write_tracks`)."""
@@ -222,27 +234,37 @@ class RecorderService(AnalyticsAccounting):
                 return
 
     def _duplicate(self, item: RecordItem) -> bool:
-        """True for an odometry sample or a frame that a restarted drone actor sent again: its stamp is not newer
-        than the newest one written for the same robot / image topic while its sequence number is larger than
-        that one's (the restarted producer numbers on from its ledger, but flies again from its checkpoint's time).
-        A sample with a smaller number is one that arrived late (batches of one producer may be handed on out of
-        order, e.g. after the recorder actor stalled): it is written, never taken for a duplicate."""
+        """True for an odometry sample or a frame not to write because its stamp is not newer than the newest one
+        written for the same robot / image topic and:
+
+        * another incarnation of its producer (:attr:`~aerodaas.protocol.messages.ProducerLedger.incarnation`)
+          wrote that one: a restarted drone actor flies again from its checkpoint's time, and the dead process's
+          last batch may reach the recorder after the restarted one asked for its ledger, so sequence numbers of
+          two incarnations overlap and cannot tell a re-sent sample from a late one (a restart test saw an odometry
+          stamp 1 s older than its predecessor written); a late batch of the dead process after the restarted one
+          wrote newer samples is dropped the same way. A restarted producer never writes a sample older than one
+          already written on that channel;
+        * or the same incarnation wrote it with a smaller sequence number (sent again).
+
+        A sample of the same incarnation with a smaller number is one that arrived late (batches of one producer
+        may be handed on out of order, e.g. after the recorder actor stalled): it is written, never taken for a
+        duplicate."""
         if isinstance(item, RecordOdometry):
             key = ("odometry", item.robot)
         elif isinstance(item, RecordImage):
             key = ("image", item.topic)
         else:
             return False
-        t_ns, seq = int(item.t_ns), int(item.seq)
+        t_ns, seq, inc = int(item.t_ns), int(item.seq), int(item.incarnation)
         last = self._last_stamp.get(key)
-        if last is not None and t_ns <= last[0]:
-            if seq > last[1]:
+        if last is not None and t_ns <= last.t_ns:
+            if inc != last.incarnation or seq > last.seq:
                 self.duplicates += 1
                 stream = item.stream() or ""
                 self.duplicates_by_topic[stream] = self.duplicates_by_topic.get(stream, 0) + 1
                 return True
             return False
-        self._last_stamp[key] = (t_ns, seq)
+        self._last_stamp[key] = _Newest(t_ns, seq, inc)
         return False
 
     def _write(self, item: RecordItem) -> None:

@@ -18,6 +18,7 @@ previous segment, ``resumed_at_ns``), the run says "recording lost at t = ..." a
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import threading
 import time
@@ -49,6 +50,7 @@ class RecorderActor:
         self._setup_lock = threading.Lock()
         self._lock = threading.Lock()
         self._ledgers: dict[str, ProducerLedger] = {}  # producer host id -> its counts (the largest seen)
+        self._incarnations: dict[str, int] = {}  # producer host id -> the last incarnation handed out (ledger_of)
         self.received = 0
         self.segments: list[str] = []
         self.losses: list[dict] = []
@@ -215,10 +217,16 @@ class RecorderActor:
             self._ledgers[ledger.producer] = ledger if old is None else old.merged(ledger)
 
     def ledger_of(self, producer: str) -> ProducerLedger:
-        """Actor ``producer``'s counts so far, as its batches said (empty for one never heard of): a restarted
-        producer counts on from here, so its sequence numbers never restart from 0."""
+        """Actor ``producer``'s counts so far, as its batches said (empty for one never heard of), with the
+        incarnation number of the process asking (:attr:`ProducerLedger.incarnation`): one more than any this
+        actor handed out or saw in a batch of that producer, so a restarted producer's number differs from the
+        dead process's even when the dead one's last batch is still on its way. A producer asks once per process,
+        before its first batch; it counts on from here, so its sequence numbers never restart from 0."""
         with self._lock:
-            return self._ledgers.get(producer) or ProducerLedger(producer, {})
+            kept = self._ledgers.get(producer) or ProducerLedger(producer, {})
+            incarnation = max(self._incarnations.get(producer, 0), kept.incarnation) + 1
+            self._incarnations[producer] = incarnation
+            return dataclasses.replace(kept, incarnation=incarnation)
 
     def ledgers(self) -> list[ProducerLedger]:
         """Every producer's counts."""

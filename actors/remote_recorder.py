@@ -162,8 +162,9 @@ class RemoteRecorder(AnalyticsAccounting):
 
     def _base(self) -> ProducerLedger | None:
         """This actor's counts from before this process (its earlier incarnations', kept by the recorder actor;
-        empty for a first start), asked once; None while the recorder actor does not answer (asked again at the
-        next batch, which waits until then)."""
+        empty for a first start) and this process's incarnation number (its ``incarnation``, carried by every item
+        and ledger it sends: the recorder's duplicate rule is keyed by it), asked once; None while the recorder
+        actor does not answer (asked again at the next batch, which waits until then)."""
         import ray
 
         if self._base_ledger is None:
@@ -190,8 +191,8 @@ class RemoteRecorder(AnalyticsAccounting):
         if not batch and ledger == self._ledger_sent:
             return
         self._ledger_sent = ledger
-        batch = [it.numbered(base.produced.get(it.stream() or "", 0) + it.seq) if getattr(it, "seq", -1) >= 0
-                 else it for it in batch]
+        batch = [(it.numbered(base.produced.get(it.stream() or "", 0) + it.seq) if getattr(it, "seq", -1) >= 0
+                  else it).of_incarnation(base.incarnation) for it in batch]
         if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
             batch = [dataclasses.replace(it, frame=encode_frame(it.frame, self.jpeg_quality))
                      if isinstance(it, RecordImage) and isinstance(it.frame, np.ndarray) else it for it in batch]

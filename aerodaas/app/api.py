@@ -25,9 +25,13 @@ def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, optio
     """While an application is loaded, mark its mission's start (:func:`aerodaas.runtime.app_loader.mark_mission`:
     nothing flies); else run the mission of ``robots`` under ``options`` (a
     :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) and return the MissionResult (blocks;
-    ``aerodaas run`` is told each result by :func:`aerodaas.runtime.driver.run_file`)."""
+    ``aerodaas run`` is told each result by :func:`aerodaas.runtime.driver.run_file`). Raises ValueError naming
+    ``start_mission(timeout=...)`` and the value for a ``timeout`` that is not a number of seconds in (0, 1e7] (the
+    rule of ``--timeout``), before anything starts."""
     from aerodaas.runtime.app_loader import is_sentinel, mark_mission
+    from aerodaas.runtime.preflight import check_timeout
 
+    check_timeout(timeout, "start_mission(timeout=...)")
     marked = mark_mission(env, robots, timeout)
     if not is_sentinel(marked):
         return marked  # a mission of the application that already flew (loaded again after it)
@@ -186,9 +190,12 @@ class Robot:
             hook(self, result)
 
     def start_mission(self, timeout: float | None = None, *, options: Any = None):
-        """Start the actors, fly the mission to its end (``timeout``: wall seconds), and return the MissionResult
-        (blocks); ``options``: the run's :class:`~aerodaas.runtime.options.RunOptions` (recording, speed-up, ...).
-        While the application is loaded (``aerodaas run``), only marks the mission's start."""
+        """Start the actors, fly the mission to its end, and return the MissionResult (blocks); ``options``: the
+        run's :class:`~aerodaas.runtime.options.RunOptions` (recording, speed-up, ...). ``timeout``: wall-clock
+        seconds in (0, 1e7] from the mission's start, as ``aerodaas run --timeout`` (which wins when both are
+        given); past it the mission ends with outcome ``timeout`` (``aerodaas run`` exits 1). Any other value
+        raises ValueError naming it before anything starts (``aerodaas run``: exit 2, before Ray). While the
+        application is loaded (``aerodaas run``), only marks the mission's start."""
         return _fly(self.env, [self], timeout, options)
 
     def end_mission(self, reason: str = "ended") -> None:
@@ -353,8 +360,8 @@ class Environment:
         one MissionResult with a report per robot. Robots sharing the environment's trajectory scheduler each get
         their own waypoint queue holding the missions they were told to ``navigate``. ``robots`` holds Robots of
         this environment or their ids; ``options``: the run's :class:`~aerodaas.runtime.options.RunOptions`. Raises
-        KeyError for an unknown id and ValueError naming the item for anything else, or a robot given twice, before
-        anything starts. While the application is loaded (``aerodaas run``), only marks the mission's start."""
+        KeyError for an unknown id and ValueError naming the item for anything else, or a robot given twice, or a
+        ``timeout`` outside (0, 1e7] wall seconds (as :meth:`Robot.start_mission`), before anything starts. While the application is loaded (``aerodaas run``), only marks the mission's start."""
         if isinstance(robots, (Robot, str)):
             robots = [robots]
         given = list(robots) if robots is not None else self.get_env_robots()

@@ -8,7 +8,7 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NamedTuple
 
 from pydantic import BaseModel, Field, PrivateAttr, Strict, ValidationError, field_validator, model_validator
 
@@ -287,6 +287,14 @@ class RecordingConfig(_Cfg):
                            "driver's file")
 
 
+class ReferencedFile(NamedTuple):
+    """A file the environment names: ``field`` (its place in ``environment.json``, e.g. ``world.ground.image``,
+    ``robots.0.replay.log``) and ``path`` (absolute, as :meth:`EnvironmentConfig.resolve_path` found it)."""
+
+    field: str
+    path: str
+
+
 class EnvironmentConfig(_Cfg):
     """Root of ``environment.json``. ``aerodaas schema`` prints its JSON Schema.
 
@@ -323,6 +331,16 @@ class EnvironmentConfig(_Cfg):
         "cascade)")
     base_dir: str | None = Field(default=None, description="set by the loader: folder of the environment file")
     _source_file: str | None = PrivateAttr(default=None)
+    #: absolute path -> the field that named it, for every file :meth:`resolve_path` found (see :attr:`files_read`)
+    _files_read: dict[str, str] = PrivateAttr(default_factory=dict)
+
+    @property
+    def files_read(self) -> tuple[ReferencedFile, ...]:
+        """Every file this configuration names that was resolved (:meth:`resolve_path`: the ground and target
+        images, a replay's log, a recorded camera's MCAP or video file, a geofence ``.plan``, the analytics
+        workload, a MAVLink signing key, the HITL API's TLS files, and any file a plug-in resolves through it), in
+        the order they were first resolved: inputs of the run, which ``--record`` never overwrites."""
+        return tuple(ReferencedFile(field, path) for path, field in self._files_read.items())
 
     @property
     def source_file(self) -> str | None:
@@ -396,7 +414,9 @@ class EnvironmentConfig(_Cfg):
             cands.append(Path.cwd() / p)
         for c in cands:
             if c.is_file():
-                return c.resolve()
+                found = c.resolve()
+                self._files_read.setdefault(str(found), field)
+                return found
         raise ConfigError(f"{field}: file {rel!r} not found (looked in: {', '.join(str(c) for c in cands)}); "
                           f"set {DATA_DIR_ENV} to the folder that holds it, or give an absolute path")
 

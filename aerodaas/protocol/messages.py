@@ -180,6 +180,11 @@ class RecordItem(ABC):
         """This item with sequence number ``seq``."""
         return dataclasses.replace(self, seq=seq) if hasattr(self, "seq") else self
 
+    def of_incarnation(self, incarnation: int) -> "RecordItem":
+        """This item sent by incarnation ``incarnation`` of its producer (the kinds the recorder's duplicate rule
+        reads, a frame and an odometry sample, carry it; :attr:`ProducerLedger.incarnation`)."""
+        return dataclasses.replace(self, incarnation=incarnation) if hasattr(self, "incarnation") else self
+
 
 @dataclass(frozen=True)
 class SealedCheckpoint:
@@ -220,13 +225,19 @@ class ProducerLedger:
     handed each analytics component (consumer component id -> robot -> items), ``no_output`` the items each of this
     actor's analytics took without recording an output (its own component id -> robot -> items: ``process``
     returned None or something unrecorded, raised, a stale item, a task the analytics scheduler did not run on
-    time) and ``analytics`` names them (component id -> analytics name, the ``/<robot>/<name>`` of its topics)."""
+    time) and ``analytics`` names them (component id -> analytics name, the ``/<robot>/<name>`` of its topics).
+
+    ``incarnation`` numbers the producer's processes: 1 for its first, one more for each restart (handed out by the
+    recorder actor, ``RecorderActor.ledger_of``, never reused even when a batch of the dead process is still on
+    its way); 0 for a ledger not from a producer process (the recorder's own, a test's). The recorder's duplicate
+    rule is keyed by it (:class:`aerodaas.actors.recorder.RecorderService`)."""
 
     producer: str
     produced: dict[str, int]
     offered_to: dict[str, dict[str, int]] = field(default_factory=dict)
     no_output: dict[str, dict[str, int]] = field(default_factory=dict)
     analytics: dict[str, str] = field(default_factory=dict)
+    incarnation: int = 0
 
     def merged(self, other: "ProducerLedger") -> "ProducerLedger":
         """The largest count of each key of this ledger and ``other`` (batches may arrive out of order)."""
@@ -238,11 +249,12 @@ class ProducerLedger:
 
         return ProducerLedger(self.producer, most(self.produced, other.produced),
                               most2(self.offered_to, other.offered_to), most2(self.no_output, other.no_output),
-                              {**self.analytics, **other.analytics})
+                              {**self.analytics, **other.analytics}, max(self.incarnation, other.incarnation))
 
     def plus(self, produced: dict[str, int], offered_to: dict[str, dict[str, int]],
              no_output: dict[str, dict[str, int]], analytics: dict[str, str]) -> "ProducerLedger":
-        """This ledger (an earlier incarnation's counts) with a later incarnation's counts added."""
+        """This ledger (an earlier incarnation's counts) with a later incarnation's counts added; its
+        ``incarnation`` is this ledger's (the one :meth:`RecorderActor.ledger_of` gave the later process)."""
         def add(a: dict, b: dict) -> dict:
             return {k: a.get(k, 0) + b.get(k, 0) for k in {*a, *b}}
 
@@ -250,22 +262,24 @@ class ProducerLedger:
             return {k: add(a.get(k, {}), b.get(k, {})) for k in {*a, *b}}
 
         return ProducerLedger(self.producer, add(self.produced, produced), add2(self.offered_to, offered_to),
-                              add2(self.no_output, no_output), {**self.analytics, **analytics})
+                              add2(self.no_output, no_output), {**self.analytics, **analytics}, self.incarnation)
 
 
 @dataclass(frozen=True)
 class RecordImage(RecordItem):
     """A camera frame for ``topic`` at ``t_ns`` (log time, ns): ``frame`` is JPEG bytes on the wire (encoded by
-    the sender) or the (H, W, 3) uint8 BGR ``ndarray`` before that."""
+    the sender) or the (H, W, 3) uint8 BGR ``ndarray`` before that; ``incarnation``: its producer's
+    (:attr:`ProducerLedger.incarnation`)."""
 
     topic: str
     t_ns: int
     frame: Any
     frame_id: str
     seq: int = -1
+    incarnation: int = 0
 
     def apply(self, recorder: Any) -> None:
-        recorder.image(self.topic, self.t_ns, self.frame, self.frame_id, seq=self.seq)
+        recorder.image(self.topic, self.t_ns, self.frame, self.frame_id, seq=self.seq, incarnation=self.incarnation)
 
 
 @dataclass(frozen=True)
@@ -315,15 +329,17 @@ class RecordTracks(RecordItem):
 
 @dataclass(frozen=True)
 class RecordOdometry(RecordItem):
-    """One odometry sample of ``robot`` (an Odometry dict) at ``t_ns``."""
+    """One odometry sample of ``robot`` (an Odometry dict) at ``t_ns``; ``incarnation``: its producer's
+    (:attr:`ProducerLedger.incarnation`)."""
 
     robot: str
     t_ns: int
     odometry: dict
     seq: int = -1
+    incarnation: int = 0
 
     def apply(self, recorder: Any) -> None:
-        recorder.odometry(self.robot, self.t_ns, self.odometry, seq=self.seq)
+        recorder.odometry(self.robot, self.t_ns, self.odometry, seq=self.seq, incarnation=self.incarnation)
 
     def stream(self) -> str | None:
         return f"/{self.robot}/odometry"

@@ -8,11 +8,20 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 #: the library name the writer puts in every recording's MCAP Header record
 LIBRARY = "aerodaas"
 #: the MCAP magic (MCAP specification, "Magic") that every recording starts with
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+class RunInput(NamedTuple):
+    """A file the run reads, which a recording never overwrites: ``path`` and ``what`` names it in the refusal (the
+    environment field that named it, e.g. ``world.ground.image``)."""
+
+    path: str
+    what: str
 
 
 def is_aerodaas_recording(p: Path) -> bool:
@@ -33,15 +42,17 @@ def is_aerodaas_recording(p: Path) -> bool:
 
 
 def check_record_path(path: str | os.PathLike, *, overwrite: bool = False,
-                      protect: tuple[str | os.PathLike, ...] = ()) -> Path:
+                      protect: tuple[str | os.PathLike | RunInput, ...] = ()) -> Path:
     """Check, before anything starts, that a recording can be written at ``path``; returns the absolute path.
 
     The folder must already exist (nothing is created: a typo must not leave directories behind), the path must be
     a regular file or not exist yet (``/dev/full``, ``/dev/null``, FIFOs and directories are refused), and the file
     must be creatable there (``/proc/x.mcap`` is not). Outputs never clobber inputs: an existing file that is not an
     AeroDaaS recording (:func:`is_aerodaas_recording`) is refused unless ``overwrite`` (``--overwrite``), and the
-    files in ``protect`` (the application, its environment file) always. An existing file is left as it is until
-    the run starts. Raises ValueError naming the path and the reason."""
+    files in ``protect`` (the application, its environment file, every file the environment names: a
+    :class:`RunInput` is named by its field) always, a recording of ours too (a replayed log or a recorded camera's
+    MCAP is one). An existing file is left as it is until the run starts. Raises ValueError naming the path and the
+    reason."""
     import stat
 
     p = Path(os.path.abspath(os.path.expanduser(str(path))))
@@ -58,13 +69,16 @@ def check_record_path(path: str | os.PathLike, *, overwrite: bool = False,
         if not os.access(p, os.W_OK):
             raise ValueError(f"--record {str(path)!r}: the file is not writable")
         for q in protect:
+            where = q.path if isinstance(q, RunInput) else q
             try:
-                same = q is not None and os.path.samefile(p, q)
+                same = where is not None and os.path.samefile(p, where)
             except OSError:
                 same = False
             if same:
-                raise ValueError(f"--record {str(path)!r} is an input of this run ({str(q)!r}): a recording never "
-                                 f"overwrites the application or its environment file")
+                named = f"{q.what}: {q.path!r}" if isinstance(q, RunInput) else repr(str(q))
+                raise ValueError(f"--record {str(path)!r} is an input of this run ({named}): a recording never "
+                                 f"overwrites the application, its environment file or a file the environment "
+                                 f"names")
         if not overwrite and not is_aerodaas_recording(p):
             raise ValueError(f"--record {str(path)!r}: the file exists and is not an AeroDaaS recording; pass "
                              f"--overwrite to replace it")

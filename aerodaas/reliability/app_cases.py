@@ -49,6 +49,13 @@ def _nav(items: str) -> str:
 _NAN_WP = ('Waypoint.model_construct(id="n", x=float("nan"), y=0.0, z=2.0, hover_duration=0.0, '
            'waypoint_type="relative", speed=None, acceptance_radius=0.3)')
 
+def _app_timeout(value: str) -> Callable[[Path], list[str]]:
+    """argv of ``aerodaas run`` for a one-waypoint application calling ``drone.start_mission(timeout=<value>)``."""
+    text = _APP.format(env="{env}", body=_nav('[Waypoint(id="a", x=1, y=0, z=2)]'))
+    text = text.replace("drone.start_mission()", f"drone.start_mission(timeout={value})")
+    return lambda t: [_app(t, text.replace("'{env}'", repr(str(t / "cli_env.json"))))]
+
+
 #: (name, argv after ``run``, expected exit code, text the message must contain, category)
 APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
     ('Waypoint(x="1") (a string)', _app_body(_nav('[Waypoint(id="a", x="1", y=0, z=2)]')), 2, "got str '1'",
@@ -61,6 +68,10 @@ APP_VALUE_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = 
     ("VelocityCommand(yaw_rate=1e308)", _app_body(_nav("[VelocityCommand(yaw_rate=1e308)]")), 2, "yaw_rate",
      "bounds / cross-field"),
     ("an empty navigation", _app_body(_nav("[]")), 2, "holds no waypoints", "app-level errors"),
+    ("start_mission(timeout=-1)", _app_timeout("-1"), 2, "start_mission(timeout=...) must be a number of "
+     "wall-clock seconds within (0, 1e+07], got -1", "bounds / cross-field"),
+    ('start_mission(timeout="60") (a string)', _app_timeout('"60"'), 2, "start_mission(timeout=...) must be a "
+     "number of wall-clock seconds within (0, 1e+07], got str '60'", "strict types"),
     ("50,000 pre-planned waypoints (max_queued_items 5000)",
      _app_body(_nav('[Waypoint(id=f"w{i}", x=i % 50, y=i // 50 % 50, z=2) for i in range(50000)]')), 2,
      "max_queued_items", "app-level errors"),
@@ -100,6 +111,30 @@ def _record_into(which: str, *extra: str) -> Callable[[Path], list[str]]:
     return make
 
 
+def _record_into_named(kind: str) -> Callable[[Path], list[str]]:
+    """argv of ``aerodaas run --record F --overwrite`` where F is a file the environment names: the ground image
+    (``ground``) or a recorded camera's MCAP, itself a recording of ours (``camera``)."""
+    def make(t: Path) -> list[str]:
+        import numpy as np
+
+        if kind == "ground":
+            import cv2
+
+            target = t / "ground.png"
+            cv2.imwrite(str(target), np.full((32, 32, 3), 90, np.uint8))
+            env: dict[str, Any] = {"robots": [{"id": "d1"}], "world": {"ground": {"image": target.name}}}
+        else:
+            from aerodaas.recording.writer import McapRecorder
+
+            target = t / "camera.mcap"
+            with McapRecorder(target) as rec:
+                rec.write_image("/d1/camera/cam", 1, np.zeros((8, 8, 3), np.uint8))
+            env = {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera", "properties": {
+                "source": "mcap", "mcap": target.name}}]}]}
+        return [_app(t, env=env), "--record", str(target), "--overwrite"]
+    return make
+
+
 _INPUT = "is an input of this run"
 #: ``--record`` given the run's own inputs or a device: (name, argv after ``run``, exit code, text, category)
 OUTPUT_PATH_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] = [
@@ -108,6 +143,10 @@ OUTPUT_PATH_CASES: list[tuple[str, Callable[[Path], list[str]], int, str, str]] 
     ("--record names the environment file the app opens, with --overwrite", _record_into("env", "--overwrite"), 2,
      _INPUT, "output paths"),
     ("--record /dev/null", _record_into("null"), 2, "not a regular file", "output paths"),
+    ("--record names the environment's ground image, with --overwrite", _record_into_named("ground"), 2,
+     "is an input of this run (world.ground.image of the environment", "output paths"),
+    ("--record names a recorded camera's MCAP (a recording of ours), with --overwrite", _record_into_named("camera"),
+     2, "is an input of this run (robots.0.sensors.0.properties.mcap of the environment", "output paths"),
 ]
 
 #: plug-in modules written for the plug-in cases: stem -> source

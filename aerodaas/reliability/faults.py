@@ -119,15 +119,19 @@ def _signal_case(sig: int, min_size: int, group: bool = False, speedup: float = 
     return run
 
 
-def _timeout_case(speedup: float, timeout_s: float) -> Callable[[Path], dict]:
-    """``--timeout`` at an extreme speedup: the run ends as ``timeout`` (exit 1) with a finished recording, within
-    :data:`STOP_WITHIN_S` of the timeout, counted from when the recording file appears (the recorder opens it while
-    the actors set up, before the mission starts: Ray's own start, 40 s and more on a loaded 2-core machine, is not
-    the timeout's to bound)."""
+def _timeout_case(speedup: float, timeout_s: float, in_app: bool = False) -> Callable[[Path], dict]:
+    """``--timeout`` (``in_app``: ``start_mission(timeout=...)`` in a copy of the farm survey instead) at an extreme
+    speedup: the run ends as ``timeout`` (exit 1) with a finished recording, within :data:`STOP_WITHIN_S` of the
+    timeout, counted from when the recording file appears (the recorder opens it while the actors set up, before
+    the mission starts: Ray's own start, 40 s and more on a loaded 2-core machine, is not the timeout's to bound)."""
     def run(tmp: Path) -> dict:
-        rec = tmp / "run.mcap"
-        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", f"{speedup:g}",
-                  "--timeout", f"{timeout_s:g}", "--quiet"], start_new_session=True)
+        rec, app = tmp / "run.mcap", tmp / "farm_survey.py"
+        src = (REPO_APPS / "farm_survey.py").read_text()
+        app.write_text(src.replace("start_mission()", f"start_mission(timeout={timeout_s!r})") if in_app else src)
+        (tmp / "farm_survey.json").write_text((REPO_APPS / "farm_survey.json").read_text())
+        flag = [] if in_app else ["--timeout", f"{timeout_s:g}"]
+        p = _run(["run", str(app), "--record", str(rec), "--speedup", f"{speedup:g}", *flag, "--quiet"],
+                 start_new_session=True)
         t0 = time.monotonic()
         if _wait_size(rec, 1, p):
             t0 = time.monotonic()
@@ -481,6 +485,8 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
      _signal_case(signal.SIGTERM, 5000, speedup=0.01)),
     ("--timeout 8 at the slowest speedup (0.01)", f"exit 1, outcome timeout, within {STOP_WITHIN_S:g} s of the "
      "timeout, recording finished", _timeout_case(0.01, 8.0)),
+    ("start_mission(timeout=8) in the app at the slowest speedup (0.01)", f"exit 1, outcome timeout, within "
+     f"{STOP_WITHIN_S:g} s of the timeout, recording finished", _timeout_case(0.01, 8.0, in_app=True)),
     ("Ctrl-C (SIGINT to the process group) during the flight", "exit 130, recording finished",
      _signal_case(signal.SIGINT, 20000, group=True)),
     ("disk full (ENOSPC) mid-run", "exit 1, summary says what was lost, recording finished up to the failure",

@@ -11,7 +11,8 @@ from typing import Any
 from aerodaas.config import SimulationConfig
 
 __all__ = ["validate", "validate_graph", "check_options", "check_deployment", "simulation_for", "check_clocks",
-           "robot_schedulers", "scheduled_analytics", "check_preplanned", "check_required_providers"]
+           "check_timeout", "MAX_TIMEOUT_S", "robot_schedulers", "scheduled_analytics", "check_preplanned",
+           "check_required_providers"]
 
 
 def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
@@ -150,20 +151,25 @@ def check_deployment(env, analytics) -> None:
 
 def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple = ()) -> SimulationConfig:
     """The checks of a run's options (``opts``: :class:`~aerodaas.runtime.options.RunOptions`) against the
-    application, before Ray starts: the recording's path (never one of the run's ``inputs`` — the app file — nor the
-    environment file, whoever named it: ``--env`` or the app's ``Environment("x.json")``, even with
-    ``--overwrite``), the HITL API's host and port, an autopilot mission with ``--hitl``, the clocks under
-    ``--speedup`` / ``--lockstep``. Returns the run's simulation settings (:func:`simulation_for`). Raises
-    ConfigError / ValueError naming the field or flag."""
-    if opts.record:
-        from aerodaas.recording.record_path import check_record_path
-
-        protect = tuple(q for q in (*inputs, getattr(env.cfg, "source_file", None)) if q)
-        check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
+    application, before Ray starts: the HITL API's host and port, the recording's path (never one of the run's
+    ``inputs`` — the app file —, the environment file, whoever named it: ``--env`` or the app's
+    ``Environment("x.json")``, nor any file the environment names (:attr:`~aerodaas.config.EnvironmentConfig.
+    files_read`: images, logs, recorded cameras, ``.plan`` files, keys, the HITL API's TLS files), even with
+    ``--overwrite``), an autopilot mission with ``--hitl``, the clocks under ``--speedup`` / ``--lockstep``. Returns
+    the run's simulation settings (:func:`simulation_for`). Raises ConfigError / ValueError naming the field or
+    flag."""
     from aerodaas.clusters.addresses import check_hitl
 
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
-    hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
+    access = hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
+    if opts.record:
+        from aerodaas.recording.record_path import RunInput, check_record_path
+
+        named = [RunInput(f.path, f"{f.field} of the environment") for f in env.cfg.files_read]
+        tls = [RunInput(str(q), flag) for q, flag in ((access.cert_file, "--tls-cert"), (access.key_file, "--tls-key"))
+               if q]
+        protect = (*(q for q in (*inputs, getattr(env.cfg, "source_file", None)) if q), *named, *tls)
+        check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
     check_required_providers(robots, opts)
     if opts.hitl and not env.cfg.hitl.enabled:  # --hitl: a backend's mission may refuse the HITL API
         from aerodaas.backends import backend_class
@@ -334,9 +340,10 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
         check_record_path(record, overwrite=True, protect=tuple(q for q in (app, env) if q))
     from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
 
-    for flag, v, lo, hi in (("--speedup", speedup, MIN_SPEEDUP, MAX_SPEEDUP), ("--timeout", timeout, 0.0, 1e7)):
+    for flag, v, lo, hi in (("--speedup", speedup, MIN_SPEEDUP, MAX_SPEEDUP),):
         if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
             raise ValueError(f"{flag} must be a number within {'[' if lo else '('}{lo:g}, {hi:g}], got {v!r}")
+    check_timeout(timeout, "--timeout")
     if hitl_port is not None and not 0 <= hitl_port <= 65535:
         raise ValueError(f"--hitl-port {hitl_port}: outside [0, 65535] (0: any free port)")
     if address is not None:  # parsed, resolved and reachable within 10 s, before any Ray process
@@ -347,6 +354,24 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
         from aerodaas.config import load_environment_config
 
         load_environment_config(env)
+
+
+#: the longest wall-clock limit of a mission, s (about 116 days): ``--timeout`` and ``start_mission(timeout=...)``
+MAX_TIMEOUT_S = 1e7
+
+
+def check_timeout(timeout: Any, name: str) -> None:
+    """Refuse a mission's wall-clock limit ``timeout`` (seconds; None: no limit) that is not a number in
+    (0, :data:`MAX_TIMEOUT_S`]: a bool, a string, NaN, 0, a negative number or an infinite one. The same rule
+    for the command line's ``--timeout`` and the application's ``start_mission(timeout=...)`` (``name`` is what
+    the message calls it). Raises ValueError naming ``name`` and the value, before Ray starts."""
+    if timeout is None:
+        return
+    number = isinstance(timeout, (int, float)) and not isinstance(timeout, bool)
+    if not number or not 0.0 < timeout <= MAX_TIMEOUT_S:  # NaN fails every comparison
+        kind = "" if number else f" {type(timeout).__name__}"
+        raise ValueError(f"{name} must be a number of wall-clock seconds within (0, {MAX_TIMEOUT_S:g}], got"
+                         f"{kind} {timeout!r}")
 
 
 def check_failure_fraction(a: Any) -> None:

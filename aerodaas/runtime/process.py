@@ -6,7 +6,7 @@ connects the whole process (Python docs, "signal — Set handlers for asynchrono
 the main thread; Ray docs, ``ray.init``: one connection per driver process) — so they live in one documented
 object, :data:`PROCESS`, instead of module-level lists and dicts (issue 48.4). Nothing else of the framework keeps
 module-level mutable state outside the plug-in registry (:data:`aerodaas.plugins.registry.REGISTRY`); the test
-``tests/test_module_state.py`` checks it.
+``tests/architecture/test_module_state.py`` checks it.
 """
 from __future__ import annotations
 

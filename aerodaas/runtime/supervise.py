@@ -1,7 +1,7 @@
 """The driver's side of a running mission: start the plan's actors, wait for the drone actors while showing
 progress, and contain whatever dies.
 
-Fault handling (each is a test in ``tests/test_faults_actors.py``):
+Fault handling (each is a test in ``tests/runtime/test_runtime_actors.py`` and ``tests/runtime/test_faults.py``):
 
 * a **drone actor** that dies (process killed, native crash) is restarted by Ray (``max_restarts``); the restarted
   actor restores its drones from their last checkpoints (:mod:`aerodaas.actors.checkpoint`), and
