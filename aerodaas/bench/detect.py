@@ -4,7 +4,9 @@ Per class: recall and precision at IoU 0.5 and 0.3, AP50 (:mod:`aerodaas.percept
 time of ``detect``, onnxruntime on ``--threads`` threads) and boxes. ``--sweep`` runs every combination of
 ``--input-sizes`` (for a model with dynamic axes), ``--tiles`` (0: no tiling) and ``--thresholds``; a threshold
 sweep reuses the detections at the lowest threshold (filtering by score gives exactly what a higher threshold
-would). JSON out (``--out``), a PR-curve PNG (``--plot``), a rich progress bar.
+would). Every row also breaks the scores down by object size and, where the set records it, by view angle and
+altitude (:mod:`aerodaas.bench.detect_breakdown`). JSON out (``--out``), a PR-curve PNG (``--plot``), a rich
+progress bar.
 
 Example (our own hand-made annotations of three shared photos, ``tests/data/brighton_beach_cars.json``)::
 
@@ -62,14 +64,34 @@ def _relabel(dets: list, group_of: dict[str, str]) -> list:
             for d in dets]
 
 
+def _score_row(per: list, thr: float, with_curve: bool, classes: list[str], metas: dict, row: dict) -> dict:
+    """One result row: ``row`` (configuration fields) plus boxes per frame, per-class scores of the detections at
+    score >= ``thr`` (the PR curve when ``with_curve``) and the breakdowns (:mod:`aerodaas.bench.detect_breakdown`)."""
+    from aerodaas.bench.detect_breakdown import breakdown
+    from aerodaas.perception.scoring import score
+
+    kept = [([d for d in ds if d.score >= thr], g) for ds, g in per]
+    row = {**row, "boxes_per_frame": round(sum(len(d) for d, _ in kept) / len(kept), 2), "classes": {}}
+    for c in classes:
+        s5, s3 = score(kept, c, 0.5), score(kept, c, 0.3)
+        row["classes"][c] = {"n_gt": s5.n_gt, "n_det": s5.n_det, "recall@0.5": round(s5.recall, 3),
+                             "precision@0.5": round(s5.precision, 3), "recall@0.3": round(s3.recall, 3),
+                             "precision@0.3": round(s3.precision, 3), "ap50": round(s5.ap, 3)}
+        if with_curve:
+            row["classes"][c]["pr_curve@0.5"] = {"recall": s5.curve_recall, "precision": s5.curve_precision}
+    row.update(breakdown(kept, classes, metas))
+    return row
+
+
 def run_detect(a: argparse.Namespace) -> dict:
     """Run the benchmark described by the parsed arguments; returns the JSON report (dict)."""
     import cv2
     import os
     from rich.progress import Progress
 
+    from aerodaas.perception.breakdown import SIZE_BUCKETS, frame_meta
     from aerodaas.perception.options import build_detector
-    from aerodaas.perception.scoring import load_annotations, score
+    from aerodaas.perception.scoring import load_annotations
     from aerodaas.perception.tiling import TiledDetector, Tiling
 
     gts = load_annotations(a.annotations, a.images, a.names, a.annotation_format)
@@ -79,6 +101,7 @@ def run_detect(a: argparse.Namespace) -> dict:
     if a.limit:
         gts = gts[:a.limit]
     classes = a.classes or sorted({c for g in gts for c in g.classes})
+    metas = frame_meta([g.file for g in gts], a.frame_meta)
     thresholds = sorted(a.thresholds if a.sweep else a.thresholds[:1])
     configs = _configs(a)
     images = {}
@@ -117,25 +140,17 @@ def run_detect(a: argparse.Namespace) -> dict:
                 per.append((_relabel(dets, group_of), g))
                 prog.update(task, advance=1, description=f"size {size if size != '0' else 'model'} tile {cfg['tile'] or '-'}")
             for thr in thresholds:
-                kept = [([d for d in ds if d.score >= thr], g) for ds, g in per]
-                row = {"input_size": list(getattr(det, "input_hw", ())), "tile": cfg["tile"],
-                       "score_threshold": thr, "ms_per_frame": round(sum(ms) / len(ms), 1),
-                       "boxes_per_frame": round(sum(len(d) for d, _ in kept) / len(kept), 2), "classes": {}}
-                for c in classes:
-                    s5, s3 = score(kept, c, 0.5), score(kept, c, 0.3)
-                    row["classes"][c] = {"n_gt": s5.n_gt, "n_det": s5.n_det, "recall@0.5": round(s5.recall, 3),
-                                         "precision@0.5": round(s5.precision, 3), "recall@0.3": round(s3.recall, 3),
-                                         "precision@0.3": round(s3.precision, 3), "ap50": round(s5.ap, 3)}
-                    if thr == thresholds[0]:
-                        row["classes"][c]["pr_curve@0.5"] = {"recall": s5.curve_recall,
-                                                             "precision": s5.curve_precision}
-                results.append(row)
+                results.append(_score_row(per, thr, thr == thresholds[0], classes, metas,
+                                          {"input_size": list(getattr(det, "input_hw", ())), "tile": cfg["tile"],
+                                           "score_threshold": thr, "ms_per_frame": round(sum(ms) / len(ms), 1)}))
     return {"benchmark": "detect", "machine": machine_info(), "load_avg_1min_start": round(load_start, 2),
             "load_avg_1min_end": round(os.getloadavg()[0], 2), "images": str(a.images),
             "annotations": str(a.annotations), "n_images": len(gts), "model": a.model_path or a.model,
             "threads": a.threads, "repeat": a.repeat, "frame_width": a.frame_width or None, "overlap": a.overlap,
             "merge": a.merge, "full_frame": not a.no_full_frame, "groups": a.group or [],
-            "agnostic_nms": a.agnostic_nms, "results": results}
+            "agnostic_nms": a.agnostic_nms, "frame_meta": a.frame_meta if metas else "none",
+            "size_buckets_px2": {n: [lo, None if hi == float("inf") else hi] for n, lo, hi in SIZE_BUCKETS},
+            "results": results}
 
 
 def best(report: dict, cls: str, min_precision: float, max_ms: float) -> dict | None:
@@ -169,6 +184,8 @@ def plot_pr(report: dict, path: str) -> None:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from aerodaas.perception.breakdown import FRAME_META_SOURCES
+
     p = sub.add_parser("detect", help="score a detector on annotated images (COCO JSON or YOLO txt): recall/precision, "
                                       "AP50, ms/frame; --sweep over input size, tiling, threshold")
     p.add_argument("--images", required=True, help="folder of the images")
@@ -199,6 +216,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame-width", type=int, default=0,
                    help="resize each image to this width first (e.g. 1920), boxes scaled alike (0: as stored)")
     p.add_argument("--limit", type=int, default=0, help="score only the first N annotated images")
+    p.add_argument("--frame-meta", default="auto", choices=list(FRAME_META_SOURCES),
+                   help="per-frame view angle and altitude for the breakdowns: hit-uav (from HIT-UAV file names "
+                        "T_H_A_S_N.jpg), auto (hit-uav when every file name has that form), none")
     p.add_argument("--out", help="write the JSON report here")
     p.add_argument("--plot", help="write the PR-curve PNG here")
     p.add_argument("--json", action="store_true", help="print the JSON report")
@@ -221,12 +241,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             Path(a.out).write_text(text)
         if a.plot:
             plot_pr(report, a.plot)
+        from aerodaas.bench.detect_breakdown import breakdown_lines
         from aerodaas.bench.output import print_report
 
         lines = [f"size {r['input_size']} tile {r['tile'] or '-'} thr {r['score_threshold']}: "
                  + " ".join(f"{c}: R {v['recall@0.5']:.2f} P {v['precision@0.5']:.2f} AP50 {v['ap50']:.2f}"
                             for c, v in r["classes"].items())
                  + f" | {r['ms_per_frame']:.0f} ms/frame, {r['boxes_per_frame']} boxes/frame"
+                 + "".join("\n" + ln for ln in breakdown_lines(r))
                  for r in report["results"]]
         lines.append(f"load average (1 min) {report['load_avg_1min_start']} -> {report['load_avg_1min_end']}")
         if a.json:  # the summary is for people: on stderr, so stdout is the JSON document alone

@@ -21,7 +21,7 @@ import numpy as np
 
 from aerodaas.perception.boxes import iou_matrix
 
-__all__ = ["GroundTruth", "load_annotations", "load_visdrone", "VISDRONE_CLASSES", "match", "ClassScore", "score"]
+__all__ = ["GroundTruth", "load_annotations", "load_visdrone", "VISDRONE_CLASSES", "match", "ClassScore", "score", "summarise"]
 
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 
@@ -190,6 +190,13 @@ def score(per_image: list[tuple[list, GroundTruth]], cls: str, iou_thr: float) -
         scores.append(sc)
     tp = np.concatenate(flags) if flags else np.zeros(0, bool)
     sc = np.concatenate(scores) if scores else np.zeros(0)
+    return summarise(tp, sc, n_gt)
+
+
+def summarise(tp: np.ndarray, sc: np.ndarray, n_gt: int) -> ClassScore:
+    """:class:`ClassScore` from the true-positive flags ``tp`` ``(D,)`` bool and scores ``sc`` ``(D,)`` of the
+    detections that count (any order) and ``n_gt`` ground-truth boxes: recall and precision with every detection
+    given, all-point interpolated AP (module docstring)."""
     order = np.argsort(-sc, kind="stable")
     tp = tp[order]
     ctp = np.cumsum(tp)

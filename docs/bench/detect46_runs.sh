@@ -1,0 +1,32 @@
+#!/bin/bash
+# Issue 46 item 5: the runs behind docs/bench/detect46_*.json (docs/perception.md, "Measured on held-out aerial sets").
+# usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets OUTDIR  (aerial splits laid out by
+# examples/training/prepare_aerial_data.py in $S; the shared photos in $AERODAAS_DATA_DIR/imagery/brighton_beach)
+set -u
+S=${S:-/work/cache/aerial/splits}; O=$2; mkdir -p "$O"
+B="aerodaas bench detect --names car large_vehicle person --repeat 1 --sweep --thresholds 0.2 0.3 0.4 --overlap 0.2"
+J="--images $S/jekhor_test/images --annotations $S/jekhor_test/labels --classes car large_vehicle"
+C="--images $S/cats_lab_eval_only/images --annotations $S/cats_lab_eval_only/labels --classes car --limit 100"
+if [ "$1" = tiles ]; then  # whole frame vs tiles (+ the whole frame at the tile's input size), aerial_nano
+  for set in jekhor_test cats_lab; do
+    [ $set = jekhor_test ] && A=$J || A=$C
+    $B $A --model aerial_nano --tiles 0 --out "$O/tiles_${set}_whole.json" >/dev/null
+    for t in 416 640 960; do
+      $B $A --model aerial_nano --input-sizes $t --tiles $t --out "$O/tiles_${set}_$t.json" >/dev/null
+    done
+  done
+else  # every held-out split and evaluation-only set, aerial_nano and the COCO yolox_nano side by side, whole frame
+  for m in aerial_nano yolox_nano; do
+    G=""; [ $m = yolox_nano ] && G="--group large_vehicle=truck,bus"
+    $B $J --model $m $G --out "$O/sets_${m}_jekhor_test.json" >/dev/null
+    $B --images $S/hit_uav_test/images --annotations $S/hit_uav_test/labels --classes car person --model $m $G \
+       --out "$O/sets_${m}_hit_uav_test.json" >/dev/null
+    $B --images $S/jekhor_eval_only/images --annotations $S/jekhor_eval_only/labels --classes car --model $m $G \
+       --out "$O/sets_${m}_jekhor_eval_only.json" >/dev/null
+    $B --images $S/cats_lab_eval_only/images --annotations $S/cats_lab_eval_only/labels --classes car --limit 300 \
+       --model $m $G --out "$O/sets_${m}_cats_lab_eval_only.json" >/dev/null
+    $B --images $AERODAAS_DATA_DIR/imagery/brighton_beach --annotations tests/data/brighton_beach_cars.json \
+       --classes car --model $m $G --out "$O/sets_${m}_brighton_beach.json" >/dev/null
+  done
+fi
+echo done
