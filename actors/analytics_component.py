@@ -258,15 +258,16 @@ class AnalyticsComponent(Component):
                                                                     trace=dict(msg.trace))], msg.tok, inline=False)
 
     def _record_tracks(self, msg: Message) -> None:
-        """A tracking analytics' tracks of this frame (``recorded_tracks``, :mod:`aerodaas.perception.track_records`)
+        """A tracking analytics' tracks of this frame (its ``track_records``, :mod:`aerodaas.perception.track_records`)
         go to the recorder under ``/<robot>/<name>/tracks``, whatever the analytics' own output was."""
-        take = getattr(self.obj, "recorded_tracks", None)
-        if self.recorder is None or not callable(take) or not getattr(self.obj, "records_tracks", False):
+        from aerodaas.perception.track_records import records_of, tracks_prefix
+
+        records = records_of(self.obj)
+        if self.recorder is None or records is None:
             return
-        rows = take(msg.meta)
+        rows = records.take(msg.meta)
         if rows is None:
             return
-        from aerodaas.perception.track_records import tracks_prefix
 
         meta = msg.meta
         size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None

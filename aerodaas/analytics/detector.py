@@ -9,12 +9,12 @@ import numpy as np
 from aerodaas.analytics.base import Analytics
 from aerodaas.analytics.contract import current_emissions
 from aerodaas.model.types import Detection, FrameMeta
-from aerodaas.perception.track_records import TrackRecording, track_and_keep
+from aerodaas.perception.track_records import TrackRecords, track_and_keep
 
 __all__ = ["ObjectDetector"]
 
 
-class ObjectDetector(TrackRecording, Analytics):
+class ObjectDetector(Analytics):
     """ONNX object detector on onnxruntime (YOLOX-Nano by default). Input frames (H, W, 3) uint8 BGR; output a
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
     without it the model is resolved by :func:`aerodaas.perception.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
@@ -92,6 +92,8 @@ class ObjectDetector(TrackRecording, Analytics):
         if tiling is not None:  # a bad slice size fails where the app wrote it (ValueError naming the field)
             tiling.check()
         self.tracker = tracker
+        #: the tracks the runtime records (aerodaas.perception.track_records), None without a tracker
+        self.track_records = TrackRecords() if tracker is not None else None
         if tracker is not None:
             tracker.check()
             self.stateful = True  # one ByteTracker per drone: each drone's frames must reach the same replica
@@ -175,8 +177,8 @@ class ObjectDetector(TrackRecording, Analytics):
         self.n_frames += 1
         self.n_with_dets += bool(dets)
         self._tell_providers(meta)
-        if self.tracker is not None:
-            track_and_keep(self, dets, meta, self.tracker)
+        if self.track_records is not None:
+            track_and_keep(self, self.track_records, dets, meta, self.tracker)
         return dets
 
     def _tell_providers(self, meta: FrameMeta | None) -> None:
@@ -210,9 +212,9 @@ class ObjectDetector(TrackRecording, Analytics):
             if em is not None:
                 em.item = j  # the event belongs to this drone's frame (Analytics.process_batch)
             self._tell_providers(meta)
-        if self.tracker is not None:
+        if self.track_records is not None:
             for dets, (_, meta) in zip(out, items):
-                track_and_keep(self, dets, meta, self.tracker)
+                track_and_keep(self, self.track_records, dets, meta, self.tracker)
         return out
 
     def stats(self) -> dict:

@@ -10,7 +10,7 @@ import numpy as np
 from aerodaas.analytics.base import NavigableAnalytics
 from aerodaas.analytics.motion import MovingTarget, TrackMotion
 from aerodaas.model.types import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
-from aerodaas.perception.track_records import TrackRecording
+from aerodaas.perception.track_records import TrackRecords
 
 __all__ = ["FollowTrack", "FollowAnalytics"]
 
@@ -57,7 +57,7 @@ class FollowTrack:
         self.integral, self.prev_err, self.prev_t = np.zeros(2), None, None
 
 
-class FollowAnalytics(TrackRecording, NavigableAnalytics):
+class FollowAnalytics(NavigableAnalytics):
     """Follow a detected target: turns its pixel box into ENU velocity commands with a PID controller.
 
     The box centre is back-projected through the frame's camera pose onto the ground plane
@@ -112,6 +112,8 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
             moving.check()
         self.moving = moving
         self.tracker = tracker
+        #: the tracks the runtime records (aerodaas.perception.track_records), None without a tracker
+        self.track_records = TrackRecords() if tracker is not None else None
         self.standoff_m = float(standoff_m)
         self.target_classes = set(target_classes)
         self.kp, self.ki, self.kd = kp, ki, kd
@@ -139,14 +141,14 @@ class FollowAnalytics(TrackRecording, NavigableAnalytics):
         drone = np.array(meta.pose.position[:2])
         cands = []
         ids: list[int | None] = []
-        if self.tracker is not None:
+        if self.tracker is not None and self.track_records is not None:
             from aerodaas.perception.track_records import track_rows
             from aerodaas.perception.tracking import ByteTracker
 
             if st.tracker is None:
                 st.tracker = ByteTracker(self.tracker)
             active = st.tracker.update([d for d in dets if d.class_name in self.target_classes])
-            self.keep_tracks(meta, track_rows(active, meta))  # recorded by the runtime (perception.track_records)
+            self.track_records.keep(meta, track_rows(active, meta))  # recorded by the runtime (track_records)
             seen = [(tr.detection, tr.track_id) for tr in active]
         else:
             seen = [(d, None) for d in dets if d.class_name in self.target_classes]

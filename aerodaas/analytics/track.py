@@ -8,13 +8,13 @@ from typing import Any, Iterable
 from aerodaas.analytics.core import Analytics
 from aerodaas.model.types import Detection, FrameMeta, GeoPoint
 from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.perception.track_records import TrackRecording, track_rows
+from aerodaas.perception.track_records import TrackRecords, track_rows
 from aerodaas.perception.tracking import ByteTrackConfig, ByteTracker
 
 __all__ = ["TrackAnalytics"]
 
 
-class TrackAnalytics(TrackRecording, Analytics):
+class TrackAnalytics(Analytics):
     """Per drone ByteTrack on ``classes`` (None: all) plus the ground position of every active track; in a run
     the tracks are also recorded (:mod:`aerodaas.perception.track_records`: image annotations, 3-D scene and one
     ``LocationFixes`` of all tracks under ``/{robot}/{name}/tracks``).
@@ -38,6 +38,7 @@ class TrackAnalytics(TrackRecording, Analytics):
         self.tracker = tracker or ByteTrackConfig()
         self.tracker.check()
         self.home, self.ground_z = home, float(ground_z)
+        self.track_records = TrackRecords()  # the rows the runtime records (aerodaas.perception.track_records)
 
     def check(self) -> None:
         """Pre-flight: the tracker options (ValueError naming the field)."""
@@ -48,12 +49,12 @@ class TrackAnalytics(TrackRecording, Analytics):
         intrinsics; None: no ground position) into this drone's ByteTrack update: the detections of ``classes``
         update the drone's tracker, and every active track becomes one row (fields in the class docstring), by
         track id; ``[]`` when no track is active. The rows are also kept for the recorder
-        (:meth:`~aerodaas.perception.track_records.TrackRecording.keep_tracks`)."""
+        (:meth:`~aerodaas.perception.track_records.TrackRecords.keep`)."""
         tr: ByteTracker = self.drone_state(dets, meta, lambda: ByteTracker(self.tracker))
         keep = [d for d in dets if self.classes is None or d.class_name in self.classes]
         robot = getattr(meta, "robot_id", "")
         rows = track_rows(tr.update(keep), meta, ground_z=self.ground_z)
-        self.keep_tracks(meta, rows)  # recorded by the runtime (aerodaas.perception.track_records)
+        self.track_records.keep(meta, rows)  # recorded by the runtime (aerodaas.perception.track_records)
         out = []
         for r in rows:
             row: dict[str, Any] = {"robot": robot, "track_id": r["track_id"], "class_name": r["class_name"],

@@ -3,9 +3,9 @@ the recorder writes it.
 
 An analytics that tracks (:class:`~aerodaas.analytics.track.TrackAnalytics`, or
 :class:`~aerodaas.analytics.core.ObjectDetector` / :class:`~aerodaas.analytics.core.FollowAnalytics` with a
-``tracker``) sets ``records_tracks`` and keeps, per drone,
+``tracker``) owns a :class:`TrackRecords` (``track_records``) that keeps, per drone,
 the rows of its last tracker update (:func:`track_rows`); the runtime's analytics component takes them with
-``recorded_tracks(meta)`` after every processed frame (also when the analytics' own output is None, e.g. a follow
+``track_records.take(meta)`` after every processed frame (also when the analytics' own output is None, e.g. a follow
 that issues no command) and hands them to the recorder, which writes for drone ``robot`` and analytics ``name``,
 with ``prefix = /{robot}/{name}/tracks`` (the detections of the same analytics are on ``/{robot}/{name}/detections``):
 
@@ -31,7 +31,8 @@ import numpy as np
 
 from aerodaas.model.types import FrameMeta, GeoPoint
 
-__all__ = ["TrackRecording", "track_and_keep", "track_rows", "write_tracks", "declared_track_channels", "tracks_prefix"]
+__all__ = ["TrackRecords", "records_of", "track_and_keep", "track_rows", "write_tracks", "declared_track_channels",
+           "tracks_prefix"]
 
 _ORIGIN = GeoPoint(lat=0.0, lon=0.0, alt=0.0)
 
@@ -116,55 +117,60 @@ def write_tracks(recorder: Any, prefix: str, log_time_ns: int, robot: str, rows:
 def declared_track_channels(robots: Iterable[str], graphs: dict[str, Iterable[Any]]) -> list[tuple[str, str]]:
     """``[(topic, schema)]`` of the track channels known from the plan (``graphs``: robot id -> its analytics):
     ``{prefix}`` (``foxglove.ImageAnnotations``), ``{prefix}/scene`` (``foxglove.SceneUpdate``) and ``{prefix}/fixes``
-    (``foxglove.LocationFixes``) for each drone and each of its analytics with ``records_tracks``."""
+    (``foxglove.LocationFixes``) for each drone and each of its analytics that tracks (:func:`records_of`)."""
     out: list[tuple[str, str]] = []
     for rid in robots:
         for a in graphs.get(rid, ()):
-            if getattr(a, "records_tracks", False):
+            if records_of(a) is not None:
                 p = tracks_prefix(rid, a.name)
                 out += [(p, "foxglove.ImageAnnotations"), (f"{p}/scene", "foxglove.SceneUpdate"),
                         (f"{p}/fixes", "foxglove.LocationFixes")]
     return out
 
 
-class TrackRecording:
-    """Mixin of the analytics that track: :meth:`keep_tracks` stores a frame's rows per drone and the runtime's
-    analytics component takes them once with :meth:`recorded_tracks` to record them (module docstring).
-    :attr:`records_tracks` says whether this analytics has tracks to record: whether it has a ``tracker``
-    (a :class:`~aerodaas.perception.tracking.ByteTrackConfig`)."""
+class TrackRecords:
+    """The tracks a tracking analytics hands the recorder, one frame per drone: the analytics owns one
+    (``analytics.track_records``, None when it does not track) and calls :meth:`keep` after each tracker update;
+    the runtime's analytics component takes the frame's rows once with :meth:`take` to record them (module
+    docstring). Not thread-safe: one analytics replica processes one frame at a time."""
 
-    @property
-    def records_tracks(self) -> bool:
-        """True when the analytics tracks (its ``tracker`` is set): the runtime then records its tracks."""
-        return getattr(self, "tracker", None) is not None
+    def __init__(self) -> None:
+        self._kept: dict[str, tuple[int, list[dict[str, Any]]]] = {}
 
-    def keep_tracks(self, meta: FrameMeta | None, rows: list[dict[str, Any]]) -> None:
-        """Keep ``rows`` (:func:`track_rows`) as drone ``meta.robot_id``'s tracks of frame ``meta.seq``."""
+    def keep(self, meta: FrameMeta | None, rows: list[dict[str, Any]]) -> None:
+        """Keep ``rows`` (:func:`track_rows`) as drone ``meta.robot_id``'s tracks of frame ``meta.seq`` (nothing
+        without ``meta``); replaces that drone's earlier rows."""
         if meta is not None:
-            self.__dict__.setdefault("_kept_tracks", {})[meta.robot_id] = (meta.seq, rows)
+            self._kept[meta.robot_id] = (meta.seq, rows)
 
-    def recorded_tracks(self, meta: FrameMeta | None) -> list[dict[str, Any]] | None:
+    def take(self, meta: FrameMeta | None) -> list[dict[str, Any]] | None:
         """The rows kept for the frame ``meta`` (and forgotten), or None when this frame produced none (not
         tracked: another drone's frame, or no ``meta``)."""
-        kept = self.__dict__.get("_kept_tracks")
-        if meta is None or not kept:
+        if meta is None:
             return None
-        got = kept.get(meta.robot_id)
+        got = self._kept.get(meta.robot_id)
         if got is None or got[0] != meta.seq:
             return None
-        del kept[meta.robot_id]
+        del self._kept[meta.robot_id]
         return got[1]
 
 
-def track_and_keep(analytics: Any, dets: list, meta: FrameMeta | None, config: Any,
+def records_of(analytics: Any) -> TrackRecords | None:
+    """The :class:`TrackRecords` of ``analytics`` (its ``track_records``), or None for an analytics that does not
+    track (no such attribute, or None: e.g. a follow without ``tracker``)."""
+    rec = getattr(analytics, "track_records", None)
+    return rec if isinstance(rec, TrackRecords) else None
+
+
+def track_and_keep(analytics: Any, records: TrackRecords, dets: list, meta: FrameMeta | None, config: Any,
                    classes: Iterable[str] | None = None) -> list:
     """Advance ``analytics``' ByteTracker of the drone of ``meta`` (one per drone, in its
     :meth:`~aerodaas.analytics.core.Analytics.drone_state`) with ``dets`` (only ``classes`` when given), keep the
-    geo-located rows for the recorder (:meth:`TrackRecording.keep_tracks`) and return the active tracks."""
+    geo-located rows for the recorder in ``records`` (:meth:`TrackRecords.keep`) and return the active tracks."""
     from aerodaas.perception.tracking import ByteTracker
 
     tr = analytics.drone_state(dets, meta, lambda: ByteTracker(config))
     keep = dets if classes is None else [d for d in dets if d.class_name in classes]
     active = tr.update(keep)
-    analytics.keep_tracks(meta, track_rows(active, meta))
+    records.keep(meta, track_rows(active, meta))
     return active

@@ -22,52 +22,59 @@ _ASKS = {M.MAV_CMD_REQUEST_CAMERA_INFORMATION: M.MAVLINK_MSG_ID_CAMERA_INFORMATI
          M.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION: M.MAVLINK_MSG_ID_VIDEO_STREAM_INFORMATION}
 
 
-class CameraHostMixin:
-    """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator`: :meth:`attach_camera` puts a camera
-    component on the vehicle's system (none by default)."""
+class CameraHost:
+    """The camera component slot of the emulated vehicle's system ``system_id`` (none attached by default):
+    :meth:`attach` puts a camera there, :meth:`heartbeat` sends its HEARTBEAT with the autopilot's and
+    :meth:`answer` replies to the COMMAND_LONGs addressed to its component. ``enc``: the vehicle's MAVLink encoder
+    (messages are built with it and sent with the camera's own per-link encoders). Not locked: the vehicle calls it
+    under its lock."""
 
-    camera: "EmulatedCamera | None" = None
+    def __init__(self, system_id: int, enc: Any) -> None:
+        self.system_id, self._enc = system_id, enc
+        #: the attached camera (None: none)
+        self.camera: "EmulatedCamera | None" = None
+        self._mavs: dict[int, Any] = {}
+        #: (command, component asked) of every request the camera answered
+        self.requests: list[tuple[int, int]] = []
 
-    def attach_camera(self, camera: "EmulatedCamera | None") -> None:
+    def attach(self, camera: "EmulatedCamera | None") -> None:
         """Put ``camera`` on the vehicle's system (None takes it away): its HEARTBEAT starts with the next one
-        of the autopilot, and it answers requests addressed to its component id."""
-        with self._lock:
-            self.camera = camera
-            self._camera_mavs: dict[int, Any] = {}
-            #: (command, component asked) of every request the camera answered
-            self.camera_requests: list[tuple[int, int]] = []
+        of the autopilot, and it answers requests addressed to its component id; the request log starts empty."""
+        self.camera = camera
+        self._mavs = {}
+        self.requests = []
 
-    def _camera_send(self, msg: Any, link: "_Link | None" = None) -> None:
-        """Send ``msg`` from the camera's component on ``link`` (None: every link)."""
-        for lk in [link] if link is not None else list(self._links):
-            mav = self._camera_mavs.get(id(lk))
+    def _send(self, msg: Any, links: "list[_Link]") -> None:
+        """Send ``msg`` from the camera's component on each of ``links`` (a closed link is marked closed)."""
+        for lk in links:
+            mav = self._mavs.get(id(lk))
             if mav is None:
-                mav = self._camera_mavs[id(lk)] = M.MAVLink(lk, srcSystem=self.system_id,
-                                                            srcComponent=self.camera.component)
+                mav = self._mavs[id(lk)] = M.MAVLink(lk, srcSystem=self.system_id,
+                                                     srcComponent=self.camera.component)
             try:
                 mav.send(msg)
             except Exception:  # noqa: BLE001 - a closed link: the link layer drops it
                 lk.closed = True
 
-    def _camera_heartbeat(self) -> None:
-        """With the autopilot's HEARTBEAT: the camera's own."""
+    def heartbeat(self, links: "list[_Link]") -> None:
+        """With the autopilot's HEARTBEAT: the camera's own on every one of ``links`` (nothing without a camera)."""
         if self.camera is not None:
-            self._camera_send(self._enc.heartbeat_encode(M.MAV_TYPE_CAMERA, M.MAV_AUTOPILOT_INVALID, 0, 0,
-                                                         M.MAV_STATE_ACTIVE, 3))
+            self._send(self._enc.heartbeat_encode(M.MAV_TYPE_CAMERA, M.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                  M.MAV_STATE_ACTIVE, 3), list(links))
 
-    def _camera_command(self, link: "_Link", msg: Any) -> bool:
-        """A COMMAND_LONG addressed to the camera's component: answered here (True), else False."""
+    def answer(self, link: "_Link", msg: Any, boot_ms: int) -> bool:
+        """A COMMAND_LONG ``msg`` from ``link`` addressed to the camera's component: answered here (a COMMAND_ACK,
+        then the message asked for, stamped ``boot_ms`` ms since boot), True; anything else False."""
         cam = self.camera
         if cam is None or msg.get_type() != "COMMAND_LONG" or msg.target_component != cam.component \
                 or msg.target_system not in (0, self.system_id):
             return False
         msg_id = int(msg.param1) if msg.command == M.MAV_CMD_REQUEST_MESSAGE else _ASKS.get(msg.command)
-        boot_ms = int(self.boot_ms0 + self.t * 1000.0) & 0xFFFFFFFF
         out = cam.build(msg_id, self._enc, boot_ms) if msg_id is not None else None
         result = M.MAV_RESULT_ACCEPTED if out is not None else M.MAV_RESULT_UNSUPPORTED
-        self.camera_requests.append((int(msg.command), int(msg.target_component)))
-        self._camera_send(self._enc.command_ack_encode(msg.command, result, 0, 0, msg.get_srcSystem(),
-                                                       msg.get_srcComponent()), link)
+        self.requests.append((int(msg.command), int(msg.target_component)))
+        self._send(self._enc.command_ack_encode(msg.command, result, 0, 0, msg.get_srcSystem(),
+                                                msg.get_srcComponent()), [link])
         if out is not None:
-            self._camera_send(out, link)
+            self._send(out, [link])
         return True

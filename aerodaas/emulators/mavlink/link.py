@@ -1,22 +1,19 @@
-"""The MAVLink link: sockets (TCP server, UDP in/out), the I/O loop, parsing, sending, STATUSTEXT chunking and the link-fault test hooks (MAVLink 2 serialisation by pymavlink)."""
+"""The emulated vehicle's MAVLink link (:class:`EmulatorLink`): sockets (TCP server, UDP in/out), reading and
+parsing, sending, STATUSTEXT chunking, and the link faults tests inject (:class:`LinkFaults`); MAVLink 2
+serialisation by pymavlink. The vehicle's I/O thread (:meth:`MavlinkVehicleEmulator.start
+<aerodaas.emulators.mavlink.vehicle.MavlinkVehicleEmulator.start>`) drives it."""
 from __future__ import annotations
 
-import time
+import ipaddress
 import selectors
 import socket
-import threading
-import ipaddress
-from typing import Any, Callable, Literal
+import time
+from typing import Any, Literal
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from aerodaas.emulators.mavlink.constants import _STATUSTEXT_LEN
-
-
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from aerodaas.emulators.mavlink.vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink.signing import EmulatedSigning
 
 M = mavlink
 
@@ -46,19 +43,62 @@ def _is_loopback(host: str) -> bool:
         return False
 
 
-class _Link:
-    """One peer: a TCP client, or a UDP peer address. Owns its MAVLink parser/encoder (sequence numbers)."""
+class LinkFaults:
+    """The link faults tests inject, shared by every peer of one vehicle: a cut link (:meth:`set_blackhole`) and
+    single lost packets (:meth:`drop_next`). Read and changed under the vehicle's lock, except :attr:`blackhole`
+    (see :attr:`EmulatorLink.blackholed`)."""
 
-    def __init__(self, emu: "MavlinkVehicleEmulator", sock: socket.socket, addr: Any, tcp: bool) -> None:
-        self.emu, self.sock, self.addr, self.tcp = emu, sock, addr, tcp
-        self.mav = mavlink.MAVLink(self, srcSystem=emu.system_id, srcComponent=emu.component_id)
+    def __init__(self) -> None:
+        #: everything the vehicle sends is dropped
+        self.blackhole = False
+        #: everything the vehicle receives is dropped (logged in :attr:`blackholed_inbound`)
+        self.blackhole_inbound = False
+        self._drop_counts: dict[tuple[str, str], int] = {}  # (direction, message type) -> how many more to drop
+        #: (direction "in"/"out", message type) of every message dropped by :meth:`drop_next`
+        self.dropped: list[tuple[str, str]] = []
+        #: (wall monotonic s, message type) of every message that arrived while the inbound link was cut
+        self.blackholed_inbound: list[tuple[float, str]] = []
+
+    def set_blackhole(self, on: bool, inbound: bool = True) -> None:
+        """Cut (``on``) or restore the link: outbound always, inbound too with ``inbound``."""
+        self.blackhole = bool(on)
+        self.blackhole_inbound = bool(on and inbound)
+
+    def drop_next(self, msg_type: str, direction: Literal["in", "out"] = "out", count: int = 1) -> None:
+        """Lose the next ``count`` messages of type ``msg_type`` in ``direction``. Raises ValueError for another
+        direction or count < 1."""
+        if direction not in ("in", "out") or count < 1:
+            raise ValueError(f"drop_next: direction must be 'in' or 'out' and count >= 1, got {direction!r}, {count!r}")
+        key = (direction, msg_type.upper())
+        self._drop_counts[key] = self._drop_counts.get(key, 0) + int(count)
+
+    def dropping(self, direction: str, msg_type: str) -> bool:
+        """Whether this ``msg_type`` message in ``direction`` is lost (one of the :meth:`drop_next` count used up
+        and logged in :attr:`dropped`)."""
+        key = (direction, msg_type)
+        if self._drop_counts.get(key, 0) <= 0:
+            return False
+        self._drop_counts[key] -= 1
+        self.dropped.append(key)
+        return True
+
+
+class _Link:
+    """One peer: a TCP client, or a UDP peer address. Owns its MAVLink parser/encoder (sequence numbers) for
+    ``system_id``/``component_id``, signed with ``signing``'s key when set; writes nothing while ``faults`` cut
+    the link."""
+
+    def __init__(self, faults: LinkFaults, signing: EmulatedSigning, system_id: int, component_id: int,
+                 sock: socket.socket, addr: Any, tcp: bool) -> None:
+        self.faults, self.sock, self.addr, self.tcp = faults, sock, addr, tcp
+        self.mav = mavlink.MAVLink(self, srcSystem=system_id, srcComponent=component_id)
         self.mav.robust_parsing = True
-        emu.signing.setup(self.mav)  # MAVLink 2 signing, when the vehicle has a key (signing.py)
+        signing.setup(self.mav)  # MAVLink 2 signing, when the vehicle has a key (signing.py)
         self.outbuf = bytearray()
         self.closed = False
 
     def write(self, buf: bytes) -> None:  # called by MAVLink.send
-        if self.emu.blackholed or self.closed:
+        if self.faults.blackhole or self.closed:
             return
         if self.tcp:
             self.outbuf += buf
@@ -82,13 +122,37 @@ class _Link:
             self.closed = True
 
 
-class LinkMixin:
-    """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator` (state lives there)."""
+class EmulatorLink:
+    """The MAVLink link of one emulated vehicle (``system_id``/``component_id``, MAVLink 2, signed by
+    ``signing`` once it has a key) to any number of peers: :meth:`open` binds the socket, :meth:`wait` and
+    :meth:`receive` read what the peers sent (parsed, with the faults applied), :meth:`send` / :meth:`text` write,
+    :meth:`flush` pushes TCP output and forgets closed peers, :meth:`close` closes everything. ``faults``: the
+    injected link faults (:class:`LinkFaults`). Not thread-safe: the vehicle calls it under its lock (except
+    :meth:`wait`)."""
 
-    def start(self, address: str = "tcp:127.0.0.1:0", allow_remote: bool = False) -> str:
-        """Listen (tcp, udpin) or send (udpout) on ``address`` and start the vehicle thread. Returns the address
-        actually bound (port 0 -> the chosen port). Raises ValueError for a non-loopback address unless
-        ``allow_remote``, OSError when the port cannot be bound."""
+    def __init__(self, system_id: int, component_id: int, signing: EmulatedSigning) -> None:
+        self.system_id, self.component_id, self.signing = system_id, component_id, signing
+        #: the vehicle's message encoder (messages are built with it and sent with each peer's own sequence)
+        self.enc = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.faults = LinkFaults()
+        #: the connected peers
+        self.peers: list[_Link] = []
+        self._udp_links: dict[Any, _Link] = {}
+        self._sel: selectors.BaseSelector | None = None
+        self._listen: socket.socket | None = None
+        self._udp: socket.socket | None = None
+        #: the address bound by :meth:`open` (None before)
+        self.address: str | None = None
+        #: every STATUSTEXT sent, in full
+        self.statustexts: list[str] = []
+        self._statustext_id = 0
+        #: packets that did not parse (and BAD_DATA)
+        self.bad_packets = 0
+
+    def open(self, address: str, allow_remote: bool = False) -> str:
+        """Listen (tcp, udpin) or send (udpout) on ``address``; returns the address actually bound (port 0 -> the
+        chosen port). Raises ValueError for a non-loopback address unless ``allow_remote``, OSError when the port
+        cannot be bound."""
         kind, host, port = parse_endpoint(address)
         if not allow_remote and not _is_loopback(host):
             raise ValueError(f"--mavlink: {host!r} is not a loopback address; the emulated vehicle accepts commands "
@@ -103,38 +167,32 @@ class LinkMixin:
             self._listen = s
             self._sel.register(s, selectors.EVENT_READ, "accept")
             self.address = f"tcp:{host}:{s.getsockname()[1]}"
+            return self.address
+        u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        udpout = None
+        if kind == "udpin":
+            u.bind((host, port))
+            self.address = f"udpin:{host}:{u.getsockname()[1]}"
         else:
-            u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            if kind == "udpin":
-                u.bind((host, port))
-                self.address = f"udpin:{host}:{u.getsockname()[1]}"
-            else:
-                u.bind(("127.0.0.1" if _is_loopback(host) else "0.0.0.0", 0))
-                self._udpout_addr = (host, port)
-                self.address = f"udpout:{host}:{port}"
-            u.setblocking(False)
-            self._udp = u
-            self._sel.register(u, selectors.EVENT_READ, "udp")
-            if self._udpout_addr:
-                self._udp_link(self._udpout_addr)
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name=f"mavlink-{self.autopilot}-emulator", daemon=True)
-        self._thread.start()
+            u.bind(("127.0.0.1" if _is_loopback(host) else "0.0.0.0", 0))
+            udpout = (host, port)
+            self.address = f"udpout:{host}:{port}"
+        u.setblocking(False)
+        self._udp = u
+        self._sel.register(u, selectors.EVENT_READ, "udp")
+        if udpout:
+            self._udp_link(udpout)
         return self.address
 
-    def stop(self) -> None:
-        """Stop the vehicle thread and close every socket (idempotent)."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-            self._thread = None
-        for link in list(self._links):
+    def close(self) -> None:
+        """Close every socket and forget the peers (idempotent)."""
+        for link in list(self.peers):
             if link.tcp:
                 try:
                     link.sock.close()
                 except OSError:
                     pass
-        self._links.clear()
+        self.peers.clear()
         self._udp_links.clear()
         for s in (self._listen, self._udp):
             if s is not None:
@@ -147,105 +205,54 @@ class LinkMixin:
             self._sel.close()
             self._sel = None
 
-    def __enter__(self) -> "MavlinkVehicleEmulator":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.stop()
-
-    def set_blackhole(self, on: bool, inbound: bool = True) -> None:
-        """Drop everything the vehicle sends (and, with ``inbound``, everything it receives, logging its type and
-        wall time in :attr:`blackholed_inbound`), like a radio out of range; the vehicle keeps flying on its own.
-        ``False`` restores the link."""
-        with self._lock:
-            self._blackhole = bool(on)
-            self._blackhole_inbound = bool(on and inbound)
-
     @property
-    def blackholed(self) -> bool:
-        """True while :meth:`set_blackhole` drops everything the vehicle sends (read without the lock: a link
-        write racing a switch sends or drops that one message, as a radio at the edge of its range)."""
-        return self._blackhole
+    def is_open(self) -> bool:
+        """True between :meth:`open` and :meth:`close`."""
+        return self._sel is not None
 
-    def drop_next(self, msg_type: str, direction: Literal["in", "out"] = "out", count: int = 1) -> None:
-        """Lose exactly the next ``count`` messages of type ``msg_type`` (e.g. ``"COMMAND_ACK"``,
-        ``"MISSION_COUNT"``) that the vehicle sends (``"out"``) or receives (``"in"``), like single lost radio
-        packets (a lost outgoing one used up its link's sequence number, as on a radio); each loss is logged in
-        :attr:`dropped`. Raises ValueError for another direction or count < 1."""
-        if direction not in ("in", "out") or count < 1:
-            raise ValueError(f"drop_next: direction must be 'in' or 'out' and count >= 1, got {direction!r}, {count!r}")
-        with self._lock:
-            key = (direction, msg_type.upper())
-            self._drop_counts[key] = self._drop_counts.get(key, 0) + int(count)
+    def wait(self, timeout_s: float) -> list[selectors.SelectorKey] | None:
+        """The sockets ready to read within ``timeout_s`` wall seconds, or None when the link is closed."""
+        sel = self._sel
+        if sel is None:
+            return None
+        try:
+            return [key for key, _ in sel.select(timeout_s)]
+        except (OSError, ValueError):
+            return None
 
-    def _dropping(self, direction: str, msg_type: str) -> bool:
-        key = (direction, msg_type)
-        if self._drop_counts.get(key, 0) <= 0:
-            return False
-        self._drop_counts[key] -= 1
-        self.dropped.append(key)
-        return True
+    def receive(self, ready: list[selectors.SelectorKey]) -> list[tuple[_Link, Any]]:
+        """Accept, read and parse the ``ready`` sockets (:meth:`wait`): the (peer, message) pairs to handle, in
+        order, without those the faults drop or that did not parse (counted in :attr:`bad_packets`)."""
+        out: list[tuple[_Link, Any]] = []
+        for key in ready:
+            try:
+                self._on_ready(key, out)
+            except OSError:
+                pass
+        return out
 
-    def inject(self, data: bytes | Any) -> None:
-        """Put ``data`` on the link to every peer as if the vehicle had sent it: raw bytes (garbage, a corrupt
-        frame) are written unchanged between two packets; a pymavlink message is packed with each link's
-        sequence number."""
-        with self._lock:
-            for link in list(self._links):
-                if isinstance(data, (bytes, bytearray)):
-                    link.write(bytes(data))
-                else:
-                    self._send(data, link)
-
-    def send_status_text(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
-        """Send STATUSTEXT ``text`` (ASCII) to every peer; longer than 50 characters it goes out in chunks as
-        MAVLink 2 specifies (same non-zero ``id``, ``chunk_seq`` from 0, the last chunk NUL-terminated)."""
-        with self._lock:
-            self._text(severity, text)
+    def flush(self) -> None:
+        """Push each TCP peer's output; forget the peers whose socket closed."""
+        for link in list(self.peers):
+            link.flush()
+            if link.closed:
+                self._drop(link)
 
     def _udp_link(self, addr: Any) -> _Link:
         link = self._udp_links.get(addr)
         if link is None:
-            link = _Link(self, self._udp, addr, tcp=False)
+            link = _Link(self.faults, self.signing, self.system_id, self.component_id, self._udp, addr, tcp=False)
             self._udp_links[addr] = link
-            self._links.append(link)
+            self.peers.append(link)
         return link
 
-    def _run(self) -> None:
-        last = time.monotonic()
-        while not self._stop.is_set():
-            sel = self._sel
-            if sel is None:
-                break
-            try:
-                ready = sel.select(0.004)
-            except (OSError, ValueError):
-                break
-            with self._lock:
-                for key, _ in ready:
-                    try:
-                        self._on_ready(key)
-                    except OSError:
-                        pass
-                now = time.monotonic()
-                elapsed = min(now - last, 0.5) * self.speedup  # a stalled thread does not teleport the vehicle
-                last = now
-                while elapsed > 1e-9:
-                    dt = min(self.physics_dt, elapsed)
-                    elapsed -= dt
-                    self._tick(dt)
-                for link in list(self._links):
-                    link.flush()
-                    if link.closed:
-                        self._drop(link)
-
-    def _on_ready(self, key: selectors.SelectorKey) -> None:
+    def _on_ready(self, key: selectors.SelectorKey, out: list[tuple[_Link, Any]]) -> None:
         if key.data == "accept":
             conn, addr = self._listen.accept()
             conn.setblocking(False)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            link = _Link(self, conn, addr, tcp=True)
-            self._links.append(link)
+            link = _Link(self.faults, self.signing, self.system_id, self.component_id, conn, addr, tcp=True)
+            self.peers.append(link)
             self._sel.register(conn, selectors.EVENT_READ, link)
         elif key.data == "udp":
             while True:
@@ -253,7 +260,7 @@ class LinkMixin:
                     data, addr = self._udp.recvfrom(65535)
                 except (BlockingIOError, InterruptedError):
                     return
-                self._feed(self._udp_link(addr), data)
+                self._feed(self._udp_link(addr), data, out)
         else:
             link: _Link = key.data
             try:
@@ -265,11 +272,11 @@ class LinkMixin:
             if not data:
                 self._drop(link)
                 return
-            self._feed(link, data)
+            self._feed(link, data, out)
 
     def _drop(self, link: _Link) -> None:
-        if link in self._links:
-            self._links.remove(link)
+        if link in self.peers:
+            self.peers.remove(link)
             self.signing.forget(link.mav)
         if link.tcp:
             try:
@@ -281,30 +288,30 @@ class LinkMixin:
             except OSError:
                 pass
 
-    def _feed(self, link: _Link, data: bytes) -> None:
+    def _feed(self, link: _Link, data: bytes, out: list[tuple[_Link, Any]]) -> None:
         try:
             msgs = link.mav.parse_buffer(data) or []
         except Exception:  # a malformed stream must never stop the vehicle
             self.bad_packets += 1
             return
-        if self._blackhole_inbound:  # out of range: parsed only to log what the ground station still sent
+        faults = self.faults
+        if faults.blackhole_inbound:  # out of range: parsed only to log what the ground station still sent
             now = time.monotonic()
-            self.blackholed_inbound.extend((now, m.get_type()) for m in msgs)
+            faults.blackholed_inbound.extend((now, m.get_type()) for m in msgs)
             return
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
                 self.bad_packets += 1
                 continue
-            if self._drop_counts and self._dropping("in", msg.get_type()):
+            if faults.dropping("in", msg.get_type()):
                 continue
-            try:
-                self._handle(link, msg)
-            except Exception as e:  # noqa: BLE001 - report, keep flying
-                self._text(M.MAV_SEVERITY_ERROR, f"emulator: {msg.get_type()} handling failed: {e}")
+            out.append((link, msg))
 
-    def _send(self, msg: Any, link: _Link | None = None) -> None:
-        links = [link] if link is not None else list(self._links)
-        if self._drop_counts and self._dropping("out", msg.get_type()):
+    def send(self, msg: Any, link: _Link | None = None) -> None:
+        """Send ``msg`` to ``link`` (None: every peer), each with its own sequence number; a message
+        :meth:`LinkFaults.drop_next` loses still uses up its number."""
+        links = [link] if link is not None else list(self.peers)
+        if self.faults.dropping("out", msg.get_type()):
             for lk in links:  # lost on the way: it had its number
                 lk.mav.seq = (lk.mav.seq + 1) % 256
             return
@@ -314,37 +321,34 @@ class LinkMixin:
             except Exception:  # noqa: BLE001
                 lk.closed = True
 
-    def _text(self, severity: int, text: str) -> None:
+    def inject(self, data: bytes | Any) -> None:
+        """Put ``data`` on the link to every peer: raw bytes unchanged between two packets, a pymavlink message
+        packed with each peer's sequence number."""
+        for link in list(self.peers):
+            if isinstance(data, (bytes, bytearray)):
+                link.write(bytes(data))
+            else:
+                self.send(data, link)
+
+    def text(self, severity: int, text: str) -> None:
         """STATUSTEXT: one message up to 50 characters (``id`` 0); longer ones in chunks of 50 with a shared
         non-zero ``id`` and ``chunk_seq`` 0, 1, ...; the last chunk is shorter than 50 (NUL-padded on the wire),
-        an empty one when the text fills the previous chunks exactly. Texts are cut at 200 characters."""
+        an empty one when the text fills the previous chunks exactly (MAVLink 2 STATUSTEXT). Texts are cut at 200
+        characters; each is logged in full in :attr:`statustexts`."""
         self.statustexts.append(text)
         data = text.encode("ascii", "replace")[:200]
         if len(data) <= _STATUSTEXT_LEN:
-            self._send(self._enc.statustext_encode(severity, data, 0, 0))
+            self.send(self.enc.statustext_encode(severity, data, 0, 0))
             return
         self._statustext_id = self._statustext_id % 0xFFFF + 1
         chunks = [data[i:i + _STATUSTEXT_LEN] for i in range(0, len(data), _STATUSTEXT_LEN)]
         if len(chunks[-1]) == _STATUSTEXT_LEN:
             chunks.append(b"")
         for seq, chunk in enumerate(chunks):
-            self._send(self._enc.statustext_encode(severity, chunk, self._statustext_id, seq))
+            self.send(self.enc.statustext_encode(severity, chunk, self._statustext_id, seq))
 
-    def _for_us(self, msg: Any) -> bool:
+    def for_us(self, msg: Any) -> bool:
+        """Whether ``msg`` targets this vehicle (its system and component, or broadcast 0)."""
         ts = getattr(msg, "target_system", 0)
         tc = getattr(msg, "target_component", 0)
         return ts in (0, self.system_id) and tc in (0, self.component_id)
-
-    def _handle(self, link: _Link, msg: Any) -> None:
-        mtype = msg.get_type()
-        if mtype == "SETUP_SIGNING":
-            if self._for_us(msg):  # it passed this link's signature check (or signing is off)
-                self.signing.on_setup_signing(msg)
-            return
-        handler: Callable | None = getattr(self, f"_on_{mtype.lower()}", None)
-        if handler is None:
-            return
-        if mtype not in ("HEARTBEAT", "REQUEST_DATA_STREAM") and not self._for_us(msg):
-            self._camera_command(link, msg)  # a camera component's, if one is attached (camera.py)
-            return
-        handler(link, msg)

@@ -1,4 +1,5 @@
-"""The parameter protocol (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET -> PARAM_VALUE; mavlink.io/en/services/parameter.html)."""
+"""The emulated firmware's parameters and the parameter protocol (PARAM_REQUEST_LIST / PARAM_REQUEST_READ /
+PARAM_SET -> PARAM_VALUE; mavlink.io/en/services/parameter.html)."""
 from __future__ import annotations
 
 import math
@@ -7,67 +8,57 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-
-
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from aerodaas.emulators.mavlink.link import _Link
-
-from aerodaas.emulators.mavlink.flavour import PX4_INT_PARAMS, SPEED_PARAMS
+from aerodaas.emulators.mavlink.flavour import PX4_INT_PARAMS
 
 M = mavlink
 
 
-class ParamMixin:
-    """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator` (state lives there)."""
+class EmulatedParams:
+    """The parameter table of the emulated ``autopilot`` (``values``: name -> value in the firmware's units, kept
+    as this very dict, in the order the protocol indexes it) and the parameter protocol's messages, built with the
+    vehicle's encoder ``enc``. It decides what to answer; the vehicle sends and stores (its ``_store_param``).
+    PX4 sends and expects its integer parameters (:data:`.flavour.PX4_INT_PARAMS`) bytewise as INT32."""
 
-    def set_param(self, name: str, value: float) -> None:
-        """Set an emulated parameter (see the class docstring). Raises KeyError for an unknown name."""
-        with self._lock:
-            if name not in self.params:
-                raise KeyError(f"unknown {self.autopilot} parameter {name!r}")
-            self._store_param(name, float(value))
+    def __init__(self, values: dict[str, float], autopilot: str, enc: Any) -> None:
+        self.values, self.autopilot, self._enc = values, autopilot, enc
+        self.px4 = autopilot == "px4"
 
-    def _store_param(self, name: str, value: float) -> None:
-        self.params[name] = value
-        if name in SPEED_PARAMS:
-            self._apply_speed_params()
-
-    def _param_msg(self, name: str) -> Any:
-        names = list(self.params)
+    def message(self, name: str) -> Any:
+        """PARAM_VALUE of parameter ``name`` (REAL32, or PX4's INT32 bytewise), with its index and the count."""
+        names = list(self.values)
         if self.px4 and name in PX4_INT_PARAMS:  # bytewise INT32, as PX4 sends its integers
-            value = struct.unpack("<f", struct.pack("<i", int(self.params[name])))[0]
+            value = struct.unpack("<f", struct.pack("<i", int(self.values[name])))[0]
             return self._enc.param_value_encode(name.encode(), value, M.MAV_PARAM_TYPE_INT32, len(names),
                                                 names.index(name))
-        return self._enc.param_value_encode(name.encode(), float(self.params[name]), M.MAV_PARAM_TYPE_REAL32,
+        return self._enc.param_value_encode(name.encode(), float(self.values[name]), M.MAV_PARAM_TYPE_REAL32,
                                             len(names), names.index(name))
 
-    def _on_param_request_list(self, link: _Link, msg: Any) -> None:
-        for name in self.params:
-            self._send(self._param_msg(name), link)
+    def list_reply(self) -> list[Any]:
+        """PARAM_REQUEST_LIST: a PARAM_VALUE of every parameter, in index order."""
+        return [self.message(name) for name in self.values]
 
-    def _on_param_request_read(self, link: _Link, msg: Any) -> None:
-        names = list(self.params)
-        name = msg.param_id if msg.param_index < 0 else (names[msg.param_index] if msg.param_index < len(names) else "")
+    def read_reply(self, msg: Any) -> list[Any]:
+        """PARAM_REQUEST_READ ``msg`` (by name, or by index when ``param_index`` >= 0): that parameter's
+        PARAM_VALUE, none for an unknown name or an index out of range."""
+        names = list(self.values)
+        idx = msg.param_index
+        name = msg.param_id if idx < 0 else (names[idx] if idx < len(names) else "")
         if isinstance(name, bytes):
             name = name.decode(errors="replace")
         name = name.rstrip("\x00")
-        if name in self.params:
-            self._send(self._param_msg(name), link)
+        return [self.message(name)] if name in self.values else []
 
-    def _on_param_set(self, link: _Link, msg: Any) -> None:
+    def decode_set(self, msg: Any) -> tuple[str, float] | None:
+        """PARAM_SET ``msg`` -> (name, value) to store, or None when the firmware ignores it: an unknown name gets
+        no answer, PX4 refuses a type other than the parameter's ("param types mismatch"), and a non-finite value is
+        not stored. A stored parameter's new value is broadcast as PARAM_VALUE (both firmware do, trace)."""
         name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else msg.param_id
         name = name.rstrip("\x00")
-        # the parameter protocol: an unknown name gets no answer; a known one is stored and its new value
-        # broadcast as PARAM_VALUE (REAL32, the firmware's units) - both firmware do so (trace)
-        if name not in self.params:
-            return
+        if name not in self.values:
+            return None
         value = float(msg.param_value)
         if self.px4 and (name in PX4_INT_PARAMS) != (msg.param_type == M.MAV_PARAM_TYPE_INT32):
-            return  # PX4: "param types mismatch", nothing set, no PARAM_VALUE
+            return None  # PX4: "param types mismatch", nothing set, no PARAM_VALUE
         if self.px4 and name in PX4_INT_PARAMS:
             value = float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
-        if math.isfinite(value):
-            self._store_param(name, value)
-            self._send(self._param_msg(name))
+        return (name, value) if math.isfinite(value) else None

@@ -28,7 +28,7 @@ class TelemetryMixin:
         if self.t >= self._next_hb:
             self._next_hb = self.t + 1.0
             self._emit(M.MAVLINK_MSG_ID_HEARTBEAT)
-            self._camera_heartbeat()  # an attached camera component's own (camera.py)
+            self.camera_host.heartbeat(self._links)  # an attached camera component's own (camera.py)
         for cmd, (link, sysid, compid, due, pct) in list(self._in_progress.items()):
             if link not in self._links:
                 del self._in_progress[cmd]

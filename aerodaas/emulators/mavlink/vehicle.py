@@ -40,11 +40,10 @@ and mode change in vehicle time.
 from __future__ import annotations
 
 import math
-import selectors
-import socket
 import threading
+import time
 from collections import deque
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Callable, Literal
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -53,17 +52,18 @@ from aerodaas.config import Limits, RobotConfig
 from aerodaas.model.types import GeoPoint
 from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.emulators.mavlink.arming import ArmingMixin
-from aerodaas.emulators.mavlink.camera import CameraHostMixin
+from aerodaas.emulators.mavlink.camera import CameraHost
 from aerodaas.emulators.mavlink.commands import CommandMixin
 from aerodaas.emulators.mavlink.constants import _PX4_DEFAULT_STREAMS
-from aerodaas.emulators.mavlink.gimbal import EmulatedGimbal
-from aerodaas.emulators.mavlink.flavour import AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS, PX4_PARAMS
+from aerodaas.emulators.mavlink.gimbal import EmulatedCamera, EmulatedGimbal
+from aerodaas.emulators.mavlink.flavour import (AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS,
+                                               PX4_PARAMS, SPEED_PARAMS)
 from aerodaas.emulators.mavlink.guided import GuidedMixin
-from aerodaas.emulators.mavlink.link import LinkMixin
+from aerodaas.emulators.mavlink.link import EmulatorLink
 from aerodaas.emulators.mavlink.mission import MissionMixin
 from aerodaas.emulators.mavlink.mission_run import MissionRunMixin
 from aerodaas.emulators.mavlink.modes import ModeMixin
-from aerodaas.emulators.mavlink.params import ParamMixin
+from aerodaas.emulators.mavlink.params import EmulatedParams
 from aerodaas.emulators.mavlink.signing import EmulatedSigning
 from aerodaas.emulators.mavlink.telemetry import TelemetryMixin
 
@@ -76,8 +76,8 @@ M = mavlink
 __all__ = ["MavlinkVehicleEmulator"]
 
 
-class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, ParamMixin, MissionMixin,
-                             MissionRunMixin, TelemetryMixin, CameraHostMixin):
+class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, MissionMixin,
+                             MissionRunMixin, TelemetryMixin):
     """A simulated ArduPilot Copter or PX4 multicopter speaking MAVLink 2 over TCP (server) or UDP.
 
     ``autopilot``: ``"ardupilot"`` or ``"px4"``. ``robot``: battery, yaw rate, altitude and home from a
@@ -141,11 +141,58 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         #: MAVLink 2 signing (signing.py): every link's parser checks, every packet out is signed, once a key is set
         self.signing = EmulatedSigning(signing_key)
         self._init_links(system_id, component_id)
+        #: the parameter protocol over :attr:`params` (params.py)
+        self.param_table = EmulatedParams(self.params, autopilot, self._enc)
         self._init_state()
         self._apply_speed_params()
         #: the vehicle's gimbal (a servo mount, as ArduCopter's MNT1_TYPE 1; the robot's ``gimbal`` limits or
         #: ArduPilot's defaults): gimbal.py
         self.gimbal = EmulatedGimbal(robot.gimbal)
+        #: the camera component on the vehicle's system (camera.py; none until :meth:`attach_camera`)
+        self.camera_host = CameraHost(system_id, self._enc)
+
+    def set_param(self, name: str, value: float) -> None:
+        """Set an emulated parameter (see the class docstring). Raises KeyError for an unknown name."""
+        with self._lock:
+            if name not in self.params:
+                raise KeyError(f"unknown {self.autopilot} parameter {name!r}")
+            self._store_param(name, float(value))
+
+    def _store_param(self, name: str, value: float) -> None:
+        """Store parameter ``name`` (firmware units); a speed parameter changes the vehicle's speeds at once."""
+        self.params[name] = value
+        if name in SPEED_PARAMS:
+            self._apply_speed_params()
+
+    def _on_param_request_list(self, link: _Link, msg: Any) -> None:
+        for out in self.param_table.list_reply():
+            self._send(out, link)
+
+    def _on_param_request_read(self, link: _Link, msg: Any) -> None:
+        for out in self.param_table.read_reply(msg):
+            self._send(out, link)
+
+    def _on_param_set(self, link: _Link, msg: Any) -> None:
+        got = self.param_table.decode_set(msg)
+        if got is not None:
+            self._store_param(*got)
+            self._send(self.param_table.message(got[0]))  # to every link, as the firmware broadcasts it
+
+    def attach_camera(self, camera: EmulatedCamera | None) -> None:
+        """Put ``camera`` on the vehicle's system (None takes it away): its HEARTBEAT starts with the next one
+        of the autopilot, and it answers requests addressed to its component id (:class:`.camera.CameraHost`)."""
+        with self._lock:
+            self.camera_host.attach(camera)
+
+    @property
+    def camera(self) -> EmulatedCamera | None:
+        """The attached camera component (None: none)."""
+        return self.camera_host.camera
+
+    @property
+    def camera_requests(self) -> list[tuple[int, int]]:
+        """(command, component asked) of every request the attached camera answered."""
+        return self.camera_host.requests
 
     def _init_emulated_firmware(self, ekf_gps_s: float, mission_int: bool | None, home_alt_drift_m: float | None,
                                 seed: int, estimate_speed_error_mps: float, land_detect_s: float,
@@ -188,7 +235,6 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         autopilot = self.autopilot
         self._rejections: dict[int, list[int]] = {}  # MAV_CMD -> results still to answer (reject_next)
         self._in_progress: dict[int, tuple[_Link, int, int, float, int]] = {}  # cmd -> (link, sys, comp, next t, %)
-        self._statustext_id = 0
         self.params: dict[str, float] = dict(PX4_PARAMS if self.px4 else ARDUPILOT_PARAMS)
         self.params["MAV_SYS_ID" if self.px4 else "SYSID_THISMAV"] = float(system_id)
         if self.px4:
@@ -203,25 +249,13 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
             self.params[k] = float(v)
 
     def _init_links(self, system_id: int, component_id: int) -> None:
-        """The MAVLink encoder, the I/O thread's sockets and links, and the link faults tests inject."""
-        self._enc = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        """The MAVLink link (link.py: sockets, peers, faults), the vehicle thread and the pre-arm test hook."""
+        #: the MAVLink link to the ground stations (link.py)
+        self.link = EmulatorLink(system_id, component_id, self.signing)
+        self._enc = self.link.enc
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._sel: selectors.BaseSelector | None = None
-        self._links: list[_Link] = []
-        self._udp_links: dict[Any, _Link] = {}
-        self._listen: socket.socket | None = None
-        self._udp: socket.socket | None = None
-        self._udpout_addr: tuple[str, int] | None = None
-        self.address: str | None = None
-        self._blackhole = False
-        self._blackhole_inbound = False
-        self._drop_counts: dict[tuple[str, str], int] = {}  # (direction, message type) -> how many more to drop
-        #: (direction "in"/"out", message type) of every message dropped by :meth:`drop_next`
-        self.dropped: list[tuple[str, str]] = []
-        #: (wall monotonic s, message type) of every message that arrived while the inbound link was cut
-        self.blackholed_inbound: list[tuple[float, str]] = []
         self.prearm_failure: str | None = None
 
     def _init_state(self) -> None:
@@ -269,9 +303,157 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
         self._intervals: dict[int, float] = {m: 1.0 / hz for m, hz in _PX4_DEFAULT_STREAMS.items()} if self.px4 else {}
         self._next_due: dict[int, float] = {}
         self._next_hb = 0.0
-        self.statustexts: list[str] = []
         self.commands_seen: list[int] = []
-        self.bad_packets = 0
+
+    def start(self, address: str = "tcp:127.0.0.1:0", allow_remote: bool = False) -> str:
+        """Listen (tcp, udpin) or send (udpout) on ``address`` and start the vehicle thread. Returns the address
+        actually bound (port 0 -> the chosen port). Raises ValueError for a non-loopback address unless
+        ``allow_remote``, OSError when the port cannot be bound."""
+        bound = self.link.open(address, allow_remote)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f"mavlink-{self.autopilot}-emulator", daemon=True)
+        self._thread.start()
+        return bound
+
+    def stop(self) -> None:
+        """Stop the vehicle thread and close every socket (idempotent)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+            self._thread = None
+        self.link.close()
+
+    def __enter__(self) -> "MavlinkVehicleEmulator":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        """The vehicle thread: read what the peers sent, handle it, run the physics and the firmware for the wall
+        time elapsed x ``speedup`` (at most 0.5 s at a time: a stalled thread does not teleport the vehicle) in
+        steps of ``physics_dt``, and push the output."""
+        last = time.monotonic()
+        while not self._stop.is_set():
+            ready = self.link.wait(0.004)
+            if ready is None:
+                break
+            with self._lock:
+                for link, msg in self.link.receive(ready):
+                    try:
+                        self._handle(link, msg)
+                    except Exception as e:  # noqa: BLE001 - report, keep flying
+                        self._text(M.MAV_SEVERITY_ERROR, f"emulator: {msg.get_type()} handling failed: {e}")
+                now = time.monotonic()
+                elapsed = min(now - last, 0.5) * self.speedup
+                last = now
+                while elapsed > 1e-9:
+                    dt = min(self.physics_dt, elapsed)
+                    elapsed -= dt
+                    self._tick(dt)
+                self.link.flush()
+
+    def _handlers(self) -> dict[str, Callable[[_Link, Any], None]]:
+        """Message type -> the firmware's handler of it (a type not listed is ignored, e.g. HEARTBEAT)."""
+        return {"COMMAND_LONG": self._on_command_long, "COMMAND_INT": self._on_command_int,
+                "SET_MODE": self._on_set_mode, "REQUEST_DATA_STREAM": self._on_request_data_stream,
+                "SET_POSITION_TARGET_GLOBAL_INT": self._on_set_position_target_global_int,
+                "SET_POSITION_TARGET_LOCAL_NED": self._on_set_position_target_local_ned,
+                "MISSION_COUNT": self._on_mission_count, "MISSION_ITEM_INT": self._on_mission_item_int,
+                "MISSION_ITEM": self._on_mission_item, "MISSION_REQUEST_LIST": self._on_mission_request_list,
+                "MISSION_REQUEST_INT": self._on_mission_request_int, "MISSION_REQUEST": self._on_mission_request,
+                "MISSION_CLEAR_ALL": self._on_mission_clear_all, "MISSION_SET_CURRENT": self._on_mission_set_current,
+                "PARAM_REQUEST_LIST": self._on_param_request_list, "PARAM_REQUEST_READ": self._on_param_request_read,
+                "PARAM_SET": self._on_param_set}
+
+    def _handle(self, link: _Link, msg: Any) -> None:
+        """One message from ``link``: SETUP_SIGNING for this vehicle to the signing (signing.py), a message for
+        another component to the camera (camera.py), the rest to its handler (:meth:`_handlers`)."""
+        mtype = msg.get_type()
+        if mtype == "SETUP_SIGNING":
+            if self.link.for_us(msg):  # it passed this link's signature check (or signing is off)
+                self.signing.on_setup_signing(msg)
+            return
+        handler = self._handlers().get(mtype)
+        if handler is None:
+            return
+        if mtype != "REQUEST_DATA_STREAM" and not self.link.for_us(msg):
+            boot_ms = int(self.boot_ms0 + self.t * 1000.0) & 0xFFFFFFFF
+            self.camera_host.answer(link, msg, boot_ms)  # a camera component's, if one is attached (camera.py)
+            return
+        handler(link, msg)
+
+    def _send(self, msg: Any, link: _Link | None = None) -> None:
+        """Send ``msg`` to ``link`` (None: every peer): :meth:`.link.EmulatorLink.send`."""
+        self.link.send(msg, link)
+
+    def _text(self, severity: int, text: str) -> None:
+        """STATUSTEXT ``text`` to every peer, chunked: :meth:`.link.EmulatorLink.text`."""
+        self.link.text(severity, text)
+
+    @property
+    def _links(self) -> list[_Link]:
+        """The connected peers (:attr:`.link.EmulatorLink.peers`)."""
+        return self.link.peers
+
+    def set_blackhole(self, on: bool, inbound: bool = True) -> None:
+        """Drop everything the vehicle sends (and, with ``inbound``, everything it receives, logging its type and
+        wall time in :attr:`blackholed_inbound`), like a radio out of range; the vehicle keeps flying on its own.
+        ``False`` restores the link."""
+        with self._lock:
+            self.link.faults.set_blackhole(on, inbound)
+
+    @property
+    def blackholed(self) -> bool:
+        """True while :meth:`set_blackhole` drops everything the vehicle sends (read without the lock: a link
+        write racing a switch sends or drops that one message, as a radio at the edge of its range)."""
+        return self.link.faults.blackhole
+
+    def drop_next(self, msg_type: str, direction: Literal["in", "out"] = "out", count: int = 1) -> None:
+        """Lose exactly the next ``count`` messages of type ``msg_type`` (e.g. ``"COMMAND_ACK"``,
+        ``"MISSION_COUNT"``) that the vehicle sends (``"out"``) or receives (``"in"``), like single lost radio
+        packets (a lost outgoing one used up its link's sequence number, as on a radio); each loss is logged in
+        :attr:`dropped`. Raises ValueError for another direction or count < 1."""
+        with self._lock:
+            self.link.faults.drop_next(msg_type, direction, count)
+
+    def inject(self, data: bytes | Any) -> None:
+        """Put ``data`` on the link to every peer as if the vehicle had sent it: raw bytes (garbage, a corrupt
+        frame) are written unchanged between two packets; a pymavlink message is packed with each link's
+        sequence number."""
+        with self._lock:
+            self.link.inject(data)
+
+    def send_status_text(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
+        """Send STATUSTEXT ``text`` (ASCII) to every peer; longer than 50 characters it goes out in chunks as
+        MAVLink 2 specifies (same non-zero ``id``, ``chunk_seq`` from 0, the last chunk NUL-terminated)."""
+        with self._lock:
+            self._text(severity, text)
+
+    @property
+    def address(self) -> str | None:
+        """The address :meth:`start` bound (None before)."""
+        return self.link.address
+
+    @property
+    def dropped(self) -> list[tuple[str, str]]:
+        """(direction "in"/"out", message type) of every message dropped by :meth:`drop_next`."""
+        return self.link.faults.dropped
+
+    @property
+    def blackholed_inbound(self) -> list[tuple[float, str]]:
+        """(wall monotonic s, message type) of every message that arrived while the inbound link was cut."""
+        return self.link.faults.blackholed_inbound
+
+    @property
+    def statustexts(self) -> list[str]:
+        """Every STATUSTEXT the vehicle sent, in full."""
+        return self.link.statustexts
+
+    @property
+    def bad_packets(self) -> int:
+        """Packets that did not parse."""
+        return self.link.bad_packets
 
     def snapshot(self) -> dict[str, Any]:
         """The vehicle's state: ``t`` (vehicle seconds), ``mode``, ``armed``, ``in_air``, ``position`` (ENU metres
@@ -284,7 +466,7 @@ class MavlinkVehicleEmulator(LinkMixin, CommandMixin, ModeMixin, ArmingMixin, Gu
                     "position": tuple(float(v) for v in s.position - self.home_enu),
                     "position_origin": tuple(float(v) for v in s.position), "home": self.home,
                     "gps_fix": self._fix_type(), "mission_seq": self.mission_seq, "mission_len": len(self.mission),
-                    "reached": list(self.reached_log), "links": len(self._links),
+                    "reached": list(self.reached_log), "links": len(self.link.peers),
                     "statustexts": list(self.statustexts), "commands_seen": list(self.commands_seen),
                     "battery_pct": self.veh.battery_pct}
 
