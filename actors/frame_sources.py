@@ -40,14 +40,7 @@ def _camera_backends() -> list[str]:
     """The registered backends that declare a camera stream (for the error message)."""
     from aerodaas.plugins import registry
 
-    out = []
-    for e in registry.entries("backend"):
-        try:
-            if getattr(e.load(), "provides_camera", False):
-                out.append(e.name)
-        except Exception:  # noqa: BLE001 - a backend that does not import offers no camera
-            continue
-    return out
+    return registry.names_with_flag("backend", "provides_camera")
 
 
 class RenderedFrames(FrameSource):

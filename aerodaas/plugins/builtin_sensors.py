@@ -199,11 +199,4 @@ def _environment_sources() -> list[str]:
     """The registered frame sources an environment camera may use (for the error message)."""
     from aerodaas.plugins import registry
 
-    out = []
-    for e in registry.entries("frame_source"):
-        try:
-            if getattr(e.load(), "environment_ok", False):
-                out.append(e.name)
-        except Exception:  # noqa: BLE001 - a source that does not import is not offered
-            continue
-    return out
+    return registry.names_with_flag("frame_source", "environment_ok")

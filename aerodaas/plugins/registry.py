@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "BUILTIN_DIST", "BUILTIN_ORIGIN", "MissingBuiltins", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
-           "register", "plugin", "get", "class_origin", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
+           "register", "plugin", "get", "class_origin", "names_with_flag", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
            "PluginRegistry", "REGISTRY",
            "plugin_package_paths", "plugin_name", "is_import_path"]
 
@@ -476,6 +476,20 @@ def class_origin(kind: str, cls: type) -> tuple[str, str]:
     if (cls.__module__ or "").split(".")[0] == BUILTIN_DIST:  # a class of this package's own
         return plugin_name(cls, kind), BUILTIN_ORIGIN
     return plugin_name(cls, kind), _origin_of(cls).replace("decorator in", "unregistered class in", 1)
+
+
+def names_with_flag(kind: str, flag: str) -> list[str]:
+    """Names of the registered plug-ins of ``kind`` whose class declares the class attribute ``flag`` true (a
+    backend's ``provides_camera``, a frame source's ``environment_ok``), for error messages that list the choices;
+    a plug-in whose module does not import is left out. Raises ValueError for an unknown kind."""
+    out = []
+    for e in entries(kind):
+        try:
+            if getattr(e.load(), flag, False):
+                out.append(e.name)
+        except Exception:  # noqa: BLE001 - a plug-in that does not import offers nothing
+            continue
+    return out
 
 
 def describe_all(kind: str | None = None) -> list[dict[str, Any]]:
