@@ -1,4 +1,4 @@
-"""Helpers for the real-firmware tests (``tests/test_sitl_*.py``, marker ``sitl``): ArduCopter and PX4 SITL from
+"""Helpers for the real-firmware tests (``tests/firmware/test_sitl_*.py``, marker ``sitl``): ArduCopter and PX4 SITL from
 ``../shared/sitl`` (or ``$AERODAAS_SITL_DIR``), each run in a private network namespace that has only loopback
 (``unshare -n``), together with the ``aerodaas`` commands that talk to it; recordings are read back in the parent
 with the ``mcap`` package's own reader (not ours).

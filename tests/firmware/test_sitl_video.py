@@ -39,7 +39,7 @@ def _flight(tmp: Path, scheme: str) -> tuple[int | None, str, Path]:
     """One fresh ArduCopter, one sender, one ``aerodaas run`` of the app; returns (exit code, output, recording)."""
     footage = make_footage(tmp / "pan.mp4", seconds=8.0, empty_s=22.0)  # cars, then none: the follow ends
     py = shlex.quote(sys.executable)
-    rig = shlex.quote(str(REPO / "tests" / "video_rig.py"))
+    rig = shlex.quote(str(REPO / "tests" / "video" / "video_rig.py"))
     if scheme == "rtsp":
         url = "rtsp://127.0.0.1:8554/cam"  # a companion computer's RTSP server (gst-rtsp-server's usual port)
         sender = f"{py} {rig} rtsp {shlex.quote(str(footage))} 8554 5004"

@@ -155,7 +155,7 @@ def _flight_timing(pose_of: str, latency_s: float = 0.5, speed: float = 5.0) -> 
 
 
 def test_the_pose_tag_check_fails_on_a_pose_taken_at_arrival():
-    """tests/video_rig.check_pose_tags (what every stream run's recording is judged by) passes the camera's own
+    """tests/video/video_rig.check_pose_tags (what every stream run's recording is judged by) passes the camera's own
     tagging and fails a pose taken at the frame's arrival instead of its capture, by its sample times and, when
     those are relabelled, by its position against the odometry (0.5 s late at 5 m/s: 2.5 m, beyond the 1.7 m the
     sample gaps allow)."""

@@ -34,7 +34,7 @@ in an explicit table), ``backend.link`` (:class:`~.link.MavlinkLink`: connection
 dispatch, stream requests), ``backend.clock`` (:class:`~.clock.VehicleClock`: the vehicle clock from
 ``time_boot_ms``), ``backend.status_texts`` (:class:`~.statustext.StatusTexts`). No concern is a mix-in any more:
 :class:`MavlinkBackend` holds them and keeps the :class:`~aerodaas.backends.base.VehicleBackend` surface, connect and
-close. Verified against real ArduCopter and PX4 SITL firmware (``tests/test_sitl_*.py``).
+close. Verified against real ArduCopter and PX4 SITL firmware (``tests/firmware/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed
