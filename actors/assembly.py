@@ -34,7 +34,7 @@ def _capture_due(d: Any, tok: Any) -> None:
             cam["next_t"] += 1.0 / cam["fps"]
             if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
                 cam["next_t"] = b.t + 1.0 / cam["fps"]
-            cam["comp"].try_capture(tuple(float(c) for c in b.position), float(b.yaw), b.t, tok)
+            cam["comp"].try_capture(b.pose_sample(), b.t, tok)
 
 
 def _halt_cameras(d: Any) -> None:

@@ -12,6 +12,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from aerodaas.backends.base import PoseSample
 from aerodaas.protocol.messages import FrameMsg
 from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 from aerodaas.plugins.frames import FrameSource, FrameSourceContext, LiveFrameSource, frame_source_class
@@ -23,6 +24,11 @@ from aerodaas.video.pose import angles_at, pose_sampled_at
 #: how long a stream frame captured after the newest clock tick waits for the next one (s): the clock ticks at
 #: twice the stream's rate, so this is only reached when the clock stalls
 TICK_WAIT_S = 0.25
+#: how long a stream frame waits for the vehicle's first position sample after its capture (s), so that its pose is
+#: interpolated between samples that enclose the capture: a vehicle's samples arrive one telemetry interval apart
+#: (10 Hz by default, ``mavlink.stream_rate_hz``; 0.5 s covers 2 Hz). Past it the newest sample is used (held, not
+#: extrapolated) and the frame's ``pose_samples_t`` shows the single sample it came from
+POSE_WAIT_S = 0.5
 
 
 class CameraComponent:
@@ -62,7 +68,9 @@ class CameraComponent:
         self._busy = threading.Lock()
         #: the robot's event sink (DroneComponent.record_event), set by the actor's assembly: video_lost/restored
         self.on_event: Callable[..., None] | None = None
-        #: (run time s, position ENU m, yaw deg) at each clock tick: the pose a stream frame is tagged with
+        #: (run time s, position ENU m, yaw deg) of each vehicle position sample a clock tick saw, stamped with the
+        #: sample's own time (:meth:`~aerodaas.backends.base.VehicleBackend.pose_sample`), each once, in time order:
+        #: the poses a stream frame's is interpolated between
         self._poses: deque[tuple[float, tuple, float]] = deque(maxlen=256)
         #: the gimbal's attitude at each tick (run clock s, GimbalAttitude): a stream frame's is the one at its
         #: capture time (aerodaas.video.pose.angles_at)
@@ -110,12 +118,14 @@ class CameraComponent:
         if isinstance(self.src, LiveFrameSource):
             self.stream = self.src.reader
 
-    def try_capture(self, position: tuple, yaw: float, t: float, tok: Cascade | None) -> bool:
-        """Clock thread: a frame is due at run time ``t`` (s), the vehicle at ``position`` (ENU m) with ``yaw``
-        (ENU deg). Submits the capture unless the previous one is still running (then counted in
-        ``dropped_at_camera``). A stream camera samples the pose and gimbal here and captures only a frame that is
-        waiting (one that arrived while the previous capture ran); the others are captured on arrival."""
-        self._poses.append((t, tuple(position), float(yaw)))
+    def try_capture(self, pose: PoseSample, t: float, tok: Cascade | None) -> bool:
+        """Clock thread: a frame is due at run time ``t`` (s); ``pose`` is the vehicle's newest position sample
+        (ENU m, ENU yaw deg) and the run time it is of (at most ``t``). Submits the capture unless the previous one
+        is still running (then counted in ``dropped_at_camera``). A stream camera keeps the pose sample and the
+        gimbal here and captures only a frame that is waiting (one that arrived while the previous capture ran);
+        the others are captured on arrival."""
+        self._keep_pose(pose)
+        position, yaw = pose.position, pose.yaw_deg
         if self.stream is not None:
             self._last_gimbal = self._gimbal(t)
             self._note_tick(t)
@@ -138,6 +148,12 @@ class CameraComponent:
         with self._tick_cond:
             self._halted = True
             self._tick_cond.notify_all()
+
+    def _keep_pose(self, pose: PoseSample) -> None:
+        """Keep a position sample for stream frames' poses, once (a tick that saw no new sample adds nothing) and in
+        time order (an older one than the newest kept is dropped)."""
+        if not self._poses or pose.t > self._poses[-1][0]:
+            self._poses.append((float(pose.t), tuple(pose.position), float(pose.yaw_deg)))
 
     def _note_tick(self, t: float) -> None:
         """A clock tick at run time ``t`` (s), now on the host's monotonic clock."""
@@ -167,6 +183,14 @@ class CameraComponent:
         with self._tick_cond:
             self._tick_cond.wait_for(lambda: self._halted or self._tick_clock[1] >= mono, timeout=TICK_WAIT_S)
             return self._tick_clock
+
+    def _pose_after(self, t: float) -> None:
+        """Wait until a position sample at or after run time ``t`` (s, a stream frame's capture) was kept, so that
+        the frame's pose is interpolated between samples that enclose it: at most :data:`POSE_WAIT_S`, not when the
+        mission is over (the clock's ticks bring the samples: :meth:`try_capture` notifies)."""
+        with self._tick_cond:
+            self._tick_cond.wait_for(lambda: self._halted or (bool(self._poses) and self._poses[-1][0] >= t),
+                                     timeout=POSE_WAIT_S)
 
     def _gimbal(self, t: float) -> Any:
         """The gimbal's attitude now (the clock thread, at the frame's tick at run time ``t`` s), kept for the
@@ -210,7 +234,7 @@ class CameraComponent:
     def capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None = None) -> np.ndarray | None:
         """Produce one frame and hand it to the subscribers in this thread; returns it (None if the source had no
         new frame)."""
-        self._poses.append((t, tuple(position), float(yaw)))
+        self._keep_pose(PoseSample(t, tuple(position), float(yaw)))
         self._note_tick(t)
         msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal(t))
         if msg is None:
@@ -287,11 +311,12 @@ class CameraComponent:
         """The stream's newest frame not delivered before, its pose at capture and its timing, or None. Its capture
         and arrival times on the run clock are the newest tick's run time plus their host-time offset from that tick
         (the run clock of a stream camera runs at wall rate: speedup 1, checked before Ray), with a tick at or after
-        the capture (:meth:`_tick_after`), so that the pose is interpolated between ticks around it. The timing
+        the capture (:meth:`_tick_after`). The timing
         (``aerodaas.FrameTiming``): ``capture_t``, ``arrival_t``, ``pose_t`` (run-clock s), ``age_ms`` (capture to
         hand-off), ``stream_seq``, the vehicle pose at capture (``position`` ENU m, ``yaw`` ENU deg) and
-        ``pose_samples_t``: the run times (s) of the two ticks' poses it was interpolated between, or of the one
-        used outside them."""
+        ``pose_samples_t``: the run times (s) of the two vehicle position samples it was interpolated between (their
+        own times, not the ticks' that read them; a capture after the newest sample waits for the next one:
+        :meth:`_pose_after`), or of the one used outside them."""
         for ev in self.stream.drain_events():
             if self.on_event is not None:
                 self.on_event(ev.kind, sensor=self.sensor_id, **ev.fields)
@@ -308,6 +333,7 @@ class CameraComponent:
         capture_t = max(tick_t - max(0.0, tick_mono - capture_mono), self._last_capture_t + 1e-6)
         arrival_t = max(tick_t - (tick_mono - f.arrival_mono), capture_t)
         self._last_capture_t = capture_t
+        self._pose_after(capture_t)
         position, yaw, pose_t, samples_t = pose_sampled_at(list(self._poses), capture_t)
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         self.latency_ms.append((now - f.capture_mono) * 1e3)

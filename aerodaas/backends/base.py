@@ -22,13 +22,24 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar, NamedTuple, Sequence
 
 import numpy as np
 
 from aerodaas.model.types import GeoPoint, Odometry
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
+
+
+class PoseSample(NamedTuple):
+    """One position sample of the vehicle and the run time it is of: ``t`` (s on the run's clock; for a vehicle on
+    its own clock the sample's own time, e.g. GLOBAL_POSITION_INT ``time_boot_ms`` mapped to the run's clock, which
+    can be up to one telemetry interval before :attr:`VehicleBackend.t`), ``position`` (3,) ENU metres from home,
+    ``yaw_deg`` ENU degrees."""
+
+    t: float
+    position: tuple[float, float, float]
+    yaw_deg: float
 
 
 class BackendError(RuntimeError):
@@ -281,6 +292,15 @@ class VehicleBackend(abc.ABC):
         """The current :class:`~aerodaas.model.types.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
         for backends with a :attr:`sample_key`): ENU metres from :attr:`home` and their WGS-84 position, ENU m/s,
         attitude in degrees (yaw as :attr:`yaw`), battery percent, armed and in-air. Must not block."""
+
+    def pose_sample(self) -> PoseSample:
+        """The newest position and yaw with the run time they are of, read together (one sample, never the position
+        of one and the time of another). A camera tags a frame with the pose interpolated between these samples at
+        the frame's capture time, so the time must be the sample's, not the tick's that read it (issue 47 item 6).
+        The default: :attr:`position` and :attr:`yaw` at :attr:`t` (right for a backend whose state is new at
+        every :meth:`step`: the simulator). A backend with a :attr:`sample_key` overrides it. Must not block."""
+        p = self.position
+        return PoseSample(float(self.t), (float(p[0]), float(p[1]), float(p[2])), float(self.yaw))
 
     @property
     def sample_key(self) -> Any:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from aerodaas.backends.base import PoseSample
 from aerodaas.config import ConfigError
 from aerodaas.config.robot import SensorConfig
 from aerodaas.video import CaptureClock, StreamReader, VideoSourceError, parse_stream_source
@@ -162,11 +163,11 @@ def test_the_pose_tag_check_fails_on_a_pose_taken_at_arrival():
     timing, odometry = _flight_timing("capture")
     got = check_pose_tags(timing, odometry)
     assert got["compared"] == got["judged"] > 150 and got["worst_m"] < 0.05
-    with pytest.raises(AssertionError, match=r"pose from the ticks at \[.*\] s, captured at"):
+    with pytest.raises(AssertionError, match=r"pose from the samples at \[.*\] s, captured at"):
         check_pose_tags(*_flight_timing("arrival"))
     with pytest.raises(AssertionError, match=r"m from the odometry there"):
         check_pose_tags(*_flight_timing("arrival_relabelled"))
-    with pytest.raises(AssertionError, match=r"pose from the ticks at"):  # the newest tick's, 0.19 s after capture
+    with pytest.raises(AssertionError, match=r"pose from the samples at"):  # the newest sample's, 0.19 s after capture
         check_pose_tags(*_flight_timing("arrival", latency_s=0.2))
     # a recording whose odometry surrounds no frame compares zero poses: that is a failure, never a pass
     timing, odometry = _flight_timing("capture")
@@ -265,9 +266,9 @@ def test_a_stream_frame_is_handed_off_when_it_arrives_not_at_the_next_tick():
     stream.put(time.monotonic(), 1)
     cam._on_stream_frame()  # before the clock's first tick: it waits for the tick
     assert plane.published == [] and stream.waiting()
-    assert cam.try_capture((0.0, 0.0, 10.0), 0.0, 1.0, None)  # the first tick takes the waiting frame
+    assert cam.try_capture(PoseSample(1.0, (0.0, 0.0, 10.0), 0.0), 1.0, None)  # the first tick takes the waiting frame
     assert len(plane.published) == 1 and not stream.waiting()
-    assert not cam.try_capture((2.0, 0.0, 10.0), 0.0, 1.5, None)  # a tick with nothing waiting captures nothing
+    assert not cam.try_capture(PoseSample(1.5, (2.0, 0.0, 10.0), 0.0), 1.5, None)  # a tick with nothing waiting captures nothing
     tick_mono = cam._tick_clock[1]
     stream.put(tick_mono - 0.25, 2)  # captured half-way between the two ticks, arriving now
     cam._on_stream_frame()  # the arrival alone hands it off
@@ -280,6 +281,36 @@ def test_a_stream_frame_is_handed_off_when_it_arrives_not_at_the_next_tick():
     stream.put(time.monotonic(), 3)
     cam._on_stream_frame()
     assert len(plane.published) == 2 and stream.waiting()
+
+
+def test_a_stream_frame_takes_its_pose_from_the_vehicle_samples_own_times():
+    """Issue 47 item 6: a MAVLink vehicle's newest position sample is older than the tick that reads it (one
+    telemetry interval at most). The frame's pose is interpolated between the samples at their own times, not at
+    the ticks': captured at 1.25 s between samples of 0.8 s (x 0 m) and 1.3 s (x 5 m), it is at x 4.5 m (stamped
+    with the ticks' times, 1.0 and 1.5 s, it would be at 2.5 m). A frame captured after the newest sample waits
+    for the next one, and without one holds the newest (its pose time is that sample's)."""
+    from aerodaas.actors.camera import CameraComponent
+
+    plane = _InlinePlane()
+    cam = CameraComponent(plane, "cam", "uav", "cam1", {"width": 160, "height": 120, "hfov_deg": 78, "fps": 10,
+                                                        "pitch_deg": 90}, None, None, None, 0)
+    stream = cam.stream = _FakeStream()
+    assert not cam.try_capture(PoseSample(0.8, (0.0, 0.0, 10.0), 0.0), 1.0, None)
+    assert not cam.try_capture(PoseSample(0.8, (0.0, 0.0, 10.0), 0.0), 1.25, None)  # the same sample: kept once
+    assert not cam.try_capture(PoseSample(1.3, (5.0, 0.0, 10.0), 0.0), 1.5, None)
+    assert [p[0] for p in cam._poses] == [0.8, 1.3]
+    tick_mono = cam._tick_clock[1]
+    stream.put(tick_mono - 0.25, 1)  # captured at run time 1.25 s
+    cam._on_stream_frame()
+    meta = plane.published[-1].meta
+    assert meta.capture_time == pytest.approx(1.25, abs=1e-3)
+    assert meta.pose.position == pytest.approx((4.5, 0.0, 10.0), abs=1e-2)
+    assert meta.pose_time == pytest.approx(1.25, abs=1e-3)  # interpolated: the pose is of the capture time
+    stream.put(tick_mono - 0.05, 2)  # captured at 1.45 s, after the newest sample (1.3 s); no newer one comes
+    cam._on_stream_frame()
+    meta = plane.published[-1].meta
+    assert meta.pose.position == pytest.approx((5.0, 0.0, 10.0), abs=1e-6)
+    assert meta.pose_time == 1.3  # held: the pose is of that sample's time
 
 
 @pytest.fixture(scope="module")

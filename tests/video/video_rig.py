@@ -175,7 +175,7 @@ def check_stream_recording(rec: Path, robot: str = "quadrotor_base", camera: str
     the stream recorded, but the ones refused before they left the camera's actor (``not_recorded``) or by the
     recorder actor's full queue (``/run/recorder_drops``), each counted; every decoded frame
     taken, replaced or still waiting, and each frame's pose tag the vehicle's pose at its capture time
-    (:func:`check_pose_tags`: from the ticks around the capture, and where the recording's own odometry says the
+    (:func:`check_pose_tags`: from the vehicle samples around the capture, and where the recording's own odometry says the
     vehicle was then). Returns ``{"stats", "timing", "follow" (log times of the follow analytics' navigation),
     "odometry" ([(log time, message)]), "poses" (what check_pose_tags judged)}`` for the test's own assertions."""
     from aerodaas.recording.reader import read_messages
@@ -208,8 +208,8 @@ def check_stream_recording(rec: Path, robot: str = "quadrotor_base", camera: str
 
 #: a pose tag from one sample (the capture outside the camera's samples) must be of a sample this near, s
 POSE_SAMPLE_SLACK_S = 0.1
-#: ... and when that sample is older than the capture (the capture after the newest tick), this near: a frame is
-#: never captured after the tick that takes it (the camera keeps capture times increasing by 1 us), s
+#: ... and when that sample is older than the capture (the vehicle sent no newer one within the camera's
+#: POSE_WAIT_S), no older than the odometry's largest sample gap around the capture plus this, s
 AFTER_NEWEST_SLACK_S = 1e-3
 #: added to the fastest speed the odometry shows: the speed between two samples can exceed the sampled ones
 #: (a quadrotor gains well under 1 m/s in the 0.05 s to the nearest 10 Hz sample), m/s
@@ -225,19 +225,21 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     pose at the frame's capture, from what the recording holds; for frames arriving ``settle_s`` (s) after the first
     one (the camera then has a second of per-tick poses behind it):
 
-    1. the tick poses it was interpolated between enclose ``capture_t`` (or the one sample used outside them is
-       within :data:`POSE_SAMPLE_SLACK_S` after it, :data:`AFTER_NEWEST_SLACK_S` before it): a pose taken at the
-       arrival (20-300 ms later) is bracketed by later ticks, or is the newest tick's, older than the arrival but
-       not than the capture;
+    1. the vehicle's position samples it was interpolated between (``pose_samples_t``: their own times, issue 47
+       item 6) enclose ``capture_t``, or the one sample used outside them is within :data:`POSE_SAMPLE_SLACK_S`
+       after it, or older than it by no more than the vehicle's own largest sample gap there (a stalled stream of
+       samples) plus :data:`AFTER_NEWEST_SLACK_S`: a pose taken at the arrival (20-300 ms later) is bracketed by
+       later samples;
     2. its ``position`` (ENU m) agrees with the recording's own ``odometry`` (the ``/<robot>/odometry`` messages:
        ``t`` s, ``position``, ``velocity``) interpolated at ``capture_t``, for every frame the odometry surrounds.
 
     The tolerance of 2 is made of speed x sample gap only, never of a wall-clock time: both come from the same
-    vehicle state, so they differ by (a) the camera's own interpolation between its ticks, at most speed x their
-    gap; (b) the odometry's interpolation, at most speed x its gap around ``capture_t``; and (c) the position a
-    tick took being the vehicle's newest sample, older than the tick by at most one position-sample gap (0 on the
-    simulator; a MAVLink autopilot's samples and stalls, as real SITL firmware's), bounded by the odometry's largest
-    sample gap within :data:`GAP_WINDOW_S` of the ticks. Speed: the fastest the odometry shows anywhere (sampled
+    vehicle samples stamped with the same times, so they differ by (a) the camera's own interpolation between its
+    samples, at most speed x their gap; (b) the odometry's interpolation, at most speed x its gap around
+    ``capture_t`` (the recording keeps samples at the odometry rate, the camera every sample its ticks saw); and,
+    for a pose held from an older sample only, (c) that sample's age at the capture. Before issue 47 item 6 the
+    camera stamped a sample with the tick's time, up to one sample gap later than the sample's own, and this check
+    had to add the largest sample gap near the frame (within :data:`GAP_WINDOW_S`) to every tolerance. Speed: the fastest the odometry shows anywhere (sampled
     velocity and distance over sample gaps) plus :data:`SPEED_SLACK_MPS`. A loaded machine delays ticks and samples,
     which widens the gaps and so the tolerance with them: it cannot break the check; a pose taken at arrival
     instead of capture can (tests/video/test_video_source.py fabricates one). Raises AssertionError naming the frame, or
@@ -248,17 +250,24 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     t_first = timing[0]["arrival_t"]
     late = [m for m in timing if m["arrival_t"] > t_first + settle_s]
     assert late, "no frame arrived a second after the first: no pose tag to judge"
-    for m in late:
-        samples, c = m["pose_samples_t"], m["capture_t"]
-        assert samples and (samples[0] <= c <= samples[-1] if len(samples) == 2
-                            else -AFTER_NEWEST_SLACK_S <= samples[0] - c <= POSE_SAMPLE_SLACK_S), \
-            f"frame {m['seq']}: pose from the ticks at {samples} s, captured at {c} s (arrived at {m['arrival_t']} s)"
     odo = sorted((float(o["t"]), np.asarray(o["position"], float), np.asarray(o.get("velocity") or (0, 0, 0), float))
                  for o in odometry)
     times = np.array([o[0] for o in odo])
+    gaps = np.diff(times) if len(odo) >= 2 else np.zeros(0)
+
+    def stall_near(t: float) -> float:
+        """The odometry's largest sample gap within GAP_WINDOW_S of run time ``t`` (s)."""
+        near = slice(max(int(np.searchsorted(times, t - GAP_WINDOW_S)) - 1, 0),
+                     int(np.searchsorted(times, t + GAP_WINDOW_S)))
+        return float(np.max(gaps[near], initial=0.0))
+
+    for m in late:
+        samples, c = m["pose_samples_t"], m["capture_t"]
+        assert samples and (samples[0] <= c <= samples[-1] if len(samples) == 2
+                            else -stall_near(c) - AFTER_NEWEST_SLACK_S <= samples[0] - c <= POSE_SAMPLE_SLACK_S), \
+            f"frame {m['seq']}: pose from the samples at {samples} s, captured at {c} s (arrived at {m['arrival_t']} s)"
     compared, worst_m, worst_ratio = 0, 0.0, 0.0
     if len(odo) >= 2:
-        gaps = np.diff(times)
         chord = [float(np.linalg.norm(b[1] - a[1])) / g for a, b, g in zip(odo, odo[1:], gaps) if g > 0]
         speed = max([float(np.linalg.norm(o[2])) for o in odo] + chord) + SPEED_SLACK_MPS
         for m in late:
@@ -269,11 +278,8 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
             lo = hi - 1
             a = (c - times[lo]) / (times[hi] - times[lo]) if times[hi] > times[lo] else 0.0
             expected = odo[lo][1] + a * (odo[hi][1] - odo[lo][1])
-            ticks = list(m["pose_samples_t"]) + [c]
-            near = slice(max(int(np.searchsorted(times, min(ticks) - GAP_WINDOW_S)) - 1, 0),
-                         int(np.searchsorted(times, max(ticks) + GAP_WINDOW_S)))  # the gaps it touches
-            stale = float(np.max(gaps[near], initial=0.0))
-            tol = speed * ((max(ticks) - min(ticks)) + (times[hi] - times[lo]) + stale) + POSITION_SLACK_M
+            samples = list(m["pose_samples_t"]) + [c]
+            tol = speed * ((max(samples) - min(samples)) + (times[hi] - times[lo])) + POSITION_SLACK_M
             err = float(np.linalg.norm(np.asarray(m["position"], float) - expected))
             assert err <= tol, (f"frame {m['seq']} captured at {c:.3f} s: pose tag {m['position']} is {err:.2f} m "
                                 f"from the odometry there {expected.round(2).tolist()} (tolerance {tol:.2f} m: "

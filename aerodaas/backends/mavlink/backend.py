@@ -13,7 +13,7 @@ import numpy as np
 from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem, MissionPlan
 from aerodaas.model.types import GeoPoint, Odometry
-from aerodaas.backends.base import BackendError, VehicleBackend
+from aerodaas.backends.base import BackendError, PoseSample, VehicleBackend
 from aerodaas.backends.mavlink.action import Readiness, VehicleAction
 from aerodaas.backends.mavlink.camera import CameraFinder
 from aerodaas.backends.mavlink.clock import VehicleClock
@@ -411,6 +411,10 @@ made the robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``) a
     def sample_key(self) -> int:
         """:attr:`VehicleTelemetry.sample_key`."""
         return self.telemetry.sample_key
+
+    def pose_sample(self) -> PoseSample:
+        """:meth:`VehicleTelemetry.pose_sample`."""
+        return self.telemetry.pose_sample()
 
     def odometry(self) -> Odometry:
         """:meth:`VehicleTelemetry.odometry`."""

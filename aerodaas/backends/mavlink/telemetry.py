@@ -11,7 +11,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.base import PoseSample, VehicleBackend
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.mavlink.action import Readiness
@@ -361,14 +361,28 @@ class VehicleTelemetry:
         with self._lock:
             pos = tuple(float(v) for v in self._pos)
             geo = self._geo or enu_to_geodetic(pos[0], pos[1], pos[2], self._vehicle.home)
-            t = self._vehicle.t
-            if self._pos_seq:  # the sample's own time (time_boot_ms mapped to the run's clock), never after now
-                t = min(t, max(0.0, self._pos_t - self._t_connect()))
+            t = self._sample_run_t()
             return Odometry(robot_id=self.robot_id, t=t, position=pos, geodetic=geo,
                             velocity=tuple(float(v) for v in self._vel),
                             attitude=Attitude(roll=self._att[0], pitch=self._att[1], yaw=self._att[2]),
                             battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._vehicle.armed,
                             in_air=self.in_air)
+
+    def _sample_run_t(self) -> float:
+        """The run time (s) of the position sample in ``_pos``: its own ``time_boot_ms`` mapped to the run's clock,
+        never after :attr:`TelemetryVehicle.t` (that time before the first sample). Caller holds ``_lock``."""
+        t = self._vehicle.t
+        if self._pos_seq:
+            t = min(t, max(0.0, self._pos_t - self._t_connect()))
+        return float(t)
+
+    def pose_sample(self) -> PoseSample:
+        """The latest position sample with the yaw known with it, stamped as :meth:`odometry` stamps it (the
+        sample's own ``time_boot_ms`` on the run's clock, never after :attr:`TelemetryVehicle.t`), read under one
+        lock: see :meth:`~aerodaas.backends.base.VehicleBackend.pose_sample`."""
+        with self._lock:
+            return PoseSample(self._sample_run_t(), (float(self._pos[0]), float(self._pos[1]), float(self._pos[2])),
+                              float(self._att[2]))
 
     def _queue_odometry(self) -> None:
         """Keep the odometry of the position sample just received (with the velocity, attitude and state known with
