@@ -96,7 +96,7 @@ def test_goto_speed_cap(fly, autopilot):
     b.takeoff(3.0)
     assert run_until(b, lambda: b.position[2] > 2.8, 15)
     speeds: list = []
-    sample = lambda: speeds.append(float(np.hypot(*emu.veh.state.velocity[:2])))  # noqa: E731 - ground truth
+    sample = lambda: speeds.append(float(np.hypot(*emu.state.veh.state.velocity[:2])))  # noqa: E731 - ground truth
     t0 = b.t
     b.goto((6.0, 0.0, 3.0), speed=0.5)
     assert run_until(b, lambda: dist(b.position, (6, 0, 3)) < 0.3, 20, every=sample), b.position
@@ -190,9 +190,9 @@ def test_mission_round_trip_and_auto_flight(fly, autopilot):
     for wp in square:  # the vehicle went to every waypoint and held there; the backend saw it
         # PX4 resolves an item's height above home when it starts, and its home altitude moves after take-off
         # (COM_HOME_EN; up to home_alt_drift_m in the emulator), so the true height may be off by that much
-        assert min(math.hypot(p[0] - wp.x, p[1] - wp.y) + max(0.0, abs(p[2] - wp.z) - emu.home_alt_drift_m)
+        assert min(math.hypot(p[0] - wp.x, p[1] - wp.y) + max(0.0, abs(p[2] - wp.z) - emu.state.home_alt_drift_m)
                    for p in truth) < 1.0, wp.id
-        assert min(math.hypot(p[0] - wp.x, p[1] - wp.y) + max(0.0, abs(p[2] - wp.z) - emu.home_alt_drift_m)
+        assert min(math.hypot(p[0] - wp.x, p[1] - wp.y) + max(0.0, abs(p[2] - wp.z) - emu.state.home_alt_drift_m)
                    for p in track) < 2.0, wp.id
     assert max(p[2] for p in track) > 5.5 and dist(b.position[:2], (0, 10)) < 1.0  # landed at the last waypoint
 

@@ -183,7 +183,7 @@ def test_a_run_without_the_announced_camera_fails_naming_it(tmp_path):
         proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
                                "--env", str(env_path), "--record", str(tmp_path / "run.mcap")],
                               capture_output=True, text=True, timeout=600, env=dict(os.environ))
-        armed = emu.snapshot()["armed"] or emu.took_off
+        armed = emu.snapshot()["armed"] or emu.state.took_off
     finally:
         emu.stop()
     out = proc.stdout + proc.stderr

@@ -14,7 +14,7 @@ def _fly_survey(flavour: str, run_options, tmp_path, land_detect_s: float = 0.0)
     """apps/farm_survey.py on an emulated ``flavour`` autopilot at 10x; asserts that the emulated autopilot itself
     ends disarmed. Returns (MissionResult, the recording read with the ``mcap`` package)."""
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, params=PX4_AT_SPEED[flavour])
-    emu.land_detect_s = land_detect_s
+    emu.state.land_detect_s = land_detect_s
     try:
         res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
         vehicle = emu.snapshot()

@@ -65,7 +65,7 @@ def vehicle():
 
 def _held(emu) -> list[tuple]:
     with emu._lock:
-        return [(it.command, round(it.param1, 3), it.x, it.y) for it in emu.fence_items]
+        return [(it.command, round(it.param1, 3), it.x, it.y) for it in emu.missions.fence_items]
 
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
@@ -105,7 +105,7 @@ def test_ardupilot_without_fence_options_refuses_several_inclusion_zones(vehicle
     del emu.params["FENCE_OPTIONS"]
     with pytest.raises(BackendError, match=r"no FENCE_OPTIONS parameter.*every one of the fence's 2 inclusion zones"):
         b.connect(timeout_s=10)
-    assert emu.fence_items == [] and emu.params["FENCE_ENABLE"] == 0
+    assert emu.missions.fence_items == [] and emu.params["FENCE_ENABLE"] == 0
 
 
 def test_px4_refuses_several_inclusion_zones_before_sending_anything(vehicle):
@@ -115,7 +115,7 @@ def test_px4_refuses_several_inclusion_zones_before_sending_anything(vehicle):
     before = dict(emu.params)
     with pytest.raises(BackendError, match=r"2 inclusion zones: PX4 requires a position inside every inclusion zone"):
         b.connect(timeout_s=10)
-    assert emu.fence_items == [] and emu.params == before
+    assert emu.missions.fence_items == [] and emu.params == before
 
 
 def test_px4s_return_altitude_is_lowered_under_the_altitude_fence(vehicle):
@@ -158,22 +158,22 @@ def test_home_radius_and_hold_action(vehicle, autopilot):
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_a_fence_read_back_different_refuses_to_fly(vehicle, autopilot):
     emu, b, _ = vehicle(autopilot)
-    store = emu._store_typed
+    store = emu.mission_protocol.store_typed
 
     def corrupt(link, msg, is_int):  # the vehicle keeps the last vertex 1e-7 degrees off
         store(link, msg, is_int)
-        if emu.fence_items and len(emu.fence_items) == len(FENCES[autopilot][1]):
-            emu.fence_items[3].x += 1
+        if emu.missions.fence_items and len(emu.missions.fence_items) == len(FENCES[autopilot][1]):
+            emu.missions.fence_items[3].x += 1
 
-    emu._store_typed = corrupt
+    emu.mission_protocol.store_typed = corrupt
     with pytest.raises(BackendError, match=r"fence read back differs.*item 3: position.*refusing to fly"):
         b.connect(timeout_s=10)
 
 
 def test_a_parameter_the_vehicle_clamps_refuses_to_fly(vehicle):
     emu, b, _ = vehicle("ardupilot", max_altitude=35.0)
-    store = emu._store_param
-    emu._store_param = lambda name, value: store(name, min(value, 30.0) if name == "FENCE_ALT_MAX" else value)
+    store = emu.param_protocol.store
+    emu.param_protocol.store = lambda name, value: store(name, min(value, 30.0) if name == "FENCE_ALT_MAX" else value)
     with pytest.raises(BackendError, match=r"FENCE_ALT_MAX set to 35, the vehicle reports 30; refusing to fly"):
         b.connect(timeout_s=10)
 
@@ -193,7 +193,7 @@ def test_px4_int32_parameter_sent_as_real32_is_refused_by_the_emulator(vehicle):
 def test_no_geofence_leaves_the_vehicle_fence_alone(vehicle, autopilot):
     emu, b, _ = vehicle(autopilot, fence=None)
     b.connect(timeout_s=10)
-    assert emu.fence_items == []
+    assert emu.missions.fence_items == []
     assert emu.params.get("FENCE_ENABLE", 0) == 0 and emu.params.get("GF_ACTION", 2) == 2
 
 
@@ -238,7 +238,7 @@ def test_mission_upload_sends_the_plan_geofence_and_rally_points(vehicle, tmp_pa
     assert [h[0] for h in held] == [5002, 5002, 5002, 5003] and held[3][1] == 250.0
     assert held[3][2:] == (round(home[0] * 1e7), round(home[1] * 1e7))
     with emu._lock:
-        rally = [(it.command, it.frame, it.x, it.y, round(it.z, 2)) for it in emu.rally_items]
+        rally = [(it.command, it.frame, it.x, it.y, round(it.z, 2)) for it in emu.missions.rally_items]
     assert rally == [(5100, 3, round(_ll(-10, 0)[0] * 1e7), round(_ll(-10, 0)[1] * 1e7), 15.0),
                      (5100, 3, round(_ll(0, -12)[0] * 1e7), round(_ll(0, -12)[1] * 1e7), 20.0)]
     p = emu.params
@@ -333,20 +333,20 @@ def test_a_fence_the_vehicle_clears_after_storing_it_is_uploaded_again(vehicle):
 
     two = {"circles": [{"center": _ll(-6, 0), "radius": 10.0}, {"center": _ll(6, 0), "radius": 10.0}]}
     emu, b, _ = vehicle("ardupilot", fence=two)
-    store, wiped = emu._store_typed, []
+    store, wiped = emu.mission_protocol.store_typed, []
 
     def wipe_once(link, msg, is_int):
         store(link, msg, is_int)
-        if not wiped and len(emu.fence_items) == 2:
+        if not wiped and len(emu.missions.fence_items) == 2:
             wiped.append(True)
 
             def clear():
                 with emu._lock:
-                    emu.fence_items.clear()
+                    emu.missions.fence_items.clear()
 
             threading.Timer(0.02, clear).start()
 
-    emu._store_typed = wipe_once
+    emu.mission_protocol.store_typed = wipe_once
     b.connect(timeout_s=10)
     assert wiped and [h[0] for h in _held(emu)] == [5003, 5003]
     ev = [e["event"] for e in b.drain_events()]

@@ -99,12 +99,12 @@ def test_accepted_but_never_shown_mode_or_arming_raises(fly, autopilot):
     assert e.value.expected == f"mode {target}" and e.value.observed == f"mode {first}, disarmed"
     assert f"mode {target}" in str(e.value) and f"shows mode {first}" in str(e.value)
     assert "MAV_RESULT_ACCEPTED" in str(e.value) and emu.snapshot()["mode"] != target
-    emu.ack_only_commands = {M.MAV_CMD_COMPONENT_ARM_DISARM}
+    emu.commands.ack_only_commands = {M.MAV_CMD_COMPONENT_ARM_DISARM}
     with pytest.raises(CommandNotConfirmed) as e:
         b.arm()
     assert e.value.command == "arm" and e.value.expected == "armed" and e.value.observed.endswith("disarmed")
     assert not emu.snapshot()["armed"]
-    emu.ack_only_commands = set()
+    emu.commands.ack_only_commands = set()
     b.arm()
     assert b.armed
 
@@ -134,7 +134,7 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     assert e.value.result == "MAV_RESULT_TEMPORARILY_REJECTED"
     assert e.value.status_text == "Command temporarily rejected: busy"
     assert emu.snapshot()["commands_seen"].count(speed) == 3 and time.monotonic() - t0 < 30.0  # bounded tries
-    emu.in_progress_commands = {speed}
+    emu.commands.in_progress_commands = {speed}
     seen = emu.snapshot()["commands_seen"].count(speed)
     box: dict = {}
 
@@ -463,7 +463,7 @@ def test_mavproxy_ground_station(autopilot, tmp_path):
         else:
             say(f"long NAV_TAKEOFF 0 0 0 nan nan nan {VEHICLE_HOME.alt + 5:g}")
         assert wait_for(lambda: emu.snapshot()["position"][2] > 0.3, 10), lines[-10:]
-        assert emu.takeoff_alt == pytest.approx(5.0, abs=0.01)  # climbing to 5 m above home
+        assert emu.state.takeoff_alt == pytest.approx(5.0, abs=0.01)  # climbing to 5 m above home
         assert emu.snapshot()["mode"] == ("GUIDED" if autopilot == "ardupilot" else "AUTO.TAKEOFF")
     finally:
         proc.kill()  # --no-state: nothing to save

@@ -263,10 +263,10 @@ def test_spoofed_telemetry_and_commands_in_flight_change_nothing_the_backend_kno
         assert run_until(b, lambda: abs(b.position[2] - 5.0) < 0.3 and b.in_air, 30), b.position
         mode = b.mode
         enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # no key: unsigned, in the vehicle's name
-        home = emu.home
+        home = emu.state.home
         seen_pos, seen_batt = [], []
         for _ in range(20):
-            pos = M.MAVLink_global_position_int_message(int(emu.t * 1000) + 1, int((home.lat + 100 / 111_320) * 1e7),
+            pos = M.MAVLink_global_position_int_message(int(emu.state.t * 1000) + 1, int((home.lat + 100 / 111_320) * 1e7),
                                                         int(home.lon * 1e7), int((home.alt + 30) * 1000), 30_000,
                                                         0, 0, 0, 0)
             status = M.MAVLink_sys_status_message(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)

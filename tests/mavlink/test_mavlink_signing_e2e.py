@@ -66,10 +66,10 @@ class _Attack(threading.Thread):
                 return
             rejected0 = self.emu.signing.rejected
             enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # no key: unsigned
-            home = self.emu.home
+            home = self.emu.state.home
             for i in range(10):
                 lat = int((home.lat + 100.0 / 111_320.0) * 1e7)
-                pos = M.MAVLink_global_position_int_message(int(self.emu.t * 1000) + 1, lat,
+                pos = M.MAVLink_global_position_int_message(int(self.emu.state.t * 1000) + 1, lat,
                                                             int(home.lon * 1e7), int((home.alt + 30) * 1000),
                                                             30_000, 0, 0, 0, 0)
                 status = M.MAVLink_sys_status_message(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)
@@ -134,7 +134,7 @@ def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(ray_s
     emu, env_path = _signed_survey(tmp_path, OTHER_KEY, KEY, connect_timeout_s=5.0)
     try:
         res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
-        vehicle, took_off = emu.snapshot(), emu.took_off
+        vehicle, took_off = emu.snapshot(), emu.state.took_off
     finally:
         emu.stop()
     err = res.robots["quadrotor_base"].get("error", "")

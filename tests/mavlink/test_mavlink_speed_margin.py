@@ -68,7 +68,7 @@ def _legs(emu, b, n: int, events: list) -> list[list[float]]:
         speeds: list[float] = []
         b.goto(target)
         assert run_until(b, lambda: math.dist(b.position, target) < 0.3, 40,
-                         every=lambda: speeds.append(float(np.hypot(*emu.veh.state.velocity[:2])))), b.position
+                         every=lambda: speeds.append(float(np.hypot(*emu.state.veh.state.velocity[:2])))), b.position
         events.extend(b.drain_events())
         out.append(speeds)
     return out

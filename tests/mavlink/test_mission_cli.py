@@ -93,7 +93,7 @@ def test_upload_of_a_plan_with_a_geofence_sends_it(vehicle, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "fenced.plan" in out and "1 circle(s)" in out and "FENCE_ENABLE 0 -> 1" in out, out
     with emu._lock:
-        assert [(it.command, it.param1) for it in emu.fence_items] == [(5003, 200.0)]
+        assert [(it.command, it.param1) for it in emu.missions.fence_items] == [(5003, 200.0)]
     assert emu.params["FENCE_ENABLE"] == 1
 
 
@@ -121,7 +121,7 @@ SPEEDY = [(22, 3, 0, 0, 0, 0, 5.0), (16, 3, 0, 0, 0, 20, 5.0), (178, 2, 1, 5, 0,
 def _stored(emu) -> list[tuple]:
     """(command, param2) of the emulated vehicle's mission, ArduPilot's home item left out."""
     with emu._lock:
-        return [(it.command, round(it.param2, 3)) for it in emu.mission[1:]]
+        return [(it.command, round(it.param2, 3)) for it in emu.missions.mission[1:]]
 
 
 def test_items_are_measured_from_the_vehicles_home_not_the_files(vehicle, tmp_path, capsys):
@@ -178,14 +178,14 @@ def test_a_mission_the_vehicle_stores_differently_is_not_started(vehicle, tmp_pa
     """The read-back after the upload: a vehicle that keeps the second waypoint 1e-5 degree off holds another flight:
     exit 2, named, and --start does not arm."""
     emu, address = vehicle("ardupilot")
-    store = emu._store_item
+    store = emu.mission_protocol.store_item
 
     def shift(link, msg, is_int):
         if getattr(msg, "mission_type", 0) == 0 and msg.seq == 4:
             msg.x += 100
         store(link, msg, is_int)
 
-    emu._store_item = shift
+    emu.mission_protocol.store_item = shift
     path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
     assert main(["mission", "upload", str(path), "--connection", address, "--start"]) == 2
     err = capsys.readouterr().err
@@ -215,7 +215,7 @@ def test_a_mission_planner_file_with_frame_3_on_every_item_uploads_starts_and_do
         assert "read back: the vehicle holds the 8 items as sent" in out, out
         assert emu.snapshot()["armed"]
         with emu._lock:
-            frames = [it.frame for it in (emu.mission[1:] if autopilot == "ardupilot" else emu.mission)]
+            frames = [it.frame for it in (emu.missions.mission[1:] if autopilot == "ardupilot" else emu.missions.mission)]
         assert frames == ([3, 3, 3, 3, 3, 0, 3, 0] if autopilot == "ardupilot" else [3, 3, 3, 3, 3, 2, 3, 2])
         back = tmp_path / "back.waypoints"
         assert main(["mission", "download", "--out", str(back), "--connection", address]) == 0

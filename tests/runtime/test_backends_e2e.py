@@ -295,7 +295,7 @@ def test_farm_survey_flown_as_an_autopilot_mission(ray_session, run_options, tmp
     try:
         res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
         vehicle = emu.snapshot()
-        setpoints_seen = emu.last_setpoint_t > 0
+        setpoints_seen = emu.state.last_setpoint_t > 0
     finally:
         emu.stop()
     rep = res.robots["quadrotor_base"]

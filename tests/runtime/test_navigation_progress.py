@@ -71,16 +71,16 @@ def test_a_target_the_autopilot_drops_is_stalled_then_abandoned(ray_session, run
 
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
     emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, home=home, gps_lock_s=1.0)
-    apply = emu._apply_target
+    apply = emu.guided.apply_target
     dropped = []
 
-    def refuse_b(pos_enu, vel_enu, yaw_rate_dps, note=True):
+    def refuse_b(pos_enu, vel_enu, yaw_rate_dps):
         if pos_enu is not None and np.hypot(pos_enu[0] - 0.0, pos_enu[1] - 8.0) < 1.0:
-            dropped.append(emu.t)
+            dropped.append(emu.state.t)
             return None  # ArduCopter: ModeGuided::set_destination returned false, the previous target stays
-        return apply(pos_enu, vel_enu, yaw_rate_dps, note)
+        return apply(pos_enu, vel_enu, yaw_rate_dps)
 
-    emu._apply_target = refuse_b
+    emu.guided.apply_target = refuse_b
     addr = emu.start("tcp:127.0.0.1:0")
     try:
         robot = {"id": "d", "takeoff_altitude": 2.0, "home": home.model_dump(), "backend": "mavlink",

@@ -65,7 +65,7 @@ def test_a_hold_that_cannot_be_kept_is_hold_failed_never_reached(ray_session, ru
 
     def gusts():
         while not stop.wait(0.1):
-            s = emu.veh.state
+            s = emu.state.veh.state
             # once it has settled at "a" (where the hold starts), a gust blows it off
             if s.in_air and np.hypot(s.position[0] - 6.0, s.position[1]) < 0.3 and np.hypot(*s.velocity[:2]) < 0.3:
                 s.position[0] += 1.5

@@ -18,139 +18,158 @@ Firmware behaviour reproduced (observed with :mod:`.trace` on ArduCopter and PX4
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.emulators.mavlink.constants import _AP_ARMABLE, _AP_NEEDS_POSITION, _PX4_MANUAL
-from aerodaas.emulators.mavlink.flavour import (AP_PREARM_DISPLAY_PERIOD_S, AP_SENSORS, EKF_NO_POSITION, EKF_POSITION,
-                      PX4_HOME_CORRECTION_STEP_M, PX4_HOME_CORRECTION_WINDOW_S, PX4_SENSORS)
+from aerodaas.emulators.mavlink.constants import _AP_ARMABLE, _PX4_MANUAL
+from aerodaas.emulators.mavlink.flavour import (AP_PREARM_DISPLAY_PERIOD_S, PX4_HOME_CORRECTION_STEP_M,
+                                               PX4_HOME_CORRECTION_WINDOW_S, PX4_HOME_MOVED_M)
+from aerodaas.emulators.mavlink.link import EmulatorLink
+from aerodaas.emulators.mavlink.state import EmulatorState
+from aerodaas.emulators.mavlink.telemetry import Telemetry
 
 M = mavlink
 
+__all__ = ["Arming"]
 
-class ArmingMixin:
-    """Part of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator` (state lives there)."""
 
-    def set_prearm_failure(self, text: str | None) -> None:
-        """Make pre-arm checks fail with ``text`` (e.g. ``"Compass not calibrated"``); None clears it."""
-        with self._lock:
-            self.prearm_failure = text
+class Arming:
+    """Readiness, home and arming of the emulated firmware: the estimator's announcements and ArduPilot's repeated
+    pre-arm report (:meth:`readiness_tick`), home (:meth:`set_home_here`, PX4's in-flight altitude correction from a
+    random walk seeded with ``seed``), the arm command and disarming, over ``state`` (the checks themselves:
+    :meth:`.state.EmulatorState.prearm`), telling the ground stations on ``link`` and announcing home with
+    ``telemetry``. Not locked: the vehicle calls it under its lock."""
+
+    def __init__(self, state: EmulatorState, link: EmulatorLink, telemetry: Telemetry, seed: int = 0) -> None:
+        self.state, self.link, self.telemetry = state, link, telemetry
+        self._rng = np.random.default_rng(seed)
+        self._position_ok_sent = False
+        self._next_prearm_report = AP_PREARM_DISPLAY_PERIOD_S
+        self._home_corr = (0.0, 0.0, 0.0)  # PX4 home-altitude correction: (error m, applied m, next update s)
+
+    def set_home_here(self) -> None:
+        """Home is where the vehicle is (:meth:`.state.EmulatorState.set_home_here`), announced as HOME_POSITION."""
+        self.state.set_home_here()
+        self.telemetry.emit(M.MAVLINK_MSG_ID_HOME_POSITION)
 
     # ------------------------------------------------------------------ estimator
-    def _position_ok(self) -> bool:
-        """The EKF has a horizontal position estimate (vehicle seconds ``gps_lock_s + ekf_gps_s``)."""
-        return self.home is not None and self.t >= self.gps_lock_s + self.ekf_gps_s
-
-    def _readiness_tick(self) -> None:
+    def readiness_tick(self) -> None:
         """Per physics step: announce the position estimate, repeat ArduPilot's failing pre-arm checks every 30 s
         while disarmed, correct PX4's home altitude after take-off."""
-        if not self._position_ok_sent and self._position_ok():
+        st = self.state
+        if not self._position_ok_sent and st.position_ok():
             self._position_ok_sent = True
-            if not self.px4:
-                self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 is using GPS")
-        if not self.px4 and self.t >= self._next_prearm_report:
-            self._next_prearm_report = self.t + AP_PREARM_DISPLAY_PERIOD_S
-            why = None if self.veh.state.armed else self._prearm()
+            if not st.px4:
+                self.link.text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 is using GPS")
+        if not st.px4 and st.t >= self._next_prearm_report:
+            self._next_prearm_report = st.t + AP_PREARM_DISPLAY_PERIOD_S
+            why = None if st.veh.state.armed else st.prearm()
             if why:
-                self._text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {why}")
-        if self.px4 and self.home_alt_drift_m > 0 and self.took_off_at is not None \
-                and self.params.get("COM_HOME_EN", 1.0) >= 0.5:
+                self.link.text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {why}")
+        if st.px4 and st.home_alt_drift_m > 0 and st.took_off_at is not None \
+                and st.params.get("COM_HOME_EN", 1.0) >= 0.5:
             self._home_alt_correction()
 
     def _home_alt_correction(self) -> None:
         """PX4 HomePosition::update: within 120 s of take-off, when the baro/GPS altitude disagreement moved more
         than 1 m since the last correction, home.alt moves by it (emulated as a bounded random walk, 1 Hz)."""
+        st = self.state
         err, applied, due = self._home_corr
-        if self.t - self.took_off_at > PX4_HOME_CORRECTION_WINDOW_S or self.t < due or self.home is None:
+        if st.t - st.took_off_at > PX4_HOME_CORRECTION_WINDOW_S or st.t < due or st.home is None:
             return
-        bound = self.home_alt_drift_m
+        bound = st.home_alt_drift_m
         err = float(np.clip(err + self._rng.normal(0.0, 0.6 * bound), -bound, bound))
         if abs(err - applied) > PX4_HOME_CORRECTION_STEP_M:
-            self.home_enu = self.home_enu + np.array([0.0, 0.0, err - applied])
-            h = self.home_enu
-            self.home = enu_to_geodetic(float(h[0]), float(h[1]), float(h[2]), self.origin)
+            st.home_enu = st.home_enu + np.array([0.0, 0.0, err - applied])
+            h = st.home_enu
+            st.home = enu_to_geodetic(float(h[0]), float(h[1]), float(h[2]), st.origin)
             applied = err
-            self._emit(M.MAVLINK_MSG_ID_HOME_POSITION)
-        self._home_corr = (err, applied, self.t + 1.0)
+            self.telemetry.emit(M.MAVLINK_MSG_ID_HOME_POSITION)
+        self._home_corr = (err, applied, st.t + 1.0)
 
-    def _ekf_flags(self) -> int:
-        """ArduPilot EKF_STATUS_REPORT.flags for the estimator's state."""
-        return EKF_POSITION if self._position_ok() else EKF_NO_POSITION
+    # ------------------------------------------------------------------ arming and disarming
+    def arm_disarm(self, p: list[float]) -> int:
+        """MAV_CMD_COMPONENT_ARM_DISARM (param1 >= 0.5 arms, param2 21196 forces): its MAV_RESULT. A disarm in the
+        air, or on PX4 before its land detector confirmed the landing, is refused as the firmware refuses it."""
+        st = self.state
+        s = st.veh.state
+        force = int(round(p[1])) == 21196
+        if p[0] >= 0.5:
+            return self.arm(force)
+        if s.armed and not force and st.px4 and not s.in_air and st.landed_at is not None and \
+                st.t - st.landed_at < st.land_detect_s:  # PX4's land detector has not said landed yet
+            self.link.text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+            return M.MAV_RESULT_TEMPORARILY_REJECTED
+        if s.armed and s.in_air and not force:
+            if st.px4:
+                self.link.text(M.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
+            self.link.text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying")
+            return M.MAV_RESULT_FAILED
+        if s.armed:
+            s.in_air = False
+            self.disarm("external command")
+        return M.MAV_RESULT_ACCEPTED
 
-    def _sensors(self) -> tuple[int, int, int]:
-        """SYS_STATUS (present, enabled, health) bit masks (MAV_SYS_STATUS_SENSOR)."""
-        present = PX4_SENSORS if self.px4 else AP_SENSORS
-        health = present
-        if self._fix_type() < 3:
-            health &= ~M.MAV_SYS_STATUS_SENSOR_GPS
-        if not self._position_ok():
-            health &= ~M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-        if self.px4:
-            if self._prearm() is None:  # PX4 sets the pre-arm bit in health only
-                health |= M.MAV_SYS_STATUS_PREARM_CHECK
-            return present, present, health
-        if self.home is None:
-            health &= ~M.MAV_SYS_STATUS_AHRS
-        if self._prearm() is not None:
-            health &= ~M.MAV_SYS_STATUS_PREARM_CHECK
-        return present, present, health
-
-    # ------------------------------------------------------------------ pre-arm checks and arming
-    def _prearm(self, mode: str | None = None) -> str | None:
-        """The first failing pre-arm check for ``mode`` (default: the current one), in the autopilot's words
-        without its prefix, or None."""
-        mode = mode or self.mode
-        if self.prearm_failure:
-            return self.prearm_failure
-        if self.px4:
-            if self._fix_type() < 3:
-                return "GPS fix too low"
-            if not self._position_ok():
-                return "heading estimate not stable"  # as seen on PX4 SIH before the EKF has converged
+    def _refusal(self) -> str | None:
+        """Why the firmware refuses to arm now (its STATUSTEXT), or None (PX4 HealthAndArmingChecks, ArduCopter
+        AP_Arming_Copter)."""
+        st = self.state
+        if st.px4:
+            why = st.prearm()  # health checks first (PX4 reports every failing check; we send the first)
+            if why:
+                return f"Preflight Fail: {why}"
+            if st.mode in _PX4_MANUAL:
+                return "Preflight Fail: No manual control input"
+            if st.mode in ("AUTO.RTL", "AUTO.LAND"):
+                return f"Arming denied: {st.mode} mode not armable"
+            if st.mode == "OFFBOARD" and not st.offboard_stream_ok():
+                return "Preflight Fail: offboard control signal lost"
             return None
-        if mode not in _AP_NEEDS_POSITION:
-            return None
-        if self.home is None:
-            return "AHRS: waiting for home"
-        if not self._position_ok():
-            return "Need Position Estimate"
-        return None
+        if st.mode not in _AP_ARMABLE:
+            return "Arm: Mode not armable"
+        why = st.prearm()
+        return f"Arm: {why}" if why else None
 
-    def _arm(self, force: bool) -> int:
-        s = self.veh.state
+    def arm(self, force: bool) -> int:
+        """Arm (``force``: without the checks): its MAV_RESULT (PX4 TEMPORARILY_REJECTED, ArduPilot FAILED, with
+        the reason as STATUSTEXT). Home is reset to where the vehicle arms, as both autopilots do."""
+        st = self.state
+        s = st.veh.state
         if s.armed:
             return M.MAV_RESULT_ACCEPTED
-        if not force:
-            if self.px4:
-                why = self._prearm()  # health checks first (PX4 reports every failing check; we send the first)
-                if why:
-                    self._text(M.MAV_SEVERITY_CRITICAL, f"Preflight Fail: {why}")
-                    return M.MAV_RESULT_TEMPORARILY_REJECTED
-                if self.mode in _PX4_MANUAL:
-                    self._text(M.MAV_SEVERITY_CRITICAL, "Preflight Fail: No manual control input")
-                    return M.MAV_RESULT_TEMPORARILY_REJECTED
-                if self.mode in ("AUTO.RTL", "AUTO.LAND"):
-                    self._text(M.MAV_SEVERITY_CRITICAL, f"Arming denied: {self.mode} mode not armable")
-                    return M.MAV_RESULT_TEMPORARILY_REJECTED
-                if self.mode == "OFFBOARD" and not self._offboard_stream_ok():
-                    self._text(M.MAV_SEVERITY_CRITICAL, "Preflight Fail: offboard control signal lost")
-                    return M.MAV_RESULT_TEMPORARILY_REJECTED
-            else:
-                if self.mode not in _AP_ARMABLE:
-                    self._text(M.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable")
-                    return M.MAV_RESULT_FAILED
-                why = self._prearm()
-                if why:
-                    self._text(M.MAV_SEVERITY_CRITICAL, f"Arm: {why}")
-                    return M.MAV_RESULT_FAILED
-        self.veh.arm()
-        self.armed_at = self.t
-        self.took_off = False
-        self.took_off_at = None
+        why = None if force else self._refusal()
+        if why:
+            self.link.text(M.MAV_SEVERITY_CRITICAL, why)
+            return M.MAV_RESULT_TEMPORARILY_REJECTED if st.px4 else M.MAV_RESULT_FAILED
+        st.veh.arm()
+        st.armed_at = st.t
+        st.took_off = False
+        st.took_off_at = None
         self._home_corr = (0.0, 0.0, 0.0)
-        self.landed_at = None
-        if self._fix_type() >= 3:
-            self._set_home_here()  # both autopilots reset home to where they arm
-        self._text(M.MAV_SEVERITY_INFO, "Arming motors" if not self.px4 else "Armed by external command")
+        st.landed_at = None
+        if st.fix_type() >= 3:
+            self.set_home_here()  # both autopilots reset home to where they arm
+        self.link.text(M.MAV_SEVERITY_INFO, "Arming motors" if not st.px4 else "Armed by external command")
         return M.MAV_RESULT_ACCEPTED
+
+    def disarm(self, why: str) -> None:
+        """Disarm (``why``: the firmware's reason in its STATUSTEXT); PX4 moves home to a vehicle that landed away
+        from it."""
+        st = self.state
+        s = st.veh.state
+        s.armed = False
+        s.velocity[:] = 0.0
+        st.veh.setpoint.mode = "idle"
+        st.takeoff_alt = None
+        st.phase = ""
+        st.landed_at = None
+        self.link.text(M.MAV_SEVERITY_INFO, f"Disarming motors ({why})" if not st.px4 else f"Disarmed by {why}")
+        if st.px4 and st.home_enu is not None and st.params.get("COM_HOME_EN", 1.0) >= 0.5 \
+                and math.hypot(*(s.position[:2] - st.home_enu[:2])) > PX4_HOME_MOVED_M:
+            # PX4 commander, disarmed and landed: home follows the vehicle once it moved from it by more than
+            # twice the GPS eph (HomePosition::update, hasMovedFromCurrentHomeLocation; SIH GPS eph 0.9 m)
+            self.set_home_here()

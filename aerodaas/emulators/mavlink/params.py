@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from aerodaas.emulators.mavlink.flavour import PX4_INT_PARAMS
+from aerodaas.emulators.mavlink.flavour import PX4_INT_PARAMS, SPEED_PARAMS
+from aerodaas.emulators.mavlink.link import EmulatorLink
+from aerodaas.emulators.mavlink.motion import Motion
+
+if TYPE_CHECKING:
+    from aerodaas.emulators.mavlink.link import _Link
 
 M = mavlink
 
@@ -16,7 +21,7 @@ M = mavlink
 class EmulatedParams:
     """The parameter table of the emulated ``autopilot`` (``values``: name -> value in the firmware's units, kept
     as this very dict, in the order the protocol indexes it) and the parameter protocol's messages, built with the
-    vehicle's encoder ``enc``. It decides what to answer; the vehicle sends and stores (its ``_store_param``).
+    vehicle's encoder ``enc``. It decides what to answer; :class:`ParamProtocol` sends and stores.
     PX4 sends and expects its integer parameters (:data:`.flavour.PX4_INT_PARAMS`) bytewise as INT32."""
 
     def __init__(self, values: dict[str, float], autopilot: str, enc: Any) -> None:
@@ -62,3 +67,35 @@ class EmulatedParams:
         if self.px4 and name in PX4_INT_PARAMS:
             value = float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
         return (name, value) if math.isfinite(value) else None
+
+
+class ParamProtocol:
+    """The parameter protocol's handlers: the answers of ``table`` (:class:`EmulatedParams`) sent on ``link``;
+    a stored speed parameter changes the vehicle's speeds at once through ``motion``. Not locked: the vehicle calls
+    it under its lock."""
+
+    def __init__(self, table: EmulatedParams, link: EmulatorLink, motion: Motion) -> None:
+        self.table, self.link, self.motion = table, link, motion
+
+    def store(self, name: str, value: float) -> None:
+        """Store parameter ``name`` (firmware units); a speed parameter changes the vehicle's speeds at once."""
+        self.table.values[name] = value
+        if name in SPEED_PARAMS:
+            self.motion.apply_speed_params()
+
+    def on_param_request_list(self, link: _Link, msg: Any) -> None:
+        """PARAM_REQUEST_LIST: every PARAM_VALUE to the asking ``link``."""
+        for out in self.table.list_reply():
+            self.link.send(out, link)
+
+    def on_param_request_read(self, link: _Link, msg: Any) -> None:
+        """PARAM_REQUEST_READ: the parameter's PARAM_VALUE to the asking ``link`` (nothing for an unknown one)."""
+        for out in self.table.read_reply(msg):
+            self.link.send(out, link)
+
+    def on_param_set(self, link: _Link, msg: Any) -> None:
+        """PARAM_SET: stored (:meth:`store`) and its PARAM_VALUE broadcast to every link, as the firmware does."""
+        got = self.table.decode_set(msg)
+        if got is not None:
+            self.store(*got)
+            self.link.send(self.table.message(got[0]))  # to every link, as the firmware broadcasts it

@@ -45,39 +45,40 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING, Any, Callable, Literal
 
-import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from aerodaas.config import Limits, RobotConfig
 from aerodaas.model.types import GeoPoint
 from aerodaas.sim.vehicle import SimVehicle
-from aerodaas.emulators.mavlink.arming import ArmingMixin
+from aerodaas.emulators.mavlink.arming import Arming
+from aerodaas.emulators.mavlink.autopilot import AutopilotLoop
 from aerodaas.emulators.mavlink.camera import CameraHost
-from aerodaas.emulators.mavlink.commands import CommandMixin
-from aerodaas.emulators.mavlink.constants import _PX4_DEFAULT_STREAMS
+from aerodaas.emulators.mavlink.commands import CommandHandler
+from aerodaas.emulators.mavlink.flavour import AIRFRAME_MAX_SPEED
 from aerodaas.emulators.mavlink.gimbal import EmulatedCamera, EmulatedGimbal
-from aerodaas.emulators.mavlink.flavour import (AIRFRAME_MAX_SPEED, AP_PREARM_DISPLAY_PERIOD_S, ARDUPILOT_PARAMS,
-                                               PX4_PARAMS, SPEED_PARAMS)
-from aerodaas.emulators.mavlink.guided import GuidedMixin
+from aerodaas.emulators.mavlink.guided import GuidedTargets
 from aerodaas.emulators.mavlink.link import EmulatorLink
-from aerodaas.emulators.mavlink.mission import MissionMixin
-from aerodaas.emulators.mavlink.mission_run import MissionRunMixin
-from aerodaas.emulators.mavlink.modes import ModeMixin
-from aerodaas.emulators.mavlink.params import EmulatedParams
+from aerodaas.emulators.mavlink.mission import MissionProtocol
+from aerodaas.emulators.mavlink.mission_run import MissionRunner
+from aerodaas.emulators.mavlink.modes import FlightModes
+from aerodaas.emulators.mavlink.motion import Motion
+from aerodaas.emulators.mavlink.params import EmulatedParams, ParamProtocol
 from aerodaas.emulators.mavlink.signing import EmulatedSigning
-from aerodaas.emulators.mavlink.telemetry import TelemetryMixin
+from aerodaas.emulators.mavlink.state import EmulatorState, MissionStore
+from aerodaas.emulators.mavlink.telemetry import Telemetry
 
 if TYPE_CHECKING:
     from aerodaas.emulators.mavlink.link import _Link
-    from aerodaas.emulators.mavlink.mission import _Transfer
 
 M = mavlink
 
 __all__ = ["MavlinkVehicleEmulator"]
 
+#: a handler of one incoming message type: (the peer it came from, the parsed message)
+Handler = Callable[["_Link", Any], None]
 
-class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, MissionMixin,
-                             MissionRunMixin, TelemetryMixin):
+
+class MavlinkVehicleEmulator:
     """A simulated ArduPilot Copter or PX4 multicopter speaking MAVLink 2 over TCP (server) or UDP.
 
     ``autopilot``: ``"ardupilot"`` or ``"px4"``. ``robot``: battery, yaw rate, altitude and home from a
@@ -104,6 +105,13 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
     key (default: off until a SETUP_SIGNING sets a key; :mod:`.signing`).
 
     Use :meth:`start` (returns the bound address), :meth:`stop`, :meth:`snapshot` for the state.
+
+    Composed of one object per concern, each given the collaborators it uses: :attr:`state` (:mod:`.state`: flight
+    model, clock, mode, home, targets) and :attr:`missions` (the stored items), :attr:`link` (:mod:`.link`),
+    :attr:`telemetry`, :attr:`motion`, :attr:`arming`, :attr:`modes`, :attr:`guided`, :attr:`mission_protocol`,
+    :attr:`mission_runner`, :attr:`commands`, :attr:`param_protocol`, :attr:`autopilot_loop`, :attr:`gimbal`,
+    :attr:`camera_host`, :attr:`signing`. Incoming messages go through one table, message type -> bound handler
+    (:attr:`handlers`).
     """
 
     def __init__(self, autopilot: Literal["ardupilot", "px4"] = "ardupilot", *, robot: RobotConfig | None = None,
@@ -123,60 +131,107 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
         self.px4 = autopilot == "px4"
         self.speedup = float(speedup)
         self.system_id, self.component_id = system_id, component_id
-        self.origin = home or robot.home  # EKF origin: the simulator's ENU frame
+        origin = home or robot.home  # EKF origin: the simulator's ENU frame
         # the airframe's envelope; the robot's own limits are the ground station's business (it must set the
         # vehicle's speed parameters, as with the real firmware)
         self.limits = Limits(max_speed=AIRFRAME_MAX_SPEED, max_vertical_speed=3.0, max_acceleration=3.0,
                              max_yaw_rate=robot.limits.max_yaw_rate, max_altitude=robot.limits.max_altitude)
-        self.veh = SimVehicle(robot.id, self.origin, self.limits, robot.battery, robot.noise)
         self.physics_dt = 1.0 / physics_hz
-        self.gps_lock_s = gps_lock_s
-        self.message_interval_supported = message_interval
-        self.ignore_commands = set(ignore_commands or ())
-        self.ack_only_commands = set(ack_only_commands or ())
-        self.in_progress_commands = set(in_progress_commands or ())
-        self._init_emulated_firmware(ekf_gps_s, mission_int, home_alt_drift_m, seed, estimate_speed_error_mps,
-                                     land_detect_s, deny_default_speed)
-        self._init_params(system_id, params)
+        #: the vehicle's state and settings (state.py)
+        self.state = EmulatorState(
+            autopilot, SimVehicle(robot.id, origin, self.limits, robot.battery, robot.noise), origin,
+            system_id=system_id, speedup=self.speedup, params=params, gps_lock_s=gps_lock_s, ekf_gps_s=ekf_gps_s,
+            estimate_speed_error_mps=estimate_speed_error_mps, land_detect_s=land_detect_s,
+            home_alt_drift_m=home_alt_drift_m)
+        #: the stored mission, fence and rally items and the mission run (state.py)
+        self.missions = MissionStore(self.px4)
         #: MAVLink 2 signing (signing.py): every link's parser checks, every packet out is signed, once a key is set
         self.signing = EmulatedSigning(signing_key)
-        self._init_links(system_id, component_id)
-        #: the parameter protocol over :attr:`params` (params.py)
-        self.param_table = EmulatedParams(self.params, autopilot, self._enc)
-        self._init_state()
-        self._apply_speed_params()
+        #: the MAVLink link to the ground stations (link.py)
+        self.link = EmulatorLink(system_id, component_id, self.signing)
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
         #: the vehicle's gimbal (a servo mount, as ArduCopter's MNT1_TYPE 1; the robot's ``gimbal`` limits or
         #: ArduPilot's defaults): gimbal.py
         self.gimbal = EmulatedGimbal(robot.gimbal)
         #: the camera component on the vehicle's system (camera.py; none until :meth:`attach_camera`)
-        self.camera_host = CameraHost(system_id, self._enc)
+        self.camera_host = CameraHost(system_id, self.link.enc)
+        self._compose(message_interval, mission_int, seed, ignore_commands, ack_only_commands, in_progress_commands,
+                      deny_default_speed)
+        self.motion.apply_speed_params()
+
+    def _compose(self, message_interval: bool, mission_int: bool | None, seed: int, ignore_commands: set[int] | None,
+                 ack_only_commands: set[int] | None, in_progress_commands: set[int] | None,
+                 deny_default_speed: bool | None) -> None:
+        """The concern objects, each given its collaborators, and the message table (see :meth:`__init__`'s
+        arguments)."""
+        st, store, link = self.state, self.missions, self.link
+        self.telemetry = Telemetry(st, store, link, self.gimbal, self.camera_host, message_interval)
+        self.motion = Motion(st)
+        #: the parameter protocol over :attr:`params` (params.py)
+        self.param_table = EmulatedParams(st.params, self.autopilot, link.enc)
+        self.param_protocol = ParamProtocol(self.param_table, link, self.motion)
+        self.arming = Arming(st, link, self.telemetry, seed)
+        self.modes = FlightModes(st, store, link, self.motion)
+        self.guided = GuidedTargets(st, self.modes, self.motion)
+        self.mission_protocol = MissionProtocol(st, store, link, self.telemetry, mission_int)
+        self.mission_runner = MissionRunner(st, store, link, self.modes, self.motion, self.arming,
+                                            self.mission_protocol)
+        self.commands = CommandHandler(st, link, self.telemetry, self.arming, self.modes, self.motion,
+                                       self.mission_runner, self.mission_protocol, self.gimbal,
+                                       ignore_commands=ignore_commands, ack_only_commands=ack_only_commands,
+                                       in_progress_commands=in_progress_commands,
+                                       deny_default_speed=deny_default_speed)
+        self.autopilot_loop = AutopilotLoop(st, store, link, self.arming, self.modes, self.motion,
+                                            self.mission_runner)
+        cmd, mp, pp = self.commands, self.mission_protocol, self.param_protocol
+        #: message type -> the firmware's handler of it (a type not listed is ignored, e.g. HEARTBEAT)
+        self.handlers: dict[str, Handler] = {
+            "COMMAND_LONG": cmd.on_command_long, "COMMAND_INT": cmd.on_command_int, "SET_MODE": cmd.on_set_mode,
+            "REQUEST_DATA_STREAM": self.telemetry.on_request_data_stream,
+            "SET_POSITION_TARGET_GLOBAL_INT": self.guided.on_set_position_target_global_int,
+            "SET_POSITION_TARGET_LOCAL_NED": self.guided.on_set_position_target_local_ned,
+            "MISSION_COUNT": mp.on_mission_count, "MISSION_ITEM_INT": mp.on_mission_item_int,
+            "MISSION_ITEM": mp.on_mission_item, "MISSION_REQUEST_LIST": mp.on_mission_request_list,
+            "MISSION_REQUEST_INT": mp.on_mission_request_int, "MISSION_REQUEST": mp.on_mission_request,
+            "MISSION_CLEAR_ALL": mp.on_mission_clear_all, "MISSION_SET_CURRENT": mp.on_mission_set_current,
+            "PARAM_REQUEST_LIST": pp.on_param_request_list, "PARAM_REQUEST_READ": pp.on_param_request_read,
+            "PARAM_SET": pp.on_param_set}
+
+    @property
+    def params(self) -> dict[str, float]:
+        """The emulated parameters (name -> value in the firmware's units; read-only by convention: change them
+        with :meth:`set_param` or PARAM_SET)."""
+        return self.state.params
+
+    @property
+    def mode_log(self) -> deque[tuple[float, str]]:
+        """(vehicle time s, mode name) of every mode change (the most recent 10 000)."""
+        return self.state.mode_log
+
+    @property
+    def setpoint_log(self) -> deque[float]:
+        """Vehicle time (s) of every position/velocity target received (the most recent 100 000)."""
+        return self.state.setpoint_log
 
     def set_param(self, name: str, value: float) -> None:
         """Set an emulated parameter (see the class docstring). Raises KeyError for an unknown name."""
         with self._lock:
-            if name not in self.params:
+            if name not in self.state.params:
                 raise KeyError(f"unknown {self.autopilot} parameter {name!r}")
-            self._store_param(name, float(value))
+            self.param_protocol.store(name, float(value))
 
-    def _store_param(self, name: str, value: float) -> None:
-        """Store parameter ``name`` (firmware units); a speed parameter changes the vehicle's speeds at once."""
-        self.params[name] = value
-        if name in SPEED_PARAMS:
-            self._apply_speed_params()
+    def reject_next(self, command: int, count: int = 1, result: int = M.MAV_RESULT_TEMPORARILY_REJECTED) -> None:
+        """Answer the next ``count`` COMMAND_LONG/COMMAND_INT ``command`` with ``result`` without carrying it out
+        (:meth:`.commands.CommandHandler.reject_next`; raises ValueError as it does)."""
+        with self._lock:
+            self.commands.reject_next(command, count, result)
 
-    def _on_param_request_list(self, link: _Link, msg: Any) -> None:
-        for out in self.param_table.list_reply():
-            self._send(out, link)
-
-    def _on_param_request_read(self, link: _Link, msg: Any) -> None:
-        for out in self.param_table.read_reply(msg):
-            self._send(out, link)
-
-    def _on_param_set(self, link: _Link, msg: Any) -> None:
-        got = self.param_table.decode_set(msg)
-        if got is not None:
-            self._store_param(*got)
-            self._send(self.param_table.message(got[0]))  # to every link, as the firmware broadcasts it
+    def set_prearm_failure(self, text: str | None) -> None:
+        """Make pre-arm checks fail with ``text`` (e.g. ``"Compass not calibrated"``); None clears it."""
+        with self._lock:
+            self.state.prearm_failure = text
 
     def attach_camera(self, camera: EmulatedCamera | None) -> None:
         """Put ``camera`` on the vehicle's system (None takes it away): its HEARTBEAT starts with the next one
@@ -193,117 +248,6 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
     def camera_requests(self) -> list[tuple[int, int]]:
         """(command, component asked) of every request the attached camera answered."""
         return self.camera_host.requests
-
-    def _init_emulated_firmware(self, ekf_gps_s: float, mission_int: bool | None, home_alt_drift_m: float | None,
-                                seed: int, estimate_speed_error_mps: float, land_detect_s: float,
-                                deny_default_speed: bool | None) -> None:
-        """The firmware behaviours the emulator models (see :meth:`__init__`'s arguments). Raises ValueError naming
-        the argument for a value out of range."""
-        autopilot = self.autopilot
-        if not (ekf_gps_s >= 0 and math.isfinite(ekf_gps_s)):
-            raise ValueError(f"ekf_gps_s must be a finite number >= 0, got {ekf_gps_s!r}")
-        #: vehicle seconds from the GPS fix until the EKF fuses GPS (a position estimate); the firmware takes
-        #: ~20 s (ArduCopter SITL) - shorter here so that tests stay fast
-        self.ekf_gps_s = float(ekf_gps_s)
-        #: None: the flavour's mission request form (ArduPilot MISSION_REQUEST, PX4 MISSION_REQUEST_INT, as the
-        #: firmware sends them); False: older firmware that speaks only the float forms
-        self.mission_int = mission_int
-        drift = (2.0 if autopilot == "px4" else 0.0) if home_alt_drift_m is None else float(home_alt_drift_m)
-        if not (drift >= 0 and math.isfinite(drift)):
-            raise ValueError(f"home_alt_drift_m must be a finite number >= 0, got {home_alt_drift_m!r}")
-        #: bound (m) of PX4's in-flight home-altitude correction (COM_HOME_EN); 0 disables it
-        self.home_alt_drift_m = drift
-        self._rng = np.random.default_rng(seed)
-        if not (estimate_speed_error_mps >= 0 and math.isfinite(estimate_speed_error_mps)):
-            raise ValueError(f"estimate_speed_error_mps must be a finite number >= 0, got {estimate_speed_error_mps!r}")
-        #: the estimator reports the horizontal speed this much (m/s) below the true one, which GPS_RAW_INT carries:
-        #: an estimator that lets the vehicle fly faster than its limit (stock PX4 SIH: 0.5 m/s at the p99,
-        #: aerodaas.backends.mavlink.speed_margin); the physics flies the true speed at the vehicle's limit + this
-        self.estimate_speed_error_mps = float(estimate_speed_error_mps)
-        if not (land_detect_s >= 0 and math.isfinite(land_detect_s)):
-            raise ValueError(f"land_detect_s must be a finite number >= 0, got {land_detect_s!r}")
-        #: PX4: vehicle seconds after touchdown during which an unforced disarm is denied ("Disarming denied: not
-        #: landed": its land detector has not confirmed the landing yet, commander Commander::disarm)
-        self.land_detect_s = float(land_detect_s)
-        #: MAV_CMD_DO_CHANGE_SPEED with a speed <= 0 (-2 "default") is DENIED (None: as the flavour's firmware,
-        #: ArduCopter denies, PX4 accepts)
-        self.deny_default_speed = (not self.px4) if deny_default_speed is None else bool(deny_default_speed)
-
-    def _init_params(self, system_id: int, params: dict[str, float] | None) -> None:
-        """The flavour's parameters (with the system id) and the given overrides. Raises ValueError for an unknown
-        parameter name."""
-        autopilot = self.autopilot
-        self._rejections: dict[int, list[int]] = {}  # MAV_CMD -> results still to answer (reject_next)
-        self._in_progress: dict[int, tuple[_Link, int, int, float, int]] = {}  # cmd -> (link, sys, comp, next t, %)
-        self.params: dict[str, float] = dict(PX4_PARAMS if self.px4 else ARDUPILOT_PARAMS)
-        self.params["MAV_SYS_ID" if self.px4 else "SYSID_THISMAV"] = float(system_id)
-        if self.px4:
-            # PX4 SITL stretches its loss timeouts by the simulation's speed factor, so that they stay the same in
-            # wall time (ROMFS init.d-posix/rcS, "Adapt timeout parameters if simulation runs faster or slower than
-            # realtime": COM_OF_LOSS_T = PX4_SIM_SPEED_FACTOR x 1.0 s); at 10x the unscaled 1 s was 0.1 s of wall
-            # time, less than a loaded machine stalls a setpoint stream for
-            self.params["COM_OF_LOSS_T"] = self.speedup * PX4_PARAMS["COM_OF_LOSS_T"]
-        for k, v in (params or {}).items():
-            if k not in self.params:
-                raise ValueError(f"params: unknown {autopilot} parameter {k!r}; known: {sorted(self.params)}")
-            self.params[k] = float(v)
-
-    def _init_links(self, system_id: int, component_id: int) -> None:
-        """The MAVLink link (link.py: sockets, peers, faults), the vehicle thread and the pre-arm test hook."""
-        #: the MAVLink link to the ground stations (link.py)
-        self.link = EmulatorLink(system_id, component_id, self.signing)
-        self._enc = self.link.enc
-        self._lock = threading.RLock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.prearm_failure: str | None = None
-
-    def _init_state(self) -> None:
-        """The vehicle's state: clock, mode, home, targets, mission and fence items, message intervals."""
-        # vehicle state
-        self.t = 0.0
-        self.boot_ms0 = 73_421  # the autopilot booted a while before we count
-        self.mode = "MANUAL" if self.px4 else "STABILIZE"
-        self.home: GeoPoint | None = None
-        self.home_enu = np.zeros(3)
-        self.armed_at = 0.0
-        self.landed_at: float | None = None
-        self.took_off = False
-        self.speed: float | None = None  # DO_CHANGE_SPEED, m/s
-        self.phase = ""  # RTL phase: climb / return / land
-        self.last_setpoint_t = -1e9
-        #: PX4: the mode its offboard-loss failsafe switched to, while the pilot's mode is still OFFBOARD (None: not
-        #: in that failsafe); a setpoint stream that comes back ends it (modes.py)
-        self.offboard_fallback: str | None = None
-        #: vehicle time (s) of every position/velocity target received (the most recent 100 000)
-        self.setpoint_log: deque[float] = deque(maxlen=100_000)
-        #: (vehicle time s, mode name) of every mode change (the most recent 10 000)
-        self.mode_log: deque[tuple[float, str]] = deque(maxlen=10_000)
-        self.velocity_deadline: float | None = None  # ArduPilot GUIDED velocity timeout
-        self._last_target: tuple | None = None  # last position/velocity target (PX4 acts on it in OFFBOARD)
-        self.posvel: tuple | None = None  # active position + velocity feed-forward target (ENU m, m/s)
-        self.takeoff_alt: float | None = None
-        self.mission: list[Any] = []  # MISSION_ITEM_INT-like messages, wire sequence
-        self.fence_items: list[Any] = []  # MAV_MISSION_TYPE_FENCE items (mission.py), as MISSION_ITEM_INT
-        self.rally_items: list[Any] = []  # MAV_MISSION_TYPE_RALLY items
-        self.mission_seq = 0
-        self.mission_state = "idle"  # idle / wait_start / running / holding / done
-        self.item_reached_at: float | None = None
-        self.item_started = False
-        self._item_target = np.zeros(3)  # ENU target of the mission item being flown
-        self.reached_log: list[int] = []
-        self._reached_repeat: tuple[int, int, float] | None = None  # PX4: (seq, repeats left, next vehicle s)
-        self._mission_item_warned = False
-        self._position_ok_sent = False
-        self._next_prearm_report = AP_PREARM_DISPLAY_PERIOD_S
-        self._home_corr = (0.0, 0.0, 0.0)  # PX4 home-altitude correction: (error m, applied m, next update s)
-        self.took_off_at: float | None = None
-        self._transfer: _Transfer | None = None
-        # message id -> interval in vehicle seconds
-        self._intervals: dict[int, float] = {m: 1.0 / hz for m, hz in _PX4_DEFAULT_STREAMS.items()} if self.px4 else {}
-        self._next_due: dict[int, float] = {}
-        self._next_hb = 0.0
-        self.commands_seen: list[int] = []
 
     def start(self, address: str = "tcp:127.0.0.1:0", allow_remote: bool = False) -> str:
         """Listen (tcp, udpin) or send (udpout) on ``address`` and start the vehicle thread. Returns the address
@@ -343,7 +287,7 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
                     try:
                         self._handle(link, msg)
                     except Exception as e:  # noqa: BLE001 - report, keep flying
-                        self._text(M.MAV_SEVERITY_ERROR, f"emulator: {msg.get_type()} handling failed: {e}")
+                        self.link.text(M.MAV_SEVERITY_ERROR, f"emulator: {msg.get_type()} handling failed: {e}")
                 now = time.monotonic()
                 elapsed = min(now - last, 0.5) * self.speedup
                 last = now
@@ -353,48 +297,21 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
                     self._tick(dt)
                 self.link.flush()
 
-    def _handlers(self) -> dict[str, Callable[[_Link, Any], None]]:
-        """Message type -> the firmware's handler of it (a type not listed is ignored, e.g. HEARTBEAT)."""
-        return {"COMMAND_LONG": self._on_command_long, "COMMAND_INT": self._on_command_int,
-                "SET_MODE": self._on_set_mode, "REQUEST_DATA_STREAM": self._on_request_data_stream,
-                "SET_POSITION_TARGET_GLOBAL_INT": self._on_set_position_target_global_int,
-                "SET_POSITION_TARGET_LOCAL_NED": self._on_set_position_target_local_ned,
-                "MISSION_COUNT": self._on_mission_count, "MISSION_ITEM_INT": self._on_mission_item_int,
-                "MISSION_ITEM": self._on_mission_item, "MISSION_REQUEST_LIST": self._on_mission_request_list,
-                "MISSION_REQUEST_INT": self._on_mission_request_int, "MISSION_REQUEST": self._on_mission_request,
-                "MISSION_CLEAR_ALL": self._on_mission_clear_all, "MISSION_SET_CURRENT": self._on_mission_set_current,
-                "PARAM_REQUEST_LIST": self._on_param_request_list, "PARAM_REQUEST_READ": self._on_param_request_read,
-                "PARAM_SET": self._on_param_set}
-
     def _handle(self, link: _Link, msg: Any) -> None:
         """One message from ``link``: SETUP_SIGNING for this vehicle to the signing (signing.py), a message for
-        another component to the camera (camera.py), the rest to its handler (:meth:`_handlers`)."""
+        another component to the camera (camera.py), the rest to its handler (:attr:`handlers`)."""
         mtype = msg.get_type()
         if mtype == "SETUP_SIGNING":
             if self.link.for_us(msg):  # it passed this link's signature check (or signing is off)
                 self.signing.on_setup_signing(msg)
             return
-        handler = self._handlers().get(mtype)
+        handler = self.handlers.get(mtype)
         if handler is None:
             return
         if mtype != "REQUEST_DATA_STREAM" and not self.link.for_us(msg):
-            boot_ms = int(self.boot_ms0 + self.t * 1000.0) & 0xFFFFFFFF
-            self.camera_host.answer(link, msg, boot_ms)  # a camera component's, if one is attached (camera.py)
+            self.camera_host.answer(link, msg, self.state.boot_ms())  # an attached camera's (camera.py)
             return
         handler(link, msg)
-
-    def _send(self, msg: Any, link: _Link | None = None) -> None:
-        """Send ``msg`` to ``link`` (None: every peer): :meth:`.link.EmulatorLink.send`."""
-        self.link.send(msg, link)
-
-    def _text(self, severity: int, text: str) -> None:
-        """STATUSTEXT ``text`` to every peer, chunked: :meth:`.link.EmulatorLink.text`."""
-        self.link.text(severity, text)
-
-    @property
-    def _links(self) -> list[_Link]:
-        """The connected peers (:attr:`.link.EmulatorLink.peers`)."""
-        return self.link.peers
 
     def set_blackhole(self, on: bool, inbound: bool = True) -> None:
         """Drop everything the vehicle sends (and, with ``inbound``, everything it receives, logging its type and
@@ -428,7 +345,7 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
         """Send STATUSTEXT ``text`` (ASCII) to every peer; longer than 50 characters it goes out in chunks as
         MAVLink 2 specifies (same non-zero ``id``, ``chunk_seq`` from 0, the last chunk NUL-terminated)."""
         with self._lock:
-            self._text(severity, text)
+            self.link.text(severity, text)
 
     @property
     def address(self) -> str | None:
@@ -459,46 +376,46 @@ class MavlinkVehicleEmulator(CommandMixin, ModeMixin, ArmingMixin, GuidedMixin, 
         """The vehicle's state: ``t`` (vehicle seconds), ``mode``, ``armed``, ``in_air``, ``position`` (ENU metres
         from the *current* home), ``position_origin`` (ENU from the EKF origin), ``home`` (GeoPoint or None),
         ``gps_fix``, ``mission_seq``, ``mission_len`` (wire items), ``reached`` (MISSION_ITEM_REACHED seqs),
-        ``links`` (connected peers), ``statustexts``, ``commands_seen``."""
+        ``links`` (connected peers), ``statustexts``, ``commands_seen``, ``battery_pct``."""
         with self._lock:
-            s = self.veh.state
-            return {"t": self.t, "mode": self.mode, "armed": s.armed, "in_air": s.in_air,
-                    "position": tuple(float(v) for v in s.position - self.home_enu),
-                    "position_origin": tuple(float(v) for v in s.position), "home": self.home,
-                    "gps_fix": self._fix_type(), "mission_seq": self.mission_seq, "mission_len": len(self.mission),
-                    "reached": list(self.reached_log), "links": len(self.link.peers),
-                    "statustexts": list(self.statustexts), "commands_seen": list(self.commands_seen),
-                    "battery_pct": self.veh.battery_pct}
-
-    def _motors_lift(self) -> bool:
-        """Whether the motors can climb. ArduPilot SITL scales the PWM of the motors in ``SIM_ENGINE_FAIL`` (a
-        bitmask, bit 0: servo 1) by ``SIM_ENGINE_MUL`` (libraries/SITL/SITL.cpp, SIM_Aircraft.cpp); the emulator
-        models only whether its quad's four motors together give at least half their thrust (a quadrotor hovers near
-        half throttle): below that it does not climb. PX4: always (SIH has no such parameter)."""
-        if self.px4:
-            return True
-        mask, mul = int(self.params["SIM_ENGINE_FAIL"]), self.params["SIM_ENGINE_MUL"]
-        return sum(mul if mask >> i & 1 else 1.0 for i in range(4)) / 4.0 >= 0.5
+            st = self.state
+            s = st.veh.state
+            return {"t": st.t, "mode": st.mode, "armed": s.armed, "in_air": s.in_air,
+                    "position": tuple(float(v) for v in s.position - st.home_enu),
+                    "position_origin": tuple(float(v) for v in s.position), "home": st.home,
+                    "gps_fix": st.fix_type(), "mission_seq": self.missions.seq,
+                    "mission_len": len(self.missions.mission), "reached": list(self.missions.reached_log),
+                    "links": len(self.link.peers), "statustexts": list(self.statustexts),
+                    "commands_seen": list(self.commands.seen), "battery_pct": st.veh.battery_pct}
 
     def _tick(self, dt: float) -> None:
-        self.t += dt
-        veh, s = self.veh, self.veh.state
-        if self.home is None and self._fix_type() >= 3:
-            self._set_home_here()
-            self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 origin set" if not self.px4 else "home set")
-        self._readiness_tick()
+        """One physics step of ``dt`` vehicle seconds: home at the GPS fix, readiness, the flight model (motors
+        that lift nothing do not climb), take-off and landing, the autopilot's logic, the gimbal, then what is
+        due on the link (HEARTBEAT, IN_PROGRESS answers, PX4's repeated MISSION_ITEM_REACHED, a stalled upload's
+        request, the streams), in that order."""
+        st = self.state
+        st.t += dt
+        veh, s = st.veh, st.veh.state
+        if st.home is None and st.fix_type() >= 3:
+            self.arming.set_home_here()
+            self.link.text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 origin set" if not self.px4 else "home set")
+        self.arming.readiness_tick()
         was_in_air = s.in_air
         if s.armed:
             z0 = float(s.position[2])
             veh.step(dt)
-            if s.position[2] > z0 and not self._motors_lift():  # full throttle, no climb
+            if s.position[2] > z0 and not st.motors_lift():  # full throttle, no climb
                 s.position[2], s.velocity[2], s.in_air = z0, min(float(s.velocity[2]), 0.0), was_in_air
         if s.in_air:
-            if not self.took_off:
-                self.took_off_at = self.t
-            self.took_off = True
+            if not st.took_off:
+                st.took_off_at = st.t
+            st.took_off = True
         if was_in_air and not s.in_air:
-            self.landed_at = self.t
-        self._autopilot_logic()
+            st.landed_at = st.t
+        self.autopilot_loop.step()
         self.gimbal.step(dt, tuple(float(c) for c in s.position), float(s.yaw))
-        self._stream()
+        self.telemetry.heartbeat_tick()
+        self.commands.in_progress_tick()
+        self.mission_runner.repeat_reached_tick()
+        self.mission_protocol.transfer_tick()
+        self.telemetry.interval_tick()
