@@ -181,6 +181,28 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
             "outcomes": sorted({str(r.get("outcome")) for r in res.robots.values()})}
 
 
+#: attempts at a fleet size whose local Ray did not start (each after :func:`~aerodaas.runtime.ray_start.ensure_ray`'s
+#: own three): on a machine at load 30-50, Ray's raylet missed its 30 s registration with the GCS that often
+RAY_START_ATTEMPTS = 4
+
+
+def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nodes: int, profile: bool) -> dict:
+    """:func:`run_size`, started again (at most :data:`RAY_START_ATTEMPTS` times) when its Ray did not start: no
+    drone flew then, so nothing of the measurement is lost or repeated. Raises the last RayStartError."""
+    from aerodaas.runtime.ray_start import RayStartError
+
+    for attempt in range(1, RAY_START_ATTEMPTS + 1):
+        try:
+            return run_size(n, duration_s, k, edge_nodes, profile)
+        except RayStartError as e:
+            if attempt == RAY_START_ATTEMPTS:
+                raise
+            progress.console.print(f"fleet N={n} k={k}: Ray did not start ({e}); attempt {attempt + 1} of "
+                                   f"{RAY_START_ATTEMPTS}")
+            time.sleep(10.0)
+    raise AssertionError("unreachable")
+
+
 def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
               edge_nodes: int = 1, runs: tuple[tuple[int, int], ...] = (), profile: bool = False) -> dict:
     """Every (size, grouping) pair of ``sizes`` x ``groupings``, or exactly ``runs`` ((drones, drones per actor)
@@ -195,7 +217,7 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
     with bench_progress("bench fleet", total=len(pairs)) as (progress, task):
         for k, n in pairs:
             progress.update(task, description=f"bench fleet N={n} k={k}")
-            row = run_size(n, duration_s, k, edge_nodes, profile)
+            row = _run_size_started(progress, n, duration_s, k, edge_nodes, profile)
             row["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
             progress.advance(task)
             progress.console.print(
