@@ -94,9 +94,10 @@ class LocalCluster:
         self._restore_tls = use_tls(tls)
         enable_token_auth()
         from aerodaas.clusters.loopback import loopback_only
-        from aerodaas.clusters.worker_memory import limit_malloc_arenas
+        from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 
         limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
+        lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
         from aerodaas.clusters import reaper
 
         reaper.ensure_started()  # the nodes' processes end with this process, however it ends

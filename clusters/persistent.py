@@ -175,9 +175,10 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
 
     enable_token_auth()
     loopback_only()  # kept: this process exists only to run the node
-    from aerodaas.clusters.worker_memory import limit_malloc_arenas
+    from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 
     limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
+    lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
     system_config: dict[str, Any] = {"worker_niceness": 0}
     # the import path the node's workers share with this daemon: without sys.path[0], this module's own start
     # folder (`python -m` puts the caller's working directory there), which workers do not have

@@ -7,15 +7,32 @@ so it must be in the environment of the node processes before they are launched,
 caps that. Measured with ``aerodaas bench fleet --drones 1 --drones 20 --duration 20`` on the 2-core CI machine
 kind: 88-91 MB of PSS per extra drone actor without it, 77 MB with it, missed control ticks 0.07-0.25 % and
 0.02 %. A value the user already set is kept; ``AERODAAS_MALLOC_ARENA_MAX=0`` leaves glibc's default.
+
+The Python heap: Ray imports pyarrow in every worker when it first deserialises anything (its serialisation context
+registers Arrow reducers for Ray Data: ``ray/util/serialization_addons.py`` -> ``ray/_private/arrow_serialization.py``,
+Ray 2.60), +30 MB private per process measured on CPython 3.11, and no actor of a run uses Arrow.
+:func:`lean_worker_imports` names :func:`worker_setup` as the workers' setup hook (Ray's
+``worker_process_setup_hook``, passed through the environment the node processes and their workers inherit, like
+``MALLOC_ARENA_MAX``); it runs in each worker before its serialisation context exists and registers the Arrow
+reducers only when pyarrow is already imported. An actor that imports pyarrow later still sends Arrow tables through
+Ray (pickled by cloudpickle without Ray's zero-copy-slice workaround). ``AERODAAS_LEAN_WORKERS=0`` turns it off.
 """
 from __future__ import annotations
 
+import functools
 import os
+import sys
+from collections.abc import Callable
 
-__all__ = ["ARENAS", "limit_malloc_arenas"]
+__all__ = ["ARENAS", "SETUP_HOOK", "SETUP_HOOK_ENV", "lean_worker_imports", "limit_malloc_arenas", "worker_setup"]
 
 #: glibc malloc arenas per process of the Ray nodes AeroDaaS starts
 ARENAS = 2
+#: the environment variable a Ray worker reads its setup hook from (``ray._private.ray_constants.
+#: WORKER_PROCESS_SETUP_HOOK_ENV_VAR``; ``ray/_private/workers/default_worker.py`` runs the hook before the main loop)
+SETUP_HOOK_ENV = "__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"
+#: the hook: an import path, loaded by Ray with ``load_class``
+SETUP_HOOK = "aerodaas.clusters.worker_memory.worker_setup"
 
 
 def limit_malloc_arenas() -> bool:
@@ -26,3 +43,26 @@ def limit_malloc_arenas() -> bool:
         return False
     os.environ.setdefault("MALLOC_ARENA_MAX", str(ARENAS))
     return True
+
+
+def lean_worker_imports() -> bool:
+    """Name :func:`worker_setup` as the setup hook of the Ray workers this process is about to start (see the
+    module), unless ``AERODAAS_LEAN_WORKERS`` is ``0`` or another hook is set. Returns True when it is in effect."""
+    if os.environ.get("AERODAAS_LEAN_WORKERS", "").strip() == "0":
+        return False
+    return os.environ.setdefault(SETUP_HOOK_ENV, SETUP_HOOK) == SETUP_HOOK
+
+
+def worker_setup() -> None:
+    """Ray worker setup hook: Ray's Arrow reducers are registered only when pyarrow is already imported, so that a
+    worker that never uses Arrow never imports it (see the module)."""
+    import ray._private.arrow_serialization as arrow  # serialization_addons.apply imports the function at call time
+
+    arrow._register_custom_datasets_serializers = functools.partial(
+        _register_if_imported, arrow._register_custom_datasets_serializers)
+
+
+def _register_if_imported(register: Callable[[object], None], context: object) -> None:
+    """Ray's ``register(context)`` when pyarrow is imported in this process, else nothing."""
+    if "pyarrow" in sys.modules:
+        register(context)

@@ -105,9 +105,11 @@ def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
     return env, shared
 
 
-def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int = 1) -> dict:
+def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int = 1,
+             profile: bool = False) -> dict:
     """One fleet size on a fresh local Ray (or a fresh LocalCluster of ``edge_nodes`` edge nodes); returns the
-    measured row."""
+    measured row. ``profile``: also the cost table of one drone actor and of the node's processes
+    (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as ``"profile"`` in the row."""
     from aerodaas.runtime import driver as runtime
 
     from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
@@ -128,8 +130,16 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
         time.sleep(2.0)  # let Ray's own processes settle before measuring
         procs = ray_processes(nodes)
         cpu0, wall0 = cpu_seconds(procs), time.monotonic()
+        prof = None
+        if profile and edge_nodes == 1:
+            from aerodaas.bench.fleet_profile import ActorProfiler
+
+            # the window: after the fleet's start (its actors up and flying), within the flight
+            prof = ActorProfiler(n, min(drones_per_actor, n), window_s=max(2.0, min(10.0, duration_s / 2))).start()
         with MemorySampler(1.0, nodes) as mem:
             res = env.start_mission(timeout=duration_s, options=opts)
+        if prof is not None:
+            prof.stop()
         wall = time.monotonic() - wall0
         cpu = cpu_seconds(ray_processes(nodes)) - cpu0
         names = {nd.node_id: f"edge node {j}" for j, nd in enumerate(lc.edge_nodes)} if lc else {}
@@ -166,21 +176,48 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
             "tick_lateness_ms": {"median": float(np.median([x["median"] for x in lateness])) if lateness else None,
                                  "p99": max((x["p99"] for x in lateness), default=None)},
             "host_errors": sum(h.get("error_count", 0) for h in hosts.values()),
+            **({"profile": prof.result if prof.result is not None else {"error": prof.error or "window missed"}}
+               if prof is not None else {}),
             "outcomes": sorted({str(r.get("outcome")) for r in res.robots.values()})}
 
 
+#: attempts at a fleet size whose local Ray did not start (each after :func:`~aerodaas.runtime.ray_start.ensure_ray`'s
+#: own three): on a machine at load 30-50, Ray's raylet missed its 30 s registration with the GCS that often
+RAY_START_ATTEMPTS = 4
+
+
+def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nodes: int, profile: bool) -> dict:
+    """:func:`run_size`, started again (at most :data:`RAY_START_ATTEMPTS` times) when its Ray did not start: no
+    drone flew then, so nothing of the measurement is lost or repeated. Raises the last RayStartError."""
+    from aerodaas.runtime.ray_start import RayStartError
+
+    for attempt in range(1, RAY_START_ATTEMPTS + 1):
+        try:
+            return run_size(n, duration_s, k, edge_nodes, profile)
+        except RayStartError as e:
+            if attempt == RAY_START_ATTEMPTS:
+                raise
+            progress.console.print(f"fleet N={n} k={k}: Ray did not start ({e}); attempt {attempt + 1} of "
+                                   f"{RAY_START_ATTEMPTS}")
+            time.sleep(10.0)
+    raise AssertionError("unreachable")
+
+
 def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
-              edge_nodes: int = 1) -> dict:
+              edge_nodes: int = 1, runs: tuple[tuple[int, int], ...] = (), profile: bool = False) -> dict:
+    """Every (size, grouping) pair of ``sizes`` x ``groupings``, or exactly ``runs`` ((drones, drones per actor)
+    pairs, in order) when given; the report with a row per run and the machine and load at the start."""
     from aerodaas.bench import machine_info
 
     from aerodaas.bench.progress import bench_progress
 
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
-    with bench_progress("bench fleet", total=len(groupings) * len(sizes)) as (progress, task):
-        for k, n in [(k, n) for k in groupings for n in sizes]:
+    pairs = [(k, n) for n, k in runs] if runs else [(k, n) for k in groupings for n in sizes]
+    with bench_progress("bench fleet", total=len(pairs)) as (progress, task):
+        for k, n in pairs:
             progress.update(task, description=f"bench fleet N={n} k={k}")
-            row = run_size(n, duration_s, k, edge_nodes)
+            row = _run_size_started(progress, n, duration_s, k, edge_nodes, profile)
             row["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
             progress.advance(task)
             progress.console.print(
@@ -190,15 +227,30 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                 + (f"  per node {row['drones_per_node']}" if edge_nodes > 1 else ""))
             rows.append(row)
     for r in rows:
-        one = next((o for o in rows if o["drones"] == 1 and o["drones_per_actor"] == r["drones_per_actor"]), None)
+        # the one-drone row of the same grouping, else any (one drone is one actor whatever the grouping)
+        one = next((o for o in rows if o["drones"] == 1 and o["drones_per_actor"] == r["drones_per_actor"]),
+                   next((o for o in rows if o["drones"] == 1), None))
         r["rss_mb_per_extra_drone"] = ((r["rss_mb"] - one["rss_mb"]) / (r["drones"] - 1)
                                        if one and r["drones"] > 1 else None)
         r["pss_mb_per_extra_drone"] = ((r["pss_mb"] - one["pss_mb"]) / (r["drones"] - 1)
                                        if one and r["drones"] > 1 else None)
+        actors = math.ceil(r["drones"] / r["drones_per_actor"])
+        r["pss_mb_per_extra_actor"] = (r["pss_mb"] - one["pss_mb"]) / (actors - 1) if one and actors > 1 else None
     return {"benchmark": "fleet", "machine": machine, "duration_s": duration_s, "edge_nodes": edge_nodes,
             "load_avg_1min_start": load_start, "results": rows,
             "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "drones_at_least_grouped": 40,
                         "rss_mb_per_extra_drone_max": 150}}
+
+
+def parse_run(text: str) -> tuple[int, int]:
+    """``"N:K"`` -> (N drones, K per actor), both >= 1. Raises ValueError naming ``--run`` and the value."""
+    try:
+        n, k = (int(x) for x in text.split(":"))
+    except ValueError:
+        raise ValueError(f"--run must be N:K (drones:drones per actor, e.g. 40:1), got {text!r}") from None
+    if n < 1 or k < 1:
+        raise ValueError(f"--run N:K needs N >= 1 and K >= 1, got {text!r}")
+    return n, k
 
 
 def plot_fleet(report: dict, path: str) -> None:
@@ -243,6 +295,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=30.0, help="seconds of flight per size (real time)")
     p.add_argument("--drones-per-actor", type=int, action="append", dest="per_actor",
                    help="drones sharing one drone actor (repeatable; default 1)")
+    p.add_argument("--run", action="append", dest="runs", metavar="N:K",
+                   help="one fleet of N drones, K per drone actor (repeatable; replaces the --drones x "
+                        "--drones-per-actor grid, so one invocation can hold 20:1, 40:1 and 100:10)")
+    p.add_argument("--profile", action="store_true",
+                   help="per run, where one drone actor's CPU and memory go (per-thread CPU from /proc, "
+                        "apportioned by py-spy when it is on the PATH) and the node's processes' CPU")
     p.add_argument("--edge-nodes", type=int, default=1, help="tier=edge nodes of a local cluster (default 1: "
                                                             "the local Ray)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
@@ -263,7 +321,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
                   f"{a.edge_nodes}", file=sys.stderr)
             return 2
-        report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes)
+        try:
+            runs = tuple(parse_run(r) for r in (a.runs or []))
+        except ValueError as e:
+            print(f"aerodaas bench fleet: {e}", file=sys.stderr)
+            return 2
+        report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes, runs, a.profile)
         if a.plot:
             report["plot"] = os.path.abspath(a.plot)
         from aerodaas.bench.output import emit_report

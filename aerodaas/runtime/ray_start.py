@@ -116,9 +116,10 @@ def _start_local(dashboard: bool) -> None:
 
     from aerodaas.clusters import reaper
     from aerodaas.clusters.loopback import loopback_only
-    from aerodaas.clusters.worker_memory import limit_malloc_arenas
+    from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 
     limit_malloc_arenas()  # the workers' C heap: see the module
+    lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
     reaper.ensure_started()  # Ray's processes end with this driver, however it ends (see the module)
     temp_dir = ray_temp_dir()
     for attempt in range(3):

@@ -9,10 +9,11 @@ from aerodaas import cli
 from aerodaas.bench import fleet
 
 
-def _report(sizes, duration_s, groupings=(1,), edge_nodes=1):
+def _report(sizes, duration_s, groupings=(1,), edge_nodes=1, runs=(), profile=False):
+    pairs = [(n, k) for n, k in runs] if runs else [(n, k) for k in groupings for n in sizes]
     rows = [{"drones": n, "drones_per_actor": k, "missed_ticks_pct": 0.1 * n, "dropped_frames_pct": 1.0,
-             "cpu_pct": 20.0 * n, "rss_mb": 900.0 + 40 * n / k, "pss_mb": 700.0 + 30 * n / k}
-            for k in groupings for n in sizes]
+             "cpu_pct": 20.0 * n, "rss_mb": 900.0 + 40 * n / k, "pss_mb": 700.0 + 30 * n / k,
+             **({"profile": {}} if profile else {})} for n, k in pairs]
     return {"benchmark": "fleet", "machine": {"cpu_count": 2}, "duration_s": duration_s, "results": rows}
 
 
@@ -42,3 +43,19 @@ def test_plot_and_out_write_where_they_are_told(canned, capsys):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     out = capsys.readouterr()
     assert json.loads(out.out)["plot"] == str(png) and f"curve written to {png}" in out.err
+
+
+def test_runs_name_each_fleet_and_its_grouping(canned, capsys):
+    """--run N:K (issue 49: 20 and 40 drones one actor each and 100 packed, in one invocation) replaces the grid."""
+    assert cli.main(["bench", "fleet", "--json", "--run", "20:1", "--run", "40:1", "--run", "100:10", "--profile",
+                     "--duration", "1"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert [(r["drones"], r["drones_per_actor"]) for r in rep["results"]] == [(20, 1), (40, 1), (100, 10)]
+    assert all("profile" in r for r in rep["results"])
+
+
+@pytest.mark.parametrize("bad", ["40", "40:0", "x:1", "0:1", "1:2:3"])
+def test_a_bad_run_is_refused_naming_it(canned, capsys, bad):
+    assert cli.main(["bench", "fleet", "--run", bad, "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--run" in err and repr(bad) in err

@@ -1,0 +1,305 @@
+"""Where a drone's time and memory go (issue 49 item 1): ``aerodaas bench fleet --profile`` measures one drone actor
+of the running fleet, and every process of the node, over a window of the flight.
+
+CPU: the exact CPU time of every thread of the drone actor over the window, from ``/proc/<pid>/task/<tid>/stat``
+(fields 14 and 15, utime and stime, in clock ticks: proc(5)), apportioned to components by a py-spy sample of the
+same window (``py-spy record --threads --nonblocking --format raw``: each sample names the native thread id, so a
+thread's CPU is split over the components its own samples fall in). Threads py-spy never sees run no Python: Ray's
+C++ threads (core worker I/O, gRPC, the object store client...: Ray names them in ``comm``), whose CPU is Ray's
+per-actor work, and unnamed ones keeping the process's name: OpenCV's ``parallel_for`` pool (``cv2.getNumThreads()``
+is 2 on two cores, so each ``warpPerspective`` of the renderer runs partly on a pool thread: measured alone, that
+thread took 2/3 of the warp's CPU). Without py-spy (not on the PATH) every thread keeping the process's name is
+in that unnamed row. Node level: the CPU
+of every process of this driver's Ray node over the same window (drone actors, the recorder actor, raylet, GCS,
+dashboard and runtime-env agents, the driver). Both are given as CPU-seconds per drone per simulated second
+(``cpu_s / (drones x window_s x speedup)``): unlike missed ticks, a CPU-time share does not change when other
+work shares the cores.
+
+Memory: the drone actor's PSS (``/proc/<pid>/smaps``: proc(5); shared pages divided by the processes mapping them)
+split by mapping: the shared ground cache (``aerodaas.sim.ground_cache``), POSIX shared memory, each Python
+package's extension libraries (so an import an actor does not need shows up here with its size), the
+interpreter and system libraries, and anonymous memory (Python objects, malloc arenas, thread stacks).
+"""
+from __future__ import annotations
+
+import enum
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+
+__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "ActorProfiler"]
+
+
+class Component(enum.Enum):
+    """Where a drone actor's CPU time goes; the value is the row's label in the cost table."""
+
+    PHYSICS = "physics (vehicle model steps)"
+    CONTROL = "control and mission (control ticks, safety gate, waypoint queue)"
+    ODOMETRY = "odometry and stat-stream"
+    CAMERA = "camera rendering (homography warp of the ground)"
+    ANALYTICS = "the drone's colocated analytics"
+    DATA_PLANE = "data plane (hand-off, channel sends)"
+    RECORD_ENCODE = "recording: JPEG encoding of frames"
+    RECORDING = "recording: batching and sending to the recorder, checkpoints"
+    CLOCK = "clock loop (pacing, scheduling captures)"
+    RAY_PYTHON = "Ray, Python side (worker main loop, actor calls)"
+    RAY_CORE = "Ray, C++ threads (core worker I/O, gRPC, heartbeats, object store client)"
+    NATIVE_UNNAMED = "unnamed native threads (OpenCV's worker pool: its share of each warp)"
+
+
+#: first match wins: the innermost concern before the caller that contains it (an analytics runs inside the
+#: camera's publish, the JPEG encode inside the recorder's send)
+_RULES: tuple[tuple[Component, tuple[str, ...]], ...] = (
+    (Component.RECORD_ENCODE, ("encode_frame (", "imencode")),
+    (Component.ANALYTICS, ("AnalyticsComponent", "FrameExposure.process", "Analytics.process")),
+    (Component.RECORDING, ("RemoteRecorder", "RecorderService", "_Checkpointer", "drone_checkpoint")),
+    (Component.CAMERA, ("World.render", "frame_at (", "CameraComponent")),
+    (Component.PHYSICS, ("SimBackend.step", "SimVehicle.step")),
+    (Component.ODOMETRY, ("OdometryPublisher", "publish_odometry", "StatStream")),
+    (Component.CONTROL, ("DroneComponent", "DroneInbox", "QueueFlight", "MissionFSM", "SafetyGate")),
+    (Component.DATA_PLANE, ("DataPlane", "ChannelOutlet", "ChannelServer", "Component.")),
+    (Component.CLOCK, ("ActorAssembly.run",)),
+    (Component.RAY_PYTHON, ("(ray/", "ray/_private", "ray/_raylet")),
+)
+
+
+def classify_stack(stack: str) -> Component:
+    """The component of one py-spy stack (``frame;frame;...`` outermost first, each ``function (file:line)``):
+    the first of ``_RULES`` whose pattern appears in it, else :attr:`Component.RAY_PYTHON` for an otherwise
+    unknown frame set (the worker's own threads)."""
+    for comp, patterns in _RULES:
+        if any(p in stack for p in patterns):
+            return comp
+    return Component.RAY_PYTHON
+
+
+@dataclass(frozen=True)
+class ThreadCpu:
+    """One thread: native id, ``comm`` (the name Ray's C++ threads set; a Python thread keeps the process's),
+    CPU seconds consumed since it started (utime + stime)."""
+
+    tid: int
+    comm: str
+    cpu_s: float
+
+
+def thread_cpu(pid: int) -> dict[int, ThreadCpu]:
+    """Every thread of ``pid`` now (tid -> :class:`ThreadCpu`); a thread that exits while being read is skipped.
+    Raises FileNotFoundError when the process is gone."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out: dict[int, ThreadCpu] = {}
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{tid}/stat") as f:
+                raw = f.read()
+        except OSError:
+            continue
+        comm = raw[raw.index("(") + 1: raw.rindex(")")]
+        rest = raw[raw.rindex(")") + 2:].split()  # fields from 3 (state) on; utime, stime are fields 14, 15
+        out[int(tid)] = ThreadCpu(int(tid), comm, (int(rest[11]) + int(rest[12])) / tick)
+    return out
+
+
+_PYSPY_LINE = re.compile(r"^thread \((?:0x)?([0-9a-fA-F]+)\)(?::[^;]*)?;(.*) (\d+)$")
+
+
+def parse_pyspy_raw(text: str) -> dict[int, dict[Component, int]]:
+    """py-spy ``--threads --format raw`` output -> native tid -> component -> samples. py-spy writes the thread as
+    ``thread (<tid>)`` (decimal native id on Linux) as the first frame, optionally followed by its Python name."""
+    per: dict[int, dict[Component, int]] = {}
+    for line in text.splitlines():
+        m = _PYSPY_LINE.match(line.strip())
+        if not m:
+            continue
+        tid = int(m.group(1))
+        comp = classify_stack(m.group(2))
+        per.setdefault(tid, {})
+        per[tid][comp] = per[tid].get(comp, 0) + int(m.group(3))
+    return per
+
+
+def attribute(before: dict[int, ThreadCpu], after: dict[int, ThreadCpu],
+              samples: dict[int, dict[Component, int]] | None, process_comm: str) -> dict[Component, float]:
+    """CPU seconds per component over a window: each thread's CPU delta (a thread born in the window counts from
+    0) split in proportion to its py-spy samples; a thread without samples is Ray's C++ work when its ``comm`` is
+    its own (Ray names its threads), else an unnamed native thread (OpenCV's pool). ``samples`` None: no profiler
+    ran."""
+    cpu: dict[Component, float] = {}
+    for tid, th in after.items():
+        delta = th.cpu_s - (before[tid].cpu_s if tid in before else 0.0)
+        if delta <= 0:
+            continue
+        mine = (samples or {}).get(tid)
+        if mine:
+            total = sum(mine.values())
+            for comp, n in mine.items():
+                cpu[comp] = cpu.get(comp, 0.0) + delta * n / total
+        else:
+            comp = Component.NATIVE_UNNAMED if th.comm == process_comm else Component.RAY_CORE
+            cpu[comp] = cpu.get(comp, 0.0) + delta
+    return cpu
+
+
+def _mapping_kind(path: str, ground_dir: str) -> str:
+    """The row of a mapping in the PSS breakdown."""
+    if not path or path.startswith("[anon") or path in ("[heap]", "[stack]"):
+        return "anonymous (Python objects, malloc arenas, thread stacks)"
+    if ground_dir and path.startswith(ground_dir):
+        return "shared ground cache (memmap, one per machine)"
+    if path.startswith("/dev/shm") or "plasma" in path or path.startswith("/memfd:"):
+        return "shared memory (object store, channel slots)"
+    m = re.search(r"site-packages/([A-Za-z0-9_.\-]+?)(?:/|\.libs/|$)", path)
+    if m:
+        pkg = m.group(1).removesuffix(".libs")
+        return f"package {pkg.split('-')[0].lower()}"
+    if "/lib/python3" in path or "libpython" in path:
+        return "CPython standard library"
+    return "system libraries and other files"
+
+
+def smaps_pss(pid: int) -> dict[str, float]:
+    """PSS (MiB) of ``pid`` by mapping kind (``/proc/<pid>/smaps``). Raises FileNotFoundError when it is gone."""
+    try:
+        from aerodaas.sim.ground_cache import cache_dir
+
+        ground = str(cache_dir())
+    except Exception:  # noqa: BLE001 - the ground cache's place only labels rows
+        ground = ""
+    kinds: dict[str, float] = {}
+    path = ""
+    with open(f"/proc/{pid}/smaps") as f:
+        for line in f:
+            head = line.split(None, 5)
+            if len(head) >= 5 and "-" in head[0] and not head[0].endswith(":"):
+                path = head[5].strip() if len(head) > 5 else ""
+            elif line.startswith("Pss:"):
+                kind = _mapping_kind(path, ground)
+                kinds[kind] = kinds.get(kind, 0.0) + int(line.split()[1]) / 1024.0
+    return {k: round(v, 1) for k, v in sorted(kinds.items(), key=lambda kv: -kv[1])}
+
+
+def _role(name: str) -> str:
+    """A node process's row in the node-level table, from its name."""
+    for key, role in (("DroneActor", "drone actors"), ("RecorderActor", "recorder actor"),
+                      ("raylet", "raylet"), ("gcs_server", "GCS"), ("driver", "driver (aerodaas bench)")):
+        if key in name:
+            return role
+    return "Ray's other processes (agents, log monitor, idle workers)"
+
+
+@dataclass
+class ActorProfiler:
+    """Profiles the first drone actor of the running fleet for ``window_s`` seconds once it flies (``delay_s`` after
+    the first drone actor began its flight), in a background thread; :meth:`report` returns the tables (None when no
+    window could be taken: the run ended first). ``drones_per_actor`` and ``speedup`` turn CPU seconds into
+    CPU-seconds per drone per simulated second; ``drones`` is the fleet size (node-level rows)."""
+
+    drones: int
+    drones_per_actor: int
+    speedup: float = 1.0
+    window_s: float = 10.0
+    delay_s: float = 3.0
+    rate_hz: int = 50
+    result: dict | None = None
+    error: str | None = None
+    _stop: threading.Event = field(default_factory=threading.Event)
+    _thread: threading.Thread | None = None
+
+    def start(self) -> "ActorProfiler":
+        self._thread = threading.Thread(target=self._run, name="bench-fleet-profiler", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(self.window_s + 30)
+
+    @staticmethod
+    def _flying_actor(procs: list) -> int | None:
+        """The pid of a drone actor running its flight (Ray titles the worker ``ray::DroneActor.run`` while it
+        executes :meth:`DroneActor.run`), or None."""
+        for p in procs:
+            try:
+                if " ".join(p.cmdline()[:1]).startswith("ray::DroneActor.run"):
+                    return p.pid
+            except Exception:  # noqa: BLE001 - a process that exited
+                continue
+        return None
+
+    def _run(self) -> None:
+        try:
+            self.result = self._measure()
+        except Exception as e:  # noqa: BLE001 - reported in the benchmark's JSON, never fatal to the run
+            self.error = f"{type(e).__name__}: {e}"
+
+    def _measure(self) -> dict | None:
+        from aerodaas.bench.procs import ray_processes
+
+        procs, pid = [], None
+        while pid is None:  # the fleet's start takes 3 s to a minute, with the load
+            if self._stop.wait(0.5):
+                return None
+            procs = ray_processes()
+            pid = self._flying_actor(procs)
+        if self._stop.wait(self.delay_s):  # past the take-off (the driver starts every actor's flight at once)
+            return None
+        procs = ray_processes()
+        comm = open(f"/proc/{pid}/comm").read().strip()
+        node0 = _node_cpu(procs)
+        before, t0 = thread_cpu(pid), time.monotonic()
+        samples = self._pyspy(pid)
+        if samples is None:
+            self._stop.wait(self.window_s)
+        after, window = thread_cpu(pid), time.monotonic() - t0
+        node1 = _node_cpu(procs)
+        per = self.drones_per_actor * window * self.speedup
+        actor = attribute(before, after, samples, comm)
+        node: dict[str, float] = {}
+        for key, (role, c1) in node1.items():
+            node[role] = node.get(role, 0.0) + c1 - node0.get(key, (role, c1))[1]
+        sim_s = self.drones * window * self.speedup
+        return {"actor_pid": pid, "window_s": round(window, 2), "drones_in_actor": self.drones_per_actor,
+                "profiler": "py-spy" if samples is not None else "none (per-thread CPU only)",
+                "threads": len(after),
+                "actor_cpu_s_per_drone_per_sim_s": {c.value: round(v / per, 4) for c, v in
+                                                    sorted(actor.items(), key=lambda kv: -kv[1])},
+                "actor_cpu_s_per_drone_per_sim_s_total": round(sum(actor.values()) / per, 4),
+                "node_cpu_s_per_drone_per_sim_s": {r: round(v / sim_s, 4) for r, v in
+                                                   sorted(node.items(), key=lambda kv: -kv[1])},
+                "node_cpu_s_per_drone_per_sim_s_total": round(sum(node.values()) / sim_s, 4),
+                "actor_pss_mb": smaps_pss(pid)}
+
+    def _pyspy(self, pid: int) -> dict[int, dict[Component, int]] | None:
+        """py-spy over the window (blocks for it): tid -> component -> samples; None without py-spy on the PATH.
+        Its raw output goes to a temporary file, removed after reading."""
+        exe = shutil.which("py-spy")
+        if exe is None:
+            return None
+        fd, path = tempfile.mkstemp(prefix="aerodaas-fleet-pyspy-", suffix=".txt")
+        os.close(fd)
+        subprocess.run([exe, "record", "--pid", str(pid), "--duration", str(int(round(self.window_s))),
+                        "--rate", str(self.rate_hz), "--threads", "--nonblocking", "--format", "raw", "-o", path],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=self.window_s + 30, check=False)
+        with open(path) as f:
+            text = f.read()
+        os.unlink(path)
+        return parse_pyspy_raw(text)
+
+
+def _node_cpu(procs: list) -> dict[int, tuple[str, float]]:
+    """pid -> (role, CPU seconds so far) of every process in ``procs`` still alive."""
+    out: dict[int, tuple[str, float]] = {}
+    for p in procs:
+        try:
+            t = p.cpu_times()
+            name = "driver" if p.pid == os.getpid() else (p.name() + " " + " ".join(p.cmdline()[:1]))
+        except Exception:  # noqa: BLE001 - exited
+            continue
+        out[p.pid] = (_role(name), t.user + t.system)
+    return out

@@ -1,0 +1,99 @@
+"""``aerodaas bench fleet --profile``'s measuring parts (issue 49 item 1): the per-thread CPU read from /proc, the
+py-spy stacks classified into components, CPU apportioned between them, PSS split by mapping."""
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import numpy as np
+
+from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classify_stack, parse_pyspy_raw, \
+    smaps_pss, thread_cpu
+
+#: stacks as py-spy 0.4 writes them (``--threads --format raw``), taken from a drone actor of the fleet benchmark
+RENDER = ("Thread._bootstrap (threading.py:1002);_worker (concurrent/futures/thread.py:83);DataPlane._guard "
+          "(actors/dataplane.py:282);CameraComponent._capture (actors/camera.py:199);CameraComponent._produce "
+          "(actors/camera.py:241);RenderedFrames.frame_at (actors/frame_sources.py:55);World.render "
+          "(aerodaas/sim/world.py:165)")
+ANALYSE = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (actors/camera.py:204);"
+           "DataPlane.publish (actors/dataplane.py:300);AnalyticsComponent._run (actors/analytics_component.py:90);"
+           "FrameExposure.process (aerodaas/bench/fleet.py:44)")
+ENCODE = ("Thread.run (threading.py:982);RemoteRecorder._loop (actors/remote_recorder.py:216);RemoteRecorder._send "
+          "(actors/remote_recorder.py:197);encode_frame (actors/frames.py:49)")
+MAIN = "<module> (ray/_private/workers/default_worker.py:323);Worker.main_loop (ray/_private/worker.py:1069)"
+PHYSICS = ("DroneActor.run (actors/drone_actor.py:38);ActorAssembly.run (actors/assembly.py:270);DroneComponent.step "
+           "(actors/drone.py:320);SimBackend.step (aerodaas/backends/sim.py:70);SimVehicle.step "
+           "(aerodaas/sim/vehicle.py:90)")
+CONTROL = ("DroneActor.run (actors/drone_actor.py:38);ActorAssembly.run (actors/assembly.py:288);"
+           "ActorAssembly._control_due (actors/assembly.py:315);DroneComponent.control_tick (actors/drone.py:340)")
+
+
+def test_stacks_go_to_the_innermost_concern():
+    assert classify_stack(RENDER) is Component.CAMERA
+    assert classify_stack(ANALYSE) is Component.ANALYTICS  # the analytics runs inside the camera's publish
+    assert classify_stack(ENCODE) is Component.RECORD_ENCODE  # the encode inside the recorder's send
+    assert classify_stack(MAIN) is Component.RAY_PYTHON
+    assert classify_stack(PHYSICS) is Component.PHYSICS
+    assert classify_stack(CONTROL) is Component.CONTROL
+    assert classify_stack("ActorAssembly.run (actors/assembly.py:266)") is Component.CLOCK
+
+
+def test_raw_output_counts_samples_per_native_thread_and_component():
+    text = "\n".join([f"thread (4242): aerodaas-drone/d00_0;{RENDER} 30",
+                      f"thread (4242): aerodaas-drone/d00_0;{ANALYSE} 10",
+                      f"thread (4100): MainThread;{MAIN} 5", "py-spy> a line that is not a sample", ""])
+    assert parse_pyspy_raw(text) == {4242: {Component.CAMERA: 30, Component.ANALYTICS: 10},
+                                     4100: {Component.RAY_PYTHON: 5}}
+
+
+def test_cpu_is_split_by_each_threads_own_samples_and_unsampled_threads_by_name():
+    before = {1: ThreadCpu(1, "ray::DroneActor", 10.0), 2: ThreadCpu(2, "ray::DroneActor", 1.0),
+              3: ThreadCpu(3, "worker.io", 2.0)}
+    after = {1: ThreadCpu(1, "ray::DroneActor", 14.0), 2: ThreadCpu(2, "ray::DroneActor", 1.5),
+             3: ThreadCpu(3, "worker.io", 2.25), 4: ThreadCpu(4, "ray::DroneActor", 0.5)}  # 4: born in the window
+    samples = {1: {Component.CAMERA: 3, Component.ANALYTICS: 1}}
+    got = attribute(before, after, samples, "ray::DroneActor")
+    assert got == {Component.CAMERA: 3.0, Component.ANALYTICS: 1.0, Component.NATIVE_UNNAMED: 1.0,
+                   Component.RAY_CORE: 0.25}
+    assert attribute(before, after, None, "ray::DroneActor")[Component.NATIVE_UNNAMED] == 5.0  # no profiler
+
+
+def test_thread_cpu_reads_the_kernels_count_for_each_thread():
+    native: dict = {}
+    spent, release = threading.Event(), threading.Event()
+
+    def burn() -> None:
+        native["tid"] = threading.get_native_id()
+        t0 = time.thread_time()
+        while time.thread_time() - t0 < 0.3:  # 0.3 s of this thread's own CPU, however loaded the machine
+            sum(range(1000))
+        native["cpu"] = time.thread_time()
+        spent.set()
+        release.wait(120)  # alive until the main thread has read /proc
+
+    th = threading.Thread(target=burn)
+    th.start()
+    assert spent.wait(120)
+    got = thread_cpu(os.getpid())
+    release.set()
+    th.join()
+    assert os.getpid() in got  # the main thread, whose tid is the pid
+    # the kernel's utime + stime of that thread, in clock ticks (10 ms): at least what the thread measured itself
+    assert got[native["tid"]].cpu_s >= native["cpu"] - 0.02
+
+
+def test_pss_rows_add_up_to_the_kernels_total(tmp_path):
+    big = np.ones(20 * 2**20, dtype=np.uint8)  # 20 MiB of anonymous memory, touched
+    path = tmp_path / "ground.bin"
+    np.ones(8 * 2**20, dtype=np.uint8).tofile(path)
+    mapped = np.memmap(path, dtype=np.uint8, mode="r")
+    assert int(mapped.sum()) == 8 * 2**20  # every page read
+    rows = smaps_pss(os.getpid())
+    with open(f"/proc/{os.getpid()}/smaps_rollup") as f:
+        total = next(int(line.split()[1]) for line in f if line.startswith("Pss:")) / 1024
+    assert abs(sum(rows.values()) - total) < 4.0, (rows, total)
+    assert rows["anonymous (Python objects, malloc arenas, thread stacks)"] >= 20.0
+    assert rows["system libraries and other files"] >= 7.5  # the mapped file, not in a package or the stdlib
+    assert any(k == "package numpy" for k in rows)
+    del big, mapped

@@ -1,0 +1,77 @@
+"""What a drone actor loads (issue 49 item 2): no library it does not use. Read from outside the actor, in the
+kernel's list of the worker process's mappings (``/proc/<pid>/maps``): an imported extension module maps its shared
+library."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from tests.runtime.test_dataplane import _env
+
+#: libraries that no drone actor of a simulated fleet uses: Ray's Arrow reducers (imported by Ray's serialisation
+#: context unless aerodaas.clusters.worker_memory.worker_setup runs), the detector's runtime, plotting, PyTorch
+UNUSED = ("pyarrow", "onnxruntime", "matplotlib", "torch")
+
+
+def _mapped_packages(pid: int) -> set[str]:
+    """Top-level packages under site-packages with a file mapped into ``pid``."""
+    out = set()
+    for line in Path(f"/proc/{pid}/maps").read_text().splitlines():
+        path = line.split(None, 5)[5] if len(line.split(None, 5)) > 5 else ""
+        if "site-packages/" in path:
+            out.add(path.split("site-packages/", 1)[1].split("/", 1)[0].split(".libs")[0].lower())
+    return out
+
+
+def test_a_drone_actor_maps_no_library_it_does_not_use(ray_session, run_options):
+    import ray
+
+    env = _env(1)
+    run_options.run_id = "imports1"
+    seen: dict = {}
+
+    def look(robot) -> None:
+        pid = ray.get(ray.get_actor(f"aerodaas/{run_options.run_id}/drone/d00").ping.remote())
+        seen["packages"] = _mapped_packages(pid)
+
+    env.get_robot_by_id("d00").on_mission_start(look)
+    res = env.start_mission(timeout=2.0, options=run_options)
+    assert set(res.robots) == {"d00"}
+    pkgs = seen["packages"]
+    assert any(p.startswith(("cv2", "opencv")) for p in pkgs), pkgs  # the renderer's OpenCV: the reading works
+    assert "ray" in pkgs, pkgs
+    assert not [p for p in pkgs if p.startswith(UNUSED)], pkgs
+
+
+class _Context:
+    """Ray's serialisation context as its add-ons see it: records what they register."""
+
+    def __init__(self) -> None:
+        self.registered: list[str] = []
+
+    def _register_cloudpickle_reducer(self, cls, *args, **kwargs) -> None:
+        self.registered.append(f"{cls.__module__}.{cls.__name__}")
+
+    def _register_cloudpickle_serializer(self, cls, *args, **kwargs) -> None:
+        self.registered.append(f"{cls.__module__}.{cls.__name__}")
+
+
+def test_the_setup_hook_keeps_arrow_out_until_something_imports_it():
+    """In a fresh interpreter (pyarrow not imported yet): Ray's add-ons after the hook register nothing of Arrow and
+    import nothing; once the process imports pyarrow itself, they register the Arrow reducers as before."""
+    import subprocess
+
+    code = ("import sys\n"
+            "from aerodaas.clusters.worker_memory import worker_setup\n"
+            "from tests.runtime.test_worker_imports import _Context\n"
+            "from ray.util import serialization_addons\n"
+            "worker_setup()\n"
+            "c = _Context(); serialization_addons.apply(c)\n"
+            "print('pyarrow' in sys.modules, any('pyarrow' in r for r in c.registered))\n"
+            "import pyarrow\n"
+            "c = _Context(); serialization_addons.apply(c)\n"
+            "print(any(r.startswith('pyarrow') for r in c.registered))\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "False", "True"], out.stdout
