@@ -25,6 +25,16 @@ from typing import Any
 import numpy as np
 
 from aerodaas.analytics.core import Analytics
+from aerodaas.app.api import Environment
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import emit_report
+from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
+from aerodaas.bench.progress import bench_progress
+from aerodaas.clusters.local import LocalCluster
+from aerodaas.config import parse_environment_config
+from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.runtime import driver as runtime
+from aerodaas.schedulers import TrajectoryScheduler
 
 DEFAULT_SIZES = (1, 5, 10, 20, 40)
 
@@ -83,11 +93,6 @@ def _grid_offset(i: int, n: int) -> tuple[float, float]:
 def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
     """The fleet application: environment, an analytics colocated with each drone's camera, a looping survey per
     drone."""
-    from aerodaas.app.api import Environment
-    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
-    from aerodaas.config import parse_environment_config
-    from aerodaas.schedulers import TrajectoryScheduler
-
     env = Environment(parse_environment_config(fleet_config(n, drones_per_actor=drones_per_actor,
                                                             edge_nodes=edge_nodes)))
     shared = FrameExposure()
@@ -108,17 +113,11 @@ def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
 def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int = 1) -> dict:
     """One fleet size on a fresh local Ray (or a fresh LocalCluster of ``edge_nodes`` edge nodes); returns the
     measured row."""
-    from aerodaas.runtime import driver as runtime
-
-    from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
-
     runtime.shutdown_ray()
     opts = runtime.RunOptions(progress=False)
     env, _ = build_fleet(n, drones_per_actor, edge_nodes)
     lc, nodes = None, None
     if edge_nodes > 1:
-        from aerodaas.clusters.local import LocalCluster
-
         lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes, worker_niceness=0,
                           edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
         nodes = lc.cluster.list_all_nodes()
@@ -171,10 +170,6 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
 
 def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
               edge_nodes: int = 1) -> dict:
-    from aerodaas.bench import machine_info
-
-    from aerodaas.bench.progress import bench_progress
-
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
     with bench_progress("bench fleet", total=len(groupings) * len(sizes)) as (progress, task):
@@ -204,10 +199,10 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
 def plot_fleet(report: dict, path: str) -> None:
     """Four panels against N, one curve per grouping k (drones per actor): missed ticks %, frames dropped %, CPU %,
     PSS MB."""
-    import matplotlib
+    import matplotlib  # lazy: heavy dependency (matplotlib)
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: heavy dependency (matplotlib)
 
     by_k: dict[int, list] = {}
     for r in report["results"]:
@@ -237,41 +232,27 @@ def plot_fleet(report: dict, path: str) -> None:
     plt.close(fig)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fleet", help="N simulated drones on one node: missed control ticks, dropped frames, CPU, RSS")
-    p.add_argument("--drones", type=int, action="append", help="fleet size (repeatable; default 1 5 10 20 40)")
-    p.add_argument("--duration", type=float, default=30.0, help="seconds of flight per size (real time)")
-    p.add_argument("--drones-per-actor", type=int, action="append", dest="per_actor",
-                   help="drones sharing one drone actor (repeatable; default 1)")
-    p.add_argument("--edge-nodes", type=int, default=1, help="tier=edge nodes of a local cluster (default 1: "
-                                                            "the local Ray)")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-    p.add_argument("--out", help="also write the JSON report to this file")
-    p.add_argument("--plot", help="write the curve as a PNG to this file (default: no figure; a benchmark writes "
-                                  "no file it was not given)")
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench fleet`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    if a.duration <= 0:
+        print(f"aerodaas bench fleet: --duration must be > 0, got {a.duration}", file=sys.stderr)
+        return 2
+    sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
+    if any(s < 1 for s in sizes):
+        print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
+        return 2
+    per_actor = tuple(a.per_actor) if a.per_actor else (1,)
+    if any(k < 1 for k in per_actor) or a.edge_nodes < 1:
+        print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
+              f"{a.edge_nodes}", file=sys.stderr)
+        return 2
+    report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes)
+    if a.plot:
+        report["plot"] = os.path.abspath(a.plot)
 
-    def run(a: argparse.Namespace) -> int:
-        if a.duration <= 0:
-            print(f"aerodaas bench fleet: --duration must be > 0, got {a.duration}", file=sys.stderr)
-            return 2
-        sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
-        if any(s < 1 for s in sizes):
-            print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
-            return 2
-        per_actor = tuple(a.per_actor) if a.per_actor else (1,)
-        if any(k < 1 for k in per_actor) or a.edge_nodes < 1:
-            print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
-                  f"{a.edge_nodes}", file=sys.stderr)
-            return 2
-        report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes)
-        if a.plot:
-            report["plot"] = os.path.abspath(a.plot)
-        from aerodaas.bench.output import emit_report
-
-        emit_report(report, a.out, a.json)
-        if a.plot:
-            plot_fleet(report, a.plot)
-            print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
-        return 0
-
-    p.set_defaults(func=run)
+    emit_report(report, a.out, a.json)
+    if a.plot:
+        plot_fleet(report, a.plot)
+        print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
+    return 0
