@@ -13,20 +13,26 @@ import pytest
 
 from aerodaas import cli
 from aerodaas.bench.options import FRAME_META_SOURCES
+from tests.architecture.test_lazy_imports import HEAVY
 
 
-def test_the_command_line_imports_no_benchmark():
-    """Building the whole ``aerodaas`` parser (what ``aerodaas --help`` does) imports, of ``aerodaas.bench``, only
-    the parsers, their options and the report output, and neither NumPy nor Ray through them."""
-    code = textwrap.dedent("""
+def test_the_command_line_imports_no_benchmark_and_no_heavy_library():
+    """Building the whole ``aerodaas`` parser (what ``aerodaas --help`` does: every command's ``add_parser``)
+    imports, of ``aerodaas.bench``, only the parsers, their options and the report output, and none of the heavy
+    libraries of ``tests/architecture/test_lazy_imports.py`` (NumPy, Ray, pydantic, the plug-in registry's ...):
+    each command imports its handler's module when it runs."""
+    code = textwrap.dedent(f"""
         import sys
         from aerodaas import cli
         cli.build_parser()
         print(" ".join(sorted(m for m in sys.modules if m.startswith("aerodaas.bench"))))
+        print(" ".join(m for m in {HEAVY!r} if m in sys.modules))
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert set(r.stdout.split()) == {"aerodaas.bench", "aerodaas.bench.options", "aerodaas.bench.output",
+    bench, heavy = (r.stdout + "\n").split("\n")[:2]
+    assert heavy.split() == []
+    assert set(bench.split()) == {"aerodaas.bench", "aerodaas.bench.options", "aerodaas.bench.output",
                                      "aerodaas.bench.parsers", "aerodaas.bench.schedulers_cli"}
 
 
@@ -43,6 +49,18 @@ def test_the_command_line_imports_no_benchmark():
 def test_a_benchmark_refuses_a_bad_option_through_its_lazy_handler(argv, message, capfd):
     assert cli.main(["bench", *argv]) == 2
     assert message in capfd.readouterr().err
+
+
+def test_a_plugin_kind_is_checked_when_given(capsys):
+    """``aerodaas plugins --kind`` is checked against the registry's kinds only when given (the parser does not
+    import the registry): an unknown kind exits 2 naming it and the kinds."""
+    from aerodaas.plugins.registry import KINDS
+
+    with pytest.raises(SystemExit) as e:
+        cli.main(["plugins", "--kind", "nosuchkind"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "'nosuchkind'" in err and all(k in err for k in KINDS)
 
 
 def test_the_detect_parser_offers_the_breakdown_frame_meta_sources():
