@@ -32,6 +32,7 @@ bound on the mean over seeds, not on every seed (a lucky seed can lie above it b
 """
 from __future__ import annotations
 
+import math
 import os
 import pickle
 import resource
@@ -39,7 +40,10 @@ import select
 import signal
 import time
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Any, Callable, Sequence
+
+import numpy as np
 
 from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 from aerodaas.schedulers.single_machine import max_gain_schedule
@@ -122,8 +126,6 @@ def lognormal_on_time_chance(cloud_ms: float, sigma: float, slack_ms: float, ext
     """P(``cloud_ms * X + extra_ms <= slack_ms``) for the harness's cloud jitter ``X = exp(N(-sigma²/2, sigma))``
     (:class:`aerodaas.schedulers.dispatch.emulation.Jitter`, mean 1): ``Phi((ln((slack - extra) / cloud) + sigma²/2)
     / sigma)``; a step at 1 for ``sigma = 0``."""
-    import math
-
     room = slack_ms - extra_ms
     if room <= 0:
         return 0.0
@@ -136,18 +138,14 @@ def lognormal_on_time_chance(cloud_ms: float, sigma: float, slack_ms: float, ext
 def lognormal_slack(profile_ms: float, sigma: float, chance: float) -> float:
     """The time (ms) a run of ``profile_ms * X``, ``X = exp(N(-sigma²/2, sigma))``, fits with probability
     ``chance``: ``profile * exp(-sigma²/2 + sigma * z_chance)`` (``profile_ms`` for sigma 0)."""
-    import math
-    from statistics import NormalDist
-
     if sigma <= 0:
         return profile_ms
     return profile_ms * math.exp(-sigma * sigma / 2 + sigma * NormalDist().inv_cdf(min(max(chance, 1e-12), 1 - 1e-12)))
 
 
 def _lp_edge_gain(cands: list[tuple[float, float, float, float]]) -> float:
-    import numpy as np
-    from scipy.optimize import linprog
-    from scipy.sparse import coo_matrix
+    from scipy.optimize import linprog  # lazy: heavy dependency (SciPy)
+    from scipy.sparse import coo_matrix  # lazy: heavy dependency (SciPy)
 
     points = sorted({c[0] for c in cands} | {c[1] for c in cands})
     index = {v: i for i, v in enumerate(points)}

@@ -17,15 +17,22 @@ parameters, the edge and cloud jitter, the scheduler's options and whether LAPLA
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict
 import json
 import os
 import sys
 import time
+from dataclasses import asdict
 from typing import Sequence
 
-from aerodaas.bench import machine_info
-from aerodaas.bench.schedulers_cli import scheduler_option, trace_options, trace_spec
+from aerodaas.bench.harness import Harness, fleet_tasks
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.schedulers import LOADS, default_workload_path, make_trace
+from aerodaas.bench.schedulers_cli import scheduler_option, trace_options
+from aerodaas.bench.schedulers_main import trace_spec
+from aerodaas.bench.traces import TraceSpec
+from aerodaas.schedulers import single_machine_jit
+from aerodaas.schedulers.analytics_base import Workload, analytics_scheduler_class, make_analytics_scheduler
+from aerodaas.schedulers.dispatch.emulation import Jitter
 
 __all__ = ["measure", "main"]
 
@@ -41,8 +48,6 @@ def _policy(scheduler: str, w, options: dict):
     """``scheduler`` built for workload ``w`` with ``options``. Raises ValueError naming the option and the
     scheduler for an option it does not take (it would be ignored, yet recorded as applied), and for an unknown
     scheduler."""
-    from aerodaas.schedulers.analytics_base import analytics_scheduler_class, make_analytics_scheduler
-
     takes = analytics_scheduler_class(scheduler).options
     bad = [k for k in options if k not in takes]
     if bad:
@@ -60,13 +65,6 @@ def measure(scheduler: str = "LAPLAN", *, load: str = "HEAVY", drones_per_edge: 
     LAPLAN's planner ran compiled). ``trace``: a :class:`aerodaas.bench.traces.TraceSpec` or its kind (default
     parameters). Raises ValueError for an unknown scheduler, load or trace, a bad jitter, or an option the
     scheduler does not take."""
-    from aerodaas.bench.harness import Harness, fleet_tasks
-    from aerodaas.bench.schedulers import LOADS, default_workload_path, make_trace
-    from aerodaas.bench.traces import TraceSpec
-    from aerodaas.schedulers import single_machine_jit
-    from aerodaas.schedulers.analytics_base import Workload
-    from aerodaas.schedulers.dispatch.emulation import Jitter
-
     if load not in LOADS:
         raise ValueError(f"load: choose from {list(LOADS)}, got {load!r}")
     w = Workload.from_file(default_workload_path(), load)

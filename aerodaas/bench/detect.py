@@ -19,11 +19,20 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
-from aerodaas.bench import machine_info
+from rich.progress import Progress
+
+from aerodaas.bench.detect_breakdown import breakdown, breakdown_lines
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import print_report
+from aerodaas.perception.breakdown import SIZE_BUCKETS, frame_meta
+from aerodaas.perception.options import build_detector
+from aerodaas.perception.scoring import load_annotations, score
+from aerodaas.perception.tiling import TiledDetector, Tiling
 
 
 def _configs(a: argparse.Namespace) -> list[dict]:
@@ -67,9 +76,6 @@ def _relabel(dets: list, group_of: dict[str, str]) -> list:
 def _score_row(per: list, thr: float, with_curve: bool, classes: list[str], metas: dict, row: dict) -> dict:
     """One result row: ``row`` (configuration fields) plus boxes per frame, per-class scores of the detections at
     score >= ``thr`` (the PR curve when ``with_curve``) and the breakdowns (:mod:`aerodaas.bench.detect_breakdown`)."""
-    from aerodaas.bench.detect_breakdown import breakdown
-    from aerodaas.perception.scoring import score
-
     kept = [([d for d in ds if d.score >= thr], g) for ds, g in per]
     row = {**row, "boxes_per_frame": round(sum(len(d) for d, _ in kept) / len(kept), 2), "classes": {}}
     for c in classes:
@@ -85,14 +91,7 @@ def _score_row(per: list, thr: float, with_curve: bool, classes: list[str], meta
 
 def run_detect(a: argparse.Namespace) -> dict:
     """Run the benchmark described by the parsed arguments; returns the JSON report (dict)."""
-    import cv2
-    import os
-    from rich.progress import Progress
-
-    from aerodaas.perception.breakdown import SIZE_BUCKETS, frame_meta
-    from aerodaas.perception.options import build_detector
-    from aerodaas.perception.scoring import load_annotations
-    from aerodaas.perception.tiling import TiledDetector, Tiling
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     gts = load_annotations(a.annotations, a.images, a.names, a.annotation_format)
     group_of = parse_groups(a.group)
@@ -163,9 +162,9 @@ def best(report: dict, cls: str, min_precision: float, max_ms: float) -> dict | 
 
 def plot_pr(report: dict, path: str) -> None:
     """PR curves (IoU 0.5) of each configuration at its lowest threshold, one panel per class, to a PNG."""
-    import matplotlib
+    import matplotlib  # lazy: heavy dependency (matplotlib)
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: heavy dependency (matplotlib)
 
     rows = [r for r in report["results"] if any("pr_curve@0.5" in c for c in r["classes"].values())]
     classes = sorted({c for r in rows for c in r["classes"]})
@@ -183,79 +182,37 @@ def plot_pr(report: dict, path: str) -> None:
     plt.close(fig)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    from aerodaas.perception.breakdown import FRAME_META_SOURCES
-
-    p = sub.add_parser("detect", help="score a detector on annotated images (COCO JSON or YOLO txt): recall/precision, "
-                                      "AP50, ms/frame; --sweep over input size, tiling, threshold")
-    p.add_argument("--images", required=True, help="folder of the images")
-    p.add_argument("--annotations", required=True,
-                   help="COCO .json file, folder of YOLO .txt labels, or VisDrone-DET annotations folder")
-    p.add_argument("--annotation-format", default="auto", choices=["auto", "coco", "yolo", "visdrone"],
-                   help="auto: a .json file is COCO, a folder YOLO; visdrone: a VisDrone-DET annotations folder")
-    p.add_argument("--names", nargs="+", help="class names of YOLO labels (else classes.txt in the label folder)")
-    p.add_argument("--model", default="yolox_nano", help="shipped model name (yolox_nano, nanodet_plus_m_416)")
-    p.add_argument("--model-path", help="bring your own ONNX model")
-    p.add_argument("--format", default="auto", choices=["auto", "yolox", "nanodet", "ultralytics"])
-    p.add_argument("--classes", nargs="+", help="classes to score (default: those annotated)")
-    p.add_argument("--group", action="append",
-                   help="NAME=a,b,c: score annotated and detected classes a, b, c as one class NAME (e.g. "
-                        "vehicle=car,truck,bus,minibus: a car the model calls a truck is found); repeatable")
-    p.add_argument("--thresholds", nargs="+", type=float, default=[0.15])
-    p.add_argument("--input-sizes", nargs="+", default=["0"],
-                   help="input sizes for a dynamic-axes model: N (N x N) or HxW pixels (0: the model's own)")
-    p.add_argument("--tiles", nargs="+", type=int, default=[0], help="tile sizes in pixels (0: whole frame)")
-    p.add_argument("--overlap", type=float, default=0.2)
-    p.add_argument("--merge", default="greedynmm", choices=["nms", "greedynmm"])
-    p.add_argument("--no-full-frame", action="store_true", help="tiles only, without the whole frame")
-    p.add_argument("--agnostic-nms", action="store_true")
-    p.add_argument("--sweep", action="store_true", help="every combination of sizes, tiles and thresholds")
-    p.add_argument("--threads", type=int, default=1,
-                   help="onnxruntime intra-op threads (1: on a shared, loaded machine 2 threads spin and run slower)")
-    p.add_argument("--repeat", type=int, default=3, help="timed runs per frame (the median is kept)")
-    p.add_argument("--frame-width", type=int, default=0,
-                   help="resize each image to this width first (e.g. 1920), boxes scaled alike (0: as stored)")
-    p.add_argument("--limit", type=int, default=0, help="score only the first N annotated images")
-    p.add_argument("--frame-meta", default="auto", choices=list(FRAME_META_SOURCES),
-                   help="per-frame view angle and altitude for the breakdowns: hit-uav (from HIT-UAV file names "
-                        "T_H_A_S_N.jpg), auto (hit-uav when every file name has that form), none")
-    p.add_argument("--out", help="write the JSON report here")
-    p.add_argument("--plot", help="write the PR-curve PNG here")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-
-    def run(a: argparse.Namespace) -> int:
-        for t in a.thresholds:
-            if not 0.0 <= t <= 1.0:
-                print(f"aerodaas bench detect: --thresholds must be within [0, 1], got {t}", file=sys.stderr)
-                return 2
-        if not Path(a.images).is_dir():
-            print(f"aerodaas bench detect: --images {a.images!r} is not a folder", file=sys.stderr)
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench detect`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    for t in a.thresholds:
+        if not 0.0 <= t <= 1.0:
+            print(f"aerodaas bench detect: --thresholds must be within [0, 1], got {t}", file=sys.stderr)
             return 2
-        try:
-            report = run_detect(a)
-        except (ValueError, FileNotFoundError) as e:
-            print(f"aerodaas bench detect: {e}", file=sys.stderr)
-            return 2
-        text = json.dumps(report, indent=1)
-        if a.out:
-            Path(a.out).write_text(text)
-        if a.plot:
-            plot_pr(report, a.plot)
-        from aerodaas.bench.detect_breakdown import breakdown_lines
-        from aerodaas.bench.output import print_report
+    if not Path(a.images).is_dir():
+        print(f"aerodaas bench detect: --images {a.images!r} is not a folder", file=sys.stderr)
+        return 2
+    try:
+        report = run_detect(a)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"aerodaas bench detect: {e}", file=sys.stderr)
+        return 2
+    text = json.dumps(report, indent=1)
+    if a.out:
+        Path(a.out).write_text(text)
+    if a.plot:
+        plot_pr(report, a.plot)
 
-        lines = [f"size {r['input_size']} tile {r['tile'] or '-'} thr {r['score_threshold']}: "
-                 + " ".join(f"{c}: R {v['recall@0.5']:.2f} P {v['precision@0.5']:.2f} AP50 {v['ap50']:.2f}"
-                            for c, v in r["classes"].items())
-                 + f" | {r['ms_per_frame']:.0f} ms/frame, {r['boxes_per_frame']} boxes/frame"
-                 + "".join("\n" + ln for ln in breakdown_lines(r))
-                 for r in report["results"]]
-        lines.append(f"load average (1 min) {report['load_avg_1min_start']} -> {report['load_avg_1min_end']}")
-        if a.json:  # the summary is for people: on stderr, so stdout is the JSON document alone
-            print_report(text)
-            print("\n".join(lines), file=sys.stderr)
-        else:
-            print_report("\n".join(lines))
-        return 0
-
-    p.set_defaults(func=run)
+    lines = [f"size {r['input_size']} tile {r['tile'] or '-'} thr {r['score_threshold']}: "
+             + " ".join(f"{c}: R {v['recall@0.5']:.2f} P {v['precision@0.5']:.2f} AP50 {v['ap50']:.2f}"
+                        for c, v in r["classes"].items())
+             + f" | {r['ms_per_frame']:.0f} ms/frame, {r['boxes_per_frame']} boxes/frame"
+             + "".join("\n" + ln for ln in breakdown_lines(r))
+             for r in report["results"]]
+    lines.append(f"load average (1 min) {report['load_avg_1min_start']} -> {report['load_avg_1min_end']}")
+    if a.json:  # the summary is for people: on stderr, so stdout is the JSON document alone
+        print_report(text)
+        print("\n".join(lines), file=sys.stderr)
+    else:
+        print_report("\n".join(lines))
+    return 0

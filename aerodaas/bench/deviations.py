@@ -14,8 +14,12 @@ import json
 import sys
 from typing import Callable
 
+from aerodaas.bench.harness import fleet_tasks, run_fleet
+from aerodaas.bench.schedulers import default_workload_path, make_trace
+from aerodaas.bench.sweep import mean_ci, scenario_specs
 from aerodaas.schedulers.analytics_base import AnalyticsScheduler, Workload
 from aerodaas.schedulers.analytics_dems import Dem, Dems, Gems
+from aerodaas.schedulers.dispatch.emulation import Jitter
 
 __all__ = ["VARIANTS", "measure"]
 
@@ -61,11 +65,6 @@ def measure(*, seeds: int = 5, duration_s: float = 60.0, edges: int = 4, sigmas=
             workload_path: str | None = None) -> list[dict]:
     """Run every variant against its as-shipped policy; one row per (deviation, sigma, drones per edge) with the
     relative change of utility (``delta``, mean ± CI over seeds) and both utilities' means."""
-    from aerodaas.bench.harness import fleet_tasks, run_fleet
-    from aerodaas.bench.schedulers import default_workload_path, make_trace
-    from aerodaas.bench.sweep import mean_ci, scenario_specs
-    from aerodaas.schedulers.dispatch.emulation import Jitter
-
     w = Workload.from_file(workload_path or default_workload_path(), load)
     ej = Jitter("lognormal", 0.05)
     rows = []

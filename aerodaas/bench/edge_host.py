@@ -12,7 +12,8 @@ import time
 from typing import Any, Mapping, Sequence
 
 from aerodaas.actors.remote import LazyActorClass, where
-from aerodaas.schedulers.analytics_base import Workload
+from aerodaas.schedulers import single_machine_jit
+from aerodaas.schedulers.analytics_base import Workload, make_analytics_scheduler
 from aerodaas.schedulers.dispatch.clock import Clock, set_result_if_pending
 from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
 from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
@@ -32,8 +33,6 @@ class EdgeHost:
     """
 
     def __init__(self, name: str = "edge-host") -> None:
-        from aerodaas.schedulers import single_machine_jit
-
         self.name = name
         # load LAPLAN's compiled planner now (seconds on first use): inside configure() it would overrun the run's
         # lead time (start_epoch), and a deployment's dispatcher actor likewise loads it when it starts
@@ -45,8 +44,6 @@ class EdgeHost:
     async def info(self) -> dict:
         """Where this host runs: ``name``, ``pid``, ``node_id``, node ``labels``, and whether LAPLAN's planner runs
         compiled here (``laplan_planner``: :func:`aerodaas.schedulers.single_machine_jit.status`)."""
-        from aerodaas.schedulers import single_machine_jit
-
         return {"name": self.name, **where(), "laplan_planner": single_machine_jit.status()}
 
     async def configure(self, *, scheduler: str, workload: Workload, edge_ids: Sequence[str],
@@ -58,8 +55,6 @@ class EdgeHost:
         """Create one dispatcher with a fresh ``scheduler`` policy per edge id, sharing a new cloud pool over
         ``cloud_executors`` (none: edge-only). ``start_epoch``: the run's time origin (epoch s), shared by every
         host of a run. Raises ValueError (unknown scheduler, bad specs) before anything starts."""
-        from aerodaas.schedulers.analytics_base import make_analytics_scheduler
-
         await self.close()
         policies = {e: make_analytics_scheduler(scheduler, workload, **dict(scheduler_kwargs or {})) for e in edge_ids}
         ej, cj = Jitter.parse(edge_jitter), Jitter.parse(cloud_jitter)

@@ -25,6 +25,18 @@ from typing import Any
 import numpy as np
 
 from aerodaas.analytics.core import Analytics
+from aerodaas.app.api import Environment
+from aerodaas.bench.fleet_profile import ActorProfiler
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import emit_report
+from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
+from aerodaas.bench.progress import bench_progress
+from aerodaas.clusters.local import LocalCluster
+from aerodaas.config import parse_environment_config
+from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.runtime import driver as runtime
+from aerodaas.runtime.ray_start import RayStartError
+from aerodaas.schedulers import TrajectoryScheduler
 
 DEFAULT_SIZES = (1, 5, 10, 20, 40)
 
@@ -83,11 +95,6 @@ def _grid_offset(i: int, n: int) -> tuple[float, float]:
 def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
     """The fleet application: environment, an analytics colocated with each drone's camera, a looping survey per
     drone."""
-    from aerodaas.app.api import Environment
-    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
-    from aerodaas.config import parse_environment_config
-    from aerodaas.schedulers import TrajectoryScheduler
-
     env = Environment(parse_environment_config(fleet_config(n, drones_per_actor=drones_per_actor,
                                                             edge_nodes=edge_nodes)))
     shared = FrameExposure()
@@ -110,17 +117,11 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     """One fleet size on a fresh local Ray (or a fresh LocalCluster of ``edge_nodes`` edge nodes); returns the
     measured row. ``profile``: also the cost table of one drone actor and of the node's processes
     (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as ``"profile"`` in the row."""
-    from aerodaas.runtime import driver as runtime
-
-    from aerodaas.bench.procs import MemorySampler, cpu_seconds, ray_processes
-
     runtime.shutdown_ray()
     opts = runtime.RunOptions(progress=False)
     env, _ = build_fleet(n, drones_per_actor, edge_nodes)
     lc, nodes = None, None
     if edge_nodes > 1:
-        from aerodaas.clusters.local import LocalCluster
-
         lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes, worker_niceness=0,
                           edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
         nodes = lc.cluster.list_all_nodes()
@@ -132,8 +133,6 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
         cpu0, wall0 = cpu_seconds(procs), time.monotonic()
         prof = None
         if profile and edge_nodes == 1:
-            from aerodaas.bench.fleet_profile import ActorProfiler
-
             # the window: after the fleet's start (its actors up and flying), within the flight
             prof = ActorProfiler(n, min(drones_per_actor, n), window_s=max(2.0, min(10.0, duration_s / 2))).start()
         with MemorySampler(1.0, nodes) as mem:
@@ -189,8 +188,6 @@ RAY_START_ATTEMPTS = 4
 def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nodes: int, profile: bool) -> dict:
     """:func:`run_size`, started again (at most :data:`RAY_START_ATTEMPTS` times) when its Ray did not start: no
     drone flew then, so nothing of the measurement is lost or repeated. Raises the last RayStartError."""
-    from aerodaas.runtime.ray_start import RayStartError
-
     for attempt in range(1, RAY_START_ATTEMPTS + 1):
         try:
             return run_size(n, duration_s, k, edge_nodes, profile)
@@ -207,10 +204,6 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
               edge_nodes: int = 1, runs: tuple[tuple[int, int], ...] = (), profile: bool = False) -> dict:
     """Every (size, grouping) pair of ``sizes`` x ``groupings``, or exactly ``runs`` ((drones, drones per actor)
     pairs, in order) when given; the report with a row per run and the machine and load at the start."""
-    from aerodaas.bench import machine_info
-
-    from aerodaas.bench.progress import bench_progress
-
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
     pairs = [(k, n) for n, k in runs] if runs else [(k, n) for k in groupings for n in sizes]
@@ -256,10 +249,10 @@ def parse_run(text: str) -> tuple[int, int]:
 def plot_fleet(report: dict, path: str) -> None:
     """Four panels against N, one curve per grouping k (drones per actor): missed ticks %, frames dropped %, CPU %,
     PSS MB."""
-    import matplotlib
+    import matplotlib  # lazy: heavy dependency (matplotlib)
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: heavy dependency (matplotlib)
 
     by_k: dict[int, list] = {}
     for r in report["results"]:
@@ -289,52 +282,32 @@ def plot_fleet(report: dict, path: str) -> None:
     plt.close(fig)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fleet", help="N simulated drones on one node: missed control ticks, dropped frames, CPU, RSS")
-    p.add_argument("--drones", type=int, action="append", help="fleet size (repeatable; default 1 5 10 20 40)")
-    p.add_argument("--duration", type=float, default=30.0, help="seconds of flight per size (real time)")
-    p.add_argument("--drones-per-actor", type=int, action="append", dest="per_actor",
-                   help="drones sharing one drone actor (repeatable; default 1)")
-    p.add_argument("--run", action="append", dest="runs", metavar="N:K",
-                   help="one fleet of N drones, K per drone actor (repeatable; replaces the --drones x "
-                        "--drones-per-actor grid, so one invocation can hold 20:1, 40:1 and 100:10)")
-    p.add_argument("--profile", action="store_true",
-                   help="per run, where one drone actor's CPU and memory go (per-thread CPU from /proc, "
-                        "apportioned by py-spy when it is on the PATH) and the node's processes' CPU")
-    p.add_argument("--edge-nodes", type=int, default=1, help="tier=edge nodes of a local cluster (default 1: "
-                                                            "the local Ray)")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-    p.add_argument("--out", help="also write the JSON report to this file")
-    p.add_argument("--plot", help="write the curve as a PNG to this file (default: no figure; a benchmark writes "
-                                  "no file it was not given)")
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench fleet`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    if a.duration <= 0:
+        print(f"aerodaas bench fleet: --duration must be > 0, got {a.duration}", file=sys.stderr)
+        return 2
+    sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
+    if any(s < 1 for s in sizes):
+        print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
+        return 2
+    per_actor = tuple(a.per_actor) if a.per_actor else (1,)
+    if any(k < 1 for k in per_actor) or a.edge_nodes < 1:
+        print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
+              f"{a.edge_nodes}", file=sys.stderr)
+        return 2
+    try:
+        runs = tuple(parse_run(r) for r in (a.runs or []))
+    except ValueError as e:
+        print(f"aerodaas bench fleet: {e}", file=sys.stderr)
+        return 2
+    report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes, runs, a.profile)
+    if a.plot:
+        report["plot"] = os.path.abspath(a.plot)
 
-    def run(a: argparse.Namespace) -> int:
-        if a.duration <= 0:
-            print(f"aerodaas bench fleet: --duration must be > 0, got {a.duration}", file=sys.stderr)
-            return 2
-        sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
-        if any(s < 1 for s in sizes):
-            print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
-            return 2
-        per_actor = tuple(a.per_actor) if a.per_actor else (1,)
-        if any(k < 1 for k in per_actor) or a.edge_nodes < 1:
-            print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
-                  f"{a.edge_nodes}", file=sys.stderr)
-            return 2
-        try:
-            runs = tuple(parse_run(r) for r in (a.runs or []))
-        except ValueError as e:
-            print(f"aerodaas bench fleet: {e}", file=sys.stderr)
-            return 2
-        report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes, runs, a.profile)
-        if a.plot:
-            report["plot"] = os.path.abspath(a.plot)
-        from aerodaas.bench.output import emit_report
-
-        emit_report(report, a.out, a.json)
-        if a.plot:
-            plot_fleet(report, a.plot)
-            print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
-        return 0
-
-    p.set_defaults(func=run)
+    emit_report(report, a.out, a.json)
+    if a.plot:
+        plot_fleet(report, a.plot)
+        print(f"aerodaas bench fleet: curve written to {report['plot']}", file=sys.stderr, flush=True)
+    return 0

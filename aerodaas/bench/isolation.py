@@ -32,6 +32,7 @@ import secrets
 import sys
 import traceback
 import types
+from collections import Counter
 from typing import Any, Mapping
 
 from aerodaas.schedulers.analytics_base import (AnalyticsScheduler, AnalyticsTask, Decision, TaskState, Workload,
@@ -266,7 +267,6 @@ class IsolatedPolicy(AnalyticsScheduler):
 
     @property
     def counters(self):  # type: ignore[override]  # the policy's, read from its process
-        from collections import Counter
 
         if getattr(self, "_conn", None) is None or self._conn.closed:
             return Counter(self.__dict__.get("_final_counters", {}))

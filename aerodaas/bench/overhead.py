@@ -45,14 +45,23 @@ from typing import Any
 
 import numpy as np
 
+from aerodaas.analytics.core import FollowAnalytics
+from aerodaas.app.api import Environment
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.options import ALL_LAYOUTS, LAYOUTS, LOCKSTEP  # noqa: F401 - re-exported
+from aerodaas.bench.output import emit_report
+from aerodaas.bench.peers_dora import DoraPipeline, unavailable_reason
+from aerodaas.bench.peers_naive_ray import NaiveRayPipeline
 from aerodaas.bench.pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, FixedCostDetector,  # noqa: F401
                        FollowStage, Pacer, mp, overheads, parsed_config, summary)
+from aerodaas.bench.pipeline import HOVER_M, make_detector
+from aerodaas.bench.progress import bench_progress
+from aerodaas.model.types import PriorityQueue
+from aerodaas.perception.detect import ModelNotFoundError, resolve_model
+from aerodaas.runtime import driver as runtime
+from aerodaas.schedulers import TrajectoryScheduler
 
 RESOLUTIONS = ((1280, 720), (640, 480))
-LAYOUTS = ("colocated", "actors", "actors-ray")
-#: a layout flown under the lock-step clock (``--lockstep``): ``<layout>+lockstep``
-LOCKSTEP = "+lockstep"
-ALL_LAYOUTS = (*LAYOUTS, *(f"{x}{LOCKSTEP}" for x in LAYOUTS))
 NOT_MEASURED = "not flown in this invocation"
 PEERS = ("bare_loop", "naive_ray", "dora_rs", "dora_rs_grouped")
 
@@ -72,14 +81,6 @@ class FrameworkWindows:
                                 "dispatch": [], "recording_bytes": 0, "transports": set()}
 
     def window(self, seconds: float) -> list[dict]:
-        from aerodaas.analytics.core import FollowAnalytics
-        from aerodaas.app.api import Environment
-        from aerodaas.model.types import PriorityQueue
-        from aerodaas.runtime import driver as runtime
-        from aerodaas.schedulers import TrajectoryScheduler
-
-        from aerodaas.bench.pipeline import HOVER_M, make_detector
-
         width, height, kind, stub_ms = self.args
         env = Environment(parsed_config(width, height, kind))
         layout, lockstep = self.layout.removesuffix(LOCKSTEP), self.layout.endswith(LOCKSTEP)
@@ -187,10 +188,7 @@ def _peer(name: str, width: int, height: int, kind: str, stub_ms: float) -> tupl
         if name == "bare_loop":
             return BareLoop(width, height, kind, stub_ms), None
         if name == "naive_ray":
-            from aerodaas.bench.peers_naive_ray import NaiveRayPipeline
-
             return NaiveRayPipeline(width, height, kind, stub_ms), None
-        from aerodaas.bench.peers_dora import DoraPipeline, unavailable_reason
 
         reason = unavailable_reason()
         shape = "grouped" if name == "dora_rs_grouped" else "per_component"
@@ -291,13 +289,8 @@ def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
 def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[str, ...] = ("stub", "yolox"),
                  resolutions: tuple[tuple[int, int], ...] = RESOLUTIONS, layouts: tuple[str, ...] = ("colocated",),
                  window_s: float = 5.0, record: bool = False) -> dict:
-    from aerodaas.runtime import driver as runtime
-
-    from aerodaas.bench import machine_info
-
     machine = machine_info()
     runtime.ensure_ray()
-    from aerodaas.bench.progress import bench_progress
 
     results, loads = [], []
     record_dir = tempfile.mkdtemp(prefix="aerodaas-overhead-rec-") if record else None
@@ -349,58 +342,35 @@ def _parse_resolutions(values: list[str] | None) -> tuple[tuple[int, int], ...]:
     return res  # type: ignore[return-value]
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("overhead", help="per-frame framework overhead (camera -> detector -> follow -> scheduler -> "
-                                        "drone) vs a bare loop, a naive Ray pipeline and dora-rs, interleaved")
-    p.add_argument("--duration", type=float, default=20.0, help="measured seconds per pipeline and configuration")
-    p.add_argument("--window", type=float, default=5.0, help="seconds per round-robin window")
-    p.add_argument("--stub-ms", type=float, default=10.0, help="inference time of the fixed-cost stub detector, ms")
-    p.add_argument("--detector", choices=["stub", "yolox", "both"], default="both")
-    p.add_argument("--resolution", action="append", help="WxH (repeatable; default 1280x720 and 640x480)")
-    p.add_argument("--layout", choices=[*ALL_LAYOUTS, "both", "all"], default="all",
-                   help="AeroDaaS layout(s) to fly: colocated (zero hops), actors (the detector in its own actor, "
-                        "same-node channel), actors-ray (its own actor, Ray calls), both (colocated + actors), "
-                        "all (default); LAYOUT+lockstep flies LAYOUT under the lock-step clock")
-    p.add_argument("--lockstep", action="store_true",
-                   help="also fly the actors layout under the lock-step clock the shipped apps use "
-                        "(row actors+lockstep: same channel, the clock waits for each frame's cascade)")
-    p.add_argument("--record", action="store_true", help="record the AeroDaaS runs to MCAP (recording cost shows)")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-    p.add_argument("--out", help="also write the JSON report to this file")
-
-    def run(a: argparse.Namespace) -> int:
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench overhead`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    try:
+        res = _parse_resolutions(a.resolution)
+    except ValueError:
+        print(f"aerodaas bench overhead: --resolution expects WxH with positive integers, got {a.resolution}",
+              file=sys.stderr)
+        return 2
+    for name in ("duration", "window"):
+        if not getattr(a, name) > 0:
+            print(f"aerodaas bench overhead: --{name} must be > 0 seconds, got {getattr(a, name)}", file=sys.stderr)
+            return 2
+    if a.stub_ms < 0:
+        print(f"aerodaas bench overhead: --stub-ms must be >= 0, got {a.stub_ms}", file=sys.stderr)
+        return 2
+    kinds = ("stub", "yolox") if a.detector == "both" else (a.detector,)
+    if "yolox" in kinds:
         try:
-            res = _parse_resolutions(a.resolution)
-        except ValueError:
-            print(f"aerodaas bench overhead: --resolution expects WxH with positive integers, got {a.resolution}",
+            resolve_model("yolox_nano")
+            if not os.environ.get("AERODAAS_DATA_DIR"):
+                raise ModelNotFoundError("AERODAAS_DATA_DIR is not set (the YOLOX run flies over real imagery)")
+        except (ModelNotFoundError, OSError) as e:
+            print(f"aerodaas bench overhead: the YOLOX-Nano configuration needs the model and imagery: {e}",
                   file=sys.stderr)
             return 2
-        for name in ("duration", "window"):
-            if not getattr(a, name) > 0:
-                print(f"aerodaas bench overhead: --{name} must be > 0 seconds, got {getattr(a, name)}", file=sys.stderr)
-                return 2
-        if a.stub_ms < 0:
-            print(f"aerodaas bench overhead: --stub-ms must be >= 0, got {a.stub_ms}", file=sys.stderr)
-            return 2
-        kinds = ("stub", "yolox") if a.detector == "both" else (a.detector,)
-        if "yolox" in kinds:
-            from aerodaas.perception.detect import ModelNotFoundError, resolve_model
+    layouts = {"both": ("colocated", "actors"), "all": LAYOUTS}.get(a.layout, (a.layout,))
+    if a.lockstep and f"actors{LOCKSTEP}" not in layouts:
+        layouts = (*layouts, f"actors{LOCKSTEP}")
 
-            try:
-                resolve_model("yolox_nano")
-                if not os.environ.get("AERODAAS_DATA_DIR"):
-                    raise ModelNotFoundError("AERODAAS_DATA_DIR is not set (the YOLOX run flies over real imagery)")
-            except (ModelNotFoundError, OSError) as e:
-                print(f"aerodaas bench overhead: the YOLOX-Nano configuration needs the model and imagery: {e}",
-                      file=sys.stderr)
-                return 2
-        layouts = {"both": ("colocated", "actors"), "all": LAYOUTS}.get(a.layout, (a.layout,))
-        if a.lockstep and f"actors{LOCKSTEP}" not in layouts:
-            layouts = (*layouts, f"actors{LOCKSTEP}")
-        from aerodaas.bench.output import emit_report
-
-        emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
-        return 0
-
-    p.set_defaults(func=run)
-
+    emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
+    return 0

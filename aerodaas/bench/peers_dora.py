@@ -34,6 +34,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
+from aerodaas.bench import pipeline as pl
+from aerodaas.bench.pipeline import FPS, HOVER_M, CameraStage, Pacer
+from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
+
 #: per shape: node ids, node -> (input port, source), node -> output
 SHAPES = {
     "per_component": (("camera", "detector", "follow", "scheduler", "drone"),
@@ -56,7 +62,7 @@ def dora_cli() -> str | None:
 def unavailable_reason() -> str | None:
     """Why the dora-rs column cannot be measured here (None when it can)."""
     try:
-        import dora  # noqa: F401
+        import dora  # noqa: F401  # lazy: optional dependency (dora-rs)
     except ImportError:
         return "dora-rs is not installed (pip install 'aerodaas[bench]': dora-rs and dora-rs-cli >= 1.1)"
     if dora_cli() is None:
@@ -148,8 +154,7 @@ class DoraPipeline:
 
 # ---------------------------------------------------------------------------------------------- the node processes
 def _pack(obj: object):
-    import numpy as np
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: optional dependency (dora-rs's pyarrow)
 
     return pa.array(np.frombuffer(pickle.dumps(obj), np.uint8))
 
@@ -161,9 +166,7 @@ def _unpack(value) -> object:
 def _send_frame(node, cam, tick: float, t0: float) -> None:
     """Render one frame (the camera's ``tick``, monotonic seconds; ``t0`` the node's start) and send it on the
     ``frame`` output: a flat uint8 Arrow array of the (H, W, 3) BGR frame, its timing trace as JSON metadata."""
-    import pyarrow as pa
-
-    from aerodaas.bench.pipeline import HOVER_M
+    import pyarrow as pa  # lazy: optional dependency (dora-rs's pyarrow)
 
     start = time.monotonic()
     frame, meta = cam.capture((0.0, 0.0, HOVER_M), 0.0, start - t0)
@@ -173,8 +176,6 @@ def _send_frame(node, cam, tick: float, t0: float) -> None:
 
 
 def _camera(node, p: dict, workdir: str) -> None:
-    from aerodaas.bench.pipeline import FPS, CameraStage, Pacer
-
     cam = CameraStage(p["width"], p["height"], p["kind"])
     Path(workdir, "ready_camera").touch()
     pacer, t0, until = Pacer(FPS), time.monotonic(), 0.0
@@ -194,18 +195,12 @@ def _camera(node, p: dict, workdir: str) -> None:
 
 
 def _rebuild_meta(p: dict, tr: dict):
-    from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
-
-    from aerodaas.bench.pipeline import HOVER_M
-
     return FrameMeta(robot_id="uav", sensor_id="cam", seq=tr["seq"], capture_time=tr["t"], wall_time=time.time(),
                      pose=FramePose(position=(0.0, 0.0, HOVER_M), yaw=0.0, camera_pitch=90),
                      intrinsics=CameraIntrinsics.from_hfov(p["width"], p["height"], 78))
 
 
 def _worker(node, p: dict, workdir: str, role: str) -> None:
-    from aerodaas.bench import pipeline as pl
-
     rc = pl.parsed_config(p["width"], p["height"], p["kind"]).robots[0]
     stage = {"detector": lambda: pl.DetectStage(p["kind"], p["stub_ms"]), "follow": pl.FollowStage,
              "scheduler": lambda: pl.CommandStage(rc), "drone": lambda: pl.DroneStage(rc)}[role]()
@@ -259,8 +254,6 @@ def _group(node, p: dict, workdir: str) -> None:
     """The grouped shape's first node: the camera, paced at the pipeline's FPS, and, in the same process, follow ->
     scheduler -> drone on every detection message that comes back (no crossing between them, as in the AeroDaaS
     drone actor). Between frames it waits on its input with ``node.next(timeout)`` until the next frame is due."""
-    from aerodaas.bench import pipeline as pl
-
     rc = pl.parsed_config(p["width"], p["height"], p["kind"]).robots[0]
     cam, follow = pl.CameraStage(p["width"], p["height"], p["kind"]), pl.FollowStage()
     sched, drone = pl.CommandStage(rc), pl.DroneStage(rc)
@@ -320,7 +313,7 @@ def _group(node, p: dict, workdir: str) -> None:
 
 def node_main(argv: list[str]) -> int:
     """Entry point of a node process: ``NODE WORKDIR``."""
-    from dora import Node
+    from dora import Node  # lazy: optional dependency (dora-rs)
 
     role, workdir = argv
     p = json.loads(Path(workdir, "params.json").read_text())

@@ -16,6 +16,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import ray
+
 from aerodaas.bench.pipeline import (FPS, HOVER_M, CameraStage, CommandStage, DetectStage, DroneStage, FollowStage, Pacer,
                        parsed_config)
 
@@ -30,8 +32,6 @@ class CameraActor:
 
     def run(self, window_s: float, fps: float = FPS) -> int:
         """Produce frames at ``fps`` for ``window_s`` seconds; returns how many were sent."""
-        import ray
-
         pacer, start, n = Pacer(fps), time.monotonic(), 0
         while time.monotonic() - start < window_s:
             tick = pacer.wait()
@@ -52,8 +52,6 @@ class DetectorActor:
         return True
 
     def process(self, payload: tuple) -> None:
-        import ray
-
         t_in = time.monotonic()
         frame, meta, tr = payload
         tr["hop_camera_detector"] = t_in - tr["out"]
@@ -70,8 +68,6 @@ class FollowActor:
         return True
 
     def process(self, payload: tuple) -> None:
-        import ray
-
         t_in = time.monotonic()
         dets, meta, tr = payload
         tr["hop_detector_follow"] = t_in - tr["out"]
@@ -91,8 +87,6 @@ class SchedulerActor:
         return True
 
     def process(self, payload: tuple) -> None:
-        import ray
-
         t_in = time.monotonic()
         nav, meta, tr = payload
         tr["hop_follow_scheduler"] = t_in - tr["out"]
@@ -135,8 +129,6 @@ class NaiveRayPipeline:
     name = "naive_ray"
 
     def __init__(self, width: int, height: int, kind: str, stub_ms: float) -> None:
-        import ray
-
         opts = {"num_cpus": 0}
         self.drone = ray.remote(**opts)(DroneActor).remote(width, height, kind)
         sched = ray.remote(**opts)(SchedulerActor).remote(width, height, kind, self.drone)
@@ -147,14 +139,10 @@ class NaiveRayPipeline:
         ray.get([a.ready.remote() for a in self.actors], timeout=300)
 
     def window(self, seconds: float, settle_s: float = 0.5) -> list[dict]:
-        import ray
-
         ray.get(self.cam.run.remote(seconds))
         time.sleep(settle_s)  # frames still in flight land
         return ray.get(self.drone.take.remote())
 
     def close(self) -> None:
-        import ray
-
         for a in self.actors:
             ray.kill(a)

@@ -18,8 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.analytics.core import Analytics
-from aerodaas.model.types import Detection
+from aerodaas.analytics.core import Analytics, FollowAnalytics, ObjectDetector
+from aerodaas.backends.sim import SimBackend
+from aerodaas.config import parse_environment_config
+from aerodaas.model.types import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.navigation.safety import SafetyGate
+from aerodaas.schedulers import TrajectoryScheduler
+from aerodaas.sim.world import World
 
 FPS = 30.0
 HOVER_M = 14.0  # metres above the target
@@ -67,16 +72,12 @@ def env_config(width: int, height: int, real: bool) -> dict:
 
 
 def parsed_config(width: int, height: int, kind: str):
-    from aerodaas.config import parse_environment_config
-
     return parse_environment_config(env_config(width, height, kind == "yolox"),
                                     base_dir=os.environ.get("AERODAAS_DATA_DIR"))
 
 
 def make_detector(kind: str, stub_ms: float) -> Analytics:
     """``stub``: :class:`FixedCostDetector` (``stub_ms``); ``yolox``: YOLOX-Nano on cars, trucks and buses."""
-    from aerodaas.analytics.core import ObjectDetector
-
     if kind == "stub":
         return FixedCostDetector(stub_ms)
     return ObjectDetector("yolox_nano", classes=["car", "truck", "bus"], score_threshold=0.15)
@@ -107,17 +108,12 @@ class CameraStage:
     """Renders one (H, W, 3) uint8 read-only frame at a pose (metres ENU, yaw degrees) and builds its FrameMeta."""
 
     def __init__(self, width: int, height: int, kind: str) -> None:
-        from aerodaas.model.types import CameraIntrinsics
-        from aerodaas.sim.world import World
-
         cfg = parsed_config(width, height, kind)
         self.world = World(cfg.world.ground, cfg.world.targets)
         self.k = CameraIntrinsics.from_hfov(width, height, 78)
         self.seq = 0
 
     def capture(self, position: tuple, yaw: float, t: float) -> tuple[np.ndarray, Any]:
-        from aerodaas.model.types import FrameMeta, FramePose
-
         self.seq += 1
         pose = FramePose(position=tuple(float(c) for c in position), yaw=float(yaw), camera_pitch=90)
         frame, _ = self.world.render(pose, self.k, t)
@@ -146,14 +142,10 @@ class FollowStage:
     """The follow analytics; returns ``(AeroNavigation or None, ms spent)`` (the ms count as post-processing)."""
 
     def __init__(self) -> None:
-        from aerodaas.analytics.core import FollowAnalytics
-
         self.follow = FollowAnalytics(target_classes=["car", "truck", "bus"], confirm_hits=1, lost_after=1e9)
         self.follow.setup()
 
     def __call__(self, dets: list, meta: Any) -> tuple[Any, float]:
-        from aerodaas.model.types import AeroNavigation
-
         t0 = time.perf_counter()
         nav = self.follow.process(dets, meta)
         return (nav if isinstance(nav, AeroNavigation) else None), (time.perf_counter() - t0) * 1e3
@@ -164,9 +156,6 @@ class CommandStage:
     safety-checked item to fly now (or None)."""
 
     def __init__(self, rc: Any) -> None:
-        from aerodaas.navigation.safety import SafetyGate
-        from aerodaas.schedulers import TrajectoryScheduler
-
         self.gate = SafetyGate(rc.safety, rc.limits, rc.home)
         self.sched = TrajectoryScheduler()
 
@@ -181,8 +170,6 @@ class DroneStage:
     """The simulated vehicle, airborne and holding at the hover altitude; :meth:`apply` sets the velocity."""
 
     def __init__(self, rc: Any) -> None:
-        from aerodaas.backends.sim import SimBackend
-
         self.backend = SimBackend(rc)
         self.backend.vehicle.state.position[:] = (0.0, 0.0, rc.takeoff_altitude)
         self.backend.vehicle.state.in_air = self.backend.vehicle.state.armed = True

@@ -8,15 +8,15 @@ import threading
 import time
 from typing import Any
 
+import psutil
+import ray
+
 
 def ray_processes(nodes: list | None = None) -> list:
     """psutil.Process objects of this driver's local Ray node — or of ``nodes`` (``ray._private.node.Node``
     handles, e.g. a :class:`~aerodaas.clusters.local.LocalCluster`'s) — (their system processes and all their
     descendants) and of the driver itself. Raises RuntimeError when Ray was not started by this driver and no
     ``nodes`` are given."""
-    import psutil
-    import ray
-
     if nodes is None:
         node = getattr(ray._private.worker, "_global_node", None)
         if node is None:
@@ -36,8 +36,6 @@ def ray_processes(nodes: list | None = None) -> list:
 
 def memory_mb(procs: list | None = None) -> dict[str, Any]:
     """Summed RSS and PSS (MiB) of ``procs`` (default: :func:`ray_processes`), and per-process rows."""
-    import psutil
-
     rows, rss, pss = [], 0.0, 0.0
     for p in procs if procs is not None else ray_processes():
         try:
@@ -57,8 +55,6 @@ def memory_mb(procs: list | None = None) -> dict[str, Any]:
 
 def cpu_seconds(procs: list) -> float:
     """User + system CPU seconds consumed so far by ``procs`` (processes that exited are skipped)."""
-    import psutil
-
     total = 0.0
     for p in procs:
         try:

@@ -20,11 +20,17 @@ on, loopback only). Each step is timed ``--repeat`` times (after 20 unmeasured w
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from typing import Any
 
 import numpy as np
+import ray
+
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import emit_report
+from aerodaas.runtime import driver as runtime
 
 
 class _Probe:
@@ -36,8 +42,6 @@ class _Probe:
         return t
 
     def get_nested(self, refs: list) -> float:
-        import ray
-
         t0 = time.perf_counter()
         frame = ray.get(refs[0])
         int(frame[0, 0, 0])
@@ -55,8 +59,6 @@ def _stats(us: list[float]) -> dict:
 def measure(repeat: int = 300, width: int = 1280, height: int = 720, warmup: int = 20) -> dict[str, dict]:
     """Times each step (see the module docstring); Ray must be initialised. Returns ``{step: {median, p99, mean,
     n}}`` in µs."""
-    import ray
-
     frame = np.random.default_rng(0).integers(0, 255, (height, width, 3), dtype=np.uint8)
     actor = ray.remote(num_cpus=0)(_Probe).remote()
     ray.get(actor.small.remote())
@@ -98,39 +100,26 @@ def measure(repeat: int = 300, width: int = 1280, height: int = 720, warmup: int
 
 
 def run_raypath(repeat: int = 300) -> dict:
-    from aerodaas.runtime import driver as runtime
-
-    from aerodaas.bench import machine_info
-
     machine = machine_info()
     runtime.ensure_ray()
     try:
         res = measure(repeat)
     finally:
         runtime.shutdown_ray()
-    import os
 
     return {"benchmark": "raypath", "machine": machine, "load_avg_1min_end": round(os.getloadavg()[0], 2),
             "frame_shape": [720, 1280, 3], "frame_bytes": 720 * 1280 * 3, "repeat": repeat, "results_us": res}
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("raypath", help="where Ray's call path spends its time for one 1280x720 frame hop "
-                                       "(put, call with an ObjectRef, get, inline and by-value calls)")
-    p.add_argument("--repeat", type=int, default=300, help="measured repetitions per step")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-    p.add_argument("--out", help="also write the JSON report to this file")
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench raypath`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    if a.repeat < 1:
+        print(f"aerodaas bench raypath: --repeat must be >= 1, got {a.repeat}", file=sys.stderr)
+        return 2
+    report = run_raypath(a.repeat)
+    for k, v in report["results_us"].items():
+        print(f"raypath {k:32s} median {v['median']:9.1f} µs  p99 {v['p99']:9.1f} µs", file=sys.stderr)
 
-    def run(a: argparse.Namespace) -> int:
-        if a.repeat < 1:
-            print(f"aerodaas bench raypath: --repeat must be >= 1, got {a.repeat}", file=sys.stderr)
-            return 2
-        report = run_raypath(a.repeat)
-        for k, v in report["results_us"].items():
-            print(f"raypath {k:32s} median {v['median']:9.1f} µs  p99 {v['p99']:9.1f} µs", file=sys.stderr)
-        from aerodaas.bench.output import emit_report
-
-        emit_report(report, a.out, a.json)
-        return 0
-
-    p.set_defaults(func=run)
+    emit_report(report, a.out, a.json)
+    return 0

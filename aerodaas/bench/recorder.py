@@ -31,6 +31,7 @@ folder (removed at the end).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import tempfile
@@ -38,6 +39,21 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+import ray
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+
+from aerodaas.actors.recorder_actor import RecorderActor
+from aerodaas.actors.remote_recorder import RemoteRecorder
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import emit_report, print_report
+from aerodaas.bench.progress import bench_progress
+from aerodaas.protocol.specs import ActorSpec, RecordSpec
+from aerodaas.recording.accounting import account_recording
+from aerodaas.recording.reader import summarize_mcap
+from aerodaas.runtime import driver as runtime
 
 DEFAULT_SIZES = (5, 10, 20, 40, 80)
 #: a drain longer than this (seconds after the last offer until the file is finished) counts as back-pressure
@@ -64,8 +80,7 @@ def bench_frames(width: int, height: int, count: int = 16, quality: int = 80) ->
     ``height`` pixels, else synthetic textured frames (field pattern plus noise, compressing to a similar size).
     Distinct, so that the recorder's zstd chunks cannot shrink a repeated frame (a chunk of 256 KiB holds two or
     three). Raises ValueError for a size below 16 px or ``count`` < 1."""
-    import cv2
-    import numpy as np
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     if width < 16 or height < 16 or count < 1:
         raise ValueError(f"frame size must be at least 16x16 pixels and count >= 1, got {width}x{height}, {count}")
@@ -95,8 +110,6 @@ def bench_frames(width: int, height: int, count: int = 16, quality: int = 80) ->
 def odometry_sample(robot_index: int, t_s: float) -> dict:
     """One odometry dict as a drone actor records it (``position`` ENU m, ``attitude`` deg, ``geodetic`` WGS-84
     deg / m, ``velocity`` m/s, ``battery`` %), for drone ``robot_index`` at ``t_s`` seconds of flight."""
-    import math
-
     x, y = 3.0 * math.cos(t_s / 5.0) + robot_index * 8.0, 3.0 * math.sin(t_s / 5.0)
     return {"position": [x, y, 20.0], "velocity": [0.6, 0.6, 0.0],
             "attitude": {"roll": 0.5, "pitch": -1.0, "yaw": (t_s * 7.0) % 360.0},
@@ -125,8 +138,6 @@ class BenchProducer:
     and odometry through a real :class:`~aerodaas.actors.remote_recorder.RemoteRecorder` to the recorder actor."""
 
     def __init__(self, actor_id: str, recorder: Any) -> None:
-        from aerodaas.actors.remote_recorder import RemoteRecorder
-
         self.rec = RemoteRecorder(_BenchPlane(actor_id, recorder))
 
     def ready(self) -> bool:
@@ -166,8 +177,6 @@ class BenchProducer:
 
 
 def _producer_class() -> Any:
-    import ray
-
     return ray.remote(num_cpus=0)(BenchProducer)
 
 
@@ -176,11 +185,6 @@ def run_size(n: int, load: DroneLoad, producers: int, folder: Path, recorders: i
     makes one per node: each writes ``folder/run-<n>-<j>.mcap`` with its own accounting) and ``producers`` producer
     actors (at least one per recorder; producer i sends to recorder i mod ``recorders``); returns the measured row
     (see the module docstring)."""
-    import ray
-
-    from aerodaas.actors.recorder_actor import RecorderActor
-    from aerodaas.protocol.specs import ActorSpec, RecordSpec
-
     paths = [folder / f"run-{n}-{j}.mcap" for j in range(recorders)]
     epoch_ns = time.time_ns()
     recs = [RecorderActor.options(name=f"aerodaas/bench-recorder-{n}-{j}-{os.getpid()}").remote(
@@ -209,9 +213,6 @@ def _row(n: int, k: int, load: DroneLoad, outs: list[dict], rec_dropped: int, pa
     from the first offer, ``start_at``, until the recorders finished their files, ``finished``; the drain from
     ``offered_until``, the producers' last offer, until then: delivering and writing what was still behind;
     baseline over every file)."""
-    from aerodaas.recording.accounting import account_recording
-    from aerodaas.recording.reader import summarize_mcap
-
     channels = [c for p in paths for c in summarize_mcap(p)["channels"]]
     recorded = sum(c["count"] for c in channels)
     accs = [account_recording([p]) for p in paths]
@@ -247,9 +248,6 @@ def baseline_write(path: Path) -> dict:
     """The bare baseline: every message of the recording ``path`` (read into memory first) written again with the
     ``mcap`` library directly, in this process, zstd chunks of 256 KiB. Returns ``{"messages", "seconds",
     "messages_per_s", "mb_per_s"}`` (MB of the file it wrote)."""
-    from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
-
     with open(path, "rb") as f:
         msgs = [(s, c, m.log_time, m.data) for s, c, m in make_reader(f).iter_messages(log_time_order=True)]
     out = path.with_suffix(".baseline.mcap")
@@ -278,10 +276,6 @@ def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, 
                        recorders: int = 1) -> dict:
     """Every fleet size in ``sizes`` on one local Ray (started here, shut down at the end), with ``recorders``
     recorder actors; returns the report."""
-    from aerodaas.bench import machine_info
-    from aerodaas.bench.progress import bench_progress
-    from aerodaas.runtime import driver as runtime
-
     machine = machine_info()
     rows = []
     runtime.ensure_ray(None)
@@ -324,47 +318,27 @@ def _limit(rows: list[dict]) -> dict:
             "drain_limit_s": DRAIN_LIMIT_S}
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("recorder", help="the run's recorder actor: messages/s and MB/s into one MCAP with frames, "
-                                        "the fleet size where it drops or back-pressures, beside bare mcap")
-    p.add_argument("--drones", type=int, action="append", help="fleet size (repeatable; default 5 10 20 40 80)")
-    p.add_argument("--duration", type=float, default=10.0, help="seconds of offering per size (default 10)")
-    p.add_argument("--fps", type=float, default=5.0, help="frames per second per drone (default 5)")
-    p.add_argument("--odom-hz", type=float, default=10.0, help="odometry samples per second per drone (default 10)")
-    p.add_argument("--width", type=int, default=1280, help="frame width, px (default 1280)")
-    p.add_argument("--height", type=int, default=720, help="frame height, px (default 720)")
-    p.add_argument("--producers", type=int, default=2, help="producer actors the drones are spread over (default 2; "
-                                                            "at least --recorders)")
-    p.add_argument("--recorders", type=int, default=1, help="recorder actors, each writing its own file with its own "
-                                                            "accounting, as recording.per_node makes one per node "
-                                                            "(default 1: the run's one recorder)")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-    p.add_argument("--out", help="also write the JSON report to this file")
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench recorder`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
+    for name, ok, val in (("--drones", all(s >= 1 for s in sizes), list(sizes)),
+                          ("--duration", a.duration > 0, a.duration), ("--fps", a.fps > 0, a.fps),
+                          ("--odom-hz", a.odom_hz > 0, a.odom_hz), ("--producers", a.producers >= 1, a.producers),
+                          ("--recorders", a.recorders >= 1, a.recorders),
+                          ("--width/--height", a.width >= 16 and a.height >= 16, f"{a.width}x{a.height}")):
+        if not ok:
+            print(f"aerodaas bench recorder: {name} must be positive (frames at least 16x16), got {val}",
+                  file=sys.stderr)
+            return 2
+    frames, source = bench_frames(a.width, a.height)
+    load = DroneLoad(a.fps, a.odom_hz, a.duration, frames, a.width, a.height)
+    report = run_recorder_bench(sizes, load, a.producers, source, a.recorders)
 
-    def run(a: argparse.Namespace) -> int:
-        sizes = tuple(a.drones) if a.drones else DEFAULT_SIZES
-        for name, ok, val in (("--drones", all(s >= 1 for s in sizes), list(sizes)),
-                              ("--duration", a.duration > 0, a.duration), ("--fps", a.fps > 0, a.fps),
-                              ("--odom-hz", a.odom_hz > 0, a.odom_hz), ("--producers", a.producers >= 1, a.producers),
-                              ("--recorders", a.recorders >= 1, a.recorders),
-                              ("--width/--height", a.width >= 16 and a.height >= 16, f"{a.width}x{a.height}")):
-            if not ok:
-                print(f"aerodaas bench recorder: {name} must be positive (frames at least 16x16), got {val}",
-                      file=sys.stderr)
-                return 2
-        frames, source = bench_frames(a.width, a.height)
-        load = DroneLoad(a.fps, a.odom_hz, a.duration, frames, a.width, a.height)
-        report = run_recorder_bench(sizes, load, a.producers, source, a.recorders)
-        from aerodaas.bench.output import emit_report
-
-        emit_report(report, a.out, a.json)
-        if not a.json:
-            from aerodaas.bench.output import print_report
-
-            print_report(format_table(report))
-        return 0
-
-    p.set_defaults(func=run)
+    emit_report(report, a.out, a.json)
+    if not a.json:
+        print_report(format_table(report))
+    return 0
 
 
 def format_table(report: dict) -> str:

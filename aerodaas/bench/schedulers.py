@@ -29,7 +29,6 @@ actual vs intended edge hold, actual vs intended cloud round trip, how late poli
 """
 from __future__ import annotations
 
-from dataclasses import asdict
 import functools
 import itertools
 import math
@@ -38,74 +37,26 @@ import random
 import sys
 import time
 from collections import Counter
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
-from aerodaas.bench import machine_info
+import ray
+
+from aerodaas.actors.cloud_executor import start_cloud_executors
+from aerodaas.bench.edge_host import EdgeHostActor
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.options import DEFAULT_DRONES_PER_EDGE, DEFAULT_FPS, EMULATION_BOUND_MS, LOADS  # noqa: F401
 from aerodaas.bench.schedulers_report import (_emulation_p99, compare_with_harness, format_table,  # noqa: F401
                                               summarize_runs, write_plot)
+from aerodaas.bench.sweep import scenario_specs
+from aerodaas.bench.workload import default_workload_path, edge_layout, make_trace  # noqa: F401 - re-exported
+from aerodaas.clusters.local import LocalCluster
+from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options, iter_schedulers,
+                                                make_analytics_scheduler)
+from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
+from aerodaas.schedulers.dispatch.stats import Samples
 
-LOADS = ("LIGHT", "MEDIUM", "HEAVY")
-#: a runtime run is valid only if its worst emulation timing error p99 stays within this (ms; see run_schedulers)
-EMULATION_BOUND_MS = 10.0
-DEFAULT_DRONES_PER_EDGE = 3
-DEFAULT_FPS = 1.0
-
-
-# ---------------------------------------------------------------------------------------------- workload and trace
-def default_workload_path() -> Path:
-    """``$AERODAAS_DATA_DIR/workloads/ocularone_lambda.json`` (default data dir: ``../shared/data`` of the repo)."""
-    base = os.environ.get("AERODAAS_DATA_DIR") or str(Path(__file__).resolve().parents[2].parent / "shared" / "data")
-    return Path(base) / "workloads" / "ocularone_lambda.json"
-
-
-def edge_layout(drones: int, drones_per_edge: int) -> list[list[str]]:
-    """Drones ``d000..`` assigned to edges in order, ``drones_per_edge`` each (the last edge may have fewer).
-    Raises ValueError for non-positive counts."""
-    if drones < 1:
-        raise ValueError(f"drones must be >= 1, got {drones}")
-    if drones_per_edge < 1:
-        raise ValueError(f"drones_per_edge must be >= 1, got {drones_per_edge}")
-    names = [f"d{i:03d}" for i in range(drones)]
-    return [names[i:i + drones_per_edge] for i in range(0, drones, drones_per_edge)]
-
-
-def make_trace(workload, drones: int, duration_s: float, seed: int, drones_per_edge: int = DEFAULT_DRONES_PER_EDGE,
-               fps: float = DEFAULT_FPS, trace=None) -> list[tuple[float, str, str, str]]:
-    """The arrival trace: rows ``(arrival_ms, edge_id, drone, model)`` sorted by time, for frames sent in
-    ``[0, duration_s)``. Each frame yields one task per model of ``workload`` in a seeded shuffled order.
-    ``trace`` (a :class:`aerodaas.bench.traces.TraceSpec`, default periodic): periodic — each drone sends a frame
-    every ``1/fps`` s from a seeded phase in ``[0, 1/fps)`` (the published sweep's traces, unchanged); realistic or
-    recording — the frame times of :func:`aerodaas.bench.traces.frame_times`. Raises ValueError for bad
-    parameters."""
-    if not duration_s > 0:
-        raise ValueError(f"duration must be > 0 s, got {duration_s}")
-    if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps}")
-    rng = random.Random(seed)
-    period_ms = 1000.0 / fps
-    models = list(workload.models)
-    rows = []
-    periodic = trace is None or trace.kind == "periodic"
-    n = 0
-    for e, group in enumerate(edge_layout(drones, drones_per_edge)):
-        for i, drone in enumerate(group):
-            if periodic:
-                t = round(rng.uniform(0.0, period_ms), 3)
-                times = []
-                while t < duration_s * 1000.0:
-                    times.append(t)
-                    t = round(t + period_ms, 3)
-            else:
-                from aerodaas.bench.traces import frame_times
-                times = frame_times(trace, drone, i, len(group), n, period_ms, duration_s * 1000.0, seed)
-            n += 1
-            for t in times:
-                order = models[:]
-                rng.shuffle(order)
-                rows.extend((t, f"edge{e:02d}", drone, m) for m in order)
-    rows.sort(key=lambda r: r[0])  # stable: keeps each frame's shuffled model order
-    return rows
 
 
 # ---------------------------------------------------------------------------------------------- cluster
@@ -113,8 +64,6 @@ class _Cluster:
     """The benchmark's Ray cluster: a LocalCluster it started, or the cluster at ``address``."""
 
     def __init__(self, address: str | None, cloud_nodes: int) -> None:
-        import ray
-
         self.local = None
         if address:
             if not ray.is_initialized():
@@ -122,13 +71,10 @@ class _Cluster:
         else:
             if ray.is_initialized():
                 ray.shutdown()
-            from aerodaas.clusters.local import LocalCluster
 
             self.local = LocalCluster(cloud_nodes=cloud_nodes, edge_cpus=2, cloud_cpus=2, worker_niceness=0)
 
     def nodes(self) -> list[dict]:
-        import ray
-
         return [{"node_id": n["NodeID"], "labels": {k: v for k, v in n.get("Labels", {}).items()
                                                      if not k.startswith("ray.io/")}}
                 for n in ray.nodes() if n.get("Alive")]
@@ -139,8 +85,6 @@ class _Cluster:
 
 
 def _pooled(values: list[float]) -> dict:
-    from aerodaas.schedulers.dispatch.stats import Samples
-
     return Samples.summarize(values)
 
 
@@ -214,8 +158,6 @@ def _merge(name: str, load: str, drones: int, n_edges: int, per_edge: int, host_
 def _run_one(hosts, host_edges: list[list[str]], cloud, name: str, workload, trace_by_host, *, seed: int,
              edge_jitter: str, cloud_jitter: str, network: Sequence[str] | None, drain_s: float,
              reply_lead_ms: float, options: dict | None = None) -> list[dict]:
-    import ray
-
     t = time.time()
     # lead time for configure(): each host builds its dispatchers and loads the compiled planner; 0.5 s was overrun
     # with 9 hosts at load average ~40 (2 cores), which aborted the run before its first arrival
@@ -237,11 +179,6 @@ def _checked(schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_
     """:func:`run_schedulers`'s parameters checked before Ray starts (ValueError naming the field): the scheduler
     names, the (sigma, cloud jitter) pairs, the scenarios and their network specs, the workload's path, the
     workloads by load and each scheduler's options (every scheduler built once with them)."""
-    from aerodaas.bench.sweep import scenario_specs
-    from aerodaas.schedulers.analytics_base import filter_options
-    from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
-    from aerodaas.schedulers.analytics_base import Workload, analytics_scheduler_names
-
     known = analytics_scheduler_names()
     names = list(schedulers) if schedulers else known
     unknown = [n for n in names if n not in known]
@@ -267,7 +204,6 @@ def _checked(schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_
     if not wpath.is_file():
         raise ValueError(f"workload file not found: {wpath} (set AERODAAS_DATA_DIR or pass workload_path)")
     workloads = {ld: Workload.from_file(wpath, ld) for ld in loads}
-    from aerodaas.schedulers.analytics_base import make_analytics_scheduler
 
     opts = {n: filter_options(n, options or {}) for n in names}
     for n in names:  # a bad option value fails here, before Ray
@@ -279,8 +215,6 @@ def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, rep
             cloud_jitter, network, seed, cloud_nodes, address, n_hosts, n_cloud, wpath, reply_lead_ms, jitters, scen,
             options, emulation_bound_ms, drain_s) -> dict:
     """The runtime result's ``config``: every option that shaped it (issue 41.4)."""
-    from aerodaas.schedulers.dispatch.emulation import NetworkModel
-
     return {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
             "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
             "trace": asdict(trace_spec) if trace_spec is not None else None,
@@ -313,9 +247,6 @@ def _arrival_process(trace_spec, fps: float, drones_per_edge: int) -> dict:
 def _start_actors(nodes: list[dict], address: str | None, cloud_executors: int | None, n_hosts: int) -> tuple:
     """The edge host actors (on the ``tier=edge`` node) and the cloud executors (one per cloud node unless
     ``cloud_executors``). Raises ValueError when no node is labelled ``tier=edge``."""
-    from aerodaas.actors.cloud_executor import start_cloud_executors
-    from aerodaas.bench.edge_host import EdgeHostActor
-
     if not any(n["labels"].get("tier") == "edge" for n in nodes):
         raise ValueError(f"the cluster at {address!r} has no node labelled tier=edge (start the edge node with "
                          "`ray start --labels tier=edge`, see docs/clusters.md)")
@@ -367,8 +298,6 @@ def _say(progress: bool, msg: str) -> None:
 def _warm_up_scheduler(names: Sequence[str]) -> str:
     """The scheduler of the warm-up run (not recorded): one that uses the cloud, so that every code path (actor
     imports, the cloud link) is hot before the measured runs."""
-    from aerodaas.schedulers.analytics_base import iter_schedulers
-
     return next((c.name for c in iter_schedulers(names) if c.uses_cloud), names[0])
 
 
@@ -402,7 +331,6 @@ def run_schedulers(schedulers: Sequence[str] | None = None, loads: Sequence[str]
     cluster = _Cluster(address, cloud_nodes)
     results, t_all = [], time.time()
     hosts, cloud = [], []
-    import ray
 
     try:
         nodes = cluster.nodes()

@@ -7,6 +7,13 @@ import math
 import os
 from typing import Sequence
 
+from aerodaas.bench.harness import fleet_tasks, run_fleet
+from aerodaas.bench.sweep import mean_ci
+from aerodaas.bench.workload import make_trace, scenario_specs
+from aerodaas.bench.traces import TraceSpec
+from aerodaas.schedulers.analytics_base import Workload
+from aerodaas.schedulers.dispatch.emulation import Jitter
+
 __all__ = ["summarize_runs", "format_table", "write_plot", "compare_with_harness"]
 
 
@@ -22,8 +29,6 @@ def summarize_runs(runs: Sequence[dict]) -> list[dict]:
     """Per (load, cloud sigma, scenario, scheduler): every figure as mean ± 95 % CI over the seeds
     (:func:`aerodaas.bench.sweep.mean_ci`), the counters' means, and the emulation's validity (valid only if every
     seed's run was)."""
-    from aerodaas.bench.sweep import mean_ci
-
     groups: dict[tuple, list[dict]] = {}
     for r in runs:
         groups.setdefault((r["load"], r.get("cloud_sigma"), r.get("scenario", "none"), r["scheduler"]), []).append(r)
@@ -99,10 +104,10 @@ def write_plot(res: dict, path: str | os.PathLike) -> None:
     """A comparison figure (PNG): one panel per cell (load, sigma, drones per edge, scenario), utility by scheduler
     as mean with its 95 % CI; the upper bound as a line where known; runs with an invalid emulation hatched and
     labelled INVALID."""
-    import matplotlib
+    import matplotlib  # lazy: heavy dependency (matplotlib)
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: heavy dependency (matplotlib)
 
     cells = list(dict.fromkeys((r["load"], r["cloud_sigma"], r["drones_per_edge"], r["scenario"])
                                for r in res["results"]))
@@ -145,13 +150,6 @@ def compare_with_harness(res: dict, workload_path: str | os.PathLike | None = No
     """For each runtime result, the harness on the same configuration, traces, seeds and draws: whether the
     runtime's mean utility lies within the harness's mean ± 95 % CI (the runtime adds only its emulation error, so
     on a valid emulation the two agree seed by seed)."""
-    from aerodaas.bench.harness import fleet_tasks, run_fleet
-    from aerodaas.bench.schedulers import make_trace
-    from aerodaas.bench.traces import TraceSpec
-    from aerodaas.bench.sweep import mean_ci, scenario_specs
-    from aerodaas.schedulers.dispatch.emulation import Jitter
-    from aerodaas.schedulers.analytics_base import Workload
-
     cfg = res["config"]
     wpath = workload_path or cfg["workload"]
     out = []

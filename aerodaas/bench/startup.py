@@ -26,6 +26,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from rich.console import Console
+from rich.progress import Progress
+
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import emit_report
+from aerodaas.clusters import persistent
+from aerodaas.clusters.persistent import read_state
 from aerodaas.protocol.startup_probe import PROBE_ENV
 
 
@@ -86,8 +93,6 @@ def measure_once(app: str, timeout_s: float = 120.0, attach: bool = False, probe
 def _await_warm_pool(timeout_s: float = 60.0) -> int:
     """Wait (at most ``timeout_s``) until the attached cluster's warm pool is full, as it is when a user starts the
     next run some seconds after the last one; returns the idle warm workers then (0 when it keeps none)."""
-    from aerodaas.clusters.persistent import read_state
-
     t_end = time.monotonic() + timeout_s
     while True:
         st = read_state() or {}
@@ -114,13 +119,6 @@ def _measure(app: str, repeat: int, attach: bool, progress, task, probe_file: Pa
 
 
 def run_startup(app: str, repeat: int = 3, mode: str = "both", warm_workers: int | None = None) -> dict:
-    from rich.console import Console
-    from rich.progress import Progress
-
-    from aerodaas.clusters import persistent
-
-    from aerodaas.bench import machine_info
-
     load_before = os.getloadavg()
     out: dict = {"benchmark": "startup", "machine": machine_info(), "app": app}
     modes = ["cold", "attached"] if mode == "both" else [mode]
@@ -155,36 +153,24 @@ def run_startup(app: str, repeat: int = 3, mode: str = "both", warm_workers: int
     return out
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("startup", help="seconds from `aerodaas run APP` to the first processed frame (cold Ray)")
-    p.add_argument("--app", default=None, help="application (default: apps/vehicle_tracking.py next to this install)")
-    p.add_argument("--repeat", type=int, default=3)
-    p.add_argument("--mode", choices=["cold", "attached", "both"], default="both",
-                   help="cold Ray start, attached to `aerodaas up`'s cluster, or both (default)")
-    p.add_argument("--warm-workers", type=int, default=None,
-                   help="warm workers of the `aerodaas up` cluster of attached runs (default: aerodaas up's; 0: none)")
-    p.add_argument("--json", action="store_true", help="print the JSON report")
-    p.add_argument("--out", help="also write the JSON report to this file")
+def main(a: argparse.Namespace) -> int:
+    """``aerodaas bench startup`` with the options of :mod:`aerodaas.bench.parsers`: checks them (exit 2 naming a bad
+    one), runs the benchmark and prints its report; returns the exit code."""
+    app = a.app or str(Path(__file__).resolve().parents[2] / "apps" / "vehicle_tracking.py")
+    if not Path(app).is_file():
+        print(f"aerodaas bench startup: application {app!r} not found (give --app)", file=sys.stderr)
+        return 2
+    if a.repeat < 1:
+        print(f"aerodaas bench startup: --repeat must be >= 1, got {a.repeat}", file=sys.stderr)
+        return 2
+    if a.warm_workers is not None and not 0 <= a.warm_workers <= 64:
+        print(f"aerodaas bench startup: --warm-workers must be in [0, 64], got {a.warm_workers}", file=sys.stderr)
+        return 2
+    try:
+        report = run_startup(app, a.repeat, a.mode, a.warm_workers)
+    except RuntimeError as e:
+        print(f"aerodaas bench startup: {e}", file=sys.stderr)
+        return 1
 
-    def run(a: argparse.Namespace) -> int:
-        app = a.app or str(Path(__file__).resolve().parents[2] / "apps" / "vehicle_tracking.py")
-        if not Path(app).is_file():
-            print(f"aerodaas bench startup: application {app!r} not found (give --app)", file=sys.stderr)
-            return 2
-        if a.repeat < 1:
-            print(f"aerodaas bench startup: --repeat must be >= 1, got {a.repeat}", file=sys.stderr)
-            return 2
-        if a.warm_workers is not None and not 0 <= a.warm_workers <= 64:
-            print(f"aerodaas bench startup: --warm-workers must be in [0, 64], got {a.warm_workers}", file=sys.stderr)
-            return 2
-        try:
-            report = run_startup(app, a.repeat, a.mode, a.warm_workers)
-        except RuntimeError as e:
-            print(f"aerodaas bench startup: {e}", file=sys.stderr)
-            return 1
-        from aerodaas.bench.output import emit_report
-
-        emit_report(report, a.out, a.json)
-        return 0
-
-    p.set_defaults(func=run)
+    emit_report(report, a.out, a.json)
+    return 0

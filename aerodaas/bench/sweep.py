@@ -15,22 +15,26 @@ ratio of the means, and whether the 95 % intervals overlap.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Sequence
 
+from aerodaas.bench.bound import Budget, bounded, lognormal_on_time_chance, lognormal_slack, utility_upper_bound
+from aerodaas.bench.harness import Harness, fleet_tasks, run_fleet
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.options import LOADS, SCENARIOS
+from aerodaas.bench.workload import default_workload_path, make_trace, scenario_specs
+from aerodaas.schedulers import single_machine_jit
+from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options,
+                                                make_analytics_scheduler)
+from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
+
 __all__ = ["Cell", "BOUND_NAMES", "mean_ci", "t95", "scenario_specs", "SCENARIOS", "run_sweep", "aggregate", "format_sweep",
            "DEFAULT_SCHEDULERS", "BASELINES", "OURS", "markdown_tables", "claims"]
 
-#: network-variability scenarios: name -> what it adds to every cloud round trip (NetworkModel specs)
-SCENARIOS = {
-    "none": "no extra latency (the workload's cloud_ms is the measured Lambda round trip)",
-    "step": "+200 ms on every cloud call sent in the last 20 s of each minute (stand-in for the reference's "
-            "artificial latency variability, deploy_nwvar_og_artif_lat.py)",
-    "walk": "a seeded random walk of +-25 ms per second within [0, 250] ms (slow drift, walk:25,250)",
-}
 DEFAULT_SCHEDULERS = ("EDGE_EDF", "CLOUD", "E+C", "DEM", "DEMS", "DEMS-A", "GEMS", "GAINPLAN", "EVPLAN", "LAPLAN")
 #: the reference policies our scheduler must beat, and ours
 BASELINES = ("DEM", "DEMS", "DEMS-A", "GEMS")
@@ -72,17 +76,6 @@ def mean_ci(values: Sequence[float]) -> dict:
     return {"mean": m, "ci95": half, "n": n, "per_seed": xs}
 
 
-def scenario_specs(name: str, duration_s: float) -> list[str]:
-    """The NetworkModel specs of scenario ``name`` for a run of ``duration_s`` s. Raises ValueError if unknown."""
-    if name == "none":
-        return []
-    if name == "step":
-        return [f"+200@{60 * k + 40:g}-{60 * k + 60:g}" for k in range(max(1, math.ceil(duration_s / 60)))]
-    if name == "walk":
-        return ["walk:25,250"]
-    raise ValueError(f"network scenario {name!r}: choose from {sorted(SCENARIOS)}")
-
-
 @dataclass(frozen=True)
 class Cell:
     """One configuration of the sweep."""
@@ -115,11 +108,6 @@ def _bounds(per_edge: dict, w, specs: list[str], seed: int, ej, cj, exact: bool,
     value and expected edge reward by start time; only for lognormal or no edge jitter). Each exact DP of an edge
     runs under ``budget`` (:class:`aerodaas.bench.bound.Budget`, default one): a bound of which some edge ran out is
     None, and ``not_computed`` says which (``{"exact": "time on edge03", ...}``); the LP is always there beside it."""
-    from aerodaas.bench.bound import Budget, bounded, lognormal_on_time_chance, lognormal_slack, utility_upper_bound
-    from aerodaas.bench.harness import Harness
-    from aerodaas.schedulers.analytics_base import make_analytics_scheduler
-    from aerodaas.schedulers.dispatch.emulation import NetworkModel
-
     budget = budget or Budget()
     out: dict = {"lp": 0.0}
     if exact:
@@ -157,11 +145,6 @@ def _bounds(per_edge: dict, w, specs: list[str], seed: int, ej, cj, exact: bool,
 
 def _job(args: tuple) -> dict:
     """One (cell, seed): every scheduler and the upper bounds on the same trace. Runs in a worker process."""
-    from aerodaas.bench.harness import fleet_tasks, run_fleet
-    from aerodaas.bench.schedulers import make_trace
-    from aerodaas.schedulers.analytics_base import Workload
-    from aerodaas.schedulers.dispatch.emulation import Jitter
-
     cell, seed, drones, duration_s, fps, names, options, edge_jitter, wpath, bound, exact, trace, budget = args
     t0 = time.process_time()
     w = Workload.from_file(wpath, cell.load)
@@ -196,13 +179,9 @@ def run_sweep(*, loads: Sequence[str], sigmas: Sequence[float], drones_per_edge:
     ``bound_budget``: the time and memory each edge's exact DP may use (:class:`aerodaas.bench.bound.Budget`;
     default 120 s, 1 GiB): past it the bound is reported "not computed", with the LP bound beside it.
     Raises ValueError for bad parameters, before any work starts."""
-    from aerodaas.bench import machine_info
-    from aerodaas.schedulers import single_machine_jit
-
     names = list(schedulers or DEFAULT_SCHEDULERS)
     wpath = _checked(names, loads, sigmas, drones_per_edge, scenarios, seeds, duration_s, edge_jitter, workload_path,
                      options)
-    from aerodaas.bench.bound import Budget
 
     budget = bound_budget or Budget()
     scenario_loads = list(scenario_loads or ["HEAVY"])
@@ -241,11 +220,6 @@ def _checked(names, loads, sigmas, drones_per_edge, scenarios, seeds, duration_s
              options) -> str:
     """The sweep's parameters checked before any work (ValueError naming the field); returns the workload's path.
     Every scheduler is built once with its options, so a bad option value fails here, not in a worker."""
-    from aerodaas.bench.schedulers import LOADS, default_workload_path
-    from aerodaas.schedulers.dispatch.emulation import Jitter
-    from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options,
-                                                    make_analytics_scheduler)
-
     unknown = [n for n in names if n not in analytics_scheduler_names()]
     if unknown:
         raise ValueError(f"schedulers: unknown {unknown}; registered: {analytics_scheduler_names()}")
@@ -276,8 +250,6 @@ def _run_jobs(jobs: list, procs: int, progress) -> list[dict]:
     ``progress(done, total)``; the results in completion order."""
     done: list[dict] = []
     if procs > 1 and len(jobs) > 1:
-        import multiprocessing
-
         with multiprocessing.get_context("fork").Pool(procs) as pool:
             for r in pool.imap_unordered(_job, jobs):
                 done.append(r)

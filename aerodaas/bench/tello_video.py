@@ -24,7 +24,11 @@ import tempfile
 import threading
 import time
 
+from aerodaas.backends.tello.video import H264Reassembler
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import print_report
 from aerodaas.emulators import free_udp_port
+from aerodaas.emulators.tello import TelloEmulator, read_index
 
 def _percentiles(xs: list[float]) -> dict:
     if not xs:
@@ -37,8 +41,6 @@ def _percentiles(xs: list[float]) -> dict:
 
 def _stream(width: int, height: int, fps: float, video_port: int):
     """A started emulator streaming to ``video_port`` on loopback, and the client socket that asked for it."""
-    from aerodaas.emulators.tello import TelloEmulator
-
     emu = TelloEmulator(video_port=video_port, state_port=free_udp_port(), video_size=(width, height), video_fps=fps,
                         stamp_frame_index=True, camera_pitch_deg=30.0).start()
     cli = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -51,9 +53,6 @@ def _stream(width: int, height: int, fps: float, video_port: int):
 
 def run_pyav(width: int, height: int, fps: float, seconds: float, record: str | None = None) -> dict:
     """Live PyAV decode of the emulated stream; optionally writes the received bytes to ``record``."""
-    from aerodaas.backends.tello.video import H264Reassembler
-    from aerodaas.emulators.tello import read_index
-
     port = free_udp_port()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
@@ -96,14 +95,12 @@ LOW_DELAY = "fflags;nobuffer|flags;low_delay|probesize;32768|analyzeduration;0"
 def run_opencv(width: int, height: int, fps: float, seconds: float, low_delay: bool = False) -> dict:
     """Live decode with ``cv2.VideoCapture(udp://..., CAP_FFMPEG)``; ``low_delay`` sets :data:`LOW_DELAY`
     (no input buffering, minimal probing) through ``OPENCV_FFMPEG_CAPTURE_OPTIONS`` (process-wide)."""
-    import cv2
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     if low_delay:
         os.environ["OPENCV_FFMPEG_CAPTURE_OPTIONS"] = LOW_DELAY
     else:
         os.environ.pop("OPENCV_FFMPEG_CAPTURE_OPTIONS", None)
-
-    from aerodaas.emulators.tello import read_index
 
     port = free_udp_port()
     res: dict = {"opened": False}
@@ -146,8 +143,8 @@ def run_opencv(width: int, height: int, fps: float, seconds: float, low_delay: b
 def offline_decode_ms(path: str) -> dict:
     """CPU ms per frame to decode the recorded stream at ``path`` to BGR, PyAV and OpenCV (the recording lost its
     datagram boundaries, so PyAV's parser cuts it into frames here; the cut is not timed)."""
-    import av
-    import cv2
+    import av  # lazy: heavy dependency (PyAV)
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     with open(path, "rb") as f:
         packets = av.CodecContext.create("h264", "r").parse(f.read())
@@ -169,8 +166,6 @@ def offline_decode_ms(path: str) -> dict:
 
 
 def run(width: int = 960, height: int = 720, fps: float = 30.0, seconds: float = 8.0) -> dict:
-    from aerodaas.bench import machine_info
-
     with tempfile.TemporaryDirectory() as d:
         rec = os.path.join(d, "tello.h264")
         pyav = run_pyav(width, height, fps, seconds, record=rec)
@@ -181,23 +176,7 @@ def run(width: int = 960, height: int = 720, fps: float = 30.0, seconds: float =
             "pyav": pyav, "opencv": ocv, "opencv_low_delay": ocv_low, "offline_decode": offline}
 
 
-def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Register ``aerodaas bench tello-video``."""
-    t = bench_subparsers.add_parser("tello-video", help="Tello H.264 decode: PyAV vs OpenCV (latency, ms/frame)",
-                                    description=__doc__.split("\n\n")[0])
-    t.add_argument("--width", type=int, default=960)
-    t.add_argument("--height", type=int, default=720)
-    t.add_argument("--fps", type=float, default=30.0)
-    t.add_argument("--seconds", type=float, default=8.0, help="live streaming time per decoder (default 8)")
-    t.add_argument("--json", action="store_true", help="print the JSON report (it is printed either way: this "
-                                                       "benchmark has no table)")
-    t.set_defaults(func=_cmd)
-    return t
-
-
-def _cmd(args: argparse.Namespace) -> int:
+def main(args: argparse.Namespace) -> int:
     """``aerodaas bench tello-video``: the report of :func:`run` as JSON on standard output."""
-    from aerodaas.bench.output import print_report
-
     print_report(json.dumps(run(args.width, args.height, args.fps, args.seconds), indent=2))
     return 0

@@ -34,11 +34,17 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.options import TOUR_SIZES
+from aerodaas.bench.output import print_report
+from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler
 from aerodaas.schedulers.two_opt import held_karp_open_path  # the exact reference (re-exported here)
+from aerodaas.schedulers.two_opt import node_cost_matrix
 
 AREA_M = 1000.0
 ALT_RANGE_M = (10.0, 60.0)
-DEFAULT_SIZES = (10, 20, 50, 100, 200)
+DEFAULT_SIZES = TOUR_SIZES
 EXACT_MAX = 12
 
 # disaster survey (paper §6.1; the same geometry as apps/disaster_survey.py and its `aerodaas inject` example):
@@ -119,8 +125,6 @@ def open_path_lower_bound(D, upper: float, max_iter: int = 400) -> float:
 # ---------------------------------------------------------------------------------------------- instances
 def random_instance(rng, n: int) -> list:
     """``n`` waypoints uniform in the 1 km x 1 km square centred on home, altitude uniform in [10, 60] m."""
-    from aerodaas.model.types import Waypoint
-
     xy = rng.uniform(-AREA_M / 2.0, AREA_M / 2.0, size=(n, 2))
     z = rng.uniform(*ALT_RANGE_M, size=n)
     return [Waypoint(id=f"w{i}", x=float(xy[i, 0]), y=float(xy[i, 1]), z=float(z[i])) for i in range(n)]
@@ -129,14 +133,10 @@ def random_instance(rng, n: int) -> list:
 def default_schedulers() -> dict:
     """The schedulers compared, name -> zero-argument factory: the paper's nearest neighbour and the
     2-opt/Or-opt plug-in."""
-    from aerodaas.schedulers import NearestNeighborScheduler, TwoOptScheduler
-
     return {"nearest_neighbor": NearestNeighborScheduler, "two_opt": TwoOptScheduler}
 
 
 def _matrix(waypoints: Sequence, start: Sequence[float]):
-    from aerodaas.schedulers.two_opt import node_cost_matrix
-
     pts = [(w.x, w.y, w.z) for w in waypoints]
     return node_cost_matrix(pts, pts, start)
 
@@ -151,10 +151,6 @@ def run_tours(sizes: Sequence[int] = DEFAULT_SIZES, instances: int = 5, seed: in
 
     ``schedulers`` maps a name to a zero-argument factory of a TrajectoryScheduler (default: nearest_neighbor
     and two_opt)."""
-    from aerodaas.schedulers import TrajectoryScheduler
-
-    from aerodaas.bench import machine_info
-
     if instances < 1 or repeats < 1:
         raise ValueError("instances and repeats must be >= 1")
     if any(n < 1 for n in sizes):
@@ -235,10 +231,6 @@ def disaster_survey(schedulers: dict | None = None) -> dict:
     UNORDERED (everything left may be re-ordered), or ORDERED (the survey's remaining waypoints stay one fixed
     run, the injected ones are free). Distances in metres; "given order" = survey in its given order, then the
     injected waypoints in injection order."""
-    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
-    from aerodaas.schedulers import TrajectoryScheduler
-    from aerodaas.schedulers.two_opt import node_cost_matrix
-
     factories = schedulers or default_schedulers()
     z = SURVEY_Z_M
 
@@ -303,45 +295,7 @@ def disaster_survey(schedulers: dict | None = None) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- CLI
-def _sizes(text: str) -> list[int]:
-    try:
-        sizes = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--sizes takes comma-separated integers, got {text!r}") from None
-    if not sizes or any(n < 1 for n in sizes):
-        raise argparse.ArgumentTypeError(f"--sizes needs positive integers, got {text!r}")
-    return sizes
-
-
-def _positive(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
-
-
-def add_parser(bench_subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Register ``aerodaas bench tours`` on the ``bench`` sub-command's subparsers."""
-    t = bench_subparsers.add_parser(
-        "tours", help="tour length vs exact optimum / lower bound, and planning time, per trajectory scheduler",
-        description="Tour length (vs the exact optimum for n <= 12, else vs a proven lower bound) and planning "
-                    "time of the trajectory schedulers on seeded random instances, plus the paper's "
-                    "disaster-survey case.")
-    t.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
-    t.add_argument("--out", metavar="FILE", help="also write the JSON result to FILE")
-    t.add_argument("--seed", type=int, default=0, help="seed of the random instances (default 0)")
-    t.add_argument("--sizes", type=_sizes, default=list(DEFAULT_SIZES),
-                   help="comma-separated waypoint counts (default 10,20,50,100,200; exact reference for n <= 12)")
-    t.add_argument("--instances", type=_positive, default=5, help="instances per size (default 5)")
-    t.add_argument("--repeats", type=_positive, default=3, help="timed runs per instance and scheduler (default 3)")
-    t.set_defaults(func=_cmd_tours)
-    return t
-
-
-def _cmd_tours(args: argparse.Namespace) -> int:
+def main(args: argparse.Namespace) -> int:
     res = run_tours(sizes=args.sizes, instances=args.instances, seed=args.seed, repeats=args.repeats)
     text = json.dumps(res, indent=2)
     if args.out:
@@ -351,7 +305,6 @@ def _cmd_tours(args: argparse.Namespace) -> int:
         except OSError as e:
             print(f"aerodaas bench tours: cannot write {args.out!r}: {e}", file=sys.stderr)
             return 2
-    from aerodaas.bench.output import print_report
 
     print_report(text if args.json else format_table(res))
     return 0

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from aerodaas.recording.reader import _iter_raw, _open_mcap
+
 __all__ = ["TraceSpec", "TRACE_KINDS", "frame_times", "recording_frame_gaps", "gap_stats", "IMAGE_SCHEMAS"]
 
 TRACE_KINDS = ("periodic", "realistic", "recording", "pareto", "onoff", "flush")
@@ -136,8 +138,6 @@ def recording_frame_gaps(path: str | Path) -> list[list[float]]:
     """Per camera topic of the MCAP recording ``path`` (messages of :data:`IMAGE_SCHEMAS`, in log-time order): the
     gaps between consecutive frames' log times, in ms. Topics with fewer than 3 frames are skipped. Raises
     FileNotFoundError, ValueError (not an MCAP file, or no camera topic with 3 frames)."""
-    from aerodaas.recording.reader import _iter_raw, _open_mcap
-
     key = str(Path(path).resolve())
     if key in _GAP_CACHE:
         return _GAP_CACHE[key]

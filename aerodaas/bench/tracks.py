@@ -16,11 +16,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections import defaultdict
 from typing import Any
 
 import numpy as np
+
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.output import print_report
+from aerodaas.recording.reader import read_messages
 
 __all__ = ["score_tracks", "add_parser"]
 
@@ -35,8 +40,6 @@ def score_tracks(path: str, *, altitude: tuple[float, float] = (19.0, 21.0), gat
     "recall", "id_switches", "id_switches_per_100_frames", "error_m": {"median", "p95", "max", "n"},
     "per_robot": {robot: {...}}}``. Raises ValueError when the recording has no ``/world/targets`` or no track
     scene (not a simulated run with a tracking analytics)."""
-    from aerodaas.recording.reader import read_messages
-
     truth: dict[tuple[str, int], list] = {}
     scenes: dict[tuple[str, int], list] = {}
     alt: dict[str, list[tuple[int, float]]] = defaultdict(list)
@@ -99,24 +102,7 @@ def score_tracks(path: str, *, altitude: tuple[float, float] = (19.0, 21.0), gat
     return out
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("tracks", help="score a simulated run's recorded tracks against the simulator's truth: id "
-                                      "switches per 100 frames, geo-location error (m)")
-    p.add_argument("recording", help="the run's MCAP file (aerodaas run APP --record FILE)")
-    p.add_argument("--altitude", nargs=2, type=float, default=[19.0, 21.0], metavar=("MIN", "MAX"),
-                   help="score frames taken at this altitude above home, metres (default 19 21)")
-    p.add_argument("--gate", type=float, default=3.0, help="largest track-to-truth distance that matches, metres")
-    p.add_argument("--out", help="write the JSON report here")
-    p.add_argument("--json", action="store_true", help="print the JSON report (it is printed either way: this "
-                                                       "benchmark has no table)")
-    p.set_defaults(func=_main)
-
-
-def _main(args: argparse.Namespace) -> int:
-    import os
-
-    from aerodaas.bench import machine_info
-
+def main(args: argparse.Namespace) -> int:
     if not os.path.isfile(args.recording):
         print(f"aerodaas bench tracks: recording {args.recording!r}: no such file", file=sys.stderr)
         return 2
@@ -134,7 +120,6 @@ def _main(args: argparse.Namespace) -> int:
     if args.out:
         with open(args.out, "w") as f:
             f.write(text + "\n")
-    from aerodaas.bench.output import print_report
 
     print_report(text)
     return 0

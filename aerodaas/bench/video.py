@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import struct
 import subprocess
 import sys
 import tempfile
@@ -24,19 +25,30 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
+from aerodaas.bench.machine import machine_info
+from aerodaas.bench.options import VIDEO_READERS, VIDEO_SIZES
+from aerodaas.bench.output import print_report
+from aerodaas.bench.progress import bench_progress
+from aerodaas.bench.tello_video import _percentiles
+from aerodaas.bench.video_gst import HEADER
+from aerodaas.emulators import free_udp_port
+from aerodaas.video import StreamReader, parse_stream_source
+
 #: the ArUco dictionary and the marker's size (px) and position (top-left corner, margin px)
 ARUCO_DICT = "DICT_4X4_1000"
 MARKER_PX, MARGIN_PX = 160, 16
-READERS = ("ours", "pyav", "opencv", "gstreamer")
+READERS = VIDEO_READERS
 #: the interpreter that runs the GStreamer peer: one with PyGObject (Debian's python3-gi is for /usr/bin/python3)
 GST_PYTHON = os.environ.get("AERODAAS_GST_PYTHON", "/usr/bin/python3")
 #: the square of pixels (top-left) that holds the marker: what every reader searches
 ROI_PX = MARKER_PX + 3 * MARGIN_PX
-SIZES = {"720p": (1280, 720), "1080p": (1920, 1080)}
+SIZES = VIDEO_SIZES
 
 
 def _aruco():
-    import cv2
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICT))
     return d, cv2.aruco.ArucoDetector(d, cv2.aruco.DetectorParameters())
@@ -45,9 +57,8 @@ def _aruco():
 def send(url: str, width: int, height: int, fps: float, log_path: str) -> None:
     """The sender (run in its own process): frames with their index as an ArUco marker, MPEG-TS to ``url``, in
     real time until killed; writes ``index glass_time`` lines to ``log_path``."""
-    import av
-    import cv2
-    import numpy as np
+    import av  # lazy: heavy dependency (PyAV)
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     d, _ = _aruco()
     photo = None
@@ -119,8 +130,6 @@ def _read(reader: str, url: str, width: int, height: int, fps: float,
     if reader == "gstreamer":
         return got, _read_gstreamer(url, seconds, note)
     if reader == "ours":
-        from aerodaas.video import StreamReader, parse_stream_source
-
         arrived = threading.Event()
         r = StreamReader(parse_stream_source(url), width, height, on_frame=arrived.set).start()
         try:
@@ -134,7 +143,7 @@ def _read(reader: str, url: str, width: int, height: int, fps: float,
         finally:
             r.close()
     elif reader == "pyav":
-        import av
+        import av  # lazy: heavy dependency (PyAV)
 
         c = av.open(url + "?overrun_nonfatal=1&fifo_size=1000000&buffer_size=4194304", format="mpegts",
                     options={"fflags": "nobuffer"}, timeout=(30.0, 5.0))
@@ -146,7 +155,7 @@ def _read(reader: str, url: str, width: int, height: int, fps: float,
         finally:
             c.close()
     else:
-        import cv2
+        import cv2  # lazy: heavy dependency (OpenCV)
 
         cap = cv2.VideoCapture(url, cv2.CAP_FFMPEG)
         try:
@@ -167,18 +176,12 @@ def _read_gstreamer(url: str, seconds: float, note) -> dict:
 
     :raises RuntimeError: the system Python has no PyGObject/GStreamer (it names the packages), or the peer failed
     """
-    import struct
-
-    import numpy as np
-
-    from aerodaas.bench.video_gst import HEADER
-
     port = url.rsplit(":", 1)[1]
     script = str(Path(__file__).with_name("video_gst.py"))
     proc = subprocess.Popen([GST_PYTHON, script, port, str(seconds), str(ROI_PX)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     try:  # room for several records (130 kB each): the peer must not wait on our marker search between pulls
-        import fcntl
+        import fcntl  # lazy: optional dependency (fcntl is POSIX only)
 
         fcntl.fcntl(proc.stdout.fileno(), fcntl.F_SETPIPE_SZ, 1 << 20)
     except (ImportError, AttributeError, OSError):
@@ -215,9 +218,6 @@ def _read_gstreamer(url: str, seconds: float, note) -> dict:
 
 def run_one(reader: str, size: str, fps: float, seconds: float) -> dict:
     """One reader on one fresh stream: latency percentiles (ms), frames, CPU."""
-    from aerodaas.emulators import free_udp_port
-    from aerodaas.bench.tello_video import _percentiles
-
     width, height = SIZES[size]
     url = f"udp://127.0.0.1:{free_udp_port()}"
     with tempfile.TemporaryDirectory() as tmp:
@@ -251,9 +251,6 @@ def run_one(reader: str, size: str, fps: float, seconds: float) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
-    from aerodaas.bench import machine_info
-    from aerodaas.bench.progress import bench_progress
-
     readers = args.readers.split(",")
     bad = [r for r in readers if r not in READERS]
     sizes = args.sizes.split(",")
@@ -276,20 +273,6 @@ def main(args: argparse.Namespace) -> int:
     text = json.dumps(report, indent=2)
     if args.out:
         Path(args.out).write_text(text)
-    from aerodaas.bench.output import print_report
 
     print_report(text)
     return 0
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("video", help="video stream latency (ArUco frame counter) and decode CPU: ours vs bare PyAV "
-                                     "vs OpenCV CAP_FFMPEG vs a GStreamer appsink, at 720p and 1080p")
-    p.add_argument("--readers", default=",".join(READERS), help=f"comma-separated, of {list(READERS)}")
-    p.add_argument("--sizes", default="720p,1080p", help=f"comma-separated, of {list(SIZES)}")
-    p.add_argument("--fps", type=float, default=30.0, help="stream frame rate (1-120)")
-    p.add_argument("--seconds", type=float, default=10.0, help="seconds each reader reads")
-    p.add_argument("--out", help="also write the JSON report here")
-    p.add_argument("--json", action="store_true", help="print the JSON report (it is printed either way: this "
-                                                       "benchmark has no table)")
-    p.set_defaults(func=main)

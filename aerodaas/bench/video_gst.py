@@ -28,10 +28,10 @@ HEADER = struct.Struct("<dII")
 
 
 def main() -> int:
-    import gi  # here, so that the project's interpreter can import HEADER without PyGObject
+    import gi  # lazy: optional dependency (GStreamer bindings; the project interpreter imports HEADER without them)
 
     gi.require_version("Gst", "1.0")
-    from gi.repository import Gst
+    from gi.repository import Gst  # lazy: optional dependency (GStreamer bindings)
 
     port, seconds, roi = int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
     Gst.init(None)

@@ -4,12 +4,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from aerodaas.clusters.persistent import DEFAULT_WARM_WORKERS, down, up
+
 def run_up(args: argparse.Namespace) -> int:
     """``aerodaas up [--cpus N] [--warm-workers K]``: start the persistent local cluster
     (:mod:`aerodaas.clusters.persistent`) with K warm workers (:mod:`aerodaas.clusters.warm_pool`). Exit 0 (also
     when it already runs), 1 when it cannot start, 2 for a bad ``--cpus`` or ``--warm-workers``."""
-    from aerodaas.clusters.persistent import up
-
     if not 1 <= args.cpus <= 256:
         print(f"aerodaas up: --cpus must be in [1, 256], got {args.cpus}", file=sys.stderr)
         return 2
@@ -32,8 +32,6 @@ def run_up(args: argparse.Namespace) -> int:
 def run_down(args: argparse.Namespace) -> int:
     """``aerodaas down``: stop the cluster ``aerodaas up`` started (its processes only) and remove the shared
     ground cache (:func:`aerodaas.sim.ground_cache.clear`). Exit 0, 1 if it would not stop."""
-    from aerodaas.clusters.persistent import down
-
     try:
         st = down()
     except RuntimeError as e:
@@ -41,7 +39,7 @@ def run_down(args: argparse.Namespace) -> int:
         return 1
     print("aerodaas down: " + (f"stopped the local cluster at {st['address']} (pid {st['pid']})" if st else
                                "no local cluster of `aerodaas up` is running"), flush=True)
-    from aerodaas.sim import ground_cache
+    from aerodaas.sim import ground_cache  # lazy: CLI start-up (NumPy)
 
     freed = ground_cache.clear()
     if freed:
@@ -52,8 +50,6 @@ def run_down(args: argparse.Namespace) -> int:
 
 def add_parser(sub) -> None:
     """``aerodaas up`` and ``aerodaas down``."""
-    from aerodaas.clusters.persistent import DEFAULT_WARM_WORKERS
-
     upp = sub.add_parser("up", help="start a persistent local Ray cluster (loopback, token auth, tier=edge, "
                                      "dashboard) that `aerodaas run` attaches to")
     upp.add_argument("--cpus", type=int, default=3, help="logical CPUs of the node (sizes the prestarted workers)")

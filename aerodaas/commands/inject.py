@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     """``aerodaas inject``: POST the waypoints to the running mission's human-in-the-loop API
     (:func:`aerodaas.tools.hitl.request`). Exit 0, 1 when the API refuses them (its HTTP status and reason), 2 when
     it cannot be reached or no token is known."""
-    from aerodaas.tools.hitl import request
+    from aerodaas.tools.hitl import request  # lazy: CLI start-up (FastAPI)
 
     body: dict = {"waypoints": args.waypoint, "scheduling_type": "ORDERED" if args.ordered else "UNORDERED"}
     if args.index is not None:

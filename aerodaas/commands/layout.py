@@ -9,7 +9,7 @@ from pathlib import Path
 def run(args: argparse.Namespace) -> int:
     """``aerodaas layout RUN.mcap [--out FILE]``: a Foxglove layout for the recording's robot, camera and detections
     (:func:`aerodaas.liveview.layout.layout_for_recording`); exit 2 for a missing or foreign file."""
-    from aerodaas.liveview.layout import layout_for_recording
+    from aerodaas.liveview.layout import layout_for_recording  # lazy: CLI start-up (OpenCV and MCAP)
 
     try:
         text = json.dumps(layout_for_recording(args.file), indent=2) + "\n"

@@ -9,7 +9,7 @@ def run(args: argparse.Namespace) -> int:
     """``aerodaas merge FILE [FILE ...] --out OUT``: :func:`aerodaas.recording.merge.merge_recordings` (channels and
     schemas de-duplicated, messages in log-time order, the files' accounting summed). Exit 0, 2 for a missing,
     foreign or unfinished input, an output among the inputs or one that cannot be written."""
-    from aerodaas.recording.merge import merge_recordings
+    from aerodaas.recording.merge import merge_recordings  # lazy: CLI start-up (MCAP)
 
     try:
         r = merge_recordings(args.files, args.out)

@@ -6,7 +6,7 @@ import argparse
 def run(args: argparse.Namespace) -> int:
     """``aerodaas plot FILE [--out DIR]``: :func:`aerodaas.tools.plot.cmd_plot` (matplotlib is imported only for
     this command)."""
-    from aerodaas.tools.plot import cmd_plot
+    from aerodaas.tools.plot import cmd_plot  # lazy: CLI start-up (matplotlib)
 
     return cmd_plot(args)
 

@@ -9,8 +9,8 @@ def run(args: argparse.Namespace) -> int:
     recorder actor was restarted: ``FILE``, ``FILE.1.mcap`` ...) is joined into one file
     (:func:`aerodaas.recording.segments.join_segments`). Exit 0 (also for a file that was already finished), 2 for a
     missing or non-MCAP file or an output that cannot be written."""
-    from aerodaas.recording.recover import recover_mcap
-    from aerodaas.recording.segments import join_segments, list_segments
+    from aerodaas.recording.recover import recover_mcap  # lazy: CLI start-up (MCAP)
+    from aerodaas.recording.segments import join_segments, list_segments  # lazy: CLI start-up (MCAP)
 
     try:
         if len(list_segments(args.file)) > 1:

@@ -10,7 +10,8 @@ def run(args: argparse.Namespace) -> int:
     """``aerodaas replay FILE.mcap --live [HOST:PORT] [--speed K]``: serve a recording to Foxglove over WebSocket
     (:func:`aerodaas.liveview.server.replay`). Exit 0 when played to the end or stopped (Ctrl-C, SIGTERM), 2 for a bad file,
     address or speed."""
-    from aerodaas.liveview.server import check_bindable, live_access, parse_address, replay, write_live_state
+    from aerodaas.liveview.server import (  # lazy: CLI start-up (OpenCV and MCAP)
+        check_bindable, live_access, parse_address, replay, write_live_state)
 
     try:
         host, port = parse_address(args.live)

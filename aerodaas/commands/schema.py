@@ -6,7 +6,7 @@ import json
 
 def run(args: argparse.Namespace) -> int:
     """``aerodaas schema``: print the JSON Schema of ``environment.json`` (:func:`aerodaas.config.json_schema`)."""
-    from aerodaas.config import json_schema
+    from aerodaas.config import json_schema  # lazy: CLI start-up (pydantic)
 
     print(json.dumps(json_schema(), indent=2))
     return 0

@@ -6,13 +6,21 @@ with the ``mcap`` package's own reader: per channel, the producers' count in ``/
 deliberately not recorded less the messages in every segment, and the sequence numbers there distinct."""
 from __future__ import annotations
 
+import base64
 import json
 import os
 import re
 import signal
+import socket
 import time
 from pathlib import Path
 from typing import Any
+
+from mcap.reader import make_reader
+
+from aerodaas.recording.segments import segment_path
+from aerodaas.reliability.procs import (REPO_APPS, actor_pids, mcap_reader_ok, no_crash, run_cli, summary_outcome,
+                                        wait_size)
 
 __all__ = ["ACCOUNTING_FAULTS", "file_losses", "summary_losses"]
 
@@ -25,8 +33,6 @@ def file_losses(paths: list[Path]) -> tuple[dict[str, int], list[str]]:
     reader alone: the last ``/run/accounting`` gives what the producers numbered; a channel loses what it lacks of
     that. ``problems``: a sequence number recorded twice on a channel with one producer, or one not below the
     producers' count, or no accounting at all."""
-    from mcap.reader import make_reader
-
     counts: dict[str, int] = {}
     seqs: dict[str, list[int]] = {}
     accounting = None
@@ -67,8 +73,6 @@ def summary_losses(out: str) -> dict[str, int]:
 
 
 def _segments(rec: Path) -> list[Path]:
-    from aerodaas.recording.segments import segment_path
-
     out, k = [rec], 1
     while segment_path(rec, k).exists():
         out.append(Path(segment_path(rec, k)))
@@ -78,16 +82,14 @@ def _segments(rec: Path) -> list[Path]:
 
 def accounting_verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: bool, what: str) -> dict:
     """Clean when the exit code and outcome match the file's truth and the summary's counts equal the file's."""
-    from aerodaas.reliability.faults import _no_crash, _summary_outcome, mcap_reader_ok
-
     segs = _segments(rec)
     readable = all(mcap_reader_ok(s)[0] for s in segs)
     lost, problems = file_losses(segs) if readable else ({}, ["a segment is not readable"])
     said = summary_losses(out)
-    truthful = (p.returncode == 4 and "recording_lost" in _summary_outcome(out)) if lost else \
-        (p.returncode == 0 and "success" in _summary_outcome(out))
-    clean = reached and readable and not problems and truthful and said == lost and extra_ok and _no_crash(out)
-    return {"observed": f"{what}; exit {p.returncode}, {_summary_outcome(out).strip() or 'no summary'}; "
+    truthful = (p.returncode == 4 and "recording_lost" in summary_outcome(out)) if lost else \
+        (p.returncode == 0 and "success" in summary_outcome(out))
+    clean = reached and readable and not problems and truthful and said == lost and extra_ok and no_crash(out)
+    return {"observed": f"{what}; exit {p.returncode}, {summary_outcome(out).strip() or 'no summary'}; "
                         f"{len(segs)} segment(s); the file lacks {sum(lost.values())} numbered messages "
                         f"({', '.join(f'{t} {n}' for t, n in lost.items()) or 'none'}), the summary says "
                         f"{sum(said.values())}" + (f"; {'; '.join(problems)}" if problems else ""),
@@ -97,12 +99,10 @@ def accounting_verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: boo
 def _recorder_stall(tmp: Path) -> dict:
     """SIGSTOP of the recorder actor for :data:`STALL_S` s mid-flight, then SIGCONT (the issue's stall: exit 0 and
     "success" with 517 of 1,288 frames recorded before)."""
-    from aerodaas.reliability.faults import REPO_APPS, _run, _wait_size, actor_pids
-
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
              start_new_session=True)
-    reached = _wait_size(rec, 20000, p)
+    reached = wait_size(rec, 20000, p)
     pids = actor_pids(p.pid, "RecorderActor") if reached else []
     for pid in pids:
         os.kill(pid, signal.SIGSTOP)
@@ -117,12 +117,10 @@ def _recorder_stall(tmp: Path) -> dict:
 def _recorder_killed_twice(tmp: Path) -> dict:
     """SIGKILL of the recorder actor, and again once its restart records into ``run.1.mcap``: both deaths are
     reported (only the second one was before) and the three segments account for every numbered message."""
-    from aerodaas.reliability.faults import REPO_APPS, _run, _wait_size, actor_pids
-
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
              start_new_session=True)
-    reached = _wait_size(rec, 20000, p)
+    reached = wait_size(rec, 20000, p)
     killed = []
     for seg in (rec.with_name("run.1.mcap"), None):
         pids = actor_pids(p.pid, "RecorderActor") if reached else []
@@ -130,7 +128,7 @@ def _recorder_killed_twice(tmp: Path) -> dict:
             os.kill(pid, signal.SIGKILL)
         killed += pids
         if seg is not None:
-            reached = reached and _wait_size(seg, 20000, p)
+            reached = reached and wait_size(seg, 20000, p)
     out, _ = p.communicate(timeout=900)
     deaths = len(re.findall(r"^  recording lost at t = .*: the recorder actor died", out, re.MULTILINE))
     return accounting_verdict(p, out, rec, reached and len(killed) == 2, deaths == 2,
@@ -169,9 +167,6 @@ def _stalled_client(port: int, proc: Any, want: str, limit_s: float = 300.0) -> 
     """Connect to the live view on ``port``, subscribe to every channel advertised until ``want`` is, then stop
     reading (its receive buffer 4 KiB). Returns (subscribed to ``want``, the socket, left open: the caller closes
     it once the run ended; None when it could not connect)."""
-    import base64
-    import socket
-
     t0 = time.monotonic()
     while time.monotonic() - t0 < limit_s and proc.poll() is None:
         try:
@@ -211,15 +206,11 @@ def _live_client_stalled(tmp: Path) -> dict:
     """``aerodaas run --live``: a client subscribes to every channel (the camera's too) and then stops reading. It is
     dropped (a ``live_client_dropped`` event in the recording) and never holds the run: the run ends with the
     summary's message count equal to the file's (it said "0 messages" after ~120 s before)."""
-    import socket
-
-    from aerodaas.reliability.faults import REPO_APPS, _run, mcap_reader_ok
-
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet",
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet",
               "--live", f"127.0.0.1:{port}"], start_new_session=True)
     sock = None
     try:
@@ -232,8 +223,6 @@ def _live_client_stalled(tmp: Path) -> dict:
     ok, n, _ = mcap_reader_ok(rec)
     dropped = 0
     if ok:
-        from mcap.reader import make_reader
-
         with open(rec, "rb") as f:
             dropped = sum(json.loads(m.data).get("event") == "live_client_dropped"
                           for _, _, m in make_reader(f).iter_messages(topics=["/run/events"]))
@@ -248,12 +237,10 @@ def _analytics_killed_twice(tmp: Path) -> dict:
     """SIGKILL of the monitoring analytics' actor, and again once Ray restarted it (its one restart used up): the
     issue's run said success with 163 of 880 outputs recorded and no line for the analytics; now its output channel
     loses what its senders offered it and it never recorded."""
-    from aerodaas.reliability.faults import REPO_APPS, _run, _wait_size, actor_pids
-
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
              start_new_session=True)
-    reached = _wait_size(rec, 20000, p)
+    reached = wait_size(rec, 20000, p)
     killed: list[int] = []
     for _ in range(2):
         t0 = time.monotonic()  # the next victim: an analytics actor process not killed yet (Ray's restart)

@@ -18,13 +18,24 @@ Each row: ``{"kind", "category", "name", "refused", "message"}`` as in
 from __future__ import annotations
 
 import contextlib
+import copy
 import io
+import json
 import sys
 import uuid
 from pathlib import Path
 from typing import Any, Callable
 
-from aerodaas.reliability.cli_cases import _app
+import numpy as np
+
+from aerodaas import cli
+from aerodaas.config import ConfigError, RobotConfig, parse_environment_config
+from aerodaas.missionfile import MissionFileError, load_mission
+from aerodaas.model.types import VelocityCommand, Waypoint
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.reliability.cli_cases import _app, base_env, run_cli_cases
+from aerodaas.tools import hitl
 
 __all__ = ["APP_VALUE_CASES", "OUTPUT_PATH_CASES", "PLUGIN_MODULES", "plugin_cases", "run_app_cases"]
 
@@ -115,17 +126,13 @@ def _record_into_named(kind: str) -> Callable[[Path], list[str]]:
     """argv of ``aerodaas run --record F --overwrite`` where F is a file the environment names: the ground image
     (``ground``) or a recorded camera's MCAP, itself a recording of ours (``camera``)."""
     def make(t: Path) -> list[str]:
-        import numpy as np
-
         if kind == "ground":
-            import cv2
+            import cv2  # lazy: heavy dependency (OpenCV)
 
             target = t / "ground.png"
             cv2.imwrite(str(target), np.full((32, 32, 3), 90, np.uint8))
             env: dict[str, Any] = {"robots": [{"id": "d1"}], "world": {"ground": {"image": target.name}}}
         else:
-            from aerodaas.recording.writer import McapRecorder
-
             target = t / "camera.mcap"
             with McapRecorder(target) as rec:
                 rec.write_image("/d1/camera/cam", 1, np.zeros((8, 8, 3), np.uint8))
@@ -228,12 +235,6 @@ def plugin_cases(tag: str) -> list[tuple[str, Callable[[dict], None], str]]:
 
 
 def _plugin_rows(tmp: Path) -> list[dict[str, Any]]:
-    import copy
-    import json
-
-    from aerodaas.config import ConfigError, parse_environment_config
-    from aerodaas.reliability.catalogue import base_env
-
     tag = uuid.uuid4().hex[:8]
     folder = tmp / f"plugins_{tag}"
     folder.mkdir()
@@ -258,8 +259,6 @@ def _plugin_rows(tmp: Path) -> list[dict[str, Any]]:
 
 
 def _wpl_row(tmp: Path) -> dict[str, Any]:
-    from aerodaas.missionfile import MissionFileError, load_mission
-
     rows = ["QGC WPL 110", "0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5456\t488\t1"]
     rows += [f"{seq}\t0\t3\t16\t0\t0\t0\t0\t47.3978\t8.5456\t20\t1" for seq in (1, 1, 5)]
     p = tmp / "numbered_1_1_5.waypoints"
@@ -274,10 +273,6 @@ def _wpl_row(tmp: Path) -> dict[str, Any]:
 
 
 def _gate_rows() -> list[dict[str, Any]]:
-    from aerodaas.model.types import VelocityCommand, Waypoint
-    from aerodaas.config import RobotConfig
-    from aerodaas.navigation.safety import SafetyGate, SafetyViolation
-
     r = RobotConfig.model_validate({"id": "r"})
     gate = SafetyGate(r.safety, r.limits, r.home)
     rows = []
@@ -304,9 +299,6 @@ def _gate_rows() -> list[dict[str, Any]]:
 def _inject_rows() -> list[dict[str, Any]]:
     """``aerodaas inject`` with a token and a waypoint that start with '-' (argparse read them as options: about one
     token in 64 failed): the request must carry them as given. The HTTP call is captured, not sent."""
-    from aerodaas import cli
-    from aerodaas.tools import hitl
-
     token = "-" + "t0k3n" * 5
     sent: list = []
     saved = hitl.request
@@ -336,8 +328,6 @@ def _inject_rows() -> list[dict[str, Any]]:
 
 def run_app_cases(tmp: Path) -> list[dict[str, Any]]:
     """Every case of this module (files written under ``tmp``)."""
-    from aerodaas.reliability.cli_cases import run_cli_cases
-
     rows = []
     for name, make, code, expect, category in APP_VALUE_CASES + OUTPUT_PATH_CASES:
         rows += run_cli_cases([(name, make, code, expect)], category)

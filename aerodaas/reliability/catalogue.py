@@ -11,22 +11,35 @@ table and the suite cannot drift apart.
 """
 from __future__ import annotations
 
+import argparse
 import copy
 import dataclasses
 import json
 import math
 import os
+import random
+import struct
 import tempfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from aerodaas.config import ConfigError, parse_environment_config
+from aerodaas.recording.record_path import check_record_path
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.reliability.app_cases import run_app_cases
+from aerodaas.reliability.cli_cases import base_env, run_cli_cases
+from aerodaas.reliability.faults import render, run_faults
+from aerodaas.reliability.file_cases import run_file_cases
+from aerodaas.reliability.flight import Excursion, fly_commands, random_commands
+from aerodaas.reliability.hitl_probe import run_hitl_cases
+from aerodaas.reliability.input_report import guarded, summarize
+
 __all__ = ["InputCase", "ENV_CASES", "PATH_CASES", "base_env", "check_env_case", "check_path_case", "main"]
-
-
-def base_env() -> dict:
-    """A valid environment: one simulated drone with a camera and odometry."""
-    return {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}, {"id": "odom", "type": "odometry"}]}]}
 
 
 @dataclass(frozen=True)
@@ -54,8 +67,7 @@ def _cam(d: dict) -> dict:
 
 
 def _png(tmp: Path, w: int = 64, h: int = 48) -> str:
-    import cv2
-    import numpy as np
+    import cv2  # lazy: heavy dependency (OpenCV)
 
     p = tmp / f"img_{w}x{h}.png"
     cv2.imwrite(str(p), np.full((h, w, 3), 128, np.uint8))
@@ -65,9 +77,6 @@ def _png(tmp: Path, w: int = 64, h: int = 48) -> str:
 def _png_bomb(tmp: Path, w: int = 100_000, h: int = 100_000) -> str:
     """A PNG "decompression bomb": a valid 8-bit grey PNG whose header declares ``w`` x ``h`` pixels (10 GB decoded)
     in a file of a few hundred bytes (its data holds the first rows only: the header alone must refuse it)."""
-    import struct
-    import zlib
-
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
@@ -79,10 +88,6 @@ def _png_bomb(tmp: Path, w: int = 100_000, h: int = 100_000) -> str:
 
 def _tlog_without_position(tmp: Path) -> str:
     """A MAVLink telemetry log holding only autopilot HEARTBEATs (written with pymavlink): nothing to replay."""
-    import struct
-
-    from pymavlink.dialects.v20 import ardupilotmega as mav
-
     p = tmp / "heartbeats.tlog"
     link = mav.MAVLink(None, srcSystem=1, srcComponent=1)
     with open(p, "wb") as f:
@@ -97,10 +102,6 @@ def _replay_camera(tmp: Path, recording: bool) -> dict:
     ours whose only camera channel is another robot's (its own topic absent)."""
     p = tmp / ("other.mcap" if recording else "notes.mcap")
     if recording:
-        import numpy as np
-
-        from aerodaas.recording.writer import McapRecorder
-
         with McapRecorder(p) as rec:
             rec.write_image("/other/camera/cam", 1, np.zeros((8, 8, 3), np.uint8))
     else:
@@ -310,8 +311,6 @@ PATH_CASES: list[tuple[str, Callable[[Path], str], str]] = [
 
 def check_env_case(case: InputCase, tmp: Path) -> tuple[bool, str]:
     """(refused with the expected field named, message) for one environment case."""
-    from aerodaas.config import ConfigError, parse_environment_config
-
     d = copy.deepcopy(base_env())
     case.mutate(d, tmp)
     d = json.loads(json.dumps(d))  # what a file would hold (Infinity/NaN survive as JSON extensions)
@@ -324,8 +323,6 @@ def check_env_case(case: InputCase, tmp: Path) -> tuple[bool, str]:
 
 def check_path_case(make: Callable[[Path], str], expect: str, tmp: Path) -> tuple[bool, str]:
     """(refused with the expected reason and nothing created, message) for one ``--record`` path."""
-    from aerodaas.recording.record_path import check_record_path
-
     path = make(tmp)
     before = Path(path).parent.exists()
     try:
@@ -339,8 +336,6 @@ def check_path_case(make: Callable[[Path], str], expect: str, tmp: Path) -> tupl
 def run_inputs() -> dict[str, Any]:
     """Run every input case, each (or each batch) under :func:`aerodaas.reliability.input_report.guarded`; returns
     the rows (with their category) and the counts: tried, refused, accepted wrongly, tracebacks, hangs."""
-    from aerodaas.reliability.input_report import guarded, summarize
-
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as td:
         tmp = Path(td)
@@ -357,15 +352,11 @@ def run_inputs() -> dict[str, Any]:
                 return [{"kind": "--record path", "name": name, "refused": ok, "message": msg}]
 
             rows += guarded(path_row, "--record path", name, "output paths", 120.0)
-        from aerodaas.reliability.app_cases import run_app_cases
-        from aerodaas.reliability.file_cases import run_file_cases
 
         # malformed JSON files, mission files and uploads, safety-gate probes
         rows += guarded(lambda: run_file_cases(tmp), "file", "file, mission and gate cases", "files and images", 1800.0)
         # app values, plug-in imports, output paths, WPL numbering, the gate's own check, `aerodaas inject`
         rows += guarded(lambda: run_app_cases(tmp), "application", "issue 40 cases", "app-level errors", 900.0)
-    from aerodaas.reliability.cli_cases import run_cli_cases
-    from aerodaas.reliability.hitl_probe import run_hitl_cases
 
     # flags refused before Ray (exit 2), the app's own exceptions (exit 1, its traceback)
     rows += guarded(run_cli_cases, "command line", "command-line cases", "command line", 900.0)
@@ -376,10 +367,6 @@ def run_inputs() -> dict[str, Any]:
 def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
     """``n`` seeded random command sequences (half ``reject``, half ``clamp``) plus the issue's attacks, flown on the
     simulator's vehicle behind the safety gate (:mod:`aerodaas.reliability.flight`); the worst excursions."""
-    import random
-
-    from aerodaas.reliability.flight import Excursion, fly_commands, random_commands
-
     total, outside = Excursion(), 0
     seqs = [random_commands(random.Random(seed + i)) for i in range(n)]
     seqs += [[("vel", 3.0, 0.0, 0.0, 0.5, 5)] * 80, [("vel", 2.0, 1.2, 0.0, 0.5, 5)] * 80,
@@ -394,8 +381,6 @@ def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import argparse
-
     p = argparse.ArgumentParser(prog="python -m aerodaas.reliability", description=__doc__.splitlines()[0])
     p.add_argument("--out", help="write the Markdown report here (default: print it)")
     p.add_argument("--no-faults", action="store_true", help="only the input cases (no runs)")
@@ -404,10 +389,7 @@ def main(argv: list[str] | None = None) -> int:
     flights = run_flights()
     faults = None
     if not args.no_faults:
-        from aerodaas.reliability.faults import run_faults
-
         faults = run_faults()
-    from aerodaas.reliability.faults import render
 
     text = render(inputs, faults, flights)
     if args.out:

@@ -7,8 +7,13 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import socket
+import tempfile
 from pathlib import Path
 from typing import Any, Callable
+
+from aerodaas import cli
+from aerodaas.runtime import driver as runtime, ray_start
 
 __all__ = ["CLI_CASES", "run_cli_cases"]
 
@@ -21,6 +26,11 @@ drone.start_mission()
 """
 
 
+def base_env() -> dict:
+    """A valid environment: one simulated drone with a camera and odometry."""
+    return {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}, {"id": "odom", "type": "odometry"}]}]}
+
+
 def _app(tmp: Path, text: str | None = None, env: dict | None = None) -> str:
     e = tmp / "cli_env.json"
     e.write_text(json.dumps(env or {"robots": [{"id": "d1"}]}))
@@ -30,8 +40,6 @@ def _app(tmp: Path, text: str | None = None, env: dict | None = None) -> str:
 
 
 def _busy_hitl(tmp: Path) -> list[str]:
-    import socket
-
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
     s.listen()
@@ -70,12 +78,6 @@ def run_cli_cases(cases: list | None = None, category: str | None = None) -> lis
     "name", "refused", "message", "traceback"}`` (``refused``: the expected exit code, the expected text, Ray never
     started, and a traceback exactly for the app's own errors; ``traceback``: one printed where none belongs).
     ``category``: the rows' report group (default: "command line" for exit 2, "app-level errors" for exit 1)."""
-    import tempfile
-
-    from aerodaas import cli
-    from aerodaas.runtime import driver as runtime
-    from aerodaas.runtime import ray_start
-
     rows = []
     saved = (ray_start.init_ray, ray_start.start_ray_early, runtime.shutdown_ray)
     started: list = []

@@ -15,12 +15,20 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting_verdict
+from mcap.reader import make_reader
+
 from aerodaas.clusters.reaper import descendants, start_time
+from aerodaas.config.robot import sensor_class
+from aerodaas.plugins.sensor import FrameSensor
+from aerodaas.recording.writer import McapRecorder, read_messages, summarize_mcap
+from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting_verdict
+from aerodaas.reliability.input_report import render_input_rows, render_inputs
+from aerodaas.reliability.procs import (REPO_APPS, actor_pids, argv0, mcap_reader_ok, no_crash, run_cli,  # noqa: F401
+                                       summary_outcome, wait_size)
+from aerodaas.tools.hitl import request
 
 __all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
 
-REPO_APPS = Path(__file__).resolve().parents[2] / "apps"
 
 FAILING_APP = '''
 from aerodaas import *
@@ -49,43 +57,6 @@ result = drone.start_mission()
 '''
 
 
-def mcap_reader_ok(path: str | Path) -> tuple[bool, int, str]:
-    """(mcap's standard seeking reader accepts the file: summary present and every message iterable, message count,
-    reason). The reader is the ``mcap`` package's, not ours."""
-    from mcap.reader import make_reader
-
-    try:
-        with open(path, "rb") as f:
-            r = make_reader(f)
-            summ = r.get_summary()
-            if summ is None:
-                return False, 0, "no summary (unfinished file)"
-            n = sum(1 for _ in r.iter_messages())
-            return n == summ.statistics.message_count, n, "ok"
-    except Exception as e:  # noqa: BLE001 - any reader failure is the verdict
-        return False, 0, f"{type(e).__name__}: {e}"
-
-
-def _run(args: list[str], env: dict | None = None, **kw: Any) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "aerodaas.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})}, **kw)
-
-
-def _wait_size(path: Path, size: int, proc: subprocess.Popen, limit_s: float = 480.0) -> bool:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < limit_s:
-        if proc.poll() is not None:
-            return False
-        if path.exists() and path.stat().st_size >= size:
-            return True
-        time.sleep(0.1)
-    return False
-
-
-def _no_crash(out: str) -> bool:
-    return "Traceback" not in out and "Aborted" not in out and "core dumped" not in out
-
-
 #: a run stopped by a signal or ``--timeout`` ends within this (s) of it, at any speedup the config allows
 STOP_WITHIN_S = 60.0
 
@@ -93,10 +64,10 @@ STOP_WITHIN_S = 60.0
 def _signal_case(sig: int, min_size: int, group: bool = False, speedup: float = 1.0) -> Callable[[Path], dict]:
     def run(tmp: Path) -> dict:
         rec = tmp / "run.mcap"
-        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", f"{speedup:g}",
+        p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", f"{speedup:g}",
                   "--quiet"], start_new_session=True,
                  preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-        reached = _wait_size(rec, min_size, p)
+        reached = wait_size(rec, min_size, p)
         if group:
             os.killpg(p.pid, sig)
         else:
@@ -107,11 +78,9 @@ def _signal_case(sig: int, min_size: int, group: bool = False, speedup: float = 
         ok, n, why = mcap_reader_ok(rec)
         outcome = None
         if rec.exists():
-            from aerodaas.recording.writer import summarize_mcap
-
             outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
         want = 128 + sig
-        clean = reached and p.returncode == want and ok and _no_crash(out) and took <= STOP_WITHIN_S
+        clean = reached and p.returncode == want and ok and no_crash(out) and took <= STOP_WITHIN_S
         late = "" if reached else " (the run had not reached the phase to interrupt: machine too loaded)"
         return {"observed": f"exit {p.returncode} {took:.1f} s after the signal, recording "
                             f"{'finished' if ok else why} ({n} msgs), outcome {outcome}{late}", "clean": clean,
@@ -130,16 +99,16 @@ def _timeout_case(speedup: float, timeout_s: float, in_app: bool = False) -> Cal
         app.write_text(src.replace("start_mission()", f"start_mission(timeout={timeout_s!r})") if in_app else src)
         (tmp / "farm_survey.json").write_text((REPO_APPS / "farm_survey.json").read_text())
         flag = [] if in_app else ["--timeout", f"{timeout_s:g}"]
-        p = _run(["run", str(app), "--record", str(rec), "--speedup", f"{speedup:g}", *flag, "--quiet"],
+        p = run_cli(["run", str(app), "--record", str(rec), "--speedup", f"{speedup:g}", *flag, "--quiet"],
                  start_new_session=True)
         t0 = time.monotonic()
-        if _wait_size(rec, 1, p):
+        if wait_size(rec, 1, p):
             t0 = time.monotonic()
         out, _ = p.communicate(timeout=timeout_s + 600)
         took = time.monotonic() - t0
         ok, n, why = mcap_reader_ok(rec)
         said = "mission outcome: timeout" in out
-        clean = p.returncode == 1 and said and ok and _no_crash(out) and took <= timeout_s + STOP_WITHIN_S
+        clean = p.returncode == 1 and said and ok and no_crash(out) and took <= timeout_s + STOP_WITHIN_S
         return {"observed": f"exit {p.returncode} {took:.1f} s after the recording opened (timeout {timeout_s:g} s), "
                             f"outcome timeout {said}, recording {'finished' if ok else why} ({n} msgs)", "clean": clean,
                 "exit": p.returncode, "output": out[-3000:]}
@@ -149,12 +118,12 @@ def _timeout_case(speedup: float, timeout_s: float, in_app: bool = False) -> Cal
 def _disk_case(kind: str, after_bytes: int) -> Callable[[Path], dict]:
     def run(tmp: Path) -> dict:
         rec = tmp / "run.mcap"
-        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
+        p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
                  env={"AERODAAS_FAULT_RECORDER": f"{kind}:{after_bytes}"})
         out, _ = p.communicate(timeout=600)
         ok, n, why = mcap_reader_ok(rec)
         said = "recording: FAILED" in out and "not recorded" in out
-        clean = p.returncode == 1 and ok and said and _no_crash(out)
+        clean = p.returncode == 1 and ok and said and no_crash(out)
         line = next((ln.strip() for ln in out.splitlines() if "recording:" in ln), "(no recording line)")
         return {"observed": f"exit {p.returncode}, recording {'finished' if ok else why} ({n} msgs); summary: "
                             f"{line[:160]}", "clean": clean, "exit": p.returncode, "output": out[-3000:]}
@@ -164,8 +133,6 @@ def _disk_case(kind: str, after_bytes: int) -> Callable[[Path], dict]:
 def _analytics_case(on_error: str) -> Callable[[Path], dict]:
     def run(tmp: Path) -> dict:
         env = json.loads((REPO_APPS / "farm_survey.json").read_text())
-        from aerodaas.config.robot import sensor_class
-        from aerodaas.plugins.sensor import FrameSensor
 
         env["robots"][0]["sensors"] = [s for s in env["robots"][0]["sensors"]
                                        if not issubclass(sensor_class(s["type"]), FrameSensor)]
@@ -173,10 +140,9 @@ def _analytics_case(on_error: str) -> Callable[[Path], dict]:
         app = tmp / "flaky_app.py"
         app.write_text(FAILING_APP.replace("ENV", repr(str(tmp / "env.json"))).replace("ON_ERROR", repr(on_error)))
         rec = tmp / "run.mcap"
-        p = _run(["run", str(app), "--record", str(rec), "--speedup", "20", "--quiet"])
+        p = run_cli(["run", str(app), "--record", str(rec), "--speedup", "20", "--quiet"])
         out, _ = p.communicate(timeout=600)
         ok, n, why = mcap_reader_ok(rec)
-        from aerodaas.recording.writer import read_messages, summarize_mcap
 
         events = [m for _, _, _, m in read_messages(rec, ["/quadrotor_base/events"])
                   if m.get("event") == "analytics_error"] if rec.exists() else []
@@ -198,9 +164,9 @@ def _analytics_case(on_error: str) -> Callable[[Path], dict]:
 
 def _sigkill_recover(tmp: Path) -> dict:
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "1", "--quiet"],
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "1", "--quiet"],
              start_new_session=True)
-    reached = _wait_size(rec, 30000, p)
+    reached = wait_size(rec, 30000, p)
     os.killpg(p.pid, signal.SIGKILL)
     p.communicate(timeout=60)
     last, t0 = -1, time.monotonic()  # Ray's worker holding the recorder dies with its parent: wait for the file
@@ -211,7 +177,6 @@ def _sigkill_recover(tmp: Path) -> dict:
         last = size
         time.sleep(3.0)
     before_ok, _, before_why = mcap_reader_ok(rec)
-    from aerodaas.recording.writer import summarize_mcap
 
     seen = summarize_mcap(rec)["message_count"] if rec.exists() else 0
     r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "recover", str(rec)], capture_output=True, text=True,
@@ -226,8 +191,8 @@ def _kill_mid_run(args: list[str], rec: Path, min_size: int, targets: Callable[[
                   timeout_s: float = 600.0) -> tuple[subprocess.Popen, str, bool, list[int]]:
     """``aerodaas run *args`` (its own session); once ``rec`` holds ``min_size`` bytes, SIGKILL the pids
     ``targets(driver pid)`` names, then wait for the run. Returns (process, output, reached, pids killed)."""
-    p = _run(["run", *args, "--record", str(rec), "--quiet"], start_new_session=True)
-    reached = _wait_size(rec, min_size, p)
+    p = run_cli(["run", *args, "--record", str(rec), "--quiet"], start_new_session=True)
+    reached = wait_size(rec, min_size, p)
     pids = targets(p.pid) if reached else []
     for pid in pids:
         os.kill(pid, signal.SIGKILL)
@@ -270,7 +235,6 @@ def _frames_without_detections(rec: Path) -> list[int]:
     ok, _, _ = mcap_reader_ok(rec)
     if not ok:
         return []
-    from mcap.reader import make_reader
 
     times: dict[str, list[int]] = {}
     with open(rec, "rb") as f:
@@ -280,17 +244,9 @@ def _frames_without_detections(rec: Path) -> list[int]:
     return [i for i, t in enumerate(times.get("/quadrotor_base/camera/cam1", [])) if t not in dets]
 
 
-def _argv0(pid: int) -> str | None:
-    """The first word of ``pid``'s command line (Ray titles its workers ``ray::<Class>...``), None when gone."""
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0].decode(errors="replace")
-    except OSError:
-        return None
-
-
 def _raylets(root: int) -> list[int]:
     """Pids of the raylet processes below ``root``."""
-    return [pid for pid in descendants(root) if (_argv0(pid) or "").rsplit("/", 1)[-1] == "raylet"]
+    return [pid for pid in descendants(root) if (argv0(pid) or "").rsplit("/", 1)[-1] == "raylet"]
 
 
 def _raylet_kill(tmp: Path) -> dict:
@@ -319,12 +275,12 @@ def _driver_sigkill(tmp: Path) -> dict:
     """SIGKILL of the driver alone (as the OOM killer does) mid-flight: every process below it -- Ray's GCS,
     raylet, dashboard and runtime-env agents, the workers -- must be gone soon after, the reaper included."""
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
              start_new_session=True)
-    reached = _wait_size(rec, 20000, p)
+    reached = wait_size(rec, 20000, p)
     procs = {}
     for pid in descendants(p.pid):
-        t, cmd = start_time(pid), _argv0(pid)
+        t, cmd = start_time(pid), argv0(pid)
         if t is not None and cmd is not None:
             procs[pid] = (t, cmd)
     p.kill()
@@ -345,12 +301,6 @@ def _driver_sigkill(tmp: Path) -> dict:
             "clean": clean, "gone_s": gone_s}
 
 
-def actor_pids(root: int, actor_class: str) -> list[int]:
-    """Pids of the Ray worker processes below ``root`` that hold an actor of ``actor_class`` (Ray titles them
-    ``ray::<Class>``)."""
-    return [pid for pid in descendants(root) if (_argv0(pid) or "").startswith(f"ray::{actor_class}")]
-
-
 def _recorder_kill(tmp: Path) -> dict:
     """SIGKILL of the recorder actor's process mid-run: the run must say "recording lost at t = ...", exit 4, the
     recorder go on in ``run.1.mcap``, and ``aerodaas recover run.mcap`` join both into one readable file."""
@@ -368,11 +318,9 @@ def _recorder_kill(tmp: Path) -> dict:
     ok, n, why = mcap_reader_ok(rec)
     outcome = None
     if ok:
-        from aerodaas.recording.writer import summarize_mcap
-
         outcome = (summarize_mcap(rec).get("mission") or {}).get("outcome")
-    clean = (reached and len(pids) == 1 and p.returncode == 4 and said and "success" not in _summary_outcome(out)
-             and ok0 and ok1 and r.returncode == 0 and ok and n == n0 + n1 and not seg1.exists() and _no_crash(out)
+    clean = (reached and len(pids) == 1 and p.returncode == 4 and said and "success" not in summary_outcome(out)
+             and ok0 and ok1 and r.returncode == 0 and ok and n == n0 + n1 and not seg1.exists() and no_crash(out)
              and summed == (n0 + n1, n0, n1) and outcome == "recording_lost")
     return {"observed": f"exit {p.returncode}, says 'recording lost at t = ...' {said}; segments: run.mcap "
                         f"{'finished' if ok0 else why0} ({n0} msgs), run.1.mcap {'finished' if ok1 else why1} ({n1} "
@@ -387,7 +335,7 @@ def _signal_after_summary(sig: int) -> Callable[[Path], dict]:
     exit code stays the mission's (0 for the survey)."""
     def run(tmp: Path) -> dict:
         rec = tmp / "run.mcap"
-        p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
+        p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "20", "--quiet"],
                  start_new_session=True)
         lines, sent = [], 0
         assert p.stdout is not None
@@ -402,7 +350,7 @@ def _signal_after_summary(sig: int) -> Callable[[Path], dict]:
         out = "".join(lines) + rest
         ok, n, why = mcap_reader_ok(rec)
         success = "mission outcome: success" in out
-        clean = sent >= 1 and success and p.returncode == 0 and ok and _no_crash(out) and \
+        clean = sent >= 1 and success and p.returncode == 0 and ok and no_crash(out) and \
             "KeyboardInterrupt" not in out
         return {"observed": f"{sent} signal(s) after the summary; exit {p.returncode}, outcome success {success}, "
                             f"KeyboardInterrupt {'KeyboardInterrupt' in out}, recording "
@@ -415,10 +363,8 @@ def _hitl_clear_all(tmp: Path) -> dict:
     """The farm survey with the HITL API: once the drone has reached its first waypoint, a ``clear`` with a null
     body (refused, 422) and then ``{"scope": "all"}``: the pre-planned survey is gone, so the run must not report
     success (outcome incomplete, exit 1), and the summary says how many of the 4 waypoints were flown."""
-    from aerodaas.tools.hitl import request
-
     rec = tmp / "run.mcap"
-    p = _run(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet", "--hitl",
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "4", "--quiet", "--hitl",
               "--hitl-port", "0"], env={"AERODAAS_STATE_DIR": str(tmp / "state")})
     assert p.stdout is not None
     lines, url, token = [], None, None
@@ -445,25 +391,17 @@ def _hitl_clear_all(tmp: Path) -> dict:
         time.sleep(0.5)
     rest, _ = p.communicate(timeout=600)
     out = "".join(lines) + rest
-    outcome = _summary_outcome(out)
+    outcome = summary_outcome(out)
     m = re.search(r"waypoints (\d+)/(\d+)", out)
     flown = f"{m.group(1)}/{m.group(2)}" if m else "?"
     clean = (null_status == 422 and clear_status == 200 and p.returncode == 1 and "incomplete" in outcome and
-             m is not None and int(m.group(1)) < int(m.group(2)) and _no_crash(out))
+             m is not None and int(m.group(1)) < int(m.group(2)) and no_crash(out))
     return {"observed": f"clear null body {null_status}, clear scope all {clear_status} after {visited} waypoint(s); "
                         f"exit {p.returncode}, {outcome.strip() or 'no summary'}, waypoints {flown}", "clean": clean,
             "exit": p.returncode, "output": out[-3000:]}
 
 
-def _summary_outcome(out: str) -> str:
-    """The summary's ``mission outcome: ...`` word plus 'ok' when the run was reported as a success."""
-    line = next((ln for ln in out.splitlines() if ln.startswith("mission outcome:")), "")
-    return line
-
-
 def _broken_pipe(tmp: Path) -> dict:
-    from aerodaas.recording.writer import McapRecorder
-
     rec = tmp / "small.mcap"
     with McapRecorder(rec) as r:
         for i in range(50):
@@ -537,8 +475,6 @@ def run_faults() -> dict[str, Any]:
 
 def render(inputs: dict[str, Any], faults: dict[str, Any] | None, extra: dict[str, Any] | None = None) -> str:
     """The Markdown of ``docs/reliability.md``."""
-    from aerodaas.reliability.input_report import render_input_rows, render_inputs
-
     lines = ["# Reliability: bad inputs and injected faults", "",
              "Regenerated by `python -m aerodaas.reliability --out docs/reliability.md` (the same cases run as "
              "tests: `python -m pytest -m faults tests`).", "",

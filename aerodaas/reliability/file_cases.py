@@ -15,6 +15,13 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from aerodaas import cli
+from aerodaas.config import ConfigError, RobotConfig, load_environment_config
+from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.missionfile import load_mission, plan_to_flight
+from aerodaas.model.types import GeoPoint, VelocityCommand, Waypoint
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+
 __all__ = ["JSON_FILE_CASES", "MISSION_CASES", "run_file_cases", "big_plan", "big_wpl"]
 
 HOME = (47.3977, 8.5456, 488.0)
@@ -81,8 +88,6 @@ MISSION_CASES: list[tuple[str, str, Callable[[], str], list[str], str | None]] =
 
 
 def _json_file_row(name: str, data: bytes, expect: str, tmp: Path) -> dict[str, Any]:
-    from aerodaas.config import ConfigError, load_environment_config
-
     p = tmp / "env.json"
     p.write_bytes(data)
     try:
@@ -95,11 +100,6 @@ def _json_file_row(name: str, data: bytes, expect: str, tmp: Path) -> dict[str, 
 
 
 def _upload_row(name: str, fname: str, text: str, flags: list[str], expect: str, tmp: Path) -> dict[str, Any]:
-    from aerodaas import cli
-
-    from aerodaas.model.types import GeoPoint
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-
     f = tmp / fname
     f.write_text(text)
     err = io.StringIO()
@@ -123,8 +123,6 @@ def _upload_row(name: str, fname: str, text: str, flags: list[str], expect: str,
 
 
 def _big_file_row(name: str, fname: str, text: str, tmp: Path) -> dict[str, Any]:
-    from aerodaas.missionfile import load_mission, plan_to_flight
-
     f = tmp / fname
     f.write_text(text)
     t0 = time.perf_counter()
@@ -137,10 +135,6 @@ def _big_file_row(name: str, fname: str, text: str, tmp: Path) -> dict[str, Any]
 
 
 def _gate_rows() -> list[dict[str, Any]]:
-    from aerodaas.model.types import VelocityCommand, Waypoint
-    from aerodaas.config import RobotConfig
-    from aerodaas.navigation.safety import SafetyGate, SafetyViolation
-
     r = RobotConfig.model_validate({"id": "r", "home": dict(zip(("lat", "lon", "alt"), HOME)),
                                     "safety": {"max_distance": 500.0}})
     gate = SafetyGate(r.safety, r.limits, r.home)

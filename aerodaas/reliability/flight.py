@@ -10,6 +10,14 @@ import random
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
+import pymap3d
+from shapely.geometry import Point
+
+from aerodaas.config import RobotConfig
+from aerodaas.model.types import VelocityCommand, Waypoint
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
+from aerodaas.sim.vehicle import SimVehicle
+
 __all__ = ["PROBE_ENV", "Excursion", "fly_commands", "random_commands"]
 
 #: the probe's robot: 3 m/s, 2 m/s² (the issue's velocity attack), a 60 m square inclusion fence around home with an
@@ -18,10 +26,6 @@ PROBE_HOME = (47.3977, 8.5456, 488.0)
 
 
 def _probe_robot(on_violation: str = "reject") -> Any:
-    import pymap3d
-
-    from aerodaas.config import RobotConfig
-
     def ll(e: float, n: float) -> list[float]:
         lat, lon, _ = pymap3d.enu2geodetic(e, n, 0.0, *PROBE_HOME)
         return [lat, lon]
@@ -87,11 +91,6 @@ class _ProbeFlight:
     gate's control ticks, and the excursions measured at every physics step."""
 
     def __init__(self, cfg: Any, physics_hz: float) -> None:
-        from shapely.geometry import Point
-
-        from aerodaas.navigation.safety import SafetyGate
-        from aerodaas.sim.vehicle import SimVehicle
-
         self.point = Point
         self.cfg = cfg
         self.gate = SafetyGate(cfg.safety, cfg.limits, cfg.home, control_period_s=1.0 / cfg.control_rate_hz)
@@ -134,9 +133,6 @@ class _ProbeFlight:
 
     def waypoint(self, x: float, y: float, z: float, ticks: int) -> None:
         """A waypoint, checked once by the gate when it becomes active (refused: the vehicle holds)."""
-        from aerodaas.model.types import Waypoint
-        from aerodaas.navigation.safety import SafetyViolation
-
         veh, wp = self.veh, Waypoint(id="w", x=x, y=y, z=z)
         try:
             wp = self.gate.check_waypoint(wp, tuple(veh.state.position), tuple(veh.state.velocity))
@@ -150,9 +146,6 @@ class _ProbeFlight:
     def velocity(self, vx: float, vy: float, vz: float, duration_s: float, ticks: int) -> None:
         """A velocity command re-checked at every tick (as the drone does) until it expires after ``duration_s``
         or is refused; then the vehicle holds."""
-        from aerodaas.model.types import VelocityCommand
-        from aerodaas.navigation.safety import SafetyViolation
-
         cmd, veh, ex = VelocityCommand(vx=vx, vy=vy, vz=vz, duration=duration_s), self.veh, self.ex
         left, live = [duration_s], [True]
 

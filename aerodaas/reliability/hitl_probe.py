@@ -12,6 +12,11 @@ import threading
 from types import SimpleNamespace
 from typing import Any
 
+from aerodaas.actors.scheduler_component import SchedulerComponent
+from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.schedulers import NearestNeighborScheduler
+from aerodaas.tools.hitl import HitlServer
+
 __all__ = ["run_hitl_cases"]
 
 _TOKEN = "p" * 24
@@ -58,11 +63,6 @@ def _send(port: int, method: str, path: str, body: Any = None, chunked: bool = F
 
 def run_hitl_cases() -> list[dict[str, Any]]:
     """Rows ``{"kind": "HITL API", "name", "refused", "message"}`` (``refused``: answered as documented)."""
-    from aerodaas.actors.scheduler_component import SchedulerComponent
-    from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
-    from aerodaas.schedulers import NearestNeighborScheduler
-    from aerodaas.tools.hitl import HitlServer
-
     rows: list[dict[str, Any]] = []
 
     def row(name: str, ok: bool, msg: str) -> None:

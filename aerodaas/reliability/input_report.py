@@ -5,6 +5,7 @@ and the Markdown tables (:func:`render_inputs`, :func:`render_input_rows`). Used
 from __future__ import annotations
 
 import re
+import signal
 import threading
 import traceback
 from typing import Any, Callable
@@ -33,8 +34,6 @@ def guarded(run: Callable[[], list[dict[str, Any]]], kind: str, name: str, categ
     with traceback=True; no answer within ``timeout_s`` seconds one row with hang=True. ``run`` runs in this thread
     (``aerodaas run`` installs signal handlers, which only the main thread may): the limit is a SIGALRM timer
     (``signal.setitimer``), none off the main thread."""
-    import signal
-
     timed = threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
 
     def on_alarm(signum: int, frame: Any) -> None:

@@ -41,19 +41,28 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import re
 import secrets
+import ssl
 import threading
 import time
+import urllib.error
+import urllib.request
 from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from aerodaas.clusters.tls import state_dir, write_private_json
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.navigation.safety import SafetyViolation
 
 __all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
 
@@ -61,8 +70,6 @@ __all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
 def state_file() -> Path:
     """Where a running server publishes its url and token: ``$AERODAAS_STATE_DIR/hitl.json``
     (:func:`aerodaas.clusters.tls.state_dir`)."""
-    from aerodaas.clusters.tls import state_dir
-
     return state_dir() / "hitl.json"
 
 
@@ -108,8 +115,6 @@ class ClearRequest(BaseModel):
 def _json_safe(v: Any, depth: int = 0) -> Any:
     """An echo of request input that JSON can carry: non-finite floats as strings, long strings and deep or long
     containers cut (an error reply never fails to serialise, and never echoes a megabyte back)."""
-    import math
-
     if isinstance(v, float) and not math.isfinite(v):
         return repr(v)
     if isinstance(v, str):
@@ -194,11 +199,6 @@ class _TooLarge(Exception):
 def _add_error_handlers(app: Any) -> None:
     """Error answers as JSON: an HTTP error (an undecodable body is 422 like every malformed one), a request that
     does not validate (at most 20 errors), and a waypoint outside the safety limits (422, ``safety_limit``)."""
-    from fastapi.exceptions import RequestValidationError
-    from starlette.exceptions import HTTPException as StarletteHTTPException
-
-    from aerodaas.navigation.safety import SafetyViolation
-
     @app.exception_handler(StarletteHTTPException)
     async def _http(_req: Request, e: StarletteHTTPException) -> JSONResponse:
         # FastAPI answers an undecodable body 400; a malformed body is 422 like every other one
@@ -269,8 +269,6 @@ class HitlServer:
         _add_error_handlers(app)
         self._add_routes(app)
         if self.docs:  # hitl.docs: true: the documentation, behind the same bearer token as everything else
-            from fastapi.openapi.docs import get_swagger_ui_html
-
             @app.get("/openapi.json", dependencies=[Depends(self._auth)], include_in_schema=False)
             def openapi() -> dict:
                 return app.openapi()
@@ -284,7 +282,7 @@ class HitlServer:
     def _call(self, method: Any, *args: Any) -> Any:
         """Call a component method and wait at most :data:`CALL_TIMEOUT_S`; a remote exception is re-raised as
         its cause; an actor that does not answer (stopped, restarting, dead) is 503."""
-        import ray
+        import ray  # lazy: CLI start-up (`aerodaas inject` imports this module and runs without Ray)
 
         get = self._get or ray.get
         try:
@@ -362,8 +360,6 @@ class HitlServer:
 
     def _add(self, h: dict, req: AddWaypointsRequest) -> dict:
         """Queue the request's waypoints on drone ``h`` (ids given or ``hitl<n>``, none already queued)."""
-        from aerodaas.navigation.safety import SafetyViolation
-
         queued = {i.get("id") for m in self._call(h["scheduler"].snapshot) for i in m["items"]}
         wps = []
         for w in req.waypoints:
@@ -389,7 +385,7 @@ class HitlServer:
     def start(self, timeout: float = 10.0) -> "HitlServer":
         """Serve in a daemon thread; returns when listening (the real port is known then). Raises
         RuntimeError if the server could not start (e.g. the port is taken)."""
-        import uvicorn
+        import uvicorn  # lazy: heavy dependency (uvicorn)
 
         tls = {"ssl_certfile": self.cert_file, "ssl_keyfile": self.key_file} if self.cert_file else {}
         config = uvicorn.Config(self.app, host=self.host, port=self.port, log_level="warning", access_log=False,
@@ -405,7 +401,6 @@ class HitlServer:
             time.sleep(0.02)
         sock = self._server.servers[0].sockets[0]
         self.port = sock.getsockname()[1]
-        from aerodaas.clusters.tls import write_private_json
 
         write_private_json(state_file(), {"url": self.local_url, "token": self.token, "pid": os.getpid(),
                                           "drones": sorted(self.drones),
@@ -432,10 +427,6 @@ def request(method: str, path: str, body: Any = None, url: str | None = None, to
     :func:`state_file`. An ``https`` URL is verified (certificate and host name) against ``cafile`` (a self-signed
     server certificate, or the CA that signed it), else the system's CAs. Raises RuntimeError when no server can be
     found or reached (a certificate that does not verify included)."""
-    import ssl
-    import urllib.error
-    import urllib.request
-
     url = url or os.environ.get("AERODAAS_HITL_URL")
     token = token or os.environ.get("AERODAAS_HITL_TOKEN")
     cafile = cafile or os.environ.get("AERODAAS_HITL_CAFILE")

@@ -1,93 +1,11 @@
 """``aerodaas mission upload FILE`` / ``aerodaas mission download --out FILE``: QGroundControl ``.plan`` and
-``QGC WPL 110`` missions to and from a MAVLink vehicle, with no Ray and no environment file (see :func:`cmd_mission`)."""
+``QGC WPL 110`` missions to and from a MAVLink vehicle, with no Ray and no environment file: the options (this
+module, parsed at every ``aerodaas`` start) and the command (:mod:`aerodaas.tools.mission_main`)."""
 from __future__ import annotations
 
 import argparse
-import os
-import sys
-import time
-from pathlib import Path
-from typing import Any
 
 __all__ = ["add_parser", "cmd_mission"]
-
-_MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
-
-
-
-def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5.0):
-    """A connected MAVLink backend for ``--connection``, after waiting up to ``home_wait_s`` seconds for the
-    vehicle's HOME_POSITION (BackendError / ValueError name the connection)."""
-    from aerodaas.backends import make_backend
-    from aerodaas.config import MavlinkConfig, RobotConfig
-
-    fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
-    # set_speed_limits False: the vehicle's own speed parameters are left as they are (a started mission flies on
-    # after we close, so nothing changed could be put back); the file's speeds, capped by --max-speed, are the mission
-    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
-                       fence=fence, set_speed_limits=False)
-    cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
-    backend = make_backend(cfg)
-    backend.connect()
-    deadline = time.monotonic() + min(args.timeout, home_wait_s)
-    while not backend.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
-        time.sleep(0.05)
-    return backend
-
-
-def _download_fence_and_rally(backend, plan, out: Path, name: str):
-    """``plan`` with the vehicle's fence (MAV_MISSION_TYPE_FENCE) and rally points (MAV_MISSION_TYPE_RALLY); what
-    cannot be read, or cannot be stored in ``out`` (QGC WPL holds neither), is said on stderr, never dropped
-    silently."""
-    from aerodaas.backends import BackendError
-    from aerodaas.backends.mavlink.fence import FENCE, RALLY, fence_from_items
-
-    update = {}
-    try:
-        update["geofence"] = fence_from_items(backend.download_items(FENCE))
-    except (BackendError, ValueError) as e:
-        print(f"{name}: WARNING: the vehicle's geofence could not be read ({e}); {str(out)!r} has none",
-              file=sys.stderr, flush=True)
-    try:
-        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.download_items(RALLY)]
-    except BackendError as e:
-        print(f"{name}: WARNING: the vehicle's rally points could not be read ({e}); {str(out)!r} has none",
-              file=sys.stderr, flush=True)
-    plan = plan.model_copy(update=update)
-    if out.suffix.lower() != ".plan" and (not plan.geofence.is_empty or plan.rally_points):
-        print(f"{name}: WARNING: the vehicle's geofence ({len(plan.geofence.polygons)} polygon(s), "
-              f"{len(plan.geofence.circles)} circle(s)) and {len(plan.rally_points)} rally point(s) cannot be stored "
-              f"in a QGC WPL file; download to a .plan to keep them", file=sys.stderr, flush=True)
-    return plan
-
-
-def _cruise_speed(backend) -> float | None:
-    """The vehicle's own cruise speed in m/s (ArduCopter ``WPNAV_SPEED`` cm/s, PX4 ``MPC_XY_CRUISE`` m/s), read and
-    left as it is; None when it does not answer."""
-    name, unit = ("WPNAV_SPEED", 0.01) if backend.autopilot == "ardupilot" else ("MPC_XY_CRUISE", 1.0)
-    got = backend.read_parameters([name])
-    return got[name] * unit if name in got else None
-
-
-def _check_read_back(backend, sent, name: str) -> None:
-    """Download the vehicle's mission and compare it with ``sent`` (:func:`~aerodaas.missionfile.upload.
-    mission_differences`): prints what it stored differently; raises BackendError when that changes the flight
-    (command, the frame, position or altitude of a command with a position, a hold time or speed, the number of
-    items)."""
-    from aerodaas.backends import BackendError
-    from aerodaas.missionfile.upload import mission_differences
-
-    stored = backend.download_mission().items
-    diffs = mission_differences(sent, stored)
-    flight = [d for d in diffs if d.flight]
-    for d in diffs:
-        if not d.flight:
-            print(f"{name}: note: the vehicle stored {d} (a field it does not keep)", file=sys.stderr, flush=True)
-    if flight:
-        raise BackendError("the mission read back differs from the one sent: "
-                           + "; ".join(str(d) for d in flight[:5]) + "; not started")
-    print(f"{name}: read back: the vehicle holds the {len(stored)} items as sent"
-          + (f", but for {len(diffs)} field(s) it does not keep (above)" if diffs else ""), flush=True)
 
 
 def _upload_bound(kind: str):
@@ -96,8 +14,8 @@ def _upload_bound(kind: str):
     (exit 2)."""
 
     def parse(text: str) -> float:
-        from aerodaas.model.types import MAX_LOCAL_M
-        from aerodaas.config.base import MAX_ALTITUDE_M, MAX_SPEED_MPS
+        from aerodaas.config.base import MAX_ALTITUDE_M, MAX_SPEED_MPS  # lazy: CLI start-up (pydantic)
+        from aerodaas.model.types import MAX_LOCAL_M  # lazy: CLI start-up (pydantic)
 
         upper = {"altitude": MAX_ALTITUDE_M, "distance": MAX_LOCAL_M, "speed": MAX_SPEED_MPS}[kind]
         unit = "m/s" if kind == "speed" else "metres"
@@ -113,136 +31,11 @@ def _upload_bound(kind: str):
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
-    """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
-    through the MAVLink backend's mission protocol. The file is read and its items checked before anything is
-    sent (with :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly; the altitude,
-    distance and geofence bounds measured from the vehicle's own home, the file's planned home only when the
-    vehicle reports none); a download is written only once complete. A ``.plan``'s geofence goes up first
-    (MAV_MISSION_TYPE_FENCE items and the fence parameters, ``--fence-action``; read back and compared: a mismatch
-    stops the upload before the mission is sent; each fence parameter changed is printed with its old value), then
-    its rally points (MAV_MISSION_TYPE_RALLY), then the mission as written: its speeds unless ``--max-speed`` caps
-    them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`), each command without a
-    position in ``MAV_FRAME_MISSION`` (printed, :func:`~aerodaas.missionfile.upload.mission_frames`); no other
-    vehicle parameter is changed. The mission is then read back and compared as each autopilot stores it
-    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started)."""
-    from aerodaas.backends import BackendError
-    from aerodaas.missionfile import MissionFileError
+    """``aerodaas mission upload FILE`` / ``download --out FILE``: :func:`aerodaas.tools.mission_main.run_mission`
+    (exit 0, 2 for a file, bound or vehicle that refuses the mission, named)."""
+    from aerodaas.tools.mission_main import run_mission  # lazy: CLI start-up (pydantic, pymavlink)
 
-    name = f"aerodaas mission {args.mission_cmd}"
-    opened: list = []  # the backend once connected: closed at the end, whatever happened
-    try:
-        if args.mission_cmd == "upload":
-            _upload(args, name, opened)
-        else:
-            _download(args, name, opened)
-    except (MissionFileError, BackendError, ValueError, OSError) as e:
-        where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
-            else ""
-        print(f"{name}: {e}{where}", file=sys.stderr)
-        return 2
-    finally:
-        for backend in opened:
-            backend.close(safe_end=False)  # hand the vehicle over as it is: a started mission flies on
-    return 0
-
-
-def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
-    """``aerodaas mission upload`` (see :func:`cmd_mission`); the backend it connects goes into ``opened``."""
-    from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight
-
-    path = Path(args.file)
-    if not path.is_file():
-        raise MissionFileError(f"{str(path)!r}: mission file not found")
-    plan = load_mission(path)
-    if not plan.items:
-        raise MissionFileError(f"{str(path)!r}: the mission has no items; nothing to upload (an empty upload "
-                               f"would clear the vehicle's mission)")
-    # the file alone, before connecting: commands, frames, order (the bounds are measured from the vehicle's
-    # home, so not yet; a planned home only stands in for AMSL altitudes here)
-    from aerodaas.model.types import GeoPoint
-
-    plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
-                   min_altitude=None)
-    from aerodaas.missionfile.upload import check_relative_altitudes
-
-    check_relative_altitudes(plan, args.max_altitude)  # needs no home: refused before connecting
-    backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
-    opened.append(backend)
-    _check_from_vehicle_home(args, name, plan, backend, path)
-    _upload_fence_and_rally(name, plan, backend, path)
-    from aerodaas.missionfile.upload import mission_frames
-
-    items, frames = mission_frames(plan.expanded_items())
-    for f in frames:
-        print(f"{name}: {f}", flush=True)
-    if args.max_speed is not None:
-        from aerodaas.missionfile.upload import cap_speeds
-
-        items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
-        for c in changes:
-            print(f"{name}: {c}", flush=True)
-    sent = backend.upload_mission(items)
-    print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
-          f"{args.connection}", flush=True)
-    _check_read_back(backend, sent, name)
-    if args.start:
-        backend.arm()
-        backend.start_mission()
-        print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
-
-
-def _check_from_vehicle_home(args: argparse.Namespace, name: str, plan: Any, backend: Any, path: Path) -> None:
-    """The altitude, distance and geofence bounds, measured from the vehicle's own home (the file's planned home
-    only when the vehicle reports none). Raises MissionFileError when neither has one."""
-    from aerodaas.missionfile import MissionFileError, plan_to_flight
-
-    bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
-    if backend.home_received:  # as documented: from the vehicle's own home, whatever the file planned
-        plan_to_flight(plan, backend.home, **bounds)
-    elif plan.home is None:  # the bounds are measured from a home, never from a default one
-        raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
-                               f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
-                               "altitude and distance bounds are measured from it)")
-    else:  # no GPS fix yet (bench, indoors)
-        print(f"{name}: warning: the vehicle reported no home position within {args.timeout:g} s; the "
-              f"items are checked against the file's planned home only", file=sys.stderr, flush=True)
-        plan_to_flight(plan, plan.home, **bounds)
-
-
-def _upload_fence_and_rally(name: str, plan: Any, backend: Any, path: Path) -> None:
-    """A ``.plan``'s geofence first (the vehicle must never fly its mission without it; each fence parameter
-    changed is printed), then its rally points; both read back by the backend."""
-    fence = plan.geofence
-    if not fence.is_empty:
-        got = backend.apply_fence(fence)
-        changed = [f"{k} {got['before'][k]:g} -> {v:g}" for k, v in got["params"].items()
-                   if abs(got["before"][k] - v) > 1e-6]
-        print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
-              f"circle(s), {got['items']} fence items) uploaded and read back; it stays on the vehicle with "
-              f"its parameters: " + (", ".join(changed) or "none changed"), flush=True)
-    if plan.rally_points:
-        n = backend.upload_rally(plan.rally_points)
-        print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
-
-
-def _download(args: argparse.Namespace, name: str, opened: list) -> None:
-    """``aerodaas mission download --out FILE`` (see :func:`cmd_mission`): written only once complete."""
-    from aerodaas.missionfile import MissionFileError, save_plan, save_wpl
-
-    out = Path(args.out)
-    if out.suffix.lower() not in _MISSION_SUFFIXES:
-        raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
-                               "(QGroundControl .plan or QGC WPL 110 waypoints)")
-    backend = _mission_backend(args)
-    opened.append(backend)
-    plan = backend.download_mission().model_copy(update={
-        "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
-    plan = _download_fence_and_rally(backend, plan, out, name)
-    tmp = out.with_name(out.name + ".part")
-    (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
-    os.replace(tmp, out)  # never a half-written mission file
-    print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
-          f"written to {str(out)!r}", flush=True)
+    return run_mission(args)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

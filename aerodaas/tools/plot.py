@@ -73,8 +73,8 @@ def _masked_path(xy: np.ndarray, seg_mask: np.ndarray) -> np.ndarray:
 # figures
 # --------------------------------------------------------------------------------------------------------------
 def _new_figure(w: float, h: float) -> Any:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # lazy: heavy dependency (matplotlib)
+    from matplotlib.figure import Figure  # lazy: heavy dependency (matplotlib)
 
     fig = Figure(figsize=(w, h), dpi=_DPI)
     FigureCanvasAgg(fig)
@@ -168,7 +168,7 @@ def plot_trajectory(data: RunData, r: RobotRun, out: Path) -> Path:
     ax.set_xlabel("x east of home (m)")
     ax.set_ylabel("y north of home (m)")
     ax.set_title(f"{r.robot}: planned vs flown trajectory (top view, local ENU)\n{_subtitle(data, r)}", fontsize=11)
-    from matplotlib.transforms import offset_copy
+    from matplotlib.transforms import offset_copy  # lazy: heavy dependency (matplotlib)
 
     below = offset_copy(ax.transAxes, fig=fig, y=-36, units="points")  # under the x tick labels and axis label
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, ncol=2, fontsize=8.5,

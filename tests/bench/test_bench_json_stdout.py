@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from aerodaas.bench import add_parsers
+from aerodaas.bench.parsers import add_parsers
 
 from tests.conftest import DATA_DIR, needs_data_case
 

@@ -200,7 +200,8 @@ def test_trace_parameters_a_kind_does_not_use_are_refused():
 
 
 def test_the_cli_takes_the_bursty_trace_options(tmp_path):
-    from aerodaas.bench.schedulers_cli import add_parser, trace_spec
+    from aerodaas.bench.schedulers_cli import add_parser
+    from aerodaas.bench.schedulers_main import trace_spec
     import argparse
 
     sub = argparse.ArgumentParser().add_subparsers()

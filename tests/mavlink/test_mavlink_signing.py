@@ -297,7 +297,7 @@ def test_a_refused_key_travels_to_exit_code_2():
     import pickle
 
     from aerodaas.backends.base import RobotsNotConnected
-    from aerodaas.commands.run import _exit_code
+    from aerodaas.commands.run_main import _exit_code
     from aerodaas.runtime.driver import MissionResult
 
     e = pickle.loads(pickle.dumps(RobotsNotConnected({"a": "CredentialsRefused: no correctly signed heartbeat",

@@ -128,7 +128,7 @@ def test_a_signed_mission_flies_and_unsigned_spoofs_change_nothing_in_the_record
 
 @pytest.mark.e2e
 def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(ray_session, run_options, tmp_path):
-    from aerodaas.commands.run import _exit_code
+    from aerodaas.commands.run_main import _exit_code
     from tests.runtime.test_backends_e2e import _run_app
 
     emu, env_path = _signed_survey(tmp_path, OTHER_KEY, KEY, connect_timeout_s=5.0)
