@@ -12,9 +12,12 @@ from __future__ import annotations
 import os
 import sys
 from typing import Any, Callable
+import warnings
 
 import ray
+from ray import cloudpickle
 
+from aerodaas.actors.channel import ChannelServer, channel_address
 from aerodaas.protocol.messages import Delivery
 from aerodaas.protocol.specs import ActorSpec
 from aerodaas.protocol.startup_probe import probe
@@ -24,8 +27,6 @@ from aerodaas.actors.dataplane import DataPlane, Settled
 
 def restarted_actor() -> bool:
     """True in the constructor of an actor that Ray restarted (``max_restarts``)."""
-    import warnings
-
     with warnings.catch_warnings():  # Ray's own property reads its deprecated ``actor_id`` inside
         warnings.simplefilter("ignore")
         return bool(ray.get_runtime_context().was_current_actor_reconstructed)
@@ -54,7 +55,6 @@ class ActorBase:
             # the default GIL switch interval (5 ms) would let a busy Python thread delay a frame that is ready
             # to move on by up to 5 ms; the actors are latency-bound, not throughput-bound
             sys.setswitchinterval(switch_interval_s)
-        from ray import cloudpickle
 
         # the run's recorder actor keeps every actor's spec (see aerodaas.runtime.supervise.start_actors)
         spec_b, wiring_b = ray.get(ray.get_actor(_recorder_name(self_name())).spec_of.remote(actor_id), timeout=60)
@@ -83,8 +83,6 @@ class ActorBase:
     def _serve_channel(self, actor_id: str, key: bytes) -> Any:
         """This actor's :class:`~.channel.ChannelServer`, or None when its address cannot be served (peers then
         reach this actor through Ray calls)."""
-        from aerodaas.actors.channel import ChannelServer, channel_address
-
         try:
             return ChannelServer(channel_address(key, actor_id), key, self.plane.deliver,
                                  on_error=self.plane.report_error)
@@ -98,7 +96,7 @@ class ActorBase:
 
     def setup(self) -> dict:
         """Create this actor's components (drones connect to their vehicles here). Returns :meth:`describe`."""
-        from aerodaas.actors.assembly import ActorAssembly
+        from aerodaas.actors.assembly import ActorAssembly  # lazy: heavy pydantic, pymap3d, shapely
 
         if self.runtime is None:
             self.runtime = ActorAssembly(self.plane, self.spec)

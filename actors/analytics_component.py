@@ -3,17 +3,26 @@
 by the analytics scheduler of a dispatcher actor)."""
 from __future__ import annotations
 
+import logging
 import time
+import traceback
 from typing import Any
 
 import numpy as np
 
-from aerodaas.analytics.contract import Emissions, collecting, event_record
+from aerodaas.analytics.contract import Emissions, collecting, event_record, schema_name
+from aerodaas.perception.track_records import records_of, tracks_prefix
 from aerodaas.protocol.messages import DetectionsMsg, FrameMsg, Message, NavigationMsg, Port, ValueMsg, output_message
 from aerodaas.protocol.specs import AnalyticsSchedulerSpec
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION, ComponentKind, FailureCount, FailureLog
 
 from aerodaas.actors.dataplane import Component, DataPlane
+from aerodaas.schedulers.dispatch.banks import AnalyticsBank
+from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
+from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
+from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
+from aerodaas.schedulers.dispatch.emulation import NetworkModel
+from aerodaas.schedulers.dispatch.payload import FramePayload
 
 
 class AnalyticsComponent(Component):
@@ -140,9 +149,6 @@ class AnalyticsComponent(Component):
         run's summary, recorded as an ``analytics_error`` event of the robot (the first ones, then
         ``analytics_error_summary`` events: :class:`~aerodaas.recording.health.FailureLog`); ``on_error ==
         "abort"`` ends every mission of the run as failed (once)."""
-        import logging
-        import traceback
-
         self.failures += 1
         self._no_output(msg)
         tb = traceback.format_exc()
@@ -212,8 +218,6 @@ class AnalyticsComponent(Component):
         if self.recorder is not None:
             t_ns = self.epoch_ns + int(msg.sim_t * 1e9)
             if self.output_model is not None:
-                from aerodaas.analytics.contract import schema_name
-
                 self.recorder.json(f"/{robot}/{self.name}", t_ns, out, schema_name(self.output_model))
             elif isinstance(res, DetectionsMsg):
                 size = (meta.intrinsics.width, meta.intrinsics.height) if meta else None
@@ -241,8 +245,6 @@ class AnalyticsComponent(Component):
     def _emitted(self, em: Emissions, msg: Message) -> None:
         """Record ``em``'s events on ``/<robot>/events`` and its named outputs on ``/<robot>/<name>/<output>``, and
         publish each named output from ``<cid>:<output>``, all with ``msg``'s robot and time."""
-        from aerodaas.analytics.contract import schema_name
-
         robot, t_ns = msg.robot, self.epoch_ns + int(msg.sim_t * 1e9)
         for _, ev in em.events:
             self.events[ev.kind] = self.events.get(ev.kind, 0) + 1
@@ -260,8 +262,6 @@ class AnalyticsComponent(Component):
     def _record_tracks(self, msg: Message) -> None:
         """A tracking analytics' tracks of this frame (its ``track_records``, :mod:`aerodaas.perception.track_records`)
         go to the recorder under ``/<robot>/<name>/tracks``, whatever the analytics' own output was."""
-        from aerodaas.perception.track_records import records_of, tracks_prefix
-
         records = records_of(self.obj)
         if self.recorder is None or records is None:
             return
@@ -409,11 +409,6 @@ class AnalyticsSchedulingService:
         self.comps[comp.name] = comp
 
     def start(self) -> None:
-        from aerodaas.schedulers.dispatch.banks import AnalyticsBank
-        from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
-        from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
-        from aerodaas.schedulers.dispatch.edge_executors import AnalyticsEdgeExecutor
-        from aerodaas.schedulers.dispatch.emulation import NetworkModel
         w = self.spec.workload
         policy = self.spec.policy_class(w)
         self.policy_name = policy.name or self.name
@@ -427,8 +422,6 @@ class AnalyticsSchedulingService:
         self.dispatcher.start_background()
 
     def submit(self, comp: ScheduledAnalyticsComponent, msg: Message) -> None:
-        from aerodaas.schedulers.dispatch.payload import FramePayload
-
         self.dispatcher.submit(msg.robot, comp.name, FramePayload(msg.data, msg.meta, msg))
 
     def _on_result(self, task: Any) -> None:

@@ -10,12 +10,19 @@ lock-step its :class:`~.dataplane.Cascade`.
 """
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
 
+from aerodaas.actors.checkpoint import drone_checkpoint
+from aerodaas.actors.drone import DroneComponent
+from aerodaas.actors.plugin_sensor import PluginSensorComponent
+from aerodaas.actors.remote_recorder import RemoteRecorder
+from aerodaas.backends.base import CredentialsRefused, RobotsNotConnected
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
 from aerodaas.plugins.frames import frame_source_class
+from aerodaas.plugins.registry import adopt
 from aerodaas.protocol.ids import is_drone
 from aerodaas.protocol.messages import SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
@@ -23,6 +30,8 @@ from aerodaas.protocol.specs import ActorSpec
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
 from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
 from aerodaas.actors.camera import CameraComponent
+from aerodaas.recording.schemas import register_json_schema
+from aerodaas.sim.world import World
 
 
 def _capture_due(d: Any, tok: Any) -> None:
@@ -61,8 +70,6 @@ class _Checkpointer:
         due = now - self.last >= self.period_s
         for d in active:
             if due or len(d.visited) != self.visited.get(id(d)):
-                from aerodaas.actors.checkpoint import drone_checkpoint
-
                 self.visited[id(d)] = len(d.visited)
                 # taken here (consistent with the control step), serialised and sent on the pool: the clock
                 # thread never pays for pickling the queue
@@ -86,8 +93,6 @@ class ActorAssembly:
     vehicle fails the run before take-off (:class:`~aerodaas.backends.base.RobotsNotConnected`)."""
 
     def __init__(self, plane: DataPlane, spec: ActorSpec) -> None:
-        from aerodaas.actors.drone import DroneComponent
-
         self.plane = plane
         self.sim = SimulationConfig.model_validate(spec.sim)
         self.recorder = self._make_recorder(plane, spec)
@@ -116,19 +121,17 @@ class ActorAssembly:
     def _make_recorder(plane: DataPlane, spec: ActorSpec) -> Any:
         """A file of its own (and/or the live view) with ``spec.record``, the run's recorder actor with
         ``spec.record_remote``, else None."""
-        from aerodaas.actors.recorder import RecorderService
+        from aerodaas.actors.recorder import RecorderService  # lazy: heavy mcap, protobuf
 
         rec = spec.record
         if rec is not None:  # an actor with the file and/or the live view
             if rec.schemas:  # plug-in sensors' message schemas, from their declarations
-                from aerodaas.recording.schemas import register_json_schema
 
                 for name, js in rec.schemas.items():
                     register_json_schema(name, js)
             return RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
                                    declare=rec.declare)
         if spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
-            from aerodaas.actors.remote_recorder import RemoteRecorder
 
             return RemoteRecorder(plane, spec.record_remote)
         return None
@@ -153,10 +156,7 @@ class ActorAssembly:
     def _add_robot(self, plane: DataPlane, spec: ActorSpec, r: Any, world: Any) -> Any:
         """Robot ``r``'s drone (with its navigation inbox), cameras and plug-in sensors. ``world``: the simulated
         world its cameras render, made on the first simulated camera of this actor; returns it."""
-        from aerodaas.actors.drone import DroneComponent
-
         if r.plugins:  # plug-in classes carried in the spec: known here before the config is checked
-            from aerodaas.plugins.registry import adopt
 
             adopt(r.plugins)
         cfg = RobotConfig.model_validate(r.robot)
@@ -168,8 +168,6 @@ class ActorAssembly:
         for c in r.cameras:
             source = c.source if c.source is not None else frame_source_class(c.props.get("source", "sim"))
             if source.needs_world and world is None:
-                from aerodaas.sim.world import World
-
                 w = WorldConfig.model_validate(spec.world)
                 world = World(w.ground, w.targets)  # one texture for every camera of this actor
             cam = CameraComponent(plane, c.cid, cfg.id, c.sensor, c.props, world, drone.backend,
@@ -178,8 +176,6 @@ class ActorAssembly:
             drone.cameras.append({"comp": cam, "fps": cam.fps, "next_t": 0.0})
             self.comps[c.cid] = cam
         for ps in r.plugin_sensors:
-            from aerodaas.actors.plugin_sensor import PluginSensorComponent
-
             comp = PluginSensorComponent(plane, ps, cfg.id, self.recorder, plane.epoch_ns)
             drone.plugin_sensors.append(comp)
             self.comps[ps["cid"]] = comp
@@ -193,8 +189,6 @@ class ActorAssembly:
         system id) connect before the ones that take the lowest unclaimed one on a shared link
         (VehicleBackend.connects_first). Raises RobotsNotConnected naming each robot's error (the connected
         vehicles are handed back untouched)."""
-        from aerodaas.backends.base import CredentialsRefused
-
         errors: dict[str, str] = {}
         refused: list[str] = []  # robots whose vehicle refused our credentials (CredentialsRefused)
         for d in sorted(self.drones, key=lambda d: not d.backend.connects_first):
@@ -211,8 +205,6 @@ class ActorAssembly:
                 except Exception:  # noqa: BLE001
                     pass
         if errors:
-            from aerodaas.backends.base import RobotsNotConnected
-
             for d in self.drones:  # the run will not start: hand the connected vehicles back untouched
                 if d.cfg.id not in errors:
                     try:
@@ -224,7 +216,7 @@ class ActorAssembly:
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)
         return {"host": self.plane.actor_id, "tier": self.plane.tier, "components": sorted(self.comps),
-                "pid": __import__("os").getpid(), "threads": self.plane.workers,
+                "pid": os.getpid(), "threads": self.plane.workers,
                 "live_url": live.url if live is not None else None}
 
     def lookup(self, cid: str) -> Any:
@@ -328,7 +320,6 @@ class ActorAssembly:
             d.error = reason
             d.end_mission("failed")
         peers = getattr(self.plane, "peers", {}) or {}
-        from aerodaas.actors.drone import DroneComponent
 
         for cid, hid in getattr(self.plane, "location", {}).items():
             if is_drone(cid) and hid in peers and not any(d.cid == cid for d in self.drones):

@@ -206,7 +206,7 @@ def start_cloud_executors(n: int, mode: str = "emulated", *, selector: Mapping[s
     :func:`cloud_selector` for the current cluster), spread over the nodes that match; ``ray_name_prefix``: name
     them ``<prefix><i>`` in Ray (``ray list actors``). Returns the handles once each has answered
     :meth:`CloudExecutor.info`. Raises ValueError for ``n < 1``."""
-    import ray
+    import ray  # lazy: heavy ray
 
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")

@@ -58,9 +58,11 @@ import numpy as np
 import ray
 
 from aerodaas.actors.cascade import Cascade
+from aerodaas.actors.channel import ChannelOutlet, channel_address
 from aerodaas.actors.frames import FrameCopies, decode_frame, encode_frame
 from aerodaas.actors.remote_outlet import RemoteOutlet
 from aerodaas.protocol.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
+from aerodaas.protocol.startup_probe import probe
 
 __all__ = ["Cascade", "Component", "FrameCopies", "RemoteOutlet", "DataPlane", "Settled", "encode_frame",
            "decode_frame"]
@@ -408,7 +410,6 @@ class DataPlane:
         machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
         if self.channel_key is None or self.tiers.get(hid, self.tier) != self.tier:
             return None
-        from aerodaas.actors.channel import ChannelOutlet, channel_address
 
         try:
             return ChannelOutlet(channel_address(self.channel_key, hid), self.channel_key, cid, port, buffer,
@@ -488,8 +489,6 @@ class DataPlane:
     def mark_processed(self) -> None:
         """Called by analytics when they finish an item: remembers the wall time of the first one (startup bench)."""
         if self.first_processed_wall is None:
-            from aerodaas.protocol.startup_probe import probe
-
             self.first_processed_wall = time.time()
             probe("first_processed")
 

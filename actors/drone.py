@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import threading
+import traceback
 from typing import Any
 
 from aerodaas.backends import BackendError, make_backend
@@ -350,8 +351,6 @@ class DroneComponent:
                 self._event("backend_error", error=str(e))
                 self.error = str(e)
             except Exception as e:
-                import traceback
-
                 self.error = f"{type(e).__name__}: {e}"
                 self.flight.outcome = "failed"
                 self._event("error", message=self.error, traceback=traceback.format_exc())

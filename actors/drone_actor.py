@@ -16,6 +16,7 @@ from __future__ import annotations
 import ray
 
 from aerodaas.actors.actor_base import ActorBase
+from aerodaas.actors.checkpoint import drone_checkpoint, restore_drone
 
 
 @ray.remote(num_cpus=0, max_concurrency=32)
@@ -23,8 +24,6 @@ class DroneActor(ActorBase):
     """See the module docstring. Methods beyond :class:`~.actor_base.ActorBase`: :meth:`run`, :meth:`checkpoint`."""
 
     def on_restart(self) -> None:
-        from aerodaas.actors.checkpoint import restore_drone
-
         self.setup()
         rec = self.plane.peer("recorder")
         for d in self.runtime.drones:
@@ -39,6 +38,4 @@ class DroneActor(ActorBase):
 
     def checkpoint(self) -> dict:
         """Robot id -> its current checkpoint (see :mod:`.checkpoint`)."""
-        from aerodaas.actors.checkpoint import drone_checkpoint
-
         return {d.cfg.id: drone_checkpoint(d) for d in self.runtime.drones}

@@ -11,6 +11,7 @@ import math
 from aerodaas.actors.drone_flight import FlightContext, FlightState
 from aerodaas.navigation.fsm import MissionState as S
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
+from aerodaas.navigation.rtl import plan_return
 
 
 class AutopilotFlight:
@@ -218,7 +219,6 @@ class AutopilotFlight:
         f.active_wp, f.hold_until = None, None
         if c.fsm.state == S.TRACKING:
             c.event("tracking_ended")
-        from aerodaas.navigation.rtl import plan_return
 
         alt = min(max(pos[2], c.cfg.takeoff_altitude), c.gate.max_alt)
         try:

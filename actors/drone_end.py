@@ -4,6 +4,8 @@ vehicle's end state. An object of its drone (:attr:`~aerodaas.actors.drone.Drone
 else of the drone (the drone records its last odometry and the mission result itself: ``DroneComponent.finish``)."""
 from __future__ import annotations
 
+import threading
+import time
 from typing import Any, Callable
 
 from aerodaas.actors.drone_odometry import OdometryPublisher
@@ -37,8 +39,6 @@ class RunEnd:
         b = self.backend
         safe_end = getattr(b, "safe_end", None)
         if callable(safe_end) and b.navigable and b.armed and b.link_ok and (b.in_air or self.fsm.state != S.LANDED):
-            import threading
-
             result: dict[str, Any] = {}
 
             def run() -> None:
@@ -82,8 +82,6 @@ class RunEnd:
         itself after touchdown (PX4 ``COM_DISARM_LAND``, 2 s; ArduCopter in LAND at touchdown), so wait for it up to
         :data:`DISARM_WAIT_S` vehicle seconds (and :data:`DISARM_WAIT_WALL_S` wall seconds) while recording state and
         odometry, then disarm it ourselves (on the ground; ``disarmed_by_us`` event). Returns how the run ended."""
-        import time
-
         b = self.backend
         t_end, wall_end = b.t + DISARM_WAIT_S, time.monotonic() + DISARM_WAIT_WALL_S
         while b.armed and b.link_ok and not b.in_air and b.t < t_end and time.monotonic() < wall_end:
@@ -107,8 +105,6 @@ class RunEnd:
         (:meth:`settled`: a position sample taken after the disarm; bounded by :data:`SETTLE_WALL_S` wall seconds).
         Each sample is recorded with the state the vehicle had when it was taken, so the one before the disarm
         still says armed."""
-        import time
-
         self._settle_until = None  # a wait of its own (settled() may have run out while the drone was landing)
         while self.backend.link_ok and not self.settled():
             time.sleep(0.02)
@@ -136,8 +132,6 @@ class RunEnd:
         sample recorded last may still say "in air"; the clock keeps stepping this drone (odometry only, no control)
         until the next position sample carries the end state. A backend without ``sample_key`` (the simulator)
         is settled at once."""
-        import time
-
         b, o = self.backend, self.odometry.last
         if b.sample_key is None or o is None or (o.get("in_air") == bool(b.in_air) and o.get("armed") == bool(b.armed)):
             return True

@@ -18,9 +18,13 @@ from __future__ import annotations
 from typing import Any, Callable, Mapping
 
 from aerodaas.model.types import FramePose
-from aerodaas.plugins.builtin_sensors import DISCOVERY_PROPERTIES, STREAM_PROPERTIES
+from aerodaas.plugins import registry
+from aerodaas.plugins.builtin_sensors import DISCOVERY_PROPERTIES, STREAM_PROPERTIES, check_replay_recording
 from aerodaas.plugins.frames import (STREAM_SOURCE, CapturedFrame, FrameSource, FrameSourceContext, LiveFrameSource,
                                     frame_source_names)
+from aerodaas.video import StreamReader
+from aerodaas.video.discovery import DEFAULT_DISCOVERY_TIMEOUT_S, StreamDiscoveryError, StreamRequest
+from aerodaas.video.source import parse_stream_source
 
 __all__ = ["RenderedFrames", "BackendFrames", "McapFrames", "StreamFrames", "MavlinkFrames"]
 
@@ -28,8 +32,6 @@ __all__ = ["RenderedFrames", "BackendFrames", "McapFrames", "StreamFrames", "Mav
 
 def _backend_declares(backend: str, flag: str) -> bool:
     """Whether the registered backend ``backend`` declares the class attribute ``flag`` true."""
-    from aerodaas.plugins import registry
-
     try:
         return bool(getattr(registry.get("backend", backend), flag, False))
     except registry.UnknownPlugin:
@@ -38,8 +40,6 @@ def _backend_declares(backend: str, flag: str) -> bool:
 
 def _camera_backends() -> list[str]:
     """The registered backends that declare a camera stream (for the error message)."""
-    from aerodaas.plugins import registry
-
     return registry.names_with_flag("backend", "provides_camera")
 
 
@@ -101,7 +101,7 @@ class McapFrames(FrameSource):
 
     def __init__(self, ctx: FrameSourceContext) -> None:
         super().__init__(ctx)
-        from aerodaas.backends.replay import McapCameraReplay
+        from aerodaas.backends.replay import McapCameraReplay  # lazy: heavy pymap3d, shapely
 
         p = ctx.properties
         self.replay = McapCameraReplay(p["mcap"], p.get("topic") or f"/{ctx.robot_id}/camera/{ctx.sensor_id}")
@@ -122,8 +122,6 @@ class McapFrames(FrameSource):
                       robot_id: str | None, sensor_id: str) -> None:
         """The recording resolved to an absolute path, the topic defaulted and checked to be a camera channel with
         messages (:func:`aerodaas.plugins.builtin_sensors.check_replay_recording`)."""
-        from aerodaas.plugins.builtin_sensors import check_replay_recording
-
         properties["mcap"] = str(resolve(properties["mcap"], f"{where}.properties.mcap"))
         properties.setdefault("topic", f"/{robot_id}/camera/{sensor_id}")
         check_replay_recording(properties["mcap"], properties["topic"], where)
@@ -144,8 +142,6 @@ class StreamFrames(LiveFrameSource):
     def check_properties(cls, properties: Mapping[str, Any], where: str) -> None:
         """Scheme, host, port and codec, by :func:`aerodaas.video.source.parse_stream_source`; a bare word that is
         no stream is named with the registered frame sources (a misspelt one)."""
-        from aerodaas.video.source import parse_stream_source
-
         src = properties["source"]
         try:
             parse_stream_source(src, properties.get("transport"), properties.get("codec"))
@@ -158,8 +154,6 @@ class StreamFrames(LiveFrameSource):
     def resolve_files(cls, properties: dict[str, Any], resolve: Callable[[str, str], Any], where: str,
                       robot_id: str | None, sensor_id: str) -> None:
         """A video or SDP file is resolved like every other file of the environment."""
-        from aerodaas.video.source import parse_stream_source
-
         spec = parse_stream_source(properties["source"], properties.get("transport"), properties.get("codec"))
         if spec.kind in ("file", "sdp"):
             properties["source"] = str(resolve(spec.url, f"{where}.properties.source"))
@@ -170,8 +164,6 @@ class StreamFrames(LiveFrameSource):
 
     def open(self, source: str, codec: str | None) -> None:
         """Read video ``source`` and wait for its first frame (VideoSourceError names the URL)."""
-        from aerodaas.video import StreamReader, parse_stream_source
-
         p, k = self.ctx.properties, self.ctx.intrinsics
         spec = parse_stream_source(source, p.get("transport") if source.startswith("rtsp") else None, codec)
         self.reader = StreamReader(spec, k.width, k.height, stall_timeout_s=float(p.get("stall_timeout_s") or 2.0),
@@ -217,7 +209,6 @@ class MavlinkFrames(StreamFrames):
         StreamDiscoveryError (naming robot, sensor and what was asked) or VideoSourceError."""
         if self.reader is not None:
             return
-        from aerodaas.video.discovery import DEFAULT_DISCOVERY_TIMEOUT_S, StreamDiscoveryError, StreamRequest
 
         p = self.ctx.properties
         req = StreamRequest(self.ctx.robot_id, self.ctx.sensor_id, p.get("camera_component"), p.get("stream_id"),

@@ -46,7 +46,7 @@ class LiveForwarder:
             self._bytes += len(msg.data)
 
     def _send(self) -> None:
-        import ray
+        import ray  # lazy: heavy ray
 
         with self._lock:
             batch, self._buf, self._bytes = self._buf, [], 0
@@ -69,7 +69,7 @@ class LiveForwarder:
 
     def close(self, timeout_s: float = 30.0) -> None:
         """Send what is left and wait (at most ``timeout_s``) for the driver's recorder to have published it."""
-        import ray
+        import ray  # lazy: heavy ray
 
         self._stop.set()
         self._thread.join(timeout_s)

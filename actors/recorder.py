@@ -34,8 +34,14 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
+from aerodaas.liveview.server import LiveServer
+from aerodaas.model.types import GeoPoint
+from aerodaas.perception.track_records import write_tracks
 from aerodaas.protocol.messages import (ProducerLedger, RecordCamera, RecordDetections, RecordImage, RecordItem,
                                        RecordJson, RecordOdometry, RecordTracks)
+from aerodaas.recording.channel_accounts import ACCOUNTING_TOPIC, account_channels, accounting_message
+from aerodaas.recording.reader import RUN_RESULT_TOPIC
+from aerodaas.recording.recover import recover_mcap
 from aerodaas.recording.task_tally import TASK_SCHEMA, TaskTally
 from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
 from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts
@@ -75,8 +81,6 @@ class RecorderService(AnalyticsAccounting):
                  max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
                  live: str | None = None, homes: dict[str, Any] | None = None,
                  declare: list[tuple[str, str]] | None = None, live_access: Any = None) -> None:
-        from aerodaas.model.types import GeoPoint
-
         self.homes = {r: GeoPoint.model_validate(h) for r, h in (homes or {}).items()}
         self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality)
         self.path = path
@@ -128,8 +132,6 @@ class RecorderService(AnalyticsAccounting):
         """Start the live view on ``address`` (HOST:PORT) and feed it every message from now on, the declared track
         channels advertised first; returns its URL (the current one if a live view already runs). Raises
         ``ValueError`` for a bad address and ``RuntimeError`` when it cannot bind."""
-        from aerodaas.liveview.server import LiveServer
-
         if self.live is not None:
             return self.live.url
         live = LiveServer(address, name="aerodaas run", access=self.live_access)
@@ -302,8 +304,6 @@ class RecorderService(AnalyticsAccounting):
             if item.schema_name == TASK_SCHEMA:
                 self.task_tally.add(item.obj)
         elif isinstance(item, RecordTracks):
-            from aerodaas.perception.track_records import write_tracks
-
             write_tracks(r, item.prefix, item.t_ns, item.robot, item.rows, self.homes.get(item.robot), item.image_size)
         elif isinstance(item, RecordOdometry):
             robot, t_ns, odom = item.robot, item.t_ns, item.odometry
@@ -343,8 +343,6 @@ class RecorderService(AnalyticsAccounting):
         finished = False
         try:
             os.truncate(rec.path, durable)  # the file ends at a complete record: an unfinished but valid MCAP
-            from aerodaas.recording.recover import recover_mcap
-
             info["messages_in_file"] = recover_mcap(rec.path)["messages"]  # finished and indexed, if the disk
             finished = True  # still takes it
         except OSError as e2:
@@ -401,9 +399,6 @@ class RecorderService(AnalyticsAccounting):
         — a recorder death (``run_losses``) or a message numbered but in none of the run's segments — ``/run/result``
         ``{"outcome": "recording_lost", "losses": [...], "lost": {topic: n}}``, so that no reader takes the drones'
         own ``success`` for the run's."""
-        from aerodaas.recording.accounting import ACCOUNTING_TOPIC, account_channels, accounting_message
-        from aerodaas.recording.reader import RUN_RESULT_TOPIC
-
         if self.live is not None:
             for peer, at in list(self.live.dropped_clients):
                 self.rec.write_json("/run/events", self.last_t_ns or 0, {

@@ -23,11 +23,15 @@ import os
 import threading
 import time
 from typing import Any
+import warnings
 
 import ray
 
 from aerodaas.protocol.messages import ProducerLedger, SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
+from aerodaas.recording.recover import recover_mcap
+from aerodaas.recording.segments import message_time_range, next_segment, remove_stale_segments, segment_path
+from aerodaas.recording.task_tally import TaskTally, tally_recording
 
 
 #: how often Ray restarts a dead recorder actor (each restart opens a new segment file)
@@ -57,7 +61,6 @@ class RecorderActor:
         self._finishing: threading.Thread | None = None
         self.live_error: str | None = None  # a restarted recorder that could not serve the live view again
         self._forward: Any = None  # a node recorder's LiveForwarder to the driver's recorder (per-node recording)
-        import warnings
 
         with warnings.catch_warnings():  # Ray's property reads its own deprecated ``actor_id`` internally
             warnings.simplefilter("ignore")
@@ -70,8 +73,7 @@ class RecorderActor:
         previous one (the dead process's, unfinished) in a background thread. Every earlier segment ended with a
         death of this actor: each is one of ``losses`` (a second death was reported alone before: the first one's
         loss lived in the process that died second)."""
-        from aerodaas.actors.recorder import RecorderService
-        from aerodaas.recording.segments import next_segment, segment_path
+        from aerodaas.actors.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         rec = self.spec.record
         if rec is None or not rec.path:
@@ -93,7 +95,7 @@ class RecorderActor:
         finally:
             self._set_up.set()
         if rec.live and self.recorder is not None:
-            from aerodaas.liveview.server import parse_address
+            from aerodaas.liveview.server import parse_address  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
             host, port = parse_address(rec.live)
             if port:  # a fixed port: serve there again at once (port 0: the driver's watch gives the bound one)
@@ -101,9 +103,6 @@ class RecorderActor:
                                  daemon=True).start()
 
         def finish_previous() -> None:
-            from aerodaas.recording.recover import recover_mcap
-            from aerodaas.recording.segments import message_time_range
-
             try:
                 recover_mcap(prev)
                 first, loss["recorded_until_ns"], _ = message_time_range(prev)
@@ -119,19 +118,17 @@ class RecorderActor:
     def setup(self) -> dict:
         """Open the file and the live view. Raises what :class:`~.recorder.RecorderService` raises (a bad path,
         a busy live port)."""
-        from aerodaas.actors.recorder import RecorderService
+        from aerodaas.actors.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         rec = self.spec.record
         with self._setup_lock:
             try:
                 if rec is not None and self.recorder is None:
-                    from aerodaas.recording.schemas import register_json_schema
+                    from aerodaas.recording.schemas import register_json_schema  # lazy: heavy pydantic
 
                     for name, js in rec.schemas.items():  # plug-in sensors' message schemas
                         register_json_schema(name, js)
                     if rec.path:  # segments of an earlier run to the same file would be joined to this one
-                        from aerodaas.recording.segments import remove_stale_segments
-
                         remove_stale_segments(rec.path)
                         self.segments = [str(rec.path)]
                     self.recorder = RecorderService(rec.path, rec.meta, live=rec.live, max_pending_frames=64,
@@ -150,7 +147,7 @@ class RecorderActor:
         :mod:`aerodaas.runtime.node_recorders`): every message written is also sent to the driver's recorder,
         whose actor name is this one's without its last part (``aerodaas/<run>/recorder/<compute>`` ->
         ``aerodaas/<run>/recorder``), for its live view (:class:`~.live_forward.LiveForwarder`)."""
-        from aerodaas.actors.live_forward import LiveForwarder
+        from aerodaas.actors.live_forward import LiveForwarder  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         main = ray.get_actor(ray.get_runtime_context().get_actor_name().rsplit("/", 1)[0])
         self._forward = LiveForwarder(main)
@@ -202,7 +199,7 @@ class RecorderActor:
         """Messages of another actor (:class:`~.remote_recorder.RemoteRecorder`) and its counts so far (``ledger``,
         kept: :meth:`ledger_of`); returns how many were taken. The other actors set up while this one does: their
         first messages wait (at most 60 s) for the file to be open."""
-        from aerodaas.actors.recorder import deliver
+        from aerodaas.actors.recorder import deliver  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         if ledger is not None:
             self.keep_ledger(ledger)
@@ -295,8 +292,7 @@ class RecorderActor:
         and their task records tallied per scheduler (a :class:`~aerodaas.recording.task_tally.TaskTally`). An
         unreadable segment counts 0 messages (they count as lost) and adds the task records read before the
         error."""
-        from aerodaas.recording.reader import summarize_mcap
-        from aerodaas.recording.task_tally import TaskTally, tally_recording
+        from aerodaas.recording.reader import summarize_mcap  # lazy: heavy mcap
 
         out: dict[str, int] = {}
         tally = TaskTally()
@@ -315,8 +311,6 @@ class RecorderActor:
         order) and ``losses`` (one per recorder restart: ``segment``, ``recorded_until_ns``, ``next_segment``,
         ``resumed_at_ns``, ``previous_finished``) and ``segment_messages`` (the message count of each segment
         before this process's, read from its finished summary; None where it cannot be read)."""
-        from aerodaas.recording.segments import message_time_range
-
         rep = self.recorder.report() if self.recorder is not None else {}
         if self.losses:
             first = None
@@ -343,8 +337,6 @@ class RecorderActor:
 def _earlier_loss(segment: Any, following: Any) -> dict:
     """The loss of a recorder death before the last one: ``segment`` ended there, ``following`` went on (both
     finished by the recorder that followed; None times where one cannot be read)."""
-    from aerodaas.recording.segments import message_time_range
-
     loss = {"segment": str(segment), "next_segment": str(following), "recorded_until_ns": None,
             "resumed_at_ns": None, "previous_finished": False}
     try:

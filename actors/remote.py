@@ -25,7 +25,7 @@ def where() -> dict:
 
 
 def _ray_remote(cls, **options):
-    import ray
+    import ray  # lazy: heavy ray
 
     return ray.remote(**options)(cls)
 

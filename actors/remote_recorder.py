@@ -165,7 +165,7 @@ class RemoteRecorder(AnalyticsAccounting):
         empty for a first start) and this process's incarnation number (its ``incarnation``, carried by every item
         and ledger it sends: the recorder's duplicate rule is keyed by it), asked once; None while the recorder
         actor does not answer (asked again at the next batch, which waits until then)."""
-        import ray
+        import ray  # lazy: heavy ray
 
         if self._base_ledger is None:
             try:
@@ -177,9 +177,9 @@ class RemoteRecorder(AnalyticsAccounting):
         return self._base_ledger
 
     def _send(self) -> None:
-        import ray
+        import ray  # lazy: heavy ray
 
-        from aerodaas.actors.dataplane import encode_frame
+        from aerodaas.actors.dataplane import encode_frame  # lazy: heavy cv2, ray
 
         base = self._base()
         if base is None:
@@ -223,7 +223,7 @@ class RemoteRecorder(AnalyticsAccounting):
 
     def close(self, timeout_s: float = 30.0) -> dict[str, Any]:
         """Deliver the rest and wait (at most ``timeout_s``) until the edge recorder has queued it all."""
-        import ray
+        import ray  # lazy: heavy ray
 
         if not self.closed:
             self._wake.set()

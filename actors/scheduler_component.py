@@ -12,7 +12,7 @@ from typing import Any
 from aerodaas.config import RobotConfig
 from aerodaas.protocol.messages import Message, Port
 from aerodaas.model.types import AeroNavigation, Waypoint
-from aerodaas.navigation.safety import SafetyViolation
+from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order, WaypointQueue
 
 from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
@@ -43,8 +43,6 @@ class SchedulerComponent(Component):
     def __init__(self, plane: DataPlane, cid: str, robot_id: str, scheduler: Any, recorder: Any, epoch_ns: int,
                  robot_cfg: dict | None = None, queue: WaypointQueue | None = None,
                  log: MissionPlanLog | None = None) -> None:
-        from aerodaas.navigation.safety import SafetyGate
-
         super().__init__(plane, cid, buffer=4)
         self.robot_id = robot_id
         self.s = scheduler

@@ -7,6 +7,8 @@ import socket
 import ssl
 import threading
 
+from aerodaas.clusters.ray_tls import RayTLS
+
 __all__ = ["ResolveError", "try_bind", "check_ray_address", "check_listen", "check_hitl"]
 
 
@@ -78,7 +80,6 @@ def check_ray_address(address: str, timeout_s: float = 10.0, option: str = "--ad
         infos = _resolve(host, port, timeout_s)
     except (OSError, TimeoutError) as e:
         raise ValueError(f"{option} {address!r}: cannot resolve host {host!r} ({e})") from None
-    from aerodaas.clusters.ray_tls import RayTLS
 
     tls = RayTLS.from_environ()  # Ray's TLS on (RAY_USE_TLS): the check speaks TLS as Ray's processes do
     family, kind, proto, _, addr = infos[0]

@@ -28,6 +28,11 @@ import logging
 import os
 from typing import TYPE_CHECKING, Any
 
+from aerodaas.clusters import reaper
+from aerodaas.clusters.loopback import loopback_only
+from aerodaas.clusters.ray_tls import use_tls
+from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
+
 if TYPE_CHECKING:
     from aerodaas.clusters.ray_tls import RayTLS
 
@@ -43,7 +48,7 @@ def enable_token_auth() -> None:
     try:
         from ray._private.authentication.authentication_token_setup import (
             enable_token_auth_by_default, ensure_token_if_auth_enabled,
-        )
+        )  # lazy: heavy ray
     except ImportError:  # an older or newer Ray without these helpers: set the mode, let Ray find the token
         os.environ.setdefault("RAY_AUTH_MODE", "token")
         return
@@ -79,26 +84,22 @@ class LocalCluster:
                  worker_niceness: int | None = None, edge_nodes: int = 1,
                  edge_labels: list[dict[str, str]] | None = None, head_gpus: float | None = None,
                  dashboard: bool = False, tls: "RayTLS | None" = None) -> None:
-        import ray
-        from ray.cluster_utils import Cluster
+        import ray  # lazy: heavy ray
+        from ray.cluster_utils import Cluster  # lazy: heavy ray
 
         if cloud_nodes < 0:
             raise ValueError(f"cloud_nodes must be >= 0, got {cloud_nodes}")
         if connect and ray.is_initialized():
             raise RuntimeError("Ray is already initialised in this process; call ray.shutdown() before starting a "
                                "LocalCluster with connect=True")
-        from aerodaas.clusters.ray_tls import use_tls
 
         # first: Ray's C++ configuration of this process reads the variables once, at its first use (the token
         # set-up below is one); every node process started afterwards inherits them. Undone by shutdown().
         self._restore_tls = use_tls(tls)
         enable_token_auth()
-        from aerodaas.clusters.loopback import loopback_only
-        from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 
         limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
         lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
-        from aerodaas.clusters import reaper
 
         reaper.ensure_started()  # the nodes' processes end with this process, however it ends
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
@@ -188,7 +189,7 @@ class LocalCluster:
 
     def shutdown(self) -> None:
         """Disconnect this driver (if it connected) and stop every node."""
-        import ray
+        import ray  # lazy: heavy ray
 
         if self.connected and ray.is_initialized():
             ray.shutdown()

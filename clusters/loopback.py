@@ -24,7 +24,7 @@ def loopback_only() -> Callable[[], None]:
     (Ray may already be imported). Returns the function that undoes both once Ray has started (its processes keep
     the variable; a later ``ray.init(address=...)`` of this process must see the machine's address again). A
     cluster joined with ``--address`` is never touched."""
-    from ray._private import ray_constants
+    from ray._private import ray_constants  # lazy: heavy ray
 
     before_env, before_const = os.environ.get(RAY_LOCAL_ONLY_ENV), ray_constants.ENABLE_RAY_CLUSTER
     os.environ[RAY_LOCAL_ONLY_ENV] = "0"

@@ -26,6 +26,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -96,7 +97,7 @@ def await_fresh_workers(timeout_s: float = 5.0) -> bool:
     st = read_state() or {}
     if not st.get("warm_workers"):
         return True
-    from aerodaas.clusters.warm_pool import code_fingerprint, package_roots
+    from aerodaas.clusters.warm_pool import code_fingerprint, package_roots  # lazy: a joined cluster only (every run imports this module, runtime.ray_start)
 
     if st.get("package_roots") not in (None, package_roots()):
         return True  # another install than this driver's: its workers run that one's code in any case
@@ -156,7 +157,7 @@ def down(timeout_s: float = 60.0) -> dict[str, Any] | None:
 
 def _zombie(pid: int) -> bool:
     try:
-        import psutil
+        import psutil  # lazy: psutil, only `aerodaas down` (every run imports this module)
 
         return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
     except Exception:  # noqa: BLE001 - gone, or psutil missing
@@ -165,17 +166,16 @@ def _zombie(pid: int) -> bool:
 
 def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     """The daemon: start the head node (with ``warm`` warm workers), write the state file, wait for SIGTERM/SIGINT,
-    stop the node."""
-    import threading
+    stop the node. Its imports stay in it: every run imports this module (:mod:`aerodaas.runtime.ray_start`), and
+    only the daemon needs the node's (``# lazy: the cluster daemon only``)."""
+    from ray.cluster_utils import Cluster  # lazy: heavy ray, the cluster daemon only
 
-    from ray.cluster_utils import Cluster
-
-    from aerodaas.clusters.local import enable_token_auth
-    from aerodaas.clusters.loopback import loopback_only
+    from aerodaas.clusters.local import enable_token_auth  # lazy: the cluster daemon only
+    from aerodaas.clusters.loopback import loopback_only  # lazy: the cluster daemon only
 
     enable_token_auth()
     loopback_only()  # kept: this process exists only to run the node
-    from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
+    from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas  # lazy: the cluster daemon only
 
     limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
     lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
@@ -184,7 +184,7 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     # folder (`python -m` puts the caller's working directory there), which workers do not have
     worker_path = [p for p in sys.path[1:] if p]
     if warm > 0:
-        from aerodaas.clusters.warm_pool import setup_hook_env
+        from aerodaas.clusters.warm_pool import setup_hook_env  # lazy: the cluster daemon only
 
         # the raylet's workers inherit it: each imports the framework at start
         os.environ.update(setup_hook_env(state_path().parent / "warm_hook"))
@@ -212,7 +212,7 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
 
     if warm > 0:
         try:
-            from aerodaas.clusters.warm_pool import READY_DIR, package_roots, raylet_pool, run_in_thread
+            from aerodaas.clusters.warm_pool import READY_DIR, package_roots, raylet_pool, run_in_thread  # lazy: the cluster daemon only
 
             pool = raylet_pool(node, warm, publish, ready_dir=state_path().parent / "warm_hook" / READY_DIR)
             st.update(warm_workers=warm, package_roots=package_roots())

@@ -13,6 +13,7 @@ in Ray's queue for ever (Ray only logs that it is infeasible): :func:`gpu_placem
 """
 from __future__ import annotations
 
+import re
 from typing import Any
 
 __all__ = ["COMPUTE_LABEL", "compute_label", "indistinct_computes", "placement_warning", "selector_matches",
@@ -25,8 +26,6 @@ COMPUTE_LABEL = "aerodaas/compute"
 def compute_label(compute_id: str) -> dict[str, str]:
     """``{"aerodaas/compute": compute_id}``: the label of the node that serves ``compute_id`` (Ray label values:
     letters, digits, ``-_.``, at most 63 characters). Raises ``ValueError`` naming the id when it cannot be one."""
-    import re
-
     if not re.fullmatch(r"[A-Za-z0-9]([A-Za-z0-9_.-]{0,61}[A-Za-z0-9])?", compute_id or ""):
         raise ValueError(f"compute id {compute_id!r} cannot be a Ray label value ({COMPUTE_LABEL})")
     return {COMPUTE_LABEL: compute_id}

@@ -13,11 +13,13 @@ naming the field (or flag) and the file, never its content.
 from __future__ import annotations
 
 import ipaddress
+import json
 import os
 import ssl
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
+import tempfile
 
 __all__ = ["ServeAccess", "check_exposure", "check_tls_files", "is_loopback", "server_context", "state_dir",
            "write_private_json"]
@@ -33,9 +35,6 @@ def write_private_json(path: Path, data: dict) -> None:
     """Write ``data`` as JSON to ``path`` readable and writable by its owner only (0600), whatever was there before:
     written to a new file created 0600 (never wider, not even for a moment), then renamed over ``path``. The
     folder is created 0700 when missing. Raises OSError."""
-    import json
-    import tempfile
-
     path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)  # mkstemp creates it 0600
     try:

@@ -30,12 +30,15 @@ run's own start on a small machine. Idle workers cost memory (``docs/clusters.md
 """
 from __future__ import annotations
 
+import hashlib
 import importlib
 import os
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+import psutil
 
 __all__ = ["HOOK_MODULE", "PREIMPORT_MODULES", "READY_DIR", "WarmPool", "code_fingerprint", "forget_ended",
            "hook_done", "package_roots", "preimport", "raylet_pool", "run_in_thread", "setup_hook_env"]
@@ -96,7 +99,7 @@ def setup_hook_env(hook_dir: str | os.PathLike) -> dict[str, str]:
     ``PYTHONPATH`` with ``hook_dir`` first) that make every worker of a node started with them run
     :func:`preimport` at start. Raises OSError if the module cannot be written."""
     try:
-        from ray._private import ray_constants
+        from ray._private import ray_constants  # lazy: heavy ray
 
         key = getattr(ray_constants, "WORKER_PROCESS_SETUP_HOOK_ENV_VAR", _HOOK_ENV_FALLBACK)
     except ImportError:
@@ -119,8 +122,6 @@ def setup_hook_env(hook_dir: str | os.PathLike) -> dict[str, str]:
 def package_roots() -> list[str]:
     """The folders of the installed ``aerodaas`` package and of its sub-packages installed from the repository's
     top level (``actors``, ``schedulers``, ``clusters``)."""
-    import importlib.util
-
     spec = importlib.util.find_spec("aerodaas")  # the package's folder, without importing its public API
     roots = list(spec.submodule_search_locations or []) if spec is not None else []
     for sub in ("actors", "schedulers", "clusters"):  # installed as aerodaas.<sub> from the repository's top level
@@ -136,8 +137,6 @@ def code_fingerprint(roots: list[str] | None = None) -> str:
     """A digest of every ``*.py`` file under ``roots`` (default: :func:`package_roots`): its path within its root,
     size and modification time (ns). Changes when any module file is edited, added or removed. Unreadable folders
     are skipped; never raises."""
-    import hashlib
-
     h = hashlib.blake2b(digest_size=12)
     for root in sorted(roots if roots is not None else package_roots()):
         stack = [root]
@@ -298,10 +297,9 @@ def raylet_pool(node, size: int, publish: Callable[[dict], None],
     worker Ray titles ``ray::IDLE`` counts as idle only once its hook has run (:func:`hook_done`; Ray sets the
     title when the worker connects, before the hook imports the framework), as starting until then. Raises
     ImportError/AttributeError when this Ray lacks what it needs (the daemon then runs without a pool)."""
-    import psutil
-    from ray._private import ray_constants
-    from ray._private.grpc_utils import init_grpc_channel
-    from ray.core.generated import common_pb2, node_manager_pb2, node_manager_pb2_grpc
+    from ray._private import ray_constants  # lazy: heavy ray
+    from ray._private.grpc_utils import init_grpc_channel  # lazy: heavy ray
+    from ray.core.generated import common_pb2, node_manager_pb2, node_manager_pb2_grpc  # lazy: heavy ray
 
     raylet = psutil.Process(node.all_processes[ray_constants.PROCESS_TYPE_RAYLET][0].process.pid)
     stub = node_manager_pb2_grpc.NodeManagerServiceStub(init_grpc_channel(f"127.0.0.1:{node.node_manager_port}"))

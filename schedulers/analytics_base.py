@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, ClassVar, Iterable, Mapping
 
+from aerodaas.plugins import registry
+
 __all__ = ["ModelProfile", "Workload", "TaskState", "AnalyticsTask", "Decision", "AnalyticsScheduler",
            "task_utility", "register_analytics_scheduler", "analytics_scheduler_names",
            "analytics_scheduler_class", "make_analytics_scheduler",
@@ -392,8 +394,6 @@ def register_analytics_scheduler(cls: type[AnalyticsScheduler]) -> type[Analytic
     """Class decorator: make ``cls`` available by ``cls.name`` in the plug-in registry
     (:mod:`aerodaas.plugins.registry`, kind ``analytics_scheduler``, origin ``decorator in FILE``; the built-in schedulers are
     entry points of this package, see pyproject.toml). Raises ValueError on a duplicate or empty name."""
-    from aerodaas.plugins import registry
-
     if not cls.name:
         raise ValueError(f"{cls.__name__}: an analytics scheduler needs a non-empty 'name'")
     return registry.register(cls, "analytics_scheduler", cls.name)
@@ -401,8 +401,6 @@ def register_analytics_scheduler(cls: type[AnalyticsScheduler]) -> type[Analytic
 
 def analytics_scheduler_names() -> list[str]:
     """Registered names (built-ins, decorators, installed entry points), in registration order."""
-    from aerodaas.plugins import registry
-
     return registry.names("analytics_scheduler")
 
 
@@ -413,8 +411,6 @@ def analytics_scheduler_class(name: str) -> type[AnalyticsScheduler]:
     application's class exists only where the application ran (Ray pickles a class defined in the application by
     value). Raises ValueError (:class:`aerodaas.plugins.registry.UnknownPlugin`) naming the known schedulers and
     where each came from."""
-    from aerodaas.plugins import registry
-
     return registry.get("analytics_scheduler", name)
 
 

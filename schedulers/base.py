@@ -13,6 +13,7 @@ preemption and fixed ORDERED runs are described in :mod:`aerodaas.navigation.way
 """
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any, Callable, Iterable, Sequence
 
@@ -59,8 +60,6 @@ class TrajectoryScheduler:
         """A scheduler of the same class and settings whose queue holds only ``missions`` (each robot of a fleet
         gets its own share when an application plugs one scheduler into the environment). Analytics stream inputs
         are kept: their navigation carries the robot it is meant for."""
-        import copy
-
         twin = copy.copy(self)
         twin.queue = WaypointQueue(missions, self.queue.seq, self.queue.segments_issued)
         twin.stream_inputs = list(self.stream_inputs)
@@ -155,7 +154,7 @@ class TrajectoryScheduler:
             return
         nav, prio = self.unwrap_navigation(nav, priority)
         if self._remote is not None:
-            import ray
+            import ray  # lazy: heavy ray
 
             ray.get(self._remote.add_navigation.remote(nav, index, prio))
             return
@@ -196,7 +195,7 @@ class TrajectoryScheduler:
         """Abort: drop every queued mission (or only those at ``priority``). A cleared mission never resumes. While
         a mission runs (:meth:`bind_remote`) this clears the drone's live queue."""
         if self._remote is not None:
-            import ray
+            import ray  # lazy: heavy ray
 
             ray.get(self._remote.clear_navigation.remote(priority))
             return

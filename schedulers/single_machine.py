@@ -28,6 +28,8 @@ import heapq
 import itertools
 from typing import Sequence
 
+import numpy as np
+
 from aerodaas.schedulers import single_machine_jit
 
 __all__ = ["max_gain_schedule", "max_gain_schedule_arrays"]
@@ -93,8 +95,6 @@ def _solve_compiled(members: dict, jobs, gains: list[float], free_at: float
     """The same DP, run by the compiled kernel (:mod:`.single_machine_jit`): the groups built as :class:`_Group`
     builds them (variants by (latest start, index), suffix-best gain; stable sort by release), as arrays, with
     bits reused over time (:func:`_bits`). None if more than 64 groups are live at once."""
-    import numpy as np
-
     rows = []
     for js in members.values():
         r, _, p, _ = jobs[js[0]]
@@ -144,8 +144,6 @@ def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int,
     then None is returned when the compiled kernel is there but more than 64 groups are live (the pure-Python DP is
     exponential in the live groups: 67 ms for one LAPLAN plan on a stall-and-flush trace, issue 41). Raises
     ValueError if the jobs of one group differ in release or processing time."""
-    import numpy as np
-
     if jit and single_machine_jit.available():
         gains = np.ascontiguousarray(gain, np.float64)
         code, rel, p, bit, vstart, latest, best = single_machine_jit.prepare(

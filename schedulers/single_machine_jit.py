@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 __all__ = ["MAX_GROUPS", "available", "prepare", "solve", "status", "warm_up"]
 
 #: the most task groups a uint64 mask holds
@@ -39,7 +41,7 @@ def available() -> bool:
     if not _state["tried"]:
         _state["tried"] = True
         try:
-            from aerodaas.schedulers.single_machine_kernel import kernel, prepare
+            from aerodaas.schedulers.single_machine_kernel import kernel, prepare  # lazy: optional numba
         except ImportError as e:  # numba not installed: the pure-Python loop is used
             _state["error"] = e
         else:
@@ -84,7 +86,6 @@ def warm_up() -> bool:
     does not pay for it (seconds). Returns :func:`available`."""
     if not available():
         return False
-    import numpy as np
 
     solve(np.zeros(1), np.ones(1), np.ones(1, np.uint64), np.array([0, 1], np.int64), np.zeros(1),
           np.zeros(1, np.int64), np.ones(1), 1e-9)

@@ -30,6 +30,7 @@ from typing import Any, Iterator
 from pydantic import BaseModel
 
 from aerodaas.model.data import AeroStreamData
+from aerodaas.plugins import registry
 
 __all__ = ["AnalyticsEvent", "NamedOutput", "Emissions", "collecting", "current_emissions", "NamedOutputStream",
            "ContractError", "RESERVED_OUTPUT_NAMES", "RESERVED_EVENT_FIELDS", "schema_name", "json_schema",
@@ -190,7 +191,6 @@ def stream_types(stream: AeroStreamData) -> tuple[str, ...]:
         return (_token(src.named_outputs[stream.output]),)
     sensor_type = getattr(src, "type", None)
     if isinstance(sensor_type, str) and not hasattr(src, "analyse"):  # a robot's sensor (aerodaas.app.api.Sensor)
-        from aerodaas.plugins import registry
 
         try:
             cls = registry.resolve("sensor", sensor_type).load()

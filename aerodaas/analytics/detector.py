@@ -9,6 +9,9 @@ import numpy as np
 from aerodaas.analytics.base import Analytics
 from aerodaas.analytics.contract import current_emissions
 from aerodaas.model.types import Detection, FrameMeta
+from aerodaas.perception.detector_values import check_detector_values, normalise_classes
+from aerodaas.perception.providers import ProviderUnavailableError, providers_setting
+from aerodaas.perception.tiling import TiledDetector
 from aerodaas.perception.track_records import TrackRecords, track_and_keep
 
 __all__ = ["ObjectDetector"]
@@ -66,9 +69,6 @@ class ObjectDetector(Analytics):
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
                  class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None,
                  providers: Any = None) -> None:
-        from aerodaas.perception.options import check_detector_values, normalise_classes
-        from aerodaas.perception.providers import providers_setting
-
         super().__init__(name)
         # what needs no model file fails where the app wrote it; the model's own names in check() (pre-flight)
         check_detector_values(name=self.name, model=model, model_path=model_path, format=format,
@@ -113,15 +113,13 @@ class ObjectDetector(Analytics):
         (:func:`aerodaas.perception.options.check_detector_options`: thresholds, class names against the model's,
         class groups, input size, the model's format) and resolve the model, so a typo or a missing model fails
         with a ValueError naming the field and the value (``aerodaas run`` exits 2)."""
-        from aerodaas.perception.detect import ShippedModel, resolve_model
-        from aerodaas.perception.options import check_detector_options
+        from aerodaas.perception.detect import ShippedModel, resolve_model  # lazy: cv2, onnxruntime
+        from aerodaas.perception.options import check_detector_options  # lazy: cv2, onnxruntime
 
         if self.tiling is not None:
             self.tiling.check()
         if self.tracker is not None:
             self.tracker.check()
-        from aerodaas.perception.providers import providers_setting
-
         self.providers = providers_setting(self.providers, self.name)  # a field changed after construction
         self.num_gpus = self.providers.ray_gpus() if self.providers is not None else 0.0
         if self.model_path is not None and not os.path.isfile(self.model_path):
@@ -138,8 +136,7 @@ class ObjectDetector(Analytics):
         """On the actor: load the model into an onnxruntime session on ``providers`` (a provider this node lacks:
         a warning and the CPU, recorded as :attr:`session_providers`; required: ProviderUnavailableError naming
         this analytics, the node and the provider) and wrap it for ``tiling``."""
-        from aerodaas.perception.options import build_detector
-        from aerodaas.perception.providers import ProviderUnavailableError
+        from aerodaas.perception.options import build_detector  # lazy: cv2 and onnxruntime, on the actor only
 
         path = self.shipped.path_on_this_node(self.model_path) if self.shipped is not None else self.model_path
         try:
@@ -153,8 +150,6 @@ class ObjectDetector(Analytics):
             raise ProviderUnavailableError(f"analytics {self.name!r}: {e}") from None
         self.session_providers = self.detector.session_providers
         if self.tiling is not None:
-            from aerodaas.perception.tiling import TiledDetector
-
             self.detector = TiledDetector(self.detector, self.tiling)
 
     def _ready(self):

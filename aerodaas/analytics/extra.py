@@ -17,11 +17,13 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
+import time
 from typing import Any
 
 import numpy as np
 
 from aerodaas.analytics.core import Analytics, NavigableAnalytics
+from aerodaas.model.camera import pixel_to_ground
 from aerodaas.model.types import (ActionCommand, AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType,
                                   Waypoint)
 
@@ -59,7 +61,7 @@ def decode_yolov8(out: np.ndarray, score_threshold: float, scale_xy: tuple[float
     """Decode a raw YOLOv8 detection head ``(1, 4 + C, N)`` float32 — rows ``cx, cy, w, h`` in input pixels,
     then C class scores (already sigmoid) — into Detections in image pixels (``scale_xy`` = image / input
     size per axis), with class-aware NMS (OpenCV ``NMSBoxesBatched``). Format: Ultralytics YOLOv8 ONNX export."""
-    import cv2
+    import cv2  # lazy: heavy cv2
 
     p = out[0] if out.ndim == 3 else out
     scores = p[4:].T
@@ -156,7 +158,7 @@ class FallDetector(NavigableAnalytics):
         self.model_path = str(self.resolve_model(self.model_path))
 
     def setup(self) -> None:
-        import onnxruntime as ort
+        import onnxruntime as ort  # lazy: heavy onnxruntime
 
         so = ort.SessionOptions()
         so.intra_op_num_threads = self.threads
@@ -167,9 +169,7 @@ class FallDetector(NavigableAnalytics):
 
     def infer(self, frame: np.ndarray) -> list[Detection]:
         """Detections (classes Normal/Fall) in ``frame`` pixels."""
-        import time
-
-        import cv2
+        import cv2  # lazy: heavy cv2
 
         t0 = time.perf_counter()
         x = cv2.cvtColor(cv2.resize(frame, (self.in_w, self.in_h)), cv2.COLOR_BGR2RGB)
@@ -242,7 +242,7 @@ class StructureLocator(Analytics):
         return p.resolve()
 
     def _load(self) -> np.ndarray:
-        import cv2
+        import cv2  # lazy: heavy cv2
 
         if isinstance(self.template_src, np.ndarray):
             return self.template_src
@@ -268,7 +268,7 @@ class StructureLocator(Analytics):
         self.template = self._load()
 
     def process(self, frame: np.ndarray, meta: FrameMeta | None) -> list[Detection] | None:
-        import cv2
+        import cv2  # lazy: heavy cv2
 
         self.frames += 1
         if meta is None or self.template is None:
@@ -320,8 +320,6 @@ class InspectionPlanner(NavigableAnalytics):
         return st.planned if st is not None else None
 
     def generate_navigation(self, dets: list[Detection], meta: FrameMeta | None) -> AeroNavigation | None:
-        from aerodaas.model.camera import pixel_to_ground
-
         if meta is None:
             return None
         st = self.drone_state(dets, meta, _InspectionState)

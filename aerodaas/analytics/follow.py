@@ -9,8 +9,10 @@ import numpy as np
 
 from aerodaas.analytics.base import NavigableAnalytics
 from aerodaas.analytics.motion import MovingTarget, TrackMotion
+from aerodaas.model.camera import pixel_to_ground
 from aerodaas.model.types import AeroNavigation, Detection, FrameMeta, NavigationType, SchedulingType, VelocityCommand
-from aerodaas.perception.track_records import TrackRecords
+from aerodaas.perception.track_records import TrackRecords, track_rows
+from aerodaas.perception.tracking import ByteTracker
 
 __all__ = ["FollowTrack", "FollowAnalytics"]
 
@@ -131,8 +133,6 @@ class FollowAnalytics(NavigableAnalytics):
         return sum(st.commands for st in self.drone_states().values())
 
     def generate_navigation(self, dets: list[Detection], meta: FrameMeta | None) -> AeroNavigation | None:
-        from aerodaas.model.camera import pixel_to_ground
-
         if meta is None:
             return None
         st = self.drone_state(dets, meta, FollowTrack)
@@ -142,9 +142,6 @@ class FollowAnalytics(NavigableAnalytics):
         cands = []
         ids: list[int | None] = []
         if self.tracker is not None and self.track_records is not None:
-            from aerodaas.perception.track_records import track_rows
-            from aerodaas.perception.tracking import ByteTracker
-
             if st.tracker is None:
                 st.tracker = ByteTracker(self.tracker)
             active = st.tracker.update([d for d in dets if d.class_name in self.target_classes])

@@ -8,6 +8,7 @@ from typing import Any, Iterable
 from aerodaas.analytics.core import Analytics
 from aerodaas.model.types import Detection, FrameMeta, GeoPoint
 from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.perception.detector_values import normalise_classes
 from aerodaas.perception.track_records import TrackRecords, track_rows
 from aerodaas.perception.tracking import ByteTrackConfig, ByteTracker
 
@@ -31,8 +32,6 @@ class TrackAnalytics(Analytics):
 
     def __init__(self, classes: Iterable[str] | str | None = None, tracker: ByteTrackConfig | None = None,
                  home: GeoPoint | None = None, ground_z: float = 0.0, name: str | None = None) -> None:
-        from aerodaas.perception.options import normalise_classes
-
         super().__init__(name)
         self.classes = normalise_classes(classes)
         self.tracker = tracker or ByteTrackConfig()

@@ -9,14 +9,26 @@ before any actor starts.
 """
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import os
 from pathlib import Path
 from typing import Any, Callable
 
-from aerodaas.config import ComputeConfig, EnvironmentConfig, RobotConfig, SensorConfig, load_environment_config
+from pydantic import ValidationError
+
+from aerodaas.backends import NotNavigable, is_navigable
+from aerodaas.config import (AnalyticsSchedulerConfig, ComputeConfig, ConfigError, EnvironmentConfig, RobotConfig,
+                             SensorConfig, _format_errors, load_environment_config)
 from aerodaas.model.data import AeroStreamData
 from aerodaas.model.types import AeroNavigation, PriorityQueue
+from aerodaas.navigation.gimbal import GimbalError
+from aerodaas.plugins import registry
+from aerodaas.protocol.gimbal import GimbalPoint, GimbalRelease, GimbalRoi
+from aerodaas.runtime.app_loader import env_path_override, is_sentinel, mark_mission
+from aerodaas.runtime.options import RunOptions
+from aerodaas.runtime.preflight import check_timeout
+from aerodaas.schedulers import TrajectoryScheduler
 
 __all__ = ["Environment", "Robot", "Sensor", "ComputeResource"]
 
@@ -28,14 +40,11 @@ def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, optio
     ``aerodaas run`` is told each result by :func:`aerodaas.runtime.driver.run_file`). Raises ValueError naming
     ``start_mission(timeout=...)`` and the value for a ``timeout`` that is not a number of seconds in (0, 1e7] (the
     rule of ``--timeout``), before anything starts."""
-    from aerodaas.runtime.app_loader import is_sentinel, mark_mission
-    from aerodaas.runtime.preflight import check_timeout
-
     check_timeout(timeout, "start_mission(timeout=...)")
     marked = mark_mission(env, robots, timeout)
     if not is_sentinel(marked):
         return marked  # a mission of the application that already flew (loaded again after it)
-    from aerodaas.runtime.driver import run_mission
+    from aerodaas.runtime.driver import run_mission  # lazy: the runtime (~60 modules), only when a mission flies
 
     return run_mission(env, robots, with_builtin_actors(options), timeout)
 
@@ -44,14 +53,10 @@ def with_builtin_actors(options: Any = None) -> Any:
     """``options`` (a :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) with the built-in actor
     classes (:data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`) when it names none: the application API hands the
     runtime the actors it starts (the runtime imports no actor module). Imports Ray."""
-    import dataclasses
-
-    from aerodaas.runtime.options import RunOptions
-
     opts = options if options is not None else RunOptions()
     if opts.actors is not None:
         return opts
-    from aerodaas.actors.catalogue import BUILTIN_ACTORS
+    from aerodaas.actors.catalogue import BUILTIN_ACTORS  # lazy: heavy cv2, ray
 
     return dataclasses.replace(opts, actors=BUILTIN_ACTORS)
 
@@ -140,8 +145,6 @@ class Robot:
     # -- navigation
     def is_navigable(self) -> bool:
         """False for a robot whose backend only reports (``replay`` of a recorded flight)."""
-        from aerodaas.backends import is_navigable
-
         return is_navigable(self.cfg.backend)
 
     def navigate(self, nav: AeroNavigation | PriorityQueue | Any) -> None:
@@ -149,8 +152,6 @@ class Robot:
         trajectory scheduler; navigation that the scheduler has not queued yet is queued now. Raises
         :class:`aerodaas.backends.NotNavigable` for a robot that cannot fly (``is_navigable()`` is False)."""
         if not self.is_navigable():
-            from aerodaas.backends import NotNavigable
-
             raise NotNavigable(f"robot {self.id!r}: backend {self.cfg.backend!r} is not navigable "
                                f"(is_navigable() is False); it replays a recorded flight")
         sched = self.env.trajectory_scheduler()
@@ -201,7 +202,7 @@ class Robot:
     def end_mission(self, reason: str = "ended") -> None:
         """End the running mission now (the run stops; the result's outcome is ``reason``)."""
         if self._handle is not None:
-            import ray
+            import ray  # lazy: heavy ray
 
             ray.get(self._handle.end_mission.remote(reason))
 
@@ -209,14 +210,14 @@ class Robot:
         """Hover in place until :meth:`resume_mission`."""
         if self._handle is None:
             raise RuntimeError(f"robot {self.id!r}: no mission is running")
-        import ray
+        import ray  # lazy: heavy ray
 
         ray.get(self._handle.pause_mission.remote())
 
     def resume_mission(self) -> None:
         if self._handle is None:
             raise RuntimeError(f"robot {self.id!r}: no mission is running")
-        import ray
+        import ray  # lazy: heavy ray
 
         ray.get(self._handle.resume_mission.remote())
 
@@ -229,22 +230,16 @@ class Robot:
         MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW). Raises :class:`~aerodaas.navigation.gimbal.GimbalError` naming the
         field and value (not finite, out of limits, no gimbal section) before anything is sent, and the backend's
         error when the vehicle refuses."""
-        from aerodaas.protocol.gimbal import GimbalPoint
-
         self._gimbal(GimbalPoint(pitch_deg, yaw_deg))
 
     def set_gimbal_roi(self, x: float, y: float, z: float = 0.0) -> None:
         """Keep the camera on the region of interest at (``x``, ``y``, ``z``) ENU metres from home (the simulator
         aims from the vehicle's pose at every step; a MAVLink vehicle gets MAV_CMD_DO_SET_ROI_LOCATION). Raises
         GimbalError as :meth:`point_gimbal`."""
-        from aerodaas.protocol.gimbal import GimbalRoi
-
         self._gimbal(GimbalRoi(x, y, z))
 
     def clear_gimbal_roi(self) -> None:
         """Stop following the region of interest (MAV_CMD_DO_SET_ROI_NONE); the gimbal stays where it points."""
-        from aerodaas.protocol.gimbal import GimbalRelease
-
         self._gimbal(GimbalRelease())
 
     def gimbal_attitude(self) -> dict | None:
@@ -253,16 +248,13 @@ class Robot:
         RuntimeError when no mission is running."""
         if self._handle is None:
             raise RuntimeError(f"robot {self.id!r}: no mission is running")
-        import ray
+        import ray  # lazy: heavy ray
 
         return ray.get(self._handle.gimbal_attitude.remote())
 
     def _gimbal(self, cmd) -> None:
         """Check ``cmd`` against the robot's gimbal limits (GimbalError naming the field and value), then keep it
         for take-off or send it to the running drone (its error raised here, typed)."""
-        from aerodaas.navigation.gimbal import GimbalError
-        from aerodaas.protocol.gimbal import GimbalPoint, GimbalRoi
-
         lim = self.cfg.gimbal
         if lim is None:
             raise GimbalError(f"robot {self.id!r} has no gimbal: add a 'gimbal' section to its configuration "
@@ -277,7 +269,7 @@ class Robot:
         if self._handle is None:
             self.gimbal_commands.append(cmd)
             return
-        import ray
+        import ray  # lazy: heavy ray
 
         try:
             ray.get(self._handle.point_gimbal.remote(cmd))
@@ -294,8 +286,6 @@ class Environment:
     directory, then next to the application file. Raises :class:`aerodaas.config.ConfigError`. Never starts Ray."""
 
     def __init__(self, path: str | os.PathLike | EnvironmentConfig) -> None:
-        from aerodaas.runtime.app_loader import env_path_override
-
         if isinstance(path, EnvironmentConfig):
             cfg = path
         else:
@@ -393,12 +383,8 @@ class Environment:
         (a registered name or ``module.path:ClassName``, constructed as ``Class(env)``), else
         :class:`aerodaas.schedulers.TrajectoryScheduler`."""
         if self._trajectory_scheduler is None:
-            from aerodaas.schedulers import TrajectoryScheduler
-
             cls = TrajectoryScheduler
             if self.cfg.trajectory_scheduler is not None:
-                from aerodaas.plugins import registry
-
                 cls = registry.get("trajectory_scheduler", self.cfg.trajectory_scheduler)
             self._trajectory_scheduler = cls(self)
         return self._trajectory_scheduler
@@ -415,10 +401,6 @@ class Environment:
         utility units) or a model name of ``workload`` under ``load``. Each frame reaching a named analytics then
         becomes a task the scheduler runs on the edge, sends to the cloud, or drops. See
         :class:`aerodaas.config.AnalyticsSchedulerConfig`. Raises ConfigError naming the bad field and value."""
-        from pydantic import ValidationError
-
-        from aerodaas.config import AnalyticsSchedulerConfig, ConfigError, _format_errors
-
         cur = self.cfg.analytics_scheduler.model_dump()
         cur["name"] = name
         for k, v in (("models", models), ("workload", workload), ("load", load),

@@ -3,6 +3,7 @@ recorded flights. :func:`make_backend` builds the one a robot's ``backend`` name
 from __future__ import annotations
 
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
+from aerodaas.plugins import registry
 
 __all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
            "backend_class", "is_navigable", "backend_clock"]
@@ -13,8 +14,6 @@ def backend_class(name: str) -> type[VehicleBackend]:
     the simulator never imports pymavlink), a plug-in registered with a decorator or installed under the entry
     point group ``aerodaas.backends``, or ``"module.path:ClassName"`` (:mod:`aerodaas.plugins.registry`). Raises
     ValueError (UnknownPlugin) listing the available backends and where each came from."""
-    from aerodaas.plugins import registry
-
     return registry.get("backend", name)
 
 

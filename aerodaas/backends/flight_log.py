@@ -17,6 +17,7 @@ and a genuinely repeated message — a STATUSTEXT sent twice — has its own seq
 """
 from __future__ import annotations
 
+from collections import deque
 import math
 import os
 import struct
@@ -57,7 +58,7 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
     Returns (messages, info) with info ``{"t0": unix seconds of the first record, "sysid", "compid",
     "duplicates": n dropped, "foreign": n from other systems}``. Raises BackendError when the file cannot be
     read or holds no vehicle HEARTBEAT."""
-    from pymavlink import mavutil
+    from pymavlink import mavutil  # lazy: heavy pymavlink
 
     p = Path(path)
     try:
@@ -69,7 +70,6 @@ def load_tlog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
         conn = mavutil.mavlink_connection(str(p))
     except OSError as e:
         raise BackendError(f"replay.log: cannot read {str(p)!r}: {e}") from e
-    from collections import deque
 
     raw: list[tuple[float, str, Any]] = []
     recent: dict[tuple[int, int], deque] = {}  # sender -> its last packets' (seq, msgid, time)
@@ -163,7 +163,7 @@ def load_ulog(path: str | os.PathLike) -> tuple[list[LogMessage], dict[str, Any]
     "ulog", "topics": [topics found], "dropouts": n}``. Raises BackendError when pyulog is missing, the file cannot
     be parsed, or it has no ``vehicle_global_position`` samples."""
     try:
-        from pyulog import ULog
+        from pyulog import ULog  # lazy: heavy pyulog
     except ImportError as e:  # pragma: no cover - a dependency; only a broken install lacks it
         raise BackendError("replay.log: reading a PX4 .ulg needs pyulog (pip install pyulog)") from e
     p = Path(path)

@@ -35,6 +35,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from aerodaas.config.base import ConfigError
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
@@ -84,8 +85,6 @@ class ReplayBackend(VehicleBackend):
     def resolve_files(cls, robot: Any, resolve: Any, where: str) -> None:
         """The log (``replay.log``), resolved like every file of the environment and checked to hold a flight
         (:func:`check_log`): a missing or empty log fails before Ray starts. Raises ConfigError naming the field."""
-        from aerodaas.config.base import ConfigError
-
         field = f"{where}.{cls.config_section}.log"
         robot.backend_config["log"] = log = str(resolve(cls.options(robot).log, field))
         try:
@@ -226,7 +225,7 @@ class ReplayBackend(VehicleBackend):
                 self._event("mission_item_reached", t, seq=int(m.seq))
 
     def _heartbeat(self, m: Any, t: float) -> None:
-        from pymavlink import mavutil
+        from pymavlink import mavutil  # lazy: heavy pymavlink
 
         self._last_hb = t
         armed = bool(m.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
@@ -323,7 +322,7 @@ class McapCameraReplay:
     naming the topics that are there)."""
 
     def __init__(self, path: str | os.PathLike, topic: str, start_ns: int | None = None) -> None:
-        from aerodaas.recording.writer import read_messages, summarize_mcap
+        from aerodaas.recording.writer import read_messages, summarize_mcap  # lazy: heavy cv2, mcap, protobuf
 
         self.path, self.topic = str(path), topic
         summary = summarize_mcap(self.path)
@@ -349,7 +348,7 @@ class McapCameraReplay:
 
     def frame(self, i: int) -> np.ndarray:
         """Frame ``i`` decoded, ``(H, W, 3) uint8 BGR``. Raises IndexError / ValueError (undecodable bytes)."""
-        import cv2
+        import cv2  # lazy: heavy cv2
 
         img = cv2.imdecode(np.frombuffer(self._data[i], np.uint8), cv2.IMREAD_COLOR)
         if img is None:

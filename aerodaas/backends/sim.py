@@ -1,6 +1,7 @@
 """The embedded simulator as a vehicle backend (see :mod:`aerodaas.sim.vehicle` for the flight model)."""
 from __future__ import annotations
 
+import copy
 from typing import Sequence
 
 import numpy as np
@@ -50,15 +51,11 @@ class SimBackend(VehicleBackend):
 
     def checkpoint(self) -> dict:
         """The simulated vehicle's state, setpoint, clock and noise generator (deep copies)."""
-        import copy
-
         v = self.vehicle
         return copy.deepcopy({"state": v.state, "setpoint": v.setpoint, "t": v.t, "rng": v.noise_state,
                               "gimbal": None if self.gimbal is None else self.gimbal.state()})
 
     def restore(self, state: dict) -> None:
-        import copy
-
         v, s = self.vehicle, copy.deepcopy(state)
         v.state, v.setpoint, v.t = s["state"], s["setpoint"], s["t"]
         v.noise_state = s["rng"]

@@ -7,6 +7,7 @@ Strict and bounded: a string or a boolean is not a number, and every rate, size 
 (:mod:`aerodaas.config.base`). Durations in seconds, rates in Hz, ports 0-65535."""
 from __future__ import annotations
 
+import ipaddress
 import json
 import re
 from typing import Any, Literal
@@ -14,6 +15,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, plugin_config_error
+from aerodaas.plugins import registry
 
 __all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",
            "backend_settings_into_config", "add_section_schemas"]
@@ -63,8 +65,6 @@ def check_mavlink_connection(conn: str) -> None:
     labels; not resolved here) and a port within [1, 65535]; or a serial device (a path such as ``/dev/ttyACM0``,
     or ``COM3``; it may appear later, so it need not exist yet). Raises ValueError naming the value and what is
     wrong (``tcp:999.1.1.1:99999`` reached the drone actor, after Ray had started: issue 47 item 5)."""
-    import ipaddress
-
     s = conn.strip()
     if s != conn or not s:
         raise ValueError(f"{conn!r}: a connection string without surrounding blanks")
@@ -231,8 +231,6 @@ def backend_settings_into_config(data: dict[str, Any], fields: set[str]) -> dict
     An unknown backend is left to the ``backend`` field's check. Raises pydantic's ValidationError located at the
     section the file used (``mavlink.baud``), or ValueError for settings given twice or a section of another
     backend (``mavlink: use_autopilot_mission: true needs backend 'mavlink' ..., but backend is 'sim'``)."""
-    from aerodaas.plugins import registry
-
     backend = data.get("backend", "sim")
     if not isinstance(backend, str):
         return data
@@ -277,8 +275,6 @@ def backend_settings_into_config(data: dict[str, Any], fields: set[str]) -> dict
 def _refuse_other_sections(keys: set[str], data: dict[str, Any], backend: str) -> None:
     """A key that is another backend's settings section: refused naming the settings and both backends (before,
     a ``mavlink`` section beside ``backend: sim`` was read by nothing). Other unknown keys are left to the model."""
-    from aerodaas.plugins import registry
-
     for e in registry.entries("backend"):
         try:
             owner = e.load()
@@ -296,8 +292,6 @@ def add_section_schemas(schema: dict[str, Any]) -> None:
     """Add the settings sections of the built-in backends (``mavlink``, ``tello``, ``replay``: each class's
     ``config_section``, with the JSON Schema of its ``Config``, references inlined) to ``schema``, the JSON Schema
     of a robot, so that ``aerodaas schema`` still describes them (pydantic ``json_schema_extra``)."""
-    from aerodaas.plugins import registry
-
     for e in registry.entries("backend"):
         if not e.builtin:
             continue

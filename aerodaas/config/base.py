@@ -3,6 +3,8 @@ finite numbers, strict types), the documented physical bounds (:mod:`aerodaas.mo
 "did you mean" helper."""
 from __future__ import annotations
 
+import difflib
+
 
 from pydantic import BaseModel, ConfigDict
 
@@ -29,8 +31,6 @@ class _Cfg(BaseModel):
 
 def did_you_mean(word: str, choices) -> str:
     """``" (did you mean 'width'?)"`` for the closest of ``choices`` to a misspelt ``word`` (difflib), else ``""``."""
-    import difflib
-
     close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
 

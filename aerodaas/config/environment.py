@@ -3,22 +3,27 @@ labels), the simulated world (ground, moving targets), the simulation clock, the
 and its QoS, the runtime's actor settings; parsing and loading with errors that name the field and the value."""
 from __future__ import annotations
 
+import ipaddress
 import json
 import math
 import os
 import re
 from pathlib import Path
 from typing import Annotated, Any, Literal, NamedTuple
+import typing
+import warnings
 
 from pydantic import BaseModel, Field, PrivateAttr, Strict, ValidationError, field_validator, model_validator
 
-from aerodaas.navigation.geofence import GeofenceConfig
+from aerodaas.model.jsonfile import JsonFileError, read_json
+from aerodaas.navigation.geofence import Geofence, GeofenceConfig
 
 from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ,
                    MAX_LIST_ITEMS, MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg,
                    did_you_mean)
 from aerodaas.model.ids import Identifier, check_unique
-from aerodaas.config.robot import RobotConfig, SensorConfig
+from aerodaas.config.robot import RobotConfig, SensorConfig, sensor_class
+from aerodaas.plugins import registry
 
 
 _LABEL_KEY = re.compile(r"^([a-z0-9]([-a-z0-9.]*[a-z0-9])?/)?[A-Za-z0-9]([-A-Za-z0-9_.]{0,61}[A-Za-z0-9])?$")
@@ -162,8 +167,6 @@ class HitlConfig(_Cfg):
     def _host_syntax(cls, v: str) -> str:
         """A host name (RFC 1123 labels) or an IPv4/IPv6 address; dotted numbers must be a valid IPv4 address
         (``999.999.1.1`` is not). Whether it is an address of this machine is checked before Ray starts."""
-        import ipaddress
-
         h = v.strip()
         if h.startswith("[") and h.endswith("]"):
             h = h[1:-1]
@@ -216,8 +219,6 @@ class AnalyticsSchedulerConfig(_Cfg):
     @classmethod
     def _known_scheduler(cls, v: str) -> str:
         if v != "default":
-            from aerodaas.plugins import registry
-
             try:  # a registered name, an installed entry point or "module.path:ClassName"; imported here
                 registry.get("analytics_scheduler", v)
             except registry.UnknownPlugin as e:
@@ -239,7 +240,7 @@ class AnalyticsSchedulerConfig(_Cfg):
         named = sorted(k for k, v in self.models.items() if isinstance(v, str))
         if named and (self.workload is None or self.load is None):
             raise ValueError(f"models: {named} name workload models, which needs 'workload' and 'load'")
-        from aerodaas.schedulers.dispatch.emulation import NetworkModel
+        from aerodaas.schedulers.dispatch.emulation import NetworkModel  # lazy: start-up (a scheduler only)
 
         NetworkModel.parse(self.network)  # ValueError naming the bad spec
         return self
@@ -248,15 +249,13 @@ class AnalyticsSchedulerConfig(_Cfg):
         """The QoS of every scheduled analytics as a :class:`aerodaas.schedulers.analytics_base.Workload` keyed by
         analytics name (named models read from ``workload``, resolved like every file of the environment).
         Raises ConfigError naming the field for a missing file, load or model."""
-        from aerodaas.schedulers.analytics_base import ModelProfile, Workload
+        from aerodaas.schedulers.analytics_base import ModelProfile, Workload  # lazy: start-up (a scheduler only)
 
         data = None
         if any(isinstance(v, str) for v in self.models.values()):
             path = base.resolve_path(self.workload, "analytics_scheduler.workload") if base is not None \
                 else Path(self.workload)
             try:
-                from aerodaas.model.jsonfile import read_json
-
                 data = read_json(path)
             except (OSError, ValueError) as e:
                 raise ConfigError(f"analytics_scheduler.workload: cannot read {str(path)!r}: {e}") from None
@@ -358,8 +357,6 @@ class EnvironmentConfig(_Cfg):
     @classmethod
     def _known_trajectory_scheduler(cls, v: str | None) -> str | None:
         if v is not None:
-            from aerodaas.plugins import registry
-
             try:  # a registered name, an installed entry point or "module.path:ClassName"; imported here
                 registry.get("trajectory_scheduler", v)
             except registry.UnknownPlugin as e:
@@ -376,15 +373,12 @@ class EnvironmentConfig(_Cfg):
             if r.compute is not None and r.compute not in edges:
                 raise ValueError(f"robots.{j}.compute: {r.compute!r} is not an edge compute resource of this "
                                  f"environment (edge: {edges})")
-        from aerodaas.plugins import registry
 
         by_backend: dict[type, list] = {}
         for j, r in enumerate(self.robots):
             by_backend.setdefault(registry.get("backend", r.backend), []).append((j, r))
         for backend_cls, on_it in by_backend.items():  # each backend's own checks across its robots
             backend_cls.check_fleet(on_it)
-        from aerodaas.config.robot import sensor_class
-        from aerodaas.plugins import registry
 
         for j, s in enumerate(self.env_sensors):
             try:
@@ -439,8 +433,6 @@ def _format_errors(err: ValidationError, source: str) -> str:
 def _fields_at(model: type, loc: tuple) -> list[str]:
     """The field names of the pydantic model reached from ``model`` along an error location (list indices and dict
     keys skipped); [] when the path does not end at a model."""
-    import typing
-
     def models_in(tp) -> list[type]:
         if isinstance(tp, type) and issubclass(tp, BaseModel):
             return [tp]
@@ -486,7 +478,6 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
                               f"({w} x {h} px); x1 must be <= {w} and y1 <= {h}")
     sensors = [(f"robots.{i}.sensors.{j}", r.id, s) for i, r in enumerate(cfg.robots) for j, s in enumerate(r.sensors)]
     sensors += [(f"env_sensors.{j}", None, s) for j, s in enumerate(cfg.env_sensors)]
-    from aerodaas.config.robot import sensor_class
 
     for where, robot_id, s in sensors:
         try:
@@ -496,13 +487,11 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
         except ValueError as e:  # a file the sensor reads that is not what it needs (a replay's recording)
             raise ConfigError(str(e)) from None
     for i, r in enumerate(cfg.robots):
-        from aerodaas.plugins import registry
-
         registry.get("backend", r.backend).resolve_files(r, cfg.resolve_path, f"robots.{i}")
         if r.safety.geofence_plan:
             field = f"robots.{i}.safety.geofence_plan"
             path = cfg.resolve_path(r.safety.geofence_plan, field)
-            from aerodaas.missionfile import MissionFileError, load_mission
+            from aerodaas.missionfile import MissionFileError, load_mission  # lazy: start-up (a geofence plan only)
 
             try:
                 fence = load_mission(path).geofence
@@ -512,8 +501,6 @@ def parse_environment_config(data: dict[str, Any], source: str = "<dict>", base_
                                                circles=[*r.safety.geofence.circles, *fence.circles])
             r.safety.geofence_plan = str(path)
     for i, r in enumerate(cfg.robots):
-        from aerodaas.navigation.geofence import Geofence
-
         try:
             why = Geofence(r.safety.geofence, r.home).check_point(0.0, 0.0)
         except ValueError as e:
@@ -541,11 +528,9 @@ def _image_size(path: str, field: str) -> tuple[int, int]:
     a PNG "decompression bomb" (a few KB declaring 100,000 x 100,000 px) made ``cv2.imread`` raise ``cv2.error``
     (OpenCV's own bound, CV_IO_MAX_IMAGE_PIXELS) or allocate gigabytes. Only then is it decoded with OpenCV, which
     must read it. Raises ConfigError naming ``field``, the file and the size."""
-    import warnings
-
-    import cv2
-    from PIL import Image, UnidentifiedImageError
-    from PIL.JpegImagePlugin import JpegImageFile
+    import cv2  # lazy: heavy cv2
+    from PIL import Image, UnidentifiedImageError  # lazy: heavy PIL
+    from PIL.JpegImagePlugin import JpegImageFile  # lazy: heavy PIL
 
     try:
         with warnings.catch_warnings():
@@ -575,7 +560,6 @@ def load_environment_config(path: str | os.PathLike) -> EnvironmentConfig:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"environment file {str(p)!r} not found")
-    from aerodaas.model.jsonfile import JsonFileError, read_json
 
     try:
         data = read_json(p)

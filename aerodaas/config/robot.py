@@ -11,6 +11,7 @@ from aerodaas.navigation.geofence import GeofenceConfig
 from aerodaas.navigation.gimbal import GimbalLimits
 from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
+from aerodaas.plugins import registry
 from aerodaas.plugins.builtin_sensors import STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
 from aerodaas.plugins.sensor import MissionStatusSensor
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
@@ -111,8 +112,6 @@ def sensor_class(type_: str) -> type:
     (:mod:`aerodaas.plugins.builtin_sensors`), a registered plug-in, an installed entry point or
     ``"module.path:ClassName"``. Raises :class:`aerodaas.plugins.registry.UnknownPlugin` (a ValueError) listing the
     available sensor types with their origins."""
-    from aerodaas.plugins import registry
-
     return registry.get("sensor", type_)
 
 
@@ -157,8 +156,6 @@ def properties_error(cls: type, err: ValidationError) -> str:
 
 def _known_sensor(type_: str) -> type | None:
     """The class sensor ``type_`` names, None when it names none (reported where the robot is known)."""
-    from aerodaas.plugins import registry
-
     try:
         cls = sensor_class(type_)
     except registry.UnknownPlugin:
@@ -343,8 +340,6 @@ class RobotConfig(_Cfg):
     @field_validator("backend")
     @classmethod
     def _known_backend(cls, v: str, info) -> str:
-        from aerodaas.plugins import registry
-
         try:
             registry.get("backend", v)
         except registry.UnknownPlugin as e:
@@ -354,8 +349,6 @@ class RobotConfig(_Cfg):
 
     def backend_settings(self) -> Any:
         """The backend's settings: an instance of its class's ``Config`` (None when it declares none)."""
-        from aerodaas.plugins import registry
-
         return registry.get("backend", self.backend).options(self)
 
     def _settings_if(self, model: type) -> Any:
@@ -399,8 +392,6 @@ class RobotConfig(_Cfg):
 def _check_gimbal_backend(robot: "RobotConfig") -> None:
     """A ``gimbal`` section needs a backend that declares one (``provides_gimbal``). Raises ValueError naming the
     robot and its backend."""
-    from aerodaas.plugins import registry
-
     try:
         cls = registry.get("backend", robot.backend)
     except registry.UnknownPlugin:
@@ -417,8 +408,6 @@ def check_plugin_sensors(sensors: list[SensorConfig], owner: str, field: str) ->
     were validated against the class's ``Config`` with the sensor). Raises ValueError naming ``owner`` (the robot),
     the sensor id, its type and every available sensor type with its origin, or a class that is not a
     SensorPlugin."""
-    from aerodaas.plugins import registry
-
     for j, s in enumerate(sensors):
         try:
             cls = sensor_class(s.type)

@@ -33,13 +33,23 @@ server closes; a client that follows only some channels (Foxglove's app: its pan
 """
 from __future__ import annotations
 
+import math
+import os
+import re
+import secrets
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from mcap.reader import make_reader
+from urllib.parse import quote
+
+from aerodaas.clusters.addresses import ResolveError, try_bind
 from aerodaas.clusters.tls import ServeAccess, check_exposure, is_loopback, state_dir, write_private_json
+from aerodaas.liveview.subprotocol import SubprotocolFront
+from aerodaas.recording.reader import _iter_raw, _open_mcap
 from aerodaas.recording.writer import RecordedMessage
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LATCHED_SUFFIXES", "LiveServer", "check_bindable", "live_access",
@@ -91,8 +101,6 @@ def check_bindable(host: str, port: int, option: str = "--live") -> None:
     """Raise ``ValueError`` naming ``option`` when ``host:port`` cannot be listened on here (port taken, address not
     of this machine, host not resolved within 10 s), so that ``aerodaas run --live`` fails before anything starts.
     Port 0 always works."""
-    from aerodaas.clusters.addresses import ResolveError, try_bind
-
     try:
         try_bind(host, port)
     except ResolveError as e:
@@ -107,10 +115,6 @@ def live_access(host: str, cert: str | None, key: str | None, insecure: bool, op
     ``$AERODAAS_LIVE_TOKEN`` is set. Raises ``ValueError`` naming the flag and value (no certificate off loopback
     without ``--insecure``, a bad certificate or key file, a token in ``$AERODAAS_LIVE_TOKEN`` that is not 16 to 256
     URL-safe characters)."""
-    import os
-    import re
-    import secrets
-
     check_exposure(host, cert, key, insecure, option, "--tls-cert", "--tls-key", "--insecure")
     token = os.environ.get("AERODAAS_LIVE_TOKEN") or None
     if token is not None and not re.fullmatch(r"[A-Za-z0-9\-._~]{16,256}", token):
@@ -124,9 +128,6 @@ def write_live_state(url: str, access: ServeAccess) -> "Path":
     """Hand the live view's connection to this user: ``$AERODAAS_STATE_DIR/live.json`` (mode 0600:
     :func:`aerodaas.clusters.tls.write_private_json`) with ``url``, ``token``, ``url_with_token`` (what Foxglove's
     "Open connection" takes) and ``cafile`` (the certificate to trust). Returns the file's path."""
-    import os
-    from urllib.parse import quote
-
     f = state_dir() / "live.json"
     for wildcard in ("://0.0.0.0:", "://[::]:"):  # bound on every address: a client here reaches it as localhost
         url = url.replace(wildcard, "://localhost:")
@@ -171,10 +172,8 @@ class LiveServer:
                  listener: Any = None, time_capability: bool = False, catchup_s: float = 5.0,
                  catchup_messages: int = 256, catchup_bytes: int = 32 << 20, client_send_timeout_s: float = 10.0,
                  access: ServeAccess | None = None) -> None:
-        import foxglove
-        from foxglove.websocket import Capability
-
-        from aerodaas.liveview.subprotocol import SubprotocolFront
+        import foxglove  # lazy: heavy foxglove
+        from foxglove.websocket import Capability  # lazy: heavy foxglove
 
         self.host, port = parse_address(address)
         self.access = access or ServeAccess()
@@ -373,12 +372,6 @@ def replay(path: str, address: str | None = None, *, speed: float = 1.0, wait_fo
     Raises ``FileNotFoundError``/``ValueError`` for a missing or non-MCAP file, ``ValueError`` for ``speed <= 0``
     and ``RuntimeError`` when the address cannot be bound.
     """
-    import math
-
-    from mcap.reader import make_reader
-
-    from aerodaas.recording.reader import _iter_raw, _open_mcap
-
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and speed > 0):
         raise ValueError(f"--speed must be a positive number (1 = as recorded), got {speed!r}")
     stop = stop or threading.Event()

@@ -22,7 +22,7 @@ def _read_text(path: Path) -> str:
         data = path.read_bytes()
     except OSError as e:
         raise MissionFileError(f"{path}: cannot read mission file ({e.strerror or e})") from e
-    from aerodaas.model.jsonfile import JsonFileError, decode_text
+    from aerodaas.model.jsonfile import JsonFileError, decode_text  # lazy: heavy numpy
 
     try:
         return decode_text(data, str(path))

@@ -5,7 +5,7 @@ QGroundControl's ``StructureScanComplexItem::appendMissionItems`` algorithm (the
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import GeoPoint
@@ -14,12 +14,19 @@ from aerodaas.missionfile.commands import (MAV_CMD_DO_SET_CAM_TRIGG_DIST, MAV_CM
                        MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_MISSION)
 from aerodaas.missionfile.items import MissionItem, _parse_simple_item
 
-if TYPE_CHECKING:  # annotations only: MissionPlan.expanded_items calls expand_items
-    from aerodaas.missionfile.plans import MissionPlan
+
+class PlanItems(Protocol):
+    """What :func:`expand_items` reads of a plan: a :class:`~aerodaas.missionfile.plans.MissionPlan` is one (it
+    calls :func:`expand_items`, so this module does not import it)."""
+
+    #: the mission items in order
+    items: list[MissionItem]
+    #: the file the plan was read from (error messages), None for a plan built in code
+    source: str | None
 
 
-def expand_items(plan: MissionPlan) -> list[MissionItem]:
-    """See :meth:`MissionPlan.expanded_items`."""
+def expand_items(plan: PlanItems) -> list[MissionItem]:
+    """See :meth:`aerodaas.missionfile.plans.MissionPlan.expanded_items`."""
     src = plan.source or "<plan>"
     out: list[MissionItem] = []
     for k, item in enumerate(plan.items):

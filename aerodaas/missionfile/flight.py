@@ -3,6 +3,7 @@ action and geofence a drone flies; :func:`plan_to_navigation` for the waypoints 
 :func:`navigation_to_plan` (the other way, for export)."""
 from __future__ import annotations
 
+from collections import Counter
 import math
 
 from pathlib import Path
@@ -87,8 +88,6 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
     fb = _FlightBuilder(src, home, skip, min_altitude, max_altitude, max_distance)
     for k, item in enumerate(items):
         fb.item(item, items[k + 1:])
-
-    from collections import Counter
 
     for k, (lat, lon, alt) in enumerate(plan.rally_points):  # the autopilot's RTL may fly to them
         _check_bounds(src, f"rally point {k + 1}", lat, lon, alt, home, max_altitude, max_distance)

@@ -9,8 +9,8 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from aerodaas.missionfile._common import _fail, _is_number
-from aerodaas.missionfile.commands import (_FRAME_NAMES, _GLOBAL_FRAMES, COMPLEX_ITEM_COMMAND, MISSION_FRAMES, command_name,
-                       frame_name)
+from aerodaas.missionfile.commands import (COMPLEX_ITEM_COMMAND, MISSION_FRAMES, NAV_KINDS, _FRAME_NAMES,
+                                           _GLOBAL_FRAMES, command_name, frame_name)
 
 
 class _Model(BaseModel):
@@ -86,8 +86,6 @@ class MissionItem(_Model):
     def nav_kind(self) -> str:
         """What the item makes the vehicle do, in the drone's words: ``"waypoint"`` (NAV_WAYPOINT), ``"takeoff"``,
         ``"land"``, ``"rtl"`` (NAV_RETURN_TO_LAUNCH), or ``"other"``."""
-        from aerodaas.missionfile.commands import NAV_KINDS
-
         return NAV_KINDS.get(self.command, "other")
 
     def describe(self) -> str:

@@ -46,7 +46,7 @@ def _complex_item_count(raw: dict[str, Any]) -> int:
 
 
 def _parse_plan(text: str, src: str) -> MissionPlan:
-    from aerodaas.model.jsonfile import JsonFileError, parse_json
+    from aerodaas.model.jsonfile import JsonFileError, parse_json  # lazy: heavy numpy
 
     try:
         doc = parse_json(text, src)

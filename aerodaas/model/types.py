@@ -111,13 +111,14 @@ class Waypoint(_Model):
         return self
 
     def to_local(self, home: "GeoPoint") -> tuple[float, float, float]:
-        """ENU metres of this waypoint relative to ``home`` (geodetic conversion via pymap3d)."""
+        """ENU metres of this waypoint relative to ``home`` (``pymap3d.geodetic2enu``, as
+        :func:`aerodaas.model.geo.geodetic_to_enu`, which imports this module)."""
         if self.waypoint_type == "relative":
             return (self.x, self.y, self.z)
-        from aerodaas.model.geo import geodetic_to_enu
+        import pymap3d  # lazy: it imports numpy (~0.1 s); only absolute waypoints need it
 
-        e, n, _ = geodetic_to_enu(self.x, self.y, home.alt, home)
-        return (e, n, self.z)
+        e, n, _ = pymap3d.geodetic2enu(self.x, self.y, home.alt, home.lat, home.lon, home.alt)
+        return (float(e), float(n), self.z)
 
 
 class VelocityCommand(_Model):

@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 from typing import Any, Sequence
 
+from aerodaas.model.types import Waypoint
 from aerodaas.navigation.route import plan_path
+from aerodaas.navigation.safety import SafetyViolation
 
 __all__ = ["RTL_MARGIN_M", "plan_return"]
 
@@ -20,9 +22,6 @@ def plan_return(gate: Any, position: Sequence[float], velocity: Sequence[float],
     """Plan the way home for a vehicle at ``position`` (ENU m) moving at ``velocity`` (ENU m/s), flown at ``altitude``
     (m above home) and the gate's ``max_speed``. Returns ``(path, "")`` with ``path`` the ENU ``(x, y)`` points from
     the position to ``home``, or ``(None, reason)`` when no path exists or a leg of it is refused by the gate."""
-    from aerodaas.model.types import Waypoint
-    from aerodaas.navigation.safety import SafetyViolation
-
     clearance = gate.stopping_distance(gate.max_speed) + RTL_MARGIN_M
     start = (float(position[0]), float(position[1]))
     path = plan_path(gate.fence, start, home, clearance) if not gate.fence.is_empty else [start, tuple(home)]

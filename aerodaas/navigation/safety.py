@@ -34,6 +34,8 @@ from __future__ import annotations
 import math
 from typing import Any, Sequence
 
+from pydantic import ValidationError
+
 from aerodaas.model.types import ActionCommand, AeroNavigation, GeoPoint, VelocityCommand, Waypoint
 from aerodaas.navigation.braking import braking_speed, limited_change
 
@@ -64,7 +66,7 @@ class SafetyGate:
     PREDICT_DT_S = 0.1
 
     def __init__(self, safety: Any, limits: Any, home: GeoPoint, control_period_s: float = 0.1) -> None:
-        from aerodaas.navigation.geofence import Geofence
+        from aerodaas.navigation.geofence import Geofence  # lazy: heavy pymap3d, shapely
 
         self.cfg = safety
         self.home = home
@@ -148,7 +150,7 @@ class SafetyGate:
                                       f"above max_altitude {self.max_alt:g} m")
             why = self._fence_violation(turn)
             if why is None and not self.fence.is_empty:
-                from shapely.geometry import LineString
+                from shapely.geometry import LineString  # lazy: heavy shapely
 
                 xy = [(p[0], p[1]) for p in path]
                 if len(xy) > 2:
@@ -241,7 +243,7 @@ class SafetyGate:
         it stands (``position``, ENU metres about ``vehicle_home``), is more than ``safety.home_tolerance_m``
         metres from the robot's home: the gate and the vehicle would place every point that far apart. Distances
         are horizontal (pymap3d ENU)."""
-        from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
+        from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu  # lazy: heavy pymap3d
 
         here = enu_to_geodetic(float(position[0]), float(position[1]), 0.0, vehicle_home)
         tol = float(getattr(self.cfg, "home_tolerance_m", 5.0))
@@ -277,8 +279,6 @@ class SafetyGate:
         ``model_construct`` or changed by ``model_copy(update=...)`` skips pydantic's validation: a NaN waypoint
         built so passed the pre-flight check and the gate (every comparison with NaN is False) before. Raises
         :class:`SafetyViolation` naming the field and its value."""
-        from pydantic import ValidationError
-
         try:
             type(item).model_validate(dict(item.__dict__))
         except ValidationError as e:

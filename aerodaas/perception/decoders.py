@@ -25,7 +25,7 @@ import numpy as np
 
 from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, _OnnxDetector
 from aerodaas.perception.model_meta import metadata_imgsz, metadata_names
-from aerodaas.perception.options import FORMATS  # the output formats inspect_model recognises / format= accepts
+from aerodaas.perception.detector_values import FORMATS  # the output formats inspect_model recognises / format= accepts
 
 __all__ = ["UltralyticsDetector", "ModelInfo", "inspect_model", "FORMATS", "metadata_names"]
 
@@ -60,7 +60,7 @@ def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
     ``format`` other than ``"auto"`` is taken as given (and checked against the graph where the shape is known).
     Raises ValueError naming the field and value for an unknown ``format``, an input that is not NCHW, or a head
     that matches none of the formats (or not the ``format`` given)."""
-    import onnxruntime as ort
+    import onnxruntime as ort  # lazy: heavy onnxruntime
 
     if format not in FORMATS:
         raise ValueError(f"format must be one of {list(FORMATS)}, got {format!r}")

@@ -31,7 +31,7 @@ import numpy as np
 
 from aerodaas.model.types import COCO_CLASSES, Detection
 from aerodaas.perception.model_meta import metadata_imgsz, metadata_names
-from aerodaas.perception.options import check_input_size
+from aerodaas.perception.detector_values import check_input_size
 from aerodaas.perception.providers import Providers, open_session
 
 __all__ = [
@@ -134,7 +134,7 @@ class _OnnxDetector:
         input: name, (H, W) size (the model's fixed one, ``input_size``, or the subclass's default), whether the
         batch is dynamic, the output names. Raises ValueError for a model whose input is not NCHW or an
         ``input_size`` its fixed input contradicts, ProviderUnavailableError for a required provider missing."""
-        import onnxruntime as ort
+        import onnxruntime as ort  # lazy: heavy onnxruntime
 
         so = ort.SessionOptions()
         so.intra_op_num_threads = intra_op_threads

@@ -12,11 +12,13 @@ obliquity, as it should. Lat/lon from ENU: :func:`aerodaas.model.geo.enu_to_geod
 """
 from __future__ import annotations
 
+import colorsys
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from aerodaas.model.camera import pixel_to_ground
 from aerodaas.model.types import CameraIntrinsics, FramePose, GeoPoint
 
 __all__ = ["GroundFix", "geolocate_box", "record_track_fixes", "track_color"]
@@ -36,8 +38,6 @@ class GroundFix:
 
 
 def _ground(u, v, pose: FramePose, k: CameraIntrinsics, ground_z: float, dyaw=0.0, dpitch=0.0, dalt=0.0):
-    from aerodaas.model.camera import pixel_to_ground
-
     p = pose.model_copy(update={"yaw": pose.yaw + dyaw, "camera_pitch": pose.camera_pitch + dpitch,
                                 "position": (pose.position[0], pose.position[1], pose.position[2] + dalt)})
     g = pixel_to_ground(u, v, p, k, ground_z)
@@ -74,7 +74,7 @@ def geolocate_box(box: tuple[float, float, float, float], pose: FramePose, k: Ca
         cols.append(np.zeros(2) if a is None or b is None else (a - b) / 2 * scale)
     j = np.stack(cols, axis=1)  # (2, 5), each column already scaled by its sigma
     cov = j @ j.T
-    from aerodaas.model.geo import enu_to_geodetic
+    from aerodaas.model.geo import enu_to_geodetic  # lazy: heavy pymap3d
 
     geo = enu_to_geodetic(float(g[0]), float(g[1]), float(ground_z), home)
     return GroundFix((float(g[0]), float(g[1]), float(ground_z)), geo.lat, geo.lon, geo.alt, cov,
@@ -84,9 +84,7 @@ def geolocate_box(box: tuple[float, float, float, float], pose: FramePose, k: Ca
 def track_color(track_id: int) -> Any:
     """The colour of track ``track_id`` (a ``foxglove.Color``, alpha 1): golden-ratio steps of the hue (saturation
     0.85, value 1), so neighbouring ids get distinct colours; the same on the image, in the 3-D scene and on the map."""
-    import colorsys
-
-    from foxglove_schemas_protobuf.Color_pb2 import Color
+    from foxglove_schemas_protobuf.Color_pb2 import Color  # lazy: heavy protobuf
 
     r, g, b = colorsys.hsv_to_rgb((track_id * 0.61803398875) % 1.0, 0.85, 1.0)
     return Color(r=r, g=g, b=b, a=1.0)
@@ -113,19 +111,19 @@ def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[in
       track id as text.
 
     ``with_fix=False`` writes the scene only (no home known, so no lat/lon)."""
-    from foxglove_schemas_protobuf.Color_pb2 import Color
-    from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
-    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
-    from foxglove_schemas_protobuf.LocationFixes_pb2 import LocationFixes
-    from foxglove_schemas_protobuf.Pose_pb2 import Pose
-    from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
-    from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
-    from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletion
-    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
-    from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive
-    from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
-    from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
-    from google.protobuf.timestamp_pb2 import Timestamp
+    from foxglove_schemas_protobuf.Color_pb2 import Color  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.LocationFixes_pb2 import LocationFixes  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.Pose_pb2 import Pose  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletion  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.Vector3_pb2 import Vector3  # lazy: heavy protobuf
+    from google.protobuf.timestamp_pb2 import Timestamp  # lazy: heavy protobuf
 
     prefix = prefix or f"/{robot_id}/tracks"
     stamp = Timestamp(seconds=log_time_ns // 1_000_000_000, nanos=log_time_ns % 1_000_000_000)

@@ -4,95 +4,22 @@ from it on the actor.
 :func:`check_detector_options` checks every field of an :class:`~aerodaas.analytics.core.ObjectDetector` (thresholds,
 class names against the model's own names, class groups, input size, the model's format) and raises ValueError
 naming the field and the value; the pre-flight (:func:`aerodaas.runtime.preflight.validate`, through
-``ObjectDetector.check``) calls it, so ``aerodaas run`` exits 2 before any actor starts.
+``ObjectDetector.check``) calls it, so ``aerodaas run`` exits 2 before any actor starts. It opens the model with
+onnxruntime (:func:`aerodaas.perception.decoders.inspect_model`), so this module imports cv2 and onnxruntime: the
+checks that need no model file are :mod:`aerodaas.perception.detector_values`, which an app imports instead.
 """
 from __future__ import annotations
 
-import math
 import os
 from typing import Any, Iterable
 
 from aerodaas.model.types import COCO_CLASSES
+from aerodaas.perception.decoders import DETECTOR_CLASSES, inspect_model
+from aerodaas.perception.detect import make_detector
+from aerodaas.perception.detector_values import (SHIPPED_FORMAT, check_detector_values, check_input_size,
+                                                 normalise_classes)
 
-__all__ = ["FORMATS", "normalise_classes", "check_input_size", "check_detector_values", "check_detector_options", "build_detector"]
-
-#: the ONNX output heads the decoders read (:mod:`aerodaas.perception.decoders`); ``"auto"``: from the graph
-FORMATS = ("auto", "yolox", "nanodet", "ultralytics")
-
-_SHIPPED_FORMAT = {"yolox_nano": "yolox", "yolox": "yolox", "nanodet_plus_m_416": "nanodet", "nanodet": "nanodet",
-                   "aerial_nano": "yolox", "aerial": "yolox"}
-
-
-def normalise_classes(classes: Any, field: str = "classes") -> list[str] | None:
-    """``None`` -> None (all classes); a plain string -> that one class; an iterable of strings -> a list.
-    Raises ValueError for an empty list (it would silently mean nothing or everything) or a non-string item."""
-    if classes is None:
-        return None
-    if isinstance(classes, str):
-        return [classes]
-    try:
-        out = list(classes)
-    except TypeError:
-        raise ValueError(f"{field} must be a class name or a list of class names, got {classes!r}") from None
-    if not out:
-        raise ValueError(f"{field}=[] names no class; give at least one class name, or None for all classes")
-    bad = [c for c in out if not isinstance(c, str)]
-    if bad:
-        raise ValueError(f"{field}: class names must be strings, got {bad!r}")
-    return out
-
-
-def _unit(field: str, v: Any) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"{field} must be a number within [0, 1], got {v!r}") from None
-    if isinstance(v, bool) or not math.isfinite(f) or not 0.0 <= f <= 1.0:
-        raise ValueError(f"{field} must be a number within [0, 1] (a score, not a percentage), got {v!r}")
-    return f
-
-
-def check_input_size(input_size: Any) -> tuple[int, int]:
-    """``(H, W)`` in pixels, both positive multiples of 32 (the largest stride of the supported heads), at most
-    4096. Raises ValueError naming the value."""
-    try:
-        ih, iw = (int(v) for v in input_size)
-        ok = all(float(v) == int(v) for v in input_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"input_size must be (H, W) in pixels, got {input_size!r}") from None
-    if not ok or not (32 <= ih <= 4096 and 32 <= iw <= 4096) or ih % 32 or iw % 32:
-        raise ValueError(f"input_size must be (H, W) with each a multiple of 32 within [32, 4096], got {input_size!r}")
-    return ih, iw
-
-
-def check_detector_values(*, name: str = "detector", model: str = "yolox_nano", model_path: Any = None,
-                          format: str = "auto", score_threshold: float = 0.3, nms_threshold: float = 0.45,
-                          class_thresholds: dict[str, float] | None = None, input_size: Any = None,
-                          threads: int = 1) -> None:
-    """The checks of a detector configuration that need no model file (thresholds in [0, 1], ``format``, a known
-    shipped ``model`` name or a ``model_path`` string, ``input_size`` multiples of 32, ``threads`` an integer >= 0
-    (onnxruntime intra-op threads; 0 is its default)): cheap, without cv2 or onnxruntime, so
-    :class:`~aerodaas.analytics.detector.ObjectDetector` runs them where the app builds it. Raises ValueError
-    starting with ``analytics {name!r}:`` and naming the field and the value."""
-    try:
-        _unit("score_threshold", score_threshold)
-        _unit("nms_threshold", nms_threshold)
-        for c, v in (class_thresholds or {}).items():
-            _unit(f"class_thresholds[{c!r}]", v)
-        if format not in FORMATS:
-            raise ValueError(f"format must be one of {list(FORMATS)}, got {format!r}")
-        if input_size is not None:
-            check_input_size(input_size)
-        if model_path is None and model not in _SHIPPED_FORMAT:
-            raise ValueError(f"model must be one of {sorted(_SHIPPED_FORMAT)} or model_path must name an ONNX file, "
-                             f"got model={model!r}")
-        if model_path is not None and not isinstance(model_path, (str, os.PathLike)):
-            raise ValueError(f"model_path must be a file path, got {model_path!r}")
-        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
-            raise ValueError(f"threads must be an integer >= 0 (onnxruntime intra-op threads, 0: its default), "
-                             f"got {threads!r}")
-    except ValueError as e:
-        raise ValueError(f"analytics {name!r}: {e}") from None
+__all__ = ["check_detector_options", "build_detector"]
 
 
 def check_detector_options(*, name: str = "detector", model: str = "yolox_nano", model_path: str | None = None,
@@ -106,8 +33,6 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
     format, input size and class names (:func:`aerodaas.perception.decoders.inspect_model`). Returns
     ``{"format", "class_names", "input_hw"}`` as they will be used. Every error is a ValueError whose message
     starts with ``analytics {name!r}:`` and names the field and the value."""
-    from aerodaas.perception.decoders import inspect_model  # cv2 and onnxruntime load here, not when an app is built
-
     check_detector_values(name=name, model=model, model_path=model_path, format=format,
                           score_threshold=score_threshold, nms_threshold=nms_threshold,
                           class_thresholds=class_thresholds, input_size=input_size, threads=threads)
@@ -115,7 +40,7 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
     try:
         hw = check_input_size(input_size) if input_size is not None else None
         names: list[str] | None = list(class_names) if class_names is not None else None
-        fmt = _SHIPPED_FORMAT.get(model, "yolox") if format == "auto" and model_path is None else format
+        fmt = SHIPPED_FORMAT.get(model, "yolox") if format == "auto" and model_path is None else format
         if model_path is not None:
             if not os.path.isfile(model_path):
                 raise ValueError(f"model_path={str(model_path)!r} is not a file")
@@ -170,11 +95,8 @@ def build_detector(model: str = "yolox_nano", model_path: str | os.PathLike | No
     ``kwargs`` go to the detector's constructor (thresholds, classes, ``agnostic_nms``, ``class_groups``,
     ``input_size``, ``class_names``, ``intra_op_threads``). Raises ValueError as the constructors and
     :func:`check_detector_options` do."""
-    from aerodaas.perception.detect import make_detector
-    from aerodaas.perception.decoders import DETECTOR_CLASSES, inspect_model
-
     if model_path is None:
-        if format not in ("auto", _SHIPPED_FORMAT.get(model, "")):
+        if format not in ("auto", SHIPPED_FORMAT.get(model, "")):
             raise ValueError(f"format={format!r} does not match the shipped model {model!r}")
         return make_detector(model, **kwargs)
     fmt = inspect_model(model_path, format).format

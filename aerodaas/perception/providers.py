@@ -49,7 +49,7 @@ class ProviderUnavailableError(RuntimeError):
 def known_providers() -> list[str]:
     """Every provider name this onnxruntime knows (``onnxruntime.get_all_providers()``, built or not), plus
     :data:`GPU_PROVIDERS` (names of other builds that a newer or older wheel may lack)."""
-    import onnxruntime as ort
+    import onnxruntime as ort  # lazy: heavy onnxruntime
 
     return list(dict.fromkeys([*ort.get_all_providers(), *sorted(GPU_PROVIDERS)]))
 
@@ -161,7 +161,7 @@ def validation_message(e: ValidationError, pre: str) -> str:
 def missing_here(providers: Providers) -> list[str]:
     """The providers of ``providers`` this process's onnxruntime build does not offer
     (``onnxruntime.get_available_providers()``)."""
-    import onnxruntime as ort
+    import onnxruntime as ort  # lazy: heavy onnxruntime
 
     avail = set(ort.get_available_providers())
     return [n for n in providers.names if n not in avail]
@@ -194,7 +194,7 @@ def open_session(path: str, sess_options: Any, providers: Providers | None, what
     dropped with a warning (logged; the message is ``SessionProviders.fallback``) and the CPU provider is always
     last. ``what`` names the session in the messages. Raises :class:`ProviderUnavailableError` when
     ``providers.required`` and a named provider is not used, else what onnxruntime raises for the model."""
-    import onnxruntime as ort
+    import onnxruntime as ort  # lazy: heavy onnxruntime
 
     host = socket.gethostname()
     if providers is None:

@@ -37,7 +37,7 @@ class GroundTruth:
 
 
 def _image_size(path: Path) -> tuple[int, int]:
-    import cv2
+    import cv2  # lazy: heavy cv2
 
     im = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if im is None:

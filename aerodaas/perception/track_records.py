@@ -30,6 +30,8 @@ from typing import Any, Iterable
 import numpy as np
 
 from aerodaas.model.types import FrameMeta, GeoPoint
+from aerodaas.perception.geolocate import GroundFix, geolocate_box, record_track_fixes, track_color
+from aerodaas.perception.tracking import ByteTracker
 
 __all__ = ["TrackRecords", "records_of", "track_and_keep", "track_rows", "write_tracks", "declared_track_channels",
            "tracks_prefix"]
@@ -48,8 +50,6 @@ def track_rows(tracks: Iterable[Any], meta: FrameMeta | None, *, ground_z: float
     ``enu`` ``[x, y, z]`` metres from home, ``cov`` ``[[xx, xy], [yx, yy]]`` m^2 (ENU horizontal) and ``sigma_m``
     (1-sigma, metres) from :func:`aerodaas.perception.geolocate.geolocate_box` (``enu``/``cov``/``sigma_m`` None when
     the box's ray misses the ground or ``meta`` is None). ``ground_z``: terrain height, metres ENU."""
-    from aerodaas.perception.geolocate import geolocate_box
-
     out = []
     for t in tracks:
         d = t.detection
@@ -69,16 +69,15 @@ def write_tracks(recorder: Any, prefix: str, log_time_ns: int, robot: str, rows:
     (:class:`aerodaas.recording.writer.McapRecorder`) under ``prefix`` (module docstring); lat/lon from the ENU
     positions and the drone's ``home`` (pymap3d, WGS-84; None: rows are written to the image and scene only).
     ``image_size`` ``(width, height)`` pixels clips the boxes. Raises ValueError for a malformed row."""
-    from foxglove_schemas_protobuf.Color_pb2 import Color
-    from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
-    from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
-    from foxglove_schemas_protobuf.Point2_pb2 import Point2
-    from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
-    from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
+    from foxglove_schemas_protobuf.Color_pb2 import Color  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.Point2_pb2 import Point2  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation  # lazy: heavy protobuf
+    from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation  # lazy: heavy protobuf
 
-    from aerodaas.model.geo import enu_to_geodetic
-    from aerodaas.perception.geolocate import GroundFix, record_track_fixes, track_color
-    from aerodaas.recording.values import _timestamp
+    from aerodaas.model.geo import enu_to_geodetic  # lazy: heavy pymap3d
+    from aerodaas.recording.values import _timestamp  # lazy: heavy protobuf
 
     stamp = _timestamp(log_time_ns)
     ann = ImageAnnotations()
@@ -167,8 +166,6 @@ def track_and_keep(analytics: Any, records: TrackRecords, dets: list, meta: Fram
     """Advance ``analytics``' ByteTracker of the drone of ``meta`` (one per drone, in its
     :meth:`~aerodaas.analytics.core.Analytics.drone_state`) with ``dets`` (only ``classes`` when given), keep the
     geo-located rows for the recorder in ``records`` (:meth:`TrackRecords.keep`) and return the active tracks."""
-    from aerodaas.perception.tracking import ByteTracker
-
     tr = analytics.drone_state(dets, meta, lambda: ByteTracker(config))
     keep = dets if classes is None else [d for d in dets if d.class_name in classes]
     active = tr.update(keep)

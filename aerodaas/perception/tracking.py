@@ -127,7 +127,7 @@ def _iou_cost(tracks: list[Track], dets: list[Detection]) -> np.ndarray:
 
 
 def _assign(cost: np.ndarray, thresh: float) -> tuple[list[tuple[int, int]], list[int], list[int]]:
-    from scipy.optimize import linear_sum_assignment
+    from scipy.optimize import linear_sum_assignment  # lazy: heavy scipy
 
     if cost.size == 0:
         return [], list(range(cost.shape[0])), list(range(cost.shape[1]))

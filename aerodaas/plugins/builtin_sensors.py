@@ -18,6 +18,7 @@ from typing import Any, Callable, ClassVar
 from pydantic import Field, model_validator
 
 from aerodaas.model.bounds import MAX_CAMERA_FPS, MAX_CAMERA_PX, MAX_RATE_HZ
+from aerodaas.plugins import registry
 from aerodaas.plugins.frames import frame_source_class
 from aerodaas.plugins.sensor import (FrameSensor, MissionStatusSensor, SensorPropertiesBase,
                                     VehicleStateSensor)
@@ -85,7 +86,7 @@ def check_replay_recording(path: str, topic: str, where: str) -> None:
     channel with messages in it, what :class:`aerodaas.backends.replay.McapCameraReplay` reads (it refused such a
     file only in the camera's actor, after Ray had started). ``where`` is the sensor's path
     (``robots.0.sensors.0``). Raises ValueError naming the property."""
-    from mcap.reader import NonSeekingReader, make_reader
+    from mcap.reader import NonSeekingReader, make_reader  # lazy: heavy mcap
 
     schemas: dict[str, str] = {}  # topic -> schema name, of the channels with messages
     try:
@@ -197,6 +198,4 @@ class StatStreamSensor(MissionStatusSensor):
 
 def _environment_sources() -> list[str]:
     """The registered frame sources an environment camera may use (for the error message)."""
-    from aerodaas.plugins import registry
-
     return registry.names_with_flag("frame_source", "environment_ok")

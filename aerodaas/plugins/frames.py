@@ -33,6 +33,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from aerodaas.model.types import CameraIntrinsics, FramePose
+from aerodaas.plugins import registry
 
 __all__ = ["CapturedFrame", "FrameSourceContext", "FrameSource", "LiveFrameSource", "FrameReader", "STREAM_SOURCE",
            "frame_source_class", "frame_source_names"]
@@ -168,8 +169,6 @@ class LiveFrameSource(FrameSource):
 
 def frame_source_names() -> list[str]:
     """The names of the registered frame sources (built in, installed, registered)."""
-    from aerodaas.plugins import registry
-
     return registry.names("frame_source")
 
 
@@ -178,8 +177,6 @@ def frame_source_class(source: str) -> type[FrameSource]:
     name (or import path ``module:Class``), else the stream source (:data:`STREAM_SOURCE`: ``source`` is a URL or
     a file). Raises :class:`aerodaas.plugins.registry.InvalidPlugin` (a ValueError) for a registered class that is
     not a FrameSource."""
-    from aerodaas.plugins import registry
-
     try:
         return registry.get("frame_source", source)
     except registry.InvalidPlugin:

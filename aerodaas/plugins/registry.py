@@ -31,12 +31,18 @@ with its origin; configuration validation turns it into a ConfigError before Ray
 """
 from __future__ import annotations
 
+import difflib
 import importlib
+from importlib.metadata import PackageNotFoundError, distribution, entry_points, packages_distributions
 import inspect
 import sys
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
+
+from aerodaas.model.ids import check_plugin_name
+
+from pydantic import BaseModel
 
 __all__ = ["KINDS", "ENTRY_POINT_GROUPS", "BUILTIN_DIST", "BUILTIN_ORIGIN", "MissingBuiltins", "PluginEntry", "UnknownPlugin", "InvalidPlugin", "declaration_error",
            "register", "plugin", "get", "class_origin", "names_with_flag", "KIND_BASES", "kind_base", "base_error", "resolve", "entries", "names", "describe_all", "adopt", "by_value_modules",
@@ -75,7 +81,6 @@ class UnknownPlugin(ValueError):
 
     def __init__(self, kind: str, name: str, available: list["PluginEntry"], why: str = "") -> None:
         self.kind, self.name = kind, name
-        import difflib
 
         avail = ", ".join(f"{e.name!r} ({e.origin})" for e in available) or "none"
         close = difflib.get_close_matches(name, [e.name for e in available], n=1)
@@ -110,8 +115,6 @@ def declaration_error(cls: Any, kind: str, name: str) -> str | None:
     nothing: ``Config``, when declared (not None), must be a pydantic BaseModel subclass — the framework validates the
     plug-in's settings with ``Config.model_validate`` when the environment is loaded, and anything else failed there
     as a raw AttributeError (issue 40.5). A class that is itself a pydantic model keeps pydantic's own ``Config``."""
-    from pydantic import BaseModel
-
     cfg = getattr(cls, "Config", None)
     if cfg is None or (isinstance(cfg, type) and issubclass(cfg, BaseModel)):
         return None
@@ -289,7 +292,6 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     name = name or plugin_name(cls, kind)
     if not name:
         raise ValueError(f"{cls.__name__}: a {kind} plug-in needs a non-empty name")
-    from aerodaas.model.ids import check_plugin_name
 
     check_plugin_name(name, f"{cls.__name__}: {kind.replace('_', ' ')} plug-in name")
     _check_declaration(cls, kind, name)
@@ -327,8 +329,6 @@ def _distribution_entry_points(builtin: bool) -> list[tuple[str, str, str, str]]
     from this package's own metadata alone (under 1 ms), the others from one scan of every installed
     distribution (``entry_points(group=...)`` once per group scanned them five times: 224 ms against 37 ms at
     load 26 on the 2-core machine), since every Ray worker that resolves ``sim`` reads the built-ins."""
-    from importlib.metadata import PackageNotFoundError, distribution, entry_points
-
     kinds = {g: k for k, g in ENTRY_POINT_GROUPS.items()}
     if builtin:
         try:
@@ -409,8 +409,6 @@ def _installed(module: Any) -> bool:
     if "site-packages" in path or "dist-packages" in path:
         return True
     try:
-        from importlib.metadata import packages_distributions
-
         top = module.__name__.split(".")[0]
         return top in packages_distributions()
     except Exception:  # noqa: BLE001
@@ -511,9 +509,6 @@ def plugin_package_paths() -> list[str]:
     the aerodaas groups, found without importing it. The driver ships them to a cluster it attaches to as Ray's
     job-level ``runtime_env={"py_modules": [...]}`` (Ray docs, "Environment Dependencies"), so that nodes where
     the package is not installed import it too. ``aerodaas`` itself is never shipped."""
-    import importlib.util
-    from importlib.metadata import entry_points
-
     out: list[str] = []
     for group in ENTRY_POINT_GROUPS.values():
         for ep in entry_points(group=group):

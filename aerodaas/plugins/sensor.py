@@ -174,7 +174,7 @@ class FrameSensor(ActorProducedSensor):
     def frame_source(cls, properties: dict[str, Any]) -> type:
         """The :class:`aerodaas.plugins.frames.FrameSource` subclass that produces this sensor's frames, from its
         validated ``properties`` (``source``, default ``sim``; see :func:`aerodaas.plugins.frames.frame_source_class`)."""
-        from aerodaas.plugins.frames import frame_source_class
+        from aerodaas.plugins.frames import frame_source_class  # lazy: heavy numpy
 
         return frame_source_class(properties.get("source", "sim"))
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+import pickle
 from typing import Any, ClassVar, Literal
 
 __all__ = ["Port", "Message", "FrameMsg", "OdometryMsg", "StatMsg", "DetectionsMsg", "NavigationMsg", "ValueMsg",
@@ -123,7 +124,7 @@ class ValueMsg(Message):
 def output_message(out: Any, source: Message, trace: dict[str, float]) -> Message:
     """The message carrying analytics output ``out`` computed from ``source``: NavigationMsg for an
     AeroNavigation, DetectionsMsg for a list of Detection (or an empty list), ValueMsg otherwise."""
-    from aerodaas.model.types import AeroNavigation, Detection
+    from aerodaas.model.types import AeroNavigation, Detection  # lazy: heavy pydantic
 
     if isinstance(out, AeroNavigation):
         cls: type[Message] = NavigationMsg
@@ -203,14 +204,12 @@ class SealedCheckpoint:
     @classmethod
     def seal(cls, state: dict) -> "SealedCheckpoint":
         """Pickle ``state`` (a checkpoint dict with ``robot`` and ``seq``) with Ray's cloudpickle."""
-        from ray import cloudpickle
+        from ray import cloudpickle  # lazy: heavy ray
 
         return cls(str(state["robot"]), int(state.get("seq", 0)), cloudpickle.dumps(state))
 
     def open(self) -> dict:
         """The checkpoint dict again (imports the classes it holds)."""
-        import pickle
-
         return pickle.loads(self.blob)
 
 

@@ -189,7 +189,7 @@ def tally_failures(paths: Iterable[str | os.PathLike]) -> dict[tuple, FailureCou
     """The failures recorded in a run's recording ``paths`` (its segments in order): per component key
     (:attr:`FailureCount.key`) the sum of its events' ``failures`` and ``attempts``, the first individual event's
     error and the last error. A segment that cannot be read adds what was read of it before the error."""
-    from aerodaas.recording.reader import read_messages, summarize_mcap
+    from aerodaas.recording.reader import read_messages, summarize_mcap  # lazy: heavy mcap
 
     out: dict[tuple, FailureCount] = {}
     for p in paths:

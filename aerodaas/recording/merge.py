@@ -23,9 +23,13 @@ log-time order without reading a whole file into memory.
 from __future__ import annotations
 
 import heapq
+import json
 import os
 from pathlib import Path
 from typing import Any, Iterator
+
+from aerodaas.recording.record_path import LIBRARY
+from aerodaas.recording.task_tally import TaskTally
 
 __all__ = ["merge_recordings", "node_recording_path", "MERGED_METADATA"]
 
@@ -45,7 +49,7 @@ def node_recording_path(base: str | os.PathLike, compute: str) -> Path:
 def _messages(path: Path, index: int) -> Iterator[tuple[int, int, int, Any, Any, Any]]:
     """``(log_time, file index, n, schema, channel, message)`` of a finished file, in log-time order (``n`` keeps
     the sort stable and never compares records)."""
-    from mcap.reader import make_reader
+    from mcap.reader import make_reader  # lazy: heavy mcap
 
     with open(path, "rb") as f:
         for n, (schema, channel, msg) in enumerate(make_reader(f).iter_messages(log_time_order=True)):
@@ -55,7 +59,7 @@ def _messages(path: Path, index: int) -> Iterator[tuple[int, int, int, Any, Any,
 def _check_inputs(paths: list[Path], out: Path) -> None:
     """Raise ValueError (no input, the output among the inputs, a file twice, a foreign or unfinished file) or
     FileNotFoundError naming the file."""
-    from aerodaas.recording.reader import _open_mcap
+    from aerodaas.recording.reader import _open_mcap  # lazy: heavy mcap
 
     if not paths:
         raise ValueError("merge needs at least one recording")
@@ -74,8 +78,6 @@ def _check_inputs(paths: list[Path], out: Path) -> None:
 
 def _sum_accounting(accs: list[dict]) -> dict[str, Any]:
     """The sum of several ``/run/accounting`` messages (see the module docstring)."""
-    from aerodaas.recording.task_tally import TaskTally
-
     chans: dict[str, dict[str, int]] = {}
     analytics: dict[str, dict[str, int]] = {}
     tasks = TaskTally()
@@ -132,12 +134,8 @@ def merge_recordings(paths: list[str | os.PathLike], out: str | os.PathLike) -> 
     renamed into place); see the module docstring. Returns ``{"files": [...], "messages": n, "channels": n,
     "schemas": n, "accounting_files": n (inputs with a ``/run/accounting``), "out": path}``. Raises ValueError
     (bad inputs, see :func:`_check_inputs`), FileNotFoundError or OSError."""
-    import json
-
-    from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
-
-    from aerodaas.recording.record_path import LIBRARY
+    from mcap.reader import make_reader  # lazy: heavy mcap
+    from mcap.writer import CompressionType, Writer  # lazy: heavy mcap
 
     files = [Path(p) for p in paths]
     dst = Path(out)
@@ -177,9 +175,7 @@ def merge_recordings(paths: list[str | os.PathLike], out: str | os.PathLike) -> 
 def _write_sums(w: Any, reg: _Registry, summed: dict[str, list[dict]], last_t: int) -> int:
     """Write the summed ``/run/recorder_drops`` and ``/run/accounting`` (the file's last messages, after every
     other one) on channels with the recorder's own JSON schemas; returns how many were written."""
-    import json
-
-    from aerodaas.recording.schemas import json_schema_for
+    from aerodaas.recording.schemas import json_schema_for  # lazy: heavy pydantic
 
     n = 0
     for topic, schema_name, make in (("/run/recorder_drops", "aerodaas.RecorderDrops", _sum_drops),

@@ -20,6 +20,8 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap_protobuf.decoder import DecoderFactory as _ProtobufDecoderFactory
 
+from aerodaas.recording.channel_accounts import ACCOUNTING_TOPIC, account_channels, as_report
+
 __all__ = ["read_messages", "summarize_mcap", "MISSION_STATE_TOPIC", "MISSION_RESULT_TOPIC", "METADATA_NAME"]
 
 MISSION_STATE_TOPIC = "/mission/state"
@@ -278,8 +280,6 @@ def _scan_records(f: Any, scan: _ScanResult) -> None:
 
 def _summary_dict(path: Any, scan: _ScanResult, finished: bool) -> dict[str, Any]:
     """The dict :func:`summarize_mcap` returns, from what was scanned."""
-    from aerodaas.recording.accounting import ACCOUNTING_TOPIC, account_channels, as_report
-
     start_ns, end_ns = scan.start_ns, scan.end_ns
     duration_s = (end_ns - start_ns) / 1e9 if start_ns is not None and end_ns is not None else 0.0
     channels = []

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+import stat
 from typing import NamedTuple
 
 #: the library name the writer puts in every recording's MCAP Header record
@@ -53,8 +54,6 @@ def check_record_path(path: str | os.PathLike, *, overwrite: bool = False,
     :class:`RunInput` is named by its field) always, a recording of ours too (a replayed log or a recorded camera's
     MCAP is one). An existing file is left as it is until the run starts. Raises ValueError naming the path and the
     reason."""
-    import stat
-
     p = Path(os.path.abspath(os.path.expanduser(str(path))))
     if not p.parent.is_dir():
         raise ValueError(f"--record {str(path)!r}: folder {str(p.parent)!r} does not exist (create it first)")

@@ -22,9 +22,9 @@ def recover_mcap(path: str | os.PathLike, out: str | os.PathLike | None = None) 
     """Rewrite ``path`` (unfinished MCAP) as a finished one at ``out`` (default: in place). Returns
     ``{"path", "was_finished", "messages", "channels", "out"}``. Raises FileNotFoundError, ValueError (not an MCAP
     file) or OSError (cannot write the output)."""
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import CompressionType, Writer  # lazy: heavy mcap
 
-    from aerodaas.recording.reader import _open_mcap, _scan_linear
+    from aerodaas.recording.reader import _open_mcap, _scan_linear  # lazy: heavy mcap
 
     src = Path(path)
     dst = Path(out) if out is not None else src

@@ -13,6 +13,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from aerodaas.recording.recover import recover_mcap
+
 __all__ = ["segment_path", "list_segments", "next_segment", "remove_stale_segments", "join_segments",
            "message_time_range"]
 
@@ -72,7 +74,7 @@ def remove_stale_segments(base: str | os.PathLike) -> list[Path]:
 def message_time_range(path: str | os.PathLike) -> tuple[int | None, int | None, int]:
     """(first log time ns, last log time ns, message count) of a finished MCAP file, from its summary statistics
     (mcap's reader). (None, None, 0) when the file has no summary or no message."""
-    from mcap.reader import make_reader
+    from mcap.reader import make_reader  # lazy: heavy mcap
 
     with open(path, "rb") as f:
         s = make_reader(f).get_summary()
@@ -89,10 +91,9 @@ def join_segments(base: str | os.PathLike, out: str | os.PathLike | None = None)
     (topic, schema) across segments; messages keep their log/publish times and sequence numbers. Returns
     ``{"segments": [...], "messages": n, "channels": n, "out": path}``. Raises FileNotFoundError (no ``base``),
     ValueError (not an MCAP file) or OSError."""
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import CompressionType, Writer  # lazy: heavy mcap
 
-    from aerodaas.recording.reader import _open_mcap, _scan_linear
-    from aerodaas.recording.recover import recover_mcap
+    from aerodaas.recording.reader import _open_mcap, _scan_linear  # lazy: heavy mcap
 
     segs = list_segments(base)
     if not segs or segs[0] != Path(base):

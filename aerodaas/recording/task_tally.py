@@ -113,7 +113,7 @@ class TaskTally:
 def tally_recordings(paths: Iterable[str | os.PathLike]) -> TaskTally:
     """The task records in the recordings ``paths`` (segments of a run; finished or not), tallied. A file that
     cannot be read (gone, not an MCAP file, cut inside a record) adds what was read of it before the error."""
-    from aerodaas.recording.reader import summarize_mcap
+    from aerodaas.recording.reader import summarize_mcap  # lazy: heavy mcap
 
     tally = TaskTally()
     for p in paths:
@@ -130,7 +130,7 @@ def tally_recording(tally: TaskTally, path: str | os.PathLike, channels: list[di
     a caller that summarized the file already does not read it twice. Returns ``tally``. Raises what
     :func:`aerodaas.recording.reader.read_messages` raises for an unreadable file (the records read before the
     error stay counted)."""
-    from aerodaas.recording.reader import read_messages
+    from aerodaas.recording.reader import read_messages  # lazy: heavy mcap
 
     topics = [c["topic"] for c in channels if c["schema"] == TASK_SCHEMA]
     if topics:

@@ -36,6 +36,7 @@ checks of where a recording may be written (:func:`check_record_path`, :func:`is
 """
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
@@ -280,8 +281,6 @@ class McapRecorder:
         before its first message, so the channel is in the file (and can be advertised live) from the start;
         returns its schema record ``(name, "protobuf", FileDescriptorSet bytes)``. Raises ``ValueError`` for a
         name that is not a Foxglove schema or a topic that already carries another kind."""
-        import importlib
-
         pkg, _, short = schema_name.partition(".")
         try:
             if pkg != "foxglove" or not short.isidentifier():

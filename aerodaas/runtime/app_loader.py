@@ -29,6 +29,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
 
+from aerodaas.runtime.options import RunOptions
+
 __all__ = ["Application", "AppGraph", "MissionStart", "MissionMarked", "load_app", "app_module_name",
            "env_path_override", "mark_mission"]
 
@@ -80,9 +82,8 @@ class Application:
         """The run's typed dataflow graph and its placement (:class:`aerodaas.runtime.dataflow.RunPlan`) under
         ``options`` (a :class:`~aerodaas.runtime.options.RunOptions`; default: none). Starts nothing. Raises
         ValueError when the application has no mission."""
-        from aerodaas.runtime.dataflow import build_plan
-        from aerodaas.runtime.options import RunOptions
-        from aerodaas.runtime.preflight import simulation_for
+        from aerodaas.runtime.dataflow import build_plan  # lazy: heavy numpy, pydantic, pymap3d, shapely
+        from aerodaas.runtime.preflight import simulation_for  # lazy: heavy numpy, pydantic, pymap3d, shapely
 
         if self.mission is None or self.graph is None:
             raise ValueError(f"{self.path}: the application never called start_mission()")
@@ -159,7 +160,7 @@ def mark_mission(env: Any, robots: list, timeout: float | None) -> Any:
         if load.marks == len(load.flown) and load.stdout is not None:  # the replay of what ran is over: show output
             sys.stdout, load.stdout = load.stdout, None
         return load.flown[index]
-    from aerodaas.runtime.preflight import validate_graph
+    from aerodaas.runtime.preflight import validate_graph  # lazy: heavy numpy, pydantic, pymap3d, shapely
 
     graphs, scheds, scheduled = validate_graph(env, robots)
     line, top = _caller_in_app(load.path)
@@ -185,7 +186,7 @@ def _code_after(path: str, start: MissionStart) -> bool:
 
 def _exit_error(path: str, e: SystemExit):
     """The ConfigError for an application that called ``sys.exit`` while it loaded (nothing would fly)."""
-    from aerodaas.config import ConfigError
+    from aerodaas.config import ConfigError  # lazy: heavy numpy, pydantic, pymap3d, shapely
 
     tb = e.__traceback__
     while tb is not None and tb.tb_next is not None:
@@ -210,7 +211,7 @@ def _syntax_error(path: str, e: SyntaxError):
     """The ConfigError for an app file that is not valid Python (``e`` raised compiling it): the file, the line,
     Python's reason and the line itself with a caret under the column. Bad input, not a bug of AeroDaaS (it was
     reported as one, exit 1)."""
-    from aerodaas.config import ConfigError
+    from aerodaas.config import ConfigError  # lazy: heavy numpy, pydantic, pymap3d, shapely
 
     text = (e.text or "").rstrip("\n")
     shown = text.lstrip()

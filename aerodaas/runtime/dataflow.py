@@ -25,12 +25,17 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from aerodaas.analytics.contract import stream_types
+from aerodaas.analytics.contract import output_schemas, stream_types
+from aerodaas.backends import backend_class
 from aerodaas.config.robot import sensor_class
+from aerodaas.perception.track_records import declared_track_channels
+from aerodaas.plugins import registry
 from aerodaas.plugins.sensor import ActorProducedSensor, FrameSensor, MissionStatusSensor, VehicleStateSensor
 from aerodaas.protocol.ids import ComponentId, ComponentKind
 from aerodaas.protocol.messages import Port
 from aerodaas.protocol.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
+from aerodaas.runtime.node_recorders import add_node_recorders
+from aerodaas.runtime.plan_robots import robot_uses
 
 __all__ = ["Port", "Node", "Edge", "ActorPlan", "RunPlan", "Placement", "build_plan", "collect_graph"]
 
@@ -198,8 +203,6 @@ class RunPlan:
 
 
 def _link_of(robot) -> str | None:
-    from aerodaas.backends import backend_class
-
     return backend_class(robot.cfg.backend).link_key(robot.cfg)
 
 
@@ -243,8 +246,6 @@ def sensor_plugin_spec(sensor, cid: str) -> dict:
     not built in): its component id, sensor id, type, the plug-in class itself (it travels to the actor), its
     validated properties, its recording schema (``{name: JSON Schema}``; empty when the plug-in names a
     schema the recorder knows) and its failure limit (``max_failure_fraction``, :mod:`aerodaas.recording.health`)."""
-    from aerodaas.plugins import registry
-
     entry = registry.resolve("sensor", sensor.type)
     cls = entry.load()
     js = cls.json_schema()
@@ -258,8 +259,6 @@ def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
     frame sources its cameras' ``properties.source`` name — as ``(kind, name, class, origin)``: they travel with
     the drone actor's spec and are registered there before the robot's configuration is validated again
     (:func:`aerodaas.plugins.registry.adopt`; a node without the plug-in's distribution has no entry point of it)."""
-    from aerodaas.plugins import registry
-
     wanted = [("backend", cfg.backend)] + [("sensor", s.type) for s in cfg.sensors]
     sources = set(registry.names("frame_source"))
     for s in cfg.sensors:
@@ -533,7 +532,6 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     drone_host = _place_drones(st, robots, k)
     inst, every = _place_analytics(st, robots, graphs, scheduled, drone_host)
     if recorded:  # the drones' homes (lat/lon of recorded tracks) and the track channels known from the plan
-        from aerodaas.perception.track_records import declared_track_channels
 
         rec.spec.record.homes = {r.id: getattr(r, "cfg", r).home.model_dump() for r in robots}
         rec.spec.record.declare = declared_track_channels([r.id for r in robots], graphs)
@@ -545,20 +543,16 @@ def build_plan(env, robots: list, graphs: dict, scheds: dict, sim: Any, *, recor
     for r in robots:
         robot_ids[r.id]["analytics"] = [cid for a in graphs[r.id] for cid, _, served in inst[id(a)]
                                         if r.id in served]
-    from aerodaas.analytics.contract import output_schemas
 
     for a in every.values():  # analytics' declared output models (Output, named_outputs)
         schemas.update(output_schemas(a))
     if recorded and schemas:
         rec.spec.record.schemas = schemas
     if recorded and getattr(getattr(env.cfg, "recording", None), "per_node", False):
-        from aerodaas.runtime.node_recorders import add_node_recorders
-
         add_node_recorders(st.actors, rec, run_id)  # one recorder per edge compute (recording.per_node)
     for a in st.actors.values():
         a.spec.epoch_ns = epoch_ns
     key = os.urandom(32) if getattr(env.cfg, "same_node_transport", "channel") == "channel" else None
-    from aerodaas.runtime.plan_robots import robot_uses
 
     return RunPlan(run_id, st.nodes, edges, st.actors, robot_ids,
                    {aid: [c for c, _, _ in v] for aid, v in inst.items()}, channel_key=key,

@@ -19,16 +19,29 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
-from aerodaas.recording.health import FailureCount
+from aerodaas.clusters.placement import gpu_placement_errors, placement_warning
+from aerodaas.config import ConfigError
+from aerodaas.config.robot import sensor_class
+from aerodaas.plugins.registry import by_value_modules
+from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor
+from aerodaas.protocol.specs import AnalyticsSchedulerSpec
+from aerodaas.protocol.startup_probe import probe
+from aerodaas.recording.health import FailureCount, assess, tally_failures
 from aerodaas.runtime import ray_start
+from aerodaas.runtime.app_loader import load_app
+from aerodaas.runtime.dataflow import Placement, build_plan
+from aerodaas.runtime.node_recorders import run_accounting
 from aerodaas.runtime.options import RunOptions, actor_classes
+from aerodaas.runtime.preflight import check_options, hitl_access, validate_graph
 from aerodaas.runtime.process import PROCESS
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
                                         shutdown_ray, start_ray_early)
 from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 from aerodaas.runtime.supervise import error_cause as _cause
+from aerodaas.runtime.supervise import collect_stats, start_actors, supervise
 from aerodaas.runtime.teardown import close_actors
+from aerodaas.schedulers.analytics_base import analytics_scheduler_class
 
 if TYPE_CHECKING:
     from aerodaas.protocol.actor_classes import ActorClasses
@@ -110,9 +123,6 @@ def _start_scheduling(run: "_Run", placement: Any) -> list:
     """Start the cloud executors of the analytics scheduler (tier=cloud nodes, or this node without any) running
     copies of the scheduled analytics, and give every dispatcher actor of the plan (one per edge compute) the
     scheduler's spec. Returns the executors' handles (to kill at the end)."""
-    from aerodaas.protocol.specs import AnalyticsSchedulerSpec
-    from aerodaas.schedulers.analytics_base import analytics_scheduler_class
-
     cfg = run.env.cfg.analytics_scheduler
     policy_class = analytics_scheduler_class(cfg.name)  # the class travels, not its name
     analytics = {a.name: a for a in run.scheduled.values()}
@@ -133,7 +143,7 @@ def _bind_handles(run: "_Run") -> dict:
     """The driver's handles per robot (drone, scheduler, cameras, analytics: the
     :class:`~aerodaas.protocol.handles.ComponentHandle` classes of ``run.classes`` into their actors), bound to the
     application's objects (``Robot.bind_drone``, live scheduler, pull getters)."""
-    import ray
+    import ray  # lazy: heavy ray
 
     plan, actors, classes = run.plan, run.actors, run.classes
     loc = plan.location()
@@ -177,8 +187,6 @@ def run_file(path: str, options: RunOptions | None = None,
     mission flew, with its result (``aerodaas run`` does this). ``on_result`` is told each result. Returns the
     results (empty: the file never called ``start_mission()``). Raises what loading or a run raises; a stop signal
     (``aerodaas.runtime.process.PROCESS.stop``) after a mission ends the file there."""
-    from aerodaas.runtime.app_loader import load_app
-
     opts = options or RunOptions()
     results: list[MissionResult] = []
     app = load_app(path, opts.env_path)
@@ -197,8 +205,6 @@ def run_mission(env, robots: list, options: RunOptions | None = None, timeout: f
     (default: :class:`RunOptions`; its ``timeout`` wins over ``timeout``, wall seconds). Checks the application's
     graph and the options first: bad input raises before Ray starts; once actors exist, every failure ends in a
     :class:`MissionResult` (never a raw traceback) with the recording finished."""
-    from aerodaas.runtime.preflight import validate_graph
-
     return _fly(env, robots, validate_graph(env, robots), options or RunOptions(), timeout, ())
 
 
@@ -207,8 +213,6 @@ def _fly(env, robots: list, graph: tuple, opts: RunOptions, timeout: float | Non
     """Check ``opts``, run the mission and return its result (``aerodaas run`` is told it by :func:`run_file`'s
     ``on_result``). The app's file (``by_value``'s modules, or ``__main__`` of ``python app.py``) is an input
     ``--record`` never overwrites."""
-    from aerodaas.runtime.preflight import check_options
-
     actor_classes(opts)  # the entry point handed the actor classes (ValueError before Ray otherwise)
     files = (getattr(sys.modules.get(m), "__file__", None) for m in (*by_value, "__main__"))
     sim = check_options(env, robots, graph[1], opts, inputs=tuple(f for f in files if f))
@@ -258,11 +262,7 @@ class _Run:
 def _plan_run(run: _Run) -> Any:
     """Start (or join) Ray, let the application's classes travel by value, plan the actors and say where they
     go. Returns the cluster's :class:`~aerodaas.runtime.dataflow.Placement`."""
-    import ray
-
-    from aerodaas.plugins.registry import by_value_modules
-    from aerodaas.runtime.dataflow import Placement, build_plan
-    from aerodaas.protocol.startup_probe import probe
+    import ray  # lazy: heavy ray
 
     opts = run.opts
     probe("app_built")
@@ -282,8 +282,6 @@ def _plan_run(run: _Run) -> Any:
     placement = Placement(has_cloud=run.has_cloud, local=ray_start.started_here() and not opts.address)
     _check_gpus(run.plan, placement)
     if not placement.local:
-        from aerodaas.clusters.placement import placement_warning
-
         warning = placement_warning(run.plan)
         if warning:
             print(f"aerodaas: warning: {warning}", file=sys.stderr, flush=True)
@@ -303,10 +301,7 @@ def _plan_run(run: _Run) -> Any:
 def _check_gpus(plan: Any, placement: Any) -> None:
     """Every actor asking for GPUs has a live node of its compute with them (else Ray would hold it pending for
     ever and the run would wait). Raises ConfigError naming each actor, its selector and the nodes' GPUs."""
-    import ray
-
-    from aerodaas.clusters.placement import gpu_placement_errors
-    from aerodaas.config import ConfigError
+    import ray  # lazy: heavy ray
 
     if not any(a.num_gpus for a in plan.actors.values()):
         return
@@ -319,10 +314,7 @@ def _start_actors(run: _Run, placement: Any) -> list:
     """Start every actor of the plan and set them up at once (drones connect to their vehicles); the recorder's
     answer is read first: a bad file or live view is the error reported. Returns each actor's description; raises
     the first error (``run.robot_errors`` holds each robot's own)."""
-    import ray
-
-    from aerodaas.protocol.startup_probe import probe
-    from aerodaas.runtime.supervise import start_actors
+    import ray  # lazy: heavy ray
 
     if run.scheduled:
         run.cloud_executors = _start_scheduling(run, placement)
@@ -355,8 +347,7 @@ def _start_hitl(run: _Run):
         return None
     # only now: the HITL server imports FastAPI (a quarter of a second of CPU between the actors' set-up and the
     # mission's start, paid by every run when it sat above the check)
-    from aerodaas.runtime.preflight import hitl_access
-    from aerodaas.tools.hitl import HitlServer, state_file
+    from aerodaas.tools.hitl import HitlServer, state_file  # lazy: heavy fastapi
 
     access = hitl_access(run.env, opts)
     hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in run.handles.items()},
@@ -376,8 +367,6 @@ def _start_hitl(run: _Run):
 def _supervise(run: _Run, described: list) -> None:
     """Bind the application's objects to the actors, run the start hooks, fly until the mission ends and collect
     the stats."""
-    from aerodaas.runtime.supervise import collect_stats, supervise
-
     for r in run.robots:
         h = run.handles[r.id]
         if run.scheds[r.id] is h["sched_obj"]:  # not shared: live add/clear go to this robot's queue
@@ -403,7 +392,7 @@ def _supervise(run: _Run, described: list) -> None:
 def _release(run: _Run, hitl: Any) -> tuple[dict, dict]:
     """Stop the HITL API, close every actor (the recording finished), unbind the application's objects and kill
     the actors. Returns (recorded message counts, recording report)."""
-    import ray
+    import ray  # lazy: heavy ray
 
     allow_stop_interrupt(False)
     if hitl is not None:
@@ -426,7 +415,7 @@ def _release(run: _Run, hitl: Any) -> tuple[dict, dict]:
 def _announce_live(run: _Run, url: str) -> None:
     """Print where the live view is; with a token, write it to the owner-only state file ``live.json``
     (:func:`aerodaas.liveview.server.write_live_state`) and print that file's path, never the token."""
-    from aerodaas.liveview.server import write_live_state
+    from aerodaas.liveview.server import write_live_state  # lazy: heavy cv2, mcap, protobuf
 
     access = run.opts.live_access
     where = ""
@@ -441,9 +430,7 @@ def _announce_live(run: _Run, url: str) -> None:
 
 def _run_mission(run: _Run) -> MissionResult:
     """Plan, start, fly and tear down ``run``; every failure once Ray runs ends in the result."""
-    import ray
-
-    from aerodaas.protocol.startup_probe import probe
+    import ray  # lazy: heavy ray
 
     placement = _plan_run(run)
     hitl = None
@@ -482,7 +469,6 @@ def _recording_accounting(record: str | None, rec_report: dict) -> dict[str, Any
     nodes = [r.get("segments") or [] for r in (rec_report.get("nodes") or {}).values()]  # recording.per_node
     if not paths or not all(os.path.isfile(p) for p in [*paths, *(p for n in nodes for p in n)]):
         return None
-    from aerodaas.runtime.node_recorders import run_accounting
 
     try:
         return run_accounting(paths, nodes)
@@ -536,8 +522,6 @@ def component_failures(reports: dict, stats: Any, paths: list[str]) -> list[Fail
     own counts (the drones' ``reports`` for plug-in sensors, the actors' ``stats`` for analytics: one entry per
     analytics component) and the failures recorded in ``paths`` (the recording's segments; none: own counts
     only)."""
-    from aerodaas.recording.health import assess, tally_failures
-
     own: list[FailureCount] = []
     for rep in reports.values():
         for ps in (rep.get("plugin_sensors") or {}).values():
@@ -554,10 +538,7 @@ def component_failures(reports: dict, stats: Any, paths: list[str]) -> list[Fail
 
 
 def _pull_getter(sensor, h: dict):
-    import ray
-
-    from aerodaas.config.robot import sensor_class
-    from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor
+    import ray  # lazy: heavy ray
 
     cls = sensor_class(sensor.type)
 

@@ -20,7 +20,10 @@ for it; without ``--live`` nothing does).
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from typing import Any
+
+from aerodaas.recording.merge import node_recording_path
 
 __all__ = ["NODE_RECORDER_PREFIX", "add_node_recorders", "node_recorder_ids", "close_node_recorders",
            "run_accounting"]
@@ -32,13 +35,10 @@ NODE_RECORDER_PREFIX = "recorder/"
 def add_node_recorders(actors: dict[str, Any], main: Any, run_id: str) -> list[str]:
     """Add a recorder actor (:class:`~aerodaas.runtime.dataflow.ActorPlan`, role ``recorder``) to ``actors`` for
     every edge compute that places actors, and point those actors' ``record_remote`` at it. ``main`` is the
-    driver's recorder plan (its ``spec.record`` has the file: the node files are named after it). Returns the new
-    host ids. A run without a file (live view only) gets none (nothing to split)."""
-    from dataclasses import replace
-
-    from aerodaas.recording.merge import node_recording_path
-    from aerodaas.runtime.dataflow import ActorPlan
-
+    driver's recorder plan (its ``spec.record`` has the file: the node files are named after it); each node's plan
+    is a copy of it (``dataclasses.replace``: the plan's class is the caller's, :mod:`aerodaas.runtime.dataflow`,
+    which imports this module). Returns the new host ids. A run without a file (live view only) gets none
+    (nothing to split)."""
     rec = main.spec.record
     if rec is None or not rec.path:
         return []
@@ -49,10 +49,11 @@ def add_node_recorders(actors: dict[str, Any], main: Any, run_id: str) -> list[s
     added = []
     for compute, group in sorted(by_compute.items()):
         hid = f"{NODE_RECORDER_PREFIX}{compute}"
-        plan = ActorPlan(hid, "recorder", f"aerodaas/{run_id}/{hid}", "edge", compute, dict(group[0].labels))
-        plan.spec = replace(main.spec, record=replace(rec, path=str(node_recording_path(rec.path, compute)),
-                                                      live=None, meta={**rec.meta, "node": compute}, declare=None),
-                            record_remote="recorder" if rec.live else None)
+        spec = replace(main.spec, record=replace(rec, path=str(node_recording_path(rec.path, compute)),
+                                                 live=None, meta={**rec.meta, "node": compute}, declare=None),
+                       record_remote="recorder" if rec.live else None)
+        plan = replace(main, actor_id=hid, role="recorder", name=f"aerodaas/{run_id}/{hid}", tier="edge",
+                       compute=compute, labels=dict(group[0].labels), components=[], spec=spec, num_gpus=0.0)
         actors[hid] = plan
         for a in group:
             a.spec.record_remote = hid
@@ -69,7 +70,7 @@ def close_node_recorders(actors: dict[str, Any], timeout_s: float = 120.0) -> di
     """Close every node recorder (after the actors that record to them, before the driver's recorder); returns host
     id -> its :meth:`~aerodaas.actors.recorder_actor.RecorderActor.recording_report` (``{"error": ...}`` for one
     that could not be closed: its file is then unfinished, ``aerodaas recover`` finishes it). Never raises."""
-    import ray
+    import ray  # lazy: heavy ray
 
     ids = node_recorder_ids(actors)
     refs = {h: actors[h].close.remote() for h in ids}
@@ -93,7 +94,7 @@ def run_accounting(main_paths: list[str], nodes: list[list[str]]) -> dict[str, A
     listed in ``unaccounted`` and counts one lost message: the run cannot say nothing was lost (the driver's file
     may have none: with every producer on a node, nothing numbered was sent to it). None when the driver's file
     has no accounting and there are no node recordings."""
-    from aerodaas.recording.accounting import account_recording
+    from aerodaas.recording.accounting import account_recording  # lazy: heavy mcap
 
     main = account_recording(main_paths) if main_paths else None
     if not nodes:

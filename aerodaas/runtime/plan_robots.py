@@ -13,7 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from aerodaas.plugins import registry
+from aerodaas.plugins.registry import class_origin
 from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor, VehicleStateSensor
+from aerodaas.protocol.ids import ComponentId
 
 __all__ = ["PluginUse", "SensorUse", "RobotUse", "robot_uses"]
 
@@ -75,8 +78,6 @@ class RobotUse:
 
 
 def _use(kind: str, cls: type, name: str | None = None, origin: str | None = None) -> PluginUse:
-    from aerodaas.plugins.registry import class_origin
-
     if name is None or origin is None:
         name, origin = class_origin(kind, cls)
     return PluginUse(name, origin, f"{cls.__module__}:{cls.__qualname__}")
@@ -99,9 +100,7 @@ def robot_uses(robots: list, scheds: dict[str, Any], components: set[str]) -> di
     ``cfg`` and ``sensors``); ``scheds``: robot id -> its trajectory scheduler object; ``components``: the ids of
     the plan's nodes. Raises :class:`aerodaas.plugins.registry.UnknownPlugin` for a backend or sensor type that is
     not registered (refused earlier, when the configuration was validated)."""
-    from aerodaas.config.robot import sensor_class
-    from aerodaas.plugins import registry
-    from aerodaas.protocol.ids import ComponentId
+    from aerodaas.config.robot import sensor_class  # lazy: heavy numpy, pymap3d, shapely
 
     out: dict[str, RobotUse] = {}
     for r in robots:

@@ -6,9 +6,23 @@ analytics scheduler places per frame. Each check raises ConfigError / ValueError
 and the value; nothing here starts Ray."""
 from __future__ import annotations
 
+import sys
 from typing import Any
 
-from aerodaas.config import SimulationConfig
+from aerodaas.analytics.contract import check_consumes, check_declaration
+from aerodaas.backends import backend_class, backend_clock
+from aerodaas.clusters.addresses import check_hitl, check_ray_address
+from aerodaas.clusters.tls import ServeAccess, check_exposure, is_loopback
+from aerodaas.config import ConfigError, MAX_SPEEDUP, MIN_SPEEDUP, SimulationConfig, load_environment_config
+from aerodaas.config.robot import sensor_class
+from aerodaas.model.ids import check_analytics_names
+from aerodaas.model.types import AeroNavigation, SchedulingType
+from aerodaas.navigation.safety import SafetyGate
+from aerodaas.perception.providers import missing_here
+from aerodaas.plugins.sensor import FrameSensor
+from aerodaas.recording.record_path import RunInput, check_record_path
+from aerodaas.runtime.dataflow import collect_graph
+from aerodaas.sim.ground_cache import limit_bytes
 
 __all__ = ["validate", "validate_graph", "check_options", "check_deployment", "simulation_for", "check_clocks",
            "check_timeout", "MAX_TIMEOUT_S", "robot_schedulers", "scheduled_analytics", "check_preplanned",
@@ -19,8 +33,6 @@ def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
     """The analytics the environment's analytics scheduler places per frame (id -> analytics): those named in
     ``analytics_scheduler.models``. Raises ConfigError for a named analytics the application does not have, two
     scheduled analytics sharing a name, or one that is not fed by camera frames."""
-    from aerodaas.config import ConfigError
-
     cfg = env.cfg.analytics_scheduler
     if cfg.name == "default":
         return {}
@@ -34,8 +46,6 @@ def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
         if names.count(name) > 1:
             raise ConfigError(f"analytics_scheduler.models.{name}: {names.count(name)} analytics share the name "
                               f"{name!r}; give each scheduled analytics its own name")
-    from aerodaas.config.robot import sensor_class
-    from aerodaas.plugins.sensor import FrameSensor
 
     def camera(src) -> bool:  # a sensor whose class delivers camera frames (an analytics' output is not)
         type_ = getattr(src, "type", None)
@@ -84,10 +94,6 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
     scheduler and pre-planned missions, an autopilot mission's shape, the analytics scheduler's analytics and the
     clocks under the environment's simulation settings. Returns (graphs, schedulers, scheduled analytics). Raises
     ConfigError / ValueError / SafetyViolation naming the field."""
-    from aerodaas.config import ConfigError
-    from aerodaas.model.ids import check_analytics_names
-    from aerodaas.runtime.dataflow import collect_graph
-
     simulation_for(env, robots, None)
     graphs = {}
     scheds = robot_schedulers(env, robots)
@@ -112,13 +118,11 @@ def validate_graph(env, robots: list) -> tuple[dict, dict, dict]:
                 raise ConfigError(f"analytics {a.name!r}: asks Ray for num_gpus={a.num_gpus:g} (its providers), but "
                                   f"deploy(..., colocate=True) runs it inside each drone's actor, which asks for "
                                   f"none; deploy it on its own actor, or set Providers(num_gpus=0)")
-            from aerodaas.analytics.contract import check_consumes, check_declaration
 
             check_declaration(a)  # Output / named_outputs / consumes well-formed (ContractError, a ValueError)
             check_consumes(a)  # each feeding stream carries a type it consumes
         graphs[r.id] = analytics
         check_preplanned(r, scheds[r.id])
-        from aerodaas.backends import backend_class
 
         backend_class(r.cfg.backend).check_mission(r, scheds[r.id], env.cfg.hitl.enabled)
     scheduled = scheduled_analytics(env, graphs)
@@ -135,8 +139,6 @@ def check_deployment(env, analytics) -> None:
     ``env.get_compute_resource_by_id`` returns). Raises ConfigError naming the analytics and the value given: a name
     (``deploy("edge")``, or ``analytics.compute = "edge"``) or another object failed after Ray started, as an
     AttributeError reported as a bug of AeroDaaS."""
-    from aerodaas.config import ConfigError
-
     comp, known = analytics.compute, env.get_compute_resources()
     if any(comp is c for c in known):
         return
@@ -158,13 +160,9 @@ def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple =
     ``--overwrite``), an autopilot mission with ``--hitl``, the clocks under ``--speedup`` / ``--lockstep``. Returns
     the run's simulation settings (:func:`simulation_for`). Raises ConfigError / ValueError naming the field or
     flag."""
-    from aerodaas.clusters.addresses import check_hitl
-
     check_hitl(env.cfg, opts)  # the HITL API's host and port: parsed, in range, free
     access = hitl_access(env, opts, check=True)  # off loopback: HTTPS with good certificate and key files, or insecure
     if opts.record:
-        from aerodaas.recording.record_path import RunInput, check_record_path
-
         named = [RunInput(f.path, f"{f.field} of the environment") for f in env.cfg.files_read]
         tls = [RunInput(str(q), flag) for q, flag in ((access.cert_file, "--tls-cert"), (access.key_file, "--tls-key"))
                if q]
@@ -172,7 +170,6 @@ def check_options(env, robots: list, scheds: dict, opts: Any, *, inputs: tuple =
         check_record_path(opts.record, overwrite=opts.overwrite, protect=protect)  # ValueError naming it: before Ray
     check_required_providers(robots, opts)
     if opts.hitl and not env.cfg.hitl.enabled:  # --hitl: a backend's mission may refuse the HITL API
-        from aerodaas.backends import backend_class
 
         for r in robots:
             backend_class(r.cfg.backend).check_mission(r, scheds[r.id], True)
@@ -185,8 +182,6 @@ def hitl_access(env, opts: Any, check: bool = False) -> Any:
     ``hitl.tls_key`` (resolved like every file of the environment), ``--insecure`` or ``hitl.insecure``;
     ``insecure`` is kept only when it matters (clear text off loopback). With ``check`` (before Ray starts) and the
     API on: :func:`aerodaas.clusters.tls.check_exposure`. Raises ConfigError / ValueError naming the field and value."""
-    from aerodaas.clusters.tls import ServeAccess, check_exposure, is_loopback
-
     h = env.cfg.hitl
     if not (opts.hitl if getattr(opts, "hitl", None) is not None else h.enabled):
         return ServeAccess()
@@ -211,11 +206,6 @@ def check_required_providers(robots: list, opts: Any) -> None:
     application): every onnxruntime provider an analytics requires (``Providers(required=True)``,
     :mod:`aerodaas.perception.providers`) is offered by this process's onnxruntime. Raises ConfigError naming the
     analytics and the provider; elsewhere the analytics' actor checks on its node and fails to start."""
-    import sys
-
-    from aerodaas.config import ConfigError
-    from aerodaas.runtime.dataflow import collect_graph
-
     ray = sys.modules.get("ray")
     if getattr(opts, "address", None) or (ray is not None and ray.is_initialized()):
         return
@@ -226,11 +216,10 @@ def check_required_providers(robots: list, opts: Any) -> None:
             if id(a) in seen or not getattr(prov, "required", False):
                 continue
             seen.add(id(a))
-            from aerodaas.perception.providers import missing_here
 
             missing = missing_here(prov)
             if missing:
-                import onnxruntime as ort
+                import onnxruntime as ort  # lazy: heavy onnxruntime
 
                 raise ConfigError(f"analytics {a.name!r}: providers.required=True but this machine's onnxruntime "
                                   f"{ort.__version__} does not offer {missing} (it offers "
@@ -263,17 +252,9 @@ def simulation_for(env, robots: list, opts: Any) -> SimulationConfig:
 def check_clocks(robots: list, sim: SimulationConfig) -> None:
     """Real vehicles live in real time: lock-step needs every robot on the simulator. Raises ConfigError. A run
     that only replays logs runs its clock at the replay rate (so odometry keeps its rate in log time)."""
-    from aerodaas.config import ConfigError
-
-    from aerodaas.backends import backend_class
-
     rates = [backend_class(r.cfg.backend).clock_rate(r.cfg) for r in robots]
     if robots and all(x is not None for x in rates):  # e.g. every robot replays a log: its rate is the clock's
         sim.speedup = max(rates)
-
-    from aerodaas.backends import backend_clock
-
-    from aerodaas.config.robot import sensor_class
 
     live = [f"{r.id}/{s.id}" for r in robots for s in r.cfg.sensors if sensor_class(s.type).reads_wall_clock(s.properties)]
     if live and (sim.speedup != 1.0 or sim.lockstep):
@@ -292,10 +273,6 @@ def check_preplanned(robot, sched) -> None:
     until the battery failsafe, 960 s) and for more pre-planned items than ``max_queued_items`` (the cap bounded only
     what was added in flight: 50,000 pre-planned waypoints were accepted), else
     :class:`aerodaas.navigation.safety.SafetyViolation`; clamped items replace the originals."""
-    from aerodaas.model.types import AeroNavigation, SchedulingType
-    from aerodaas.config import ConfigError
-    from aerodaas.navigation.safety import SafetyGate
-
     for nav in getattr(robot, "navigations", []):
         if isinstance(nav, AeroNavigation) and not nav.waypoints:
             raise ConfigError(f"robot {robot.id!r}: navigation {nav.name!r} holds no waypoints or commands "
@@ -326,19 +303,14 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     ``--env`` file valid, and ``AERODAAS_GROUND_CACHE_MB`` a number >= 0. ``overwrite`` is for
     :func:`check_options`, which refuses an existing file that is not a recording once the application is loaded.
     Raises ValueError / ConfigError naming the flag (or variable) and the value."""
-    from aerodaas.sim.ground_cache import limit_bytes
-
     limit_bytes()
     for flag, v in (("--record", record), ("--env", env)):
         if v is not None and not v.strip():
             raise ValueError(f"{flag} {v!r}: an empty path (leave the option out instead)")
     if record:
-        from aerodaas.recording.record_path import check_record_path
-
         # an existing file that is no recording is refused once the app is loaded (check_options): the environment
         # file the app opens itself is known only then, and is refused as an input, never with "pass --overwrite"
         check_record_path(record, overwrite=True, protect=tuple(q for q in (app, env) if q))
-    from aerodaas.config import MAX_SPEEDUP, MIN_SPEEDUP
 
     for flag, v, lo, hi in (("--speedup", speedup, MIN_SPEEDUP, MAX_SPEEDUP),):
         if v is not None and not (v > lo and v <= hi or v == lo > 0):  # NaN fails every comparison
@@ -347,12 +319,9 @@ def check_run_flags(record: str | None, env: str | None, speedup: float | None, 
     if hitl_port is not None and not 0 <= hitl_port <= 65535:
         raise ValueError(f"--hitl-port {hitl_port}: outside [0, 65535] (0: any free port)")
     if address is not None:  # parsed, resolved and reachable within 10 s, before any Ray process
-        from aerodaas.clusters.addresses import check_ray_address
 
         check_ray_address(address, timeout_s=10.0)
     if env:
-        from aerodaas.config import load_environment_config
-
         load_environment_config(env)
 
 
@@ -376,8 +345,6 @@ def check_timeout(timeout: Any, name: str) -> None:
 
 def check_failure_fraction(a: Any) -> None:
     """Refuse an analytics whose ``max_failure_fraction`` is not a number in [0, 1] (ConfigError naming it)."""
-    from aerodaas.config import ConfigError
-
     f = getattr(a, "max_failure_fraction", 0.0)
     if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 1.0:
         raise ConfigError(f"analytics {a.name!r}: max_failure_fraction must be a number in [0, 1] (the fraction of "

@@ -7,11 +7,18 @@ Nothing here is called while an application is loaded (:mod:`aerodaas.runtime.ap
 """
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import tempfile
 import threading
 
+from aerodaas.clusters import reaper
+from aerodaas.clusters.addresses import check_ray_address
+from aerodaas.clusters.local import enable_token_auth
+from aerodaas.clusters.loopback import loopback_only
+from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
+from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 from aerodaas.runtime.process import PROCESS, EarlyStart
 
 __all__ = ["RayStartError", "RayAddressError", "init_ray", "ensure_ray", "start_ray_early", "shutdown_ray",
@@ -63,7 +70,6 @@ def _up_address() -> str | None:
     """The address of a running `aerodaas up` cluster, unless ``AERODAAS_NO_ATTACH=1``."""
     if os.environ.get("AERODAAS_NO_ATTACH") == "1":
         return None
-    from aerodaas.clusters.persistent import attached_address
 
     return attached_address()
 
@@ -71,12 +77,11 @@ def _up_address() -> str | None:
 def _shipped_plugins(address: str | None, up_address: str | None) -> dict:
     """``ray.init``'s runtime_env keyword: installed plug-in packages (entry points) travel to a cluster we join or
     attach to (its nodes may not have them; ``AERODAAS_SHIP_PLUGINS=0``: not)."""
-    from aerodaas.plugins.registry import plugin_package_paths
+    from aerodaas.plugins.registry import plugin_package_paths  # lazy: heavy pydantic
 
     ship = plugin_package_paths() if (address or up_address) and os.environ.get("AERODAAS_SHIP_PLUGINS") != "0" \
         else []
     if up_address:  # not what `aerodaas up`'s workers import already: their warm pool serves jobs without one
-        from aerodaas.clusters.persistent import not_on_cluster_path
 
         ship = not_on_cluster_path(ship)
     return {"runtime_env": {"py_modules": ship}} if ship else {}
@@ -85,11 +90,7 @@ def _shipped_plugins(address: str | None, up_address: str | None) -> dict:
 def _attach_up(up_address: str, renv: dict) -> None:
     """Join the persistent local cluster of `aerodaas up` (:mod:`aerodaas.clusters.persistent`): loopback, token
     auth, like our own."""
-    import ray
-
-    from aerodaas.clusters.local import enable_token_auth
-    from aerodaas.clusters.persistent import await_fresh_workers
-    from aerodaas.clusters.loopback import loopback_only
+    import ray  # lazy: heavy ray
 
     enable_token_auth()  # the cluster was started with token auth: the driver must present the token
     if not await_fresh_workers():
@@ -112,11 +113,7 @@ def _start_local(dashboard: bool) -> None:
     num_cpus=3: the run's actors reserve no CPU (num_cpus=0), so the CPU resource only sizes Ray's pool of workers
     prestarted while the app is built: three, which the recorder, a drone and an analytics actor take (1.4 s
     instead of 2.0 s from Ray ready to the actors ready, `aerodaas bench startup`)."""
-    import ray
-
-    from aerodaas.clusters import reaper
-    from aerodaas.clusters.loopback import loopback_only
-    from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
+    import ray  # lazy: heavy ray
 
     limit_malloc_arenas()  # the workers' C heap: see the module
     lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
@@ -155,13 +152,11 @@ def init_ray(address: str | None, dashboard: bool = False) -> None:
     fails within 10 s instead of hanging); else attach to the persistent local cluster of ``aerodaas up`` if one
     runs; else start a fresh loopback-only local Ray of our own (``dashboard``: with Ray's dashboard on
     127.0.0.1). Raises ValueError for a bad ``address``, else what ``ray.init`` raises."""
-    import ray
+    import ray  # lazy: heavy ray
 
     up_address = None if address else _up_address()
     renv = _shipped_plugins(address, up_address)
     if address:
-        from aerodaas.clusters.addresses import check_ray_address
-
         check_ray_address(address, timeout_s=10.0)
         ray.init(address=address, log_to_driver=True, include_dashboard=False, **renv)
     elif up_address:
@@ -177,15 +172,13 @@ def start_ray_early(address: str | None = None, dashboard: bool = False) -> None
     thread, ``ray.init`` leaves the main thread's SIGTERM handler alone (in the main thread it installs its own,
     which exits at once: ``aerodaas run`` then died with SIGABRT instead of stopping the mission cleanly). Nothing
     to do when Ray is already initialized."""
-    import ray
+    import ray  # lazy: heavy ray
 
     if PROCESS.ray.early is not None or ray.is_initialized():
         return
     early = PROCESS.ray.early = EarlyStart(address)
 
     def keeper() -> None:
-        import logging
-
         class _NoSigtermNotice(logging.Filter):  # the CLI installs its own SIGTERM handler in the main thread
             def filter(self, record: logging.LogRecord) -> bool:
                 return not str(record.msg).startswith("SIGTERM handler is not set")
@@ -205,7 +198,7 @@ def ensure_ray(address: str | None = None, dashboard: bool = False) -> bool:
     """Connect to (``address``) or start a local Ray (``dashboard``: with its dashboard); returns True when the
     cluster has ``tier=cloud`` nodes. Raises :class:`RayAddressError` (``address`` unreachable or no Ray cluster) or
     :class:`RayStartError`."""
-    import ray
+    import ray  # lazy: heavy ray
 
     where = f"the Ray cluster at {address!r}" if address else "a local Ray"
     err_cls = RayAddressError if address else RayStartError
@@ -228,7 +221,7 @@ def ensure_ray(address: str | None = None, dashboard: bool = False) -> bool:
 def shutdown_ray() -> None:
     """Shut down the Ray this driver started (a joined or attached cluster is only disconnected from when this
     process ends)."""
-    import ray
+    import ray  # lazy: heavy ray
 
     if PROCESS.ray.early is not None:
         PROCESS.ray.early.ready.wait()

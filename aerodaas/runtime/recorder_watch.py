@@ -15,7 +15,7 @@ __all__ = ["RecorderWatch", "recorder_specs"]
 def recorder_specs(plan: Any) -> tuple[dict[str, bytes], bytes]:
     """(host id -> pickled spec of every actor but the recorder, pickled wiring): what the recorder keeps for
     restarted actors (:meth:`aerodaas.actors.recorder_actor.RecorderActor.keep_specs`)."""
-    from ray import cloudpickle
+    from ray import cloudpickle  # lazy: heavy ray
 
     wiring = {"routes": plan.routes(), "location": plan.location(),
               "tiers": {h: a.tier for h, a in plan.actors.items()}, "peers": plan.peer_names(),
@@ -46,7 +46,7 @@ class RecorderWatch:
 
     def poll(self) -> None:
         """Look at the recorder's last answer and ask again; never raises, never waits."""
-        import ray
+        import ray  # lazy: heavy ray
 
         if self.recorder is None:
             return

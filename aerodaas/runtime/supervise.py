@@ -21,6 +21,11 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any, Callable
 
+from aerodaas.runtime.recorder_watch import RecorderWatch, recorder_specs
+from aerodaas.runtime.report import pct, waypoint_count
+
+from rich.live import Live
+
 if TYPE_CHECKING:
     from aerodaas.protocol.actor_classes import ActorClasses
 
@@ -36,12 +41,10 @@ def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorCla
     (and their ``num_gpus``, :meth:`~aerodaas.runtime.dataflow.ActorPlan.ray_options`) and restartable
     ``max_restarts`` times. Returns host id -> actor handle. Nothing is set up yet. Raises what Ray
     raises for an impossible placement option."""
-    import ray
-
-    from aerodaas.runtime.recorder_watch import recorder_specs
+    import ray  # lazy: heavy ray
 
     handles: dict[str, Any] = {}
-    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy  # lazy: heavy ray
 
     rec_plan = plan.actors["recorder"]
     # the recorder writes the driver's file: it runs on the driver's node, whatever other edge nodes exist (and
@@ -64,14 +67,14 @@ def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorCla
 
 
 def _is_actor_death(e: BaseException) -> bool:
-    import ray
+    import ray  # lazy: heavy ray
 
     return isinstance(e, (ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError))
 
 
 def _await_restart(handle: Any, deadline_s: float) -> bool:
     """Wait (at most ``deadline_s``) for a dead actor to come back restarted; False when it is gone for good."""
-    import ray
+    import ray  # lazy: heavy ray
 
     t_end = time.monotonic() + deadline_s
     while time.monotonic() < t_end:
@@ -103,7 +106,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     for what happens when actors die). ``handles``: robot id -> the driver's component handles (progress and
     Ctrl-C). Ctrl-C (KeyboardInterrupt) ends every mission as ``interrupted``, waits for the reports and
     re-raises nothing: the outcome says so."""
-    import ray
+    import ray  # lazy: heavy ray
 
     drones = {hid: a for hid, a in plan.actors.items() if a.role == "drone"}
     robots_of = {hid: [r.robot_id for r in a.spec.robots] for hid, a in drones.items()}
@@ -112,16 +115,12 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     def remaining() -> float | None:
         return None if timeout is None else max(1.0, timeout - (time.monotonic() - t0))
 
-    from aerodaas.runtime.recorder_watch import RecorderWatch
-
     watch = RecorderWatch(actors.get("recorder"), plan)
     refs = {actors[hid].run.remote(remaining()): hid for hid in drones}
     restarts = {hid: 0 for hid in drones}
     reports: dict[str, dict] = {}
     live = None
     if progress and sys.stdout.isatty():
-        from rich.live import Live
-
         live = Live(refresh_per_second=4, transient=False)
         live.start()
     last_print = 0.0
@@ -137,7 +136,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
             if progress and refs:
                 lines = progress_lines(handles, t0)
                 if live is not None:
-                    from rich.text import Text
+                    from rich.text import Text  # lazy: rich, only for the progress display of a terminal
 
                     live.update(Text("\n".join(lines)))
                 elif time.monotonic() - last_print > 5.0:
@@ -166,7 +165,7 @@ def _collect(ref: Any, refs: dict, reports: dict, restarts: dict, plan: Any, act
     """A drone actor's run call ``ref`` (one of ``refs``, ref -> actor id) returned: its reports; or the actor died
     and Ray restarted it within ``restart_wait_s`` (its run resumed, counted in ``restarts``); or its robots end
     ``lost`` (``failed`` for another error) with their last checkpoint, recorded as their result."""
-    import ray
+    import ray  # lazy: heavy ray
 
     hid = refs.pop(ref)
     try:
@@ -192,7 +191,7 @@ def _collect(ref: Any, refs: dict, reports: dict, restarts: dict, plan: Any, act
 
 def _interrupt(handles: dict, refs: dict, reports: dict, robots_of: dict) -> None:
     """Ctrl-C: end every mission as ``interrupted`` and wait (bounded) for the reports of the runs in ``refs``."""
-    import ray
+    import ray  # lazy: heavy ray
 
     for h in handles.values():
         try:
@@ -223,7 +222,7 @@ def _first_line(e: BaseException) -> str:
 
 
 def _last_checkpoint(recorder: Any, rid: str) -> dict | None:
-    import ray
+    import ray  # lazy: heavy ray
 
     if recorder is None:
         return None
@@ -235,7 +234,7 @@ def _last_checkpoint(recorder: Any, rid: str) -> dict | None:
 
 
 def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
-    import ray
+    import ray  # lazy: heavy ray
 
     if recorder is None:
         return
@@ -252,9 +251,7 @@ def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
 def progress_lines(handles: dict, t0: float) -> list[str]:
     """One line per flying drone: time, state, waypoints, position, battery, camera FPS (a drone with a camera),
     detections, link."""
-    import ray
-
-    from aerodaas.runtime.report import pct, waypoint_count
+    import ray  # lazy: heavy ray
 
     lines = []
     for rid, h in handles.items():
@@ -291,7 +288,7 @@ def settle_actors(actors: dict, budget_s: float = 20.0, rounds: int = 6) -> bool
     until a round in which no actor had anything to wait for (a message handed on in one round may give another
     actor work) — at most ``rounds`` rounds and ``budget_s`` seconds in all. Returns True when the actors were
     found idle; an actor that is gone or does not answer counts as settled (its loss is reported elsewhere)."""
-    import ray
+    import ray  # lazy: heavy ray
 
     deadline = time.monotonic() + budget_s
     for _ in range(rounds):
@@ -314,7 +311,7 @@ def settle_actors(actors: dict, budget_s: float = 20.0, rounds: int = 6) -> bool
 def collect_stats(handles: dict, actors: dict, plan: Any) -> tuple[dict, dict]:
     """Per-robot stats (scheduler, cameras, analytics) and per-frame latency from every actor still alive; an
     actor that is gone contributes ``{"error": ...}`` under ``_hosts``. Never raises."""
-    import ray
+    import ray  # lazy: heavy ray
 
     flow = {hid: h for hid, h in actors.items() if plan.actors[hid].role != "recorder"}  # the data plane's actors
     t0 = time.monotonic()

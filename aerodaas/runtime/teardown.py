@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import sys
 
+from aerodaas.recording.recover import recover_mcap
+from aerodaas.runtime.node_recorders import close_node_recorders, node_recorder_ids
 from aerodaas.runtime.supervise import error_cause as _cause
 
 __all__ = ["close_actors"]
@@ -13,9 +15,7 @@ __all__ = ["close_actors"]
 def close_actors(actors: dict, record: str | None) -> tuple[dict, dict]:
     """Close every actor (analytics and dispatchers first, drones, the recorder last: everything they recorded
     reaches the file); returns (message counts, recording report). Never raises."""
-    import ray
-
-    from aerodaas.runtime.node_recorders import close_node_recorders, node_recorder_ids
+    import ray  # lazy: heavy ray
 
     nodes = node_recorder_ids(actors)
     order = sorted((h for h in actors if h != "recorder" and h not in nodes), key=lambda h: h.startswith("drone"))
@@ -75,8 +75,7 @@ def _finish_orphaned_recording(record: str | None, loss: dict) -> dict[str, int]
     be read; then ``loss["finish_error"]`` says why)."""
     if not record or not os.path.isfile(record):
         return {}
-    from aerodaas.recording.reader import summarize_mcap
-    from aerodaas.recording.recover import recover_mcap
+    from aerodaas.recording.reader import summarize_mcap  # lazy: heavy mcap
 
     try:
         recover_mcap(record)

@@ -23,6 +23,9 @@ pyramid gone while loading it builds its own.
 """
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import fcntl
 import hashlib
 import json
 import os
@@ -182,8 +185,6 @@ def shared_levels(key: str, build: Callable[[], list[Level]]) -> list[Level]:
 
     Returns a list of ((H, W, 3) uint8 BGR read-only array, metres per pixel, home pixel (x, y)). Any OS error
     while storing (no space, read-only file system) falls back to the pyramid ``build()`` returned, in the heap."""
-    import fcntl
-
     root = cache_dir()
     final = root / key
     levels = _stored(final)
@@ -244,9 +245,6 @@ def release_heap() -> bool:
     float32 scratch of a pyramid's build in the process (measured outside Ray with the default ground: 77.1 MB PSS
     after building without it, 71.5 MB with it, 65.2 MB for a process that only mapped the copy). Returns False
     where there is no glibc."""
-    import ctypes
-    import ctypes.util
-
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
         return bool(libc.malloc_trim(0))

@@ -20,13 +20,13 @@ __all__ = ["train_on_ray"]
 
 def _worker(config: dict) -> None:
     """One Ray Train worker (``train_loop_per_worker``): builds the data and model and runs :meth:`Trainer.fit`."""
-    import ray.train
-    import ray.train.torch
+    import ray.train  # lazy: heavy ray
+    import ray.train.torch  # lazy: heavy ray
 
-    from aerodaas.training.config import TrainConfig
-    from aerodaas.training.loop import Trainer
-    from aerodaas.training.sets import load_training_data
-    from aerodaas.training.session import build_model
+    from aerodaas.training.config import TrainConfig  # lazy: heavy pydantic
+    from aerodaas.training.loop import Trainer  # lazy: optional onnx, torch; heavy cv2, numpy, pydantic
+    from aerodaas.training.sets import load_training_data  # lazy: heavy cv2, numpy, pydantic
+    from aerodaas.training.session import build_model  # lazy: optional onnx, torch; heavy cv2, numpy, onnxruntime, pydantic
 
     cfg = TrainConfig.model_validate(config)
     ctx = ray.train.get_context()
@@ -39,7 +39,7 @@ def _worker(config: dict) -> None:
 
 
 def _report_epoch(res) -> None:
-    import ray.train
+    import ray.train  # lazy: heavy ray
 
     ray.train.report({"epoch": res.epoch, "loss": res.loss, "mean_ap50": res.mean_ap50,
                       "metrics": json.dumps([asdict(m) for m in res.metrics])})
@@ -49,8 +49,8 @@ def train_on_ray(cfg) -> dict:
     """Run ``cfg`` (a :class:`aerodaas.training.config.TrainConfig` with ``workers >= 1``) as a Ray Train job on the
     connected Ray cluster; returns the last reported metrics. Raises ``ray.train.TrainingFailedError`` (what a
     worker raised) when the job fails."""
-    from ray.train import RunConfig, ScalingConfig
-    from ray.train.torch import TorchTrainer
+    from ray.train import RunConfig, ScalingConfig  # lazy: heavy ray
+    from ray.train.torch import TorchTrainer  # lazy: heavy ray
 
     out = Path(cfg.out).resolve()
     trainer = TorchTrainer(

@@ -15,7 +15,11 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from onnx import version_converter
+import onnx
 import onnxruntime as ort
+from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
+from onnxruntime.quantization.shape_inference import quant_pre_process
 import torch
 
 from aerodaas.perception.detect import YoloxDetector
@@ -102,12 +106,6 @@ def quantize_checked(report: ExportReport, names: Sequence[str], val: ValTiles, 
                      score_threshold: float = 0.3) -> tuple[ExportReport | None, str]:
     """Quantize ``report.path`` to int8 at ``out`` and score it; returns (its report, "kept ...") when no class's
     recall dropped by more than ``max_recall_drop``, else (None, the reason) and the int8 file is removed."""
-    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
-    from onnxruntime.quantization.shape_inference import quant_pre_process
-
-    import onnx
-    from onnx import version_converter
-
     out = Path(out)
     pre = out.with_suffix(".pre.onnx")
     # per-channel weight scales need DequantizeLinear's axis attribute: opset 13 (the YOLOX export is opset 11)

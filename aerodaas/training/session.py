@@ -15,6 +15,7 @@ from typing import Callable
 import torch
 
 from aerodaas.model.types import COCO_CLASSES
+from aerodaas.perception.decoders import inspect_model
 from aerodaas.perception.model_files import resolve_model
 from aerodaas.training.config import TrainConfig
 from aerodaas.training.export import ExportReport, export_checked, quantize_checked
@@ -29,8 +30,6 @@ def build_model(cfg: TrainConfig, names: list[str]) -> OnnxYolox:
     """The module to fine-tune: ``cfg.base_model`` (default the shipped YOLOX-Nano, resolved and sha256-checked by
     :func:`resolve_model`) with one class row per name (:func:`base_rows`). The base model's class names are its
     metadata's, else COCO's 80."""
-    from aerodaas.perception.decoders import inspect_model
-
     path = cfg.base_model or resolve_model("yolox_nano")
     base_names = inspect_model(path, "yolox").class_names or list(COCO_CLASSES)
     return OnnxYolox(path, base_rows(names, base_names, cfg.init_from))

@@ -152,7 +152,7 @@ class StreamReader:
 
     # ------------------------------------------------------------------ reading thread
     def _run(self) -> None:
-        import av
+        import av  # lazy: heavy av
 
         backoff = self.backoff_s[0]
         while not self._stop.is_set():
@@ -190,7 +190,7 @@ class StreamReader:
 
     def _read(self, container) -> int:
         """Decode ``container`` until it ends, fails or the reader stops; returns the number of frames decoded."""
-        import av
+        import av  # lazy: heavy av
 
         n = 0
         stream = container.streams.video[0]

@@ -14,7 +14,7 @@ RFC 4566 (SDP), RFC 6184 (RTP payload for H.264), RFC 7798 (H.265); QGroundContr
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
 from urllib.parse import urlsplit
@@ -154,6 +154,4 @@ def parse_stream_source(source: str, transport: str | None = None, codec: str | 
 
 def with_path(spec: StreamSpec, path: Path) -> StreamSpec:
     """``spec`` (kind file or sdp) reading the resolved file ``path``."""
-    from dataclasses import replace
-
     return replace(spec, url=str(path))

@@ -3,6 +3,7 @@
 one instance per thread, since onnxruntime sessions are not meant to be shared across concurrent ``run`` calls."""
 from __future__ import annotations
 
+import copy
 import threading
 from typing import Any, Mapping
 
@@ -28,7 +29,7 @@ class DetectorBank:
                 from None
 
     def detect(self, model: str, frame) -> list:
-        from aerodaas.perception.detect import make_detector
+        from aerodaas.perception.detect import make_detector  # lazy: heavy cv2
 
         cache = getattr(self._local, "cache", None)
         if cache is None:
@@ -70,8 +71,6 @@ class AnalyticsBank:
             cache = self._local.cache = {}
         obj = cache.get(model)
         if obj is None:
-            import copy
-
             obj = cache[model] = copy.deepcopy(proto)
             obj.setup()
         return obj

@@ -41,26 +41,43 @@ import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Protocol, Sequence
 
-from aerodaas.schedulers.analytics_base import AnalyticsTask
+from aerodaas.schedulers.analytics_base import AnalyticsTask, Workload
 
 from aerodaas.schedulers.dispatch.clock import Clock
 from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel, seeded_rng
 from aerodaas.schedulers.dispatch.payload import frame_from_payload
 from aerodaas.schedulers.dispatch.stats import Samples
 
-if TYPE_CHECKING:  # annotations only: the dispatcher imports this module
-    from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
-
-__all__ = ["CloudPool"]
+__all__ = ["CloudClient", "CloudPool"]
 
 log = logging.getLogger(__name__)
 
 
+class CloudClient(Protocol):
+    """What the pool needs of a dispatcher that sends it tasks
+    (:class:`~aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher` is one; the pool does not import it,
+    the dispatcher imports the pool): its edge id, clock and workload (task profiles by model), and three
+    callbacks, run on the dispatcher's event loop."""
+
+    edge_id: str
+    clock: Clock
+    workload: Workload
+
+    def cloud_admits(self, task: AnalyticsTask, now_ms: float) -> bool:
+        """Whether the dispatcher's policy still admits ``task`` to the cloud at ``now_ms`` (ms, run clock)."""
+
+    def on_cloud_reply(self, task: AnalyticsTask, reply: dict, latency_ms: float, executor: str | None) -> None:
+        """A reply (or failure, ``reply["failed"]``) for ``task`` after ``latency_ms`` (ms) from ``executor``."""
+
+    def on_cloud_availability(self, available: bool) -> None:
+        """The cloud became unavailable (no executor alive) or available again."""
+
+
 @dataclass
 class _InFlight:
-    dispatcher: "AnalyticsDispatcher"
+    dispatcher: CloudClient
     task: AnalyticsTask
     executor: int
     sent_ms: float
@@ -107,7 +124,7 @@ class CloudPool:
         self.alive = [True] * len(self.executors)
         self.infos: list[dict] = [{} for _ in self.executors]
         self.events: list[dict] = []
-        self.dispatchers: list[AnalyticsDispatcher] = []
+        self.dispatchers: list[CloudClient] = []
         self.clock: Clock | None = None
         self.rtt_error = Samples()
         self.reply_margin = Samples()
@@ -168,7 +185,7 @@ class CloudPool:
         if self._encoder is not None:
             self._encoder.shutdown(wait=False)
 
-    def attach(self, dispatcher: "AnalyticsDispatcher") -> None:
+    def attach(self, dispatcher: CloudClient) -> None:
         self.dispatchers.append(dispatcher)
 
     async def add_executor(self, executor: Any) -> dict:
@@ -200,7 +217,7 @@ class CloudPool:
         """True once :meth:`start` bound the pool to an event loop (it is then started only once)."""
         return self._loop is not None
 
-    def fail_in_flight(self, dispatcher: "AnalyticsDispatcher", reason: str) -> int:
+    def fail_in_flight(self, dispatcher: CloudClient, reason: str) -> int:
         """End every task of ``dispatcher`` still in flight on the cloud as failed with ``reason`` (its
         ``on_cloud_reply`` hears ``{"ok": False, "failed": True, "error": reason}``; a reply arriving later is
         ignored). Returns how many were failed. Call it on the pool's event loop."""
@@ -209,7 +226,7 @@ class CloudPool:
             self._finish_failed(k, reason)
         return len(keys)
 
-    def in_flight(self, dispatcher: "AnalyticsDispatcher | None" = None) -> int:
+    def in_flight(self, dispatcher: CloudClient | None = None) -> int:
         return sum(1 for f in self._inflight.values() if dispatcher is None or f.dispatcher is dispatcher)
 
     def name_of(self, i: int) -> str:
@@ -222,7 +239,7 @@ class CloudPool:
             return None
         return alive[next(self._rr) % len(alive)]
 
-    def send(self, dispatcher: "AnalyticsDispatcher", task: AnalyticsTask, admit_by_ms: float, now_ms: float) -> bool:
+    def send(self, dispatcher: CloudClient, task: AnalyticsTask, admit_by_ms: float, now_ms: float) -> bool:
         """Queue ``task`` for the cloud (on the loop). Returns False when no executor is alive."""
         i = self._pick()
         if i is None:
@@ -264,7 +281,7 @@ class CloudPool:
             self._reroute_or_fail(key, f"cloud executor {self.name_of(f.executor)} is gone")
 
     def _encode(self, payload: Any) -> bytes:
-        import cv2
+        import cv2  # lazy: heavy cv2
 
         frame = frame_from_payload(payload)
         ok, buf = cv2.imencode(".jpg", frame, [int(cv2.IMWRITE_JPEG_QUALITY), self.jpeg_quality])

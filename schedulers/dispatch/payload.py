@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 __all__ = ["FramePayload", "frame_from_payload"]
 
 
@@ -22,18 +24,16 @@ class FramePayload:
 def frame_from_payload(payload: Any):
     """The frame of a task payload: an ``(H, W, 3)`` uint8 BGR array, from an ndarray, a :class:`FramePayload`, an
     ObjectRef to one, or JPEG bytes. Raises TypeError for anything else and ValueError for undecodable bytes."""
-    import numpy as np
-
     if isinstance(payload, FramePayload):
         payload = payload.frame
     if payload is None:
         raise TypeError("the task has no frame (payload None); real executors need an image")
     if type(payload).__name__ == "ObjectRef":
-        import ray
+        import ray  # lazy: heavy ray
 
         payload = ray.get(payload)
     if isinstance(payload, (bytes, bytearray, memoryview)):
-        import cv2
+        import cv2  # lazy: heavy cv2
 
         img = cv2.imdecode(np.frombuffer(payload, dtype=np.uint8), cv2.IMREAD_COLOR)
         if img is None:

@@ -94,7 +94,7 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
 
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
     from aerodaas import Environment, ObjectDetector
-    from aerodaas.runtime import supervise
+    from aerodaas.runtime import driver
     from aerodaas.perception.detect import ModelNotFoundError
 
     started = []
@@ -103,7 +103,7 @@ def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_opti
         started.append("actors")
         raise AssertionError("the run's actors started although the model is missing")
 
-    monkeypatch.setattr(supervise, "start_actors", no_actors)  # every actor of a run is started there
+    monkeypatch.setattr(driver, "start_actors", no_actors)  # every actor of a run is started there
 
     monkeypatch.setenv("AERODAAS_MODEL_DIR", str(tmp_path))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))

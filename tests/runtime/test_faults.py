@@ -120,7 +120,7 @@ def test_recorder_failure_is_reported_and_the_file_is_finished(tmp_path, monkeyp
 def test_recorder_failure_when_the_disk_stays_full_leaves_a_recoverable_file(tmp_path, monkeypatch):
     """The summary cannot be written either: the file is cut at the last record boundary (valid, unfinished), the
     failure says so, and `aerodaas recover` finishes it once there is room."""
-    import aerodaas.recording.recover as recover
+    import aerodaas.actors.recorder as recorder
     from aerodaas import cli
     from aerodaas.actors.recorder import RecorderService
 
@@ -129,7 +129,7 @@ def test_recorder_failure_when_the_disk_stays_full_leaves_a_recoverable_file(tmp
     def full(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(recover, "recover_mcap", full)
+    monkeypatch.setattr(recorder, "recover_mcap", full)  # the recorder's own finish (aerodaas recover: below)
     path = tmp_path / "r.mcap"
     svc = RecorderService(str(path), flush_every_s=0.0)
     _json_burst(svc, 600)

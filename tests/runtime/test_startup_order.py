@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import ray
 
-from aerodaas.runtime import driver, recorder_watch
+from aerodaas.runtime import driver, supervise
 
 
 class _Calls:
@@ -74,7 +74,7 @@ def test_every_actor_and_its_setup_is_asked_for_before_the_first_wait(monkeypatc
 
     monkeypatch.setattr(ray, "get", fake_get)
     monkeypatch.setattr(ray, "get_runtime_context", lambda: SimpleNamespace(get_node_id=lambda: "0" * 56))
-    monkeypatch.setattr(recorder_watch, "recorder_specs", lambda plan: ({}, b""))
+    monkeypatch.setattr(supervise, "recorder_specs", lambda plan: ({}, b""))  # where start_actors looks it up
     described = driver._start_actors(run, placement=None)
 
     first_get = next(i for i, (kind, _) in enumerate(calls.log) if kind == "get")
