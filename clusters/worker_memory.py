@@ -56,7 +56,7 @@ def lean_worker_imports() -> bool:
 def worker_setup() -> None:
     """Ray worker setup hook: Ray's Arrow reducers are registered only when pyarrow is already imported, so that a
     worker that never uses Arrow never imports it (see the module)."""
-    import ray._private.arrow_serialization as arrow  # serialization_addons.apply imports the function at call time
+    import ray._private.arrow_serialization as arrow  # lazy: ray, in the worker only (serialization_addons.apply imports the function at call time)
 
     arrow._register_custom_datasets_serializers = functools.partial(
         _register_if_imported, arrow._register_custom_datasets_serializers)

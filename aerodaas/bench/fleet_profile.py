@@ -32,6 +32,9 @@ import threading
 import time
 from dataclasses import dataclass, field
 
+from aerodaas.bench.procs import ray_processes
+from aerodaas.sim.ground_cache import cache_dir
+
 __all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "ActorProfiler"]
 
 
@@ -165,8 +168,6 @@ def _mapping_kind(path: str, ground_dir: str) -> str:
 def smaps_pss(pid: int) -> dict[str, float]:
     """PSS (MiB) of ``pid`` by mapping kind (``/proc/<pid>/smaps``). Raises FileNotFoundError when it is gone."""
     try:
-        from aerodaas.sim.ground_cache import cache_dir
-
         ground = str(cache_dir())
     except Exception:  # noqa: BLE001 - the ground cache's place only labels rows
         ground = ""
@@ -239,8 +240,6 @@ class ActorProfiler:
             self.error = f"{type(e).__name__}: {e}"
 
     def _measure(self) -> dict | None:
-        from aerodaas.bench.procs import ray_processes
-
         procs, pid = [], None
         while pid is None:  # the fleet's start takes 3 s to a minute, with the load
             if self._stop.wait(0.5):

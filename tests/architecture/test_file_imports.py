@@ -171,34 +171,12 @@ def unmarked(mod: str, path: Path) -> list[str]:
 
 
 #: files in an import cycle today (to be emptied)
-KNOWN_CYCLE_FILES: set[str] = {
-    "aerodaas.bench", "aerodaas.bench.detect", "aerodaas.bench.fleet", "aerodaas.bench.overhead",
-    "aerodaas.bench.raypath", "aerodaas.bench.recorder", "aerodaas.bench.schedulers",
-    "aerodaas.bench.schedulers_cli", "aerodaas.bench.schedulers_report", "aerodaas.bench.startup",
-    "aerodaas.bench.sweep", "aerodaas.bench.tello_video", "aerodaas.bench.tours", "aerodaas.bench.tracks",
-    "aerodaas.bench.video", "aerodaas.reliability.accounting_faults", "aerodaas.reliability.app_cases",
-    "aerodaas.reliability.catalogue", "aerodaas.reliability.faults",
-}
+KNOWN_CYCLE_FILES: set[str] = set()
 
 #: files with unmarked imports inside functions today (to be emptied)
 KNOWN_UNMARKED: set[str] = {
     "aerodaas.backends.mavlink.backend", "aerodaas.backends.mavlink.camera", "aerodaas.backends.mavlink.preflight",
-    "aerodaas.bench", "aerodaas.bench.bound", "aerodaas.bench.decision_time", "aerodaas.bench.detect",
-    "aerodaas.bench.deviations", "aerodaas.bench.edge_host", "aerodaas.bench.fleet", "aerodaas.bench.isolation",
-    "aerodaas.bench.overhead", "aerodaas.bench.peers_dora", "aerodaas.bench.peers_naive_ray",
-    "aerodaas.bench.pipeline", "aerodaas.bench.procs", "aerodaas.bench.progress", "aerodaas.bench.raypath",
-    "aerodaas.bench.recorder", "aerodaas.bench.schedulers", "aerodaas.bench.schedulers_cli",
-    "aerodaas.bench.schedulers_report", "aerodaas.bench.startup", "aerodaas.bench.sweep",
-    "aerodaas.bench.tello_video", "aerodaas.bench.tours", "aerodaas.bench.traces", "aerodaas.bench.tracks",
-    "aerodaas.bench.video", "aerodaas.bench.video_gst", "aerodaas.commands.bench", "aerodaas.commands.cluster",
-    "aerodaas.commands.info", "aerodaas.commands.inject", "aerodaas.commands.layout", "aerodaas.commands.merge",
-    "aerodaas.commands.plan", "aerodaas.commands.plot", "aerodaas.commands.plugins", "aerodaas.commands.recover",
-    "aerodaas.commands.replay", "aerodaas.commands.run", "aerodaas.commands.schema", "aerodaas.commands.sim",
-    "aerodaas.commands.train", "aerodaas.emulators", "aerodaas.emulators.mavlink.trace",
-    "aerodaas.reliability.accounting_faults", "aerodaas.reliability.app_cases", "aerodaas.reliability.catalogue",
-    "aerodaas.reliability.cli_cases", "aerodaas.reliability.faults", "aerodaas.reliability.file_cases",
-    "aerodaas.reliability.flight", "aerodaas.reliability.hitl_probe", "aerodaas.reliability.input_report",
-    "aerodaas.tools.hitl", "aerodaas.tools.mission_cli", "aerodaas.tools.plot", "aerodaas.tools.signing_cli",
+    "aerodaas.emulators", "aerodaas.emulators.mavlink.trace",
 }
 
 
