@@ -34,7 +34,7 @@ def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5
     backend = make_backend(cfg)
     backend.connect()
     deadline = time.monotonic() + min(args.timeout, home_wait_s)
-    while not backend.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
+    while not backend.telemetry.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
         time.sleep(0.05)
     return backend
 
@@ -45,12 +45,12 @@ def _download_fence_and_rally(backend, plan, out: Path, name: str):
     silently."""
     update = {}
     try:
-        update["geofence"] = fence_from_items(backend.download_items(FENCE))
+        update["geofence"] = fence_from_items(backend.transfers.download_items(FENCE))
     except (BackendError, ValueError) as e:
         print(f"{name}: WARNING: the vehicle's geofence could not be read ({e}); {str(out)!r} has none",
               file=sys.stderr, flush=True)
     try:
-        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.download_items(RALLY)]
+        update["rally_points"] = [(w[6] / 1e7, w[7] / 1e7, float(w[8] or 0.0)) for w in backend.transfers.download_items(RALLY)]
     except BackendError as e:
         print(f"{name}: WARNING: the vehicle's rally points could not be read ({e}); {str(out)!r} has none",
               file=sys.stderr, flush=True)
@@ -66,7 +66,7 @@ def _cruise_speed(backend) -> float | None:
     """The vehicle's own cruise speed in m/s (ArduCopter ``WPNAV_SPEED`` cm/s, PX4 ``MPC_XY_CRUISE`` m/s), read and
     left as it is; None when it does not answer."""
     name, unit = ("WPNAV_SPEED", 0.01) if backend.autopilot == "ardupilot" else ("MPC_XY_CRUISE", 1.0)
-    got = backend.read_parameters([name])
+    got = backend.parameters.read([name])
     return got[name] * unit if name in got else None
 
 
@@ -75,7 +75,7 @@ def _check_read_back(backend, sent, name: str) -> None:
     mission_differences`): prints what it stored differently; raises BackendError when that changes the flight
     (command, the frame, position or altitude of a command with a position, a hold time or speed, the number of
     items)."""
-    stored = backend.download_mission().items
+    stored = backend.mission.download().items
     diffs = mission_differences(sent, stored)
     flight = [d for d in diffs if d.flight]
     for d in diffs:
@@ -161,7 +161,7 @@ def _check_from_vehicle_home(args: argparse.Namespace, name: str, plan: Any, bac
     """The altitude, distance and geofence bounds, measured from the vehicle's own home (the file's planned home
     only when the vehicle reports none). Raises MissionFileError when neither has one."""
     bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
-    if backend.home_received:  # as documented: from the vehicle's own home, whatever the file planned
+    if backend.telemetry.home_received:  # as documented: from the vehicle's own home, whatever the file planned
         plan_to_flight(plan, backend.home, **bounds)
     elif plan.home is None:  # the bounds are measured from a home, never from a default one
         raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
@@ -178,14 +178,14 @@ def _upload_fence_and_rally(name: str, plan: Any, backend: Any, path: Path) -> N
     changed is printed), then its rally points; both read back by the backend."""
     fence = plan.geofence
     if not fence.is_empty:
-        got = backend.apply_fence(fence)
+        got = backend.fence.apply(fence)
         changed = [f"{k} {got['before'][k]:g} -> {v:g}" for k, v in got["params"].items()
                    if abs(got["before"][k] - v) > 1e-6]
         print(f"{name}: geofence of {str(path)!r} ({len(fence.polygons)} polygon(s), {len(fence.circles)} "
               f"circle(s), {got['items']} fence items) uploaded and read back; it stays on the vehicle with "
               f"its parameters: " + (", ".join(changed) or "none changed"), flush=True)
     if plan.rally_points:
-        n = backend.upload_rally(plan.rally_points)
+        n = backend.fence.upload_rally(plan.rally_points)
         print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
 
 
@@ -197,7 +197,7 @@ def _download(args: argparse.Namespace, name: str, opened: list) -> None:
                                "(QGroundControl .plan or QGC WPL 110 waypoints)")
     backend = _mission_backend(args)
     opened.append(backend)
-    plan = backend.download_mission().model_copy(update={
+    plan = backend.mission.download().model_copy(update={
         "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
     plan = _download_fence_and_rally(backend, plan, out, name)
     tmp = out.with_name(out.name + ".part")

@@ -104,7 +104,7 @@ def _check_signed(args: argparse.Namespace, system: int) -> None:
     backend = make_backend(RobotConfig(id="vehicle", backend="mavlink", mavlink=mc))
     try:
         backend.connect()
-        backend.command_long("request AUTOPILOT_VERSION", M.MAV_CMD_REQUEST_MESSAGE,
+        backend.commands.command_long("request AUTOPILOT_VERSION", M.MAV_CMD_REQUEST_MESSAGE,
                              M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
     except BackendError as e:
         raise ConnectionError(f"the signed round trip failed: {e}") from None

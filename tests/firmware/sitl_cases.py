@@ -15,8 +15,12 @@ from tests.firmware import sitl
 from tests.firmware.sitl import (FARM_CORNERS, events, flown_speed, horizontal_speed, max_horizontal_speed, odometry,
                    sustained_speed)
 
-#: each module's scenarios run in its first tests' fixtures (minutes of flight): beyond the suite's 600 s default
-pytestmark = [pytest.mark.sitl, pytest.mark.timeout(1800)]
+#: each module's scenarios run in its first tests' fixtures (minutes of flight): beyond the suite's 600 s default.
+#: The importing modules put these in their own ``pytestmark`` (a module's ``pytestmark`` replaces the one its
+#: ``import *`` brought, and marks of this module never reach tests collected there): without it the seven PX4
+#: single-vehicle scenarios ran under the 600 s default and timed out at load 30-35 (2026-11-26), ~3.3 min each
+SITL_MARKS = [pytest.mark.sitl, pytest.mark.timeout(1800)]
+pytestmark = SITL_MARKS
 
 
 @pytest.fixture(scope="module")

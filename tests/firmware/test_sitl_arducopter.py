@@ -8,4 +8,4 @@ from tests.conftest import needs_sitl
 from tests.firmware.sitl_cases import *  # noqa: F401,F403 - the shared cases and fixtures
 
 AUTOPILOT = "ardupilot"
-pytestmark = [pytest.mark.sitl, needs_sitl]  # no firmware or namespace: skipped, failed in CI
+pytestmark = [*SITL_MARKS, needs_sitl]  # no firmware or namespace: skipped, failed in CI

@@ -9,7 +9,7 @@ from tests.conftest import needs_sitl
 from tests.firmware.sitl_cases import *  # noqa: F401,F403 - the shared cases and fixtures
 
 AUTOPILOT = "px4"
-pytestmark = [pytest.mark.sitl, needs_sitl]  # no firmware or namespace: skipped, failed in CI
+pytestmark = [*SITL_MARKS, needs_sitl]  # no firmware or namespace: skipped, failed in CI
 
 # PX4 runs its default parameters plus only what our backend sets (no EKF2 tuning: see tests/firmware/sitl.py MAX_SPEED for
 # why its robots are limited to 2 m/s: stock SIH flies up to 0.5 m/s faster than its estimate, p99).

@@ -34,9 +34,9 @@ from tests.mavlink.emulated import (
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_connect_arm_takeoff_square_velocity_land_rtl(fly, autopilot):
     emu, b = fly(autopilot, params=RTL_PARAMS[autopilot])
-    assert b.autopilot == autopilot and b.vehicle_type == "MAV_TYPE_QUADROTOR"
+    assert b.autopilot == autopilot and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
     # HOME_POSITION replaces the configured home as ENU origin
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     assert abs(b.home.lat - VEHICLE_HOME.lat) < 1e-6 and abs(b.home.alt - VEHICLE_HOME.alt) < 0.01
     assert dist(b.position, (0, 0, 0)) < 0.2
     b.arm()
@@ -135,7 +135,7 @@ def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
     assert not b.armed and not emu.snapshot()["armed"]
     # an unknown command is UNSUPPORTED
     with pytest.raises(CommandRefused) as e:
-        b.command_long("bogus", 31999)
+        b.commands.command_long("bogus", 31999)
     assert e.value.result == "MAV_RESULT_UNSUPPORTED"
     emu.set_prearm_failure(None)
     b.arm()
@@ -145,9 +145,9 @@ def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_arm_before_gps_fix_is_refused(fly, autopilot):
     emu, b = fly(autopilot, gps_lock_s=1e6, mavlink={"arm_timeout_s": 0.2})
-    assert not b.home_received and b.gps_fix_type < 3
+    assert not b.telemetry.home_received and b.telemetry.gps_fix_type < 3
     if autopilot == "ardupilot":  # ArduCopter arms without GPS in STABILIZE; GUIDED needs it (mode change accepted)
-        b.set_mode("GUIDED")
+        b.commands.set_mode("GUIDED")
     with pytest.raises(CommandRefused) as e:
         b.arm()
     assert e.value.result == REFUSED[autopilot]
@@ -166,12 +166,12 @@ def test_ardupilot_takeoff_refused_when_disarmed(fly):
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_mission_round_trip_and_auto_flight(fly, autopilot):
     emu, b = fly(autopilot)
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     square = [Waypoint(id=f"wp{i}", x=x, y=y, z=6.0, hover_duration=2.0)
               for i, (x, y) in enumerate([(10, 0), (10, 10), (0, 10)])]
     sent = b.upload_mission(square, takeoff_altitude=6.0, final_action="land")
     assert [it.command for it in sent] == [22, 16, 16, 16, 21]
-    got = b.download_mission()
+    got = b.mission.download()
     assert got.items == sent
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)  # ArduPilot: home
     b.drain_events()
@@ -203,7 +203,7 @@ def test_imported_plan_round_trip(fly, autopilot):
     emu, b = fly(autopilot)
     sent = b.upload_mission(plan)
     assert len(sent) == len(plan.expanded_items())
-    assert b.download_mission().items == sent
+    assert b.mission.download().items == sent
     for s, p in zip(sent, plan.expanded_items()):
         assert s.command == p.command and s.frame == p.frame
         if p.params[4] is not None:
@@ -214,8 +214,8 @@ def test_imported_plan_round_trip(fly, autopilot):
 def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     """Single lost packets: the backend's bounded retries recover each, and nothing else is lost."""
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
-    assert run_until(b, lambda: b.home_received, 5)
-    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     emu.drop_next("COMMAND_ACK")  # the arm command's acknowledgement is lost: re-sent once, then acknowledged
     b.arm()
     assert b.armed and emu.snapshot()["commands_seen"].count(400) == 2
@@ -224,7 +224,7 @@ def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     sent = b.upload_mission(wps, final_action="land")
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)
     emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
-    assert b.download_mission().items == sent
+    assert b.mission.download().items == sent
     assert emu.dropped == [("out", "COMMAND_ACK"), ("in", "MISSION_COUNT"), ("out", "MISSION_ITEM_INT")]
     # the two the vehicle sent and the link lost are counted by their sequence numbers (on TCP nothing else is lost)
     events: list = []
@@ -239,11 +239,11 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     loaded machine: PX4 armed, no ACK arrived, the run died): the HEARTBEAT shows the mode / the armed flag, so
     the command is done (``command_ack_lost``); a command whose effect never shows still raises."""
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 1})
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     mode = "GUIDED" if autopilot == "ardupilot" else "LOITER"
     b.drain_events()
     emu.drop_next("COMMAND_ACK", count=2)
-    b.set_mode(mode)
+    b.commands.set_mode(mode)
     assert b.mode == mode
     emu.drop_next("COMMAND_ACK", count=2)
     b.arm()
@@ -259,7 +259,7 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     assert all(e["waited_s"] >= 0.3 for e in events if e["event"] == "command_resent")
     emu.drop_next("COMMAND_LONG", "in", count=2)  # the vehicle never hears it: no answer, no effect
     with pytest.raises(CommandNotAcknowledged, match="no COMMAND_ACK"):
-        b.set_mode("LAND")
+        b.commands.set_mode("LAND")
     assert b.mode == mode
 
 
@@ -321,27 +321,33 @@ def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(mo
 
     wall = [1000.0]
     monkeypatch.setattr(time, "monotonic", lambda: wall[0])
-    link_ok, events = [True], []
-    clock = VehicleClock(MavlinkConfig(), link_ok=lambda: link_ok[0], live_since=lambda now: now,
-                         event=lambda name, **fields: events.append(name), lock=threading.RLock())
+    class Link:  # the link's HEARTBEAT watch (clock.py LinkHealth), its socket always read empty
+        link_ok = True
+
+        def live_since(self, now: float) -> float:
+            return now
+
+    link, events = Link(), []
+    clock = VehicleClock(MavlinkConfig(), lock=threading.RLock())
+    clock.watch(link)
     ms = 10_000
     for _ in range(50):  # 5 vehicle seconds per wall second
         wall[0] += 0.1
         ms += 500
-        clock.on_boot_ms(ms)
+        events += clock.on_boot_ms(ms)
     assert 4.5 < clock.ratio < 5.5
     wall[0] += 3.0  # silent: the heartbeat watch declares the link lost (link.py periodic)
-    link_ok[0] = False
+    link.link_ok = False
     clock.link_lost()
     wall[0] += 3.0
     t_silent = clock.t
     assert t_silent > 24.0 + 25.0  # 24.5 s of samples, then 6 s of silence extrapolated at 5x
-    link_ok[0] = True
+    link.link_ok = True
     wall[0] += 0.1
-    clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
+    events += clock.on_boot_ms(ms + 500)  # the firmware goes on from its own last time stamp
     assert t_silent <= clock.t < t_silent + 1.0
     wall[0] += 0.1
-    clock.on_boot_ms(ms + 1000)
+    events += clock.on_boot_ms(ms + 1000)
     assert t_silent + 0.3 < clock.t < t_silent + 1.5
     assert "vehicle_clock_resumed" in events
 
@@ -426,7 +432,7 @@ def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopil
     b.arm()
     b.takeoff(3.0)
     assert run_until(b, lambda: b.position[2] > 2.7, 15), b.position
-    assert b.home_received and b.gps_fix_type == 3 and b.in_air
+    assert b.telemetry.home_received and b.telemetry.gps_fix_type == 3 and b.in_air
 
 
 @pytest.mark.realtime  # the stream's gaps in vehicle time: a starved sender stretches them (0.58 s at load 10-16)

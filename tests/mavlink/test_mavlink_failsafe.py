@@ -113,12 +113,12 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     time.sleep(0.3)
     port.recv_msg = real
     gate.set()
-    assert run_until(b, lambda: b.failsafe is not None, 10), b.mode
+    assert run_until(b, lambda: b.link.failsafe is not None, 10), b.mode
     run_until(b, lambda: False, 1.5)
     modes = [m for _, m in emu.mode_log]
     left = len(modes) - 1 - modes[::-1].index("AUTO.RTL")
     assert "OFFBOARD" not in modes[left:], emu.mode_log
-    assert b.failsafe["mode"] == "RTL", b.failsafe
+    assert b.link.failsafe["mode"] == "RTL", b.link.failsafe
     # the caller has not taken the failsafe event yet: a goto now is withheld, nothing reaches the vehicle
     b.goto((0.0, 0.0, 2.0))
     run_until(b, lambda: False, 0.5)

@@ -184,9 +184,9 @@ def test_px4_int32_parameter_sent_as_real32_is_refused_by_the_emulator(vehicle):
     emu, b, _ = vehicle("px4", fence=None)
     b.connect(timeout_s=10)
     with pytest.raises(BackendError, match="no PARAM_VALUE"):
-        b.set_parameter("GF_ACTION", 3.0, wait_s=0.3)
+        b.parameters.set("GF_ACTION", 3.0, wait_s=0.3)
     assert emu.params["GF_ACTION"] == 2
-    assert b.set_parameter("GF_ACTION", 3.0, integer=True) == 3.0 and emu.params["GF_ACTION"] == 3
+    assert b.parameters.set("GF_ACTION", 3.0, integer=True) == 3.0 and emu.params["GF_ACTION"] == 3
 
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
@@ -207,7 +207,7 @@ def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, a
     from aerodaas.backends.mavlink.fence import FENCE as FENCE_TYPE
     from aerodaas.backends.mavlink.fence import fence_items
     from aerodaas.navigation.geofence import GeofenceConfig
-    prior.upload_items(FENCE_TYPE, fence_items(GeofenceConfig(circles=[{"center": _ll(0, 0), "radius": 100.0}])))
+    prior.transfers.upload_items(FENCE_TYPE, fence_items(GeofenceConfig(circles=[{"center": _ll(0, 0), "radius": 100.0}])))
     prior.close()
     old_items = _held(emu)
     old = dict(emu.params)

@@ -52,7 +52,7 @@ def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
     from pymavlink.dialects.v20 import ardupilotmega as M
 
     emu, b = fly("ardupilot", mavlink={"heartbeat_timeout_s": 1.0})
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     b.drain_events()
     enc = M.MAVLink(None, srcSystem=1, srcComponent=1)  # the vehicle's own ids
     rtl_armed = enc.heartbeat_encode(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -64,12 +64,12 @@ def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
     unknown = _frame_v2(0xBEEF1, b"\x01\x02\x03\x04\x05", seq=7)
     rng = np.random.default_rng(5)
     garbage = bytes(rng.integers(0, 256, 300, dtype=np.uint8)) + b"\xfd\xff\x00" + b"\xfe\x09"
-    n0, t0 = b.messages_received, b.t
+    n0, t0 = b.link.messages_received, b.t
     for _ in range(5):
         for data in (garbage, bad_crc, truncated, unknown):
             emu.inject(data)
             time.sleep(0.02)
-    assert run_until(b, lambda: b.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
+    assert run_until(b, lambda: b.link.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
     assert emu.snapshot()["links"] == 1 and b.link_ok and b.link.io_alive
     b.step(0.05)  # raises if the I/O thread failed
     events = b.drain_events()
@@ -90,11 +90,11 @@ def test_accepted_but_never_shown_mode_or_arming_raises(fly, autopilot):
 
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.5, "heartbeat_timeout_s": 1.0},
                  ack_only_commands={M.MAV_CMD_DO_SET_MODE})
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     first, target = ("STABILIZE", "GUIDED") if autopilot == "ardupilot" else ("MANUAL", "LOITER")
     t0 = time.monotonic()
     with pytest.raises(CommandNotConfirmed) as e:
-        b.set_mode(target)
+        b.commands.set_mode(target)
     assert 0.9 < time.monotonic() - t0 < 30.0  # at least max(command_timeout_s, heartbeat_timeout_s), not forever
     assert e.value.expected == f"mode {target}" and e.value.observed == f"mode {first}, disarmed"
     assert f"mode {target}" in str(e.value) and f"shows mode {first}" in str(e.value)
@@ -116,8 +116,8 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     from pymavlink.dialects.v20 import ardupilotmega as M
 
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
-    assert run_until(b, lambda: b.home_received, 5)
-    b.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     arm = M.MAV_CMD_COMPONENT_ARM_DISARM
     emu.reject_next(arm, 2)
     b.drain_events()
@@ -130,7 +130,7 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     emu.reject_next(speed, 5)
     t0 = time.monotonic()
     with pytest.raises(CommandRefused) as e:
-        b.command_long("change speed", speed, 1, 1.5, -1)
+        b.commands.command_long("change speed", speed, 1, 1.5, -1)
     assert e.value.result == "MAV_RESULT_TEMPORARILY_REJECTED"
     assert e.value.status_text == "Command temporarily rejected: busy"
     assert emu.snapshot()["commands_seen"].count(speed) == 3 and time.monotonic() - t0 < 30.0  # bounded tries
@@ -141,7 +141,7 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     def call() -> None:
         t = time.monotonic()
         try:
-            b.command_long("change speed", speed, 1, 1.5, -1)
+            b.commands.command_long("change speed", speed, 1, 1.5, -1)
         except BaseException as exc:  # noqa: BLE001 - examined below
             box["error"] = exc
         box["s"] = time.monotonic() - t
@@ -161,10 +161,10 @@ def test_mission_round_trip_with_older_firmware_using_mission_item(fly, autopilo
     degrees): upload answers its MISSION_REQUESTs and download accepts its MISSION_ITEM replies, on the same
     1e-7 degree grid, equal to what was sent within float32 precision."""
     emu, b = fly(autopilot, mission_int=False)
-    assert run_until(b, lambda: b.home_received, 5)
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
     wps = [Waypoint(id=f"w{i}", x=x, y=y, z=5.0, hover_duration=1.0) for i, (x, y) in enumerate([(12, 3), (-7, 25)])]
     sent = b.upload_mission(wps, takeoff_altitude=5.0, final_action="land")
-    got = b.download_mission().items
+    got = b.mission.download().items
     assert len(got) == len(sent) == 4
     for s_, g in zip(sent, got):
         assert (g.seq, g.command, g.frame, g.autocontinue) == (s_.seq, s_.command, s_.frame, s_.autocontinue)
@@ -195,9 +195,10 @@ def test_long_statustext_chunks_are_joined(fly, autopilot, caplog):
     b.drain_events()
     exact = "".join(chr(65 + i % 26) for i in range(100))  # fills two chunks: an empty third one ends it
     emu.send_status_text(exact, M.MAV_SEVERITY_WARNING)
-    assert run_until(b, lambda: any(x["event"] == "status_text" for x in b._events), 3)
-    texts = [x for x in b.drain_events() if x["event"] == "status_text"]
-    assert [(x["text"], x["severity"]) for x in texts] == [(exact, "MAV_SEVERITY_WARNING")]
+    got: list = []
+    assert run_until(b, lambda: bool(got), 3,
+                     every=lambda: got.extend(x for x in b.drain_events() if x["event"] == "status_text"))
+    assert [(x["text"], x["severity"]) for x in got] == [(exact, "MAV_SEVERITY_WARNING")]
     emu.inject(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"x" * 50, 4242, 0))  # its last chunk never comes
     emu.inject(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"short one", 0, 0))
     texts: list = []
@@ -361,22 +362,22 @@ def test_real_px4_tlog_through_the_receive_path():
     b = MavlinkBackend(cfg)
     try:
         b.connect(timeout_s=20)
-        assert b.autopilot == "px4" and b.vehicle_type == "MAV_TYPE_QUADROTOR"
+        assert b.autopilot == "px4" and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
         assert done.wait(30)
         from aerodaas.backends.mavlink import shared_link
 
         link = shared_link.links()[cfg.mavlink.link_key()]
         seen = -1
-        while seen != (link.messages, b.messages_received):  # until the receive path has drained the socket
-            seen = (link.messages, b.messages_received)
+        while seen != (link.messages, b.link.messages_received):  # until the receive path has drained the socket
+            seen = (link.messages, b.link.messages_received)
             time.sleep(0.5)
         # the link read every packet; the robot got its own vehicle's (system id 1: 18905 of them; the ground
         # station's 255, a companion's 51 and unparsed ids go elsewhere)
-        assert link.messages > 30000 and b.messages_received > 18000, (link.messages, b.messages_received)
+        assert link.messages > 30000 and b.link.messages_received > 18000, (link.messages, b.link.messages_received)
         b.step(0.1)  # raises if the I/O thread failed
         events = b.drain_events()
         assert not [e for e in events if e["event"] == "receive_error"]
-        assert b.home_received and abs(b.home.lat - 43.7) < 0.3 and abs(b.home.lon + 72.2) < 0.5
+        assert b.telemetry.home_received and abs(b.home.lat - 43.7) < 0.3 and abs(b.home.lon + 72.2) < 0.5
         odo = b.odometry()
         e, n, _ = geodetic_to_enu(odo.geodetic.lat, odo.geodetic.lon, b.home.alt, b.home)
         assert abs(odo.position[0] - e) < 0.01 and abs(odo.position[1] - n) < 0.01

@@ -224,9 +224,9 @@ def test_vehicles_with_their_own_keys_share_one_link(tmp_path):
                                signing_key_file=_key_file(tmp_path / f"v{s}.key", k), set_speed_limits=False)
             backends[s] = make_backend(RobotConfig(id=f"r{s}", backend="mavlink", mavlink=mc))
             backends[s].connect()
-        backends[1].set_parameter("WPNAV_SPEED", 321.0)
+        backends[1].parameters.set("WPNAV_SPEED", 321.0)
         assert emus[1].params["WPNAV_SPEED"] == 321.0 and emus[2].params["WPNAV_SPEED"] != 321.0
-        assert backends[2].read_parameters(["WPNAV_SPEED"])["WPNAV_SPEED"] != 321.0
+        assert backends[2].parameters.read(["WPNAV_SPEED"])["WPNAV_SPEED"] != 321.0
         assert backends[1].signing.bad_signature == 0 and backends[2].signing.bad_signature == 0
         assert emus[2].signing.rejected > 0  # it heard robot 1's messages, signed with a key it does not hold
     finally:
@@ -257,7 +257,7 @@ def test_spoofed_telemetry_and_commands_in_flight_change_nothing_the_backend_kno
     b = make_backend(RobotConfig(id="r", backend="mavlink", mavlink=mc))
     try:
         b.connect()
-        assert run_until(b, lambda: b.home_received, 10)
+        assert run_until(b, lambda: b.telemetry.home_received, 10)
         b.arm()
         b.takeoff(5.0)
         assert run_until(b, lambda: abs(b.position[2] - 5.0) < 0.3 and b.in_air, 30), b.position

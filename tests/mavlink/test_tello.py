@@ -46,7 +46,7 @@ def tello(request):
 
 
 def _settle(backend) -> None:
-    _wait(lambda: not backend.busy, 15.0, "the manoeuvre to finish")
+    _wait(lambda: not backend.control.busy, 15.0, "the manoeuvre to finish")
     time.sleep(0.25)  # a couple of state packets after the reply
 
 
@@ -119,7 +119,7 @@ def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
     b.goto((5.0, -1.0, 1.2), speed=0.5)
     _wait(lambda: emu.position[0] > x0 + 0.3, 15.0, "the go to be under way")
     b.hold()  # stops the running go
-    assert not b.busy and _sent(emu, "stop") == ["stop"]
+    assert not b.control.busy and _sent(emu, "stop") == ["stop"]
     _wait(lambda: np.linalg.norm(emu.vehicle.state.velocity) < 0.02, 15.0, "the stop")
     stopped = emu.position
     assert x0 + 0.3 < stopped[0] < 4.5, stopped  # stopped on the way, short of the go's end (5.0)
@@ -140,15 +140,15 @@ def test_refused_command_carries_the_tello_reply(tello):
         b.goto((1.0, 0.0, 1.0))  # on the ground: the Tello refuses motion
     assert ei.value.result == "error Motor stop" and ei.value.command.startswith("go ")  # the SDK text sent
     with pytest.raises(CommandRefused, match="out of range"):
-        b.command("speed 500")
-    assert b.command("battery?") == str(int(emu.vehicle.battery_pct))
+        b.link.command("speed 500")
+    assert b.link.command("battery?") == str(int(emu.vehicle.battery_pct))
 
 
 def test_lost_replies_are_retried_without_flying_twice(tello):
     emu, b = tello
     emu.drop_next_reply("speed")
-    assert b.command("speed 50") == "ok"
-    assert _sent(emu, "speed") == ["speed 50", "speed 50"] and b.stats["retries"] == 1
+    assert b.link.command("speed 50") == "ok"
+    assert _sent(emu, "speed") == ["speed 50", "speed 50"] and b.link.stats["retries"] == 1
 
     b.takeoff(0.8)
     _settle(b)
@@ -162,13 +162,13 @@ def test_lost_replies_are_retried_without_flying_twice(tello):
 
 def test_malformed_state_packets_are_counted_and_skipped(tello):
     emu, b = tello
-    before = b.stats["malformed_state"]
+    before = b.link.stats["malformed_state"]
     emu.send_raw_state(b"pitch:0;roll:0;yaw:oops;")
     emu.send_raw_state(b"\x00\x01garbage")
     emu.send_raw_state(b"ok")
-    _wait(lambda: b.stats["malformed_state"] >= before + 3, 2.0, "the malformed packets")
+    _wait(lambda: b.link.stats["malformed_state"] >= before + 3, 2.0, "the malformed packets")
     time.sleep(0.3)
-    assert b.stats["malformed_state"] == before + 3 and b.link_ok
+    assert b.link.stats["malformed_state"] == before + 3 and b.link_ok
     assert b.yaw == pytest.approx(90.0 - HEADING, abs=1.0) and b.battery_pct == pytest.approx(90.0, abs=1.0)
 
 
@@ -193,7 +193,7 @@ def test_keepalive_keeps_the_tello_flying(tello):
     _settle(b)
     # more than twice the emulated 1.0 s auto-land time without any application command (waited on the keep-alives
     # themselves, so a loaded host sending them late is not a shorter test)
-    _wait(lambda: b.stats["keepalives"] >= 8, 30.0, "eight keep-alives")
+    _wait(lambda: b.link.stats["keepalives"] >= 8, 30.0, "eight keep-alives")
     assert emu.in_air and emu.auto_landings == 0
     assert all(t == "rc 0 0 0 0" for t in _sent(emu, "rc"))
     b.close()  # no more keep-alives: the emulated Tello lands by itself
@@ -206,11 +206,11 @@ def test_keepalive_keeps_the_tello_flying(tello):
 def test_video_frames_decode_to_the_rendered_view(tello):
     emu, b = tello
     assert _sent(emu, "streamon") == ["streamon"]
-    _wait(lambda: b.stats["video_frames"] >= 3, 10.0, "decoded video frames")
+    _wait(lambda: b.link.stats["video_frames"] >= 3, 10.0, "decoded video frames")
     b.takeoff(0.8)  # up where the camera sees the ground's texture
     _settle(b)
-    n = b.stats["video_frames"]
-    _wait(lambda: b.stats["video_frames"] >= n + 3, 5.0, "frames of the hovering Tello")
+    n = b.link.stats["video_frames"]
+    _wait(lambda: b.link.stats["video_frames"] >= n + 3, 5.0, "frames of the hovering Tello")
     frame, t = b.camera_frame()
     assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
     assert 0.0 < t <= b.t
@@ -219,7 +219,7 @@ def test_video_frames_decode_to_the_rendered_view(tello):
     other = emu.render(emu.position, emu.yaw_enu + 90.0)
     mad_other = float(np.abs(frame.astype(np.int16) - other.astype(np.int16)).mean())
     assert mad < 6.0 and mad_other > 3 * mad, (mad, mad_other)
-    assert b.stats["video_errors"] == 0
+    assert b.link.stats["video_errors"] == 0
 
 
 @pytest.mark.tello(emu={"refuse": {"streamon": "error"}}, cfg={"video": True})
@@ -231,10 +231,10 @@ def test_refused_streamon_without_a_backend_camera_is_a_video_error_event(tello)
     events = b.drain_events()
     assert [e["event"] for e in events] == ["video_error"]
     assert events[0]["command"] == "streamon" and events[0]["reply"] == "error"
-    assert "streamon refused: error" in events[0]["reason"] and b.last_status == "error"
+    assert "streamon refused: error" in events[0]["reason"] and b.link.last_status == "error"
     time.sleep(0.5)
-    assert b.camera_frame() is None and emu.frames_sent == 0 and b.stats["video_datagrams"] == 0
-    assert b.command("battery?") == str(int(emu.vehicle.battery_pct))  # otherwise a working Tello
+    assert b.camera_frame() is None and emu.frames_sent == 0 and b.link.stats["video_datagrams"] == 0
+    assert b.link.command("battery?") == str(int(emu.vehicle.battery_pct))  # otherwise a working Tello
 
 
 def test_refused_streamon_fails_connect_when_a_camera_needs_the_video():
@@ -254,7 +254,7 @@ def test_refused_streamon_fails_connect_when_a_camera_needs_the_video():
         assert "'cam'" in e.status_text and "properties.source 'backend'" in e.status_text
         assert str(e).startswith("robot 'tello1': streamon refused: error")
         assert _sent(emu, "streamon") == ["streamon"]  # a refusal is an answer: not re-sent
-        assert b._stop.is_set() and not b._threads  # closed: sockets and threads released
+        assert b.link.closed  # closed: sockets and threads released
     finally:
         b.close()
         emu.stop()

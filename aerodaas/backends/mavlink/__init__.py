@@ -17,9 +17,12 @@ Flavour differences handled here: ArduPilot flies targets in GUIDED, PX4 in OFFB
 setpoint stream runs); MAV_CMD_NAV_TAKEOFF ``param7`` is metres above home on ArduPilot and metres above mean sea
 level on PX4; ArduPilot missions carry home at sequence 0.
 
-One module per MAVLink concern, the way MAVSDK splits its plugins. The concerns that are objects the backend
-holds declare their state in their ``__init__`` and reach the others only through the typed references and
-callables they are given: ``backend.commands`` (:class:`~.command.CommandProtocol`: the command protocol, mode
+One module per MAVLink concern, the way MAVSDK splits its plugins, and composed as MAVSDK composes a ``System``:
+each concern declares its state in its ``__init__`` and is given its collaborators there as typed objects (the
+link, the clock, the telemetry store, the command protocol...; small Protocols where a module cycle would
+otherwise form), never the backend; those made on the link register what they receive with it
+(:mod:`.routes`: ``link.serve_commands``, ``link.handle``...), and every concern records its events in
+``backend.events`` (:class:`~.events.EventLog`). The concerns: ``backend.commands`` (:class:`~.command.CommandProtocol`: the command protocol, mode
 changes confirmed by the HEARTBEAT), ``backend.parameters`` (:class:`~.params.ParameterProtocol`: the parameter protocol),
 ``backend.speed_limits`` (:class:`~.params.SpeedLimits`: the vehicle's own speed limits, lowered in flight for
 the estimator's margin),
@@ -29,10 +32,11 @@ upload, download and start, and its progress), ``backend.actions`` (:class:`~.ac
 arming, disarming, take-off), ``backend.offboard`` (:class:`~.offboard.OffboardControl`: GUIDED/OFFBOARD
 targets, hold/land/RTL, safe end), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight),
-``backend.telemetry`` (:class:`~.telemetry.VehicleTelemetry`: the state the streams report, its message handlers
-in an explicit table), ``backend.link`` (:class:`~.link.MavlinkLink`: connection, autopilot HEARTBEAT, I/O thread,
+``backend.telemetry`` (:class:`~.telemetry.VehicleTelemetry`: the state the streams report and the ENU origin
+``home``, its message handlers in an explicit table), ``backend.link`` (:class:`~.link.MavlinkLink`: connection, autopilot HEARTBEAT, I/O thread,
 dispatch, stream requests), ``backend.clock`` (:class:`~.clock.VehicleClock`: the vehicle clock from
-``time_boot_ms``), ``backend.status_texts`` (:class:`~.statustext.StatusTexts`). No concern is a mix-in any more:
+``time_boot_ms``), ``backend.status_texts`` (:class:`~.statustext.StatusTexts`), ``backend.cameras`` (:class:`~.camera.CameraFinder`)
+and ``backend.gimbal`` (:class:`~.gimbal.GimbalConcern`). No concern is a mix-in any more:
 :class:`MavlinkBackend` holds them and keeps the :class:`~aerodaas.backends.base.VehicleBackend` surface, connect and
 close. Verified against real ArduCopter and PX4 SITL firmware (``tests/firmware/test_sitl_*.py``).
 """

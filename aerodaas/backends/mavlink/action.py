@@ -27,13 +27,16 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any, Callable, Protocol
 
 from aerodaas.backends.base import CommandRefused
 from aerodaas.backends.mavlink._common import M, _PX4_NO_ARM_MODES
 from aerodaas.backends.mavlink.command import CommandProtocol
-from aerodaas.backends.mavlink.params import LinkCheck
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.offboard import OffboardControl
+from aerodaas.backends.mavlink.statustext import StatusTexts
+from aerodaas.backends.mavlink.telemetry import Readiness  # noqa: F401 - Readiness: API of this module too
 
 #: EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (EKF_STATUS_FLAGS, ESTIMATOR_STATUS_FLAGS share these low bits)
 _EKF_ATTITUDE, _EKF_VEL_HORIZ, _EKF_POS_HORIZ_ABS = 1, 2, 16
@@ -43,91 +46,54 @@ _NOT_YET = ("MAV_RESULT_FAILED", "MAV_RESULT_TEMPORARILY_REJECTED")
 _ARM_BACKOFF_S = (0.5, 4.0)
 
 
-@dataclass(frozen=True)
-class Readiness:
-    """What the autopilot has reported about its readiness to arm (telemetry and HEARTBEAT, read together under the
-    backend's lock): GPS_RAW_INT ``fix_type`` (-1 before any report), whether HOME_POSITION came, SYS_STATUS
-    ``onboard_control_sensors_present`` / ``_health`` (0 before any) and every health bit ever reported, the
-    EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (None before any), HEARTBEAT ``system_status`` and armed flag,
-    whether ArduPilot's "EKFn IMUm is using GPS" was seen, and whether EKF_STATUS_REPORT will never come (its
-    stream refused, or the legacy REQUEST_DATA_STREAM in use)."""
+class FlightTelemetry(Protocol):
+    """What the actions use of the telemetry store (telemetry.py
+    :class:`~aerodaas.backends.mavlink.telemetry.VehicleTelemetry`): the altitude reference (AMSL metres, None
+    before it is fixed), the flag telling it an :meth:`VehicleAction.arm` runs, fixing the altitude reference where
+    the vehicle stands, making a home the autopilot moved after the last flight the ENU origin, and a
+    :class:`Readiness` of the latest reports with the link's (caller holds the backend's lock for the last two)."""
 
-    gps_fix: int
-    home_received: bool
-    sensors_present: int
-    sensors_health: int
-    health_seen: int
-    ekf_flags: int | None
-    system_status: int
-    armed: bool
-    ekf_using_gps: bool
-    ekf_report_unavailable: bool
-
-
-class ActionVehicle(Protocol):
-    """What the actions read of the vehicle (the backend's public state): its autopilot (``"ardupilot"`` /
-    ``"px4"``), flight mode, armed flag, vehicle clock (:attr:`t`, seconds) and altitude reference (AMSL metres,
-    None before it is fixed)."""
-
-    autopilot: str | None
-
-    @property
-    def mode(self) -> str: ...
-
-    @property
-    def armed(self) -> bool: ...
-
-    @property
-    def t(self) -> float: ...
+    arming: bool
 
     @property
     def altitude_reference(self) -> float | None: ...
+
+    def fix_altitude_reference(self) -> None: ...
+
+    def home_for_flight(self) -> None: ...
+
+    def readiness(self, system_status: int, ekf_using_gps: bool, ekf_report_unavailable: bool) -> Readiness: ...
 
 
 class VehicleAction:
     """Readiness, arming, disarming and take-off of one vehicle (see the module docstring).
 
-    It talks to the vehicle only through what it is given: ``vehicle`` (:class:`ActionVehicle`), ``commands`` (the
-    command protocol), ``check_link`` (the link's), ``event`` (records a backend event), ``lock`` (the backend's
-    lock), ``readiness`` (a :class:`Readiness` of the latest reports; caller holds ``lock``), ``home_for_flight``
-    (telemetry: a home the autopilot moved after the last flight becomes the ENU origin; caller holds ``lock``),
-    ``fix_altitude_reference`` (telemetry: heights are measured from where the vehicle stands) and
-    ``stop_setpoints`` (offboard: our target stream stops). ``settings``: ``arm_timeout_s``.
+    It is given its collaborators: ``link`` (the autopilot, its mode and armed flag, the link check, the HEARTBEAT's
+    ``system_status``), ``clock`` (vehicle seconds), ``texts`` (ArduPilot's "using GPS" seen), ``commands`` (the
+    command protocol), ``telemetry`` (:class:`FlightTelemetry`), ``offboard`` (the guided control: its target
+    stream stops before disarming and take-off, and arming puts the vehicle in our control,
+    :attr:`OffboardControl.in_control`), ``event`` (records a backend event) and ``lock`` (the backend's lock).
+    ``settings``: ``arm_timeout_s``.
 
-    State: whether an :meth:`arm` runs (:attr:`arming`), whether we are in control (:attr:`in_control`: we armed
-    it or sent it targets or a mission, so :meth:`~aerodaas.backends.mavlink.MavlinkBackend.safe_end` is ours)
-    and whether a mission upload pinned the altitude reference for the next arming."""
+    State: whether a mission upload pinned the altitude reference for the next arming."""
 
-    def __init__(self, robot_id: str, settings: Any, *, vehicle: ActionVehicle, commands: CommandProtocol,
-                 check_link: LinkCheck, event: Callable[..., None], lock: threading.RLock,
-                 readiness: Callable[[], Readiness], home_for_flight: Callable[[], None],
-                 fix_altitude_reference: Callable[[], None], stop_setpoints: Callable[[], None]) -> None:
+    def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink, clock: VehicleClock, texts: StatusTexts,
+                 commands: CommandProtocol, telemetry: FlightTelemetry, offboard: OffboardControl,
+                 event: Callable[..., None], lock: threading.RLock) -> None:
         self.robot_id, self._settings = robot_id, settings
-        self._vehicle, self._commands, self._check_link, self._event = vehicle, commands, check_link, event
-        self._lock, self._readiness, self._home_for_flight = lock, readiness, home_for_flight
-        self._fix_altitude_reference, self._stop_setpoints = fix_altitude_reference, stop_setpoints
-        self._arming = False  # arm() runs: the home the autopilot sets where it arms becomes the origin
-        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
+        self._link, self._clock, self._texts, self._commands = link, clock, texts, commands
+        self._telemetry, self._offboard, self._event, self._lock = telemetry, offboard, event, lock
         self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it
 
-    @property
-    def arming(self) -> bool:
-        """An :meth:`arm` runs: the home the autopilot sets where it arms becomes the ENU origin (telemetry.py)."""
-        return self._arming
-
-    @property
-    def in_control(self) -> bool:
-        """We armed the vehicle or sent it targets or a mission: bringing it down at the end is ours to do."""
-        return self._in_control
-
-    def take_control(self) -> None:
-        """We command the vehicle now (targets, a mission): :attr:`in_control`."""
-        self._in_control = True
+    def _readiness(self) -> Readiness:
+        """The reports readiness is judged from (telemetry's with the link's). Caller holds ``_lock``."""
+        return self._telemetry.readiness(self._link.system_status, self._texts.ekf_using_gps,
+                                         self._link.ekf_report_unavailable)
 
     def pin_altitude_reference(self) -> None:
         """Fix the altitude reference where the vehicle stands now and keep it for the next :meth:`arm` (an uploaded
         mission's altitudes refer to it: mission.py)."""
-        self._fix_altitude_reference()
+        self._telemetry.fix_altitude_reference()
         self._alt_ref_pinned = True
 
     def not_ready_reasons(self) -> list[str]:
@@ -141,7 +107,7 @@ class VehicleAction:
         if not r.home_received and r.gps_fix >= 0:
             out.append("no HOME_POSITION yet")
         present, health, ekf = r.sensors_present, r.sensors_health, r.ekf_flags
-        if self._vehicle.autopilot == "px4":
+        if self._link.autopilot == "px4":
             if not health & M.MAV_SYS_STATUS_PREARM_CHECK:
                 out.append("SYS_STATUS pre-arm check not healthy")
             xy = M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
@@ -179,20 +145,20 @@ class VehicleAction:
         ``Arm: Need Position Estimate``) when the window expires or for a final result (DENIED, UNSUPPORTED);
         LinkLost / BackendError as :meth:`command_long`; :class:`CommandNotConfirmed` when the vehicle
         acknowledged but never reported itself armed."""
-        self._check_link("arm")
+        self._link.check_link("arm")
         with self._lock:  # a new flight: its home (where it arms) becomes the ENU origin (telemetry.py)
-            self._arming = True
-            self._home_for_flight()
+            self._telemetry.arming = True
+            self._telemetry.home_for_flight()
         try:
             self._arm()
         finally:
-            self._arming = False
+            self._telemetry.arming = False
 
     def _arm(self) -> None:
-        start, t0 = time.monotonic(), self._vehicle.t
+        start, t0 = time.monotonic(), self._clock.t
         end = start + self._settings.arm_timeout_s
         while self.not_ready_reasons() and time.monotonic() < end:
-            self._check_link("arm")
+            self._link.check_link("arm")
             time.sleep(0.02)
         backoff, tries = _ARM_BACKOFF_S[0], 0
         while True:
@@ -200,13 +166,13 @@ class VehicleAction:
             try:
                 # not ready when the window closed: ask in the current mode, so the refusal carries the
                 # autopilot's pre-arm reason (a guided mode would be refused first, without it)
-                autopilot, mode = self._vehicle.autopilot, self._vehicle.mode
+                autopilot, mode = self._link.autopilot, self._link.mode
                 if autopilot == "ardupilot" and mode != "GUIDED" and self._armable():
                     self._commands.set_mode("GUIDED")
                 elif autopilot == "px4" and mode in _PX4_NO_ARM_MODES and self._armable():
                     self._commands.set_mode("LOITER")
                 sent = time.monotonic()
-                armed = lambda: self._vehicle.armed  # noqa: E731 - what the HEARTBEAT must show
+                armed = lambda: self._link.armed  # noqa: E731 - what the HEARTBEAT must show
                 self._commands.command_with_effect("arm", armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
                 self._commands.await_heartbeat("arm", armed, "armed", None, sent)
                 break
@@ -217,19 +183,19 @@ class VehicleAction:
                             not_ready=self.not_ready_reasons())
                 stop = time.monotonic() + backoff
                 while time.monotonic() < stop:
-                    self._check_link("arm")
+                    self._link.check_link("arm")
                     time.sleep(0.02)
                 backoff = min(backoff * 2.0, _ARM_BACKOFF_S[1])
         if not self._alt_ref_pinned:  # an uploaded mission's altitudes refer to the one fixed at upload
-            self._fix_altitude_reference()
+            self._telemetry.fix_altitude_reference()
         self._alt_ref_pinned = False
-        self._in_control = True
+        self._offboard.take_control()
         self._event("armed_after", wall_s=round(time.monotonic() - start, 3),
-                    vehicle_s=round(self._vehicle.t - t0, 3), tries=tries)
+                    vehicle_s=round(self._clock.t - t0, 3), tries=tries)
 
     def disarm(self) -> None:
         """MAV_CMD_COMPONENT_ARM_DISARM(0); autopilots refuse it in flight (CommandRefused)."""
-        self._stop_setpoints()
+        self._offboard.stop()
         self._commands.command_long("disarm", M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
 
     def takeoff(self, altitude_m: float) -> None:
@@ -240,15 +206,15 @@ class VehicleAction:
         Raises ValueError for a non-positive or non-finite altitude; CommandRefused / LinkLost / BackendError."""
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude_m must be a positive number of metres, got {altitude_m!r}")
-        self._check_link("takeoff")
-        self._stop_setpoints()
-        if self._vehicle.altitude_reference is None:
-            self._fix_altitude_reference()
-        if self._vehicle.autopilot == "px4":
+        self._link.check_link("takeoff")
+        self._offboard.stop()
+        if self._telemetry.altitude_reference is None:
+            self._telemetry.fix_altitude_reference()
+        if self._link.autopilot == "px4":
             nan = float("nan")
             self._commands.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan,
-                                        self._vehicle.altitude_reference + altitude_m)
+                                        self._telemetry.altitude_reference + altitude_m)
         else:
-            if self._vehicle.mode != "GUIDED":
+            if self._link.mode != "GUIDED":
                 self._commands.set_mode("GUIDED")
             self._commands.command_long("takeoff", M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_m)

@@ -33,11 +33,14 @@ _REQUESTS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_CAMERA_INFORMATION,
 
 class CameraLink(Protocol):
     """What the finder needs of the vehicle's link (link.py :class:`MavlinkLink`): ``send(fn)`` calls ``fn`` with
-    the pymavlink ``MAVLink`` object on the I/O side, ``target`` is the vehicle's (system id, component id)."""
+    the pymavlink ``MAVLink`` object on the I/O side, ``target`` is the vehicle's (system id, component id), and
+    ``serve_components(finder)`` hands the finder every message of the vehicle's system."""
 
     target: tuple[int, int]
 
     def send(self, fn: Callable[[Any], Any]) -> None: ...
+
+    def serve_components(self, receiver: Any) -> None: ...
 
 
 def _text(value: Any) -> str:
@@ -68,6 +71,7 @@ class CameraFinder:
 
     def __init__(self, link: CameraLink) -> None:
         self._link = link
+        link.serve_components(self)
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._cams: dict[int, _Camera] = {}

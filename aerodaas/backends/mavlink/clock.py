@@ -8,9 +8,24 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from typing import Any, Callable
+from typing import Any, Protocol
 
 from aerodaas.backends.mavlink._common import _CLOCK_STALE_S
+
+
+class LinkHealth(Protocol):
+    """What the clock reads of the link that feeds it (link.py :class:`~aerodaas.backends.mavlink.link.MavlinkLink`,
+    which registers itself with :meth:`VehicleClock.watch` when it is made)."""
+
+    @property
+    def link_ok(self) -> bool:
+        """HEARTBEATs keep coming (the heartbeat watch)."""
+        ...
+
+    def live_since(self, now: float) -> float:
+        """Given the wall time ``now`` (time.monotonic()), the wall time since which the link's socket has been
+        read empty (shared_link.py ``LinkPort.live_since``)."""
+        ...
 
 
 class VehicleClock:
@@ -19,16 +34,13 @@ class VehicleClock:
     down) it runs on from the last sample at the measured vehicle/wall rate :attr:`ratio`, and never goes back.
 
     It knows only what it is given: ``settings`` (:class:`~aerodaas.config.MavlinkConfig`: its
-    ``heartbeat_timeout_s``, wall seconds, read when needed),
-    ``link_ok`` (the link's HEARTBEAT watch), ``live_since`` (given the wall time now, the wall time since which the
-    link's socket has been read empty: shared_link.py ``LinkPort.live_since``), ``event`` (records a backend event:
-    ``vehicle_rebooted``, ``vehicle_clock_resumed``) and ``lock`` (the backend's lock; the I/O thread feeds samples
-    under it)."""
+    ``heartbeat_timeout_s``, wall seconds, read when needed), ``lock`` (the backend's lock; the I/O thread feeds
+    samples under it) and the link it :meth:`watch` es (:class:`LinkHealth`; none yet: the link counts as down).
+    It records no events itself: :meth:`on_boot_ms` returns the ones its caller records."""
 
-    def __init__(self, settings: Any, *, link_ok: Callable[[], bool],
-                 live_since: Callable[[float], float], event: Callable[..., None], lock: threading.RLock) -> None:
-        self._settings, self._link_ok, self._live_since, self._event, self._lock = \
-            settings, link_ok, live_since, event, lock
+    def __init__(self, settings: Any, *, lock: threading.RLock) -> None:
+        self._settings, self._lock = settings, lock
+        self._link: LinkHealth | None = None
         self._wall0 = time.monotonic()
         self._boot_ref: tuple[int, float] | None = None  # (time_boot_ms, vehicle seconds at that sample)
         self._boot_last = 0
@@ -65,18 +77,24 @@ class VehicleClock:
         self._t_connect = self.raw_t()
         self._t_max = 0.0
 
+    def watch(self, link: LinkHealth) -> None:
+        """Take ``link``'s HEARTBEAT watch and socket state from now on (the link calls this when it is made)."""
+        self._link = link
+
     def link_lost(self) -> None:
         """The link was declared lost: the next ``time_boot_ms`` may re-anchor the clock (:meth:`on_boot_ms`)."""
         self._reanchor = True
 
-    def on_boot_ms(self, ms: int) -> None:
+    def on_boot_ms(self, ms: int) -> tuple[str, ...]:
         """A ``time_boot_ms`` ``ms`` received. A first sample, or one more than 5 s before the latest (the autopilot
         rebooted: ``vehicle_rebooted``), anchors the clock; after a link loss a vehicle clock that stood still while
-        ours ran on is re-anchored where :attr:`t` got to (``vehicle_clock_resumed``). Caller holds ``lock``."""
+        ours ran on is re-anchored where :attr:`t` got to (``vehicle_clock_resumed``). Returns the names of those
+        events, for the caller to record now (their time is :attr:`t` after this sample). Caller holds ``lock``."""
         now = time.monotonic()
+        events: tuple[str, ...] = ()
         if self._boot_ref is None or ms + 5000 < self._boot_last:  # first sample, or the autopilot rebooted
             if self._boot_ref is not None:
-                self._event("vehicle_rebooted")
+                events += ("vehicle_rebooted",)
             self._boot_ref = (ms, self.raw_t())
             self._clock_samples.clear()
         self._boot_last = max(ms, self._boot_last) if self._boot_ref[0] <= ms else ms
@@ -91,10 +109,11 @@ class VehicleClock:
             resumed = True
         self._reanchor = False
         self._boot_wall = now
-        self._boot_live = self._live_since(now)  # received after then (shared_link.py LinkPort)
-        if resumed:  # only now: the event reads :attr:`t`, which before this sample still counted the silence
-            # on top of the re-anchored clock (t jumped by the whole stop x the clock ratio: 28 s at 5x for 6 s)
-            self._event("vehicle_clock_resumed")
+        # received after then (shared_link.py LinkPort)
+        self._boot_live = self._link.live_since(now) if self._link is not None else now
+        if resumed:  # recorded after this sample: the event reads :attr:`t`, which before it still counted the
+            # silence on top of the re-anchored clock (t jumped by the whole stop x the clock ratio: 28 s at 5x for 6 s)
+            events += ("vehicle_clock_resumed",)
         # vehicle seconds per wall second over the last few seconds (an emulator may run K times faster)
         samples = self._clock_samples
         samples.append((now, ms))
@@ -105,6 +124,7 @@ class VehicleClock:
             r = (ms - samples[0][1]) / 1000.0 / span
             if 0.05 < r < 200:
                 self._ratio = r
+        return events
 
     def sample_time(self, ms: int) -> float:
         """``time_boot_ms`` ``ms`` of a sample on the raw vehicle clock (s): its own time when the clock's anchor is
@@ -126,7 +146,8 @@ class VehicleClock:
         with self._lock:
             t = self.raw_t() - self._t_connect
             silent = time.monotonic() - self._boot_wall
-            if self._boot_ref is not None and (not self._link_ok() or silent > _CLOCK_STALE_S):
+            link_ok = self._link is not None and self._link.link_ok
+            if self._boot_ref is not None and (not link_ok or silent > _CLOCK_STALE_S):
                 # nothing timestamped arrives (the link is down, or not yet declared down): the vehicle's clock
                 # goes on at its last rate, so odometry and control ticks go on before link loss is declared
                 t += silent * self._ratio

@@ -4,68 +4,38 @@ from __future__ import annotations
 
 import queue
 import time
-from typing import Any, Callable, Protocol
+from typing import Any, Callable
 
 from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
 from aerodaas.backends.mavlink._common import M, _enum_name, CommandNotAcknowledged, CommandNotConfirmed, _REJECTED_BACKOFF_S
-from aerodaas.backends.mavlink.params import LinkCheck, VehicleSender
-
-
-class HeartbeatView(Protocol):
-    """What the autopilot's latest HEARTBEAT shows (the link's): the flight mode, the armed flag, and whether the
-    link is up (HEARTBEATs keep coming)."""
-
-    @property
-    def mode(self) -> str: ...
-
-    @property
-    def armed(self) -> bool: ...
-
-    @property
-    def link_ok(self) -> bool: ...
-
-
-class HeartbeatDue(Protocol):
-    """Has a HEARTBEAT been due since ``started`` (monotonic seconds), when the vehicle's time_boot_ms was
-    ``boot0``, for a wait of ``wait_s`` wall seconds (the link's vehicle clock: link.py ``heartbeat_due``)."""
-
-    def __call__(self, started: float, boot0: int, wait_s: float) -> bool: ...
-
-
-class StatusTextSince(Protocol):
-    """The autopilot's latest STATUSTEXT since ``since`` (monotonic seconds), waiting up to ``wait_s`` for one
-    (the link's)."""
-
-    def __call__(self, since: float, wait_s: float = 0.3) -> str: ...
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.statustext import StatusTexts
 
 
 class CommandProtocol:
     """The MAVLink command protocol with one vehicle (COMMAND_LONG / COMMAND_INT -> COMMAND_ACK) and the commands
     whose effect the HEARTBEAT must show (mode changes, arming).
 
-    It talks to the link only through what it is given: ``send`` and ``check_link`` (the link's), ``target`` (the
-    vehicle's system and component id), ``heartbeat`` (what the latest HEARTBEAT shows), ``boot_ms`` (the
-    vehicle's latest time_boot_ms) and ``heartbeat_due`` (the link's vehicle clock), ``status_text_since`` (the
-    autopilot's latest STATUSTEXT, for refusals), ``mode_params`` (MAV_CMD_DO_SET_MODE's params for a mode name,
-    from the autopilot's mode table; ValueError for an unknown name) and ``event`` (records a backend event).
-    ``settings``: ``command_timeout_s``, ``command_retries``, ``heartbeat_timeout_s``. :meth:`on_command_ack` is
-    fed every COMMAND_ACK for us (the I/O thread); commands wait for them (the control thread).
+    It is given its collaborators: ``link`` (sending, the link check, the vehicle's system and component id, what
+    the latest HEARTBEAT shows, MAV_CMD_DO_SET_MODE's params for a mode name), ``clock`` (the vehicle's latest
+    time_boot_ms, whether a HEARTBEAT was due), ``texts`` (the autopilot's latest STATUSTEXT, for refusals) and
+    ``event`` (records a backend event). ``settings``: ``command_timeout_s``, ``command_retries``,
+    ``heartbeat_timeout_s``. It registers with the link (:meth:`MavlinkLink.serve_commands`): :meth:`on_command_ack`
+    is fed every COMMAND_ACK for us (the I/O thread); commands wait for them (the control thread).
 
     State: the COMMAND_ACKs waiting to be taken, the round trips of acknowledged commands (:attr:`rtt_ms`) and our
     last mode request (:attr:`mode_asked`)."""
 
-    def __init__(self, robot_id: str, settings: Any, *, send: VehicleSender, check_link: LinkCheck,
-                 target: Callable[[], tuple[int, int]], heartbeat: HeartbeatView, boot_ms: Callable[[], int],
-                 heartbeat_due: HeartbeatDue, status_text_since: StatusTextSince,
-                 mode_params: Callable[[str], tuple[float, ...]], event: Callable[..., None]) -> None:
+    def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink, clock: VehicleClock, texts: StatusTexts,
+                 event: Callable[..., None]) -> None:
         self.robot_id, self._settings = robot_id, settings
-        self._send, self._check_link, self._target = send, check_link, target
-        self._heartbeat, self._boot_ms, self._heartbeat_due = heartbeat, boot_ms, heartbeat_due
-        self._status_text_since, self._mode_params, self._event = status_text_since, mode_params, event
+        self._link, self._clock, self._texts, self._event = link, clock, texts, event
         #: acknowledged command round trips, wall milliseconds
         self.rtt_ms: list[float] = []
         self._acks: queue.Queue = queue.Queue()
         self._mode_asked: tuple[str, float] | None = None  # (mode, monotonic) of our last set_mode
+        link.serve_commands(self)
 
     @property
     def mode_asked(self) -> tuple[str, float] | None:
@@ -95,10 +65,10 @@ class CommandProtocol:
         ACCEPTED, and for TEMPORARILY_REJECTED when the tries are used up; :class:`LinkLost` when the link is or
         goes down; :class:`BackendError` when no ACK comes, or the command is still IN_PROGRESS at the overall
         deadline."""
-        self._check_link(name)
+        self._link.check_link(name)
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         self._command_tries(name, command, lambda mav, attempt: mav.command_long_send(
-            *self._target(), command, min(attempt, 255), *p), retries, timeout_s)
+            *self._link.target, command, min(attempt, 255), *p), retries, timeout_s)
 
     def command_int(self, name: str, command: int, frame: int, params: tuple[float, float, float, float], x: int,
                     y: int, z: float, retries: int | None = None, timeout_s: float | None = None) -> None:
@@ -106,10 +76,10 @@ class CommandProtocol:
         x 1e7, ``z`` metres in the frame) and wait for its COMMAND_ACK, re-sent and refused as
         :meth:`command_long` (the MAVLink command protocol asks for COMMAND_INT for commands that carry a
         position). Raises what :meth:`command_long` raises."""
-        self._check_link(name)
+        self._link.check_link(name)
         p = [float(v) for v in params] + [0.0] * (4 - len(params))
         self._command_tries(name, command, lambda mav, attempt: mav.command_int_send(
-            *self._target(), frame, command, 0, 0, *p[:4], int(x), int(y), float(z)), retries, timeout_s)
+            *self._link.target, frame, command, 0, 0, *p[:4], int(x), int(y), float(z)), retries, timeout_s)
 
     def _command_tries(self, name: str, command: int, send: Any, retries: int | None, timeout_s: float | None) -> None:
         """The tries of one command (:meth:`command_long`'s rules): ``send(mav, attempt)`` sends it once."""
@@ -132,7 +102,7 @@ class CommandProtocol:
                             after=_enum_name("MAV_RESULT", answer.result) if answer is not None else "no COMMAND_ACK",
                             waited_s=round(time.monotonic() - started, 3))
             sent = time.monotonic()
-            self._send(lambda mav, attempt=attempt: send(mav, attempt))
+            self._link.send(lambda mav, attempt=attempt: send(mav, attempt))
             accepted, latest, answer = self._await_ack(name, command, started, sent, min(sent + timeout, overall),
                                                        overall, attempt == retries, min(timeout, _REJECTED_BACKOFF_S))
             if accepted:
@@ -158,7 +128,7 @@ class CommandProtocol:
             try:
                 _, ack = self._acks.get(timeout=min(remaining, 0.05))
             except queue.Empty:
-                if not self._heartbeat.link_ok:
+                if not self._link.link_ok:
                     raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
                 continue
             if ack.command != command:
@@ -177,16 +147,16 @@ class CommandProtocol:
                 deadline = min(deadline, time.monotonic() + backoff_s)
                 continue
             raise CommandRefused(self.robot_id, name, _enum_name("MAV_RESULT", ack.result),
-                                 self._status_text_since(started))
+                                 self._texts.since(started))
 
     def _command_failed(self, name: str, command: int, last: Any, started: float, retries: int,
                         timeout: float) -> None:
         """Raise why :meth:`command_long` got no accepted COMMAND_ACK (``last``: the latest non-final one)."""
-        if not self._heartbeat.link_ok:
+        if not self._link.link_ok:
             raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
         if last is not None and last.result == M.MAV_RESULT_TEMPORARILY_REJECTED:
             raise CommandRefused(self.robot_id, name, "MAV_RESULT_TEMPORARILY_REJECTED",
-                                 self._status_text_since(started))
+                                 self._texts.since(started))
         if last is not None:
             progress = "" if last.progress in (0, 255) else f", progress {last.progress} %"
             raise BackendError(f"robot {self.robot_id!r}: {name}: {_enum_name('MAV_CMD', command)} still "
@@ -204,9 +174,9 @@ class CommandProtocol:
         try:
             self.command_long(name, *args, **kw)
         except CommandNotAcknowledged:
-            started, boot0 = time.monotonic(), self._boot_ms()
-            while not effect() and not self._heartbeat_due(started, boot0, self._settings.heartbeat_timeout_s) \
-                    and self._heartbeat.link_ok:
+            started, boot0 = time.monotonic(), self._clock.boot_ms
+            while not effect() and not self._clock.heartbeat_due(started, boot0, self._settings.heartbeat_timeout_s) \
+                    and self._link.link_ok:
                 time.sleep(0.01)
             if not effect():
                 raise
@@ -224,10 +194,10 @@ class CommandProtocol:
         name = name.upper()
         sent = time.monotonic()
         self._mode_asked = (name, sent)  # a mode we asked for is never taken for the autopilot's failsafe
-        params = self._mode_params(name)  # ValueError for a mode the autopilot does not have
-        self.command_with_effect(f"set mode {name}", lambda: self._heartbeat.mode == name, M.MAV_CMD_DO_SET_MODE,
+        params = self._link.mode_params(name)  # ValueError for a mode the autopilot does not have
+        self.command_with_effect(f"set mode {name}", lambda: self._link.mode == name, M.MAV_CMD_DO_SET_MODE,
                                  M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, *params)
-        self.await_heartbeat(f"set mode {name}", lambda: self._heartbeat.mode == name, f"mode {name}", confirm_s, sent)
+        self.await_heartbeat(f"set mode {name}", lambda: self._link.mode == name, f"mode {name}", confirm_s, sent)
 
     def await_heartbeat(self, command: str, done: Callable[[], bool], expected: str, wait_s: float | None,
                          sent: float) -> None:
@@ -236,13 +206,13 @@ class CommandProtocol:
         ``heartbeat_timeout_s``: the autopilot's HEARTBEAT comes at least that often while the link is up).
         Raises LinkLost or CommandNotConfirmed."""
         wait = max(self._settings.command_timeout_s, self._settings.heartbeat_timeout_s) if wait_s is None else wait_s
-        started, boot0 = time.monotonic(), self._boot_ms()
+        started, boot0 = time.monotonic(), self._clock.boot_ms
         while not done():
-            if not self._heartbeat.link_ok:
+            if not self._link.link_ok:
                 raise LinkLost(f"robot {self.robot_id!r}: {command}: link lost before a HEARTBEAT showed {expected}")
-            if self._heartbeat_due(started, boot0, wait):
-                hb = self._heartbeat
+            if self._clock.heartbeat_due(started, boot0, wait):
+                hb = self._link
                 observed = f"mode {hb.mode or '(none)'}, {'armed' if hb.armed else 'disarmed'}"
                 raise CommandNotConfirmed(self.robot_id, command, expected, observed, wait,
-                                          self._status_text_since(sent, wait_s=0.0))
+                                          self._texts.since(sent, wait_s=0.0))
             time.sleep(0.005)

@@ -53,7 +53,9 @@ from typing import Any, Callable, Iterable, Protocol
 
 from aerodaas.backends.base import BackendError, CommandRefused
 from aerodaas.backends.mavlink._common import M, _f32
-from aerodaas.backends.mavlink.params import LinkCheck, ParameterProtocol
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.params import ParameterProtocol
 from aerodaas.backends.mavlink.transfer import FENCE, RALLY, Wire  # noqa: F401 - FENCE/RALLY: API
 from aerodaas.navigation.geofence import GeofenceConfig, autopilot_disagreement
 
@@ -170,10 +172,10 @@ class AutopilotFence:
     """The vehicle's own geofence and rally points, a concern object of
     :class:`~aerodaas.backends.mavlink.MavlinkBackend` (see the module docstring for the firmware's rules).
 
-    It talks to the others only through what it is given: ``params`` (the backend's
-    :class:`~aerodaas.backends.mavlink.params.ParameterProtocol`), ``transfers`` (:class:`ItemTransfer`), and the
-    callables ``autopilot`` (``"ardupilot"`` / ``"px4"``, known once connected), ``vehicle_time`` (the vehicle's
-    clock, s), ``check_link`` and ``event`` (records a backend event). ``settings``: ``mavlink.fence``
+    It is given its collaborators: ``params`` (the backend's
+    :class:`~aerodaas.backends.mavlink.params.ParameterProtocol`), ``transfers`` (:class:`ItemTransfer`), ``link``
+    (the autopilot, ``"ardupilot"`` / ``"px4"`` once connected; the link check), ``clock`` (vehicle seconds) and
+    ``event`` (records a backend event). ``settings``: ``mavlink.fence``
     (:class:`~aerodaas.config.backends.MavlinkFenceConfig`); ``limits`` and ``safety``: the robot's (the altitude
     ceiling, the default fence).
 
@@ -181,11 +183,9 @@ class AutopilotFence:
     before :meth:`apply` changed them (for :meth:`restore`; :attr:`has_saved`)."""
 
     def __init__(self, robot_id: str, settings: Any, limits: Any, safety: Any, *, params: ParameterProtocol,
-                 transfers: ItemTransfer, autopilot: Callable[[], str | None], vehicle_time: Callable[[], float],
-                 check_link: LinkCheck, event: Callable[..., None]) -> None:
+                 transfers: ItemTransfer, link: MavlinkLink, clock: VehicleClock, event: Callable[..., None]) -> None:
         self.robot_id, self._settings, self.limits, self.safety = robot_id, settings, limits, safety
-        self._params, self._transfers = params, transfers
-        self._autopilot, self._vehicle_time, self._check_link, self._event = autopilot, vehicle_time, check_link, event
+        self._params, self._transfers, self._link, self._clock, self._event = params, transfers, link, clock, event
         self._saved: dict[str, Any] | None = None
         #: what :meth:`apply` verified (``{"items", "params", "before"}``), or None
         self.applied: dict[str, Any] | None = None
@@ -206,7 +206,7 @@ class AutopilotFence:
         # the safety gate's ceiling: the lower of the two settings (safety.py SafetyGate.max_alt)
         max_alt = min(float(self.limits.max_altitude), float(self.safety.max_altitude or math.inf))
         ap_action, px4_action = FENCE_ACTIONS[fc.action]
-        if self._autopilot() == "ardupilot":
+        if self._link.autopilot == "ardupilot":
             bits = (AP_FENCE_POLYGON if not fence.is_empty else 0) | (AP_FENCE_ALT_MAX if fc.max_altitude else 0) \
                 | (AP_FENCE_CIRCLE if fc.home_radius_m else 0)
             out = {"FENCE_TYPE": (float(bits), True), "FENCE_ACTION": (float(ap_action), True)}
@@ -245,7 +245,7 @@ class AutopilotFence:
         fence = self.safety.geofence if fence is None else fence
         wire = fence_items(fence)
         where = f"robot {self.robot_id!r}: autopilot geofence"
-        why = autopilot_disagreement(fence, self._autopilot())
+        why = autopilot_disagreement(fence, self._link.autopilot)
         if why is not None:
             raise BackendError(f"{where}: {why}; refusing to fly")
         try:
@@ -261,7 +261,7 @@ class AutopilotFence:
                                f"option); refusing to fly (draw the allowed area as one inclusion polygon, or set "
                                f"mavlink.fence.upload false to fly on our gate alone)")
         if missing:
-            raise BackendError(f"{where}: the {self._autopilot()} vehicle has no parameter {', '.join(missing)} "
+            raise BackendError(f"{where}: the {self._link.autopilot} vehicle has no parameter {', '.join(missing)} "
                                f"(firmware without a geofence?); refusing to fly (set mavlink.fence.upload false "
                                f"to fly on our gate alone, or mavlink.fence.max_altitude false without the altitude "
                                f"fence and its return altitudes)")
@@ -314,9 +314,9 @@ class AutopilotFence:
     def _after_vehicle_s(self, seconds: float, then):
         """``then()`` once the vehicle's clock has run ``seconds`` further (at most 5 wall seconds: a vehicle whose
         clock does not advance is not waited for longer)."""
-        t0, end = self._vehicle_time(), time.monotonic() + 5.0
-        while self._vehicle_time() - t0 < seconds and time.monotonic() < end:
-            self._check_link("fence read-back")
+        t0, end = self._clock.t, time.monotonic() + 5.0
+        while self._clock.t - t0 < seconds and time.monotonic() < end:
+            self._link.check_link("fence read-back")
             time.sleep(0.02)
         return then()
 

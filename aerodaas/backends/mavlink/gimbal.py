@@ -14,6 +14,10 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.command import CommandProtocol
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.navigation.gimbal import GimbalLimits, euler_from_quaternion
 from aerodaas.protocol import gimbal as proto
@@ -160,19 +164,25 @@ class GimbalConcern:
     (:data:`aerodaas.protocol.gimbal.GimbalCommand`) through a :class:`GimbalManager` speaking with the backend's
     ``command_long`` / ``command_int``, converts a region of interest from ENU metres to the vehicle's home-relative
     latitude/longitude/altitude, and keeps the GIMBAL_DEVICE_ATTITUDE_STATUS reports (up to 600, oldest dropped) for
-    the drone to record. ``backend``: a :class:`~aerodaas.backends.mavlink.MavlinkBackend` (its ``home``, ``t``,
-    ``command_long``, ``command_int``); ``limits``: the robot's ``gimbal`` section (None: no gimbal configured)."""
+    the drone to record. ``limits``: the robot's ``gimbal`` section (None: no gimbal configured); its
+    collaborators: ``commands`` (the command protocol: ``command_long``, ``command_int``), ``telemetry`` (the ENU
+    origin ``home``), ``clock`` (vehicle seconds of each report) and ``link`` (it registers its message handlers
+    and, with a gimbal configured, asks for GIMBAL_DEVICE_ATTITUDE_STATUS with the telemetry streams)."""
 
     #: GIMBAL_DEVICE_ATTITUDE_STATUS's rate asked of the vehicle (SET_MESSAGE_INTERVAL), Hz
     STATUS_HZ = 10.0
 
-    def __init__(self, backend: Any, limits: GimbalLimits | None) -> None:
-        self.backend = backend
+    def __init__(self, limits: GimbalLimits | None, *, commands: CommandProtocol, telemetry: VehicleTelemetry,
+                 clock: VehicleClock, link: MavlinkLink) -> None:
+        self._telemetry, self._clock = telemetry, clock
         self.configured = limits is not None
-        self.manager = GimbalManager(backend.command_long, backend.command_int, limits)
+        self.manager = GimbalManager(commands.command_long, commands.command_int, limits)
         self._reports: deque[proto.GimbalAttitude] = deque(maxlen=600)
         self._latest: proto.GimbalAttitude | None = None
         self._lock = threading.Lock()
+        link.handle("GIMBAL_DEVICE_ATTITUDE_STATUS", self.on_message)
+        link.handle("GIMBAL_MANAGER_INFORMATION", self.on_message)
+        link.add_streams(self)
 
     def streams(self) -> tuple:
         """(message id, Hz) to request of the vehicle: GIMBAL_DEVICE_ATTITUDE_STATUS when a gimbal is configured."""
@@ -185,7 +195,7 @@ class GimbalConcern:
         if isinstance(cmd, proto.GimbalPoint):
             self.manager.point(cmd.pitch_deg, cmd.yaw_deg)
         elif isinstance(cmd, proto.GimbalRoi):
-            g = enu_to_geodetic(cmd.x, cmd.y, cmd.z, self.backend.home)
+            g = enu_to_geodetic(cmd.x, cmd.y, cmd.z, self._telemetry.home)
             self.manager.point_at(g.lat, g.lon, cmd.z)
         elif isinstance(cmd, proto.GimbalRelease):
             self.manager.release()
@@ -194,7 +204,7 @@ class GimbalConcern:
 
     def on_message(self, msg: Any) -> None:
         """A GIMBAL_DEVICE_ATTITUDE_STATUS or GIMBAL_MANAGER_INFORMATION from the vehicle (the I/O thread)."""
-        att = self.manager.on_message(msg, float(self.backend.t))
+        att = self.manager.on_message(msg, float(self._clock.t))
         if att is None:
             return
         q = tuple(float(v) for v in msg.q)

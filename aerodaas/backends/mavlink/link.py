@@ -14,6 +14,7 @@ from pymavlink import mavutil
 
 from aerodaas.backends.base import BackendError, CommandRefused, CredentialsRefused, LinkLost
 from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.routes import CommandRoute, ComponentRoute, MissionRoute, SetpointStream, StreamSource
 from aerodaas.backends.mavlink.shared_link import LinkPort, PortLosses, open_link
 from aerodaas.backends.mavlink.signing import LinkSigning, NoSigning
 from aerodaas.backends.mavlink.statustext import StatusTexts
@@ -29,36 +30,33 @@ class MavlinkLink:
     every message, our GCS HEARTBEAT, sending, and the telemetry stream requests.
 
     It knows only what it is given: ``settings`` (:class:`~aerodaas.config.MavlinkConfig`), ``clock`` (the
-    :class:`~aerodaas.backends.mavlink.clock.VehicleClock` the timestamped messages feed), ``texts`` (the
+    :class:`~aerodaas.backends.mavlink.clock.VehicleClock` the timestamped messages feed; the link registers itself
+    with it as its :class:`~aerodaas.backends.mavlink.clock.LinkHealth`), ``texts`` (the
     :class:`~aerodaas.backends.mavlink.statustext.StatusTexts` STATUSTEXT feeds), ``signing`` (MAVLink 2 signing,
     :class:`~aerodaas.backends.mavlink.signing.LinkSigning`, or :class:`~aerodaas.backends.mavlink.signing.NoSigning`:
     every received message passes its check first, every sent one is signed), ``event`` (records a backend
-    event), ``lock`` (the backend's lock: the I/O thread updates every concern's state under it), and callables:
-    where messages go (``on_command_ack(now, msg)``, ``on_mission_message`` for the mission protocol's
-    exchanges, ``on_component_message`` for every message of the vehicle's system, cameras included, and
-    :attr:`handlers`, the typed table of the other message types), the command protocol's ``command_long`` and
-    ``mode_asked`` (the mode we last asked for: no failsafe), the guided control's ``setpoint`` (the target to
-    stream, or None), ``send_setpoint(setpoint, now)``, ``stop_setpoints`` (on an autopilot failsafe) and
-    ``loss_timeout_s`` (PX4's offboard-loss timeout, vehicle seconds), and ``extra_streams`` (more (message id,
-    Hz) to request). Raises :class:`BackendError` / :class:`LinkLost` as :meth:`open`, :meth:`send` and
+    event), ``lock`` (the backend's lock: the I/O thread updates every concern's state under it). As in MAVSDK,
+    where each plugin is handed the ``System`` and subscribes to its messages, the concerns made on this link
+    register what they receive: :meth:`serve_commands` (:class:`CommandRoute`: COMMAND_ACK, the mode we last asked
+    for, the command sender for stream requests), :meth:`serve_mission_protocol` (:class:`MissionRoute`),
+    :meth:`serve_components` (:class:`ComponentRoute`: every message of the vehicle's system, cameras included),
+    :meth:`serve_setpoints` (:class:`SetpointStream`: the guided target streamed by the I/O thread),
+    :meth:`add_streams` (:class:`StreamSource`: more (message id, Hz) to request) and :meth:`handle` (the handler
+    of one message type). Raises :class:`BackendError` / :class:`LinkLost` as :meth:`open`, :meth:`send` and
     :meth:`check_link` say."""
 
     def __init__(self, robot_id: str, settings: Any, *, clock: VehicleClock, texts: StatusTexts,
-                 signing: LinkSigning | NoSigning, event: Callable[..., None], lock: threading.RLock, on_command_ack: Callable[[float, Any], None],
-                 on_mission_message: Callable[[Any], None], on_component_message: Callable[[Any], None],
-                 command_long: Callable[..., None], mode_asked: Callable[[], tuple | None],
-                 setpoint: Callable[[], Any], send_setpoint: Callable[[Any, float], None],
-                 stop_setpoints: Callable[[], None], loss_timeout_s: Callable[[], float],
-                 extra_streams: Callable[[], tuple]) -> None:
+                 signing: LinkSigning | NoSigning, event: Callable[..., None], lock: threading.RLock) -> None:
         self.robot_id, self._settings, self._clock, self._texts = robot_id, settings, clock, texts
         self._signing = signing
         self._event, self._lock = event, lock
-        self._on_command_ack, self._on_mission_message = on_command_ack, on_mission_message
-        self._on_component_message, self._command_long, self._mode_asked = on_component_message, command_long, \
-            mode_asked
-        self._setpoint, self._send_setpoint, self._stop_setpoints = setpoint, send_setpoint, stop_setpoints
-        self._loss_timeout_s, self._extra_streams = loss_timeout_s, extra_streams
-        #: the handler of each other message type (backend.py ``_message_handlers``), called under ``lock``
+        self._commands: CommandRoute | None = None
+        self._mission: MissionRoute | None = None
+        self._components: list[ComponentRoute] = []
+        self._setpoints: SetpointStream | None = None
+        self._stream_sources: list[StreamSource] = []
+        clock.watch(self)
+        #: the handler of each other message type (registered with :meth:`handle`), called under ``lock``
         self.handlers: dict[str, Callable[[Any], None]] = {}
         #: the connection (shared_link.py ``LinkPort``), None when not connected
         self.port: Any = None
@@ -93,6 +91,36 @@ class MavlinkLink:
         self._ever_linked = False
         self._resume_streams = False
         self._streams_refused: set[int] = set()  # message ids the vehicle would not stream
+
+    # ------------------------------------------------------------------ what the concerns made on this link receive
+    def serve_commands(self, commands: CommandRoute) -> None:
+        """COMMAND_ACKs go to ``commands``; its :attr:`~CommandRoute.mode_asked` is no failsafe; stream and
+        HOME_POSITION requests are sent with its ``command_long``."""
+        self._commands = commands
+
+    def serve_mission_protocol(self, transfers: MissionRoute) -> None:
+        """The mission protocol's messages (MISSION_REQUEST(_INT), MISSION_ACK, MISSION_COUNT, MISSION_ITEM(_INT))
+        go to ``transfers``."""
+        self._mission = transfers
+
+    def serve_components(self, receiver: ComponentRoute) -> None:
+        """Every message of the vehicle's system (any component) goes to ``receiver`` too."""
+        self._components.append(receiver)
+
+    def serve_setpoints(self, stream: SetpointStream) -> None:
+        """The I/O thread streams ``stream``'s active target and stops it on an autopilot failsafe."""
+        self._setpoints = stream
+
+    def add_streams(self, source: StreamSource) -> None:
+        """The (message id, Hz) ``source`` asks for are requested with the telemetry streams."""
+        self._stream_sources.append(source)
+
+    def handle(self, message_type: str, handler: Callable[[Any], None]) -> None:
+        """Messages of ``message_type`` (pymavlink's name, e.g. ``"PARAM_VALUE"``) go to ``handler`` under the lock.
+        Raises ValueError when that type already has a handler."""
+        if message_type in self.handlers:
+            raise ValueError(f"robot {self.robot_id!r}: {message_type} already has a handler")
+        self.handlers[message_type] = handler
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, deadline: float, timeout: float) -> None:
@@ -249,7 +277,8 @@ class MavlinkLink:
         while not self._stop.is_set():
             got, start = 0, time.monotonic()
             # at most a quarter of PX4's offboard-loss timeout (wall seconds at the vehicle's speed-up) between sends
-            budget = min(_DRAIN_S, 0.25 * self._loss_timeout_s() / max(self._clock.ratio, 1.0))
+            loss_s = self._setpoints.loss_timeout_s if self._setpoints is not None else 1.0
+            budget = min(_DRAIN_S, 0.25 * loss_s / max(self._clock.ratio, 1.0))
             while True:
                 try:
                     msg = conn.recv_msg()
@@ -293,7 +322,8 @@ class MavlinkLink:
         src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
         if self._sysid and src_sys != self._sysid:
             return
-        self._on_component_message(msg)  # cameras are components of their own: before the autopilot-only filter
+        for receiver in self._components:  # cameras are components of their own: before the autopilot-only filter
+            receiver.on_message(msg)
         if mtype == "HEARTBEAT":
             if src_comp == self._compid and self._is_autopilot_heartbeat(msg):
                 self.on_heartbeat(msg, now)
@@ -304,14 +334,15 @@ class MavlinkLink:
         if self._compid and src_comp != self._compid:
             return
         if mtype == "COMMAND_ACK":
-            if getattr(msg, "target_system", 0) in (0, self._settings.source_system):
-                self._on_command_ack(now, msg)
+            if self._commands is not None and getattr(msg, "target_system", 0) in (0, self._settings.source_system):
+                self._commands.on_command_ack(now, msg)
             return
         if mtype in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT", "MISSION_ITEM_INT",
                      "MISSION_ITEM"):
-            self._on_mission_message(msg)  # kept for the exchange under way, when it is for us (transfer.py)
+            if self._mission is not None:  # kept for the exchange under way, when it is for us (transfer.py)
+                self._mission.offer(msg)
             return
-        handler = self.handlers.get(mtype)  # the backend's typed table (backend.py _message_handlers)
+        handler = self.handlers.get(mtype)  # registered by the concerns (handle)
         if handler is not None:
             with self._lock:
                 handler(msg)
@@ -348,7 +379,7 @@ class MavlinkLink:
         asked for (set_mode): the autopilot's own failsafe (datalink, battery, geofence action, EKF) or a pilot's
         switch. Recorded as :attr:`failsafe` and an ``autopilot_failsafe`` event with the status texts of the last
         2 s (the autopilot says why). Caller holds ``_lock``."""
-        asked = self._mode_asked()
+        asked = self._commands.mode_asked if self._commands is not None else None
         if not self._armed or mode not in FAILSAFE_MODES.get(self.autopilot or "", ()):
             return
         if asked is not None and asked[0] == mode:
@@ -356,7 +387,8 @@ class MavlinkLink:
         texts = self._texts.recent(now, 2.0)
         self.failsafe = {"mode": mode, "previous": previous, "t": round(self._clock.t, 3),
                          "text": "; ".join(texts[-3:])}
-        self._stop_setpoints()
+        if self._setpoints is not None:
+            self._setpoints.stop_quiet()
         self._failsafe_undelivered += 1
         self._event("autopilot_failsafe", **{k: v for k, v in self.failsafe.items() if k != "t"})
 
@@ -382,11 +414,11 @@ class MavlinkLink:
                 self._clock.link_lost()
             resume = self._resume_streams
             self._resume_streams = False
-            sp = self._setpoint() if self._link_ok else None
+            sp = self._setpoints.setpoint if self._link_ok and self._setpoints is not None else None
         if resume:
             self.request_streams(wait=False)
         if sp is not None:
-            self._send_setpoint(sp, now)
+            self._setpoints.send_due(sp, now)
 
     # ------------------------------------------------------------------ sending
     def live_since(self, now: float) -> float:
@@ -408,6 +440,13 @@ class MavlinkLink:
                 self._signing.after_send(mav)
             except OSError as e:
                 raise LinkLost(f"robot {self.robot_id!r}: send failed: {e}") from None
+
+    def _command(self, name: str, command: int, *params: float, retries: int | None = None) -> None:
+        """COMMAND_LONG through the command protocol that :meth:`serve_commands` named. Raises BackendError without
+        one, else as :meth:`CommandRoute.command_long`."""
+        if self._commands is None:
+            raise BackendError(f"robot {self.robot_id!r}: no command protocol on this link for {name}")
+        self._commands.command_long(name, command, *params, retries=retries)
 
     def _send_gcs_heartbeat(self) -> None:
         try:
@@ -443,7 +482,7 @@ class MavlinkLink:
         for msg_id, hz in self._streams():
             name = f"SET_MESSAGE_INTERVAL for message {msg_id}"
             try:
-                self._command_long(name, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (hz or rate), retries=1)
+                self._command(name, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (hz or rate), retries=1)
             except CommandRefused as e:
                 if e.result == "MAV_RESULT_UNSUPPORTED":
                     self._stream_legacy = True
@@ -463,7 +502,7 @@ class MavlinkLink:
         """(message id, Hz or None for ``stream_rate_hz``) of every telemetry message requested (the extra streams:
         the gimbal's attitude when a gimbal is configured)."""
         extra = _ESTIMATOR_STREAM.get(self.autopilot or "")
-        return _TELEMETRY + ((extra,) if extra else ()) + self._extra_streams()
+        return _TELEMETRY + ((extra,) if extra else ()) + tuple(x for source in self._stream_sources for x in source.streams())
 
     def _legacy_streams(self, rate: float) -> None:
         for _ in range(3):  # no acknowledgement exists for REQUEST_DATA_STREAM
@@ -475,12 +514,12 @@ class MavlinkLink:
         """MAV_CMD_REQUEST_MESSAGE(HOME_POSITION), MAV_CMD_GET_HOME_POSITION where that is unsupported; a refusal
         or no answer is no error (the autopilot sends home once it has one). Raises LinkLost."""
         try:
-            self._command_long("request HOME_POSITION", M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION,
+            self._command("request HOME_POSITION", M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION,
                               retries=1)
         except CommandRefused as e:
             if e.result == "MAV_RESULT_UNSUPPORTED":
                 try:
-                    self._command_long("request HOME_POSITION", M.MAV_CMD_GET_HOME_POSITION, retries=1)
+                    self._command("request HOME_POSITION", M.MAV_CMD_GET_HOME_POSITION, retries=1)
                 except BackendError:
                     pass
             # FAILED / DENIED: no home yet; it is sent when it is set
@@ -543,6 +582,11 @@ class MavlinkLink:
     def failsafe_delivered(self) -> None:
         """An ``autopilot_failsafe`` event was handed out. Caller holds ``lock``."""
         self._failsafe_undelivered = max(0, self._failsafe_undelivered - 1)
+
+    @property
+    def wire_version(self) -> str:
+        """The MAVLink wire protocol the connection speaks (``"1.0"`` / ``"2.0"``; ``"2.0"`` when not connected)."""
+        return getattr(getattr(self.port, "mav", None), "WIRE_PROTOCOL_VERSION", "2.0")
 
     @property
     def io_error(self) -> BaseException | None:

@@ -5,18 +5,20 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import Any, Callable, Literal, Protocol
+from typing import Any, Callable, Literal
 
-import numpy as np
 
 
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
 from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
-from aerodaas.model.types import GeoPoint
 from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
+from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.command import CommandProtocol
-from aerodaas.backends.mavlink.params import LinkCheck
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.offboard import OffboardControl
+from aerodaas.backends.mavlink.params import SpeedLimits
+from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer
 
 
@@ -27,54 +29,29 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 _ARRIVAL_RADIUS_M = 0.5
 
 
-class MissionVehicle(Protocol):
-    """What the mission reads of the vehicle (the backend's public state): its home (the ENU origin), autopilot
-    (``"ardupilot"`` / ``"px4"``), position (ENU metres), flight mode, armed flag, whether it is in the air, its
-    altitude reference (AMSL metres, None before the first arming) and its horizontal speed limit (m/s)."""
-
-    home: GeoPoint
-    autopilot: str | None
-
-    @property
-    def position(self) -> np.ndarray: ...
-
-    @property
-    def mode(self) -> str: ...
-
-    @property
-    def armed(self) -> bool: ...
-
-    @property
-    def in_air(self) -> bool: ...
-
-    @property
-    def altitude_reference(self) -> float | None: ...
-
-    def xy_speed_cap(self) -> float: ...
-
-
 class AutopilotMission:
     """The vehicle's own mission: built from waypoints (or given as items), uploaded, downloaded, cleared and
     started over the mission protocol, and its progress reported as events.
 
-    It talks to the vehicle only through what it is given: ``vehicle`` (:class:`MissionVehicle`), ``commands``
-    (the command protocol: mode change, MAV_CMD_MISSION_START), ``transfers`` (the mission protocol's exchanges),
-    ``check_link`` (the link's), ``event`` (records a backend event), ``lock`` (the backend's lock, which guards the
-    progress state; the I/O thread holds it while it feeds :meth:`on_mission_current`,
-    :meth:`on_mission_item_reached` and :meth:`on_position`) and ``pin_altitude_reference`` (fixes the altitude
-    reference where the vehicle stands and keeps it for the next arming: an uploaded mission's altitudes refer to
-    it).
+    It is given its collaborators: ``link`` (the link check, the autopilot, its mode and armed flag; it registers
+    :meth:`on_mission_current` and :meth:`on_mission_item_reached` with it), ``telemetry`` (home, position, in the
+    air, altitude reference; it feeds :meth:`on_position`), ``speed_limits`` (the horizontal speed limit),
+    ``commands`` (the command protocol: mode change, MAV_CMD_MISSION_START), ``transfers`` (the mission protocol's
+    exchanges), ``offboard`` (our target stream stops when the mission starts, and the vehicle is ours to bring
+    down), ``actions`` (fixes the altitude reference where the vehicle stands and keeps it for the next
+    arming: an uploaded mission's altitudes refer to it), ``event`` (records a backend event) and ``lock`` (the
+    backend's lock, which guards the progress state; the I/O thread holds it while it feeds the handlers).
 
     State: the uploaded mission's NAV_WAYPOINTs by wire sequence number, its autocontinue items and length, the
     current item, and the items whose arrival we reported and those the autopilot reported reached."""
 
-    def __init__(self, robot_id: str, *, vehicle: MissionVehicle, commands: CommandProtocol,
-                 transfers: MissionTransfer, check_link: LinkCheck, event: Callable[..., None],
-                 lock: threading.RLock, pin_altitude_reference: Callable[[], None]) -> None:
+    def __init__(self, robot_id: str, *, link: MavlinkLink, telemetry: VehicleTelemetry, speed_limits: SpeedLimits,
+                 commands: CommandProtocol, transfers: MissionTransfer, actions: VehicleAction,
+                 offboard: OffboardControl, event: Callable[..., None], lock: threading.RLock) -> None:
         self.robot_id = robot_id
-        self._vehicle, self._commands, self._transfers = vehicle, commands, transfers
-        self._check_link, self._event, self._lock = check_link, event, lock
-        self._pin_altitude_reference = pin_altitude_reference
+        self._link, self._telemetry, self._speed_limits = link, telemetry, speed_limits
+        self._commands, self._transfers, self._actions, self._offboard = commands, transfers, actions, offboard
+        self._event, self._lock = event, lock
         self._waypoints: dict[int, tuple[float, float, float]] = {}  # wire seq -> (east, north, arrival radius m)
         #: wire seqs of our uploaded mission's autocontinue items, and its length (the next item after a reached one)
         self._next: tuple[frozenset[int], int] = (frozenset(), 0)
@@ -82,6 +59,9 @@ class AutopilotMission:
         self._seq = -1  # the current item (wire seq)
         self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
         self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
+        link.handle("MISSION_CURRENT", self.on_mission_current)
+        link.handle("MISSION_ITEM_REACHED", self.on_mission_item_reached)
+        telemetry.notify_positions(self)
 
     def _mission_items(self, mission: Any, takeoff_altitude: float | None,
                        final_action: str) -> tuple[list[MissionItem], bool]:
@@ -104,7 +84,7 @@ class AutopilotMission:
                     raise TypeError(f"upload_mission: items must all be Waypoint/ActionCommand or all MissionItem, "
                                     f"got {type(bad).__name__}")
             if nav is not None:
-                items = navigation_to_plan(nav, self._vehicle.home, final_action,
+                items = navigation_to_plan(nav, self._telemetry.home, final_action,
                                            takeoff_altitude=takeoff_altitude).items
         for it in items:
             if it.is_complex:
@@ -133,12 +113,12 @@ class AutopilotMission:
         autopilot rejects an item, BackendError after ``command_retries`` timeouts, LinkLost, TypeError/ValueError
         for bad input (nothing is sent then)."""
         items, built = self._mission_items(mission, takeoff_altitude, final_action)
-        absolute = built and self._vehicle.autopilot == "px4"
-        if absolute and (self._vehicle.altitude_reference is None or not self._vehicle.armed):
+        absolute = built and self._link.autopilot == "px4"
+        if absolute and (self._telemetry.altitude_reference is None or not self._link.armed):
             # the take-off point, where the vehicle stands now; arm() keeps it: the mission's altitudes refer to it
-            self._pin_altitude_reference()
+            self._actions.pin_altitude_reference()
         wire, sent_items = self._wire_items(items, built, absolute)
-        self._check_link("mission upload")
+        self._link.check_link("mission upload")
         self._transfers.upload_mission(wire)
         self._remember_waypoints(wire)
         self._event("mission_uploaded", count=len(sent_items))
@@ -165,19 +145,19 @@ class AutopilotMission:
             if absolute and frame in _RELATIVE_FRAMES:
                 # PX4 resolves home-relative altitudes with a home it keeps re-estimating for minutes after
                 # take-off (COM_HOME_EN): our own waypoints go up as AMSL altitudes above the take-off point
-                frame, z = M.MAV_FRAME_GLOBAL, _f32(self._vehicle.altitude_reference + z)
+                frame, z = M.MAV_FRAME_GLOBAL, _f32(self._telemetry.altitude_reference + z)
             if it.command == M.MAV_CMD_DO_CHANGE_SPEED and built:
                 # our own waypoints' speeds: never above the robot's limit (less any estimator margin measured in
                 # flight), never -2 ("default": DENIED by ArduCopter): the limit instead. Given items (a mission
                 # file) go up as written (``aerodaas mission upload --max-speed`` caps them itself, and says so)
-                limit = self._vehicle.xy_speed_cap()
+                limit = self._speed_limits.xy_speed_cap()
                 p[1] = _f32(limit if p[1] is None or (p[1] <= 0 and p[1] != -1) else min(p[1], limit))
             wire.append((frame, it.command, 1 if it.autocontinue else 0,
                          *[float("nan") if v is None else v for v in p], xi, yi, z))
             sent_items.append(MissionItem(seq=k + 1, command=it.command, frame=frame, params=[*p, xs, ys, z],
                                           autocontinue=it.autocontinue))
-        if self._vehicle.autopilot == "ardupilot":
-            h = self._vehicle.home
+        if self._link.autopilot == "ardupilot":
+            h = self._telemetry.home
             wire.insert(0, (0, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, 0.0, int(round(h.lat * 1e7)),
                             int(round(h.lon * 1e7)), float(h.alt)))
         return wire, sent_items
@@ -186,16 +166,16 @@ class AutopilotMission:
         """Keep each uploaded NAV_WAYPOINT's horizontal position (ENU metres from :attr:`home`) and acceptance
         radius by wire sequence number, for the arrival report (:meth:`_check_arrival`)."""
         wps = {}
-        first = 1 if self._vehicle.autopilot == "ardupilot" else 0
+        first = 1 if self._link.autopilot == "ardupilot" else 0
         # PX4 starts an item's hold when its own reached check passes: horizontal distance within the item's
         # acceptance radius (navigator mission_block.cpp is_mission_item_reached, Navigator::get_acceptance_radius),
         # so its arrival radius is that one; stock PX4 SIH then holds 0.6-0.7 m from the waypoint at times and never
         # came within 0.5 m at one corner of a CI run (no arrival, so the hold had no start). ArduCopter's at most
         # _ARRIVAL_RADIUS_M
-        px4 = self._vehicle.autopilot == "px4"
+        px4 = self._link.autopilot == "px4"
         for seq, (frame, cmd, _auto, _p1, p2, _p3, _p4, xi, yi, _z) in enumerate(wire):
             if seq >= first and cmd == M.MAV_CMD_NAV_WAYPOINT and frame in _GLOBAL_FRAMES:
-                e, n, _ = geodetic_to_enu(xi / 1e7, yi / 1e7, self._vehicle.home.alt, self._vehicle.home)
+                e, n, _ = geodetic_to_enu(xi / 1e7, yi / 1e7, self._telemetry.home.alt, self._telemetry.home)
                 radius = float(p2) if p2 is not None and p2 == p2 and p2 > 0 else _ARRIVAL_RADIUS_M
                 wps[seq] = (float(e), float(n), radius if px4 else min(radius, _ARRIVAL_RADIUS_M))
         with self._lock:
@@ -213,16 +193,16 @@ class AutopilotMission:
         (ArduPilot's home item at sequence 0 is left out); turn it into waypoints with
         :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
         with an error)."""
-        self._check_link("mission download")
+        self._link.check_link("mission download")
         got = self._transfers.download_messages(0, "mission download")
         items = []
-        first = 1 if self._vehicle.autopilot == "ardupilot" else 0
+        first = 1 if self._link.autopilot == "ardupilot" else 0
         # PX4 starts an item's hold when its own reached check passes: horizontal distance within the item's
         # acceptance radius (navigator mission_block.cpp is_mission_item_reached, Navigator::get_acceptance_radius),
         # so its arrival radius is that one; stock PX4 SIH then holds 0.6-0.7 m from the waypoint at times and never
         # came within 0.5 m at one corner of a CI run (no arrival, so the hold had no start). ArduCopter's at most
         # _ARRIVAL_RADIUS_M
-        px4 = self._vehicle.autopilot == "px4"
+        px4 = self._link.autopilot == "px4"
         for seq in sorted(got):
             if seq < first:
                 continue
@@ -236,7 +216,7 @@ class AutopilotMission:
             items.append(MissionItem(seq=seq + 1 - first, command=m.command, frame=m.frame,
                                      params=[_f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4), x, y,
                                              _f32(m.z)], autocontinue=bool(m.autocontinue)))
-        return MissionPlan(home=self._vehicle.home, items=items)
+        return MissionPlan(home=self._telemetry.home, items=items)
 
     def clear(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
@@ -245,9 +225,13 @@ class AutopilotMission:
     def start(self) -> None:
         """Fly the uploaded mission: in the air switch to AUTO (ArduPilot) / MISSION (PX4); on the ground (armed)
         MAV_CMD_MISSION_START, which starts it from the first item (ArduPilot needs a NAV_TAKEOFF first; PX4
-        takes off by itself). Progress arrives as ``mission_current`` / ``mission_item_reached`` events."""
-        if self._vehicle.in_air:
-            self._commands.set_mode("MISSION" if self._vehicle.autopilot == "px4" else "AUTO")
+        takes off by itself). Our target stream stops first, and the vehicle is ours to bring down
+        (:attr:`OffboardControl.in_control`). Progress arrives as ``mission_current`` / ``mission_item_reached``
+        events. Raises as :meth:`CommandProtocol.command_long` / :meth:`CommandProtocol.set_mode`."""
+        self._offboard.stop()
+        self._offboard.take_control()
+        if self._telemetry.in_air:
+            self._commands.set_mode("MISSION" if self._link.autopilot == "px4" else "AUTO")
         else:
             self._commands.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
 
@@ -284,9 +268,9 @@ class AutopilotMission:
         stat-stream's WAYPOINT_HOLD would begin when the hover ends. Caller holds the backend's lock."""
         seq = self._seq
         wp = self._waypoints.get(seq)
-        if wp is None or seq in self._arrived or seq in self._reached_fw or self._vehicle.mode not in ("AUTO", "MISSION"):
+        if wp is None or seq in self._arrived or seq in self._reached_fw or self._link.mode not in ("AUTO", "MISSION"):
             return
-        pos = self._vehicle.position
+        pos = self._telemetry.position
         if math.hypot(pos[0] - wp[0], pos[1] - wp[1]) <= wp[2]:
             self._arrived.add(seq)
             self._event("mission_item_reached", seq=seq, item=self._item_number(seq), by="arrival")
@@ -294,7 +278,7 @@ class AutopilotMission:
     def _item_number(self, wire_seq: int) -> int:
         """The :class:`MissionItem` ``seq`` (from 1, as :meth:`upload` returns) of a wire sequence number:
         ArduPilot's wire numbering already starts at 1 (home is 0), PX4's at 0."""
-        return wire_seq if self._vehicle.autopilot == "ardupilot" else wire_seq + 1
+        return wire_seq if self._link.autopilot == "ardupilot" else wire_seq + 1
 
     def on_mission_item_reached(self, msg: Any) -> None:
         """The autopilot's MISSION_ITEM_REACHED (after the item's hold): reported once per item and mission run

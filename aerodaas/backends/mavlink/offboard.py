@@ -6,17 +6,17 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Any, Callable, Protocol, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.model.types import GeoPoint
 from aerodaas.backends.base import LinkLost, VehicleBackend
-from aerodaas.backends.mavlink.action import VehicleAction
+from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.command import CommandProtocol
-from aerodaas.backends.mavlink.mission import MissionVehicle
-from aerodaas.backends.mavlink.params import LinkCheck, VehicleSender
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.params import SpeedLimits
+from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
 
@@ -30,53 +30,32 @@ _MIN_TARGET_HEIGHT_M = 0.5
 _CARROT_LEAD_M = 0.25
 
 
-class OffboardVehicle(MissionVehicle, Protocol):
-    """What guided control reads of the vehicle (the backend's public state): its home (the ENU origin), autopilot
-    (``"ardupilot"`` / ``"px4"``), vehicle clock (:attr:`t`, seconds) and its rate (vehicle seconds per wall
-    second), position (ENU metres), flight mode, armed flag, whether it is in the air, whether the link is up, its
-    altitude reference (AMSL metres, None before it is fixed) and its horizontal speed limit (m/s)."""
-
-    @property
-    def t(self) -> float: ...
-
-    @property
-    def clock_ratio(self) -> float: ...
-
-    @property
-    def link_ok(self) -> bool: ...
-
-
 class OffboardControl:
     """Guided control of one vehicle: the position/velocity target streamed to it, the speed-capped goto, the
     offboard-loss watch, the last DO_CHANGE_SPEED, the hand-over to the autopilot's own modes and the safe end.
 
-    It talks to the vehicle only through what it is given: ``vehicle`` (:class:`OffboardVehicle`), ``commands``
-    (the command protocol: modes, DO_CHANGE_SPEED), ``actions`` (in control, disarm), ``send`` (the link's),
-    ``target`` (the vehicle's system and component id), ``boot_ms_out`` (our time_boot_ms for the setpoints we
-    send), the link's readings ``boot_ms`` (the vehicle's latest time_boot_ms), ``live_since`` (that sample was
-    received after the link's socket was empty at this monotonic time), ``last_heartbeat`` (monotonic time of the
-    autopilot's latest HEARTBEAT), ``mode_changes`` (how many mode changes the HEARTBEAT showed) and
-    ``failsafe_undelivered`` (``autopilot_failsafe`` events not yet handed out), ``check_link`` (the link's),
+    It is given its collaborators: ``link`` (sending, the link check, the vehicle's ids, the autopilot, its mode,
+    armed flag, latest HEARTBEAT time, mode changes seen and ``autopilot_failsafe`` events not yet handed out),
+    ``clock`` (vehicle seconds and their rate, the vehicle's latest time_boot_ms and when it was received, our
+    time_boot_ms for the setpoints we send), ``telemetry`` (home, position, altitude reference, in the air),
+    ``speed_limits`` (the horizontal speed limit), ``commands`` (the command protocol: modes, DO_CHANGE_SPEED),
     ``event`` (records a backend event) and ``lock`` (the backend's lock, which guards the target state: the I/O
-    thread sends the stream, :meth:`send_due`). ``settings``: ``setpoint_rate_hz``, ``on_close``,
-    ``safe_end_timeout_s``.
+    thread sends the stream, :meth:`send_due`; it registers with the link, :meth:`MavlinkLink.serve_setpoints`).
+    ``settings``: ``setpoint_rate_hz``, ``on_close``, ``safe_end_timeout_s``.
 
     State: the active setpoint and its stream (when the next is due, how many were sent, the last one's wall and
     vehicle time, a stall seen), the speed-capped goto's progress, PX4's offboard-loss timeout
-    (:attr:`loss_timeout_s`), when the stream was stopped as stalled, and the last DO_CHANGE_SPEED asked and sent."""
+    (:attr:`loss_timeout_s`), when the stream was stopped as stalled, the last DO_CHANGE_SPEED asked and sent, and
+    whether we are in control (:attr:`in_control`: we armed it or sent it targets or a mission, so
+    :meth:`safe_end` is ours)."""
 
-    def __init__(self, robot_id: str, settings: Any, *, vehicle: OffboardVehicle, commands: CommandProtocol,
-                 actions: VehicleAction, send: VehicleSender, target: Callable[[], tuple[int, int]],
-                 boot_ms_out: Callable[[], int], boot_ms: Callable[[], int], live_since: Callable[[], float],
-                 last_heartbeat: Callable[[], float], mode_changes: Callable[[], int],
-                 failsafe_undelivered: Callable[[], int], check_link: LinkCheck, event: Callable[..., None],
-                 lock: threading.RLock) -> None:
+    def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink, clock: VehicleClock,
+                 telemetry: VehicleTelemetry, speed_limits: SpeedLimits, commands: CommandProtocol,
+                 event: Callable[..., None], lock: threading.RLock) -> None:
         self.robot_id, self._settings = robot_id, settings
-        self._vehicle, self._commands, self._actions = vehicle, commands, actions
-        self._send, self._target, self._boot_ms_out = send, target, boot_ms_out
-        self._boot_ms, self._live_since, self._last_heartbeat = boot_ms, live_since, last_heartbeat
-        self._mode_changes, self._failsafe_undelivered = mode_changes, failsafe_undelivered
-        self._check_link, self._event, self._lock = check_link, event, lock
+        self._link, self._clock, self._telemetry, self._speed_limits = link, clock, telemetry, speed_limits
+        self._commands, self._event, self._lock = commands, event, lock
+        self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
         self._setpoint: tuple | None = None
         self._carrot_sp: tuple | None = None  # the speed-capped goto being flown, its progress (m) and time (s)
         self._carrot_s = self._carrot_t = 0.0
@@ -89,6 +68,17 @@ class OffboardControl:
         self._offboard_lost_at: float | None = None  # wall time the stream was stopped as stalled
         self._speed_cmd: tuple | None = None  # (m/s, mode change count) of the last DO_CHANGE_SPEED
         self._speed_asked: float | None = None  # the speed of the last DO_CHANGE_SPEED asked (None: the limit)
+
+        link.serve_setpoints(self)
+
+    @property
+    def in_control(self) -> bool:
+        """We armed the vehicle or sent it targets or a mission: bringing it down at the end is ours to do."""
+        return self._in_control
+
+    def take_control(self) -> None:
+        """We command the vehicle now (armed it, targets, a mission): :attr:`in_control`."""
+        self._in_control = True
 
     @property
     def loss_timeout_s(self) -> float:
@@ -114,8 +104,8 @@ class OffboardControl:
         due (``setpoint_rate_hz`` in the vehicle's time; ArduPilot's position targets at 1 Hz) and the stream may
         go on (:meth:`_stream_may_go_on`)."""
         if now >= self._sp_next and self._stream_may_go_on(now):
-            rate = self._settings.setpoint_rate_hz if sp[0] == "vel" or self._vehicle.autopilot == "px4" else 1.0
-            self._sp_next = now + max(0.004, 1.0 / (rate * self._vehicle.clock_ratio))
+            rate = self._settings.setpoint_rate_hz if sp[0] == "vel" or self._link.autopilot == "px4" else 1.0
+            self._sp_next = now + max(0.004, 1.0 / (rate * self._clock.ratio))
             self._send_setpoint(sp)
 
     def resend_speed(self) -> None:
@@ -133,14 +123,14 @@ class OffboardControl:
         delta = target - start
         length = float(np.linalg.norm(delta))
         with self._lock:
-            now = self._vehicle.t
+            now = self._clock.t
             if self._carrot_sp is not sp:  # a new leg
                 self._carrot_sp, self._carrot_s, self._carrot_t = sp, 0.0, max(now, t0)
             if length < 1e-6:
                 s_now = length
             else:
                 unit = delta / length
-                along = float(np.dot(self._vehicle.position - start, unit))  # the vehicle's progress, metres
+                along = float(np.dot(self._telemetry.position - start, unit))  # the vehicle's progress, metres
                 step = speed * max(0.0, now - self._carrot_t)
                 s_now = min(length, max(self._carrot_s, min(self._carrot_s + step, along + _CARROT_LEAD_M)))
             self._carrot_s, self._carrot_t = s_now, now
@@ -154,10 +144,10 @@ class OffboardControl:
         """ENU metres -> (lat 1e-7 deg, lon 1e-7 deg, altitude m, MAV_FRAME) for SET_POSITION_TARGET_GLOBAL_INT:
         once the altitude reference is fixed (arming), MAV_FRAME_GLOBAL_INT with the AMSL altitude reference +
         ``z`` (a frame that does not move with PX4's re-estimated home); before, relative to home."""
-        g = enu_to_geodetic(x, y, 0.0, self._vehicle.home)
+        g = enu_to_geodetic(x, y, 0.0, self._telemetry.home)
         lat_i, lon_i = int(round(g.lat * 1e7)), int(round(g.lon * 1e7))
-        if self._vehicle.altitude_reference is not None:
-            return lat_i, lon_i, self._vehicle.altitude_reference + z, M.MAV_FRAME_GLOBAL_INT
+        if self._telemetry.altitude_reference is not None:
+            return lat_i, lon_i, self._telemetry.altitude_reference + z, M.MAV_FRAME_GLOBAL_INT
         return lat_i, lon_i, z, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
     def _stream_may_go_on(self, now: float) -> bool:
@@ -175,26 +165,26 @@ class OffboardControl:
         stops (event ``offboard_stream_stalled``): the autopilot's own mode change that follows, or came while we
         stalled, is its failsafe (link.py ``_check_failsafe``). A firmware stopped with us (SITL under a debugger)
         shows no such gap and the stream goes on. ArduPilot has no such failsafe in GUIDED (always True)."""
-        if self._vehicle.autopilot != "px4":
+        if self._link.autopilot != "px4":
             return True
         with self._lock:  # the caller's thread may stop or replace the stream meanwhile (stop, goto)
             sp_boot, sp = self._sp_boot_ms, self._setpoint
             if sp_boot is None or sp is None:
                 return True
             limit = self._loss_s
-            if (now - self._sp_wall) * self._vehicle.clock_ratio > 0.5 * limit:
+            if (now - self._sp_wall) * self._clock.ratio > 0.5 * limit:
                 if self._stall_seen is None:
                     self._stall_seen = now
-                if self._live_since() <= self._stall_seen:
+                if self._clock.live_since <= self._stall_seen:
                     return False  # still the backlog of the stall: not yet the vehicle's state of now
             self._stall_seen = None
-            gap_s = (self._boot_ms() - sp_boot) / 1000.0
+            gap_s = (self._clock.boot_ms - sp_boot) / 1000.0
             if gap_s <= limit:
                 return True
             self._setpoint = None
             self._sp_boot_ms = None
             self._offboard_lost_at = now
-        self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._vehicle.mode)
+        self._event("offboard_stream_stalled", vehicle_s=round(gap_s, 3), limit_s=limit, mode=self._link.mode)
         log.warning("%s: no setpoint reached the vehicle for %.1f s of its clock (COM_OF_LOSS_T %.1f s): the stream "
                     "is not resumed; PX4's offboard-loss failsafe has the vehicle", self.robot_id, gap_s, limit)
         return False
@@ -205,26 +195,26 @@ class OffboardControl:
                 sp = self._carrot(sp)
             if sp[0] == "pos":
                 _, lat_i, lon_i, alt, frame = sp
-                self._send(lambda mav: mav.set_position_target_global_int_send(
-                    self._boot_ms_out(), *self._target(), frame,
+                self._link.send(lambda mav: mav.set_position_target_global_int_send(
+                    self._clock.boot_ms_out(), *self._link.target, frame,
                     POSITION_ONLY_MASK, lat_i, lon_i, alt, 0, 0, 0, 0, 0, 0, 0, 0))
             elif sp[0] == "posvel":
                 _, lat_i, lon_i, alt, frame, vn, ve, vd = sp
-                self._send(lambda mav: mav.set_position_target_global_int_send(
-                    self._boot_ms_out(), *self._target(), frame,
+                self._link.send(lambda mav: mav.set_position_target_global_int_send(
+                    self._clock.boot_ms_out(), *self._link.target, frame,
                     POSITION_VELOCITY_MASK, lat_i, lon_i, alt, vn, ve, vd, 0, 0, 0, 0, 0))
             else:
                 _, vn, ve, vd, yaw_rate = sp
-                self._send(lambda mav: mav.set_position_target_local_ned_send(
-                    self._boot_ms_out(), *self._target(), M.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK,
+                self._link.send(lambda mav: mav.set_position_target_local_ned_send(
+                    self._clock.boot_ms_out(), *self._link.target, M.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK,
                     0, 0, 0, vn, ve, vd, 0, 0, 0, 0, yaw_rate))
             self._sp_sent += 1
-            self._sp_wall, self._sp_boot_ms = time.monotonic(), self._boot_ms()
+            self._sp_wall, self._sp_boot_ms = time.monotonic(), self._clock.boot_ms
         except LinkLost:
             pass
 
     def _guided_mode(self) -> str:
-        return "OFFBOARD" if self._vehicle.autopilot == "px4" else "GUIDED"
+        return "OFFBOARD" if self._link.autopilot == "px4" else "GUIDED"
 
     def _autopilot_has_it(self, command: str) -> bool:
         """Whether the autopilot has taken the vehicle in a way the caller has not yet been told of, so that
@@ -237,17 +227,17 @@ class OffboardControl:
         (``command_withheld``) and the drone re-issues its waypoint when no failsafe follows."""
         lost_at = self._offboard_lost_at
         if lost_at is not None:
-            end = time.monotonic() + min(3.0, 1.5 / max(self._vehicle.clock_ratio, 1e-3))
-            while self._last_heartbeat() <= lost_at and time.monotonic() < end and self._vehicle.link_ok:
+            end = time.monotonic() + min(3.0, 1.5 / max(self._clock.ratio, 1e-3))
+            while self._link.last_heartbeat <= lost_at and time.monotonic() < end and self._link.link_ok:
                 time.sleep(0.01)
             with self._lock:
-                fresh = self._last_heartbeat() > lost_at
+                fresh = self._link.last_heartbeat > lost_at
                 if fresh and self._offboard_lost_at == lost_at:
                     self._offboard_lost_at = None
             if not fresh:
                 return self._withheld(command, "offboard stream stalled; no HEARTBEAT since")
-        if self._failsafe_undelivered():
-            return self._withheld(command, f"autopilot failsafe {self._vehicle.mode}")
+        if self._link.failsafe_undelivered:
+            return self._withheld(command, f"autopilot failsafe {self._link.mode}")
         return False
 
     def _withheld(self, command: str, reason: str) -> bool:
@@ -260,10 +250,10 @@ class OffboardControl:
         have checked :meth:`_autopilot_has_it`; it is checked again here under the lock that installs the target,
         and before the mode switch (the I/O thread may have seen the autopilot's failsafe meanwhile)."""
         guided = self._guided_mode()
-        self._actions.take_control()
-        if self._vehicle.autopilot == "px4":
+        self.take_control()
+        if self._link.autopilot == "px4":
             with self._lock:
-                withhold = bool(self._failsafe_undelivered() or self._offboard_lost_at is not None)
+                withhold = bool(self._link.failsafe_undelivered or self._offboard_lost_at is not None)
                 if not withhold:
                     if self._setpoint is None:
                         self._sp_boot_ms = None  # a new stream, not a gap in the old one
@@ -273,27 +263,27 @@ class OffboardControl:
             if withhold:
                 self._withheld(sp[0], "autopilot failsafe meanwhile")
                 return
-            if self._vehicle.mode != guided:
+            if self._link.mode != guided:
                 start, sent0 = time.monotonic(), self._sp_sent
                 # PX4 wants the stream running before the switch: at least 3 setpoints and 0.3 s of vehicle time
-                while (self._sp_sent - sent0 < 3 or (time.monotonic() - start) * self._vehicle.clock_ratio < 0.3) \
+                while (self._sp_sent - sent0 < 3 or (time.monotonic() - start) * self._clock.ratio < 0.3) \
                         and time.monotonic() - start < 2.0:
                     time.sleep(0.005)
                 with self._lock:  # the autopilot may have taken over while the stream started
-                    ours = self._setpoint is sp and not self._failsafe_undelivered()
+                    ours = self._setpoint is sp and not self._link.failsafe_undelivered
                 if not ours:
                     self._withheld(sp[0], f"stream stopped before the switch to {guided}")
                     return
                 self._commands.set_mode(guided)
         else:
-            if self._vehicle.mode != guided:
-                if self._failsafe_undelivered():
-                    self._withheld(sp[0], f"autopilot failsafe {self._vehicle.mode}")
+            if self._link.mode != guided:
+                if self._link.failsafe_undelivered:
+                    self._withheld(sp[0], f"autopilot failsafe {self._link.mode}")
                     return
                 self._commands.set_mode(guided)
             with self._lock:
                 self._setpoint = sp
-                self._sp_next = time.monotonic() + 1.0 / (self._settings.setpoint_rate_hz * self._vehicle.clock_ratio)
+                self._sp_next = time.monotonic() + 1.0 / (self._settings.setpoint_rate_hz * self._clock.ratio)
             self._send_setpoint(sp)
 
     def stop_quiet(self) -> None:
@@ -320,9 +310,9 @@ class OffboardControl:
         again after every mode change (ArduCopter re-initialises its navigation speed from WPNAV_SPEED on mode
         entry). Raises as :meth:`command_long`."""
         self._speed_asked = speed
-        limit = self._vehicle.xy_speed_cap()
+        limit = self._speed_limits.xy_speed_cap()
         value = limit if speed is None else min(float(speed), limit)
-        key = (round(value, 3), self._mode_changes())
+        key = (round(value, 3), self._link.mode_changes)
         if key == self._speed_cmd:
             return
         self._commands.command_long("change speed", M.MAV_CMD_DO_CHANGE_SPEED, 1, value, -1)
@@ -343,23 +333,23 @@ class OffboardControl:
             raise ValueError(f"goto target_enu must be finite metres, got {tuple(target_enu)!r}")
         if speed is not None and not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"goto speed must be a positive number of m/s or None, got {speed!r}")
-        self._check_link("goto")
-        if z < _MIN_TARGET_HEIGHT_M and self._vehicle.armed:
+        self._link.check_link("goto")
+        if z < _MIN_TARGET_HEIGHT_M and self._link.armed:
             self._event("target_raised", asked_m=z, sent_m=_MIN_TARGET_HEIGHT_M,
                         reason="below the take-off point (only LAND goes lower)")
             z = _MIN_TARGET_HEIGHT_M
         if self._autopilot_has_it("goto"):  # before any mode change or speed command reaches the vehicle
             return
-        if self._vehicle.autopilot == "px4":
+        if self._link.autopilot == "px4":
             # PX4 OFFBOARD: even at MPC_XY_VEL_MAX a 5 m position step overshoots it (0.64 m/s at 0.5 measured on
             # SIH); a setpoint moving at the speed, with it as feed-forward, is flown within the limit
-            limit = self._vehicle.xy_speed_cap()
+            limit = self._speed_limits.xy_speed_cap()
             speed = limit if speed is None else min(float(speed), limit)
-            self._enter_guided(("carrot", self._vehicle.position, np.array([x, y, z]), speed, self._vehicle.t))
+            self._enter_guided(("carrot", self._telemetry.position, np.array([x, y, z]), speed, self._clock.t))
             return
         sp = ("pos", *self._global_target(x, y, z))
-        if self._vehicle.autopilot == "ardupilot":
-            if self._vehicle.mode != "GUIDED":
+        if self._link.autopilot == "ardupilot":
+            if self._link.mode != "GUIDED":
                 self._commands.set_mode("GUIDED")
             self._change_speed(speed)
         self._enter_guided(sp)
@@ -371,7 +361,7 @@ class OffboardControl:
         ve, vn, vu = (float(v) for v in v_enu)
         if not all(math.isfinite(v) for v in (ve, vn, vu, yaw_rate_dps)):
             raise ValueError(f"set_velocity needs finite m/s and deg/s, got {tuple(v_enu)!r}, {yaw_rate_dps!r}")
-        self._check_link("set_velocity")
+        self._link.check_link("set_velocity")
         if self._autopilot_has_it("set_velocity"):
             return
         self._enter_guided(("vel", vn, ve, -vu, -math.radians(yaw_rate_dps)))
@@ -379,12 +369,12 @@ class OffboardControl:
     def hold(self) -> None:
         """Hover here: in GUIDED/OFFBOARD a position target at the current position; otherwise the autopilot's
         hold mode (ArduPilot LOITER, PX4 LOITER/Hold). On the ground it only stops the target stream."""
-        self._check_link("hold")
-        if not self._vehicle.in_air:
+        self._link.check_link("hold")
+        if not self._telemetry.in_air:
             self.stop()
             return
-        if self._vehicle.mode == self._guided_mode():
-            p = self._vehicle.position
+        if self._link.mode == self._guided_mode():
+            p = self._telemetry.position
             self.goto((p[0], p[1], p[2]))
         else:
             self._autopilot_mode("LOITER")
@@ -421,24 +411,25 @@ class OffboardControl:
         stops only once the autopilot's own mode holds it. Returns what was done (``"nothing"``, ``"landed"``,
         ``"disarmed"``, ``"timeout"``, ``"link lost"``), also as a ``safe_end`` event. Raises BackendError /
         CommandRefused when LAND/RTL is refused."""
-        if not self._vehicle.armed or not self._actions.in_control:
+        if not self._link.armed or not self._in_control:
             return "nothing"  # disarmed, or armed by someone else and never commanded by us: not ours to end
-        if not self._vehicle.link_ok:
+        if not self._link.link_ok:
             self.stop()
-            self._event("safe_end", result="link lost", mode=self._vehicle.mode)
+            self._event("safe_end", result="link lost", mode=self._link.mode)
             return "link lost"
-        if not self._vehicle.in_air:
-            if self._vehicle.mode in ("GUIDED", "OFFBOARD"):
-                self._actions.disarm()
+        if not self._telemetry.in_air:
+            if self._link.mode in ("GUIDED", "OFFBOARD"):
+                self.stop()
+                self._commands.command_long("disarm", M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
                 self._event("safe_end", result="disarmed")
                 return "disarmed"
             return "nothing"
         mode = "RTL" if self._settings.on_close == "rtl" else "LAND"
-        if self._vehicle.mode not in (mode, "LAND", "RTL"):
+        if self._link.mode not in (mode, "LAND", "RTL"):
             self._autopilot_mode(mode)
-        t0 = self._vehicle.t
-        while self._vehicle.armed and self._vehicle.t - t0 < self._settings.safe_end_timeout_s and self._vehicle.link_ok:
+        t0 = self._clock.t
+        while self._link.armed and self._clock.t - t0 < self._settings.safe_end_timeout_s and self._link.link_ok:
             time.sleep(0.05)
-        result = "landed" if not self._vehicle.armed else ("link lost" if not self._vehicle.link_ok else "timeout")
-        self._event("safe_end", result=result, mode=mode, vehicle_s=round(self._vehicle.t - t0, 2))
+        result = "landed" if not self._link.armed else ("link lost" if not self._link.link_ok else "timeout")
+        self._event("safe_end", result=result, mode=mode, vehicle_s=round(self._clock.t - t0, 2))
         return result

@@ -22,6 +22,9 @@ from typing import Any, Callable, Protocol
 
 from aerodaas.backends.base import BackendError
 from aerodaas.backends.mavlink._common import M, _f32
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.speed_margin import MIN_STEP_MPS, EstimatorSpeedMargin, SpeedCap
 
 #: PX4's horizontal limits are ``limits.max_speed`` less this margin (m/s), and never below half of it (see
@@ -53,38 +56,27 @@ def speed_floor(max_speed: float) -> float:
 _PARAM_READ_WAIT_S = 0.6
 
 
-class VehicleSender(Protocol):
-    """Sends one message on the vehicle's link (the backend's link: one sender at a time): ``build(mav)`` calls a
-    pymavlink ``*_send`` method. Raises LinkLost when the link is down or the send fails."""
-
-    def __call__(self, build: Callable[[Any], None]) -> None: ...
-
-
-class LinkCheck(Protocol):
-    """Raises BackendError / LinkLost, naming ``command``, unless the vehicle's link is up."""
-
-    def __call__(self, command: str) -> None: ...
-
-
 class ParameterProtocol:
     """The MAVLink parameter protocol with one vehicle (mavlink.io: PARAM_REQUEST_READ / PARAM_SET, answered by
     PARAM_VALUE), a concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend`.
 
-    It talks to the link only through what it is given: ``send`` and ``check_link`` (the link's), ``target`` (the
-    vehicle's system and component id, known once connected) and ``is_px4`` (whether the autopilot is PX4: its
-    integers travel bytewise). ``settings``: ``command_timeout_s`` and ``command_retries``. :meth:`on_param_value`
-    is fed every PARAM_VALUE (the I/O thread); reads and writes wait on them (the control thread).
+    It is given the ``link`` (sending, the link check, the vehicle's system and component id once connected, and
+    its autopilot: PX4's integers travel bytewise). ``settings``: ``command_timeout_s`` and ``command_retries``. It
+    registers :meth:`on_param_value` with the link for every PARAM_VALUE (the I/O thread); reads and writes wait on
+    them (the control thread).
 
     State: the latest value per parameter (name -> float), a condition notified on each, and the user's values of
     the parameters AeroDaaS changed (:meth:`remember_original`, put back by :meth:`restore`)."""
 
-    def __init__(self, robot_id: str, settings: Any, *, send: VehicleSender, check_link: LinkCheck,
-                 target: Callable[[], tuple[int, int]], is_px4: Callable[[], bool]) -> None:
-        self.robot_id, self._settings = robot_id, settings
-        self._send, self._check_link, self._target, self._is_px4 = send, check_link, target, is_px4
+    def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink) -> None:
+        self.robot_id, self._settings, self._link = robot_id, settings, link
         self._values: dict[str, float] = {}
         self._cv = threading.Condition()
         self._originals: dict[str, float] = {}
+        link.handle("PARAM_VALUE", self.on_param_value)
+
+    def _is_px4(self) -> bool:
+        return self._link.autopilot == "px4"
 
     @property
     def changed(self) -> list[str]:
@@ -114,7 +106,7 @@ class ParameterProtocol:
         to ``wait_s`` wall seconds per round (default min(``command_timeout_s``, 0.6)). Returns the values that
         came (floats, in the parameter's own unit); a name without answer is absent (the firmware lacks it).
         Raises LinkLost."""
-        self._check_link("read parameters")
+        self._link.check_link("read parameters")
         wait = min(self._settings.command_timeout_s, _PARAM_READ_WAIT_S) if wait_s is None else wait_s
         with self._cv:
             for n in names:
@@ -123,9 +115,9 @@ class ParameterProtocol:
             missing = [n for n in names if n not in self._values]
             if not missing:
                 break
-            sysid, compid = self._target()
+            sysid, compid = self._link.target
             for n in missing:
-                self._send(lambda mav, n=n: mav.param_request_read_send(sysid, compid, n.encode(), -1))
+                self._link.send(lambda mav, n=n: mav.param_request_read_send(sysid, compid, n.encode(), -1))
             end = time.monotonic() + wait
             with self._cv:
                 while any(n not in self._values for n in missing) and time.monotonic() < end:
@@ -140,7 +132,7 @@ class ParameterProtocol:
         the REAL32 value to the parameter's own type (AP_Param), so it always gets REAL32. Returns the value the
         vehicle reports, which may differ (the firmware clamps to its range). Raises BackendError when no echo
         comes, LinkLost."""
-        self._check_link(f"set parameter {name}")
+        self._link.check_link(f"set parameter {name}")
         retries = self._settings.command_retries
         wait = self._settings.command_timeout_s if wait_s is None else wait_s
         if integer and self._is_px4():
@@ -151,15 +143,15 @@ class ParameterProtocol:
         for _ in range(retries + 1):
             with self._cv:
                 self._values.pop(name, None)
-            sysid, compid = self._target()
-            self._send(lambda mav: mav.param_set_send(sysid, compid, name.encode(), v32, ptype))
+            sysid, compid = self._link.target
+            self._link.send(lambda mav: mav.param_set_send(sysid, compid, name.encode(), v32, ptype))
             end = time.monotonic() + wait
             with self._cv:
                 while name not in self._values and time.monotonic() < end:
                     self._cv.wait(timeout=max(0.0, min(0.05, end - time.monotonic())))
                 if name in self._values:
                     return self._values[name]
-            self._check_link(f"set parameter {name}")
+            self._link.check_link(f"set parameter {name}")
         raise BackendError(f"robot {self.robot_id!r}: set parameter {name}: no PARAM_VALUE after "
                            f"{retries + 1} tries of {wait:g} s")
 
@@ -179,20 +171,15 @@ class ParameterProtocol:
         return done
 
 
-class SpeedVehicle(Protocol):
-    """What the speed limits read of the vehicle (the backend's public state): its autopilot (``"ardupilot"`` /
-    ``"px4"``), vehicle clock (:attr:`t`, seconds), whether it is in the air and whether the link is up."""
-
-    autopilot: str | None
-
-    @property
-    def t(self) -> float: ...
+class SpeedCommander(Protocol):
+    """The guided control's speed command (offboard.py :class:`~aerodaas.backends.mavlink.offboard.OffboardControl`):
+    whether a DO_CHANGE_SPEED is in force (ArduPilot's GUIDED flies it, not WPNAV_SPEED), and sending it again at the
+    limit now in force (raises as :meth:`CommandProtocol.command_long`)."""
 
     @property
-    def in_air(self) -> bool: ...
+    def speed_commanded(self) -> bool: ...
 
-    @property
-    def link_ok(self) -> bool: ...
+    def resend_speed(self) -> None: ...
 
 
 class SpeedLimits:
@@ -200,21 +187,23 @@ class SpeedLimits:
     protocol, and lowered in flight when the vehicle's estimator needs more margin
     (:mod:`~aerodaas.backends.mavlink.speed_margin`).
 
-    It talks to the vehicle only through what it is given: ``limits`` (the robot's :class:`~aerodaas.config.Limits`),
-    ``params`` (the parameter protocol), ``vehicle`` (:class:`SpeedVehicle`), ``event`` (records a backend event),
-    ``lock`` (the backend's lock, which guards the margin's samples: the I/O thread adds them),
-    ``speed_commanded`` (whether a DO_CHANGE_SPEED is in force: ArduPilot's GUIDED flies it, not WPNAV_SPEED) and
-    ``change_speed_again`` (sends that DO_CHANGE_SPEED again at the limit now in force: offboard.py).
+    It is given its collaborators: ``limits`` (the robot's :class:`~aerodaas.config.Limits`), ``params`` (the
+    parameter protocol), ``link`` (the autopilot, whether the link is up), ``clock`` (vehicle seconds),
+    ``telemetry`` (whether the vehicle is in the air; the speed limits follow its GNSS speeds,
+    :meth:`VehicleTelemetry.notify_gnss_speed`), ``event`` (records a backend event) and ``lock`` (the backend's
+    lock, which guards the margin's samples: the I/O thread adds them). :meth:`resend_speed` is handed the
+    :class:`SpeedCommander` whose DO_CHANGE_SPEED it sends again.
 
     State: whether the limits were applied, the estimator's measured margin and the cap it asks for, the worker
     thread lowering the limit (:attr:`worker`) and its retry schedule, and a DO_CHANGE_SPEED still to be re-sent."""
 
-    def __init__(self, robot_id: str, limits: Any, *, params: ParameterProtocol, vehicle: SpeedVehicle,
-                 event: Callable[..., None], lock: threading.RLock, speed_commanded: Callable[[], bool],
-                 change_speed_again: Callable[[], None]) -> None:
+    def __init__(self, robot_id: str, limits: Any, *, params: ParameterProtocol, link: MavlinkLink,
+                 clock: VehicleClock, telemetry: VehicleTelemetry, event: Callable[..., None],
+                 lock: threading.RLock) -> None:
         self.robot_id, self.limits = robot_id, limits
-        self._params, self._vehicle, self._event, self._lock = params, vehicle, event, lock
-        self._speed_commanded, self._change_speed_again = speed_commanded, change_speed_again
+        self._params, self._link, self._clock, self._telemetry = params, link, clock, telemetry
+        self._event, self._lock = event, lock
+        telemetry.notify_gnss_speed(self)
         self._limits_applied = False
         self._speed_margin = EstimatorSpeedMargin()
         self._speed_cap: SpeedCap | None = None  # lowered for the estimator's margin (None: the autopilot's rule)
@@ -242,13 +231,13 @@ class SpeedLimits:
         """The autopilot's rule for ``limits.max_speed`` (m/s): ArduCopter the limit itself, PX4
         :func:`px4_speed_limit`."""
         xy = float(self.limits.max_speed)
-        return px4_speed_limit(xy) if self._vehicle.autopilot == "px4" else xy
+        return px4_speed_limit(xy) if self._link.autopilot == "px4" else xy
 
     def _limit_parameters(self) -> dict[str, float]:
         """The parameters that carry the robot's ``limits`` on this autopilot, in the firmware's units (see the
         module docstring): ArduCopter cm/s, PX4 m/s; horizontally :meth:`xy_speed_cap`."""
         xy, z = self.xy_speed_cap(), float(self.limits.max_vertical_speed)
-        if self._vehicle.autopilot == "ardupilot":
+        if self._link.autopilot == "ardupilot":
             return {"WPNAV_SPEED": max(20.0, xy * 100.0), "WPNAV_SPEED_UP": max(10.0, z * 100.0),
                     "WPNAV_SPEED_DN": max(10.0, z * 100.0)}
         # PX4's velocity estimate jolts above its setpoint on every GPS fusion correction: a margin (see above)
@@ -261,7 +250,7 @@ class SpeedLimits:
         minus estimated horizontal speed for the speed margin. Caller: the I/O thread, holding the backend's
         lock."""
         with self._lock:
-            if est_steady and est_hspeed >= 0.5 * self.xy_speed_cap() and self._vehicle.in_air:
+            if est_steady and est_hspeed >= 0.5 * self.xy_speed_cap() and self._telemetry.in_air:
                 self._speed_margin.add(gnss_speed_mps, est_hspeed)
 
     def update(self) -> None:
@@ -272,9 +261,9 @@ class SpeedLimits:
         vehicle's limits (``set_speed_limits``), a worker thread sets it on the vehicle (:meth:`_lower_speed_limit`;
         one at a time, not while the link is lost, after a failure again only 2 -> 4 -> ... 30 vehicle seconds
         later). Only ever lowered within a connection. Never raises."""
-        if self._vehicle.t < self._speed_check_t:
+        if self._clock.t < self._speed_check_t:
             return
-        self._speed_check_t = self._vehicle.t + 2.0
+        self._speed_check_t = self._clock.t + 2.0
         xy = float(self.limits.max_speed)
         with self._lock:
             cap: SpeedCap = self._speed_margin.cap(xy, self._default_speed_cap(), floor=speed_floor(xy))
@@ -285,8 +274,8 @@ class SpeedLimits:
                         reason="the vehicle's estimator lets it fly this much faster than its estimate (GNSS, p99): "
                                "its limit cannot keep it within max_speed + 10 %")
         worker = self._speed_worker
-        if (not self._limits_applied or not self._vehicle.link_ok or (worker is not None and worker.is_alive())
-                or self._vehicle.t < self._speed_retry_t or cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS):
+        if (not self._limits_applied or not self._link.link_ok or (worker is not None and worker.is_alive())
+                or self._clock.t < self._speed_retry_t or cap.cap_mps > self.xy_speed_cap() - MIN_STEP_MPS):
             return
         self._speed_worker = threading.Thread(target=self._lower_speed_limit, args=(cap,), daemon=True,
                                               name=f"speed-limit-{self.robot_id}")
@@ -304,7 +293,7 @@ class SpeedLimits:
         except Exception as e:  # noqa: BLE001 - in flight: report, keep flying at the applied limit, retry later
             self._speed_cap = before
             self._speed_backoff_s = min(30.0, 2.0 * self._speed_backoff_s)
-            self._speed_retry_t = self._vehicle.t + self._speed_backoff_s
+            self._speed_retry_t = self._clock.t + self._speed_backoff_s
             self._event("speed_limit_update_failed", cap_mps=round(cap.cap_mps, 3), error=str(e),
                         retry_in_s=self._speed_backoff_s)
             return
@@ -313,18 +302,20 @@ class SpeedLimits:
                     max_speed=float(self.limits.max_speed), **{k: round(v, 3) for k, v in verified.items()})
         # ArduCopter's GUIDED leg flies the DO_CHANGE_SPEED it was given: the drone's thread sends it again at the
         # new limit (commands are not sent from this thread: one command exchange at a time)
-        self._speed_resend = self._vehicle.autopilot == "ardupilot" and self._speed_commanded()
+        self._speed_resend = self._link.autopilot == "ardupilot"
 
-    def resend_speed(self) -> None:
+    def resend_speed(self, speed: SpeedCommander) -> None:
         """From the backend's ``step`` (the drone's thread) after the limit was lowered: ArduPilot's DO_CHANGE_SPEED
-        again, for the speed last asked (``change_speed_again``: offboard.py ``resend_speed`` caps it at the new
-        limit); a refusal or timeout is reported (``speed_command_failed``; WPNAV_SPEED holds from the next mode
+        again when ``speed`` has one in force, for the speed last asked (offboard.py ``resend_speed`` caps it at the
+        new limit); a refusal or timeout is reported (``speed_command_failed``; WPNAV_SPEED holds from the next mode
         change). Never raises."""
         if not self._speed_resend:
             return
         self._speed_resend = False
+        if not speed.speed_commanded:
+            return
         try:
-            self._change_speed_again()
+            speed.resend_speed()
         except Exception as e:  # noqa: BLE001 - reported; flying on
             self._event("speed_command_failed", cap_mps=round(self.xy_speed_cap(), 3), error=str(e))
 

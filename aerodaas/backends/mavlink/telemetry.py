@@ -7,6 +7,7 @@ import math
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -14,7 +15,8 @@ import numpy as np
 from aerodaas.backends.base import PoseSample, VehicleBackend
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
-from aerodaas.backends.mavlink.action import Readiness
+from aerodaas.backends.mavlink.clock import VehicleClock
+from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink._common import M
 
 
@@ -26,41 +28,63 @@ ODOMETRY_QUEUE = 600
 Handler = Callable[[Any], None]
 
 
-class TelemetryVehicle(Protocol):
-    """What telemetry reads and sets of the vehicle (the backend's public members): its ENU origin :attr:`home`
-    (telemetry moves it to the autopilot's HOME_POSITION), the HEARTBEAT's armed flag and the run's clock
-    (:attr:`t`, vehicle seconds since connect)."""
+@dataclass(frozen=True)
+class Readiness:
+    """What the autopilot has reported about its readiness to arm (telemetry and HEARTBEAT, read together under the
+    backend's lock): GPS_RAW_INT ``fix_type`` (-1 before any report), whether HOME_POSITION came, SYS_STATUS
+    ``onboard_control_sensors_present`` / ``_health`` (0 before any) and every health bit ever reported, the
+    EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (None before any), HEARTBEAT ``system_status`` and armed flag,
+    whether ArduPilot's "EKFn IMUm is using GPS" was seen, and whether EKF_STATUS_REPORT will never come (its
+    stream refused, or the legacy REQUEST_DATA_STREAM in use)."""
 
-    home: GeoPoint
+    gps_fix: int
+    home_received: bool
+    sensors_present: int
+    sensors_health: int
+    health_seen: int
+    ekf_flags: int | None
+    system_status: int
+    armed: bool
+    ekf_using_gps: bool
+    ekf_report_unavailable: bool
 
-    @property
-    def armed(self) -> bool: ...
 
-    @property
-    def t(self) -> float: ...
+class PositionListener(Protocol):
+    """Told of each new position sample (mission.py :class:`~aerodaas.backends.mavlink.mission.AutopilotMission`:
+    its arrival check), on the I/O thread under the backend's lock."""
+
+    def on_position(self) -> None: ...
+
+
+class GnssSpeedListener(Protocol):
+    """Told of each GPS_RAW_INT ground speed (params.py :class:`~aerodaas.backends.mavlink.params.SpeedLimits`: the
+    estimator's margin): GNSS speed m/s, the estimate's horizontal speed m/s, whether that estimate is steady."""
+
+    def on_gnss_speed(self, gnss_speed_mps: float, est_hspeed: float, est_steady: bool) -> None: ...
 
 
 class VehicleTelemetry:
     """The vehicle's state as its streams report it (see the module docstring), fed by the I/O thread through the
     handlers of :meth:`handlers` under the backend's lock.
 
-    It knows only what it is given: ``vehicle`` (:class:`TelemetryVehicle`), the vehicle clock's callables
-    ``on_boot_ms`` (a ``time_boot_ms`` received), ``sample_time`` (a ``time_boot_ms`` on the raw vehicle clock, s)
-    and ``t_connect`` (the raw clock's value at connect, s), ``was_armed`` (armed at least once since connect: the
-    HEARTBEAT's), ``arming`` (an :meth:`~aerodaas.backends.mavlink.action.VehicleAction.arm` is under way),
-    ``on_position`` (the mission's arrival check), ``on_gnss_speed`` (the speed limits' margin: GNSS speed m/s,
-    the estimate's horizontal speed m/s, whether it is steady), ``event`` (records a backend event) and ``lock``
-    (the backend's lock)."""
+    It owns the ENU origin :attr:`home` (the configured ``home``, moved to the autopilot's HOME_POSITION) and is
+    given its collaborators: ``link`` (the HEARTBEAT's armed flag, armed at least once since connect; the
+    telemetry registers its message handlers with it), ``clock`` (the vehicle clock its ``time_boot_ms`` feed),
+    ``event`` (records a backend event) and ``lock`` (the backend's lock). :attr:`arming` is set while
+    :meth:`~aerodaas.backends.mavlink.action.VehicleAction.arm` runs. Listeners: :meth:`notify_positions`,
+    :meth:`notify_gnss_speed`."""
 
-    def __init__(self, robot_id: str, *, vehicle: TelemetryVehicle, on_boot_ms: Callable[[int], None],
-                 sample_time: Callable[[int], float], t_connect: Callable[[], float], was_armed: Callable[[], bool],
-                 arming: Callable[[], bool], on_position: Callable[[], None],
-                 on_gnss_speed: Callable[[float, float, bool], None], event: Callable[..., None],
-                 lock: threading.RLock) -> None:
-        self.robot_id, self._vehicle, self._lock, self._event = robot_id, vehicle, lock, event
-        self._on_boot_ms, self._sample_time, self._t_connect = on_boot_ms, sample_time, t_connect
-        self._was_armed, self._arming = was_armed, arming
-        self._on_position, self._on_gnss_speed = on_position, on_gnss_speed
+    def __init__(self, robot_id: str, home: GeoPoint, *, link: MavlinkLink, clock: VehicleClock,
+                 event: Callable[..., None], lock: threading.RLock) -> None:
+        self.robot_id, self._link, self._clock, self._lock, self._event = robot_id, link, clock, lock, event
+        #: the ENU origin (WGS-84 degrees, metres AMSL): the configured home until the autopilot reports its own
+        self.home = home
+        #: an :meth:`~aerodaas.backends.mavlink.action.VehicleAction.arm` is under way (set by the actions)
+        self.arming = False
+        self._position_listeners: list[PositionListener] = []
+        self._gnss_listeners: list[GnssSpeedListener] = []
+        for message_type, handler in self.handlers().items():
+            link.handle(message_type, handler)
         self._pos = np.zeros(3)
         self._pos_t = 0.0  # vehicle time (raw clock, s) of the position sample in _pos
         self._pos_seq = 0  # position samples received
@@ -94,6 +118,14 @@ class VehicleTelemetry:
         self._alt_ref: float | None = None  # AMSL metres of the take-off point (fixed at arming)
         self._home_moved_alt = 0.0
 
+    def notify_positions(self, listener: PositionListener) -> None:
+        """Tell ``listener`` of each new position sample from now on."""
+        self._position_listeners.append(listener)
+
+    def notify_gnss_speed(self, listener: GnssSpeedListener) -> None:
+        """Tell ``listener`` of each GNSS ground speed from now on."""
+        self._gnss_listeners.append(listener)
+
     def handlers(self) -> dict[str, Handler]:
         """The handler of each telemetry message type (MAVLink message name), for the I/O thread's dispatch."""
         return {"GLOBAL_POSITION_INT": self.on_global_position_int, "LOCAL_POSITION_NED": self.on_local_position_ned,
@@ -105,17 +137,18 @@ class VehicleTelemetry:
     def on_global_position_int(self, msg: Any) -> None:
         """GLOBAL_POSITION_INT: the position (ENU from home, height above the altitude reference), its velocity
         and heading when nothing fresher came. Caller holds ``_lock``."""
-        self._on_boot_ms(msg.time_boot_ms)
+        self._boot_ms(msg.time_boot_ms)
         if msg.lat == 0 and msg.lon == 0:
             return  # ArduPilot sends zeros before its position estimate exists
         lat, lon = msg.lat / 1e7, msg.lon / 1e7
         self._geo = GeoPoint(lat=lat, lon=lon, alt=msg.alt / 1000.0)
         self._rel_alt = msg.relative_alt / 1000.0
-        e, n, _ = geodetic_to_enu(lat, lon, self._vehicle.home.alt, self._vehicle.home)
+        e, n, _ = geodetic_to_enu(lat, lon, self.home.alt, self.home)
         self._pos = np.array([e, n, self._height()])
         self._new_sample(msg.time_boot_ms)
         self._has_global = True
-        self._on_position()
+        for listener in self._position_listeners:
+            listener.on_position()
         if time.monotonic() - self._local_wall > 1.0:  # no fresher LOCAL_POSITION_NED velocity
             v_ned = (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0)
             self._set_velocity(VehicleBackend.ned_to_enu(v_ned), msg.time_boot_ms)
@@ -138,7 +171,7 @@ class VehicleTelemetry:
         (``COM_HOME_EN``, commander ``HomePosition::update``)."""
         with self._lock:
             if self._geo is None:
-                ref = self._vehicle.home.alt
+                ref = self.home.alt
             elif self.in_air:
                 ref = self._geo.alt - self._rel_alt
             else:
@@ -146,7 +179,7 @@ class VehicleTelemetry:
             self._alt_ref = ref
             if self._geo is not None:
                 self._pos = np.array([self._pos[0], self._pos[1], self._height()])
-        self._event("altitude_reference", amsl_m=round(ref, 3), home_amsl_m=round(self._vehicle.home.alt, 3))
+        self._event("altitude_reference", amsl_m=round(ref, 3), home_amsl_m=round(self.home.alt, 3))
 
     @property
     def altitude_reference(self) -> float | None:
@@ -164,7 +197,7 @@ class VehicleTelemetry:
     def on_local_position_ned(self, msg: Any) -> None:
         """LOCAL_POSITION_NED: the velocity, and the position (ENU from the EKF origin) without a global one.
         Caller holds ``_lock``."""
-        self._on_boot_ms(msg.time_boot_ms)
+        self._boot_ms(msg.time_boot_ms)
         self._local_ned = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
         self._local_wall = time.monotonic()
         self._set_velocity(VehicleBackend.ned_to_enu((msg.vx, msg.vy, msg.vz)), msg.time_boot_ms)
@@ -189,7 +222,7 @@ class VehicleTelemetry:
         """A new position sample: its own ``time_boot_ms`` (not the latest of all messages: ATTITUDE or SYSTEM_TIME
         stamped a few ms later may have come first), on the run's clock, stamps the odometry made from it, and
         :attr:`sample_key` changes. Caller holds ``_lock``."""
-        raw = self._sample_time(ms)
+        raw = self._clock.sample_time(ms)
         self._pos_t = max(raw, self._pos_t)
         self._pos_seq += 1
 
@@ -202,14 +235,14 @@ class VehicleTelemetry:
 
     def on_attitude(self, msg: Any) -> None:
         """ATTITUDE: roll, pitch (degrees) and ENU yaw. Caller holds ``_lock``."""
-        self._on_boot_ms(msg.time_boot_ms)
+        self._boot_ms(msg.time_boot_ms)
         yaw = VehicleBackend.enu_yaw_from_heading(math.degrees(msg.yaw))
         self._att = (math.degrees(msg.roll), math.degrees(msg.pitch), yaw)
         self._att_wall = time.monotonic()
 
     def on_system_time(self, msg: Any) -> None:
         """SYSTEM_TIME: a ``time_boot_ms`` for the vehicle clock."""
-        self._on_boot_ms(msg.time_boot_ms)
+        self._boot_ms(msg.time_boot_ms)
 
     def on_sys_status(self, msg: Any) -> None:
         """SYS_STATUS: sensor bits for readiness, the battery (when BATTERY_STATUS gives none) and its voltage."""
@@ -240,7 +273,8 @@ class VehicleTelemetry:
         if msg.fix_type >= M.GPS_FIX_TYPE_3D_FIX:
             self._gps_h_acc = max(0.0, float(getattr(msg, "h_acc", 0) or 0) / 1000.0)
         if msg.fix_type >= M.GPS_FIX_TYPE_3D_FIX and msg.vel != 65535:  # UINT16_MAX: speed unknown
-            self._on_gnss_speed(msg.vel / 100.0, self._est_hspeed, self._est_steady)
+            for listener in self._gnss_listeners:
+                listener.on_gnss_speed(msg.vel / 100.0, self._est_hspeed, self._est_steady)
 
     def on_extended_sys_state(self, msg: Any) -> None:
         """EXTENDED_SYS_STATE: the landed state (for :attr:`in_air`)."""
@@ -257,25 +291,30 @@ class VehicleTelemetry:
         if self._home_after is not None and abs(home.lat - self._home_after.lat) <= 1e-7 \
                 and abs(home.lon - self._home_after.lon) <= 1e-7 and abs(home.alt - self._home_after.alt) <= 0.01:
             return  # the moved home reported again (HOME_POSITION streams at 0.5 Hz)
-        old = self._vehicle.home
+        old = self.home
         moved = (not self._home_received or abs(home.lat - old.lat) > 1e-7 or abs(home.lon - old.lon) > 1e-7
                  or abs(home.alt - old.alt) > 0.01)
-        if moved and self._home_received and self._vehicle.armed:
+        if moved and self._home_received and self._link.armed:
             if abs(home.alt - old.alt) > abs(self._home_moved_alt - old.alt) + 0.5:  # a new largest move only
                 self._home_moved_alt = home.alt
                 self._event("home_moved_in_flight", lat=home.lat, lon=home.lon, alt=home.alt)
             return
-        if moved and self._home_received and self._was_armed() and not self._arming():
+        if moved and self._home_received and self._link.was_armed and not self.arming:
             self._event("home_moved", lat=home.lat, lon=home.lon, alt=home.alt, reason="after landing")
             self._home_after = home
             return
         if moved:
             self._rebase_home(home)
 
+    def _boot_ms(self, ms: int) -> None:
+        """A ``time_boot_ms`` for the vehicle clock; the events it reports are recorded. Caller holds ``_lock``."""
+        for name in self._clock.on_boot_ms(ms):
+            self._event(name)
+
     def home_for_flight(self) -> None:
         """A new flight (:meth:`arm`): a home the autopilot moved after the last flight (reported as ``home_moved``)
         becomes the ENU origin, as the home it sets where it arms will. Caller holds ``_lock``."""
-        if self._home_after is not None and not self._vehicle.armed:
+        if self._home_after is not None and not self._link.armed:
             self._rebase_home(self._home_after)
 
     def readiness(self, system_status: int, ekf_using_gps: bool, ekf_report_unavailable: bool) -> Readiness:
@@ -285,14 +324,14 @@ class VehicleTelemetry:
         present, health = (self._sensors[0], self._sensors[2]) if self._sensors is not None else (0, 0)
         return Readiness(gps_fix=self._gps_fix, home_received=self._home_received, sensors_present=present,
                          sensors_health=health, health_seen=self._health_seen, ekf_flags=self._ekf_flags,
-                         system_status=system_status, armed=self._vehicle.armed, ekf_using_gps=ekf_using_gps,
+                         system_status=system_status, armed=self._link.armed, ekf_using_gps=ekf_using_gps,
                          ekf_report_unavailable=ekf_report_unavailable)
 
     def _rebase_home(self, home: GeoPoint) -> None:
         """Make ``home`` the ENU origin (re-expressing the last fix in it). Caller holds ``_lock``."""
         self._home_moved_alt = home.alt
         self._home_after = None
-        self._vehicle.home = home
+        self.home = home
         self._home_received = True
         if self._geo is not None:
             e, n, _ = geodetic_to_enu(self._geo.lat, self._geo.lon, home.alt, home)
@@ -332,7 +371,7 @@ class VehicleTelemetry:
             if self._landed_state and time.monotonic() - self._landed_wall < 5.0:
                 return self._landed_state in (M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF,
                                               M.MAV_LANDED_STATE_LANDING)
-            return self._vehicle.armed and self._height() > 0.3
+            return self._link.armed and self._height() > 0.3
 
     @property
     def battery_pct(self) -> float:
@@ -357,28 +396,28 @@ class VehicleTelemetry:
 
     def odometry(self) -> Odometry:
         """The latest position sample with the velocity, attitude, battery and state known with it, stamped with the
-        sample's own vehicle time on the run's clock (never after :attr:`TelemetryVehicle.t`)."""
+        sample's own vehicle time on the run's clock (never after the vehicle clock's :attr:`VehicleClock.t`)."""
         with self._lock:
             pos = tuple(float(v) for v in self._pos)
-            geo = self._geo or enu_to_geodetic(pos[0], pos[1], pos[2], self._vehicle.home)
+            geo = self._geo or enu_to_geodetic(pos[0], pos[1], pos[2], self.home)
             t = self._sample_run_t()
             return Odometry(robot_id=self.robot_id, t=t, position=pos, geodetic=geo,
                             velocity=tuple(float(v) for v in self._vel),
                             attitude=Attitude(roll=self._att[0], pitch=self._att[1], yaw=self._att[2]),
-                            battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._vehicle.armed,
+                            battery_pct=self.battery_pct, battery_voltage=self._battery_v, armed=self._link.armed,
                             in_air=self.in_air)
 
     def _sample_run_t(self) -> float:
         """The run time (s) of the position sample in ``_pos``: its own ``time_boot_ms`` mapped to the run's clock,
-        never after :attr:`TelemetryVehicle.t` (that time before the first sample). Caller holds ``_lock``."""
-        t = self._vehicle.t
+        never after the vehicle clock's :attr:`VehicleClock.t` (that time before the first sample). Caller holds ``_lock``."""
+        t = self._clock.t
         if self._pos_seq:
-            t = min(t, max(0.0, self._pos_t - self._t_connect()))
+            t = min(t, max(0.0, self._pos_t - self._clock.t_connect))
         return float(t)
 
     def pose_sample(self) -> PoseSample:
         """The latest position sample with the yaw known with it, stamped as :meth:`odometry` stamps it (the
-        sample's own ``time_boot_ms`` on the run's clock, never after :attr:`TelemetryVehicle.t`), read under one
+        sample's own ``time_boot_ms`` on the run's clock, never after :attr:`VehicleClock.t`), read under one
         lock: see :meth:`~aerodaas.backends.base.VehicleBackend.pose_sample`."""
         with self._lock:
             return PoseSample(self._sample_run_t(), (float(self._pos[0]), float(self._pos[1]), float(self._pos[2])),

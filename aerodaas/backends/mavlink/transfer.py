@@ -10,7 +10,8 @@ from typing import Any, Callable
 
 from aerodaas.backends.base import BackendError, CommandRefused
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32
-from aerodaas.backends.mavlink.params import LinkCheck, VehicleSender
+from aerodaas.backends.mavlink.link import MavlinkLink
+from aerodaas.backends.mavlink.statustext import StatusTexts
 
 __all__ = ["MissionTransfer", "FENCE", "RALLY", "Wire"]
 
@@ -24,23 +25,21 @@ Wire = tuple
 class MissionTransfer:
     """The mission protocol's exchanges with one vehicle, one at a time (the control thread waits for each).
 
-    It talks to the link only through what it is given: ``send`` and ``check_link`` (the link's), ``target`` (the
-    vehicle's system and component id), ``status_text_since`` (the autopilot's latest STATUSTEXT since a wall time,
-    for refusals: the command concern's), ``event`` (records a backend event) and ``wire_version`` (the link's
-    MAVLink version, ``"1.0"`` / ``"2.0"``). ``settings``: ``command_timeout_s``, ``command_retries``,
-    ``source_system``. :meth:`offer` is fed every mission message for us (the I/O thread).
+    It is given its collaborators: ``link`` (sending, the link check, the vehicle's system and component id, the
+    MAVLink version ``"1.0"`` / ``"2.0"``; it registers with it, :meth:`MavlinkLink.serve_mission_protocol`, and
+    :meth:`offer` is fed every mission message for us on the I/O thread), ``texts`` (the autopilot's latest
+    STATUSTEXT since a wall time, for refusals) and ``event`` (records a backend event). ``settings``:
+    ``command_timeout_s``, ``command_retries``, ``source_system``.
 
     State: the queue of mission messages of the exchange under way and whether one is (only then are they
     queued)."""
 
-    def __init__(self, robot_id: str, settings: Any, *, send: VehicleSender, check_link: LinkCheck,
-                 target: Callable[[], tuple[int, int]], status_text_since: Callable[[float], str],
-                 event: Callable[..., None], wire_version: Callable[[], str]) -> None:
-        self.robot_id, self._settings = robot_id, settings
-        self._send, self._check_link, self._target = send, check_link, target
-        self._status_text_since, self._event, self._wire_version = status_text_since, event, wire_version
+    def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink, texts: StatusTexts,
+                 event: Callable[..., None]) -> None:
+        self.robot_id, self._settings, self._link, self._texts, self._event = robot_id, settings, link, texts, event
         self._queue: queue.Queue = queue.Queue()
         self._active = False
+        link.serve_mission_protocol(self)
 
     def offer(self, msg: Any) -> None:
         """A mission message from the vehicle (MISSION_REQUEST(_INT), MISSION_ACK, MISSION_COUNT,
@@ -57,12 +56,12 @@ class MissionTransfer:
             # always MISSION_ITEM_INT, also to a MISSION_REQUEST (ArduPilot: "GCS should send MISSION_ITEM_INT";
             # the float MISSION_ITEM loses ~0.4 m of latitude/longitude in float32)
             frame, cmd, auto, p1, p2, p3, p4, xi, yi, z = wire[seq]
-            self._send(lambda mav: mav.mission_item_int_send(*self._target(), seq, frame, cmd, 0, auto,
+            self._link.send(lambda mav: mav.mission_item_int_send(*self._link.target, seq, frame, cmd, 0, auto,
                                                              p1, p2, p3, p4, xi, yi, z, 0))
 
         def resend(last: Any) -> None:
             if last is None:
-                self._send(lambda mav: mav.mission_count_send(*self._target(), n, 0))
+                self._link.send(lambda mav: mav.mission_count_send(*self._link.target, n, 0))
             else:
                 send_item(*last)
 
@@ -83,7 +82,7 @@ class MissionTransfer:
                     return False
                 if msg.type != M.MAV_MISSION_ACCEPTED:
                     raise CommandRefused(self.robot_id, "mission upload", _enum_name("MAV_MISSION_RESULT", msg.type),
-                                         self._status_text_since(state["start"]))
+                                         self._texts.since(state["start"]))
                 return state["max"] == n - 1 or n == 0
             return False
 
@@ -115,7 +114,7 @@ class MissionTransfer:
                     except queue.Empty:
                         pass
                 if msg is None:
-                    self._check_link(name)
+                    self._link.check_link(name)
                     retries += 1
                     if retries > self._settings.command_retries:
                         raise BackendError(f"robot {self.robot_id!r}: {name}: no usable answer after {retries} "
@@ -141,10 +140,10 @@ class MissionTransfer:
         got: dict[int, Any] = {}
 
         def begin() -> None:
-            self._send(lambda mav: mav.mission_request_list_send(*self._target(), mission_type))
+            self._link.send(lambda mav: mav.mission_request_list_send(*self._link.target, mission_type))
 
         def request(seq: int) -> None:
-            self._send(lambda mav: mav.mission_request_int_send(*self._target(), seq, mission_type))
+            self._link.send(lambda mav: mav.mission_request_int_send(*self._link.target, seq, mission_type))
 
         def resend(last: Any) -> None:
             begin() if last is None else request(last)
@@ -167,16 +166,16 @@ class MissionTransfer:
                 request(msg.seq + 1)
             elif t == "MISSION_ACK" and msg.type != M.MAV_MISSION_ACCEPTED:
                 raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
-                                     self._status_text_since(state["start"]))
+                                     self._texts.since(state["start"]))
             return False
 
         self._transaction(what, begin, resend, on_msg)
-        self._send(lambda mav: mav.mission_ack_send(*self._target(), M.MAV_MISSION_ACCEPTED, mission_type))
+        self._link.send(lambda mav: mav.mission_ack_send(*self._link.target, M.MAV_MISSION_ACCEPTED, mission_type))
         return got
 
     def clear_mission(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
-        self._check_link("mission clear")
+        self._link.check_link("mission clear")
 
         def on_msg(msg: Any, state: dict) -> bool:
             if msg.get_type() == "MISSION_ACK":
@@ -185,7 +184,7 @@ class MissionTransfer:
                 return True
             return False
 
-        clear = lambda *_: self._send(lambda mav: mav.mission_clear_all_send(*self._target(), 0))  # noqa: E731
+        clear = lambda *_: self._link.send(lambda mav: mav.mission_clear_all_send(*self._link.target, 0))  # noqa: E731
         self._transaction("mission clear", clear, clear, on_msg)
 
     # ------------------------------------------------------------------ typed transfers (fence, rally)
@@ -193,7 +192,7 @@ class MissionTransfer:
         """``mission_type`` is a MAVLink 2 extension field: framed as MAVLink 1 it is dropped and the vehicle takes
         a fence for its mission (and overwrites the mission). Raises BackendError on a MAVLink 1 link."""
         if mission_type != M.MAV_MISSION_TYPE_MISSION and \
-                self._wire_version() != "2.0":
+                self._link.wire_version != "2.0":
             raise BackendError(f"robot {self.robot_id!r}: {what}: the link speaks MAVLink 1, which cannot carry "
                                f"mission_type; the vehicle must send MAVLink 2 (ArduPilot SERIALn_PROTOCOL 2)")
 
@@ -203,18 +202,18 @@ class MissionTransfer:
         them. Raises CommandRefused (MAV_MISSION_RESULT name), BackendError after ``command_retries`` timeouts,
         LinkLost."""
         what = f"{_TYPE_NAME.get(mission_type, mission_type)} upload"
-        self._check_link(what)
+        self._link.check_link(what)
         self._require_mavlink2(what, mission_type)
         n = len(wire)
 
         def send_item(seq: int) -> None:
             frame, cmd, p1, p2, p3, p4, xi, yi, z = wire[seq]
-            self._send(lambda mav: mav.mission_item_int_send(*self._target(), seq, frame, cmd, 0, 1,
+            self._link.send(lambda mav: mav.mission_item_int_send(*self._link.target, seq, frame, cmd, 0, 1,
                                                              p1, p2, p3, p4, xi, yi, z, mission_type))
 
         def resend(last: Any) -> None:
             if last is None:
-                self._send(lambda mav: mav.mission_count_send(*self._target(), n, mission_type))
+                self._link.send(lambda mav: mav.mission_count_send(*self._link.target, n, mission_type))
             else:
                 send_item(last)
 
@@ -233,7 +232,7 @@ class MissionTransfer:
                     return False  # ArduPilot: an answer to a request it had already repeated (see mission.py)
                 if msg.type != M.MAV_MISSION_ACCEPTED:
                     raise CommandRefused(self.robot_id, what, _enum_name("MAV_MISSION_RESULT", msg.type),
-                                         self._status_text_since(state["start"]))
+                                         self._texts.since(state["start"]))
                 return state["max"] == n - 1 or n == 0
             return False
 
@@ -244,7 +243,7 @@ class MissionTransfer:
         item, MISSION_ACK), as wire tuples ``(frame, command, param1..4, x, y, z)``. Raises CommandRefused,
         BackendError, LinkLost."""
         what = f"{_TYPE_NAME.get(mission_type, mission_type)} download"
-        self._check_link(what)
+        self._link.check_link(what)
         self._require_mavlink2(what, mission_type)
         got = self.download_messages(mission_type, what)
         out = []

@@ -32,8 +32,8 @@ packets' arrival times), z is ``h``; yaw is converted to ENU with the mission-st
 ``TelloConfig.initial_heading_deg`` (the heading the Tello faces when :meth:`TelloBackend.connect` runs). The
 geodetic fix is home + ENU, so it drifts like the dead reckoning does.
 
-Modules, one concern each, the way the MAVLink backend is split (mixins of :class:`~.backend.TelloBackend`, which
-holds the shared state): :mod:`.protocol` (the SDK's state packets and ``go`` command), :mod:`.video` (the H.264
+Modules, one concern each, the way the MAVLink backend is split (concern objects composed by :class:`~.backend.TelloBackend`,
+each given its collaborators): :mod:`.protocol` (the SDK's state packets and ``go`` command), :mod:`.video` (the H.264
 stream), :mod:`.link` (sockets, receiver threads, keep-alive, the command channel), :mod:`.control` (the motion
 worker and the flight commands) and :mod:`.backend` (the class, its state and odometry).
 """

@@ -1,12 +1,9 @@
-"""The DJI Tello vehicle backend: :class:`TelloBackend`, one class composed of the link and control mixins
-(see the package docstring), holding the shared state: the dead-reckoned pose, the newest video frame, events."""
+"""The DJI Tello vehicle backend: :class:`TelloBackend`, composed of its link (:class:`~.link.TelloLink`: sockets,
+receivers, the dead-reckoned state, the video) and its flight control (:class:`~.control.TelloControl`), each
+given what it needs (see the package docstring)."""
 from __future__ import annotations
 
-import queue
-import socket
-import threading
-import time
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -16,13 +13,13 @@ from aerodaas.plugins.sensor import FrameSensor
 from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.model.types import Attitude, Odometry
 from aerodaas.backends.base import VehicleBackend
-from aerodaas.backends.tello.control import ControlMixin, _Motion
-from aerodaas.backends.tello.link import LinkMixin
+from aerodaas.backends.tello.control import TelloControl
+from aerodaas.backends.tello.link import TelloLink
 
 __all__ = ["TelloBackend"]
 
 
-class TelloBackend(LinkMixin, ControlMixin, VehicleBackend):
+class TelloBackend(VehicleBackend):
     """A DJI Tello over the SDK 2.0 UDP protocol (see the package docstring for the protocol and conventions).
 
     Threads: a reply receiver (command socket), a state receiver (parses packets, dead-reckons, watches the
@@ -45,52 +42,35 @@ class TelloBackend(LinkMixin, ControlMixin, VehicleBackend):
     provides_camera = True  # the Tello's H.264 video stream (video.py)
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
+        """The link and the flight control, each given its collaborators (see :class:`TelloLink`,
+        :class:`TelloControl`)."""
         super().__init__(cfg.id, cfg.home)
         self.cfg: TelloConfig = self.options(cfg)
         self.limits = cfg.limits
-        self._state_lock = threading.Lock()
-        self._cmd_lock = threading.Lock()
-        self._replies: queue.Queue[str] = queue.Queue()
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
-        self._cmd_sock: socket.socket | None = None
-        self._state_sock: socket.socket | None = None
-        self._video_sock: socket.socket | None = None
-        self._t0 = time.monotonic()
-        self._connected = False
-        # state (guarded by _state_lock)
-        self._pos = np.zeros(3)
-        self._vel = np.zeros(3)
-        self._yaw_enu = self.enu_yaw_from_heading(self.cfg.initial_heading_deg)
-        self._roll = self._pitch = 0.0
-        self._bat = 0.0
-        self._h_cm = 0.0
-        self._yaw_ref: float | None = None  # Tello yaw at connect
-        self._last_state: float | None = None  # monotonic arrival of the last good packet
-        #: monotonic arrival of the last packet that showed the Tello at rest (0 dm/s, yaw as in the one before)
-        self._rest_at: float | None = None
-        self._armed = False
-        self._frame: tuple[np.ndarray, float] | None = None
-        self._link_was_ok = True
-        self._events: list[dict[str, Any]] = []
-        # control
-        self._motion: _Motion | None = None
-        self._sticks = (0, 0, 0, 0)
-        self._last_send = 0.0
-        self.stats = {"commands": 0, "retries": 0, "timeouts": 0, "stale_replies": 0, "state_packets": 0,
-                      "malformed_state": 0, "keepalives": 0, "video_datagrams": 0, "video_frames": 0,
-                      "video_errors": 0, "video_decode_ms": 0.0, "settle_timeouts": 0}
-        #: the Tello's last reply other than ``ok`` (diagnostics)
-        self.last_status = ""
         #: ids of the robot's camera sensors with ``properties.source: backend``: they need the video stream
-        self._video_sensors = [s.id for s in cfg.sensors
-                               if issubclass(sensor_class(s.type), FrameSensor)
-                               and s.properties.get("source") == "backend"]
+        video_sensors = [s.id for s in cfg.sensors
+                         if issubclass(sensor_class(s.type), FrameSensor)
+                         and s.properties.get("source") == "backend"]
+        #: sockets, receivers, keep-alive, command channel, the dead-reckoned state and the video (link.py)
+        self.link = TelloLink(self.robot_id, self.cfg, video_sensors)
+        #: the motion worker and the flight commands (control.py)
+        self.control = TelloControl(self.robot_id, self.cfg, self.limits, self.link)
+        self._link_was_ok = True
 
-    # ------------------------------------------------------------------ time and state
+    # ------------------------------------------------------------------ lifecycle, time and state
+    def connect(self, timeout_s: float = 30.0) -> None:
+        """:meth:`TelloLink.connect`."""
+        self.link.connect(timeout_s)
+
+    def close(self) -> None:
+        """Cancel a running manoeuvre, then :meth:`TelloLink.close` (idempotent, never raises; does not land)."""
+        self.control.cancel()
+        self.link.close()
+
     @property
     def t(self) -> float:
-        return time.monotonic() - self._t0
+        """Wall seconds since :meth:`connect` (:attr:`TelloLink.t`)."""
+        return self.link.t
 
     def step(self, dt: float) -> None:
         """Non-blocking: turns link changes into ``link_lost``/``link_regained`` events (state arrives on a
@@ -98,61 +78,86 @@ class TelloBackend(LinkMixin, ControlMixin, VehicleBackend):
         ok = self.link_ok
         if ok != self._link_was_ok:
             self._link_was_ok = ok
-            self._push_event("link_regained" if ok else "link_lost")
+            self.link.event("link_regained" if ok else "link_lost")
 
     @property
     def link_ok(self) -> bool:
-        last = self._last_state
-        return last is not None and time.monotonic() - last < self.cfg.state_timeout_s
+        """:attr:`TelloLink.link_ok`."""
+        return self.link.link_ok
 
     @property
     def position(self) -> np.ndarray:
-        with self._state_lock:
-            return self._pos.copy()
+        """:attr:`TelloLink.position`."""
+        return self.link.position
 
     @property
     def velocity(self) -> np.ndarray:
-        with self._state_lock:
-            return self._vel.copy()
+        """:attr:`TelloLink.velocity`."""
+        return self.link.velocity
 
     @property
     def yaw(self) -> float:
-        return float(self._yaw_enu) % 360.0
+        """:attr:`TelloLink.yaw`."""
+        return self.link.yaw
 
     @property
     def armed(self) -> bool:
-        return self._armed or self.in_air
+        """Marked armed (:attr:`TelloControl.armed`) or in the air."""
+        return self.control.armed or self.in_air
 
     @property
     def in_air(self) -> bool:
         """True while the Tello reports a height (``h`` >= 10 cm) above its take-off point."""
-        return self._h_cm >= 10.0
+        return self.link.height_cm >= 10.0
 
     @property
     def battery_pct(self) -> float:
-        return float(self._bat)
+        """:attr:`TelloLink.battery_pct`."""
+        return self.link.battery_pct
 
     def odometry(self) -> Odometry:
-        with self._state_lock:
-            pos, vel = self._pos.copy(), self._vel.copy()
-            roll, pitch, yaw, bat = self._roll, self._pitch, self._yaw_enu % 360.0, self._bat
+        """The dead-reckoned pose (:meth:`TelloLink.pose`) with its geodetic fix from :attr:`home`."""
+        pos, vel, roll, pitch, yaw, bat = self.link.pose()
         geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
         return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
                         velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=roll, pitch=pitch, yaw=yaw),
                         battery_pct=float(min(max(bat, 0.0), 100.0)), armed=self.armed, in_air=self.in_air)
 
-    def _push_event(self, name: str, **kw: Any) -> None:
-        with self._state_lock:
-            self._events.append({"event": name, "t": self.t, **kw})
-
     def drain_events(self) -> list[dict[str, Any]]:
-        with self._state_lock:
-            out, self._events = self._events, []
-        return out
+        """:meth:`TelloLink.drain_events`."""
+        return self.link.drain_events()
 
     def camera_frame(self) -> tuple[np.ndarray, float] | None:
         """The newest decoded video frame, ``(720, 960, 3) uint8 BGR`` on a real Tello, and its arrival time
         on :attr:`t`'s clock; None before the first frame, with ``video`` off, or after a refused ``streamon``
         (a ``video_error`` event)."""
-        with self._state_lock:
-            return self._frame
+        return self.link.frame()
+
+    # ------------------------------------------------------------------ the contract's flight commands (control.py)
+    def arm(self) -> None:
+        """:meth:`TelloControl.arm`."""
+        self.control.arm()
+
+    def disarm(self) -> None:
+        """:meth:`TelloControl.disarm`."""
+        self.control.disarm()
+
+    def takeoff(self, altitude_m: float) -> None:
+        """:meth:`TelloControl.takeoff`."""
+        self.control.takeoff(altitude_m)
+
+    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
+        """:meth:`TelloControl.goto`."""
+        self.control.goto(target_enu, speed)
+
+    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
+        """:meth:`TelloControl.set_velocity`."""
+        self.control.set_velocity(v_enu, yaw_rate_dps)
+
+    def hold(self) -> None:
+        """:meth:`TelloControl.hold`."""
+        self.control.hold()
+
+    def land(self) -> None:
+        """:meth:`TelloControl.land`."""
+        self.control.land()

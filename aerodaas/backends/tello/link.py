@@ -1,5 +1,6 @@
-"""The Tello link: UDP sockets, the receiver threads (command replies, state packets with dead reckoning, video),
-the keep-alive, and the command channel (one transaction at a time, retries, stale replies drained)."""
+"""The Tello link (:class:`TelloLink`): UDP sockets, the receiver threads (command replies, state packets with dead
+reckoning, video), the keep-alive, the command channel (one transaction at a time, retries, stale replies drained),
+and what the state packets and the video stream say: the dead-reckoned pose, the newest frame, the events."""
 from __future__ import annotations
 
 import logging
@@ -8,11 +9,11 @@ import queue
 import socket
 import threading
 import time
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost, VehicleBackend
 from aerodaas.backends.tello.protocol import parse_state
 from aerodaas.backends.tello.video import H264Reassembler
 
@@ -24,8 +25,135 @@ class _Cancelled(Exception):
     pass
 
 
-class LinkMixin:
-    """Part of :class:`~aerodaas.backends.tello.backend.TelloBackend` (see its ``__init__`` for the shared state)."""
+class TelloLink:
+    """The link to one Tello (see the module docstring), a concern object of
+    :class:`~aerodaas.backends.tello.backend.TelloBackend`. ``cfg``: the robot's
+    :class:`~aerodaas.config.TelloConfig`; ``video_sensors``: ids of the robot's camera sensors that read the
+    Tello's video (a refused ``streamon`` then fails :meth:`connect`).
+
+    State (the pose guarded by a lock: the state receiver updates it): the sockets and threads, the replies
+    waiting, the dead-reckoned position (ENU m), velocity (ENU m/s), yaw (ENU degrees), roll/pitch (degrees),
+    battery (%), height ``h`` (cm), when the last state packet came and the last one at rest, the newest video
+    frame, the events not yet drained, :attr:`stats` (counters) and :attr:`last_status` (the Tello's last reply
+    other than ``ok``). :attr:`sticks` are the virtual sticks the keep-alive re-sends unless :attr:`manoeuvre` (the
+    motion worker's thread) runs."""
+
+    def __init__(self, robot_id: str, cfg: Any, video_sensors: list[str]) -> None:
+        self.robot_id, self.cfg, self._video_sensors = robot_id, cfg, video_sensors
+        self._state_lock = threading.Lock()
+        self._cmd_lock = threading.Lock()
+        self._replies: queue.Queue[str] = queue.Queue()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._cmd_sock: socket.socket | None = None
+        self._state_sock: socket.socket | None = None
+        self._video_sock: socket.socket | None = None
+        self._t0 = time.monotonic()
+        self._connected = False
+        # state (guarded by _state_lock)
+        self._pos = np.zeros(3)
+        self._vel = np.zeros(3)
+        self._yaw_enu = VehicleBackend.enu_yaw_from_heading(cfg.initial_heading_deg)
+        self._roll = self._pitch = 0.0
+        self._bat = 0.0
+        self._h_cm = 0.0
+        self._yaw_ref: float | None = None  # Tello yaw at connect
+        self._last_state: float | None = None  # monotonic arrival of the last good packet
+        #: monotonic arrival of the last packet that showed the Tello at rest (0 dm/s, yaw as in the one before)
+        self._rest_at: float | None = None
+        self._frame: tuple[np.ndarray, float] | None = None
+        self._events: list[dict[str, Any]] = []
+        #: the virtual sticks (``rc a b c d``) the keep-alive re-sends
+        self.sticks: tuple[int, int, int, int] = (0, 0, 0, 0)
+        #: the motion worker's thread while a manoeuvre may run (control.py): no keep-alive meanwhile
+        self.manoeuvre: threading.Thread | None = None
+        self._last_send = 0.0
+        self.stats = {"commands": 0, "retries": 0, "timeouts": 0, "stale_replies": 0, "state_packets": 0,
+                      "malformed_state": 0, "keepalives": 0, "video_datagrams": 0, "video_frames": 0,
+                      "video_errors": 0, "video_decode_ms": 0.0, "settle_timeouts": 0}
+        #: the Tello's last reply other than ``ok`` (diagnostics)
+        self.last_status = ""
+
+    # ------------------------------------------------------------------ time and state
+    @property
+    def t(self) -> float:
+        """Wall seconds since :meth:`connect` (since construction before it)."""
+        return time.monotonic() - self._t0
+
+    @property
+    def connected(self) -> bool:
+        """:meth:`connect` succeeded and :meth:`close` has not run."""
+        return self._connected
+
+    @property
+    def closed(self) -> bool:
+        """:meth:`close` ran: the threads are stopped and released."""
+        return self._stop.is_set() and not self._threads
+
+    @property
+    def link_ok(self) -> bool:
+        """A state packet came within ``state_timeout_s``."""
+        last = self._last_state
+        return last is not None and time.monotonic() - last < self.cfg.state_timeout_s
+
+    @property
+    def position(self) -> np.ndarray:
+        """(3,) ENU metres: dead-reckoned x/y, ``h`` as z (a copy)."""
+        with self._state_lock:
+            return self._pos.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """(3,) ENU m/s of the latest state packet (a copy)."""
+        with self._state_lock:
+            return self._vel.copy()
+
+    @property
+    def yaw(self) -> float:
+        """ENU yaw, degrees 0..360 (counter-clockwise from east)."""
+        return float(self._yaw_enu) % 360.0
+
+    @property
+    def height_cm(self) -> float:
+        """The state packets' ``h``: centimetres above the take-off point."""
+        return self._h_cm
+
+    @property
+    def battery_pct(self) -> float:
+        """The state packets' ``bat``, percent."""
+        return float(self._bat)
+
+    @property
+    def rest_at(self) -> float | None:
+        """Monotonic arrival of the last state packet showing the Tello at rest (None before one)."""
+        return self._rest_at
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray, float, float, float, float]:
+        """One consistent reading: position (ENU m), velocity (ENU m/s), roll, pitch, yaw (ENU, 0..360) in
+        degrees, battery percent."""
+        with self._state_lock:
+            return self._pos.copy(), self._vel.copy(), self._roll, self._pitch, self._yaw_enu % 360.0, self._bat
+
+    def correct_horizontal(self, east_m: float, north_m: float) -> None:
+        """Set the dead-reckoned horizontal position (the Tello's own estimate after an answered ``go``)."""
+        with self._state_lock:
+            self._pos[0], self._pos[1] = east_m, north_m
+
+    def event(self, name: str, **fields: Any) -> None:
+        """Record an event ``{"event": name, "t": :attr:`t`, **fields}``."""
+        with self._state_lock:
+            self._events.append({"event": name, "t": self.t, **fields})
+
+    def drain_events(self) -> list[dict[str, Any]]:
+        """Every event not yet drained, oldest first."""
+        with self._state_lock:
+            out, self._events = self._events, []
+        return out
+
+    def frame(self) -> tuple[np.ndarray, float] | None:
+        """The newest decoded video frame and its arrival time on :attr:`t`'s clock (None before the first)."""
+        with self._state_lock:
+            return self._frame
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
@@ -57,7 +185,7 @@ class LinkMixin:
                 raise BackendError(f"robot {self.robot_id!r}: connect: no 'ok' to 'command' from "
                                    f"{c.host}:{c.command_port} within {timeout_s} s")
             try:
-                if self._transact("command", min(c.command_timeout_s, left), retries=0) == "ok":
+                if self.transact("command", min(c.command_timeout_s, left), retries=0) == "ok":
                     break
             except BackendError:
                 continue
@@ -82,7 +210,7 @@ class LinkMixin:
         c = self.cfg
         reply: str | None = None
         try:
-            reply = self._transact("streamon", c.command_timeout_s, retries=c.command_retries)
+            reply = self.transact("streamon", c.command_timeout_s, retries=c.command_retries)
         except BackendError as e:
             failure = str(e)
         else:
@@ -97,14 +225,11 @@ class LinkMixin:
             if reply is not None:
                 raise CommandRefused(self.robot_id, "streamon", reply, needs)
             raise BackendError(f"{failure}; {needs}")
-        self._push_event("video_error", command="streamon", reply=reply, reason=failure)
+        self.event("video_error", command="streamon", reply=reply, reason=failure)
         log.warning("%s; flying without video (set tello.video to false if none is wanted)", failure)
 
     def close(self) -> None:
         """Stop the threads and close the sockets (idempotent, never raises). Does not land the Tello."""
-        m = self._motion
-        if m is not None:
-            m.cancel.set()
         self._stop.set()
         for s in (self._cmd_sock, self._state_sock, self._video_sock):
             if s is not None:
@@ -182,7 +307,7 @@ class LinkMixin:
                 self._pos[2] = st["h"] / 100.0
                 self._h_cm = st["h"]
                 self._vel = v
-                self._yaw_enu = self.enu_yaw_from_heading(heading)
+                self._yaw_enu = VehicleBackend.enu_yaw_from_heading(heading)
                 self._roll, self._pitch = st["roll"], st["pitch"]
                 self._bat = st["bat"]
 
@@ -201,7 +326,7 @@ class LinkMixin:
         try:
             dec = H264Reassembler()
         except ImportError as e:
-            self._push_event("video_error", reason=f"PyAV is not installed: {e}")
+            self.event("video_error", reason=f"PyAV is not installed: {e}")
             return
         for data in self._datagrams(self._video_sock, 65536):
             self.stats["video_datagrams"] += 1
@@ -217,15 +342,16 @@ class LinkMixin:
     def _keepalive_loop(self) -> None:
         period = self.cfg.keepalive_s
         while not self._stop.wait(min(0.1, period / 4)):
-            m = self._motion
-            if m is not None and m.thread is not None and m.thread.is_alive():
+            m = self.manoeuvre
+            if m is not None and m.is_alive():
                 continue  # the Tello is busy with a manoeuvre; its 15 s count starts when it finishes
             if time.monotonic() - self._last_send >= period:
-                self._send_rc(self._sticks)
+                self.send_rc(self.sticks)
                 self.stats["keepalives"] += 1
 
     # ------------------------------------------------------------------ command channel
-    def _send(self, cmd: str) -> None:
+    def send(self, cmd: str) -> None:
+        """Send ``cmd`` without waiting for a reply. Raises LinkLost when not connected or the send fails."""
         if self._cmd_sock is None:
             raise LinkLost(f"robot {self.robot_id!r}: {cmd}: not connected (call connect() first)")
         try:
@@ -235,13 +361,14 @@ class LinkMixin:
         self._last_send = time.monotonic()
         self.stats["commands"] += 1
 
-    def _send_rc(self, sticks: tuple[int, int, int, int]) -> None:
+    def send_rc(self, sticks: tuple[int, int, int, int]) -> None:
+        """``rc a b c d`` with ``sticks`` (-100..100 each); a failed send is logged, not raised."""
         try:
-            self._send("rc {} {} {} {}".format(*sticks))
+            self.send("rc {} {} {} {}".format(*sticks))
         except LinkLost as e:
             log.debug("%s", e)
 
-    def _transact(self, cmd: str, timeout_s: float, retries: int, cancel: threading.Event | None = None) -> str:
+    def transact(self, cmd: str, timeout_s: float, retries: int, cancel: threading.Event | None = None) -> str:
         """Send ``cmd`` and return the Tello's reply (stripped). A missing reply is retried ``retries`` times;
         then :class:`LinkLost` (no state either) or :class:`BackendError`. ``cancel`` aborts the wait
         (raises :class:`_Cancelled`). One transaction at a time: the protocol has no sequence numbers, so stale
@@ -256,7 +383,7 @@ class LinkMixin:
                         break
                 if attempt:
                     self.stats["retries"] += 1
-                self._send(cmd)
+                self.send(cmd)
                 deadline = time.monotonic() + timeout_s
                 while True:
                     left = deadline - time.monotonic()
@@ -275,7 +402,8 @@ class LinkMixin:
         raise BackendError(f"robot {self.robot_id!r}: {cmd}: no reply from the Tello after {retries + 1} tries "
                            f"of {timeout_s:.1f} s")
 
-    def _expect_ok(self, cmd: str, reply: str) -> None:
+    def expect_ok(self, cmd: str, reply: str) -> None:
+        """Raises CommandRefused (the Tello's reply, kept as :attr:`last_status`) unless ``reply`` is ``ok``."""
         if reply.lower() != "ok":
             self.last_status = reply
             raise CommandRefused(self.robot_id, cmd, reply)
@@ -284,7 +412,7 @@ class LinkMixin:
         """Send any SDK command and return its reply (e.g. ``battery?`` -> ``"87"``), with retries; waits while a
         manoeuvre is being executed (one command at a time). Raises :class:`CommandRefused` for
         ``error...``/``out of range``/``unknown command`` replies, BackendError / LinkLost without reply."""
-        reply = self._transact(cmd, self.cfg.command_timeout_s, self.cfg.command_retries)
+        reply = self.transact(cmd, self.cfg.command_timeout_s, self.cfg.command_retries)
         low = reply.lower()
         if low.startswith(("error", "out of range", "unknown command")):
             self.last_status = reply
