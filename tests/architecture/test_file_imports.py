@@ -174,10 +174,7 @@ def unmarked(mod: str, path: Path) -> list[str]:
 KNOWN_CYCLE_FILES: set[str] = set()
 
 #: files with unmarked imports inside functions today (to be emptied)
-KNOWN_UNMARKED: set[str] = {
-    "aerodaas.backends.mavlink.backend", "aerodaas.backends.mavlink.camera", "aerodaas.backends.mavlink.preflight",
-    "aerodaas.emulators", "aerodaas.emulators.mavlink.trace",
-}
+KNOWN_UNMARKED: set[str] = set()
 
 
 def test_the_reader_sees_every_kind_of_import(tmp_path):

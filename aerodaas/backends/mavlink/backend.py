@@ -24,7 +24,8 @@ from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.mission import AutopilotMission
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
-from aerodaas.backends.mavlink.preflight import resolve_signing_key
+from aerodaas.backends.mavlink.preflight import (check_autopilot_fence, check_autopilot_mission, check_shared_links,
+                                                 resolve_signing_key)
 from aerodaas.backends.mavlink.signing import make_signing
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
@@ -71,8 +72,6 @@ class MavlinkBackend(VehicleBackend):
     @classmethod
     def check_config(cls, robot: Any, where: str) -> None:
         """The autopilot's own fence must accept what the safety gate accepts (``mavlink.fence``)."""
-        from aerodaas.backends.mavlink.preflight import check_autopilot_fence
-
         check_autopilot_fence(robot, where)
 
     #: ``mavlink.signing_key_file`` resolved and checked before Ray starts (preflight.py)
@@ -81,8 +80,6 @@ class MavlinkBackend(VehicleBackend):
     @classmethod
     def check_fleet(cls, robots: list[tuple[int, Any]]) -> None:
         """Robots on one link (``mavlink.connection``) speak as one ground station to distinct system ids."""
-        from aerodaas.backends.mavlink.preflight import check_shared_links
-
         check_shared_links(robots)
 
     @classmethod
@@ -93,8 +90,6 @@ class MavlinkBackend(VehicleBackend):
     @classmethod
     def check_mission(cls, robot: Any, sched: Any, hitl_on: bool) -> None:
         """``mavlink.use_autopilot_mission``: the navigation must be expressible as an uploaded mission."""
-        from aerodaas.backends.mavlink.preflight import check_autopilot_mission
-
         check_autopilot_mission(robot, sched, hitl_on)
 
     @property

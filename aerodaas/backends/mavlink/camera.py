@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Protocol
 
 from aerodaas.backends.mavlink._common import M, _enum_name
@@ -194,8 +194,6 @@ class CameraFinder:
     @staticmethod
     def _named(s: DiscoveredStream, cam: _Camera) -> DiscoveredStream:
         """``s`` with its camera's name (CAMERA_INFORMATION may come after VIDEO_STREAM_INFORMATION)."""
-        from dataclasses import replace
-
         return replace(s, camera=cam.name or s.camera)
 
     def _failure(self, request: StreamRequest, autopilot: int) -> str:

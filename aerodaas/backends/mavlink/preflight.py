@@ -6,6 +6,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from aerodaas.backends.mavlink.signing import KeyFileError, TimestampStore, read_key_file
+from aerodaas.config.base import ConfigError
+from aerodaas.missionfile import MissionFileError, navigation_to_plan
+from aerodaas.model.types import AeroNavigation, SchedulingType, Waypoint
+from aerodaas.navigation.geofence import autopilot_disagreement
+
 __all__ = ["check_autopilot_fence", "check_shared_links", "check_autopilot_mission", "resolve_signing_key"]
 
 
@@ -18,9 +24,6 @@ def check_autopilot_fence(robot: Any, where: str) -> None:
     a geofence leaves the vehicle's fence alone and is not checked. A vehicle identified on connect
     (``autopilot: auto``) is checked by the backend then, before it uploads anything.
     Raises ConfigError naming ``where`` (the robot's path) and the field."""
-    from aerodaas.config.base import ConfigError
-    from aerodaas.navigation.geofence import autopilot_disagreement
-
     mc = robot.backend_settings()
     if not mc.fence.upload or robot.safety.geofence.is_empty:
         return  # the backend leaves the vehicle's fence as it is
@@ -44,9 +47,6 @@ def resolve_signing_key(cls: Any, robot: Any, resolve: Any, where: str) -> None:
     key read (signing.py :func:`~aerodaas.backends.mavlink.signing.read_key_file`: a private file of 32 raw bytes or
     64 hex characters) and its timestamp file checked (:class:`~aerodaas.backends.mavlink.signing.TimestampStore`).
     Raises ConfigError naming ``field`` and the file (never the key)."""
-    from aerodaas.backends.mavlink.signing import KeyFileError, TimestampStore, read_key_file
-    from aerodaas.config.base import ConfigError
-
     field = f"{where}.{cls.config_section}.signing_key_file"
     name = robot.backend_settings().signing_key_file
     if name is None:
@@ -97,10 +97,6 @@ def check_autopilot_mission(robot: Any, sched: Any, hitl_on: bool) -> None:
     an uploaded mission can express. Raises ConfigError naming the field and the reason: analytics navigating
     through the scheduler, the HITL API on (both add waypoints mid-flight), time-driven navigation, velocity
     commands or a land/rtl action before the end (MissionFileError), or no waypoints at all."""
-    from aerodaas.config import ConfigError
-    from aerodaas.missionfile import MissionFileError, navigation_to_plan
-    from aerodaas.model.types import AeroNavigation, SchedulingType, Waypoint
-
     mc = robot.cfg.backend_settings()
     if not mc.use_autopilot_mission:
         return

@@ -31,12 +31,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
 import sys
 import time
 from typing import Any, Callable
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
+
+from aerodaas.emulators import free_udp_port
 
 __all__ = ["run_trace", "trace_emulator", "summarise", "main"]
 
@@ -476,10 +479,6 @@ def trace_emulator(autopilot: str, speedup: float = 10.0, wall_limit_s: float = 
     keyword arguments of :class:`~aerodaas.emulators.mavlink.MavlinkVehicleEmulator`, JSON-able) in a child
     process on a free loopback UDP port; the vehicle sends to the tracer as the SITL firmware does (``udpout`` ->
     ``udpin``)."""
-    import subprocess
-
-    from aerodaas.emulators import free_udp_port
-
     port = free_udp_port()
     spec = json.dumps({"autopilot": autopilot, "speedup": speedup, **(emulator or {})})
     code = ("import json, sys, time; from aerodaas.emulators.mavlink import MavlinkVehicleEmulator as E; "
