@@ -33,7 +33,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-from tests.architecture.test_layers import MODULES, ROOT, one_cycle, strongly_connected
+from tests.architecture.test_layers import MODULES, ROOT, node_targets, one_cycle, strongly_connected
 
 #: the example applications: loaded by ``aerodaas run`` as modules of their own, imported by nothing of ours
 APPS = {f"apps.{f.stem}": f for f in sorted((ROOT / "apps").glob("*.py"))}
@@ -90,25 +90,8 @@ def imports_in(module: str, path: Path) -> list[Import]:
         out.append(Import(_resolve(target), node.lineno, node.end_lineno or node.lineno, in_fn, reason(node)))
 
     def visit(node: ast.AST, in_fn: bool) -> None:
-        if isinstance(node, ast.Import):
-            for a in node.names:
-                add(a.name, node, in_fn)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = pkg.split(".")
-                base = base[:len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
-            for a in node.names:
-                sub = f"{target}.{a.name}"
-                add(sub if sub in FILES else target, node, in_fn)
-        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
-                and isinstance(node.args[0].value, str):
-            f = node.func
-            name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
-            if name in ("import_module", "__import__"):
-                add(node.args[0].value, node, in_fn)
+        for target in node_targets(node, pkg, FILES):
+            add(target, node, in_fn)
         deeper = in_fn or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
         for child in ast.iter_child_nodes(node):
             visit(child, deeper)

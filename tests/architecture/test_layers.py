@@ -72,6 +72,29 @@ def _is_package(module: str) -> bool:
     return MODULES.get(module, Path()).name == "__init__.py"
 
 
+def node_targets(node: ast.AST, pkg: str, known) -> list[str]:
+    """The dotted targets one AST node imports: ``import X`` gives ``X``; ``from X import name`` gives ``X.name``
+    when that is in ``known`` (the modules of ours), else ``X``, a relative ``X`` resolved against the package
+    ``pkg``; a literal ``importlib.import_module("X")`` / ``__import__("X")`` gives ``X``; any other node, none."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.ImportFrom):
+        if node.level:
+            base = pkg.split(".")
+            base = base[:len(base) - (node.level - 1)]
+            target = ".".join(base + ([node.module] if node.module else []))
+        else:
+            target = node.module or ""
+        return [f"{target}.{a.name}" if f"{target}.{a.name}" in known else target for a in node.names]
+    if isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+            and isinstance(node.args[0].value, str):
+        f = node.func
+        name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+        if name in ("import_module", "__import__"):
+            return [node.args[0].value]
+    return []
+
+
 def imports_of(module: str, path: Path) -> list[tuple[str, int]]:
     """(dotted target, line) for every import in the file: module level, in functions, in ``if TYPE_CHECKING``,
     and ``importlib.import_module("literal")`` / ``__import__("literal")``. ``from X import name`` counts as
@@ -80,24 +103,7 @@ def imports_of(module: str, path: Path) -> list[tuple[str, int]]:
     pkg = module if _is_package(module) else module.rpartition(".")[0]
     out: list[tuple[str, int]] = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            out += [(a.name, node.lineno) for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = pkg.split(".")
-                base = base[:len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
-            for a in node.names:
-                sub = f"{target}.{a.name}"
-                out.append((sub if sub in MODULES else target, node.lineno))
-        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
-                and isinstance(node.args[0].value, str):
-            f = node.func
-            name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
-            if name in ("import_module", "__import__"):
-                out.append((node.args[0].value, node.lineno))
+        out += [(target, node.lineno) for target in node_targets(node, pkg, MODULES)]
     return out
 
 
