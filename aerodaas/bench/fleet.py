@@ -276,7 +276,10 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                 f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
                 f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
                 f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
-                + (f"  per node {row['drones_per_node']}, GCS actors {row.get('gcs_actors')}" if edge_nodes else ""))
+                + (f"  per node {row['drones_per_node']}, GCS actors {row.get('gcs_actors')}" if edge_nodes else "")
+                + (f"  RECORDING LOST {row['recording_lost']} messages" if row.get("recording_lost") else "")
+                + (f"  node window incomplete: {row['window']}" if row.get("window", {}).get("complete") is False
+                   else ""))
             rows.append(row)
     for r in rows:
         # the one-drone row of the same grouping, else any (one drone is one actor whatever the grouping)
@@ -294,10 +297,10 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                         "rss_mb_per_extra_drone_max": 150}}
 
 
-#: memory a cluster run needs before it starts, MiB (measured, docs/benchmarks.md section 2c, PSS): the head's
-#: extra (GCS, the benchmark's driver), each node's fixed processes (raylet, Ray's agents, log monitor, its recorder
-#: actor) and each drone actor
-HEAD_EXTRA_MB, NODE_FIXED_MB, DRONE_ACTOR_MB = 300.0, 400.0, 90.0
+#: memory a cluster run needs before it starts, MiB (PSS measured in docs/benchmarks.md section 2c, rounded up:
+#: 402, 210 and 86): the head's extra (GCS, the benchmark's driver, the run's recorder, head-only agents), each
+#: node's fixed processes (raylet, Ray's agents, log monitor, its recorder actor) and each drone actor
+HEAD_EXTRA_MB, NODE_FIXED_MB, DRONE_ACTOR_MB = 450.0, 250.0, 90.0
 
 
 def check_edge_nodes(edge_nodes: int, runs: tuple[tuple[int, int], ...], available_mb: float) -> str | None:

@@ -3,7 +3,7 @@ projects the nodes a fleet of D drones needs — by CPU, by memory, by the per-n
 actor count, and names what breaks first. Pure: JSON in, numbers out (no Ray, no clock); ``aerodaas bench
 fleet-model RUN.json... [--drones 1000 --node-cores C --node-mem-gib M]`` prints it.
 
-**Data.** Every row of every report carries ``nodes`` (:func:`aerodaas.bench.fleet_nodes.node_report`): per node p
+**Data.** Every row of every report (whose measuring window was whole) carries ``nodes`` (:func:`aerodaas.bench.fleet_nodes.node_report`): per node p
 its drones d_p, CPU-seconds per simulated second by role ``cpu[role]_p`` over a window of the flight, PSS (MiB) by
 role at the window's end and per drone actor, and its recorder's messages/s and MiB/s. Node 0 is the head (GCS,
 driver).
@@ -13,15 +13,20 @@ driver).
 * CPU per drone, c_d = Σ_p (cpu[drone_actors]_p + cpu[recorder_actors]_p) / Σ_p d_p — the drone actors' work and
   the recorder's, which grows with the drones it records (CPU-s per drone per simulated second = cores per drone
   at speedup 1).
-* Fixed CPU per node, c_n = mean_p (cpu[raylet]_p + cpu[ray_other]_p) (raylet, Ray's agents, log monitor, idle
-  workers); the head's extra, c_h = mean over head points of (cpu[gcs] + cpu[driver]).
+* Fixed CPU per edge node, c_n = mean over the non-head points (all points when a run had only the head) of
+  (cpu[raylet] + cpu[ray_other]) (raylet, Ray's agents, log monitor, idle workers); the head's extra,
+  c_h = max(0, mean over head points of (cpu[raylet] + cpu[ray_other] + cpu[gcs] + cpu[driver]) − c_n): the GCS,
+  the driver and the agents only the head runs.
 * PSS per drone actor, m_a = Σ_p Σ(drone actor PSS) / Σ_p (drone actors); per drone m_d = m_a / k (k drones per
-  actor). Fixed PSS per node, m_n = mean_p (pss[raylet] + pss[ray_other] + pss[recorder_actors]) (a recorder's
-  memory is bounded by its queues, not by the drones); the head's extra m_h = mean of (pss[gcs] + pss[driver]).
+  actor). Fixed PSS per edge node, m_n = mean over the non-head points (else all) of (pss[raylet] +
+  pss[ray_other] + pss[recorder_actors]) (a recorder's memory is bounded by its queues, not by the drones); the
+  head's extra m_h = max(0, mean over head points of (the same + pss[gcs] + pss[driver]) − m_n) (its GCS, driver,
+  the run's own recorder and the head-only agents).
 * Recorder load per drone, r_msg = Σ_p msgs/s_p / Σ_p d_p and r_mb = Σ_p MiB/s_p / Σ_p d_p (``recording.per_node``:
   each node's recorder records that node's drones).
 * GCS actors: per run, from the GCS's count by class: drone actors per drone actor (1), node recorders per node
-  g_n = mean((RecorderActor − 1) / nodes), everything else per run g_r = mean(total − DroneActor − node recorders).
+  g_n = mean((RecorderActor − 1) / nodes), everything else per run
+  g_r = mean(total − DroneActor − node recorders).
 
 **Projection** for D drones, k per actor, edge nodes of C cores and M GiB, one recorder's ceiling R_msg msgs/s and
 R_mb MiB/s (``aerodaas bench recorder``, docs/benchmarks.md section 2b: about 8,000 msgs/s and 15 MiB/s):
@@ -104,8 +109,10 @@ class Projection:
 
 
 def _points(reports: list[dict]) -> tuple[list[dict], list[dict]]:
-    """(node points, rows) of every row with ``nodes`` in ``reports``. Raises ValueError when there are none."""
-    rows = [r for rep in reports for r in rep.get("results", []) if r.get("nodes")]
+    """(node points, rows) of every row with ``nodes`` in ``reports`` whose measuring window was whole (a row whose
+    run ended before its window closed is left out). Raises ValueError when there are none."""
+    rows = [r for rep in reports for r in rep.get("results", [])
+            if r.get("nodes") and (r.get("window") or {}).get("complete", True)]
     if not rows:
         raise ValueError("no row with 'nodes' in the reports: run `aerodaas bench fleet --edge-nodes N --json`")
     return [p for r in rows for p in r["nodes"]], rows
@@ -113,6 +120,14 @@ def _points(reports: list[dict]) -> tuple[list[dict], list[dict]]:
 
 def _mean(xs: list[float]) -> float:
     return sum(xs) / len(xs) if xs else 0.0
+
+
+#: the roles of a node's fixed cost (CPU; PSS also counts its recorder) and of the head's extra
+_CPU_FIXED, _PSS_FIXED, _HEAD = ("raylet", "ray_other"), ("raylet", "ray_other", "recorder_actors"), ("gcs", "driver")
+
+
+def _sum(by_role: dict[str, float], roles: tuple[str, ...]) -> float:
+    return sum(by_role.get(r, 0.0) for r in roles)
 
 
 def _ratio(num: float, den: float, what: str) -> float:
@@ -132,6 +147,9 @@ def fit(reports: list[dict]) -> CostModel:
     cpu = {role: sum(p["cpu_s_per_sim_s"].get(role, 0.0) for p in points) for role in ("drone_actors",
                                                                                        "recorder_actors")}
     heads = [p for p in points if p.get("head")]
+    edges = [p for p in points if not p.get("head")] or points
+    cpu_node = _mean([_sum(p["cpu_s_per_sim_s"], _CPU_FIXED) for p in edges])
+    pss_node = _mean([_sum(p["pss_mb"], _PSS_FIXED) for p in edges])
     actor_pss = [(p["pss_mb_per_drone_actor"], len(p["drone_actors"])) for p in points
                  if p.get("pss_mb_per_drone_actor") is not None]
     rec = [p["recorder"] for p in points if p.get("recorder")]
@@ -141,15 +159,12 @@ def fit(reports: list[dict]) -> CostModel:
     per_run = [t - c.get("DroneActor", 0) - max(c.get("RecorderActor", 0) - 1, 0) for c, t, _ in classes]
     return CostModel(
         cpu_per_drone=_ratio(cpu["drone_actors"] + cpu["recorder_actors"], drones, "CPU per drone"),
-        cpu_node_fixed=_mean([p["cpu_s_per_sim_s"].get("raylet", 0.0) + p["cpu_s_per_sim_s"].get("ray_other", 0.0)
-                              for p in points]),
-        cpu_head_extra=_mean([p["cpu_s_per_sim_s"].get("gcs", 0.0) + p["cpu_s_per_sim_s"].get("driver", 0.0)
-                              for p in heads]),
+        cpu_node_fixed=cpu_node,
+        cpu_head_extra=max(0.0, _mean([_sum(p["cpu_s_per_sim_s"], _CPU_FIXED + _HEAD) for p in heads]) - cpu_node),
         pss_per_drone_actor=_ratio(sum(m * n for m, n in actor_pss), sum(n for _, n in actor_pss),
                                    "PSS per drone actor"),
-        pss_node_fixed=_mean([sum(p["pss_mb"].get(r, 0.0) for r in ("raylet", "ray_other", "recorder_actors"))
-                              for p in points]),
-        pss_head_extra=_mean([p["pss_mb"].get("gcs", 0.0) + p["pss_mb"].get("driver", 0.0) for p in heads]),
+        pss_node_fixed=pss_node,
+        pss_head_extra=max(0.0, _mean([_sum(p["pss_mb"], _PSS_FIXED + _HEAD) for p in heads]) - pss_node),
         recorder_msgs_per_drone=(sum(r["messages_per_s"] for r in rec) / rec_drones) if rec_drones else 0.0,
         recorder_mb_per_drone=(sum(r["mb_per_s"] for r in rec) / rec_drones) if rec_drones else 0.0,
         gcs_actors_per_node=_mean(node_recorders), gcs_actors_per_run=_mean([float(x) for x in per_run]),
@@ -165,15 +180,18 @@ def _capacity(budget: float, per_drone: float) -> int:
 
 
 def project(model: CostModel, drones: int = 1000, node_cores: float = 2.0, node_mem_gib: float = 8.0,
-            recorder_msgs_per_s: float = 8000.0, recorder_mb_per_s: float = 15.0) -> Projection:
+            recorder_msgs_per_s: float = 8000.0, recorder_mb_per_s: float = 15.0,
+            mb_per_drone: float | None = None) -> Projection:
     """The :class:`Projection` of ``drones`` drones on edge nodes of ``node_cores`` cores and ``node_mem_gib``
-    GiB, one recorder per node with the given ceilings (formulas: the module docstring). Raises ValueError for
-    drones < 1 or a node with no cores or memory, or when a node cannot carry one drone."""
+    GiB, one recorder per node with the given ceilings (formulas: the module docstring). ``mb_per_drone``: the
+    recorded MiB/s of one drone instead of the fitted r_mb (e.g. a real camera's frames: the benchmark's
+    simulated ground compresses to a few KB a frame). Raises ValueError for drones < 1 or a node with no cores or
+    memory, or when a node cannot carry one drone."""
     if drones < 1 or node_cores <= 0 or node_mem_gib <= 0:
         raise ValueError(f"drones must be >= 1 and the node's cores and memory > 0, got drones={drones}, "
                          f"node_cores={node_cores}, node_mem_gib={node_mem_gib}")
     per_rec = min(_capacity(recorder_msgs_per_s, model.recorder_msgs_per_drone),
-                  _capacity(recorder_mb_per_s, model.recorder_mb_per_drone))
+                  _capacity(recorder_mb_per_s, model.recorder_mb_per_drone if mb_per_drone is None else mb_per_drone))
     caps = {"CPU": _capacity(node_cores - model.cpu_node_fixed, model.cpu_per_drone),
             "memory": _capacity(1024.0 * node_mem_gib - model.pss_node_fixed,
                                 model.pss_per_drone_actor / model.drones_per_actor),
@@ -233,13 +251,14 @@ def main(a: argparse.Namespace) -> int:
     mem = a.node_mem_gib if a.node_mem_gib is not None else float(machine.get("memory_gib") or 0)
     try:
         model = fit(reports)
-        proj = project(model, a.drones, cores, mem, a.recorder_msgs_per_s, a.recorder_mb_per_s)
+        proj = project(model, a.drones, cores, mem, a.recorder_msgs_per_s, a.recorder_mb_per_s, a.mb_per_drone)
     except ValueError as e:
         print(f"aerodaas bench fleet-model: {e}", file=sys.stderr)
         return 2
     if a.json or a.out:
-        emit_report({"benchmark": "fleet-model", "reports": list(a.reports), "model": asdict(model),
-                     "projection": asdict(proj)}, a.out, a.json)
+        # machine: where the runs were measured (the first report's), as every benchmark's report names it
+        emit_report({"benchmark": "fleet-model", "machine": machine, "reports": list(a.reports),
+                     "model": asdict(model), "projection": asdict(proj)}, a.out, a.json)
     if not a.json:
         print_report(format_projection(model, proj))
     return 0

@@ -92,6 +92,8 @@ def add_fleet_model(sub: argparse._SubParsersAction) -> None:
                    help="one recorder's message ceiling (default 8000: bench recorder, docs/benchmarks.md 2b)")
     p.add_argument("--recorder-mb-per-s", type=float, default=15.0,
                    help="one recorder's byte ceiling, MiB/s (default 15: bench recorder, docs/benchmarks.md 2b)")
+    p.add_argument("--mb-per-drone", type=float, help="recorded MiB/s of one drone instead of the fitted one (e.g. a "
+                                                      "real camera's frames; default: as the runs recorded)")
     p.add_argument("--json", action="store_true", help="print the JSON projection")
     p.add_argument("--out", help="also write the JSON projection to this file")
     p.set_defaults(func=_run_fleet_model)

@@ -88,6 +88,14 @@ def test_packed_actors_divide_the_memory_per_drone():
     assert {lim.resource: lim.drones_per_node for lim in p.limits}["memory"] == math.floor(budget / (85.0 / 4))
 
 
+def test_a_row_whose_window_was_cut_short_is_not_fitted():
+    cut = _report([9, 9])
+    cut["results"][0]["window"] = {"complete": False, "seconds": 0.5, "error": None}
+    for p in cut["results"][0]["nodes"]:
+        p["cpu_s_per_sim_s"]["drone_actors"] = 0.0  # what a window that closed at once would read
+    assert fit([_report([2]), cut]) == fit([_report([2])])
+
+
 def test_bad_inputs_are_refused_with_the_reason():
     with pytest.raises(ValueError, match="no row with 'nodes'"):
         fit([{"results": [{"drones": 4, "drones_per_actor": 1}]}])
@@ -111,7 +119,8 @@ def test_the_command_prints_the_projection_and_refuses_a_bad_file(tmp_path, caps
     assert out["projection"]["edge_nodes"] == want.edge_nodes and out["projection"]["breaks_first"] == want.breaks_first
     assert cli.main(["bench", "fleet-model", str(run)]) == 0  # the measured machine's 2 cores and 8 GiB
     text = capsys.readouterr().out
-    assert "breaks first: " in text and f"{project(fit([_report([2, 2])]), 1000, 2.0, 8.0).edge_nodes:,} + 1 head" in text
+    nodes = project(fit([_report([2, 2])]), 1000, 2.0, 8.0).edge_nodes
+    assert "breaks first: " in text and f"{nodes:,} + 1 head" in text
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
     assert cli.main(["bench", "fleet-model", str(bad)]) == 2
@@ -119,3 +128,11 @@ def test_the_command_prints_the_projection_and_refuses_a_bad_file(tmp_path, caps
     assert cli.main(["bench", "fleet-model", str(run), "--drones", "0"]) == 2
     assert "drones must be >= 1" in capsys.readouterr().err
     assert fleet_model.RAY_TESTED_ACTORS == 10_000
+
+
+def test_a_camera_s_bytes_per_drone_can_replace_the_fitted_ones():
+    m = fit([_report([2, 2])])
+    p = project(m, 1000, 64.0, 64.0, mb_per_drone=1.5)
+    rec = {lim.resource: lim.drones_per_node for lim in p.limits}["recorder (one per node)"]
+    assert rec == math.floor(min(8000.0 / COST["msgs"], 15.0 / 1.5)) == 10
+    assert p.breaks_first == "recorder (one per node)"
