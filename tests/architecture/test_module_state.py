@@ -37,23 +37,10 @@ ALLOWED = {
 #: state found when the scan was introduced, still to be moved into an owned object (issue 48.4, not yet done).
 #: Listed so that nothing new is added; an entry that no longer matches fails the test (remove it here)
 KNOWN_DEBT = {
-    ("actors/channel.py", "_OWN"),  # the channels this worker created
-    ("actors/checkpoint.py", "_SEQ"),  # checkpoint numbers of the process
     ("aerodaas/analytics/contract.py", "_LOCAL"),  # a thread's contract check in progress
     ("aerodaas/backends/mavlink/shared_link.py", "_LINKS"),  # MAVLink connections shared by the drones of a process
     ("aerodaas/bench/output.py", "_REPORT_STREAMS"),
-    ("aerodaas/bench/traces.py", "_GAP_CACHE"),
-    ("aerodaas/perception/model_files.py", "_sha_cache"),
-    ("aerodaas/recording/schemas.py", "_CACHE"),
-    ("aerodaas/recording/schemas.py", "_DECLARED"),
-    ("aerodaas/reliability/cli_cases.py", "_HELD"),
     ("aerodaas/runtime/app_loader.py", "_LOADING"),  # a ContextVar: the load in progress, per context
-    ("clusters/reaper.py", "_STARTED"),
-    ("schedulers/single_machine.py", "SOLVES"),  # counters of the planner's compiled / Python solves
-    ("schedulers/single_machine_jit.py", "_state"),
-    ("schedulers/single_machine_jit.py", "_kernel"),  # rebound with `global` once compiled
-    ("schedulers/single_machine_jit.py", "_prepare"),
-    ("aerodaas/bench/isolation.py", "_CTX"),
 }
 
 
