@@ -39,7 +39,6 @@ ALLOWED = {
 KNOWN_DEBT = {
     ("aerodaas/analytics/contract.py", "_LOCAL"),  # a thread's contract check in progress
     ("aerodaas/backends/mavlink/shared_link.py", "_LINKS"),  # MAVLink connections shared by the drones of a process
-    ("aerodaas/runtime/app_loader.py", "_LOADING"),  # a ContextVar: the load in progress, per context
 }
 
 
