@@ -37,7 +37,6 @@ ALLOWED = {
 #: state found when the scan was introduced, still to be moved into an owned object (issue 48.4, not yet done).
 #: Listed so that nothing new is added; an entry that no longer matches fails the test (remove it here)
 KNOWN_DEBT = {
-    ("aerodaas/analytics/contract.py", "_LOCAL"),  # a thread's contract check in progress
     ("aerodaas/backends/mavlink/shared_link.py", "_LINKS"),  # MAVLink connections shared by the drones of a process
 }
 
