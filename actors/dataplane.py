@@ -311,8 +311,9 @@ class DataPlane:
     def publish(self, src: str, msgs: list[Message], tok: Cascade | None = None, inline: bool = True) -> None:
         """Hand ``msgs`` (outputs of component ``src``) to every subscriber. Local subscribers: the last one runs
         in this thread when ``inline`` (zero hops for a chain), the others on the pool; remote ones through their
-        outlet on the pool (JPEG encoding stays off the hot path), or in the reply of the deliver call this thread
-        is answering. ``tok``: the lock-step cascade the messages join (it stays open until each is handed on)."""
+        outlet on the pool (JPEG encoding stays off the hot path) — a same-node channel's in this thread when
+        ``inline`` and no local subscriber takes the item — or in the reply of the deliver call this thread is
+        answering. ``tok``: the lock-step cascade the messages join (it stays open until each is handed on)."""
         subs = self.routes.get(src)
         if not subs:
             return
@@ -320,6 +321,7 @@ class DataPlane:
             if tok is not None:
                 msg.tok = tok
             local = []
+            remote = []
             robot = msg.robot
             rec = self.recorder
             for cid, port, buf, only in subs:
@@ -331,7 +333,17 @@ class DataPlane:
                 if comp is not None:
                     local.append((comp, port))
                 elif not self._reply_to(cid, port, msg):  # else: returned to the caller in its deliver's reply
-                    self.later(tok, self._outlet(src, cid, port, buf).send, msg)
+                    remote.append(self._outlet(src, cid, port, buf))
+            # a same-node channel's send is a copy into its shared-memory slot and a socket write: made in this thread
+            # when nothing of this actor reads the item after it (no pool hop for a frame bound for an analytics
+            # actor: a thread wake-up less per frame); a Ray outlet (it may JPEG-encode), or one publishing thread
+            # that must not wait (``inline`` False: the clock's), or local readers waiting behind it: on the pool
+            now = inline and not local
+            for o in remote:
+                if now and isinstance(o, ChannelOutlet):
+                    self._guard(o.send, msg)
+                else:
+                    self.later(tok, o.send, msg)
             last = len(local) - 1
             for i, (comp, port) in enumerate(local):
                 if inline and i == last:

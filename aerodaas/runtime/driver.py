@@ -252,6 +252,7 @@ class _Run:
     robot_errors: dict = field(default_factory=dict)  # robot id -> its own error when the run could not start
     robot_refused: set = field(default_factory=set)  # robots whose vehicle refused our credentials (outcome refused)
     insecure: list = field(default_factory=list)  # servers of the run in clear text off loopback (--insecure)
+    recorder_described: dict = field(default_factory=dict)  # the recorder actor's set-up answer (its live view URL)
 
     @property
     def classes(self) -> ActorClasses:
@@ -312,8 +313,9 @@ def _check_gpus(plan: Any, placement: Any) -> None:
 
 def _start_actors(run: _Run, placement: Any) -> list:
     """Start every actor of the plan and set them up at once (drones connect to their vehicles); the recorder's
-    answer is read first: a bad file or live view is the error reported. Returns each actor's description; raises
-    the first error (``run.robot_errors`` holds each robot's own)."""
+    answer is read first (kept in ``run.recorder_described``: its live view's URL): a bad file or live view is the
+    error reported. Returns each other actor's description; raises the first error (``run.robot_errors`` holds each
+    robot's own)."""
     import ray  # lazy: heavy ray
 
     if run.scheduled:
@@ -322,7 +324,7 @@ def _start_actors(run: _Run, placement: Any) -> list:
     probe("actors_created")
     rec_setup = run.actors["recorder"].setup.remote()
     others = [h.setup.remote() for hid, h in run.actors.items() if hid != "recorder"]
-    ray.get(rec_setup)
+    run.recorder_described = ray.get(rec_setup) or {}
     described, first = [], None
     for ref in others:  # every actor's answer: each robot that could not connect gets its own error
         try:
@@ -447,8 +449,8 @@ def _run_mission(run: _Run) -> MissionResult:
                 print(f"aerodaas: robot {rid!r} could not start: {err}", file=sys.stderr, flush=True)
             print(f"aerodaas: the run could not start: {run.failure}", file=sys.stderr, flush=True)
             described = []
-        if "recorder" in run.actors and run.failure is None:
-            live_url = ray.get(run.actors["recorder"].setup.remote()).get("live_url")
+        if run.failure is None:  # the recorder's set-up answer, read once (no second round trip to it)
+            live_url = run.recorder_described.get("live_url")
             if live_url:
                 _announce_live(run, live_url)
         probe("hosts_ready")

@@ -90,3 +90,31 @@ def test_a_run_without_hitl_does_not_import_its_server():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.split() == []
+
+
+def test_an_unrecorded_runs_actor_sets_up_without_the_recorders_writer_or_live_view():
+    """Issue 49 item 5: the drone actor of a run that is not recorded builds its components (a fresh interpreter, as
+    a fresh Ray worker does) without importing the MCAP writer, the recorder service or the live view (57 modules,
+    0.04 s of CPU per actor measured); a recorded one still gets them (see tests/recording)."""
+    code = textwrap.dedent("""
+        import sys
+        from aerodaas import Environment
+        from aerodaas.actors.assembly import ActorAssembly
+        from aerodaas.actors.dataplane import DataPlane
+        from aerodaas.bench.fleet import fleet_config
+        from aerodaas.config import SimulationConfig, parse_environment_config
+        from aerodaas.runtime.dataflow import build_plan
+        from aerodaas.runtime.preflight import robot_schedulers
+
+        env = Environment(parse_environment_config(fleet_config(1, fps=10.0, width=160, height=120)))
+        robots = env.get_env_robots()
+        plan = build_plan(env, robots, {r.id: [] for r in robots}, robot_schedulers(env, robots), SimulationConfig())
+        (hid,) = [h for h, a in plan.actors.items() if a.role == "drone"]
+        assert plan.actors[hid].spec.record is None and not plan.actors[hid].spec.record_remote
+        rt = ActorAssembly(DataPlane(hid, "edge", 0, workers=2), plan.actors[hid].spec)
+        assert rt.drones and rt.recorder is None
+        print(" ".join(m for m in ("mcap", "aerodaas.actors.recorder", "aerodaas.liveview.server") if m in sys.modules))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == []

@@ -353,3 +353,22 @@ def test_an_install_without_the_packages_entry_points_is_an_error_saying_how_to_
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.startswith("MissingBuiltins:") and "pip install -e ." in r.stdout, r.stdout
+
+
+def test_resolving_a_builtin_in_a_fresh_process_reads_this_packages_metadata_alone():
+    """Issue 49 item 5: a fresh process (a driver building its app, a Ray worker setting up a drone on ``sim``) that
+    resolves a built-in reads only this package's entry points; every other installed distribution is scanned only
+    for a name that is not a built-in (then once)."""
+    code = textwrap.dedent('''
+        from aerodaas.plugins import registry
+        e = registry.resolve("backend", "sim")
+        first = (e.builtin, registry.REGISTRY.builtins_loaded, registry.REGISTRY.entry_points_loaded)
+        try:
+            registry.resolve("backend", "no-such-backend")
+        except registry.UnknownPlugin:
+            pass
+        print(first, registry.REGISTRY.entry_points_loaded)
+    ''')
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[0] == "(True, True, False) True"

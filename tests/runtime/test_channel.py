@@ -290,3 +290,49 @@ def test_a_lockstep_send_waits_for_the_restarted_receiver_and_gives_up_after_its
     finally:
         out.close()
         srv.close()
+
+
+@pytest.mark.parametrize("inline, local_reader, on_pool", [(True, False, False), (False, False, True),
+                                                          (True, True, True)])
+def test_a_frame_for_a_channel_alone_leaves_in_the_publishing_thread(address, inline, local_reader, on_pool):
+    """A frame whose only reader is another actor's component on a same-node channel is copied and sent by the
+    thread that publishes it (issue 49 item 6: no pool hop per frame); a publisher that must not wait (``inline``
+    False, the clock's) or a local reader behind it leaves the send to the pool. Observed with the pool's every
+    thread held: a send made in this thread has reached the receiver before the pool is free again."""
+    from aerodaas.actors.dataplane import Component, DataPlane
+
+    rx = Receiver()
+    peer = "analytics/edge/det#1"
+    addr = channel_address(KEY, peer)
+    srv = ChannelServer(addr, KEY, rx)
+    plane = DataPlane("drone/d1", "edge", 0, workers=2)
+    plane.channel_key = KEY
+    routes = [("det", Port("in"), 1, None)]
+    if local_reader:
+        plane.add(Component(plane, "rec"))
+        routes.append(("rec", Port("in"), 1, None))
+    plane.connect({"cam": routes}, {"det": peer}, {peer: "edge"}, {peer: "aerodaas/run/analytics/det"})
+    hold = threading.Event()
+    started = threading.Semaphore(0)
+
+    def occupy() -> None:
+        started.release()
+        hold.wait(30)
+
+    try:
+        for _ in range(plane.workers):
+            plane.submit(occupy)
+        for _ in range(plane.workers):
+            assert started.acquire(timeout=30)  # every pool thread is held from here
+        plane.publish("cam", [_frame(5)], None, inline=inline)
+        if on_pool:
+            time.sleep(0.2)  # were it sent here, it would have arrived by now
+            assert rx.got == []
+            hold.set()
+        assert _wait(lambda: len(rx.got) == 1)
+        assert rx.got[0][:3] == ("det", Port("in"), "FrameMsg") and rx.got[0][3][2] == 5
+        assert not hold.is_set() if not on_pool else True
+    finally:
+        hold.set()
+        plane.close()
+        srv.close()

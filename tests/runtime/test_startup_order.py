@@ -82,3 +82,7 @@ def test_every_actor_and_its_setup_is_asked_for_before_the_first_wait(monkeypatc
     assert {h for kind, h in before if kind == "create"} == {"recorder", *hosts}, calls.log
     assert {h for kind, h in before if kind == "setup"} == {"recorder", *hosts}, calls.log
     assert sorted(d["host"] for d in described) == sorted(hosts)
+    # the recorder's answer is kept (its live view's URL): asked once, read once
+    assert run.recorder_described == {"host": "recorder"}
+    assert [c for c in calls.log if c == ("setup", "recorder")] == [("setup", "recorder")]
+    assert [c for c in calls.log if c == ("get", "recorder")] == [("get", "recorder")]
