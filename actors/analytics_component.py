@@ -102,7 +102,7 @@ class AnalyticsComponent(Component):
             return out
         t0 = time.perf_counter()
         try:
-            with collecting() as em:
+            with collecting(self.obj) as em:
                 res = self.obj.process_batch([(m.data, m.meta) for _, m in fresh])
         except Exception:  # noqa: BLE001 - find the culprit item by item
             res = None
@@ -136,7 +136,7 @@ class AnalyticsComponent(Component):
     def _process_one(self, msg: Message) -> list[Message] | None:
         t0 = time.perf_counter()
         try:
-            with collecting() as em:
+            with collecting(self.obj) as em:
                 out = self.obj.process(msg.data, msg.meta)
         except Exception as e:  # noqa: BLE001 - the analytics' own bug: logged, recorded, counted, policy applied
             self._failed(e, msg)

@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 
-from aerodaas.actors.checkpoint import drone_checkpoint
+from aerodaas.actors.checkpoint import CheckpointNumbers
 from aerodaas.actors.drone import DroneComponent
 from aerodaas.actors.plugin_sensor import PluginSensorComponent
 from aerodaas.actors.remote_recorder import RemoteRecorder
@@ -30,7 +30,6 @@ from aerodaas.protocol.specs import ActorSpec
 from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
 from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
 from aerodaas.actors.camera import CameraComponent
-from aerodaas.recording.schemas import register_json_schema
 from aerodaas.sim.world import World
 
 
@@ -57,8 +56,8 @@ class _Checkpointer:
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
     checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
 
-    def __init__(self, plane: DataPlane, drones: list, period_s: float = 2.0) -> None:
-        self.plane, self.period_s = plane, period_s
+    def __init__(self, plane: DataPlane, drones: list, numbers: CheckpointNumbers, period_s: float = 2.0) -> None:
+        self.plane, self.period_s, self.numbers = plane, period_s, numbers
         self.on = "recorder" in (getattr(plane, "peers", None) or {}) and bool(drones)
         self.last = time.monotonic()
         self.visited = {id(d): len(d.visited) for d in drones}
@@ -73,7 +72,7 @@ class _Checkpointer:
                 self.visited[id(d)] = len(d.visited)
                 # taken here (consistent with the control step), serialised and sent on the pool: the clock
                 # thread never pays for pickling the queue
-                self.plane.submit(self._send, d.cfg.id, drone_checkpoint(d))
+                self.plane.submit(self._send, d.cfg.id, self.numbers.take(d))
         if due:
             self.last = now
 
@@ -95,6 +94,8 @@ class ActorAssembly:
     def __init__(self, plane: DataPlane, spec: ActorSpec) -> None:
         self.plane = plane
         self.sim = SimulationConfig.model_validate(spec.sim)
+        #: the numbers of this actor's checkpoints (its runs and its ``checkpoint`` call)
+        self.checkpoint_numbers = CheckpointNumbers()
         self.recorder = self._make_recorder(plane, spec)
         plane.recorder = self.recorder
         self.comps: dict[str, Any] = {}
@@ -125,12 +126,9 @@ class ActorAssembly:
 
         rec = spec.record
         if rec is not None:  # an actor with the file and/or the live view
-            if rec.schemas:  # plug-in sensors' message schemas, from their declarations
-
-                for name, js in rec.schemas.items():
-                    register_json_schema(name, js)
             return RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
-                                   declare=rec.declare)
+                                   declare=rec.declare,
+                                   json_schemas=rec.schemas)  # plug-in sensors' message schemas
         if spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
 
             return RemoteRecorder(plane, spec.record_remote)
@@ -246,7 +244,7 @@ class ActorAssembly:
         wall0 = time.monotonic()
         step = 0
         active = [d for d in drones if not d.done]
-        checkpoints = _Checkpointer(self.plane, drones)
+        checkpoints = _Checkpointer(self.plane, drones, self.checkpoint_numbers)
         self.tick_lateness: list[float] = []
         try:
             while active:

@@ -34,6 +34,8 @@ sender); a frame's ``data`` on the wire is a :class:`SlotFrame`.
 from __future__ import annotations
 
 import hashlib
+import os
+import secrets
 import socket
 import sys
 from collections import deque
@@ -110,8 +112,20 @@ def _shutdown(conn: Any) -> None:
         pass
 
 
-#: names of the shared-memory segments this process created (and will unlink)
-_OWN: set[str] = set()
+def _own_prefix() -> str:
+    """The name prefix of the shared-memory segments this process creates (:func:`_create`): its pid, so a segment
+    of this very process is known by its name alone (no table of them kept)."""
+    return f"adc{os.getpid()}_"
+
+
+def _create(size: int) -> SharedMemory:
+    """A new segment of ``size`` bytes named :func:`_own_prefix` + 12 random hex digits (23 characters at most: the
+    31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names."""
+    while True:
+        try:
+            return SharedMemory(name=_own_prefix() + secrets.token_hex(6), create=True, size=size)
+        except FileExistsError:
+            continue
 
 
 def _freed(freed: deque, wake: threading.Event, name: str) -> None:
@@ -125,7 +139,7 @@ def _attach(name: str) -> SharedMemory:
     if sys.version_info >= (3, 13):
         return SharedMemory(name=name, create=False, track=False)
     shm = SharedMemory(name=name, create=False)
-    if name not in _OWN:  # a segment of this very process (tests) stays registered: it is ours to unlink
+    if not name.startswith(_own_prefix()):  # a segment of this very process (tests) stays registered: ours to unlink
         try:
             resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - the documented workaround
         except Exception:  # noqa: BLE001 - not registered: nothing to undo
@@ -323,12 +337,10 @@ class _Slot:
     __slots__ = ("shm", "size", "free")
 
     def __init__(self, size: int) -> None:
-        self.shm = SharedMemory(create=True, size=size)
-        _OWN.add(self.shm.name)
+        self.shm = _create(size)
         self.size, self.free = size, True
 
     def drop(self) -> None:
-        _OWN.discard(self.shm.name)
         try:
             self.shm.close()
             self.shm.unlink()

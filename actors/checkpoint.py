@@ -14,15 +14,29 @@ from typing import Any
 
 from aerodaas.navigation.fsm import MissionState as S
 
-_SEQ = itertools.count(1)
+
+class CheckpointNumbers:
+    """The sequence numbers of an actor's checkpoints (1, 2, ... in the order taken, across every drone of the
+    actor and every ``run`` of it): the recorder actor keeps a robot's checkpoint with the largest one
+    (:meth:`aerodaas.actors.recorder_actor.RecorderActor.checkpoint`). Owned by the actor's
+    :class:`~aerodaas.actors.assembly.ActorAssembly`; ``itertools.count`` is thread-safe (the clock thread takes
+    checkpoints, the actor's ``checkpoint`` call too)."""
+
+    def __init__(self) -> None:
+        self._count = itertools.count(1)
+
+    def take(self, d: Any) -> dict:
+        """:func:`drone_checkpoint` of DroneComponent ``d`` with the next number."""
+        return drone_checkpoint(d, next(self._count))
 
 
-def drone_checkpoint(d: Any) -> dict:
-    """A checkpoint of DroneComponent ``d`` (taken under its lock, so it is consistent with one control step)."""
+def drone_checkpoint(d: Any, seq: int) -> dict:
+    """A checkpoint of DroneComponent ``d`` numbered ``seq`` (newer is larger, :class:`CheckpointNumbers`), taken
+    under its lock, so it is consistent with one control step."""
     with d.lock:
         q = d.queue.state()  # the items themselves are never changed in place: list copies suffice
         f = d.flight
-        return {"seq": next(_SEQ), "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
+        return {"seq": seq, "robot": d.cfg.id, "t": d.backend.t, "vehicle": d.backend.checkpoint(),
                 "state": d.fsm.state.value, "history": list(d.fsm.history), "visited": list(f.visited),
                 "events": list(d.events[-50:]), "preplanned_left": f.preplanned_left,
                 "preplanned_total": f.preplanned_total, "takeoff_altitude": d.takeoff_altitude,

@@ -16,7 +16,7 @@ from __future__ import annotations
 import ray
 
 from aerodaas.actors.actor_base import ActorBase
-from aerodaas.actors.checkpoint import drone_checkpoint, restore_drone
+from aerodaas.actors.checkpoint import restore_drone
 
 
 @ray.remote(num_cpus=0, max_concurrency=32)
@@ -38,4 +38,4 @@ class DroneActor(ActorBase):
 
     def checkpoint(self) -> dict:
         """Robot id -> its current checkpoint (see :mod:`.checkpoint`)."""
-        return {d.cfg.id: drone_checkpoint(d) for d in self.runtime.drones}
+        return {d.cfg.id: self.runtime.checkpoint_numbers.take(d) for d in self.runtime.drones}

@@ -75,14 +75,16 @@ class RecorderService(AnalyticsAccounting):
     ``homes``: robot id -> its home (a :class:`~aerodaas.model.types.GeoPoint` or its dict), for the lat/lon of
     recorded tracks. ``declare``: ``[(topic, schema)]`` of protobuf channels known from the plan (the track channels,
     :func:`aerodaas.perception.track_records.declared_track_channels`), registered in the file and advertised by the
-    live view before the first message."""
+    live view before the first message. ``json_schemas``: the plug-ins' message schemas (schema name -> JSON
+    Schema, :class:`~aerodaas.recording.writer.McapRecorder`)."""
 
     def __init__(self, path: str | None, metadata: dict[str, str] | None = None, jpeg_quality: int = 80,
                  max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
                  live: str | None = None, homes: dict[str, Any] | None = None,
-                 declare: list[tuple[str, str]] | None = None, live_access: Any = None) -> None:
+                 declare: list[tuple[str, str]] | None = None, live_access: Any = None,
+                 json_schemas: dict[str, dict] | None = None) -> None:
         self.homes = {r: GeoPoint.model_validate(h) for r, h in (homes or {}).items()}
-        self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality)
+        self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality, json_schemas=json_schemas)
         self.path = path
         #: the live Foxglove WebSocket server (``live`` = its HOST:PORT), fed by the same writer
         self.live = None

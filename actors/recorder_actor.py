@@ -89,7 +89,8 @@ class RecorderActor:
         self.losses.append(loss)
         try:
             self.recorder = RecorderService(str(path), rec.meta, max_pending_frames=64, homes=rec.homes,
-                                            declare=rec.declare, live_access=rec.live_access)
+                                            declare=rec.declare, live_access=rec.live_access,
+                                            json_schemas=rec.schemas)
         except OSError as e:
             loss["error"] = f"{type(e).__name__}: {e}"
         finally:
@@ -124,16 +125,13 @@ class RecorderActor:
         with self._setup_lock:
             try:
                 if rec is not None and self.recorder is None:
-                    from aerodaas.recording.schemas import register_json_schema  # lazy: heavy pydantic
-
-                    for name, js in rec.schemas.items():  # plug-in sensors' message schemas
-                        register_json_schema(name, js)
                     if rec.path:  # segments of an earlier run to the same file would be joined to this one
                         remove_stale_segments(rec.path)
                         self.segments = [str(rec.path)]
                     self.recorder = RecorderService(rec.path, rec.meta, live=rec.live, max_pending_frames=64,
                                                     homes=rec.homes, declare=rec.declare,
-                                                    live_access=rec.live_access)
+                                                    live_access=rec.live_access,
+                                                    json_schemas=rec.schemas)  # plug-in sensors' message schemas
             finally:
                 self._set_up.set()
             if self.spec.record_remote and self.recorder is not None and self._forward is None:

@@ -101,7 +101,8 @@ class LocalCluster:
         limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
         lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
 
-        reaper.ensure_started()  # the nodes' processes end with this process, however it ends
+        # the nodes' processes end with this process, however it ends (None: this process has its reaper already)
+        self._reaper = reaper.ensure_started()
         # kept for the cluster's life: nodes added later must bind loopback too; undone by shutdown()
         self._restore_network = loopback_only()
         self._cloud_cpus = int(cloud_cpus)

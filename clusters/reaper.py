@@ -23,9 +23,7 @@ import subprocess
 import sys
 import time
 
-__all__ = ["descendants", "ensure_started", "start", "start_time"]
-
-_STARTED: dict[int, subprocess.Popen] = {}  # driver pid -> its reaper (one per process, forks included)
+__all__ = ["descendants", "ensure_started", "running_for", "start", "start_time"]
 
 
 def _stat_fields(pid: int | str) -> list[str] | None:
@@ -79,14 +77,60 @@ def start(driver_pid: int | None = None, period_s: float = 0.5, grace_s: float =
 
 
 def ensure_started() -> subprocess.Popen | None:
-    """:func:`start` for this process unless its reaper already runs (called before a local Ray starts)."""
+    """:func:`start` for this process unless its reaper already runs (called before a local Ray starts): one
+    reaper per process, a forked child gets its own. Returns the Popen of the reaper started, None when one was
+    running already (or where there is no /proc). Whether one runs is read from the process table
+    (:func:`running_for`), not kept in a module-level table: the caller that starts one holds its Popen."""
     me = os.getpid()
-    r = _STARTED.get(me)
-    if r is None or r.poll() is not None:
-        r = start(me)
-        if r is not None:
-            _STARTED[me] = r
-    return r
+    if running_for(me):
+        return None
+    return start(me)
+
+
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid``: ``/proc/<pid>/task/<tid>/children`` of each of its threads (proc(5)), or,
+    on a kernel without that file, the processes whose parent (/proc/<pid>/stat field 4) is ``pid``."""
+    out: list[int] = []
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    try:
+        for tid in tasks:
+            with open(f"/proc/{pid}/task/{tid}/children", encoding="ascii") as f:
+                out += [int(c) for c in f.read().split()]
+    except FileNotFoundError:  # no CONFIG_PROC_CHILDREN (or the thread ended): the parents of every process
+        out = [int(d) for d in os.listdir("/proc") if d.isdigit() and (_stat_fields(d) or ["", ""])[1] == str(pid)]
+    return out
+
+
+def running_for(driver: int) -> bool:
+    """Whether a reaper for ``driver`` runs: a live child of ``driver`` whose command line runs this file for it
+    (``python -S <this file> <driver> ...``, :func:`start`; an ended one that is not waited for yet, a zombie, has
+    an empty command line)."""
+    me = os.path.abspath(__file__).encode()
+    for pid in _children(driver):
+        argv = _cmdline(pid)
+        if len(argv) >= 4 and argv[2] == me and argv[3] == str(driver).encode():
+            return True
+    return False
+
+
+def _cmdline(pid: int, wait_s: float = 1.0) -> list[bytes]:
+    """The command line of ``pid`` (/proc/<pid>/cmdline, split at NUL), ``[]`` when it is gone. A process that
+    has just exec'd reads empty for a moment (seen right after ``subprocess.Popen`` returned): read again, up to
+    ``wait_s``, unless it is a zombie (whose command line stays empty)."""
+    end = time.monotonic() + wait_s
+    while True:
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                raw = f.read()
+        except OSError:
+            return []
+        fields = _stat_fields(pid)
+        if raw or fields is None or fields[0] == "Z" or time.monotonic() >= end:
+            return raw.split(b"\0")
+        time.sleep(0.01)
 
 
 def _watch(driver: int, period_s: float, grace_s: float) -> int:

@@ -71,7 +71,7 @@ from aerodaas.schedulers.analytics_dems import JIT_EARLY_MS
 from aerodaas.schedulers.analytics_evplan import EvPlan
 from aerodaas.schedulers.analytics_gainplan import COMMITTED, EDGE_ONLY, OPEN
 from aerodaas.schedulers import single_machine_jit
-from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule_arrays
+from aerodaas.schedulers.single_machine import SolveCounts, max_gain_schedule_arrays
 
 __all__ = ["LaPlan", "ArrivalPredictor", "EDGE_LEVELS"]
 
@@ -268,21 +268,21 @@ class LaPlan(EvPlan):
         rel_a, dl_a, fb_a = np.array(rel, np.float64), np.array(dl, np.float64), np.array(fb, np.float64)
         wt_a = np.array(wt, np.float64)  # x 1.0 is exact: unweighted rows keep their gains bit for bit
         reduced = False
+        solves = SolveCounts()  # which DP solved this plan
         while True:
             idx = np.array(rows, np.int64)
             pa = pa_all[idx]
             ids: dict[tuple, int] = {}
             gid = np.array([ids.setdefault(keys[r], len(ids)) for r in rows], np.int64)  # one group per key
             latest, proc = (dl_a[idx][:, None] - pa[:, :, 0]).ravel(), pa[:, :, 1].ravel()
-            n_python = SOLVES["python"]
             got = max_gain_schedule_arrays(
                 np.repeat(rel_a[idx], levels), latest, proc, ((pa[:, :, 2] - fb_a[idx][:, None]) * wt_a[idx][:, None]).ravel(),
-                np.repeat(gid, levels), len(ids), free_at=free, python_fallback=False)
+                np.repeat(gid, levels), len(ids), free_at=free, python_fallback=False, counts=solves)
             if got is not None:
                 break
             reduced = True
             rows = self._fewer_rows(rows, rel, fb, parts, n_pool)
-        if SOLVES["python"] > n_python:  # the slow pure-Python DP ran (numba missing)
+        if solves.python:  # the slow pure-Python DP ran (numba missing)
             self.counters["plans_in_python"] += 1
         if reduced:
             self.counters["plans_reduced"] += 1

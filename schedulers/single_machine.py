@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from aerodaas.schedulers import single_machine_jit
 
-__all__ = ["max_gain_schedule", "max_gain_schedule_arrays"]
+__all__ = ["SolveCounts", "max_gain_schedule", "max_gain_schedule_arrays"]
 
 _EPS = 1e-9
 
@@ -62,9 +63,14 @@ class _Group:
         return self.best[self.pos] if self.pos < len(self.latest) else None
 
 
-#: plans solved by the compiled kernel and by the Python loop (the latter: numba missing, ``jit=False`` or more than
-#: 64 groups live at once), per process — LAPLAN reports the Python ones
-SOLVES = {"compiled": 0, "python": 0}
+@dataclass
+class SolveCounts:
+    """Plans solved by the compiled kernel (``compiled``) and by the Python loop (``python``: numba missing,
+    ``jit=False`` or more than 64 groups live at once), counted into the object a caller passes as ``counts`` to
+    :func:`max_gain_schedule` / :func:`max_gain_schedule_arrays` (LAPLAN reports its plans solved in Python)."""
+
+    compiled: int = 0
+    python: int = 0
 
 
 def _bits(rows: list) -> list[int] | None:
@@ -129,12 +135,11 @@ def _run_kernel(rel, proc, bit, vstart, latest, best, gains) -> tuple[float, lis
     while node >= 0:
         out.append((int(nj[node]), float(nt[node])))
         node = npar[node]
-    SOLVES["compiled"] += 1
     return float(gain), out[::-1]
 
 
 def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int, *, free_at: float = float("-inf"),
-                             jit: bool = True, python_fallback: bool = True
+                             jit: bool = True, python_fallback: bool = True, counts: SolveCounts | None = None
                              ) -> tuple[float, list[tuple[int, float]]] | None:
     """:func:`max_gain_schedule` on flat arrays, with the same answer (ties included): ``release``, ``deadline``,
     ``proc`` (J,) float64 ms, ``gain`` (J,) float64, ``group`` (J,) int64 in ``[0, ngroups)`` (at most one job of
@@ -142,8 +147,9 @@ def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int,
     the Python preparation of the job tuples cost about twice the DP itself); without it, or above 64 groups live
     at once, the job tuples are built and :func:`max_gain_schedule` runs — unless ``python_fallback`` is False:
     then None is returned when the compiled kernel is there but more than 64 groups are live (the pure-Python DP is
-    exponential in the live groups: 67 ms for one LAPLAN plan on a stall-and-flush trace, issue 41). Raises
-    ValueError if the jobs of one group differ in release or processing time."""
+    exponential in the live groups: 67 ms for one LAPLAN plan on a stall-and-flush trace, issue 41). ``counts``:
+    which DP solved it is counted there (:class:`SolveCounts`; None: not counted). Raises ValueError if the jobs of
+    one group differ in release or processing time."""
     if jit and single_machine_jit.available():
         gains = np.ascontiguousarray(gain, np.float64)
         code, rel, p, bit, vstart, latest, best = single_machine_jit.prepare(
@@ -155,16 +161,19 @@ def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int,
         if code == 0:
             if rel.shape[0] == 0:
                 return 0.0, []
+            if counts is not None:
+                counts.compiled += 1
             return _run_kernel(rel, p, bit, vstart, latest, best, gains)
         if not python_fallback:
             return None
     jobs = list(zip(np.asarray(release, float).tolist(), np.asarray(deadline, float).tolist(),
                     np.asarray(proc, float).tolist(), np.asarray(gain, float).tolist()))
-    return max_gain_schedule(jobs, free_at=free_at, groups=np.asarray(group).tolist(), jit=False)
+    return max_gain_schedule(jobs, free_at=free_at, groups=np.asarray(group).tolist(), jit=False, counts=counts)
 
 
 def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free_at: float = float("-inf"),
-                      groups: Sequence[object] | None = None, jit: bool = True) -> tuple[float, list[tuple[int, float]]]:
+                      groups: Sequence[object] | None = None, jit: bool = True, counts: SolveCounts | None = None
+                      ) -> tuple[float, list[tuple[int, float]]]:
     """The exact optimum of 1 | r_j | Σ w_j U_j (see the module docstring).
 
     ``jobs``: ``(release_ms, deadline_ms, processing_ms, gain)`` each; jobs with gain <= 0 or that cannot fit
@@ -173,8 +182,9 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
     start_ms), ...]`` in start order, every job starting at its release or when the previous one ends, none before
     ``free_at``. Ties prefer the schedule found first. ``jit``: run the DP compiled (:mod:`.single_machine_jit`,
     numba) when it is installed and at most 64 groups are live at once (:func:`_bits`) — the same algorithm and
-    the same answer, ties included, ~5-10x faster; False (or ``AERODAAS_NO_JIT=1``) runs the pure-Python loop. Raises ValueError if the
-    jobs of one group differ in release or processing time."""
+    the same answer, ties included, ~5-10x faster; False (or ``AERODAAS_NO_JIT=1``) runs the pure-Python loop.
+    ``counts``: which DP solved it is counted there (:class:`SolveCounts`; None: not counted). Raises ValueError if
+    the jobs of one group differ in release or processing time."""
     gains = [w for *_, w in jobs]
     members: dict[object, list[int]] = {}
     for j, (r, d, p, w) in enumerate(jobs):
@@ -185,8 +195,11 @@ def max_gain_schedule(jobs: Sequence[tuple[float, float, float, float]], *, free
     if jit and single_machine_jit.available():
         res = _solve_compiled(members, jobs, gains, free_at)
         if res is not None:
+            if counts is not None:
+                counts.compiled += 1
             return res
-    SOLVES["python"] += 1
+    if counts is not None:
+        counts.python += 1
     return _label_setting(_groups(members, jobs, gains, free_at), gains)
 
 

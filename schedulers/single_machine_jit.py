@@ -18,36 +18,50 @@ importing the schedulers does not pay for it; the first call compiles (a few sec
 """
 from __future__ import annotations
 
+import functools
 import os
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["MAX_GROUPS", "available", "prepare", "solve", "status", "warm_up"]
+__all__ = ["MAX_GROUPS", "available", "import_error", "prepare", "solve", "status", "warm_up"]
 
 #: the most task groups a uint64 mask holds
 MAX_GROUPS = 64
 
-_kernel = None  # the compiled kernel once loaded
-_prepare = None  # the compiled array builder once loaded
-_state = {"tried": False, "error": None}
+class _Compiled(NamedTuple):
+    """The compiled functions once loaded (``kernel``, ``prepare``; both None when numba could not be imported,
+    ``error`` then says why)."""
+
+    kernel: Callable[..., Any] | None
+    prepare: Callable[..., Any] | None
+    error: ImportError | None
+
+
+@functools.cache
+def _compiled() -> _Compiled:
+    """Import the numba kernel, once per process (``functools.cache``: the import's outcome, kept; no module-level
+    variable rebound with ``global``)."""
+    try:
+        from aerodaas.schedulers import single_machine_kernel as k  # lazy: optional numba
+    except ImportError as e:  # numba not installed: the pure-Python loop is used
+        return _Compiled(None, None, e)
+    return _Compiled(k.kernel, k.prepare, None)
 
 
 def available() -> bool:
     """True if the compiled kernel can be used (compiling it on the first call); False if numba is missing or
     ``AERODAAS_NO_JIT`` is set (then :func:`solve` must not be called)."""
-    global _kernel, _prepare
     if os.environ.get("AERODAAS_NO_JIT"):
         return False
-    if not _state["tried"]:
-        _state["tried"] = True
-        try:
-            from aerodaas.schedulers.single_machine_kernel import kernel, prepare  # lazy: optional numba
-        except ImportError as e:  # numba not installed: the pure-Python loop is used
-            _state["error"] = e
-        else:
-            _kernel = kernel
-            _prepare = prepare
-    return _kernel is not None
+    return _compiled().kernel is not None
+
+
+def import_error() -> ImportError | None:
+    """Why the compiled kernel cannot be used: the ImportError of numba, None when it imported (tries the import on
+    the first call, as :func:`available` does)."""
+    return _compiled().error
 
 
 def status() -> dict:
@@ -61,7 +75,8 @@ def status() -> dict:
     elif os.environ.get("AERODAAS_NO_JIT"):
         why = "AERODAAS_NO_JIT is set"
     else:
-        why = f"{type(_state['error']).__name__}: {_state['error']}"
+        err = import_error()
+        why = f"{type(err).__name__}: {err}"
     return {"compiled": compiled, "why_not": why}
 
 
@@ -70,7 +85,7 @@ def solve(rel, proc, bit, vstart, latest, best, gains, eps: float):
     ``bit`` (G,) uint64, ``vstart`` (G + 1,) int64 offsets into ``latest`` (V,) float64 latest starts (ascending per
     group) and ``best`` (V,) int64 (the suffix-best job index), ``gains`` (J,) float64. Returns ``(best gain,
     node_j, node_t, node_parent, best node)``: the best path is the chain of nodes from ``best node`` (-1: empty)."""
-    return _kernel(rel, proc, bit, vstart, latest, best, gains, eps)
+    return _compiled().kernel(rel, proc, bit, vstart, latest, best, gains, eps)
 
 
 def prepare(r, d, p, w, gid, ngroups: int, free_at: float, eps: float):
@@ -78,7 +93,7 @@ def prepare(r, d, p, w, gid, ngroups: int, free_at: float, eps: float):
     (J,) int64 group in ``[0, ngroups)``), compiled; see ``single_machine_kernel.prepare``. Returns ``(code, rel,
     proc, bit, vstart, latest, best)``, code 0 ok, 1 a group's jobs differ in release or processing time, 2 more
     than :data:`MAX_GROUPS` groups live at once. Only after :func:`available` returned True."""
-    return _prepare(r, d, p, w, gid, ngroups, free_at, eps, MAX_GROUPS)
+    return _compiled().prepare(r, d, p, w, gid, ngroups, free_at, eps, MAX_GROUPS)
 
 
 def warm_up() -> bool:

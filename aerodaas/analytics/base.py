@@ -247,7 +247,7 @@ class Analytics:
 
     def _emissions(self) -> Emissions:
         """Where :meth:`emit`/:meth:`emit_event` go: the runtime's collector of this thread, else this object's own."""
-        em = current_emissions()
+        em = current_emissions(self)
         if em is None:
             em = self.__dict__.setdefault("_own_emissions", Emissions())
         return em
@@ -267,10 +267,10 @@ class Analytics:
         :attr:`max_batch`. Errors: whatever :meth:`process` raises; when it raises, no output of the batch is
         valid (a runtime re-runs the items one by one with :meth:`process` to attribute the failure, which is safe
         for the analytics that batch: they are not :attr:`stateful`). What :meth:`emit`/:meth:`emit_event` send
-        belongs to the item being processed (an override that emits sets ``current_emissions().item`` to the
+        belongs to the item being processed (an override that emits sets ``current_emissions(self).item`` to the
         index first; otherwise it belongs to the batch's first item)."""
         out = []
-        em = current_emissions()
+        em = current_emissions(self)
         for i, (data, meta) in enumerate(items):
             if em is not None:
                 em.item = i

@@ -84,24 +84,53 @@ class Emissions:
         return out
 
 
-_LOCAL = threading.local()
+class EmissionCollector:
+    """Where one analytics object's ``emit`` / ``emit_event`` go while the runtime processes an item: per thread,
+    the :class:`Emissions` of the innermost :func:`collecting` block (a ``threading.local`` of its own, so an
+    object that several threads run at once keeps their items apart). Each analytics object owns one
+    (:func:`collector_of`), no process-wide table."""
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+
+    def __reduce__(self) -> tuple:
+        """A copy (``copy.deepcopy``, pickling the analytics to its actor) is a fresh collector: blocks in progress
+        belong to the threads of this process (a ``threading.local`` cannot be pickled)."""
+        return (EmissionCollector, ())
+
+    @contextmanager
+    def collecting(self) -> Iterator[Emissions]:
+        """Gather what is emitted in this thread while the block runs; nested blocks each gather their own."""
+        prev = getattr(self._local, "emissions", None)
+        self._local.emissions = em = Emissions()
+        try:
+            yield em
+        finally:
+            self._local.emissions = prev
+
+    def current(self) -> Emissions | None:
+        """The :class:`Emissions` of the innermost block of this thread, None outside one."""
+        return getattr(self._local, "emissions", None)
+
+
+def collector_of(analytics: Any) -> EmissionCollector:
+    """The :class:`EmissionCollector` of the analytics object ``analytics``, made on first use and kept in the
+    object's own ``__dict__``, as :class:`~aerodaas.analytics.base.Analytics` keeps its other per-object state."""
+    return analytics.__dict__.setdefault("_emission_collector", EmissionCollector())
 
 
 @contextmanager
-def collecting() -> Iterator[Emissions]:
-    """Gather what an analytics emits in this thread while the block runs (the runtime wraps each ``process`` /
+def collecting(analytics: Any) -> Iterator[Emissions]:
+    """Gather what ``analytics`` emits in this thread while the block runs (the runtime wraps each ``process`` /
     ``process_batch`` call in it); nested blocks each gather their own."""
-    prev = getattr(_LOCAL, "emissions", None)
-    _LOCAL.emissions = em = Emissions()
-    try:
+    with collector_of(analytics).collecting() as em:
         yield em
-    finally:
-        _LOCAL.emissions = prev
 
 
-def current_emissions() -> Emissions | None:
-    """The :class:`Emissions` of the innermost :func:`collecting` block of this thread, None outside one."""
-    return getattr(_LOCAL, "emissions", None)
+def current_emissions(analytics: Any) -> Emissions | None:
+    """The :class:`Emissions` of the innermost :func:`collecting` block of ``analytics`` in this thread, None
+    outside one."""
+    return collector_of(analytics).current()
 
 
 class NamedOutputStream(AeroStreamData):

@@ -202,7 +202,7 @@ class ObjectDetector(Analytics):
         self.n_frames += n
         self.n_with_dets += sum(bool(d) for d in out)
         self.n_batched += self.detector.last_batched
-        em = current_emissions()
+        em = current_emissions(self)
         for j, (_, meta) in enumerate(items):
             if em is not None:
                 em.item = j  # the event belongs to this drone's frame (Analytics.process_batch)

@@ -4,9 +4,11 @@ For each fleet size N (default 1, 5, 10, 20, 40) and each grouping k (``--drones
 actor per drone) on a fresh local Ray: N simulated drones, each with a camera (640x480 at 15 FPS), odometry
 (10 Hz), the stat-stream and a navigation (control) loop at 10 Hz flying its own survey, and a lightweight
 analytics colocated with each drone (in its drone actor), in real time (speedup 1) for ``--duration`` seconds.
-``--edge-nodes M`` (M > 1) runs the fleet on a :class:`~aerodaas.clusters.local.LocalCluster` with M ``tier=edge``
-nodes, one edge compute resource per node (its own ``aerodaas/site`` label), the drones spread over them
-round-robin, and reports the drones each node carried. Reported per run: missed control ticks (%: a tick that runs
+``--edge-nodes M`` (M >= 1) runs each fleet on a fresh :class:`~aerodaas.clusters.local.LocalCluster` with M
+``tier=edge`` nodes (the first is the head: GCS and driver), one edge compute resource per node (its own
+``aerodaas/site`` label), the drones spread over them round-robin, recorded with ``recording.per_node`` into a
+temporary directory, and reports each node (``nodes``: :mod:`aerodaas.bench.fleet_nodes`) — the fit of
+:mod:`aerodaas.bench.fleet_model` reads them. Reported per run: missed control ticks (%: a tick that runs
 more than one control period late), frames dropped (%: camera ticks whose frame never reached the analytics), CPU
 (% of one core, all Ray processes and the driver), the summed RSS (and PSS) of every Ray process and the driver at
 its peak, and the Ray worker processes (one per drone actor, plus the recorder's). ``--plot FILE`` draws the
@@ -19,13 +21,17 @@ import argparse
 import math
 import os
 import sys
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import psutil
 
 from aerodaas.analytics.core import Analytics
 from aerodaas.app.api import Environment
+from aerodaas.bench.fleet_nodes import ClusterLayout, FlightWindow, drones_in_actor, node_report, recorder_throughput
 from aerodaas.bench.fleet_profile import ActorProfiler
 from aerodaas.bench.machine import machine_info
 from aerodaas.bench.output import emit_report
@@ -64,16 +70,17 @@ class FrameExposure(Analytics):
 
 
 def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480, drones_per_actor: int = 1,
-                 edge_nodes: int = 1) -> dict:
+                 edge_nodes: int = 1, labelled: bool = False) -> dict:
     """environment.json dict for ``n`` drones 6 m apart on a grid, each flying a 4 m square over and over;
-    ``drones_per_actor`` drones share a drone actor; ``edge_nodes`` > 1: one edge compute per node (label
-    ``aerodaas/site: site<j>``), drone i flying from compute ``edge<i % edge_nodes>``."""
+    ``drones_per_actor`` drones share a drone actor; ``edge_nodes`` > 1 (or ``labelled``): one edge compute per
+    node (label ``aerodaas/site: site<j>``), drone i flying from compute ``edge<i % edge_nodes>``."""
     robots = []
     side = max(1, math.ceil(math.sqrt(n)))
+    labelled = labelled or edge_nodes > 1
     for i in range(n):
         robots.append({
             "id": f"d{i:02d}", "backend": "sim", "takeoff_altitude": 3.0, "control_rate_hz": 10,
-            **({"compute": f"edge{i % edge_nodes}"} if edge_nodes > 1 else {}),
+            **({"compute": f"edge{i % edge_nodes}"} if labelled else {}),
             "limits": {"max_speed": 2.0, "max_vertical_speed": 1.0, "max_acceleration": 2.0},
             "sensors": [
                 {"id": "cam", "type": "camera",
@@ -81,7 +88,7 @@ def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480,
                 {"id": "odom", "type": "odometry", "properties": {"rate_hz": 10}},
                 {"id": "stat", "type": "stat_stream"}]})
     compute = ([{"id": f"edge{j}", "tier": "edge", "labels": {"aerodaas/site": f"site{j}"}} for j in range(edge_nodes)]
-               if edge_nodes > 1 else [{"id": "edge", "tier": "edge"}])
+               if labelled else [{"id": "edge", "tier": "edge"}])
     return {"name": f"fleet-{n}", "robots": robots, "compute": compute, "drones_per_actor": drones_per_actor,
             "world": {"ground": {"seed": 3, "metres_per_pixel": 0.05, "size_m": 12.0 * side + 40}},
             "simulation": {"speedup": 1.0, "lockstep": False, "physics_hz": 50}}
@@ -92,11 +99,13 @@ def _grid_offset(i: int, n: int) -> tuple[float, float]:
     return (6.0 * (i % side), 6.0 * (i // side))
 
 
-def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
+def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1, cluster: bool = False):
     """The fleet application: environment, an analytics colocated with each drone's camera, a looping survey per
-    drone."""
-    env = Environment(parse_environment_config(fleet_config(n, drones_per_actor=drones_per_actor,
-                                                            edge_nodes=edge_nodes)))
+    drone. ``cluster``: one labelled edge compute per node (even for one node) and ``recording.per_node``."""
+    cfg = fleet_config(n, drones_per_actor=drones_per_actor, edge_nodes=edge_nodes, labelled=cluster)
+    if cluster:
+        cfg["recording"] = {"per_node": True}
+    env = Environment(parse_environment_config(cfg))
     shared = FrameExposure()
     shared.deploy(env.get_compute_resources()[0], colocate=True)  # a copy inside each drone's actor
     sched = TrajectoryScheduler(env)
@@ -112,40 +121,89 @@ def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1):
     return env, shared
 
 
-def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int = 1,
+def _start_cluster(edge_nodes: int) -> LocalCluster:
+    """A LocalCluster of ``edge_nodes`` ``tier=edge`` nodes (node j labelled ``aerodaas/site: site<j>``; the first
+    is the head, with the GCS and the driver), no cloud node, workers at niceness 0 like the local Ray's. Raises
+    RayStartError when a node did not start (Ray's own ``Exception``: a raylet's registration timed out under load;
+    :func:`_run_size_started` tries again)."""
+    try:
+        return LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes, worker_niceness=0,
+                            edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
+    except Exception as e:  # noqa: BLE001 - ray._private.node raises a bare Exception for a node's start timeout
+        raise RayStartError(f"the local cluster of {edge_nodes} edge node(s) did not start: {e}") from e
+
+
+def _cluster_part(window: FlightWindow, lc: LocalCluster, env: Any, res: Any, rec_dir: str, mission_s: float) -> dict:
+    """The cluster-only fields of a row: ``nodes`` (:func:`~aerodaas.bench.fleet_nodes.node_report`), the GCS's
+    actor count, the run recorder's throughput, the recording's losses and whether the window was whole."""
+    n_nodes = len(lc.edge_nodes)
+    robot_node = {r.id: i % n_nodes for i, r in enumerate(env.get_env_robots())}
+    recordings = {j: sorted(Path(rec_dir).glob(f"fleet.node-edge{j}.mcap")) for j in range(n_nodes)}
+    layout = ClusterLayout([nd.node_id for nd in lc.edge_nodes], str(res.stats.get("_plan", {}).get("run")),
+                           robot_node, recordings)
+    main_rec = sorted(Path(rec_dir).glob("fleet.mcap"))
+    return {"nodes": node_report(window, layout, res, mission_s),
+            "gcs_actors": sum(1 for a in window.actors if a["state"] == "ALIVE"),
+            "gcs_actor_classes": {c: sum(1 for a in window.actors if a["state"] == "ALIVE" and a["class"] == c)
+                                  for c in sorted({str(a["class"]) for a in window.actors})},
+            "run_recorder": recorder_throughput(main_rec, mission_s) if main_rec else None,
+            "recording_lost": int((res.recording_accounting or {}).get("lost_total", 0)),
+            "recording_accounting_read": res.recording_accounting is not None,
+            "window": {"complete": window.complete, "seconds": round(window.measured_s, 2), "error": window.error}}
+
+
+def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int | None = None,
              profile: bool = False) -> dict:
-    """One fleet size on a fresh local Ray (or a fresh LocalCluster of ``edge_nodes`` edge nodes); returns the
-    measured row. ``profile``: also the cost table of one drone actor and of the node's processes
-    (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as ``"profile"`` in the row."""
+    """One fleet size on a fresh local Ray (``edge_nodes`` None) or a fresh LocalCluster of ``edge_nodes`` edge
+    nodes, recorded with one recorder per node into a temporary directory (removed after; only the numbers are
+    kept); returns the measured row (with ``nodes`` on a cluster). ``profile``: also the cost table of one drone
+    actor and of the node's processes (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as
+    ``"profile"`` in the row."""
     runtime.shutdown_ray()
     opts = runtime.RunOptions(progress=False)
-    env, _ = build_fleet(n, drones_per_actor, edge_nodes)
-    lc, nodes = None, None
-    if edge_nodes > 1:
-        lc = LocalCluster(cloud_nodes=0, edge_nodes=edge_nodes, worker_niceness=0,
-                          edge_labels=[{"aerodaas/site": f"site{j}"} for j in range(edge_nodes)])
-        nodes = lc.cluster.list_all_nodes()
-        opts.address = lc.address
-    try:
-        runtime.ensure_ray(opts.address)
-        time.sleep(2.0)  # let Ray's own processes settle before measuring
-        procs = ray_processes(nodes)
-        cpu0, wall0 = cpu_seconds(procs), time.monotonic()
-        prof = None
-        if profile and edge_nodes == 1:
-            # the window: after the fleet's start (its actors up and flying), within the flight
-            prof = ActorProfiler(n, min(drones_per_actor, n), window_s=max(2.0, min(10.0, duration_s / 2))).start()
-        with MemorySampler(1.0, nodes) as mem:
-            res = env.start_mission(timeout=duration_s, options=opts)
-        if prof is not None:
-            prof.stop()
-        wall = time.monotonic() - wall0
-        cpu = cpu_seconds(ray_processes(nodes)) - cpu0
-        names = {nd.node_id: f"edge node {j}" for j, nd in enumerate(lc.edge_nodes)} if lc else {}
-    finally:
-        runtime.shutdown_ray()
-        if lc is not None:
-            lc.shutdown()
+    cluster = edge_nodes is not None
+    env, _ = build_fleet(n, drones_per_actor, edge_nodes or 1, cluster)
+    lc, nodes, window, extra = None, None, None, {}
+    with tempfile.TemporaryDirectory(prefix="aerodaas-bench-fleet-") as rec_dir:
+        if cluster:
+            lc = _start_cluster(edge_nodes)
+            nodes = lc.cluster.list_all_nodes()
+            opts.address, opts.record = lc.address, os.path.join(rec_dir, "fleet.mcap")
+            window = FlightWindow(lc.edge_nodes, settle_s=min(3.0, duration_s / 4),
+                                  window_s=max(1.0, duration_s * 0.75 - min(3.0, duration_s / 4) - 0.5))
+            for robot in env.get_env_robots():
+                robot.on_mission_start(window.begin)
+        try:
+            runtime.ensure_ray(opts.address)
+            time.sleep(2.0)  # let Ray's own processes settle before measuring
+            procs = ray_processes(nodes)
+            cpu0, wall0 = cpu_seconds(procs), time.monotonic()
+            prof = None
+            if profile and not cluster:
+                # the window: after the fleet's start (its actors up and flying), within the flight
+                prof = ActorProfiler(n, min(drones_per_actor, n), window_s=max(2.0, min(10.0, duration_s / 2))).start()
+            with MemorySampler(1.0, nodes) as mem:
+                res = env.start_mission(timeout=duration_s, options=opts)
+            for m in (prof, window):
+                if m is not None:
+                    m.stop()
+            wall = time.monotonic() - wall0
+            cpu = cpu_seconds(ray_processes(nodes)) - cpu0
+            mission_s = float(res.stats.get("_timing", {}).get("mission_s", wall))
+            if window is not None:
+                extra = _cluster_part(window, lc, env, res, rec_dir, mission_s)
+        finally:
+            runtime.shutdown_ray()
+            if lc is not None:
+                lc.shutdown()
+    return {**_row(n, drones_per_actor, edge_nodes, res, wall, cpu, mem, lc), **extra,
+            **({"profile": prof.result if prof.result is not None else {"error": prof.error or "window missed"}}
+               if prof is not None else {})}
+
+
+def _row(n: int, drones_per_actor: int, edge_nodes: int | None, res: Any, wall: float, cpu: float,
+         mem: MemorySampler, lc: LocalCluster | None) -> dict:
+    """The row of one fleet size from its run's result ``res``: the whole fleet's ticks, frames, CPU and memory."""
     ticks = sum(r.get("ticks", 0) for r in res.robots.values())
     missed = sum(r.get("missed_ticks", 0) for r in res.robots.values())
     cam_ticks = sum(c.get("ticks", 0) for s in res.stats.values() if isinstance(s, dict)
@@ -155,11 +213,11 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     hosts = res.stats.get("_hosts", {})
     lateness = [h["tick_lateness_ms"] for h in hosts.values() if (h.get("tick_lateness_ms") or {}).get("n")]
     plan = res.stats.get("_plan", {})
+    names = {nd.node_id: f"edge node {j}" for j, nd in enumerate(lc.edge_nodes)} if lc else {}
     per_node: dict[str, int] = {}
     for hid, node in (plan.get("placed") or {}).items():
         if hid and hid.startswith("drone"):
-            per_node[names.get(node, node)] = per_node.get(names.get(node, node), 0) + (
-                1 if hid.startswith("drone/") else int(hid.rsplit("+", 1)[1]) + 1)
+            per_node[names.get(node, node)] = per_node.get(names.get(node, node), 0) + drones_in_actor(hid)
     return {"drones": n, "drones_per_actor": drones_per_actor, "edge_nodes": edge_nodes,
             # duration_s: the measured (flying) part; wall_s also holds the actors' start and close
             "duration_s": round(float(res.stats.get("_timing", {}).get("mission_s", wall)), 1),
@@ -175,8 +233,7 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
             "tick_lateness_ms": {"median": float(np.median([x["median"] for x in lateness])) if lateness else None,
                                  "p99": max((x["p99"] for x in lateness), default=None)},
             "host_errors": sum(h.get("error_count", 0) for h in hosts.values()),
-            **({"profile": prof.result if prof.result is not None else {"error": prof.error or "window missed"}}
-               if prof is not None else {}),
+            "outcome": res.outcome,
             "outcomes": sorted({str(r.get("outcome")) for r in res.robots.values()})}
 
 
@@ -185,7 +242,8 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
 RAY_START_ATTEMPTS = 4
 
 
-def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nodes: int, profile: bool) -> dict:
+def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nodes: int | None,
+                      profile: bool) -> dict:
     """:func:`run_size`, started again (at most :data:`RAY_START_ATTEMPTS` times) when its Ray did not start: no
     drone flew then, so nothing of the measurement is lost or repeated. Raises the last RayStartError."""
     for attempt in range(1, RAY_START_ATTEMPTS + 1):
@@ -201,9 +259,10 @@ def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nod
 
 
 def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
-              edge_nodes: int = 1, runs: tuple[tuple[int, int], ...] = (), profile: bool = False) -> dict:
+              edge_nodes: int | None = None, runs: tuple[tuple[int, int], ...] = (), profile: bool = False) -> dict:
     """Every (size, grouping) pair of ``sizes`` x ``groupings``, or exactly ``runs`` ((drones, drones per actor)
-    pairs, in order) when given; the report with a row per run and the machine and load at the start."""
+    pairs, in order) when given, on the local Ray (``edge_nodes`` None) or a fresh local cluster of ``edge_nodes``
+    edge nodes per run; the report with a row per run and the machine and load at the start."""
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
     pairs = [(k, n) for n, k in runs] if runs else [(k, n) for k in groupings for n in sizes]
@@ -217,7 +276,10 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                 f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
                 f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
                 f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
-                + (f"  per node {row['drones_per_node']}" if edge_nodes > 1 else ""))
+                + (f"  per node {row['drones_per_node']}, GCS actors {row.get('gcs_actors')}" if edge_nodes else "")
+                + (f"  RECORDING LOST {row['recording_lost']} messages" if row.get("recording_lost") else "")
+                + (f"  node window incomplete: {row['window']}" if row.get("window", {}).get("complete") is False
+                   else ""))
             rows.append(row)
     for r in rows:
         # the one-drone row of the same grouping, else any (one drone is one actor whatever the grouping)
@@ -233,6 +295,32 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
             "load_avg_1min_start": load_start, "results": rows,
             "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "drones_at_least_grouped": 40,
                         "rss_mb_per_extra_drone_max": 150}}
+
+
+#: memory a cluster run needs before it starts, MiB (PSS measured in docs/benchmarks.md section 2c, rounded up:
+#: 402, 210 and 86): the head's extra (GCS, the benchmark's driver, the run's recorder, head-only agents), each
+#: node's fixed processes (raylet, Ray's agents, log monitor, its recorder actor) and each drone actor
+HEAD_EXTRA_MB, NODE_FIXED_MB, DRONE_ACTOR_MB = 450.0, 250.0, 90.0
+
+
+def check_edge_nodes(edge_nodes: int, runs: tuple[tuple[int, int], ...], available_mb: float) -> str | None:
+    """Why ``--edge-nodes edge_nodes`` cannot carry ``runs`` ((drones, drones per actor) pairs) on this machine, or
+    None: fewer than one node, more nodes than a run's drones (a node would carry none), or more memory than
+    ``available_mb`` (MiB; :data:`HEAD_EXTRA_MB` + nodes x :data:`NODE_FIXED_MB` + drone actors x
+    :data:`DRONE_ACTOR_MB` for the largest run)."""
+    if edge_nodes < 1:
+        return f"--edge-nodes must be >= 1, got {edge_nodes}"
+    fewest = min(n for n, _ in runs)
+    if fewest < edge_nodes:
+        return (f"--edge-nodes {edge_nodes} needs at least {edge_nodes} drones in every run (one per node), "
+                f"got a run of {fewest}")
+    actors = max(math.ceil(n / k) for n, k in runs)
+    need = HEAD_EXTRA_MB + edge_nodes * NODE_FIXED_MB + actors * DRONE_ACTOR_MB
+    if need > available_mb:
+        return (f"--edge-nodes {edge_nodes} with {actors} drone actors needs about {need:,.0f} MiB "
+                f"({HEAD_EXTRA_MB:.0f} + {edge_nodes} x {NODE_FIXED_MB:.0f} per node + {actors} x "
+                f"{DRONE_ACTOR_MB:.0f} per drone actor); this machine has {available_mb:,.0f} MiB available")
+    return None
 
 
 def parse_run(text: str) -> tuple[int, int]:
@@ -293,15 +381,20 @@ def main(a: argparse.Namespace) -> int:
         print(f"aerodaas bench fleet: --drones must be >= 1, got {list(sizes)}", file=sys.stderr)
         return 2
     per_actor = tuple(a.per_actor) if a.per_actor else (1,)
-    if any(k < 1 for k in per_actor) or a.edge_nodes < 1:
-        print(f"aerodaas bench fleet: --drones-per-actor and --edge-nodes must be >= 1, got {list(per_actor)}, "
-              f"{a.edge_nodes}", file=sys.stderr)
+    if any(k < 1 for k in per_actor):
+        print(f"aerodaas bench fleet: --drones-per-actor must be >= 1, got {list(per_actor)}", file=sys.stderr)
         return 2
     try:
         runs = tuple(parse_run(r) for r in (a.runs or []))
     except ValueError as e:
         print(f"aerodaas bench fleet: {e}", file=sys.stderr)
         return 2
+    if a.edge_nodes is not None:
+        problem = check_edge_nodes(a.edge_nodes, runs or tuple((n, k) for k in per_actor for n in sizes),
+                                   psutil.virtual_memory().available / 2**20)
+        if problem:
+            print(f"aerodaas bench fleet: {problem}", file=sys.stderr)
+            return 2
     report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes, runs, a.profile)
     if a.plot:
         report["plot"] = os.path.abspath(a.plot)

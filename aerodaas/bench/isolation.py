@@ -27,6 +27,7 @@ keeps its reproducible in-process runs (a published, recorded seed).
 from __future__ import annotations
 
 import enum
+import functools
 import multiprocessing
 import secrets
 import sys
@@ -42,7 +43,6 @@ __all__ = ["secret_seed", "IsolatedPolicy", "PolicyProcessError"]
 
 #: the modules the fork server imports before forking policy processes (so each fork starts warm, not with state)
 PRELOAD = ("aerodaas.bench.isolation_preload",)
-_CTX: Any = None
 
 
 def secret_seed() -> bytes:
@@ -81,13 +81,13 @@ def _row(t: AnalyticsTask) -> tuple:
             t.end_ms)
 
 
-def _context():
-    global _CTX
-    if _CTX is None:
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(list(PRELOAD))
-        _CTX = ctx
-    return _CTX
+@functools.cache
+def _context() -> Any:
+    """The ``forkserver`` multiprocessing context with :data:`PRELOAD` set, made once per process
+    (``functools.cache``: a cached factory, no module-level variable rebound with ``global``)."""
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(PRELOAD))
+    return ctx
 
 
 def _decisions(ds: list[Decision]) -> list[tuple]:

@@ -17,12 +17,31 @@ import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TextIO
+from typing import Any, TextIO
 
 __all__ = ["emit_report", "print_report", "report_only_stdout"]
 
-#: the real standard outputs of the active :func:`report_only_stdout` blocks, innermost last
-_REPORT_STREAMS: list[TextIO] = []
+class _StderrWithReport:
+    """What ``sys.stdout`` is inside a :func:`report_only_stdout` block: standard error (``stderr``), to which
+    every attribute but ``report`` goes (``write``, ``flush``, ``fileno``, ``encoding``...), carrying the block's
+    real standard output ``report``, where :func:`print_report` writes. The report stream thus lives with the
+    redirection that needs it and ends with it (no module-level stack of blocks); an inner block's ``sys.stdout``
+    replaces it and the outer one is back after the inner block."""
+
+    def __init__(self, stderr: TextIO, report: TextIO) -> None:
+        self._stderr = stderr
+        self.report = report
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stderr, name)
+
+    def write(self, text: str) -> int:
+        """Write ``text`` to standard error."""
+        return self._stderr.write(text)
+
+    def flush(self) -> None:
+        """Flush standard error."""
+        self._stderr.flush()
 
 
 def _fileno(stream: TextIO | None) -> int | None:
@@ -34,8 +53,9 @@ def _fileno(stream: TextIO | None) -> int | None:
 
 @contextmanager
 def report_only_stdout(*, restore: bool = True) -> Iterator[TextIO]:
-    """For the block, ``sys.stdout`` is ``sys.stderr`` and file descriptor 1 a duplicate of descriptor 2, so that
-    prints of any thread (Ray's log monitor), C code and child processes land on standard error; yields the real
+    """For the block, ``sys.stdout`` writes to ``sys.stderr`` (:class:`_StderrWithReport`) and file descriptor 1
+    is a duplicate of descriptor 2, so that prints of any thread (Ray's log monitor), C code and child processes
+    land on standard error; yields the real
     standard output (a stream on a duplicate of the old descriptor 1 when ``sys.stdout`` wrote to it, else the old
     ``sys.stdout`` object itself), which :func:`print_report` writes to. ``restore=False`` leaves the redirection
     in place after the block (the ``aerodaas`` process, which exits next: Ray's own shutdown at exit prints too);
@@ -47,12 +67,10 @@ def report_only_stdout(*, restore: bool = True) -> Iterator[TextIO]:
     report: TextIO = (os.fdopen(os.dup(saved), "w", encoding="utf-8", errors="replace")
                       if old is None or _fileno(old) == 1 else old)
     os.dup2(2, 1)
-    sys.stdout = sys.stderr
-    _REPORT_STREAMS.append(report)
+    sys.stdout = _StderrWithReport(sys.stderr, report)  # type: ignore[assignment]
     try:
         yield report
     finally:
-        _REPORT_STREAMS.pop()
         try:
             report.flush()
         except BrokenPipeError:  # the reader left (`| head`): nothing more can reach it; end quietly
@@ -70,8 +88,10 @@ def report_only_stdout(*, restore: bool = True) -> Iterator[TextIO]:
 
 def print_report(text: str) -> None:
     """Print a benchmark's report (its JSON document, or its table without ``--json``) and a newline: on the real
-    standard output kept by the innermost :func:`report_only_stdout` block, else on ``sys.stdout``; flushed."""
-    stream = _REPORT_STREAMS[-1] if _REPORT_STREAMS else sys.stdout
+    standard output kept by the innermost :func:`report_only_stdout` block (the ``report`` of ``sys.stdout`` in
+    one), else on ``sys.stdout``; flushed."""
+    out = sys.stdout
+    stream = out.report if isinstance(out, _StderrWithReport) else out
     stream.write(text + "\n")
     stream.flush()
 

@@ -37,6 +37,7 @@ def add_parsers(bench_subparsers: argparse._SubParsersAction) -> None:
     schedulers_cli.add_parser(bench_subparsers)
     add_overhead(bench_subparsers)
     add_fleet(bench_subparsers)
+    add_fleet_model(bench_subparsers)
     add_startup(bench_subparsers)
     add_tello_video(bench_subparsers)
     add_raypath(bench_subparsers)
@@ -61,8 +62,10 @@ def add_fleet(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", action="store_true",
                    help="per run, where one drone actor's CPU and memory go (per-thread CPU from /proc, "
                         "apportioned by py-spy when it is on the PATH) and the node's processes' CPU")
-    p.add_argument("--edge-nodes", type=int, default=1, help="tier=edge nodes of a local cluster (default 1: "
-                                                            "the local Ray)")
+    p.add_argument("--edge-nodes", type=int, default=None,
+                   help="run each fleet on a fresh local cluster of this many tier=edge nodes (>= 1; raylets of "
+                        "their own, loopback, token auth; the first is the head), drones spread over them by node "
+                        "label, recorded with one recorder per node; reports each node (default: the local Ray)")
     p.add_argument("--json", action="store_true", help="print the JSON report")
     p.add_argument("--out", help="also write the JSON report to this file")
     p.add_argument("--plot", help="write the curve as a PNG to this file (default: no figure; a benchmark writes "
@@ -72,6 +75,32 @@ def add_fleet(sub: argparse._SubParsersAction) -> None:
 
 def _run_fleet(args: argparse.Namespace) -> int:
     from aerodaas.bench.fleet import main  # lazy: CLI start-up
+
+    return main(args)
+
+
+def add_fleet_model(sub: argparse._SubParsersAction) -> None:
+    """Register ``aerodaas bench fleet-model`` on the ``bench`` sub-command\'s sub-parsers ``sub``."""
+    p = sub.add_parser("fleet-model", help="fit a cost model to bench fleet --edge-nodes reports and project the "
+                                           "nodes a fleet needs (CPU, memory, GCS actors, recorder ceiling)")
+    p.add_argument("reports", nargs="+", metavar="RUN.json", help="bench fleet --edge-nodes N --json reports")
+    p.add_argument("--drones", type=int, default=1000, help="fleet to project (default 1000)")
+    p.add_argument("--node-cores", type=float, help="cores of one edge node (default: the measured machine's)")
+    p.add_argument("--node-mem-gib", type=float, help="memory of one edge node, GiB (default: the measured "
+                                                      "machine's)")
+    p.add_argument("--recorder-msgs-per-s", type=float, default=8000.0,
+                   help="one recorder's message ceiling (default 8000: bench recorder, docs/benchmarks.md 2b)")
+    p.add_argument("--recorder-mb-per-s", type=float, default=15.0,
+                   help="one recorder's byte ceiling, MiB/s (default 15: bench recorder, docs/benchmarks.md 2b)")
+    p.add_argument("--mb-per-drone", type=float, help="recorded MiB/s of one drone instead of the fitted one (e.g. a "
+                                                      "real camera's frames; default: as the runs recorded)")
+    p.add_argument("--json", action="store_true", help="print the JSON projection")
+    p.add_argument("--out", help="also write the JSON projection to this file")
+    p.set_defaults(func=_run_fleet_model)
+
+
+def _run_fleet_model(args: argparse.Namespace) -> int:
+    from aerodaas.bench.fleet_model import main  # lazy: CLI start-up
 
     return main(args)
 

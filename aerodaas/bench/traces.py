@@ -13,6 +13,7 @@ drone's frames do not depend on the other drones nor on the fleet size.
 """
 from __future__ import annotations
 
+import functools
 import math
 import random
 from dataclasses import dataclass
@@ -131,16 +132,18 @@ _DEFAULTS = {"jitter": {"realistic": 0.2, "*": 0.0}, "drop": {"realistic": 0.1, 
              "joins": {"realistic": 1, "*": 0}, "leaves": {"*": 0}, "alpha": {"*": 1.5}, "on_s": {"*": 3.0},
              "off_s": {"*": 3.0}, "stall_s": {"*": 2.0}, "stall_every_s": {"*": 6.0}, "flush_gap_ms": {"*": 2.0}}
 
-_GAP_CACHE: dict[str, list[list[float]]] = {}
-
-
 def recording_frame_gaps(path: str | Path) -> list[list[float]]:
     """Per camera topic of the MCAP recording ``path`` (messages of :data:`IMAGE_SCHEMAS`, in log-time order): the
-    gaps between consecutive frames' log times, in ms. Topics with fewer than 3 frames are skipped. Raises
-    FileNotFoundError, ValueError (not an MCAP file, or no camera topic with 3 frames)."""
-    key = str(Path(path).resolve())
-    if key in _GAP_CACHE:
-        return _GAP_CACHE[key]
+    gaps between consecutive frames' log times, in ms. Topics with fewer than 3 frames are skipped. Read once per
+    resolved path in a process (:func:`_frame_gaps`). Raises FileNotFoundError, ValueError (not an MCAP file, or no
+    camera topic with 3 frames)."""
+    return _frame_gaps(str(Path(path).resolve()))
+
+
+@functools.cache
+def _frame_gaps(path: str) -> list[list[float]]:
+    """:func:`recording_frame_gaps` of the resolved ``path``, memoised by ``functools.cache`` (a failed read raises
+    and is not remembered)."""
     times: dict[str, list[int]] = {}
     f, finished = _open_mcap(path)
     with f:
@@ -154,7 +157,6 @@ def recording_frame_gaps(path: str | Path) -> list[list[float]]:
             out.append([(b - a) / 1e6 for a, b in zip(ts, ts[1:])])
     if not out:
         raise ValueError(f"trace recording {path}: no camera topic ({', '.join(IMAGE_SCHEMAS)}) with >= 3 frames")
-    _GAP_CACHE[key] = out
     return out
 
 

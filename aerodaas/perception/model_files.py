@@ -4,12 +4,12 @@ how the driver ships a resolved file to the node that runs the analytics (:class
 manifest (``MANIFEST.md`` next to the models) documents the same contract."""
 from __future__ import annotations
 
+import functools
 import hashlib
 import logging
 import os
 import pathlib
 import tempfile
-import threading
 import urllib.error
 import urllib.request
 from dataclasses import dataclass
@@ -90,26 +90,23 @@ class ModelChecksumError(ValueError):
     """A model file's sha256 differs from the registry (wrong, truncated or corrupted file)."""
 
 
-_sha_cache: dict[tuple[str, int, int], str] = {}
-_sha_lock = threading.Lock()
-
-
 def _sha256_file(path: pathlib.Path) -> str:
-    """sha256 hex digest of ``path``; cached per (path, mtime_ns, size) so repeated resolutions are cheap."""
+    """sha256 hex digest of ``path``; cached per (resolved path, mtime_ns, size) so repeated resolutions are cheap
+    and a rewritten file is hashed again. Raises OSError when ``path`` cannot be read."""
     st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    with _sha_lock:
-        hit = _sha_cache.get(key)
-    if hit is not None:
-        return hit
+    return _sha256_of(str(path.resolve()), st.st_mtime_ns, st.st_size)
+
+
+@functools.cache
+def _sha256_of(path: str, mtime_ns: int, size: int) -> str:
+    """sha256 hex digest of the file ``path`` as of (``mtime_ns``, ``size``): a memo of a pure function of its key
+    (``functools.cache``, thread-safe; two threads may hash the same file once each), instead of a hand-kept dict."""
+    del mtime_ns, size  # part of the cache key only
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
-    digest = h.hexdigest()
-    with _sha_lock:
-        _sha_cache[key] = digest
-    return digest
+    return h.hexdigest()
 
 
 def _verify(path: pathlib.Path, spec: ModelSpec) -> None:

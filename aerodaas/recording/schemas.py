@@ -12,13 +12,15 @@ plain dicts), so a test validates recorded messages against these schemas (tests
 """
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from typing import Any, Optional
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from aerodaas.model.types import AeroNavigation, Odometry, Waypoint
 
-__all__ = ["JSON_SCHEMA_MODELS", "json_schema_for", "register_json_schema"]
+__all__ = ["JSON_SCHEMA_MODELS", "json_schema_for", "plugin_json_schemas"]
 
 
 class _Open(BaseModel):
@@ -244,18 +246,18 @@ JSON_SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "aerodaas.FramePose": FramePose,
 }
 
-_CACHE: dict[str, dict[str, Any]] = {}
-#: schemas declared by plug-ins (a sensor plug-in's message model), registered in the recorder's process
-_DECLARED: dict[str, dict[str, Any]] = {}
 
-
-def register_json_schema(schema_name: str, schema: dict[str, Any]) -> None:
-    """Make ``schema`` (a JSON Schema dict) the schema of ``schema_name`` in this process: how a plug-in's message
-    model (:meth:`aerodaas.plugins.sensor.SensorPlugin.json_schema`) reaches the recorder. A built-in name cannot
-    be replaced (ValueError)."""
-    if schema_name in JSON_SCHEMA_MODELS:
-        raise ValueError(f"schema {schema_name!r} is built in; a plug-in names its own schema")
-    _DECLARED[schema_name] = dict(schema)
+def plugin_json_schemas(schemas: Mapping[str, Mapping[str, Any]] | None) -> dict[str, dict[str, Any]]:
+    """The schemas plug-ins declared (schema name -> JSON Schema dict, e.g. a sensor plug-in's message model,
+    :meth:`aerodaas.plugins.sensor.SensorPlugin.json_schema`), checked and copied for the recorder that writes
+    their messages (:class:`aerodaas.recording.writer.McapRecorder`'s ``json_schemas``). A built-in name cannot be
+    replaced (ValueError naming it)."""
+    out: dict[str, dict[str, Any]] = {}
+    for schema_name, schema in (schemas or {}).items():
+        if schema_name in JSON_SCHEMA_MODELS:
+            raise ValueError(f"schema {schema_name!r} is built in; a plug-in names its own schema")
+        out[schema_name] = dict(schema)
+    return out
 
 
 #: free-form schemas: their fields are taken from an example message (json_schema_for's ``example``)
@@ -277,19 +279,24 @@ def json_schema_for(schema_name: str, example: dict[str, Any] | None = None) -> 
     """The JSON Schema (a dict, ``"type": "object"``, ``"title"`` = ``schema_name``) of a registered schema name,
     or None for a name this module does not know. For a free-form schema (:data:`FREE_FORM`) with an ``example``
     message (plain JSON types), each top-level field of the example is declared with its JSON type (numbers as
-    ``number``; a ``null`` accepts anything); other fields stay allowed. Generated once per name (cached)."""
+    ``number``; a ``null`` accepts anything); other fields stay allowed. Generated once per name (cached). A
+    plug-in's schema is not known here: the recorder holds those (:func:`plugin_json_schemas`)."""
     if schema_name in FREE_FORM and example:
         base = dict(json_schema_for(schema_name) or {})
         base["properties"] = {str(k): _field_schema(v) for k, v in example.items()}
         return base
-    got = _CACHE.get(schema_name) or _DECLARED.get(schema_name)
-    if got is None:
-        model = JSON_SCHEMA_MODELS.get(schema_name)
-        if model is None:
-            return None
-        got = model.model_json_schema(mode="serialization")
-        got["title"] = schema_name
-        got.setdefault("type", "object")
-        got["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-        _CACHE[schema_name] = got
+    return _model_schema(schema_name)
+
+
+@functools.cache
+def _model_schema(schema_name: str) -> dict[str, Any] | None:
+    """The JSON Schema of the built-in model of ``schema_name`` (None: not built in), generated once per name
+    (``functools.cache``: a memo of a pure function of the name)."""
+    model = JSON_SCHEMA_MODELS.get(schema_name)
+    if model is None:
+        return None
+    got = model.model_json_schema(mode="serialization")
+    got["title"] = schema_name
+    got.setdefault("type", "object")
+    got["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     return got

@@ -73,7 +73,7 @@ from aerodaas.recording.chunk_stream import ChunkFlushingStream
 from aerodaas.recording.record_path import (  # noqa: F401 - the path checks stay importable from here
     LIBRARY, MCAP_MAGIC, check_record_path, is_aerodaas_recording,
 )
-from aerodaas.recording.schemas import json_schema_for
+from aerodaas.recording.schemas import json_schema_for, plugin_json_schemas
 from aerodaas.recording.values import (_check_time, _class_color, _detection_fields, _finite, _jsonable,  # noqa: F401
                             _timestamp, _vec3, camera_mount_quaternion, quaternion_from_euler_deg)
 
@@ -131,11 +131,14 @@ class McapRecorder:
             better. Must be > 0.
         jpeg_quality: JPEG quality 0-100 used by :meth:`write_image` when given a raw BGR array.
         metadata: string key/values stored as an MCAP metadata record named ``"aerodaas"`` (values are ``str()``-ed).
+        json_schemas: the plug-ins' message schemas (schema name -> JSON Schema dict), the schema of their JSON
+            channels (:meth:`write_json`); the recorder owns them (no process-wide table).
 
     Raises:
         OSError (e.g. ``PermissionError``, ``IsADirectoryError``): the file cannot be created; the message names
             the path.
-        ValueError: ``chunk_size <= 0`` or ``jpeg_quality`` outside 0-100.
+        ValueError: ``chunk_size <= 0``, ``jpeg_quality`` outside 0-100, or a ``json_schemas`` name that is built
+            in (:func:`aerodaas.recording.schemas.plugin_json_schemas`).
 
     Every ``write_*`` method takes ``topic`` and ``log_time_ns`` (``int`` nanoseconds, ``0 <= t < 2**64``;
     publish time = log time). A topic's channel is created on first use and keeps its message kind: writing a
@@ -145,7 +148,8 @@ class McapRecorder:
     """
 
     def __init__(self, path: str | os.PathLike | None, *, chunk_size: int = 256 * 1024, jpeg_quality: int = 85,
-                 metadata: dict[str, str] | None = None) -> None:
+                 metadata: dict[str, str] | None = None,
+                 json_schemas: Mapping[str, Mapping[str, Any]] | None = None) -> None:
         if int(chunk_size) <= 0:
             raise ValueError(f"chunk_size must be a positive number of bytes, got {chunk_size!r}")
         if not 0 <= int(jpeg_quality) <= 100:
@@ -162,6 +166,8 @@ class McapRecorder:
         self._schema_records: dict[str, tuple[str, str, bytes]] = {}  # topic -> (name, encoding, data)
         self._sinks: list[Callable[[RecordedMessage], None]] = []
         self._default_schema_text: dict[str, str] = {}  # topic -> its generated JSON Schema (write_json)
+        #: the plug-ins' message schemas (schema name -> JSON Schema), checked: a built-in name raises ValueError
+        self._plugin_schemas = plugin_json_schemas(json_schemas)
         self.sink_errors: list[str] = []
         self._sequence: int | None = None  # set_sequence: the producer's number for the messages that follow
         try:
@@ -464,6 +470,7 @@ class McapRecorder:
         ``obj`` is a dict (a pydantic model is accepted and dumped). numpy scalars/arrays become plain numbers/
         lists, NaN/inf become ``null``, other unknown objects ``str()``. ``schema_name`` names the schema (e.g.
         ``"aerodaas.MissionState"``); ``json_schema`` is the JSON Schema dict, default the one generated from the
+        plug-in's schema of that name given to the constructor (``json_schemas``), else the one generated from the
         pydantic model registered for ``schema_name`` in :mod:`aerodaas.recording.schemas` (for a free-form schema
         such as ``aerodaas.AnalyticsOutput``, with the top-level fields of the topic's first message), else the
         permissive ``{"type": "object"}``. The schema is fixed by the first message on the topic.
@@ -483,7 +490,8 @@ class McapRecorder:
         if json_schema is None:  # generated once per topic (free-form outputs: from the topic's first message)
             schema_text = self._default_schema_text.get(topic)
             if schema_text is None:
-                schema_text = json.dumps(json_schema_for(schema_name, plain) or _PERMISSIVE_SCHEMA, sort_keys=True)
+                schema_text = json.dumps(self._plugin_schemas.get(schema_name) or json_schema_for(schema_name, plain)
+                                         or _PERMISSIVE_SCHEMA, sort_keys=True)
                 self._default_schema_text[topic] = schema_text
         else:
             schema_text = json.dumps(json_schema, sort_keys=True)

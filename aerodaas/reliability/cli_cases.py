@@ -10,12 +10,12 @@ import json
 import socket
 import tempfile
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 from aerodaas import cli
 from aerodaas.runtime import driver as runtime, ray_start
 
-__all__ = ["CLI_CASES", "run_cli_cases"]
+__all__ = ["CLI_CASES", "HeldArgv", "run_cli_cases"]
 
 _APP = """
 from aerodaas import *
@@ -39,18 +39,24 @@ def _app(tmp: Path, text: str | None = None, env: dict | None = None) -> str:
     return str(a)
 
 
-def _busy_hitl(tmp: Path) -> list[str]:
+class HeldArgv(NamedTuple):
+    """What a case's builder returns when something must stay open while the case runs: the ``argv`` and the
+    sockets ``held`` (:func:`run_cli_cases` closes them after the case)."""
+
+    argv: list[str]
+    held: tuple[socket.socket, ...]
+
+
+def _busy_hitl(tmp: Path) -> HeldArgv:
+    """A HITL port that is already in use: a socket listening on it, held for the case."""
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
     s.listen()
-    _HELD.append(s)  # closed after the case
-    return [_app(tmp, env={"robots": [{"id": "d1"}], "hitl": {"enabled": True, "port": s.getsockname()[1]}})]
-
-
-_HELD: list = []
+    return HeldArgv([_app(tmp, env={"robots": [{"id": "d1"}], "hitl": {"enabled": True,
+                                                                        "port": s.getsockname()[1]}})], (s,))
 
 #: (name, argv after ``run`` (made in a scratch folder), expected exit code, text the message must contain)
-CLI_CASES: list[tuple[str, Callable[[Path], list[str]], int, str]] = [
+CLI_CASES: list[tuple[str, Callable[[Path], list[str] | HeldArgv], int, str]] = [
     ("--env ''", lambda t: [_app(t), "--env", ""], 2, "--env"),
     ("--env '   '", lambda t: [_app(t), "--env", "   "], 2, "--env"),
     ("--record ''", lambda t: [_app(t), "--record", ""], 2, "--record"),
@@ -74,7 +80,8 @@ CLI_CASES: list[tuple[str, Callable[[Path], list[str]], int, str]] = [
 
 
 def run_cli_cases(cases: list | None = None, category: str | None = None) -> list[dict[str, Any]]:
-    """Run ``cases`` (default :data:`CLI_CASES`) as ``aerodaas run ARGV --quiet``; rows ``{"kind", "category",
+    """Run ``cases`` (default :data:`CLI_CASES`; each builder returns the ARGV, or a :class:`HeldArgv`) as
+    ``aerodaas run ARGV --quiet``; rows ``{"kind", "category",
     "name", "refused", "message", "traceback"}`` (``refused``: the expected exit code, the expected text, Ray never
     started, and a traceback exactly for the app's own errors; ``traceback``: one printed where none belongs).
     ``category``: the rows' report group (default: "command line" for exit 2, "app-level errors" for exit 1)."""
@@ -89,13 +96,14 @@ def run_cli_cases(cases: list | None = None, category: str | None = None) -> lis
             with tempfile.TemporaryDirectory() as td:
                 started.clear()
                 err = io.StringIO()
+                made = make(Path(td))
+                args, held = (made.argv, made.held) if isinstance(made, HeldArgv) else (made, ())
                 try:
-                    argv = ["run", *make(Path(td)), "--quiet"]
                     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-                        got = cli.main(argv)
+                        got = cli.main(["run", *args, "--quiet"])
                 finally:
-                    while _HELD:
-                        _HELD.pop().close()
+                    for s in held:
+                        s.close()
                 msg = err.getvalue().strip()
                 tb_ok = ("Traceback" in msg) == (code == 1)
                 ok = got == code and expect in msg and not started and tb_ok

@@ -23,7 +23,6 @@ import io
 import os
 import re
 import sys
-from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -105,8 +104,9 @@ class MissionMarked(BaseException):
 
 @dataclass
 class _Load:
-    """The state of one load in progress (in :data:`_LOADING`, a context variable: the load's own, never a
-    global of the run)."""
+    """The state of one load in progress, held in the namespace of the app module being run (under
+    :data:`_LOAD_NAME`, for the load only: :func:`_load_in_progress` finds it on the stack), never a global of the
+    run."""
 
     path: str
     env_path: str | None
@@ -115,7 +115,22 @@ class _Load:
     stdout: Any = field(default=None, repr=False)
 
 
-_LOADING: ContextVar[_Load | None] = ContextVar("aerodaas_app_loading", default=None)
+#: the name under which the app module being loaded holds its :class:`_Load` in its own namespace (set by
+#: :func:`load_app` before the module runs, removed when it stops)
+_LOAD_NAME = "__aerodaas_load__"
+
+
+def _load_in_progress() -> _Load | None:
+    """The load in progress, seen from the calling code: the innermost frame on this thread's stack that runs code
+    of an app module being loaded holds it in its globals (:data:`_LOAD_NAME`). None outside a load: after it,
+    or in a thread whose stack holds no code of the app being loaded."""
+    f = sys._getframe(1)
+    while f is not None:
+        load = f.f_globals.get(_LOAD_NAME)
+        if isinstance(load, _Load):
+            return load
+        f = f.f_back
+    return None
 
 
 def app_module_name(path: str | os.PathLike) -> str:
@@ -128,7 +143,7 @@ def app_module_name(path: str | os.PathLike) -> str:
 def env_path_override() -> str | None:
     """The environment file given to the load in progress (``aerodaas run --env``), used by
     :class:`aerodaas.app.api.Environment` instead of the one the application names; None outside a load."""
-    load = _LOADING.get()
+    load = _load_in_progress()
     return load.env_path if load is not None else None
 
 
@@ -151,7 +166,7 @@ def mark_mission(env: Any, robots: list, timeout: float | None) -> Any:
     returns the result of this mission when it already flew (``flown``), else checks the graph and raises
     :class:`MissionMarked` (nothing flies). Raises what the checks raise (ConfigError, ValueError naming the
     field)."""
-    load = _LOADING.get()
+    load = _load_in_progress()
     if load is None:
         return _NOT_LOADING
     index = load.marks
@@ -247,7 +262,7 @@ def load_app(path: str | os.PathLike, env_path: str | None = None, *, flown: tup
     load = _Load(p, env_path, tuple(flown))
     if flown:
         load.stdout, sys.stdout = sys.stdout, io.StringIO()
-    token = _LOADING.set(load)
+    module.__dict__[_LOAD_NAME] = load  # the load's state, where the app's own code runs (_load_in_progress)
     try:
         spec.loader.exec_module(module)
     except MissionMarked as m:
@@ -259,7 +274,7 @@ def load_app(path: str | os.PathLike, env_path: str | None = None, *, flown: tup
             raise  # a module the app imports, or code it compiles itself: the app's own error
         raise _syntax_error(str(path), e) from None
     finally:
-        _LOADING.reset(token)
+        module.__dict__.pop(_LOAD_NAME, None)
         if load.stdout is not None:
             sys.stdout = load.stdout
     return Application(p, name, index=len(flown))

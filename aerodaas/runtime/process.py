@@ -10,6 +10,7 @@ module-level mutable state outside the plug-in registry (:data:`aerodaas.plugins
 """
 from __future__ import annotations
 
+import subprocess
 import threading
 from dataclasses import dataclass, field
 
@@ -67,12 +68,14 @@ class EarlyStart:
 class RayConnection:
     """What this process did with Ray: ``local`` (started a Ray of its own, shut down by
     :func:`aerodaas.runtime.ray_start.shutdown_ray`), ``attached_up`` (joined the persistent local cluster of
-    ``aerodaas up``, placed as a local Ray is) and ``early`` (the background start in progress or done, None when
-    none)."""
+    ``aerodaas up``, placed as a local Ray is), ``early`` (the background start in progress or done, None when
+    none) and ``reaper`` (the process reaper it started with its local Ray, :func:`aerodaas.clusters.reaper.
+    ensure_started`; None: none started by this object)."""
 
     local: bool = False
     attached_up: bool = False
     early: EarlyStart | None = None
+    reaper: subprocess.Popen | None = None
 
 
 @dataclass

@@ -117,7 +117,8 @@ def _start_local(dashboard: bool) -> None:
 
     limit_malloc_arenas()  # the workers' C heap: see the module
     lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
-    reaper.ensure_started()  # Ray's processes end with this driver, however it ends (see the module)
+    # Ray's processes end with this driver, however it ends (see the module); kept: the process's own
+    PROCESS.ray.reaper = reaper.ensure_started() or PROCESS.ray.reaper
     temp_dir = ray_temp_dir()
     for attempt in range(3):
         restore = loopback_only()

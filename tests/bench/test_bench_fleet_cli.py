@@ -59,3 +59,30 @@ def test_a_bad_run_is_refused_naming_it(canned, capsys, bad):
     assert cli.main(["bench", "fleet", "--run", bad, "--duration", "1"]) == 2
     err = capsys.readouterr().err
     assert "--run" in err and repr(bad) in err
+
+
+def _never(*a, **k):
+    raise AssertionError("the benchmark ran: a bad value must stop it before Ray starts")
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--edge-nodes", "0"], "--edge-nodes must be >= 1, got 0"),
+    (["--edge-nodes", "-2"], "--edge-nodes must be >= 1, got -2"),
+    (["--edge-nodes", "3", "--drones", "2"], "--edge-nodes 3 needs at least 3 drones in every run"),
+    (["--edge-nodes", "100000", "--drones", "100000"], "--edge-nodes 100000 with 100000 drone actors needs about"),
+])
+def test_bad_edge_nodes_exit_2_naming_them_before_ray_starts(monkeypatch, capsys, args, says):
+    import ray
+
+    monkeypatch.setattr(fleet, "run_fleet", _never)
+    assert cli.main(["bench", "fleet", "--duration", "1", *args]) == 2
+    assert says in capsys.readouterr().err
+    assert not ray.is_initialized()
+
+
+def test_the_memory_check_counts_head_nodes_and_drone_actors():
+    need = fleet.HEAD_EXTRA_MB + 2 * fleet.NODE_FIXED_MB + 8 * fleet.DRONE_ACTOR_MB
+    assert fleet.check_edge_nodes(2, ((8, 1),), need) is None
+    assert "needs about" in fleet.check_edge_nodes(2, ((8, 1),), need - 1)
+    # packed drones: 8 drones in 2 actors need less
+    assert fleet.check_edge_nodes(2, ((8, 4),), need - 1) is None

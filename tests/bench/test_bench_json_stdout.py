@@ -40,6 +40,8 @@ TINY: dict[str, list] = {
     "overhead": [pytest.param(["--detector", "stub", "--stub-ms", "1", "--resolution", "160x120", "--duration", "1",
                                "--window", "1", "--layout", "colocated"], id="overhead", marks=slow)],
     "fleet": [pytest.param(["--drones", "1", "--duration", "1"], id="fleet", marks=slow)],
+    "fleet-model": [pytest.param([str(ROOT / "docs" / "results" / "bench_fleet_cluster_2node.json")],
+                                 id="fleet-model")],
     "startup": [pytest.param(["--mode", "cold", "--repeat", "1", "--app", str(ROOT / "apps" / "farm_survey.py")],
                              id="startup", marks=slow)],
     "tello-video": [pytest.param(["--width", "160", "--height", "120", "--fps", "10", "--seconds", "1"],

@@ -65,3 +65,20 @@ def test_descendants_walks_the_tree_below_a_process():
             os.kill(q, 9)
         p.kill()
         p.wait()
+
+
+def test_a_process_starts_one_reaper_and_knows_it_from_the_process_table():
+    """``ensure_started`` starts a reaper for the calling process once: a second call finds it among the process's
+    children (``running_for``, read from /proc, no table kept in the module) and starts none; once the process is
+    gone its reaper ends too."""
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        import os
+        from aerodaas.clusters import reaper
+        first = reaper.ensure_started()
+        print(first.pid, reaper.running_for(os.getpid()), reaper.ensure_started() is None, flush=True)
+        os._exit(0)  # not waiting for the reaper: it ends once this process is gone
+        """)], capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    pid, running, second_is_none = out.stdout.split()
+    assert (running, second_is_none) == ("True", "True"), out.stdout
+    assert _gone_within(int(pid), 60.0), "the reaper outlived its driver"

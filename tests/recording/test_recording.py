@@ -352,3 +352,26 @@ def test_flush_makes_everything_durable(tmp_path: Path) -> None:
     s = summarize_mcap(path)
     assert (s["finished"], s["message_count"]) == (False, 7)
     assert s["mission"] == {"outcome": None, "final_state": "S6"}
+
+
+def test_a_plugins_schema_given_to_the_recorder_is_its_channels_schema_and_a_builtin_name_is_refused(tmp_path):
+    """The plug-ins' message schemas are the recorder's own (``McapRecorder(json_schemas=...)``, no process-wide
+    table): the channel of a plug-in's schema name carries that JSON Schema, a name nobody declared the permissive
+    one, and a plug-in cannot replace a built-in schema (ValueError naming it, before the file is opened)."""
+    gas = {"type": "object", "title": "my_plugin.GasReading", "properties": {"ppm": {"type": "number"}}}
+    path = tmp_path / "plugin.mcap"
+    with McapRecorder(path, json_schemas={"my_plugin.GasReading": gas}) as rec:
+        rec.write_json("/uav/gas", T0, {"ppm": 1.5}, schema_name="my_plugin.GasReading")
+        rec.write_json("/uav/other", T0, {"x": 1}, schema_name="my_plugin.Undeclared")
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    by_topic = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    assert json.loads(by_topic["/uav/gas"].data) == gas
+    assert json.loads(by_topic["/uav/other"].data) == {"type": "object"}
+    with McapRecorder(tmp_path / "second.mcap") as rec:  # another recorder of this process: not declared there
+        rec.write_json("/uav/gas", T0, {"ppm": 1.5}, schema_name="my_plugin.GasReading")
+    with open(tmp_path / "second.mcap", "rb") as f:
+        assert json.loads(next(iter(make_reader(f).get_summary().schemas.values())).data) == {"type": "object"}
+    with pytest.raises(ValueError, match="aerodaas.MissionState"):
+        McapRecorder(tmp_path / "refused.mcap", json_schemas={"aerodaas.MissionState": gas})
+    assert not (tmp_path / "refused.mcap").exists()

@@ -19,7 +19,7 @@ from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers import analytics_laplan, single_machine_jit
 from aerodaas.schedulers.analytics_base import TaskState, Workload, make_analytics_scheduler
 from aerodaas.schedulers.dispatch.emulation import Jitter
-from aerodaas.schedulers.single_machine import SOLVES, max_gain_schedule, max_gain_schedule_arrays
+from aerodaas.schedulers.single_machine import SolveCounts, max_gain_schedule, max_gain_schedule_arrays
 
 from tests.conftest import DATA_DIR, needs_workload
 from tests.schedulers.reference_max_gain_schedule import max_gain_schedule as old_max_gain_schedule
@@ -27,11 +27,11 @@ from tests.schedulers.reference_max_gain_schedule import max_gain_schedule as ol
 WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
 
 
-def _python(jobs, *, free_at=float("-inf"), groups=None):
-    return max_gain_schedule(jobs, free_at=free_at, groups=groups, jit=False)
+def _python(jobs, *, free_at=float("-inf"), groups=None, counts=None):
+    return max_gain_schedule(jobs, free_at=free_at, groups=groups, jit=False, counts=counts)
 
 
-def _arrays(jobs, *, free_at=float("-inf"), groups=None):
+def _arrays(jobs, *, free_at=float("-inf"), groups=None, counts=None):
     """The flat-array entry point LAPLAN uses, its groups numbered in order of first appearance."""
     import numpy as np
 
@@ -39,7 +39,7 @@ def _arrays(jobs, *, free_at=float("-inf"), groups=None):
     gid = [ids.setdefault(g if groups is not None else j, len(ids)) for j, g in enumerate(groups or [None] * len(jobs))]
     cols = list(zip(*jobs)) if jobs else [(), (), (), ()]
     return max_gain_schedule_arrays(*(np.array(c, np.float64) for c in cols), np.array(gid, np.int64), len(ids),
-                                    free_at=free_at)
+                                    free_at=free_at, counts=counts)
 
 
 SOLVERS = {"compiled": max_gain_schedule, "python": _python, "arrays": _arrays}
@@ -47,7 +47,7 @@ SOLVERS = {"compiled": max_gain_schedule, "python": _python, "arrays": _arrays}
 
 def test_the_compiled_kernel_is_available():
     # numba is a dependency (pyproject.toml): without it LAPLAN silently falls back to the slow loop
-    assert single_machine_jit.available(), single_machine_jit._state["error"]
+    assert single_machine_jit.available(), single_machine_jit.import_error()
 
 
 def _random_instance(rng: random.Random, n_groups: int, span_ms: float = 3000.0):
@@ -69,18 +69,21 @@ def test_the_solver_returns_the_old_schedule_on_random_instances_with_ties(solve
     f = SOLVERS[solver]
     sizes = [rng.randint(0, 12) for _ in range(250)] + [rng.randint(40, 64) for _ in range(12)] + [70, 80]
     nonempty = 0
-    before = dict(SOLVES)
+    counts = SolveCounts()
     for n in sizes:                                   # 70 and 80 groups over 3 s: > 64 live, the Python loop runs
         jobs, free_at, groups = _random_instance(rng, n)
         want = old_max_gain_schedule(jobs, free_at=free_at, groups=groups)
-        assert f(jobs, free_at=free_at, groups=groups) == want, (n, jobs, free_at)
+        assert f(jobs, free_at=free_at, groups=groups, counts=counts) == want, (n, jobs, free_at)
         nonempty += bool(want[1])
     assert nonempty > 200                             # the instances are not trivially empty
     for _ in range(3):                                # 300 groups over 40 s: the compiled kernel reuses bits
         jobs, free_at, groups = _random_instance(rng, 300, span_ms=40_000.0)
-        assert f(jobs, free_at=free_at, groups=groups) == old_max_gain_schedule(jobs, free_at=free_at, groups=groups)
+        assert f(jobs, free_at=free_at, groups=groups, counts=counts) == old_max_gain_schedule(jobs, free_at=free_at,
+                                                                                              groups=groups)
     if solver in ("compiled", "arrays"):
-        assert SOLVES["python"] - before["python"] >= 1 and SOLVES["compiled"] - before["compiled"] > 200
+        assert counts.python >= 1 and counts.compiled > 200, counts
+    else:
+        assert counts.compiled == 0 and counts.python > 200, counts  # jit=False: every non-empty plan in Python
 
 
 def _run_laplan(w: Workload, tasks, seed: int):
