@@ -83,19 +83,22 @@ needs_workload = pytest.mark.usefixtures("_workload")
 SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime")
 
 
-#: the development tier's longest files, longest first (worker-seconds each, 3 workers on the 2-core CI kind of
-#: machine, 2026-11-24: 202 s for the first down to 15 s for the last; 1,497 s in all). ``--dist loadfile`` hands
-#: whole files to the workers in the collection's order, so these start first and the many short files fill in at
-#: the end: a longest-first schedule, 557 s -> about 500 s simulated. Only the order: a file missing here runs after
-#: them, a stale entry costs time, never a result
-LONGEST_FIRST = ("test_backends_e2e.py", "test_bench_cli.py", "test_e2e.py", "test_mavlink.py",
-                 "test_example_plugins.py", "test_missions.py", "test_mavlink_failsafe.py", "test_live_and_foxglove.py",
-                 "test_analytics_scheduling.py", "test_dataplane.py", "test_perception_track_recording.py",
-                 "test_mavlink_telemetry.py", "test_edgecloud.py", "test_plugin_registry.py",
-                 "test_liveview_npm_client.py", "test_mavlink_end.py", "test_mavlink_fleet.py", "test_tello.py",
-                 "test_user_scheduler_plugin.py", "test_mavlink_speed_margin.py",
-                 "test_trajectory_scheduler_in_environment.py", "test_bench_peers.py",
-                 "test_laplan_planner_equivalence.py")
+#: the development tier's longest files, longest first (worker-seconds each, 3 workers on this shared 2-core machine,
+#: 2026-11-26, load 6-36, mean 15.6: 262 s for the first down to 36 s for the last; 3,439 s in all, 1,224 s wall;
+#: test_layers.py's 131 s were before its fresh-import check stopped recompiling). ``--dist loadfile`` hands whole
+#: files to the workers in the collection's order, so these start first and the many short files fill in at the end:
+#: a longest-first schedule (files of 111 s and 91 s under tests/schedulers/, not listed before, were collected
+#: near the end). Only the order: a file missing here runs after them, a stale entry costs time, never a result
+LONGEST_FIRST = ("test_e2e.py", "test_bench_cli.py", "test_missions.py", "test_example_plugins.py",
+                 "test_backends_e2e.py", "test_layers.py", "test_non_anticipation.py", "test_live_and_foxglove.py",
+                 "test_mavlink_failsafe.py", "test_liveview_npm_client.py", "test_burst_arrivals.py",
+                 "test_dataplane.py", "test_record_no_clobber.py", "test_video_source.py",
+                 "test_perception_track_recording.py", "test_no_secret_in_outputs.py", "test_component_health.py",
+                 "test_analytics_contract.py", "test_phase_deadlines.py", "test_analytics_scheduling.py",
+                 "test_mavlink.py", "test_bench_json_stdout.py", "test_mavlink_end.py", "test_plugin_registry.py",
+                 "test_tls_access.py", "test_gimbal_missions.py", "test_mavlink_signing.py", "test_app_value.py",
+                 "test_mavlink_fleet.py", "test_app_errors_before_ray.py", "test_user_scheduler_plugin.py",
+                 "test_perception_providers.py", "test_trajectory_scheduler_in_environment.py")
 
 
 #: the slow tier's other lane, longest first (seconds, serial, 2026-11-26 at load 2-9: test_faults 735, test_ray_up
@@ -167,7 +170,9 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.slow)
         item.add_marker(pytest.mark.xdist_group(lane(item)))
     if os.environ.get("PYTEST_XDIST_WORKER"):
-        rank = {name: i for i, name in enumerate(RANK)}
+        rank: dict[str, int] = {}
+        for i, name in enumerate(RANK):  # a name listed twice keeps its first place
+            rank.setdefault(name, i)
         items.sort(key=lambda item: (not any(m.args[:1] == (REALTIME_LANE,) for m in item.iter_markers("xdist_group")),
                                      rank.get(item.path.name, len(rank))))
 

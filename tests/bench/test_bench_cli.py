@@ -81,6 +81,25 @@ def test_bench_overhead_json_has_every_column_every_layout_and_the_honest_tail(t
             assert colo[f"{peer}_overhead_ms"] is None and "dora" in dora["reason"]
 
 
+def test_bench_startup_cold_json_reports_phases_in_order(tmp_path):
+    """``--mode cold`` (the development tier's share of ``bench startup``): one run that starts its own Ray, its
+    phases in order; no `aerodaas up` cluster is started (that is the cluster test below)."""
+    out = tmp_path / "s.json"
+    p = _aerodaas("bench", "startup", "--app", str(ROOT / "apps" / "farm_survey.py"), "--repeat", "1", "--mode",
+                  "cold", "--out", str(out), timeout=240)
+    assert p.returncode == 0, p.stderr[-2000:]
+    rep = json.loads(out.read_text())
+    (run,) = rep["runs"]
+    assert rep["seconds_to_first_frame"] == run["seconds_to_first_frame"] > 0
+    assert list(run["phases_s"]) == ["cli", "app_built", "ray_ready", "hosts_ready", "first_processed"]
+    assert run["phases_s"]["first_processed"] == run["seconds_to_first_frame"]
+    assert rep["cold"]["runs"] == [run] and "attached" not in rep
+    assert len(rep["load_avg_before"]) == 3 == len(rep["load_avg_after"])
+
+
+# starts `aerodaas up`'s persistent cluster, on Ray's fixed default ports: the cluster lane of the slow tier
+# (tests/conftest.py CLUSTER_GROUPS), as tests/cluster/test_persistent_cluster.py
+@pytest.mark.cluster
 def test_bench_startup_json_reports_phases_in_order(tmp_path):
     out = tmp_path / "s.json"
     p = _aerodaas("bench", "startup", "--app", str(ROOT / "apps" / "farm_survey.py"), "--repeat", "1",
