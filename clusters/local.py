@@ -110,7 +110,9 @@ class LocalCluster:
         first = (edge_labels or [{}])[0] if edge_labels else {}
         head_args: dict[str, Any] = {"num_cpus": int(edge_cpus),
                                      "labels": {"tier": "edge", **(extra_edge_labels or {}), **first},
-                                     "include_dashboard": bool(dashboard), "object_store_memory": self._store}
+                                     "include_dashboard": bool(dashboard), "object_store_memory": self._store,
+                                     # 8265 or the next free port (see clusters/persistent.py), never a failure
+                                     "dashboard_port": None}
         if head_gpus is not None:  # else what Ray detects on this machine
             head_args["num_gpus"] = head_gpus
         if worker_niceness is not None:  # Ray starts workers at niceness 15 (below the control plane) by default

@@ -194,7 +194,11 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args={
         "num_cpus": cpus, "labels": {"tier": "edge", "aerodaas/compute": "local"},
-        "include_dashboard": True, "dashboard_host": "127.0.0.1", "_system_config": system_config})
+        "include_dashboard": True, "dashboard_host": "127.0.0.1", "_system_config": system_config,
+        # None: 8265, or the next free port when another Ray on this machine holds it (as ray.init does); the
+        # state file and `aerodaas up` give the one bound. Ray's RayParams default (8265 exactly, no retry) made
+        # `aerodaas up` exit "Failed to bind to 127.0.0.1:8265" beside any other Ray with a dashboard
+        "dashboard_port": None})
     node = cluster.head_node
     st = {"pid": os.getpid(), "address": cluster.address, "session_dir": node.get_session_dir_path(),
           "dashboard": getattr(node, "webui_url", None) or "", "started": time.time(), "warm_workers": 0,

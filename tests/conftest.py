@@ -144,25 +144,37 @@ def slow_lane(item) -> str:
     return item.path.name
 
 
+#: the order in which ``--dist loadgroup`` hands the lanes and files out when both tiers run in one invocation (CI):
+#: the real-time lane first (it is the longest, about 35 min), then the longest other units (the fault scenarios,
+#: the cluster lane, whose first file is ``test_example_plugins.py``), then the development tier's longest files,
+#: then the rest of the slow files; a name missing here runs after them all
+RANK = (SLOW_LONGEST_FIRST[:1] + ("test_example_plugins.py",) + LONGEST_FIRST
+        + tuple(n for n in SLOW_LONGEST_FIRST[1:] if n not in LONGEST_FIRST))
+
+
+def lane(item) -> str:
+    """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`, a development-tier test's file name. Under
+    ``--dist loadfile`` (the development tier alone) the marks change nothing; under ``--dist loadgroup`` (CI, both
+    tiers in one run) a development-tier file stays on one worker with its module fixtures, as under loadfile."""
+    return slow_lane(item) if item.get_closest_marker("slow") else item.path.name
+
+
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook, which reads the xdist_group marks set here
 def pytest_collection_modifyitems(config, items):
     """Mark every test of a slow group ``slow`` too, so that ``pytest -m "not slow"`` is the development tier
-    (everything but SITL, ``ray up``, cluster, fault, video and real-time runs); CI runs everything. Each slow test
-    gets its lane (:func:`slow_lane`, read by ``--dist loadgroup``). On an xdist worker, the real-time lane comes
-    first, then the files of :data:`LONGEST_FIRST` (in that order; the tests of a file keep theirs)."""
+    (everything but SITL, ``ray up``, cluster, fault, video and real-time runs); CI runs everything. Every test gets
+    its lane (:func:`lane`, read by ``--dist loadgroup``). On an xdist worker, the real-time lane comes first, then
+    the files in :data:`RANK`'s order (the tests of a file keep theirs)."""
     for item in items:
         if any(item.get_closest_marker(g) for g in SLOW_GROUPS):
             item.add_marker(pytest.mark.slow)
-            item.add_marker(pytest.mark.xdist_group(slow_lane(item)))
+        item.add_marker(pytest.mark.xdist_group(lane(item)))
     if os.environ.get("PYTEST_XDIST_WORKER"):
-        # a file in both lists (its slow tests in one tier, the rest in the other): a slow test takes the file's place
-        # in SLOW_LONGEST_FIRST, a development-tier test its place in LONGEST_FIRST (one dict over both lists had
-        # put the development tier's test_example_plugins.py and test_liveview_npm_client.py after every listed file)
-        slow_rank = {name: i for i, name in enumerate(LONGEST_FIRST + SLOW_LONGEST_FIRST)}
-        dev_rank = {**slow_rank, **{name: i for i, name in enumerate(LONGEST_FIRST)}}
+        rank: dict[str, int] = {}
+        for i, name in enumerate(RANK):  # a name listed twice keeps its first place
+            rank.setdefault(name, i)
         items.sort(key=lambda item: (not any(m.args[:1] == (REALTIME_LANE,) for m in item.iter_markers("xdist_group")),
-                                     (slow_rank if item.get_closest_marker("slow") else dev_rank)
-                                     .get(item.path.name, len(slow_rank))))
+                                     rank.get(item.path.name, len(rank))))
 
 
 @pytest.fixture(scope="session")

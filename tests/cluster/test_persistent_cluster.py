@@ -55,3 +55,32 @@ def test_up_starts_one_loopback_head_and_down_stops_only_its_processes(tmp_path)
     assert not [q for q in alive if q.status() != psutil.STATUS_ZOMBIE], alive
     assert not (tmp_path / "cluster.json").exists()
     assert "no local cluster" in _aerodaas(env, "down").stdout
+
+
+@pytest.mark.cluster
+def test_up_beside_another_dashboard_on_8265_binds_the_next_free_port(tmp_path):
+    """Another Ray on the machine (a developer's `ray start`, a test's LocalCluster) holds 127.0.0.1:8265: `aerodaas
+    up` still starts, its dashboard on another port, which the state file and its own line name (it failed with
+    "Failed to bind to 127.0.0.1:8265" before, 2026-11-26)."""
+    import socket
+
+    holder = socket.socket()
+    try:
+        holder.bind(("127.0.0.1", 8265))
+        holder.listen(1)
+    except OSError:  # some other process holds it already: the situation this test is about
+        holder.close()
+        holder = None
+    env = dict(os.environ, AERODAAS_STATE_DIR=str(tmp_path))
+    try:
+        p = _aerodaas(env, "up", "--cpus", "1")
+        assert p.returncode == 0 and "started" in p.stdout, p.stdout + p.stderr
+        dashboard = json.loads((tmp_path / "cluster.json").read_text())["dashboard"]
+        host, port = dashboard.rsplit(":", 1)
+        assert host.removeprefix("http://") == "127.0.0.1" and int(port) != 8265, dashboard
+        assert f"dashboard http://{dashboard}" in p.stdout or f"dashboard {dashboard}" in p.stdout, p.stdout
+    finally:
+        d = _aerodaas(env, "down")
+        if holder is not None:
+            holder.close()
+    assert d.returncode == 0 and "stopped" in d.stdout, d.stdout + d.stderr
