@@ -144,18 +144,19 @@ def slow_lane(item) -> str:
     return item.path.name
 
 
-#: the order in which ``--dist loadgroup`` hands the lanes and files out when both tiers run in one invocation (CI):
-#: the real-time lane first (it is the longest, about 35 min), then the longest other units (the fault scenarios,
-#: the cluster lane, whose first file is ``test_example_plugins.py``), then the development tier's longest files,
-#: then the rest of the slow files; a name missing here runs after them all
+#: the order of the files on an xdist worker (--dist loadfile and loadgroup hand units out in the collection's
+#: order): the fault scenarios and the cluster lane (its first file is ``test_example_plugins.py``) first among the
+#: slow files, the development tier's longest files, then the rest of the slow files; a name missing here runs
+#: after them all. Both tiers in one run also works (every test has a lane) but is not what CI does
+#: (docs/architecture.md, Development loop)
 RANK = (SLOW_LONGEST_FIRST[:1] + ("test_example_plugins.py",) + LONGEST_FIRST
         + tuple(n for n in SLOW_LONGEST_FIRST[1:] if n not in LONGEST_FIRST))
 
 
 def lane(item) -> str:
     """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`, a development-tier test's file name. Under
-    ``--dist loadfile`` (the development tier alone) the marks change nothing; under ``--dist loadgroup`` (CI, both
-    tiers in one run) a development-tier file stays on one worker with its module fixtures, as under loadfile."""
+    ``--dist loadfile`` (the development tier) the marks change nothing; under ``--dist loadgroup`` (the slow tier,
+    or both tiers in one run) a development-tier file stays on one worker with its module fixtures, as under loadfile."""
     return slow_lane(item) if item.get_closest_marker("slow") else item.path.name
 
 
