@@ -164,6 +164,36 @@ def _zombie(pid: int) -> bool:
         return False
 
 
+#: how often the daemon starts its head node when Ray's start times out (as aerodaas.runtime.ray_start does)
+HEAD_START_ATTEMPTS = 3
+
+
+def _start_head(cluster_type: Any, head_args: dict[str, Any]) -> Any:
+    """``cluster_type(initialize_head=True, ...)`` (``ray.cluster_utils.Cluster``) with ``head_args``, started again
+    (at most :data:`HEAD_START_ATTEMPTS` times) when Ray reports "timed out during startup": Ray gives a raylet a
+    fixed 30 s to register with the GCS (``ray/_private/node.py``), which a loaded machine can miss. A failed
+    attempt's processes (this daemon's descendants started by it: GCS, raylet, dashboard) are killed first, since
+    the node object that would stop them was never made. Any other error, or the last timeout, is raised."""
+    import psutil  # lazy: psutil, only the cluster daemon
+
+    for attempt in range(HEAD_START_ATTEMPTS):
+        before = {c.pid for c in psutil.Process().children(recursive=True)}
+        try:
+            return cluster_type(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
+        except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
+            if "timed out during startup" not in str(e) or attempt == HEAD_START_ATTEMPTS - 1:
+                raise
+            for child in psutil.Process().children(recursive=True):
+                if child.pid not in before:
+                    try:
+                        child.kill()
+                    except psutil.Error:  # already gone
+                        pass
+            print(f"aerodaas up: Ray's node start timed out (attempt {attempt + 1} of {HEAD_START_ATTEMPTS}); "
+                  "starting it again", file=sys.stderr, flush=True)
+    raise AssertionError("unreachable")  # the loop returns or raises
+
+
 def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     """The daemon: start the head node (with ``warm`` warm workers), write the state file, wait for SIGTERM/SIGINT,
     stop the node. Its imports stay in it: every run imports this module (:mod:`aerodaas.runtime.ray_start`), and
@@ -192,7 +222,7 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args={
+    cluster = _start_head(Cluster, {
         "num_cpus": cpus, "labels": {"tier": "edge", "aerodaas/compute": "local"},
         "include_dashboard": True, "dashboard_host": "127.0.0.1", "_system_config": system_config,
         # None: 8265, or the next free port when another Ray on this machine holds it (as ray.init does); the
