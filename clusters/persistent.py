@@ -31,6 +31,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from aerodaas.clusters import reaper
+
 __all__ = ["attached_address", "await_fresh_workers", "down", "importable_by_cluster", "not_on_cluster_path",
            "read_state", "state_path", "up"]
 
@@ -174,21 +176,14 @@ def _start_head(cluster_type: Any, head_args: dict[str, Any]) -> Any:
     fixed 30 s to register with the GCS (``ray/_private/node.py``), which a loaded machine can miss. A failed
     attempt's processes (this daemon's descendants started by it: GCS, raylet, dashboard) are killed first, since
     the node object that would stop them was never made. Any other error, or the last timeout, is raised."""
-    import psutil  # lazy: psutil, only the cluster daemon
-
     for attempt in range(HEAD_START_ATTEMPTS):
-        before = {c.pid for c in psutil.Process().children(recursive=True)}
+        before = set(reaper.descendants(os.getpid()))
         try:
             return cluster_type(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
         except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
             if "timed out during startup" not in str(e) or attempt == HEAD_START_ATTEMPTS - 1:
                 raise
-            for child in psutil.Process().children(recursive=True):
-                if child.pid not in before:
-                    try:
-                        child.kill()
-                    except psutil.Error:  # already gone
-                        pass
+            reaper.kill_started_since(before)
             print(f"aerodaas up: Ray's node start timed out (attempt {attempt + 1} of {HEAD_START_ATTEMPTS}); "
                   "starting it again", file=sys.stderr, flush=True)
     raise AssertionError("unreachable")  # the loop returns or raises

@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 
-__all__ = ["descendants", "ensure_started", "running_for", "start", "start_time"]
+__all__ = ["descendants", "ensure_started", "kill_started_since", "running_for", "start", "start_time"]
 
 
 def _stat_fields(pid: int | str) -> list[str] | None:
@@ -64,6 +64,23 @@ def descendants(root: int) -> list[int]:
             todo.append(c)
     return out
 
+
+
+def kill_started_since(before: set[int], marker: str = "") -> list[int]:
+    """SIGKILL this process's descendants that are not in ``before`` (pids from :func:`descendants` taken earlier)
+    and whose command line contains ``marker`` ("" matches all): what a failed Ray node start left behind (GCS,
+    raylet, dashboard), which ``ray.shutdown()`` does not stop when the node never finished starting. Returns the
+    pids signalled; a process already gone is skipped."""
+    killed = []
+    for pid in descendants(os.getpid()):
+        if pid in before or marker.encode() not in b" ".join(_cmdline(pid)):
+            continue
+        try:
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+        except ProcessLookupError:
+            pass
+    return killed
 
 def start(driver_pid: int | None = None, period_s: float = 0.5, grace_s: float = 3.0) -> subprocess.Popen | None:
     """Start the reaper for ``driver_pid`` (default: this process). Returns its Popen, or None where there is no

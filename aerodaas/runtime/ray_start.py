@@ -13,8 +13,6 @@ import sys
 import tempfile
 import threading
 
-import psutil
-
 from aerodaas.clusters import reaper
 from aerodaas.clusters.addresses import check_ray_address
 from aerodaas.clusters.local import enable_token_auth
@@ -124,7 +122,7 @@ def _start_local(dashboard: bool) -> None:
     temp_dir = ray_temp_dir()
     for attempt in range(3):
         restore = loopback_only()
-        before = _children()
+        before = set(reaper.descendants(os.getpid()))
         try:
             # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
             # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
@@ -140,7 +138,8 @@ def _start_local(dashboard: bool) -> None:
             # machine can miss that: start again (at most 3 times) rather than fail the run. A dashboard that fails
             # to start is not worth failing the run for: start again without it
             ray.shutdown()
-            _stop_started_since(before, temp_dir)
+            # the failed attempt's GCS, raylet, dashboard: ray.shutdown() does not stop a node that never started
+            reaper.kill_started_since(before, temp_dir)
             if dashboard and "dashboard" in str(e).lower() and attempt < 2:
                 print(f"aerodaas: warning: Ray's dashboard did not start ({str(e).splitlines()[0][:120]}); "
                       f"running without it", file=sys.stderr, flush=True)
@@ -149,26 +148,6 @@ def _start_local(dashboard: bool) -> None:
             if "timed out during startup" not in str(e) or attempt == 2:
                 raise
     PROCESS.ray.local = True
-
-
-def _children() -> set[int]:
-    """The pids of this process's descendants now."""
-    return {c.pid for c in psutil.Process().children(recursive=True)}
-
-
-def _stop_started_since(before: set[int], temp_dir: str) -> None:
-    """Kill the Ray processes a failed ``ray.init`` attempt left behind: this process's descendants that were not
-    there before it (``before``, from :func:`_children`) and run in this driver's Ray temp directory ``temp_dir``
-    (GCS, raylet, dashboard, log monitor...). ``ray.shutdown()`` does not stop them when the node never finished
-    starting, so each retry of a start that timed out under load added a set that lived until the driver exited."""
-    for child in psutil.Process().children(recursive=True):
-        if child.pid in before:
-            continue
-        try:
-            if any(temp_dir in arg for arg in child.cmdline()):
-                child.kill()
-        except psutil.Error:  # already gone
-            pass
 
 
 def init_ray(address: str | None, dashboard: bool = False) -> None:

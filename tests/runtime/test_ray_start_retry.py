@@ -1,5 +1,5 @@
 """A local Ray start that failed (the raylet missed Ray's 30 s registration on a loaded machine) leaves no process
-behind when ``aerodaas.runtime.ray_start`` tries again: the retry kills this driver's descendants that the failed
+behind when ``aerodaas.runtime.ray_start`` tries again (``aerodaas.clusters.reaper.kill_started_since``): the retry kills this driver's descendants that the failed
 attempt started in its Ray temp directory, and nothing else. No Ray: stand-in processes."""
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import sys
 
 import psutil
 
-from aerodaas.runtime import ray_start
+import os
+
+from aerodaas.clusters import reaper
 
 
 def _sleeper(tag: str) -> subprocess.Popen:
@@ -19,11 +21,11 @@ def _sleeper(tag: str) -> subprocess.Popen:
 def test_a_failed_start_leaves_no_process_in_its_temp_dir_and_spares_the_rest(tmp_path):
     temp_dir = str(tmp_path / "ray")
     older = _sleeper(temp_dir)  # there before the attempt: not the attempt's
-    before = ray_start._children()
+    before = set(reaper.descendants(os.getpid()))
     started = _sleeper(temp_dir)  # started by the attempt, in its temp dir
     other = _sleeper(str(tmp_path / "elsewhere"))  # started meanwhile, not Ray's of this driver
     try:
-        ray_start._stop_started_since(before, temp_dir)
+        reaper.kill_started_since(before, temp_dir)
         assert started.wait(timeout=60) is not None
         assert older.poll() is None and other.poll() is None
         assert psutil.pid_exists(older.pid) and psutil.pid_exists(other.pid)
