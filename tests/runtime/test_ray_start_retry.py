@@ -3,12 +3,11 @@ behind when ``aerodaas.runtime.ray_start`` tries again (``aerodaas.clusters.reap
 attempt started in its Ray temp directory, and nothing else. No Ray: stand-in processes."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
 import psutil
-
-import os
 
 from aerodaas.clusters import reaper
 
