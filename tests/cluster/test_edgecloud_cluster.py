@@ -228,23 +228,49 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
     flight there are retried or failed, and every later frame runs on the edge or is dropped with a reason."""
     import threading
 
+    import ray
+
     from aerodaas.bench.overhead import FixedCostDetector
     from aerodaas.runtime.driver import format_summary
     from tests.schedulers.test_analytics_scheduling import QOS, build, hover_config, topic_messages
 
     node = cluster.add_cloud_node({"cloud-node": "c-mission"})
     cluster.cluster.wait_for_nodes()
-    env, drone = build(hover_config(fps=15), FixedCostDetector(80), hover_s=12.0)
+    env, drone = build(hover_config(fps=15), FixedCostDetector(80), hover_s=20.0)
     env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
     run_options.record = str(tmp_path / "loss.mcap")
     removed: list[str] = []
+    executed: list[int] = []
 
-    def lose_cloud() -> None:  # 8 s into the flight (the cloud has taken a share by then): SIGKILL its node
-        removed.append(cluster.remove_cloud_node(cluster.cloud_nodes.index(node)))
+    def lose_cloud_once_in_use() -> None:
+        """SIGKILL the node of the cloud executor (the run's named actor ``aerodaas/<run>/cloud-analytics/0``; the
+        module's cluster may still have its c0/c1 cloud nodes, so it is looked up, not assumed to be ``node``) 3.5 s
+        after it has run 3 tasks. Not at a fixed time: in the CI run of 2026-11-27 (slow tier beside the firmware
+        lane) the cloud had no task done on time in the first 5 s of the flight, so an 8 s timer lost a cloud not
+        yet in use."""
+        until = time.monotonic() + 60.0  # a bound, not a judgement: the asserts below say what went wrong
+        handle = None
+        while time.monotonic() < until and not (executed and executed[-1] >= 3):
+            named = [a for a in ray.util.list_named_actors(all_namespaces=True)
+                     if a["name"].endswith("/cloud-analytics/0")]
+            if named:
+                handle = ray.get_actor(named[0]["name"], namespace=named[0]["namespace"])
+                executed.append(ray.get(handle.stats.remote())["executed"])
+            time.sleep(0.5)
+        if handle is None:
+            return
+        host = ray.get(handle.info.remote())["node_id"]
+        time.sleep(3.5)
+        removed.append(cluster.remove_cloud_node([n.node_id for n in cluster.cloud_nodes].index(host)))
 
-    drone.on_mission_start(lambda r: threading.Timer(8.0, lose_cloud).start())
-    res = drone.start_mission(options=run_options)
+    drone.on_mission_start(lambda r: threading.Thread(target=lose_cloud_once_in_use, daemon=True).start())
+    try:
+        res = drone.start_mission(options=run_options)
+    finally:  # the module's later tests place by their own labels
+        if node in cluster.cloud_nodes:
+            cluster.remove_cloud_node(cluster.cloud_nodes.index(node), graceful=True)
     assert removed, "the cloud node was never removed"
+    assert executed and executed[-1] >= 3, executed  # the cloud executor ran tasks before its node was lost
     assert res.outcome == "success", res.robots["uav"].get("error")
     rep = res.stats["analytics_scheduler"]
     assert rep["terminal"] == rep["submitted"] and rep["pending"] == 0
@@ -257,7 +283,7 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
     lost_ms = losses[0]["at_s"] * 1000.0
     before = [t for t in tasks if t["arrival_ms"] < lost_ms - 3000]
     after = [t for t in tasks if t["arrival_ms"] > lost_ms + 50]
-    assert any(t["tier"] == "cloud" and t["state"] == "done_on_time" for t in before)  # the cloud was in use
+    assert any(t["tier"] == "cloud" and t["state"] in ("done_on_time", "done_late") for t in before)  # cloud in use
     assert after and all(t["tier"] != "cloud" for t in after)
     assert any(t["tier"] == "edge" and t["state"] == "done_on_time" for t in after)
     assert all(t["reason"] for t in after if t["state"] != "done_on_time")

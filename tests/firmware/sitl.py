@@ -36,7 +36,7 @@ AERODAAS = [sys.executable, "-m", "aerodaas.cli"]
 #: firmware clock factors (vehicle seconds per wall second); 2-core machines keep up with these
 SPEEDUP = {"ardupilot": 5.0, "px4": 5.0}
 #: the three-vehicle fleet's speed-up where it differs from :data:`SPEEDUP` (see :func:`fleet_session`)
-FLEET_SPEEDUP = {"px4": 2.0}
+FLEET_SPEEDUP = {"px4": 1.0}
 FARM_HOME = {"lat": 13.0213, "lon": 77.5671, "alt": 920.0}
 #: the robots' ``limits.max_speed`` (m/s) per autopilot. Both firmwares run their default parameters plus only what
 #: our backend sets. Stock PX4 SIH's EKF2 assumes an IMU far quieter than the one SIH simulates (SIH: accelerometer

@@ -284,10 +284,13 @@ def test_three_vehicles_behind_one_router_port(router_fleet, autopilot):
         x0, y0 = obs["samples"][0][1:3]
         flying = [s for s in obs["samples"] if math.hypot(s[1] - x0, s[2] - y0) > 1.0]
         assert flying, k
-        # the firmware flew the survey of the robot with its system id, nobody else's: x near 3k, y up to 8 m
-        xs = [s[1] for s in flying]
-        ys = [s[2] for s in flying]
-        assert abs(sorted(xs)[len(xs) // 2] - 3.0 * k) < 1.0 and max(ys) > 7.5, (k, min(xs), max(xs), max(ys))
+        # the firmware flew the survey of the robot with its system id (every other robot's waypoints are 3 m or more
+        # from these): it came within _within of both of its waypoints (3k, 3) and (3k, 8). Judged by where it went,
+        # not by where it spent most samples: the median x of the flying samples (the check before) counts the
+        # transit from (0, 0), and in the CI run of 2026-11-27 (beside the cluster lane) vehicle 3's was under 5 m
+        # (x 0.63-7.18). Idle, the closest approaches are 0.03-0.22 m (2026-11-27)
+        reach = [min(math.hypot(s[1] - wx, s[2] - wy) for s in flying) for wx, wy in ((3.0 * k, 3.0), (3.0 * k, 8.0))]
+        assert max(reach) <= _within(autopilot), (k, reach, min(s[1] for s in flying), max(s[1] for s in flying))
         if autopilot == "ardupilot":
             assert obs["samples"][-1][3] < 0.3, (k, obs["samples"][-1])
         # PX4: its disarm is the firmware's own landed verdict (we never force one, and Commander::disarm denies an
