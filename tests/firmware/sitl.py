@@ -489,7 +489,8 @@ def fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str, Any]:
                 sensor.setdefault("properties", {}).update(width=320, height=240, fps=2)
     env = _write_env(workdir / "fleet.json", cfg)
     # PX4 SIH's CPU grows with its speed factor: three at 5x on 2 cores went silent for 3.4-4.7 s at a time (link
-    # lost, OFFBOARD setpoints stopped, PX4's failsafe RTL) once anything else ran beside them; at 2x they keep up
+    # lost, OFFBOARD setpoints stopped, PX4's failsafe RTL) once anything else ran beside them; at 2x beside the
+    # cluster lane one's altitude estimate swung by +-1 m and its landing stalled (2026-11-27); at 1x they keep up
     speedup = FLEET_SPEEDUP.get(autopilot)
     run_in_namespace(autopilot, workdir, [aerodaas_run(FLEET_APP, env, workdir / "fleet.mcap",
                                                               hold_radius_m=HOLD_RADIUS[autopilot])], n=n,
