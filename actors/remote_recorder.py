@@ -85,18 +85,27 @@ class RemoteRecorder(AnalyticsAccounting):
     Every item is numbered on its stream when offered (a frame dropped here too: its number is never recorded, a
     gap the accounting counts); numbers go on from this actor's count the recorder actor holds (a restarted actor
     asks for it before its first batch, :meth:`_base`), and each batch carries this actor's counts so far
-    (:class:`~aerodaas.protocol.messages.ProducerLedger`)."""
+    (:class:`~aerodaas.protocol.messages.ProducerLedger`).
+
+    Memory is bounded while the recorder does not answer (stopped, starved, restarting): at most
+    ``max_in_flight_frames`` JPEG frames are in batches the recorder actor has not yet taken; past that, batches wait
+    here (their frames count against ``max_pending_frames``), and further frames are dropped and counted. Before,
+    Ray's queue to a stopped recorder actor grew without bound, and whether a 20 s recorder stall lost frames
+    depended on whether this process had asked for its base counts before the stall (2026-11-27)."""
 
     def __init__(self, plane: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
-                 max_pending_frames: int = 256, max_pending_bytes: int = 256 << 20) -> None:
+                 max_pending_frames: int = 256, max_pending_bytes: int = 256 << 20,
+                 max_in_flight_frames: int = 64) -> None:
         self.plane, self.target, self.period_s = plane, target, period_s
         self.jpeg_quality, self.max_pending_frames = jpeg_quality, max_pending_frames
         self.max_pending_bytes = max_pending_bytes
+        self.max_in_flight_frames = max(1, int(max_in_flight_frames))
+        self.held_batches = 0  # sends put off because max_in_flight_frames were not yet taken by the recorder
         self._pending_frames = 0
         self._pending_bytes = 0
         self._buf: list[RecordItem] = []
         self._lock = threading.Lock()
-        self._refs: list = []
+        self._refs: list[tuple[Any, int]] = []  # (ObjectRef of a record call, frames in its batch)
         self._offered: dict[str, int] = {}  # stream -> items numbered by this process (before adding _base)
         self.analytics_counts = AnalyticsCounts()  # analytics inputs offered / taken without output, by this process
         self._base_ledger: ProducerLedger | None = None  # this actor's counts before this process
@@ -176,11 +185,37 @@ class RemoteRecorder(AnalyticsAccounting):
                 return None
         return self._base_ledger
 
-    def _send(self) -> None:
+    @property
+    def frames_in_flight(self) -> int:
+        """Frames in batches sent to the recorder actor and not yet answered (at most ``max_in_flight_frames`` plus
+        one batch's)."""
+        return sum(n for _, n in self._refs)
+
+    def _reap(self) -> None:
+        """Forget the record calls the recorder actor has answered (their errors into ``send_errors``)."""
         import ray  # lazy: heavy ray
 
+        if not self._refs:
+            return
+        done, _ = ray.wait([r for r, _ in self._refs], num_returns=len(self._refs), timeout=0)
+        for ref in done:
+            try:
+                ray.get(ref)
+            except Exception as e:  # noqa: BLE001
+                self.send_errors.append(f"{type(e).__name__}: {e}")
+        answered = set(done)
+        self._refs = [(r, n) for r, n in self._refs if r not in answered]
+
+    def _send(self, hold: bool = True) -> None:
+        """Send what waits as one batch (frames JPEG-encoded here). ``hold``: not while ``max_in_flight_frames``
+        frames are in batches the recorder has not answered (what waits stays here; :meth:`image` drops beyond
+        ``max_pending_frames``)."""
         from aerodaas.actors.dataplane import encode_frame  # lazy: heavy cv2, ray
 
+        self._reap()
+        if hold and self.frames_in_flight >= self.max_in_flight_frames:
+            self.held_batches += 1
+            return
         base = self._base()
         if base is None:
             return
@@ -200,16 +235,10 @@ class RemoteRecorder(AnalyticsAccounting):
             if copies is not None:
                 copies.count("recorder_jpeg_encoded", frames)
         try:
-            self._refs.append(self.plane.peer(self.target).record.remote(batch, ledger))
+            self._refs.append((self.plane.peer(self.target).record.remote(batch, ledger), frames))
             self.sent += len(batch)
         except Exception as e:  # noqa: BLE001 - reported in stats, never fatal
             self.send_errors.append(f"{type(e).__name__}: {e}")
-        done, self._refs = ray.wait(self._refs, num_returns=len(self._refs), timeout=0)
-        for ref in done:
-            try:
-                ray.get(ref)
-            except Exception as e:  # noqa: BLE001
-                self.send_errors.append(f"{type(e).__name__}: {e}")
 
     def _loop(self) -> None:
         while not self._wake.wait(self.period_s):
@@ -228,10 +257,10 @@ class RemoteRecorder(AnalyticsAccounting):
         if not self.closed:
             self._wake.set()
             self._thread.join(timeout_s)
-            self._send()
+            self._send(hold=False)
             self.closed = True
             try:
-                ray.get(self._refs, timeout=timeout_s)
+                ray.get([r for r, _ in self._refs], timeout=timeout_s)
             except Exception as e:  # noqa: BLE001
                 self.send_errors.append(f"{type(e).__name__}: {e}")
             self._refs = []

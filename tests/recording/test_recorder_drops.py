@@ -50,3 +50,70 @@ def test_a_recording_without_images_has_no_drops_channel(tmp_path):
     svc.json("/d1/events", 1, {"event": "x"}, "aerodaas.MissionEvent")
     svc.close()
     assert [t for t, *_ in read_messages(str(path))] == ["/d1/events", "/run/accounting"]
+
+
+class _StalledRecorder:
+    """A recorder actor that takes no batch until :meth:`release` (as a SIGSTOPped one): ``record`` waits."""
+
+    def __init__(self) -> None:
+        self.gate = threading.Event()
+        self.frames = 0
+
+    def ledger_of(self, producer: str):
+        from aerodaas.protocol.messages import ProducerLedger
+
+        return ProducerLedger(producer, {}, incarnation=1)
+
+    def record(self, batch: list, ledger=None) -> int:
+        self.gate.wait(120)
+        self.frames += sum(1 for it in batch if it.topic.endswith("/camera/cam"))
+        return len(batch)
+
+    def release(self) -> None:
+        self.gate.set()
+
+    def recorded_frames(self) -> int:
+        return self.frames
+
+
+class _Plane:
+    """What :class:`RemoteRecorder` needs of its actor's data plane: its id and the recorder actor's handle."""
+
+    actor_id = "drone-test"
+    copies = None
+
+    def __init__(self, recorder) -> None:
+        self.recorder = recorder
+
+    def peer(self, name: str):
+        return self.recorder
+
+
+def test_a_stalled_recorder_actor_holds_a_bounded_number_of_frames_and_the_rest_are_dropped_and_counted(ray_session):
+    """The recorder actor takes nothing (stalled): the producer sends at most ``max_in_flight_frames`` frames, keeps at
+    most ``max_pending_frames`` more, and drops and counts the others; once the recorder answers again, every frame
+    not dropped reaches it. Before, Ray's queue to a stopped recorder grew without bound (the 20 s stall of
+    tests/runtime/test_faults.py lost frames in some runs and none in others, 2026-11-27)."""
+    import time
+
+    import ray
+
+    from aerodaas.actors.remote_recorder import RemoteRecorder
+
+    recorder = ray.remote(max_concurrency=64)(_StalledRecorder).remote()
+    rec = RemoteRecorder(_Plane(recorder), period_s=0.01, max_pending_frames=20, max_in_flight_frames=8)
+    frame = np.zeros((24, 32, 3), np.uint8)
+    offered = 0
+    for k in range(200):
+        rec.image("/d1/camera/cam", 1_000_000 * (k + 1), frame, "d1/cam")
+        offered += 1
+        time.sleep(0.002)
+    until = time.monotonic() + 60
+    while rec.held_batches == 0 and time.monotonic() < until:  # the sending thread has met the bound
+        time.sleep(0.05)
+    in_flight = rec.frames_in_flight
+    assert rec.held_batches > 0 and in_flight <= 8 + 20, (rec.held_batches, in_flight)
+    assert rec.frames_dropped >= offered - 8 - 20 - 20, rec.frames_dropped  # one batch may exceed the bound
+    ray.get(recorder.release.remote())
+    rec.close(timeout_s=60)
+    assert ray.get(recorder.recorded_frames.remote()) == offered - rec.frames_dropped
