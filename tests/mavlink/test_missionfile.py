@@ -499,11 +499,7 @@ def test_plan_geofence_and_rally_points_round_trip(tmp_path):
 
 
 def test_navigation_ending_with_an_action_command_exports_that_action():
-    import aerodaas.model.types as models
-
-    action_cls = getattr(models, "ActionCommand", None)
-    if action_cls is None:
-        pytest.skip("aerodaas.model.types has no ActionCommand (land/rtl) in this tree")
+    from aerodaas.model.types import ActionCommand as action_cls
     nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, [Waypoint(id="a", x=5, y=5, z=10),
                                                           action_cls(id="home", action="rtl")])
     plan = navigation_to_plan(nav, HOME, "land")
