@@ -23,7 +23,7 @@ from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Waypoint
-from tests.conftest import DATA_DIR
+from tests.conftest import DATA_DIR, skip_or_fail
 from tests.mavlink.emulated import (
     AUTOPILOTS,
     CONFIG_HOME,
@@ -334,7 +334,7 @@ def test_real_px4_tlog_through_the_receive_path():
     connect() and the I/O thread: nothing raises, positions, home, status texts and mission progress parse."""
     tlog = DATA_DIR / "tlogs" / "thayer_rural.tlog"
     if not tlog.is_file():
-        pytest.skip(f"{tlog} not found (set AERODAAS_DATA_DIR)")
+        skip_or_fail(f"{tlog} not found (set AERODAAS_DATA_DIR)")
     packets = _tlog_packets(tlog)
     from pymavlink import mavutil
 

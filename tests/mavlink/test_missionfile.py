@@ -28,7 +28,7 @@ from aerodaas.missionfile import (
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
 from aerodaas.navigation.geofence import GeofenceCircle, GeofenceConfig, GeofencePolygon
-from tests.conftest import DATA_DIR
+from tests.conftest import DATA_DIR, skip_or_fail
 
 MISSIONS = DATA_DIR / "missions"
 KNOWN = ["dronekit_mpmission.txt", "mavsdk_mission_planner_sample.txt", "mavsdk_qgroundcontrol_sample.plan",
@@ -47,7 +47,7 @@ def _mission_files() -> list[str]:
 def sample(name: str):
     path = MISSIONS / name
     if not path.is_file():
-        pytest.skip(f"sample mission not found: {path} (set AERODAAS_DATA_DIR)")
+        skip_or_fail(f"sample mission not found: {path} (set AERODAAS_DATA_DIR)")
     return path
 
 

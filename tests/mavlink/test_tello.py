@@ -13,8 +13,6 @@ from aerodaas.config import RobotConfig, SensorConfig, TelloConfig
 from aerodaas.emulators import free_udp_port
 from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator, format_state
 
-pytest.importorskip("av")
-
 HEADING = 30.0  # the emulated Tello's power-on heading, compass degrees: makes every frame conversion matter
 
 

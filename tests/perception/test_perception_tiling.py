@@ -111,11 +111,11 @@ def test_bench_detect_cli_scores_our_annotations(tmp_path):
 
     from aerodaas.cli import main
 
-    from tests.conftest import DATA_DIR, needs_data  # noqa: F401
+    from tests.conftest import DATA_DIR, skip_or_fail
 
     images = DATA_DIR / "imagery" / "brighton_beach"
     if not (images / "DJI_0028.JPG").is_file():
-        pytest.skip("shared imagery not available")
+        skip_or_fail("shared imagery not available")
     ann = Path(__file__).parents[1] / "data" / "brighton_beach_cars.json"
     out = tmp_path / "r.json"
     assert main(["bench", "detect", "--images", str(images), "--annotations", str(ann), "--limit", "1",

@@ -97,7 +97,6 @@ def test_a_replayed_px4_ulog_drives_the_same_stat_stream(ray_session, run_option
 
 
 def test_a_tello_flies_the_survey_and_feeds_its_own_video_to_analytics(ray_session, run_options, tmp_path):
-    pytest.importorskip("av")
     from aerodaas.emulators.tello import TELLO_LIMITS, TelloEmulator
 
     sp, vp = free_udp_port(), free_udp_port()
