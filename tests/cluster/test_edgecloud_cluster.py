@@ -236,11 +236,12 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
 
     node = cluster.add_cloud_node({"cloud-node": "c-mission"})
     cluster.cluster.wait_for_nodes()
-    env, drone = build(hover_config(fps=15), FixedCostDetector(80), hover_s=20.0)
+    env, drone = build(hover_config(fps=15), FixedCostDetector(80), hover_s=30.0)
     env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
     run_options.record = str(tmp_path / "loss.mcap")
     removed: list[str] = []
     executed: list[int] = []
+    ended = threading.Event()  # the mission is over: the watcher stops, and never kills a node a later test uses
 
     def lose_cloud_once_in_use() -> None:
         """SIGKILL the node of the cloud executor (the run's named actor ``aerodaas/<run>/cloud-analytics/0``; the
@@ -250,26 +251,31 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
         yet in use."""
         until = time.monotonic() + 60.0  # a bound, not a judgement: the asserts below say what went wrong
         handle = None
-        while time.monotonic() < until and not (executed and executed[-1] >= 3):
+        while time.monotonic() < until and not ended.is_set() and not (executed and executed[-1] >= 3):
             named = [a for a in ray.util.list_named_actors(all_namespaces=True)
                      if a["name"].endswith("/cloud-analytics/0")]
             if named:
                 handle = ray.get_actor(named[0]["name"], namespace=named[0]["namespace"])
                 executed.append(ray.get(handle.stats.remote())["executed"])
             time.sleep(0.5)
-        if handle is None:
+        if handle is None or ended.is_set():
             return
         host = ray.get(handle.info.remote())["node_id"]
-        time.sleep(3.5)
+        if ended.wait(3.5):
+            return
         removed.append(cluster.remove_cloud_node([n.node_id for n in cluster.cloud_nodes].index(host)))
 
-    drone.on_mission_start(lambda r: threading.Thread(target=lose_cloud_once_in_use, daemon=True).start())
+    watcher = threading.Thread(target=lose_cloud_once_in_use, daemon=True)
+    drone.on_mission_start(lambda r: watcher.start())
     try:
         res = drone.start_mission(options=run_options)
     finally:  # the module's later tests place by their own labels
+        ended.set()
+        if watcher.is_alive():
+            watcher.join(120)
         if node in cluster.cloud_nodes:
             cluster.remove_cloud_node(cluster.cloud_nodes.index(node), graceful=True)
-    assert removed, "the cloud node was never removed"
+    assert removed, ("the cloud node was never removed; the executor's task counts:", executed)
     assert executed and executed[-1] >= 3, executed  # the cloud executor ran tasks before its node was lost
     assert res.outcome == "success", res.robots["uav"].get("error")
     rep = res.stats["analytics_scheduler"]
