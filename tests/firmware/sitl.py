@@ -88,19 +88,20 @@ def monitor_connection(autopilot: str, instance: int = 0) -> str:
         f"udpin:127.0.0.1:{14550 + instance}"
 
 
-def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, speedup: float,
-                     sysid: int | None = None) -> str:
+def firmware_start(autopilot: str, instance: int, home: dict, workdir: Path, speedup: float,
+                   sysid: int | None = None, extra: str = "") -> str:
     """A shell command starting firmware instance ``instance`` (fresh parameters: ArduCopter ``-w``, PX4 a new
-    working directory) in the background, its output in ``workdir/fw<i>.log``, its pid in ``$FW<i>``."""
+    working directory) in the background, its output in ``workdir/fw<i>.log`` (``$!`` is the firmware's own pid);
+    ``extra``: further ArduCopter options (``--serial2 ...``)."""
     log = workdir / f"fw{instance}.log"
     if autopilot == "ardupilot":
         d = ARDUCOPTER.parent
-        cmd = (f"cd {shlex.quote(str(workdir))} && {shlex.quote(str(ARDUCOPTER))} --model + --speedup {speedup:g} "
+        cmd = (f"cd {shlex.quote(str(workdir))} && exec {shlex.quote(str(ARDUCOPTER))} --model + --speedup {speedup:g} "
                f"-I{instance} -w --defaults {shlex.quote(str(d / 'copter.parm'))} "
                f"--home {home['lat']},{home['lon']},{home['alt']},0 "
                f"--serial0 udpclient:127.0.0.1:{14550 + 10 * instance} "
                f"--serial1 udpclient:127.0.0.1:{14551 + 10 * instance}"
-               + (f" --sysid {sysid}" if sysid is not None else ""))
+               + (f" --sysid {sysid}" if sysid is not None else "") + (f" {extra}" if extra else ""))
     else:
         w = workdir / f"px4_{instance}"
         farm = w / "bin"  # the px4-* command aliases must be symlinks to px4 (the shared copy has plain files)
@@ -122,7 +123,19 @@ def firmware_command(autopilot: str, instance: int, home: dict, workdir: Path, s
                  f"mount -c --bind /proc/self/fd/3 {shlex.quote(str(w))} && exec 3<&- && cd {shlex.quote(str(w))} "
                  f"&& {px4}")
         cmd = f"cd {shlex.quote(str(w))} && exec unshare -m --propagation private bash -c {shlex.quote(inner)}"
-    return f"( {cmd} ) > {shlex.quote(str(log))} 2>&1 &\nFW{instance}=$!"
+    return f"( {cmd} ) > {shlex.quote(str(log))} 2>&1 &"
+
+
+def boot_check(autopilot: str, starts: list[tuple[str, Path]], workdir: Path) -> str:
+    """A shell line that waits for the first HEARTBEAT of each instance ``starts`` started (``(its
+    :func:`firmware_start` command, its log)``, instance i's pid in ``$FW<i>``) and starts again one that never
+    sends it (tests/firmware/firmware_boot.py, whose ``FW<i>=pid`` lines are evaluated)."""
+    spec = workdir / "boot.json"
+    spec.write_text(json.dumps([{"instance": i, "connection": connection(autopilot, i), "command": c, "log": str(log)}
+                                for i, (c, log) in enumerate(starts)]))
+    pids = " ".join(f"$FW{i}" for i in range(len(starts)))
+    return (f"eval \"$({shlex.quote(sys.executable)} -m tests.firmware.firmware_boot {shlex.quote(str(spec))} "
+            f"{pids})\"")
 
 
 def mavlink_env(autopilot: str, app_env: Path, n: int = 1, **mavlink: Any) -> dict:
@@ -151,19 +164,28 @@ def mavlink_env(autopilot: str, app_env: Path, n: int = 1, **mavlink: Any) -> di
 
 def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1, home: dict | None = None,
                      speedup: float | None = None, timeout_s: float = 900,
-                     with_firmware: bool = True, sysids: bool = False) -> subprocess.CompletedProcess:
-    """Start ``n`` fresh firmware instances and run the shell ``steps`` one after another inside one private
-    loopback-only network namespace (each step's exit code in ``workdir/rc<k>``, output in ``workdir/out<k>``);
-    the firmware is killed at the end. Steps may use ``$FW0``..: the firmware pids. ``sysids``: instance i has
-    MAVLink system id i + 1 (ArduCopter ``--sysid``)."""
+                     with_firmware: bool = True, sysids: bool = False, own_dirs: bool = False,
+                     extra: str = "") -> subprocess.CompletedProcess:
+    """Start ``n`` fresh firmware instances, wait until each sends (:func:`boot_check`), and run the shell ``steps``
+    one after another inside one private loopback-only network namespace (each step's exit code in
+    ``workdir/rc<k>``, output in ``workdir/out<k>``); the firmware is killed at the end. Steps may use ``$FW0``..:
+    the firmware pids. ``sysids``: instance i has MAVLink system id i + 1 (ArduCopter ``--sysid``); ``own_dirs``:
+    instance i runs in ``workdir/v<i+1>`` (its own storage, ArduCopter's ``eeprom.bin``); ``extra``: further
+    ArduCopter options for every instance."""
     workdir.mkdir(parents=True, exist_ok=True)
     speedup = SPEEDUP[autopilot] if speedup is None else speedup
     ray_tmp = tempfile.mkdtemp(prefix="rs", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
     lines = ["set -u", "ip link set lo up", f"export RAY_TMPDIR={shlex.quote(ray_tmp)}",
              "mkdir -p $RAY_TMPDIR", f"export PYTHONPATH={shlex.quote(str(REPO))}${{PYTHONPATH:+:$PYTHONPATH}}"]
+    starts = []
     for i in range(n if with_firmware else 0):
-        lines.append(firmware_command(autopilot, i, home or FARM_HOME, workdir, speedup,
-                                      sysid=i + 1 if sysids else None))
+        own = workdir / f"v{i + 1}" if own_dirs else workdir
+        own.mkdir(exist_ok=True)
+        starts.append((firmware_start(autopilot, i, home or FARM_HOME, own, speedup, sysid=i + 1 if sysids else None,
+                                      extra=extra), own / f"fw{i}.log"))
+        lines.append(f"{starts[-1][0]}\nFW{i}=$!")
+    if starts:
+        lines.append(boot_check(autopilot, starts, workdir))
     lines.append("cleanup() { for p in $(jobs -p); do kill -9 $p 2>/dev/null; done; }")
     lines.append("trap cleanup EXIT")
     for k, step in enumerate(steps):

@@ -24,20 +24,6 @@ SHARED_PORT = 14700
 N = 3
 
 
-def _firmware(workdir) -> str:
-    """Start the three firmware instances (tests/firmware/sitl.py's, SERIAL2 sent to :data:`SHARED_PORT` as well), each in a
-    directory of its own (its storage, eeprom.bin, holds its key)."""
-    lines = []
-    for i in range(N):
-        own = workdir / f"v{i + 1}"
-        own.mkdir()
-        cmd = sitl.firmware_command("ardupilot", i, sitl.FARM_HOME, own, sitl.SPEEDUP["ardupilot"], sysid=i + 1)
-        assert f"--sysid {i + 1} )" in cmd, cmd  # the option the shared port is added after
-        lines.append(cmd.replace(f"--sysid {i + 1} )",
-                                 f"--sysid {i + 1} --serial2 udpclient:127.0.0.1:{SHARED_PORT} )").split("\n")[0])
-    return " ".join(lines)
-
-
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory) -> dict:
     """The three vehicles started, provisioned one by one, then the fleet flown: each step's (exit code, output)
@@ -57,9 +43,12 @@ def fleet(tmp_path_factory) -> dict:
     setups = [" ".join([*map(str, sitl.AERODAAS), "mavlink", "signing", "setup", "--connection",
                         sitl.connection("ardupilot", i), "--key-file", keys[i], "--target-system", str(i + 1),
                         "--secure-link", "--timeout", "120"]) for i in range(N)]
-    steps = [_firmware(ns) + " true", *setups,
+    steps = [*setups,
              sitl.aerodaas_run(sitl.FLEET_APP, env, d / "fleet.mcap", hold_radius_m=sitl.HOLD_RADIUS["ardupilot"])]
-    sitl.run_in_namespace("ardupilot", ns, steps, with_firmware=False, timeout_s=1500)
+    # each vehicle in a directory of its own (its storage, eeprom.bin, holds its key), its SERIAL2 sent to the shared
+    # port as well
+    sitl.run_in_namespace("ardupilot", ns, steps, n=N, sysids=True, own_dirs=True,
+                          extra=f"--serial2 udpclient:127.0.0.1:{SHARED_PORT}", timeout_s=1500)
     return {"steps": [sitl.step_result(ns, k) for k in range(len(steps))],
             "rec": sitl._read_or_note(d / "fleet.mcap")}  # noqa: SLF001
 
@@ -70,10 +59,10 @@ def test_three_vehicles_with_their_own_keys_fly_on_one_link(fleet):
     telemetry in the recording); no message of any vehicle was refused as unsigned or wrongly signed."""
     from aerodaas.recording.metrics import waypoint_visits
 
-    for k in range(1, N + 1):
+    for k in range(N):
         rc, text = fleet["steps"][k]
-        assert rc == 0 and f"system {k} signs with the key" in text, (k, text[-2000:])
-    rc, text = fleet["steps"][N + 1]
+        assert rc == 0 and f"system {k + 1} signs with the key" in text, (k + 1, text[-2000:])
+    rc, text = fleet["steps"][N]
     assert rc == 0, text[-3000:]
     rec = fleet["rec"]
     r = _within("ardupilot")
