@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import threading
 import time
 from collections import defaultdict
 from typing import Any, Mapping
@@ -65,12 +66,42 @@ class CloudExecutor:
             if mode == "real" else None
         self._pool = concurrent.futures.ThreadPoolExecutor(int(threads), thread_name_prefix="cloud-onnx") \
             if mode == "real" else None
+        if self._pool is not None:
+            self._prepare_threads(int(threads))
         self._ready: dict[str, list[dict]] = defaultdict(list)
         self._events: dict[str, asyncio.Event] = {}
         self._handles: dict[str, set] = defaultdict(set)
         self.executed = 0
         self.refused = 0
         self._loop: asyncio.AbstractEventLoop | None = None
+
+    def _prepare_threads(self, threads: int) -> None:
+        """Set up the models on each of the ``threads`` pool threads before the first task (the bank keeps one
+        instance per thread, built on first use: otherwise the run's first frame on each thread waits for an ONNX
+        session to open; the first task of a cloud executor once took 6 s, beside two CPU burners). A barrier keeps
+        the ``threads`` jobs on distinct threads. Raises the first error of a set-up (the executor then never
+        starts, and :func:`start_cloud_executors` raises it)."""
+        barrier = threading.Barrier(threads)
+
+        def one() -> None:
+            try:
+                self._bank.prepare()
+            except BaseException:
+                barrier.abort()
+                raise
+            barrier.wait()
+
+        errors = []
+        for fut in [self._pool.submit(one) for _ in range(threads)]:
+            try:
+                fut.result()
+            except threading.BrokenBarrierError as e:
+                errors.append(e)
+            except Exception as e:  # the set-up's own error comes first
+                errors.insert(0, e)
+        if errors:
+            self._pool.shutdown(wait=False)
+            raise errors[0]
 
     # ---- API
     async def info(self) -> dict:

@@ -28,17 +28,28 @@ class DetectorBank:
             raise KeyError(f"no ONNX detector configured for model {model!r} (have {sorted(self.detector_for)})") \
                 from None
 
-    def detect(self, model: str, frame) -> list:
+    def _detector(self, name: str):
+        """This thread's detector ``name``, built on first use."""
         from aerodaas.perception.detect import make_detector  # lazy: heavy cv2
 
         cache = getattr(self._local, "cache", None)
         if cache is None:
             cache = self._local.cache = {}
-        name = self.name_for(model)
         det = cache.get(name)
         if det is None:
             det = cache[name] = make_detector(name, **self.kwargs)
-        return det.detect(frame)
+        return det
+
+    def prepare(self) -> None:
+        """Build this thread's detector of every configured name now rather than during its first task (opening an
+        ONNX session took 6 s on a loaded 2-core machine, which made the run's first frame late). Raises what
+        :func:`~aerodaas.perception.detect.make_detector` raises."""
+        names = [self.detector_for] if isinstance(self.detector_for, str) else sorted(set(self.detector_for.values()))
+        for name in names:
+            self._detector(name)
+
+    def detect(self, model: str, frame) -> list:
+        return self._detector(self.name_for(model)).detect(frame)
 
     def run(self, model: str, frame, meta: Any = None) -> list:
         """The detections of ``model``'s detector on ``frame`` (``meta`` unused)."""
@@ -74,6 +85,12 @@ class AnalyticsBank:
             obj = cache[model] = copy.deepcopy(proto)
             obj.setup()
         return obj
+
+    def prepare(self) -> None:
+        """Copy and set up this thread's instance of every analytics now rather than during its first task (see
+        :meth:`DetectorBank.prepare`); nothing to do with ``shared``. Raises what ``setup()`` raises."""
+        for model in self.analytics:
+            self._get(model)
 
     def run(self, model: str, frame, meta: Any = None) -> Any:
         """``process(frame, meta)`` of ``model``'s analytics on this thread; raises what it raises."""
