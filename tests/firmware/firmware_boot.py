@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import signal
 import subprocess
@@ -46,6 +47,16 @@ def _describe(pid: int) -> str:
     except OSError:
         return f"pid {pid} has exited"
     return f"pid {pid} state {stat[2]}, CPU {(int(stat[13]) + int(stat[14])) / os.sysconf('SC_CLK_TCK'):.1f} s"
+
+
+def boot_check(starts: list[tuple[str, Path, str]], spec: Path) -> str:
+    """A shell line that runs this check on the instances ``starts`` started (``(the command that starts it in the
+    background, its log, its pymavlink connection)``, instance i's pid in ``$FW<i>``), its spec written to ``spec``,
+    and evaluates the ``FW<i>=pid`` lines it prints."""
+    spec.write_text(json.dumps([{"instance": i, "connection": conn, "command": c, "log": str(log)}
+                                for i, (c, log, conn) in enumerate(starts)]))
+    pids = " ".join(f"$FW{i}" for i in range(len(starts)))
+    return f'eval "$({shlex.quote(sys.executable)} -m tests.firmware.firmware_boot {shlex.quote(str(spec))} {pids})"'
 
 
 def main(spec_path: str, pids: list[int]) -> int:

@@ -25,6 +25,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from tests.firmware.firmware_boot import boot_check
+
 REPO = Path(__file__).resolve().parents[2]
 SITL_DIR = Path(os.environ.get("AERODAAS_SITL_DIR", REPO.parent / "shared" / "sitl"))
 if not SITL_DIR.is_dir():  # a worktree beside /work/main: the shared folder is /work/shared
@@ -126,18 +128,6 @@ def firmware_start(autopilot: str, instance: int, home: dict, workdir: Path, spe
     return f"( {cmd} ) > {shlex.quote(str(log))} 2>&1 &"
 
 
-def boot_check(autopilot: str, starts: list[tuple[str, Path]], workdir: Path) -> str:
-    """A shell line that waits for the first HEARTBEAT of each instance ``starts`` started (``(its
-    :func:`firmware_start` command, its log)``, instance i's pid in ``$FW<i>``) and starts again one that never
-    sends it (tests/firmware/firmware_boot.py, whose ``FW<i>=pid`` lines are evaluated)."""
-    spec = workdir / "boot.json"
-    spec.write_text(json.dumps([{"instance": i, "connection": connection(autopilot, i), "command": c, "log": str(log)}
-                                for i, (c, log) in enumerate(starts)]))
-    pids = " ".join(f"$FW{i}" for i in range(len(starts)))
-    return (f"eval \"$({shlex.quote(sys.executable)} -m tests.firmware.firmware_boot {shlex.quote(str(spec))} "
-            f"{pids})\"")
-
-
 def mavlink_env(autopilot: str, app_env: Path, n: int = 1, **mavlink: Any) -> dict:
     """``app_env`` (an app's environment.json) with its first robot turned into ``n`` MAVLink robots
     (``<id>``, ``<id>_1``...) on firmware instances 0..n-1, limited to :data:`MAX_SPEED` of the autopilot;
@@ -166,12 +156,10 @@ def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1
                      speedup: float | None = None, timeout_s: float = 900,
                      with_firmware: bool = True, sysids: bool = False, own_dirs: bool = False,
                      extra: str = "") -> subprocess.CompletedProcess:
-    """Start ``n`` fresh firmware instances, wait until each sends (:func:`boot_check`), and run the shell ``steps``
-    one after another inside one private loopback-only network namespace (each step's exit code in
-    ``workdir/rc<k>``, output in ``workdir/out<k>``); the firmware is killed at the end. Steps may use ``$FW0``..:
-    the firmware pids. ``sysids``: instance i has MAVLink system id i + 1 (ArduCopter ``--sysid``); ``own_dirs``:
-    instance i runs in ``workdir/v<i+1>`` (its own storage, ArduCopter's ``eeprom.bin``); ``extra``: further
-    ArduCopter options for every instance."""
+    """Start ``n`` fresh firmware instances, wait for each one's first HEARTBEAT (tests/firmware/firmware_boot.py),
+    run the shell ``steps`` one after another in one private loopback-only network namespace (step k's exit code in
+    ``workdir/rc<k>``, output in ``workdir/out<k>``; ``$FW0``..: the firmware pids), kill the firmware. ``sysids``:
+    system id i + 1; ``own_dirs``: instance i in ``workdir/v<i+1>`` (its own storage); ``extra``: ArduCopter options."""
     workdir.mkdir(parents=True, exist_ok=True)
     speedup = SPEEDUP[autopilot] if speedup is None else speedup
     ray_tmp = tempfile.mkdtemp(prefix="rs", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
@@ -182,10 +170,10 @@ def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1
         own = workdir / f"v{i + 1}" if own_dirs else workdir
         own.mkdir(exist_ok=True)
         starts.append((firmware_start(autopilot, i, home or FARM_HOME, own, speedup, sysid=i + 1 if sysids else None,
-                                      extra=extra), own / f"fw{i}.log"))
+                                      extra=extra), own / f"fw{i}.log", connection(autopilot, i)))
         lines.append(f"{starts[-1][0]}\nFW{i}=$!")
     if starts:
-        lines.append(boot_check(autopilot, starts, workdir))
+        lines.append(boot_check(starts, workdir / "boot.json"))
     lines.append("cleanup() { for p in $(jobs -p); do kill -9 $p 2>/dev/null; done; }")
     lines.append("trap cleanup EXIT")
     for k, step in enumerate(steps):
