@@ -15,7 +15,7 @@ from aerodaas.runtime import driver as runtime
 from aerodaas.runtime.app_errors import report
 from aerodaas.runtime.options import RunOptions
 from aerodaas.runtime.preflight import check_run_flags
-from aerodaas.runtime.process import PROCESS
+from aerodaas.process.state import PROCESS
 
 
 def _run_options(args: argparse.Namespace) -> "RunOptions | int":

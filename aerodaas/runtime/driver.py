@@ -33,7 +33,7 @@ from aerodaas.runtime.dataflow import Placement, build_plan
 from aerodaas.runtime.node_recorders import run_accounting
 from aerodaas.runtime.options import RunOptions, actor_classes
 from aerodaas.runtime.preflight import check_options, hitl_access, validate_graph
-from aerodaas.runtime.process import PROCESS
+from aerodaas.process.state import PROCESS
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
                                         shutdown_ray, start_ray_early)
@@ -108,14 +108,14 @@ class MissionResult:
 def allow_stop_interrupt(allowed: bool) -> None:
     """Whether a stop signal (:func:`request_stop`) may raise KeyboardInterrupt in the main thread from now on:
     True while the application is built, False around Ray's shutdown (the process's
-    :class:`aerodaas.runtime.process.StopState`, which says why)."""
+    :class:`aerodaas.process.state.StopState`, which says why)."""
     PROCESS.stop.raise_ok = bool(allowed)
 
 
 def request_stop(signum: int) -> None:
     """Called by the CLI's SIGINT/SIGTERM handler (main thread): record the stop and raise KeyboardInterrupt when
     that is safe now; otherwise the run stops at its next safe point
-    (:meth:`aerodaas.runtime.process.StopState.request`)."""
+    (:meth:`aerodaas.process.state.StopState.request`)."""
     PROCESS.stop.request(signum)
 
 
@@ -186,7 +186,7 @@ def run_file(path: str, options: RunOptions | None = None,
     its missions in order, each with :func:`run_application`; code of the file after a mission runs once that
     mission flew, with its result (``aerodaas run`` does this). ``on_result`` is told each result. Returns the
     results (empty: the file never called ``start_mission()``). Raises what loading or a run raises; a stop signal
-    (``aerodaas.runtime.process.PROCESS.stop``) after a mission ends the file there."""
+    (``aerodaas.process.state.PROCESS.stop``) after a mission ends the file there."""
     opts = options or RunOptions()
     results: list[MissionResult] = []
     app = load_app(path, opts.env_path)

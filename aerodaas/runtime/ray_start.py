@@ -19,7 +19,7 @@ from aerodaas.clusters.local import enable_token_auth
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
 from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
-from aerodaas.runtime.process import PROCESS, EarlyStart
+from aerodaas.process.state import PROCESS, EarlyStart
 
 __all__ = ["RayStartError", "RayAddressError", "init_ray", "ensure_ray", "start_ray_early", "shutdown_ray",
            "started_here", "ray_temp_dir", "SUN_PATH_MAX", "RAY_SOCKET_SUFFIX_MAX"]
@@ -43,7 +43,7 @@ class RayAddressError(RayStartError):
 
 def started_here() -> bool:
     """True when this driver runs on a local Ray: its own, or the persistent cluster of ``aerodaas up`` (what this
-    process did with Ray is :data:`aerodaas.runtime.process.PROCESS`'s ``ray``, process state, not run options)."""
+    process did with Ray is :data:`aerodaas.process.state.PROCESS`'s ``ray``, process state, not run options)."""
     return PROCESS.ray.local or PROCESS.ray.attached_up
 
 

@@ -34,19 +34,14 @@ MUTATORS = {"append", "extend", "insert", "pop", "popleft", "appendleft", "remov
 ALLOWED = {
     # the one plug-in registry object (aerodaas.plugins.registry.PluginRegistry): every plug-in of the process
     ("aerodaas/plugins/registry.py", "REGISTRY"),
-    # the process's signal handling and Ray connection (aerodaas.runtime.process.ProcessState): signal.signal and
-    # ray.init are process-wide by nature
-    ("aerodaas/runtime/process.py", "PROCESS"),
+    # the process's signal handling, Ray connection and shared MAVLink links (aerodaas.process.state.ProcessState):
+    # signal.signal, ray.init and a bound UDP port are process-wide by nature
+    ("aerodaas/process/state.py", "PROCESS"),
 }
-#: state found when the scan was introduced, still to be moved into an owned object (issue 48.4, not yet done).
-#: Listed so that nothing new is added; an entry that no longer matches fails the test (remove it here). The one
-#: left: the MAVLink connections shared by every robot of a process that names the same endpoint (one socket per
-#: UDP port in a process). Per-process by nature, but :data:`aerodaas.runtime.process.PROCESS` is out of reach of
-#: ``aerodaas.backends`` (layer 6 under runtime's 8, tests/architecture/test_layers.py), and a table per actor would
-#: have to reach ``MavlinkBackend`` through ``make_backend(cfg)``, the constructor every backend plug-in shares
-KNOWN_DEBT = {
-    ("aerodaas/backends/mavlink/shared_link.py", "_LINKS"),
-}
+#: state found when the scan was introduced, still to be moved into an owned object (issue 48.4): listed so that
+#: nothing new is added; an entry that no longer matches fails the test (remove it here). Empty since the MAVLink
+#: links a process's robots share moved into :data:`aerodaas.process.state.PROCESS` (``mavlink_links``)
+KNOWN_DEBT: set[tuple[str, str]] = set()
 
 
 def _call_name(node: ast.AST) -> str:
@@ -166,5 +161,5 @@ def test_the_state_named_in_issue_48_is_gone():
     files = _production_files()
     bound = {(rel, name) for rel, src in files.items() for name in module_bindings(ast.parse(src))}
     named = {"MISSION_LISTENERS", "STOP_SIGNALS", "_RAISE_OK", "IN_MISSION", "_STATE", "_EARLY", "_ENTRIES",
-             "_LOADED", "_BY_VALUE"}
+             "_LOADED", "_BY_VALUE", "_LINKS", "_LINKS_LOCK"}
     assert {n for _, n in bound} & named == set()

@@ -33,6 +33,7 @@ from pymavlink import mavutil
 
 from aerodaas.backends.base import BackendError
 from aerodaas.backends.mavlink._common import M, _NOT_VEHICLES, log
+from aerodaas.process.state import PROCESS
 
 #: wall seconds of discovery before ``target_system: auto`` picks the lowest unclaimed id (autopilots send their
 #: HEARTBEAT at 1 Hz, mavlink.io/en/services/heartbeat.html)
@@ -46,9 +47,6 @@ PORT_QUEUE = 5000
 RCVBUF_BYTES = 4 * 1024 * 1024
 #: messages kept per unclaimed system id (the latest), handed to the robot that claims it
 PENDING = 200
-
-_LINKS: dict[str, "SharedLink"] = {}
-_LINKS_LOCK = threading.Lock()
 
 
 def is_autopilot_heartbeat(msg: Any, source_system: int, source_component: int) -> bool:
@@ -318,14 +316,14 @@ class LinkPort:
                 return
             self._closed = True
             self._cv.notify_all()
-        with _LINKS_LOCK:
+        with PROCESS.mavlink_links.lock:
             link = self.link
             with link.cond:
                 link.ports.pop(self.robot_id, None)
                 for s in [s for s, r in link.claimed.items() if r == self.robot_id]:
                     del link.claimed[s]
             if not link.ports:
-                _LINKS.pop(link.key, None)
+                PROCESS.mavlink_links.by_key.pop(link.key, None)
                 link.close()
 
 
@@ -412,8 +410,8 @@ def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
     key = cfg.link_key()
     last: Exception | None = None
     while True:
-        with _LINKS_LOCK:
-            link = _LINKS.get(key)
+        with PROCESS.mavlink_links.lock:
+            link = PROCESS.mavlink_links.by_key.get(key)
             if link is None:
                 try:
                     conn = mavutil.mavlink_connection(
@@ -425,7 +423,7 @@ def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
                     conn = None
                 if conn is not None:
                     _grow_rcvbuf(conn)
-                    link = _LINKS[key] = SharedLink(key, conn, cfg.source_system, cfg.source_component)
+                    link = PROCESS.mavlink_links.by_key[key] = SharedLink(key, conn, cfg.source_system, cfg.source_component)
             if link is not None:
                 if robot_id in link.ports:
                     raise BackendError(f"robot {robot_id!r}: already connected on {key}")
@@ -438,5 +436,5 @@ def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
 
 def links() -> dict[str, SharedLink]:
     """The links open in this process (endpoint -> link), for reports and tests."""
-    with _LINKS_LOCK:
-        return dict(_LINKS)
+    with PROCESS.mavlink_links.lock:
+        return dict(PROCESS.mavlink_links.by_key)

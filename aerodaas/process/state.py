@@ -1,10 +1,12 @@
-"""The state a driver process has once, whatever runs in it: its signal handling (the stop signals of ``aerodaas
-run``) and its Ray connection (the local Ray it started, or the cluster of ``aerodaas up`` it attached to).
+"""The state a process has once, whatever runs in it: a driver's signal handling (the stop signals of ``aerodaas
+run``) and its Ray connection (the local Ray it started, or the cluster of ``aerodaas up`` it attached to), and the
+MAVLink connections that the robots of one process (a driver, or a drone actor packing several drones) share.
 
-Both are process-wide by nature — ``signal.signal`` installs a handler for the whole process and ``ray.init``
+All three are process-wide by nature — ``signal.signal`` installs a handler for the whole process, ``ray.init``
 connects the whole process (Python docs, "signal — Set handlers for asynchronous events": handlers always run in
-the main thread; Ray docs, ``ray.init``: one connection per driver process) — so they live in one documented
-object, :data:`PROCESS`, instead of module-level lists and dicts (issue 48.4). Nothing else of the framework keeps
+the main thread; Ray docs, ``ray.init``: one connection per driver process), and a UDP port is bound by one socket,
+which every robot of the process naming that endpoint must then read — so they live in one documented object,
+:data:`PROCESS`, instead of module-level lists and dicts (issue 48.4). Nothing else of the framework keeps
 module-level mutable state outside the plug-in registry (:data:`aerodaas.plugins.registry.REGISTRY`); the test
 ``tests/architecture/test_module_state.py`` checks it.
 """
@@ -13,8 +15,9 @@ from __future__ import annotations
 import subprocess
 import threading
 from dataclasses import dataclass, field
+from typing import Any
 
-__all__ = ["StopState", "EarlyStart", "RayConnection", "ProcessState", "PROCESS"]
+__all__ = ["StopState", "EarlyStart", "RayConnection", "SharedConnections", "ProcessState", "PROCESS"]
 
 
 @dataclass
@@ -79,12 +82,26 @@ class RayConnection:
 
 
 @dataclass
+class SharedConnections:
+    """The connections of this process that several robots share, by endpoint key (for MAVLink:
+    :meth:`aerodaas.config.MavlinkConfig.link_key`, e.g. ``udpin:0.0.0.0:14550``) → the open link
+    (:class:`aerodaas.backends.mavlink.shared_link.SharedLink`, which opens, hands out and closes them). Read and
+    changed only while holding ``lock``."""
+
+    by_key: dict[str, Any] = field(default_factory=dict)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+@dataclass
 class ProcessState:
-    """The process-wide state of a driver: its :class:`StopState` and its :class:`RayConnection`."""
+    """The process-wide state: a driver's :class:`StopState` and :class:`RayConnection`, and the MAVLink links the
+    process's robots share (:class:`SharedConnections`)."""
 
     stop: StopState = field(default_factory=StopState)
     ray: RayConnection = field(default_factory=RayConnection)
+    mavlink_links: SharedConnections = field(default_factory=SharedConnections)
 
 
-#: the process-wide state of this process (signal handling and Ray connection, see the module docstring)
+#: the process-wide state of this process (signal handling, Ray connection, shared MAVLink links; see the module
+#: docstring)
 PROCESS = ProcessState()
