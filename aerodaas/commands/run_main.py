@@ -11,11 +11,11 @@ from pathlib import Path
 
 from aerodaas.app.api import with_builtin_actors
 from aerodaas.config import ConfigError
+from aerodaas.process.state import PROCESS
 from aerodaas.runtime import driver as runtime
 from aerodaas.runtime.app_errors import report
 from aerodaas.runtime.options import RunOptions
 from aerodaas.runtime.preflight import check_run_flags
-from aerodaas.process.state import PROCESS
 
 
 def _run_options(args: argparse.Namespace) -> "RunOptions | int":

@@ -240,7 +240,7 @@ class PluginRegistry:
 
 
 #: the one plug-in registry of this process, and the only module-level mutable state of the framework besides the
-#: process's signal handling and Ray connection (:data:`aerodaas.process.state.PROCESS`;
+#: process's own state — signal handling, Ray connection, shared MAVLink links (:data:`aerodaas.process.state.PROCESS`;
 #: tests/architecture/test_module_state.py): a plug-in class registered in a module is known to the whole process, as Python's
 #: own import system knows a module (sys.modules)
 REGISTRY = PluginRegistry()

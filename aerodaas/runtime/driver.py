@@ -24,6 +24,7 @@ from aerodaas.config import ConfigError
 from aerodaas.config.robot import sensor_class
 from aerodaas.plugins.registry import by_value_modules
 from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor
+from aerodaas.process.state import PROCESS
 from aerodaas.protocol.specs import AnalyticsSchedulerSpec
 from aerodaas.protocol.startup_probe import probe
 from aerodaas.recording.health import FailureCount, assess, tally_failures
@@ -33,7 +34,6 @@ from aerodaas.runtime.dataflow import Placement, build_plan
 from aerodaas.runtime.node_recorders import run_accounting
 from aerodaas.runtime.options import RunOptions, actor_classes
 from aerodaas.runtime.preflight import check_options, hitl_access, validate_graph
-from aerodaas.process.state import PROCESS
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
                                         shutdown_ray, start_ray_early)

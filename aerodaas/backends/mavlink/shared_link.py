@@ -423,7 +423,8 @@ def open_link(cfg: Any, robot_id: str, deadline: float) -> LinkPort:
                     conn = None
                 if conn is not None:
                     _grow_rcvbuf(conn)
-                    link = PROCESS.mavlink_links.by_key[key] = SharedLink(key, conn, cfg.source_system, cfg.source_component)
+                    link = SharedLink(key, conn, cfg.source_system, cfg.source_component)
+                    PROCESS.mavlink_links.by_key[key] = link
             if link is not None:
                 if robot_id in link.ports:
                     raise BackendError(f"robot {robot_id!r}: already connected on {key}")
