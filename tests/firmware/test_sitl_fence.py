@@ -322,8 +322,13 @@ def test_px4_itself_reads_overlapping_inclusion_zones_as_their_intersection(px4_
     moved_to_both = min(math.hypot(s[1] - 2.0, s[2]) for s in between(both["t"], one["t"]))
     assert moved_to_both < 1.5, moved_to_both
     at = between(one["t"], one["t"] + 0.5)[0]
-    drift = max(math.hypot(s[1] - at[1], s[2] - at[2]) for s in between(one["t"], one["t"] + 10.0))
-    assert drift < 1.5, drift  # it stayed where it was: the target in one circle only was dropped
+    after = between(one["t"], one["t"] + 10.0)
+    # The dropped target is 14 m west of (2, 0); flown, PX4 would cover most of that in 10 s. Measured as progress
+    # toward it (west), not as any motion: the vehicle may still be settling on (2, 0) when the second command goes
+    # (a loaded CI machine saw 1.75 m of such settling), and settling is not obeying the command.
+    toward_one = at[1] - min(s[1] for s in after)
+    assert toward_one < 3.0, toward_one  # the target inside the first circle only was dropped
+    assert all(math.hypot(s[1] - 6.0, s[2]) < 10.0 for s in after), "it left the second circle toward the target"
     log = (px4_upload["workdir"] / "fw0.log").read_text(errors="replace")
     assert "Reposition is outside geofence" in log
 
