@@ -17,6 +17,7 @@ from typing import Any, Callable
 
 from pydantic import ValidationError
 
+from aerodaas.actors.builtin import BUILTIN
 from aerodaas.backends import NotNavigable, is_navigable
 from aerodaas.config import (AnalyticsSchedulerConfig, ComputeConfig, ConfigError, EnvironmentConfig, RobotConfig,
                              SensorConfig, _format_errors, load_environment_config)
@@ -50,15 +51,14 @@ def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, optio
 
 
 def with_builtin_actors(options: Any = None) -> Any:
-    """``options`` (a :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) with the built-in actor
-    classes (:data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`) when it names none: the application API hands the
-    runtime the actors it starts (the runtime imports no actor module). Imports Ray."""
+    """``options`` (a :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) with the built-in actors'
+    source (:data:`aerodaas.actors.builtin.BUILTIN`) when it names no actor classes: the application API hands the
+    runtime the actors it starts (the runtime imports no actor module), and the runtime imports them only once the
+    application passed its checks. Imports neither Ray nor any actor module."""
     opts = options if options is not None else RunOptions()
     if opts.actors is not None:
         return opts
-    from aerodaas.actors.catalogue import BUILTIN_ACTORS  # lazy: heavy cv2, ray
-
-    return dataclasses.replace(opts, actors=BUILTIN_ACTORS)
+    return dataclasses.replace(opts, actors=BUILTIN)
 
 
 class ComputeResource:

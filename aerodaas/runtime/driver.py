@@ -13,6 +13,7 @@ cluster listens on loopback only.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -32,7 +33,7 @@ from aerodaas.runtime import ray_start
 from aerodaas.runtime.app_loader import load_app
 from aerodaas.runtime.dataflow import Placement, build_plan
 from aerodaas.runtime.node_recorders import run_accounting
-from aerodaas.runtime.options import RunOptions, actor_classes
+from aerodaas.runtime.options import RunOptions, actor_classes, check_actor_classes
 from aerodaas.runtime.preflight import check_options, hitl_access, validate_graph
 from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
 from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
@@ -213,9 +214,11 @@ def _fly(env, robots: list, graph: tuple, opts: RunOptions, timeout: float | Non
     """Check ``opts``, run the mission and return its result (``aerodaas run`` is told it by :func:`run_file`'s
     ``on_result``). The app's file (``by_value``'s modules, or ``__main__`` of ``python app.py``) is an input
     ``--record`` never overwrites."""
-    actor_classes(opts)  # the entry point handed the actor classes (ValueError before Ray otherwise)
+    check_actor_classes(opts)  # the entry point handed the actor classes (ValueError before Ray otherwise)
     files = (getattr(sys.modules.get(m), "__file__", None) for m in (*by_value, "__main__"))
     sim = check_options(env, robots, graph[1], opts, inputs=tuple(f for f in files if f))
+    # the input passed its checks: now the actor modules (Ray, OpenCV) are imported, once, into the run's options
+    opts = dataclasses.replace(opts, actors=actor_classes(opts))
     ray_start.start_ray_early(opts.address, opts.dashboard)  # in its own thread (see there), overlapping the plan
     PROCESS.stop.in_mission = True
     try:

@@ -4,12 +4,11 @@ them from a global."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from aerodaas.protocol.actor_classes import ActorClasses
+from aerodaas.protocol.actor_classes import ActorClasses, ActorClassesSource
 
-__all__ = ["RunOptions", "actor_classes"]
+__all__ = ["RunOptions", "actor_classes", "check_actor_classes"]
 
 
 @dataclass
@@ -46,15 +45,25 @@ class RunOptions:
     #: --overwrite: --record may replace an existing file that is not an AeroDaaS recording
     overwrite: bool = False
     #: the run's actor classes and component handle classes (the runtime imports no actor module): the entry point
-    #: that starts the run sets them — ``start_mission()`` and ``aerodaas run`` the built-in
-    #: :data:`aerodaas.actors.catalogue.BUILTIN_ACTORS` when None; the runner refuses None (ValueError, before Ray)
-    actors: ActorClasses | None = None
+    #: that starts the run sets them — ``start_mission()`` and ``aerodaas run`` the built-in source
+    #: :data:`aerodaas.actors.builtin.BUILTIN` (loaded once the input passed its checks) when None; a test may hand
+    #: the record itself (:data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`); the runner refuses None (ValueError,
+    #: before Ray)
+    actors: ActorClasses | ActorClassesSource | None = None
+
+
+def check_actor_classes(opts: RunOptions) -> None:
+    """Raises ValueError (before Ray starts, without importing any actor module) when the entry point handed no
+    actor classes (``opts.actors`` None)."""
+    if opts.actors is None:
+        raise ValueError("RunOptions.actors: None; the code that starts a run hands the runtime its actor classes "
+                         "(RunOptions(actors=aerodaas.actors.builtin.BUILTIN), as start_mission() and "
+                         "`aerodaas run` do)")
 
 
 def actor_classes(opts: RunOptions) -> ActorClasses:
-    """``opts.actors``. Raises ValueError (before Ray starts) when the entry point handed none."""
-    if opts.actors is None:
-        raise ValueError("RunOptions.actors: None; the code that starts a run hands the runtime its actor classes "
-                         "(RunOptions(actors=aerodaas.actors.catalogue.BUILTIN_ACTORS), as start_mission() and "
-                         "`aerodaas run` do)")
-    return opts.actors
+    """``opts.actors`` as the record: a source (:class:`~aerodaas.protocol.actor_classes.ActorClassesSource`) is
+    loaded, which imports its actor modules. Raises ValueError when the entry point handed none, and what loading
+    the source raises."""
+    check_actor_classes(opts)
+    return opts.actors.load() if isinstance(opts.actors, ActorClassesSource) else opts.actors

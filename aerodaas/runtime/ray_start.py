@@ -224,7 +224,9 @@ def ensure_ray(address: str | None = None, dashboard: bool = False) -> bool:
 
 def shutdown_ray() -> None:
     """Shut down the Ray this driver started (a joined or attached cluster is only disconnected from when this
-    process ends)."""
+    process ends). Imports nothing when Ray never started (a run refused for its input ends faster)."""
+    if PROCESS.ray.early is None and "ray" not in sys.modules:
+        return  # Ray was never imported, so never started by this process
     import ray  # lazy: heavy ray
 
     if PROCESS.ray.early is not None:
