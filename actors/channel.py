@@ -34,22 +34,19 @@ sender); a frame's ``data`` on the wire is a :class:`SlotFrame`.
 from __future__ import annotations
 
 import hashlib
-import os
-import secrets
 import socket
-import sys
 from collections import deque
 import threading
 import time
 import weakref
 from dataclasses import dataclass
 from multiprocessing import connection as mpc
-from multiprocessing import resource_tracker
 from multiprocessing.shared_memory import SharedMemory
 from typing import Any, Callable
 
 import numpy as np
 
+from aerodaas.actors.channel_slots import Slot, attach
 from aerodaas.protocol.messages import Delivery, FrameMsg, Message, Port
 
 __all__ = ["channel_address", "SlotFrame", "ChannelSend", "ChannelDone", "SlotFree", "ChannelServer",
@@ -112,39 +109,12 @@ def _shutdown(conn: Any) -> None:
         pass
 
 
-def _own_prefix() -> str:
-    """The name prefix of the shared-memory segments this process creates (:func:`_create`): its pid, so a segment
-    of this very process is known by its name alone (no table of them kept)."""
-    return f"adc{os.getpid()}_"
-
-
-def _create(size: int) -> SharedMemory:
-    """A new segment of ``size`` bytes named :func:`_own_prefix` + 12 random hex digits (23 characters at most: the
-    31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names."""
-    while True:
-        try:
-            return SharedMemory(name=_own_prefix() + secrets.token_hex(6), create=True, size=size)
-        except FileExistsError:
-            continue
-
-
-def _freed(freed: deque, wake: threading.Event, name: str) -> None:
+def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int) -> None:
+    """A mapped frame was collected: its slot joins ``freed``; the late-frees thread is woken only off the connection's
+    own thread (``server_thread``), whose next answer carries it (a thread switch per frame saved)."""
     freed.append(name)
-    wake.set()
-
-
-def _attach(name: str) -> SharedMemory:
-    """Map the sender's segment ``name`` without making this process's resource tracker its owner (before Python
-    3.13 an attached segment is registered too, and would be unlinked when this process exits)."""
-    if sys.version_info >= (3, 13):
-        return SharedMemory(name=name, create=False, track=False)
-    shm = SharedMemory(name=name, create=False)
-    if not name.startswith(_own_prefix()):  # a segment of this very process (tests) stays registered: ours to unlink
-        try:
-            resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - the documented workaround
-        except Exception:  # noqa: BLE001 - not registered: nothing to undo
-            pass
-    return shm
+    if threading.get_ident() != server_thread:
+        wake.set()
 
 
 class _SenderSession:
@@ -250,6 +220,7 @@ class ChannelServer:
         self.connections += 1
         session = _SenderSession(conn)
         maps, freed, wake, send = session.maps, session.freed, session.wake, session.send
+        me = threading.get_ident()
         try:
             while True:
                 try:
@@ -268,7 +239,7 @@ class ChannelServer:
                 try:
                     if isinstance(d.msg, FrameMsg) and isinstance(d.msg.data, SlotFrame):
                         t0 = time.time()
-                        d.msg.data = self._map(d.msg.data, maps, freed, wake)
+                        d.msg.data = self._map(d.msg.data, maps, freed, wake, me)
                         d.msg.trace["get_ms"] = (time.time() - t0) * 1e3
                     elif isinstance(d.msg, FrameMsg) and isinstance(d.msg.data, np.ndarray):
                         d.msg.data.flags.writeable = False  # sent inline: shared by every reader here too
@@ -276,6 +247,8 @@ class ChannelServer:
                     if d.cascade:  # answered when the cascade it starts here is done; this thread reads on
                         self._deliver(d, lambda r, seq=seq: send(ChannelDone(seq, r, None, session.take_freed())))
                         d = None
+                        if freed:  # freed here but answered later: the late-frees thread tells them
+                            wake.set()
                         continue
                     else:
                         replies = self._deliver(d)
@@ -309,15 +282,16 @@ class ChannelServer:
         return True
 
     @staticmethod
-    def _map(sf: SlotFrame, maps: dict[str, SharedMemory], freed: deque, wake: threading.Event) -> np.ndarray:
+    def _map(sf: SlotFrame, maps: dict[str, SharedMemory], freed: deque, wake: threading.Event,
+             server_thread: int) -> np.ndarray:
         """The read-only array over slot ``sf`` (mapped once per slot); when the last reference to it goes, its
         name joins ``freed`` (never a send from a finalizer: it may run inside another send of this thread)."""
         shm = maps.get(sf.name)
         if shm is None:
-            shm = maps[sf.name] = _attach(sf.name)
+            shm = maps[sf.name] = attach(sf.name)
         arr = np.ndarray(sf.shape, np.dtype(sf.dtype), buffer=shm.buf)
         arr.flags.writeable = False
-        weakref.finalize(arr, _freed, freed, wake, sf.name)
+        weakref.finalize(arr, _freed, freed, wake, sf.name, server_thread)
         return arr
 
     def close(self) -> None:
@@ -331,21 +305,6 @@ class ChannelServer:
         if self._acceptor is not threading.current_thread():
             self._acceptor.join(2.0)  # it leaves accept() within its timeout; then the address is free at once
         self._sock.close()
-
-
-class _Slot:
-    __slots__ = ("shm", "size", "free")
-
-    def __init__(self, size: int) -> None:
-        self.shm = _create(size)
-        self.size, self.free = size, True
-
-    def drop(self) -> None:
-        try:
-            self.shm.close()
-            self.shm.unlink()
-        except (OSError, BufferError):
-            pass
 
 
 class ChannelOutlet:
@@ -379,7 +338,7 @@ class ChannelOutlet:
         self.on_shed: Callable[[Message], None] | None = None
         self.lost = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
         self._lock = threading.Lock()
-        self._slots: dict[str, _Slot] = {}
+        self._slots: dict[str, Slot] = {}
         #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None)
         self._in_flight: dict[int, tuple[str | None, Any]] = {}
         self._seq = 0
@@ -388,6 +347,7 @@ class ChannelOutlet:
         self.sent = self.dropped = self.failed = 0
         self.inline_frames = 0  # frames sent in the message itself: the receiver still held every slot
         self.reconnects = 0
+        self.late_frees = 0  # SlotFree messages: frames the receiver released after answering their delivery
         self.closed = False
         self.connect()
 
@@ -425,6 +385,7 @@ class ChannelOutlet:
                         tok.done()
             elif isinstance(item, SlotFree):
                 with self._lock:
+                    self.late_frees += 1
                     self._free(item.names)
         lost: list = []
         with self._lock:  # the peer died (or closed): what was in flight is lost; its mappings went with it
@@ -491,7 +452,7 @@ class ChannelOutlet:
             time.sleep(min(self.retry_s, max(0.0, deadline - time.monotonic())))
 
     # ------------------------------------------------------------------ sending
-    def _slot(self, nbytes: int) -> _Slot | None:
+    def _slot(self, nbytes: int) -> Slot | None:
         """Caller holds ``_lock``. A free slot of at least ``nbytes`` bytes (a new one while fewer than
         ``max_slots`` exist; a too-small free one is replaced), or None when the receiver holds them all."""
         for s in self._slots.values():
@@ -504,7 +465,7 @@ class ChannelOutlet:
                 return None
             del self._slots[small.shm.name]
             small.drop()
-        s = _Slot(nbytes)
+        s = Slot(nbytes)
         self._slots[s.shm.name] = s
         s.free = False
         return s
@@ -576,6 +537,7 @@ class ChannelOutlet:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
                     "dropped": self.dropped, "failed": self.failed, "slots": len(self._slots),
                     "inline_frames": self.inline_frames, "reconnects": self.reconnects, "held": self.held,
+                    "late_frees": self.late_frees,
                     "lost": self.lost}
 
     def close(self) -> None:

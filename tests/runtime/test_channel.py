@@ -336,3 +336,28 @@ def test_a_frame_for_a_channel_alone_leaves_in_the_publishing_thread(address, in
         hold.set()
         plane.close()
         srv.close()
+
+
+def test_a_frame_released_in_its_delivery_comes_back_in_the_answer_not_in_a_late_free(address):
+    """A receiver that lets go of each frame while handling it frees the slot on the connection's own thread: the
+    answer carries it (so one slot serves every frame) and no separate ``SlotFree`` is sent, which would wake a
+    second thread for every frame. A kept frame, released later in another thread, still comes back (late)."""
+    rx = Receiver()
+    srv = ChannelServer(address, KEY, rx)
+    replies: list = []
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
+    try:
+        for n, v in enumerate(range(1, 21), start=1):
+            assert out.send(_frame(v)) is not None
+            assert _wait(lambda: len(replies) == n)
+        st = out.stats()
+        assert st["slots"] == 1 and st["inline_frames"] == 0 and st["late_frees"] == 0, st
+        rx.keep = True
+        assert out.send(_frame(99)) is not None
+        assert _wait(lambda: len(replies) == 21)
+        rx.kept.clear()  # let go of here, in this test's thread: not the connection's
+        gc.collect()
+        assert _wait(lambda: out.stats()["late_frees"] == 1), out.stats()
+    finally:
+        out.close()
+        srv.close()

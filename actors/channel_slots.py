@@ -1,0 +1,60 @@
+"""The shared-memory slots of the same-node channel (:mod:`aerodaas.actors.channel`): the segments a sender
+creates for its frames (:class:`Slot`, named by :func:`own_prefix`) and the receiver's mapping of one of them
+(:func:`attach`), which never makes the receiver the segment's owner."""
+from __future__ import annotations
+
+import os
+import secrets
+import sys
+from multiprocessing import resource_tracker
+from multiprocessing.shared_memory import SharedMemory
+
+__all__ = ["Slot", "attach", "create_segment", "own_prefix"]
+
+
+def own_prefix() -> str:
+    """The name prefix of the shared-memory segments this process creates (:func:`create_segment`): its pid, so a
+    segment of this very process is known by its name alone (no table of them kept)."""
+    return f"adc{os.getpid()}_"
+
+
+def create_segment(size: int) -> SharedMemory:
+    """A new segment of ``size`` bytes named :func:`own_prefix` + 12 random hex digits (23 characters at most: the
+    31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names."""
+    while True:
+        try:
+            return SharedMemory(name=own_prefix() + secrets.token_hex(6), create=True, size=size)
+        except FileExistsError:
+            continue
+
+
+def attach(name: str) -> SharedMemory:
+    """Map the sender's segment ``name`` without making this process's resource tracker its owner (before Python
+    3.13 an attached segment is registered too, and would be unlinked when this process exits)."""
+    if sys.version_info >= (3, 13):
+        return SharedMemory(name=name, create=False, track=False)
+    shm = SharedMemory(name=name, create=False)
+    if not name.startswith(own_prefix()):  # a segment of this very process (tests) stays registered: ours to unlink
+        try:
+            resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - the documented workaround
+        except Exception:  # noqa: BLE001 - not registered: nothing to undo
+            pass
+    return shm
+
+
+class Slot:
+    """One segment of a sender's frames: ``size`` bytes; ``free`` while no receiver holds the frame written in it."""
+
+    __slots__ = ("shm", "size", "free")
+
+    def __init__(self, size: int) -> None:
+        self.shm = create_segment(size)
+        self.size, self.free = size, True
+
+    def drop(self) -> None:
+        """Unmap and unlink the segment (a receiver still mapping it keeps its mapping until it lets go)."""
+        try:
+            self.shm.close()
+            self.shm.unlink()
+        except (OSError, BufferError):
+            pass
