@@ -24,8 +24,6 @@ from typing import TYPE_CHECKING, Any, Callable
 from aerodaas.runtime.recorder_watch import RecorderWatch, recorder_specs
 from aerodaas.runtime.report import pct, waypoint_count
 
-from rich.live import Live
-
 if TYPE_CHECKING:
     from aerodaas.protocol.actor_classes import ActorClasses
 
@@ -121,6 +119,8 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
     reports: dict[str, dict] = {}
     live = None
     if progress and sys.stdout.isatty():
+        from rich.live import Live  # lazy: rich (0.1 s of every run's start), only for a terminal's progress display
+
         live = Live(refresh_per_second=4, transient=False)
         live.start()
     last_print = 0.0

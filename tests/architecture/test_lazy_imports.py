@@ -122,7 +122,8 @@ def test_an_unrecorded_runs_actor_sets_up_without_the_recorders_writer_or_live_v
 
 def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
     """``aerodaas run`` of an application its checks refuse (a waypoint below the safety floor) exits 2 naming the
-    value without having imported Ray, OpenCV or any actor module: the built-in actors reach the runtime as a source
+    value without having imported Ray, OpenCV, any actor module or rich (the progress display, imported only for a
+    terminal's progress: 0.1 s of every run's start): the built-in actors reach the runtime as a source
     (:data:`aerodaas.actors.builtin.BUILTIN`) it loads only once the input passed (0.4 CPU-s less per refusal, about
     a third, measured with ``/usr/bin/time``); a good application still gets them (every run test)."""
     from tests.conftest import REPO
@@ -134,7 +135,7 @@ def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
         import sys
         from aerodaas.cli import main
         rc = main(["run", {str(tmp_path / "low.py")!r}])
-        print(rc, " ".join(m for m in ("ray", "cv2", "aerodaas.actors.catalogue") if m in sys.modules))
+        print(rc, " ".join(m for m in ("ray", "cv2", "aerodaas.actors.catalogue", "rich") if m in sys.modules))
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]
