@@ -1,13 +1,22 @@
 #!/bin/bash
 # Issue 46 item 5: the runs behind docs/bench/detect46_*.json (docs/perception.md, "Measured on held-out aerial sets").
-# usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets OUTDIR  (aerial splits laid out by
+# usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets|scale OUTDIR  (aerial splits laid out by
 # examples/training/prepare_aerial_data.py in $S; the shared photos in $AERODAAS_DATA_DIR/imagery/brighton_beach)
 set -u
 S=${S:-/work/cache/aerial/splits}; O=$2; mkdir -p "$O"
 B="aerodaas bench detect --names car large_vehicle person --repeat 1 --sweep --thresholds 0.2 0.3 0.4 --overlap 0.2"
 J="--images $S/jekhor_test/images --annotations $S/jekhor_test/labels --classes car large_vehicle"
 C="--images $S/cats_lab_eval_only/images --annotations $S/cats_lab_eval_only/labels --classes car --limit 100"
-if [ "$1" = tiles ]; then  # whole frame vs tiles (+ the whole frame at the tile's input size), aerial_nano
+if [ "$1" = scale ]; then  # the input scale on far oblique views, and its check on HIT-UAV by view angle (2026-11-27)
+  for in in 736x1280 1088x1920 1440x2560; do
+    $B --images $S/jekhor_eval_only/images --annotations $S/jekhor_eval_only/labels --classes car --model aerial_nano \
+       --threads 1 --thresholds 0.1 0.15 0.2 0.25 0.3 --input-sizes $in --tiles 0 \
+       --out "$O/scale_jekhor_eval_only_$in.json" >/dev/null
+    $B --images $S/hit_uav_test/images --annotations $S/hit_uav_test/labels --classes car person --model aerial_nano \
+       --threads 1 --thresholds 0.2 0.3 --frame-meta hit-uav --input-sizes $in --tiles 0 \
+       --out "$O/scale_hit_uav_test_$in.json" >/dev/null
+  done
+elif [ "$1" = tiles ]; then  # whole frame vs tiles (+ the whole frame at the tile's input size), aerial_nano
   for set in jekhor_test cats_lab; do
     [ $set = jekhor_test ] && A=$J || A=$C
     $B $A --model aerial_nano --tiles 0 --out "$O/tiles_${set}_whole.json" >/dev/null
