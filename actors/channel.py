@@ -141,9 +141,11 @@ class _SenderSession:
 
     def take_freed(self) -> tuple[str, ...]:
         out = []
-        while self.freed:
-            out.append(self.freed.popleft())
-        return tuple(out)
+        while True:  # three threads may take (this connection's, the late-frees one, a cascade's finisher)
+            try:
+                out.append(self.freed.popleft())
+            except IndexError:
+                return tuple(out)
 
     def late_frees(self) -> None:
         """Frames that outlived their delivery (kept, queued): told when collected."""

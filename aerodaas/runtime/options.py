@@ -54,11 +54,14 @@ class RunOptions:
 
 def check_actor_classes(opts: RunOptions) -> None:
     """Raises ValueError (before Ray starts, without importing any actor module) when the entry point handed no
-    actor classes (``opts.actors`` None)."""
+    actor classes (``opts.actors`` None) or something that is neither a record nor a source of them."""
     if opts.actors is None:
         raise ValueError("RunOptions.actors: None; the code that starts a run hands the runtime its actor classes "
                          "(RunOptions(actors=aerodaas.actors.builtin.BUILTIN), as start_mission() and "
                          "`aerodaas run` do)")
+    if not isinstance(opts.actors, (ActorClasses, ActorClassesSource)):
+        raise ValueError(f"RunOptions.actors: {type(opts.actors).__name__}; expected an ActorClasses record or an "
+                         "ActorClassesSource (aerodaas.protocol.actor_classes)")
 
 
 def actor_classes(opts: RunOptions) -> ActorClasses:

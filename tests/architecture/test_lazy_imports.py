@@ -129,15 +129,22 @@ def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
     from tests.conftest import REPO
 
     apps = REPO / "apps"
+    src = (apps / "farm_survey.py").read_text()
+    assert "z=1.5" in src  # else the run below would not be refused: it would fly
     (tmp_path / "farm_survey.json").write_text((apps / "farm_survey.json").read_text())
-    (tmp_path / "low.py").write_text((apps / "farm_survey.py").read_text().replace("z=1.5", "z=-3"))
-    code = textwrap.dedent(f"""
-        import sys
-        from aerodaas.cli import main
-        rc = main(["run", {str(tmp_path / "low.py")!r}])
-        print(rc, " ".join(m for m in ("ray", "cv2", "aerodaas.actors.catalogue", "rich") if m in sys.modules))
-    """)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
-    assert "z=-3.0" in r.stderr and "min_altitude" in r.stderr, r.stderr[-2000:]
-    assert r.stdout.split() == ["2"], r.stdout
+    (tmp_path / "low.py").write_text(src.replace("z=1.5", "z=-3"))
+    (tmp_path / "good.py").write_text(src)
+    # refused while the app loads (its waypoint), and refused by the run's checks of the options (--record names
+    # one of its inputs), which come after the app was loaded and just before the actors would be
+    for args, says in ((["low.py"], ("z=-3.0", "min_altitude")), (["good.py", "--record", "farm_survey.json"],
+                                                                   ("farm_survey.json",))):
+        code = textwrap.dedent(f"""
+            import sys
+            from aerodaas.cli import main
+            rc = main(["run", *{args!r}])
+            print(rc, " ".join(m for m in ("ray", "cv2", "aerodaas.actors.catalogue", "rich") if m in sys.modules))
+        """)
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-2000:]
+        assert all(s in r.stderr for s in says), r.stderr[-2000:]
+        assert r.stdout.split() == ["2"], (args, r.stdout)

@@ -361,3 +361,20 @@ def test_a_frame_released_in_its_delivery_comes_back_in_the_answer_not_in_a_late
     finally:
         out.close()
         srv.close()
+
+
+def test_a_frame_freed_on_the_connections_thread_wakes_no_other_thread():
+    """The finalizer of a mapped frame (``_freed``) only queues the slot when it runs on the connection's own thread,
+    whose next answer carries it; run anywhere else it wakes the late-frees thread, which would otherwise tell the
+    sender only at its next 0.5 s poll."""
+    from collections import deque
+
+    from aerodaas.actors.channel import _freed
+
+    freed, wake = deque(), threading.Event()
+    _freed(freed, wake, "slot-a", threading.get_ident())
+    assert list(freed) == ["slot-a"] and not wake.is_set()
+    other = threading.Thread(target=_freed, args=(freed, wake, "slot-b", threading.get_ident()))
+    other.start()
+    other.join()
+    assert list(freed) == ["slot-a", "slot-b"] and wake.is_set()
