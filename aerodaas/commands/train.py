@@ -32,6 +32,11 @@ def add_parser(sub) -> None:
     d.add_argument("--batch", type=int, default=8)
     d.add_argument("--lr", type=float, default=1e-3)
     d.add_argument("--tile", type=int, default=416, help="training tile size in pixels (multiple of 32)")
+    d.add_argument("--object-px", type=float, nargs=2, default=(8.0, 96.0), metavar=("MIN", "MAX"),
+                   help="the size range (pixels) a training tile's median object is scaled into, log-uniformly: "
+                        "the altitudes your camera flies at (default 8 96)")
+    d.add_argument("--oblique", type=float, default=0.3, metavar="P",
+                   help="share of training tiles warped to an oblique view (camera pitched towards the horizon)")
     d.add_argument("--val-tiles", type=int, default=300)
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")

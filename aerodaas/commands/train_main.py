@@ -31,12 +31,14 @@ def _config(args: argparse.Namespace):
         return TrainConfig(data=args.data, val=args.val, val_fraction=args.val_fraction, names=names,
                            base_model=args.base_model, init_from=init, out=args.out, epochs=args.epochs,
                            tiles_per_epoch=args.tiles_per_epoch, batch=args.batch, lr=args.lr, tile=args.tile,
+                           object_px=tuple(args.object_px), p_oblique=args.oblique,
                            val_tiles=args.val_tiles, seed=args.seed, resume=args.resume, workers=args.workers,
                            use_gpu=args.gpu, quantize=args.quantize, max_steps=args.max_steps,
                            balance_sources=not args.no_balance)
     except ValidationError as e:
         err = e.errors()[0]
-        field = "--" + ".".join(str(x) for x in err["loc"]).replace("_", "-")
+        field = {"p_oblique": "--oblique"}.get(str(err["loc"][0]),
+                                               "--" + ".".join(str(x) for x in err["loc"]).replace("_", "-"))
         raise ValueError(f"{field}={err.get('input')!r}: {err['msg']}") from None
 
 

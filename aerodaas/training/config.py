@@ -19,7 +19,10 @@ class TrainConfig(BaseModel):
     class names; ``val``: held-out sets (default: ``val_fraction`` of ``data`` split by video/sequence);
     ``base_model``: the YOLOX ONNX to start from (default: the shipped YOLOX-Nano, COCO); ``init_from``: per class,
     the base model's class whose output row it starts from (default: the same name, or :data:`COCO_ALIASES`);
-    ``out``: the run folder (checkpoints ``last.pt`` / ``best.pt``, ``history.json``, ``model.onnx``).
+    ``out``: the run folder (checkpoints ``last.pt`` / ``best.pt``, ``history.json``, ``model.onnx``);
+    ``object_px``: the range (pixels, min < max) a tile's median object is scaled into, drawn log-uniformly (the
+    altitudes the camera should see, :class:`~aerodaas.training.augment.Augment`); ``p_oblique``: the share of tiles
+    warped as a camera pitched towards the horizon sees the ground.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -38,6 +41,8 @@ class TrainConfig(BaseModel):
     weight_decay: float = Field(5e-4, ge=0.0, le=1.0)
     ema_decay: float = Field(0.9995, ge=0.0, lt=1.0)
     tile: int = Field(416, ge=64, le=4096)
+    object_px: tuple[float, float] = (8.0, 96.0)
+    p_oblique: float = Field(0.3, ge=0.0, le=1.0)
     val_tiles: int = Field(300, ge=1, le=1_000_000)
     score_threshold: float = Field(0.3, gt=0.0, lt=1.0)
     balance_sources: bool = True
@@ -47,6 +52,13 @@ class TrainConfig(BaseModel):
     use_gpu: bool = False
     quantize: bool = False
     max_steps: int | None = Field(None, ge=1)
+
+    @field_validator("object_px")
+    @classmethod
+    def _object_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 2.0 <= v[0] < v[1] <= 4096.0:
+            raise ValueError(f"object_px={list(v)} must be two sizes in pixels, 2 <= min < max <= 4096")
+        return v
 
     @field_validator("tile")
     @classmethod

@@ -24,7 +24,7 @@ from aerodaas.training.loss import LossParts, YoloxLoss
 from aerodaas.training.onnx_module import OnnxYolox
 from aerodaas.training.validate import ClassMetrics, ValTiles, evaluate
 
-__all__ = ["Trainer", "EpochResult", "base_rows", "TrainingData", "load_training_data"]
+__all__ = ["Trainer", "EpochResult", "augment_of", "base_rows", "TrainingData", "load_training_data"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,11 @@ def base_rows(names: list[str], base_names: list[str], init_from: dict[str, str]
                              f"{base_names[:10]}...); pass --init-from {n}=<one of them>")
         rows.append(index[src])
     return rows
+
+
+def augment_of(cfg: TrainConfig) -> Augment:
+    """The training tiles' augmentation for run ``cfg``: its tile size, object size range and oblique share."""
+    return Augment(tile=cfg.tile, object_px=cfg.object_px, p_oblique=cfg.p_oblique)
 
 
 class _Ema:
@@ -101,7 +106,7 @@ class Trainer:
         self.loss = YoloxLoss(len(self.data.names))
         self.opt = torch.optim.AdamW(self.model.parameters(), lr=self.cfg.lr, weight_decay=self.cfg.weight_decay)
         self.ema = _Ema(self.model, self.cfg.ema_decay)
-        self.sampler = TileSampler(self.data.train, Augment(tile=self.cfg.tile), weights=self.data.weights,
+        self.sampler = TileSampler(self.data.train, augment_of(self.cfg), weights=self.data.weights,
                                    n_classes=len(self.data.names))
         self.rng = np.random.default_rng([self.cfg.seed, self.rank])
         self.val = ValTiles.cut(self.data.val, self.cfg.val_tiles, self.cfg.tile, self.cfg.seed + 7919)

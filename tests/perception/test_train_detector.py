@@ -60,13 +60,15 @@ def test_one_step_exports_a_model_that_matches_pytorch(tmp_path):
         skip_or_fail('the [train] extra (PyTorch) is not installed: pip install -e ".[train]"')
     data = _draw_set(tmp_path / "set")
     out = tmp_path / "run"
-    r = _train("--data", str(data), "--val", str(data), "--out", str(out), "--max-steps", "1", *SMOKE)
+    r = _train("--data", str(data), "--val", str(data), "--out", str(out), "--max-steps", "1", *SMOKE,
+               "--object-px", "6", "48", "--oblique", "0.6")
     assert r.returncode == 0, r.stderr[-3000:]
     report = json.loads((out / "report.json").read_text())
     assert report["names"] == NAMES
     assert len(report["history"]) == 1
     assert report["export"]["max_abs_diff"] <= 1e-3
     assert (out / "last.pt").is_file() and (out / "best.pt").is_file()
+    assert report["config"]["object_px"] == [6.0, 48.0] and report["config"]["p_oblique"] == 0.6  # the options kept
     # the exported file is what the analytics load: the framework's detector reads its classes from its metadata
     from aerodaas.perception.decoders import inspect_model
     from aerodaas.perception.detect import YoloxDetector
@@ -159,11 +161,38 @@ def test_coco_labels_with_a_missing_image_are_refused(tmp_path):
 
 
 @pytest.mark.parametrize("args,field", [(("--tile", "100"), "--tile=100"), (("--epochs", "0"), "--epochs=0"),
-                                        (("--init-from", "car"), "--init-from 'car'")])
+                                        (("--init-from", "car"), "--init-from 'car'"),
+                                        (("--object-px", "48", "6"), "--object-px=(48.0, 6.0)"),
+                                        (("--oblique", "1.5"), "--oblique=1.5")])
 def test_bad_options_are_named(tmp_path, args, field):
     r = _train("--data", str(tmp_path), "--out", str(tmp_path / "run"), *args)
     assert r.returncode == 2
     assert field in r.stderr, r.stderr
+
+
+def test_object_px_scales_each_tiles_median_object_into_its_range(tmp_path):
+    """``--object-px MIN MAX`` (the altitudes a user's camera flies at): every training tile is scaled so that its
+    frame's median object measures MIN..MAX px (square root of the box area). The drawn frames' median object is a
+    car (40 x 20 px among cars, 80 x 30 trucks and 8 x 8 persons), so every car fully inside a tile measures that."""
+    if importlib.util.find_spec("torch") is None:
+        skip_or_fail('the [train] extra (PyTorch) is not installed: pip install -e ".[train]"')
+    from aerodaas.training.augment import TileSampler
+    from aerodaas.training.config import TrainConfig
+    from aerodaas.training.dataset import load_set
+    from aerodaas.training.loop import augment_of
+
+    items, _ = load_set(_draw_set(tmp_path / "set"))
+    for lo, hi in ((6.0, 9.0), (60.0, 70.0)):
+        aug = augment_of(TrainConfig(data=[tmp_path], tile=256, object_px=(lo, hi), p_oblique=0.0))
+        assert (aug.tile, aug.object_px, aug.p_oblique) == (256, (lo, hi), 0.0)
+        sampler, rng, sizes = TileSampler(items, aug, n_classes=3), np.random.default_rng(0), []
+        for _ in range(40):
+            _, targets = sampler.sample_plain(rng)
+            for c, x0, y0, x1, y1 in targets:
+                if c == 0 and x0 > 0 and y0 > 0 and x1 < 256 and y1 < 256:
+                    sizes.append(float(np.sqrt((x1 - x0) * (y1 - y0))))
+        assert len(sizes) >= 10, sizes
+        assert lo * 0.97 <= min(sizes) and max(sizes) <= hi * 1.03, (lo, hi, sorted(sizes))
 
 
 def test_split_by_sequence_never_splits_a_video(tmp_path):
