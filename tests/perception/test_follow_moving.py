@@ -1,7 +1,10 @@
 """Moving-track selection (issue 46 item 3): with an aerial detector the parked cars are detected too, and the
 follow must adopt the track that moves (its ground speed over a window of geo-located fixes), not the most
-confident parked car. Synthetic tracks through the real camera model: boxes are projections of ground points."""
+confident parked car. Synthetic tracks through the real camera model (boxes are projections of ground points), and
+real UAV footage of moving and parked cars seen from a hovering camera (``tests/data/meva_uav``)."""
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
@@ -11,6 +14,7 @@ from aerodaas.analytics.motion import MovingTarget, TrackMotion
 from aerodaas.model.camera import project_points
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
 from aerodaas.perception.tracking import ByteTrackConfig
+from tests.conftest import REPO
 
 K = CameraIntrinsics.from_hfov(640, 480, 78.0)
 PARKED = [(-4.0, 3.0), (2.0, 4.0), (5.0, -3.0)]
@@ -133,3 +137,80 @@ def test_bad_rule_names_the_field(kw, field):
 def test_moving_without_a_tracker_is_refused():
     with pytest.raises(ValueError, match="FollowAnalytics.moving needs tracker"):
         FollowAnalytics(moving=MovingTarget())
+
+
+ROUNDABOUT = REPO / "tests" / "data" / "meva_uav" / "uav_roundabout.mp4"
+VEHICLES = ["car", "large_vehicle"]
+#: the clip's ground scale, from its cars (4.5 m long, about 35 px along their diagonal in the 640x480 frame):
+#: 0.13 m/px, as a nadir camera of 92 degrees sees the ground from 40 m
+HOVER = FramePose(position=(0.0, 0.0, 40.0), yaw=90.0, camera_pitch=90.0)
+K_ROUNDABOUT = CameraIntrinsics.from_hfov(640, 480, 92.0)
+
+
+def _iou(a, b) -> float:
+    w, h = min(a[2], b[2]) - max(a[0], b[0]), min(a[3], b[3]) - max(a[1], b[1])
+    if w <= 0 or h <= 0:
+        return 0.0
+    return w * h / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - w * h)
+
+
+def _roundabout() -> tuple[list, dict]:
+    """The real clip's frames as the app's 640x480 camera sees them ((480, 640, 3) uint8 BGR, the 400x300 cut
+    enlarged 1.6x) with the aerial detector's boxes (the vehicle-tracking app's settings), and the hand labels."""
+    import av
+    import cv2
+
+    from aerodaas.perception.detect import AerialDetector
+
+    det = AerialDetector(input_size=(480, 640), score_threshold=0.3, classes=VEHICLES,
+                         class_groups={"vehicle": VEHICLES})
+    with av.open(str(ROUNDABOUT)) as c:
+        frames = [cv2.resize(f.to_ndarray(format="bgr24"), (640, 480), interpolation=cv2.INTER_LINEAR)
+                  for f in c.decode(video=0)]
+    labels = json.loads(ROUNDABOUT.with_name("roundabout.json").read_text())["moving"]
+    return [det.detect(im) for im in frames], labels
+
+
+def _ids_on(history: dict[int, dict[int, tuple]], boxes: dict[str, list]) -> set[int]:
+    """The track ids whose box overlaps a labelled box (IoU >= 0.3) on a labelled frame."""
+    return {tid for tid, h in history.items() for k, b in boxes.items() if int(k) in h and _iou(h[int(k)], b) >= 0.3}
+
+
+def test_on_real_footage_the_follow_adopts_a_moving_car_and_keeps_its_track():
+    """Real UAV video (MEVA, CC BY 4.0; ``tests/data/meva_uav/README.md``): a camera hovering over a roundabout where a
+    white car waits, then drives round, and a dark car leaves, among parked cars. The app's detector, ByteTrack and
+    follow, fed frame by frame with the hovering pose (the clip's own camera, so the ground fixes are true): the
+    moving cars are detected where they were labelled by hand, the white car keeps one track id through the whole
+    clip, and the follow adopts one of the two moving cars — never a parked one — and steers towards it.
+
+    At this ground scale (0.13 m/px, three times the app's 16 m) a box that jitters by a few pixels reads as a
+    ground speed near 1 m/s over :class:`MovingTarget`'s default 1 s window: a parked car with a person beside it
+    was adopted that way. The 2 s window used here is what ``docs/perception.md`` advises for such footage."""
+    dets, labels = _roundabout()
+    for name, boxes in labels.items():  # the detector sees the moving cars on every labelled frame
+        for k, box in boxes.items():
+            assert max((_iou(d.box, box) for d in dets[int(k)]), default=0.0) >= 0.3, (name, k, dets[int(k)])
+    follow = FollowAnalytics(target_classes=VEHICLES, tracker=ByteTrackConfig(high_threshold=0.3,
+                             new_track_threshold=0.3), moving=MovingTarget(window_s=2.0))
+    history: dict[int, dict[int, tuple]] = {}
+    adopted, commands = set(), []
+    for k, frame_dets in enumerate(dets):
+        meta = FrameMeta(robot_id="d1", sensor_id="cam1", seq=k, capture_time=k / 29.97, wall_time=0.0,
+                         pose=HOVER, intrinsics=K_ROUNDABOUT)  # the montage's 29.97 frames/s
+        nav = follow.generate_navigation(frame_dets, meta)
+        st = follow.track_of("d1")
+        for tr in st.tracker.tracks:
+            if tr.state == "tracked" and tr.last_frame == st.tracker.frame:  # matched on this frame
+                history.setdefault(tr.track_id, {})[k] = tr.detection.box
+        if st.target_id is not None:
+            adopted.add(st.target_id)
+        if nav is not None:
+            commands.append((nav.waypoints[0], st.track.copy()))
+    white = _ids_on(history, labels["white_car"])
+    assert len(white) == 1, white  # one id on the white car at all its labelled frames ...
+    assert len(history[next(iter(white))]) >= 0.9 * len(dets)  # ... kept through the clip
+    movers = white | _ids_on(history, labels["dark_car"])
+    assert adopted and adopted <= movers, (adopted, movers)
+    assert len(commands) >= 10
+    for cmd, target in commands:  # every command steers the hovering drone towards the followed car
+        assert cmd.vx * target[0] + cmd.vy * target[1] > 0, (cmd, target)

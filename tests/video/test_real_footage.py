@@ -7,9 +7,9 @@ source the shipped aerial model never trained on. GStreamer's RTSP server serves
 
 Judged from the recording: the detector's boxes on the real cars against hand-labelled boxes of three frames
 (``cars.json``, IoU >= 0.3), and one ByteTrack id kept on each labelled car across most frames (the follow
-analytics' recorded tracks). The cars are parked: no real drone video with a moving car and an open licence was
-within reach (see the README), so following is not shown by this footage. The follow commands of the run are not
-asserted: the stream does not move with the simulated drone, so a parked car's geo-located fixes move with the
+analytics' recorded tracks). The cars are parked, so following is not shown by this footage (a moving car from the same
+source, with its own hovering pose, is in tests/perception/test_follow_moving.py). The follow commands of the run are
+not asserted: the stream does not move with the simulated drone, so a parked car's geo-located fixes move with the
 drone and the follow adopts it (``docs/perception.md``, "On real drone footage"); their count is printed."""
 from __future__ import annotations
 
