@@ -36,7 +36,8 @@ def add_parser(sub) -> None:
                    help="the size range (pixels) a training tile's median object is scaled into, log-uniformly: "
                         "the altitudes your camera flies at (default 8 96)")
     d.add_argument("--oblique", type=float, default=0.3, metavar="P",
-                   help="share of training tiles warped to an oblique view (camera pitched towards the horizon)")
+                   help="share of training tiles (0 to 1, default 0.3) warped to an oblique view (the camera "
+                        "pitched towards the horizon)")
     d.add_argument("--val-tiles", type=int, default=300)
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")

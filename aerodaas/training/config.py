@@ -42,7 +42,7 @@ class TrainConfig(BaseModel):
     ema_decay: float = Field(0.9995, ge=0.0, lt=1.0)
     tile: int = Field(416, ge=64, le=4096)
     object_px: tuple[float, float] = (8.0, 96.0)
-    p_oblique: float = Field(0.3, ge=0.0, le=1.0)
+    p_oblique: float = Field(0.3, ge=0.0, le=1.0, allow_inf_nan=False)
     val_tiles: int = Field(300, ge=1, le=1_000_000)
     score_threshold: float = Field(0.3, gt=0.0, lt=1.0)
     balance_sources: bool = True
@@ -57,7 +57,7 @@ class TrainConfig(BaseModel):
     @classmethod
     def _object_range(cls, v: tuple[float, float]) -> tuple[float, float]:
         if not 2.0 <= v[0] < v[1] <= 4096.0:
-            raise ValueError(f"object_px={list(v)} must be two sizes in pixels, 2 <= min < max <= 4096")
+            raise ValueError(f"two sizes in pixels are needed, 2 <= MIN < MAX <= 4096, got {list(v)}")
         return v
 
     @field_validator("tile")

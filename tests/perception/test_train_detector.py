@@ -163,6 +163,7 @@ def test_coco_labels_with_a_missing_image_are_refused(tmp_path):
 @pytest.mark.parametrize("args,field", [(("--tile", "100"), "--tile=100"), (("--epochs", "0"), "--epochs=0"),
                                         (("--init-from", "car"), "--init-from 'car'"),
                                         (("--object-px", "48", "6"), "--object-px=(48.0, 6.0)"),
+                                        (("--oblique", "nan"), "--oblique=nan"),
                                         (("--oblique", "1.5"), "--oblique=1.5")])
 def test_bad_options_are_named(tmp_path, args, field):
     r = _train("--data", str(tmp_path), "--out", str(tmp_path / "run"), *args)
@@ -193,6 +194,24 @@ def test_object_px_scales_each_tiles_median_object_into_its_range(tmp_path):
                     sizes.append(float(np.sqrt((x1 - x0) * (y1 - y0))))
         assert len(sizes) >= 10, sizes
         assert lo * 0.97 <= min(sizes) and max(sizes) <= hi * 1.03, (lo, hi, sorted(sizes))
+
+
+@needs_data
+def test_the_trainer_draws_its_tiles_with_the_runs_object_sizes_and_oblique_share(tmp_path):
+    """The options reach the tiles: the Trainer's sampler is built from the run's ``object_px`` and ``p_oblique``."""
+    if importlib.util.find_spec("torch") is None:
+        skip_or_fail('the [train] extra (PyTorch) is not installed: pip install -e ".[train]"')
+    from aerodaas.training.config import TrainConfig
+    from aerodaas.training.loop import Trainer
+    from aerodaas.training.session import build_model
+    from aerodaas.training.sets import load_training_data
+
+    data_dir = _draw_set(tmp_path / "set")
+    cfg = TrainConfig(data=[data_dir], val=[data_dir], tile=256, val_tiles=4, object_px=(6.0, 48.0), p_oblique=0.6,
+                      out=tmp_path / "run")
+    data = load_training_data(cfg)
+    aug = Trainer(cfg, data, build_model(cfg, data.names)).sampler.aug
+    assert (aug.tile, aug.object_px, aug.p_oblique) == (256, (6.0, 48.0), 0.6)
 
 
 def test_split_by_sequence_never_splits_a_video(tmp_path):
