@@ -48,9 +48,12 @@ def _options(argv: list[str] | None = None) -> argparse.Namespace:
         ap.error(f"--model {str(a.model)!r}: no such file")
     try:
         a.hw = tuple(int(v) for v in a.input.lower().split("x"))
+    except ValueError:
+        ap.error(f"--input {a.input!r} must be HxW, each a multiple of 32")
+    try:
         a.skips = [tuple(int(v) for v in s.split(":")) for s in a.skip]
     except ValueError:
-        ap.error(f"--input {a.input!r} must be HxW, --skip A:B (frame numbers): got {a.skip}")
+        ap.error(f"--skip {a.skip}: each must be A:B (frame numbers)")
     if len(a.hw) != 2 or min(a.hw) < 32 or any(v % 32 for v in a.hw):
         ap.error(f"--input {a.input!r} must be HxW, each a multiple of 32")
     if any(len(r) != 2 or not 0 <= r[0] < r[1] for r in a.skips):

@@ -13,6 +13,7 @@ from aerodaas import FollowAnalytics
 from aerodaas.analytics.motion import MovingTarget, TrackMotion
 from aerodaas.model.camera import project_points
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.perception.boxes import iou_matrix
 from aerodaas.perception.tracking import ByteTrackConfig
 from tests.conftest import REPO
 
@@ -149,10 +150,8 @@ K_ROUNDABOUT = CameraIntrinsics.from_hfov(640, 480, 92.0)
 
 
 def _iou(a, b) -> float:
-    w, h = min(a[2], b[2]) - max(a[0], b[0]), min(a[3], b[3]) - max(a[1], b[1])
-    if w <= 0 or h <= 0:
-        return 0.0
-    return w * h / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - w * h)
+    """IoU of two pixel boxes ``(x0, y0, x1, y1)``, by the framework's own :func:`iou_matrix`."""
+    return float(iou_matrix(np.asarray([a], float), np.asarray([b], float))[0, 0])
 
 
 def _roundabout() -> tuple[list, dict]:
