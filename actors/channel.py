@@ -28,8 +28,10 @@ channels: a delivery of a lock-step cascade (:attr:`~aerodaas.protocol.messages.
 the receiver's cascade for it is done (never blocking the connection's thread), and the sender's cascade stays
 open until that answer and its replies were handed on.
 
-Wire messages: :class:`ChannelSend` (sender -> receiver), :class:`ChannelDone` and :class:`SlotFree` (receiver ->
-sender); a frame's ``data`` on the wire is a :class:`SlotFrame`.
+Messages: :class:`ChannelSend` (sender -> receiver), :class:`ChannelDone` and :class:`SlotFree` (receiver ->
+sender), in :mod:`.channel_msgs`; a frame's ``data`` in a delivery is a :class:`SlotFrame`. On the socket a frame's
+delivery and its answer travel as tuples of built-in values (:mod:`.channel_wire`): the answer's detections
+flattened, and the frame's metadata not sent back (the sender puts back the object it sent).
 """
 from __future__ import annotations
 
@@ -39,14 +41,15 @@ from collections import deque
 import threading
 import time
 import weakref
-from dataclasses import dataclass
 from multiprocessing import connection as mpc
 from multiprocessing.shared_memory import SharedMemory
 from typing import Any, Callable
 
 import numpy as np
 
+from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.actors.channel_slots import Slot, attach
+from aerodaas.actors.channel_wire import decode, decode_done, encode_done, encode_free, encode_send
 from aerodaas.protocol.messages import Delivery, FrameMsg, Message, Port
 
 __all__ = ["channel_address", "SlotFrame", "ChannelSend", "ChannelDone", "SlotFree", "ChannelServer",
@@ -57,43 +60,6 @@ def channel_address(run_key: bytes, actor_id: str) -> str:
     """The abstract Unix socket address (Linux) of actor ``host_id``'s channel server in the run whose key is
     ``run_key``: ``\\0aerodaas-`` + 32 hex digits of SHA-256 (fits the 108-byte ``sun_path`` whatever the id)."""
     return "\0aerodaas-" + hashlib.sha256(run_key + actor_id.encode()).hexdigest()[:32]
-
-
-@dataclass(frozen=True)
-class SlotFrame:
-    """A frame's pixels in the sender's shared-memory slot ``name``: ``shape`` (H, W, 3) and ``dtype`` (uint8)."""
-
-    name: str
-    shape: tuple[int, ...]
-    dtype: str
-
-
-@dataclass(frozen=True)
-class ChannelSend:
-    """Sender -> receiver: delivery number ``seq`` (the sender's count) carrying ``delivery``."""
-
-    seq: int
-    delivery: Delivery
-
-
-@dataclass(frozen=True)
-class ChannelDone:
-    """Receiver -> sender: delivery ``seq`` was handed to its component; ``replies``: outputs bound for the
-    sender's components (computed in that hand-over); ``error``: why it failed, or None; ``freed``: slots whose
-    frames are no longer referenced (see :class:`SlotFree`)."""
-
-    seq: int
-    replies: list
-    error: str | None = None
-    freed: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class SlotFree:
-    """Receiver -> sender: the frames in slots ``names`` are no longer referenced; the slots may be written again
-    (sent on its own when a frame outlives its delivery, e.g. one an analytics kept or one queued for later)."""
-
-    names: tuple[str, ...]
 
 
 def _shutdown(conn: Any) -> None:
@@ -132,7 +98,8 @@ class _SenderSession:
         self.stop = threading.Event()
         threading.Thread(target=self.late_frees, name="aerodaas-channel-free", daemon=True).start()
 
-    def send(self, obj: Any) -> None:
+    def send(self, obj: tuple) -> None:
+        """Send one wire tuple (:mod:`.channel_wire`) to the sender."""
         with self.send_lock:
             try:
                 self.conn.send(obj)
@@ -154,7 +121,7 @@ class _SenderSession:
             self.wake.clear()
             names = self.take_freed()
             if names:
-                self.send(SlotFree(names))
+                self.send(encode_free(SlotFree(names)))
 
     def close(self) -> None:
         """Stop the late-frees thread, close the connection and unmap the slots no frame holds any more."""
@@ -226,7 +193,7 @@ class ChannelServer:
         try:
             while True:
                 try:
-                    item = conn.recv()
+                    item = decode(conn.recv())
                 except (EOFError, OSError):
                     return
                 if self._closed:  # read from the buffer after close(): the sender counts it failed, so hand nothing on
@@ -235,6 +202,7 @@ class ChannelServer:
                     continue
                 self.received += 1
                 seq, d = item.seq, item.delivery
+                meta = d.msg.meta  # a reply carrying this very object says so instead (channel_wire.SAME_META)
                 item = None
                 error = None
                 replies: list = []
@@ -247,7 +215,8 @@ class ChannelServer:
                         d.msg.data.flags.writeable = False  # sent inline: shared by every reader here too
                         d.msg.trace["get_ms"] = 0.0
                     if d.cascade:  # answered when the cascade it starts here is done; this thread reads on
-                        self._deliver(d, lambda r, seq=seq: send(ChannelDone(seq, r, None, session.take_freed())))
+                        self._deliver(d, lambda r, seq=seq, meta=meta: send(
+                            encode_done(ChannelDone(seq, r, None, session.take_freed()), meta)))
                         d = None
                         if freed:  # freed here but answered later: the late-frees thread tells them
                             wake.set()
@@ -259,7 +228,8 @@ class ChannelServer:
                     error = f"{type(e).__name__}: {e}"
                     self._on_error("channel", e)
                 d = None  # this thread's last reference to the frame: usually frees its slot right here
-                send(ChannelDone(seq, replies, error, session.take_freed()))
+                send(encode_done(ChannelDone(seq, replies, error, session.take_freed()), meta))
+                meta = None
         finally:
             with self._conns_lock:
                 self._conns.discard(conn)
@@ -341,8 +311,9 @@ class ChannelOutlet:
         self.lost = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
         self._lock = threading.Lock()
         self._slots: dict[str, Slot] = {}
-        #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None)
-        self._in_flight: dict[int, tuple[str | None, Any]] = {}
+        #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None, the FrameMeta
+        #: sent: the answer's replies refer to it instead of sending it back, channel_wire.SAME_META)
+        self._in_flight: dict[int, tuple[str | None, Any, Any]] = {}
         self._seq = 0
         self._conn: Any = None
         self._next_try = 0.0
@@ -364,17 +335,18 @@ class ChannelOutlet:
     def _read_loop(self, conn: Any) -> None:
         while True:
             try:
-                item = conn.recv()
+                item = decode(conn.recv())
             except Exception:  # noqa: BLE001 - EOF, reset, or closed under us by close(): the channel is over
                 break
             if isinstance(item, ChannelDone):
                 with self._lock:
-                    _, tok = self._in_flight.pop(item.seq, (None, None))
+                    _, tok, meta = self._in_flight.pop(item.seq, (None, None, None))
                     if item.error is not None:
                         self.failed += 1
                     self._free(item.freed)
                 try:
                     if item.replies:
+                        item = ChannelDone(item.seq, decode_done(item.replies, meta), item.error, item.freed)
                         if tok is not None:  # the replies join the cascade that waited for this answer
                             for d in item.replies:
                                 d.msg.tok = tok
@@ -407,7 +379,7 @@ class ChannelOutlet:
 
     def _take_in_flight(self) -> list:
         """Caller holds ``_lock``: forget every delivery in flight; returns the cascades they held open."""
-        toks = [tok for _, tok in self._in_flight.values() if tok is not None]
+        toks = [tok for _, tok, _ in self._in_flight.values() if tok is not None]
         self._in_flight.clear()
         return toks
 
@@ -510,8 +482,8 @@ class ChannelOutlet:
             self._seq += 1
             seq = self._seq
             try:
-                self._conn.send(ChannelSend(seq, Delivery(self.cid, self.port, wire, cascade=tok is not None,
-                                                          reply_to=self.reply_to)))
+                d = Delivery(self.cid, self.port, wire, cascade=tok is not None, reply_to=self.reply_to)
+                self._conn.send(encode_send(ChannelSend(seq, d)))
             except (OSError, ValueError):
                 if slot_name is not None:
                     self._slots[slot_name].free = True
@@ -519,7 +491,7 @@ class ChannelOutlet:
                 return None
             if tok is not None:
                 tok.add()  # the reader thread cannot see the answer before this lock is released
-            self._in_flight[seq] = (slot_name, tok)
+            self._in_flight[seq] = (slot_name, tok, wire.meta)
             self.sent += 1
             return seq
 

@@ -88,6 +88,42 @@ def test_frames_arrive_read_only_and_equal_and_replies_come_back(address):
         srv.close()
 
 
+def test_a_detection_reply_gets_back_the_very_frame_metadata_the_sender_sent(address):
+    """The receiver's detections carry the frame's FrameMeta (as every analytics output does): the sender's
+    component receives its own FrameMeta object back (the wire sent a marker, not the metadata), the detections and
+    the trace equal to what the receiver made, the frame's pixels as sent."""
+    from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
+    from aerodaas.protocol.messages import DetectionsMsg
+
+    seen: list = []
+
+    def detect(d: Delivery) -> list:
+        m = d.msg
+        seen.append((type(m.meta).__name__, m.meta.seq, int(m.data[0, 1, 2])))
+        box = Detection(class_id=2, class_name="car", score=0.9, box=(1.0, 2.0, 30.0, 20.0))
+        return [Delivery("d1/follow", Port("in"), DetectionsMsg(robot=m.robot, sim_t=m.sim_t, data=[box],
+                                                                  meta=m.meta, trace={**m.trace, "inference_ms": 4.0}))]
+
+    srv = ChannelServer(address, KEY, detect)
+    replies: list = []
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
+    try:
+        frame = _frame(5, (48, 64, 3))
+        frame.meta = FrameMeta(robot_id="d1", sensor_id="cam", seq=41, capture_time=0.5, wall_time=time.time(),
+                               pose=FramePose(position=(0.0, 0.0, 16.0)),
+                               intrinsics=CameraIntrinsics(width=64, height=48, fx=50.0, fy=50.0, cx=32.0, cy=24.0))
+        assert out.send(frame) is not None
+        assert _wait(lambda: len(replies) == 1)
+        (r,) = replies
+        assert seen == [("FrameMeta", 41, 6)]
+        assert r.cid == "d1/follow" and r.msg.meta is frame.meta
+        assert r.msg.data == [Detection(class_id=2, class_name="car", score=0.9, box=(1.0, 2.0, 30.0, 20.0))]
+        assert r.msg.trace["inference_ms"] == 4.0 and r.msg.trace["capture_wall"] == frame.trace["capture_wall"]
+    finally:
+        out.close()
+        srv.close()
+
+
 def test_in_flight_limit_drops_and_counts(address):
     rx = Receiver()
     rx.gate.clear()  # the receiver is busy with the first delivery

@@ -1,0 +1,166 @@
+"""The same-node channel's wire format (:mod:`aerodaas.actors.channel`): what a frame's delivery and its answer
+look like on the Unix socket.
+
+Why: a frame's delivery crosses the channel 30 times a second per consumer, and between two frames both actors
+sleep, so the interpreter meets each message with cold caches and every Python-level step counts. Pickled as
+objects (the :class:`ChannelSend` dataclass, its :class:`~aerodaas.protocol.messages.Delivery`, the ``FrameMsg`` and
+the pydantic ``FrameMeta`` with its pose and intrinsics, whose pickling runs in Python), the delivery took 0.52-0.54 ms
+from ``send`` to the receiving component and the answer 0.52-0.53 ms back, on this machine kind at 720p and 30 FPS;
+as below, 0.38-0.49 and 0.32-0.45 ms (``docs/benchmarks.md``, "The same-node channel's wire"). So the common
+messages travel as tuples of built-ins, which pickle encodes and decodes in C:
+
+* a frame's delivery (:func:`encode_send`): a ``FrameMsg`` whose pixels are in a slot, its ``FrameMeta`` flattened
+  (:func:`flatten`), the port and the trace as they are;
+* an answer (:func:`encode_done`): each reply's kind and fields, its detections flattened, and its ``meta`` as the
+  marker :data:`SAME_META` when it is the very ``FrameMeta`` object of the frame it answers (what
+  :func:`~aerodaas.protocol.messages.output_message` gives every output): the sender puts back the object it sent
+  (:func:`decode_done`), so the frame's metadata is not sent back at all.
+
+Anything else (a frame sent inline, a message of another kind, a user's own metadata or payload) travels as the
+pickled objects, tagged :data:`OBJECT`. Decoding gives objects equal to what was encoded (the pydantic models are
+rebuilt with ``model_construct``: their values were validated when they were made).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
+from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.protocol.messages import (DetectionsMsg, Delivery, FrameMsg, Message, NavigationMsg, OdometryMsg, Port,
+                                        StatMsg, ValueMsg)
+
+__all__ = ["SAME_META", "OBJECT", "flatten", "unflatten", "encode_send", "encode_done", "encode_free", "decode",
+           "decode_done"]
+
+#: tags of the wire tuples
+FRAME, DONE, FREE, OBJECT = "f", "d", "x", "o"
+#: a reply's ``meta`` is the very FrameMeta of the frame its delivery carried
+SAME_META = "="
+
+#: the pydantic models flattened on the wire (a field typed as one of them is flattened too)
+MODELS: tuple[type, ...] = (FrameMeta, FramePose, CameraIntrinsics, Detection)
+_INDEX = {cls: i for i, cls in enumerate(MODELS)}
+_FIELDS = [tuple(cls.model_fields) for cls in MODELS]
+#: per model, the positions of its fields typed as another model of :data:`MODELS`
+_NESTED = [frozenset(j for j, f in enumerate(cls.model_fields.values()) if f.annotation in _INDEX) for cls in MODELS]
+#: the message kinds a reply's tuple names by position
+KINDS: tuple[type[Message], ...] = (DetectionsMsg, NavigationMsg, ValueMsg, OdometryMsg, StatMsg, FrameMsg)
+_KIND = {cls: i for i, cls in enumerate(KINDS)}
+
+
+def flatten(m: Any) -> tuple:
+    """Model ``m`` (an instance of exactly one of :data:`MODELS`) as ``(model index, field values...)`` in its
+    fields' order, a field typed as another of :data:`MODELS` flattened likewise. Raises TypeError for anything
+    else (the caller then sends the object pickled)."""
+    i = _INDEX[type(m)] if type(m) in _INDEX else None
+    if i is None:
+        raise TypeError(f"not flattened on the wire: {type(m).__name__}")
+    vals = list(m.__dict__.values())
+    if len(vals) != len(_FIELDS[i]):
+        raise TypeError(f"{type(m).__name__} with extra attributes")
+    for j in _NESTED[i]:
+        if vals[j] is not None:
+            vals[j] = flatten(vals[j])
+    return (i, *vals)
+
+
+def unflatten(t: tuple) -> Any:
+    """The model :func:`flatten` gave ``t`` for (equal to it)."""
+    i = t[0]
+    kw = dict(zip(_FIELDS[i], t[1:]))
+    for j in _NESTED[i]:
+        v = t[1 + j]
+        if v is not None:
+            kw[_FIELDS[i][j]] = unflatten(v)
+    return MODELS[i].model_construct(**kw)
+
+
+def _port(p: Port) -> tuple:
+    return (p.name, p.priority, p.replace)
+
+
+def encode_send(send: ChannelSend) -> tuple:
+    """``send`` as the tuple that travels: a frame in a slot with FrameMeta (or no) metadata flattened, anything
+    else as ``(OBJECT, send)``."""
+    d, m = send.delivery, send.delivery.msg
+    if (type(m) is FrameMsg and type(m.data) is SlotFrame and m.ref is None and m.jpeg is None
+            and (m.meta is None or type(m.meta) is FrameMeta)):
+        try:
+            meta = None if m.meta is None else flatten(m.meta)
+        except TypeError:
+            return (OBJECT, send)
+        s = m.data
+        return (FRAME, send.seq, d.cid, _port(d.port), d.cascade, d.reply_to, m.robot, m.sim_t,
+                (s.name, s.shape, s.dtype), m.trace, meta)
+    return (OBJECT, send)
+
+
+def _reply(d: Delivery, meta: Any) -> tuple:
+    """One reply item: ``(cid, port, kind index, robot, sim_t, data, meta, trace)``, its detections flattened
+    (``data`` then ``("D", [...])``, else ``("o", data)``) and its meta :data:`SAME_META` when it is ``meta``."""
+    m = d.msg
+    k = _KIND.get(type(m))
+    if k is None or m.tok is not None or (type(m) is FrameMsg and (m.ref is not None or m.jpeg is not None)):
+        raise TypeError(type(m).__name__)
+    data: tuple = ("o", m.data)
+    if type(m) is DetectionsMsg and type(m.data) is list and all(type(x) is Detection for x in m.data):
+        data = ("D", [flatten(x) for x in m.data])
+    if m.meta is None:
+        mt: Any = None
+    elif meta is not None and m.meta is meta:
+        mt = SAME_META
+    else:
+        mt = ("o", m.meta)
+    return (d.cid, _port(d.port), k, m.robot, m.sim_t, data, mt, m.trace)
+
+
+def encode_done(done: ChannelDone, meta: Any = None) -> tuple:
+    """``done`` as the tuple that travels; ``meta``: the FrameMeta object of the frame the answered delivery
+    carried (a reply whose ``meta`` is that object travels as :data:`SAME_META`). Anything that is not a plain
+    message travels as ``(OBJECT, done)``."""
+    try:
+        replies = [_reply(d, meta) for d in done.replies]
+    except TypeError:
+        return (OBJECT, done)
+    return (DONE, done.seq, replies, done.error, done.freed)
+
+
+def encode_free(free: SlotFree) -> tuple:
+    """A :class:`SlotFree` as the tuple that travels."""
+    return (FREE, free.names)
+
+
+def decode(t: tuple) -> Any:
+    """What :func:`encode_send`, :func:`encode_done` or :func:`encode_free` encoded, as objects: a
+    :class:`ChannelSend`, a :class:`ChannelDone` (a reply's :data:`SAME_META` left in place for
+    :func:`decode_done`) or a :class:`SlotFree`. Raises ValueError for a tuple of no known tag."""
+    tag = t[0]
+    if tag == FRAME:
+        _, seq, cid, port, cascade, reply_to, robot, sim_t, (name, shape, dtype), trace, meta = t
+        msg = FrameMsg(robot, sim_t, SlotFrame(name, tuple(shape), dtype), None if meta is None else unflatten(meta),
+                       trace)
+        return ChannelSend(seq, Delivery(cid, Port(*port), msg, cascade, reply_to))
+    if tag == DONE:
+        return ChannelDone(t[1], t[2], t[3], tuple(t[4]))
+    if tag == FREE:
+        return SlotFree(tuple(t[1]))
+    if tag == OBJECT:
+        return t[1]
+    raise ValueError(f"channel: a message of no known tag {tag!r}")
+
+
+def decode_done(replies: list, meta: Any) -> list[Delivery]:
+    """The reply items of a :data:`DONE` tuple (already :class:`Delivery` objects when it travelled as
+    :data:`OBJECT`) as Delivery objects; ``meta``: the FrameMeta the answered delivery carried (put back where a
+    reply says :data:`SAME_META`)."""
+    out = []
+    for r in replies:
+        if isinstance(r, Delivery):
+            out.append(r)
+            continue
+        cid, port, k, robot, sim_t, (dk, data), mt, trace = r
+        if dk == "D":
+            data = [unflatten(x) for x in data]
+        m = meta if mt == SAME_META else (None if mt is None else mt[1])
+        out.append(Delivery(cid, Port(*port), KINDS[k](robot, sim_t, data, m, trace)))
+    return out
