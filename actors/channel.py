@@ -14,6 +14,9 @@ and restarts:
   socket** (:mod:`multiprocessing.connection`: HMAC challenge with the run's key both ways), and the outputs bound
   for the sender (detections, navigation) come back on the same socket as soon as the receiver is done — no Ray
   task submission per frame in either direction;
+* a camera whose source can render into a buffer (:attr:`aerodaas.plugins.frames.FrameSource.renders_into`, the
+  simulator's) makes the frame straight in a slot the outlet lends (:meth:`ChannelOutlet.lend`): that frame is sent
+  from there, with no copy at all;
 * a slot is reused only once the receiver released the frame: the receiver sends :class:`SlotFree` when its last
   reference to the array is gone (``weakref.finalize``), so an analytics that keeps a frame keeps its slot, exactly
   as an ObjectRef would keep its object. A sender whose slots are all held (a receiver that keeps frames, or an
@@ -311,6 +314,10 @@ class ChannelOutlet:
         self.lost = False  # a lock-step send waited hold_s in vain: later ones fail at once until reconnected
         self._lock = threading.Lock()
         self._slots: dict[str, Slot] = {}
+        #: lent frames (:meth:`lend`) by the address of their first pixel -> their slot's name
+        self._lent: dict[int, str] = {}
+        #: slots whose lent frame was collected here (filled by finalizers, taken under the lock)
+        self._unlent: deque[str] = deque()
         #: seq -> (slot name or None: no frame, the lock-step cascade waiting for the answer or None, the FrameMeta
         #: sent: the answer's replies refer to it instead of sending it back, channel_wire.SAME_META)
         self._in_flight: dict[int, tuple[str | None, Any, Any]] = {}
@@ -319,6 +326,7 @@ class ChannelOutlet:
         self._next_try = 0.0
         self.sent = self.dropped = self.failed = 0
         self.inline_frames = 0  # frames sent in the message itself: the receiver still held every slot
+        self.in_place = 0  # frames made in a lent slot and sent from there, not copied
         self.reconnects = 0
         self.late_frees = 0  # SlotFree messages: frames the receiver released after answering their delivery
         self.closed = False
@@ -428,13 +436,21 @@ class ChannelOutlet:
     # ------------------------------------------------------------------ sending
     def _slot(self, nbytes: int) -> Slot | None:
         """Caller holds ``_lock``. A free slot of at least ``nbytes`` bytes (a new one while fewer than
-        ``max_slots`` exist; a too-small free one is replaced), or None when the receiver holds them all."""
+        ``max_slots`` exist; a too-small free one is replaced), or None when the receiver (or lent frames here)
+        hold them all."""
+        while self._unlent:  # lent frames collected since: their slots are this outlet's to write again
+            name = self._unlent.popleft()
+            s = self._slots.get(name)
+            if s is not None:
+                s.lent = False
+            for addr in [a for a, n in self._lent.items() if n == name]:
+                del self._lent[addr]
         for s in self._slots.values():
-            if s.free and s.size >= nbytes:
+            if s.free and not s.lent and s.size >= nbytes:
                 s.free = False
                 return s
         if len(self._slots) >= self.max_slots:
-            small = next((s for s in self._slots.values() if s.free), None)
+            small = next((s for s in self._slots.values() if s.free and not s.lent), None)
             if small is None:
                 return None
             del self._slots[small.shm.name]
@@ -442,6 +458,34 @@ class ChannelOutlet:
         s = Slot(nbytes)
         self._slots[s.shm.name] = s
         s.free = False
+        return s
+
+    def lend(self, shape: tuple[int, ...], dtype: Any = np.uint8) -> np.ndarray | None:
+        """A writable array of ``shape`` and ``dtype`` over one of this outlet's slots, for a frame to be made in
+        (a camera's render, :attr:`aerodaas.plugins.frames.FrameSource.renders_into`): when that array is then
+        sent, it is not copied (counted in ``in_place``). The slot is written again only once this process no
+        longer references the array (a finalizer tells) and the receiver let go of the frame. None when the channel
+        is down or every slot is held."""
+        nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        with self._lock:
+            if self.closed or self._conn is None:
+                return None
+            slot = self._slot(nbytes)
+            if slot is None:
+                return None
+            slot.free, slot.lent = True, True  # no receiver holds it yet; a frame here does
+            arr = np.ndarray(shape, dtype, buffer=slot.shm.buf)
+            self._lent[arr.ctypes.data] = slot.shm.name
+        weakref.finalize(arr, self._unlent.append, slot.shm.name)
+        return arr
+
+    def _lent_slot(self, frame: np.ndarray) -> Slot | None:
+        """Caller holds ``_lock``. The slot ``frame`` was made in (:meth:`lend`), when it is one of this outlet's
+        lent frames as lent (C-contiguous, from its first pixel), else None."""
+        name = self._lent.get(frame.ctypes.data)
+        s = self._slots.get(name) if name is not None else None
+        if s is None or not s.lent or not s.free or frame.nbytes > s.size or not frame.flags.c_contiguous:
+            return None
         return s
 
     def send(self, msg: Message) -> int | None:
@@ -465,16 +509,24 @@ class ChannelOutlet:
             t0 = time.time()
             if isinstance(msg, FrameMsg):
                 frame = msg.data
-                slot = self._slot(frame.nbytes)
+                slot = self._lent_slot(frame)
+                if slot is not None:  # made in this very slot (lend): nothing to copy
+                    slot.free = False
+                    self.in_place += 1
+                    copied = "channel_in_place"
+                else:
+                    slot = self._slot(frame.nbytes)
+                    copied = "channel_copy"
                 if slot is None:  # every slot held by the receiver: the pixels travel in the message
                     self.inline_frames += 1
                     wire = msg.to_wire()
                 else:
-                    np.copyto(np.ndarray(frame.shape, frame.dtype, buffer=slot.shm.buf), frame)
+                    if copied == "channel_copy":
+                        np.copyto(np.ndarray(frame.shape, frame.dtype, buffer=slot.shm.buf), frame)
                     slot_name = slot.shm.name
                     wire = msg.to_wire(SlotFrame(slot_name, tuple(frame.shape), frame.dtype.str))
                 if self.copies is not None:
-                    self.copies.count("channel_copy")
+                    self.copies.count(copied)
                 wire.trace.update(put_ms=(time.time() - t0) * 1e3)
             else:
                 wire = msg.to_wire()
@@ -510,7 +562,8 @@ class ChannelOutlet:
         with self._lock:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
                     "dropped": self.dropped, "failed": self.failed, "slots": len(self._slots),
-                    "inline_frames": self.inline_frames, "reconnects": self.reconnects, "held": self.held,
+                    "inline_frames": self.inline_frames, "in_place": self.in_place, "reconnects": self.reconnects,
+                    "held": self.held,
                     "late_frees": self.late_frees,
                     "lost": self.lost}
 

@@ -43,18 +43,24 @@ def attach(name: str) -> SharedMemory:
 
 
 class Slot:
-    """One segment of a sender's frames: ``size`` bytes; ``free`` while no receiver holds the frame written in it."""
+    """One segment of a sender's frames: ``size`` bytes; ``free`` while no receiver holds the frame written in it;
+    ``lent`` while a frame made in it in this process (:meth:`~.channel.ChannelOutlet.lend`) is still referenced
+    here. It may be written again only when free and not lent."""
 
-    __slots__ = ("shm", "size", "free")
+    __slots__ = ("shm", "size", "free", "lent")
 
     def __init__(self, size: int) -> None:
         self.shm = create_segment(size)
-        self.size, self.free = size, True
+        self.size, self.free, self.lent = size, True, False
 
     def drop(self) -> None:
-        """Unmap and unlink the segment (a receiver still mapping it keeps its mapping until it lets go)."""
+        """Unlink the segment and unmap it (a receiver still mapping it, or a lent frame here still referencing it,
+        keeps its mapping until it lets go)."""
+        try:
+            self.shm.unlink()
+        except OSError:
+            pass
         try:
             self.shm.close()
-            self.shm.unlink()
-        except (OSError, BufferError):
+        except (OSError, BufferError):  # a lent frame still references it: unmapped when that is collected
             pass

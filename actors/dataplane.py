@@ -396,6 +396,22 @@ class DataPlane:
             else:
                 self.later(d.msg.tok, comp.offer, d.port, d.msg)
 
+    def frame_buffer(self, src: str, shape: tuple[int, ...]) -> np.ndarray | None:
+        """A writable ``shape`` uint8 array to make component ``src``'s next frame in: a slot lent by the same-node
+        channel of its first subscriber in another actor on this machine (:meth:`.channel.ChannelOutlet.lend`;
+        that outlet then sends the frame without copying it; every other reader reads it as any frame). None when
+        no subscriber is reached by a channel or its slots are all held: the frame is then made as usual."""
+        for cid, port, buf, _only in self.routes.get(src, ()):
+            if cid in self.components:
+                continue
+            try:
+                o = self._outlet(src, cid, port, buf)
+            except KeyError:
+                continue
+            if isinstance(o, ChannelOutlet):
+                return o.lend(shape)
+        return None
+
     def _outlet(self, src: str, cid: str, port: Port, buffer: int) -> Any:
         """The outlet of edge ``src`` -> ``cid`` (another actor's component), made on first use: a same-node
         channel when the peer serves one on this machine (:mod:`.channel`), else Ray calls

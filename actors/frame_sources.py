@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from typing import Any, Callable, Mapping
 
+import numpy as np
+
 from aerodaas.model.types import FramePose
 from aerodaas.plugins import registry
 from aerodaas.plugins.builtin_sensors import DISCOVERY_PROPERTIES, STREAM_PROPERTIES, check_replay_recording
@@ -50,9 +52,10 @@ class RenderedFrames(FrameSource):
     name = "sim"
     needs_world = True
     environment_ok = True
+    renders_into = True
 
-    def frame_at(self, t: float, pose: FramePose) -> CapturedFrame | None:
-        frame, truth = self.ctx.world.render(pose, self.ctx.intrinsics, t)
+    def frame_at(self, t: float, pose: FramePose, out: np.ndarray | None = None) -> CapturedFrame | None:
+        frame, truth = self.ctx.world.render(pose, self.ctx.intrinsics, t, out=out)
         return CapturedFrame(frame, t, tuple(truth))
 
 

@@ -21,13 +21,15 @@ class FrameCopies:
       ObjectRef;
     * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`.channel`; the
       receiver reads the slot in place);
+    * ``channel_in_place``: frames a camera made straight in such a slot (:meth:`.channel.ChannelOutlet.lend`)
+      and sent from there, with no copy;
     * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
 
     Handing a frame to a component of the same actor copies nothing and is not counted. Thread-safe; a count costs
     one uncontended lock (well under a microsecond)."""
 
     FIELDS = ("materialised", "tier_jpeg_encoded", "tier_jpeg_decoded", "object_store_put", "object_store_get",
-              "channel_copy", "recorder_jpeg_encoded")
+              "channel_copy", "channel_in_place", "recorder_jpeg_encoded")
 
     def __init__(self) -> None:
         self._lock = threading.Lock()

@@ -105,6 +105,11 @@ class FrameSource(ABC):
     needs_world: ClassVar[bool] = False
     #: whether an environment camera (``env_sensors[]``, no vehicle) may use it
     environment_ok: ClassVar[bool] = False
+    #: whether its :meth:`frame_at` can make the image in a buffer the camera lends (``frame_at(t, pose, out=...)``,
+    #: ``out`` a writable ``(H, W, 3)`` uint8 array it must fill and return as the image): the camera lends one of a
+    #: same-node channel's shared-memory slots when the frame's consumer is in another actor on this machine, and
+    #: the frame then crosses without a copy. False: ``frame_at(t, pose)`` only, and the frame is copied into a slot
+    renders_into: ClassVar[bool] = False
     #: whether its frames arrive on the host's wall clock (the run then needs speedup 1 and no lock-step)
     wall_clock: ClassVar[bool] = False
 
@@ -137,7 +142,9 @@ class FrameSource(ABC):
     def frame_at(self, t: float, pose: FramePose) -> CapturedFrame | None:
         """The frame due at run time ``t`` (s, vehicle clock), the camera at ``pose`` (ENU m, degrees); None when
         there is no new one. Called on the actor's pool, one call at a time per camera. An exception fails the
-        capture (reported by the actor's data plane)."""
+        capture (reported by the actor's data plane). A source with :attr:`renders_into` is called as
+        ``frame_at(t, pose, out=buf)`` when the camera lends a buffer (see there) and returns ``buf`` filled as the
+        image."""
 
     def close(self) -> None:
         """Release what the source holds (files, devices). Nothing here."""

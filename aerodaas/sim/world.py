@@ -144,10 +144,12 @@ class World:
         return np.array([[p[0], p[1], 0.0] for p in pts])
 
     # ------------------------------------------------------------------ rendering
-    def render(self, pose: FramePose, k: CameraIntrinsics, t: float) -> tuple[np.ndarray, list[dict]]:
-        """Render what the camera sees at sim time ``t``.
+    def render(self, pose: FramePose, k: CameraIntrinsics, t: float,
+               out: np.ndarray | None = None) -> tuple[np.ndarray, list[dict]]:
+        """Render what the camera sees at sim time ``t``, into ``out`` when given (a writable (k.height, k.width, 3)
+        uint8 array, e.g. a same-node channel's shared-memory slot: the frame is then made where it travels from).
 
-        Returns ((k.height, k.width, 3) uint8 BGR frame, ground truth per target with ``in_view`` (any corner
+        Returns ((k.height, k.width, 3) uint8 BGR frame (``out`` itself when given), ground truth per target with ``in_view`` (any corner
         visible), ``fully_in_view`` (all four corners inside the image) and ``bbox_px`` (x0, y0, x1, y1))."""
         if pose.position[2] < CAMERA_MIN_HEIGHT_M:  # on the ground: the lens sits above it, never in the plane
             pose = pose.model_copy(update={"position": (pose.position[0], pose.position[1], CAMERA_MIN_HEIGHT_M)})
@@ -162,7 +164,7 @@ class World:
         tex, mpp, (hx, hy) = self.levels[lvl]
         M = np.array([[mpp, 0, -hx * mpp], [0, -mpp, hy * mpp], [0, 0, 1.0]])
         H = Hg @ M
-        frame = cv2.warpPerspective(tex, H, (k.width, k.height), flags=cv2.INTER_LINEAR,
+        frame = cv2.warpPerspective(tex, H, (k.width, k.height), dst=out, flags=cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REFLECT_101)
         if pose.camera_pitch < 90.0:
             self._paint_sky(frame, pose, k)

@@ -166,6 +166,58 @@ def test_a_kept_frame_keeps_its_slot_until_it_is_collected(address):
         srv.close()
 
 
+
+def test_a_frame_made_in_a_lent_slot_is_sent_without_a_copy_and_its_slot_waits_for_both_sides(address):
+    """A camera that renders into a slot the outlet lends: the frame crosses with no copy (``in_place``, the
+    ``channel_in_place`` counter, not ``channel_copy``), the receiver reads exactly its pixels, and the slot is
+    written again only once the receiver let go of the frame *and* nothing here references it any more; a lent
+    buffer never sent comes back when dropped. Frames not made in a lent slot are copied as before."""
+    from aerodaas.actors.frames import FrameCopies
+
+    rx = Receiver()
+    srv = ChannelServer(address, KEY, rx)
+    copies = FrameCopies()
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None,
+                        copies=copies, max_slots=3)
+
+    def made(value: int) -> FrameMsg:
+        buf = out.lend((48, 64, 3))
+        assert buf is not None and buf.flags.writeable
+        buf[:] = value
+        buf[0, 1, 2] = value + 1
+        buf.flags.writeable = False
+        return FrameMsg(robot="d1", sim_t=0.1 * value, data=buf, trace={"capture_wall": time.time()})
+
+    try:
+        first = made(9)
+        slot_of_first = out._lent[first.data.ctypes.data]
+        assert out.send(first) is not None
+        assert _wait(lambda: len(rx.got) == 1 and not out._in_flight)
+        assert rx.got[0][3][2:] == (9, int(_frame(9, (48, 64, 3)).data.sum() % 997))  # the pixels made in the slot
+        assert out.in_place == 1 and copies.snapshot()["channel_copy"] == 0
+        assert copies.snapshot()["channel_in_place"] == 1
+        # the receiver let go, but the frame is still referenced here: its slot is not lent or written again
+        second = made(20)
+        assert out._lent[second.data.ctypes.data] != slot_of_first
+        assert out.send(second) is not None and _wait(lambda: len(rx.got) == 2 and not out._in_flight)
+        assert out.send(_frame(30, (48, 64, 3))) is not None  # a frame made elsewhere: copied into a free slot
+        assert _wait(lambda: len(rx.got) == 3 and not out._in_flight)
+        assert out.stats()["slots"] == 3 and copies.snapshot()["channel_copy"] == 1
+        assert int(first.data[0, 0, 0]) == 9  # not overwritten by the frames after it
+        slot_of_second = out._lent[second.data.ctypes.data]
+        unsent = out.lend((48, 64, 3))  # the copy's slot: the receiver let go of it and nothing here holds it
+        assert unsent is not None and out._lent[unsent.ctypes.data] not in (slot_of_first, slot_of_second)
+        assert out.lend((48, 64, 3)) is None  # first, second and the unsent buffer hold all three slots here...
+        first = second = unsent = None
+        gc.collect()
+        again = made(40)  # ...until they are collected: a slot of theirs is lent again, no new one is made
+        assert out._lent[again.data.ctypes.data] in out._slots and out.stats()["slots"] == 3
+        assert out.send(again) is not None and _wait(lambda: len(rx.got) == 4)
+        assert rx.got[3][3][2] == 40 and out.in_place == 3 and out.inline_frames == 0
+    finally:
+        out.close()
+        srv.close()
+
 def test_a_restarted_receiver_is_reconnected_and_in_flight_items_count_as_failed(address):
     rx = Receiver()
     rx.gate.clear()

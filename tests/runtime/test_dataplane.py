@@ -253,15 +253,17 @@ def test_frame_copies_on_the_edge_hot_path_and_the_recorder(tmp_path):
     assert rt.stats()["_host"]["frame_copies"] == copies
     assert counts["/d00/camera/cam"] == 3
     assert copies == {"materialised": 3, "recorder_jpeg_encoded": 3, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": 0,
-                      "object_store_put": 0, "object_store_get": 0, "channel_copy": 0}
+                      "object_store_put": 0, "object_store_get": 0, "channel_copy": 0,
+                      "channel_in_place": 0}
 
 
 @pytest.mark.parametrize("where", ["edge", "cloud"])
 def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_session, run_options, where):
     """A real lock-step run with a frame analytics in its own actor: on the same tier every frame the drone actor
-    materialises is copied once into a same-node channel slot (lock-step uses the same transport as a free-running
-    run) and read in place by the analytics actor; across tiers (cloud) it is JPEG-encoded once by the drone actor
-    and decoded once by the analytics actor — nothing else."""
+    materialises is copied once into a same-node channel slot or made in one (lock-step uses the same transport as a
+    free-running run) and read in place by the analytics actor; across tiers (cloud) it is JPEG-encoded once by the
+    drone actor and decoded once by the analytics actor — nothing else. (The probe keeps every frame, so after the
+    outlet's few slots were lent the frames cannot be made in one: both counters are used.)"""
     env = _env(1, lockstep=True)
     probe = FrameProbe()
     probe.deploy(env.get_compute_resource_by_id(where))
@@ -279,19 +281,21 @@ def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_se
     assert [o["sent"] for o in cam["outlets"]] == [n] and cam["outlets"][0]["dropped"] == 0
     cross = where != "edge"
     assert cam["outlets"][0]["transport"] == ("ray" if cross else "channel")
+    crossed = drone.pop("channel_copy") + drone.pop("channel_in_place")
+    assert crossed == (0 if cross else n)
     assert drone == {"materialised": n, "tier_jpeg_encoded": n if cross else 0, "tier_jpeg_decoded": 0,
-                     "object_store_put": 0, "object_store_get": 0, "recorder_jpeg_encoded": 0,
-                     "channel_copy": 0 if cross else n}
+                     "object_store_put": 0, "object_store_get": 0, "recorder_jpeg_encoded": 0}
     assert ana == {"materialised": 0, "tier_jpeg_encoded": 0, "tier_jpeg_decoded": n if cross else 0,
                    "object_store_put": 0, "object_store_get": 0, "recorder_jpeg_encoded": 0,
-                   "channel_copy": 0}
+                   "channel_copy": 0, "channel_in_place": 0}
 
 
 @pytest.mark.parametrize("transport", ["channel", "ray"])
 def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, transport):
     """A real run (not lock-step) with a frame analytics in its own actor on this node and navigation coming back:
     with ``same_node_transport: channel`` every frame that left the drone actor was copied once into a shared-memory
-    slot and nothing went through the object store; with ``ray`` each was put once and read once. Either way the
+    slot or rendered straight into one (the simulator's camera renders into a slot the channel lends) and nothing
+    went through the object store; with ``ray`` each was put once and read once. Either way the
     analytics saw every frame that was sent, and its results reached the drone's trajectory scheduler."""
     env = _env(1)
     env.cfg.same_node_transport = transport
@@ -317,10 +321,12 @@ def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, 
     assert res.stats["_settle"]["idle"]  # nothing was left in flight when the counts were taken
     assert analysed["received"] == sent and analysed["errors"] == 0
     if transport == "channel":
-        assert d_copies["channel_copy"] == sent and d_copies["object_store_put"] == 0
+        assert d_copies["channel_copy"] + d_copies["channel_in_place"] == sent and d_copies["object_store_put"] == 0
+        assert d_copies["channel_in_place"] == outlet["in_place"] > 0  # rendered in the slot it was sent from
         assert a_copies["object_store_get"] == 0
     else:
-        assert d_copies["object_store_put"] == sent == a_copies["object_store_get"] and d_copies["channel_copy"] == 0
+        assert d_copies["object_store_put"] == sent == a_copies["object_store_get"]
+        assert d_copies["channel_copy"] == d_copies["channel_in_place"] == 0
     lat = res.stats["d00"]["scheduler"]
     assert lat["frames_with_latency"] > 0  # navigation from the other actor's detections reached this drone
     assert all(k in r for r in lat["latency_records"] for k in ("put_ms", "call_ms", "get_ms"))
@@ -328,8 +334,8 @@ def test_same_node_frames_travel_by_channel_or_by_ray(ray_session, run_options, 
 
 def test_lockstep_frames_travel_by_channel_and_every_frame_is_processed(ray_session, run_options):
     """Lock-step is a property of the clock, not of the transport: a lock-step run with the detector in its own
-    actor on this node moves every frame over the same-node channel (copied once into a slot, nothing through the
-    object store), drops none, and the detector processes exactly the frames that were sent; each frame's
+    actor on this node moves every frame over the same-node channel (copied once into a slot or rendered in one,
+    nothing through the object store), drops none, and the detector processes exactly the frames that were sent; each frame's
     detections come back in the channel's answer within the frame's cascade, so the follow analytics in the drone
     actor sees every one of them (from the runtime's counters, not from timing)."""
     env = _env(1, lockstep=True)
@@ -356,7 +362,8 @@ def test_lockstep_frames_travel_by_channel_and_every_frame_is_processed(ray_sess
     assert outlet["transport"] == "channel" and outlet["dropped"] == outlet["failed"] == 0
     assert sent == cam["frames"] > 10
     assert spotter["received"] == spotter["processed"] == sent and spotter["dropped"] == spotter["errors"] == 0
-    assert d_copies["channel_copy"] == sent and d_copies["object_store_put"] == a_copies["object_store_get"] == 0
+    assert d_copies["channel_copy"] + d_copies["channel_in_place"] == sent
+    assert d_copies["object_store_put"] == a_copies["object_store_get"] == 0
     assert follow_stats["received"] == sent and follow_stats["dropped"] == 0  # every reply, within its cascade
     assert res.stats["d00"]["scheduler"]["frames_with_latency"] > 0
 
