@@ -45,4 +45,3 @@ class SlotFree:
     (sent on its own when a frame outlives its delivery, e.g. one an analytics kept or one queued for later)."""
 
     names: tuple[str, ...]
-

@@ -44,7 +44,7 @@ def attach(name: str) -> SharedMemory:
 
 class Slot:
     """One segment of a sender's frames: ``size`` bytes; ``free`` while no receiver holds the frame written in it;
-    ``lent`` while a frame made in it in this process (:meth:`~.channel.ChannelOutlet.lend`) is still referenced
+    ``lent`` while a frame made in it in this process (:meth:`~.channel_outlet.ChannelOutlet.lend`) is still referenced
     here. It may be written again only when free and not lent."""
 
     __slots__ = ("shm", "size", "free", "lent")

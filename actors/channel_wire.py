@@ -14,14 +14,18 @@ messages travel as tuples of built-ins, which pickle encodes and decodes in C:
 * an answer (:func:`encode_done`): each reply's kind and fields, its detections flattened, and its ``meta`` as the
   marker :data:`SAME_META` when it is the very ``FrameMeta`` object of the frame it answers (what
   :func:`~aerodaas.protocol.messages.output_message` gives every output): the sender puts back the object it sent
-  (:func:`decode_done`), so the frame's metadata is not sent back at all.
+  (:func:`decode_done`), so the frame's metadata is not sent back at all, and the sender's components get the
+  very object it sent (as a component of its own actor would; a receiver that changed it in place before
+  replying would not see that change travel, and nothing here does).
 
-Anything else (a frame sent inline, a message of another kind, a user's own metadata or payload) travels as the
-pickled objects, tagged :data:`OBJECT`. Decoding gives objects equal to what was encoded (the pydantic models are
-rebuilt with ``model_construct``: their values were validated when they were made).
+Anything else (a frame sent inline, a message of another kind or class, a user's own metadata class or payload, a
+model or message with attributes beyond its fields) travels as the pickled objects, tagged :data:`OBJECT`.
+Decoding gives objects equal to what was encoded, with the same fields set (the pydantic models are rebuilt with
+``model_construct``: their values were validated when they were made).
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
@@ -46,33 +50,37 @@ _NESTED = [frozenset(j for j, f in enumerate(cls.model_fields.values()) if f.ann
 #: the message kinds a reply's tuple names by position
 KINDS: tuple[type[Message], ...] = (DetectionsMsg, NavigationMsg, ValueMsg, OdometryMsg, StatMsg, FrameMsg)
 _KIND = {cls: i for i, cls in enumerate(KINDS)}
+#: per kind, how many attributes an instance has (its dataclass fields): one with more travels as the object
+_NATTR = tuple(len(dataclasses.fields(cls)) for cls in KINDS)
 
 
 def flatten(m: Any) -> tuple:
-    """Model ``m`` (an instance of exactly one of :data:`MODELS`) as ``(model index, field values...)`` in its
-    fields' order, a field typed as another of :data:`MODELS` flattened likewise. Raises TypeError for anything
-    else (the caller then sends the object pickled)."""
+    """Model ``m`` (an instance of exactly one of :data:`MODELS`) as ``(model index, fields set or None, field
+    values...)`` in its fields' order, a field typed as another of :data:`MODELS` flattened likewise; the names
+    of the fields set explicitly travel only when some were not (pydantic's ``model_fields_set``). Raises
+    TypeError for anything else (the caller then sends the object pickled)."""
     i = _INDEX[type(m)] if type(m) in _INDEX else None
     if i is None:
         raise TypeError(f"not flattened on the wire: {type(m).__name__}")
     vals = list(m.__dict__.values())
-    if len(vals) != len(_FIELDS[i]):
-        raise TypeError(f"{type(m).__name__} with extra attributes")
+    if len(vals) != len(_FIELDS[i]) or m.__pydantic_extra__ or m.__pydantic_private__:
+        raise TypeError(f"{type(m).__name__} with attributes beyond its fields")
     for j in _NESTED[i]:
         if vals[j] is not None:
             vals[j] = flatten(vals[j])
-    return (i, *vals)
+    fs = m.__pydantic_fields_set__
+    return (i, None if len(fs) == len(vals) else tuple(sorted(fs)), *vals)
 
 
 def unflatten(t: tuple) -> Any:
-    """The model :func:`flatten` gave ``t`` for (equal to it)."""
-    i = t[0]
-    kw = dict(zip(_FIELDS[i], t[1:]))
+    """The model :func:`flatten` gave ``t`` for (equal to it, with the same fields set)."""
+    i, fs = t[0], t[1]
+    kw = dict(zip(_FIELDS[i], t[2:]))
     for j in _NESTED[i]:
-        v = t[1 + j]
+        v = t[2 + j]
         if v is not None:
             kw[_FIELDS[i][j]] = unflatten(v)
-    return MODELS[i].model_construct(**kw)
+    return MODELS[i].model_construct(None if fs is None else set(fs), **kw)
 
 
 def _port(p: Port) -> tuple:
@@ -100,7 +108,8 @@ def _reply(d: Delivery, meta: Any) -> tuple:
     (``data`` then ``("D", [...])``, else ``("o", data)``) and its meta :data:`SAME_META` when it is ``meta``."""
     m = d.msg
     k = _KIND.get(type(m))
-    if k is None or m.tok is not None or (type(m) is FrameMsg and (m.ref is not None or m.jpeg is not None)):
+    if (k is None or type(d) is not Delivery or d.cascade or d.reply_to is not None or m.tok is not None
+            or len(m.__dict__) != _NATTR[k] or (type(m) is FrameMsg and (m.ref is not None or m.jpeg is not None))):
         raise TypeError(type(m).__name__)
     data: tuple = ("o", m.data)
     if type(m) is DetectionsMsg and type(m.data) is list and all(type(x) is Detection for x in m.data):
@@ -116,8 +125,12 @@ def _reply(d: Delivery, meta: Any) -> tuple:
 
 def encode_done(done: ChannelDone, meta: Any = None) -> tuple:
     """``done`` as the tuple that travels; ``meta``: the FrameMeta object of the frame the answered delivery
-    carried (a reply whose ``meta`` is that object travels as :data:`SAME_META`). Anything that is not a plain
-    message travels as ``(OBJECT, done)``."""
+    carried (a reply whose ``meta`` is that very object travels as :data:`SAME_META`; anything but a FrameMeta is
+    ignored here). Anything that is not a plain message (another Delivery class, a reply with ``cascade`` or
+    ``reply_to`` set, a message class or instance attribute the tuple does not carry) travels as
+    ``(OBJECT, done)``."""
+    if type(meta) is not FrameMeta:
+        meta = None
     try:
         replies = [_reply(d, meta) for d in done.replies]
     except TypeError:
@@ -152,7 +165,9 @@ def decode(t: tuple) -> Any:
 def decode_done(replies: list, meta: Any) -> list[Delivery]:
     """The reply items of a :data:`DONE` tuple (already :class:`Delivery` objects when it travelled as
     :data:`OBJECT`) as Delivery objects; ``meta``: the FrameMeta the answered delivery carried (put back where a
-    reply says :data:`SAME_META`)."""
+    reply says :data:`SAME_META`: the sender's components then get the very object it sent, as a component of its
+    own actor would). Raises ValueError for a reply that says :data:`SAME_META` when ``meta`` is None (an answer
+    to a delivery this sender no longer has in flight)."""
     out = []
     for r in replies:
         if isinstance(r, Delivery):
@@ -161,6 +176,8 @@ def decode_done(replies: list, meta: Any) -> list[Delivery]:
         cid, port, k, robot, sim_t, (dk, data), mt, trace = r
         if dk == "D":
             data = [unflatten(x) for x in data]
+        if mt == SAME_META and meta is None:
+            raise ValueError("channel: an answer refers to the metadata of a delivery no longer in flight")
         m = meta if mt == SAME_META else (None if mt is None else mt[1])
         out.append(Delivery(cid, Port(*port), KINDS[k](robot, sim_t, data, m, trace)))
     return out

@@ -58,7 +58,8 @@ import numpy as np
 import ray
 
 from aerodaas.actors.cascade import Cascade
-from aerodaas.actors.channel import ChannelOutlet, channel_address
+from aerodaas.actors.channel import channel_address
+from aerodaas.actors.channel_outlet import ChannelOutlet
 from aerodaas.actors.frames import FrameCopies, decode_frame, encode_frame
 from aerodaas.actors.remote_outlet import RemoteOutlet
 from aerodaas.protocol.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
@@ -199,7 +200,7 @@ class DataPlane:
         self.location: dict[str, str] = {}
         self.tiers: dict[str, str] = {actor_id: tier}
         self.peers: dict[str, Any] = {}
-        self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel.ChannelOutlet
+        self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel_outlet.ChannelOutlet
         #: the run's channel key (bytes) when actors on this machine talk through same-node channels
         #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``)
         self.channel_key: bytes | None = None
@@ -398,7 +399,7 @@ class DataPlane:
 
     def frame_buffer(self, src: str, shape: tuple[int, ...]) -> np.ndarray | None:
         """A writable ``shape`` uint8 array to make component ``src``'s next frame in: a slot lent by the same-node
-        channel of its first subscriber in another actor on this machine (:meth:`.channel.ChannelOutlet.lend`;
+        channel of its first subscriber in another actor on this machine (:meth:`.channel_outlet.ChannelOutlet.lend`;
         that outlet then sends the frame without copying it; every other reader reads it as any frame). None when
         no subscriber is reached by a channel or its slots are all held: the frame is then made as usual."""
         for cid, port, buf, _only in self.routes.get(src, ()):
@@ -434,7 +435,7 @@ class DataPlane:
         return o
 
     def _channel_outlet(self, hid: str, cid: str, port: Port, buffer: int) -> Any:
-        """A :class:`~.channel.ChannelOutlet` to actor ``hid`` when channels are on and ``hid`` serves one on this
+        """A :class:`~.channel_outlet.ChannelOutlet` to actor ``hid`` when channels are on and ``hid`` serves one on this
         machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
         if self.channel_key is None or self.tiers.get(hid, self.tier) != self.tier:
             return None

@@ -21,7 +21,7 @@ class FrameCopies:
       ObjectRef;
     * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`.channel`; the
       receiver reads the slot in place);
-    * ``channel_in_place``: frames a camera made straight in such a slot (:meth:`.channel.ChannelOutlet.lend`)
+    * ``channel_in_place``: frames a camera made straight in such a slot (:meth:`.channel_outlet.ChannelOutlet.lend`)
       and sent from there, with no copy;
     * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
 

@@ -10,7 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from aerodaas.actors.channel import ChannelOutlet, ChannelServer, channel_address
+from aerodaas.actors.channel import ChannelServer, channel_address
+from aerodaas.actors.channel_outlet import ChannelOutlet
 from aerodaas.protocol.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
 from aerodaas.model.types import AeroNavigation
 
@@ -292,14 +293,20 @@ def test_nobody_serving_or_a_wrong_key_is_refused(address):
 def test_a_lockstep_delivery_holds_the_senders_cascade_until_the_receivers_cascade_is_done(address):
     """Lock-step over the channel (no Ray calls): a frame of a cascade is sent even beyond ``buffer`` (never
     dropped), the receiver answers only when its own cascade for it is done (here: when released), and the sender's
-    cascade stays open until that answer arrived and its replies — which join the same cascade — were handed on."""
+    cascade stays open until that answer arrived and its replies — which join the same cascade — were handed on,
+    each with the very frame metadata object the sender sent (the answer, written later from another thread, refers
+    to it)."""
     from aerodaas.actors.cascade import Cascade
+    from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
     pending: list = []
 
     def deliver(d: Delivery, answer=None):
         assert d.cascade and answer is not None  # a lock-step delivery: answered later, the reader never blocks
-        pending.append((answer, Receiver()(d)))
+        replies = Receiver()(d)
+        for r in replies:
+            r.msg.meta = d.msg.meta  # an output of this frame carries its metadata
+        pending.append((answer, replies))
         return None
 
     srv = ChannelServer(address, KEY, deliver)
@@ -315,9 +322,14 @@ def test_a_lockstep_delivery_holds_the_senders_cascade_until_the_receivers_casca
     out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=on_reply)
     try:
         tok = Cascade()
+        metas = []
         for i in range(3):  # three frames of one cascade with buffer=1: none dropped
             f = _frame(i, shape=(8, 8, 3))
             f.tok = tok
+            f.meta = FrameMeta(robot_id="d1", sensor_id="cam", seq=i, capture_time=0.1 * i, wall_time=time.time(),
+                               pose=FramePose(position=(0.0, 0.0, 10.0)),
+                               intrinsics=CameraIntrinsics(width=8, height=8, fx=8.0, fy=8.0, cx=4.0, cy=4.0))
+            metas.append(f.meta)
             assert out.send(f) is not None
         assert _wait(lambda: len(pending) == 3)
         assert out.stats()["dropped"] == 0 and tok.outstanding == 3
@@ -327,6 +339,7 @@ def test_a_lockstep_delivery_holds_the_senders_cascade_until_the_receivers_casca
             answer(replies)
         assert _wait(lambda: len(handed) == 3)
         assert all(d.msg.tok is tok for d in handed) and tok.outstanding == 3  # the replies' own work holds it
+        assert sorted((d.msg.meta.seq, id(d.msg.meta)) for d in handed) == [(i, id(m)) for i, m in enumerate(metas)]
         for t in holds:
             t.done()
         tok.wait(5)
@@ -467,3 +480,34 @@ def test_a_frame_freed_on_the_connections_thread_wakes_no_other_thread():
     other.start()
     other.join()
     assert list(freed) == ["slot-a", "slot-b"] and wake.is_set()
+
+
+def test_an_answer_that_does_not_decode_is_counted_failed_and_the_channel_goes_on(address, monkeypatch):
+    """An answer whose replies cannot be rebuilt (here: made to fail once) costs that delivery only: counted
+    failed, its slot and in-flight place given back, and the next frame's answer arrives as usual."""
+    import aerodaas.actors.channel_outlet as channel_mod
+
+    real = channel_mod.decode_done
+    calls = []
+
+    def once_broken(replies, meta):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ValueError("a reply this sender cannot rebuild")
+        return real(replies, meta)
+
+    monkeypatch.setattr(channel_mod, "decode_done", once_broken)
+    rx = Receiver()
+    srv = ChannelServer(address, KEY, rx)
+    replies: list = []
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
+    try:
+        assert out.send(_frame(1, (8, 8, 3))) is not None
+        assert _wait(lambda: out.failed == 1 and not out._in_flight)
+        assert replies == [] and out.connected
+        assert out.send(_frame(2, (8, 8, 3))) is not None
+        assert _wait(lambda: len(replies) == 1)
+        assert out.failed == 1 and out.dropped == 0 and len(rx.got) == 2
+    finally:
+        out.close()
+        srv.close()

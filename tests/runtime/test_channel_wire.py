@@ -19,6 +19,14 @@ from aerodaas.protocol.messages import DetectionsMsg, Delivery, FrameMsg, Naviga
 BUILTIN = (int, float, str, bool, type(None))
 
 
+class MyMeta(FrameMeta):
+    """A user's own metadata class."""
+
+
+class MyDetections(DetectionsMsg):
+    """A user's own message class."""
+
+
 def only_builtins(x) -> bool:
     """True when ``x`` is made of built-in scalars, tuples, lists and str-keyed dicts only (no object of ours)."""
     if isinstance(x, BUILTIN):
@@ -37,10 +45,17 @@ def meta(seq: int = 7, arrival: float | None = None) -> FrameMeta:
                      arrival_time=arrival, pose_time=None if arrival is None else arrival - 0.01)
 
 
-def frame_send(m: FrameMeta | None, seq: int = 3, cascade: bool = False) -> ChannelSend:
+def frame_send(m: FrameMeta | None, seq: int = 3, cascade: bool = False, port: Port = Port("in")) -> ChannelSend:
     msg = FrameMsg(robot="d1", sim_t=1.5, data=SlotFrame("adc1_ab", (720, 1280, 3), "|u1"), meta=m,
                    trace={"capture_wall": 1.8e9, "put_ms": 0.3, "sent_wall": 1.8e9 + 0.001})
-    return ChannelSend(seq, Delivery("detector#1", Port("in"), msg, cascade=cascade, reply_to="drone/d1"))
+    return ChannelSend(seq, Delivery("detector#1", port, msg, cascade=cascade, reply_to="drone/d1"))
+
+
+def fields_set(m) -> object:
+    """The fields set explicitly of a model and of the models in it (pydantic's ``model_fields_set``)."""
+    if m is None or not hasattr(m, "model_fields_set"):
+        return None
+    return (sorted(m.model_fields_set), [fields_set(getattr(m, f)) for f in type(m).model_fields])
 
 
 def same_send(a: ChannelSend, b: ChannelSend) -> bool:
@@ -49,12 +64,22 @@ def same_send(a: ChannelSend, b: ChannelSend) -> bool:
     return (a.seq == b.seq and (da.cid, da.port, da.cascade, da.reply_to) == (db.cid, db.port, db.cascade, db.reply_to)
             and type(ma) is type(mb)
             and (ma.robot, ma.sim_t, ma.meta, ma.trace) == (mb.robot, mb.sim_t, mb.meta, mb.trace)
+            and fields_set(ma.meta) == fields_set(mb.meta)
             and (np.array_equal(ma.data, mb.data) if isinstance(ma.data, np.ndarray) else ma.data == mb.data))
 
 
-@pytest.mark.parametrize("m", [meta(), meta(arrival=1.49), None], ids=["rendered", "streamed", "no-meta"])
-def test_a_frames_delivery_travels_as_builtins_and_decodes_equal(m):
-    send = frame_send(m, cascade=m is None)
+def sparse_meta() -> FrameMeta:
+    """Metadata whose pose sets only its position (yaw and pitch left to their defaults)."""
+    return FrameMeta(robot_id="d1", sensor_id="cam", seq=1, capture_time=0.0, wall_time=0.0,
+                     pose=FramePose(position=(0.0, 0.0, 5.0)),
+                     intrinsics=CameraIntrinsics(width=64, height=48, fx=50.0, fy=50.0, cx=32.0, cy=24.0))
+
+
+@pytest.mark.parametrize("m,port", [(meta(), Port("in")), (meta(arrival=1.49), Port("priority", 2, True)),
+                                    (None, Port("in")), (sparse_meta(), Port("priority", 0))],
+                         ids=["rendered", "streamed-to-a-replacing-priority", "no-meta", "fields-left-unset"])
+def test_a_frames_delivery_travels_as_builtins_and_decodes_equal(m, port):
+    send = frame_send(m, cascade=m is None, port=port)
     wire = encode_send(send)
     assert wire[0] != OBJECT and only_builtins(wire), wire
     back = decode(pickle.loads(pickle.dumps(wire, 5)))
@@ -69,7 +94,7 @@ def test_a_reply_carrying_the_frames_own_meta_does_not_send_it_back():
                               Detection(class_id=0, class_name="person", score=0.5, box=(1.0, 2.0, 3.0, 4.0))])
     other = NavigationMsg(robot="d1", sim_t=1.5, meta=meta(seq=8), data=AeroNavigation(waypoints=[]), trace={})
     done = ChannelDone(3, [Delivery("d1/follow", Port("in"), det),
-                           Delivery("d1/scheduler", Port("priority", 1), other)], None, ("adc1_ab",))
+                           Delivery("d1/scheduler", Port("priority", 1, True), other)], None, ("adc1_ab",))
     wire = encode_done(done, m)
     assert wire[0] != OBJECT
     det_wire, nav_wire = wire[2]
@@ -83,7 +108,9 @@ def test_a_reply_carrying_the_frames_own_meta_does_not_send_it_back():
     assert (r_det.cid, r_det.port, type(r_det.msg), r_det.msg.data, r_det.msg.trace) == \
         ("d1/follow", Port("in"), DetectionsMsg, det.data, det.trace)
     assert (r_nav.cid, r_nav.port, type(r_nav.msg), r_nav.msg.meta, r_nav.msg.data) == \
-        ("d1/scheduler", Port("priority", 1), NavigationMsg, other.meta, other.data)
+        ("d1/scheduler", Port("priority", 1, True), NavigationMsg, other.meta, other.data)
+    with pytest.raises(ValueError, match="no longer in flight"):  # the sender has no object to put back
+        decode_done(back.replies, None)
 
 
 def test_what_the_tuples_do_not_cover_travels_as_the_objects():
@@ -91,14 +118,27 @@ def test_what_the_tuples_do_not_cover_travels_as_the_objects():
     inline = ChannelSend(4, Delivery("detector#1", Port("in"), FrameMsg(robot="d1", sim_t=0.0, data=pix)))
     value = ChannelSend(5, Delivery("monitor#1", Port("in"), ValueMsg(robot="d1", sim_t=0.0, data={"battery": 90})))
 
-    class MyMeta(FrameMeta):  # a user's own metadata class
-        pass
-
     theirs = frame_send(MyMeta(**meta().model_dump()))
-    for send in (inline, value, theirs):
+    extra = meta()
+    extra.__dict__["note"] = "an attribute beyond the fields"
+    for send in (inline, value, theirs, frame_send(extra)):
         wire = encode_send(send)
         assert wire[0] == OBJECT
-        assert same_send(decode(wire), send)
+        assert same_send(decode(pickle.loads(pickle.dumps(wire, 5))), send)
+
+    m = meta()
+    for reply in (Delivery("d1/follow", Port("in"), MyDetections(robot="d1", sim_t=0.0, data=[], meta=m)),
+                  Delivery("d1/follow", Port("in"), DetectionsMsg(robot="d1", sim_t=0.0, data=[], meta=m),
+                           reply_to="drone/d2")):
+        wire = encode_done(ChannelDone(7, [reply]), m)
+        assert wire[0] == OBJECT
+        (r,) = decode(pickle.loads(pickle.dumps(wire, 5))).replies
+        assert type(r.msg) is type(reply.msg) and r.reply_to == reply.reply_to and r.msg.meta == m
+    # only a FrameMeta is left behind: a delivery's other metadata (a dict here) travels back itself
+    d_meta = {"source": "gas"}
+    wire = encode_done(ChannelDone(8, [Delivery("x", Port("in"), ValueMsg(robot="d1", sim_t=0.0, data=1,
+                                                                          meta=d_meta))]), d_meta)
+    assert wire[2][0][6] != SAME_META and decode_done(wire[2], None)[0].msg.meta == d_meta
     odd = ChannelDone(6, [Delivery("d1/follow", Port("in"), DetectionsMsg(robot="d1", sim_t=0.0, data=["not a box"]))])
     wire = encode_done(odd, None)
     assert wire[0] != OBJECT and decode_done(decode(wire).replies, None)[0].msg.data == ["not a box"]

@@ -140,3 +140,17 @@ def test_processes_that_start_together_build_the_ground_once(cache, tmp_path):
     assert [p.returncode for p in procs] == [0, 0, 0]
     assert outs == ["memmap"] * 3
     assert len(log.read_text().split()) == 1
+
+
+@pytest.mark.parametrize("pitch", [90.0, 35.0], ids=["nadir", "oblique-with-sky"])
+def test_a_frame_rendered_into_a_given_buffer_is_that_buffer_with_the_same_pixels(cache, pitch):
+    """What the camera does when a same-node channel lends it a slot (``World.render(out=...)``): the frame is the
+    buffer itself, pixel for pixel the frame rendered on its own (the ground, and the sky of an oblique view)."""
+    w = World(GROUND, [])
+    k = CameraIntrinsics.from_hfov(160, 120, 78)
+    pose = FramePose(position=(1, 2, 6), yaw=30, camera_pitch=pitch)
+    alone, truth = w.render(pose, k, 0.0)
+    buf = np.full((120, 160, 3), 7, np.uint8)
+    into, truth_into = w.render(pose, k, 0.0, out=buf)
+    assert into is buf and np.array_equal(buf, alone) and truth_into == truth
+    assert len(np.unique(alone.reshape(-1, 3), axis=0)) > 10  # a real picture, not the buffer's old fill
