@@ -263,8 +263,8 @@ class CameraComponent:
             pose = self._frame_pose(pose.position, pose.yaw, gimbal)
         else:  # a pulled source (a live one not opened yet has no frame)
             # made straight in a same-node channel's slot when the source can and the frame travels by one
-            out = (self.plane.frame_buffer(self.cid, (self.k.height, self.k.width, 3))
-                   if type(self.src).renders_into else None)
+            out = (self.plane.frame_buffer(self.cid, (self.k.height, self.k.width, 3), self.robot_id)
+                   if type(self.src).renders_into and not isinstance(self.src, LiveFrameSource) else None)
             got = self.src.frame_at(t, pose) if out is None else self.src.frame_at(t, pose, out=out)
             out = None
             if got is None:  # no new frame since the last capture

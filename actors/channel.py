@@ -66,9 +66,11 @@ def channel_address(run_key: bytes, actor_id: str) -> str:
     return "\0aerodaas-" + hashlib.sha256(run_key + actor_id.encode()).hexdigest()[:32]
 
 
-def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int) -> None:
+def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int, shm: SharedMemory) -> None:
     """A mapped frame was collected: its slot joins ``freed``; the late-frees thread is woken only off the connection's
-    own thread (``server_thread``), whose next answer carries it (a thread switch per frame saved)."""
+    own thread (``server_thread``), whose next answer carries it (a thread switch per frame saved). ``shm``: the
+    frame's mapping, held by this finalizer so that it outlives every frame read from it (unmapped when the last
+    reference goes, even after the connection ended)."""
     freed.append(name)
     if threading.get_ident() != server_thread:
         wake.set()
@@ -115,15 +117,14 @@ class _SenderSession:
                 self.send(encode_free(SlotFree(names)))
 
     def close(self) -> None:
-        """Stop the late-frees thread, close the connection and unmap the slots no frame holds any more."""
+        """Stop the late-frees thread, close the connection and let go of the mappings: one no frame holds is
+        unmapped at once, one an analytics still holds a frame of when that frame is collected (its finalizer holds
+        the mapping: numpy holds no buffer export that would stop an explicit close from unmapping it under the
+        frame)."""
         self.stop.set()
         self.wake.set()
         self.conn.close()
-        for shm in self.maps.values():
-            try:
-                shm.close()
-            except BufferError:  # an analytics still holds a frame of it: unmapped when that is collected
-                pass
+        self.maps.clear()
 
 
 class ChannelServer:
@@ -187,11 +188,19 @@ class ChannelServer:
                     raw = conn.recv()
                 except (EOFError, OSError):
                     return
-                try:
-                    item = decode(raw)
-                except (ValueError, TypeError, IndexError) as e:  # not a wire tuple of this version: skipped
+                except Exception as e:  # noqa: BLE001 - not a wire tuple at all: not a peer of this version
                     self.failed += 1
                     self._on_error("channel", e)
+                    return  # the sender sees the channel end and counts what it had in flight as failed
+                try:
+                    item = decode(raw)
+                except Exception as e:  # noqa: BLE001 - e.g. a message of a class this process cannot import
+                    self.failed += 1
+                    self._on_error("channel", e)
+                    seq = raw[1] if isinstance(raw, tuple) and len(raw) > 1 and type(raw[1]) is int else None
+                    if seq is None:
+                        return
+                    send(encode_done(ChannelDone(seq, [], f"{type(e).__name__}: {e}", session.take_freed())))
                     continue
                 raw = None
                 if self._closed:  # read from the buffer after close(): the sender counts it failed, so hand nothing on
@@ -261,7 +270,7 @@ class ChannelServer:
             shm = maps[sf.name] = attach(sf.name)
         arr = np.ndarray(sf.shape, np.dtype(sf.dtype), buffer=shm.buf)
         arr.flags.writeable = False
-        weakref.finalize(arr, _freed, freed, wake, sf.name, server_thread)
+        weakref.finalize(arr, _freed, freed, wake, sf.name, server_thread, shm)
         return arr
 
     def close(self) -> None:

@@ -14,7 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
-from aerodaas.actors.channel_slots import Slot
+from aerodaas.actors.channel_slots import Slot, release_lent
 from aerodaas.actors.channel_wire import decode, decode_done, encode_send
 from aerodaas.protocol.messages import Delivery, FrameMsg, Message, Port
 
@@ -80,6 +80,7 @@ class ChannelOutlet:
         self.sent = self.dropped = self.failed = 0
         self.inline_frames = 0  # frames sent in the message itself: the receiver still held every slot
         self.in_place = 0  # frames made in a lent slot and sent from there, not copied
+        self.lend_refused = 0  # lend() calls answered None (slots held): those frames were made as usual
         self.reconnects = 0
         self.late_frees = 0  # SlotFree messages: frames the receiver released after answering their delivery
         self.closed = False
@@ -197,13 +198,7 @@ class ChannelOutlet:
         """Caller holds ``_lock``. A free slot of at least ``nbytes`` bytes (a new one while fewer than
         ``max_slots`` exist; a too-small free one is replaced), or None when the receiver (or lent frames here)
         hold them all."""
-        while self._unlent:  # lent frames collected since: their slots are this outlet's to write again
-            name = self._unlent.popleft()
-            s = self._slots.get(name)
-            if s is not None:
-                s.lent = False
-            for addr in [a for a, n in self._lent.items() if n == name]:
-                del self._lent[addr]
+        self._take_unlent()
         for s in self._slots.values():
             if s.free and not s.lent and s.size >= nbytes:
                 s.free = False
@@ -219,6 +214,17 @@ class ChannelOutlet:
         s.free = False
         return s
 
+    def _take_unlent(self) -> None:
+        """Caller holds ``_lock``. The slots of lent frames collected since (:func:`release_lent`) are this
+        outlet's to write again."""
+        while self._unlent:
+            name = self._unlent.popleft()
+            s = self._slots.get(name)
+            if s is not None:
+                s.lent = False
+            for addr in [a for a, n in self._lent.items() if n == name]:
+                del self._lent[addr]
+
     def lend(self, shape: tuple[int, ...], dtype: Any = np.uint8) -> np.ndarray | None:
         """A writable array of ``shape`` and ``dtype`` over one of this outlet's slots, for a frame to be made in
         (a camera's render, :attr:`aerodaas.plugins.frames.FrameSource.renders_into`): when that array is then
@@ -229,13 +235,20 @@ class ChannelOutlet:
         with self._lock:
             if self.closed or self._conn is None:
                 return None
+            self._take_unlent()
+            if sum(s.lent for s in self._slots.values()) >= self.max_slots - 2:
+                # frames made here are still referenced (a recorder catching up, the camera's latest frame): the
+                # last two slots stay for copies, or every frame would travel in its message
+                self.lend_refused += 1
+                return None
             slot = self._slot(nbytes)
             if slot is None:
+                self.lend_refused += 1
                 return None
             slot.free, slot.lent = True, True  # no receiver holds it yet; a frame here does
             arr = np.ndarray(shape, dtype, buffer=slot.shm.buf)
             self._lent[arr.ctypes.data] = slot.shm.name
-        weakref.finalize(arr, self._unlent.append, slot.shm.name)
+        weakref.finalize(arr, release_lent, self._unlent, slot)
         return arr
 
     def _lent_slot(self, frame: np.ndarray) -> Slot | None:
@@ -295,7 +308,7 @@ class ChannelOutlet:
             try:
                 d = Delivery(self.cid, self.port, wire, cascade=tok is not None, reply_to=self.reply_to)
                 self._conn.send(encode_send(ChannelSend(seq, d)))
-            except (OSError, ValueError):
+            except Exception:  # noqa: BLE001 - the peer is gone, or the message does not pickle: failed
                 if slot_name is not None:
                     self._slots[slot_name].free = True
                 self.failed += 1
@@ -321,7 +334,8 @@ class ChannelOutlet:
         with self._lock:
             return {"port": self.port.wire(), "to": self.cid, "transport": self.transport, "sent": self.sent,
                     "dropped": self.dropped, "failed": self.failed, "slots": len(self._slots),
-                    "inline_frames": self.inline_frames, "in_place": self.in_place, "reconnects": self.reconnects,
+                    "inline_frames": self.inline_frames, "in_place": self.in_place, "lend_refused": self.lend_refused,
+                    "reconnects": self.reconnects,
                     "held": self.held,
                     "late_frees": self.late_frees,
                     "lost": self.lost}

@@ -8,8 +8,9 @@ import secrets
 import sys
 from multiprocessing import resource_tracker
 from multiprocessing.shared_memory import SharedMemory
+from typing import Any
 
-__all__ = ["Slot", "attach", "create_segment", "own_prefix"]
+__all__ = ["Slot", "attach", "create_segment", "own_prefix", "release_lent"]
 
 
 def own_prefix() -> str:
@@ -47,20 +48,37 @@ class Slot:
     ``lent`` while a frame made in it in this process (:meth:`~.channel_outlet.ChannelOutlet.lend`) is still referenced
     here. It may be written again only when free and not lent."""
 
-    __slots__ = ("shm", "size", "free", "lent")
+    __slots__ = ("shm", "size", "free", "lent", "dropped")
 
     def __init__(self, size: int) -> None:
         self.shm = create_segment(size)
-        self.size, self.free, self.lent = size, True, False
+        self.size, self.free, self.lent, self.dropped = size, True, False, False
 
     def drop(self) -> None:
-        """Unlink the segment and unmap it (a receiver still mapping it, or a lent frame here still referencing it,
-        keeps its mapping until it lets go)."""
+        """Unlink the segment (a receiver still mapping it keeps its mapping until it lets go) and unmap it here —
+        unless a lent frame here still uses it: then it is unmapped when that frame is collected
+        (:func:`release_lent`), never under a live array (numpy holds no buffer export that would stop it)."""
+        self.dropped = True
         try:
             self.shm.unlink()
         except OSError:
             pass
+        if not self.lent:
+            try:
+                self.shm.close()
+            except (OSError, BufferError):
+                pass
+
+
+def release_lent(unlent: Any, slot: Slot) -> None:
+    """Finalizer of a lent frame (:meth:`~.channel_outlet.ChannelOutlet.lend`): its slot's name joins ``unlent``
+    (the outlet makes it writable again under its lock); a slot dropped meanwhile (the outlet closed) is unmapped
+    now that nothing here uses it. Holding ``slot`` keeps the mapping alive as long as the frame is."""
+    if slot.dropped:
+        slot.lent = False
         try:
-            self.shm.close()
-        except (OSError, BufferError):  # a lent frame still references it: unmapped when that is collected
+            slot.shm.close()
+        except (OSError, BufferError):
             pass
+    else:
+        unlent.append(slot.shm.name)

@@ -19,13 +19,16 @@ messages travel as tuples of built-ins, which pickle encodes and decodes in C:
   replying would not see that change travel, and nothing here does).
 
 Anything else (a frame sent inline, a message of another kind or class, a user's own metadata class or payload, a
-model or message with attributes beyond its fields) travels as the pickled objects, tagged :data:`OBJECT`.
+model or message with attributes beyond its fields) travels pickled on its own inside the tuple: a delivery as
+``(OBJECT, seq, bytes)``, an answer's replies as bytes. The tuple itself is built-ins only and always decodes, so a
+class the other side cannot import fails that one message (answered, or counted, as failed), never the channel.
 Decoding gives objects equal to what was encoded, with the same fields set (the pydantic models are rebuilt with
 ``model_construct``: their values were validated when they were made).
 """
 from __future__ import annotations
 
 import dataclasses
+import pickle
 from typing import Any
 
 from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
@@ -87,39 +90,47 @@ def _port(p: Port) -> tuple:
     return (p.name, p.priority, p.replace)
 
 
+def _pickled(obj: Any) -> bytes:
+    """``obj`` pickled on its own (the receiver unpickles it inside its error handling: a class it cannot import
+    fails that message only, never the connection's envelope). Raises what pickling raises."""
+    return pickle.dumps(obj, pickle.HIGHEST_PROTOCOL)
+
+
 def encode_send(send: ChannelSend) -> tuple:
     """``send`` as the tuple that travels: a frame in a slot with FrameMeta (or no) metadata flattened, anything
-    else as ``(OBJECT, send)``."""
+    else as ``(OBJECT, seq, pickled send)``. Raises what pickling ``send`` raises."""
     d, m = send.delivery, send.delivery.msg
     if (type(m) is FrameMsg and type(m.data) is SlotFrame and m.ref is None and m.jpeg is None
             and (m.meta is None or type(m.meta) is FrameMeta)):
         try:
             meta = None if m.meta is None else flatten(m.meta)
         except TypeError:
-            return (OBJECT, send)
+            return (OBJECT, send.seq, _pickled(send))
         s = m.data
         return (FRAME, send.seq, d.cid, _port(d.port), d.cascade, d.reply_to, m.robot, m.sim_t,
                 (s.name, s.shape, s.dtype), m.trace, meta)
-    return (OBJECT, send)
+    return (OBJECT, send.seq, _pickled(send))
 
 
 def _reply(d: Delivery, meta: Any) -> tuple:
     """One reply item: ``(cid, port, kind index, robot, sim_t, data, meta, trace)``, its detections flattened
-    (``data`` then ``("D", [...])``, else ``("o", data)``) and its meta :data:`SAME_META` when it is ``meta``."""
+    (``data`` then ``("D", [...])``, else ``("o", pickled data)``) and its meta :data:`SAME_META` when it is
+    ``meta`` (else None or ``("o", pickled meta)``)."""
     m = d.msg
     k = _KIND.get(type(m))
     if (k is None or type(d) is not Delivery or d.cascade or d.reply_to is not None or m.tok is not None
             or len(m.__dict__) != _NATTR[k] or (type(m) is FrameMsg and (m.ref is not None or m.jpeg is not None))):
         raise TypeError(type(m).__name__)
-    data: tuple = ("o", m.data)
     if type(m) is DetectionsMsg and type(m.data) is list and all(type(x) is Detection for x in m.data):
-        data = ("D", [flatten(x) for x in m.data])
+        data: tuple = ("D", [flatten(x) for x in m.data])
+    else:
+        data = ("o", _pickled(m.data))
     if m.meta is None:
         mt: Any = None
     elif meta is not None and m.meta is meta:
         mt = SAME_META
     else:
-        mt = ("o", m.meta)
+        mt = ("o", _pickled(m.meta))
     return (d.cid, _port(d.port), k, m.robot, m.sim_t, data, mt, m.trace)
 
 
@@ -127,15 +138,20 @@ def encode_done(done: ChannelDone, meta: Any = None) -> tuple:
     """``done`` as the tuple that travels; ``meta``: the FrameMeta object of the frame the answered delivery
     carried (a reply whose ``meta`` is that very object travels as :data:`SAME_META`; anything but a FrameMeta is
     ignored here). Anything that is not a plain message (another Delivery class, a reply with ``cascade`` or
-    ``reply_to`` set, a message class or instance attribute the tuple does not carry) travels as
-    ``(OBJECT, done)``."""
+    ``reply_to`` set, a message class or instance attribute the tuple does not carry) has its reply list pickled
+    as a whole (bytes in the tuple). The tuple itself always decodes: replies that cannot be pickled here travel as
+    none, with the reason as the answer's ``error`` (the delivery then counts as failed at the sender)."""
     if type(meta) is not FrameMeta:
         meta = None
+    error = done.error
     try:
-        replies = [_reply(d, meta) for d in done.replies]
-    except TypeError:
-        return (OBJECT, done)
-    return (DONE, done.seq, replies, done.error, done.freed)
+        try:
+            replies: Any = [_reply(d, meta) for d in done.replies]
+        except TypeError:
+            replies = _pickled(done.replies)
+    except Exception as e:  # noqa: BLE001 - an output this process cannot pickle: the answer says so
+        replies, error = [], f"replies not sent: {type(e).__name__}: {e}"
+    return (DONE, done.seq, replies, error, done.freed)
 
 
 def encode_free(free: SlotFree) -> tuple:
@@ -158,26 +174,25 @@ def decode(t: tuple) -> Any:
     if tag == FREE:
         return SlotFree(tuple(t[1]))
     if tag == OBJECT:
-        return t[1]
+        return pickle.loads(t[2])
     raise ValueError(f"channel: a message of no known tag {tag!r}")
 
 
 def decode_done(replies: list, meta: Any) -> list[Delivery]:
-    """The reply items of a :data:`DONE` tuple (already :class:`Delivery` objects when it travelled as
-    :data:`OBJECT`) as Delivery objects; ``meta``: the FrameMeta the answered delivery carried (put back where a
+    """The reply items of a :data:`DONE` tuple (pickled as a whole when they could not be flattened) as Delivery
+    objects; ``meta``: the FrameMeta the answered delivery carried (put back where a
     reply says :data:`SAME_META`: the sender's components then get the very object it sent, as a component of its
     own actor would). Raises ValueError for a reply that says :data:`SAME_META` when ``meta`` is None (an answer
-    to a delivery this sender no longer has in flight)."""
+    to a delivery this sender no longer has in flight), and what unpickling a reply raises (e.g. a class this
+    process cannot import)."""
+    if isinstance(replies, bytes):
+        return pickle.loads(replies)
     out = []
     for r in replies:
-        if isinstance(r, Delivery):
-            out.append(r)
-            continue
         cid, port, k, robot, sim_t, (dk, data), mt, trace = r
-        if dk == "D":
-            data = [unflatten(x) for x in data]
+        data = [unflatten(x) for x in data] if dk == "D" else pickle.loads(data)
         if mt == SAME_META and meta is None:
             raise ValueError("channel: an answer refers to the metadata of a delivery no longer in flight")
-        m = meta if mt == SAME_META else (None if mt is None else mt[1])
+        m = meta if mt == SAME_META else (None if mt is None else pickle.loads(mt[1]))
         out.append(Delivery(cid, Port(*port), KINDS[k](robot, sim_t, data, m, trace)))
     return out

@@ -397,17 +397,18 @@ class DataPlane:
             else:
                 self.later(d.msg.tok, comp.offer, d.port, d.msg)
 
-    def frame_buffer(self, src: str, shape: tuple[int, ...]) -> np.ndarray | None:
-        """A writable ``shape`` uint8 array to make component ``src``'s next frame in: a slot lent by the same-node
-        channel of its first subscriber in another actor on this machine (:meth:`.channel_outlet.ChannelOutlet.lend`;
-        that outlet then sends the frame without copying it; every other reader reads it as any frame). None when
-        no subscriber is reached by a channel or its slots are all held: the frame is then made as usual."""
-        for cid, port, buf, _only in self.routes.get(src, ()):
-            if cid in self.components:
+    def frame_buffer(self, src: str, shape: tuple[int, ...], robot: str) -> np.ndarray | None:
+        """A writable ``shape`` uint8 array to make component ``src``'s next frame (of ``robot``) in: a slot lent by
+        the same-node channel of its first subscriber in another actor on this machine that takes ``robot``'s items
+        (:meth:`.channel_outlet.ChannelOutlet.lend`; that outlet then sends the frame without copying it; every
+        other reader reads it as any frame). None when no such subscriber is reached by a channel, its slots are
+        held, or its outlet cannot be made now (the frame is then made as usual, and publishing it reports why)."""
+        for cid, port, buf, only in self.routes.get(src, ()):
+            if cid in self.components or (only is not None and robot not in only):
                 continue
             try:
                 o = self._outlet(src, cid, port, buf)
-            except KeyError:
+            except Exception:  # noqa: BLE001 - no route or peer yet: publish() meets and reports it
                 continue
             if isinstance(o, ChannelOutlet):
                 return o.lend(shape)

@@ -108,7 +108,9 @@ class FrameSource(ABC):
     #: whether its :meth:`frame_at` can make the image in a buffer the camera lends (``frame_at(t, pose, out=...)``,
     #: ``out`` a writable ``(H, W, 3)`` uint8 array it must fill and return as the image): the camera lends one of a
     #: same-node channel's shared-memory slots when the frame's consumer is in another actor on this machine, and
-    #: the frame then crosses without a copy. False: ``frame_at(t, pose)`` only, and the frame is copied into a slot
+    #: the frame then crosses without a copy. False: ``frame_at(t, pose)`` only, and the frame is copied into a slot.
+    #: The source must not keep ``out`` or write it after returning (readers share it). Pulled sources only: a
+    #: :class:`LiveFrameSource`'s frames come from its reader
     renders_into: ClassVar[bool] = False
     #: whether its frames arrive on the host's wall clock (the run then needs speedup 1 and no lock-step)
     wall_clock: ClassVar[bool] = False

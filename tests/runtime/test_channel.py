@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import gc
 import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -171,19 +173,22 @@ def test_a_kept_frame_keeps_its_slot_until_it_is_collected(address):
 def test_a_frame_made_in_a_lent_slot_is_sent_without_a_copy_and_its_slot_waits_for_both_sides(address):
     """A camera that renders into a slot the outlet lends: the frame crosses with no copy (``in_place``, the
     ``channel_in_place`` counter, not ``channel_copy``), the receiver reads exactly its pixels, and the slot is
-    written again only once the receiver let go of the frame *and* nothing here references it any more; a lent
-    buffer never sent comes back when dropped. Frames not made in a lent slot are copied as before."""
+    lent or written again only once the receiver let go of the frame *and* nothing here references it any more.
+    Frames made here that stay referenced never take the last two slots: frames made elsewhere are still copied
+    into a slot, never sent in their message."""
     from aerodaas.actors.frames import FrameCopies
 
-    rx = Receiver()
+    rx = Receiver(keep=True)
     srv = ChannelServer(address, KEY, rx)
     copies = FrameCopies()
     out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None,
-                        copies=copies, max_slots=3)
+                        copies=copies, max_slots=4)
 
-    def made(value: int) -> FrameMsg:
+    def made(value: int) -> FrameMsg | None:
         buf = out.lend((48, 64, 3))
-        assert buf is not None and buf.flags.writeable
+        if buf is None:
+            return None
+        assert buf.flags.writeable
         buf[:] = value
         buf[0, 1, 2] = value + 1
         buf.flags.writeable = False
@@ -194,27 +199,102 @@ def test_a_frame_made_in_a_lent_slot_is_sent_without_a_copy_and_its_slot_waits_f
         slot_of_first = out._lent[first.data.ctypes.data]
         assert out.send(first) is not None
         assert _wait(lambda: len(rx.got) == 1 and not out._in_flight)
+        rx.keep = False  # the receiver keeps the first frame only
         assert rx.got[0][3][2:] == (9, int(_frame(9, (48, 64, 3)).data.sum() % 997))  # the pixels made in the slot
         assert out.in_place == 1 and copies.snapshot()["channel_copy"] == 0
         assert copies.snapshot()["channel_in_place"] == 1
-        # the receiver let go, but the frame is still referenced here: its slot is not lent or written again
-        second = made(20)
-        assert out._lent[second.data.ctypes.data] != slot_of_first
-        assert out.send(second) is not None and _wait(lambda: len(rx.got) == 2 and not out._in_flight)
-        assert out.send(_frame(30, (48, 64, 3))) is not None  # a frame made elsewhere: copied into a free slot
-        assert _wait(lambda: len(rx.got) == 3 and not out._in_flight)
-        assert out.stats()["slots"] == 3 and copies.snapshot()["channel_copy"] == 1
-        assert int(first.data[0, 0, 0]) == 9  # not overwritten by the frames after it
-        slot_of_second = out._lent[second.data.ctypes.data]
-        unsent = out.lend((48, 64, 3))  # the copy's slot: the receiver let go of it and nothing here holds it
-        assert unsent is not None and out._lent[unsent.ctypes.data] not in (slot_of_first, slot_of_second)
-        assert out.lend((48, 64, 3)) is None  # first, second and the unsent buffer hold all three slots here...
-        first = second = unsent = None
+        # this process lets go of the frame, the receiver keeps it: its slot is neither lent nor written again
+        first = None
         gc.collect()
-        again = made(40)  # ...until they are collected: a slot of theirs is lent again, no new one is made
-        assert out._lent[again.data.ctypes.data] in out._slots and out.stats()["slots"] == 3
+        second, third = made(20), made(21)
+        assert second is not None and third is not None
+        assert slot_of_first not in (out._lent[second.data.ctypes.data], out._lent[third.data.ctypes.data])
+        assert made(22) is None and out.lend_refused == 1  # two lent frames referenced here: the rest for copies
+        for v in (30, 31):  # frames made elsewhere are copied into the slot left, not sent in their messages
+            assert out.send(_frame(v, (48, 64, 3))) is not None
+            assert _wait(lambda: len(rx.got) == (v - 28) and not out._in_flight)
+        assert copies.snapshot()["channel_copy"] == 2 and out.inline_frames == 0 and out.stats()["slots"] == 4
+        assert int(rx.kept[0][0, 0, 0]) == 9  # the kept frame was not overwritten by anything after it
+        rx.kept.clear()  # the receiver lets go of everything it kept
+        gc.collect()
+        second = third = None
+        gc.collect()
+        assert _wait(lambda: all(s.free for s in out._slots.values()))
+        again = made(40)  # now a slot of theirs is lent again, and no new one is made
+        assert again is not None and out._lent[again.data.ctypes.data] in out._slots and out.stats()["slots"] == 4
         assert out.send(again) is not None and _wait(lambda: len(rx.got) == 4)
-        assert rx.got[3][3][2] == 40 and out.in_place == 3 and out.inline_frames == 0
+        assert rx.got[3][3][2] == 40 and out.in_place == 2 and out.inline_frames == 0
+    finally:
+        out.close()
+        srv.close()
+
+
+_CLOSE_UNDER_FRAMES = """
+import os, sys, time
+import numpy as np
+from aerodaas.actors.channel import ChannelServer, channel_address
+from aerodaas.actors.channel_outlet import ChannelOutlet
+from aerodaas.protocol.messages import FrameMsg, Port
+key = os.urandom(32)
+addr = channel_address(key, "close-under-frames/%d" % os.getpid())
+kept = []
+srv = ChannelServer(addr, key, lambda d: kept.append(d.msg.data) or [])
+out = ChannelOutlet(addr, key, "a#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None)
+lent = out.lend((48, 64, 3))
+lent[:] = 7
+lent.flags.writeable = False
+out.send(FrameMsg(robot="d1", sim_t=0.0, data=lent))
+deadline = time.monotonic() + 10
+while not kept and time.monotonic() < deadline:
+    time.sleep(0.01)
+out.close()   # the sender's end goes while a lent frame here and a frame over there are still referenced
+srv.close()
+time.sleep(0.2)
+print(int(lent.sum()), int(kept[0].sum()))
+"""
+
+
+def test_closing_a_channel_never_unmaps_a_frame_still_referenced_on_either_side():
+    """An outlet closed while this process still references a frame made in its slot (the recorder still encoding
+    it, the camera's latest frame) and a server whose sender went while its analytics still holds a frame: both
+    frames stay readable (a crash, SIGSEGV, before the mappings were tied to the frames' lifetimes)."""
+    r = subprocess.run([sys.executable, "-c", _CLOSE_UNDER_FRAMES], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    assert r.stdout.split() == [str(7 * 48 * 64 * 3)] * 2, r.stdout
+
+
+class _Unloadable:
+    """Pickles fine, fails to unpickle (as a class the other process cannot import would)."""
+
+    def __reduce__(self):
+        return (_refuse, ())
+
+
+def _refuse():
+    raise ImportError("no module named 'their_plugin'")
+
+
+def test_a_message_the_other_side_cannot_unpickle_fails_alone_and_the_channel_goes_on(address):
+    """A delivery the receiver cannot unpickle is answered as failed (the sender's in-flight place is given back);
+    an answer whose reply the sender cannot unpickle counts that delivery failed; either way the next frame goes
+    through on the same connection."""
+    replies: list = []
+
+    def deliver(d: Delivery) -> list:
+        if isinstance(d.msg, FrameMsg) and int(d.msg.data[0, 0, 0]) == 2:
+            return [Delivery("drone/d1", Port("in"), ValueMsg(robot="d1", sim_t=2.0, data=_Unloadable()))]
+        return Receiver()(d)
+
+    srv = ChannelServer(address, KEY, deliver)
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
+    try:
+        assert out.send(ValueMsg(robot="d1", sim_t=1.0, data=_Unloadable())) is not None
+        assert _wait(lambda: out.failed == 1 and not out._in_flight) and srv.failed == 1
+        assert out.send(_frame(2, (8, 8, 3))) is not None
+        assert _wait(lambda: out.failed == 2 and not out._in_flight) and replies == []
+        assert out.send(_frame(3, (8, 8, 3))) is not None
+        assert _wait(lambda: len(replies) == 1)
+        assert out.connected and out.reconnects == 0 and out.dropped == 0
     finally:
         out.close()
         srv.close()
@@ -474,40 +554,9 @@ def test_a_frame_freed_on_the_connections_thread_wakes_no_other_thread():
     from aerodaas.actors.channel import _freed
 
     freed, wake = deque(), threading.Event()
-    _freed(freed, wake, "slot-a", threading.get_ident())
+    _freed(freed, wake, "slot-a", threading.get_ident(), None)
     assert list(freed) == ["slot-a"] and not wake.is_set()
-    other = threading.Thread(target=_freed, args=(freed, wake, "slot-b", threading.get_ident()))
+    other = threading.Thread(target=_freed, args=(freed, wake, "slot-b", threading.get_ident(), None))
     other.start()
     other.join()
     assert list(freed) == ["slot-a", "slot-b"] and wake.is_set()
-
-
-def test_an_answer_that_does_not_decode_is_counted_failed_and_the_channel_goes_on(address, monkeypatch):
-    """An answer whose replies cannot be rebuilt (here: made to fail once) costs that delivery only: counted
-    failed, its slot and in-flight place given back, and the next frame's answer arrives as usual."""
-    import aerodaas.actors.channel_outlet as channel_mod
-
-    real = channel_mod.decode_done
-    calls = []
-
-    def once_broken(replies, meta):
-        calls.append(1)
-        if len(calls) == 1:
-            raise ValueError("a reply this sender cannot rebuild")
-        return real(replies, meta)
-
-    monkeypatch.setattr(channel_mod, "decode_done", once_broken)
-    rx = Receiver()
-    srv = ChannelServer(address, KEY, rx)
-    replies: list = []
-    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
-    try:
-        assert out.send(_frame(1, (8, 8, 3))) is not None
-        assert _wait(lambda: out.failed == 1 and not out._in_flight)
-        assert replies == [] and out.connected
-        assert out.send(_frame(2, (8, 8, 3))) is not None
-        assert _wait(lambda: len(replies) == 1)
-        assert out.failed == 1 and out.dropped == 0 and len(rx.got) == 2
-    finally:
-        out.close()
-        srv.close()

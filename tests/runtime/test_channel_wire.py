@@ -123,22 +123,32 @@ def test_what_the_tuples_do_not_cover_travels_as_the_objects():
     extra.__dict__["note"] = "an attribute beyond the fields"
     for send in (inline, value, theirs, frame_send(extra)):
         wire = encode_send(send)
-        assert wire[0] == OBJECT
+        assert wire[0] == OBJECT and wire[1] == send.seq and only_builtins(wire[:2]) and type(wire[2]) is bytes
         assert same_send(decode(pickle.loads(pickle.dumps(wire, 5))), send)
 
     m = meta()
+    noted = DetectionsMsg(robot="d1", sim_t=0.0, data=[], meta=m)
+    noted.note = "an attribute beyond the message's fields"
     for reply in (Delivery("d1/follow", Port("in"), MyDetections(robot="d1", sim_t=0.0, data=[], meta=m)),
                   Delivery("d1/follow", Port("in"), DetectionsMsg(robot="d1", sim_t=0.0, data=[], meta=m),
-                           reply_to="drone/d2")):
+                           reply_to="drone/d2"),
+                  Delivery("d1/follow", Port("in"), DetectionsMsg(robot="d1", sim_t=0.0, data=[], meta=m),
+                           cascade=True),
+                  Delivery("d1/follow", Port("in"), noted)):
         wire = encode_done(ChannelDone(7, [reply]), m)
-        assert wire[0] == OBJECT
-        (r,) = decode(pickle.loads(pickle.dumps(wire, 5))).replies
-        assert type(r.msg) is type(reply.msg) and r.reply_to == reply.reply_to and r.msg.meta == m
+        assert wire[0] != OBJECT and type(wire[2]) is bytes  # the replies pickled as a whole, the envelope not
+        (r,) = decode_done(decode(pickle.loads(pickle.dumps(wire, 5))).replies, m)
+        assert type(r.msg) is type(reply.msg) and (r.reply_to, r.cascade) == (reply.reply_to, reply.cascade)
+        assert r.msg.meta == m and vars(r.msg).get("note") == vars(reply.msg).get("note")
     # only a FrameMeta is left behind: a delivery's other metadata (a dict here) travels back itself
     d_meta = {"source": "gas"}
     wire = encode_done(ChannelDone(8, [Delivery("x", Port("in"), ValueMsg(robot="d1", sim_t=0.0, data=1,
                                                                           meta=d_meta))]), d_meta)
     assert wire[2][0][6] != SAME_META and decode_done(wire[2], None)[0].msg.meta == d_meta
+    # a reply this process cannot pickle: the answer still travels, with no replies and the reason as its error
+    bad = ChannelDone(9, [Delivery("x", Port("in"), ValueMsg(robot="d1", sim_t=0.0, data=lambda: 1))])
+    wire = encode_done(bad, None)
+    assert only_builtins(wire) and wire[1] == 9 and wire[2] == [] and "replies not sent" in wire[3]
     odd = ChannelDone(6, [Delivery("d1/follow", Port("in"), DetectionsMsg(robot="d1", sim_t=0.0, data=["not a box"]))])
     wire = encode_done(odd, None)
     assert wire[0] != OBJECT and decode_done(decode(wire).replies, None)[0].msg.data == ["not a box"]
