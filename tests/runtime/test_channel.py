@@ -560,3 +560,45 @@ def test_a_frame_freed_on_the_connections_thread_wakes_no_other_thread():
     other.start()
     other.join()
     assert list(freed) == ["slot-a", "slot-b"] and wake.is_set()
+
+
+def test_an_answer_to_a_delivery_no_longer_in_flight_is_dropped(address):
+    """An answer for a delivery number the outlet no longer has in flight (it was closed and reopened meanwhile, or
+    counted the delivery lost) is dropped: no reply handed on with metadata it cannot put back, nothing counted
+    failed; the answer to the delivery in flight arrives as usual, with the sender's own FrameMeta object."""
+    from multiprocessing import connection as mpc
+
+    from aerodaas.actors.channel_msgs import ChannelDone
+    from aerodaas.actors.channel_wire import decode, encode_done
+    from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
+
+    listener = mpc.Listener(address, family="AF_UNIX", authkey=KEY)
+
+    def serve() -> None:  # a peer answering a stale number first, then the delivery's own
+        conn = listener.accept()
+        item = decode(conn.recv())
+        d = item.delivery
+        nav = NavigationMsg(robot="d1", sim_t=d.msg.sim_t, data=AeroNavigation(waypoints=[]), meta=d.msg.meta)
+        reply = [Delivery("d1/scheduler", Port("priority", 1), nav)]
+        conn.send(encode_done(ChannelDone(item.seq + 100, reply, None, ()), d.msg.meta))
+        conn.send(encode_done(ChannelDone(item.seq, reply, None, ()), d.msg.meta))
+        try:
+            conn.recv()  # until the outlet closes
+        except (EOFError, OSError):
+            pass
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    replies: list = []
+    out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to="drone/d1", on_reply=replies.extend)
+    try:
+        f = _frame(4, (8, 8, 3))
+        f.meta = FrameMeta(robot_id="d1", sensor_id="cam", seq=4, capture_time=0.4, wall_time=time.time(),
+                           pose=FramePose(position=(0.0, 0.0, 10.0)),
+                           intrinsics=CameraIntrinsics(width=8, height=8, fx=8.0, fy=8.0, cx=4.0, cy=4.0))
+        assert out.send(f) is not None
+        assert _wait(lambda: len(replies) == 1 and not out._in_flight)
+        assert replies[0].msg.meta is f.meta and out.failed == 0 and out.connected
+    finally:
+        out.close()
+        listener.close()
