@@ -34,7 +34,6 @@ def shutdown_connection(conn: Any) -> None:
         pass
 
 
-
 class ChannelOutlet:
     """The sending end of an edge to component ``cid`` of a peer actor on the same machine, over that peer's
     channel (the same interface as :class:`~.remote_outlet.RemoteOutlet`: :meth:`send`, :meth:`stats`).
@@ -110,16 +109,16 @@ class ChannelOutlet:
                 try:
                     if item.replies and known:  # an answer to a delivery no longer in flight (closed): dropped
                         try:
-                            item = ChannelDone(item.seq, decode_done(item.replies, meta), item.error, item.freed)
+                            replies = decode_done(item.replies, meta)
                         except Exception:  # noqa: BLE001 - an answer that does not decode: failed, the channel goes on
                             with self._lock:
                                 self.failed += 1
                             continue
                         if tok is not None:  # the replies join the cascade that waited for this answer
-                            for d in item.replies:
+                            for d in replies:
                                 d.msg.tok = tok
                         try:
-                            self.on_reply(item.replies)
+                            self.on_reply(replies)
                         except Exception:  # noqa: BLE001 - the receiving component counts its own errors
                             pass
                 finally:
