@@ -75,3 +75,27 @@ def test_the_setup_hook_keeps_arrow_out_until_something_imports_it():
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "False", "True"], out.stdout
+
+
+def test_a_runs_driver_creates_actors_without_importing_arrow(tmp_path):
+    """The driver's side (``aerodaas.runtime.ray_start.init_ray``, a fresh local Ray as ``aerodaas run`` starts it):
+    its first actor creation builds Ray's serialisation context, and pyarrow stays out of the driver."""
+    import os
+    import subprocess
+
+    code = ("import sys\n"
+            "from aerodaas.runtime.ray_start import init_ray, shutdown_ray\n"
+            "init_ray(None)\n"
+            "import ray\n"
+            "@ray.remote(num_cpus=0)\n"
+            "class Echo:\n"
+            "    def echo(self, x):\n"
+            "        return x\n"
+            "print(ray.get(Echo.remote().echo.remote(41)) + 1, 'pyarrow' in sys.modules, flush=True)\n"
+            "shutdown_ray()\n")
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "AERODAAS_NO_ATTACH": "1", "RAY_TMPDIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300,
+                         env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.split()[-2:] == ["42", "False"], out.stdout
