@@ -30,6 +30,7 @@ run's own start on a small machine. Idle workers cost memory (``docs/clusters.md
 """
 from __future__ import annotations
 
+import gc
 import hashlib
 import importlib
 import os
@@ -55,6 +56,8 @@ PREIMPORT_MODULES = (
     "aerodaas.actors.scheduler_component", "aerodaas.actors.camera", "aerodaas.actors.recorder",
     "aerodaas.backends.sim", "aerodaas.sim.world", "aerodaas.perception.detect", "aerodaas.perception.tracking",
     "aerodaas.recording.writer", "onnxruntime",
+    # the follow analytics' track assignment (aerodaas.perception.tracking, on its first frame with tracks): 0.3 s
+    "scipy.optimize",
 )
 
 #: the environment variable Ray's ``default_worker.py`` reads for a module-path setup hook
@@ -63,12 +66,18 @@ _HOOK_ENV_FALLBACK = "__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"
 
 
 def preimport() -> None:
-    """Ray worker setup hook: import :data:`PREIMPORT_MODULES`. Never raises (a failed import is skipped)."""
+    """Ray worker setup hook: import :data:`PREIMPORT_MODULES`, then move everything they allocated out of the
+    cyclic garbage collector's sight (``gc.collect()`` then ``gc.freeze()``, the pattern CPython documents for
+    pre-fork servers): an actor's set-up collects once before its run (``DataPlane.watch_gc``), which then scans
+    only what the actor itself made — 0.06 s of CPU less per actor on the 2-core machine kind — and so does every
+    full collection during the run. Never raises (a failed import is skipped)."""
     for name in PREIMPORT_MODULES:
         try:
             importlib.import_module(name)
         except BaseException:  # noqa: BLE001 - a warm-up must never stop a worker from starting
             pass
+    gc.collect()
+    gc.freeze()
 
 
 #: the folder beside the hook module where each worker leaves an empty file named by its pid once its hook has run

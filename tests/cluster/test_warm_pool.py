@@ -160,11 +160,15 @@ def test_the_code_fingerprint_follows_module_files_only(tmp_path):
 
 
 def test_the_setup_hook_never_stops_a_worker(monkeypatch, tmp_path):
+    import gc
     import importlib
     import sys
 
     monkeypatch.setattr(warm_pool, "PREIMPORT_MODULES", ("aerodaas.no_such_module", "json"))
-    warm_pool.preimport()  # a failed import is left to the actor that needs the module
+    try:
+        warm_pool.preimport()  # a failed import is left to the actor that needs the module
+    finally:
+        gc.unfreeze()  # this test process's objects go back to the collector (preimport freezes them)
     env = warm_pool.setup_hook_env(tmp_path / "hook")
     assert env["__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"] == "aerodaas_warm_hook.preimport"
     assert env["PYTHONPATH"].split(os.pathsep)[0] == str(tmp_path / "hook")
@@ -215,3 +219,23 @@ def test_a_plugin_on_the_cluster_import_path_is_not_shipped(tmp_path):
     assert importable_by_cluster(str(site / "mod.py"), st)
     assert not importable_by_cluster(str(tmp_path / "elsewhere" / "plug"), st)
     assert not importable_by_cluster(str(site / "plug"), {})
+
+
+def test_a_warm_worker_holds_the_follow_assignment_and_hides_its_imports_from_the_collector():
+    """In a fresh interpreter, as in a warm worker: after the hook, the follow's track assignment (scipy.optimize)
+    is imported and what the imports allocated is frozen, so that the actor's own set-up collection
+    (``DataPlane.watch_gc``) scans only what the actor makes."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import gc, sys\n"
+            "from aerodaas.clusters.warm_pool import preimport\n"
+            "preimport()\n"
+            "print('scipy.optimize' in sys.modules, 'aerodaas.actors.drone' in sys.modules, gc.get_freeze_count())\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    scipy_in, drone_in, frozen = out.stdout.split()
+    assert (scipy_in, drone_in) == ("True", "True"), out.stdout
+    assert int(frozen) > 50_000, out.stdout  # the framework, Ray, numpy, OpenCV and scipy: about 115,000 objects
