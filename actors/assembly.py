@@ -33,16 +33,25 @@ from aerodaas.actors.camera import CameraComponent
 from aerodaas.sim.world import World
 
 
-def _capture_due(d: Any, tok: Any) -> None:
+#: the actor's clock sheds its cameras' due frames while it is more than this many control periods behind the wall
+#: clock (outside lock-step): control before sensing. A node that cannot keep up (40 drone actors with 640x480
+#: cameras at 15 FPS on two cores, docs/benchmarks.md "Control before the camera") then renders fewer, fresher
+#: frames instead of letting the renders take the CPU from the control ticks the clock is catching up on
+SHED_LATE_TICKS = 0.5
+
+
+def _capture_due(d: Any, tok: Any, clock_late: bool = False) -> None:
     """Drone ``d``'s cameras whose next frame is due at its vehicle time capture (in lock-step, as part of the
-    cascade ``tok``); after a jump of the vehicle clock the next frame is one period on, not a burst."""
+    cascade ``tok``); after a jump of the vehicle clock the next frame is one period on, not a burst. ``clock_late``:
+    the actor's clock is behind the wall clock (see :data:`SHED_LATE_TICKS`): a pulled camera's due frame is not
+    rendered (:meth:`~aerodaas.actors.camera.CameraComponent.try_capture`)."""
     b = d.backend
     for cam in d.cameras:
         if b.t + 1e-9 >= cam["next_t"]:
             cam["next_t"] += 1.0 / cam["fps"]
             if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
                 cam["next_t"] = b.t + 1.0 / cam["fps"]
-            cam["comp"].try_capture(b.pose_sample(), b.t, tok)
+            cam["comp"].try_capture(b.pose_sample(), b.t, tok, clock_late)
 
 
 def _halt_cameras(d: Any) -> None:
@@ -252,16 +261,19 @@ class ActorAssembly:
             while active:
                 step += 1
                 nominal = step * dt
+                behind_s = 0.0  # how far the clock is behind the wall clock at this step (wall s)
                 if not lock:  # simulated time ``nominal`` is computed when wall time reaches it, not one step early
                     lag = wall0 + nominal / sim.speedup - time.monotonic()
                     if lag > 0:
                         time.sleep(lag)
+                    else:
+                        behind_s = -lag
                 tok = Cascade() if lock else None
                 for d in active:
                     d.step(dt, tok)
                 for d in active:
                     if not d.done:  # settling: odometry only (:meth:`DroneComponent.settled`)
-                        _capture_due(d, tok)
+                        _capture_due(d, tok, behind_s > SHED_LATE_TICKS * d.tick_period / sim.speedup)
                     else:  # no more ticks: a stream camera stops capturing its arrivals too
                         _halt_cameras(d)
                 if tok is not None:  # a frame for a consumer that Ray restarts waits up to restart_hold_s for it

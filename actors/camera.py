@@ -60,6 +60,7 @@ class CameraComponent:
         self.ticks = 0
         self.frames = 0
         self.dropped_at_camera = 0
+        self.shed_late = 0  # of those, frames not rendered because the actor's clock was late (try_capture)
         self.not_recorded = 0  # frames the recorder refused (its queue full)
         #: the last frames' render time and capture dispatch delay (clock tick -> render start on the pool), ms
         self.render_ms: deque[float] = deque(maxlen=4096)
@@ -118,12 +119,14 @@ class CameraComponent:
         if isinstance(self.src, LiveFrameSource):
             self.stream = self.src.reader
 
-    def try_capture(self, pose: PoseSample, t: float, tok: Cascade | None) -> bool:
+    def try_capture(self, pose: PoseSample, t: float, tok: Cascade | None, clock_late: bool = False) -> bool:
         """Clock thread: a frame is due at run time ``t`` (s); ``pose`` is the vehicle's newest position sample
         (ENU m, ENU yaw deg) and the run time it is of (at most ``t``). Submits the capture unless the previous one
-        is still running (then counted in ``dropped_at_camera``). A stream camera keeps the pose sample and the
-        gimbal here and captures only a frame that is waiting (one that arrived while the previous capture ran);
-        the others are captured on arrival."""
+        is still running, or unless ``clock_late`` (the actor's clock is behind the wall clock: the frame would be
+        stale, and rendering it would take CPU from the control ticks the clock is catching up on; counted in
+        ``shed_late`` too); either way counted in ``dropped_at_camera``. A stream camera keeps the pose sample and
+        the gimbal here and captures only a frame that is waiting (one that arrived while the previous capture ran);
+        the others are captured on arrival, late or not (the vehicle's own camera sent them)."""
         self._keep_pose(pose)
         position, yaw = pose.position, pose.yaw_deg
         if self.stream is not None:
@@ -131,6 +134,10 @@ class CameraComponent:
             self._note_tick(t)
             return self.stream.waiting() and self._submit_stream_capture()
         self.ticks += 1
+        if clock_late:
+            self.dropped_at_camera += 1
+            self.shed_late += 1
+            return False
         if not self._busy.acquire(blocking=False):
             self.dropped_at_camera += 1
             return False
@@ -372,6 +379,7 @@ class CameraComponent:
         r = np.array(self.render_ms or [0.0])
         q = np.array(self.dispatch_ms or [0.0])
         return {"frames": self.frames, "ticks": self.ticks, "dropped_at_camera": self.dropped_at_camera,
+                "shed_late": self.shed_late,
                 "render_ms_median": float(np.median(r)),
                 "dispatch_ms_median": float(np.median(q)), "dispatch_ms_p99": float(np.percentile(q, 99)),
                 "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,

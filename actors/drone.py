@@ -283,6 +283,7 @@ class DroneComponent:
                 "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
                 "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
+                "frames_shed_late": sum(c["comp"].shed_late for c in self.cameras),
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
                 "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
 

@@ -117,9 +117,11 @@ def _camera_lines(st: dict, rep: dict) -> list[str]:
             lines.append(f"    camera {sid}: {c['frames']} frames from its video stream, {dropped} dropped by "
                          f"busy consumers")
         else:
+            shed = c.get("shed_late", 0)
             lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
-                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera, {dropped} dropped by "
-                         f"busy consumers")
+                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera"
+                         + (f" ({shed} while the clock was late)" if shed else "")
+                         + f", {dropped} dropped by busy consumers")
         v = c.get("video")
         if v:  # a video stream: what was decoded, what newest-wins replaced, outages, capture-to-hand-off time
             lines.append(f"      video {v['source']}: {v['decoded']} decoded, {v['overwritten']} replaced by a newer "
