@@ -45,9 +45,10 @@ def _send(port: int, method: str, path: str, body: bytes | None = None) -> tuple
 
 
 def _answers_200(port: int, path: str, tries: int = 120) -> bool:
-    """Whether GET ``path`` comes back 200 within ``tries`` requests. A loaded machine may keep an actor's first
-    answer (its worker imports the handles' component classes) or its first after SIGCONT past the API's
-    :data:`CALL_TIMEOUT_S`; that is a correct 503, so the test asks again instead of racing the clock."""
+    """Whether GET ``path`` comes back 200 within ``tries`` requests (0.5 s apart), every other answer being a 503
+    with ``Retry-After: 1`` (AssertionError otherwise). On a loaded machine an actor's first answer, or its first
+    after SIGCONT, can come later than the API's :data:`CALL_TIMEOUT_S` (CI saw it once; the cause was not
+    reproduced here); that 503 is correct, so the test asks again instead of racing the clock."""
     for _ in range(tries):
         status, body, headers = _send(port, "GET", path)
         if status == 200:
