@@ -1,6 +1,6 @@
 #!/bin/bash
 # Issue 46 item 5: the runs behind docs/bench/detect46_*.json (docs/perception.md, "Measured on held-out aerial sets").
-# usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets|scale|selftrain OUTDIR  (aerial splits laid
+# usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets|scale|selftrain|oblique2 OUTDIR  (aerial splits laid
 # out by examples/training/prepare_aerial_data.py in $S; the shared photos in $AERODAAS_DATA_DIR/imagery/brighton_beach;
 # for selftrain, MEVA's UAV montage in $MEVA and stage 4 of docs/perception.md in $R/v4/model.onnx)
 set -u
@@ -29,6 +29,26 @@ if [ "$1" = selftrain ]; then  # the self-training round (2026-11-28): candidate
     $E $J --out "$O/stage${c}_jekhor_test.json" >/dev/null
     $E --images $S/hit_uav_test/images --annotations $S/hit_uav_test/labels --classes car person \
       --frame-meta hit-uav --out "$O/stage${c}_hit_uav_test.json" >/dev/null
+  done
+elif [ "$1" = oblique2 ]; then  # two more evaluation-only oblique colour sets (2026-11-28): AU-AIR's sample, SAR persons
+  for m in aerial_nano yolox_nano; do
+    G=""; [ $m = yolox_nano ] && G="--group large_vehicle=truck,bus"
+    E="$B --threads 2 --tiles 0 --model $m"
+    $E $G --images $S/auair_eval_only/images --annotations $S/auair_eval_only/labels --classes car large_vehicle person \
+      --out "$O/${m}_auair_eval_only.json" >/dev/null
+    [ $m = yolox_nano ] && G="--group vehicle=car,large_vehicle,truck,bus" || G="--group vehicle=car,large_vehicle"
+    $E $G --images $S/auair_eval_only/images --annotations $S/auair_eval_only/labels --classes vehicle \
+      --out "$O/${m}_auair_eval_only_vehicle.json" >/dev/null
+    $E --images $S/sar_persons_eval_only/images --annotations $S/sar_persons_eval_only/labels --classes person \
+      --out "$O/${m}_sar_persons_eval_only.json" >/dev/null
+  done
+  # persons in colour with the COCO model the person apps use, tiled (640 px tiles + the whole frame, as the app could)
+  $B --threads 2 --model yolox_nano --tiles 0 640 --images $S/sar_persons_eval_only/images \
+    --annotations $S/sar_persons_eval_only/labels --classes person --out "$O/yolox_nano_sar_persons_tiles.json" >/dev/null
+  R=${R:-runs}
+  for c in v4 5b; do  # stage 4 and candidate 5b of the sections on oblique colour views
+    $B --threads 2 --tiles 0 --input-sizes 736x1280 --model-path $R/$c/model.onnx --images $S/auair_eval_only/images \
+      --annotations $S/auair_eval_only/labels --classes car large_vehicle person --out "$O/stage${c#v}_auair_eval_only.json" >/dev/null
   done
 elif [ "$1" = scale ]; then  # the input scale on far oblique views, and its check on HIT-UAV by view angle (2026-11-27)
   for in in 736x1280 1088x1920 1440x2560; do

@@ -307,8 +307,71 @@ def stage_cats_lab():
     st.finish()
 
 
+# --------------------------------------------------------------------------- source 4: AU-AIR sample (eval only)
+AUAIR_CLASS = {'Car': 0, 'Truck': 1, 'Van': 1, 'Bus': 1, 'Trailer': 1, 'Human': 2}  # Motorbike, Bicycle: not ours
+
+
+def stage_auair():
+    """github.com/sunw71/auairdataset, examples/auair_subset: 80 frames of AU-AIR (Bozcan and Kayacan, 2020), a
+    Parrot Bebop 2 over traffic in Aarhus, low oblique colour views from 4.8-30 m, 1920x1080, 10 frames from each
+    of 8 flights (file name frame_<flight start>_x_<n>.jpg -> group = flight).
+
+    Labels: annotations.json, per frame ``bbox`` [{top, left, height, width, class}] in pixels, classes Human, Car,
+    Truck, Van, Motorbike, Bicycle, Bus, Trailer (its ``categories``); the file's ``licenses`` are CC BY-NC-SA 2.0 and
+    CC BY-NC 2.0 -> non-commercial -> eval_only. Its boxes are drawn loosely and a row of parked cars is sometimes
+    one box, so score it at IoU 0.3 beside 0.5 (docs/perception.md).
+    """
+    g = GitReader(f'{MIRROR}/sunw71+auairdataset/repo')
+    ann = json.loads(g.read('examples/auair_subset/annotations.json'))
+    cats = ann['categories']
+    st = Stager('auair')
+    for a in ann['annotations']:
+        name = a['image_name']
+        data = g.read(f'examples/auair_subset/images/{name}')
+        if data is None:
+            continue
+        w, h = float(a['image_width']), float(a['image_height'])
+        boxes = [(AUAIR_CLASS[cats[b['class']]], (b['left'] + b['width'] / 2) / w, (b['top'] + b['height'] / 2) / h,
+                  b['width'] / w, b['height'] / h) for b in a['bbox'] if cats[b['class']] in AUAIR_CLASS]
+        st.add(name, data, boxes, group='auair_' + name.split('_')[1], split='eval_only',
+               licence='CC-BY-NC-SA-2.0', licence_url='https://creativecommons.org/licenses/by-nc-sa/2.0/',
+               attribution='AU-AIR dataset, I. Bozcan and E. Kayacan (Aarhus University), subset in sunw71/auairdataset',
+               view='oblique', altitude_m=round(a['altitude'] / 1000.0, 1), modality='rgb', orig_name=name,
+               notes='non-commercial licence; loose boxes, some rows of parked cars boxed as one')
+    g.close()
+    st.finish()
+
+
+# --------------------------------------------------------------------------- source 5: UAV search and rescue (eval only)
+def stage_sar_persons():
+    """github.com/gvessio/uav-search-and-rescue (Castellano et al., 2020): 310 frames of oblique colour drone video
+    found on YouTube, beaches (110) and mountains (200), half with persons; YOLO labels, class 1 = person.
+
+    No licence file; its README: "intended for testing and evaluation purposes only" -> eval_only. The frames are
+    not named by video, so each scene is one group.
+    """
+    g = GitReader(f'{MIRROR}/gvessio+uav-search-and-rescue/repo')
+    st = Stager('sar_persons')
+    files = set(g.ls())
+    for n in sorted(x for x in files if '/frames/' in x):
+        scene, stem = n.split('/')[1], os.path.splitext(os.path.basename(n))[0]
+        data, lab = g.read(n), g.read(f'dataset/{scene}/annotations/{stem}.txt')
+        if data is None:
+            continue
+        boxes = [(2,) + tuple(float(x) for x in p[1:]) for p in (line.split() for line in
+                 (lab or b'').decode().splitlines()) if len(p) == 5 and p[0] == '1']
+        st.add(f'{scene}_{stem}{os.path.splitext(n)[1]}', data, boxes, group=f'sar_{scene}', split='eval_only',
+               licence='LicenseRef-evaluation-only', licence_url='https://github.com/gvessio/uav-search-and-rescue',
+               attribution='G. Castellano, D. Carone, F. Scigliuto, G. Vessio, doi:10.5281/zenodo.3924925',
+               view='oblique', altitude_m='', modality='rgb', orig_name=n,
+               notes='README: for testing and evaluation only; YouTube footage; only persons labelled')
+    g.close()
+    st.finish()
+
+
 # --------------------------------------------------------------------------- driver
-SOURCES = {'jekhor': stage_jekhor, 'hit_uav': stage_hit_uav, 'cats_lab': stage_cats_lab}
+SOURCES = {'jekhor': stage_jekhor, 'hit_uav': stage_hit_uav, 'cats_lab': stage_cats_lab, 'auair': stage_auair,
+           'sar_persons': stage_sar_persons}
 
 
 def merge_cards():
