@@ -2,6 +2,7 @@
 aborted (the queue is cleared, it never resumes) and replaced by following the person.
 Needs real imagery and YOLOX-Nano (AERODAAS_DATA_DIR, AERODAAS_MODEL_DIR)."""
 from aerodaas import *
+from aerodaas.perception.tiling import Tiling
 
 env = Environment("search_and_rescue.json")
 edge = env.get_compute_resource_by_id("edge")
@@ -15,7 +16,10 @@ search = AeroNavigation(NavigationType.DISTANCE_DRIVEN,
                         SchedulingType.ORDERED, name="search")
 drone.navigate(scheduler.generate_navigation(search))
 
-detector = ObjectDetector("yolox_nano", classes=["person"], score_threshold=0.12)
+# persons in colour from the air: the COCO model by 640 px slices (a 1080p camera: 8 slices + the whole frame; the
+# simulated 640x480 one: one slice, the frame itself). Real oblique footage: recall 0.10 whole, 0.44 sliced
+# (docs/perception.md, "Persons in colour"); the aerial model learnt persons from thermal frames only
+detector = ObjectDetector("yolox_nano", classes=["person"], score_threshold=0.12, tiling=Tiling(tile=640))
 detector.deploy(edge)
 follow = FollowAnalytics(target_classes=["person"], max_speed=2.0, gate_m=3.0, confirm_hits=4)
 follow.deploy(edge)
