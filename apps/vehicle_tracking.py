@@ -14,9 +14,10 @@ survey = AeroListData([Waypoint(id=f"wp{i + 1}", x=x, y=-4, z=16, hover_duration
 drone_nav = scheduler.generate_navigation(PriorityQueue(survey, priority=2))
 
 vehicles = ["car", "large_vehicle"]
-# the shipped aerial model (MODEL_CARD.md) at the camera's own 640x480, not upscaled; one NMS over its vehicle
-# classes (a car is not also a large vehicle). The COCO one stays by name: "yolox_nano", ["car", "truck", "bus"]
-detector = ObjectDetector("aerial_nano", classes=vehicles, score_threshold=0.3, input_size=(480, 640),
+# the shipped aerial model (MODEL_CARD.md), never enlarging a frame (a 640x480 camera's go in at 480x640, a 1080p
+# one's at the model's 736x1280); one NMS over its vehicle classes (a car is not also a large vehicle). The COCO
+# one stays by name: "yolox_nano", ["car", "truck", "bus"]
+detector = ObjectDetector("aerial_nano", classes=vehicles, score_threshold=0.3, upscale=False,
                           class_groups={"vehicle": vehicles})
 detector.deploy(edge)
 # follows one ByteTrack track id, and only one that moves (>= 0.5 m/s): the aerial model also sees parked cars

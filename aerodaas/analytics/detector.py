@@ -28,11 +28,13 @@ class ObjectDetector(Analytics):
     Bring your own model (issue 28): ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
     ``"yolox"``, ``"nanodet"`` or ``"ultralytics"`` (YOLOv5 / YOLOv8 / YOLO11 ONNX exports,
     :mod:`aerodaas.perception.decoders`); ``class_names`` (else the model's metadata ``names``, else COCO for the
-    YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes. ``nms_threshold`` (IoU),
+    YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes; ``upscale=False``: a frame smaller
+    than the input is not enlarged (with a dynamic-size model it goes in at its own size, rounded up to multiples of
+    32: a 640x480 camera's frames at 480x640, a 1080p camera's at the model's input). ``nms_threshold`` (IoU),
     ``agnostic_nms`` (one NMS over all classes) and ``class_groups`` (``{"vehicle": ["car", "truck", "bus"]}``:
     class-agnostic NMS within a group); ``class_thresholds`` per class. ``tiling``: a
     :class:`aerodaas.perception.tiling.Tiling` for small objects in large frames. Options that need no model file
-    (thresholds, ``format``, ``model`` name, ``input_size``, ``threads``, ``batch``, tiling, tracker) raise
+    (thresholds, ``format``, ``model`` name, ``input_size``, ``threads``, ``batch``, ``upscale``, tiling, tracker) raise
     ValueError naming the field and the value where the detector is built; :meth:`check` checks them again with the
     model's class names and the model file in the pre-flight, before Ray starts (``aerodaas run``/``plan`` exit 2);
     :meth:`process` before :meth:`setup` raises RuntimeError.
@@ -68,12 +70,13 @@ class ObjectDetector(Analytics):
                  nms_threshold: float = 0.45, agnostic_nms: bool = False,
                  class_groups: dict[str, Iterable[str]] | None = None, input_size: tuple[int, int] | None = None,
                  class_names: Sequence[str] | None = None, tiling: Any = None, tracker: Any = None,
-                 providers: Any = None) -> None:
+                 providers: Any = None, upscale: bool = True) -> None:
         super().__init__(name)
         # what needs no model file fails where the app wrote it; the model's own names in check() (pre-flight)
         check_detector_values(name=self.name, model=model, model_path=model_path, format=format,
                               score_threshold=score_threshold, nms_threshold=nms_threshold,
-                              class_thresholds=class_thresholds, input_size=input_size, threads=threads)
+                              class_thresholds=class_thresholds, input_size=input_size, threads=threads,
+                              upscale=upscale)
         if not (isinstance(batch, int) and batch >= 1):
             raise ValueError(f"ObjectDetector batch must be an integer >= 1 (frames per inference call), got {batch!r}")
         self.batch = batch
@@ -87,6 +90,7 @@ class ObjectDetector(Analytics):
         self.agnostic_nms = agnostic_nms
         self.class_groups = {g: normalise_classes(m, f"class_groups[{g!r}]") for g, m in (class_groups or {}).items()}
         self.input_size = tuple(input_size) if input_size is not None else None
+        self.upscale = upscale
         self.class_names = list(class_names) if class_names is not None else None
         self.tiling = tiling
         if tiling is not None:  # a bad slice size fails where the app wrote it (ValueError naming the field)
@@ -129,7 +133,7 @@ class ObjectDetector(Analytics):
                                classes=self.classes, score_threshold=self.score_threshold,
                                nms_threshold=self.nms_threshold, class_thresholds=self.class_thresholds,
                                class_groups=self.class_groups, input_size=self.input_size,
-                               class_names=self.class_names, threads=self.threads)
+                               class_names=self.class_names, threads=self.threads, upscale=self.upscale)
         self.shipped = ShippedModel.read(self.model_path)
 
     def setup(self) -> None:
@@ -145,7 +149,8 @@ class ObjectDetector(Analytics):
                                            classes=self.classes, class_thresholds=self.class_thresholds,
                                            intra_op_threads=self.threads, agnostic_nms=self.agnostic_nms,
                                            class_groups=self.class_groups or None, input_size=self.input_size,
-                                           class_names=self.class_names, providers=self.providers)
+                                           class_names=self.class_names, providers=self.providers,
+                                           upscale=self.upscale)
         except ProviderUnavailableError as e:
             raise ProviderUnavailableError(f"analytics {self.name!r}: {e}") from None
         self.session_providers = self.detector.session_providers

@@ -142,9 +142,8 @@ class UltralyticsDetector(_OnnxDetector):
         return [f"class{i}" for i in range(nc)]
 
     def _preprocess(self, image: np.ndarray):
-        ih, iw = self.input_hw
         h, w = image.shape[:2]
-        r = min(ih / h, iw / w)
+        r, (ih, iw) = self._scale_and_canvas(h, w)
         nw, nh = int(round(w * r)), int(round(h * r))
         dw, dh = (iw - nw) / 2, (ih - nh) / 2
         top, left = int(round(dh - 0.1)), int(round(dw - 0.1))
@@ -167,7 +166,7 @@ class UltralyticsDetector(_OnnxDetector):
         raise RuntimeError(f"{self.model_path}: output shape {outputs[0].shape} is neither (1, 4+{nc}, A) nor "
                            f"(1, A, 5+{nc}) for {nc} classes")
 
-    def _candidates(self, outputs, min_score: float):
+    def _candidates(self, outputs, min_score: float, ctx=None):
         rows, has_obj = self._rows(outputs)
         if has_obj:
             idx = np.flatnonzero(rows[:, 4] >= min_score)
@@ -176,7 +175,7 @@ class UltralyticsDetector(_OnnxDetector):
         idx = np.flatnonzero(cls.max(axis=1) >= min_score)
         return idx, cls[idx]
 
-    def _boxes(self, outputs, idx: np.ndarray) -> np.ndarray:
+    def _boxes(self, outputs, idx: np.ndarray, ctx=None) -> np.ndarray:
         rows, _ = self._rows(outputs)
         p = rows[idx, :4]
         return np.concatenate([p[:, :2] - p[:, 2:4] / 2, p[:, :2] + p[:, 2:4] / 2], axis=1)

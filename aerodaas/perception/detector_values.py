@@ -65,10 +65,10 @@ def check_input_size(input_size: Any) -> tuple[int, int]:
 def check_detector_values(*, name: str = "detector", model: str = "yolox_nano", model_path: Any = None,
                           format: str = "auto", score_threshold: float = 0.3, nms_threshold: float = 0.45,
                           class_thresholds: dict[str, float] | None = None, input_size: Any = None,
-                          threads: int = 1) -> None:
+                          threads: int = 1, upscale: Any = True) -> None:
     """The checks of a detector configuration that need no model file (thresholds in [0, 1], ``format``, a known
     shipped ``model`` name or a ``model_path`` string, ``input_size`` multiples of 32, ``threads`` an integer >= 0
-    (onnxruntime intra-op threads; 0 is its default)): cheap, without cv2 or onnxruntime, so
+    (onnxruntime intra-op threads; 0 is its default), ``upscale`` a bool): cheap, without cv2 or onnxruntime, so
     :class:`~aerodaas.analytics.detector.ObjectDetector` runs them where the app builds it. Raises ValueError
     starting with ``analytics {name!r}:`` and naming the field and the value."""
     try:
@@ -85,6 +85,8 @@ def check_detector_values(*, name: str = "detector", model: str = "yolox_nano", 
                              f"got model={model!r}")
         if model_path is not None and not isinstance(model_path, (str, os.PathLike)):
             raise ValueError(f"model_path must be a file path, got {model_path!r}")
+        if not isinstance(upscale, bool):
+            raise ValueError(f"upscale must be True or False (enlarge a frame smaller than the input), got {upscale!r}")
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
             raise ValueError(f"threads must be an integer >= 0 (onnxruntime intra-op threads, 0: its default), "
                              f"got {threads!r}")

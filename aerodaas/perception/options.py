@@ -28,14 +28,16 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
                            class_thresholds: dict[str, float] | None = None,
                            class_groups: dict[str, Iterable[str]] | None = None,
                            input_size: tuple[int, int] | None = None,
-                           class_names: list[str] | None = None, threads: int = 1) -> dict[str, Any]:
+                           class_names: list[str] | None = None, threads: int = 1,
+                           upscale: Any = True) -> dict[str, Any]:
     """Check a detector configuration without Ray; ``model_path`` (if given) is opened with onnxruntime to read its
     format, input size and class names (:func:`aerodaas.perception.decoders.inspect_model`). Returns
     ``{"format", "class_names", "input_hw"}`` as they will be used. Every error is a ValueError whose message
     starts with ``analytics {name!r}:`` and names the field and the value."""
     check_detector_values(name=name, model=model, model_path=model_path, format=format,
                           score_threshold=score_threshold, nms_threshold=nms_threshold,
-                          class_thresholds=class_thresholds, input_size=input_size, threads=threads)
+                          class_thresholds=class_thresholds, input_size=input_size, threads=threads,
+                          upscale=upscale)
     pre = f"analytics {name!r}: "
     try:
         hw = check_input_size(input_size) if input_size is not None else None

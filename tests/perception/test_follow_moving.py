@@ -162,7 +162,7 @@ def _roundabout() -> tuple[list, dict]:
 
     from aerodaas.perception.detect import AerialDetector
 
-    det = AerialDetector(input_size=(480, 640), score_threshold=0.3, classes=VEHICLES,
+    det = AerialDetector(upscale=False, score_threshold=0.3, classes=VEHICLES,
                          class_groups={"vehicle": VEHICLES})
     with av.open(str(ROUNDABOUT)) as c:
         frames = [cv2.resize(f.to_ndarray(format="bgr24"), (640, 480), interpolation=cv2.INTER_LINEAR)
