@@ -36,6 +36,7 @@ _ORIGIN: dict[str, tuple[str, str]] = {
     "INavigate": ("aerodaas.schedulers", "TrajectoryScheduler"),
     "TrackAnalytics": ("aerodaas.analytics.track", "TrackAnalytics"),
     "ByteTrackConfig": ("aerodaas.perception.tracking", "ByteTrackConfig"),
+    "Tiling": ("aerodaas.perception.tiling", "Tiling"),
     "MovingTarget": ("aerodaas.analytics.motion", "MovingTarget"),
 }
 
@@ -46,7 +47,7 @@ __all__ = [
     "NavigationType", "SchedulingType", "PriorityQueue", "Waypoint", "VelocityCommand", "Odometry", "Detection",
     "MissionState", "IllegalTransition", "ConfigError", "TrajectoryScheduler", "NearestNeighborScheduler",
     "INavigate", "TwoOptScheduler", "ActionCommand", "TrackAnalytics", "ByteTrackConfig",
-    "MovingTarget",
+    "MovingTarget", "Tiling",
 ]
 
 
@@ -77,6 +78,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs read: the eager imports the laz
     from aerodaas.model.types import (ActionCommand, AeroNavigation, Detection, NavigationType,  # noqa: F401
                                       Odometry, PriorityQueue, SchedulingType, VelocityCommand, Waypoint)
     from aerodaas.navigation.fsm import IllegalTransition, MissionState  # noqa: F401
+    from aerodaas.perception.tiling import Tiling  # noqa: F401
     from aerodaas.perception.tracking import ByteTrackConfig  # noqa: F401
     from aerodaas.schedulers import NearestNeighborScheduler, TrajectoryScheduler, TwoOptScheduler  # noqa: F401
 

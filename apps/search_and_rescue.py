@@ -2,7 +2,6 @@
 aborted (the queue is cleared, it never resumes) and replaced by following the person.
 Needs real imagery and YOLOX-Nano (AERODAAS_DATA_DIR, AERODAAS_MODEL_DIR)."""
 from aerodaas import *
-from aerodaas.perception.tiling import Tiling
 
 env = Environment("search_and_rescue.json")
 edge = env.get_compute_resource_by_id("edge")

@@ -3,7 +3,6 @@ and the follow analytics keeps the drone ~2 m behind them. In parallel an emerge
 same frames for a fall and commands a landing (needs: pip install "aerodaas[fall]"; without it the app runs
 without that check and says so). Needs real imagery and YOLOX-Nano (AERODAAS_DATA_DIR, AERODAAS_MODEL_DIR)."""
 from aerodaas import *
-from aerodaas.perception.tiling import Tiling
 from aerodaas.analytics.extra import FallDetector
 
 env = Environment("situation_awareness.json")
