@@ -45,6 +45,9 @@ elif [ "$1" = oblique2 ]; then  # two more evaluation-only oblique colour sets (
   # persons in colour with the COCO model the person apps use, tiled (640 px tiles + the whole frame, as the app could)
   $B --threads 2 --model yolox_nano --tiles 0 640 --images $S/sar_persons_eval_only/images \
     --annotations $S/sar_persons_eval_only/labels --classes person --out "$O/yolox_nano_sar_persons_tiles.json" >/dev/null
+  aerodaas bench detect --names car large_vehicle person --repeat 1 --sweep --thresholds 0.1 0.15 0.2 0.3 --overlap 0.2 \
+    --threads 2 --model yolox_nano --tiles 416 960 --images $S/sar_persons_eval_only/images \
+    --annotations $S/sar_persons_eval_only/labels --classes person --out "$O/yolox_nano_sar_persons_tiles_416_960.json" >/dev/null
   R=${R:-runs}
   for c in v4 5b; do  # stage 4 and candidate 5b of the sections on oblique colour views
     $B --threads 2 --tiles 0 --input-sizes 736x1280 --model-path $R/$c/model.onnx --images $S/auair_eval_only/images \
