@@ -30,5 +30,11 @@ def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:
     return False
 
 
+def position_ready(backend) -> bool:
+    """HOME_POSITION came and the autopilot's own reports say it can arm (its EKF has a position estimate):
+    PX4 refuses LOITER before that, and HOME_POSITION alone comes up to ``ekf_gps_s`` vehicle seconds earlier."""
+    return backend.telemetry.home_received and not backend.actions.not_ready_reasons()
+
+
 def dist(a, b) -> float:
     return float(np.linalg.norm(np.asarray(a, float) - np.asarray(b, float)))

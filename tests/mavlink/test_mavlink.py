@@ -27,6 +27,7 @@ from tests.mavlink.emulated import (
     RTL_PARAMS,
     VEHICLE_HOME,
     dist,
+    position_ready,
     run_until,
 )
 
@@ -214,7 +215,7 @@ def test_imported_plan_round_trip(fly, autopilot):
 def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     """Single lost packets: the backend's bounded retries recover each, and nothing else is lost."""
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
-    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    assert run_until(b, lambda: position_ready(b), 10)
     b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     emu.drop_next("COMMAND_ACK")  # the arm command's acknowledgement is lost: re-sent once, then acknowledged
     b.arm()
@@ -239,7 +240,7 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     loaded machine: PX4 armed, no ACK arrived, the run died): the HEARTBEAT shows the mode / the armed flag, so
     the command is done (``command_ack_lost``); a command whose effect never shows still raises."""
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 1})
-    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    assert run_until(b, lambda: position_ready(b), 10)
     mode = "GUIDED" if autopilot == "ardupilot" else "LOITER"
     b.drain_events()
     emu.drop_next("COMMAND_ACK", count=2)

@@ -30,6 +30,7 @@ from tests.mavlink.emulated import (
     PREARM_PREFIX,
     VEHICLE_HOME,
     dist,
+    position_ready,
     run_until,
 )
 
@@ -90,7 +91,7 @@ def test_accepted_but_never_shown_mode_or_arming_raises(fly, autopilot):
 
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.5, "heartbeat_timeout_s": 1.0},
                  ack_only_commands={M.MAV_CMD_DO_SET_MODE})
-    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    assert run_until(b, lambda: position_ready(b), 10)
     first, target = ("STABILIZE", "GUIDED") if autopilot == "ardupilot" else ("MANUAL", "LOITER")
     t0 = time.monotonic()
     with pytest.raises(CommandNotConfirmed) as e:
@@ -116,7 +117,7 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     from pymavlink.dialects.v20 import ardupilotmega as M
 
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.3, "command_retries": 2})
-    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    assert run_until(b, lambda: position_ready(b), 10)
     b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     arm = M.MAV_CMD_COMPONENT_ARM_DISARM
     emu.reject_next(arm, 2)
