@@ -31,8 +31,10 @@ def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:
 
 
 def position_ready(backend) -> bool:
-    """HOME_POSITION came and the autopilot's own reports say it can arm (its EKF has a position estimate):
-    PX4 refuses LOITER before that, and HOME_POSITION alone comes up to ``ekf_gps_s`` vehicle seconds earlier."""
+    """HOME_POSITION came and the autopilot's own reports say it can arm (its EKF has a position estimate).
+    HOME_POSITION alone is not enough before a mode that needs a position (PX4 LOITER): PX4 sets home from a GPS
+    fix before its estimator's global position is valid (commander HomePosition.cpp,
+    ``can_set_home_gpos_first_time``), which the emulator models as ``ekf_gps_s`` vehicle seconds between the two."""
     return backend.telemetry.home_received and not backend.actions.not_ready_reasons()
 
 
