@@ -285,9 +285,11 @@ class _OnnxDetector:
         """Detect in several images (each ``(H, W, 3)`` ``uint8`` BGR, sizes may differ); returns one detection list
         per image, in order, each exactly as :meth:`detect` returns it for that image alone.
 
-        With a model whose input batch dimension is dynamic (``batch_dynamic``), the images go through
-        onnxruntime together, up to ``max_batch`` per call (an ``(n, 3, h, w)`` input, outputs split along axis 0);
-        with a fixed-batch model (both shipped ones: ``(1, 3, 416, 416)``) this is a loop over :meth:`detect`.
+        With a model whose input batch dimension is dynamic (``batch_dynamic``: the shipped ``aerial_nano``), the
+        images go through onnxruntime together, up to ``max_batch`` consecutive ones per call whose input has one
+        size (an ``(n, 3, h, w)`` input, outputs split along axis 0; with ``upscale=False`` the size follows the
+        frame, so a change of frame size starts a new call); with a fixed-batch model (the COCO ``yolox_nano`` and
+        ``nanodet_plus_m_416``: ``(1, 3, 416, 416)``) this is a loop over :meth:`detect`.
         ``last_timing`` then holds the whole call's times (ms), ``last_batch`` the most images in one onnxruntime
         call and ``last_batched`` how many images shared a call with others. Raises ``ValueError`` (naming the image's index, shape and dtype) before any inference if an image is
         not a 3-channel ``uint8`` array, and ``ValueError`` if ``max_batch`` < 1."""
