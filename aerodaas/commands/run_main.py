@@ -42,7 +42,7 @@ def _run_options(args: argparse.Namespace) -> "RunOptions | int":
         live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
     return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
                       overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
-                      lockstep=True if args.lockstep else None, dashboard=bool(getattr(args, "dashboard", False)),
+                      lockstep=True if args.lockstep else None, recorder_hold_s=args.recorder_hold, dashboard=bool(getattr(args, "dashboard", False)),
                       progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live,
                       live_access=access, tls_cert=args.tls_cert, tls_key=args.tls_key, insecure=bool(args.insecure))
 
