@@ -96,7 +96,8 @@ def build_detectors(model: str = "aerial_nano", classes: Sequence[str] | None = 
     if is_file and not Path(model).is_file():
         raise LabelInputError(f"--model {model!r}: no such file")
     if not is_file and model not in DETECTORS:
-        raise LabelInputError(f"--model {model!r}: not a known model ({', '.join(sorted(DETECTORS))}) nor an .onnx file")
+        raise LabelInputError(f"--model {model!r}: not a known model ({', '.join(sorted(DETECTORS))}) "
+                              "nor an .onnx file")
 
     def make(**kw):
         if is_file:
