@@ -112,7 +112,7 @@ def build_detectors(model: str = "aerial_nano", classes: Sequence[str] | None = 
             raise LabelInputError(f"--classes {','.join(classes)}: unknown class(es) {unknown}; the model "
                                   f"{model!r} has {names}")
     keep = [n for n in names if not classes or n in classes]
-    base = make(score_threshold=low, classes=keep)
+    base = probe if keep == names else make(score_threshold=low, classes=keep)
     if strong == "enlarged":
         h, w = base.input_hw
         stronger = make(score_threshold=low, classes=keep, input_size=(_round32(h * ENLARGE), _round32(w * ENLARGE)))

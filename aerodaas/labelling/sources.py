@@ -200,6 +200,7 @@ class VideoSource:
                 if not box.streams.video:
                     raise LabelInputError(f"video {self.source!r}: no video stream")
                 stream = box.streams.video[0]
+                stream.thread_type = "AUTO"  # FFmpeg's frame and slice threads
                 rate = float(stream.average_rate) if stream.average_rate else 0.0
                 t0 = None
                 for frame in box.decode(stream):

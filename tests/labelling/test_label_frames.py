@@ -14,7 +14,7 @@ from aerodaas import cli
 from aerodaas.labelling import frames as frames_mod
 from aerodaas.recording.writer import McapRecorder
 from aerodaas.training.dataset import load_set, sequence_of
-from tests.labelling.footage import SIZE, scene, write_recording, write_video
+from tests.labelling.footage import SIZE, write_recording, write_video
 
 REPO = Path(__file__).resolve().parents[2]
 CLIP = REPO / "tests" / "data" / "meva_uav" / "uav_parked_cars.mp4"
@@ -170,4 +170,3 @@ def test_uniform_picks_evenly_spaced_frames(small, tmp_path):
     assert sel["parameters"]["uniform"] is True
     assert [f["frame"] for f in sel["frames"]] == [0, 2, 4]  # one per scene: the repeats were dropped
     assert all(f["reason"] == "evenly spaced (uniform)" for f in sel["frames"])
-    assert scene(0).shape[:2] == SIZE
