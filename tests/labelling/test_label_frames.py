@@ -4,6 +4,7 @@ agree with each other; bad input exits 2 naming the problem, with nothing writte
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import cv2
@@ -133,7 +134,8 @@ def small(tmp_path_factory) -> Path:
     (["A.mp4", "--classes", "car,boat"], r"--classes car,boat: unknown class\(es\) \['boat'\].*'person'"),
     (["A.mp4", "--model", "nope"], r"--model 'nope': not a known model"),
     (["A.mp4", "--per-flight-quota", "0"], r"--per-flight-quota 0: must be >= 1"),
-])
+], ids=["recording-without-camera", "undecodable-video", "budget-above-candidates", "unknown-held-out",
+        "unknown-class", "unknown-model", "quota-0"])
 def test_bad_input_exits_2_naming_it_before_anything_is_written(small, tmp_path, capsys, args, message):
     out = tmp_path / "out"
     argv = [str(small / args[0]), *args[1:]]
@@ -141,7 +143,7 @@ def test_bad_input_exits_2_naming_it_before_anything_is_written(small, tmp_path,
         argv += ["--budget", "1"]
     assert cli.main(["label", "frames", *argv, "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and pytest.importorskip("re").search(message, err), err
+    assert err.startswith("error: ") and re.search(message, err), err
     assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
