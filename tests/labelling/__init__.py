@@ -1,0 +1,1 @@
+"""Tests: frames worth labelling (``aerodaas label frames``): sources, selection, pre-label files."""
