@@ -45,12 +45,8 @@ import math
 import os
 import re
 import secrets
-import ssl
 import threading
 import time
-import urllib.error
-import urllib.request
-from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Request
@@ -60,17 +56,13 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from aerodaas.clusters.tls import state_dir, write_private_json
+from aerodaas.clusters.tls import write_private_json
+# the client (``aerodaas inject``) lives in its own module, without FastAPI; these names stay importable from here
+from aerodaas.tools.hitl_client import INJECT_VALUE_OPTIONS, inject_argv, request, state_file  # noqa: F401
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
 
-__all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
-
-
-def state_file() -> Path:
-    """Where a running server publishes its url and token: ``$AERODAAS_STATE_DIR/hitl.json``
-    (:func:`aerodaas.clusters.tls.state_dir`)."""
-    return state_dir() / "hitl.json"
+__all__ = ["HitlServer", "state_file", "request", "WaypointIn", "AddWaypointsRequest"]
 
 
 #: limits of one request: body bytes (413 beyond), waypoints per request (422 beyond; the robot's
@@ -418,61 +410,3 @@ class HitlServer:
                 f.unlink()
         except (OSError, ValueError):
             pass
-
-
-def request(method: str, path: str, body: Any = None, url: str | None = None, token: str | None = None,
-            timeout: float = 10.0, cafile: str | None = None) -> tuple[int, Any]:
-    """Minimal client (stdlib only): returns (HTTP status, decoded JSON). ``url``/``token``/``cafile`` default to
-    ``$AERODAAS_HITL_URL``/``$AERODAAS_HITL_TOKEN``/``$AERODAAS_HITL_CAFILE``, then the running server's
-    :func:`state_file`. An ``https`` URL is verified (certificate and host name) against ``cafile`` (a self-signed
-    server certificate, or the CA that signed it), else the system's CAs. Raises RuntimeError when no server can be
-    found or reached (a certificate that does not verify included)."""
-    url = url or os.environ.get("AERODAAS_HITL_URL")
-    token = token or os.environ.get("AERODAAS_HITL_TOKEN")
-    cafile = cafile or os.environ.get("AERODAAS_HITL_CAFILE")
-    if not url or not token:
-        f = state_file()
-        if not f.is_file():
-            raise RuntimeError(f"no HITL server found: give --url and --token, set AERODAAS_HITL_URL/"
-                               f"AERODAAS_HITL_TOKEN, or start a run with hitl enabled (writes {f})")
-        info = json.loads(f.read_text())
-        if not url:
-            cafile = cafile or info.get("cafile")
-        url, token = url or info["url"], token or info["token"]
-    data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(url.rstrip("/") + path, data=data, method=method,
-                                 headers={"Authorization": f"Bearer {token}", "Content-Type": "application/json"})
-    context = ssl.create_default_context(cafile=cafile) if url.startswith("https:") else None
-    try:
-        with urllib.request.urlopen(req, timeout=timeout, context=context) as r:
-            return r.status, json.loads(r.read() or b"null")
-    except urllib.error.HTTPError as e:
-        raw = e.read()
-        try:
-            return e.code, json.loads(raw)
-        except ValueError:
-            return e.code, raw.decode(errors="replace")
-    except urllib.error.URLError as e:
-        raise RuntimeError(f"cannot reach the HITL API at {url}: {e.reason}") from None
-
-
-#: options of ``aerodaas inject`` whose value may start with '-': a bearer token (base64url: one in 64 starts so), a
-#: waypoint west or south of home (``-3,2,5``)
-INJECT_VALUE_OPTIONS = ("--drone", "--waypoint", "--index", "--priority", "--url", "--token", "--cacert")
-
-
-def inject_argv(argv: list[str]) -> list[str]:
-    """``aerodaas`` command-line ``argv`` with, for the ``inject`` command, each ``OPTION VALUE`` of
-    :data:`INJECT_VALUE_OPTIONS` written ``OPTION=VALUE``: argparse reads a separate value that starts with '-' as an
-    option of its own (``--token -abc...`` failed with "expected one argument"). Other commands are left as given."""
-    if argv[:1] != ["inject"]:
-        return argv
-    out, i = [], 0
-    while i < len(argv):
-        if argv[i] in INJECT_VALUE_OPTIONS and i + 1 < len(argv):
-            out.append(f"{argv[i]}={argv[i + 1]}")
-            i += 2
-        else:
-            out.append(argv[i])
-            i += 1
-    return out
