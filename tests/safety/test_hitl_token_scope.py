@@ -188,3 +188,13 @@ def test_a_redirect_is_not_followed(state, servers, connections, capsys, monkeyp
     code, out, err = _inject(capsys)
     assert code == 1 and "HTTP 302" in err, out + err
     assert a.seen == [f"Bearer {TOKEN}"] and b.seen == []
+
+
+def test_no_proxy_of_the_environment_sees_a_plain_http_request(state, servers, connections, capsys, monkeypatch):
+    """``http_proxy`` would receive the request, token included, in clear text: the client connects directly."""
+    (url_a, a), (url_b, b) = servers
+    monkeypatch.setenv("http_proxy", url_b)
+    for v in ("no_proxy", "NO_PROXY"):
+        monkeypatch.delenv(v, raising=False)
+    code, out, err = _inject(capsys)
+    assert code == 0 and a.seen == [f"Bearer {TOKEN}"] and b.seen == [], out + err
