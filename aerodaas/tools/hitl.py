@@ -56,7 +56,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from aerodaas.clusters.tls import write_private_json
+from aerodaas.clusters.tls import ServeAccess, write_private_json
 # the client (``aerodaas inject``) lives in its own module, without FastAPI; these names stay importable from here
 from aerodaas.tools.hitl_client import INJECT_VALUE_OPTIONS, inject_argv, request, state_file  # noqa: F401
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
@@ -214,11 +214,14 @@ class HitlServer:
     """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": handle of the drone component,
     "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns
     once the server accepts connections. ``cert_file`` / ``key_file``: PEM certificate and key, served as HTTPS
-    (checked first: :func:`aerodaas.clusters.tls.check_tls_files`)."""
+    (checked first: :func:`aerodaas.clusters.tls.check_tls_files`). The constructor applies the exposure rule of
+    every server (:func:`aerodaas.clusters.tls.check_exposure`): bound off loopback, HTTPS or ``insecure=True``
+    (plain HTTP, then :attr:`insecure` is True: what the run summary repeats). Raises ``ValueError`` naming the
+    parameter (a bad token, TLS files or exposure)."""
 
     def __init__(self, drones: dict[str, dict], host: str = "127.0.0.1", port: int = 8470,
                  token: str | None = None, docs: bool = False, get: Any = None, cert_file: str | None = None,
-                 key_file: str | None = None) -> None:
+                 key_file: str | None = None, insecure: bool = False) -> None:
         self.drones = drones
         self.docs = docs  # /docs and /openapi.json: off unless asked for, and then behind the token
         self._get = get  # how a call's result is awaited (default ray.get; tests pass a local one)
@@ -228,6 +231,8 @@ class HitlServer:
             raise ValueError("hitl.token: 16 to 256 characters of A-Z a-z 0-9 - . _ ~ + / (then '=' padding; RFC 6750 "
                              "section 2.1), no blanks")
         self.token = token or secrets.token_urlsafe(24)
+        self.access = ServeAccess(cert_file, key_file, self.token, bool(insecure))
+        self.access.check(host, f"HitlServer(host={host!r})", "cert_file", "key_file", "insecure=True", "token")
         self._locks = {rid: threading.Lock() for rid in drones}  # one add (check + queue) at a time per drone
         self.generated_token = token is None
         self._ids = itertools.count(1)
@@ -235,6 +240,11 @@ class HitlServer:
         self._thread: threading.Thread | None = None
         self.requests = 0
         self.app = self._build_app()
+
+    @property
+    def insecure(self) -> bool:
+        """Whether this API serves plain HTTP off loopback (``insecure=True``): what the run summary repeats."""
+        return self.access.clear_text_off_loopback(self.host)
 
     @property
     def url(self) -> str:
