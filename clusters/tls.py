@@ -30,7 +30,7 @@ __all__ = ["MIN_TOKEN_CHARS", "ServeAccess", "check_exposure", "check_tls_files"
            "state_dir", "write_private_json"]
 
 
-#: the shortest token a server off loopback may ask of its clients (RFC 6750 ``b64token`` characters, 96 bits)
+#: the shortest token a server off loopback may ask of its clients (16 random base64url characters: 96 bits)
 MIN_TOKEN_CHARS = 16
 
 

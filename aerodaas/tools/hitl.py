@@ -57,10 +57,10 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from aerodaas.clusters.tls import ServeAccess, write_private_json
-# the client (``aerodaas inject``) lives in its own module, without FastAPI; these names stay importable from here
-from aerodaas.tools.hitl_client import INJECT_VALUE_OPTIONS, inject_argv, request, state_file  # noqa: F401
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
+# the client (``aerodaas inject``) lives in its own module, without FastAPI; these names stay importable from here
+from aerodaas.tools.hitl_client import INJECT_VALUE_OPTIONS, inject_argv, request, state_file  # noqa: F401
 
 __all__ = ["HitlServer", "state_file", "request", "WaypointIn", "AddWaypointsRequest"]
 
