@@ -357,12 +357,13 @@ def _start_hitl(run: _Run):
     access = hitl_access(run.env, opts)
     hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in run.handles.items()},
                       host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
-                      token=hcfg.token, docs=hcfg.docs, cert_file=access.cert_file, key_file=access.key_file).start()
+                      token=hcfg.token, docs=hcfg.docs, cert_file=access.cert_file, key_file=access.key_file,
+                      insecure=access.insecure).start()
     run.env.hitl = hitl
     source = "generated" if hitl.generated_token else "from environment.json"
     print(f"aerodaas: human-in-the-loop API at {hitl.url}  (bearer token {source}: in {state_file()}, owner only)",
           flush=True)
-    if access.insecure:
+    if hitl.insecure:  # what the server itself does, repeated in the summary
         run.insecure.append(f"the HITL API at {hitl.url}")
         print(f"aerodaas: WARNING: the HITL API serves plain HTTP off loopback ({hitl.url}, insecure): its token "
               f"and requests can be read on the network", file=sys.stderr, flush=True)
