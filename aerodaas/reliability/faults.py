@@ -25,7 +25,7 @@ from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting
 from aerodaas.reliability.input_report import render_input_rows, render_inputs
 from aerodaas.reliability.procs import (REPO_APPS, actor_pids, argv0, mcap_reader_ok, no_crash, run_cli,  # noqa: F401
                                        summary_outcome, wait_size)
-from aerodaas.tools.hitl import request
+from aerodaas.tools.hitl_client import request
 
 __all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
 

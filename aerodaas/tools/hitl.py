@@ -60,9 +60,9 @@ from aerodaas.clusters.tls import ServeAccess, write_private_json
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
 # the client (``aerodaas inject``) lives in its own module, without FastAPI; these names stay importable from here
-from aerodaas.tools.hitl_client import INJECT_VALUE_OPTIONS, inject_argv, request, state_file  # noqa: F401
+from aerodaas.tools.hitl_client import state_file
 
-__all__ = ["HitlServer", "state_file", "request", "WaypointIn", "AddWaypointsRequest"]
+__all__ = ["HitlServer", "WaypointIn", "AddWaypointsRequest"]
 
 
 #: limits of one request: body bytes (413 beyond), waypoints per request (422 beyond; the robot's

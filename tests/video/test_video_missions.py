@@ -14,7 +14,7 @@ import time
 import pytest
 
 from aerodaas.recording.metrics import load_run
-from aerodaas.tools.hitl import request, state_file
+from aerodaas.tools.hitl_client import request, state_file
 from tests.conftest import REPO, needs_data
 from tests.video.video_rig import RtspServer, Sender, check_stream_recording, free_udp_port, make_footage
 
