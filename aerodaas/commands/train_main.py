@@ -15,7 +15,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from aerodaas.runtime.ray_start import ensure_ray, shutdown_ray
 from aerodaas.training.config import TrainConfig
-from aerodaas.training.dataset import LabelError
+from aerodaas.training.labels.check import LabelError
 from aerodaas.training.sets import load_training_data
 
 
