@@ -53,15 +53,22 @@ def base_rows(names: Sequence[str], base_names: Sequence[str], init_from: dict[s
 
 def _names_of(path: Path) -> list[str]:
     """The class names of a YOLOX ONNX file: its metadata's, else COCO's 80. Raises ValueError for a file that is
-    not a YOLOX detector."""
-    return list(inspect_model(path, "yolox").class_names or COCO_CLASSES)
+    not a YOLOX detector or that onnxruntime cannot load (not ONNX, a broken graph)."""
+    from onnxruntime.capi.onnxruntime_pybind11_state import (  # lazy: heavy onnxruntime
+        Fail, InvalidGraph, InvalidProtobuf)
+
+    try:
+        return list(inspect_model(path, "yolox").class_names or COCO_CLASSES)
+    except (Fail, InvalidGraph, InvalidProtobuf) as e:
+        raise ValueError(f"onnxruntime cannot load it: {e}") from None
 
 
-def choose_base(base_model: Path | None, names: Sequence[str], init_from: dict[str, str] | None = None) -> BaseModel:
+def choose_base(base_model: Path | None, names: Sequence[str],
+                init_from: dict[str, str] | None = None) -> BaseModel:
     """The model a run of classes ``names`` starts from: ``base_model`` when given; else the shipped
     ``aerial_nano`` when every name (and every ``init_from`` source) is one of its classes (``car``,
-    ``large_vehicle``, ``person``: it has already learnt them from above); else the COCO ``yolox_nano`` (resolved, and downloaded once, by
-    :func:`~aerodaas.perception.model_files.resolve_model`). Raises ModelNotFoundError (a FileNotFoundError) when
+    ``large_vehicle``, ``person``: it has already learnt them from above); else the COCO ``yolox_nano``
+    (resolved, and downloaded once, by :func:`~aerodaas.perception.model_files.resolve_model`). Raises ModelNotFoundError (a FileNotFoundError) when
     the file is missing or cannot be fetched, its message saying where it was looked for and how to provide it;
     ValueError for a file that is not a YOLOX ONNX model or a class with no row to start from (:func:`base_rows`)."""
     init_from = init_from or {}

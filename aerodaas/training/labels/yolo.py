@@ -1,6 +1,7 @@
 """YOLO txt labels: one ``<stem>.txt`` per image, lines ``class cx cy w h`` normalised to [0, 1] of the image's
 width and height (the Darknet format CVAT's "YOLO 1.1" and Label Studio's "YOLO" exports write), paired with the
-images by stem, with or without Label Studio's upload prefix (:func:`~aerodaas.training.labels.images.original_stem`)."""
+images by stem, with or without Label Studio's upload prefix
+(:func:`~aerodaas.training.labels.images.original_stem`)."""
 from __future__ import annotations
 
 from collections import defaultdict
