@@ -70,7 +70,8 @@ def choose_base(base_model: Path | None, names: Sequence[str],
     ``large_vehicle``, ``person``: it has already learnt them from above); else the COCO ``yolox_nano``
     (resolved, and downloaded once, by :func:`~aerodaas.perception.model_files.resolve_model`). Raises
     ModelNotFoundError (a FileNotFoundError) when the file is missing or cannot be fetched, its message saying
-    where it was looked for and how to provide it; ValueError for a file that is not a YOLOX ONNX model or a class with no row to start from (:func:`base_rows`)."""
+    where it was looked for and how to provide it; ValueError for a file that is not a YOLOX ONNX model or a class
+    with no row to start from (:func:`base_rows`)."""
     init_from = init_from or {}
     if base_model is not None:
         path = Path(base_model).expanduser()
