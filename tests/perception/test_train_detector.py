@@ -65,6 +65,8 @@ def test_one_step_exports_a_model_that_matches_pytorch(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     report = json.loads((out / "report.json").read_text())
     assert report["names"] == NAMES
+    # the shipped aerial model knows every class of the set: the run starts from it, and says so
+    assert report["base_model"]["name"] == "aerial_nano" and "starting from aerial_nano" in r.stderr
     assert len(report["history"]) == 1
     assert report["export"]["max_abs_diff"] <= 1e-3
     assert (out / "last.pt").is_file() and (out / "best.pt").is_file()
