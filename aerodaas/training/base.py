@@ -9,7 +9,7 @@ from typing import Sequence
 
 from aerodaas.model.types import COCO_CLASSES
 from aerodaas.perception.decoders import inspect_model
-from aerodaas.perception.model_files import ModelNotFoundError, resolve_model
+from aerodaas.perception.model_files import MODELS, ModelNotFoundError, resolve_model
 from aerodaas.training.config import COCO_ALIASES
 
 __all__ = ["BaseModel", "choose_base", "base_rows"]
@@ -65,7 +65,8 @@ def _names_of(path: Path) -> list[str]:
 
 def choose_base(base_model: Path | None, names: Sequence[str],
                 init_from: dict[str, str] | None = None) -> BaseModel:
-    """The model a run of classes ``names`` starts from: ``base_model`` when given; else the shipped
+    """The model a run of classes ``names`` starts from: ``base_model`` when given (a file, or a name of
+    :data:`~aerodaas.perception.model_files.MODELS` such as ``yolox_nano``); else the shipped
     ``aerial_nano`` when every name (and every ``init_from`` source) is one of its classes (``car``,
     ``large_vehicle``, ``person``: it has already learnt them from above); else the COCO ``yolox_nano``
     (resolved, and downloaded once, by :func:`~aerodaas.perception.model_files.resolve_model`). Raises
@@ -75,8 +76,11 @@ def choose_base(base_model: Path | None, names: Sequence[str],
     init_from = init_from or {}
     if base_model is not None:
         path = Path(base_model).expanduser()
+        if not path.is_file() and str(base_model) in MODELS:  # a registry name: resolved (and checked) as usual
+            path = resolve_model(str(base_model))
         if not path.is_file():
-            raise ModelNotFoundError(f"--base-model={str(base_model)!r}: no such file")
+            raise ModelNotFoundError(f"--base-model={str(base_model)!r}: no such file (nor one of the models "
+                                     f"{sorted(MODELS)})")
         try:
             base_names = _names_of(path)
         except ValueError as e:

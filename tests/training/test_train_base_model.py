@@ -84,3 +84,6 @@ def test_the_coco_model_is_the_base_for_a_class_the_aerial_model_lacks():
     assert "['boat']" in base.why
     # an --init-from source the aerial model lacks also starts from the COCO model
     assert choose_base(None, ["car"], {"car": "truck"}).rows == [COCO_CLASSES.index("truck")]
+    # --base-model yolox_nano: the COCO model by name, whatever the classes
+    named = choose_base(Path("yolox_nano"), ["car"])
+    assert named.path == base.path and named.rows == [COCO_CLASSES.index("car")] and named.why == "--base-model"
