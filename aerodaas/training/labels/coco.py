@@ -30,17 +30,27 @@ def export_root(js: Path) -> Path:
 
 class ImageIndex:
     """Every image file under an export's folder (:func:`export_root`) by base name and by base name without
-    Label Studio's upload prefix, listed once (bounded by the folder's own files)."""
+    Label Studio's upload prefix; the folder is walked once, on the first :meth:`lookup` (only a ``file_name``
+    that is not where the tools put it needs it)."""
 
     def __init__(self, root: Path) -> None:
-        self.by_name: dict[str, list[Path]] = defaultdict(list)
-        self.by_original: dict[str, list[Path]] = defaultdict(list)
-        for d, _, files in os.walk(root):
-            for f in files:
-                p = Path(d) / f
-                if p.suffix.lower() in IMAGE_EXTS:
-                    self.by_name[f].append(p)
-                    self.by_original[original_stem(p.stem) + p.suffix].append(p)
+        self.root = root
+        self._tables: tuple[dict[str, list[Path]], dict[str, list[Path]]] | None = None
+
+    def lookup(self, name: str) -> list[list[Path]]:
+        """The images named ``name``, then those named so once Label Studio's prefixes are taken off both."""
+        if self._tables is None:
+            by_name: dict[str, list[Path]] = defaultdict(list)
+            by_original: dict[str, list[Path]] = defaultdict(list)
+            for d, _, files in os.walk(self.root):
+                for f in files:
+                    p = Path(d) / f
+                    if p.suffix.lower() in IMAGE_EXTS:
+                        by_name[f].append(p)
+                        by_original[original_stem(p.stem) + p.suffix].append(p)
+            self._tables = by_name, by_original
+        n = Path(name)
+        return [self._tables[0].get(name, []), self._tables[1].get(original_stem(n.stem) + n.suffix, [])]
 
 
 def find_image(js: Path, file_name: str, index: ImageIndex) -> tuple[Path | None, str]:
@@ -54,9 +64,7 @@ def find_image(js: Path, file_name: str, index: ImageIndex) -> tuple[Path | None
         cand = base / file_name
         if cand.is_file():
             return cand, ""
-    name = Path(file_name.replace("\\", "/")).name
-    for table, key in ((index.by_name, name), (index.by_original, original_stem(Path(name).stem) + Path(name).suffix)):
-        found = table.get(key, [])
+    for found in index.lookup(Path(file_name.replace("\\", "/")).name):
         if len(found) == 1:
             return found[0], ""
         if len(found) > 1:
