@@ -27,6 +27,13 @@ def test_label_studio_yolo_export(tmp_path, with_images, cache_prefix):
     assert_loaded(items, names, fs)
 
 
+def test_a_stray_json_beside_a_yolo_export_is_no_problem_of_the_set(tmp_path):
+    fs = frames()
+    root = write_ls_yolo(tmp_path / "export", fs, with_images=True)
+    (root / "project.json").write_text('{"half written')
+    assert_loaded(*load_set(root), fs)
+
+
 def test_cvat_yolo_export(tmp_path):
     """CVAT "YOLO 1.1": obj.names, obj.data, train.txt and the labels beside the images in obj_train_data/."""
     fs = frames()

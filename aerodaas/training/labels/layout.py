@@ -45,13 +45,17 @@ class Layout:
 
 
 def _read_json(f: Path) -> object:
+    """The parsed JSON of ``f``, or a :class:`LabelError` naming it (returned: a stray broken file beside a YOLO
+    set is no problem of the set)."""
     try:
         return json.loads(f.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise LabelError(str(f), [f"{f}: cannot be read as JSON ({type(e).__name__}: {e})"]) from None
+        return LabelError(str(f), [f"{f}: cannot be read as JSON ({type(e).__name__}: {e})"])
 
 
 def _kind_of_json(doc: object) -> str:
+    if isinstance(doc, LabelError):
+        return "broken"
     if is_coco(doc):
         return "coco"
     if isinstance(doc, list):
@@ -112,6 +116,8 @@ def detect_layout(path: Path, chk: Checker) -> Layout:
         if path.suffix.lower() != ".json":
             raise LabelError(str(path), [f"data={str(path)!r}: expected a folder or a COCO .json file"])
         doc = _read_json(path)
+        if isinstance(doc, LabelError):
+            raise doc
         kind = _kind_of_json(doc)
         if kind not in ("coco", "tasks"):
             raise _not_coco(path, kind)
@@ -136,5 +142,6 @@ def detect_layout(path: Path, chk: Checker) -> Layout:
         raise LabelError(str(path), [f"{f}: Label Studio's notes.json of a YOLO export, but no label file "
                                      f"(labels/*.txt) and no image (images/) beside it: unpack the whole export"])
     if kinds:
-        raise _not_coco(*next(iter(kinds.items())))
+        f, k = next(iter(kinds.items()))
+        raise jsons[f] if k == "broken" else _not_coco(f, k)
     return lay
