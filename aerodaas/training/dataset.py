@@ -7,7 +7,9 @@ A data folder is either
   an image without a label file has no object) with the class names in ``classes.txt``, ``obj.names`` or
   ``names.txt`` (one per line; CVAT's "YOLO 1.1" export and Label Studio's "YOLO" export), or
 * COCO: one ``*.json`` with ``images`` / ``annotations`` (``bbox`` ``[x, y, w, h]`` pixels) / ``categories`` beside
-  the images (or in ``annotations/`` with the images in ``images/``).
+  the images (or in ``annotations/`` with the images in ``images/``), or
+* Label Studio JSON: one ``*.json`` export (a list of tasks) with the images in ``images/`` beside it and the class
+  names in a names file: its reviewed tasks (:mod:`aerodaas.training.label_studio_export`).
 
 Every problem is collected (boxes outside the image, non-positive sizes, unknown classes, label files without an
 image, images that cannot be read, an empty set) and reported at once as :class:`LabelError`, naming the file, line
@@ -23,6 +25,8 @@ from typing import Sequence
 
 import cv2
 import numpy as np
+
+from aerodaas.training.label_studio_export import local_files_path, tasks_to_boxes
 
 __all__ = ["LabelledImage", "LabelError", "load_set", "labelled_classes", "sequence_of", "split_by_sequence", "IMAGE_EXTS"]
 
@@ -255,6 +259,47 @@ def _load_coco(js: Path, names: list[str] | None, chk: _Checker) -> tuple[list[L
     return out, names
 
 
+def _is_label_studio(js: Path) -> bool:
+    """Whether ``js`` is a Label Studio JSON export (a JSON list of tasks; a COCO file is an object)."""
+    with open(js, "rb") as f:
+        return f.read(4096).lstrip()[:1] == b"["
+
+
+def _load_label_studio(js: Path, names: Sequence[str] | None, chk: _Checker) -> tuple[list[LabelledImage], list[str]]:
+    """A Label Studio JSON export (:mod:`aerodaas.training.label_studio_export`): its reviewed tasks (a submitted
+    annotation: exhaustive frames) with their images in ``images/`` beside it or in its own folder; machine-only tasks are
+    left out (``aerodaas label pull`` writes them as a set of their own). Class names: ``names``, else the names
+    file beside it (the export has none)."""
+    names = _names_in(js.parent, names)
+    if not names:
+        raise LabelError(str(js), [f"{js}: a Label Studio export has no class list: put {_NAME_FILES[0]} (one name "
+                                   f"per line, in label order) beside it or pass --names"])
+    try:
+        tasks = json.loads(js.read_text())
+    except ValueError as e:
+        raise LabelError(str(js), [f"not a Label Studio JSON export ({e})"]) from None
+    kept, problems = tasks_to_boxes(tasks, names, str(js), predictions=False, tolerance=EDGE_TOLERANCE_PX)
+    chk.problems += problems
+    out = []
+    for t in kept:
+        rel = local_files_path(t.ref)
+        cands = [js.parent / "images" / t.name, js.parent / t.name] + ([js.parent / rel] if rel else [])
+        img = next((c for c in cands if c.is_file()), None)
+        if img is None:
+            chk.problems.append(f"{js}: task {t.task_id}: image {t.name!r} not found in {js.parent}/images or "
+                                f"{js.parent}")
+            continue
+        hw = _read_hw(img, chk)
+        if hw is None:
+            continue
+        if t.hw is not None and t.hw != hw:
+            chk.problems.append(f"{js}: task {t.task_id}: {img} is {hw[1]}x{hw[0]} px but was labelled as "
+                                f"{t.hw[1]}x{t.hw[0]}")
+            continue
+        out.append(_item(img, hw, list(t.boxes), list(t.classes)))
+    return out, list(names)
+
+
 def load_set(path: str | Path, names: Sequence[str] | None = None) -> tuple[list[LabelledImage], list[str]]:
     """Read and check the labelled set at ``path`` (module docstring for the layouts). ``names``: the class names
     in label order (default: the folder's names file, or the COCO categories). Returns the images and the class
@@ -267,7 +312,8 @@ def load_set(path: str | Path, names: Sequence[str] | None = None) -> tuple[list
     if jsons:
         if len(jsons) > 1:
             raise LabelError(str(root), [f"several COCO files {[j.name for j in jsons]}: pass one as --data"])
-        items, names = _load_coco(jsons[0], names, chk)
+        loader = _load_label_studio if _is_label_studio(jsons[0]) else _load_coco
+        items, names = loader(jsons[0], names, chk)
     else:
         found = _names_in(root, names)
         if not found:

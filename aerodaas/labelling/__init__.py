@@ -1,0 +1,1 @@
+"""From footage to labels: frames worth labelling, pre-labels, and the Label Studio round trip."""
