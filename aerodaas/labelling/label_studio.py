@@ -100,6 +100,8 @@ class LabelStudio:
         return data
 
     def _http_error(self, method: str, path: str, e: urllib.error.HTTPError) -> LabelStudioError:
+        if 300 <= e.code < 400:
+            return LabelStudioError(f"{method} {path}: HTTP {e.code} {e.reason}")
         try:
             doc = json.loads(e.read(65536) or b"{}")
             detail = doc.get("validation_errors") or doc.get("detail") or doc
