@@ -243,3 +243,18 @@ def test_pull_refuses_labels_it_cannot_train_on(round_trip, bad, said, tmp_path)
     assert said in r.stderr and f"task {task['id']} annotation" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_personal_access_token_pulls_the_same_sets(round_trip, tmp_path):
+    """A personal access token (what Label Studio 1.23's Account & Settings page gives: a JWT refresh token) works
+    as the legacy token does: the pull is the same."""
+    server, pid, _, out, _, _ = round_trip
+    pat = _api(server, "POST", "/api/token/")["token"]
+    (tmp_path / "pat").write_text(pat)
+    r = _cli("label", "pull", "--url", server.url, "--token-file", str(tmp_path / "pat"), "--project", str(pid),
+             "--out", str(tmp_path / "again"), "--reviewed-only")
+    assert r.returncode == 0, r.stderr
+    assert not (tmp_path / "again" / "machine").exists()
+    for f in sorted((out / "reviewed").rglob("*")):
+        g = tmp_path / "again" / "reviewed" / f.relative_to(out / "reviewed")
+        assert g.exists() and (f.is_dir() or f.read_bytes() == g.read_bytes()), f
