@@ -39,11 +39,28 @@ def add_label_studio_parsers(lsub) -> None:
                    help="leave out the frames that kept only the detector's boxes (no reviewer submitted them)")
     _server_options(q)
     q.set_defaults(func=cmd_pull)
+    s = lsub.add_parser("serve", help="serve the detector as a Label Studio ML backend (pre-labels on demand)")
+    s.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; others need "
+                                                       "--allow-remote)")
+    s.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port, printed)")
+    s.add_argument("--allow-remote", action="store_true",
+                   help="bind an address other than loopback (the backend has no authentication of its own)")
+    s.add_argument("--model", type=Path, help="detector ONNX (default: the shipped aerial_nano)")
+    s.add_argument("--score-threshold", type=float, default=0.3, help="lowest score predicted (default 0.3)")
+    _server_options(s)
+    s.set_defaults(func=cmd_serve)
 
 
 def cmd_push(args: argparse.Namespace) -> int:
     """``aerodaas label push``: :func:`aerodaas.commands.label_studio_main.cmd_push`."""
     from aerodaas.commands.label_studio_main import cmd_push as run  # lazy: CLI start-up (numpy)
+
+    return run(args)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """``aerodaas label serve``: :func:`aerodaas.commands.label_studio_main.cmd_serve`."""
+    from aerodaas.commands.label_studio_main import cmd_serve as run  # lazy: CLI start-up (onnxruntime, OpenCV)
 
     return run(args)
 

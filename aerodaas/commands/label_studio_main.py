@@ -3,9 +3,12 @@ the Label Studio client made, the round trip run; any bad input ends with exit 2
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import sys
+from pathlib import Path
 
+from aerodaas.clusters.tls import is_loopback
 from aerodaas.labelling.label_studio import LabelStudio, LabelStudioError
 from aerodaas.labelling.pull import pull
 from aerodaas.labelling.push import push
@@ -62,4 +65,49 @@ def cmd_pull(args: argparse.Namespace) -> int:
           f"{r.skipped} left out; classes {r.names}")
     sets = [f"--data {r.out / s}" for s, n in (("reviewed", r.reviewed), ("machine", r.machine)) if n]
     print(f"train: aerodaas train detector {' '.join(sets)} --names {','.join(r.names)}")
+    return 0
+
+
+def _backend(args: argparse.Namespace):
+    """The detector backend of ``serve`` (imports onnxruntime and OpenCV)."""
+    from aerodaas.labelling.ml_backend import DetectorBackend  # lazy: OpenCV
+    from aerodaas.perception.detect import AerialDetector  # lazy: onnxruntime
+
+    if not is_loopback(args.host) and not args.allow_remote:
+        raise LabelStudioError(f"--host {args.host!r}: not loopback; the backend has no authentication of its own "
+                               f"(give --allow-remote on a network you trust)")
+    if not 0.0 <= args.score_threshold <= 1.0:
+        raise LabelStudioError(f"--score-threshold={args.score_threshold}: must be in [0, 1]")
+    try:
+        det = AerialDetector(args.model, score_threshold=args.score_threshold)
+    except (OSError, ValueError) as e:
+        raise LabelStudioError(f"--model {str(args.model)!r}: {e}") from None
+    path = Path(det.model_path)
+    version = f"{path.stem}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
+    has_token = args.token_file is not None or args.token or os.environ.get("LABEL_STUDIO_API_KEY")
+    studio = _client(args) if has_token else None
+    root = args.document_root or os.environ.get("LABEL_STUDIO_LOCAL_FILES_DOCUMENT_ROOT")
+    return DetectorBackend(det, version, Path(root) if root else None, studio)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Serve the detector to Label Studio until interrupted; print the address to give Label Studio. Exit 0 on
+    Ctrl-C, 2 for bad options or an address that cannot be bound."""
+    from aerodaas.labelling.ml_backend import make_server  # lazy: OpenCV
+
+    try:
+        backend = _backend(args)
+        srv = make_server(backend, args.host, args.port)
+    except (LabelStudioError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    host, port = srv.server_address[:2]
+    print(f"ML backend {backend.model_version} at http://{host}:{port} (Label Studio: Settings > Model > Connect "
+          f"Model)", flush=True)
+    try:
+        srv.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        srv.server_close()
     return 0

@@ -55,6 +55,8 @@ def _env(base: Path, root: Path) -> dict:
             "LABEL_STUDIO_COLLECT_ANALYTICS": "false", "LABEL_STUDIO_LATEST_VERSION_CHECK": "false",
             "LABEL_STUDIO_FEATURE_FLAGS_OFFLINE": "true", "SENTRY_DSN": "", "FRONTEND_SENTRY_DSN": "",
             "LABEL_STUDIO_SENTRY_DSN": "", "LABEL_STUDIO_FRONTEND_SENTRY_DSN": "",
+            # an ML backend on loopback (aerodaas label serve): Label Studio refuses private addresses by default
+            "LABEL_STUDIO_USE_DEFAULT_BANNED_SUBNETS": "false",
             "PYTHONUNBUFFERED": "1", "DJANGO_DEBUG": "false"}
 
 

@@ -14,6 +14,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 import urllib.request
 import uuid
 import zipfile
@@ -258,3 +259,47 @@ def test_a_personal_access_token_pulls_the_same_sets(round_trip, tmp_path):
     for f in sorted((out / "reviewed").rglob("*")):
         g = tmp_path / "again" / "reviewed" / f.relative_to(out / "reviewed")
         assert g.exists() and (f.is_dir() or f.read_bytes() == g.read_bytes()), f
+
+
+def test_label_studio_gets_pre_labels_from_the_served_detector(round_trip, tmp_path):
+    """``aerodaas label serve`` connected to a project as its ML backend: Label Studio's "Retrieve Predictions"
+    stores the detector's boxes on every task, in the project's classes, boxes that pull accepts."""
+    server, _, _, _, _, token_file = round_trip
+    folder = server.root / f"serve-{uuid.uuid4().hex[:6]}"
+    write_frames_folder(folder)
+    (folder / "tasks.json").write_text(json.dumps([{"data": t["data"]} for t in
+                                                   json.loads((folder / "tasks.json").read_text())]))
+    r = _cli("label", "push", str(folder), "--url", server.url, "--token-file", str(token_file),
+             "--project", folder.name, "--document-root", str(server.root))
+    assert r.returncode == 0, r.stderr
+    pid = int(r.stdout.split("(id ")[1].split(")")[0])
+    log = tmp_path / "serve.log"
+    with open(log, "w") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "label", "serve", "--port", "0",
+                                 "--document-root", str(server.root)], stdout=out, stderr=subprocess.STDOUT,
+                                cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, start_new_session=True)
+    try:
+        url = None
+        for _ in range(240):  # the detector loads, then the address is printed
+            m = [ln for ln in log.read_text().splitlines() if ln.startswith("ML backend ")]
+            if m or proc.poll() is not None:
+                url = m[0].split(" at ")[1].split()[0] if m else None
+                break
+            time.sleep(0.5)
+        assert url, log.read_text()
+        _api(server, "POST", "/api/ml", {"url": url, "project": pid, "title": "aerodaas"})
+        done = _api(server, "POST", f"/api/dm/actions?id=retrieve_tasks_predictions&project={pid}",
+                    {"selectedItems": {"all": True, "excluded": []}})
+        assert done["processed_items"] == len(FRAME_NAMES), done
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    preds = _api(server, "GET", f"/api/predictions?project={pid}")
+    assert len(preds) == len(FRAME_NAMES)
+    from aerodaas.training.label_studio_export import tasks_to_boxes
+
+    kept, problems = tasks_to_boxes([{"id": p["task"], "data": {"image": "x.jpg"}, "annotations": [],
+                                      "predictions": [p]} for p in preds], NAMES, "served")
+    assert problems == []
+    assert sum(len(k.boxes) for k in kept) > 0  # the sample frames hold cars and persons the model finds
+    assert all(k.hw == (512, 640) for k in kept if len(k.boxes))
