@@ -7,6 +7,6 @@ from aerodaas.commands.label_studio import add_label_studio_parsers
 
 def add_parser(sub) -> None:
     """Register ``label`` and its sub-commands on the CLI's sub-parsers ``sub``."""
-    lp = sub.add_parser("label", help="label your own footage: Label Studio push / pull")
+    lp = sub.add_parser("label", help="label your own footage: Label Studio push, pull and serve")
     lsub = lp.add_subparsers(dest="what", required=True)
     add_label_studio_parsers(lsub)

@@ -267,9 +267,9 @@ def _is_label_studio(js: Path) -> bool:
 
 def _load_label_studio(js: Path, names: Sequence[str] | None, chk: _Checker) -> tuple[list[LabelledImage], list[str]]:
     """A Label Studio JSON export (:mod:`aerodaas.training.label_studio_export`): its reviewed tasks (a submitted
-    annotation: exhaustive frames) with their images in ``images/`` beside it or in its own folder; machine-only tasks are
-    left out (``aerodaas label pull`` writes them as a set of their own). Class names: ``names``, else the names
-    file beside it (the export has none)."""
+    annotation: exhaustive frames) with their images in ``images/`` beside it or in its own folder; machine-only
+    tasks are left out (``aerodaas label pull`` writes them as a set of their own). Class names: ``names``, else
+    the names file beside it (the export has none)."""
     names = _names_in(js.parent, names)
     if not names:
         raise LabelError(str(js), [f"{js}: a Label Studio export has no class list: put {_NAME_FILES[0]} (one name "

@@ -87,12 +87,16 @@ def start(base: Path, timeout: float = START_TIMEOUT_S) -> LabelStudioServer:
                                 stdin=subprocess.DEVNULL, start_new_session=True)
     server = LabelStudioServer("", token, root, log, proc)
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and proc.poll() is None:
-        m = _STARTED.search(log.read_text(errors="replace"))  # the port it took (another if ours was taken)
-        if m and _healthy(m.group(1)):
-            server.url = m.group(1)
-            return server
-        time.sleep(1.0)
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            m = _STARTED.search(log.read_text(errors="replace"))  # the port it took (another if ours was taken)
+            if m and _healthy(m.group(1)):
+                server.url = m.group(1)
+                return server
+            time.sleep(1.0)
+    except BaseException:  # interrupted while it starts: no server left behind
+        stop(server)
+        raise
     stop(server)
     raise RuntimeError(f"Label Studio did not answer /health within {timeout:.0f} s (exit code {proc.poll()}); "
                        f"log tail:\n{log.read_text(errors='replace')[-2000:]}")
