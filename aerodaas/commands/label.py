@@ -1,5 +1,6 @@
 """``aerodaas label``: from footage to labels. ``push`` and ``pull`` carry frames and pre-labels to a Label Studio
-project and the reviewed boxes back as training sets (:mod:`aerodaas.commands.label_studio`)."""
+project and the reviewed boxes back as training sets; ``serve`` is the detector as its ML backend
+(:mod:`aerodaas.commands.label_studio`)."""
 from __future__ import annotations
 
 from aerodaas.commands.label_studio import add_label_studio_parsers

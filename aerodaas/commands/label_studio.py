@@ -1,4 +1,4 @@
-"""``aerodaas label push`` and ``aerodaas label pull``: the Label Studio round trip's options (the work is in
+"""``aerodaas label push``, ``pull`` and ``serve``: the Label Studio round trip's options (the work is in
 :mod:`aerodaas.commands.label_studio_main`). Exit codes: 0 done; 2 bad input (a folder, an option, a token Label
 Studio refuses, an unknown project, Label Studio not answering, labels it returned that cannot be trained on),
 named in one line, nothing half-written."""
