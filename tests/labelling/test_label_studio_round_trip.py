@@ -303,3 +303,18 @@ def test_label_studio_gets_pre_labels_from_the_served_detector(round_trip, tmp_p
     assert problems == []
     assert sum(len(k.boxes) for k in kept) > 0  # the sample frames hold cars and persons the model finds
     assert all(k.hw == (512, 640) for k in kept if len(k.boxes))
+
+
+def test_a_push_label_studio_refuses_leaves_no_project(round_trip, tmp_path):
+    """Frames outside Label Studio's document root (the user's ``--document-root`` is not the server's): Label
+    Studio refuses the storage, push ends with exit 2 naming it and deletes the project it had made."""
+    server, _, _, _, _, token_file = round_trip
+    folder = tmp_path / "elsewhere"
+    write_frames_folder(folder)
+    title = f"outside {uuid.uuid4().hex[:6]}"
+    r = _cli("label", "push", str(folder), "--url", server.url, "--token-file", str(token_file), "--project", title,
+             "--document-root", str(tmp_path))
+    assert r.returncode == 2
+    assert "POST /api/storages/localfiles" in r.stderr and "LOCAL_FILES_DOCUMENT_ROOT" in r.stderr, r.stderr
+    projects = _api(server, "GET", "/api/projects?page_size=100")["results"]
+    assert title not in [p["title"] for p in projects]
