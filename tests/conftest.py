@@ -78,9 +78,9 @@ def _workload() -> None:
 needs_workload = pytest.mark.usefixtures("_workload")
 
 
-#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs and
-#: missions flown on a real-time video stream
-SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime")
+#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs,
+#: missions flown on a real-time video stream and a real Label Studio server
+SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime", "labelstudio")
 
 
 #: the development tier's longest files, longest first (worker-seconds each, 3 workers on this shared 2-core machine,

@@ -3,15 +3,28 @@
 # python (tests/video/rtsp_server.py runs under /usr/bin/python3), with the elements the relay uses (udpsrc, tsdemux,
 # h264parse, rtph264pay), and FFmpeg's decoders for GStreamer (gstreamer1.0-libav: avdec_h264, what the GStreamer
 # appsink peer of `aerodaas bench video` decodes with, as a user's pipeline would). The video tests fail, never skip,
-# without them. Run by the README's test command and CI.
+# without them.
+# Then Label Studio 1.23.2 in a venv of its own (AERODAAS_LABEL_STUDIO_VENV, default
+# $HOME/.cache/aerodaas/label-studio-1.23.2; it pins NumPy and OpenCV versions that must not replace the project's):
+# the server the tests of `aerodaas label push/pull` start (tests/labelling/). Each step is skipped when already
+# done. Run by the README's test command and CI.
 set -e
 PKGS="gstreamer1.0-rtsp gir1.2-gst-rtsp-server-1.0 python3-gi gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav"
 if /usr/bin/python3 -c "import gi; gi.require_version('GstRtspServer', '1.0'); from gi.repository import GstRtspServer" 2>/dev/null \
    && command -v gst-inspect-1.0 >/dev/null 2>&1 && gst-inspect-1.0 tsdemux >/dev/null 2>&1 \
    && gst-inspect-1.0 avdec_h264 >/dev/null 2>&1; then
-  exit 0  # already there
+  :  # already there
+else
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq >/dev/null
+  $SUDO apt-get install -y -qq --no-install-recommends $PKGS gstreamer1.0-tools >/dev/null
 fi
-SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq >/dev/null
-$SUDO apt-get install -y -qq --no-install-recommends $PKGS gstreamer1.0-tools >/dev/null
+
+LS_VERSION=1.23.2
+LS_VENV="${AERODAAS_LABEL_STUDIO_VENV:-$HOME/.cache/aerodaas/label-studio-$LS_VERSION}"
+if ! "$LS_VENV/bin/python" -c "import sys, label_studio; sys.exit(label_studio.__version__ != '$LS_VERSION')" 2>/dev/null \
+   || [ ! -x "$LS_VENV/bin/label-studio" ]; then
+  python3 -m venv "$LS_VENV"
+  "$LS_VENV/bin/python" -m pip install -q --disable-pip-version-check "label-studio==$LS_VERSION"
+fi

@@ -25,7 +25,7 @@ COMMAND_MODULES: tuple[ModuleType, ...] = (
     schema,         # schema
     plugins,        # plugins
     train,          # train
-    label,          # label frames
+    label,          # label
     recover,        # recover
     merge,          # merge
     inject,         # inject

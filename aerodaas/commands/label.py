@@ -1,21 +1,25 @@
 """``aerodaas label ...``: turn your own footage into labelled frames. ``label frames`` picks the frames worth
 labelling out of recordings (``aerodaas run --record``) and videos within a budget and writes them with the shipped
 detector's boxes as pre-labels (Label Studio tasks, CVAT XML, COCO JSON; docs/training.md, "Frames worth
-labelling"). Exit codes: 0 written; 2 bad input (files, options, classes), named before anything is written; 1 the
-run failed (nothing is left half-written).
+labelling"). ``push``, ``pull`` and ``serve`` carry the frames and pre-labels to a Label Studio project and the
+reviewed boxes back as training sets (:mod:`aerodaas.commands.label_studio`). Exit codes: 0 written; 2 bad input
+(files, options, classes), named before anything is written; 1 the run failed (nothing is left half-written).
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from aerodaas.commands.label_studio import add_label_studio_parsers
+
 
 def add_parser(sub) -> None:
     """Register the ``label`` group and its sub-command ``frames`` on the CLI's sub-parsers ``sub``; more
     sub-commands go on the ``what`` sub-parsers the same way."""
-    lp = sub.add_parser("label", help="pick frames worth labelling and pre-label them")
+    lp = sub.add_parser("label", help="label your own footage: pick frames, Label Studio push, pull and serve")
     what = lp.add_subparsers(dest="what", required=True)
     _add_frames(what)
+    add_label_studio_parsers(what)
 
 
 def _add_frames(what) -> None:

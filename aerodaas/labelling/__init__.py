@@ -6,5 +6,7 @@ Modules: :mod:`~aerodaas.labelling.names` (frame file names), :mod:`~aerodaas.la
 MCAP recordings, videos and image lists), :mod:`~aerodaas.labelling.features` (near-duplicate hash and the
 appearance embedding), :mod:`~aerodaas.labelling.scoring` (informativeness), :mod:`~aerodaas.labelling.select`
 (the selection: :func:`~aerodaas.labelling.select.select_frames`), :mod:`~aerodaas.labelling.prelabels` (the
-pre-label files) and :mod:`~aerodaas.labelling.frames` (the whole ``label frames`` run, written atomically).
+pre-label files) and :mod:`~aerodaas.labelling.frames` (the whole ``label frames`` run, written atomically); the Label Studio round
+trip: :mod:`~aerodaas.labelling.label_studio` (its REST client), :mod:`~aerodaas.labelling.push`,
+:mod:`~aerodaas.labelling.pull` and :mod:`~aerodaas.labelling.ml_backend` (``aerodaas label serve``).
 """

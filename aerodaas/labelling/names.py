@@ -3,7 +3,7 @@
 ``flight`` is the recording's or video's file stem and ``camera`` the camera's name, each reduced to letters, digits
 and ``-`` (any other run of characters becomes one ``-``; leading and trailing ``-`` are dropped), so the one ``_``
 of a name separates the flight from the camera. The training loader groups frames into sequences by stripping a
-trailing frame number (:func:`aerodaas.training.dataset.sequence_of`, regex ``[-_ .]*\\d+$``): a name written here
+trailing frame number (:func:`aerodaas.training.labels.images.sequence_of`, regex ``[-_ .]*\\d+$``): a name written here
 maps back to ``<flight>_<camera>`` for every flight, ``DJI_0025`` (written ``DJI-0025``) included, because the
 stripped run is exactly ``-<frame>`` (the camera part never ends in a separator).
 """

@@ -19,6 +19,7 @@ from aerodaas.training.labels.coco import load_coco
 from aerodaas.training.labels.images import LabelledImage
 from aerodaas.training.labels.layout import detect_layout
 from aerodaas.training.labels.yolo import NAME_FILES, load_yolo
+from aerodaas.training.label_studio_export import load_tasks
 
 __all__ = ["load_set", "labelled_classes", "split_by_sequence"]
 
@@ -68,10 +69,8 @@ def load_set(path: str | Path, names: Sequence[str] | None = None) -> tuple[list
     chk = Checker()
     layout = detect_layout(root, chk)
     if layout.kind == "tasks":
-        raise LabelError(str(layout.source), [
-            f"{layout.source}: not a COCO detection file: a JSON list (Label Studio's JSON export of tasks); "
-            f"export 'YOLO' or 'COCO' from Label Studio instead"])
-    if layout.kind == "coco":
+        items, names = load_tasks(layout.source, layout.doc, names, chk)
+    elif layout.kind == "coco":
         items, names = load_coco(layout.source, layout.doc, names, chk)
     else:
         names = list(names) if names else layout.names

@@ -1,1 +1,2 @@
-"""Tests: frames worth labelling (``aerodaas label frames``): sources, selection, pre-label files."""
+"""Tests: from footage to labels: frames worth labelling (sources, selection, pre-label files) and the Label
+Studio round trip (push, review, pull, train) against a real server."""

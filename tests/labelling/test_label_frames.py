@@ -14,7 +14,8 @@ import pytest
 from aerodaas import cli
 from aerodaas.labelling import frames as frames_mod
 from aerodaas.recording.writer import McapRecorder
-from aerodaas.training.dataset import load_set, sequence_of
+from aerodaas.training.dataset import load_set
+from aerodaas.training.labels.images import sequence_of
 from tests.labelling.footage import SIZE, write_recording, write_video
 
 REPO = Path(__file__).resolve().parents[2]

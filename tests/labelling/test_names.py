@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aerodaas.labelling.names import clean_name, flight_of, frame_name
-from aerodaas.training.dataset import sequence_of
+from aerodaas.training.labels.images import sequence_of
 
 
 @pytest.mark.parametrize("stem", ["DJI_0025", "DJI-0025", "flight 12", "2024-05-01_07", "a.b.c-7", "run_", "___",
