@@ -162,7 +162,7 @@ def test_push_refuses_a_bad_frames_folder_before_contacting_the_server(capsys, t
 def _export(tmp_path: Path, tasks: list, names: list[str] | None = NAMES) -> Path:
     folder = tmp_path / "ls_export"
     write_frames_folder(folder)
-    (folder / "tasks.json").rename(folder / "pre-labels.txt")  # the export is the folder's one .json
+    (folder / "tasks.json").unlink()  # the export is the folder's one .json
     (folder / "export.json").write_text(json.dumps(tasks))
     if names is None:
         (folder / "classes.txt").unlink()

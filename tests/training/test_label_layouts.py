@@ -115,7 +115,7 @@ def _not_detection(root: Path) -> tuple[Path, str]:
 def _task_list(root: Path) -> tuple[Path, str]:
     root.mkdir()
     (root / "project-1.json").write_text(json.dumps([{"id": 1, "data": {"image": "/data/upload/1/a.jpg"}}]))
-    return root / "project-1.json", "project-1.json: not a COCO detection file: a JSON list"
+    return root / "project-1.json", "project-1.json: a Label Studio export has no class list"
 
 
 def _broken_json(root: Path) -> tuple[Path, str]:

@@ -9,7 +9,8 @@
   ``obj.names`` or ``names.txt``;
 * COCO: one ``*.json`` with ``images``, ``annotations`` and ``categories`` in the folder or in ``annotations/``
   (CVAT "COCO 1.0": ``annotations/instances_default.json``; Label Studio "COCO": ``result.json``), or its path;
-* a JSON list: Label Studio's JSON export of tasks (kind ``"tasks"``).
+* a JSON list: Label Studio's JSON export of tasks (kind ``"tasks"``), as a file or in a folder of no label files with its
+  frames in ``images/``.
 """
 from __future__ import annotations
 
@@ -132,11 +133,11 @@ def detect_layout(path: Path, chk: Checker) -> Layout:
         tool = 'CVAT "COCO 1.0"' if cocos[0].parent.name == "annotations" else "COCO"
         return Layout("coco", cocos[0], tool, doc=jsons[cocos[0]])
     lay = _yolo(path, chk)
+    tasks = [f for f, k in kinds.items() if k == "tasks"]
+    if tasks and not lay.labels:  # Label Studio's JSON export with the frames beside it (images/)
+        return Layout("tasks", tasks[0], "Label Studio JSON", doc=jsons[tasks[0]])
     if lay.labels or lay.images:
         return lay
-    for f, k in kinds.items():
-        if k == "tasks":
-            return Layout("tasks", f, "Label Studio JSON", doc=jsons[f])
     if "notes" in kinds.values():
         f = next(f for f, k in kinds.items() if k == "notes")
         raise LabelError(str(path), [f"{f}: Label Studio's notes.json of a YOLO export, but no label file "
