@@ -59,8 +59,8 @@ def test_vehicle_tracking_runs_on_a_fresh_clone_without_shared_data(tmp_path):
     env = _env(clone)
 
     # every module the run needs is the clone's, not the checkout's that is installed in this venv
-    probe = ("import importlib, json, sys; print(json.dumps({n: importlib.import_module(n).__file__ for n in "
-             f"{list(PACKAGES)!r}}))")
+    probe = ("import importlib, json; print(json.dumps({n: importlib.import_module(n).__file__ for n in "
+             + repr(list(PACKAGES)) + "}))")
     where = json.loads(subprocess.run([sys.executable, "-c", probe], cwd=clone, env=env, capture_output=True,
                                       text=True, check=True, timeout=120).stdout)
     for name, path in where.items():
