@@ -8,7 +8,7 @@ rest with short low-gain models (DEV, BP, HV: gain 25-38 for 172-244 ms). The re
 plans over the tasks that have arrived. When the edge frees and no DEO/CD is waiting, it starts a BP (244 ms); a
 DEO arriving 50 ms later can then no longer start by its latest start (deadline 950 - 739 = arrival + 211 ms), and
 its cloud trigger (arrival + 108 ms) sends it to the cloud. The drones' frames are periodic (one 1-frame batch per
-drone per second, :func:`aerodaas.bench.schedulers.make_trace`, the reference's mock client), so the next
+drone per second, :func:`aerodaas.bench.workload.make_trace`, the reference's mock client), so the next
 arrivals can be predicted from the ones seen.
 
 Rules (times ms; EVPLAN's expected cloud value ``V`` and triggers, see :mod:`.analytics_evplan`, with two

@@ -26,7 +26,8 @@ from typing import Sequence
 
 from aerodaas.bench.harness import Harness, fleet_tasks
 from aerodaas.bench.machine import machine_info
-from aerodaas.bench.schedulers import LOADS, default_workload_path, make_trace
+from aerodaas.bench.options import LOADS
+from aerodaas.bench.workload import default_workload_path, make_trace
 from aerodaas.bench.schedulers_cli import scheduler_option, trace_options
 from aerodaas.bench.schedulers_main import trace_spec
 from aerodaas.bench.traces import TraceSpec

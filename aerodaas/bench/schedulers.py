@@ -46,11 +46,10 @@ import ray
 from aerodaas.actors.cloud_executor import start_cloud_executors
 from aerodaas.bench.edge_host import EdgeHostActor
 from aerodaas.bench.machine import machine_info
-from aerodaas.bench.options import DEFAULT_DRONES_PER_EDGE, DEFAULT_FPS, EMULATION_BOUND_MS, LOADS  # noqa: F401
-from aerodaas.bench.schedulers_report import (_emulation_p99, compare_with_harness, format_table,  # noqa: F401
-                                              summarize_runs, write_plot)
+from aerodaas.bench.options import DEFAULT_DRONES_PER_EDGE, DEFAULT_FPS, EMULATION_BOUND_MS, LOADS
+from aerodaas.bench.schedulers_report import _emulation_p99, summarize_runs
 from aerodaas.bench.sweep import scenario_specs
-from aerodaas.bench.workload import default_workload_path, edge_layout, make_trace  # noqa: F401 - re-exported
+from aerodaas.bench.workload import default_workload_path, edge_layout, make_trace
 from aerodaas.clusters.local import LocalCluster
 from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options, iter_schedulers,
                                                 make_analytics_scheduler)

@@ -14,7 +14,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
-from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, plugin_config_error
+from aerodaas.config.base import _Cfg, plugin_config_error
+from aerodaas.model.bounds import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP
 from aerodaas.plugins import registry
 
 __all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",

@@ -1,6 +1,6 @@
 """The configuration's foundations: :class:`ConfigError`, the strict base of every section (unknown keys refused,
-finite numbers, strict types), the documented physical bounds (:mod:`aerodaas.model.bounds`, imported here) and the
-"did you mean" helper."""
+finite numbers, strict types), the "did you mean" helper and where the files an environment names are found. The
+documented physical bounds the sections check are in :mod:`aerodaas.model.bounds`."""
 from __future__ import annotations
 
 import difflib
@@ -8,11 +8,6 @@ from pathlib import Path
 
 
 from pydantic import BaseModel, ConfigDict
-
-from aerodaas.model.bounds import (  # noqa: F401 - the configuration's sections read them from here
-    MAX_SPEED_MPS, MAX_ACCEL_MPS2, MAX_YAW_RATE_DPS, MAX_ALTITUDE_M, DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M,
-    MAX_CAMERA_PX, MAX_CAMERA_FPS, MAX_RATE_HZ, MAX_SPEEDUP, MIN_SPEEDUP, MIN_PHYSICS_HZ, MAX_GROUND_PX, MAX_SEED,
-    MAX_DURATION_S, MAX_BATTERY_WH, MAX_POWER_W, MIN_CONTROL_HZ, MAX_IMAGE_SIDE_PX, MAX_LIST_ITEMS)
 
 
 DATA_DIR_ENV = "AERODAAS_DATA_DIR"

@@ -7,7 +7,8 @@ from typing import Literal
 
 from pydantic import Field
 
-from aerodaas.config.base import MAX_ALTITUDE_M, MAX_DURATION_S, MAX_SPEED_MPS, _Cfg
+from aerodaas.config.base import _Cfg
+from aerodaas.model.bounds import MAX_ALTITUDE_M, MAX_DURATION_S, MAX_SPEED_MPS
 
 __all__ = ["PhaseDeadlinesConfig"]
 

@@ -18,9 +18,9 @@ from pydantic import BaseModel, Field, PrivateAttr, Strict, ValidationError, fie
 from aerodaas.model.jsonfile import JsonFileError, read_json
 from aerodaas.navigation.geofence import Geofence, GeofenceConfig
 
-from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, PACKAGE_PREFIX, MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ,
-                   MAX_LIST_ITEMS, MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg,
-                   did_you_mean, packaged_file)
+from aerodaas.config.base import ConfigError, DATA_DIR_ENV, PACKAGE_PREFIX, _Cfg, did_you_mean, packaged_file
+from aerodaas.model.bounds import (MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ, MAX_LIST_ITEMS,
+                                   MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP)
 from aerodaas.model.ids import Identifier, check_unique
 from aerodaas.config.robot import RobotConfig, SensorConfig, sensor_class
 from aerodaas.plugins import registry

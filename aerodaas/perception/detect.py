@@ -35,15 +35,12 @@ from aerodaas.perception.detector_values import check_input_size
 from aerodaas.perception.providers import Providers, open_session
 
 __all__ = [
-    "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
-    "ShippedModel",
     "YoloxDetector", "NanoDetDetector", "AerialDetector", "make_detector", "DETECTORS",
 ]
 
 log = logging.getLogger(__name__)
 
-from aerodaas.perception.model_files import (MODEL_DIR_ENV, MODELS, _ALIASES, ModelChecksumError, ModelNotFoundError,  # noqa: F401
-                          ModelSpec, ShippedModel, model_cache_dir, resolve_model)
+from aerodaas.perception.model_files import _ALIASES, resolve_model
 
 
 # ----------------------------------------------------------------------------------------------------------------

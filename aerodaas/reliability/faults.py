@@ -20,10 +20,11 @@ from mcap.reader import make_reader
 from aerodaas.clusters.reaper import descendants, start_time
 from aerodaas.config.robot import sensor_class
 from aerodaas.plugins.sensor import FrameSensor
-from aerodaas.recording.writer import McapRecorder, read_messages, summarize_mcap
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.reader import read_messages, summarize_mcap
 from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting_verdict
 from aerodaas.reliability.input_report import render_input_rows, render_inputs
-from aerodaas.reliability.procs import (REPO_APPS, actor_pids, argv0, mcap_reader_ok, no_crash, run_cli,  # noqa: F401
+from aerodaas.reliability.procs import (REPO_APPS, actor_pids, argv0, mcap_reader_ok, no_crash, run_cli,
                                        summary_outcome, wait_size)
 from aerodaas.tools.hitl import request
 

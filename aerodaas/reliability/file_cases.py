@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from aerodaas import cli
 from aerodaas.config import ConfigError, RobotConfig, load_environment_config
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission, plan_to_flight
 from aerodaas.model.types import GeoPoint, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation

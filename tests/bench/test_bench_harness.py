@@ -12,7 +12,7 @@ import pytest
 
 from aerodaas.bench.bound import lognormal_on_time_chance, lognormal_slack, utility_upper_bound
 from aerodaas.bench.harness import Harness, fleet_tasks, make_trace, run_fleet, run_policy
-from aerodaas.bench.schedulers import make_trace as fleet_trace
+from aerodaas.bench.workload import make_trace as fleet_trace
 from aerodaas.bench.schedulers_report import summarize_runs
 from aerodaas.bench.sweep import mean_ci, run_sweep, scenario_specs, t95
 from aerodaas.schedulers.dispatch.emulation import Jitter

@@ -72,7 +72,7 @@ SCRIPT = textwrap.dedent(r'''
 
 @pytest.mark.cluster
 def test_a_mission_flies_on_a_tls_cluster_that_refuses_drivers_without_its_certificates(tmp_path):
-    from aerodaas.recording.writer import summarize_mcap
+    from aerodaas.recording.reader import summarize_mcap
 
     from tests.safety.tls_certs import ca_and_node
 

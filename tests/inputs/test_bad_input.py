@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 
 from aerodaas import cli
-from aerodaas.runtime import driver as runtime
 from aerodaas.reliability.catalogue import ENV_CASES, PATH_CASES, check_env_case, check_path_case
 
 pytestmark = pytest.mark.faults
@@ -85,7 +84,7 @@ def no_ray(monkeypatch):
                         lambda address=None, dashboard=False: calls.append(("early", address)))
     # `aerodaas run` shuts Ray down at its end: here that would be the test session's shared Ray (tests after this
     # one found it gone); nothing was started, so there is nothing to stop
-    monkeypatch.setattr(runtime, "shutdown_ray", lambda: None)
+    monkeypatch.setattr(ray_start, "shutdown_ray", lambda: None)
     yield calls
 
 
@@ -200,7 +199,7 @@ def test_mission_upload_refuses_items_too_high_before_connecting(tmp_path, capsy
 def vehicle_at_home():
     """An emulated ArduCopter whose home is the test plans' planned home; yields (emulator, connection)."""
     from aerodaas.model.types import GeoPoint
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     emu = MavlinkVehicleEmulator("ardupilot", speedup=10.0, gps_lock_s=1.0,
                                  home=GeoPoint(lat=47.3977, lon=8.5456, alt=488.0))

@@ -26,7 +26,8 @@ from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
 from aerodaas.liveview.server import LiveServer, parse_address
-from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion, quaternion_from_euler_deg
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.values import camera_mount_quaternion, quaternion_from_euler_deg
 from aerodaas.recording.schemas import JSON_SCHEMA_MODELS, json_schema_for
 
 from tests.conftest import REPO
@@ -349,7 +350,7 @@ def test_replay_serves_a_recording_to_a_protocol_client(live_run, tmp_path):
 
 
 # --------------------------------------------------------------------------------------------- progress line
-from aerodaas.bench.overhead import FixedCostDetector  # noqa: E402
+from aerodaas.bench.pipeline import FixedCostDetector  # noqa: E402
 
 
 class CountingDetector(FixedCostDetector):
@@ -373,7 +374,7 @@ class CountingDetector(FixedCostDetector):
 def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run_options, tmp_path):
     """DEMS sends part of an overloaded detector's frames to a cloud executor: the detections shown live and in the
     summary are those of every executed task, edge and cloud (the edge copy alone saw only its own)."""
-    from aerodaas.runtime.driver import format_summary
+    from aerodaas.runtime.report import format_summary
     from tests.schedulers.test_analytics_scheduling import QOS, build, hover_config
 
     env, drone = build(hover_config(fps=15), CountingDetector(80), hover_s=4.0)

@@ -24,7 +24,7 @@ from mcap.reader import make_reader
 from aerodaas.liveview.server import LiveServer
 from aerodaas.recording.writer import RecordedMessage
 
-from aerodaas.reliability.faults import actor_pids
+from aerodaas.reliability.procs import actor_pids
 
 from tests.liveview.test_live_and_foxglove import AERODAAS, APP, ENV, REPO, _start, _wait_for_url
 

@@ -12,7 +12,7 @@ import pytest
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.cli import main
 from aerodaas.config import MavlinkConfig, RobotConfig
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.model.types import GeoPoint
 from tests.conftest import DATA_DIR
@@ -204,7 +204,7 @@ def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, a
     prior = make_backend(RobotConfig(id="gcs", backend="mavlink", home=HOME, mavlink=MavlinkConfig(
         connection=address, stream_rate_hz=5.0, set_speed_limits=False)))
     prior.connect(timeout_s=10)
-    from aerodaas.backends.mavlink.fence import FENCE as FENCE_TYPE
+    from aerodaas.backends.mavlink.transfer import FENCE as FENCE_TYPE
     from aerodaas.backends.mavlink.fence import fence_items
     from aerodaas.navigation.geofence import GeofenceConfig
     prior.transfers.upload_items(FENCE_TYPE, fence_items(GeofenceConfig(circles=[{"center": _ll(0, 0), "radius": 100.0}])))

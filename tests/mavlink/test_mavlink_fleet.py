@@ -16,7 +16,7 @@ import pytest
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.backends.mavlink import shared_link
 from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, load_environment_config
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.types import GeoPoint
 from tests.mavlink.emulated import run_until
 from tests.video.udp_fanout import UdpFanout

@@ -27,7 +27,7 @@ def _signed_survey(tmp_path, vehicle_key: bytes, key_file_key: bytes, connect_ti
                                      mavlink={"signing_key_file": key_path, "connect_timeout_s": connect_timeout_s})
     emu.stop()  # the same vehicle again, now with its key (the variant's emulator was made without one)
     from aerodaas.config import load_environment_config
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     robot = load_environment_config(str(env_path)).robots[0]
     emu = MavlinkVehicleEmulator("ardupilot", robot=robot, speedup=10.0, signing_key=vehicle_key)

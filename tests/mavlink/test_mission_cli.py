@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from aerodaas.cli import main
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission
 from aerodaas.model.types import GeoPoint
 from tests.conftest import DATA_DIR

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 from aerodaas.runtime.app_loader import app_module_name
 from aerodaas.runtime.driver import run_file
 

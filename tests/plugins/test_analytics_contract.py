@@ -16,7 +16,7 @@ from pydantic import BaseModel, ValidationError
 
 from aerodaas.analytics.base import Analytics
 from aerodaas.analytics.contract import ContractError, check_declaration
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 from aerodaas.protocol.messages import Port, ValueMsg
 
 from tests.conftest import REPO

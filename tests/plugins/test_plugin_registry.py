@@ -154,7 +154,7 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
     travel to the drone actor by value, sample the vehicle state there and are recorded with their schema."""
     from mcap.reader import make_reader
 
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
 
     app = tmp_path / "my_app.py"
     app.write_text(APP.replace('"sensors": [{"id": "alt", "type": "my_altimeter"}]',

@@ -10,7 +10,9 @@ import sys
 
 import pytest
 
-from aerodaas.recording.writer import McapRecorder, check_record_path, is_aerodaas_recording, read_messages
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.record_path import check_record_path, is_aerodaas_recording
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

@@ -18,7 +18,7 @@ import pytest
 
 from aerodaas.recording.health import (FIRST_EVENTS, ComponentKind, FailureCount, FailureLog, assess,
                                        tally_failures)
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

@@ -84,7 +84,7 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     from aerodaas.actors.dataplane import DataPlane
     from aerodaas.config import SimulationConfig
     from aerodaas.runtime.dataflow import build_plan, collect_graph
-    from aerodaas.runtime.driver import _robot_schedulers
+    from aerodaas.runtime.preflight import robot_schedulers as _robot_schedulers
     from aerodaas.protocol.specs import RecordSpec
 
     robots = robots or env.get_env_robots()

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
-from aerodaas.recording.writer import read_messages, summarize_mcap
+from aerodaas.recording.reader import read_messages, summarize_mcap
 from aerodaas.runtime.driver import run_file
 
 from tests.conftest import REPO, needs_data
@@ -95,7 +95,7 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
     from aerodaas import Environment, ObjectDetector
     from aerodaas.runtime import driver
-    from aerodaas.perception.detect import ModelNotFoundError
+    from aerodaas.perception.model_files import ModelNotFoundError
 
     started = []
 

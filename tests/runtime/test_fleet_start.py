@@ -10,7 +10,7 @@ import pytest
 
 from aerodaas import Environment
 from aerodaas.recording.metrics import waypoint_visits
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

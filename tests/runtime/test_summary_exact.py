@@ -13,7 +13,7 @@ import textwrap
 
 import pytest
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

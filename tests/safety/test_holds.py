@@ -55,7 +55,7 @@ def test_a_hold_that_cannot_be_kept_is_hold_failed_never_reached(ray_session, ru
 
     import numpy as np
 
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from aerodaas.model.types import GeoPoint
 
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)

@@ -212,7 +212,7 @@ result = drone.start_mission()
 
 
 def _e2e(tmp_path, run_options, robot: dict, waypoints: str, rtl: bool):
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
 
     robot.setdefault("sensors", [{"id": "odom", "type": "odometry", "properties": {"rate_hz": 10.0}}])
     robot["idle_land_s"] = 2.0

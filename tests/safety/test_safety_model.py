@@ -143,7 +143,7 @@ result = drone.start_mission()
 @pytest.mark.e2e
 def test_end_to_end_velocity_attack_stays_inside_on_the_recorded_odometry(ray_session, run_options, tmp_path):
     from aerodaas.navigation.geofence import Geofence
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
     from aerodaas.reliability.flight import PROBE_ENV
 
     robot = PROBE_ENV().model_dump(mode="json")

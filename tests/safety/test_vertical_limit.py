@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st
 
 from aerodaas.model.types import GeoPoint
 from aerodaas.config import BatteryConfig, Limits
-from aerodaas.config.base import MIN_PHYSICS_HZ
+from aerodaas.model.bounds import MIN_PHYSICS_HZ
 from aerodaas.navigation.braking import braking_speed, limited_change
 from aerodaas.sim.vehicle import SimVehicle
 

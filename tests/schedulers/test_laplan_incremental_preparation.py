@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from aerodaas.bench.harness import Harness, fleet_tasks
-from aerodaas.bench.schedulers import make_trace
+from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers.analytics_base import Workload
 from aerodaas.schedulers.analytics_laplan import LaPlan

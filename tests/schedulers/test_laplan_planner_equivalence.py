@@ -14,7 +14,7 @@ import random
 import pytest
 
 from aerodaas.bench.harness import Harness, fleet_tasks
-from aerodaas.bench.schedulers import make_trace
+from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers import analytics_laplan, single_machine_jit
 from aerodaas.schedulers.analytics_base import TaskState, Workload, make_analytics_scheduler

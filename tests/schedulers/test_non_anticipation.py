@@ -164,11 +164,11 @@ def cut_trace(w, seed: int, kind: str | None = None, *, drones: int = 3, duratio
     """The cut comparison's single-edge trace. ``kind`` None: :func:`aerodaas.bench.harness.make_trace` (1 fps,
     250 ms jitter; the policy tests' trace). Else a trace kind of :class:`TraceSpec` with its default parameters
     (``"onoff"``, ``"pareto"``, ``"flush"``: the bursty kinds of issue 41), made as the runtime benchmark and the
-    sweep make it (:func:`aerodaas.bench.schedulers.make_trace`, one edge of ``drones`` drones at 1 fps), its tasks
+    sweep make it (:func:`aerodaas.bench.workload.make_trace`, one edge of ``drones`` drones at 1 fps), its tasks
     numbered from 0 in arrival order as the harness's trace."""
     if kind is None:
         return make_trace(w, drones=drones, duration_s=duration_s, seed=seed, jitter_ms=250.0)
-    from aerodaas.bench.schedulers import make_trace as fleet_trace
+    from aerodaas.bench.workload import make_trace as fleet_trace
 
     rows = fleet_trace(w, drones, duration_s, seed, drones_per_edge=drones, trace=TraceSpec.parse(kind))
     return [AnalyticsTask(n, d, m, t, t + w[m].deadline_ms) for n, (t, _, d, m) in enumerate(rows)]
