@@ -1,4 +1,4 @@
-"""Warm workers for the persistent local cluster of ``aerodaas up`` (issue 27, item 2: a run attached to it reaches
+"""Warm workers for the persistent local cluster of ``aerodaas up`` (a run attached to it reaches
 its first processed frame in about a second).
 
 Ray's worker processes are started per job: every ``aerodaas run`` is a new job (driver), so without help each of its

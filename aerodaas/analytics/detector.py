@@ -25,7 +25,7 @@ class ObjectDetector(Analytics):
     (:class:`aerodaas.perception.model_files.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to the
     model's class names (a plain string is one class; ``[]`` is refused); thresholds are scores in [0, 1].
 
-    Bring your own model (issue 28): ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
+    Bring your own model: ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
     ``"yolox"``, ``"nanodet"`` or ``"ultralytics"`` (YOLOv5 / YOLOv8 / YOLO11 ONNX exports,
     :mod:`aerodaas.perception.decoders`); ``class_names`` (else the model's metadata ``names``, else COCO for the
     YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes; ``upscale=False``: a frame smaller
@@ -49,7 +49,7 @@ class ObjectDetector(Analytics):
     detections (the output stays the detections); each drone's geo-located tracks are recorded in a run under
     ``/{robot}/{name}/tracks`` (:mod:`aerodaas.perception.track_records`). The detector is then :attr:`stateful`.
 
-    ``providers`` (issue 46): onnxruntime execution providers in onnxruntime's names, in order of preference — a
+    ``providers``: onnxruntime execution providers in onnxruntime's names, in order of preference — a
     list (``["CUDAExecutionProvider", "CPUExecutionProvider"]``) or a
     :class:`aerodaas.perception.providers.Providers` (``required``, ``num_gpus``, provider ``options``); None: the
     CPU. Names are checked against ``onnxruntime.get_all_providers()`` where the detector is built (ValueError

@@ -1,4 +1,4 @@
-"""``aerodaas bench recorder``: the ceiling of the run's one recorder actor (issue 49 item 3).
+"""``aerodaas bench recorder``: the ceiling of the run's one recorder actor.
 
 A run records through one :class:`~aerodaas.actors.recorder_actor.RecorderActor`: every other actor's
 :class:`~aerodaas.actors.remote_recorder.RemoteRecorder` batches its messages to it (every 0.1 s, frames as JPEG

@@ -213,7 +213,7 @@ def _checked(schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_
 def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, repeat, trace_spec, edge_jitter,
             cloud_jitter, network, seed, cloud_nodes, address, n_hosts, n_cloud, wpath, reply_lead_ms, jitters, scen,
             options, emulation_bound_ms, drain_s) -> dict:
-    """The runtime result's ``config``: every option that shaped it (issue 41.4)."""
+    """The runtime result's ``config``: every option that shaped it."""
     return {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
             "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
             "trace": asdict(trace_spec) if trace_spec is not None else None,

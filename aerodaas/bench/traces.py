@@ -3,7 +3,7 @@ joining and leaving mid-run), bursty (heavy-tailed gaps, on/off bursts, a link t
 from a recording's camera-frame timestamps.
 
 Real drone video is not periodic: encoders and links jitter each frame gap, frames are lost on the link, and drones
-join and leave a fleet mid-mission. It also arrives in bursts (issue 41): encoder GOPs and paused streams (on/off),
+join and leave a fleet mid-mission. It also arrives in bursts: encoder GOPs and paused streams (on/off),
 heavy-tailed gaps, and a link that stalls and then delivers its buffered frames back to back. Every bursty kind keeps
 the mean frame rate (``1/period``), so a trace differs from the periodic one in its shape only.
 :func:`frame_times` gives one drone's frame send times (ms) for a :class:`TraceSpec`; :func:`aerodaas.bench.workload.make_trace` turns them into the benchmark's task rows.

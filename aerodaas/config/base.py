@@ -54,7 +54,7 @@ def plugin_config_error(what: str, cls: type, err: BaseException) -> str:
     """The message for an exception other than pydantic's ValidationError raised while a plug-in's ``Config``
     validated its settings (a validator raising TypeError or KeyError, which pydantic passes on as it is): worded
     as that plug-in's configuration error, naming ``what`` (``sensor type 'gas'``), the class and the exception,
-    never a traceback (issue 47 item 5)."""
+    never a traceback."""
     config = getattr(cls, "Config", None)
     model = f"{config.__module__}.{config.__qualname__}" if isinstance(config, type) else repr(config)
     return (f"{what}: the settings were refused by the plug-in's Config ({model}): {type(err).__name__}: "

@@ -267,7 +267,7 @@ def _raylet_kill(tmp: Path) -> dict:
             "output": out[-3000:]}
 
 
-#: how long a run's processes may outlive a SIGKILLed driver (s; issue 25: "beyond 10 s"), and the bound the
+#: how long a run's processes may outlive a SIGKILLed driver (s: none may live beyond 10 s), and the bound the
 #: test allows on a loaded machine; Ray's agents alone stay 60-64 s (:mod:`aerodaas.clusters.reaper`)
 GONE_WITHIN_S, GONE_WITHIN_LOADED_S = 10.0, 25.0
 
@@ -456,7 +456,7 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them, the joined "
      "recording's outcome is recording_lost (/run/result), never success", _recorder_kill),
-    *ACCOUNTING_FAULTS,  # the recording's end-to-end accounting under stalls and deaths (issue 40.1)
+    *ACCOUNTING_FAULTS,  # the recording's end-to-end accounting under stalls and deaths
 ]
 
 

@@ -1,4 +1,4 @@
-"""Input cases that are whole files or commands rather than one environment field (issue 25 items 1 and 4): JSON
+"""Input cases that are whole files or commands rather than one environment field: JSON
 files that are malformed as text (nesting 100,000 deep, UTF-16 / Latin-1, a duplicate key, a 5,000-digit integer),
 mission files (100,000 items of a ``.plan`` and of a WPL checked in bounded, linear time; an item 50 km up or
 7,100 km away, a far rally point: refused by ``mission upload`` before it connects) and safety-gate probes (an

@@ -1,4 +1,4 @@
-"""Ray's own TLS on a multi-node cluster (issue 50, item 5): a two-node ``LocalCluster`` runs Ray's mutual TLS
+"""Ray's own TLS on a multi-node cluster: a two-node ``LocalCluster`` runs Ray's mutual TLS
 (``RAY_USE_TLS`` and the ``RAY_TLS_*`` files of a private certificate authority, set for every Ray process,
 ``aerodaas run --address``'s driver included); a mission flies on it; the GCS and both raylets answer only a TLS
 client holding a certificate of that authority, and a driver without the certificates, or with one of another

@@ -1,4 +1,4 @@
-"""One MAVLink link, many vehicles (issue 26 item 1): robots naming one connection share one socket and receive
+"""One MAVLink link, many vehicles: robots naming one connection share one socket and receive
 their own system id's messages; commands carry each robot's target_system; ``auto`` takes the next unclaimed id;
 a clash is refused before Ray starts; ``aerodaas plan`` puts robots of one link in one drone actor."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 50 item 1: MAVLink 2 message signing (aerodaas/backends/mavlink/signing.py, the emulator's
+"""MAVLink 2 message signing (aerodaas/backends/mavlink/signing.py, the emulator's
 aerodaas/emulators/mavlink/signing.py). Judged by what the vehicle did (the emulated autopilot's own state), what the
 recording holds (read with the ``mcap`` package's reader) and the exit code a user meets. Spoofed messages come from
 another process (a pymavlink ground station run with ``sys.executable``) or are written onto the link unsigned."""

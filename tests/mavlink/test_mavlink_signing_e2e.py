@@ -1,4 +1,4 @@
-"""Issue 50 item 1 through the whole runtime (Ray, the drone actor, the recorder): MAVLink 2 signing on the MAVLink
+"""MAVLink 2 message signing through the whole runtime (Ray, the drone actor, the recorder) on the MAVLink
 emulator. A signed survey flies while unsigned telemetry in the vehicle's name and unsigned commands from another
 process are refused (judged from the recording, read with the ``mcap`` package, and the emulated autopilot's own
 state); a key the vehicle does not hold fails before take-off with exit 2."""

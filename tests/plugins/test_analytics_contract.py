@@ -1,4 +1,4 @@
-"""The analytics output contract (issue 39 item 3, docs/extending.md): a typed ``Output``, named outputs a downstream
+"""The analytics output contract (docs/extending.md): a typed ``Output``, named outputs a downstream
 analytics subscribes to, ``emit_event``, and ``consumes`` checked against the feeding stream before Ray starts.
 
 The component tests drive the real :class:`AnalyticsComponent` in a plain :class:`DataPlane` (no Ray) with a

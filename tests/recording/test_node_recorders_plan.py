@@ -1,4 +1,4 @@
-"""``recording.per_node`` in the run's plan (issue 49 item 3): a recorder actor per edge compute, placed by its
+"""``recording.per_node`` in the run's plan: a recorder actor per edge compute, placed by its
 labels, writing ``RUN.node-<compute>.mcap``, and that compute's actors recording to it. The plan only: nothing
 starts (the run on a two-node cluster is ``tests/cluster/test_node_recorders_cluster.py``)."""
 from __future__ import annotations

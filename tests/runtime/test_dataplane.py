@@ -1,4 +1,4 @@
-"""The data plane (issues 6 and 15): structural facts, not wall-clock numbers.
+"""The data plane: structural facts, not wall-clock numbers.
 
 * one drone actor per drone (or per ``drones_per_actor`` drones), one actor per deployed analytics and one recorder
   per run, counted on the Ray node during a real run and found by their names;

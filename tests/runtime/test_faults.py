@@ -45,7 +45,7 @@ def test_fault_ends_clean(name):
 @pytest.mark.e2e
 @pytest.mark.parametrize("name", [n for n, _, _ in ACCOUNTING_FAULTS])
 def test_stalls_deaths_and_slow_clients_end_with_the_files_truth(name):
-    """Issue 40.1: a recorder stalled 20 s, a recorder killed twice and an analytics killed twice each end
+    """A recorder stalled 20 s, a recorder killed twice and an analytics killed twice each end
     not-success (exit 4, recording_lost) with the summary's lost count per channel equal to what the file lacks,
     read with mcap's reader (the producers' counts in /run/accounting less the messages in every segment); a live
     client that stops reading is dropped and the run's end tells the same truth."""

@@ -1,4 +1,4 @@
-"""The camera gimbal pointed from an application (issue 38 item 3): pitch/yaw and a region of interest, on the
+"""The camera gimbal pointed from an application: pitch/yaw and a region of interest, on the
 simulator and on the MAVLink emulator, judged from the recording (``/<robot>/gimbal``, the frames' poses, the
 events); values out of the environment's limits refused before Ray (exit 2, the field named) and at run time with
 nothing sent."""

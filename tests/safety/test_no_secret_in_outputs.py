@@ -1,4 +1,4 @@
-"""Issue 50 item 4: no secret in a recording, a log or a summary.
+"""No secret in a recording, a log or a summary.
 
 One ``aerodaas run`` of a MAVLink mission on the emulated ArduPilot vehicle with every secret the project handles: the
 link signed (``mavlink.signing_key_file``, the emulator holding the same key), the HITL API on with a token

@@ -1,4 +1,4 @@
-"""Take-off, landing and the return to launch each have a deadline in vehicle seconds (issue 47 item 1: a ground-rover
+"""Take-off, landing and the return to launch each have a deadline in vehicle seconds (a ground-rover
 plug-in sat in TAKING_OFF for 4,000 simulated seconds until the battery failsafe ended it as failsafe_rtl). The
 formula alone; the drone (:class:`~aerodaas.actors.drone.DroneComponent`) stepped by hand on simulated time with
 backends that cannot climb, cannot land or cannot fly home, judged from its events, states and vehicle; then a
