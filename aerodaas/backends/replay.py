@@ -19,7 +19,7 @@ messages above, in MAVLink units, by :func:`load_ulog` (see there). A ULog has n
 reported for it.
 
 Only the vehicle's own messages count, and a packet a router forwarded on two links is played once: the logs are
-read by :mod:`aerodaas.backends.flight_log` (see there; its names are re-exported here).
+read by :mod:`aerodaas.backends.flight_log` (see there).
 
 A battery reported as unknown (``battery_remaining`` -1, MAVLink's "not available") stays unknown: ``battery_pct``
 is None and the odometry records ``null``, never 100 %.

@@ -7,8 +7,7 @@ Two detectors share one interface (``detect(image_bgr) -> list[Detection]``, ``d
 * :class:`NanoDetDetector` -- NanoDet-Plus-m 1.5x, 416x416 input (RangiLyu NanoDet / OpenCV model zoo, Apache-2.0).
 
 Model files are located by :func:`~aerodaas.perception.model_files.resolve_model` (explicit path, ``$AERODAAS_MODEL_DIR``,
-the user cache, then a download pinned to a commit and verified by sha256; :mod:`aerodaas.perception.model_files`, re-exported
-here).
+the user cache, then a download pinned to a commit and verified by sha256; :mod:`aerodaas.perception.model_files`).
 
 Batching: ``detect_batch`` runs several images (e.g. the latest frames of several drones) in one onnxruntime call
 when the model's input has a dynamic batch dimension (``batch_dynamic``); the shipped YOLOX-Nano and NanoDet-Plus
