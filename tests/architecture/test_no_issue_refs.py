@@ -37,7 +37,7 @@ def _tracked() -> list[str]:
     return [p for p in out.decode().split("\0") if p]
 
 
-def test_no_line_names_a_tracker_issue():
+def test_no_line_names_a_tracker_number():
     bad = []
     for rel in _tracked():
         path = ROOT / rel
