@@ -13,7 +13,7 @@ Frames of reference written for Foxglove's transform tree (on ``/tf``, with ever
 that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the vehicle's pose),
 ``<robot>/base_link`` -> ``<robot>/gps`` (the GPS antenna, at the body origin) and ``<robot>/base_link`` ->
 ``<robot>/<camera>`` (each camera's optical frame, pitched by its mount, see
-:func:`aerodaas.recording.writer.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
+:func:`aerodaas.recording.values.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
 on ``<image topic>/calibration`` with the camera's intrinsics.
 
 A failing disk (full, I/O error, gone) stops the recording cleanly instead of killing the writer thread: the file
@@ -43,7 +43,8 @@ from aerodaas.recording.channel_accounts import ACCOUNTING_TOPIC, account_channe
 from aerodaas.recording.reader import RUN_RESULT_TOPIC
 from aerodaas.recording.recover import recover_mcap
 from aerodaas.recording.task_tally import TASK_SCHEMA, TaskTally
-from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.values import camera_mount_quaternion
 from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts, FrameHold
 
 TF_TOPIC = "/tf"

@@ -181,11 +181,11 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture(scope="session")
 def ray_session():
     """A local Ray with this node labelled tier=edge (token auth on), shared by all e2e tests."""
-    from aerodaas.runtime import driver as runtime
+    from aerodaas.runtime import ray_start
 
-    runtime.ensure_ray(None)
+    ray_start.ensure_ray(None)
     yield
-    runtime.shutdown_ray()
+    ray_start.shutdown_ray()
 
 
 @pytest.fixture

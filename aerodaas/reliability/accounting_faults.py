@@ -1,4 +1,4 @@
-"""Fault scenarios of the recording's end-to-end accounting (issue 40.1): real ``aerodaas run`` processes of the farm
+"""Fault scenarios of the recording's end-to-end accounting: real ``aerodaas run`` processes of the farm
 survey (camera, odometry, a monitoring analytics) whose recorder actor is stalled or killed mid-run. Each ends clean
 when the outcome tells the truth: not ``success`` (exit 4, ``recording_lost``) exactly when the recording lacks a
 message its producers numbered, and the summary's per-channel lost counts equal what the file lacks — read back
@@ -24,7 +24,7 @@ from aerodaas.reliability.procs import (REPO_APPS, actor_pids, mcap_reader_ok, n
 
 __all__ = ["ACCOUNTING_FAULTS", "file_losses", "summary_losses"]
 
-#: how long the recorder actor is stopped (s): the issue's stall
+#: how long the recorder actor is stopped (s)
 STALL_S = 20.0
 
 

@@ -1,4 +1,4 @@
-"""Input cases of issue 40 (items 4 and 9) that are not one environment field, for ``python -m aerodaas.reliability``:
+"""Input cases that are not one environment field, for ``python -m aerodaas.reliability``:
 
 * values an application gives the API (``Waypoint(x="1")``, ``y=True``, a yaw rate of 1e308), an empty navigation,
   a pre-planned mission above ``max_queued_items``, a NaN waypoint built with ``model_construct``: ``aerodaas run``
@@ -209,7 +209,7 @@ def plugin_cases(tag: str) -> list[tuple[str, Callable[[dict], None], str]]:
          lambda d: robot(d).update(backend=f"{mod('badconfig')}:Backend"),
          "Config must be a pydantic BaseModel subclass, the model of its settings, or None; got the class "
          "builtins.dict"),
-        # issue 47 item 5: a class that is not of its kind's base (subprocess.Popen was constructed as Popen(env))
+        # a class that is not of its kind's base (subprocess.Popen was constructed as Popen(env))
         ("trajectory_scheduler 'subprocess:Popen' (a class, not a TrajectoryScheduler)",
          lambda d: d.update(trajectory_scheduler="subprocess:Popen"),
          "trajectory_scheduler: Value error, trajectory scheduler plug-in 'subprocess:Popen' (class subprocess.Popen) "

@@ -35,10 +35,6 @@ from aerodaas.runtime.dataflow import Placement, build_plan
 from aerodaas.runtime.node_recorders import run_accounting
 from aerodaas.runtime.options import RunOptions, actor_classes, check_actor_classes
 from aerodaas.runtime.preflight import check_options, hitl_access, validate_graph
-from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
-from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
-                                        shutdown_ray, start_ray_early)
-from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 from aerodaas.runtime.supervise import error_cause as _cause
 from aerodaas.runtime.supervise import collect_stats, start_actors, supervise
 from aerodaas.runtime.teardown import close_actors
@@ -173,7 +169,7 @@ def run_application(app: Any, options: RunOptions | None = None) -> MissionResul
     ``options`` (default: :class:`RunOptions`); its classes travel to the actors by value. Checks the options
     against it first (bad input raises ConfigError / ValueError before Ray starts); once actors exist, every
     failure ends in a :class:`MissionResult` with the recording finished. Raises ValueError for an application
-    without a mission, :class:`RayStartError` when Ray cannot be started or reached."""
+    without a mission, :class:`~aerodaas.runtime.ray_start.RayStartError` when Ray cannot be started or reached."""
     if app.mission is None or app.graph is None:
         raise ValueError(f"{app.path}: the application never called start_mission()")
     m = app.mission

@@ -1,4 +1,4 @@
-"""One way to add a command (issue 48 item 5): every ``aerodaas`` sub-command comes from a module of
+"""One way to add a command: every ``aerodaas`` sub-command comes from a module of
 :data:`aerodaas.commands.COMMAND_MODULES` that holds both its parser and its handler; ``aerodaas/cli.py`` only
 assembles them."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 50 item 2: MAVLink 2 signing on real ArduCopter SITL (marker ``sitl``), one firmware boot in a
+"""MAVLink 2 signing on real ArduCopter SITL (marker ``sitl``), one firmware boot in a
 loopback-only network namespace (tests/firmware/sitl.py) shared by the tests below, which only read what it produced.
 
 The firmware's ports play the roles they have on a real vehicle (ArduPilot GCS_Signing.cpp

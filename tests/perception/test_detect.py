@@ -18,15 +18,8 @@ cv2 = pytest.importorskip("cv2")
 pytest.importorskip("onnxruntime")
 
 from aerodaas.perception import detect as D  # noqa: E402
-from aerodaas.perception.detect import (  # noqa: E402
-    MODELS,
-    ModelChecksumError,
-    ModelNotFoundError,
-    NanoDetDetector,
-    YoloxDetector,
-    make_detector,
-    resolve_model,
-)
+from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, make_detector  # noqa: E402
+from aerodaas.perception.model_files import MODELS, ModelChecksumError, ModelNotFoundError, resolve_model  # noqa: E402
 
 DATA_DIR = Path(os.environ.get("AERODAAS_DATA_DIR", Path(__file__).parents[2] / "../shared/data")).resolve()
 MODELS_DIR = DATA_DIR / "models"

@@ -1,4 +1,4 @@
-"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.perception.detect.ShippedModel):
+"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.perception.model_files.ShippedModel):
 a node without the file (a cloud node: other disk, no model folder, no internet) writes the bytes to its own cache
 and loads them; the driver's own node keeps loading the file it resolved."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 pytest.importorskip("onnxruntime")
 
 from aerodaas.analytics.core import ObjectDetector  # noqa: E402
-from aerodaas.perception.detect import MODELS, ModelNotFoundError, ShippedModel  # noqa: E402
+from aerodaas.perception.model_files import MODELS, ModelNotFoundError, ShippedModel  # noqa: E402
 from tests.conftest import MODEL_DIR  # noqa: E402
 
 needs_model = pytest.mark.skipif(not (MODEL_DIR / "yolox_nano.onnx").is_file(),

@@ -13,7 +13,8 @@ import time
 import pytest
 
 from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS
-from aerodaas.reliability.faults import mcap_reader_ok, run_fault
+from aerodaas.reliability.faults import run_fault
+from aerodaas.reliability.procs import mcap_reader_ok
 
 from tests.conftest import needs_data
 
@@ -141,7 +142,7 @@ def test_recorder_failure_when_the_disk_stays_full_leaves_a_recoverable_file(tmp
     fail = svc.report()["failure"]
     assert fail["finished"] is False and "No space" in fail["finish_error"]
     assert not mcap_reader_ok(path)[0]
-    from aerodaas.recording.writer import summarize_mcap
+    from aerodaas.recording.reader import summarize_mcap
 
     readable = summarize_mcap(path)["message_count"]
     assert readable > 0
@@ -171,7 +172,7 @@ time.sleep(600)
     p.wait()
     assert not mcap_reader_ok(path)[0]
     from aerodaas import cli
-    from aerodaas.recording.writer import summarize_mcap
+    from aerodaas.recording.reader import summarize_mcap
 
     assert summarize_mcap(path)["message_count"] == 400
     assert cli.main(["recover", str(path)]) == 0

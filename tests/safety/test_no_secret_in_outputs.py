@@ -1,4 +1,4 @@
-"""Issue 50 item 4: no secret in a recording, a log or a summary.
+"""No secret in a recording, a log or a summary.
 
 One ``aerodaas run`` of a MAVLink mission on the emulated ArduPilot vehicle with every secret the project handles: the
 link signed (``mavlink.signing_key_file``, the emulator holding the same key), the HITL API on with a token
@@ -54,7 +54,7 @@ def _wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 240) -> boo
 
 
 def test_no_secret_in_the_recording_the_console_or_rays_logs(tmp_path):
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     from tests.liveview.foxglove_ws_client import collect
 

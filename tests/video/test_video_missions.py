@@ -22,7 +22,7 @@ APP = REPO / "apps" / "vehicle_tracking.py"
 
 
 def check_recording_replays_as_a_trace(rec, fps: float = 2.0, seed: int = 1) -> dict[str, int]:
-    """A recording of a real stream as the scheduler benchmarks' trace ``--trace recording:FILE`` (issue 41): its
+    """A recording of a real stream as the scheduler benchmarks' trace ``--trace recording:FILE``: its
     camera-frame gaps are read — :func:`recording_frame_gaps` gives one gap list per camera topic, with as many
     gaps as the topic has frames minus one, the gaps between their log times (counted here from the MCAP file
     itself) — and :func:`frame_times` replays them at ``fps``: a drone's replayed gaps are the recorded ones, in
