@@ -349,7 +349,7 @@ def _start_hitl(run: _Run):
     # only now: the HITL server imports FastAPI (a quarter of a second of CPU between the actors' set-up and the
     # mission's start, paid by every run when it sat above the check)
     from aerodaas.tools.hitl import HitlServer  # lazy: heavy fastapi
-    from aerodaas.tools.hitl_client import state_file
+    from aerodaas.tools.hitl_client import state_file  # lazy: only a run with the HITL API writes its state file
 
     access = hitl_access(run.env, opts)
     hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in run.handles.items()},
