@@ -17,7 +17,7 @@ from pydantic import BaseModel, Field, ValidationError, field_validator, model_v
 from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, plugin_config_error
 from aerodaas.plugins import registry
 
-__all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",
+__all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "MavlinkDefaults", "TelloConfig", "ReplayConfig",
            "backend_settings_into_config", "add_section_schemas"]
 
 
@@ -153,6 +153,11 @@ class MavlinkConfig(_Cfg):
     #: is signed with it; every message from the vehicle must be (aerodaas/backends/mavlink/signing.py). Unset: no
     #: signing. The key itself never goes in the environment file.
     signing_key_file: str | None = Field(default=None, min_length=1)
+    #: refuse to arm, take off or send a target (anything that moves the vehicle) unless the link is signed; unset:
+    #: the environment's ``mavlink.require_signing`` (:class:`MavlinkDefaults`), false without one. True with no
+    #: ``signing_key_file`` is refused before Ray starts (aerodaas/config/environment.py); the backend refuses it
+    #: too, naming the robot (aerodaas/backends/mavlink/backend.py)
+    require_signing: bool | None = None
 
     @field_validator("connection")
     @classmethod
@@ -183,6 +188,15 @@ class MavlinkConfig(_Cfg):
                 return f"udpin:{parts[2]}"
             return f"{kind}:{host}:{parts[2]}"
         return self.connection.strip()
+
+
+class MavlinkDefaults(_Cfg):
+    """The environment's defaults for every robot on a MAVLink backend (``mavlink`` at the top of
+    ``environment.json``); a robot's own ``mavlink`` section overrides each field it sets.
+    ``require_signing``: every such robot refuses to move its vehicle over an unsigned link, so each needs a
+    ``mavlink.signing_key_file`` (docs/security.md)."""
+
+    require_signing: bool = False
 
 
 class TelloConfig(_Cfg):

@@ -22,6 +22,7 @@ from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX
                    MAX_LIST_ITEMS, MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg,
                    did_you_mean)
 from aerodaas.model.ids import Identifier, check_unique
+from aerodaas.config.backends import MavlinkConfig, MavlinkDefaults
 from aerodaas.config.robot import RobotConfig, SensorConfig, sensor_class
 from aerodaas.plugins import registry
 
@@ -315,6 +316,8 @@ class EnvironmentConfig(_Cfg):
         "(TrajectoryScheduler, NearestNeighborScheduler, TwoOptScheduler, a plug-in) or 'module.path:ClassName'; "
         "constructed as Class(env). Unset: TrajectoryScheduler")
     recording: RecordingConfig = Field(default_factory=RecordingConfig)
+    mavlink: MavlinkDefaults = Field(default_factory=MavlinkDefaults, description="defaults for every robot on a "
+                                     "MAVLink backend (a robot's own mavlink section overrides them)")
     drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
                                   "1: an actor per drone; more for memory-bound fleets")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
@@ -392,6 +395,24 @@ class EnvironmentConfig(_Cfg):
                                  f"one of {kinds} (a sensor plug-in samples a robot's state: "
                                  f"list it under robots[].sensors)")
             cls.check_for_environment(s.properties, f"env_sensors.{j}")
+        return self
+
+    @model_validator(mode="after")
+    def _mavlink_signing(self) -> "EnvironmentConfig":
+        """Each MAVLink robot's ``require_signing``: its own, else the environment's ``mavlink.require_signing``
+        (written into its ``backend_config``); when true it needs a ``signing_key_file``, refused here otherwise
+        (naming where the requirement came from), before Ray starts."""
+        for j, r in enumerate(self.robots):
+            if not isinstance(r.backend_config, dict) or not isinstance(r.backend_settings(), MavlinkConfig):
+                continue
+            own = r.backend_config.get("require_signing")
+            if own is None:
+                r.backend_config["require_signing"] = self.mavlink.require_signing
+            if (own if own is not None else self.mavlink.require_signing) and not r.backend_config.get("signing_key_file"):
+                field = f"robots.{j}.mavlink.require_signing" if own is not None else "mavlink.require_signing"
+                raise ValueError(f"{field}: true, but robot {r.id!r} has no mavlink.signing_key_file: it would refuse "
+                                 f"to arm over an unsigned link; give it its key file (docs/security.md) or set "
+                                 f"robots.{j}.mavlink.require_signing to false")
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:
