@@ -38,10 +38,10 @@ def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5
         backend = make_backend(cfg)
     except KeyFileError as e:
         raise KeyFileError(f"--key-file: {e}") from None
-    backend.connect()
     if not backend.signing.enabled:
         print(f"aerodaas mission {args.mission_cmd}: note: the link {args.connection} is not signed (no --key-file): "
               "anyone on it can command the vehicle", file=sys.stderr, flush=True)
+    backend.connect()
     deadline = time.monotonic() + min(args.timeout, home_wait_s)
     while not backend.telemetry.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
         time.sleep(0.05)
