@@ -21,6 +21,10 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from aerodaas.backends import make_backend
+from aerodaas.config import MavlinkConfig, RobotConfig
+from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+
 __all__ = ["FloodSource", "SignedTelemetryTap", "flood_run"]
 
 KEY = hashlib.sha256(b"aerodaas signing flood vehicle key").digest()
@@ -130,10 +134,6 @@ def _stats(ages: list[float]) -> dict[str, float]:
 def flood_run(factor: float = 20.0, duration_s: float = 10.0, transport: str = "udp", speedup: float = 1.0,
               stream_rate_hz: float = 10.0) -> dict[str, Any]:
     """One measurement (see the module docstring); returns its numbers. Raises what connecting raises."""
-    from aerodaas.backends import make_backend
-    from aerodaas.config import MavlinkConfig, RobotConfig
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
-
     emu = MavlinkVehicleEmulator("ardupilot", speedup=speedup, gps_lock_s=0.0, signing_key=KEY)
     address = emu.start("udpin:127.0.0.1:0" if transport == "udp" else "tcp:127.0.0.1:0")
     tmp = tempfile.mkdtemp(prefix="aerodaas-flood-")

@@ -105,3 +105,24 @@ def test_the_environment_wide_requirement_reaches_every_mavlink_robot_and_a_robo
     assert make_backend(a).cfg.require_signing is True  # what the backend itself reads
     default = parse_environment_config({"robots": [{"id": "a", "backend": "mavlink"}]})
     assert default.robots[0].backend_settings().require_signing is False
+
+
+@pytest.mark.e2e
+def test_an_unsigned_survey_says_so_in_its_recording_and_summary(ray_session, run_options, tmp_path):
+    """Through the whole runtime (Ray, the drone actor, the recorder): apps/farm_survey.py on an emulated ArduCopter
+    with no key flies, and the recording (read with the ``mcap`` package) holds the ``link_not_signed`` event, the
+    printed summary its line."""
+    from aerodaas.runtime.report import format_summary
+    from tests.firmware.sitl import read_recording
+    from tests.runtime.test_backends_e2e import _mavlink_variant, _run_app
+
+    emu, env_path = _mavlink_variant("farm_survey", "ardupilot", 10.0, tmp_path)
+    try:
+        res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
+    finally:
+        emu.stop()
+    assert res.outcome == "success", res.robots["quadrotor_base"].get("error")
+    ev = [m for _, m in read_recording(tmp_path / "farm.mcap")["/quadrotor_base/events"]]
+    said = [e for e in ev if e["event"] == "link_not_signed"]
+    assert len(said) == 1 and said[0]["connection"].startswith("tcp:127.0.0.1:"), said
+    assert f"MAVLink link NOT SIGNED ({said[0]['connection']})" in format_summary(res)
