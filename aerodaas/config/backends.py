@@ -17,7 +17,7 @@ from pydantic import BaseModel, Field, ValidationError, field_validator, model_v
 from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, plugin_config_error
 from aerodaas.plugins import registry
 
-__all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "MavlinkDefaults", "TelloConfig", "ReplayConfig",
+__all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "MavlinkDefaults", "apply_mavlink_defaults", "TelloConfig", "ReplayConfig",
            "backend_settings_into_config", "add_section_schemas"]
 
 
@@ -197,6 +197,25 @@ class MavlinkDefaults(_Cfg):
     ``mavlink.signing_key_file`` (docs/security.md)."""
 
     require_signing: bool = False
+
+
+def apply_mavlink_defaults(robots: list[Any], defaults: MavlinkDefaults) -> None:
+    """The environment's ``mavlink`` section (``defaults``) applied to ``robots`` (``robots[]``, RobotConfig): each
+    robot on a MAVLink backend that sets no ``require_signing`` gets the environment's (written into its
+    ``backend_config``, where the backend reads it); one that requires signing needs a ``signing_key_file``.
+    Raises ValueError naming where the requirement came from (``robots.<i>.mavlink.require_signing`` or the
+    environment's ``mavlink.require_signing``) and the robot."""
+    for j, r in enumerate(robots):
+        if not isinstance(r.backend_config, dict) or not isinstance(r.backend_settings(), MavlinkConfig):
+            continue
+        own = r.backend_config.get("require_signing")
+        required = defaults.require_signing if own is None else own
+        r.backend_config["require_signing"] = required
+        if required and not r.backend_config.get("signing_key_file"):
+            field = "mavlink.require_signing" if own is None else f"robots.{j}.mavlink.require_signing"
+            raise ValueError(f"{field}: true, but robot {r.id!r} has no mavlink.signing_key_file: it would refuse to "
+                             f"arm over an unsigned link; give it its key file (docs/security.md) or set "
+                             f"robots.{j}.mavlink.require_signing to false")
 
 
 class TelloConfig(_Cfg):

@@ -22,7 +22,7 @@ from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX
                    MAX_LIST_ITEMS, MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg,
                    did_you_mean)
 from aerodaas.model.ids import Identifier, check_unique
-from aerodaas.config.backends import MavlinkConfig, MavlinkDefaults
+from aerodaas.config.backends import MavlinkDefaults, apply_mavlink_defaults
 from aerodaas.config.robot import RobotConfig, SensorConfig, sensor_class
 from aerodaas.plugins import registry
 
@@ -398,21 +398,8 @@ class EnvironmentConfig(_Cfg):
         return self
 
     @model_validator(mode="after")
-    def _mavlink_signing(self) -> "EnvironmentConfig":
-        """Each MAVLink robot's ``require_signing``: its own, else the environment's ``mavlink.require_signing``
-        (written into its ``backend_config``); when true it needs a ``signing_key_file``, refused here otherwise
-        (naming where the requirement came from), before Ray starts."""
-        for j, r in enumerate(self.robots):
-            if not isinstance(r.backend_config, dict) or not isinstance(r.backend_settings(), MavlinkConfig):
-                continue
-            own = r.backend_config.get("require_signing")
-            if own is None:
-                r.backend_config["require_signing"] = self.mavlink.require_signing
-            if (own if own is not None else self.mavlink.require_signing) and not r.backend_config.get("signing_key_file"):
-                field = f"robots.{j}.mavlink.require_signing" if own is not None else "mavlink.require_signing"
-                raise ValueError(f"{field}: true, but robot {r.id!r} has no mavlink.signing_key_file: it would refuse "
-                                 f"to arm over an unsigned link; give it its key file (docs/security.md) or set "
-                                 f"robots.{j}.mavlink.require_signing to false")
+    def _mavlink_defaults(self) -> "EnvironmentConfig":
+        apply_mavlink_defaults(self.robots, self.mavlink)  # require_signing, checked before Ray (config/backends.py)
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:
