@@ -9,7 +9,7 @@ import time
 def run(args: argparse.Namespace) -> int:
     """``aerodaas sim --mavlink ADDR``: the flight model as an ArduPilot/PX4 vehicle until Ctrl-C or SIGTERM
     (``kill``, ``docker stop``, systemd), either of which stops it cleanly: sockets closed, exit code 0 (stopping
-    is how a server ends, unlike ``run``'s interrupted mission); 2 for a bad argument or address."""
+    is how a server ends, unlike ``run``'s interrupted mission); 2 for a bad argument, address or ``--key-file``."""
     from aerodaas.emulators.mavlink import MavlinkVehicleEmulator  # lazy: CLI start-up (pydantic and pymavlink)
     from aerodaas.model.types import GeoPoint  # lazy: CLI start-up (pydantic)
 
@@ -22,8 +22,18 @@ def run(args: argparse.Namespace) -> int:
             print(f"aerodaas sim: --home expects LAT,LON,ALT (degrees, degrees, metres AMSL), got {args.home!r} "
                   f"({e})", file=sys.stderr)
             return 2
+    key = None
+    if args.key_file:
+        from aerodaas.backends.mavlink.signing import KeyFileError, read_key_file  # lazy: CLI start-up
+
+        try:  # the key read as the backend reads it: the same file works on both ends
+            key = read_key_file(args.key_file)
+        except KeyFileError as e:
+            print(f"aerodaas sim: --key-file: {e}", file=sys.stderr)
+            return 2
     try:
-        emu = MavlinkVehicleEmulator(args.autopilot, home=home, speedup=args.speedup, system_id=args.sysid)
+        emu = MavlinkVehicleEmulator(args.autopilot, home=home, speedup=args.speedup, system_id=args.sysid,
+                                     signing_key=key)
         address = emu.start(args.mavlink, allow_remote=args.allow_remote)
     except (ValueError, OSError) as e:
         print(f"aerodaas sim: {e}", file=sys.stderr)
@@ -39,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
             previous_sigterm = signal.signal(signal.SIGTERM, on_sigterm)
         except ValueError:  # not the main thread (main() called from a worker thread): Ctrl-C only
             pass
+        signed = "MAVLink 2 signing on (unsigned commands dropped)" if key is not None else "NOT SIGNED"
         print(f"aerodaas sim: {args.autopilot} vehicle (system {args.sysid}) on {address}, {args.speedup:g}x real "
-              "time; Ctrl-C or SIGTERM to stop", flush=True)
+              f"time, {signed}; Ctrl-C or SIGTERM to stop", flush=True)
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
@@ -64,4 +75,7 @@ def add_parser(sub) -> None:
     sm.add_argument("--home", metavar="LAT,LON,ALT", help="home position (degrees, degrees, metres AMSL)")
     sm.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
     sm.add_argument("--allow-remote", action="store_true", help="allow a non-loopback address")
+    sm.add_argument("--key-file", metavar="F", default=None,
+                    help="MAVLink 2 signing key file (as mavlink.signing_key_file): the vehicle signs what it sends "
+                         "and drops unsigned or wrongly signed commands, as ArduPilot does once provisioned")
     sm.set_defaults(func=run)

@@ -18,7 +18,7 @@ from aerodaas.config.base import _Cfg, plugin_config_error
 from aerodaas.model.bounds import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP
 from aerodaas.plugins import registry
 
-__all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",
+__all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "MavlinkDefaults", "apply_mavlink_defaults", "TelloConfig", "ReplayConfig",
            "backend_settings_into_config", "add_section_schemas"]
 
 
@@ -154,6 +154,11 @@ class MavlinkConfig(_Cfg):
     #: is signed with it; every message from the vehicle must be (aerodaas/backends/mavlink/signing.py). Unset: no
     #: signing. The key itself never goes in the environment file.
     signing_key_file: str | None = Field(default=None, min_length=1)
+    #: refuse to arm, take off or send a target (anything that moves the vehicle) unless the link is signed; unset:
+    #: the environment's ``mavlink.require_signing`` (:class:`MavlinkDefaults`), false without one. True with no
+    #: ``signing_key_file`` is refused before Ray starts (aerodaas/config/environment.py); the backend refuses it
+    #: too, naming the robot (aerodaas/backends/mavlink/backend.py)
+    require_signing: bool | None = None
 
     @field_validator("connection")
     @classmethod
@@ -184,6 +189,34 @@ class MavlinkConfig(_Cfg):
                 return f"udpin:{parts[2]}"
             return f"{kind}:{host}:{parts[2]}"
         return self.connection.strip()
+
+
+class MavlinkDefaults(_Cfg):
+    """The environment's defaults for every robot on a MAVLink backend (``mavlink`` at the top of
+    ``environment.json``); a robot's own ``mavlink`` section overrides each field it sets.
+    ``require_signing``: every such robot refuses to move its vehicle over an unsigned link, so each needs a
+    ``mavlink.signing_key_file`` (docs/security.md)."""
+
+    require_signing: bool = False
+
+
+def apply_mavlink_defaults(robots: list[Any], defaults: MavlinkDefaults) -> None:
+    """The environment's ``mavlink`` section (``defaults``) applied to ``robots`` (``robots[]``, RobotConfig): each
+    robot on a MAVLink backend that sets no ``require_signing`` gets the environment's (written into its
+    ``backend_config``, where the backend reads it); one that requires signing needs a ``signing_key_file``.
+    Raises ValueError naming where the requirement came from (``robots.<i>.mavlink.require_signing`` or the
+    environment's ``mavlink.require_signing``) and the robot."""
+    for j, r in enumerate(robots):
+        if not isinstance(r.backend_config, dict) or not isinstance(r.backend_settings(), MavlinkConfig):
+            continue
+        own = r.backend_config.get("require_signing")
+        required = defaults.require_signing if own is None else own
+        r.backend_config["require_signing"] = required
+        if required and not r.backend_config.get("signing_key_file"):
+            field = "mavlink.require_signing" if own is None else f"robots.{j}.mavlink.require_signing"
+            raise ValueError(f"{field}: true, but robot {r.id!r} has no mavlink.signing_key_file: it would refuse to "
+                             f"arm over an unsigned link; give it its key file (docs/security.md) or set "
+                             f"robots.{j}.mavlink.require_signing to false")
 
 
 class TelloConfig(_Cfg):

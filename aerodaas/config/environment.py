@@ -22,6 +22,7 @@ from aerodaas.config.base import ConfigError, DATA_DIR_ENV, PACKAGE_PREFIX, _Cfg
 from aerodaas.model.bounds import (MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ, MAX_LIST_ITEMS,
                                    MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP)
 from aerodaas.model.ids import Identifier, check_unique
+from aerodaas.config.backends import MavlinkDefaults, apply_mavlink_defaults
 from aerodaas.config.robot import RobotConfig, SensorConfig, sensor_class
 from aerodaas.plugins import registry
 
@@ -327,6 +328,8 @@ class EnvironmentConfig(_Cfg):
         "(TrajectoryScheduler, NearestNeighborScheduler, TwoOptScheduler, a plug-in) or 'module.path:ClassName'; "
         "constructed as Class(env). Unset: TrajectoryScheduler")
     recording: RecordingConfig = Field(default_factory=RecordingConfig)
+    mavlink: MavlinkDefaults = Field(default_factory=MavlinkDefaults, description="defaults for every robot on a "
+                                     "MAVLink backend (a robot's own mavlink section overrides them)")
     drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
                                   "1: an actor per drone; more for memory-bound fleets")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
@@ -404,6 +407,11 @@ class EnvironmentConfig(_Cfg):
                                  f"one of {kinds} (a sensor plug-in samples a robot's state: "
                                  f"list it under robots[].sensors)")
             cls.check_for_environment(s.properties, f"env_sensors.{j}")
+        return self
+
+    @model_validator(mode="after")
+    def _mavlink_defaults(self) -> "EnvironmentConfig":
+        apply_mavlink_defaults(self.robots, self.mavlink)  # require_signing, checked before Ray (config/backends.py)
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:

@@ -357,6 +357,11 @@ def _link_lines(events: list[dict]) -> list[str]:
     e = _last(events, "link_messages_dropped")
     if e is not None:
         out.append(f"    MAVLink link: {e.get('total')} messages of the vehicle dropped here (this process fell behind)")
+    e = _last(events, "link_not_signed")  # aerodaas/backends/mavlink/signing.py NoSigning.announce
+    if e is not None:
+        out.append(f"    MAVLink link NOT SIGNED ({e.get('connection')}): anyone who could put a packet on it could "
+                   f"command the vehicle or send telemetry in its name (set mavlink.signing_key_file; "
+                   f"docs/security.md)")
     for name, what in (("link_unsigned", "unsigned"), ("link_bad_signature", "wrongly signed or replayed")):
         e = _last(events, name)  # MAVLink 2 signing (aerodaas/backends/mavlink/signing.py RejectReport)
         if e is not None:

@@ -64,4 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="pymavlink connection string, e.g. tcp:127.0.0.1:5760, udpin:0.0.0.0:14550, /dev/ttyACM0")
         m.add_argument("--autopilot", choices=["auto", "ardupilot", "px4"], default="auto")
         m.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the vehicle (default 10)")
+        m.add_argument("--key-file", metavar="F", default=None,
+                       help="MAVLink 2 signing key file of the vehicle (32 bytes, 64 hex characters, mode 0600; "
+                            "docs/security.md): everything sent is signed, only correctly signed messages are taken")
         m.set_defaults(func=cmd_mission)

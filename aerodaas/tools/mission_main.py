@@ -12,6 +12,7 @@ from typing import Any
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.backends.mavlink.fence import fence_from_items
 from aerodaas.backends.mavlink.transfer import FENCE, RALLY
+from aerodaas.backends.mavlink.signing import KeyFileError
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
 from aerodaas.missionfile.upload import cap_speeds, check_relative_altitudes, mission_differences, mission_frames
@@ -29,10 +30,18 @@ def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5
     fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
     # set_speed_limits False: the vehicle's own speed parameters are left as they are (a started mission flies on
     # after we close, so nothing changed could be put back); the file's speeds, capped by --max-speed, are the mission
+    key_file = getattr(args, "key_file", None)
     mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
-                       fence=fence, set_speed_limits=False)
+                       fence=fence, set_speed_limits=False,
+                       signing_key_file=os.path.abspath(key_file) if key_file else None)
     cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
-    backend = make_backend(cfg)
+    try:  # the key read as the backend reads it (signing.py read_key_file), before anything is sent
+        backend = make_backend(cfg)
+    except KeyFileError as e:
+        raise KeyFileError(f"--key-file: {e}") from None
+    if not backend.signing.enabled:
+        print(f"aerodaas mission {args.mission_cmd}: note: the link {args.connection} is not signed (no --key-file): "
+              "anyone on it can command the vehicle", file=sys.stderr, flush=True)
     backend.connect()
     deadline = time.monotonic() + min(args.timeout, home_wait_s)
     while not backend.telemetry.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
@@ -101,7 +110,9 @@ def run_mission(args: argparse.Namespace) -> int:
     them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`), each command without a
     position in ``MAV_FRAME_MISSION`` (printed, :func:`~aerodaas.missionfile.upload.mission_frames`); no other
     vehicle parameter is changed. The mission is then read back and compared as each autopilot stores it
-    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started)."""
+    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started).
+    ``--key-file``: the link signed with that key as the backend signs it (``mavlink.signing_key_file``); a key file
+    that cannot be used or a vehicle that does not answer signed: exit 2."""
     name = f"aerodaas mission {args.mission_cmd}"
     opened: list = []  # the backend once connected: closed at the end, whatever happened
     try:

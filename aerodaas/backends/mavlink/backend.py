@@ -12,7 +12,7 @@ import numpy as np
 from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem
 from aerodaas.model.types import GeoPoint, Odometry
-from aerodaas.backends.base import BackendError, PoseSample, VehicleBackend
+from aerodaas.backends.base import BackendError, CredentialsRefused, PoseSample, VehicleBackend
 from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.camera import CameraFinder
 from aerodaas.backends.mavlink.clock import VehicleClock
@@ -354,7 +354,9 @@ class MavlinkBackend(VehicleBackend):
 
     # readiness, arming, take-off (aerodaas.backends.mavlink.action.VehicleAction)
     def arm(self) -> None:
-        """Arm for a guided flight, bounded by ``arm_timeout_s`` (:meth:`VehicleAction.arm`)."""
+        """Arm for a guided flight, bounded by ``arm_timeout_s`` (:meth:`VehicleAction.arm`). Raises
+        CredentialsRefused on an unsigned link when ``mavlink.require_signing`` (:meth:`require_signed`)."""
+        self.require_signed("arm")
         self.actions.arm()
 
     def disarm(self) -> None:
@@ -365,17 +367,30 @@ class MavlinkBackend(VehicleBackend):
     def takeoff(self, altitude_m: float) -> None:
         """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above the take-off point (:meth:`VehicleAction.takeoff`)."""
         self._require_navigable("takeoff")
+        self.require_signed("takeoff")
         self.actions.takeoff(altitude_m)
+
+    def require_signed(self, command: str) -> None:
+        """``mavlink.require_signing``: ``command`` (arming, take-off, a target, a mission start: anything that moves
+        the vehicle) goes only over a signed link. Stopping (hold, land, RTL, disarm, the safe end) is never refused:
+        refusing it could only leave a vehicle flying. Raises CredentialsRefused naming the robot otherwise."""
+        if self.cfg.require_signing and not (self.signing.enabled and self.link.port is not None):
+            raise CredentialsRefused(
+                f"robot {self.robot_id!r}: {command} refused: mavlink.require_signing is true but the link "
+                f"{self.cfg.connection!r} is not signed (mavlink.signing_key_file "
+                f"{'unset' if self.cfg.signing_key_file is None else 'set, but not connected'}); nothing was sent")
 
     # guided control (aerodaas.backends.mavlink.offboard.OffboardControl)
     def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
         """Fly to ``target_enu`` (ENU metres from home) at most at ``speed`` m/s (:meth:`OffboardControl.goto`)."""
         self._require_navigable("goto")
+        self.require_signed("goto")
         self.offboard.goto(target_enu, speed)
 
     def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
         """Hold ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s) (:meth:`OffboardControl.set_velocity`)."""
         self._require_navigable("set_velocity")
+        self.require_signed("set_velocity")
         self.offboard.set_velocity(v_enu, yaw_rate_dps)
 
     def hold(self) -> None:
@@ -412,6 +427,7 @@ class MavlinkBackend(VehicleBackend):
         """Fly the uploaded mission (:meth:`AutopilotMission.start`): our target stream stops first, and the vehicle
         is ours to bring down (:meth:`safe_end`)."""
         self._require_navigable("start_mission")
+        self.require_signed("start_mission")
         self.mission.start()
 
     def discover_video_stream(self, request: Any) -> Any:

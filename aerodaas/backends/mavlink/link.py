@@ -136,6 +136,7 @@ class MavlinkLink:
         self._send_lock = port.send_lock
         if self._signing.enabled:
             port.link.use_signing_encoder()  # before our first (signed) HEARTBEAT
+            port.screen = self._signing.screen  # checked before queueing: rejected messages take no queue slot
         next_hb = [0.0]
 
         def tick() -> None:  # udpout: the vehicle learns our address from what we send
@@ -157,6 +158,7 @@ class MavlinkLink:
             hb = self._signed_heartbeat(port, deadline, tick, timeout)
         self.losses.count_from(port)  # counted from this connection on
         self.identify(hb)
+        self._signing.announce(self._settings.connection)  # an unsigned link said out loud (signing.py NoSigning)
         self.on_heartbeat(hb, time.monotonic())
         self._stop.clear()
         self._io = threading.Thread(target=self._io_loop, name=f"mavlink-{self.robot_id}", daemon=True)

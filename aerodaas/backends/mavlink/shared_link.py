@@ -205,6 +205,11 @@ class LinkPort:
         self.target_system = self.target_component = 0
         self.dropped = 0
         self.live_since = 0.0
+        #: the check every message of this robot's vehicle passes before it is queued (signing.py
+        #: ``LinkSigning.accept``, set by a robot that signs): a rejected one is dropped at once, counted by the
+        #: check, and never takes a queue slot, so a flood of unsigned messages in the vehicle's name cannot push
+        #: the signed ones out of the queue (:data:`PORT_QUEUE`). None: every message is queued
+        self.screen: Callable[[Any], bool] | None = None
         self._q: deque = deque()
         self._cv = threading.Condition()
         self._closed = False
@@ -221,7 +226,14 @@ class LinkPort:
     def deliver(self, msg: Any) -> None:
         """Queue ``msg`` (a pymavlink message from this robot's vehicle) for :meth:`recv_msg`; called by the
         :class:`SharedLink`'s reader thread. A full queue (``PORT_QUEUE`` messages) drops its oldest message
-        (counted in :attr:`dropped`). Never blocks, never raises."""
+        (counted in :attr:`dropped`); a message :attr:`screen` rejects is not queued. Never blocks, never raises."""
+        screen = self.screen
+        if screen is not None:
+            try:
+                if not screen(msg):
+                    return
+            except Exception:  # noqa: BLE001 - a message the check cannot read is not the vehicle's signed one
+                return
         with self._cv:
             if len(self._q) >= PORT_QUEUE:
                 self._q.popleft()

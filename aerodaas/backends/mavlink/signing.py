@@ -53,6 +53,9 @@ SUMMARY_EVERY_S = 5.0
 #: the SETUP_SIGNING key that switches signing off (MAVLink common.xml SETUP_SIGNING: "all zero ... disable")
 DISABLE_KEY = bytes(32)
 
+#: the attribute set on a pymavlink message once :meth:`LinkSigning.accept` took it (a local mark, never on the wire)
+ACCEPTED_MARK = "_aerodaas_signature_accepted"
+
 _HEX_KEY = re.compile(r"[0-9a-fA-F]{64}")
 
 
@@ -148,6 +151,20 @@ class Verdict(enum.Enum):
     REPLAYED = "replayed"  # correctly signed, but its timestamp is not newer than its stream's (or too old)
 
 
+def sign_outgoing(mav: Any, key: bytes, timestamp: int, link_id: int = LINK_ID) -> None:
+    """Make pymavlink's encoder ``mav`` (a ``MAVLink`` object) sign every message it sends from now on with ``key``
+    (32 bytes), link id ``link_id``, from ``timestamp`` (10 us units since :data:`SIGNING_EPOCH_S`) or the
+    timestamp it already holds, whichever is later: pymavlink then adds one per message (spec, "Timestamp
+    Handling"). The one place our senders set up pymavlink's signing (:meth:`LinkSigning.before_send`, through
+    which the backend, ``aerodaas mission`` and ``aerodaas mavlink signing`` send). Raises ValueError for a key
+    that is not 32 bytes."""
+    if len(key) != 32:
+        raise ValueError(f"a signing key is 32 bytes, got {len(key)}")
+    s = mav.signing
+    s.secret_key, s.link_id, s.sign_outgoing = bytes(key), int(link_id), True
+    s.timestamp = max(int(s.timestamp or 0), int(timestamp))
+
+
 def sign_fields(buf: bytes | bytearray) -> tuple[bool, int, int]:
     """(signed, link id, timestamp) of a packet ``buf`` as received (pymavlink ``get_msgbuf()``): a MAVLink 2
     packet (0xFD) whose incompatibility flags have MAVLINK_IFLAG_SIGNED (0x01) ends in the 13-byte signature
@@ -221,10 +238,24 @@ class RejectReport:
 
 
 class NoSigning:
-    """Signing off (``mavlink.signing_key_file`` unset): every message is taken, ours go out unsigned."""
+    """Signing off (``mavlink.signing_key_file`` unset): every message is taken, ours go out unsigned, and the
+    connection says so (:meth:`announce`). ``robot_id``: named in the warning; ``event``: records a backend event
+    (None: none recorded)."""
 
     enabled = False
     unsigned = bad_signature = 0
+    screen = None  # shared_link.py LinkPort.screen: every message is queued
+
+    def __init__(self, robot_id: str = "", event: Callable[..., None] | None = None) -> None:
+        self.robot_id, self._event = robot_id, event
+
+    def announce(self, connection: str) -> None:
+        """The link on ``connection`` is up unsigned: a ``link_not_signed`` event (the run summary repeats it:
+        runtime/report.py) and a warning, for anyone who can put a packet on the link can command the vehicle."""
+        if self._event is not None:
+            self._event("link_not_signed", connection=connection)
+        log.warning("%s: the MAVLink link %s is not signed (mavlink.signing_key_file unset): anyone who can put a "
+                    "packet on it can command the vehicle or speak in its name", self.robot_id, connection)
 
     def accept(self, msg: Any) -> bool:
         """Every message is taken."""
@@ -281,20 +312,35 @@ class LinkSigning:
 
     def accept(self, msg: Any) -> bool:
         """True when ``msg`` (from the vehicle's system) is correctly signed with a new timestamp, or is of a type
-        allowed unsigned; otherwise it is counted, reported and False. Called by the I/O thread."""
+        allowed unsigned; otherwise it is counted, reported and False. A message accepted once is marked
+        (:data:`ACCEPTED_MARK`) and accepted again at once: the shared link's reader checks each message before it
+        is queued (shared_link.py ``LinkPort.screen``: a rejected one is dropped there, so a flood of them never
+        takes a queue slot of a signed one), and the I/O thread's dispatch checks what reaches it by any path.
+        Called by one thread at a time (the link's reader, or the caller of connect before the reader routes)."""
+        if getattr(msg, ACCEPTED_MARK, False):
+            return True
         verdict = self._check.verdict(msg, now_timestamp())
         if verdict in (Verdict.SIGNED, Verdict.ALLOWED_UNSIGNED):
+            setattr(msg, ACCEPTED_MARK, True)
             return True
         (self._unsigned if verdict is Verdict.UNSIGNED else self._bad).reject(msg, verdict)
         return False
+
+    def screen(self, msg: Any) -> bool:
+        """The shared link's check of a message of this vehicle before it is queued (shared_link.py
+        ``LinkPort.screen``): :meth:`accept`; malformed and unknown messages pass (the link's dispatch counts and
+        skips them)."""
+        mtype = msg.get_type()
+        return mtype == "BAD_DATA" or mtype.startswith("UNKNOWN_") or self.accept(msg)
+
+    def announce(self, connection: str) -> None:
+        """Nothing to say: the link is signed (a vehicle without the key never got this far)."""
 
     def before_send(self, mav: Any) -> None:
         """Make ``mav`` (a pymavlink ``MAVLink`` encoder that parses nothing: shared_link.py ``SharedLink.tx``)
         sign the next messages with this vehicle's key, from a timestamp no older than the clock, the stored value
         or any timestamp accepted from the vehicle. Caller holds the link's send lock."""
-        s = mav.signing
-        s.secret_key, s.link_id, s.sign_outgoing = self._key, LINK_ID, True
-        s.timestamp = max(int(s.timestamp or 0), now_timestamp(), self._floor, self._check.latest)
+        sign_outgoing(mav, self._key, max(now_timestamp(), self._floor, self._check.latest))
 
     def after_send(self, mav: Any) -> None:
         """Keep the timestamp ``mav`` will use next; store a new reserve once use reached the stored one. Caller
@@ -321,4 +367,4 @@ class LinkSigning:
 def make_signing(key_path: str | None, robot_id: str, event: Callable[..., None]) -> LinkSigning | NoSigning:
     """:class:`LinkSigning` for the key file ``key_path`` (``mavlink.signing_key_file``), :class:`NoSigning` when
     None. Raises what :class:`LinkSigning` raises."""
-    return NoSigning() if key_path is None else LinkSigning(key_path, robot_id, event)
+    return NoSigning(robot_id, event) if key_path is None else LinkSigning(key_path, robot_id, event)
