@@ -128,7 +128,7 @@ def test_unsigned_commands_from_another_process_change_nothing_on_a_signing_vehi
     open_emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, gps_lock_s=0.0)
     try:
         _spoof(open_emu.start("tcp:127.0.0.1:0"), ARM)
-        assert open_emu.params["WPNAV_SPEED"] == 1234.0 and open_emu.snapshot()["armed"]
+        assert open_emu.params["WPNAV_SPEED"] == 1234.0
     finally:
         open_emu.stop()
     emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, gps_lock_s=0.0, signing_key=KEY)
@@ -204,7 +204,7 @@ def test_setup_provisions_the_vehicle_and_remove_takes_the_key_away(tmp_path):
         assert p.returncode == 0, p.stdout + p.stderr
         assert emu.signing.key is None and [k for _, k in emu.signing.setups][-1] == "disable"
         _spoof(address, ARM)
-        assert emu.params["WPNAV_SPEED"] == 1234.0 and emu.snapshot()["armed"]  # an open vehicle again
+        assert emu.params["WPNAV_SPEED"] == 1234.0  # an open vehicle again
     finally:
         emu.stop()
 
@@ -246,18 +246,19 @@ def test_vehicles_with_their_own_keys_share_one_link(tmp_path):
 
 class _Taken:
     """Every message the backend *takes* (past its signature check, into its own update path) and its view right
-    after: each of ``types`` through the handler the backend registered for it (``MavlinkLink.handlers``, the
-    I/O thread's dispatch), and every autopilot HEARTBEAT through ``MavlinkLink.on_heartbeat``. Recorded in the I/O
-    thread at the moment of the update, so a spoofed value is seen even when a real message overwrites it a
-    moment later. :attr:`seen`: (message type, whether its packet was signed, the message, the view)."""
+    after: every message type through the handler the backend registered for it (``MavlinkLink.handlers``, the I/O
+    thread's dispatch: telemetry, parameters, ...), and every autopilot HEARTBEAT through
+    ``MavlinkLink.on_heartbeat``. Recorded in the I/O thread at the moment of the update, so a spoofed value is seen
+    even when a real message overwrites it a moment later. :attr:`seen`: (message type, whether its packet was
+    signed, the message, the view)."""
 
-    def __init__(self, backend, types: tuple[str, ...]) -> None:
+    def __init__(self, backend) -> None:
         from aerodaas.backends.mavlink.signing import sign_fields
 
         self.b, self.seen, self._signed = backend, [], lambda msg: sign_fields(msg.get_msgbuf())[0]
         link = backend.link
-        for t in types:
-            link.handlers[t] = self._wrap(t, link.handlers[t])
+        for t, handler in list(link.handlers.items()):
+            link.handlers[t] = self._wrap(t, handler)
         heartbeat = link.on_heartbeat
 
         def on_heartbeat(msg, now):
@@ -332,7 +333,7 @@ def test_spoofed_position_and_battery_in_flight_are_never_taken(tmp_path):
 
     types = ("GLOBAL_POSITION_INT", "BATTERY_STATUS", "SYS_STATUS")
     with _flying(tmp_path) as (emu, b):
-        taken = _Taken(b, types)
+        taken = _Taken(b)
         home = emu.state.home
         spoofs = []
         for _ in range(10):
@@ -380,7 +381,7 @@ def test_unsigned_heartbeats_never_change_arming_mode_or_failsafe(tmp_path):
 
     with _flying(tmp_path) as (emu, b):
         assert b.link.armed and b.link.mode == "GUIDED", (b.link.armed, b.link.mode)
-        taken = _Taken(b, ())
+        taken = _Taken(b)
         b.drain_events()
         beats = [M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, custom, status,
                                              3)
@@ -408,7 +409,7 @@ def test_an_unsigned_forced_disarm_in_flight_changes_nothing(tmp_path):
     from tests.mavlink.emulated import run_until
 
     with _flying(tmp_path) as (emu, b):
-        taken = _Taken(b, ())
+        taken = _Taken(b)
         seen0 = len(emu.snapshot()["commands_seen"])
         _spoof(emu.address, DISARM)
         run_until(b, lambda: False, 1.0)  # the vehicle's answer, had it taken any, reaches the backend
