@@ -60,6 +60,38 @@ def _halt_cameras(d: Any) -> None:
         cam["comp"].halt()
 
 
+class _ClockHold:
+    """The wall time this actor's clock spent waiting for its recorder (``recorder.held_s``,
+    :class:`~.remote_recorder.FrameHold`): :meth:`taken` returns what was waited since the last call; a wait that
+    is over becomes a ``clock_held`` event (``held_s``: wall s) of every drone in ``drones``."""
+
+    def __init__(self, recorder: Any, drones: list) -> None:
+        self.recorder, self.drones = recorder, drones
+        self.seen = self._held()
+        self.total_s = 0.0
+        self.open_s = 0.0  # the wait in progress (over several captures)
+
+    def _held(self) -> float:
+        return float(getattr(getattr(self.recorder, "hold", None), "held_s", 0.0))
+
+    def taken(self) -> float:
+        now = self._held()
+        dt, self.seen = now - self.seen, now
+        if dt > 0:
+            self.open_s += dt
+            self.total_s += dt
+        elif self.open_s:
+            self.end()
+        return dt
+
+    def end(self) -> None:
+        """Record the wait in progress, if any."""
+        if self.open_s:
+            for d in self.drones:
+                d.record_event("clock_held", held_s=round(self.open_s, 3), cause="recorder behind")
+            self.open_s = 0.0
+
+
 class _Checkpointer:
     """Sends each drone's checkpoint (:mod:`.checkpoint`) to the run's recorder actor about every ``period_s``
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
@@ -138,11 +170,10 @@ class ActorAssembly:
             from aerodaas.actors.recorder import RecorderService  # lazy: heavy mcap, protobuf, websockets
 
             return RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
-                                   declare=rec.declare,
+                                   declare=rec.declare, hold_s=float(spec.sim.get("recorder_hold_s", 0.0)),
                                    json_schemas=rec.schemas)  # plug-in sensors' message schemas
         if spec.record_remote:  # an actor of a recorded run: its messages go to the run's recorder actor
-
-            return RemoteRecorder(plane, spec.record_remote)
+            return RemoteRecorder(plane, spec.record_remote, hold_s=float(spec.sim.get("recorder_hold_s", 0.0)))
         return None
 
     def _add_analytics(self, plane: DataPlane, spec: ActorSpec) -> None:
@@ -244,7 +275,11 @@ class ActorAssembly:
         tick runs at ``control_rate_hz``. Time runs at ``speedup`` x wall time (lock-step: as fast as the
         analytics allow). A control tick that runs later than one control period after its due wall time (the
         period divided by ``speedup``) is counted as missed. A drone whose mission has ended keeps stepping, with
-        odometry only, until its recorded odometry shows the end state (:meth:`DroneComponent.settled`)."""
+        odometry only, until its recorded odometry shows the end state (:meth:`DroneComponent.settled`).
+
+        A simulated run's clock waits for a recorder that falls behind (``simulation.recorder_hold_s``): the wall
+        time a capture spent waiting for the recorder is taken off the pacing, so no tick runs late for it; each
+        wait is a ``clock_held`` event of every drone here, and the total is each drone's ``clock_held_s``."""
         sim, drones = self.sim, self.drones
         dt = 1.0 / sim.physics_hz
         lock = sim.lockstep
@@ -256,6 +291,7 @@ class ActorAssembly:
         step = 0
         active = [d for d in drones if not d.done]
         checkpoints = _Checkpointer(self.plane, drones, self.checkpoint_numbers)
+        held = _ClockHold(self.recorder, drones)
         self.tick_lateness: list[float] = []
         try:
             while active:
@@ -276,6 +312,7 @@ class ActorAssembly:
                         _capture_due(d, tok, behind_s > SHED_LATE_TICKS * d.tick_period / sim.speedup)
                     else:  # no more ticks: a stream camera stops capturing its arrivals too
                         _halt_cameras(d)
+                wall0 += held.taken()  # simulated time waited for the recorder: not late for it
                 if tok is not None:  # a frame for a consumer that Ray restarts waits up to restart_hold_s for it
                     tok.wait(max(120.0, self.plane.restart_hold_s + 60.0))
                 now = time.monotonic()
@@ -294,6 +331,7 @@ class ActorAssembly:
                         d.finish()
                     active = []
         finally:
+            held.end()
             for d in drones:
                 _halt_cameras(d)
                 d.close()
@@ -302,7 +340,8 @@ class ActorAssembly:
                     self.scheduling.finish()
                 except Exception as e:  # reported; the drones' reports must still come back
                     self.plane.report_error("analytics_scheduler", e)
-        return {d.cfg.id: {**d.report(), "plugin_sensors": {ps.sensor_id: ps.stats() for ps in d.plugin_sensors}}
+        return {d.cfg.id: {**d.report(), "plugin_sensors": {ps.sensor_id: ps.stats() for ps in d.plugin_sensors},
+                           "clock_held_s": round(held.total_s, 3), "clock_hold_budget_s": sim.recorder_hold_s}
                 for d in drones}
 
     def _control_due(self, d: Any, now: float, wall0: float) -> bool:

@@ -1,4 +1,4 @@
-"""Every flight phase of a drone is bounded (issue 47 item 1): take-off, landing and the return to launch each get a
+"""Every flight phase of a drone is bounded: take-off, landing and the return to launch each get a
 deadline in vehicle seconds when the drone enters them (:mod:`aerodaas.navigation.deadlines`, the robot's
 ``deadlines`` settings: :class:`~aerodaas.config.deadlines.PhaseDeadlinesConfig`). Past it the phase is stalled:
 a ``takeoff_stalled`` / ``landing_stalled`` / ``rtl_stalled`` event, an outcome that is not success, and the

@@ -8,7 +8,7 @@ SET_POSITION_TARGET_GLOBAL_INT whose destination its own fence refuses (``ModeGu
 after ``AC_Fence::check_destination_within_fence``; no COMMAND_ACK exists for that message) and keeps flying to its
 previous target; PX4 acknowledges a DO_REPOSITION outside its geofence and ignores it ("Reposition is outside
 geofence"). A drone waiting in NAVIGATING for such a target sat there for 330 vehicle seconds until its battery
-failsafe (issue 40). The watch judges the vehicle's own progress, whatever the reason it stopped: the distance to the
+failsafe. The watch judges the vehicle's own progress, whatever the reason it stopped: the distance to the
 target must shrink by ``progress.min_progress_m`` within a window, or the vehicle be inside the acceptance radius
 (settling there is the hold's business, :class:`~aerodaas.config.robot.HoldConfig`).
 """

@@ -13,7 +13,7 @@ Frames of reference written for Foxglove's transform tree (on ``/tf``, with ever
 that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the vehicle's pose),
 ``<robot>/base_link`` -> ``<robot>/gps`` (the GPS antenna, at the body origin) and ``<robot>/base_link`` ->
 ``<robot>/<camera>`` (each camera's optical frame, pitched by its mount, see
-:func:`aerodaas.recording.writer.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
+:func:`aerodaas.recording.values.camera_mount_quaternion`). Each image is accompanied by a ``foxglove.CameraCalibration``
 on ``<image topic>/calibration`` with the camera's intrinsics.
 
 A failing disk (full, I/O error, gone) stops the recording cleanly instead of killing the writer thread: the file
@@ -43,8 +43,9 @@ from aerodaas.recording.channel_accounts import ACCOUNTING_TOPIC, account_channe
 from aerodaas.recording.reader import RUN_RESULT_TOPIC
 from aerodaas.recording.recover import recover_mcap
 from aerodaas.recording.task_tally import TASK_SCHEMA, TaskTally
-from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion
-from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.values import camera_mount_quaternion
+from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts, FrameHold
 
 TF_TOPIC = "/tf"
 
@@ -67,10 +68,11 @@ _STOP = _Stop()
 
 class RecorderService(AnalyticsAccounting):
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
-    are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera; JSON and
+    are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera (in a simulated run,
+    :meth:`image` first waits for room up to ``hold_s`` wall seconds in all, :class:`~.remote_recorder.FrameHold`); JSON and
     telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
     ``recorder_jpeg_encoded`` in ``copies`` (the actor's :class:`~.dataplane.FrameCopies`) when given. All methods are
-    thread-safe and return at once.
+    thread-safe and return at once, but :meth:`image` with a hold, which may wait for room.
 
     ``homes``: robot id -> its home (a :class:`~aerodaas.model.types.GeoPoint` or its dict), for the lat/lon of
     recorded tracks. ``declare``: ``[(topic, schema)]`` of protobuf channels known from the plan (the track channels,
@@ -82,7 +84,7 @@ class RecorderService(AnalyticsAccounting):
                  max_pending_frames: int = 8, flush_every_s: float = 2.0, copies: Any = None,
                  live: str | None = None, homes: dict[str, Any] | None = None,
                  declare: list[tuple[str, str]] | None = None, live_access: Any = None,
-                 json_schemas: dict[str, dict] | None = None) -> None:
+                 json_schemas: dict[str, dict] | None = None, hold_s: float = 0.0) -> None:
         self.homes = {r: GeoPoint.model_validate(h) for r, h in (homes or {}).items()}
         self.rec = McapRecorder(path, metadata=metadata, jpeg_quality=jpeg_quality, json_schemas=json_schemas)
         self.path = path
@@ -100,6 +102,8 @@ class RecorderService(AnalyticsAccounting):
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._pending_frames = 0
         self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)  # notified when the writer thread takes a frame
+        self.hold = FrameHold(hold_s)
         self.max_pending_frames = max_pending_frames
         self.flush_every_s = flush_every_s
         self.copies = copies
@@ -155,6 +159,10 @@ class RecorderService(AnalyticsAccounting):
             item = self._numbered(RecordImage(topic, t_ns, frame, frame_id, seq, incarnation)) \
                 if not self.closed else None
             self.dropped_by_topic.setdefault(topic, 0)  # every image topic offered: its count (0 too) is recorded
+            if item is not None:
+                self.hold.wait(self._room, lambda: self.closed or self.failure is not None
+                               or self._pending_frames < self.max_pending_frames)
+                item = None if self.closed else item
             if item is None or self._pending_frames >= self.max_pending_frames:
                 self.frames_dropped += 1
                 self.dropped_by_topic[topic] += 1
@@ -230,6 +238,7 @@ class RecorderService(AnalyticsAccounting):
                         if isinstance(item, RecordImage):
                             with self._lock:
                                 self._pending_frames -= 1
+                                self._room.notify_all()
                 if time.monotonic() - last_flush > self.flush_every_s:
                     self.rec.flush()
                     last_flush = time.monotonic()

@@ -89,7 +89,7 @@ class RecorderActor:
         self.losses.append(loss)
         try:
             self.recorder = RecorderService(str(path), rec.meta, max_pending_frames=64, homes=rec.homes,
-                                            declare=rec.declare, live_access=rec.live_access,
+                                            declare=rec.declare, live_access=rec.live_access, hold_s=self._hold_s(),
                                             json_schemas=rec.schemas)
         except OSError as e:
             loss["error"] = f"{type(e).__name__}: {e}"
@@ -129,7 +129,7 @@ class RecorderActor:
                         remove_stale_segments(rec.path)
                         self.segments = [str(rec.path)]
                     self.recorder = RecorderService(rec.path, rec.meta, live=rec.live, max_pending_frames=64,
-                                                    homes=rec.homes, declare=rec.declare,
+                                                    homes=rec.homes, declare=rec.declare, hold_s=self._hold_s(),
                                                     live_access=rec.live_access,
                                                     json_schemas=rec.schemas)  # plug-in sensors' message schemas
             finally:
@@ -180,6 +180,12 @@ class RecorderActor:
             time.sleep(every_s)
         self.live_error = err
         return None
+
+    def _hold_s(self) -> float:
+        """How long in all (wall s) the recorder's ``image`` may wait for room in a simulated run: while a ``record``
+        call waits, its sender's frames wait too, and so does the sender's simulated clock
+        (:class:`~.remote_recorder.FrameHold`)."""
+        return float(self.spec.sim.get("recorder_hold_s", 0.0))
 
     def ping(self) -> int:
         return os.getpid()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -13,7 +14,7 @@ import numpy as np
 from aerodaas.protocol.messages import (ProducerLedger, RecordCamera, RecordDetections, RecordImage, RecordItem,
                                        RecordJson, RecordOdometry, RecordTracks)
 
-__all__ = ["RemoteRecorder", "AnalyticsCounts", "AnalyticsAccounting"]
+__all__ = ["RemoteRecorder", "AnalyticsCounts", "AnalyticsAccounting", "FrameHold"]
 
 
 class AnalyticsCounts:
@@ -73,6 +74,31 @@ class AnalyticsAccounting:
         self.analytics_counts.declare(cid, name)
 
 
+class FrameHold:
+    """How long a simulated run's clock may still wait for its recorder: ``budget_s`` wall seconds in all
+    (:attr:`aerodaas.config.SimulationConfig.recorder_hold_s`), of which :attr:`held_s` are spent. A recorder's
+    ``image`` calls :meth:`wait` on the clock's thread before it would drop a frame, so simulated time waits instead
+    (the actor's clock takes the time waited off its pacing, :meth:`aerodaas.actors.assembly.ActorAssembly.run`)."""
+
+    def __init__(self, budget_s: float = 0.0) -> None:
+        self.budget_s = max(0.0, float(budget_s))
+        self.held_s = 0.0
+
+    def wait(self, room: threading.Condition, ready: Callable[[], bool], poll_s: float = 0.1) -> None:
+        """Wait on ``room`` (its lock held by the caller) until ``ready()`` or the budget is spent."""
+        if ready() or self.held_s >= self.budget_s:
+            return
+        t0 = time.monotonic()
+        try:
+            while not ready():
+                left = self.budget_s - self.held_s - (time.monotonic() - t0)
+                if left <= 0:
+                    return
+                room.wait(min(poll_s, left))
+        finally:
+            self.held_s += time.monotonic() - t0
+
+
 class RemoteRecorder(AnalyticsAccounting):
     """The recorder of an actor without one (e.g. the cloud actor of analytics deployed on cloud compute): the same
     non-blocking producer calls as :class:`RecorderService` (``detections``, ``json``, ``odometry``, ``camera``;
@@ -91,11 +117,15 @@ class RemoteRecorder(AnalyticsAccounting):
     ``max_in_flight_frames`` JPEG frames are in batches the recorder actor has not yet taken; past that, batches wait
     here (their frames count against ``max_pending_frames``), and further frames are dropped and counted. Before,
     Ray's queue to a stopped recorder actor grew without bound, and whether a 20 s recorder stall lost frames
-    depended on whether this process had asked for its base counts before the stall (2026-11-27)."""
+    depended on whether this process had asked for its base counts before the stall.
+
+    ``hold_s``: in a simulated run, how long in all (wall seconds) :meth:`image` may wait for room instead of
+    dropping a frame (the caller is the clock's thread, so simulated time waits with it); the time waited is in
+    :attr:`held_s`. 0: drop at once (real vehicles, video streams)."""
 
     def __init__(self, plane: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
                  max_pending_frames: int = 256, max_pending_bytes: int = 256 << 20,
-                 max_in_flight_frames: int = 64) -> None:
+                 max_in_flight_frames: int = 64, hold_s: float = 0.0) -> None:
         self.plane, self.target, self.period_s = plane, target, period_s
         self.jpeg_quality, self.max_pending_frames = jpeg_quality, max_pending_frames
         self.max_pending_bytes = max_pending_bytes
@@ -105,6 +135,8 @@ class RemoteRecorder(AnalyticsAccounting):
         self._pending_bytes = 0
         self._buf: list[RecordItem] = []
         self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)  # notified when a batch leaves the buffer (:meth:`_send`)
+        self.hold = FrameHold(hold_s)
         self._refs: list[tuple[Any, int]] = []  # (ObjectRef of a record call, frames in its batch)
         self._offered: dict[str, int] = {}  # stream -> items numbered by this process (before adding _base)
         self.analytics_counts = AnalyticsCounts()  # analytics inputs offered / taken without output, by this process
@@ -130,14 +162,23 @@ class RemoteRecorder(AnalyticsAccounting):
         size = int(getattr(frame, "nbytes", None) or len(frame))
         with self._lock:
             item = self._number(RecordImage(topic, t_ns, frame, frame_id))
-            if self.closed or self._pending_frames >= self.max_pending_frames or \
-                    self._pending_bytes + size > self.max_pending_bytes:
+            self.hold.wait(self._room, lambda: self.closed or not self._full(size))
+            if self.closed or self._full(size):
                 self.frames_dropped += 1
                 return False
             self._pending_frames += 1
             self._pending_bytes += size
             self._buf.append(item)
         return True
+
+    def _full(self, size: int) -> bool:
+        """No room for a frame of ``size`` bytes (caller holds the lock)."""
+        return self._pending_frames >= self.max_pending_frames or self._pending_bytes + size > self.max_pending_bytes
+
+    @property
+    def held_s(self) -> float:
+        """Wall seconds :meth:`image` has waited for room in all (:class:`FrameHold`)."""
+        return self.hold.held_s
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
         self._put(RecordCamera(robot, sensor, dict(intrinsics), float(pitch_deg)))
@@ -222,6 +263,7 @@ class RemoteRecorder(AnalyticsAccounting):
         with self._lock:
             batch, self._buf = self._buf, []
             frames, self._pending_frames, self._pending_bytes = self._pending_frames, 0, 0
+            self._room.notify_all()
             ledger = base.plus(dict(self._offered), *self.analytics_counts.snapshot())
         if not batch and ledger == self._ledger_sent:
             return

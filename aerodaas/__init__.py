@@ -8,7 +8,7 @@ Its names are resolved on first use (PEP 562 module ``__getattr__``; ``from aero
 ``aerodaas.Environment`` resolve them as before): importing a sub-module such as ``aerodaas.cli`` or an actor's
 module runs only that module's own imports, not the whole API (numpy, pydantic models, the analytics), which a
 Ray actor that never builds an application (the recorder) and every command that loads none (``aerodaas info``,
-``--help``) paid at each start (issue 49 item 5). An unknown name raises AttributeError naming it.
+``--help``) paid at each start. An unknown name raises AttributeError naming it.
 """
 from __future__ import annotations
 

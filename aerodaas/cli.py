@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None, *, own_process: bool = False) -> int:
     p = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["inject"]:  # its values may start with '-' (a token, a waypoint south-west of home)
-        from aerodaas.tools.hitl import inject_argv  # lazy: heavy fastapi, pydantic
+        from aerodaas.tools.hitl_client import inject_argv  # lazy: only for inject
 
         argv = inject_argv(argv)
     args = p.parse_args(argv)

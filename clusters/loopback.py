@@ -1,6 +1,6 @@
 """A loopback-only local Ray: every server of a Ray started on this machine listens on 127.0.0.1 only.
 
-Used by the driver's own local Ray (:func:`aerodaas.runtime.driver.init_ray`), the persistent cluster of
+Used by the driver's own local Ray (:func:`aerodaas.runtime.ray_start.init_ray`), the persistent cluster of
 ``aerodaas up`` (:mod:`aerodaas.clusters.persistent`) and the local test cluster (:mod:`aerodaas.clusters.local`).
 """
 from __future__ import annotations

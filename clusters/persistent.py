@@ -1,5 +1,5 @@
 """A persistent local Ray cluster: ``aerodaas up`` starts it once, ``aerodaas run`` attaches, ``aerodaas down``
-stops it (issue 27, item 2).
+stops it.
 
 ``aerodaas up`` starts a daemon (``python -m aerodaas.clusters.persistent serve``, its own session) that runs one
 Ray head node with ``ray.cluster_utils.Cluster``: loopback only (:func:`aerodaas.clusters.loopback.loopback_only`), token

@@ -1,4 +1,4 @@
-"""Placement you can see before flying: computes that Ray cannot tell apart (issue 27, item 4).
+"""Placement you can see before flying: computes that Ray cannot tell apart.
 
 An actor of compute resource ``c`` is placed with ``label_selector={"tier": c.tier, **c.labels}``
 (:meth:`aerodaas.runtime.dataflow.ActorPlan.selector`). Two computes of the same tier with the same labels (typically none)
@@ -7,7 +7,7 @@ edge computes landed 5 + 1). :func:`indistinct_computes` finds them in a plan; `
 (on a cluster) print :func:`placement_warning`. :func:`compute_label` is the label that tells them apart, which
 :class:`aerodaas.clusters.local.LocalCluster` callers and cluster files put on the node of each compute.
 
-An actor that asks for GPUs (``num_gpus``, issue 46 item 4) that no live node matching its selector has would wait
+An actor that asks for GPUs (``num_gpus``) that no live node matching its selector has would wait
 in Ray's queue for ever (Ray only logs that it is infeasible): :func:`gpu_placement_errors` finds them from
 ``ray.nodes()`` once Ray runs, before any actor is created, so ``aerodaas run`` stops with a message instead.
 """

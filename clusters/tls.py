@@ -1,11 +1,16 @@
-"""TLS for the servers a run opens to people (the HITL API, the Foxglove live view): the certificate and key files,
-checked before Ray starts, and the rule that nothing is served in clear text off loopback.
+"""TLS for the servers AeroDaaS opens to people (the HITL API, the Foxglove live view of a run or a replay, and any
+server added later): the certificate and key files, and the one exposure rule, applied by each server's constructor
+and, before Ray starts, by its command.
 
 A server bound to a loopback address (``127.0.0.0/8``, ``::1``, ``localhost``) is reachable only from this machine
-and may serve plain HTTP/WS. Bound to any other address it needs a certificate and a key (it then serves HTTPS/WSS
-with Python's :mod:`ssl`: TLS 1.2 or later, OpenSSL's default ciphers), or an explicit ``insecure`` choice (the
-``--insecure`` flag, ``hitl.insecure``), which the run summary repeats. :func:`check_exposure` applies the rule,
-:func:`check_tls_files` checks the files: a regular file each, readable, the certificate PEM (a chain may follow),
+and may serve plain HTTP/WS without a token. Bound to any other address it needs a token that clients present (at
+least :data:`MIN_TOKEN_CHARS` characters) and a certificate and a key (it then serves HTTPS/WSS with Python's
+:mod:`ssl`: TLS 1.2 or later, OpenSSL's default ciphers), or, in place of the certificate only, an explicit
+``insecure`` choice (the ``--insecure`` flag, ``hitl.insecure``, ``ServeAccess(insecure=True)``), which the server
+exposes (``insecure``) and the run summary repeats. :func:`check_exposure` is that rule, the only one: a server calls
+it (through :meth:`ServeAccess.check` when it holds a :class:`ServeAccess`) in its constructor, before it binds,
+and its command calls it again before Ray starts, so the error names the command's flags. :func:`check_tls_files`
+checks the files: a regular file each, readable, the certificate PEM (a chain may follow),
 the key PEM, unencrypted, matching the certificate, and readable or writable by its owner only (``chmod 600``; the
 rule of the MAVLink signing key file, :mod:`aerodaas.backends.mavlink.signing`). Every error is a ``ValueError``
 naming the field (or flag) and the file, never its content.
@@ -21,8 +26,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 import tempfile
 
-__all__ = ["ServeAccess", "check_exposure", "check_tls_files", "is_loopback", "server_context", "state_dir",
-           "write_private_json"]
+__all__ = ["MIN_TOKEN_CHARS", "ServeAccess", "check_exposure", "check_tls_files", "is_loopback", "server_context",
+           "state_dir", "write_private_json"]
+
+
+#: the shortest token a server off loopback may ask of its clients (16 random base64url characters: 96 bits)
+MIN_TOKEN_CHARS = 16
 
 
 def state_dir() -> Path:
@@ -131,18 +140,44 @@ class ServeAccess:
         """The server's TLS context, None without TLS."""
         return server_context(self.cert_file, self.key_file) if self.cert_file and self.key_file else None
 
+    def check(self, host: str, where: str, cert_field: str = "ServeAccess.cert_file",
+              key_field: str = "ServeAccess.key_file", insecure_field: str = "ServeAccess(insecure=True)",
+              token_field: str = "ServeAccess.token") -> None:
+        """:func:`check_exposure` for a server ``where`` bound to ``host`` with this access: what a server's
+        constructor calls before it binds. Raises ``ValueError`` naming the field and the value."""
+        check_exposure(host, self.cert_file, self.key_file, self.insecure, where, cert_field, key_field,
+                       insecure_field, token=self.token, token_field=token_field)
+
+    def clear_text_off_loopback(self, host: str) -> bool:
+        """Whether a server bound to ``host`` with this access serves in clear text off loopback (allowed only by
+        ``insecure``): what a run summary or a server's ``insecure`` attribute repeats."""
+        return self.insecure and not self.tls and not is_loopback(host)
+
 
 def check_exposure(host: str, cert: str | None, key: str | None, insecure: bool, where: str,
-                   cert_field: str, key_field: str, insecure_field: str) -> None:
-    """The rule of the module docstring for a server ``where`` (e.g. ``"--live"``) bound to ``host``: a certificate
-    without its key (or the reverse) is refused; given, both are checked (:func:`check_tls_files`); off loopback,
-    neither given nor ``insecure`` is refused. Raises ``ValueError`` naming the field or flag and the value."""
+                   cert_field: str = "--tls-cert", key_field: str = "--tls-key", insecure_field: str = "--insecure",
+                   *, token: str | bool | None = True, token_field: str = "a token") -> None:
+    """The exposure rule of the module docstring for a server ``where`` (e.g. ``"--live"``, ``"LiveServer"``) bound
+    to ``host``, the one every server of AeroDaaS applies: a certificate ``cert`` without its key ``key`` (or the
+    reverse) is refused; given, both are checked (:func:`check_tls_files`); off loopback, neither given nor
+    ``insecure`` is refused, and so is a server whose clients present no token, ``insecure`` or not. ``token``: the
+    token the server asks for (a string of at least :data:`MIN_TOKEN_CHARS` characters), None when it asks for
+    none, True when it will generate one (a command's check before the server exists). ``*_field``: the names the
+    message gives the caller's flags or parameters. Raises ``ValueError`` naming the field or flag and the value,
+    never the token."""
     if (cert is None) != (key is None):
         given, missing = (cert_field, key_field) if cert is not None else (key_field, cert_field)
         raise ValueError(f"{given} is given without {missing}: TLS needs both the certificate and its key")
     if cert is not None and key is not None:
         check_tls_files(cert, key, cert_field, key_field)
-    elif not is_loopback(host) and not insecure:
+    if is_loopback(host):
+        return
+    if cert is None and not insecure:
         raise ValueError(f"{where}: {host!r} is not a loopback address and no TLS certificate is given: give "
                          f"{cert_field} and {key_field} (served over TLS), bind 127.0.0.1, or accept clear text "
                          f"off this machine with {insecure_field}")
+    if token is not True and (not isinstance(token, str) or len(token) < MIN_TOKEN_CHARS):
+        what = "no token" if not token else f"a token shorter than {MIN_TOKEN_CHARS} characters"
+        raise ValueError(f"{where}: {host!r} is not a loopback address and its clients would present {what}: give "
+                         f"{token_field} (at least {MIN_TOKEN_CHARS} characters, e.g. secrets.token_urlsafe(32)), "
+                         f"or bind 127.0.0.1")

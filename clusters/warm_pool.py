@@ -1,4 +1,4 @@
-"""Warm workers for the persistent local cluster of ``aerodaas up`` (issue 27, item 2: a run attached to it reaches
+"""Warm workers for the persistent local cluster of ``aerodaas up`` (a run attached to it reaches
 its first processed frame in about a second).
 
 Ray's worker processes are started per job: every ``aerodaas run`` is a new job (driver), so without help each of its
@@ -11,7 +11,7 @@ each, on a 2-core machine the largest part of an attached start). Two things rem
   worker is bound to the first job that needs one, so the next run's actors are placed in processes that already run.
   Only jobs without a runtime environment of their own can use them (Ray matches workers by the job's runtime
   environment hash); that is why an attached run ships no plug-in packages that the cluster's interpreter already
-  imports (:func:`aerodaas.runtime.driver.init_ray`).
+  imports (:func:`aerodaas.runtime.ray_start.init_ray`).
 - **The framework imported ahead.** The daemon sets Ray's worker setup hook (``worker_process_setup_hook``, here
   through the environment variable Ray's ``default_worker.py`` reads at start, inherited from the raylet) to a
   generated module (:func:`setup_hook_env`) that calls :func:`preimport`, which imports the modules the drone,

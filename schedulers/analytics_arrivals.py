@@ -2,7 +2,7 @@
 
 * :class:`ArrivalPredictor` — periodic frames: per drone, the period is the last frame gap (or the median of the
   last ``gap_window``); the frames of the next ``horizon_ms`` are predicted at ``last + k * period``.
-* :class:`BurstArrivalPredictor` — bursty video (issue 41 item 3): per drone, the frame gaps seen decide between
+* :class:`BurstArrivalPredictor` — bursty video: per drone, the frame gaps seen decide between
   a *regular* drone (most gaps near their median) and an *irregular* one (heavy-tailed gaps), and a regular
   drone's gaps are split into burst gaps and idle gaps (longer than ``idle_factor`` x the median; a drone is
   regular when most of its non-idle gaps are within ``regular_band`` of the median):

@@ -8,7 +8,7 @@ rest with short low-gain models (DEV, BP, HV: gain 25-38 for 172-244 ms). The re
 plans over the tasks that have arrived. When the edge frees and no DEO/CD is waiting, it starts a BP (244 ms); a
 DEO arriving 50 ms later can then no longer start by its latest start (deadline 950 - 739 = arrival + 211 ms), and
 its cloud trigger (arrival + 108 ms) sends it to the cloud. The drones' frames are periodic (one 1-frame batch per
-drone per second, :func:`aerodaas.bench.schedulers.make_trace`, the reference's mock client), so the next
+drone per second, :func:`aerodaas.bench.workload.make_trace`, the reference's mock client), so the next
 arrivals can be predicted from the ones seen.
 
 Rules (times ms; EVPLAN's expected cloud value ``V`` and triggers, see :mod:`.analytics_evplan`, with two
@@ -17,9 +17,9 @@ model's few samples no longer decide its ``V``), and a task is acted on ``releas
 default DEMS's 50 ms):
 
 * Arrival prediction, learned online (by default, ``arrivals="burst"``, the burst/idle model described at the end of
-  this bullet; with ``arrivals="last"``, the default until issue 41's held-out sweep, as follows): per drone, the
+  this bullet; with ``arrivals="last"``, the earlier default, as follows): per drone, the
   period is the gap between its last two frames (tasks of one frame share an arrival time), or with ``gap_window`` k > 1 the median of its last k gaps (bursty video: a burst's
-  gap rather than the silence before it or a flush's 2 ms; issue 41), and the frame's models are the last frame's. The frames of the next
+  gap rather than the silence before it or a flush's 2 ms), and the frame's models are the last frame's. The frames of the next
   ``horizon_ms`` (default 2,000) are predicted at ``last + k * period``; a frame overdue by more than a tenth of
   the period stops the drone's predictions until it sends again (a stopped or irregular drone is not waited for).
   With ``arrivals="burst"`` (the default) the burst/idle model of :class:`.analytics_arrivals.BurstArrivalPredictor`
@@ -95,7 +95,7 @@ class LaPlan(EvPlan):
     (default True), ``release_early_ms`` (default 50), ``replan_tolerance_ms`` (default 2, in [0, 100]),
     ``gap_window`` (``arrivals="last"`` only; default 1: the period is the last frame gap; k: the median of the last
     k, see the module),
-    ``arrivals`` (``"burst"``, default since issue 41's held-out sweep: the burst/idle and hazard model
+    ``arrivals`` (``"burst"``, the default, chosen on held-out seeds: the burst/idle and hazard model
     :class:`.analytics_arrivals.BurstArrivalPredictor`; ``"last"``: the last-gap predictor
     :class:`.analytics_arrivals.ArrivalPredictor`, the default before, with which the published periodic and
     realistic sweeps and the Ray runtime results were made), ``burst_quantile`` (its ``quantile``, default 0.5), and

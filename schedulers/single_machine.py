@@ -147,7 +147,7 @@ def max_gain_schedule_arrays(release, deadline, proc, gain, group, ngroups: int,
     the Python preparation of the job tuples cost about twice the DP itself); without it, or above 64 groups live
     at once, the job tuples are built and :func:`max_gain_schedule` runs — unless ``python_fallback`` is False:
     then None is returned when the compiled kernel is there but more than 64 groups are live (the pure-Python DP is
-    exponential in the live groups: 67 ms for one LAPLAN plan on a stall-and-flush trace, issue 41). ``counts``:
+    exponential in the live groups: 67 ms for one LAPLAN plan on a stall-and-flush trace). ``counts``:
     which DP solved it is counted there (:class:`SolveCounts`; None: not counted). Raises ValueError if the jobs of
     one group differ in release or processing time."""
     if jit and single_machine_jit.available():

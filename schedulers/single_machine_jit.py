@@ -1,7 +1,7 @@
 """The label-setting DP of :func:`aerodaas.schedulers.single_machine.max_gain_schedule`, compiled with numba.
 
 Why: LAPLAN re-plans with this DP on the dispatcher's event path, ~1,000-1,800 labels per plan over 40-65 task
-groups; in CPython that took 1-5 ms per plan (p99 of the decision time ~4.5-5 ms idle, 6-15 ms loaded, issue 29).
+groups; in CPython that took 1-5 ms per plan (p99 of the decision time ~4.5-5 ms idle, 6-15 ms loaded).
 Compiled, the same DP takes ~0.05-0.2 ms.
 
 Same algorithm, same answer: this is a line-by-line port of the Python loop (same float64 arithmetic, same ``_EPS``

@@ -95,9 +95,9 @@ def _workload() -> None:
 needs_workload = pytest.mark.usefixtures("_workload")
 
 
-#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs and
-#: missions flown on a real-time video stream
-SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime")
+#: the groups that the development tier leaves out: real firmware, `ray up`, multi-node clusters, fault runs,
+#: missions flown on a real-time video stream and a real Label Studio server
+SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime", "labelstudio")
 
 
 #: the development tier's longest files, longest first (worker-seconds each, 3 workers on this shared 2-core machine,
@@ -198,11 +198,11 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture(scope="session")
 def ray_session():
     """A local Ray with this node labelled tier=edge (token auth on), shared by all e2e tests."""
-    from aerodaas.runtime import driver as runtime
+    from aerodaas.runtime import ray_start
 
-    runtime.ensure_ray(None)
+    ray_start.ensure_ray(None)
     yield
-    runtime.shutdown_ray()
+    ray_start.shutdown_ray()
 
 
 @pytest.fixture

@@ -281,7 +281,7 @@ class Analytics:
     def drone_state(self, data: Any, meta: Any, factory: Callable[[], _S]) -> _S:
         """This analytics' state object for the drone the item ``(data, meta)`` comes from
         (:func:`source_robot`), made by ``factory()`` on that drone's first item. Keep in it everything remembered
-        between items, so that drones sharing this analytics never mix (issue 15)."""
+        between items, so that drones sharing this analytics never mix."""
         states = self.__dict__.setdefault("_drone_states", {})
         key = source_robot(data, meta)
         st = states.get(key)

@@ -20,12 +20,12 @@ __all__ = ["ObjectDetector"]
 class ObjectDetector(Analytics):
     """ONNX object detector on onnxruntime (YOLOX-Nano by default). Input frames (H, W, 3) uint8 BGR; output a
     list of :class:`Detection` (COCO classes, pixel boxes). ``model_path`` may name any compatible ONNX file;
-    without it the model is resolved by :func:`aerodaas.perception.detect.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
+    without it the model is resolved by :func:`aerodaas.perception.model_files.resolve_model` (``$AERODAAS_MODEL_DIR``, cache,
     download) where the driver runs, once, and its bytes travel with the analytics to the node that runs it
-    (:class:`aerodaas.perception.detect.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to the
+    (:class:`aerodaas.perception.model_files.ShippedModel`: cloud nodes need no copy of their own). ``classes`` restricts to the
     model's class names (a plain string is one class; ``[]`` is refused); thresholds are scores in [0, 1].
 
-    Bring your own model (issue 28): ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
+    Bring your own model: ``model_path`` with ``format`` ``"auto"`` (recognised from the graph),
     ``"yolox"``, ``"nanodet"`` or ``"ultralytics"`` (YOLOv5 / YOLOv8 / YOLO11 ONNX exports,
     :mod:`aerodaas.perception.decoders`); ``class_names`` (else the model's metadata ``names``, else COCO for the
     YOLOX/NanoDet formats); ``input_size=(H, W)`` for an export with dynamic axes; ``upscale=False``: a frame smaller
@@ -49,7 +49,7 @@ class ObjectDetector(Analytics):
     detections (the output stays the detections); each drone's geo-located tracks are recorded in a run under
     ``/{robot}/{name}/tracks`` (:mod:`aerodaas.perception.track_records`). The detector is then :attr:`stateful`.
 
-    ``providers`` (issue 46): onnxruntime execution providers in onnxruntime's names, in order of preference — a
+    ``providers``: onnxruntime execution providers in onnxruntime's names, in order of preference — a
     list (``["CUDAExecutionProvider", "CPUExecutionProvider"]``) or a
     :class:`aerodaas.perception.providers.Providers` (``required``, ``num_gpus``, provider ``options``); None: the
     CPU. Names are checked against ``onnxruntime.get_all_providers()`` where the detector is built (ValueError
@@ -117,7 +117,7 @@ class ObjectDetector(Analytics):
         (:func:`aerodaas.perception.options.check_detector_options`: thresholds, class names against the model's,
         class groups, input size, the model's format) and resolve the model, so a typo or a missing model fails
         with a ValueError naming the field and the value (``aerodaas run`` exits 2)."""
-        from aerodaas.perception.detect import ShippedModel, resolve_model  # lazy: cv2, onnxruntime
+        from aerodaas.perception.model_files import ShippedModel, resolve_model  # lazy: cv2, onnxruntime
         from aerodaas.perception.options import check_detector_options  # lazy: cv2, onnxruntime
 
         if self.tiling is not None:

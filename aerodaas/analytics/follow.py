@@ -82,7 +82,7 @@ class FollowAnalytics(NavigableAnalytics):
     Shared by several drones, it keeps one :class:`FollowTrack` per drone (keyed by the frame's
     ``FrameMeta.robot_id``): each drone follows what its own camera sees, with its own PID memory.
 
-    ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` makes it follow a **track id** (issue 28):
+    ``tracker``: a :class:`aerodaas.perception.tracking.ByteTrackConfig` makes it follow a **track id**:
     each drone runs its own ByteTracker on the target-class detections; the followed id is kept while that track
     is seen, whatever other boxes come near, and ByteTrack re-acquires it under the same id after a short occlusion
     (``track_buffer`` frames); when the id is gone for good, the track nearest the predicted ground position within
@@ -92,7 +92,7 @@ class FollowAnalytics(NavigableAnalytics):
 
     ``moving``: a :class:`aerodaas.analytics.motion.MovingTarget` (needs ``tracker``) adopts only a track whose
     ground speed over the rule's window is at least its ``min_speed_mps`` (0.5 m/s by default): an aerial detector
-    also sees the parked cars, and without it the first confident parked car was followed (issue 46). A track too
+    also sees the parked cars, and without it the first confident parked car was followed. A track too
     new to have a speed is not adopted yet; the adopted one is kept while it is seen, even when it stops.
     ValueError for ``moving`` without ``tracker`` or with a bad threshold (naming the field and the value).
     """

@@ -1,4 +1,4 @@
-"""Which track is moving (issue 46 item 3): the ground speed of each tracked object from its geo-located fixes over
+"""Which track is moving: the ground speed of each tracked object from its geo-located fixes over
 a time window, and the rule :class:`~aerodaas.analytics.follow.FollowAnalytics` uses to follow the *moving* target
 rather than a parked one (:class:`MovingTarget`, :class:`TrackMotion`)."""
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """``TrackAnalytics``: an analytics that turns each drone's detections into ByteTrack tracks with stable ids and
-geo-locates them (issue 28, items 3 and 4). Feed it an :class:`~aerodaas.analytics.core.ObjectDetector`'s output
+geo-locates them. Feed it an :class:`~aerodaas.analytics.core.ObjectDetector`'s output
 stream; it keeps one :class:`~aerodaas.perception.tracking.ByteTracker` per drone (:meth:`drone_state`)."""
 from __future__ import annotations
 

@@ -296,7 +296,7 @@ class VehicleBackend(abc.ABC):
     def pose_sample(self) -> PoseSample:
         """The newest position and yaw with the run time they are of, read together (one sample, never the position
         of one and the time of another). A camera tags a frame with the pose interpolated between these samples at
-        the frame's capture time, so the time must be the sample's, not the tick's that read it (issue 47 item 6).
+        the frame's capture time, so the time must be the sample's, not the tick's that read it.
         The default: :attr:`position` and :attr:`yaw` at :attr:`t` (right for a backend whose state is new at
         every :meth:`step`: the simulator). A backend with a :attr:`sample_key` overrides it. Must not block."""
         p = self.position

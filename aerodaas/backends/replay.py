@@ -19,7 +19,7 @@ messages above, in MAVLink units, by :func:`load_ulog` (see there). A ULog has n
 reported for it.
 
 Only the vehicle's own messages count, and a packet a router forwarded on two links is played once: the logs are
-read by :mod:`aerodaas.backends.flight_log` (see there; its names are re-exported here).
+read by :mod:`aerodaas.backends.flight_log` (see there).
 
 A battery reported as unknown (``battery_remaining`` -1, MAVLink's "not available") stays unknown: ``battery_pct``
 is None and the odometry records ``null``, never 100 %.
@@ -39,13 +39,10 @@ from aerodaas.config.base import ConfigError
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
 from aerodaas.backends.base import BackendError, VehicleBackend
-from aerodaas.backends.flight_log import (  # noqa: F401 - the log readers stay importable from here
-    DUPLICATE_WINDOW_PACKETS, DUPLICATE_WINDOW_S, MAV_MODE_FLAG_SAFETY_ARMED, PX4_NAV_STATE_MODES, TLOG_TYPES,
-    ULOG_TOPICS, LogMessage, check_log, load_tlog, load_ulog,
-)
+from aerodaas.backends.flight_log import MAV_MODE_FLAG_SAFETY_ARMED, LogMessage, check_log, load_tlog, load_ulog
 from aerodaas.config.backends import ReplayConfig
 
-__all__ = ["ReplayBackend", "McapCameraReplay", "check_log", "load_tlog", "load_ulog", "LogMessage", "DUPLICATE_WINDOW_S"]
+__all__ = ["ReplayBackend", "McapCameraReplay"]
 
 #: the link counts as lost after this many seconds of log time without a vehicle HEARTBEAT (as a GCS would)
 HEARTBEAT_TIMEOUT_S = 3.0
@@ -322,7 +319,7 @@ class McapCameraReplay:
     naming the topics that are there)."""
 
     def __init__(self, path: str | os.PathLike, topic: str, start_ns: int | None = None) -> None:
-        from aerodaas.recording.writer import read_messages, summarize_mcap  # lazy: heavy cv2, mcap, protobuf
+        from aerodaas.recording.reader import read_messages, summarize_mcap  # lazy: heavy cv2, mcap, protobuf
 
         self.path, self.topic = str(path), topic
         summary = summarize_mcap(self.path)

@@ -58,7 +58,7 @@ NOT_COMPUTED = "not computed"
 @dataclass(frozen=True)
 class Budget:
     """Time (s, wall clock) and memory (MiB of address space above the process's own at the start) one exact
-    bound may use. Why (issue 41): on a stall-and-flush trace one edge's exact bound ran over 5 min and 2 GB (the
+    bound may use. Why: on a stall-and-flush trace one edge's exact bound ran over 5 min and 2 GB (the
     flushed frames put more than 64 task groups in one window, and the DP's label sets grow exponentially)."""
 
     time_s: float = 120.0

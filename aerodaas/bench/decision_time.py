@@ -26,7 +26,8 @@ from typing import Sequence
 
 from aerodaas.bench.harness import Harness, fleet_tasks
 from aerodaas.bench.machine import machine_info
-from aerodaas.bench.schedulers import LOADS, default_workload_path, make_trace
+from aerodaas.bench.options import LOADS
+from aerodaas.bench.workload import default_workload_path, make_trace
 from aerodaas.bench.schedulers_cli import scheduler_option, trace_options
 from aerodaas.bench.schedulers_main import trace_spec
 from aerodaas.bench.traces import TraceSpec
@@ -119,7 +120,7 @@ def measure(scheduler: str = "LAPLAN", *, load: str = "HEAVY", drones_per_edge: 
                                 "mean": sum(cpu_events) / len(cpu_events)},
             "cloud_admit_ms": {"p50": _pct(probes, 0.5), "p99": _pct(probes, 0.99), "calls": len(probes)},
             "cpu_s": cpu, "load_average": list(os.getloadavg()), "counters": dict(pol.counters),
-            # the slow paths, never silent (issue 41.5): plans solved by the pure-Python DP (numba missing) and plans
+            # the slow paths, never silent: plans solved by the pure-Python DP (numba missing) and plans
             # whose instance was cut to fit the compiled kernel's 64 live task groups (LAPLAN's counters)
             "slow_path": {k: pol.counters.get(k, 0) for k in ("plans", "plans_in_python", "plans_reduced")}}
 

@@ -1,4 +1,4 @@
-"""``aerodaas bench detect``: score a detector configuration on an annotated image set (issue 28, item 5).
+"""``aerodaas bench detect``: score a detector configuration on an annotated image set.
 
 Per class: recall and precision at IoU 0.5 and 0.3, AP50 (:mod:`aerodaas.perception.scoring`); per frame: ms (wall
 time of ``detect``, onnxruntime on ``--threads`` threads) and boxes. ``--sweep`` runs every combination of

@@ -1,4 +1,4 @@
-"""Breakdowns of ``aerodaas bench detect`` (issue 46 item 5): recall, precision (IoU 0.5) and AP50 per class by
+"""Breakdowns of ``aerodaas bench detect``: recall, precision (IoU 0.5) and AP50 per class by
 object size (COCO small < 32², medium < 96², large, in pixels of the frame as scored; rule in
 :mod:`aerodaas.perception.breakdown`) and, where the set records it per frame (HIT-UAV file names), by camera view
 angle and by flight altitude (one bucket per recorded value), for the JSON report and the printed table.

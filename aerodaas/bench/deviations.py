@@ -15,7 +15,7 @@ import sys
 from typing import Callable
 
 from aerodaas.bench.harness import fleet_tasks, run_fleet
-from aerodaas.bench.schedulers import default_workload_path, make_trace
+from aerodaas.bench.workload import default_workload_path, make_trace
 from aerodaas.bench.sweep import mean_ci, scenario_specs
 from aerodaas.schedulers.analytics_base import AnalyticsScheduler, Workload
 from aerodaas.schedulers.analytics_dems import Dem, Dems, Gems

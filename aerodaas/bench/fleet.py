@@ -40,7 +40,8 @@ from aerodaas.bench.progress import bench_progress
 from aerodaas.clusters.local import LocalCluster
 from aerodaas.config import parse_environment_config
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
-from aerodaas.runtime import driver as runtime
+from aerodaas.runtime import ray_start
+from aerodaas.runtime.options import RunOptions
 from aerodaas.runtime.ray_start import RayStartError
 from aerodaas.schedulers import TrajectoryScheduler
 
@@ -159,8 +160,8 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     kept); returns the measured row (with ``nodes`` on a cluster). ``profile``: also the cost table of one drone
     actor and of the node's processes (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as
     ``"profile"`` in the row."""
-    runtime.shutdown_ray()
-    opts = runtime.RunOptions(progress=False)
+    ray_start.shutdown_ray()
+    opts = RunOptions(progress=False)
     cluster = edge_nodes is not None
     env, _ = build_fleet(n, drones_per_actor, edge_nodes or 1, cluster)
     lc, nodes, window, extra = None, None, None, {}
@@ -174,7 +175,7 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
             for robot in env.get_env_robots():
                 robot.on_mission_start(window.begin)
         try:
-            runtime.ensure_ray(opts.address)
+            ray_start.ensure_ray(opts.address)
             time.sleep(2.0)  # let Ray's own processes settle before measuring
             procs = ray_processes(nodes)
             cpu0, wall0 = cpu_seconds(procs), time.monotonic()
@@ -193,7 +194,7 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
             if window is not None:
                 extra = _cluster_part(window, lc, env, res, rec_dir, mission_s)
         finally:
-            runtime.shutdown_ray()
+            ray_start.shutdown_ray()
             if lc is not None:
                 lc.shutdown()
     return {**_row(n, drones_per_actor, edge_nodes, res, wall, cpu, mem, lc), **extra,

@@ -1,4 +1,4 @@
-"""The fleet cost model (issue 49 item 4): fitted to ``aerodaas bench fleet --edge-nodes N --json`` reports, it
+"""The fleet cost model: fitted to ``aerodaas bench fleet --edge-nodes N --json`` reports, it
 projects the nodes a fleet of D drones needs — by CPU, by memory, by the per-node recorder's ceiling — the GCS's
 actor count, and names what breaks first. Pure: JSON in, numbers out (no Ray, no clock); ``aerodaas bench
 fleet-model RUN.json... [--drones 1000 --node-cores C --node-mem-gib M]`` prints it.

@@ -1,4 +1,4 @@
-"""Per-node accounting of ``aerodaas bench fleet --edge-nodes N`` (issue 49 item 4): what each node of a local
+"""Per-node accounting of ``aerodaas bench fleet --edge-nodes N``: what each node of a local
 multi-node cluster carried and what it cost, over a window of the flight.
 
 The window (:class:`FlightWindow`) opens ``settle_s`` after the drones' start hooks ran (the driver runs them just

@@ -1,4 +1,4 @@
-"""Where a drone's time and memory go (issue 49 item 1): ``aerodaas bench fleet --profile`` measures one drone actor
+"""Where a drone's time and memory go: ``aerodaas bench fleet --profile`` measures one drone actor
 of the running fleet, and every process of the node, over a window of the flight.
 
 CPU: the exact CPU time of every thread of the drone actor over the window, from ``/proc/<pid>/task/<tid>/stat``

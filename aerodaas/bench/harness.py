@@ -15,7 +15,7 @@ exact. So the harness reproduces what the Ray benchmark measures minus its wall-
 schedulers --harness``, :mod:`aerodaas.bench.sweep`).
 
 :func:`make_trace` is the single-edge arrival process of the policy tests; fleets use
-:func:`aerodaas.bench.schedulers.make_trace` (the runtime benchmark's) through :func:`run_fleet`.
+:func:`aerodaas.bench.workload.make_trace` (the runtime benchmark's) through :func:`run_fleet`.
 """
 from __future__ import annotations
 

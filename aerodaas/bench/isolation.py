@@ -1,6 +1,6 @@
 """A policy run in its own fresh process, with secret draws: what the non-anticipation test needs to be sound.
 
-Why (issue 41): the harness drew every edge and cloud time from ``seeded_rng(seed, kind, edge_id, task_id)`` with a
+Why: the harness drew every edge and cloud time from ``seeded_rng(seed, kind, edge_id, task_id)`` with a
 small public seed and ran the policy in its own process. A policy could then walk the call stack to the harness
 and recompute a draw from its seed, infer the seed from the first revealed latency (the seeding scheme is public),
 or cache latencies across runs of one process — and pass the cut test (0 of 22 cuts caught).

@@ -1,4 +1,4 @@
-"""A benchmark's standard output carries its report alone (issue 49 item 7: ``aerodaas bench … --json | jq`` and
+"""A benchmark's standard output carries its report alone (``aerodaas bench … --json | jq`` and
 ``json.load`` must work): everything else a benchmark run prints goes to standard error.
 
 The noise comes from places a benchmark does not control: Ray's log monitor thread in the driver forwards worker

@@ -48,17 +48,18 @@ import numpy as np
 from aerodaas.analytics.core import FollowAnalytics
 from aerodaas.app.api import Environment
 from aerodaas.bench.machine import machine_info
-from aerodaas.bench.options import ALL_LAYOUTS, LAYOUTS, LOCKSTEP  # noqa: F401 - re-exported
+from aerodaas.bench.options import LAYOUTS, LOCKSTEP
 from aerodaas.bench.output import emit_report
 from aerodaas.bench.peers_dora import DoraPipeline, unavailable_reason
 from aerodaas.bench.peers_naive_ray import NaiveRayPipeline
-from aerodaas.bench.pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, FixedCostDetector,  # noqa: F401
-                       FollowStage, Pacer, mp, overheads, parsed_config, summary)
+from aerodaas.bench.pipeline import (FPS, CameraStage, CommandStage, DetectStage, DroneStage, FollowStage, Pacer, mp,
+                                     overheads, parsed_config, summary)
 from aerodaas.bench.pipeline import HOVER_M, make_detector
 from aerodaas.bench.progress import bench_progress
 from aerodaas.model.types import PriorityQueue
-from aerodaas.perception.detect import ModelNotFoundError, resolve_model
-from aerodaas.runtime import driver as runtime
+from aerodaas.perception.model_files import ModelNotFoundError, resolve_model
+from aerodaas.runtime import ray_start
+from aerodaas.runtime.options import RunOptions
 from aerodaas.schedulers import TrajectoryScheduler
 
 RESOLUTIONS = ((1280, 720), (640, 480))
@@ -98,7 +99,7 @@ class FrameworkWindows:
         self.n += 1
         rec = os.path.join(self.record_dir, f"w{self.n}.mcap") if self.record_dir else None
         res = drone.start_mission(timeout=seconds + HOVER_M / 4.0 + 4.0,  # climb at 4 m/s, then settle
-                                  options=runtime.RunOptions(progress=False, record=rec))
+                                  options=RunOptions(progress=False, record=rec))
         cam = res.stats["uav"]["cameras"]["cam"]
         i = self.info
         i["frames_captured"] += cam.get("frames", 0)
@@ -290,7 +291,7 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
                  resolutions: tuple[tuple[int, int], ...] = RESOLUTIONS, layouts: tuple[str, ...] = ("colocated",),
                  window_s: float = 5.0, record: bool = False) -> dict:
     machine = machine_info()
-    runtime.ensure_ray()
+    ray_start.ensure_ray()
 
     results, loads = [], []
     record_dir = tempfile.mkdtemp(prefix="aerodaas-overhead-rec-") if record else None
@@ -307,7 +308,7 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
                         results.append(row)
                         progress.console.print(_line(row))
     finally:
-        runtime.shutdown_ray()
+        ray_start.shutdown_ray()
         if record_dir:
             shutil.rmtree(record_dir, ignore_errors=True)
     return {"benchmark": "overhead", "machine": machine, "duration_s": duration_s, "window_s": window_s,

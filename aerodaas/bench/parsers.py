@@ -19,7 +19,7 @@ from aerodaas.bench.output import report_only_stdout
 
 class ReportOnlyStdout:
     """A benchmark's ``func(args) -> exit code`` run inside :func:`aerodaas.bench.output.report_only_stdout`, so
-    that its standard output carries its report alone (issue 49 item 7). In the ``aerodaas`` process itself
+    that its standard output carries its report alone. In the ``aerodaas`` process itself
     (``args.own_process``) the redirection stays until the exit, where Ray's shutdown may still print."""
 
     def __init__(self, func: Callable[[argparse.Namespace], int]) -> None:

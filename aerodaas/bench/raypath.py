@@ -30,7 +30,7 @@ import ray
 
 from aerodaas.bench.machine import machine_info
 from aerodaas.bench.output import emit_report
-from aerodaas.runtime import driver as runtime
+from aerodaas.runtime import ray_start
 
 
 class _Probe:
@@ -101,11 +101,11 @@ def measure(repeat: int = 300, width: int = 1280, height: int = 720, warmup: int
 
 def run_raypath(repeat: int = 300) -> dict:
     machine = machine_info()
-    runtime.ensure_ray()
+    ray_start.ensure_ray()
     try:
         res = measure(repeat)
     finally:
-        runtime.shutdown_ray()
+        ray_start.shutdown_ray()
 
     return {"benchmark": "raypath", "machine": machine, "load_avg_1min_end": round(os.getloadavg()[0], 2),
             "frame_shape": [720, 1280, 3], "frame_bytes": 720 * 1280 * 3, "repeat": repeat, "results_us": res}

@@ -1,4 +1,4 @@
-"""``aerodaas bench recorder``: the ceiling of the run's one recorder actor (issue 49 item 3).
+"""``aerodaas bench recorder``: the ceiling of the run's one recorder actor.
 
 A run records through one :class:`~aerodaas.actors.recorder_actor.RecorderActor`: every other actor's
 :class:`~aerodaas.actors.remote_recorder.RemoteRecorder` batches its messages to it (every 0.1 s, frames as JPEG
@@ -53,7 +53,7 @@ from aerodaas.bench.progress import bench_progress
 from aerodaas.protocol.specs import ActorSpec, RecordSpec
 from aerodaas.recording.accounting import account_recording
 from aerodaas.recording.reader import summarize_mcap
-from aerodaas.runtime import driver as runtime
+from aerodaas.runtime import ray_start
 
 DEFAULT_SIZES = (5, 10, 20, 40, 80)
 #: a drain longer than this (seconds after the last offer until the file is finished) counts as back-pressure
@@ -278,7 +278,7 @@ def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, 
     recorder actors; returns the report."""
     machine = machine_info()
     rows = []
-    runtime.ensure_ray(None)
+    ray_start.ensure_ray(None)
     try:
         with tempfile.TemporaryDirectory(prefix="aerodaas-bench-recorder-") as d, \
                 bench_progress("bench recorder", total=len(sizes)) as (progress, task):
@@ -294,7 +294,7 @@ def run_recorder_bench(sizes: tuple[int, ...], load: DroneLoad, producers: int, 
                     f"MB/s)  lost {row['lost_by_accounting']}  recorder dropped {row['frames_dropped_by_recorder']} "
                     f"frames  drain {row['drain_s']:.2f} s  lag {row['producer_max_lag_s']:.2f} s")
     finally:
-        runtime.shutdown_ray()
+        ray_start.shutdown_ray()
     return {"benchmark": "recorder", "machine": machine, "load": {"fps": load.fps, "odom_hz": load.odom_hz,
             "duration_s": load.duration_s, "frame_bytes": round(_mean_size(load)), "frame_size": [load.width, load.height],
             "frame_source": frame_source}, "producers": producers, "recorders": recorders, "results": rows,

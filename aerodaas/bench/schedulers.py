@@ -46,11 +46,10 @@ import ray
 from aerodaas.actors.cloud_executor import start_cloud_executors
 from aerodaas.bench.edge_host import EdgeHostActor
 from aerodaas.bench.machine import machine_info
-from aerodaas.bench.options import DEFAULT_DRONES_PER_EDGE, DEFAULT_FPS, EMULATION_BOUND_MS, LOADS  # noqa: F401
-from aerodaas.bench.schedulers_report import (_emulation_p99, compare_with_harness, format_table,  # noqa: F401
-                                              summarize_runs, write_plot)
+from aerodaas.bench.options import DEFAULT_DRONES_PER_EDGE, DEFAULT_FPS, EMULATION_BOUND_MS, LOADS
+from aerodaas.bench.schedulers_report import _emulation_p99, summarize_runs
 from aerodaas.bench.sweep import scenario_specs
-from aerodaas.bench.workload import default_workload_path, edge_layout, make_trace  # noqa: F401 - re-exported
+from aerodaas.bench.workload import default_workload_path, edge_layout, make_trace
 from aerodaas.clusters.local import LocalCluster
 from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_names, filter_options, iter_schedulers,
                                                 make_analytics_scheduler)
@@ -214,7 +213,7 @@ def _checked(schedulers, loads, repeat, cloud_nodes, reply_lead_ms, seeds, edge_
 def _config(names, loads, drones, drones_per_edge, n_edges, fps, duration_s, repeat, trace_spec, edge_jitter,
             cloud_jitter, network, seed, cloud_nodes, address, n_hosts, n_cloud, wpath, reply_lead_ms, jitters, scen,
             options, emulation_bound_ms, drain_s) -> dict:
-    """The runtime result's ``config``: every option that shaped it (issue 41.4)."""
+    """The runtime result's ``config``: every option that shaped it."""
     return {"schedulers": names, "loads": list(loads), "drones": drones, "drones_per_edge": drones_per_edge,
             "edges": n_edges, "fps": fps, "duration_s": duration_s, "repeat": repeat,
             "trace": asdict(trace_spec) if trace_spec is not None else None,

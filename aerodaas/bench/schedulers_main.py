@@ -29,7 +29,7 @@ def trace_spec(args: argparse.Namespace):
     return TraceSpec.parse(args.trace, **{k: getattr(args, f"trace_{k}") for k in TRACE_PARAMS})
 
 
-#: options only one mode uses (attribute -> option): given to the other mode, they are refused (issue 41.4: the
+#: options only one mode uses (attribute -> option): given to the other mode, they are refused (the
 #: harness ignored --network-variability and --cloud-jitter: a const:500 network gave the same utility as none)
 RUNTIME_ONLY = {"network_variability": "--network-variability", "cloud_jitter": "--cloud-jitter",
                 "cloud_nodes": "--cloud-nodes", "edge_hosts": "--edge-hosts",
@@ -46,7 +46,7 @@ def unused_options(args: argparse.Namespace) -> list[str]:
 
 
 #: the scheduler options with an option of their own (attribute -> option), like ``--option KEY=JSON``: refused when
-#: no scheduler of the run takes them (issue 41.4: `--estimator` with EDGE_EDF alone was accepted and did nothing)
+#: no scheduler of the run takes them (`--estimator` with EDGE_EDF alone was accepted and did nothing)
 SCHEDULER_OPTIONS = {"estimator": "--estimator", "eviction_scan": "--eviction-scan"}
 
 

@@ -1,7 +1,7 @@
 """``aerodaas bench schedulers --harness``: the analytics-scheduler sweep on the deterministic policy harness.
 
 For every cell of loads x cloud jitter sigma x drones per edge x network scenario, and every seed, the runtime
-benchmark's own arrival trace (:func:`aerodaas.bench.schedulers.make_trace`) is run through every scheduler with
+benchmark's own arrival trace (:func:`aerodaas.bench.workload.make_trace`) is run through every scheduler with
 the runtime's seeded timing draws (:mod:`aerodaas.bench.harness`), and through the LP upper bound
 (:mod:`aerodaas.bench.bound`: the LP relaxation everywhere; for the loads in ``exact_bound_loads``, default HEAVY,
 also the exact clairvoyant optimum and the non-anticipative bound on the expected utility of any online policy).

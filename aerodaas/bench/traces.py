@@ -3,10 +3,10 @@ joining and leaving mid-run), bursty (heavy-tailed gaps, on/off bursts, a link t
 from a recording's camera-frame timestamps.
 
 Real drone video is not periodic: encoders and links jitter each frame gap, frames are lost on the link, and drones
-join and leave a fleet mid-mission. It also arrives in bursts (issue 41): encoder GOPs and paused streams (on/off),
+join and leave a fleet mid-mission. It also arrives in bursts: encoder GOPs and paused streams (on/off),
 heavy-tailed gaps, and a link that stalls and then delivers its buffered frames back to back. Every bursty kind keeps
 the mean frame rate (``1/period``), so a trace differs from the periodic one in its shape only.
-:func:`frame_times` gives one drone's frame send times (ms) for a :class:`TraceSpec`; :func:`aerodaas.bench.schedulers.make_trace` turns them into the benchmark's task rows.
+:func:`frame_times` gives one drone's frame send times (ms) for a :class:`TraceSpec`; :func:`aerodaas.bench.workload.make_trace` turns them into the benchmark's task rows.
 
 Every draw is seeded per (seed, drone) (:func:`random.Random` of a string, which CPython seeds through SHA-512), so a
 drone's frames do not depend on the other drones nor on the fleet size.
@@ -163,7 +163,7 @@ def _frame_gaps(path: str) -> list[list[float]]:
 def frame_times(spec: TraceSpec, drone: str, index_on_edge: int, drones_on_edge: int, index_in_fleet: int,
                 period_ms: float, duration_ms: float, seed: int) -> list[float]:
     """Send times (ms, rounded to µs, increasing, in [0, ``duration_ms``)) of ``drone``'s frames under ``spec``
-    (not ``"periodic"``, which :func:`aerodaas.bench.schedulers.make_trace` generates itself to keep the published
+    (not ``"periodic"``, which :func:`aerodaas.bench.workload.make_trace` generates itself to keep the published
     sweep's traces). ``index_on_edge`` / ``drones_on_edge`` decide who joins (the last ``joins``) and who leaves
     (the first ``leaves``); ``index_in_fleet`` picks the recording stream."""
     rng = random.Random(f"aerodaas-trace/{seed}/{drone}")

@@ -1,5 +1,5 @@
 """``aerodaas bench tracks RUN.mcap``: score the geo-located tracks recorded in a simulated run against the
-simulator's truth (issue 28, "numbers to report": id switches per 100 frames, geo-location error).
+simulator's truth ("numbers to report": id switches per 100 frames, geo-location error).
 
 Truth is ``/world/targets`` (written by the simulated camera from its world model at each frame's capture time);
 tracks are the ``foxglove.SceneUpdate`` messages on ``/<robot>/<analytics>/tracks/scene`` with the same log time

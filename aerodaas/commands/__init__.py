@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from aerodaas.commands import (bench, cluster, info, inject, layout, merge, plan, plot, plugins, recover, replay, run,
-                               schema, sim, train)
+from aerodaas.commands import (bench, cluster, info, inject, label, layout, merge, plan, plot, plugins, recover, replay,
+                               run, schema, sim, train)
 from aerodaas.tools import mission_cli, signing_cli
 
 #: the modules of the sub-commands, in help order; ``mission`` and ``mavlink signing`` live beside the tools they
@@ -25,6 +25,7 @@ COMMAND_MODULES: tuple[ModuleType, ...] = (
     schema,         # schema
     plugins,        # plugins
     train,          # train
+    label,          # label
     recover,        # recover
     merge,          # merge
     inject,         # inject

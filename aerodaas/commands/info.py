@@ -7,9 +7,9 @@ import sys
 
 def run(args: argparse.Namespace) -> int:
     """``aerodaas info FILE [--json]``: a recording's messages, channels, mission outcome, lost-message accounting
-    and video streams (:func:`aerodaas.recording.writer.summarize_mcap`). Exit 0, 2 for a missing or foreign file."""
+    and video streams (:func:`aerodaas.recording.reader.summarize_mcap`). Exit 0, 2 for a missing or foreign file."""
     from aerodaas.recording.video_summary import format_video_streams, video_streams  # lazy: CLI start-up (MCAP)
-    from aerodaas.recording.writer import summarize_mcap  # lazy: CLI start-up (MCAP)
+    from aerodaas.recording.reader import summarize_mcap  # lazy: CLI start-up (MCAP)
 
     try:
         s = summarize_mcap(args.file)

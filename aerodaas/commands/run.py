@@ -16,6 +16,9 @@ def add_parser(sub) -> None:
     r.add_argument("--record", help="write the run to this MCAP file")
     r.add_argument("--speedup", type=float, help="simulation speed-up over real time (default: from the env file)")
     r.add_argument("--lockstep", action="store_true", help="simulated time waits for analytics on every frame")
+    r.add_argument("--recorder-hold", type=float, metavar="S", help="wall seconds in all a simulated run's clock may "
+                   "wait for a recorder that falls behind instead of dropping frames (0 to 3600; over "
+                   "simulation.recorder_hold_s, default 120)")
     r.add_argument("--timeout", type=float, help="wall-clock limit in seconds")
     r.add_argument("--overwrite", action="store_true", help="let --record replace an existing file that is not an "
                    "AeroDaaS recording (the app and its environment file are never replaced)")

@@ -12,7 +12,8 @@ from pathlib import Path
 from aerodaas.app.api import with_builtin_actors
 from aerodaas.config import ConfigError
 from aerodaas.process.state import PROCESS
-from aerodaas.runtime import driver as runtime
+from aerodaas.runtime import driver as runtime, ray_start
+from aerodaas.runtime.report import format_summary
 from aerodaas.runtime.app_errors import report
 from aerodaas.runtime.options import RunOptions
 from aerodaas.runtime.preflight import check_run_flags
@@ -42,7 +43,7 @@ def _run_options(args: argparse.Namespace) -> "RunOptions | int":
         live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
     return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
                       overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
-                      lockstep=True if args.lockstep else None, dashboard=bool(getattr(args, "dashboard", False)),
+                      lockstep=True if args.lockstep else None, recorder_hold_s=args.recorder_hold, dashboard=bool(getattr(args, "dashboard", False)),
                       progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live,
                       live_access=access, tls_cert=args.tls_cert, tls_key=args.tls_key, insecure=bool(args.insecure))
 
@@ -126,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
     def on_result(res) -> None:  # every mission of the app counts
         results.append(res)
-        print(runtime.format_summary(res), flush=True)
+        print(format_summary(res), flush=True)
 
     try:
         # the run's actors are handed to the runtime (which imports none): the built-in ones
@@ -137,15 +138,15 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("aerodaas run: interrupted", file=sys.stderr)
         return 128 + (signals.stop or signals.late or [signal.SIGINT])[0]
-    except runtime.RayStartError as e:
+    except ray_start.RayStartError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
-        return 2 if isinstance(e, runtime.RayAddressError) else 1
+        return 2 if isinstance(e, ray_start.RayAddressError) else 1
     except Exception as e:  # noqa: BLE001 - whose is it: the app's own bug (exit 1) or input we refused (exit 2)
 
         return report(e, str(app), "aerodaas run")
     finally:
         runtime.allow_stop_interrupt(False)  # a signal now is recorded, never raised inside ray.shutdown
-        runtime.shutdown_ray()
+        ray_start.shutdown_ray()
         if not (getattr(args, "own_process", False) and results):
             signals.restore()
         # else the process is this command and ends now: a signal from here to its exit is a late one, recorded by

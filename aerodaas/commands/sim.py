@@ -10,7 +10,7 @@ def run(args: argparse.Namespace) -> int:
     """``aerodaas sim --mavlink ADDR``: the flight model as an ArduPilot/PX4 vehicle until Ctrl-C or SIGTERM
     (``kill``, ``docker stop``, systemd), either of which stops it cleanly: sockets closed, exit code 0 (stopping
     is how a server ends, unlike ``run``'s interrupted mission); 2 for a bad argument or address."""
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator  # lazy: CLI start-up (pydantic and pymavlink)
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator  # lazy: CLI start-up (pydantic and pymavlink)
     from aerodaas.model.types import GeoPoint  # lazy: CLI start-up (pydantic)
 
     home = None

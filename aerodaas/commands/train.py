@@ -2,8 +2,8 @@
 or with ``--workers N`` as a Ray Train job on your cluster; export a checked ONNX file the analytics load by path.
 
 Needs the ``[train]`` extra (PyTorch, CPU build: ``pip install -e ".[train]"``; docs/training.md). Exit codes: 0
-trained and exported; 2 bad input (options, labels, a missing PyTorch), named before anything trains; 1 the training
-or export failed.
+trained and exported; 2 bad input (options, labels, a missing or unusable base model, a missing PyTorch), named
+before anything trains; 1 the training or export failed.
 """
 from __future__ import annotations
 
@@ -23,7 +23,10 @@ def add_parser(sub) -> None:
                    help="a held-out set (repeatable); default: --val-fraction of --data, split by video/sequence")
     d.add_argument("--val-fraction", type=float, default=0.15)
     d.add_argument("--names", help="class names in label order, comma-separated (default: the set's own)")
-    d.add_argument("--base-model", type=Path, help="YOLOX ONNX to start from (default: the shipped YOLOX-Nano)")
+    d.add_argument("--base-model", type=Path, metavar="FILE|NAME",
+                   help="YOLOX ONNX file (or model name: aerial_nano, yolox_nano) to start from (default: the shipped "
+                        "aerial model, aerial_nano, when every class is one of its car, large_vehicle, person; else "
+                        "the COCO YOLOX-Nano, yolox_nano)")
     d.add_argument("--init-from", action="append", default=[], metavar="CLASS=BASECLASS",
                    help="start a class from the base model's class row (default: same name or a COCO alias)")
     d.add_argument("--out", type=Path, default=Path("runs/detector"), help="run folder (checkpoints, model.onnx)")

@@ -1,7 +1,7 @@
 """``aerodaas train detector`` itself (its options: :mod:`aerodaas.commands.train`): the options checked into a
 :class:`~aerodaas.training.config.TrainConfig`, the labels loaded, the training here or as a Ray Train job, and
-the export. Exit codes: 0 trained and exported; 2 bad input (options, labels, a missing PyTorch), named before
-anything trains; 1 the training or export failed.
+the export. Exit codes: 0 trained and exported; 2 bad input (options, labels, a base model that is missing or no
+YOLOX file, a missing PyTorch), named before anything trains; 1 the training or export failed.
 """
 from __future__ import annotations
 
@@ -13,9 +13,11 @@ from pathlib import Path
 from pydantic import ValidationError
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+from aerodaas.perception.model_files import ModelNotFoundError
 from aerodaas.runtime.ray_start import ensure_ray, shutdown_ray
+from aerodaas.training.base import choose_base
 from aerodaas.training.config import TrainConfig
-from aerodaas.training.dataset import LabelError
+from aerodaas.training.labels.check import LabelError
 from aerodaas.training.sets import load_training_data
 
 
@@ -43,7 +45,8 @@ def _config(args: argparse.Namespace):
 
 
 def cmd_train_detector(args: argparse.Namespace) -> int:
-    """Check the options and labels (exit 2 naming the problem), train, export; print where the model is."""
+    """Check the options, the labels and the base model (exit 2 naming the problem: a missing base model is named
+    with where it was looked for), train, export; print where the model is."""
     try:
         cfg = _config(args)
     except ValueError as e:
@@ -52,7 +55,8 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
 
     try:
         data = load_training_data(cfg)
-    except (LabelError, ValueError) as e:
+        base = choose_base(cfg.base_model, data.names, cfg.init_from)
+    except (LabelError, ModelNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     try:
@@ -62,8 +66,8 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
               "pip install torch --index-url https://download.pytorch.org/whl/cpu; docs/training.md)",
               file=sys.stderr)
         return 2
-    print(f"training on {len(data.train)} images, validating on {len(data.val)}; classes {data.names}",
-          file=sys.stderr)
+    print(f"training on {len(data.train)} images, validating on {len(data.val)}; classes {data.names}; starting from "
+          f"{base.name} ({base.why})", file=sys.stderr)
     if cfg.workers:
         return _on_ray(cfg, data, args.address)
     return _here(cfg, data)

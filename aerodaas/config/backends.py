@@ -14,7 +14,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
-from aerodaas.config.base import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP, _Cfg, plugin_config_error
+from aerodaas.config.base import _Cfg, plugin_config_error
+from aerodaas.model.bounds import MAX_DURATION_S, MAX_RATE_HZ, MAX_SPEEDUP
 from aerodaas.plugins import registry
 
 __all__ = ["SimConfig", "MavlinkFenceConfig", "MavlinkConfig", "TelloConfig", "ReplayConfig",
@@ -64,7 +65,7 @@ def check_mavlink_connection(conn: str) -> None:
     :data:`MAVLINK_NET_SCHEMES`, a host that is an IPv4 address (four octets 0-255) or a host name (RFC 1123
     labels; not resolved here) and a port within [1, 65535]; or a serial device (a path such as ``/dev/ttyACM0``,
     or ``COM3``; it may appear later, so it need not exist yet). Raises ValueError naming the value and what is
-    wrong (``tcp:999.1.1.1:99999`` reached the drone actor, after Ray had started: issue 47 item 5)."""
+    wrong (``tcp:999.1.1.1:99999`` reached the drone actor, after Ray had started)."""
     s = conn.strip()
     if s != conn or not s:
         raise ValueError(f"{conn!r}: a connection string without surrounding blanks")

@@ -1,5 +1,5 @@
 """A robot's phase deadlines (``robots[].deadlines`` of ``environment.json``): how long take-off, landing and the
-return to launch may take, in vehicle seconds, and what the drone does when one is overrun (issue 47 item 1).
+return to launch may take, in vehicle seconds, and what the drone does when one is overrun.
 The formula is :mod:`aerodaas.navigation.deadlines`; the drone applies it in :mod:`aerodaas.actors.drone_deadline`."""
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from typing import Literal
 
 from pydantic import Field
 
-from aerodaas.config.base import MAX_ALTITUDE_M, MAX_DURATION_S, MAX_SPEED_MPS, _Cfg
+from aerodaas.config.base import _Cfg
+from aerodaas.model.bounds import MAX_ALTITUDE_M, MAX_DURATION_S, MAX_SPEED_MPS
 
 __all__ = ["PhaseDeadlinesConfig"]
 

@@ -18,9 +18,9 @@ from pydantic import BaseModel, Field, PrivateAttr, Strict, ValidationError, fie
 from aerodaas.model.jsonfile import JsonFileError, read_json
 from aerodaas.navigation.geofence import Geofence, GeofenceConfig
 
-from aerodaas.config.base import (ConfigError, DATA_DIR_ENV, MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ,
-                   MAX_LIST_ITEMS, MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP, _Cfg,
-                   did_you_mean)
+from aerodaas.config.base import ConfigError, DATA_DIR_ENV, PACKAGE_PREFIX, _Cfg, did_you_mean, packaged_file
+from aerodaas.model.bounds import (MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ, MAX_LIST_ITEMS,
+                                   MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP)
 from aerodaas.model.ids import Identifier, check_unique
 from aerodaas.config.robot import RobotConfig, SensorConfig, sensor_class
 from aerodaas.plugins import registry
@@ -125,15 +125,27 @@ class WorldConfig(_Cfg):
     targets: list[TargetConfig] = Field(default_factory=list, max_length=MAX_LIST_ITEMS)
 
 
+#: the default bound (wall s) on how long a simulated clock waits in all for its recorder
+MAX_RECORDER_HOLD_S = 120.0
+
+
 class SimulationConfig(_Cfg):
     """Simulation clock: ``speedup`` x real time; ``lockstep`` makes sim time wait for analytics to consume each
     frame; ``physics_hz`` is the integration rate. Bounds: ``speedup`` in [MIN_SPEEDUP, MAX_SPEEDUP] = [0.01, 1000];
     ``physics_hz`` in [MIN_PHYSICS_HZ, MAX_RATE_HZ] = [10, 1000] Hz (a coarser step than the 0.1 s control period is
-    not covered by the safety gate's envelope model)."""
+    not covered by the safety gate's envelope model).
+
+    ``recorder_hold_s``: how long in all (wall seconds, [0, 3600]) the simulated clock may wait for a recorder that
+    falls behind (stopped, starved of CPU) instead of dropping camera frames it was given; the summary and a
+    ``clock_held`` event in the recording say how long it waited. Past it, frames are shed and counted as on a real
+    vehicle, and the run ends ``recording_lost``. Only a run whose robots all fly on the simulator and whose cameras
+    read no video stream waits: real vehicles and live streams live in real time (0 there,
+    :func:`aerodaas.runtime.preflight.simulation_for`)."""
 
     speedup: float = Field(default=1.0, ge=MIN_SPEEDUP, le=MAX_SPEEDUP)
     lockstep: bool = False
     physics_hz: float = Field(default=50.0, ge=MIN_PHYSICS_HZ, le=MAX_RATE_HZ)
+    recorder_hold_s: float = Field(default=MAX_RECORDER_HOLD_S, ge=0.0, le=3600.0)
 
 
 class HitlConfig(_Cfg):
@@ -395,9 +407,15 @@ class EnvironmentConfig(_Cfg):
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:
-        """Resolve a file named in the config: absolute, relative to the env file, or under $AERODAAS_DATA_DIR.
+        """Resolve a file named in the config: ``package:NAME``, one of the images shipped in the package
+        (:func:`~aerodaas.config.base.packaged_file`); else absolute, relative to the env file, under
+        $AERODAAS_DATA_DIR, or relative to the current folder, the first that exists.
 
         Raises ConfigError naming ``field`` and the search locations when it is not found."""
+        if rel.startswith(PACKAGE_PREFIX):
+            found = packaged_file(rel, field)
+            self._files_read.setdefault(str(found), field)
+            return found
         p = Path(os.path.expanduser(rel))
         cands = [p] if p.is_absolute() else []
         if not p.is_absolute():

@@ -12,16 +12,16 @@ from aerodaas.navigation.gimbal import GimbalLimits
 from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
 from aerodaas.plugins import registry
-from aerodaas.plugins.builtin_sensors import STREAM_PROPERTIES, StatStreamSensor  # noqa: F401
+from aerodaas.plugins.builtin_sensors import StatStreamSensor
 from aerodaas.plugins.sensor import MissionStatusSensor
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
-from aerodaas.config.backends import (MavlinkConfig, MavlinkFenceConfig, ReplayConfig, SimConfig,  # noqa: F401
-                                      TelloConfig, add_section_schemas, backend_settings_into_config)
+from aerodaas.config.backends import (MavlinkConfig, ReplayConfig, TelloConfig, add_section_schemas,
+                                      backend_settings_into_config)
 from aerodaas.config.deadlines import PhaseDeadlinesConfig
-from aerodaas.config.base import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M, MAX_BATTERY_WH, MAX_CAMERA_FPS, MAX_CAMERA_PX,
-                   MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEEDUP, MAX_SPEED_MPS,
-                   MAX_LIST_ITEMS, MAX_YAW_RATE_DPS, MIN_CONTROL_HZ, _Cfg, did_you_mean,
-                   plugin_config_error)
+from aerodaas.config.base import _Cfg, did_you_mean, plugin_config_error
+from aerodaas.model.bounds import (DEFAULT_MAX_DISTANCE_M, HOME_ALT_RANGE_M, MAX_ACCEL_MPS2, MAX_ALTITUDE_M,
+                                   MAX_BATTERY_WH, MAX_DURATION_S, MAX_POWER_W, MAX_RATE_HZ, MAX_SPEED_MPS,
+                                   MAX_LIST_ITEMS, MAX_YAW_RATE_DPS, MIN_CONTROL_HZ)
 
 
 class Limits(_Cfg):

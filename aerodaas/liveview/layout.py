@@ -71,7 +71,7 @@ def layout_for_recording(path: str | os.PathLike) -> dict[str, Any]:
     """:func:`build_layout` for the first robot of a recording that has a pose channel, its first camera, every
     detections channel of that robot and its recorded tracks (read from the file's channels). Raises ValueError when
     the recording has no robot pose channel, ``FileNotFoundError`` when it does not exist."""
-    from aerodaas.recording.writer import summarize_mcap  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+    from aerodaas.recording.reader import summarize_mcap  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
     chans = summarize_mcap(path)["channels"]
     robots = [c["topic"].split("/")[1] for c in chans if c["schema"] == "foxglove.PoseInFrame"

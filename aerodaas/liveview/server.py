@@ -149,9 +149,13 @@ class LiveServer:
     range; ``listener`` is told of subscriptions (``on_subscribe``/``on_unsubscribe``, a
     ``foxglove.websocket.ServerListener`` subset).
 
-    ``access``: TLS and the token clients must present (module docstring; None: plain, no token).
+    ``access``: TLS and the token clients must present (module docstring; None: plain, no token, which only a
+    loopback address may be). The constructor applies the exposure rule of every server
+    (:func:`aerodaas.clusters.tls.check_exposure`) before it binds: off loopback a token, and TLS or
+    ``access.insecure``; :attr:`insecure` then says whether it serves in clear text off loopback.
 
-    Raises ``ValueError`` for a bad address and ``RuntimeError`` naming the address when the server cannot bind.
+    Raises ``ValueError`` for a bad address or an exposure the rule refuses (naming the ``ServeAccess`` field), and
+    ``RuntimeError`` naming the address when the server cannot bind.
 
     Limitation: during a channel's catch-up window its messages go to each client by sink id, and the SDK's Python
     ``Client`` exposes only its client id (foxglove-sdk 0.30). A connection's ClientId and SinkId are allocated
@@ -177,6 +181,8 @@ class LiveServer:
 
         self.host, port = parse_address(address)
         self.access = access or ServeAccess()
+        # the exposure rule of every server (aerodaas.clusters.tls), here too and not only in `aerodaas run/replay`
+        self.access.check(self.host, f"LiveServer({address!r})")
         self.client_send_timeout_s = float(client_send_timeout_s)
         self._foxglove = foxglove
         self._ctx = foxglove.Context()
@@ -212,6 +218,11 @@ class LiveServer:
 
     def _client_dropped(self, peer: str) -> None:
         self.dropped_clients.append((peer, time.time()))
+
+    @property
+    def insecure(self) -> bool:
+        """Whether this server serves plain WebSocket off loopback (``access.insecure``): what a summary repeats."""
+        return self.access.clear_text_off_loopback(self.host)
 
     @property
     def url(self) -> str:

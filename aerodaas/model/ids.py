@@ -1,5 +1,5 @@
 """One grammar for every id a user gives: robots, sensors, compute resources, world targets, analytics names and
-plug-in names (issue 40.2).
+plug-in names.
 
 An id is 1-64 ASCII characters: a letter first, then letters, digits, ``_`` or ``-`` (``ID_PATTERN``). It becomes
 part of Ray actor names, MCAP topics (``/<robot>/camera/<sensor>``, ``/<robot>/<analytics>/detections``), file names

@@ -67,7 +67,7 @@ MAX_COMMAND_SPEED_MPS = 100.0
 #: ArduCopter parameter docs, range 10..2000 cm/s); 1e-300 m/s would hold the vehicle in place until its battery ends
 MIN_WAYPOINT_SPEED_MPS = 0.1
 #: velocity commands turning faster than this (deg/s) are refused (the configuration's own bound on
-#: ``limits.max_yaw_rate``, aerodaas.config.base.MAX_YAW_RATE_DPS: 10 turns a second)
+#: ``limits.max_yaw_rate``, aerodaas.model.bounds.MAX_YAW_RATE_DPS: 10 turns a second)
 MAX_COMMAND_YAW_RATE_DPS = 3600.0
 
 

@@ -1,6 +1,6 @@
 """The braking-aware position profile shared by the embedded simulator (:mod:`aerodaas.sim.vehicle`) and the safety
-gate's prediction of it (:mod:`aerodaas.navigation.safety`), so that the vertical limit holds at every physics step
-(issue 40.6).
+gate's prediction of it (:mod:`aerodaas.navigation.safety`), so that the vertical limit holds at every physics
+step.
 
 A vehicle stepping at ``dt`` seconds (velocity changed by at most ``a dt``, then position += velocity * dt) that
 flies towards a point at the continuous-time ``sqrt(2 a d)`` overshoots it: at 10 Hz a waypoint 5 cm under

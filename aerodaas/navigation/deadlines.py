@@ -1,4 +1,4 @@
-"""How long a flight phase may take before it counts as stalled (issue 47 item 1: a ground-rover backend sat in
+"""How long a flight phase may take before it counts as stalled (a ground-rover backend sat in
 TAKING_OFF for 4,000 vehicle seconds, until the battery failsafe ended it).
 
 A phase's deadline is derived from the vehicle's limits: the phase is cut into legs, each a distance (metres) flown

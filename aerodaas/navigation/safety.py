@@ -137,7 +137,7 @@ class SafetyGate:
             for _ in range(4):  # the approach of the vehicle model may overshoot the target altitude
                 turn, path, samples = self._predict_goto(from_position, vel0, (x, y, tz), speed)
                 # the path, and the stop (a hold) from any point of it: a climb with horizontal speed stops higher
-                # than its target (0.52-0.57 m above max_altitude when a hold came mid-climb, issue 40.6)
+                # than its target (0.52-0.57 m above max_altitude when a hold came mid-climb)
                 over = max(max(p[2] for p in path), self._z_range(turn)[0], self._z_range(samples)[0]) - self.max_alt
                 if over <= 1e-9 or not self.clamp:
                     break

@@ -1,2 +1,2 @@
-"""Perception from a drone (issue 28): bring-your-own ONNX detectors (:mod:`.decoders`), the detector options
+"""Perception from a drone: bring-your-own ONNX detectors (:mod:`.decoders`), the detector options
 checked before Ray (:mod:`.options`) and tiled (sliced) inference for small objects (:mod:`.tiling`)."""

@@ -68,7 +68,7 @@ def inspect_model(path: str | os.PathLike, format: str = "auto") -> ModelInfo:
     so.log_severity_level = 3
     # nothing runs in this session: no graph optimisation (the graph's inputs, outputs and metadata are the same)
     # and no thread pools. The default options cost 0.45-0.58 s wall (0.07 s CPU) for yolox_nano on the driver
-    # before Ray started, these 0.06-0.10 s (0.011 s CPU), measured at load 46 on 2 cores (issue 49 item 5)
+    # before Ray started, these 0.06-0.10 s (0.011 s CPU), measured at load 46 on 2 cores
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
     so.intra_op_num_threads = so.inter_op_num_threads = 1
     sess = ort.InferenceSession(str(path), sess_options=so, providers=["CPUExecutionProvider"])

@@ -7,8 +7,7 @@ Two detectors share one interface (``detect(image_bgr) -> list[Detection]``, ``d
 * :class:`NanoDetDetector` -- NanoDet-Plus-m 1.5x, 416x416 input (RangiLyu NanoDet / OpenCV model zoo, Apache-2.0).
 
 Model files are located by :func:`~aerodaas.perception.model_files.resolve_model` (explicit path, ``$AERODAAS_MODEL_DIR``,
-the user cache, then a download pinned to a commit and verified by sha256; :mod:`aerodaas.perception.model_files`, re-exported
-here).
+the user cache, then a download pinned to a commit and verified by sha256; :mod:`aerodaas.perception.model_files`).
 
 Batching: ``detect_batch`` runs several images (e.g. the latest frames of several drones) in one onnxruntime call
 when the model's input has a dynamic batch dimension (``batch_dynamic``); the shipped YOLOX-Nano and NanoDet-Plus
@@ -35,15 +34,12 @@ from aerodaas.perception.detector_values import check_input_size
 from aerodaas.perception.providers import Providers, open_session
 
 __all__ = [
-    "ModelSpec", "MODELS", "ModelNotFoundError", "ModelChecksumError", "resolve_model", "model_cache_dir",
-    "ShippedModel",
     "YoloxDetector", "NanoDetDetector", "AerialDetector", "make_detector", "DETECTORS",
 ]
 
 log = logging.getLogger(__name__)
 
-from aerodaas.perception.model_files import (MODEL_DIR_ENV, MODELS, _ALIASES, ModelChecksumError, ModelNotFoundError,  # noqa: F401
-                          ModelSpec, ShippedModel, model_cache_dir, resolve_model)
+from aerodaas.perception.model_files import _ALIASES, resolve_model
 
 
 # ----------------------------------------------------------------------------------------------------------------

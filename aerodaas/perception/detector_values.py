@@ -1,5 +1,5 @@
 """The checks of a detector configuration that need no model file: thresholds, class names, ``format``, input size,
-the shipped model's name (issue 28, item 6). Cheap, without cv2 or onnxruntime: an
+the shipped model's name. Cheap, without cv2 or onnxruntime: an
 :class:`~aerodaas.analytics.core.ObjectDetector` runs them where the app builds it, and the detectors
 (:mod:`aerodaas.perception.detect`, :mod:`aerodaas.perception.decoders`) check their own input size with them.
 The checks that open the model (:func:`aerodaas.perception.options.check_detector_options`) build on these.

@@ -1,4 +1,4 @@
-"""Geo-located tracks (issue 28, item 4): a track's ground position from the camera pose, the intrinsics and the
+"""Geo-located tracks: a track's ground position from the camera pose, the intrinsics and the
 ground plane, as ENU metres and WGS-84 lat/lon with its uncertainty, and its recording as Foxglove
 ``SceneUpdate`` (3-D) and ``LocationFixes`` (map: one message with every track's ``LocationFix``) messages.
 
@@ -97,7 +97,7 @@ def record_track_fixes(recorder, log_time_ns: int, robot_id: str, fixes: dict[in
     (:class:`aerodaas.recording.writer.McapRecorder`), ``prefix`` defaulting to ``/{robot_id}/tracks`` (the runtime
     passes ``/{robot}/{analytics}/tracks``):
 
-    * ``{prefix}/fixes``: one ``foxglove.LocationFixes`` (issue 47 item 4: one topic for all tracks, not a channel per
+    * ``{prefix}/fixes``: one ``foxglove.LocationFixes`` (one topic for all tracks, not a channel per
       track) holding one ``foxglove.LocationFix`` per track, in track id order: frame ``wgs84``, WGS-84 lat/lon
       (degrees) and altitude (m), the ENU horizontal covariance in m^2 (``DIAGONAL_KNOWN`` when the axes are
       uncorrelated else ``KNOWN``), ``color`` :func:`track_color` and ``metadata`` ``robot``, ``track_id`` (decimal

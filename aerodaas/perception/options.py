@@ -1,4 +1,4 @@
-"""A detector configuration checked on the driver, before Ray starts (issue 28, item 6), and the detector built
+"""A detector configuration checked on the driver, before Ray starts, and the detector built
 from it on the actor.
 
 :func:`check_detector_options` checks every field of an :class:`~aerodaas.analytics.core.ObjectDetector` (thresholds,

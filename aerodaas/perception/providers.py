@@ -1,4 +1,4 @@
-"""onnxruntime execution providers of a detector: accelerators where a node has one (issue 46, item 4).
+"""onnxruntime execution providers of a detector: accelerators where a node has one.
 
 :class:`Providers` is the typed setting (``ObjectDetector(providers=...)``): the execution providers in
 onnxruntime's own names, in order of preference (``"CUDAExecutionProvider"``, ``"TensorrtExecutionProvider"``,

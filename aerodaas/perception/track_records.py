@@ -1,4 +1,4 @@
-"""Geo-located tracks in a run's recording (issue 28, item 4): what a tracking analytics hands the recorder and how
+"""Geo-located tracks in a run's recording: what a tracking analytics hands the recorder and how
 the recorder writes it.
 
 An analytics that tracks (:class:`~aerodaas.analytics.track.TrackAnalytics`, or
@@ -15,7 +15,7 @@ with ``prefix = /{robot}/{name}/tracks`` (the detections of the same analytics a
   the previous entities deleted first so that ended tracks leave the 3-D view;
 * ``{prefix}/fixes``: one ``foxglove.LocationFixes`` per frame for the Map panel, a ``foxglove.LocationFix`` per
   track (WGS-84 from the drone's home, ENU covariance in m^2, the track's colour, metadata ``robot``, ``track_id``,
-  ``class_name``); one topic for all tracks (issue 47 item 4; it replaced a ``{prefix}/{id}/fix`` channel per track,
+  ``class_name``); one topic for all tracks (it replaced a ``{prefix}/{id}/fix`` channel per track,
   453 of them on three minutes of real video). Written only when the drone's home is known.
 
 The runtime declares ``{prefix}``, ``{prefix}/scene`` and ``{prefix}/fixes`` for every drone and tracking analytics

@@ -114,7 +114,7 @@ def declaration_error(cls: Any, kind: str, name: str) -> str | None:
     """What is wrong with the declaration of plug-in class ``cls`` registered as ``name`` of ``kind``, None when
     nothing: ``Config``, when declared (not None), must be a pydantic BaseModel subclass — the framework validates the
     plug-in's settings with ``Config.model_validate`` when the environment is loaded, and anything else failed there
-    as a raw AttributeError (issue 40.5). A class that is itself a pydantic model keeps pydantic's own ``Config``."""
+    as a raw AttributeError. A class that is itself a pydantic model keeps pydantic's own ``Config``."""
     cfg = getattr(cls, "Config", None)
     if cfg is None or (isinstance(cfg, type) and issubclass(cfg, BaseModel)):
         return None
@@ -137,7 +137,7 @@ def kind_base(kind: str) -> type:
 def base_error(cls: Any, kind: str, name: str) -> str | None:
     """What is wrong with ``cls`` as plug-in ``name`` of ``kind`` when it is not a subclass of the kind's base
     (:func:`kind_base`), None when it is: ``"subprocess:Popen"`` as a trajectory scheduler was accepted and then
-    constructed as ``Popen(env)`` (issue 47 item 5)."""
+    constructed as ``Popen(env)``."""
     base = kind_base(kind)
     if isinstance(cls, type) and issubclass(cls, base):
         return None
@@ -281,7 +281,7 @@ def register(cls: type, kind: str | None = None, name: str | None = None, *, ori
     name outside the plug-in name grammar (:func:`aerodaas.model.ids.check_plugin_name`), :class:`InvalidPlugin` (a
     ValueError) for a ``Config`` that is not a pydantic model (:func:`declaration_error`), or a name already taken
     by another class — a built-in's too (``sim``, ``camera``, ``ObjectDetector``...: a user backend called ``sim``
-    replaced the simulator silently, issue 40.5) — unless the registration says it replaces it: ``replaces=True``
+    replaced the simulator silently) — unless the registration says it replaces it: ``replaces=True``
     or the class attribute ``plugin_replaces = True``. Raises :class:`MissingBuiltins` when the package's own
     entry points are not installed. A class registering itself under the name and target of an entry point (its
     module imported by the entry point) keeps the entry point's origin."""

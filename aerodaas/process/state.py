@@ -6,7 +6,7 @@ All three are process-wide by nature — ``signal.signal`` installs a handler fo
 connects the whole process (Python docs, "signal — Set handlers for asynchronous events": handlers always run in
 the main thread; Ray docs, ``ray.init``: one connection per driver process), and a UDP port is bound by one socket,
 which every robot of the process naming that endpoint must then read — so they live in one documented object,
-:data:`PROCESS`, instead of module-level lists and dicts (issue 48.4). Nothing else of the framework keeps
+:data:`PROCESS`, instead of module-level lists and dicts. Nothing else of the framework keeps
 module-level mutable state outside the plug-in registry (:data:`aerodaas.plugins.registry.REGISTRY`); the test
 ``tests/architecture/test_module_state.py`` checks it.
 """

@@ -1,4 +1,4 @@
-"""Component health: how often each sensor and analytics failed, and whether that degrades the run (issue 47.2).
+"""Component health: how often each sensor and analytics failed, and whether that degrades the run.
 
 A component counts every attempt (a sensor's sample, an analytics' item) and every failure (an exception, an output
 that breaks the declared contract) in a :class:`FailureLog`. The first :data:`FIRST_EVENTS` failures are recorded one

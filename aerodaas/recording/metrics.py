@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 
 def load_run(path: str) -> dict[str, Any]:

@@ -24,15 +24,16 @@ Topic conventions used by other AeroDaaS code: ``"/mission/state"`` (JSON dict w
 Crash safety: messages are grouped into compressed chunks of about ``chunk_size`` bytes. Each chunk is handed to
 the operating system (``file.flush()``) as soon as it is complete, and :meth:`McapRecorder.flush` closes the chunk
 in progress and flushes it too. If the recording process dies without :meth:`McapRecorder.close`, the file lacks
-its summary/footer but every completed chunk is still readable with :func:`read_messages` and
-:func:`summarize_mcap` (which report ``finished=False``); at most the unfinished last chunk is lost.
+its summary/footer but every completed chunk is still readable with
+:func:`~aerodaas.recording.reader.read_messages` and :func:`~aerodaas.recording.reader.summarize_mcap` (which report
+``finished=False``); at most the unfinished last chunk is lost.
 
-Reading helpers (in :mod:`aerodaas.recording.reader`, re-exported here): :func:`summarize_mcap` (what ``aerodaas info
-FILE.mcap`` prints) and :func:`read_messages`.
+Reading a recording is :mod:`aerodaas.recording.reader`'s: ``summarize_mcap`` (what ``aerodaas info FILE.mcap``
+prints) and ``read_messages``.
 
 The stream between mcap's writer and the file is :class:`aerodaas.recording.chunk_stream.ChunkFlushingStream`; the
-checks of where a recording may be written (:func:`check_record_path`, :func:`is_aerodaas_recording`) are in
-:mod:`aerodaas.recording.record_path` (re-exported here).
+checks of where a recording may be written (``check_record_path``, ``is_aerodaas_recording``) are in
+:mod:`aerodaas.recording.record_path`.
 """
 from __future__ import annotations
 
@@ -65,30 +66,15 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as _McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from aerodaas.recording.reader import (  # noqa: F401 - the readers and topic names stay importable from here
-    METADATA_NAME, MISSION_RESULT_TOPIC, MISSION_STATE_TOPIC, read_messages, summarize_mcap,
-)
+from aerodaas.recording.reader import METADATA_NAME
 from aerodaas.model.types import Detection
 from aerodaas.recording.chunk_stream import ChunkFlushingStream
-from aerodaas.recording.record_path import (  # noqa: F401 - the path checks stay importable from here
-    LIBRARY, MCAP_MAGIC, check_record_path, is_aerodaas_recording,
-)
+from aerodaas.recording.record_path import LIBRARY
 from aerodaas.recording.schemas import json_schema_for, plugin_json_schemas
-from aerodaas.recording.values import (_check_time, _class_color, _detection_fields, _finite, _jsonable,  # noqa: F401
-                            _timestamp, _vec3, camera_mount_quaternion, quaternion_from_euler_deg)
+from aerodaas.recording.values import (_check_time, _class_color, _detection_fields, _finite, _jsonable, _timestamp,
+                                      _vec3, quaternion_from_euler_deg)
 
-__all__ = [
-    "McapRecorder",
-    "RecordedMessage",
-    "summarize_mcap",
-    "read_messages",
-    "quaternion_from_euler_deg",
-    "camera_mount_quaternion",
-    "MISSION_STATE_TOPIC",
-    "MISSION_RESULT_TOPIC",
-    "TF_TOPIC",
-    "METADATA_NAME",
-]
+__all__ = ["McapRecorder", "RecordedMessage", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
 """Conventional topic for ``foxglove.FrameTransform`` messages."""

@@ -1,4 +1,4 @@
-"""Fault scenarios of the recording's end-to-end accounting (issue 40.1): real ``aerodaas run`` processes of the farm
+"""Fault scenarios of the recording's end-to-end accounting: real ``aerodaas run`` processes of the farm
 survey (camera, odometry, a monitoring analytics) whose recorder actor is stalled or killed mid-run. Each ends clean
 when the outcome tells the truth: not ``success`` (exit 4, ``recording_lost``) exactly when the recording lacks a
 message its producers numbered, and the summary's per-channel lost counts equal what the file lacks — read back
@@ -24,7 +24,7 @@ from aerodaas.reliability.procs import (REPO_APPS, actor_pids, mcap_reader_ok, n
 
 __all__ = ["ACCOUNTING_FAULTS", "file_losses", "summary_losses"]
 
-#: how long the recorder actor is stopped (s): the issue's stall
+#: how long the recorder actor is stopped (s)
 STALL_S = 20.0
 
 
@@ -96,11 +96,14 @@ def accounting_verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: boo
             "clean": clean, "exit": p.returncode, "output": out[-3000:], "lost": lost}
 
 
-def _recorder_stall(tmp: Path) -> dict:
-    """SIGSTOP of the recorder actor for :data:`STALL_S` s mid-flight, then SIGCONT (the issue's stall: exit 0 and
-    "success" with 517 of 1,288 frames recorded before)."""
+def _recorder_stall(tmp: Path, hold_s: float | None = None) -> dict:
+    """SIGSTOP of the recorder actor for :data:`STALL_S` s mid-flight, then SIGCONT. ``hold_s``: the run's
+    ``--recorder-hold`` (None: the default, longer than the stall: the simulated clock waits and nothing is lost;
+    shorter: frames are shed past it and the run ends ``recording_lost``). Clean when the outcome tells the file's
+    truth and the summary says how long the clock was held exactly when it was."""
     rec = tmp / "run.mcap"
-    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet"],
+    hold = [] if hold_s is None else ["--recorder-hold", f"{hold_s:g}"]
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet", *hold],
              start_new_session=True)
     reached = wait_size(rec, 20000, p)
     pids = actor_pids(p.pid, "RecorderActor") if reached else []
@@ -110,8 +113,12 @@ def _recorder_stall(tmp: Path) -> dict:
     for pid in pids:
         os.kill(pid, signal.SIGCONT)
     out, _ = p.communicate(timeout=900)
-    return accounting_verdict(p, out, rec, reached and len(pids) == 1, True,
-                    f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
+    said_held = re.findall(r"simulated clock held ([\d.]+) s for the recorder", out)
+    res = accounting_verdict(p, out, rec, reached and len(pids) == 1, bool(said_held),
+                             (f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
+                             + f"; the summary says the clock was held {', '.join(said_held) or 'never'} s")
+    res["held_s"] = [float(x) for x in said_held]
+    return res
 
 
 def _recorder_killed_twice(tmp: Path) -> dict:
@@ -260,9 +267,12 @@ def _analytics_killed_twice(tmp: Path) -> dict:
 
 #: (name, expected end, scenario(tmp folder) -> {"observed", "clean", ...}), joined to the fault catalogue
 ACCOUNTING_FAULTS = [
-    (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run, then SIGCONT", "exit 4 and recording_lost when the "
-     "file lacks a numbered message (else exit 0, success); the summary's lost counts per channel equal what the "
-     "file lacks (mcap's reader: /run/accounting against the messages)", _recorder_stall),
+    (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run, then SIGCONT", "the simulated clock waits for the "
+     "recorder (the summary says how long): exit 0, success, and the file lacks no numbered message (mcap's reader: "
+     "/run/accounting against the messages)", _recorder_stall),
+    (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run with --recorder-hold 2", "the clock waits 2 s, then "
+     "frames are shed: exit 4 and recording_lost, the summary's lost counts per channel equal what the file lacks",
+     lambda tmp: _recorder_stall(tmp, hold_s=2.0)),
     ("SIGKILL of the recorder actor twice mid-run", "exit 4, recording_lost, both deaths reported; the summary's lost "
      "counts per channel equal what the three segments lack (mcap's reader)", _recorder_killed_twice),
     ("SIGKILL of the monitoring analytics actor twice mid-run", "exit 4, recording_lost; the monitor's output channel "

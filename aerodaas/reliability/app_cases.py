@@ -1,4 +1,4 @@
-"""Input cases of issue 40 (items 4 and 9) that are not one environment field, for ``python -m aerodaas.reliability``:
+"""Input cases that are not one environment field, for ``python -m aerodaas.reliability``:
 
 * values an application gives the API (``Waypoint(x="1")``, ``y=True``, a yaw rate of 1e308), an empty navigation,
   a pre-planned mission above ``max_queued_items``, a NaN waypoint built with ``model_construct``: ``aerodaas run``
@@ -35,7 +35,7 @@ from aerodaas.model.types import VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 from aerodaas.recording.writer import McapRecorder
 from aerodaas.reliability.cli_cases import _app, base_env, run_cli_cases
-from aerodaas.tools import hitl
+from aerodaas.tools import hitl_client
 
 __all__ = ["APP_VALUE_CASES", "OUTPUT_PATH_CASES", "PLUGIN_MODULES", "plugin_cases", "run_app_cases"]
 
@@ -209,7 +209,7 @@ def plugin_cases(tag: str) -> list[tuple[str, Callable[[dict], None], str]]:
          lambda d: robot(d).update(backend=f"{mod('badconfig')}:Backend"),
          "Config must be a pydantic BaseModel subclass, the model of its settings, or None; got the class "
          "builtins.dict"),
-        # issue 47 item 5: a class that is not of its kind's base (subprocess.Popen was constructed as Popen(env))
+        # a class that is not of its kind's base (subprocess.Popen was constructed as Popen(env))
         ("trajectory_scheduler 'subprocess:Popen' (a class, not a TrajectoryScheduler)",
          lambda d: d.update(trajectory_scheduler="subprocess:Popen"),
          "trajectory_scheduler: Value error, trajectory scheduler plug-in 'subprocess:Popen' (class subprocess.Popen) "
@@ -301,8 +301,8 @@ def _inject_rows() -> list[dict[str, Any]]:
     token in 64 failed): the request must carry them as given. The HTTP call is captured, not sent."""
     token = "-" + "t0k3n" * 5
     sent: list = []
-    saved = hitl.request
-    hitl.request = lambda method, path, body=None, **kw: (sent.append((path, body, kw)) or (200, {"added": ["w"]}))
+    saved = hitl_client.request
+    hitl_client.request = lambda method, path, body=None, **kw: (sent.append((path, body, kw)) or (200, {"added": ["w"]}))
     rows = []
     try:
         for name, argv, check in [
@@ -322,7 +322,7 @@ def _inject_rows() -> list[dict[str, Any]]:
             rows.append({"kind": "command line", "category": "command line", "name": name, "refused": ok,
                          "message": f"exit {code}: " + (f"sent {sent[0][1]}" if sent else err.getvalue().strip()[:200])})
     finally:
-        hitl.request = saved
+        hitl_client.request = saved
     return rows
 
 

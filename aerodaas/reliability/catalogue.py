@@ -154,7 +154,7 @@ STRICT_TYPE_CASES: list[InputCase] = _category('strict types', [
               lambda d, t: _robot(d).update(safety={"geofence": {"circles": [
                   {"center": [47.3977, 8.5456], "radius": 50, "inclusion": "yes"}]}}), "inclusion"),
     InputCase("hitl.enabled \"true\" (string)", lambda d, t: d.update(hitl={"enabled": "true"}), "hitl.enabled"),
-    # issue 40.4: strict numbers everywhere (a JSON string or boolean is never a number)
+    # strict numbers everywhere (a JSON string or boolean is never a number)
     InputCase("home.lat \"13.02\" (string)", lambda d, t: _robot(d).update(home={"lat": "13.02", "lon": 8.0}), "home.lat"),
     InputCase("battery.capacity_wh \"60\" (string)", lambda d, t: _robot(d).update(battery={"capacity_wh": "60"}),
               "capacity_wh"),
@@ -208,10 +208,10 @@ BOUND_CASES: list[InputCase] = _category('bounds / cross-field', [
               "max_distance"),
     InputCase("mavlink.setpoint_rate_hz 1e308",
               lambda d, t: _robot(d).update(backend="mavlink", mavlink={"setpoint_rate_hz": BIG}), "setpoint_rate_hz"),
-    InputCase("mavlink.connection \"tcp:999.1.1.1:99999\" (issue 47: refused by the drone actor, after Ray)",
+    InputCase("mavlink.connection \"tcp:999.1.1.1:99999\" (refused by the drone actor, after Ray)",
               lambda d, t: _robot(d).update(backend="mavlink", mavlink={"connection": "tcp:999.1.1.1:99999"}),
               "mavlink.connection"),
-    # issue 40.4: every rate, size and duration bounded, the cross-field rules
+    # every rate, size and duration bounded, the cross-field rules
     InputCase("control_rate_hz 1e-6", lambda d, t: _robot(d).update(control_rate_hz=1e-6), "control_rate_hz"),
     InputCase("limits.max_yaw_rate 1e308", lambda d, t: _robot(d).update(limits={"max_yaw_rate": BIG}), "max_yaw_rate"),
     InputCase("idle_land_s 1e308", lambda d, t: _robot(d).update(idle_land_s=BIG), "idle_land_s"),
@@ -277,7 +277,7 @@ FILE_REF_CASES: list[InputCase] = _category('files and images', [
               lambda d, t: d.update(world={"ground": {"image": _png_bomb(t)}}), "world.ground.image"),
     InputCase("target image a PNG bomb (header 100000 x 100000 px)",
               lambda d, t: d.update(world={"targets": [{**_target(t), "image": _png_bomb(t)}]}), "world.targets.0.image"),
-    # issue 47 item 5: refused by the camera actor, after Ray had started
+    # refused by the camera actor, after Ray had started
     InputCase("camera source mcap naming a file that is not MCAP",
               lambda d, t: _cam(d).update(_replay_camera(t, False)), "robots.0.sensors.0.properties.mcap"),
     InputCase("camera source mcap naming a recording without its topic",
@@ -356,7 +356,7 @@ def run_inputs() -> dict[str, Any]:
         # malformed JSON files, mission files and uploads, safety-gate probes
         rows += guarded(lambda: run_file_cases(tmp), "file", "file, mission and gate cases", "files and images", 1800.0)
         # app values, plug-in imports, output paths, WPL numbering, the gate's own check, `aerodaas inject`
-        rows += guarded(lambda: run_app_cases(tmp), "application", "issue 40 cases", "app-level errors", 900.0)
+        rows += guarded(lambda: run_app_cases(tmp), "application", "application cases", "app-level errors", 900.0)
 
     # flags refused before Ray (exit 2), the app's own exceptions (exit 1, its traceback)
     rows += guarded(run_cli_cases, "command line", "command-line cases", "command line", 900.0)
@@ -365,8 +365,8 @@ def run_inputs() -> dict[str, Any]:
 
 
 def run_flights(n: int = 20, seed: int = 0) -> dict[str, Any]:
-    """``n`` seeded random command sequences (half ``reject``, half ``clamp``) plus the issue's attacks, flown on the
-    simulator's vehicle behind the safety gate (:mod:`aerodaas.reliability.flight`); the worst excursions."""
+    """``n`` seeded random command sequences (half ``reject``, half ``clamp``) plus repeated pushes at the fence and
+    ceiling, flown on the simulator's vehicle behind the safety gate (:mod:`aerodaas.reliability.flight`); the worst excursions."""
     total, outside = Excursion(), 0
     seqs = [random_commands(random.Random(seed + i)) for i in range(n)]
     seqs += [[("vel", 3.0, 0.0, 0.0, 0.5, 5)] * 80, [("vel", 2.0, 1.2, 0.0, 0.5, 5)] * 80,

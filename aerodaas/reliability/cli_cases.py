@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
 from aerodaas import cli
-from aerodaas.runtime import driver as runtime, ray_start
+from aerodaas.runtime import ray_start
 
 __all__ = ["CLI_CASES", "HeldArgv", "run_cli_cases"]
 
@@ -86,11 +86,11 @@ def run_cli_cases(cases: list | None = None, category: str | None = None) -> lis
     started, and a traceback exactly for the app's own errors; ``traceback``: one printed where none belongs).
     ``category``: the rows' report group (default: "command line" for exit 2, "app-level errors" for exit 1)."""
     rows = []
-    saved = (ray_start.init_ray, ray_start.start_ray_early, runtime.shutdown_ray)
+    saved = (ray_start.init_ray, ray_start.start_ray_early, ray_start.shutdown_ray)
     started: list = []
     ray_start.init_ray = lambda address, dashboard=False: started.append(address)
     ray_start.start_ray_early = lambda address=None, dashboard=False: started.append(("early", address))
-    runtime.shutdown_ray = lambda: None
+    ray_start.shutdown_ray = lambda: None
     try:
         for name, make, code, expect in (CLI_CASES if cases is None else cases):
             with tempfile.TemporaryDirectory() as td:
@@ -112,5 +112,5 @@ def run_cli_cases(cases: list | None = None, category: str | None = None) -> lis
                              "refused": ok, "message": f"exit {got}: {msg}" if msg else f"exit {got}",
                              "traceback": "Traceback" in msg and code != 1})
     finally:
-        ray_start.init_ray, ray_start.start_ray_early, runtime.shutdown_ray = saved
+        ray_start.init_ray, ray_start.start_ray_early, ray_start.shutdown_ray = saved
     return rows

@@ -20,12 +20,13 @@ from mcap.reader import make_reader
 from aerodaas.clusters.reaper import descendants, start_time
 from aerodaas.config.robot import sensor_class
 from aerodaas.plugins.sensor import FrameSensor
-from aerodaas.recording.writer import McapRecorder, read_messages, summarize_mcap
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.reader import read_messages, summarize_mcap
 from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting_verdict
 from aerodaas.reliability.input_report import render_input_rows, render_inputs
-from aerodaas.reliability.procs import (REPO_APPS, actor_pids, argv0, mcap_reader_ok, no_crash, run_cli,  # noqa: F401
+from aerodaas.reliability.procs import (REPO_APPS, actor_pids, argv0, mcap_reader_ok, no_crash, run_cli,
                                        summary_outcome, wait_size)
-from aerodaas.tools.hitl import request
+from aerodaas.tools.hitl_client import request
 
 __all__ = ["FAULTS", "run_faults", "render", "mcap_reader_ok"]
 
@@ -266,7 +267,7 @@ def _raylet_kill(tmp: Path) -> dict:
             "output": out[-3000:]}
 
 
-#: how long a run's processes may outlive a SIGKILLed driver (s; issue 25: "beyond 10 s"), and the bound the
+#: how long a run's processes may outlive a SIGKILLed driver (s: none may live beyond 10 s), and the bound the
 #: test allows on a loaded machine; Ray's agents alone stay 60-64 s (:mod:`aerodaas.clusters.reaper`)
 GONE_WITHIN_S, GONE_WITHIN_LOADED_S = 10.0, 25.0
 
@@ -455,7 +456,7 @@ FAULTS: list[tuple[str, str, Callable[[Path], dict]]] = [
     ("SIGKILL of the recorder actor mid-run", "exit 4, 'recording lost at t = ...', recording goes on in "
      "run.1.mcap, the summary counts the messages of both segments, `aerodaas recover` joins them, the joined "
      "recording's outcome is recording_lost (/run/result), never success", _recorder_kill),
-    *ACCOUNTING_FAULTS,  # the recording's end-to-end accounting under stalls and deaths (issue 40.1)
+    *ACCOUNTING_FAULTS,  # the recording's end-to-end accounting under stalls and deaths
 ]
 
 

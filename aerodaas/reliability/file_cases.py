@@ -1,4 +1,4 @@
-"""Input cases that are whole files or commands rather than one environment field (issue 25 items 1 and 4): JSON
+"""Input cases that are whole files or commands rather than one environment field: JSON
 files that are malformed as text (nesting 100,000 deep, UTF-16 / Latin-1, a duplicate key, a 5,000-digit integer),
 mission files (100,000 items of a ``.plan`` and of a WPL checked in bounded, linear time; an item 50 km up or
 7,100 km away, a far rally point: refused by ``mission upload`` before it connects) and safety-gate probes (an
@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from aerodaas import cli
 from aerodaas.config import ConfigError, RobotConfig, load_environment_config
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission, plan_to_flight
 from aerodaas.model.types import GeoPoint, VelocityCommand, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation

@@ -20,7 +20,7 @@ from aerodaas.sim.vehicle import SimVehicle
 
 __all__ = ["PROBE_ENV", "Excursion", "fly_commands", "random_commands"]
 
-#: the probe's robot: 3 m/s, 2 m/s² (the issue's velocity attack), a 60 m square inclusion fence around home with an
+#: the probe's robot: 3 m/s, 2 m/s² (a velocity push at the fence), a 60 m square inclusion fence around home with an
 #: exclusion circle of 6 m radius inside it, and max_altitude 10 m
 PROBE_HOME = (47.3977, 8.5456, 488.0)
 

@@ -35,10 +35,6 @@ from aerodaas.runtime.dataflow import Placement, build_plan
 from aerodaas.runtime.node_recorders import run_accounting
 from aerodaas.runtime.options import RunOptions, actor_classes, check_actor_classes
 from aerodaas.runtime.preflight import check_options, hitl_access, validate_graph
-from aerodaas.runtime.preflight import check_clocks, robot_schedulers as _robot_schedulers, validate  # noqa: F401 - tests use it
-from aerodaas.runtime.ray_start import (RayAddressError, RayStartError, ensure_ray, init_ray,  # noqa: F401 - API
-                                        shutdown_ray, start_ray_early)
-from aerodaas.runtime.report import format_summary  # noqa: F401 - ``runtime.format_summary`` is what ``aerodaas run`` prints
 from aerodaas.runtime.supervise import error_cause as _cause
 from aerodaas.runtime.supervise import collect_stats, start_actors, supervise
 from aerodaas.runtime.teardown import close_actors
@@ -173,7 +169,7 @@ def run_application(app: Any, options: RunOptions | None = None) -> MissionResul
     ``options`` (default: :class:`RunOptions`); its classes travel to the actors by value. Checks the options
     against it first (bad input raises ConfigError / ValueError before Ray starts); once actors exist, every
     failure ends in a :class:`MissionResult` with the recording finished. Raises ValueError for an application
-    without a mission, :class:`RayStartError` when Ray cannot be started or reached."""
+    without a mission, :class:`~aerodaas.runtime.ray_start.RayStartError` when Ray cannot be started or reached."""
     if app.mission is None or app.graph is None:
         raise ValueError(f"{app.path}: the application never called start_mission()")
     m = app.mission
@@ -352,17 +348,19 @@ def _start_hitl(run: _Run):
         return None
     # only now: the HITL server imports FastAPI (a quarter of a second of CPU between the actors' set-up and the
     # mission's start, paid by every run when it sat above the check)
-    from aerodaas.tools.hitl import HitlServer, state_file  # lazy: heavy fastapi
+    from aerodaas.tools.hitl import HitlServer  # lazy: heavy fastapi
+    from aerodaas.tools.hitl_client import state_file
 
     access = hitl_access(run.env, opts)
     hitl = HitlServer({rid: {"drone": h["drone"], "scheduler": h["scheduler"]} for rid, h in run.handles.items()},
                       host=hcfg.host, port=opts.hitl_port if opts.hitl_port is not None else hcfg.port,
-                      token=hcfg.token, docs=hcfg.docs, cert_file=access.cert_file, key_file=access.key_file).start()
+                      token=hcfg.token, docs=hcfg.docs, cert_file=access.cert_file, key_file=access.key_file,
+                      insecure=access.insecure).start()
     run.env.hitl = hitl
     source = "generated" if hitl.generated_token else "from environment.json"
     print(f"aerodaas: human-in-the-loop API at {hitl.url}  (bearer token {source}: in {state_file()}, owner only)",
           flush=True)
-    if access.insecure:
+    if hitl.insecure:  # what the server itself does, repeated in the summary
         run.insecure.append(f"the HITL API at {hitl.url}")
         print(f"aerodaas: WARNING: the HITL API serves plain HTTP off loopback ({hitl.url}, insecure): its token "
               f"and requests can be read on the network", file=sys.stderr, flush=True)

@@ -1,4 +1,4 @@
-"""One recorder per node (``recording.per_node: true`` in the environment; issue 49 item 3).
+"""One recorder per node (``recording.per_node: true`` in the environment).
 
 A run records through one recorder actor on the driver's node (:mod:`aerodaas.actors.recorder_actor`); every frame
 of every drone crosses to it. ``aerodaas bench recorder`` measures where that one actor stops keeping up

@@ -21,6 +21,8 @@ class RunOptions:
     record: str | None = None
     speedup: float | None = None
     lockstep: bool | None = None
+    #: ``--recorder-hold``: over ``simulation.recorder_hold_s`` (wall s)
+    recorder_hold_s: float | None = None
     timeout: float | None = None
     address: str | None = None
     env_path: str | None = None

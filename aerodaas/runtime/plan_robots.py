@@ -1,4 +1,4 @@
-"""What each robot of a run plan flies with (issue 47 item 3): its vehicle backend and trajectory scheduler, each
+"""What each robot of a run plan flies with: its vehicle backend and trajectory scheduler, each
 with its registered name and origin, and every sensor it has, also those that feed nothing and so are no component
 of the plan's graph (an odometry sensor nobody subscribes to: the drone actor records the vehicle state anyway).
 

@@ -239,14 +239,28 @@ def validate(env, robots: list, opts: Any) -> tuple[dict, dict, dict]:
 
 def simulation_for(env, robots: list, opts: Any) -> SimulationConfig:
     """The run's simulation settings: the environment's, ``opts.speedup`` / ``opts.lockstep`` over them (``opts``
-    None: none), checked with :func:`check_clocks` (which sets a replay-only run's speed-up). Raises ConfigError."""
+    None: none), checked with :func:`check_clocks` (which sets a replay-only run's speed-up); ``recorder_hold_s``
+    is 0 when a robot flies a real or emulated vehicle or a camera reads a video stream. Raises ConfigError."""
     sim = SimulationConfig.model_validate(env.cfg.simulation.model_dump())
     if opts is not None and opts.speedup is not None:
         sim.speedup = opts.speedup
     if opts is not None and opts.lockstep is not None:
         sim.lockstep = opts.lockstep
+    hold = getattr(opts, "recorder_hold_s", None)
+    if hold is not None:
+        if not 0.0 <= hold <= 3600.0:  # also NaN
+            raise ConfigError(f"--recorder-hold: {hold!r} s is outside [0, 3600]")
+        sim.recorder_hold_s = float(hold)
     check_clocks(robots, sim)
+    if any(backend_clock(r.cfg.backend) != "sim" for r in robots) or _stream_cameras(robots):
+        sim.recorder_hold_s = 0.0  # real vehicles and video streams run on the wall clock: nothing can wait
     return sim
+
+
+def _stream_cameras(robots: list) -> list[str]:
+    """``robot/sensor`` of every camera that reads a video stream (on the wall clock)."""
+    return [f"{r.id}/{s.id}" for r in robots for s in r.cfg.sensors
+            if sensor_class(s.type).reads_wall_clock(s.properties)]
 
 
 def check_clocks(robots: list, sim: SimulationConfig) -> None:
@@ -256,7 +270,7 @@ def check_clocks(robots: list, sim: SimulationConfig) -> None:
     if robots and all(x is not None for x in rates):  # e.g. every robot replays a log: its rate is the clock's
         sim.speedup = max(rates)
 
-    live = [f"{r.id}/{s.id}" for r in robots for s in r.cfg.sensors if sensor_class(s.type).reads_wall_clock(s.properties)]
+    live = _stream_cameras(robots)
     if live and (sim.speedup != 1.0 or sim.lockstep):
         raise ConfigError(f"simulation: the cameras {live} read a video stream, which runs on the wall clock: "
                           f"speedup must be 1 (got {sim.speedup:g}; also --speedup) and lockstep false (got "

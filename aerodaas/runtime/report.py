@@ -92,6 +92,14 @@ def _robot_lines(rid: str, rep: dict) -> list[str]:
                      f"the target")
     lines += _speed_margin_lines(rep.get("events") or [])
     lines += _link_lines(rep.get("events") or [])
+    waits = [e for e in rep.get("events") or [] if e.get("event") == "clock_held"]
+    if rep.get("clock_held_s"):  # simulation.recorder_hold_s: simulated time waited instead of shedding frames
+        held, budget = rep["clock_held_s"], rep.get("clock_hold_budget_s") or 0.0
+        spent = budget and held >= budget - 0.05
+        lines.append(f"    simulated clock held {held:.1f} s for the recorder ({len(waits)} wait(s), longest "
+                     f"{max((e.get('held_s', 0.0) for e in waits), default=0.0):.1f} s, of {budget:g} s allowed by "
+                     f"simulation.recorder_hold_s): " + ("the allowance is spent, later frames were dropped" if spent
+                                                         else "frames waited instead of being dropped"))
     if rep.get("failsafe"):
         f = rep["failsafe"]
         lines.append(f"    autopilot failsafe: {f.get('mode')} at t={f.get('t', 0):.1f} s"

@@ -114,7 +114,7 @@ class SimVehicle:
             desired = np.clip(err * 1.5, -lim.max_speed, lim.max_speed)
         # a hold not yet at rest brakes at the full acceleration along its velocity (desired 0): the stop the safety
         # gate predicts from every point (v^2 / 2a along v); steering back to where the hold was commanded at the
-        # same time took part of the budget and passed that stop point (0.57 m above max_altitude, issue 40.6)
+        # same time took part of the budget and passed that stop point (0.57 m above max_altitude)
         # a position target: the vertical change first, so a climb brakes under its target whatever the turn needs
         s.velocity += np.asarray(limited_change(desired - s.velocity, lim.max_acceleration * dt,
                                                 vertical_first=sp.mode == "position"))

@@ -45,12 +45,8 @@ import math
 import os
 import re
 import secrets
-import ssl
 import threading
 import time
-import urllib.error
-import urllib.request
-from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Request
@@ -60,17 +56,13 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from aerodaas.clusters.tls import state_dir, write_private_json
+from aerodaas.clusters.tls import ServeAccess, write_private_json
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation.safety import SafetyViolation
+# the client (``aerodaas inject``) lives in its own module, without FastAPI; these names stay importable from here
+from aerodaas.tools.hitl_client import state_file
 
-__all__ = ["HitlServer", "state_file", "WaypointIn", "AddWaypointsRequest"]
-
-
-def state_file() -> Path:
-    """Where a running server publishes its url and token: ``$AERODAAS_STATE_DIR/hitl.json``
-    (:func:`aerodaas.clusters.tls.state_dir`)."""
-    return state_dir() / "hitl.json"
+__all__ = ["HitlServer", "WaypointIn", "AddWaypointsRequest"]
 
 
 #: limits of one request: body bytes (413 beyond), waypoints per request (422 beyond; the robot's
@@ -222,11 +214,14 @@ class HitlServer:
     """The HITL API for the drones of one run. ``drones``: robot id -> {"drone": handle of the drone component,
     "scheduler": handle of its trajectory-scheduler component} (``h.method.remote(...)`` handles). ``start()`` returns
     once the server accepts connections. ``cert_file`` / ``key_file``: PEM certificate and key, served as HTTPS
-    (checked first: :func:`aerodaas.clusters.tls.check_tls_files`)."""
+    (checked first: :func:`aerodaas.clusters.tls.check_tls_files`). The constructor applies the exposure rule of
+    every server (:func:`aerodaas.clusters.tls.check_exposure`): bound off loopback, HTTPS or ``insecure=True``
+    (plain HTTP, then :attr:`insecure` is True: what the run summary repeats). Raises ``ValueError`` naming the
+    parameter (a bad token, TLS files or exposure)."""
 
     def __init__(self, drones: dict[str, dict], host: str = "127.0.0.1", port: int = 8470,
                  token: str | None = None, docs: bool = False, get: Any = None, cert_file: str | None = None,
-                 key_file: str | None = None) -> None:
+                 key_file: str | None = None, insecure: bool = False) -> None:
         self.drones = drones
         self.docs = docs  # /docs and /openapi.json: off unless asked for, and then behind the token
         self._get = get  # how a call's result is awaited (default ray.get; tests pass a local one)
@@ -236,6 +231,8 @@ class HitlServer:
             raise ValueError("hitl.token: 16 to 256 characters of A-Z a-z 0-9 - . _ ~ + / (then '=' padding; RFC 6750 "
                              "section 2.1), no blanks")
         self.token = token or secrets.token_urlsafe(24)
+        self.access = ServeAccess(cert_file, key_file, self.token, bool(insecure))
+        self.access.check(host, f"HitlServer(host={host!r})", "cert_file", "key_file", "insecure=True", "token")
         self._locks = {rid: threading.Lock() for rid in drones}  # one add (check + queue) at a time per drone
         self.generated_token = token is None
         self._ids = itertools.count(1)
@@ -243,6 +240,11 @@ class HitlServer:
         self._thread: threading.Thread | None = None
         self.requests = 0
         self.app = self._build_app()
+
+    @property
+    def insecure(self) -> bool:
+        """Whether this API serves plain HTTP off loopback (``insecure=True``): what the run summary repeats."""
+        return self.access.clear_text_off_loopback(self.host)
 
     @property
     def url(self) -> str:
@@ -418,61 +420,3 @@ class HitlServer:
                 f.unlink()
         except (OSError, ValueError):
             pass
-
-
-def request(method: str, path: str, body: Any = None, url: str | None = None, token: str | None = None,
-            timeout: float = 10.0, cafile: str | None = None) -> tuple[int, Any]:
-    """Minimal client (stdlib only): returns (HTTP status, decoded JSON). ``url``/``token``/``cafile`` default to
-    ``$AERODAAS_HITL_URL``/``$AERODAAS_HITL_TOKEN``/``$AERODAAS_HITL_CAFILE``, then the running server's
-    :func:`state_file`. An ``https`` URL is verified (certificate and host name) against ``cafile`` (a self-signed
-    server certificate, or the CA that signed it), else the system's CAs. Raises RuntimeError when no server can be
-    found or reached (a certificate that does not verify included)."""
-    url = url or os.environ.get("AERODAAS_HITL_URL")
-    token = token or os.environ.get("AERODAAS_HITL_TOKEN")
-    cafile = cafile or os.environ.get("AERODAAS_HITL_CAFILE")
-    if not url or not token:
-        f = state_file()
-        if not f.is_file():
-            raise RuntimeError(f"no HITL server found: give --url and --token, set AERODAAS_HITL_URL/"
-                               f"AERODAAS_HITL_TOKEN, or start a run with hitl enabled (writes {f})")
-        info = json.loads(f.read_text())
-        if not url:
-            cafile = cafile or info.get("cafile")
-        url, token = url or info["url"], token or info["token"]
-    data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(url.rstrip("/") + path, data=data, method=method,
-                                 headers={"Authorization": f"Bearer {token}", "Content-Type": "application/json"})
-    context = ssl.create_default_context(cafile=cafile) if url.startswith("https:") else None
-    try:
-        with urllib.request.urlopen(req, timeout=timeout, context=context) as r:
-            return r.status, json.loads(r.read() or b"null")
-    except urllib.error.HTTPError as e:
-        raw = e.read()
-        try:
-            return e.code, json.loads(raw)
-        except ValueError:
-            return e.code, raw.decode(errors="replace")
-    except urllib.error.URLError as e:
-        raise RuntimeError(f"cannot reach the HITL API at {url}: {e.reason}") from None
-
-
-#: options of ``aerodaas inject`` whose value may start with '-': a bearer token (base64url: one in 64 starts so), a
-#: waypoint west or south of home (``-3,2,5``)
-INJECT_VALUE_OPTIONS = ("--drone", "--waypoint", "--index", "--priority", "--url", "--token", "--cacert")
-
-
-def inject_argv(argv: list[str]) -> list[str]:
-    """``aerodaas`` command-line ``argv`` with, for the ``inject`` command, each ``OPTION VALUE`` of
-    :data:`INJECT_VALUE_OPTIONS` written ``OPTION=VALUE``: argparse reads a separate value that starts with '-' as an
-    option of its own (``--token -abc...`` failed with "expected one argument"). Other commands are left as given."""
-    if argv[:1] != ["inject"]:
-        return argv
-    out, i = [], 0
-    while i < len(argv):
-        if argv[i] in INJECT_VALUE_OPTIONS and i + 1 < len(argv):
-            out.append(f"{argv[i]}={argv[i + 1]}")
-            i += 2
-        else:
-            out.append(argv[i])
-            i += 1
-    return out

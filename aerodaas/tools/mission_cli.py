@@ -14,7 +14,7 @@ def _upload_bound(kind: str):
     (exit 2)."""
 
     def parse(text: str) -> float:
-        from aerodaas.config.base import MAX_ALTITUDE_M, MAX_SPEED_MPS  # lazy: CLI start-up (pydantic)
+        from aerodaas.model.bounds import MAX_ALTITUDE_M, MAX_SPEED_MPS  # lazy: CLI start-up (pydantic)
         from aerodaas.model.types import MAX_LOCAL_M  # lazy: CLI start-up (pydantic)
 
         upper = {"altitude": MAX_ALTITUDE_M, "distance": MAX_LOCAL_M, "speed": MAX_SPEED_MPS}[kind]

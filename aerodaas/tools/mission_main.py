@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from aerodaas.backends import BackendError, make_backend
-from aerodaas.backends.mavlink.fence import FENCE, RALLY, fence_from_items
+from aerodaas.backends.mavlink.fence import fence_from_items
+from aerodaas.backends.mavlink.transfer import FENCE, RALLY
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
 from aerodaas.missionfile.upload import cap_speeds, check_relative_altitudes, mission_differences, mission_frames

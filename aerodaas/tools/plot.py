@@ -36,11 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.tools.plot_data import (TARGETS_TOPIC, PlannedWaypoint, RobotRun, RunData, TargetTrack, load_plot_data,  # noqa: F401
-                        planned_and_flown, tracking_segments)
+from aerodaas.tools.plot_data import RobotRun, RunData, load_plot_data, tracking_segments
 
-__all__ = ["plot_run", "load_plot_data", "planned_and_flown", "tracking_segments", "RunData", "RobotRun",
-           "PlannedWaypoint", "TargetTrack", "cmd_plot", "FIGURES"]
+__all__ = ["plot_run", "cmd_plot", "FIGURES"]
 
 FIGURES = ("trajectory", "battery_altitude", "latency")
 """Stems of the PNG files :func:`plot_run` writes (per robot; suffixed ``_<robot>`` with several robots)."""

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from aerodaas.training.dataset import LabelledImage
+from aerodaas.training.labels.images import LabelledImage
 
 __all__ = ["Augment", "TileSampler", "read_bgr"]
 

@@ -17,7 +17,8 @@ class TrainConfig(BaseModel):
 
     ``data``: labelled sets (YOLO folder or COCO JSON, :func:`aerodaas.training.dataset.load_set`), all with the same
     class names; ``val``: held-out sets (default: ``val_fraction`` of ``data`` split by video/sequence);
-    ``base_model``: the YOLOX ONNX to start from (default: the shipped YOLOX-Nano, COCO); ``init_from``: per class,
+    ``base_model``: the YOLOX ONNX to start from (default: :func:`~aerodaas.training.base.choose_base`, the shipped
+    aerial model when it knows every class, else the COCO YOLOX-Nano); ``init_from``: per class,
     the base model's class whose output row it starts from (default: the same name, or :data:`COCO_ALIASES`);
     ``out``: the run folder (checkpoints ``last.pt`` / ``best.pt``, ``history.json``, ``model.onnx``);
     ``object_px``: the range (pixels, min < max) a tile's median object is scaled into, drawn log-uniformly (the

@@ -18,13 +18,13 @@ import numpy as np
 import torch
 
 from aerodaas.training.augment import Augment, TileSampler
-from aerodaas.training.config import COCO_ALIASES, TrainConfig
+from aerodaas.training.config import TrainConfig
 from aerodaas.training.sets import TrainingData, load_training_data
 from aerodaas.training.loss import LossParts, YoloxLoss
 from aerodaas.training.onnx_module import OnnxYolox
 from aerodaas.training.validate import ClassMetrics, ValTiles, evaluate
 
-__all__ = ["Trainer", "EpochResult", "augment_of", "base_rows", "TrainingData", "load_training_data"]
+__all__ = ["Trainer", "EpochResult", "augment_of", "TrainingData", "load_training_data"]
 
 
 @dataclass(frozen=True)
@@ -45,20 +45,6 @@ class EpochResult:
         """AP50 averaged over the classes that have validation boxes."""
         aps = [m.ap50 for m in self.metrics if m.n_gt]
         return float(np.mean(aps)) if aps else 0.0
-
-
-def base_rows(names: list[str], base_names: list[str], init_from: dict[str, str]) -> list[int]:
-    """For each class name, the base model's output row it starts from (``init_from``, the same name, or
-    :data:`COCO_ALIASES`). Raises ValueError naming a class that has no row in the base model."""
-    index = {n: i for i, n in enumerate(base_names)}
-    rows = []
-    for n in names:
-        src = init_from.get(n, n if n in index else COCO_ALIASES.get(n, n))
-        if src not in index:
-            raise ValueError(f"init_from: class {n!r} has no start in the base model (its classes: "
-                             f"{base_names[:10]}...); pass --init-from {n}=<one of them>")
-        rows.append(index[src])
-    return rows
 
 
 def augment_of(cfg: TrainConfig) -> Augment:

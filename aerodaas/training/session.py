@@ -14,12 +14,10 @@ from typing import Callable
 
 import torch
 
-from aerodaas.model.types import COCO_CLASSES
-from aerodaas.perception.decoders import inspect_model
-from aerodaas.perception.model_files import resolve_model
+from aerodaas.training.base import choose_base
 from aerodaas.training.config import TrainConfig
 from aerodaas.training.export import ExportReport, export_checked, quantize_checked
-from aerodaas.training.loop import EpochResult, Trainer, TrainingData, base_rows
+from aerodaas.training.loop import EpochResult, Trainer, TrainingData
 from aerodaas.training.loss import LossParts
 from aerodaas.training.onnx_module import OnnxYolox
 
@@ -27,21 +25,20 @@ __all__ = ["build_model", "run_training", "export_run"]
 
 
 def build_model(cfg: TrainConfig, names: list[str]) -> OnnxYolox:
-    """The module to fine-tune: ``cfg.base_model`` (default the shipped YOLOX-Nano, resolved and sha256-checked by
-    :func:`resolve_model`) with one class row per name (:func:`base_rows`). The base model's class names are its
-    metadata's, else COCO's 80."""
-    path = cfg.base_model or resolve_model("yolox_nano")
-    base_names = inspect_model(path, "yolox").class_names or list(COCO_CLASSES)
-    return OnnxYolox(path, base_rows(names, base_names, cfg.init_from))
+    """The module to fine-tune: the base model :func:`~aerodaas.training.base.choose_base` picks for ``names``
+    (``cfg.base_model``, else the shipped aerial model or the COCO YOLOX-Nano), one class row per name. Raises
+    as :func:`~aerodaas.training.base.choose_base` does."""
+    base = choose_base(cfg.base_model, names, cfg.init_from)
+    return OnnxYolox(base.path, base.rows)
 
 
 def export_run(cfg: TrainConfig, trainer: Trainer, started: float) -> dict:
     """Export the best epoch's EMA weights to ``out/model.onnx`` (checked, scored), quantize when asked, and write
-    ``out/report.json``; returns the report."""
+    ``out/report.json`` (with ``base_model``: the model the run started from and why); returns the report."""
     best_state = torch.load(cfg.out / "best.pt", weights_only=False)
     trainer.ema.model.load_state_dict(best_state["ema"])
-    meta = {"aerodaas_training": json.dumps({"seed": cfg.seed, "epoch": best_state["epoch"],
-                                             "base": str(cfg.base_model or "yolox_nano")})}
+    base = choose_base(cfg.base_model, trainer.data.names, cfg.init_from)
+    meta = {"aerodaas_training": json.dumps({"seed": cfg.seed, "epoch": best_state["epoch"], "base": base.name})}
     rep = export_checked(trainer.ema.model, cfg.out / "model.onnx", trainer.data.names, trainer.val, meta,
                          cfg.score_threshold)
     q_note, q_rep = "not asked (--quantize)", None
@@ -53,7 +50,7 @@ def export_run(cfg: TrainConfig, trainer: Trainer, started: float) -> dict:
         return None if r is None else {"path": str(r.path), "size_bytes": r.size_bytes,
                                        "max_abs_diff": r.max_abs_diff, "metrics": [asdict(m) for m in r.metrics]}
 
-    report = {"config": cfg.model_dump(mode="json"), "names": trainer.data.names,
+    report = {"config": cfg.model_dump(mode="json"), "names": trainer.data.names, "base_model": base.as_dict(),
               "train_images": len(trainer.data.train), "val_images": len(trainer.data.val),
               "best_epoch": best_state["epoch"] - 1, "history": [asdict(h) for h in trainer.history],
               "export": _exp(rep), "int8": _exp(q_rep), "int8_note": q_note,

@@ -8,7 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from aerodaas.training.config import TrainConfig
-from aerodaas.training.dataset import LabelledImage, LabelError, labelled_classes, load_set, split_by_sequence
+from aerodaas.training.dataset import labelled_classes, load_set, split_by_sequence
+from aerodaas.training.labels.check import LabelError
+from aerodaas.training.labels.images import LabelledImage
 
 __all__ = ["TrainingData", "load_training_data"]
 

@@ -16,7 +16,7 @@ import torch
 from aerodaas.model.types import Detection
 from aerodaas.perception.scoring import GroundTruth, score
 from aerodaas.training.augment import Augment, TileSampler
-from aerodaas.training.dataset import LabelledImage
+from aerodaas.training.labels.images import LabelledImage
 from aerodaas.training.loss import decode_maps
 from aerodaas.training.onnx_module import STRIDES
 

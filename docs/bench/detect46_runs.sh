@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 46 item 5: the runs behind docs/bench/detect46_*.json (docs/perception.md, "Measured on held-out aerial sets").
+# The runs behind docs/bench/detect46_*.json (docs/perception.md, "Measured on held-out aerial sets").
 # usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets|scale|selftrain|oblique2 OUTDIR  (aerial splits laid
 # out by examples/training/prepare_aerial_data.py in $S; the shared photos in $AERODAAS_DATA_DIR/imagery/brighton_beach;
 # for selftrain, MEVA's UAV montage in $MEVA and stage 4 of docs/perception.md in $R/v4/model.onnx)

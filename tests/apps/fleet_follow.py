@@ -1,4 +1,4 @@
-"""Two drones share one FollowAnalytics (issue 15: a shared follow kept one track and mixed the drones' targets).
+"""Two drones share one FollowAnalytics (a shared follow kept one track and mixed the drones' targets).
 Each drone surveys towards its own parked car (d1 west, d2 east); a ground-truth "detector" reports every car in a
 frame's field of view (cars are visible until t = 14 s, then gone); the shared follow preempts each survey and puts
 each drone over its own car; when the cars are gone the surveys resume and both drones land at home.

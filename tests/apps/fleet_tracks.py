@@ -1,4 +1,4 @@
-"""Geo-located tracks recorded in a run (issue 28, item 4): two drones at 20 m, each over its own cars (moving and
+"""Geo-located tracks recorded in a run: two drones at 20 m, each over its own cars (moving and
 parked, the simulator's targets). A colour "detector" finds the magenta cars in the rendered pixels (it does not
 know the simulator's truth), one TrackAnalytics (ByteTrack per drone + geo-location) is shared by both drones; the
 runtime records each drone's tracks under /<robot>/tracks/tracks (image annotations, /scene, /fixes).

@@ -1,5 +1,5 @@
-"""Two drones flown as one fleet with ``env.start_mission([d1, d2])`` (the regression app of issue 15's "never
-called start_mission()" bug): each flies one waypoint 4 m from home and lands.
+"""Two drones flown as one fleet with ``env.start_mission([d1, d2])`` (a fleet's start is not
+reported as "never called start_mission()"): each flies one waypoint 4 m from home and lands.
 Run: aerodaas run tests/apps/fleet_two_drones.py --speedup 20"""
 from aerodaas import *
 

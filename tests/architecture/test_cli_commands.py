@@ -1,4 +1,4 @@
-"""One way to add a command (issue 48 item 5): every ``aerodaas`` sub-command comes from a module of
+"""One way to add a command: every ``aerodaas`` sub-command comes from a module of
 :data:`aerodaas.commands.COMMAND_MODULES` that holds both its parser and its handler; ``aerodaas/cli.py`` only
 assembles them."""
 from __future__ import annotations
@@ -29,7 +29,7 @@ def test_each_command_module_adds_commands_whose_handler_it_holds():
             assert name not in seen, f"{name!r} added by {module.__name__} and {seen[name]}"
             seen[name] = module.__name__
             func = parser.get_default("func")
-            if name in ("mission", "mavlink", "bench", "plugins", "train"):  # a group: its own sub-commands
+            if name in ("mission", "mavlink", "bench", "plugins", "train", "label"):  # a group: its own sub-commands
                 continue
             assert func is not None and func.__module__ == module.__name__, (name, func, module.__name__)
     # the command line is exactly these modules' commands

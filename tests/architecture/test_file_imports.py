@@ -1,4 +1,4 @@
-"""The file-level import graph (issue 48 item 4): what ``tests/architecture/test_layers.py`` checks between
+"""The file-level import graph: what ``tests/architecture/test_layers.py`` checks between
 sub-packages, checked between files.
 
 The graph has one node per production file of ours (``aerodaas/``; ``actors/``, ``schedulers/``, ``clusters/``
@@ -19,7 +19,7 @@ Two rules:
   without it ...) or a documented start-up cost. A cycle is not a reason: it is broken instead (a shared type
   moved down, a module split, an object passed).
 
-The public API's PEP 562 ``__getattr__`` in ``aerodaas/__init__.py`` (issue 49: start-up) resolves names with
+The public API's PEP 562 ``__getattr__`` in ``aerodaas/__init__.py`` (start-up) resolves names with
 ``import_module(origin)``, not a literal, so it is neither an edge nor an import to mark.
 
 ``KNOWN_CYCLE_FILES`` and ``KNOWN_UNMARKED`` name today's offenders so that the suite passes while they are fixed;

@@ -1,10 +1,10 @@
-"""No production function is 80 lines or longer (issue 39, item 5: units a person can hold in mind), and no module
-over 600 lines (issue 48 item 4).
+"""No production function is 80 lines or longer (units a person can hold in mind), and no module
+over 600 lines.
 
 Parses every ``.py`` file of ``aerodaas/``, ``actors/``, ``schedulers/`` and ``clusters/`` with :mod:`ast` and
 measures each function and method (nested ones too) from its ``def`` line to its last line, docstring and
 comments included. The allow-list holds the functions still over the limit when this test was written, each
-split by another engineer working in parallel (issue 39 items 2 and 41; the end-of-run summary): it may only
+split by another engineer working in parallel (the end-of-run summary): it may only
 shrink. An entry whose function is now under the limit (or gone) fails the test too, so the list is emptied
 as the splits land.
 """
@@ -98,7 +98,7 @@ def test_the_module_measure_counts_a_long_module(tmp_path):
 
 
 def test_tests_are_laid_out_like_the_code():
-    """Issue 48 item 6: every test module sits in an area folder ``tests/<area>/`` (one per concept, with an
+    """Every test module sits in an area folder ``tests/<area>/`` (one per concept, with an
     ``__init__.py`` that says what the area tests), none directly under ``tests/``, and none over 600 lines: shared
     fixtures go in the area's ``conftest.py`` or a support module beside the tests."""
     tests = ROOT / "tests"

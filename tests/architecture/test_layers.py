@@ -1,4 +1,4 @@
-"""Layers without cycles (issue 39 item 4): the import graph between the sub-packages of ``aerodaas`` has no cycle.
+"""Layers without cycles: the import graph between the sub-packages of ``aerodaas`` has no cycle.
 
 Every production module (``aerodaas/``, ``actors/``, ``schedulers/``, ``clusters/``) is parsed with :mod:`ast`;
 every import counts — at module level, inside functions and under ``TYPE_CHECKING`` — and so does

@@ -1,4 +1,4 @@
-"""Start-up cost kept out of processes that do not need it (issue 49 item 5): the heavy third-party libraries are
+"""Start-up cost kept out of processes that do not need it: the heavy third-party libraries are
 imported only where they are used. Each check imports a module in a fresh interpreter and reads ``sys.modules``
 (what Python itself loaded), so no wall-clock time is involved.
 
@@ -93,7 +93,7 @@ def test_a_run_without_hitl_does_not_import_its_server():
 
 
 def test_an_unrecorded_runs_actor_sets_up_without_the_recorders_writer_or_live_view():
-    """Issue 49 item 5: the drone actor of a run that is not recorded builds its components (a fresh interpreter, as
+    """The drone actor of a run that is not recorded builds its components (a fresh interpreter, as
     a fresh Ray worker does) without importing the MCAP writer, the recorder service or the live view (57 modules,
     0.04 s of CPU per actor measured); a recorded one still gets them (see tests/recording)."""
     code = textwrap.dedent("""

@@ -1,4 +1,4 @@
-"""No module-level mutable state in production code (issue 48.4) outside the one plug-in registry object and the
+"""No module-level mutable state in production code outside the one plug-in registry object and the
 process object (its signal handling and its Ray connection), each documented where it is defined. An AST scan of
 ``aerodaas/``, ``actors/``, ``schedulers/`` and ``clusters/``: a module-level name bound to a mutable value — a
 list, dict or set display or comprehension, a call of a mutable container type (``list()``, ``dict()``,
@@ -38,7 +38,7 @@ ALLOWED = {
     # signal.signal, ray.init and a bound UDP port are process-wide by nature
     ("aerodaas/process/state.py", "PROCESS"),
 }
-#: state found when the scan was introduced, still to be moved into an owned object (issue 48.4): listed so that
+#: state found when the scan was introduced, still to be moved into an owned object: listed so that
 #: nothing new is added; an entry that no longer matches fails the test (remove it here). Empty since the MAVLink
 #: links a process's robots share moved into :data:`aerodaas.process.state.PROCESS` (``mavlink_links``)
 KNOWN_DEBT: set[tuple[str, str]] = set()
@@ -155,7 +155,7 @@ def test_no_module_level_mutable_state_outside_the_registry_and_the_process_obje
     assert not gone, f"listed here but no longer found (remove the entry): {gone}"
 
 
-def test_the_state_named_in_issue_48_is_gone():
+def test_the_former_module_level_state_is_gone():
     """``MISSION_LISTENERS``, ``STOP_SIGNALS``, ``_RAISE_OK``, ``IN_MISSION`` (driver) and ``_STATE``/``_EARLY``
     (ray_start) were module-level lists and dicts; each is now a field of an owned object."""
     files = _production_files()

@@ -1,4 +1,4 @@
-"""No production code reaches into another class's private fields or methods (issue 24, item 5).
+"""No production code reaches into another class's private fields or methods.
 
 Parses every ``.py`` file of ``aerodaas/``, ``actors/``, ``schedulers/`` and ``clusters/`` with
 :mod:`ast` and lists every attribute access ``expr._name`` (single leading underscore, not a dunder)

@@ -1,5 +1,5 @@
-"""Every repository path a test launches or a docstring names exists (issue 48 item 6 moved ``tests/`` into area
-folders; one stream test still launched ``tests/video_rig.py`` and failed only in CI's slow tier).
+"""Every repository path a test launches or a docstring names exists (when ``tests/`` moved into area
+folders, one stream test still launched ``tests/video_rig.py`` and failed only in CI's slow tier).
 
 Scans the tests, the production packages, ``.ci/`` and the docs (not ``docs/results``, which quote old runs) for
 ``tests/<path>.<ext>`` literals and ``"tests" / "<a>" / "<b>"`` path joins, and fails naming each file that points

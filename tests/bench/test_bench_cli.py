@@ -1,5 +1,5 @@
 """``aerodaas bench overhead`` and ``aerodaas bench startup`` end to end, as a user runs them (subprocesses, each
-with its own Ray): the JSON reports carry the keys the issue asks for and sane structure. No timing is asserted —
+with its own Ray): the JSON reports carry their documented keys and sane structure. No timing is asserted —
 the numbers live in the benchmark results, not in tests."""
 from __future__ import annotations
 
@@ -112,7 +112,7 @@ def test_bench_startup_json_reports_phases_in_order(tmp_path):
     order = ["cli", "app_built", "ray_ready", "hosts_ready", "first_processed"]
     assert list(phases) == order                                             # each phase seen, in this order
     assert phases["first_processed"] == run["seconds_to_first_frame"]
-    # attached to an `aerodaas up` cluster of the benchmark's own (issue 27 item 2), stopped afterwards
+    # attached to an `aerodaas up` cluster of the benchmark's own, stopped afterwards
     (att,) = rep["attached"]["runs"]
     assert list(att["phases_s"]) == order and rep["cold"]["runs"] == [run]
     # the attached run started once the cluster's warm pool was full (clusters.warm_pool)

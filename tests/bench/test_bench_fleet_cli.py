@@ -25,7 +25,7 @@ def canned(monkeypatch, tmp_path):
 
 
 def test_json_writes_no_file_it_was_not_given(canned, capsys):
-    """issue 49 item 7: without --plot no figure (it used to land as fleet.png in the current directory)."""
+    """Without --plot no figure (it used to land as fleet.png in the current directory)."""
     assert cli.main(["bench", "fleet", "--json", "--drones", "1", "--drones", "5", "--duration", "1"]) == 0
     out = capsys.readouterr()
     rep = json.loads(out.out)
@@ -46,7 +46,7 @@ def test_plot_and_out_write_where_they_are_told(canned, capsys):
 
 
 def test_runs_name_each_fleet_and_its_grouping(canned, capsys):
-    """--run N:K (issue 49: 20 and 40 drones one actor each and 100 packed, in one invocation) replaces the grid."""
+    """--run N:K (20 and 40 drones one actor each and 100 packed, in one invocation) replaces the grid."""
     assert cli.main(["bench", "fleet", "--json", "--run", "20:1", "--run", "40:1", "--run", "100:10", "--profile",
                      "--duration", "1"]) == 0
     rep = json.loads(capsys.readouterr().out)

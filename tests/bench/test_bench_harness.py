@@ -12,7 +12,7 @@ import pytest
 
 from aerodaas.bench.bound import lognormal_on_time_chance, lognormal_slack, utility_upper_bound
 from aerodaas.bench.harness import Harness, fleet_tasks, make_trace, run_fleet, run_policy
-from aerodaas.bench.schedulers import make_trace as fleet_trace
+from aerodaas.bench.workload import make_trace as fleet_trace
 from aerodaas.bench.schedulers_report import summarize_runs
 from aerodaas.bench.sweep import mean_ci, run_sweep, scenario_specs, t95
 from aerodaas.schedulers.dispatch.emulation import Jitter
@@ -329,7 +329,7 @@ def test_cli_option_reaches_the_scheduler_that_has_it_and_refuses_what_none_has(
     (["--exact-bound-budget-s", "5"], "--exact-bound-budget-s"),
 ])
 def test_an_option_the_mode_does_not_use_is_refused_naming_it(argv, named, tmp_path, capsys):
-    """issue 41.4: the harness ignored --network-variability and --cloud-jitter (with const:500 the utility was
+    """The harness ignored --network-variability and --cloud-jitter (with const:500 the utility was
     40,786 either way); an option the chosen mode would not use is exit 2, before any run (no Ray, no job)."""
     from aerodaas.cli import main
 
@@ -350,7 +350,7 @@ def _grab():
 
 
 def test_bounded_runs_within_its_budget_or_says_what_ran_out():
-    """issue 41.5: the exact bound ran over 5 min and 2 GB on a stall-and-flush trace; now it is cut off and said."""
+    """The exact bound ran over 5 min and 2 GB on a stall-and-flush trace; now it is cut off and said."""
     from aerodaas.bench.bound import Budget, bounded
 
     assert bounded(lambda: 6 * 7, Budget(60.0, 256.0)) == ("ok", 42)

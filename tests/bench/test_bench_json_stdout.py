@@ -1,4 +1,4 @@
-"""Benchmarks a script can read (issue 49 item 7): every ``aerodaas bench <name> --json``, run as a user runs it (a
+"""Benchmarks a script can read: every ``aerodaas bench <name> --json``, run as a user runs it (a
 subprocess, in an empty working folder), prints its JSON document alone on standard output (``json.loads`` of the
 whole of it succeeds: no Ray worker warning, progress line or summary before or after it) and leaves the working
 folder empty (no ``fleet.png`` or ``bench_schedulers.png`` it was not asked for). The benchmarks are listed from the

@@ -1,4 +1,4 @@
-"""Every option of the scheduler benchmarks honoured or refused (issue 41 item 4): ``python -m
+"""Every option of the scheduler benchmarks honoured or refused: ``python -m
 aerodaas.bench.decision_time`` refuses an option its scheduler does not take and takes the ``--trace-*`` options of
 ``aerodaas bench schedulers``; ``aerodaas bench schedulers`` refuses ``--estimator`` / ``--eviction-scan`` when no
 scheduler of the run takes them, and ``--cloud-sigma`` with ``--cloud-jitter`` on the runtime; and every JSON holds
@@ -27,7 +27,7 @@ WORKLOAD_JSON = DATA_DIR / "workloads" / "ocularone_lambda.json"
     (["--trace", "periodic", "--trace-drop", "0.1"], "trace periodic takes no drop"),
 ])
 def test_decision_time_refuses_what_it_would_ignore_naming_it(argv, named, tmp_path, monkeypatch, capsys):
-    """issue 41.4: an option the scheduler does not take was filtered out silently and yet recorded as applied;
+    """An option the scheduler does not take was filtered out silently and yet recorded as applied;
     a trace parameter could not be set at all. Refused, exit 2, before any run (no JSON)."""
     monkeypatch.setenv("AERODAAS_DATA_DIR", str(DATA_DIR))
     out = tmp_path / "d.json"
@@ -79,7 +79,7 @@ def _bench(argv, tmp_path):
     (["--cloud-sigma", "0.1", "--cloud-jitter", "lognormal:0.3"], "--cloud-sigma, --cloud-jitter"),
 ])
 def test_a_scheduler_option_no_scheduler_takes_is_refused_naming_it(argv, named, tmp_path, capsys):
-    """issue 41.4: --estimator and --eviction-scan were accepted when no scheduler of the run used them; on the
+    """--estimator and --eviction-scan were accepted when no scheduler of the run used them; on the
     runtime --cloud-sigma overrode --cloud-jitter while the JSON recorded the ignored jitter. Exit 2 before any run
     (no Ray, no job, no figure), naming the options."""
     # tiny runs, should one be accepted by mistake (the runtime's default is 80 drones over 60 s x 5 seeds)

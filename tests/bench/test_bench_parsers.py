@@ -1,4 +1,4 @@
-"""The benchmarks' options are parsed without their code (issue 48 item 4): ``aerodaas`` builds every ``bench``
+"""The benchmarks' options are parsed without their code: ``aerodaas`` builds every ``bench``
 sub-parser from :mod:`aerodaas.bench.parsers`, which imports a benchmark's module only when that benchmark runs.
 Checked from ``sys.modules`` of a fresh interpreter (what Python itself loaded) and by running each benchmark with
 a bad option in-process: its handler reaches the benchmark's ``main``, which refuses the option (exit 2, named)

@@ -1,4 +1,4 @@
-"""``aerodaas bench recorder`` (issue 49 item 3): its parts that need no Ray. The Ray run itself is in
+"""``aerodaas bench recorder``: its parts that need no Ray. The Ray run itself is in
 ``tests/bench/test_bench_json_stdout.py`` (slow tier); timing is never asserted."""
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ import math
 import pytest
 from mcap.writer import Writer
 
-from aerodaas.bench.schedulers import make_trace
+from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec, frame_times, recording_frame_gaps
 from aerodaas.schedulers.analytics_base import Workload
 from tests.conftest import needs_workload

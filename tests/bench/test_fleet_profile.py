@@ -1,4 +1,4 @@
-"""``aerodaas bench fleet --profile``'s measuring parts (issue 49 item 1): the per-thread CPU read from /proc, the
+"""``aerodaas bench fleet --profile``'s measuring parts: the per-thread CPU read from /proc, the
 py-spy stacks classified into components, CPU apportioned between them, PSS split by mapping."""
 from __future__ import annotations
 

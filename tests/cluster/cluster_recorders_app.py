@@ -43,7 +43,8 @@ def main(out_dir: str, local: bool = False) -> dict:
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     from aerodaas import AeroListData, Environment, NearestNeighborScheduler, PriorityQueue, Waypoint
     from aerodaas.config import parse_environment_config
-    from aerodaas.runtime import driver as runtime
+    from aerodaas.runtime.options import RunOptions
+    from aerodaas.runtime.report import format_summary
     from tests.cluster.cluster_runtime_app import _actors_by_node, _cfg
     from tests.liveview.foxglove_ws_client import collect
 
@@ -67,7 +68,7 @@ def main(out_dir: str, local: bool = False) -> dict:
                              daemon=True).start()
 
         env.get_robot_by_id("d00").on_mission_start(watch)
-        opts = runtime.RunOptions(progress=False, address=address, run_id="pernode", record=rec,
+        opts = RunOptions(progress=False, address=address, run_id="pernode", record=rec,
                                   live=f"127.0.0.1:{port}")
         res = env.start_mission(timeout=120, options=opts)
     got = live.get("got") or {}
@@ -76,7 +77,7 @@ def main(out_dir: str, local: bool = False) -> dict:
             "actors": live.get("actors", []),
             "live_channels": sorted(got.get("channels", {})),
             "live_counts": {t: len(m) for t, m in (got.get("messages") or {}).items()},
-            "nodes": res.recording_nodes, "summary": runtime.format_summary(res)}
+            "nodes": res.recording_nodes, "summary": format_summary(res)}
 
 
 if __name__ == "__main__":

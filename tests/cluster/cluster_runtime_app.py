@@ -61,8 +61,8 @@ def _actors_by_node() -> list[dict]:
 
 def placement(out_dir: str) -> dict:
     from aerodaas import Environment, NearestNeighborScheduler
-    from aerodaas.runtime import driver as runtime
-    from aerodaas.bench.overhead import FixedCostDetector
+    from aerodaas.runtime.options import RunOptions
+    from aerodaas.bench.pipeline import FixedCostDetector
     from aerodaas.clusters.local import LocalCluster
     from aerodaas.config import parse_environment_config
 
@@ -82,7 +82,7 @@ def placement(out_dir: str) -> dict:
         for i, drone in enumerate(env.get_env_robots()):
             dets["ab"[i % 2]].analyse(drone.get_sensor_by_id("cam").get_data_stream())
             _survey(env, drone, sched, 1.0, i)
-        opts = runtime.RunOptions(progress=False, address=lc.address, run_id="place")
+        opts = RunOptions(progress=False, address=lc.address, run_id="place")
         seen: dict = {}
         env.get_robot_by_id("d00").on_mission_start(lambda r: seen.update(actors=_actors_by_node()))
         res = env.start_mission(timeout=60, options=opts)
@@ -93,7 +93,8 @@ def placement(out_dir: str) -> dict:
 
 def node_loss(out_dir: str) -> dict:
     from aerodaas import Environment, NearestNeighborScheduler
-    from aerodaas.runtime import driver as runtime
+    from aerodaas.runtime.options import RunOptions
+    from aerodaas.runtime.report import format_summary
     from aerodaas.clusters.local import LocalCluster
     from aerodaas.config import parse_environment_config
 
@@ -106,7 +107,7 @@ def node_loss(out_dir: str) -> dict:
         env.set_trajectory_scheduler(sched)
         for i, drone in enumerate(env.get_env_robots()):
             _survey(env, drone, sched, 4.0, i)
-        opts = runtime.RunOptions(progress=False, address=lc.address, run_id="loss", record=rec)
+        opts = RunOptions(progress=False, address=lc.address, run_id="loss", record=rec)
         killed: dict = {}
 
         def kill_later(robot) -> None:
@@ -131,7 +132,7 @@ def node_loss(out_dir: str) -> dict:
         return {"outcome": res.outcome, "killed": killed, "recording": rec,
                 "robots": {k: {"outcome": v.get("outcome"), "visited": v.get("visited"), "error": v.get("error")}
                            for k, v in res.robots.items()},
-                "summary": runtime.format_summary(res)}
+                "summary": format_summary(res)}
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""``aerodaas bench fleet --edge-nodes 2`` on a local two-node cluster (issue 49 item 4): the drones run on both
+"""``aerodaas bench fleet --edge-nodes 2`` on a local two-node cluster: the drones run on both
 nodes — Ray's GCS places a drone actor on each node's raylet (node ids from Ray's state API) — and the per-node
 accounting adds up to the fleet's. The benchmark runs as a subprocess (its own cluster; the test session's Ray is
 left alone); everything is read from its JSON report."""

@@ -561,7 +561,7 @@ def test_edge_host_and_cloud_executor_actors_on_the_session_ray(ray_session):
 
 # ------------------------------------------------------------------------------------------------ benchmark trace
 def test_benchmark_trace_is_seeded_and_follows_the_arrival_process():
-    from aerodaas.bench.schedulers import edge_layout, make_trace
+    from aerodaas.bench.workload import edge_layout, make_trace
 
     w = workload("HEAVY")
     a = make_trace(w, drones=10, duration_s=3.0, seed=4, drones_per_edge=3, fps=1.0)

@@ -23,12 +23,12 @@ def cluster():
     restarted afterwards."""
     import ray
 
-    from aerodaas.runtime import driver as runtime
+    from aerodaas.runtime import ray_start
     from aerodaas.clusters.local import LocalCluster
 
     had_session = ray.is_initialized()
     if had_session:
-        runtime.shutdown_ray()
+        ray_start.shutdown_ray()
         if ray.is_initialized():
             ray.shutdown()
     lc = LocalCluster(cloud_nodes=0, edge_cpus=2, cloud_cpus=2, connect=False)
@@ -42,7 +42,7 @@ def cluster():
     finally:
         lc.shutdown()
         if had_session:
-            runtime.ensure_ray(None)
+            ray_start.ensure_ray(None)
 
 
 def _executor(label: str):
@@ -251,7 +251,7 @@ def test_a_mission_keeps_flying_when_its_analytics_cloud_node_is_lost(cluster, r
 
     import ray
 
-    from aerodaas.runtime.driver import format_summary
+    from aerodaas.runtime.report import format_summary
     from tests.schedulers.test_analytics_scheduling import QOS, build, hover_config, topic_messages
 
     node = cluster.add_cloud_node({"cloud-node": "c-mission"})

@@ -1,5 +1,5 @@
 """``LocalCluster`` (bench fleet --edge-nodes, bench schedulers, cluster tests) listens on loopback only, as
-``aerodaas run``'s local mode does (issue 27, item 3): every listening socket of every process of the cluster."""
+``aerodaas run``'s local mode does: every listening socket of every process of the cluster."""
 from __future__ import annotations
 
 import json

@@ -1,4 +1,4 @@
-"""One recorder per node on a two-node local cluster (issue 49 item 3): two recorders write one run, each on its
+"""One recorder per node on a two-node local cluster: two recorders write one run, each on its
 node, the live view shows both nodes' channels, and ``aerodaas merge`` + ``aerodaas info`` present the run whole
 with the accounting complete. The run is ``tests/cluster/cluster_recorders_app.py`` in a subprocess; placement is read from
 Ray's GCS, the files with the mcap library's own reader, the live view with a Foxglove protocol client written

@@ -1,4 +1,4 @@
-"""``aerodaas up`` / ``aerodaas down`` (issue 27, item 2): one loopback-only, token-authenticated Ray head labelled
+"""``aerodaas up`` / ``aerodaas down``: one loopback-only, token-authenticated Ray head labelled
 ``tier=edge``; ``down`` stops exactly the processes ``up`` started. Uses a private ``AERODAAS_STATE_DIR`` so it never
 meets a cluster the user started."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Ray's own TLS on a multi-node cluster (issue 50, item 5): a two-node ``LocalCluster`` runs Ray's mutual TLS
+"""Ray's own TLS on a multi-node cluster: a two-node ``LocalCluster`` runs Ray's mutual TLS
 (``RAY_USE_TLS`` and the ``RAY_TLS_*`` files of a private certificate authority, set for every Ray process,
 ``aerodaas run --address``'s driver included); a mission flies on it; the GCS and both raylets answer only a TLS
 client holding a certificate of that authority, and a driver without the certificates, or with one of another
@@ -72,7 +72,7 @@ SCRIPT = textwrap.dedent(r'''
 
 @pytest.mark.cluster
 def test_a_mission_flies_on_a_tls_cluster_that_refuses_drivers_without_its_certificates(tmp_path):
-    from aerodaas.recording.writer import summarize_mcap
+    from aerodaas.recording.reader import summarize_mcap
 
     from tests.safety.tls_certs import ca_and_node
 

@@ -227,7 +227,7 @@ def test_geofence_refusal_through_the_safety_gate(session, autopilot):
 
 def test_link_loss_by_stopping_the_firmware(session, autopilot):
     """The firmware process stopped for 6 s in flight (SIGSTOP/SIGCONT): LINK_LOST then recovery, odometry
-    without a gap in vehicle time until the firmware went silent, then none (issue 26: the last position is never
+    without a gap in vehicle time until the firmware went silent, then none (the last position is never
     repeated under new time stamps while nothing arrives; those repeats read as 3.69 m/s where the firmware flew
     1.87), and the survey still completes and lands."""
     rec = session["linkloss"]["rec"]
@@ -308,7 +308,7 @@ def test_three_vehicles_behind_one_router_port(router_fleet, autopilot):
 def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
     """Odometry once per vehicle sample, stamped with the firmware's time_boot_ms: the speed computed from the
     recorded positions and times matches what the firmware flew (its own positions and time_boot_ms) within 5 %
-    over 1 s and 2 s windows (the issue's recordings repeated positions under new time stamps: 0.56-0.58 m/s where
+    over 1 s and 2 s windows (recordings repeated positions under new time stamps: 0.56-0.58 m/s where
     the firmware flew 0.51-0.52); in flight every recorded sample is one the vehicle sent, and every position
     sample that reached the router (MAVProxy's own log) is recorded at the odometry sensor's 10 Hz."""
     assert router_fleet["rc"] == 0, router_fleet["out"][-3000:]

@@ -1,4 +1,4 @@
-"""Real-firmware scenarios of the autopilot's own geofence (issue 26 item 2; ``tests/firmware/test_sitl_fence.py``).
+"""Real-firmware scenarios of the autopilot's own geofence (``tests/firmware/test_sitl_fence.py``).
 
 Everything the tests judge is read from the firmware with raw pymavlink on the firmware's *second* link
 (:func:`tests.firmware.sitl.monitor_connection`, system id 253, MAVLink 2), never through AeroDaaS:

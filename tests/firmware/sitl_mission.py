@@ -1,4 +1,4 @@
-"""Follow a mission file flown by the firmware (issue 47 item 8; ``tests/firmware/test_sitl_mission_files.py``), judged from the
+"""Follow a mission file flown by the firmware (``tests/firmware/test_sitl_mission_files.py``), judged from the
 firmware's own telemetry on its *second* link (raw pymavlink, :class:`tests.firmware.sitl_fence.Watcher`, never AeroDaaS):
 
 ``python -m tests.firmware.sitl_mission follow CONN OUT LAT LON ALT LAST_SEQ RTL_AFTER``: wait until the vehicle arms (someone

@@ -1,4 +1,4 @@
-"""The autopilot's own geofence on real firmware (issue 26 item 2; marker ``sitl``): what ``aerodaas mission upload``
+"""The autopilot's own geofence on real firmware (marker ``sitl``): what ``aerodaas mission upload``
 and ``aerodaas run`` leave on the vehicle is read back by a separate raw pymavlink client (``tests/firmware/sitl_fence.py``),
 and with the driver SIGKILLed mid-mission the firmware's own fence keeps the vehicle in, judged from the firmware's
 telemetry. Default firmware parameters plus what the backend sets; one firmware instance per scenario, each in its
@@ -121,7 +121,7 @@ def _vehicle_session(autopilot: str, workdir: Path) -> dict:
         return f"{py} -m tests.firmware.sitl_fence read-fence {mon} {shlex.quote(str(workdir / name))}"
 
     steps = {"upload": up, "read": read("fence.json")}
-    # mission upload --start of a file without a fence: flown as written, nothing else changed (issue 40 item 8)
+    # mission upload --start of a file without a fence: flown as written, nothing else changed
     mission = _mission_file(workdir / "mission.waypoints")
     steps["params_before"] = f"{py} -m tests.firmware.sitl_fence read-params {mon} {shlex.quote(str(workdir / 'before.json'))}"
     steps["start"] = " ".join(shlex.quote(a) for a in [*sitl.AERODAAS, "mission", "upload", str(mission), "--start",
@@ -163,7 +163,7 @@ def ardupilot_upload(tmp_path_factory):
 
 
 def test_ardupilot_mission_upload_leaves_the_plan_fence_on_the_vehicle(ardupilot_upload):
-    """issue 26: a .plan with a fence left ArduCopter with 0 fence items and FENCE_ENABLE 0. Read back by a
+    """A .plan with a fence left ArduCopter with 0 fence items and FENCE_ENABLE 0. Read back by a
     separate client: the items are ours and the fence is on (polygon + max altitude, RTL or land)."""
     rc, text = ardupilot_upload["upload"]
     assert rc == 0, text
@@ -193,7 +193,7 @@ def test_px4_mission_upload_leaves_the_plan_fence_on_the_vehicle(px4_upload):
     assert p["GF_ACTION"] == 3 and p["GF_MAX_VER_DIST"] == 120.0, p
 
 
-# ------------------------------------------------------------------ mission upload --start is faithful (issue 40)
+# ------------------------------------------------------------------ mission upload --start is faithful
 #: parameters the firmware itself changes by flying or by holding a mission (not settings anyone made): ArduCopter's
 #: statistics (AP_Stats: STAT_RUNTIME, STAT_FLTTIME, STAT_DISTFLWN...), its mission count MIS_TOTAL (the uploaded
 #: mission itself) and its hover throttle learnt in flight (MOT_THST_HOVER, saved with MOT_HOVER_LEARN 2, the default);
@@ -245,7 +245,7 @@ def test_px4_mission_upload_start_flies_the_file_and_leaves_the_parameters(px4_u
     _mission_upload_start(px4_upload)
 
 
-# ------------------------------------------------------------------------- overlapping inclusion zones (issue 40)
+# ------------------------------------------------------------------------- overlapping inclusion zones
 _events = sitl.events
 
 
@@ -260,7 +260,7 @@ def test_ardupilot_flies_the_union_of_overlapping_inclusion_zones(ardupilot_uplo
     """Two overlapping inclusion circles (home in both), a waypoint in each one only: our gate allows them (the
     union). The backend set FENCE_OPTIONS bit 1 with the fence, so ArduCopter allows them too: both are flown and
     held, no fence breach, no failsafe, the mission a success. Without the bit ArduCopter silently dropped such a
-    target (issue 40; next test)."""
+    target (next test)."""
     rc, text = ardupilot_upload["union"]
     rec = ardupilot_upload["union_rec"]
     ev = _events(rec)

@@ -1,5 +1,5 @@
-"""Mission files as ground stations save them, uploaded, started and downloaded on real firmware (issue 47 item 8;
-marker ``sitl``): ``aerodaas mission upload FILE --start`` on ArduCopter and PX4 SITL booted at the file's home, the
+"""Mission files as ground stations save them, uploaded, started and downloaded on real firmware (marker
+``sitl``): ``aerodaas mission upload FILE --start`` on ArduCopter and PX4 SITL booted at the file's home, the
 flight followed by a raw pymavlink client on the firmware's second link (``tests/firmware/sitl_mission.py``: MISSION_CURRENT,
 MISSION_ITEM_REACHED, GLOBAL_POSITION_INT), then ``aerodaas mission download``. One firmware instance per file and
 autopilot, in its own loopback-only network namespace (``tests/firmware/sitl.py``), default parameters.

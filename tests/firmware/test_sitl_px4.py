@@ -66,7 +66,7 @@ def test_stock_px4_stays_within_its_limit_by_its_ground_truth(session):
 
 
 def test_the_autopilots_own_failsafe_is_respected(session, autopilot):
-    """PX4's own failsafe while AeroDaaS runs (issue 26 item 6; PX4 only: ArduCopter has no failsafe for a GUIDED
+    """PX4's own failsafe while AeroDaaS runs (PX4 only: ArduCopter has no failsafe for a GUIDED
     vehicle whose ground station stops, FS_GCS_ENABLE 0): our drone actor is frozen for 3 s wall in OFFBOARD
     flight, so our setpoint stream stops and PX4 leaves OFFBOARD after COM_OF_LOSS_T (its offboard-loss failsafe,
     default parameters). From the firmware's own HEARTBEATs: once it left OFFBOARD it never went back (with

@@ -1,4 +1,4 @@
-"""Issue 50 item 2, three vehicles on one link each with its own key, on real ArduCopter SITL (marker ``sitl``): three
+"""Three vehicles on one link each with its own key, on real ArduCopter SITL (marker ``sitl``): three
 firmware instances (system ids 1-3) each send their SERIAL2 to the same UDP port, as three vehicles share one
 telemetry radio; each is provisioned with its own key over its own SERIAL0 (the cable: ``aerodaas mavlink signing
 setup``), and the three robots of tests/firmware/sitl_fleet_app.py name that one port with their own ``target_system`` and

@@ -1,4 +1,4 @@
-"""Issue 50 item 2 on PX4 SITL (marker ``sitl``): the shared PX4 build cannot sign, and our provisioning says so.
+"""MAVLink 2 signing on PX4 SITL (marker ``sitl``): the shared PX4 build cannot sign, and our provisioning says so.
 
 PX4 gained MAVLink 2 signing with PX4-Autopilot pull request 25284 (``src/modules/mavlink/mavlink_sign_control.cpp``:
 SETUP_SIGNING stores the key, then every link signs and checks; docs.px4.io "MAVLink Message Signing"). The shared

@@ -1,5 +1,5 @@
 """Real ArduCopter SITL whose motors lift nothing (``SIM_ENGINE_FAIL`` 15: motors 1-4, ``SIM_ENGINE_MUL`` 0;
-libraries/SITL/SITL.cpp), flying apps/farm_survey.py (issue 47 item 1: nothing bounded a take-off). The firmware
+libraries/SITL/SITL.cpp), flying apps/farm_survey.py (nothing bounded a take-off). The firmware
 accepts GUIDED, the arm and NAV_TAKEOFF and never climbs; the drone must end the take-off at its deadline. The
 drone's flight logic flies it alone, without Ray (``tests.firmware.sitl_no_lift drive``: on this shared machine Ray's own
 start timed out at load 30-40 when this was written; the full runtime's handling of the outcome and exit code is

@@ -1,5 +1,5 @@
-"""apps/vehicle_tracking.py, unchanged, on real ArduCopter SITL firmware with its camera from a video stream
-(issue 38): from GStreamer's RTSP server (gst-rtsp-server) and from raw RTP H.264 on UDP 5600 as QGroundControl
+"""apps/vehicle_tracking.py, unchanged, on real ArduCopter SITL firmware with its camera from a video stream:
+from GStreamer's RTSP server (gst-rtsp-server) and from raw RTP H.264 on UDP 5600 as QGroundControl
 receives it, both fed with real aerial footage by a sender in the same private loopback-only network namespace as
 the firmware. The firmware runs in real time (speed-up 1: a stream runs on the wall clock, as on a real drone) with
 its default parameters plus what our backend sets, and the app's own limits.

@@ -1,4 +1,4 @@
-"""Issue 40 item 5, errors of the application refused before Ray as a user meets them: ``aerodaas plan`` /
+"""Errors of the application refused before Ray as a user meets them: ``aerodaas plan`` /
 ``aerodaas run`` on an app file written here, exit 2, a message naming the value, and no Ray session (a fresh
 ``RAY_TMPDIR`` stays empty, no Ray process names it). ``deploy("edge")`` (a name, not a compute resource), a plug-in
 whose ``Config`` is not a pydantic model (registered in the app, or named by an import path in the environment file)

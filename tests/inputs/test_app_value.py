@@ -1,6 +1,6 @@
-"""Issue 39 item 2, an application is a value: loading an app file yields its typed graph without Ray or a flight,
+"""An application is a value: loading an app file yields its typed graph without Ray or a flight,
 ``run``, ``plan`` and ``plugins --app`` share that loader (one module name, so one schema name), and the run's
-options are passed, never read from a global. Issue 40 item 5: ``--address`` to a port that is no Ray cluster fails
+options are passed, never read from a global. ``--address`` to a port that is no Ray cluster fails
 fast with exit 2; a long temp path does not keep a local Ray from starting."""
 from __future__ import annotations
 

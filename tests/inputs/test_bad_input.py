@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 
 from aerodaas import cli
-from aerodaas.runtime import driver as runtime
 from aerodaas.reliability.catalogue import ENV_CASES, PATH_CASES, check_env_case, check_path_case
 
 pytestmark = pytest.mark.faults
@@ -85,7 +84,7 @@ def no_ray(monkeypatch):
                         lambda address=None, dashboard=False: calls.append(("early", address)))
     # `aerodaas run` shuts Ray down at its end: here that would be the test session's shared Ray (tests after this
     # one found it gone); nothing was started, so there is nothing to stop
-    monkeypatch.setattr(runtime, "shutdown_ray", lambda: None)
+    monkeypatch.setattr(ray_start, "shutdown_ray", lambda: None)
     yield calls
 
 
@@ -113,7 +112,7 @@ def test_an_application_error_after_a_valid_environment_never_starts_ray(tmp_pat
 
 
 def test_a_bad_detector_option_fails_before_ray_subprocess(tmp_path):
-    """Issue 38: `Tiling(tile=16)` in an app was reported ~10 s after Ray started. Now: exit 2 naming the field,
+    """`Tiling(tile=16)` in an app: exit 2 naming the field,
     and Ray never created a session in a fresh RAY_TMPDIR."""
     good = tmp_path / "good.json"
     good.write_text(json.dumps({"robots": [{"id": "d1"}]}))
@@ -185,7 +184,7 @@ def _one_waypoint_plan(tmp_path, lat: float, lon: float, alt: float):
 
 
 @pytest.mark.parametrize("where, flags, said", [
-    ((47.3977, 8.5456, 50_000.0), [], "above max_altitude 120 m"),               # 50 km up (issue 25)
+    ((47.3977, 8.5456, 50_000.0), [], "above max_altitude 120 m"),               # 50 km up
     ((47.3977, 8.5456, 150.0), ["--max-altitude", "100"], "above max_altitude 100 m"),
 ])
 def test_mission_upload_refuses_items_too_high_before_connecting(tmp_path, capsys, where, flags, said):
@@ -200,7 +199,7 @@ def test_mission_upload_refuses_items_too_high_before_connecting(tmp_path, capsy
 def vehicle_at_home():
     """An emulated ArduCopter whose home is the test plans' planned home; yields (emulator, connection)."""
     from aerodaas.model.types import GeoPoint
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     emu = MavlinkVehicleEmulator("ardupilot", speedup=10.0, gps_lock_s=1.0,
                                  home=GeoPoint(lat=47.3977, lon=8.5456, alt=488.0))
@@ -216,7 +215,7 @@ def vehicle_at_home():
 ])
 def test_mission_upload_refuses_items_too_far_from_the_vehicles_home_before_sending(tmp_path, capsys, vehicle_at_home,
                                                                                     where, flags, said):
-    """Distances are measured from the vehicle's reported home (issue 40.8), and refused before anything is sent."""
+    """Distances are measured from the vehicle's reported home, and refused before anything is sent."""
     emu, conn = vehicle_at_home
     f = _one_waypoint_plan(tmp_path, *where)
     assert cli.main(["mission", "upload", str(f), "--connection", conn, "--timeout", "10", *flags]) == 2
@@ -330,8 +329,8 @@ def test_plan_reports_the_apps_own_exception_as_the_apps(tmp_path, capsys):
     assert "the application" in err and "KeyError" in err and "Traceback" in err
 
 
-def test_reliability_issue_40_cases(tmp_path):
-    """The catalogue's cases of issue 40 items 4 and 9 (aerodaas.reliability.app_cases): app values of the wrong type
+def test_reliability_application_cases(tmp_path):
+    """The catalogue's application cases (aerodaas.reliability.app_cases): app values of the wrong type
     or out of bounds, an empty navigation, 50,000 pre-planned waypoints and a NaN waypoint made with model_construct
     (exit 2 before Ray), plug-in modules that do not import (named), --record naming the run's inputs, a WPL numbered
     1, 1, 5, the safety gate's own check, `aerodaas inject` values starting with '-'."""
@@ -341,7 +340,7 @@ def test_reliability_issue_40_cases(tmp_path):
     names = [r["name"] for r in rows]
     keys = [(r["category"], r["name"]) for r in rows]
     assert len(keys) == len(set(keys)), keys  # each case once
-    # the cases this test's docstring names are all there (the catalogue grows: issue 47 item 10 added 7 rows)
+    # the cases this test's docstring names are all there (the catalogue grows)
     for needed in ('Waypoint(x="1") (a string)', "an empty navigation",
                    "50,000 pre-planned waypoints (max_queued_items 5000)", "a NaN waypoint built with model_construct",
                    "backend from a module that does not exist", "--record names the application itself",
@@ -355,7 +354,7 @@ def test_reliability_issue_40_cases(tmp_path):
 
 
 def test_app_values_are_strictly_typed_numbers():
-    """Issue 40.4: pydantic's lax mode read Waypoint(x='1', y=True) as (1.0, 1.0) and home.lat "13.02" as 13.02."""
+    """Pydantic's lax mode read Waypoint(x='1', y=True) as (1.0, 1.0) and home.lat "13.02" as 13.02."""
     import numpy as np
     from pydantic import ValidationError
 
@@ -377,7 +376,7 @@ def test_app_values_are_strictly_typed_numbers():
 
 
 def test_the_safety_gate_checks_values_itself():
-    """Issue 40.4: a NaN waypoint built with model_construct passed the pre-flight check and the gate (NaN compares
+    """A NaN waypoint built with model_construct passed the pre-flight check and the gate (NaN compares
     False with every limit)."""
     from aerodaas.model.types import ActionCommand, Waypoint
     from aerodaas.config import RobotConfig
@@ -416,7 +415,7 @@ def test_the_catalogue_guard_reports_tracebacks_and_hangs():
 
 
 def test_the_summary_never_shows_more_waypoints_reached_than_planned_as_a_fraction():
-    """Issue 40.9: 746 waypoints added through the HITL API to a 1-waypoint survey printed "waypoints 747/1"."""
+    """746 waypoints added through the HITL API to a 1-waypoint survey printed "waypoints 747/1"."""
     from aerodaas.runtime.driver import MissionResult
     from aerodaas.runtime.report import format_summary, waypoint_count
 

@@ -1,4 +1,4 @@
-"""Issue 47 item 5, held-out errors: each ends before Ray with exit 2 naming the field. (a) a plug-in class that is
+"""Held-out errors: each ends before Ray with exit 2 naming the field. (a) a plug-in class that is
 not a subclass of its kind's base (``"trajectory_scheduler": "subprocess:Popen"`` was accepted when the app set
 its own scheduler and constructed as ``Popen(env)`` otherwise); (b) a plug-in whose ``Config`` validator raises
 something other than ValueError (a TypeError gave a traceback); (c) a camera replaying a file that is not MCAP, or

@@ -1,4 +1,4 @@
-"""One id grammar (issue 40.2, aerodaas.model.ids): robots, sensors, compute resources, targets, analytics and
+"""One id grammar (aerodaas.model.ids): robots, sensors, compute resources, targets, analytics and
 plug-in names. Ids with a newline, NUL, blanks, '/', a right-to-left override, a zero-width space, non-ASCII
 look-alikes or case twins were accepted; robot ``a`` with camera ``camera/X`` and robot ``a/camera`` with camera
 ``X`` shared one topic (84 frames rendered, 37 recorded, "success")."""

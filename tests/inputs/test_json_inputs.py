@@ -1,4 +1,4 @@
-"""Every JSON input read within bounds (issue 25, item 4): nesting depth, encodings, duplicate keys, huge integers
+"""Every JSON input read within bounds: nesting depth, encodings, duplicate keys, huge integers
 give an error naming the file (and line), not a traceback; a 100k-item .plan is converted (linear checks)."""
 from __future__ import annotations
 

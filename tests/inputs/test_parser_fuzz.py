@@ -1,4 +1,4 @@
-"""Property-based fuzzing (hypothesis) of the environment and mission-file parsers (issue 25 item 7): any document —
+"""Property-based fuzzing (hypothesis) of the environment and mission-file parsers: any document —
 random JSON of any shape, a valid one with a field replaced by random JSON, nesting thousands deep, random WPL
 lines — is either accepted or refused with the parser's own error naming the file (ConfigError /
 MissionFileError); never another exception (a traceback), never a hang (bounded sizes in the strategies, and

@@ -93,7 +93,7 @@ def _two_edge_env(tmp_path, labels: list[dict]) -> Path:
 
 
 def test_plan_warns_when_two_edge_computes_place_alike_and_not_when_labelled(tmp_path):
-    """Issue 27 item 4: two unlabelled edge computes get one selector, so Ray picks the node: said before flying."""
+    """Two unlabelled edge computes get one selector, so Ray picks the node: said before flying."""
     p = _plan(str(_two_edge_env(tmp_path, [{}, {}])), "--json")
     assert p.returncode == 0, p.stderr[-2000:]
     sels = {json.dumps(a["label_selector"]) for a in json.loads(p.stdout)["actors"] if a["role"] == "drone"}
@@ -132,7 +132,7 @@ env.start_mission()
 
 
 def test_plan_json_is_the_graph_the_runtime_builds_with_edge_types_backends_schedulers_and_every_sensor(tmp_path):
-    """Issue 47 item 3: ``aerodaas plan --json`` names each edge's message types, each robot's backend and trajectory
+    """``aerodaas plan --json`` names each edge's message types, each robot's backend and trajectory
     scheduler with their origin (a built-in backend, a scheduler registered by decorator in the app) and every
     sensor, also an odometry or stat-stream sensor nobody subscribes to. Compared with the graph the runtime builds
     for the same application (:meth:`Application.plan`, the builder the driver runs, without Ray): the same actors

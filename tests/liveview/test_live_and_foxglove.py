@@ -1,4 +1,4 @@
-"""Live view and Foxglove completeness of recordings (issue 17, second half).
+"""Live view and Foxglove completeness of recordings (second half).
 
 * ``aerodaas run --live`` and ``aerodaas replay --live`` are exercised as a user runs them (subprocesses), with a
   WebSocket client that speaks the Foxglove protocol (tests/liveview/foxglove_ws_client.py, written from the spec) and decodes
@@ -26,7 +26,8 @@ from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
 from aerodaas.liveview.server import LiveServer, parse_address
-from aerodaas.recording.writer import McapRecorder, camera_mount_quaternion, quaternion_from_euler_deg
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.values import camera_mount_quaternion, quaternion_from_euler_deg
 from aerodaas.recording.schemas import JSON_SCHEMA_MODELS, json_schema_for
 
 from tests.conftest import REPO, skip_or_fail
@@ -155,7 +156,7 @@ def test_docs_layout_is_the_generated_vehicle_tracking_layout_with_the_panels_as
 
     doc = json.loads((REPO / "docs" / "foxglove-layout.json").read_text())
     assert doc == build_layout("quadrotor_base", "cam1", ["/quadrotor_base/detector/detections"],
-                               tracks=["/quadrotor_base/follow/tracks"])  # the app's follow tracks (issue 28)
+                               tracks=["/quadrotor_base/follow/tracks"])  # the app's follow tracks
     panels = _panels(doc["content"])
     kinds = {p["panelType"]: p["config"] for p in panels}
     assert {"Image", "ThreeDee", "Map", "StateTransitions", "Plot"} <= set(kinds)
@@ -349,7 +350,7 @@ def test_replay_serves_a_recording_to_a_protocol_client(live_run, tmp_path):
 
 
 # --------------------------------------------------------------------------------------------- progress line
-from aerodaas.bench.overhead import FixedCostDetector  # noqa: E402
+from aerodaas.bench.pipeline import FixedCostDetector  # noqa: E402
 
 
 class CountingDetector(FixedCostDetector):
@@ -373,7 +374,7 @@ class CountingDetector(FixedCostDetector):
 def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run_options, tmp_path):
     """DEMS sends part of an overloaded detector's frames to a cloud executor: the detections shown live and in the
     summary are those of every executed task, edge and cloud (the edge copy alone saw only its own)."""
-    from aerodaas.runtime.driver import format_summary
+    from aerodaas.runtime.report import format_summary
     from tests.schedulers.test_analytics_scheduling import QOS, build, hover_config
 
     env, drone = build(hover_config(fps=15), CountingDetector(80), hover_s=4.0)
@@ -415,7 +416,7 @@ def _npm_mcap_reader(tmp_path: Path) -> list[str]:
 
 
 def test_the_npm_mcap_reader_reads_many_tracks_from_one_location_fixes_topic(tmp_path):
-    """Issue 47 item 4: a recording of 12 frames in which tracks 1-14 come and go (three at a time), read with npm
+    """A recording of 12 frames in which tracks 1-14 come and go (three at a time), read with npm
     ``@mcap/core``: one ``foxglove.LocationFixes`` channel for all tracks (no channel per track), each of its
     messages, decoded with the schema the TypeScript reader found in the file, carries that frame's track ids."""
     from aerodaas.model.types import GeoPoint

@@ -1,5 +1,5 @@
 """A live-view client that stops reading is dropped once the bounded buffers towards it are full, and the server
-stops without waiting for it (issue 40.1: such a client held the end of a run for ~120 s). The client is a raw
+stops without waiting for it (such a client held the end of a run for ~120 s). The client is a raw
 socket that completes the WebSocket handshake and then never reads."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The live view as Foxglove's own client sees it (issue 27, item 1).
+"""The live view as Foxglove's own client sees it.
 
 The client is ``@foxglove/ws-protocol`` from npm (tests/js/count_channels.mjs; it offers only the subprotocol
 ``foxglove.websocket.v1``). It connects before the run's first message, subscribes to every channel as it is
@@ -24,7 +24,7 @@ from mcap.reader import make_reader
 from aerodaas.liveview.server import LiveServer
 from aerodaas.recording.writer import RecordedMessage
 
-from aerodaas.reliability.faults import actor_pids
+from aerodaas.reliability.procs import actor_pids
 
 from tests.liveview.test_live_and_foxglove import AERODAAS, APP, ENV, REPO, _start, _wait_for_url
 from tests.conftest import skip_or_fail
@@ -94,7 +94,7 @@ def test_a_late_subscriber_gets_the_latest_latched_message_and_an_early_one_ever
 
 
 def test_a_late_npm_client_gets_the_current_tracks_as_one_latched_location_fixes_message(node_client):
-    """Issue 47 item 4: three frames of a tracking analytics (tracks 1-3, then 2-4, then 4 and 5) go through the
+    """Three frames of a tracking analytics (tracks 1-3, then 2-4, then 4 and 5) go through the
     recorder to the live view with no catch-up window; Foxglove's client, subscribing afterwards, is advertised ONE
     ``foxglove.LocationFixes`` topic for all tracks and receives its latest message only (latched), which, decoded
     with the schema the server advertised, holds the current tracks 4 and 5 with their ids and colours; the scene is
@@ -137,7 +137,7 @@ def test_a_late_npm_client_gets_the_current_tracks_as_one_latched_location_fixes
 
 def test_the_npm_client_reads_the_live_view_over_wss_with_the_token_and_nothing_without(node_client, tmp_path,
                                                                                        monkeypatch):
-    """Issue 50 item 3: bound off loopback (all addresses) with a self-signed certificate made here and a token,
+    """Bound off loopback (all addresses) with a self-signed certificate made here and a token,
     Foxglove's npm client (``ws`` over Node's TLS, the certificate trusted through ``NODE_EXTRA_CA_CERTS``) gets
     every message with ``?token=`` in the URL; without the token it gets no channel at all (401 at the upgrade)."""
     from aerodaas.clusters.tls import ServeAccess
@@ -223,7 +223,7 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
 
 @pytest.mark.e2e
 def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, tmp_path, monkeypatch):
-    """Issue 50 item 3: ``aerodaas run --live 0.0.0.0:0 --tls-cert --tls-key`` (a self-signed certificate made
+    """``aerodaas run --live 0.0.0.0:0 --tls-cert --tls-key`` (a self-signed certificate made
     here); Foxglove's npm client, given the URL with the token from the owner-only state file and trusting the
     certificate (``NODE_EXTRA_CA_CERTS``), receives every message of every channel the recording holds."""
     from tests.safety.tls_certs import self_signed

@@ -6,7 +6,7 @@ import pytest
 from aerodaas.backends import make_backend
 from aerodaas.backends.mavlink import MavlinkBackend
 from aerodaas.config import Limits, MavlinkConfig, RobotConfig
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from tests.mavlink.emulated import CONFIG_HOME, VEHICLE_HOME
 
 

@@ -20,7 +20,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from aerodaas.backends.mavlink import MavlinkBackend
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink.gimbal import EmulatedCamera
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.video.discovery import StreamDiscoveryError, StreamRequest, VideoStreamType, stream_source
 from tests.conftest import REPO, needs_data
 

@@ -1,4 +1,4 @@
-"""The end recorded (issue 26 item 7): a run cut short (its timeout) with the vehicle in the air: the safe end
+"""The end recorded: a run cut short (its timeout) with the vehicle in the air: the safe end
 (LAND commanded, touchdown, disarm) is in the recording as events, the stat-stream goes LANDING -> LANDED, odometry
 goes on until the disarm, and the summary says how the run ended. Read with the ``mcap`` package's reader."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Failsafes respected (issue 26 item 6): when the autopilot enters a failsafe mode by itself (here: RTL set by a
+"""Failsafes respected: when the autopilot enters a failsafe mode by itself (here: RTL set by a
 second ground station / a pilot's switch, which the backend cannot tell from the autopilot's own), the mission
 pauses, the outcome records it, and ``mavlink.on_failsafe`` decides: ``end`` leaves the vehicle to the
 autopilot's RTL (never switched back to GUIDED/OFFBOARD), ``resume`` goes on with the survey. From the recording

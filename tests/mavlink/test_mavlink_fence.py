@@ -1,4 +1,4 @@
-"""The autopilot's own geofence (issue 26 item 2) against the emulated ArduPilot and PX4 vehicles: the robot's
+"""The autopilot's own geofence against the emulated ArduPilot and PX4 vehicles: the robot's
 ``safety.geofence`` goes up as MAV_MISSION_TYPE_FENCE items with the fence parameters on connect, is read back and
 checked (a mismatch refuses to fly), is restored on close when asked, and ``aerodaas mission upload`` sends a
 ``.plan``'s fence and rally points. What the vehicle holds is read from the emulator's own state (its stored
@@ -12,7 +12,7 @@ import pytest
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.cli import main
 from aerodaas.config import MavlinkConfig, RobotConfig
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.model.types import GeoPoint
 from tests.conftest import DATA_DIR
@@ -204,7 +204,7 @@ def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, a
     prior = make_backend(RobotConfig(id="gcs", backend="mavlink", home=HOME, mavlink=MavlinkConfig(
         connection=address, stream_rate_hz=5.0, set_speed_limits=False)))
     prior.connect(timeout_s=10)
-    from aerodaas.backends.mavlink.fence import FENCE as FENCE_TYPE
+    from aerodaas.backends.mavlink.transfer import FENCE as FENCE_TYPE
     from aerodaas.backends.mavlink.fence import fence_items
     from aerodaas.navigation.geofence import GeofenceConfig
     prior.transfers.upload_items(FENCE_TYPE, fence_items(GeofenceConfig(circles=[{"center": _ll(0, 0), "radius": 100.0}])))
@@ -222,7 +222,7 @@ def test_restore_on_close_puts_the_previous_fence_and_parameters_back(vehicle, a
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_mission_upload_sends_the_plan_geofence_and_rally_points(vehicle, tmp_path, autopilot, capsys):
-    """issue 26: a .plan with a 25 m inclusion circle left the vehicle with 0 fence items and FENCE_ENABLE 0."""
+    """A .plan with a 25 m inclusion circle left the vehicle with 0 fence items and FENCE_ENABLE 0."""
     doc = json.loads(SQUARE.read_text())
     home = doc["mission"]["plannedHomePosition"]
     doc["geoFence"] = {"version": 2, "polygons": [

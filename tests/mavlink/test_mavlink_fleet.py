@@ -1,4 +1,4 @@
-"""One MAVLink link, many vehicles (issue 26 item 1): robots naming one connection share one socket and receive
+"""One MAVLink link, many vehicles: robots naming one connection share one socket and receive
 their own system id's messages; commands carry each robot's target_system; ``auto`` takes the next unclaimed id;
 a clash is refused before Ray starts; ``aerodaas plan`` puts robots of one link in one drone actor."""
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.backends.mavlink import shared_link
 from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, load_environment_config
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.types import GeoPoint
 from tests.mavlink.emulated import run_until
 from tests.video.udp_fanout import UdpFanout

@@ -20,7 +20,7 @@ import pytest
 from aerodaas.backends import BackendError, CommandRefused
 from aerodaas.backends.mavlink import CommandNotConfirmed, MavlinkBackend
 from aerodaas.config import MavlinkConfig, RobotConfig
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Waypoint
 from tests.conftest import DATA_DIR, skip_or_fail

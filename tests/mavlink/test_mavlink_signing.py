@@ -123,7 +123,7 @@ def test_unsigned_commands_from_another_process_change_nothing_on_a_signing_vehi
     """A control first: the same spoofer does change an emulated vehicle that does not sign (its PARAM_SET lands),
     so the refusal below is signing's doing. With a key, the vehicle stays disarmed in its mode, its parameter
     unchanged, and its parser counts the rejected packets."""
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     open_emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, gps_lock_s=0.0)
     try:
@@ -184,7 +184,7 @@ def test_setup_provisions_the_vehicle_and_remove_takes_the_key_away(tmp_path):
     """``aerodaas mavlink signing setup`` on a vehicle that does not sign: afterwards it holds the key (the
     emulated autopilot's own state) and drops an unsigned PARAM_SET from another process; ``remove`` switches it
     off again. Without --secure-link nothing is sent (exit 2)."""
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     key_file = str(tmp_path / "new.key")
     emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, gps_lock_s=0.0)
@@ -215,7 +215,7 @@ def test_vehicles_with_their_own_keys_share_one_link(tmp_path):
     through robot 1 changes vehicle 1 only (vehicle 2 drops what is signed with the other key)."""
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from tests.video.udp_fanout import UdpFanout
 
     keys = {1: KEY, 2: OTHER_KEY}
@@ -292,7 +292,7 @@ def _flying(tmp_path):
     armed and hovering 5 m up in GUIDED. Yields (emulator, backend); closes both."""
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from tests.mavlink.emulated import run_until
 
     emu = MavlinkVehicleEmulator("ardupilot", speedup=5.0, gps_lock_s=1.0, signing_key=KEY)

@@ -1,4 +1,4 @@
-"""MAVLink 2 signing through the whole runtime (Ray, the drone actor, the recorder): MAVLink 2 signing on the MAVLink
+"""MAVLink 2 message signing through the whole runtime (Ray, the drone actor, the recorder) on the MAVLink
 emulator. A signed survey flies while unsigned telemetry in the vehicle's name and unsigned commands from another
 process are refused (judged from the recording, read with the ``mcap`` package, and the emulated autopilot's own
 state); a key the vehicle does not hold fails before take-off with exit 2."""
@@ -27,7 +27,7 @@ def _signed_survey(tmp_path, vehicle_key: bytes, key_file_key: bytes, connect_ti
                                      mavlink={"signing_key_file": key_path, "connect_timeout_s": connect_timeout_s})
     emu.stop()  # the same vehicle again, now with its key (the variant's emulator was made without one)
     from aerodaas.config import load_environment_config
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     robot = load_environment_config(str(env_path)).robots[0]
     emu = MavlinkVehicleEmulator("ardupilot", robot=robot, speedup=10.0, signing_key=vehicle_key)

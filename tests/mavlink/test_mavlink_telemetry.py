@@ -1,4 +1,4 @@
-"""Telemetry as the vehicle reports it (issue 26 item 3): odometry is recorded once per vehicle sample, stamped
+"""Telemetry as the vehicle reports it: odometry is recorded once per vehicle sample, stamped
 with the vehicle's own time, so speed computed from the recording matches what the vehicle flew. Read back with
 the ``mcap`` package's reader."""
 from __future__ import annotations

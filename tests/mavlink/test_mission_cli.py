@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from aerodaas.cli import main
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission
 from aerodaas.model.types import GeoPoint
 from tests.conftest import DATA_DIR
@@ -78,7 +78,7 @@ def test_errors_name_the_file_item_or_connection_and_send_nothing(vehicle, tmp_p
 
 
 def test_upload_of_a_plan_with_a_geofence_sends_it(vehicle, tmp_path, capsys):
-    """issue 26: a .plan's geofence left the vehicle without a fence, silently. Now it goes up first
+    """A .plan's geofence left the vehicle without a fence, silently. Now it goes up first
     (MAV_MISSION_TYPE_FENCE, FENCE_ENABLE 1) and the command says so (tests/mavlink/test_mavlink_fence.py has the rest)."""
     import json
 
@@ -125,7 +125,7 @@ def _stored(emu) -> list[tuple]:
 
 
 def test_items_are_measured_from_the_vehicles_home_not_the_files(vehicle, tmp_path, capsys):
-    """issue 40: a mission 537 m from the vehicle was refused as 9,238 km, measured from the file's planned home.
+    """A mission 537 m from the vehicle was refused as 9,238 km, measured from the file's planned home.
     A .plan planned at the other end of the world, its items beside the vehicle, goes up; items 537 m from the
     vehicle are refused by --max-distance 500 as 537 m, wherever the file planned its home."""
     import json
@@ -145,7 +145,7 @@ def test_items_are_measured_from_the_vehicles_home_not_the_files(vehicle, tmp_pa
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_the_files_speeds_go_up_as_written_and_no_parameter_changes(vehicle, tmp_path, capsys, autopilot):
-    """issue 40: DO_CHANGE_SPEED 5 m/s went up as 2 m/s without a word, and --start left WPNAV_SPEED 1000 -> 200,
+    """DO_CHANGE_SPEED 5 m/s went up as 2 m/s without a word, and --start left WPNAV_SPEED 1000 -> 200,
     WPNAV_SPEED_UP 250 -> 100, WPNAV_SPEED_DN 150 -> 100 on the vehicle. Now the file goes up as written, the
     read-back says so, and every vehicle parameter is as before, also after --start."""
     emu, address = vehicle(autopilot)
@@ -199,7 +199,7 @@ CMAC = GeoPoint(lat=-35.363261, lon=149.165230, alt=584.0)
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_a_mission_planner_file_with_frame_3_on_every_item_uploads_starts_and_downloads(tmp_path, capsys, autopilot):
-    """issue 47 item 8: Mission Planner's frame 3 on DO_CHANGE_SPEED (item 6) and RTL (item 8). ArduCopter stores them
+    """Mission Planner's frame 3 on DO_CHANGE_SPEED (item 6) and RTL (item 8). ArduCopter stores them
     in frame 0 (AP_Mission) and the read-back called that a different flight (exit 2, not started); PX4 refuses them
     in a global frame (MAV_MISSION_UNSUPPORTED). Now they go up in MAV_FRAME_MISSION, said per item, the read-back
     compares what each autopilot keeps, and the mission starts; the download flies the same."""

@@ -1,4 +1,4 @@
-"""What ``aerodaas mission upload`` sends and checks (issue 40 item 8): speeds capped only by an explicit limit, each
+"""What ``aerodaas mission upload`` sends and checks: speeds capped only by an explicit limit, each
 change said (:func:`~aerodaas.missionfile.upload.cap_speeds`), and the vehicle's read-back compared field by field
 (:func:`~aerodaas.missionfile.upload.mission_differences`). End to end against the emulated vehicles:
 tests/mavlink/test_mission_cli.py; on the real firmware: tests/firmware/test_sitl_fence.py."""
@@ -79,7 +79,7 @@ def _rtl(seq, frame=3):
 
 
 def test_mission_planners_frame_3_on_items_without_a_position_reads_back_as_arducopter_stores_it():
-    """issue 47 item 8: Mission Planner writes DO_CHANGE_SPEED and RTL in frame 3; ArduCopter returns them in frame 0
+    """Mission Planner writes DO_CHANGE_SPEED and RTL in frame 3; ArduCopter returns them in frame 0
     (AP_Mission::mission_cmd_to_mavlink_int: no location stored for them). That was 'a different flight': exit 2."""
     sent = [_takeoff(1), _wp(2), _speed(3, 5.0).model_copy(update={"frame": 3}), _wp(4), _rtl(5)]
     stored = [*sent[:2], _speed(3, 5.0).model_copy(update={"frame": 0}), sent[3], _rtl(5, frame=0)]

@@ -413,7 +413,7 @@ def test_malformed_wpl_is_rejected_with_file_line_and_value(tmp_path, body, patt
                                               ((1, 2, 5), 5, "seq 5 out of order: the row after seq 2 must be seq 3"),
                                               ((1, 3), 4, "seq 3 out of order")])
 def test_wpl_rows_out_of_sequence_are_refused_not_renumbered(tmp_path, seqs, line, said):
-    """Issue 40.9: a WPL numbered 1, 1, 5 was renumbered 1, 2, 3 silently (and a DO_JUMP target with it)."""
+    """A WPL numbered 1, 1, 5 was renumbered 1, 2, 3 silently (and a DO_JUMP target with it)."""
     rows = ["QGC WPL 110", "0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5456\t488\t1"]
     rows += [f"{q}\t0\t3\t16\t0\t0\t0\t0\t47.3978\t8.5456\t20\t1" for q in seqs]
     path = write(tmp_path, "seq.waypoints", "\n".join(rows) + "\n")

@@ -1,4 +1,4 @@
-"""Issue 46 item 4 on a fresh local cluster: ``python tests/perception/cluster_gpu_app.py OUT_DIR`` starts a
+"""GPU execution providers on a fresh local cluster: ``python tests/perception/cluster_gpu_app.py OUT_DIR`` starts a
 :class:`~aerodaas.clusters.local.LocalCluster` (with Ray's dashboard, for its state API) whose head (``tier=edge``)
 declares no GPU and whose second ``tier=edge`` node declares one logical GPU (this machine has no real one), then
 runs ``aerodaas run`` on it (``--address``) with an app whose detector asks for the CUDA provider. At mission start

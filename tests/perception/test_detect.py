@@ -17,15 +17,8 @@ import pytest
 import cv2
 
 from aerodaas.perception import detect as D
-from aerodaas.perception.detect import (
-    MODELS,
-    ModelChecksumError,
-    ModelNotFoundError,
-    NanoDetDetector,
-    YoloxDetector,
-    make_detector,
-    resolve_model,
-)
+from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, make_detector
+from aerodaas.perception.model_files import MODELS, ModelChecksumError, ModelNotFoundError, resolve_model
 from tests.conftest import skip_or_fail
 
 DATA_DIR = Path(os.environ.get("AERODAAS_DATA_DIR", Path(__file__).parents[2] / "../shared/data")).resolve()

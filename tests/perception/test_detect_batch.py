@@ -1,4 +1,4 @@
-"""Batched inference across drones (issue 15: "where several drones feed one detector, batch their frames into one
+"""Batched inference across drones ("where several drones feed one detector, batch their frames into one
 inference call when the model allows").
 
 * The shipped YOLOX-Nano and NanoDet-Plus exports take a fixed batch of 1: ``process_batch`` is then a loop, one

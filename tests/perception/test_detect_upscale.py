@@ -1,4 +1,4 @@
-"""``upscale=False``: a detector that never enlarges a frame (issue 46: the vehicle-tracking app on a real camera).
+"""``upscale=False``: a detector that never enlarges a frame (the vehicle-tracking app on a real camera).
 
 The app used to pin ``input_size=(480, 640)`` for its simulated 640x480 camera, which shrinks a real 1080p camera's
 frames to a third (held-out flight: car recall 0.59 instead of 0.80). With ``upscale=False`` a 640x480 frame goes in

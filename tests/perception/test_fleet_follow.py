@@ -1,4 +1,4 @@
-"""Two drones share one FollowAnalytics through the runtime (issue 15: a shared follow kept one track, so the drones
+"""Two drones share one FollowAnalytics through the runtime (a shared follow kept one track, so the drones
 mixed their targets). tests/apps/fleet_follow.py: each drone surveys towards its own parked car, the shared follow
 preempts each survey; from the recording, each drone flew over its own car and never towards the other one, and each
 got its own navigation."""
@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 from aerodaas.runtime.app_loader import app_module_name
 from aerodaas.runtime.driver import run_file
 

@@ -1,4 +1,4 @@
-"""Moving-track selection (issue 46 item 3): with an aerial detector the parked cars are detected too, and the
+"""Moving-track selection: with an aerial detector the parked cars are detected too, and the
 follow must adopt the track that moves (its ground speed over a window of geo-located fixes), not the most
 confident parked car. Synthetic tracks through the real camera model (boxes are projections of ground points), and
 real UAV footage of moving and parked cars seen from a hovering camera (``tests/data/meva_uav``)."""
@@ -89,7 +89,7 @@ def test_follow_adopts_the_moving_track_not_the_confident_parked_ones():
 
 
 def test_without_the_rule_the_most_confident_parked_car_is_followed():
-    """What happened in the simulated mission with the aerial model (issue 46): the default adopts the best
+    """What happened in the simulated mission with the aerial model: the default adopts the best
     score, a parked car."""
     follow = FollowAnalytics(target_classes=["car"], tracker=ByteTrackConfig(high_threshold=0.3,
                              new_track_threshold=0.3))

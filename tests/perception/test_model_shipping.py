@@ -1,4 +1,4 @@
-"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.perception.detect.ShippedModel):
+"""The driver resolves a detector's model once and ships its bytes with the analytics (aerodaas.perception.model_files.ShippedModel):
 a node without the file (a cloud node: other disk, no model folder, no internet) writes the bytes to its own cache
 and loads them; the driver's own node keeps loading the file it resolved."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from aerodaas.analytics.core import ObjectDetector
-from aerodaas.perception.detect import MODELS, ModelNotFoundError, ShippedModel
+from aerodaas.perception.model_files import MODELS, ModelNotFoundError, ShippedModel
 from tests.conftest import MODEL_DIR, needs_path
 
 needs_model = needs_path(MODEL_DIR / "yolox_nano.onnx", reason="the shipped detector model (set AERODAAS_MODEL_DIR)")

@@ -1,4 +1,4 @@
-"""Scores by object size (COCO area ranges) and by per-frame view angle and altitude (issue 46 item 5), on synthetic
+"""Scores by object size (COCO area ranges) and by per-frame view angle and altitude, on synthetic
 boxes: a detector that misses exactly one kind of box must show it in that bucket and only there."""
 from __future__ import annotations
 

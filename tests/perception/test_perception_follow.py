@@ -1,4 +1,4 @@
-"""FollowAnalytics following a ByteTrack track id (issue 28, item 3): a second car that comes near while the
+"""FollowAnalytics following a ByteTrack track id: a second car that comes near while the
 target is hidden does not steal the follow, and the target is re-acquired under its id when it reappears."""
 from __future__ import annotations
 

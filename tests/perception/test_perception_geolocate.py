@@ -1,4 +1,4 @@
-"""Geo-located tracks (issue 28, item 4): the ground position of a box seen by the simulator's camera model, its
+"""Geo-located tracks: the ground position of a box seen by the simulator's camera model, its
 uncertainty, and the Foxglove messages recorded per track (read back with the mcap library)."""
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def test_fixes_recorded_as_location_fix_and_scene_update(tmp_path):
     with open(path, "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         msgs = {c.topic: m for _, c, _, m in reader.iter_decoded_messages()}
-    (loc,) = msgs["/d1/tracks/fixes"].fixes  # one LocationFixes for all tracks (issue 47 item 4)
+    (loc,) = msgs["/d1/tracks/fixes"].fixes  # one LocationFixes for all tracks
     assert dict((kv.key, kv.value) for kv in loc.metadata) == {"robot": "d1", "track_id": "7"}
     assert loc.frame_id == "wgs84" and loc.color.a == 1.0
     assert (loc.latitude, loc.longitude) == pytest.approx((fixes[7].lat, fixes[7].lon))

@@ -1,4 +1,4 @@
-"""Bring-your-own-model decoding and the detector API checks (issue 28, items 1 and 6).
+"""Bring-your-own-model decoding and the detector API checks.
 
 The Ultralytics heads are checked on small ONNX graphs written here with ``onnx.helper`` whose output is a known
 constant (plus ``0 x mean(input)``, so the graph does read the image and keeps the batch axis): the boxes the

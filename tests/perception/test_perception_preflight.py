@@ -1,4 +1,4 @@
-"""Issue 38 item 6: every detector and tiling setting is checked before Ray starts, the way a user meets it: an app
+"""Every detector and tiling setting is checked before Ray starts, the way a user meets it: an app
 file with a bad value, ``aerodaas plan`` / ``aerodaas run`` in a subprocess, exit 2, a message naming the field and
 the value, and no Ray session created (a fresh ``RAY_TMPDIR`` stays empty, no Ray process names it). Values that need
 no model file fail where the app writes them (``Tiling(tile=16)``, a threshold of 15); the model's own class names

@@ -1,4 +1,4 @@
-"""Issue 46 item 4: a detector's onnxruntime execution providers. The setting is checked where the app writes it
+"""A detector's onnxruntime execution providers. The setting is checked where the app writes it
 (names against ``onnxruntime.get_all_providers()``), a provider the node's onnxruntime lacks falls back to the CPU
 with a message that is logged, recorded and summarised (or fails the analytics when required: a run on this machine
 is refused before Ray starts), a GPU provider makes the analytics' actor ask Ray for ``num_gpus``, and a cluster

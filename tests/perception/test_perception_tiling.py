@@ -1,4 +1,4 @@
-"""Tiled inference (SAHI slicing and merging) and detection scoring (issue 28, items 2 and 5)."""
+"""Tiled inference (SAHI slicing and merging) and detection scoring."""
 from __future__ import annotations
 
 import json

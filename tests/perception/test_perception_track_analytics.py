@@ -1,4 +1,4 @@
-"""TrackAnalytics on frames of a simulated camera whose truth is known (issue 28, items 3 and 4): two drones, each
+"""TrackAnalytics on frames of a simulated camera whose truth is known: two drones, each
 watching three cars that drive through its view, detected with pixel noise, missed detections, low scores and an
 occlusion. Counts id switches (a truth object whose track id changes) and the geo-location error."""
 from __future__ import annotations

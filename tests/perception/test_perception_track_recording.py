@@ -1,4 +1,4 @@
-"""Geo-located tracks recorded during a run (issue 28, item 4).
+"""Geo-located tracks recorded during a run.
 
 tests/apps/fleet_tracks.py: two simulated drones at 20 m, each over two of the simulator's cars (moving and parked); a
 pixel colour detector (missing 10 % of the cars, 20 % at a low score) and one shared TrackAnalytics. From the recording (read with the ``mcap`` library): the track
@@ -140,7 +140,7 @@ def test_write_tracks_writes_annotations_scene_and_one_fixes_message_with_a_fix_
 
 
 def test_many_tracks_are_one_fixes_topic_with_every_id_and_info_lists_one_track_topic(tmp_path):
-    """Issue 47 item 4: 30 frames in which 40 tracks come and go (five at a time) give ONE ``foxglove.LocationFixes``
+    """30 frames in which 40 tracks come and go (five at a time) give ONE ``foxglove.LocationFixes``
     channel whose messages carry exactly each frame's track ids (metadata ``track_id``), 40 distinct ids in all;
     ``aerodaas info`` (the command line) lists three track channels, not one per track."""
     import subprocess
@@ -335,7 +335,7 @@ def test_the_live_view_advertises_the_track_channels_from_the_start_and_serves_t
         if op == "advertise":
             first.setdefault(topic, t)
     assert first[scene] <= first[cam] and first["/d1/tracks/tracks"] <= first[cam], got["timeline"]
-    # one LocationFixes topic for all of the drone's tracks (issue 47 item 4), declared from the plan as well
+    # one LocationFixes topic for all of the drone's tracks, declared from the plan as well
     assert "/d1/tracks/tracks/fixes" in order and first["/d1/tracks/tracks/fixes"] <= first[cam], got["timeline"]
     assert not [t for t in order if t.endswith("/fix")], order  # no channel per track any more
     ch = got["channels"][scene]

@@ -1,4 +1,4 @@
-"""ByteTrack (issue 28, item 3): stable ids, the low-score association, re-acquisition after occlusion."""
+"""ByteTrack: stable ids, the low-score association, re-acquisition after occlusion."""
 from __future__ import annotations
 
 import pytest

@@ -65,6 +65,8 @@ def test_one_step_exports_a_model_that_matches_pytorch(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     report = json.loads((out / "report.json").read_text())
     assert report["names"] == NAMES
+    # the shipped aerial model knows every class of the set: the run starts from it, and says so
+    assert report["base_model"]["name"] == "aerial_nano" and "starting from aerial_nano" in r.stderr
     assert len(report["history"]) == 1
     assert report["export"]["max_abs_diff"] <= 1e-3
     assert (out / "last.pt").is_file() and (out / "best.pt").is_file()
@@ -152,7 +154,8 @@ def test_coco_labels_with_a_missing_image_are_refused(tmp_path):
            "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [5, 5, 10, 10]},
                            {"id": 2, "image_id": 1, "category_id": 9, "bbox": [5, 5, 10, 10]}]}
     (tmp_path / "labels.json").write_text(json.dumps(doc))
-    from aerodaas.training.dataset import LabelError, load_set
+    from aerodaas.training.dataset import load_set
+    from aerodaas.training.labels.check import LabelError
 
     with pytest.raises(LabelError) as e:
         load_set(tmp_path)
@@ -215,7 +218,8 @@ def test_the_trainer_draws_its_tiles_with_the_runs_object_sizes_and_oblique_shar
 
 
 def test_split_by_sequence_never_splits_a_video(tmp_path):
-    from aerodaas.training.dataset import LabelledImage, split_by_sequence
+    from aerodaas.training.dataset import split_by_sequence
+    from aerodaas.training.labels.images import LabelledImage
 
     items = [LabelledImage(Path(f"/x/{v}_{f:05d}.jpg"), (10, 10), np.zeros((0, 4), np.float32),
                            np.zeros(0, np.int64)) for v in ("dji0005", "dji0760", "mos", "harbour") for f in range(5)]

@@ -1,4 +1,4 @@
-"""The analytics output contract (issue 39 item 3, docs/extending.md): a typed ``Output``, named outputs a downstream
+"""The analytics output contract (docs/extending.md): a typed ``Output``, named outputs a downstream
 analytics subscribes to, ``emit_event``, and ``consumes`` checked against the feeding stream before Ray starts.
 
 The component tests drive the real :class:`AnalyticsComponent` in a plain :class:`DataPlane` (no Ray) with a
@@ -16,7 +16,7 @@ from pydantic import BaseModel, ValidationError
 
 from aerodaas.analytics.base import Analytics
 from aerodaas.analytics.contract import ContractError, check_declaration
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 from aerodaas.protocol.messages import Port, ValueMsg
 
 from tests.conftest import REPO

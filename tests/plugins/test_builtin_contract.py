@@ -1,4 +1,4 @@
-"""Built-ins through the plug-in contract (issue 39.1): the built-in sensor types and backends are registered
+"""Built-ins through the plug-in contract: the built-in sensor types and backends are registered
 classes with pydantic ``Config`` models, their settings read from ``backend_config`` (a built-in's section is an
 alias), strict and bounded, and listed by ``aerodaas plugins`` like any plug-in."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The framework has no branch on a built-in sensor or backend name (issue 39.1): built-ins go through the same
+"""The framework has no branch on a built-in sensor or backend name: built-ins go through the same
 contract as plug-ins (their classes declare what the framework needs), so production code never compares a
 sensor's ``type`` or a robot's ``backend`` with ``"camera"``, ``"mavlink"``... nor keeps a table keyed by them.
 

@@ -19,7 +19,7 @@ import pytest
 
 from aerodaas.model.types import CameraIntrinsics, FramePose
 from aerodaas.plugins.frames import FrameSourceContext
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO, needs_data
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp

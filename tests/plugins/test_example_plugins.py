@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 from tests.liveview.test_liveview_npm_client import node_client  # noqa: F401 - the fixture: Foxglove's npm client

@@ -154,7 +154,7 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
     travel to the drone actor by value, sample the vehicle state there and are recorded with their schema."""
     from mcap.reader import make_reader
 
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
 
     app = tmp_path / "my_app.py"
     app.write_text(APP.replace('"sensors": [{"id": "alt", "type": "my_altimeter"}]',
@@ -184,7 +184,7 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
 
 
 def test_a_builtins_name_is_taken_from_the_start_unless_the_registration_says_it_replaces():
-    """issue 40.5: an app's backend named ``sim`` silently replaced the simulator (the built-ins were registered
+    """An app's backend named ``sim`` silently replaced the simulator (the built-ins were registered
     lazily, after it). Now refused naming the built-in, unless ``replaces=True`` / ``plugin_replaces = True``."""
     from aerodaas.backends.sim import SimBackend
 
@@ -267,7 +267,7 @@ def _declared_entry_points() -> dict[str, dict[str, str]]:
 
 
 def test_every_builtin_resolves_through_this_packages_own_entry_points():
-    """Issue 48.1: the built-ins are declared as a user's package declares its plug-ins — entry points in
+    """The built-ins are declared as a user's package declares its plug-ins — entry points in
     pyproject.toml, read from the installed metadata — with no private table. Every built-in the registry knows is
     one of them, every one resolves (its class a subclass of its kind's base), and the installed metadata is what
     pyproject.toml declares (an install that predates an edit of the entry points fails here)."""
@@ -325,7 +325,7 @@ def test_a_plugin_cannot_take_a_builtins_name_in_a_fresh_process():
 
 
 def test_no_private_table_of_builtins_remains():
-    """Done-criterion of issue 48.1, as the issue states it: no ``_BUILTIN_TARGETS`` or ``_BUILTIN_MODULES``."""
+    """Built-ins go through the registry like any plug-in: no ``_BUILTIN_TARGETS`` or ``_BUILTIN_MODULES`` table."""
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
@@ -356,7 +356,7 @@ def test_an_install_without_the_packages_entry_points_is_an_error_saying_how_to_
 
 
 def test_resolving_a_builtin_in_a_fresh_process_reads_this_packages_metadata_alone():
-    """Issue 49 item 5: a fresh process (a driver building its app, a Ray worker setting up a drone on ``sim``) that
+    """A fresh process (a driver building its app, a Ray worker setting up a drone on ``sim``) that
     resolves a built-in reads only this package's entry points; every other installed distribution is scanned only
     for a name that is not a built-in (then once)."""
     code = textwrap.dedent('''

@@ -8,7 +8,7 @@ import subprocess
 import sys
 import textwrap
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 APP = textwrap.dedent('''
     import time

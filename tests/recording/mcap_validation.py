@@ -16,7 +16,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from aerodaas.recording.writer import camera_mount_quaternion
+from aerodaas.recording.values import camera_mount_quaternion
 
 
 class JsonDecoderFactory:

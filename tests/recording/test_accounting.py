@@ -1,4 +1,4 @@
-"""End-to-end accounting in process (issue 40.1): every recorded message carries its producer's sequence number as
+"""End-to-end accounting in process: every recorded message carries its producer's sequence number as
 the MCAP message's ``sequence``; the recording's ``/run/accounting`` and its own messages give each channel's loss,
 whatever the cause. Read back with the ``mcap`` package's own reader."""
 from __future__ import annotations

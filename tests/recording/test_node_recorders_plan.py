@@ -1,4 +1,4 @@
-"""``recording.per_node`` in the run's plan (issue 49 item 3): a recorder actor per edge compute, placed by its
+"""``recording.per_node`` in the run's plan: a recorder actor per edge compute, placed by its
 labels, writing ``RUN.node-<compute>.mcap``, and that compute's actors recording to it. The plan only: nothing
 starts (the run on a two-node cluster is ``tests/cluster/test_node_recorders_cluster.py``)."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ def _plan(per_node: bool, tmp_path, live: str | None = None):
     from aerodaas import Environment
     from aerodaas.config import SimulationConfig, parse_environment_config
     from aerodaas.runtime.dataflow import build_plan, collect_graph
-    from aerodaas.runtime.driver import _robot_schedulers
+    from aerodaas.runtime.preflight import robot_schedulers as _robot_schedulers
 
     env = Environment(parse_environment_config({**_cfg(3, ["a", "b"], 1.0), "recording": {"per_node": per_node}}))
     robots = env.get_env_robots()

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from aerodaas.cli import main
-from aerodaas.tools.plot import load_plot_data, plot_run, planned_and_flown, tracking_segments
+from aerodaas.tools.plot import plot_run
+from aerodaas.tools.plot_data import load_plot_data, planned_and_flown, tracking_segments
 from aerodaas.recording.writer import McapRecorder
 
 T0 = 1_700_000_000_000_000_000  # ns

@@ -1,4 +1,4 @@
-"""Issue 47 item 6: every file the environment names is an input ``--record`` never overwrites, with
+"""Every file the environment names is an input ``--record`` never overwrites, with
 ``--overwrite`` too, and a recording of ours among them (a replayed camera's MCAP) as well: the ground image, a
 target's image, a geofence ``.plan``, a replay log, a recorded camera's MCAP, a MAVLink signing key. Each case runs
 ``aerodaas run APP --record <that file>`` on an environment written here: exit 2 before Ray, the message names the

@@ -1,4 +1,4 @@
-"""Outputs never clobber inputs (issue 40.3): --record refuses an existing file that is not an AeroDaaS recording
+"""Outputs never clobber inputs: --record refuses an existing file that is not an AeroDaaS recording
 unless --overwrite, and the application and its environment file always; an earlier recording is replaced as before.
 The runs use a temporary copy of apps/farm_survey.py and its environment file, never the checkout's own."""
 from __future__ import annotations
@@ -10,7 +10,9 @@ import sys
 
 import pytest
 
-from aerodaas.recording.writer import McapRecorder, check_record_path, is_aerodaas_recording, read_messages
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.record_path import check_record_path, is_aerodaas_recording
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

@@ -1,4 +1,4 @@
-"""Issue 47 item 6: the recorder's duplicate rule is keyed by producer incarnation, so a restarted producer (a
+"""The recorder's duplicate rule is keyed by producer incarnation, so a restarted producer (a
 drone actor Ray restarted from its checkpoint) never writes a sample older than one already written on that
 channel. A restart test saw an odometry stamp 1 s older than its predecessor: the restarted process asked the
 recorder actor for its earlier counts (``ledger_of``) while the dead process's last batch was still on its way,

@@ -17,7 +17,9 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from aerodaas.model.types import Detection
-from aerodaas.recording.writer import McapRecorder, quaternion_from_euler_deg, read_messages, summarize_mcap
+from aerodaas.recording.writer import McapRecorder
+from aerodaas.recording.values import quaternion_from_euler_deg
+from aerodaas.recording.reader import read_messages, summarize_mcap
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 T0 = 1_700_000_000_000_000_000  # ns

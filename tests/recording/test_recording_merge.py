@@ -1,4 +1,4 @@
-"""``aerodaas merge``: the files of one run recorded by one recorder per node, merged into one (issue 49 item 3).
+"""``aerodaas merge``: the files of one run recorded by one recorder per node, merged into one.
 
 Two node recordings are made by the recorder's own writer (:class:`~aerodaas.actors.recorder.RecorderService`, with
 its ``/run/accounting``), each holding one drone's frames and odometry numbered as a remote producer numbers them;

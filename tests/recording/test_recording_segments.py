@@ -96,7 +96,8 @@ def test_the_runs_own_outcome_wins_over_its_missions(tmp_path):
     """A recorder that replaced a dead one records ``/run/result`` ``recording_lost`` (actors/recorder_actor.py):
     summaries of that recording (unfinished or finished) say so, even where every drone's ``/mission/result`` says
     success and comes later in log time."""
-    from aerodaas.recording.writer import McapRecorder, summarize_mcap
+    from aerodaas.recording.writer import McapRecorder
+    from aerodaas.recording.reader import summarize_mcap
 
     path = tmp_path / "run.mcap"
     with McapRecorder(path) as rec:

@@ -9,7 +9,7 @@ import struct
 import pytest
 
 from aerodaas.backends import make_backend
-from aerodaas.backends.replay import load_tlog
+from aerodaas.backends.flight_log import load_tlog
 from aerodaas.config import ReplayConfig, RobotConfig
 
 pytestmark = pytest.mark.faults

@@ -1,4 +1,4 @@
-"""The analytics scheduler's task counts from the recording (issue 40 item 1): the recorder tallies the task records
+"""The analytics scheduler's task counts from the recording: the recorder tallies the task records
 it writes per scheduler into ``/run/accounting``, across its segments, and the summary's scheduler headline is
 that tally; the dispatchers' own count (it restarts with their actor) is shown only where it differs. In process,
 on fabricated task records."""

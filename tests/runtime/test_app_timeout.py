@@ -1,4 +1,4 @@
-"""Issue 47 item 6: ``start_mission(timeout=...)`` from the application is bounded as ``aerodaas run --timeout`` is.
+"""``start_mission(timeout=...)`` from the application is bounded as ``aerodaas run --timeout`` is.
 A value that is not a number of seconds in (0, 1e7] (a negative one, NaN, a string, a bool, 0, 1e8) is refused
 while the app loads, exit 2 naming ``start_mission(timeout=...)`` and the value, before Ray (it used to reach the
 actors: ``-1`` and NaN ended the mission after 1 s as ``timeout``, a string was a TypeError traceback after Ray

@@ -177,7 +177,7 @@ def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path, mavlink: 
     wait). ``mavlink``: more MavlinkConfig fields; ``params``: emulated autopilot parameters. Returns (emulator,
     path of the variant environment file)."""
     from aerodaas.config import load_environment_config
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     from tests.conftest import REPO
 

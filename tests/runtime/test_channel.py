@@ -348,7 +348,7 @@ def test_a_lockstep_send_waits_for_the_restarted_receiver_and_gives_up_after_its
                                                           (True, True, True)])
 def test_a_frame_for_a_channel_alone_leaves_in_the_publishing_thread(address, inline, local_reader, on_pool):
     """A frame whose only reader is another actor's component on a same-node channel is copied and sent by the
-    thread that publishes it (issue 49 item 6: no pool hop per frame); a publisher that must not wait (``inline``
+    thread that publishes it (no pool hop per frame); a publisher that must not wait (``inline``
     False, the clock's) or a local reader behind it leaves the send to the pool. Observed with the pool's every
     thread held: a send made in this thread has reached the receiver before the pool is free again."""
     from aerodaas.actors.dataplane import Component, DataPlane

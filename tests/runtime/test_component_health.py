@@ -1,4 +1,4 @@
-"""Component health decides the outcome (issue 47.2): a sensor or an analytics that fails more often than its limit
+"""Component health decides the outcome: a sensor or an analytics that fails more often than its limit
 (``max_failure_fraction``) makes the run ``degraded`` (exit code 5) with the component named in the summary; every
 failure is counted, the first ones recorded as events and the rest as summary events whose counts add up.
 
@@ -18,7 +18,7 @@ import pytest
 
 from aerodaas.recording.health import (FIRST_EVENTS, ComponentKind, FailureCount, FailureLog, assess,
                                        tally_failures)
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

@@ -1,4 +1,4 @@
-"""The data plane (issues 6 and 15): structural facts, not wall-clock numbers.
+"""The data plane: structural facts, not wall-clock numbers.
 
 * one drone actor per drone (or per ``drones_per_actor`` drones), one actor per deployed analytics and one recorder
   per run, counted on the Ray node during a real run and found by their names;
@@ -84,7 +84,7 @@ def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str
     from aerodaas.actors.dataplane import DataPlane
     from aerodaas.config import SimulationConfig
     from aerodaas.runtime.dataflow import build_plan, collect_graph
-    from aerodaas.runtime.driver import _robot_schedulers
+    from aerodaas.runtime.preflight import robot_schedulers as _robot_schedulers
     from aerodaas.protocol.specs import RecordSpec
 
     robots = robots or env.get_env_robots()

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
-from aerodaas.recording.writer import read_messages, summarize_mcap
+from aerodaas.recording.reader import read_messages, summarize_mcap
 from aerodaas.runtime.driver import run_file
 
 from tests.conftest import REPO, needs_data
@@ -69,7 +69,7 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
     assert m["detection_rate"] >= 0.80, m
     assert m["switch_delay_s"] is not None and m["switch_delay_s"] <= 2.0, m
     assert m["time_within_5m_s"] >= 20.0, m
-    # the followed track is the moving car, not one of the parked cars the aerial model also finds (issue 46): the
+    # the followed track is the moving car, not one of the parked cars the aerial model also finds: the
     # drone stays over the driving car (ground truth from the recording), whose path runs 30 m past the car park
     assert m["tracking_error_m"]["median"] <= 2.0, m
     # the survey resumed after the car left: a waypoint was completed after tracking ended
@@ -84,9 +84,9 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
     c = checked["counts"]
     assert c["/quadrotor_base/detector/detections"] > 50 and c["/quadrotor_base/follow/navigation"] > 0
     assert c["/quadrotor_base/camera/cam1/calibration"] == c["/quadrotor_base/camera/cam1"]
-    # the follow tracks (issue 28): its geo-located tracks are recorded, the car's among them
+    # the follow tracks: its geo-located tracks are recorded, the car's among them
     assert c["/quadrotor_base/follow/tracks/scene"] > 20 and c["/quadrotor_base/follow/tracks"] > 20, c
-    # one LocationFixes topic for all of them (issue 47 item 4), a message per scene, the track ids in its fixes
+    # one LocationFixes topic for all of them, a message per scene, the track ids in its fixes
     assert c["/quadrotor_base/follow/tracks/fixes"] == c["/quadrotor_base/follow/tracks/scene"], c
     assert not [t for t in c if t.endswith("/fix")], c
     assert checked["track_ids"]["/quadrotor_base/follow/tracks/fixes"], checked["track_ids"]
@@ -95,7 +95,7 @@ def test_vehicle_tracking_detects_follows_and_resumes_the_survey(ray_session, ru
 def test_missing_model_is_rejected_before_any_actor_starts(ray_session, run_options, monkeypatch, tmp_path):
     from aerodaas import Environment, ObjectDetector
     from aerodaas.runtime import driver
-    from aerodaas.perception.detect import ModelNotFoundError
+    from aerodaas.perception.model_files import ModelNotFoundError
 
     started = []
 

@@ -1,4 +1,4 @@
-"""`aerodaas run` of a fleet application that starts its mission with ``env.start_mission([d1, d2])`` (issue 15: such
+"""`aerodaas run` of a fleet application that starts its mission with ``env.start_mission([d1, d2])`` (such
 a run flew, then printed "the application never called start_mission()" and exited 1): the CLI entry flies both
 drones, prints the summary and exits 0; and the fleet start's own argument checks."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from aerodaas import Environment
 from aerodaas.recording.metrics import waypoint_visits
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

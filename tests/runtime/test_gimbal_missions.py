@@ -1,4 +1,4 @@
-"""The camera gimbal pointed from an application (issue 38 item 3): pitch/yaw and a region of interest, on the
+"""The camera gimbal pointed from an application: pitch/yaw and a region of interest, on the
 simulator and on the MAVLink emulator, judged from the recording (``/<robot>/gimbal``, the frames' poses, the
 events); values out of the environment's limits refused before Ray (exit 2, the field named) and at run time with
 nothing sent."""
@@ -139,7 +139,7 @@ def test_the_same_app_on_the_mavlink_emulator(ray_session, run_options, tmp_path
     DO_GIMBAL_MANAGER_PITCHYAW and DO_SET_ROI_LOCATION (COMMAND_INT) and streams GIMBAL_DEVICE_ATTITUDE_STATUS,
     which the drone records."""
     from aerodaas.config import parse_environment_config
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from aerodaas.runtime.driver import run_file
 
     env = _env(speedup=5.0)

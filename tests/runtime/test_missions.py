@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from aerodaas.tools.hitl import request, state_file
+from aerodaas.tools.hitl_client import request, state_file
 from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
 
 from tests.conftest import needs_data

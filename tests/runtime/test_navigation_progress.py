@@ -1,5 +1,5 @@
 """A target the vehicle does not fly towards becomes an event, and if that lasts, the waypoint ends as not reached
-(issue 40 item 7: an ArduCopter that silently dropped a GUIDED target outside its own fence left the drone
+(an ArduCopter that silently dropped a GUIDED target outside its own fence left the drone
 NAVIGATING for 330 vehicle seconds). :class:`~aerodaas.actors.drone_progress.ProgressWatch` alone, then end to end on
 an emulated ArduCopter that drops the target of one waypoint as the firmware does (no COMMAND_ACK exists for
 SET_POSITION_TARGET_GLOBAL_INT), judged from the recording."""
@@ -64,7 +64,7 @@ def test_a_target_the_autopilot_drops_is_stalled_then_abandoned(ray_session, run
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
     from aerodaas.model.types import GeoPoint
     from aerodaas.config import parse_environment_config
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from aerodaas.runtime.report import format_summary
 
     from tests.firmware.sitl import read_recording
@@ -141,7 +141,7 @@ def test_a_vehicle_armed_away_from_the_robots_home_never_takes_off(ray_session, 
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
     from aerodaas.model.types import GeoPoint
     from aerodaas.config import parse_environment_config
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from aerodaas.model.geo import enu_to_geodetic
 
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)

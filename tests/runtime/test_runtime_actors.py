@@ -1,4 +1,4 @@
-"""The Ray-native runtime under faults (issue 15), each fault injected for real into a running mission:
+"""The Ray-native runtime under faults, each fault injected for real into a running mission:
 
 * a drone actor killed mid-mission restarts, restores its checkpoint and resumes the mission from the waypoint it
   was heading to (every waypoint flown once, checked on the recording's odometry);
@@ -302,7 +302,7 @@ def test_dispatcher_actor_killed_mid_mission_the_summary_counts_the_recordings_t
 @needs_data
 def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(ray_session, run_options, data_env,
                                                                               tmp_path, capfd):
-    """``apps/vehicle_tracking.py`` as shipped (lock-step on, its detector — aerial_nano since issue 46 — in its own actor): once the detector actor
+    """``apps/vehicle_tracking.py`` as shipped (lock-step on, its detector, aerial_nano, in its own actor): once the detector actor
     has analysed 15 frames (its own count), it is SIGKILLed by its exact name. Ray restarts it (a new process
     answers to the same name), the simulated clock waits for it, the drone's mission succeeds (the run's outcome is
     recording_lost when frames in flight were lost, and the file lacks exactly those), the drone actor is not

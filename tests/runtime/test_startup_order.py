@@ -1,4 +1,4 @@
-"""Actors created concurrently (issue 49 item 5): the driver asks Ray for every actor of a run and for every actor's
+"""Actors created concurrently: the driver asks Ray for every actor of a run and for every actor's
 set-up before it waits for any answer, so the actors' processes start and set up side by side, not one after the
 other. Checked on the order of the driver's calls, with actor classes that record them and ``ray.get`` replaced by
 a recorder of its own: no Ray process, no timing, nothing that can race. (Ray's state API cannot show this

@@ -1,4 +1,4 @@
-"""The summary is exact (issue 47.3): pre-planned waypoints count as reached only when they were (a run whose
+"""The summary is exact: pre-planned waypoints count as reached only when they were (a run whose
 analytics adds waypoints in flight and then lands printed "waypoints 9 reached (4 pre-planned, at least 5 added
 in flight)" when 1 of the 4 pre-planned was reached), and a robot without a camera gets no "camera 0.0 FPS" in its
 progress lines. Judged from a real run's output against its recording's ``waypoint_done`` events."""
@@ -13,7 +13,7 @@ import textwrap
 
 import pytest
 
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
 

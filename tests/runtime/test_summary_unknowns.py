@@ -1,4 +1,4 @@
-"""The end-of-run summary says what it does not know instead of printing zeros (issue 25: a raylet SIGKILL was
+"""The end-of-run summary says what it does not know instead of printing zeros (a raylet SIGKILL was
 summarised as "sim time 0.0 s")."""
 from aerodaas.runtime.driver import MissionResult
 from aerodaas.runtime.report import format_summary

@@ -1,4 +1,4 @@
-"""What a drone actor loads (issue 49 item 2): no library it does not use. Read from outside the actor, in the
+"""What a drone actor loads: no library it does not use. Read from outside the actor, in the
 kernel's list of the worker process's mappings (``/proc/<pid>/maps``): an imported extension module maps its shared
 library."""
 from __future__ import annotations

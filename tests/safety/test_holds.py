@@ -1,4 +1,4 @@
-"""Holds that are held (issue 26 item 5), end to end on the embedded simulator: a hold starts within the acceptance
+"""Holds that are held, end to end on the embedded simulator: a hold starts within the acceptance
 radius and below the settle speed, counts only time within the radius, and a hold that cannot be kept ends the
 waypoint as ``hold_failed`` with its figures (never reached; the mission is incomplete). Read from the recording."""
 from __future__ import annotations
@@ -55,7 +55,7 @@ def test_a_hold_that_cannot_be_kept_is_hold_failed_never_reached(ray_session, ru
 
     import numpy as np
 
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from aerodaas.model.types import GeoPoint
 
     home = GeoPoint(lat=47.3977, lon=8.5456, alt=488.0)
@@ -90,7 +90,7 @@ def test_a_hold_that_cannot_be_kept_is_hold_failed_never_reached(ray_session, ru
 
 
 def test_the_hold_radius_is_at_least_the_vehicles_position_accuracy():
-    """issue 47 item 7: stock PX4 SIH reports GPS_RAW_INT h_acc 0.90 m (ArduCopter SITL 0.30 m); a 0.3 m hold there
+    """Stock PX4 SIH reports GPS_RAW_INT h_acc 0.90 m (ArduCopter SITL 0.30 m); a 0.3 m hold there
     ended 'hold failed at wp1: 4.392 of 5 s within 0.3 m'. The radius is widened to the accuracy, unless configured
     not to; an unreported accuracy (0) leaves the waypoint's own radius."""
     from aerodaas.config.robot import HoldConfig

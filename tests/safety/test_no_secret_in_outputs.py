@@ -92,7 +92,7 @@ def _wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 240) -> boo
 
 
 def test_no_secret_in_the_recording_the_console_or_rays_logs(tmp_path):
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
     from tests.liveview.foxglove_ws_client import collect
 

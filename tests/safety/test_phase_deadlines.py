@@ -1,4 +1,4 @@
-"""Take-off, landing and the return to launch each have a deadline in vehicle seconds (issue 47 item 1: a ground-rover
+"""Take-off, landing and the return to launch each have a deadline in vehicle seconds (a ground-rover
 plug-in sat in TAKING_OFF for 4,000 simulated seconds until the battery failsafe ended it as failsafe_rtl). The
 formula alone; the drone (:class:`~aerodaas.actors.drone.DroneComponent`) stepped by hand on simulated time with
 backends that cannot climb, cannot land or cannot fly home, judged from its events, states and vehicle; then a
@@ -246,7 +246,7 @@ APP = textwrap.dedent('''
 
 
 def _run_app(tmp_path, backend: str) -> tuple[subprocess.CompletedProcess, list]:
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
 
     robot = {"id": "r", "backend": backend, "takeoff_altitude": 3.0, "idle_land_s": 2.0,
              "safety": {"min_altitude": 0.0}, "limits": {"max_speed": 4.0, "max_vertical_speed": 1.0},
@@ -296,7 +296,7 @@ def test_an_emulated_arducopter_whose_motors_lift_nothing_is_stalled_then_landed
     accepts GUIDED, the arm and NAV_TAKEOFF, and never climbs. At the take-off deadline the drone records
     takeoff_stalled, switches it to LAND (the emulator's own mode log) and the run ends takeoff_stalled."""
     from aerodaas import Environment
-    from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+    from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
     from aerodaas.model.types import GeoPoint
 
     from tests.firmware.sitl import events, odometry, read_recording

@@ -1,4 +1,4 @@
-"""One limit set (issue 25, item 1): the effective limit is the minimum of every configured one, applied to waypoints,
+"""One limit set: the effective limit is the minimum of every configured one, applied to waypoints,
 velocity commands and take-off; RTL and the low-battery failsafe fly a path around the exclusion zones or land in
 place; the physics step, speed-up, seeds and ground size have bounds checked before Ray. The end-to-end cases judge
 from the recorded odometry (mcap)."""
@@ -58,7 +58,7 @@ def test_the_effective_limit_is_the_minimum_of_limits_and_safety():
 def test_nothing_reaches_beyond_max_distance_from_home():
     g = _gate({}, {})
     assert g.max_dist == 10_000.0  # the documented default
-    # a mistyped absolute waypoint 6,000+ km away (issue 25): refused, never flown until the battery ends
+    # a mistyped absolute waypoint 6,000+ km away: refused, never flown until the battery ends
     with pytest.raises(SafetyViolation, match="beyond max_distance 10000 m") as e:
         g.check_waypoint(Waypoint(id="far", x=1.0, y=60.0, z=10.0, waypoint_type="absolute"))
     assert e.value.field == "position"
@@ -212,7 +212,7 @@ result = drone.start_mission()
 
 
 def _e2e(tmp_path, run_options, robot: dict, waypoints: str, rtl: bool):
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
 
     robot.setdefault("sensors", [{"id": "odom", "type": "odometry", "properties": {"rate_hz": 10.0}}])
     robot["idle_land_s"] = 2.0
@@ -245,7 +245,7 @@ _U_FENCE = [(-5, -5), (5, -5), (5, 20), (20, 20), (20, -5), (30, -5), (30, 30), 
 
 
 def test_no_path_home_inside_the_inclusion_zones_says_so():
-    """Issue 40.9: with inclusion zones only, the reason spoke of exclusion zones that do not exist."""
+    """With inclusion zones only, the reason spoke of exclusion zones that do not exist."""
     r = _robot({"max_speed": 2.0}, {"geofence": {"polygons": [{"points": [_ll(*p) for p in _U_FENCE]}]}})
     path, why = plan_return(SafetyGate(r.safety, r.limits, r.home), (24.0, 0.0, 3.0), (0.0, 0.0, 0.0), 3.0)
     assert path is None
@@ -255,7 +255,7 @@ def test_no_path_home_inside_the_inclusion_zones_says_so():
 @pytest.mark.faults
 @pytest.mark.e2e
 def test_end_to_end_rtl_that_cannot_be_flown_is_not_a_success(ray_session, run_options, tmp_path):
-    """Issue 40.9: an app's RTL with no path home inside the fence lands in place, away from home: the outcome is
+    """An app's RTL with no path home inside the fence lands in place, away from home: the outcome is
     ``rtl_failed`` (it was "success", 43 m from home), the event says how far and why."""
     robot = {"id": "r", "home": HOME, "takeoff_altitude": 3.0, "limits": {"max_speed": 2.0},
              "safety": {"geofence": {"polygons": [{"points": [_ll(*p) for p in _U_FENCE]}]}}}

@@ -1,6 +1,5 @@
 """One safety model with the vehicle's dynamics: whatever sequence of commands arrives, the simulated drone never
-leaves its inclusion fence, never enters an exclusion zone and never exceeds max_altitude (to float rounding; 0.05 m
-was allowed before issue 40.6) — checked on the vehicle's odometry at every physics step (randomized sequences, hypothesis), and once end to end on
+leaves its inclusion fence, never enters an exclusion zone and never exceeds max_altitude (to float rounding) — checked on the vehicle's odometry at every physics step (randomized sequences, hypothesis), and once end to end on
 the recorded odometry of a real run."""
 from __future__ import annotations
 
@@ -19,14 +18,14 @@ from aerodaas.runtime.driver import run_file
 
 pytestmark = pytest.mark.faults
 
-ALT_TOL_M = 1e-6  # float rounding: the vertical limit holds at every physics step (issue 40.6; 0.05 m before)
+ALT_TOL_M = 1e-6  # float rounding: the vertical limit holds at every physics step (0.05 m before)
 
 speed = st.floats(-3.5, 3.5, allow_nan=False)
 vel_cmd = st.tuples(st.just("vel"), speed, speed, st.floats(-2.0, 2.0), st.sampled_from([0.1, 0.5, 0.5, 1.0, 3.0]),
                     st.integers(1, 30))
 wp_cmd = st.tuples(st.just("wp"), st.floats(-45, 45), st.floats(-45, 45), st.floats(0.5, 14), st.integers(5, 60))
 hold_cmd = st.tuples(st.just("hold"), st.integers(1, 20))
-# the issue's attack, repeated short commands (5 ticks each) straight at an edge, mixed in as its own building block
+# the fence push, repeated short commands (5 ticks each) straight at an edge, mixed in as its own building block
 burst = st.builds(lambda c, n: [c[:5] + (5,)] * n, vel_cmd, st.integers(5, 40))
 sequences = st.lists(st.one_of(vel_cmd.map(lambda c: [c]), wp_cmd.map(lambda c: [c]), hold_cmd.map(lambda c: [c]),
                                burst), min_size=1, max_size=8).map(lambda ls: [c for part in ls for c in part])
@@ -47,14 +46,14 @@ def test_no_command_sequence_takes_the_drone_outside_its_limits(seq, mode):
 @settings(max_examples=10, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seq=sequences, mode=st.sampled_from(["reject", "clamp"]))
 def test_no_command_sequence_leaves_the_limits_at_the_coarsest_physics_step(seq, mode):
-    """The same property at ``physics_hz`` 10, the coarsest step the configuration allows (issue 25: at 0.5-1 Hz
+    """The same property at ``physics_hz`` 10, the coarsest step the configuration allows (at 0.5-1 Hz
     pushes reached 9.6 m against an 8 m fence; such steps are now refused before Ray)."""
     _assert_inside(fly_commands(seq, on_violation=mode, physics_hz=10.0))
 
 
 @pytest.mark.parametrize("physics_hz", [50.0, 10.0])
 @pytest.mark.parametrize("mode", ["reject", "clamp"])
-def test_the_issue_attacks_stay_inside(mode, physics_hz):
+def test_repeated_pushes_at_the_fence_zone_and_ceiling_stay_inside(mode, physics_hz):
     """Repeated 0.5 s commands at 3 m/s towards the fence edge (1.69 m outside before), towards the exclusion zone,
     and climbing into the ceiling (0.11 m over before); the gate refuses before the stopping distance runs out, at
     the default physics step and at the coarsest one allowed."""
@@ -143,7 +142,7 @@ result = drone.start_mission()
 @pytest.mark.e2e
 def test_end_to_end_velocity_attack_stays_inside_on_the_recorded_odometry(ray_session, run_options, tmp_path):
     from aerodaas.navigation.geofence import Geofence
-    from aerodaas.recording.writer import read_messages
+    from aerodaas.recording.reader import read_messages
     from aerodaas.reliability.flight import PROBE_ENV
 
     robot = PROBE_ENV().model_dump(mode="json")

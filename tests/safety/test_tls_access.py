@@ -1,4 +1,4 @@
-"""Issue 50 item 3: TLS where the HITL API and the live view leave loopback (clusters/tls.py,
+"""TLS where the HITL API and the live view leave loopback (clusters/tls.py,
 aerodaas/liveview/subprotocol.py, aerodaas/liveview/tls_stream.py, aerodaas/tools/hitl.py).
 
 Without Ray: bad certificate and key files, and an address off loopback without them, are refused before Ray with exit

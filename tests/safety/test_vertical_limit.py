@@ -1,4 +1,4 @@
-"""The vertical limit holds at every allowed physics step (issue 40.6): ``physics_hz`` 10 with a waypoint at 9.95 m
+"""The vertical limit holds at every allowed physics step: ``physics_hz`` 10 with a waypoint at 9.95 m
 under ``max_altitude`` 10 climbed to 10.094 m; with fast climbs and a turn sharing the acceleration the simulator
 passed a waypoint by up to 0.8-1.0 m. Now a position target is approached with the discrete-time braking speed
 and the vertical change first (aerodaas.navigation.braking), in the simulator and in the gate's prediction alike:
@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st
 
 from aerodaas.model.types import GeoPoint
 from aerodaas.config import BatteryConfig, Limits
-from aerodaas.config.base import MIN_PHYSICS_HZ
+from aerodaas.model.bounds import MIN_PHYSICS_HZ
 from aerodaas.navigation.braking import braking_speed, limited_change
 from aerodaas.sim.vehicle import SimVehicle
 
@@ -46,8 +46,8 @@ def test_a_climb_to_a_waypoint_never_passes_its_altitude(vz, accel, vh, hz, star
 
 
 @pytest.mark.parametrize("hz", [10.0, 50.0])
-def test_the_issues_waypoint_5cm_under_the_ceiling_stays_under_it(hz):
-    """The issue's case: 9.95 m under a 10 m ceiling at 10 Hz (10.094 m before), with the acceleration and climb
+def test_a_waypoint_5cm_under_the_ceiling_stays_under_it(hz):
+    """A waypoint 9.95 m under a 10 m ceiling at 10 Hz (10.094 m before), with the acceleration and climb
     rate that overshot most in a sweep (1.04 m before)."""
     for limits in (Limits(max_speed=3.0, max_vertical_speed=1.5, max_acceleration=2.0),
                    Limits(max_speed=10.0, max_vertical_speed=10.0, max_acceleration=5.0),

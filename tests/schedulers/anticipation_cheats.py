@@ -2,7 +2,7 @@
 
 Each is DEM (:class:`aerodaas.schedulers.analytics_dems.Dem`) plus one way of learning what a real dispatcher only
 reveals later. Two are handed the future (the test's ``peek`` hook, in the harness's process): they test that the
-cut comparison flags a policy that uses it. Three attack the harness the way issue 41 found it could be fooled
+cut comparison flags a policy that uses it. Three attack the harness the ways it was once fooled
 (a small public seed, the policy in the harness's process, one process for many runs):
 
 * :class:`RecomputeDraw` walks the call stack to the harness and recomputes the cloud draw from its seed;

@@ -1,4 +1,4 @@
-"""The max-gain schedule DP exactly as it was before issue 29 (commit 976279e, ``schedulers/single_machine.py``):
+"""The max-gain schedule DP exactly as it was before it was compiled (commit 976279e, ``schedulers/single_machine.py``):
 the reference that the compiled and the rewritten pure-Python DP must agree with, ties included
 (``tests/schedulers/test_laplan_planner_equivalence.py``). Test code only: production uses
 :func:`aerodaas.schedulers.single_machine.max_gain_schedule`."""

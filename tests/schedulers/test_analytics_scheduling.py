@@ -7,9 +7,9 @@ import pytest
 
 from aerodaas import (AeroListData, Analytics, Environment, NearestNeighborScheduler, ObjectDetector, PriorityQueue,
                       Waypoint)
-from aerodaas.bench.overhead import FixedCostDetector
+from aerodaas.bench.pipeline import FixedCostDetector
 from aerodaas.config import ConfigError, parse_environment_config
-from aerodaas.recording.writer import read_messages
+from aerodaas.recording.reader import read_messages
 from tests.conftest import DATA_DIR, needs_data, needs_workload
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"

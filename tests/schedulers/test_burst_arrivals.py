@@ -1,4 +1,4 @@
-"""LAPLAN's burst/idle-aware arrival predictor (issue 41 item 3) on synthetic bursty arrivals.
+"""LAPLAN's burst/idle-aware arrival predictor on synthetic bursty arrivals.
 
 Frames are fed as tasks (one model per frame unless said) to :class:`BurstArrivalPredictor`; the predictions are
 read back from :meth:`predict`. Covers: within a burst it predicts the burst's gap (not the silence before it);
@@ -129,7 +129,7 @@ def test_options_out_of_range_are_refused():
 def test_laplan_option_arrivals():
     w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
     assert isinstance(LaPlan(w, arrivals="burst").arrivals, BurstArrivalPredictor)
-    # the default since issue 41's held-out sweep (seeds 500-507): the last-gap predictor stays as an option
+    # the default, chosen on held-out seeds (500-507): the last-gap predictor stays as an option
     assert isinstance(LaPlan(w).arrivals, BurstArrivalPredictor)
     assert type(LaPlan(w, arrivals="last").arrivals) is ArrivalPredictor
     assert LaPlan(w, arrivals="last", gap_window=5).arrivals.gap_window == 5

@@ -1,4 +1,4 @@
-"""LAPLAN's incremental plan preparation decides exactly as the from-scratch one (issue 29, item 4).
+"""LAPLAN's incremental plan preparation decides exactly as the from-scratch one.
 
 The preparation around the compiled DP keeps, per model, the deadline- and fallback-free parts of each task's
 edge-time variants until the edge statistics change (``_variants``), and indexes the current plan once instead of
@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from aerodaas.bench.harness import Harness, fleet_tasks
-from aerodaas.bench.schedulers import make_trace
+from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers.analytics_base import Workload
 from aerodaas.schedulers.analytics_laplan import LaPlan
@@ -73,7 +73,7 @@ def test_incremental_preparation_gives_the_same_decisions(seed, dpe, realistic, 
 
 
 def test_the_arrival_predictor_takes_a_bursts_gap_with_a_gap_window():
-    """issue 41: on/off video (frames 500 ms apart for 3 s, then 3 s of silence): with the last gap as the period a
+    """On/off video (frames 500 ms apart for 3 s, then 3 s of silence): with the last gap as the period a
     drone's first frame after a silence predicts the next one 3.5 s on; the median of the last 5 gaps keeps 500 ms.
     After a stall's flush (frames 2 ms apart) the median keeps the 1 s period too."""
     from aerodaas.schedulers.analytics_base import AnalyticsTask

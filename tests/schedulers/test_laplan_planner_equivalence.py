@@ -1,4 +1,4 @@
-"""LAPLAN's faster planner decides exactly as the old one did (issue 29, item 4).
+"""LAPLAN's faster planner decides exactly as the old one did.
 
 The max-gain DP behind LAPLAN's plan now runs compiled (numba, :mod:`aerodaas.schedulers.single_machine_jit`) or as a
 rewritten pure-Python loop (``jit=False``, and above 64 task groups). Both must return the schedule the old DP
@@ -14,7 +14,7 @@ import random
 import pytest
 
 from aerodaas.bench.harness import Harness, fleet_tasks
-from aerodaas.bench.schedulers import make_trace
+from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec
 from aerodaas.schedulers import analytics_laplan, single_machine_jit
 from aerodaas.schedulers.analytics_base import TaskState, Workload, make_analytics_scheduler
@@ -129,7 +129,7 @@ def test_laplan_decides_exactly_as_with_the_old_planner(trace, monkeypatch):
 
 @needs_workload
 def test_a_flushed_burst_is_planned_compiled_on_a_reduced_instance_not_in_python():
-    """issue 41.5: on a stall-and-flush trace more than 64 task groups were live in one plan and LAPLAN's DP fell
+    """On a stall-and-flush trace more than 64 task groups were live in one plan and LAPLAN's DP fell
     back to pure Python (7 times in a run, one decision of 67 ms). Now the plan's instance is reduced until the
     compiled kernel takes it (the latest predicted tasks first), counted, and no plan runs in Python."""
     w = Workload.from_file(WORKLOAD_JSON, "HEAVY")

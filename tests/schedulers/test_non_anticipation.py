@@ -7,7 +7,7 @@ arrivals at or after T (another trace), and every edge or cloud draw that comple
 another seed, kept at or after T so it is still unrevealed before T). The decision logs and edge starts before T
 must be identical.
 
-By construction (issue 41; :mod:`aerodaas.bench.isolation`): every trace and every draw comes from a 256-bit secret
+By construction (:mod:`aerodaas.bench.isolation`): every trace and every draw comes from a 256-bit secret
 (:func:`secret_seed`), recorded in the check's result only after the runs; the post-cut run replays the past
 exactly (the same secret for draws that complete before T) and re-draws the rest from a fresh secret; the policy
 runs in a fresh process for every run (:class:`IsolatedPolicy`), built from its name alone, holding no harness, no
@@ -163,12 +163,12 @@ def _trace_seed(secret: bool, public: int) -> int:
 def cut_trace(w, seed: int, kind: str | None = None, *, drones: int = 3, duration_s: float = DURATION_S) -> list:
     """The cut comparison's single-edge trace. ``kind`` None: :func:`aerodaas.bench.harness.make_trace` (1 fps,
     250 ms jitter; the policy tests' trace). Else a trace kind of :class:`TraceSpec` with its default parameters
-    (``"onoff"``, ``"pareto"``, ``"flush"``: the bursty kinds of issue 41), made as the runtime benchmark and the
-    sweep make it (:func:`aerodaas.bench.schedulers.make_trace`, one edge of ``drones`` drones at 1 fps), its tasks
+    (``"onoff"``, ``"pareto"``, ``"flush"``: the bursty kinds), made as the runtime benchmark and the
+    sweep make it (:func:`aerodaas.bench.workload.make_trace`, one edge of ``drones`` drones at 1 fps), its tasks
     numbered from 0 in arrival order as the harness's trace."""
     if kind is None:
         return make_trace(w, drones=drones, duration_s=duration_s, seed=seed, jitter_ms=250.0)
-    from aerodaas.bench.schedulers import make_trace as fleet_trace
+    from aerodaas.bench.workload import make_trace as fleet_trace
 
     rows = fleet_trace(w, drones, duration_s, seed, drones_per_edge=drones, trace=TraceSpec.parse(kind))
     return [AnalyticsTask(n, d, m, t, t + w[m].deadline_ms) for n, (t, _, d, m) in enumerate(rows)]

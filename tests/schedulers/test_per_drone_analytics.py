@@ -1,4 +1,4 @@
-"""Per-drone state in shared analytics (issue 15): one analytics object fed by several drones keeps what it remembers
+"""Per-drone state in shared analytics: one analytics object fed by several drones keeps what it remembers
 (follow tracks, PID integrators, confirmation streaks, minima/maxima) per drone, keyed by the robot id the items
 carry; and the analytics API's ``process_batch`` (default: one ``process`` call per item).
 

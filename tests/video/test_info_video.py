@@ -1,4 +1,4 @@
-"""``aerodaas info RUN.mcap`` on a recording with a stream camera (issue 38: "`aerodaas info` and the summary give
+"""``aerodaas info RUN.mcap`` on a recording with a stream camera ("`aerodaas info` and the summary give
 the glass-to-analytics latency"): the reader's counters from ``<topic>/video_stats`` and the capture-to-hand-off
 latency from the frames' ``<topic>/timing``, per stream camera; nothing about video for a run without one."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""apps/vehicle_tracking.py, unchanged, on real drone video served over RTSP (issue 46 item 6; slow group ``video``).
+"""apps/vehicle_tracking.py, unchanged, on real drone video served over RTSP (slow group ``video``).
 
 The footage is ``tests/data/meva_uav/uav_parked_cars.mp4``: 7.5 s of real UAV video from the MEVA dataset (Kitware
 and IARPA, CC BY 4.0; ``tests/data/meva_uav/README.md``), a near-nadir view of a building with parked cars, from a

@@ -14,7 +14,7 @@ import time
 import pytest
 
 from aerodaas.recording.metrics import load_run
-from aerodaas.tools.hitl import request, state_file
+from aerodaas.tools.hitl_client import request, state_file
 from tests.conftest import REPO, needs_data
 from tests.video.video_rig import RtspServer, Sender, check_stream_recording, free_udp_port, make_footage
 
@@ -22,7 +22,7 @@ APP = REPO / "apps" / "vehicle_tracking.py"
 
 
 def check_recording_replays_as_a_trace(rec, fps: float = 2.0, seed: int = 1) -> dict[str, int]:
-    """A recording of a real stream as the scheduler benchmarks' trace ``--trace recording:FILE`` (issue 41): its
+    """A recording of a real stream as the scheduler benchmarks' trace ``--trace recording:FILE``: its
     camera-frame gaps are read — :func:`recording_frame_gaps` gives one gap list per camera topic, with as many
     gaps as the topic has frames minus one, the gaps between their log times (counted here from the MCAP file
     itself) — and :func:`frame_times` replays them at ``fps``: a drone's replayed gaps are the recorded ones, in

@@ -188,7 +188,7 @@ def test_angles_at_interpolates_each_angle_along_the_short_arc():
 
 def test_a_stream_frame_carries_the_gimbal_attitude_of_its_capture_time():
     """The camera keeps the gimbal's attitude of every tick; a stream frame captured between two ticks gets the
-    attitude interpolated at its capture time (issue 38 item 2), not the one of the tick that delivered it."""
+    attitude interpolated at its capture time, not the one of the tick that delivered it."""
     from collections import deque
 
     from aerodaas.actors.camera import CameraComponent
@@ -253,7 +253,7 @@ class _InlinePlane:
 
 
 def test_a_stream_frame_is_handed_off_when_it_arrives_not_at_the_next_tick():
-    """Issue 38: a stream camera captures a frame when the reader says it arrived (no poll on the clock's tick);
+    """A stream camera captures a frame when the reader says it arrived (no poll on the clock's tick);
     the ticks give the poses it is tagged with (interpolated at its capture time between the two ticks around it),
     nothing is captured before the first tick or after the drone's mission ended, and a tick takes only a frame
     that is waiting."""
@@ -284,7 +284,7 @@ def test_a_stream_frame_is_handed_off_when_it_arrives_not_at_the_next_tick():
 
 
 def test_a_stream_frame_takes_its_pose_from_the_vehicle_samples_own_times():
-    """Issue 47 item 6: a MAVLink vehicle's newest position sample is older than the tick that reads it (one
+    """A MAVLink vehicle's newest position sample is older than the tick that reads it (one
     telemetry interval at most). The frame's pose is interpolated between the samples at their own times, not at
     the ticks': captured at 1.25 s between samples of 0.8 s (x 0 m) and 1.3 s (x 5 m), it is at x 4.5 m (stamped
     with the ticks' times, 1.0 and 1.5 s, it would be at 2.5 m). A frame captured after the newest sample waits

@@ -225,8 +225,7 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     pose at the frame's capture, from what the recording holds; for frames arriving ``settle_s`` (s) after the first
     one (the camera then has a second of per-tick poses behind it):
 
-    1. the vehicle's position samples it was interpolated between (``pose_samples_t``: their own times, issue 47
-       item 6) enclose ``capture_t``, or the one sample used outside them is within :data:`POSE_SAMPLE_SLACK_S`
+    1. the vehicle's position samples it was interpolated between (``pose_samples_t``: their own times) enclose ``capture_t``, or the one sample used outside them is within :data:`POSE_SAMPLE_SLACK_S`
        after it, or older than it by no more than the vehicle's own largest sample gap there (a stalled stream of
        samples) plus :data:`AFTER_NEWEST_SLACK_S`: a pose taken at the arrival (20-300 ms later) is bracketed by
        later samples;
@@ -237,9 +236,7 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     vehicle samples stamped with the same times, so they differ by (a) the camera's own interpolation between its
     samples, at most speed x their gap; (b) the odometry's interpolation, at most speed x its gap around
     ``capture_t`` (the recording keeps samples at the odometry rate, the camera every sample its ticks saw); and,
-    for a pose held from an older sample only, (c) that sample's age at the capture. Before issue 47 item 6 the
-    camera stamped a sample with the tick's time, up to one sample gap later than the sample's own, and this check
-    had to add the largest sample gap near the frame (within :data:`GAP_WINDOW_S`) to every tolerance. Speed: the fastest the odometry shows anywhere (sampled
+    for a pose held from an older sample only, (c) that sample's age at the capture. Speed: the fastest the odometry shows anywhere (sampled
     velocity and distance over sample gaps) plus :data:`SPEED_SLACK_MPS`. A loaded machine delays ticks and samples,
     which widens the gaps and so the tolerance with them: it cannot break the check; a pose taken at arrival
     instead of capture can (tests/video/test_video_source.py fabricates one). Raises AssertionError naming the frame, or

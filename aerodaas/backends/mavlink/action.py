@@ -36,7 +36,7 @@ from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.statustext import StatusTexts
-from aerodaas.backends.mavlink.telemetry import Readiness  # noqa: F401 - Readiness: API of this module too
+from aerodaas.backends.mavlink.telemetry import Readiness
 
 #: EKF_STATUS_REPORT / ESTIMATOR_STATUS flags (EKF_STATUS_FLAGS, ESTIMATOR_STATUS_FLAGS share these low bits)
 _EKF_ATTITUDE, _EKF_VEL_HORIZ, _EKF_POS_HORIZ_ABS = 1, 2, 16

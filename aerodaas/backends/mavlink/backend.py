@@ -30,7 +30,7 @@ from aerodaas.backends.mavlink.signing import make_signing
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer
-from aerodaas.backends.mavlink._common import M, _enum_name, _f32, _log_level, log  # noqa: F401
+from aerodaas.backends.mavlink._common import log
 
 
 class MavlinkBackend(VehicleBackend):

@@ -56,7 +56,7 @@ from aerodaas.backends.mavlink._common import M, _f32
 from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.params import ParameterProtocol
-from aerodaas.backends.mavlink.transfer import FENCE, RALLY, Wire  # noqa: F401 - FENCE/RALLY: API
+from aerodaas.backends.mavlink.transfer import FENCE, RALLY, Wire
 from aerodaas.navigation.geofence import GeofenceConfig, autopilot_disagreement
 
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: the speed limit's tolerance: flown speed within ``max_speed`` x (1 + this) (issue 26: over 1 s windows)
+#: the speed limit's tolerance: flown speed within ``max_speed`` x (1 + this) (over 1 s windows)
 SPEED_TOLERANCE = 0.10
 #: airborne GNSS samples needed before the margin is used (10 s at speed at the backend's 5 Hz GPS_RAW_INT; 25 s
 #: where the vehicle only streams it at 2 Hz, REQUEST_DATA_STREAM's EXTENDED_STATUS)

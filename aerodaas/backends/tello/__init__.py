@@ -23,7 +23,7 @@ Protocol (Ryze Tech, *Tello SDK 2.0 User Guide*, V1.0 2018-11):
   ``rc`` with the current sticks every ``keepalive_s`` seconds when no manoeuvre is in progress.
 
 What the guide does not say, and what we assume (each a :class:`~aerodaas.config.TelloConfig` field where it can
-differ): ``vgx/vgy/vgz`` are in **dm/s** (measured by users, DJITelloPy issue #96), in a NED-like frame whose x
+differ): ``vgx/vgy/vgz`` are in **dm/s** (measured by users: damiafuentes/DJITelloPy issues/96 on GitHub), in a NED-like frame whose x
 points along the heading of yaw 0 (``velocity_frame="yaw_zero"``, the ``north_speed/east_speed`` naming of the
 Tello's low-level flight data) — ``"body"`` reads them as forward/right instead; ``vgz`` is positive down.
 
