@@ -42,9 +42,26 @@ def _shared_data() -> None:
 #: a test (or, as ``pytestmark``, a module) that reads the shared imagery or the detector model: skipped without
 #: them, failed in CI (:func:`skip_or_fail`)
 needs_data = pytest.mark.usefixtures("_shared_data")
-#: the same for one case of a parametrized test (``pytest.param(..., marks=needs_data_case)``, which cannot take a
-#: fixture): skipped without the data, run in CI, where it then fails on the missing file
-needs_data_case = pytest.mark.skipif(DATA_MISSING is not None and not os.environ.get("CI"), reason=str(DATA_MISSING))
+
+
+def needs_path(*paths: Path, reason: str):
+    """The mark of a test (a module's ``pytestmark``, a case's ``pytest.param(..., marks=...)``) that reads
+    ``paths`` (shared data: files or folders): :func:`skip_or_fail` with ``reason`` when one is missing, checked
+    when the test is set up (:func:`pytest_runtest_setup`)."""
+    return pytest.mark.needs_path(*paths, reason=reason)
+
+
+#: :data:`needs_data` for one case of a parametrized test (``pytest.param(..., marks=needs_data_case)``, which cannot
+#: take a fixture)
+needs_data_case = needs_path(DATA_DIR / "imagery", MODEL_DIR / "yolox_nano.onnx", reason=str(DATA_MISSING))
+
+
+def pytest_runtest_setup(item):
+    """A test marked :func:`needs_path` whose files are not all there: :func:`skip_or_fail`."""
+    for mark in item.iter_markers("needs_path"):
+        missing = [str(p) for p in mark.args if not Path(p).exists()]
+        if missing:
+            skip_or_fail(f"{mark.kwargs.get('reason', 'shared data missing')}: {', '.join(missing)} not found")
 
 
 @pytest.fixture(scope="session")

@@ -17,11 +17,11 @@ import pytest
 
 from aerodaas.bench.parsers import add_parsers
 
-from tests.conftest import DATA_DIR, needs_data_case
+from tests.conftest import DATA_DIR, needs_data_case, needs_path
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"
-needs_workload = pytest.mark.skipif(not WORKLOAD.is_file(), reason=f"no workload at {WORKLOAD}")
+needs_workload = needs_path(WORKLOAD, reason="the inference workload of the shared data (set AERODAAS_DATA_DIR)")
 #: a run of Ray processes or of tens of seconds of flight: in the slow tier (the development tier keeps one cheap
 #: Ray benchmark, raypath, and the unit test of the redirection below)
 slow = pytest.mark.slow

@@ -10,6 +10,7 @@ from mcap.writer import Writer
 from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec, frame_times, recording_frame_gaps
 from aerodaas.schedulers.analytics_base import Workload
+from tests.conftest import needs_workload
 
 W = Workload.from_dict({"models": {"A": {"edge_ms": 100, "cloud_ms": 200, "benefit": 50, "edge_cost": 1,
                                          "cloud_cost": 10},
@@ -133,13 +134,11 @@ def test_bad_trace_options_name_the_field(tmp_path):
         recording_frame_gaps(tmp_path / "empty.mcap")
 
 
+@needs_workload
 def test_sweep_runs_and_records_the_realistic_trace():
     from aerodaas.bench.sweep import run_sweep
-    from tests.conftest import DATA_DIR
+    from tests.conftest import WORKLOAD_JSON as wpath
 
-    wpath = DATA_DIR / "workloads" / "ocularone_lambda.json"
-    if not wpath.is_file():
-        pytest.skip(f"no workload at {wpath}")
     kw = dict(loads=["HEAVY"], sigmas=[0.0], drones_per_edge=[2], scenarios=["none"], seeds=[0], duration_s=10,
               edges=1, schedulers=["DEM"], processes=1, bound=False, workload_path=wpath)
     per = run_sweep(**kw)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import MODEL_DIR
+from tests.conftest import MODEL_DIR, skip_or_fail
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "clusters" / "smoke" / "ray_up_test.sh"
@@ -39,7 +39,7 @@ def test_ray_up_edge_and_cloud_machines(tmp_path):
     text = log.read_text()
     if rc == 77:
         reason = next((line for line in text.splitlines() if line.startswith("SKIP:")), text[-500:])
-        pytest.skip(f"ray up smoke test cannot run here: {reason}")
+        skip_or_fail(f"ray up smoke test cannot run here: {reason}")  # fails in CI, which provides the rig
     print(text[-6000:])
     assert rc == 0, text[-6000:]
     out = json.loads(result.read_text())

@@ -16,7 +16,9 @@ tests.firmware.sitl_signing_attack ...``): a control probe, an observer of the f
   our backend uses) over ``ATTACK_AT``: 5 rounds 0.1 s apart of a forced disarm, MAV_CMD_DO_FLIGHTTERMINATION,
   DO_SET_MODE LAND, PARAM_SET WPNAV_SPEED 1234 and a harmless MAV_CMD_REQUEST_MESSAGE (the probe's), and onto our
   backend's own port ``SPOOF_AT``, in the vehicle's name (system 1, component 1), a GLOBAL_POSITION_INT 100 m north
-  of home and a SYS_STATUS at 5 % battery; then it collects for 1.5 s every COMMAND_ACK and PARAM_VALUE answered and
+  of home, a BATTERY_STATUS at 5 % (the battery our backend reads while the firmware sends BATTERY_STATUS), a
+  SYS_STATUS at 5 % and 1 V (the voltage it reads) and a HEARTBEAT claiming disarmed in LAND with system_status
+  CRITICAL; then it collects for 1.5 s every COMMAND_ACK and PARAM_VALUE answered and
   prints them as JSON."""
 from __future__ import annotations
 
@@ -98,7 +100,11 @@ def attack(attack_at: str, spoof_at: str) -> None:
         for k in range(4):
             spoof.mav.global_position_int_send(t_ms + 50 * (4 * i + k), lat, int(FARM_HOME["lon"] * 1e7),
                                                int((FARM_HOME["alt"] + 30.0) * 1000), 30_000, 0, 0, 0, 0)
-            spoof.mav.sys_status_send(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)
+            spoof.mav.sys_status_send(0, 0, 0, 0, 1000, -1, 5, 0, 0, 0, 0, 0, 0)
+            spoof.mav.battery_status_send(0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 32767,
+                                          [1000] + [65535] * 9, -1, -1, -1, 5)
+            spoof.mav.heartbeat_send(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                     M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9, M.MAV_STATE_CRITICAL)
         time.sleep(0.1)
     print(json.dumps(_answers(conn, time.monotonic() + 1.5)), flush=True)
 

@@ -17,10 +17,11 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import needs_sitl
 from tests.firmware import sitl
 
-_SKIP = sitl.namespace_skip_reason()
-pytestmark = [pytest.mark.sitl, pytest.mark.skipif(_SKIP is not None, reason=_SKIP or "")]
+# without the firmware or a network namespace: skipped, failed in CI (tests/conftest.py needs_sitl)
+pytestmark = [pytest.mark.sitl, needs_sitl]
 
 DATA = Path(__file__).parents[1] / "data" / "missions"
 #: (file, the vehicle's home: the file's own, whether the follower sends RTL after the last item)

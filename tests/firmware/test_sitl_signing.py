@@ -13,7 +13,8 @@ spoofed telemetry in the vehicle's name onto our backend's own port. Steps, in o
 1. ``aerodaas mavlink signing setup`` (SETUP_SIGNING, checked by a signed round trip);
 2. the farm survey signed over serial1; once the vehicle is armed and 1 m up, the attacker (another process, no
    key) sends a forced disarm, DO_FLIGHTTERMINATION, DO_SET_MODE LAND, PARAM_SET WPNAV_SPEED and a harmless
-   command over serial2, and GLOBAL_POSITION_INT 100 m north and SYS_STATUS at 5 % onto our port;
+   command over serial2, and GLOBAL_POSITION_INT 100 m north, BATTERY_STATUS at 5 %, SYS_STATUS at 5 % and 1 V and
+   a HEARTBEAT claiming disarmed in LAND (CRITICAL) onto our port;
 3. the survey again with a key the vehicle does not hold: exit 2 before take-off.
 
 (PX4 SITL: the shared build, PX4 main 02e73e3b6f of 2026-03-02, has no signing: see docs/security.md.)"""
@@ -139,20 +140,27 @@ def test_unsigned_commands_and_param_set_from_another_process_are_refused(signed
 
 
 def test_spoofed_telemetry_leaves_no_trace_in_the_recording(signed):
-    """GLOBAL_POSITION_INT 100 m north and SYS_STATUS at 5 % written unsigned onto our port in the vehicle's name:
-    dropped (``link_unsigned`` events naming both), no recorded position more than 20 m from home, no battery below
-    50 %, no battery or failsafe event."""
+    """GLOBAL_POSITION_INT 100 m north, BATTERY_STATUS at 5 % (the battery the backend reads: the firmware sends
+    BATTERY_STATUS), SYS_STATUS at 5 % and 1 V and a HEARTBEAT claiming disarmed in LAND written unsigned onto our
+    port in the vehicle's name: dropped (``link_unsigned`` events naming each type), no recorded position more than
+    20 m from home (every position sample the backend takes is recorded), no battery below 50 %, no voltage below
+    2 V, no battery, failsafe or disarm event in flight (one arming, one disarming)."""
     _attack(signed)
     ev = sitl.events(signed["rec"])
     dropped = {e.get("message") for e in ev if e["event"] == "link_unsigned"}
-    assert {"GLOBAL_POSITION_INT", "SYS_STATUS"} <= dropped, [e for e in ev if e["event"] == "link_unsigned"]
-    assert max(e["total"] for e in ev if e["event"] == "link_unsigned") >= 40  # 5 rounds of 4 + 4
+    assert {"GLOBAL_POSITION_INT", "SYS_STATUS", "BATTERY_STATUS", "HEARTBEAT"} <= dropped, \
+        [e for e in ev if e["event"] == "link_unsigned"]
+    assert max(e["total"] for e in ev if e["event"] == "link_unsigned") >= 80  # 5 rounds of 4 x 4 messages
     names = {e["event"] for e in ev}
     assert not {"battery_low", "battery_critical", "failsafe_rtl", "autopilot_failsafe"} & names, names
+    seq = [e["event"] for e in ev]
+    assert seq.count("armed") == 1 and seq.count("disarmed") <= 1, [n for n in seq if "arm" in n]
     odo = sitl.odometry(signed["rec"])
     assert max(math.hypot(*o["position"][:2]) for o in odo) < 20.0
     batt = [o["battery_pct"] for o in odo if o.get("battery_pct") is not None]
     assert batt and min(batt) > 50.0, min(batt or [None])
+    volts = [o["battery_voltage"] for o in odo if o.get("battery_voltage")]
+    assert volts and min(volts) > 2.0, min(volts or [None])
 
 
 def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(signed):

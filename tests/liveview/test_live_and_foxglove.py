@@ -30,7 +30,7 @@ from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.values import camera_mount_quaternion, quaternion_from_euler_deg
 from aerodaas.recording.schemas import JSON_SCHEMA_MODELS, json_schema_for
 
-from tests.conftest import REPO
+from tests.conftest import REPO, skip_or_fail
 from tests.liveview.foxglove_ws_client import collect, schema_bytes
 from tests.recording.mcap_validation import rotation, validate_recording
 
@@ -397,19 +397,19 @@ def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run
 # already makes: one run of the real detector instead of two.)
 def _npm_mcap_reader(tmp_path: Path) -> list[str]:
     """``[node, read.mjs]``: :data:`NODE_READER` with npm ``@mcap/core`` installed in ``tmp_path``. Skips the test
-    when node/npm are missing or npm cannot install."""
+    (:func:`~tests.conftest.skip_or_fail`: fails in CI) when node/npm are missing or npm cannot install."""
     npm, node = shutil.which("npm"), shutil.which("node")
     if not npm or not node:
-        pytest.skip("node/npm not installed")
+        skip_or_fail("node/npm not installed (tests/install-rig.sh installs them)")
     try:
         # no retries and a short fetch timeout: offline, npm fails (or uses its cache) in seconds, not minutes
         inst = subprocess.run([npm, "install", "--silent", "--no-audit", "--no-fund", "--prefer-offline",
                                "--fetch-retries=0", "--fetch-timeout=15000", "@mcap/core@2", "fzstd@0.1"],
                               cwd=tmp_path, capture_output=True, text=True, timeout=120)
     except subprocess.TimeoutExpired:
-        pytest.skip("npm install @mcap/core timed out (offline?)")
+        skip_or_fail("npm install @mcap/core timed out (offline?)")
     if inst.returncode != 0:
-        pytest.skip(f"npm install @mcap/core failed (offline?): {inst.stderr[-300:]}")
+        skip_or_fail(f"npm install @mcap/core failed (offline?): {inst.stderr[-300:]}")
     script = tmp_path / "read.mjs"
     script.write_text(NODE_READER)
     return [node, str(script)]
@@ -449,7 +449,7 @@ def test_the_npm_mcap_reader_reads_many_tracks_from_one_location_fixes_topic(tmp
 @pytest.mark.e2e
 def test_the_recording_reads_with_the_npm_mcap_reader(live_run, tmp_path):
     """The TypeScript reader (npm @mcap/core, zstd via fzstd) indexes the file, finds every channel with its schema,
-    reads every message and parses every JSON one. Skipped when node/npm are missing or npm cannot install."""
+    reads every message and parses every JSON one. Skipped (:func:`~tests.conftest.skip_or_fail`: fails in CI) when node/npm are missing or npm cannot install."""
     rec = live_run["recording"]
     p = subprocess.run([*_npm_mcap_reader(tmp_path), str(rec)], cwd=tmp_path, capture_output=True, text=True,
                        timeout=300)

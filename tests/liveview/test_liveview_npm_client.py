@@ -27,6 +27,7 @@ from aerodaas.recording.writer import RecordedMessage
 from aerodaas.reliability.procs import actor_pids
 
 from tests.liveview.test_live_and_foxglove import AERODAAS, APP, ENV, REPO, _start, _wait_for_url
+from tests.conftest import skip_or_fail
 
 JS = Path(__file__).parents[1] / "js"
 
@@ -35,16 +36,16 @@ JS = Path(__file__).parents[1] / "js"
 def node_client():
     npm, node = shutil.which("npm"), shutil.which("node")
     if not npm or not node:
-        pytest.skip("node/npm not installed")
+        skip_or_fail("node/npm not installed (tests/install-rig.sh installs them)")
     if not (JS / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
         try:
             inst = subprocess.run([npm, "install", "--silent", "--no-audit", "--no-fund", "--prefer-offline",
                                    "--fetch-retries=0", "--fetch-timeout=15000"], cwd=JS, capture_output=True,
                                   text=True, timeout=180)
         except subprocess.TimeoutExpired:
-            pytest.skip("npm install @foxglove/ws-protocol timed out (offline?)")
+            skip_or_fail("npm install @foxglove/ws-protocol timed out (offline?)")
         if inst.returncode != 0:
-            pytest.skip(f"npm install @foxglove/ws-protocol failed (offline?): {inst.stderr[-300:]}")
+            skip_or_fail(f"npm install @foxglove/ws-protocol failed (offline?): {inst.stderr[-300:]}")
 
     def start(url: str, timeout_s: float = 240, subscribe_after_ms: int = 0, reconnects: int = 0,
               keep: tuple[str, ...] = ()) -> subprocess.Popen:

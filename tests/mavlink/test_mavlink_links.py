@@ -392,13 +392,14 @@ def test_real_px4_tlog_through_the_receive_path():
         server.close()
 
 
-@pytest.mark.skipif(importlib.util.find_spec("MAVProxy") is None, reason="MAVProxy not installed (pip install '.[test]')")
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_mavproxy_ground_station(autopilot, tmp_path):
     """MAVProxy, driven headless through its stdin, sees the emulated vehicle's heartbeat and position, switches
     its mode, arms it and takes off with the commands the README gives. (MAVProxy's ``mode NAME`` passes PX4's
     (base, main, sub) tuple to pymavlink's set_mode, which fails packing it, so for PX4 the mode goes out with the
     generic ``long DO_SET_MODE``.)"""
+    if importlib.util.find_spec("MAVProxy") is None:
+        skip_or_fail("MAVProxy not installed (pip install --no-deps 'MAVProxy>=1.8', as the README says)")
     emu = MavlinkVehicleEmulator(autopilot, home=VEHICLE_HOME, gps_lock_s=0.5)
     address = emu.start("tcp:127.0.0.1:0")
     proc = subprocess.Popen([sys.executable, "-m", "MAVProxy.mavproxy", "--master", address, "--no-state",

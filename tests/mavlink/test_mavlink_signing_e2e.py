@@ -14,7 +14,7 @@ import time
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from tests.mavlink.test_mavlink_signing import KEY, OTHER_KEY, SPOOFER, _key_file
+from tests.mavlink.test_mavlink_signing import DISARM, KEY, OTHER_KEY, SPOOFED_HEARTBEATS, SPOOFER, _key_file
 
 
 def _signed_survey(tmp_path, vehicle_key: bytes, key_file_key: bytes, connect_timeout_s: float = 30.0):
@@ -44,17 +44,19 @@ assert READY_SPOOFER != SPOOFER, "tests.mavlink.test_mavlink_signing.SPOOFER no 
 
 
 class _Attack(threading.Thread):
-    """Once the vehicle is in the air: unsigned GLOBAL_POSITION_INT 100 m north of it and SYS_STATUS at 5 % battery
-    written onto the link in the vehicle's name (system 1, component 1), then :data:`READY_SPOOFER` (forced disarm,
-    LAND, flight termination, PARAM_SET, from another process) released. :attr:`done`: it ran while the vehicle was
-    in the air; :attr:`rejected`: the packets the vehicle's parser refused meanwhile. Waits until the vehicle flies
-    or :attr:`stop` is set (no wall-clock limit: the test's own timeout bounds it)."""
+    """Once the vehicle is in the air: unsigned GLOBAL_POSITION_INT 100 m north of it, BATTERY_STATUS at 5 % (the
+    battery the backend reads), SYS_STATUS at 5 % and 1 V, and HEARTBEATs claiming disarmed / LAND / RTL / a critical
+    state (:data:`~tests.mavlink.test_mavlink_signing.SPOOFED_HEARTBEATS`) written onto the link in the vehicle's
+    name (system 1, component 1), then :data:`READY_SPOOFER` (a forced disarm, LAND, flight termination, PARAM_SET,
+    from another process) released. :attr:`after`: the emulated autopilot's own state right after the spoofer
+    ended, while still in flight; :attr:`rejected`: the packets the vehicle's parser refused meanwhile. Waits until
+    the vehicle flies or :attr:`stop` is set (no wall-clock limit: the test's own timeout bounds it)."""
 
     def __init__(self, emu) -> None:
         super().__init__(daemon=True)
-        self.emu, self.done, self.rejected, self.error = emu, False, 0, None
+        self.emu, self.after, self.rejected, self.error = emu, None, 0, None
         self.stop = threading.Event()
-        self.spoofer = subprocess.Popen([sys.executable, "-c", READY_SPOOFER, emu.address], stdin=subprocess.PIPE,
+        self.spoofer = subprocess.Popen([sys.executable, "-c", READY_SPOOFER, emu.address, DISARM], stdin=subprocess.PIPE,
                                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
     def run(self) -> None:
@@ -72,13 +74,18 @@ class _Attack(threading.Thread):
                 pos = M.MAVLink_global_position_int_message(int(self.emu.state.t * 1000) + 1, lat,
                                                             int(home.lon * 1e7), int((home.alt + 30) * 1000),
                                                             30_000, 0, 0, 0, 0)
-                status = M.MAVLink_sys_status_message(0, 0, 0, 0, 10_000, -1, 5, 0, 0, 0, 0, 0, 0)
-                self.emu.inject(pos.pack(enc) + status.pack(enc))
+                status = M.MAVLink_sys_status_message(0, 0, 0, 0, 1000, -1, 5, 0, 0, 0, 0, 0, 0)
+                battery = M.MAVLink_battery_status_message(0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO,
+                                                           32767, [1000] + [65535] * 9, -1, -1, -1, 5)
+                base, custom, state = SPOOFED_HEARTBEATS[i % len(SPOOFED_HEARTBEATS)]
+                beat = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, custom,
+                                                   state, 3)
+                self.emu.inject(b"".join(m.pack(enc) for m in (pos, status, battery, beat)))
                 time.sleep(0.02)
             out, err = self.spoofer.communicate("go\n", timeout=120)
             assert self.spoofer.returncode == 0, err[-1500:]
             self.rejected = self.emu.signing.rejected - rejected0
-            self.done = self.emu.snapshot()["in_air"]
+            self.after = self.emu.snapshot()
         except Exception as e:  # noqa: BLE001 - reported by the test
             self.error = e
         finally:
@@ -105,24 +112,34 @@ def test_a_signed_mission_flies_and_unsigned_spoofs_change_nothing_in_the_record
         vehicle = emu.snapshot()
         params = dict(emu.params)
         emu.stop()
-    assert attack.error is None and attack.done, attack.error
+    assert attack.error is None and attack.after is not None, attack.error
+    # the forced disarm, LAND and flight termination came in flight: right after them the vehicle still flies armed
+    assert attack.after["armed"] and attack.after["in_air"] and attack.after["mode"] != "LAND", attack.after
     assert attack.rejected >= 20, attack.rejected  # the spoofer's 5 rounds of 4 unsigned messages, all refused
     rep = res.robots["quadrotor_base"]
     assert res.outcome == "success", rep.get("error")
+    # landed and disarmed by the survey itself; our backend sends 400 and 176 too, flight termination never
     assert not vehicle["armed"] and 185 not in vehicle["commands_seen"] and params["WPNAV_SPEED"] != 1234.0
     rec = read_recording(tmp_path / "farm.mcap")
     ev = [m for _, m in rec["/quadrotor_base/events"]]
     names = [e["event"] for e in ev]
-    assert not {"battery_critical", "failsafe_rtl", "autopilot_failsafe"} & set(names), names
+    assert not {"battery_critical", "battery_low", "failsafe_rtl", "autopilot_failsafe"} & set(names), names
+    # armed once, disarmed once after landing: a spoofed HEARTBEAT taken would add a disarm (and a re-arm) in flight
+    assert names.count("armed") == 1 and names.count("disarmed") <= 1, [n for n in names if "arm" in n]
     dropped = {e.get("message") for e in ev if e["event"] == "link_unsigned"}
-    assert {"GLOBAL_POSITION_INT", "SYS_STATUS"} <= dropped, [e for e in ev if e["event"] == "link_unsigned"]
+    assert {"GLOBAL_POSITION_INT", "SYS_STATUS", "BATTERY_STATUS", "HEARTBEAT"} <= dropped, \
+        [e for e in ev if e["event"] == "link_unsigned"]
     unsigned_total = max(e["total"] for e in ev if e["event"] == "link_unsigned")
     assert unsigned_total >= 6  # the first five one by one, then a summary (reports are lower bounds: 5 s apart)
     odo = [m for _, m in rec["/quadrotor_base/odometry"]]
-    # the survey stays within ~60 m of home; a spoofed fix would put a sample 100 m north
+    # the survey stays within ~60 m of home; a spoofed fix would put a sample 100 m north (every position sample the
+    # backend takes is recorded: telemetry.py _queue_odometry)
     far = max(math.hypot(*o["position"][:2]) for o in odo)
     assert far < 90.0, far
+    # BATTERY_STATUS comes every 2 vehicle seconds, SYS_STATUS every second: a spoof taken would stand in several
+    # position samples
     assert min(o["battery_pct"] for o in odo if o.get("battery_pct") is not None) > 50.0
+    assert min(o["battery_voltage"] for o in odo if o.get("battery_voltage")) > 2.0
     assert "MAVLink signing: at least" in format_summary(res)
 
 

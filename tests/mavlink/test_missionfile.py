@@ -28,14 +28,13 @@ from aerodaas.missionfile import (
 from aerodaas.model.geo import enu_to_geodetic, geodetic_to_enu
 from aerodaas.model.types import AeroNavigation, GeoPoint, NavigationType, SchedulingType, VelocityCommand, Waypoint
 from aerodaas.navigation.geofence import GeofenceCircle, GeofenceConfig, GeofencePolygon
-from tests.conftest import DATA_DIR, skip_or_fail
+from tests.conftest import DATA_DIR, needs_path, skip_or_fail
 
 MISSIONS = DATA_DIR / "missions"
 KNOWN = ["dronekit_mpmission.txt", "mavsdk_mission_planner_sample.txt", "mavsdk_qgroundcontrol_sample.plan",
          "mavsdk_qgroundcontrol_sample_with_structured_scan.plan", "mavsdk_qgroundcontrol_sample_with_survey.plan",
          "qgc_test_simple_square.plan"]
-needs_missions = pytest.mark.skipif(not MISSIONS.is_dir(),
-                                    reason=f"sample missions not found at {MISSIONS} (set AERODAAS_DATA_DIR)")
+needs_missions = needs_path(MISSIONS, reason="the sample missions of the shared data (set AERODAAS_DATA_DIR)")
 
 
 def _mission_files() -> list[str]:

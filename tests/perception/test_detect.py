@@ -1,7 +1,7 @@
 """Tests for aerodaas.perception.detect: model resolution and the YOLOX / NanoDet detectors on real aerial photos.
 
 Data: ``$AERODAAS_DATA_DIR`` (default ``<repo>/../shared/data``), see its MANIFEST.md. Tests needing the data are
-skipped with a reason when it is absent.
+skipped with a reason when it is absent, and fail when ``CI`` is set (tests/conftest.py skip_or_fail).
 """
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-cv2 = pytest.importorskip("cv2")
-pytest.importorskip("onnxruntime")
+import cv2
 
-from aerodaas.perception import detect as D  # noqa: E402
-from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, make_detector  # noqa: E402
-from aerodaas.perception.model_files import MODELS, ModelChecksumError, ModelNotFoundError, resolve_model  # noqa: E402
+from aerodaas.perception import detect as D
+from aerodaas.perception.detect import NanoDetDetector, YoloxDetector, make_detector
+from aerodaas.perception.model_files import MODELS, ModelChecksumError, ModelNotFoundError, resolve_model
+from tests.conftest import skip_or_fail
 
 DATA_DIR = Path(os.environ.get("AERODAAS_DATA_DIR", Path(__file__).parents[2] / "../shared/data")).resolve()
 MODELS_DIR = DATA_DIR / "models"
@@ -28,7 +28,7 @@ BRIGHTON = DATA_DIR / "imagery" / "brighton_beach"
 
 def _need(path: Path) -> Path:
     if not path.exists():
-        pytest.skip(f"shared data not found: {path} (set AERODAAS_DATA_DIR to the shared data folder)")
+        skip_or_fail(f"shared data not found: {path} (set AERODAAS_DATA_DIR to the shared data folder)")
     return path
 
 

@@ -40,7 +40,7 @@ def _contract_model(path, contract: str, seed: int = 0) -> None:
     """A small ONNX model with the input/output contract of ``contract`` ("yolox_nano": ``images`` (N, 3, 416, 416)
     -> ``output`` (N, 3549, 85), sigmoid; "nanodet_plus_m_416": per stride 8/16/32 scores (N, HW, 80), sigmoid, and
     box distributions (N, HW, 32)) and a dynamic batch N: one strided convolution per stride."""
-    onnx = pytest.importorskip("onnx")
+    import onnx  # the test extra (pyproject), installed by the README and CI
     from onnx import TensorProto, helper, numpy_helper
 
     rng = np.random.default_rng(seed)
@@ -80,7 +80,7 @@ def _contract_model(path, contract: str, seed: int = 0) -> None:
 def _dynamic_yolox_copy(path) -> None:
     """The shipped YOLOX-Nano with a dynamic batch: input dim 0 named ``N`` and every Reshape target starting with 1
     made to start with 0 (ONNX Reshape: 0 copies that dimension of the input, here the batch)."""
-    onnx = pytest.importorskip("onnx")
+    import onnx  # the test extra (pyproject), installed by the README and CI
     from onnx import numpy_helper
 
     m = onnx.load(str(MODEL_DIR / "yolox_nano.onnx"))

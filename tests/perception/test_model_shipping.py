@@ -10,14 +10,11 @@ import shutil
 import numpy as np
 import pytest
 
-pytest.importorskip("onnxruntime")
+from aerodaas.analytics.core import ObjectDetector
+from aerodaas.perception.model_files import MODELS, ModelNotFoundError, ShippedModel
+from tests.conftest import MODEL_DIR, needs_path
 
-from aerodaas.analytics.core import ObjectDetector  # noqa: E402
-from aerodaas.perception.model_files import MODELS, ModelNotFoundError, ShippedModel  # noqa: E402
-from tests.conftest import MODEL_DIR  # noqa: E402
-
-needs_model = pytest.mark.skipif(not (MODEL_DIR / "yolox_nano.onnx").is_file(),
-                                 reason=f"yolox_nano.onnx not found in {MODEL_DIR} (set AERODAAS_MODEL_DIR)")
+needs_model = needs_path(MODEL_DIR / "yolox_nano.onnx", reason="the shipped detector model (set AERODAAS_MODEL_DIR)")
 
 
 @pytest.fixture

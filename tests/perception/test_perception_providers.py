@@ -62,7 +62,7 @@ def test_provider_settings_fail_where_the_app_writes_them():
 
 
 def _tiny_model(tmp_path: Path) -> str:
-    onnx = pytest.importorskip("onnx")
+    import onnx  # the test extra (pyproject), installed by the README and CI
     from onnx import TensorProto, helper
 
     x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3])

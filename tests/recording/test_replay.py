@@ -15,10 +15,10 @@ from aerodaas.backends.replay import McapCameraReplay
 from aerodaas.config import ConfigError, RobotConfig, ReplayConfig, SensorConfig, parse_environment_config
 from aerodaas.recording.writer import McapRecorder
 
-from tests.conftest import DATA_DIR
+from tests.conftest import DATA_DIR, needs_path
 
 TLOG = DATA_DIR / "tlogs" / "thayer_rural.tlog"
-needs_tlog = pytest.mark.skipif(not TLOG.is_file(), reason=f"{TLOG} not found (set AERODAAS_DATA_DIR)")
+needs_tlog = needs_path(TLOG, reason="the flight log of the shared data (set AERODAAS_DATA_DIR)")
 RATE = 100.0
 
 

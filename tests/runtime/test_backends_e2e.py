@@ -15,7 +15,7 @@ from aerodaas.backends import NotNavigable
 from aerodaas.config import parse_environment_config
 from aerodaas.recording.metrics import load_run
 
-from tests.conftest import DATA_DIR, needs_data
+from tests.conftest import DATA_DIR, needs_data, needs_path
 from aerodaas.emulators import free_udp_port
 
 TLOG = DATA_DIR / "tlogs" / "thayer_rural.tlog"
@@ -43,7 +43,7 @@ def _assert_flight_phases(run: dict) -> None:
     assert idx == sorted(idx), states
 
 
-@pytest.mark.skipif(not TLOG.is_file(), reason=f"{TLOG} not found (set AERODAAS_DATA_DIR)")
+@needs_path(TLOG, reason="the PX4 flight log of the shared data (set AERODAAS_DATA_DIR)")
 def test_a_replayed_px4_log_drives_the_stat_stream_odometry_and_events(ray_session, run_options, tmp_path):
     cfg = {"name": "replay", "robots": [{"id": "px4", "backend": "replay",
                                          "replay": {"log": str(TLOG), "rate": 60},

@@ -201,6 +201,65 @@ def test_docs_are_off_and_behind_the_token_when_on(api):
         srv.stop()
 
 
+#: routes of the HITL app meant to answer without the token: none (docs and the OpenAPI schema are off by default,
+#: and behind the token with ``hitl.docs: true``: aerodaas/tools/hitl.py ``_build_app``). A route added here is public.
+PUBLIC_ROUTES: frozenset[tuple[str, str]] = frozenset()
+#: a body each guarded POST route would accept with the token (so a route that forgot the token answers 200, not
+#: 422); a route not listed gets ``{}``
+VALID_BODIES = {"/drones/{robot_id}/waypoints": wp_body({"x": -3, "y": -3, "z": 2}),
+                "/drones/{robot_id}/clear": b'{"scope": "all"}'}
+
+
+def _route_table(app) -> list[tuple[str, str]]:
+    """(method, path template) of every route of the FastAPI ``app`` (its own table, ``app.routes``: a route added
+    later is in it), HEAD and OPTIONS aside (Starlette answers them for the GET routes)."""
+    out = []
+    for r in app.routes:
+        for m in sorted(getattr(r, "methods", None) or ()):
+            if m not in ("HEAD", "OPTIONS"):
+                out.append((m, r.path))
+    return out
+
+
+@pytest.mark.parametrize("docs", [False, True], ids=["docs_off", "docs_on"])
+def test_every_route_in_the_app_is_401_without_the_token(api, docs):
+    """Every route of the app's own route table (:func:`_route_table`, with and without ``hitl.docs``), but the
+    :data:`PUBLIC_ROUTES`, answers 401 with ``WWW-Authenticate: Bearer`` without a token, with a wrong one and with
+    another scheme, and changes nothing (the scheduler's queue, the drone's pause); with the token the same request
+    is not 401 (the control: the request itself is one the route takes)."""
+    srv = api.srv if not docs else HitlServer({"d1": api.srv.drones["d1"]}, port=0, token=TOKEN, docs=True,
+                                             get=_get).start()
+    try:
+        c = SimpleNamespace(srv=srv)
+        table = _route_table(srv.app)
+        assert ("POST", "/drones/{robot_id}/pause") in table and (("GET", "/docs") in table) == docs, table
+        for method, template in table:
+            if (method, template) in PUBLIC_ROUTES:
+                continue
+            path = template.replace("{robot_id}", "d1")
+            assert "{" not in path, f"{template}: fill its path parameter in this test"
+            body = VALID_BODIES.get(template, b"{}") if method in ("POST", "PUT", "PATCH") else None
+            for token, headers in ((None, {}), ("wrong" * 5, {}), (None, {"Authorization": f"Basic {TOKEN}"})):
+                before = state(api)
+                c2 = http.client.HTTPConnection("127.0.0.1", srv.port, timeout=30)
+                h = {"Content-Type": "application/json", **headers}
+                if token is not None:
+                    h["Authorization"] = f"Bearer {token}"
+                c2.request(method, path, body=body, headers=h)
+                r = c2.getresponse()
+                r.read()
+                c2.close()
+                assert r.status == 401 and r.getheader("WWW-Authenticate") == "Bearer", (method, template, r.status)
+                assert state(api) == before, (method, template)
+            status, reply = send(c, method, path, body)
+            assert status != 401, (method, template, status, reply)
+            api.sched.clear_navigation()
+            api.drone.paused = False
+    finally:
+        if docs:
+            srv.stop()
+
+
 # ------------------------------------------------------------------------------------------------ fuzzing
 json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-10**20, 10**20),
                       st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=30))

@@ -6,7 +6,10 @@ link signed (``mavlink.signing_key_file``, the emulator holding the same key), t
 file), the live view with a token (generated, read over WSS by a protocol client; both servers bound off loopback
 with a certificate made here, whose private key is a secret too) and Ray's token authentication (``RAY_AUTH_MODE=token``, the token in a file named by ``RAY_AUTH_TOKEN_PATH``). Afterwards every file
 the run wrote (the recording and its sidecars, the captured console, the clients' output, the Ray session directory
-of the run: its logs) is searched for each secret, as bytes and in the encodings a leak would take (hex, base64). The
+of the run: its logs) is searched for each secret, as bytes and in the encodings a leak would take (hex, base64);
+every MCAP file also record by record, decompressed by the ``mcap`` package's reader (its chunks are zstd-compressed,
+so a secret inside a message is not in the file's bytes): every message, attachment, metadata record, channel and
+schema. The
 inputs (the app, the environment file, the key file, Ray's token file) and the owner-only state files are the only
 places a secret may be; the state files must be mode 0600."""
 from __future__ import annotations
@@ -42,6 +45,41 @@ def _forms(secret: bytes) -> list[bytes]:
     """The ways a leaked secret shows in a file: itself, hex (both cases), base64 and base64url."""
     return [secret, secret.hex().encode(), secret.hex().upper().encode(), base64.b64encode(secret).rstrip(b"="),
             base64.urlsafe_b64encode(secret).rstrip(b"=")]
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _mcap_records(path: Path) -> list[tuple[str, bytes]]:
+    """(what, bytes) of every record of the MCAP file ``path``, decompressed, read with the ``mcap`` package: each
+    message's data, each attachment (name, media type, data), each metadata record (name, keys, values), and each
+    channel (topic, encoding, metadata) and schema (name, encoding, data) of the summary and of the messages."""
+    from mcap.reader import make_reader
+
+    out: list[tuple[str, bytes]] = []
+    channels, schemas = {}, {}
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        if summary is not None:
+            channels.update(summary.channels)
+            schemas.update(summary.schemas)
+        for schema, channel, message in reader.iter_messages():
+            out.append((f"message on {channel.topic}", bytes(message.data)))
+            channels[channel.id] = channel
+            if schema is not None:
+                schemas[schema.id] = schema
+        for a in reader.iter_attachments():
+            out.append((f"attachment {a.name!r}", a.name.encode() + b"\n" + a.media_type.encode() + b"\n" + bytes(a.data)))
+        for m in reader.iter_metadata():
+            out.append((f"metadata {m.name!r}",
+                        "\n".join([m.name, *(f"{k}={v}" for k, v in m.metadata.items())]).encode()))
+    for c in channels.values():
+        out.append((f"channel {c.topic}", "\n".join([c.topic, c.message_encoding,
+                                                     *(f"{k}={v}" for k, v in c.metadata.items())]).encode()))
+    for sc in schemas.values():
+        out.append((f"schema {sc.name}", sc.name.encode() + b"\n" + sc.encoding.encode() + b"\n" + bytes(sc.data)))
+    return out
 
 
 def _wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 240) -> bool:
@@ -122,17 +160,22 @@ def test_no_secret_in_the_recording_the_console_or_rays_logs(tmp_path):
     sessions = [d for d in (ray_tmp / "ray").glob("session_*") if d.is_dir() and not d.is_symlink()]
     assert len(sessions) == 1 and any(f.suffix in (".out", ".err", ".log") for f in written), written[:20]
     assert any(f.name.startswith("run") and f.suffix == ".mcap" for f in written)
+    contents: list[tuple[str, bytes]] = []  # (where, bytes) of every file, and of every record of each MCAP file
+    for f in written:
+        try:
+            data = f.read_bytes()
+        except OSError:
+            continue  # a socket or a file that went away
+        contents.append((str(f), data))
+        if data.startswith(MCAP_MAGIC):
+            contents += [(f"{f}: {what}", rec) for what, rec in _mcap_records(f)]
+    messages = [w for w, _ in contents if ": message on " in w]
+    assert any("/d1/pose" in w for w in messages) and any("/d1/events" in w for w in messages), messages[:20]
     found = []
     pem_body = b"".join(tls_key.read_bytes().splitlines()[1:-1])
     for name, secret in (("signing key", key), ("TLS private key", base64.b64decode(pem_body)),
                          ("HITL token", hitl_token.encode()), ("live view token", live_token.encode()),
                          ("Ray token", ray_token.encode())):
         forms = _forms(secret)
-        for f in written:
-            try:
-                data = f.read_bytes()
-            except OSError:
-                continue  # a socket or a file that went away
-            if any(x in data for x in forms):
-                found.append((name, str(f)))
+        found += [(name, where) for where, data in contents if any(x in data for x in forms)]
     assert found == [], found
