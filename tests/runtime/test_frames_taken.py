@@ -13,6 +13,8 @@ import pytest
 from mcap.reader import make_reader
 
 from aerodaas import Analytics, Environment
+from aerodaas.actors.camera import CameraComponent
+from aerodaas.backends.base import PoseSample
 from aerodaas.bench.fleet import fleet_config
 from aerodaas.config import parse_environment_config
 from aerodaas.runtime.report import format_summary
@@ -147,3 +149,51 @@ def test_a_record_fps_above_fps_or_not_a_rate_is_refused_naming_it(rate, said):
         _env([_camera("cam", record_fps=rate)])
     assert "properties.record_fps" in str(e.value) and said in str(e.value), str(e.value)
     assert "'d00'" in str(e.value) and "'cam'" in str(e.value), str(e.value)
+
+
+class _Plane:
+    """A data plane that keeps the captures submitted to its pool (their ``record`` flag last) and has ``routes``."""
+
+    def __init__(self, routes: dict) -> None:
+        self.routes, self.submitted = routes, []
+
+    def submit(self, fn, *args) -> None:
+        self.submitted.append(args)
+
+
+class _Recorder:
+    def camera(self, *args) -> None:
+        pass
+
+
+def _ticks(plane: _Plane, late_at: int | None = None) -> CameraComponent:
+    """100 due ticks of a 10 FPS camera recorded at 3 frames/s, each capture finishing before the next tick; the
+    clock late at tick ``late_at``."""
+    cam = CameraComponent(plane, "d/cam", "d", "cam", {"width": 16, "height": 12, "hfov_deg": 78, "fps": 10,
+                                                       "pitch_deg": 90, "record_fps": 3}, None, None, _Recorder(), 0)
+    for k in range(100):
+        t = 0.05 + k / 10
+        cam.try_capture(PoseSample(t, (0.0, 0.0, 10.0), 0.0), t, None, clock_late=k == late_at)
+        if cam._busy.locked():
+            cam._busy.release()  # the capture ran
+    return cam
+
+
+def test_the_recorders_frames_are_the_ones_made_when_nothing_else_takes_the_camera():
+    """Over 9.9 s of ticks at 10 FPS: only the recorder's 30 frames (3/s) are made, the other 70 not; with a consumer
+    routed from the camera all 100 are made and 30 of them are the recorder's. A due frame of the recorder shed for a
+    late clock is made at the next tick (it counts as dropped, the tick after it is not a frame not made)."""
+    alone = _Plane({})
+    cam = _ticks(alone)
+    assert (len(alone.submitted), cam.ticks, cam.frames_not_made, cam.dropped_at_camera) == (30, 30, 70, 0)
+    assert all(a[-1] for a in alone.submitted)
+    times = [a[2] for a in alone.submitted]
+    assert all(abs((b - a) - 1 / 3) < 0.1 for a, b in zip(times, times[1:])), times  # one frame every 1/3 s
+    taken = _Plane({"d/cam": [("count", "in", 1, None)]})
+    cam = _ticks(taken)
+    assert (len(taken.submitted), cam.ticks, cam.frames_not_made) == (100, 100, 0)
+    assert sum(a[-1] for a in taken.submitted) == 30
+    late = _Plane({})
+    cam = _ticks(late, late_at=10)  # t = 1.05 s: a frame of the recorder's (its instants 0.05, 0.383, 0.717, 1.05)
+    assert (cam.dropped_at_camera, cam.shed_late, cam.ticks - cam.dropped_at_camera) == (1, 1, 30)
+    assert [a[2] for a in late.submitted][3] == pytest.approx(1.15)
