@@ -44,7 +44,7 @@ class CameraComponent:
     A frame is made only when something takes it: a consumer routed from the camera (an analytics, a trajectory
     scheduler's priority port) takes every due frame (``fps``); the recorder (the file and the live view) takes
     those at ``properties.record_fps`` (frames/s of vehicle time, default ``fps``; 0: none), the due frame nearest
-    each of its instants :attr:`record_period` apart. A pulled camera whose only taker is the recorder therefore
+    each of its instants, 1 / ``record_fps`` s apart (:meth:`_record_due`). A pulled camera whose only taker is the recorder therefore
     renders at ``record_fps``; its due frames nobody takes are not made, counted in ``frames_not_made`` (never in
     ``dropped_at_camera``). Frames made for a consumer but not at the recorder's rate are counted in
     ``record_skipped``. A camera without a recorder and without a route (built outside a run's plan, read with
