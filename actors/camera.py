@@ -39,7 +39,16 @@ class CameraComponent:
     read-only, and publishes it. While the previous capture is still being rendered a new one is skipped and
     counted (``dropped_at_camera``). A live source's frame (a video stream: RTSP, RTP/UDP, ...) is captured when it
     arrives, the clock's ticks giving the poses it is tagged with (:meth:`try_capture`). Frames go to the recorder
-    by reference."""
+    by reference.
+
+    A frame is made only when something takes it: a consumer routed from the camera (an analytics, a trajectory
+    scheduler's priority port) takes every due frame (``fps``); the recorder (the file and the live view) takes
+    those at ``properties.record_fps`` (frames/s of vehicle time, default ``fps``; 0: none), the due frame nearest
+    each of its instants, 1 / ``record_fps`` s apart (:meth:`_record_due`). A pulled camera whose only taker is the recorder therefore
+    renders at ``record_fps``; its due frames nobody takes are not made, counted in ``frames_not_made`` (never in
+    ``dropped_at_camera``). Frames made for a consumer but not at the recorder's rate are counted in
+    ``record_skipped``. A camera without a recorder and without a route (built outside a run's plan, read with
+    :meth:`get_latest` or :meth:`capture`) makes every due frame."""
 
     kind = "camera"
 
@@ -51,6 +60,13 @@ class CameraComponent:
         self.pitch = float(props["pitch_deg"])
         self.source = props.get("source", "sim")
         self.fps = float(props["fps"])
+        rate = props.get("record_fps")
+        #: frames/s of vehicle time the recorder takes (``properties.record_fps``, at most ``fps``; 0: none)
+        self.record_fps = self.fps if rate is None else min(float(rate), self.fps)
+        self._every_frame_recorded = self.record_fps >= self.fps
+        self._frame_period = 1.0 / self.fps  # the configured one (a stream camera's clock ticks twice as fast)
+        #: run time (s) of the recorder's next frame (None: its first frame is the next one made)
+        self._next_record_t: float | None = None
         self.world, self.backend = world, backend
         self.recorder = recorder
         self.topic = f"/{robot_id}/camera/{sensor_id}"
@@ -62,6 +78,8 @@ class CameraComponent:
         self.dropped_at_camera = 0
         self.shed_late = 0  # of those, frames not rendered because the actor's clock was late (try_capture)
         self.not_recorded = 0  # frames the recorder refused (its queue full)
+        self.frames_not_made = 0  # due frames nobody takes: not rendered (see the class docstring)
+        self.record_skipped = 0  # frames made for a consumer that the recorder does not take (record_fps)
         #: the last frames' render time and capture dispatch delay (clock tick -> render start on the pool), ms
         self.render_ms: deque[float] = deque(maxlen=4096)
         self.dispatch_ms: deque[float] = deque(maxlen=4096)
@@ -126,13 +144,20 @@ class CameraComponent:
         stale, and rendering it would take CPU from the control ticks the clock is catching up on; counted in
         ``shed_late`` too); either way counted in ``dropped_at_camera``. A stream camera keeps the pose sample and
         the gimbal here and captures only a frame that is waiting (one that arrived while the previous capture ran);
-        the others are captured on arrival, late or not (the vehicle's own camera sent them)."""
+        the others are captured on arrival, late or not (the vehicle's own camera sent them).
+
+        A pulled camera's due frame that nobody takes (no consumer, and not one the recorder takes at
+        ``record_fps``: :meth:`_record_due`) is not made: counted in ``frames_not_made``, not in ``ticks``."""
         self._keep_pose(pose)
         position, yaw = pose.position, pose.yaw_deg
         if self.stream is not None:
             self._last_gimbal = self._gimbal(t)
             self._note_tick(t)
             return self.stream.waiting() and self._submit_stream_capture()
+        record = self._record_due(t)
+        if not record and not self._consumed():
+            self.frames_not_made += 1
+            return False
         self.ticks += 1
         if clock_late:
             self.dropped_at_camera += 1
@@ -143,8 +168,40 @@ class CameraComponent:
             return False
         if tok is not None:
             tok.add()
-        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter(), self._gimbal(t))
+        if record:
+            self._record_taken(t)
+        self.plane.submit(self._capture, position, yaw, t, self.ticks, tok, time.perf_counter(), self._gimbal(t),
+                          record)
         return True
+
+    def _consumed(self) -> bool:
+        """Whether a consumer takes every frame this camera makes: a route from it that carries its robot's items
+        (an analytics, a trajectory scheduler's priority port), or, without a recorder or routes (a camera built
+        outside a run's plan), whoever reads it (:meth:`get_latest`)."""
+        routes = getattr(self.plane, "routes", None)
+        if self.recorder is None or routes is None:
+            return True
+        return any(len(r) < 4 or r[3] is None or self.robot_id in r[3] for r in routes.get(self.cid, ()))
+
+    def _record_due(self, t: float) -> bool:
+        """Whether the recorder takes a frame captured at run time ``t`` (s): every one when ``record_fps`` is
+        ``fps``, none without a recorder or with ``record_fps`` 0, else the first frame, then the one nearest each
+        instant one record period (1 / ``record_fps`` s) after the previous recorded one's instant (within half a
+        frame period of it)."""
+        if self.recorder is None or self.record_fps <= 0.0:
+            return False
+        if self._every_frame_recorded:
+            return True
+        nxt = self._next_record_t
+        return nxt is None or t + 0.5 * self._frame_period >= nxt
+
+    def _record_taken(self, t: float) -> None:
+        """The recorder takes the frame at run time ``t`` (s): its next instant is one record period on (from ``t``
+        after a jump of the clock of more than a period, so that it does not burst)."""
+        if self._every_frame_recorded:
+            return
+        period, nxt = 1.0 / self.record_fps, self._next_record_t
+        self._next_record_t = t + period if nxt is None or t > nxt + period else nxt + period
 
     def halt(self) -> None:
         """The drone's mission is over (the clock calls no more :meth:`try_capture`): stream frames that arrive from
@@ -222,12 +279,12 @@ class CameraComponent:
                                    q=quaternion_from_euler(roll, pitch, yaw))
 
     def _capture(self, position: tuple, yaw: float, t: float, seq: int, tok: Cascade | None, ticked: float,
-                 gimbal: Any = None) -> None:
+                 gimbal: Any = None, record: bool | None = None) -> None:
         dispatch_ms = (time.perf_counter() - ticked) * 1e3
         self.dispatch_ms.append(dispatch_ms)
         try:
             try:
-                msg = self._produce(position, yaw, t, seq, dispatch_ms, gimbal)
+                msg = self._produce(position, yaw, t, seq, dispatch_ms, gimbal, record)
             finally:
                 self._busy.release()  # the next frame may be rendered while this one travels downstream
             if self.stream is not None and not self._halted and self.stream.waiting():
@@ -243,18 +300,22 @@ class CameraComponent:
         new frame)."""
         self._keep_pose(PoseSample(t, tuple(position), float(yaw)))
         self._note_tick(t)
-        msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal(t))
+        record = self._record_due(t)
+        if record:
+            self._record_taken(t)
+        msg = self._produce(position, yaw, t, seq, 0.0, self._gimbal(t), record)
         if msg is None:
             return None
         self.plane.publish(self.cid, [msg], tok, inline=True)
         return msg.data
 
     def _produce(self, position: tuple, yaw: float, t: float, seq: int,
-                 dispatch_ms: float = 0.0, gimbal: Any = None) -> FrameMsg | None:
+                 dispatch_ms: float = 0.0, gimbal: Any = None, record: bool | None = None) -> FrameMsg | None:
         """Render (or fetch) the frame, make it read-only, record it; returns its message. ``dispatch_ms``: how long
         the capture waited for a pool thread after the clock's tick (it joins the frame's trace: the honest tail of
         ``aerodaas bench overhead`` counts it frame by frame); ``gimbal``: the gimbal's attitude at the tick (the
-        camera's heading and pitch then come from it) or None (the configured mount ``pitch_deg``)."""
+        camera's heading and pitch then come from it) or None (the configured mount ``pitch_deg``); ``record``:
+        whether the recorder takes its image (None: decided here at its capture time, a stream frame's)."""
         t0 = time.perf_counter()
         pose = self._frame_pose(position, yaw, gimbal)
         truth: list = []
@@ -266,6 +327,10 @@ class CameraComponent:
                 return None
             frame, pose, timing = got
             t = timing["capture_t"]
+            if record is None:
+                record = self._record_due(t)
+                if record:
+                    self._record_taken(t)
             gimbal = self._gimbal_at(t, gimbal)  # the gimbal's attitude at the frame's capture, as its position
             pose = self._frame_pose(pose.position, pose.yaw, gimbal)
         else:  # a pulled source (a live one not opened yet has no frame)
@@ -290,7 +355,9 @@ class CameraComponent:
         self.latest = (frame, meta)
         if self.recorder is not None:  # by reference; encoded by the recorder's thread
             t_ns = self.epoch_ns + int(t * 1e9)
-            if not self.recorder.image(self.topic, t_ns, frame, f"{self.robot_id}/{self.sensor_id}"):
+            if record is False:  # made for a consumer, not at the recorder's rate (record_fps)
+                self.record_skipped += 1
+            elif not self.recorder.image(self.topic, t_ns, frame, f"{self.robot_id}/{self.sensor_id}"):
                 self.not_recorded += 1  # the recorder's bounded queue was full: counted, never silent
             if truth:
                 self.recorder.json("/world/targets", t_ns, {"robot": self.robot_id, "seq": seq, "t": t,
@@ -379,7 +446,8 @@ class CameraComponent:
         r = np.array(self.render_ms or [0.0])
         q = np.array(self.dispatch_ms or [0.0])
         return {"frames": self.frames, "ticks": self.ticks, "dropped_at_camera": self.dropped_at_camera,
-                "shed_late": self.shed_late,
+                "shed_late": self.shed_late, "frames_not_made": self.frames_not_made,
+                "record_fps": self.record_fps, "record_skipped": self.record_skipped,
                 "render_ms_median": float(np.median(r)),
                 "dispatch_ms_median": float(np.median(q)), "dispatch_ms_p99": float(np.percentile(q, 99)),
                 "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,

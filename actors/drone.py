@@ -284,6 +284,7 @@ class DroneComponent:
                 "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "frames_shed_late": sum(c["comp"].shed_late for c in self.cameras),
+                "frames_not_made": sum(c["comp"].frames_not_made for c in self.cameras),
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
                 "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
 

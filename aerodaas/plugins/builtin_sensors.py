@@ -42,7 +42,8 @@ _Text = Field(default=None, min_length=1, strict=True)
 class CameraProperties(SensorPropertiesBase):
     """A camera's ``properties`` (see :class:`aerodaas.config.SensorConfig` for ``source``): ``width``/``height``
     pixels [1, 8192], ``hfov_deg`` (0, 180), ``fps`` (0, 240], ``pitch_deg`` (0, 90] (90 = nadir),
-    ``jpeg_quality`` [1, 100]; a video stream's ``transport``/``codec`` and timeouts in seconds,
+    ``jpeg_quality`` [1, 100], ``record_fps`` [0, ``fps``] (the frames per second of vehicle time the recording and
+    the live view take, default ``fps``; 0: none; a camera nothing else takes renders only those); a video stream's ``transport``/``codec`` and timeouts in seconds,
     ``first_frame_timeout_s`` (0, 600], ``stall_timeout_s`` (0, 60]; with ``source: "mavlink"`` (the stream the
     vehicle announces, docs/video.md) ``camera_component`` [1, 255] (MAVLink component id; default the first camera
     found), ``stream_id`` [1, 255] (default the lowest-numbered) and ``discovery_timeout_s`` (0, 120] (default 10)."""
@@ -53,6 +54,9 @@ class CameraProperties(SensorPropertiesBase):
     fps: float = Field(default=15.0, gt=0.0, le=MAX_CAMERA_FPS, strict=True, description="frames per second")
     pitch_deg: float = Field(default=90.0, gt=0.0, le=90.0, strict=True, description="degrees below the horizon")
     jpeg_quality: int = Field(default=80, ge=1, le=100, strict=True)
+    record_fps: float | None = Field(default=None, ge=0.0, le=MAX_CAMERA_FPS, strict=True,
+                                     description="frames per second the recording and the live view take, at most fps "
+                                     "(0: none); unset: fps")
     source: str = Field(default="sim", min_length=1, strict=True)
     mcap: str | None = _Text
     topic: str | None = _Text
@@ -66,10 +70,13 @@ class CameraProperties(SensorPropertiesBase):
 
     @model_validator(mode="after")
     def _check_source(self) -> "CameraProperties":
-        """The properties against the frame source ``source`` selects (:func:`aerodaas.plugins.frames.
+        """``record_fps`` against ``fps``, then the properties against the frame source ``source`` selects (:func:`aerodaas.plugins.frames.
         frame_source_class`): a built-in property set that the source does not use is refused, naming it; then the
         source's own checks (for a source with properties of its own, :meth:`CameraSensor.validate_properties`
         runs them with those)."""
+        if self.record_fps is not None and self.record_fps > self.fps:
+            raise ValueError(f"properties.record_fps must be at most properties.fps ({self.fps:g}), "
+                             f"got {self.record_fps!r}")
         src = self.source
         cls = frame_source_class(src)
         for k in _USED_WITH:

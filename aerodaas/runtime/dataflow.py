@@ -456,7 +456,9 @@ def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: di
             scls = sensor_class(s.type)
             cid = ComponentId.sensor(r.id, s.id, scls.component_kind)
             subs = consumers(s.get_data_stream(), r.id)
-            if issubclass(scls, FrameSensor) and (s.get_data_stream().subscribers or recorded):
+            # a camera is made when something takes its frames: a subscriber, or the recorder (record_fps 0: never)
+            if issubclass(scls, FrameSensor) and (s.get_data_stream().subscribers
+                                                  or (recorded and s.cfg.properties.get("record_fps") != 0)):
                 cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties), scls.frame_source(s.cfg.properties)))
                 ids["cameras"][s.id] = cid
             elif issubclass(scls, VehicleStateSensor) and subs:

@@ -115,7 +115,8 @@ def _robot_lines(rid: str, rep: dict) -> list[str]:
 
 
 def _camera_lines(st: dict, rep: dict) -> list[str]:
-    """A robot's cameras: frames, drops, a video stream's decoding and outages, consumers whose actor died."""
+    """A robot's cameras: frames, those never made because nothing took them (``record_fps``), drops, frames the
+    recorder did not take at its rate, a video stream's decoding and outages, consumers whose actor died."""
     lines = []
     for sid, c in st.get("cameras", {}).items():
         if not c:
@@ -125,11 +126,14 @@ def _camera_lines(st: dict, rep: dict) -> list[str]:
             lines.append(f"    camera {sid}: {c['frames']} frames from its video stream, {dropped} dropped by "
                          f"busy consumers")
         else:
-            shed = c.get("shed_late", 0)
+            shed, not_made, skipped = c.get("shed_late", 0), c.get("frames_not_made", 0), c.get("record_skipped", 0)
             lines.append(f"    camera {sid}: {c['frames']} frames rendered ({c['render_ms_median']:.1f} ms median), "
-                         f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera"
+                         + (f"{not_made} not made (nothing took them: record_fps {c.get('record_fps', 0):g}), "
+                            if not_made else "")
+                         + f"{rep.get('frames_dropped_at_camera', 0)} dropped at the camera"
                          + (f" ({shed} while the clock was late)" if shed else "")
-                         + f", {dropped} dropped by busy consumers")
+                         + f", {dropped} dropped by busy consumers"
+                         + (f", {skipped} not recorded (record_fps {c.get('record_fps', 0):g})" if skipped else ""))
         v = c.get("video")
         if v:  # a video stream: what was decoded, what newest-wins replaced, outages, capture-to-hand-off time
             lines.append(f"      video {v['source']}: {v['decoded']} decoded, {v['overwritten']} replaced by a newer "
