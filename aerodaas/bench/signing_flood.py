@@ -23,7 +23,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from aerodaas.backends import make_backend
 from aerodaas.config import MavlinkConfig, RobotConfig
-from aerodaas.emulators.mavlink_vehicle import MavlinkVehicleEmulator
+from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
 __all__ = ["FloodSource", "SignedTelemetryTap", "flood_run"]
 
