@@ -68,9 +68,10 @@ def _healthy(url: str) -> bool:
         return False
 
 
-def start(base: Path, timeout: float = START_TIMEOUT_S) -> LabelStudioServer:
+def start(base: Path, timeout: float = START_TIMEOUT_S, password: str | None = None) -> LabelStudioServer:
     """Start Label Studio with its data in ``base/data`` and its document root ``base/root``; wait (at most
-    ``timeout`` seconds) until ``/health`` answers. Raises RuntimeError naming the log's tail if it does not."""
+    ``timeout`` seconds) until ``/health`` answers. ``password``: the user's (default: a random one, for a server
+    only the API uses). Raises RuntimeError naming the log's tail if it does not."""
     exe = VENV / "bin" / "label-studio"
     if not exe.is_file():
         raise FileNotFoundError(f"no Label Studio at {exe} (run tests/install-rig.sh)")
@@ -81,7 +82,7 @@ def start(base: Path, timeout: float = START_TIMEOUT_S) -> LabelStudioServer:
     with open(log, "wb") as out:
         proc = subprocess.Popen([str(exe), "start", "--no-browser", "--internal-host", "127.0.0.1",
                                  "--port", str(_free_port()), "--username", "reviewer@example.test",
-                                 "--password", secrets.token_hex(12), "--user-token", token,
+                                 "--password", password or secrets.token_hex(12), "--user-token", token,
                                  "--enable-legacy-api-token"],
                                 cwd=base, env=_env(base, root), stdout=out, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, start_new_session=True)
