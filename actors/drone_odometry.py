@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from aerodaas.config.robot import sensor_class
-from aerodaas.plugins.sensor import VehicleStateSensor
+from aerodaas.plugins.sensor import Delivery
 from aerodaas.protocol.messages import OdometryMsg
 
 
@@ -34,7 +34,7 @@ class OdometryPublisher:
         """The ``rate_hz`` (Hz) of the robot's odometry sensor, default 10."""
         rate = 10.0
         for s in robot_cfg.sensors:
-            if issubclass(sensor_class(s.type), VehicleStateSensor):
+            if sensor_class(s.type).delivery is Delivery.VEHICLE_STATE:
                 rate = float(s.properties.get("rate_hz", 10.0))
         return rate
 

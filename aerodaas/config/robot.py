@@ -13,7 +13,7 @@ from aerodaas.model.types import MAX_LOCAL_M, GeoPoint
 from aerodaas.model.ids import Identifier, RobotId, check_topic_name, check_unique
 from aerodaas.plugins import registry
 from aerodaas.plugins.builtin_sensors import StatStreamSensor
-from aerodaas.plugins.sensor import MissionStatusSensor
+from aerodaas.plugins.sensor import Delivery
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION
 from aerodaas.config.backends import (MavlinkConfig, ReplayConfig, TelloConfig, add_section_schemas,
                                       backend_settings_into_config)
@@ -163,9 +163,9 @@ def _known_sensor(type_: str) -> type | None:
     return cls if hasattr(cls, "validate_properties") else None
 
 
-def _is_subclass(cls: Any, base: type) -> bool:
-    """Whether ``cls`` is a class and a subclass of ``base`` (False for None: an unknown sensor type)."""
-    return isinstance(cls, type) and issubclass(cls, base)
+def _delivers(cls: Any, delivery: Delivery) -> bool:
+    """Whether sensor class ``cls`` delivers its data by ``delivery`` (False for None: an unknown sensor type)."""
+    return getattr(cls, "delivery", None) is delivery
 
 
 def check_sensor_properties(type_: str, properties: dict[str, Any]) -> dict[str, Any] | None:
@@ -363,7 +363,7 @@ class RobotConfig(_Cfg):
     @model_validator(mode="after")
     def _unique_sensors(self) -> "RobotConfig":
         check_unique([s.id for s in self.sensors], "sensors")
-        if not any(_is_subclass(_known_sensor(s.type), MissionStatusSensor) for s in self.sensors):
+        if not any(_delivers(_known_sensor(s.type), Delivery.MISSION_STATUS) for s in self.sensors):
             self.sensors.append(SensorConfig(id=StatStreamSensor.default_id, type=StatStreamSensor.name))
         lo, hi = HOME_ALT_RANGE_M
         if not lo <= self.home.alt <= hi:

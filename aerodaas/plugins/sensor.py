@@ -23,18 +23,54 @@ names a plug-in sensor type.
 The other ways a sensor's data is produced are contracts of their own, subclasses of :class:`ActorProducedSensor`
 (the drone's actor makes the data, not :meth:`SensorPlugin.sample`): :class:`FrameSensor` (frames of a frame
 source, :mod:`aerodaas.plugins.frames`, chosen by the sensor's properties), :class:`VehicleStateSensor` (the
-vehicle's odometry) and :class:`MissionStatusSensor` (the drone's mission status). The runtime wires a sensor by
-the contract its class is (``issubclass``), never by its type name.
+vehicle's odometry) and :class:`MissionStatusSensor` (the drone's mission status). Each contract names the
+component of the drone's actor that delivers its data by its :attr:`SensorPlugin.delivery` (a :class:`Delivery`);
+the runtime wires a sensor by asking that delivery (is it frames? is its component built without a subscriber?),
+never by testing the sensor's class or its type name.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from enum import Enum
 from typing import Any, Callable, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["SensorPlugin", "SensorPluginConfig", "SensorPropertiesBase", "ActorProducedSensor", "FrameSensor",
+__all__ = ["Delivery", "SensorPlugin", "SensorPluginConfig", "SensorPropertiesBase", "ActorProducedSensor", "FrameSensor",
            "VehicleStateSensor", "MissionStatusSensor"]
+
+
+class Delivery(Enum):
+    """The component of the drone's actor that delivers a sensor type's data (:attr:`SensorPlugin.delivery`), and
+    what the runtime needs to know of it. The value names it in ``aerodaas plan`` (text and ``--json``)."""
+
+    #: readings of :meth:`SensorPlugin.sample`, called at ``rate_hz`` (vehicle time) by the sensor's own component
+    SAMPLED = "sampled"
+    #: frames of the frame source the sensor's properties select (:meth:`FrameSensor.frame_source`), from a camera
+    CAMERA = "camera"
+    #: the vehicle's odometry, published by the drone
+    VEHICLE_STATE = "vehicle_state"
+    #: the drone's mission status (stat stream), published by the drone
+    MISSION_STATUS = "mission_status"
+
+    @property
+    def frames(self) -> bool:
+        """Whether the data are frames of a frame source (the sensor class has :meth:`FrameSensor.frame_source`)."""
+        return self is Delivery.CAMERA
+
+    @property
+    def sampled(self) -> bool:
+        """Whether the data are readings of :meth:`SensorPlugin.sample` (not produced by the drone's actor itself)."""
+        return self is Delivery.SAMPLED
+
+    def has_component(self, subscribed: bool, recorded: bool) -> bool:
+        """Whether a run builds this sensor's component in the drone's actor, given whether anything subscribes to
+        the sensor's stream and whether the run records: sampled readings always (they are recorded on the
+        sensor's own topic), frames when subscribed or recorded, the vehicle state and the mission status only when
+        subscribed (the drone records those itself)."""
+        if self is Delivery.SAMPLED:
+            return True
+        return subscribed or (recorded and self is Delivery.CAMERA)
 
 
 class SensorPropertiesBase(BaseModel):
@@ -62,6 +98,8 @@ class SensorPlugin(ABC):
     #: the token an analytics' ``consumes`` names what the drone's actor delivers for this type by ("frame",
     #: "odometry", "stat"); None for a sampled sensor, whose readings are its ``Message``
     delivered_token: ClassVar[str | None] = None
+    #: the component of the drone's actor that delivers the data (set by the contract a class subclasses)
+    delivery: ClassVar[Delivery] = Delivery.SAMPLED
     #: the kind of the sensor's component in the plan (:class:`aerodaas.protocol.ids.ComponentId`)
     component_kind: ClassVar[str] = "sensor"
     #: whether an environment-level sensor (``env_sensors[]``) may be of this type (not a robot's)
@@ -81,6 +119,9 @@ class SensorPlugin(ABC):
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)
+        if not isinstance(cls.delivery, Delivery):
+            raise TypeError(f"sensor class {cls.__module__}.{cls.__qualname__}: delivery must be a member of "
+                            f"aerodaas.plugins.sensor.Delivery, got {cls.delivery!r:.80}")
         if cls.Message is not None and "produces" not in cls.__dict__:
             cls.produces = (cls.Message,)
 
@@ -153,7 +194,15 @@ class SensorPlugin(ABC):
 
 class ActorProducedSensor(SensorPlugin):
     """Base of the sensor types whose data the drone's actor produces itself (frames, odometry, mission status),
-    not :meth:`sample`: declarations, never instantiated by the framework."""
+    not :meth:`sample`: declarations, never instantiated by the framework. A subclass is one of the contracts
+    below (or names a :class:`Delivery` other than ``SAMPLED``); one without raises TypeError when defined."""
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        if cls.delivery.sampled:
+            raise TypeError(f"sensor class {cls.__module__}.{cls.__qualname__}: the drone's actor produces its data, "
+                            f"so its delivery must name the component that does (a Delivery other than SAMPLED): "
+                            f"subclass FrameSensor, VehicleStateSensor or MissionStatusSensor")
 
     def sample(self, state: Any, t: float) -> BaseModel | dict | None:
         """Not used: raises TypeError (the drone's actor produces this sensor's data)."""
@@ -165,6 +214,7 @@ class FrameSensor(ActorProducedSensor):
     from the frame source its properties select (:meth:`frame_source`), published and recorded by the drone
     actor's camera component on ``/<robot>/camera/<id>`` (``foxglove.CompressedImage``)."""
 
+    delivery = Delivery.CAMERA
     delivered_token = "frame"
     component_kind = "camera"
     own_topic = False  # /<robot>/camera/<id>
@@ -188,6 +238,7 @@ class VehicleStateSensor(ActorProducedSensor):
     """The vehicle's odometry (an :class:`aerodaas.model.types.Odometry`: ENU metres from home, m/s, degrees,
     geodetic position), published by the drone at the sensor's ``rate_hz`` of vehicle time."""
 
+    delivery = Delivery.VEHICLE_STATE
     delivered_token = "odometry"
     component_kind = "odometry"
     own_topic = False  # /<robot>/odometry
@@ -196,6 +247,7 @@ class VehicleStateSensor(ActorProducedSensor):
 class MissionStatusSensor(ActorProducedSensor):
     """The drone's stat-stream (mission state, battery, current waypoint)."""
 
+    delivery = Delivery.MISSION_STATUS
     delivered_token = "stat"
     component_kind = "stat_stream"
     own_topic = False  # /mission/state

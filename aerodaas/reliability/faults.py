@@ -19,7 +19,6 @@ from mcap.reader import make_reader
 
 from aerodaas.clusters.reaper import descendants, start_time
 from aerodaas.config.robot import sensor_class
-from aerodaas.plugins.sensor import FrameSensor
 from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.reader import read_messages, summarize_mcap
 from aerodaas.reliability.accounting_faults import ACCOUNTING_FAULTS, accounting_verdict
@@ -136,7 +135,7 @@ def _analytics_case(on_error: str) -> Callable[[Path], dict]:
         env = json.loads((REPO_APPS / "farm_survey.json").read_text())
 
         env["robots"][0]["sensors"] = [s for s in env["robots"][0]["sensors"]
-                                       if not issubclass(sensor_class(s["type"]), FrameSensor)]
+                                       if not sensor_class(s["type"]).delivery.frames]
         (tmp / "env.json").write_text(json.dumps(env))
         app = tmp / "flaky_app.py"
         app.write_text(FAILING_APP.replace("ENV", repr(str(tmp / "env.json"))).replace("ON_ERROR", repr(on_error)))

@@ -30,7 +30,7 @@ from aerodaas.backends import backend_class
 from aerodaas.config.robot import sensor_class
 from aerodaas.perception.track_records import declared_track_channels
 from aerodaas.plugins import registry
-from aerodaas.plugins.sensor import ActorProducedSensor, FrameSensor, MissionStatusSensor, VehicleStateSensor
+from aerodaas.plugins.sensor import Delivery
 from aerodaas.protocol.ids import ComponentId, ComponentKind
 from aerodaas.protocol.messages import Port
 from aerodaas.protocol.specs import ActorSpec, AnalyticsSpec, CameraSpec, RecordSpec, RobotSpec, Role
@@ -263,7 +263,7 @@ def robot_plugins(cfg) -> list[tuple[str, str, type, str]]:
     sources = set(registry.names("frame_source"))
     for s in cfg.sensors:
         src = s.properties.get("source", "sim")
-        if issubclass(sensor_class(s.type), FrameSensor) and (src in sources or registry.is_import_path(src)):
+        if sensor_class(s.type).delivery.frames and (src in sources or registry.is_import_path(src)):
             wanted.append(("frame_source", src))
     out = []
     for kind, name in dict.fromkeys(wanted):
@@ -443,40 +443,39 @@ def _drone_components(st: _PlanState, robots: list, scheds: dict, drone_host: di
         sched = scheds[r.id]
         preplanned = sum(sum(1 for i in m.items if type(i).__name__ == "Waypoint")
                          for m in sched.missions() if m.distance_driven)
-        ids = {"drone": ComponentId.drone(r.id), "scheduler": ComponentId.scheduler(r.id), "cameras": {}, "odom": [],
-               "stat": [],
-               "actor": hid}
+        ids = {"drone": ComponentId.drone(r.id), "scheduler": ComponentId.scheduler(r.id), "cameras": {}, "actor": hid}
         add(Node(ids["drone"], "drone", r.id, hid))
         add(Node(ids["scheduler"], "scheduler", r.id, hid))
         cams = []
         plugin_sensors: list[dict] = []
+        # the components whose data the drone publishes itself (RobotSpec odom_cids, stat_cids)
+        published: dict[Delivery, list[str]] = {Delivery.VEHICLE_STATE: [], Delivery.MISSION_STATUS: []}
         for s in r.sensors.values():
-            # the contract the sensor's class is says how its data is produced (built-ins and plug-ins alike): a
+            # the sensor's class names the component that delivers its data (built-ins and plug-ins alike): a
             # frame sensor's frame source is chosen in the actor from its properties (aerodaas.plugins.frames)
             scls = sensor_class(s.type)
             cid = ComponentId.sensor(r.id, s.id, scls.component_kind)
             subs = consumers(s.get_data_stream(), r.id)
             # a camera is made when something takes its frames: a subscriber, or the recorder (record_fps 0: never)
-            if issubclass(scls, FrameSensor) and (s.get_data_stream().subscribers
-                                                  or (recorded and s.cfg.properties.get("record_fps") != 0)):
+            recorded_here = recorded and s.cfg.properties.get("record_fps") != 0
+            if not scls.delivery.has_component(bool(subs or s.get_data_stream().subscribers), recorded_here):
+                continue
+            if scls.delivery.frames:
                 cams.append(CameraSpec(cid, s.id, dict(s.cfg.properties), scls.frame_source(s.cfg.properties)))
                 ids["cameras"][s.id] = cid
-            elif issubclass(scls, VehicleStateSensor) and subs:
-                ids["odom"].append(cid)
-            elif issubclass(scls, MissionStatusSensor) and subs:
-                ids["stat"].append(cid)
-            elif not issubclass(scls, ActorProducedSensor):  # sampled readings: always sampled and recorded
+            elif scls.delivery.sampled:  # its readings: sampled and recorded by its own component
                 plugin_sensors.append(sensor_plugin_spec(s, cid))
                 schemas.update(plugin_sensors[-1].pop("schema"))
-            else:
-                continue
+            else:  # the drone publishes it to its component's subscribers
+                published[scls.delivery].append(cid)
             ps = plugin_sensors[-1] if plugin_sensors and plugin_sensors[-1]["cid"] == cid else None
             add(Node(cid, scls.component_kind, r.id, hid,
                      plugin=f"{ps['type']} -> {ps['schema_name']}" if ps else None))
             types = tuple(dict.fromkeys(stream_types(s.get_data_stream())))  # "odometry" is delivery and type
             edges.extend(Edge(cid, e.dst, e.port, e.buffer, e.robots, types) for e in subs)
         actors[hid].spec.robots.append(RobotSpec(r.cfg.model_dump(mode="json"), ids["drone"], ids["scheduler"], sched,
-                                                 preplanned, cams, ids["odom"], ids["stat"], plugin_sensors,
+                                                 preplanned, cams, published[Delivery.VEHICLE_STATE],
+                                                 published[Delivery.MISSION_STATUS], plugin_sensors,
                                                  robot_plugins(r.cfg), list(getattr(r, "gimbal_commands", ()))))
         robot_ids[r.id] = ids
     return robot_ids

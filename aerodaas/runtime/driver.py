@@ -24,7 +24,7 @@ from aerodaas.clusters.placement import gpu_placement_errors, placement_warning
 from aerodaas.config import ConfigError
 from aerodaas.config.robot import sensor_class
 from aerodaas.plugins.registry import by_value_modules
-from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor
+from aerodaas.plugins.sensor import Delivery
 from aerodaas.process.state import PROCESS
 from aerodaas.protocol.specs import AnalyticsSchedulerSpec
 from aerodaas.protocol.startup_probe import probe
@@ -546,9 +546,9 @@ def _pull_getter(sensor, h: dict):
     cls = sensor_class(sensor.type)
 
     def get():
-        if issubclass(cls, FrameSensor) and sensor.id in h["cameras"]:
+        if cls.delivery.frames and sensor.id in h["cameras"]:
             return ray.get(h["cameras"][sensor.id].get_latest.remote())
         st = ray.get(h["drone"].status.remote())
-        return st if issubclass(cls, MissionStatusSensor) else ray.get(h["drone"].report.remote()).get("position")
+        return st if cls.delivery is Delivery.MISSION_STATUS else ray.get(h["drone"].report.remote()).get("position")
 
     return get

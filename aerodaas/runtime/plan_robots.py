@@ -15,7 +15,7 @@ from typing import Any
 
 from aerodaas.plugins import registry
 from aerodaas.plugins.registry import class_origin
-from aerodaas.plugins.sensor import FrameSensor, MissionStatusSensor, VehicleStateSensor
+from aerodaas.plugins.sensor import Delivery
 from aerodaas.protocol.ids import ComponentId
 
 __all__ = ["PluginUse", "SensorUse", "RobotUse", "robot_uses"]
@@ -37,19 +37,20 @@ class PluginUse:
 
 @dataclass(frozen=True)
 class SensorUse:
-    """One sensor of a robot: ``id``, ``type`` (``sensors[].type``), its plug-in ``origin``, ``delivery`` (how the
-    drone actor gets its readings: :func:`delivery_of`) and ``component``: its
+    """One sensor of a robot: ``id``, ``type`` (``sensors[].type``), its plug-in ``origin``, ``delivery`` (the
+    component of the drone actor that delivers its data: the sensor class's
+    :attr:`~aerodaas.plugins.sensor.SensorPlugin.delivery`) and ``component``: its
     component id in the plan's graph, None when it feeds nothing and is not a camera or plug-in sensor."""
 
     id: str
     type: str
     origin: str
-    delivery: str
+    delivery: Delivery
     component: str | None
 
     def describe(self) -> dict[str, Any]:
-        """``{"id", "type", "origin", "delivery", "component"}``."""
-        return {"id": self.id, "type": self.type, "origin": self.origin, "delivery": self.delivery,
+        """``{"id", "type", "origin", "delivery", "component"}`` (``delivery``: the :class:`Delivery`'s value)."""
+        return {"id": self.id, "type": self.type, "origin": self.origin, "delivery": self.delivery.value,
                 "component": self.component}
 
 
@@ -73,7 +74,7 @@ class RobotUse:
         lines = [f"  robot {self.robot}: backend {b.name} ({b.origin}), trajectory scheduler {s.name} ({s.origin})"]
         for x in self.sensors:
             where = f"component {x.component}" if x.component else "no component (nothing subscribes)"
-            lines.append(f"      sensor {x.id:<12} {x.type} ({x.origin}), {x.delivery}, {where}")
+            lines.append(f"      sensor {x.id:<12} {x.type} ({x.origin}), {x.delivery.value}, {where}")
         return lines
 
 
@@ -81,18 +82,6 @@ def _use(kind: str, cls: type, name: str | None = None, origin: str | None = Non
     if name is None or origin is None:
         name, origin = class_origin(kind, cls)
     return PluginUse(name, origin, f"{cls.__module__}:{cls.__qualname__}")
-
-
-def delivery_of(sensor_cls: type) -> str:
-    """How the drone actor gets a sensor type's data, named by the sensor contract its class subclasses
-    (:mod:`aerodaas.plugins.sensor`): ``camera`` (a :class:`FrameSensor`), ``vehicle_state``
-    (:class:`VehicleStateSensor`), ``mission_status`` (:class:`MissionStatusSensor`), else ``sampled`` (its
-    :meth:`SensorPlugin.sample` at ``rate_hz``)."""
-    for base, name in ((FrameSensor, "camera"), (VehicleStateSensor, "vehicle_state"),
-                       (MissionStatusSensor, "mission_status")):
-        if issubclass(sensor_cls, base):
-            return name
-    return "sampled"
 
 
 def robot_uses(robots: list, scheds: dict[str, Any], components: set[str]) -> dict[str, RobotUse]:
@@ -109,7 +98,7 @@ def robot_uses(robots: list, scheds: dict[str, Any], components: set[str]) -> di
         for s in r.sensors.values():
             e, scls = registry.resolve("sensor", s.type), sensor_class(s.type)
             cid = ComponentId.sensor(r.id, s.id, scls.component_kind)
-            sensors.append(SensorUse(s.id, s.type, e.origin, delivery_of(scls),
+            sensors.append(SensorUse(s.id, s.type, e.origin, scls.delivery,
                                      cid if cid in components else None))
         out[r.id] = RobotUse(r.id, _use("backend", be.load(), be.name, be.origin),
                              _use("trajectory_scheduler", type(scheds[r.id])), tuple(sensors))

@@ -19,7 +19,6 @@ from aerodaas.model.ids import check_analytics_names
 from aerodaas.model.types import AeroNavigation, SchedulingType
 from aerodaas.navigation.safety import SafetyGate
 from aerodaas.perception.providers import missing_here
-from aerodaas.plugins.sensor import FrameSensor
 from aerodaas.recording.record_path import RunInput, check_record_path
 from aerodaas.runtime.dataflow import collect_graph
 from aerodaas.sim.ground_cache import limit_bytes
@@ -50,7 +49,7 @@ def scheduled_analytics(env, graphs: dict) -> dict[int, Any]:
     def camera(src) -> bool:  # a sensor whose class delivers camera frames (an analytics' output is not)
         type_ = getattr(src, "type", None)
         try:
-            return isinstance(type_, str) and issubclass(sensor_class(type_), FrameSensor)
+            return isinstance(type_, str) and sensor_class(type_).delivery.frames
         except ValueError:
             return False
 

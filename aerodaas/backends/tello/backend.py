@@ -9,7 +9,6 @@ import numpy as np
 
 from aerodaas.config import TelloConfig
 from aerodaas.config.robot import sensor_class
-from aerodaas.plugins.sensor import FrameSensor
 from aerodaas.model.geo import enu_to_geodetic
 from aerodaas.model.types import Attitude, Odometry
 from aerodaas.backends.base import VehicleBackend
@@ -49,7 +48,7 @@ class TelloBackend(VehicleBackend):
         self.limits = cfg.limits
         #: ids of the robot's camera sensors with ``properties.source: backend``: they need the video stream
         video_sensors = [s.id for s in cfg.sensors
-                         if issubclass(sensor_class(s.type), FrameSensor)
+                         if sensor_class(s.type).delivery.frames
                          and s.properties.get("source") == "backend"]
         #: sockets, receivers, keep-alive, command channel, the dead-reckoned state and the video (link.py)
         self.link = TelloLink(self.robot_id, self.cfg, video_sensors)
