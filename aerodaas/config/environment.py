@@ -126,27 +126,21 @@ class WorldConfig(_Cfg):
     targets: list[TargetConfig] = Field(default_factory=list, max_length=MAX_LIST_ITEMS)
 
 
-#: the default bound (wall s) on how long a simulated clock waits in all for its recorder
-MAX_RECORDER_HOLD_S = 120.0
-
-
 class SimulationConfig(_Cfg):
     """Simulation clock: ``speedup`` x real time; ``lockstep`` makes sim time wait for analytics to consume each
     frame; ``physics_hz`` is the integration rate. Bounds: ``speedup`` in [MIN_SPEEDUP, MAX_SPEEDUP] = [0.01, 1000];
     ``physics_hz`` in [MIN_PHYSICS_HZ, MAX_RATE_HZ] = [10, 1000] Hz (a coarser step than the 0.1 s control period is
     not covered by the safety gate's envelope model).
 
-    ``recorder_hold_s``: how long in all (wall seconds, [0, 3600]) the simulated clock may wait for a recorder that
-    falls behind (stopped, starved of CPU) instead of dropping camera frames it was given; the summary and a
-    ``clock_held`` event in the recording say how long it waited. Past it, frames are shed and counted as on a real
-    vehicle, and the run ends ``recording_lost``. Only a run whose robots all fly on the simulator and whose cameras
-    read no video stream waits: real vehicles and live streams live in real time (0 there,
+    ``recorder_hold_s``: how long in all (wall s, default 120) the simulated clock may wait for a recorder that
+    falls behind instead of dropping frames; the summary and ``clock_held`` events say how long it waited; past it
+    frames are shed and the run ends ``recording_lost``. Real vehicles and video streams never wait (0 there,
     :func:`aerodaas.runtime.preflight.simulation_for`)."""
 
     speedup: float = Field(default=1.0, ge=MIN_SPEEDUP, le=MAX_SPEEDUP)
     lockstep: bool = False
     physics_hz: float = Field(default=50.0, ge=MIN_PHYSICS_HZ, le=MAX_RATE_HZ)
-    recorder_hold_s: float = Field(default=MAX_RECORDER_HOLD_S, ge=0.0, le=3600.0)
+    recorder_hold_s: float = Field(default=120.0, ge=0.0, le=3600.0)
 
 
 class HitlConfig(_Cfg):

@@ -48,7 +48,7 @@ def test_plan_places_actors_by_compute_labels_and_replicas(tmp_path):
     app = tmp_path / "app.py"
     app.write_text(f'''
 from aerodaas import *
-from aerodaas.bench.overhead import FixedCostDetector
+from aerodaas.bench.pipeline import FixedCostDetector
 env = Environment({str(env)!r})
 det = FixedCostDetector(5.0)
 det.deploy(env.get_compute_resource_by_id("dc"), replicas=2)
@@ -106,7 +106,7 @@ def test_plan_warns_when_two_edge_computes_place_alike_and_not_when_labelled(tmp
 
 PLAN_APP = '''
 from aerodaas import *
-from aerodaas.bench.overhead import FixedCostDetector
+from aerodaas.bench.pipeline import FixedCostDetector
 from aerodaas.plugins import register_trajectory_scheduler
 
 

@@ -203,7 +203,7 @@ ENV = {
 }
 APP = '''"""Test app: a detector deployed on CLOUD compute looks at the camera of a short flight."""
 from aerodaas import *
-from aerodaas.bench.overhead import FixedCostDetector
+from aerodaas.bench.pipeline import FixedCostDetector
 
 env = Environment({env!r})
 drone = env.get_robot_by_id("uav")

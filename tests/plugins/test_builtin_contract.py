@@ -47,7 +47,8 @@ def test_a_builtin_section_and_backend_config_are_one_place():
     legacy = parse_environment_config(_robot(backend="mavlink", mavlink={"connection": "udpin:0.0.0.0:14551"})).robots[0]
     new = parse_environment_config(_robot(backend="mavlink", backend_config={"connection": "udpin:0.0.0.0:14551"}))
     assert legacy.backend_config == new.robots[0].backend_config and legacy.backend_config["baud"] == 57600
-    assert legacy.mavlink == MavlinkConfig(connection="udpin:0.0.0.0:14551")  # the old attribute still reads it
+    # the old attribute still reads it, with the environment's require_signing (false) written in
+    assert legacy.mavlink == MavlinkConfig(connection="udpin:0.0.0.0:14551", require_signing=False)
     assert RobotConfig(id="q", backend="mavlink", mavlink=MavlinkConfig(baud=9600)).backend_settings().baud == 9600
     assert parse_environment_config(_robot()).robots[0].mavlink is None  # a simulator has no MAVLink settings
     with pytest.raises(ConfigError, match=r"not both"):
