@@ -9,7 +9,7 @@ held out, and the hand-labelled cars of that clip (`cars.json`) score the models
 task's pre-labels are submitted as the reviewer's answer (a person's review time is not part of the measurement).
 
     python docs/bench/label_walkthrough.py MONTAGE.mp4 WORKDIR [--out docs/results/label_walkthrough.json]
-        [--screenshot docs/images/label_studio_prelabels.png] [--epochs 6]
+        [--screenshot docs/images/label_studio_prelabels.jpg] [--epochs 6]
 
 Needs Label Studio in its venv (tests/install-rig.sh), Chromium and chromedriver (Debian's chromium,
 chromium-driver) and selenium in the venv named by $SHOT_PYTHON (default ~/.cache/aerodaas/shot-venv/bin/python)
@@ -143,7 +143,7 @@ def main() -> None:
     ap.add_argument("montage", type=Path)
     ap.add_argument("work", type=Path)
     ap.add_argument("--out", type=Path, default=REPO / "docs/results/label_walkthrough.json")
-    ap.add_argument("--screenshot", type=Path, default=REPO / "docs/images/label_studio_prelabels.png")
+    ap.add_argument("--screenshot", type=Path, default=REPO / "docs/images/label_studio_prelabels.jpg")
     ap.add_argument("--budget", type=int, default=40)
     ap.add_argument("--epochs", type=int, default=6)
     a = ap.parse_args()
@@ -179,7 +179,9 @@ def main() -> None:
         if a.screenshot:
             a.screenshot.parent.mkdir(parents=True, exist_ok=True)
             try:
-                screenshot(server.url, "reviewer@example.test", password, pid, first_task, a.screenshot)
+                png = work / "screenshot.png"  # Chromium writes PNG; the docs keep a JPEG
+                screenshot(server.url, "reviewer@example.test", password, pid, first_task, png)
+                cv2.imwrite(str(a.screenshot), cv2.imread(str(png)), [cv2.IMWRITE_JPEG_QUALITY, 82])
             except Exception as e:  # noqa: BLE001 - the screenshot is an illustration, the timings stand
                 steps["screenshot"] = {"error": f"{type(e).__name__}: {e}"}
         steps["review (scripted: pre-labels submitted)"] = review(server.url, server.token, pid)
