@@ -243,6 +243,12 @@ def _ms(v: list[float]) -> str:
     return f"{np.mean(v):.2f} ± {(max(v) - min(v)) / 2:.2f}"
 
 
+def _cars(name: str) -> int:
+    """Car boxes in AU-AIR's label of frame ``name`` (what a reviewer checked)."""
+    f = SRC / "labels" / (Path(name).stem + ".txt")
+    return sum(1 for ln in f.read_text().splitlines() if ln.split()[:1] == ["0"]) if f.is_file() else 0
+
+
 def table(_: argparse.Namespace) -> None:
     """Markdown rows (N x selection x variant, mean ± half range over seeds/splits) of every fewshot_*.json."""
     reps = [json.loads(p.read_text()) for p in sorted(OUT.glob("fewshot_*.json"))]
@@ -250,12 +256,14 @@ def table(_: argparse.Namespace) -> None:
     for r in reps:
         sel = "shipped" if r["n"] == 0 else r["select"] + (" + machine-boxed rest" if r["machine_boxed"] else "")
         groups.setdefault((r["n"], sel, r.get("tag") or ""), []).append(r)
-    print("| N | selection | runs (split/seed) | score ≥ 0.3: R/P IoU 0.5 | R/P IoU 0.3 | AP50 | "
+    print("| N | selection | runs (split, seed) | cars boxed in the N | score ≥ 0.3: R/P IoU 0.5 | R/P IoU 0.3 | AP50 | "
           "best-F1 thr on pool: R/P IoU 0.5 | R/P IoU 0.3 |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for (n, sel, tag), rs in sorted(groups.items(), key=lambda kv: (kv[0][2] != "", kv[0][0], kv[0][1], kv[0][2])):
         c = [r["test_car_at_0.3"] for r in rs]
+        cars = [sum(_cars(f) for f in r["selected"]) for r in rs]
         row = [str(n), sel + (f" ({tag})" if tag else ""), " ".join(f"{r['split']}{r['seed']}" for r in rs),
+               f"{np.mean(cars):.0f}",
                f"{_ms([x['recall@0.5'] for x in c])} / {_ms([x['precision@0.5'] for x in c])}",
                f"{_ms([x['recall@0.3'] for x in c])} / {_ms([x['precision@0.3'] for x in c])}",
                _ms([x["ap50"] for x in c])]
