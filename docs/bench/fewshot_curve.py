@@ -167,6 +167,14 @@ def at(rep: dict, thr: float) -> dict:
     return next(r["classes"]["car"] for r in rep["results"] if abs(r["score_threshold"] - thr) < 1e-9)
 
 
+def _epochs(train_report: dict) -> list[dict]:
+    """Per epoch of a training run's report.json: loss, seconds and the validation car AP50 (tiles of --val)."""
+    return [{"epoch": e["epoch"], "loss": round(e["loss"], 3), "train_s": round(e["train_s"]),
+             "val_s": round(e["val_s"]), "val_car_ap50": round(next(m["ap50"] for m in e["metrics"]
+                                                                   if m["name"] == "car"), 3)}
+            for e in train_report.get("history", [])]
+
+
 def run(a: argparse.Namespace) -> dict:
     """One point of the curve; returns (and writes) its report."""
     pool, test = split_frames(a.split)
@@ -207,10 +215,7 @@ def run(a: argparse.Namespace) -> dict:
         rep["train"] = {"command": " ".join(c.replace(str(CACHE), "$FEWSHOT_CACHE") for c in cmd[3:]),
                         "wall_s": round(time.time() - t0, 1), "val_frames": len(val),
                         "val_is_training_frames": not rest,
-                        "epochs": [{k: e[k] for k in ("epoch", "loss", "train_s", "val_s") if k in e}
-                                   | {"val_car_ap50": next((m["ap50"] for m in e.get("metrics", [])
-                                                            if m.get("name") == "car"), None)}
-                                   for e in tr.get("epochs", [])]}
+                        "best_epoch": tr.get("best_epoch"), "epochs": _epochs(tr)}
         model = str(work / "run" / "model.onnx")
     rep["test"] = bench(model, link_set(work / "test", test), work / "test.json")
     if rest:
