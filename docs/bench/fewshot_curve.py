@@ -16,6 +16,7 @@ staged frames live in ``$FEWSHOT_CACHE`` (default ``~/.cache/aerodaas/fewshot``)
 AU-AIR (CC BY-NC-SA 2.0, non-commercial) is used for this measurement only: nothing trained here is kept.
 
     python docs/bench/fewshot_curve.py run --split A --n 20 --select uniform --seed 0 [--machine-boxed] [-- TRAIN...]
+    python docs/bench/fewshot_curve.py rescore --tag A_uniform_n60_s0 --input 1088x1920   # before clean
     python docs/bench/fewshot_curve.py table          # the markdown table of every docs/bench/fewshot_*.json
     python docs/bench/fewshot_curve.py clean
 """
@@ -138,14 +139,15 @@ def machine_box(dst: Path, frames: list[Path]) -> Path:
     return dst
 
 
-def bench(model: str | None, images: Path, out: Path) -> dict:
+def bench(model: str | None, images: Path, out: Path, size: str = INPUT) -> dict:
     """``aerodaas bench detect`` on a YOLO folder with detect46_runs.sh oblique2's options (whole frame, 736x1280,
     every threshold of :data:`THRESHOLDS`), one thread under nice; the report without its PR curve."""
     cmd = ["nice", "-n", "5", "aerodaas", "bench", "detect", "--names", *NAMES, "--repeat", "1", "--sweep",
            "--thresholds", *map(str, THRESHOLDS), "--overlap", "0.2", "--threads", "1", "--tiles", "0",
            "--images", str(images / "images"), "--annotations", str(images / "labels"), "--classes", *NAMES,
            "--out", str(out)]
-    cmd += ["--model", "aerial_nano"] if model is None else ["--model-path", model, "--input-sizes", INPUT]
+    cmd += ["--model", "aerial_nano"] if model is None else ["--model-path", model]
+    cmd += ["--input-sizes", size] if model is not None or size != INPUT else []
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env={**os.environ, "OMP_NUM_THREADS": "1"})
     rep = json.loads(out.read_text())
     for r in rep["results"]:
@@ -241,6 +243,24 @@ def run(a: argparse.Namespace) -> dict:
     return rep
 
 
+def rescore(a: argparse.Namespace) -> None:
+    """A finished run's model (kept in CACHE/keep/<tag>.onnx; the shipped model for N=0) scored again on its test
+    flights at another input size; written as fewshot_<tag>_in<size>.json (no threshold picked on the pool)."""
+    src = json.loads((OUT / f"fewshot_{a.tag}.json").read_text())
+    model = None if src["n"] == 0 else str(CACHE / "keep" / f"{a.tag}.onnx")
+    work = CACHE / f"{a.tag}_in{a.input}"
+    work.mkdir(parents=True, exist_ok=True)
+    rep = {k: src[k] for k in ("benchmark", "split", "test_flights", "n", "select", "seed", "machine_boxed",
+                               "selected", "train")}
+    rep["tag"] = "+".join(t for t in (src.get("tag"), f"input {a.input}") if t)
+    rep["test"] = bench(model, link_set(work / "test", split_frames(src["split"])[1]), work / "test.json", a.input)
+    rep["test_car_at_0.3"] = at(rep["test"], 0.3)
+    out = OUT / f"fewshot_{a.tag}_in{a.input}.json"
+    out.write_text(json.dumps(rep, indent=1) + "\n")
+    c = rep["test_car_at_0.3"]
+    print(f"{out.name}: car R/P@0.5 {c['recall@0.5']:.3f}/{c['precision@0.5']:.3f} AP50 {c['ap50']:.3f}")
+
+
 def _ms(v: list[float]) -> str:
     """mean ± half the range (over seeds and splits)."""
     if len(v) == 1:
@@ -291,6 +311,9 @@ def main() -> None:
     r.add_argument("--machine-boxed", action="store_true", help="add the unselected pool frames, machine-boxed")
     r.add_argument("--tag", default="", help="suffix of the report name for a changed training schedule")
     r.add_argument("train", nargs="*", help="after --: aerodaas train detector options replacing the schedule")
+    rs = sub.add_parser("rescore")
+    rs.add_argument("--tag", required=True, help="a finished run, e.g. A_uniform_n60_s0")
+    rs.add_argument("--input", required=True, help="HxW, e.g. 1088x1920")
     sub.add_parser("table")
     sub.add_parser("clean")
     a = ap.parse_args()
@@ -298,6 +321,8 @@ def main() -> None:
         if not (SRC / "images").is_dir():
             sys.exit(f"AU-AIR not staged at {SRC} (examples/training/prepare_aerial_data.py auair)")
         run(a)
+    elif a.cmd == "rescore":
+        rescore(a)
     elif a.cmd == "table":
         table(a)
     else:
