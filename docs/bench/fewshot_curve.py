@@ -281,13 +281,13 @@ def table(_: argparse.Namespace) -> None:
     for r in reps:
         sel = "shipped" if r["n"] == 0 else r["select"] + (" + machine-boxed rest" if r["machine_boxed"] else "")
         groups.setdefault((r["n"], sel, r.get("tag") or ""), []).append(r)
-    print("| N | selection | runs (split, seed) | cars boxed in the N | score ≥ 0.3: R/P IoU 0.5 | R/P IoU 0.3 | AP50 | "
+    print("| N | selection | runs (split, seed): AP50 | cars boxed in the N | score ≥ 0.3: R/P IoU 0.5 | R/P IoU 0.3 | AP50 | "
           "best-F1 thr on pool: R/P IoU 0.5 | R/P IoU 0.3 |")
     print("|---|---|---|---|---|---|---|---|---|")
     for (n, sel, tag), rs in sorted(groups.items(), key=lambda kv: (kv[0][2] != "", kv[0][0], kv[0][1], kv[0][2])):
         c = [r["test_car_at_0.3"] for r in rs]
         cars = [sum(_cars(f) for f in r["selected"]) for r in rs]
-        row = [str(n), sel + (f" ({tag})" if tag else ""), " ".join(f"{r['split']}{r['seed']}" for r in rs),
+        row = [str(n), sel + (f" ({tag})" if tag else ""), ", ".join(f"{r['split']}{r['seed']} {r['test_car_at_0.3']['ap50']:.3f}" for r in rs),
                f"{np.mean(cars):.0f}",
                f"{_ms([x['recall@0.5'] for x in c])} / {_ms([x['precision@0.5'] for x in c])}",
                f"{_ms([x['recall@0.3'] for x in c])} / {_ms([x['precision@0.3'] for x in c])}",
