@@ -199,7 +199,7 @@ def main() -> None:
         out = work / f"bench_{name.split()[0]}.json"
         timed(steps, f"bench detect ({name})", [*aer, "bench", "detect", "--images", str(held / "images"),
                                                "--annotations", str(held / "labels"), *model, "--classes", "car",
-                                               "--thresholds", "0.3", "--out", str(out)])
+                                               "--thresholds", "0.3", "--input-sizes", "480x640", "--out", str(out)])
         scores[name] = json.loads(out.read_text())
     total = sum(s.get("seconds", 0) for s in steps.values() if isinstance(s, dict))
     report = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
