@@ -10,6 +10,8 @@ import numpy as np
 from aerodaas.actors.recorder import RecorderService
 from aerodaas.recording.reader import read_messages
 
+from tests.recording.stalled_recorder import StalledPlane, StalledRecorder
+
 
 def test_refused_frames_are_recorded_per_topic_and_the_written_ones_add_up(tmp_path):
     path = tmp_path / "r.mcap"
@@ -52,43 +54,6 @@ def test_a_recording_without_images_has_no_drops_channel(tmp_path):
     assert [t for t, *_ in read_messages(str(path))] == ["/d1/events", "/run/accounting"]
 
 
-class _StalledRecorder:
-    """A recorder actor that takes no batch until :meth:`release` (as a SIGSTOPped one): ``record`` waits."""
-
-    def __init__(self) -> None:
-        self.gate = threading.Event()
-        self.frames = 0
-
-    def ledger_of(self, producer: str):
-        from aerodaas.protocol.messages import ProducerLedger
-
-        return ProducerLedger(producer, {}, incarnation=1)
-
-    def record(self, batch: list, ledger=None) -> int:
-        self.gate.wait(120)
-        self.frames += sum(1 for it in batch if it.topic.endswith("/camera/cam"))
-        return len(batch)
-
-    def release(self) -> None:
-        self.gate.set()
-
-    def recorded_frames(self) -> int:
-        return self.frames
-
-
-class _Plane:
-    """What :class:`RemoteRecorder` needs of its actor's data plane: its id and the recorder actor's handle."""
-
-    actor_id = "drone-test"
-    copies = None
-
-    def __init__(self, recorder) -> None:
-        self.recorder = recorder
-
-    def peer(self, name: str):
-        return self.recorder
-
-
 def test_a_stalled_recorder_actor_holds_a_bounded_number_of_frames_and_the_rest_are_dropped_and_counted(ray_session):
     """The recorder actor takes nothing (stalled): the producer sends at most ``max_in_flight_frames`` frames, keeps at
     most ``max_pending_frames`` more, and drops and counts the others; once the recorder answers again, every frame
@@ -100,8 +65,8 @@ def test_a_stalled_recorder_actor_holds_a_bounded_number_of_frames_and_the_rest_
 
     from aerodaas.actors.remote_recorder import RemoteRecorder
 
-    recorder = ray.remote(max_concurrency=64)(_StalledRecorder).remote()
-    rec = RemoteRecorder(_Plane(recorder), period_s=0.01, max_pending_frames=20, max_in_flight_frames=8)
+    recorder = ray.remote(max_concurrency=64)(StalledRecorder).remote()
+    rec = RemoteRecorder(StalledPlane(recorder), period_s=0.01, max_pending_frames=20, max_in_flight_frames=8)
     frame = np.zeros((24, 32, 3), np.uint8)
     offered = 0
     for k in range(200):

@@ -14,6 +14,8 @@ import pytest
 from aerodaas.actors.recorder import RecorderService
 from aerodaas.recording.reader import read_messages
 
+from tests.recording.stalled_recorder import StalledPlane, StalledRecorder
+
 APPS = Path(__file__).resolve().parents[2] / "apps"
 FRAME = np.zeros((24, 32, 3), np.uint8)
 
@@ -91,48 +93,13 @@ def test_without_a_hold_frames_are_dropped_at_once(tmp_path):
     svc.close()
 
 
-class _StalledRecorder:
-    """A recorder actor that takes no batch until :meth:`release` (as a SIGSTOPped one)."""
-
-    def __init__(self) -> None:
-        self.gate = threading.Event()
-        self.frames = 0
-
-    def ledger_of(self, producer: str):
-        from aerodaas.protocol.messages import ProducerLedger
-
-        return ProducerLedger(producer, {}, incarnation=1)
-
-    def record(self, batch: list, ledger=None) -> int:
-        self.gate.wait(120)
-        self.frames += sum(1 for it in batch if it.topic.endswith("/camera/cam"))
-        return len(batch)
-
-    def release(self) -> None:
-        self.gate.set()
-
-    def recorded_frames(self) -> int:
-        return self.frames
-
-
-class _Plane:
-    actor_id = "drone-test"
-    copies = None
-
-    def __init__(self, recorder) -> None:
-        self.recorder = recorder
-
-    def peer(self, name: str):
-        return self.recorder
-
-
 def test_a_stalled_recorder_actor_holds_the_camera_and_every_frame_arrives(ray_session):
     import ray
 
     from aerodaas.actors.remote_recorder import RemoteRecorder
 
-    recorder = ray.remote(max_concurrency=64)(_StalledRecorder).remote()
-    rec = RemoteRecorder(_Plane(recorder), period_s=0.01, max_pending_frames=10, max_in_flight_frames=4,
+    recorder = ray.remote(max_concurrency=64)(StalledRecorder).remote()
+    rec = RemoteRecorder(StalledPlane(recorder), period_s=0.01, max_pending_frames=10, max_in_flight_frames=4,
                          hold_s=300.0)
     prod = _Producer(rec, 60)
     prod.start()

@@ -3,7 +3,6 @@ frame source, and the camera ``source`` configuration."""
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pymap3d
