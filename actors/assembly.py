@@ -61,7 +61,7 @@ def _halt_cameras(d: Any) -> None:
 
 
 class _ClockHold:
-    """The wall time this actor's clock spent waiting for its recorder (``recorder.held_s``,
+    """The wall time this actor's clock spent waiting for its recorder (``recorder.hold.held_s``,
     :class:`~.remote_recorder.FrameHold`): :meth:`taken` returns what was waited since the last call; a wait that
     is over becomes a ``clock_held`` event (``held_s``: wall s) of every drone in ``drones``."""
 
@@ -72,7 +72,7 @@ class _ClockHold:
         self.open_s = 0.0  # the wait in progress (over several captures)
 
     def _held(self) -> float:
-        return float(getattr(getattr(self.recorder, "hold", None), "held_s", 0.0))
+        return 0.0 if self.recorder is None else self.recorder.hold.held_s
 
     def taken(self) -> float:
         now = self._held()

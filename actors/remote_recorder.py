@@ -121,7 +121,7 @@ class RemoteRecorder(AnalyticsAccounting):
 
     ``hold_s``: in a simulated run, how long in all (wall seconds) :meth:`image` may wait for room instead of
     dropping a frame (the caller is the clock's thread, so simulated time waits with it); the time waited is in
-    :attr:`held_s`. 0: drop at once (real vehicles, video streams)."""
+    ``hold.held_s``. 0: drop at once (real vehicles, video streams)."""
 
     def __init__(self, plane: Any, target: str = "recorder", period_s: float = 0.1, jpeg_quality: int = 80,
                  max_pending_frames: int = 256, max_pending_bytes: int = 256 << 20,
@@ -174,11 +174,6 @@ class RemoteRecorder(AnalyticsAccounting):
     def _full(self, size: int) -> bool:
         """No room for a frame of ``size`` bytes (caller holds the lock)."""
         return self._pending_frames >= self.max_pending_frames or self._pending_bytes + size > self.max_pending_bytes
-
-    @property
-    def held_s(self) -> float:
-        """Wall seconds :meth:`image` has waited for room in all (:class:`FrameHold`)."""
-        return self.hold.held_s
 
     def camera(self, robot: str, sensor: str, intrinsics: dict, pitch_deg: float) -> None:
         self._put(RecordCamera(robot, sensor, dict(intrinsics), float(pitch_deg)))

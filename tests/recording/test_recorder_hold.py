@@ -110,7 +110,7 @@ def test_a_stalled_recorder_actor_holds_the_camera_and_every_frame_arrives(ray_s
     rec.close(timeout_s=120)
     assert not prod.is_alive() and prod.refused == 0 and rec.frames_dropped == 0
     assert ray.get(recorder.recorded_frames.remote()) == 60
-    assert rec.held_s > 0.0
+    assert rec.hold.held_s > 0.0
 
 
 def _env(backend: str = "sim", stream: bool = False, hold: float | None = None):
