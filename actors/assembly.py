@@ -35,7 +35,7 @@ from aerodaas.sim.world import World
 
 #: the actor's clock sheds its cameras' due frames while it is more than this many control periods behind the wall
 #: clock (outside lock-step): control before sensing. A node that cannot keep up (40 drone actors with 640x480
-#: cameras at 15 FPS on two cores, docs/benchmarks.md "Control before the camera") then renders fewer, fresher
+#: cameras at 15 FPS on two cores, docs/results/fleet.md "When the node is full") then renders fewer, fresher
 #: frames instead of letting the renders take the CPU from the control ticks the clock is catching up on
 SHED_LATE_TICKS = 0.5
 

@@ -1,7 +1,7 @@
 """Same-node channels: how an actor hands messages — frames above all — to another actor of the run on the same
 machine without paying Ray's per-call costs.
 
-Why (measured, ``docs/benchmarks.md``): one 1280x720 frame hop through Ray on this machine kind costs about
+Why (measured, ``docs/results/overhead.md``): one 1280x720 frame hop through Ray on this machine kind costs about
 ``ray.put`` 1.8 ms + actor call 2.1 ms + ``ray.get`` 0.3 ms + the reply 1.8 ms, so an analytics in its own actor
 cost 7.9 ms of framework overhead per frame against 4.3 ms for the same pipeline on dora-rs (one process per node,
 shared memory, a persistent channel). A channel does what dora-rs does, between Ray actors that Ray placed, named

@@ -6,7 +6,7 @@ sleep, so the interpreter meets each message with cold caches and every Python-l
 objects (the :class:`ChannelSend` dataclass, its :class:`~aerodaas.protocol.messages.Delivery`, the ``FrameMsg`` and
 the pydantic ``FrameMeta`` with its pose and intrinsics, whose pickling runs in Python), the delivery took 0.52-0.54 ms
 from ``send`` to the receiving component and the answer 0.52-0.53 ms back, on this machine kind at 720p and 30 FPS;
-as below, 0.38-0.49 and 0.32-0.45 ms (``docs/benchmarks.md``, "The same-node channel's wire"). So the common
+as below, 0.38-0.49 and 0.32-0.45 ms (``docs/results/overhead.md``, "The actors layout, run by run"). So the common
 messages travel as tuples of built-ins, which pickle encodes and decodes in C:
 
 * a frame's delivery (:func:`encode_send`): a ``FrameMsg`` whose pixels are in a slot, its ``FrameMeta`` flattened

@@ -298,7 +298,7 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                         "rss_mb_per_extra_drone_max": 150}}
 
 
-#: memory a cluster run needs before it starts, MiB (PSS measured in docs/benchmarks.md section 2c, rounded up:
+#: memory a cluster run needs before it starts, MiB (PSS measured in docs/results/cluster.md, rounded up:
 #: 402, 210 and 86): the head's extra (GCS, the benchmark's driver, the run's recorder, head-only agents), each
 #: node's fixed processes (raylet, Ray's agents, log monitor, its recorder actor) and each drone actor
 HEAD_EXTRA_MB, NODE_FIXED_MB, DRONE_ACTOR_MB = 450.0, 250.0, 90.0

@@ -29,7 +29,7 @@ driver).
   g_r = mean(total − DroneActor − node recorders).
 
 **Projection** for D drones, k per actor, edge nodes of C cores and M GiB, one recorder's ceiling R_msg msgs/s and
-R_mb MiB/s (``aerodaas bench recorder``, docs/benchmarks.md section 2b: about 8,000 msgs/s and 15 MiB/s):
+R_mb MiB/s (``aerodaas bench recorder``, docs/results/recorder.md: about 8,000 msgs/s and 15 MiB/s):
 
 * drones per node by CPU  n_cpu = floor((C − c_n) / c_d)
 * drones per node by memory  n_mem = floor((1024 M − m_n) / m_d)

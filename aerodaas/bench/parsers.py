@@ -89,9 +89,9 @@ def add_fleet_model(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--node-mem-gib", type=float, help="memory of one edge node, GiB (default: the measured "
                                                       "machine's)")
     p.add_argument("--recorder-msgs-per-s", type=float, default=8000.0,
-                   help="one recorder's message ceiling (default 8000: bench recorder, docs/benchmarks.md 2b)")
+                   help="one recorder's message ceiling (default 8000: bench recorder, docs/results/recorder.md)")
     p.add_argument("--recorder-mb-per-s", type=float, default=15.0,
-                   help="one recorder's byte ceiling, MiB/s (default 15: bench recorder, docs/benchmarks.md 2b)")
+                   help="one recorder's byte ceiling, MiB/s (default 15: bench recorder, docs/results/recorder.md)")
     p.add_argument("--mb-per-drone", type=float, help="recorded MiB/s of one drone instead of the fitted one (e.g. a "
                                                       "real camera's frames; default: as the runs recorded)")
     p.add_argument("--json", action="store_true", help="print the JSON projection")

@@ -286,7 +286,7 @@ class RecordingConfig(_Cfg):
     compute of the run besides the driver's (each on its compute's nodes, by its labels), writing
     ``RUN.node-<compute>.mcap`` next to ``RUN.mcap`` with its own accounting; the drones and analytics of that
     compute record to it, everything else (cloud analytics, the mission results) to the driver's file.
-    ``aerodaas merge`` joins the files into one (``docs/benchmarks.md``: when one recorder is the limit)."""
+    ``aerodaas merge`` joins the files into one (``docs/results/recorder.md``: when one recorder is the limit)."""
 
     per_node: bool = Field(default=False, description="one recorder per edge compute, each writing "
                            "RUN.node-<compute>.mcap (joined by `aerodaas merge`); false: every actor records into the "

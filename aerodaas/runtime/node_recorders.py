@@ -2,7 +2,7 @@
 
 A run records through one recorder actor on the driver's node (:mod:`aerodaas.actors.recorder_actor`); every frame
 of every drone crosses to it. ``aerodaas bench recorder`` measures where that one actor stops keeping up
-(``docs/benchmarks.md``). With ``per_node`` the plan (:func:`add_node_recorders`) adds a recorder actor per edge
+(``docs/results/recorder.md``). With ``per_node`` the plan (:func:`add_node_recorders`) adds a recorder actor per edge
 compute that has actors of the run, host id ``recorder/<compute>``, placed like that compute's other actors (its
 ``label_selector``: ``tier=edge`` and the compute's labels), writing ``RUN.node-<compute>.mcap``
 (:func:`aerodaas.recording.merge.node_recording_path`) next to the driver's ``RUN.mcap``; the drone, analytics and
