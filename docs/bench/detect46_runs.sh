@@ -1,8 +1,8 @@
 #!/bin/bash
-# The runs behind docs/bench/detect46_*.json (docs/perception.md, "Measured on held-out aerial sets").
+# The runs behind docs/bench/detect46_*.json (docs/results/detection.md).
 # usage (from the repository root): docs/bench/detect46_runs.sh tiles|sets|scale|selftrain|oblique2 OUTDIR  (aerial splits laid
 # out by examples/training/prepare_aerial_data.py in $S; the shared photos in $AERODAAS_DATA_DIR/imagery/brighton_beach;
-# for selftrain, MEVA's UAV montage in $MEVA and stage 4 of docs/perception.md in $R/v4/model.onnx)
+# for selftrain, MEVA's UAV montage in $MEVA and stage 4 of docs/results/detection.md in $R/v4/model.onnx)
 set -u
 S=${S:-/work/cache/aerial/splits}; O=$2; mkdir -p "$O"
 B="aerodaas bench detect --names car large_vehicle person --repeat 1 --sweep --thresholds 0.2 0.3 0.4 --overlap 0.2"

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The few-shot curve on AU-AIR's sample (docs/perception.md, "How many of your own frames: the few-shot curve"):
+"""The few-shot curve on AU-AIR's sample (docs/results/detection.md, "The few-shot curve"):
 how many reviewed frames of one drone's flights does fine-tuning the shipped aerial model need to see that drone's
 other flights? A benchmark helper, driven by ``docs/bench/fewshot_runs.sh``; production code never imports it.
 

@@ -1,10 +1,10 @@
 #!/bin/bash
-# The runs behind docs/bench/fewshot_*.json (docs/perception.md, "How many of your own frames: the few-shot curve").
+# The runs behind docs/bench/fewshot_*.json (docs/results/detection.md, "The few-shot curve").
 # usage (from the repository root, the [train] extra installed):
 #   AERIAL_MIRRORS=/path/to/mirrors AERIAL_DATA_OUT=$HOME/.cache/aerodaas/aerial \
 #     python examples/training/prepare_aerial_data.py auair          # AU-AIR's 80-frame sample (CC BY-NC-SA 2.0)
 #   docs/bench/fewshot_runs.sh & docs/bench/fewshot_runs.sh & docs/bench/fewshot_runs.sh   # three queues
-#   python docs/bench/fewshot_curve.py table    # the table of docs/perception.md
+#   python docs/bench/fewshot_curve.py table    # the table of docs/results/detection.md
 #   python docs/bench/fewshot_curve.py clean    # delete the throwaway weights, staged sets and claims ($FEWSHOT_CACHE)
 # The list below is in order of priority; each queue takes the next run no other queue has taken (a claim file in
 # $FEWSHOT_CACHE/claims) and skips the ones whose report exists, so queues can run side by side and a stopped list

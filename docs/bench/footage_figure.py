@@ -1,4 +1,4 @@
-"""Draw the picture of docs/perception.md's "On real drone footage" section from a run's recording.
+"""Draw the picture of docs/results/tracking.md's "Real footage over RTSP" section from a run's recording.
 
     python docs/bench/footage_figure.py RUN.mcap OUT.png [--robot quadrotor_base] [--track ID]
 

@@ -319,7 +319,7 @@ def stage_auair():
     Labels: annotations.json, per frame ``bbox`` [{top, left, height, width, class}] in pixels, classes Human, Car,
     Truck, Van, Motorbike, Bicycle, Bus, Trailer (its ``categories``); the file's ``licenses`` are CC BY-NC-SA 2.0 and
     CC BY-NC 2.0 -> non-commercial -> eval_only. Its boxes are drawn loosely and a row of parked cars is sometimes
-    one box, so score it at IoU 0.3 beside 0.5 (docs/perception.md).
+    one box, so score it at IoU 0.3 beside 0.5 (docs/results/detection.md).
     """
     g = GitReader(f'{MIRROR}/sunw71+auairdataset/repo')
     ann = json.loads(g.read('examples/auair_subset/annotations.json'))

@@ -4,7 +4,7 @@ run at an enlarged input (slow, but it finds more of the far, small objects than
 written as a YOLO folder whose ``labelled_classes.txt`` is empty, so training learns the boxes as objects but never
 learns an unboxed object as background (the pseudo-labels miss many; ``docs/training.md``, "Your labels").
 
-How the stage-4 candidate of ``docs/perception.md`` ("Oblique colour views: two more training stages") was made:
+How the stage-4 candidate of ``docs/results/detection.md`` ("Stages 3 and 4") was made:
 
     python3 examples/training/pseudo_label_video.py uav-clips.mp4 OUT --model runs/v3/model.onnx \\
         --input 928x1600 --score 0.45 --step 5 --skip 0:30 --skip 1087:1162 --skip 1464:1539

@@ -10,7 +10,7 @@ Judged from the recording: the detector's boxes on the real cars against hand-la
 analytics' recorded tracks). The cars are parked, so following is not shown by this footage (a moving car from the same
 source, with its own hovering pose, is in tests/perception/test_follow_moving.py). The follow commands of the run are
 not asserted: the stream does not move with the simulated drone, so a parked car's geo-located fixes move with the
-drone and the follow adopts it (``docs/perception.md``, "On real drone footage"); their count is printed."""
+drone and the follow adopts it (``docs/results/tracking.md``, "Real footage over RTSP"); their count is printed."""
 from __future__ import annotations
 
 import json
