@@ -10,7 +10,7 @@ cool-down), ``TentativeCloudQueueWorker.java`` (JIT release), ``TaskExecutorEdge
 the head), ``ApplicationDetails/Application.java`` (``calculateScore``, ``getUtilityDiff``, constants: 10-entry
 latency window, 10 ms drift threshold, 10 s cool-down, 20 s gatekeeper window, 0.9 required fraction),
 ``PostProcessing.java`` / ``TriggerUpdate.java`` (latency window) and ``GateKeeper.java``. Our own code; the
-deviations are listed in ``docs/analytics-schedulers.md``.
+deviations are listed in ``docs/analytics-scheduler-rules.md``.
 
 Edge queue order for all of them is EDF by the model's *relative* deadline, ties FIFO (TaskCreation.java).
 Throughout, a task "fits" on the edge from time ``t`` if ``t + edge_ms <= deadline`` and on the cloud if
@@ -127,7 +127,7 @@ class EdgeCloud(AnalyticsScheduler):
         """``eviction_scan``: ``"reference"`` (default) checks the queued tasks behind the insertion point exactly as
         ``PriorityQueue.add`` does — the first of them was already consumed by the outer iterator, so it is neither
         checked nor counted in the running finish time; ``"full"`` checks every one (our earlier variant,
-        deviation 2 in docs/analytics-schedulers.md). ``estimator``: a cloud-latency estimator spec
+        deviation 2 in docs/analytics-scheduler-rules.md). ``estimator``: a cloud-latency estimator spec
         (:func:`~.analytics_estimators.make_estimator`) replacing the policy's own (the fair-margin option).
         Raises ValueError for an unknown scan or a bad spec."""
         super().__init__(workload)

@@ -52,7 +52,7 @@ timer, ``next_edge_task`` from the edge loop) reach the policy a fraction of a m
 clock, and with no tolerance each found the plan's instant just passed and planned again: 4,401 plans against the
 harness's 3,178 on the same 80-drone trace (2026-11-24), each ~1 ms of CPU, which made the 80-drone emulation late.
 In the harness, where one event's calls share one time, it moved the 5-seed mean utility at 80 drones by under
-0.01 % (single seeds by up to 0.09 %) on periodic and realistic traces (docs/analytics-schedulers.md).
+0.01 % (single seeds by up to 0.09 %) on periodic and realistic traces (docs/results/schedulers.md).
 
 There is no ``commit_horizon_ms`` (GAINPLAN/EVPLAN's): at its trigger a task is committed to the edge exactly
 when the plan runs it, wherever it stands.

@@ -88,8 +88,8 @@ class NotNavigable(BackendError):
 
 class VehicleBackend(abc.ABC):
     """Driver of one robot. Subclasses set :attr:`kind`, :attr:`clock` and implement the abstract methods (the
-    members docs/extending.md "Writing a vehicle backend from scratch" tables, with units, frames, return types,
-    errors and which are optional; ``examples/plugins/aerodaas_example_plugins/rover.py`` is a complete one).
+    members docs/extending-vehicles.md "Writing a vehicle backend from scratch" tables, with units, frames, return
+    types, errors and which are optional; ``examples/plugins/aerodaas_example_plugins/rover.py`` is a complete one).
 
     Construction: the drone actor builds the backend as ``Backend(cfg)`` with the robot's validated
     :class:`aerodaas.config.RobotConfig` (:func:`aerodaas.backends.make_backend`, called in

@@ -1,4 +1,4 @@
-"""The measured size of our deviations from the reference DEMS code (docs/analytics-schedulers.md, "Deviations").
+"""The measured size of our deviations from the reference DEMS code (docs/analytics-scheduler-rules.md, "Deviations from the reference").
 
 Each deviation that can be switched is run both ways on the same traces and draws (the policy harness,
 :mod:`aerodaas.bench.harness`): per seed, the relative utility change ``variant / as-shipped - 1``, reported as mean

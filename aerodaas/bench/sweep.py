@@ -407,7 +407,7 @@ def format_sweep(res: dict) -> str:
 
 def markdown_tables(res: dict, schedulers: Sequence[str] = ("E+C", "DEM", "DEMS", "DEMS-A", "GEMS", "EVPLAN",
                                                            OURS)) -> str:
-    """The sweep as Markdown (the tables of docs/analytics-schedulers.md): per load and scenario, one row per
+    """The sweep as Markdown (the tables of docs/results/schedulers.md): per load and scenario, one row per
     (sigma, drones per edge), one cell per scheduler: utility mean ± CI in thousands, on-time %, fraction of the
     tightest per-seed upper bound (exact where computed, else LP); the bounds' means in their own columns."""
     rows = [r for r in res["results"] if r["scheduler"] in schedulers]

@@ -20,7 +20,7 @@ A source is registered like every plug-in (:mod:`aerodaas.plugins.registry`, kin
 group ``aerodaas.frame_sources``) under its ``name``; a ``source`` that names no registered frame source is read as
 a video stream URL or file (:data:`STREAM_SOURCE`). Its own properties (beside the camera's ``width``, ``height``,
 ``hfov_deg``, ``fps``, ``pitch_deg``) are declared by its ``Config`` (a pydantic model), validated with the
-environment before Ray starts; errors name ``properties.<field>``. ``docs/extending.md`` ("Writing a frame source")
+environment before Ray starts; errors name ``properties.<field>``. ``docs/extending-vehicles.md``
 walks through an example (``examples/plugins/aerodaas_example_plugins/image_folder.py``).
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""The example's frame source (examples/plugins/aerodaas_example_plugins/image_folder.py, docs/extending.md "Writing
-a frame source"): frames from a folder of images with an index of capture times. Without Ray: the frames it hands
+"""The example's frame source (examples/plugins/aerodaas_example_plugins/image_folder.py, docs/extending-vehicles.md):
+frames from a folder of images with an index of capture times. Without Ray: the frames it hands
 over and their times, its refusals of a bad index. Installed as a user installs the package (the fixture of
 tests/plugins/test_example_plugins.py): listed by entry point, a bad camera configuration refused before Ray, and the app
 (examples/plugins/app/folder_detect.py, the unchanged built-in ObjectDetector) run by ``aerodaas run`` on local Ray

@@ -1,5 +1,5 @@
 """The example's from-scratch ground-rover backend (examples/plugins/aerodaas_example_plugins/rover.py,
-docs/extending.md "Writing a vehicle backend from scratch"), without Ray: the unicycle's exact solution, the
+docs/extending-vehicles.md "Writing a vehicle backend from scratch"), without Ray: the unicycle's exact solution, the
 controller's limits (top speed, acceleration, turn rate) and its stops, the battery, the refused commands, its
 settings' errors and pre-flight checks; then a drone (the runtime's DroneComponent) driving a patrol on it, stepped by
 hand on simulated time. tests/plugins/test_example_plugins.py runs the installed package's rover app with ``aerodaas run``."""
@@ -207,11 +207,11 @@ def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
 
 
 def test_the_backend_contract_documents_every_member_and_which_are_required():
-    """docs/extending.md "Writing a vehicle backend from scratch" names every public member of VehicleBackend, and
-    its members table marks exactly the abstract ones required."""
+    """docs/extending-vehicles.md "Writing a vehicle backend from scratch" names every public member of
+    VehicleBackend, and its members table marks exactly the abstract ones required."""
     import re
 
-    docs = (REPO / "docs" / "extending.md").read_text(encoding="utf-8")
+    docs = (REPO / "docs" / "extending-vehicles.md").read_text(encoding="utf-8")
     section = docs.split("## Writing a vehicle backend from scratch", 1)[1].split("\n## ", 1)[0]
     public = {n for n in vars(VehicleBackend) if not n.startswith("_")}
     named = set(re.findall(r"`(\w+)", section))

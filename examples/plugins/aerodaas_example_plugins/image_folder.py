@@ -1,4 +1,4 @@
-"""A frame source plug-in (docs/extending.md "Writing a frame source"): a camera's frames from a folder of images
+"""A frame source plug-in (docs/extending-vehicles.md): a camera's frames from a folder of images
 with their capture times, so that an unchanged analytics (the built-in ``ObjectDetector``) runs on photos taken
 elsewhere — a survey's JPEGs, another camera's stills.
 

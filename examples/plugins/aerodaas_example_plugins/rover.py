@@ -1,6 +1,6 @@
 """Vehicle backend ``ground_rover``: a ground rover written from scratch on the backend contract (a direct
-:class:`~aerodaas.backends.base.VehicleBackend` subclass; AeroDaaS docs/extending.md "Writing a vehicle backend from
-scratch" walks through it).
+:class:`~aerodaas.backends.base.VehicleBackend` subclass; AeroDaaS docs/extending-vehicles.md walks
+through it).
 
 The rover never leaves the ground (``needs_takeoff = False``): armed, it is ready to drive; its ``in_air`` is always
 False, its position's z always 0, and ``land`` stops it where it is.

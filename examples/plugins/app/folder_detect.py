@@ -1,4 +1,4 @@
-"""Car detection on a folder of photos (docs/extending.md "Writing a frame source"): the drone's camera takes its
+"""Car detection on a folder of photos (docs/extending-vehicles.md): the drone's camera takes its
 frames from the ``image_folder`` frame source (examples/plugins/aerodaas_example_plugins/image_folder.py, installed
 through the package's entry points), images with the capture times of the folder's index.csv, and the unchanged
 built-in ObjectDetector finds the cars in them while the drone hovers; the recording holds each image at its

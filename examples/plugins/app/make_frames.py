@@ -1,4 +1,4 @@
-"""Make the image folder of the ``folder_detect`` app (docs/extending.md "Writing a frame source"): four 640x480
+"""Make the image folder of the ``folder_detect`` app (docs/extending-vehicles.md): four 640x480
 views of real nadir photos (imagery/brighton_beach under $AERODAAS_DATA_DIR, a DJI Phantom 3 at about 2 cm a
 pixel: crops of 1600x1200 pixels, parked cars in three of them) as JPEGs, and their index ``index.csv`` (image,
 capture time in seconds of vehicle time, 1.5 s apart from 3 s on). The photos are read in place, never copied

@@ -1,4 +1,4 @@
-"""A ground rover patrol (docs/extending.md "Writing a vehicle backend from scratch"): a rover on the ``ground_rover``
+"""A ground rover patrol (docs/extending-vehicles.md): a rover on the ``ground_rover``
 backend (examples/plugins/aerodaas_example_plugins/rover.py, a VehicleBackend written from scratch, installed through
 the package's entry points) drives three patrol points on the ground (z = 0) in order, stopping 1 s at each. It
 needs no take-off: the drone arms it and it drives (ARMED -> HOVERING -> NAVIGATING, never TAKING_OFF); at the end
