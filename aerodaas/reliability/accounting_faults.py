@@ -12,6 +12,8 @@ import os
 import re
 import signal
 import socket
+import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -22,7 +24,7 @@ from aerodaas.recording.segments import segment_path
 from aerodaas.reliability.procs import (REPO_APPS, actor_pids, mcap_reader_ok, no_crash, run_cli, summary_outcome,
                                         wait_size)
 
-__all__ = ["ACCOUNTING_FAULTS", "file_losses", "summary_losses"]
+__all__ = ["ACCOUNTING_FAULTS", "STREAM_STALL", "file_losses", "stream_shedding", "summary_losses"]
 
 #: how long the recorder actor is stopped (s)
 STALL_S = 20.0
@@ -96,6 +98,19 @@ def accounting_verdict(p: Any, out: str, rec: Path, reached: bool, extra_ok: boo
             "clean": clean, "exit": p.returncode, "output": out[-3000:], "lost": lost}
 
 
+def _stop_recorder(p: Any, rec: Path) -> tuple[bool, list[int]]:
+    """Once ``rec`` holds 20 kB (the run ``p`` is flying): SIGSTOP of its recorder actor for :data:`STALL_S` s, then
+    SIGCONT. Returns (the size was reached, the pids stopped)."""
+    reached = wait_size(rec, 20000, p)
+    pids = actor_pids(p.pid, "RecorderActor") if reached else []
+    for pid in pids:
+        os.kill(pid, signal.SIGSTOP)
+    time.sleep(STALL_S if pids else 0)
+    for pid in pids:
+        os.kill(pid, signal.SIGCONT)
+    return reached, pids
+
+
 def _recorder_stall(tmp: Path, hold_s: float | None = None) -> dict:
     """SIGSTOP of the recorder actor for :data:`STALL_S` s mid-flight, then SIGCONT. ``hold_s``: the run's
     ``--recorder-hold`` (None: the default, longer than the stall: the simulated clock waits and nothing is lost;
@@ -105,19 +120,95 @@ def _recorder_stall(tmp: Path, hold_s: float | None = None) -> dict:
     hold = [] if hold_s is None else ["--recorder-hold", f"{hold_s:g}"]
     p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet", *hold],
              start_new_session=True)
-    reached = wait_size(rec, 20000, p)
-    pids = actor_pids(p.pid, "RecorderActor") if reached else []
-    for pid in pids:
-        os.kill(pid, signal.SIGSTOP)
-    time.sleep(STALL_S if pids else 0)
-    for pid in pids:
-        os.kill(pid, signal.SIGCONT)
+    reached, pids = _stop_recorder(p, rec)
     out, _ = p.communicate(timeout=900)
     said_held = re.findall(r"simulated clock held ([\d.]+) s for the recorder", out)
     res = accounting_verdict(p, out, rec, reached and len(pids) == 1, bool(said_held),
                              (f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
                              + f"; the summary says the clock was held {', '.join(said_held) or 'never'} s")
     res["held_s"] = [float(x) for x in said_held]
+    return res
+
+
+#: the scenario of :func:`_recorder_stall_on_stream`
+STREAM_STALL = f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run while the camera reads a live video stream"
+#: the camera of the farm survey, and the live stream it reads in :func:`_recorder_stall_on_stream`: MPEG-TS on
+#: loopback UDP at the camera's size (px) and rate (frames/s)
+STREAM_CAMERA = "/quadrotor_base/camera/cam1"
+STREAM_SIZE, STREAM_FPS = (640, 480), 15.0
+
+
+def _stream_env(tmp: Path, url: str) -> Path:
+    """``apps/farm_survey.json`` with its camera reading the live stream ``url``, at speed-up 1 without lock-step
+    (what a stream camera needs); written into ``tmp``."""
+    env = json.loads((REPO_APPS / "farm_survey.json").read_text())
+    env["robots"][0]["sensors"][0]["properties"]["source"] = url
+    env["simulation"] = {**env["simulation"], "speedup": 1, "lockstep": False}
+    path = tmp / "farm_survey_stream.json"
+    path.write_text(json.dumps(env))
+    return path
+
+
+def stream_shedding(rec: Path, topic: str = STREAM_CAMERA) -> dict:
+    """What a stream camera's recording says of frames shed, read with mcap's reader alone: ``{"shed": frames refused
+    by the recorder actor's full queue (``/run/recorder_drops``) plus those the camera did not hand to the recorder
+    (``not_recorded`` of its ``video_stats``), "frames": frames of ``topic`` in the file, "taken": frames the camera
+    took from the stream, "clock_held": the drones' ``clock_held`` events}``; None values when not recorded."""
+    got: dict[str, Any] = {"shed": None, "frames": 0, "taken": None, "clock_held": 0}
+    drops, stats = None, None
+    with open(rec, "rb") as f:
+        for _, ch, m in make_reader(f).iter_messages(log_time_order=False):
+            if ch.topic == topic:
+                got["frames"] += 1
+            elif ch.topic == "/run/recorder_drops":
+                drops = json.loads(m.data)
+            elif ch.topic == topic + "/video_stats":
+                stats = json.loads(m.data)
+            elif ch.topic.endswith("/events"):
+                got["clock_held"] += json.loads(m.data).get("event") == "clock_held"
+    if drops is not None and stats is not None:
+        got["shed"] = drops["frames_dropped"].get(topic, 0) + stats["not_recorded"]
+        got["taken"] = stats["taken"]
+    return got
+
+
+def _recorder_stall_on_stream(tmp: Path) -> dict:
+    """The farm survey with its camera reading a live video stream (a sender process, :func:`aerodaas.bench.video.send`,
+    encodes MPEG-TS onto loopback UDP in real time and goes on while the recorder is stopped, as a camera does), its
+    recorder actor stopped for :data:`STALL_S` s. A stream runs on the wall clock, so its clock must not wait (the
+    run's hold is 0, :func:`aerodaas.runtime.preflight.simulation_for`): clean when frames were shed and counted
+    (the camera's channel lacks exactly the frames ``/run/recorder_drops`` and its ``not_recorded`` count), the run
+    ends exit 4 ``recording_lost`` with the summary's lost counts equal to what the file lacks, and no ``clock_held``
+    event nor "simulated clock held" line says the clock waited."""
+    from aerodaas.emulators import free_udp_port  # lazy: only this scenario streams
+
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    sender = subprocess.Popen([sys.executable, "-c", "import sys; from aerodaas.bench.video import send; send("
+                               "sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]), sys.argv[5])",
+                               url, *map(str, STREAM_SIZE), str(STREAM_FPS), str(tmp / "sent.log")],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rec = tmp / "run.mcap"
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--env", str(_stream_env(tmp, url)), "--record", str(rec),
+                 "--quiet"], start_new_session=True)
+    try:
+        reached, pids = _stop_recorder(p, rec)
+        out, _ = p.communicate(timeout=900)
+    finally:
+        streaming = sender.poll() is None  # the stream never paused for the recorder
+        sender.kill()
+        sender.wait(timeout=30)
+        if p.poll() is None:
+            p.kill()
+    said_held = re.findall(r"simulated clock held ([\d.]+) s for the recorder", out)
+    shed = stream_shedding(rec) if mcap_reader_ok(rec)[0] else {"shed": None, "clock_held": None}
+    res = accounting_verdict(p, out, rec, reached and len(pids) == 1 and streaming, not said_held,
+                             (f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
+                             + f" while its camera read a live stream (sender still streaming at the end: "
+                             f"{streaming}); {shed['shed']} frames shed and counted, {shed['clock_held']} clock_held "
+                             f"events, the summary says the clock was held {', '.join(said_held) or 'never'}")
+    res["clean"] = (res["clean"] and res["exit"] == 4 and bool(shed["shed"]) and shed["clock_held"] == 0
+                    and res["lost"].get(STREAM_CAMERA) == shed["shed"])
+    res.update(held_s=[float(x) for x in said_held], **shed)
     return res
 
 
@@ -273,6 +364,10 @@ ACCOUNTING_FAULTS = [
     (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run with --recorder-hold 2", "the clock waits 2 s, then "
      "frames are shed: exit 4 and recording_lost, the summary's lost counts per channel equal what the file lacks",
      lambda tmp: _recorder_stall(tmp, hold_s=2.0)),
+    (STREAM_STALL, "a live stream cannot wait: the clock is never held (no clock_held event, no \"simulated clock "
+     "held\" line), frames are shed and counted (the camera's channel lacks exactly /run/recorder_drops plus its "
+     "not_recorded), exit 4 and recording_lost, the summary's lost counts per channel equal what the file lacks",
+     _recorder_stall_on_stream),
     ("SIGKILL of the recorder actor twice mid-run", "exit 4, recording_lost, both deaths reported; the summary's lost "
      "counts per channel equal what the three segments lack (mcap's reader)", _recorder_killed_twice),
     ("SIGKILL of the monitoring analytics actor twice mid-run", "exit 4, recording_lost; the monitor's output channel "
