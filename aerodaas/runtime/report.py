@@ -137,7 +137,8 @@ def _camera_lines(st: dict, rep: dict) -> list[str]:
         v = c.get("video")
         if v:  # a video stream: what was decoded, what newest-wins replaced, outages, capture-to-hand-off time
             lines.append(f"      video {v['source']}: {v['decoded']} decoded, {v['overwritten']} replaced by a newer "
-                         f"frame before use, {v.get('not_recorded', 0)} not recorded (recorder busy), "
+                         f"frame before use, {v.get('not_recorded', 0)} not recorded (the drone's recorder "
+                         f"queue full; the recorder actor's own refusals are in 'recording LOST'), "
                          f"{v['decode_errors']} damaged packets; {v['lost']} outage(s) "
                          f"({v['outage_s']:.1f} s without video, {v['restored']} restored); capture to "
                          f"hand-off {v['latency_ms_median']:.0f} ms median, {v['latency_ms_p99']:.0f} ms p99")
