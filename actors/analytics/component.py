@@ -16,7 +16,7 @@ from aerodaas.protocol.messages import DetectionsMsg, FrameMsg, Message, Navigat
 from aerodaas.protocol.specs import AnalyticsSchedulerSpec
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION, ComponentKind, FailureCount, FailureLog
 
-from aerodaas.actors.dataplane import Component, DataPlane
+from aerodaas.actors.data.plane import Component, DataPlane
 from aerodaas.schedulers.dispatch.banks import AnalyticsBank
 from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
 from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher

@@ -4,11 +4,11 @@ module imports Ray (the actor classes are ``ray.remote`` classes): entry points 
 when an application is only loaded (``aerodaas plan``)."""
 from __future__ import annotations
 
-from aerodaas.actors.analytics_actor import AnalyticsActor, DispatcherActor
-from aerodaas.actors.cloud_executor import start_cloud_executors
-from aerodaas.actors.drone_actor import DroneActor
-from aerodaas.actors.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
-from aerodaas.actors.recorder_actor import RecorderActor
+from aerodaas.actors.host.analytics_actor import AnalyticsActor, DispatcherActor
+from aerodaas.actors.cloud.executor import start_cloud_executors
+from aerodaas.actors.host.drone_actor import DroneActor
+from aerodaas.actors.builtin.handles import AnalyticsHandle, CameraHandle, DroneHandle, SchedulerHandle
+from aerodaas.actors.recording.actor import RecorderActor
 from aerodaas.protocol.actor_classes import ActorClasses
 
 __all__ = ["BUILTIN_ACTORS"]

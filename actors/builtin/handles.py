@@ -2,7 +2,7 @@
 
 A component (a drone, its navigation inbox, a camera, an analytics instance) lives in one of the run's Ray
 actors; the driver, the HITL API and the application reach it through that actor's
-:meth:`~aerodaas.actors.actor_base.ActorBase.call`, which takes the component id and the component class's method
+:meth:`~aerodaas.actors.host.base.ActorBase.call`, which takes the component id and the component class's method
 itself (a function, pickled by reference), never a method name. Each handle class lists the methods it offers as
 :class:`remote_method` attributes, used like an actor handle's: ``h.status.remote()`` returns the ObjectRef of
 ``DroneComponent.status()`` run in the drone's actor. A misspelt method is an AttributeError here, in the driver,
@@ -10,17 +10,17 @@ before anything is sent.
 """
 from __future__ import annotations
 
-from aerodaas.actors.analytics_component import AnalyticsComponent
-from aerodaas.actors.camera import CameraComponent
-from aerodaas.actors.drone import DroneComponent
-from aerodaas.actors.scheduler_component import SchedulerComponent
+from aerodaas.actors.analytics.component import AnalyticsComponent
+from aerodaas.actors.sensors.camera import CameraComponent
+from aerodaas.actors.drone.component import DroneComponent
+from aerodaas.actors.drone.scheduler_component import SchedulerComponent
 from aerodaas.protocol.handles import ComponentHandle, remote_method
 
 __all__ = ["remote_method", "ComponentHandle", "DroneHandle", "SchedulerHandle", "CameraHandle", "AnalyticsHandle"]
 
 
 class DroneHandle(ComponentHandle):
-    """A drone component (:class:`~aerodaas.actors.drone.DroneComponent`)."""
+    """A drone component (:class:`~aerodaas.actors.drone.component.DroneComponent`)."""
 
     status = remote_method(DroneComponent.status)
     report = remote_method(DroneComponent.report)
@@ -32,8 +32,8 @@ class DroneHandle(ComponentHandle):
 
 
 class SchedulerHandle(ComponentHandle):
-    """A robot's navigation inbox (:class:`~aerodaas.actors.scheduler_component.SchedulerComponent`; in a run the
-    drone's own :class:`~aerodaas.actors.drone_inbox.DroneInbox`, which has the drone apply what it adds at once):
+    """A robot's navigation inbox (:class:`~aerodaas.actors.drone.scheduler_component.SchedulerComponent`; in a run the
+    drone's own :class:`~aerodaas.actors.drone.inbox.DroneInbox`, which has the drone apply what it adds at once):
     the drone's waypoint queue (``snapshot``), navigation added and cleared through the HITL API."""
 
     snapshot = remote_method(SchedulerComponent.snapshot)
@@ -43,14 +43,14 @@ class SchedulerHandle(ComponentHandle):
 
 
 class CameraHandle(ComponentHandle):
-    """A camera component (:class:`~aerodaas.actors.camera.CameraComponent`)."""
+    """A camera component (:class:`~aerodaas.actors.sensors.camera.CameraComponent`)."""
 
     get_latest = remote_method(CameraComponent.get_latest)
     stats = remote_method(CameraComponent.stats)
 
 
 class AnalyticsHandle(ComponentHandle):
-    """An analytics instance (:class:`~aerodaas.actors.analytics_component.AnalyticsComponent`)."""
+    """An analytics instance (:class:`~aerodaas.actors.analytics.component.AnalyticsComponent`)."""
 
     get_latest = remote_method(AnalyticsComponent.get_latest)
     stats = remote_method(AnalyticsComponent.stats)

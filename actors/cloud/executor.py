@@ -24,7 +24,7 @@ from typing import Any, Mapping
 from aerodaas.schedulers.dispatch.banks import AnalyticsBank, DetectorBank
 from aerodaas.schedulers.dispatch.payload import frame_from_payload
 
-from aerodaas.actors.remote import LazyActorClass, where
+from aerodaas.actors.host.remote import LazyActorClass, where
 
 __all__ = ["CloudExecutor", "CloudExecutorActor", "cloud_selector", "start_cloud_executors"]
 

@@ -1,5 +1,5 @@
 """Lock-step cascades: the outstanding work derived from one item the clock waits for (see
-:mod:`aerodaas.actors.dataplane`: lock-step is a property of the clock, not of the transport)."""
+:mod:`aerodaas.actors.data.plane`: lock-step is a property of the clock, not of the transport)."""
 from __future__ import annotations
 
 import threading

@@ -15,7 +15,7 @@ and restarts:
   for the sender (detections, navigation) come back on the same socket as soon as the receiver is done — no Ray
   task submission per frame in either direction;
 * a camera whose source can render into a buffer (:attr:`aerodaas.plugins.frames.FrameSource.renders_into`, the
-  simulator's) makes the frame straight in a slot the outlet lends (:meth:`.channel_outlet.ChannelOutlet.lend`):
+  simulator's) makes the frame straight in a slot the outlet lends (:meth:`aerodaas.actors.data.channel_outlet.ChannelOutlet.lend`):
   that frame is sent from there, with no copy at all;
 * a slot is reused only once the receiver released the frame: the receiver sends :class:`SlotFree` when its last
   reference to the array is gone (``weakref.finalize``), so an analytics that keeps a frame keeps its slot, exactly
@@ -31,10 +31,10 @@ channels: a delivery of a lock-step cascade (:attr:`~aerodaas.protocol.messages.
 the receiver's cascade for it is done (never blocking the connection's thread), and the sender's cascade stays
 open until that answer and its replies were handed on.
 
-The receiving end is here (:class:`ChannelServer`), the sending end in :mod:`.channel_outlet`. Messages:
+The receiving end is here (:class:`ChannelServer`), the sending end in :mod:`aerodaas.actors.data.channel_outlet`. Messages:
 :class:`ChannelSend` (sender -> receiver), :class:`ChannelDone` and :class:`SlotFree` (receiver ->
-sender), in :mod:`.channel_msgs`; a frame's ``data`` in a delivery is a :class:`SlotFrame`. On the socket a frame's
-delivery and its answer travel as tuples of built-in values (:mod:`.channel_wire`): the answer's detections
+sender), in :mod:`aerodaas.actors.data.channel_msgs`; a frame's ``data`` in a delivery is a :class:`SlotFrame`. On the socket a frame's
+delivery and its answer travel as tuples of built-in values (:mod:`aerodaas.actors.data.channel_wire`): the answer's detections
 flattened, and the frame's metadata not sent back (the sender puts back the object it sent).
 """
 from __future__ import annotations
@@ -51,10 +51,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
-from aerodaas.actors.channel_outlet import shutdown_connection
-from aerodaas.actors.channel_slots import attach
-from aerodaas.actors.channel_wire import decode, encode_done, encode_free
+from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
+from aerodaas.actors.data.channel_outlet import shutdown_connection
+from aerodaas.actors.data.channel_slots import attach
+from aerodaas.actors.data.channel_wire import decode, encode_done, encode_free
 from aerodaas.protocol.messages import Delivery, FrameMsg
 
 __all__ = ["channel_address", "ChannelServer"]
@@ -92,7 +92,7 @@ class _SenderSession:
         threading.Thread(target=self.late_frees, name="aerodaas-channel-free", daemon=True).start()
 
     def send(self, obj: tuple) -> None:
-        """Send one wire tuple (:mod:`.channel_wire`) to the sender."""
+        """Send one wire tuple (:mod:`aerodaas.actors.data.channel_wire`) to the sender."""
         with self.send_lock:
             try:
                 self.conn.send(obj)
@@ -130,7 +130,7 @@ class _SenderSession:
 class ChannelServer:
     """The receiving end of every channel into one actor: listens on :func:`channel_address`, authenticates each
     sender with the run's key and serves it on a thread of its own. ``deliver(d) -> replies`` is the actor's
-    :meth:`~.dataplane.DataPlane.deliver`; it runs in the connection's thread (as a Ray actor call runs in one of the actor's
+    :meth:`~aerodaas.actors.data.plane.DataPlane.deliver`; it runs in the connection's thread (as a Ray actor call runs in one of the actor's
     threads); for a delivery of a lock-step cascade it is called as ``deliver(d, answer)``, returns None and calls
     ``answer(replies)`` once the cascade is done (from whichever thread finished it). Raises OSError if the
     address is taken (another live process serves it)."""

@@ -1,6 +1,6 @@
-"""The messages of the same-node channel (:mod:`aerodaas.actors.channel`) as objects: :class:`ChannelSend`
+"""The messages of the same-node channel (:mod:`aerodaas.actors.data.channel`) as objects: :class:`ChannelSend`
 (sender -> receiver), :class:`ChannelDone` and :class:`SlotFree` (receiver -> sender); a frame's ``data`` in a
-delivery is a :class:`SlotFrame`. How they travel on the socket: :mod:`aerodaas.actors.channel_wire`."""
+delivery is a :class:`SlotFrame`. How they travel on the socket: :mod:`aerodaas.actors.data.channel_wire`."""
 from __future__ import annotations
 
 from dataclasses import dataclass

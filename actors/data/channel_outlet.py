@@ -1,4 +1,4 @@
-"""The sending end of a same-node channel (:mod:`aerodaas.actors.channel` explains the channel): one outlet per
+"""The sending end of a same-node channel (:mod:`aerodaas.actors.data.channel` explains the channel): one outlet per
 edge from a component of this actor to a component of a peer actor on the same machine, with its shared-memory
 slots (copied into, or lent for a frame to be made in) and its deliveries in flight."""
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
-from aerodaas.actors.channel_slots import Slot, release_lent
-from aerodaas.actors.channel_wire import decode, decode_done, encode_send
+from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
+from aerodaas.actors.data.channel_slots import Slot, release_lent
+from aerodaas.actors.data.channel_wire import decode, decode_done, encode_send
 from aerodaas.protocol.messages import Delivery, FrameMsg, Message, Port
 
 __all__ = ["ChannelOutlet", "shutdown_connection"]
@@ -36,7 +36,7 @@ def shutdown_connection(conn: Any) -> None:
 
 class ChannelOutlet:
     """The sending end of an edge to component ``cid`` of a peer actor on the same machine, over that peer's
-    channel (the same interface as :class:`~.remote_outlet.RemoteOutlet`: :meth:`send`, :meth:`stats`).
+    channel (the same interface as :class:`~aerodaas.actors.data.remote_outlet.RemoteOutlet`: :meth:`send`, :meth:`stats`).
 
     At most ``buffer`` deliveries are in flight (sent, not yet answered); a new one beyond that is dropped and
     counted, as a busy consumer's mailbox would. Frames go through at most ``max_slots`` shared-memory slots of

@@ -1,4 +1,4 @@
-"""The shared-memory slots of the same-node channel (:mod:`aerodaas.actors.channel`): the segments a sender
+"""The shared-memory slots of the same-node channel (:mod:`aerodaas.actors.data.channel`): the segments a sender
 creates for its frames (:class:`Slot`, named by :func:`own_prefix`) and the receiver's mapping of one of them
 (:func:`attach`), which never makes the receiver the segment's owner."""
 from __future__ import annotations
@@ -45,7 +45,7 @@ def attach(name: str) -> SharedMemory:
 
 class Slot:
     """One segment of a sender's frames: ``size`` bytes; ``free`` while no receiver holds the frame written in it;
-    ``lent`` while a frame made in it in this process (:meth:`~.channel_outlet.ChannelOutlet.lend`) is still referenced
+    ``lent`` while a frame made in it in this process (:meth:`~aerodaas.actors.data.channel_outlet.ChannelOutlet.lend`) is still referenced
     here. It may be written again only when free and not lent."""
 
     __slots__ = ("shm", "size", "free", "lent", "dropped")
@@ -71,7 +71,7 @@ class Slot:
 
 
 def release_lent(unlent: Any, slot: Slot) -> None:
-    """Finalizer of a lent frame (:meth:`~.channel_outlet.ChannelOutlet.lend`): its slot's name joins ``unlent``
+    """Finalizer of a lent frame (:meth:`~aerodaas.actors.data.channel_outlet.ChannelOutlet.lend`): its slot's name joins ``unlent``
     (the outlet makes it writable again under its lock); a slot dropped meanwhile (the outlet closed) is unmapped
     now that nothing here uses it. Holding ``slot`` keeps the mapping alive as long as the frame is."""
     if slot.dropped:

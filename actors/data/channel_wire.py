@@ -1,4 +1,4 @@
-"""The same-node channel's wire format (:mod:`aerodaas.actors.channel`): what a frame's delivery and its answer
+"""The same-node channel's wire format (:mod:`aerodaas.actors.data.channel`): what a frame's delivery and its answer
 look like on the Unix socket.
 
 Why: a frame's delivery crosses the channel 30 times a second per consumer, and between two frames both actors
@@ -31,7 +31,7 @@ import dataclasses
 import pickle
 from typing import Any
 
-from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
+from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
 from aerodaas.protocol.messages import (DetectionsMsg, Delivery, FrameMsg, Message, NavigationMsg, OdometryMsg, Port,
                                         StatMsg, ValueMsg)

@@ -1,5 +1,5 @@
 """Frames between actors: JPEG encoding for the edges that cross tiers, and the per-process count of every copy of a
-frame's pixels (the totals per frame are in :mod:`aerodaas.actors.dataplane`'s docstring)."""
+frame's pixels (the totals per frame are in :mod:`aerodaas.actors.data.plane`'s docstring)."""
 from __future__ import annotations
 
 import threading
@@ -12,16 +12,16 @@ __all__ = ["FrameCopies", "encode_frame", "decode_frame"]
 
 class FrameCopies:
     """Counts, in one actor process, every place where a frame's pixels are materialised or copied (see
-    :mod:`aerodaas.actors.dataplane`'s docstring for the per-frame totals). Counters, in frames:
+    :mod:`aerodaas.actors.data.plane`'s docstring for the per-frame totals). Counters, in frames:
 
     * ``materialised``: frames produced by a camera (the one allocation of the pixels);
     * ``tier_jpeg_encoded`` / ``tier_jpeg_decoded``: frames JPEG-encoded here to cross to an actor of another tier /
       decoded here on arrival from one;
     * ``object_store_put`` / ``object_store_get``: frames sent to / received from an actor of the same tier as an
       ObjectRef;
-    * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`.channel`; the
+    * ``channel_copy``: frames copied into a same-node channel's shared-memory slot (:mod:`aerodaas.actors.data.channel`; the
       receiver reads the slot in place);
-    * ``channel_in_place``: frames a camera made straight in such a slot (:meth:`.channel_outlet.ChannelOutlet.lend`)
+    * ``channel_in_place``: frames a camera made straight in such a slot (:meth:`aerodaas.actors.data.channel_outlet.ChannelOutlet.lend`)
       and sent from there, with no copy;
     * ``recorder_jpeg_encoded``: frames JPEG-encoded by the recorder (written as ``foxglove.CompressedImage``).
 

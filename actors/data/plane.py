@@ -10,7 +10,7 @@ analytics actor, a dispatcher actor; :mod:`aerodaas.runtime.dataflow` decides wh
   is the same ``ndarray`` object from the camera to the last colocated analytics); an item for a busy component
   is queued up to its stream ``buffer`` (then dropped and counted, so a slow consumer never stalls the camera or
   the control loop); items waiting for an analytics that takes batches go to it in one call;
-* in a drone actor the clock thread (:class:`~.assembly.ActorAssembly`) steps every vehicle, publishes
+* in a drone actor the clock thread (:class:`~aerodaas.actors.host.assembly.ActorAssembly`) steps every vehicle, publishes
   odometry and the stat-stream, triggers camera captures and runs each drone's control ticks; it never runs
   components itself: it submits work to a small thread pool (OpenCV and onnxruntime release the GIL, so renders
   and inference overlap on 2 cores);
@@ -19,7 +19,7 @@ analytics actor, a dispatcher actor; :mod:`aerodaas.runtime.dataflow` decides wh
 
 Items for a component of another actor (:class:`~aerodaas.protocol.messages.Message` kinds, typed) leave through that
 edge's outlet, bounded in flight: a same-node channel when the other actor serves one on this machine
-(:mod:`.channel`: the frame copied once into shared memory, the message and its reply on a Unix socket), else a
+(:mod:`aerodaas.actors.data.channel`: the frame copied once into shared memory, the message and its reply on a Unix socket), else a
 Ray actor call (:class:`RemoteOutlet`: the frame put once into the object store on one tier, JPEG-encoded across
 tiers). Outputs bound for the sender come back in the reply of the same delivery.
 
@@ -57,11 +57,11 @@ from typing import Any, Callable
 import numpy as np
 import ray
 
-from aerodaas.actors.cascade import Cascade
-from aerodaas.actors.channel import channel_address
-from aerodaas.actors.channel_outlet import ChannelOutlet
-from aerodaas.actors.frames import FrameCopies, decode_frame, encode_frame
-from aerodaas.actors.remote_outlet import RemoteOutlet
+from aerodaas.actors.data.cascade import Cascade
+from aerodaas.actors.data.channel import channel_address
+from aerodaas.actors.data.channel_outlet import ChannelOutlet
+from aerodaas.actors.data.frames import FrameCopies, decode_frame, encode_frame
+from aerodaas.actors.data.remote_outlet import RemoteOutlet
 from aerodaas.protocol.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
 from aerodaas.protocol.startup_probe import probe
 
@@ -183,7 +183,7 @@ class Component:
 
 class DataPlane:
     """One actor's share of a run: its components, the routes between them, the outlets to other actors and the
-    worker pool. Plain Python: :class:`~.actor_base.ActorBase` is the Ray actor around it.
+    worker pool. Plain Python: :class:`~aerodaas.actors.host.base.ActorBase` is the Ray actor around it.
 
     ``routes`` maps a producing component id to its subscribers ``[(component id, port, buffer)]``; components
     of other actors are reached through ``peers`` (actor id -> actor handle) and ``location`` (component id ->
@@ -202,7 +202,7 @@ class DataPlane:
         self.peers: dict[str, Any] = {}
         self._outlets: dict[tuple[str, str, Port], Any] = {}  # RemoteOutlet or channel_outlet.ChannelOutlet
         #: the run's channel key (bytes) when actors on this machine talk through same-node channels
-        #: (:mod:`.channel`); None: Ray calls only (``same_node_transport: ray``)
+        #: (:mod:`aerodaas.actors.data.channel`); None: Ray calls only (``same_node_transport: ray``)
         self.channel_key: bytes | None = None
         #: lock-step: how long (s) a frame for a consumer actor that died waits for its restart
         #: (``ActorSpec.restart_hold_s``, the environment's ``actor_restart_timeout_s``)
@@ -400,7 +400,7 @@ class DataPlane:
     def frame_buffer(self, src: str, shape: tuple[int, ...], robot: str) -> np.ndarray | None:
         """A writable ``shape`` uint8 array to make component ``src``'s next frame (of ``robot``) in: a slot lent by
         the same-node channel of its first subscriber in another actor on this machine that takes ``robot``'s items
-        (:meth:`.channel_outlet.ChannelOutlet.lend`; that outlet then sends the frame without copying it; every
+        (:meth:`aerodaas.actors.data.channel_outlet.ChannelOutlet.lend`; that outlet then sends the frame without copying it; every
         other reader reads it as any frame). None when no such subscriber is reached by a channel, its slots are
         held, or its outlet cannot be made now (the frame is then made as usual, and publishing it reports why)."""
         for cid, port, buf, only in self.routes.get(src, ()):
@@ -416,7 +416,7 @@ class DataPlane:
 
     def _outlet(self, src: str, cid: str, port: Port, buffer: int) -> Any:
         """The outlet of edge ``src`` -> ``cid`` (another actor's component), made on first use: a same-node
-        channel when the peer serves one on this machine (:mod:`.channel`), else Ray calls
+        channel when the peer serves one on this machine (:mod:`aerodaas.actors.data.channel`), else Ray calls
         (:class:`RemoteOutlet`). Raises KeyError for a component no actor of the run has."""
         key = (src, cid, port)
         o = self._outlets.get(key)
@@ -436,7 +436,7 @@ class DataPlane:
         return o
 
     def _channel_outlet(self, hid: str, cid: str, port: Port, buffer: int) -> Any:
-        """A :class:`~.channel_outlet.ChannelOutlet` to actor ``hid`` when channels are on and ``hid`` serves one on this
+        """A :class:`~aerodaas.actors.data.channel_outlet.ChannelOutlet` to actor ``hid`` when channels are on and ``hid`` serves one on this
         machine (same tier only: frames cross tiers as JPEG through Ray); None otherwise."""
         if self.channel_key is None or self.tiers.get(hid, self.tier) != self.tier:
             return None

@@ -1,6 +1,6 @@
 """The sending side of a route to a component of another actor over Ray: a bounded number of deliveries in
 flight, the frame put once into the object store on one tier and JPEG-encoded across tiers, replies handed back
-to the sending data plane (see :mod:`aerodaas.actors.dataplane`; the same-node alternative is :mod:`.channel`)."""
+to the sending data plane (see :mod:`aerodaas.actors.data.plane`; the same-node alternative is :mod:`aerodaas.actors.data.channel`)."""
 from __future__ import annotations
 
 import threading
@@ -9,8 +9,8 @@ from typing import Any, Callable
 
 import ray
 
-from aerodaas.actors.cascade import Cascade
-from aerodaas.actors.frames import FrameCopies, encode_frame
+from aerodaas.actors.data.cascade import Cascade
+from aerodaas.actors.data.frames import FrameCopies, encode_frame
 from aerodaas.protocol.messages import Delivery, EncodedFrame, FrameMsg, Message, Port
 
 __all__ = ["RemoteOutlet"]

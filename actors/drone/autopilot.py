@@ -1,14 +1,14 @@
 """What a drone does when the autopilot, not AeroDaaS, flies: an autopilot's own mission (ArduPilot AUTO, PX4
 AUTO.MISSION) uploaded and followed by its MISSION_CURRENT / MISSION_ITEM_REACHED reports, the autopilot's own
 failsafes (RTL, LAND, BRAKE: ``mavlink.on_failsafe``), a regained link, and the return to launch around exclusion
-zones. An object of its drone (:attr:`~aerodaas.actors.drone.DroneComponent.autopilot_flight`), given the drone's
-collaborators and the flight state it shares with the drone (:mod:`aerodaas.actors.drone_flight`); it knows nothing
+zones. An object of its drone (:attr:`~aerodaas.actors.drone.component.DroneComponent.autopilot_flight`), given the drone's
+collaborators and the flight state it shares with the drone (:mod:`aerodaas.actors.drone.flight`); it knows nothing
 else of the drone."""
 from __future__ import annotations
 
 import math
 
-from aerodaas.actors.drone_flight import FlightContext, FlightState
+from aerodaas.actors.drone.flight import FlightContext, FlightState
 from aerodaas.navigation.fsm import MissionState as S
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation.rtl import plan_return

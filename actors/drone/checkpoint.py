@@ -4,7 +4,7 @@ A checkpoint (a picklable dict) holds the vehicle's state when the backend keeps
 :meth:`~aerodaas.backends.base.VehicleBackend.checkpoint`; a real vehicle keeps flying on its own), the mission
 state machine's state, the waypoints visited, the last 50 events (the recording has them all), the drone's waypoint queue (queued missions
 and completed items), the clocks of the control loop and the drone's counters (its plug-in sensors' failures too). :func:`restore_drone` puts them back into a freshly built
-:class:`~.drone.DroneComponent`: the waypoint that was being flown to (or held) is flown to again, from where the
+:class:`~aerodaas.actors.drone.component.DroneComponent`: the waypoint that was being flown to (or held) is flown to again, from where the
 vehicle is, and the events say ``resumed_after_restart``.
 """
 from __future__ import annotations
@@ -18,8 +18,8 @@ from aerodaas.navigation.fsm import MissionState as S
 class CheckpointNumbers:
     """The sequence numbers of an actor's checkpoints (1, 2, ... in the order taken, across every drone of the
     actor and every ``run`` of it): the recorder actor keeps a robot's checkpoint with the largest one
-    (:meth:`aerodaas.actors.recorder_actor.RecorderActor.checkpoint`). Owned by the actor's
-    :class:`~aerodaas.actors.assembly.ActorAssembly`; ``itertools.count`` is thread-safe (the clock thread takes
+    (:meth:`aerodaas.actors.recording.actor.RecorderActor.checkpoint`). Owned by the actor's
+    :class:`~aerodaas.actors.host.assembly.ActorAssembly`; ``itertools.count`` is thread-safe (the clock thread takes
     checkpoints, the actor's ``checkpoint`` call too)."""
 
     def __init__(self) -> None:
@@ -71,7 +71,7 @@ def restore_drone(d: Any, cp: dict) -> None:
             if k in cp:
                 setattr(d, k, cp[k])
         for k in ("visited", "preplanned_left", "flew_something", "idle_since", "outcome", "rejected", "hold_failed"):
-            if k in cp:  # the flight state the drone shares with its flights (:mod:`.drone_flight`)
+            if k in cp:  # the flight state the drone shares with its flights (:mod:`aerodaas.actors.drone.flight`)
                 setattr(d.flight, k, cp[k])
         if "not_reached" in cp:
             d.progress.not_reached = list(cp["not_reached"])

@@ -2,12 +2,12 @@
 hover timers, failsafes), navigation executor, and its odometry and stat-stream sensors (their data is the
 vehicle state itself).
 
-It lives in the edge actor (:mod:`aerodaas.actors.dataplane`): the actor's clock thread calls :meth:`step` and
+It lives in the edge actor (:mod:`aerodaas.actors.data.plane`): the actor's clock thread calls :meth:`step` and
 :meth:`control_tick`. A control step checks what holds in every state (link, autopilot failsafe), then runs the
 handler of the current mission state (``_on_landing``, ``_on_returning``, ``_on_paused``, ...), from a table with
 one handler per state of :data:`~aerodaas.navigation.fsm.TRANSITIONS` (:func:`~aerodaas.navigation.fsm.handler_table`). The drone owns its waypoint queue (:attr:`DroneComponent.queue`, a
 :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue` holding the pre-planned navigation it was given) and its
-navigation inbox (:attr:`DroneComponent.inbox`, :class:`~aerodaas.actors.drone_inbox.DroneInbox`), which checks new
+navigation inbox (:attr:`DroneComponent.inbox`, :class:`~aerodaas.actors.drone.inbox.DroneInbox`), which checks new
 navigation, asks the trajectory scheduler plug-in to plan it into the queue, and hands it to
 :meth:`DroneComponent.apply_navigation` so that it is applied at once. Every command passes the robot's
 :class:`~aerodaas.navigation.safety.SafetyGate` right before it reaches the backend (the one choke point). The
@@ -19,10 +19,10 @@ MISSION_CURRENT / MISSION_ITEM_REACHED reports instead of sending targets (the r
 started, every navigation that such a mission cannot express).
 
 The drone composes its flight logic from objects that know nothing else of it: :attr:`DroneComponent.queue_flight`
-(flying its own queue, :mod:`~aerodaas.actors.drone_queue_flight`) and :attr:`DroneComponent.autopilot_flight` (the
-autopilot's own mission, failsafes, link regain, return to launch, :mod:`~aerodaas.actors.drone_autopilot`), both
+(flying its own queue, :mod:`~aerodaas.actors.drone.queue_flight`) and :attr:`DroneComponent.autopilot_flight` (the
+autopilot's own mission, failsafes, link regain, return to launch, :mod:`~aerodaas.actors.drone.autopilot`), both
 given its collaborators and the flight state it shares with them (:attr:`DroneComponent.flight`, a
-:class:`~aerodaas.actors.drone_flight.FlightState`).
+:class:`~aerodaas.actors.drone.flight.FlightState`).
 """
 from __future__ import annotations
 
@@ -39,16 +39,16 @@ from aerodaas.navigation.safety import SafetyGate
 from aerodaas.navigation.waypoint_queue import Order
 from aerodaas.schedulers.base import TrajectoryScheduler
 
-from aerodaas.actors.drone_autopilot import AutopilotFlight
-from aerodaas.actors.drone_deadline import PhaseDeadlines
-from aerodaas.actors.drone_inbox import DroneInbox
-from aerodaas.actors.mission_plan import MissionPlanLog
-from aerodaas.actors.drone_end import SETTLE_WALL_S, RunEnd
-from aerodaas.actors.drone_gimbal import DroneGimbal
-from aerodaas.actors.drone_odometry import OdometryPublisher
-from aerodaas.actors.drone_progress import NavigationProgress
-from aerodaas.actors.drone_flight import FlightContext, FlightState
-from aerodaas.actors.drone_queue_flight import QueueFlight
+from aerodaas.actors.drone.autopilot import AutopilotFlight
+from aerodaas.actors.drone.deadline import PhaseDeadlines
+from aerodaas.actors.drone.inbox import DroneInbox
+from aerodaas.actors.drone.mission_plan import MissionPlanLog
+from aerodaas.actors.drone.end import SETTLE_WALL_S, RunEnd
+from aerodaas.actors.drone.gimbal import DroneGimbal
+from aerodaas.actors.drone.odometry import OdometryPublisher
+from aerodaas.actors.drone.progress import NavigationProgress
+from aerodaas.actors.drone.flight import FlightContext, FlightState
+from aerodaas.actors.drone.queue_flight import QueueFlight
 
 _ACTIVE = (S.HOVERING, S.NAVIGATING, S.WAYPOINT_HOLD, S.TRACKING)
 
@@ -87,7 +87,7 @@ class DroneComponent:
         self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
         self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the actor's assembly
-        self.plugin_sensors: list = []  # PluginSensorComponent (aerodaas.actors.plugin_sensor), filled likewise
+        self.plugin_sensors: list = []  # PluginSensorComponent (aerodaas.actors.sensors.plugin_sensor), filled likewise
         self.events: list[dict] = []
         self.takeoff_altitude = self.cfg.takeoff_altitude  # as the safety gate passed it (start())
         self._failsafe_pending: dict | None = None  # an autopilot_failsafe event not yet acted on
@@ -101,11 +101,11 @@ class DroneComponent:
         #: fly the pre-planned waypoints as a mission uploaded to the vehicle (the backend says whether)
         self.autopilot_mission = bool(self.backend.flies_uploaded_mission)
         #: the autopilot's own mission, its failsafes, link regain, the return to launch
-        #: (:class:`~aerodaas.actors.drone_autopilot.AutopilotFlight`)
+        #: (:class:`~aerodaas.actors.drone.autopilot.AutopilotFlight`)
         self.autopilot_flight = AutopilotFlight(ctx, self.flight, self.autopilot_mission)
-        #: flying the drone's own queue (:class:`~aerodaas.actors.drone_queue_flight.QueueFlight`)
+        #: flying the drone's own queue (:class:`~aerodaas.actors.drone.queue_flight.QueueFlight`)
         self.queue_flight = QueueFlight(ctx, self.flight, self.autopilot_flight.return_to_launch)
-        #: the deadlines of take-off, landing and the return (:class:`~aerodaas.actors.drone_deadline.PhaseDeadlines`)
+        #: the deadlines of take-off, landing and the return (:class:`~aerodaas.actors.drone.deadline.PhaseDeadlines`)
         self.deadlines = PhaseDeadlines(ctx, self.flight)
         self._pause_req = threading.Event()
         self._resume_req = threading.Event()
@@ -176,12 +176,12 @@ class DroneComponent:
 
     def close(self) -> None:
         """Close the backend, a real vehicle still armed brought down first and recorded until the disarm
-        (:meth:`RunEnd.close <aerodaas.actors.drone_end.RunEnd.close>`)."""
+        (:meth:`RunEnd.close <aerodaas.actors.drone.end.RunEnd.close>`)."""
         self.end.close()
 
     def settled(self, wait_s: float = SETTLE_WALL_S) -> bool:
         """After the mission ended: whether the recorded odometry shows the vehicle's end state, or ``wait_s`` wall
-        seconds passed (:meth:`RunEnd.settled <aerodaas.actors.drone_end.RunEnd.settled>`)."""
+        seconds passed (:meth:`RunEnd.settled <aerodaas.actors.drone.end.RunEnd.settled>`)."""
         return self.end.settled(wait_s)
 
     def finish(self) -> None:
@@ -256,13 +256,13 @@ class DroneComponent:
     @property
     def visited(self) -> list[dict]:
         """The waypoints done, in order: id, vehicle time ``t`` (s), ``position`` and ``target`` (ENU metres),
-        ``error_m`` (:attr:`FlightState.visited <aerodaas.actors.drone_flight.FlightState.visited>`)."""
+        ``error_m`` (:attr:`FlightState.visited <aerodaas.actors.drone.flight.FlightState.visited>`)."""
         return self.flight.visited
 
     @property
     def outcome(self) -> str | None:
         """How this drone's mission ended (``success``, ``incomplete``, ``failsafe``, ``timeout`` ...); None while it
-        runs (:attr:`FlightState.outcome <aerodaas.actors.drone_flight.FlightState.outcome>`)."""
+        runs (:attr:`FlightState.outcome <aerodaas.actors.drone.flight.FlightState.outcome>`)."""
         return self.flight.outcome
 
     @outcome.setter

@@ -3,14 +3,14 @@ deadline in vehicle seconds when the drone enters them (:mod:`aerodaas.navigatio
 ``deadlines`` settings: :class:`~aerodaas.config.deadlines.PhaseDeadlinesConfig`). Past it the phase is stalled:
 a ``takeoff_stalled`` / ``landing_stalled`` / ``rtl_stalled`` event, an outcome that is not success, and the
 configured action (land, hold, or abort the mission). An object of its drone
-(:attr:`~aerodaas.actors.drone.DroneComponent.deadlines`), given the drone's collaborators and the flight state it
-shares with the drone (:mod:`aerodaas.actors.drone_flight`); it knows nothing else of the drone."""
+(:attr:`~aerodaas.actors.drone.component.DroneComponent.deadlines`), given the drone's collaborators and the flight state it
+shares with the drone (:mod:`aerodaas.actors.drone.flight`); it knows nothing else of the drone."""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from aerodaas.actors.drone_flight import FlightContext, FlightState
+from aerodaas.actors.drone.flight import FlightContext, FlightState
 from aerodaas.navigation import deadlines as dl
 from aerodaas.navigation.fsm import MissionState as S
 

@@ -1,6 +1,6 @@
 """How a drone's run ends: a real vehicle still armed is brought down by its backend's safe end while its events,
 state and odometry go on being recorded; a finished drone waits (bounded) until its recorded odometry shows the
-vehicle's end state. An object of its drone (:attr:`~aerodaas.actors.drone.DroneComponent.end`); it knows nothing
+vehicle's end state. An object of its drone (:attr:`~aerodaas.actors.drone.component.DroneComponent.end`); it knows nothing
 else of the drone (the drone records its last odometry and the mission result itself: ``DroneComponent.finish``)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from aerodaas.actors.drone_odometry import OdometryPublisher
+from aerodaas.actors.drone.odometry import OdometryPublisher
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S
 
 #: vehicle seconds a landed, still armed vehicle is given to disarm by itself at the end (:meth:`RunEnd._await_disarm`)
@@ -22,7 +22,7 @@ SETTLE_WALL_S = 2.0
 class RunEnd:
     """The end of robot ``robot_id``'s run on ``backend`` (see the module): its mission state machine ``fsm`` follows
     the vehicle down, ``event(kind, **fields)`` records the drone's events and ``odometry`` (the drone's
-    :class:`~aerodaas.actors.drone_odometry.OdometryPublisher`) records and publishes its samples meanwhile.
+    :class:`~aerodaas.actors.drone.odometry.OdometryPublisher`) records and publishes its samples meanwhile.
     :attr:`ended`: how the run ended for this robot (None until :meth:`close`), e.g. ``"landed and disarmed"``."""
 
     def __init__(self, backend: Any, robot_id: str, fsm: MissionFSM, event: Callable[..., None],

@@ -2,17 +2,17 @@
 waypoint being flown and its hold, the waypoints visited, refused or not held, the idle time, how much of the
 pre-planned mission is left, the outcome, the failsafe, the return path, what a pause or a link loss interrupted)
 and the drone's collaborators a flight works with (:class:`FlightContext`). The drone
-(:class:`~aerodaas.actors.drone.DroneComponent`) owns one of each and hands them to its flight objects:
-:class:`~aerodaas.actors.drone_queue_flight.QueueFlight` (its own queue) and
-:class:`~aerodaas.actors.drone_autopilot.AutopilotFlight` (the autopilot's own mission, failsafes, link regain, the
+(:class:`~aerodaas.actors.drone.component.DroneComponent`) owns one of each and hands them to its flight objects:
+:class:`~aerodaas.actors.drone.queue_flight.QueueFlight` (its own queue) and
+:class:`~aerodaas.actors.drone.autopilot.AutopilotFlight` (the autopilot's own mission, failsafes, link regain, the
 return to launch). Neither flight knows the drone, nor the other flight."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from aerodaas.actors.drone_progress import NavigationProgress
-from aerodaas.actors.mission_plan import MissionPlanLog
+from aerodaas.actors.drone.progress import NavigationProgress
+from aerodaas.actors.drone.mission_plan import MissionPlanLog
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState
 from aerodaas.navigation.safety import SafetyGate

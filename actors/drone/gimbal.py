@@ -1,7 +1,7 @@
 """A drone's camera gimbal: the gimbal commands it carries out (from the application, checked by the drone's safety
 gate against the robot's ``gimbal`` limits, then sent to the vehicle backend) and the attitude it records on
 ``/<robot>/gimbal`` (``aerodaas.GimbalAttitude``: quaternion, roll/pitch/yaw degrees, vehicle time). An object of
-its drone (:attr:`~aerodaas.actors.drone.DroneComponent.gimbal`); it knows nothing else of the drone."""
+its drone (:attr:`~aerodaas.actors.drone.component.DroneComponent.gimbal`); it knows nothing else of the drone."""
 from __future__ import annotations
 
 from typing import Any, Callable

@@ -1,7 +1,7 @@
 """A drone's odometry sensor: what it records and publishes of its vehicle's position. The simulator's state is taken
 on the odometry sensor's rate; a real vehicle's own position samples are each recorded once, stamped with the
 vehicle's time of the sample, none lost while the drone's clock thread waited. An object of its drone
-(:attr:`~aerodaas.actors.drone.DroneComponent.odometry`), given the vehicle backend, the recorder and the subscribers
+(:attr:`~aerodaas.actors.drone.component.DroneComponent.odometry`), given the vehicle backend, the recorder and the subscribers
 it publishes to; it knows nothing else of the drone."""
 from __future__ import annotations
 

@@ -82,7 +82,7 @@ class NavigationProgress:
     a leg, :meth:`check` each tick), judged by ``cfg`` (the robot's :class:`~aerodaas.config.ProgressConfig`);
     ``event(kind, **fields)`` records the drone's events. ``watch``: the :class:`ProgressWatch` of the leg being
     flown (None before the first and after one was given up); ``not_reached``: the waypoints given up for lack of
-    progress (never a success). An object of its drone (:attr:`~aerodaas.actors.drone.DroneComponent.progress`); it
+    progress (never a success). An object of its drone (:attr:`~aerodaas.actors.drone.component.DroneComponent.progress`); it
     knows nothing else of the drone."""
 
     def __init__(self, backend: Any, robot_id: str, cfg: ProgressConfig, gate: SafetyGate,

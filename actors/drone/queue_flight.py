@@ -1,17 +1,17 @@
 """How a drone flies its own waypoint queue (what AeroDaaS, not the autopilot, flies): each order the queue gives
 passes the safety gate, then a waypoint is flown as a leg (NAVIGATING, its progress watched), reached (WAYPOINT_HOLD)
-and held for its ``hover_duration`` (:class:`~aerodaas.actors.drone_flight.WaypointHold`), a velocity command is
+and held for its ``hover_duration`` (:class:`~aerodaas.actors.drone.flight.WaypointHold`), a velocity command is
 tracked (TRACKING), a land or rtl action ends the flight, a command outside the safety limits is refused; with
 nothing queued the drone hovers, and lands once its mission is done or it idled ``idle_land_s``. An object of its
-drone (:attr:`~aerodaas.actors.drone.DroneComponent.queue_flight`; the drone's airborne state handler calls
+drone (:attr:`~aerodaas.actors.drone.component.DroneComponent.queue_flight`; the drone's airborne state handler calls
 :meth:`QueueFlight.fly`), given the drone's collaborators and the flight state it shares with the drone
-(:mod:`aerodaas.actors.drone_flight`); it knows nothing else of the drone."""
+(:mod:`aerodaas.actors.drone.flight`); it knows nothing else of the drone."""
 from __future__ import annotations
 
 import math
 from typing import Any, Callable
 
-from aerodaas.actors.drone_flight import FlightContext, FlightState, WaypointHold
+from aerodaas.actors.drone.flight import FlightContext, FlightState, WaypointHold
 from aerodaas.model.types import ActionCommand, VelocityCommand, Waypoint
 from aerodaas.navigation.fsm import MissionState as S
 from aerodaas.navigation.safety import SafetyViolation
@@ -64,7 +64,7 @@ class QueueFlight:
 
     def reject(self, t: float, item: Any, err: SafetyViolation) -> None:
         """A command outside the safety limits at vehicle time ``t`` (s): never sent to the backend; dropped from
-        the queue, recorded in :attr:`FlightState.rejected <aerodaas.actors.drone_flight.FlightState.rejected>` and
+        the queue, recorded in :attr:`FlightState.rejected <aerodaas.actors.drone.flight.FlightState.rejected>` and
         as a ``command_rejected`` event; the vehicle holds where it is."""
         c, f = self.ctx, self.flight
         rec = {"id": getattr(item, "id", "?"), "t": t, "field": err.field, "value": err.value, "reason": err.reason,

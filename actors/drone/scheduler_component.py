@@ -1,7 +1,7 @@
 """SchedulerComponent: a robot's navigation inbox, inside the robot's drone actor. Navigation from analytics (its
 ``priority`` port) and from users (the HITL API) is checked by the robot's safety gate and bounds, planned by the
 trajectory scheduler plug-in (INavigate) and committed into the drone's own waypoint queue. One way: it never calls
-the drone; the drone's port (:class:`aerodaas.actors.drone_inbox.DroneInbox`) applies what it took at once."""
+the drone; the drone's port (:class:`aerodaas.actors.drone.inbox.DroneInbox`) applies what it took at once."""
 from __future__ import annotations
 
 import threading
@@ -15,8 +15,8 @@ from aerodaas.model.types import AeroNavigation, Waypoint
 from aerodaas.navigation.safety import SafetyGate, SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order, WaypointQueue
 
-from aerodaas.actors.dataplane import Component, DataPlane, percentiles as _percentiles
-from aerodaas.actors.mission_plan import MissionPlanLog
+from aerodaas.actors.data.plane import Component, DataPlane, percentiles as _percentiles
+from aerodaas.actors.drone.mission_plan import MissionPlanLog
 
 __all__ = ["Order", "SchedulerComponent"]
 
@@ -30,10 +30,10 @@ class SchedulerComponent(Component):
     Analytics streams deliver navigation messages on a ``priority`` :class:`~aerodaas.protocol.messages.Port`
     (optionally ``replace``), taken by :meth:`take`; users add navigation through :meth:`add_navigation` (the HITL
     API). Everything added is checked by the robot's :class:`~aerodaas.navigation.safety.SafetyGate` and bounds
-    first (all items or none). ``log``: the :class:`~aerodaas.actors.mission_plan.MissionPlanLog` shared with the
+    first (all items or none). ``log``: the :class:`~aerodaas.actors.drone.mission_plan.MissionPlanLog` shared with the
     drone (plan record, discards; default: one of its own). This class never calls the drone, and the drone never
     calls it: the drone pops its own queue; on its own (with :meth:`tick` standing in for the drone) this inbox
-    leaves new navigation to the next tick, while the drone's port (:class:`~aerodaas.actors.drone_inbox.DroneInbox`)
+    leaves new navigation to the next tick, while the drone's port (:class:`~aerodaas.actors.drone.inbox.DroneInbox`)
     has the drone apply it at once. The per-frame latency (frame ready -> command applied to the vehicle) is
     recorded by :meth:`record_latency`; the waypoint plan on ``/<robot>/mission/plan`` at start and whenever the
     queued waypoints change."""
@@ -103,7 +103,7 @@ class SchedulerComponent(Component):
 
     def handle(self, port: Port, msg: Message) -> None:
         """A navigation message on a ``priority`` port: :meth:`take` it; the drone applies it at its next control
-        tick (its own port, :class:`~aerodaas.actors.drone_inbox.DroneInbox`, applies it at once)."""
+        tick (its own port, :class:`~aerodaas.actors.drone.inbox.DroneInbox`, applies it at once)."""
         if self.take(port, msg):
             self.record_latency(msg, applied=False)
         return None

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import ray
 
-from aerodaas.actors.actor_base import ActorBase
+from aerodaas.actors.host.base import ActorBase
 
 
 @ray.remote(num_cpus=0, max_concurrency=32)

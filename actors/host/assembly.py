@@ -6,7 +6,7 @@ read-only (H, W, 3) uint8 BGR ``ndarray``, shared by every reader of the actor, 
 :class:`OdometryMsg` and :class:`StatMsg`, an analytics :class:`DetectionsMsg`, :class:`NavigationMsg` or
 :class:`ValueMsg`; each carries its robot, simulated time, the FrameMeta of its frame and the frame's latency
 trace (``capture_wall``: ``time.time()`` when the frame was ready, ``inference_ms``, ``post_ms``), and in
-lock-step its :class:`~.dataplane.Cascade`.
+lock-step its :class:`~aerodaas.actors.data.plane.Cascade`.
 """
 from __future__ import annotations
 
@@ -15,10 +15,10 @@ import time
 from typing import Any
 
 
-from aerodaas.actors.checkpoint import CheckpointNumbers
-from aerodaas.actors.drone import DroneComponent
-from aerodaas.actors.plugin_sensor import PluginSensorComponent
-from aerodaas.actors.remote_recorder import RemoteRecorder
+from aerodaas.actors.drone.checkpoint import CheckpointNumbers
+from aerodaas.actors.drone.component import DroneComponent
+from aerodaas.actors.sensors.plugin_sensor import PluginSensorComponent
+from aerodaas.actors.recording.remote_recorder import RemoteRecorder
 from aerodaas.backends.base import CredentialsRefused, RobotsNotConnected
 from aerodaas.config import RobotConfig, SimulationConfig, WorldConfig
 from aerodaas.plugins.frames import frame_source_class
@@ -27,9 +27,9 @@ from aerodaas.protocol.ids import is_drone
 from aerodaas.protocol.messages import SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
 
-from aerodaas.actors.dataplane import Cascade, DataPlane, percentiles as _percentiles
-from aerodaas.actors.analytics_component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
-from aerodaas.actors.camera import CameraComponent
+from aerodaas.actors.data.plane import Cascade, DataPlane, percentiles as _percentiles
+from aerodaas.actors.analytics.component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
+from aerodaas.actors.sensors.camera import CameraComponent
 from aerodaas.sim.world import World
 
 
@@ -44,7 +44,7 @@ def _capture_due(d: Any, tok: Any, clock_late: bool = False) -> None:
     """Drone ``d``'s cameras whose next frame is due at its vehicle time capture (in lock-step, as part of the
     cascade ``tok``); after a jump of the vehicle clock the next frame is one period on, not a burst. ``clock_late``:
     the actor's clock is behind the wall clock (see :data:`SHED_LATE_TICKS`): a pulled camera's due frame is not
-    rendered (:meth:`~aerodaas.actors.camera.CameraComponent.try_capture`)."""
+    rendered (:meth:`~aerodaas.actors.sensors.camera.CameraComponent.try_capture`)."""
     b = d.backend
     for cam in d.cameras:
         if b.t + 1e-9 >= cam["next_t"]:
@@ -62,7 +62,7 @@ def _halt_cameras(d: Any) -> None:
 
 class _ClockHold:
     """The wall time this actor's clock spent waiting for its recorder (``recorder.hold.held_s``,
-    :class:`~.remote_recorder.FrameHold`): :meth:`taken` returns what was waited since the last call; a wait that
+    :class:`~aerodaas.actors.recording.remote_recorder.FrameHold`): :meth:`taken` returns what was waited since the last call; a wait that
     is over becomes a ``clock_held`` event (``held_s``: wall s) of every drone in ``drones``."""
 
     def __init__(self, recorder: Any, drones: list) -> None:
@@ -93,7 +93,7 @@ class _ClockHold:
 
 
 class _Checkpointer:
-    """Sends each drone's checkpoint (:mod:`.checkpoint`) to the run's recorder actor about every ``period_s``
+    """Sends each drone's checkpoint (:mod:`aerodaas.actors.drone.checkpoint`) to the run's recorder actor about every ``period_s``
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
     checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
 
@@ -167,7 +167,7 @@ class ActorAssembly:
         if rec is not None:  # an actor with the file and/or the live view
             # only here: an unrecorded run's actors never import the writer and the live view (0.08-0.10 s of CPU
             # per fresh worker, measured at load 40)
-            from aerodaas.actors.recorder import RecorderService  # lazy: heavy mcap, protobuf, websockets
+            from aerodaas.actors.recording.recorder import RecorderService  # lazy: heavy mcap, protobuf, websockets
 
             return RecorderService(rec.path, rec.meta, copies=plane.copies, live=rec.live, homes=rec.homes,
                                    declare=rec.declare, hold_s=float(spec.sim.get("recorder_hold_s", 0.0)),
@@ -425,5 +425,5 @@ class ActorAssembly:
         return self.recorder.close() if self.recorder is not None else {}
 
     def recording_report(self) -> dict:
-        """The recorder's :meth:`~.recorder.RecorderService.report` (failure, lost messages), {} without one."""
+        """The recorder's :meth:`~aerodaas.actors.recording.recorder.RecorderService.report` (failure, lost messages), {} without one."""
         return self.recorder.report() if self.recorder is not None else {}

@@ -1,5 +1,5 @@
-"""What every actor of a run shares: a :class:`~.dataplane.DataPlane` (its components and the routes between actors), built
-from the plan's spec by :class:`~.assembly.ActorAssembly`, and the calls the driver makes on it.
+"""What every actor of a run shares: a :class:`~aerodaas.actors.data.plane.DataPlane` (its components and the routes between actors), built
+from the plan's spec by :class:`~aerodaas.actors.host.assembly.ActorAssembly`, and the calls the driver makes on it.
 
 An actor gets its whole spec and wiring (routes, locations, peers by Ray actor name) in its constructor, so when
 Ray restarts it (``max_restarts``) it rebuilds itself: the constructor sees
@@ -17,12 +17,12 @@ import warnings
 import ray
 from ray import cloudpickle
 
-from aerodaas.actors.channel import ChannelServer, channel_address
+from aerodaas.actors.data.channel import ChannelServer, channel_address
 from aerodaas.protocol.messages import Delivery
 from aerodaas.protocol.specs import ActorSpec
 from aerodaas.protocol.startup_probe import probe
 
-from aerodaas.actors.dataplane import DataPlane, Settled
+from aerodaas.actors.data.plane import DataPlane, Settled
 
 
 def restarted_actor() -> bool:
@@ -66,7 +66,7 @@ class ActorBase:
                           wiring.get("peers", {}))
         self.channel = None
         key = wiring.get("channel_key")
-        if key:  # same-node channels (aerodaas.actors.channel): use the peers', serve ours (below)
+        if key:  # same-node channels (aerodaas.actors.data.channel): use the peers', serve ours (below)
             self.plane.channel_key = key
         self.runtime: Any = None
         self.restarts = 0
@@ -81,7 +81,7 @@ class ActorBase:
             self.channel = self._serve_channel(actor_id, key)
 
     def _serve_channel(self, actor_id: str, key: bytes) -> Any:
-        """This actor's :class:`~.channel.ChannelServer`, or None when its address cannot be served (peers then
+        """This actor's :class:`~aerodaas.actors.data.channel.ChannelServer`, or None when its address cannot be served (peers then
         reach this actor through Ray calls)."""
         try:
             return ChannelServer(channel_address(key, actor_id), key, self.plane.deliver,
@@ -96,7 +96,7 @@ class ActorBase:
 
     def setup(self) -> dict:
         """Create this actor's components (drones connect to their vehicles here). Returns :meth:`describe`."""
-        from aerodaas.actors.assembly import ActorAssembly  # lazy: heavy pydantic, pymap3d, shapely
+        from aerodaas.actors.host.assembly import ActorAssembly  # lazy: heavy pydantic, pymap3d, shapely
 
         if self.runtime is None:
             self.runtime = ActorAssembly(self.plane, self.spec)
@@ -116,13 +116,13 @@ class ActorBase:
     pid = ping
 
     def deliver(self, d: Delivery) -> list:
-        """A message from another actor for one of this actor's components (see :meth:`.dataplane.DataPlane.deliver`:
+        """A message from another actor for one of this actor's components (see :meth:`aerodaas.actors.data.plane.DataPlane.deliver`:
         a lock-step delivery returns once its cascade here is done)."""
         return self.plane.deliver(d)
 
     def call(self, cid: str, method: Callable, *args: Any, **kwargs: Any) -> Any:
         """Call ``method`` — a public method of the component's class, the function itself (e.g.
-        ``DroneComponent.status``, see :mod:`aerodaas.actors.handles`), never its name — on component ``cid``
+        ``DroneComponent.status``, see :mod:`aerodaas.actors.builtin.handles`), never its name — on component ``cid``
         with ``args``; a subclass's override runs. Raises TypeError when ``method`` is not a public method of the
         component's class (or a base of it), KeyError for an unknown component, RuntimeError before setup."""
         if self.runtime is None:
@@ -137,7 +137,7 @@ class ActorBase:
 
     def settle(self, timeout_s: float) -> Settled:
         """Wait (at most ``timeout_s`` seconds) until nothing of this actor is in flight (see
-        :meth:`.dataplane.DataPlane.settle`); called on every actor once the drones stopped, before the counts."""
+        :meth:`aerodaas.actors.data.plane.DataPlane.settle`); called on every actor once the drones stopped, before the counts."""
         return self.plane.settle(timeout_s)
 
     def drain(self) -> bool:

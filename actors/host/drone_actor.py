@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import ray
 
-from aerodaas.actors.actor_base import ActorBase
-from aerodaas.actors.checkpoint import restore_drone
+from aerodaas.actors.host.base import ActorBase
+from aerodaas.actors.drone.checkpoint import restore_drone
 
 
 @ray.remote(num_cpus=0, max_concurrency=32)
 class DroneActor(ActorBase):
-    """See the module docstring. Methods beyond :class:`~.actor_base.ActorBase`: :meth:`run`, :meth:`checkpoint`."""
+    """See the module docstring. Methods beyond :class:`~aerodaas.actors.host.base.ActorBase`: :meth:`run`, :meth:`checkpoint`."""
 
     def on_restart(self) -> None:
         self.setup()
@@ -37,5 +37,5 @@ class DroneActor(ActorBase):
         return self.runtime.run(timeout_s, resume=resume)
 
     def checkpoint(self) -> dict:
-        """Robot id -> its current checkpoint (see :mod:`.checkpoint`)."""
+        """Robot id -> its current checkpoint (see :mod:`aerodaas.actors.drone.checkpoint`)."""
         return {d.cfg.id: self.runtime.checkpoint_numbers.take(d) for d in self.runtime.drones}

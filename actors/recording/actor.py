@@ -1,6 +1,6 @@
 """RecorderActor: the run's recorder, one per run, named ``aerodaas/<run>/recorder`` and placed on the driver's
-edge node. Every other actor records through a :class:`~.remote_recorder.RemoteRecorder` that batches its messages here
-(frames as JPEG bytes, encoded by the sender); a :class:`~.recorder.RecorderService` writes the MCAP file and feeds
+edge node. Every other actor records through a :class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder` that batches its messages here
+(frames as JPEG bytes, encoded by the sender); a :class:`~aerodaas.actors.recording.recorder.RecorderService` writes the MCAP file and feeds
 the live view. It outlives every other actor of the run: whatever dies, the driver still finishes the recording
 with a ``/mission/result`` per drone.
 
@@ -73,7 +73,7 @@ class RecorderActor:
         previous one (the dead process's, unfinished) in a background thread. Every earlier segment ended with a
         death of this actor: each is one of ``losses`` (a second death was reported alone before: the first one's
         loss lived in the process that died second)."""
-        from aerodaas.actors.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+        from aerodaas.actors.recording.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         rec = self.spec.record
         if rec is None or not rec.path:
@@ -117,9 +117,9 @@ class RecorderActor:
         self._finishing.start()
 
     def setup(self) -> dict:
-        """Open the file and the live view. Raises what :class:`~.recorder.RecorderService` raises (a bad path,
+        """Open the file and the live view. Raises what :class:`~aerodaas.actors.recording.recorder.RecorderService` raises (a bad path,
         a busy live port)."""
-        from aerodaas.actors.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+        from aerodaas.actors.recording.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         rec = self.spec.record
         with self._setup_lock:
@@ -144,8 +144,8 @@ class RecorderActor:
         """A node's recorder of a run with a live view (``spec.record_remote`` names the driver's recorder,
         :mod:`aerodaas.runtime.node_recorders`): every message written is also sent to the driver's recorder,
         whose actor name is this one's without its last part (``aerodaas/<run>/recorder/<compute>`` ->
-        ``aerodaas/<run>/recorder``), for its live view (:class:`~.live_forward.LiveForwarder`)."""
-        from aerodaas.actors.live_forward import LiveForwarder  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+        ``aerodaas/<run>/recorder``), for its live view (:class:`~aerodaas.actors.recording.live_forward.LiveForwarder`)."""
+        from aerodaas.actors.recording.live_forward import LiveForwarder  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         main = ray.get_actor(ray.get_runtime_context().get_actor_name().rsplit("/", 1)[0])
         self._forward = LiveForwarder(main)
@@ -184,7 +184,7 @@ class RecorderActor:
     def _hold_s(self) -> float:
         """How long in all (wall s) the recorder's ``image`` may wait for room in a simulated run: while a ``record``
         call waits, its sender's frames wait too, and so does the sender's simulated clock
-        (:class:`~.remote_recorder.FrameHold`)."""
+        (:class:`~aerodaas.actors.recording.remote_recorder.FrameHold`)."""
         return float(self.spec.sim.get("recorder_hold_s", 0.0))
 
     def ping(self) -> int:
@@ -200,10 +200,10 @@ class RecorderActor:
                 "last_t_ns": getattr(rec, "last_t_ns", None), "live_url": live.url if live is not None else None}
 
     def record(self, batch: list, ledger: ProducerLedger | None = None) -> int:
-        """Messages of another actor (:class:`~.remote_recorder.RemoteRecorder`) and its counts so far (``ledger``,
+        """Messages of another actor (:class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder`) and its counts so far (``ledger``,
         kept: :meth:`ledger_of`); returns how many were taken. The other actors set up while this one does: their
         first messages wait (at most 60 s) for the file to be open."""
-        from aerodaas.actors.recorder import deliver  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+        from aerodaas.actors.recording.recorder import deliver  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
 
         if ledger is not None:
             self.keep_ledger(ledger)
@@ -272,7 +272,7 @@ class RecorderActor:
 
     def close(self) -> dict:
         """Finish the file; returns the per-topic message counts (of this segment). The file ends with the run's
-        accounting (:meth:`~.recorder.RecorderService.close`: the producers' counts, the messages in the earlier
+        accounting (:meth:`~aerodaas.actors.recording.recorder.RecorderService.close`: the producers' counts, the messages in the earlier
         segments, the task records of every segment tallied per analytics scheduler) and, when the run lost
         anything — this recorder replaced a dead one, or a numbered message is in no segment — ``/run/result``
         ``{"outcome": "recording_lost", "losses": [...], "lost": {topic: n}}`` (stamped after the last message
@@ -311,7 +311,7 @@ class RecorderActor:
         return out, tally
 
     def recording_report(self) -> dict:
-        """:meth:`~aerodaas.actors.recorder.RecorderService.report` plus ``segments`` (the files of this run, in
+        """:meth:`~aerodaas.actors.recording.recorder.RecorderService.report` plus ``segments`` (the files of this run, in
         order) and ``losses`` (one per recorder restart: ``segment``, ``recorded_until_ns``, ``next_segment``,
         ``resumed_at_ns``, ``previous_finished``) and ``segment_messages`` (the message count of each segment
         before this process's, read from its finished summary; None where it cannot be read)."""

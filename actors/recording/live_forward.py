@@ -5,7 +5,7 @@ channels (one recorder per node, :mod:`aerodaas.runtime.node_recorders`; only wi
 (:meth:`~aerodaas.recording.writer.McapRecorder.add_sink`): it keeps each message as written (topic, schema,
 encoding, log time, bytes: a :class:`~aerodaas.recording.writer.RecordedMessage`) and a background thread sends
 them in batches, every ``period_s`` seconds, to the driver's recorder actor
-(:meth:`~aerodaas.actors.recorder_actor.RecorderActor.publish_live`), which hands them to its live server as its
+(:meth:`~aerodaas.actors.recording.actor.RecorderActor.publish_live`), which hands them to its live server as its
 own writer does. The recording never waits for it: beyond ``max_pending_bytes`` waiting, messages are not forwarded
 (counted in ``dropped``; the node's file has them all).
 """

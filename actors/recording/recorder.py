@@ -7,7 +7,7 @@ least every ``flush_every_s`` seconds, so a crash loses at most the last couple 
 serialized once and goes to the file and to the Foxglove WebSocket clients.
 
 Components on other actors (analytics deployed on cloud compute) record through a
-:class:`~.remote_recorder.RemoteRecorder`, which batches their messages to the edge actor's recorder.
+:class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder`, which batches their messages to the edge actor's recorder.
 
 Frames of reference written for Foxglove's transform tree (on ``/tf``, with every odometry message, so a client
 that joins late or seeks gets them too): ``enu`` -> ``<robot>/base_link`` (the vehicle's pose),
@@ -45,7 +45,7 @@ from aerodaas.recording.recover import recover_mcap
 from aerodaas.recording.task_tally import TASK_SCHEMA, TaskTally
 from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.values import camera_mount_quaternion
-from aerodaas.actors.remote_recorder import AnalyticsAccounting, AnalyticsCounts, FrameHold
+from aerodaas.actors.recording.remote_recorder import AnalyticsAccounting, AnalyticsCounts, FrameHold
 
 TF_TOPIC = "/tf"
 
@@ -69,9 +69,9 @@ _STOP = _Stop()
 class RecorderService(AnalyticsAccounting):
     """Asynchronous recorder. ``max_pending_frames`` bounds the frames waiting to be encoded: beyond it new frames
     are dropped and counted (``frames_dropped``) instead of growing memory or slowing the camera (in a simulated run,
-    :meth:`image` first waits for room up to ``hold_s`` wall seconds in all, :class:`~.remote_recorder.FrameHold`); JSON and
+    :meth:`image` first waits for room up to ``hold_s`` wall seconds in all, :class:`~aerodaas.actors.recording.remote_recorder.FrameHold`); JSON and
     telemetry messages are never dropped. Each frame written is JPEG-encoded exactly once, counted as
-    ``recorder_jpeg_encoded`` in ``copies`` (the actor's :class:`~.dataplane.FrameCopies`) when given. All methods are
+    ``recorder_jpeg_encoded`` in ``copies`` (the actor's :class:`~aerodaas.actors.data.plane.FrameCopies`) when given. All methods are
     thread-safe and return at once, but :meth:`image` with a hold, which may wait for room.
 
     ``homes``: robot id -> its home (a :class:`~aerodaas.model.types.GeoPoint` or its dict), for the lat/lon of
@@ -450,7 +450,7 @@ def _what(item: RecordItem) -> str:
 
 
 def deliver(recorder: Any, batch: list[RecordItem]) -> int:
-    """Hand a :class:`~.remote_recorder.RemoteRecorder` batch to ``recorder`` (the run's :class:`RecorderService`);
+    """Hand a :class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder` batch to ``recorder`` (the run's :class:`RecorderService`);
     returns the number of items. Raises TypeError for anything that is not a :class:`~aerodaas.protocol.messages.RecordItem`."""
     for item in batch:
         if not isinstance(item, RecordItem):

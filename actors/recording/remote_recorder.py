@@ -56,7 +56,7 @@ class AnalyticsCounts:
 
 class AnalyticsAccounting:
     """The accounting calls an analytics component makes on its recorder (the run's
-    :class:`~aerodaas.actors.recorder.RecorderService` in the recorder actor's process, a :class:`RemoteRecorder`
+    :class:`~aerodaas.actors.recording.recorder.RecorderService` in the recorder actor's process, a :class:`RemoteRecorder`
     elsewhere), kept in :attr:`analytics_counts`, which the subclass creates in its ``__init__``."""
 
     analytics_counts: AnalyticsCounts
@@ -78,7 +78,7 @@ class FrameHold:
     """How long a simulated run's clock may still wait for its recorder: ``budget_s`` wall seconds in all
     (:attr:`aerodaas.config.SimulationConfig.recorder_hold_s`), of which :attr:`held_s` are spent. A recorder's
     ``image`` calls :meth:`wait` on the clock's thread before it would drop a frame, so simulated time waits instead
-    (the actor's clock takes the time waited off its pacing, :meth:`aerodaas.actors.assembly.ActorAssembly.run`)."""
+    (the actor's clock takes the time waited off its pacing, :meth:`aerodaas.actors.host.assembly.ActorAssembly.run`)."""
 
     def __init__(self, budget_s: float = 0.0) -> None:
         self.budget_s = max(0.0, float(budget_s))
@@ -104,7 +104,7 @@ class RemoteRecorder(AnalyticsAccounting):
     non-blocking producer calls as :class:`RecorderService` (``detections``, ``json``, ``odometry``, ``camera``;
     frames are not sent), batched and delivered to the recorder of actor ``target`` (the edge actor) through its
     ``record`` actor method, at most every ``period_s`` seconds from a background thread. :meth:`close` delivers
-    what is left and waits for it. ``plane`` is this process's :class:`~.dataplane.DataPlane` (its ``peers`` are known once
+    what is left and waits for it. ``plane`` is this process's :class:`~aerodaas.actors.data.plane.DataPlane` (its ``peers`` are known once
     the actors are connected).
     Delivery failures are counted in ``send_errors`` (the run goes on; the recording then lacks those messages).
 
@@ -246,7 +246,7 @@ class RemoteRecorder(AnalyticsAccounting):
         """Send what waits as one batch (frames JPEG-encoded here). ``hold``: not while ``max_in_flight_frames``
         frames are in batches the recorder has not answered (what waits stays here; :meth:`image` drops beyond
         ``max_pending_frames``)."""
-        from aerodaas.actors.dataplane import encode_frame  # lazy: heavy cv2, ray
+        from aerodaas.actors.data.plane import encode_frame  # lazy: heavy cv2, ray
 
         self._reap()
         if hold and self.frames_in_flight >= self.max_in_flight_frames:

@@ -1,5 +1,5 @@
 """CameraComponent: a camera sensor inside its drone's actor; its frames come from a frame source
-(:mod:`aerodaas.plugins.frames`; the built-ins in :mod:`aerodaas.actors.frame_sources`: rendered by the simulator,
+(:mod:`aerodaas.plugins.frames`; the built-ins in :mod:`aerodaas.actors.sensors.frame_sources`: rendered by the simulator,
 the vehicle's own stream, a recorded MCAP channel, a video stream: RTSP, RTP/UDP, MPEG-TS/UDP, V4L2, file, or one a
 plug-in brings) and are published by reference to every reader in the actor."""
 from __future__ import annotations
@@ -17,7 +17,7 @@ from aerodaas.protocol.messages import FrameMsg
 from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 from aerodaas.plugins.frames import FrameSource, FrameSourceContext, LiveFrameSource, frame_source_class
 
-from aerodaas.actors.dataplane import Cascade, DataPlane
+from aerodaas.actors.data.plane import Cascade, DataPlane
 from aerodaas.navigation.gimbal import camera_angles, quaternion_from_euler, wrap_deg
 from aerodaas.video.pose import angles_at, pose_sampled_at
 
