@@ -28,7 +28,8 @@ from aerodaas.protocol.messages import SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
 
 from aerodaas.actors.data.plane import Cascade, DataPlane, percentiles as _percentiles
-from aerodaas.actors.analytics.component import AnalyticsComponent, AnalyticsSchedulingService, ScheduledAnalyticsComponent
+from aerodaas.actors.analytics.component import AnalyticsComponent
+from aerodaas.actors.dispatch.scheduling import AnalyticsSchedulingService, ScheduledAnalyticsComponent
 from aerodaas.actors.sensors.camera import CameraComponent
 from aerodaas.sim.world import World
 
