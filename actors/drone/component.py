@@ -41,7 +41,7 @@ from aerodaas.schedulers.base import TrajectoryScheduler
 
 from aerodaas.actors.drone.autopilot import AutopilotFlight
 from aerodaas.actors.drone.deadline import PhaseDeadlines
-from aerodaas.actors.drone.inbox import DroneInbox
+from aerodaas.actors.drone.inbox import DroneInbox, DronePort
 from aerodaas.actors.drone.mission_plan import MissionPlanLog
 from aerodaas.actors.drone.end import SETTLE_WALL_S, RunEnd
 from aerodaas.actors.drone.gimbal import DroneGimbal
@@ -83,7 +83,8 @@ class DroneComponent:
         self.last_tick: tuple[float, tuple] = (0.0, tuple(planner.start))
         #: the drone's navigation port (``<robot>/scheduler``): analytics and the HITL API add navigation there
         self.inbox = DroneInbox(plane, inbox_cid or f"{self.cfg.id}/scheduler", self.cfg.id, planner, recorder,
-                                epoch_ns, robot_cfg, self.queue, self.plan_log, self)
+                                epoch_ns, robot_cfg, self.queue, self.plan_log,
+                                DronePort(last_tick=lambda: self.last_tick, apply=self.apply_navigation))
         self.lock = threading.RLock()
         self.fsm = MissionFSM(self._on_transition)
         self.cameras: list[dict] = []  # {"comp", "fps", "next_t"} — filled by the actor's assembly
