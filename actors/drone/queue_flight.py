@@ -17,7 +17,7 @@ from aerodaas.navigation.fsm import MissionState as S
 from aerodaas.navigation.safety import SafetyViolation
 from aerodaas.navigation.waypoint_queue import Order
 
-__all__ = ["QueueFlight", "WaypointHold"]
+__all__ = ["QueueFlight"]
 
 
 class QueueFlight:
