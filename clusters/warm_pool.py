@@ -51,9 +51,9 @@ IDLE_TITLE = "ray::IDLE"
 #: in each actor's worker during ``apps/vehicle_tracking.py``); their own imports bring the rest (numpy, OpenCV,
 #: pydantic, shapely, scipy, mcap)
 PREIMPORT_MODULES = (
-    "aerodaas.actors.drone_actor", "aerodaas.actors.analytics_actor", "aerodaas.actors.recorder_actor",
-    "aerodaas.actors.assembly", "aerodaas.actors.drone", "aerodaas.actors.analytics_component",
-    "aerodaas.actors.scheduler_component", "aerodaas.actors.camera", "aerodaas.actors.recorder",
+    "aerodaas.actors.host.drone_actor", "aerodaas.actors.host.analytics_actor", "aerodaas.actors.recording.actor",
+    "aerodaas.actors.host.assembly", "aerodaas.actors.drone.component", "aerodaas.actors.analytics.component",
+    "aerodaas.actors.drone.scheduler_component", "aerodaas.actors.sensors.camera", "aerodaas.actors.recording.recorder",
     "aerodaas.backends.sim", "aerodaas.sim.world", "aerodaas.perception.detect", "aerodaas.perception.tracking",
     "aerodaas.recording.writer", "onnxruntime",
     # the follow analytics' track assignment (aerodaas.perception.tracking, on its first frame with tracks): 0.3 s

@@ -6,7 +6,7 @@ list is sequenced; :meth:`~TrajectoryScheduler.order_segments` to plan with fixe
 The scheduler does not fly anything and never calls a drone. Before a run it keeps the navigation the application
 queued (``generate_navigation``, ``add_navigation``) in a :class:`~aerodaas.navigation.waypoint_queue.WaypointQueue`
 of its own (:attr:`TrajectoryScheduler.queue`); at start each drone gets a copy of its share and owns it. While the
-run goes on, the drone's navigation inbox (:class:`aerodaas.actors.scheduler_component.SchedulerComponent`) asks
+run goes on, the drone's navigation inbox (:class:`aerodaas.actors.drone.scheduler_component.SchedulerComponent`) asks
 the scheduler to plan each addition on a copy of the drone's queue (:meth:`TrajectoryScheduler.plan_addition`) and
 commits the result into that queue (:meth:`WaypointQueue.commit`). The queue, its missions, priorities,
 preemption and fixed ORDERED runs are described in :mod:`aerodaas.navigation.waypoint_queue`.
@@ -68,7 +68,7 @@ class TrajectoryScheduler:
 
     def bind_remote(self, handle: Any) -> None:
         """While a mission runs, route :meth:`add_navigation` and :meth:`clear_navigation` to the robot's running
-        navigation inbox ``handle`` (a :class:`~aerodaas.actors.handles.SchedulerHandle`), which fills the drone's
+        navigation inbox ``handle`` (a :class:`~aerodaas.actors.builtin.handles.SchedulerHandle`), which fills the drone's
         live queue; ``None`` (after the run) makes them act on :attr:`queue` again. Not pickled."""
         self._remote = handle
 

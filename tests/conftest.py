@@ -209,7 +209,7 @@ def ray_session():
 def run_options():
     """The test's own run options (no progress lines, the built-in actor classes), passed explicitly to what runs
     the mission (``start_mission(options=...)``, :func:`aerodaas.runtime.driver.run_file`)."""
-    from aerodaas.actors.catalogue import BUILTIN_ACTORS
+    from aerodaas.actors.builtin.catalogue import BUILTIN_ACTORS
     from aerodaas.runtime.options import RunOptions
 
     return RunOptions(progress=False, actors=BUILTIN_ACTORS)

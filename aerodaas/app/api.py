@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from pydantic import ValidationError
 
-from aerodaas.actors.builtin import BUILTIN
+from aerodaas.actors.builtin.source import BUILTIN
 from aerodaas.backends import NotNavigable, is_navigable
 from aerodaas.config import (AnalyticsSchedulerConfig, ComputeConfig, ConfigError, EnvironmentConfig, RobotConfig,
                              SensorConfig, _format_errors, load_environment_config)
@@ -52,7 +52,7 @@ def _fly(env: "Environment", robots: list["Robot"], timeout: float | None, optio
 
 def with_builtin_actors(options: Any = None) -> Any:
     """``options`` (a :class:`~aerodaas.runtime.options.RunOptions`; None: the defaults) with the built-in actors'
-    source (:data:`aerodaas.actors.builtin.BUILTIN`) when it names no actor classes: the application API hands the
+    source (:data:`aerodaas.actors.builtin.source.BUILTIN`) when it names no actor classes: the application API hands the
     runtime the actors it starts (the runtime imports no actor module), and the runtime imports them only once the
     application passed its checks. Imports neither Ray nor any actor module."""
     opts = options if options is not None else RunOptions()
@@ -173,7 +173,7 @@ class Robot:
         self._end_hooks.append(hook)
 
     def bind_drone(self, handle: Any) -> None:
-        """Bind the running mission's drone component ``handle`` (a :class:`~aerodaas.actors.handles.DroneHandle`,
+        """Bind the running mission's drone component ``handle`` (a :class:`~aerodaas.actors.builtin.handles.DroneHandle`,
         set by the driver once the actors run) so :meth:`end_mission`, :meth:`pause_mission` and
         :meth:`resume_mission` reach the vehicle; ``None`` when the run is over."""
         self._handle = handle

@@ -93,7 +93,7 @@ class VehicleBackend(abc.ABC):
 
     Construction: the drone actor builds the backend as ``Backend(cfg)`` with the robot's validated
     :class:`aerodaas.config.RobotConfig` (:func:`aerodaas.backends.make_backend`, called in
-    ``actors/drone.py``); a subclass's ``__init__(self, cfg)`` calls this class's ``__init__(cfg.id, cfg.home)``
+    ``actors/drone/component.py``); a subclass's ``__init__(self, cfg)`` calls this class's ``__init__(cfg.id, cfg.home)``
     and reads its settings with :meth:`options`. It must not open a link there (:meth:`connect` does).
 
     Errors: a command the vehicle refuses or cannot carry out raises a :class:`BackendError` (a

@@ -11,7 +11,7 @@ import itertools
 import time
 from typing import Any, Mapping, Sequence
 
-from aerodaas.actors.remote import LazyActorClass, where
+from aerodaas.actors.host.remote import LazyActorClass, where
 from aerodaas.schedulers import single_machine_jit
 from aerodaas.schedulers.analytics_base import Workload, make_analytics_scheduler
 from aerodaas.schedulers.dispatch.clock import Clock, set_result_if_pending

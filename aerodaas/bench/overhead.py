@@ -14,7 +14,7 @@ round) until each has had ``--duration`` seconds, so a drift in the machine's lo
 * ``framework`` — the AeroDaaS runtime in each ``--layout``: ``colocated`` (detector and follow deployed with
   ``colocate=True``: everything runs in the drone actor, zero actor hops), ``actors`` (the detector in its own
   analytics actor on the same node, reached through the run's same-node channel — the frame copied once into a
-  shared-memory slot, the message and the detections coming back on a Unix socket, :mod:`aerodaas.actors.channel`
+  shared-memory slot, the message and the detections coming back on a Unix socket, :mod:`aerodaas.actors.data.channel`
   — to the follow controller colocated in the drone actor) and ``actors-ray`` (the same actors with
   ``same_node_transport: ray``: the frame ``ray.put`` once and an actor call per frame, the detections in the
   call's reply) and, with ``--lockstep``, ``actors+lockstep`` (the ``actors`` layout under the lock-step clock the

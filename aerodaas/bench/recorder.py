@@ -1,8 +1,8 @@
 """``aerodaas bench recorder``: the ceiling of the run's one recorder actor.
 
-A run records through one :class:`~aerodaas.actors.recorder_actor.RecorderActor`: every other actor's
-:class:`~aerodaas.actors.remote_recorder.RemoteRecorder` batches its messages to it (every 0.1 s, frames as JPEG
-bytes) and its :class:`~aerodaas.actors.recorder.RecorderService` writes them into one MCAP. This benchmark drives
+A run records through one :class:`~aerodaas.actors.recording.actor.RecorderActor`: every other actor's
+:class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder` batches its messages to it (every 0.1 s, frames as JPEG
+bytes) and its :class:`~aerodaas.actors.recording.recorder.RecorderService` writes them into one MCAP. This benchmark drives
 that same path with synthetic drones and measures what reaches the file:
 
 * each simulated drone offers a camera frame ``--fps`` times a second (a real aerial photo,
@@ -45,8 +45,8 @@ import ray
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from aerodaas.actors.recorder_actor import RecorderActor
-from aerodaas.actors.remote_recorder import RemoteRecorder
+from aerodaas.actors.recording.actor import RecorderActor
+from aerodaas.actors.recording.remote_recorder import RemoteRecorder
 from aerodaas.bench.machine import machine_info
 from aerodaas.bench.output import emit_report, print_report
 from aerodaas.bench.progress import bench_progress
@@ -118,7 +118,7 @@ def odometry_sample(robot_index: int, t_s: float) -> dict:
 
 
 class _BenchPlane:
-    """The part of a :class:`~aerodaas.actors.dataplane.DataPlane` a RemoteRecorder uses: this actor's id and its
+    """The part of a :class:`~aerodaas.actors.data.plane.DataPlane` a RemoteRecorder uses: this actor's id and its
     peers (here only the recorder actor)."""
 
     def __init__(self, actor_id: str, recorder: Any) -> None:
@@ -135,7 +135,7 @@ class _BenchPlane:
 
 class BenchProducer:
     """A producer actor of the benchmark (made a Ray actor by :func:`_producer_class`): offers its drones' frames
-    and odometry through a real :class:`~aerodaas.actors.remote_recorder.RemoteRecorder` to the recorder actor."""
+    and odometry through a real :class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder` to the recorder actor."""
 
     def __init__(self, actor_id: str, recorder: Any) -> None:
         self.rec = RemoteRecorder(_BenchPlane(actor_id, recorder))

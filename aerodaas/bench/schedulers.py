@@ -10,7 +10,7 @@ time, on a local multi-node Ray cluster (one ``tier=edge`` node, ``--cloud-nodes
 * edge devices: ``ceil(drones / drones_per_edge)`` emulated edge accelerators, each an
   :class:`~aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher` with its own policy instance, hosted by a few
   :class:`~aerodaas.bench.edge_host.EdgeHost` actors on the edge node (many devices per process: the tasks are timers);
-* cloud: :class:`~aerodaas.actors.cloud_executor.CloudExecutor` actors on the cloud nodes (Lambda-like, unbounded
+* cloud: :class:`~aerodaas.actors.cloud.executor.CloudExecutor` actors on the cloud nodes (Lambda-like, unbounded
   concurrency), holding ``cloud_ms`` x jitter plus the ``--network-variability`` latency.
 
 Arrival process (see ``arrival_process`` in the JSON): the Ocularone scheduler creates, for every batch a drone
@@ -43,7 +43,7 @@ from typing import Sequence
 
 import ray
 
-from aerodaas.actors.cloud_executor import start_cloud_executors
+from aerodaas.actors.cloud.executor import start_cloud_executors
 from aerodaas.bench.edge_host import EdgeHostActor
 from aerodaas.bench.machine import machine_info
 from aerodaas.bench.options import DEFAULT_DRONES_PER_EDGE, DEFAULT_FPS, EMULATION_BOUND_MS, LOADS

@@ -1,6 +1,6 @@
 """A robot's phase deadlines (``robots[].deadlines`` of ``environment.json``): how long take-off, landing and the
 return to launch may take, in vehicle seconds, and what the drone does when one is overrun.
-The formula is :mod:`aerodaas.navigation.deadlines`; the drone applies it in :mod:`aerodaas.actors.drone_deadline`."""
+The formula is :mod:`aerodaas.navigation.deadlines`; the drone applies it in :mod:`aerodaas.actors.drone.deadline`."""
 from __future__ import annotations
 
 from typing import Literal

@@ -7,7 +7,7 @@ a descent at the landing speed — and the deadline is ``speed_factor`` x the su
 ``margin_s`` (vehicle seconds). The factor covers a vehicle that flies below its limit (acceleration ramps, PX4's
 own take-off speed ``MPC_TKO_SPEED``), the margin what takes time without moving (spool-up after arming, a land
 detector confirming touchdown: ArduCopter ``land_detector.cpp`` needs 1 s, PX4 ``MultirotorLandDetector`` a few).
-Pure functions, no I/O: the drone (:mod:`aerodaas.actors.drone_deadline`) measures the legs when a phase starts
+Pure functions, no I/O: the drone (:mod:`aerodaas.actors.drone.deadline`) measures the legs when a phase starts
 and reads the vehicle's clock.
 """
 from __future__ import annotations

@@ -66,7 +66,7 @@ H = TypeVar("H")
 
 def handler_table(handlers: Mapping[MissionState, H]) -> dict[MissionState, H]:
     """A per-state dispatch table checked against :data:`TRANSITIONS`: exactly one handler for every mission state
-    (e.g. the drone's control step, :meth:`~aerodaas.actors.drone.DroneComponent._control`). Raises ValueError
+    (e.g. the drone's control step, :meth:`~aerodaas.actors.drone.component.DroneComponent._control`). Raises ValueError
     naming the states without a handler, or the keys that are not mission states."""
     missing = set(TRANSITIONS) - set(handlers)
     unknown = [k for k in handlers if k not in TRANSITIONS]

@@ -133,9 +133,9 @@ class StatStreamProperties(SensorPropertiesBase):
 
 
 class CameraSensor(FrameSensor):
-    """``camera``: frames from the drone actor's camera component (``actors/camera.py``), produced by the frame
+    """``camera``: frames from the drone actor's camera component (``actors/sensors/camera.py``), produced by the frame
     source ``properties.source`` selects (:mod:`aerodaas.plugins.frames`; the built-ins in
-    ``actors/frame_sources.py``: rendered, the vehicle's own video, a replayed MCAP channel, a video stream, the
+    ``actors/sensors/frame_sources.py``: rendered, the vehicle's own video, a replayed MCAP channel, a video stream, the
     stream the vehicle announces). Also allowed as an environment sensor (``env_sensors[]``) with a source that
     needs no vehicle (``environment_ok``: ``sim``, ``mcap``)."""
 

@@ -1,7 +1,7 @@
 """The frame-source extension point: where a camera's frames come from is one class, a subclass of
 :class:`FrameSource`, selected by the camera's ``properties.source`` (``environment.json``).
 
-A frame source is asked for frames by the camera component in the drone's actor (``actors/camera.py``); it never
+A frame source is asked for frames by the camera component in the drone's actor (``actors/sensors/camera.py``); it never
 publishes, records or tags a frame itself — the camera does that for every source alike (pose, intrinsics, the
 ``foxglove.CompressedImage`` channel ``/<robot>/camera/<sensor>``, the detector's input). Two forms:
 

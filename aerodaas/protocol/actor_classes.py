@@ -4,7 +4,7 @@ The runtime (:mod:`aerodaas.runtime`) starts the run's actors and binds the driv
 but imports no module of :mod:`aerodaas.actors` (``tests/architecture/test_layers.py`` checks it): whoever starts a run — the
 application API's ``start_mission()``, ``aerodaas run``, a test's ``run_options`` fixture — puts the classes on
 :attr:`aerodaas.runtime.options.RunOptions.actors`. The built-in record is
-:data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`; a test or benchmark may hand other classes with the same
+:data:`aerodaas.actors.builtin.catalogue.BUILTIN_ACTORS`; a test or benchmark may hand other classes with the same
 constructor and method contract. An entry point that should not import the actor modules (and with them Ray and
 OpenCV) before the application is checked hands an :class:`ActorClassesSource` instead: the runtime loads it once the
 run's input passed its checks (``aerodaas run`` reports a bad application in about 0.5 s less that way).
@@ -22,7 +22,7 @@ __all__ = ["ActorClasses", "ActorClassesSource", "RayActorClass", "CloudExecutor
 
 
 class RayActorClass(Protocol):
-    """What ``ray.remote`` makes of a class (or :class:`aerodaas.actors.remote.LazyActorClass`): ``options(...)``
+    """What ``ray.remote`` makes of a class (or :class:`aerodaas.actors.host.remote.LazyActorClass`): ``options(...)``
     returns a copy with Ray's actor options (``name``, ``label_selector``, ``max_restarts``,
     ``scheduling_strategy``); ``remote(*args)`` creates the actor and returns its handle."""
 
@@ -32,7 +32,7 @@ class RayActorClass(Protocol):
 
 
 class CloudExecutorStarter(Protocol):
-    """Starts ``n`` cloud executor actors (:func:`aerodaas.actors.cloud_executor.start_cloud_executors`) placed with
+    """Starts ``n`` cloud executor actors (:func:`aerodaas.actors.cloud.executor.start_cloud_executors`) placed with
     ``selector`` and named ``<ray_name_prefix><i>`` in Ray, running copies of ``analytics`` (name -> analytics);
     returns their handles once each answered. Raises ValueError for ``n < 1``."""
 
@@ -71,7 +71,7 @@ class ActorClassesSource(ABC):
     """Where a run's :class:`ActorClasses` come from when they are imported only as the run starts: the runtime calls
     :meth:`load` after the application and the run's options passed their checks (bad input is reported without
     importing the actor modules) and before Ray starts. The built-in source is
-    :data:`aerodaas.actors.builtin.BUILTIN`."""
+    :data:`aerodaas.actors.builtin.source.BUILTIN`."""
 
     @abstractmethod
     def load(self) -> ActorClasses:

@@ -2,9 +2,9 @@
 
 A component (a drone, its navigation inbox, a camera, an analytics instance) lives in one of the run's Ray
 actors; the driver, the HITL API and the application reach it through that actor's
-:meth:`~aerodaas.actors.actor_base.ActorBase.call`, which takes the component id and the component class's method
+:meth:`~aerodaas.actors.host.base.ActorBase.call`, which takes the component id and the component class's method
 itself (a function, pickled by reference), never a method name. :class:`ComponentHandle` is the base of the
-concrete handles (:mod:`aerodaas.actors.handles`: ``DroneHandle``, ``SchedulerHandle`` ...), which list the methods
+concrete handles (:mod:`aerodaas.actors.builtin.handles`: ``DroneHandle``, ``SchedulerHandle`` ...), which list the methods
 they offer as :class:`remote_method` attributes; the runtime builds them from the classes it is handed
 (:class:`aerodaas.protocol.actor_classes.ActorClasses`) and never imports them.
 """

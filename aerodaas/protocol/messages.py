@@ -10,7 +10,7 @@ between actors), the deliveries actors send each other, and what they send the r
 * :class:`Delivery` — one message for one component of another actor (``DataPlane.deliver``), and the replies that
   come back in the same call; :class:`EncodedFrame` — a frame's pixels as JPEG bytes, the wire form across
   tiers (on one tier a frame's pixels travel as an ObjectRef or through a same-node channel,
-  :mod:`aerodaas.actors.channel`);
+  :mod:`aerodaas.actors.data.channel`);
 * :class:`RecordItem` and its kinds — what an actor without the file sends the run's recorder actor.
 
 Frames are (H, W, 3) uint8 BGR, read-only ``ndarray``s shared by every reader of one process (never copied there).
@@ -51,7 +51,7 @@ class Message:
     time for derived items); ``data``: the payload (see each kind); ``meta``: the FrameMeta of the frame it derives
     from, or None; ``trace``: the frame's latency trace (``capture_wall``: ``time.time()`` when the pixels were
     ready, ``inference_ms``, ``post_ms``, and for an actor hop ``put_ms``/``call_ms``/``get_ms``/``reply_ms``);
-    ``tok``: the lock-step :class:`~aerodaas.actors.dataplane.Cascade` it belongs to (None outside lock-step; never
+    ``tok``: the lock-step :class:`~aerodaas.actors.data.plane.Cascade` it belongs to (None outside lock-step; never
     crosses an actor boundary: a delivery carries ``cascade`` instead)."""
 
     robot: str
@@ -159,8 +159,8 @@ class Delivery:
 
 @dataclass(frozen=True)
 class RecordItem(ABC):
-    """What an actor without the file sends the run's recorder actor (:class:`~aerodaas.actors.remote_recorder.
-    RemoteRecorder`); :meth:`apply` hands it to the :class:`~aerodaas.actors.recorder.RecorderService`.
+    """What an actor without the file sends the run's recorder actor (:class:`~aerodaas.actors.recording.remote_recorder.
+    RemoteRecorder`); :meth:`apply` hands it to the :class:`~aerodaas.actors.recording.recorder.RecorderService`.
 
     The kinds counted on a :meth:`stream` (image, detections, odometry, JSON) end with ``seq``: its producer's
     sequence number on that stream
@@ -189,7 +189,7 @@ class RecordItem(ABC):
 
 @dataclass(frozen=True)
 class SealedCheckpoint:
-    """A drone's checkpoint (:func:`aerodaas.actors.checkpoint.drone_checkpoint`) as the recorder actor keeps it:
+    """A drone's checkpoint (:func:`aerodaas.actors.drone.checkpoint.drone_checkpoint`) as the recorder actor keeps it:
     ``robot``, its sequence number ``seq`` (newer is larger) and ``blob``, the state pickled by the drone actor's
     data-plane pool. The recorder never unpickles it: opening a checkpoint imports the classes in it (numpy, the
     pydantic waypoints, the mission queue) and, in a recorder that had not imported them yet, that stalled its writer
@@ -218,7 +218,7 @@ class ProducerLedger:
     """What one producer actor (``producer``: its host id) had offered the recorder per stream (topic -> messages
     numbered so far, the frames it dropped itself included), sent with each of its batches; the recorder actor
     keeps the largest per producer and key, and gives it back to a restarted producer, whose counts go on from
-    there (:class:`~aerodaas.actors.remote_recorder.RemoteRecorder`).
+    there (:class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder`).
 
     An analytics' recorded outputs are accounted against its inputs: ``offered_to`` counts the items this actor
     handed each analytics component (consumer component id -> robot -> items), ``no_output`` the items each of this
@@ -229,7 +229,7 @@ class ProducerLedger:
     ``incarnation`` numbers the producer's processes: 1 for its first, one more for each restart (handed out by the
     recorder actor, ``RecorderActor.ledger_of``, never reused even when a batch of the dead process is still on
     its way); 0 for a ledger not from a producer process (the recorder's own, a test's). The recorder's duplicate
-    rule is keyed by it (:class:`aerodaas.actors.recorder.RecorderService`)."""
+    rule is keyed by it (:class:`aerodaas.actors.recording.recorder.RecorderService`)."""
 
     producer: str
     produced: dict[str, int]

@@ -2,7 +2,7 @@
 
 The driver builds an :class:`ActorSpec` per actor (:func:`~aerodaas.runtime.dataflow.build_plan`), the run's
 recorder actor keeps them (pickled with ``ray.cloudpickle``, so a restarted actor reads the same again) and
-:class:`~aerodaas.actors.assembly.ActorAssembly` builds the actor's components from it. The specs hold the
+:class:`~aerodaas.actors.host.assembly.ActorAssembly` builds the actor's components from it. The specs hold the
 application's own objects (analytics, trajectory schedulers, the analytics scheduler's class): they travel, not
 their names.
 

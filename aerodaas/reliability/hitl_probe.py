@@ -1,5 +1,5 @@
 """HITL API cases of ``python -m aerodaas.reliability``: the real FastAPI app under uvicorn on loopback, in front
-of a real scheduler component (:class:`aerodaas.actors.scheduler_component.SchedulerComponent`) and a stand-in
+of a real scheduler component (:class:`aerodaas.actors.drone.scheduler_component.SchedulerComponent`) and a stand-in
 drone, called in-process (no Ray). Each row: what was sent, what came back, whether that is the documented answer.
 A drone actor that does not answer (503) needs Ray: ``tests/safety/test_hitl_unreachable.py``."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ import threading
 from types import SimpleNamespace
 from typing import Any
 
-from aerodaas.actors.scheduler_component import SchedulerComponent
+from aerodaas.actors.drone.scheduler_component import SchedulerComponent
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.schedulers import NearestNeighborScheduler
 from aerodaas.tools.hitl import HitlServer

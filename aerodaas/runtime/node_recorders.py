@@ -1,6 +1,6 @@
 """One recorder per node (``recording.per_node: true`` in the environment).
 
-A run records through one recorder actor on the driver's node (:mod:`aerodaas.actors.recorder_actor`); every frame
+A run records through one recorder actor on the driver's node (:mod:`aerodaas.actors.recording.actor`); every frame
 of every drone crosses to it. ``aerodaas bench recorder`` measures where that one actor stops keeping up
 (``docs/results/recorder.md``). With ``per_node`` the plan (:func:`add_node_recorders`) adds a recorder actor per edge
 compute that has actors of the run, host id ``recorder/<compute>``, placed like that compute's other actors (its
@@ -68,7 +68,7 @@ def node_recorder_ids(actors: dict[str, Any]) -> list[str]:
 
 def close_node_recorders(actors: dict[str, Any], timeout_s: float = 120.0) -> dict[str, dict]:
     """Close every node recorder (after the actors that record to them, before the driver's recorder); returns host
-    id -> its :meth:`~aerodaas.actors.recorder_actor.RecorderActor.recording_report` (``{"error": ...}`` for one
+    id -> its :meth:`~aerodaas.actors.recording.actor.RecorderActor.recording_report` (``{"error": ...}`` for one
     that could not be closed: its file is then unfinished, ``aerodaas recover`` finishes it). Never raises."""
     import ray  # lazy: heavy ray
 

@@ -48,8 +48,8 @@ class RunOptions:
     overwrite: bool = False
     #: the run's actor classes and component handle classes (the runtime imports no actor module): the entry point
     #: that starts the run sets them — ``start_mission()`` and ``aerodaas run`` the built-in source
-    #: :data:`aerodaas.actors.builtin.BUILTIN` (loaded once the input passed its checks) when None; a test may hand
-    #: the record itself (:data:`aerodaas.actors.catalogue.BUILTIN_ACTORS`); the runner refuses None (ValueError,
+    #: :data:`aerodaas.actors.builtin.source.BUILTIN` (loaded once the input passed its checks) when None; a test may hand
+    #: the record itself (:data:`aerodaas.actors.builtin.catalogue.BUILTIN_ACTORS`); the runner refuses None (ValueError,
     #: before Ray)
     actors: ActorClasses | ActorClassesSource | None = None
 
@@ -59,7 +59,7 @@ def check_actor_classes(opts: RunOptions) -> None:
     actor classes (``opts.actors`` None) or something that is neither a record nor a source of them."""
     if opts.actors is None:
         raise ValueError("RunOptions.actors: None; the code that starts a run hands the runtime its actor classes "
-                         "(RunOptions(actors=aerodaas.actors.builtin.BUILTIN), as start_mission() and "
+                         "(RunOptions(actors=aerodaas.actors.builtin.source.BUILTIN), as start_mission() and "
                          "`aerodaas run` do)")
     if not isinstance(opts.actors, (ActorClasses, ActorClassesSource)):
         raise ValueError(f"RunOptions.actors: {type(opts.actors).__name__}; expected an ActorClasses record or an "

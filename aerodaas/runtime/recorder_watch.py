@@ -1,5 +1,5 @@
 """The driver's watch on the run's recorder actor (:class:`RecorderWatch`): a recorder that dies mid-run is
-restarted by Ray into a new segment file (:mod:`aerodaas.actors.recorder_actor`); the driver notices the new
+restarted by Ray into a new segment file (:mod:`aerodaas.actors.recording.actor`); the driver notices the new
 process, says "recording lost (recorded up to at least t = ...)" at once (the summary gives the segment's exact end),
 and gives the new recorder the other actors' specs again (a drone or analytics actor restarted later reads its spec
 there)."""
@@ -14,7 +14,7 @@ __all__ = ["RecorderWatch", "recorder_specs"]
 
 def recorder_specs(plan: Any) -> tuple[dict[str, bytes], bytes]:
     """(host id -> pickled spec of every actor but the recorder, pickled wiring): what the recorder keeps for
-    restarted actors (:meth:`aerodaas.actors.recorder_actor.RecorderActor.keep_specs`)."""
+    restarted actors (:meth:`aerodaas.actors.recording.actor.RecorderActor.keep_specs`)."""
     from ray import cloudpickle  # lazy: heavy ray
 
     wiring = {"routes": plan.routes(), "location": plan.location(),

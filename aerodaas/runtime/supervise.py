@@ -4,7 +4,7 @@ progress, and contain whatever dies.
 Fault handling (each is a test in ``tests/runtime/test_runtime_actors.py`` and ``tests/runtime/test_faults.py``):
 
 * a **drone actor** that dies (process killed, native crash) is restarted by Ray (``max_restarts``); the restarted
-  actor restores its drones from their last checkpoints (:mod:`aerodaas.actors.checkpoint`), and
+  actor restores its drones from their last checkpoints (:mod:`aerodaas.actors.drone.checkpoint`), and
   :func:`supervise` calls its ``run`` again with ``resume=True``. The drone's events say
   ``resumed_after_restart`` and its report counts ``actor_restarts``;
 * a drone actor that cannot come back (restarts used up, its node lost with no other node to take it) ends its

@@ -10,7 +10,7 @@ package is what runs it, one module per concept:
   runs a real ONNX detector (:func:`aerodaas.perception.detect.make_detector`: YOLOX-Nano, NanoDet-Plus) on the frame;
   :class:`~.edge_executors.AnalyticsEdgeExecutor` runs an application's analytics.
 * :mod:`.cloud_pool` -- :class:`~.cloud_pool.CloudPool`, the edge-side client of the cloud executors (the Ray actor
-  :data:`aerodaas.actors.cloud_executor.CloudExecutorActor`), shared by the dispatchers of one process: batched
+  :data:`aerodaas.actors.cloud.executor.CloudExecutorActor`), shared by the dispatchers of one process: batched
   transport, replies on the intended schedule, cloud node loss.
 * :mod:`.payload` -- :class:`~.payload.FramePayload` (a task's frame) and :func:`~.payload.frame_from_payload`.
 * :mod:`.banks` -- the models executors run by name: ONNX detectors (:class:`~.banks.DetectorBank`) or an

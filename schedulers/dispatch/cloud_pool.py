@@ -1,5 +1,5 @@
 """The edge side of the cloud: :class:`CloudPool`, the client of a set of cloud executors
-(:data:`aerodaas.actors.cloud_executor.CloudExecutorActor`), shared by the dispatchers of one process.
+(:data:`aerodaas.actors.cloud.executor.CloudExecutorActor`), shared by the dispatchers of one process.
 
 Cloud transport
 ---------------

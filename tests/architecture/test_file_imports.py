@@ -169,16 +169,16 @@ def test_the_reader_sees_every_kind_of_import(tmp_path):
                  "if TYPE_CHECKING:\n    from ..navigation import geo\n"
                  "def f():\n    from aerodaas.protocol import (messages,\n        specs)  # lazy: heavy\n"
                  "    import json\n"
-                 "    importlib.import_module('aerodaas.actors.drone')  # lazy: a cycle\n"
+                 "    importlib.import_module('aerodaas.actors.drone.component')  # lazy: a cycle\n"
                  "    g = lambda: __import__('cv2')\n", encoding="utf-8")
     got = {(i.target, i.in_function, i.reason) for i in imports_in("aerodaas.sim.world", f)}
     assert ("aerodaas.model.types", False, None) in got
     assert ("aerodaas.navigation.geo", False, None) in got or ("aerodaas.navigation", False, None) in got
     assert ("aerodaas.protocol.messages", True, "heavy") in got and ("json", True, None) in got
-    assert ("aerodaas.actors.drone", True, "a cycle") in got and ("cv2", True, None) in got
+    assert ("aerodaas.actors.drone.component", True, "a cycle") in got and ("cv2", True, None) in got
     bad = unmarked("aerodaas.sim.world", f)
     assert [b.split(": ", 1)[1] for b in bad] == [
-        "json", "aerodaas.actors.drone (reason: 'a cycle' - break the cycle instead)", "cv2"]
+        "json", "aerodaas.actors.drone.component (reason: 'a cycle' - break the cycle instead)", "cv2"]
     assert _targets("aerodaas.sim.world", "aerodaas.protocol.messages") == ["aerodaas.protocol",
                                                                               "aerodaas.protocol.messages"]
     sub = "aerodaas.emulators.mavlink"

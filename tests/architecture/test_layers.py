@@ -215,9 +215,9 @@ def test_reader_sees_top_level_function_and_literal_imports(tmp_path):
     f = tmp_path / "m.py"
     f.write_text("import aerodaas.model.types\nfrom ..navigation import geo\n"
                  "def f():\n    from aerodaas.protocol import messages\n"
-                 "    importlib.import_module('aerodaas.actors.drone')\n")
+                 "    importlib.import_module('aerodaas.actors.drone.component')\n")
     got = {t for t, _ in imports_of("aerodaas.sim.world", f)}
-    assert {"aerodaas.model.types", "aerodaas.protocol.messages", "aerodaas.actors.drone"} <= got
+    assert {"aerodaas.model.types", "aerodaas.protocol.messages", "aerodaas.actors.drone.component"} <= got
     assert "aerodaas.model.geo" in got or "aerodaas.navigation" in got
     comps = cycles_report({("a", "b"): ["x:1 -> y"], ("b", "c"): ["y:2 -> z"], ("c", "a"): ["z:3 -> x"],
                            ("c", "d"): ["z:4 -> w"]})

@@ -67,9 +67,9 @@ def test_the_public_api_is_complete_and_resolved_on_use():
 
 
 @pytest.mark.parametrize("module, unused", [
-    ("aerodaas.actors.recorder_actor", {"cv2", "onnxruntime", "matplotlib", "av", "fastapi", "pydantic", "scipy"}),
-    ("aerodaas.actors.drone_actor", {"onnxruntime", "matplotlib", "av", "fastapi"}),
-    ("aerodaas.actors.analytics_actor", {"matplotlib", "av", "fastapi", "mcap"}),
+    ("aerodaas.actors.recording.actor", {"cv2", "onnxruntime", "matplotlib", "av", "fastapi", "pydantic", "scipy"}),
+    ("aerodaas.actors.host.drone_actor", {"onnxruntime", "matplotlib", "av", "fastapi"}),
+    ("aerodaas.actors.host.analytics_actor", {"matplotlib", "av", "fastapi", "mcap"}),
 ])
 def test_an_actor_module_imports_only_what_its_actor_uses(module, unused):
     loaded = _loaded_after(module, before="import ray")
@@ -99,8 +99,8 @@ def test_an_unrecorded_runs_actor_sets_up_without_the_recorders_writer_or_live_v
     code = textwrap.dedent("""
         import sys
         from aerodaas import Environment
-        from aerodaas.actors.assembly import ActorAssembly
-        from aerodaas.actors.dataplane import DataPlane
+        from aerodaas.actors.host.assembly import ActorAssembly
+        from aerodaas.actors.data.plane import DataPlane
         from aerodaas.bench.fleet import fleet_config
         from aerodaas.config import SimulationConfig, parse_environment_config
         from aerodaas.runtime.dataflow import build_plan
@@ -113,7 +113,7 @@ def test_an_unrecorded_runs_actor_sets_up_without_the_recorders_writer_or_live_v
         assert plan.actors[hid].spec.record is None and not plan.actors[hid].spec.record_remote
         rt = ActorAssembly(DataPlane(hid, "edge", 0, workers=2), plan.actors[hid].spec)
         assert rt.drones and rt.recorder is None
-        print(" ".join(m for m in ("mcap", "aerodaas.actors.recorder", "aerodaas.liveview.server") if m in sys.modules))
+        print(" ".join(m for m in ("mcap", "aerodaas.actors.recording.recorder", "aerodaas.liveview.server") if m in sys.modules))
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
@@ -124,7 +124,7 @@ def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
     """``aerodaas run`` of an application its checks refuse (a waypoint below the safety floor) exits 2 naming the
     value without having imported Ray, OpenCV, any actor module or rich (the progress display, imported only for a
     terminal's progress: 0.1 s of every run's start): the built-in actors reach the runtime as a source
-    (:data:`aerodaas.actors.builtin.BUILTIN`) it loads only once the input passed (0.4 CPU-s less per refusal, about
+    (:data:`aerodaas.actors.builtin.source.BUILTIN`) it loads only once the input passed (0.4 CPU-s less per refusal, about
     a third, measured with ``/usr/bin/time``); a good application still gets them (every run test)."""
     from tests.conftest import REPO
 
@@ -142,7 +142,7 @@ def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
             import sys
             from aerodaas.cli import main
             rc = main(["run", *{args!r}])
-            print(rc, " ".join(m for m in ("ray", "cv2", "aerodaas.actors.catalogue", "rich") if m in sys.modules))
+            print(rc, " ".join(m for m in ("ray", "cv2", "aerodaas.actors.builtin.catalogue", "rich") if m in sys.modules))
         """)
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path)
         assert r.returncode == 0, r.stderr[-2000:]

@@ -21,7 +21,7 @@ PACKAGES = ("aerodaas", "actors", "schedulers", "clusters")
 
 #: (path relative to the repository root, expression as ``ast.unparse`` prints it) -> reason.
 ALLOWED: dict[tuple[str, str], str] = {
-    ("actors/channel_slots.py", "shm._name"): "stdlib SharedMemory: the resource tracker registers the leading-slash "
+    ("actors/data/channel_slots.py", "shm._name"): "stdlib SharedMemory: the resource tracker registers the leading-slash "
                                         "``_name``; the public ``name`` strips the slash, so it cannot unregister "
                                         "(the documented pre-3.13 workaround; 3.13 has ``track=False``)",
 }

@@ -21,7 +21,7 @@ def test_bench_frames_are_distinct_jpegs_of_the_asked_size():
 
 def test_baseline_writes_every_message_of_the_recording_again(tmp_path):
     from aerodaas.bench.recorder import baseline_write, odometry_sample
-    from aerodaas.actors.recorder import RecorderService
+    from aerodaas.actors.recording.recorder import RecorderService
 
     path = tmp_path / "r.mcap"
     rec = RecorderService(str(path))

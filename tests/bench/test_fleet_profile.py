@@ -13,20 +13,20 @@ from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classi
 
 #: stacks as py-spy 0.4 writes them (``--threads --format raw``), taken from a drone actor of the fleet benchmark
 RENDER = ("Thread._bootstrap (threading.py:1002);_worker (concurrent/futures/thread.py:83);DataPlane._guard "
-          "(actors/dataplane.py:282);CameraComponent._capture (actors/camera.py:199);CameraComponent._produce "
-          "(actors/camera.py:241);RenderedFrames.frame_at (actors/frame_sources.py:55);World.render "
+          "(actors/data/plane.py:282);CameraComponent._capture (actors/sensors/camera.py:199);CameraComponent._produce "
+          "(actors/sensors/camera.py:241);RenderedFrames.frame_at (actors/sensors/frame_sources.py:55);World.render "
           "(aerodaas/sim/world.py:165)")
-ANALYSE = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (actors/camera.py:204);"
-           "DataPlane.publish (actors/dataplane.py:300);AnalyticsComponent._run (actors/analytics_component.py:90);"
+ANALYSE = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (actors/sensors/camera.py:204);"
+           "DataPlane.publish (actors/data/plane.py:300);AnalyticsComponent._run (actors/analytics/component.py:90);"
            "FrameExposure.process (aerodaas/bench/fleet.py:44)")
-ENCODE = ("Thread.run (threading.py:982);RemoteRecorder._loop (actors/remote_recorder.py:216);RemoteRecorder._send "
-          "(actors/remote_recorder.py:197);encode_frame (actors/frames.py:49)")
+ENCODE = ("Thread.run (threading.py:982);RemoteRecorder._loop (actors/recording/remote_recorder.py:216);RemoteRecorder._send "
+          "(actors/recording/remote_recorder.py:197);encode_frame (actors/data/frames.py:49)")
 MAIN = "<module> (ray/_private/workers/default_worker.py:323);Worker.main_loop (ray/_private/worker.py:1069)"
-PHYSICS = ("DroneActor.run (actors/drone_actor.py:38);ActorAssembly.run (actors/assembly.py:270);DroneComponent.step "
-           "(actors/drone.py:320);SimBackend.step (aerodaas/backends/sim.py:70);SimVehicle.step "
+PHYSICS = ("DroneActor.run (actors/host/drone_actor.py:38);ActorAssembly.run (actors/host/assembly.py:270);DroneComponent.step "
+           "(actors/drone/component.py:320);SimBackend.step (aerodaas/backends/sim.py:70);SimVehicle.step "
            "(aerodaas/sim/vehicle.py:90)")
-CONTROL = ("DroneActor.run (actors/drone_actor.py:38);ActorAssembly.run (actors/assembly.py:288);"
-           "ActorAssembly._control_due (actors/assembly.py:315);DroneComponent.control_tick (actors/drone.py:340)")
+CONTROL = ("DroneActor.run (actors/host/drone_actor.py:38);ActorAssembly.run (actors/host/assembly.py:288);"
+           "ActorAssembly._control_due (actors/host/assembly.py:315);DroneComponent.control_tick (actors/drone/component.py:340)")
 
 
 def test_stacks_go_to_the_innermost_concern():
@@ -36,7 +36,7 @@ def test_stacks_go_to_the_innermost_concern():
     assert classify_stack(MAIN) is Component.RAY_PYTHON
     assert classify_stack(PHYSICS) is Component.PHYSICS
     assert classify_stack(CONTROL) is Component.CONTROL
-    assert classify_stack("ActorAssembly.run (actors/assembly.py:266)") is Component.CLOCK
+    assert classify_stack("ActorAssembly.run (actors/host/assembly.py:266)") is Component.CLOCK
 
 
 def test_raw_output_counts_samples_per_native_thread_and_component():

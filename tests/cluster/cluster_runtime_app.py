@@ -116,7 +116,7 @@ def node_loss(out_dir: str) -> dict:
 
                 h = ray.get_actor("aerodaas/loss/drone/d01")
                 for _ in range(200):  # until d01 is in the air, on its way
-                    from aerodaas.actors.drone import DroneComponent
+                    from aerodaas.actors.drone.component import DroneComponent
 
                     st = ray.get(h.call.remote("d01/drone", DroneComponent.status))
                     if st["state"] in ("NAVIGATING", "WAYPOINT_HOLD"):

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from aerodaas.actors.cloud_executor import CloudExecutor
+from aerodaas.actors.cloud.executor import CloudExecutor
 from aerodaas.schedulers.dispatch.clock import Clock
 from aerodaas.schedulers.dispatch.cloud_pool import CloudPool
 from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
@@ -531,7 +531,7 @@ def test_onnx_executors_run_the_detector_on_the_edge_and_on_a_jpeg_in_the_cloud(
 def test_edge_host_and_cloud_executor_actors_on_the_session_ray(ray_session):
     import ray
 
-    from aerodaas.actors.cloud_executor import start_cloud_executors
+    from aerodaas.actors.cloud.executor import start_cloud_executors
     from aerodaas.bench.edge_host import EdgeHostActor
 
     w = workload("LIGHT")

@@ -46,7 +46,7 @@ def cluster():
 
 
 def _executor(label: str):
-    from aerodaas.actors.cloud_executor import CloudExecutorActor
+    from aerodaas.actors.cloud.executor import CloudExecutorActor
 
     return CloudExecutorActor.options(label_selector={"tier": "cloud", "cloud-node": label}).remote(f"cloud-{label}")
 
@@ -63,7 +63,7 @@ def test_token_auth_is_on(cluster):
 def test_edge_host_runs_on_the_edge_node_and_cloud_executors_on_cloud_nodes(cluster):
     import ray
 
-    from aerodaas.actors.cloud_executor import start_cloud_executors
+    from aerodaas.actors.cloud.executor import start_cloud_executors
     from aerodaas.bench.edge_host import EdgeHostActor
 
     nodes = {n["NodeID"]: n["Labels"] for n in ray.nodes() if n["Alive"]}

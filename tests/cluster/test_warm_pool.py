@@ -232,7 +232,7 @@ def test_a_warm_worker_holds_the_follow_assignment_and_hides_its_imports_from_th
     code = ("import gc, sys\n"
             "from aerodaas.clusters.warm_pool import preimport\n"
             "preimport()\n"
-            "print('scipy.optimize' in sys.modules, 'aerodaas.actors.drone' in sys.modules, gc.get_freeze_count())\n")
+            "print('scipy.optimize' in sys.modules, 'aerodaas.actors.drone.component' in sys.modules, gc.get_freeze_count())\n")
     root = Path(__file__).resolve().parents[2]
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr

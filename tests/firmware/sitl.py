@@ -303,7 +303,7 @@ def unrecorded_samples(recorded: list[tuple[float, PositionKey]], sent: list[tup
     10 Hz recorded times on some sent time: a first version of this check chose a wrong offset and paired 85 % of
     the samples with the wrong messages, 2026-11-24.) A recorded sample is one the vehicle sent when a sent one has
     its time (within :data:`_SAME_S`) and the same position. The drone records at most one sample per ``period_s``
-    (actors/drone_odometry.py: a sample a full period after the last recorded one is always taken), so a sent
+    (actors/drone/odometry.py: a sample a full period after the last recorded one is always taken), so a sent
     sample is missing when it lies at least ``period_s`` after a recorded one and before the next. ``within``
     (recorded times, seconds): only that stretch (e.g. the flight) is judged.
 

@@ -342,5 +342,5 @@ def test_recorded_speed_matches_the_firmware(router_fleet, autopilot):
                                                    within=(flying[0], flying[-1]))
         assert matched == 1.0, (rid, len(flying), matched)
         assert not missing, (rid, len(missing), missing[:10], router_fleet["udp"])
-        # and never more than the odometry sensor's 10 Hz (one sample per slot, actors/drone_odometry.py)
+        # and never more than the odometry sensor's 10 Hz (one sample per slot, actors/drone/odometry.py)
         assert len(flying) <= 10.0 * (flying[-1] - flying[0]) * 1.02 + 3, (rid, len(flying), flying[-1] - flying[0])

@@ -92,10 +92,10 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
 
 def drive(env_path: str, out: str, timeout_s: float) -> int:
     """Fly the first robot of ``env_path`` (a MAVLink robot) with the drone's own flight logic
-    (:class:`~aerodaas.actors.drone.DroneComponent`, no Ray: its control step every 0.05 wall seconds) to one
+    (:class:`~aerodaas.actors.drone.component.DroneComponent`, no Ray: its control step every 0.05 wall seconds) to one
     waypoint 5 m north at 1.5 m, until its mission ends or ``timeout_s`` wall seconds, then until the vehicle says
     it is disarmed (at most 20 s); writes ``{"outcome", "done", "states", "armed_end", "events"}`` to ``out``."""
-    from aerodaas.actors.drone import DroneComponent
+    from aerodaas.actors.drone.component import DroneComponent
     from aerodaas.config import load_environment_config
     from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
     from aerodaas.schedulers.base import TrajectoryScheduler

@@ -1,4 +1,4 @@
-"""A drone (:class:`~aerodaas.actors.drone.DroneComponent`) on a MAVLink backend with no socket: the test hands the
+"""A drone (:class:`~aerodaas.actors.drone.component.DroneComponent`) on a MAVLink backend with no socket: the test hands the
 backend the vehicle's messages as its I/O thread would (through the wire format, so each has its own sequence
 number), and the drone's recorder calls are kept in memory."""
 from __future__ import annotations
@@ -31,7 +31,7 @@ class WiredDrone:
     :meth:`heartbeat` and :meth:`landed_state` the vehicle's state. ``rate_hz``: the odometry sensor's rate."""
 
     def __init__(self, rate_hz: float = 10.0) -> None:
-        from aerodaas.actors.drone import DroneComponent
+        from aerodaas.actors.drone.component import DroneComponent
 
         from aerodaas.backends.mavlink import MavlinkBackend
         from aerodaas.config import MavlinkConfig, RobotConfig

@@ -100,7 +100,7 @@ class _NoOdometry:
 
 def _run_end(backend, events: list):
     """A drone's RunEnd (the drone's own object) on ``backend``, landed, its events appended to ``events``."""
-    from aerodaas.actors.drone_end import RunEnd
+    from aerodaas.actors.drone.end import RunEnd
 
     from aerodaas.navigation.fsm import MissionState as S
 
@@ -109,7 +109,7 @@ def _run_end(backend, events: list):
 
 
 def test_a_landed_vehicle_that_stays_armed_is_disarmed_by_us_after_its_grace():
-    from aerodaas.actors.drone_end import DISARM_WAIT_S
+    from aerodaas.actors.drone.end import DISARM_WAIT_S
 
     events: list = []
     e = _run_end(_Landed(), events)

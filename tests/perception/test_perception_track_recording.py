@@ -84,7 +84,7 @@ def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_option
 
 
 def test_declared_track_channels_exist_before_any_message_and_are_advertised_live(tmp_path):
-    from aerodaas.actors.recorder import RecorderService
+    from aerodaas.actors.recording.recorder import RecorderService
     from aerodaas.perception.track_records import declared_track_channels
     from aerodaas.analytics.track import TrackAnalytics
     from aerodaas import FollowAnalytics
@@ -239,7 +239,7 @@ def test_the_analytics_component_records_each_drones_tracks_whatever_the_output(
     /<robot>/<name>/tracks on every frame (the follow's output is often None); a follow without a tracker records
     none. Two drones share the analytics: each keeps its own track ids."""
     from aerodaas import ByteTrackConfig, FollowAnalytics, ObjectDetector
-    from aerodaas.actors.analytics_component import AnalyticsComponent
+    from aerodaas.actors.analytics.component import AnalyticsComponent
     from aerodaas.protocol.messages import DetectionsMsg, FrameMsg
 
     if kind == "detector":

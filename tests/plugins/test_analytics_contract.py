@@ -70,8 +70,8 @@ class _Kept:
 
 
 def _component(analytics):
-    from aerodaas.actors.analytics_component import AnalyticsComponent
-    from aerodaas.actors.dataplane import DataPlane
+    from aerodaas.actors.analytics.component import AnalyticsComponent
+    from aerodaas.actors.data.plane import DataPlane
 
     plane = DataPlane("test", "edge", epoch_ns=0, workers=1)
     rec = _Kept()

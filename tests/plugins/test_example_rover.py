@@ -178,7 +178,7 @@ def test_its_pre_flight_checks_name_the_field_and_the_waypoint():
 def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
     """The runtime's drone (mission state machine, safety gate, waypoint holds, end of mission) on the rover,
     stepped by hand: it arms and drives (never TAKING_OFF), holds at each point, and its landing is a stop."""
-    from aerodaas.actors.drone import DroneComponent
+    from aerodaas.actors.drone.component import DroneComponent
     from aerodaas.schedulers.base import TrajectoryScheduler
 
     patrol = [Waypoint(id=f"p{i}", x=x, y=y, z=0.0, hover_duration=1.0)

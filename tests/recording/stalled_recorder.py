@@ -1,5 +1,5 @@
 """A stand-in for the run's recorder actor that takes no batch until released (as a SIGSTOPped one), and the part of
-a data plane a :class:`~aerodaas.actors.remote_recorder.RemoteRecorder` needs, shared by the recorder tests."""
+a data plane a :class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder` needs, shared by the recorder tests."""
 from __future__ import annotations
 
 import threading

@@ -8,7 +8,7 @@ import threading
 import numpy as np
 from mcap.reader import make_reader
 
-from aerodaas.actors.recorder import RecorderService
+from aerodaas.actors.recording.recorder import RecorderService
 from aerodaas.recording.accounting import account_recording
 from aerodaas.recording.reader import summarize_mcap
 from aerodaas.protocol.messages import ProducerLedger

@@ -7,7 +7,7 @@ import threading
 
 import numpy as np
 
-from aerodaas.actors.recorder import RecorderService
+from aerodaas.actors.recording.recorder import RecorderService
 from aerodaas.recording.reader import read_messages
 
 from tests.recording.stalled_recorder import StalledPlane, StalledRecorder
@@ -63,7 +63,7 @@ def test_a_stalled_recorder_actor_holds_a_bounded_number_of_frames_and_the_rest_
 
     import ray
 
-    from aerodaas.actors.remote_recorder import RemoteRecorder
+    from aerodaas.actors.recording.remote_recorder import RemoteRecorder
 
     recorder = ray.remote(max_concurrency=64)(StalledRecorder).remote()
     rec = RemoteRecorder(StalledPlane(recorder), period_s=0.01, max_pending_frames=20, max_in_flight_frames=8)

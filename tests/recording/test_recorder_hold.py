@@ -1,5 +1,5 @@
 """A simulated run's clock waits for a recorder that falls behind instead of dropping frames
-(``simulation.recorder_hold_s``, :class:`aerodaas.actors.remote_recorder.FrameHold`): the recorder's ``image`` call,
+(``simulation.recorder_hold_s``, :class:`aerodaas.actors.recording.remote_recorder.FrameHold`): the recorder's ``image`` call,
 made on the clock's thread, waits for room up to the hold's budget; past it, frames are dropped and counted as
 before. Real vehicles and video streams never wait (the run's hold is 0)."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aerodaas.actors.recorder import RecorderService
+from aerodaas.actors.recording.recorder import RecorderService
 from aerodaas.recording.reader import read_messages
 
 from tests.recording.stalled_recorder import StalledPlane, StalledRecorder
@@ -96,7 +96,7 @@ def test_without_a_hold_frames_are_dropped_at_once(tmp_path):
 def test_a_stalled_recorder_actor_holds_the_camera_and_every_frame_arrives(ray_session):
     import ray
 
-    from aerodaas.actors.remote_recorder import RemoteRecorder
+    from aerodaas.actors.recording.remote_recorder import RemoteRecorder
 
     recorder = ray.remote(max_concurrency=64)(StalledRecorder).remote()
     rec = RemoteRecorder(StalledPlane(recorder), period_s=0.01, max_pending_frames=10, max_in_flight_frames=4,

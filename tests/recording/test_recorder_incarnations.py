@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 from mcap.reader import make_reader
 
-from aerodaas.actors.recorder import RecorderService, deliver
+from aerodaas.actors.recording.recorder import RecorderService, deliver
 from aerodaas.protocol.messages import ProducerLedger, RecordImage, RecordOdometry
 from aerodaas.recording.reader import summarize_mcap
 
@@ -92,7 +92,7 @@ def test_the_recorder_actor_hands_each_producer_process_a_new_incarnation(ray_se
     odometry stamp older than its predecessor."""
     import ray
 
-    from aerodaas.actors.recorder_actor import RecorderActor
+    from aerodaas.actors.recording.actor import RecorderActor
     from aerodaas.protocol.specs import ActorSpec, RecordSpec
 
     path = tmp_path / "inc.mcap"

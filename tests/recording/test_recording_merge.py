@@ -1,6 +1,6 @@
 """``aerodaas merge``: the files of one run recorded by one recorder per node, merged into one.
 
-Two node recordings are made by the recorder's own writer (:class:`~aerodaas.actors.recorder.RecorderService`, with
+Two node recordings are made by the recorder's own writer (:class:`~aerodaas.actors.recording.recorder.RecorderService`, with
 its ``/run/accounting``), each holding one drone's frames and odometry numbered as a remote producer numbers them;
 the merged file is read back with the ``mcap`` library's own reader and with ``aerodaas info``."""
 from __future__ import annotations
@@ -17,7 +17,7 @@ JPEG = b"\xff\xd8" + bytes(range(256)) * 4 + b"\xff\xd9"
 def _node_recording(path, robot: str, t0_s: float, n: int, produced: int | None = None) -> None:
     """A node recorder's file: ``n`` odometry samples and ``n`` frames of ``robot`` every 0.1 s from ``t0_s``,
     numbered 0..n-1 by the drone actor, whose ledger says it numbered ``produced`` (default ``n``) of each."""
-    from aerodaas.actors.recorder import RecorderService
+    from aerodaas.actors.recording.recorder import RecorderService
     from aerodaas.bench.recorder import odometry_sample
     from aerodaas.protocol.messages import ProducerLedger
 

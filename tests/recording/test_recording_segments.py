@@ -9,7 +9,7 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from aerodaas.actors.recorder import RecorderService
+from aerodaas.actors.recording.recorder import RecorderService
 from aerodaas.recording.segments import list_segments, remove_stale_segments, segment_path
 from aerodaas.recording.writer import McapRecorder
 
@@ -93,7 +93,7 @@ def test_a_new_run_removes_stale_segments(tmp_path):
 
 
 def test_the_runs_own_outcome_wins_over_its_missions(tmp_path):
-    """A recorder that replaced a dead one records ``/run/result`` ``recording_lost`` (actors/recorder_actor.py):
+    """A recorder that replaced a dead one records ``/run/result`` ``recording_lost`` (actors/recording/actor.py):
     summaries of that recording (unfinished or finished) say so, even where every drone's ``/mission/result`` says
     success and comes later in log time."""
     from aerodaas.recording.writer import McapRecorder

@@ -68,7 +68,7 @@ def test_duplicates_by_sequence_number_not_payload(tmp_path):
 
 
 def _replay(path):
-    from aerodaas.actors.drone import DroneComponent
+    from aerodaas.actors.drone.component import DroneComponent
 
     cfg = RobotConfig(id="px4", backend="replay", replay=ReplayConfig(log=str(path), rate=1.0))
     b = make_backend(cfg)

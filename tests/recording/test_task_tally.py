@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from aerodaas.actors.recorder import RecorderService
+from aerodaas.actors.recording.recorder import RecorderService
 from aerodaas.recording.accounting import account_recording
 from aerodaas.recording.task_tally import TASK_SCHEMA, TaskCounts, TaskTally, tally_recordings
 from aerodaas.runtime.report import _scheduler_lines

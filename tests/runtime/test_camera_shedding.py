@@ -1,9 +1,9 @@
 """Control before the camera: a drone actor's clock that is behind the wall clock does not render its cameras' due
-frames (actors/assembly.py ``SHED_LATE_TICKS``; ``CameraComponent.try_capture``'s ``clock_late``), and says so in
+frames (actors/host/assembly.py ``SHED_LATE_TICKS``; ``CameraComponent.try_capture``'s ``clock_late``), and says so in
 the drone's report (``frames_shed_late``) and the run's summary."""
 from __future__ import annotations
 
-from aerodaas.actors.camera import CameraComponent
+from aerodaas.actors.sensors.camera import CameraComponent
 from aerodaas.backends.base import PoseSample
 from aerodaas.runtime.report import format_summary
 from tests.runtime.test_dataplane import FrameProbe, _env

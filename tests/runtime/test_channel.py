@@ -1,4 +1,4 @@
-"""Same-node channels (aerodaas.actors.channel) on their own: a server and an outlet in this process, talking over a
+"""Same-node channels (aerodaas.actors.data.channel) on their own: a server and an outlet in this process, talking over a
 real abstract Unix socket and real POSIX shared memory."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from aerodaas.actors.channel import ChannelServer, channel_address
-from aerodaas.actors.channel_outlet import ChannelOutlet
+from aerodaas.actors.data.channel import ChannelServer, channel_address
+from aerodaas.actors.data.channel_outlet import ChannelOutlet
 from aerodaas.protocol.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
 from aerodaas.model.types import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose
 
@@ -197,7 +197,7 @@ def test_a_server_closed_while_it_still_authenticates_a_sender_ends_that_connect
     """The sender's side of the handshake ends one message before the server's: a close() in that gap must still
     end the connection (CI once saw a delivery answered by a server closed before it), so the in-flight delivery
     counts as failed and a restarted server is reconnected to."""
-    import aerodaas.actors.channel as channel
+    import aerodaas.actors.data.channel as channel
 
     real = channel.mpc.answer_challenge
     server_authenticating = threading.Event()
@@ -250,7 +250,7 @@ def test_a_lockstep_delivery_holds_the_senders_cascade_until_the_receivers_casca
     cascade stays open until that answer arrived and its replies — which join the same cascade — were handed on,
     each with the very frame metadata object the sender sent (the answer, written later from another thread, refers
     to it)."""
-    from aerodaas.actors.cascade import Cascade
+    from aerodaas.actors.data.cascade import Cascade
 
     pending: list = []
 
@@ -304,7 +304,7 @@ def test_a_lockstep_send_waits_for_the_restarted_receiver_and_gives_up_after_its
     """The receiving actor dies and Ray restarts it: a frame of a lock-step cascade waits for the new server (its
     cascade keeps the clock still) instead of failing; if nobody comes back within ``hold_s`` it fails, and later
     ones fail at once (no second wait) until the outlet reconnects."""
-    from aerodaas.actors.cascade import Cascade
+    from aerodaas.actors.data.cascade import Cascade
 
     srv = ChannelServer(address, KEY, Receiver())
     out = ChannelOutlet(address, KEY, "detector#1", Port("in"), buffer=1, reply_to=None, on_reply=lambda r: None,
@@ -351,7 +351,7 @@ def test_a_frame_for_a_channel_alone_leaves_in_the_publishing_thread(address, in
     thread that publishes it (no pool hop per frame); a publisher that must not wait (``inline``
     False, the clock's) or a local reader behind it leaves the send to the pool. Observed with the pool's every
     thread held: a send made in this thread has reached the receiver before the pool is free again."""
-    from aerodaas.actors.dataplane import Component, DataPlane
+    from aerodaas.actors.data.plane import Component, DataPlane
 
     rx = Receiver()
     peer = "analytics/edge/det#1"
@@ -422,7 +422,7 @@ def test_a_frame_freed_on_the_connections_thread_wakes_no_other_thread():
     sender only at its next 0.5 s poll."""
     from collections import deque
 
-    from aerodaas.actors.channel import _freed
+    from aerodaas.actors.data.channel import _freed
 
     freed, wake = deque(), threading.Event()
     _freed(freed, wake, "slot-a", threading.get_ident(), None)

@@ -1,4 +1,4 @@
-"""Same-node channels (aerodaas.actors.channel) on their own, what outlives what: a frame made in a slot the outlet
+"""Same-node channels (aerodaas.actors.data.channel) on their own, what outlives what: a frame made in a slot the outlet
 lends, mappings that must outlive every frame read from them, and messages or answers one side cannot take. The
 helpers and the ``address`` fixture are test_channel.py's."""
 from __future__ import annotations
@@ -10,11 +10,11 @@ import threading
 import time
 from multiprocessing import connection as mpc
 
-from aerodaas.actors.channel import ChannelServer
-from aerodaas.actors.channel_msgs import ChannelDone
-from aerodaas.actors.channel_outlet import ChannelOutlet
-from aerodaas.actors.channel_wire import decode, encode_done
-from aerodaas.actors.frames import FrameCopies
+from aerodaas.actors.data.channel import ChannelServer
+from aerodaas.actors.data.channel_msgs import ChannelDone
+from aerodaas.actors.data.channel_outlet import ChannelOutlet
+from aerodaas.actors.data.channel_wire import decode, encode_done
+from aerodaas.actors.data.frames import FrameCopies
 from aerodaas.model.types import AeroNavigation
 from aerodaas.protocol.messages import Delivery, FrameMsg, NavigationMsg, Port, ValueMsg
 from tests.runtime.test_channel import KEY, Receiver, _frame, _meta, _wait, address  # noqa: F401 - address: fixture
@@ -80,8 +80,8 @@ def test_a_frame_made_in_a_lent_slot_is_sent_without_a_copy_and_its_slot_waits_f
 _CLOSE_UNDER_FRAMES = """
 import os, sys, time
 import numpy as np
-from aerodaas.actors.channel import ChannelServer, channel_address
-from aerodaas.actors.channel_outlet import ChannelOutlet
+from aerodaas.actors.data.channel import ChannelServer, channel_address
+from aerodaas.actors.data.channel_outlet import ChannelOutlet
 from aerodaas.protocol.messages import FrameMsg, Port
 key = os.urandom(32)
 addr = channel_address(key, "close-under-frames/%d" % os.getpid())

@@ -1,4 +1,4 @@
-"""The same-node channel's wire format (aerodaas.actors.channel_wire): a frame's delivery and its answer travel as
+"""The same-node channel's wire format (aerodaas.actors.data.channel_wire): a frame's delivery and its answer travel as
 tuples of built-in values, decode to objects equal to what was sent, and a reply's metadata that is the frame's own
 is not sent back; anything else travels as the objects themselves."""
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aerodaas.actors.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
-from aerodaas.actors.channel_wire import (OBJECT, SAME_META, decode, decode_done, encode_done, encode_free,
+from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
+from aerodaas.actors.data.channel_wire import (OBJECT, SAME_META, decode, decode_done, encode_done, encode_free,
                                           encode_send, flatten)
 from aerodaas.model.types import AeroNavigation, CameraIntrinsics, Detection, FrameMeta, FramePose
 from aerodaas.protocol.messages import DetectionsMsg, Delivery, FrameMsg, NavigationMsg, Port, ValueMsg

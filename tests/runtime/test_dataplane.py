@@ -80,8 +80,8 @@ class Spotter(RightBox):
 def _host_for(env: Environment, robots=None, lockstep: bool = False, record: str | None = None):
     """Plan the run as the driver does, with every analytics colocated and every drone in one drone actor, and
     build that actor's host in this process (no Ray actors); ``record``: an MCAP path for an in-process recorder."""
-    from aerodaas.actors.assembly import ActorAssembly
-    from aerodaas.actors.dataplane import DataPlane
+    from aerodaas.actors.host.assembly import ActorAssembly
+    from aerodaas.actors.data.plane import DataPlane
     from aerodaas.config import SimulationConfig
     from aerodaas.runtime.dataflow import build_plan, collect_graph
     from aerodaas.runtime.preflight import robot_schedulers as _robot_schedulers
@@ -372,10 +372,10 @@ def test_components_are_called_by_their_methods_never_by_name():
     """An actor runs a component's public method given as the function itself (what the driver's typed handles
     send); a method name, another component class's method or a private method is refused with a TypeError, and
     a handle has no attribute for a method it does not declare (a typo fails in the driver)."""
-    from aerodaas.actors.actor_base import ActorBase
-    from aerodaas.actors.drone import DroneComponent
-    from aerodaas.actors.scheduler_component import SchedulerComponent
-    from aerodaas.actors.handles import DroneHandle
+    from aerodaas.actors.host.base import ActorBase
+    from aerodaas.actors.drone.component import DroneComponent
+    from aerodaas.actors.drone.scheduler_component import SchedulerComponent
+    from aerodaas.actors.builtin.handles import DroneHandle
 
     env = _env(1)
     host, rt, _ = _host_for(env)
@@ -430,7 +430,7 @@ def test_busy_consumer_drops_and_counts_lockstep_never_drops():
         slow.analyse(env.get_robot_by_id("d00").get_sensor_by_id("cam").get_data_stream())
         host, rt, _ = _host_for(env, lockstep=lockstep)
         try:
-            from aerodaas.actors.dataplane import Cascade
+            from aerodaas.actors.data.plane import Cascade
 
             cam = rt.drones[0].cameras[0]["comp"]
             comp = rt.comps["probe#1@d00"]
@@ -481,8 +481,8 @@ class BatchProbe(Analytics):
 def test_frames_waiting_for_one_analytics_go_in_one_batch_call():
     """Frames of three drones arriving while the detector is busy wait in its mailbox and reach it in one
     process_batch call (its max_batch allows 4); every frame still gets its own output, in order."""
-    from aerodaas.actors.analytics_component import AnalyticsComponent
-    from aerodaas.actors.dataplane import DataPlane
+    from aerodaas.actors.analytics.component import AnalyticsComponent
+    from aerodaas.actors.data.plane import DataPlane
     from aerodaas.protocol.messages import FrameMsg, Port
     from aerodaas.model.types import CameraIntrinsics, FrameMeta, FramePose
 
@@ -516,7 +516,7 @@ def test_settle_waits_for_work_in_flight_and_says_when_it_ran_out_of_time():
     """What the end of a run relies on to count a frame at both ends (see ``aerodaas.runtime.supervise.
     settle_actors``): ``DataPlane.settle`` returns only once no pool job, mailbox or outlet holds a message; with
     a consumer stuck it returns after its bound saying so; once idle, a second call had nothing to wait for."""
-    from aerodaas.actors.dataplane import Component, DataPlane
+    from aerodaas.actors.data.plane import Component, DataPlane
     from aerodaas.protocol.messages import Message, Port
 
     release, entered = threading.Event(), threading.Event()

@@ -115,7 +115,7 @@ def _wait(pred, limit_s: float = 60.0) -> None:
 
 @pytest.mark.parametrize("kind", ["enospc", "eio"])
 def test_recorder_failure_is_reported_and_the_file_is_finished(tmp_path, monkeypatch, kind):
-    from aerodaas.actors.recorder import RecorderService
+    from aerodaas.actors.recording.recorder import RecorderService
 
     monkeypatch.setenv("AERODAAS_FAULT_RECORDER", f"{kind}:60000")
     path = tmp_path / "r.mcap"
@@ -138,9 +138,9 @@ def test_recorder_failure_is_reported_and_the_file_is_finished(tmp_path, monkeyp
 def test_recorder_failure_when_the_disk_stays_full_leaves_a_recoverable_file(tmp_path, monkeypatch):
     """The summary cannot be written either: the file is cut at the last record boundary (valid, unfinished), the
     failure says so, and `aerodaas recover` finishes it once there is room."""
-    import aerodaas.actors.recorder as recorder
+    import aerodaas.actors.recording.recorder as recorder
     from aerodaas import cli
-    from aerodaas.actors.recorder import RecorderService
+    from aerodaas.actors.recording.recorder import RecorderService
 
     monkeypatch.setenv("AERODAAS_FAULT_RECORDER", "enospc:60000")
 

@@ -1,4 +1,4 @@
-"""A camera makes only the frames something takes (``actors/camera.py`` ``CameraComponent``, the plan in
+"""A camera makes only the frames something takes (``actors/sensors/camera.py`` ``CameraComponent``, the plan in
 ``aerodaas/runtime/dataflow.py``): a camera that no analytics subscribes to and nothing records is not built and
 renders nothing; one that only the recorder takes renders at its ``properties.record_fps`` (default ``fps``: as
 before); one an analytics takes renders at ``fps`` and the recorder keeps the frames at ``record_fps``. The due
@@ -13,7 +13,7 @@ import pytest
 from mcap.reader import make_reader
 
 from aerodaas import Analytics, Environment
-from aerodaas.actors.camera import CameraComponent
+from aerodaas.actors.sensors.camera import CameraComponent
 from aerodaas.backends.base import PoseSample
 from aerodaas.bench.fleet import fleet_config
 from aerodaas.config import parse_environment_config
@@ -67,7 +67,7 @@ def recorded_run(ray_session, tmp_path_factory):
     """A recorded run of one drone with four cameras: ``seen`` (an analytics takes it, ``record_fps`` 2), ``rec``
     (only recorded, ``record_fps`` 2), ``all`` (only recorded, no ``record_fps``) and ``off`` (``record_fps`` 0,
     nothing takes it). Returns (result, topic -> log times, vehicle seconds the run's odometry spans)."""
-    from aerodaas.actors.catalogue import BUILTIN_ACTORS
+    from aerodaas.actors.builtin.catalogue import BUILTIN_ACTORS
     from aerodaas.runtime.options import RunOptions
 
     env = _env([_camera("seen", record_fps=RECORD_FPS), _camera("rec", record_fps=RECORD_FPS), _camera("all"),

@@ -221,7 +221,7 @@ def test_in_app_calls_are_checked_strictly_and_nothing_is_queued():
 def test_the_drone_refuses_out_of_limit_commands_with_nothing_sent():
     """At run time the drone's safety gate checks again (a command that did not come through the app's check):
     refused, recorded as ``command_rejected``, never reaching the backend."""
-    from actors.drone_gimbal import DroneGimbal
+    from aerodaas.actors.drone.gimbal import DroneGimbal
     from aerodaas.config import parse_environment_config
     from aerodaas.navigation.gimbal import GimbalLimits
     from aerodaas.navigation.safety import SafetyGate

@@ -1,13 +1,13 @@
 """A target the vehicle does not fly towards becomes an event, and if that lasts, the waypoint ends as not reached
 (an ArduCopter that silently dropped a GUIDED target outside its own fence left the drone
-NAVIGATING for 330 vehicle seconds). :class:`~aerodaas.actors.drone_progress.ProgressWatch` alone, then end to end on
+NAVIGATING for 330 vehicle seconds). :class:`~aerodaas.actors.drone.progress.ProgressWatch` alone, then end to end on
 an emulated ArduCopter that drops the target of one waypoint as the firmware does (no COMMAND_ACK exists for
 SET_POSITION_TARGET_GLOBAL_INT), judged from the recording."""
 from __future__ import annotations
 
 import pytest
 
-from aerodaas.actors.drone_progress import ProgressWatch
+from aerodaas.actors.drone.progress import ProgressWatch
 from aerodaas.config import ProgressConfig
 
 

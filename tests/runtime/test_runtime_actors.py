@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 from aerodaas import AeroListData, Analytics, Environment, FollowAnalytics, PriorityQueue, Waypoint
-from aerodaas.actors.drone import DroneComponent
-from aerodaas.actors.scheduler_component import SchedulerComponent
+from aerodaas.actors.drone.component import DroneComponent
+from aerodaas.actors.drone.scheduler_component import SchedulerComponent
 from aerodaas.config import parse_environment_config
 from aerodaas.runtime.report import format_summary
 
@@ -312,7 +312,7 @@ def test_real_yolox_detector_killed_under_lockstep_in_the_vehicle_tracking_app(r
 
     import ray
 
-    from aerodaas.actors.analytics_component import AnalyticsComponent
+    from aerodaas.actors.analytics.component import AnalyticsComponent
 
     run_options.run_id, run_options.record = "kill-yolox", str(tmp_path / "yolox.mcap")
     name = "aerodaas/kill-yolox/analytics/edge/detector#1"

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from aerodaas.actors.scheduler_component import SchedulerComponent
+from aerodaas.actors.drone.scheduler_component import SchedulerComponent
 from aerodaas.tools.hitl import HitlServer
 from aerodaas.schedulers import NearestNeighborScheduler
 

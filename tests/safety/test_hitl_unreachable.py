@@ -95,7 +95,7 @@ def test_stopped_or_dead_drone_actor_is_503_never_500(ray_session, tmp_path, mon
 
     After SIGCONT, or on the first call, a loaded machine may answer a call later than the API's bound, so a 503 is
     right then too: the test asks again (each answer either 200 or a 503 with Retry-After) instead of racing it."""
-    from aerodaas.actors.handles import DroneHandle, SchedulerHandle
+    from aerodaas.actors.builtin.handles import DroneHandle, SchedulerHandle
 
     monkeypatch.setenv("AERODAAS_STATE_DIR", str(tmp_path))
     actor = FakeComponents.remote()

@@ -1,6 +1,6 @@
 """Take-off, landing and the return to launch each have a deadline in vehicle seconds (a ground-rover
 plug-in sat in TAKING_OFF for 4,000 simulated seconds until the battery failsafe ended it as failsafe_rtl). The
-formula alone; the drone (:class:`~aerodaas.actors.drone.DroneComponent`) stepped by hand on simulated time with
+formula alone; the drone (:class:`~aerodaas.actors.drone.component.DroneComponent`) stepped by hand on simulated time with
 backends that cannot climb, cannot land or cannot fly home, judged from its events, states and vehicle; then a
 user's plug-in backends run by ``aerodaas run`` (a simulator that cannot climb, a ground vehicle that needs no
 take-off), judged from the recording and the exit code."""
@@ -106,7 +106,7 @@ class Recorded:
 
 
 def _drone(backend_cls, items=(), **robot):
-    from aerodaas.actors.drone import DroneComponent
+    from aerodaas.actors.drone.component import DroneComponent
     from aerodaas.schedulers.base import TrajectoryScheduler
 
     robot = {"id": "d", "takeoff_altitude": 4.0, "limits": {"max_vertical_speed": 2.0, "max_speed": 4.0}, **robot}

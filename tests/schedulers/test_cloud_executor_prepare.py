@@ -1,4 +1,4 @@
-"""A cloud executor sets its analytics up on every thread before its first task (actors/cloud_executor.py
+"""A cloud executor sets its analytics up on every thread before its first task (actors/cloud/executor.py
 ``_prepare_threads``): the run's first frame no longer waits for an ONNX session to open (6 s once, beside two CPU
 burners), and an analytics whose set-up fails stops the executor from starting instead of failing each task."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aerodaas.actors.cloud_executor import CloudExecutor
+from aerodaas.actors.cloud.executor import CloudExecutor
 from aerodaas.analytics.core import Analytics
 
 

@@ -191,7 +191,7 @@ def test_a_stream_frame_carries_the_gimbal_attitude_of_its_capture_time():
     attitude interpolated at its capture time, not the one of the tick that delivered it."""
     from collections import deque
 
-    from aerodaas.actors.camera import CameraComponent
+    from aerodaas.actors.sensors.camera import CameraComponent
     from aerodaas.navigation.gimbal import euler_from_quaternion
     from aerodaas.protocol.gimbal import GimbalAttitude
 
@@ -257,7 +257,7 @@ def test_a_stream_frame_is_handed_off_when_it_arrives_not_at_the_next_tick():
     the ticks give the poses it is tagged with (interpolated at its capture time between the two ticks around it),
     nothing is captured before the first tick or after the drone's mission ended, and a tick takes only a frame
     that is waiting."""
-    from aerodaas.actors.camera import CameraComponent
+    from aerodaas.actors.sensors.camera import CameraComponent
 
     plane = _InlinePlane()
     cam = CameraComponent(plane, "cam", "uav", "cam1", {"width": 160, "height": 120, "hfov_deg": 78, "fps": 10,
@@ -289,7 +289,7 @@ def test_a_stream_frame_takes_its_pose_from_the_vehicle_samples_own_times():
     the ticks': captured at 1.25 s between samples of 0.8 s (x 0 m) and 1.3 s (x 5 m), it is at x 4.5 m (stamped
     with the ticks' times, 1.0 and 1.5 s, it would be at 2.5 m). A frame captured after the newest sample waits
     for the next one, and without one holds the newest (its pose time is that sample's)."""
-    from aerodaas.actors.camera import CameraComponent
+    from aerodaas.actors.sensors.camera import CameraComponent
 
     plane = _InlinePlane()
     cam = CameraComponent(plane, "cam", "uav", "cam1", {"width": 160, "height": 120, "hfov_deg": 78, "fps": 10,

@@ -23,7 +23,7 @@ _MULTIROTORS = {M.MAV_TYPE_QUADROTOR, M.MAV_TYPE_COAXIAL, M.MAV_TYPE_HEXAROTOR, 
 #: modes an autopilot enters by itself on a failsafe (ArduCopter FS_* / FENCE_ACTION: RTL, SMART_RTL, LAND, BRAKE,
 #: AUTO_RTL; PX4 COM_*_ACT / GF_ACTION / NAV_DLL_ACT: AUTO.RTL, AUTO.LAND, AUTO.LOITER is "Hold" and also an
 #: ordinary mode, so not counted). Entered without our asking, they are the autopilot's failsafe (or a pilot's
-#: switch): the mission pauses (offboard.py, actors/drone.py ``mavlink.on_failsafe``)
+#: switch): the mission pauses (offboard.py, actors/drone/component.py ``mavlink.on_failsafe``)
 FAILSAFE_MODES = {"ardupilot": {"RTL", "SMART_RTL", "LAND", "BRAKE", "AUTO_RTL"}, "px4": {"RTL", "LAND"}}
 _AP_ARM_MODES = {"GUIDED", "LOITER", "STABILIZE", "ALT_HOLD", "POSHOLD", "BRAKE"}
 _PX4_NO_ARM_MODES = {"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE", "RTL", "LAND"}
