@@ -1,6 +1,7 @@
 """Surveillance and vehicle tracking (paper §6.4, pattern 4): a low-priority survey; when the detector finds
 the car, a priority-1 follow mission preempts it; when the car leaves the view the survey resumes.
-Needs real imagery (AERODAAS_DATA_DIR=../shared/data); the aerial model ships in the package"""
+Runs on a fresh clone: the aerial model, the ground photo and the car ship in the package
+(``package:`` images in vehicle_tracking.json, aerodaas/sim/ground)"""
 from aerodaas import *
 
 env = Environment("vehicle_tracking.json")

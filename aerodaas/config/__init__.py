@@ -4,7 +4,7 @@ Everything is validated with pydantic before any actor starts. :func:`load_envir
 validation problem into :class:`ConfigError`, whose message names the JSON path of the field and the bad
 value, e.g. ``robots.0.limits.max_speed: Input should be greater than 0 (got -1)``.
 Relative file paths (imagery) are resolved against the environment file's folder, then
-``$AERODAAS_DATA_DIR``.
+``$AERODAAS_DATA_DIR``; ``package:NAME`` names an image shipped in the package (``aerodaas/sim/ground``).
 """
 from __future__ import annotations
 

@@ -4,12 +4,32 @@ documented physical bounds the sections check are in :mod:`aerodaas.model.bounds
 from __future__ import annotations
 
 import difflib
+from pathlib import Path
 
 
 from pydantic import BaseModel, ConfigDict
 
 
 DATA_DIR_ENV = "AERODAAS_DATA_DIR"
+#: the prefix of a file name in an environment file that names one of the images shipped in the package
+#: (:data:`PACKAGE_IMAGERY_DIR`): ``"image": "package:brighton_beach_DJI_0025_8cm.jpg"``
+PACKAGE_PREFIX = "package:"
+#: the package's imagery folder (its README.md says where each image comes from)
+PACKAGE_IMAGERY_DIR = Path(__file__).resolve().parents[1] / "sim" / "ground"
+
+
+def packaged_file(name: str, field: str) -> Path:
+    """The packaged image that ``package:NAME`` names: ``NAME``, a plain file name, in :data:`PACKAGE_IMAGERY_DIR`.
+
+    Raises ConfigError naming ``field``, the name and the packaged images when ``NAME`` is not one of them (a
+    folder or ``..`` in it is refused, so it never reaches outside that folder)."""
+    rest = name[len(PACKAGE_PREFIX):]
+    path = PACKAGE_IMAGERY_DIR / rest
+    if rest and Path(rest).name == rest and rest not in (".", "..") and path.is_file():
+        return path
+    shipped = sorted(p.name for p in PACKAGE_IMAGERY_DIR.glob("*") if p.suffix.lower() in (".jpg", ".png"))
+    raise ConfigError(f"{field}: {name!r} is not a packaged image (the package ships: "
+                      f"{', '.join(PACKAGE_PREFIX + s for s in shipped) or 'none'})")
 
 
 class ConfigError(ValueError):

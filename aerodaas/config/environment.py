@@ -18,7 +18,7 @@ from pydantic import BaseModel, Field, PrivateAttr, Strict, ValidationError, fie
 from aerodaas.model.jsonfile import JsonFileError, read_json
 from aerodaas.navigation.geofence import Geofence, GeofenceConfig
 
-from aerodaas.config.base import ConfigError, DATA_DIR_ENV, _Cfg, did_you_mean
+from aerodaas.config.base import ConfigError, DATA_DIR_ENV, PACKAGE_PREFIX, _Cfg, did_you_mean, packaged_file
 from aerodaas.model.bounds import (MAX_DURATION_S, MAX_GROUND_PX, MAX_IMAGE_SIDE_PX, MAX_RATE_HZ, MAX_LIST_ITEMS,
                                    MAX_SEED, MAX_SPEEDUP, MIN_PHYSICS_HZ, MIN_SPEEDUP)
 from aerodaas.model.ids import Identifier, check_unique
@@ -409,9 +409,15 @@ class EnvironmentConfig(_Cfg):
         return self
 
     def resolve_path(self, rel: str, field: str) -> Path:
-        """Resolve a file named in the config: absolute, relative to the env file, or under $AERODAAS_DATA_DIR.
+        """Resolve a file named in the config: ``package:NAME``, one of the images shipped in the package
+        (:func:`~aerodaas.config.base.packaged_file`); else absolute, relative to the env file, under
+        $AERODAAS_DATA_DIR, or relative to the current folder, the first that exists.
 
         Raises ConfigError naming ``field`` and the search locations when it is not found."""
+        if rel.startswith(PACKAGE_PREFIX):
+            found = packaged_file(rel, field)
+            self._files_read.setdefault(str(found), field)
+            return found
         p = Path(os.path.expanduser(rel))
         cands = [p] if p.is_absolute() else []
         if not p.is_absolute():
