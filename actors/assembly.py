@@ -14,6 +14,7 @@ import os
 import time
 from typing import Any
 
+import cv2
 
 from aerodaas.actors.checkpoint import CheckpointNumbers
 from aerodaas.actors.drone import DroneComponent
@@ -134,6 +135,8 @@ class ActorAssembly:
 
     def __init__(self, plane: DataPlane, spec: ActorSpec) -> None:
         self.plane = plane
+        if spec.role in ("drone", "analytics") and spec.opencv_threads is not None:
+            cv2.setNumThreads(spec.opencv_threads)  # the process's OpenCV pool (ActorSpec.opencv_threads)
         self.sim = SimulationConfig.model_validate(spec.sim)
         #: the numbers of this actor's checkpoints (its runs and its ``checkpoint`` call)
         self.checkpoint_numbers = CheckpointNumbers()
@@ -256,7 +259,7 @@ class ActorAssembly:
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)
         return {"host": self.plane.actor_id, "tier": self.plane.tier, "components": sorted(self.comps),
-                "pid": os.getpid(), "threads": self.plane.workers,
+                "pid": os.getpid(), "threads": self.plane.workers, "opencv_threads": cv2.getNumThreads(),
                 "live_url": live.url if live is not None else None}
 
     def lookup(self, cid: str) -> Any:
