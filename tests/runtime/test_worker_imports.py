@@ -45,6 +45,30 @@ def test_a_drone_actor_maps_no_library_it_does_not_use(ray_session, run_options)
     assert not [p for p in pkgs if p.startswith(UNUSED)], pkgs
 
 
+#: modules an actor of a run never needs: the detector's runtime, PyTorch, plotting, Arrow, the terminal display,
+#: the MCAP writer (only the recorder actor writes), and the driver's side (application API, runtime, benchmarks)
+DRIVER_SIDE = ("onnxruntime", "torch", "matplotlib", "pyarrow", "rich", "mcap", "aerodaas.app", "aerodaas.runtime",
+               "aerodaas.bench.fleet")
+
+
+def test_the_actor_modules_import_nothing_of_the_driver_side():
+    """A fresh interpreter imports what a drone actor of the fleet benchmark runs — the drone and analytics actor
+    classes, the assembly their setup builds, the benchmark's colocated analytics — and none of
+    :data:`DRIVER_SIDE` is then in ``sys.modules`` (``aerodaas.bench.fleet_analytics`` is not
+    ``aerodaas.bench.fleet``)."""
+    import subprocess
+
+    code = ("import sys\n"
+            "import aerodaas.actors.drone_actor, aerodaas.actors.analytics_actor, aerodaas.actors.assembly\n"
+            "import aerodaas.bench.fleet_analytics\n"
+            f"print(sorted(m for m in sys.modules if any(m == d or m.startswith(d + '.') for d in {DRIVER_SIDE!r})))\n"
+            "print('cv2' in sys.modules, 'aerodaas.actors.assembly' in sys.modules)\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.splitlines() == ["[]", "True True"], out.stdout
+
+
 def test_drone_and_analytics_actors_run_opencv_on_one_thread_by_default(ray_session, run_options):
     """``actor_opencv_threads`` (default 1): the drone actor (its renderer and colocated analytics) and an analytics
     actor report OpenCV's thread count of their own process (``cv2.getNumThreads()``) as 1, whatever the cores."""
