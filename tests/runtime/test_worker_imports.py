@@ -11,8 +11,9 @@ import pytest
 from tests.runtime.test_dataplane import _env
 
 #: libraries that no drone actor of a simulated fleet uses: Ray's Arrow reducers (imported by Ray's serialisation
-#: context unless aerodaas.clusters.worker_memory.worker_setup runs), the detector's runtime, plotting, PyTorch
-UNUSED = ("pyarrow", "onnxruntime", "matplotlib", "torch")
+#: context unless aerodaas.clusters.worker_memory.worker_setup runs), the detector's runtime, plotting, PyTorch,
+#: the geofence's geometry (Shapely: these drones have no geofence)
+UNUSED = ("pyarrow", "onnxruntime", "matplotlib", "torch", "shapely")
 
 
 def _mapped_packages(pid: int) -> set[str]:
