@@ -10,10 +10,12 @@ lock-step its :class:`~aerodaas.actors.data.plane.Cascade`.
 """
 from __future__ import annotations
 
+import math
 import os
 import time
 from typing import Any
 
+import cv2
 
 from aerodaas.actors.drone.checkpoint import CheckpointNumbers
 from aerodaas.actors.drone.component import DroneComponent
@@ -39,6 +41,40 @@ from aerodaas.sim.world import World
 #: cameras at 15 FPS on two cores, docs/results/fleet.md "When the node is full") then renders fewer, fresher
 #: frames instead of letting the renders take the CPU from the control ticks the clock is catching up on
 SHED_LATE_TICKS = 0.5
+
+
+#: at most this many physics steps in one wake of an actor's clock outside lock-step (:func:`_quiet_steps`)
+MAX_QUIET_STEPS = 10
+
+
+def _quiet_steps(drones: list, dt: float) -> int:
+    """How many physics steps of ``dt`` (s) an actor's clock computes in one wake outside lock-step: up to and
+    including the first step at which a drone of ``drones`` has something due — a control tick, a camera's frame,
+    an odometry or plug-in sensor sample — at most :data:`MAX_QUIET_STEPS`. The clock sleeps until that step's
+    wall time, then computes the steps before it in order, each at its own simulated time, so nothing is computed
+    before its wall time and whatever is due happens at its own; a call reading a drone's state between two wakes
+    (``status``) sees it as of the last wake. 1 (a wake per step) while a drone's vehicle is not the simulator, a
+    camera reads a video stream (both are polled every step), or its mission has ended or its end is requested."""
+    n = MAX_QUIET_STEPS
+    for d in drones:
+        b = d.backend
+        if d.done or d.end_requested is not None or b.clock != "sim" or b.sample_key is not None or any(
+                c["comp"].stream is not None for c in d.cameras):
+            return 1
+        due = min([d.next_tick, d.next_odom] + [c["next_t"] for c in d.cameras]
+                  + [ps.next_t for ps in d.plugin_sensors])
+        # the first step j after which b.t + 1e-9 >= due; rounded down when in doubt: one wake more, never late
+        n = min(n, max(1, math.ceil((due - b.t - 1e-9) / dt - 1e-6)))
+    return n
+
+
+def _sleep_until(wall: float) -> float:
+    """Sleep until monotonic time ``wall`` (s); returns how far past it the clock already was (s, 0 when on time)."""
+    lag = wall - time.monotonic()
+    if lag > 0:
+        time.sleep(lag)
+        return 0.0
+    return -lag
 
 
 def _capture_due(d: Any, tok: Any, clock_late: bool = False) -> None:
@@ -135,6 +171,8 @@ class ActorAssembly:
 
     def __init__(self, plane: DataPlane, spec: ActorSpec) -> None:
         self.plane = plane
+        if spec.role in ("drone", "analytics") and spec.opencv_threads is not None:
+            cv2.setNumThreads(spec.opencv_threads)  # the process's OpenCV pool (ActorSpec.opencv_threads)
         self.sim = SimulationConfig.model_validate(spec.sim)
         #: the numbers of this actor's checkpoints (its runs and its ``checkpoint`` call)
         self.checkpoint_numbers = CheckpointNumbers()
@@ -257,7 +295,7 @@ class ActorAssembly:
     def describe(self) -> dict:
         live = getattr(self.recorder, "live", None)
         return {"host": self.plane.actor_id, "tier": self.plane.tier, "components": sorted(self.comps),
-                "pid": os.getpid(), "threads": self.plane.workers,
+                "pid": os.getpid(), "threads": self.plane.workers, "opencv_threads": cv2.getNumThreads(),
                 "live_url": live.url if live is not None else None}
 
     def lookup(self, cid: str) -> Any:
@@ -274,9 +312,11 @@ class ActorAssembly:
         One clock for the fleet: every ``1/physics_hz`` simulated seconds each backend steps (simulator) or is
         polled (real vehicles), odometry is published at its rate, due cameras capture, and each drone's control
         tick runs at ``control_rate_hz``. Time runs at ``speedup`` x wall time (lock-step: as fast as the
-        analytics allow). A control tick that runs later than one control period after its due wall time (the
-        period divided by ``speedup``) is counted as missed. A drone whose mission has ended keeps stepping, with
-        odometry only, until its recorded odometry shows the end state (:meth:`DroneComponent.settled`).
+        analytics allow); outside lock-step the clock wakes for the steps with something due (:func:`_quiet_steps`)
+        and computes the steps before each on waking. A control tick that runs later than one control period after
+        its due wall time (the period divided by ``speedup``) is counted as missed. A drone whose mission has ended
+        keeps stepping, with odometry only, until its recorded odometry shows the end state
+        (:meth:`DroneComponent.settled`).
 
         A simulated run's clock waits for a recorder that falls behind (``simulation.recorder_hold_s``): the wall
         time a capture spent waiting for the recorder is taken off the pacing, so no tick runs late for it; each
@@ -294,17 +334,14 @@ class ActorAssembly:
         checkpoints = _Checkpointer(self.plane, drones, self.checkpoint_numbers)
         held = _ClockHold(self.recorder, drones)
         self.tick_lateness: list[float] = []
+        behind_s = 0.0  # how far the clock is behind the wall clock at this wake (wall s)
+        wake_to = 0  # the last step of this wake (outside lock-step)
         try:
             while active:
                 step += 1
-                nominal = step * dt
-                behind_s = 0.0  # how far the clock is behind the wall clock at this step (wall s)
-                if not lock:  # simulated time ``nominal`` is computed when wall time reaches it, not one step early
-                    lag = wall0 + nominal / sim.speedup - time.monotonic()
-                    if lag > 0:
-                        time.sleep(lag)
-                    else:
-                        behind_s = -lag
+                if not lock and step > wake_to:  # simulated time is computed when wall time reaches it, never early:
+                    wake_to = step - 1 + _quiet_steps(active, dt)  # one wake to the next step with something due
+                    behind_s = _sleep_until(wall0 + wake_to * dt / sim.speedup)
                 tok = Cascade() if lock else None
                 for d in active:
                     d.step(dt, tok)
@@ -323,7 +360,7 @@ class ActorAssembly:
                     d.finish()
                     active.remove(d)
                 checkpoints.maybe([d for d in active if not d.done])  # a settling drone's mission is over
-                if timeout_s is not None and time.monotonic() - wall0 > timeout_s:
+                if timeout_s is not None and (lock or step >= wake_to) and time.monotonic() - wall0 > timeout_s:
                     for d in active:
                         if not d.done:  # one still settling has ended its mission already
                             d.outcome = "timeout"

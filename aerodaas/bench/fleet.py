@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 import psutil
 
-from aerodaas.analytics.core import Analytics
 from aerodaas.app.api import Environment
+from aerodaas.bench.fleet_analytics import FrameExposure
 from aerodaas.bench.fleet_nodes import ClusterLayout, FlightWindow, drones_in_actor, node_report, recorder_throughput
 from aerodaas.bench.fleet_profile import ActorProfiler
 from aerodaas.bench.machine import machine_info
@@ -46,28 +46,6 @@ from aerodaas.runtime.ray_start import RayStartError
 from aerodaas.schedulers import TrajectoryScheduler
 
 DEFAULT_SIZES = (1, 5, 10, 20, 40)
-
-
-class FrameExposure(Analytics):
-    """A lightweight analytics: mean brightness and the fraction of saturated pixels of every 8th pixel of a frame
-    ((H, W, 3) uint8 BGR in; a dict out). Colocated with every drone of the fleet benchmark."""
-
-    name = "exposure"
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.frames = 0
-        self.per_robot: dict[str, int] = {}
-
-    def process(self, frame: np.ndarray, meta: Any) -> dict:
-        small = frame[::8, ::8]
-        self.frames += 1
-        rid = meta.robot_id if meta is not None else "?"
-        self.per_robot[rid] = self.per_robot.get(rid, 0) + 1
-        return {"robot": rid, "mean": float(small.mean()), "saturated": float((small >= 250).mean())}
-
-    def stats(self) -> dict:
-        return {"frames": self.frames, "per_robot": dict(self.per_robot)}
 
 
 def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480, drones_per_actor: int = 1,

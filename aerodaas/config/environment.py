@@ -328,6 +328,11 @@ class EnvironmentConfig(_Cfg):
                                   "1: an actor per drone; more for memory-bound fleets")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
                                     "and dispatcher actor of a run (the recorder is never restarted)")
+    actor_opencv_threads: int | None = Field(
+        default=1, ge=1, le=256, description="OpenCV's worker threads (cv2.setNumThreads) in each drone and analytics "
+        "actor of a run: 1 renders each frame on the thread that asks for it, no pool thread per actor competing for "
+        "a node's cores shared by many actors; null keeps OpenCV's default, one per core (a shorter render for a node "
+        "that carries one drone)")
     actor_restart_timeout_s: float = Field(default=60.0, gt=0, le=3600, description="how long the driver waits for "
                                            "a dead drone actor to come back before its drones end as 'lost', s")
     same_node_transport: Literal["channel", "ray"] = Field(

@@ -39,14 +39,15 @@ Sources: QGroundControl plan file format (docs ``qgc-dev-guide/file_formats/plan
 from __future__ import annotations
 
 import math
-from typing import Annotated, Sequence
+from typing import TYPE_CHECKING, Annotated, Sequence
 
 from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator
-from shapely.geometry import LineString, Point, Polygon
-from shapely.validation import explain_validity
 
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import GeoPoint
+
+if TYPE_CHECKING:
+    from shapely.geometry import LineString, Polygon
 
 __all__ = ["GeofencePolygon", "GeofenceCircle", "GeofenceConfig", "Geofence", "autopilot_disagreement"]
 
@@ -161,12 +162,16 @@ class _Zone:
     def covers(self, x: float, y: float) -> bool:
         """Inside or on the boundary."""
         if self.polygon is not None:
+            from shapely.geometry import Point  # lazy: heavy shapely, only with a polygon zone
+
             return bool(self.polygon.covers(Point(x, y)))
         return math.hypot(x - self.center[0], y - self.center[1]) <= self.radius
 
     def interior_contains(self, x: float, y: float) -> bool:
         """Strictly inside (the boundary excluded)."""
         if self.polygon is not None:
+            from shapely.geometry import Point  # lazy: heavy shapely, only with a polygon zone
+
             return bool(self.polygon.contains(Point(x, y)))
         return math.hypot(x - self.center[0], y - self.center[1]) < self.radius
 
@@ -174,6 +179,8 @@ class _Zone:
     def leg_enters_interior(self, p0: tuple[float, float], p1: tuple[float, float]) -> bool:
         """True if some part of the straight leg p0 -> p1 lies strictly inside the zone."""
         if self.polygon is not None:
+            from shapely.geometry import LineString  # lazy: heavy shapely, only with a polygon zone
+
             # DE-9IM: the interior of the leg meets the interior of the polygon (boundary contact is allowed)
             return bool(LineString([p0, p1]).relate_pattern(self.polygon, "T********"))
         return _segment_point_distance(p0, p1, self.center) < self.radius
@@ -182,6 +189,8 @@ class _Zone:
         """Parameter intervals ``[t0, t1]`` (0 = p0, 1 = p1) of the leg that lie inside or on the zone."""
         length = math.hypot(p1[0] - p0[0], p1[1] - p0[1])
         if self.polygon is not None:
+            from shapely.geometry import LineString, Point  # lazy: heavy shapely, only with a polygon zone
+
             line = LineString([p0, p1])
             out = []
             for part in _lines_of(line.intersection(self.polygon)):
@@ -236,6 +245,9 @@ class Geofence:
         self.home = home
         self._zones: list[_Zone] = []
         for i, poly in enumerate(config.polygons):
+            from shapely.geometry import Polygon  # lazy: heavy shapely, only with a polygon zone
+            from shapely.validation import explain_validity  # lazy: heavy shapely, only with a polygon zone
+
             pts = [geodetic_to_enu(lat, lon, home.alt, home)[:2] for lat, lon in poly.points]
             shape = Polygon(pts)
             if not shape.is_valid or shape.area <= 0.0:

@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import heapq
 import math
-from typing import Sequence
-
-from shapely.geometry import LineString, Point, Polygon
+from typing import TYPE_CHECKING, Sequence
 
 from aerodaas.navigation.geofence import Geofence
+
+if TYPE_CHECKING:
+    from shapely.geometry import Polygon
 
 __all__ = ["grown_exclusions", "plan_path"]
 
@@ -28,6 +29,8 @@ CIRCLE_VERTICES = 16
 def grown_exclusions(fence: Geofence, clearance: float) -> list[Polygon]:
     """Each exclusion zone of ``fence`` grown by ``clearance`` metres, as a Shapely polygon (ENU metres) that contains
     the grown zone (circles: a circumscribed regular polygon of :data:`CIRCLE_VERTICES` vertices)."""
+    from shapely.geometry import Polygon  # lazy: heavy shapely, only when a path is planned
+
     out = []
     for z in fence.exclusions:
         if z.polygon is not None:
@@ -56,6 +59,8 @@ def plan_path(fence: Geofence, start: Sequence[float], goal: Sequence[float], cl
     Cost: O(N² · Z) leg checks for N vertices (at most ``max_nodes``) and Z zones."""
     if not (math.isfinite(clearance) and clearance >= 0):
         raise ValueError(f"clearance must be a finite number of metres >= 0, got {clearance!r}")
+    from shapely.geometry import LineString, Point  # lazy: heavy shapely, only when a path is planned
+
     s = (float(start[0]), float(start[1]))
     g = (float(goal[0]), float(goal[1]))
     if fence.check_point(*g) is not None:

@@ -127,7 +127,9 @@ class ActorSpec:
     simulated cameras render it); ``robots``, ``analytics``: its drones and analytics instances;
     ``mavlink_links``: endpoint -> robot ids sharing one MAVLink socket in this actor; ``analytics_scheduler``: a
     dispatcher actor's scheduler (set by the driver); ``restart_hold_s``: in lock-step, how long a frame for a
-    consumer actor that died waits for Ray to restart it (the environment's ``actor_restart_timeout_s``), seconds."""
+    consumer actor that died waits for Ray to restart it (the environment's ``actor_restart_timeout_s``), seconds;
+    ``opencv_threads``: OpenCV's worker threads in a drone or analytics actor (the environment's
+    ``actor_opencv_threads``; None: OpenCV's default, one per core)."""
 
     role: Role
     sim: dict = field(default_factory=dict)
@@ -140,3 +142,4 @@ class ActorSpec:
     mavlink_links: dict[str, list[str]] = field(default_factory=dict)
     analytics_scheduler: AnalyticsSchedulerSpec | None = None
     restart_hold_s: float = 60.0
+    opencv_threads: int | None = 1

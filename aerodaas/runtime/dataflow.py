@@ -318,7 +318,8 @@ class _PlanState:
         if actor_id not in self.actors:
             spec = ActorSpec(role, sim=self.sim_d,
                              record_remote="recorder" if self.recorded and role != "recorder" else None,
-                             restart_hold_s=float(self.env.cfg.actor_restart_timeout_s))
+                             restart_hold_s=float(self.env.cfg.actor_restart_timeout_s),
+                             opencv_threads=self.env.cfg.actor_opencv_threads)
             self.actors[actor_id] = ActorPlan(actor_id, role, f"aerodaas/{self.run_id}/{actor_id}", tier, compute,
                                               dict(labels), [], spec)
         return self.actors[actor_id]

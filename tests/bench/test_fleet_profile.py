@@ -18,7 +18,7 @@ RENDER = ("Thread._bootstrap (threading.py:1002);_worker (concurrent/futures/thr
           "(aerodaas/sim/world.py:165)")
 ANALYSE = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (actors/sensors/camera.py:204);"
            "DataPlane.publish (actors/data/plane.py:300);AnalyticsComponent._run (actors/analytics/component.py:90);"
-           "FrameExposure.process (aerodaas/bench/fleet.py:44)")
+           "FrameExposure.process (aerodaas/bench/fleet_analytics.py:29)")
 ENCODE = ("Thread.run (threading.py:982);RemoteRecorder._loop (actors/recording/remote_recorder.py:216);RemoteRecorder._send "
           "(actors/recording/remote_recorder.py:197);encode_frame (actors/data/frames.py:49)")
 MAIN = "<module> (ray/_private/workers/default_worker.py:323);Worker.main_loop (ray/_private/worker.py:1069)"

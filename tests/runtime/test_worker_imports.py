@@ -6,11 +6,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.runtime.test_dataplane import _env
 
 #: libraries that no drone actor of a simulated fleet uses: Ray's Arrow reducers (imported by Ray's serialisation
-#: context unless aerodaas.clusters.worker_memory.worker_setup runs), the detector's runtime, plotting, PyTorch
-UNUSED = ("pyarrow", "onnxruntime", "matplotlib", "torch")
+#: context unless aerodaas.clusters.worker_memory.worker_setup runs), the detector's runtime, plotting, PyTorch,
+#: the geofence's geometry (Shapely: these drones have no geofence)
+UNUSED = ("pyarrow", "onnxruntime", "matplotlib", "torch", "shapely")
 
 
 def _mapped_packages(pid: int) -> set[str]:
@@ -41,6 +44,83 @@ def test_a_drone_actor_maps_no_library_it_does_not_use(ray_session, run_options)
     assert any(p.startswith(("cv2", "opencv")) for p in pkgs), pkgs  # the renderer's OpenCV: the reading works
     assert "ray" in pkgs, pkgs
     assert not [p for p in pkgs if p.startswith(UNUSED)], pkgs
+
+
+#: modules an actor of a run never needs: the detector's runtime, PyTorch, plotting, Arrow, the terminal display,
+#: the MCAP writer (only the recorder actor writes), and the driver's side (application API, runtime, benchmarks)
+DRIVER_SIDE = ("onnxruntime", "torch", "matplotlib", "pyarrow", "rich", "mcap", "aerodaas.app", "aerodaas.runtime",
+               "aerodaas.bench.fleet")
+
+
+def test_the_actor_modules_import_nothing_of_the_driver_side():
+    """A fresh interpreter imports what a drone actor of the fleet benchmark runs — the drone and analytics actor
+    classes, the assembly their setup builds, the benchmark's colocated analytics — and none of
+    :data:`DRIVER_SIDE` is then in ``sys.modules`` (``aerodaas.bench.fleet_analytics`` is not
+    ``aerodaas.bench.fleet``)."""
+    import subprocess
+
+    code = ("import sys\n"
+            "import aerodaas.actors.host.drone_actor, aerodaas.actors.host.analytics_actor, aerodaas.actors.host.assembly\n"
+            "import aerodaas.bench.fleet_analytics\n"
+            f"print(sorted(m for m in sys.modules if any(m == d or m.startswith(d + '.') for d in {DRIVER_SIDE!r})))\n"
+            "print('cv2' in sys.modules, 'aerodaas.actors.host.assembly' in sys.modules)\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.splitlines() == ["[]", "True True"], out.stdout
+
+
+def test_drone_and_analytics_actors_run_opencv_on_one_thread_by_default(ray_session, run_options):
+    """``actor_opencv_threads`` (default 1): the drone actor (its renderer and colocated analytics) and an analytics
+    actor report OpenCV's thread count of their own process (``cv2.getNumThreads()``) as 1, whatever the cores."""
+    import ray
+
+    from tests.runtime.test_dataplane import FrameProbe
+
+    env = _env(1)
+    probe = FrameProbe()
+    probe.deploy(env.get_compute_resource_by_id("edge"))  # an analytics actor of its own
+    probe.analyse(env.get_robot_by_id("d00").get_sensor_by_id("cam").get_data_stream())
+    run_options.run_id = "cvthreads1"
+    seen: dict = {}
+
+    def look(robot) -> None:
+        for name in ("drone/d00", "analytics/edge/probe#1"):
+            seen[name] = ray.get(ray.get_actor(f"aerodaas/{run_options.run_id}/{name}").describe.remote())
+
+    env.get_robot_by_id("d00").on_mission_start(look)
+    res = env.start_mission(timeout=2.0, options=run_options)
+    assert set(res.robots) == {"d00"}
+    assert {k: v["opencv_threads"] for k, v in seen.items()} == {"drone/d00": 1, "analytics/edge/probe#1": 1}, seen
+
+
+@pytest.mark.parametrize("threads", [None, 3])
+def test_actor_opencv_threads_reaches_the_actors_opencv(threads):
+    """The environment's ``actor_opencv_threads`` is the drone actor's OpenCV pool (built in this process: no Ray);
+    null leaves OpenCV's own setting alone."""
+    import cv2
+
+    from tests.runtime.test_dataplane import _host_for
+
+    before = cv2.getNumThreads()
+    env = _env(1)
+    env.cfg.actor_opencv_threads = threads
+    try:
+        cv2.setNumThreads(2)
+        host, _rt, plan = _host_for(env)
+        host.close()
+        assert {a.spec.opencv_threads for a in plan.actors.values()} == {threads}
+        assert cv2.getNumThreads() == (2 if threads is None else threads)
+    finally:
+        cv2.setNumThreads(before)
+
+
+def test_actor_opencv_threads_must_be_a_positive_count():
+    from aerodaas.bench.fleet import fleet_config
+    from aerodaas.config import ConfigError, parse_environment_config
+
+    with pytest.raises((ConfigError, ValueError), match="actor_opencv_threads"):
+        parse_environment_config({**fleet_config(1), "actor_opencv_threads": 0})
 
 
 class _Context:
