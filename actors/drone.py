@@ -32,6 +32,7 @@ import traceback
 from typing import Any
 
 from aerodaas.backends import BackendError, make_backend
+from aerodaas.backends.base import VehicleState
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S, handler_table
 from aerodaas.protocol.messages import StatMsg
@@ -277,16 +278,18 @@ class DroneComponent:
 
     def status(self) -> dict:
         b = self.backend
+        now = b.state()
         cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
-        return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
-                "position": [float(v) for v in b.position], "battery_pct": None if b.battery_pct is None else float(b.battery_pct),
+        return {"robot": self.cfg.id, "t": now.t, "state": self.fsm.state.value,
+                "position": [float(v) for v in now.position],
+                "battery_pct": None if now.battery_pct is None else float(now.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
                 "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "frames_shed_late": sum(c["comp"].shed_late for c in self.cameras),
                 "frames_not_made": sum(c["comp"].frames_not_made for c in self.cameras),
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
-                "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
+                "link_ok": bool(now.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
 
     def report(self) -> dict:
         f = self.flight
@@ -390,10 +393,11 @@ class DroneComponent:
         (:attr:`_handlers`, one per state of the state machine's table). Returns True when the mission is over.
         Caller holds ``self.lock``."""
         v, st = self.backend, self.fsm.state
-        t = v.t
+        now = v.state()
+        t = now.t
         if not v.navigable:
-            return self._observe(t, st)
-        if not v.link_ok:
+            return self._observe(t, st, now)
+        if not now.link_ok:
             if st not in (S.LINK_LOST, S.LANDED):
                 self.flight.link_lost_from = st
                 self.fsm.transition(S.LINK_LOST, t)
@@ -404,7 +408,7 @@ class DroneComponent:
             return self.autopilot_flight.on_failsafe(t, st, fs)
         if self.flight.reissue and st != S.LINK_LOST:
             self._on_link_blip(t, st)
-        pos = tuple(float(c) for c in v.position)
+        pos = tuple(float(c) for c in now.position)
         stalled = self.deadlines.check(t, self.fsm.state, pos)  # take-off, landing, return: each has a deadline
         if stalled is not None:
             return stalled
@@ -431,7 +435,7 @@ class DroneComponent:
     def _on_landing(self, t: float, pos: tuple) -> bool:
         """On the ground: LANDED, disarm, and the outcome (success only if everything planned was flown)."""
         v = self.backend
-        if v.in_air:
+        if v.state().in_air:
             return False
         self.fsm.transition(S.LANDED, t)
         try:
@@ -462,7 +466,7 @@ class DroneComponent:
             return False
         v = self.backend
         if self.flight.backend_rtl:
-            if not v.in_air:
+            if not v.state().in_air:
                 self.fsm.transition(S.LANDING, t)
             return False
         path = self.flight.rtl_path
@@ -480,8 +484,8 @@ class DroneComponent:
         """Hover until resumeMission(), then go back to what was paused; a landing meanwhile ends the flight."""
         if self._failsafe_or_pause(t, pos):
             return False
-        v = self.backend
-        if not v.in_air and not v.armed and self.flew_something_or_took_off():
+        v, now = self.backend, self.backend.state()
+        if not now.in_air and not now.armed and self.flew_something_or_took_off():
             # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
             self.fsm.transition(S.LANDING, t)
             self.flight.outcome = self.flight.outcome or ("failsafe" if self.flight.failsafe else "incomplete")
@@ -508,7 +512,7 @@ class DroneComponent:
         if self.autopilot_mission:
             return self.autopilot_flight.follow_mission(t, pos)
         v = self.backend
-        if abs(v.position[2] - self.takeoff_altitude) < 0.1:
+        if abs(v.state().position[2] - self.takeoff_altitude) < 0.1:
             self.fsm.transition(S.HOVERING, t)
             v.hold()
         return False
@@ -526,10 +530,10 @@ class DroneComponent:
     # ------------------------------------------------------------------ failsafes and pause
     def _battery_critical(self, t: float) -> bool:
         """Below ``safety.critical_battery_pct`` in the air: EMERGENCY (outcome failed). True when it acted."""
-        v = self.backend
-        if not (v.battery_pct < self.cfg.safety.critical_battery_pct and v.in_air):
+        now = self.backend.state()
+        if not (now.battery_pct < self.cfg.safety.critical_battery_pct and now.in_air):
             return False
-        self._event("battery_critical", battery_pct=v.battery_pct)
+        self._event("battery_critical", battery_pct=now.battery_pct)
         self.flight.outcome = "failed"
         self.fsm.transition(S.EMERGENCY, t)
         return True
@@ -540,8 +544,9 @@ class DroneComponent:
         v, safety = self.backend, self.cfg.safety
         if self._battery_critical(t):
             return True
-        if v.battery_pct < safety.low_battery_rtl_pct and v.in_air:
-            self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
+        now = v.state()
+        if now.battery_pct < safety.low_battery_rtl_pct and now.in_air:
+            self._event("failsafe_rtl", battery_pct=now.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
             self.flight.outcome = "failsafe_rtl"
             self.autopilot_flight.return_to_launch(t, pos)
             return True
@@ -561,10 +566,11 @@ class DroneComponent:
         """The vehicle has been in the air in this run (a landed, disarmed vehicle then means the flight ended)."""
         return any(s in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) for _, s in self.fsm.history)
 
-    def _observe(self, t: float, st: S) -> bool:
-        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state; ends with the log."""
-        v, fsm = self.backend, self.fsm
-        finished = bool(getattr(v, "finished", False))
+    def _observe(self, t: float, st: S, v: VehicleState) -> bool:
+        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state ``v`` (read at ``t``); ends
+        with the log."""
+        fsm = self.fsm
+        finished = bool(getattr(self.backend, "finished", False))
         speed = math.hypot(float(v.velocity[0]), float(v.velocity[1]))
         if st in (S.IDLE, S.LANDED) and v.armed:  # armed again for another flight
             if st == S.LANDED:

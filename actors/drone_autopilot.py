@@ -197,7 +197,7 @@ class AutopilotFlight:
         c, f = self.ctx, self.flight
         v, prev = c.backend, f.link_lost_from or S.HOVERING
         c.event("link_regained", resuming=prev.value)
-        if not v.in_air:
+        if not v.state().in_air:
             c.fsm.transition(S.LANDED, t)
             c.event("landed", reason="landed while the link was lost")
             if f.outcome is None:
@@ -222,7 +222,7 @@ class AutopilotFlight:
 
         alt = min(max(pos[2], c.cfg.takeoff_altitude), c.gate.max_alt)
         try:
-            vel = tuple(float(x) for x in c.backend.velocity)
+            vel = tuple(float(x) for x in c.backend.state().velocity)
         except Exception:  # noqa: BLE001 - a backend without a velocity estimate: planned from rest
             vel = (0.0, 0.0, 0.0)
         path, why = plan_return(c.gate, pos, vel, alt)

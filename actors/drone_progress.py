@@ -97,7 +97,7 @@ class NavigationProgress:
         ``vehicle_home_refused`` event, disarm, and BackendError, before any take-off."""
         b = self.backend
         try:
-            self.gate.check_vehicle_home(b.home, b.position)
+            self.gate.check_vehicle_home(b.home, b.state().position)
         except SafetyViolation as e:
             self.event("vehicle_home_refused", reason=e.reason, vehicle_home=[b.home.lat, b.home.lon])
             try:

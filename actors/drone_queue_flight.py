@@ -45,7 +45,7 @@ class QueueFlight:
         if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and f.active_wp == item.id):
             try:  # a velocity command is checked for the time it has left (its fence horizon shrinks as it runs)
                 left = item.left_at(t) if isinstance(item, VelocityCommand) else item
-                item = c.gate.check_item(left, pos, tuple(float(v) for v in c.backend.velocity))
+                item = c.gate.check_item(left, pos, tuple(float(v) for v in c.backend.state().velocity))
             except SafetyViolation as e:
                 self.reject(t, item, e)
                 return
@@ -120,10 +120,10 @@ class QueueFlight:
         """The waypoint being flown: given up without progress; reached (within its acceptance radius and, to hold
         there, settled below ``hold.settle_speed``): WAYPOINT_HOLD; held for its ``hover_duration``: done."""
         c, f = self.ctx, self.flight
-        v = c.backend
+        v, now = c.backend, c.backend.state()
         dist = math.dist(pos, target)
-        speed = math.hypot(*tuple(float(x) for x in v.velocity)[:2])
-        radius = c.cfg.hold.radius(item.acceptance_radius, v.position_accuracy_m)  # the vehicle's accuracy at least
+        speed = math.hypot(*tuple(float(x) for x in now.velocity)[:2])
+        radius = c.cfg.hold.radius(item.acceptance_radius, now.position_accuracy_m)  # the vehicle's accuracy at least
         within = dist <= radius
         if c.fsm.state == S.NAVIGATING:
             if c.progress.check(t, item, target, dist, within):

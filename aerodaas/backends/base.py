@@ -21,14 +21,61 @@ a refused command raises :class:`CommandRefused` carrying the autopilot's result
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
 from typing import Any, ClassVar, NamedTuple, Sequence
 
 import numpy as np
 
-from aerodaas.model.types import GeoPoint, Odometry
+from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.model.types import Attitude, GeoPoint, Odometry
 
-__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
+__all__ = ["VehicleBackend", "VehicleState", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
+
+
+def _vector3(name: str, value: Any) -> np.ndarray:
+    """``value`` as a read-only (3,) float array; ValueError naming ``name`` and the value otherwise."""
+    arr = np.array(value, dtype=float)
+    if arr.shape != (3,):
+        raise ValueError(f"VehicleState.{name}: expected 3 values, got {value!r}")
+    arr.flags.writeable = False
+    return arr
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class VehicleState:
+    """One reading of a vehicle's state, every field read together (what :meth:`VehicleBackend.state` returns).
+
+    ``t``: seconds on the vehicle's clock when it was read (:attr:`VehicleBackend.t`); ``position``: (3,) float
+    ENU metres from the backend's ``home`` (x east, y north, z up); ``velocity``: (3,) float ENU m/s (both
+    read-only arrays); ``roll``, ``pitch``, ``yaw``: attitude in degrees (yaw ENU: counter-clockwise from east,
+    :meth:`VehicleBackend.enu_yaw_from_heading` converts a compass heading); ``battery_pct``: state of charge in
+    percent, 0-100 (None: unknown, allowed for a backend with ``navigable = False``); ``armed``: the motors are
+    armed, as the vehicle last reported it; ``in_air``: off the ground (the autopilot's land detector; always False
+    for a vehicle with ``needs_takeoff = False``); ``link_ok``: False while the link is lost (no heartbeat or state
+    for the configured time; always True in simulation); ``mode``: the vehicle's flight mode in its own names
+    (MAVLink: pymavlink's ``GUIDED``, ``OFFBOARD``, ``LOITER``...; "" when it has none); ``position_accuracy_m``:
+    the reported horizontal position accuracy, metres, 1 sigma as the receiver states it (0: exact or not
+    reported).
+
+    Raises ValueError naming the field when ``position`` or ``velocity`` is not 3 values."""
+
+    t: float
+    position: np.ndarray
+    velocity: np.ndarray
+    yaw: float
+    armed: bool
+    in_air: bool
+    battery_pct: float | None
+    roll: float = 0.0
+    pitch: float = 0.0
+    link_ok: bool = True
+    mode: str = ""
+    position_accuracy_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _vector3("position", self.position))
+        object.__setattr__(self, "velocity", _vector3("velocity", self.velocity))
 
 
 class PoseSample(NamedTuple):
@@ -101,10 +148,13 @@ class VehicleBackend(abc.ABC):
     a ``backend_error`` event and the run goes on, and any other exception from a command ends the robot's mission
     as ``failed``; an exception from :meth:`arm` (the drone's start) or :meth:`step` ends the drone actor's run.
 
+    State: :meth:`state` returns one :class:`VehicleState` (position, velocity, attitude, battery, armed, in-air,
+    link health, flight mode, position accuracy, all read together, with their time): a backend implements that
+    one method, not a property per field.
+
     Thread-safety: the runtime calls every method from one thread (the drone's control thread), except
-    :attr:`link_ok`, :meth:`odometry` and the state properties (:attr:`t`, :attr:`position`, :attr:`velocity`,
-    :attr:`yaw`, :attr:`armed`, :attr:`in_air`, :attr:`battery_pct`), which may also be read from a status thread
-    and must not block.
+    :meth:`state`, :attr:`t` and :meth:`odometry`, which may also be read from a status thread and must not
+    block.
     """
 
     #: the ``backend`` name in ``environment.json``
@@ -227,80 +277,47 @@ class VehicleBackend(abc.ABC):
         """Take back a :meth:`checkpoint` (called after :meth:`connect` of a restarted drone actor)."""
 
     # ------------------------------------------------------------------ time and state
-    @property
     @abc.abstractmethod
+    def state(self) -> VehicleState:
+        """The vehicle's state now, every field read together (:class:`VehicleState`: ENU metres from
+        :attr:`home`, ENU m/s, degrees, battery percent, armed, in-air, link health, flight mode, position accuracy,
+        and the time it was read on the vehicle's clock). Must not block; raises nothing."""
+
+    @property
     def t(self) -> float:
         """Seconds on the vehicle's clock since :meth:`connect` (simulated seconds for the simulator); never goes
-        back. Must not block."""
+        back: ``state().t``. Must not block."""
+        return self.state().t
 
     @abc.abstractmethod
     def step(self, dt: float) -> None:
         """Called once per physics step of the run (``dt`` = 1 / ``simulation.physics_hz`` seconds). ``clock ==
         "sim"``: advance the vehicle ``dt`` simulated seconds. ``"vehicle"``: process incoming messages
         (non-blocking; ``dt`` is only a hint). Should not raise: an exception leaves the drone actor's run loop (the
-        run fails); report trouble as events (:meth:`drain_events`) or through :attr:`link_ok`."""
+        run fails); report trouble as events (:meth:`drain_events`) or through ``state().link_ok``."""
 
-    @property
-    @abc.abstractmethod
-    def position(self) -> np.ndarray:
-        """(3,) float ENU metres from :attr:`home` (x east, y north, z up). Must not block."""
-
-    @property
-    @abc.abstractmethod
-    def velocity(self) -> np.ndarray:
-        """(3,) float ENU m/s. Must not block."""
-
-    @property
-    @abc.abstractmethod
-    def yaw(self) -> float:
-        """Heading in degrees, ENU convention (counter-clockwise from east; :meth:`enu_yaw_from_heading` converts a
-        compass/NED heading). Must not block."""
-
-    @property
-    @abc.abstractmethod
-    def armed(self) -> bool:
-        """True while the motors are armed (as the vehicle last reported it). The drone reads it to judge the
-        flight's end (landed and disarmed) and a disarm by someone else. Must not block; raises nothing."""
-
-    @property
-    @abc.abstractmethod
-    def in_air(self) -> bool:
-        """True while the vehicle is off the ground (the autopilot's land detector; the simulator: above the
-        ground or climbing). The drone ends LANDING (touchdown) and the autopilot's own return on it, and its
-        battery failsafes act only while it is True; always False for a vehicle with ``needs_takeoff = False``.
-        Must not block; raises nothing."""
-
-    @property
-    @abc.abstractmethod
-    def battery_pct(self) -> float:
-        """State of charge in percent, 0-100 (a backend that only reports, ``navigable = False``, may return None:
-        unknown). The drone's battery failsafes compare it with ``safety.*_battery_pct``. Must not block."""
-
-    @property
-    def position_accuracy_m(self) -> float:
-        """The vehicle's reported horizontal position accuracy in metres (1 sigma as the receiver states it; 0:
-        exact or not reported). 0 here: the simulator knows its position exactly."""
-        return 0.0
-
-    @property
-    def link_ok(self) -> bool:
-        """False while the link is lost (no heartbeat/state for the configured time). Always True in simulation."""
-        return True
-
-    @abc.abstractmethod
     def odometry(self) -> Odometry:
         """The current :class:`~aerodaas.model.types.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
         for backends with a :attr:`sample_key`): ENU metres from :attr:`home` and their WGS-84 position, ENU m/s,
-        attitude in degrees (yaw as :attr:`yaw`), battery percent, armed and in-air. Must not block."""
+        attitude in degrees, battery percent, armed and in-air. Must not block. The default: :meth:`state` with
+        its geodetic position from :attr:`home` (:func:`aerodaas.model.geo.enu_to_geodetic`)."""
+        s = self.state()
+        x, y, z = (float(v) for v in s.position)
+        bat = None if s.battery_pct is None else min(max(float(s.battery_pct), 0.0), 100.0)
+        return Odometry(robot_id=self.robot_id, t=float(s.t), position=(x, y, z),
+                        geodetic=enu_to_geodetic(x, y, z, self.home), velocity=tuple(float(v) for v in s.velocity),
+                        attitude=Attitude(roll=s.roll, pitch=s.pitch, yaw=s.yaw), battery_pct=bat,
+                        armed=bool(s.armed), in_air=bool(s.in_air))
 
     def pose_sample(self) -> PoseSample:
         """The newest position and yaw with the run time they are of, read together (one sample, never the position
         of one and the time of another). A camera tags a frame with the pose interpolated between these samples at
         the frame's capture time, so the time must be the sample's, not the tick's that read it.
-        The default: :attr:`position` and :attr:`yaw` at :attr:`t` (right for a backend whose state is new at
+        The default: :meth:`state`'s position and yaw at its time (right for a backend whose state is new at
         every :meth:`step`: the simulator). A backend with a :attr:`sample_key` overrides it. Must not block."""
-        p = self.position
-        return PoseSample(float(self.t), (float(p[0]), float(p[1]), float(p[2])), float(self.yaw))
+        s = self.state()
+        p = s.position
+        return PoseSample(float(s.t), (float(p[0]), float(p[1]), float(p[2])), float(s.yaw))
 
     @property
     def sample_key(self) -> Any:
@@ -365,7 +382,7 @@ class VehicleBackend(abc.ABC):
     @abc.abstractmethod
     def land(self) -> None:
         """Descend and land where the vehicle is (a ground vehicle: stop). Raises NotNavigable, CommandRefused or
-        BackendError; the drone then watches :attr:`in_air` for the touchdown (bounded by its landing
+        BackendError; the drone then watches ``state().in_air`` for the touchdown (bounded by its landing
         deadline)."""
 
     def return_to_launch(self) -> bool:
@@ -426,5 +443,5 @@ class VehicleBackend(abc.ABC):
 
     def horizontal_distance(self, target_enu: Sequence[float]) -> float:
         """Metres from the vehicle to ``target_enu`` in the horizontal plane."""
-        p = self.position
+        p = self.state().position
         return math.hypot(float(target_enu[0]) - p[0], float(target_enu[1]) - p[1])

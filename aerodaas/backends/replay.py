@@ -38,7 +38,7 @@ import numpy as np
 from aerodaas.config.base import ConfigError
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
-from aerodaas.backends.base import BackendError, VehicleBackend
+from aerodaas.backends.base import BackendError, VehicleBackend, VehicleState
 from aerodaas.backends.flight_log import MAV_MODE_FLAG_SAFETY_ARMED, LogMessage, check_log, load_tlog, load_ulog
 from aerodaas.config.backends import ReplayConfig
 
@@ -113,7 +113,7 @@ class ReplayBackend(VehicleBackend):
         self._have_battery_status = False
         self._armed = False
         self._landed_state: int | None = None
-        self.mode = ""
+        self._mode = ""
         self._last_reached: int | None = None
         self._last_hb: float | None = None
         self._link_ok = True
@@ -155,8 +155,9 @@ class ReplayBackend(VehicleBackend):
         return float(self.info.get("duration_s", 0.0))
 
     # ------------------------------------------------------------------ time and state
-    @property
-    def t(self) -> float:
+    def _log_now(self) -> float:
+        """Log time now: ``rate`` x wall seconds since the first :meth:`step` (the applied time before it and after
+        :meth:`close`)."""
         if self._t_wall0 is None:
             return self._t_applied
         return (time.monotonic() - self._t_wall0) * self.rate
@@ -167,7 +168,7 @@ class ReplayBackend(VehicleBackend):
         if not self._clock_started:
             self._clock_started = True
             self._t_wall0 = time.monotonic() - self._t_applied / self.rate
-        now = self.t
+        now = self._log_now()
         msgs = self._msgs
         while self._i < len(msgs) and msgs[self._i].t <= now:
             lm = msgs[self._i]
@@ -230,8 +231,8 @@ class ReplayBackend(VehicleBackend):
             self._armed = armed
             self._event("armed" if armed else "disarmed", t)
         mode = getattr(m, "mode_name", None) or mavutil.mode_string_v10(m)
-        if mode != self.mode:
-            self.mode = mode
+        if mode != self._mode:
+            self._mode = mode
             self._event("mode", t, name=mode)
 
     def _event(self, kind: str, t: float, **kw: Any) -> None:
@@ -241,36 +242,21 @@ class ReplayBackend(VehicleBackend):
         out, self._events = self._events, []
         return out
 
-    @property
-    def link_ok(self) -> bool:
-        return self._link_ok
+    def state(self) -> VehicleState:
+        """The logged vehicle at the log time now (:attr:`t`: ``rate`` x wall seconds since the first :meth:`step`),
+        as of the messages applied so far: position and velocity from GLOBAL_POSITION_INT, attitude from ATTITUDE,
+        battery percent (None while the log has not reported it, or reports it unknown), armed and mode from the
+        HEARTBEAT, in-air from EXTENDED_SYS_STATE's landed state (else armed and above 0.5 m), link health from
+        the gaps between the log's heartbeats."""
+        att = self._att
+        return VehicleState(t=self._log_now(), position=self._pos, velocity=self._vel, roll=att.roll,
+                            pitch=att.pitch, yaw=att.yaw, battery_pct=self._bat, armed=self._armed,
+                            in_air=self._in_air(), link_ok=self._link_ok, mode=self._mode)
 
-    @property
-    def position(self) -> np.ndarray:
-        return self._pos.copy()
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self._vel.copy()
-
-    @property
-    def yaw(self) -> float:
-        return float(self._att.yaw)
-
-    @property
-    def armed(self) -> bool:
-        return self._armed
-
-    @property
-    def in_air(self) -> bool:
+    def _in_air(self) -> bool:
         if self._landed_state is not None:
             return self._landed_state in _MAV_LANDED_STATE_IN_AIR
         return self._armed and self._pos[2] > 0.5
-
-    @property
-    def battery_pct(self) -> float | None:
-        """Percent from the log, or None while the log has not reported it (or reports it unknown)."""
-        return self._bat
 
     def odometry(self) -> Odometry:
         geo = self._geo or self.home
@@ -278,7 +264,7 @@ class ReplayBackend(VehicleBackend):
                         geodetic=geo, velocity=tuple(float(v) for v in self._vel), attitude=self._att,
                         battery_pct=None if self._bat is None else min(max(self._bat, 0.0), 100.0),
                         battery_voltage=self._volt,
-                        armed=self._armed, in_air=self.in_air)
+                        armed=self._armed, in_air=self._in_air())
 
     # ------------------------------------------------------------------ control: a recording cannot be flown
     def arm(self) -> None:

@@ -4,13 +4,11 @@ from __future__ import annotations
 import copy
 from typing import Sequence
 
-import numpy as np
-
 from aerodaas.model.types import Odometry
 from aerodaas.config.backends import SimConfig
 from aerodaas.sim.gimbal import SimGimbal
 from aerodaas.sim.vehicle import SimVehicle
-from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.base import VehicleBackend, VehicleState
 
 
 class SimBackend(VehicleBackend):
@@ -45,10 +43,6 @@ class SimBackend(VehicleBackend):
         """The simulated gimbal's attitude now (None without a gimbal)."""
         return None if self.gimbal is None else self.gimbal.attitude(self.vehicle.t)
 
-    @property
-    def t(self) -> float:
-        return self.vehicle.t
-
     def checkpoint(self) -> dict:
         """The simulated vehicle's state, setpoint, clock and noise generator (deep copies)."""
         v = self.vehicle
@@ -67,29 +61,12 @@ class SimBackend(VehicleBackend):
         if self.gimbal is not None:
             self.gimbal.step(dt, self.vehicle.state.position, self.vehicle.state.yaw)
 
-    @property
-    def position(self) -> np.ndarray:
-        return self.vehicle.state.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self.vehicle.state.velocity
-
-    @property
-    def yaw(self) -> float:
-        return self.vehicle.state.yaw
-
-    @property
-    def armed(self) -> bool:
-        return self.vehicle.state.armed
-
-    @property
-    def in_air(self) -> bool:
-        return self.vehicle.state.in_air
-
-    @property
-    def battery_pct(self) -> float:
-        return self.vehicle.battery_pct
+    def state(self) -> VehicleState:
+        """The simulated vehicle now (exact: the odometry adds the configured noise); the link is always up."""
+        v = self.vehicle
+        st = v.state
+        return VehicleState(t=v.t, position=st.position, velocity=st.velocity, yaw=st.yaw, armed=st.armed,
+                            in_air=st.in_air, battery_pct=v.battery_pct)
 
     def odometry(self) -> Odometry:
         return self.vehicle.odometry()

@@ -177,7 +177,7 @@ class DroneStage:
 
     @property
     def position(self) -> tuple:
-        return tuple(float(c) for c in self.backend.position)
+        return tuple(float(c) for c in self.backend.state().position)
 
     def step(self, dt: float) -> None:
         self.backend.step(dt)

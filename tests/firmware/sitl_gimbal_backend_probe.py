@@ -50,7 +50,7 @@ def main() -> int:
         reports.extend(b.drain_gimbal())
         time.sleep(0.2)
     time.sleep(2.0)
-    pos, yaw_enu = tuple(float(c) for c in b.position), float(b.yaw)
+    pos, yaw_enu = tuple(float(c) for c in b.state().position), float(b.state().yaw)
     roi = (30.0, 40.0, pos[2] - 25.0)
     b.point_gimbal(GimbalRoi(*roi))
     pred = roi_angles(pos, yaw_enu, roi)

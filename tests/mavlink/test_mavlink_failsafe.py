@@ -94,9 +94,9 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     assert any(e["event"] == "offboard_loss_timeout" and e["seconds"] == 1.0 for e in b.drain_events())
     b.arm()
     b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.8, 15)
+    assert run_until(b, lambda: b.state().position[2] > 1.8, 15)
     b.goto((0.0, 30.0, 2.0))
-    assert run_until(b, lambda: b.mode == "OFFBOARD" and b.position[1] > 1.0, 15), (b.mode, b.position)
+    assert run_until(b, lambda: b.state().mode == "OFFBOARD" and b.state().position[1] > 1.0, 15), (b.state().mode, b.state().position)
     b.drain_events()
     gate, port = threading.Event(), b.link.port  # stall the backend's receive path, as a stopped process would
     real = port.recv_msg
@@ -113,7 +113,7 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     time.sleep(0.3)
     port.recv_msg = real
     gate.set()
-    assert run_until(b, lambda: b.link.failsafe is not None, 10), b.mode
+    assert run_until(b, lambda: b.link.failsafe is not None, 10), b.state().mode
     run_until(b, lambda: False, 1.5)
     modes = [m for _, m in emu.mode_log]
     left = len(modes) - 1 - modes[::-1].index("AUTO.RTL")
@@ -128,7 +128,7 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     # with the event in hand, the caller may take the vehicle back (mavlink.on_failsafe: resume)
     b.goto((0.0, 0.0, 2.0))
     assert run_until(b, lambda: emu.snapshot()["mode"] == "OFFBOARD", 10), emu.mode_log
-    assert run_until(b, lambda: dist(b.position, (0, 0, 2)) < 0.6, 40), b.position
+    assert run_until(b, lambda: dist(b.state().position, (0, 0, 2)) < 0.6, 40), b.state().position
 
 
 def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
@@ -140,9 +140,9 @@ def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
     emu, b = fly("px4", speedup=1.0, params={"COM_OF_LOSS_T": 3.0})
     b.arm()
     b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.8, 30)
+    assert run_until(b, lambda: b.state().position[2] > 1.8, 30)
     b.goto((0.0, 30.0, 2.0))
-    assert run_until(b, lambda: b.mode == "OFFBOARD", 15), b.mode
+    assert run_until(b, lambda: b.state().mode == "OFFBOARD", 15), b.state().mode
     b.drain_events()
     gate, port = threading.Event(), b.link.port
     real = port.recv_msg

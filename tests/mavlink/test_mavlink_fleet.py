@@ -76,11 +76,11 @@ def test_three_vehicles_on_one_link_each_flies_its_own_target(fleet, autopilot):
             by_id[rid].takeoff(3.0)
         for rid in ("r1", "r2", "r3"):
             b = by_id[rid]
-            assert run_until(b, lambda: b.position[2] > 2.7, 30), (rid, b.position)
+            assert run_until(b, lambda: b.state().position[2] > 2.7, 30), (rid, b.state().position)
             b.goto(targets[rid])
         for rid in ("r1", "r2", "r3"):
             b = by_id[rid]
-            assert run_until(b, lambda: np.linalg.norm(b.position - targets[rid]) < 0.5, 40), (rid, b.position)
+            assert run_until(b, lambda: np.linalg.norm(b.state().position - targets[rid]) < 0.5, 40), (rid, b.state().position)
         # the firmware agrees: emulator k (system id k) is where robot rk was sent, not where the others were
         for k, rid in enumerate(("r1", "r2", "r3")):
             at = np.asarray(emus[k].snapshot()["position_origin"], float)
@@ -88,7 +88,7 @@ def test_three_vehicles_on_one_link_each_flies_its_own_target(fleet, autopilot):
         for b in backends:
             b.land()
         for b in backends:
-            assert run_until(b, lambda: not b.armed and not b.in_air, 60), (b.robot_id, b.position)
+            assert run_until(b, lambda: not b.state().armed and not b.state().in_air, 60), (b.robot_id, b.state().position)
         for emu in emus:
             assert not emu.snapshot()["armed"]
     finally:

@@ -85,12 +85,12 @@ def test_go_command_body_frame_ranges_and_chunking():
 @pytest.mark.tello(cfg={"keepalive_s": 0.3})
 def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
     emu, b = tello
-    assert b.link_ok and b.yaw == pytest.approx(90.0 - HEADING, abs=1.0)  # mission-start reference
+    assert b.state().link_ok and b.state().yaw == pytest.approx(90.0 - HEADING, abs=1.0)  # mission-start reference
     b.arm()
     b.takeoff(1.5)
     _settle(b)
-    assert emu.position[2] == pytest.approx(1.5, abs=0.1) and b.position[2] == pytest.approx(emu.position[2], abs=0.02)
-    assert b.in_air and b.odometry().in_air
+    assert emu.position[2] == pytest.approx(1.5, abs=0.1) and b.state().position[2] == pytest.approx(emu.position[2], abs=0.02)
+    assert b.state().in_air and b.odometry().in_air
     assert _sent(emu, "takeoff") == ["takeoff"] and len(_sent(emu, "up")) == 1  # takeoff climbs to 0.8 m
 
     p0, yaw0 = emu.position, emu.yaw_enu
@@ -99,8 +99,8 @@ def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
     moved = emu.position - p0
     assert moved[1] > 0.3 and abs(moved[0]) < 0.2 and abs(moved[2]) < 0.05, moved
     assert emu.yaw_enu - yaw0 > 10.0  # counter-clockwise in ENU
-    assert b.yaw == pytest.approx(emu.yaw_enu, abs=3.0)
-    assert np.linalg.norm(b.position - emu.position) < 0.15, (b.position, emu.position)  # dead reckoning
+    assert b.state().yaw == pytest.approx(emu.yaw_enu, abs=3.0)
+    assert np.linalg.norm(b.state().position - emu.position) < 0.15, (b.state().position, emu.position)  # dead reckoning
 
     target = np.array([2.0, -1.0, 1.2])  # east-south-down from a yawed vehicle: no axis is a body axis
     b.goto(target, speed=1.0)  # replaces the velocity command
@@ -109,9 +109,9 @@ def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
         x, y, z, s = (int(v) for v in go.split()[1:])
         assert all(abs(c) <= 500 for c in (x, y, z)) and 10 <= s <= 100 and max(abs(x), abs(y), abs(z)) > 20
     assert np.linalg.norm(emu.position - target) < 0.2, emu.position  # the vehicle flew there
-    assert np.linalg.norm(b.position - emu.position) < 0.1, (b.position, emu.position)  # and we know it
+    assert np.linalg.norm(b.state().position - emu.position) < 0.1, (b.state().position, emu.position)  # and we know it
     time.sleep(0.8)  # keep-alives while hovering must not resume the old velocity
-    assert np.linalg.norm(emu.position - target) < 0.2 and b.velocity == pytest.approx(np.zeros(3), abs=0.1)
+    assert np.linalg.norm(emu.position - target) < 0.2 and b.state().velocity == pytest.approx(np.zeros(3), abs=0.1)
 
     x0 = float(emu.position[0])
     b.goto((5.0, -1.0, 1.2), speed=0.5)
@@ -126,7 +126,7 @@ def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
 
     b.land()
     _settle(b)
-    assert not emu.in_air and not b.in_air and b.position[2] == pytest.approx(0.0, abs=0.02)
+    assert not emu.in_air and not b.state().in_air and b.state().position[2] == pytest.approx(0.0, abs=0.02)
     odo = b.odometry()
     assert odo.battery_pct == pytest.approx(emu.vehicle.battery_pct, abs=1.5)
     assert b.drain_events() == []
@@ -166,20 +166,20 @@ def test_malformed_state_packets_are_counted_and_skipped(tello):
     emu.send_raw_state(b"ok")
     _wait(lambda: b.link.stats["malformed_state"] >= before + 3, 2.0, "the malformed packets")
     time.sleep(0.3)
-    assert b.link.stats["malformed_state"] == before + 3 and b.link_ok
-    assert b.yaw == pytest.approx(90.0 - HEADING, abs=1.0) and b.battery_pct == pytest.approx(90.0, abs=1.0)
+    assert b.link.stats["malformed_state"] == before + 3 and b.state().link_ok
+    assert b.state().yaw == pytest.approx(90.0 - HEADING, abs=1.0) and b.state().battery_pct == pytest.approx(90.0, abs=1.0)
 
 
 def test_link_lost_and_regained(tello):
     emu, b = tello
     b.step(0.0)
     emu.state_paused = True
-    _wait(lambda: not b.link_ok, 2.0, "the link to be lost")
+    _wait(lambda: not b.state().link_ok, 2.0, "the link to be lost")
     b.step(0.0)
     with pytest.raises(LinkLost):
         b.takeoff(1.0)
     emu.state_paused = False
-    _wait(lambda: b.link_ok, 2.0, "the link to come back")
+    _wait(lambda: b.state().link_ok, 2.0, "the link to come back")
     b.step(0.0)
     assert [e["event"] for e in b.drain_events()] == ["link_lost", "link_regained"]
 
@@ -225,7 +225,7 @@ def test_refused_streamon_without_a_backend_camera_is_a_video_error_event(tello)
     """No camera takes its frames from this Tello: a refused ``streamon`` does not fail the connection, it is a
     ``video_error`` event carrying the reply, and no frames come."""
     emu, b = tello
-    assert _sent(emu, "streamon") == ["streamon"] and b.link_ok
+    assert _sent(emu, "streamon") == ["streamon"] and b.state().link_ok
     events = b.drain_events()
     assert [e["event"] for e in events] == ["video_error"]
     assert events[0]["command"] == "streamon" and events[0]["reply"] == "error"

@@ -90,18 +90,18 @@ def test_velocity_hold_and_the_battery():
     r.arm()
     r.set_velocity((0.0, -1.0, 3.0))  # south at 1 m/s; a rover ignores the vertical part
     _drive(r, 5.0)
-    assert r.velocity == pytest.approx((0.0, -1.0, 0.0), abs=1e-9) and r.yaw == pytest.approx(270.0)
+    assert r.state().velocity == pytest.approx((0.0, -1.0, 0.0), abs=1e-9) and r.state().yaw == pytest.approx(270.0)
     driven = r.checkpoint().odometer_m
-    assert r.battery_pct == pytest.approx(100.0 - 0.5 * 5.0 - 1.0 * driven)
+    assert r.state().battery_pct == pytest.approx(100.0 - 0.5 * 5.0 - 1.0 * driven)
     r.hold()
     _drive(r, 2.0)
-    assert r.velocity == pytest.approx((0.0, 0.0, 0.0)) and r.position[2] == 0.0
+    assert r.state().velocity == pytest.approx((0.0, 0.0, 0.0)) and r.state().position[2] == 0.0
     r.land()  # on the ground already: a stop, the rover stays armed until the drone disarms it
-    assert r.armed and not r.in_air
+    assert r.state().armed and not r.state().in_air
     r.set_velocity((0.0, 0.0, 0.0), yaw_rate_dps=45.0)  # turn on the spot
-    yaw0, pos0 = r.yaw, r.position.copy()
+    yaw0, pos0 = r.state().yaw, r.state().position.copy()
     _drive(r, 2.0)
-    assert r.yaw == pytest.approx((yaw0 + 90.0) % 360) and r.position == pytest.approx(pos0)
+    assert r.state().yaw == pytest.approx((yaw0 + 90.0) % 360) and r.state().position == pytest.approx(pos0)
 
 
 def test_an_empty_battery_stops_the_rover_with_one_event_and_it_cannot_arm_again():
@@ -112,7 +112,7 @@ def test_an_empty_battery_stops_the_rover_with_one_event_and_it_cannot_arm_again
     events = r.drain_events()
     # 1 % at 0.5 % a metre: empty after 2 m, within the step that crossed it (at most 2 m/s x 0.1 s)
     assert [e["event"] for e in events] == ["battery_empty"] and 2.0 <= events[0]["odometer_m"] <= 2.2, events
-    assert r.battery_pct == 0.0 and odo[-1].velocity == (0.0, 0.0, 0.0)
+    assert r.state().battery_pct == 0.0 and odo[-1].velocity == (0.0, 0.0, 0.0)
     assert odo[-1].position[0] == pytest.approx(events[0]["odometer_m"], abs=1e-3)
     assert r.drain_events() == []
     r.disarm()
@@ -200,7 +200,7 @@ def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
     assert [v["id"] for v in d.visited] == ["p1", "p2", "p3"]
     assert all(v["error_m"] <= 0.3 for v in d.visited), d.visited
     assert "TAKING_OFF" not in rec.states and rec.states[:3] == ["PREFLIGHT", "ARMED", "HOVERING"], rec.states
-    assert rec.states[-2:] == ["LANDING", "LANDED"] and not backend.armed
+    assert rec.states[-2:] == ["LANDING", "LANDED"] and not backend.state().armed
     assert not any(o.in_air or o.position[2] != 0.0 for o in path)
     kinds = [e["event"] for e in rec.events]
     assert "takeoff_skipped" in kinds and "takeoff" not in kinds and not [k for k in kinds if k.endswith("_stalled")]

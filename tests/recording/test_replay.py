@@ -63,7 +63,7 @@ def replayed():
         samples, events = [], []
         while not b.finished:
             b.step(0.0)
-            samples.append((b.odometry(), b.battery_pct))
+            samples.append((b.odometry(), b.state().battery_pct))
             events += b.drain_events()
             clock.now += 0.01
         wall = clock() - t_start
@@ -262,7 +262,7 @@ def test_replay_plays_a_px4_ulog(ulog_file, monkeypatch):
     samples, events = [], []
     while not b.finished and clock.now < 1000.0 + 60.0 / RATE + 5:
         b.step(0.0)
-        samples.append((b.odometry().t, b.position.copy(), b.battery_pct, b.in_air, b.yaw))
+        samples.append((b.odometry().t, b.state().position.copy(), b.state().battery_pct, b.state().in_air, b.state().yaw))
         events += b.drain_events()
         clock.now += 0.00037  # 0.037 s of log per step, off the 0.1 s sample grid
     assert b.finished

@@ -128,7 +128,7 @@ def _fly(d, until_s: float, dt: float = 0.1, on_step=None) -> list[float]:
     while d.backend.t < until_s and not d.done:
         d.step(dt)
         d.control_tick()
-        heights.append(float(d.backend.position[2]))
+        heights.append(float(d.backend.state().position[2]))
         if on_step is not None:
             on_step(d)
     return heights
@@ -146,7 +146,7 @@ def test_a_vehicle_that_cannot_climb_is_stalled_at_its_deadline_then_landed():
     assert stall["deadline_s"] == pytest.approx(19.0) and 19.0 < stall["elapsed_s"] <= 19.1 + 1e-9, stall
     assert stall["action"] == "land" and stall["legs"] == [{"kind": "climb", "distance_m": 4.0, "speed_mps": 2.0}]
     assert [s.value for _, s in d.fsm.history][-3:] == ["TAKING_OFF", "LANDING", "LANDED"]
-    assert d.outcome == "takeoff_stalled" and d.done and max(heights) < 0.05 and not d.backend.armed
+    assert d.outcome == "takeoff_stalled" and d.done and max(heights) < 0.05 and not d.backend.state().armed
     assert d.backend.t < 25.0  # bounded: not the battery's 4,000 s
 
 
@@ -188,7 +188,7 @@ def test_a_return_that_makes_no_way_home_is_stalled_and_lands_where_it_is():
     def stick_after_a(drone):
         if drone.visited and not drone.backend.stuck:
             drone.backend.stuck = True
-            drone.queue_flight.return_to_launch(drone.backend.t, tuple(drone.backend.position))
+            drone.queue_flight.return_to_launch(drone.backend.t, tuple(drone.backend.state().position))
 
     _fly(d, 300.0, on_step=stick_after_a)
     stall = next(e for e in rec.events if e["event"] == "rtl_stalled")
@@ -196,7 +196,7 @@ def test_a_return_that_makes_no_way_home_is_stalled_and_lands_where_it_is():
     assert stall["deadline_s"] == pytest.approx(12.0, abs=0.2) and stall["distance_from_home_m"] > 19.0, stall
     assert d.outcome == "rtl_stalled" and [s.value for _, s in d.fsm.history][-3:] == ["RETURNING", "LANDING",
                                                                                         "LANDED"]
-    assert abs(d.backend.position[0] - 20.0) < 1.0 and d.backend.position[2] == 0.0  # landed where it was
+    assert abs(d.backend.state().position[0] - 20.0) < 1.0 and d.backend.state().position[2] == 0.0  # landed where it was
 
 
 def test_phases_within_their_deadlines_fly_as_before():
@@ -347,4 +347,4 @@ def test_a_return_around_an_exclusion_zone_flies_within_its_deadline():
     _fly(d, 600.0)
     ret = next(e for e in rec.events if e["event"] == "returning")
     assert len(ret["path"]) > 1 and not [e for e in rec.events if e["event"].endswith("_stalled")], rec.events[-5:]
-    assert d.fsm.state.value == "LANDED" and abs(d.backend.position[0]) < 1.0 and abs(d.backend.position[1]) < 1.0
+    assert d.fsm.state.value == "LANDED" and abs(d.backend.state().position[0]) < 1.0 and abs(d.backend.state().position[1]) < 1.0

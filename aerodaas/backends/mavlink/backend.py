@@ -12,7 +12,7 @@ import numpy as np
 from aerodaas.config import MavlinkConfig
 from aerodaas.missionfile import MissionItem
 from aerodaas.model.types import GeoPoint, Odometry
-from aerodaas.backends.base import BackendError, CredentialsRefused, PoseSample, VehicleBackend
+from aerodaas.backends.base import BackendError, CredentialsRefused, PoseSample, VehicleBackend, VehicleState
 from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.camera import CameraFinder
 from aerodaas.backends.mavlink.clock import VehicleClock
@@ -203,7 +203,7 @@ class MavlinkBackend(VehicleBackend):
         with self._lock:
             self.clock.start()
             self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
-        if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
+        if self.link.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
             got = self.parameters.read(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
                 self.offboard.loss_timeout_s = float(got)
@@ -238,19 +238,21 @@ class MavlinkBackend(VehicleBackend):
                 except Exception as e:  # noqa: BLE001 - closing must go on
                     self.events("safe_end_failed", error=str(e))
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
+            link_ok, armed = self.link.link_ok, self.link.armed
             if self.cfg.fence.restore_on_close and self.fence.has_saved:
-                if self.link_ok and not self.armed:
+                if link_ok and not armed:
                     self.fence.restore()
                 else:
-                    self.events("fence_not_restored", reason="link lost" if not self.link_ok else "still armed")
+                    self.events("fence_not_restored", reason="link lost" if not link_ok else "still armed")
+            link_ok, armed = self.link.link_ok, self.link.armed  # again: restoring the fence took time
             if self.cfg.restore_params and self.parameters.changed:
                 if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
                     self.events("params_not_restored", reason="speed limit write in progress",
                                 names=self.parameters.changed)
-                elif self.link_ok and not self.armed:
+                elif link_ok and not armed:
                     self.parameters.restore(self.events)
                 else:
-                    self.events("params_not_restored", reason="link lost" if not self.link_ok else "still armed",
+                    self.events("params_not_restored", reason="link lost" if not link_ok else "still armed",
                                 names=self.parameters.changed)
         self.link.close()
 
@@ -263,35 +265,19 @@ class MavlinkBackend(VehicleBackend):
         self.speed_limits.update()
         self.speed_limits.resend_speed(self.offboard)
 
-    @property
-    def t(self) -> float:
-        """Vehicle seconds since :meth:`connect` (:attr:`VehicleClock.t`)."""
-        return self.clock.t
-
-    @property
-    def clock_ratio(self) -> float:
-        """Vehicle seconds per wall second (:attr:`VehicleClock.ratio`; 1 for a real vehicle)."""
-        return self.clock.ratio
-
-    @property
-    def autopilot(self) -> Literal["ardupilot", "px4"] | None:
-        """``"ardupilot"`` / ``"px4"`` once connected (:attr:`MavlinkLink.autopilot`)."""
-        return self.link.autopilot
-
-    @property
-    def armed(self) -> bool:
-        """The armed flag of the autopilot's latest HEARTBEAT."""
-        return self.link.armed
-
-    @property
-    def link_ok(self) -> bool:
-        """HEARTBEATs keep coming (:attr:`MavlinkLink.link_ok`)."""
-        return self.link.link_ok
-
-    @property
-    def mode(self) -> str:
-        """The flight mode from the latest HEARTBEAT, in pymavlink's names (``GUIDED``, ``OFFBOARD``, ``LOITER``...)."""
-        return self.link.mode
+    def state(self) -> VehicleState:
+        """The vehicle now, read under the I/O thread's lock: position, velocity, attitude and battery as the autopilot
+        streams them (:class:`VehicleTelemetry`: ENU metres from HOME_POSITION, ENU m/s, degrees, percent; in-air
+        from EXTENDED_SYS_STATE's landed state, else armed and above 0.3 m; the GNSS receiver's horizontal accuracy
+        from GPS_RAW_INT ``h_acc``, 0 when it reports none), armed and flight mode (pymavlink's names: ``GUIDED``,
+        ``OFFBOARD``, ``LOITER``...) from the latest HEARTBEAT, link health (HEARTBEATs keep coming,
+        :attr:`MavlinkLink.link_ok`), at :attr:`VehicleClock.t`."""
+        tel, link = self.telemetry, self.link
+        with self._lock:
+            roll, pitch, yaw = tel.attitude
+            return VehicleState(t=self.clock.t, position=tel.position, velocity=tel.velocity, roll=roll, pitch=pitch,
+                                yaw=yaw, battery_pct=tel.battery_pct, armed=link.armed, in_air=tel.in_air,
+                                link_ok=link.link_ok, mode=link.mode, position_accuracy_m=tel.gps_h_acc_m)
 
     # events of every concern (events.py EventLog), and the state the autopilot streams (telemetry.py)
     def drain_events(self) -> list[dict[str, Any]]:
@@ -303,37 +289,6 @@ class MavlinkBackend(VehicleBackend):
                 with self._lock:
                     self.link.failsafe_delivered()
         return out
-
-    @property
-    def position(self) -> np.ndarray:
-        """:attr:`VehicleTelemetry.position`."""
-        return self.telemetry.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """:attr:`VehicleTelemetry.velocity`."""
-        return self.telemetry.velocity
-
-    @property
-    def yaw(self) -> float:
-        """:attr:`VehicleTelemetry.yaw`."""
-        return self.telemetry.yaw
-
-    @property
-    def in_air(self) -> bool:
-        """:attr:`VehicleTelemetry.in_air`."""
-        return self.telemetry.in_air
-
-    @property
-    def battery_pct(self) -> float:
-        """:attr:`VehicleTelemetry.battery_pct`."""
-        return self.telemetry.battery_pct
-
-    @property
-    def position_accuracy_m(self) -> float:
-        """The GNSS receiver's horizontal accuracy (:attr:`VehicleTelemetry.gps_h_acc_m`, GPS_RAW_INT ``h_acc``);
-        0 when the vehicle reports none."""
-        return self.telemetry.gps_h_acc_m
 
     @property
     def sample_key(self) -> int:

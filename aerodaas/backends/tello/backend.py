@@ -9,9 +9,7 @@ import numpy as np
 
 from aerodaas.config import TelloConfig
 from aerodaas.config.robot import sensor_class
-from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.model.types import Attitude, Odometry
-from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.base import VehicleBackend, VehicleState
 from aerodaas.backends.tello.control import TelloControl
 from aerodaas.backends.tello.link import TelloLink
 
@@ -66,61 +64,24 @@ class TelloBackend(VehicleBackend):
         self.control.cancel()
         self.link.close()
 
-    @property
-    def t(self) -> float:
-        """Wall seconds since :meth:`connect` (:attr:`TelloLink.t`)."""
-        return self.link.t
-
     def step(self, dt: float) -> None:
         """Non-blocking: turns link changes into ``link_lost``/``link_regained`` events (state arrives on a
         receiver thread)."""
-        ok = self.link_ok
+        ok = self.link.link_ok
         if ok != self._link_was_ok:
             self._link_was_ok = ok
             self.link.event("link_regained" if ok else "link_lost")
 
-    @property
-    def link_ok(self) -> bool:
-        """:attr:`TelloLink.link_ok`."""
-        return self.link.link_ok
-
-    @property
-    def position(self) -> np.ndarray:
-        """:attr:`TelloLink.position`."""
-        return self.link.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """:attr:`TelloLink.velocity`."""
-        return self.link.velocity
-
-    @property
-    def yaw(self) -> float:
-        """:attr:`TelloLink.yaw`."""
-        return self.link.yaw
-
-    @property
-    def armed(self) -> bool:
-        """Marked armed (:attr:`TelloControl.armed`) or in the air."""
-        return self.control.armed or self.in_air
-
-    @property
-    def in_air(self) -> bool:
-        """True while the Tello reports a height (``h`` >= 10 cm) above its take-off point."""
-        return self.link.height_cm >= 10.0
-
-    @property
-    def battery_pct(self) -> float:
-        """:attr:`TelloLink.battery_pct`."""
-        return self.link.battery_pct
-
-    def odometry(self) -> Odometry:
-        """The dead-reckoned pose (:meth:`TelloLink.pose`) with its geodetic fix from :attr:`home`."""
+    def state(self) -> VehicleState:
+        """The dead-reckoned pose, attitude and battery of one reading (:meth:`TelloLink.pose`) at :attr:`TelloLink.t`;
+        armed while marked armed (:attr:`TelloControl.armed`) or in the air; in the air while the Tello reports a
+        height (``h``) of at least 10 cm above its take-off point; the link is up while state packets come
+        (:attr:`TelloLink.link_ok`)."""
         pos, vel, roll, pitch, yaw, bat = self.link.pose()
-        geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
-        return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
-                        velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=roll, pitch=pitch, yaw=yaw),
-                        battery_pct=float(min(max(bat, 0.0), 100.0)), armed=self.armed, in_air=self.in_air)
+        in_air = self.link.height_cm >= 10.0
+        return VehicleState(t=self.link.t, position=pos, velocity=vel, roll=roll, pitch=pitch, yaw=yaw,
+                            battery_pct=float(bat), armed=self.control.armed or in_air, in_air=in_air,
+                            link_ok=self.link.link_ok)
 
     def drain_events(self) -> list[dict[str, Any]]:
         """:meth:`TelloLink.drain_events`."""
