@@ -160,7 +160,7 @@ class DroneComponent:
             self.autopilot_flight.start_mission()
             return
         if not b.needs_takeoff:  # a ground vehicle: armed, it is ready to drive (no take-off phase to bound)
-            b.arm()
+            b.actions.arm()
             self.progress.check_vehicle_home()
             self.fsm.transition(S.ARMED, b.t)
             self.fsm.transition(S.HOVERING, b.t)
@@ -168,10 +168,10 @@ class DroneComponent:
             return
         alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
         self.takeoff_altitude = alt
-        b.arm()
+        b.actions.arm()
         self.progress.check_vehicle_home()
         self.fsm.transition(S.ARMED, b.t)
-        b.takeoff(alt)
+        b.actions.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
         self._event("takeoff", altitude=alt)
 
@@ -439,7 +439,7 @@ class DroneComponent:
             return False
         self.fsm.transition(S.LANDED, t)
         try:
-            v.disarm()
+            v.actions.disarm()
         except BackendError as e:
             self._event("backend_error", error=str(e))
         self._event("landed")
@@ -456,7 +456,7 @@ class DroneComponent:
                 and not self.plan_log.cleared_preplanned)
 
     def _on_emergency(self, t: float, pos: tuple) -> bool:
-        self.backend.land()
+        self.backend.guidance.land()
         self.fsm.transition(S.LANDING, t)
         return False
 
@@ -472,10 +472,10 @@ class DroneComponent:
         path = self.flight.rtl_path
         if path and len(path) > 1 and math.hypot(pos[0] - path[0][0], pos[1] - path[0][1]) <= 0.5:
             path.pop(0)  # the next leg of the path around the exclusion zones
-            v.goto(path[0], self.gate.max_speed)
+            v.guidance.goto(path[0], self.gate.max_speed)
             self._event("rtl_leg", target=list(path[0]), legs_left=len(path))
         elif math.hypot(pos[0], pos[1]) <= 0.5:
-            v.land()
+            v.guidance.land()
             self.fsm.transition(S.LANDING, t)
             self._event("landing", reason="return to launch")
         return False
@@ -498,9 +498,9 @@ class DroneComponent:
         self.fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
         self._event("resumed")
         if self.autopilot_mission:
-            v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
+            v.mission.start()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
         elif back == S.TAKING_OFF:
-            v.takeoff(self.takeoff_altitude)
+            v.actions.takeoff(self.takeoff_altitude)
         self.flight.active_wp = None
         self.flight.hold_until = None
         return False
@@ -514,7 +514,7 @@ class DroneComponent:
         v = self.backend
         if abs(v.state().position[2] - self.takeoff_altitude) < 0.1:
             self.fsm.transition(S.HOVERING, t)
-            v.hold()
+            v.guidance.hold()
         return False
 
     def _on_airborne(self, t: float, pos: tuple) -> bool:
@@ -556,7 +556,7 @@ class DroneComponent:
         st = self.fsm.state
         if st != S.PAUSED and self.fsm.can(S.PAUSED):
             self.flight.paused_from = st
-            v.hold()
+            v.guidance.hold()
             self.fsm.transition(S.PAUSED, t)
             self._event("paused")
         return True

@@ -37,7 +37,7 @@ class RunEnd:
         change, ``safe_end``), state (LANDING, LANDED) and odometry are recorded until the disarm; :attr:`ended`
         says how the run ended for this robot."""
         b = self.backend
-        safe_end, now = getattr(b, "safe_end", None), b.state()
+        safe_end, now = getattr(b.guidance, "safe_end", None), b.state()
         if callable(safe_end) and b.navigable and now.armed and now.link_ok and (now.in_air or self.fsm.state != S.LANDED):
             result: dict[str, Any] = {}
 
@@ -95,7 +95,7 @@ class RunEnd:
         if now.in_air or not now.link_ok:
             return f"state {self.fsm.state.value}, armed"
         try:
-            b.disarm()
+            b.actions.disarm()
         except Exception as e:  # noqa: BLE001 - recorded; closing goes on
             self.event("disarm_failed", error=f"{type(e).__name__}: {e}")
             return "landed, still armed (disarm refused)"
@@ -136,7 +136,7 @@ class RunEnd:
         until the next position sample carries the end state. A backend without ``sample_key`` (the simulator)
         is settled at once."""
         b, o = self.backend, self.odometry.last
-        if b.sample_key is None or o is None:
+        if b.telemetry.sample_key is None or o is None:
             return True
         now = b.state()
         if o.get("in_air") == bool(now.in_air) and o.get("armed") == bool(now.armed):

@@ -165,6 +165,10 @@ class SimVehicle:
     def land(self) -> None:
         self.setpoint = Setpoint("land")
 
+    def return_to_launch(self) -> bool:
+        """False: the simulator has no return mode of its own (the drone flies home and lands)."""
+        return False
+
     # ------------------------------------------------------------------ sensing
     @property
     def battery_pct(self) -> float:

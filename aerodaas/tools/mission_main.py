@@ -159,13 +159,13 @@ def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
         items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
         for c in changes:
             print(f"{name}: {c}", flush=True)
-    sent = backend.upload_mission(items)
+    sent = backend.mission.upload(items)
     print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.link.autopilot} vehicle on "
           f"{args.connection}", flush=True)
     _check_read_back(backend, sent, name)
     if args.start:
-        backend.arm()
-        backend.start_mission()
+        backend.actions.arm()
+        backend.mission.start()
         print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
 
 
@@ -174,7 +174,7 @@ def _check_from_vehicle_home(args: argparse.Namespace, name: str, plan: Any, bac
     only when the vehicle reports none). Raises MissionFileError when neither has one."""
     bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
     if backend.telemetry.home_received:  # as documented: from the vehicle's own home, whatever the file planned
-        plan_to_flight(plan, backend.home, **bounds)
+        plan_to_flight(plan, backend.telemetry.home, **bounds)
     elif plan.home is None:  # the bounds are measured from a home, never from a default one
         raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
                                f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "

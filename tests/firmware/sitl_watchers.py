@@ -42,7 +42,7 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     try:
         while time.monotonic() < end:
             was_armed = was_armed or b.state().armed
-            g, v = b.odometry().geodetic, b.state().velocity
+            g, v = b.telemetry.odometry().geodetic, b.state().velocity
             e, n, _ = geodetic_to_enu(g.lat, g.lon, FARM_HOME["alt"], GeoPoint(**FARM_HOME))
             samples.append([b.t, float(e), float(n), float(b.state().position[2]), float(v[0]), float(v[1])])
             if was_armed and not b.state().armed and not b.state().in_air:

@@ -303,8 +303,8 @@ def _flying(tmp_path):
     try:
         b.connect()
         assert run_until(b, lambda: b.telemetry.home_received, 10)
-        b.arm()
-        b.takeoff(5.0)
+        b.actions.arm()
+        b.actions.takeoff(5.0)
         assert run_until(b, lambda: abs(b.state().position[2] - 5.0) < 0.3 and b.state().in_air, 30), b.state().position
         yield emu, b
     finally:

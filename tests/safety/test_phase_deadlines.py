@@ -14,6 +14,7 @@ import textwrap
 import pytest
 
 from aerodaas.backends.sim import SimBackend
+from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.config import ConfigError, RobotConfig, parse_environment_config
 from aerodaas.config.deadlines import PhaseDeadlinesConfig
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
@@ -61,34 +62,44 @@ def test_the_defaults_are_documented_values():
 
 
 # ---------------------------------------------------------------- the drone, stepped by hand on simulated time
-class NoClimbSim(SimBackend):
-    """A simulator whose motors lift nothing until ``lift`` is set: take-off is accepted, the vehicle stays on the
-    ground."""
+class NoClimbVehicle(SimVehicle):
+    """Motors that lift nothing until ``lift`` is set: take-off is accepted, the vehicle stays on the ground."""
 
-    kind = "no_climb_sim_test"
     lift = False
 
-    def takeoff(self, altitude_m: float) -> None:
-        super().takeoff(altitude_m if self.lift else 0.0)
+    def takeoff(self, altitude: float) -> None:
+        super().takeoff(altitude if self.lift else 0.0)
 
 
-class NoLandSim(SimBackend):
-    """A simulator that accepts LAND and keeps hovering (an autopilot whose landing never starts)."""
+class NoClimbSim(SimBackend):
+    kind = "no_climb_sim_test"
+    vehicle_class = NoClimbVehicle
 
-    kind = "no_land_sim_test"
+
+class NoLandVehicle(SimVehicle):
+    """Accepts LAND and keeps hovering (an autopilot whose landing never starts)."""
 
     def land(self) -> None:
         self.hold()
 
 
-class StuckSim(SimBackend):
-    """A simulator that holds wherever it is once ``stuck`` (a vehicle that cannot make way home: wind, a fence)."""
+class NoLandSim(SimBackend):
+    kind = "no_land_sim_test"
+    vehicle_class = NoLandVehicle
 
-    kind = "stuck_sim_test"
+
+class StuckVehicle(SimVehicle):
+    """Holds wherever it is once ``stuck`` (a vehicle that cannot make way home: wind, a fence)."""
+
     stuck = False
 
-    def goto(self, target_enu, speed=None) -> None:
-        self.hold() if self.stuck else super().goto(target_enu, speed)
+    def goto(self, target, speed=None) -> None:
+        self.hold() if self.stuck else super().goto(target, speed)
+
+
+class StuckSim(SimBackend):
+    kind = "stuck_sim_test"
+    vehicle_class = StuckVehicle
 
 
 class Recorded:
@@ -157,7 +168,7 @@ def test_a_take_off_stall_can_hold_for_the_operator_and_resume_climbs_again():
     assert d.fsm.state.value == "PAUSED" and d.outcome == "takeoff_stalled" and not d.done
     assert [e["event"] for e in rec.events][-2:] == ["takeoff_stalled", "paused"]
     assert rec.events[-2]["legs"] == [] and rec.events[-2]["deadline_s"] == 5.0  # the configured deadline
-    d.backend.lift = True  # the operator fixed the motors: resuming commands the take-off again
+    d.backend.vehicle.lift = True  # the operator fixed the motors: resuming commands the take-off again
     d.resume_mission()
     _fly(d, 200.0)
     assert [e["event"] for e in rec.events].count("takeoff_stalled") == 1 and "waypoint_done" in _kinds(rec)
@@ -186,8 +197,8 @@ def test_a_return_that_makes_no_way_home_is_stalled_and_lands_where_it_is():
     d, rec = _drone(StuckSim, items, deadlines={"margin_s": 2.0})
 
     def stick_after_a(drone):
-        if drone.visited and not drone.backend.stuck:
-            drone.backend.stuck = True
+        if drone.visited and not drone.backend.vehicle.stuck:
+            drone.backend.vehicle.stuck = True
             drone.queue_flight.return_to_launch(drone.backend.t, tuple(drone.backend.state().position))
 
     _fly(d, 300.0, on_step=stick_after_a)
@@ -210,6 +221,12 @@ APP = textwrap.dedent('''
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
     from aerodaas.backends.sim import SimBackend
     from aerodaas.plugins import register_backend
+    from aerodaas.sim.vehicle import SimVehicle
+
+
+    class WeakMotor(SimVehicle):
+        def takeoff(self, altitude):
+            super().takeoff(0.0)  # full throttle, no lift
 
 
     @register_backend
@@ -217,9 +234,15 @@ APP = textwrap.dedent('''
         """My test rig: the simulator with motors that cannot lift the airframe."""
 
         kind = "weak_motor_sim"
+        vehicle_class = WeakMotor
 
-        def takeoff(self, altitude_m):
-            super().takeoff(0.0)  # full throttle, no lift
+
+    class GroundVehicle(SimVehicle):
+        def goto(self, target, speed=None):
+            super().goto((target[0], target[1], 0.0), speed)
+
+        def land(self):
+            self.hold()  # a rover is always on the ground: stop
 
 
     @register_backend
@@ -228,12 +251,7 @@ APP = textwrap.dedent('''
 
         kind = "rover"
         needs_takeoff = False
-
-        def goto(self, target_enu, speed=None):
-            super().goto((target_enu[0], target_enu[1], 0.0), speed)
-
-        def land(self):
-            self.hold()  # a rover is always on the ground: stop
+        vehicle_class = GroundVehicle
 
 
     env = Environment("env.json")

@@ -3,9 +3,8 @@ receivers, the dead-reckoned state, the video) and its flight control (:class:`~
 given what it needs (see the package docstring)."""
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
 
-import numpy as np
 
 from aerodaas.config import TelloConfig
 from aerodaas.config.robot import sensor_class
@@ -50,14 +49,21 @@ class TelloBackend(VehicleBackend):
                          and s.properties.get("source") == "backend"]
         #: sockets, receivers, keep-alive, command channel, the dead-reckoned state and the video (link.py)
         self.link = TelloLink(self.robot_id, self.cfg, video_sensors)
-        #: the motion worker and the flight commands (control.py)
+        #: the motion worker and the flight commands (control.py): the command groups ``actions`` and ``guidance``
         self.control = TelloControl(self.robot_id, self.cfg, self.limits, self.link)
-        self._link_was_ok = True
+        self.actions = self.guidance = self.control
+        #: the camera (:meth:`TelloLink.frame`: the newest decoded frame, ``(720, 960, 3) uint8 BGR`` on a real
+        #: Tello, and its arrival time on :attr:`t`'s clock; None before the first, with ``video`` off, or after a
+        #: refused ``streamon``, a ``video_error`` event)
+        self.camera = self.link
+        self._link_was_ok: bool | None = None  # the link as last seen (None: not connected yet)
 
     # ------------------------------------------------------------------ lifecycle, time and state
     def connect(self, timeout_s: float = 30.0) -> None:
-        """:meth:`TelloLink.connect`."""
+        """:meth:`TelloLink.connect`, then watch the link from its state now (``link_lost`` / ``link_regained``
+        events from here on, :meth:`drain_events`). Raises what :meth:`TelloLink.connect` raises."""
         self.link.connect(timeout_s)
+        self._link_was_ok = self.link.link_ok
 
     def close(self) -> None:
         """Cancel a running manoeuvre, then :meth:`TelloLink.close` (idempotent, never raises; does not land)."""
@@ -65,12 +71,8 @@ class TelloBackend(VehicleBackend):
         self.link.close()
 
     def step(self, dt: float) -> None:
-        """Non-blocking: turns link changes into ``link_lost``/``link_regained`` events (state arrives on a
-        receiver thread)."""
-        ok = self.link.link_ok
-        if ok != self._link_was_ok:
-            self._link_was_ok = ok
-            self.link.event("link_regained" if ok else "link_lost")
+        """Nothing: state, replies and video arrive on receiver threads (link changes are reported by
+        :meth:`drain_events`)."""
 
     def state(self) -> VehicleState:
         """The dead-reckoned pose, attitude and battery of one reading (:meth:`TelloLink.pose`) at :attr:`TelloLink.t`;
@@ -81,43 +83,13 @@ class TelloBackend(VehicleBackend):
         in_air = self.link.height_cm >= 10.0
         return VehicleState(t=self.link.t, position=pos, velocity=vel, roll=roll, pitch=pitch, yaw=yaw,
                             battery_pct=float(bat), armed=self.control.armed or in_air, in_air=in_air,
-                            link_ok=self.link.link_ok)
+                            link_ok=self.link.link_ok, home=self.home)
 
     def drain_events(self) -> list[dict[str, Any]]:
-        """:meth:`TelloLink.drain_events`."""
+        """The link's events (:meth:`TelloLink.drain_events`), after a ``link_lost`` / ``link_regained`` when the
+        link changed since the last look (once connected)."""
+        ok = self.link.link_ok
+        if self._link_was_ok is not None and ok != self._link_was_ok:
+            self._link_was_ok = ok
+            self.link.event("link_regained" if ok else "link_lost")
         return self.link.drain_events()
-
-    def camera_frame(self) -> tuple[np.ndarray, float] | None:
-        """The newest decoded video frame, ``(720, 960, 3) uint8 BGR`` on a real Tello, and its arrival time
-        on :attr:`t`'s clock; None before the first frame, with ``video`` off, or after a refused ``streamon``
-        (a ``video_error`` event)."""
-        return self.link.frame()
-
-    # ------------------------------------------------------------------ the contract's flight commands (control.py)
-    def arm(self) -> None:
-        """:meth:`TelloControl.arm`."""
-        self.control.arm()
-
-    def disarm(self) -> None:
-        """:meth:`TelloControl.disarm`."""
-        self.control.disarm()
-
-    def takeoff(self, altitude_m: float) -> None:
-        """:meth:`TelloControl.takeoff`."""
-        self.control.takeoff(altitude_m)
-
-    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        """:meth:`TelloControl.goto`."""
-        self.control.goto(target_enu, speed)
-
-    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        """:meth:`TelloControl.set_velocity`."""
-        self.control.set_velocity(v_enu, yaw_rate_dps)
-
-    def hold(self) -> None:
-        """:meth:`TelloControl.hold`."""
-        self.control.hold()
-
-    def land(self) -> None:
-        """:meth:`TelloControl.land`."""
-        self.control.land()

@@ -125,6 +125,8 @@ class RoverBackend(VehicleBackend):
         self.opts: RoverConfig = self.options(cfg)
         self._s = RoverState(psi=math.radians(self.opts.start_yaw_deg), battery_pct=self.opts.start_battery_pct)
         self._events: list[dict[str, Any]] = []
+        #: the command groups the drone calls: the rover carries its commands itself (the methods under "control")
+        self.actions = self.guidance = self
 
     # ------------------------------------------------------------------ pre-flight checks (before Ray starts)
     @classmethod
@@ -195,18 +197,19 @@ class RoverBackend(VehicleBackend):
     def state(self) -> VehicleState:
         """The rover now (exact: no noise): ENU metres from home on the ground (z always 0), its ground velocity
         along the heading (ENU m/s, z 0), the heading as yaw (degrees CCW from east in [0, 360)), battery percent,
-        armed; never in the air; the link (there is none) always up. The base class's ``odometry()`` adds the
-        geodetic position from this."""
+        armed; never in the air; the link (there is none) always up. The base class's ``telemetry`` records it as
+        odometry, with the geodetic position from ``home``."""
         s = self._s
         return VehicleState(t=s.t, position=(s.x, s.y, 0.0),
                             velocity=(s.v * math.cos(s.psi), s.v * math.sin(s.psi), 0.0),
-                            yaw=math.degrees(s.psi) % 360.0, battery_pct=s.battery_pct, armed=s.armed, in_air=False)
+                            yaw=math.degrees(s.psi) % 360.0, battery_pct=s.battery_pct, armed=s.armed, in_air=False,
+                            home=self.home)
 
     def drain_events(self) -> list[dict[str, Any]]:
         out, self._events = self._events, []
         return out
 
-    # ------------------------------------------------------------------ control
+    # ------------------------------------------------------------------ control (``actions`` and ``guidance``)
     def arm(self) -> None:
         """Arm (standing still). Raises CommandRefused when the battery is empty."""
         if self._s.battery_pct <= 0.0:
@@ -245,6 +248,10 @@ class RoverBackend(VehicleBackend):
     def land(self) -> None:
         """Stop: a rover is always on the ground, so a landing is a hold. Never raises."""
         self.hold()
+
+    def return_to_launch(self) -> bool:
+        """False: no return mode of its own (the drone drives it home with ``goto`` and stops it with ``land``)."""
+        return False
 
     def _require_armed(self, command: str) -> None:
         if not self._s.armed:
