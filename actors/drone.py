@@ -31,8 +31,7 @@ import threading
 import traceback
 from typing import Any
 
-from aerodaas.backends import BackendError, make_backend
-from aerodaas.backends.base import VehicleState
+from aerodaas.backends import BackendError, VehicleState, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S, handler_table
 from aerodaas.protocol.messages import StatMsg
@@ -277,12 +276,10 @@ class DroneComponent:
         return self._end_req
 
     def status(self) -> dict:
-        b = self.backend
-        now = b.state()
+        b, now = self.backend, self.backend.state()
         cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
         return {"robot": self.cfg.id, "t": now.t, "state": self.fsm.state.value,
-                "position": [float(v) for v in now.position],
-                "battery_pct": None if now.battery_pct is None else float(now.battery_pct),
+                "position": [float(v) for v in now.position], "battery_pct": None if now.battery_pct is None else float(now.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
                 "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
@@ -392,8 +389,7 @@ class DroneComponent:
         an autopilot failsafe; a short link drop to recover from), then the handler of the current mission state
         (:attr:`_handlers`, one per state of the state machine's table). Returns True when the mission is over.
         Caller holds ``self.lock``."""
-        v, st = self.backend, self.fsm.state
-        now = v.state()
+        v, st, now = self.backend, self.fsm.state, self.backend.state()
         t = now.t
         if not v.navigable:
             return self._observe(t, st, now)
@@ -567,8 +563,7 @@ class DroneComponent:
         return any(s in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) for _, s in self.fsm.history)
 
     def _observe(self, t: float, st: S, v: VehicleState) -> bool:
-        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state ``v`` (read at ``t``); ends
-        with the log."""
+        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state ``v``; ends with the log."""
         fsm = self.fsm
         finished = bool(getattr(self.backend, "finished", False))
         speed = math.hypot(float(v.velocity[0]), float(v.velocity[1]))

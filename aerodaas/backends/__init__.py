@@ -3,11 +3,11 @@ recorded flights. :func:`make_backend` builds the one a robot's ``backend`` name
 from __future__ import annotations
 
 from aerodaas.backends.base import (Actions, BackendError, CommandRefused, Guidance, LinkLost, NotNavigable,
-                                   VehicleBackend)
+                                   VehicleBackend, VehicleState)
 from aerodaas.plugins import registry
 
-__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
-           "backend_class", "is_navigable", "backend_clock"]
+__all__ = ["VehicleBackend", "VehicleState", "BackendError", "CommandRefused", "LinkLost", "NotNavigable",
+           "make_backend", "backend_class", "is_navigable", "backend_clock"]
 
 
 def backend_class(name: str) -> type[VehicleBackend]:
@@ -40,5 +40,5 @@ def make_backend(cfg) -> VehicleBackend:
             missing = [m for m in group.__dict__ if not m.startswith("_") and callable(getattr(group, m))
                        and not callable(getattr(getattr(backend, name, None), m, None))]
             raise TypeError(f"backend {cfg.backend!r} ({type(backend).__name__}): its __init__ must set "
-                            f"self.{name} to an object with {', '.join(missing)}() (VehicleBackend {name})")
+                            f"self.{name} to an object with {', '.join(m + '()' for m in missing)} (VehicleBackend {name})")
     return backend

@@ -225,3 +225,39 @@ def test_the_backend_contract_documents_every_member_and_which_are_required():
                 required[name] = req.strip().startswith("**yes**")
     assert {n for n, r in required.items() if r} == set(VehicleBackend.__abstractmethods__), required
     assert all(not r for n, r in required.items() if n not in VehicleBackend.__abstractmethods__)
+
+
+def test_a_backend_without_its_command_groups_is_refused_naming_what_is_missing(monkeypatch):
+    """make_backend refuses a backend whose __init__ set no ``actions`` / ``guidance`` (or one short of a command):
+    a TypeError naming the backend and the missing commands, not an AttributeError in the drone's first tick."""
+    from aerodaas.backends import make_backend
+    from aerodaas.plugins import registry
+
+    rover = _load()
+
+    class HalfRover(rover.RoverBackend):
+        kind = "half_rover_test"
+
+        def __init__(self, cfg):
+            super().__init__(cfg)
+            self.guidance = types.SimpleNamespace(goto=self.goto, hold=self.hold)  # no set_velocity, land, rtl
+
+    class NoGroups(rover.RoverBackend):
+        kind = "no_groups_rover_test"
+
+        def __init__(self, cfg):
+            super().__init__(cfg)
+            del self.actions
+
+    for cls in (HalfRover, NoGroups):
+        monkeypatch.setattr(registry, "get", lambda kind, name, cls=cls: cls)
+        cfg = types.SimpleNamespace(id="r", home=GeoPoint(lat=0.0, lon=0.0, alt=0.0), backend=cls.kind,
+                                    backend_config={}, safety=None)
+        with pytest.raises(TypeError) as e:
+            make_backend(cfg)
+        group, missing = ("guidance", "set_velocity(), land(), return_to_launch()") if cls is HalfRover else \
+            ("actions", "arm(), disarm(), takeoff()")
+        assert f"backend {cls.kind!r}" in str(e.value) and f"self.{group}" in str(e.value), e.value
+        assert missing in str(e.value), e.value
+    monkeypatch.undo()
+    assert isinstance(make_backend(RobotConfig(id="d1")), VehicleBackend)  # the built-ins pass

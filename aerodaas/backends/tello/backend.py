@@ -57,11 +57,12 @@ class TelloBackend(VehicleBackend):
         #: refused ``streamon``, a ``video_error`` event)
         self.camera = self.link
         self._link_was_ok: bool | None = None  # the link as last seen (None: not connected yet)
+        self._events: list[dict[str, Any]] = []  # link changes not yet drained
 
     # ------------------------------------------------------------------ lifecycle, time and state
     def connect(self, timeout_s: float = 30.0) -> None:
         """:meth:`TelloLink.connect`, then watch the link from its state now (``link_lost`` / ``link_regained``
-        events from here on, :meth:`drain_events`). Raises what :meth:`TelloLink.connect` raises."""
+        events from here on, :meth:`step`). Raises what :meth:`TelloLink.connect` raises."""
         self.link.connect(timeout_s)
         self._link_was_ok = self.link.link_ok
 
@@ -71,8 +72,12 @@ class TelloBackend(VehicleBackend):
         self.link.close()
 
     def step(self, dt: float) -> None:
-        """Nothing: state, replies and video arrive on receiver threads (link changes are reported by
-        :meth:`drain_events`)."""
+        """Non-blocking: turns link changes into ``link_lost``/``link_regained`` events (state arrives on a
+        receiver thread)."""
+        ok = self.link.link_ok
+        if self._link_was_ok is not None and ok != self._link_was_ok:
+            self._link_was_ok = ok
+            self._events.append({"event": "link_regained" if ok else "link_lost", "t": self.link.t})
 
     def state(self) -> VehicleState:
         """The dead-reckoned pose, attitude and battery of one reading (:meth:`TelloLink.pose`) at :attr:`TelloLink.t`;
@@ -86,10 +91,7 @@ class TelloBackend(VehicleBackend):
                             link_ok=self.link.link_ok, home=self.home)
 
     def drain_events(self) -> list[dict[str, Any]]:
-        """The link's events (:meth:`TelloLink.drain_events`), after a ``link_lost`` / ``link_regained`` when the
-        link changed since the last look (once connected)."""
-        ok = self.link.link_ok
-        if self._link_was_ok is not None and ok != self._link_was_ok:
-            self._link_was_ok = ok
-            self.link.event("link_regained" if ok else "link_lost")
-        return self.link.drain_events()
+        """The link's events (:meth:`TelloLink.drain_events`: command failures, video errors...) and the link
+        changes :meth:`step` saw, in time order (``t``), oldest first."""
+        own, self._events = self._events, []
+        return sorted(self.link.drain_events() + own, key=lambda e: e["t"])
