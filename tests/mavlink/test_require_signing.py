@@ -48,8 +48,8 @@ def test_require_signing_refuses_to_move_a_vehicle_over_an_unsigned_link(fly):
     armed and saw no command of ours that moves it. Landing and holding are not refused (stopping never is)."""
     emu, b = fly("ardupilot", mavlink={"require_signing": True, "set_speed_limits": False})
     assert run_until(b, lambda: position_ready(b), 20)
-    for call in (b.arm, lambda: b.actions.takeoff(5.0), lambda: b.guidance.goto([0, 5, 5]), lambda: b.guidance.set_velocity([1, 0, 0]),
-                 b.start_mission):
+    for call in (b.actions.arm, lambda: b.actions.takeoff(5.0), lambda: b.guidance.goto([0, 5, 5]),
+                 lambda: b.guidance.set_velocity([1, 0, 0]), b.mission.start):
         with pytest.raises(CredentialsRefused) as e:
             call()
         assert "robot 'quad'" in str(e.value) and "mavlink.require_signing is true" in str(e.value), e.value
