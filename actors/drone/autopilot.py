@@ -44,7 +44,7 @@ class AutopilotFlight:
         b = c.backend
         items = c.queue.queued()
         nav = AeroNavigation(NavigationType.DISTANCE_DRIVEN, items, SchedulingType.ORDERED, name="autopilot mission")
-        sent = b.upload_mission(nav, takeoff_altitude=c.gate.check_takeoff(c.cfg.takeoff_altitude),
+        sent = b.mission.upload(nav, takeoff_altitude=c.gate.check_takeoff(c.cfg.takeoff_altitude),
                                 final_action="land")
         wps = iter([w for w in items if isinstance(w, Waypoint)])
         for it in sent:
@@ -52,10 +52,10 @@ class AutopilotFlight:
             self._items[it.seq] = (kind, next(wps) if kind == "waypoint" else None)
         c.event("autopilot_mission_uploaded", items=len(sent),
                 waypoints=[w.id for _, w in self._items.values() if w is not None])
-        b.arm()
+        b.actions.arm()
         c.progress.check_vehicle_home()
         c.fsm.transition(S.ARMED, b.t)
-        b.start_mission()
+        b.mission.start()
         c.fsm.transition(S.TAKING_OFF, b.t)
         c.event("takeoff", altitude=c.cfg.takeoff_altitude, by="autopilot mission")
 
@@ -172,7 +172,7 @@ class AutopilotFlight:
             if st == S.WAYPOINT_HOLD:
                 fsm.transition(S.NAVIGATING, t)
             return False
-        getattr(v, "release", lambda: None)()
+        getattr(v.guidance, "release", lambda: None)()
         if action == "hold":
             if st != S.PAUSED and fsm.can(S.PAUSED):
                 f.paused_from = {S.LINK_LOST: f.link_lost_from}.get(st, st)
@@ -186,7 +186,7 @@ class AutopilotFlight:
             c.event("returning", by="autopilot failsafe", mode=mode)
         else:
             if mode not in ("LAND",):
-                v.land()  # BRAKE (a fence action) holds in the air: end the flight here
+                v.guidance.land()  # BRAKE (a fence action) holds in the air: end the flight here
             fsm.transition(S.LANDING, t)
             c.event("landing", reason=f"autopilot failsafe {mode}")
         return False
@@ -197,7 +197,7 @@ class AutopilotFlight:
         c, f = self.ctx, self.flight
         v, prev = c.backend, f.link_lost_from or S.HOVERING
         c.event("link_regained", resuming=prev.value)
-        if not v.in_air:
+        if not v.state().in_air:
             c.fsm.transition(S.LANDED, t)
             c.event("landed", reason="landed while the link was lost")
             if f.outcome is None:
@@ -222,13 +222,13 @@ class AutopilotFlight:
 
         alt = min(max(pos[2], c.cfg.takeoff_altitude), c.gate.max_alt)
         try:
-            vel = tuple(float(x) for x in c.backend.velocity)
+            vel = tuple(float(x) for x in c.backend.state().velocity)
         except Exception:  # noqa: BLE001 - a backend without a velocity estimate: planned from rest
             vel = (0.0, 0.0, 0.0)
         path, why = plan_return(c.gate, pos, vel, alt)
         if path is None:  # no safe path home: land in place (a failsafe never crosses an exclusion zone)
             f.rtl_path = None
-            c.backend.land()
+            c.backend.guidance.land()
             c.fsm.transition(S.LANDING, t)
             away = math.hypot(pos[0], pos[1])
             # landing away from home is not the return asked for: never a success (it was, 43 m from home)
@@ -239,10 +239,10 @@ class AutopilotFlight:
             return
         # the autopilot's own RTL flies straight home: only when the straight leg is the planned path
         straight = len(path) == 2
-        f.backend_rtl = bool(straight and c.backend.return_to_launch())
+        f.backend_rtl = bool(straight and c.backend.guidance.return_to_launch())
         f.rtl_path = [(x, y, alt) for x, y in path[1:]]
         if not f.backend_rtl:
-            c.backend.goto(f.rtl_path[0], c.gate.max_speed)
+            c.backend.guidance.goto(f.rtl_path[0], c.gate.max_speed)
         c.fsm.transition(S.RETURNING, t)
         c.event("returning", home=[0.0, 0.0], by="autopilot" if f.backend_rtl else "aerodaas",
                 path=[list(p) for p in f.rtl_path])

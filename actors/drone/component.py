@@ -31,7 +31,7 @@ import threading
 import traceback
 from typing import Any
 
-from aerodaas.backends import BackendError, make_backend
+from aerodaas.backends import BackendError, VehicleState, make_backend
 from aerodaas.config import RobotConfig
 from aerodaas.navigation.fsm import MissionFSM, MissionState as S, handler_table
 from aerodaas.protocol.messages import StatMsg
@@ -160,7 +160,7 @@ class DroneComponent:
             self.autopilot_flight.start_mission()
             return
         if not b.needs_takeoff:  # a ground vehicle: armed, it is ready to drive (no take-off phase to bound)
-            b.arm()
+            b.actions.arm()
             self.progress.check_vehicle_home()
             self.fsm.transition(S.ARMED, b.t)
             self.fsm.transition(S.HOVERING, b.t)
@@ -168,10 +168,10 @@ class DroneComponent:
             return
         alt = self.gate.check_takeoff(self.cfg.takeoff_altitude)  # the take-off target passes the gate too
         self.takeoff_altitude = alt
-        b.arm()
+        b.actions.arm()
         self.progress.check_vehicle_home()
         self.fsm.transition(S.ARMED, b.t)
-        b.takeoff(alt)
+        b.actions.takeoff(alt)
         self.fsm.transition(S.TAKING_OFF, b.t)
         self._event("takeoff", altitude=alt)
 
@@ -277,17 +277,17 @@ class DroneComponent:
         return self._end_req
 
     def status(self) -> dict:
-        b = self.backend
+        b, now = self.backend, self.backend.state()
         cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
-        return {"robot": self.cfg.id, "t": b.t, "state": self.fsm.state.value,
-                "position": [float(v) for v in b.position], "battery_pct": None if b.battery_pct is None else float(b.battery_pct),
+        return {"robot": self.cfg.id, "t": now.t, "state": self.fsm.state.value,
+                "position": [float(v) for v in now.position], "battery_pct": None if now.battery_pct is None else float(now.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
                 "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
                 "frames": sum(c["comp"].ticks for c in self.cameras), "frames_dropped_at_camera": cam_drop,
                 "frames_shed_late": sum(c["comp"].shed_late for c in self.cameras),
                 "frames_not_made": sum(c["comp"].frames_not_made for c in self.cameras),
                 "outcome": self.outcome, "missed_ticks": self.missed_ticks, "ticks": self.ticks,
-                "link_ok": bool(b.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
+                "link_ok": bool(now.link_ok), "backend": self.cfg.backend, "navigable": b.navigable}
 
     def report(self) -> dict:
         f = self.flight
@@ -390,11 +390,11 @@ class DroneComponent:
         an autopilot failsafe; a short link drop to recover from), then the handler of the current mission state
         (:attr:`_handlers`, one per state of the state machine's table). Returns True when the mission is over.
         Caller holds ``self.lock``."""
-        v, st = self.backend, self.fsm.state
-        t = v.t
+        v, st, now = self.backend, self.fsm.state, self.backend.state()
+        t = now.t
         if not v.navigable:
-            return self._observe(t, st)
-        if not v.link_ok:
+            return self._observe(t, st, now)
+        if not now.link_ok:
             if st not in (S.LINK_LOST, S.LANDED):
                 self.flight.link_lost_from = st
                 self.fsm.transition(S.LINK_LOST, t)
@@ -405,7 +405,7 @@ class DroneComponent:
             return self.autopilot_flight.on_failsafe(t, st, fs)
         if self.flight.reissue and st != S.LINK_LOST:
             self._on_link_blip(t, st)
-        pos = tuple(float(c) for c in v.position)
+        pos = tuple(float(c) for c in now.position)
         stalled = self.deadlines.check(t, self.fsm.state, pos)  # take-off, landing, return: each has a deadline
         if stalled is not None:
             return stalled
@@ -432,11 +432,11 @@ class DroneComponent:
     def _on_landing(self, t: float, pos: tuple) -> bool:
         """On the ground: LANDED, disarm, and the outcome (success only if everything planned was flown)."""
         v = self.backend
-        if v.in_air:
+        if v.state().in_air:
             return False
         self.fsm.transition(S.LANDED, t)
         try:
-            v.disarm()
+            v.actions.disarm()
         except BackendError as e:
             self._event("backend_error", error=str(e))
         self._event("landed")
@@ -453,7 +453,7 @@ class DroneComponent:
                 and not self.plan_log.cleared_preplanned)
 
     def _on_emergency(self, t: float, pos: tuple) -> bool:
-        self.backend.land()
+        self.backend.guidance.land()
         self.fsm.transition(S.LANDING, t)
         return False
 
@@ -463,16 +463,16 @@ class DroneComponent:
             return False
         v = self.backend
         if self.flight.backend_rtl:
-            if not v.in_air:
+            if not v.state().in_air:
                 self.fsm.transition(S.LANDING, t)
             return False
         path = self.flight.rtl_path
         if path and len(path) > 1 and math.hypot(pos[0] - path[0][0], pos[1] - path[0][1]) <= 0.5:
             path.pop(0)  # the next leg of the path around the exclusion zones
-            v.goto(path[0], self.gate.max_speed)
+            v.guidance.goto(path[0], self.gate.max_speed)
             self._event("rtl_leg", target=list(path[0]), legs_left=len(path))
         elif math.hypot(pos[0], pos[1]) <= 0.5:
-            v.land()
+            v.guidance.land()
             self.fsm.transition(S.LANDING, t)
             self._event("landing", reason="return to launch")
         return False
@@ -481,8 +481,8 @@ class DroneComponent:
         """Hover until resumeMission(), then go back to what was paused; a landing meanwhile ends the flight."""
         if self._failsafe_or_pause(t, pos):
             return False
-        v = self.backend
-        if not v.in_air and not v.armed and self.flew_something_or_took_off():
+        v, now = self.backend, self.backend.state()
+        if not now.in_air and not now.armed and self.flew_something_or_took_off():
             # landed while paused (the autopilot's failsafe RTL/LAND under on_failsafe: hold): the flight is over
             self.fsm.transition(S.LANDING, t)
             self.flight.outcome = self.flight.outcome or ("failsafe" if self.flight.failsafe else "incomplete")
@@ -495,9 +495,9 @@ class DroneComponent:
         self.fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
         self._event("resumed")
         if self.autopilot_mission:
-            v.start_mission()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
+            v.mission.start()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
         elif back == S.TAKING_OFF:
-            v.takeoff(self.takeoff_altitude)
+            v.actions.takeoff(self.takeoff_altitude)
         self.flight.active_wp = None
         self.flight.hold_until = None
         return False
@@ -509,9 +509,9 @@ class DroneComponent:
         if self.autopilot_mission:
             return self.autopilot_flight.follow_mission(t, pos)
         v = self.backend
-        if abs(v.position[2] - self.takeoff_altitude) < 0.1:
+        if abs(v.state().position[2] - self.takeoff_altitude) < 0.1:
             self.fsm.transition(S.HOVERING, t)
-            v.hold()
+            v.guidance.hold()
         return False
 
     def _on_airborne(self, t: float, pos: tuple) -> bool:
@@ -527,10 +527,10 @@ class DroneComponent:
     # ------------------------------------------------------------------ failsafes and pause
     def _battery_critical(self, t: float) -> bool:
         """Below ``safety.critical_battery_pct`` in the air: EMERGENCY (outcome failed). True when it acted."""
-        v = self.backend
-        if not (v.battery_pct < self.cfg.safety.critical_battery_pct and v.in_air):
+        now = self.backend.state()
+        if not (now.battery_pct < self.cfg.safety.critical_battery_pct and now.in_air):
             return False
-        self._event("battery_critical", battery_pct=v.battery_pct)
+        self._event("battery_critical", battery_pct=now.battery_pct)
         self.flight.outcome = "failed"
         self.fsm.transition(S.EMERGENCY, t)
         return True
@@ -541,8 +541,9 @@ class DroneComponent:
         v, safety = self.backend, self.cfg.safety
         if self._battery_critical(t):
             return True
-        if v.battery_pct < safety.low_battery_rtl_pct and v.in_air:
-            self._event("failsafe_rtl", battery_pct=v.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
+        now = v.state()
+        if now.battery_pct < safety.low_battery_rtl_pct and now.in_air:
+            self._event("failsafe_rtl", battery_pct=now.battery_pct, threshold_pct=safety.low_battery_rtl_pct)
             self.flight.outcome = "failsafe_rtl"
             self.autopilot_flight.return_to_launch(t, pos)
             return True
@@ -552,7 +553,7 @@ class DroneComponent:
         st = self.fsm.state
         if st != S.PAUSED and self.fsm.can(S.PAUSED):
             self.flight.paused_from = st
-            v.hold()
+            v.guidance.hold()
             self.fsm.transition(S.PAUSED, t)
             self._event("paused")
         return True
@@ -562,10 +563,10 @@ class DroneComponent:
         """The vehicle has been in the air in this run (a landed, disarmed vehicle then means the flight ended)."""
         return any(s in (S.TAKING_OFF, S.HOVERING, S.NAVIGATING) for _, s in self.fsm.history)
 
-    def _observe(self, t: float, st: S) -> bool:
-        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state; ends with the log."""
-        v, fsm = self.backend, self.fsm
-        finished = bool(getattr(v, "finished", False))
+    def _observe(self, t: float, st: S, v: VehicleState) -> bool:
+        """Not navigable (a replayed log): the stat-stream follows the vehicle's own state ``v``; ends with the log."""
+        fsm = self.fsm
+        finished = bool(getattr(self.backend, "finished", False))
         speed = math.hypot(float(v.velocity[0]), float(v.velocity[1]))
         if st in (S.IDLE, S.LANDED) and v.armed:  # armed again for another flight
             if st == S.LANDED:

@@ -97,17 +97,17 @@ class PhaseDeadlines:
             return True
         if action == "hold":
             f.paused_from = timer.state
-            v.hold()
+            v.guidance.hold()
             fsm.transition(S.PAUSED, t)
             ctx.event("paused", reason=f"{timer.name} stalled")
             return False
         if timer.state == S.LANDING:  # the landing commanded once more, with a new deadline
-            v.land()
+            v.guidance.land()
             self.timer = self._start(t, S.LANDING, pos, again=True)
             ctx.event("landing", reason="landing stalled: commanded again")
             return False
         f.active_wp, f.rtl_path = None, None
-        v.land()
+        v.guidance.land()
         fsm.transition(S.LANDING, t)
         ctx.event("landing", reason=f"{timer.name} stalled: landing where it is")
         return False

@@ -37,8 +37,8 @@ class RunEnd:
         change, ``safe_end``), state (LANDING, LANDED) and odometry are recorded until the disarm; :attr:`ended`
         says how the run ended for this robot."""
         b = self.backend
-        safe_end = getattr(b, "safe_end", None)
-        if callable(safe_end) and b.navigable and b.armed and b.link_ok and (b.in_air or self.fsm.state != S.LANDED):
+        safe_end, now = getattr(b.guidance, "safe_end", None), b.state()
+        if callable(safe_end) and b.navigable and now.armed and now.link_ok and (now.in_air or self.fsm.state != S.LANDED):
             result: dict[str, Any] = {}
 
             def run() -> None:
@@ -47,7 +47,7 @@ class RunEnd:
                 except Exception as e:  # noqa: BLE001 - recorded; closing goes on
                     result["error"] = f"{type(e).__name__}: {e}"
 
-            self.event("safe_end_started", state=self.fsm.state.value, mode=getattr(b, "mode", None),
+            self.event("safe_end_started", state=self.fsm.state.value, mode=now.mode or None,
                         on_close=getattr(getattr(b, "cfg", None), "on_close", None))
             th = threading.Thread(target=run, name=f"safe-end-{self.robot_id}", daemon=True)
             th.start()
@@ -56,24 +56,25 @@ class RunEnd:
                 self._record_safe_end()
             self._record_safe_end()
             self._await_end_sample()
-            how = result.get("how") or "failed: " + result.get("error", "?")
+            how, now = result.get("how") or "failed: " + result.get("error", "?"), b.state()
             if how == "nothing":  # not ours to end (armed by someone else), or already down
-                how = "landed" if not b.armed else "left armed (not commanded by us)"
+                how = "landed" if not now.armed else "left armed (not commanded by us)"
             self.ended = {"landed": "safe end: landed and disarmed", "disarmed": "safe end: disarmed on the ground",
                           "timeout": "safe end: TIMEOUT, vehicle still armed",
                           "link lost": "safe end: link lost, vehicle left to its autopilot's failsafe"}.get(
                 how, f"safe end {how}")
-            self.event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
-        elif self.ended is None and b.navigable and b.armed and b.link_ok and self.fsm.state == S.LANDED:
+            self.event("run_end", how=self.ended, armed=bool(now.armed), in_air=bool(now.in_air))
+        elif self.ended is None and b.navigable and now.armed and now.link_ok and self.fsm.state == S.LANDED:
             self.ended = self._await_disarm()
             self._await_end_sample()
-            self.event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+            now = b.state()
+            self.event("run_end", how=self.ended, armed=bool(now.armed), in_air=bool(now.in_air))
         elif self.ended is None:
             st = self.fsm.state
-            self.ended = ("landed and disarmed" if st == S.LANDED and not b.armed else
-                          f"state {st.value}, {'armed' if b.armed else 'disarmed'}" if b.navigable else
+            self.ended = ("landed and disarmed" if st == S.LANDED and not now.armed else
+                          f"state {st.value}, {'armed' if now.armed else 'disarmed'}" if b.navigable else
                           f"observed to the end ({st.value})")
-            self.event("run_end", how=self.ended, armed=bool(b.armed), in_air=bool(b.in_air))
+            self.event("run_end", how=self.ended, armed=bool(now.armed), in_air=bool(now.in_air))
         b.close()
 
     def _await_disarm(self) -> str:
@@ -83,16 +84,18 @@ class RunEnd:
         :data:`DISARM_WAIT_S` vehicle seconds (and :data:`DISARM_WAIT_WALL_S` wall seconds) while recording state and
         odometry, then disarm it ourselves (on the ground; ``disarmed_by_us`` event). Returns how the run ended."""
         b = self.backend
-        t_end, wall_end = b.t + DISARM_WAIT_S, time.monotonic() + DISARM_WAIT_WALL_S
-        while b.armed and b.link_ok and not b.in_air and b.t < t_end and time.monotonic() < wall_end:
+        now = b.state()
+        t_end, wall_end = now.t + DISARM_WAIT_S, time.monotonic() + DISARM_WAIT_WALL_S
+        while now.armed and now.link_ok and not now.in_air and now.t < t_end and time.monotonic() < wall_end:
             time.sleep(0.05)
             self._record_safe_end()
-        if not b.armed:
+            now = b.state()
+        if not now.armed:
             return "landed and disarmed"
-        if b.in_air or not b.link_ok:
+        if now.in_air or not now.link_ok:
             return f"state {self.fsm.state.value}, armed"
         try:
-            b.disarm()
+            b.actions.disarm()
         except Exception as e:  # noqa: BLE001 - recorded; closing goes on
             self.event("disarm_failed", error=f"{type(e).__name__}: {e}")
             return "landed, still armed (disarm refused)"
@@ -106,7 +109,7 @@ class RunEnd:
         Each sample is recorded with the state the vehicle had when it was taken, so the one before the disarm
         still says armed."""
         self._settle_until = None  # a wait of its own (settled() may have run out while the drone was landing)
-        while self.backend.link_ok and not self.settled():
+        while self.backend.state().link_ok and not self.settled():
             time.sleep(0.02)
             self._record_safe_end()
 
@@ -116,12 +119,12 @@ class RunEnd:
         b = self.backend
         for ev in b.drain_events():
             self.event(ev.pop("event", "backend_event"), **ev)
-        st = self.fsm.state
-        if st not in (S.LANDING, S.LANDED) and getattr(b, "mode", "") in ("LAND", "RTL"):
+        st, now = self.fsm.state, b.state()
+        if st not in (S.LANDING, S.LANDED) and now.mode in ("LAND", "RTL"):
             if self.fsm.can(S.LANDING):
-                self.fsm.transition(S.LANDING, b.t)
-        if self.fsm.state == S.LANDING and not b.armed and not b.in_air:
-            self.fsm.transition(S.LANDED, b.t)
+                self.fsm.transition(S.LANDING, now.t)
+        if self.fsm.state == S.LANDING and not now.armed and not now.in_air:
+            self.fsm.transition(S.LANDED, now.t)
             self.event("landed", reason="safe end")
         self.odometry.publish(paced=True)
 
@@ -133,7 +136,10 @@ class RunEnd:
         until the next position sample carries the end state. A backend without ``sample_key`` (the simulator)
         is settled at once."""
         b, o = self.backend, self.odometry.last
-        if b.sample_key is None or o is None or (o.get("in_air") == bool(b.in_air) and o.get("armed") == bool(b.armed)):
+        if b.telemetry.sample_key is None or o is None:
+            return True
+        now = b.state()
+        if o.get("in_air") == bool(now.in_air) and o.get("armed") == bool(now.armed):
             return True
         now = time.monotonic()
         if self._settle_until is None:

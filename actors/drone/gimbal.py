@@ -60,7 +60,10 @@ class DroneGimbal:
             self.event("command_rejected", item="gimbal", field=e.field, value=repr(e.value), reason=str(e))
             raise
         try:
-            self.backend.point_gimbal(cmd)
+            gimbal = self.backend.gimbal
+            if gimbal is None:
+                raise BackendError(f"robot {self.robot_id!r}: backend {self.backend.kind!r} has no gimbal")
+            gimbal.point(cmd)
         except (BackendError, ValueError) as e:
             self.event("gimbal_refused", error=str(e), **cmd.describe())
             raise
@@ -85,7 +88,8 @@ class DroneGimbal:
         ``rate_hz`` on vehicle time; :meth:`command` also records the attitude it was given from)."""
         if self.limits is None:
             return
-        for att in self.backend.drain_gimbal():
+        gimbal = self.backend.gimbal
+        for att in gimbal.drain() if gimbal is not None else []:
             self.latest = att
             if att.t + 1e-9 < self.next_t:
                 continue

@@ -42,7 +42,7 @@ class OdometryPublisher:
         """After a step of the vehicle (the clock thread): a vehicle's own samples, each one, paced on its own time;
         the simulator's state on the odometry rate's grid (after a jump of the vehicle clock, no burst)."""
         b = self.backend
-        if b.sample_key is not None:
+        if b.telemetry.sample_key is not None:
             self.publish(tok, paced=True)
         elif b.t + 1e-9 >= self.next_t:
             self.next_t += self.period
@@ -63,9 +63,9 @@ class OdometryPublisher:
         10 Hz stream whose stamps jitter is recorded whole at 10 Hz); otherwise (the end of a run) the newest sample
         is published even when that rate would skip it."""
         b = self.backend
-        key = b.sample_key
+        key = b.telemetry.sample_key
         if key is None:
-            self._publish(b.odometry().model_dump(mode="json"), tok)
+            self._publish(b.telemetry.odometry().model_dump(mode="json"), tok)
             return
         if key == self._key:
             return
@@ -74,7 +74,7 @@ class OdometryPublisher:
         # was no longer stepped): the newest only
         fresh = self._t is None or self._fresh
         self._fresh = False
-        samples = b.drain_odometry(newest_only=fresh)
+        samples = b.telemetry.drain_odometry(newest_only=fresh)
         if samples and fresh:  # the slots start here at the latest (a drone restored from a checkpoint as well)
             self.next_t = min(self.next_t, samples[-1].t)
         samples = [o for o in samples if self._t is None or o.t > self._t]

@@ -95,13 +95,13 @@ class NavigationProgress:
         """After arming (an autopilot's home is where it armed): the vehicle's frame must be the gate's
         (:meth:`~aerodaas.navigation.safety.SafetyGate.check_vehicle_home`, ``safety.home_tolerance_m``); else a
         ``vehicle_home_refused`` event, disarm, and BackendError, before any take-off."""
-        b = self.backend
+        b, now = self.backend, self.backend.state()
         try:
-            self.gate.check_vehicle_home(b.home, b.position)
+            self.gate.check_vehicle_home(now.home, now.position)
         except SafetyViolation as e:
-            self.event("vehicle_home_refused", reason=e.reason, vehicle_home=[b.home.lat, b.home.lon])
+            self.event("vehicle_home_refused", reason=e.reason, vehicle_home=[now.home.lat, now.home.lon])
             try:
-                b.disarm()
+                b.actions.disarm()
             except BackendError as de:
                 self.event("backend_error", error=str(de))
             raise BackendError(f"robot {self.robot_id!r}: refusing to take off: {e.reason}") from None

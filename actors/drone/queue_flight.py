@@ -45,7 +45,7 @@ class QueueFlight:
         if isinstance(item, (Waypoint, VelocityCommand)) and not (isinstance(item, Waypoint) and f.active_wp == item.id):
             try:  # a velocity command is checked for the time it has left (its fence horizon shrinks as it runs)
                 left = item.left_at(t) if isinstance(item, VelocityCommand) else item
-                item = c.gate.check_item(left, pos, tuple(float(v) for v in c.backend.velocity))
+                item = c.gate.check_item(left, pos, tuple(float(v) for v in c.backend.state().velocity))
             except SafetyViolation as e:
                 self.reject(t, item, e)
                 return
@@ -76,7 +76,7 @@ class QueueFlight:
             c.event("tracking_ended")
         if c.fsm.state in (S.TRACKING, S.NAVIGATING, S.WAYPOINT_HOLD):
             c.fsm.transition(S.HOVERING, t)
-        c.backend.hold()
+        c.backend.guidance.hold()
         f.active_wp, f.hold_until = None, None
 
     def _fly_action(self, t: float, pos: tuple, item: ActionCommand, res: Order) -> None:
@@ -88,7 +88,7 @@ class QueueFlight:
         c.plan_log.discard(c.queue, item.id, "executed", t)
         self.flight.preplanned_left = c.queue.pending(distance_driven_only=True)
         if item.action == "land":
-            c.backend.land()
+            c.backend.guidance.land()
             c.fsm.transition(S.LANDING, t)
             c.event("landing", reason=item.reason or "land command")
         else:
@@ -100,7 +100,7 @@ class QueueFlight:
         if c.fsm.state != S.TRACKING:
             c.fsm.transition(S.TRACKING, t)
             c.event("tracking_started", priority=res.priority, mission=res.mission, preempted=f.active_wp)
-        c.backend.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
+        c.backend.guidance.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
         f.active_wp, f.hold_until = None, None
 
     def _start_leg(self, t: float, pos: tuple, item: Waypoint, target: tuple, res: Order) -> None:
@@ -109,7 +109,7 @@ class QueueFlight:
         if c.fsm.state == S.TRACKING:
             c.event("tracking_ended")
         f.active_wp, f.hold_until, f.hold = item.id, None, None
-        c.backend.goto(target, item.speed)
+        c.backend.guidance.goto(target, item.speed)
         c.fsm.transition(S.NAVIGATING, t)
         c.progress.start(t, math.dist(pos, target), item.speed)
         c.event("navigate", waypoint=item.id, target=list(target), priority=res.priority, mission=res.mission)
@@ -120,10 +120,10 @@ class QueueFlight:
         """The waypoint being flown: given up without progress; reached (within its acceptance radius and, to hold
         there, settled below ``hold.settle_speed``): WAYPOINT_HOLD; held for its ``hover_duration``: done."""
         c, f = self.ctx, self.flight
-        v = c.backend
+        v, now = c.backend, c.backend.state()
         dist = math.dist(pos, target)
-        speed = math.hypot(*tuple(float(x) for x in v.velocity)[:2])
-        radius = c.cfg.hold.radius(item.acceptance_radius, v.position_accuracy_m)  # the vehicle's accuracy at least
+        speed = math.hypot(*tuple(float(x) for x in now.velocity)[:2])
+        radius = c.cfg.hold.radius(item.acceptance_radius, now.position_accuracy_m)  # the vehicle's accuracy at least
         within = dist <= radius
         if c.fsm.state == S.NAVIGATING:
             if c.progress.check(t, item, target, dist, within):
@@ -134,7 +134,7 @@ class QueueFlight:
             if not (within and (item.hover_duration <= 0 or speed <= c.cfg.hold.settle_speed)):
                 return
             c.fsm.transition(S.WAYPOINT_HOLD, t)
-            v.goto(target)  # keep station on the exact waypoint
+            v.guidance.goto(target)  # keep station on the exact waypoint
             f.hold_until = t + item.hover_duration
             f.hold = WaypointHold(start=t, last=t, max_error_m=dist, max_speed=speed)
             c.event("waypoint_reached", waypoint=item.id, error_m=dist, speed=round(speed, 3),
@@ -178,14 +178,14 @@ class QueueFlight:
         had_mission = f.flew_something or f.preplanned_total > 0
         idle_too_long = had_mission and t - f.idle_since >= c.cfg.idle_land_s
         if done_plan or idle_too_long:
-            v.land()
+            v.guidance.land()
             c.fsm.transition(S.LANDING, t)
             c.event("landing", reason="mission complete" if done_plan else
                     f"nothing to do for {c.cfg.idle_land_s:g} s")
             return
         if st != S.HOVERING:
             c.fsm.transition(S.HOVERING, t)
-            v.hold()
+            v.guidance.hold()
 
 
 def _widened(item: Waypoint, radius: float) -> dict:

@@ -88,7 +88,7 @@ def _capture_due(d: Any, tok: Any, clock_late: bool = False) -> None:
             cam["next_t"] += 1.0 / cam["fps"]
             if b.t > cam["next_t"] + 1.0 / cam["fps"]:  # vehicle clock jumped: do not burst
                 cam["next_t"] = b.t + 1.0 / cam["fps"]
-            cam["comp"].try_capture(b.pose_sample(), b.t, tok, clock_late)
+            cam["comp"].try_capture(b.telemetry.pose_sample(), b.t, tok, clock_late)
 
 
 def _halt_cameras(d: Any) -> None:

@@ -259,7 +259,8 @@ class CameraComponent:
     def _gimbal(self, t: float) -> Any:
         """The gimbal's attitude now (the clock thread, at the frame's tick at run time ``t`` s), kept for the
         stream frames captured around it; None: no gimbal."""
-        g = self.backend.gimbal_attitude() if self.backend is not None else None
+        gimbal = self.backend.gimbal if self.backend is not None else None
+        g = gimbal.latest() if gimbal is not None else None
         if g is not None and (not self._gimbals or t > self._gimbals[-1][0]):
             self._gimbals.append((t, g))
         return g

@@ -73,7 +73,7 @@ class _NewOnly:
 
 
 class BackendFrames(FrameSource):
-    """``backend``: the robot's backend's own newest frame (``VehicleBackend.camera_frame``) at its time on the
+    """``backend``: the robot's backend's own newest frame (``VehicleBackend.camera``) at its time on the
     vehicle clock; None when it is the one delivered before."""
 
     name = "backend"
@@ -90,7 +90,8 @@ class BackendFrames(FrameSource):
                              f"(provides_camera: {_camera_backends()}), but backend is {robot.backend!r}")
 
     def frame_at(self, t: float, pose: FramePose) -> CapturedFrame | None:
-        return self._new.fresh(self.ctx.backend.camera_frame())
+        camera = self.ctx.backend.camera
+        return self._new.fresh(camera.frame() if camera is not None else None)
 
 
 class McapFrames(FrameSource):

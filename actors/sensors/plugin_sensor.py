@@ -47,7 +47,7 @@ class PluginSensorComponent:
         if t > self.next_t + self.period:  # the vehicle clock jumped: do not burst
             self.next_t = t + self.period
         try:
-            out = self.plugin.sample(backend.odometry(), t)
+            out = self.plugin.sample(backend.telemetry.odometry(), t)
             if out is None:
                 return
             data = out.model_dump(mode="json") if hasattr(out, "model_dump") else dict(out)

@@ -2,11 +2,12 @@
 recorded flights. :func:`make_backend` builds the one a robot's ``backend`` names in ``environment.json``."""
 from __future__ import annotations
 
-from aerodaas.backends.base import BackendError, CommandRefused, LinkLost, NotNavigable, VehicleBackend
+from aerodaas.backends.base import (Actions, BackendError, CommandRefused, Guidance, LinkLost, NotNavigable,
+                                   VehicleBackend, VehicleState)
 from aerodaas.plugins import registry
 
-__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable", "make_backend",
-           "backend_class", "is_navigable", "backend_clock"]
+__all__ = ["VehicleBackend", "VehicleState", "BackendError", "CommandRefused", "LinkLost", "NotNavigable",
+           "make_backend", "backend_class", "is_navigable", "backend_clock"]
 
 
 def backend_class(name: str) -> type[VehicleBackend]:
@@ -30,5 +31,14 @@ def backend_clock(name: str) -> str:
 
 def make_backend(cfg) -> VehicleBackend:
     """The backend for ``cfg`` (an :class:`aerodaas.config.RobotConfig`): ``backend_class(cfg.backend)(cfg)``.
-    Raises ValueError for an unknown ``backend``."""
-    return backend_class(cfg.backend)(cfg)
+    Raises ValueError for an unknown ``backend``; TypeError naming the backend when its ``__init__`` set no command
+    group ``actions`` (:class:`~aerodaas.backends.base.Actions`) or ``guidance``
+    (:class:`~aerodaas.backends.base.Guidance`), or one without every command of its group."""
+    backend = backend_class(cfg.backend)(cfg)
+    for name, group in (("actions", Actions), ("guidance", Guidance)):
+        if not isinstance(getattr(backend, name, None), group):
+            missing = [m for m in group.__dict__ if not m.startswith("_") and callable(getattr(group, m))
+                       and not callable(getattr(getattr(backend, name, None), m, None))]
+            raise TypeError(f"backend {cfg.backend!r} ({type(backend).__name__}): its __init__ must set "
+                            f"self.{name} to an object with {', '.join(m + '()' for m in missing)} (VehicleBackend {name})")
+    return backend

@@ -21,14 +21,64 @@ a refused command raises :class:`CommandRefused` carrying the autopilot's result
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
-from typing import Any, ClassVar, NamedTuple, Sequence
+from typing import Any, Callable, ClassVar, NamedTuple, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
-from aerodaas.model.types import GeoPoint, Odometry
+from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.model.types import Attitude, GeoPoint, Odometry
 
-__all__ = ["VehicleBackend", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
+__all__ = ["VehicleBackend", "VehicleState", "Actions", "Guidance", "Telemetry", "Gimbal", "Camera",
+           "StateSamples", "BackendError", "CommandRefused", "LinkLost", "NotNavigable"]
+
+
+def _vector3(name: str, value: Any) -> np.ndarray:
+    """``value`` as a read-only (3,) float array; ValueError naming ``name`` and the value otherwise."""
+    arr = np.array(value, dtype=float)
+    if arr.shape != (3,):
+        raise ValueError(f"VehicleState.{name}: expected 3 values, got {value!r}")
+    arr.flags.writeable = False
+    return arr
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class VehicleState:
+    """One reading of a vehicle's state, every field read together (what :meth:`VehicleBackend.state` returns).
+
+    ``t``: seconds on the vehicle's clock when it was read (:attr:`VehicleBackend.t`); ``position``: (3,) float
+    ENU metres from ``home`` (x east, y north, z up; ``home`` the ENU origin, WGS-84 degrees and metres, which a
+    real vehicle may move: its HOME_POSITION); ``velocity``: (3,) float ENU m/s (both
+    read-only arrays); ``roll``, ``pitch``, ``yaw``: attitude in degrees (yaw ENU: counter-clockwise from east,
+    :meth:`VehicleBackend.enu_yaw_from_heading` converts a compass heading); ``battery_pct``: state of charge in
+    percent, 0-100 (None: unknown, allowed for a backend with ``navigable = False``); ``armed``: the motors are
+    armed, as the vehicle last reported it; ``in_air``: off the ground (the autopilot's land detector; always False
+    for a vehicle with ``needs_takeoff = False``); ``link_ok``: False while the link is lost (no heartbeat or state
+    for the configured time; always True in simulation); ``mode``: the vehicle's flight mode in its own names
+    (MAVLink: pymavlink's ``GUIDED``, ``OFFBOARD``, ``LOITER``...; "" when it has none); ``position_accuracy_m``:
+    the reported horizontal position accuracy, metres, 1 sigma as the receiver states it (0: exact or not
+    reported).
+
+    Raises ValueError naming the field when ``position`` or ``velocity`` is not 3 values."""
+
+    t: float
+    position: np.ndarray
+    velocity: np.ndarray
+    yaw: float
+    armed: bool
+    in_air: bool
+    battery_pct: float | None
+    home: GeoPoint
+    roll: float = 0.0
+    pitch: float = 0.0
+    link_ok: bool = True
+    mode: str = ""
+    position_accuracy_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _vector3("position", self.position))
+        object.__setattr__(self, "velocity", _vector3("velocity", self.velocity))
 
 
 class PoseSample(NamedTuple):
@@ -86,6 +136,150 @@ class NotNavigable(BackendError):
     """Navigation was asked of a backend that cannot navigate (e.g. the replay of a recorded flight)."""
 
 
+# ---------------------------------------------------------------------- the command groups
+# Every motion command below (takeoff, goto, set_velocity) has passed the robot's safety gate (geofence, altitude and
+# speed limits) before it is called; a command returns once the vehicle accepted it, not once it is carried out (the
+# drone watches the state).
+@runtime_checkable
+class Actions(Protocol):
+    """Arming and take-off (:attr:`VehicleBackend.actions`)."""
+
+    def arm(self) -> None:
+        """Arm the motors (waiting until the vehicle is armable); called once, when the drone starts. Raises
+        CommandRefused (the vehicle said no, e.g. a pre-arm check) or BackendError (no answer, the link): the run
+        fails."""
+
+    def disarm(self) -> None:
+        """Disarm the motors. Called by the drone once the vehicle is on the ground (LANDED), or when it refuses the
+        vehicle's home before a take-off. Raises CommandRefused when the vehicle refuses (e.g. still in the air)
+        or BackendError; the drone records it and, at the end of the run, waits for the autopilot's own disarm."""
+
+    def takeoff(self, altitude_m: float) -> None:
+        """Climb to ``altitude_m`` metres above home; returns once the command is accepted (not reached). Never
+        called when ``needs_takeoff`` is False. Raises CommandRefused / BackendError."""
+
+
+@runtime_checkable
+class Guidance(Protocol):
+    """Where the vehicle goes (:attr:`VehicleBackend.guidance`)."""
+
+    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
+        """Fly to ``target_enu`` (ENU metres from home, z up; a ground vehicle decides what z means to it) at up
+        to ``speed`` m/s (None: the vehicle's limit). Replaces any previous target. Raises NotNavigable (a
+        backend that only reports), CommandRefused or BackendError."""
+
+    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
+        """Hold the ENU velocity ``v_enu`` (3 values, m/s) and yaw rate (deg/s, counter-clockwise positive) until
+        the next command. Raises NotNavigable, CommandRefused or BackendError."""
+
+    def hold(self) -> None:
+        """Hover (stop) where the vehicle is. Raises NotNavigable, CommandRefused or BackendError."""
+
+    def land(self) -> None:
+        """Descend and land where the vehicle is (a ground vehicle: stop). Raises NotNavigable, CommandRefused or
+        BackendError; the drone then watches ``state().in_air`` for the touchdown (bounded by its landing
+        deadline)."""
+
+    def return_to_launch(self) -> bool:
+        """Ask the vehicle to return home and land by itself. Returns False when it has no such mode (the drone
+        then flies home with :meth:`goto` and lands with :meth:`land`)."""
+
+
+@runtime_checkable
+class Telemetry(Protocol):
+    """The vehicle's position samples as the runtime records them (:attr:`VehicleBackend.telemetry`)."""
+
+    def odometry(self) -> Odometry:
+        """The current :class:`~aerodaas.model.types.Odometry` (its ``t``: the run time of the sample, at most
+        :attr:`VehicleBackend.t`): ENU metres from home and their WGS-84 position, ENU m/s, attitude in degrees,
+        battery percent, armed and in-air. Must not block."""
+
+    def pose_sample(self) -> PoseSample:
+        """The newest position and yaw with the run time they are of, read together (one sample, never the position
+        of one and the time of another). A camera tags a frame with the pose interpolated between these samples at
+        the frame's capture time, so the time must be the sample's, not the tick's that read it. Must not block."""
+
+    @property
+    def sample_key(self) -> Any:
+        """None when every :meth:`odometry` is a fresh state (the simulator); otherwise a value that changes with
+        each new position sample from the vehicle, so that the runtime records a sample once, never the same
+        position again under a new timestamp."""
+
+    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
+        """The vehicle's position samples not yet handed out, oldest first, each as an
+        :class:`~aerodaas.model.types.Odometry` stamped with the vehicle's own time of the sample (``t``, seconds on
+        the run's clock; ENU metres, m/s, degrees as in :meth:`odometry`). Raises nothing. A vehicle with a
+        :attr:`sample_key` keeps every sample here until the runtime takes it, so a drone whose clock thread was
+        held up (a command waiting for its acknowledgement, a loaded machine) still records each one.
+        ``newest_only``: the newest sample alone; the others are discarded, not lost (the runtime was not recording
+        them: before the run, or after the drone's mission ended)."""
+
+
+@runtime_checkable
+class Gimbal(Protocol):
+    """A camera gimbal the drone can point (:attr:`VehicleBackend.gimbal`)."""
+
+    def point(self, cmd: Any) -> None:
+        """Carry out a gimbal command (:data:`aerodaas.protocol.gimbal.GimbalCommand`: pitch/yaw degrees, a region of
+        interest in ENU metres, or its release), already checked against the robot's gimbal limits. Raises
+        :class:`BackendError` when the vehicle refuses it."""
+
+    def latest(self) -> Any:
+        """The gimbal's latest attitude (:class:`aerodaas.protocol.gimbal.GimbalAttitude`, vehicle time), or None
+        before the first report."""
+
+    def drain(self) -> list:
+        """Every gimbal attitude not handed out yet, oldest first (what the drone records on
+        ``/<robot>/gimbal``)."""
+
+
+@runtime_checkable
+class Camera(Protocol):
+    """The vehicle's own camera stream (:attr:`VehicleBackend.camera`)."""
+
+    def frame(self) -> tuple[np.ndarray, float] | None:
+        """The newest decoded frame, (H, W, 3) uint8 BGR, and its time on :attr:`VehicleBackend.t`'s clock; None
+        when no frame arrived yet."""
+
+
+class StateSamples:
+    """The :class:`Telemetry` of a backend whose every :meth:`VehicleBackend.state` is a fresh sample (the
+    simulator, or a vehicle that keeps no queue of its own): the default :attr:`VehicleBackend.telemetry`.
+
+    ``backend``: the backend whose state is sampled; ``odometry``: a function returning the current
+    :class:`~aerodaas.model.types.Odometry` when the backend makes its own (the simulator adds its GPS noise, a
+    replayed log its own fix and voltage); None: from ``backend.state()``, its WGS-84 position from the state's
+    ``home`` (:func:`aerodaas.model.geo.enu_to_geodetic`), battery clipped to 0-100 %."""
+
+    sample_key = None
+
+    def __init__(self, backend: "VehicleBackend", odometry: Callable[[], Odometry] | None = None) -> None:
+        self._backend, self._odometry = backend, odometry
+
+    def odometry(self) -> Odometry:
+        """See :meth:`Telemetry.odometry`: the state now."""
+        if self._odometry is not None:
+            return self._odometry()
+        s = self._backend.state()
+        x, y, z = (float(v) for v in s.position)
+        bat = None if s.battery_pct is None else min(max(float(s.battery_pct), 0.0), 100.0)
+        return Odometry(robot_id=self._backend.robot_id, t=float(s.t), position=(x, y, z),
+                        geodetic=enu_to_geodetic(x, y, z, s.home), velocity=tuple(float(v) for v in s.velocity),
+                        attitude=Attitude(roll=s.roll, pitch=s.pitch, yaw=s.yaw), battery_pct=bat,
+                        armed=bool(s.armed), in_air=bool(s.in_air))
+
+    def pose_sample(self) -> PoseSample:
+        """See :meth:`Telemetry.pose_sample`: the state's position and yaw at its time (right for a backend whose
+        state is new at every :meth:`VehicleBackend.step`)."""
+        s = self._backend.state()
+        p = s.position
+        return PoseSample(float(s.t), (float(p[0]), float(p[1]), float(p[2])), float(s.yaw))
+
+    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
+        """See :meth:`Telemetry.drain_odometry`: ``[self.odometry()]`` (each state is a new sample)."""
+        return [self.odometry()]
+
+
 class VehicleBackend(abc.ABC):
     """Driver of one robot. Subclasses set :attr:`kind`, :attr:`clock` and implement the abstract methods (the
     members docs/extending-vehicles.md "Writing a vehicle backend from scratch" tables, with units, frames, return
@@ -99,12 +293,25 @@ class VehicleBackend(abc.ABC):
     Errors: a command the vehicle refuses or cannot carry out raises a :class:`BackendError` (a
     :class:`CommandRefused`, :class:`LinkLost`, :class:`NotNavigable`): during the mission the drone records it as
     a ``backend_error`` event and the run goes on, and any other exception from a command ends the robot's mission
-    as ``failed``; an exception from :meth:`arm` (the drone's start) or :meth:`step` ends the drone actor's run.
+    as ``failed``; an exception from ``actions.arm()`` (the drone's start) or :meth:`step` ends the drone actor's
+    run.
+
+    Commands: the subclass's ``__init__`` sets two typed attributes, the command groups the drone calls directly:
+    :attr:`actions` (:class:`Actions`: arm, disarm, take-off) and :attr:`guidance` (:class:`Guidance`: goto,
+    set_velocity, hold, land, return_to_launch), each the concern object that carries the commands out (the same
+    object may be both, or the backend itself); :func:`aerodaas.backends.make_backend` checks them.
+
+    State: :meth:`state` returns one :class:`VehicleState` (position, velocity, attitude, battery, armed, in-air,
+    link health, flight mode, position accuracy, all read together, with their time): a backend implements that
+    one method, not a property per field.
+
+    Samples: :attr:`telemetry` (:class:`Telemetry`: ``odometry()``, ``pose_sample()``, ``sample_key``,
+    ``drain_odometry()``) is what the runtime records; the default :class:`StateSamples` takes each state as a
+    sample, a vehicle that streams its own samples sets its own (the MAVLink backend's telemetry concern).
 
     Thread-safety: the runtime calls every method from one thread (the drone's control thread), except
-    :attr:`link_ok`, :meth:`odometry` and the state properties (:attr:`t`, :attr:`position`, :attr:`velocity`,
-    :attr:`yaw`, :attr:`armed`, :attr:`in_air`, :attr:`battery_pct`), which may also be read from a status thread
-    and must not block.
+    :meth:`state`, :attr:`t` and ``telemetry.odometry()``, which may also be read from a status thread and must
+    not block.
     """
 
     #: the ``backend`` name in ``environment.json``
@@ -130,20 +337,31 @@ class VehicleBackend(abc.ABC):
     config_section: ClassVar[str | None] = None
     produces: ClassVar[tuple] = ("odometry", "events")
     consumes: ClassVar[tuple] = ("flight_commands",)
-    #: whether the vehicle has its own camera stream (:meth:`camera_frame`): a camera sensor with
+    #: whether the vehicle has its own camera stream (:attr:`camera`): a camera sensor with
     #: ``"source": "backend"`` needs one (checked when the environment is validated, before Ray starts)
     provides_camera: ClassVar[bool] = False
-    #: whether the vehicle has a camera gimbal the drone can point (:meth:`point_gimbal`, :meth:`gimbal_attitude`):
+    #: whether the vehicle has a camera gimbal the drone can point (:attr:`gimbal`):
     #: a robot's ``gimbal`` section needs one (checked when the environment is validated, before Ray starts)
     provides_gimbal: ClassVar[bool] = False
+
+    #: arming and take-off (:class:`Actions`), set by the subclass's ``__init__``
+    actions: Actions
+    #: where the vehicle goes (:class:`Guidance`), set by the subclass's ``__init__``
+    guidance: Guidance
+    #: the camera gimbal the drone points (:class:`Gimbal`), None: the vehicle has none (``provides_gimbal``
+    #: declares that it may have one; a robot's ``gimbal`` section then needs it)
+    gimbal: Gimbal | None = None
+    #: the vehicle's own camera stream (:class:`Camera`, with ``provides_camera``), None: it has none (the Tello's
+    #: video; a camera sensor with ``"source": "backend"`` reads it)
+    camera: Camera | None = None
 
     # ------------------------------------------------------------------ what the drone asks of a backend
     @property
     def flies_uploaded_mission(self) -> bool:
         """Whether the robot's pre-planned waypoints are flown as a mission uploaded to the vehicle, which then
-        flies it by itself (the backend offers ``upload_mission(nav, takeoff_altitude=, final_action=)`` returning
-        :class:`aerodaas.missionfile.MissionItem` s, ``start_mission()``, and ``mission_current`` /
-        ``mission_item_reached`` events). False here."""
+        flies it by itself (the backend then has a ``mission`` attribute with ``upload(nav, takeoff_altitude=,
+        final_action=)`` returning :class:`aerodaas.missionfile.MissionItem` s and ``start()``, and reports
+        ``mission_current`` / ``mission_item_reached`` events). False here."""
         return False
 
     @property
@@ -203,12 +421,17 @@ class VehicleBackend(abc.ABC):
         """Checks of the robot's queued navigation (``robot``: the application's :class:`aerodaas.app.api.Robot`,
         ``sched`` its trajectory scheduler) that only this backend knows, before any actor starts. Nothing here."""
 
-    def __init__(self, robot_id: str, home: GeoPoint) -> None:
-        """Sets :attr:`robot_id` (``robots[].id``) and :attr:`home` (the ENU origin, WGS-84 degrees and metres).
-        Called by a subclass's ``__init__(cfg)`` as ``super().__init__(cfg.id, cfg.home)``; raises nothing."""
+    def __init__(self, robot_id: str, home: GeoPoint | None) -> None:
+        """Sets :attr:`robot_id` (``robots[].id``), :attr:`home` (the ENU origin, WGS-84 degrees and metres; None:
+        the vehicle keeps its own, reported in its :meth:`state`, and the backend has no ``home`` attribute) and the
+        default :attr:`telemetry` (:class:`StateSamples`). Called by a subclass's ``__init__(cfg)`` as
+        ``super().__init__(cfg.id, cfg.home)``, before it sets its own groups; raises nothing."""
         self.robot_id = robot_id
-        #: ENU origin; a real vehicle may replace it with its HOME_POSITION when it connects
-        self.home = home
+        if home is not None:
+            #: the ENU origin (a replayed log may move it to its HOME_POSITION)
+            self.home = home
+        #: the position samples the runtime records (:class:`Telemetry`); a subclass may set its own
+        self.telemetry: Telemetry = StateSamples(self)
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self, timeout_s: float = 30.0) -> None:
@@ -227,98 +450,24 @@ class VehicleBackend(abc.ABC):
         """Take back a :meth:`checkpoint` (called after :meth:`connect` of a restarted drone actor)."""
 
     # ------------------------------------------------------------------ time and state
-    @property
     @abc.abstractmethod
+    def state(self) -> VehicleState:
+        """The vehicle's state now, every field read together (:class:`VehicleState`: ENU metres from its home, the
+        home, ENU m/s, degrees, battery percent, armed, in-air, link health, flight mode, position accuracy, and the
+        time it was read on the vehicle's clock). Must not block; raises nothing."""
+
+    @property
     def t(self) -> float:
         """Seconds on the vehicle's clock since :meth:`connect` (simulated seconds for the simulator); never goes
-        back. Must not block."""
+        back: ``state().t``. Must not block."""
+        return self.state().t
 
     @abc.abstractmethod
     def step(self, dt: float) -> None:
         """Called once per physics step of the run (``dt`` = 1 / ``simulation.physics_hz`` seconds). ``clock ==
         "sim"``: advance the vehicle ``dt`` simulated seconds. ``"vehicle"``: process incoming messages
         (non-blocking; ``dt`` is only a hint). Should not raise: an exception leaves the drone actor's run loop (the
-        run fails); report trouble as events (:meth:`drain_events`) or through :attr:`link_ok`."""
-
-    @property
-    @abc.abstractmethod
-    def position(self) -> np.ndarray:
-        """(3,) float ENU metres from :attr:`home` (x east, y north, z up). Must not block."""
-
-    @property
-    @abc.abstractmethod
-    def velocity(self) -> np.ndarray:
-        """(3,) float ENU m/s. Must not block."""
-
-    @property
-    @abc.abstractmethod
-    def yaw(self) -> float:
-        """Heading in degrees, ENU convention (counter-clockwise from east; :meth:`enu_yaw_from_heading` converts a
-        compass/NED heading). Must not block."""
-
-    @property
-    @abc.abstractmethod
-    def armed(self) -> bool:
-        """True while the motors are armed (as the vehicle last reported it). The drone reads it to judge the
-        flight's end (landed and disarmed) and a disarm by someone else. Must not block; raises nothing."""
-
-    @property
-    @abc.abstractmethod
-    def in_air(self) -> bool:
-        """True while the vehicle is off the ground (the autopilot's land detector; the simulator: above the
-        ground or climbing). The drone ends LANDING (touchdown) and the autopilot's own return on it, and its
-        battery failsafes act only while it is True; always False for a vehicle with ``needs_takeoff = False``.
-        Must not block; raises nothing."""
-
-    @property
-    @abc.abstractmethod
-    def battery_pct(self) -> float:
-        """State of charge in percent, 0-100 (a backend that only reports, ``navigable = False``, may return None:
-        unknown). The drone's battery failsafes compare it with ``safety.*_battery_pct``. Must not block."""
-
-    @property
-    def position_accuracy_m(self) -> float:
-        """The vehicle's reported horizontal position accuracy in metres (1 sigma as the receiver states it; 0:
-        exact or not reported). 0 here: the simulator knows its position exactly."""
-        return 0.0
-
-    @property
-    def link_ok(self) -> bool:
-        """False while the link is lost (no heartbeat/state for the configured time). Always True in simulation."""
-        return True
-
-    @abc.abstractmethod
-    def odometry(self) -> Odometry:
-        """The current :class:`~aerodaas.model.types.Odometry` (t = :attr:`t`, or the vehicle's own time of the sample
-        for backends with a :attr:`sample_key`): ENU metres from :attr:`home` and their WGS-84 position, ENU m/s,
-        attitude in degrees (yaw as :attr:`yaw`), battery percent, armed and in-air. Must not block."""
-
-    def pose_sample(self) -> PoseSample:
-        """The newest position and yaw with the run time they are of, read together (one sample, never the position
-        of one and the time of another). A camera tags a frame with the pose interpolated between these samples at
-        the frame's capture time, so the time must be the sample's, not the tick's that read it.
-        The default: :attr:`position` and :attr:`yaw` at :attr:`t` (right for a backend whose state is new at
-        every :meth:`step`: the simulator). A backend with a :attr:`sample_key` overrides it. Must not block."""
-        p = self.position
-        return PoseSample(float(self.t), (float(p[0]), float(p[1]), float(p[2])), float(self.yaw))
-
-    @property
-    def sample_key(self) -> Any:
-        """None when every :meth:`odometry` is a fresh state (the simulator); otherwise a value that changes with
-        each new position sample from the vehicle, so that the runtime records a sample once, never the same
-        position again under a new timestamp."""
-        return None
-
-    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
-        """The vehicle's position samples not yet handed out, oldest first, each as an
-        :class:`~aerodaas.model.types.Odometry` stamped with the vehicle's own time of the sample (``t``, seconds on
-        the run's clock; ENU metres, m/s, degrees as in :meth:`odometry`). Raises nothing. A backend with a
-        :attr:`sample_key` keeps every sample here until the runtime takes it, so a drone whose clock thread was
-        held up (a command waiting for its acknowledgement, a loaded machine) still records each one. The default
-        (the simulator, whose :meth:`odometry` is new at every step, or a backend that keeps no queue):
-        ``[self.odometry()]``. ``newest_only``: the newest sample alone; the others are discarded, not lost (the
-        runtime was not recording them: before the run, or after the drone's mission ended)."""
-        return [self.odometry()]
+        run fails); report trouble as events (:meth:`drain_events`) or through ``state().link_ok``."""
 
     def drain_events(self) -> list[dict[str, Any]]:
         """Events since the last call, oldest first, each ``{"event": name, ...}``: e.g. ``status_text``
@@ -326,84 +475,7 @@ class VehicleBackend(abc.ABC):
         The runtime records them on ``/<robot>/events``."""
         return []
 
-    # ------------------------------------------------------------------ control
-    # Every motion command below (takeoff, goto, set_velocity) has passed the robot's safety gate (geofence,
-    # altitude and speed limits) before it is called; a command returns once the vehicle accepted it, not once it
-    # is carried out (the drone watches the state).
-    @abc.abstractmethod
-    def arm(self) -> None:
-        """Arm the motors (waiting until the vehicle is armable); called once, when the drone starts. Raises
-        CommandRefused (the vehicle said no, e.g. a pre-arm check) or BackendError (no answer, the link): the run
-        fails."""
-
-    @abc.abstractmethod
-    def disarm(self) -> None:
-        """Disarm the motors. Called by the drone once the vehicle is on the ground (LANDED), or when it refuses the
-        vehicle's home before a take-off. Raises CommandRefused when the vehicle refuses (e.g. still in the air)
-        or BackendError; the drone records it and, at the end of the run, waits for the autopilot's own disarm."""
-
-    @abc.abstractmethod
-    def takeoff(self, altitude_m: float) -> None:
-        """Climb to ``altitude_m`` metres above home; returns once the command is accepted (not reached). Never
-        called when ``needs_takeoff`` is False. Raises CommandRefused / BackendError."""
-
-    @abc.abstractmethod
-    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        """Fly to ``target_enu`` (ENU metres from home, z up; a ground vehicle decides what z means to it) at up
-        to ``speed`` m/s (None: the vehicle's limit). Replaces any previous target. Raises NotNavigable (a
-        backend that only reports), CommandRefused or BackendError."""
-
-    @abc.abstractmethod
-    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        """Hold the ENU velocity ``v_enu`` (3 values, m/s) and yaw rate (deg/s, counter-clockwise positive) until
-        the next command. Raises NotNavigable, CommandRefused or BackendError."""
-
-    @abc.abstractmethod
-    def hold(self) -> None:
-        """Hover (stop) where the vehicle is. Raises NotNavigable, CommandRefused or BackendError."""
-
-    @abc.abstractmethod
-    def land(self) -> None:
-        """Descend and land where the vehicle is (a ground vehicle: stop). Raises NotNavigable, CommandRefused or
-        BackendError; the drone then watches :attr:`in_air` for the touchdown (bounded by its landing
-        deadline)."""
-
-    def return_to_launch(self) -> bool:
-        """Ask the vehicle to return home and land by itself. Returns False when the backend has no such mode
-        (the runtime then flies home with :meth:`goto` and lands with :meth:`land`)."""
-        return False
-
-    def camera_frame(self) -> tuple[np.ndarray, float] | None:
-        """For vehicles with their own camera stream (the Tello): the newest decoded frame, (H, W, 3) uint8 BGR,
-        and its time on :attr:`t`'s clock; None when no frame arrived yet or the backend has no camera."""
-        return None
-
-    def point_gimbal(self, cmd: Any) -> None:
-        """Carry out a gimbal command (:data:`aerodaas.protocol.gimbal.GimbalCommand`: pitch/yaw degrees, a region of
-        interest in ENU metres, or its release), already checked against the robot's gimbal limits. Raises
-        :class:`BackendError` when the vehicle refuses it; here (no gimbal) always."""
-        raise BackendError(f"robot {self.robot_id!r}: backend {self.kind!r} has no gimbal")
-
-    def gimbal_attitude(self) -> Any:
-        """The gimbal's latest attitude (:class:`aerodaas.protocol.gimbal.GimbalAttitude`, vehicle time), or None
-        when there is no gimbal or no report yet (the default)."""
-        return None
-
-    def drain_gimbal(self) -> list:
-        """Every gimbal attitude not handed out yet, oldest first (what the drone records on ``/<robot>/gimbal``).
-        Default: the newest once per change of :meth:`gimbal_attitude`."""
-        att = self.gimbal_attitude()
-        if att is None or att == getattr(self, "_gimbal_drained", None):
-            return []
-        self._gimbal_drained = att
-        return [att]
-
     # ------------------------------------------------------------------ helpers for subclasses
-    def _require_navigable(self, command: str) -> None:
-        if not self.navigable:
-            raise NotNavigable(f"robot {self.robot_id!r}: backend {self.kind!r} is not navigable; {command} is "
-                               f"not possible (is_navigable() is False)")
-
     @staticmethod
     def enu_yaw_from_heading(heading_deg: float) -> float:
         """ENU yaw (deg, CCW from east) from a compass heading (deg, CW from north), in [0, 360)."""
@@ -426,5 +498,5 @@ class VehicleBackend(abc.ABC):
 
     def horizontal_distance(self, target_enu: Sequence[float]) -> float:
         """Metres from the vehicle to ``target_enu`` in the horizontal plane."""
-        p = self.position
+        p = self.state().position
         return math.hypot(float(target_enu[0]) - p[0], float(target_enu[1]) - p[1])

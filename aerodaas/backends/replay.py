@@ -31,18 +31,18 @@ import math
 import os
 import time
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterator, NoReturn, Sequence
 
 import numpy as np
 
 from aerodaas.config.base import ConfigError
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
-from aerodaas.backends.base import BackendError, VehicleBackend
+from aerodaas.backends.base import BackendError, NotNavigable, StateSamples, VehicleBackend, VehicleState
 from aerodaas.backends.flight_log import MAV_MODE_FLAG_SAFETY_ARMED, LogMessage, check_log, load_tlog, load_ulog
 from aerodaas.config.backends import ReplayConfig
 
-__all__ = ["ReplayBackend", "McapCameraReplay"]
+__all__ = ["ReplayBackend", "NoCommands", "McapCameraReplay"]
 
 #: the link counts as lost after this many seconds of log time without a vehicle HEARTBEAT (as a GCS would)
 HEARTBEAT_TIMEOUT_S = 3.0
@@ -69,7 +69,8 @@ class ReplayBackend(VehicleBackend):
     ``home`` (lat, lon, alt), ``link_lost``/``link_regained`` (gaps of HEARTBEAT_TIMEOUT_S in the log's
     heartbeats), and ``replay_finished`` after the last message (then :attr:`finished` is True).
 
-    Every navigation method raises :class:`~aerodaas.backends.base.NotNavigable`.
+    Every command (:attr:`actions`, :attr:`guidance`: :class:`NoCommands`) raises
+    :class:`~aerodaas.backends.base.NotNavigable`.
     """
 
     kind = "replay"
@@ -96,6 +97,10 @@ class ReplayBackend(VehicleBackend):
 
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig (settings: ReplayConfig)
         super().__init__(cfg.id, cfg.home)
+        #: a recording cannot be flown: every command raises NotNavigable
+        self.actions = self.guidance = NoCommands(self.robot_id, self.kind)
+        #: the position samples: the log's own fix and battery voltage, at the log time applied so far
+        self.telemetry = StateSamples(self, odometry=self._odometry)
         settings = self.options(cfg)
         self.log_path = str(settings.log)
         self.rate = float(settings.rate)
@@ -113,7 +118,7 @@ class ReplayBackend(VehicleBackend):
         self._have_battery_status = False
         self._armed = False
         self._landed_state: int | None = None
-        self.mode = ""
+        self._mode = ""
         self._last_reached: int | None = None
         self._last_hb: float | None = None
         self._link_ok = True
@@ -155,8 +160,9 @@ class ReplayBackend(VehicleBackend):
         return float(self.info.get("duration_s", 0.0))
 
     # ------------------------------------------------------------------ time and state
-    @property
-    def t(self) -> float:
+    def _log_now(self) -> float:
+        """Log time now: ``rate`` x wall seconds since the first :meth:`step` (the applied time before it and after
+        :meth:`close`)."""
         if self._t_wall0 is None:
             return self._t_applied
         return (time.monotonic() - self._t_wall0) * self.rate
@@ -167,7 +173,7 @@ class ReplayBackend(VehicleBackend):
         if not self._clock_started:
             self._clock_started = True
             self._t_wall0 = time.monotonic() - self._t_applied / self.rate
-        now = self.t
+        now = self._log_now()
         msgs = self._msgs
         while self._i < len(msgs) and msgs[self._i].t <= now:
             lm = msgs[self._i]
@@ -230,8 +236,8 @@ class ReplayBackend(VehicleBackend):
             self._armed = armed
             self._event("armed" if armed else "disarmed", t)
         mode = getattr(m, "mode_name", None) or mavutil.mode_string_v10(m)
-        if mode != self.mode:
-            self.mode = mode
+        if mode != self._mode:
+            self._mode = mode
             self._event("mode", t, name=mode)
 
     def _event(self, kind: str, t: float, **kw: Any) -> None:
@@ -241,70 +247,66 @@ class ReplayBackend(VehicleBackend):
         out, self._events = self._events, []
         return out
 
-    @property
-    def link_ok(self) -> bool:
-        return self._link_ok
+    def state(self) -> VehicleState:
+        """The logged vehicle at the log time now (:attr:`t`: ``rate`` x wall seconds since the first :meth:`step`),
+        as of the messages applied so far: position and velocity from GLOBAL_POSITION_INT, attitude from ATTITUDE,
+        battery percent (None while the log has not reported it, or reports it unknown), armed and mode from the
+        HEARTBEAT, in-air from EXTENDED_SYS_STATE's landed state (else armed and above 0.5 m), link health from
+        the gaps between the log's heartbeats."""
+        att = self._att
+        return VehicleState(t=self._log_now(), position=self._pos, velocity=self._vel, roll=att.roll,
+                            pitch=att.pitch, yaw=att.yaw, battery_pct=self._bat, armed=self._armed,
+                            in_air=self._in_air(), link_ok=self._link_ok, mode=self._mode, home=self.home)
 
-    @property
-    def position(self) -> np.ndarray:
-        return self._pos.copy()
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self._vel.copy()
-
-    @property
-    def yaw(self) -> float:
-        return float(self._att.yaw)
-
-    @property
-    def armed(self) -> bool:
-        return self._armed
-
-    @property
-    def in_air(self) -> bool:
+    def _in_air(self) -> bool:
         if self._landed_state is not None:
             return self._landed_state in _MAV_LANDED_STATE_IN_AIR
         return self._armed and self._pos[2] > 0.5
 
-    @property
-    def battery_pct(self) -> float | None:
-        """Percent from the log, or None while the log has not reported it (or reports it unknown)."""
-        return self._bat
-
-    def odometry(self) -> Odometry:
+    def _odometry(self) -> Odometry:
+        """The logged fix (else home), applied up to the log time of the last step, with the battery voltage."""
         geo = self._geo or self.home
         return Odometry(robot_id=self.robot_id, t=self._t_applied, position=tuple(float(v) for v in self._pos),
                         geodetic=geo, velocity=tuple(float(v) for v in self._vel), attitude=self._att,
                         battery_pct=None if self._bat is None else min(max(self._bat, 0.0), 100.0),
                         battery_voltage=self._volt,
-                        armed=self._armed, in_air=self.in_air)
+                        armed=self._armed, in_air=self._in_air())
 
-    # ------------------------------------------------------------------ control: a recording cannot be flown
+
+class NoCommands:
+    """The command groups (``actions`` and ``guidance``) of a backend that only reports: every command raises
+    :class:`~aerodaas.backends.base.NotNavigable` naming the robot, the backend and the command."""
+
+    def __init__(self, robot_id: str, kind: str) -> None:
+        self.robot_id, self.kind = robot_id, kind
+
+    def _refuse(self, command: str) -> NoReturn:
+        raise NotNavigable(f"robot {self.robot_id!r}: backend {self.kind!r} is not navigable; {command} is "
+                           f"not possible (is_navigable() is False)")
+
     def arm(self) -> None:
-        self._require_navigable("arm")
+        self._refuse("arm")
 
     def disarm(self) -> None:
-        self._require_navigable("disarm")
+        self._refuse("disarm")
 
     def takeoff(self, altitude_m: float) -> None:
-        self._require_navigable("takeoff")
+        self._refuse("takeoff")
 
     def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        self._require_navigable("goto")
+        self._refuse("goto")
 
     def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        self._require_navigable("set_velocity")
+        self._refuse("set_velocity")
 
     def hold(self) -> None:
-        self._require_navigable("hold")
+        self._refuse("hold")
 
     def land(self) -> None:
-        self._require_navigable("land")
+        self._refuse("land")
 
     def return_to_launch(self) -> bool:
-        self._require_navigable("return_to_launch")
-        return False
+        self._refuse("return_to_launch")
 
 
 class McapCameraReplay:

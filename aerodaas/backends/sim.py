@@ -2,15 +2,12 @@
 from __future__ import annotations
 
 import copy
-from typing import Sequence
+from typing import ClassVar
 
-import numpy as np
-
-from aerodaas.model.types import Odometry
 from aerodaas.config.backends import SimConfig
 from aerodaas.sim.gimbal import SimGimbal
 from aerodaas.sim.vehicle import SimVehicle
-from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.base import StateSamples, VehicleBackend, VehicleState
 
 
 class SimBackend(VehicleBackend):
@@ -21,11 +18,21 @@ class SimBackend(VehicleBackend):
     Config = SimConfig  # no settings of its own: the vehicle is the robot's limits, battery and noise
     provides_gimbal = True  # a simulated gimbal when the robot has a ``gimbal`` section (aerodaas.sim.gimbal)
 
+    #: the flight model; a plug-in that changes how the simulated vehicle answers a command (motors that cannot
+    #: lift, a landing that never starts) subclasses :class:`~aerodaas.sim.vehicle.SimVehicle` and names it here
+    vehicle_class: ClassVar[type[SimVehicle]] = SimVehicle
+
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
+        """The simulated vehicle (:attr:`vehicle_class`), which is also the command groups :attr:`actions` and
+        :attr:`guidance`, and the gimbal when the robot has a ``gimbal`` section."""
         super().__init__(cfg.id, cfg.home)
-        self.vehicle = SimVehicle(cfg.id, cfg.home, cfg.limits, cfg.battery, cfg.noise)
+        self.vehicle = self.vehicle_class(cfg.id, cfg.home, cfg.limits, cfg.battery, cfg.noise)
+        self.actions = self.guidance = self.vehicle
+        #: the position samples: the simulated vehicle's odometry, with the robot's GPS and velocity noise
+        self.telemetry = StateSamples(self, odometry=self.vehicle.odometry)
         #: the camera gimbal (None: the robot has no ``gimbal`` section), starting at the first camera's mount
-        self.gimbal = SimGimbal(cfg.gimbal, -self._mount_pitch(cfg)) if cfg.gimbal is not None else None
+        self.gimbal = (SimGimbal(cfg.gimbal, -self._mount_pitch(cfg), clock=lambda: self.vehicle.t)
+                       if cfg.gimbal is not None else None)
 
     @staticmethod
     def _mount_pitch(cfg) -> float:
@@ -34,20 +41,6 @@ class SimBackend(VehicleBackend):
             if "pitch_deg" in s.properties:
                 return float(s.properties["pitch_deg"])
         return 90.0
-
-    def point_gimbal(self, cmd) -> None:
-        """Command the simulated gimbal (:class:`~aerodaas.sim.gimbal.SimGimbal`); it slews at its rate."""
-        if self.gimbal is None:
-            super().point_gimbal(cmd)
-        self.gimbal.command(cmd)
-
-    def gimbal_attitude(self):
-        """The simulated gimbal's attitude now (None without a gimbal)."""
-        return None if self.gimbal is None else self.gimbal.attitude(self.vehicle.t)
-
-    @property
-    def t(self) -> float:
-        return self.vehicle.t
 
     def checkpoint(self) -> dict:
         """The simulated vehicle's state, setpoint, clock and noise generator (deep copies)."""
@@ -67,50 +60,9 @@ class SimBackend(VehicleBackend):
         if self.gimbal is not None:
             self.gimbal.step(dt, self.vehicle.state.position, self.vehicle.state.yaw)
 
-    @property
-    def position(self) -> np.ndarray:
-        return self.vehicle.state.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self.vehicle.state.velocity
-
-    @property
-    def yaw(self) -> float:
-        return self.vehicle.state.yaw
-
-    @property
-    def armed(self) -> bool:
-        return self.vehicle.state.armed
-
-    @property
-    def in_air(self) -> bool:
-        return self.vehicle.state.in_air
-
-    @property
-    def battery_pct(self) -> float:
-        return self.vehicle.battery_pct
-
-    def odometry(self) -> Odometry:
-        return self.vehicle.odometry()
-
-    def arm(self) -> None:
-        self.vehicle.arm()
-
-    def disarm(self) -> None:
-        self.vehicle.disarm()
-
-    def takeoff(self, altitude_m: float) -> None:
-        self.vehicle.takeoff(altitude_m)
-
-    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        self.vehicle.goto(tuple(target_enu), speed)
-
-    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        self.vehicle.set_velocity(tuple(v_enu), yaw_rate_dps)
-
-    def hold(self) -> None:
-        self.vehicle.hold()
-
-    def land(self) -> None:
-        self.vehicle.land()
+    def state(self) -> VehicleState:
+        """The simulated vehicle now (exact: the odometry adds the configured noise); the link is always up."""
+        v = self.vehicle
+        st = v.state
+        return VehicleState(t=v.t, position=st.position, velocity=st.velocity, yaw=st.yaw, armed=st.armed,
+                            in_air=st.in_air, battery_pct=v.battery_pct, home=self.home)

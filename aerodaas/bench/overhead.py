@@ -165,7 +165,7 @@ class BareLoop:
             tick = pacer.wait()
             t_start = time.monotonic()
             self.drone.step(pacer.period)
-            frame, meta = self.cam.capture(self.drone.position, float(self.drone.backend.yaw), t_start - self.t0)
+            frame, meta = self.cam.capture(self.drone.position, float(self.drone.backend.state().yaw), t_start - self.t0)
             ready = time.monotonic()
             dets, inf, post = self.det(frame, meta)
             nav, f_ms = self.follow(dets, meta)

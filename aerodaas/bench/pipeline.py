@@ -173,17 +173,17 @@ class DroneStage:
         self.backend = SimBackend(rc)
         self.backend.vehicle.state.position[:] = (0.0, 0.0, rc.takeoff_altitude)
         self.backend.vehicle.state.in_air = self.backend.vehicle.state.armed = True
-        self.backend.hold()
+        self.backend.guidance.hold()
 
     @property
     def position(self) -> tuple:
-        return tuple(float(c) for c in self.backend.position)
+        return tuple(float(c) for c in self.backend.state().position)
 
     def step(self, dt: float) -> None:
         self.backend.step(dt)
 
     def apply(self, item: Any) -> None:
-        self.backend.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
+        self.backend.guidance.set_velocity((item.vx, item.vy, item.vz), item.yaw_rate)
 
 
 def summary(values: list[float]) -> dict[str, float]:

@@ -228,7 +228,7 @@ class HoldConfig(_Cfg):
     reached: the mission is then ``incomplete``.
 
     ``radius_from_vehicle`` (default True): the radius a waypoint is reached and held within is at least the
-    vehicle's reported horizontal position accuracy (``VehicleBackend.position_accuracy_m``: a MAVLink vehicle's
+    vehicle's reported horizontal position accuracy (``VehicleState.position_accuracy_m``: a MAVLink vehicle's
     GNSS ``GPS_RAW_INT.h_acc``; 0 on the simulator): a smaller ``acceptance_radius`` asks for a hold the vehicle
     cannot know it keeps, so it is widened to the accuracy and said (``radius_widened`` in the ``waypoint_reached``
     and ``hold_failed`` events). Measured on SITL with stock parameters (2026-11-26): ArduCopter ``h_acc`` 0.30 m,

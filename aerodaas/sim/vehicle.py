@@ -44,7 +44,10 @@ class Setpoint:
 
 
 @dataclass
-class VehicleState:
+class SimState:
+    """The simulated multirotor's own mutable state: position (3,) ENU m, velocity (3,) ENU m/s, yaw deg ENU, armed,
+    in-air, battery energy J."""
+
     position: np.ndarray = field(default_factory=lambda: np.zeros(3))
     velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
     yaw: float = 90.0  # deg, ENU (90 = facing north)
@@ -64,7 +67,7 @@ class SimVehicle:
         self.battery = battery
         self.noise = noise or NoiseConfig()
         self._rng = np.random.default_rng(self.noise.seed)
-        self.state = VehicleState(energy_j=battery.capacity_wh * 3600.0 * battery.initial_pct / 100.0)
+        self.state = SimState(energy_j=battery.capacity_wh * 3600.0 * battery.initial_pct / 100.0)
         self.setpoint = Setpoint()
         self.t = 0.0
 
@@ -161,6 +164,10 @@ class SimVehicle:
 
     def land(self) -> None:
         self.setpoint = Setpoint("land")
+
+    def return_to_launch(self) -> bool:
+        """False: the simulator has no return mode of its own (the drone flies home and lands)."""
+        return False
 
     # ------------------------------------------------------------------ sensing
     @property

@@ -75,7 +75,7 @@ def _download_fence_and_rally(backend, plan, out: Path, name: str):
 def _cruise_speed(backend) -> float | None:
     """The vehicle's own cruise speed in m/s (ArduCopter ``WPNAV_SPEED`` cm/s, PX4 ``MPC_XY_CRUISE`` m/s), read and
     left as it is; None when it does not answer."""
-    name, unit = ("WPNAV_SPEED", 0.01) if backend.autopilot == "ardupilot" else ("MPC_XY_CRUISE", 1.0)
+    name, unit = ("WPNAV_SPEED", 0.01) if backend.link.autopilot == "ardupilot" else ("MPC_XY_CRUISE", 1.0)
     got = backend.parameters.read([name])
     return got[name] * unit if name in got else None
 
@@ -159,13 +159,13 @@ def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
         items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
         for c in changes:
             print(f"{name}: {c}", flush=True)
-    sent = backend.upload_mission(items)
-    print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.autopilot} vehicle on "
+    sent = backend.mission.upload(items)
+    print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.link.autopilot} vehicle on "
           f"{args.connection}", flush=True)
     _check_read_back(backend, sent, name)
     if args.start:
-        backend.arm()
-        backend.start_mission()
+        backend.actions.arm()
+        backend.mission.start()
         print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
 
 
@@ -174,7 +174,7 @@ def _check_from_vehicle_home(args: argparse.Namespace, name: str, plan: Any, bac
     only when the vehicle reports none). Raises MissionFileError when neither has one."""
     bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
     if backend.telemetry.home_received:  # as documented: from the vehicle's own home, whatever the file planned
-        plan_to_flight(plan, backend.home, **bounds)
+        plan_to_flight(plan, backend.telemetry.home, **bounds)
     elif plan.home is None:  # the bounds are measured from a home, never from a default one
         raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
                                f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
@@ -210,10 +210,10 @@ def _download(args: argparse.Namespace, name: str, opened: list) -> None:
     backend = _mission_backend(args)
     opened.append(backend)
     plan = backend.mission.download().model_copy(update={
-        "firmware_type": 3 if backend.autopilot == "ardupilot" else 12, "vehicle_type": 2})
+        "firmware_type": 3 if backend.link.autopilot == "ardupilot" else 12, "vehicle_type": 2})
     plan = _download_fence_and_rally(backend, plan, out, name)
     tmp = out.with_name(out.name + ".part")
     (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
     os.replace(tmp, out)  # never a half-written mission file
-    print(f"{name}: {len(plan.items)} items from the {backend.autopilot} vehicle on {args.connection} "
+    print(f"{name}: {len(plan.items)} items from the {backend.link.autopilot} vehicle on {args.connection} "
           f"written to {str(out)!r}", flush=True)

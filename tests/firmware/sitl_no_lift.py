@@ -115,11 +115,11 @@ def drive(env_path: str, out: str, timeout_s: float) -> int:
             d.control_tick()
             time.sleep(0.05)
         end = time.monotonic() + 20.0
-        while d.backend.armed and time.monotonic() < end:
+        while d.backend.state().armed and time.monotonic() < end:
             d.step(0.0)
             time.sleep(0.1)
         Path(out).write_text(json.dumps({"outcome": d.outcome, "done": d.done, "states": rec.states,
-                                         "armed_end": d.backend.armed, "events": rec.events}, default=str))
+                                         "armed_end": d.backend.state().armed, "events": rec.events}, default=str))
     finally:
         d.close()
     return 0

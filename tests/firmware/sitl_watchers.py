@@ -41,17 +41,17 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     end = time.monotonic() + timeout_s
     try:
         while time.monotonic() < end:
-            was_armed = was_armed or b.armed
-            g, v = b.odometry().geodetic, b.velocity
+            was_armed = was_armed or b.state().armed
+            g, v = b.telemetry.odometry().geodetic, b.state().velocity
             e, n, _ = geodetic_to_enu(g.lat, g.lon, FARM_HOME["alt"], GeoPoint(**FARM_HOME))
-            samples.append([b.t, float(e), float(n), float(b.position[2]), float(v[0]), float(v[1])])
-            if was_armed and not b.armed and not b.in_air:
+            samples.append([b.t, float(e), float(n), float(b.state().position[2]), float(v[0]), float(v[1])])
+            if was_armed and not b.state().armed and not b.state().in_air:
                 break
             time.sleep(0.05)
     finally:
         events = b.drain_events()
         b.close()
-    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not b.armed,
+    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not b.state().armed,
                                      "samples": samples, "events": events}, default=str))
     return 0
 

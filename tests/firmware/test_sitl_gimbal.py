@@ -59,7 +59,7 @@ def test_the_firmware_points_its_mount_where_the_gimbal_manager_says(tmp_path):
 
 
 def test_our_mavlink_backend_points_the_firmware_mount(tmp_path):
-    """The MAVLink backend a drone actor holds (robot ``gimbal`` section; ``point_gimbal``, ``drain_gimbal``), not
+    """The MAVLink backend a drone actor holds (robot ``gimbal`` section; ``gimbal.point``, ``gimbal.drain``), not
     the probe's bare manager: the firmware's own GIMBAL_DEVICE_ATTITUDE_STATUS shows the angle asked for, then the
     angles to a region of interest given in ENU metres (converted by the backend to a COMMAND_INT location)."""
     firmware = _firmware(tmp_path)

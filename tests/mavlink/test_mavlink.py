@@ -35,56 +35,56 @@ from tests.mavlink.emulated import (
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_connect_arm_takeoff_square_velocity_land_rtl(fly, autopilot):
     emu, b = fly(autopilot, params=RTL_PARAMS[autopilot])
-    assert b.autopilot == autopilot and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
+    assert b.link.autopilot == autopilot and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
     # HOME_POSITION replaces the configured home as ENU origin
     assert run_until(b, lambda: b.telemetry.home_received, 5)
-    assert abs(b.home.lat - VEHICLE_HOME.lat) < 1e-6 and abs(b.home.alt - VEHICLE_HOME.alt) < 0.01
-    assert dist(b.position, (0, 0, 0)) < 0.2
-    b.arm()
-    assert b.armed and emu.snapshot()["armed"]
-    b.takeoff(5.0)
-    assert run_until(b, lambda: abs(b.position[2] - 5.0) < 0.3 and b.in_air, 15), b.position
+    assert abs(b.telemetry.home.lat - VEHICLE_HOME.lat) < 1e-6 and abs(b.telemetry.home.alt - VEHICLE_HOME.alt) < 0.01
+    assert dist(b.state().position, (0, 0, 0)) < 0.2
+    b.actions.arm()
+    assert b.state().armed and emu.snapshot()["armed"]
+    b.actions.takeoff(5.0)
+    assert run_until(b, lambda: abs(b.state().position[2] - 5.0) < 0.3 and b.state().in_air, 15), b.state().position
     # a 4-waypoint square flown with goto(), positions relative to the vehicle's real home
     for corner in [(8, 0, 5), (8, 8, 5), (0, 8, 5), (0, 0, 5)]:
-        b.goto(corner)
-        assert run_until(b, lambda: dist(b.position, corner) < 0.5, 20), (corner, b.position, b.drain_events(),
+        b.guidance.goto(corner)
+        assert run_until(b, lambda: dist(b.state().position, corner) < 0.5, 20), (corner, b.state().position, b.drain_events(),
                                                                           emu.snapshot()["statustexts"])
         # the vehicle agrees with the backend (from where it armed, the EKF origin here: PX4's home moves)
         assert dist(emu.snapshot()["position_origin"], corner) < 1.0
-    assert b.mode == ("OFFBOARD" if autopilot == "px4" else "GUIDED")
+    assert b.state().mode == ("OFFBOARD" if autopilot == "px4" else "GUIDED")
     # velocity commands are ENU: east, then north; re-sent each tick like the runtime does (from a hover)
-    b.hold()
-    assert run_until(b, lambda: np.linalg.norm(b.velocity) < 0.05, 10)
-    start = b.position
-    assert run_until(b, lambda: b.position[0] - start[0] > 2.5, 10, every=lambda: b.set_velocity((1.0, 0.0, 0.0)))
-    assert abs(b.position[1] - start[1]) < 0.3 and abs(b.position[2] - start[2]) < 0.3
-    assert b.velocity[0] > 0.8 and abs(b.velocity[1]) < 0.2 and abs(b.velocity[2]) < 0.2
-    start = b.position
-    assert run_until(b, lambda: b.position[1] - start[1] > 2.5, 10, every=lambda: b.set_velocity((0.0, 1.0, 0.0)))
-    assert b.velocity[1] > 0.8 and abs(b.velocity[0]) < 0.2  # the east motion has been braked away
-    b.hold()
+    b.guidance.hold()
+    assert run_until(b, lambda: np.linalg.norm(b.state().velocity) < 0.05, 10)
+    start = b.state().position
+    assert run_until(b, lambda: b.state().position[0] - start[0] > 2.5, 10, every=lambda: b.guidance.set_velocity((1.0, 0.0, 0.0)))
+    assert abs(b.state().position[1] - start[1]) < 0.3 and abs(b.state().position[2] - start[2]) < 0.3
+    assert b.state().velocity[0] > 0.8 and abs(b.state().velocity[1]) < 0.2 and abs(b.state().velocity[2]) < 0.2
+    start = b.state().position
+    assert run_until(b, lambda: b.state().position[1] - start[1] > 2.5, 10, every=lambda: b.guidance.set_velocity((0.0, 1.0, 0.0)))
+    assert b.state().velocity[1] > 0.8 and abs(b.state().velocity[0]) < 0.2  # the east motion has been braked away
+    b.guidance.hold()
     # land: in_air goes False, the autopilot disarms by itself
-    b.land()
-    assert run_until(b, lambda: not b.in_air and not b.armed, 25), (b.position, b.in_air, b.armed)
-    assert b.position[2] < 0.2
+    b.guidance.land()
+    assert run_until(b, lambda: not b.state().in_air and not b.state().armed, 25), (b.state().position, b.state().in_air, b.state().armed)
+    assert b.state().position[2] < 0.2
     # again, then RTL from a displaced position: the autopilot flies home and lands
-    b.arm()
-    b.takeoff(4.0)
-    assert run_until(b, lambda: b.position[2] > 3.7, 15)
-    b.goto((8.0, -6.0, 4.0))
-    assert run_until(b, lambda: dist(b.position, (8, -6, 4)) < 0.5, 20)
-    assert b.return_to_launch() is True
-    assert run_until(b, lambda: b.position[2] > 7.5, 15)  # climbs to its return altitude first
-    assert run_until(b, lambda: not b.armed and not b.in_air, 40), b.position
-    assert math.hypot(b.position[0], b.position[1]) < 1.0 and b.position[2] < 0.2, (
-        b.position, emu.snapshot(), b.drain_events()[-12:])
-    odo = b.odometry()
+    b.actions.arm()
+    b.actions.takeoff(4.0)
+    assert run_until(b, lambda: b.state().position[2] > 3.7, 15)
+    b.guidance.goto((8.0, -6.0, 4.0))
+    assert run_until(b, lambda: dist(b.state().position, (8, -6, 4)) < 0.5, 20)
+    assert b.guidance.return_to_launch() is True
+    assert run_until(b, lambda: b.state().position[2] > 7.5, 15)  # climbs to its return altitude first
+    assert run_until(b, lambda: not b.state().armed and not b.state().in_air, 40), b.state().position
+    assert math.hypot(b.state().position[0], b.state().position[1]) < 1.0 and b.state().position[2] < 0.2, (
+        b.state().position, emu.snapshot(), b.drain_events()[-12:])
+    odo = b.telemetry.odometry()
     assert odo.robot_id == "quad" and odo.t > 10 and 0 < odo.battery_pct < 100
     names = [e["event"] for e in b.drain_events()]
     assert {"home", "armed", "disarmed", "mode"} <= set(names)
     # vehicle time runs faster than the wall clock and t follows it (at most the configured 10x; a loaded machine
     # may give the emulator less: the lower bound is load-independent)
-    assert 1.0 < b.clock_ratio < 14
+    assert 1.0 < b.clock.ratio < 14
 
 
 @pytest.mark.realtime  # PX4's setpoints at 20 Hz wall: a starved sender is its offboard-loss failsafe (it lands)
@@ -93,19 +93,19 @@ def test_goto_speed_cap(fly, autopilot):
     """goto(speed=0.5): ArduPilot through DO_CHANGE_SPEED, PX4 (which flies OFFBOARD position setpoints at its own
     limit) through a setpoint moving at 0.5 m/s; without a speed the vehicle's limit (2 m/s) applies again."""
     emu, b = fly(autopilot)
-    b.arm()
-    b.takeoff(3.0)
-    assert run_until(b, lambda: b.position[2] > 2.8, 15)
+    b.actions.arm()
+    b.actions.takeoff(3.0)
+    assert run_until(b, lambda: b.state().position[2] > 2.8, 15)
     speeds: list = []
     sample = lambda: speeds.append(float(np.hypot(*emu.state.veh.state.velocity[:2])))  # noqa: E731 - ground truth
     t0 = b.t
-    b.goto((6.0, 0.0, 3.0), speed=0.5)
-    assert run_until(b, lambda: dist(b.position, (6, 0, 3)) < 0.3, 20, every=sample), b.position
+    b.guidance.goto((6.0, 0.0, 3.0), speed=0.5)
+    assert run_until(b, lambda: dist(b.state().position, (6, 0, 3)) < 0.3, 20, every=sample), b.state().position
     assert 10.0 < b.t - t0 < 16.0  # 6 m at 0.5 m/s, in vehicle seconds
     assert max(speeds) < 0.75  # peaks while the position loop catches up with the moving PX4 setpoint
     speeds.clear()
-    b.goto((0.0, 0.0, 3.0))
-    assert run_until(b, lambda: dist(b.position, (0, 0, 3)) < 0.3, 20, every=sample), b.position
+    b.guidance.goto((0.0, 0.0, 3.0))
+    assert run_until(b, lambda: dist(b.state().position, (0, 0, 3)) < 0.3, 20, every=sample), b.state().position
     # the vehicle's own limit: ArduPilot WPNAV_SPEED 2 m/s, PX4 MPC_XY_VEL_MAX px4_speed_limit(2) = 1.75 m/s
     assert max(speeds) > (1.5 if autopilot == "ardupilot" else 0.9 * px4_speed_limit(2.0))
 
@@ -126,21 +126,21 @@ def test_refused_commands_carry_result_and_status_text(fly, autopilot, caplog):
     emu, b = fly(autopilot, mavlink={"arm_timeout_s": 0.3})
     emu.set_prearm_failure("Compass not calibrated")
     with caplog.at_level(logging.INFO, logger="aerodaas.mavlink"), pytest.raises(CommandRefused) as e:
-        b.arm()
+        b.actions.arm()
     # the STATUSTEXT is also a log line, at the level of its MAV_SEVERITY (CRITICAL for both autopilots' pre-arm)
     logged = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "aerodaas.mavlink"]
     assert (logging.CRITICAL, "quad: " + PREARM_PREFIX[autopilot] + "Compass not calibrated") in logged, logged
     assert e.value.result == REFUSED[autopilot]
     assert e.value.status_text == PREARM_PREFIX[autopilot] + "Compass not calibrated"
     assert REFUSED[autopilot] in str(e.value) and "Compass not calibrated" in str(e.value)
-    assert not b.armed and not emu.snapshot()["armed"]
+    assert not b.state().armed and not emu.snapshot()["armed"]
     # an unknown command is UNSUPPORTED
     with pytest.raises(CommandRefused) as e:
         b.commands.command_long("bogus", 31999)
     assert e.value.result == "MAV_RESULT_UNSUPPORTED"
     emu.set_prearm_failure(None)
-    b.arm()
-    assert b.armed
+    b.actions.arm()
+    assert b.state().armed
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
@@ -150,7 +150,7 @@ def test_arm_before_gps_fix_is_refused(fly, autopilot):
     if autopilot == "ardupilot":  # ArduCopter arms without GPS in STABILIZE; GUIDED needs it (mode change accepted)
         b.commands.set_mode("GUIDED")
     with pytest.raises(CommandRefused) as e:
-        b.arm()
+        b.actions.arm()
     assert e.value.result == REFUSED[autopilot]
     assert e.value.status_text.startswith(PREARM_PREFIX[autopilot])
     # the firmware's words: ArduCopter's AHRS needs a home (a GPS fix) in GUIDED, PX4's GPS check
@@ -160,7 +160,7 @@ def test_arm_before_gps_fix_is_refused(fly, autopilot):
 def test_ardupilot_takeoff_refused_when_disarmed(fly):
     emu, b = fly("ardupilot")
     with pytest.raises(CommandRefused) as e:
-        b.takeoff(3.0)
+        b.actions.takeoff(3.0)
     assert e.value.result == "MAV_RESULT_FAILED" and "not armed" in e.value.status_text
 
 
@@ -170,22 +170,22 @@ def test_mission_round_trip_and_auto_flight(fly, autopilot):
     assert run_until(b, lambda: b.telemetry.home_received, 5)
     square = [Waypoint(id=f"wp{i}", x=x, y=y, z=6.0, hover_duration=2.0)
               for i, (x, y) in enumerate([(10, 0), (10, 10), (0, 10)])]
-    sent = b.upload_mission(square, takeoff_altitude=6.0, final_action="land")
+    sent = b.mission.upload(square, takeoff_altitude=6.0, final_action="land")
     assert [it.command for it in sent] == [22, 16, 16, 16, 21]
     got = b.mission.download()
     assert got.items == sent
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)  # ArduPilot: home
     b.drain_events()
-    b.arm()
-    b.start_mission()
+    b.actions.arm()
+    b.mission.start()
     track: list = []
     truth: list = []  # the emulator's own position
 
     def sample():
-        track.append(b.position)
+        track.append(b.state().position)
         truth.append(emu.snapshot()["position_origin"])  # from where it armed (PX4's home moves in flight)
 
-    assert run_until(b, lambda: not b.armed and not b.in_air and len(track) > 50, 60, every=sample), b.position
+    assert run_until(b, lambda: not b.state().armed and not b.state().in_air and len(track) > 50, 60, every=sample), b.state().position
     reached = [e["item"] for e in b.drain_events() if e["event"] == "mission_item_reached"]
     assert reached == [1, 2, 3, 4, 5]  # take-off, three waypoints, land: in order, each once
     for wp in square:  # the vehicle went to every waypoint and held there; the backend saw it
@@ -195,14 +195,14 @@ def test_mission_round_trip_and_auto_flight(fly, autopilot):
                    for p in truth) < 1.0, wp.id
         assert min(math.hypot(p[0] - wp.x, p[1] - wp.y) + max(0.0, abs(p[2] - wp.z) - emu.state.home_alt_drift_m)
                    for p in track) < 2.0, wp.id
-    assert max(p[2] for p in track) > 5.5 and dist(b.position[:2], (0, 10)) < 1.0  # landed at the last waypoint
+    assert max(p[2] for p in track) > 5.5 and dist(b.state().position[:2], (0, 10)) < 1.0  # landed at the last waypoint
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_imported_plan_round_trip(fly, autopilot):
     plan = load_mission(DATA_DIR / "missions" / "qgc_test_simple_square.plan")
     emu, b = fly(autopilot)
-    sent = b.upload_mission(plan)
+    sent = b.mission.upload(plan)
     assert len(sent) == len(plan.expanded_items())
     assert b.mission.download().items == sent
     for s, p in zip(sent, plan.expanded_items()):
@@ -218,11 +218,11 @@ def test_one_lost_ack_and_lost_mission_messages_are_retried(fly, autopilot):
     assert run_until(b, lambda: position_ready(b), 10)
     b.commands.set_mode("GUIDED" if autopilot == "ardupilot" else "LOITER")
     emu.drop_next("COMMAND_ACK")  # the arm command's acknowledgement is lost: re-sent once, then acknowledged
-    b.arm()
-    assert b.armed and emu.snapshot()["commands_seen"].count(400) == 2
+    b.actions.arm()
+    assert b.state().armed and emu.snapshot()["commands_seen"].count(400) == 2
     wps = [Waypoint(id=f"w{i}", x=x, y=5.0, z=4.0) for i, x in enumerate((0, 5, 10))]
     emu.drop_next("MISSION_COUNT", "in")  # the vehicle never hears the upload start: the backend re-sends it
-    sent = b.upload_mission(wps, final_action="land")
+    sent = b.mission.upload(wps, final_action="land")
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)
     emu.drop_next("MISSION_ITEM_INT", "out")  # one answer of the download is lost: that item is requested again
     assert b.mission.download().items == sent
@@ -245,10 +245,10 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     b.drain_events()
     emu.drop_next("COMMAND_ACK", count=2)
     b.commands.set_mode(mode)
-    assert b.mode == mode
+    assert b.state().mode == mode
     emu.drop_next("COMMAND_ACK", count=2)
-    b.arm()
-    assert b.armed and emu.snapshot()["armed"]
+    b.actions.arm()
+    assert b.state().armed and emu.snapshot()["armed"]
     events = b.drain_events()
     lost = [e["command"] for e in events if e["event"] == "command_ack_lost"]
     assert lost == [f"set mode {mode}", "arm"], lost
@@ -261,32 +261,32 @@ def test_every_ack_lost_but_the_heartbeat_shows_the_effect(fly, autopilot):
     emu.drop_next("COMMAND_LONG", "in", count=2)  # the vehicle never hears it: no answer, no effect
     with pytest.raises(CommandNotAcknowledged, match="no COMMAND_ACK"):
         b.commands.set_mode("LAND")
-    assert b.mode == mode
+    assert b.state().mode == mode
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 def test_link_loss_and_recovery(fly, autopilot):
     emu, b = fly(autopilot, speedup=5, mavlink={"heartbeat_timeout_s": 0.6})
-    assert b.link_ok
+    assert b.state().link_ok
     b.drain_events()
     emu.set_blackhole(True)
-    assert run_until(b, lambda: not b.link_ok, 5)
+    assert run_until(b, lambda: not b.state().link_ok, 5)
     t0 = time.monotonic()
     with pytest.raises(LinkLost):
-        b.arm()
+        b.actions.arm()
     with pytest.raises(LinkLost):
-        b.goto((1.0, 0.0, 2.0))
+        b.guidance.goto((1.0, 0.0, 2.0))
     # refused at once, not after timeouts: nothing was sent to wait for, and both took less than one command's
     # tries would wait for a COMMAND_ACK (a generous bound)
     assert time.monotonic() - t0 < b.cfg.command_timeout_s * (b.cfg.command_retries + 1)
     events = b.drain_events()
     assert not [e for e in events if e["event"] in ("command_resent", "command_ack_lost")], events
     emu.set_blackhole(False)
-    assert run_until(b, lambda: b.link_ok, 5)
+    assert run_until(b, lambda: b.state().link_ok, 5)
     events = [e["event"] for e in events + b.drain_events()]
     assert events.index("link_lost") < events.index("link_regained")
-    b.arm()  # commands work again
-    assert b.armed
+    b.actions.arm()  # commands work again
+    assert b.state().armed
 
 
 def test_px4_home_moves_to_where_it_landed_and_positions_keep_their_origin(fly):
@@ -295,22 +295,22 @@ def test_px4_home_moves_to_where_it_landed_and_positions_keep_their_origin(fly):
     (``home_moved``) and keeps the ENU origin of the flight."""
     emu, b = fly("px4")
     events: list = []
-    b.arm()
-    b.takeoff(3.0)
-    assert run_until(b, lambda: b.position[2] > 2.8, 15)
-    b.goto((6.0, 0.0, 3.0))
-    assert run_until(b, lambda: dist(b.position[:2], (6, 0)) < 0.3, 25), b.position
-    b.land()
-    assert run_until(b, lambda: not b.armed and not b.in_air, 40)
-    landed = np.array(b.position[:2])
+    b.actions.arm()
+    b.actions.takeoff(3.0)
+    assert run_until(b, lambda: b.state().position[2] > 2.8, 15)
+    b.guidance.goto((6.0, 0.0, 3.0))
+    assert run_until(b, lambda: dist(b.state().position[:2], (6, 0)) < 0.3, 25), b.state().position
+    b.guidance.land()
+    assert run_until(b, lambda: not b.state().armed and not b.state().in_air, 40)
+    landed = np.array(b.state().position[:2])
     assert dist(landed, (6, 0)) < 1.0, landed  # it descended from (6, 0), drifting on at most its last speed
     assert run_until(b, lambda: events.extend(b.drain_events()) or "home_moved" in [e["event"] for e in events], 10)
     moved = next(e for e in events if e["event"] == "home_moved")
-    assert geodetic_to_enu(moved["lat"], moved["lon"], b.home.alt, b.home)[0] > 5.0  # the emulated PX4's new home
+    assert geodetic_to_enu(moved["lat"], moved["lon"], b.telemetry.home.alt, b.telemetry.home)[0] > 5.0  # the emulated PX4's new home
     # a vehicle second of samples after the home moved (not a wall-clock pause, which under load may bring none)
     t_moved = b.t
     assert run_until(b, lambda: b.t > t_moved + 1.0, 30)
-    assert dist(b.position[:2], landed) < 0.1, (b.position, landed)  # still where it landed, in the flight's frame
+    assert dist(b.state().position[:2], landed) < 0.1, (b.state().position, landed)  # still where it landed, in the flight's frame
 
 
 def test_vehicle_clock_goes_on_without_a_jump_after_the_autopilot_was_stopped(monkeypatch):
@@ -372,18 +372,18 @@ def test_a_slow_vehicle_clock_is_no_lost_link(monkeypatch):
         ms += 30
         b.clock.on_boot_ms(ms)
         b.link.periodic(wall[0])
-    assert b.link_ok
+    assert b.state().link_ok
     for _ in range(80):  # 8 more wall s: 2.4 more vehicle s, 3.4 s past the last HEARTBEAT: missed
         wall[0] += 0.1
         ms += 30
         b.clock.on_boot_ms(ms)
         b.link.periodic(wall[0])
-    assert not b.link_ok
+    assert not b.state().link_ok
     b.link.on_heartbeat(hb, wall[0])
-    assert b.link_ok
+    assert b.state().link_ok
     wall[0] += 3.1  # nothing at all arrives: lost after the wall timeout, as before
     b.link.periodic(wall[0])
-    assert not b.link_ok
+    assert not b.state().link_ok
 
 
 def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost():
@@ -398,7 +398,7 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
     b.link.autopilot = "px4"  # and a HEARTBEAT in PX4's AUTO.MISSION (main mode 4, sub mode 4)
     b.link.on_heartbeat(NS(base_mode=M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode=(4 << 16) | (4 << 24), type=2,
                            autopilot=M.MAV_AUTOPILOT_PX4, system_status=3, get_type=lambda: "HEARTBEAT"), 0.0)
-    assert b.mode == "MISSION"
+    assert b.state().mode == "MISSION"
     b.drain_events()
     # wire 0 take-off, 1 and 2 waypoints (ENU x, y, radius), 3 land; all autocontinue
     b.mission._waypoints = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
@@ -430,10 +430,10 @@ def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopil
     emu, b = fly(autopilot, mavlink={"command_timeout_s": 0.2, "command_retries": 1}, **emu_kw)
     assert any(e["event"] == "stream_fallback" for e in b.drain_events())
     # ArduPilot streams only what REQUEST_DATA_STREAM asked for; PX4 ignores it and streams its defaults
-    b.arm()
-    b.takeoff(3.0)
-    assert run_until(b, lambda: b.position[2] > 2.7, 15), b.position
-    assert b.telemetry.home_received and b.telemetry.gps_fix_type == 3 and b.in_air
+    b.actions.arm()
+    b.actions.takeoff(3.0)
+    assert run_until(b, lambda: b.state().position[2] > 2.7, 15), b.state().position
+    assert b.telemetry.home_received and b.telemetry.gps_fix_type == 3 and b.state().in_air
 
 
 @pytest.mark.realtime  # the stream's gaps in vehicle time: a starved sender stretches them (0.58 s at load 10-16)
@@ -443,19 +443,19 @@ def test_px4_offboard_setpoints_stream_above_2hz_before_and_during_offboard(fly)
     each switch into OFFBOARD until it leaves OFFBOARD, is at most 0.5 s of vehicle time. Run at 2x with PX4's
     default COM_OF_LOSS_T of 1 s, so a loaded machine does not stretch wall gaps into vehicle-time ones."""
     emu, b = fly("px4", speedup=2.0, params={"COM_OF_LOSS_T": 1.0})
-    b.arm()
-    b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.8, 15)
-    b.goto((3.0, 0.0, 2.0))
-    assert run_until(b, lambda: dist(b.position, (3, 0, 2)) < 0.5, 15)
-    b.goto((3.0, 2.0, 2.0), speed=1.5)  # the moving (carrot) setpoint
-    assert run_until(b, lambda: dist(b.position, (3, 2, 2)) < 0.5, 15)
+    b.actions.arm()
+    b.actions.takeoff(2.0)
+    assert run_until(b, lambda: b.state().position[2] > 1.8, 15)
+    b.guidance.goto((3.0, 0.0, 2.0))
+    assert run_until(b, lambda: dist(b.state().position, (3, 0, 2)) < 0.5, 15)
+    b.guidance.goto((3.0, 2.0, 2.0), speed=1.5)  # the moving (carrot) setpoint
+    assert run_until(b, lambda: dist(b.state().position, (3, 2, 2)) < 0.5, 15)
     end = b.t + 1.0
-    assert run_until(b, lambda: b.t > end, 5, every=lambda: b.set_velocity((-1.0, 0.0, 0.0)))
-    b.hold()
+    assert run_until(b, lambda: b.t > end, 5, every=lambda: b.guidance.set_velocity((-1.0, 0.0, 0.0)))
+    b.guidance.hold()
     run_until(b, lambda: False, 0.3)
-    b.land()
-    assert run_until(b, lambda: not b.in_air, 20)
+    b.guidance.land()
+    assert run_until(b, lambda: not b.state().in_air, 20)
     sp, modes = list(emu.setpoint_log), list(emu.mode_log)
     spans = []  # (entered, left) OFFBOARD, vehicle seconds
     for i, (t, mode) in enumerate(modes):

@@ -75,10 +75,20 @@ class _Landed:
     """A landed vehicle that stays armed until told (a firmware whose auto-disarm is off, COM_DISARM_LAND -1, after
     a disarm it refused at touchdown)."""
 
-    navigable, link_ok, in_air, sample_key = True, True, False, 0
+    navigable, in_air = True, False
+    telemetry = type("Samples", (), {"sample_key": 0})()
 
     def __init__(self) -> None:
         self.armed, self.t, self.disarms = True, 100.0, 0
+        self.actions = self  # its disarm below
+
+    def state(self):
+        from aerodaas.backends.base import VehicleState
+
+        from aerodaas.model.types import GeoPoint
+
+        return VehicleState(t=self.t, position=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.0), yaw=0.0, armed=self.armed,
+                            in_air=self.in_air, battery_pct=100.0, home=GeoPoint(lat=0.0, lon=0.0, alt=0.0))
 
     def disarm(self) -> None:
         self.disarms += 1

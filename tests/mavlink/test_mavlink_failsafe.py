@@ -92,11 +92,11 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
 
     emu, b = fly("px4", speedup=2.0, params={"COM_OF_LOSS_T": 1.0})
     assert any(e["event"] == "offboard_loss_timeout" and e["seconds"] == 1.0 for e in b.drain_events())
-    b.arm()
-    b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.8, 15)
-    b.goto((0.0, 30.0, 2.0))
-    assert run_until(b, lambda: b.mode == "OFFBOARD" and b.position[1] > 1.0, 15), (b.mode, b.position)
+    b.actions.arm()
+    b.actions.takeoff(2.0)
+    assert run_until(b, lambda: b.state().position[2] > 1.8, 15)
+    b.guidance.goto((0.0, 30.0, 2.0))
+    assert run_until(b, lambda: b.state().mode == "OFFBOARD" and b.state().position[1] > 1.0, 15), (b.state().mode, b.state().position)
     b.drain_events()
     gate, port = threading.Event(), b.link.port  # stall the backend's receive path, as a stopped process would
     real = port.recv_msg
@@ -113,22 +113,22 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     time.sleep(0.3)
     port.recv_msg = real
     gate.set()
-    assert run_until(b, lambda: b.link.failsafe is not None, 10), b.mode
+    assert run_until(b, lambda: b.link.failsafe is not None, 10), b.state().mode
     run_until(b, lambda: False, 1.5)
     modes = [m for _, m in emu.mode_log]
     left = len(modes) - 1 - modes[::-1].index("AUTO.RTL")
     assert "OFFBOARD" not in modes[left:], emu.mode_log
     assert b.link.failsafe["mode"] == "RTL", b.link.failsafe
     # the caller has not taken the failsafe event yet: a goto now is withheld, nothing reaches the vehicle
-    b.goto((0.0, 0.0, 2.0))
+    b.guidance.goto((0.0, 0.0, 2.0))
     run_until(b, lambda: False, 0.5)
     assert emu.snapshot()["mode"] == "AUTO.RTL", emu.mode_log
     events = [e["event"] for e in b.drain_events()]
     assert "autopilot_failsafe" in events and "command_withheld" in events, events
     # with the event in hand, the caller may take the vehicle back (mavlink.on_failsafe: resume)
-    b.goto((0.0, 0.0, 2.0))
+    b.guidance.goto((0.0, 0.0, 2.0))
     assert run_until(b, lambda: emu.snapshot()["mode"] == "OFFBOARD", 10), emu.mode_log
-    assert run_until(b, lambda: dist(b.position, (0, 0, 2)) < 0.6, 40), b.position
+    assert run_until(b, lambda: dist(b.state().position, (0, 0, 2)) < 0.6, 40), b.state().position
 
 
 def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
@@ -138,11 +138,11 @@ def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
     from tests.mavlink.emulated import run_until
 
     emu, b = fly("px4", speedup=1.0, params={"COM_OF_LOSS_T": 3.0})
-    b.arm()
-    b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.8, 30)
-    b.goto((0.0, 30.0, 2.0))
-    assert run_until(b, lambda: b.mode == "OFFBOARD", 15), b.mode
+    b.actions.arm()
+    b.actions.takeoff(2.0)
+    assert run_until(b, lambda: b.state().position[2] > 1.8, 30)
+    b.guidance.goto((0.0, 30.0, 2.0))
+    assert run_until(b, lambda: b.state().mode == "OFFBOARD", 15), b.state().mode
     b.drain_events()
     gate, port = threading.Event(), b.link.port
     real = port.recv_msg

@@ -72,23 +72,23 @@ def test_three_vehicles_on_one_link_each_flies_its_own_target(fleet, autopilot):
         assert sorted(next(iter(links.values())).ports) == ["r1", "r2", "r3"]
         targets = {"r1": (6.0, 0.0, 3.0), "r2": (0.0, 6.0, 3.0), "r3": (-5.0, -4.0, 3.0)}
         for rid in ("r1", "r2", "r3"):
-            by_id[rid].arm()
-            by_id[rid].takeoff(3.0)
+            by_id[rid].actions.arm()
+            by_id[rid].actions.takeoff(3.0)
         for rid in ("r1", "r2", "r3"):
             b = by_id[rid]
-            assert run_until(b, lambda: b.position[2] > 2.7, 30), (rid, b.position)
-            b.goto(targets[rid])
+            assert run_until(b, lambda: b.state().position[2] > 2.7, 30), (rid, b.state().position)
+            b.guidance.goto(targets[rid])
         for rid in ("r1", "r2", "r3"):
             b = by_id[rid]
-            assert run_until(b, lambda: np.linalg.norm(b.position - targets[rid]) < 0.5, 40), (rid, b.position)
+            assert run_until(b, lambda: np.linalg.norm(b.state().position - targets[rid]) < 0.5, 40), (rid, b.state().position)
         # the firmware agrees: emulator k (system id k) is where robot rk was sent, not where the others were
         for k, rid in enumerate(("r1", "r2", "r3")):
             at = np.asarray(emus[k].snapshot()["position_origin"], float)
             assert np.linalg.norm(at - targets[rid]) < 1.0, (rid, at)
         for b in backends:
-            b.land()
+            b.guidance.land()
         for b in backends:
-            assert run_until(b, lambda: not b.armed and not b.in_air, 60), (b.robot_id, b.position)
+            assert run_until(b, lambda: not b.state().armed and not b.state().in_air, 60), (b.robot_id, b.state().position)
         for emu in emus:
             assert not emu.snapshot()["armed"]
     finally:

@@ -71,15 +71,15 @@ def test_corrupt_packets_are_skipped_and_the_backend_keeps_working(fly):
             emu.inject(data)
             time.sleep(0.02)
     assert run_until(b, lambda: b.link.messages_received > n0 + 100 and b.t > t0 + 3.0, 10)
-    assert emu.snapshot()["links"] == 1 and b.link_ok and b.link.io_alive
+    assert emu.snapshot()["links"] == 1 and b.state().link_ok and b.link.io_alive
     b.step(0.05)  # raises if the I/O thread failed
     events = b.drain_events()
     assert not [e for e in events if e["event"] in ("receive_error", "armed", "mode", "link_lost")], events
-    assert not b.armed and b.mode == "STABILIZE" and dist(b.position, (0, 0, 0)) < 0.3  # nothing taken from them
-    assert b.odometry().t > t0 + 3.0
-    b.arm()
-    b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.7, 10) and emu.snapshot()["in_air"]
+    assert not b.state().armed and b.state().mode == "STABILIZE" and dist(b.state().position, (0, 0, 0)) < 0.3  # nothing taken from them
+    assert b.telemetry.odometry().t > t0 + 3.0
+    b.actions.arm()
+    b.actions.takeoff(2.0)
+    assert run_until(b, lambda: b.state().position[2] > 1.7, 10) and emu.snapshot()["in_air"]
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
@@ -102,12 +102,12 @@ def test_accepted_but_never_shown_mode_or_arming_raises(fly, autopilot):
     assert "MAV_RESULT_ACCEPTED" in str(e.value) and emu.snapshot()["mode"] != target
     emu.commands.ack_only_commands = {M.MAV_CMD_COMPONENT_ARM_DISARM}
     with pytest.raises(CommandNotConfirmed) as e:
-        b.arm()
+        b.actions.arm()
     assert e.value.command == "arm" and e.value.expected == "armed" and e.value.observed.endswith("disarmed")
     assert not emu.snapshot()["armed"]
     emu.commands.ack_only_commands = set()
-    b.arm()
-    assert b.armed
+    b.actions.arm()
+    assert b.state().armed
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
@@ -122,8 +122,8 @@ def test_temporarily_rejected_is_retried_and_in_progress_is_bounded(fly, autopil
     arm = M.MAV_CMD_COMPONENT_ARM_DISARM
     emu.reject_next(arm, 2)
     b.drain_events()
-    b.arm()  # rejected twice, accepted on the third try
-    assert b.armed and emu.snapshot()["commands_seen"].count(arm) == 3
+    b.actions.arm()  # rejected twice, accepted on the third try
+    assert b.state().armed and emu.snapshot()["commands_seen"].count(arm) == 3
     resent = [(e["command"], e["attempt"], e["after"]) for e in b.drain_events()
               if e["event"] == "command_resent" and e["command"] == "arm"]
     assert resent == [("arm", 1, "MAV_RESULT_TEMPORARILY_REJECTED"), ("arm", 2, "MAV_RESULT_TEMPORARILY_REJECTED")]
@@ -164,7 +164,7 @@ def test_mission_round_trip_with_older_firmware_using_mission_item(fly, autopilo
     emu, b = fly(autopilot, mission_int=False)
     assert run_until(b, lambda: b.telemetry.home_received, 5)
     wps = [Waypoint(id=f"w{i}", x=x, y=y, z=5.0, hover_duration=1.0) for i, (x, y) in enumerate([(12, 3), (-7, 25)])]
-    sent = b.upload_mission(wps, takeoff_altitude=5.0, final_action="land")
+    sent = b.mission.upload(wps, takeoff_altitude=5.0, final_action="land")
     got = b.mission.download().items
     assert len(got) == len(sent) == 4
     for s_, g in zip(sent, got):
@@ -188,7 +188,7 @@ def test_long_statustext_chunks_are_joined(fly, autopilot, caplog):
               "reboot")  # 106 characters: three chunks with the prefix
     emu.set_prearm_failure(reason)
     with caplog.at_level(logging.INFO, logger="aerodaas.mavlink"), pytest.raises(CommandRefused) as e:
-        b.arm()
+        b.actions.arm()
     whole = PREARM_PREFIX[autopilot] + reason
     assert e.value.status_text == whole and whole in str(e.value)
     assert ("quad: " + whole) in [r.getMessage() for r in caplog.records if r.name == "aerodaas.mavlink"]
@@ -212,10 +212,10 @@ def _connect_and_take_off(b: MavlinkBackend, emu: MavlinkVehicleEmulator, autopi
     """Over whatever link ``b`` uses: connect, identify the autopilot, arm, take off to 2 m — as the vehicle sees it."""
     b.connect(timeout_s=10)
     if autopilot is not None:
-        assert b.autopilot == autopilot
-    b.arm()
-    b.takeoff(2.0)
-    assert run_until(b, lambda: b.position[2] > 1.7, 10)
+        assert b.link.autopilot == autopilot
+    b.actions.arm()
+    b.actions.takeoff(2.0)
+    assert run_until(b, lambda: b.state().position[2] > 1.7, 10)
     assert emu.snapshot()["armed"] and emu.snapshot()["in_air"]
 
 
@@ -363,7 +363,7 @@ def test_real_px4_tlog_through_the_receive_path():
     b = MavlinkBackend(cfg)
     try:
         b.connect(timeout_s=20)
-        assert b.autopilot == "px4" and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
+        assert b.link.autopilot == "px4" and b.link.vehicle_type == "MAV_TYPE_QUADROTOR"
         assert done.wait(30)
         from aerodaas.backends.mavlink import shared_link
 
@@ -378,9 +378,9 @@ def test_real_px4_tlog_through_the_receive_path():
         b.step(0.1)  # raises if the I/O thread failed
         events = b.drain_events()
         assert not [e for e in events if e["event"] == "receive_error"]
-        assert b.telemetry.home_received and abs(b.home.lat - 43.7) < 0.3 and abs(b.home.lon + 72.2) < 0.5
-        odo = b.odometry()
-        e, n, _ = geodetic_to_enu(odo.geodetic.lat, odo.geodetic.lon, b.home.alt, b.home)
+        assert b.telemetry.home_received and abs(b.telemetry.home.lat - 43.7) < 0.3 and abs(b.telemetry.home.lon + 72.2) < 0.5
+        odo = b.telemetry.odometry()
+        e, n, _ = geodetic_to_enu(odo.geodetic.lat, odo.geodetic.lon, b.telemetry.home.alt, b.telemetry.home)
         assert abs(odo.position[0] - e) < 0.01 and abs(odo.position[1] - n) < 0.01
         assert 0 < math.hypot(e, n) < 2000
         assert any(e["event"] == "status_text" and e["text"] for e in events)
@@ -455,7 +455,7 @@ def test_mavproxy_ground_station(autopilot, tmp_path):
         b = MavlinkBackend(RobotConfig(id="quad", backend="mavlink", mavlink=MavlinkConfig(connection=address)))
         try:
             b.connect(timeout_s=10)
-            assert b.armed and b.mode == ("GUIDED" if autopilot == "ardupilot" else "LOITER")
+            assert b.state().armed and b.state().mode == ("GUIDED" if autopilot == "ardupilot" else "LOITER")
             assert emu.snapshot()["links"] == 2
         finally:
             b.close()
@@ -503,7 +503,7 @@ def test_recorded_odometry_ends_with_the_vehicles_end_state():
     flying(w)
     assert d.last_odom["in_air"] and d.last_odom["armed"]
     landed(w)  # landed and disarmed, no new position sample: nothing new is recorded
-    assert not w.backend.in_air and not w.backend.armed and d.last_odom["in_air"]
+    assert not w.backend.state().in_air and not w.backend.state().armed and d.last_odom["in_air"]
     assert not d.settled(wait_s=60.0)
     w.position(1200, alt_m=0.0)
     d.publish_odometry()

@@ -303,9 +303,9 @@ def _flying(tmp_path):
     try:
         b.connect()
         assert run_until(b, lambda: b.telemetry.home_received, 10)
-        b.arm()
-        b.takeoff(5.0)
-        assert run_until(b, lambda: abs(b.position[2] - 5.0) < 0.3 and b.in_air, 30), b.position
+        b.actions.arm()
+        b.actions.takeoff(5.0)
+        assert run_until(b, lambda: abs(b.state().position[2] - 5.0) < 0.3 and b.state().in_air, 30), b.state().position
         yield emu, b
     finally:
         b.close(safe_end=False)
@@ -414,7 +414,7 @@ def test_an_unsigned_forced_disarm_in_flight_changes_nothing(tmp_path):
         _spoof(emu.address, DISARM)
         run_until(b, lambda: False, 1.0)  # the vehicle's answer, had it taken any, reaches the backend
         vehicle = emu.snapshot()
-        in_flight = b.in_air
+        in_flight = b.state().in_air
     assert vehicle["armed"] and vehicle["in_air"] and vehicle["mode"] == "GUIDED", vehicle
     assert in_flight
     assert not {400, 176, 185} & set(vehicle["commands_seen"][seen0:]), vehicle["commands_seen"]

@@ -52,9 +52,9 @@ def vehicle(fly):
     """vehicle(autopilot, max_speed m/s, estimator error m/s) -> (emulator, backend), taken off to 3 m."""
     def make(autopilot: str, max_speed: float, error_mps: float):
         emu, b = fly(autopilot, limits=Limits(max_speed=max_speed), estimate_speed_error_mps=error_mps)
-        b.arm()
-        b.takeoff(3.0)
-        assert run_until(b, lambda: b.position[2] > 2.8, 20)
+        b.actions.arm()
+        b.actions.takeoff(3.0)
+        assert run_until(b, lambda: b.state().position[2] > 2.8, 20)
         return emu, b
 
     return make
@@ -66,9 +66,9 @@ def _legs(emu, b, n: int, events: list) -> list[list[float]]:
     for k in range(n):
         target = (12.0 if k % 2 == 0 else 0.0, 0.0, 3.0)
         speeds: list[float] = []
-        b.goto(target)
-        assert run_until(b, lambda: math.dist(b.position, target) < 0.3, 40,
-                         every=lambda: speeds.append(float(np.hypot(*emu.state.veh.state.velocity[:2])))), b.position
+        b.guidance.goto(target)
+        assert run_until(b, lambda: math.dist(b.state().position, target) < 0.3, 40,
+                         every=lambda: speeds.append(float(np.hypot(*emu.state.veh.state.velocity[:2])))), b.state().position
         events.extend(b.drain_events())
         out.append(speeds)
     return out

@@ -159,7 +159,7 @@ def test_the_run_end_waits_for_a_sample_taken_after_the_disarm():
     d.step(0.0)
     w.landed_state(mav.MAV_LANDED_STATE_ON_GROUND)
     w.heartbeat(False)  # landed and disarmed: no sample since
-    assert not w.backend.armed and d.last_odom["armed"]
+    assert not w.backend.state().armed and d.last_odom["armed"]
     assert not d.settled(wait_s=0.01)
     time.sleep(0.02)
     assert d.settled(wait_s=0.01)  # the drone's own wait ran out

@@ -1,4 +1,4 @@
-"""MAVLink signing that cannot be forgotten (aerodaas/backends/mavlink/signing.py, backend.py ``require_signed``,
+"""MAVLink signing that cannot be forgotten (aerodaas/backends/mavlink/signing.py, its ``SignedOnly``,
 aerodaas/config/environment.py): an unsigned link is said out loud (a ``link_not_signed`` event, a line in the run
 summary), and ``mavlink.require_signing`` (per robot, or for every MAVLink robot of the environment) refuses to
 move a vehicle over an unsigned link, before Ray when the configuration alone shows it. Judged by the emulated
@@ -48,8 +48,8 @@ def test_require_signing_refuses_to_move_a_vehicle_over_an_unsigned_link(fly):
     armed and saw no command of ours that moves it. Landing and holding are not refused (stopping never is)."""
     emu, b = fly("ardupilot", mavlink={"require_signing": True, "set_speed_limits": False})
     assert run_until(b, lambda: position_ready(b), 20)
-    for call in (b.arm, lambda: b.takeoff(5.0), lambda: b.goto([0, 5, 5]), lambda: b.set_velocity([1, 0, 0]),
-                 b.start_mission):
+    for call in (b.actions.arm, lambda: b.actions.takeoff(5.0), lambda: b.guidance.goto([0, 5, 5]),
+                 lambda: b.guidance.set_velocity([1, 0, 0]), b.mission.start):
         with pytest.raises(CredentialsRefused) as e:
             call()
         assert "robot 'quad'" in str(e.value) and "mavlink.require_signing is true" in str(e.value), e.value
@@ -59,7 +59,7 @@ def test_require_signing_refuses_to_move_a_vehicle_over_an_unsigned_link(fly):
     assert not vehicle["armed"] and not vehicle["in_air"]
     moving = {400, 22, 300, 176}  # ARM_DISARM, NAV_TAKEOFF, MISSION_START, DO_SET_MODE
     assert not moving & set(vehicle["commands_seen"]), vehicle["commands_seen"]
-    b.hold()  # not refused: it cannot move a vehicle on the ground anywhere
+    b.guidance.hold()  # not refused: it cannot move a vehicle on the ground anywhere
 
 
 def test_require_signing_arms_over_a_signed_link(fly, tmp_path):
@@ -67,9 +67,9 @@ def test_require_signing_arms_over_a_signed_link(fly, tmp_path):
     emu, b = fly("ardupilot", signing_key=KEY, mavlink={"require_signing": True, "set_speed_limits": False,
                                                         "signing_key_file": _key_file(tmp_path / "v.key")})
     assert run_until(b, lambda: position_ready(b), 20)
-    b.arm()
+    b.actions.arm()
     assert run_until(b, lambda: emu.snapshot()["armed"], 10)
-    b.disarm()
+    b.actions.disarm()
 
 
 def _env(tmp_path, robot_mavlink: dict, top: dict | None = None) -> None:

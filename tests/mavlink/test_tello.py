@@ -85,38 +85,38 @@ def test_go_command_body_frame_ranges_and_chunking():
 @pytest.mark.tello(cfg={"keepalive_s": 0.3})
 def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
     emu, b = tello
-    assert b.link_ok and b.yaw == pytest.approx(90.0 - HEADING, abs=1.0)  # mission-start reference
-    b.arm()
-    b.takeoff(1.5)
+    assert b.state().link_ok and b.state().yaw == pytest.approx(90.0 - HEADING, abs=1.0)  # mission-start reference
+    b.actions.arm()
+    b.actions.takeoff(1.5)
     _settle(b)
-    assert emu.position[2] == pytest.approx(1.5, abs=0.1) and b.position[2] == pytest.approx(emu.position[2], abs=0.02)
-    assert b.in_air and b.odometry().in_air
+    assert emu.position[2] == pytest.approx(1.5, abs=0.1) and b.state().position[2] == pytest.approx(emu.position[2], abs=0.02)
+    assert b.state().in_air and b.telemetry.odometry().in_air
     assert _sent(emu, "takeoff") == ["takeoff"] and len(_sent(emu, "up")) == 1  # takeoff climbs to 0.8 m
 
     p0, yaw0 = emu.position, emu.yaw_enu
-    b.set_velocity((0.0, 0.5, 0.0), yaw_rate_dps=20.0)  # north at 0.5 m/s, turning counter-clockwise
+    b.guidance.set_velocity((0.0, 0.5, 0.0), yaw_rate_dps=20.0)  # north at 0.5 m/s, turning counter-clockwise
     time.sleep(1.0)
     moved = emu.position - p0
     assert moved[1] > 0.3 and abs(moved[0]) < 0.2 and abs(moved[2]) < 0.05, moved
     assert emu.yaw_enu - yaw0 > 10.0  # counter-clockwise in ENU
-    assert b.yaw == pytest.approx(emu.yaw_enu, abs=3.0)
-    assert np.linalg.norm(b.position - emu.position) < 0.15, (b.position, emu.position)  # dead reckoning
+    assert b.state().yaw == pytest.approx(emu.yaw_enu, abs=3.0)
+    assert np.linalg.norm(b.state().position - emu.position) < 0.15, (b.state().position, emu.position)  # dead reckoning
 
     target = np.array([2.0, -1.0, 1.2])  # east-south-down from a yawed vehicle: no axis is a body axis
-    b.goto(target, speed=1.0)  # replaces the velocity command
+    b.guidance.goto(target, speed=1.0)  # replaces the velocity command
     _settle(b)
     for go in _sent(emu, "go"):
         x, y, z, s = (int(v) for v in go.split()[1:])
         assert all(abs(c) <= 500 for c in (x, y, z)) and 10 <= s <= 100 and max(abs(x), abs(y), abs(z)) > 20
     assert np.linalg.norm(emu.position - target) < 0.2, emu.position  # the vehicle flew there
-    assert np.linalg.norm(b.position - emu.position) < 0.1, (b.position, emu.position)  # and we know it
+    assert np.linalg.norm(b.state().position - emu.position) < 0.1, (b.state().position, emu.position)  # and we know it
     time.sleep(0.8)  # keep-alives while hovering must not resume the old velocity
-    assert np.linalg.norm(emu.position - target) < 0.2 and b.velocity == pytest.approx(np.zeros(3), abs=0.1)
+    assert np.linalg.norm(emu.position - target) < 0.2 and b.state().velocity == pytest.approx(np.zeros(3), abs=0.1)
 
     x0 = float(emu.position[0])
-    b.goto((5.0, -1.0, 1.2), speed=0.5)
+    b.guidance.goto((5.0, -1.0, 1.2), speed=0.5)
     _wait(lambda: emu.position[0] > x0 + 0.3, 15.0, "the go to be under way")
-    b.hold()  # stops the running go
+    b.guidance.hold()  # stops the running go
     assert not b.control.busy and _sent(emu, "stop") == ["stop"]
     _wait(lambda: np.linalg.norm(emu.vehicle.state.velocity) < 0.02, 15.0, "the stop")
     stopped = emu.position
@@ -124,10 +124,10 @@ def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
     time.sleep(0.4)
     assert np.linalg.norm(emu.position - stopped) < 0.05
 
-    b.land()
+    b.guidance.land()
     _settle(b)
-    assert not emu.in_air and not b.in_air and b.position[2] == pytest.approx(0.0, abs=0.02)
-    odo = b.odometry()
+    assert not emu.in_air and not b.state().in_air and b.state().position[2] == pytest.approx(0.0, abs=0.02)
+    odo = b.telemetry.odometry()
     assert odo.battery_pct == pytest.approx(emu.vehicle.battery_pct, abs=1.5)
     assert b.drain_events() == []
 
@@ -135,7 +135,7 @@ def test_takeoff_rc_go_hold_land_reach_expected_positions(tello):
 def test_refused_command_carries_the_tello_reply(tello):
     emu, b = tello
     with pytest.raises(CommandRefused) as ei:
-        b.goto((1.0, 0.0, 1.0))  # on the ground: the Tello refuses motion
+        b.guidance.goto((1.0, 0.0, 1.0))  # on the ground: the Tello refuses motion
     assert ei.value.result == "error Motor stop" and ei.value.command.startswith("go ")  # the SDK text sent
     with pytest.raises(CommandRefused, match="out of range"):
         b.link.command("speed 500")
@@ -148,10 +148,10 @@ def test_lost_replies_are_retried_without_flying_twice(tello):
     assert b.link.command("speed 50") == "ok"
     assert _sent(emu, "speed") == ["speed 50", "speed 50"] and b.link.stats["retries"] == 1
 
-    b.takeoff(0.8)
+    b.actions.takeoff(0.8)
     _settle(b)
     emu.drop_next_reply("go")
-    b.goto((1.0, 0.0, 0.8), speed=1.0)
+    b.guidance.goto((1.0, 0.0, 0.8), speed=1.0)
     _settle(b)
     assert emu.dropped_replies == 2
     assert len(_sent(emu, "go")) == 1  # the go was done: re-checking the position, not re-sending it
@@ -166,20 +166,20 @@ def test_malformed_state_packets_are_counted_and_skipped(tello):
     emu.send_raw_state(b"ok")
     _wait(lambda: b.link.stats["malformed_state"] >= before + 3, 2.0, "the malformed packets")
     time.sleep(0.3)
-    assert b.link.stats["malformed_state"] == before + 3 and b.link_ok
-    assert b.yaw == pytest.approx(90.0 - HEADING, abs=1.0) and b.battery_pct == pytest.approx(90.0, abs=1.0)
+    assert b.link.stats["malformed_state"] == before + 3 and b.state().link_ok
+    assert b.state().yaw == pytest.approx(90.0 - HEADING, abs=1.0) and b.state().battery_pct == pytest.approx(90.0, abs=1.0)
 
 
 def test_link_lost_and_regained(tello):
     emu, b = tello
     b.step(0.0)
     emu.state_paused = True
-    _wait(lambda: not b.link_ok, 2.0, "the link to be lost")
+    _wait(lambda: not b.state().link_ok, 2.0, "the link to be lost")
     b.step(0.0)
     with pytest.raises(LinkLost):
-        b.takeoff(1.0)
+        b.actions.takeoff(1.0)
     emu.state_paused = False
-    _wait(lambda: b.link_ok, 2.0, "the link to come back")
+    _wait(lambda: b.state().link_ok, 2.0, "the link to come back")
     b.step(0.0)
     assert [e["event"] for e in b.drain_events()] == ["link_lost", "link_regained"]
 
@@ -187,7 +187,7 @@ def test_link_lost_and_regained(tello):
 @pytest.mark.tello(emu={"auto_land_s": 1.0}, cfg={"keepalive_s": 0.3})
 def test_keepalive_keeps_the_tello_flying(tello):
     emu, b = tello
-    b.takeoff(0.8)
+    b.actions.takeoff(0.8)
     _settle(b)
     # more than twice the emulated 1.0 s auto-land time without any application command (waited on the keep-alives
     # themselves, so a loaded host sending them late is not a shorter test)
@@ -205,11 +205,11 @@ def test_video_frames_decode_to_the_rendered_view(tello):
     emu, b = tello
     assert _sent(emu, "streamon") == ["streamon"]
     _wait(lambda: b.link.stats["video_frames"] >= 3, 10.0, "decoded video frames")
-    b.takeoff(0.8)  # up where the camera sees the ground's texture
+    b.actions.takeoff(0.8)  # up where the camera sees the ground's texture
     _settle(b)
     n = b.link.stats["video_frames"]
     _wait(lambda: b.link.stats["video_frames"] >= n + 3, 5.0, "frames of the hovering Tello")
-    frame, t = b.camera_frame()
+    frame, t = b.camera.frame()
     assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
     assert 0.0 < t <= b.t
     sent = emu.sent_frames[-1][2]  # the vehicle hovers still: every rendered frame is the same view
@@ -225,13 +225,13 @@ def test_refused_streamon_without_a_backend_camera_is_a_video_error_event(tello)
     """No camera takes its frames from this Tello: a refused ``streamon`` does not fail the connection, it is a
     ``video_error`` event carrying the reply, and no frames come."""
     emu, b = tello
-    assert _sent(emu, "streamon") == ["streamon"] and b.link_ok
+    assert _sent(emu, "streamon") == ["streamon"] and b.state().link_ok
     events = b.drain_events()
     assert [e["event"] for e in events] == ["video_error"]
     assert events[0]["command"] == "streamon" and events[0]["reply"] == "error"
     assert "streamon refused: error" in events[0]["reason"] and b.link.last_status == "error"
     time.sleep(0.5)
-    assert b.camera_frame() is None and emu.frames_sent == 0 and b.link.stats["video_datagrams"] == 0
+    assert b.camera.frame() is None and emu.frames_sent == 0 and b.link.stats["video_datagrams"] == 0
     assert b.link.command("battery?") == str(int(emu.vehicle.battery_pct))  # otherwise a working Tello
 
 

@@ -62,14 +62,14 @@ def _drive(r, seconds: float, dt: float = 0.1) -> list:
     samples = []
     for _ in range(round(seconds / dt)):
         r.step(dt)
-        samples.append(r.odometry())
+        samples.append(r.telemetry.odometry())
     return samples
 
 
 def test_goto_turns_on_the_spot_then_drives_within_its_limits_and_stops_on_the_target():
     r = _rover(max_speed_mps=2.0, turn_rate_dps=90.0, accel_mps2=1.0, start_yaw_deg=180.0)
-    r.arm()
-    r.goto((10.0, 0.0, 0.0))  # due east, the rover faces west: a half turn first
+    r.actions.arm()
+    r.guidance.goto((10.0, 0.0, 0.0))  # due east, the rover faces west: a half turn first
     odo = _drive(r, 15.0)
     speeds = [math.hypot(*o.velocity[:2]) for o in odo]
     assert all(o.position[2] == 0.0 and not o.in_air for o in odo)
@@ -87,66 +87,66 @@ def test_goto_turns_on_the_spot_then_drives_within_its_limits_and_stops_on_the_t
 
 def test_velocity_hold_and_the_battery():
     r = _rover(drain_pct_per_s=0.5, drain_pct_per_m=1.0, start_yaw_deg=0.0)
-    r.arm()
-    r.set_velocity((0.0, -1.0, 3.0))  # south at 1 m/s; a rover ignores the vertical part
+    r.actions.arm()
+    r.guidance.set_velocity((0.0, -1.0, 3.0))  # south at 1 m/s; a rover ignores the vertical part
     _drive(r, 5.0)
-    assert r.velocity == pytest.approx((0.0, -1.0, 0.0), abs=1e-9) and r.yaw == pytest.approx(270.0)
+    assert r.state().velocity == pytest.approx((0.0, -1.0, 0.0), abs=1e-9) and r.state().yaw == pytest.approx(270.0)
     driven = r.checkpoint().odometer_m
-    assert r.battery_pct == pytest.approx(100.0 - 0.5 * 5.0 - 1.0 * driven)
-    r.hold()
+    assert r.state().battery_pct == pytest.approx(100.0 - 0.5 * 5.0 - 1.0 * driven)
+    r.guidance.hold()
     _drive(r, 2.0)
-    assert r.velocity == pytest.approx((0.0, 0.0, 0.0)) and r.position[2] == 0.0
-    r.land()  # on the ground already: a stop, the rover stays armed until the drone disarms it
-    assert r.armed and not r.in_air
-    r.set_velocity((0.0, 0.0, 0.0), yaw_rate_dps=45.0)  # turn on the spot
-    yaw0, pos0 = r.yaw, r.position.copy()
+    assert r.state().velocity == pytest.approx((0.0, 0.0, 0.0)) and r.state().position[2] == 0.0
+    r.guidance.land()  # on the ground already: a stop, the rover stays armed until the drone disarms it
+    assert r.state().armed and not r.state().in_air
+    r.guidance.set_velocity((0.0, 0.0, 0.0), yaw_rate_dps=45.0)  # turn on the spot
+    yaw0, pos0 = r.state().yaw, r.state().position.copy()
     _drive(r, 2.0)
-    assert r.yaw == pytest.approx((yaw0 + 90.0) % 360) and r.position == pytest.approx(pos0)
+    assert r.state().yaw == pytest.approx((yaw0 + 90.0) % 360) and r.state().position == pytest.approx(pos0)
 
 
 def test_an_empty_battery_stops_the_rover_with_one_event_and_it_cannot_arm_again():
     r = _rover(start_battery_pct=1.0, drain_pct_per_s=0.0, drain_pct_per_m=0.5)
-    r.arm()
-    r.goto((100.0, 0.0, 0.0))
+    r.actions.arm()
+    r.guidance.goto((100.0, 0.0, 0.0))
     odo = _drive(r, 20.0)
     events = r.drain_events()
     # 1 % at 0.5 % a metre: empty after 2 m, within the step that crossed it (at most 2 m/s x 0.1 s)
     assert [e["event"] for e in events] == ["battery_empty"] and 2.0 <= events[0]["odometer_m"] <= 2.2, events
-    assert r.battery_pct == 0.0 and odo[-1].velocity == (0.0, 0.0, 0.0)
+    assert r.state().battery_pct == 0.0 and odo[-1].velocity == (0.0, 0.0, 0.0)
     assert odo[-1].position[0] == pytest.approx(events[0]["odometer_m"], abs=1e-3)
     assert r.drain_events() == []
-    r.disarm()
+    r.actions.disarm()
     with pytest.raises(CommandRefused, match="'r': arm refused: DENIED .battery empty."):
-        r.arm()
+        r.actions.arm()
 
 
 def test_commands_it_cannot_carry_out_are_refused_naming_robot_and_command():
     r = _rover()
     with pytest.raises(CommandRefused, match="'r': goto refused: DENIED .not armed."):
-        r.goto((1.0, 0.0, 0.0))
+        r.guidance.goto((1.0, 0.0, 0.0))
     with pytest.raises(CommandRefused, match="set_velocity refused"):
-        r.set_velocity((1.0, 0.0, 0.0))
-    r.arm()
+        r.guidance.set_velocity((1.0, 0.0, 0.0))
+    r.actions.arm()
     with pytest.raises(CommandRefused, match="takeoff to 3 m refused: UNSUPPORTED"):
-        r.takeoff(3.0)
-    r.hold()  # always accepted, armed or not
-    r.disarm()
-    r.hold()
+        r.actions.takeoff(3.0)
+    r.guidance.hold()  # always accepted, armed or not
+    r.actions.disarm()
+    r.guidance.hold()
     with pytest.raises(ValueError, match="dt must be >= 0 s, got -0.1"):
         r.step(-0.1)
 
 
 def test_a_checkpoint_restores_the_whole_state():
     r = _rover()
-    r.arm()
-    r.goto((5.0, 5.0, 0.0))
+    r.actions.arm()
+    r.guidance.goto((5.0, 5.0, 0.0))
     _drive(r, 3.0)
     saved = r.checkpoint()
     again = _rover()
     again.restore(saved)
-    assert again.odometry() == r.odometry()
+    assert again.telemetry.odometry() == r.telemetry.odometry()
     _drive(r, 2.0), _drive(again, 2.0)
-    assert again.odometry() == r.odometry()
+    assert again.telemetry.odometry() == r.telemetry.odometry()
 
 
 @pytest.mark.parametrize("opts,field,message", [
@@ -195,12 +195,12 @@ def test_a_drone_on_the_rover_drives_its_patrol_without_a_take_off():
     while backend.t < 120.0 and not d.done:
         d.step(0.1)
         d.control_tick()
-        path.append(backend.odometry())
+        path.append(backend.telemetry.odometry())
     assert d.done and d.outcome == "success", (d.outcome, rec.events[-5:])
     assert [v["id"] for v in d.visited] == ["p1", "p2", "p3"]
     assert all(v["error_m"] <= 0.3 for v in d.visited), d.visited
     assert "TAKING_OFF" not in rec.states and rec.states[:3] == ["PREFLIGHT", "ARMED", "HOVERING"], rec.states
-    assert rec.states[-2:] == ["LANDING", "LANDED"] and not backend.armed
+    assert rec.states[-2:] == ["LANDING", "LANDED"] and not backend.state().armed
     assert not any(o.in_air or o.position[2] != 0.0 for o in path)
     kinds = [e["event"] for e in rec.events]
     assert "takeoff_skipped" in kinds and "takeoff" not in kinds and not [k for k in kinds if k.endswith("_stalled")]
@@ -225,3 +225,39 @@ def test_the_backend_contract_documents_every_member_and_which_are_required():
                 required[name] = req.strip().startswith("**yes**")
     assert {n for n, r in required.items() if r} == set(VehicleBackend.__abstractmethods__), required
     assert all(not r for n, r in required.items() if n not in VehicleBackend.__abstractmethods__)
+
+
+def test_a_backend_without_its_command_groups_is_refused_naming_what_is_missing(monkeypatch):
+    """make_backend refuses a backend whose __init__ set no ``actions`` / ``guidance`` (or one short of a command):
+    a TypeError naming the backend and the missing commands, not an AttributeError in the drone's first tick."""
+    from aerodaas.backends import make_backend
+    from aerodaas.plugins import registry
+
+    rover = _load()
+
+    class HalfRover(rover.RoverBackend):
+        kind = "half_rover_test"
+
+        def __init__(self, cfg):
+            super().__init__(cfg)
+            self.guidance = types.SimpleNamespace(goto=self.goto, hold=self.hold)  # no set_velocity, land, rtl
+
+    class NoGroups(rover.RoverBackend):
+        kind = "no_groups_rover_test"
+
+        def __init__(self, cfg):
+            super().__init__(cfg)
+            del self.actions
+
+    for cls in (HalfRover, NoGroups):
+        monkeypatch.setattr(registry, "get", lambda kind, name, cls=cls: cls)
+        cfg = types.SimpleNamespace(id="r", home=GeoPoint(lat=0.0, lon=0.0, alt=0.0), backend=cls.kind,
+                                    backend_config={}, safety=None)
+        with pytest.raises(TypeError) as e:
+            make_backend(cfg)
+        group, missing = ("guidance", "set_velocity(), land(), return_to_launch()") if cls is HalfRover else \
+            ("actions", "arm(), disarm(), takeoff()")
+        assert f"backend {cls.kind!r}" in str(e.value) and f"self.{group}" in str(e.value), e.value
+        assert missing in str(e.value), e.value
+    monkeypatch.undo()
+    assert isinstance(make_backend(RobotConfig(id="d1")), VehicleBackend)  # the built-ins pass

@@ -63,7 +63,7 @@ def replayed():
         samples, events = [], []
         while not b.finished:
             b.step(0.0)
-            samples.append((b.odometry(), b.battery_pct))
+            samples.append((b.telemetry.odometry(), b.state().battery_pct))
             events += b.drain_events()
             clock.now += 0.01
         wall = clock() - t_start
@@ -146,7 +146,7 @@ def test_replay_is_not_navigable():
              "hold": (), "land": (), "return_to_launch": ()}
     for name, args in calls.items():
         with pytest.raises(NotNavigable, match=f"not navigable; {name} is not possible"):
-            getattr(b, name)(*args)
+            getattr(b.actions if name in ("arm", "disarm", "takeoff") else b.guidance, name)(*args)
 
 
 def test_replay_rejects_bad_logs(tmp_path):
@@ -262,7 +262,7 @@ def test_replay_plays_a_px4_ulog(ulog_file, monkeypatch):
     samples, events = [], []
     while not b.finished and clock.now < 1000.0 + 60.0 / RATE + 5:
         b.step(0.0)
-        samples.append((b.odometry().t, b.position.copy(), b.battery_pct, b.in_air, b.yaw))
+        samples.append((b.telemetry.odometry().t, b.state().position.copy(), b.state().battery_pct, b.state().in_air, b.state().yaw))
         events += b.drain_events()
         clock.now += 0.00037  # 0.037 s of log per step, off the 0.1 s sample grid
     assert b.finished
@@ -285,7 +285,7 @@ def test_replay_plays_a_px4_ulog(ulog_file, monkeypatch):
         (6, "Takeoff detected"), (4, "Landing detected")]  # MAV_SEVERITY_INFO, _WARNING
     assert "link_lost" not in kinds  # an onboard log has no link to lose
     with pytest.raises(NotNavigable):
-        b.goto((0.0, 0.0, 5.0))
+        b.guidance.goto((0.0, 0.0, 5.0))
 
 
 def test_replay_rejects_a_bad_ulog(tmp_path):

@@ -119,7 +119,7 @@ def test_unknown_battery_is_unknown_not_100(tmp_path):
     b._t_wall0 = None
     b._t_applied = 5.0
     b.step(0.0)
-    assert b.battery_pct is None
-    o = b.odometry()
+    assert b.state().battery_pct is None
+    o = b.telemetry.odometry()
     assert o.battery_pct is None and o.model_dump(mode="json")["battery_pct"] is None
     assert b._volt == pytest.approx(15.8)

@@ -240,7 +240,7 @@ def test_frame_copies_on_the_edge_hot_path_and_the_recorder(tmp_path):
         cam = d.cameras[0]["comp"]
         produced = []
         for i in range(1, 4):
-            produced.append(cam.capture(tuple(d.backend.position), 90.0, 0.1 * i, i))
+            produced.append(cam.capture(tuple(d.backend.state().position), 90.0, 0.1 * i, i))
             deadline = time.time() + 5  # one frame at a time: no reader is busy, nothing is dropped
             while (len(det.seen) < i or len(other.seen) < i
                    or len(rt.comps["d00/scheduler"].latency) < i) and time.time() < deadline:
@@ -409,7 +409,7 @@ def test_navigation_reaches_the_backend_before_the_next_tick():
         d = rt.drones[0]
         _fly(d)
         ticks = d.ticks
-        rt.drones[0].cameras[0]["comp"].capture(tuple(d.backend.position), 90.0, 1.0, 1)
+        rt.drones[0].cameras[0]["comp"].capture(tuple(d.backend.state().position), 90.0, 1.0, 1)
         deadline = time.time() + 5
         while d.backend.vehicle.setpoint.mode != "velocity" and time.time() < deadline:
             time.sleep(0.005)

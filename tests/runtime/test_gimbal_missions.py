@@ -230,9 +230,12 @@ def test_the_drone_refuses_out_of_limit_commands_with_nothing_sent():
     cfg = parse_environment_config(_env()).robots[0]
     sent, events = [], []
 
-    class Backend:
-        def point_gimbal(self, cmd):
+    class Gimbal:
+        def point(self, cmd):
             sent.append(cmd)
+
+    class Backend:
+        gimbal = Gimbal()
 
     g = DroneGimbal(Backend(), "uav", GimbalLimits(**LIMITS), SafetyGate(cfg.safety, cfg.limits, cfg.home),
                     None, lambda t: 0, lambda kind, **kw: events.append((kind, kw)))

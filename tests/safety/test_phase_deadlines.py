@@ -14,6 +14,7 @@ import textwrap
 import pytest
 
 from aerodaas.backends.sim import SimBackend
+from aerodaas.sim.vehicle import SimVehicle
 from aerodaas.config import ConfigError, RobotConfig, parse_environment_config
 from aerodaas.config.deadlines import PhaseDeadlinesConfig
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
@@ -61,34 +62,44 @@ def test_the_defaults_are_documented_values():
 
 
 # ---------------------------------------------------------------- the drone, stepped by hand on simulated time
-class NoClimbSim(SimBackend):
-    """A simulator whose motors lift nothing until ``lift`` is set: take-off is accepted, the vehicle stays on the
-    ground."""
+class NoClimbVehicle(SimVehicle):
+    """Motors that lift nothing until ``lift`` is set: take-off is accepted, the vehicle stays on the ground."""
 
-    kind = "no_climb_sim_test"
     lift = False
 
-    def takeoff(self, altitude_m: float) -> None:
-        super().takeoff(altitude_m if self.lift else 0.0)
+    def takeoff(self, altitude: float) -> None:
+        super().takeoff(altitude if self.lift else 0.0)
 
 
-class NoLandSim(SimBackend):
-    """A simulator that accepts LAND and keeps hovering (an autopilot whose landing never starts)."""
+class NoClimbSim(SimBackend):
+    kind = "no_climb_sim_test"
+    vehicle_class = NoClimbVehicle
 
-    kind = "no_land_sim_test"
+
+class NoLandVehicle(SimVehicle):
+    """Accepts LAND and keeps hovering (an autopilot whose landing never starts)."""
 
     def land(self) -> None:
         self.hold()
 
 
-class StuckSim(SimBackend):
-    """A simulator that holds wherever it is once ``stuck`` (a vehicle that cannot make way home: wind, a fence)."""
+class NoLandSim(SimBackend):
+    kind = "no_land_sim_test"
+    vehicle_class = NoLandVehicle
 
-    kind = "stuck_sim_test"
+
+class StuckVehicle(SimVehicle):
+    """Holds wherever it is once ``stuck`` (a vehicle that cannot make way home: wind, a fence)."""
+
     stuck = False
 
-    def goto(self, target_enu, speed=None) -> None:
-        self.hold() if self.stuck else super().goto(target_enu, speed)
+    def goto(self, target, speed=None) -> None:
+        self.hold() if self.stuck else super().goto(target, speed)
+
+
+class StuckSim(SimBackend):
+    kind = "stuck_sim_test"
+    vehicle_class = StuckVehicle
 
 
 class Recorded:
@@ -128,7 +139,7 @@ def _fly(d, until_s: float, dt: float = 0.1, on_step=None) -> list[float]:
     while d.backend.t < until_s and not d.done:
         d.step(dt)
         d.control_tick()
-        heights.append(float(d.backend.position[2]))
+        heights.append(float(d.backend.state().position[2]))
         if on_step is not None:
             on_step(d)
     return heights
@@ -146,7 +157,7 @@ def test_a_vehicle_that_cannot_climb_is_stalled_at_its_deadline_then_landed():
     assert stall["deadline_s"] == pytest.approx(19.0) and 19.0 < stall["elapsed_s"] <= 19.1 + 1e-9, stall
     assert stall["action"] == "land" and stall["legs"] == [{"kind": "climb", "distance_m": 4.0, "speed_mps": 2.0}]
     assert [s.value for _, s in d.fsm.history][-3:] == ["TAKING_OFF", "LANDING", "LANDED"]
-    assert d.outcome == "takeoff_stalled" and d.done and max(heights) < 0.05 and not d.backend.armed
+    assert d.outcome == "takeoff_stalled" and d.done and max(heights) < 0.05 and not d.backend.state().armed
     assert d.backend.t < 25.0  # bounded: not the battery's 4,000 s
 
 
@@ -157,7 +168,7 @@ def test_a_take_off_stall_can_hold_for_the_operator_and_resume_climbs_again():
     assert d.fsm.state.value == "PAUSED" and d.outcome == "takeoff_stalled" and not d.done
     assert [e["event"] for e in rec.events][-2:] == ["takeoff_stalled", "paused"]
     assert rec.events[-2]["legs"] == [] and rec.events[-2]["deadline_s"] == 5.0  # the configured deadline
-    d.backend.lift = True  # the operator fixed the motors: resuming commands the take-off again
+    d.backend.vehicle.lift = True  # the operator fixed the motors: resuming commands the take-off again
     d.resume_mission()
     _fly(d, 200.0)
     assert [e["event"] for e in rec.events].count("takeoff_stalled") == 1 and "waypoint_done" in _kinds(rec)
@@ -186,9 +197,9 @@ def test_a_return_that_makes_no_way_home_is_stalled_and_lands_where_it_is():
     d, rec = _drone(StuckSim, items, deadlines={"margin_s": 2.0})
 
     def stick_after_a(drone):
-        if drone.visited and not drone.backend.stuck:
-            drone.backend.stuck = True
-            drone.queue_flight.return_to_launch(drone.backend.t, tuple(drone.backend.position))
+        if drone.visited and not drone.backend.vehicle.stuck:
+            drone.backend.vehicle.stuck = True
+            drone.queue_flight.return_to_launch(drone.backend.t, tuple(drone.backend.state().position))
 
     _fly(d, 300.0, on_step=stick_after_a)
     stall = next(e for e in rec.events if e["event"] == "rtl_stalled")
@@ -196,7 +207,7 @@ def test_a_return_that_makes_no_way_home_is_stalled_and_lands_where_it_is():
     assert stall["deadline_s"] == pytest.approx(12.0, abs=0.2) and stall["distance_from_home_m"] > 19.0, stall
     assert d.outcome == "rtl_stalled" and [s.value for _, s in d.fsm.history][-3:] == ["RETURNING", "LANDING",
                                                                                         "LANDED"]
-    assert abs(d.backend.position[0] - 20.0) < 1.0 and d.backend.position[2] == 0.0  # landed where it was
+    assert abs(d.backend.state().position[0] - 20.0) < 1.0 and d.backend.state().position[2] == 0.0  # landed where it was
 
 
 def test_phases_within_their_deadlines_fly_as_before():
@@ -210,6 +221,12 @@ APP = textwrap.dedent('''
     from aerodaas import AeroNavigation, Environment, NavigationType, SchedulingType, Waypoint
     from aerodaas.backends.sim import SimBackend
     from aerodaas.plugins import register_backend
+    from aerodaas.sim.vehicle import SimVehicle
+
+
+    class WeakMotor(SimVehicle):
+        def takeoff(self, altitude):
+            super().takeoff(0.0)  # full throttle, no lift
 
 
     @register_backend
@@ -217,9 +234,15 @@ APP = textwrap.dedent('''
         """My test rig: the simulator with motors that cannot lift the airframe."""
 
         kind = "weak_motor_sim"
+        vehicle_class = WeakMotor
 
-        def takeoff(self, altitude_m):
-            super().takeoff(0.0)  # full throttle, no lift
+
+    class GroundVehicle(SimVehicle):
+        def goto(self, target, speed=None):
+            super().goto((target[0], target[1], 0.0), speed)
+
+        def land(self):
+            self.hold()  # a rover is always on the ground: stop
 
 
     @register_backend
@@ -228,12 +251,7 @@ APP = textwrap.dedent('''
 
         kind = "rover"
         needs_takeoff = False
-
-        def goto(self, target_enu, speed=None):
-            super().goto((target_enu[0], target_enu[1], 0.0), speed)
-
-        def land(self):
-            self.hold()  # a rover is always on the ground: stop
+        vehicle_class = GroundVehicle
 
 
     env = Environment("env.json")
@@ -347,4 +365,4 @@ def test_a_return_around_an_exclusion_zone_flies_within_its_deadline():
     _fly(d, 600.0)
     ret = next(e for e in rec.events if e["event"] == "returning")
     assert len(ret["path"]) > 1 and not [e for e in rec.events if e["event"].endswith("_stalled")], rec.events[-5:]
-    assert d.fsm.state.value == "LANDED" and abs(d.backend.position[0]) < 1.0 and abs(d.backend.position[1]) < 1.0
+    assert d.fsm.state.value == "LANDED" and abs(d.backend.state().position[0]) < 1.0 and abs(d.backend.state().position[1]) < 1.0

@@ -198,9 +198,12 @@ def test_a_stream_frame_carries_the_gimbal_attitude_of_its_capture_time():
     reports = iter([GimbalAttitude(t=10.0, q=(1.0, 0.0, 0.0, 0.0), roll_deg=0.0, pitch_deg=-10.0, yaw_deg=20.0),
                     GimbalAttitude(t=10.2, q=(1.0, 0.0, 0.0, 0.0), roll_deg=0.0, pitch_deg=-50.0, yaw_deg=40.0)])
 
-    class Backend:
-        def gimbal_attitude(self):
+    class Gimbal:
+        def latest(self):
             return next(reports)
+
+    class Backend:
+        gimbal = Gimbal()
 
     cam = CameraComponent.__new__(CameraComponent)  # only the gimbal bookkeeping, no plane or stream
     cam.backend, cam._gimbals = Backend(), deque(maxlen=256)

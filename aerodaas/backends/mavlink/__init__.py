@@ -29,16 +29,19 @@ the estimator's margin),
 ``backend.transfers`` (:class:`~.transfer.MissionTransfer`: every mission-protocol exchange, mission, fence and
 rally items), ``backend.mission`` (:class:`~.mission.AutopilotMission`: the mission built from waypoints, its
 upload, download and start, and its progress), ``backend.actions`` (:class:`~.action.VehicleAction`: readiness,
-arming, disarming, take-off), ``backend.offboard`` (:class:`~.offboard.OffboardControl`: GUIDED/OFFBOARD
-targets, hold/land/RTL, safe end), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
+arming, disarming, take-off: the contract's command group ``actions``), ``backend.guidance``
+(:class:`~.offboard.OffboardControl`: GUIDED/OFFBOARD targets, hold/land/RTL, safe end: the command group
+``guidance``), ``backend.signed_only`` (:class:`~.signing.SignedOnly`: ``mavlink.require_signing`` for what moves
+the vehicle), ``backend.fence`` (:class:`~.fence.AutopilotFence`: the autopilot's own geofence and rally points,
 FENCE_* / GF_* parameters, read back before flight),
-``backend.telemetry`` (:class:`~.telemetry.VehicleTelemetry`: the state the streams report and the ENU origin
-``home``, its message handlers in an explicit table), ``backend.link`` (:class:`~.link.MavlinkLink`: connection, autopilot HEARTBEAT, I/O thread,
+``backend.telemetry`` (:class:`~.telemetry.VehicleTelemetry`: the state the streams report, the ENU origin
+``home`` and the position samples the runtime records, the contract's ``telemetry``; its message handlers in an
+explicit table), ``backend.link`` (:class:`~.link.MavlinkLink`: connection, autopilot HEARTBEAT, I/O thread,
 dispatch, stream requests), ``backend.clock`` (:class:`~.clock.VehicleClock`: the vehicle clock from
 ``time_boot_ms``), ``backend.status_texts`` (:class:`~.statustext.StatusTexts`), ``backend.cameras`` (:class:`~.camera.CameraFinder`)
-and ``backend.gimbal`` (:class:`~.gimbal.GimbalConcern`). No concern is a mix-in any more:
-:class:`MavlinkBackend` holds them and keeps the :class:`~aerodaas.backends.base.VehicleBackend` surface, connect and
-close. Verified against real ArduCopter and PX4 SITL firmware (``tests/firmware/test_sitl_*.py``).
+and ``backend.gimbal`` (:class:`~.gimbal.GimbalConcern`, the contract's ``gimbal``). No concern is a mix-in, and
+none has a second name on the backend: :class:`MavlinkBackend` holds them, reads its
+:class:`~aerodaas.backends.base.VehicleState` from the telemetry, link and clock, and connects and closes. Verified against real ArduCopter and PX4 SITL firmware (``tests/firmware/test_sitl_*.py``).
 """
 from aerodaas.backends.mavlink.backend import MavlinkBackend
 from aerodaas.backends.mavlink._common import CommandNotAcknowledged, CommandNotConfirmed

@@ -20,7 +20,8 @@ health failures first", ArduPilot "PreArm: ..."): MAV_RESULT_FAILED / TEMPORARIL
 retried with back-off (0.5 s doubling to 4 s, wall) until ``arm_timeout_s`` expires; then the last refusal is
 raised with the autopilot's text.
 
-A concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`VehicleAction`).
+A concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`VehicleAction`), its command group
+``actions`` (:class:`~aerodaas.backends.base.Actions`).
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.offboard import OffboardControl
+from aerodaas.backends.mavlink.signing import SignedOnly
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import Readiness
 
@@ -72,15 +74,16 @@ class VehicleAction:
     ``system_status``), ``clock`` (vehicle seconds), ``texts`` (ArduPilot's "using GPS" seen), ``commands`` (the
     command protocol), ``telemetry`` (:class:`FlightTelemetry`), ``offboard`` (the guided control: its target
     stream stops before disarming and take-off, and arming puts the vehicle in our control,
-    :attr:`OffboardControl.in_control`), ``event`` (records a backend event) and ``lock`` (the backend's lock).
+    :attr:`OffboardControl.in_control`), ``signed`` (:class:`SignedOnly`: ``mavlink.require_signing`` for arming
+    and take-off), ``event`` (records a backend event) and ``lock`` (the backend's lock).
     ``settings``: ``arm_timeout_s``.
 
     State: whether a mission upload pinned the altitude reference for the next arming."""
 
     def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink, clock: VehicleClock, texts: StatusTexts,
                  commands: CommandProtocol, telemetry: FlightTelemetry, offboard: OffboardControl,
-                 event: Callable[..., None], lock: threading.RLock) -> None:
-        self.robot_id, self._settings = robot_id, settings
+                 signed: SignedOnly, event: Callable[..., None], lock: threading.RLock) -> None:
+        self.robot_id, self._settings, self._signed = robot_id, settings, signed
         self._link, self._clock, self._texts, self._commands = link, clock, texts, commands
         self._telemetry, self._offboard, self._event, self._lock = telemetry, offboard, event, lock
         self._alt_ref_pinned = False  # fixed by a mission upload on the ground: the next arm() keeps it
@@ -144,7 +147,9 @@ class VehicleAction:
         Raises :class:`CommandRefused` (the last refusal: MAV_RESULT name and the autopilot's STATUSTEXT, e.g.
         ``Arm: Need Position Estimate``) when the window expires or for a final result (DENIED, UNSUPPORTED);
         LinkLost / BackendError as :meth:`command_long`; :class:`CommandNotConfirmed` when the vehicle
-        acknowledged but never reported itself armed."""
+        acknowledged but never reported itself armed; CredentialsRefused on an unsigned link when
+        ``mavlink.require_signing`` (:class:`SignedOnly`)."""
+        self._signed.require("arm")
         self._link.check_link("arm")
         with self._lock:  # a new flight: its home (where it arms) becomes the ENU origin (telemetry.py)
             self._telemetry.arming = True
@@ -203,7 +208,9 @@ class VehicleAction:
         take-off point's AMSL altitude from GLOBAL_POSITION_INT, fixed when arming) is used on both autopilots
         (ArduPilot: in GUIDED, ``param7`` relative to home, which ArduPilot sets at arming = the take-off point;
         PX4: ``param7`` AMSL = reference + ``altitude_m``, position NaN = here; PX4 holds (LOITER) when there).
-        Raises ValueError for a non-positive or non-finite altitude; CommandRefused / LinkLost / BackendError."""
+        Raises CredentialsRefused on an unsigned link when ``mavlink.require_signing``; ValueError for a
+        non-positive or non-finite altitude; CommandRefused / LinkLost / BackendError."""
+        self._signed.require("takeoff")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude_m must be a positive number of metres, got {altitude_m!r}")
         self._link.check_link("takeoff")

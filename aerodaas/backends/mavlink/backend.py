@@ -1,18 +1,16 @@
 """The MAVLink vehicle backend: one class holding the concern objects (commands, parameters, mission transfers, mission,
-actions, offboard, speed limits, telemetry, fence, gimbal, link, clock, status texts; see the package docstring)."""
+actions, guidance, speed limits, telemetry, fence, gimbal, link, clock, signing, status texts; see the package
+docstring)."""
 from __future__ import annotations
 
 import math
 import threading
 import time
-from typing import Any, Literal, Sequence
-
-import numpy as np
+from typing import Any
 
 from aerodaas.config import MavlinkConfig
-from aerodaas.missionfile import MissionItem
-from aerodaas.model.types import GeoPoint, Odometry
-from aerodaas.backends.base import BackendError, CredentialsRefused, PoseSample, VehicleBackend
+from aerodaas.model.types import GeoPoint
+from aerodaas.backends.base import BackendError, VehicleBackend, VehicleState
 from aerodaas.backends.mavlink.action import VehicleAction
 from aerodaas.backends.mavlink.camera import CameraFinder
 from aerodaas.backends.mavlink.clock import VehicleClock
@@ -26,7 +24,7 @@ from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import ParameterProtocol, SpeedLimits
 from aerodaas.backends.mavlink.preflight import (check_autopilot_fence, check_autopilot_mission, check_shared_links,
                                                  resolve_signing_key)
-from aerodaas.backends.mavlink.signing import make_signing
+from aerodaas.backends.mavlink.signing import SignedOnly, make_signing
 from aerodaas.backends.mavlink.statustext import StatusTexts
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer
@@ -38,18 +36,21 @@ class MavlinkBackend(VehicleBackend):
 
     ``clock == "vehicle"``: :attr:`t` is the autopilot's ``time_boot_ms`` (seconds since :meth:`connect`), wall time
     until a timestamped message arrives; while the link is lost it runs on from the last sample at the measured
-    vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres from the vehicle's HOME_POSITION (the configured
-    home until the vehicle reports one). Besides the :class:`VehicleBackend` contract (with the optional members
-    :meth:`upload_mission` / :meth:`start_mission` for ``flies_uploaded_mission``, :meth:`release`,
-    :meth:`safe_end`, :meth:`discover_video_stream`) and the attributes :attr:`autopilot`
-    (``"ardupilot"``/``"px4"``) and :attr:`mode`, the MAVLink concerns are its public members, used directly:
-    ``commands`` (COMMAND_LONG/INT, ``set_mode``, ``rtt_ms``), ``parameters`` (``read``/``set``/``restore``),
-    ``speed_limits``, ``mission`` (``upload``/``download``/``clear``/``start``), ``transfers`` (typed mission,
-    fence and rally items), ``fence`` (``apply``/``upload_rally``/``restore``: the vehicle's own geofence, made the
-    robot's ``safety.geofence`` on connect when ``mavlink.fence.upload``), ``actions`` (``not_ready_reasons``),
-    ``offboard``, ``telemetry`` (``home_received``, ``gps_fix_type``, ``altitude_reference``), ``link``
-    (``vehicle_type``, ``failsafe``, ``messages_received``), ``clock``, ``events``, ``status_texts``,
-    ``cameras``, ``gimbal`` (package docstring).
+    vehicle/wall rate (so the runtime's control ticks, and its LINK_LOST state, go on). Positions are ENU metres
+    from the vehicle's HOME_POSITION (the configured home until the vehicle reports one; ``state().home``).
+    Besides the :class:`VehicleBackend` contract (:meth:`state`, and :meth:`discover_video_stream` for a camera with
+    ``source: "mavlink"``), the MAVLink concerns are its public members, used directly, as the contract's groups
+    are: ``actions`` (the command group: ``arm``/``disarm``/``takeoff``, ``not_ready_reasons``), ``guidance``
+    (the command group: ``goto``/``set_velocity``/``hold``/``land``/``return_to_launch``, and ``release``,
+    ``safe_end``), ``telemetry`` (the position samples: ``odometry``/``drain_odometry``/``pose_sample``/
+    ``sample_key``; ``home``, ``home_received``, ``gps_fix_type``, ``altitude_reference``), ``mission``
+    (``upload``/``download``/``clear``/``start``, for ``flies_uploaded_mission``), ``gimbal`` (``point``/
+    ``latest``/``drain``), ``commands`` (COMMAND_LONG/INT, ``set_mode``, ``rtt_ms``), ``parameters``
+    (``read``/``set``/``restore``), ``speed_limits``, ``transfers`` (typed mission, fence and rally items),
+    ``fence`` (``apply``/``upload_rally``/``restore``: the vehicle's own geofence, made the robot's
+    ``safety.geofence`` on connect when ``mavlink.fence.upload``), ``link`` (``autopilot``: ``"ardupilot"``/
+    ``"px4"``, ``mode``, ``vehicle_type``, ``failsafe``, ``messages_received``), ``clock`` (``t``, ``ratio``),
+    ``signed_only`` (``mavlink.require_signing``), ``events``, ``status_texts``, ``cameras`` (package docstring).
     Every STATUSTEXT becomes a ``status_text`` event and a log line on the ``aerodaas.mavlink`` logger
     (``"<robot>: <text>"``; MAV_SEVERITY EMERGENCY-CRITICAL -> CRITICAL, ERROR, WARNING, NOTICE/INFO -> INFO,
     DEBUG).
@@ -111,6 +112,7 @@ class MavlinkBackend(VehicleBackend):
     def __init__(self, cfg) -> None:  # cfg: aerodaas.config.RobotConfig
         """The concern objects, each given its collaborators (as MAVSDK composes a ``System`` of plugins: each is
         made on the link and registers what it receives). Raises what :func:`make_signing` raises (key file)."""
+        super().__init__(cfg.id, None)  # the home is the telemetry's: the vehicle's HOME_POSITION once it reports one
         self.cfg: MavlinkConfig = self.options(cfg)
         self._lock = threading.RLock()  # guards the state the I/O thread updates (every concern's)
         #: the vehicle clock from time_boot_ms (clock.py): the run's time t, its rate, missed heartbeats
@@ -118,7 +120,6 @@ class MavlinkBackend(VehicleBackend):
         #: every concern's events, stamped with the vehicle clock (events.py; drain_events)
         self.events = EventLog(self.clock)
         self._compose(cfg)
-        super().__init__(cfg.id, cfg.home)  # sets home: the telemetry's (the property below)
         self.config_home: GeoPoint = cfg.home
 
     def _compose(self, cfg) -> None:
@@ -135,30 +136,35 @@ class MavlinkBackend(VehicleBackend):
         #: the link (link.py): connection, HEARTBEAT, the I/O thread that hands each message to its concern
         self.link = MavlinkLink(rid, self.cfg, clock=self.clock, texts=self.status_texts, signing=self.signing,
                                 event=ev, lock=lock)
+        #: ``mavlink.require_signing`` for what moves the vehicle (signing.py), asked by actions, guidance, mission
+        self.signed_only = SignedOnly(rid, self.cfg, signing=self.signing, link=self.link)
         #: the command protocol (command.py): COMMAND_LONG/COMMAND_INT with their acknowledgements, mode changes
         self.commands = CommandProtocol(rid, self.cfg, link=self.link, clock=self.clock, texts=self.status_texts,
                                         event=ev)
         #: the parameter protocol (params.py)
         self.parameters = ParameterProtocol(rid, self.cfg, link=self.link)
-        #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py)
+        #: the state the autopilot streams: position, velocity, attitude, battery, GPS, home (telemetry.py); the
+        #: position samples the runtime records (the contract's ``telemetry``)
         self.telemetry = VehicleTelemetry(rid, cfg.home, link=self.link, clock=self.clock, event=ev,
                                           lock=lock)
         #: the vehicle's own speed limits for ``limits``, over the parameter protocol (params.py)
         self.speed_limits = SpeedLimits(rid, self.limits, params=self.parameters, link=self.link, clock=self.clock,
                                         telemetry=self.telemetry, event=ev, lock=lock)
-        #: guided/offboard targets, the autopilot's hold/land/return modes, the safe end (offboard.py)
-        self.offboard = OffboardControl(rid, self.cfg, link=self.link, clock=self.clock, telemetry=self.telemetry,
-                                        speed_limits=self.speed_limits, commands=self.commands, event=ev, lock=lock)
-        #: readiness, arming, disarming, take-off (action.py)
+        #: the command group ``guidance``: guided/offboard targets, the autopilot's hold/land/return modes, the
+        #: release and the safe end (offboard.py)
+        self.guidance = OffboardControl(rid, self.cfg, link=self.link, clock=self.clock, telemetry=self.telemetry,
+                                        speed_limits=self.speed_limits, commands=self.commands,
+                                        signed=self.signed_only, event=ev, lock=lock)
+        #: the command group ``actions``: readiness, arming, disarming, take-off (action.py)
         self.actions = VehicleAction(rid, self.cfg, link=self.link, clock=self.clock, texts=self.status_texts,
-                                     commands=self.commands, telemetry=self.telemetry, offboard=self.offboard,
-                                     event=ev, lock=lock)
+                                     commands=self.commands, telemetry=self.telemetry, offboard=self.guidance,
+                                     signed=self.signed_only, event=ev, lock=lock)
         #: the mission protocol's transfers (transfer.py)
         self.transfers = MissionTransfer(rid, self.cfg, link=self.link, texts=self.status_texts, event=ev)
         #: the vehicle's own mission (mission.py): upload, download, clear, start, progress
         self.mission = AutopilotMission(rid, link=self.link, telemetry=self.telemetry, speed_limits=self.speed_limits,
                                         commands=self.commands, transfers=self.transfers, actions=self.actions,
-                                        offboard=self.offboard, event=ev, lock=lock)
+                                        offboard=self.guidance, signed=self.signed_only, event=ev, lock=lock)
         #: the vehicle's own geofence and rally points (fence.py), over the parameter protocol and the transfers
         self.fence = AutopilotFence(rid, self.cfg.fence, self.limits, self.safety, params=self.parameters,
                                     transfers=self.transfers, link=self.link, clock=self.clock, event=ev)
@@ -167,16 +173,6 @@ class MavlinkBackend(VehicleBackend):
         #: the gimbal concern (gimbal protocol v2): commands, GIMBAL_DEVICE_ATTITUDE_STATUS reports
         self.gimbal = GimbalConcern(cfg.gimbal, commands=self.commands, telemetry=self.telemetry, clock=self.clock,
                                     link=self.link)
-
-    @property
-    def home(self) -> GeoPoint:
-        """The ENU origin: the configured home until the autopilot reports its HOME_POSITION
-        (:attr:`VehicleTelemetry.home`)."""
-        return self.telemetry.home
-
-    @home.setter
-    def home(self, value: GeoPoint) -> None:
-        self.telemetry.home = value
 
     # the link (aerodaas.backends.mavlink.link.MavlinkLink) and the vehicle clock (clock.VehicleClock)
     def connect(self, timeout_s: float | None = None) -> None:
@@ -203,13 +199,13 @@ class MavlinkBackend(VehicleBackend):
         with self._lock:
             self.clock.start()
             self.telemetry.clear_odometry()  # stamped on the clock before the connection's zero
-        if self.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
+        if self.link.autopilot == "px4":  # how long PX4 waits for our setpoints before its failsafe (offboard.py)
             got = self.parameters.read(["COM_OF_LOSS_T"]).get("COM_OF_LOSS_T")
             if got is not None and math.isfinite(got) and got > 0:
-                self.offboard.loss_timeout_s = float(got)
+                self.guidance.loss_timeout_s = float(got)
             else:  # PX4's default 1 s, scaled as PX4 SITL's rcS scales it by its speed factor (never stricter)
-                self.offboard.loss_timeout_s = max(1.0, self.clock.ratio)
-            self.events("offboard_loss_timeout", seconds=self.offboard.loss_timeout_s, read=got is not None)
+                self.guidance.loss_timeout_s = max(1.0, self.clock.ratio)
+            self.events("offboard_loss_timeout", seconds=self.guidance.loss_timeout_s, read=got is not None)
         if self.cfg.set_speed_limits:
             try:
                 self.speed_limits.apply()
@@ -234,23 +230,25 @@ class MavlinkBackend(VehicleBackend):
         if self.link.running:
             if safe_end:
                 try:
-                    self.safe_end()
+                    self.guidance.safe_end()
                 except Exception as e:  # noqa: BLE001 - closing must go on
                     self.events("safe_end_failed", error=str(e))
                     log.warning("%s: safe end failed: %s", self.robot_id, e)
+            link_ok, armed = self.link.link_ok, self.link.armed
             if self.cfg.fence.restore_on_close and self.fence.has_saved:
-                if self.link_ok and not self.armed:
+                if link_ok and not armed:
                     self.fence.restore()
                 else:
-                    self.events("fence_not_restored", reason="link lost" if not self.link_ok else "still armed")
+                    self.events("fence_not_restored", reason="link lost" if not link_ok else "still armed")
+            link_ok, armed = self.link.link_ok, self.link.armed  # again: restoring the fence took time
             if self.cfg.restore_params and self.parameters.changed:
                 if worker is not None and worker.is_alive():  # its PARAM_SET echoes and ours would be mixed up
                     self.events("params_not_restored", reason="speed limit write in progress",
                                 names=self.parameters.changed)
-                elif self.link_ok and not self.armed:
+                elif link_ok and not armed:
                     self.parameters.restore(self.events)
                 else:
-                    self.events("params_not_restored", reason="link lost" if not self.link_ok else "still armed",
+                    self.events("params_not_restored", reason="link lost" if not link_ok else "still armed",
                                 names=self.parameters.changed)
         self.link.close()
 
@@ -261,37 +259,23 @@ class MavlinkBackend(VehicleBackend):
         if self.link.io_error is not None:
             raise BackendError(f"robot {self.robot_id!r}: the MAVLink I/O thread failed: {self.link.io_error}")
         self.speed_limits.update()
-        self.speed_limits.resend_speed(self.offboard)
+        self.speed_limits.resend_speed(self.guidance)
 
-    @property
-    def t(self) -> float:
-        """Vehicle seconds since :meth:`connect` (:attr:`VehicleClock.t`)."""
-        return self.clock.t
-
-    @property
-    def clock_ratio(self) -> float:
-        """Vehicle seconds per wall second (:attr:`VehicleClock.ratio`; 1 for a real vehicle)."""
-        return self.clock.ratio
-
-    @property
-    def autopilot(self) -> Literal["ardupilot", "px4"] | None:
-        """``"ardupilot"`` / ``"px4"`` once connected (:attr:`MavlinkLink.autopilot`)."""
-        return self.link.autopilot
-
-    @property
-    def armed(self) -> bool:
-        """The armed flag of the autopilot's latest HEARTBEAT."""
-        return self.link.armed
-
-    @property
-    def link_ok(self) -> bool:
-        """HEARTBEATs keep coming (:attr:`MavlinkLink.link_ok`)."""
-        return self.link.link_ok
-
-    @property
-    def mode(self) -> str:
-        """The flight mode from the latest HEARTBEAT, in pymavlink's names (``GUIDED``, ``OFFBOARD``, ``LOITER``...)."""
-        return self.link.mode
+    def state(self) -> VehicleState:
+        """The vehicle now, read under the I/O thread's lock: position, velocity, attitude and battery as the autopilot
+        streams them (:class:`VehicleTelemetry`: ENU metres from its home, the configured one until the autopilot
+        reports its HOME_POSITION, ENU m/s, degrees, percent; in-air
+        from EXTENDED_SYS_STATE's landed state, else armed and above 0.3 m; the GNSS receiver's horizontal accuracy
+        from GPS_RAW_INT ``h_acc``, 0 when it reports none), armed and flight mode (pymavlink's names: ``GUIDED``,
+        ``OFFBOARD``, ``LOITER``...) from the latest HEARTBEAT, link health (HEARTBEATs keep coming,
+        :attr:`MavlinkLink.link_ok`), at :attr:`VehicleClock.t`."""
+        tel, link = self.telemetry, self.link
+        with self._lock:
+            roll, pitch, yaw = tel.attitude
+            return VehicleState(t=self.clock.t, position=tel.position, velocity=tel.velocity, roll=roll, pitch=pitch,
+                                yaw=yaw, battery_pct=tel.battery_pct, armed=link.armed, in_air=tel.in_air,
+                                link_ok=link.link_ok, mode=link.mode, position_accuracy_m=tel.gps_h_acc_m,
+                                home=tel.home)
 
     # events of every concern (events.py EventLog), and the state the autopilot streams (telemetry.py)
     def drain_events(self) -> list[dict[str, Any]]:
@@ -304,132 +288,6 @@ class MavlinkBackend(VehicleBackend):
                     self.link.failsafe_delivered()
         return out
 
-    @property
-    def position(self) -> np.ndarray:
-        """:attr:`VehicleTelemetry.position`."""
-        return self.telemetry.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """:attr:`VehicleTelemetry.velocity`."""
-        return self.telemetry.velocity
-
-    @property
-    def yaw(self) -> float:
-        """:attr:`VehicleTelemetry.yaw`."""
-        return self.telemetry.yaw
-
-    @property
-    def in_air(self) -> bool:
-        """:attr:`VehicleTelemetry.in_air`."""
-        return self.telemetry.in_air
-
-    @property
-    def battery_pct(self) -> float:
-        """:attr:`VehicleTelemetry.battery_pct`."""
-        return self.telemetry.battery_pct
-
-    @property
-    def position_accuracy_m(self) -> float:
-        """The GNSS receiver's horizontal accuracy (:attr:`VehicleTelemetry.gps_h_acc_m`, GPS_RAW_INT ``h_acc``);
-        0 when the vehicle reports none."""
-        return self.telemetry.gps_h_acc_m
-
-    @property
-    def sample_key(self) -> int:
-        """:attr:`VehicleTelemetry.sample_key`."""
-        return self.telemetry.sample_key
-
-    def pose_sample(self) -> PoseSample:
-        """:meth:`VehicleTelemetry.pose_sample`."""
-        return self.telemetry.pose_sample()
-
-    def odometry(self) -> Odometry:
-        """:meth:`VehicleTelemetry.odometry`."""
-        return self.telemetry.odometry()
-
-    def drain_odometry(self, newest_only: bool = False) -> list[Odometry]:
-        """:meth:`VehicleTelemetry.drain_odometry`."""
-        return self.telemetry.drain_odometry(newest_only)
-
-    # readiness, arming, take-off (aerodaas.backends.mavlink.action.VehicleAction)
-    def arm(self) -> None:
-        """Arm for a guided flight, bounded by ``arm_timeout_s`` (:meth:`VehicleAction.arm`). Raises
-        CredentialsRefused on an unsigned link when ``mavlink.require_signing`` (:meth:`require_signed`)."""
-        self.require_signed("arm")
-        self.actions.arm()
-
-    def disarm(self) -> None:
-        """MAV_CMD_COMPONENT_ARM_DISARM(0), our target stream stopped first; autopilots refuse it in flight
-        (:meth:`VehicleAction.disarm`)."""
-        self.actions.disarm()
-
-    def takeoff(self, altitude_m: float) -> None:
-        """MAV_CMD_NAV_TAKEOFF to ``altitude_m`` metres above the take-off point (:meth:`VehicleAction.takeoff`)."""
-        self._require_navigable("takeoff")
-        self.require_signed("takeoff")
-        self.actions.takeoff(altitude_m)
-
-    def require_signed(self, command: str) -> None:
-        """``mavlink.require_signing``: ``command`` (arming, take-off, a target, a mission start: anything that moves
-        the vehicle) goes only over a signed link. Stopping (hold, land, RTL, disarm, the safe end) is never refused:
-        refusing it could only leave a vehicle flying. Raises CredentialsRefused naming the robot otherwise."""
-        if self.cfg.require_signing and not (self.signing.enabled and self.link.port is not None):
-            raise CredentialsRefused(
-                f"robot {self.robot_id!r}: {command} refused: mavlink.require_signing is true but the link "
-                f"{self.cfg.connection!r} is not signed (mavlink.signing_key_file "
-                f"{'unset' if self.cfg.signing_key_file is None else 'set, but not connected'}); nothing was sent")
-
-    # guided control (aerodaas.backends.mavlink.offboard.OffboardControl)
-    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        """Fly to ``target_enu`` (ENU metres from home) at most at ``speed`` m/s (:meth:`OffboardControl.goto`)."""
-        self._require_navigable("goto")
-        self.require_signed("goto")
-        self.offboard.goto(target_enu, speed)
-
-    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        """Hold ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s) (:meth:`OffboardControl.set_velocity`)."""
-        self._require_navigable("set_velocity")
-        self.require_signed("set_velocity")
-        self.offboard.set_velocity(v_enu, yaw_rate_dps)
-
-    def hold(self) -> None:
-        """Hover here (:meth:`OffboardControl.hold`)."""
-        self._require_navigable("hold")
-        self.offboard.hold()
-
-    def land(self) -> None:
-        """LAND mode: descend and land here (:meth:`OffboardControl.land`)."""
-        self._require_navigable("land")
-        self.offboard.land()
-
-    def return_to_launch(self) -> bool:
-        """RTL mode (:meth:`OffboardControl.return_to_launch`). Returns True."""
-        self._require_navigable("return_to_launch")
-        return self.offboard.return_to_launch()
-
-    def release(self) -> None:
-        """Stop streaming targets and leave the vehicle to the mode it is in (:meth:`OffboardControl.release`)."""
-        self.offboard.release()
-
-    def safe_end(self) -> str:
-        """Leave the vehicle safe before the link closes (:meth:`OffboardControl.safe_end`); returns what was done."""
-        return self.offboard.safe_end()
-
-    # the mission (aerodaas.backends.mavlink.mission.AutopilotMission)
-    def upload_mission(self, mission: Any, *, takeoff_altitude: float | None = None,
-                       final_action: Literal["land", "rtl", "hover"] = "hover") -> list[MissionItem]:
-        """Upload a mission with the MISSION_ITEM_INT protocol (:meth:`AutopilotMission.upload`); returns the items
-        as sent."""
-        return self.mission.upload(mission, takeoff_altitude=takeoff_altitude, final_action=final_action)
-
-    def start_mission(self) -> None:
-        """Fly the uploaded mission (:meth:`AutopilotMission.start`): our target stream stops first, and the vehicle
-        is ours to bring down (:meth:`safe_end`)."""
-        self._require_navigable("start_mission")
-        self.require_signed("start_mission")
-        self.mission.start()
-
     def discover_video_stream(self, request: Any) -> Any:
         """The video stream a camera of the connected vehicle announces (camera protocol v2), for a camera with
         ``source: "mavlink"``: ``request`` an :class:`aerodaas.video.discovery.StreamRequest`, returns its
@@ -438,16 +296,3 @@ class MavlinkBackend(VehicleBackend):
         when the link is down."""
         self.link.check_link("camera discovery")
         return self.cameras.discover(request, self.link.target[1])
-
-    # the gimbal (aerodaas.backends.mavlink.gimbal.GimbalConcern)
-    def point_gimbal(self, cmd: Any) -> None:
-        """Point the vehicle's gimbal (:meth:`GimbalConcern.point`)."""
-        self.gimbal.point(cmd)
-
-    def gimbal_attitude(self) -> Any:
-        """The latest GIMBAL_DEVICE_ATTITUDE_STATUS as a GimbalAttitude (None before the first)."""
-        return self.gimbal.latest()
-
-    def drain_gimbal(self) -> list:
-        """Every GIMBAL_DEVICE_ATTITUDE_STATUS not handed out yet, oldest first."""
-        return self.gimbal.drain()

@@ -18,6 +18,7 @@ from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.offboard import OffboardControl
 from aerodaas.backends.mavlink.params import SpeedLimits
+from aerodaas.backends.mavlink.signing import SignedOnly
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink.transfer import MissionTransfer
 
@@ -39,7 +40,8 @@ class AutopilotMission:
     ``commands`` (the command protocol: mode change, MAV_CMD_MISSION_START), ``transfers`` (the mission protocol's
     exchanges), ``offboard`` (our target stream stops when the mission starts, and the vehicle is ours to bring
     down), ``actions`` (fixes the altitude reference where the vehicle stands and keeps it for the next
-    arming: an uploaded mission's altitudes refer to it), ``event`` (records a backend event) and ``lock`` (the
+    arming: an uploaded mission's altitudes refer to it), ``signed`` (:class:`SignedOnly`:
+    ``mavlink.require_signing`` for the start), ``event`` (records a backend event) and ``lock`` (the
     backend's lock, which guards the progress state; the I/O thread holds it while it feeds the handlers).
 
     State: the uploaded mission's NAV_WAYPOINTs by wire sequence number, its autocontinue items and length, the
@@ -47,8 +49,9 @@ class AutopilotMission:
 
     def __init__(self, robot_id: str, *, link: MavlinkLink, telemetry: VehicleTelemetry, speed_limits: SpeedLimits,
                  commands: CommandProtocol, transfers: MissionTransfer, actions: VehicleAction,
-                 offboard: OffboardControl, event: Callable[..., None], lock: threading.RLock) -> None:
-        self.robot_id = robot_id
+                 offboard: OffboardControl, signed: SignedOnly, event: Callable[..., None],
+                 lock: threading.RLock) -> None:
+        self.robot_id, self._signed = robot_id, signed
         self._link, self._telemetry, self._speed_limits = link, telemetry, speed_limits
         self._commands, self._transfers, self._actions, self._offboard = commands, transfers, actions, offboard
         self._event, self._lock = event, lock
@@ -227,7 +230,9 @@ class AutopilotMission:
         MAV_CMD_MISSION_START, which starts it from the first item (ArduPilot needs a NAV_TAKEOFF first; PX4
         takes off by itself). Our target stream stops first, and the vehicle is ours to bring down
         (:attr:`OffboardControl.in_control`). Progress arrives as ``mission_current`` / ``mission_item_reached``
-        events. Raises as :meth:`CommandProtocol.command_long` / :meth:`CommandProtocol.set_mode`."""
+        events. Raises CredentialsRefused on an unsigned link when ``mavlink.require_signing``
+        (:class:`SignedOnly`); as :meth:`CommandProtocol.command_long` / :meth:`CommandProtocol.set_mode`."""
+        self._signed.require("start_mission")
         self._offboard.stop()
         self._offboard.take_control()
         if self._telemetry.in_air:

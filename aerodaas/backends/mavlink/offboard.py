@@ -1,6 +1,7 @@
 """Guided/offboard control: position and velocity targets streamed in ArduPilot GUIDED / PX4 OFFBOARD
 (SET_POSITION_TARGET_GLOBAL_INT / _LOCAL_NED), and the hand-over to the autopilot's own hold/land/return modes. A
-concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`OffboardControl`)."""
+concern object of :class:`~aerodaas.backends.mavlink.MavlinkBackend` (:class:`OffboardControl`), its command group
+``guidance`` (:class:`~aerodaas.backends.base.Guidance`)."""
 from __future__ import annotations
 
 import math
@@ -16,6 +17,7 @@ from aerodaas.backends.mavlink.clock import VehicleClock
 from aerodaas.backends.mavlink.command import CommandProtocol
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.params import SpeedLimits
+from aerodaas.backends.mavlink.signing import SignedOnly
 from aerodaas.backends.mavlink.telemetry import VehicleTelemetry
 from aerodaas.backends.mavlink._common import M, CommandNotConfirmed, log, POSITION_ONLY_MASK, POSITION_VELOCITY_MASK, VELOCITY_ONLY_MASK
 
@@ -39,7 +41,8 @@ class OffboardControl:
     ``clock`` (vehicle seconds and their rate, the vehicle's latest time_boot_ms and when it was received, our
     time_boot_ms for the setpoints we send), ``telemetry`` (home, position, altitude reference, in the air),
     ``speed_limits`` (the horizontal speed limit), ``commands`` (the command protocol: modes, DO_CHANGE_SPEED),
-    ``event`` (records a backend event) and ``lock`` (the backend's lock, which guards the target state: the I/O
+    ``signed`` (:class:`SignedOnly`: ``mavlink.require_signing`` for targets), ``event`` (records a backend event)
+    and ``lock`` (the backend's lock, which guards the target state: the I/O
     thread sends the stream, :meth:`send_due`; it registers with the link, :meth:`MavlinkLink.serve_setpoints`).
     ``settings``: ``setpoint_rate_hz``, ``on_close``, ``safe_end_timeout_s``.
 
@@ -51,8 +54,8 @@ class OffboardControl:
 
     def __init__(self, robot_id: str, settings: Any, *, link: MavlinkLink, clock: VehicleClock,
                  telemetry: VehicleTelemetry, speed_limits: SpeedLimits, commands: CommandProtocol,
-                 event: Callable[..., None], lock: threading.RLock) -> None:
-        self.robot_id, self._settings = robot_id, settings
+                 signed: SignedOnly, event: Callable[..., None], lock: threading.RLock) -> None:
+        self.robot_id, self._settings, self._signed = robot_id, settings, signed
         self._link, self._clock, self._telemetry, self._speed_limits = link, clock, telemetry, speed_limits
         self._commands, self._event, self._lock = commands, event, lock
         self._in_control = False  # we armed it or sent it targets/missions: safe_end() is ours to do
@@ -327,7 +330,13 @@ class OffboardControl:
         position setpoints at its own velocity limit (DO_CHANGE_SPEED is a navigator/mission command), so the
         streamed setpoint itself moves from here towards the target at ``speed`` per vehicle second, with that
         velocity as feed-forward (position + velocity type mask).
-        Raises ValueError for a non-finite target or a non-positive speed."""
+        Raises ValueError for a non-finite target or a non-positive speed; CredentialsRefused on an unsigned link
+        when ``mavlink.require_signing`` (:class:`SignedOnly`)."""
+        self._signed.require("goto")
+        self._goto(target_enu, speed)
+
+    def _goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
+        """:meth:`goto` without the signing check (a hold is never refused)."""
         x, y, z = (float(v) for v in target_enu)
         if not all(math.isfinite(v) for v in (x, y, z)):
             raise ValueError(f"goto target_enu must be finite metres, got {tuple(target_enu)!r}")
@@ -357,7 +366,9 @@ class OffboardControl:
     def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
         """Hold ENU velocity ``v_enu`` (m/s) and yaw rate (deg/s, counter-clockwise) with
         SET_POSITION_TARGET_LOCAL_NED (MAV_FRAME_LOCAL_NED, velocity + yaw-rate type mask; NED = (v_north, v_east,
-        -v_up), yaw rate clockwise rad/s), re-sent at ``setpoint_rate_hz`` vehicle time."""
+        -v_up), yaw rate clockwise rad/s), re-sent at ``setpoint_rate_hz`` vehicle time. Raises ValueError for
+        non-finite values; CredentialsRefused on an unsigned link when ``mavlink.require_signing``."""
+        self._signed.require("set_velocity")
         ve, vn, vu = (float(v) for v in v_enu)
         if not all(math.isfinite(v) for v in (ve, vn, vu, yaw_rate_dps)):
             raise ValueError(f"set_velocity needs finite m/s and deg/s, got {tuple(v_enu)!r}, {yaw_rate_dps!r}")
@@ -375,7 +386,7 @@ class OffboardControl:
             return
         if self._link.mode == self._guided_mode():
             p = self._telemetry.position
-            self.goto((p[0], p[1], p[2]))
+            self._goto((p[0], p[1], p[2]))
         else:
             self._autopilot_mode("LOITER")
 

@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from aerodaas.backends.base import CredentialsRefused
 from aerodaas.backends.mavlink._common import log
 
 #: 1 January 2015 00:00:00 GMT in Unix seconds: the signing timestamp's epoch (spec, "Timestamp")
@@ -368,3 +369,27 @@ def make_signing(key_path: str | None, robot_id: str, event: Callable[..., None]
     """:class:`LinkSigning` for the key file ``key_path`` (``mavlink.signing_key_file``), :class:`NoSigning` when
     None. Raises what :class:`LinkSigning` raises."""
     return NoSigning(robot_id, event) if key_path is None else LinkSigning(key_path, robot_id, event)
+
+
+class SignedOnly:
+    """``mavlink.require_signing``: a command that moves the vehicle (arming, take-off, a target, a mission start)
+    goes only over a signed link. Stopping (hold, land, RTL, disarm, the safe end) is never refused: refusing it
+    could only leave a vehicle flying. Asked by the concerns that send such commands (:class:`VehicleAction`,
+    :class:`OffboardControl`, :class:`AutopilotMission`) before they send anything.
+
+    ``settings``: the robot's :class:`~aerodaas.config.MavlinkConfig` (``require_signing``, ``connection``,
+    ``signing_key_file``); ``signing``: the link's :class:`LinkSigning` / :class:`NoSigning`; ``link``: the
+    :class:`~aerodaas.backends.mavlink.link.MavlinkLink` (its ``port`` is None until connected)."""
+
+    def __init__(self, robot_id: str, settings: Any, *, signing: LinkSigning | NoSigning, link: Any) -> None:
+        self.robot_id, self._settings, self._signing, self._link = robot_id, settings, signing, link
+
+    def require(self, command: str) -> None:
+        """Raises :class:`~aerodaas.backends.base.CredentialsRefused` naming the robot, ``command`` and the link
+        when ``mavlink.require_signing`` is set and the link is not signed; nothing was sent then."""
+        s = self._settings
+        if s.require_signing and not (self._signing.enabled and self._link.port is not None):
+            raise CredentialsRefused(
+                f"robot {self.robot_id!r}: {command} refused: mavlink.require_signing is true but the link "
+                f"{s.connection!r} is not signed (mavlink.signing_key_file "
+                f"{'unset' if s.signing_key_file is None else 'set, but not connected'}); nothing was sent")

@@ -360,9 +360,9 @@ class VehicleTelemetry:
             return self._vel.copy()
 
     @property
-    def yaw(self) -> float:
-        """ENU yaw, degrees (ATTITUDE, else GLOBAL_POSITION_INT ``hdg``)."""
-        return self._att[2]
+    def attitude(self) -> tuple[float, float, float]:
+        """Roll, pitch and ENU yaw in degrees (ATTITUDE; the yaw from GLOBAL_POSITION_INT ``hdg`` until one comes)."""
+        return self._att
 
     @property
     def in_air(self) -> bool:

@@ -3,15 +3,12 @@ receivers, the dead-reckoned state, the video) and its flight control (:class:`~
 given what it needs (see the package docstring)."""
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
 
-import numpy as np
 
 from aerodaas.config import TelloConfig
 from aerodaas.config.robot import sensor_class
-from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.model.types import Attitude, Odometry
-from aerodaas.backends.base import VehicleBackend
+from aerodaas.backends.base import VehicleBackend, VehicleState
 from aerodaas.backends.tello.control import TelloControl
 from aerodaas.backends.tello.link import TelloLink
 
@@ -52,111 +49,49 @@ class TelloBackend(VehicleBackend):
                          and s.properties.get("source") == "backend"]
         #: sockets, receivers, keep-alive, command channel, the dead-reckoned state and the video (link.py)
         self.link = TelloLink(self.robot_id, self.cfg, video_sensors)
-        #: the motion worker and the flight commands (control.py)
+        #: the motion worker and the flight commands (control.py): the command groups ``actions`` and ``guidance``
         self.control = TelloControl(self.robot_id, self.cfg, self.limits, self.link)
-        self._link_was_ok = True
+        self.actions = self.guidance = self.control
+        #: the camera (:meth:`TelloLink.frame`: the newest decoded frame, ``(720, 960, 3) uint8 BGR`` on a real
+        #: Tello, and its arrival time on :attr:`t`'s clock; None before the first, with ``video`` off, or after a
+        #: refused ``streamon``, a ``video_error`` event)
+        self.camera = self.link
+        self._link_was_ok: bool | None = None  # the link as last seen (None: not connected yet)
+        self._events: list[dict[str, Any]] = []  # link changes not yet drained
 
     # ------------------------------------------------------------------ lifecycle, time and state
     def connect(self, timeout_s: float = 30.0) -> None:
-        """:meth:`TelloLink.connect`."""
+        """:meth:`TelloLink.connect`, then watch the link from its state now (``link_lost`` / ``link_regained``
+        events from here on, :meth:`step`). Raises what :meth:`TelloLink.connect` raises."""
         self.link.connect(timeout_s)
+        self._link_was_ok = self.link.link_ok
 
     def close(self) -> None:
         """Cancel a running manoeuvre, then :meth:`TelloLink.close` (idempotent, never raises; does not land)."""
         self.control.cancel()
         self.link.close()
 
-    @property
-    def t(self) -> float:
-        """Wall seconds since :meth:`connect` (:attr:`TelloLink.t`)."""
-        return self.link.t
-
     def step(self, dt: float) -> None:
         """Non-blocking: turns link changes into ``link_lost``/``link_regained`` events (state arrives on a
         receiver thread)."""
-        ok = self.link_ok
-        if ok != self._link_was_ok:
+        ok = self.link.link_ok
+        if self._link_was_ok is not None and ok != self._link_was_ok:
             self._link_was_ok = ok
-            self.link.event("link_regained" if ok else "link_lost")
+            self._events.append({"event": "link_regained" if ok else "link_lost", "t": self.link.t})
 
-    @property
-    def link_ok(self) -> bool:
-        """:attr:`TelloLink.link_ok`."""
-        return self.link.link_ok
-
-    @property
-    def position(self) -> np.ndarray:
-        """:attr:`TelloLink.position`."""
-        return self.link.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """:attr:`TelloLink.velocity`."""
-        return self.link.velocity
-
-    @property
-    def yaw(self) -> float:
-        """:attr:`TelloLink.yaw`."""
-        return self.link.yaw
-
-    @property
-    def armed(self) -> bool:
-        """Marked armed (:attr:`TelloControl.armed`) or in the air."""
-        return self.control.armed or self.in_air
-
-    @property
-    def in_air(self) -> bool:
-        """True while the Tello reports a height (``h`` >= 10 cm) above its take-off point."""
-        return self.link.height_cm >= 10.0
-
-    @property
-    def battery_pct(self) -> float:
-        """:attr:`TelloLink.battery_pct`."""
-        return self.link.battery_pct
-
-    def odometry(self) -> Odometry:
-        """The dead-reckoned pose (:meth:`TelloLink.pose`) with its geodetic fix from :attr:`home`."""
+    def state(self) -> VehicleState:
+        """The dead-reckoned pose, attitude and battery of one reading (:meth:`TelloLink.pose`) at :attr:`TelloLink.t`;
+        armed while marked armed (:attr:`TelloControl.armed`) or in the air; in the air while the Tello reports a
+        height (``h``) of at least 10 cm above its take-off point; the link is up while state packets come
+        (:attr:`TelloLink.link_ok`)."""
         pos, vel, roll, pitch, yaw, bat = self.link.pose()
-        geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
-        return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
-                        velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=roll, pitch=pitch, yaw=yaw),
-                        battery_pct=float(min(max(bat, 0.0), 100.0)), armed=self.armed, in_air=self.in_air)
+        in_air = self.link.height_cm >= 10.0
+        return VehicleState(t=self.link.t, position=pos, velocity=vel, roll=roll, pitch=pitch, yaw=yaw,
+                            battery_pct=float(bat), armed=self.control.armed or in_air, in_air=in_air,
+                            link_ok=self.link.link_ok, home=self.home)
 
     def drain_events(self) -> list[dict[str, Any]]:
-        """:meth:`TelloLink.drain_events`."""
-        return self.link.drain_events()
-
-    def camera_frame(self) -> tuple[np.ndarray, float] | None:
-        """The newest decoded video frame, ``(720, 960, 3) uint8 BGR`` on a real Tello, and its arrival time
-        on :attr:`t`'s clock; None before the first frame, with ``video`` off, or after a refused ``streamon``
-        (a ``video_error`` event)."""
-        return self.link.frame()
-
-    # ------------------------------------------------------------------ the contract's flight commands (control.py)
-    def arm(self) -> None:
-        """:meth:`TelloControl.arm`."""
-        self.control.arm()
-
-    def disarm(self) -> None:
-        """:meth:`TelloControl.disarm`."""
-        self.control.disarm()
-
-    def takeoff(self, altitude_m: float) -> None:
-        """:meth:`TelloControl.takeoff`."""
-        self.control.takeoff(altitude_m)
-
-    def goto(self, target_enu: Sequence[float], speed: float | None = None) -> None:
-        """:meth:`TelloControl.goto`."""
-        self.control.goto(target_enu, speed)
-
-    def set_velocity(self, v_enu: Sequence[float], yaw_rate_dps: float = 0.0) -> None:
-        """:meth:`TelloControl.set_velocity`."""
-        self.control.set_velocity(v_enu, yaw_rate_dps)
-
-    def hold(self) -> None:
-        """:meth:`TelloControl.hold`."""
-        self.control.hold()
-
-    def land(self) -> None:
-        """:meth:`TelloControl.land`."""
-        self.control.land()
+        """The link's events (:meth:`TelloLink.drain_events`: command failures, video errors...) and the link
+        changes :meth:`step` saw, in time order (``t``), oldest first."""
+        own, self._events = self._events, []
+        return sorted(self.link.drain_events() + own, key=lambda e: e["t"])

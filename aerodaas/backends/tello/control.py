@@ -294,6 +294,10 @@ class TelloControl:
 
         self._start_motion("land", plan)
 
+    def return_to_launch(self) -> bool:
+        """False: the Tello has no return mode (the drone flies home with :meth:`goto` and lands)."""
+        return False
+
     def emergency(self) -> None:
         """``emergency``: stop the motors at once (the Tello falls). Sent without waiting for a manoeuvre."""
         m = self._motion

@@ -206,7 +206,7 @@ class TelloLink:
         retries fails the connection (the backend is closed; CommandRefused with the Tello's reply, or
         BackendError) when a camera sensor of this robot has ``properties.source: backend``; otherwise the robot
         flies without video: a ``video_error`` event (``command``, ``reply``, ``reason``), a warning in the log,
-        and :meth:`camera_frame` stays None."""
+        and :meth:`frame` stays None."""
         c = self.cfg
         reply: str | None = None
         try:

@@ -28,10 +28,9 @@ from typing import Any, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from aerodaas.backends.base import CommandRefused, VehicleBackend
+from aerodaas.backends.base import CommandRefused, VehicleBackend, VehicleState
 from aerodaas.config import ConfigError
-from aerodaas.model.geo import enu_to_geodetic
-from aerodaas.model.types import Attitude, Odometry, Waypoint
+from aerodaas.model.types import Waypoint
 
 #: below this distance (m) to its target the rover counts as on it and stops (no turning on the spot over a mm)
 ON_TARGET_M = 0.01
@@ -126,6 +125,8 @@ class RoverBackend(VehicleBackend):
         self.opts: RoverConfig = self.options(cfg)
         self._s = RoverState(psi=math.radians(self.opts.start_yaw_deg), battery_pct=self.opts.start_battery_pct)
         self._events: list[dict[str, Any]] = []
+        #: the command groups the drone calls: the rover carries its commands itself (the methods under "control")
+        self.actions = self.guidance = self
 
     # ------------------------------------------------------------------ pre-flight checks (before Ray starts)
     @classmethod
@@ -154,11 +155,6 @@ class RoverBackend(VehicleBackend):
         self._s = state
 
     # ------------------------------------------------------------------ time and state
-    @property
-    def t(self) -> float:
-        """Simulated seconds since the start."""
-        return self._s.t
-
     def step(self, dt: float) -> None:
         """Advance ``dt`` simulated seconds: the controller picks (v, omega) for the command, the unicycle moves,
         the battery drains. Raises ValueError for a negative ``dt``."""
@@ -198,49 +194,22 @@ class RoverBackend(VehicleBackend):
         v = min(cap, brake, s.v + o.accel_mps2 * dt) * max(0.0, math.cos(err - omega * dt))
         return max(0.0, v), omega
 
-    @property
-    def position(self) -> np.ndarray:
-        """(3,) ENU metres from home; z is always 0."""
-        return np.array([self._s.x, self._s.y, 0.0])
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """(3,) ENU m/s along the heading; z is always 0."""
+    def state(self) -> VehicleState:
+        """The rover now (exact: no noise): ENU metres from home on the ground (z always 0), its ground velocity
+        along the heading (ENU m/s, z 0), the heading as yaw (degrees CCW from east in [0, 360)), battery percent,
+        armed; never in the air; the link (there is none) always up. The base class's ``telemetry`` records it as
+        odometry, with the geodetic position from ``home``."""
         s = self._s
-        return np.array([s.v * math.cos(s.psi), s.v * math.sin(s.psi), 0.0])
-
-    @property
-    def yaw(self) -> float:
-        """Heading, degrees CCW from east in [0, 360)."""
-        return math.degrees(self._s.psi) % 360.0
-
-    @property
-    def armed(self) -> bool:
-        return self._s.armed
-
-    @property
-    def in_air(self) -> bool:
-        """Always False: a rover never leaves the ground."""
-        return False
-
-    @property
-    def battery_pct(self) -> float:
-        return self._s.battery_pct
-
-    def odometry(self) -> Odometry:
-        """The state now (exact: no noise), its geodetic position from the ENU one about :attr:`home`."""
-        s = self._s
-        vel = self.velocity
-        return Odometry(robot_id=self.robot_id, t=s.t, position=(s.x, s.y, 0.0),
-                        geodetic=enu_to_geodetic(s.x, s.y, 0.0, self.home),
-                        velocity=(float(vel[0]), float(vel[1]), 0.0), attitude=Attitude(yaw=self.yaw),
-                        battery_pct=s.battery_pct, armed=s.armed, in_air=False)
+        return VehicleState(t=s.t, position=(s.x, s.y, 0.0),
+                            velocity=(s.v * math.cos(s.psi), s.v * math.sin(s.psi), 0.0),
+                            yaw=math.degrees(s.psi) % 360.0, battery_pct=s.battery_pct, armed=s.armed, in_air=False,
+                            home=self.home)
 
     def drain_events(self) -> list[dict[str, Any]]:
         out, self._events = self._events, []
         return out
 
-    # ------------------------------------------------------------------ control
+    # ------------------------------------------------------------------ control (``actions`` and ``guidance``)
     def arm(self) -> None:
         """Arm (standing still). Raises CommandRefused when the battery is empty."""
         if self._s.battery_pct <= 0.0:
@@ -279,6 +248,10 @@ class RoverBackend(VehicleBackend):
     def land(self) -> None:
         """Stop: a rover is always on the ground, so a landing is a hold. Never raises."""
         self.hold()
+
+    def return_to_launch(self) -> bool:
+        """False: no return mode of its own (the drone drives it home with ``goto`` and stops it with ``land``)."""
+        return False
 
     def _require_armed(self, command: str) -> None:
         if not self._s.armed:
