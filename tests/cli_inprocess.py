@@ -154,7 +154,8 @@ def _process_context(cwd: Path | str | None, env: dict | None):
 
 def run_cli(*args: str, cwd: Path | str | None = None, env: dict | None = None) -> CliResult:
     """``aerodaas ARGS`` run in this process by :func:`aerodaas.cli.main` in ``cwd`` (default: the current folder)
-    with the environment ``env`` (default: this process's; its ``PYTHONPATH`` goes first on ``sys.path``), its stdout and stderr captured. Raises
+    with the environment ``env`` (default: this process's; its ``PYTHONPATH`` goes first on ``sys.path``), its
+    stdout and stderr captured. Raises
     :class:`RayStartedInProcess` when the command tried to start or join Ray (after putting everything back)."""
     from aerodaas import cli
 
