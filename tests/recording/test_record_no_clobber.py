@@ -14,6 +14,7 @@ from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.record_path import check_record_path, is_aerodaas_recording
 from aerodaas.recording.reader import read_messages
 
+from tests.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 
@@ -68,7 +69,8 @@ def test_the_app_and_environment_file_are_never_a_recording_target(tmp_path):
     app, env_file = _farm_copy(tmp_path)
     for target in (app, env_file):
         before = target.read_bytes()
-        p = _run(app, "--record", str(target), "--overwrite")
+        # in-process (Ray refused): the record path is checked before anything starts
+        p = run_cli("run", str(app), "--record", str(target), "--overwrite", "--quiet", cwd=app.parent)
         assert p.returncode == 2 and "a recording never overwrites the application" in p.stderr, p.stderr
         assert target.read_bytes() == before
 
