@@ -17,6 +17,9 @@ CLI's imports (about half a CPU-second each) for the same code path. What a subp
   the installed packages and this checkout (the app file run as ``aerodaas_app_<stem>``, the plug-in modules next
   to it) are forgotten, as they would be with the subprocess.
 
+With ``shared_ray``, an ``aerodaas run`` that flies uses the pytest worker's shared Ray session instead of starting
+one of its own (see :func:`run_cli`).
+
 The few tests that prove the whole command end to end (exit code 2 from the real process, no Ray session in a fresh
 ``RAY_TMPDIR``) keep a subprocess."""
 from __future__ import annotations
@@ -100,19 +103,28 @@ def _framework_state():
 
 
 @contextlib.contextmanager
-def _no_ray(calls: list):
-    """``init_ray``/``start_ray_early`` record their address in ``calls`` and raise; ``shutdown_ray`` is a no-op."""
+def _no_ray(calls: list, shared: bool = False):
+    """``init_ray``/``start_ray_early`` record their address in ``calls`` and raise; ``shutdown_ray`` is a no-op.
+    ``shared``: the command may use the Ray session this process is connected to, so only ``init_ray`` (a start or
+    join of another) is refused and Ray's own functions are left alone."""
     from aerodaas.runtime import ray_start
+
+    if shared:
+        ray = sys.modules.get("ray")
+        if ray is None or not ray.is_initialized():
+            raise RuntimeError("run_cli(shared_ray=True) needs the shared Ray session: request ray_session")
 
     def refuse(address=None, dashboard=False):
         calls.append(address)
         raise RayStartedInProcess(f"a command run in-process tried to start or join Ray (address {address!r})")
 
     patched = [(ray_start, n, getattr(ray_start, n)) for n in ("init_ray", "start_ray_early", "shutdown_ray")]
-    ray_start.init_ray = ray_start.start_ray_early = refuse
+    ray_start.init_ray = refuse
+    if not shared:
+        ray_start.start_ray_early = refuse
     ray_start.shutdown_ray = lambda: None
     ray = sys.modules.get("ray")
-    if ray is not None:  # this worker's shared session may be up: the command sees none, as a new process would
+    if ray is not None and not shared:  # this worker's shared session may be up: the command sees none, as a new process would
         patched += [(ray, n, getattr(ray, n)) for n in ("init", "is_initialized")]
         ray.init = lambda address=None, **kw: refuse(address)
         ray.is_initialized = lambda: False
@@ -152,11 +164,16 @@ def _process_context(cwd: Path | str | None, env: dict | None):
         root.setLevel(saved_level)
 
 
-def run_cli(*args: str, cwd: Path | str | None = None, env: dict | None = None) -> CliResult:
+def run_cli(*args: str, cwd: Path | str | None = None, env: dict | None = None, shared_ray: bool = False) -> CliResult:
     """``aerodaas ARGS`` run in this process by :func:`aerodaas.cli.main` in ``cwd`` (default: the current folder)
     with the environment ``env`` (default: this process's; its ``PYTHONPATH`` goes first on ``sys.path``), its
-    stdout and stderr captured. Raises
-    :class:`RayStartedInProcess` when the command tried to start or join Ray (after putting everything back)."""
+    stdout and stderr captured. Raises :class:`RayStartedInProcess` when the command tried to start or join Ray
+    (after putting everything back).
+
+    ``shared_ray``: an ``aerodaas run`` that flies, on the session the tests of this pytest worker share (the caller
+    requests the ``ray_session`` fixture, which then checks that the run left no actor behind). Only where isolation
+    allows: the session's workers started with the environment of the test process, so a run whose actors need
+    an environment variable or ``PYTHONPATH`` entry of ``env`` keeps a subprocess."""
     from aerodaas import cli
 
     argv = [str(a) for a in args]
@@ -164,8 +181,10 @@ def run_cli(*args: str, cwd: Path | str | None = None, env: dict | None = None) 
     calls: list = []
     modules = set(sys.modules)
     ray_was_up = "ray" in sys.modules and sys.modules["ray"].is_initialized()
+    if shared_ray and env is not None and env.get("PYTHONPATH") != os.environ.get("PYTHONPATH"):
+        raise ValueError("run_cli(shared_ray=True): the shared session's workers never see this PYTHONPATH")
     try:
-        with _process_context(cwd, env), _framework_state(), _no_ray(calls), \
+        with _process_context(cwd, env), _framework_state(), _no_ray(calls, shared_ray), \
                 contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             sys.argv[:] = ["aerodaas", *argv]
             try:

@@ -149,7 +149,7 @@ def test_an_environment_sensor_of_unknown_type_is_refused_not_skipped():
 
 
 @pytest.mark.e2e
-def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
+def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path, ray_session):
     """The decorator path on Ray: the app's sensor class (and its pydantic message model) live only in the app,
     travel to the drone actor by value, sample the vehicle state there and are recorded with their schema."""
     from mcap.reader import make_reader
@@ -168,9 +168,8 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
                 [Waypoint(id="h", x=0.0, y=0.0, z=3.0, hover_duration=2.0)]), priority=2)))
             env.start_mission([d])''')))
     rec = tmp_path / "run.mcap"
-    env = dict(__import__("os").environ, AERODAAS_NO_ATTACH="1")
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet",
-                        "--timeout", "240"], capture_output=True, text=True, cwd=tmp_path, timeout=600, env=env)
+    # in-process on the worker's shared Ray session (the class travels by value as before; checked clean after)
+    p = run_cli("run", str(app), "--record", str(rec), "--quiet", "--timeout", "240", cwd=tmp_path, shared_ray=True)
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "sensor alt (my_altimeter):" in p.stdout
     levels = [m for t, _, _, m in read_messages(str(rec)) if t == "/uav/alt"]

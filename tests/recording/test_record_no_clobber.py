@@ -3,10 +3,7 @@ unless --overwrite, and the application and its environment file always; an earl
 The runs use a temporary copy of apps/farm_survey.py and its environment file, never the checkout's own."""
 from __future__ import annotations
 
-import os
 import shutil
-import subprocess
-import sys
 
 import pytest
 
@@ -23,11 +20,6 @@ def _farm_copy(tmp_path):
     for name in ("farm_survey.py", "farm_survey.json"):
         shutil.copy(REPO / "apps" / name, tmp_path / name)
     return tmp_path / "farm_survey.py", tmp_path / "farm_survey.json"
-
-
-def _run(app, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), *args, "--quiet"],
-                          capture_output=True, text=True, timeout=300, cwd=app.parent, env=dict(os.environ))
 
 
 def _earlier_recording(path) -> None:
@@ -77,7 +69,7 @@ def test_the_app_and_environment_file_are_never_a_recording_target(tmp_path):
 
 @pytest.mark.e2e
 @pytest.mark.parametrize("earlier", ["ours", "foreign"])
-def test_a_run_replaces_an_earlier_recording_and_with_overwrite_a_foreign_file(tmp_path, earlier):
+def test_a_run_replaces_an_earlier_recording_and_with_overwrite_a_foreign_file(tmp_path, earlier, ray_session):
     """The positive path, on a copy of the farm survey: an earlier recording of ours is replaced without
     --overwrite, a file that is not ours with it; the file then holds this run (its mission result, its odometry),
     nothing of what was there."""
@@ -87,7 +79,9 @@ def test_a_run_replaces_an_earlier_recording_and_with_overwrite_a_foreign_file(t
         _earlier_recording(rec)
     else:
         rec.write_text("field notes")
-    p = _run(app, "--record", str(rec), "--speedup", "20", *(["--overwrite"] if earlier == "foreign" else []))
+    # in-process on the worker's shared Ray session (no Ray start of its own; the session checked clean after)
+    p = run_cli("run", str(app), "--record", str(rec), "--speedup", "20",
+                *(["--overwrite"] if earlier == "foreign" else []), "--quiet", cwd=app.parent, shared_ray=True)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     assert is_aerodaas_recording(rec)
     topics = [m[0] for m in read_messages(str(rec))]
