@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.e2e

@@ -10,7 +10,7 @@ from mcap.writer import Writer
 from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec, frame_times, recording_frame_gaps
 from aerodaas.schedulers.analytics_base import Workload
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_workload
 
 W = Workload.from_dict({"models": {"A": {"edge_ms": 100, "cloud_ms": 200, "benefit": 50, "edge_cost": 1,

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 
 def test_bench_video_reports_every_reader(tmp_path):

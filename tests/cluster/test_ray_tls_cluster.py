@@ -14,7 +14,7 @@ import textwrap
 
 import pytest
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 SCRIPT = textwrap.dedent(r'''

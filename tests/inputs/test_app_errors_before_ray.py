@@ -17,7 +17,7 @@ import pytest
 
 from aerodaas.plugins import SensorPlugin, registry
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
 APP = """from aerodaas import *
@@ -70,7 +70,7 @@ def _write(tmp_path, body: str = "", app_text: str | None = None, robot: dict | 
 
 def _cli(tmp_path, command: str, app, *extra: str, own_process: bool = False):
     """``aerodaas COMMAND APP EXTRA`` (in ``tmp_path``) with a new empty RAY_TMPDIR: in this process
-    (:func:`tests.cli_inprocess.run_cli`, which fails the test if Ray is started), or with ``own_process`` as the
+    (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started), or with ``own_process`` as the
     real command in a subprocess."""
     ray_tmp = fresh_ray_tmp(tmp_path)
     args = [command, str(app), *extra] + (["--quiet"] if command == "run" else ["--json"])

@@ -20,7 +20,7 @@ import pytest
 from aerodaas.runtime.app_loader import Application, app_module_name, load_app
 from aerodaas.runtime.ray_start import RAY_SOCKET_SUFFIX_MAX, SUN_PATH_MAX, ray_temp_dir
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.plugins.test_plugin_registry import APP
 
 ROOT = Path(__file__).resolve().parents[2]

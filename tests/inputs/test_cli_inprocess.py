@@ -1,5 +1,5 @@
-"""The in-process command line of the bad-input checks (tests/cli_inprocess.py) answers as the real command does and
-leaves nothing behind: the app's module and plug-ins, the environment, the working folder, ``sys.path`` and the
+"""The in-process command line of the bad-input checks (tests/inputs/cli_inprocess.py) answers as the real command
+does and leaves nothing behind: the app's module and plug-ins, the environment, the working folder, ``sys.path`` and the
 signal handlers are as before, and a command that would start Ray fails the test instead."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from aerodaas.plugins import registry
-from tests.cli_inprocess import RayStartedInProcess, run_cli
+from tests.inputs.cli_inprocess import RayStartedInProcess, run_cli
 
 APP = """from aerodaas import *
 from aerodaas.plugins import SensorPlugin, register_sensor

@@ -4,7 +4,7 @@ import pytest
 
 from aerodaas.config import ConfigError, load_environment_config, parse_environment_config
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 GOOD = {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}, {"id": "odom", "type": "odometry"}]}]}
 

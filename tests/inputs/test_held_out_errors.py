@@ -18,7 +18,7 @@ import pytest
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.plugins import registry
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
 #: a sensor plug-in and a backend plug-in whose Config validators raise TypeError (pydantic passes it on as is)

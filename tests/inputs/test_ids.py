@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.model.ids import RESERVED, ROOT_RESERVED, check_id
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 GOOD_IDS = ["d1", "quadrotor_base", "Edge-2", "x" * 64, "A"]
 BAD_IDS = {

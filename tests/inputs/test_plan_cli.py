@@ -4,14 +4,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_data
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _plan(*args: str):
-    """``aerodaas plan ARGS`` in this process (:func:`tests.cli_inprocess.run_cli`: no Ray, as plan never starts it)."""
+    """``aerodaas plan ARGS`` in this process (:func:`tests.inputs.cli_inprocess.run_cli`: no Ray, as plan never
+    starts it)."""
     return run_cli("plan", *args, cwd=ROOT)
 
 

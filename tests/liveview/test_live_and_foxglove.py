@@ -30,7 +30,7 @@ from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.values import camera_mount_quaternion, quaternion_from_euler_deg
 from aerodaas.recording.schemas import JSON_SCHEMA_MODELS, json_schema_for
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO, skip_or_fail
 from tests.liveview.foxglove_ws_client import collect, schema_bytes
 from tests.recording.mcap_validation import rotation, validate_recording

@@ -22,7 +22,7 @@ from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink.gimbal import EmulatedCamera
 from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.video.discovery import StreamDiscoveryError, StreamRequest, VideoStreamType, stream_source
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO, needs_data
 
 

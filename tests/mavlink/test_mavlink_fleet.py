@@ -16,7 +16,7 @@ from aerodaas.backends.mavlink import shared_link
 from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, load_environment_config
 from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.types import GeoPoint
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.mavlink.emulated import run_until
 from tests.video.udp_fanout import UdpFanout
 
@@ -155,7 +155,8 @@ env.start_mission(env.get_env_robots())
 
 
 def _cli(*args: str):
-    """``aerodaas ARGS`` in this process (:func:`tests.cli_inprocess.run_cli`, which fails the test if Ray starts)."""
+    """``aerodaas ARGS`` in this process (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray
+    starts)."""
     return run_cli(*args, cwd=ROOT)
 
 

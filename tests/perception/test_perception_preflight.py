@@ -1,8 +1,8 @@
 """Every detector and tiling setting is checked before Ray starts, the way a user meets it: an app
-file with a bad value, ``aerodaas plan`` / ``aerodaas run`` (in-process, one real subprocess), exit 2, a message naming the field and
-the value, and no Ray session created (a fresh ``RAY_TMPDIR`` stays empty, no Ray process names it). Values that need
-no model file fail where the app writes them (``Tiling(tile=16)``, a threshold of 15); the model's own class names
-and a missing model file fail in the pre-flight (``ObjectDetector.check``)."""
+file with a bad value, ``aerodaas plan`` / ``aerodaas run`` (in-process, one real subprocess), exit 2, a message
+naming the field and the value, and no Ray session created (a fresh ``RAY_TMPDIR`` stays empty, no Ray process
+names it). Values that need no model file fail where the app writes them (``Tiling(tile=16)``, a threshold of 15);
+the model's own class names and a missing model file fail in the pre-flight (``ObjectDetector.check``)."""
 from __future__ import annotations
 
 import json
@@ -16,7 +16,7 @@ from aerodaas.analytics.detector import ObjectDetector
 from aerodaas.perception.tiling import Tiling
 from aerodaas.perception.tracking import ByteTrackConfig
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_data_case
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
@@ -57,7 +57,7 @@ def _app(tmp_path, args: str):
 
 def _cli(tmp_path, command: str, app, own_process: bool = False):
     """``aerodaas COMMAND APP`` with a new empty RAY_TMPDIR: (result, that folder); in this process
-    (:func:`tests.cli_inprocess.run_cli`, which fails the test if Ray is started), or with ``own_process`` as the
+    (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started), or with ``own_process`` as the
     real command in a subprocess."""
     ray_tmp = fresh_ray_tmp(tmp_path)
     args = [command, str(app)] + (["--quiet"] if command == "run" else ["--json"])

@@ -20,7 +20,7 @@ from aerodaas.analytics.detector import ObjectDetector
 from aerodaas.perception.providers import (CPU_PROVIDER, ProviderUnavailableError, Providers, open_session,
                                            providers_setting)
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_data
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
@@ -208,7 +208,8 @@ def test_gpu_placement_errors_name_the_actor_and_the_nodes():
 
 def _cli(tmp_path: Path, app: Path, in_process: bool = False):
     """``aerodaas run APP --quiet`` (a new empty RAY_TMPDIR) in a subprocess, or with ``in_process`` (bad input) in
-    this process (:func:`tests.cli_inprocess.run_cli`, which fails the test if Ray is started): (result, RAY_TMPDIR)."""
+    this process (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started): (result,
+    RAY_TMPDIR)."""
     ray_tmp = fresh_ray_tmp(tmp_path)
     if in_process:
         env = {**os.environ, "RAY_TMPDIR": str(ray_tmp)}

@@ -23,7 +23,7 @@ from aerodaas.bench.tracks import score_tracks
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.runtime.driver import run_file
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 APP = REPO / "tests" / "apps" / "fleet_tracks.py"

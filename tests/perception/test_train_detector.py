@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import MODEL_DIR, needs_data, skip_or_fail
 
 
@@ -48,7 +48,7 @@ def _draw_set(root: Path, n: int = 4, seed: int = 0) -> Path:
 
 def _train(*args: str, env_extra: dict | None = None, in_process: bool = False):
     """``aerodaas train detector ARGS`` in a subprocess, or with ``in_process`` (a check of bad input, which ends
-    before training) in this process (:func:`tests.cli_inprocess.run_cli`)."""
+    before training) in this process (:func:`tests.inputs.cli_inprocess.run_cli`)."""
     env = {**os.environ, "AERODAAS_MODEL_DIR": str(MODEL_DIR), **(env_extra or {})}
     if in_process:
         return run_cli("train", "detector", *args, env=env)

@@ -19,7 +19,7 @@ from aerodaas.analytics.contract import ContractError, check_declaration
 from aerodaas.recording.reader import read_messages
 from aerodaas.protocol.messages import Port, ValueMsg
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 from tests.plugins.test_example_plugins import _aerodaas, _env_with, installed  # noqa: F401 - the fixture: the installed example

@@ -13,7 +13,7 @@ import pytest
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.plugins import SensorPlugin, SensorPluginConfig, registry
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 
 

@@ -11,7 +11,7 @@ from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.record_path import check_record_path, is_aerodaas_recording
 from aerodaas.recording.reader import read_messages
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 

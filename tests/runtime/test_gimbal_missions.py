@@ -15,7 +15,7 @@ import pytest
 from aerodaas.navigation.gimbal import GimbalError, roi_angles, wrap_deg
 from aerodaas.recording.metrics import load_run
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 LIMITS = {"pitch_min_deg": -90, "pitch_max_deg": 20, "yaw_min_deg": -120, "yaw_max_deg": 120, "rate_deg_s": 60}
 ROI = (8.0, 4.0, 0.0)

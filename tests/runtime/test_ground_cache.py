@@ -12,7 +12,7 @@ from aerodaas.config import GroundConfig
 from aerodaas.sim import ground_cache
 from aerodaas.sim.world import World, ground_pyramid
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 GROUND = GroundConfig(seed=3, metres_per_pixel=0.05, size_m=40)
 

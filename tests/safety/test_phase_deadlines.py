@@ -17,7 +17,7 @@ from aerodaas.config.deadlines import PhaseDeadlinesConfig
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation import deadlines as dl
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 
 def test_a_deadline_is_the_legs_at_the_vehicles_limits_times_the_factor_plus_the_margin():

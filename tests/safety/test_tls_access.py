@@ -25,7 +25,7 @@ from aerodaas.liveview.server import LiveServer
 from aerodaas.recording.writer import RecordedMessage
 from aerodaas.tools.hitl import HitlServer
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.liveview.foxglove_ws_client import collect
 from tests.inputs.test_app_errors_before_ray import APP, _refused_before_ray
 from tests.inputs.test_app_value import fresh_ray_tmp
@@ -108,7 +108,7 @@ def _app(tmp_path, hitl: dict | None = None):
 
 def _run_cli(tmp_path, *args: str, in_process: bool = False):
     """``aerodaas ARGS`` (in ``tmp_path``, a new empty RAY_TMPDIR) in a subprocess, or with ``in_process`` (bad
-    input) in this process (:func:`tests.cli_inprocess.run_cli`, which fails the test if Ray is started)."""
+    input) in this process (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started)."""
     ray_tmp = fresh_ray_tmp(tmp_path)
     if in_process:
         return run_cli(*args, cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)}), ray_tmp

@@ -13,7 +13,7 @@ import textwrap
 import pytest
 from mcap.reader import make_reader
 
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 
 SCHED = textwrap.dedent('''
     from aerodaas.schedulers.base import TrajectoryScheduler

@@ -16,7 +16,7 @@ from aerodaas.config import ConfigError
 from aerodaas.config.robot import SensorConfig
 from aerodaas.video import CaptureClock, StreamReader, VideoSourceError, parse_stream_source
 from aerodaas.video.pose import pose_at, pose_sampled_at
-from tests.cli_inprocess import run_cli
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import DATA_MISSING, REPO, needs_data, skip_or_fail
 from tests.video.video_rig import RtspServer, Sender, check_pose_tags, free_udp_port, make_footage
 

@@ -36,7 +36,7 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 #: folders whose modules are the installed packages or this checkout's: kept in ``sys.modules`` after a call
 _KEPT_ROOTS = tuple({str(Path(p).resolve()) + os.sep for p in (sys.prefix, sys.base_prefix, sys.exec_prefix,
                                                                 site.USER_BASE or sys.prefix, REPO)})
@@ -124,7 +124,7 @@ def _no_ray(calls: list, shared: bool = False):
         ray_start.start_ray_early = refuse
     ray_start.shutdown_ray = lambda: None
     ray = sys.modules.get("ray")
-    if ray is not None and not shared:  # this worker's shared session may be up: the command sees none, as a new process would
+    if ray is not None and not shared:  # the worker's shared session may be up: the command sees none, as a new process
         patched += [(ray, n, getattr(ray, n)) for n in ("init", "is_initialized")]
         ray.init = lambda address=None, **kw: refuse(address)
         ray.is_initialized = lambda: False
