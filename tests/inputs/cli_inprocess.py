@@ -159,7 +159,6 @@ def _process_context(cwd: Path | str | None, env: dict | None):
         sys.path[:], sys.argv[:] = saved_path, saved_argv
         for s, h in saved_signals.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
-        signal.alarm(0)
         root.handlers[:] = saved_handlers
         root.setLevel(saved_level)
 
