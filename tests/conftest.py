@@ -197,12 +197,45 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def ray_session():
-    """A local Ray with this node labelled tier=edge (token auth on), shared by all e2e tests."""
+    """A local Ray with this node labelled tier=edge (token auth on, loopback only), shared by all e2e tests of this
+    pytest worker; yields which session it is (:func:`tests.runtime.shared_ray.session_id`)."""
     from aerodaas.runtime import ray_start
 
+    from tests.runtime.shared_ray import session_id
+
     ray_start.ensure_ray(None)
-    yield
+    yield session_id()
     ray_start.shutdown_ray()
+
+
+#: the test modules whose first test on this worker found the shared Ray session clean (:func:`_shared_ray_stays_clean`)
+_RAY_MODULES_CHECKED: set[str] = set()
+
+
+@pytest.fixture(autouse=True)
+def _shared_ray_stays_clean(request):
+    """Around each test that uses the shared ``ray_session`` (directly or through a fixture): before the first test
+    of a module, the session holds no run actor or placement group (what an earlier module and its fixtures left:
+    :func:`tests.runtime.shared_ray.wait_clean`); after each test, none that appeared during the test (a module
+    fixture's, there before, is checked at the next module) and the session is still the same one (nobody shut it
+    down or started another). Else the test errors, naming what was left."""
+    if "ray_session" not in request.fixturenames:
+        yield
+        return
+    from tests.runtime.shared_ray import leftovers, session_id, wait_clean
+
+    session = request.getfixturevalue("ray_session")
+    module = request.node.module.__name__
+    if module not in _RAY_MODULES_CHECKED:
+        _RAY_MODULES_CHECKED.add(module)
+        left = wait_clean()
+        assert not left, f"the shared Ray session holds what earlier tests left, before {module}: {left}"
+    before = leftovers()  # the module fixtures' actors
+    yield
+    now = session_id()
+    assert now == session, f"the shared Ray session changed during the test: {session} -> {now}"
+    left = wait_clean(before)
+    assert not left, f"the test left these in the shared Ray session: {left}"
 
 
 @pytest.fixture

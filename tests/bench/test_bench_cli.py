@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.inputs.cli_inprocess import run_cli
+
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.e2e
 
@@ -121,5 +123,5 @@ def test_bench_startup_json_reports_phases_in_order(tmp_path):
 
 
 def test_bench_overhead_refuses_a_bad_resolution():
-    p = _aerodaas("bench", "overhead", "--detector", "stub", "--resolution", "640by480", timeout=60)
+    p = run_cli("bench", "overhead", "--detector", "stub", "--resolution", "640by480", cwd=ROOT)  # in-process
     assert p.returncode == 2 and "--resolution expects WxH" in p.stderr

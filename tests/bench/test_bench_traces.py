@@ -10,6 +10,7 @@ from mcap.writer import Writer
 from aerodaas.bench.workload import make_trace
 from aerodaas.bench.traces import TraceSpec, frame_times, recording_frame_gaps
 from aerodaas.schedulers.analytics_base import Workload
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_workload
 
 W = Workload.from_dict({"models": {"A": {"edge_ms": 100, "cloud_ms": 200, "benefit": 50, "edge_cost": 1,
@@ -149,12 +150,8 @@ def test_sweep_runs_and_records_the_realistic_trace():
 
 
 def test_cli_rejects_a_bad_trace_before_running(tmp_path):
-    import subprocess
-    import sys
 
-    cli = "import sys; from aerodaas.cli import main; sys.exit(main())"
-    p = subprocess.run([sys.executable, "-c", cli, "bench", "schedulers", "--harness", "--trace", "bursty",
-                        "--out", str(tmp_path / "x.json")], capture_output=True, text=True, timeout=120)
+    p = run_cli("bench", "schedulers", "--harness", "--trace", "bursty", "--out", str(tmp_path / "x.json"))
     assert p.returncode == 2 and "trace kind" in p.stderr and "bursty" in p.stderr
     assert not (tmp_path / "x.json").exists()
 

@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+from tests.inputs.cli_inprocess import run_cli
+
 
 def test_bench_video_reports_every_reader(tmp_path):
     out = tmp_path / "video.json"
@@ -24,6 +26,5 @@ def test_bench_video_reports_every_reader(tmp_path):
 
 
 def test_bench_video_refuses_bad_options():
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "video", "--readers", "vlc"],
-                       capture_output=True, text=True, timeout=120)
+    p = run_cli("bench", "video", "--readers", "vlc")  # in-process: bad input
     assert p.returncode == 2 and "vlc" in p.stderr

@@ -14,6 +14,7 @@ import textwrap
 
 import pytest
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 SCRIPT = textwrap.dedent(r'''
@@ -149,8 +150,7 @@ def test_run_address_with_ray_tls_half_set_exits_2_before_ray(tmp_path):
     app = tmp_path / "app.py"
     app.write_text("from aerodaas import *\n")
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_TLS_")} | {"RAY_USE_TLS": "1"}
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet", "--address",
-                        "127.0.0.1:1"], capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
+    p = run_cli("run", str(app), "--quiet", "--address", "127.0.0.1:1", cwd=REPO, env=env)  # in-process
     assert p.returncode == 2, p.stderr[-2000:]
     assert "RAY_USE_TLS=1 turns Ray's TLS on, but RAY_TLS_SERVER_CERT, RAY_TLS_SERVER_KEY, RAY_TLS_CA_CERT are not" \
            in p.stderr, p.stderr[-2000:]

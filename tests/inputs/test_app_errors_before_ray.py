@@ -17,6 +17,7 @@ import pytest
 
 from aerodaas.plugins import SensorPlugin, registry
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
 APP = """from aerodaas import *
@@ -67,12 +68,17 @@ def _write(tmp_path, body: str = "", app_text: str | None = None, robot: dict | 
     return app
 
 
-def _cli(tmp_path, command: str, app, *extra: str):
-    """``aerodaas COMMAND APP EXTRA`` in a subprocess (in ``tmp_path``) with a new empty RAY_TMPDIR."""
+def _cli(tmp_path, command: str, app, *extra: str, own_process: bool = False):
+    """``aerodaas COMMAND APP EXTRA`` (in ``tmp_path``) with a new empty RAY_TMPDIR: in this process
+    (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started), or with ``own_process`` as the
+    real command in a subprocess."""
     ray_tmp = fresh_ray_tmp(tmp_path)
     args = [command, str(app), *extra] + (["--quiet"] if command == "run" else ["--json"])
+    env = {**os.environ, "RAY_TMPDIR": str(ray_tmp)}
+    if not own_process:
+        return run_cli(*args, cwd=tmp_path, env=env), ray_tmp
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", *args], capture_output=True, text=True, cwd=tmp_path,
-                       env={**os.environ, "RAY_TMPDIR": str(ray_tmp)}, timeout=300)
+                       env=env, timeout=300)
     return p, ray_tmp
 
 
@@ -141,7 +147,8 @@ def test_registering_a_config_that_is_not_a_model_fails_at_the_decorator():
 @pytest.mark.parametrize("command", ["plan", "run"])
 def test_a_syntax_error_in_the_app_is_bad_input_naming_the_file_and_line(tmp_path, command):
     app = _write(tmp_path, app_text='from aerodaas import *\n\nenv = Environment("env.json"\nx = 1\n')
-    p, ray_tmp = _cli(tmp_path, command, app)
+    # `run` as the real command: its exit code 2 and no Ray session, from the process itself
+    p, ray_tmp = _cli(tmp_path, command, app, own_process=command == "run")
     _refused_before_ray(p, ray_tmp, f"application file {str(app)!r}, line 3: not valid Python: SyntaxError: '(' "
                                     f"was never closed", 'env = Environment("env.json"')
 

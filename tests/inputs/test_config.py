@@ -1,10 +1,10 @@
 import json
-import subprocess
-import sys
 
 import pytest
 
 from aerodaas.config import ConfigError, load_environment_config, parse_environment_config
+
+from tests.inputs.cli_inprocess import run_cli
 
 GOOD = {"robots": [{"id": "d1", "sensors": [{"id": "cam", "type": "camera"}, {"id": "odom", "type": "odometry"}]}]}
 
@@ -46,7 +46,8 @@ def test_bad_json_and_missing_file(tmp_path):
 
 
 def test_schema_command_prints_json_schema():
-    out = subprocess.run([sys.executable, "-m", "aerodaas.cli", "schema"], capture_output=True, text=True, check=True)
+    out = run_cli("schema")
+    assert out.returncode == 0, out.stderr
     schema = json.loads(out.stdout)
     assert "robots" in schema["properties"] and "RobotConfig" in schema["$defs"]
 

@@ -18,6 +18,7 @@ import pytest
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.plugins import registry
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
 #: a sensor plug-in and a backend plug-in whose Config validators raise TypeError (pydantic passes it on as is)
@@ -120,9 +121,12 @@ def test_a_held_out_error_ends_before_ray_with_exit_2_naming_the_field(tmp_path,
     app = tmp_path / "app.py"
     app.write_text(APP.format(scheduler=scheduler))
     ray_tmp = fresh_ray_tmp(tmp_path)
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
-                       text=True, cwd=tmp_path, timeout=300,
-                       env={**os.environ, "RAY_TMPDIR": str(ray_tmp), "PYTHONPATH": str(tmp_path)})
+    env = {**os.environ, "RAY_TMPDIR": str(ray_tmp), "PYTHONPATH": str(tmp_path)}
+    if case == CASES[0][0]:  # the real command: its exit code 2 and no Ray session, from the process itself
+        p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
+                           text=True, cwd=tmp_path, timeout=300, env=env)
+    else:  # the same code path in this process (which fails the test if Ray is started)
+        p = run_cli("run", str(app), "--quiet", cwd=tmp_path, env=env)
     assert p.returncode == 2, p.stdout[-2000:] + p.stderr[-2000:]
     assert said in p.stderr, p.stderr[-2000:]
     assert "Traceback" not in p.stderr, p.stderr[-3000:]

@@ -5,14 +5,14 @@ look-alikes or case twins were accepted; robot ``a`` with camera ``camera/X`` an
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 from hypothesis import given, settings, strategies as st
 
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.model.ids import RESERVED, ROOT_RESERVED, check_id
+
+from tests.inputs.cli_inprocess import run_cli
 
 GOOD_IDS = ["d1", "quadrotor_base", "Edge-2", "x" * 64, "A"]
 BAD_IDS = {
@@ -120,8 +120,7 @@ def test_analytics_names_are_ids_and_distinct_per_robot_before_ray(tmp_path, a, 
     env.write_text(json.dumps(_env([_robot("d1", ("odom", "odometry"))])))
     app = tmp_path / "app.py"
     app.write_text(APP.format(env=str(env), a=a, b=b))
-    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", str(app)], capture_output=True, text=True,
-                       timeout=120)
+    r = run_cli("plan", str(app))
     assert r.returncode == 2 and named in r.stderr, r.stderr[-2000:]
 
 

@@ -2,19 +2,18 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_data
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _plan(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120, env=dict(os.environ))
+def _plan(*args: str):
+    """``aerodaas plan ARGS`` in this process (:func:`tests.inputs.cli_inprocess.run_cli`: no Ray, as plan never
+    starts it)."""
+    return run_cli("plan", *args, cwd=ROOT)
 
 
 @needs_data

@@ -30,6 +30,7 @@ from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.values import camera_mount_quaternion, quaternion_from_euler_deg
 from aerodaas.recording.schemas import JSON_SCHEMA_MODELS, json_schema_for
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO, skip_or_fail
 from tests.liveview.foxglove_ws_client import collect, schema_bytes
 from tests.recording.mcap_validation import rotation, validate_recording
@@ -99,16 +100,14 @@ def test_a_bad_or_busy_live_address_fails_before_ray(tmp_path):
 
     app = tmp_path / "app.py"
     app.write_text("raise SystemExit('must not run')\n")
-    p = subprocess.run([*AERODAAS, "run", str(app), "--live", "127.0.0.1:99999"], capture_output=True, text=True,
-                       timeout=60)
+    p = run_cli("run", str(app), "--live", "127.0.0.1:99999")  # in-process: Ray refused
     assert p.returncode == 2 and "--live: port 99999" in p.stderr and "must not run" not in p.stderr
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
         for cmd in (["run", str(app)], ["replay", str(tmp_path / "none.mcap")]):
-            p = subprocess.run([*AERODAAS, *cmd, "--live", f"127.0.0.1:{port}"], capture_output=True, text=True,
-                               timeout=60)
+            p = run_cli(*cmd, "--live", f"127.0.0.1:{port}")
             assert p.returncode == 2 and f"cannot listen on 127.0.0.1:{port}" in p.stderr, p.stderr
 
 

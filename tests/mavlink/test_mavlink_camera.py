@@ -22,6 +22,7 @@ from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.emulators.mavlink.gimbal import EmulatedCamera
 from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.video.discovery import StreamDiscoveryError, StreamRequest, VideoStreamType, stream_source
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO, needs_data
 
 
@@ -109,8 +110,7 @@ def _env(source_props: dict, backend: dict) -> dict:
 def test_mavlink_source_on_another_backend_is_refused_before_ray(tmp_path):
     env_path = tmp_path / "env.json"
     env_path.write_text(json.dumps(_env({"source": "mavlink"}, {})))
-    proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
-                           "--env", str(env_path), "--quiet"], capture_output=True, text=True, timeout=300)
+    proc = run_cli("run", str(REPO / "apps" / "vehicle_tracking.py"), "--env", str(env_path), "--quiet")
     assert proc.returncode == 2, proc.stderr[-2000:]
     assert "sensors.0.properties.source: 'mavlink'" in proc.stderr and "backend is 'sim'" in proc.stderr
     assert "ray" not in proc.stdout.lower()

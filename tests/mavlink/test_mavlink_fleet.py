@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -18,6 +16,7 @@ from aerodaas.backends.mavlink import shared_link
 from aerodaas.config import ConfigError, MavlinkConfig, RobotConfig, load_environment_config
 from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.model.types import GeoPoint
+from tests.inputs.cli_inprocess import run_cli
 from tests.mavlink.emulated import run_until
 from tests.video.udp_fanout import UdpFanout
 
@@ -155,9 +154,10 @@ env.start_mission(env.get_env_robots())
 '''
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aerodaas.cli", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=120, env=dict(os.environ))
+def _cli(*args: str):
+    """``aerodaas ARGS`` in this process (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray
+    starts)."""
+    return run_cli(*args, cwd=ROOT)
 
 
 def test_run_refuses_a_system_id_clash_with_exit_2_before_ray(tmp_path):
@@ -167,8 +167,7 @@ def test_run_refuses_a_system_id_clash_with_exit_2_before_ray(tmp_path):
     from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
     ray_tmp = fresh_ray_tmp(tmp_path)
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
-                       text=True, timeout=120, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
+    p = run_cli("run", str(app), "--quiet", env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
     assert p.returncode == 2, p.stderr[-2000:]
     assert "'a' and 'b'" in p.stderr and "system id 1" in p.stderr
     assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started

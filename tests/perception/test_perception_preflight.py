@@ -1,8 +1,8 @@
 """Every detector and tiling setting is checked before Ray starts, the way a user meets it: an app
-file with a bad value, ``aerodaas plan`` / ``aerodaas run`` in a subprocess, exit 2, a message naming the field and
-the value, and no Ray session created (a fresh ``RAY_TMPDIR`` stays empty, no Ray process names it). Values that need
-no model file fail where the app writes them (``Tiling(tile=16)``, a threshold of 15); the model's own class names
-and a missing model file fail in the pre-flight (``ObjectDetector.check``)."""
+file with a bad value, ``aerodaas plan`` / ``aerodaas run`` (in-process, one real subprocess), exit 2, a message
+naming the field and the value, and no Ray session created (a fresh ``RAY_TMPDIR`` stays empty, no Ray process
+names it). Values that need no model file fail where the app writes them (``Tiling(tile=16)``, a threshold of 15);
+the model's own class names and a missing model file fail in the pre-flight (``ObjectDetector.check``)."""
 from __future__ import annotations
 
 import json
@@ -16,6 +16,7 @@ from aerodaas.analytics.detector import ObjectDetector
 from aerodaas.perception.tiling import Tiling
 from aerodaas.perception.tracking import ByteTrackConfig
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_data_case
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
@@ -54,12 +55,17 @@ def _app(tmp_path, args: str):
     return app
 
 
-def _cli(tmp_path, command: str, app):
-    """``aerodaas COMMAND APP`` in a subprocess with a new empty RAY_TMPDIR: (result, that folder)."""
+def _cli(tmp_path, command: str, app, own_process: bool = False):
+    """``aerodaas COMMAND APP`` with a new empty RAY_TMPDIR: (result, that folder); in this process
+    (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started), or with ``own_process`` as the
+    real command in a subprocess."""
     ray_tmp = fresh_ray_tmp(tmp_path)
     args = [command, str(app)] + (["--quiet"] if command == "run" else ["--json"])
+    env = {**os.environ, "RAY_TMPDIR": str(ray_tmp)}
+    if not own_process:
+        return run_cli(*args, cwd=tmp_path, env=env), ray_tmp
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", *args], capture_output=True, text=True, cwd=tmp_path,
-                       env={**os.environ, "RAY_TMPDIR": str(ray_tmp)}, timeout=300)
+                       env=env, timeout=300)
     return p, ray_tmp
 
 
@@ -80,7 +86,8 @@ def test_plan_refuses_a_bad_detector_setting(tmp_path, args, message):
 @pytest.mark.parametrize("args,message", [CASES[0], CASES[2], CASES[4], pytest.param(*NEEDS_MODEL[0], marks=needs_data_case)],
                          ids=["tile=16", "score_threshold=15", "missing model file", "unknown class"])
 def test_run_refuses_a_bad_detector_setting_before_ray(tmp_path, args, message):
-    p, ray_tmp = _cli(tmp_path, "run", _app(tmp_path, args))
+    # the first case as the real command: its exit code 2 and no Ray session, from the process itself
+    p, ray_tmp = _cli(tmp_path, "run", _app(tmp_path, args), own_process=args == CASES[0][0])
     _assert_refused_before_ray(p, ray_tmp, message)
 
 

@@ -20,6 +20,7 @@ from aerodaas.analytics.detector import ObjectDetector
 from aerodaas.perception.providers import (CPU_PROVIDER, ProviderUnavailableError, Providers, open_session,
                                            providers_setting)
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import needs_data
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
@@ -205,8 +206,14 @@ def test_gpu_placement_errors_name_the_actor_and_the_nodes():
     assert gpu_placement_errors(plan, Placement(local=True), nodes[1:]) == []
 
 
-def _cli(tmp_path: Path, app: Path) -> tuple[subprocess.CompletedProcess, Path]:
+def _cli(tmp_path: Path, app: Path, in_process: bool = False):
+    """``aerodaas run APP --quiet`` (a new empty RAY_TMPDIR) in a subprocess, or with ``in_process`` (bad input) in
+    this process (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started): (result,
+    RAY_TMPDIR)."""
     ray_tmp = fresh_ray_tmp(tmp_path)
+    if in_process:
+        env = {**os.environ, "RAY_TMPDIR": str(ray_tmp)}
+        return run_cli("run", str(app), "--quiet", cwd=tmp_path, env=env), ray_tmp
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
                        text=True, cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)}, timeout=300)
     return p, ray_tmp
@@ -215,7 +222,8 @@ def _cli(tmp_path: Path, app: Path) -> tuple[subprocess.CompletedProcess, Path]:
 @needs_data
 def test_run_refuses_a_required_provider_this_machine_lacks_before_ray(tmp_path, data_env):
     _cpu_build()
-    p, ray_tmp = _cli(tmp_path, _app(tmp_path, "Providers(names=['CUDAExecutionProvider'], required=True)"))
+    p, ray_tmp = _cli(tmp_path, _app(tmp_path, "Providers(names=['CUDAExecutionProvider'], required=True)"),
+                      in_process=True)
     assert p.returncode == 2, p.stdout[-1500:] + p.stderr[-1500:]
     assert "analytics 'detector': providers.required=True but this machine's onnxruntime" in p.stderr
     assert "does not offer ['CUDAExecutionProvider']" in p.stderr and "Traceback" not in p.stderr

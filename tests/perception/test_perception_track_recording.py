@@ -23,6 +23,7 @@ from aerodaas.bench.tracks import score_tracks
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.runtime.driver import run_file
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 APP = REPO / "tests" / "apps" / "fleet_tracks.py"
@@ -143,8 +144,6 @@ def test_many_tracks_are_one_fixes_topic_with_every_id_and_info_lists_one_track_
     """30 frames in which 40 tracks come and go (five at a time) give ONE ``foxglove.LocationFixes``
     channel whose messages carry exactly each frame's track ids (metadata ``track_id``), 40 distinct ids in all;
     ``aerodaas info`` (the command line) lists three track channels, not one per track."""
-    import subprocess
-    import sys
 
     from aerodaas.perception.track_records import write_tracks
     from aerodaas.recording.reader import read_messages
@@ -168,8 +167,7 @@ def test_many_tracks_are_one_fixes_topic_with_every_id_and_info_lists_one_track_
     assert got == frames
     all_ids = {i for ids in frames.values() for i in ids}
     assert len(all_ids) == 40
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "info", str(tmp_path / "many.mcap")],
-                       capture_output=True, text=True, timeout=120)
+    p = run_cli("info", str(tmp_path / "many.mcap"))  # in-process: a reader, no Ray
     assert p.returncode == 0, p.stderr
     lines = [ln.split() for ln in p.stdout.splitlines() if "/tracks" in ln]
     assert [tuple(ln[:3]) for ln in lines] == [("/d1/tracks/tracks", "foxglove.ImageAnnotations", "30"),
@@ -273,8 +271,6 @@ def test_the_analytics_component_records_each_drones_tracks_whatever_the_output(
 def test_bench_tracks_refuses_a_recording_without_truth_or_tracks(tmp_path):
     """`aerodaas bench tracks` on a recording that is not a simulated run with a tracking analytics: exit 2 with the
     reason, no traceback."""
-    import subprocess
-    import sys
 
     from aerodaas.recording.writer import McapRecorder
 
@@ -283,11 +279,9 @@ def test_bench_tracks_refuses_a_recording_without_truth_or_tracks(tmp_path):
         rec.write_json("/d1/odometry", 1, {"robot_id": "d1", "position": [0, 0, 20]}, schema_name="aerodaas.Odometry")
     with pytest.raises(ValueError, match="world/targets"):
         score_tracks(str(path))
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "tracks", str(path)], capture_output=True,
-                       text=True, timeout=120)
+    p = run_cli("bench", "tracks", str(path))  # in-process: bad input
     assert p.returncode == 2 and "no /world/targets" in p.stdout + p.stderr, (p.stdout, p.stderr)
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "tracks", str(tmp_path / "none.mcap")],
-                       capture_output=True, text=True, timeout=120)
+    p = run_cli("bench", "tracks", str(tmp_path / "none.mcap"))
     assert p.returncode == 2 and "no such file" in p.stdout + p.stderr
 
 

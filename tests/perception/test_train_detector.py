@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import MODEL_DIR, needs_data, skip_or_fail
 
 
@@ -45,8 +46,12 @@ def _draw_set(root: Path, n: int = 4, seed: int = 0) -> Path:
     return root
 
 
-def _train(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+def _train(*args: str, env_extra: dict | None = None, in_process: bool = False):
+    """``aerodaas train detector ARGS`` in a subprocess, or with ``in_process`` (a check of bad input, which ends
+    before training) in this process (:func:`tests.inputs.cli_inprocess.run_cli`)."""
     env = {**os.environ, "AERODAAS_MODEL_DIR": str(MODEL_DIR), **(env_extra or {})}
+    if in_process:
+        return run_cli("train", "detector", *args, env=env)
     return subprocess.run([sys.executable, "-m", "aerodaas.cli", "train", "detector", *args], capture_output=True,
                           text=True, env=env, timeout=600)
 
@@ -140,7 +145,7 @@ def test_bad_labels_end_before_training_naming_the_file(tmp_path, case):
     data = _draw_set(tmp_path / "set")
     expected = case(data)
     out = tmp_path / "run"
-    r = _train("--data", str(data), "--out", str(out), *SMOKE)
+    r = _train("--data", str(data), "--out", str(out), *SMOKE, in_process=True)
     assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
     for text in expected:
         assert text in r.stderr, (text, r.stderr[-2000:])
@@ -169,7 +174,7 @@ def test_coco_labels_with_a_missing_image_are_refused(tmp_path):
                                         (("--oblique", "nan"), "--oblique=nan"),
                                         (("--oblique", "1.5"), "--oblique=1.5")])
 def test_bad_options_are_named(tmp_path, args, field):
-    r = _train("--data", str(tmp_path), "--out", str(tmp_path / "run"), *args)
+    r = _train("--data", str(tmp_path), "--out", str(tmp_path / "run"), *args, in_process=True)
     assert r.returncode == 2
     assert field in r.stderr, r.stderr
 

@@ -19,6 +19,7 @@ from aerodaas.analytics.contract import ContractError, check_declaration
 from aerodaas.recording.reader import read_messages
 from aerodaas.protocol.messages import Port, ValueMsg
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 from tests.plugins.test_example_plugins import _aerodaas, _env_with, installed  # noqa: F401 - the fixture: the installed example
@@ -173,17 +174,13 @@ MONITOR_ON_CAMERA = textwrap.dedent('''
 
 
 def test_a_builtin_analytics_fed_the_wrong_stream_stops_the_run_before_ray(tmp_path):
-    import subprocess
-    import sys
-
     env = tmp_path / "env.json"
     env.write_text(json.dumps({"name": "t", "compute": [{"id": "edge", "tier": "edge"}],
                                "robots": [{"id": "uav", "sensors": [{"id": "cam", "type": "camera"}]}]}))
     app = tmp_path / "app.py"
     app.write_text(MONITOR_ON_CAMERA.format(env=env))
     ray_tmp = fresh_ray_tmp(tmp_path)
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--quiet"], capture_output=True,
-                       text=True, cwd=tmp_path, timeout=300, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
+    p = run_cli("run", str(app), "--quiet", cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
     err = p.stdout + p.stderr
     assert p.returncode == 2, err[-3000:]
     assert ("analytics 'monitor' (MonitoringAnalytics) consumes ['odometry'], but it is fed sensor 'cam' (camera), "
@@ -292,11 +289,7 @@ def test_a_downstream_analytics_subscribes_to_a_named_output(installed, tmp_path
 def test_every_shipped_app_passes_the_consumes_check(app, tmp_path):
     """The shipped apps wire built-in analytics that declare ``consumes`` (detector on frames, follow on detections,
     monitor on odometry): the check refuses none of them."""
-    import subprocess
-    import sys
-
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", str(REPO / "apps" / app), "--json"],
-                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    p = run_cli("plan", str(REPO / "apps" / app), "--json", cwd=tmp_path)
     assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
     plan = json.loads(p.stdout[p.stdout.index("\n{") + 1 if not p.stdout.startswith("{") else 0:])  # after notes
     assert any(n["kind"] == "analytics" for n in plan["nodes"])

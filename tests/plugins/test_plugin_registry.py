@@ -13,6 +13,8 @@ import pytest
 from aerodaas.config import ConfigError, parse_environment_config
 from aerodaas.plugins import SensorPlugin, SensorPluginConfig, registry
 
+from tests.inputs.cli_inprocess import run_cli
+
 
 
 def test_builtins_of_every_kind_are_listed_with_their_origin():
@@ -127,15 +129,13 @@ APP = textwrap.dedent('''
 def test_a_sensor_written_in_the_app_is_planned_and_listed_without_starting_ray(tmp_path):
     app = tmp_path / "my_app.py"
     app.write_text(APP)
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plan", str(app), "--json"], capture_output=True,
-                       text=True, cwd=tmp_path, timeout=120)
+    p = run_cli("plan", str(app), "--json", cwd=tmp_path)  # in-process: Ray refused
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     node = next(n for n in json.loads(p.stdout)["nodes"] if n["id"] == "uav/alt")
     assert node["kind"] == "sensor" and node["plugin"] == "my_altimeter -> aerodaas_app_my_app.Level", node
     plug = tmp_path / "plug.py"
     plug.write_text(APP.split("env = Environment")[0])
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "plugins", "--json", "--kind", "sensor", "--app",
-                        str(plug)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    p = run_cli("plugins", "--json", "--kind", "sensor", "--app", str(plug), cwd=tmp_path)
     assert p.returncode == 0, p.stderr[-2000:]
     rows = {r["name"]: r for r in json.loads(p.stdout)}
     assert rows["my_altimeter"]["origin"] == f"decorator in {plug}", rows["my_altimeter"]
@@ -149,7 +149,7 @@ def test_an_environment_sensor_of_unknown_type_is_refused_not_skipped():
 
 
 @pytest.mark.e2e
-def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
+def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path, ray_session):
     """The decorator path on Ray: the app's sensor class (and its pydantic message model) live only in the app,
     travel to the drone actor by value, sample the vehicle state there and are recorded with their schema."""
     from mcap.reader import make_reader
@@ -168,9 +168,8 @@ def test_a_sensor_written_in_the_app_flies_and_is_recorded(tmp_path):
                 [Waypoint(id="h", x=0.0, y=0.0, z=3.0, hover_duration=2.0)]), priority=2)))
             env.start_mission([d])''')))
     rec = tmp_path / "run.mcap"
-    env = dict(__import__("os").environ, AERODAAS_NO_ATTACH="1")
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet",
-                        "--timeout", "240"], capture_output=True, text=True, cwd=tmp_path, timeout=600, env=env)
+    # in-process on the worker's shared Ray session (the class travels by value as before; checked clean after)
+    p = run_cli("run", str(app), "--record", str(rec), "--quiet", "--timeout", "240", cwd=tmp_path, shared_ray=True)
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "sensor alt (my_altimeter):" in p.stdout
     levels = [m for t, _, _, m in read_messages(str(rec)) if t == "/uav/alt"]
@@ -219,8 +218,6 @@ def test_a_plugin_module_that_exits_on_import_is_an_error_naming_it(tmp_path, mo
 
 def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_path):
     import json
-    import subprocess
-    import sys
 
     from tests.inputs.test_app_value import _ray_processes_under, fresh_ray_tmp
 
@@ -231,9 +228,8 @@ def test_an_app_whose_import_exits_is_refused_before_ray_naming_the_file(tmp_pat
     app = tmp_path / "app.py"
     app.write_text(f"from aerodaas import *\nimport exiting_helper\nenv = Environment({str(env)!r})\n"
                    "drone = env.get_robot_by_id('d1')\nresult = drone.start_mission()\n")
-    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(tmp_path / "r.mcap")],
-                       capture_output=True, text=True, timeout=180, env={**__import__("os").environ,
-                                                                         "RAY_TMPDIR": str(ray_tmp)})
+    r = run_cli("run", str(app), "--record", str(tmp_path / "r.mcap"),  # in-process: Ray refused
+                env={**__import__("os").environ, "RAY_TMPDIR": str(ray_tmp)})
     assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
     assert "sys.exit(0) was called in" in r.stderr and "exiting_helper.py line 3" in r.stderr, r.stderr[-2000:]
     assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session started

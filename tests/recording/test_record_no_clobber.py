@@ -3,10 +3,7 @@ unless --overwrite, and the application and its environment file always; an earl
 The runs use a temporary copy of apps/farm_survey.py and its environment file, never the checkout's own."""
 from __future__ import annotations
 
-import os
 import shutil
-import subprocess
-import sys
 
 import pytest
 
@@ -14,6 +11,7 @@ from aerodaas.recording.writer import McapRecorder
 from aerodaas.recording.record_path import check_record_path, is_aerodaas_recording
 from aerodaas.recording.reader import read_messages
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
 
 
@@ -22,11 +20,6 @@ def _farm_copy(tmp_path):
     for name in ("farm_survey.py", "farm_survey.json"):
         shutil.copy(REPO / "apps" / name, tmp_path / name)
     return tmp_path / "farm_survey.py", tmp_path / "farm_survey.json"
-
-
-def _run(app, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), *args, "--quiet"],
-                          capture_output=True, text=True, timeout=300, cwd=app.parent, env=dict(os.environ))
 
 
 def _earlier_recording(path) -> None:
@@ -68,14 +61,15 @@ def test_the_app_and_environment_file_are_never_a_recording_target(tmp_path):
     app, env_file = _farm_copy(tmp_path)
     for target in (app, env_file):
         before = target.read_bytes()
-        p = _run(app, "--record", str(target), "--overwrite")
+        # in-process (Ray refused): the record path is checked before anything starts
+        p = run_cli("run", str(app), "--record", str(target), "--overwrite", "--quiet", cwd=app.parent)
         assert p.returncode == 2 and "a recording never overwrites the application" in p.stderr, p.stderr
         assert target.read_bytes() == before
 
 
 @pytest.mark.e2e
 @pytest.mark.parametrize("earlier", ["ours", "foreign"])
-def test_a_run_replaces_an_earlier_recording_and_with_overwrite_a_foreign_file(tmp_path, earlier):
+def test_a_run_replaces_an_earlier_recording_and_with_overwrite_a_foreign_file(tmp_path, earlier, ray_session):
     """The positive path, on a copy of the farm survey: an earlier recording of ours is replaced without
     --overwrite, a file that is not ours with it; the file then holds this run (its mission result, its odometry),
     nothing of what was there."""
@@ -85,7 +79,9 @@ def test_a_run_replaces_an_earlier_recording_and_with_overwrite_a_foreign_file(t
         _earlier_recording(rec)
     else:
         rec.write_text("field notes")
-    p = _run(app, "--record", str(rec), "--speedup", "20", *(["--overwrite"] if earlier == "foreign" else []))
+    # in-process on the worker's shared Ray session (no Ray start of its own; the session checked clean after)
+    p = run_cli("run", str(app), "--record", str(rec), "--speedup", "20",
+                *(["--overwrite"] if earlier == "foreign" else []), "--quiet", cwd=app.parent, shared_ray=True)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     assert is_aerodaas_recording(rec)
     topics = [m[0] for m in read_messages(str(rec))]

@@ -15,6 +15,8 @@ import pytest
 from aerodaas.navigation.gimbal import GimbalError, roi_angles, wrap_deg
 from aerodaas.recording.metrics import load_run
 
+from tests.inputs.cli_inprocess import run_cli
+
 LIMITS = {"pitch_min_deg": -90, "pitch_max_deg": 20, "yaw_min_deg": -120, "yaw_max_deg": 120, "rate_deg_s": 60}
 ROI = (8.0, 4.0, 0.0)
 POINT = (-45.0, 30.0)
@@ -171,7 +173,8 @@ def _aerodaas_run(app: str, tmp_path) -> subprocess.CompletedProcess:
 def test_out_of_limit_values_are_refused_before_ray(tmp_path):
     """``point_gimbal(-120, 30)`` in the app: exit 2 naming the field and value, before Ray starts."""
     app = _write_app(tmp_path, _env())
-    proc = _aerodaas_run(app, tmp_path)
+    proc = run_cli("run", app, "--record", str(tmp_path / "x.mcap"), cwd=tmp_path,  # in-process: Ray refused
+                   env={**__import__("os").environ, "GIMBAL_PITCH": "-120"})
     assert proc.returncode == 2, proc.stderr[-2000:]
     assert "pitch_deg -120.0" in proc.stderr and "uav" in proc.stderr, proc.stderr[-2000:]
 

@@ -12,6 +12,8 @@ from aerodaas.config import GroundConfig
 from aerodaas.sim import ground_cache
 from aerodaas.sim.world import World, ground_pyramid
 
+from tests.inputs.cli_inprocess import run_cli
+
 GROUND = GroundConfig(seed=3, metres_per_pixel=0.05, size_m=40)
 
 
@@ -106,8 +108,7 @@ def test_a_bad_cache_bound_is_refused_before_ray_and_down_removes_the_cache(cach
     env = dict(os.environ, AERODAAS_GROUND_CACHE_MB="lots")
     app = tmp_path / "app.py"
     app.write_text("raise SystemExit('the app must not run')\n")
-    r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app)], env=env, capture_output=True, text=True,
-                       timeout=120)
+    r = run_cli("run", str(app), env=env)  # in-process: Ray refused
     assert r.returncode == 2 and "AERODAAS_GROUND_CACHE_MB" in r.stderr and "'lots'" in r.stderr, r.stderr
     env = dict(os.environ, AERODAAS_STATE_DIR=str(tmp_path / "state"))  # no `aerodaas up` cluster there
     r = subprocess.run([sys.executable, "-m", "aerodaas.cli", "down"], env=env, capture_output=True, text=True,

@@ -7,8 +7,6 @@ take-off), judged from the recording and the exit code."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import textwrap
 
 import pytest
@@ -19,6 +17,8 @@ from aerodaas.config import ConfigError, RobotConfig, parse_environment_config
 from aerodaas.config.deadlines import PhaseDeadlinesConfig
 from aerodaas.model.types import AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.navigation import deadlines as dl
+
+from tests.inputs.cli_inprocess import run_cli
 
 
 def test_a_deadline_is_the_legs_at_the_vehicles_limits_times_the_factor_plus_the_margin():
@@ -263,7 +263,9 @@ APP = textwrap.dedent('''
 ''')
 
 
-def _run_app(tmp_path, backend: str) -> tuple[subprocess.CompletedProcess, list]:
+def _run_app(tmp_path, backend: str):
+    """``aerodaas run app.py`` in this process on the worker's shared Ray session (the caller requests
+    ``ray_session``; the app's backend class travels to the drone actor by value): (result, recorded messages)."""
     from aerodaas.recording.reader import read_messages
 
     robot = {"id": "r", "backend": backend, "takeoff_altitude": 3.0, "idle_land_s": 2.0,
@@ -273,14 +275,13 @@ def _run_app(tmp_path, backend: str) -> tuple[subprocess.CompletedProcess, list]
                                                    "simulation": {"speedup": 20.0}}))
     (tmp_path / "app.py").write_text(APP)
     rec = tmp_path / "run.mcap"
-    proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(tmp_path / "app.py"), "--record",
-                           str(rec), "--quiet", "--timeout", "300"], capture_output=True, text=True, timeout=480,
-                          cwd=tmp_path)
+    proc = run_cli("run", str(tmp_path / "app.py"), "--record", str(rec), "--quiet", "--timeout", "300",
+                   cwd=tmp_path, shared_ray=True)
     return proc, [(t, m) for t, _, _, m in read_messages(str(rec))]
 
 
 @pytest.mark.e2e
-def test_a_users_simulator_that_cannot_climb_ends_takeoff_stalled_with_exit_1(tmp_path):
+def test_a_users_simulator_that_cannot_climb_ends_takeoff_stalled_with_exit_1(tmp_path, ray_session):
     proc, msgs = _run_app(tmp_path, "weak_motor_sim")
     events = [m for t, m in msgs if t == "/r/events"]
     result = next(m for t, m in msgs if t == "/mission/result")
@@ -295,7 +296,7 @@ def test_a_users_simulator_that_cannot_climb_ends_takeoff_stalled_with_exit_1(tm
 
 
 @pytest.mark.e2e
-def test_a_ground_vehicle_that_needs_no_take_off_drives_its_mission_without_the_deadline(tmp_path):
+def test_a_ground_vehicle_that_needs_no_take_off_drives_its_mission_without_the_deadline(tmp_path, ray_session):
     proc, msgs = _run_app(tmp_path, "rover")
     events = [m["event"] for t, m in msgs if t == "/r/events"]
     states = [m["state"] for t, m in msgs if t == "/mission/state"]

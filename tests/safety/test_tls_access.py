@@ -25,6 +25,7 @@ from aerodaas.liveview.server import LiveServer
 from aerodaas.recording.writer import RecordedMessage
 from aerodaas.tools.hitl import HitlServer
 
+from tests.inputs.cli_inprocess import run_cli
 from tests.liveview.foxglove_ws_client import collect
 from tests.inputs.test_app_errors_before_ray import APP, _refused_before_ray
 from tests.inputs.test_app_value import fresh_ray_tmp
@@ -105,8 +106,12 @@ def _app(tmp_path, hitl: dict | None = None):
     return app
 
 
-def _run_cli(tmp_path, *args: str):
+def _run_cli(tmp_path, *args: str, in_process: bool = False):
+    """``aerodaas ARGS`` (in ``tmp_path``, a new empty RAY_TMPDIR) in a subprocess, or with ``in_process`` (bad
+    input) in this process (:func:`tests.inputs.cli_inprocess.run_cli`, which fails the test if Ray is started)."""
     ray_tmp = fresh_ray_tmp(tmp_path)
+    if in_process:
+        return run_cli(*args, cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)}), ray_tmp
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", *args], capture_output=True, text=True, cwd=tmp_path,
                        env={**os.environ, "RAY_TMPDIR": str(ray_tmp)}, timeout=300)
     return p, ray_tmp
@@ -115,38 +120,35 @@ def _run_cli(tmp_path, *args: str):
 @pytest.mark.parametrize("case", ["live_no_cert", "live_world_readable_key", "hitl_no_cert", "hitl_missing_cert",
                                   "hitl_bad_key"])
 def test_aerodaas_run_refuses_clear_text_off_loopback_and_bad_files_before_ray(tmp_path, certs, case):
-    quiet = "--quiet"
     if case == "live_no_cert":
-        p, ray_tmp = _run_cli(tmp_path, "run", str(_app(tmp_path)), "--live", "0.0.0.0:0", quiet)
+        args = ("run", str(_app(tmp_path)), "--live", "0.0.0.0:0")
         said = ("--live: '0.0.0.0' is not a loopback address", "--tls-cert", "--insecure")
     elif case == "live_world_readable_key":
         os.chmod(certs.key, 0o604)
-        p, ray_tmp = _run_cli(tmp_path, "run", str(_app(tmp_path)), "--live", "0.0.0.0:0", "--tls-cert",
-                              str(certs.crt), "--tls-key", str(certs.key), quiet)
+        args = ("run", str(_app(tmp_path)), "--live", "0.0.0.0:0", "--tls-cert", str(certs.crt), "--tls-key",
+                str(certs.key))
         said = (f"--tls-key: '{certs.key}' is readable or writable by other users (mode 0604)",)
     elif case == "hitl_no_cert":
-        p, ray_tmp = _run_cli(tmp_path, "run", str(_app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0})),
-                              quiet)
+        args = ("run", str(_app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0})))
         said = ("hitl.host: '0.0.0.0' is not a loopback address", "hitl.tls_cert", "hitl.insecure")
     elif case == "hitl_missing_cert":
-        p, ray_tmp = _run_cli(tmp_path, "run", str(_app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0,
-                                                                   "tls_cert": "gone.crt", "tls_key": "gone.key"})),
-                              quiet)
+        args = ("run", str(_app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0,
+                                           "tls_cert": "gone.crt", "tls_key": "gone.key"})))
         said = ("hitl.tls_cert: file 'gone.crt' not found",)
     else:
         (certs.dir / "bad.key").write_text("-----BEGIN PRIVATE KEY-----\nAAAA\n-----END PRIVATE KEY-----\n")
         os.chmod(certs.dir / "bad.key", 0o600)
-        p, ray_tmp = _run_cli(tmp_path, "run", str(_app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0,
-                                                                   "tls_cert": certs.crt.name,
-                                                                   "tls_key": "bad.key"})), quiet)
+        args = ("run", str(_app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0,
+                                           "tls_cert": certs.crt.name, "tls_key": "bad.key"})))
         said = (f"hitl.tls_key: '{certs.dir / 'bad.key'}' is not a PEM private key",)
+    # the first case as the real command (exit 2 and no Ray session, from the process itself), the others in-process
+    p, ray_tmp = _run_cli(tmp_path, *args, "--quiet", in_process=case != "live_no_cert")
     _refused_before_ray(p, ray_tmp, *said)
 
 
 def test_aerodaas_replay_refuses_clear_text_off_loopback(tmp_path):
     (tmp_path / "x.mcap").write_bytes(b"")
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "replay", str(tmp_path / "x.mcap"), "--live",
-                        "0.0.0.0:0"], capture_output=True, text=True, timeout=120)
+    p = run_cli("replay", str(tmp_path / "x.mcap"), "--live", "0.0.0.0:0")
     assert p.returncode == 2 and "--live: '0.0.0.0' is not a loopback address" in p.stderr, p.stderr
 
 

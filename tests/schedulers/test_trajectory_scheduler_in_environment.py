@@ -13,6 +13,8 @@ import textwrap
 import pytest
 from mcap.reader import make_reader
 
+from tests.inputs.cli_inprocess import run_cli
+
 SCHED = textwrap.dedent('''
     from aerodaas.schedulers.base import TrajectoryScheduler
 
@@ -54,7 +56,8 @@ def _run(tmp_path, *extra: str) -> subprocess.CompletedProcess:
 
 def test_a_misspelt_trajectory_scheduler_is_exit_2_before_ray(tmp_path):
     _write(tmp_path, "NearestNeighbourScheduler")
-    proc = _run(tmp_path)
+    proc = run_cli("run", "app.py", "--quiet", "--timeout", "240", cwd=tmp_path,  # in-process: Ray refused
+                   env=dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])))
     out = proc.stdout + proc.stderr
     assert proc.returncode == 2, out[-3000:]
     assert "trajectory_scheduler" in out and "'NearestNeighbourScheduler'" in out

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -18,6 +16,7 @@ from aerodaas.config import ConfigError
 from aerodaas.config.robot import SensorConfig
 from aerodaas.video import CaptureClock, StreamReader, VideoSourceError, parse_stream_source
 from aerodaas.video.pose import pose_at, pose_sampled_at
+from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import DATA_MISSING, REPO, needs_data, skip_or_fail
 from tests.video.video_rig import RtspServer, Sender, check_pose_tags, free_udp_port, make_footage
 
@@ -93,9 +92,8 @@ def test_a_stream_camera_needs_the_wall_clock_refused_before_ray(tmp_path):
 
     env = _env_with_camera(tmp_path, {"source": "udp://127.0.0.1:5999"}, {"speedup": 10, "lockstep": True})
     ray_tmp = fresh_ray_tmp(tmp_path)
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
-                        "--env", str(env), "--quiet"], capture_output=True, text=True, timeout=300,
-                       cwd=tmp_path, env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})
+    p = run_cli("run", str(REPO / "apps" / "vehicle_tracking.py"), "--env", str(env), "--quiet", cwd=tmp_path,
+                env={**os.environ, "RAY_TMPDIR": str(ray_tmp)})  # in-process: Ray refused
     assert p.returncode == 2, p.stdout + p.stderr
     assert "quadrotor_base/cam1" in p.stderr + p.stdout and "speedup must be 1" in p.stderr + p.stdout
     assert list(ray_tmp.iterdir()) == [] and _ray_processes_under(ray_tmp) == []  # no Ray session was started
