@@ -58,7 +58,7 @@ def _quiet_steps(drones: list, dt: float) -> int:
     n = MAX_QUIET_STEPS
     for d in drones:
         b = d.backend
-        if d.done or d.end_requested is not None or b.clock != "sim" or b.sample_key is not None or any(
+        if d.done or d.end_requested is not None or b.clock != "sim" or b.telemetry.sample_key is not None or any(
                 c["comp"].stream is not None for c in d.cameras):
             return 1
         due = min([d.next_tick, d.next_odom] + [c["next_t"] for c in d.cameras]
