@@ -416,9 +416,8 @@ class EnvironmentConfig(_Cfg):
     def resolve_path(self, rel: str, field: str) -> Path:
         """Resolve a file named in the config: ``package:NAME``, one of the images shipped in the package
         (:func:`~aerodaas.config.base.packaged_file`); else absolute, relative to the env file, under
-        $AERODAAS_DATA_DIR, or relative to the current folder, the first that exists.
-
-        Raises ConfigError naming ``field`` and the search locations when it is not found."""
+        $AERODAAS_DATA_DIR, or relative to the current folder, the first that exists. Raises ConfigError naming
+        ``field`` and the search locations when it is not found."""
         if rel.startswith(PACKAGE_PREFIX):
             found = packaged_file(rel, field)
             self._files_read.setdefault(str(found), field)
