@@ -30,4 +30,9 @@ for s in A B; do $F --split $s --n 10 --select ranked --seed 1; done
 $F --split A --n 60 --seed 0 --tag tile640 -- --epochs 2 --tiles-per-epoch 160 --val-tiles 32 --tile 640
 for n in 20 40; do for sel in uniform ranked; do for s in A B; do $F --split $s --n $n --select $sel --seed 1; done
   done; done
+# a schedule that fits better: 10 epochs (200 steps of 8 tiles), five times the default
+L="--epochs 10 --tiles-per-epoch 160 --val-tiles 32"
+for s in A B; do $F --split $s --n 60 --select uniform --seed 0 --tag fit200 -- $L; done
+for sel in uniform ranked; do for s in A B; do $F --split $s --n 20 --select $sel --seed 0 --tag fit200 -- $L; done; done
+$F --split A --n 60 --select uniform --seed 1 --tag fit200 -- $L
 echo done
