@@ -1,9 +1,12 @@
 """``aerodaas run APP.py``: its options, parsed at every ``aerodaas`` start (this module imports nothing heavy), and
-its handler :func:`cmd_run`, which marks the CLI's start (``aerodaas bench startup``) and runs the command
-(:func:`aerodaas.commands.run_main.run`: Ray, the runtime and the configuration are imported from there)."""
+its handler :func:`run`, which marks the CLI's start (``aerodaas bench startup``), checks the flags into the run's
+options before Ray starts and flies the application (:func:`aerodaas.runtime.fly.fly`: Ray, the runtime and the
+configuration are imported from there)."""
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 from aerodaas.protocol.startup_probe import probe
 
@@ -37,13 +40,56 @@ def add_parser(sub) -> None:
     r.add_argument("--tls-key", metavar="PEM", help="private key of --tls-cert (mode 0600)")
     r.add_argument("--insecure", action="store_true", help="let the HITL API and the live view serve in clear text "
                    "off loopback without a certificate (the summary says so)")
-    r.set_defaults(func=cmd_run)
+    r.set_defaults(func=run)
 
 
-def cmd_run(args: argparse.Namespace) -> int:
-    """``aerodaas run APP.py``: load the application and fly it (:func:`aerodaas.commands.run_main.run`); the exit
-    code of its missions' results (see the README), 2 for bad input named before Ray starts."""
+def _run_options(args: argparse.Namespace):
+    """``aerodaas run``'s flags as the run's :class:`~aerodaas.runtime.options.RunOptions`, every one checked before
+    Ray starts (exit 2 naming the bad input: the returned int)."""
+    from aerodaas.config import ConfigError  # lazy: CLI start-up (pydantic)
+    from aerodaas.runtime.options import RunOptions  # lazy: CLI start-up (the runtime)
+    from aerodaas.runtime.preflight import check_run_flags  # lazy: CLI start-up (pydantic, the runtime)
+
+    try:
+        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address,
+                        app=str(args.app), overwrite=args.overwrite)
+    except (ConfigError, ValueError) as e:
+        print(f"aerodaas run: {e}", file=sys.stderr)
+        return 2
+    live = access = None
+    if args.live is not None:
+        from aerodaas.liveview.server import check_bindable, live_access, parse_address  # lazy: --live only (cv2)
+
+        try:
+            host, port = parse_address(args.live)
+            if not args.address:  # local run: the edge host (which serves) is on this machine
+                check_bindable(host, port)
+            access = live_access(host, args.tls_cert, args.tls_key, bool(args.insecure))
+        except ValueError as e:
+            print(f"aerodaas run: {e}", file=sys.stderr)
+            return 2
+        live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
+                      overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
+                      lockstep=True if args.lockstep else None, recorder_hold_s=args.recorder_hold, dashboard=bool(getattr(args, "dashboard", False)),
+                      progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live,
+                      live_access=access, tls_cert=args.tls_cert, tls_key=args.tls_key, insecure=bool(args.insecure))
+
+
+def run(args: argparse.Namespace) -> int:
+    """``aerodaas run APP.py``: mark the CLI's start, check the flags (exit 2 naming bad input before any Ray
+    process exists), then load the application and fly it with the built-in actors
+    (:func:`aerodaas.runtime.fly.fly`); the exit code of its missions' results (see the README)."""
     probe("cli")
-    from aerodaas.commands.run_main import run  # lazy: CLI start-up (Ray, pydantic, the runtime)
+    app = Path(args.app)
+    if not app.is_file():
+        print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
+        return 2
+    opts = _run_options(args)
+    if isinstance(opts, int):
+        return opts
+    from aerodaas.app.api import with_builtin_actors  # lazy: CLI start-up (pydantic, the application API)
+    from aerodaas.runtime.fly import fly  # lazy: CLI start-up (the runtime)
 
-    return run(args)
+    # the run's actors are handed to the runtime (which imports none): the built-in ones
+    return fly(app, with_builtin_actors(opts), own_process=getattr(args, "own_process", False))

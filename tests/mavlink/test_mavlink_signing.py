@@ -430,8 +430,8 @@ def test_a_refused_key_travels_to_exit_code_2():
     import pickle
 
     from aerodaas.backends.base import RobotsNotConnected
-    from aerodaas.commands.run_main import _exit_code
     from aerodaas.runtime.driver import MissionResult
+    from aerodaas.runtime.fly import exit_code
 
     e = pickle.loads(pickle.dumps(RobotsNotConnected({"a": "CredentialsRefused: no correctly signed heartbeat",
                                                       "b": "BackendError: no HEARTBEAT"}, ("a",))))
@@ -440,4 +440,4 @@ def test_a_refused_key_travels_to_exit_code_2():
     def result(outcome):
         return MissionResult(outcome=outcome, robots={}, stats={}, latency={}, recording=None, wall_s=0.0)
 
-    assert _exit_code([result("refused")], []) == 2 and _exit_code([result("failed")], []) == 1
+    assert exit_code([result("refused")], []) == 2 and exit_code([result("failed")], []) == 1

@@ -145,7 +145,7 @@ def test_a_signed_mission_flies_and_unsigned_spoofs_change_nothing_in_the_record
 
 @pytest.mark.e2e
 def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(ray_session, run_options, tmp_path):
-    from aerodaas.commands.run_main import _exit_code
+    from aerodaas.runtime.fly import exit_code
     from tests.runtime.test_backends_e2e import _run_app
 
     emu, env_path = _signed_survey(tmp_path, OTHER_KEY, KEY, connect_timeout_s=5.0)
@@ -155,7 +155,7 @@ def test_a_key_the_vehicle_does_not_hold_fails_before_take_off_with_exit_2(ray_s
     finally:
         emu.stop()
     err = res.robots["quadrotor_base"].get("error", "")
-    assert res.outcome == "refused" and _exit_code([res], []) == 2, (res.outcome, err)
+    assert res.outcome == "refused" and exit_code([res], []) == 2, (res.outcome, err)
     assert "no correctly signed heartbeat from system 1 within 5 s" in err, err
     assert not vehicle["armed"] and not vehicle["in_air"] and vehicle["commands_seen"] == []
     assert not took_off  # the emulated autopilot's own record: it never left the ground

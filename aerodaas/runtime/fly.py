@@ -1,56 +1,28 @@
-"""``aerodaas run APP.py`` itself (its options: :mod:`aerodaas.commands.run`): its flags checked into the run's
-options before Ray starts, the SIGTERM/SIGINT handling of a mission (one clean stop; a late signal after the summary
-keeps the exit code), and the exit code of the missions' results."""
+"""An application file flown as the process's command (``aerodaas run APP.py``, whose options are checked by
+:mod:`aerodaas.commands.run` before this runs): the SIGTERM/SIGINT handling of a mission (one clean stop; a late
+signal after the summary keeps the exit code), each mission's summary printed, and the exit code of the missions'
+results (the README's table of ``aerodaas run`` exit codes)."""
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import sys
 from pathlib import Path
 
-from aerodaas.app.api import with_builtin_actors
 from aerodaas.config import ConfigError
 from aerodaas.process.state import PROCESS
 from aerodaas.runtime import driver as runtime, ray_start
-from aerodaas.runtime.report import format_summary
 from aerodaas.runtime.app_errors import report
 from aerodaas.runtime.options import RunOptions
-from aerodaas.runtime.preflight import check_run_flags
+from aerodaas.runtime.report import format_summary
+
+__all__ = ["StopSignals", "exit_code", "fly"]
 
 
-def _run_options(args: argparse.Namespace) -> "RunOptions | int":
-    """``aerodaas run``'s flags as the run's options, every one checked before Ray starts (exit 2 naming the bad
-    input: the returned int)."""
-    try:
-        check_run_flags(args.record, args.env, args.speedup, args.timeout, args.hitl_port, args.address,
-                        app=str(args.app), overwrite=args.overwrite)
-    except (ConfigError, ValueError) as e:
-        print(f"aerodaas run: {e}", file=sys.stderr)
-        return 2
-    live = access = None
-    if args.live is not None:
-        from aerodaas.liveview.server import check_bindable, live_access, parse_address  # lazy: --live only (cv2)
-
-        try:
-            host, port = parse_address(args.live)
-            if not args.address:  # local run: the edge host (which serves) is on this machine
-                check_bindable(host, port)
-            access = live_access(host, args.tls_cert, args.tls_key, bool(args.insecure))
-        except ValueError as e:
-            print(f"aerodaas run: {e}", file=sys.stderr)
-            return 2
-        live = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-    return RunOptions(record=args.record, speedup=args.speedup, timeout=args.timeout, address=args.address,
-                      overwrite=bool(args.overwrite), env_path=str(Path(args.env).resolve()) if args.env else None,
-                      lockstep=True if args.lockstep else None, recorder_hold_s=args.recorder_hold, dashboard=bool(getattr(args, "dashboard", False)),
-                      progress=not args.quiet, hitl=True if args.hitl else None, hitl_port=args.hitl_port, live=live,
-                      live_access=access, tls_cert=args.tls_cert, tls_key=args.tls_key, insecure=bool(args.insecure))
-
-
-class _StopSignals:
+class StopSignals:
     """``aerodaas run``'s SIGTERM/SIGINT handling (`kill`, `docker stop`, systemd, Ctrl-C): one clean stop of the
-    mission; after a mission's summary, a signal is a late one that does not change the exit code."""
+    mission; after a mission's summary, a signal is a late one that does not change the exit code. ``results``:
+    the list the run appends each mission's result to (read, never changed)."""
 
     def __init__(self, results: list) -> None:
         self.results = results
@@ -85,12 +57,16 @@ class _StopSignals:
         self.previous = (signal.signal(signal.SIGTERM, self), signal.signal(signal.SIGINT, self))
 
     def restore(self) -> None:
+        """Put back the handlers :meth:`install` replaced."""
         signal.signal(signal.SIGTERM, self.previous[0])
         signal.signal(signal.SIGINT, self.previous[1])
 
 
-def _exit_code(results: list, stop: list[int]) -> int:
-    """``aerodaas run``'s exit code for its missions' results (see the README)."""
+def exit_code(results: list, stop: list[int]) -> int:
+    """``aerodaas run``'s exit code for its missions' results (``MissionResult`` list) and the stop signals it
+    received (``stop``, signal numbers; see the README): 1 no mission (said on standard error), 128 + signal for a
+    stopped or interrupted one, 2 a vehicle refused our credentials, 3 a drone lost, 4 part of the recording lost,
+    5 degraded, else 0 when every mission succeeded and 1 when one failed."""
     if not results:
         print("aerodaas run: the application never called start_mission()", file=sys.stderr)
         return 1
@@ -107,20 +83,14 @@ def _exit_code(results: list, stop: list[int]) -> int:
     return 0 if all(r.ok for r in results) else 1
 
 
-def run(args: argparse.Namespace) -> int:
-    """``aerodaas run APP.py`` after :func:`aerodaas.commands.run.cmd_run` marked the CLI's start: load the
-    application (:func:`aerodaas.runtime.app_loader.load_app`: no Ray, nothing
-    flies; bad input exits 2 before any Ray process exists), then fly it (:func:`aerodaas.runtime.driver.run_file`)
-    and print each mission's summary."""
-    app = Path(args.app)
-    if not app.is_file():
-        print(f"aerodaas run: application file {str(app)!r} not found", file=sys.stderr)
-        return 2
-    opts = _run_options(args)
-    if isinstance(opts, int):
-        return opts
+def fly(app: Path, opts: RunOptions, *, own_process: bool = False) -> int:
+    """Fly the application file ``app`` with the checked options ``opts`` (the actor classes included:
+    :func:`aerodaas.app.api.with_builtin_actors`) through :func:`aerodaas.runtime.driver.run_file`, printing each
+    mission's summary; returns :func:`exit_code` (2 for bad input the run refused, named on standard error, 1 for
+    an exception of the app's own code, with its traceback). ``own_process``: the process is this command and ends
+    when this returns, so the stop-signal handler stays installed and a late signal keeps the exit code."""
     results: list = []
-    signals = _StopSignals(results)
+    signals = StopSignals(results)
     signals.install()
     PROCESS.stop.reset()
     runtime.allow_stop_interrupt(True)  # loading the app: a stop may interrupt it at once
@@ -130,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
         print(format_summary(res), flush=True)
 
     try:
-        # the run's actors are handed to the runtime (which imports none): the built-in ones
-        runtime.run_file(str(app), with_builtin_actors(opts), on_result=on_result)
+        runtime.run_file(str(app), opts, on_result=on_result)
     except ConfigError as e:
         print(f"aerodaas run: {e}", file=sys.stderr)
         return 2
@@ -147,9 +116,9 @@ def run(args: argparse.Namespace) -> int:
     finally:
         runtime.allow_stop_interrupt(False)  # a signal now is recorded, never raised inside ray.shutdown
         ray_start.shutdown_ray()
-        if not (getattr(args, "own_process", False) and results):
+        if not (own_process and results):
             signals.restore()
         # else the process is this command and ends now: a signal from here to its exit is a late one, recorded by
         # the handler, and the exit code stays the mission's (restoring the default handler let a SIGTERM sent right
         # after the summary kill the process with -15)
-    return _exit_code(results, signals.stop)
+    return exit_code(results, signals.stop)
