@@ -12,19 +12,23 @@ legacy token, sent as ``Authorization: Token`` (the server's organisation must a
 from __future__ import annotations
 
 import json
+import os
 import urllib.error
 import urllib.request
+from pathlib import Path
 from urllib.parse import urlencode, urljoin, urlsplit
 
 from aerodaas.clusters.tls import is_loopback
 
-__all__ = ["LabelStudio", "LabelStudioError", "check_url"]
+__all__ = ["LabelStudio", "LabelStudioError", "check_url", "read_token"]
 
 #: seconds a request may take before Label Studio counts as not answering (an export of thousands of tasks is built
 #: while the request waits, so this is generous)
 DEFAULT_TIMEOUT_S = 60.0
 #: the largest response read (bytes): an export or an image larger than this is refused, not read into memory
 MAX_RESPONSE_BYTES = 1 << 30
+#: the largest token file read (bytes)
+MAX_TOKEN_BYTES = 16384
 
 
 class LabelStudioError(ValueError):
@@ -44,6 +48,26 @@ def check_url(url: str, insecure_http: bool = False) -> str:
         raise LabelStudioError(f"--url {url!r}: plain http to a host other than loopback would send the token "
                                f"unencrypted; use https, or --insecure-http on a network you trust")
     return url.rstrip("/")
+
+
+def read_token(token_file: Path | None, token: str | None) -> str:
+    """The Label Studio API token: the stripped content of ``token_file`` (at most :data:`MAX_TOKEN_BYTES` read),
+    else ``token``, else the environment's ``LABEL_STUDIO_API_KEY``. Raises :class:`LabelStudioError` naming the
+    file (unreadable, larger than a token) or saying how to give a token when there is none."""
+    if token_file is not None:
+        try:
+            with open(token_file, "rb") as f:
+                raw = f.read(MAX_TOKEN_BYTES + 1)
+        except OSError as e:
+            raise LabelStudioError(f"--token-file {str(token_file)!r}: cannot be read ({e.strerror})") from None
+        if len(raw) > MAX_TOKEN_BYTES:
+            raise LabelStudioError(f"--token-file {str(token_file)!r}: larger than {MAX_TOKEN_BYTES} bytes, "
+                                   f"not a token")
+        return raw.decode("utf-8", "replace").strip()
+    token = token or os.environ.get("LABEL_STUDIO_API_KEY", "")
+    if not token:
+        raise LabelStudioError("token: give --token-file F (or --token T, or LABEL_STUDIO_API_KEY)")
+    return token
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

@@ -11,6 +11,7 @@ server the backend was given (``/data/...`` URLs, with its token); the server bi
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import threading
 import xml.etree.ElementTree as ET
@@ -24,7 +25,7 @@ import numpy as np
 from aerodaas.labelling.label_studio import LabelStudio, LabelStudioError
 from aerodaas.training.label_studio_export import image_ref, local_files_path
 
-__all__ = ["DetectorBackend", "make_server", "MAX_BODY_BYTES"]
+__all__ = ["DetectorBackend", "load_detector", "make_server", "MAX_BODY_BYTES"]
 
 #: the largest request body read (bytes)
 MAX_BODY_BYTES = 64 << 20
@@ -87,6 +88,21 @@ class DetectorBackend:
             score = float(np.mean([d.score for d in dets])) if dets else 0.0
             out.append({"result": result, "score": score, "model_version": self.model_version})
         return out
+
+
+def load_detector(model: Path | None, score_threshold: float):
+    """The detector ``serve`` predicts with: an :class:`aerodaas.perception.detect.AerialDetector` of ``model`` (a
+    YOLOX ONNX file; None: the shipped aerial_nano) keeping boxes of at least ``score_threshold`` (0 to 1), and its
+    model version ``STEM@SHA256[:12]`` of the file. Raises :class:`LabelStudioError` naming ``--model`` for a file
+    that is missing or no usable detector."""
+    from aerodaas.perception.detect import AerialDetector  # lazy: onnxruntime
+
+    try:
+        det = AerialDetector(model, score_threshold=score_threshold)
+    except (OSError, ValueError) as e:
+        raise LabelStudioError(f"--model {str(model)!r}: {e}") from None
+    path = Path(det.model_path)
+    return det, f"{path.stem}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
 
 
 class _Handler(BaseHTTPRequestHandler):
