@@ -21,7 +21,7 @@ from aerodaas.training.loop import EpochResult, Trainer, TrainingData
 from aerodaas.training.loss import LossParts
 from aerodaas.training.onnx_module import OnnxYolox
 
-__all__ = ["build_model", "run_training", "export_run"]
+__all__ = ["build_model", "run_training", "export_run", "export_checkpoints"]
 
 
 def build_model(cfg: TrainConfig, names: list[str]) -> OnnxYolox:
@@ -59,6 +59,15 @@ def export_run(cfg: TrainConfig, trainer: Trainer, started: float) -> dict:
                           "torch": torch.__version__}}
     (cfg.out / "report.json").write_text(json.dumps(report, indent=1))
     return report
+
+
+def export_checkpoints(cfg: TrainConfig, data: TrainingData, started: float) -> dict:
+    """Export and report (:func:`export_run`) the run whose checkpoints a Ray Train job wrote to ``cfg.out``
+    (``last.pt``: the trainer's state, ``best.pt``: the best epoch); ``started``: its ``time.monotonic()`` start.
+    Returns the report. Raises FileNotFoundError when a checkpoint is missing."""
+    trainer = Trainer(cfg, data, build_model(cfg, data.names))
+    trainer.restore(torch.load(cfg.out / "last.pt", weights_only=False))
+    return export_run(cfg, trainer, started)
 
 
 def run_training(cfg: TrainConfig, data: TrainingData,

@@ -19,7 +19,7 @@ ALLOWED = {
     # is zstandard there? the recorder then writes zstd chunks, else uncompressed ones
     ("aerodaas/recording/writer.py", ("zstandard",)),
     # is PyTorch (the [train] extra) there? else `aerodaas train` stops with the install command
-    ("aerodaas/commands/train_main.py", ("torch",)),
+    ("aerodaas/commands/train.py", ("torch",)),
     # is dora-rs there? else the peers benchmark says why its column is missing
     ("aerodaas/bench/peers_dora.py", ("dora",)),
     # the fork server loads the built-in schedulers once before it forks policy processes, so each starts warm
