@@ -2,7 +2,7 @@
 ``MAV_FRAME_MISSION`` (:func:`mission_frames`), the speeds an explicit limit caps (:func:`cap_speeds`), each change
 said, and what the vehicle stored compared with what was sent (:func:`mission_differences`).
 
-``aerodaas mission upload`` (:mod:`aerodaas.tools.mission_cli`) uses all three. What is compared is what the
+``aerodaas mission upload`` (:mod:`aerodaas.commands.mission`) uses all three. What is compared is what the
 autopilots document storing: the command; the parameters the flight depends on (:data:`FLIGHT_PARAMS`); for a
 command with a position (:data:`~aerodaas.missionfile.commands.POSITION_COMMANDS`) its latitude, longitude,
 altitude and frame. Autopilots keep less than a mission item can say. ArduPilot

@@ -5,14 +5,14 @@ cable, never a radio), then check the result by a round trip: after ``setup`` th
 (a correctly signed HEARTBEAT, signed acknowledgements: aerodaas/backends/mavlink/signing.py) and a signed command is
 acknowledged; after ``remove`` the vehicle's HEARTBEAT comes unsigned and an unsigned command is acknowledged. No Ray,
 no environment file. Exit 0 when checked, 2 for bad input (the key file, no ``--secure-link``), 1 when the vehicle
-does not answer as it should. The options are this module (parsed at every ``aerodaas`` start); the command,
-:mod:`aerodaas.tools.signing_main`."""
+does not answer as it should. The options and the handler :func:`run_signing` are this module (parsed at every
+``aerodaas`` start); the work, :mod:`aerodaas.tools.signing_provision`."""
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
-__all__ = ["add_parser", "cmd_signing"]
+__all__ = ["add_parser", "run_signing"]
 
 
 def add_parser(sub: Any) -> None:
@@ -32,12 +32,12 @@ def add_parser(sub: Any) -> None:
     sg.add_argument("--target-system", type=int, default=None, help="the vehicle's system id (default: the first heard)")
     sg.add_argument("--baud", type=int, default=57600)
     sg.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the vehicle at each step")
-    sg.set_defaults(func=cmd_signing)
+    sg.set_defaults(func=run_signing)
 
 
-def cmd_signing(args: argparse.Namespace) -> int:
-    """Run ``mavlink signing setup|remove``: :func:`aerodaas.tools.signing_main.run_signing`; returns the exit
-    code."""
-    from aerodaas.tools.signing_main import run_signing  # lazy: CLI start-up (pymavlink, pydantic)
+def run_signing(args: argparse.Namespace) -> int:
+    """``aerodaas mavlink signing setup|remove``: :func:`aerodaas.tools.signing_provision.provision`; returns the
+    exit code."""
+    from aerodaas.tools.signing_provision import provision  # lazy: CLI start-up (pymavlink, pydantic)
 
-    return run_signing(args)
+    return provision(args)

@@ -1,11 +1,12 @@
 """``aerodaas mission upload FILE`` / ``aerodaas mission download --out FILE``: QGroundControl ``.plan`` and
 ``QGC WPL 110`` missions to and from a MAVLink vehicle, with no Ray and no environment file: the options (this
-module, parsed at every ``aerodaas`` start) and the command (:mod:`aerodaas.tools.mission_main`)."""
+module, parsed at every ``aerodaas`` start) and its handlers :func:`run_upload` and :func:`run_download` (the work:
+:mod:`aerodaas.tools.mission_transfer`)."""
 from __future__ import annotations
 
 import argparse
 
-__all__ = ["add_parser", "cmd_mission"]
+__all__ = ["add_parser", "run_download", "run_upload"]
 
 
 def _upload_bound(kind: str):
@@ -30,12 +31,20 @@ def _upload_bound(kind: str):
     return parse
 
 
-def cmd_mission(args: argparse.Namespace) -> int:
-    """``aerodaas mission upload FILE`` / ``download --out FILE``: :func:`aerodaas.tools.mission_main.run_mission`
-    (exit 0, 2 for a file, bound or vehicle that refuses the mission, named)."""
-    from aerodaas.tools.mission_main import run_mission  # lazy: CLI start-up (pydantic, pymavlink)
+def run_upload(args: argparse.Namespace) -> int:
+    """``aerodaas mission upload FILE``: :func:`aerodaas.tools.mission_transfer.upload` (exit 0, 2 for a file,
+    bound or vehicle that refuses the mission, named)."""
+    from aerodaas.tools.mission_transfer import upload  # lazy: CLI start-up (pydantic, pymavlink)
 
-    return run_mission(args)
+    return upload(args)
+
+
+def run_download(args: argparse.Namespace) -> int:
+    """``aerodaas mission download --out FILE``: :func:`aerodaas.tools.mission_transfer.download` (exit 0, 2 for a
+    file or vehicle that refuses, named)."""
+    from aerodaas.tools.mission_transfer import download  # lazy: CLI start-up (pydantic, pymavlink)
+
+    return download(args)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -67,4 +76,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         m.add_argument("--key-file", metavar="F", default=None,
                        help="MAVLink 2 signing key file of the vehicle (32 bytes, 64 hex characters, mode 0600; "
                             "docs/security.md): everything sent is signed, only correctly signed messages are taken")
-        m.set_defaults(func=cmd_mission)
+    mu.set_defaults(func=run_upload)
+    md.set_defaults(func=run_download)

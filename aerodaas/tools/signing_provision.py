@@ -1,5 +1,5 @@
 """The command ``aerodaas mavlink signing setup|remove --connection C --key-file F --secure-link`` (its options:
-:mod:`aerodaas.tools.signing_cli`): provision a vehicle with a MAVLink 2 signing key, or take it away, with
+:mod:`aerodaas.commands.mavlink`; :func:`provision`): provision a vehicle with a MAVLink 2 signing key, or take it away, with
 SETUP_SIGNING (MAVLink common.xml; mavlink.io/en/guide/message_signing.html "Secret Key Management": the key travels
 in the clear, so only over a link the user declares secure, e.g. USB or a cable, never a radio), then check the
 result by a round trip: after ``setup`` the backend connects with the key (a correctly signed HEARTBEAT, signed
@@ -24,13 +24,13 @@ from aerodaas.backends.mavlink.signing import (DISABLE_KEY, KeyFileError, now_ti
                                                write_key_file)
 from aerodaas.config import MavlinkConfig, RobotConfig
 
-__all__ = ["run_signing"]
+__all__ = ["provision"]
 
 #: SETUP_SIGNING has no acknowledgement (common.xml): sent this many times, this far apart (wall seconds)
 SETUP_REPEAT, SETUP_GAP_S = 3, 0.2
 
 
-def run_signing(args: argparse.Namespace) -> int:
+def provision(args: argparse.Namespace) -> int:
     """Run ``mavlink signing setup|remove`` (see the module docstring); returns the exit code."""
     name = "aerodaas mavlink signing"
     if not args.secure_link:

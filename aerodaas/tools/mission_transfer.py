@@ -1,5 +1,5 @@
-"""``aerodaas mission upload|download`` itself (its options: :mod:`aerodaas.tools.mission_cli`): QGroundControl
-``.plan`` and ``QGC WPL 110`` missions checked and sent to, or read from, a MAVLink vehicle (:func:`run_mission`)."""
+"""QGroundControl ``.plan`` and ``QGC WPL 110`` missions checked and sent to a MAVLink vehicle (:func:`upload`), or
+read from one (:func:`download`): ``aerodaas mission upload|download`` (its options: :mod:`aerodaas.commands.mission`)."""
 from __future__ import annotations
 
 import argparse
@@ -18,7 +18,7 @@ from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight,
 from aerodaas.missionfile.upload import cap_speeds, check_relative_altitudes, mission_differences, mission_frames
 from aerodaas.model.types import GeoPoint
 
-__all__ = ["run_mission"]
+__all__ = ["download", "upload"]
 
 _MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
 
@@ -98,12 +98,12 @@ def _check_read_back(backend, sent, name: str) -> None:
           + (f", but for {len(diffs)} field(s) it does not keep (above)" if diffs else ""), flush=True)
 
 
-def run_mission(args: argparse.Namespace) -> int:
-    """``aerodaas mission upload FILE`` / ``download --out FILE``: the file formats of :mod:`aerodaas.missionfile`
-    through the MAVLink backend's mission protocol. The file is read and its items checked before anything is
+def upload(args: argparse.Namespace) -> int:
+    """``aerodaas mission upload FILE``: a file of the formats of :mod:`aerodaas.missionfile` sent through the
+    MAVLink backend's mission protocol. The file is read and its items checked before anything is
     sent (with :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly; the altitude,
     distance and geofence bounds measured from the vehicle's own home, the file's planned home only when the
-    vehicle reports none); a download is written only once complete. A ``.plan``'s geofence goes up first
+    vehicle reports none). A ``.plan``'s geofence goes up first
     (MAV_MISSION_TYPE_FENCE items and the fence parameters, ``--fence-action``; read back and compared: a mismatch
     stops the upload before the mission is sent; each fence parameter changed is printed with its old value), then
     its rally points (MAV_MISSION_TYPE_RALLY), then the mission as written: its speeds unless ``--max-speed`` caps
@@ -112,14 +112,24 @@ def run_mission(args: argparse.Namespace) -> int:
     vehicle parameter is changed. The mission is then read back and compared as each autopilot stores it
     (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started).
     ``--key-file``: the link signed with that key as the backend signs it (``mavlink.signing_key_file``); a key file
-    that cannot be used or a vehicle that does not answer signed: exit 2."""
+    that cannot be used or a vehicle that does not answer signed: exit 2 (as for a refused file or bound, named)."""
+    return _transfer(args, _upload)
+
+
+def download(args: argparse.Namespace) -> int:
+    """``aerodaas mission download --out FILE``: the vehicle's mission read and written to ``--out`` (``.plan``,
+    ``.waypoints`` or ``.txt``) only once complete, with a ``.plan``'s geofence and rally points. Exit 0, 2 for a
+    file, option or vehicle that refuses (named)."""
+    return _transfer(args, _download)
+
+
+def _transfer(args: argparse.Namespace, step) -> int:
+    """Run ``step(args, name, opened)`` (:func:`_upload` or :func:`_download`) and close the backend it opened; exit
+    0, or 2 after printing the error (with the connection when the error does not name it)."""
     name = f"aerodaas mission {args.mission_cmd}"
     opened: list = []  # the backend once connected: closed at the end, whatever happened
     try:
-        if args.mission_cmd == "upload":
-            _upload(args, name, opened)
-        else:
-            _download(args, name, opened)
+        step(args, name, opened)
     except (MissionFileError, BackendError, ValueError, OSError) as e:
         where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
             else ""
@@ -132,7 +142,7 @@ def run_mission(args: argparse.Namespace) -> int:
 
 
 def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
-    """``aerodaas mission upload`` (see :func:`cmd_mission`); the backend it connects goes into ``opened``."""
+    """``aerodaas mission upload`` (see :func:`upload`); the backend it connects goes into ``opened``."""
     path = Path(args.file)
     if not path.is_file():
         raise MissionFileError(f"{str(path)!r}: mission file not found")
@@ -202,7 +212,7 @@ def _upload_fence_and_rally(name: str, plan: Any, backend: Any, path: Path) -> N
 
 
 def _download(args: argparse.Namespace, name: str, opened: list) -> None:
-    """``aerodaas mission download --out FILE`` (see :func:`cmd_mission`): written only once complete."""
+    """``aerodaas mission download --out FILE`` (see :func:`download`): written only once complete."""
     out = Path(args.out)
     if out.suffix.lower() not in _MISSION_SUFFIXES:
         raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
