@@ -27,7 +27,6 @@ order they were first commanded; planned waypoints never commanded follow in pla
 """
 from __future__ import annotations
 
-import argparse
 import re
 import sys
 from collections.abc import Callable
@@ -38,7 +37,7 @@ import numpy as np
 
 from aerodaas.tools.plot_data import RobotRun, RunData, load_plot_data, tracking_segments
 
-__all__ = ["plot_run", "cmd_plot", "FIGURES"]
+__all__ = ["plot_run", "FIGURES"]
 
 FIGURES = ("trajectory", "battery_altitude", "latency")
 """Stems of the PNG files :func:`plot_run` writes (per robot; suffixed ``_<robot>`` with several robots)."""
@@ -357,29 +356,3 @@ def plot_run(path: str | Path, out_dir: str | Path | None = None, *,
         else:
             note(f"{name}: no per-frame latency channel (/{name}/latency); skipping the latency figure")
     return written
-
-
-def cmd_plot(args: argparse.Namespace) -> int:
-    """``aerodaas plot FILE [--out DIR]``: 0 when figures were written (paths printed), 2 for a missing or
-    unreadable file or an output folder that cannot be created, 1 when the recording has nothing to plot."""
-    src = Path(args.file)
-    if not src.exists():
-        print(f"aerodaas plot: recording {str(src)!r} not found", file=sys.stderr)
-        return 2
-    if not src.is_file():
-        print(f"aerodaas plot: {str(src)!r} is not a file", file=sys.stderr)
-        return 2
-    try:
-        written = plot_run(src, args.out)
-    except ValueError as e:
-        print(f"aerodaas plot: cannot read {str(src)!r}: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:
-        print(f"aerodaas plot: {e}", file=sys.stderr)
-        return 2
-    if not written:
-        print(f"aerodaas plot: nothing to plot in {str(src)!r}", file=sys.stderr)
-        return 1
-    for p in written.values():
-        print(p)
-    return 0
