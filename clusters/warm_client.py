@@ -100,7 +100,7 @@ def delegate(argv: list[str] | None = None) -> int | None:
     if not os.path.exists(path):
         return None
     import json  # lazy: a server socket exists
-    import socket
+    import socket  # lazy: a server socket exists
 
     try:
         req = _request(argv)

@@ -31,16 +31,20 @@ from __future__ import annotations
 import gc
 import importlib
 import json
+import locale
 import os
+import resource
 import selectors
 import signal
 import socket
 import struct
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 
 from aerodaas.clusters.warm_client import RLIMITS, socket_path
+from aerodaas.clusters.warm_pool import code_fingerprint
 
 __all__ = ["COMMAND_LINE", "IMPORT_TIME_ENV", "PRELOAD", "ForkSafetyError", "main", "preload", "serve"]
 
@@ -77,8 +81,6 @@ def preload(names: tuple[str, ...] = PRELOAD, baseline: tuple[str, ...] = BASELI
     object out of the cyclic collector's sight (``gc.freeze``, as CPython's documentation advises before forking).
     Raises :class:`ForkSafetyError` naming the import that started a Python thread, or a native thread after the
     baseline."""
-    import threading
-
     for name in baseline:
         importlib.import_module(name)
     base = _native_threads()
@@ -148,8 +150,6 @@ def _import_time_env(env: dict[str, str]) -> dict[str, str]:
 
 def _refusal(srv: _Server, req: dict) -> str | None:
     """Why this server cannot run ``req`` as a fresh process would, or None."""
-    import resource
-
     if req.get("exe") != sys.executable or list(req.get("path") or [])[1:] != srv.path_at_start:
         return "another interpreter or import path"
     mine, theirs = _import_time_env(srv.env), _import_time_env(req.get("env") or {})
@@ -166,8 +166,6 @@ def _refusal(srv: _Server, req: dict) -> str | None:
             return f"{name} above the server's"
     if srv.stale:
         return "framework code edited since the server started"
-    from aerodaas.clusters.warm_pool import code_fingerprint
-
     if code_fingerprint() != srv.fingerprint:
         srv.stale.append("code")
         return "framework code edited since the server started"
@@ -189,8 +187,6 @@ def _reopen_streams(streams: list) -> None:
 
 def _become(req: dict, fds: list[int], env_delta: dict[str, str | None]) -> None:
     """In the child: become the client's command (see the module's docstring)."""
-    import resource
-
     os.setsid()
     for target, fd in enumerate(fds):
         os.dup2(fd, target)
@@ -218,8 +214,6 @@ def _become(req: dict, fds: list[int], env_delta: dict[str, str | None]) -> None
             pass
     time.tzset()
     try:
-        import locale
-
         locale.setlocale(locale.LC_CTYPE, "")
     except Exception:  # noqa: BLE001 - the client's locale may not exist here: C as before
         pass
@@ -332,8 +326,6 @@ def serve(path: str, parent: int | None = None, path_at_start: list[str] | None 
     import path before :func:`preload` (a client's must equal it but for its first entry); ``env_at_start``: the
     environment before it (a client's must equal it in :data:`IMPORT_TIME_ENV`; what the imports changed in it is
     changed in each child's environment too, as the same imports would in a fresh process)."""
-    from aerodaas.clusters.warm_pool import code_fingerprint
-
     env0 = dict(os.environ if env_at_start is None else env_at_start)
     delta = {k: v for k, v in os.environ.items() if env0.get(k) != v} | {k: None for k in env0 if k not in os.environ}
     srv = _Server(path, _listen(path), selectors.DefaultSelector(), env0, delta, code_fingerprint(),
