@@ -30,6 +30,10 @@ FORWARDED = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signa
 RLIMITS = ("RLIMIT_NOFILE", "RLIMIT_CORE", "RLIMIT_AS", "RLIMIT_DATA", "RLIMIT_STACK", "RLIMIT_FSIZE",
            "RLIMIT_NPROC", "RLIMIT_MEMLOCK")
 
+#: how long the client waits for the server's answer to its request; without one it runs the command itself (the
+#: server lets a run start only once that answer is sent, so a client that gave up earlier never runs it twice)
+ANSWER_TIMEOUT_S = 60.0
+
 #: longest path a Unix socket address holds on Linux (``sun_path``: 108 bytes with its terminating NUL)
 _MAX_SOCKET_PATH = 107
 
@@ -102,38 +106,26 @@ def delegate(argv: list[str] | None = None) -> int | None:
     import json  # lazy: a server socket exists
     import socket  # lazy: a server socket exists
 
+    req = _request(argv)
+    if req is None:
+        return None
+    fwd = _Forwarder(set(req["ignored"]))
+    sock = None
     try:
-        req = _request(argv)
-        if req is None:
-            return None
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        sock.settimeout(30.0)
+        sock.settimeout(5.0)
         sock.connect(path)
         socket.send_fds(sock, [json.dumps(req).encode()], [0, 1, 2])
+        sock.settimeout(ANSWER_TIMEOUT_S)
         first = json.loads(sock.recv(65536) or b"{}")
     except (OSError, ValueError):
-        return None  # stale socket file, a server that went away, a request too large: run it here
+        first = {}  # stale socket file, a server that went away, a request too large: run it here
     if "pid" not in first:
-        sock.close()
+        if sock is not None:
+            sock.close()
+        fwd.give_back()
         return None
-    return _wait(sock, int(first["pid"]), set(req["ignored"]), json)
-
-
-def _wait(sock, pid: int, ignored: set[int], json) -> int:
-    """Forward signals to the run ``pid`` until the server reports its end; returns its exit code."""
-
-    def forward(signum, _frame) -> None:
-        try:
-            if signum == signal.SIGINT:
-                os.killpg(pid, signum)
-            else:
-                os.kill(pid, signum)
-        except OSError:
-            pass
-
-    for s in FORWARDED:
-        if int(s) not in ignored:
-            signal.signal(s, forward)
+    fwd.to(int(first["pid"]))
     sock.settimeout(None)
     try:
         end = json.loads(sock.recv(65536) or b"{}")
@@ -141,6 +133,46 @@ def _wait(sock, pid: int, ignored: set[int], json) -> int:
         end = {}
     finally:
         sock.close()
+    return _exit(end, int(first["pid"]))
+
+
+class _Forwarder:
+    """The client's handler of :data:`FORWARDED` (but those it ignores): until the run's pid is known the signals
+    wait; then each goes to the run (SIGINT to its process group). :meth:`give_back` restores the handlers and
+    delivers what waited to this process (the client then runs the command itself)."""
+
+    def __init__(self, ignored: set[int]) -> None:
+        self.pid: int | None = None
+        self.pending: list[int] = []
+        self.previous = {s: signal.signal(s, self) for s in FORWARDED if int(s) not in ignored}
+
+    def __call__(self, signum, _frame) -> None:
+        if self.pid is None:
+            self.pending.append(signum)
+            return
+        try:
+            if signum == signal.SIGINT:
+                os.killpg(self.pid, signum)
+            else:
+                os.kill(self.pid, signum)
+        except OSError:
+            pass
+
+    def to(self, pid: int) -> None:
+        self.pid = pid
+        for signum in self.pending:
+            self(signum, None)
+
+    def give_back(self) -> None:
+        for s, h in self.previous.items():
+            signal.signal(s, h)
+        for signum in self.pending:
+            os.kill(os.getpid(), signum)
+
+
+def _exit(end: dict, pid: int) -> int:
+    """The exit code for the server's report ``end`` of the run ``pid``: a run killed by a signal kills this
+    process with the same signal."""
     if "signal" in end:
         n = int(end["signal"])
         signal.signal(n, signal.SIG_DFL)

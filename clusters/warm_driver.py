@@ -257,8 +257,13 @@ def _accept(srv: _Server) -> dict | None:
         return None
     for f in (sys.stdout, sys.stderr):
         f.flush()
+    go_r, go_w = os.pipe()  # the child starts once its client has its pid: a client that gave up never sees it
     pid = os.fork()
     if pid == 0:
+        os.close(go_w)
+        if os.read(go_r, 1) != b"1":
+            os._exit(0)
+        os.close(go_r)
         srv.sel.close()
         for c in (srv.listener, conn, *(r.conn for r in srv.runs.values())):
             c.close()  # the socket objects, not their numbers: a number closed twice may be someone else's by then
@@ -273,10 +278,13 @@ def _accept(srv: _Server) -> dict | None:
     srv.runs[pid] = run
     srv.sel.register(pidfd, selectors.EVENT_READ, ("end", run))
     srv.sel.register(conn, selectors.EVENT_READ, ("client", run))
+    os.close(go_r)
     try:
         conn.send(json.dumps({"pid": pid}).encode())
+        os.write(go_w, b"1")
     except OSError:
-        os.kill(pid, signal.SIGTERM)
+        os.write(go_w, b"0")
+    os.close(go_w)
     return None
 
 
