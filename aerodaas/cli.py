@@ -14,8 +14,12 @@ from aerodaas.commands import COMMAND_MODULES
 
 def console() -> int:
     """The ``aerodaas`` command (console script and ``python -m aerodaas.cli``): :func:`main` as the process's own
-    command, whose late-signal handler then stays installed until the process exits."""
-    return main(own_process=True)
+    command, whose late-signal handler then stays installed until the process exits. An attached ``aerodaas run``
+    goes to the warm driver of ``aerodaas up`` when one listens (:mod:`aerodaas.clusters.warm_client`)."""
+    from aerodaas.clusters.warm_client import delegate  # lazy: the standard library only
+
+    code = delegate(sys.argv)
+    return main(own_process=True) if code is None else code
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -131,7 +131,7 @@ def up(cpus: int = 3, timeout_s: float = 180.0, warm_workers: int = DEFAULT_WARM
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
         st = read_state()
-        if st and st.get("pid") == proc.pid:
+        if st and st.get("pid") == proc.pid and "warm_driver" in st:  # the warm driver's start is the last
             return {**st, "already": False, "log": str(logf)}
         if proc.poll() is not None:
             raise RuntimeError(f"aerodaas up: the cluster daemon exited ({proc.returncode}); see {logf}")
@@ -193,6 +193,7 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
     """The daemon: start the head node (with ``warm`` warm workers), write the state file, wait for SIGTERM/SIGINT,
     stop the node. Its imports stay in it: every run imports this module (:mod:`aerodaas.runtime.ray_start`), and
     only the daemon needs the node's (``# lazy: the cluster daemon only``)."""
+    user_env = dict(os.environ)  # the warm driver's: the shell's, without what the node needs below
     from ray.cluster_utils import Cluster  # lazy: heavy ray, the cluster daemon only
 
     from aerodaas.clusters.local import enable_token_auth  # lazy: the cluster daemon only
@@ -249,11 +250,16 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
         except (ImportError, AttributeError, OSError, KeyError, IndexError) as e:  # this Ray lacks what it needs
             st.update(warm_workers=0, warm_error=f"{type(e).__name__}: {e}"[:300])
             print(f"aerodaas cluster: no warm workers ({st['warm_error']})", flush=True)
+    from aerodaas.clusters import warm_driver_process  # lazy: the cluster daemon only
+
+    driver = warm_driver_process.start(user_env, stop)
+    st.update(warm_driver=warm_driver_process.status(driver))
     publish({})
     print(f"aerodaas cluster up: {st}", flush=True)
     try:
         stop.wait()
     finally:
+        warm_driver_process.stop(driver)
         cluster.shutdown()
         try:
             if json.loads(state_path().read_text()).get("pid") == os.getpid():
