@@ -52,7 +52,7 @@ __all__ = ["COMMAND_LINE", "IMPORT_TIME_ENV", "PRELOAD", "ForkSafetyError", "mai
 BASELINE = ("numpy", "cv2")
 #: what an attached ``aerodaas run`` imports to build and start its application (the rest comes with them);
 #: checked to start no thread
-PRELOAD = ("pydantic", "ray", "ray.util.state", "aerodaas.cli", "aerodaas.commands.run_main", "aerodaas.app.api",
+PRELOAD = ("pydantic", "ray", "ray.util.state", "aerodaas.cli", "aerodaas.commands.run", "aerodaas.runtime.fly", "aerodaas.app.api",
            "aerodaas.runtime.app_loader", "aerodaas.actors.builtin.catalogue", "aerodaas.actors.builtin.handles",
            "aerodaas.actors.host.drone_actor", "aerodaas.actors.host.analytics_actor",
            "aerodaas.actors.recording.actor", "aerodaas.actors.cloud.executor", "aerodaas.actors.host.remote",
