@@ -52,9 +52,9 @@ __all__ = ["COMMAND_LINE", "IMPORT_TIME_ENV", "PRELOAD", "ForkSafetyError", "mai
 BASELINE = ("numpy", "cv2")
 #: what an attached ``aerodaas run`` imports to build and start its application (the rest comes with them);
 #: checked to start no thread
-PRELOAD = ("pydantic", "ray", "ray.util.state", "aerodaas.cli", "aerodaas.commands.run", "aerodaas.runtime.fly", "aerodaas.app.api",
-           "aerodaas.runtime.app_loader", "aerodaas.actors.builtin.catalogue", "aerodaas.actors.builtin.handles",
-           "aerodaas.actors.host.drone_actor", "aerodaas.actors.host.analytics_actor",
+PRELOAD = ("pydantic", "ray", "ray.util.state", "aerodaas.cli", "aerodaas.commands.run", "aerodaas.runtime.fly",
+           "aerodaas.app.api", "aerodaas.runtime.app_loader", "aerodaas.actors.builtin.catalogue",
+           "aerodaas.actors.builtin.handles", "aerodaas.actors.host.drone_actor", "aerodaas.actors.host.analytics_actor",
            "aerodaas.actors.recording.actor", "aerodaas.actors.cloud.executor", "aerodaas.actors.host.remote",
            "aerodaas.actors.sensors.frame_sources", "aerodaas.backends.sim", "aerodaas.perception.model_files",
            "aerodaas.perception.model_meta", "aerodaas.video.discovery", "aerodaas.clusters.local",
