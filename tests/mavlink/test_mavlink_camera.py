@@ -171,8 +171,9 @@ def test_vehicle_tracking_reads_the_stream_the_vehicle_announces(tmp_path, monke
 
 
 @needs_data  # the app's detector model
-def test_a_run_without_the_announced_camera_fails_naming_it(tmp_path):
-    """The whole run: no camera on the vehicle -> the robot's error says so, exit code 1, before take-off."""
+def test_a_run_without_the_announced_camera_fails_naming_it(tmp_path, ray_session):
+    """The whole run (in-process, on the pytest worker's shared Ray session): no camera on the vehicle -> the
+    robot's error says so, exit code 1, before take-off."""
     emu = MavlinkVehicleEmulator("ardupilot", speedup=1.0, gps_lock_s=0.5)
     addr = emu.start("tcp:127.0.0.1:0")
     env = _env({"source": "mavlink", "discovery_timeout_s": 2.0},
@@ -180,9 +181,8 @@ def test_a_run_without_the_announced_camera_fails_naming_it(tmp_path):
     env_path = tmp_path / "env.json"
     env_path.write_text(json.dumps(env))
     try:
-        proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(REPO / "apps" / "vehicle_tracking.py"),
-                               "--env", str(env_path), "--record", str(tmp_path / "run.mcap")],
-                              capture_output=True, text=True, timeout=600, env=dict(os.environ))
+        proc = run_cli("run", str(REPO / "apps" / "vehicle_tracking.py"), "--env", str(env_path), "--record",
+                       str(tmp_path / "run.mcap"), shared_ray=True)
         armed = emu.snapshot()["armed"] or emu.state.took_off
     finally:
         emu.stop()

@@ -1,14 +1,16 @@
 """A user's analytics scheduler, written the way the README says: a subclass registered with
 ``register_analytics_scheduler`` in the application's own file (outside the framework's package), named in the
 environment, run by ``aerodaas run``. The dispatcher actor must run the user's class: it lives only in the app,
-so the runtime carries the class (pickled by value) to the actor, not its name."""
+so the runtime carries the class (pickled by value) to the actor, not its name. The run is in-process on the pytest
+worker's shared Ray session (``run_cli(shared_ray=True)``): the class travels by value there as in a Ray of its own,
+and the session is checked clean after."""
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 
 from aerodaas.recording.reader import read_messages
+
+from tests.inputs.cli_inprocess import run_cli
 
 APP = textwrap.dedent('''
     import time
@@ -64,12 +66,11 @@ APP = textwrap.dedent('''
 ''')
 
 
-def test_a_users_analytics_scheduler_in_the_app_runs_in_the_dispatcher(tmp_path):
+def test_a_users_analytics_scheduler_in_the_app_runs_in_the_dispatcher(tmp_path, ray_session):
     app = tmp_path / "my_app.py"
     app.write_text(APP)
     rec = tmp_path / "run.mcap"
-    proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet",
-                           "--timeout", "240"], capture_output=True, text=True, timeout=420, cwd=tmp_path)
+    proc = run_cli("run", str(app), "--record", str(rec), "--quiet", "--timeout", "240", cwd=tmp_path, shared_ray=True)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     tasks = [m for t, _, _, m in read_messages(str(rec)) if t == "/uav/detector/tasks"]
     assert len(tasks) >= 6, len(tasks)

@@ -3,8 +3,6 @@
 (a drone actor restarted from its checkpoint) are recorded once. Fast: no Ray."""
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 from mcap.reader import make_reader
@@ -12,6 +10,8 @@ from mcap.reader import make_reader
 from aerodaas.actors.recording.recorder import RecorderService
 from aerodaas.recording.segments import list_segments, remove_stale_segments, segment_path
 from aerodaas.recording.writer import McapRecorder
+
+from tests.inputs.cli_inprocess import run_cli
 
 
 def _odom(t: float) -> dict:
@@ -63,8 +63,7 @@ def test_recover_joins_segments(tmp_path):
     _segment(segment_path(base, 1), 10_000, 200)  # the restarted recorder's
     _segment(segment_path(base, 2), 20_000, 100)
     assert len(list_segments(base)) == 3
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "recover", str(base)], capture_output=True, text=True,
-                       timeout=120)
+    p = run_cli("recover", str(base))  # in-process: a reader and writer, no Ray
     assert p.returncode == 0, p.stderr
     assert "3 segments" in p.stdout
     with open(base, "rb") as f:
@@ -79,8 +78,7 @@ def test_recover_joins_segments(tmp_path):
         [20_000 + i for i in range(100)]
     assert meta["aerodaas.segments"]["joined"] == "run.mcap,run.1.mcap,run.2.mcap"
     assert list_segments(base) == [base]  # joined: the segment files are gone
-    p2 = subprocess.run([sys.executable, "-m", "aerodaas.cli", "recover", str(base)], capture_output=True, text=True,
-                        timeout=120)
+    p2 = run_cli("recover", str(base))
     assert p2.returncode == 0 and "already finished" in p2.stdout  # idempotent
 
 

@@ -1,10 +1,8 @@
 """`aerodaas run` of a fleet application that starts its mission with ``env.start_mission([d1, d2])`` (such
 a run flew, then printed "the application never called start_mission()" and exited 1): the CLI entry flies both
-drones, prints the summary and exits 0; and the fleet start's own argument checks."""
+drones, prints the summary and exits 0 (in-process on the pytest worker's shared Ray session); and the fleet start's
+own argument checks."""
 from __future__ import annotations
-
-import subprocess
-import sys
 
 import pytest
 
@@ -13,15 +11,15 @@ from aerodaas.recording.metrics import waypoint_visits
 from aerodaas.recording.reader import read_messages
 
 from tests.conftest import REPO
+from tests.inputs.cli_inprocess import run_cli
 
 APP = REPO / "tests" / "apps" / "fleet_two_drones.py"
 
 
 @pytest.mark.e2e
-def test_aerodaas_run_of_a_fleet_app_prints_the_summary_and_exits_0(tmp_path):
+def test_aerodaas_run_of_a_fleet_app_prints_the_summary_and_exits_0(tmp_path, ray_session):
     rec = tmp_path / "fleet.mcap"
-    proc = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(APP), "--speedup", "20", "--quiet",
-                           "--record", str(rec)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    proc = run_cli("run", str(APP), "--speedup", "20", "--quiet", "--record", str(rec), cwd=tmp_path, shared_ray=True)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
     assert "never called start_mission" not in out

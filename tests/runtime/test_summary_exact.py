@@ -1,21 +1,19 @@
 """The summary is exact: pre-planned waypoints count as reached only when they were (a run whose
 analytics adds waypoints in flight and then lands printed "waypoints 9 reached (4 pre-planned, at least 5 added
 in flight)" when 1 of the 4 pre-planned was reached), and a robot without a camera gets no "camera 0.0 FPS" in its
-progress lines. Judged from a real run's output against its recording's ``waypoint_done`` events."""
+progress lines. Judged from a real run's output against its recording's ``waypoint_done`` events (the run
+in-process on the pytest worker's shared Ray session; the app's analytics class travels to its actor by value)."""
 from __future__ import annotations
 
 import json
-import os
 import re
-import subprocess
-import sys
 import textwrap
 
 import pytest
 
 from aerodaas.recording.reader import read_messages
 
-from tests.conftest import REPO
+from tests.inputs.cli_inprocess import run_cli
 
 APP = textwrap.dedent('''
     from aerodaas import *
@@ -58,14 +56,12 @@ ENV = {"name": "exact", "robots": [{
 
 
 @pytest.mark.timeout(900)
-def test_preplanned_waypoints_count_only_when_reached(tmp_path):
+def test_preplanned_waypoints_count_only_when_reached(tmp_path, ray_session):
     (tmp_path / "env.json").write_text(json.dumps(ENV))
     app = tmp_path / "app.py"
     app.write_text(APP.replace("ENV", repr(str(tmp_path / "env.json"))))
     rec = tmp_path / "run.mcap"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO)] + [x for x in [os.environ.get("PYTHONPATH")] if x])}
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--lockstep"],
-                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+    p = run_cli("run", str(app), "--record", str(rec), "--lockstep", cwd=tmp_path, shared_ray=True)
     out = p.stdout + p.stderr
     done = [m["waypoint"] for _, _, _, m in read_messages(rec, ["/d1/events"]) if m.get("event") == "waypoint_done"]
     pre = sum(1 for w in done if w.startswith("wp"))

@@ -284,11 +284,12 @@ def test_live_view_refuses_clients_without_the_token_or_tls(wss, certs):
 
 
 @pytest.mark.e2e
-def test_insecure_serves_clear_text_off_loopback_and_the_summary_says_so(tmp_path):
+def test_insecure_serves_clear_text_off_loopback_and_the_summary_says_so(tmp_path, ray_session):
     """``--insecure`` and ``hitl.insecure``: the run serves plain WS and HTTP on every address (the live view still
-    asks its token off loopback), warns at start, and its summary repeats the choice for each server."""
+    asks its token off loopback), warns at start, and its summary repeats the choice for each server. In-process on
+    the pytest worker's shared Ray session (the servers run in the driver; the session is checked clean after)."""
     app = _app(tmp_path, {"enabled": True, "host": "0.0.0.0", "port": 0, "insecure": True})
-    p, _ = _run_cli(tmp_path, "run", str(app), "--live", "0.0.0.0:0", "--insecure", "--quiet")
+    p = run_cli("run", str(app), "--live", "0.0.0.0:0", "--insecure", "--quiet", cwd=tmp_path, shared_ray=True)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     assert "human-in-the-loop API at http://0.0.0.0:" in p.stdout and "live view at ws://0.0.0.0:" in p.stdout
     summary = p.stdout[p.stdout.index("mission outcome:"):]
