@@ -8,25 +8,28 @@ caps that. Measured with ``aerodaas bench fleet --drones 1 --drones 20 --duratio
 kind: 88-91 MB of PSS per extra drone actor without it, 77 MB with it, missed control ticks 0.07-0.25 % and
 0.02 %. A value the user already set is kept; ``AERODAAS_MALLOC_ARENA_MAX=0`` leaves glibc's default.
 
-The Python heap: Ray imports pyarrow in every worker when it first deserialises anything (its serialisation context
-registers Arrow reducers for Ray Data: ``ray/util/serialization_addons.py`` -> ``ray/_private/arrow_serialization.py``,
-Ray 2.60), +30 MB private per process measured on CPython 3.11, and no actor of a run uses Arrow.
+The Python heap: when a Ray process first deserialises anything, its serialisation context applies Ray's add-ons
+(``ray.util.serialization_addons.apply``, Ray 2.60), and each imports the library it serves: pyarrow for Ray Data's
+Arrow reducers (``ray/_private/arrow_serialization.py``; +30 MB private per process on CPython 3.11), Pydantic's
+v1 compatibility package for FastAPI's ``ModelField`` (``ray/_common/pydantic_compat.py``; ``pydantic.v1``, 0.17 s
+of CPU in a drone actor) and Starlette with anyio for Serve's app state. No actor of a run uses any of them.
 :func:`lean_worker_imports` names :func:`worker_setup` as the workers' setup hook (Ray's
 ``worker_process_setup_hook``, passed through the environment the node processes and their workers inherit, like
-``MALLOC_ARENA_MAX``); it runs in each worker before its serialisation context exists and registers the Arrow
-reducers only when pyarrow is already imported. An actor that imports pyarrow later still sends Arrow tables through
-Ray (pickled by cloudpickle without Ray's zero-copy-slice workaround). A run's driver does the same for itself
-(:func:`arrow_only_when_imported`, called before it starts or joins Ray): its first actor creation otherwise
-imported pyarrow on the path to the first frame. ``AERODAAS_LEAN_WORKERS=0`` turns both off.
+``MALLOC_ARENA_MAX``); it runs in each worker before its serialisation context exists and lets each add-on register
+only when its library is already imported (:data:`ADDONS`). An actor that imports one of them later still sends its
+objects through Ray (pickled by cloudpickle without Ray's reducer). A run's driver does the same for itself
+(:func:`addons_only_when_imported`, called before it starts or joins Ray): its first actor creation otherwise
+imported them on the path to the first frame. ``AERODAAS_LEAN_WORKERS=0`` turns both off.
 """
 from __future__ import annotations
 
 import functools
+import importlib
 import os
 import sys
 from collections.abc import Callable
 
-__all__ = ["ARENAS", "SETUP_HOOK", "SETUP_HOOK_ENV", "arrow_only_when_imported", "lean_worker_imports",
+__all__ = ["ADDONS", "ARENAS", "SETUP_HOOK", "SETUP_HOOK_ENV", "addons_only_when_imported", "lean_worker_imports",
            "limit_malloc_arenas", "worker_setup"]
 
 #: glibc malloc arenas per process of the Ray nodes AeroDaaS starts
@@ -36,6 +39,11 @@ ARENAS = 2
 SETUP_HOOK_ENV = "__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"
 #: the hook: an import path, loaded by Ray with ``load_class``
 SETUP_HOOK = "aerodaas.clusters.worker_memory.worker_setup"
+#: Ray's serialisation add-ons registered only in a process that already imported their library: (the module of the
+#: register function, its name, the library's module). ``serialization_addons.apply`` looks each up at call time
+ADDONS = (("ray._private.arrow_serialization", "_register_custom_datasets_serializers", "pyarrow"),
+          ("ray._common.pydantic_compat", "register_pydantic_serializers", "pydantic.v1.fields"),
+          ("ray.util.serialization_addons", "register_starlette_serializer", "starlette.datastructures"))
 
 
 def limit_malloc_arenas() -> bool:
@@ -57,26 +65,28 @@ def lean_worker_imports() -> bool:
 
 
 def worker_setup() -> None:
-    """Ray worker setup hook: :func:`arrow_only_when_imported` in the worker (see the module)."""
-    arrow_only_when_imported()
+    """Ray worker setup hook: :func:`addons_only_when_imported` in the worker (see the module)."""
+    addons_only_when_imported()
 
 
-def arrow_only_when_imported() -> bool:
-    """In this process, register Ray's Arrow reducers only when pyarrow is already imported, so that a process that
-    never uses Arrow never imports it: a Ray worker (:func:`worker_setup`) or a run's driver, whose first actor
-    creation otherwise imports pyarrow (0.11 s of CPU on the 2-core machine kind, a warm page cache; +30 MB). Done
-    once per process; nothing when ``AERODAAS_LEAN_WORKERS`` is ``0``. Returns True when it is in effect."""
+def addons_only_when_imported() -> bool:
+    """In this process, let each of Ray's serialisation add-ons of :data:`ADDONS` register only when its library is
+    already imported, so that a process that never uses Arrow, Pydantic's v1 package or Starlette never imports
+    them: a Ray worker (:func:`worker_setup`) or a run's driver, whose first actor creation otherwise imports them
+    (pyarrow alone 0.11 s of CPU on the 2-core machine kind, a warm page cache; +30 MB). Imports Pydantic (Ray's
+    ``pydantic_compat`` does; every actor of a run imports it for its messages). Done once per process; nothing when
+    ``AERODAAS_LEAN_WORKERS`` is ``0``. Returns True when it is in effect."""
     if os.environ.get("AERODAAS_LEAN_WORKERS", "").strip() == "0":
         return False
-    import ray._private.arrow_serialization as arrow  # lazy: heavy ray (serialization_addons.apply imports the function at call time)
-
-    if not isinstance(arrow._register_custom_datasets_serializers, functools.partial):
-        arrow._register_custom_datasets_serializers = functools.partial(
-            _register_if_imported, arrow._register_custom_datasets_serializers)
+    for module, name, library in ADDONS:
+        mod = importlib.import_module(module)
+        register = getattr(mod, name)
+        if not isinstance(register, functools.partial):
+            setattr(mod, name, functools.partial(_register_if_imported, library, register))
     return True
 
 
-def _register_if_imported(register: Callable[[object], None], context: object) -> None:
-    """Ray's ``register(context)`` when pyarrow is imported in this process, else nothing."""
-    if "pyarrow" in sys.modules:
+def _register_if_imported(library: str, register: Callable[[object], None], context: object) -> None:
+    """Ray's ``register(context)`` when module ``library`` is imported in this process, else nothing."""
+    if library in sys.modules:
         register(context)

@@ -30,8 +30,6 @@ from aerodaas.protocol.messages import SealedCheckpoint
 from aerodaas.protocol.specs import ActorSpec
 
 from aerodaas.actors.data.plane import Cascade, DataPlane, percentiles as _percentiles
-from aerodaas.actors.analytics.component import AnalyticsComponent
-from aerodaas.actors.dispatch.scheduling import AnalyticsSchedulingService, ScheduledAnalyticsComponent
 from aerodaas.actors.sensors.camera import CameraComponent
 from aerodaas.sim.world import World
 
@@ -179,17 +177,17 @@ class ActorAssembly:
         self.recorder = self._make_recorder(plane, spec)
         plane.recorder = self.recorder
         self.comps: dict[str, Any] = {}
-        self.scheduling = AnalyticsSchedulingService(plane, spec.analytics_scheduler) \
-            if spec.analytics_scheduler is not None else None
+        #: this actor's analytics components (:meth:`_add_analytics`)
+        self.analytics: list[Any] = []
+        self.scheduling = self._make_scheduling(plane, spec)
         self._add_analytics(plane, spec)
         self.drones: list[DroneComponent] = []
         world = None
         for r in spec.robots:
             world = self._add_robot(plane, spec, r, world)
         # real cameras are not synchronised: spread the fleet's capture phases over one frame period
-        for c in self.comps.values():  # on_error=abort: end every mission of the run, wherever the drones are
-            if isinstance(c, AnalyticsComponent):
-                c.abort = self._abort_all
+        for c in self.analytics:  # on_error=abort: end every mission of the run, wherever the drones are
+            c.abort = self._abort_all
         if self.recorder is not None:  # a failing disk becomes an event of every drone (and the run's report)
             self.recorder.on_failure.append(
                 lambda info, drones=tuple(self.drones): [d.record_event("recording_failed", **info) for d in drones])
@@ -215,20 +213,37 @@ class ActorAssembly:
             return RemoteRecorder(plane, spec.record_remote, hold_s=float(spec.sim.get("recorder_hold_s", 0.0)))
         return None
 
+    @staticmethod
+    def _make_scheduling(plane: DataPlane, spec: ActorSpec) -> Any:
+        """The analytics scheduler's service of a dispatcher actor (``spec.analytics_scheduler``), else None."""
+        if spec.analytics_scheduler is None:
+            return None
+        # only here: a drone actor never imports the dispatcher's schedulers (0.05 s of CPU per worker)
+        from aerodaas.actors.dispatch.scheduling import AnalyticsSchedulingService  # lazy: start-up cost
+
+        return AnalyticsSchedulingService(plane, spec.analytics_scheduler)
+
     def _add_analytics(self, plane: DataPlane, spec: ActorSpec) -> None:
         """The analytics instances; those the analytics scheduler places go to its service (started here). Raises
         ValueError for a scheduled analytics in an actor without an analytics scheduler."""
+        # imported only here: an actor without analytics (a drone actor whose analytics run elsewhere) never
+        # imports their hosting and its tracks, nor one without a scheduler the dispatcher's (0.05 s of CPU each)
         for a in spec.analytics:
             if a.scheduled:
                 if self.scheduling is None:
                     raise ValueError(f"analytics {a.cid!r} is placed by the analytics scheduler, but actor "
                                      f"{plane.actor_id!r} has no analytics_scheduler spec")
+                from aerodaas.actors.dispatch.scheduling import ScheduledAnalyticsComponent  # lazy: start-up cost
+
                 comp = ScheduledAnalyticsComponent(plane, a.cid, a.name, a.obj, self.recorder, plane.epoch_ns,
                                                    self.scheduling)
                 self.scheduling.add(comp)
             else:
+                from aerodaas.actors.analytics.component import AnalyticsComponent  # lazy: start-up cost
+
                 comp = AnalyticsComponent(plane, a.cid, a.name, a.obj, self.recorder, plane.epoch_ns, a.buffer)
             self.comps[a.cid] = plane.add(comp)
+            self.analytics.append(comp)
         if self.scheduling is not None:
             self.scheduling.start()
 
@@ -451,8 +466,9 @@ class ActorAssembly:
         for d in self.drones:
             for cam in d.cameras:
                 cam["comp"].close()
+        analytics = {id(c) for c in self.analytics}
         for c in self.comps.values():
-            if isinstance(c, AnalyticsComponent):  # its failures not yet in an event: one summary
+            if id(c) in analytics:  # its failures not yet in an event: one summary
                 c.finish_failures()
             close = getattr(c.obj, "close", None) if hasattr(c, "obj") else None
             if callable(close):

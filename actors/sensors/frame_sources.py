@@ -24,12 +24,9 @@ from aerodaas.plugins import registry
 from aerodaas.plugins.builtin_sensors import DISCOVERY_PROPERTIES, STREAM_PROPERTIES, check_replay_recording
 from aerodaas.plugins.frames import (STREAM_SOURCE, CapturedFrame, FrameSource, FrameSourceContext, LiveFrameSource,
                                     frame_source_names)
-from aerodaas.video import StreamReader
-from aerodaas.video.discovery import DEFAULT_DISCOVERY_TIMEOUT_S, StreamDiscoveryError, StreamRequest
-from aerodaas.video.source import parse_stream_source
+# aerodaas.video is imported by the stream sources' methods: a simulated camera's actor reads no stream
 
 __all__ = ["RenderedFrames", "BackendFrames", "McapFrames", "StreamFrames", "MavlinkFrames"]
-
 
 
 def _backend_declares(backend: str, flag: str) -> bool:
@@ -146,6 +143,8 @@ class StreamFrames(LiveFrameSource):
     def check_properties(cls, properties: Mapping[str, Any], where: str) -> None:
         """Scheme, host, port and codec, by :func:`aerodaas.video.source.parse_stream_source`; a bare word that is
         no stream is named with the registered frame sources (a misspelt one)."""
+        from aerodaas.video.source import parse_stream_source  # lazy: start-up cost
+
         src = properties["source"]
         try:
             parse_stream_source(src, properties.get("transport"), properties.get("codec"))
@@ -158,6 +157,8 @@ class StreamFrames(LiveFrameSource):
     def resolve_files(cls, properties: dict[str, Any], resolve: Callable[[str, str], Any], where: str,
                       robot_id: str | None, sensor_id: str) -> None:
         """A video or SDP file is resolved like every other file of the environment."""
+        from aerodaas.video.source import parse_stream_source  # lazy: start-up cost
+
         spec = parse_stream_source(properties["source"], properties.get("transport"), properties.get("codec"))
         if spec.kind in ("file", "sdp"):
             properties["source"] = str(resolve(spec.url, f"{where}.properties.source"))
@@ -168,6 +169,9 @@ class StreamFrames(LiveFrameSource):
 
     def open(self, source: str, codec: str | None) -> None:
         """Read video ``source`` and wait for its first frame (VideoSourceError names the URL)."""
+        from aerodaas.video.reader import StreamReader  # lazy: start-up cost
+        from aerodaas.video.source import parse_stream_source  # lazy: start-up cost
+
         p, k = self.ctx.properties, self.ctx.intrinsics
         spec = parse_stream_source(source, p.get("transport") if source.startswith("rtsp") else None, codec)
         self.reader = StreamReader(spec, k.width, k.height, stall_timeout_s=float(p.get("stall_timeout_s") or 2.0),
@@ -213,6 +217,8 @@ class MavlinkFrames(StreamFrames):
         StreamDiscoveryError (naming robot, sensor and what was asked) or VideoSourceError."""
         if self.reader is not None:
             return
+        from aerodaas.video.discovery import (DEFAULT_DISCOVERY_TIMEOUT_S, StreamDiscoveryError,  # lazy: start-up cost
+                                              StreamRequest)
 
         p = self.ctx.properties
         req = StreamRequest(self.ctx.robot_id, self.ctx.sensor_id, p.get("camera_component"), p.get("stream_id"),

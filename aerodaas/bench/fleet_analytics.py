@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aerodaas.analytics.core import Analytics
+from aerodaas.analytics.base import Analytics
 
 __all__ = ["FrameExposure"]
 

@@ -18,7 +18,7 @@ from aerodaas.clusters.addresses import check_ray_address
 from aerodaas.clusters.local import enable_token_auth
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
-from aerodaas.clusters.worker_memory import arrow_only_when_imported, lean_worker_imports, limit_malloc_arenas
+from aerodaas.clusters.worker_memory import addons_only_when_imported, lean_worker_imports, limit_malloc_arenas
 from aerodaas.process.state import PROCESS, EarlyStart
 
 __all__ = ["RayStartError", "RayAddressError", "init_ray", "ensure_ray", "start_ray_early", "shutdown_ray",
@@ -158,9 +158,9 @@ def init_ray(address: str | None, dashboard: bool = False) -> None:
     127.0.0.1). Raises ValueError for a bad ``address``, else what ``ray.init`` raises."""
     import ray  # lazy: heavy ray
 
-    # the driver's first actor creation builds Ray's serialisation context, which imports pyarrow for Ray Data's
-    # reducers: not for a run that sends no Arrow table (aerodaas.clusters.worker_memory)
-    arrow_only_when_imported()
+    # the driver's first actor creation builds Ray's serialisation context, which imports pyarrow, Pydantic's v1
+    # package and Starlette for Ray's reducers: not for a run that uses none of them (aerodaas.clusters.worker_memory)
+    addons_only_when_imported()
     up_address = None if address else _up_address()
     renv = _shipped_plugins(address, up_address)
     if address:

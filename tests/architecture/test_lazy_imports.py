@@ -148,3 +148,78 @@ def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
         assert r.returncode == 0, r.stderr[-2000:]
         assert all(s in r.stderr for s in says), r.stderr[-2000:]
         assert r.stdout.split() == ["2"], (args, r.stdout)
+
+
+#: what no drone actor of a simulated fleet imports (the libraries and the modules of ours cut from its path; a
+#: colocated analytics brings its hosting back, the rest stays out): Ray's serialisation add-ons for libraries no actor
+#: uses (Arrow, Pydantic's v1 package, Starlette and anyio; ``aerodaas.clusters.worker_memory``), the dispatcher's
+#: analytics scheduling, the video stream readers, the live view and the recorder's writer, the built-in analytics
+#: (the benchmark's own needs only their base), the driver's side, and the heavy libraries no drone of it uses
+DRONE_ACTOR_DENIED = ("pyarrow", "pydantic.v1", "starlette", "anyio", "aerodaas.actors.dispatch",
+                      "aerodaas.schedulers.dispatch", "aerodaas.video.reader", "aerodaas.video.source",
+                      "aerodaas.video.discovery", "aerodaas.liveview", "aerodaas.recording.writer",
+                      "aerodaas.analytics.core", "aerodaas.analytics.detector", "aerodaas.analytics.follow",
+                      "aerodaas.app", "aerodaas.runtime", "aerodaas.bench.fleet", "onnxruntime", "av", "mcap", "rich",
+                      "scipy", "matplotlib", "shapely", "torch", "fastapi", "PIL")
+#: what a drone actor without analytics does not import besides: their hosting and the tracks of their detections
+NO_ANALYTICS_DENIED = ("aerodaas.actors.analytics", "aerodaas.perception")
+
+#: a Ray worker's start of a drone actor, in a fresh interpreter: the setup hook, the serialisation context's add-ons
+#: (as on the worker's first message), the actor's class (Ray imports its module), the recorder actor's class (its
+#: ``ray.get_actor`` loads it), then the actor's constructor builds its components from the driver's pickled spec
+_DRONE_WORKER = textwrap.dedent("""
+    import sys
+    from ray import cloudpickle
+    from ray.util import serialization_addons
+    from aerodaas.clusters.worker_memory import worker_setup
+
+    class Context:
+        def _register_cloudpickle_serializer(self, *a, **k): pass
+        def _register_cloudpickle_reducer(self, *a, **k): pass
+
+    worker_setup()
+    serialization_addons.apply(Context())
+    import aerodaas.actors.host.drone_actor
+    import aerodaas.actors.recording.actor
+    from aerodaas.actors.data.plane import DataPlane
+    from aerodaas.actors.host.assembly import ActorAssembly
+
+    hid, spec = cloudpickle.loads(open(sys.argv[1], "rb").read())
+    rt = ActorAssembly(DataPlane(hid, "edge", 0, workers=2), spec)
+    assert len(rt.drones) == 1, rt.drones
+    deny = sys.argv[2].split(",")
+    print("analytics", len(rt.analytics), "cameras", len(rt.drones[0].cameras))
+    print(" ".join(sorted(m for m in sys.modules if any(m == d or m.startswith(d + ".") for d in deny))))
+""")
+
+
+@pytest.mark.parametrize("colocated", [True, False], ids=["fleet-benchmark-drone", "drone-without-analytics"])
+def test_a_drone_actor_imports_none_of_what_its_path_does_not_use(tmp_path, colocated):
+    """A drone actor of ``aerodaas bench fleet`` (its exposure analytics colocated) and one whose analytics run
+    elsewhere, started as a Ray worker starts them (:data:`_DRONE_WORKER`), hold none of :data:`DRONE_ACTOR_DENIED`
+    in ``sys.modules`` (the second none of :data:`NO_ANALYTICS_DENIED` either), and their actor is built: with the
+    analytics and the camera it analyses when colocated (a camera without a consumer is not built)."""
+    import dataclasses
+
+    from ray import cloudpickle
+
+    from aerodaas import Environment
+    from aerodaas.bench.fleet import build_fleet, fleet_config
+    from aerodaas.config import SimulationConfig, parse_environment_config
+    from aerodaas.runtime.dataflow import build_plan, collect_graph
+    from aerodaas.runtime.preflight import robot_schedulers
+
+    env = build_fleet(1)[0] if colocated else Environment(parse_environment_config(fleet_config(1)))
+    robots = env.get_env_robots()
+    graphs = {r.id: collect_graph(r) if colocated else [] for r in robots}
+    plan = build_plan(env, robots, graphs, robot_schedulers(env, robots), SimulationConfig())
+    (hid,) = [h for h, a in plan.actors.items() if a.role == "drone"]
+    spec = dataclasses.replace(plan.actors[hid].spec, record_remote=None)  # its recorder is an actor of the run
+    (tmp_path / "spec.pkl").write_bytes(cloudpickle.dumps((hid, spec)))
+    deny = DRONE_ACTOR_DENIED + (() if colocated else NO_ANALYTICS_DENIED)
+    r = subprocess.run([sys.executable, "-c", _DRONE_WORKER, str(tmp_path / "spec.pkl"), ",".join(deny)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    lines = r.stdout.splitlines()
+    assert lines[0] == f"analytics {int(colocated)} cameras {int(colocated)}", r.stdout
+    assert lines[1:] == [""], f"the drone actor imported {lines[1:]}"

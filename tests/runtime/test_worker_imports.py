@@ -157,6 +157,29 @@ def test_the_setup_hook_keeps_arrow_out_until_something_imports_it():
     assert out.stdout.split() == ["False", "False", "True"], out.stdout
 
 
+@pytest.mark.parametrize("library, registered", [("pydantic.v1.fields", "pydantic.v1.fields.ModelField"),
+                                                  ("starlette.datastructures", "starlette.datastructures.State")])
+def test_the_setup_hook_keeps_rays_other_addons_out_until_something_imports_them(library, registered):
+    """Pydantic's v1 package and Starlette as Arrow above: after the hook Ray's add-ons neither import nor register
+    them; once the process imports the library itself, its reducer is registered as before."""
+    import subprocess
+
+    code = ("import sys\n"
+            "from aerodaas.clusters.worker_memory import worker_setup\n"
+            "from tests.runtime.test_worker_imports import _Context\n"
+            "from ray.util import serialization_addons\n"
+            "worker_setup()\n"
+            "c = _Context(); serialization_addons.apply(c)\n"
+            f"print({library!r} in sys.modules, {registered!r} in c.registered)\n"
+            f"import {library}\n"
+            "c = _Context(); serialization_addons.apply(c)\n"
+            f"print({registered!r} in c.registered)\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "False", "True"], out.stdout
+
+
 def test_a_runs_driver_creates_actors_without_importing_arrow(tmp_path):
     """The driver's side (``aerodaas.runtime.ray_start.init_ray``, a fresh local Ray as ``aerodaas run`` starts it):
     its first actor creation builds Ray's serialisation context, and pyarrow stays out of the driver."""
