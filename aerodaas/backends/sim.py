@@ -60,6 +60,12 @@ class SimBackend(VehicleBackend):
         if self.gimbal is not None:
             self.gimbal.step(dt, self.vehicle.state.position, self.vehicle.state.yaw)
 
+    @property
+    def t(self) -> float:
+        """Simulated seconds since the start: the vehicle's own clock, which ``state().t`` also reads (the run's
+        clock asks for it several times a physics step; a whole :class:`VehicleState` each time is not needed)."""
+        return self.vehicle.t
+
     def state(self) -> VehicleState:
         """The simulated vehicle now (exact: the odometry adds the configured noise); the link is always up."""
         v = self.vehicle
