@@ -194,7 +194,7 @@ class SimVehicle:
         if self.noise.velocity_std_mps > 0:
             vel += self._rng.normal(0.0, self.noise.velocity_std_mps, 3)
         geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
-        pitch = float(np.clip(-vel[0] * 3.0, -25, 25))  # cosmetic: lean into motion
+        pitch = min(max(-float(vel[0]) * 3.0, -25.0), 25.0)  # cosmetic: lean into motion
         return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
                         velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=0.0, pitch=pitch, yaw=s.yaw),
                         battery_pct=max(0.0, min(100.0, self.battery_pct)), battery_voltage=self.battery_voltage,
