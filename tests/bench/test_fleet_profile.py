@@ -8,8 +8,8 @@ import time
 
 import numpy as np
 
-from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classify_stack, parse_pyspy_raw, \
-    smaps_pss, thread_cpu
+from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classify_stack, framework_share, \
+    parse_pyspy_raw, smaps_pss, thread_cpu
 
 #: stacks as py-spy 0.4 writes them (``--threads --format raw``), taken from a drone actor of the fleet benchmark
 RENDER = ("Thread._bootstrap (threading.py:1002);_worker (concurrent/futures/thread.py:83);DataPlane._guard "
@@ -37,6 +37,24 @@ def test_stacks_go_to_the_innermost_concern():
     assert classify_stack(PHYSICS) is Component.PHYSICS
     assert classify_stack(CONTROL) is Component.CONTROL
     assert classify_stack("ActorAssembly.run (actors/host/assembly.py:266)") is Component.CLOCK
+
+
+HOSTING = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (actors/sensors/camera.py:204);"
+           "AnalyticsComponent.handle (actors/analytics/component.py:76);AnalyticsComponent._process_one "
+           "(actors/analytics/component.py:131);collecting (aerodaas/analytics/contract.py:88)")
+USER = ("AnalyticsComponent.handle (actors/analytics/component.py:76);AnalyticsComponent._process_one "
+        "(actors/analytics/component.py:132);MyDetector.process (my_app.py:12);_mean (numpy/_core/_methods.py:118)")
+IDLE = "Thread._bootstrap (threading.py:1002);Thread.run (threading.py:982);_worker (concurrent/futures/thread.py:81)"
+
+
+def test_the_users_analytics_is_apart_from_the_framework_hosting_it():
+    assert classify_stack(USER) is Component.ANALYTICS  # whatever the analytics' class and what it calls
+    assert classify_stack(HOSTING) is Component.ANALYTICS_HOST
+    assert classify_stack(IDLE) is Component.POOL
+    cpu = {Component.CAMERA: 0.03, Component.NATIVE_UNNAMED: 0.01, Component.ANALYTICS: 0.005,
+           Component.RECORD_ENCODE: 0.002, Component.ANALYTICS_HOST: 0.001, Component.CLOCK: 0.004,
+           Component.RAY_PYTHON: 0.006}
+    assert abs(framework_share(cpu) - 0.011) < 1e-12
 
 
 def test_raw_output_counts_samples_per_native_thread_and_component():
