@@ -128,19 +128,31 @@ def thread_cpu(pid: int) -> dict[int, ThreadCpu]:
 _PYSPY_LINE = re.compile(r"^thread \((?:0x)?([0-9a-fA-F]+)\)(?::[^;]*)?;(.*) (\d+)$")
 
 
+#: innermost frames of a thread that waits: a pool worker blocked taking its next job, a condition or event wait,
+#: the clock's sleep, Ray's worker loop (in its C++ event loop), a socket accept or receive. py-spy
+#: ``--nonblocking`` reads the Python stacks only and counts such samples too (more on a loaded machine)
+_WAITING = ("_worker (concurrent/futures/thread.py", "Condition.wait (threading.py", "Event.wait (threading.py",
+            "_sleep_until (", "Worker.main_loop (", "socket.accept (", "Connection._recv (", "Semaphore.acquire (")
+
+
 def parse_pyspy_raw(text: str) -> dict[int, dict[Component, int]]:
     """py-spy ``--threads --format raw`` output -> native tid -> component -> samples. py-spy writes the thread as
-    ``thread (<tid>)`` (decimal native id on Linux) as the first frame, optionally followed by its Python name."""
-    per: dict[int, dict[Component, int]] = {}
+    ``thread (<tid>)`` (decimal native id on Linux) as the first frame, optionally followed by its Python name. A
+    thread's samples in a wait (:data:`_WAITING`, the innermost frame) count only when it has no other samples
+    (its CPU is then its waits': Ray's worker loop); otherwise its CPU is split over what it ran, so a pool thread
+    that waited most of the window does not put its renders' CPU into the wait."""
+    ran: dict[int, dict[Component, int]] = {}
+    waited: dict[int, dict[Component, int]] = {}
     for line in text.splitlines():
         m = _PYSPY_LINE.match(line.strip())
         if not m:
             continue
-        tid = int(m.group(1))
-        comp = classify_stack(m.group(2))
+        tid, stack = int(m.group(1)), m.group(2)
+        per = waited if stack.rsplit(";", 1)[-1].startswith(_WAITING) else ran
+        comp = classify_stack(stack)
         per.setdefault(tid, {})
         per[tid][comp] = per[tid].get(comp, 0) + int(m.group(3))
-    return per
+    return {tid: ran.get(tid) or waited[tid] for tid in sorted(set(ran) | set(waited))}
 
 
 def attribute(before: dict[int, ThreadCpu], after: dict[int, ThreadCpu],
@@ -293,7 +305,7 @@ class ActorProfiler:
                                                     sorted(actor.items(), key=lambda kv: -kv[1])},
                 "actor_cpu_s_per_drone_per_sim_s_total": round(sum(actor.values()) / per, 4),
                 "framework_cpu_s_per_drone_per_sim_s": round(framework_share(actor) / per, 4),
-                "threads_cpu_s_per_drone_per_sim_s": _busiest_threads(before, after, per),
+                "threads_cpu_s_per_drone_per_sim_s": _busiest_threads(pid, before, after, per),
                 "node_cpu_s_per_drone_per_sim_s": {r: round(v / sim_s, 4) for r, v in
                                                    sorted(node.items(), key=lambda kv: -kv[1])},
                 "node_cpu_s_per_drone_per_sim_s_total": round(sum(node.values()) / sim_s, 4),
@@ -316,13 +328,12 @@ class ActorProfiler:
         return parse_pyspy_raw(text)
 
 
-def _busiest_threads(before: dict[int, ThreadCpu], after: dict[int, ThreadCpu], per: float) -> list[list]:
-    """The six threads of the window with the most CPU, ``[tid, comm, CPU-s per drone per sim s]``, the process's
-    main thread (Ray's worker loop) marked ``main``."""
-    rows = [[tid, th.comm, (th.cpu_s - (before[tid].cpu_s if tid in before else 0.0)) / per]
+def _busiest_threads(pid: int, before: dict[int, ThreadCpu], after: dict[int, ThreadCpu], per: float) -> list[list]:
+    """The six threads of process ``pid`` with the most CPU in the window, ``[tid, comm, CPU-s per drone per sim
+    s]``, its main thread (Ray's worker loop; its tid is the pid) marked ``main``."""
+    rows = [[tid, "main" if tid == pid else th.comm, (th.cpu_s - (before[tid].cpu_s if tid in before else 0.0)) / per]
             for tid, th in after.items()]
-    main = min(after) if after else None
-    return [[tid, "main" if tid == main else comm, round(v, 4)] for tid, comm, v in sorted(rows, key=lambda r: -r[2])[:6]]
+    return [[tid, comm, round(v, 4)] for tid, comm, v in sorted(rows, key=lambda r: -r[2])[:6]]
 
 
 def _node_cpu(procs: list) -> dict[int, tuple[str, float]]:

@@ -65,6 +65,13 @@ def test_raw_output_counts_samples_per_native_thread_and_component():
                                      4100: {Component.RAY_PYTHON: 5}}
 
 
+def test_a_threads_waits_take_no_share_of_what_it_ran():
+    text = "\n".join([f"thread (4242): aerodaas-drone/d00_0;{RENDER} 30", f"thread (4242): aerodaas-drone/d00_0;{IDLE} 70",
+                      f"thread (4100): MainThread;{MAIN} 5", f"thread (4300): Dummy-1;{IDLE} 9"])
+    assert parse_pyspy_raw(text) == {4242: {Component.CAMERA: 30}, 4100: {Component.RAY_PYTHON: 5},
+                                     4300: {Component.POOL: 9}}
+
+
 def test_cpu_is_split_by_each_threads_own_samples_and_unsampled_threads_by_name():
     before = {1: ThreadCpu(1, "ray::DroneActor", 10.0), 2: ThreadCpu(2, "ray::DroneActor", 1.0),
               3: ThreadCpu(3, "worker.io", 2.0)}
