@@ -69,7 +69,9 @@ _RULES: tuple[tuple[Component, tuple[str, ...]], ...] = (
     (Component.ANALYTICS, ("FrameExposure.process", "Analytics.process")),
     (Component.ANALYTICS_HOST, ("AnalyticsComponent",)),
     (Component.RECORDING, ("RemoteRecorder", "RecorderService", "_Checkpointer", "drone_checkpoint")),
-    (Component.CAMERA, ("World.render", "frame_at (", "CameraComponent")),
+    # the frame's making only: the capture's scheduling on the clock thread and the frame's hand-off are the data
+    # plane's ("Component." below)
+    (Component.CAMERA, ("World.render", "frame_at (", "CameraComponent._produce (")),
     (Component.PHYSICS, ("SimBackend.step", "SimVehicle.step")),
     (Component.ODOMETRY, ("OdometryPublisher", "publish_odometry", "StatStream")),
     (Component.CONTROL, ("DroneComponent", "DroneInbox", "QueueFlight", "MissionFSM", "SafetyGate")),

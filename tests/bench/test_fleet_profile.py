@@ -44,6 +44,9 @@ HOSTING = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (
            "(actors/analytics/component.py:131);collecting (aerodaas/analytics/contract.py:88)")
 USER = ("AnalyticsComponent.handle (actors/analytics/component.py:76);AnalyticsComponent._process_one "
         "(actors/analytics/component.py:132);MyDetector.process (my_app.py:12);_mean (numpy/_core/_methods.py:118)")
+SCHEDULE = ("ActorAssembly.run (actors/host/assembly.py:356);_capture_due (actors/host/assembly.py:90);"
+            "CameraComponent.try_capture (actors/sensors/camera.py:160);DataPlane.submit (actors/data/plane.py:263);"
+            "ThreadPoolExecutor.submit (concurrent/futures/thread.py:176)")
 IDLE = "Thread._bootstrap (threading.py:1002);Thread.run (threading.py:982);_worker (concurrent/futures/thread.py:81)"
 
 
@@ -51,6 +54,7 @@ def test_the_users_analytics_is_apart_from_the_framework_hosting_it():
     assert classify_stack(USER) is Component.ANALYTICS  # whatever the analytics' class and what it calls
     assert classify_stack(HOSTING) is Component.ANALYTICS_HOST
     assert classify_stack(IDLE) is Component.POOL
+    assert classify_stack(SCHEDULE) is Component.DATA_PLANE  # the clock hands the capture to the pool
     cpu = {Component.CAMERA: 0.03, Component.NATIVE_UNNAMED: 0.01, Component.ANALYTICS: 0.005,
            Component.RECORD_ENCODE: 0.002, Component.ANALYTICS_HOST: 0.001, Component.CLOCK: 0.004,
            Component.RAY_PYTHON: 0.006}
