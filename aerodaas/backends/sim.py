@@ -7,7 +7,17 @@ from typing import ClassVar
 from aerodaas.config.backends import SimConfig
 from aerodaas.sim.gimbal import SimGimbal
 from aerodaas.sim.vehicle import SimVehicle
-from aerodaas.backends.base import StateSamples, VehicleBackend, VehicleState
+from aerodaas.backends.base import PoseSample, StateSamples, VehicleBackend, VehicleState
+
+
+class _SimSamples(StateSamples):
+    """The simulator's :class:`~aerodaas.backends.base.StateSamples`: its pose sample (a camera's every frame) read
+    from the vehicle directly, the values ``state()`` would give."""
+
+    def pose_sample(self) -> PoseSample:
+        v = self._backend.vehicle
+        p = v.state.position
+        return PoseSample(v.t, (float(p[0]), float(p[1]), float(p[2])), float(v.state.yaw))
 
 
 class SimBackend(VehicleBackend):
@@ -29,7 +39,7 @@ class SimBackend(VehicleBackend):
         self.vehicle = self.vehicle_class(cfg.id, cfg.home, cfg.limits, cfg.battery, cfg.noise)
         self.actions = self.guidance = self.vehicle
         #: the position samples: the simulated vehicle's odometry, with the robot's GPS and velocity noise
-        self.telemetry = StateSamples(self, odometry=self.vehicle.odometry)
+        self.telemetry = _SimSamples(self, odometry=self.vehicle.odometry)
         #: the camera gimbal (None: the robot has no ``gimbal`` section), starting at the first camera's mount
         self.gimbal = (SimGimbal(cfg.gimbal, -self._mount_pitch(cfg), clock=lambda: self.vehicle.t)
                        if cfg.gimbal is not None else None)
@@ -59,6 +69,12 @@ class SimBackend(VehicleBackend):
         self.vehicle.step(dt)
         if self.gimbal is not None:
             self.gimbal.step(dt, self.vehicle.state.position, self.vehicle.state.yaw)
+
+    @property
+    def t(self) -> float:
+        """Simulated seconds since the start: the vehicle's own clock, which ``state().t`` also reads (the run's
+        clock asks for it several times a physics step; a whole :class:`VehicleState` each time is not needed)."""
+        return self.vehicle.t
 
     def state(self) -> VehicleState:
         """The simulated vehicle now (exact: the odometry adds the configured noise); the link is always up."""

@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 from aerodaas.bench.procs import ray_processes
 from aerodaas.sim.ground_cache import cache_dir
 
-__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "ActorProfiler"]
+__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "framework_share",
+           "ActorProfiler"]
 
 
 class Component(enum.Enum):
@@ -45,36 +46,54 @@ class Component(enum.Enum):
     CONTROL = "control and mission (control ticks, safety gate, waypoint queue)"
     ODOMETRY = "odometry and stat-stream"
     CAMERA = "camera rendering (homography warp of the ground)"
-    ANALYTICS = "the drone's colocated analytics"
+    ANALYTICS = "the drone's colocated analytics (its process call)"
+    ANALYTICS_HOST = "analytics hosting (mailbox, outputs, accounting)"
     DATA_PLANE = "data plane (hand-off, channel sends)"
     RECORD_ENCODE = "recording: JPEG encoding of frames"
     RECORDING = "recording: batching and sending to the recorder, checkpoints"
     CLOCK = "clock loop (pacing, scheduling captures)"
+    POOL = "thread pools (waiting for and taking each job: the data plane's, Ray's)"
     RAY_PYTHON = "Ray, Python side (worker main loop, actor calls)"
     RAY_CORE = "Ray, C++ threads (core worker I/O, gRPC, heartbeats, object store client)"
     NATIVE_UNNAMED = "unnamed native threads (OpenCV's worker pool: its share of each warp)"
 
 
+#: what the drone's user brings, outside the framework's share (:func:`framework_share`): the rendering of its
+#: simulated camera (and OpenCV's pool threads' part of it), the JPEG encode of its recorded frames, its analytics
+USER_PARTS = frozenset({"CAMERA", "NATIVE_UNNAMED", "RECORD_ENCODE", "ANALYTICS"})
+
 #: first match wins: the innermost concern before the caller that contains it (an analytics runs inside the
 #: camera's publish, the JPEG encode inside the recorder's send)
 _RULES: tuple[tuple[Component, tuple[str, ...]], ...] = (
     (Component.RECORD_ENCODE, ("encode_frame (", "imencode")),
-    (Component.ANALYTICS, ("AnalyticsComponent", "FrameExposure.process", "Analytics.process")),
+    (Component.ANALYTICS, ("FrameExposure.process", "Analytics.process")),
+    (Component.ANALYTICS_HOST, ("AnalyticsComponent",)),
     (Component.RECORDING, ("RemoteRecorder", "RecorderService", "_Checkpointer", "drone_checkpoint")),
-    (Component.CAMERA, ("World.render", "frame_at (", "CameraComponent")),
+    # the frame's making only: the capture's scheduling on the clock thread and the frame's hand-off are the data
+    # plane's ("Component." below)
+    (Component.CAMERA, ("World.render", "frame_at (", "CameraComponent._produce (")),
     (Component.PHYSICS, ("SimBackend.step", "SimVehicle.step")),
     (Component.ODOMETRY, ("OdometryPublisher", "publish_odometry", "StatStream")),
     (Component.CONTROL, ("DroneComponent", "DroneInbox", "QueueFlight", "MissionFSM", "SafetyGate")),
     (Component.DATA_PLANE, ("DataPlane", "ChannelOutlet", "ChannelServer", "Component.")),
     (Component.CLOCK, ("ActorAssembly.run",)),
     (Component.RAY_PYTHON, ("(ray/", "ray/_private", "ray/_raylet")),
+    (Component.POOL, ("_worker (concurrent/futures/thread.py",)),
 )
+
+#: the analytics component's calls into the analytics object (``actors/analytics/component.py``)
+_USER_CALLS = ("AnalyticsComponent._process_one (", "AnalyticsComponent.handle_batch (")
 
 
 def classify_stack(stack: str) -> Component:
     """The component of one py-spy stack (``frame;frame;...`` outermost first, each ``function (file:line)``):
-    the first of ``_RULES`` whose pattern appears in it, else :attr:`Component.RAY_PYTHON` for an otherwise
-    unknown frame set (the worker's own threads)."""
+    a frame the analytics component called, and what it calls, is the analytics' own; otherwise the first of
+    ``_RULES`` whose pattern appears in it, else :attr:`Component.RAY_PYTHON` for an otherwise unknown frame set
+    (the worker's own threads)."""
+    frames = stack.split(";")
+    for i, f in enumerate(frames[:-1]):
+        if f.startswith(_USER_CALLS) and ".process" in frames[i + 1]:
+            return Component.ANALYTICS
     for comp, patterns in _RULES:
         if any(p in stack for p in patterns):
             return comp
@@ -111,19 +130,31 @@ def thread_cpu(pid: int) -> dict[int, ThreadCpu]:
 _PYSPY_LINE = re.compile(r"^thread \((?:0x)?([0-9a-fA-F]+)\)(?::[^;]*)?;(.*) (\d+)$")
 
 
+#: innermost frames of a thread that waits: a pool worker blocked taking its next job, a condition or event wait,
+#: the clock's sleep, Ray's worker loop (in its C++ event loop), a socket accept or receive. py-spy
+#: ``--nonblocking`` reads the Python stacks only and counts such samples too (more on a loaded machine)
+_WAITING = ("_worker (concurrent/futures/thread.py", "Condition.wait (threading.py", "Event.wait (threading.py",
+            "_sleep_until (", "Worker.main_loop (", "socket.accept (", "Connection._recv (", "Semaphore.acquire (")
+
+
 def parse_pyspy_raw(text: str) -> dict[int, dict[Component, int]]:
     """py-spy ``--threads --format raw`` output -> native tid -> component -> samples. py-spy writes the thread as
-    ``thread (<tid>)`` (decimal native id on Linux) as the first frame, optionally followed by its Python name."""
-    per: dict[int, dict[Component, int]] = {}
+    ``thread (<tid>)`` (decimal native id on Linux) as the first frame, optionally followed by its Python name. A
+    thread's samples in a wait (:data:`_WAITING`, the innermost frame) count only when it has no other samples
+    (its CPU is then its waits': Ray's worker loop); otherwise its CPU is split over what it ran, so a pool thread
+    that waited most of the window does not put its renders' CPU into the wait."""
+    ran: dict[int, dict[Component, int]] = {}
+    waited: dict[int, dict[Component, int]] = {}
     for line in text.splitlines():
         m = _PYSPY_LINE.match(line.strip())
         if not m:
             continue
-        tid = int(m.group(1))
-        comp = classify_stack(m.group(2))
+        tid, stack = int(m.group(1)), m.group(2)
+        per = waited if stack.rsplit(";", 1)[-1].startswith(_WAITING) else ran
+        comp = classify_stack(stack)
         per.setdefault(tid, {})
         per[tid][comp] = per[tid].get(comp, 0) + int(m.group(3))
-    return per
+    return {tid: ran.get(tid) or waited[tid] for tid in sorted(set(ran) | set(waited))}
 
 
 def attribute(before: dict[int, ThreadCpu], after: dict[int, ThreadCpu],
@@ -146,6 +177,12 @@ def attribute(before: dict[int, ThreadCpu], after: dict[int, ThreadCpu],
             comp = Component.NATIVE_UNNAMED if th.comm == process_comm else Component.RAY_CORE
             cpu[comp] = cpu.get(comp, 0.0) + delta
     return cpu
+
+
+def framework_share(cpu: dict[Component, float]) -> float:
+    """The framework's part of a drone actor's CPU (same unit as ``cpu``): every component but
+    :data:`USER_PARTS`."""
+    return sum(v for c, v in cpu.items() if c.name not in USER_PARTS)
 
 
 def _mapping_kind(path: str, ground_dir: str) -> str:
@@ -269,6 +306,8 @@ class ActorProfiler:
                 "actor_cpu_s_per_drone_per_sim_s": {c.value: round(v / per, 4) for c, v in
                                                     sorted(actor.items(), key=lambda kv: -kv[1])},
                 "actor_cpu_s_per_drone_per_sim_s_total": round(sum(actor.values()) / per, 4),
+                "framework_cpu_s_per_drone_per_sim_s": round(framework_share(actor) / per, 4),
+                "threads_cpu_s_per_drone_per_sim_s": _busiest_threads(pid, before, after, per),
                 "node_cpu_s_per_drone_per_sim_s": {r: round(v / sim_s, 4) for r, v in
                                                    sorted(node.items(), key=lambda kv: -kv[1])},
                 "node_cpu_s_per_drone_per_sim_s_total": round(sum(node.values()) / sim_s, 4),
@@ -289,6 +328,14 @@ class ActorProfiler:
             text = f.read()
         os.unlink(path)
         return parse_pyspy_raw(text)
+
+
+def _busiest_threads(pid: int, before: dict[int, ThreadCpu], after: dict[int, ThreadCpu], per: float) -> list[list]:
+    """The six threads of process ``pid`` with the most CPU in the window, ``[tid, comm, CPU-s per drone per sim
+    s]``, its main thread (Ray's worker loop; its tid is the pid) marked ``main``."""
+    rows = [[tid, "main" if tid == pid else th.comm, (th.cpu_s - (before[tid].cpu_s if tid in before else 0.0)) / per]
+            for tid, th in after.items()]
+    return [[tid, comm, round(v, 4)] for tid, comm, v in sorted(rows, key=lambda r: -r[2])[:6]]
 
 
 def _node_cpu(procs: list) -> dict[int, tuple[str, float]]:

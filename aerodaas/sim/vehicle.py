@@ -84,56 +84,61 @@ class SimVehicle:
 
     # ------------------------------------------------------------------ dynamics
     def step(self, dt: float) -> None:
-        """Advance the simulation by ``dt`` seconds."""
+        """Advance the simulation by ``dt`` seconds. Computed on Python floats (a step is a few dozen operations on
+        3-vectors, for which numpy's per-call overhead is most of the cost); :attr:`state`'s position and velocity
+        arrays are updated in place."""
         s, sp, lim = self.state, self.setpoint, self.limits
         self.t += dt
         if not s.in_air and sp.mode not in ("position",):
             s.velocity[:] = 0.0
             return
-        desired = np.zeros(3)
+        px, py, pz = s.position.tolist()
+        vx, vy, vz = s.velocity.tolist()
+        dx = dy = dz = 0.0  # the desired velocity
         if sp.mode == "position" and sp.target is not None:
-            err = np.asarray(sp.target, float) - s.position
-            dh = float(np.hypot(err[0], err[1]))
+            ex, ey, ez = float(sp.target[0]) - px, float(sp.target[1]) - py, float(sp.target[2]) - pz
+            dh = math.hypot(ex, ey)
             vmax = min(lim.max_speed, sp.speed) if sp.speed else lim.max_speed
             if dh > 1e-6:
                 vh = min(vmax, math.sqrt(2.0 * lim.max_acceleration * dh), dh / dt)
-                desired[:2] = err[:2] / dh * vh
-            dz = abs(err[2])
-            if dz > 1e-6:
-                vz = min(lim.max_vertical_speed, braking_speed(dz, lim.max_acceleration, dt))
-                desired[2] = math.copysign(vz, err[2])
+                dx, dy = ex / dh * vh, ey / dh * vh
+            if abs(ez) > 1e-6:
+                dz = math.copysign(min(lim.max_vertical_speed, braking_speed(abs(ez), lim.max_acceleration, dt)), ez)
         elif sp.mode == "velocity":
-            desired[:] = sp.velocity
-            h = float(np.hypot(desired[0], desired[1]))
+            dx, dy, dz = (float(c) for c in sp.velocity)
+            h = math.hypot(dx, dy)
             if h > lim.max_speed:
-                desired[:2] *= lim.max_speed / h
-            desired[2] = float(np.clip(desired[2], -lim.max_vertical_speed, lim.max_vertical_speed))
-            yr = float(np.clip(sp.yaw_rate, -lim.max_yaw_rate, lim.max_yaw_rate))
+                dx, dy = dx * (lim.max_speed / h), dy * (lim.max_speed / h)
+            dz = min(max(dz, -lim.max_vertical_speed), lim.max_vertical_speed)
+            yr = min(max(float(sp.yaw_rate), -lim.max_yaw_rate), lim.max_yaw_rate)
             s.yaw = (s.yaw + yr * dt) % 360.0
         elif sp.mode == "land":
-            desired[2] = -min(sp.land_speed, lim.max_vertical_speed)
+            dz = -min(sp.land_speed, lim.max_vertical_speed)
         elif sp.mode == "hold" and sp.target is not None and sp.stopped:
-            err = np.asarray(sp.target, float) - s.position
-            desired = np.clip(err * 1.5, -lim.max_speed, lim.max_speed)
+            m = lim.max_speed
+            dx, dy, dz = (min(max((float(c) - p) * 1.5, -m), m) for c, p in zip(sp.target, (px, py, pz)))
         # a hold not yet at rest brakes at the full acceleration along its velocity (desired 0): the stop the safety
         # gate predicts from every point (v^2 / 2a along v); steering back to where the hold was commanded at the
         # same time took part of the budget and passed that stop point (0.57 m above max_altitude)
         # a position target: the vertical change first, so a climb brakes under its target whatever the turn needs
-        s.velocity += np.asarray(limited_change(desired - s.velocity, lim.max_acceleration * dt,
-                                                vertical_first=sp.mode == "position"))
-        s.position += s.velocity * dt
-        if sp.mode == "hold" and not sp.stopped and not s.velocity.any():
-            sp.stopped, sp.target = True, tuple(float(c) for c in s.position)  # at rest: hover here
-        if s.position[2] <= 0.0:
-            s.position[2] = 0.0
-            if s.velocity[2] < 0:
-                s.velocity[:] = 0.0
+        cx, cy, cz = limited_change((dx - vx, dy - vy, dz - vz), lim.max_acceleration * dt,
+                                    vertical_first=sp.mode == "position")
+        vx, vy, vz = vx + cx, vy + cy, vz + cz
+        px, py, pz = px + vx * dt, py + vy * dt, pz + vz * dt
+        if sp.mode == "hold" and not sp.stopped and not (vx or vy or vz):
+            sp.stopped, sp.target = True, (px, py, pz)  # at rest: hover here
+        if pz <= 0.0:
+            pz = 0.0
+            if vz < 0:
+                vx = vy = vz = 0.0
                 if sp.mode == "land":
                     s.in_air = False
-        elif s.position[2] > 0.05:
+        elif pz > 0.05:
             s.in_air = True
+        s.position[:] = (px, py, pz)
+        s.velocity[:] = (vx, vy, vz)
         if s.in_air:
-            speed = float(np.linalg.norm(s.velocity))
+            speed = math.sqrt(vx * vx + vy * vy + vz * vz)
             p = self.battery.hover_power_w + self.battery.speed_power_w_per_mps * speed
             s.energy_j = max(0.0, s.energy_j - p * dt)
 
@@ -189,7 +194,7 @@ class SimVehicle:
         if self.noise.velocity_std_mps > 0:
             vel += self._rng.normal(0.0, self.noise.velocity_std_mps, 3)
         geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
-        pitch = float(np.clip(-vel[0] * 3.0, -25, 25))  # cosmetic: lean into motion
+        pitch = min(max(-float(vel[0]) * 3.0, -25.0), 25.0)  # cosmetic: lean into motion
         return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
                         velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=0.0, pitch=pitch, yaw=s.yaw),
                         battery_pct=max(0.0, min(100.0, self.battery_pct)), battery_voltage=self.battery_voltage,

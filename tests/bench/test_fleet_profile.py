@@ -8,8 +8,8 @@ import time
 
 import numpy as np
 
-from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classify_stack, parse_pyspy_raw, \
-    smaps_pss, thread_cpu
+from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classify_stack, framework_share, \
+    parse_pyspy_raw, smaps_pss, thread_cpu
 
 #: stacks as py-spy 0.4 writes them (``--threads --format raw``), taken from a drone actor of the fleet benchmark
 RENDER = ("Thread._bootstrap (threading.py:1002);_worker (concurrent/futures/thread.py:83);DataPlane._guard "
@@ -39,12 +39,41 @@ def test_stacks_go_to_the_innermost_concern():
     assert classify_stack("ActorAssembly.run (actors/host/assembly.py:266)") is Component.CLOCK
 
 
+HOSTING = ("_worker (concurrent/futures/thread.py:83);CameraComponent._capture (actors/sensors/camera.py:204);"
+           "AnalyticsComponent.handle (actors/analytics/component.py:76);AnalyticsComponent._process_one "
+           "(actors/analytics/component.py:131);collecting (aerodaas/analytics/contract.py:88)")
+USER = ("AnalyticsComponent.handle (actors/analytics/component.py:76);AnalyticsComponent._process_one "
+        "(actors/analytics/component.py:132);MyDetector.process (my_app.py:12);_mean (numpy/_core/_methods.py:118)")
+SCHEDULE = ("ActorAssembly.run (actors/host/assembly.py:356);_capture_due (actors/host/assembly.py:90);"
+            "CameraComponent.try_capture (actors/sensors/camera.py:160);DataPlane.submit (actors/data/plane.py:263);"
+            "ThreadPoolExecutor.submit (concurrent/futures/thread.py:176)")
+IDLE = "Thread._bootstrap (threading.py:1002);Thread.run (threading.py:982);_worker (concurrent/futures/thread.py:81)"
+
+
+def test_the_users_analytics_is_apart_from_the_framework_hosting_it():
+    assert classify_stack(USER) is Component.ANALYTICS  # whatever the analytics' class and what it calls
+    assert classify_stack(HOSTING) is Component.ANALYTICS_HOST
+    assert classify_stack(IDLE) is Component.POOL
+    assert classify_stack(SCHEDULE) is Component.DATA_PLANE  # the clock hands the capture to the pool
+    cpu = {Component.CAMERA: 0.03, Component.NATIVE_UNNAMED: 0.01, Component.ANALYTICS: 0.005,
+           Component.RECORD_ENCODE: 0.002, Component.ANALYTICS_HOST: 0.001, Component.CLOCK: 0.004,
+           Component.RAY_PYTHON: 0.006}
+    assert abs(framework_share(cpu) - 0.011) < 1e-12
+
+
 def test_raw_output_counts_samples_per_native_thread_and_component():
     text = "\n".join([f"thread (4242): aerodaas-drone/d00_0;{RENDER} 30",
                       f"thread (4242): aerodaas-drone/d00_0;{ANALYSE} 10",
                       f"thread (4100): MainThread;{MAIN} 5", "py-spy> a line that is not a sample", ""])
     assert parse_pyspy_raw(text) == {4242: {Component.CAMERA: 30, Component.ANALYTICS: 10},
                                      4100: {Component.RAY_PYTHON: 5}}
+
+
+def test_a_threads_waits_take_no_share_of_what_it_ran():
+    text = "\n".join([f"thread (4242): aerodaas-drone/d00_0;{RENDER} 30", f"thread (4242): aerodaas-drone/d00_0;{IDLE} 70",
+                      f"thread (4100): MainThread;{MAIN} 5", f"thread (4300): Dummy-1;{IDLE} 9"])
+    assert parse_pyspy_raw(text) == {4242: {Component.CAMERA: 30}, 4100: {Component.RAY_PYTHON: 5},
+                                     4300: {Component.POOL: 9}}
 
 
 def test_cpu_is_split_by_each_threads_own_samples_and_unsampled_threads_by_name():
