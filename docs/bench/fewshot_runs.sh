@@ -35,4 +35,10 @@ L="--epochs 10 --tiles-per-epoch 160 --val-tiles 32"
 for s in A B; do $F --split $s --n 60 --select uniform --seed 0 --tag fit200 -- $L; done
 for sel in uniform ranked; do for s in A B; do $F --split $s --n 20 --select $sel --seed 0 --tag fit200 -- $L; done; done
 $F --split A --n 60 --select uniform --seed 1 --tag fit200 -- $L
+# fitting or data: three times fit200's steps (600 steps of 8 tiles) and fit200 on 640-pixel training tiles; the
+# curve's missing N = 40
+X="--epochs 30 --tiles-per-epoch 160 --val-tiles 32"
+for s in A B; do $F --split $s --n 60 --select uniform --seed 0 --tag fit600 -- $X; done
+$F --split A --n 60 --select uniform --seed 0 --tag tile640fit200 -- $L --tile 640
+for s in A B; do $F --split $s --n 40 --select uniform --seed 0 --tag fit200 -- $L; done
 echo done
