@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from aerodaas.clusters import reaper
+from aerodaas.clusters.state_folder import state_dir
 
 __all__ = ["attached_address", "await_fresh_workers", "down", "importable_by_cluster", "not_on_cluster_path",
            "read_state", "state_path", "up"]
@@ -39,8 +40,7 @@ __all__ = ["attached_address", "await_fresh_workers", "down", "importable_by_clu
 
 def state_path() -> Path:
     """``$AERODAAS_STATE_DIR/cluster.json`` (default ``~/.aerodaas/cluster.json``)."""
-    base = os.environ.get("AERODAAS_STATE_DIR") or os.path.join(os.path.expanduser("~"), ".aerodaas")
-    return Path(base) / "cluster.json"
+    return Path(state_dir()) / "cluster.json"
 
 
 def _alive(pid: int) -> bool:

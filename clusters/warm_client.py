@@ -18,6 +18,8 @@ import os
 import signal
 import sys
 
+from aerodaas.clusters.state_folder import state_dir
+
 __all__ = ["NO_WARM_DRIVER_ENV", "delegate", "socket_path"]
 
 #: ``AERODAAS_NO_WARM_DRIVER=1``: ``aerodaas run`` never uses the warm driver
@@ -40,11 +42,10 @@ _MAX_SOCKET_PATH = 107
 
 def socket_path(environ: dict[str, str] | None = None) -> str:
     """Where the warm driver of the ``aerodaas up`` cluster listens: ``run/warm-driver.sock`` in its state folder
-    (``$AERODAAS_STATE_DIR``, default ``~/.aerodaas``; :func:`aerodaas.clusters.persistent.state_path`), or, when
+    (:func:`aerodaas.clusters.state_folder.state_dir`), or, when
     that path is longer than a Unix socket address holds (107 bytes), ``/tmp/aerodaas-<uid>/<digest>.sock`` with
     the digest of the state folder's real path. The folder is the server's to create (mode 0700)."""
-    env = os.environ if environ is None else environ
-    base = env.get("AERODAAS_STATE_DIR") or os.path.join(os.path.expanduser("~"), ".aerodaas")
+    base = state_dir(environ)
     path = os.path.join(base, "run", "warm-driver.sock")
     if len(os.fsencode(path)) <= _MAX_SOCKET_PATH:
         return path
