@@ -38,6 +38,8 @@ def add_parser(sub: Any) -> None:
 def run_signing(args: argparse.Namespace) -> int:
     """``aerodaas mavlink signing setup|remove``: :func:`aerodaas.tools.signing_provision.provision`; returns the
     exit code."""
-    from aerodaas.tools.signing_provision import provision  # lazy: CLI start-up (pymavlink, pydantic)
+    from aerodaas.tools.signing_provision import SigningRequest, provision  # lazy: CLI start-up (pymavlink, pydantic)
 
-    return provision(args)
+    return provision(SigningRequest(action=args.action, connection=args.connection, key_file=args.key_file,
+                                    generate=args.generate, secure_link=args.secure_link,
+                                    target_system=args.target_system, baud=args.baud, timeout_s=args.timeout))

@@ -5,6 +5,7 @@ module, parsed at every ``aerodaas`` start) and its handlers :func:`run_upload` 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 __all__ = ["add_parser", "run_download", "run_upload"]
 
@@ -34,17 +35,28 @@ def _upload_bound(kind: str):
 def run_upload(args: argparse.Namespace) -> int:
     """``aerodaas mission upload FILE``: :func:`aerodaas.tools.mission_transfer.upload` (exit 0, 2 for a file,
     bound or vehicle that refuses the mission, named)."""
-    from aerodaas.tools.mission_transfer import upload  # lazy: CLI start-up (pydantic, pymavlink)
+    from aerodaas.tools.mission_transfer import Upload, upload  # lazy: CLI start-up (pydantic, pymavlink)
 
-    return upload(args)
+    return upload(Upload(file=Path(args.file), link=_link(args), start=args.start, fence_action=args.fence_action,
+                         max_altitude_m=args.max_altitude, max_distance_m=args.max_distance,
+                         max_speed_mps=args.max_speed))
 
 
 def run_download(args: argparse.Namespace) -> int:
     """``aerodaas mission download --out FILE``: :func:`aerodaas.tools.mission_transfer.download` (exit 0, 2 for a
     file or vehicle that refuses, named)."""
-    from aerodaas.tools.mission_transfer import download  # lazy: CLI start-up (pydantic, pymavlink)
+    from aerodaas.tools.mission_transfer import Download, download  # lazy: CLI start-up (pydantic, pymavlink)
 
-    return download(args)
+    return download(Download(out=Path(args.out), link=_link(args)))
+
+
+def _link(args: argparse.Namespace):
+    """The :class:`~aerodaas.tools.mission_transfer.VehicleLink` of ``--connection``, ``--autopilot``, ``--timeout``
+    and ``--key-file``."""
+    from aerodaas.tools.mission_transfer import VehicleLink  # lazy: CLI start-up (pydantic, pymavlink)
+
+    return VehicleLink(connection=args.connection, autopilot=args.autopilot, timeout_s=args.timeout,
+                       key_file=args.key_file)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

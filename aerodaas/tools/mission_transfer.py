@@ -2,12 +2,12 @@
 read from one (:func:`download`): ``aerodaas mission upload|download`` (its options: :mod:`aerodaas.commands.mission`)."""
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from aerodaas.backends import BackendError, make_backend
 from aerodaas.backends.mavlink.fence import fence_from_items
@@ -18,32 +18,73 @@ from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight,
 from aerodaas.missionfile.upload import cap_speeds, check_relative_altitudes, mission_differences, mission_frames
 from aerodaas.model.types import GeoPoint
 
-__all__ = ["download", "upload"]
+__all__ = ["Download", "Upload", "VehicleLink", "download", "upload"]
 
 _MISSION_SUFFIXES = (".plan", ".waypoints", ".txt")
 
 
+@dataclass(frozen=True)
+class VehicleLink:
+    """The MAVLink vehicle a transfer talks to.
 
-def _mission_backend(args: argparse.Namespace, home=None, home_wait_s: float = 5.0):
-    """A connected MAVLink backend for ``--connection``, after waiting up to ``home_wait_s`` seconds for the
+    ``connection``: a pymavlink connection string (``tcp:127.0.0.1:5760``, ``udpin:0.0.0.0:14550``, ``/dev/ttyACM0``);
+    ``autopilot``: its firmware, or ``"auto"`` from its HEARTBEAT (``mavlink.autopilot``); ``timeout_s``: seconds to
+    reach it and, for an upload, to wait for its HOME_POSITION; ``key_file``: its MAVLink 2 signing key file
+    (``mavlink.signing_key_file``, docs/security.md), None for an unsigned link."""
+
+    connection: str
+    autopilot: Literal["auto", "ardupilot", "px4"] = "auto"
+    timeout_s: float = 10.0
+    key_file: str | None = None
+
+
+@dataclass(frozen=True)
+class Upload:
+    """What ``aerodaas mission upload`` sends (:func:`upload`).
+
+    ``file``: a ``.plan``, ``.waypoints`` or ``.txt`` (QGC WPL 110) mission; ``start``: then arm and start it;
+    ``fence_action``: the vehicle's own action on a breach of the plan's geofence (ArduPilot ``FENCE_ACTION``, PX4
+    ``GF_ACTION``); ``max_altitude_m`` / ``max_distance_m``: refuse items higher above / farther from the vehicle's
+    home, metres; ``max_speed_mps``: cap the file's speeds at this, m/s (None: as written)."""
+
+    file: Path
+    link: VehicleLink
+    start: bool = False
+    fence_action: Literal["rtl", "land", "hold", "report"] = "rtl"
+    max_altitude_m: float = 120.0
+    max_distance_m: float = 10_000.0
+    max_speed_mps: float | None = None
+
+
+@dataclass(frozen=True)
+class Download:
+    """What ``aerodaas mission download`` reads (:func:`download`): the vehicle on ``link``, written to ``out``
+    (``.plan``, ``.waypoints`` or ``.txt``)."""
+
+    out: Path
+    link: VehicleLink
+
+
+def _mission_backend(link: VehicleLink, name: str, *, fence_action: str | None = None, home=None,
+                     home_wait_s: float = 5.0):
+    """A connected MAVLink backend for ``link``, after waiting up to ``home_wait_s`` seconds for the
     vehicle's HOME_POSITION (BackendError / ValueError name the connection)."""
-    fence = {"action": args.fence_action} if getattr(args, "fence_action", None) else {}
+    fence = {"action": fence_action} if fence_action else {}
     # set_speed_limits False: the vehicle's own speed parameters are left as they are (a started mission flies on
     # after we close, so nothing changed could be put back); the file's speeds, capped by --max-speed, are the mission
-    key_file = getattr(args, "key_file", None)
-    mc = MavlinkConfig(connection=args.connection, autopilot=args.autopilot, connect_timeout_s=args.timeout,
+    mc = MavlinkConfig(connection=link.connection, autopilot=link.autopilot, connect_timeout_s=link.timeout_s,
                        fence=fence, set_speed_limits=False,
-                       signing_key_file=os.path.abspath(key_file) if key_file else None)
+                       signing_key_file=os.path.abspath(link.key_file) if link.key_file else None)
     cfg = RobotConfig(id="vehicle", backend="mavlink", mavlink=mc, **({"home": home} if home is not None else {}))
     try:  # the key read as the backend reads it (signing.py read_key_file), before anything is sent
         backend = make_backend(cfg)
     except KeyFileError as e:
         raise KeyFileError(f"--key-file: {e}") from None
     if not backend.signing.enabled:
-        print(f"aerodaas mission {args.mission_cmd}: note: the link {args.connection} is not signed (no --key-file): "
+        print(f"{name}: note: the link {link.connection} is not signed (no --key-file): "
               "anyone on it can command the vehicle", file=sys.stderr, flush=True)
     backend.connect()
-    deadline = time.monotonic() + min(args.timeout, home_wait_s)
+    deadline = time.monotonic() + min(link.timeout_s, home_wait_s)
     while not backend.telemetry.home_received and time.monotonic() < deadline:  # ArduPilot's item 0 and .plan home need it
         time.sleep(0.05)
     return backend
@@ -98,7 +139,7 @@ def _check_read_back(backend, sent, name: str) -> None:
           + (f", but for {len(diffs)} field(s) it does not keep (above)" if diffs else ""), flush=True)
 
 
-def upload(args: argparse.Namespace) -> int:
+def upload(request: Upload) -> int:
     """``aerodaas mission upload FILE``: a file of the formats of :mod:`aerodaas.missionfile` sent through the
     MAVLink backend's mission protocol. The file is read and its items checked before anything is
     sent (with :func:`~aerodaas.missionfile.plan_to_flight`: what AeroDaaS and the autopilot can fly; the altitude,
@@ -113,25 +154,24 @@ def upload(args: argparse.Namespace) -> int:
     (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started).
     ``--key-file``: the link signed with that key as the backend signs it (``mavlink.signing_key_file``); a key file
     that cannot be used or a vehicle that does not answer signed: exit 2 (as for a refused file or bound, named)."""
-    return _transfer(args, _upload)
+    return _transfer(request, request.link, "aerodaas mission upload", _upload)
 
 
-def download(args: argparse.Namespace) -> int:
+def download(request: Download) -> int:
     """``aerodaas mission download --out FILE``: the vehicle's mission read and written to ``--out`` (``.plan``,
     ``.waypoints`` or ``.txt``) only once complete, with a ``.plan``'s geofence and rally points. Exit 0, 2 for a
     file, option or vehicle that refuses (named)."""
-    return _transfer(args, _download)
+    return _transfer(request, request.link, "aerodaas mission download", _download)
 
 
-def _transfer(args: argparse.Namespace, step) -> int:
-    """Run ``step(args, name, opened)`` (:func:`_upload` or :func:`_download`) and close the backend it opened; exit
-    0, or 2 after printing the error (with the connection when the error does not name it)."""
-    name = f"aerodaas mission {args.mission_cmd}"
+def _transfer(request: Upload | Download, link: VehicleLink, name: str, step) -> int:
+    """Run ``step(request, name, opened)`` (:func:`_upload` or :func:`_download`) and close the backend it opened;
+    exit 0, or 2 after printing the error (with the connection when the error does not name it)."""
     opened: list = []  # the backend once connected: closed at the end, whatever happened
     try:
-        step(args, name, opened)
+        step(request, name, opened)
     except (MissionFileError, BackendError, ValueError, OSError) as e:
-        where = f" (connection {args.connection!r})" if isinstance(e, BackendError) and args.connection not in str(e) \
+        where = f" (connection {link.connection!r})" if isinstance(e, BackendError) and link.connection not in str(e) \
             else ""
         print(f"{name}: {e}{where}", file=sys.stderr)
         return 2
@@ -141,9 +181,9 @@ def _transfer(args: argparse.Namespace, step) -> int:
     return 0
 
 
-def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
+def _upload(request: Upload, name: str, opened: list) -> None:
     """``aerodaas mission upload`` (see :func:`upload`); the backend it connects goes into ``opened``."""
-    path = Path(args.file)
+    path = Path(request.file)
     if not path.is_file():
         raise MissionFileError(f"{str(path)!r}: mission file not found")
     plan = load_mission(path)
@@ -156,41 +196,43 @@ def _upload(args: argparse.Namespace, name: str, opened: list) -> None:
     plan_to_flight(plan, plan.home or GeoPoint(lat=0.0, lon=0.0, alt=0.0), check_geofence=False,
                    min_altitude=None)
 
-    check_relative_altitudes(plan, args.max_altitude)  # needs no home: refused before connecting
-    backend = _mission_backend(args, plan.home, home_wait_s=args.timeout)
+    check_relative_altitudes(plan, request.max_altitude_m)  # needs no home: refused before connecting
+    backend = _mission_backend(request.link, name, fence_action=request.fence_action, home=plan.home,
+                               home_wait_s=request.link.timeout_s)
     opened.append(backend)
-    _check_from_vehicle_home(args, name, plan, backend, path)
+    _check_from_vehicle_home(request, name, plan, backend, path)
     _upload_fence_and_rally(name, plan, backend, path)
 
     items, frames = mission_frames(plan.expanded_items())
     for f in frames:
         print(f"{name}: {f}", flush=True)
-    if args.max_speed is not None:
-        items, changes = cap_speeds(items, args.max_speed, _cruise_speed(backend))
+    if request.max_speed_mps is not None:
+        items, changes = cap_speeds(items, request.max_speed_mps, _cruise_speed(backend))
         for c in changes:
             print(f"{name}: {c}", flush=True)
     sent = backend.mission.upload(items)
     print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.link.autopilot} vehicle on "
-          f"{args.connection}", flush=True)
+          f"{request.link.connection}", flush=True)
     _check_read_back(backend, sent, name)
-    if args.start:
+    if request.start:
         backend.actions.arm()
         backend.mission.start()
         print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
 
 
-def _check_from_vehicle_home(args: argparse.Namespace, name: str, plan: Any, backend: Any, path: Path) -> None:
+def _check_from_vehicle_home(request: Upload, name: str, plan: Any, backend: Any, path: Path) -> None:
     """The altitude, distance and geofence bounds, measured from the vehicle's own home (the file's planned home
     only when the vehicle reports none). Raises MissionFileError when neither has one."""
-    bounds = {"max_altitude": args.max_altitude, "max_distance": args.max_distance}
+    bounds = {"max_altitude": request.max_altitude_m, "max_distance": request.max_distance_m}
+    link = request.link
     if backend.telemetry.home_received:  # as documented: from the vehicle's own home, whatever the file planned
         plan_to_flight(plan, backend.telemetry.home, **bounds)
     elif plan.home is None:  # the bounds are measured from a home, never from a default one
-        raise MissionFileError(f"{str(path)!r}: the vehicle on {args.connection} reported no home position "
-                               f"within {args.timeout:g} s and the file has none; nothing was uploaded (the "
+        raise MissionFileError(f"{str(path)!r}: the vehicle on {link.connection} reported no home position "
+                               f"within {link.timeout_s:g} s and the file has none; nothing was uploaded (the "
                                "altitude and distance bounds are measured from it)")
     else:  # no GPS fix yet (bench, indoors)
-        print(f"{name}: warning: the vehicle reported no home position within {args.timeout:g} s; the "
+        print(f"{name}: warning: the vehicle reported no home position within {link.timeout_s:g} s; the "
               f"items are checked against the file's planned home only", file=sys.stderr, flush=True)
         plan_to_flight(plan, plan.home, **bounds)
 
@@ -211,13 +253,13 @@ def _upload_fence_and_rally(name: str, plan: Any, backend: Any, path: Path) -> N
         print(f"{name}: {n} rally point(s) of {str(path)!r} uploaded and read back", flush=True)
 
 
-def _download(args: argparse.Namespace, name: str, opened: list) -> None:
+def _download(request: Download, name: str, opened: list) -> None:
     """``aerodaas mission download --out FILE`` (see :func:`download`): written only once complete."""
-    out = Path(args.out)
+    out = Path(request.out)
     if out.suffix.lower() not in _MISSION_SUFFIXES:
         raise MissionFileError(f"{str(out)!r}: --out must end in {', '.join(_MISSION_SUFFIXES)} "
                                "(QGroundControl .plan or QGC WPL 110 waypoints)")
-    backend = _mission_backend(args)
+    backend = _mission_backend(request.link, name)
     opened.append(backend)
     plan = backend.mission.download().model_copy(update={
         "firmware_type": 3 if backend.link.autopilot == "ardupilot" else 12, "vehicle_type": 2})
@@ -225,5 +267,5 @@ def _download(args: argparse.Namespace, name: str, opened: list) -> None:
     tmp = out.with_name(out.name + ".part")
     (save_plan if out.suffix.lower() == ".plan" else save_wpl)(plan, tmp)
     os.replace(tmp, out)  # never a half-written mission file
-    print(f"{name}: {len(plan.items)} items from the {backend.link.autopilot} vehicle on {args.connection} "
+    print(f"{name}: {len(plan.items)} items from the {backend.link.autopilot} vehicle on {request.link.connection} "
           f"written to {str(out)!r}", flush=True)

@@ -8,12 +8,12 @@ vehicle's HEARTBEAT comes unsigned and an unsigned command is acknowledged. No R
 checked, 2 for bad input (the key file, no ``--secure-link``), 1 when the vehicle does not answer as it should."""
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
+from dataclasses import dataclass, replace
 from functools import partial
-from typing import Any
+from typing import Any, Literal
 
 from pymavlink import mavutil
 
@@ -24,53 +24,77 @@ from aerodaas.backends.mavlink.signing import (DISABLE_KEY, KeyFileError, now_ti
                                                write_key_file)
 from aerodaas.config import MavlinkConfig, RobotConfig
 
-__all__ = ["provision"]
+__all__ = ["SigningRequest", "provision"]
 
 #: SETUP_SIGNING has no acknowledgement (common.xml): sent this many times, this far apart (wall seconds)
 SETUP_REPEAT, SETUP_GAP_S = 3, 0.2
 
 
-def provision(args: argparse.Namespace) -> int:
-    """Run ``mavlink signing setup|remove`` (see the module docstring); returns the exit code."""
+@dataclass(frozen=True)
+class SigningRequest:
+    """What ``aerodaas mavlink signing`` does (:func:`provision`).
+
+    ``action``: ``"setup"`` gives the vehicle the key, ``"remove"`` takes signing off; ``connection``: a pymavlink
+    connection string; ``key_file``: the vehicle's key file (64 hex characters or 32 raw bytes, mode 0600);
+    ``generate``: for ``setup``, create the key file with a new random key when it does not exist; ``secure_link``:
+    the user declares the link secure (USB, a cable; without it nothing is sent); ``target_system``: the vehicle's
+    MAVLink system id 1-255, None for the first autopilot heard; ``baud``: serial baud rate; ``timeout_s``: seconds
+    to wait for the vehicle at each step."""
+
+    action: Literal["setup", "remove"]
+    connection: str
+    key_file: str
+    generate: bool = False
+    secure_link: bool = False
+    target_system: int | None = None
+    baud: int = 57600
+    timeout_s: float = 30.0
+
+
+def provision(request: SigningRequest) -> int:
+    """Run ``mavlink signing setup|remove`` (see the module docstring); returns the exit code: 0 when checked, 2 for
+    bad input (no ``secure_link``, a system id outside 1-255, a key file that cannot be read or written), 1 when
+    the vehicle does not answer as it should."""
     name = "aerodaas mavlink signing"
-    if not args.secure_link:
+    if not request.secure_link:
         print(f"{name}: --secure-link: SETUP_SIGNING carries the key in the clear; run it only over a link you "
               "declare secure (USB, a cable) and say so with --secure-link", file=sys.stderr)
         return 2
-    if args.target_system is not None and not 1 <= args.target_system <= 255:
-        print(f"{name}: --target-system: a MAVLink system id is 1-255, got {args.target_system}", file=sys.stderr)
+    if request.target_system is not None and not 1 <= request.target_system <= 255:
+        print(f"{name}: --target-system: a MAVLink system id is 1-255, got {request.target_system}", file=sys.stderr)
         return 2
     try:
-        if args.generate and args.action == "setup" and not os.path.exists(args.key_file):
-            write_key_file(args.key_file, os.urandom(32))
-        key = read_key_file(args.key_file)
+        if request.generate and request.action == "setup" and not os.path.exists(request.key_file):
+            write_key_file(request.key_file, os.urandom(32))
+        key = read_key_file(request.key_file)
     except (KeyFileError, OSError) as e:
-        print(f"{name}: --key-file: {args.key_file!r}: {e}", file=sys.stderr)
+        print(f"{name}: --key-file: {request.key_file!r}: {e}", file=sys.stderr)
         return 2
     try:
-        if args.action == "setup":
-            return _setup(args, key, name)
-        return _remove(args, name)
+        if request.action == "setup":
+            return _setup(request, key, name)
+        return _remove(request, name)
     except (TimeoutError, ConnectionError, OSError) as e:
-        print(f"{name}: {args.action} on {args.connection!r}: {e}", file=sys.stderr)
+        print(f"{name}: {request.action} on {request.connection!r}: {e}", file=sys.stderr)
         return 1
 
 
-def _open(args: argparse.Namespace) -> tuple[Any, Any]:
+def _open(request: SigningRequest) -> tuple[Any, Any]:
     """An unsigned pymavlink connection (MAVLink 2) and the autopilot HEARTBEAT of ``--target-system`` (else the
     first autopilot heard). Raises TimeoutError after ``--timeout`` seconds."""
     os.environ["MAVLINK20"] = "1"
 
-    conn = mavutil.mavlink_connection(args.connection, baud=args.baud, source_system=255, source_component=190,
+    conn = mavutil.mavlink_connection(request.connection, baud=request.baud, source_system=255, source_component=190,
                                       dialect="ardupilotmega", autoreconnect=True)
-    deadline = time.monotonic() + args.timeout
+    deadline = time.monotonic() + request.timeout_s
     while time.monotonic() < deadline:
         conn.mav.heartbeat_send(6, 8, 0, 0, 4)  # MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, MAV_STATE_ACTIVE
         hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=1.0)
-        if hb is not None and is_autopilot_heartbeat(hb, 255, 190) and args.target_system in (None, hb.get_srcSystem()):
+        if hb is not None and is_autopilot_heartbeat(hb, 255, 190) \
+                and request.target_system in (None, hb.get_srcSystem()):
             return conn, hb
     conn.close()
-    raise TimeoutError(f"no autopilot HEARTBEAT within {args.timeout:g} s")
+    raise TimeoutError(f"no autopilot HEARTBEAT within {request.timeout_s:g} s")
 
 
 def _send_setup(mav: Any, target: tuple[int, int], key: bytes, timestamp: int) -> None:
@@ -78,9 +102,9 @@ def _send_setup(mav: Any, target: tuple[int, int], key: bytes, timestamp: int) -
     mav.setup_signing_send(target[0], target[1], list(key), timestamp)
 
 
-def _setup(args: argparse.Namespace, key: bytes, name: str) -> int:
+def _setup(request: SigningRequest, key: bytes, name: str) -> int:
     """SETUP_SIGNING with the key, then the signed round trip with the backend (:func:`_check_signed`)."""
-    conn, hb = _open(args)
+    conn, hb = _open(request)
     target = (hb.get_srcSystem(), hb.get_srcComponent())
     try:
         for _ in range(SETUP_REPEAT):
@@ -88,18 +112,19 @@ def _setup(args: argparse.Namespace, key: bytes, name: str) -> int:
             time.sleep(SETUP_GAP_S)
     finally:
         conn.close()
-    _check_signed(args, target[0])
-    print(f"{name}: system {target[0]} signs with the key in {args.key_file!r}: a signed HEARTBEAT and a signed "
+    _check_signed(request, target[0])
+    print(f"{name}: system {target[0]} signs with the key in {request.key_file!r}: a signed HEARTBEAT and a signed "
           "command acknowledgement checked")
     return 0
 
 
-def _check_signed(args: argparse.Namespace, system: int) -> None:
+def _check_signed(request: SigningRequest, system: int) -> None:
     """Connect the MAVLink backend with the key file (a correctly signed HEARTBEAT within ``--timeout`` or
     CredentialsRefused) and have a signed MAV_CMD_REQUEST_MESSAGE(AUTOPILOT_VERSION) acknowledged; the vehicle is
     left as it is. Raises ConnectionError naming what failed."""
-    mc = MavlinkConfig(connection=args.connection, baud=args.baud, target_system=system, connect_timeout_s=args.timeout,
-                       signing_key_file=os.path.abspath(args.key_file), set_speed_limits=False,
+    mc = MavlinkConfig(connection=request.connection, baud=request.baud, target_system=system,
+                       connect_timeout_s=request.timeout_s,
+                       signing_key_file=os.path.abspath(request.key_file), set_speed_limits=False,
                        fence={"upload": False})
     backend = make_backend(RobotConfig(id="vehicle", backend="mavlink", mavlink=mc))
     try:
@@ -112,11 +137,11 @@ def _check_signed(args: argparse.Namespace, system: int) -> None:
         backend.close(safe_end=False)
 
 
-def _remove(args: argparse.Namespace, name: str) -> int:
+def _remove(request: SigningRequest, name: str) -> int:
     """A signed SETUP_SIGNING with the all-zero key and timestamp 0 (signing off), then an unsigned round trip:
     an unsigned HEARTBEAT and an unsigned command acknowledged (:func:`_check_unsigned`)."""
-    mc = MavlinkConfig(connection=args.connection, baud=args.baud, target_system=args.target_system,
-                       connect_timeout_s=args.timeout, signing_key_file=os.path.abspath(args.key_file),
+    mc = MavlinkConfig(connection=request.connection, baud=request.baud, target_system=request.target_system,
+                       connect_timeout_s=request.timeout_s, signing_key_file=os.path.abspath(request.key_file),
                        set_speed_limits=False, fence={"upload": False})
     backend = make_backend(RobotConfig(id="vehicle", backend="mavlink", mavlink=mc))
     try:
@@ -129,18 +154,18 @@ def _remove(args: argparse.Namespace, name: str) -> int:
         raise ConnectionError(f"the vehicle did not take our signed messages: {e}") from None
     finally:
         backend.close(safe_end=False)
-    _check_unsigned(args, target[0])
+    _check_unsigned(request, target[0])
     print(f"{name}: system {target[0]} no longer signs: an unsigned HEARTBEAT and an unsigned command "
           "acknowledgement checked")
     return 0
 
 
-def _check_unsigned(args: argparse.Namespace, system: int) -> None:
+def _check_unsigned(request: SigningRequest, system: int) -> None:
     """An unsigned HEARTBEAT from ``system`` and an unsigned MAV_CMD_REQUEST_MESSAGE acknowledged, within
     ``--timeout``. Raises ConnectionError when the vehicle still signs or ignores the command."""
-    conn, hb = _open(argparse.Namespace(**{**vars(args), "target_system": system}))
+    conn, hb = _open(replace(request, target_system=system))
     try:
-        deadline = time.monotonic() + args.timeout
+        deadline = time.monotonic() + request.timeout_s
         unsigned = acked = False
         next_cmd = 0.0
         while time.monotonic() < deadline and not (unsigned and acked):
@@ -157,4 +182,4 @@ def _check_unsigned(args: argparse.Namespace, system: int) -> None:
     if not (unsigned and acked):
         raise ConnectionError(f"after SETUP_SIGNING off: unsigned HEARTBEAT {'seen' if unsigned else 'not seen'}, "
                               f"unsigned command {'acknowledged' if acked else 'not acknowledged'} within "
-                              f"{args.timeout:g} s")
+                              f"{request.timeout_s:g} s")
