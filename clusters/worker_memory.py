@@ -23,11 +23,9 @@ imported them on the path to the first frame. ``AERODAAS_LEAN_WORKERS=0`` turns 
 """
 from __future__ import annotations
 
-import functools
 import importlib
 import os
 import sys
-from collections.abc import Callable
 
 __all__ = ["ADDONS", "ARENAS", "SETUP_HOOK", "SETUP_HOOK_ENV", "addons_only_when_imported", "lean_worker_imports",
            "limit_malloc_arenas", "worker_setup"]
@@ -73,20 +71,23 @@ def addons_only_when_imported() -> bool:
     """In this process, let each of Ray's serialisation add-ons of :data:`ADDONS` register only when its library is
     already imported, so that a process that never uses Arrow, Pydantic's v1 package or Starlette never imports
     them: a Ray worker (:func:`worker_setup`) or a run's driver, whose first actor creation otherwise imports them
-    (pyarrow alone 0.11 s of CPU on the 2-core machine kind, a warm page cache; +30 MB). Imports Pydantic (Ray's
-    ``pydantic_compat`` does; every actor of a run imports it for its messages). Done once per process; nothing when
-    ``AERODAAS_LEAN_WORKERS`` is ``0``. Returns True when it is in effect."""
+    (pyarrow alone 0.11 s of CPU on the 2-core machine kind, a warm page cache; +30 MB). Ray's ``apply`` is replaced
+    (it is looked up on its module at each call) by one that imports an add-on's module only when that add-on
+    registers: Ray's ``pydantic_compat`` imports Pydantic itself, which a worker whose actor never uses Pydantic
+    (an idle worker, the recorder of an unrecorded run) then does not import either. Done once per process;
+    nothing when ``AERODAAS_LEAN_WORKERS`` is ``0``. Returns True when it is in effect."""
     if os.environ.get("AERODAAS_LEAN_WORKERS", "").strip() == "0":
         return False
-    for module, name, library in ADDONS:
-        mod = importlib.import_module(module)
-        register = getattr(mod, name)
-        if not isinstance(register, functools.partial):
-            setattr(mod, name, functools.partial(_register_if_imported, library, register))
+    from ray.util import serialization_addons  # lazy: heavy ray (the hook runs in a worker that imported it)
+
+    serialization_addons.apply = _apply_imported
     return True
 
 
-def _register_if_imported(library: str, register: Callable[[object], None], context: object) -> None:
-    """Ray's ``register(context)`` when module ``library`` is imported in this process, else nothing."""
-    if library in sys.modules:
-        register(context)
+def _apply_imported(context: object) -> None:
+    """Ray's ``serialization_addons.apply(context)`` for the add-ons of :data:`ADDONS` whose library this process
+    imported: each registered by Ray's own function, whose module is imported only then (Arrow's never on
+    Windows, which Ray's ``apply`` skips too)."""
+    for module, name, library in ADDONS:
+        if library in sys.modules and not (library == "pyarrow" and sys.platform == "win32"):
+            getattr(importlib.import_module(module), name)(context)

@@ -73,12 +73,12 @@ class RecorderActor:
         previous one (the dead process's, unfinished) in a background thread. Every earlier segment ended with a
         death of this actor: each is one of ``losses`` (a second death was reported alone before: the first one's
         loss lived in the process that died second)."""
-        from aerodaas.actors.recording.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
-
         rec = self.spec.record
         if rec is None or not rec.path:
             self._set_up.set()
             return
+        from aerodaas.actors.recording.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+
         k, path = next_segment(rec.path)
         prev = segment_path(rec.path, k - 1)
         self.segments = [str(segment_path(rec.path, i)) for i in range(k + 1)]
@@ -119,12 +119,13 @@ class RecorderActor:
     def setup(self) -> dict:
         """Open the file and the live view. Raises what :class:`~aerodaas.actors.recording.recorder.RecorderService` raises (a bad path,
         a busy live port)."""
-        from aerodaas.actors.recording.recorder import RecorderService  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
-
         rec = self.spec.record
         with self._setup_lock:
             try:
                 if rec is not None and self.recorder is None:
+                    from aerodaas.actors.recording.recorder import (  # lazy: heavy cv2, mcap, numpy, pydantic
+                        RecorderService)
+
                     if rec.path:  # segments of an earlier run to the same file would be joined to this one
                         remove_stale_segments(rec.path)
                         self.segments = [str(rec.path)]
@@ -203,13 +204,15 @@ class RecorderActor:
         """Messages of another actor (:class:`~aerodaas.actors.recording.remote_recorder.RemoteRecorder`) and its counts so far (``ledger``,
         kept: :meth:`ledger_of`); returns how many were taken. The other actors set up while this one does: their
         first messages wait (at most 60 s) for the file to be open."""
-        from aerodaas.actors.recording.recorder import deliver  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
-
         if ledger is not None:
             self.keep_ledger(ledger)
         self._set_up.wait(60.0)
         self.received += len(batch)
-        return deliver(self.recorder, batch) if self.recorder is not None else 0
+        if self.recorder is None:
+            return 0
+        from aerodaas.actors.recording.recorder import deliver  # lazy: heavy cv2, mcap, numpy, protobuf, pydantic
+
+        return deliver(self.recorder, batch)
 
     def keep_ledger(self, ledger: ProducerLedger) -> None:
         """Keep the largest count per key of ``ledger.producer`` (batches may arrive out of order)."""

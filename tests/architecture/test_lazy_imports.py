@@ -7,6 +7,7 @@ imported only where they are used. Each check imports a module in a fresh interp
 - An actor module, imported as a Ray worker imports it (after ``ray``), imports none of the libraries its actor does
   not use: the recorder no OpenCV and no onnxruntime, the drone actor no onnxruntime, none of them matplotlib, PyAV
   or FastAPI.
+- A Ray worker's setup hook and Ray's serialisation add-ons import none of the add-ons' libraries, nor Pydantic.
 - A run without the human-in-the-loop API does not import its server (FastAPI) on the driver.
 """
 from __future__ import annotations
@@ -74,6 +75,31 @@ def test_the_public_api_is_complete_and_resolved_on_use():
 def test_an_actor_module_imports_only_what_its_actor_uses(module, unused):
     loaded = _loaded_after(module, before="import ray")
     assert not loaded & unused, f"{module} imported {sorted(loaded & unused)}"
+
+
+def test_a_ray_workers_setup_hook_imports_none_of_the_addons_libraries():
+    """A Ray worker's start as AeroDaaS sets it up (the setup hook, then Ray's serialisation add-ons on its first
+    message, ``aerodaas.clusters.worker_memory``) imports none of the libraries the add-ons serve, nor Pydantic (Ray's
+    ``pydantic_compat``, which only the Pydantic add-on needs, imports it): a worker whose actor never uses it, an
+    idle one or the recorder of an unrecorded run, does not pay for it."""
+    code = textwrap.dedent("""
+        import sys
+        import ray
+        from ray.util import serialization_addons
+        from aerodaas.clusters.worker_memory import worker_setup
+
+        class Context:
+            def _register_cloudpickle_serializer(self, *a, **k): pass
+            def _register_cloudpickle_reducer(self, *a, **k): pass
+
+        worker_setup()
+        serialization_addons.apply(Context())
+        print(" ".join(m for m in ("pydantic", "pyarrow", "starlette", "anyio", "ray._common.pydantic_compat")
+                       if m in sys.modules))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == []
 
 
 def test_a_run_without_hitl_does_not_import_its_server():

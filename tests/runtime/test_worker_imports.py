@@ -26,7 +26,14 @@ def _mapped_packages(pid: int) -> set[str]:
     return out
 
 
+#: what the recorder actor of a run that is not recorded uses none of: the MCAP writer's libraries (OpenCV, NumPy,
+#: Pydantic's core), besides :data:`UNUSED`
+RECORDER_UNUSED = UNUSED + ("cv2", "opencv", "numpy", "pydantic_core")
+
+
 def test_a_drone_actor_maps_no_library_it_does_not_use(ray_session, run_options):
+    """The drone actor of an unrecorded run maps none of :data:`UNUSED`; the run's recorder actor, which has no
+    file to write, none of :data:`RECORDER_UNUSED` either (read once both are set up and the mission flies)."""
     import ray
 
     env = _env(1)
@@ -34,16 +41,19 @@ def test_a_drone_actor_maps_no_library_it_does_not_use(ray_session, run_options)
     seen: dict = {}
 
     def look(robot) -> None:
-        pid = ray.get(ray.get_actor(f"aerodaas/{run_options.run_id}/drone/d00").ping.remote())
-        seen["packages"] = _mapped_packages(pid)
+        for actor in ("drone/d00", "recorder"):
+            pid = ray.get(ray.get_actor(f"aerodaas/{run_options.run_id}/{actor}").ping.remote())
+            seen[actor] = _mapped_packages(pid)
 
     env.get_robot_by_id("d00").on_mission_start(look)
     res = env.start_mission(timeout=2.0, options=run_options)
     assert set(res.robots) == {"d00"}
-    pkgs = seen["packages"]
+    pkgs = seen["drone/d00"]
     assert any(p.startswith(("cv2", "opencv")) for p in pkgs), pkgs  # the renderer's OpenCV: the reading works
     assert "ray" in pkgs, pkgs
     assert not [p for p in pkgs if p.startswith(UNUSED)], pkgs
+    rec = seen["recorder"]
+    assert "ray" in rec and not [p for p in rec if p.startswith(RECORDER_UNUSED)], rec
 
 
 #: modules an actor of a run never needs: the detector's runtime, PyTorch, plotting, Arrow, the terminal display,
