@@ -239,3 +239,27 @@ def test_a_warm_worker_holds_the_follow_assignment_and_hides_its_imports_from_th
     scipy_in, drone_in, frozen = out.stdout.split()
     assert (scipy_in, drone_in) == ("True", "True"), out.stdout
     assert int(frozen) > 50_000, out.stdout  # the framework, Ray, numpy, OpenCV and scipy: about 115,000 objects
+
+
+def test_a_warm_worker_keeps_rays_serialisation_addons_lean():
+    """The warm workers' hook takes the place of the node's own (``aerodaas.clusters.worker_memory.worker_setup``)
+    in the environment: in a fresh interpreter, as in a warm worker, after the hook Ray's serialisation add-ons (what
+    the worker's first deserialisation of a run runs) neither import nor register pyarrow, Pydantic's v1 package or
+    Starlette."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    libraries = ("pyarrow", "pydantic.v1", "starlette")
+    code = ("import sys\n"
+            "from aerodaas.clusters.warm_pool import preimport\n"
+            "from tests.runtime.test_worker_imports import _Context\n"
+            "from ray.util import serialization_addons\n"
+            "preimport()\n"
+            "c = _Context(); serialization_addons.apply(c)\n"
+            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {libraries!r} and m.startswith({libraries!r})))\n"
+            f"print(sorted(r for r in c.registered if r.startswith({libraries!r})))\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.splitlines() == ["[]", "[]"], out.stdout
