@@ -58,6 +58,9 @@ PREIMPORT_MODULES = (
     "aerodaas.recording.writer", "onnxruntime",
     # the follow analytics' track assignment (aerodaas.perception.tracking, on its first frame with tracks): 0.3 s
     "scipy.optimize",
+    # the built-in analytics (detector, follow, monitoring) that an actor's spec unpickles, and the detector's
+    # set-up (its options and decoders)
+    "aerodaas.analytics.core", "aerodaas.perception.options",
 )
 
 #: the environment variable Ray's ``default_worker.py`` reads for a module-path setup hook
