@@ -58,6 +58,9 @@ PREIMPORT_MODULES = (
     "aerodaas.recording.writer", "onnxruntime",
     # the follow analytics' track assignment (aerodaas.perception.tracking, on its first frame with tracks): 0.3 s
     "scipy.optimize",
+    # the built-in analytics (detector, follow, monitoring) that an actor's spec unpickles, and the detector's
+    # set-up (its options and decoders)
+    "aerodaas.analytics.core", "aerodaas.perception.options",
 )
 
 #: the environment variable Ray's ``default_worker.py`` reads for a module-path setup hook
@@ -66,11 +69,22 @@ _HOOK_ENV_FALLBACK = "__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"
 
 
 def preimport() -> None:
-    """Ray worker setup hook: import :data:`PREIMPORT_MODULES`, then move everything they allocated out of the
-    cyclic garbage collector's sight (``gc.collect()`` then ``gc.freeze()``, the pattern CPython documents for
-    pre-fork servers): an actor's set-up collects once before its run (``DataPlane.watch_gc``), which then scans
-    only what the actor itself made — 0.06 s of CPU less per actor on the 2-core machine kind — and so does every
-    full collection during the run. Never raises (a failed import is skipped)."""
+    """Ray worker setup hook: first what the node's own hook would have done
+    (:func:`aerodaas.clusters.worker_memory.worker_setup`: Ray's serialisation add-ons register only for libraries
+    the worker imported; this hook takes that one's place in the environment, and without it each warm worker
+    imported pyarrow, Pydantic's v1 package and Starlette when its first actor of a run deserialised its first
+    argument, on the way to the run's first frame), then import :data:`PREIMPORT_MODULES`, then move everything
+    they allocated out of the cyclic garbage collector's sight (``gc.collect()`` then ``gc.freeze()``, the pattern
+    CPython documents for pre-fork servers): an actor's set-up collects once before its run
+    (``DataPlane.watch_gc``), which then scans only what the actor itself made — 0.06 s of CPU less per actor on the
+    2-core machine kind — and so does every full collection during the run. Never raises (a failed import is
+    skipped)."""
+    try:
+        from aerodaas.clusters.worker_memory import worker_setup  # lazy: a Ray worker's start only
+
+        worker_setup()
+    except BaseException:  # noqa: BLE001 - a warm-up must never stop a worker from starting
+        pass
     for name in PREIMPORT_MODULES:
         try:
             importlib.import_module(name)

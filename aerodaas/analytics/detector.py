@@ -107,6 +107,9 @@ class ObjectDetector(Analytics):
         self._providers_told: set[str] = set()  # robots whose events say it already
         self.detector = None
         self.shipped = None  # the model's bytes, read by check() on the driver
+        #: the model's format as check() read it from the graph of those bytes (None before check()): the actor's
+        #: setup builds the decoder for it without opening the model a second time
+        self.checked_format: str | None = None
         self.last_timing: dict[str, float] = {}
         self.n_frames = 0
         self.n_with_dets = 0
@@ -129,12 +132,14 @@ class ObjectDetector(Analytics):
         if self.model_path is not None and not os.path.isfile(self.model_path):
             raise ValueError(f"analytics {self.name!r}: model_path={str(self.model_path)!r} is not a file")
         self.model_path = str(resolve_model(self.model, self.model_path))  # the actor loads exactly these bytes
-        check_detector_options(name=self.name, model=self.model, model_path=self.model_path, format=self.format,
-                               classes=self.classes, score_threshold=self.score_threshold,
-                               nms_threshold=self.nms_threshold, class_thresholds=self.class_thresholds,
-                               class_groups=self.class_groups, input_size=self.input_size,
-                               class_names=self.class_names, threads=self.threads, upscale=self.upscale)
+        checked = check_detector_options(name=self.name, model=self.model, model_path=self.model_path,
+                                         format=self.format,
+                                         classes=self.classes, score_threshold=self.score_threshold,
+                                         nms_threshold=self.nms_threshold, class_thresholds=self.class_thresholds,
+                                         class_groups=self.class_groups, input_size=self.input_size,
+                                         class_names=self.class_names, threads=self.threads, upscale=self.upscale)
         self.shipped = ShippedModel.read(self.model_path)
+        self.checked_format = checked["format"]
 
     def setup(self) -> None:
         """On the actor: load the model into an onnxruntime session on ``providers`` (a provider this node lacks:
@@ -143,8 +148,10 @@ class ObjectDetector(Analytics):
         from aerodaas.perception.options import build_detector  # lazy: cv2 and onnxruntime, on the actor only
 
         path = self.shipped.path_on_this_node(self.model_path) if self.shipped is not None else self.model_path
+        # the shipped bytes are the ones check() read the format of (path_on_this_node loads no other bytes)
+        known = getattr(self, "checked_format", None) if self.shipped is not None else None
         try:
-            self.detector = build_detector(self.model, model_path=path, format=self.format,
+            self.detector = build_detector(self.model, model_path=path, format=self.format, checked_format=known,
                                            score_threshold=self.score_threshold, nms_threshold=self.nms_threshold,
                                            classes=self.classes, class_thresholds=self.class_thresholds,
                                            intra_op_threads=self.threads, agnostic_nms=self.agnostic_nms,

@@ -115,7 +115,7 @@ def _measure(app: str, repeat: int, attach: bool, progress, task, probe_file: Pa
         runs.append(r)
     secs = [r["seconds_to_first_frame"] for r in runs]
     return {"seconds_to_first_frame": statistics.median(secs), "min_s": min(secs), "max_s": max(secs), "runs": runs,
-            "target_s": 1.5 if attach else 4.0}
+            "target_s": 1.0 if attach else 4.0}
 
 
 def run_startup(app: str, repeat: int = 3, mode: str = "both", warm_workers: int | None = None) -> dict:

@@ -91,9 +91,11 @@ def check_detector_options(*, name: str = "detector", model: str = "yolox_nano",
 
 
 def build_detector(model: str = "yolox_nano", model_path: str | os.PathLike | None = None, format: str = "auto",
-                   **kwargs):
+                   checked_format: str | None = None, **kwargs):
     """The detector for a configuration: a shipped model by name (``model``), or ``model_path`` decoded as
-    ``format`` (``"auto"``: recognised from the graph by :func:`~aerodaas.perception.decoders.inspect_model`).
+    ``format`` (``"auto"``: recognised from the graph by :func:`~aerodaas.perception.decoders.inspect_model`), or
+    as ``checked_format`` when given: the format :func:`check_detector_options` returned for these very bytes (the
+    model is then opened once, by the detector, not first by the inspection).
     ``kwargs`` go to the detector's constructor (thresholds, classes, ``agnostic_nms``, ``class_groups``,
     ``input_size``, ``class_names``, ``intra_op_threads``). Raises ValueError as the constructors and
     :func:`check_detector_options` do."""
@@ -101,5 +103,7 @@ def build_detector(model: str = "yolox_nano", model_path: str | os.PathLike | No
         if format not in ("auto", SHIPPED_FORMAT.get(model, "")):
             raise ValueError(f"format={format!r} does not match the shipped model {model!r}")
         return make_detector(model, **kwargs)
-    fmt = inspect_model(model_path, format).format
+    if checked_format is not None and checked_format not in DETECTOR_CLASSES:
+        raise ValueError(f"checked_format must be one of {sorted(DETECTOR_CLASSES)}, got {checked_format!r}")
+    fmt = checked_format or inspect_model(model_path, format).format
     return DETECTOR_CLASSES[fmt](model_path, **kwargs)

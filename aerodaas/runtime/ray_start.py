@@ -18,6 +18,7 @@ from aerodaas.clusters.addresses import check_ray_address
 from aerodaas.clusters.local import enable_token_auth
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
+from aerodaas.clusters.ray_exports import light_collision_identifier
 from aerodaas.clusters.worker_memory import addons_only_when_imported, lean_worker_imports, limit_malloc_arenas
 from aerodaas.process.state import PROCESS, EarlyStart
 
@@ -161,6 +162,7 @@ def init_ray(address: str | None, dashboard: bool = False) -> None:
     # the driver's first actor creation builds Ray's serialisation context, which imports pyarrow, Pydantic's v1
     # package and Starlette for Ray's reducers: not for a run that uses none of them (aerodaas.clusters.worker_memory)
     addons_only_when_imported()
+    light_collision_identifier()  # the actor classes' export: no disassembly (aerodaas.clusters.ray_exports)
     up_address = None if address else _up_address()
     renv = _shipped_plugins(address, up_address)
     if address:

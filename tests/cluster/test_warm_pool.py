@@ -223,7 +223,7 @@ def test_a_plugin_on_the_cluster_import_path_is_not_shipped(tmp_path):
 
 def test_a_warm_worker_holds_the_follow_assignment_and_hides_its_imports_from_the_collector():
     """In a fresh interpreter, as in a warm worker: after the hook, the follow's track assignment (scipy.optimize)
-    is imported and what the imports allocated is frozen, so that the actor's own set-up collection
+    and the built-in analytics are imported and what the imports allocated is frozen, so that the actor's own set-up collection
     (``DataPlane.watch_gc``) scans only what the actor makes."""
     import subprocess
     import sys
@@ -232,10 +232,37 @@ def test_a_warm_worker_holds_the_follow_assignment_and_hides_its_imports_from_th
     code = ("import gc, sys\n"
             "from aerodaas.clusters.warm_pool import preimport\n"
             "preimport()\n"
-            "print('scipy.optimize' in sys.modules, 'aerodaas.actors.drone.component' in sys.modules, gc.get_freeze_count())\n")
+            "print('scipy.optimize' in sys.modules, 'aerodaas.actors.drone.component' in sys.modules, gc.get_freeze_count())\n"
+            "print(all(m in sys.modules for m in ('aerodaas.analytics.detector', 'aerodaas.analytics.follow', "
+            "'aerodaas.perception.decoders')))\n")
     root = Path(__file__).resolve().parents[2]
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    scipy_in, drone_in, frozen = out.stdout.split()
+    scipy_in, drone_in, frozen, analytics_in = out.stdout.split()
+    assert analytics_in == "True", out.stdout  # the built-in analytics an actor's spec unpickles, and their set-up
     assert (scipy_in, drone_in) == ("True", "True"), out.stdout
     assert int(frozen) > 50_000, out.stdout  # the framework, Ray, numpy, OpenCV and scipy: about 115,000 objects
+
+
+def test_a_warm_worker_keeps_rays_serialisation_addons_lean():
+    """The warm workers' hook takes the place of the node's own (``aerodaas.clusters.worker_memory.worker_setup``)
+    in the environment: in a fresh interpreter, as in a warm worker, after the hook Ray's serialisation add-ons (what
+    the worker's first deserialisation of a run runs) neither import nor register pyarrow, Pydantic's v1 package or
+    Starlette."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    libraries = ("pyarrow", "pydantic.v1", "starlette")
+    code = ("import sys\n"
+            "from aerodaas.clusters.warm_pool import preimport\n"
+            "from tests.runtime.test_worker_imports import _Context\n"
+            "from ray.util import serialization_addons\n"
+            "preimport()\n"
+            "c = _Context(); serialization_addons.apply(c)\n"
+            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {libraries!r} and m.startswith({libraries!r})))\n"
+            f"print(sorted(r for r in c.registered if r.startswith({libraries!r})))\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.splitlines() == ["[]", "[]"], out.stdout

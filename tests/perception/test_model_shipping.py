@@ -70,3 +70,44 @@ def test_object_detector_runs_where_the_model_file_is_absent(tmp_path, monkeypat
     remote.setup()
     assert remote.detector.model_path.parent == other_node
     assert remote.process(np.zeros((480, 640, 3), np.uint8), None) == []
+
+
+
+@needs_model
+def test_the_actor_builds_the_checked_format_without_opening_the_model_twice(monkeypatch):
+    """check() on the driver reads the model's format from its graph; the actor's setup (pickled as Ray ships it)
+    builds that decoder without inspecting the model again, and detects what a detector whose setup inspected the
+    model detects, on a window of a real aerial photo with parked cars."""
+    import cv2
+
+    import aerodaas.perception.options as options
+    from tests.conftest import DATA_DIR, skip_or_fail
+
+    im = cv2.imread(str(DATA_DIR / "imagery" / "brighton_beach" / "DJI_0028.JPG"))
+    if im is None:
+        skip_or_fail("shared imagery not available (set AERODAAS_DATA_DIR)")
+    frame = np.ascontiguousarray(im[0:480, 3200:3840])
+    opened: list = []
+    real = options.inspect_model
+    monkeypatch.setattr(options, "inspect_model", lambda *a, **k: opened.append(a[0]) or real(*a, **k))
+    det = ObjectDetector("yolox_nano", score_threshold=0.1)
+    det.check()
+    assert det.checked_format == "yolox" and len(opened) == 1  # the driver's reading
+    opened.clear()
+    inspected = pickle.loads(pickle.dumps(det))
+    inspected.checked_format = None  # an actor without the driver's reading inspects the model itself
+    inspected.setup()
+    assert len(opened) == 1
+    actor = pickle.loads(pickle.dumps(det))
+    actor.setup()
+    assert len(opened) == 1  # not opened a second time
+    assert type(actor.detector) is type(inspected.detector)
+    expected = inspected.process(frame, None)
+    assert expected and actor.process(frame, None) == expected
+
+
+def test_a_checked_format_that_is_no_decoder_is_refused(tmp_path):
+    from aerodaas.perception.options import build_detector
+
+    with pytest.raises(ValueError, match="checked_format.*'yolo9'"):
+        build_detector(model_path=tmp_path / "m.onnx", checked_format="yolo9")

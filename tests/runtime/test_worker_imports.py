@@ -192,11 +192,15 @@ def test_the_setup_hook_keeps_rays_other_addons_out_until_something_imports_them
 
 def test_a_runs_driver_creates_actors_without_importing_arrow(tmp_path):
     """The driver's side (``aerodaas.runtime.ray_start.init_ray``, a fresh local Ray as ``aerodaas run`` starts it):
-    its first actor creation builds Ray's serialisation context, and pyarrow stays out of the driver."""
+    its first actor creation builds Ray's serialisation context, and pyarrow stays out of the driver; exporting the
+    actor class disassembles nothing (``aerodaas.clusters.ray_exports``) and the actor still answers."""
     import os
     import subprocess
 
-    code = ("import sys\n"
+    code = ("import dis, sys\n"
+            "def no_disassembly(*a, **k):\n"
+            "    raise AssertionError('the export disassembled the class')\n"
+            "dis.dis = no_disassembly\n"
             "from aerodaas.runtime.ray_start import init_ray, shutdown_ray\n"
             "init_ray(None)\n"
             "import ray\n"
