@@ -216,8 +216,8 @@ def after_ten_stepped_completions(d: AnalyticsDispatcher) -> list:
     trips, the last 10 of them all the stepped one or longer (:data:`HV_STEPPED_MS`): what a window of 10 measured
     completions has seen when the policy decides on the task (a completion's ``end_ms`` is the dispatcher's clock
     reading when it heard of it, so one before a task's arrival was heard of before the task was submitted)."""
-    done = sorted((t for t in d.tasks() if t.tier == "cloud" and t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE)),
-                  key=lambda t: t.end_ms)
+    executed = (TaskState.DONE_ON_TIME, TaskState.DONE_LATE)
+    done = sorted((t for t in d.tasks() if t.tier == "cloud" and t.state in executed), key=lambda t: t.end_ms)
     out = []
     for t in d.tasks():
         off_edge = t.tier == "cloud" or (t.state is TaskState.DROPPED_TIME and "ms exceeds the" in t.reason)
@@ -249,8 +249,9 @@ def test_dems_a_adapts_to_a_latency_step_on_the_runtime_where_dems_keeps_sending
     for name, (d, r, _) in out.items():
         check_accounting(d, r)
         after[name] = after_ten_stepped_completions(d)
-        assert len(after[name]) >= 5, (name, r["states"], sorted((t.arrival_ms, t.state.value, t.end_ms - (t.start_ms or 0),
-                                                                  t.notes) for t in d.tasks() if t.tier == "cloud"))
+        cloud = sorted((t.arrival_ms, t.state.value, t.end_ms - (t.start_ms or 0), t.notes)
+                       for t in d.tasks() if t.tier == "cloud")
+        assert len(after[name]) >= 5, (name, r["states"], cloud)
     # DEMS: sent with the profile's 398 ms and released >= 192 ms after arrival, so back >= 140 ms past the
     # deadline, whatever the load (or refused by the executor's re-check when a loaded hop delayed it)
     assert all(t.tier == "cloud" and t.notes["cloud_ms"] == HV_STEPPED_MS - 200.0 for t in after["DEMS"])
