@@ -152,6 +152,16 @@ def mavlink_env(autopilot: str, app_env: Path, n: int = 1, **mavlink: Any) -> di
     return cfg
 
 
+def small_cameras(cfg: dict) -> dict:
+    """``cfg`` with every robot's camera 320x240 at 2 FPS, for runs whose cameras are not under test: a 640x480
+    15 FPS render (JPEG-encoded for the recording) at the firmware's speed-up takes the CPU the firmware needs
+    (three beside three PX4 SIH on 2 cores starved them to 1.5x real time instead of 5x; OFFBOARD lost, RTL)."""
+    for sensor in (s for r in cfg["robots"] for s in r.get("sensors", [])):
+        if sensor.get("type") == "camera":
+            sensor.setdefault("properties", {}).update(width=320, height=240, fps=2)
+    return cfg
+
+
 def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1, home: dict | None = None,
                      speedup: float | None = None, timeout_s: float = 900,
                      with_firmware: bool = True, sysids: bool = False, own_dirs: bool = False,
@@ -427,9 +437,10 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     from aerodaas.model.types import GeoPoint
 
     workdir.mkdir(parents=True, exist_ok=True)
-    env_guided = _write_env(workdir / "guided.json", mavlink_env(autopilot, FARM_ENV))
-    env_auto = _write_env(workdir / "auto.json", mavlink_env(autopilot, FARM_ENV, use_autopilot_mission=True))
-    fenced = mavlink_env(autopilot, FARM_ENV)
+    env_guided = _write_env(workdir / "guided.json", small_cameras(mavlink_env(autopilot, FARM_ENV)))
+    env_auto = _write_env(workdir / "auto.json",
+                          small_cameras(mavlink_env(autopilot, FARM_ENV, use_autopilot_mission=True)))
+    fenced = small_cameras(mavlink_env(autopilot, FARM_ENV))
     c = enu_to_geodetic(10.0, 10.0, 0.0, GeoPoint(**FARM_HOME))
     fenced["robots"][0]["safety"] = {"geofence": {"circles": [
         {"center": [c.lat, c.lon], "radius": FENCE_RADIUS_M, "inclusion": False}]}}
@@ -458,7 +469,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
         scenarios["failsafe"] = [freezer + survey_step(autopilot, env_guided, workdir / "failsafe.mcap")]
         # the farm survey's own 0.5 m/s on stock PX4 SIH, with SIH's ground truth observed: a limit that cannot hold
-        slow = mavlink_env(autopilot, FARM_ENV)
+        slow = small_cameras(mavlink_env(autopilot, FARM_ENV))
         slow["robots"][0]["limits"]["max_speed"] = 0.5
         truth = (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} "
                  f"{shlex.quote(str(workdir / 'truth.json'))} 300 > {shlex.quote(str(workdir / 'truth.log'))} 2>&1 & ) ; ")
@@ -494,15 +505,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
 def fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str, Any]:
     """``n`` fresh firmware instances flying :data:`FLEET_APP` together (one app, one clock)."""
     workdir.mkdir(parents=True, exist_ok=True)
-    cfg = mavlink_env(autopilot, FARM_ENV, n=n)
-    # the cameras are not under test here, and three 640x480 15 FPS renders (JPEG-encoded for the recording) beside
-    # three firmware instances on 2 cores starved PX4 SIH to 1.5x real time instead of 5x and our OFFBOARD setpoint
-    # streams past COM_OF_LOSS_T (failsafe RTL right after take-off, then link losses): a small, slow camera each
-    for r in cfg["robots"]:
-        for sensor in r.get("sensors", []):
-            if sensor.get("type") == "camera":
-                sensor.setdefault("properties", {}).update(width=320, height=240, fps=2)
-    env = _write_env(workdir / "fleet.json", cfg)
+    env = _write_env(workdir / "fleet.json", small_cameras(mavlink_env(autopilot, FARM_ENV, n=n)))
     # PX4 SIH's CPU grows with its speed factor: three at 5x on 2 cores went silent for 3.4-4.7 s at a time (link
     # lost, OFFBOARD setpoints stopped, PX4's failsafe RTL) once anything else ran beside them; at 2x beside the
     # cluster lane one's altitude estimate swung by +-1 m and its landing stalled (2026-11-27); at 1x they keep up
@@ -532,10 +535,7 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
     for i, r in enumerate(cfg["robots"]):
         r["mavlink"]["connection"] = f"udpin:127.0.0.1:{ROUTER_PORT}"
         r["mavlink"]["target_system"] = i + 1
-        for sensor in r.get("sensors", []):
-            if sensor.get("type") == "camera":
-                sensor.setdefault("properties", {}).update(width=320, height=240, fps=2)
-    env = _write_env(workdir / "fleet.json", cfg)
+    env = _write_env(workdir / "fleet.json", small_cameras(cfg))
     py = shlex.quote(sys.executable)
     masters = " ".join(f"--master={connection(autopilot, i)}" for i in range(n))
     router = (f"( cd {shlex.quote(str(workdir))} && exec {py} -m MAVProxy.mavproxy {masters} "

@@ -64,7 +64,7 @@ def _overlap_env(autopilot: str, workdir: Path, name: str, progress: dict | None
     (:data:`tests.firmware.sitl_fence.OVERLAP_CIRCLES`: home in both), the autopilot identified on connect (``auto``), 2 m/s."""
     from tests.firmware.sitl_fence import OVERLAP_CIRCLES
 
-    cfg = sitl.mavlink_env(autopilot, sitl.FARM_ENV)
+    cfg = sitl.small_cameras(sitl.mavlink_env(autopilot, sitl.FARM_ENV))  # the camera is not under test
     r = cfg["robots"][0]
     r["mavlink"]["autopilot"] = "auto"
     r["limits"]["max_speed"] = 2.0
@@ -343,7 +343,7 @@ def _kill_session(autopilot: str, workdir: Path) -> dict:
     # acts. When it did (2026-11-23, load 2), the client took OFFBOARD back while the RTL climbed towards its return
     # altitude through our 30 m ceiling: PX4's geofence failsafe was then already taken over and the push reached 34 m
     speedup = 2.0 if autopilot == "px4" else sitl.SPEEDUP[autopilot]
-    cfg = sitl.mavlink_env(autopilot, sitl.FARM_ENV, fence={"action": "rtl"})
+    cfg = sitl.small_cameras(sitl.mavlink_env(autopilot, sitl.FARM_ENV, fence={"action": "rtl"}))
     r = cfg["robots"][0]
     r["safety"] = {"geofence": {"circles": [{"center": _ll(0, 0), "radius": RADIUS_M, "inclusion": True}]},
                    "max_altitude": MAX_ALT_M}

@@ -21,8 +21,9 @@ MOUNT_PARAMS = "MNT1_TYPE 1\nSERVO9_FUNCTION 7\nSERVO10_FUNCTION 6\n"
 
 
 def _firmware(tmp_path) -> str:
-    """The shell step that starts ArduCopter SITL with the mount parameters, real time, sending to UDP 14550 (the
-    test fails when no private network namespace can be made)."""
+    """The shell step that starts ArduCopter SITL with the mount parameters at :data:`sitl.SPEEDUP` (the probes wait
+    on the firmware's messages, not on the wall clock), sending to UDP 14550 (the test fails when no private network
+    namespace can be made)."""
     reason = sitl.namespace_skip_reason()
     if reason:
         pytest.fail(reason)
@@ -30,7 +31,9 @@ def _firmware(tmp_path) -> str:
     parm.write_text(MOUNT_PARAMS)
     d = sitl.ARDUCOPTER.parent
     home = sitl.FARM_HOME
-    return (f"cd {shlex.quote(str(tmp_path))} && ( {shlex.quote(str(sitl.ARDUCOPTER))} --model + --speedup 1 -I0 -w "
+    speedup = sitl.SPEEDUP["ardupilot"]
+    return (f"cd {shlex.quote(str(tmp_path))} && ( {shlex.quote(str(sitl.ARDUCOPTER))} --model + --speedup {speedup:g} "
+            f"-I0 -w "
             f"--defaults {shlex.quote(str(d / 'copter.parm'))},{shlex.quote(str(parm))} "
             f"--home {home['lat']},{home['lon']},{home['alt']},0 --serial0 udpclient:127.0.0.1:14550 "
             f"> {shlex.quote(str(tmp_path / 'fw.log'))} 2>&1 & ) ; true")

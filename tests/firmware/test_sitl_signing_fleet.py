@@ -34,10 +34,7 @@ def fleet(tmp_path_factory) -> dict:
     for i, r in enumerate(cfg["robots"]):
         r["mavlink"].update(connection=f"udpin:127.0.0.1:{SHARED_PORT}", target_system=i + 1,
                             signing_key_file=keys[i])
-        for sensor in r.get("sensors", []):  # not under test: small, slow cameras (see tests/firmware/sitl.py fleet_session)
-            if sensor.get("type") == "camera":
-                sensor.setdefault("properties", {}).update(width=320, height=240, fps=2)
-    env = sitl._write_env(d / "fleet.json", cfg)  # noqa: SLF001 - the SITL helpers' own
+    env = sitl._write_env(d / "fleet.json", sitl.small_cameras(cfg))  # noqa: SLF001 - the SITL helpers' own
     ns = d / "ns"
     ns.mkdir()
     setups = [" ".join([*map(str, sitl.AERODAAS), "mavlink", "signing", "setup", "--connection",

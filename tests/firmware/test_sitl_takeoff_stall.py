@@ -26,7 +26,7 @@ GUIDED, LAND = 4, 9
 
 def test_an_arducopter_whose_motors_lift_nothing_is_stalled_at_the_takeoff_deadline_and_landed(tmp_path):
     autopilot = "ardupilot"
-    env = sitl.mavlink_env(autopilot, sitl.FARM_ENV)
+    env = sitl.small_cameras(sitl.mavlink_env(autopilot, sitl.FARM_ENV))  # the camera is not under test
     robot = env["robots"][0]
     env_path = tmp_path / "nolift.json"
     env_path.write_text(json.dumps(env))
