@@ -10,9 +10,11 @@ vehicle is, and the events say ``resumed_after_restart``.
 from __future__ import annotations
 
 import itertools
+import threading
 from typing import Any
 
 from aerodaas.navigation.fsm import MissionState as S
+from aerodaas.protocol.messages import QUEUE_KEYS
 
 
 class CheckpointNumbers:
@@ -51,6 +53,72 @@ def drone_checkpoint(d: Any, seq: int) -> dict:
                 "sensor_health": {ps.sensor_id: ps.health.state() for ps in d.plugin_sensors},
                 # which queued waypoints are pre-planned, by position (object ids do not survive pickling)
                 "preplanned_flags": [[id(i) in f.preplanned_items for i in m.items] for m in q["missions"]]}
+
+
+class QueueBases:
+    """What a drone actor last sent of each drone's waypoint queue to the recorder actor, so that a checkpoint
+    carries the queue (:data:`~aerodaas.protocol.messages.QUEUE_KEYS`, hundreds of pickled waypoints) only when it
+    changed otherwise than by flying, and else only what was flown since: the items taken off the head of each
+    mission and the waypoints completed (:class:`~aerodaas.protocol.messages.SealedCheckpoint`). :meth:`split` runs
+    on the clock thread, :meth:`forget` on whichever thread learns that the recorder lacks a queue (one lock)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._ids = itertools.count(1)
+        #: robot id -> (queue id, {mission seq: (its items, segment tags, pre-planned flags, priority, name,
+        #: distance driven)}, completed ids, seq_missions, segments_issued) of the queue last sent (the items kept:
+        #: compared by identity, their ids must not be reused while they are)
+        self._sent: dict[str, tuple] = {}
+
+    def forget(self, robot: str, queue_id: int) -> None:
+        """The recorder does not hold queue ``queue_id`` of ``robot`` (it restarted, or a newer one overtook it):
+        the next checkpoint carries the whole queue again."""
+        with self._lock:
+            if robot in self._sent and self._sent[robot][0] == queue_id:
+                del self._sent[robot]
+
+    def split(self, cp: dict) -> tuple[dict, dict | None, int]:
+        """Checkpoint ``cp`` (:func:`drone_checkpoint`) -> ``(state, queue, queue_id)``: the state without the queue
+        keys but with ``queue_delta`` (what was flown since queue ``queue_id``), and the queue itself when it must
+        be sent (None: the recorder has queue ``queue_id``)."""
+        robot = cp["robot"]
+        state = {k: v for k, v in cp.items() if k not in QUEUE_KEYS}
+        with self._lock:
+            sent = self._sent.get(robot)
+            delta = _flown_since(sent, cp) if sent is not None else None
+            if delta is not None:
+                state["queue_delta"] = delta
+                return state, None, sent[0]
+            qid = next(self._ids)
+            self._sent[robot] = (qid, {m.seq: (list(m.items), dict(m.segment_of), list(flags), m.priority,
+                                               m.name, m.distance_driven)
+                                       for m, flags in zip(cp["missions"], cp["preplanned_flags"])},
+                                 list(cp["completed"]), cp["seq_missions"], cp["segments_issued"])
+        state["queue_delta"] = {"missions": [[m.seq, 0] for m in cp["missions"]], "completed": []}
+        return state, {k: cp[k] for k in QUEUE_KEYS}, qid
+
+
+def _flown_since(sent: tuple, cp: dict) -> dict | None:
+    """The ``queue_delta`` from the queue ``sent`` (:class:`QueueBases`) to checkpoint ``cp``'s, or None when the
+    queue changed otherwise than by items taken off the heads of its missions and waypoints completed (a mission
+    added, an item inserted or revised, a segment tag or pre-planned flag changed)."""
+    _qid, missions, completed, seq_missions, segments = sent
+    done = cp["completed"]
+    if cp["seq_missions"] != seq_missions or cp["segments_issued"] != segments or done[:len(completed)] != completed:
+        return None
+    out = []
+    for m, flags in zip(cp["missions"], cp["preplanned_flags"]):
+        was = missions.get(m.seq)
+        if was is None:
+            return None
+        items, tags, was_flags, priority, name, distance_driven = was
+        taken = len(items) - len(m.items)
+        if (taken < 0 or (m.priority, m.name, m.distance_driven) != (priority, name, distance_driven)
+                or list(map(id, m.items)) != list(map(id, items[taken:])) or flags != was_flags[taken:]
+                or m.segment_of != tags):
+            return None
+        out.append([m.seq, taken])
+    return {"missions": out, "completed": done[len(completed):]}
 
 
 def restore_drone(d: Any, cp: dict) -> None:

@@ -26,6 +26,10 @@ class MissionPlanLog:
         self.cleared_preplanned: list[str] = []
         self._sig: Any = None
         self._lock = threading.Lock()
+        #: id(waypoint) -> (the waypoint, its entry in the recorded plan): a queued waypoint is never changed in
+        #: place (:class:`~aerodaas.navigation.waypoint_queue.Mission`), so its entry is made once, not at every
+        #: record (a visit records the plan of every waypoint still queued)
+        self._items: dict[int, tuple[Any, dict]] = {}
 
     @property
     def recorded(self) -> bool:
@@ -34,14 +38,22 @@ class MissionPlanLog:
 
     def record_plan(self, queue: WaypointQueue, now: float) -> None:
         """Record ``queue``'s waypoints (with local ENU targets) at sim time ``now`` (s) when they changed since the
-        last record."""
+        last record. The plan's entries are shared between records (never changed after)."""
         with self._lock:  # snapshot, compare and record as one: the inbox and the drone's tick both record
-            missions = []
+            missions, known, cache = [], self._items, {}
             for m in queue.missions():
-                items = [{"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
-                          "hover_duration": w.hover_duration} for w in m.items if isinstance(w, Waypoint)]
+                items = []
+                for w in m.items:
+                    if isinstance(w, Waypoint):
+                        entry = known.get(id(w))
+                        if entry is None or entry[0] is not w:
+                            entry = (w, {"id": w.id, "local": [round(c, 3) for c in w.to_local(self.home)],
+                                         "hover_duration": w.hover_duration})
+                        cache[id(w)] = entry
+                        items.append(entry[1])
                 if items:
                     missions.append({"name": m.name, "priority": m.priority, "items": items})
+            self._items = cache  # the queued waypoints' entries only: the cache never outgrows the queue
             sig = [(m["name"], m["priority"], [i["id"] for i in m["items"]]) for m in missions]
             if sig == self._sig:
                 return

@@ -17,7 +17,7 @@ from typing import Any
 
 import cv2
 
-from aerodaas.actors.drone.checkpoint import CheckpointNumbers
+from aerodaas.actors.drone.checkpoint import CheckpointNumbers, QueueBases
 from aerodaas.actors.drone.component import DroneComponent
 from aerodaas.actors.sensors.plugin_sensor import PluginSensorComponent
 from aerodaas.actors.recording.remote_recorder import RemoteRecorder
@@ -130,34 +130,49 @@ class _ClockHold:
 class _Checkpointer:
     """Sends each drone's checkpoint (:mod:`aerodaas.actors.drone.checkpoint`) to the run's recorder actor about every ``period_s``
     wall seconds and whenever a waypoint was completed, without waiting for the reply (fire and forget: a lost
-    checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer."""
+    checkpoint only means resuming from the one before). Does nothing on an actor without the recorder peer.
+
+    The drones' periodic checkpoints are spread over the period (an actor of ten drones does not take and send ten
+    at one tick), and each carries its drone's waypoint queue only when it changed otherwise than by flying
+    (:class:`~aerodaas.actors.drone.checkpoint.QueueBases`); when the recorder answers that it lacks the queue a
+    checkpoint goes with (it restarted), the next one carries the queue again."""
 
     def __init__(self, plane: DataPlane, drones: list, numbers: CheckpointNumbers, period_s: float = 2.0) -> None:
         self.plane, self.period_s, self.numbers = plane, period_s, numbers
         self.on = "recorder" in (getattr(plane, "peers", None) or {}) and bool(drones)
-        self.last = time.monotonic()
+        now = time.monotonic()
+        self.due = {id(d): now + period_s * (i + 1) / len(drones) for i, d in enumerate(drones)}
         self.visited = {id(d): len(d.visited) for d in drones}
+        self.queues = QueueBases()
 
     def maybe(self, active: list) -> None:
         if not self.on:
             return
         now = time.monotonic()
-        due = now - self.last >= self.period_s
         for d in active:
+            due = now >= self.due[id(d)]
             if due or len(d.visited) != self.visited.get(id(d)):
                 self.visited[id(d)] = len(d.visited)
+                if due:
+                    self.due[id(d)] = now + self.period_s
                 # taken here (consistent with the control step), serialised and sent on the pool: the clock
-                # thread never pays for pickling the queue
+                # thread never pays for pickling
                 self.plane.submit(self._send, d.cfg.id, self.numbers.take(d))
-        if due:
-            self.last = now
 
     def _send(self, robot_id: str, cp: dict) -> None:
         try:
-            self.plane.peer("recorder").checkpoint.remote(robot_id, SealedCheckpoint.seal(cp))
+            state, queue, qid = self.queues.split(cp)
+            ref = self.plane.peer("recorder").checkpoint.remote(robot_id, SealedCheckpoint.seal(state, queue, qid))
+            if queue is None:  # the recorder may lack the queue this one goes with: then it answers False
+                ref.future().add_done_callback(lambda f: self._answered(f, robot_id, qid))
         except Exception as e:  # noqa: BLE001 - a missing checkpoint must never stop the flight
             self.plane.report_error("checkpoint", e)
             self.on = False
+
+    def _answered(self, reply: Any, robot_id: str, qid: int) -> None:
+        """The recorder's reply ``reply`` (a future) to a checkpoint going with queue ``qid``."""
+        if not reply.cancelled() and reply.exception() is None and reply.result() is False:
+            self.queues.forget(robot_id, qid)
 
 
 class ActorAssembly:

@@ -28,6 +28,7 @@ import warnings
 import ray
 
 from aerodaas.protocol.messages import ProducerLedger, SealedCheckpoint
+from aerodaas.actors.recording.checkpoints import CheckpointStore
 from aerodaas.protocol.specs import ActorSpec
 from aerodaas.recording.recover import recover_mcap
 from aerodaas.recording.segments import message_time_range, next_segment, remove_stale_segments, segment_path
@@ -46,7 +47,7 @@ class RecorderActor:
     def __init__(self, spec: ActorSpec) -> None:
         self.spec = spec
         self.recorder: Any = None
-        self._cp: dict[str, SealedCheckpoint] = {}
+        self.checkpoints = CheckpointStore()
         self._specs: dict[str, bytes] = {}
         self._wiring = b""
         self._specs_kept = threading.Event()
@@ -252,17 +253,14 @@ class RecorderActor:
         return self._specs[actor_id], self._wiring
 
     def checkpoint(self, robot_id: str, sealed: SealedCheckpoint) -> bool:
-        """Keep ``sealed`` as the newest checkpoint of ``robot_id`` (an older one, by its sequence number, is
-        ignored); kept sealed, never unpickled here (:class:`~aerodaas.protocol.messages.SealedCheckpoint`)."""
-        with self._lock:
-            old = self._cp.get(robot_id)
-            if old is None or sealed.seq >= old.seq:
-                self._cp[robot_id] = sealed
-        return True
+        """Keep ``sealed`` as the newest checkpoint of ``robot_id``, never unpickled here
+        (:meth:`~aerodaas.actors.recording.checkpoints.CheckpointStore.keep`: False when it goes with a waypoint
+        queue not kept here; the drone actor then sends the queue again)."""
+        return self.checkpoints.keep(robot_id, sealed)
 
     def last_checkpoint(self, robot_id: str) -> SealedCheckpoint | None:
-        """The newest checkpoint of ``robot_id``, sealed (``.open()`` it), or None."""
-        return self._cp.get(robot_id)
+        """The newest checkpoint of ``robot_id``, sealed (``.open()`` it) with the queue it goes with, or None."""
+        return self.checkpoints.last(robot_id)
 
     def mission_result(self, robot_id: str, t_ns: int, result: dict) -> bool:
         """Record ``/mission/result`` for a drone whose actor could not (its node was lost)."""

@@ -268,6 +268,11 @@ class StateSamples:
                         attitude=Attitude(roll=s.roll, pitch=s.pitch, yaw=s.yaw), battery_pct=bat,
                         armed=bool(s.armed), in_air=bool(s.in_air))
 
+    def odometry_json(self) -> dict:
+        """:meth:`odometry` as ``model_dump(mode="json")`` gives it: what the drone records and publishes (a backend
+        that can build the dict without the model's validation overrides this, with the same result)."""
+        return self.odometry().model_dump(mode="json")
+
     def pose_sample(self) -> PoseSample:
         """See :meth:`Telemetry.pose_sample`: the state's position and yaw at its time (right for a backend whose
         state is new at every :meth:`VehicleBackend.step`)."""

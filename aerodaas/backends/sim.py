@@ -11,8 +11,16 @@ from aerodaas.backends.base import PoseSample, StateSamples, VehicleBackend, Veh
 
 
 class _SimSamples(StateSamples):
-    """The simulator's :class:`~aerodaas.backends.base.StateSamples`: its pose sample (a camera's every frame) read
-    from the vehicle directly, the values ``state()`` would give."""
+    """The simulator's :class:`~aerodaas.backends.base.StateSamples`: its pose sample (a camera's every frame) and its
+    recorded odometry read from the vehicle directly, the values ``state()`` and ``odometry()`` would give."""
+
+    def odometry_json(self) -> dict:
+        """See :meth:`StateSamples.odometry_json`: the vehicle's own :meth:`SimVehicle.odometry_json`, unless its
+        class (a plug-in's flight model) makes its odometry another way."""
+        v = self._backend.vehicle
+        if type(v).odometry is SimVehicle.odometry and type(v).odometry_json is SimVehicle.odometry_json:
+            return v.odometry_json()
+        return self.odometry().model_dump(mode="json")
 
     def pose_sample(self) -> PoseSample:
         v = self._backend.vehicle

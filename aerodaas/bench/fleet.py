@@ -11,9 +11,11 @@ temporary directory, and reports each node (``nodes``: :mod:`aerodaas.bench.flee
 :mod:`aerodaas.bench.fleet_model` reads them. Reported per run: missed control ticks (%: a tick that runs
 more than one control period late), frames dropped (%: camera ticks whose frame never reached the analytics), CPU
 (% of one core, all Ray processes and the driver), the summed RSS (and PSS) of every Ray process and the driver at
-its peak, and the Ray worker processes (one per drone actor, plus the recorder's). ``--plot FILE`` draws the
-curve against N as a PNG there (no figure without it: a benchmark writes no file it was not given); its absolute
-path is printed on stderr and given as ``"plot"`` in the JSON report.
+its peak, and the Ray worker processes (one per drone actor, plus the recorder's). ``--no-camera``: the drones
+carry no camera and no analytics (odometry, stat-stream and control only; the report's ``camera`` is None and its
+rows count no camera tick). ``--plot FILE`` draws the curve against N as a PNG there (no figure without it: a
+benchmark writes no file it was not given); its absolute path is printed on stderr and given as ``"plot"`` in the
+JSON report.
 """
 from __future__ import annotations
 
@@ -46,13 +48,16 @@ from aerodaas.runtime.ray_start import RayStartError
 from aerodaas.schedulers import TrajectoryScheduler
 
 DEFAULT_SIZES = (1, 5, 10, 20, 40)
+#: each drone's camera (``--no-camera``: none): pixels and frames per second, as :func:`fleet_config` makes it
+CAMERA = {"width": 640, "height": 480, "fps": 15.0}
 
 
 def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480, drones_per_actor: int = 1,
-                 edge_nodes: int = 1, labelled: bool = False) -> dict:
+                 edge_nodes: int = 1, labelled: bool = False, camera: bool = True) -> dict:
     """environment.json dict for ``n`` drones 6 m apart on a grid, each flying a 4 m square over and over;
     ``drones_per_actor`` drones share a drone actor; ``edge_nodes`` > 1 (or ``labelled``): one edge compute per
-    node (label ``aerodaas/site: site<j>``), drone i flying from compute ``edge<i % edge_nodes>``."""
+    node (label ``aerodaas/site: site<j>``), drone i flying from compute ``edge<i % edge_nodes>``. ``camera``
+    False: no camera sensor (odometry, stat-stream and control only)."""
     robots = []
     side = max(1, math.ceil(math.sqrt(n)))
     labelled = labelled or edge_nodes > 1
@@ -62,8 +67,9 @@ def fleet_config(n: int, fps: float = 15.0, width: int = 640, height: int = 480,
             **({"compute": f"edge{i % edge_nodes}"} if labelled else {}),
             "limits": {"max_speed": 2.0, "max_vertical_speed": 1.0, "max_acceleration": 2.0},
             "sensors": [
-                {"id": "cam", "type": "camera",
-                 "properties": {"width": width, "height": height, "hfov_deg": 78, "fps": fps, "pitch_deg": 90}},
+                *([{"id": "cam", "type": "camera",
+                    "properties": {"width": width, "height": height, "hfov_deg": 78, "fps": fps, "pitch_deg": 90}}]
+                  if camera else []),
                 {"id": "odom", "type": "odometry", "properties": {"rate_hz": 10}},
                 {"id": "stat", "type": "stat_stream"}]})
     compute = ([{"id": f"edge{j}", "tier": "edge", "labels": {"aerodaas/site": f"site{j}"}} for j in range(edge_nodes)]
@@ -78,19 +84,24 @@ def _grid_offset(i: int, n: int) -> tuple[float, float]:
     return (6.0 * (i % side), 6.0 * (i // side))
 
 
-def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1, cluster: bool = False):
+def build_fleet(n: int, drones_per_actor: int = 1, edge_nodes: int = 1, cluster: bool = False,
+                camera: bool = True):
     """The fleet application: environment, an analytics colocated with each drone's camera, a looping survey per
-    drone. ``cluster``: one labelled edge compute per node (even for one node) and ``recording.per_node``."""
-    cfg = fleet_config(n, drones_per_actor=drones_per_actor, edge_nodes=edge_nodes, labelled=cluster)
+    drone. ``cluster``: one labelled edge compute per node (even for one node) and ``recording.per_node``.
+    ``camera`` False: no camera and no analytics (the analytics returned is None)."""
+    cfg = fleet_config(n, drones_per_actor=drones_per_actor, edge_nodes=edge_nodes, labelled=cluster, camera=camera)
     if cluster:
         cfg["recording"] = {"per_node": True}
     env = Environment(parse_environment_config(cfg))
-    shared = FrameExposure()
-    shared.deploy(env.get_compute_resources()[0], colocate=True)  # a copy inside each drone's actor
+    shared = None
+    if camera:
+        shared = FrameExposure()
+        shared.deploy(env.get_compute_resources()[0], colocate=True)  # a copy inside each drone's actor
     sched = TrajectoryScheduler(env)
     env.set_trajectory_scheduler(sched)  # one scheduler plugged in; each drone gets its own queue at start
     for i, drone in enumerate(env.get_env_robots()):
-        shared.analyse(drone.get_sensor_by_id("cam").get_data_stream())
+        if shared is not None:
+            shared.analyse(drone.get_sensor_by_id("cam").get_data_stream())
         ox, oy = _grid_offset(i, n)
         square = [(0, 0), (4, 0), (4, 4), (0, 4)]
         wps = [Waypoint(id=f"w{k}", x=ox + square[k % 4][0], y=oy + square[k % 4][1], z=3.0, hover_duration=0.5)
@@ -132,16 +143,16 @@ def _cluster_part(window: FlightWindow, lc: LocalCluster, env: Any, res: Any, re
 
 
 def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: int | None = None,
-             profile: bool = False) -> dict:
+             profile: bool = False, camera: bool = True) -> dict:
     """One fleet size on a fresh local Ray (``edge_nodes`` None) or a fresh LocalCluster of ``edge_nodes`` edge
     nodes, recorded with one recorder per node into a temporary directory (removed after; only the numbers are
     kept); returns the measured row (with ``nodes`` on a cluster). ``profile``: also the cost table of one drone
     actor and of the node's processes (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as
-    ``"profile"`` in the row."""
+    ``"profile"`` in the row. ``camera`` False: the drones fly without cameras (no frame is made or analysed)."""
     ray_start.shutdown_ray()
     opts = RunOptions(progress=False)
     cluster = edge_nodes is not None
-    env, _ = build_fleet(n, drones_per_actor, edge_nodes or 1, cluster)
+    env, _ = build_fleet(n, drones_per_actor, edge_nodes or 1, cluster, camera)
     lc, nodes, window, extra = None, None, None, {}
     with tempfile.TemporaryDirectory(prefix="aerodaas-bench-fleet-") as rec_dir:
         if cluster:
@@ -222,12 +233,12 @@ RAY_START_ATTEMPTS = 4
 
 
 def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nodes: int | None,
-                      profile: bool) -> dict:
+                      profile: bool, camera: bool = True) -> dict:
     """:func:`run_size`, started again (at most :data:`RAY_START_ATTEMPTS` times) when its Ray did not start: no
     drone flew then, so nothing of the measurement is lost or repeated. Raises the last RayStartError."""
     for attempt in range(1, RAY_START_ATTEMPTS + 1):
         try:
-            return run_size(n, duration_s, k, edge_nodes, profile)
+            return run_size(n, duration_s, k, edge_nodes, profile, camera)
         except RayStartError as e:
             if attempt == RAY_START_ATTEMPTS:
                 raise
@@ -238,22 +249,25 @@ def _run_size_started(progress: Any, n: int, duration_s: float, k: int, edge_nod
 
 
 def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, groupings: tuple[int, ...] = (1,),
-              edge_nodes: int | None = None, runs: tuple[tuple[int, int], ...] = (), profile: bool = False) -> dict:
+              edge_nodes: int | None = None, runs: tuple[tuple[int, int], ...] = (), profile: bool = False,
+              camera: bool = True) -> dict:
     """Every (size, grouping) pair of ``sizes`` x ``groupings``, or exactly ``runs`` ((drones, drones per actor)
     pairs, in order) when given, on the local Ray (``edge_nodes`` None) or a fresh local cluster of ``edge_nodes``
-    edge nodes per run; the report with a row per run and the machine and load at the start."""
+    edge nodes per run; the report with a row per run and the machine and load at the start. ``camera`` False:
+    drones without cameras (the report's ``camera`` is None)."""
     machine, load_start = machine_info(), round(os.getloadavg()[0], 2)  # before the fleet's own processes load it
     rows = []
     pairs = [(k, n) for n, k in runs] if runs else [(k, n) for k in groupings for n in sizes]
     with bench_progress("bench fleet", total=len(pairs)) as (progress, task):
         for k, n in pairs:
             progress.update(task, description=f"bench fleet N={n} k={k}")
-            row = _run_size_started(progress, n, duration_s, k, edge_nodes, profile)
+            row = _run_size_started(progress, n, duration_s, k, edge_nodes, profile, camera)
             row["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
             progress.advance(task)
             progress.console.print(
-                f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  frames dropped "
-                f"{row['dropped_frames_pct']:.1f}%  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
+                f"fleet N={n:3d} k={k}: missed ticks {row['missed_ticks_pct']:.2f}%  "
+                + (f"frames dropped {row['dropped_frames_pct']:.1f}%" if camera else "no cameras")
+                + f"  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
                 f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
                 + (f"  per node {row['drones_per_node']}, GCS actors {row.get('gcs_actors')}" if edge_nodes else "")
                 + (f"  RECORDING LOST {row['recording_lost']} messages" if row.get("recording_lost") else "")
@@ -271,7 +285,7 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
         actors = math.ceil(r["drones"] / r["drones_per_actor"])
         r["pss_mb_per_extra_actor"] = (r["pss_mb"] - one["pss_mb"]) / (actors - 1) if one and actors > 1 else None
     return {"benchmark": "fleet", "machine": machine, "duration_s": duration_s, "edge_nodes": edge_nodes,
-            "load_avg_1min_start": load_start, "results": rows,
+            "camera": dict(CAMERA) if camera else None, "load_avg_1min_start": load_start, "results": rows,
             "targets": {"missed_ticks_pct_below": 1.0, "drones_at_least": 20, "drones_at_least_grouped": 40,
                         "rss_mb_per_extra_drone_max": 150}}
 
@@ -374,7 +388,7 @@ def main(a: argparse.Namespace) -> int:
         if problem:
             print(f"aerodaas bench fleet: {problem}", file=sys.stderr)
             return 2
-    report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes, runs, a.profile)
+    report = run_fleet(sizes, a.duration, per_actor, a.edge_nodes, runs, a.profile, not a.no_camera)
     if a.plot:
         report["plot"] = os.path.abspath(a.plot)
 

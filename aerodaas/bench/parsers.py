@@ -62,6 +62,9 @@ def add_fleet(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", action="store_true",
                    help="per run, where one drone actor's CPU and memory go (per-thread CPU from /proc, "
                         "apportioned by py-spy when it is on the PATH) and the node's processes' CPU")
+    p.add_argument("--no-camera", action="store_true",
+                   help="drones without cameras: odometry, stat-stream and control only, no frame rendered, "
+                        "recorded or analysed (a formation or swarm; default: a 640x480 camera at 15 FPS each)")
     p.add_argument("--edge-nodes", type=int, default=None,
                    help="run each fleet on a fresh local cluster of this many tier=edge nodes (>= 1; raylets of "
                         "their own, loopback, token auth; the first is the head), drones spread over them by node "

@@ -34,7 +34,15 @@ def _home_constants(lat0: float, lon0: float, h0: float) -> tuple[float, ...]:
 
 def enu_to_geodetic(e: float, n: float, u: float, home: GeoPoint) -> GeoPoint:
     """ENU metres relative to ``home`` -> WGS-84 :class:`GeoPoint` (degrees, metres): pymap3d's ``enu2geodetic``
-    (see the module's docstring for the formulas), to rounding."""
+    (see the module's docstring for the formulas), to rounding. Raises ``pydantic.ValidationError`` for a
+    non-finite result (a non-finite input)."""
+    lat, lon, alt = enu_to_lat_lon_alt(e, n, u, home)
+    return GeoPoint(lat=lat, lon=lon, alt=alt)
+
+
+def enu_to_lat_lon_alt(e: float, n: float, u: float, home: GeoPoint) -> tuple[float, float, float]:
+    """:func:`enu_to_geodetic` as plain floats ``(lat, lon, alt)`` (degrees, degrees, metres), unvalidated: NaN
+    for a non-finite input."""
     x0, y0, z0, sla, cla, slo, clo = _home_constants(float(home.lat), float(home.lon), float(home.alt))
     e, n, u = float(e), float(n), float(u)
     t = cla * u - sla * n  # pymap3d enu2uvw
@@ -46,7 +54,7 @@ def enu_to_geodetic(e: float, n: float, u: float, home: GeoPoint) -> GeoPoint:
     q = math.sqrt(0.5 * (r2 - _E2) + 0.5 * math.hypot(r2 - _E2, 2.0 * _E * z))  # eqn. 4a (u in the paper)
     if math.isclose(q, 0.0, abs_tol=1e-8) or math.isclose(hxy, 0.0, abs_tol=1e-8):  # on the polar axis
         lat, lon, alt = pymap3d.enu2geodetic(e, n, u, home.lat, home.lon, home.alt)
-        return GeoPoint(lat=float(lat), lon=float(lon), alt=float(alt))
+        return float(lat), float(lon), float(alt)
     hue = math.hypot(q, _E)
     beta = math.atan(hue / q * z / hxy)  # eqn. 4b
     beta += ((_B * q - _A * hue + _E2) * math.sin(beta)) / (_A * hue / math.cos(beta) - _E2 * math.cos(beta))  # 13
@@ -54,7 +62,7 @@ def enu_to_geodetic(e: float, n: float, u: float, home: GeoPoint) -> GeoPoint:
     alt = math.hypot(z - _B * math.sin(beta), hxy - _A * math.cos(beta))  # eqn. 7
     if (x * x + y * y) / (_A * _A) + z * z / (_B * _B) < 1.0:  # inside the ellipsoid
         alt = -alt
-    return GeoPoint(lat=math.degrees(lat), lon=math.degrees(math.atan2(y, x)), alt=alt)
+    return math.degrees(lat), math.degrees(math.atan2(y, x)), alt
 
 
 def geodetic_to_enu(lat: float, lon: float, alt: float, home: GeoPoint) -> tuple[float, float, float]:

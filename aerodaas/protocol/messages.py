@@ -187,6 +187,11 @@ class RecordItem(ABC):
         return dataclasses.replace(self, incarnation=incarnation) if hasattr(self, "incarnation") else self
 
 
+#: the keys of a drone's checkpoint that hold its waypoint queue (:func:`aerodaas.actors.drone.checkpoint.drone_checkpoint`),
+#: sent apart from the rest when they changed (:class:`SealedCheckpoint`)
+QUEUE_KEYS = ("missions", "completed", "segments_issued", "seq_missions", "preplanned_flags")
+
+
 @dataclass(frozen=True)
 class SealedCheckpoint:
     """A drone's checkpoint (:func:`aerodaas.actors.drone.checkpoint.drone_checkpoint`) as the recorder actor keeps it:
@@ -195,22 +200,62 @@ class SealedCheckpoint:
     pydantic waypoints, the mission queue) and, in a recorder that had not imported them yet, that stalled its writer
     thread for long enough to fill its frame queue, so frames were dropped and the run ended ``recording_lost``
     (tests/perception/test_fleet_follow.py, at the first checkpoint of the mission). The restarted drone actor and the
-    driver open it (:meth:`open`)."""
+    driver open it (:meth:`open`).
+
+    The waypoint queue (the :data:`QUEUE_KEYS` of the checkpoint: hundreds of pickled waypoints) travels apart, as
+    ``queue_blob`` numbered ``queue_id`` (> 0), only when it changed otherwise than by flying: the state of every
+    checkpoint names the queue it goes with (``queue_id``) and, under ``"queue_delta"``, what was flown since (the
+    items taken off the head of each mission, the waypoints completed). The recorder keeps a robot's newest queue
+    beside its newest state and gives them back together (:meth:`with_queue`); ``queue_id`` 0: the whole queue is
+    in ``blob`` (a checkpoint of before, or one taken whole)."""
 
     robot: str
     seq: int
     blob: bytes
+    queue_id: int = 0
+    queue_blob: bytes | None = None
 
     @classmethod
-    def seal(cls, state: dict) -> "SealedCheckpoint":
-        """Pickle ``state`` (a checkpoint dict with ``robot`` and ``seq``) with Ray's cloudpickle."""
+    def seal(cls, state: dict, queue: dict | None = None, queue_id: int = 0) -> "SealedCheckpoint":
+        """Pickle ``state`` (a checkpoint dict with ``robot`` and ``seq``) with Ray's cloudpickle; ``queue``: the
+        queue it goes with (:data:`QUEUE_KEYS`), sent now, numbered ``queue_id``; None with a ``queue_id`` > 0: the
+        recorder has that queue already."""
         from ray import cloudpickle  # lazy: heavy ray
 
-        return cls(str(state["robot"]), int(state.get("seq", 0)), cloudpickle.dumps(state))
+        return cls(str(state["robot"]), int(state.get("seq", 0)), cloudpickle.dumps(state), int(queue_id),
+                   None if queue is None else cloudpickle.dumps(queue))
+
+    def with_queue(self, queue_id: int, queue_blob: bytes | None) -> "SealedCheckpoint":
+        """This checkpoint with the queue ``queue_blob`` numbered ``queue_id`` (the recorder's, given back)."""
+        return dataclasses.replace(self, queue_id=queue_id, queue_blob=queue_blob)
 
     def open(self) -> dict:
-        """The checkpoint dict again (imports the classes it holds)."""
-        return pickle.loads(self.blob)
+        """The checkpoint dict again, whole (imports the classes it holds). Raises ValueError when its state goes
+        with a queue that is not here."""
+        state = pickle.loads(self.blob)
+        delta = state.pop("queue_delta", None)
+        if not self.queue_id:
+            return state
+        if self.queue_blob is None or delta is None:
+            raise ValueError(f"checkpoint {self.seq} of robot {self.robot!r}: its waypoint queue {self.queue_id} is "
+                             f"missing")
+        return {**state, **_flown(pickle.loads(self.queue_blob), delta)}
+
+
+def _flown(queue: dict, delta: dict) -> dict:
+    """The checkpoint's queue keys (:data:`QUEUE_KEYS`) of ``queue`` after ``delta``: ``{"missions": [[mission seq,
+    items taken off its head], ...] (the missions still queued, in their order), "completed": [ids completed
+    since]}``. A mission's items are never changed in place and its segment tags are keyed by its items, so taking
+    items off the head is slicing its list."""
+    by_seq = {m.seq: (m, flags) for m, flags in zip(queue["missions"], queue["preplanned_flags"])}
+    missions, flags = [], []
+    for seq, taken in delta["missions"]:
+        m, f = by_seq[seq]
+        m.items = m.items[taken:]
+        missions.append(m)
+        flags.append(f[taken:])
+    return {**queue, "missions": missions, "preplanned_flags": flags,
+            "completed": list(queue["completed"]) + list(delta["completed"])}
 
 
 @dataclass(frozen=True)

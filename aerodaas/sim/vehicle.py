@@ -24,7 +24,7 @@ import numpy as np
 
 from aerodaas.config import BatteryConfig, Limits, NoiseConfig
 from aerodaas.navigation.braking import braking_speed, limited_change
-from aerodaas.model.geo import enu_to_geodetic
+from aerodaas.model.geo import enu_to_lat_lon_alt
 from aerodaas.model.types import Attitude, GeoPoint, Odometry
 
 
@@ -184,8 +184,9 @@ class SimVehicle:
         b = self.battery
         return b.voltage_empty + (b.voltage_full - b.voltage_empty) * self.battery_pct / 100.0
 
-    def odometry(self) -> Odometry:
-        """Current odometry; GPS comes from the local position via pymap3d, plus optional noise."""
+    def _sample(self) -> tuple:
+        """One odometry sample's values as plain floats and bools, noise drawn: ``(t, position, (lat, lon, alt),
+        velocity, pitch, yaw, battery_pct, battery_voltage, armed, in_air)``; the geodetic fix unvalidated."""
         s = self.state
         pos = s.position.copy()
         vel = s.velocity.copy()
@@ -193,9 +194,28 @@ class SimVehicle:
             pos[:2] += self._rng.normal(0.0, self.noise.gps_std_m, 2)
         if self.noise.velocity_std_mps > 0:
             vel += self._rng.normal(0.0, self.noise.velocity_std_mps, 3)
-        geo = enu_to_geodetic(float(pos[0]), float(pos[1]), float(pos[2]), self.home)
-        pitch = min(max(-float(vel[0]) * 3.0, -25.0), 25.0)  # cosmetic: lean into motion
-        return Odometry(robot_id=self.robot_id, t=self.t, position=tuple(float(v) for v in pos), geodetic=geo,
-                        velocity=tuple(float(v) for v in vel), attitude=Attitude(roll=0.0, pitch=pitch, yaw=s.yaw),
-                        battery_pct=max(0.0, min(100.0, self.battery_pct)), battery_voltage=self.battery_voltage,
-                        armed=s.armed, in_air=s.in_air)
+        px, py, pz = (float(v) for v in pos)
+        vx, vy, vz = (float(v) for v in vel)
+        pitch = min(max(-vx * 3.0, -25.0), 25.0)  # cosmetic: lean into motion
+        return (float(self.t), [px, py, pz], enu_to_lat_lon_alt(px, py, pz, self.home), [vx, vy, vz], pitch,
+                float(s.yaw), max(0.0, min(100.0, self.battery_pct)), float(self.battery_voltage), bool(s.armed),
+                bool(s.in_air))
+
+    def odometry(self) -> Odometry:
+        """Current odometry; GPS comes from the local position (:func:`aerodaas.model.geo.enu_to_lat_lon_alt`), plus
+        optional noise. Raises ``pydantic.ValidationError`` for a non-finite position."""
+        t, pos, (lat, lon, alt), vel, pitch, yaw, bat, volt, armed, in_air = self._sample()
+        return Odometry(robot_id=self.robot_id, t=t, position=tuple(pos), geodetic=GeoPoint(lat=lat, lon=lon, alt=alt),
+                        velocity=tuple(vel), attitude=Attitude(roll=0.0, pitch=pitch, yaw=yaw), battery_pct=bat,
+                        battery_voltage=volt, armed=armed, in_air=in_air)
+
+    def odometry_json(self) -> dict:
+        """:meth:`odometry` as ``Odometry.model_dump(mode="json")`` gives it (the same keys in the same order, the
+        same values), built directly: what the drone records and publishes for every sample, without pydantic's
+        validation and dump. Raises ``pydantic.ValidationError`` for a non-finite position, as :meth:`odometry`."""
+        t, pos, (lat, lon, alt), vel, pitch, yaw, bat, volt, armed, in_air = self._sample()
+        if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt)):
+            GeoPoint(lat=lat, lon=lon, alt=alt)  # raises the validation error odometry() raises
+        return {"robot_id": self.robot_id, "t": t, "position": pos, "geodetic": {"lat": lat, "lon": lon, "alt": alt},
+                "velocity": vel, "attitude": {"roll": 0.0, "pitch": pitch, "yaw": yaw}, "battery_pct": bat,
+                "battery_voltage": volt, "armed": armed, "in_air": in_air}

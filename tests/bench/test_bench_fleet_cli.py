@@ -9,12 +9,13 @@ from aerodaas import cli
 from aerodaas.bench import fleet
 
 
-def _report(sizes, duration_s, groupings=(1,), edge_nodes=1, runs=(), profile=False):
+def _report(sizes, duration_s, groupings=(1,), edge_nodes=1, runs=(), profile=False, camera=True):
     pairs = [(n, k) for n, k in runs] if runs else [(n, k) for k in groupings for n in sizes]
     rows = [{"drones": n, "drones_per_actor": k, "missed_ticks_pct": 0.1 * n, "dropped_frames_pct": 1.0,
              "cpu_pct": 20.0 * n, "rss_mb": 900.0 + 40 * n / k, "pss_mb": 700.0 + 30 * n / k,
              **({"profile": {}} if profile else {})} for n, k in pairs]
-    return {"benchmark": "fleet", "machine": {"cpu_count": 2}, "duration_s": duration_s, "results": rows}
+    return {"benchmark": "fleet", "machine": {"cpu_count": 2}, "duration_s": duration_s,
+            "camera": {"width": 640} if camera else None, "results": rows}
 
 
 @pytest.fixture

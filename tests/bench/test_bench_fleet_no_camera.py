@@ -1,0 +1,33 @@
+"""``aerodaas bench fleet --no-camera`` end to end, as a swarm researcher runs it (a subprocess with its own Ray):
+drones packed two per drone actor fly without cameras, their control ticks counted and no frame made. No timing is
+asserted — the numbers live in docs/results/fleet.md."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.e2e
+
+
+def test_packed_drones_without_cameras_fly_and_make_no_frame(tmp_path):
+    out = tmp_path / "fleet.json"
+    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "fleet", "--run", "4:2", "--no-camera",
+                        "--duration", "4", "--out", str(out)], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=600, env=dict(os.environ))
+    assert p.returncode == 0, p.stderr[-2000:]
+    rep = json.loads(out.read_text())
+    assert rep["camera"] is None
+    (row,) = rep["results"]
+    assert (row["drones"], row["drones_per_actor"]) == (4, 2)
+    assert row["worker_processes"] >= 2  # two drone actors (and the recorder's), not one per drone
+    # every drone flew its control loop; no camera ticked, no frame reached an analytics
+    assert row["ticks"] >= 4 * 10 and row["host_errors"] == 0 and row["outcomes"] == ["timeout"]
+    assert row["camera_ticks"] == 0 and row["frames_analysed"] == 0
+    assert "no cameras" in p.stderr
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["fleet.json"]  # nothing it was not asked for
