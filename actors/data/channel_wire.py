@@ -75,15 +75,40 @@ def flatten(m: Any) -> tuple:
     return (i, None if len(fs) == len(vals) else tuple(sorted(fs)), *vals)
 
 
+def _plain(cls: type) -> bool:
+    """True when ``cls.model_construct`` with every field given does nothing but set the instance's ``__dict__``,
+    fields set, and empty extra and private attributes (no ``model_post_init``, no private attributes, no extra
+    fields allowed, not a root model): :func:`unflatten` then sets those itself."""
+    return (not cls.__pydantic_post_init__ and not cls.__private_attributes__ and not cls.__pydantic_root_model__
+            and cls.model_config.get("extra") != "allow")
+
+
+#: per model, whether :func:`unflatten` may build it without ``model_construct`` (see :func:`_plain`)
+_PLAIN = tuple(_plain(cls) for cls in MODELS)
+_ALL_SET = [frozenset(f) for f in _FIELDS]
+_setattr = object.__setattr__
+
+
 def unflatten(t: tuple) -> Any:
-    """The model :func:`flatten` gave ``t`` for (equal to it, with the same fields set)."""
+    """The model :func:`flatten` gave ``t`` for (equal to it, with the same fields set). Built as pydantic's
+    ``model_construct`` builds it from every field's value (values validated when the model was made), without
+    its per-field lookup of aliases and defaults: every field travels."""
     i, fs = t[0], t[1]
-    kw = dict(zip(_FIELDS[i], t[2:]))
+    names = _FIELDS[i]
+    kw = dict(zip(names, t[2:]))
     for j in _NESTED[i]:
         v = t[2 + j]
         if v is not None:
-            kw[_FIELDS[i][j]] = unflatten(v)
-    return MODELS[i].model_construct(None if fs is None else set(fs), **kw)
+            kw[names[j]] = unflatten(v)
+    cls = MODELS[i]
+    if not _PLAIN[i] or len(kw) != len(names):
+        return cls.model_construct(None if fs is None else set(fs), **kw)
+    m = cls.__new__(cls)
+    _setattr(m, "__dict__", kw)
+    _setattr(m, "__pydantic_fields_set__", set(_ALL_SET[i] if fs is None else fs))
+    _setattr(m, "__pydantic_extra__", None)
+    _setattr(m, "__pydantic_private__", None)
+    return m
 
 
 def _port(p: Port) -> tuple:
