@@ -28,11 +28,13 @@ Decoding gives objects equal to what was encoded, with the same fields set (the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import pickle
 from typing import Any
 
 from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.protocol.ids import ComponentId
 from aerodaas.protocol.messages import (DetectionsMsg, Delivery, FrameMsg, Message, NavigationMsg, OdometryMsg, Port,
                                         StatMsg, ValueMsg)
 
@@ -111,6 +113,34 @@ def unflatten(t: tuple) -> Any:
     return m
 
 
+def _cid(c: Any) -> Any:
+    """Component id ``c`` on the wire: a :class:`~aerodaas.protocol.ids.ComponentId` whose kind and robot are
+    strings (or no robot) as the tuple ``(id, kind, robot)`` (pickled in C, where the object's own ``__reduce__``
+    runs in Python on both ends); anything else as it is."""
+    if type(c) is ComponentId and type(c.kind) is str and (c.robot is None or type(c.robot) is str):
+        return (str(c), c.kind, c.robot)
+    return c
+
+
+def _uncid(w: Any) -> Any:
+    """The component id :func:`_cid` gave ``w`` for (an equal ComponentId, the same object for the same tuple)."""
+    return _component_id(*w) if type(w) is tuple else w
+
+
+@functools.lru_cache(maxsize=1024)
+def _component_id(value: str, kind: Any, robot: Any) -> ComponentId:
+    """One ComponentId per wire tuple (a run has a handful of components; the memo spares a construction per
+    message)."""
+    return ComponentId(value, kind, robot)
+
+
+@functools.lru_cache(maxsize=1024)
+def _unport(name: Any, priority: Any, replace: Any) -> Port:
+    """The :class:`~aerodaas.protocol.messages.Port` whose wire tuple :func:`_port` gave (frozen: one object serves
+    every message of an edge)."""
+    return Port(name, priority, replace)
+
+
 def _port(p: Port) -> tuple:
     return (p.name, p.priority, p.replace)
 
@@ -132,7 +162,7 @@ def encode_send(send: ChannelSend) -> tuple:
         except TypeError:
             return (OBJECT, send.seq, _pickled(send))
         s = m.data
-        return (FRAME, send.seq, d.cid, _port(d.port), d.cascade, d.reply_to, m.robot, m.sim_t,
+        return (FRAME, send.seq, _cid(d.cid), _port(d.port), d.cascade, d.reply_to, m.robot, m.sim_t,
                 (s.name, s.shape, s.dtype), m.trace, meta)
     return (OBJECT, send.seq, _pickled(send))
 
@@ -156,7 +186,7 @@ def _reply(d: Delivery, meta: Any) -> tuple:
         mt = SAME_META
     else:
         mt = ("o", _pickled(m.meta))
-    return (d.cid, _port(d.port), k, m.robot, m.sim_t, data, mt, m.trace)
+    return (_cid(d.cid), _port(d.port), k, m.robot, m.sim_t, data, mt, m.trace)
 
 
 def encode_done(done: ChannelDone, meta: Any = None) -> tuple:
@@ -193,7 +223,7 @@ def decode(t: tuple) -> Any:
         _, seq, cid, port, cascade, reply_to, robot, sim_t, (name, shape, dtype), trace, meta = t
         msg = FrameMsg(robot, sim_t, SlotFrame(name, tuple(shape), dtype), None if meta is None else unflatten(meta),
                        trace)
-        return ChannelSend(seq, Delivery(cid, Port(*port), msg, cascade, reply_to))
+        return ChannelSend(seq, Delivery(_uncid(cid), _unport(*port), msg, cascade, reply_to))
     if tag == DONE:
         return ChannelDone(t[1], t[2], t[3], tuple(t[4]))
     if tag == FREE:
@@ -219,5 +249,5 @@ def decode_done(replies: list, meta: Any) -> list[Delivery]:
         if mt == SAME_META and meta is None:
             raise ValueError("channel: an answer refers to the metadata of a delivery no longer in flight")
         m = meta if mt == SAME_META else (None if mt is None else pickle.loads(mt[1]))
-        out.append(Delivery(cid, Port(*port), KINDS[k](robot, sim_t, data, m, trace)))
+        out.append(Delivery(_uncid(cid), _unport(*port), KINDS[k](robot, sim_t, data, m, trace)))
     return out
