@@ -51,6 +51,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from aerodaas.actors.data.channel_conn import BufferedConnection
 from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.actors.data.channel_outlet import shutdown_connection
 from aerodaas.actors.data.channel_slots import attach
@@ -167,7 +168,7 @@ class ChannelServer:
                     return
                 time.sleep(0.05)
                 continue
-            conn = mpc.Connection(s.detach())
+            conn = BufferedConnection(s.detach())
             threading.Thread(target=self._serve, args=(conn,), name="aerodaas-channel-in", daemon=True).start()
 
     def _serve(self, conn: Any) -> None:

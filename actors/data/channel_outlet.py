@@ -8,11 +8,11 @@ import threading
 import time
 import weakref
 from collections import deque
-from multiprocessing import connection as mpc
 from typing import Any, Callable
 
 import numpy as np
 
+from aerodaas.actors.data.channel_conn import client
 from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.actors.data.channel_slots import Slot, release_lent
 from aerodaas.actors.data.channel_wire import decode, decode_done, encode_send
@@ -89,7 +89,7 @@ class ChannelOutlet:
     def connect(self) -> None:
         """Open the channel (authenticating with the run's key). Raises OSError if nobody serves the address,
         AuthenticationError if the server is not one of this run's actors."""
-        conn = mpc.Client(self.address, family="AF_UNIX", authkey=self._key)
+        conn = client(self.address, self._key)
         self._conn = conn
         threading.Thread(target=self._read_loop, args=(conn,), name="aerodaas-channel-out", daemon=True).start()
 

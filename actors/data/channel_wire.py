@@ -28,11 +28,13 @@ Decoding gives objects equal to what was encoded, with the same fields set (the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import pickle
 from typing import Any
 
 from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.model.types import CameraIntrinsics, Detection, FrameMeta, FramePose
+from aerodaas.protocol.ids import ComponentId
 from aerodaas.protocol.messages import (DetectionsMsg, Delivery, FrameMsg, Message, NavigationMsg, OdometryMsg, Port,
                                         StatMsg, ValueMsg)
 
@@ -75,15 +77,68 @@ def flatten(m: Any) -> tuple:
     return (i, None if len(fs) == len(vals) else tuple(sorted(fs)), *vals)
 
 
+def _plain(cls: type) -> bool:
+    """True when ``cls.model_construct`` with every field given does nothing but set the instance's ``__dict__``,
+    fields set, and empty extra and private attributes (no ``model_post_init``, no private attributes, no extra
+    fields allowed, not a root model): :func:`unflatten` then sets those itself."""
+    return (not cls.__pydantic_post_init__ and not cls.__private_attributes__ and not cls.__pydantic_root_model__
+            and cls.model_config.get("extra") != "allow")
+
+
+#: per model, whether :func:`unflatten` may build it without ``model_construct`` (see :func:`_plain`)
+_PLAIN = tuple(_plain(cls) for cls in MODELS)
+_ALL_SET = [frozenset(f) for f in _FIELDS]
+_setattr = object.__setattr__
+
+
 def unflatten(t: tuple) -> Any:
-    """The model :func:`flatten` gave ``t`` for (equal to it, with the same fields set)."""
+    """The model :func:`flatten` gave ``t`` for (equal to it, with the same fields set). Built as pydantic's
+    ``model_construct`` builds it from every field's value (values validated when the model was made), without
+    its per-field lookup of aliases and defaults: every field travels."""
     i, fs = t[0], t[1]
-    kw = dict(zip(_FIELDS[i], t[2:]))
+    names = _FIELDS[i]
+    kw = dict(zip(names, t[2:]))
     for j in _NESTED[i]:
         v = t[2 + j]
         if v is not None:
-            kw[_FIELDS[i][j]] = unflatten(v)
-    return MODELS[i].model_construct(None if fs is None else set(fs), **kw)
+            kw[names[j]] = unflatten(v)
+    cls = MODELS[i]
+    if not _PLAIN[i] or len(kw) != len(names):
+        return cls.model_construct(None if fs is None else set(fs), **kw)
+    m = cls.__new__(cls)
+    _setattr(m, "__dict__", kw)
+    _setattr(m, "__pydantic_fields_set__", set(_ALL_SET[i] if fs is None else fs))
+    _setattr(m, "__pydantic_extra__", None)
+    _setattr(m, "__pydantic_private__", None)
+    return m
+
+
+def _cid(c: Any) -> Any:
+    """Component id ``c`` on the wire: a :class:`~aerodaas.protocol.ids.ComponentId` whose kind and robot are
+    strings (or no robot) as the tuple ``(id, kind, robot)`` (pickled in C, where the object's own ``__reduce__``
+    runs in Python on both ends); anything else as it is."""
+    if type(c) is ComponentId and type(c.kind) is str and (c.robot is None or type(c.robot) is str):
+        return (str(c), c.kind, c.robot)
+    return c
+
+
+def _uncid(w: Any) -> Any:
+    """The component id :func:`_cid` gave ``w`` for (an equal ComponentId, the same object for the same tuple)."""
+    return _component_id(*w) if type(w) is tuple else w
+
+
+@functools.lru_cache(maxsize=1024)
+def _component_id(value: str, kind: Any, robot: Any) -> ComponentId:
+    """One ComponentId per wire tuple (a run has a handful of components; the memo spares a construction per
+    message)."""
+    return ComponentId(value, kind, robot)
+
+
+@functools.lru_cache(maxsize=1024)
+def _unport(name: Any, priority: Any, replace: Any) -> Port:
+    """The :class:`~aerodaas.protocol.messages.Port` whose wire tuple :func:`_port` gave (frozen: one object serves
+    every message of an edge)."""
+    return Port(name, priority, replace)
 
 
 def _port(p: Port) -> tuple:
@@ -107,7 +162,7 @@ def encode_send(send: ChannelSend) -> tuple:
         except TypeError:
             return (OBJECT, send.seq, _pickled(send))
         s = m.data
-        return (FRAME, send.seq, d.cid, _port(d.port), d.cascade, d.reply_to, m.robot, m.sim_t,
+        return (FRAME, send.seq, _cid(d.cid), _port(d.port), d.cascade, d.reply_to, m.robot, m.sim_t,
                 (s.name, s.shape, s.dtype), m.trace, meta)
     return (OBJECT, send.seq, _pickled(send))
 
@@ -131,7 +186,7 @@ def _reply(d: Delivery, meta: Any) -> tuple:
         mt = SAME_META
     else:
         mt = ("o", _pickled(m.meta))
-    return (d.cid, _port(d.port), k, m.robot, m.sim_t, data, mt, m.trace)
+    return (_cid(d.cid), _port(d.port), k, m.robot, m.sim_t, data, mt, m.trace)
 
 
 def encode_done(done: ChannelDone, meta: Any = None) -> tuple:
@@ -168,7 +223,7 @@ def decode(t: tuple) -> Any:
         _, seq, cid, port, cascade, reply_to, robot, sim_t, (name, shape, dtype), trace, meta = t
         msg = FrameMsg(robot, sim_t, SlotFrame(name, tuple(shape), dtype), None if meta is None else unflatten(meta),
                        trace)
-        return ChannelSend(seq, Delivery(cid, Port(*port), msg, cascade, reply_to))
+        return ChannelSend(seq, Delivery(_uncid(cid), _unport(*port), msg, cascade, reply_to))
     if tag == DONE:
         return ChannelDone(t[1], t[2], t[3], tuple(t[4]))
     if tag == FREE:
@@ -194,5 +249,5 @@ def decode_done(replies: list, meta: Any) -> list[Delivery]:
         if mt == SAME_META and meta is None:
             raise ValueError("channel: an answer refers to the metadata of a delivery no longer in flight")
         m = meta if mt == SAME_META else (None if mt is None else pickle.loads(mt[1]))
-        out.append(Delivery(cid, Port(*port), KINDS[k](robot, sim_t, data, m, trace)))
+        out.append(Delivery(_uncid(cid), _unport(*port), KINDS[k](robot, sim_t, data, m, trace)))
     return out

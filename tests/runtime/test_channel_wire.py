@@ -178,3 +178,23 @@ def test_any_valid_frame_and_detection_round_trips(seq, t, pos, yaw, pitch, w, h
     done = ChannelDone(seq, [Delivery("x", Port("in"), DetectionsMsg(robot=name, sim_t=t, data=[det], meta=m))])
     (r,) = decode_done(decode(pickle.loads(pickle.dumps(encode_done(done, None), 5))).replies, None)
     assert r.msg.data == [det] and r.msg.meta == m
+
+
+def test_typed_component_ids_travel_as_builtins_and_come_back_typed():
+    """A delivery to a typed component id (the plan's ids) and a reply to one: the tuples stay built-ins, the
+    decoded ids are ComponentIds with the same kind and robot."""
+    from aerodaas.protocol.ids import ComponentId
+
+    det_id, follow_id = ComponentId("detector#1", "analytics"), ComponentId("follow#2@d1", "analytics", "d1")
+    send = frame_send(meta())
+    send = ChannelSend(send.seq, Delivery(det_id, Port("in"), send.delivery.msg, reply_to="drone/d1"))
+    wire = encode_send(send)
+    assert only_builtins(wire), wire
+    back = decode(pickle.loads(pickle.dumps(wire, 5))).delivery.cid
+    assert (type(back), back, back.kind, back.robot) == (ComponentId, "detector#1", "analytics", None)
+    det = DetectionsMsg(robot="d1", sim_t=1.5, meta=None, trace={}, data=[])
+    wire = encode_done(ChannelDone(4, [Delivery(follow_id, Port("priority", 1), det)]))
+    assert only_builtins(wire[2]), wire
+    (r,) = decode_done(decode(pickle.loads(pickle.dumps(wire, 5))).replies, None)
+    assert (type(r.cid), r.cid, r.cid.kind, r.cid.robot, r.port) == (ComponentId, "follow#2@d1", "analytics", "d1",
+                                                                   Port("priority", 1))
