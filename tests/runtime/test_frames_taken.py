@@ -45,11 +45,13 @@ def _camera(sid: str, **extra) -> dict:
             "properties": {"width": 160, "height": 120, "hfov_deg": 78, "fps": FPS, "pitch_deg": 90, **extra}}
 
 
-def _env(cameras: list[dict]) -> Environment:
-    """One lock-step simulated drone ``d00`` with ``cameras``, hovering until the run's timeout."""
+def _env(cameras: list[dict], lockstep: bool = True) -> Environment:
+    """One simulated drone ``d00`` with ``cameras``, hovering until the run's timeout; lock-step unless ``lockstep``
+    is False (then real time: a lock-step clock that nothing consumes runs as fast as the CPU lets it, and a
+    battery failsafe would end the hover before the timeout)."""
     cfg = fleet_config(1, fps=FPS, width=160, height=120)
     cfg["robots"][0]["sensors"] = cameras + [s for s in cfg["robots"][0]["sensors"] if s["type"] != "camera"]
-    cfg["simulation"]["lockstep"] = True
+    cfg["simulation"]["lockstep"] = lockstep
     return Environment(parse_environment_config(cfg))
 
 
@@ -90,7 +92,7 @@ def _near(n: float, expected: float) -> bool:
 def test_a_camera_nobody_takes_renders_nothing(ray_session, run_options):
     """Unrecorded, with no analytics on it: the plan builds no camera, the drone renders no frame."""
     run_options.run_id = "untaken"
-    res = _env([_camera("cam")]).start_mission(timeout=2.0, options=run_options)
+    res = _env([_camera("cam")], lockstep=False).start_mission(timeout=2.0, options=run_options)
     rep = res.robots["d00"]
     assert rep["outcome"] == "timeout" and rep["ticks"] > 0, rep
     assert (rep["cameras"], rep["frames"], rep["frames_not_made"]) == (0, 0, 0), rep
