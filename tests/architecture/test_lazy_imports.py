@@ -67,6 +67,23 @@ def test_the_public_api_is_complete_and_resolved_on_use():
     assert r.returncode == 0, r.stderr[-2000:]
 
 
+#: a fresh interpreter started as a Ray worker is: AeroDaaS's setup hook, then Ray's serialisation add-ons applied
+#: (as on the worker's first message, ``aerodaas.clusters.worker_memory``)
+_HOOKED_WORKER = textwrap.dedent("""
+    import sys
+    import ray
+    from ray.util import serialization_addons
+    from aerodaas.clusters.worker_memory import worker_setup
+
+    class Context:
+        def _register_cloudpickle_serializer(self, *a, **k): pass
+        def _register_cloudpickle_reducer(self, *a, **k): pass
+
+    worker_setup()
+    serialization_addons.apply(Context())
+""")
+
+
 @pytest.mark.parametrize("module, unused", [
     ("aerodaas.actors.recording.actor", {"cv2", "onnxruntime", "matplotlib", "av", "fastapi", "pydantic", "scipy"}),
     ("aerodaas.actors.host.drone_actor", {"onnxruntime", "matplotlib", "av", "fastapi"}),
@@ -82,18 +99,7 @@ def test_a_ray_workers_setup_hook_imports_none_of_the_addons_libraries():
     message, ``aerodaas.clusters.worker_memory``) imports none of the libraries the add-ons serve, nor Pydantic (Ray's
     ``pydantic_compat``, which only the Pydantic add-on needs, imports it): a worker whose actor never uses it, an
     idle one or the recorder of an unrecorded run, does not pay for it."""
-    code = textwrap.dedent("""
-        import sys
-        import ray
-        from ray.util import serialization_addons
-        from aerodaas.clusters.worker_memory import worker_setup
-
-        class Context:
-            def _register_cloudpickle_serializer(self, *a, **k): pass
-            def _register_cloudpickle_reducer(self, *a, **k): pass
-
-        worker_setup()
-        serialization_addons.apply(Context())
+    code = _HOOKED_WORKER + textwrap.dedent("""
         print(" ".join(m for m in ("pydantic", "pyarrow", "starlette", "anyio", "ray._common.pydantic_compat")
                        if m in sys.modules))
     """)
@@ -193,18 +199,8 @@ NO_ANALYTICS_DENIED = ("aerodaas.actors.analytics", "aerodaas.perception")
 #: a Ray worker's start of a drone actor, in a fresh interpreter: the setup hook, the serialisation context's add-ons
 #: (as on the worker's first message), the actor's class (Ray imports its module), the recorder actor's class (its
 #: ``ray.get_actor`` loads it), then the actor's constructor builds its components from the driver's pickled spec
-_DRONE_WORKER = textwrap.dedent("""
-    import sys
+_DRONE_WORKER = _HOOKED_WORKER + textwrap.dedent("""
     from ray import cloudpickle
-    from ray.util import serialization_addons
-    from aerodaas.clusters.worker_memory import worker_setup
-
-    class Context:
-        def _register_cloudpickle_serializer(self, *a, **k): pass
-        def _register_cloudpickle_reducer(self, *a, **k): pass
-
-    worker_setup()
-    serialization_addons.apply(Context())
     import aerodaas.actors.host.drone_actor
     import aerodaas.actors.recording.actor
     from aerodaas.actors.data.plane import DataPlane
