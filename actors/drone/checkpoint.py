@@ -60,7 +60,7 @@ class QueueBases:
     carries the queue (:data:`~aerodaas.protocol.messages.QUEUE_KEYS`, hundreds of pickled waypoints) only when it
     changed otherwise than by flying, and else only what was flown since: the items taken off the head of each
     mission and the waypoints completed (:class:`~aerodaas.protocol.messages.SealedCheckpoint`). :meth:`split` runs
-    on the clock thread, :meth:`forget` on whichever thread learns that the recorder lacks a queue (one lock)."""
+    on the data plane's pool, :meth:`forget` on whichever thread learns that the recorder lacks a queue (one lock)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
