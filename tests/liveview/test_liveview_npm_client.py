@@ -28,6 +28,7 @@ from aerodaas.reliability.procs import actor_pids
 
 from tests.liveview.test_live_and_foxglove import AERODAAS, APP, ENV, REPO, _start, _wait_for_url
 from tests.conftest import skip_or_fail
+from tests.liveview.inprocess_live import run_with_live_client
 
 JS = Path(__file__).parents[1] / "js"
 
@@ -196,8 +197,9 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
     rec = tmp_path / "run.mcap"
     state = tmp_path / "state"
     env = {**os.environ, "AERODAAS_STATE_DIR": str(state), "AERODAAS_LIVE_TOKEN": "npm-loopback-token-0123456789"}
-    cli, _, got, error = _run_in_process_with_client(
-        node_client, ["run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"], env, state)
+    npm = lambda url: _finish(node_client(url, 300), 320)  # noqa: E731
+    run = run_with_live_client(["run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"], env, npm)
+    cli, got, error = run.cli, run.got, run.error
     assert cli.returncode == 0, cli.stdout[-3000:] + cli.stderr[-3000:]
     assert got is not None, f"the npm client failed: {error!r}"
     recorded = _recorded_counts(rec)
@@ -208,47 +210,15 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
     assert not [s for s in got["statuses"] if "Unknown channel" in s], got["statuses"]
 
-    (state / "live.json").unlink()  # the replay writes its own
-    cli, _, got, error = _run_in_process_with_client(
-        node_client, ["replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"], env, state, shared_ray=False)
+    env["AERODAAS_STATE_DIR"] = str(tmp_path / "replay-state")  # the replay writes a live.json of its own
+    run = run_with_live_client(["replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"], env, npm,
+                               shared_ray=False)
+    cli, got, error = run.cli, run.got, run.error
     assert cli.returncode == 0 and "aerodaas replay: serving" in cli.stdout, cli.stdout[-3000:] + cli.stderr[-3000:]
     assert got is not None, f"the npm client failed: {error!r}"
     print("replay --live per-channel counts:", got["counts"])
     assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"]
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
-
-
-def _run_in_process_with_client(node_client, args: list[str], env: dict, state: Path, shared_ray: bool = True) -> tuple:
-    """``aerodaas ARGS`` in-process (:func:`run_cli`; a ``run`` on the pytest worker's shared Ray session, a
-    ``replay`` with ``shared_ray=False``: no Ray), Foxglove's npm client started on a thread as soon as the
-    command's owner-only ``live.json`` (in ``state``; written when the live view has a token) names the URL: (the
-    CliResult, the live.json read, what the client got or None, its error)."""
-    import threading
-
-    from tests.inputs.cli_inprocess import run_cli
-
-    out: dict = {"info": None, "got": None, "error": None}
-    done = threading.Event()
-
-    def client():
-        try:
-            while not (state / "live.json").is_file():
-                if done.wait(0.05):
-                    raise AssertionError("the run ended without writing live.json")
-            time.sleep(0.05)  # written whole (write_private_json): read once it is there
-            out["info"] = json.loads((state / "live.json").read_text())
-            out["got"] = _finish(node_client(out["info"]["url_with_token"], 300), 320)
-        except BaseException as e:  # noqa: BLE001 - the test reports it
-            out["error"] = e
-
-    th = threading.Thread(target=client, daemon=True)
-    th.start()
-    try:
-        cli = run_cli(*args, env=env, shared_ray=shared_ray)
-    finally:
-        done.set()
-        th.join(timeout=330)
-    return cli, out["info"], out["got"], out["error"]
 
 
 @pytest.mark.e2e
@@ -267,9 +237,10 @@ def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, ray_se
     app.write_text(APP.format(env=str(tmp_path / "live.json")))
     rec = tmp_path / "run.mcap"
     env = {k: v for k, v in os.environ.items() if k != "AERODAAS_LIVE_TOKEN"}
-    cli, info, got, error = _run_in_process_with_client(
-        node_client, ["run", str(app), "--record", str(rec), "--live", "0.0.0.0:0", "--tls-cert", str(crt),
-                      "--tls-key", str(key), "--quiet"], {**env, "AERODAAS_STATE_DIR": str(state)}, state)
+    run = run_with_live_client(["run", str(app), "--record", str(rec), "--live", "0.0.0.0:0", "--tls-cert", str(crt),
+                                "--tls-key", str(key), "--quiet"], {**env, "AERODAAS_STATE_DIR": str(state)},
+                               lambda url: _finish(node_client(url, 300), 320))
+    cli, info, got, error = run.cli, run.info, run.got, run.error
     assert cli.returncode == 0, cli.stdout[-3000:] + cli.stderr[-3000:]
     assert "live view at wss://0.0.0.0:" in cli.stdout, cli.stdout[-3000:]
     assert got is not None, f"the npm client failed: {error!r}"

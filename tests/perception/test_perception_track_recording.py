@@ -43,43 +43,21 @@ def tracks_run(ray_session, tmp_path_factory):
     """One ``aerodaas run tests/apps/fleet_tracks.py --record tracks.mcap --live 127.0.0.1:0`` in-process on the
     pytest worker's shared Ray session (:func:`tests.inputs.cli_inprocess.run_cli`), a Foxglove protocol client
     (tests/liveview/foxglove_ws_client.py, written from the spec) connected from the live view's start to the run's
-    end: ``{"cli": the CliResult, "recording": path, "live": what the client got, "client_error": its exception}``.
-    The live view's address is read from its state file ``live.json``, which the run writes when a token is set
-    (``$AERODAAS_LIVE_TOKEN``): the client runs on a thread while the command holds this one."""
+    end (:func:`tests.liveview.inprocess_live.run_with_live_client`, a token set): ``{"cli": the CliResult,
+    "recording": path, "live": what the client got, "client_error": its exception}``."""
     import os
     import secrets
-    import threading
-    import time
 
     from tests.liveview.foxglove_ws_client import collect
+    from tests.liveview.inprocess_live import run_with_live_client
 
     tmp = tmp_path_factory.mktemp("tracks")
-    rec, state = tmp / "tracks.mcap", tmp / "state"
-    env = dict(os.environ, AERODAAS_STATE_DIR=str(state), AERODAAS_LIVE_TOKEN=secrets.token_urlsafe(24))
-    out: dict = {"recording": rec, "live": None, "client_error": None}
-    done = threading.Event()
-
-    def client():
-        try:
-            while not (state / "live.json").is_file():
-                if done.wait(0.05):
-                    raise AssertionError("the run ended without starting its live view")
-            time.sleep(0.05)  # the file is written whole (write_private_json); read it once it is there
-            url = json.loads((state / "live.json").read_text())["url_with_token"]
-            out["live"] = collect(url, {"/d1/tracks/tracks/scene": 10**9, "/d1/tracks/tracks": 10**9},
-                                  timeout_s=300)
-        except BaseException as e:  # noqa: BLE001 - reported by the test that reads the live view
-            out["client_error"] = e
-
-    th = threading.Thread(target=client, daemon=True)
-    th.start()
-    try:
-        out["cli"] = run_cli("run", str(APP), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet", cwd=tmp,
-                             env=env, shared_ray=True)
-    finally:
-        done.set()
-        th.join(timeout=120)
-    return out
+    rec = tmp / "tracks.mcap"
+    env = dict(os.environ, AERODAAS_STATE_DIR=str(tmp / "state"), AERODAAS_LIVE_TOKEN=secrets.token_urlsafe(24))
+    run = run_with_live_client(
+        ["run", str(APP), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"], env,
+        lambda url: collect(url, {"/d1/tracks/tracks/scene": 10**9, "/d1/tracks/tracks": 10**9}, timeout_s=300), cwd=tmp)
+    return {"cli": run.cli, "recording": rec, "live": run.got, "client_error": run.error}
 
 
 @pytest.mark.e2e
