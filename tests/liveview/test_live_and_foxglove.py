@@ -1,7 +1,8 @@
 """Live view and Foxglove completeness of recordings (second half).
 
-* ``aerodaas run --live`` and ``aerodaas replay --live`` are exercised as a user runs them (subprocesses), with a
-  WebSocket client that speaks the Foxglove protocol (tests/liveview/foxglove_ws_client.py, written from the spec) and decodes
+* ``aerodaas run --live`` and ``aerodaas replay --live`` are exercised in-process (the run on the pytest worker's
+  shared Ray session: tests/liveview/inprocess_live.py; the example plug-in app's test runs ``aerodaas run --live``
+  as a subprocess, on loopback without a token), with a WebSocket client that speaks the Foxglove protocol (tests/liveview/foxglove_ws_client.py, written from the spec) and decodes
   what arrives with the schemas the server advertised;
 * recordings are validated with readers we did not write: the ``mcap`` Python reader decoding every message
   (protobuf through mcap-protobuf-support's decoder factory, JSON with ``json.loads`` and ``jsonschema`` against the
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 import queue
 import shutil
 import subprocess
@@ -243,29 +245,25 @@ def _wait_for_url(p: subprocess.Popen, lines: "queue.Queue[str]", marker: str, t
 
 
 @pytest.fixture(scope="module")
-def live_run(tmp_path_factory):
+def live_run(ray_session, tmp_path_factory):
     """``aerodaas run app.py --record run.mcap --live 127.0.0.1:0`` with a protocol client connected for the whole
-    run (subscribed to camera, pose and the cloud detector's detections)."""
+    run (subscribed to camera, pose and the cloud detector's detections): in-process on the pytest worker's shared
+    Ray session, the client on a thread finding the URL in live.json (a token set:
+    :func:`tests.liveview.inprocess_live.run_with_live_client`)."""
+    from tests.liveview.inprocess_live import run_with_live_client
+
     tmp = tmp_path_factory.mktemp("live")
     (tmp / "live.json").write_text(json.dumps(ENV))
     app = tmp / "app.py"
     app.write_text(APP.format(env=str(tmp / "live.json")))
     rec = tmp / "run.mcap"
-    p, lines = _start([*AERODAAS, "run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"])
-    try:
-        url, seen = _wait_for_url(p, lines, "live view at")
-        got = collect(url, {CAMERA_TOPIC: 10**9, POSE_TOPIC: 10**9, DETECTIONS_TOPIC: 10**9}, timeout_s=240)
-        rc = p.wait(timeout=240)
-    finally:
-        if p.poll() is None:
-            p.kill()
-    out = "".join(seen)
-    while True:
-        line = lines.get(timeout=30)
-        if line == "":
-            break
-        out += line
-    return {"rc": rc, "got": got, "recording": rec, "url": url, "output": out}
+    env = {**os.environ, "AERODAAS_STATE_DIR": str(tmp / "state"), "AERODAAS_LIVE_TOKEN": "live-run-token-0123456789"}
+    run = run_with_live_client(
+        ["run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"], env,
+        lambda url: collect(url, {CAMERA_TOPIC: 10**9, POSE_TOPIC: 10**9, DETECTIONS_TOPIC: 10**9}, timeout_s=240))
+    assert run.got is not None, f"the protocol client failed: {run.error!r}\n{run.cli.stdout[-3000:]}{run.cli.stderr[-3000:]}"
+    return {"rc": run.cli.returncode, "got": run.got, "recording": rec, "url": run.info["url"],
+            "output": run.cli.stdout + run.cli.stderr}
 
 
 @pytest.mark.e2e
@@ -315,8 +313,7 @@ def test_the_live_run_recording_validates_with_the_mcap_reader(live_run):
 @pytest.mark.e2e
 def test_aerodaas_layout_names_only_topics_the_recording_has(live_run, tmp_path):
     out = tmp_path / "layout.json"
-    p = subprocess.run([*AERODAAS, "layout", str(live_run["recording"]), "--out", str(out)], capture_output=True,
-                       text=True, timeout=120)
+    p = run_cli("layout", str(live_run["recording"]), "--out", str(out))  # in-process: a reader, no Ray
     assert p.returncode == 0, p.stderr
     doc = json.loads(out.read_text())
     with open(live_run["recording"], "rb") as f:
@@ -328,18 +325,17 @@ def test_aerodaas_layout_names_only_topics_the_recording_has(live_run, tmp_path)
 
 @pytest.mark.e2e
 def test_replay_serves_a_recording_to_a_protocol_client(live_run, tmp_path):
+    from tests.liveview.inprocess_live import run_with_live_client
+
     rec = live_run["recording"]
     topics = {CAMERA_TOPIC, POSE_TOPIC, DETECTIONS_TOPIC}
     recorded = _recorded(rec, topics)
-    p, lines = _start([*AERODAAS, "replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"])
-    try:
-        url, _ = _wait_for_url(p, lines, "serving", timeout_s=60)
-        got = collect(url, {t: 10**9 for t in topics}, timeout_s=180)
-        rc = p.wait(timeout=60)
-    finally:
-        if p.poll() is None:
-            p.kill()
-    assert rc == 0 and got["closed_by_server"]
+    env = {**os.environ, "AERODAAS_STATE_DIR": str(tmp_path / "state"), "AERODAAS_LIVE_TOKEN": "replay-token-0123456789"}
+    run = run_with_live_client(["replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"], env,
+                               lambda url: collect(url, {t: 10**9 for t in topics}, timeout_s=180), shared_ray=False)
+    got = run.got
+    assert run.cli.returncode == 0 and "aerodaas replay: serving" in run.cli.stdout, run.cli.stdout + run.cli.stderr
+    assert got is not None and got["closed_by_server"], f"the protocol client failed: {run.error!r}"
     for topic in topics:
         ch = got["channels"][topic]
         decode = _decode_with(ch)

@@ -28,6 +28,7 @@ from aerodaas.reliability.procs import actor_pids
 
 from tests.liveview.test_live_and_foxglove import AERODAAS, APP, ENV, REPO, _start, _wait_for_url
 from tests.conftest import skip_or_fail
+from tests.liveview.inprocess_live import run_with_live_client
 
 JS = Path(__file__).parents[1] / "js"
 
@@ -186,20 +187,21 @@ def test_channels_created_while_a_client_is_connected_reach_it_even_when_their_c
 
 
 @pytest.mark.e2e
-def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_client(node_client, tmp_path):
+def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_client(node_client, ray_session,
+                                                                                       tmp_path):
+    """In-process (the run on the pytest worker's shared Ray session, the replay without Ray), a token set so that
+    the client finds each live view's URL in the owner-only ``live.json``."""
     (tmp_path / "live.json").write_text(json.dumps(ENV))
     app = tmp_path / "app.py"
     app.write_text(APP.format(env=str(tmp_path / "live.json")))
     rec = tmp_path / "run.mcap"
-    p, lines = _start([*AERODAAS, "run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"])
-    try:
-        url, _ = _wait_for_url(p, lines, "live view at")
-        client = node_client(url, 300)
-        got = _finish(client, 320)
-        assert p.wait(timeout=240) == 0
-    finally:
-        if p.poll() is None:
-            p.kill()
+    state = tmp_path / "state"
+    env = {**os.environ, "AERODAAS_STATE_DIR": str(state), "AERODAAS_LIVE_TOKEN": "npm-loopback-token-0123456789"}
+    npm = lambda url: _finish(node_client(url, 300), 320)  # noqa: E731
+    run = run_with_live_client(["run", str(app), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"], env, npm)
+    cli, got, error = run.cli, run.got, run.error
+    assert cli.returncode == 0, cli.stdout[-3000:] + cli.stderr[-3000:]
+    assert got is not None, f"the npm client failed: {error!r}"
     recorded = _recorded_counts(rec)
     print("run --live per-channel counts (npm client / recording):",
           {t: (got["counts"].get(t), n) for t, n in sorted(recorded.items())})
@@ -208,24 +210,23 @@ def test_run_and_replay_live_deliver_every_message_of_every_channel_to_the_npm_c
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
     assert not [s for s in got["statuses"] if "Unknown channel" in s], got["statuses"]
 
-    p, lines = _start([*AERODAAS, "replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"])
-    try:
-        url, _ = _wait_for_url(p, lines, "serving", timeout_s=60)
-        got = _finish(node_client(url, 300), 320)
-        assert p.wait(timeout=60) == 0
-    finally:
-        if p.poll() is None:
-            p.kill()
+    env["AERODAAS_STATE_DIR"] = str(tmp_path / "replay-state")  # the replay writes a live.json of its own
+    run = run_with_live_client(["replay", str(rec), "--live", "127.0.0.1:0", "--speed", "4"], env, npm,
+                               shared_ray=False)
+    cli, got, error = run.cli, run.got, run.error
+    assert cli.returncode == 0 and "aerodaas replay: serving" in cli.stdout, cli.stdout[-3000:] + cli.stderr[-3000:]
+    assert got is not None, f"the npm client failed: {error!r}"
     print("replay --live per-channel counts:", got["counts"])
     assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"]
     assert got["counts"] == recorded, (got["statuses"], got["counts"], recorded)
 
 
 @pytest.mark.e2e
-def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, tmp_path, monkeypatch):
+def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, ray_session, tmp_path, monkeypatch):
     """``aerodaas run --live 0.0.0.0:0 --tls-cert --tls-key`` (a self-signed certificate made
     here); Foxglove's npm client, given the URL with the token from the owner-only state file and trusting the
-    certificate (``NODE_EXTRA_CA_CERTS``), receives every message of every channel the recording holds."""
+    certificate (``NODE_EXTRA_CA_CERTS``), receives every message of every channel the recording holds. In-process
+    on the pytest worker's shared Ray session (the live server runs in the driver)."""
     from tests.safety.tls_certs import self_signed
 
     crt, key = self_signed(tmp_path)
@@ -236,22 +237,14 @@ def test_the_npm_client_receives_a_run_over_wss_off_loopback(node_client, tmp_pa
     app.write_text(APP.format(env=str(tmp_path / "live.json")))
     rec = tmp_path / "run.mcap"
     env = {k: v for k, v in os.environ.items() if k != "AERODAAS_LIVE_TOKEN"}
-    p, lines = _start([*AERODAAS, "run", str(app), "--record", str(rec), "--live", "0.0.0.0:0", "--tls-cert",
-                       str(crt), "--tls-key", str(key), "--quiet"], env={**env, "AERODAAS_STATE_DIR": str(state)})
-    try:
-        seen = ""
-        while "live view at" not in seen:
-            line = lines.get(timeout=240)
-            assert line, seen
-            seen += line
-        assert "live view at wss://0.0.0.0:" in seen, seen
-        info = json.loads((state / "live.json").read_text())
-        assert info["token"] not in seen
-        got = _finish(node_client(info["url_with_token"], 300), 320)
-        assert p.wait(timeout=240) == 0
-    finally:
-        if p.poll() is None:
-            p.kill()
+    run = run_with_live_client(["run", str(app), "--record", str(rec), "--live", "0.0.0.0:0", "--tls-cert", str(crt),
+                                "--tls-key", str(key), "--quiet"], {**env, "AERODAAS_STATE_DIR": str(state)},
+                               lambda url: _finish(node_client(url, 300), 320))
+    cli, info, got, error = run.cli, run.info, run.got, run.error
+    assert cli.returncode == 0, cli.stdout[-3000:] + cli.stderr[-3000:]
+    assert "live view at wss://0.0.0.0:" in cli.stdout, cli.stdout[-3000:]
+    assert got is not None, f"the npm client failed: {error!r}"
+    assert info["token"] not in cli.stdout + cli.stderr
     recorded = _recorded_counts(rec)
     assert got["protocol"] == "foxglove.websocket.v1" and got["closed_by_server"], got
     assert "/mission/result" in recorded

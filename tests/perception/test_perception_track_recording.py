@@ -21,7 +21,6 @@ from mcap.reader import make_reader
 from aerodaas.model.types import GeoPoint
 from aerodaas.bench.tracks import score_tracks
 from aerodaas.model.geo import geodetic_to_enu
-from aerodaas.runtime.driver import run_file
 
 from tests.inputs.cli_inprocess import run_cli
 from tests.conftest import REPO
@@ -39,19 +38,41 @@ def _read(path):
     return chans, [(topic, t, m) for topic, _s, t, m in read_messages(path)]
 
 
+@pytest.fixture(scope="module")
+def tracks_run(ray_session, tmp_path_factory):
+    """One ``aerodaas run tests/apps/fleet_tracks.py --record tracks.mcap --live 127.0.0.1:0`` in-process on the
+    pytest worker's shared Ray session (:func:`tests.inputs.cli_inprocess.run_cli`), a Foxglove protocol client
+    (tests/liveview/foxglove_ws_client.py, written from the spec) connected from the live view's start to the run's
+    end (:func:`tests.liveview.inprocess_live.run_with_live_client`, a token set): ``{"cli": the CliResult,
+    "recording": path, "live": what the client got, "client_error": its exception}``."""
+    import os
+    import secrets
+
+    from tests.liveview.foxglove_ws_client import collect
+    from tests.liveview.inprocess_live import run_with_live_client
+
+    tmp = tmp_path_factory.mktemp("tracks")
+    rec = tmp / "tracks.mcap"
+    env = dict(os.environ, AERODAAS_STATE_DIR=str(tmp / "state"), AERODAAS_LIVE_TOKEN=secrets.token_urlsafe(24))
+    run = run_with_live_client(
+        ["run", str(APP), "--record", str(rec), "--live", "127.0.0.1:0", "--quiet"], env,
+        lambda url: collect(url, {"/d1/tracks/tracks/scene": 10**9, "/d1/tracks/tracks": 10**9}, timeout_s=300), cwd=tmp)
+    return {"cli": run.cli, "recording": rec, "live": run.got, "client_error": run.error}
+
+
 @pytest.mark.e2e
-def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_options, tmp_path):
-    run_options.record = str(tmp_path / "tracks.mcap")
-    res = run_file(str(APP), run_options)[-1]
-    assert res.outcome == "success", res.robots
-    chans, msgs = _read(run_options.record)
+def test_a_run_records_geolocated_tracks_with_stable_ids(tracks_run):
+    cli = tracks_run["cli"]
+    assert cli.returncode == 0 and "mission outcome: success" in cli.stdout, cli.stdout[-3000:] + cli.stderr[-3000:]
+    record = str(tracks_run["recording"])
+    chans, msgs = _read(record)
     for robot in ("d1", "d2"):
         assert chans[f"/{robot}/tracks/tracks"] == "foxglove.ImageAnnotations"
         assert chans[f"/{robot}/tracks/tracks/scene"] == "foxglove.SceneUpdate"
         assert chans[f"/{robot}/tracks/tracks/fixes"] == "foxglove.LocationFixes"
     tracks = sorted(t for t in chans if t.startswith(("/d1/tracks/tracks", "/d2/tracks/tracks")))
     assert len(tracks) == 6, tracks  # one fixes topic per drone, not one per track
-    rep = score_tracks(run_options.record)  # against /world/targets, at 19-21 m
+    rep = score_tracks(record)  # against /world/targets, at 19-21 m
     assert rep["frames"] >= 100, rep  # both drones hovered 25 s at 20 m, 5 frames/s
     assert all(r["frames"] >= 50 and r["matched"] >= 50 for r in rep["per_robot"].values()), rep
     assert rep["recall"] >= 0.8, rep  # the detector misses 10 % of the cars on purpose: no track on those frames
@@ -79,7 +100,7 @@ def test_a_run_records_geolocated_tracks_with_stable_ids(ray_session, run_option
     # `aerodaas layout` of this recording shows the tracks: ids on the image, the scene in 3D, the fixes on the map
     from aerodaas.liveview.layout import layout_for_recording
 
-    text = json.dumps(layout_for_recording(run_options.record))
+    text = json.dumps(layout_for_recording(record))
     assert '"/d1/tracks/tracks/scene"' in text and '"/d1/tracks/tracks"' in text
     assert '"/d1/tracks/tracks/fixes"' in text
 
@@ -286,41 +307,19 @@ def test_bench_tracks_refuses_a_recording_without_truth_or_tracks(tmp_path):
 
 
 @pytest.mark.e2e
-def test_the_live_view_advertises_the_track_channels_from_the_start_and_serves_the_tracks(tmp_path):
+def test_the_live_view_advertises_the_track_channels_from_the_start_and_serves_the_tracks(tracks_run):
     """`aerodaas run tests/apps/fleet_tracks.py --live` with a Foxglove protocol client (tests/liveview/foxglove_ws_client.py,
     written from the spec): the track image and scene channels are advertised before the camera's (declared from
     the plan, not created by a first message), the tracks' one LocationFixes channel is advertised with them, and the scene arrives live
     with the track entities."""
-    import subprocess
-    import sys
-    import threading
-
     from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
-    from tests.liveview.foxglove_ws_client import collect, schema_bytes
+    from tests.liveview.foxglove_ws_client import schema_bytes
 
-    p = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "run", str(APP), "--live", "127.0.0.1:0", "--quiet"],
-                         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    out: list[str] = []
-    url_ready = threading.Event()
-
-    def pump():
-        for line in p.stdout:
-            out.append(line)
-            if "live view at" in line:
-                url_ready.set()
-        url_ready.set()
-
-    threading.Thread(target=pump, daemon=True).start()
-    try:
-        assert url_ready.wait(240) and any("live view at" in ln for ln in out), "".join(out)
-        url = next(w for ln in out if "live view at" in ln for w in ln.split() if w.startswith("ws://")).rstrip(".,;")
-        scene, cam = "/d1/tracks/tracks/scene", "/d1/camera/cam"
-        got = collect(url, {scene: 10**9, "/d1/tracks/tracks": 10**9}, timeout_s=300)
-        assert p.wait(timeout=240) == 0, "".join(out)
-    finally:
-        if p.poll() is None:
-            p.kill()
+    cli, got = tracks_run["cli"], tracks_run["live"]
+    assert cli.returncode == 0, cli.stdout[-3000:] + cli.stderr[-3000:]
+    assert got is not None, f"the live client failed: {tracks_run['client_error']!r}"
+    scene, cam = "/d1/tracks/tracks/scene", "/d1/camera/cam"
     order = [topic for _t, op, topic in got["timeline"] if op == "advertise"]
     # the declared track channels are advertised no later than the camera's: in an earlier advertise message, or in
     # the same one (a client that connects late gets every channel in one message, in the server's map order)
