@@ -39,6 +39,9 @@ def _number(v: Any) -> Any:
     """A number as given (any real: ``int``, ``float``, numpy scalars), as a ``float``; a string, a ``bool`` or
     anything else is refused: ``Waypoint(x="1", y=True)`` is a typo, not a coordinate (pydantic's lax mode read them
     as 1.0 and 1.0)."""
+    t = type(v)
+    if t is float or t is int:  # the common case, without the ABC check below (every field of every command)
+        return float(v)
     if isinstance(v, numbers.Real) and not isinstance(v, bool) and type(v).__name__ != "bool_":
         return float(v)
     raise ValueError(f"must be a number (int or float), got {type(v).__name__} {v!r:.40}")

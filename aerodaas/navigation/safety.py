@@ -213,13 +213,12 @@ class SafetyGate:
             # where each predicted point would come to rest (braking at max_acceleration along its velocity); a vehicle
             # already beyond the limit may still be commanded back: only going farther than the points it reaches
             # whatever it is told (the command latency, at its present velocity) is refused
-            def reach(q, w) -> float:
-                k = math.hypot(w[0], w[1]) / (2.0 * self.accel)
-                return math.hypot(q[0] + w[0] * k, q[1] + w[1] * k)
-
-            far = max(reach(q, w) for q, w in path)
+            two_a, hypot = 2.0 * self.accel, math.hypot
+            reach = [hypot(q[0] + w[0] * k, q[1] + w[1] * k)
+                     for q, w in path for k in (hypot(w[0], w[1]) / two_a,)]
+            far = max(reach)
             n_latency = int(math.ceil(self.latency / self.PREDICT_DT_S - 1e-9)) + 1
-            unavoidable = max(reach(q, w) for q, w in path[:n_latency])
+            unavoidable = max(reach[:n_latency])
             if far > max(self.max_dist, unavoidable) + 1e-6:
                 self.rejected += 1
                 raise SafetyViolation(cmd.id, "velocity", [round(c, 3) for c in v],
@@ -304,17 +303,27 @@ class SafetyGate:
                           horizon: float) -> list[tuple[tuple[float, float, float], tuple[float, float, float]]]:
         """(position, velocity) samples: ``vel0`` held for the latency, then accelerating towards ``v_cmd`` for
         ``horizon`` seconds."""
-        p, v = [float(c) for c in position], [float(c) for c in vel0]
-        out = [(tuple(p), tuple(v))]
+        # _accelerate and limited_change (one budget along the change) written out, operation for operation: the
+        # gate runs this for every velocity command taken and again on every control step that flies one
+        px, py, pz = (float(c) for c in position)
+        vx, vy, vz = (float(c) for c in vel0)
+        cx, cy, cz = v_cmd
+        sqrt, accel, latency = math.sqrt, self.accel, self.latency
+        out = [((px, py, pz), (vx, vy, vz))]
         t, dt = 0.0, self.PREDICT_DT_S
-        total = self.latency + horizon
+        total = latency + horizon
         while t < total - 1e-9:
             step = min(dt, total - t)
-            if t >= self.latency - 1e-9:
-                self._accelerate(v, v_cmd, step)
-            p = [a + b * step for a, b in zip(p, v)]
+            if t >= latency - 1e-9:
+                dx, dy, dz = float(cx - vx), float(cy - vy), float(cz - vz)
+                amax = accel * step
+                n = sqrt(dx * dx + dy * dy + dz * dz)
+                if n > amax:
+                    dx, dy, dz = dx * amax / n, dy * amax / n, dz * amax / n
+                vx, vy, vz = vx + dx, vy + dy, vz + dz
+            px, py, pz = px + vx * step, py + vy * step, pz + vz * step
             t += step
-            out.append((tuple(p), tuple(v)))
+            out.append(((px, py, pz), (vx, vy, vz)))
         return out
 
     def _predict_goto(self, position: Sequence[float], vel0: Sequence[float], target: Sequence[float],
@@ -364,11 +373,12 @@ class SafetyGate:
         return turn, path, samples
 
     def _stop_point(self, p: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
-        n = math.sqrt(sum(c * c for c in v))
+        vx, vy, vz = v
+        n = math.sqrt(vx * vx + vy * vy + vz * vz)
         if n < 1e-9:
             return (p[0], p[1], p[2])
-        d = self.stopping_distance(n) / n
-        return (p[0] + v[0] * d, p[1] + v[1] * d, p[2] + v[2] * d)
+        d = n * n / (2.0 * self.accel) / n  # stopping_distance(n) / n
+        return (p[0] + vx * d, p[1] + vy * d, p[2] + vz * d)
 
     def _fence_violation(self, path: list) -> str | None:
         """The first geofence violation of a predicted path or of the stop from any of its points, or None."""
@@ -387,7 +397,11 @@ class SafetyGate:
 
     def _z_range(self, path: list) -> tuple[float, float]:
         """Lowest and highest altitude (m) of a predicted path and of the stop from each of its points."""
-        zs = [z for p, v in path for z in (p[2], self._stop_point(p, v)[2])]
+        two_a, sqrt = 2.0 * self.accel, math.sqrt
+        zs = []
+        for p, (vx, vy, vz) in path:  # _stop_point's height, written out
+            n = sqrt(vx * vx + vy * vy + vz * vz)
+            zs += (p[2], p[2] if n < 1e-9 else p[2] + vz * (n * n / two_a / n))
         return max(zs), min(zs)
 
     def check_item(self, item: Any, position: Sequence[float] | None = None,
