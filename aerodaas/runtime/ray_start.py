@@ -7,6 +7,7 @@ Nothing here is called while an application is loaded (:mod:`aerodaas.runtime.ap
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
@@ -15,6 +16,7 @@ import threading
 
 from aerodaas.clusters import reaper
 from aerodaas.clusters.addresses import check_ray_address
+from aerodaas.clusters.lean_head import without_monitor_and_api_server
 from aerodaas.clusters.local import enable_token_auth
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
@@ -110,6 +112,8 @@ def _attach_up(up_address: str, renv: dict) -> None:
 def _start_local(dashboard: bool) -> None:
     """A fresh loopback-only local Ray of our own (never one that `ray start` left on this machine), retried up to
     3 times when Ray's startup times out on a loaded machine, and once without the dashboard when that fails.
+    Without ``dashboard`` its head starts neither the autoscaler monitor nor the dashboard's API server
+    (:mod:`aerodaas.clusters.lean_head`).
 
     num_cpus=3: the run's actors reserve no CPU (num_cpus=0), so the CPU resource only sizes Ray's pool of workers
     prestarted while the app is built: three, which the recorder, a drone and an analytics actor take (1.4 s
@@ -127,10 +131,13 @@ def _start_local(dashboard: bool) -> None:
         try:
             # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
             # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
-            # process on the machine (a SITL autopilot, a compiler) starve their control loops
-            ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
-                     dashboard_host="127.0.0.1", log_to_driver=True, _system_config={"worker_niceness": 0},
-                     num_cpus=3, configure_logging=True, logging_level="warning", _temp_dir=temp_dir)
+            # process on the machine (a SITL autopilot, a compiler) starve their control loops.
+            # Without the dashboard, no autoscaler monitor and no API server: they serve such a run nothing and
+            # lie on the path to the first frame (aerodaas.clusters.lean_head)
+            with (contextlib.nullcontext() if dashboard else without_monitor_and_api_server()):
+                ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
+                         dashboard_host="127.0.0.1", log_to_driver=True, _system_config={"worker_niceness": 0},
+                         num_cpus=3, configure_logging=True, logging_level="warning", _temp_dir=temp_dir)
             restore()
             break
         except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
