@@ -40,11 +40,12 @@ def frames(drones: int, per_s: float, seconds: float, models, offset_ms: float =
 
 
 async def drive(policy: AnalyticsScheduler, trace, *, cloud: bool = True, network=None,
-                edge_jitter: str = "none", cloud_jitter: str = "none", drain_s: float = 5.0):
-    """Run ``policy`` on one emulated edge (+ an in-process cloud executor) over ``trace``; returns
-    (dispatcher, report, pool report)."""
-    pool = CloudPool([CloudExecutor("c0")], network=NetworkModel.parse(network), jitter=Jitter.parse(cloud_jitter),
-                     seed=1) if cloud else None
+                edge_jitter: str = "none", cloud_jitter: str = "none", drain_s: float = 5.0,
+                executor: CloudExecutor | None = None):
+    """Run ``policy`` on one emulated edge (+ an in-process cloud executor: ``executor``, or a new one) over
+    ``trace``; returns (dispatcher, report, pool report)."""
+    pool = CloudPool([executor or CloudExecutor("c0")], network=NetworkModel.parse(network),
+                     jitter=Jitter.parse(cloud_jitter), seed=1) if cloud else None
     d = AnalyticsDispatcher(policy, EmulatedEdgeExecutor(Jitter.parse(edge_jitter), seed=1), pool)
     await d.start()
     loop = asyncio.get_running_loop()
@@ -153,27 +154,10 @@ def test_cloud_recheck_refuses_a_request_that_arrives_past_its_admit_by_time():
     assert (ex.executed, ex.refused) == (1, 1)
 
 
-@pytest.mark.realtime  # on time or late by the wall clock of a real event loop: the serial tier, not beside 2 workers
-def test_network_latency_after_the_recheck_makes_a_task_late_not_refused():
-    w = workload("LIGHT")  # HV: deadline 650, cloud 398 -> admitted until 252 ms after arrival
-    trace = [(0.0, "d0", "HV"), (10.0, "d1", "HV")]
-    # 600 ms extra round trip: admitted when sent (as in the reference), back at ~998 ms: done late, cost paid
-    d, r, _ = asyncio.run(drive(SendAllToCloud(w), trace, network="const:600"))
-    check_accounting(d, r)
-    assert r["states"]["done_late"] == 2
-    assert r["cloud_cost"] > 0 and r["utility"] < 0
-    lat = [t.end_ms - t.start_ms for t in d.tasks()]
-    assert all(x > 950 for x in lat), lat  # no upper bound: how late is a question of load, for the benchmarks
-    # 100 ms extra: 398 + 100 = 498 ms, 152 ms inside the 650 ms deadline (200 ms extra left 52 ms, lost at load 20)
-    d, r, _ = asyncio.run(drive(SendAllToCloud(w), trace, network="const:100"))
-    check_accounting(d, r)
-    assert r["states"]["done_on_time"] == 2
-    lat = [t.end_ms - t.start_ms for t in d.tasks()]
-    assert all(x > 450 for x in lat), lat
-
-
 class JustInTimeCloud(AnalyticsScheduler):
-    """Test policy: hold each task and send it to the cloud at deadline - cloud time - 20 ms (a poll timer)."""
+    """Test policy: hold each task and send it to the cloud at deadline - cloud time - 20 ms (a poll timer). Its
+    cloud re-check admits at any time (no admit-by limit): what is under test is when the timer fires, and a poll
+    that fires more than 20 ms late on a loaded machine must not turn into a refusal."""
 
     name = "TEST_JIT"
 
@@ -191,6 +175,9 @@ class JustInTimeCloud(AnalyticsScheduler):
 
     def next_poll_ms(self):
         return min((self._due(t) for t in self.held), default=None)
+
+    def cloud_admit(self, task, now_ms):
+        return True
 
     def poll(self, now_ms):
         self.polls.append(now_ms)
@@ -262,27 +249,6 @@ def test_poll_timer_fires_at_next_poll_ms():
     assert len(policy.polls) >= 2
     # no poll fires before its time (how late it fires depends on the machine's load: `aerodaas bench schedulers`)
     assert r["timing_ms"]["poll_lateness"]["n"] >= 2 and min(d.poll_lateness.values) >= -1.0, r["timing_ms"]
-
-
-class OverdueCloud(JustInTimeCloud):
-    """Test policy: each task is due 200 ms before it arrived, as when a policy's latency estimate jumps and its
-    triggers move into the past."""
-
-    name = "TEST_OVERDUE"
-
-    def _due(self, t):
-        return t.arrival_ms - 200.0
-
-
-@pytest.mark.realtime  # a wall-clock bound on the event loop's lag: the serial tier, not beside 2 workers
-def test_poll_lateness_times_the_timer_not_a_due_time_already_past_when_armed():
-    policy = OverdueCloud(workload("LIGHT"))
-    d, r, _ = asyncio.run(drive(policy, [(0.0, "d0", "HV"), (50.0, "d1", "HV"), (100.0, "d2", "MD")]))
-    check_accounting(d, r)
-    assert len(policy.polls) >= 3 and r["states"]["done_on_time"] == 3
-    # each poll ran right after it was armed, 200 ms after its due time: that is no loop lag. Measured from the due
-    # time each would be 200 ms late or more; from when it was armed, far less (a generous bound for a loaded host)
-    assert r["timing_ms"]["poll_lateness"]["n"] >= 3 and r["timing_ms"]["poll_lateness"]["max"] < 150, r["timing_ms"]
 
 
 def test_held_tasks_are_dropped_when_the_run_ends():
@@ -376,42 +342,6 @@ def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     (ev,) = rep["losses"]
     assert late.arrival_ms / 1000.0 > ev["at_s"]
     assert ev["in_flight"] == 2 and ev["failed"] == 2 and ev["retried"] == 0 and "node lost" in ev["error"]
-
-
-@pytest.mark.realtime  # "on time before the loss" is by a real event loop's clock: 0.675 (bound 0.9) at load 30
-def test_losing_the_last_executor_tells_the_policy_before_failing_its_tasks():
-    """When the last cloud executor dies, the policy must already know the cloud is gone when it hears that the
-    tasks in flight there failed: otherwise GEMS's gatekeeper counts the failures as misses and sends its queued
-    edge tasks to a cloud that no longer exists (each then dropped as "cloud unavailable")."""
-    # one model, 100 ms on the edge, 1500 ms on the cloud, 2500 ms deadline: one task every 25 ms overloads the
-    # edge 4x, so its queue is full of tasks the cloud could still finish, and rejected tasks are released to the
-    # cloud just in time (990 ms after arrival) and in flight for 1.5 s
-    w = Workload.from_dict({"models": {"A": {"edge_ms": 100, "cloud_ms": 1500, "benefit": 100, "edge_cost": 1,
-                                             "cloud_cost": 10}},
-                            "loads": {"T": {"A": 2500}}}, "T")
-
-    async def run():
-        ex = DyingExecutor("c0")
-        pool = CloudPool([ex], jitter=Jitter("none"))
-        policy = make_analytics_scheduler("GEMS", w)
-        d = AnalyticsDispatcher(policy, EmulatedEdgeExecutor(), pool)
-        await d.start()
-        for _ in range(100):  # 2.5 s
-            d.submit("d0", "A")
-            await asyncio.sleep(0.025)
-        state = len(pool._inflight), policy.on_time_fraction("A")
-        ex.dead = True
-        await asyncio.sleep(0.2)
-        r = await d.finish(3.0)
-        await pool.close()
-        return d, r, state
-
-    d, r, (in_flight, fraction_before) = asyncio.run(run())
-    check_accounting(d, r)
-    assert in_flight > 5 and fraction_before >= 0.9 and r["states"]["failed"] >= in_flight  # the loss hit hard
-    moved_to_nowhere = [t for t in d.tasks() if "gatekeeper" in (t.reason or "") and "cloud unavailable" in t.reason]
-    assert moved_to_nowhere == []
-    assert r["cloud_availability_changes"][0]["available"] is False
 
 
 def ev_time(pool_report: dict) -> float:

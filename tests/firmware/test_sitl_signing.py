@@ -57,11 +57,12 @@ def signed(tmp_path_factory) -> dict:
     d = tmp_path_factory.mktemp("sitl_signing")
     key, wrong = _key(d / "drone.key"), _key(d / "wrong.key")
     radio = sitl.monitor_connection("ardupilot")  # serial1: the link the survey flies over
-    env = sitl._write_env(d / "signed.json", sitl.mavlink_env(  # noqa: SLF001 - the SITL helpers' own
-        "ardupilot", sitl.FARM_ENV, connection=radio, signing_key_file=key, target_system=1))
-    env_wrong = sitl._write_env(d / "wrong.json", sitl.mavlink_env(  # noqa: SLF001
+    # the camera is not under test: sitl.small_cameras leaves the firmware its CPU
+    env = sitl._write_env(d / "signed.json", sitl.small_cameras(sitl.mavlink_env(  # noqa: SLF001 - the SITL helpers'
+        "ardupilot", sitl.FARM_ENV, connection=radio, signing_key_file=key, target_system=1)))
+    env_wrong = sitl._write_env(d / "wrong.json", sitl.small_cameras(sitl.mavlink_env(  # noqa: SLF001
         "ardupilot", sitl.FARM_ENV, connection=radio, signing_key_file=wrong, target_system=1,
-        connect_timeout_s=WRONG_KEY_TIMEOUT_S))
+        connect_timeout_s=WRONG_KEY_TIMEOUT_S)))
     py, q = shlex.quote(sys.executable), lambda p: shlex.quote(str(p))
     helper = f"{py} -m tests.firmware.sitl_signing_attack"
     cable = sitl.connection("ardupilot")  # serial0

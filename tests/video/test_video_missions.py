@@ -16,7 +16,9 @@ import pytest
 from aerodaas.recording.metrics import load_run
 from aerodaas.tools.hitl_client import request, state_file
 from tests.conftest import REPO, needs_data
-from tests.video.video_rig import RtspServer, Sender, check_stream_recording, free_udp_port, make_footage
+from tests.video.video_rig import (
+    QUICK_LIMITS, RtspServer, Sender, check_stream_recording, free_udp_port, make_footage,
+)
 
 APP = REPO / "apps" / "vehicle_tracking.py"
 
@@ -92,6 +94,7 @@ def test_vehicle_tracking_on_a_stream_survives_a_5s_outage(tmp_path, monkeypatch
     env = json.loads((REPO / "apps" / "vehicle_tracking.json").read_text())
     env["robots"][0]["sensors"][0]["properties"]["source"] = url
     env["simulation"] = {"speedup": 1, "lockstep": False, "physics_hz": 50}
+    env["robots"][0]["limits"].update(QUICK_LIMITS)  # the stream is under test, not the flight's pace
     env_path = tmp_path / "vehicle_tracking_stream.json"
     env_path.write_text(json.dumps(env))
     rec = tmp_path / "run.mcap"

@@ -67,6 +67,12 @@ def make_footage(out: Path, *, seconds: float = 8.0, empty_s: float = 0.0, fps: 
     return out
 
 
+#: the app's limits for a stream run whose flight is not under test (apps/vehicle_tracking.json: 3 m/s, 1.5 m/s up,
+#: 2 m/s2): twice each, so its take-off and survey legs take about half the wall time at speed-up 1, the stream's
+#: clock; the pose-tag tolerance grows with the speed (:func:`check_pose_tags`), the landing is the vehicle's own
+QUICK_LIMITS = {"max_speed": 6.0, "max_vertical_speed": 3.0, "max_acceleration": 4.0}
+
+
 #: the sender's codecs: PyAV's encoder and its options for a one-second GOP, no B-frames and the parameter sets
 #: (SPS/PPS, and VPS for H.265) repeated on every keyframe, so that a receiver joining mid-stream decodes
 SENDER_CODECS = {
