@@ -25,7 +25,8 @@ OpenBLAS (numpy's BLAS) starts a pool of one thread per core when numpy is impor
 once it computes, its own work buffer. An actor's numpy work is poses and small matrices, which OpenBLAS runs on the
 calling thread anyway; the pool only holds memory and threads in every worker, more on a node with more cores.
 :func:`worker_setup` sets ``OPENBLAS_NUM_THREADS=1`` (read by OpenBLAS when numpy loads it, which in a worker comes
-after the hook: a bare Ray worker does not import numpy) unless the user set it or numpy is already imported.
+after the hook: a bare Ray worker does not import numpy) unless the user set it or numpy is already imported;
+``AERODAAS_LEAN_WORKERS=0`` leaves OpenBLAS's default too.
 """
 from __future__ import annotations
 

@@ -9,6 +9,8 @@ imported only where they are used. Each check imports a module in a fresh interp
   or FastAPI.
 - A Ray worker's setup hook and Ray's serialisation add-ons import none of the add-ons' libraries, nor Pydantic.
 - A run without the human-in-the-loop API does not import its server (FastAPI) on the driver.
+- A drone actor's start imports only the third-party packages it uses and adds at most a set amount of memory to a
+  bare Ray worker's, both measured in the same test (memory, not time).
 """
 from __future__ import annotations
 
@@ -254,8 +256,8 @@ def test_a_drone_actor_imports_none_of_what_its_path_does_not_use(tmp_path, colo
 DRONE_ACTOR_LIBRARIES = {"numpy", "cv2", "pydantic", "pydantic_core", "annotated_types", "typing_inspection",
                          "pymap3d", "dateutil"}
 #: the memory a drone actor's start may add to a bare worker's, MiB of anonymous memory (Python objects, malloc
-#: arenas, the libraries' writable data): ``docs/results/fleet.md`` has what it holds per library, about 25 MiB,
-#: this bound leaves a fifth more. Pyarrow alone is 30 MiB, onnxruntime 15
+#: arenas, the libraries' writable data): ``docs/results/fleet.md`` has what it holds per library, about 24 MiB;
+#: this bound leaves a quarter more
 DRONE_START_BUDGET_MIB = 30.0
 
 #: printed at the end of a worker's start: its anonymous memory (``/proc/self/smaps_rollup``, KiB) and the
