@@ -255,9 +255,9 @@ class AnalyticsComponent(Component):
         go to the recorder under ``/<robot>/<name>/tracks``, whatever the analytics' own output was."""
         if self.recorder is None or getattr(self.obj, "track_records", None) is None:
             return
-        # lazy: a tracking analytics' module imported it already; one that does not track (the fleet benchmark's
-        # exposure, colocated in a drone actor) keeps the tracker, geo-location and colours out of its process
-        from aerodaas.perception.track_records import records_of, tracks_prefix
+        # an analytics that does not track (the fleet benchmark's exposure, colocated in a drone actor) keeps the
+        # tracker, geo-location and colours out of its process; a tracking one's module imported them already
+        from aerodaas.perception.track_records import records_of, tracks_prefix  # lazy: tracking analytics only
 
         records = records_of(self.obj)
         if records is None:
