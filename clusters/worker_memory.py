@@ -20,6 +20,13 @@ only when its library is already imported (:data:`ADDONS`). An actor that import
 objects through Ray (pickled by cloudpickle without Ray's reducer). A run's driver does the same for itself
 (:func:`addons_only_when_imported`, called before it starts or joins Ray): its first actor creation otherwise
 imported them on the path to the first frame. ``AERODAAS_LEAN_WORKERS=0`` turns both off.
+
+OpenBLAS (numpy's BLAS) starts a pool of one thread per core when numpy is imported, each with its own stack and,
+once it computes, its own work buffer. An actor's numpy work is poses and small matrices, which OpenBLAS runs on the
+calling thread anyway; the pool only holds memory and threads in every worker, more on a node with more cores.
+:func:`worker_setup` sets ``OPENBLAS_NUM_THREADS=1`` (read by OpenBLAS when numpy loads it, which in a worker comes
+after the hook: a bare Ray worker does not import numpy) unless the user set it or numpy is already imported;
+``AERODAAS_LEAN_WORKERS=0`` leaves OpenBLAS's default too.
 """
 from __future__ import annotations
 
@@ -27,11 +34,13 @@ import importlib
 import os
 import sys
 
-__all__ = ["ADDONS", "ARENAS", "SETUP_HOOK", "SETUP_HOOK_ENV", "addons_only_when_imported", "lean_worker_imports",
-           "limit_malloc_arenas", "worker_setup"]
+__all__ = ["ADDONS", "ARENAS", "BLAS_THREADS", "SETUP_HOOK", "SETUP_HOOK_ENV", "addons_only_when_imported",
+           "lean_worker_imports", "limit_malloc_arenas", "one_blas_thread", "worker_setup"]
 
 #: glibc malloc arenas per process of the Ray nodes AeroDaaS starts
 ARENAS = 2
+#: OpenBLAS's threads in each Ray worker AeroDaaS sets up (:func:`worker_setup`)
+BLAS_THREADS = 1
 #: the environment variable a Ray worker reads its setup hook from (``ray._private.ray_constants.
 #: WORKER_PROCESS_SETUP_HOOK_ENV_VAR``; ``ray/_private/workers/default_worker.py`` runs the hook before the main loop)
 SETUP_HOOK_ENV = "__RAY_WORKER_PROCESS_SETUP_HOOK_ENV_VAR"
@@ -63,8 +72,19 @@ def lean_worker_imports() -> bool:
 
 
 def worker_setup() -> None:
-    """Ray worker setup hook: :func:`addons_only_when_imported` in the worker (see the module)."""
-    addons_only_when_imported()
+    """Ray worker setup hook: :func:`addons_only_when_imported` and :func:`one_blas_thread` in the worker (see the
+    module)."""
+    if addons_only_when_imported():
+        one_blas_thread()
+
+
+def one_blas_thread() -> bool:
+    """Set ``OPENBLAS_NUM_THREADS`` to :data:`BLAS_THREADS` in this process's environment for the OpenBLAS that
+    numpy will load (see the module), unless the user set it or numpy is already imported (too late: OpenBLAS read
+    the environment when it loaded). Returns True when it is in effect."""
+    if "numpy" in sys.modules:
+        return False
+    return os.environ.setdefault("OPENBLAS_NUM_THREADS", str(BLAS_THREADS)) == str(BLAS_THREADS)
 
 
 def addons_only_when_imported() -> bool:

@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 
 from aerodaas.analytics.contract import Emissions, collecting, event_record, schema_name
-from aerodaas.perception.track_records import records_of, tracks_prefix
 from aerodaas.protocol.messages import DetectionsMsg, Message, NavigationMsg, Port, ValueMsg, output_message
 from aerodaas.recording.health import DEFAULT_MAX_FAILURE_FRACTION, ComponentKind, FailureCount, FailureLog
 
@@ -254,8 +253,14 @@ class AnalyticsComponent(Component):
     def _record_tracks(self, msg: Message) -> None:
         """A tracking analytics' tracks of this frame (its ``track_records``, :mod:`aerodaas.perception.track_records`)
         go to the recorder under ``/<robot>/<name>/tracks``, whatever the analytics' own output was."""
+        if self.recorder is None or getattr(self.obj, "track_records", None) is None:
+            return
+        # an analytics that does not track (the fleet benchmark's exposure, colocated in a drone actor) keeps the
+        # tracker, geo-location and colours out of its process; a tracking one's module imported them already
+        from aerodaas.perception.track_records import records_of, tracks_prefix  # lazy: tracking analytics only
+
         records = records_of(self.obj)
-        if self.recorder is None or records is None:
+        if records is None:
             return
         rows = records.take(msg.meta)
         if rows is None:

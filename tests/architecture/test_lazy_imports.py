@@ -9,6 +9,8 @@ imported only where they are used. Each check imports a module in a fresh interp
   or FastAPI.
 - A Ray worker's setup hook and Ray's serialisation add-ons import none of the add-ons' libraries, nor Pydantic.
 - A run without the human-in-the-loop API does not import its server (FastAPI) on the driver.
+- A drone actor's start imports only the third-party packages it uses and adds at most a set amount of memory to a
+  bare Ray worker's, both measured in the same test (memory, not time).
 """
 from __future__ import annotations
 
@@ -186,15 +188,16 @@ def test_a_refused_application_is_reported_without_ray_or_the_actors(tmp_path):
 #: colocated analytics brings its hosting back, the rest stays out): Ray's serialisation add-ons for libraries no actor
 #: uses (Arrow, Pydantic's v1 package, Starlette and anyio; ``aerodaas.clusters.worker_memory``), the dispatcher's
 #: analytics scheduling, the video stream readers, the live view and the recorder's writer, the built-in analytics
-#: (the benchmark's own needs only their base), the driver's side, and the heavy libraries no drone of it uses
+#: (the benchmark's own needs only their base), the driver's side, the heavy libraries no drone of it uses, and the
+#: tracker with its geo-location and track colours (only an analytics that tracks records tracks)
 DRONE_ACTOR_DENIED = ("pyarrow", "pydantic.v1", "starlette", "anyio", "aerodaas.actors.dispatch",
                       "aerodaas.schedulers.dispatch", "aerodaas.video.reader", "aerodaas.video.source",
                       "aerodaas.video.discovery", "aerodaas.liveview", "aerodaas.recording.writer",
                       "aerodaas.analytics.core", "aerodaas.analytics.detector", "aerodaas.analytics.follow",
                       "aerodaas.app", "aerodaas.runtime", "aerodaas.bench.fleet", "onnxruntime", "av", "mcap", "rich",
-                      "scipy", "matplotlib", "shapely", "torch", "fastapi", "PIL")
-#: what a drone actor without analytics does not import besides: their hosting and the tracks of their detections
-NO_ANALYTICS_DENIED = ("aerodaas.actors.analytics", "aerodaas.perception")
+                      "scipy", "matplotlib", "shapely", "torch", "fastapi", "PIL", "aerodaas.perception", "colorsys")
+#: what a drone actor without analytics does not import besides: their hosting
+NO_ANALYTICS_DENIED = ("aerodaas.actors.analytics",)
 
 #: a Ray worker's start of a drone actor, in a fresh interpreter: the setup hook, the serialisation context's add-ons
 #: (as on the worker's first message), the actor's class (Ray imports its module), the recorder actor's class (its
@@ -245,3 +248,61 @@ def test_a_drone_actor_imports_none_of_what_its_path_does_not_use(tmp_path, colo
     lines = r.stdout.splitlines()
     assert lines[0] == f"analytics {int(colocated)} cameras {int(colocated)}", r.stdout
     assert lines[1:] == [""], f"the drone actor imported {lines[1:]}"
+
+
+#: the third-party packages a drone actor of ``aerodaas bench fleet`` holds beyond a bare AeroDaaS Ray worker: the
+#: frames (numpy, OpenCV), the messages and configuration (Pydantic), geodetic conversions (pymap3d, which imports
+#: dateutil)
+DRONE_ACTOR_LIBRARIES = {"numpy", "cv2", "pydantic", "pydantic_core", "annotated_types", "typing_inspection",
+                         "pymap3d", "dateutil"}
+#: the memory a drone actor's start may add to a bare worker's, MiB of anonymous memory (Python objects, malloc
+#: arenas, the libraries' writable data): ``docs/results/fleet.md`` has what it holds per library, about 24 MiB;
+#: this bound leaves a quarter more
+DRONE_START_BUDGET_MIB = 30.0
+
+#: printed at the end of a worker's start: its anonymous memory (``/proc/self/smaps_rollup``, KiB) and the
+#: top-level packages it imported from a site-packages folder
+_MEMORY_AND_LIBRARIES = textwrap.dedent("""
+    import gc
+    gc.collect()
+    anon = [int(l.split()[1]) for l in open("/proc/self/smaps_rollup") if l.startswith("Anonymous:")][0]
+    libs = {n for n, m in list(sys.modules.items()) if "." not in n and "site-packages" in (getattr(m, "__file__", None) or "")}
+    print("memory", anon, " ".join(sorted(libs)))
+""")
+
+
+def test_a_drone_actors_start_holds_its_memory_and_library_budget(tmp_path):
+    """A drone actor of ``aerodaas bench fleet`` started as a Ray worker starts it (:data:`_DRONE_WORKER`) against a
+    bare AeroDaaS Ray worker (Ray, the setup hook and Ray's add-ons: :data:`_HOOKED_WORKER`), each in a fresh
+    interpreter: it imports no third-party package but :data:`DRONE_ACTOR_LIBRARIES`, and its anonymous memory
+    exceeds the bare worker's by at most :data:`DRONE_START_BUDGET_MIB`. Memory, not time: the same on a loaded
+    machine."""
+    import dataclasses
+
+    from ray import cloudpickle
+
+    from aerodaas.bench.fleet import build_fleet
+    from aerodaas.config import SimulationConfig
+    from aerodaas.runtime.dataflow import build_plan, collect_graph
+    from aerodaas.runtime.preflight import robot_schedulers
+
+    env = build_fleet(1)[0]
+    robots = env.get_env_robots()
+    plan = build_plan(env, robots, {r.id: collect_graph(r) for r in robots}, robot_schedulers(env, robots),
+                      SimulationConfig())
+    (hid,) = [h for h, a in plan.actors.items() if a.role == "drone"]
+    spec = dataclasses.replace(plan.actors[hid].spec, record_remote=None)
+    (tmp_path / "spec.pkl").write_bytes(cloudpickle.dumps((hid, spec)))
+    out = {}
+    for name, code in (("bare", _HOOKED_WORKER), ("drone", _DRONE_WORKER)):
+        r = subprocess.run([sys.executable, "-c", code + _MEMORY_AND_LIBRARIES, str(tmp_path / "spec.pkl"), "none"],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+        (line,) = [ln for ln in r.stdout.splitlines() if ln.startswith("memory ")]
+        _, kib, *libs = line.split()
+        out[name] = (int(kib) / 1024.0, set(libs))
+    extra_libs = out["drone"][1] - out["bare"][1]
+    assert extra_libs <= DRONE_ACTOR_LIBRARIES, f"a drone actor imports {sorted(extra_libs - DRONE_ACTOR_LIBRARIES)}"
+    assert {"numpy", "cv2"} <= extra_libs, extra_libs  # else the bare worker is not bare: the check measures nothing
+    extra_mib = out["drone"][0] - out["bare"][0]
+    assert extra_mib <= DRONE_START_BUDGET_MIB, f"a drone actor's start adds {extra_mib:.1f} MiB to a bare worker's"

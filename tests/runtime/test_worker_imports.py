@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import skip_or_fail
 from tests.runtime.test_dataplane import _env
 
 #: libraries that no drone actor of a simulated fleet uses: Ray's Arrow reducers (imported by Ray's serialisation
@@ -188,6 +189,38 @@ def test_the_setup_hook_keeps_rays_other_addons_out_until_something_imports_them
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "False", "True"], out.stdout
+
+
+#: numpy's OpenBLAS's thread count, read from the loaded library (numpy's wheels ship it as ``scipy_openblas``;
+#: an OpenBLAS of the system exports ``openblas_get_num_threads``); "none" when numpy links another BLAS
+_BLAS_THREADS = """
+import ctypes, numpy
+libs = [l.split()[-1] for l in open("/proc/self/maps") if "openblas" in l.lower() and ".so" in l]
+names = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads", "openblas_get_num_threads64_",
+         "openblas_get_num_threads")
+fns = [getattr(ctypes.CDLL(p), n, None) for p in libs[:1] for n in names]
+print(next((f() for f in fns if f is not None), "none"))
+"""
+
+
+@pytest.mark.parametrize("user_value, threads", [(None, "1"), ("2", "2")], ids=["default", "the-users-own"])
+def test_the_setup_hook_gives_openblas_one_thread_unless_the_user_chose(user_value, threads):
+    """After the hook, the OpenBLAS numpy loads runs one thread (no pool of one thread per core in every worker);
+    an ``OPENBLAS_NUM_THREADS`` the user set is kept."""
+    import os
+    import subprocess
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if user_value is not None:
+        env["OPENBLAS_NUM_THREADS"] = user_value
+    code = "from aerodaas.clusters.worker_memory import worker_setup\nworker_setup()\n" + _BLAS_THREADS
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    if out.stdout.split() == ["none"]:
+        skip_or_fail("numpy here does not link OpenBLAS")
+    assert out.stdout.split() == [threads], out.stdout
 
 
 def test_a_runs_driver_creates_actors_without_importing_arrow(tmp_path):
