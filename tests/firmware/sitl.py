@@ -165,11 +165,12 @@ def small_cameras(cfg: dict) -> dict:
 def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1, home: dict | None = None,
                      speedup: float | None = None, timeout_s: float = 900,
                      with_firmware: bool = True, sysids: bool = False, own_dirs: bool = False,
-                     extra: str = "") -> subprocess.CompletedProcess:
+                     extra: str = "", boot_speedup: float | None = None) -> subprocess.CompletedProcess:
     """Start ``n`` fresh firmware instances, wait for each one's first HEARTBEAT (tests/firmware/firmware_boot.py),
     run the shell ``steps`` one after another in one private loopback-only network namespace (step k's exit code in
     ``workdir/rc<k>``, output in ``workdir/out<k>``; ``$FW0``..: the firmware pids), kill the firmware. ``sysids``:
-    system id i + 1; ``own_dirs``: instance i in ``workdir/v<i+1>`` (its own storage); ``extra``: ArduCopter options."""
+    system id i + 1; ``own_dirs``: instance i in ``workdir/v<i+1>`` (its own storage); ``extra``: ArduCopter options;
+    ``boot_speedup``: ArduCopter boots at this speed-up and runs the steps at ``speedup`` (firmware_boot.fast_boot)."""
     workdir.mkdir(parents=True, exist_ok=True)
     speedup = SPEEDUP[autopilot] if speedup is None else speedup
     ray_tmp = tempfile.mkdtemp(prefix="rs", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
@@ -179,11 +180,13 @@ def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1
     for i in range(n if with_firmware else 0):
         own = workdir / f"v{i + 1}" if own_dirs else workdir
         own.mkdir(exist_ok=True)
-        starts.append((firmware_start(autopilot, i, home or FARM_HOME, own, speedup, sysid=i + 1 if sysids else None,
-                                      extra=extra), own / f"fw{i}.log", connection(autopilot, i)))
+        starts.append((firmware_start(autopilot, i, home or FARM_HOME, own, boot_speedup or speedup,
+                                      sysid=i + 1 if sysids else None, extra=extra), own / f"fw{i}.log",
+                       connection(autopilot, i)))
         lines.append(f"{starts[-1][0]}\nFW{i}=$!")
     if starts:
-        lines.append(boot_check(starts, workdir / "boot.json"))
+        fast = [(monitor_connection(autopilot, i), speedup) for i in range(n)] if boot_speedup else None
+        lines.append(boot_check(starts, workdir / "boot.json", fast))
     lines.append("cleanup() { for p in $(jobs -p); do kill -9 $p 2>/dev/null; done; }")
     lines.append("trap cleanup EXIT")
     for k, step in enumerate(steps):
@@ -409,22 +412,6 @@ def _write_env(path: Path, cfg: dict) -> Path:
     return path
 
 
-def _mission_file(path: Path, home: dict) -> Path:
-    """A QGC WPL 110 mission: take off (at home) to 2 m, two waypoints 6 m apart (hold 3 s), land."""
-    from aerodaas.model.geo import enu_to_geodetic
-    from aerodaas.model.types import GeoPoint
-
-    h = GeoPoint(**home)
-    a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
-    rows = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t{h.alt:.2f}\t1",
-            f"1\t0\t3\t22\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t2.0\t1",  # PX4 takes 0, 0 literally
-            f"2\t0\t3\t16\t3\t0\t0\t0\t{a.lat:.7f}\t{a.lon:.7f}\t2.0\t1",
-            f"3\t0\t3\t16\t3\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t2.0\t1",
-            f"4\t0\t3\t21\t0\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t0\t1"]
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
 def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] | None = None) -> dict[str, Any]:
     """The single-vehicle scenarios, each in its own namespace with a freshly booted firmware instance (cold,
     fresh parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas
@@ -435,6 +422,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     "observed"}}``."""
     from aerodaas.model.geo import enu_to_geodetic
     from aerodaas.model.types import GeoPoint
+    from tests.firmware.sitl_mission import mission_file
 
     workdir.mkdir(parents=True, exist_ok=True)
     env_guided = _write_env(workdir / "guided.json", small_cameras(mavlink_env(autopilot, FARM_ENV)))
@@ -445,14 +433,19 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     fenced["robots"][0]["safety"] = {"geofence": {"circles": [
         {"center": [c.lat, c.lon], "radius": FENCE_RADIUS_M, "inclusion": False}]}}
     env_fence = _write_env(workdir / "fence.json", fenced)
-    plan = _mission_file(workdir / "mission.waypoints", FARM_HOME)
+    plan = mission_file(workdir / "mission.waypoints", FARM_HOME)
     py = shlex.quote(sys.executable)
     conn = connection(autopilot)
     # --max-speed 2: the file sets no speed, so the vehicle would fly at its own cruise speed (ArduCopter
     # WPNAV_SPEED 10 m/s, PX4 MPC_XY_CRUISE 5 m/s); the cap inserts a DO_CHANGE_SPEED 2 m/s after the take-off
     upload = " ".join(shlex.quote(a) for a in [*AERODAAS, "mission", "upload", str(plan), "--start", "--connection",
                                                 conn, "--timeout", "60", "--max-speed", "2"])
-    observe = f"{py} -m tests.firmware.sitl_watchers observe {conn} {shlex.quote(str(workdir / 'observed.json'))} 300"
+    # the observer follows the vehicle on its second link from before the upload (on the CLI's link it could only start
+    # once the CLI had left: at load 22 a PX4 at 5x had flown past the first waypoint by then, 2026-11-29)
+    seen, ready, log = (shlex.quote(str(workdir / f)) for f in ("observed.json", "observer.ready", "observer.log"))
+    observe = (f"( {py} -m tests.firmware.sitl_watchers observe {monitor_connection(autopilot)} {seen} 300 {ready} "
+               f"> {log} 2>&1 & ) ; for k in $(seq 1 240); do [ -e {ready} ] && break; sleep 0.5; done ; ")
+    observed = f"for k in $(seq 1 700); do [ -e {seen} ] && break; sleep 0.5; done ; cat {log}"
     stopper = (f"( {py} -m tests.firmware.sitl_watchers stop-when-flying {monitor_connection(autopilot)} $FW0 3 6 "
                f"> {shlex.quote(str(workdir / 'stopper.log'))} 2>&1 & ) ; ")
     freezer = (f"( {py} -m tests.firmware.sitl_watchers freeze-our-drone {monitor_connection(autopilot)} $$ "
@@ -462,7 +455,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     scenarios = {
         "guided": [survey_step(autopilot, env_guided, workdir / "guided.mcap")],
         "auto": [survey_step(autopilot, env_auto, workdir / "auto.mcap")],
-        "upload": [upload, observe],
+        "upload": [observe + upload, observed],
         "fence": [survey_step(autopilot, env_fence, workdir / "fence.mcap")],
         "linkloss": [stopper + survey_step(autopilot, env_guided, workdir / "linkloss.mcap")],
     }

@@ -24,6 +24,22 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MSG_MISSION_CURRENT = 42
 
 
+def mission_file(path: Path, home: dict) -> Path:
+    """A QGC WPL 110 mission written to ``path``: take off (at ``home``, a dict of lat/lon/alt) to 2 m, two waypoints
+    6 m apart (hold 3 s), land (:func:`tests.firmware.sitl.single_vehicle_session`'s ``mission upload --start``)."""
+    from aerodaas.model.geo import enu_to_geodetic
+
+    h = GeoPoint(**home)
+    a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
+    rows = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t{h.alt:.2f}\t1",
+            f"1\t0\t3\t22\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t2.0\t1",  # PX4 takes 0, 0 literally
+            f"2\t0\t3\t16\t3\t0\t0\t0\t{a.lat:.7f}\t{a.lon:.7f}\t2.0\t1",
+            f"3\t0\t3\t16\t3\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t2.0\t1",
+            f"4\t0\t3\t21\t0\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t0\t1"]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
 def follow(conn: str, out: str, home: GeoPoint, last_seq: int, rtl_after: bool, timeout_s: float = 400.0) -> int:
     w = Watcher(conn, home)
     w.wait_vehicle(120)

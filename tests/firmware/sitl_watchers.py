@@ -24,11 +24,12 @@ def wait_until(cond, timeout_s: float, every_s: float = 0.2) -> bool:
     return False
 
 
-def observe(conn: str, out: str, timeout_s: float) -> int:
+def observe(conn: str, out: str, timeout_s: float, ready: str | None = None) -> int:
     """Follow a vehicle with the MAVLink backend (never commanding it) until it has been armed and is disarmed
     again, or ``timeout_s`` wall seconds; write ``{"armed": bool, "samples": [[t, x, y, z, vx, vy], ...]`` (x, y
     ENU metres from :data:`FARM_HOME`, z above the vehicle's home),
-    "events": [...]}`` to ``out``. Used after ``aerodaas mission upload --start`` (the CLI hands the vehicle over)."""
+    "events": [...]}`` to ``out`` (whole: written beside it, then renamed). Used on the vehicle's second link
+    around ``aerodaas mission upload --start``; ``ready``: a file created once connected (the upload waits for it)."""
     from aerodaas.backends import make_backend
     from aerodaas.config import MavlinkConfig, RobotConfig
     from aerodaas.model.geo import geodetic_to_enu
@@ -37,6 +38,8 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     b = make_backend(RobotConfig(id="observer", backend="mavlink", home=FARM_HOME,
                                  mavlink=MavlinkConfig(connection=conn, set_speed_limits=False)))
     b.connect(timeout_s=60)
+    if ready:
+        Path(ready).touch()
     samples, was_armed = [], False
     end = time.monotonic() + timeout_s
     try:
@@ -51,8 +54,10 @@ def observe(conn: str, out: str, timeout_s: float) -> int:
     finally:
         events = b.drain_events()
         b.close()
-    Path(out).write_text(json.dumps({"armed": was_armed, "landed": was_armed and not b.state().armed,
-                                     "samples": samples, "events": events}, default=str))
+    part = Path(out + ".part")
+    part.write_text(json.dumps({"armed": was_armed, "landed": was_armed and not b.state().armed,
+                                "samples": samples, "events": events}, default=str))
+    os.replace(part, out)
     return 0
 
 
@@ -248,7 +253,7 @@ def freeze_our_drone_when_flying(conn: str, root_pid: int, out: str, delay_s: fl
 
 if __name__ == "__main__":
     if sys.argv[1] == "observe":
-        sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+        sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4]), *sys.argv[5:6]))
     if sys.argv[1] == "observe-raw":
         extra = dict(a.split("=", 1) for a in sys.argv[5:])  # SYSID=FILE: several vehicles on one port
         sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4]),
