@@ -466,11 +466,13 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         slow["robots"][0]["limits"]["max_speed"] = 0.5
         truth = (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} "
                  f"{shlex.quote(str(workdir / 'truth.json'))} 300 > {shlex.quote(str(workdir / 'truth.log'))} 2>&1 & ) ; ")
+        # (the observer stops 1 s after the disarm: wait for its file, not a fixed time)
+        wait = "; rc=$?; for k in $(seq 1 60); do [ -e {} ] && break; sleep 0.5; done; exit $rc"
         scenarios["slow"] = [truth + survey_step(autopilot, _write_env(workdir / "slow.json", slow),
-                                                 workdir / "slow.mcap") + "; sleep 3"]
+                                                 workdir / "slow.mcap") + wait.format(shlex.quote(str(workdir / "truth.json")))]
         # ... and the guided survey at MAX_SPEED, its ground truth observed the same way
         scenarios["guided"] = [truth.replace("truth.json", "truth_guided.json").replace("truth.log", "truth_guided.log")
-                               + scenarios["guided"][0] + "; sleep 3"]
+                               + scenarios["guided"][0] + wait.format(shlex.quote(str(workdir / "truth_guided.json")))]
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
         if only is not None and name not in only:

@@ -172,7 +172,8 @@ def observe_truth(conn: str, out: str, timeout_s: float) -> int:
             truth.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.alt / 1000.0])
         else:
             est.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.relative_alt / 1000.0])
-    Path(out).write_text(json.dumps({"truth": truth, "estimate": est}))
+    Path(out + ".part").write_text(json.dumps({"truth": truth, "estimate": est}))
+    os.replace(out + ".part", out)  # whole or absent: the scenario waits for the file, then kills what is left
     return 0
 
 
