@@ -165,12 +165,11 @@ def small_cameras(cfg: dict) -> dict:
 def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1, home: dict | None = None,
                      speedup: float | None = None, timeout_s: float = 900,
                      with_firmware: bool = True, sysids: bool = False, own_dirs: bool = False,
-                     extra: str = "", boot_speedup: float | None = None) -> subprocess.CompletedProcess:
+                     extra: str = "") -> subprocess.CompletedProcess:
     """Start ``n`` fresh firmware instances, wait for each one's first HEARTBEAT (tests/firmware/firmware_boot.py),
     run the shell ``steps`` one after another in one private loopback-only network namespace (step k's exit code in
     ``workdir/rc<k>``, output in ``workdir/out<k>``; ``$FW0``..: the firmware pids), kill the firmware. ``sysids``:
-    system id i + 1; ``own_dirs``: instance i in ``workdir/v<i+1>`` (its own storage); ``extra``: ArduCopter options;
-    ``boot_speedup``: ArduCopter boots at this speed-up and runs the steps at ``speedup`` (firmware_boot.fast_boot)."""
+    system id i + 1; ``own_dirs``: instance i in ``workdir/v<i+1>`` (its own storage); ``extra``: ArduCopter options."""
     workdir.mkdir(parents=True, exist_ok=True)
     speedup = SPEEDUP[autopilot] if speedup is None else speedup
     ray_tmp = tempfile.mkdtemp(prefix="rs", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
@@ -180,13 +179,11 @@ def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1
     for i in range(n if with_firmware else 0):
         own = workdir / f"v{i + 1}" if own_dirs else workdir
         own.mkdir(exist_ok=True)
-        starts.append((firmware_start(autopilot, i, home or FARM_HOME, own, boot_speedup or speedup,
-                                      sysid=i + 1 if sysids else None, extra=extra), own / f"fw{i}.log",
-                       connection(autopilot, i)))
+        starts.append((firmware_start(autopilot, i, home or FARM_HOME, own, speedup, sysid=i + 1 if sysids else None,
+                                      extra=extra), own / f"fw{i}.log", connection(autopilot, i)))
         lines.append(f"{starts[-1][0]}\nFW{i}=$!")
     if starts:
-        fast = [(monitor_connection(autopilot, i), speedup) for i in range(n)] if boot_speedup else None
-        lines.append(boot_check(starts, workdir / "boot.json", fast))
+        lines.append(boot_check(starts, workdir / "boot.json"))
     lines.append("cleanup() { for p in $(jobs -p); do kill -9 $p 2>/dev/null; done; }")
     lines.append("trap cleanup EXIT")
     for k, step in enumerate(steps):

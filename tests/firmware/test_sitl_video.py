@@ -1,9 +1,8 @@
 """apps/vehicle_tracking.py, unchanged, on real ArduCopter SITL firmware with its camera from a video stream:
 from GStreamer's RTSP server (gst-rtsp-server) and from raw RTP H.264 on UDP 5600 as QGroundControl
 receives it, both fed with real aerial footage by a sender in the same private loopback-only network namespace as
-the firmware. The firmware runs in real time (speed-up 1: a stream runs on the wall clock, as on a real drone) once
-booted (its GPS lock and EKF alignment at 5x, then ``SIM_SPEEDUP`` 1) with its default parameters plus what our
-backend sets, and the app's own limits.
+the firmware. The firmware runs in real time (speed-up 1: a stream runs on the wall clock, as on a real drone) with
+its default parameters plus what our backend sets, and the app's own limits.
 
 Judged from the recording: the detector's detections of the footage's cars, the follow analytics' navigation
 commands, the firmware's own odometry after them (the vehicle flew), every frame taken from the stream recorded or
@@ -59,10 +58,7 @@ def _flight(tmp: Path, scheme: str) -> tuple[int | None, str, Path]:
     rec = tmp / "run.mcap"
     step = (f"( {sender} > {shlex.quote(str(tmp / 'sender.log'))} 2>&1 & ) ; "
             + sitl.aerodaas_run(APP, env, rec, timeout_s=500))
-    # booted at sitl.SPEEDUP and switched to real time once its EKF has a position (firmware_boot.fast_boot): the
-    # stream, the flight and the app run at speed-up 1; only the wait for GPS lock and alignment is shortened
-    sitl.run_in_namespace("ardupilot", tmp / "ns", [step], speedup=1.0, timeout_s=900,
-                          boot_speedup=sitl.SPEEDUP["ardupilot"])
+    sitl.run_in_namespace("ardupilot", tmp / "ns", [step], speedup=1.0, timeout_s=900)
     rc, out = sitl.step_result(tmp / "ns", 0)
     return rc, out, rec
 
