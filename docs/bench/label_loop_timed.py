@@ -43,6 +43,7 @@ from aerodaas.recording.metrics import load_run, tracking_metrics  # noqa: E402
 from aerodaas.recording.reader import read_messages  # noqa: E402
 
 TRAIN = ["--epochs", "10", "--tiles-per-epoch", "160", "--val-tiles", "32"]  # fit200 (module docstring)
+REVIEW = "review (scripted: pre-labels submitted; not in the total)"
 HELD_OUT_EVERY = 10  # one held-out frame a second of the 10 fps camera
 
 
@@ -52,7 +53,15 @@ def load1() -> float:
 
 
 class Steps(dict):
-    """Step name -> {"seconds", "load_1min": [start, end], ...}: the JSON's ``steps``."""
+    """Step name -> {"seconds", "load_1min": [start, end], ...}: the JSON's ``steps``, saved to ``path`` after
+    each step (``--resume`` reads them back)."""
+
+    path: Path | None = None
+
+    def __setitem__(self, name: str, value: dict) -> None:
+        super().__setitem__(name, value)
+        if self.path is not None:
+            self.path.write_text(json.dumps(self, indent=1) + "\n")
 
     def run(self, name: str, argv: list, **kw) -> subprocess.CompletedProcess:
         """``argv`` timed by label_walkthrough.timed, with the load at its start and end."""
@@ -111,12 +120,18 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=REPO / "docs/results/label_loop_timed.json")
     ap.add_argument("--budget", type=int, default=60)
     ap.add_argument("--app-minutes", type=float, default=1.0, help="planned flight of the last step's app run")
+    ap.add_argument("--resume", action="store_true", help="keep WORK/steps.json's steps up to the review and go on "
+                                                          "from training (after a failed step was fixed)")
     a = ap.parse_args()
     work = a.work.resolve()
     work.mkdir(parents=True, exist_ok=True)
     flight, held = a.flight.resolve(), a.held_out.resolve()
     aer = [sys.executable, "-m", "aerodaas.cli"]
     steps = Steps()
+    saved = work / "steps.json"
+    if a.resume and saved.is_file():
+        steps.update({n: v for n, v in json.loads(saved.read_text()).items() if not n.startswith("train detector")})
+    steps.path = saved
     report: dict = {"machine": machine(), "load_1min_at_start": load1(), "steps": steps}
     info = subprocess.run([*aer, "info", str(flight), "--json"], capture_output=True, text=True)
     report["recording"] = {"file": flight.name, "bytes": flight.stat().st_size, "info_exit": info.returncode}
@@ -125,30 +140,32 @@ def main() -> None:
         cam = [c for c in s["channels"] if c["topic"].endswith("/camera/cam1")]
         report["recording"].update(duration_s=round(s["duration_s"], 1), camera_frames=cam[0]["count"],
                                    camera_rate_hz=round(cam[0]["rate_hz"], 2))
-    (work / "root").mkdir(exist_ok=True)
-    steps.run("label frames", [*aer, "label", "frames", flight, held, "--held-out", held.stem, "--budget", a.budget,
-                               "--classes", "car", "--out", work / "root/frames", "--document-root", work / "root",
-                               "--threads", "2"])
-    password = os.urandom(9).hex()
-    server = steps.block("start Label Studio", start, work / "ls", password=password)
-    try:
-        os.replace(work / "root/frames", server.root / "frames")  # the frames below the server's local-files root
-        tok = work / "token"
-        tok.write_text(server.token)
-        tok.chmod(0o600)
-        common = ["--url", server.url, "--token-file", tok, "--document-root", server.root]
-        steps.run("label push", [*aer, "label", "push", server.root / "frames", "--project", "loop", *common])
-        from label_walkthrough import _api
-        pid = next(p["id"] for p in _api(server.url, server.token, "GET", "/api/projects/")["results"]
-                   if p["title"] == "loop")
-        report["review"] = steps.block("review (scripted: pre-labels submitted; not in the total)", review,
-                                       server.url, server.token, pid)
-        steps.run("label pull", [*aer, "label", "pull", "--project", "loop", "--out", work / "train", *common])
-    finally:
-        steps.block("stop Label Studio", stop, server)
+    if "label pull" not in steps:
+        (work / "root").mkdir(exist_ok=True)
+        steps.run("label frames", [*aer, "label", "frames", flight, held, "--held-out", held.stem, "--budget", a.budget,
+                                   "--classes", "car", "--out", work / "root/frames", "--document-root", work / "root",
+                                   "--threads", "2"])
+        password = os.urandom(9).hex()
+        server = steps.block("start Label Studio", start, work / "ls", password=password)
+        try:
+            os.replace(work / "root/frames", server.root / "frames")  # the frames below the server's local-files root
+            tok = work / "token"
+            tok.write_text(server.token)
+            tok.chmod(0o600)
+            common = ["--url", server.url, "--token-file", tok, "--document-root", server.root]
+            steps.run("label push", [*aer, "label", "push", server.root / "frames", "--project", "loop", *common])
+            from label_walkthrough import _api
+            pid = next(p["id"] for p in _api(server.url, server.token, "GET", "/api/projects/")["results"]
+                       if p["title"] == "loop")
+            got = steps.block(REVIEW, review, server.url, server.token, pid)
+            steps[REVIEW] = {**steps[REVIEW], **got}
+            steps.run("label pull", [*aer, "label", "pull", "--project", "loop", "--out", work / "train", *common])
+        finally:
+            steps.block("stop Label Studio", stop, server)
     data = [x for d in ("reviewed", "machine") if (work / "train" / d / "classes.txt").exists()
             for x in ("--data", work / "train" / d)]
     steps.run("train detector", [*aer, "train", "detector", *data, *TRAIN, "--out", work / "run"])
+    report["review"] = {k: v for k, v in steps[REVIEW].items() if k not in ("seconds", "load_1min")}
     report["train"] = {k: v for k, v in json.loads((work / "run/report.json").read_text()).items()
                        if k in ("base_model", "best_epoch", "train_images", "val_images", "seed", "classes")}
     report["held_out"] = steps.block("held-out frames boxed from the simulator's truth", held_out_set, held,
