@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 BENCH = Path(__file__).resolve().parent
 REPO = BENCH.parents[1]
@@ -39,10 +40,11 @@ from label_walkthrough import review, timed  # noqa: E402  the walkthrough's rev
 from tests.labelling.label_studio_server import start, stop  # noqa: E402  the tests' own server start
 
 from aerodaas.labelling.sources import McapSource  # noqa: E402
+from aerodaas.perception.boxes import iou_matrix  # noqa: E402
 from aerodaas.recording.metrics import load_run, tracking_metrics  # noqa: E402
 from aerodaas.recording.reader import read_messages  # noqa: E402
 
-TRAIN = ["--epochs", "10", "--tiles-per-epoch", "160", "--val-tiles", "32"]  # fit200 (module docstring)
+TRAIN = ["--tiles-per-epoch", "160", "--val-tiles", "32"]  # with --epochs 10: fit200 (module docstring)
 REVIEW = "review (scripted: pre-labels submitted; not in the total)"
 HELD_OUT_EVERY = 10  # one held-out frame a second of the 10 fps camera
 
@@ -79,18 +81,24 @@ class Steps(dict):
         return out
 
 
+def truth_boxes(recording: Path) -> tuple[McapSource, dict[int, list[dict]]]:
+    """The recording's camera source and, by the camera's frame log time (ns), the simulated targets it saw
+    (``/world/targets`` entries with ``in_view``; the camera writes each frame's truth at the frame's own time)."""
+    seen = {t_ns: [g for g in m["targets"] if g.get("in_view")]
+            for _t, _s, t_ns, m in read_messages(str(recording), topics=["/world/targets"])}
+    return McapSource(recording), seen
+
+
 def held_out_set(recording: Path, out: Path) -> dict:
     """Every HELD_OUT_EVERY-th frame of ``recording`` in which every simulated car the camera sees is wholly in
     view (at least one), as a YOLO folder ``out/{images,labels}`` of class ``car`` boxed by the simulator's truth."""
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "labels").mkdir(exist_ok=True)
     (out / "labels" / "classes.txt").write_text("car\n")
-    # the camera writes each frame's truth at the frame's own log time
-    truth = {t_ns: m for _t, _s, t_ns, m in read_messages(str(recording), topics=["/world/targets"])}
-    src = McapSource(recording)
+    src, truth = truth_boxes(recording)
     kept = boxes = 0
     for ref, img in src.frames(lambda r: r.index % HELD_OUT_EVERY == 0):
-        seen = [g for g in truth[src.start_ns + round(ref.t_s * 1e9)]["targets"] if g.get("in_view")]
+        seen = truth[src.start_ns + round(ref.t_s * 1e9)]
         if not seen or not all(g.get("fully_in_view") for g in seen):
             continue
         h, w = img.shape[:2]
@@ -100,6 +108,41 @@ def held_out_set(recording: Path, out: Path) -> dict:
         (out / "labels" / f"{ref.name}.txt").write_text("\n".join(rows) + "\n")
         kept, boxes = kept + 1, boxes + len(rows)
     return {"frames": kept, "cars": boxes, "every_nth_frame": HELD_OUT_EVERY}
+
+
+def prelabels_against_truth(recording: Path, frames: Path) -> dict:
+    """The pre-labels ``label frames`` wrote (``frames/selection.json``, ``frames/coco.json``) against the cars the
+    simulator drew in those frames (every ``in_view`` car, its box clipped to the frame), matched at IoU >= 0.5:
+    what the scripted review, which accepts them all, taught the model."""
+    sel = json.loads((frames / "selection.json").read_text())["frames"]
+    coco = json.loads((frames / "coco.json").read_text())
+    ids = {im["file_name"].split("/")[-1]: im["id"] for im in coco["images"]}
+    by_image: dict[int, list] = {}
+    for an in coco["annotations"]:
+        x, y, w, h = an["bbox"]
+        by_image.setdefault(an["image_id"], []).append([x, y, x + w, y + h])
+    src, truth = truth_boxes(recording)
+    want = {f["frame"]: f["file"].split("/")[-1] for f in sel}
+    n_pred = n_true = hit_pred = hit_true = 0
+    for ref, _img in src.frames(lambda r: r.index in want):
+        gt = np.array([g["bbox_px"] for g in truth[src.start_ns + round(ref.t_s * 1e9)]], np.float32).reshape(-1, 4)
+        pr = np.array(by_image.get(ids[want[ref.index]], []), np.float32).reshape(-1, 4)
+        n_pred, n_true = n_pred + len(pr), n_true + len(gt)
+        if len(pr) and len(gt):
+            ok = iou_matrix(pr, gt) >= 0.5
+            hit_pred, hit_true = hit_pred + int(ok.any(1).sum()), hit_true + int(ok.any(0).sum())
+    return {"frames": len(want), "prelabel_boxes": n_pred, "simulated_cars_in_view": n_true,
+            "prelabels_on_a_car": hit_pred, "cars_with_a_prelabel": hit_true,
+            "precision": round(hit_pred / n_pred, 3) if n_pred else None,
+            "recall": round(hit_true / n_true, 3) if n_true else None}
+
+
+def summary(bench: dict) -> dict:
+    """The car row of an `aerodaas bench detect` report, without its precision-recall curve."""
+    row = bench["results"][0]
+    car = {k: v for k, v in row["classes"]["car"].items() if not k.startswith("pr_curve")}
+    return {"input_size": row["input_size"], "score_threshold": row["score_threshold"],
+            "ms_per_frame": row["ms_per_frame"], **car}
 
 
 def machine() -> dict:
@@ -120,8 +163,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=REPO / "docs/results/label_loop_timed.json")
     ap.add_argument("--budget", type=int, default=60)
     ap.add_argument("--app-minutes", type=float, default=1.0, help="planned flight of the last step's app run")
+    ap.add_argument("--epochs", type=int, default=10, help="training epochs of 160 tiles (10: fit200)")
     ap.add_argument("--resume", action="store_true", help="keep WORK/steps.json's steps up to the review and go on "
-                                                          "from training (after a failed step was fixed)")
+                                                          "from training (after a failed step was fixed; training "
+                                                          "itself resumes from WORK/run/last.pt when there is one)")
     a = ap.parse_args()
     work = a.work.resolve()
     work.mkdir(parents=True, exist_ok=True)
@@ -130,7 +175,7 @@ def main() -> None:
     steps = Steps()
     saved = work / "steps.json"
     if a.resume and saved.is_file():
-        steps.update({n: v for n, v in json.loads(saved.read_text()).items() if not n.startswith("train detector")})
+        steps.update({n: v for n, v in json.loads(saved.read_text()).items() if n != "train detector"})
     steps.path = saved
     report: dict = {"machine": machine(), "load_1min_at_start": load1(), "steps": steps}
     info = subprocess.run([*aer, "info", str(flight), "--json"], capture_output=True, text=True)
@@ -164,8 +209,11 @@ def main() -> None:
             steps.block("stop Label Studio", stop, server)
     data = [x for d in ("reviewed", "machine") if (work / "train" / d / "classes.txt").exists()
             for x in ("--data", work / "train" / d)]
-    steps.run("train detector", [*aer, "train", "detector", *data, *TRAIN, "--out", work / "run"])
+    again = ["--resume"] if a.resume and (work / "run/last.pt").is_file() else []
+    steps.run("train detector", [*aer, "train", "detector", *data, "--epochs", a.epochs, *TRAIN, *again,
+                                 "--out", work / "run"])
     report["review"] = {k: v for k, v in steps[REVIEW].items() if k not in ("seconds", "load_1min")}
+    report["prelabels_against_truth"] = prelabels_against_truth(flight, work / "ls/root/frames")
     report["train"] = {k: v for k, v in json.loads((work / "run/report.json").read_text()).items()
                        if k in ("base_model", "best_epoch", "train_images", "val_images", "seed", "classes")}
     report["held_out"] = steps.block("held-out frames boxed from the simulator's truth", held_out_set, held,
@@ -179,7 +227,7 @@ def main() -> None:
                                              "--classes", "car", "--thresholds", "0.3", "--input-sizes", "480x640",
                                              "--out", out])
         scores[name] = json.loads(out.read_text())
-    report["held_out"]["scores"] = {k: v.get("results", v) for k, v in scores.items()}
+    report["held_out"]["scores"] = {k: summary(v) for k, v in scores.items()}
     report["app"] = {}
     for name, model in (("fine-tuned", work / "run/model.onnx"),
                         ("shipped aerial_nano", REPO / "aerodaas/perception/models/aerial_nano.onnx")):
