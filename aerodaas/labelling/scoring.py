@@ -12,9 +12,11 @@ class at IoU >= 0.5 (greedily, best IoU first):
   model (query by committee, Seung, Opper and Sompolinsky, COLT 1992) plus margin sampling around the operating
   threshold (Scheffer, Decomain and Wrobel, IDA 2001).
 
-The stronger pass (:func:`build_detectors` ``strong``): ``"enlarged"`` runs the model at 1.5 times its normal input
-(far, small objects get more pixels); ``"tiles"`` cuts the frame into 640 px slices overlapping by 0.2 at their
-native resolution plus the whole frame (:class:`aerodaas.perception.tiling.TiledDetector`). The pre-labels of a
+Both run the model as the apps do, never enlarging a frame to fill its input (``upscale=False``: a 640x480
+camera's frames go in at 480x640, a 1080p camera's are shrunk to the model's input). The stronger pass
+(:func:`build_detectors` ``strong``): ``"enlarged"`` (:class:`Enlarged`) runs the model on the frame at 1.5 times the
+scale of the normal pass (far, small objects get more pixels); ``"tiles"`` cuts the frame into 640 px slices
+overlapping by 0.2 at their native resolution plus the whole frame (:class:`aerodaas.perception.tiling.TiledDetector`). The pre-labels of a
 frame are both passes' boxes at or above the threshold merged by class-aware NMS at IoU 0.5
 (:func:`aerodaas.perception.tiling.merge_detections`), the higher score kept.
 """
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
+import cv2
 import numpy as np
 
 from aerodaas.labelling.sources import LabelInputError
@@ -34,7 +37,7 @@ from aerodaas.perception.boxes import iou_matrix
 from aerodaas.perception.detect import AerialDetector, DETECTORS, make_detector
 from aerodaas.perception.tiling import Tiling, TiledDetector, merge_detections
 
-__all__ = ["Detectors", "build_detectors", "informativeness", "prelabels", "STRONG_PASSES", "MATCH_IOU"]
+__all__ = ["Detectors", "Enlarged", "build_detectors", "informativeness", "prelabels", "STRONG_PASSES", "MATCH_IOU"]
 
 #: the stronger passes :func:`build_detectors` knows
 STRONG_PASSES = ("enlarged", "tiles")
@@ -64,6 +67,27 @@ class Detectors:
     def detect(self, image: np.ndarray) -> tuple[list[Detection], list[Detection]]:
         """Both passes' detections on an ``(H, W, 3) uint8 BGR`` image, boxes in its pixels."""
         return self.base.detect(image), self.strong.detect(image)
+
+
+class Enlarged:
+    """The ``"enlarged"`` stronger pass: ``detector`` (built with ``upscale=False``) on the frame resized to
+    :data:`ENLARGE` times the scale ``base`` sees it at (``base``'s input over the frame, at most 1: a frame that
+    fits the input is seen at its own size), boxes mapped back to the frame's pixels. ``detect`` takes an
+    ``(H, W, 3) uint8 BGR`` frame like the detectors it wraps."""
+
+    def __init__(self, base: Any, detector: Any) -> None:
+        self.base, self.detector = base, detector
+
+    def detect(self, image: np.ndarray) -> list[Detection]:
+        """``detector``'s detections on the enlarged frame, boxes in ``image``'s pixels."""
+        h, w = image.shape[:2]
+        ih, iw = self.base.input_hw
+        k = ENLARGE * min(1.0, ih / h, iw / w)
+        nw, nh = max(1, round(w * k)), max(1, round(h * k))
+        dets = self.detector.detect(cv2.resize(image, (nw, nh), interpolation=cv2.INTER_LINEAR))
+        sx, sy = w / nw, h / nh
+        return [d.model_copy(update={"box": (d.box[0] * sx, d.box[1] * sy, d.box[2] * sx, d.box[3] * sy)})
+                for d in dets]
 
 
 def _sha12(path: str | os.PathLike) -> str:
@@ -99,10 +123,10 @@ def build_detectors(model: str = "aerial_nano", classes: Sequence[str] | None = 
         raise LabelInputError(f"--model {model!r}: not a known model ({', '.join(sorted(DETECTORS))}) "
                               "nor an .onnx file")
 
-    def make(**kw):
+    def make(**kw):  # never enlarging a frame, as the apps run the model (a 640x480 camera's frames at 480x640)
         if is_file:
-            return AerialDetector(model_path=model, intra_op_threads=threads, **kw)
-        return make_detector(model, intra_op_threads=threads, **kw)
+            return AerialDetector(model_path=model, intra_op_threads=threads, upscale=False, **kw)
+        return make_detector(model, intra_op_threads=threads, upscale=False, **kw)
 
     probe = make(score_threshold=low)
     names = list(probe.class_names)
@@ -115,9 +139,10 @@ def build_detectors(model: str = "aerial_nano", classes: Sequence[str] | None = 
     base = probe if keep == names else make(score_threshold=low, classes=keep)
     if strong == "enlarged":
         h, w = base.input_hw
-        stronger = make(score_threshold=low, classes=keep, input_size=(_round32(h * ENLARGE), _round32(w * ENLARGE)))
+        stronger = Enlarged(base, make(score_threshold=low, classes=keep,
+                                       input_size=(_round32(h * ENLARGE), _round32(w * ENLARGE))))
     else:
-        tiles = make(score_threshold=low, classes=keep, input_size=(TILE_PX, TILE_PX), upscale=False)
+        tiles = make(score_threshold=low, classes=keep, input_size=(TILE_PX, TILE_PX))
         stronger = TiledDetector(tiles, Tiling(tile=TILE_PX, overlap=0.2, full_frame=True, merge="greedynmm",
                                                agnostic=False))
     name = Path(model).stem if is_file else model

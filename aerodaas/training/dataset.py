@@ -1,6 +1,6 @@
 """Labelled sets for training: what CVAT and Label Studio export (YOLO txt folders, COCO JSON), recognised by
 their layout (:mod:`aerodaas.training.labels.layout` lists each), checked in full before any training starts, and
-split by video.
+split by video (one video by time).
 
 Every problem is collected (boxes outside the image, non-positive sizes, unknown classes, label files without an
 image, images that cannot be read, an empty set) and reported at once as
@@ -16,7 +16,7 @@ import numpy as np
 
 from aerodaas.training.labels.check import Checker, LabelError
 from aerodaas.training.labels.coco import load_coco
-from aerodaas.training.labels.images import LabelledImage
+from aerodaas.training.labels.images import LabelledImage, frame_number
 from aerodaas.training.labels.layout import detect_layout
 from aerodaas.training.labels.yolo import NAME_FILES, load_yolo
 from aerodaas.training.label_studio_export import load_tasks
@@ -41,11 +41,20 @@ def labelled_classes(path: str | Path, names: Sequence[str]) -> np.ndarray | Non
 
 def split_by_sequence(items: Sequence[LabelledImage], fraction: float, seed: int) -> tuple[list, list]:
     """Split ``items`` into (train, val) by whole sequences (``LabelledImage.sequence``), about ``fraction`` of the
-    images in val, reproducibly for ``seed``. Raises ValueError when there are fewer than two sequences."""
+    images in val, reproducibly for ``seed``. A set of one sequence (the frames of one recording) is split by time
+    instead: its last ``fraction`` of the images by frame number (the trailing number of the name,
+    :func:`~aerodaas.training.labels.images.frame_number`), at least one and not all, form val, so no validation
+    frame lies between two training frames. Raises ValueError for an empty set or a set of one image."""
     seqs = sorted({it.sequence for it in items})
-    if len(seqs) < 2:
-        raise ValueError(f"val_fraction={fraction}: the set has {len(seqs)} sequence(s) ({seqs[:3]}); a split by "
-                         f"video needs at least two (name files <video>_<frame>.jpg, or pass --val DIR)")
+    if not seqs:
+        raise ValueError(f"val_fraction={fraction}: the set has no image")
+    if len(seqs) == 1:
+        if len(items) < 2:
+            raise ValueError(f"val_fraction={fraction}: the set has {len(items)} image(s); a validation split needs at "
+                             f"least two (or pass --val DIR)")
+        by_time = sorted(items, key=lambda it: (frame_number(it.path), it.path.name))
+        k = min(max(1, round(fraction * len(items))), len(items) - 1)
+        return by_time[:-k], by_time[-k:]
     order = np.random.default_rng(seed).permutation(len(seqs))
     val, n = set(), 0
     for i in order:

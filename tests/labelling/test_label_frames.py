@@ -173,3 +173,34 @@ def test_uniform_picks_evenly_spaced_frames(small, tmp_path):
     assert sel["parameters"]["uniform"] is True
     assert [f["frame"] for f in sel["frames"]] == [0, 2, 4]  # one per scene: the repeats were dropped
     assert all(f["reason"] == "evenly spaced (uniform)" for f in sel["frames"])
+
+
+class _InputShapes:
+    """An onnxruntime session stand-in that passes every call through and keeps the input shapes it was given."""
+
+    def __init__(self, session) -> None:
+        self.session, self.shapes = session, []
+
+    def run(self, names, feed):
+        self.shapes += [v.shape[2:] for v in feed.values()]
+        return self.session.run(names, feed)
+
+    def __getattr__(self, name):
+        return getattr(self.session, name)
+
+
+def test_both_passes_see_a_small_frame_as_the_app_does(detectors, monkeypatch):
+    """A 640x480 camera's frame is not enlarged to the model's 736x1280 input (as the apps run it, upscale=False):
+    the normal pass sees it at 480x640, the enlarged pass at 1.5 times that (720x960, in a 736x960 input), and the
+    enlarged pass's boxes come back in the frame's pixels; a 1080p frame is shrunk to the model's input as before."""
+    img = cv2.imread(str(sorted(SAMPLE.glob("DJI*.jpg"))[0]))
+    model = getattr(detectors.strong, "detector", detectors.strong)  # the enlarged pass's own model
+    base, strong = _InputShapes(detectors.base.session), _InputShapes(model.session)
+    monkeypatch.setattr(detectors.base, "session", base)
+    monkeypatch.setattr(model, "session", strong)
+    small = cv2.resize(img, (640, 480))
+    _b, s = detectors.detect(small)
+    assert base.shapes == [(480, 640)] and strong.shapes == [(736, 960)]
+    assert s and all(0 <= d.box[0] < d.box[2] <= 640 and 0 <= d.box[1] < d.box[3] <= 480 for d in s)
+    detectors.detect(cv2.resize(img, (1920, 1080)))
+    assert base.shapes[1] == detectors.base.input_hw == (736, 1280) and strong.shapes[1] == (1088, 1920)

@@ -235,6 +235,24 @@ def test_split_by_sequence_never_splits_a_video(tmp_path):
         assert len(train) + len(val) == len(items)
 
 
+def test_one_recordings_frames_are_split_by_time(tmp_path):
+    """A set from one recording (``aerodaas label frames`` names every frame of a flight's camera alike): the
+    validation frames are the last ones by frame number, a block no training frame lies in, whatever the order."""
+    from aerodaas.training.dataset import split_by_sequence
+    from aerodaas.training.labels.images import LabelledImage
+
+    frames = [3, 17, 40, 41, 95, 120, 300, 301, 512, 1000, 4096, 6800]
+    names = [f"3f2a9c1e-flight10_quadrotor-base-cam1-{f:06d}.jpg" for f in frames]
+    items = [LabelledImage(Path(f"/x/{n}"), (10, 10), np.zeros((0, 4), np.float32), np.zeros(0, np.int64))
+             for n in reversed(names)]
+    for fraction, n_val in ((0.25, 3), (0.15, 2), (0.01, 1), (0.99, 11)):
+        train, val = split_by_sequence(items, fraction, seed=0)
+        assert len(val) == n_val and len(train) + len(val) == len(items)
+        assert sorted(it.path.name for it in val) == names[-n_val:]
+    with pytest.raises(ValueError, match="one image|1 image"):
+        split_by_sequence(items[:1], 0.2, seed=0)
+
+
 @needs_data
 @pytest.mark.cluster
 def test_workers_run_the_same_training_as_a_ray_train_job(tmp_path):

@@ -11,7 +11,7 @@ import numpy as np
 
 from aerodaas.training.labels.check import Checker
 
-__all__ = ["IMAGE_EXTS", "LabelledImage", "sequence_of", "original_stem", "read_hw", "make_item"]
+__all__ = ["IMAGE_EXTS", "LabelledImage", "sequence_of", "frame_number", "original_stem", "read_hw", "make_item"]
 
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 #: Label Studio's prefixes before a file name: ``<md5(url)[:8]>__`` where its converter caches a downloaded file
@@ -35,6 +35,13 @@ def sequence_of(path: Path) -> str:
     validation set."""
     stem = original_stem(path.stem)
     return re.sub(r"[-_ .]*\d+$", "", stem) or stem
+
+
+def frame_number(path: Path) -> int:
+    """The frame number an image's name ends in, after Label Studio's prefixes (:func:`original_stem`):
+    ``3f2a9c1e-DJI_0025_cam1-000012.jpg`` -> 12; -1 for a name without one."""
+    m = re.search(r"(\d+)$", original_stem(path.stem))
+    return int(m.group(1)) if m else -1
 
 
 @dataclass
