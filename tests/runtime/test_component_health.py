@@ -8,10 +8,7 @@ summary, the exit code and the recording."""
 from __future__ import annotations
 
 import json
-import os
 import re
-import subprocess
-import sys
 import textwrap
 
 import pytest
@@ -20,7 +17,7 @@ from aerodaas.recording.health import (FIRST_EVENTS, ComponentKind, FailureCount
                                        tally_failures)
 from aerodaas.recording.reader import read_messages
 
-from tests.conftest import REPO
+from tests.inputs.cli_inprocess import CliResult, run_cli
 
 SENSOR = textwrap.dedent('''
     from pydantic import BaseModel, Field
@@ -92,16 +89,16 @@ def _env(fail_per_20: int) -> dict:
         "simulation": {"speedup": 20, "physics_hz": 50}}
 
 
-def _run(tmp_path, fail_per_20: int, analytics_fails: bool) -> tuple[subprocess.CompletedProcess, str]:
+def _run(tmp_path, fail_per_20: int, analytics_fails: bool) -> tuple[CliResult, str]:
+    """``aerodaas run app.py`` in this process on the pytest worker's shared Ray session (``run_cli``): the sensor
+    module beside the app is found from the app's folder, as ``aerodaas run`` puts it first on ``sys.path``, and
+    reaches the actors by value (a plug-in outside any installed package), not through their ``PYTHONPATH``."""
     (tmp_path / "flaky_user_sensor.py").write_text(SENSOR)
     (tmp_path / "env.json").write_text(json.dumps(_env(fail_per_20)))
     app = tmp_path / "app.py"
     app.write_text(APP.replace("ENV", repr(str(tmp_path / "env.json"))).replace("FAIL", repr(analytics_fails)))
     rec = tmp_path / "run.mcap"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(REPO)] + [
-        x for x in [os.environ.get("PYTHONPATH")] if x])}
-    p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "run", str(app), "--record", str(rec), "--quiet"],
-                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+    p = run_cli("run", str(app), "--record", str(rec), "--quiet", cwd=tmp_path, shared_ray=True)
     return p, str(rec)
 
 
@@ -111,7 +108,7 @@ def _failure_events(rec: str, kind: str) -> list[dict]:
 
 
 @pytest.mark.timeout(900)
-def test_a_sensor_failing_85_percent_and_an_analytics_failing_every_item_degrade_the_run(tmp_path):
+def test_a_sensor_failing_85_percent_and_an_analytics_failing_every_item_degrade_the_run(ray_session, tmp_path):
     p, rec = _run(tmp_path, fail_per_20=17, analytics_fails=True)
     out = p.stdout + p.stderr
     assert "mission outcome: degraded" in p.stdout, out[-4000:]
@@ -143,7 +140,7 @@ def test_a_sensor_failing_85_percent_and_an_analytics_failing_every_item_degrade
 
 
 @pytest.mark.timeout(900)
-def test_a_sensor_failing_below_its_limit_leaves_the_run_a_success(tmp_path):
+def test_a_sensor_failing_below_its_limit_leaves_the_run_a_success(ray_session, tmp_path):
     p, rec = _run(tmp_path, fail_per_20=2, analytics_fails=False)
     assert "mission outcome: success" in p.stdout and p.returncode == 0, (p.stdout + p.stderr)[-4000:]
     assert "DEGRADED" not in p.stdout

@@ -14,6 +14,7 @@ from aerodaas.tools.hitl_client import request, state_file
 from aerodaas.recording.metrics import load_run, tracking_metrics, waypoint_visits
 
 from tests.conftest import needs_data
+from tests.runtime.app_variant import variant_env
 from tests.runtime.test_e2e import APPS, run_app
 
 pytestmark = pytest.mark.e2e
@@ -41,8 +42,11 @@ def test_disaster_survey_hitl_injection_is_replanned(ray_session, run_options, t
     monkeypatch.setenv("AERODAAS_STATE_DIR", str(tmp_path))
     rec = tmp_path / "disaster.mcap"
     out: dict = {}
+    # the app reads only odometry: its camera, rendered and recorded at 5 FPS, is left out
+    env = variant_env("disaster_survey", tmp_path, drop_sensors=("cam1",))
     th = threading.Thread(target=lambda: out.update(res=run_app("disaster_survey.py", run_options, record=str(rec),
-                                                                 speedup=5.0, hitl_port=0)), daemon=True)
+                                                                 speedup=5.0, hitl_port=0, env_path=str(env))),
+                          daemon=True)
     th.start()
     t0 = time.monotonic()
     while not state_file().is_file():
@@ -157,7 +161,10 @@ def test_tower_inspection_locates_then_flies_the_vertical_pattern(ray_session, r
     """Pattern 5: locating waypoints until the structure is recognised, then (locating aborted) a vertical
     inspection from 5 m to 35 m around it, bottom-up, then landing."""
     rec = tmp_path / "tower.mcap"
-    res = run_app("tower_inspection.py", run_options, record=str(rec), speedup=40.0)
+    # the camera at 2 fps, not the app's 3 (lock-step: each frame is matched before the clock moves on; the
+    # assertions are on the plan and the flown path, and the structure is seen from several frames either way)
+    env = variant_env("tower_inspection", tmp_path, camera={"cam1": {"fps": 2}})
+    res = run_app("tower_inspection.py", run_options, record=str(rec), speedup=40.0, env_path=str(env))
     assert res.outcome == "success", res.robots
     run = load_run(str(rec))
     ids = [v["id"] for v in res.robots["quadrotor_base"]["visited_waypoints"]]
