@@ -1,6 +1,8 @@
-"""`aerodaas train detector`, run as a user runs it: on a four-image labelled set it takes one step, exports an ONNX
-model that onnxruntime and the framework's detector load, with the export checked against PyTorch; `--resume`
-continues from the checkpoint; bad labels and options end before training with exit 2, naming the file and value.
+"""`aerodaas train detector` as a user runs it (the command line, in this process: the run's outputs, its report
+and its messages are the point, and the other tests here load PyTorch anyway; the Ray Train job keeps a subprocess):
+on a four-image labelled set it takes one step, exports an ONNX model that onnxruntime and the framework's detector
+load, with the export checked against PyTorch; `--resume` continues from the checkpoint; bad labels and options end
+before training with exit 2, naming the file and value.
 
 The four images are drawn here (grey ground, dark rectangles as cars, small warm blobs as persons), written as a
 labelling tool's YOLO export would be.
@@ -48,7 +50,7 @@ def _draw_set(root: Path, n: int = 4, seed: int = 0) -> Path:
 
 def _train(*args: str, env_extra: dict | None = None, in_process: bool = False):
     """``aerodaas train detector ARGS`` in a subprocess, or with ``in_process`` (a check of bad input, which ends
-    before training) in this process (:func:`tests.inputs.cli_inprocess.run_cli`)."""
+    before training, or a training run without Ray) in this process (:func:`tests.inputs.cli_inprocess.run_cli`)."""
     env = {**os.environ, "AERODAAS_MODEL_DIR": str(MODEL_DIR), **(env_extra or {})}
     if in_process:
         return run_cli("train", "detector", *args, env=env)
@@ -66,7 +68,7 @@ def test_one_step_exports_a_model_that_matches_pytorch(tmp_path):
     data = _draw_set(tmp_path / "set")
     out = tmp_path / "run"
     r = _train("--data", str(data), "--val", str(data), "--out", str(out), "--max-steps", "1", *SMOKE,
-               "--object-px", "6", "48", "--oblique", "0.6")
+               "--object-px", "6", "48", "--oblique", "0.6", in_process=True)
     assert r.returncode == 0, r.stderr[-3000:]
     report = json.loads((out / "report.json").read_text())
     assert report["names"] == NAMES
@@ -89,7 +91,7 @@ def test_one_step_exports_a_model_that_matches_pytorch(tmp_path):
         assert 0 <= d.box[0] <= d.box[2] <= 640 and 0 <= d.box[1] <= d.box[3] <= 480
     # --resume continues from the checkpoint: a second epoch is added to the same history
     r2 = _train("--data", str(data), "--val", str(data), "--out", str(out), "--resume",
-                *[a if a != "1" or i != 1 else "2" for i, a in enumerate(SMOKE)], "--max-steps", "4")
+                *[a if a != "1" or i != 1 else "2" for i, a in enumerate(SMOKE)], "--max-steps", "4", in_process=True)
     assert r2.returncode == 0, r2.stderr[-3000:]
     report2 = json.loads((out / "report.json").read_text())
     assert [h["epoch"] for h in report2["history"]] == [0, 1]
