@@ -19,12 +19,14 @@ from tests.mavlink.test_mission_cli import SQUARE, _positions
 
 @pytest.fixture(scope="module")
 def signing_sim(tmp_path_factory):
-    """``aerodaas sim`` (ArduPilot, 10x) with the key file of :data:`KEY`, in a process of its own; yields (its
+    """``aerodaas sim`` (ArduPilot, 4x) with the key file of :data:`KEY`, in a process of its own; yields (its
     address, the key file); stopped with SIGTERM after this module's tests, which share it (each judges its own
-    exchange with the vehicle: none needs a vehicle nobody else has talked to)."""
+    exchange with the vehicle: none needs a vehicle nobody else has talked to). 4x, not 10x: the vehicle cancels a
+    mission upload after 5 x 1.5 of its seconds without an answer, 0.75 wall s at 10x, which a loaded machine (load
+    45) once starved the CLI for."""
     key_file = _key_file(tmp_path_factory.mktemp("signing_sim") / "vehicle.key")
     p = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "sim", "--mavlink", "tcp:127.0.0.1:0", "--speedup",
-                          "10", "--home", "47.397742,8.545594,488", "--key-file", key_file],
+                          "4", "--home", "47.397742,8.545594,488", "--key-file", key_file],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = p.stdout.readline()
