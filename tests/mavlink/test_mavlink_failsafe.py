@@ -12,7 +12,6 @@ import pytest
 from pymavlink import mavutil
 
 from tests.firmware.sitl import read_recording
-from tests.mavlink.emulated import with_max_speed
 from tests.runtime.test_backends_e2e import PX4_AT_SPEED, _mavlink_variant, _run_app
 
 
@@ -53,8 +52,6 @@ def test_an_autopilot_failsafe_pauses_the_mission_and_on_failsafe_decides(ray_se
     emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path,
                                      params={**PX4_AT_SPEED[flavour], **LOW_RTL[flavour]},
                                      mavlink={"on_failsafe": action})
-    if action == "resume":  # the rest of the survey, faster: the resume is judged, not the legs' length
-        with_max_speed(env_path, 2.0)
     stop, done = threading.Event(), []
     th = threading.Thread(target=_rtl_when_navigating, args=(emu.address, flavour, stop, done), daemon=True)
     th.start()
